@@ -1,0 +1,419 @@
+"""The MITLD abstract syntax: a small core of frozen nodes and sugar built from it.
+
+Core nodes: ``Const`` (true/false), ``Prop``, ``Not``, ``And``, ``Or``, ``Until`` (with an
+optional integer interval), ``Release`` (its dual, needed for negation normal form),
+``Next`` and ``Dist`` (the distribution eventuality ``D[mu] a``).  Everything else --
+``F``, ``G``, ``->``, ``F<=k`` -- is sugar that builds core nodes.
+
+The node classes are plain records; the *smart constructors* (``conj``, ``disj``, ``neg``,
+``until``, ``release``, ``eventually``, ``always``, ``implies``, ``nxt``, ``dist``)
+simplify as they build: they flatten nested ``And``/``Or``, absorb ``true``/``false``,
+drop duplicate operands and fold double negation.  The parser and the operator overloads
+(``&``, ``|``, ``~``) use them, so every formula a user meets is in that simplified form.
+
+``str(formula)`` prints the parser's own ASCII syntax with the fewest parentheses the
+precedence rules allow (loosest first: ``->``, ``|``, ``&``, ``U``/``R``, unary), so that
+``parse(str(phi)) == phi``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TypeAlias
+
+__all__ = [
+    "Interval",
+    "DistRef",
+    "DistLiteral",
+    "DistSpec",
+    "Formula",
+    "Const",
+    "Prop",
+    "Not",
+    "And",
+    "Or",
+    "Until",
+    "Release",
+    "Next",
+    "Dist",
+    "TRUE",
+    "FALSE",
+    "conj",
+    "disj",
+    "neg",
+    "implies",
+    "until",
+    "release",
+    "eventually",
+    "always",
+    "nxt",
+    "dist",
+    "atoms",
+    "subformulas",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Interval:
+    """A closed integer interval ``[lo, hi]`` of steps, ``0 <= lo <= hi``."""
+
+    lo: int
+    hi: int
+
+    def __post_init__(self) -> None:
+        for name, v in (("lower bound", self.lo), ("upper bound", self.hi)):
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ValueError(f"interval {name} must be an integer, got {v!r}")
+        if self.lo < 0:
+            raise ValueError(f"interval [{self.lo},{self.hi}]: lower bound must be >= 0")
+        if self.lo > self.hi:
+            raise ValueError(
+                f"interval [{self.lo},{self.hi}]: lower bound {self.lo} exceeds upper bound "
+                f"{self.hi}"
+            )
+
+    def __str__(self) -> str:
+        return f"[{self.lo},{self.hi}]"
+
+
+# --------------------------------------------------------------------------- distributions
+
+
+@dataclass(frozen=True, slots=True)
+class DistRef:
+    """A distribution named in the formula, bound later (e.g. from a model file)."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+DistArg: TypeAlias = int | float | str
+
+
+def _format_arg(a: DistArg) -> str:
+    if isinstance(a, str):
+        return a
+    if isinstance(a, float):
+        if math.isfinite(a) and a == int(a) and abs(a) < 1e16:
+            return f"{int(a)}.0"
+        return repr(a)
+    return str(a)
+
+
+@dataclass(frozen=True, slots=True)
+class DistLiteral:
+    """An inline distribution literal such as ``geometric(0.3)`` or ``scipy(nbinom, 3, 0.5)``.
+
+    Only the shape is known here (family name and arguments); whether the parameters
+    define a probability distribution is checked by :mod:`mitld_lp.distributions`.
+    """
+
+    family: str
+    args: tuple[DistArg, ...]
+
+    def __str__(self) -> str:
+        return f"{self.family}({', '.join(_format_arg(a) for a in self.args)})"
+
+
+DistSpec: TypeAlias = DistRef | DistLiteral
+
+
+# --------------------------------------------------------------------------- formulas
+
+
+class Formula:
+    """Base class of every formula node.  Supports ``&``, ``|``, ``~`` and ``>>`` (implies)."""
+
+    __slots__ = ()
+
+    def __and__(self, other: Formula) -> Formula:
+        return conj(self, other)
+
+    def __or__(self, other: Formula) -> Formula:
+        return disj(self, other)
+
+    def __invert__(self) -> Formula:
+        return neg(self)
+
+    def __rshift__(self, other: Formula) -> Formula:
+        return implies(self, other)
+
+    def __str__(self) -> str:
+        return _show(self, 0)
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Const(Formula):
+    """``true`` or ``false``."""
+
+    value: bool
+
+    def __repr__(self) -> str:
+        return "TRUE" if self.value else "FALSE"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Prop(Formula):
+    """An atomic proposition: a robot proposition of the game or an external event."""
+
+    name: str
+
+    def __repr__(self) -> str:
+        return f"Prop({self.name!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Not(Formula):
+    arg: Formula
+
+    def __repr__(self) -> str:
+        return f"Not({self.arg!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class And(Formula):
+    """n-ary conjunction (at least two operands, none an ``And``, no ``Const``)."""
+
+    args: tuple[Formula, ...]
+
+    def __repr__(self) -> str:
+        return f"And({', '.join(map(repr, self.args))})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Or(Formula):
+    """n-ary disjunction (at least two operands, none an ``Or``, no ``Const``)."""
+
+    args: tuple[Formula, ...]
+
+    def __repr__(self) -> str:
+        return f"Or({', '.join(map(repr, self.args))})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Until(Formula):
+    """``left U[l,u] right``: some j in [t+l, t+u] has ``right``, and every i in [t, j) has
+    ``left``.  ``interval=None`` is the unbounded until (j >= t)."""
+
+    left: Formula
+    right: Formula
+    interval: Interval | None = None
+
+    def __repr__(self) -> str:
+        return f"Until({self.left!r}, {self.right!r}, {self.interval})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Release(Formula):
+    """``left R[l,u] right == !(!left U[l,u] !right)``: every j in [t+l, t+u] has ``right``
+    unless ``left`` held at some i in [t, j).  ``G[l,u] p == false R[l,u] p``."""
+
+    left: Formula
+    right: Formula
+    interval: Interval | None = None
+
+    def __repr__(self) -> str:
+        return f"Release({self.left!r}, {self.right!r}, {self.interval})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Next(Formula):
+    """``X arg``: ``arg`` holds at the next step."""
+
+    arg: Formula
+
+    def __repr__(self) -> str:
+        return f"Next({self.arg!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Dist(Formula):
+    """The distribution eventuality ``D[mu] arg``: the first step at which ``arg`` holds
+    is distributed as ``mu``.  For the automaton it reads as ``F arg``."""
+
+    mu: DistSpec
+    arg: Formula
+
+    def __repr__(self) -> str:
+        return f"Dist({self.mu}, {self.arg!r})"
+
+
+TRUE = Const(True)
+FALSE = Const(False)
+
+
+# --------------------------------------------------------------------------- constructors
+
+
+def _nary(kind: type[And] | type[Or], args: tuple[Formula, ...]) -> Formula:
+    unit, zero = (TRUE, FALSE) if kind is And else (FALSE, TRUE)
+    out: list[Formula] = []
+    seen: set[Formula] = set()
+    for a in args:
+        if not isinstance(a, Formula):
+            raise TypeError(f"expected a Formula, got {a!r}")
+        parts = a.args if isinstance(a, kind) else (a,)
+        for p in parts:
+            if p == zero:
+                return zero
+            if p == unit or p in seen:
+                continue
+            seen.add(p)
+            out.append(p)
+    if not out:
+        return unit
+    if len(out) == 1:
+        return out[0]
+    return kind(tuple(out))
+
+
+def conj(*args: Formula) -> Formula:
+    """Conjunction, flattened, with ``true`` dropped, ``false`` absorbing, duplicates removed."""
+    return _nary(And, args)
+
+
+def disj(*args: Formula) -> Formula:
+    """Disjunction, flattened, with ``false`` dropped, ``true`` absorbing, duplicates removed."""
+    return _nary(Or, args)
+
+
+def neg(arg: Formula) -> Formula:
+    """Negation with ``!true == false``, ``!false == true`` and ``!!p == p``."""
+    if isinstance(arg, Const):
+        return Const(not arg.value)
+    if isinstance(arg, Not):
+        return arg.arg
+    return Not(arg)
+
+
+def implies(left: Formula, right: Formula) -> Formula:
+    """``left -> right == !left | right``."""
+    return disj(neg(left), right)
+
+
+def _interval(bounds: Interval | tuple[int, int] | None) -> Interval | None:
+    if bounds is None or isinstance(bounds, Interval):
+        return bounds
+    lo, hi = bounds
+    return Interval(lo, hi)
+
+
+def until(
+    left: Formula, right: Formula, interval: Interval | tuple[int, int] | None = None
+) -> Formula:
+    """``left U[l,u] right``, with ``right == false`` giving false and, for an interval
+    starting at 0, ``right == true`` giving true."""
+    iv = _interval(interval)
+    if right == FALSE:
+        return FALSE
+    if right == TRUE and (iv is None or iv.lo == 0):
+        return TRUE
+    return Until(left, right, iv)
+
+
+def release(
+    left: Formula, right: Formula, interval: Interval | tuple[int, int] | None = None
+) -> Formula:
+    """``left R[l,u] right``, the dual of until: ``right == true`` gives true and, for an
+    interval starting at 0, ``right == false`` gives false."""
+    iv = _interval(interval)
+    if right == TRUE:
+        return TRUE
+    if right == FALSE and (iv is None or iv.lo == 0):
+        return FALSE
+    return Release(left, right, iv)
+
+
+def eventually(arg: Formula, interval: Interval | tuple[int, int] | None = None) -> Formula:
+    """``F[l,u] arg == true U[l,u] arg``."""
+    return until(TRUE, arg, interval)
+
+
+def always(arg: Formula, interval: Interval | tuple[int, int] | None = None) -> Formula:
+    """``G[l,u] arg == !F[l,u] !arg``, kept in core form as ``!(true U[l,u] !arg)``."""
+    return neg(eventually(neg(arg), interval))
+
+
+def nxt(arg: Formula) -> Formula:
+    """``X arg``; ``X true == true`` and ``X false == false``."""
+    if isinstance(arg, Const):
+        return arg
+    return Next(arg)
+
+
+def dist(mu: DistSpec, arg: Formula) -> Formula:
+    """The distribution eventuality ``D[mu] arg``."""
+    return Dist(mu, arg)
+
+
+# --------------------------------------------------------------------------- traversal
+
+
+def subformulas(f: Formula):
+    """Every subformula of ``f`` (pre-order, ``f`` first; shared subterms repeated)."""
+    stack = [f]
+    while stack:
+        g = stack.pop()
+        yield g
+        match g:
+            case Not(a) | Next(a) | Dist(_, a):
+                stack.append(a)
+            case And(args) | Or(args):
+                stack.extend(reversed(args))
+            case Until(left, right, _) | Release(left, right, _):
+                stack.append(right)
+                stack.append(left)
+
+
+def atoms(f: Formula) -> frozenset[str]:
+    """The names of the propositions that occur in ``f``."""
+    return frozenset(g.name for g in subformulas(f) if isinstance(g, Prop))
+
+
+# --------------------------------------------------------------------------- printing
+
+# Precedence levels, loosest first; a child printed at a level below its context is
+# parenthesised.  ``->`` is sugar and never printed (``!a | b`` parses to the same node).
+_OR, _AND, _BIN, _UNARY = 1, 2, 3, 4
+
+
+def _bracket(iv: Interval | None) -> str:
+    return "" if iv is None else str(iv)
+
+
+def _show(f: Formula, ctx: int) -> str:
+    match f:
+        case Const(v):
+            return "true" if v else "false"
+        case Prop(name):
+            return name
+        case Not(Until(Const(True), Not(inner), iv)):
+            text, level = f"G{_bracket(iv)} {_show(inner, _UNARY)}", _UNARY
+        case Not(a):
+            text, level = f"!{_show(a, _UNARY)}", _UNARY
+        case Next(a):
+            text, level = f"X {_show(a, _UNARY)}", _UNARY
+        case Dist(mu, a):
+            text, level = f"D[{mu}] {_show(a, _UNARY)}", _UNARY
+        case Until(Const(True), right, iv):
+            text, level = f"F{_bracket(iv)} {_show(right, _UNARY)}", _UNARY
+        case Release(Const(False), right, iv):
+            # ``false R p`` is ``G p`` but is a different node from ``!(true U !p)``, so
+            # it keeps the R syntax to round-trip.
+            text, level = f"false R{_bracket(iv)} {_show(right, _UNARY)}", _BIN
+        case Until(left, right, iv):
+            text = f"{_show(left, _UNARY)} U{_bracket(iv)} {_show(right, _UNARY)}"
+            level = _BIN
+        case Release(left, right, iv):
+            text = f"{_show(left, _UNARY)} R{_bracket(iv)} {_show(right, _UNARY)}"
+            level = _BIN
+        case And(args):
+            text, level = " & ".join(_show(a, _AND + 1) for a in args), _AND
+        case Or(args):
+            text, level = " | ".join(_show(a, _OR + 1) for a in args), _OR
+        case _:
+            raise TypeError(f"not a formula: {f!r}")
+    return f"({text})" if level < ctx else text
