@@ -19,7 +19,7 @@ precedence rules allow (loosest first: ``->``, ``|``, ``&``, ``U``/``R``, unary)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeAlias
 
 __all__ = [
@@ -150,6 +150,7 @@ class Const(Formula):
     """``true`` or ``false``."""
 
     value: bool
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return "TRUE" if self.value else "FALSE"
@@ -160,6 +161,7 @@ class Prop(Formula):
     """An atomic proposition: a robot proposition of the game or an external event."""
 
     name: str
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Prop({self.name!r})"
@@ -168,6 +170,7 @@ class Prop(Formula):
 @dataclass(frozen=True, slots=True, repr=False)
 class Not(Formula):
     arg: Formula
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Not({self.arg!r})"
@@ -178,6 +181,7 @@ class And(Formula):
     """n-ary conjunction (at least two operands, none an ``And``, no ``Const``)."""
 
     args: tuple[Formula, ...]
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"And({', '.join(map(repr, self.args))})"
@@ -188,6 +192,7 @@ class Or(Formula):
     """n-ary disjunction (at least two operands, none an ``Or``, no ``Const``)."""
 
     args: tuple[Formula, ...]
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Or({', '.join(map(repr, self.args))})"
@@ -201,6 +206,7 @@ class Until(Formula):
     left: Formula
     right: Formula
     interval: Interval | None = None
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Until({self.left!r}, {self.right!r}, {self.interval})"
@@ -214,6 +220,7 @@ class Release(Formula):
     left: Formula
     right: Formula
     interval: Interval | None = None
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Release({self.left!r}, {self.right!r}, {self.interval})"
@@ -224,6 +231,7 @@ class Next(Formula):
     """``X arg``: ``arg`` holds at the next step."""
 
     arg: Formula
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Next({self.arg!r})"
@@ -236,10 +244,24 @@ class Dist(Formula):
 
     mu: DistSpec
     arg: Formula
+    _hash: int = field(default=0, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"Dist({self.mu}, {self.arg!r})"
 
+
+def _cached_hash(self) -> int:
+    # Formulas are deep trees hashed over and over as dict keys (automaton states are
+    # formulas); the dataclass hash would walk the whole tree every time.
+    h = self._hash
+    if not h:
+        h = hash((type(self).__name__, *(getattr(self, f) for f in self.__match_args__))) or 1
+        object.__setattr__(self, "_hash", h)
+    return h
+
+
+for _cls in (Const, Prop, Not, And, Or, Until, Release, Next, Dist):
+    _cls.__hash__ = _cached_hash  # type: ignore[method-assign]
 
 TRUE = Const(True)
 FALSE = Const(False)

@@ -1,0 +1,191 @@
+"""The discrete-time deterministic timed automaton (DTA) of a co-safe MITL formula.
+
+In discrete time the reachable (location, clock valuation) pairs of a DTA form a finite
+automaton; this module stores that automaton directly.  State ``i`` *is* an obligation
+(a formula still to be satisfied from the next step on, ``states[i]``); its *location*
+is the obligation with every interval replaced by the interval it had in the source
+formula, and its *clock valuation* is how far each bounded operator has progressed
+(see :func:`DTA.location` and :func:`DTA.clocks`), so the automaton reads like the
+paper's Fig. 1.
+
+Transitions are stored per state as a reduced ordered decision diagram over the
+formula's propositions (tested in sorted order): ``step`` walks it, so a letter is read
+in time linear in the number of propositions and the alphabet ``2^AP`` is never
+enumerated.  Results are cached per (state, letter).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import TypeAlias
+
+from mitld_lp.logic.syntax import Formula, Interval, Release, Until, subformulas
+
+__all__ = ["DTA", "Diagram"]
+
+Diagram: TypeAlias = "int | tuple[str, Diagram, Diagram]"
+"""A leaf is a successor state index; a node ``(p, low, high)`` tests proposition ``p``
+(``high`` when ``p`` is in the letter)."""
+
+
+def _walk(d: Diagram, letter: frozenset[str] | set[str]) -> int:
+    while not isinstance(d, int):
+        p, low, high = d
+        d = high if p in letter else low
+    return d
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class DTA:
+    """A minimal complete deterministic automaton over letters ``2^AP``.
+
+    Attributes:
+        formula: the MITL formula it accepts (distribution eventualities read as ``F``).
+        atoms: the propositions the automaton reads, sorted.
+        states: the obligation each state stands for (``true`` for the accepting state,
+            ``false`` for the rejecting one).
+        initial: the state before any letter is read.
+        accepting: index of the accepting state (absorbing), ``None`` if unreachable.
+        rejecting: index of the rejecting state (absorbing; from it no word is
+            accepted), ``None`` if unreachable.
+        delta: per state, the decision diagram of its transition function.
+    """
+
+    formula: Formula
+    atoms: tuple[str, ...]
+    states: tuple[Formula, ...]
+    initial: int
+    accepting: int | None
+    rejecting: int | None
+    delta: tuple[Diagram, ...]
+    _cache: dict[tuple[int, frozenset[str]], int] = field(default_factory=dict, repr=False)
+
+    @property
+    def n_states(self) -> int:
+        """Number of reachable states (after minimisation)."""
+        return len(self.states)
+
+    def step(self, state: int, letter: Iterable[str]) -> int:
+        """The state reached from ``state`` by reading ``letter`` (a set of proposition
+        names that hold at this step; names the formula does not mention are ignored)."""
+        key = (state, letter if isinstance(letter, frozenset) else frozenset(letter))
+        nxt = self._cache.get(key)
+        if nxt is None:
+            nxt = self._cache[key] = _walk(self.delta[state], key[1])
+        return nxt
+
+    def is_accepting(self, state: int) -> bool:
+        return state == self.accepting
+
+    def is_rejecting(self, state: int) -> bool:
+        return state == self.rejecting
+
+    def run(self, trace: Iterable[Iterable[str]]) -> bool:
+        """True when the run on the finite ``trace`` reaches the accepting state."""
+        s = self.initial
+        if s == self.accepting:
+            return True
+        for letter in trace:
+            s = self.step(s, letter)
+            if s == self.accepting:
+                return True
+            if s == self.rejecting:
+                return False
+        return False
+
+    def successors(self, state: int) -> frozenset[int]:
+        """The states reachable from ``state`` in one step (for some letter)."""
+        out: set[int] = set()
+        stack: list[Diagram] = [self.delta[state]]
+        while stack:
+            d = stack.pop()
+            if isinstance(d, int):
+                out.add(d)
+            else:
+                stack.extend((d[1], d[2]))
+        return frozenset(out)
+
+    # ----------------------------------------------------------------- presentation
+
+    def _source_intervals(self) -> dict[tuple[type, Formula, Formula], list[Interval]]:
+        table: dict[tuple[type, Formula, Formula], list[Interval]] = {}
+        for g in subformulas(self.formula):
+            if isinstance(g, Until | Release) and g.interval is not None:
+                table.setdefault((type(g), g.left, g.right), []).append(g.interval)
+        return table
+
+    def clocks(self, state: int) -> tuple[tuple[str, int], ...]:
+        """The clock valuation of ``state``: for each bounded operator of the source
+        formula that is in progress, ``(name, elapsed steps)``; the clock of the operator
+        ``U[l,u]`` is named after it, e.g. ``"F[0,3] A"``."""
+        return tuple((name, v) for name, v, _ in self._clock_view(state))
+
+    def location(self, state: int) -> str:
+        """The obligation of ``state`` with every interval shown as in the source formula
+        and the elapsed time as a clock: ``F[0,3] A {x=1}`` reads "F[0,3] A, one step in"."""
+        text = str(self.states[state])
+        for _, v, (current, source) in self._clock_view(state):
+            text = text.replace(str(current), f"{source} {{x={v}}}", 1)
+        return text
+
+    def _clock_view(self, state: int):
+        table = self._source_intervals()
+        seen: set[Formula] = set()
+        out = []
+        for g in subformulas(self.states[state]):
+            if not isinstance(g, Until | Release) or g.interval is None or g in seen:
+                continue
+            seen.add(g)
+            iv = g.interval
+            for src in table.get((type(g), g.left, g.right), ()):
+                shift = src.hi - iv.hi
+                if shift >= 0 and (src.lo - iv.lo == shift or iv.lo == 0 and src.lo <= shift):
+                    source = type(g)(g.left, g.right, src)
+                    if shift > 0:
+                        out.append((str(source), shift, (g, source)))
+                    break
+        return out
+
+    def to_dot(self) -> str:
+        """Graphviz DOT text: one node per state labelled by location and clocks, one edge
+        per (state, successor) labelled by the letters that take it (as a guard over the
+        atoms, in disjunctive form)."""
+        lines = [
+            "digraph DTA {",
+            "  rankdir=LR;",
+            '  node [shape=box, style=rounded, fontname="Helvetica"];',
+            '  __init [shape=point, label=""];',
+        ]
+        for i in range(self.n_states):
+            label = _dot_escape(self.location(i) if i != self.accepting else "accept")
+            if i == self.rejecting:
+                label = "reject"
+            shape = ', peripheries=2' if i == self.accepting else ""
+            lines.append(f'  s{i} [label="{i}: {label}"{shape}];')
+        lines.append(f"  __init -> s{self.initial};")
+        for i in range(self.n_states):
+            for target, guard in sorted(_guards(self.delta[i]).items()):
+                lines.append(f'  s{i} -> s{target} [label="{_dot_escape(guard)}"];')
+        lines.append("}")
+        return "\n".join(lines) + "\n"
+
+
+def _dot_escape(text: str) -> str:
+    return text.replace("\\", "\\\\").replace('"', '\\"')
+
+
+def _guards(d: Diagram) -> dict[int, str]:
+    """For each leaf of ``d``, the disjunction of the paths' conjunctions leading to it."""
+    paths: dict[int, list[str]] = {}
+
+    def go(node: Diagram, lits: tuple[str, ...]) -> None:
+        if isinstance(node, int):
+            paths.setdefault(node, []).append(" & ".join(lits) if lits else "true")
+            return
+        p, low, high = node
+        go(high, (*lits, p))
+        go(low, (*lits, f"!{p}"))
+
+    go(d, ())
+    return {t: " | ".join(ps) for t, ps in paths.items()}

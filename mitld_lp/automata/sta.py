@@ -1,0 +1,177 @@
+"""The stochastic timed automaton (STA): the DTA plus the external events' distributions.
+
+A state of the paper's STA is ``(location, clock vector, Y)`` with ``Y`` the events that
+have not happened yet.  Two facts make it small and exact here:
+
+* Every event is pending from step 0 and stops mattering once it has happened, so the
+  age of *every* pending event is the current step ``t``: one clock serves them all
+  (the paper keeps one per event; they would always be equal).
+* The per-step probability of a pending event ``a`` at step ``k`` is its *hazard*
+  ``h_a(k) = mu_a(k) / P(K_a > k - 1)`` (DESIGN.md; the paper's ``mu_a(v + tau)`` is right
+  only for the geometric distribution).  An event whose hazard is constant from step
+  ``k0`` on needs the clock only up to ``k0 - 1`` (memoryless: no clock at all); an
+  event whose hazard never becomes constant is truncated at a point ``T_a``: a run still
+  waiting for it after step ``T_a`` goes to the truncation sink, with probability
+  ``P(K_a > T_a)``.
+
+The paper's four cases of the transition probability are one product over the pending
+events: ``p(E) = prod_{a in E} h_a(k) * prod_{b in Y \\ E} (1 - h_b(k))`` for the set ``E``
+of events that happen at step ``k = t + 1``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.distributions import FirstOccurrence
+
+__all__ = ["EventClock", "STA", "EventOutcome", "TRUNCATED", "make_sta"]
+
+TRUNCATED = -1
+"""The clock value of an outcome that ran past a truncation point."""
+
+
+@dataclass(frozen=True, slots=True)
+class EventClock:
+    """How the clock is kept for one event.
+
+    ``cap``: clock values ``>= cap`` are equivalent for this event (its hazard is
+    constant from step ``cap + 1`` on); ``truncation``: the run goes to the truncation
+    sink when the event is still pending after step ``truncation`` (None: exact).
+    """
+
+    event: str
+    distribution: FirstOccurrence
+    cap: int
+    truncation: int | None
+
+    def hazard(self, clock: int) -> float:
+        """Probability that the event happens in the step after ``clock`` steps."""
+        return float(self.distribution.hazard(min(clock, self.cap) + 1))
+
+    @property
+    def tail(self) -> float:
+        """P(K > truncation): the probability mass the truncation cuts off."""
+        return 0.0 if self.truncation is None else float(
+            self.distribution.survival(self.truncation)
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class EventOutcome:
+    """One outcome of a step's events: which happened, its probability, what follows."""
+
+    occurred: frozenset[str]
+    probability: float
+    pending: frozenset[str]
+    clock: int  # TRUNCATED when the outcome crosses a truncation point
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class STA:
+    """A DTA with the distributions of its external events (see the module docstring)."""
+
+    dta: DTA
+    clocks: Mapping[str, EventClock]
+    _cache: dict[tuple[frozenset[str], int], tuple[EventOutcome, ...]] = field(
+        default_factory=dict, repr=False
+    )
+
+    @property
+    def events(self) -> frozenset[str]:
+        return frozenset(self.clocks)
+
+    @property
+    def truncation_points(self) -> dict[str, int]:
+        return {a: c.truncation for a, c in self.clocks.items() if c.truncation is not None}
+
+    @property
+    def epsilon_achieved(self) -> float:
+        """The probability that some truncated event is still pending after its truncation
+        point, ``1 - prod_a (1 - P(K_a > T_a))`` (events are independent); it bounds
+        ``upper - lower``."""
+        keep = 1.0
+        for c in self.clocks.values():
+            keep *= 1.0 - c.tail
+        return 1.0 - keep
+
+    def cap(self, pending: frozenset[str]) -> int:
+        """The largest clock value that still matters while ``pending`` are pending."""
+        return max((self.clocks[a].cap for a in pending), default=0)
+
+    def outcomes(self, pending: frozenset[str], clock: int) -> tuple[EventOutcome, ...]:
+        """The distribution of the events of the next step, from ``clock`` with ``pending``.
+
+        The outcomes' probabilities sum to 1; outcomes of probability 0 are left out.
+        """
+        key = (pending, clock)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        events = sorted(pending)
+        hazards = [self.clocks[a].hazard(clock) for a in events]
+        out = []
+        for happened in itertools.product((False, True), repeat=len(events)):
+            p = 1.0
+            for h, yes in zip(hazards, happened, strict=True):
+                p *= h if yes else 1.0 - h
+            if p <= 0.0:
+                continue
+            occurred = frozenset(a for a, yes in zip(events, happened, strict=True) if yes)
+            left = pending - occurred
+            t = clock + 1
+            if any(
+                (T := self.clocks[a].truncation) is not None and t > T for a in left
+            ):
+                nxt = TRUNCATED
+            else:
+                nxt = min(t, self.cap(left))
+            out.append(EventOutcome(occurred, p, left, nxt))
+        result = tuple(out)
+        self._cache[key] = result
+        return result
+
+
+def make_sta(
+    dta: DTA,
+    distributions: Mapping[str, FirstOccurrence],
+    epsilon: float,
+    *,
+    clock_reduction: bool = True,
+    truncation: Mapping[str, int] | None = None,
+) -> STA:
+    """Attach event distributions to ``dta``, choosing each event's clock.
+
+    With ``clock_reduction`` an event whose hazard is constant from step ``k0`` on keeps
+    the clock up to ``k0 - 1`` and is exact; the others are truncated, at the explicit
+    points in ``truncation`` or else at the smallest ``T_a`` with ``P(K_a > T_a) <=
+    epsilon / m`` (``m`` truncated events share the budget equally).  Without it every
+    event is truncated, as in the paper.
+    """
+    truncation = dict(truncation or {})
+    unknown = set(truncation) - set(distributions)
+    if unknown:
+        raise ValueError(f"truncation: no event named {', '.join(sorted(unknown))}")
+    for a, T in truncation.items():
+        if isinstance(T, bool) or not isinstance(T, int) or T < 0:
+            raise ValueError(f"truncation.{a}: must be an integer >= 0, got {T!r}")
+    exact = {
+        a: d.constant_hazard_from
+        for a, d in distributions.items()
+        if clock_reduction and a not in truncation and d.constant_hazard_from is not None
+    }
+    cut = [a for a in distributions if a not in exact]
+    auto = [a for a in cut if a not in truncation]
+    if auto and not (0.0 < epsilon < 1.0):
+        raise ValueError(f"epsilon: must be in (0, 1), got {epsilon!r}")
+    clocks: dict[str, EventClock] = {}
+    for a, d in sorted(distributions.items()):
+        if a in exact:
+            clocks[a] = EventClock(a, d, cap=exact[a] - 1, truncation=None)
+        else:
+            T = truncation[a] if a in truncation else d.truncation_point(epsilon / len(auto))
+            clocks[a] = EventClock(a, d, cap=T, truncation=T)
+    return STA(dta, clocks)
