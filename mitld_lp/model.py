@@ -1,0 +1,504 @@
+"""Model files: a task, a world and the events' distributions in one TOML file.
+
+The schema (DESIGN.md, "Model files")::
+
+    name = "bus_grid"                   # required, non-empty string
+    spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
+    epsilon = 0.01                      # optional, in (0, 1), default 0.01
+
+    [grid]                              # the game: exactly one game table
+    size = [4, 4]                       # required, positive integers (width, height)
+    start = [0, 0]                      # required, a free cell
+    slip = 0.1                          # optional, in [0, 0.5], default 0
+    obstacles = [[2, 2]]                # optional, cells, default none
+
+    [regions]                           # optional (grid only): name -> non-empty cells
+    A = [[1, 2]]
+
+    [distributions]                     # optional: name -> inline table (see
+    mu1 = { geometric = 0.8 }           # mitld_lp.distributions.from_table)
+
+Every key is validated: unknown keys, wrong types (``true`` is not a number) and
+out-of-range values are errors.  The specification is parsed and checked to be in the
+co-safe fragment; each of its events gets exactly one distribution, either a name bound
+under ``[distributions]`` or an inline literal; every other proposition of the spec must
+be a region; region names must not be events; a distribution that the spec does not
+use is an error (nothing in a model file is silently ignored).  Regions the spec does
+not mention are allowed: they describe the world, which several tasks may share.
+
+Every error is a :class:`ModelError` whose message starts with the source (the file
+path) and names the key path and the offending value, e.g.
+``models/x.toml: grid.slip: must be in [0, 0.5], got 0.7``.
+
+Game kinds: the loader dispatches on which game table is present (today only
+``[grid]``); a new kind is one entry in ``_GAME_KINDS`` with the top-level tables it
+owns and a builder.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec, from_table
+from mitld_lp.game import Game
+from mitld_lp.gridworld import GridWorld
+from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
+from mitld_lp.logic.parser import ParseError, parse
+from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+
+__all__ = [
+    "Model",
+    "ModelError",
+    "load_model",
+    "loads_model",
+    "bind_distributions",
+    "DEFAULT_EPSILON",
+]
+
+DEFAULT_EPSILON = 0.01
+"""The truncation budget used when a model file gives no ``epsilon``."""
+
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+# Words the formula grammar reserves: a proposition of that name could not be written.
+_RESERVED = frozenset({"true", "false", "F", "G", "X", "U", "R", "D"})
+
+
+class ModelError(ValueError):
+    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``."""
+
+
+@dataclass(frozen=True, slots=True)
+class Model:
+    """A loaded, validated model file.
+
+    Attributes:
+        name: the model's ``name``.
+        spec: the parsed specification.
+        spec_text: the specification as written in the file.
+        epsilon: the truncation budget shared over the events.
+        game: the world (today a :class:`mitld_lp.gridworld.GridWorld`).
+        distributions: read-only mapping ``event -> FirstOccurrence`` with one entry per
+            external event of the spec (the events are exactly its keys).
+        source: the file the model was read from, or ``None`` for :func:`loads_model`.
+    """
+
+    name: str
+    spec: Formula
+    spec_text: str
+    epsilon: float
+    game: Game[Any]
+    distributions: Mapping[str, FirstOccurrence]
+    source: Path | None = None
+
+    @property
+    def events(self) -> frozenset[str]:
+        """The external events of the spec."""
+        return frozenset(self.distributions)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _key(part: str) -> str:
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else f'"{part}"'
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{_key(key)}" if path else _key(key)
+
+
+def _show(value: Any) -> str:
+    """A value the way TOML writes it (``true``, ``"text"``, ``[1, 2]``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{_key(k)} = {_show(v)}" for k, v in value.items()) + " }"
+    return repr(value)
+
+
+def _type_name(value: Any) -> str:
+    match value:
+        case bool():
+            return "a boolean"
+        case int():
+            return "an integer"
+        case float():
+            return "a float"
+        case str():
+            return "a string"
+        case list():
+            return "an array"
+        case dict():
+            return "a table"
+    return type(value).__name__
+
+
+class _Context:
+    """Error reporting for one source."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def error(self, path: str, message: str) -> ModelError:
+        where = f"{path}: " if path else ""
+        return ModelError(f"{self.source}: {where}{message}")
+
+    def table(self, value: Any, path: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(path, f"must be a table, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def keys(
+        self, table: dict[str, Any], path: str, required: set[str], optional: set[str]
+    ) -> None:
+        allowed = required | optional
+        for k in table:
+            if k not in allowed:
+                raise self.error(
+                    _join(path, k), f"unknown key (allowed: {', '.join(sorted(allowed))})"
+                )
+        for k in sorted(required):
+            if k not in table:
+                raise self.error(_join(path, k), "missing (required)")
+
+    def string(self, value: Any, path: str) -> str:
+        if not isinstance(value, str):
+            raise self.error(path, f"must be a string, got {_type_name(value)} {_show(value)}")
+        if not value.strip():
+            raise self.error(path, "must not be empty")
+        return value
+
+    def number(self, value: Any, path: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(path, f"must be a number, got {_type_name(value)} {_show(value)}")
+        if not math.isfinite(value):
+            raise self.error(path, f"must be finite, got {_show(value)}")
+        return float(value)
+
+    def integer(self, value: Any, path: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(path, f"must be an integer, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def array(self, value: Any, path: str) -> list[Any]:
+        if not isinstance(value, list):
+            raise self.error(path, f"must be an array, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def pair(self, value: Any, path: str) -> tuple[int, int]:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.error(path, f"must be a pair [x, y] of integers, got {_show(value)}")
+        return (self.integer(value[0], f"{path}[0]"), self.integer(value[1], f"{path}[1]"))
+
+
+# --------------------------------------------------------------------------- game kinds
+
+
+@dataclass(frozen=True, slots=True)
+class _GameKind:
+    """A kind of world a model file may describe.
+
+    Attributes:
+        table: the top-level table that selects this kind (``grid``).
+        extra_tables: other top-level tables this kind owns (``regions``).
+        proposition_noun: what the kind calls a robot proposition, for messages.
+        build: ``(document, context) -> game``; validates its own tables.
+    """
+
+    table: str
+    extra_tables: tuple[str, ...]
+    proposition_noun: str
+    build: Callable[[dict[str, Any], _Context], Game[Any]]
+
+
+def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
+    grid = ctx.table(doc["grid"], "grid")
+    ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles"})
+
+    size = grid["size"]
+    if not isinstance(size, list) or len(size) != 2:
+        raise ctx.error("grid.size", f"must be [width, height], got {_show(size)}")
+    width = ctx.integer(size[0], "grid.size[0]")
+    height = ctx.integer(size[1], "grid.size[1]")
+    for i, v in enumerate((width, height)):
+        if v < 1:
+            raise ctx.error(f"grid.size[{i}]", f"must be a positive integer, got {v}")
+
+    def on_grid(value: Any, path: str) -> tuple[int, int]:
+        cell = ctx.pair(value, path)
+        x, y = cell
+        if not (0 <= x < width and 0 <= y < height):
+            raise ctx.error(
+                path,
+                f"cell {_show(value)} is off the {width}x{height} grid "
+                f"(x in 0..{width - 1}, y in 0..{height - 1})",
+            )
+        return cell
+
+    def cells(value: Any, path: str) -> list[tuple[int, int]]:
+        out: list[tuple[int, int]] = []
+        for i, v in enumerate(ctx.array(value, path)):
+            cell = on_grid(v, f"{path}[{i}]")
+            if cell in out:
+                raise ctx.error(f"{path}[{i}]", f"cell {_show(v)} is listed twice")
+            out.append(cell)
+        return out
+
+    slip = 0.0
+    if "slip" in grid:
+        slip = ctx.number(grid["slip"], "grid.slip")
+        if not 0.0 <= slip <= 0.5:
+            raise ctx.error("grid.slip", f"must be in [0, 0.5], got {_show(grid['slip'])}")
+    obstacles = cells(grid.get("obstacles", []), "grid.obstacles")
+    start = on_grid(grid["start"], "grid.start")
+    if start in obstacles:
+        raise ctx.error("grid.start", f"cell {_show(grid['start'])} is an obstacle")
+
+    regions: dict[str, frozenset[tuple[int, int]]] = {}
+    table = ctx.table(doc.get("regions", {}), "regions")
+    for name, value in table.items():
+        path = _join("regions", name)
+        if not _IDENT.match(name) or name in _RESERVED:
+            raise ctx.error(
+                path,
+                f"region name {_show(name)} is not a proposition name (letters, digits, "
+                f"'_', not starting with a digit, not one of {', '.join(sorted(_RESERVED))})",
+            )
+        rcells = cells(value, path)
+        if not rcells:
+            raise ctx.error(path, "must list at least one cell")
+        for i, c in enumerate(rcells):
+            if c in obstacles:
+                raise ctx.error(f"{path}[{i}]", f"cell {_show(list(c))} is an obstacle")
+        regions[name] = frozenset(rcells)
+    try:
+        return GridWorld(
+            width=width,
+            height=height,
+            start=start,
+            slip=slip,
+            obstacles=frozenset(obstacles),
+            regions=tuple(regions.items()),
+        )
+    except ValueError as exc:  # every check above should have caught it first
+        raise ctx.error("grid", str(exc)) from exc
+
+
+_GAME_KINDS: tuple[_GameKind, ...] = (
+    _GameKind(
+        table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
+    ),
+)
+
+_COMMON_REQUIRED = {"name", "spec"}
+_COMMON_OPTIONAL = {"epsilon", "distributions"}
+
+
+# --------------------------------------------------------------------------- the spec
+
+
+def _parse_spec(text: str, ctx: _Context) -> tuple[Formula, FragmentReport]:
+    """Parse the spec (errors carry ``line:column`` within the spec string) and check it
+    is in the supported co-safe fragment."""
+    try:
+        formula = parse(text)
+    except ParseError as exc:
+        raise ctx.error("spec", f"{exc.line}:{exc.column}: {exc.reason}") from exc
+    try:
+        report = check(formula)
+    except FragmentError as exc:
+        raise ctx.error("spec", str(exc)) from exc
+    return formula, report
+
+
+def _bind_events(
+    events: tuple[tuple[str, DistSpec], ...],
+    named: Mapping[str, FirstOccurrence],
+    ctx: _Context,
+) -> dict[str, FirstOccurrence]:
+    """One distribution per event: a ``DistRef`` is looked up in ``named``, a
+    ``DistLiteral`` is built.  Two different distributions for one event are an error."""
+    given: dict[str, DistSpec] = {}
+    bound: dict[str, FirstOccurrence] = {}
+    for event, mu in events:
+        if event in given:
+            if given[event] != mu:
+                raise ctx.error(
+                    "spec",
+                    f"event {event!r} is given two distributions, D[{given[event]}] and D[{mu}]",
+                )
+            continue
+        given[event] = mu
+        match mu:
+            case DistRef(name):
+                if name not in named:
+                    known = ", ".join(sorted(named)) or "none"
+                    raise ctx.error(
+                        "spec",
+                        f"distribution {name!r} (of event {event!r}) is not defined under "
+                        f"[distributions] (defined: {known})",
+                    )
+                bound[event] = named[name]
+            case DistLiteral():
+                try:
+                    bound[event] = from_spec(mu)
+                except DistributionError as exc:
+                    reason = getattr(exc, "reason", str(exc))
+                    raise ctx.error("spec", f"D[{mu}] {event}: {reason}") from exc
+            case _:
+                raise ctx.error("spec", f"event {event!r}: unknown distribution {mu!r}")
+    return bound
+
+
+def bind_distributions(
+    spec: Formula, named: Mapping[str, FirstOccurrence] | None = None, source: str = "<spec>"
+) -> dict[str, FirstOccurrence]:
+    """The distribution of each external event of ``spec``: ``D[name]`` looked up in
+    ``named``, an inline literal built.  Raises :class:`ModelError` naming the problem
+    (an unsupported formula, an unknown name, a bad literal)."""
+    ctx = _Context(source)
+    try:
+        report = check(spec)
+    except FragmentError as exc:
+        raise ctx.error("spec", str(exc)) from exc
+    return _bind_events(report.events, named or {}, ctx)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: _Context) -> ModelError:
+    """``SOURCE:LINE:COLUMN: TOML syntax error at line L, column C: what``."""
+    message = str(exc)
+    m = re.search(r"\s*\(at line (\d+), column (\d+)\)", message)
+    if m:
+        line, column = int(m.group(1)), int(m.group(2))
+        message = message[: m.start()] + message[m.end() :]
+    elif "(at end of document)" in message:
+        lines = text.split("\n")
+        line, column = len(lines), len(lines[-1]) + 1
+        message = message.replace("(at end of document)", "at the end of the file").strip()
+    else:
+        return ModelError(f"{ctx.source}: TOML syntax error: {message}")
+    return ModelError(
+        f"{ctx.source}:{line}:{column}: TOML syntax error at line {line}, column {column}: "
+        f"{message.strip()}"
+    )
+
+
+def _load(text: str, source: str, path: Path | None) -> Model:
+    ctx = _Context(source)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _toml_error(exc, text, ctx) from None
+
+    present = [k for k in _GAME_KINDS if k.table in doc]
+    if len(present) > 1:
+        raise ctx.error(
+            "",
+            f"exactly one game table is allowed, got {', '.join(f'[{k.table}]' for k in present)}",
+        )
+    if not present:
+        every = {k.table for k in _GAME_KINDS} | {t for k in _GAME_KINDS for t in k.extra_tables}
+        ctx.keys(doc, "", set(), _COMMON_REQUIRED | _COMMON_OPTIONAL | every)
+        allowed = ", ".join(f"[{k.table}]" for k in _GAME_KINDS)
+        raise ctx.error("", f"no game table: add one of {allowed}")
+    kind = present[0]
+    ctx.keys(doc, "", _COMMON_REQUIRED | {kind.table}, _COMMON_OPTIONAL | set(kind.extra_tables))
+
+    name = ctx.string(doc["name"], "name")
+    spec_text = ctx.string(doc["spec"], "spec")
+    epsilon = DEFAULT_EPSILON
+    if "epsilon" in doc:
+        epsilon = ctx.number(doc["epsilon"], "epsilon")
+        if not 0.0 < epsilon < 1.0:
+            raise ctx.error("epsilon", f"must be in (0, 1), got {_show(doc['epsilon'])}")
+
+    game = kind.build(doc, ctx)
+
+    named: dict[str, FirstOccurrence] = {}
+    for dname, value in ctx.table(doc.get("distributions", {}), "distributions").items():
+        dpath = _join("distributions", dname)
+        if not isinstance(value, dict):
+            raise ctx.error(
+                dpath,
+                f"must be an inline table such as {{ geometric = 0.5 }}, got "
+                f"{_type_name(value)} {_show(value)}",
+            )
+        try:
+            named[dname] = from_table(value, dpath)
+        except DistributionError as exc:
+            message = str(exc)
+            raise ModelError(
+                f"{source}: {message}" if dpath in message else f"{source}: {dpath}: {message}"
+            ) from exc
+
+    spec, report = _parse_spec(spec_text, ctx)
+    bound = _bind_events(report.events, named, ctx)
+    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
+    for dname in named:
+        if dname not in used:
+            raise ctx.error(
+                _join("distributions", dname),
+                f"defined but not used by spec (it has no D[{dname}])",
+            )
+
+    events = frozenset(bound)
+    props = game.proposition_names
+    noun = kind.proposition_noun
+    clashes = sorted(events & props)
+    if clashes:
+        where = _join(kind.extra_tables[0], clashes[0]) if kind.extra_tables else kind.table
+        raise ctx.error(
+            where,
+            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
+        )
+    unknown = sorted(atoms(spec) - events - props)
+    if unknown:
+        raise ctx.error("spec", f"proposition {unknown[0]!r} is neither a {noun} nor an event")
+
+    return Model(
+        name=name,
+        spec=spec,
+        spec_text=spec_text,
+        epsilon=epsilon,
+        game=game,
+        distributions=MappingProxyType(bound),
+        source=path,
+    )
+
+
+def loads_model(text: str, source: str = "<string>") -> Model:
+    """Load a model from TOML ``text``; ``source`` prefixes every error message.
+
+    Raises :class:`ModelError`.  The returned model's ``source`` is ``None``."""
+    return _load(text, source, None)
+
+
+def load_model(path: str | os.PathLike[str]) -> Model:
+    """Load and validate the model file at ``path``.
+
+    Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
+    file cannot be read or is not UTF-8."""
+    p = Path(path)
+    source = os.fspath(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
+    return _load(text, source, p)
