@@ -1,0 +1,26 @@
+"""Solvers for maximal reachability on a :class:`mitld_lp.mdp.MDP`.
+
+* :func:`solve_lp` -- the occupancy-measure LP (cvxpy with any installed LP solver, or
+  Clarabel called directly), its duals as the value function, and the policies;
+* :func:`interval_iteration` -- sound lower / upper bounds by value iteration;
+* :func:`evaluate_policy` -- the exact value of a deterministic policy;
+* :func:`write_lp`, :func:`write_drn` -- exports for external solvers and Storm.
+"""
+
+from mitld_lp.solvers.export import write_drn, write_lp
+from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+from mitld_lp.solvers.lp import OccupancyLP, occupancy_lp, solve_lp
+from mitld_lp.solvers.result import IterationResult, LPResult, Status
+
+__all__ = [
+    "IterationResult",
+    "LPResult",
+    "OccupancyLP",
+    "Status",
+    "evaluate_policy",
+    "interval_iteration",
+    "occupancy_lp",
+    "solve_lp",
+    "write_drn",
+    "write_lp",
+]

@@ -1,0 +1,174 @@
+"""Export the occupancy LP (MPS / CPLEX-LP, via HiGHS) and the MDP (Storm's DRN format).
+
+Both writers refuse to overwrite an existing file unless ``overwrite=True``.
+
+LP names: column ``y<c>`` is the occupancy of original choice ``c``; row ``s<i>`` is the
+flow constraint of original state ``i`` (a maybe state outside any MEC), row ``mec<k>``
+the one of collapsed MEC ``k`` (see :func:`mitld_lp.mdp.maximal_end_components`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.mdp import ABSORB, MDP, as_state_mask
+from mitld_lp.solvers.lp import occupancy_lp
+
+__all__ = ["write_lp", "write_drn"]
+
+logger = logging.getLogger(__name__)
+
+_LP_SUFFIXES = (".mps", ".lp")
+
+
+def _check_target_path(path: str | os.PathLike[str], overwrite: bool) -> Path:
+    p = Path(path)
+    if p.exists() and not overwrite:
+        raise FileExistsError(f"{p}: file exists; pass overwrite=True to replace it")
+    return p
+
+
+def write_lp(
+    mdp: MDP,
+    target: np.ndarray,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    everywhere: bool = False,
+) -> Path:
+    """Write the occupancy LP of :func:`mitld_lp.solvers.solve_lp` to ``path``.
+
+    The format follows the suffix: ``.mps`` (free MPS) or ``.lp`` (CPLEX LP).  The model
+    goes through HiGHS (``Highs.passModel`` then ``Highs.writeModel``), so any solver
+    reading those formats sees exactly the LP we solve: maximise
+    ``sum_c y(c) P(c, target)`` subject to the flow equalities and ``y >= 0``.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is false.
+        ValueError: unknown suffix, or the initial state is decided by graph analysis
+            (target or prob-0) and ``everywhere`` is false, so the LP would be empty.
+        OSError: HiGHS failed to write the file.
+    """
+    p = Path(path)
+    if p.suffix.lower() not in _LP_SUFFIXES:
+        raise ValueError(f"{p}: unknown LP format {p.suffix!r}; use one of {_LP_SUFFIXES}")
+    p = _check_target_path(p, overwrite)
+    lp = occupancy_lp(mdp, target, everywhere=everywhere)
+    q = lp.quotient
+    if q.initial < 0 and not everywhere:
+        raise ValueError(
+            "the initial state is a target or prob-0 state: its value is decided without "
+            "an LP; pass everywhere=True to export the LP of all the other states"
+        )
+    highspy: Any = importlib.import_module("highspy")
+    a = sp.csc_array(lp.a_eq)
+    model = highspy.HighsLp()
+    model.num_col_ = q.n_choices
+    model.num_row_ = q.n_states
+    model.sense_ = highspy.ObjSense.kMaximize
+    model.col_cost_ = np.asarray(lp.objective, dtype=np.float64)
+    model.col_lower_ = np.zeros(q.n_choices)
+    model.col_upper_ = np.full(q.n_choices, highspy.kHighsInf)
+    model.row_lower_ = np.asarray(lp.b_eq, dtype=np.float64)
+    model.row_upper_ = np.asarray(lp.b_eq, dtype=np.float64)
+    model.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    model.a_matrix_.num_col_ = q.n_choices
+    model.a_matrix_.num_row_ = q.n_states
+    model.a_matrix_.start_ = np.asarray(a.indptr, dtype=np.int32)
+    model.a_matrix_.index_ = np.asarray(a.indices, dtype=np.int32)
+    model.a_matrix_.value_ = np.asarray(a.data, dtype=np.float64)
+    model.col_names_ = [f"y{c}" for c in q.choice_origin.tolist()]
+    plain = np.flatnonzero((q.state_map >= 0) & (q.mecs.mec_of < 0))
+    model.row_names_ = [f"s{i}" for i in plain.tolist()] + [
+        f"mec{k}" for k in range(q.mecs.n_mecs)
+    ]
+    highs = highspy.Highs()
+    highs.setOptionValue("output_flag", False)
+    status = highs.passModel(model)
+    if status == highspy.HighsStatus.kError:
+        raise OSError(f"{p}: HiGHS rejected the model ({status})")
+    status = highs.writeModel(str(p))
+    if status == highspy.HighsStatus.kError or not p.exists():
+        raise OSError(f"{p}: HiGHS failed to write the model ({status})")
+    logger.info("wrote LP (%d rows, %d columns) to %s", q.n_states, q.n_choices, p)
+    return p
+
+
+_TOKEN = re.compile(r"\s+")
+
+
+def _drn_action(name: str) -> str:
+    return _TOKEN.sub("_", name.strip()) or "_"
+
+
+def write_drn(
+    mdp: MDP,
+    target: np.ndarray,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    truncated_label: bool = True,
+) -> Path:
+    """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``).
+
+    State ``i`` of the file is state ``i`` of ``mdp``; its choices appear in row order
+    with the action names of ``mdp.action_names`` (whitespace replaced by ``_``) or
+    ``absorb``.  Labels: ``init``; ``target`` on the states of ``target`` (so
+    ``Pmax=? [F "target"]`` in Storm is the quantity :func:`solve_lp` computes);
+    ``sink``; ``truncated`` (unless ``truncated_label=False``).  Probabilities are
+    written with Python's shortest round-trip ``repr``.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is false.
+    """
+    target = as_state_mask(mdp, target, "target")
+    p = _check_target_path(path, overwrite)
+    n = mdp.n_states
+    labels: list[list[str]] = [[] for _ in range(n)]
+    labels[mdp.initial].append("init")
+    marks = [("target", target), ("sink", np.asarray(mdp.sink, dtype=bool))]
+    if truncated_label:
+        marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
+    for name, mask in marks:
+        for s in np.flatnonzero(mask).tolist():
+            labels[s].append(name)
+    names = [_drn_action(a) for a in mdp.action_names] + ["absorb"]
+    actions = np.asarray(mdp.choice_actions, dtype=np.int64)
+    action_label = [names[a] if a != ABSORB else "absorb" for a in actions.tolist()]
+
+    matrix = sp.csr_array(mdp.matrix)
+    matrix.sort_indices()
+    indptr, indices, data = matrix.indptr, matrix.indices.tolist(), matrix.data.tolist()
+    row_groups = mdp.row_groups.tolist()
+    lines = [
+        "// Exported by mitld_lp",
+        "@type: MDP",
+        "@parameters",
+        "",
+        "@reward_models",
+        "",
+        "@nr_states",
+        str(n),
+        "@nr_choices",
+        str(mdp.n_choices),
+        "@model",
+    ]
+    for s in range(n):
+        head = f"state {s}"
+        lines.append(f"{head} {' '.join(labels[s])}" if labels[s] else head)
+        for c in range(row_groups[s], row_groups[s + 1]):
+            lines.append(f"\taction {action_label[c]}")
+            for k in range(int(indptr[c]), int(indptr[c + 1])):
+                if data[k] > 0:
+                    lines.append(f"\t\t{indices[k]} : {data[k]!r}")
+    p.write_text("\n".join(lines) + "\n")
+    logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
+    return p
