@@ -1,0 +1,82 @@
+"""mitld_lp: policy synthesis for MITLD (Metric Interval Temporal Logic with distribution
+eventualities) by occupancy-measure linear programming.
+
+Only light modules are imported here; the solver stack is imported where it is used.
+"""
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.translate import to_dta
+from mitld_lp.controller import Controller, Observation, RunStatus
+from mitld_lp.game import ExplicitGame, Game
+from mitld_lp.gridworld import GridWorld
+from mitld_lp.logic.parser import ParseError, parse, parse_distribution
+from mitld_lp.logic.syntax import (
+    FALSE,
+    TRUE,
+    And,
+    Const,
+    Dist,
+    DistLiteral,
+    DistRef,
+    DistSpec,
+    Formula,
+    Interval,
+    Next,
+    Not,
+    Or,
+    Prop,
+    Release,
+    Until,
+)
+from mitld_lp.mdp import MDP
+from mitld_lp.model import Model, ModelError, load_model, loads_model
+from mitld_lp.product import ProductState, product
+from mitld_lp.simulate import simulate
+from mitld_lp.synthesis import SynthesisResult, synthesize
+
+__version__ = "0.1.0"
+
+# One name per line so later stages can append their exports.
+__all__ = [
+    "__version__",
+    "parse",
+    "parse_distribution",
+    "ParseError",
+    "Formula",
+    "Const",
+    "Prop",
+    "Not",
+    "And",
+    "Or",
+    "Until",
+    "Release",
+    "Next",
+    "Dist",
+    "Interval",
+    "DistRef",
+    "DistLiteral",
+    "DistSpec",
+    "TRUE",
+    "FALSE",
+    "to_dta",
+    "DTA",
+    "STA",
+    "make_sta",
+    "Game",
+    "ExplicitGame",
+    "GridWorld",
+    "Model",
+    "ModelError",
+    "load_model",
+    "loads_model",
+    "MDP",
+    "ProductState",
+    "product",
+    "synthesize",
+    "SynthesisResult",
+    "Controller",
+    "Observation",
+    "RunStatus",
+    "simulate",
+]

@@ -1,0 +1,307 @@
+"""``synthesize``: the one place that wires the stages.
+
+    spec --to_dta--> DTA --make_sta--> STA --product(game)--> MDP --solve--> policy
+
+The product is built once; its truncation sink counted as losing gives the *lower*
+model, as winning the *upper* model.  Each model is solved (occupancy LP or interval
+iteration) and certified:
+
+* the extracted deterministic policy is evaluated exactly on its Markov chain (sparse
+  solve): a value the policy really achieves;
+* interval iteration gives sound lower and upper bounds on the optimum;
+* with the LP, its primal objective, its dual objective (the value function at the
+  initial state), the policy's value and the iteration bracket must agree within
+  ``certify_tol``.
+
+``lower`` is the exact value of the returned policy in the lower model (truncation
+counted as failure): the policy achieves at least that in the real, untruncated world.
+``upper`` is the sound upper bound of interval iteration on the upper model: no policy
+does better.  So the true optimum lies in ``[lower, upper]``, and
+``upper - lower <= epsilon_achieved`` up to the solver tolerance.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.translate import to_dta
+from mitld_lp.controller import Controller
+from mitld_lp.distributions import FirstOccurrence
+from mitld_lp.game import Game
+from mitld_lp.logic.parser import parse
+from mitld_lp.logic.syntax import Formula
+from mitld_lp.mdp import MDP
+from mitld_lp.model import Model, bind_distributions
+from mitld_lp.product import product
+from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.solvers.result import IterationResult, LPResult, Status
+
+__all__ = ["synthesize", "SynthesisResult", "ModelSolution", "Check", "Sizes"]
+
+log = logging.getLogger(__name__)
+
+Method = Literal["lp", "vi"]
+
+
+@dataclass(frozen=True, slots=True)
+class Check:
+    """One certification check: what was compared, whether it passed, the numbers."""
+
+    name: str
+    passed: bool
+    detail: str
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ModelSolution:
+    """The solution of one of the two models (lower: truncation loses; upper: it wins)."""
+
+    which: str
+    status: Status
+    value: float  # the method's optimum at the initial state
+    policy: np.ndarray  # deterministic: a choice row per state, -1 where absorbing
+    policy_value: float  # exact value of ``policy`` at the initial state
+    bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
+    lp: LPResult | None
+    iteration: IterationResult
+    checks: tuple[Check, ...]
+
+    @property
+    def certified(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+@dataclass(frozen=True, slots=True)
+class Sizes:
+    dta_states: int
+    states: int
+    choices: int
+    transitions: int
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SynthesisResult:
+    """What :func:`synthesize` returns (see the module docstring for the bracket).
+
+    ``status`` is ``OPTIMAL`` when every solve succeeded; ``certified`` tells whether all
+    checks passed, and ``failed_checks`` which did not.
+    """
+
+    status: Status
+    lower: float
+    upper: float
+    value: float
+    certified: bool
+    method: str
+    policy: np.ndarray
+    randomized: np.ndarray | None
+    controller: Controller
+    epsilon: float
+    epsilon_achieved: float
+    truncation_points: Mapping[str, int]
+    sizes: Sizes
+    timings: Mapping[str, float]
+    lower_model: ModelSolution
+    upper_model: ModelSolution
+    dta: DTA
+    sta: STA
+    mdp: MDP
+
+    @property
+    def failed_checks(self) -> tuple[Check, ...]:
+        return tuple(
+            c for m in (self.lower_model, self.upper_model) for c in m.checks if not c.passed
+        )
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(self.timings.values()))
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-ready record (the CLI's ``--json``)."""
+        return {
+            "status": self.status.value,
+            "lower": self.lower,
+            "upper": self.upper,
+            "value": self.value,
+            "certified": self.certified,
+            "failed_checks": [f"{c.name}: {c.detail}" for c in self.failed_checks],
+            "method": self.method,
+            "states": self.sizes.states,
+            "choices": self.sizes.choices,
+            "transitions": self.sizes.transitions,
+            "dta_states": self.sizes.dta_states,
+            "epsilon": self.epsilon,
+            "epsilon_achieved": self.epsilon_achieved,
+            "truncation_points": dict(self.truncation_points),
+            "seconds": self.seconds,
+            "timings": dict(self.timings),
+            "lp": None
+            if self.lower_model.lp is None
+            else {
+                "status": self.lower_model.lp.status.value,
+                "solver": self.lower_model.lp.solver,
+                "backend": self.lower_model.lp.backend,
+                "primal_objective": self.lower_model.lp.primal_objective,
+                "dual_objective": self.lower_model.lp.dual_objective,
+                "iterations": self.lower_model.lp.iterations,
+                "seconds": self.lower_model.lp.seconds,
+                "message": self.lower_model.lp.message,
+            },
+            "iteration": {
+                "status": self.lower_model.iteration.status.value,
+                "lower": self.lower_model.iteration.value_lower,
+                "upper": self.upper_model.iteration.value_upper,
+                "iterations": self.lower_model.iteration.iterations,
+            },
+        }
+
+
+def _close(name: str, a: float, b: float, tol: float) -> Check:
+    ok = bool(np.isfinite(a) and np.isfinite(b) and abs(a - b) <= tol)
+    return Check(name, ok, f"{a:.10g} vs {b:.10g} (|diff| = {abs(a - b):.2e}, tol {tol:g})")
+
+
+def _solve_model(
+    mdp: MDP,
+    target: np.ndarray,
+    which: str,
+    *,
+    method: Method,
+    solver: str,
+    backend: str,
+    tol: float,
+    certify_tol: float,
+    progress: bool,
+) -> ModelSolution:
+    it = interval_iteration(mdp, target, tol=tol, progress=progress)
+    checks = [
+        Check("iteration converged", it.status is Status.OPTIMAL, it.message),
+    ]
+    lp: LPResult | None = None
+    if method == "lp":
+        lp = solve_lp(mdp, target, solver=solver, backend=backend, tol=tol)  # type: ignore[arg-type]
+        ok = lp.status is Status.OPTIMAL and lp.policy is not None
+        checks.append(Check("LP solved", ok, f"{lp.status.value}: {lp.message}"))
+        if ok:
+            assert lp.policy is not None
+            policy, value = lp.policy, lp.value
+            checks.append(_close("LP primal = dual", lp.primal_objective, lp.dual_objective,
+                                 certify_tol))
+        else:
+            policy, value = it.policy, it.value_lower
+        status = lp.status
+    else:
+        policy, value, status = it.policy, it.value_lower, it.status
+    exact = float(evaluate_policy(mdp, target, policy)[mdp.initial])
+    lo, hi = it.value_lower, it.value_upper
+    checks.append(Check(
+        "policy value within iteration bracket",
+        lo - certify_tol <= exact <= hi + certify_tol,
+        f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
+    ))
+    checks.append(_close("policy value = optimum", exact, value, certify_tol))
+    checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
+    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, tuple(checks))
+
+
+def synthesize(
+    model_or_game: Model | Game[Any],
+    spec: Formula | str | None = None,
+    *,
+    epsilon: float | None = None,
+    distributions: Mapping[str, FirstOccurrence] | None = None,
+    method: Method = "lp",
+    solver: str = "CLARABEL",
+    backend: str = "cvxpy",
+    clock_reduction: bool = True,
+    truncation: Mapping[str, int] | None = None,
+    max_states: int = 5_000_000,
+    tol: float = 1e-9,
+    certify_tol: float = 1e-6,
+    progress: bool = False,
+) -> SynthesisResult:
+    """Maximise the probability that the game's run satisfies the MITLD ``spec``.
+
+    ``model_or_game``: a loaded :class:`Model` (its spec, epsilon and distributions are
+    the defaults) or any :class:`Game` together with ``spec`` (a formula or its text) and,
+    for ``D[name]`` references, ``distributions`` mapping names to laws.
+    ``method``: ``"lp"`` (occupancy LP through cvxpy, or ``backend="direct"`` Clarabel)
+    or ``"vi"`` (interval iteration alone).  Interval iteration always runs, as the
+    cross-check.  ``truncation`` fixes truncation points per event instead of ``epsilon``.
+    """
+    if method not in ("lp", "vi"):
+        raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if isinstance(model_or_game, Model):
+        model = model_or_game
+        game = model.game
+        formula = model.spec if spec is None else (parse(spec) if isinstance(spec, str) else spec)
+        laws = dict(model.distributions) if spec is None else bind_distributions(
+            formula, distributions)
+        eps = model.epsilon if epsilon is None else epsilon
+    else:
+        if spec is None:
+            raise ValueError("spec: required when a game (not a model) is given")
+        game = model_or_game
+        formula = parse(spec) if isinstance(spec, str) else spec
+        laws = bind_distributions(formula, distributions)
+        eps = 0.01 if epsilon is None else epsilon
+    timings["parse"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    dta = to_dta(formula)
+    sta = make_sta(dta, laws, eps, clock_reduction=clock_reduction, truncation=truncation)
+    timings["automaton"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    mdp = product(game, sta, max_states=max_states, progress=progress or None)
+    timings["product"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    common = dict(method=method, solver=solver, backend=backend, tol=tol,
+                  certify_tol=certify_tol, progress=progress)
+    low = _solve_model(mdp, mdp.target, "lower", **common)  # type: ignore[arg-type]
+    if mdp.truncated.any():
+        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
+    else:
+        high = low
+    timings["solve"] = time.perf_counter() - t0
+
+    statuses = {low.status, high.status}
+    status = Status.OPTIMAL if statuses == {Status.OPTIMAL} else next(
+        s for s in (low.status, high.status) if s is not Status.OPTIMAL)
+    randomized = low.lp.randomized if low.lp is not None else None
+    result = SynthesisResult(
+        status=status,
+        lower=low.policy_value,
+        upper=high.bracket[1],
+        value=low.value,
+        certified=low.certified and high.certified,
+        method=method,
+        policy=low.policy,
+        randomized=randomized,
+        controller=Controller(game, sta, mdp, low.policy),
+        epsilon=eps,
+        epsilon_achieved=sta.epsilon_achieved,
+        truncation_points=sta.truncation_points,
+        sizes=Sizes(dta.n_states, mdp.n_states, mdp.n_choices, mdp.n_transitions),
+        timings=timings,
+        lower_model=low,
+        upper_model=high,
+        dta=dta,
+        sta=sta,
+        mdp=mdp,
+    )
+    log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
+    return result

@@ -1,0 +1,165 @@
+"""End-to-end synthesis: values against Storm's reference numbers and hand calculations,
+the certified bracket, the controller and Monte-Carlo simulation."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitld_lp import GridWorld, Observation, RunStatus, load_model, simulate, synthesize
+from mitld_lp.solvers.result import Status
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+BUS_CASE1 = MODELS / "bus_grid.toml"
+BUS_CASE2 = MODELS / "bus_grid_case2.toml"
+RED_LIGHT = MODELS / "red_light.toml"
+
+# Pmax computed by Storm on an independent PRISM encoding of the same world (issue 5).
+STORM_CASE1 = 0.9244053
+STORM_CASE2 = 0.9138372
+
+
+@pytest.mark.parametrize(("path", "expected"), [(BUS_CASE1, STORM_CASE1), (BUS_CASE2, STORM_CASE2)])
+@pytest.mark.parametrize(
+    ("method", "backend"), [("lp", "cvxpy"), ("lp", "direct"), ("vi", "cvxpy")]
+)
+def test_canonical_model_matches_storm(path, expected, method, backend):
+    r = synthesize(load_model(path), method=method, backend=backend)
+    assert r.status is Status.OPTIMAL
+    assert r.certified, r.failed_checks
+    # Geometric buses are memoryless: nothing is truncated and the bracket is a point.
+    assert r.epsilon_achieved == 0.0
+    assert r.truncation_points == {}
+    assert r.lower == pytest.approx(expected, abs=1e-6)
+    assert r.upper == pytest.approx(expected, abs=1e-6)
+    assert r.value == pytest.approx(expected, abs=1e-6)
+
+
+def _corridor(width: int, slip: float) -> GridWorld:
+    return GridWorld.make(width, 1, start=(0, 0), slip=slip, regions={"A": [(width - 1, 0)]})
+
+
+def test_hand_value_deterministic_corridor():
+    # A is two moves away and must be occupied at the very step the event happens; the
+    # event comes at step 1, 2, 3 with 0.2, 0.3, 0.4 and never with 0.1.  The robot is
+    # at A from step 2 on, so it succeeds exactly when 2 <= K <= 3: 0.3 + 0.4.
+    r = synthesize(_corridor(3, 0.0), "D[pmf(0.2, 0.3, 0.4)] b & F(b & F[0,0] A)")
+    assert r.certified, r.failed_checks
+    assert r.lower == pytest.approx(0.7, abs=1e-7)
+    assert r.upper == pytest.approx(0.7, abs=1e-7)
+
+
+def test_hand_value_slippery_corridor():
+    # 2x1 corridor, slip 0.1: moving E reaches A with 0.8, else both perpendicular moves
+    # leave the grid and the robot stays.  P(at A at step 1) = 0.8, at step 2 = 0.8 +
+    # 0.2 * 0.8 = 0.96.  The event is at step 1 or 2 with 1/2 each: 0.5*0.8 + 0.5*0.96.
+    r = synthesize(_corridor(2, 0.1), "D[pmf(0.5, 0.5)] b & F(b & F[0,0] A)")
+    assert r.certified, r.failed_checks
+    assert r.lower == pytest.approx(0.88, abs=1e-7)
+    assert r.upper == pytest.approx(0.88, abs=1e-7)
+
+
+def test_truncation_bracket_contains_the_exact_value():
+    # The exact value with a truncated (Poisson) event, from a model without truncation:
+    # the same law written as an explicit pmf over a long support is exact.  The bracket
+    # of the truncated model must contain it, and tighten as epsilon shrinks.
+    from scipy.stats import poisson
+
+    lam = 2.0
+    masses = [float(poisson.pmf(k - 1, lam)) for k in range(1, 40)]
+    spec_exact = f"D[pmf({', '.join(repr(m) for m in masses)})] b & F(b & F[0,1] A)"
+    world = GridWorld.make(4, 1, start=(0, 0), slip=0.1, regions={"A": [(3, 0)]})
+    exact = synthesize(world, spec_exact)
+    assert exact.truncation_points == {}
+    widths = []
+    for eps in (0.2, 0.05, 0.01):
+        r = synthesize(world, f"D[poisson({lam})] b & F(b & F[0,1] A)", epsilon=eps)
+        assert r.certified, r.failed_checks
+        assert r.truncation_points, "a Poisson law has no constant hazard: it is truncated"
+        assert r.lower - 1e-7 <= exact.lower <= r.upper + 1e-7
+        assert r.upper - r.lower <= r.epsilon_achieved + 1e-7
+        assert r.epsilon_achieved <= eps
+        widths.append(r.upper - r.lower)
+    assert widths[0] >= widths[1] >= widths[2]
+
+
+def test_controller_follows_the_policy_and_tracks_the_automaton():
+    model = load_model(BUS_CASE1)
+    r = synthesize(model)
+    c = r.controller
+    c.reset()
+    first = c.act(Observation((0, 0)))
+    assert first == r.mdp.action_name(int(r.policy[r.mdp.initial]))
+    assert c.pending == frozenset({"b1", "b2"})
+    # Bus 1 arrives while the robot is at A: the task is done at once (k = j).
+    assert c.act(Observation((1, 2), frozenset({"b1"}))) is None
+    assert c.status is RunStatus.ACCEPTED
+    # A second run: bus 2 arrives while the robot is far from B; after 4 more steps away
+    # from B (and bus 1 never coming), the B obligation has expired.
+    c.reset()
+    c.act(Observation((0, 0)))
+    c.act(Observation((0, 1), frozenset({"b2"})))
+    assert c.pending == frozenset({"b1"})
+    for _ in range(4):
+        assert c.act(Observation((0, 3))) is not None
+    assert c.status is RunStatus.RUNNING
+    assert c.act(Observation((1, 2), frozenset({"b1"}))) is None  # bus 1 saves the day
+    assert c.status is RunStatus.ACCEPTED
+    with pytest.raises(ValueError, match="second time"):
+        c.act(Observation((0, 0), frozenset({"b1"})))
+
+
+def test_simulation_confidence_interval_contains_the_certified_value():
+    model = load_model(RED_LIGHT)
+    r = synthesize(model)
+    sim = simulate(model.game, r.sta, r.controller, runs=4000, seed=7, max_steps=200)
+    # The controller's true value lies between its value in the lower model and the
+    # upper bound; the 95% interval must meet that range.
+    assert sim.ci_low <= r.upper + 1e-9 and sim.ci_high >= r.lower - 1e-9
+    assert sim.runs == 4000
+    assert 0 <= sim.successes <= sim.runs
+
+
+def test_simulation_of_canonical_model():
+    model = load_model(BUS_CASE2)
+    r = synthesize(model)
+    sim = simulate(model.game, r.sta, r.controller, runs=3000, seed=3, max_steps=60)
+    assert sim.ci_low <= STORM_CASE2 <= sim.ci_high
+
+
+def test_wilson_interval_by_hand():
+    from mitld_lp.simulate import _wilson
+
+    lo, hi = _wilson(50, 100)
+    # Wilson score interval for 50/100 at 95%: 0.5 +- 1.96*sqrt(0.25/100 + 1.96^2/40000)
+    # / (1 + 1.96^2/100), centred at 0.5.
+    z = 1.959963984540054
+    half = z * math.sqrt(0.25 / 100 + z * z / 40000) / (1 + z * z / 100)
+    assert lo == pytest.approx(0.5 - half) and hi == pytest.approx(0.5 + half)
+
+
+def test_unknown_method_is_an_error():
+    with pytest.raises(ValueError, match="method"):
+        synthesize(load_model(BUS_CASE1), method="magic")  # type: ignore[arg-type]
+
+
+def test_solver_failure_is_a_status_not_an_exception():
+    r = synthesize(load_model(BUS_CASE1), solver="NO_SUCH_SOLVER")
+    assert r.lower_model.lp is not None
+    assert r.lower_model.lp.status is Status.FAILED
+    assert not r.certified
+    assert any(c.name == "LP solved" for c in r.failed_checks)
+    # The interval-iteration fallback still gives a sound bracket.
+    assert r.lower == pytest.approx(STORM_CASE1, abs=1e-6)
+
+
+def test_policy_is_a_choice_of_each_state():
+    r = synthesize(load_model(BUS_CASE1))
+    mdp = r.mdp
+    live = ~(mdp.target | mdp.sink | mdp.truncated)
+    rows = r.policy[live]
+    starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
+    assert np.all((rows >= starts) & (rows < ends))
