@@ -314,9 +314,57 @@ def _expand(f: Formula) -> Diagram | Formula:
     return low if low == high else (p, low, high)  # type: ignore[return-value]
 
 
+_DIAGRAMS: dict[Formula, Diagram | Formula] = {}
+
+
+def _diagram(f: Formula) -> Diagram | Formula:
+    """The transition diagram of obligation ``f`` (leaves: successor obligations).
+
+    Progression distributes over ``&`` and ``|``, so the diagram of a conjunction is the
+    conjunction of its operands' diagrams (the BDD *apply* operation).  Operands recur
+    across many states, so their diagrams are memoised; only atomic obligations are
+    expanded from scratch."""
+    d = _DIAGRAMS.get(f)
+    if d is not None:
+        return d
+    if isinstance(f, And | Or):
+        op = _and if isinstance(f, And) else _or
+        parts = [_diagram(a) for a in f.args]
+        d = parts[0]
+        for part in parts[1:]:
+            d = _apply(op, d, part, {})
+    else:
+        d = _expand(_unfold(f))
+    if len(_DIAGRAMS) > 500_000:
+        _DIAGRAMS.clear()
+    _DIAGRAMS[f] = d
+    return d
+
+
+def _apply(op, a, b, memo: dict) -> Diagram | Formula:
+    """Combine two ordered diagrams leaf-wise with ``op`` (variables in sorted order)."""
+    key = (id(a), id(b))
+    hit = memo.get(key)
+    if hit is not None:
+        return hit[0]
+    ta, tb = isinstance(a, tuple), isinstance(b, tuple)
+    if not ta and not tb:
+        r = op([a, b])
+    else:
+        va = a[0] if ta else None
+        vb = b[0] if tb else None
+        v = min(x for x in (va, vb) if x is not None)
+        a0, a1 = (a[1], a[2]) if va == v else (a, a)
+        b0, b1 = (b[1], b[2]) if vb == v else (b, b)
+        low, high = _apply(op, a0, b0, memo), _apply(op, a1, b1, memo)
+        r = low if low == high else (v, low, high)
+    memo[key] = (r, a, b)  # keep a and b alive so their ids stay theirs
+    return r
+
+
 def progress(obligation: Formula, letter: frozenset[str] | set[str]) -> Formula:
     """The obligation left after reading ``letter`` (for tests and for people)."""
-    node = _expand(_unfold(obligation))
+    node = _diagram(obligation)
     while isinstance(node, tuple):
         p, low, high = node
         node = high if p in letter else low
@@ -340,7 +388,7 @@ def to_dta(formula: Formula, *, max_states: int = 200_000, minimise: bool = True
     queue = deque([start])
     while queue:
         f = queue.popleft()
-        d = _expand(_unfold(f))
+        d = _diagram(f)
         raw.append(d)
         stack = [d]
         while stack:

@@ -1,0 +1,158 @@
+"""The model-consuming verbs of ``mitld-lp``, and the product checked by Storm."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitld_lp.cli import main
+from mitld_lp.model import load_model
+from mitld_lp.synthesis import synthesize
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+BUS = str(MODELS / "bus_grid.toml")
+RED = str(MODELS / "red_light.toml")
+
+REQUIRED_JSON = {"lower", "upper", "value", "certified", "states", "transitions",
+                 "epsilon_achieved", "method", "seconds"}
+
+
+def _json(capsys) -> dict:
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("method", ["lp", "vi"])
+def test_solve_json_has_the_contract_keys(capsys, method):
+    assert main(["solve", BUS, "--json", "--method", method]) == 0
+    out = _json(capsys)
+    assert REQUIRED_JSON <= set(out)
+    assert out["certified"] is True
+    assert out["method"] == method
+    assert out["lower"] == pytest.approx(0.9244053, abs=1e-6)
+    assert out["upper"] == pytest.approx(0.9244053, abs=1e-6)
+
+
+def test_solve_with_truncation_reports_a_bracket(capsys):
+    assert main(["solve", RED, "--json", "--epsilon", "0.05"]) == 0
+    out = _json(capsys)
+    assert out["lower"] <= out["upper"]
+    assert out["upper"] - out["lower"] <= out["epsilon_achieved"] + 1e-7
+    assert 0 < out["epsilon_achieved"] <= 0.05
+
+
+def test_solve_human_output(capsys):
+    assert main(["solve", BUS]) == 0
+    text = capsys.readouterr().out
+    assert "certified:    yes" in text and "0.9244053" in text
+
+
+def test_solver_failure_exits_3_with_the_status(capsys):
+    assert main(["solve", BUS, "--solver", "NO_SUCH_SOLVER", "--json"]) == 3
+    out = _json(capsys)
+    assert out["certified"] is False
+    assert any("LP solved" in f for f in out["failed_checks"])
+
+
+def test_info_counts(capsys):
+    assert main(["info", BUS, "--json"]) == 0
+    out = _json(capsys)
+    # Geometric events need no clock: one clock value; 16 cells at most.
+    assert out["clock values"] == 1
+    assert out["game states"] <= 16
+    assert out["truncation_points"] == {}
+    assert out["epsilon_achieved"] == 0
+
+
+def test_info_without_clock_reduction_grows_with_the_truncation_point(capsys):
+    sizes = []
+    for eps in ("0.2", "0.05", "0.01"):
+        assert main(["info", BUS, "--json", "--no-clock-reduction", "--epsilon", eps]) == 0
+        out = _json(capsys)
+        assert set(out["truncation_points"]) == {"b1", "b2"}
+        sizes.append((max(out["truncation_points"].values()), out["states"]))
+    assert sizes == sorted(sizes) and sizes[0][1] < sizes[-1][1]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["solve", "no/such/model.toml"],
+        ["info", str(MODELS)],  # a directory
+        ["solve", BUS, "--max-states", "10"],
+        ["dta", "G p"],
+        ["dta", "F[3,1] p"],
+        ["export", BUS],
+        ["simulate", BUS, "-n", "0"],
+    ],
+)
+def test_bad_input_exits_2_with_one_line(capsys, argv):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mitld-lp: error:")
+
+
+def test_bad_model_file_names_the_key(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(Path(BUS).read_text().replace("slip = 0.1", "slip = 0.7"))
+    assert main(["solve", str(bad)]) == 2
+    assert "grid.slip" in capsys.readouterr().err
+
+
+def test_export_never_overwrites(tmp_path, capsys):
+    out = tmp_path / "m.drn"
+    out.write_text("precious")
+    assert main(["export", BUS, "--drn", str(out)]) == 2
+    assert out.read_text() == "precious"
+    assert main(["export", BUS, "--drn", str(out), "--force"]) == 0
+    assert out.read_text().startswith("// ") or "@type: MDP" in out.read_text()
+
+
+def test_dta_dot(tmp_path, capsys):
+    dot = tmp_path / "a.dot"
+    assert main(["dta", "F(b & F[0,3] A)", "--dot", str(dot)]) == 0
+    text = dot.read_text()
+    assert text.startswith("digraph") and text.count("{") == text.count("}")
+
+
+def test_simulate_is_consistent(capsys):
+    assert main(["simulate", BUS, "-n", "1500", "--seed", "2", "--json",
+                 "--max-steps", "60"]) == 0
+    out = _json(capsys)
+    assert out["consistent"] is True
+
+
+def test_storm_checks_the_exported_product(tmp_path):
+    """Storm model-checks our product (DRN) and must agree state by state with the LP's
+    dual values and the interval-iteration bracket."""
+    stormpy = pytest.importorskip("stormpy")
+    from mitld_lp.solvers.export import write_drn
+    from mitld_lp.solvers.lp import solve_lp
+
+    for path in (BUS, RED):
+        r = synthesize(load_model(path))
+        for sol, target in ((r.lower_model, r.mdp.target),
+                            (r.upper_model, r.mdp.target | r.mdp.truncated)):
+            drn = tmp_path / f"{Path(path).stem}-{sol.which}.drn"
+            write_drn(r.mdp, target, drn, overwrite=True)
+            model = stormpy.build_model_from_drn(str(drn))
+            assert model.nr_states == r.mdp.n_states
+            prop = stormpy.parse_properties('Pmax=? [F "target"]')[0]
+            # Storm's default engine stops at a relative change of 1e-6 (stormpy 2.0 does
+            # not expose its solver environment), hence the tolerance below.
+            result = stormpy.model_checking(model, prop)
+            storm = np.array(result.get_value_vector())
+            # With the initial-state objective the duals of states the optimal policy
+            # never visits are only upper bounds; started from every state, the LP's
+            # duals are the value function everywhere.
+            lp = solve_lp(r.mdp, target, everywhere=True)
+            assert lp.values is not None
+            # DRN keeps our state numbering (state i of the file is state i of ours).
+            np.testing.assert_allclose(lp.values, storm, atol=1e-5)
+            assert sol.lp is not None and sol.lp.values is not None
+            assert np.all(sol.lp.values >= storm - 1e-5)
+            assert sol.lp.value == pytest.approx(storm[r.mdp.initial], abs=1e-5)
+            assert np.all(sol.iteration.lower <= storm + 1e-5)
+            assert np.all(storm <= sol.iteration.upper + 1e-5)
