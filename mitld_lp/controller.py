@@ -106,7 +106,7 @@ class Controller:
                 c.truncation for a, c in self.sta.clocks.items()
                 if a in pending and c.truncation is not None
             ]
-            if limits and clock > min(limits):
+            if limits and clock >= min(limits):
                 self.beyond_model = True
             clock = min(clock, self.sta.cap(pending))
         self._state = (q, pending, clock)

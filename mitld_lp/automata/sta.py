@@ -39,8 +39,10 @@ class EventClock:
     """How the clock is kept for one event.
 
     ``cap``: clock values ``>= cap`` are equivalent for this event (its hazard is
-    constant from step ``cap + 1`` on); ``truncation``: the run goes to the truncation
-    sink when the event is still pending after step ``truncation`` (None: exact).
+    constant from step ``cap + 1`` on); ``truncation``: the point ``T``: a run in which
+    the event has not happened by step ``T`` goes to the truncation sink, which cuts
+    exactly the mass ``P(K > T)`` (None: exact).  A truncated event's clock thus runs
+    up to ``T - 1``.
     """
 
     event: str
@@ -124,7 +126,7 @@ class STA:
             left = pending - occurred
             t = clock + 1
             if any(
-                (T := self.clocks[a].truncation) is not None and t > T for a in left
+                (T := self.clocks[a].truncation) is not None and t >= T for a in left
             ):
                 nxt = TRUNCATED
             else:
@@ -156,8 +158,8 @@ def make_sta(
     if unknown:
         raise ValueError(f"truncation: no event named {', '.join(sorted(unknown))}")
     for a, T in truncation.items():
-        if isinstance(T, bool) or not isinstance(T, int) or T < 0:
-            raise ValueError(f"truncation.{a}: must be an integer >= 0, got {T!r}")
+        if isinstance(T, bool) or not isinstance(T, int) or T < 1:
+            raise ValueError(f"truncation.{a}: must be an integer >= 1, got {T!r}")
     exact = {
         a: d.constant_hazard_from
         for a, d in distributions.items()
@@ -173,5 +175,5 @@ def make_sta(
             clocks[a] = EventClock(a, d, cap=exact[a] - 1, truncation=None)
         else:
             T = truncation[a] if a in truncation else d.truncation_point(epsilon / len(auto))
-            clocks[a] = EventClock(a, d, cap=T, truncation=T)
+            clocks[a] = EventClock(a, d, cap=max(T - 1, 0), truncation=T)
     return STA(dta, clocks)

@@ -1,0 +1,470 @@
+"""Independent checks of the product construction (``mitld_lp.product``).
+
+The reference is a brute-force product written here from the paper's definitions (the
+STA's four cases, the product MDP of Section III-C) with DESIGN.md's fixes (the hazard
+instead of the pmf; events never at step 0; the automaton reads the step-0 label first):
+
+* the grid moves are recomputed here (intended cell ``1 - 2 slip``, each perpendicular
+  ``slip``, bounce off the walls);
+* every external event keeps its own age, as the paper does (a tuple of ages, ``None``
+  once the event has happened), saturated at ``AGE_CAP`` beyond which every hazard used
+  is constant (checked);
+* the hazards are computed from the masses by hand;
+* the automaton is tracked as an *obligation* by :func:`progress` (not by the DTA's
+  minimised table); an obligation is matched to the DTA state with the same language
+  by a pairwise exploration of the two automata (exact, all lengths), and exactly one
+  DTA state must match (minimality).
+
+The two MDPs are compared by a bisimulation walk (paired states must have the same
+game state, automaton language and pending set, and the same successor distribution
+aggregated by that image) and by their optimal reach values, computed by a value
+iteration written here.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from mitld_lp.automata.sta import make_sta
+from mitld_lp.automata.translate import progress as _progress
+from mitld_lp.automata.translate import to_dta
+from mitld_lp.distributions import geometric, pmf
+from mitld_lp.gridworld import GridWorld
+from mitld_lp.logic import parse
+from mitld_lp.logic.syntax import FALSE, TRUE
+from mitld_lp.model import load_model
+from mitld_lp.product import ProductState, ProductTooLarge, product
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
+AGE_CAP = 8
+E = frozenset
+_PROGRESS: dict = {}
+
+
+def progress(ob, letter):
+    """:func:`mitld_lp.automata.translate.progress`, memoised for speed."""
+    key = (ob, letter)
+    if key not in _PROGRESS:
+        _PROGRESS[key] = _progress(ob, letter)
+    return _PROGRESS[key]
+
+
+# --------------------------------------------------------------------------- value iteration
+
+
+def value_iteration(matrix, row_groups, target, tol=1e-14, max_iter=200_000) -> np.ndarray:
+    """Max reach probability of ``target`` (from below, Jacobi, until the update is
+    below ``tol``)."""
+    matrix = sp.csr_array(matrix)
+    starts = np.asarray(row_groups[:-1])
+    v = target.astype(float)
+    for _ in range(max_iter):
+        new = np.maximum.reduceat(matrix @ v, starts)
+        new[target] = 1.0
+        if np.max(np.abs(new - v)) < tol:
+            return new
+        v = new
+    raise AssertionError("value iteration did not converge")
+
+
+def product_value(mdp) -> float:
+    return float(value_iteration(mdp.matrix, mdp.row_groups, np.asarray(mdp.target))[mdp.initial])
+
+
+# --------------------------------------------------------------------------- brute force
+
+
+def grid_moves(width, height, slip):
+    deltas = {"N": (0, 1), "S": (0, -1), "E": (1, 0), "W": (-1, 0)}
+    side = {"N": "EW", "S": "EW", "E": "NS", "W": "NS"}
+    moves = {}
+    for x, y in itertools.product(range(width), range(height)):
+        for a in "NSEW":
+            dist: dict = {}
+            for d, p in [(a, 1 - 2 * slip), (side[a][0], slip), (side[a][1], slip)]:
+                nx, ny = x + deltas[d][0], y + deltas[d][1]
+                if not (0 <= nx < width and 0 <= ny < height):
+                    nx, ny = x, y
+                if p > 0:
+                    dist[nx, ny] = dist.get((nx, ny), 0.0) + p
+            moves[(x, y), a] = dist
+    return moves
+
+
+def hazard_table(masses, never=0.0):
+    """h(k) for k = 1..len(masses)+AGE_CAP+2 from the masses (tail sums)."""
+    n = len(masses) + AGE_CAP + 2
+    m = list(masses) + [0.0] * (n - len(masses))
+    out = {}
+    for k in range(1, n + 1):
+        alive = never + math.fsum(m[k - 1 :])
+        out[k] = 1.0 if alive <= 0 else m[k - 1] / alive
+    return out
+
+
+def geometric_hazard(p):
+    return {k: p for k in range(1, AGE_CAP + 40)}
+
+
+class BruteForce:
+    """The product MDP from the definitions, states as plain tuples."""
+
+    def __init__(self, dta, moves, labels, start, hazards, truncation=None):
+        self.dta = dta
+        self.moves = moves
+        self.labels = labels
+        self.events = tuple(sorted(hazards))
+        self.hazards = hazards
+        self.truncation = truncation or {}
+        for h in hazards.values():  # saturating the ages at AGE_CAP is exact
+            assert all(h[k] == h[AGE_CAP + 1] for k in h if k > AGE_CAP)
+        ob = progress(dta.formula, labels.get(start, E()))  # step 0: no events
+        self.initial = self._close(start, ob, tuple(0 for _ in self.events))
+        self.actions = sorted({a for _, a in moves})
+
+    @staticmethod
+    def _close(s, ob, ages):
+        if ob == TRUE:
+            return "target"
+        if ob == FALSE:
+            return "sink"
+        return (s, ob, ages)
+
+    def successors(self, state, action):
+        s, ob, ages = state
+        pending = [e for e, age in zip(self.events, ages, strict=True) if age is not None]
+        out: dict = {}
+        for r in range(len(pending) + 1):
+            for happened in itertools.combinations(pending, r):
+                p_e = 1.0
+                for e, age in zip(self.events, ages, strict=True):
+                    if age is None:
+                        continue  # case 1: events that have happened do not count
+                    h = self.hazards[e][age + 1]
+                    p_e *= h if e in happened else 1.0 - h
+                if p_e == 0.0:
+                    continue
+                new_ages = tuple(
+                    None if age is None or e in happened else min(age + 1, AGE_CAP)
+                    for e, age in zip(self.events, ages, strict=True)
+                )
+                if any(
+                    age is not None
+                    and e not in happened
+                    and e in self.truncation
+                    and age + 1 >= self.truncation[e]
+                    for e, age in zip(self.events, ages, strict=True)
+                ):
+                    out["truncated"] = out.get("truncated", 0.0) + p_e
+                    continue
+                for s2, p_s in self.moves[s, action].items():
+                    label = self.labels.get(s2, E()) | E(happened)
+                    nxt = self._close(s2, progress(ob, label), new_ages)
+                    out[nxt] = out.get(nxt, 0.0) + p_e * p_s
+        return out
+
+    def explore(self):
+        states, index, rows = [self.initial], {self.initial: 0}, {}
+        head = 0
+        while head < len(states):
+            b = states[head]
+            head += 1
+            if isinstance(b, str):
+                continue
+            rows[b] = {}
+            for a in self.actions:
+                succ = self.successors(b, a)
+                rows[b][a] = succ
+                for b2 in succ:
+                    if b2 not in index:
+                        index[b2] = len(states)
+                        states.append(b2)
+        return states, index, rows
+
+    def value(self) -> float:
+        states, index, rows = self.explore()
+        data, cols, indptr, groups = [], [], [0], [0]
+        for b in states:
+            if isinstance(b, str):
+                choices = [{b: 1.0}]
+            else:
+                choices = [rows[b][a] for a in self.actions]
+            for row in choices:
+                for b2, p in row.items():
+                    cols.append(index[b2])
+                    data.append(p)
+                indptr.append(len(cols))
+            groups.append(groups[-1] + len(choices))
+        n = len(states)
+        matrix = sp.csr_array((data, cols, indptr), shape=(groups[-1], n))
+        target = np.array([b == "target" for b in states])
+        return float(value_iteration(matrix, np.array(groups), target)[0])
+
+
+class Matcher:
+    """Maps an obligation to the DTA state with the same language (exactly one)."""
+
+    def __init__(self, dta):
+        self.dta = dta
+        atoms = sorted(dta.atoms)
+        self.letters = [
+            E(c) for r in range(len(atoms) + 1) for c in itertools.combinations(atoms, r)
+        ]
+        self.cache: dict = {}
+
+    def same_language(self, ob, q) -> bool:
+        seen, stack = set(), [(ob, q)]
+        while stack:
+            o, s = stack.pop()
+            if (o, s) in seen:
+                continue
+            seen.add((o, s))
+            if (o == TRUE) != self.dta.is_accepting(s):
+                return False
+            stack.extend((progress(o, x), self.dta.step(s, x)) for x in self.letters)
+        return True
+
+    def __call__(self, ob) -> int:
+        if ob not in self.cache:
+            hits = [q for q in range(self.dta.n_states) if self.same_language(ob, q)]
+            assert len(hits) == 1, (ob, hits)
+            self.cache[ob] = hits[0]
+        return self.cache[ob]
+
+
+def brute_key(b, brute: BruteForce, match: Matcher):
+    if isinstance(b, str):
+        return b
+    s, ob, ages = b
+    q = match(ob)
+    if q == brute.dta.rejecting:
+        return "sink"
+    pending = E(e for e, age in zip(brute.events, ages, strict=True) if age is not None)
+    return (s, q, pending)
+
+
+def product_key(key):
+    if isinstance(key, str):
+        return key
+    assert isinstance(key, ProductState)
+    return (key.game, key.automaton, key.pending)
+
+
+def assert_bisimilar(mdp, brute: BruteForce) -> None:
+    match = Matcher(brute.dta)
+    _, _, rows = brute.explore()
+    csr = sp.csr_array(mdp.matrix)
+    indptr, indices, data = csr.indptr.tolist(), csr.indices.tolist(), csr.data.tolist()
+    pairs = [(brute.initial, mdp.initial)]
+    assert brute_key(brute.initial, brute, match) == product_key(mdp.states[mdp.initial])
+    seen = set(pairs)
+    matched_product: set[int] = set()
+    head = 0
+    while head < len(pairs):
+        b, j = pairs[head]
+        head += 1
+        matched_product.add(j)
+        key = mdp.states[j]
+        if isinstance(key, str):
+            assert brute_key(b, brute, match) == key
+            c = mdp.row_groups[j]
+            assert indices[indptr[c] : indptr[c + 1]] == [j]
+            continue
+        choices = {mdp.action_name(c): c for c in mdp.choices(j)}
+        assert sorted(choices) == brute.actions
+        for a, c in choices.items():
+            lo, hi = indptr[c], indptr[c + 1]
+            prod_row: dict = {}
+            for col, p in zip(indices[lo:hi], data[lo:hi], strict=True):
+                k = product_key(mdp.states[col])
+                assert k not in prod_row, "two product successors with one image"
+                prod_row[k] = (p, col)
+            brute_row: dict = {}
+            for b2, p in rows[b][a].items():
+                k = brute_key(b2, brute, match)
+                total, members = brute_row.get(k, (0.0, []))
+                brute_row[k] = (total + p, [*members, b2])
+            assert set(prod_row) == set(brute_row), (b, a)
+            for k, (p, col) in prod_row.items():
+                assert p == pytest.approx(brute_row[k][0], abs=1e-12), (b, a, k)
+                for b2 in brute_row[k][1]:
+                    if (b2, col) not in seen:
+                        seen.add((b2, col))
+                        pairs.append((b2, col))
+    assert matched_product == set(range(mdp.n_states))  # every product state is matched
+
+
+# --------------------------------------------------------------------------- the 2x2 example
+
+GRID = {"A": [(1, 1)], "B": [(1, 0)]}
+CASES = {
+    "geometric": (
+        {"b1": geometric(0.8), "b2": geometric(0.3)},
+        {"b1": geometric_hazard(0.8), "b2": geometric_hazard(0.3)},
+        {},
+        None,
+    ),
+    "non-memoryless": (
+        {"b1": geometric(0.8), "b2": pmf([0.1, 0.3, 0.4])},
+        {"b1": geometric_hazard(0.8), "b2": hazard_table([0.1, 0.3, 0.4], never=0.2)},
+        {},
+        None,
+    ),
+    "finite support": (
+        {"b1": pmf([0.0, 0.5, 0.5]), "b2": pmf([0.2, 0.2, 0.2, 0.4])},
+        {"b1": hazard_table([0.0, 0.5, 0.5]), "b2": hazard_table([0.2, 0.2, 0.2, 0.4])},
+        {},
+        None,
+    ),
+    "truncated": (
+        {"b1": geometric(0.5), "b2": geometric(0.3)},
+        {"b1": geometric_hazard(0.5), "b2": geometric_hazard(0.3)},
+        {"clock_reduction": False, "truncation": {"b1": 2, "b2": 3}},
+        {"b1": 2, "b2": 3},
+    ),
+}
+
+
+def _example(case):
+    dists, hazards, kw, trunc = CASES[case]
+    game = GridWorld.make(2, 2, start=(0, 0), slip=0.1, regions=GRID)
+    dta = to_dta(parse(PAPER))
+    sta = make_sta(dta, dists, 0.01, **kw)
+    labels = {c: E(n for n, cells in GRID.items() if c in cells) for c in game.cells}
+    brute = BruteForce(dta, grid_moves(2, 2, 0.1), labels, (0, 0), hazards, trunc)
+    return product(game, sta), brute
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_product_is_bisimilar_to_the_brute_force(case):
+    mdp, brute = _example(case)
+    assert_bisimilar(mdp, brute)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_product_value_equals_the_brute_force_value(case):
+    mdp, brute = _example(case)
+    v = product_value(mdp)
+    assert 0.5 < v <= 1.0
+    assert v == pytest.approx(brute.value(), abs=1e-9)
+
+
+def test_truncated_values_bracket_the_exact_one():
+    lower_mdp, _ = _example("truncated")
+    # same events as "truncated" but exact (memoryless, no clock)
+    game = GridWorld.make(2, 2, start=(0, 0), slip=0.1, regions=GRID)
+    sta = make_sta(to_dta(parse(PAPER)), {"b1": geometric(0.5), "b2": geometric(0.3)}, 0.01)
+    exact = product(game, sta)
+    lo = product_value(lower_mdp)
+    hi = float(
+        value_iteration(
+            lower_mdp.matrix,
+            lower_mdp.row_groups,
+            np.asarray(lower_mdp.target) | np.asarray(lower_mdp.truncated),
+        )[lower_mdp.initial]
+    )
+    v = product_value(exact)
+    assert lo <= v + 1e-12 and v <= hi + 1e-12
+    assert np.asarray(lower_mdp.truncated).sum() == 1
+
+
+# --------------------------------------------------------------------------- all models
+
+
+@pytest.fixture(scope="module", params=sorted(p.name for p in MODELS.glob("*.toml")))
+def model_product(request):
+    m = load_model(MODELS / request.param)
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    return m, sta, product(m.game, sta)
+
+
+def test_rows_are_distributions(model_product):
+    _, _, mdp = model_product
+    sums = np.asarray(mdp.matrix.sum(axis=1)).ravel()
+    assert np.allclose(sums, 1.0, atol=1e-12)
+    assert (mdp.matrix.data > 0).all() and (mdp.matrix.data <= 1 + 1e-12).all()
+    assert (np.diff(mdp.row_groups) >= 1).all()
+    # the special states are single and absorbing
+    for mask in (mdp.target, mdp.sink, mdp.truncated):
+        idx = np.flatnonzero(mask)
+        assert len(idx) <= 1
+        for j in idx:
+            assert mdp.matrix[[mdp.row_groups[j]], [j]].item() == 1.0
+
+
+# --------------------------------------------------------------------------- bus_grid
+
+
+def _bus(name="bus_grid.toml", **kw):
+    m = load_model(MODELS / name)
+    dta = to_dta(m.spec)
+    sta = make_sta(dta, m.distributions, m.epsilon, **kw)
+    return m, dta, product(m.game, sta)
+
+
+def test_bus_grid_is_small_and_clock_free():
+    m, dta, mdp = _bus()
+    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    # 16 cells x DTA states x 4 pending sets, plus target/sink/truncated
+    assert len(ordinary) <= 16 * dta.n_states * 4
+    assert mdp.n_states <= 16 * dta.n_states * 4 + 3
+    assert all(s.clock == 0 for s in ordinary)  # both buses are geometric
+    assert not np.asarray(mdp.truncated).any()
+
+
+def test_bus_grid_without_clock_reduction_grows_with_truncation():
+    counts = []
+    for T in (3, 4, 5):
+        _, _, mdp = _bus(clock_reduction=False, truncation={"b1": T, "b2": T})
+        clocks = {s.clock for s in mdp.states if isinstance(s, ProductState)}
+        assert max(clocks) == T - 1  # not happened by step T: truncated
+        assert np.asarray(mdp.truncated).sum() == 1
+        counts.append(mdp.n_states)
+    assert counts[0] < counts[1] < counts[2]
+
+
+@pytest.mark.parametrize(
+    ("name", "storm"), [("bus_grid.toml", 0.9244053), ("bus_grid_case2.toml", 0.9138372)]
+)
+def test_bus_grid_value_matches_storm(name, storm):
+    _, _, mdp = _bus(name)
+    assert product_value(mdp) == pytest.approx(storm, abs=1e-6)
+
+
+# --------------------------------------------------------------------------- limits and edge cases
+
+
+def test_max_states_exceeded():
+    m = load_model(MODELS / "bus_grid.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    with pytest.raises(ProductTooLarge) as err:
+        product(m.game, sta, max_states=50)
+    assert re.search(r"\b50\b", str(err.value))
+
+
+def test_formula_true_at_step_zero_gives_an_initial_target():
+    game = GridWorld.make(2, 2, start=(1, 1), slip=0.1, regions={"A": [(1, 1)]})
+    sta = make_sta(to_dta(parse("A")), {}, 0.01)
+    mdp = product(game, sta)
+    assert mdp.states[mdp.initial] == "target"
+    assert bool(mdp.target[mdp.initial])
+    assert mdp.n_states == 1
+    # and with an event in the spec that is already satisfied at step 0
+    sta = make_sta(to_dta(parse("A | D[mu] b")), {"b": geometric(0.5)}, 0.01)
+    mdp = product(game, sta)
+    assert bool(mdp.target[mdp.initial])
+
+
+def test_formula_false_at_step_zero_gives_an_initial_sink():
+    game = GridWorld.make(2, 2, start=(0, 0), slip=0.1, regions={"A": [(1, 1)]})
+    mdp = product(game, make_sta(to_dta(parse("A & F[0,3] A")), {}, 0.01))
+    assert bool(mdp.sink[mdp.initial])
+    assert product_value(mdp) == 0.0
