@@ -124,9 +124,9 @@ def _cmd_dta(args: argparse.Namespace) -> int:
 
 
 def _strip_clocks(location: str) -> str:
-    import re
+    from mitld_lp.automata.dta import _CLOCK
 
-    return re.sub(r" \{x=\d+\}", "", location)
+    return _CLOCK.sub("", location)
 
 
 # --------------------------------------------------------------------------- model verbs

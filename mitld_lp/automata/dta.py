@@ -16,17 +16,21 @@ enumerated.  Results are cached per (state, letter).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
-from mitld_lp.logic.syntax import Formula, Interval, Release, Until, subformulas
+from mitld_lp.logic.syntax import And, Formula, Interval, Or, Release, Until, subformulas
 
 __all__ = ["DTA", "Diagram"]
 
 Diagram: TypeAlias = "int | tuple[str, Diagram, Diagram]"
 """A leaf is a successor state index; a node ``(p, low, high)`` tests proposition ``p``
 (``high`` when ``p`` is in the letter)."""
+
+
+_CLOCK = re.compile(r" \{x=\d+\}")
 
 
 def _walk(d: Diagram, letter: frozenset[str] | set[str]) -> int:
@@ -124,8 +128,22 @@ class DTA:
     def location(self, state: int) -> str:
         """The obligation of ``state`` with every interval shown as in the source formula
         and the elapsed time as a clock: ``F[0,3] A {x=1}`` reads "F[0,3] A, one step in"."""
-        text = str(self.states[state])
-        for _, v, (current, source) in self._clock_view(state):
+        return self._located(self.states[state], self._clock_view(state))
+
+    def _located(self, f: Formula, view) -> str:
+        # Operands are sorted by their text *without* clock values, so two states of the
+        # same location print it the same way whatever their clocks.
+        if isinstance(f, And | Or):
+            parts = []
+            for a in f.args:
+                text = self._located(a, view)
+                if isinstance(f, And) and isinstance(a, Or):
+                    text = f"({text})"
+                parts.append(text)
+            parts.sort(key=lambda t: (_CLOCK.sub("", t), t))
+            return (" & " if isinstance(f, And) else " | ").join(parts)
+        text = str(f)
+        for _, v, (current, source) in view:
             text = text.replace(str(current), f"{source} {{x={v}}}", 1)
         return text
 

@@ -202,7 +202,8 @@ def _next(a: Formula) -> Formula:
 def _until(a: Formula, b: Formula, iv: Interval | None) -> Formula:
     if b == FALSE or (iv is not None and a == FALSE and iv.lo > 0):
         return FALSE
-    if b == TRUE and (iv is None or iv.lo == 0):
+    # ``a U[l,u] true`` needs ``a`` on the first l steps only: true when l == 0 or a is.
+    if b == TRUE and (iv is None or iv.lo == 0 or a == TRUE):
         return TRUE
     return Until(a, b, iv)
 
@@ -210,7 +211,7 @@ def _until(a: Formula, b: Formula, iv: Interval | None) -> Formula:
 def _release(a: Formula, b: Formula, iv: Interval | None) -> Formula:
     if b == TRUE or (iv is not None and a == TRUE and iv.lo > 0):
         return TRUE
-    if b == FALSE and (iv is None or iv.lo == 0):
+    if b == FALSE and (iv is None or iv.lo == 0 or a == FALSE):
         return FALSE
     return Release(a, b, iv)
 
@@ -362,13 +363,64 @@ def _apply(op, a, b, memo: dict) -> Diagram | Formula:
     return r
 
 
+_MAX_BOOL_DEPTH = 4
+
+
+def _bool_depth(f: Formula) -> int:
+    if isinstance(f, And | Or):
+        return 1 + max(_bool_depth(a) for a in f.args)
+    return 0
+
+
+def _dnf(f: Formula) -> frozenset[frozenset[Formula]]:
+    """Disjunctive normal form over temporal atoms, with absorption (no term contains
+    another)."""
+    if f == TRUE:
+        return frozenset({frozenset()})
+    if f == FALSE:
+        return frozenset()
+    if isinstance(f, Or):
+        terms = set().union(*(_dnf(a) for a in f.args))
+    elif isinstance(f, And):
+        terms = {frozenset()}
+        for a in f.args:
+            terms = {t | u for t in terms for u in _dnf(a)}
+    else:
+        return frozenset({frozenset({f})})
+    return frozenset(t for t in terms if not any(u < t for u in terms))
+
+
+_CANON: dict[Formula, Formula] = {}
+
+
+def _canonical(f: Formula) -> Formula:
+    """``f`` itself, or its DNF when its ``&``/``|`` nesting is deep.
+
+    Progression of an unbounded ``U``/``R`` nests a new copy of its residual inside the
+    previous one at every step (``b | (a & (b' | (a' & ...))))``); flattening and
+    absorption do not undo that, so the obligations would grow without bound although
+    only finitely many are different.  Obligations are boolean combinations of finitely
+    many temporal atoms, so the DNF (a set of sets of atoms) bounds them; it is used
+    only past a small depth because it can be exponentially larger."""
+    r = _CANON.get(f)
+    if r is None:
+        if _bool_depth(f) > _MAX_BOOL_DEPTH:
+            r = _or([_and(list(t)) for t in _dnf(f)])
+        else:
+            r = f
+        if len(_CANON) > 1_000_000:
+            _CANON.clear()
+        _CANON[f] = r
+    return r
+
+
 def progress(obligation: Formula, letter: frozenset[str] | set[str]) -> Formula:
     """The obligation left after reading ``letter`` (for tests and for people)."""
     node = _diagram(obligation)
     while isinstance(node, tuple):
         p, low, high = node
         node = high if p in letter else low
-    return node  # type: ignore[return-value]
+    return _canonical(node)  # type: ignore[arg-type]
 
 
 # --------------------------------------------------------------------------- construction
@@ -381,7 +433,7 @@ def to_dta(formula: Formula, *, max_states: int = 200_000, minimise: bool = True
     automaton is exact for the whole co-safe fragment (every obligation is decided on a
     finite prefix); for other formulas it accepts the good prefixes.
     """
-    start = _prepare(formula)
+    start = _canonical(_prepare(formula))
     index: dict[Formula, int] = {start: 0}
     obligations: list[Formula] = [start]
     raw: list[Diagram | Formula] = []
@@ -395,10 +447,12 @@ def to_dta(formula: Formula, *, max_states: int = 200_000, minimise: bool = True
             node = stack.pop()
             if isinstance(node, tuple):
                 stack.extend((node[1], node[2]))
-            elif node not in index:
+                continue
+            node = _canonical(node)  # type: ignore[arg-type]
+            if node not in index:
                 index[node] = len(obligations)
-                obligations.append(node)  # type: ignore[arg-type]
-                queue.append(node)  # type: ignore[arg-type]
+                obligations.append(node)
+                queue.append(node)
                 if len(obligations) > max_states:
                     raise TranslationError(
                         f"{formula}: more than {max_states} automaton states; the formula's "
@@ -409,7 +463,7 @@ def to_dta(formula: Formula, *, max_states: int = 200_000, minimise: bool = True
         if isinstance(node, tuple):
             low, high = relabel(node[1], label), relabel(node[2], label)
             return low if low == high else (node[0], low, high)
-        return label[index[node]]
+        return label[index[_canonical(node)]]
 
     n = len(obligations)
     block = [1 if obligations[i] == TRUE else 0 for i in range(n)]
