@@ -75,17 +75,17 @@ def product(
     """
     dta = sta.dta
     accepting, rejecting = dta.accepting, dta.rejecting
-    index: dict[Any, int] = {}
+    # Hot loop: states are plain tuples ``(s, q, pending, clock)`` here (hashing a tuple
+    # is much cheaper than building a frozen record per transition); the records are
+    # made once at the end.  Absorbing states are the strings TARGET, SINK, TRUNCATED.
+    index: dict[Hashable, int] = {}
     states: list[Hashable] = []
-    kinds: list[int] = []  # 0 ordinary, 1 target, 2 sink, 3 truncated
-    special = {TARGET: 1, SINK: 2, TRUNCATED_STATE: 3}
 
     def intern(key: Hashable) -> int:
         i = index.get(key)
         if i is None:
             i = index[key] = len(states)
             states.append(key)
-            kinds.append(special.get(key, 0) if isinstance(key, str) else 0)
             if len(states) > max_states:
                 raise ProductTooLarge(
                     f"the product has more than {max_states:,} reachable states "
@@ -95,21 +95,14 @@ def product(
                 )
         return i
 
-    def state_key(s: Hashable, q: int, pending: frozenset[str], clock: int) -> Hashable:
-        if clock == TRUNCATED:
-            return TRUNCATED_STATE
-        if q == accepting:
-            return TARGET
-        if q == rejecting:
-            return SINK
-        return ProductState(s, q, pending, clock)
-
     s0 = game.initial
     q0 = dta.step(dta.initial, game.propositions(s0))
-    initial = intern(state_key(s0, q0, sta.events, 0))
+    first = TARGET if q0 == accepting else SINK if q0 == rejecting else (s0, q0, sta.events, 0)
+    initial = intern(first)
 
     label_cache: dict[tuple[Hashable, frozenset[str]], frozenset[str]] = {}
     succ_cache: dict[tuple[Hashable, str, frozenset[str]], tuple] = {}
+    step_cache: dict[tuple[int, frozenset[str]], Hashable] = {}
     action_index: dict[str, int] = {}
 
     indptr = [0]
@@ -130,43 +123,60 @@ def product(
     while head < len(states):
         key = states[head]
         head += 1
-        if head % 4096 == 0:
+        if not head & 4095:
             bar.update(4096)
-        if not isinstance(key, ProductState):
+        if isinstance(key, str):
             cols.append(head - 1)
             vals.append(1.0)
             indptr.append(len(cols))
             choice_actions.append(ABSORB)
             row_groups.append(len(choice_actions))
             continue
-        s, q, pending, clock = key.game, key.automaton, key.pending, key.clock
+        s, q, pending, clock = key  # type: ignore[misc]
         outcomes = sta.outcomes(pending, clock)
         for action in game.actions(s):
             row: dict[int, float] = {}
             for out in outcomes:
+                po = out.probability
                 if out.clock == TRUNCATED:
                     j = intern(TRUNCATED_STATE)
-                    row[j] = row.get(j, 0.0) + out.probability
+                    row[j] = row.get(j, 0.0) + po
                     continue
-                skey = (s, action, out.occurred)
+                occurred, left, clock2 = out.occurred, out.pending, out.clock
+                skey = (s, action, occurred)
                 succ = succ_cache.get(skey)
                 if succ is None:
-                    succ = succ_cache[skey] = tuple(game.successors(s, action, out.occurred))
+                    succ = succ_cache[skey] = tuple(game.successors(s, action, occurred))
                 for s2, p in succ:
-                    lkey = (s2, out.occurred)
+                    lkey = (s2, occurred)
                     label = label_cache.get(lkey)
                     if label is None:
-                        label = label_cache[lkey] = game.propositions(s2) | out.occurred
-                    q2 = dta.step(q, label)
-                    j = intern(state_key(s2, q2, out.pending, out.clock))
-                    row[j] = row.get(j, 0.0) + out.probability * p
+                        label = label_cache[lkey] = game.propositions(s2) | occurred
+                    dkey = (q, label)
+                    q2 = step_cache.get(dkey)
+                    if q2 is None:
+                        q2 = dta.step(q, label)
+                        q2 = step_cache[dkey] = (
+                            TARGET if q2 == accepting else SINK if q2 == rejecting else q2
+                        )
+                    nkey = q2 if isinstance(q2, str) else (s2, q2, left, clock2)
+                    j = index.get(nkey)
+                    if j is None:
+                        j = intern(nkey)
+                    row[j] = row.get(j, 0.0) + po * p
             cols.extend(row)
             vals.extend(row.values())
             indptr.append(len(cols))
-            choice_actions.append(action_index.setdefault(action, len(action_index)))
+            a = action_index.get(action)
+            if a is None:
+                a = action_index[action] = len(action_index)
+            choice_actions.append(a)
         row_groups.append(len(choice_actions))
     bar.close()
 
+    special = {TARGET: 1, SINK: 2, TRUNCATED_STATE: 3}
+    kinds = [special[k] if isinstance(k, str) else 0 for k in states]
+    records: list[Hashable] = [k if isinstance(k, str) else ProductState(*k) for k in states]
     n = len(states)
     matrix = sp.csr_array(
         (np.asarray(vals, dtype=np.float64), np.asarray(cols, dtype=np.int32),
@@ -183,7 +193,7 @@ def product(
         target=kind == 1,
         sink=kind == 2,
         truncated=kind == 3,
-        states=tuple(states),
+        states=tuple(records),
     )
     log.info(
         "product: %d states, %d choices, %d transitions", n, mdp.n_choices, mdp.n_transitions
