@@ -1,0 +1,81 @@
+"""Shared helpers of the experiment scripts (not a study itself).
+
+Every script: ``main(argv=None)`` with ``--quick`` (a reduced setting, used by the tests)
+and ``--out DIR`` (default ``experiments/out`` beside the scripts); it prints the table it
+reproduces and writes its figures and tables into ``DIR``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: the scripts only write files
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+MODELS = ROOT / "models"
+DEFAULT_OUT = HERE / "out"
+
+
+def parser(description: str) -> argparse.ArgumentParser:
+    """An argument parser with the options every experiment has."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--quick", action="store_true",
+                    help="reduced setting (seconds; what the tests run)")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                    help=f"directory for figures and tables (default {DEFAULT_OUT})")
+    return ap
+
+
+def out_dir(path: Path) -> Path:
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def model_path(name: str) -> Path:
+    """A model file: an existing path as given, else ``models/NAME`` of the repository."""
+    p = Path(name)
+    return p if p.exists() else MODELS / name
+
+
+def write_text(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> Path:
+    with path.open("w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+def text_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A plain fixed-width table (right-aligned columns) for the terminal."""
+    cells = [[str(h) for h in header]] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    lines = ["| " + " | ".join(str(h) for h in header) + " |",
+             "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def shown(path: Path) -> str:
+    """``path`` relative to the working directory when below it (for printing)."""
+    try:
+        return os.path.relpath(path)
+    except ValueError:  # another drive
+        return str(path)
