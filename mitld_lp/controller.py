@@ -53,6 +53,10 @@ class Controller:
     sta: STA
     mdp: MDP
     policy: np.ndarray
+    hopeless: np.ndarray | None = None
+    """Optional ``(n_states,)`` mask of states from which no policy can satisfy the task
+    even if every truncated event came in time (``prob0_max`` of the upper model); the
+    controller reports ``REJECTED`` there instead of acting on forever."""
     _index: dict[Hashable, int] = field(default_factory=dict, repr=False)
     _state: tuple[int, frozenset[str], int] | None = field(default=None, repr=False)
     status: RunStatus = RunStatus.RUNNING
@@ -118,6 +122,9 @@ class Controller:
             self.status = RunStatus.REJECTED
             return None
         i = self._index.get(ProductState(observation.state, q, pending, clock))
+        if i is not None and self.hopeless is not None and self.hopeless[i]:
+            self.status = RunStatus.REJECTED
+            return None
         if i is None or self.policy[i] < 0:
             # Not a state of the model: the value there is 0 (it was never reached by the
             # product construction, or it cannot reach the target); any action will do.

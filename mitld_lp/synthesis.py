@@ -38,7 +38,7 @@ from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
 from mitld_lp.logic.parser import parse
 from mitld_lp.logic.syntax import Formula
-from mitld_lp.mdp import MDP
+from mitld_lp.mdp import MDP, prob0_max
 from mitld_lp.model import Model, bind_distributions
 from mitld_lp.product import product
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
@@ -291,7 +291,8 @@ def synthesize(
         method=method,
         policy=low.policy,
         randomized=randomized,
-        controller=Controller(game, sta, mdp, low.policy),
+        controller=Controller(game, sta, mdp, low.policy,
+                              hopeless=prob0_max(mdp, mdp.target | mdp.truncated)),
         epsilon=eps,
         epsilon_achieved=sta.epsilon_achieved,
         truncation_points=sta.truncation_points,

@@ -164,3 +164,19 @@ def test_policy_is_a_choice_of_each_state():
     rows = r.policy[live]
     starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
     assert np.all((rows >= starts) & (rows < ends))
+
+
+def test_controller_rejects_once_both_deadlines_are_missed():
+    # Both buses come at step 1 while the robot is in the far corner (3, 3), three moves
+    # from A = (1, 2) and from B = (3, 0); the deadline is step 1 + 3 = 4.  At step 1
+    # three perfect moves can still make it; if the robot is still at (3, 3) at step 2,
+    # nothing can satisfy the task any more (no event is left), so the run is rejected
+    # rather than continued.
+    r = synthesize(load_model(BUS_CASE1))
+    c = r.controller
+    c.reset()
+    c.act(Observation((3, 3)))
+    assert c.act(Observation((3, 3), frozenset({"b1", "b2"}))) is not None
+    assert c.status is RunStatus.RUNNING
+    assert c.act(Observation((3, 3))) is None
+    assert c.status is RunStatus.REJECTED
