@@ -24,6 +24,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
 from tqdm.auto import tqdm
 
 from mitld_lp.mdp import (
@@ -105,6 +106,7 @@ def interval_iteration(
         bar.close()
 
     status = Status.OPTIMAL if width < tol else Status.MAX_ITERATIONS
+    np.clip(bounds, 0.0, 1.0, out=bounds)  # rounding can push the upper bound past 1
     lower = q.lift(bounds[:, 0])
     upper = q.lift(bounds[:, 1])
     policy = lift_policy(mdp, q, greedy_choices(q, bounds[:, 0]) if n else np.zeros(0, int))
@@ -188,17 +190,35 @@ def evaluate_policy(
 
 
 _DIRECT_MAX = 5_000
-"""``method="auto"`` factorises systems up to this size; larger ones go to BiCGSTAB first
-(a sparse LU of a random, well-connected chain fills in almost completely)."""
+"""``method="auto"`` always factorises systems up to this size."""
+
+_DIRECT_FILL = 3e7
+"""``method="auto"`` factorises larger systems when ``size * bandwidth`` after a reverse
+Cuthill-McKee ordering (a cheap bound on the LU fill) is below this; otherwise (a random,
+well-connected chain, whose LU fills in almost completely) BiCGSTAB goes first."""
+
+
+def _banded_fill(a: sp.csc_array) -> float:
+    pattern = sp.csr_matrix(abs(a) + abs(a.T))
+    perm = csgraph.reverse_cuthill_mckee(pattern, symmetric_mode=True)
+    pos = np.empty_like(perm)
+    pos[perm] = np.arange(perm.size)
+    coo = pattern.tocoo()
+    width = int(np.max(np.abs(pos[coo.row] - pos[coo.col]), initial=0))
+    return float(perm.size) * (width + 1)
 
 
 def _solve_transient(
     a: sp.csc_array, b: np.ndarray, method: Literal["auto", "direct", "iterative"]
 ) -> np.ndarray:
     """Solve ``(I - Q) x = b`` for a transient sub-stochastic ``Q``."""
-    if method == "direct" or (method == "auto" and b.shape[0] <= _DIRECT_MAX):
+    size = b.shape[0]
+    direct = method == "direct" or (
+        method == "auto" and (size <= _DIRECT_MAX or _banded_fill(a) <= _DIRECT_FILL)
+    )
+    if direct:
         return np.asarray(spla.spsolve(a, b), dtype=np.float64).ravel()
-    x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=100_000)
+    x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)
     x = np.asarray(x, dtype=np.float64).ravel()
     residual = float(np.max(np.abs(a @ x - b), initial=0.0))
     if info == 0 and residual <= 1e-12:

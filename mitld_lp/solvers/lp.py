@@ -38,6 +38,7 @@ from __future__ import annotations
 import importlib
 import logging
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -156,7 +157,9 @@ def _solve_cvxpy(lp: OccupancyLP, solver: str, options: dict[str, Any]) -> _Raw:
     flow = sp.csc_matrix(lp.a_eq) @ y == lp.b_eq
     problem = cp.Problem(cp.Maximize(lp.objective @ y), [flow, y >= 0])
     try:
-        problem.solve(solver=solver, **options)
+        with warnings.catch_warnings():  # "may be inaccurate": reported as the status
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=solver, **options)
     except BaseException as exc:  # a solver error must become a status, not a crash
         if _is_fatal(exc):
             raise

@@ -1,0 +1,289 @@
+"""The occupancy LP: hand values, certificates, backends, failures, random MDPs.
+
+Reference values come from routes that share nothing with ``solve_lp``: hand
+computation, and the classic *value* LP ``min sum v  s.t.  v(s) >= sum P(c,.) v`` for
+every choice, ``v(target) = 1``, ``0 <= v <= 1`` (solved by scipy's linprog on the
+untouched MDP, no graph analysis, no MEC collapse); its least solution is Pmax.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cvxpy as cp
+import numpy as np
+import pytest
+import scipy.optimize
+import scipy.sparse as sp
+
+from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.solvers import (
+    LPResult,
+    Status,
+    evaluate_policy,
+    interval_iteration,
+    occupancy_lp,
+    solve_lp,
+)
+
+# The MDP of tests/test_mdp.py: 0 has a self-loop and 'go'; {1, 4} is a two-state MEC
+# whose best exit 'd' (1/2 to target) is at 4, the other exit 'a' at 1; 6 reaches the
+# target with probability 1 by looping.  By hand:
+#   v(1) = v(4) = max(0.3 + 0.7 v(0), 0.5),  v(0) = max(v(0), 0.5 v(1))
+#   with 'a': v(1) = 0.3 / 0.65 < 0.5, so 'd': v(1) = v(4) = 1/2, v(0) = 1/4;  v(6) = 1.
+HAND = build_mdp(
+    [
+        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
+        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
+        [],
+        [],
+        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
+        [("e", {2: 1.0})],
+        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
+    ],
+    target=[3],
+    sink=[2],
+)
+HAND_VALUES = np.array([0.25, 0.5, 0.0, 1.0, 0.5, 0.0, 1.0])
+
+# A self-loop next to an exit: 0 'wait' (loop) | 'try' -> 0.6 target, 0.4 sink.
+LOOP = build_mdp(
+    [[("wait", {0: 1.0}), ("try", {1: 0.6, 2: 0.4})], [], []], target=[1], sink=[2]
+)
+
+# Initial state inside a 3-state MEC (a ring 0 -> 1 -> 2 -> 0 by 'next') whose only
+# good exit is at 2 ('jump': 0.9 target); 0 also has a bad exit 'bail' (0.2 target).
+RING = build_mdp(
+    [
+        [("next", {1: 1.0}), ("bail", {3: 0.2, 4: 0.8})],
+        [("next", {2: 1.0})],
+        [("next", {0: 1.0}), ("jump", {3: 0.9, 4: 0.1})],
+        [],
+        [],
+    ],
+    target=[3],
+    sink=[4],
+)
+
+BACKENDS = [("cvxpy", "CLARABEL"), ("cvxpy", "HIGHS"), ("direct", "CLARABEL")]
+
+
+def reference_values(mdp: MDP, target: np.ndarray) -> np.ndarray:
+    """Pmax by the value LP on the raw MDP (scipy linprog / HiGHS)."""
+    n = mdp.n_states
+    dense = mdp.matrix.toarray()
+    owner = mdp.choice_state()
+    rows = np.flatnonzero(~target[owner])
+    a_ub = dense[rows] - np.eye(n)[owner[rows]]  # P(c,.) v - v(s) <= 0
+    bounds = [(1.0, 1.0) if target[s] else (0.0, 1.0) for s in range(n)]
+    res = scipy.optimize.linprog(
+        np.ones(n), A_ub=a_ub, b_ub=np.zeros(rows.size), bounds=bounds, method="highs",
+        options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
+    )
+    assert res.status == 0, res.message
+    return np.asarray(res.x)
+
+
+def check_certificates(mdp: MDP, target: np.ndarray, r: LPResult, tol: float) -> None:
+    """Dual feasibility (Bellman inequalities) and complementary slackness, on ``mdp``."""
+    assert r.values is not None and r.occupancy is not None
+    v = r.values
+    owner = mdp.choice_state()
+    active = ~target[owner] & ~prob0_max(mdp, target)[owner]
+    slack = v[owner] - mdp.matrix @ v  # v(s) - sum_s' P(c,s') v(s')  >= 0
+    assert np.all(slack[active] >= -tol)
+    assert np.all(r.occupancy >= 0)
+    assert np.all(r.occupancy[~active] == 0)
+    assert np.all(r.occupancy * np.maximum(slack, 0) <= tol)
+    assert r.primal_objective == pytest.approx(r.dual_objective, abs=tol)
+
+
+@pytest.mark.parametrize(("backend", "solver"), BACKENDS)
+def test_hand_mdp_values_policy_and_certificates(backend: str, solver: str) -> None:
+    r = solve_lp(HAND, HAND.target, backend=backend, solver=solver)  # type: ignore[arg-type]
+    assert r.status == Status.OPTIMAL, r.message
+    assert r.value == pytest.approx(0.25, abs=1e-8)
+    assert r.primal_objective == pytest.approx(0.25, abs=1e-8)
+    assert r.values is not None and r.policy is not None
+    # States 0, 1, 4 are visited from 0; 6 is not, its value is only an upper bound.
+    np.testing.assert_allclose(r.values[[0, 1, 2, 3, 4, 5]], HAND_VALUES[:6], atol=1e-8)
+    assert r.values[6] >= 1 - 1e-8
+    check_certificates(HAND, HAND.target, r, 1e-7)
+    # 0 goes, 4 takes exit d, 1 walks to 4 with b (a would lose value); 2, 3 stop.
+    assert r.policy.tolist()[:5] == [1, 3, -1, -1, 7]
+    assert evaluate_policy(HAND, HAND.target, r.policy)[0] == pytest.approx(0.25, abs=1e-12)
+    assert r.backend == backend and r.solver == solver and r.seconds > 0
+    assert r.lp_shape == (3, 5)
+
+
+def test_everywhere_gives_the_value_function_of_every_state() -> None:
+    r = solve_lp(HAND, HAND.target, everywhere=True)
+    assert r.status == Status.OPTIMAL and r.values is not None and r.policy is not None
+    np.testing.assert_allclose(r.values, HAND_VALUES, atol=1e-8)
+    np.testing.assert_allclose(evaluate_policy(HAND, HAND.target, r.policy), HAND_VALUES,
+                               atol=1e-12)
+    assert r.value == pytest.approx(0.25, abs=1e-8)
+    assert r.primal_objective == pytest.approx(0.25 + 0.5 + 1.0, abs=1e-7)  # one per MEC
+
+
+def test_self_loop_with_exit() -> None:
+    r = solve_lp(LOOP, LOOP.target)
+    assert r.value == pytest.approx(0.6, abs=1e-8)
+    assert r.policy is not None and r.policy[0] == 1  # 'try', never 'wait'
+    assert r.occupancy is not None and r.occupancy[0] == 0  # the loop is not in the LP
+
+
+def test_initial_inside_mec_walks_to_the_best_exit() -> None:
+    r = solve_lp(RING, RING.target, backend="direct")
+    assert r.value == pytest.approx(0.9, abs=1e-8)
+    assert r.policy is not None
+    assert r.policy.tolist() == [0, 2, 4, -1, -1]  # next, next, jump
+    exact = evaluate_policy(RING, RING.target, r.policy)
+    np.testing.assert_allclose(exact[:3], 0.9, atol=1e-12)
+
+
+def test_initial_state_decided_by_graph_analysis() -> None:
+    at_target = build_mdp([[("a", {1: 1.0})], []], initial=1, target=[1])
+    r = solve_lp(at_target, at_target.target)
+    assert r.status == Status.OPTIMAL and r.value == 1.0 and r.solver == ""
+    assert "target" in r.message
+    assert r.values is not None and np.isnan(r.values[0])
+    assert r.policy is not None and r.policy.tolist() == [0, -1]
+    hopeless = build_mdp([[("a", {1: 1.0})], [], []], target=[2], sink=[1])
+    r = solve_lp(hopeless, hopeless.target)
+    assert r.status == Status.OPTIMAL and r.value == 0.0 and "prob-0" in r.message
+
+
+def test_prob_one_through_an_end_component() -> None:
+    # 0 'retry' -> 0.5 back to 0, 0.5 to 1; 1 -> target.  Pmax = 1 without a MEC exit
+    # that is certain: the loop is not an end component (it leaves with 1/2).
+    mdp = build_mdp([[("retry", {0: 0.5, 1: 0.5})], [("go", {2: 1.0})], []], target=[2])
+    r = solve_lp(mdp, mdp.target, backend="direct")
+    assert r.value == pytest.approx(1.0, abs=1e-8)
+    assert r.occupancy is not None
+    assert r.occupancy[0] == pytest.approx(2.0, abs=1e-6)  # expected visits of 0
+
+
+def test_naive_lp_without_mec_collapse_is_unbounded() -> None:
+    """On the maybe states with every choice kept, the flow polytope has a ray."""
+    maybe = ~LOOP.target & ~prob0_max(LOOP, LOOP.target)  # only state 0
+    owner = LOOP.choice_state()
+    cols = np.flatnonzero(maybe[owner])  # 'wait' (loop) and 'try'
+    dense = LOOP.matrix.toarray()
+    a_naive = np.eye(LOOP.n_states)[np.ix_(maybe, owner[cols])] - dense[np.ix_(cols, maybe)].T
+    ray = np.array([1.0, 0.0])  # push any amount of flow round the self-loop
+    np.testing.assert_allclose(a_naive @ ray, 0.0)
+    y = cp.Variable(cols.size)
+    cons = [a_naive @ y == 1.0, y >= 0]
+    naive = cp.Problem(cp.Maximize(cp.sum(y)), cons)  # expected time: infinite
+    naive.solve(solver="HIGHS")
+    assert naive.status in (cp.UNBOUNDED, cp.UNBOUNDED_INACCURATE)
+    # Ours: the same objective is bounded (expected number of steps = 1).
+    lp = occupancy_lp(LOOP, LOOP.target)
+    z = cp.Variable(lp.objective.size)
+    ours = cp.Problem(cp.Maximize(cp.sum(z)), [lp.a_eq @ z == lp.b_eq, z >= 0])
+    ours.solve(solver="HIGHS")
+    assert ours.status == cp.OPTIMAL and ours.value == pytest.approx(1.0)
+
+
+def test_backends_agree_and_scs_too() -> None:
+    mdp = random_mdp(80, seed=3, locality=5, self_loop_fraction=0.2)
+    results = [solve_lp(mdp, mdp.target, backend=b, solver=s) for b, s in BACKENDS]  # type: ignore[arg-type]
+    scs = solve_lp(mdp, mdp.target, solver="SCS", tol=1e-8)
+    assert scs.status.has_solution
+    values = [r.value for r in results]
+    assert max(values) - min(values) < 1e-7
+    assert scs.value == pytest.approx(values[0], abs=1e-5)
+
+
+# ------------------------------------------------------------------------------------
+# Failures are statuses.
+# ------------------------------------------------------------------------------------
+
+
+def test_unknown_solver_is_a_status_listing_installed_ones() -> None:
+    r = solve_lp(HAND, HAND.target, solver="NO_SUCH_SOLVER")
+    assert r.status == Status.FAILED
+    assert "NO_SUCH_SOLVER" in r.message and "CLARABEL" in r.message
+    assert r.values is None and np.isnan(r.value)
+
+
+def test_bad_backend_and_direct_with_other_solver() -> None:
+    assert solve_lp(HAND, HAND.target, backend="nope").status == Status.FAILED  # type: ignore[arg-type]
+    r = solve_lp(HAND, HAND.target, backend="direct", solver="HIGHS")
+    assert r.status == Status.FAILED and "CLARABEL" in r.message
+
+
+def test_iteration_limit_is_a_status() -> None:
+    mdp = random_mdp(60, seed=1)
+    r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"max_iter": 1})
+    assert r.status == Status.MAX_ITERATIONS and "MaxIterations" in r.message
+    r = solve_lp(mdp, mdp.target, solver_options={"max_iter": 1})
+    assert not r.status.has_solution or r.status == Status.INACCURATE
+    assert r.message.startswith("cvxpy/CLARABEL")
+    r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"no_such": 1})
+    assert r.status == Status.FAILED and "no_such" in r.message
+
+
+# ------------------------------------------------------------------------------------
+# Random MDPs: every route against the value LP.
+# ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_random_mdps_all_routes_agree(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(20, 201))
+    mdp = random_mdp(
+        n, seed=seed, target_fraction=0.03 + 0.05 * rng.random(),
+        sink_fraction=0.02 + 0.1 * rng.random(), self_loop_fraction=0.3 * rng.random(),
+        max_choices=int(rng.integers(1, 5)), max_successors=int(rng.integers(1, 5)),
+        locality=None if seed % 3 == 0 else int(rng.integers(2, 8)),
+    )
+    target = mdp.target
+    maybe = ~target & ~prob0_max(mdp, target)
+    assert maybe.any()
+    ref = reference_values(mdp, target)
+    # Start where the optimum is least trivial (closest to 1/2).
+    mdp = replace(mdp, initial=int(np.argmin(np.where(maybe, np.abs(ref - 0.5), np.inf))))
+    vi = interval_iteration(mdp, target, gap="max", progress=False)
+    assert vi.status == Status.OPTIMAL
+    np.testing.assert_allclose(vi.lower, ref, atol=1e-7)
+    np.testing.assert_allclose(vi.upper, ref, atol=1e-7)
+    for backend, solver in BACKENDS:
+        r = solve_lp(mdp, target, backend=backend, solver=solver)  # type: ignore[arg-type]
+        assert r.status == Status.OPTIMAL, r.message
+        assert r.value == pytest.approx(ref[mdp.initial], abs=1e-7)
+        assert r.values is not None and r.policy is not None
+        assert np.all(r.values >= ref - 1e-7)  # duals are upper bounds everywhere
+        check_certificates(mdp, target, r, 1e-6)
+        exact = evaluate_policy(mdp, target, r.policy)
+        assert exact[mdp.initial] == pytest.approx(ref[mdp.initial], abs=1e-7)
+    full = solve_lp(mdp, target, everywhere=True, backend="direct")
+    assert full.values is not None and full.policy is not None
+    np.testing.assert_allclose(full.values, ref, atol=1e-7)
+    np.testing.assert_allclose(evaluate_policy(mdp, target, full.policy), ref, atol=1e-7)
+    # The randomised policy is a distribution in every acting state.
+    assert full.randomized is not None
+    sums = np.add.reduceat(full.randomized, mdp.row_groups[:-1])
+    acting = full.policy >= 0
+    np.testing.assert_allclose(sums[acting], 1.0, atol=1e-9)
+    assert np.all(sums[~acting] == 0)
+
+
+def test_upper_model_target_includes_truncated() -> None:
+    # 0 'go' -> 0.5 target, 0.25 truncated, 0.25 sink.
+    mdp = build_mdp([[("go", {1: 0.5, 2: 0.25, 3: 0.25})], [], [], []],
+                    target=[1], truncated=[2], sink=[3])
+    lower = solve_lp(mdp, mdp.target)
+    upper = solve_lp(mdp, mdp.target | mdp.truncated)
+    assert lower.value == pytest.approx(0.5, abs=1e-8)
+    assert upper.value == pytest.approx(0.75, abs=1e-8)
+
+
+def test_result_arrays_are_read_only() -> None:
+    r = solve_lp(LOOP, LOOP.target)
+    assert r.values is not None
+    with pytest.raises(ValueError):
+        r.values[0] = 0.0
+    assert sp.issparse(occupancy_lp(LOOP, LOOP.target).a_eq)
