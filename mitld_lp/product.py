@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -176,7 +176,9 @@ def product(
 
     special = {TARGET: 1, SINK: 2, TRUNCATED_STATE: 3}
     kinds = [special[k] if isinstance(k, str) else 0 for k in states]
-    records: list[Hashable] = [k if isinstance(k, str) else ProductState(*k) for k in states]
+    records: list[Hashable] = [
+        k if isinstance(k, str) else ProductState(*cast(tuple, k)) for k in states
+    ]
     n = len(states)
     matrix = sp.csr_array(
         (np.asarray(vals, dtype=np.float64), np.asarray(cols, dtype=np.int32),

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from typing import Any
 
 from mitld_lp.automata.dta import DTA, Diagram
 from mitld_lp.logic.syntax import (
@@ -342,7 +343,7 @@ def _diagram(f: Formula) -> Diagram | Formula:
     return d
 
 
-def _apply(op, a, b, memo: dict) -> Diagram | Formula:
+def _apply(op, a, b, memo: dict) -> Any:
     """Combine two ordered diagrams leaf-wise with ``op`` (variables in sorted order)."""
     key = (id(a), id(b))
     hit = memo.get(key)
