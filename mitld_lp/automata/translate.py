@@ -35,6 +35,7 @@ from collections import deque
 from typing import Any
 
 from mitld_lp.automata.dta import DTA, Diagram
+from mitld_lp.logic.fragment import nnf
 from mitld_lp.logic.syntax import (
     FALSE,
     TRUE,
@@ -49,7 +50,6 @@ from mitld_lp.logic.syntax import (
     Prop,
     Release,
     Until,
-    eventually,
 )
 
 __all__ = ["to_dta", "progress", "TranslationError"]
@@ -65,39 +65,28 @@ class TranslationError(ValueError):
 
 
 def _prepare(f: Formula) -> Formula:
-    """Distribution eventualities read as ``F``; negations pushed to propositions."""
-    return _nnf(f, positive=True)
+    """Negation normal form (:func:`mitld_lp.logic.fragment.nnf`), rebuilt with the
+    canonical constructors below; distribution eventualities read as ``F``."""
+    return _rebuild(nnf(f))
 
 
-def _nnf(f: Formula, positive: bool) -> Formula:
+def _rebuild(f: Formula) -> Formula:
     match f:
-        case Const(v):
-            return Const(v if positive else not v)
-        case Prop():
-            return f if positive else Not(f)
-        case Not(a):
-            return _nnf(a, not positive)
+        case Const() | Prop() | Not(Prop()):
+            return f
         case And(args):
-            parts = [_nnf(a, positive) for a in args]
-            return _and(parts) if positive else _or(parts)
+            return _and([_rebuild(a) for a in args])
         case Or(args):
-            parts = [_nnf(a, positive) for a in args]
-            return _or(parts) if positive else _and(parts)
+            return _or([_rebuild(a) for a in args])
         case Next(a):
-            return _next(_nnf(a, positive))
+            return _next(_rebuild(a))
         case Dist(_, a):
-            if not positive:
-                raise TranslationError(f"{f}: a distribution eventuality under a negation")
-            return _nnf(eventually(a), True)
+            return _until(TRUE, _rebuild(a), None)
         case Until(a, b, iv):
-            if positive:
-                return _until(_nnf(a, True), _nnf(b, True), iv)
-            return _release(_nnf(a, False), _nnf(b, False), iv)
+            return _until(_rebuild(a), _rebuild(b), iv)
         case Release(a, b, iv):
-            if positive:
-                return _release(_nnf(a, True), _nnf(b, True), iv)
-            return _until(_nnf(a, False), _nnf(b, False), iv)
-    raise TypeError(f"not a formula: {f!r}")
+            return _release(_rebuild(a), _rebuild(b), iv)
+    raise TypeError(f"not a formula in negation normal form: {f!r}")
 
 
 # --------------------------------------------------------------------------- canonical form
