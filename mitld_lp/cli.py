@@ -94,6 +94,7 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
 
 def _cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
+    from mitld_lp.automata.dta import _guards
     from mitld_lp.automata.translate import to_dta
 
     formula = parse(args.formula)
@@ -116,8 +117,6 @@ def _cmd_dta(args: argparse.Namespace) -> int:
         tag += " (accepting)" if dta.is_accepting(i) else ""
         tag += " (rejecting)" if dta.is_rejecting(i) else ""
         print(f"  {i}{tag}: {dta.location(i)}")
-        from mitld_lp.automata.dta import _guards
-
         for target, guard in sorted(_guards(dta.delta[i]).items()):
             print(f"      --[{guard}]--> {target}")
     return EXIT_OK
