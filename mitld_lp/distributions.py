@@ -50,7 +50,6 @@ from typing import Any, overload
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
 
 from mitld_lp.logic.syntax import DistLiteral
 
@@ -111,6 +110,14 @@ class DistributionError(ValueError):
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _stats() -> Any:
+    """``scipy.stats``, imported when a law first needs it: the import takes ~0.6 s and
+    ``import mitld_lp`` (or a model with only geometric and pmf laws) should not pay it."""
+    import scipy.stats
+
+    return scipy.stats
 
 
 def _steps(k: Steps) -> tuple[IntArray, bool]:
@@ -690,14 +697,14 @@ def poisson(lam: float) -> FirstOccurrence:
     ``P(K = k) = exp(-lam) lam^(k-1) / (k-1)!``."""
     label = _label("poisson", lam)
     lf = _positive(label, "lam", lam)
-    return _ShiftedDiscrete(label, stats.poisson(lf), math.inf, shift=1)
+    return _ShiftedDiscrete(label, _stats().poisson(lf), math.inf, shift=1)
 
 
 def _scipy_generator(label: str, name: object) -> Any:
     if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
         raise DistributionError(label, f"scipy distribution name must be a name, got {name!r}")
-    gen = getattr(stats, name, None)
-    if not isinstance(gen, stats.rv_discrete | stats.rv_continuous):
+    gen = getattr(_stats(), name, None)
+    if not isinstance(gen, _stats().rv_discrete | _stats().rv_continuous):
         raise DistributionError(label, f"unknown scipy.stats distribution {name!r}")
     return gen
 
@@ -734,7 +741,7 @@ def scipy_discrete(name: str, *args: float) -> FirstOccurrence:
     (e.g. ``geom``).  A support reaching below 0 is an error."""
     label = _label("scipy", name, *args)
     gen = _scipy_generator(label, name)
-    if not isinstance(gen, stats.rv_discrete):
+    if not isinstance(gen, _stats().rv_discrete):
         raise DistributionError(label, f"scipy.stats.{name} is continuous, not discrete")
     frozen, lo, hi = _freeze(label, name, gen, _scipy_args(label, args), {})
     if lo < 0:
@@ -767,7 +774,7 @@ def discretised(name: str, *args: float) -> FirstOccurrence:
     ``P(K = k) = F(k) - F(k-1)``."""
     label = _label("scipy", name, *args)
     gen = _scipy_generator(label, name)
-    if not isinstance(gen, stats.rv_continuous):
+    if not isinstance(gen, _stats().rv_continuous):
         raise DistributionError(label, f"scipy.stats.{name} is discrete, not continuous")
     return _discretised(label, name, gen, _scipy_args(label, args), {})
 
@@ -777,7 +784,7 @@ def exponential(rate: float) -> FirstOccurrence:
     ``geometric(1 - exp(-rate))``."""
     label = _label("exponential", rate)
     r = _positive(label, "rate", rate)
-    return _discretised(label, "expon", stats.expon, [], {"scale": 1.0 / r})
+    return _discretised(label, "expon", _stats().expon, [], {"scale": 1.0 / r})
 
 
 def weibull(shape: float, scale: float) -> FirstOccurrence:
@@ -785,7 +792,7 @@ def weibull(shape: float, scale: float) -> FirstOccurrence:
     label = _label("weibull", shape, scale)
     c = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    return _discretised(label, "weibull_min", stats.weibull_min, [c], {"scale": s})
+    return _discretised(label, "weibull_min", _stats().weibull_min, [c], {"scale": s})
 
 
 def gamma(shape: float, scale: float) -> FirstOccurrence:
@@ -794,7 +801,7 @@ def gamma(shape: float, scale: float) -> FirstOccurrence:
     label = _label("gamma", shape, scale)
     a = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    return _discretised(label, "gamma", stats.gamma, [a], {"scale": s})
+    return _discretised(label, "gamma", _stats().gamma, [a], {"scale": s})
 
 
 # --------------------------------------------------------------------------- specs
@@ -821,7 +828,7 @@ def _build(family: str, args: Sequence[Any], label: str) -> FirstOccurrence:
             )
         name, rest = args[0], list(args[1:])
         gen = _scipy_generator(label, name)
-        if isinstance(gen, stats.rv_discrete):
+        if isinstance(gen, _stats().rv_discrete):
             return scipy_discrete(name, *rest)
         return discretised(name, *rest)
     names = _ARITY.get(family)
