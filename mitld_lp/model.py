@@ -52,7 +52,7 @@ from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
-from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.logic.syntax import RESERVED, DistLiteral, DistRef, DistSpec, Formula, atoms
 
 __all__ = [
     "Model",
@@ -67,8 +67,6 @@ DEFAULT_EPSILON = 0.01
 """The truncation budget used when a model file gives no ``epsilon``."""
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-# Words the formula grammar reserves: a proposition of that name could not be written.
-_RESERVED = frozenset({"true", "false", "F", "G", "X", "U", "R", "D"})
 
 
 class ModelError(ValueError):
@@ -270,11 +268,11 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
     table = ctx.table(doc.get("regions", {}), "regions")
     for name, value in table.items():
         path = _join("regions", name)
-        if not _IDENT.match(name) or name in _RESERVED:
+        if not _IDENT.match(name) or name in RESERVED:
             raise ctx.error(
                 path,
                 f"region name {_show(name)} is not a proposition name (letters, digits, "
-                f"'_', not starting with a digit, not one of {', '.join(sorted(_RESERVED))})",
+                f"'_', not starting with a digit, not one of {', '.join(sorted(RESERVED))})",
             )
         rcells = cells(value, path)
         if not rcells:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TypeAlias
 
 __all__ = [
+    "RESERVED",
     "Interval",
     "DistRef",
     "DistLiteral",
@@ -55,6 +56,12 @@ __all__ = [
     "subformulas",
     "show",
 ]
+
+
+#: The words the parser reads as operators (``grammar.lark`` spells each one as a
+#: terminal; a test checks the two agree): never a proposition, event, region or
+#: distribution name.
+RESERVED = frozenset({"true", "false", "X", "F", "G", "U", "R", "D"})
 
 
 @dataclass(frozen=True, slots=True)
