@@ -90,6 +90,8 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help="an MITLD formula (D[mu] a reads as F a)")
     p.add_argument("--dot", metavar="FILE", help="write the automaton as Graphviz DOT")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--max-states", type=int, default=200_000, metavar="N",
+                   help="refuse automata with more states (checked while it is built)")
 
 
 def _cmd_dta(args: argparse.Namespace) -> int:
@@ -97,7 +99,7 @@ def _cmd_dta(args: argparse.Namespace) -> int:
     from mitld_lp.automata.translate import to_dta
 
     formula = parse(args.formula)
-    dta = to_dta(check(formula))
+    dta = to_dta(check(formula), max_states=args.max_states)
     if args.dot:
         path = Path(args.dot)
         if path.exists() and not args.force:
