@@ -5,9 +5,8 @@ in ``{1, 2, ...}`` (never step 0) with pmf ``mu(k) = P(K = k)``.  Whatever mass 
 distribution leaves undefined is the probability that the event *never* happens:
 ``never = 1 - sum_k mu(k)``.
 
-The environment model needs the *hazard*, not the pmf (see DESIGN.md, "Per-step
-probability is the hazard"): given that ``a`` has not happened by step ``k-1``, it happens
-at step ``k`` with probability::
+The environment model needs the *hazard*, not the pmf: given that ``a`` has not happened
+by step ``k-1``, it happens at step ``k`` with probability::
 
     h(k) = mu(k) / S(k-1),     S(k) = P(K > k) = 1 - sum_{j<=k} mu(j)   (never included)
 
