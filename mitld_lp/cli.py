@@ -14,14 +14,19 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from mitld_lp import defaults
 from mitld_lp.automata.translate import TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
 from mitld_lp.model import ModelError
 from mitld_lp.product import ProductTooLarge
+
+if TYPE_CHECKING:
+    from mitld_lp.model import Model
+    from mitld_lp.synthesis import Built
 
 PROG = "mitld-lp"
 
@@ -139,22 +144,21 @@ def _args_model(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="give every event an age clock, truncated as in the paper",
     )
-    p.add_argument("--max-states", type=int, default=5_000_000, metavar="N")
+    p.add_argument("--max-states", type=int, default=defaults.MAX_STATES, metavar="N")
 
 
-def _build(args: argparse.Namespace) -> tuple[Any, Any, Any]:
-    """Model file -> (model, STA, product MDP)."""
-    from mitld_lp.automata.sta import make_sta
-    from mitld_lp.automata.translate import to_dta
+def _build(args: argparse.Namespace) -> tuple[Model, Built]:
+    """Model file -> (model, its automaton, STA and product MDP)."""
     from mitld_lp.model import load_model
-    from mitld_lp.product import product
+    from mitld_lp.synthesis import build_product
 
     model = load_model(args.model)
-    eps = model.epsilon if args.epsilon is None else args.epsilon
-    sta = make_sta(to_dta(model.spec), model.distributions, eps,
-                   clock_reduction=not args.no_clock_reduction)
-    mdp = product(model.game, sta, max_states=args.max_states)
-    return model, sta, mdp
+    built = build_product(
+        model.game, model.spec, model.distributions,
+        epsilon=model.epsilon if args.epsilon is None else args.epsilon,
+        clock_reduction=not args.no_clock_reduction, max_states=args.max_states,
+    )
+    return model, built
 
 
 def _args_info(p: argparse.ArgumentParser) -> None:
@@ -166,7 +170,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     """The product's sizes, truncation points and the epsilon achieved."""
     from mitld_lp.product import component_counts
 
-    model, sta, mdp = _build(args)
+    model, built = _build(args)
+    sta, mdp = built.sta, built.mdp
     out: dict[str, Any] = {
         "model": model.name,
         "spec": str(model.spec),
@@ -247,7 +252,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     for given in (args.lp, args.drn):
         if given and Path(given).exists() and not args.force:
             raise FileExistsError(f"{given}: exists; pass --force to overwrite it")
-    _, _, mdp = _build(args)
+    mdp = _build(args)[1].mdp
     target = mdp.target | mdp.truncated if args.upper else mdp.target
     if args.lp:
         print(f"wrote {write_lp(mdp, target, args.lp, overwrite=args.force, everywhere=True)}")

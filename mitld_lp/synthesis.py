@@ -30,22 +30,23 @@ from typing import Any, Literal
 
 import numpy as np
 
+from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
-from mitld_lp.logic.parser import parse
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP, prob0_max
-from mitld_lp.model import Model, bind_distributions
+from mitld_lp.model import Model
 from mitld_lp.product import product
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["synthesize", "SynthesisResult", "ModelSolution", "Check", "Sizes"]
+__all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check",
+           "Sizes"]
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +116,7 @@ class SynthesisResult:
     dta: DTA
     sta: STA
     mdp: MDP
+    model: Model
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -129,6 +131,7 @@ class SynthesisResult:
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record (the CLI's ``--json``)."""
         return {
+            "model": self.model.name,
             "status": self.status.value,
             "lower": self.lower,
             "upper": self.upper,
@@ -214,59 +217,78 @@ def _solve_model(
     return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, tuple(checks))
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Built:
+    """What :func:`build_product` returns: the automaton, the STA and the product MDP,
+    with the seconds each construction took (``automaton``, ``product``)."""
+
+    dta: DTA
+    sta: STA
+    mdp: MDP
+    timings: Mapping[str, float]
+
+
+def build_product(
+    game: Game[Any],
+    formula: Formula,
+    laws: Mapping[str, FirstOccurrence],
+    *,
+    epsilon: float = defaults.EPSILON,
+    clock_reduction: bool = True,
+    truncation: Mapping[str, int] | None = None,
+    max_states: int = defaults.MAX_STATES,
+    progress: bool | None = None,
+) -> Built:
+    """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
+    ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
+    then the reachable ``product`` with ``game``.  The only place that wires them."""
+    t0 = time.perf_counter()
+    dta = to_dta(formula)
+    sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
+    t1 = time.perf_counter()
+    mdp = product(game, sta, max_states=max_states, progress=progress)
+    t2 = time.perf_counter()
+    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
+
+
 def synthesize(
-    model_or_game: Model | Game[Any],
-    spec: Formula | str | None = None,
+    model: Model,
     *,
     epsilon: float | None = None,
-    distributions: Mapping[str, FirstOccurrence] | None = None,
     method: Method = "lp",
     solver: str = "CLARABEL",
     backend: str = "cvxpy",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
-    max_states: int = 5_000_000,
-    tol: float = 1e-9,
-    certify_tol: float = 1e-6,
+    max_states: int = defaults.MAX_STATES,
+    tol: float = defaults.TOL,
+    certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
 ) -> SynthesisResult:
-    """Maximise the probability that the game's run satisfies the MITLD ``spec``.
+    """Maximise the probability that the model's world satisfies its MITLD spec.
 
-    ``model_or_game``: a loaded :class:`Model` (its spec, epsilon and distributions are
-    the defaults) or any :class:`Game` together with ``spec`` (a formula or its text) and,
-    for ``D[name]`` references, ``distributions`` mapping names to laws.
-    ``method``: ``"lp"`` (occupancy LP through cvxpy, or ``backend="direct"`` Clarabel)
-    or ``"vi"`` (interval iteration alone).  Interval iteration always runs, as the
-    cross-check.  ``truncation`` fixes truncation points per event instead of ``epsilon``.
+    ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
+    made from any game with :meth:`Model.from_game`; ``epsilon`` overrides its
+    truncation budget.  ``method``: ``"lp"`` (occupancy LP through cvxpy, or
+    ``backend="direct"`` Clarabel) or ``"vi"`` (interval iteration alone).  Interval
+    iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
+    per event instead of ``epsilon``.
     """
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    if isinstance(model_or_game, Model):
-        model = model_or_game
-        game = model.game
-        formula = model.spec if spec is None else (parse(spec) if isinstance(spec, str) else spec)
-        laws = dict(model.distributions) if spec is None else bind_distributions(
-            formula, distributions)
-        eps = model.epsilon if epsilon is None else epsilon
-    else:
-        if spec is None:
-            raise ValueError("spec: required when a game (not a model) is given")
-        game = model_or_game
-        formula = parse(spec) if isinstance(spec, str) else spec
-        laws = bind_distributions(formula, distributions)
-        eps = 0.01 if epsilon is None else epsilon
-    timings["parse"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    dta = to_dta(formula)
-    sta = make_sta(dta, laws, eps, clock_reduction=clock_reduction, truncation=truncation)
-    timings["automaton"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    mdp = product(game, sta, max_states=max_states, progress=progress or None)
-    timings["product"] = time.perf_counter() - t0
+    if not isinstance(model, Model):
+        raise TypeError(
+            f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
+            f"got {type(model).__name__}"
+        )
+    eps = model.epsilon if epsilon is None else epsilon
+    built = build_product(
+        model.game, model.spec, model.distributions, epsilon=eps,
+        clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
+        progress=progress or None,
+    )
+    dta, sta, mdp = built.dta, built.sta, built.mdp
+    timings: dict[str, float] = dict(built.timings)
 
     t0 = time.perf_counter()
     common = dict(method=method, solver=solver, backend=backend, tol=tol,
@@ -291,7 +313,7 @@ def synthesize(
         method=method,
         policy=low.policy,
         randomized=randomized,
-        controller=Controller(game, sta, mdp, low.policy,
+        controller=Controller(model.game, sta, mdp, low.policy,
                               hopeless=prob0_max(mdp, mdp.target | mdp.truncated)),
         epsilon=eps,
         epsilon_achieved=sta.epsilon_achieved,
@@ -303,6 +325,7 @@ def synthesize(
         dta=dta,
         sta=sta,
         mdp=mdp,
+        model=model,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
