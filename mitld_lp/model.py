@@ -512,6 +512,8 @@ def _load(text: str, source: str, path: Path | None) -> Model:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise ctx.error("", "TOML nested too deeply to read") from None
 
     present = [k for k in _GAME_KINDS if k.table in doc]
     if len(present) > 1:
