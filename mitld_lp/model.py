@@ -324,7 +324,10 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
 
     labels, events = names("labels"), names("events")
-    spec_words = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(doc.get("spec", ""))))
+    try:
+        spec_atoms = atoms(parse(str(doc.get("spec", ""))))
+    except ParseError:  # reported with its position when the spec itself is read
+        spec_atoms = frozenset()
     try:
         game = load_prism(path, constants=constants, labels=labels, events=events or ())
     except WorldError as exc:
@@ -333,7 +336,7 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     # be offered to the robot as a move of its own: refuse it rather than let the robot
     # cause the event.
     robot_actions = {a for s in game.states for a in game.actions(s)}
-    for action in sorted(spec_words & robot_actions):
+    for action in sorted(spec_atoms & robot_actions):
         raise ctx.error(
             "prism.events",
             f"PRISM action {action!r} has the name of a proposition of spec; list it in "

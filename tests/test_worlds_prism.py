@@ -200,6 +200,8 @@ endmodule
 def test_errors_name_the_file_and_the_problem(tmp_path: Path) -> None:
     with pytest.raises(WorldError, match="no such PRISM file"):
         load_prism(tmp_path / "missing.prism")
+    with pytest.raises(WorldError, match="JANI files are not supported"):
+        load_prism(write(tmp_path, "{}", "m.jani"))
     bad = write(tmp_path, "mdp\nmodule m\n x : [0..2] init 0\n [] x<1 -> (x'=x+1);\nendmodule\n")
     with pytest.raises(WorldError, match=r"PRISM parse error: Parsing error at 4:2: +expecting"):
         load_prism(bad)
@@ -272,6 +274,10 @@ def test_model_file_prism_table(tmp_path: Path) -> None:
     with pytest.raises(ModelError, match=r"prism.events: PRISM action 'bus'"):
         loads_model(_toml(src, "constants = { N = 2 }\n",
                           spec="D[geometric(0.5)] bus & F[0,4] goal"))
+    # words of the spec that are not propositions (operators, distributions) are fine
+    poisson = write(tmp_path, LABELLED.replace("[go]", "[poisson]"), "p.prism")
+    assert loads_model(_toml(poisson, "constants = { N = 2 }\n",
+                             spec="D[poisson(2)] e & F[0,4] goal")).events == {"e"}
     m = loads_model(_toml(src, "constants = { N = 2 }\nevents = [\"bus\"]\n",
                           spec="D[geometric(0.5)] bus & F[0,4] goal"))
     assert m.events == {"bus"} and "bus" not in m.game.actions((2,))

@@ -228,6 +228,8 @@ def load_prism(
     p = Path(path)
     if not p.is_file():
         raise WorldError(f"{where}: no such PRISM file")
+    if p.suffix.lower() == ".jani":
+        raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     stormpy = _stormpy()
     try:
         program = stormpy.parse_prism_program(where)
@@ -281,6 +283,26 @@ def load_prism(
     return _tables(model, where, chosen, event_set, _command_names(program))
 
 
+def _valuations(model: Any) -> tuple[tuple[str, ...], list[State]]:
+    """The variables (in Storm's order) and each state's values, read per variable."""
+    valuations = model.state_valuations
+    if model.nr_states == 0:
+        return (), []
+    order = tuple(json.loads(str(valuations.to_json(0))))
+    by_name = {v.name: v for v in valuations.get_all_variables()}
+    columns = []
+    for name in order:
+        var = by_name[name]
+        if var.has_boolean_type():  # a bit vector: the states where it is true
+            true = set(valuations.get_boolean_values(var))
+            columns.append([s in true for s in range(model.nr_states)])
+        elif var.has_integer_type():
+            columns.append(valuations.get_int64_values(var))
+        else:  # pragma: no cover - PRISM state variables are booleans and integers
+            columns.append([valuations.get_value(s, var) for s in range(model.nr_states)])
+    return order, [tuple(row) for row in zip(*columns, strict=True)]
+
+
 def _tables(
     model: Any,
     where: str,
@@ -288,43 +310,47 @@ def _tables(
     events: frozenset[str],
     command_names: Mapping[int, str],
 ) -> PrismGame:
-    """Copy Storm's sparse MDP into the game's tables."""
-    valuations = model.state_valuations
-    values = [json.loads(str(valuations.to_json(s))) for s in range(model.nr_states)]
-    variables = tuple(values[0]) if values else ()
-    states: list[State] = [tuple(v[name] for name in variables) for v in values]
+    """Copy Storm's sparse MDP into the game's tables (labels and choice labels are read
+    per label, valuations per variable: the bindings are slow per call)."""
+    variables, states = _valuations(model)
 
     def show(s: int) -> str:
-        return "[" + " & ".join(f"{k}={v}" for k, v in values[s].items()) + "]"
+        return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
 
+    def origin(choice: int) -> str:
+        """The commands a choice comes from, ``robot_cmd2`` (``deadlock``: none)."""
+        cmds = sorted(model.choice_origins.get_command_set(choice))
+        return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
+
+    state_labels: list[set[str]] = [set() for _ in states]
+    for label in chosen:
+        for s in model.labeling.get_states(label):
+            state_labels[s].add(label)
+    choice_label: dict[int, str] = {}
+    for label in model.choice_labeling.get_labels():
+        for c in model.choice_labeling.get_choices(label):
+            choice_label[c] = label
+
+    matrix = model.transition_matrix
     transitions: dict[State, dict[str, tuple[tuple[State, float], ...]]] = {}
     effects: dict[str, dict[State, _Distribution]] = {e: {} for e in events}
     labelling: dict[State, frozenset[str]] = {}
     for s in range(model.nr_states):
         state = states[s]
-        labelling[state] = frozenset(model.labeling.get_labels_of_state(s)) & chosen
-        named: list[tuple[str, str, _Distribution]] = []  # (name, origin, distribution)
-        for action in model.states[s].actions:
-            choice = model.get_choice_index(s, action.id)
-            dist = tuple((states[t.column], float(t.value)) for t in action.transitions)
-            acts = sorted(model.choice_labeling.get_labels_of_choice(choice))
-            cmds = sorted(model.choice_origins.get_command_set(choice))
-            origin = "+".join(command_names[c] for c in cmds)
-            if acts and acts[0] in events:
-                if state in effects[acts[0]]:
+        labelling[state] = frozenset(state_labels[s])
+        named: list[tuple[str, int, _Distribution]] = []  # (name, choice, distribution)
+        for choice in range(matrix.get_row_group_start(s), matrix.get_row_group_end(s)):
+            dist = tuple((states[e.column], float(e.value)) for e in matrix.get_row(choice))
+            act = choice_label.get(choice)
+            if act in events:
+                if state in effects[act]:
                     raise WorldError(
-                        f"{where}: event {acts[0]!r} has two enabled commands at state "
+                        f"{where}: event {act!r} has two enabled commands at state "
                         f"{show(s)}; an event's effect must be one command per state"
                     )
-                effects[acts[0]][state] = dist
+                effects[act][state] = dist
                 continue
-            if acts:
-                name = acts[0]
-            elif cmds:
-                name = origin
-            else:
-                name = DEADLOCK_ACTION
-            named.append((name, origin, dist))
+            named.append((act if act is not None else origin(choice), choice, dist))
         if not named:
             raise WorldError(
                 f"{where}: at state {show(s)} only event commands are enabled; the robot "
@@ -334,9 +360,9 @@ def _tables(
         for name, _, _ in named:
             counts[name] = counts.get(name, 0) + 1
         row: dict[str, tuple[tuple[State, float], ...]] = {}
-        for name, origin, dist in named:
+        for name, choice, dist in named:
             if counts[name] > 1:
-                name = f"{name}@{origin}"
+                name = f"{name}@{origin(choice)}"
             if name in row:
                 raise WorldError(f"{where}: two choices named {name!r} at state {show(s)}")
             row[name] = dist
