@@ -350,10 +350,60 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
         raise ctx.error("grid", str(exc)) from exc
 
 
+def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+    """``[prism]``: ``file`` (relative to the model file; to the working directory for
+    :func:`loads_model`), optional ``constants`` (name -> boolean or number), ``labels``
+    (the labels that become propositions, default all) and ``events`` (PRISM actions
+    that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
+    from mitld_lp.worlds import WorldError
+    from mitld_lp.worlds.prism import load_prism
+
+    table = ctx.table(doc["prism"], "prism")
+    ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
+    source = Path(ctx.source)
+    base = source.parent if source.is_file() else Path.cwd()
+    path = base / ctx.string(table["file"], "prism.file")
+    constants = ctx.table(table.get("constants", {}), "prism.constants")
+    for cname, value in constants.items():
+        if not isinstance(value, bool | int | float):
+            raise ctx.error(
+                _join("prism.constants", cname),
+                f"must be a boolean or a number, got {_type_name(value)} {_show(value)}",
+            )
+
+    def names(key: str) -> list[str] | None:
+        if key not in table:
+            return None
+        items = ctx.array(table[key], f"prism.{key}")
+        return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
+
+    labels, events = names("labels"), names("events")
+    try:
+        spec_atoms = atoms(parse(str(doc.get("spec", ""))))
+    except ParseError:  # reported with its position when the spec itself is read
+        spec_atoms = frozenset()
+    try:
+        game = load_prism(path, constants=constants, labels=labels, events=events or ())
+    except WorldError as exc:
+        raise ctx.error("prism", str(exc)) from exc
+    # A PRISM action named like an event of the spec but not listed under events would
+    # be offered to the robot as a move of its own: refuse it rather than let the robot
+    # cause the event.
+    robot_actions = {a for s in game.states for a in game.actions(s)}
+    for action in sorted(spec_atoms & robot_actions):
+        raise ctx.error(
+            "prism.events",
+            f"PRISM action {action!r} has the name of a proposition of spec; list it in "
+            "prism.events if it is the effect of that event",
+        )
+    return game
+
+
 _GAME_KINDS: tuple[_GameKind, ...] = (
     _GameKind(
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
     ),
+    _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
 )
 
 _COMMON_REQUIRED = {"name", "spec"}
