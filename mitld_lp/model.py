@@ -1,6 +1,6 @@
 """Model files: a task, a world and the events' distributions in one TOML file.
 
-The schema (DESIGN.md, "Model files")::
+The schema (also in docs/model-files.md)::
 
     name = "bus_grid"                   # required, non-empty string
     spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
