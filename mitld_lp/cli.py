@@ -335,6 +335,9 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", choices=("cvxpy", "direct"), default="cvxpy",
                    help="direct: call Clarabel on the sparse matrices, no cvxpy")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--policy", metavar="FILE",
+                   help="write the policy table (.csv or .json): one row per state")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
 
 
 def _cmd_solve(args: argparse.Namespace) -> int:
@@ -342,6 +345,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import synthesize
 
+    policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
+                                               (".csv", ".json"))
     model = load_model(args.model)
     r = synthesize(
         model,
@@ -353,6 +358,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         max_states=args.max_states,
     )
     summary = r.summary()
+    if policy_file:
+        _write(policy_file, lambda p: r.write_policy(p, overwrite=True))
+        summary["policy_file"] = str(policy_file)
     if args.json:
         _out(_dumps(summary))
     else:
@@ -368,6 +376,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         if r.truncation_points:
             _out(f"truncation:   {dict(r.truncation_points)}")
         _out("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
+        if policy_file:
+            _out(f"policy:       {policy_file}")
     return EXIT_OK if r.certified else EXIT_UNCERTIFIED
 
 

@@ -22,10 +22,14 @@ does better.  So the true optimum lies in ``[lower, upper]``, and
 
 from __future__ import annotations
 
+import csv
+import json
 import logging
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -49,6 +53,8 @@ __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolu
            "Sizes"]
 
 log = logging.getLogger(__name__)
+
+_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
 
 Method = Literal["lp", "vi"]
 
@@ -127,6 +133,86 @@ class SynthesisResult:
     @property
     def seconds(self) -> float:
         return float(sum(self.timings.values()))
+
+    def __repr__(self) -> str:
+        return (
+            f"SynthesisResult(model={self.model.name!r}, lower={self.lower:.7g}, "
+            f"upper={self.upper:.7g}, certified={self.certified}, "
+            f"status={self.status.value!r}, states={self.sizes.states})"
+        )
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        rows = [
+            ("model", self.model.name),
+            ("spec", str(self.model.spec)),
+            ("optimum in", f"[{self.lower:.7f}, {self.upper:.7f}]"),
+            ("certified", "yes" if self.certified else "NO: " + "; ".join(
+                c.name for c in self.failed_checks)),
+            ("status", self.status.value),
+            ("epsilon achieved", f"{self.epsilon_achieved:.3g}"),
+            ("sizes", f"{self.sizes.dta_states} automaton states, {self.sizes.states} "
+                      f"states, {self.sizes.transitions} transitions"),
+        ]
+        body = "".join(
+            f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(v)}</td></tr>"
+            for k, v in rows
+        )
+        return f"<table>{body}</table>"
+
+    def policy_table(self) -> list[dict[str, Any]]:
+        """The policy as data: one row per product state that is still undecided.
+
+        Keys: ``game_state`` (the game's own state), ``automaton_state`` (the obligation
+        still to satisfy, as formula text), ``pending`` (the events that have not
+        happened, sorted), ``clock`` (steps counted for the pending events, capped where
+        their hazards stop changing), ``action`` (the policy's action), ``value`` (the
+        probability that the policy satisfies the task from there, truncation counted as
+        failure: exact, from a linear solve on the policy's Markov chain).
+        """
+        from mitld_lp.product import ProductState
+        from mitld_lp.solvers.iteration import evaluate_policy
+
+        mdp, policy = self.mdp, self.policy
+        values = evaluate_policy(mdp, mdp.target, policy)
+        obligations = self.dta.states
+        rows: list[dict[str, Any]] = []
+        for i, state in enumerate(mdp.states):
+            if not isinstance(state, ProductState) or policy[i] < 0:
+                continue
+            rows.append({
+                "game_state": state.game,
+                "automaton_state": str(obligations[state.automaton]),
+                "pending": sorted(state.pending),
+                "clock": state.clock,
+                "action": mdp.action_name(int(policy[i])),
+                "value": float(values[i]),
+            })
+        return rows
+
+    def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+        """Write :meth:`policy_table` to ``path``: ``.csv`` (one row per state, pending
+        events joined by spaces) or ``.json`` (a list of objects).  Refuses to replace an
+        existing file unless ``overwrite``."""
+        out = Path(path)
+        suffix = out.suffix.lower()
+        if suffix not in (".csv", ".json"):
+            raise ValueError(f"{out}: the suffix must be .csv or .json")
+        if out.exists() and not overwrite:
+            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
+        rows = self.policy_table()
+        if suffix == ".json":
+            out.write_text(json.dumps(rows, default=str) + "\n")
+            return out
+        with out.open("w", newline="") as handle:
+            writer: csv.DictWriter[str] = csv.DictWriter(handle, fieldnames=list(_POLICY_COLUMNS))
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({**row, "game_state": str(row["game_state"]),
+                                 "pending": " ".join(row["pending"]),
+                                 "value": repr(row["value"])})
+        return out
 
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record (the CLI's ``--json``)."""
