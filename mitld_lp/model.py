@@ -104,6 +104,11 @@ class Model:
         """The external events of the spec."""
         return frozenset(self.distributions)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # A read-only mapping view does not pickle: rebuild it from a plain dict.
+        return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
+                                  self.game, dict(self.distributions), self.source))
+
     @classmethod
     def from_game(
         cls,
@@ -156,6 +161,13 @@ class Model:
         bound = _bind_spec(formula, report, named, game, "proposition", None, ctx)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
                    distributions=MappingProxyType(bound), source=None)
+
+
+def _unpickle_model(
+    name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
+    distributions: dict[str, FirstOccurrence], source: Path | None,
+) -> Model:
+    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source)
 
 
 # --------------------------------------------------------------------------- helpers

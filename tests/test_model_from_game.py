@@ -75,3 +75,15 @@ def test_an_event_the_game_declares_needs_a_law():
     # k >= 2 iff the door event happens in step k (an event happens once, so k = 1
     # leaves it stuck at 1).  A within 4 steps iff K in {2, 3, 4}: 1/4 + 1/8 + 1/16.
     assert r.lower == pytest.approx(0.25 + 0.125 + 0.0625, abs=1e-7)
+
+
+def test_a_model_pickles_and_keeps_its_laws():
+    import pickle
+
+    model = Model.from_game(_EventWorld(), "D[geometric(0.5)] door & F[0,4] A", name="door")
+    back = pickle.loads(pickle.dumps(model))
+    assert back.name == "door" and back.spec == model.spec
+    assert dict(back.distributions).keys() == {"door"}
+    assert back.distributions["door"].hazard(3) == pytest.approx(0.5)
+    with pytest.raises(TypeError):
+        back.distributions["x"] = None  # still read-only
