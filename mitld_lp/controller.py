@@ -105,14 +105,9 @@ class Controller:
                 raise ValueError(f"events observed a second time: {sorted(again)}")
             q = dta.step(q0, label)
             pending = pending0 - observation.events
-            clock = clock0 + 1
-            limits = [
-                c.truncation for a, c in self.sta.clocks.items()
-                if a in pending and c.truncation is not None
-            ]
-            if limits and clock >= min(limits):
-                self.beyond_model = True
-            clock = min(clock, self.sta.cap(pending))
+            step = self.sta.advance(pending, clock0)
+            clock = step.clock
+            self.beyond_model = self.beyond_model or step.truncated
         self._state = (q, pending, clock)
         self.steps += 1
         if dta.is_accepting(q):

@@ -18,6 +18,7 @@ loses) and the upper model (truncated wins).
 
 from __future__ import annotations
 
+import enum
 import logging
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
@@ -31,13 +32,20 @@ from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
 
-__all__ = ["ProductState", "ProductTooLarge", "product", "TARGET", "SINK", "TRUNCATED_STATE"]
+__all__ = ["Absorbing", "ProductState", "ProductTooLarge", "product", "component_counts"]
 
 log = logging.getLogger(__name__)
 
-TARGET = "target"
-SINK = "sink"
-TRUNCATED_STATE = "truncated"
+
+class Absorbing(enum.StrEnum):
+    """The three absorbing product states (each a single self-loop in the MDP).
+
+    A ``StrEnum`` so that the states print as their DRN labels (``target``, ...).
+    """
+
+    TARGET = "target"  # the automaton accepted
+    SINK = "sink"  # the automaton rejected
+    TRUNCATED = "truncated"  # an event clock ran past its truncation point
 
 
 class ProductTooLarge(RuntimeError):
@@ -49,16 +57,13 @@ class ProductState:
     """A non-absorbing product state.
 
     ``clock`` counts the steps taken, capped where no pending event's hazard changes
-    any more; ``ages`` gives each pending event's age as its distribution sees it.
+    any more (:meth:`mitld_lp.automata.sta.STA.advance`).
     """
 
     game: Hashable
     automaton: int
     pending: frozenset[str]
     clock: int
-
-    def ages(self, sta: STA) -> dict[str, int]:
-        return {a: min(self.clock, sta.clocks[a].cap) for a in sorted(self.pending)}
 
 
 def product(
@@ -77,7 +82,7 @@ def product(
     accepting, rejecting = dta.accepting, dta.rejecting
     # Hot loop: states are plain tuples ``(s, q, pending, clock)`` here (hashing a tuple
     # is much cheaper than building a frozen record per transition); the records are
-    # made once at the end.  Absorbing states are the strings TARGET, SINK, TRUNCATED.
+    # made once at the end.  Absorbing states are :class:`Absorbing` members.
     index: dict[Hashable, int] = {}
     states: list[Hashable] = []
 
@@ -97,7 +102,11 @@ def product(
 
     s0 = game.initial
     q0 = dta.step(dta.initial, game.propositions(s0))
-    first = TARGET if q0 == accepting else SINK if q0 == rejecting else (s0, q0, sta.events, 0)
+    first = (
+        Absorbing.TARGET if q0 == accepting
+        else Absorbing.SINK if q0 == rejecting
+        else (s0, q0, sta.events, 0)
+    )
     initial = intern(first)
 
     label_cache: dict[tuple[Hashable, frozenset[str]], frozenset[str]] = {}
@@ -139,7 +148,7 @@ def product(
             for out in outcomes:
                 po = out.probability
                 if out.clock == TRUNCATED:
-                    j = intern(TRUNCATED_STATE)
+                    j = intern(Absorbing.TRUNCATED)
                     row[j] = row.get(j, 0.0) + po
                     continue
                 occurred, left, clock2 = out.occurred, out.pending, out.clock
@@ -157,7 +166,9 @@ def product(
                     if q2 is None:
                         q2 = dta.step(q, label)
                         q2 = step_cache[dkey] = (
-                            TARGET if q2 == accepting else SINK if q2 == rejecting else q2
+                            Absorbing.TARGET if q2 == accepting
+                            else Absorbing.SINK if q2 == rejecting
+                            else q2
                         )
                     nkey = q2 if isinstance(q2, str) else (s2, q2, left, clock2)
                     j = index.get(nkey)
@@ -174,8 +185,8 @@ def product(
         row_groups.append(len(choice_actions))
     bar.close()
 
-    special = {TARGET: 1, SINK: 2, TRUNCATED_STATE: 3}
-    kinds = [special[k] if isinstance(k, str) else 0 for k in states]
+    special = {Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
+    kinds = [special[k] if isinstance(k, Absorbing) else 0 for k in states]
     records: list[Hashable] = [
         k if isinstance(k, str) else ProductState(*cast(tuple, k)) for k in states
     ]
@@ -210,12 +221,12 @@ def component_counts(mdp: MDP) -> Mapping[str, int]:
         "states": mdp.n_states,
         "choices": mdp.n_choices,
         "transitions": mdp.n_transitions,
-        "ordinary states": len(ordinary),
-        "target states": int(mdp.target.sum()),
-        "sink states": int(mdp.sink.sum()),
-        "truncated states": int(mdp.truncated.sum()),
-        "game states": len({s.game for s in ordinary}),
-        "automaton states": len({s.automaton for s in ordinary}),
-        "event situations": len({s.pending for s in ordinary}),
-        "clock values": len({s.clock for s in ordinary}),
+        "ordinary_states": len(ordinary),
+        "target_states": int(mdp.target.sum()),
+        "sink_states": int(mdp.sink.sum()),
+        "truncated_states": int(mdp.truncated.sum()),
+        "game_states": len({s.game for s in ordinary}),
+        "automaton_states": len({s.automaton for s in ordinary}),
+        "event_situations": len({s.pending for s in ordinary}),
+        "clock_values": len({s.clock for s in ordinary}),
     }
