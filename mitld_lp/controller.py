@@ -21,7 +21,7 @@ import numpy as np
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
-from mitld_lp.product import ProductState
+from mitld_lp.product import ProductState, ProductStates
 
 __all__ = ["Observation", "Controller", "RunStatus"]
 
@@ -64,7 +64,14 @@ class Controller:
     beyond_model: bool = False
 
     def __post_init__(self) -> None:
-        self._index = {s: i for i, s in enumerate(self.mdp.states)}
+        if not isinstance(self.mdp.states, ProductStates):  # a hand-made MDP: index it
+            self._index = {s: i for i, s in enumerate(self.mdp.states)}
+
+    def _position(self, state: ProductState) -> int | None:
+        states = self.mdp.states
+        if isinstance(states, ProductStates):
+            return states.position(state)
+        return self._index.get(state)
 
     def reset(self) -> None:
         """Start a new run (the next ``act`` is step 0)."""
@@ -116,7 +123,7 @@ class Controller:
         if dta.is_rejecting(q):
             self.status = RunStatus.REJECTED
             return None
-        i = self._index.get(ProductState(observation.state, q, pending, clock))
+        i = self._position(ProductState(observation.state, q, pending, clock))
         if i is not None and self.hopeless is not None and self.hopeless[i]:
             self.status = RunStatus.REJECTED
             return None

@@ -65,6 +65,10 @@ class Game(Protocol[S]):
 
     The robot moves first (:meth:`actions`), then the environment chooses the events of
     the step, then the world moves (:meth:`successors`).
+
+    Optional: a game whose dynamics never depend on the events may say so with a class
+    attribute ``ignores_events = True``; the product construction then asks
+    :meth:`successors` once per (state, action) instead of once per event outcome.
     """
 
     @property

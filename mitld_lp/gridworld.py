@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from numbers import Real
 from types import MappingProxyType
-from typing import Any, cast
+from typing import Any, ClassVar, cast
 
 __all__ = ["Cell", "GridWorld", "ACTIONS", "MOVES", "PERPENDICULAR"]
 
@@ -82,6 +82,9 @@ class GridWorld:
     _labels: Mapping[Cell, frozenset[str]] = field(
         init=False, repr=False, compare=False, hash=False
     )
+
+    ignores_events: ClassVar[bool] = True
+    """The moves do not depend on the external events (see :class:`mitld_lp.game.Game`)."""
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):

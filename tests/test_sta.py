@@ -2,7 +2,7 @@
 
 Every expected probability is worked out here from the distributions' masses (plain
 arithmetic, ``math``/``scipy.stats`` for the Poisson), never read back from
-``mitld_lp.distributions``; the hazard is DESIGN.md's
+``mitld_lp.distributions``; the hazard is
 ``h(k) = mu(k) / (1 - sum_{j<k} mu(j))`` and events never happen at step 0.
 
 Truncation at ``T``: a run in which a truncated event has not happened by step ``T``
@@ -51,7 +51,7 @@ def hazard_from_masses(masses: list[float], k: int, never: float = 0.0) -> float
     alive = survival_from_masses(masses, k - 1, never)
     m = masses[k - 1] if k <= len(masses) else 0.0
     if alive <= 0.0:
-        return 1.0  # unreachable condition; the convention of DESIGN.md
+        return 1.0  # unreachable condition; the package's convention
     return m / alive
 
 

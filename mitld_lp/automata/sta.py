@@ -7,7 +7,7 @@ have not happened yet.  Two facts make it small and exact here:
   age of *every* pending event is the current step ``t``: one clock serves them all
   (the paper keeps one per event; they would always be equal).
 * The per-step probability of a pending event ``a`` at step ``k`` is its *hazard*
-  ``h_a(k) = mu_a(k) / P(K_a > k - 1)`` (DESIGN.md; the paper's ``mu_a(v + tau)`` is right
+  ``h_a(k) = mu_a(k) / P(K_a > k - 1)`` (the paper's ``mu_a(v + tau)`` is right
   only for the geometric distribution).  An event whose hazard is constant from step
   ``k0`` on needs the clock only up to ``k0 - 1`` (memoryless: no clock at all); an
   event whose hazard never becomes constant is truncated at a point ``T_a``: a run still
