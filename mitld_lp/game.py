@@ -251,6 +251,11 @@ class ExplicitGame(Generic[S]):
         """Every state of the tables, in the order given."""
         return tuple(self.transitions)
 
+    @property
+    def n_states(self) -> int:
+        """The number of states of the tables."""
+        return len(self.transitions)
+
     def actions(self, state: S) -> tuple[str, ...]:
         """The actions listed for ``state``, in table order."""
         try:

@@ -7,8 +7,10 @@ probability ``slip``; an outcome that would leave the grid or enter an obstacle 
 the robot where it is (the paper's "bouncing wall"), and outcomes landing on the same
 cell are merged.  The dynamics ignore the external events.
 
-The successor table is built once on construction, so :meth:`GridWorld.successors` is a
-single dictionary lookup (the product construction calls it millions of times).
+Nothing is tabulated on construction (a 1000 x 1000 grid costs what its obstacles and
+regions cost): a successor distribution is computed the first time a (cell, action) is
+asked and then kept, so asking again is one dictionary lookup and returns the same
+tuple.
 """
 
 from __future__ import annotations
@@ -35,6 +37,9 @@ PERPENDICULAR: Mapping[str, tuple[str, str]] = MappingProxyType(
     {"N": ("E", "W"), "S": ("W", "E"), "E": ("N", "S"), "W": ("S", "N")}
 )
 """The two directions a move may slip into."""
+
+
+_NOWHERE: frozenset[str] = frozenset()
 
 
 def _is_int(x: object) -> bool:
@@ -76,7 +81,7 @@ class GridWorld:
     slip: float = 0.0
     obstacles: frozenset[Cell] = frozenset()
     regions: tuple[tuple[str, frozenset[Cell]], ...] = ()
-    _succ: Mapping[tuple[Cell, str], tuple[tuple[Cell, float], ...]] = field(
+    _succ: dict[tuple[Cell, str], tuple[tuple[Cell, float], ...]] = field(
         init=False, repr=False, compare=False, hash=False
     )
     _labels: Mapping[Cell, frozenset[str]] = field(
@@ -124,11 +129,11 @@ class GridWorld:
         object.__setattr__(self, "slip", float(slip))
         object.__setattr__(self, "obstacles", obstacles)
         object.__setattr__(self, "regions", tuple(sorted(regions.items())))
-        object.__setattr__(self, "_succ", MappingProxyType(self._build_successors()))
-        labels: dict[Cell, set[str]] = {c: set() for c in self.cells}
+        object.__setattr__(self, "_succ", {})
+        labels: dict[Cell, set[str]] = {}
         for rname, cells in regions.items():
             for c in cells:
-                labels[c].add(rname)
+                labels.setdefault(c, set()).add(rname)
         object.__setattr__(
             self, "_labels", MappingProxyType({c: frozenset(v) for c, v in labels.items()})
         )
@@ -141,29 +146,33 @@ class GridWorld:
                 f"(x in 0..{self.width - 1}, y in 0..{self.height - 1})"
             )
 
-    def _build_successors(self) -> dict[tuple[Cell, str], tuple[tuple[Cell, float], ...]]:
+    def _is_free(self, state: Any) -> bool:
+        try:
+            x, y = state
+        except (TypeError, ValueError):
+            return False
+        return (
+            _is_int(x) and _is_int(y) and 0 <= x < self.width and 0 <= y < self.height
+            and (x, y) not in self.obstacles
+        )
+
+    def _distribution(self, cell: Cell, action: str) -> tuple[tuple[Cell, float], ...]:
         """``P(c, a)``: intended neighbour ``1 - 2*slip``, each perpendicular ``slip``,
         blocked outcomes stay at ``c``, merged by landing cell, zero outcomes dropped."""
-        w, h, obstacles = self.width, self.height, self.obstacles
+        x, y = cell
         intended, side = 1.0 - 2.0 * self.slip, self.slip
-        table: dict[tuple[Cell, str], tuple[tuple[Cell, float], ...]] = {}
-        for x in range(w):
-            for y in range(h):
-                if (x, y) in obstacles:
-                    continue
-                for action in ACTIONS:
-                    left, right = PERPENDICULAR[action]
-                    dist: dict[Cell, float] = {}
-                    for direction, p in ((action, intended), (left, side), (right, side)):
-                        if p <= 0.0:
-                            continue
-                        dx, dy = MOVES[direction]
-                        nx, ny = x + dx, y + dy
-                        if not (0 <= nx < w and 0 <= ny < h) or (nx, ny) in obstacles:
-                            nx, ny = x, y
-                        dist[nx, ny] = dist.get((nx, ny), 0.0) + p
-                    table[(x, y), action] = tuple(dist.items())
-        return table
+        left, right = PERPENDICULAR[action]
+        dist: dict[Cell, float] = {}
+        for direction, p in ((action, intended), (left, side), (right, side)):
+            if p <= 0.0:
+                continue
+            dx, dy = MOVES[direction]
+            nx, ny = x + dx, y + dy
+            if not (0 <= nx < self.width and 0 <= ny < self.height) or (
+                nx, ny) in self.obstacles:
+                nx, ny = x, y
+            dist[nx, ny] = dist.get((nx, ny), 0.0) + p
+        return tuple(dist.items())
 
     # ------------------------------------------------------------------ Game protocol
 
@@ -184,23 +193,34 @@ class GridWorld:
     def successors(
         self, state: Cell, action: str, events: frozenset[str] = frozenset()
     ) -> tuple[tuple[Cell, float], ...]:
-        """The precomputed distribution over next cells; ``events`` is ignored."""
-        try:
-            return self._succ[state, action]
-        except KeyError:
-            raise ValueError(
-                f"no move {action!r} from {state!r}: not a free cell of the grid or not "
-                f"one of {ACTIONS}"
-            ) from None
+        """The distribution over next cells (computed once per cell and action, then the
+        same tuple); ``events`` is ignored."""
+        key = (state, action)
+        hit = self._succ.get(key)
+        if hit is None:
+            if action not in MOVES or not self._is_free(state):
+                raise ValueError(
+                    f"no move {action!r} from {state!r}: not a free cell of the grid or "
+                    f"not one of {ACTIONS}"
+                )
+            hit = self._succ[key] = self._distribution(state, action)
+        return hit
 
     def propositions(self, state: Cell) -> frozenset[str]:
         """The names of the regions containing ``state``."""
-        try:
-            return self._labels[state]
-        except KeyError:
-            raise ValueError(f"{state!r} is not a free cell of the grid") from None
+        hit = self._labels.get(state)
+        if hit is None:
+            if not self._is_free(state):
+                raise ValueError(f"{state!r} is not a free cell of the grid")
+            return _NOWHERE
+        return hit
 
     # ------------------------------------------------------------------ helpers
+
+    @property
+    def n_states(self) -> int:
+        """The number of free cells (the game's states)."""
+        return self.width * self.height - len(self.obstacles)
 
     @property
     def cells(self) -> tuple[Cell, ...]:

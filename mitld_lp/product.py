@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import os
 from collections.abc import Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, cast, overload
@@ -34,6 +35,11 @@ from mitld_lp.mdp import ABSORB, MDP
 
 __all__ = [
     "Absorbing",
+    "BYTES_PER_STATE",
+    "BYTES_PER_TRANSITION",
+    "SizeEstimate",
+    "default_max_memory",
+    "estimate_size",
     "ProductState",
     "ProductStates",
     "ProductTooLarge",
@@ -56,7 +62,8 @@ class Absorbing(enum.StrEnum):
 
 
 class ProductTooLarge(RuntimeError):
-    """The reachable product exceeded ``max_states``."""
+    """The product would exceed a budget (``max_states`` or ``max_memory``); a user
+    error: the message names the numbers and what to change."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -408,11 +415,75 @@ class _Layers:
         return out
 
 
+# Peak bytes of the construction, measured with experiments/bench_product.py on builds
+# of 0.3-3.5M states (tracemalloc, numpy's buffers included): about 30 bytes per
+# transition (the matrix, the batches' rows, the merge) and 80 per state (the index at
+# load 1/4-1/2, the keys, the rows per choice); rounded up.
+BYTES_PER_TRANSITION = 32
+BYTES_PER_STATE = 96
+
+
+def default_max_memory() -> int:
+    """Half the machine's physical memory, in bytes (8 GiB if the system cannot say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+    except (AttributeError, ValueError, OSError):
+        return 8 << 30
+
+
+@dataclass(frozen=True, slots=True)
+class SizeEstimate:
+    """An upper bound on the product's states from its factors, before anything is built.
+
+    ``states = game_states * automaton_states * situations + 3``: every ordinary product
+    state is a game state, a non-absorbing automaton state and a situation (the pending
+    events and a clock value at most ``cap(pending)``), plus the three absorbing states.
+    ``game_states`` is None (and so is ``states``) for a game that does not say how many
+    states it has (an ``n_states`` attribute).
+    """
+
+    game_states: int | None
+    automaton_states: int
+    situations: int
+
+    @property
+    def states(self) -> int | None:
+        if self.game_states is None:
+            return None
+        return self.game_states * self.automaton_states * self.situations + 3
+
+    def __str__(self) -> str:
+        game = "?" if self.game_states is None else f"{self.game_states:,}"
+        total = "unknown" if self.states is None else f"{self.states:,}"
+        return (
+            f"at most {total} states from the factors: {game} game states x "
+            f"{self.automaton_states:,} automaton states x {self.situations:,} event "
+            "situations (pending events, clock)"
+        )
+
+
+def estimate_size(game: Game[Any], sta: STA) -> SizeEstimate:
+    """:class:`SizeEstimate` of ``product(game, sta)``, in time linear in the events.
+
+    The situations are counted exactly: with the events' caps sorted,
+    ``c_0 <= ... <= c_{k-1}``, the pending sets whose largest cap is ``c_i`` (ties broken
+    by the order) are ``2^i``, each with clock values ``0..c_i``; the empty set has one.
+    """
+    dta = sta.dta
+    automaton = dta.n_states - (dta.accepting is not None) - (dta.rejecting is not None)
+    caps = sorted(c.cap for c in sta.clocks.values())
+    situations = 1 + sum((1 << i) * (c + 1) for i, c in enumerate(caps))
+    n = getattr(game, "n_states", None)
+    game_states = n if isinstance(n, int) and not isinstance(n, bool) and n >= 0 else None
+    return SizeEstimate(game_states, max(automaton, 0), situations)
+
+
 def product(
     game: Game[Any],
     sta: STA,
     *,
     max_states: int = 5_000_000,
+    max_memory: int | None = None,
     progress: bool | None = None,
 ) -> MDP:
     """Build the reachable product MDP of ``game`` and ``sta`` (see the module docstring).
@@ -424,12 +495,24 @@ def product(
     game's rows per (state, action, events), the STA's outcomes per situation, the
     automaton's steps per (state, letter)) is asked once and then joined in numpy.
 
-    Raises :class:`ProductTooLarge` when more than ``max_states`` states are reached
-    (checked per batch, before the batch's new states are stored).
+    Budgets, checked before the work: :func:`estimate_size` bounds the product from its
+    factors; when the bound is within ``max_states`` nothing more can go wrong, else
+    (the reachable part may still be small) the states are counted exactly per batch,
+    before a batch's new states are stored, against ``max_states`` and against
+    ``max_memory`` bytes (default :func:`default_max_memory`) at
+    :data:`BYTES_PER_STATE` per state plus :data:`BYTES_PER_TRANSITION` per transition,
+    the transitions per state as measured so far.  Either raises
+    :class:`ProductTooLarge` naming the numbers.
     ``progress``: show a progress bar (None: only on a terminal, for large builds).
     """
+    budget = _Budget(
+        max_states,
+        default_max_memory() if max_memory is None else max_memory,
+        estimate_size(game, sta),
+    )
+    log.info("product: %s", budget.estimate)
     f = _Layers(game, sta)
-    states = _Found(f, max_states)
+    states = _Found(f, budget)
     g0 = f.game_state(game.initial)
     f.flush()
     q0 = f.step(np.array([sta.dta.initial]), f.props.view[[g0]])
@@ -448,6 +531,8 @@ def product(
         chunk, n_entries = _expand(f, keys, head, states.intern)
         chunks.append(chunk)
         state_choices.extend(chunk[4])
+        budget.expanded += keys.size
+        budget.transitions += chunk[0].size
         if bar is not None:
             bar.update(keys.size)
         head += keys.size
@@ -459,22 +544,50 @@ def product(
     return _assemble(f, chunks, state_choices.view, keys, initial)
 
 
+@dataclass(slots=True)
+class _Budget:
+    """The limits of one build and what the build has used so far."""
+
+    max_states: int
+    max_memory: int
+    estimate: SizeEstimate
+    expanded: int = 0  # states whose rows are built
+    transitions: int = 0  # their transitions
+
+    def check(self, states: int) -> None:
+        """Raise :class:`ProductTooLarge` if ``states`` states would exceed a budget."""
+        if states > self.max_states:
+            raise ProductTooLarge(
+                f"the product has more than {self.max_states:,} reachable states "
+                f"({states:,} found; {self.estimate}); raise max_states, loosen epsilon, "
+                "or shrink the model"
+            )
+        per_state = self.transitions / self.expanded if self.expanded else 0.0
+        need = states * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION)
+        if need > self.max_memory:
+            raise ProductTooLarge(
+                f"the product would need about {_bytes(need)}, more than max_memory = "
+                f"{_bytes(self.max_memory)} ({states:,} states found, {per_state:.1f} "
+                f"transitions each, {BYTES_PER_STATE} bytes per state and "
+                f"{BYTES_PER_TRANSITION} per transition); raise max_memory, loosen "
+                "epsilon, or shrink the model"
+            )
+
+
+def _bytes(n: float) -> str:
+    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n:.0f} bytes"
+
+
 class _Found:
     """The product states found so far: their keys in the order found, and an index."""
 
-    def __init__(self, f: _Layers, max_states: int) -> None:
-        self.f, self.max_states = f, max_states
+    def __init__(self, f: _Layers, budget: _Budget) -> None:
+        self.f, self.budget = f, budget
         self.index = _Index()
         self.keys = _Grow(np.int64)  # per state: its key (>= 0) or absorbing code (< 0)
-
-    def too_large(self, found: int) -> ProductTooLarge:
-        sta = self.f.sta
-        return ProductTooLarge(
-            f"the product has more than {self.max_states:,} reachable states ({found:,} "
-            f"found; automaton: {sta.dta.n_states} states, events: {sorted(sta.events)}, "
-            f"truncation points: {sta.truncation_points or 'none'}); raise "
-            "max_states, loosen epsilon, or shrink the model"
-        )
 
     def intern(self, keys: np.ndarray) -> np.ndarray:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
@@ -484,8 +597,7 @@ class _Found:
         if miss.any():
             uniq, first, inverse = np.unique(keys[miss], return_index=True, return_inverse=True)
             n = self.keys.size
-            if n + uniq.size > self.max_states:
-                raise self.too_large(n + uniq.size)
+            self.budget.check(n + uniq.size)
             order = np.argsort(first, kind="stable")
             new_ids = np.empty(uniq.size, dtype=np.int64)
             new_ids[order] = np.arange(n, n + uniq.size)

@@ -40,7 +40,15 @@ from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic import parse
 from mitld_lp.logic.syntax import FALSE, TRUE
 from mitld_lp.model import load_model
-from mitld_lp.product import ProductState, ProductTooLarge, product
+from mitld_lp.product import (
+    BYTES_PER_STATE,
+    BYTES_PER_TRANSITION,
+    ProductState,
+    ProductTooLarge,
+    default_max_memory,
+    estimate_size,
+    product,
+)
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
@@ -562,3 +570,73 @@ def test_array_build_equals_the_state_at_a_time_build_on_random_games(seed):
     for i, s in enumerate(mdp.states):
         assert mdp.states.position(s) == i
     assert mdp.states.position(ProductState(999, 0, frozenset(), 0)) is None
+
+
+# --------------------------------------------------------------------------- budgets
+
+
+def test_size_estimate_counts_the_factors():
+    game = GridWorld.make(3, 3, obstacles=[(2, 2)], regions={"A": [(1, 1)]})
+    dists = {"a": geometric(0.5), "b": pmf([0.2, 0.3, 0.5])}  # caps 0 and 2
+    sta = make_sta(to_dta(parse("D[mu1] a & D[mu2] b & F(a & F[0,2] A) & F b")), dists, 0.01)
+    # situations by enumeration: every pending set with clocks 0..max cap of the set
+    caps = {"a": 0, "b": 2}
+    situations = sum(
+        max((caps[e] for e in pend), default=0) + 1
+        for r in range(3) for pend in itertools.combinations("ab", r)
+    )
+    assert situations == 1 + 1 + 3 + 3
+    est = estimate_size(game, sta)
+    dta = sta.dta
+    live = [q for q in range(dta.n_states) if not dta.is_accepting(q) and not dta.is_rejecting(q)]
+    assert (est.game_states, est.automaton_states, est.situations) == (8, len(live), 8)
+    assert est.states == 8 * len(live) * 8 + 3
+    assert product(game, sta).n_states <= est.states
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_size_estimate_bounds_random_products(seed):
+    rng = np.random.default_rng(100 + seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    sta = make_sta(to_dta(parse(text)), dists, 0.01)
+    est = estimate_size(game, sta)
+    assert est.game_states == len(game.transitions)
+    assert product(game, sta).n_states <= est.states
+
+
+def test_a_huge_grid_is_refused_at_the_state_budget_without_being_tabulated():
+    import tracemalloc
+
+    sta = make_sta(to_dta(parse("F[0,30] A")), {}, 0.01)
+    tracemalloc.start()
+    try:
+        game = GridWorld.make(1000, 1000, start=(500, 500), regions={"A": [(0, 0)]})
+        with pytest.raises(ProductTooLarge) as err:
+            product(game, sta, max_states=1000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6  # a tabulated 1000 x 1000 grid takes gigabytes
+    text = str(err.value)
+    assert "1,000 reachable states" in text and "1,000,000 game states" in text
+
+
+def test_the_memory_budget_is_checked_before_the_states_are_stored():
+    m = load_model(MODELS / "patrol.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    mdp = product(m.game, sta, max_memory=10**9)
+    # the whole product at the measured rates, by hand
+    need = mdp.n_states * BYTES_PER_STATE + mdp.n_transitions * BYTES_PER_TRANSITION
+    assert need > 2_000_000
+    with pytest.raises(ProductTooLarge, match=r"more than max_memory = 2\.0 MB") as err:
+        product(m.game, sta, max_memory=2_000_000)
+    found = int(re.search(r"\(([\d,]+) states found", str(err.value)).group(1).replace(",", ""))
+    assert found < mdp.n_states
+
+
+def test_default_memory_budget_is_half_the_machine():
+    import os
+
+    ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    assert default_max_memory() == ram // 2
