@@ -229,6 +229,20 @@ class ExplicitGame(Generic[S]):
         object.__setattr__(self, "proposition_names", names)
         object.__setattr__(self, "event_transitions", MappingProxyType(overrides))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # The frozen tables are read-only views (which do not pickle): rebuild the game
+        # from plain copies of them, validating again.
+        return (
+            ExplicitGame,
+            (
+                self.initial,
+                {s: dict(row) for s, row in self.transitions.items()},
+                dict(self.labels),
+                self.proposition_names,
+                dict(self.event_transitions),
+            ),
+        )
+
     def _key(self) -> tuple[Any, ...]:
         return (
             self.initial,
