@@ -21,7 +21,7 @@ import numpy as np
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
-from mitld_lp.product import ProductState
+from mitld_lp.product import ProductState, ProductStates
 
 __all__ = ["Observation", "Controller", "RunStatus"]
 
@@ -64,7 +64,14 @@ class Controller:
     beyond_model: bool = False
 
     def __post_init__(self) -> None:
-        self._index = {s: i for i, s in enumerate(self.mdp.states)}
+        if not isinstance(self.mdp.states, ProductStates):  # a hand-made MDP: index it
+            self._index = {s: i for i, s in enumerate(self.mdp.states)}
+
+    def _position(self, state: ProductState) -> int | None:
+        states = self.mdp.states
+        if isinstance(states, ProductStates):
+            return states.position(state)
+        return self._index.get(state)
 
     def reset(self) -> None:
         """Start a new run (the next ``act`` is step 0)."""
@@ -105,14 +112,9 @@ class Controller:
                 raise ValueError(f"events observed a second time: {sorted(again)}")
             q = dta.step(q0, label)
             pending = pending0 - observation.events
-            clock = clock0 + 1
-            limits = [
-                c.truncation for a, c in self.sta.clocks.items()
-                if a in pending and c.truncation is not None
-            ]
-            if limits and clock >= min(limits):
-                self.beyond_model = True
-            clock = min(clock, self.sta.cap(pending))
+            step = self.sta.advance(pending, clock0)
+            clock = step.clock
+            self.beyond_model = self.beyond_model or step.truncated
         self._state = (q, pending, clock)
         self.steps += 1
         if dta.is_accepting(q):
@@ -121,7 +123,7 @@ class Controller:
         if dta.is_rejecting(q):
             self.status = RunStatus.REJECTED
             return None
-        i = self._index.get(ProductState(observation.state, q, pending, clock))
+        i = self._position(ProductState(observation.state, q, pending, clock))
         if i is not None and self.hopeless is not None and self.hopeless[i]:
             self.status = RunStatus.REJECTED
             return None

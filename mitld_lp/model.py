@@ -290,76 +290,53 @@ class _GameKind:
 
 
 def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
-    grid = ctx.table(doc["grid"], "grid")
-    ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles"})
+    """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
+    values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
+    from mitld_lp.gridworld import GridError
 
+    grid = ctx.table(doc["grid"], "grid")
+    ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})
     size = grid["size"]
     if not isinstance(size, list) or len(size) != 2:
         raise ctx.error("grid.size", f"must be [width, height], got {_show(size)}")
     width = ctx.integer(size[0], "grid.size[0]")
     height = ctx.integer(size[1], "grid.size[1]")
-    for i, v in enumerate((width, height)):
-        if v < 1:
-            raise ctx.error(f"grid.size[{i}]", f"must be a positive integer, got {v}")
 
-    def on_grid(value: Any, path: str) -> tuple[int, int]:
-        cell = ctx.pair(value, path)
-        x, y = cell
-        if not (0 <= x < width and 0 <= y < height):
-            raise ctx.error(
-                path,
-                f"cell {_show(value)} is off the {width}x{height} grid "
-                f"(x in 0..{width - 1}, y in 0..{height - 1})",
-            )
-        return cell
-
-    def cells(value: Any, path: str) -> list[tuple[int, int]]:
-        out: list[tuple[int, int]] = []
+    def cells(value: Any, path: str) -> Any:
         for i, v in enumerate(ctx.array(value, path)):
-            cell = on_grid(v, f"{path}[{i}]")
-            if cell in out:
-                raise ctx.error(f"{path}[{i}]", f"cell {_show(v)} is listed twice")
-            out.append(cell)
-        return out
+            ctx.pair(v, f"{path}[{i}]")
+        return value
 
-    slip = 0.0
     if "slip" in grid:
-        slip = ctx.number(grid["slip"], "grid.slip")
-        if not 0.0 <= slip <= 0.5:
-            raise ctx.error("grid.slip", f"must be in [0, 0.5], got {_show(grid['slip'])}")
+        ctx.number(grid["slip"], "grid.slip")
+    stay = grid.get("stay", False)
+    if not isinstance(stay, bool):
+        raise ctx.error("grid.stay", f"must be a boolean, got {_type_name(stay)} {_show(stay)}")
     obstacles = cells(grid.get("obstacles", []), "grid.obstacles")
-    start = on_grid(grid["start"], "grid.start")
-    if start in obstacles:
-        raise ctx.error("grid.start", f"cell {_show(grid['start'])} is an obstacle")
-
-    regions: dict[str, frozenset[tuple[int, int]]] = {}
+    ctx.pair(grid["start"], "grid.start")
     table = ctx.table(doc.get("regions", {}), "regions")
-    for name, value in table.items():
-        path = _join("regions", name)
-        if not _IDENT.match(name) or name in _RESERVED:
-            raise ctx.error(
-                path,
-                f"region name {_show(name)} is not a proposition name (letters, digits, "
-                f"'_', not starting with a digit, not one of {', '.join(sorted(_RESERVED))})",
-            )
-        rcells = cells(value, path)
-        if not rcells:
-            raise ctx.error(path, "must list at least one cell")
-        for i, c in enumerate(rcells):
-            if c in obstacles:
-                raise ctx.error(f"{path}[{i}]", f"cell {_show(list(c))} is an obstacle")
-        regions[name] = frozenset(rcells)
+    regions: Any = {name: cells(value, _join("regions", name)) for name, value in table.items()}
     try:
         return GridWorld(
             width=width,
             height=height,
-            start=start,
-            slip=slip,
-            obstacles=frozenset(obstacles),
-            regions=tuple(regions.items()),
+            # the values as written (lists), so that messages show them as written;
+            # GridWorld validates and normalises them
+            start=grid["start"],
+            slip=grid.get("slip", 0.0),
+            obstacles=obstacles,
+            regions=regions,
+            stay=stay,
         )
-    except ValueError as exc:  # every check above should have caught it first
-        raise ctx.error("grid", str(exc)) from exc
+    except GridError as exc:
+        head, *rest = exc.parts
+        if head in ("width", "height"):
+            path = f"grid.size[{0 if head == 'width' else 1}]"
+        else:
+            path = "regions" if head == "regions" else f"grid.{head}"
+        for part in rest:
+            path = f"{path}[{part}]" if isinstance(part, int) else _join(path, part)
+        raise ctx.error(path, exc.message) from None
 
 
 def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:

@@ -75,8 +75,8 @@ def test_info_counts(capsys):
     assert main(["info", BUS, "--json"]) == 0
     out = _json(capsys)
     # Geometric events need no clock: one clock value; 16 cells at most.
-    assert out["clock values"] == 1
-    assert out["game states"] <= 16
+    assert out["clock_values"] == 1
+    assert out["game_states"] <= 16
     assert out["truncation_points"] == {}
     assert out["epsilon_achieved"] == 0
 
