@@ -94,6 +94,23 @@ def _bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
     return parse_int
 
 
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def _memory_size(text: str) -> int:
+    """A byte count with an optional binary unit: ``500M``, ``4G``, ``1.5G``."""
+    body = text.strip().upper().removesuffix("B").removesuffix("I")
+    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
+    try:
+        value = float(body[: len(body) - len(unit)]) * _UNITS[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a size such as 4G or 500M, got {text!r}") from None
+    if not 1 <= value < float(1 << 60):
+        raise argparse.ArgumentTypeError(f"must be a positive size, got {text!r}")
+    return int(value)
+
+
 def _seconds(text: str) -> float:
     try:
         value = float(text)
@@ -282,6 +299,9 @@ def _args_model(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_STATES,
                    metavar="N", help="refuse products larger than N states (exit 3)")
+    p.add_argument("--max-memory", type=_memory_size, metavar="SIZE",
+                   help="refuse products needing more memory, e.g. 4G or 500M "
+                        "(default: half the machine's memory; exit 3)")
 
 
 def _build(args: argparse.Namespace) -> tuple[Model, Built]:
@@ -294,6 +314,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
         clock_reduction=not args.no_clock_reduction, max_states=args.max_states,
+        max_memory=args.max_memory,
     )
     return model, built
 
@@ -356,6 +377,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         backend=args.backend,
         clock_reduction=not args.no_clock_reduction,
         max_states=args.max_states,
+        max_memory=args.max_memory,
     )
     summary = r.summary()
     if policy_file:
@@ -434,7 +456,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     model = load_model(args.model)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-                   max_states=args.max_states)
+                   max_states=args.max_states, max_memory=args.max_memory)
     sim = simulate(model.game, r.sta, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {

@@ -323,16 +323,19 @@ def build_product(
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
     progress: bool | None = None,
 ) -> Built:
     """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
     ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
-    then the reachable ``product`` with ``game``.  The only place that wires them."""
+    then the reachable ``product`` with ``game``, within ``max_states`` states and
+    ``max_memory`` bytes (default: half the machine's memory), both checked before the
+    work that would exceed them.  The only place that wires the stages."""
     t0 = time.perf_counter()
     dta = to_dta(formula)
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
-    mdp = product(game, sta, max_states=max_states, progress=progress)
+    mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
     t2 = time.perf_counter()
     return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
 
@@ -347,6 +350,7 @@ def synthesize(
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
@@ -371,7 +375,7 @@ def synthesize(
     built = build_product(
         model.game, model.spec, model.distributions, epsilon=eps,
         clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
-        progress=progress or None,
+        max_memory=max_memory, progress=progress or None,
     )
     dta, sta, mdp = built.dta, built.sta, built.mdp
     timings: dict[str, float] = dict(built.timings)

@@ -43,6 +43,8 @@ def _one_error_line(capsys, code: int, argv: list[str]) -> str:
         (["solve", BUS, "--epsilon", "inf"], "--epsilon: must be in (0, 1)"),
         (["solve", BUS, "--max-states", "0"], "--max-states: must be an integer >= 1"),
         (["solve", BUS, "--time-limit", "-3"], "--time-limit: must be a positive number"),
+        (["info", BUS, "--max-memory", "lots"], "--max-memory: must be a size such as 4G"),
+        (["info", BUS, "--max-memory", "0"], "--max-memory: must be a positive size"),
         (["frobnicate"], "invalid choice: 'frobnicate'"),
         ([], "the following arguments are required: VERB"),
     ],
@@ -113,6 +115,13 @@ def test_a_time_limit_is_a_status_not_a_hang(capsys):
     captured = capsys.readouterr()
     assert json.loads(captured.out) == {"status": "time_limit", "time_limit": 0.01}
     assert "stopped: time limit of 0.01 s reached" in captured.err
+
+
+def test_a_memory_budget_stops_before_the_work(capsys):
+    # 10 KiB cannot hold the bus grid's 371-state product: a budget stop, exit 3.
+    line = _one_error_line(capsys, 3, ["info", BUS, "--max-memory", "10K", "-q"])
+    assert line.startswith("mitld-lp: stopped:") and "memory" in line
+    assert main(["info", BUS, "--max-memory", "1G", "-q"]) == 0
 
 
 def test_stage_lines_go_to_stderr_and_quiet_silences_them(capsys):
