@@ -10,22 +10,16 @@ import numpy as np
 import pytest
 import stormpy
 import stormpy.environments
+from conftest import HAND_CHOICES, build_mdp
 
-from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers import interval_iteration, solve_lp, write_drn, write_lp
+from mitld_lp.solvers.quotient import prob0_max
+from mitld_lp.testing import random_mdp
 
+# The shared HAND MDP with a state 7 that reaches target, sink or truncated (8).
 HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-        [("h", {3: 0.5, 8: 0.25, 2: 0.25})],
-        [],
-    ],
+    [*HAND_CHOICES, [("h", {3: 0.5, 8: 0.25, 2: 0.25})], []],
     target=[3],
     sink=[2],
     truncated=[8],

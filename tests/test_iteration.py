@@ -4,27 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import HAND, HAND_VALUES, build_mdp
 
-from mitld_lp.mdp import build_mdp, random_mdp
 from mitld_lp.solvers import Status, evaluate_policy, interval_iteration
-
-# 0 'stay' (loop) | 'go' -> 1/2 to 1, 1/2 sink;  {1, 4} a MEC with exits 'a' (0.3 target,
-# 0.7 back to 0) at 1 and 'd' (1/2 target, 1/2 sink) at 4;  5 -> sink;  6 'f' loops
-# with 1/2 or reaches the target, 'g' -> sink.  Hand values in tests/test_lp.py.
-HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-    ],
-    target=[3],
-    sink=[2],
-)
-HAND_VALUES = np.array([0.25, 0.5, 0.0, 1.0, 0.5, 0.0, 1.0])
+from mitld_lp.testing import random_mdp
 
 
 def test_interval_iteration_hand_values() -> None:
@@ -50,12 +33,18 @@ def test_gap_at_initial_only_stops_early_but_bounds_stay_sound() -> None:
 def test_iteration_limit_is_a_status_with_a_valid_bracket() -> None:
     # A slow leak: 0 'w' stays with 0.99, else target 0.005 / sink 0.005 -> Pmax 1/2.
     mdp = build_mdp([[("w", {0: 0.99, 1: 0.005, 2: 0.005})], [], []], target=[1], sink=[2])
-    r = interval_iteration(mdp, mdp.target, max_iterations=10, progress=False)
+    r = interval_iteration(mdp, mdp.target, max_iterations=10, progress=False,
+                           topological=False)
     assert r.status == Status.MAX_ITERATIONS and r.iterations == 10
     assert r.value_lower < 0.5 < r.value_upper
-    done = interval_iteration(mdp, mdp.target, tol=1e-10, progress=False)
+    done = interval_iteration(mdp, mdp.target, tol=1e-10, progress=False, topological=False)
     assert done.status == Status.OPTIMAL
     assert done.value_lower == pytest.approx(0.5, abs=1e-10)
+    # In topological order a single state with a self-loop is solved exactly:
+    # v = 0.005 / (1 - 0.99), no sweep at all.
+    exact = interval_iteration(mdp, mdp.target, max_iterations=10, progress=False)
+    assert exact.status == Status.OPTIMAL and exact.iterations == 0
+    assert exact.value_lower == exact.value_upper == pytest.approx(0.5, abs=1e-14)
 
 
 def test_initial_decided_without_iterating() -> None:

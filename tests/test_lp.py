@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 import scipy.optimize
 import scipy.sparse as sp
+from conftest import HAND, HAND_VALUES, build_mdp
 
-from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers import (
     LPResult,
     Status,
@@ -25,26 +26,10 @@ from mitld_lp.solvers import (
     occupancy_lp,
     solve_lp,
 )
+from mitld_lp.solvers.quotient import prob0_max
+from mitld_lp.testing import random_mdp
 
-# The MDP of tests/test_mdp.py: 0 has a self-loop and 'go'; {1, 4} is a two-state MEC
-# whose best exit 'd' (1/2 to target) is at 4, the other exit 'a' at 1; 6 reaches the
-# target with probability 1 by looping.  By hand:
-#   v(1) = v(4) = max(0.3 + 0.7 v(0), 0.5),  v(0) = max(v(0), 0.5 v(1))
-#   with 'a': v(1) = 0.3 / 0.65 < 0.5, so 'd': v(1) = v(4) = 1/2, v(0) = 1/4;  v(6) = 1.
-HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-    ],
-    target=[3],
-    sink=[2],
-)
-HAND_VALUES = np.array([0.25, 0.5, 0.0, 1.0, 0.5, 0.0, 1.0])
+# HAND and its hand values: tests/conftest.py.
 
 # A self-loop next to an exit: 0 'wait' (loop) | 'try' -> 0.6 target, 0.4 sink.
 LOOP = build_mdp(
@@ -219,8 +204,8 @@ def test_iteration_limit_is_a_status() -> None:
     r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"max_iter": 1})
     assert r.status == Status.MAX_ITERATIONS and "MaxIterations" in r.message
     r = solve_lp(mdp, mdp.target, solver_options={"max_iter": 1})
-    assert not r.status.has_solution or r.status == Status.INACCURATE
-    assert r.message.startswith("cvxpy/CLARABEL")
+    assert r.status == Status.MAX_ITERATIONS and r.values is None
+    assert r.message.startswith("cvxpy/CLARABEL: user_limit")
     r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"no_such": 1})
     assert r.status == Status.FAILED and "no_such" in r.message
 

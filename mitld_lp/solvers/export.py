@@ -4,7 +4,7 @@ Both writers refuse to overwrite an existing file unless ``overwrite=True``.
 
 LP names: column ``y<c>`` is the occupancy of original choice ``c``; row ``s<i>`` is the
 flow constraint of original state ``i`` (a maybe state outside any MEC), row ``mec<k>``
-the one of collapsed MEC ``k`` (see :func:`mitld_lp.mdp.maximal_end_components`).
+the one of collapsed MEC ``k`` (see :func:`mitld_lp.solvers.quotient.maximal_end_components`).
 """
 
 from __future__ import annotations
