@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 from conftest import HAND, HAND_VALUES, build_mdp
@@ -93,3 +95,73 @@ def test_evaluate_policy_rejects_bad_policies() -> None:
         evaluate_policy(HAND, HAND.target, np.array([-1, 2, -1, -1, 6, 8, 9]))
     with pytest.raises(ValueError, match="shape"):
         evaluate_policy(HAND, HAND.target, np.array([0]))
+
+
+# ------------------------------------------------------------------------------------
+# Topological order: slow components, time limits, agreement with the plain sweeps.
+# ------------------------------------------------------------------------------------
+
+EPS = 1e-6
+# A two-state component left once in a million steps: 0 -> 1 or target (EPS), 1 -> 0 or
+# sink (EPS).  By hand v0 = EPS + (1-EPS) v1, v1 = (1-EPS) v0, so v0 = 1 / (2 - EPS).
+SLOW = build_mdp(
+    [[("x", {1: 1 - EPS, 2: EPS})], [("y", {0: 1 - EPS, 3: EPS})], [], []],
+    target=[2], sink=[3],
+)
+
+
+def slow_exact() -> tuple[Fraction, Fraction]:
+    """v0, v1 of SLOW in exact arithmetic on the stored float probabilities (1 / (2 - EPS)
+    is off by 1e-11: 1 - EPS is not a binary fraction)."""
+    m = SLOW.matrix.toarray()
+    v0 = Fraction(m[0, 2]) / (1 - Fraction(m[0, 1]) * Fraction(m[1, 0]))
+    return v0, Fraction(m[1, 0]) * v0
+
+
+def test_slowly_draining_component_converges() -> None:
+    r = interval_iteration(SLOW, SLOW.target, gap="max", max_iterations=100_000,
+                           progress=False)
+    assert r.status == Status.OPTIMAL, r.message
+    v0, v1 = slow_exact()
+    assert float(v0) == pytest.approx(1 / (2 - EPS), abs=1e-10)
+    assert Fraction(r.lower[0]) <= v0 <= Fraction(r.upper[0])
+    assert Fraction(r.lower[1]) <= v1 <= Fraction(r.upper[1])
+    assert r.upper[0] - r.lower[0] < 1e-9 and r.upper[1] - r.lower[1] < 1e-9
+
+
+def test_geometric_one_in_a_million_event_converges() -> None:
+    from mitld_lp import GridWorld, synthesize
+
+    world = GridWorld.make(3, 3, start=(0, 0), slip=0.1, regions={"A": [(1, 2)]})
+    spec = "D[geometric(0.000001)] e & F(e & F[0,3] A)"
+    result = synthesize(world, spec, method="vi")
+    mdp = result.mdp
+    r = interval_iteration(mdp, mdp.target, max_iterations=100_000, progress=False)
+    assert r.status == Status.OPTIMAL, r.message
+    from mitld_lp.solvers import solve_lp
+
+    highs = solve_lp(mdp, mdp.target, solver="HIGHS", decompose=False)
+    assert r.value_lower - 1e-8 <= highs.value <= r.value_upper + 1e-8
+    exact = evaluate_policy(mdp, mdp.target, r.policy)[mdp.initial]
+    assert r.value_lower - 1e-12 <= exact <= r.value_upper + 1e-9
+    assert result.certified
+
+
+def test_time_limit_returns_the_bracket_so_far() -> None:
+    for topological in (True, False):
+        r = interval_iteration(SLOW, SLOW.target, time_limit=0.0, progress=False,
+                               topological=topological)
+        assert r.status == Status.TIME_LIMIT and "time limit" in r.message
+        assert Fraction(r.value_lower) <= slow_exact()[0] <= Fraction(r.value_upper)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_topological_and_plain_sweeps_agree(seed: int) -> None:
+    mdp = random_mdp(200, seed=50 + seed, locality=4, self_loop_fraction=0.3)
+    plain = interval_iteration(mdp, mdp.target, gap="max", topological=False,
+                               progress=False)
+    topo = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    assert plain.status == topo.status == Status.OPTIMAL
+    assert np.all(topo.lower <= plain.upper + 1e-12)
+    assert np.all(plain.lower <= topo.upper + 1e-12)
+    np.testing.assert_allclose(topo.lower, plain.lower, atol=2e-9)

@@ -322,18 +322,37 @@ def _retries(settings: _Settings) -> Iterator[tuple[str, dict[str, Any]]]:
     yield other, {**base, "equilibrate_max_iter": 50, "max_iter": 400, **dict(settings.extra)}
 
 
+_DUAL_SLACK = 1e-7
+"""A solve whose duals violate a constraint ``v(s) >= r(c) + sum P(c, s') v(s')`` by more
+than this is not taken as optimal, whatever the solver says (a badly conditioned LP,
+e.g. a component left once in a million steps, can come back "solved" and wrong)."""
+
+
+def _checked(lp: _Matrices, raw: _Raw) -> _Raw:
+    """``raw`` demoted to ``INACCURATE`` if its duals are not feasible (``A' v >= c``)."""
+    if raw.status is not Status.OPTIMAL or raw.v is None:
+        return raw
+    violation = float(np.max(lp.objective - lp.a_eq.T @ raw.v, initial=0.0))
+    if violation <= _DUAL_SLACK:
+        return raw
+    return _Raw(Status.INACCURATE, f"{raw.message}, but its duals violate a Bellman "
+                f"inequality by {violation:.1e}", raw.y, raw.v, raw.iterations)
+
+
 def _solve_one(lp: _Matrices, settings: _Settings) -> _Raw:
-    """Solve ``lp``; an inaccurate answer is retried with other settings (see
-    :func:`_retries`) and the first accurate one is kept, else the first answer."""
+    """Solve ``lp``; an inaccurate answer (by the solver's word or by
+    :func:`_checked`) is retried with other settings (see :func:`_retries`) and the
+    first accurate one is kept, else the first answer."""
     if time.perf_counter() >= settings.deadline:
         return _Raw(Status.TIME_LIMIT, "time limit reached before the solve")
-    raw = _run_backend(lp, settings.solver, settings.backend, settings.options())
+    raw = _checked(lp, _run_backend(lp, settings.solver, settings.backend,
+                                    settings.options()))
     if raw.status is not Status.INACCURATE:
         return raw
     for backend, options in _retries(settings):
         if time.perf_counter() >= settings.deadline:
             break
-        again = _run_backend(lp, settings.solver, backend, options)
+        again = _checked(lp, _run_backend(lp, settings.solver, backend, options))
         logger.info("inaccurate LP retried (%s, %s): %s", backend, sorted(options),
                     again.message)
         if again.status is Status.OPTIMAL:
