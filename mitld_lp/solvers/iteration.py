@@ -172,12 +172,16 @@ def _evaluate(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
     return out[0], out[1]
 
 
-def _improve(block: _Block, reward: np.ndarray, chosen: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Policy iteration from ``chosen`` (local choice indices) to a fixpoint."""
+def _improve(block: _Block, reward: np.ndarray, chosen: np.ndarray,
+             allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """Policy iteration from ``chosen`` (local choice indices) to a fixpoint, over the
+    ``allowed`` choices only if given."""
     groups = np.append(block.starts, block.choices.shape[0])
     for _ in range(_POLICY_ROUNDS):
         v, t = _evaluate(block.inner, chosen, reward)
         score = reward + block.inner @ np.asarray(v, dtype=np.float64)
+        if allowed is not None:
+            score = np.where(allowed, score, -np.inf)
         better = segmented_argmax(score, groups)
         # Switch only where the gain is real, so that rounding cannot make it cycle.
         gain = score[better] - score[chosen]
@@ -196,12 +200,17 @@ def _jump(block: _Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     local = np.column_stack([lo[block.states], hi[block.states]])
     start = segmented_argmax(exit2[:, 0] + block.inner @ local[:, 0], groups)
     chosen, v, t = _improve(block, exit2[:, 0], start)
-    eps = (tol / 100.0) / float(np.max(t))
+    eps = (tol / 4.0) / float(np.max(t))
     lower = v - eps * t
     inner_ld = block.inner.astype(np.longdouble)
     lower_ok = bool(np.all(exit2[chosen, 0] + (inner_ld @ lower)[chosen] >= lower))
-    chosen_hi, w, t_hi = _improve(block, exit2[:, 1], chosen)
-    eps_hi = (tol / 100.0) / float(np.max(t_hi))
+    chosen_hi, w, _ = _improve(block, exit2[:, 1], chosen)
+    # The shift must cover the slowest of the (nearly) optimal choices, not only the
+    # policy's: t_hi = 1 + max over choices within tol/4 of optimal of P t_hi.
+    owner_w = np.repeat(w, np.diff(groups))
+    tied = (owner_w - (exit2[:, 1] + inner_ld @ w)) < tol / 4.0
+    _, t_hi, _ = _improve(block, np.ones(block.choices.shape[0]), chosen_hi, tied)
+    eps_hi = (tol / 4.0) / float(np.max(t_hi))
     upper = w + eps_hi * t_hi
     image = exit2[:, 1] + inner_ld @ upper
     upper_ok = bool(np.all(image <= np.repeat(upper, np.diff(groups))))
