@@ -55,7 +55,12 @@ from mitld_lp.solvers.quotient import (
     segmented_argmax,
 )
 from mitld_lp.solvers.result import IterationResult, Status, read_only
-from mitld_lp.solvers.topological import blocks, gather_ranges, solve_single_states
+from mitld_lp.solvers.topological import (
+    Block,
+    blocks,
+    improve_policy,
+    solve_single_states,
+)
 
 __all__ = ["interval_iteration", "evaluate_policy"]
 
@@ -67,8 +72,6 @@ _PROGRESS_MIN_STATES = 10_000
 _SWEEPS_BEFORE_POLICY = 500
 """Sweeps of a component before it is jumped by policy evaluation (module docs)."""
 
-_POLICY_ROUNDS = 50
-"""At most this many policy improvements per jump."""
 
 
 @dataclass(slots=True)
@@ -92,37 +95,7 @@ class _Budget:
         return True
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Block:
-    """States ``states`` of the quotient with their choices: ``inner`` moves inside the
-    block (columns: positions in ``states``), ``starts`` the first choice of each state."""
-
-    states: np.ndarray
-    choices: np.ndarray
-    inner: sp.csr_array
-    outer: sp.csr_array  # the same rows, all quotient columns, block columns zeroed
-    # (kept, not dropped: eliminating zeros would be a second pass for nothing)
-    starts: np.ndarray
-    to_target: np.ndarray
-
-    @staticmethod
-    def of(q: Quotient, states: np.ndarray) -> _Block:
-        lo, hi = q.row_groups[states], q.row_groups[states + 1]
-        choices = gather_ranges(lo, hi)
-        rows = sp.csr_array(q.matrix[choices])
-        outer = rows.copy()
-        outer.data[np.isin(outer.indices, states)] = 0.0
-        starts = np.concatenate([[0], np.cumsum(hi - lo)[:-1]]).astype(np.int64)
-        return _Block(states, choices, sp.csr_array(rows[:, states]), outer, starts,
-                      q.to_target[choices])
-
-    def exits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """``(choices, 2)`` exit rewards from the lower / upper bounds downstream."""
-        return np.column_stack([self.to_target + self.outer @ lo,
-                                self.to_target + self.outer @ hi])
-
-
-def _sweeps(block: _Block, lo: np.ndarray, hi: np.ndarray, tol: float, budget: _Budget,
+def _sweeps(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float, budget: _Budget,
             width: Literal["initial", "max"], initial: int, bar: tqdm,
             limit: int | None = None) -> bool:
     """Iterate the block's bounds (``lo``, ``hi`` at ``block.states``) in place until
@@ -150,70 +123,29 @@ def _sweeps(block: _Block, lo: np.ndarray, hi: np.ndarray, tol: float, budget: _
         lo[block.states], hi[block.states] = local[:, 0], local[:, 1]
 
 
-def _matvec_ld(m: sp.csr_array, x: np.ndarray) -> np.ndarray:
-    return np.asarray(m.astype(np.longdouble) @ x.astype(np.longdouble))
-
-
-def _evaluate(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Value ``v = r + M v`` and exit time ``t = 1 + M t`` of the chain of ``chosen``
-    rows, in extended precision (a float64 LU refined twice)."""
-    k = chosen.shape[0]
-    m = sp.csr_array(inner[chosen])
-    a = sp.csc_array(sp.eye_array(k, format="csc") - m)
-    lu = spla.splu(a)
-    out = []
-    for rhs in (reward[chosen], np.ones(k)):
-        x = lu.solve(rhs).astype(np.longdouble)
-        for _ in range(2):
-            residual = rhs.astype(np.longdouble) + _matvec_ld(m, x) - x
-            x += lu.solve(np.asarray(residual, dtype=np.float64))
-        out.append(x)
-    return out[0], out[1]
-
-
-def _improve(block: _Block, reward: np.ndarray, chosen: np.ndarray,
-             allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """Policy iteration from ``chosen`` (local choice indices) to a fixpoint, over the
-    ``allowed`` choices only if given."""
-    groups = np.append(block.starts, block.choices.shape[0])
-    for _ in range(_POLICY_ROUNDS):
-        v, t = _evaluate(block.inner, chosen, reward)
-        score = reward + block.inner @ np.asarray(v, dtype=np.float64)
-        if allowed is not None:
-            score = np.where(allowed, score, -np.inf)
-        better = segmented_argmax(score, groups)
-        # Switch only where the gain is real, so that rounding cannot make it cycle.
-        gain = score[better] - score[chosen]
-        nxt = np.where(gain > 1e-13, better, chosen)
-        if np.array_equal(nxt, chosen):
-            return chosen, v, t
-        chosen = nxt
-    return chosen, v, t
-
-
-def _jump(block: _Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
+def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     """Try the verified policy jump of the module docs on ``block``; update ``lo`` and
     ``hi`` where it proves better bounds.  ``True`` if both bounds were proven."""
     exit2 = block.exits(lo, hi)
     groups = np.append(block.starts, block.choices.shape[0])
     local = np.column_stack([lo[block.states], hi[block.states]])
     start = segmented_argmax(exit2[:, 0] + block.inner @ local[:, 0], groups)
-    chosen, v, t = _improve(block, exit2[:, 0], start)
+    chosen, v, t = improve_policy(block, exit2[:, 0], start)
     eps = (tol / 4.0) / float(np.max(t))
     lower = v - eps * t
     inner_ld = block.inner.astype(np.longdouble)
     lower_ok = bool(np.all(exit2[chosen, 0] + (inner_ld @ lower)[chosen] >= lower))
-    chosen_hi, w, _ = _improve(block, exit2[:, 1], chosen)
+    chosen_hi, w, _ = improve_policy(block, exit2[:, 1], chosen)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: t_hi = 1 + max over choices within tol/4 of optimal of P t_hi.
     owner_w = np.repeat(w, np.diff(groups))
     tied = (owner_w - (exit2[:, 1] + inner_ld @ w)) < tol / 4.0
-    _, t_hi, _ = _improve(block, np.ones(block.choices.shape[0]), chosen_hi, tied)
+    _, t_hi, _ = improve_policy(block, np.ones(block.choices.shape[0]), chosen_hi, tied)
     eps_hi = (tol / 4.0) / float(np.max(t_hi))
     upper = w + eps_hi * t_hi
     image = exit2[:, 1] + inner_ld @ upper
-    upper_ok = bool(np.all(image <= np.repeat(upper, np.diff(groups))))
+    excess = float(np.max(image - np.repeat(upper, np.diff(groups))))
+    upper_ok = excess <= 0.0
     if lower_ok:
         low64 = np.nextafter(lower.astype(np.float64), -np.inf)
         local[:, 0] = np.maximum(local[:, 0], np.clip(low64, 0.0, 1.0))
@@ -221,8 +153,8 @@ def _jump(block: _Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
         up64 = np.nextafter(upper.astype(np.float64), np.inf)
         local[:, 1] = np.minimum(local[:, 1], np.clip(up64, 0.0, 1.0))
     lo[block.states], hi[block.states] = local[:, 0], local[:, 1]
-    logger.debug("policy jump on %d states: lower %s, upper %s", block.states.size,
-                 lower_ok, upper_ok)
+    logger.debug("policy jump on %d states: lower %s, upper %s (T(U) - U <= %.1e)",
+                 block.states.size, lower_ok, upper_ok, excess)
     return lower_ok and upper_ok
 
 
@@ -238,7 +170,7 @@ def _topological(q: Quotient, lo: np.ndarray, hi: np.ndarray, tol: float,
         rest = states[~single]
         if rest.size == 0:
             continue
-        block = _Block.of(q, rest)
+        block = Block.of(q, rest)
         if _sweeps(block, lo, hi, tol, budget, "max", -1, bar, _SWEEPS_BEFORE_POLICY):
             continue
         if (budget.stopped is None and _jump(block, lo, hi, tol)
@@ -289,7 +221,7 @@ def interval_iteration(
             if topological:
                 _topological(q, lo, hi, tol, budget, bar)
             else:
-                _sweeps(_Block.of(q, np.arange(n)), lo, hi, tol, budget, gap, q.initial, bar)
+                _sweeps(Block.of(q, np.arange(n)), lo, hi, tol, budget, gap, q.initial, bar)
     finally:
         bar.close()
     bounds = np.column_stack([lo, hi])

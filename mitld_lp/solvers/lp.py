@@ -67,7 +67,14 @@ from mitld_lp.solvers.quotient import (
     segmented_argmax,
 )
 from mitld_lp.solvers.result import LPResult, Status, read_only
-from mitld_lp.solvers.topological import Blocks, blocks, gather_ranges, solve_single_states
+from mitld_lp.solvers.topological import (
+    Block,
+    Blocks,
+    blocks,
+    gather_ranges,
+    improve_policy,
+    solve_single_states,
+)
 
 __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 
@@ -339,14 +346,17 @@ def _checked(lp: _Matrices, raw: _Raw) -> _Raw:
                 f"inequality by {violation:.1e}", raw.y, raw.v, raw.iterations)
 
 
-def _solve_one(lp: _Matrices, settings: _Settings) -> _Raw:
-    """Solve ``lp``; an inaccurate answer (by the solver's word or by
+def _solve_one(lp: _Matrices, settings: _Settings, *, retry: bool = True) -> _Raw:
+    """Solve ``lp``; with ``retry``, an inaccurate answer (by the solver's word or by
     :func:`_checked`) is retried with other settings (see :func:`_retries`) and the
-    first accurate one is kept, else the first answer."""
+    first accurate one is kept, else the first answer.  (A block of the topological
+    route is not retried: its answer is polished exactly instead.)"""
     if time.perf_counter() >= settings.deadline:
         return _Raw(Status.TIME_LIMIT, "time limit reached before the solve")
-    raw = _checked(lp, _run_backend(lp, settings.solver, settings.backend,
-                                    settings.options()))
+    raw = _run_backend(lp, settings.solver, settings.backend, settings.options())
+    if not retry:
+        return raw
+    raw = _checked(lp, raw)
     if raw.status is not Status.INACCURATE:
         return raw
     for backend, options in _retries(settings):
@@ -395,20 +405,46 @@ def _occupancy_policy(q: Quotient, y: np.ndarray, v: np.ndarray, tol: float) -> 
     return np.where(visited, by_flow, greedy_choices(q, v))
 
 
-def _policy_flow(q: Quotient, weights: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -> np.ndarray:
     r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
     per state) from the start weights ``b``: ``x = b + P_w^T x`` with
     ``P_w = sum_c w(c) P_hat(c, .)``, then ``y(c) = w(c) x(owner(c))``.
 
-    The policy's chain leaves the quotient almost surely, so ``I - P_w^T`` is
-    invertible; it is block triangular in the topological order, so the factorisation
-    stays sparse.
+    Solved in topological order, upstream first: the flow into a level comes only from
+    higher levels, so a single state gets ``x(s) = (b(s) + inflow(s)) / (1 - w'p)`` and a
+    non-trivial component one sparse solve of its own size.  The policy's chain leaves
+    the quotient almost surely, so every one of these systems is invertible.
     """
+    x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
+    for level in range(blk.n_levels - 1, -1, -1):
+        states = blk.states_at(level)
+        lo, hi = q.row_groups[states], q.row_groups[states + 1]
+        choices = gather_ranges(lo, hi)
+        rows = sp.csr_array(q.matrix[choices])
+        owner_local = np.repeat(np.arange(states.size), hi - lo)
+        w = weights[choices]
+        single = blk.single(states)
+        stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
+                           minlength=states.size)
+        x[states[single]] /= 1.0 - stay[single]
+        if not single.all():
+            inner = np.flatnonzero(~single)
+            block = states[inner]
+            pick = np.isin(owner_local, inner)
+            local = np.full(states.size, -1, dtype=np.int64)
+            local[inner] = np.arange(inner.size)
+            sub = rows[np.flatnonzero(pick)]
+            mix = sp.csr_array((w[pick], (local[owner_local[pick]], np.arange(sub.shape[0]))),
+                               shape=(inner.size, sub.shape[0]))
+            moves = sp.csc_array((mix @ sub[:, block]).T)
+            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - moves)
+            x[block] = np.asarray(spla.spsolve(a, x[block]), dtype=np.float64).ravel()
+        # Push the flow out of this level (its own columns were solved above).
+        y = w * x[states[owner_local]]
+        coo = rows.tocoo()
+        out = blk.level[blk.component[coo.col]] != level
+        np.add.at(x, coo.col[out], coo.data[out] * y[coo.row[out]])
     owner = q.choice_state()
-    n = q.n_states
-    mix = sp.csr_array((weights, (owner, np.arange(q.n_choices))), shape=(n, q.n_choices))
-    a = sp.csc_array(sp.eye_array(n, format="csc") - (mix @ q.matrix).T)
-    x = np.asarray(spla.spsolve(a, b), dtype=np.float64).ravel() if n else np.zeros(0)
     return np.maximum(weights * x[owner], 0.0)
 
 
@@ -444,26 +480,59 @@ def _solve_monolithic(lp: OccupancyLP, settings: _Settings) -> _Answer | _Raw:
                    float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0)), 1)
 
 
-def _block_lp(q: Quotient, states: np.ndarray, values: np.ndarray) -> tuple[_Matrices, np.ndarray]:
-    """The occupancy LP of the states ``states`` (a union of components of one level)
-    with the values downstream as exit rewards and ``b = 1``; also its choices."""
-    local = np.full(q.n_states, -1, dtype=np.int64)
-    local[states] = np.arange(states.size)
-    lo, hi = q.row_groups[states], q.row_groups[states + 1]
-    choices = gather_ranges(lo, hi)
-    rows = sp.csr_array(q.matrix[choices])
-    inside = local >= 0
-    exit_reward = q.to_target[choices] + rows @ np.where(inside, 0.0, values)
-    moves = sp.csr_array(rows[:, states])
-    owner = np.repeat(np.arange(states.size), hi - lo)
-    a_eq = _flow_matrix(owner, states.size, moves)
-    return _Matrices(a_eq, np.ones(states.size), exit_reward), choices
+def _block_lp(block: Block, values: np.ndarray) -> _Matrices:
+    """The occupancy LP of ``block`` with the values downstream as exit rewards and
+    ``b = 1`` on all of it."""
+    exit_reward = block.to_target + block.outer @ values
+    n = block.states.size
+    owner = np.repeat(np.arange(n), np.diff(block.groups))
+    return _Matrices(_flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Polished:
+    """A block's answer after the crossover: exact values of an optimal policy."""
+
+    chosen: np.ndarray  # local choice per state
+    values: np.ndarray
+    weights: np.ndarray  # per local choice: the occupancy policy on its tight choices
+    optimal: bool  # no choice improves on ``values`` by more than the tie tolerance
+
+
+def _polish(block: Block, lp: _Matrices, y: np.ndarray, tol: float) -> _Polished:
+    """Crossover by policy iteration: the policy of largest occupancy is evaluated
+    exactly on the block's chain and improved until no choice gains; an interior-point
+    answer is accurate to its tolerance times the block's expected exit time (a block
+    left once in a million steps loses six digits), the policy's exact value is not.
+    The randomised policy keeps the LP's occupancies on the choices that are tight at
+    the exact values (to ``tol`` over the block's expected exit time)."""
+    groups = block.groups
+    counts = np.diff(groups)
+    start = segmented_argmax(y, groups)
+    chosen, v_ld, exit_time = improve_policy(block, lp.objective, start)
+    v = np.asarray(v_ld, dtype=np.float64)
+    slack = np.asarray(np.repeat(v_ld, counts)
+                       - (lp.objective + block.inner.astype(np.longdouble) @ v_ld),
+                       dtype=np.float64)
+    # A choice that loses ``slack`` per step loses up to slack * (expected steps in the
+    # block) in all: ties are judged on that scale.
+    tie = tol / float(np.max(exit_time))
+    kept = np.where(slack <= tie, y, 0.0)
+    kept_flow = np.add.reduceat(kept, groups[:-1])
+    weights = np.zeros_like(y)
+    has = np.repeat(kept_flow > 0, counts)
+    weights[has] = kept[has] / np.repeat(kept_flow, counts)[has]
+    lone = np.flatnonzero(kept_flow <= 0)
+    weights[chosen[lone]] = 1.0
+    return _Polished(chosen, np.clip(v, 0.0, 1.0), weights,
+                     bool(np.min(slack, initial=0.0) >= -tie))
 
 
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _Answer | _Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
-    non-trivial components; the occupancy of the resulting randomised policy from
-    ``b_eq`` is the primal point, the values the dual one."""
+    non-trivial components, each answer polished by :func:`_polish`; the occupancy of
+    the resulting randomised policy from ``b_eq`` is the primal point, the values the
+    dual one."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
@@ -479,23 +548,25 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _An
         rest = states[~single]
         if rest.size == 0:
             continue
-        lp, choices = _block_lp(q, rest, values)
-        raw = _solve_one(lp, settings)
+        block = Block.of(q, rest)
+        lp = _block_lp(block, values)
+        raw = _solve_one(lp, settings, retry=False)
         iterations += raw.iterations
         calls += 1
         if raw.y is None or raw.v is None:
             return _Raw(raw.status, f"{raw.message} (block LP of level {level}, "
                         f"{rest.size} states)", iterations=iterations)
-        if raw.status is not Status.OPTIMAL and worst.status is Status.OPTIMAL:
-            worst = _Raw(raw.status, f"level {level}: {raw.message}")
-        y = np.maximum(raw.y, 0.0)
-        values[rest] = np.clip(raw.v, 0.0, 1.0)
-        groups = np.concatenate([[0], np.cumsum(q.row_groups[rest + 1] - q.row_groups[rest])])
-        reduced_choice[rest] = choices[segmented_argmax(y, groups)]
-        # b = 1 on the block: every state has outflow >= 1, so this never divides by 0.
-        outflow = np.add.reduceat(y, groups[:-1])
-        weights[choices] = y / np.repeat(outflow, np.diff(groups))
-    y = _policy_flow(q, weights, b_eq)
+        polished = _polish(block, lp, np.maximum(raw.y, 0.0), settings.tol)
+        if not polished.optimal and worst.status is Status.OPTIMAL:
+            worst = _Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
+                         "iteration did not settle")
+        elif raw.status is not Status.OPTIMAL:
+            logger.info("block LP of level %d: %s; exact after policy iteration", level,
+                        raw.message)
+        values[rest] = polished.values
+        reduced_choice[rest] = block.choices[polished.chosen]
+        weights[block.choices] = polished.weights
+    y = _policy_flow(q, blk, weights, b_eq)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
                + (f"; {worst.message}" if worst.message else ""))
