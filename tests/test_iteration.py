@@ -6,6 +6,8 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from conftest import HAND, HAND_VALUES, build_mdp
 
 from mitld_lp.solvers import Status, evaluate_policy, interval_iteration
@@ -85,7 +87,27 @@ def test_evaluate_policy_methods_agree() -> None:
     r = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     direct = evaluate_policy(mdp, mdp.target, r.policy, method="direct")
     iterative = evaluate_policy(mdp, mdp.target, r.policy, method="iterative")
+    by_blocks = evaluate_policy(mdp, mdp.target, r.policy)
     np.testing.assert_allclose(direct, iterative, atol=1e-11)
+    np.testing.assert_allclose(direct, by_blocks, atol=1e-12)
+
+
+def test_solve_chain_matches_one_factorisation() -> None:
+    from mitld_lp.solvers.topological import graph_blocks, solve_chain
+
+    # A random sub-stochastic chain with cycles of every size and self-loops.
+    rng = np.random.default_rng(7)
+    n = 400
+    rows = np.repeat(np.arange(n), 3)
+    cols = np.clip(rows + rng.integers(-4, 6, rows.size), 0, n - 1)
+    q = sp.csr_array((rng.random(rows.size), (rows, cols)), shape=(n, n))
+    q.sum_duplicates()
+    q = sp.csr_array(sp.diags_array(0.97 / np.asarray(q.sum(axis=1)).ravel()) @ q)
+    b = rng.random(n)
+    ref = spla.spsolve(sp.csc_array(sp.eye_array(n) - q), b)
+    np.testing.assert_allclose(solve_chain(q, b), ref, rtol=1e-11)
+    blk = graph_blocks(sp.csr_array(q != 0, dtype=np.float64), q.diagonal())
+    assert blk.n_levels > 1 and np.any(blk.size > 1) and np.any(blk.size == 1)
 
 
 def test_evaluate_policy_rejects_bad_policies() -> None:

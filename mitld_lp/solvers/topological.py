@@ -41,6 +41,8 @@ __all__ = [
     "blocks",
     "evaluate_chain",
     "gather_ranges",
+    "graph_blocks",
+    "solve_chain",
     "improve_policy",
     "solve_single_states",
 ]
@@ -108,15 +110,22 @@ def state_graph(q: Quotient) -> sp.csr_array:
 
 
 def blocks(q: Quotient) -> Blocks:
-    """The SCCs of ``q`` (``scipy.sparse.csgraph``, strong connection) and their levels.
+    """The SCCs of ``q``'s state graph and their levels (:func:`graph_blocks`)."""
+    owner = q.choice_state()
+    self_loop = np.asarray(q.matrix[np.arange(q.n_choices), owner]).ravel() if (
+        q.n_states) else np.zeros(0)
+    return graph_blocks(state_graph(q), self_loop)
+
+
+def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
+    """The SCCs of ``graph`` (``scipy.sparse.csgraph``, strong connection) and their
+    levels; ``self_loop`` is stored as given.
 
     Levels by Kahn's algorithm on the graph of components, run backwards: the
     components with no successor are level 0; removing a level frees the components
     whose last successor it held.  Each round touches only the predecessors of the
     current level, so the whole is linear in the number of edges.
     """
-    n = q.n_states
-    graph = state_graph(q)
     n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
     comp = np.asarray(comp, dtype=np.int64)
     coo = graph.tocoo()
@@ -134,16 +143,13 @@ def blocks(q: Quotient) -> Blocks:
     while frontier.size:
         level[frontier] = k
         above = preds[gather_ranges(pred_ptr[frontier], pred_ptr[frontier + 1])]
-        out_degree -= np.bincount(above, minlength=n_comp)
+        np.subtract.at(out_degree, above, 1)
         frontier = np.unique(above[out_degree[above] == 0])
         k += 1
     if np.any(level < 0):  # pragma: no cover - the graph of SCCs is acyclic
         raise AssertionError("the component graph has a cycle")
     by_level = np.argsort(level[comp], kind="stable")
     level_starts = np.searchsorted(level[comp][by_level], np.arange(k + 1))
-    owner = q.choice_state()
-    self_loop = np.asarray(q.matrix[np.arange(q.n_choices), owner]).ravel() if n else (
-        np.zeros(0))
     return Blocks(
         component=read_only(comp),
         level=read_only(level),
@@ -281,3 +287,26 @@ def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
             return chosen, v, t
         chosen = nxt
     return chosen, v, t
+
+
+def solve_chain(chain: sp.csr_array, b: np.ndarray) -> np.ndarray:
+    r"""Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``), level by
+    level downstream first: a single state by :math:`x(s) = (b(s) + \sum_{s' \ne s}
+    Q(s, s') x(s')) / (1 - Q(s, s))`, a non-trivial component by one sparse LU of its
+    own size.  No iterative method and no multi-threaded BLAS call, so a loaded machine
+    cannot make it crawl, and no fill-in across components."""
+    chain = sp.csr_array(chain)
+    blk = graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
+    x = np.zeros(b.shape[0])
+    for level in range(blk.n_levels):
+        states = blk.states_at(level)
+        rows = sp.csr_array(chain[states])
+        rhs = np.asarray(b, dtype=np.float64)[states] + rows @ x  # own states are still 0
+        single = blk.single(states)
+        x[states[single]] = rhs[single] / (1.0 - blk.self_loop[states[single]])
+        if not single.all():
+            inner = states[~single]
+            sub = sp.csc_array(sp.csr_array(rows[np.flatnonzero(~single)])[:, inner])
+            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - sub)
+            x[inner] = np.asarray(spla.spsolve(a, rhs[~single]), dtype=np.float64).ravel()
+    return x
