@@ -131,3 +131,17 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="everywhere=True"):
         write_lp(decided, decided.target, tmp_path / "d.mps")
     write_lp(decided, decided.target, tmp_path / "d.mps", everywhere=True)
+
+
+def test_drn_is_the_same_whatever_the_chunk(tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    import mitld_lp.solvers.export as export
+
+    mdp = random_mdp(60, seed=9, locality=4)
+    whole = write_drn(mdp, mdp.target, tmp_path / "whole.drn")
+    monkeypatch.setattr(export, "_DRN_CHUNK", 7)  # 60 states: 9 chunks, the last short
+    chunked = write_drn(mdp, mdp.target, tmp_path / "chunked.drn")
+    assert chunked.read_bytes() == whole.read_bytes()
+    values, _ = storm_pmax(chunked)
+    ours = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    np.testing.assert_allclose(values, ours.lower, atol=1e-8)
