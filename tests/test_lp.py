@@ -9,6 +9,7 @@ untouched MDP, no graph analysis, no MEC collapse); its least solution is Pmax.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import cvxpy as cp
 import numpy as np
@@ -375,3 +376,16 @@ def test_unfixable_lp_is_replaced_by_the_iteration_policy(
     assert result.lower == pytest.approx(1.0, abs=1e-9)
     names = [c.name for c in result.lower_model.checks]
     assert "LP replaced by the iteration policy" in names
+
+
+def test_synthesize_time_limit_is_a_status_not_a_hang() -> None:
+    from mitld_lp import load_model, synthesize
+
+    model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
+    result = synthesize(model, time_limit=0.0)
+    assert result.status == Status.TIME_LIMIT and not result.certified
+    assert result.lower_model.iteration.status == Status.TIME_LIMIT
+    assert result.lower_model.lp is not None
+    assert result.lower_model.lp.status == Status.TIME_LIMIT
+    # The bracket so far is still a bracket of the true optimum (Storm: 0.9244053).
+    assert result.lower_model.bracket[0] <= 0.9244053 <= result.lower_model.bracket[1]
