@@ -42,11 +42,12 @@ from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
 from mitld_lp.logic.syntax import Formula
-from mitld_lp.mdp import MDP, prob0_max
+from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.product import product
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
 from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.solvers.quotient import Quotient, reduce
 from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check",
@@ -80,6 +81,7 @@ class ModelSolution:
     bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
     lp: LPResult | None
     iteration: IterationResult
+    quotient: Quotient  # the reduction both solvers worked on (its prob0: no hope)
     checks: tuple[Check, ...]
 
     @property
@@ -260,6 +262,10 @@ def _close(name: str, a: float, b: float, tol: float) -> Check:
     return Check(name, ok, f"{a:.10g} vs {b:.10g} (|diff| = {abs(a - b):.2e}, tol {tol:g})")
 
 
+_NUMERICAL = (Status.INACCURATE, Status.MAX_ITERATIONS)
+"""LP outcomes that the interval-iteration policy may stand in for."""
+
+
 def _solve_model(
     mdp: MDP,
     target: np.ndarray,
@@ -271,26 +277,43 @@ def _solve_model(
     tol: float,
     certify_tol: float,
     progress: bool,
+    decompose: bool = True,
+    deadline: float = float("inf"),
 ) -> ModelSolution:
-    it = interval_iteration(mdp, target, tol=tol, progress=progress)
+    """Solve one model by ``method`` and certify it (module docs).
+
+    The model is reduced once and every solver works on that :class:`Quotient`.  An LP
+    that does not come back optimal (after its own retries) is replaced by the
+    interval-iteration policy, certified the same way (exact value inside the bracket).
+    """
+    quotient = reduce(mdp, target)
+
+    def remaining() -> float | None:
+        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
+
+    it = interval_iteration(mdp, target, quotient=quotient, tol=tol, progress=progress,
+                            time_limit=remaining())
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
     lp: LPResult | None = None
+    policy, value, status = it.policy, it.value_lower, it.status
     if method == "lp":
-        lp = solve_lp(mdp, target, solver=solver, backend=backend, tol=tol)  # type: ignore[arg-type]
-        ok = lp.status is Status.OPTIMAL and lp.policy is not None
-        checks.append(Check("LP solved", ok, f"{lp.status.value}: {lp.message}"))
-        if ok:
-            assert lp.policy is not None
-            policy, value = lp.policy, lp.value
+        lp = solve_lp(mdp, target, quotient=quotient, solver=solver, backend=backend,  # type: ignore[arg-type]
+                      tol=tol, decompose=decompose, time_limit=remaining())
+        if lp.status is Status.OPTIMAL and lp.policy is not None:
+            policy, value, status = lp.policy, lp.value, lp.status
+            checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
             checks.append(_close("LP primal = dual", lp.primal_objective, lp.dual_objective,
                                  certify_tol))
-        else:
-            policy, value = it.policy, it.value_lower
-        status = lp.status
-    else:
-        policy, value, status = it.policy, it.value_lower, it.status
+        elif lp.status in _NUMERICAL and it.status is Status.OPTIMAL:
+            # A numerical failure after the LP's own retries: the answer is the converged
+            # iteration's, certified below like method "vi"; the LP's word is kept.
+            checks.append(Check("LP replaced by the iteration policy", True,
+                                f"{lp.status.value}: {lp.message}"))
+        else:  # a usage error (solver not installed), a time limit, or no fallback
+            status = lp.status
+            checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
     exact = float(evaluate_policy(mdp, target, policy)[mdp.initial])
     lo, hi = it.value_lower, it.value_upper
     checks.append(Check(
@@ -300,7 +323,8 @@ def _solve_model(
     ))
     checks.append(_close("policy value = optimum", exact, value, certify_tol))
     checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
-    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, tuple(checks))
+    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, quotient,
+                         tuple(checks))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -354,6 +378,8 @@ def synthesize(
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
+    decompose: bool = True,
+    time_limit: float | None = None,
 ) -> SynthesisResult:
     """Maximise the probability that the model's world satisfies its MITLD spec.
 
@@ -363,6 +389,8 @@ def synthesize(
     ``backend="direct"`` Clarabel) or ``"vi"`` (interval iteration alone).  Interval
     iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
     per event instead of ``epsilon``.
+    ``decompose``: the LP block by block in topological order (default) or as one LP.
+    ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
     """
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
@@ -382,7 +410,8 @@ def synthesize(
 
     t0 = time.perf_counter()
     common = dict(method=method, solver=solver, backend=backend, tol=tol,
-                  certify_tol=certify_tol, progress=progress)
+                  certify_tol=certify_tol, progress=progress, decompose=decompose,
+                  deadline=float("inf") if time_limit is None else t0 + time_limit)
     low = _solve_model(mdp, mdp.target, "lower", **common)  # type: ignore[arg-type]
     if mdp.truncated.any():
         high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
@@ -404,7 +433,7 @@ def synthesize(
         policy=low.policy,
         randomized=randomized,
         controller=Controller(model.game, sta, mdp, low.policy,
-                              hopeless=prob0_max(mdp, mdp.target | mdp.truncated)),
+                              hopeless=high.quotient.prob0),
         epsilon=eps,
         epsilon_achieved=sta.epsilon_achieved,
         truncation_points=sta.truncation_points,

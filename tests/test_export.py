@@ -10,22 +10,16 @@ import numpy as np
 import pytest
 import stormpy
 import stormpy.environments
+from conftest import HAND_CHOICES, build_mdp
 
-from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers import interval_iteration, solve_lp, write_drn, write_lp
+from mitld_lp.solvers.quotient import prob0_max
+from mitld_lp.testing import random_mdp
 
+# The shared HAND MDP with a state 7 that reaches target, sink or truncated (8).
 HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-        [("h", {3: 0.5, 8: 0.25, 2: 0.25})],
-        [],
-    ],
+    [*HAND_CHOICES, [("h", {3: 0.5, 8: 0.25, 2: 0.25})], []],
     target=[3],
     sink=[2],
     truncated=[8],
@@ -137,3 +131,17 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="everywhere=True"):
         write_lp(decided, decided.target, tmp_path / "d.mps")
     write_lp(decided, decided.target, tmp_path / "d.mps", everywhere=True)
+
+
+def test_drn_is_the_same_whatever_the_chunk(tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    import mitld_lp.solvers.export as export
+
+    mdp = random_mdp(60, seed=9, locality=4)
+    whole = write_drn(mdp, mdp.target, tmp_path / "whole.drn")
+    monkeypatch.setattr(export, "_DRN_CHUNK", 7)  # 60 states: 9 chunks, the last short
+    chunked = write_drn(mdp, mdp.target, tmp_path / "chunked.drn")
+    assert chunked.read_bytes() == whole.read_bytes()
+    values, _ = storm_pmax(chunked)
+    ours = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    np.testing.assert_allclose(values, ours.lower, atol=1e-8)
