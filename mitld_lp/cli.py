@@ -355,6 +355,9 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
     p.add_argument("--backend", choices=("cvxpy", "direct"), default="cvxpy",
                    help="direct: call Clarabel on the sparse matrices, no cvxpy")
+    p.add_argument("--no-decompose", action="store_true",
+                   help="solve one monolithic LP instead of one LP per strongly connected "
+                        "block in topological order")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
@@ -378,6 +381,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         clock_reduction=not args.no_clock_reduction,
         max_states=args.max_states,
         max_memory=args.max_memory,
+        decompose=not args.no_decompose,
+        time_limit=_time_left(args),
     )
     summary = r.summary()
     if policy_file:
@@ -401,6 +406,14 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         if policy_file:
             _out(f"policy:       {policy_file}")
     return EXIT_OK if r.certified else EXIT_UNCERTIFIED
+
+
+def _time_left(args: argparse.Namespace) -> float | None:
+    """Seconds left of ``--time-limit`` (None without one): the solvers stop with status
+    ``time_limit`` and their bracket so far; the command's own watchdog is the backstop."""
+    if args.time_limit is None:
+        return None
+    return max(args.time_limit - (time.monotonic() - args.started), 0.0)
 
 
 def _args_export(p: argparse.ArgumentParser) -> None:
@@ -456,7 +469,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     model = load_model(args.model)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-                   max_states=args.max_states, max_memory=args.max_memory)
+                   max_states=args.max_states, max_memory=args.max_memory,
+                   time_limit=_time_left(args))
     sim = simulate(model.game, r.sta, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
@@ -574,6 +588,9 @@ def _say(message: str) -> None:
     print(f"{PROG}: {_printable(message)}", file=sys.stderr, flush=True)
 
 
+_WATCHDOG_GRACE = 1.0
+"""Seconds past ``--time-limit`` before the command is stopped from outside."""
+
 #: The thread running the current command, if it is still running after ``main`` has
 #: returned (interrupted or out of time): :func:`run` then ends the process at once.
 _worker: threading.Thread | None = None
@@ -593,6 +610,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except SystemExit as stop:  # --help and --version have printed and exit 0
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
+    args.started = time.monotonic()
     cancelled = threading.Event()
     handler = _StageLines()
     package_log = logging.getLogger("mitld_lp")
@@ -606,7 +624,10 @@ def main(argv: list[str] | None = None) -> int:
         outcome.append(_run(args))
 
     worker = threading.Thread(target=work, name=PROG, daemon=True)
-    deadline = None if args.time_limit is None else time.monotonic() + args.time_limit
+    # The solvers get the limit itself and answer with a status; the watchdog stops a
+    # stage that cannot (the product, a native call) shortly after it.
+    deadline = None if args.time_limit is None else (
+        args.started + args.time_limit + _WATCHDOG_GRACE)
     try:
         worker.start()
         while worker.is_alive():

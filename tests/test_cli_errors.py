@@ -111,10 +111,11 @@ def test_a_deeply_nested_toml_is_a_model_error(tmp_path, capsys):
 
 
 def test_a_time_limit_is_a_status_not_a_hang(capsys):
+    # Either the solvers answer with the status (and their bracket so far) or, if a stage
+    # that cannot stop itself is still running, the watchdog stops it: exit 3 both ways.
     assert main(["solve", PATROL, "--json", "--time-limit", "0.01"]) == 3
     captured = capsys.readouterr()
-    assert json.loads(captured.out) == {"status": "time_limit", "time_limit": 0.01}
-    assert "stopped: time limit of 0.01 s reached" in captured.err
+    assert json.loads(captured.out)["status"] == "time_limit"
 
 
 def test_a_memory_budget_stops_before_the_work(capsys):
