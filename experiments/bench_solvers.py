@@ -22,11 +22,9 @@ Run: ``python experiments/bench_solvers.py [--quick] [--sizes 16 32 64] [--out D
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -123,7 +121,7 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     sizes = args.sizes or ([4, 8] if args.quick else [16, 32, 64])
     n_random = args.random_states or (2_000 if args.quick else 100_000)
-    out = Path(tempfile.mkdtemp(prefix="bench_solvers_")) if args.quick else args.out
+    out = out_dir(args)
     print(text_table(HEADER, []).splitlines()[0])
     rows = [run_model(f"bus {n}x{n}", bus_mdp(n), args.mono_max) for n in sizes]
     rows.append(run_model(f"random local {n_random:,}",
@@ -131,7 +129,7 @@ def main(argv: list[str] | None = None) -> None:
                                                self_loop_fraction=0.2)),
                           args.mono_max))
     print("\n'!' marks a status other than optimal; (Nx) is the time over 'topo'.")
-    path = write_text(out_dir(out) / "bench_solvers.md", markdown_table(HEADER, rows))
+    path = write_text(out / "bench_solvers.md", markdown_table(HEADER, rows))
     print(f"wrote {shown(path)}")
 
 

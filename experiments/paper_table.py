@@ -178,7 +178,7 @@ Notes
 def main(argv: list[str] | None = None) -> list[Row]:
     ap = C.parser(__doc__.splitlines()[0])
     args = ap.parse_args(argv)
-    out = C.out_dir(args.out)
+    out = C.out_dir(args)
     Ts = (3, 5) if args.quick else (3, 4, 5)
     start = time.perf_counter()
     all_rows: list[Row] = []
