@@ -8,7 +8,15 @@ Families (each row: parameters, states, milliseconds):
   ``w^d`` states -- an inherent blow-up of explicit automata, not of the translation;
 * ``nested-G/F``: ``G[0,w](q1 -> F[0,w](q2 & G[0,w](q3 -> ...)))``, alternating;
 * ``nested-X``: ``F[0,w] X F[0,w] X ... p`` (d bounded operators, collapses to one window);
-* ``deadlines``: ``F[0,10] p1 & ... & F[0,10] pk`` for k = 2..8 (states: 2^k * 11 + 1).
+* ``deadlines``: ``F[0,10] p1 & ... & F[0,10] pk`` for k = 2..8 (states: 2^k * 11 + 1);
+* ``chain``: ``F[0,k] p`` for k up to 10,000 (k + 3 states).  Minimisation by rounds of
+  signature refinement needs k rounds here (quadratic: 2.4 s at k = 1,000, 10 s at
+  2,000, > 120 s at 10,000 before Hopcroft's algorithm); the ``ratio`` column is the time
+  per state relative to the smallest k, which stays flat when the cost is n log n;
+* ``events``: ``D[geometric(0.5)] e_i & F(e_i & F[0,3] A)`` for i < n with a budget of
+  1,000 states: the first state alone has 2^n successors, so the budget must stop the
+  work while that diagram is combined (3.6 s at n = 12 before, when it was checked only
+  once a state was numbered).
 
 Run: ``python experiments/bench_dta.py [--budget SECONDS]``.  Rows whose automaton
 would exceed ``--max-states`` are reported as such.
@@ -89,9 +97,24 @@ def main(argv: list[str] | None = None) -> None:
         n, ms = measure(deadlines(k), args.max_states)
         rows.append(("deadlines", f"k={k}", n, ms))
 
+    chain = (300, 1000, 3000) if args.quick else (1000, 3000, 10_000)
+    per_state = []
+    for k in chain:
+        n, ms = measure(parse(f"F[0,{k}] p"), 10 * k)
+        per_state.append(ms / (k + 3))
+        rows.append(("chain", f"k={k}", n, ms))
+    for n_events in (4, 8) if args.quick else (4, 8, 12, 16):
+        spec = " & ".join(f"D[geometric(0.5)] e{i} & F(e{i} & F[0,3] A)"
+                          for i in range(n_events))
+        n, ms = measure(parse(spec), 1000)
+        rows.append(("events", f"n={n_events}", n, ms))
+
     print(f"{'family':<14} {'parameters':<12} {'states':>18} {'ms':>10}")
     for name, params, n, ms in rows:
         print(f"{name:<14} {params:<12} {n:>18} {ms:>10.1f}")
+    ratios = ", ".join(f"k={k}: {t / per_state[0]:.2f}" for k, t in zip(chain, per_state,
+                                                                         strict=True))
+    print(f"\nchain: time per state relative to k={chain[0]}: {ratios}")
 
 
 if __name__ == "__main__":

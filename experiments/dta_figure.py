@@ -14,7 +14,6 @@ the example is small).
 
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 import time
@@ -29,7 +28,6 @@ SPEC = ("(D[geometric(0.8)] b1 & F(b1 & F[0,3] b3)) | "
         "(D[geometric(0.3)] b2 & F(b2 & F[0,3] b4))")
 PAPER_LOCATIONS = 5  # Fig. 1: l_init, l1, l2, l4 and the accepting l3 (sink omitted)
 PAPER_CLOCKS = 4  # c1, c2 (reset by b1, b2), c3, c4 (the deadlines after b1, b2)
-_CLOCK_VALUE = re.compile(r" \{x=\d+\}")
 
 
 @dataclass(frozen=True)
@@ -47,7 +45,7 @@ def location_name(dta: mitld_lp.DTA, q: int) -> str:
         return "accept"
     if dta.is_rejecting(q):
         return "reject"
-    return _CLOCK_VALUE.sub("", dta.location(q))
+    return dta.location(q).obligation
 
 
 def paper_names(dta: mitld_lp.DTA) -> dict[str, str]:
@@ -90,7 +88,7 @@ def main(argv: list[str] | None = None) -> Sizes:
     print(f"The paper's example formula:\n  {SPEC}\n")
     print("Automaton states (location with its clock valuation):")
     for q in range(dta.n_states):
-        text = "accept" if dta.is_accepting(q) else dta.location(q)
+        text = "accept" if dta.is_accepting(q) else dta.location(q).label
         mark = " (initial)" if q == dta.initial else ""
         print(f"  q{q:<2} {text}{mark}")
     print("\nLocations (clock values removed), with the paper's names:")

@@ -251,38 +251,37 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
 
 def _cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
-    from mitld_lp.automata.dta import _guards
     from mitld_lp.automata.translate import to_dta
 
     formula = parse(args.formula)
-    check(formula)
-    dta = to_dta(formula)
+    dta = to_dta(check(formula))
     if args.dot:
         path = Path(args.dot)
         if path.exists() and not args.force:
             raise FileExistsError(f"{path}: exists; pass --force to overwrite it")
         path.write_text(dta.to_dot())
-        print(f"wrote {path} ({dta.n_states} states)")
+        print(f"wrote {path} ({_count(dta.n_states, 'state')})")
         return EXIT_OK
-    locations = {_strip_clocks(dta.location(i)) for i in range(dta.n_states)}
-    clocks = {name for i in range(dta.n_states) for name, _ in dta.clocks(i)}
+    shown = [dta.location(i) for i in range(dta.n_states)]
+    locations = {loc.obligation for loc in shown}
+    clocks = {name for loc in shown for name, _ in loc.clocks}
     print(f"formula:   {formula}")
-    print(f"states:    {dta.n_states} ({len(locations)} locations, {len(clocks)} clocks)")
+    print(f"states:    {dta.n_states} ({_count(len(locations), 'location')}, "
+          f"{_count(len(clocks), 'clock')})")
     print(f"atoms:     {', '.join(dta.atoms)}")
-    for i in range(dta.n_states):
+    for i, loc in enumerate(shown):
         tag = " (initial)" if i == dta.initial else ""
         tag += " (accepting)" if dta.is_accepting(i) else ""
         tag += " (rejecting)" if dta.is_rejecting(i) else ""
-        print(f"  {i}{tag}: {dta.location(i)}")
-        for target, guard in sorted(_guards(dta.delta[i]).items()):
+        print(f"  {i}{tag}: {loc}")
+        for target, guard in sorted(dta.guards(i).items()):
             print(f"      --[{guard}]--> {target}")
     return EXIT_OK
 
 
-def _strip_clocks(location: str) -> str:
-    from mitld_lp.automata.dta import _CLOCK
-
-    return _CLOCK.sub("", location)
+def _count(n: int, noun: str) -> str:
+    """``n`` with ``noun`` in the singular or plural: "1 clock", "2 clocks"."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 # --------------------------------------------------------------------------- model verbs

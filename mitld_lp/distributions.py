@@ -44,15 +44,18 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, overload
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
 
-from mitld_lp.logic.syntax import DistLiteral
+# The logic layer's parser validates inline laws with this module, so this module reaches
+# the logic layer only inside functions (either may be imported first).
+if TYPE_CHECKING:
+    from mitld_lp.logic.syntax import DistLiteral
 
 __all__ = [
     "DistributionError",
@@ -69,6 +72,7 @@ __all__ = [
     "from_spec",
     "from_table",
     "FAMILIES",
+    "Family",
     "MASS_TOLERANCE",
     "HAZARD_RTOL",
     "HAZARD_ATOL",
@@ -89,9 +93,6 @@ MAX_HAZARD_SCAN = 2**20
 # Searches for a truncation point or a sample stop here (a power of two).
 _MAX_STEP = 2**62
 
-#: The families accepted by :func:`from_spec` and :func:`from_table`.
-FAMILIES = ("geometric", "pmf", "poisson", "uniform", "exponential", "weibull", "gamma", "scipy")
-
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 Steps = int | np.integer[Any] | npt.NDArray[Any] | Sequence[int]
@@ -111,6 +112,14 @@ class DistributionError(ValueError):
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _stats() -> Any:
+    """``scipy.stats``, imported when a law first needs it: the import takes ~0.6 s and
+    ``import mitld_lp`` (or a model with only geometric and pmf laws) should not pay it."""
+    import scipy.stats
+
+    return scipy.stats
 
 
 def _steps(k: Steps) -> tuple[IntArray, bool]:
@@ -140,6 +149,8 @@ def _plain(a: Any) -> Any:
 
 
 def _label(family: str, *args: Any) -> str:
+    from mitld_lp.logic.syntax import DistLiteral
+
     return str(DistLiteral(family, tuple(_plain(a) for a in args)))
 
 
@@ -690,14 +701,14 @@ def poisson(lam: float) -> FirstOccurrence:
     ``P(K = k) = exp(-lam) lam^(k-1) / (k-1)!``."""
     label = _label("poisson", lam)
     lf = _positive(label, "lam", lam)
-    return _ShiftedDiscrete(label, stats.poisson(lf), math.inf, shift=1)
+    return _ShiftedDiscrete(label, _stats().poisson(lf), math.inf, shift=1)
 
 
 def _scipy_generator(label: str, name: object) -> Any:
     if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
         raise DistributionError(label, f"scipy distribution name must be a name, got {name!r}")
-    gen = getattr(stats, name, None)
-    if not isinstance(gen, stats.rv_discrete | stats.rv_continuous):
+    gen = getattr(_stats(), name, None)
+    if not isinstance(gen, _stats().rv_discrete | _stats().rv_continuous):
         raise DistributionError(label, f"unknown scipy.stats distribution {name!r}")
     return gen
 
@@ -734,7 +745,7 @@ def scipy_discrete(name: str, *args: float) -> FirstOccurrence:
     (e.g. ``geom``).  A support reaching below 0 is an error."""
     label = _label("scipy", name, *args)
     gen = _scipy_generator(label, name)
-    if not isinstance(gen, stats.rv_discrete):
+    if not isinstance(gen, _stats().rv_discrete):
         raise DistributionError(label, f"scipy.stats.{name} is continuous, not discrete")
     frozen, lo, hi = _freeze(label, name, gen, _scipy_args(label, args), {})
     if lo < 0:
@@ -767,7 +778,7 @@ def discretised(name: str, *args: float) -> FirstOccurrence:
     ``P(K = k) = F(k) - F(k-1)``."""
     label = _label("scipy", name, *args)
     gen = _scipy_generator(label, name)
-    if not isinstance(gen, stats.rv_continuous):
+    if not isinstance(gen, _stats().rv_continuous):
         raise DistributionError(label, f"scipy.stats.{name} is discrete, not continuous")
     return _discretised(label, name, gen, _scipy_args(label, args), {})
 
@@ -777,7 +788,7 @@ def exponential(rate: float) -> FirstOccurrence:
     ``geometric(1 - exp(-rate))``."""
     label = _label("exponential", rate)
     r = _positive(label, "rate", rate)
-    return _discretised(label, "expon", stats.expon, [], {"scale": 1.0 / r})
+    return _discretised(label, "expon", _stats().expon, [], {"scale": 1.0 / r})
 
 
 def weibull(shape: float, scale: float) -> FirstOccurrence:
@@ -785,7 +796,7 @@ def weibull(shape: float, scale: float) -> FirstOccurrence:
     label = _label("weibull", shape, scale)
     c = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    return _discretised(label, "weibull_min", stats.weibull_min, [c], {"scale": s})
+    return _discretised(label, "weibull_min", _stats().weibull_min, [c], {"scale": s})
 
 
 def gamma(shape: float, scale: float) -> FirstOccurrence:
@@ -794,70 +805,132 @@ def gamma(shape: float, scale: float) -> FirstOccurrence:
     label = _label("gamma", shape, scale)
     a = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    return _discretised(label, "gamma", stats.gamma, [a], {"scale": s})
+    return _discretised(label, "gamma", _stats().gamma, [a], {"scale": s})
 
 
 # --------------------------------------------------------------------------- specs
 
 
-_ARITY: dict[str, tuple[str, ...]] = {
-    "geometric": ("p",),
-    "poisson": ("lam",),
-    "uniform": ("a", "b"),
-    "exponential": ("rate",),
-    "weibull": ("shape", "scale"),
-    "gamma": ("shape", "scale"),
-}
+@dataclass(frozen=True, slots=True)
+class Family:
+    """One family of laws: how it is written and how it is built.  :data:`FAMILIES` is
+    the one table that the parser (shapes of ``D[family(args)]``), the model loader
+    (``{ family = value }``, :func:`from_table`) and :func:`from_spec` consult.
+
+    Attributes:
+        name: the family name as written.
+        params: the names of its numeric parameters, in order; for a variadic family the
+            numbers are any count of at least ``len(params)``.
+        build: the constructor, called with the arguments as written; it validates the
+            values and raises :class:`DistributionError`.
+        description: the law in one line, for messages and documentation.
+        variadic: any number of numbers (pmf masses, scipy shape arguments).
+        named: the first argument is a name, not a number (``scipy(nbinom, 3, 0.5)``).
+        integers: the numbers must be integers (``uniform``).
+    """
+
+    name: str
+    params: tuple[str, ...]
+    build: Callable[..., FirstOccurrence]
+    description: str
+    variadic: bool = False
+    named: bool = False
+    integers: bool = False
+
+    @property
+    def min_numbers(self) -> int:
+        return len(self.params)
+
+    @property
+    def max_numbers(self) -> int | None:
+        return None if self.variadic else len(self.params)
+
+    @property
+    def takes_list(self) -> bool:
+        """Whether a model file writes its arguments as a list (one number otherwise)."""
+        return self.variadic or self.named or len(self.params) != 1
+
+    def shape(self) -> str:
+        """How a literal of this family is written, e.g. ``uniform(a, b)``."""
+        parts = ["name"] if self.named else []
+        parts += list(self.params)
+        if self.variadic:
+            parts.append("...")
+        return f"{self.name}({', '.join(parts)})"
+
+    def arity_error(self, n_args: int) -> str | None:
+        """Why ``n_args`` arguments do not fit this family (None when they do)."""
+        if self.named and n_args == 0:
+            return f"{self.name} needs a distribution name, e.g. {self.name}(nbinom, 3, 0.5)"
+        n = n_args - int(self.named)
+        hi = self.max_numbers
+        if n >= self.min_numbers and (hi is None or n <= hi):
+            return None
+        s = "s" if self.min_numbers != 1 else ""
+        at_least = "at least " if hi is None else ""
+        return (f"{self.name} takes {at_least}{self.min_numbers} argument{s} "
+                f"({', '.join(self.params)}), got {n_args}")
+
+
+def _build_scipy(name: object, *args: Any) -> FirstOccurrence:
+    gen = _scipy_generator(_label("scipy", name, *args), name)
+    assert isinstance(name, str)  # _scipy_generator checked it
+    if isinstance(gen, _stats().rv_discrete):
+        return scipy_discrete(name, *args)
+    return discretised(name, *args)
+
+
+#: Every family, by name (in the order the documentation lists them).
+FAMILIES: Mapping[str, Family] = MappingProxyType({
+    f.name: f
+    for f in (
+        Family("geometric", ("p",), geometric,
+               "P(K = k) = (1-p)^(k-1) p, p in (0, 1]; hazard p (memoryless)"),
+        Family("pmf", ("m1",), lambda *m: pmf(m),
+               "P(K = k) = m_k for k = 1..n; masses >= 0 summing to at most 1 (the rest: "
+               "never)", variadic=True),
+        Family("poisson", ("lam",), poisson, "K = 1 + X, X ~ Poisson(lam), lam > 0"),
+        Family("uniform", ("a", "b"), uniform,
+               "equally likely on the steps a..b, 1 <= a <= b; hazard 1/(b-k+1)",
+               integers=True),
+        Family("exponential", ("rate",), exponential,
+               "K = ceil(X), X ~ Exp(rate), rate > 0 (geometric(1 - exp(-rate)))"),
+        Family("weibull", ("shape", "scale"), weibull,
+               "K = ceil(X), S(k) = exp(-(k/scale)^shape), shape, scale > 0"),
+        Family("gamma", ("shape", "scale"), gamma,
+               "K = ceil(X), X ~ Gamma(shape, scale), shape, scale > 0"),
+        Family("scipy", (), _build_scipy,
+               "any scipy.stats law: discrete K = X (+1 if its support starts at 0), "
+               "continuous K = ceil(X)", variadic=True, named=True),
+    )
+})
 
 
 def _build(family: str, args: Sequence[Any], label: str) -> FirstOccurrence:
-    """Dispatch a family name and its arguments; arity errors are reported at ``label``."""
-    if family == "pmf":
-        return pmf(list(args))
-    if family == "scipy":
-        if not args:
-            raise DistributionError(
-                label, "scipy needs a distribution name, e.g. scipy(nbinom, 3, 0.5)"
-            )
-        name, rest = args[0], list(args[1:])
-        gen = _scipy_generator(label, name)
-        if isinstance(gen, stats.rv_discrete):
-            return scipy_discrete(name, *rest)
-        return discretised(name, *rest)
-    names = _ARITY.get(family)
-    if names is None:
+    """Look ``family`` up in :data:`FAMILIES` and build it from ``args``; unknown
+    families and arity errors are reported at ``label``."""
+    fam = FAMILIES.get(family)
+    if fam is None:
         raise DistributionError(
             label,
             f"unknown distribution family {family!r}; expected one of {', '.join(FAMILIES)}",
         )
-    if len(args) != len(names):
-        raise DistributionError(
-            label,
-            f"{family} takes {len(names)} argument{'s' if len(names) > 1 else ''} "
-            f"({', '.join(names)}), got {len(args)}",
-        )
-    ctor = {
-        "geometric": geometric,
-        "poisson": poisson,
-        "uniform": uniform,
-        "exponential": exponential,
-        "weibull": weibull,
-        "gamma": gamma,
-    }[family]
-    return ctor(*args)
+    why = fam.arity_error(len(args))
+    if why is not None:
+        raise DistributionError(label, why)
+    return fam.build(*args)
 
 
 def from_spec(spec: DistLiteral) -> FirstOccurrence:
     """The distribution of an inline formula literal such as ``geometric(0.3)``,
     ``pmf(0.1, 0.3, 0.6)`` or ``scipy(nbinom, 3, 0.5)``.  Its label is ``str(spec)``."""
+    from mitld_lp.logic.syntax import DistLiteral
+
     if not isinstance(spec, DistLiteral):
         raise DistributionError(
             str(spec), "is a name, not a distribution literal; bind it in the model file"
         )
     return _build(spec.family, spec.args, str(spec))
-
-
-_TABLE_LISTS = {"pmf", "uniform", "weibull", "gamma", "scipy"}
 
 
 def from_table(value: object, path: str) -> FirstOccurrence:
@@ -885,7 +958,7 @@ def from_table(value: object, path: str) -> FirstOccurrence:
         raise DistributionError(
             path, f"unknown distribution {family!r}; expected one of {', '.join(FAMILIES)}"
         )
-    if family in _TABLE_LISTS:
+    if FAMILIES[family].takes_list:
         if not isinstance(arg, list | tuple):
             raise DistributionError(where, f"must be a list, got {arg!r}")
         args = list(arg)

@@ -24,6 +24,8 @@ from numbers import Real
 from types import MappingProxyType
 from typing import Any, ClassVar, cast
 
+from mitld_lp.logic.syntax import RESERVED, is_proposition_name
+
 __all__ = ["Cell", "GridWorld", "GridError", "ACTIONS", "STAY", "MOVES", "PERPENDICULAR"]
 
 Cell = tuple[int, int]
@@ -82,13 +84,6 @@ class GridError(ValueError):
 
     def __reduce__(self) -> tuple[Any, ...]:
         return (GridError, (self.parts, self.message))
-
-
-def _proposition_names() -> tuple[re.Pattern[str], frozenset[str]]:
-    """The pattern of a proposition name and the words the formula grammar reserves."""
-    from mitld_lp.model import _IDENT, _RESERVED  # kept with the model loader today
-
-    return _IDENT, _RESERVED
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,7 +189,6 @@ class GridWorld:
 
     def _regions(self, obstacles: Mapping[Cell, Any]) -> dict[str, frozenset[Cell]]:
         """Named, non-empty sets of free cells, named as a formula can write them."""
-        ident, reserved = _proposition_names()
         raw = self.regions.items() if isinstance(self.regions, Mapping) else self.regions
         regions: dict[str, frozenset[Cell]] = {}
         for item in raw:
@@ -202,13 +196,13 @@ class GridWorld:
                 rname, rcells = item
             except (TypeError, ValueError):
                 raise GridError(["regions"], f"expected (name, cells), got {item!r}") from None
-            if not isinstance(rname, str) or not ident.match(rname) or rname in reserved:
+            if not is_proposition_name(rname):
                 shown = json.dumps(rname) if isinstance(rname, str) else repr(rname)
                 raise GridError(
                     ["regions", rname if isinstance(rname, str) else repr(rname)],
                     f"region name {shown} is not a proposition name (letters, digits, "
                     "'_', not starting with a digit, not one of "
-                    f"{', '.join(sorted(reserved))})",
+                    f"{', '.join(sorted(RESERVED))})",
                 )
             if rname in regions:
                 raise GridError(["regions", rname], "given twice")

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from mitld_lp.logic.fragment import is_co_safe
 from mitld_lp.logic.syntax import (
     FALSE,
+    RESERVED,
     TRUE,
     DistLiteral,
     DistRef,
@@ -35,8 +36,8 @@ from mitld_lp.logic.syntax import (
 
 __all__ = ["KEYWORDS", "identifiers", "intervals", "dist_specs", "formulas", "traces"]
 
-#: Words the parser reserves for operators; never valid proposition or distribution names.
-KEYWORDS = frozenset({"true", "false", "X", "F", "G", "U", "R", "D"})
+#: Words the parser reserves for operators (:data:`mitld_lp.logic.syntax.RESERVED`).
+KEYWORDS = RESERVED
 
 
 def identifiers() -> st.SearchStrategy[str]:
@@ -54,35 +55,33 @@ def intervals(max_bound: int = 6) -> st.SearchStrategy[Interval]:
     )
 
 
-def _numbers(integers_only: bool = False) -> st.SearchStrategy[int | float]:
-    ints = st.integers(-(10**12), 10**12)
-    if integers_only:
-        return ints
-    return st.one_of(ints, st.floats(allow_nan=False, allow_infinity=False))
-
-
 def dist_specs() -> st.SearchStrategy[DistSpec]:
-    """Distribution names and literals of every family, in the shapes the parser accepts
-    (values are not validated: negative or huge numbers included)."""
-    num = _numbers()
+    """Distribution names and valid literals of every family (values inside each
+    family's domain, integers and floats mixed), so that :func:`mitld_lp.logic.parse`
+    and :func:`mitld_lp.logic.check` accept them."""
+    prob = st.one_of(st.floats(0.001, 1.0), st.just(1))
+    positive = st.one_of(st.floats(0.01, 100.0), st.integers(1, 50))
 
     def lit(family: str, args: st.SearchStrategy[tuple]) -> st.SearchStrategy[DistSpec]:
         return args.map(lambda a: DistLiteral(family, tuple(a)))
 
+    masses = st.lists(st.integers(0, 100), min_size=1, max_size=4).map(
+        lambda xs: tuple(x / max(100, sum(xs)) for x in xs)
+    )
+    steps = st.tuples(st.integers(1, 20), st.integers(0, 20)).map(lambda t: (t[0], t[0] + t[1]))
+    scipy_laws = st.sampled_from(
+        [("nbinom", 3, 0.5), ("geom", 0.3), ("poisson", 2.0), ("expon",), ("gamma", 2.0)]
+    )
     return st.one_of(
         identifiers().map(DistRef),
-        lit("geometric", st.tuples(num)),
-        lit("pmf", st.lists(num, min_size=1, max_size=4).map(tuple)),
-        lit("poisson", st.tuples(num)),
-        lit("uniform", st.tuples(_numbers(True), _numbers(True))),
-        lit("exponential", st.tuples(num)),
-        lit("weibull", st.tuples(num, num)),
-        lit("gamma", st.tuples(num, num)),
-        st.builds(
-            lambda name, rest: DistLiteral("scipy", (name, *rest)),
-            identifiers(),
-            st.lists(num, max_size=3),
-        ),
+        lit("geometric", st.tuples(prob)),
+        lit("pmf", masses),
+        lit("poisson", st.tuples(positive)),
+        lit("uniform", steps),
+        lit("exponential", st.tuples(positive)),
+        lit("weibull", st.tuples(positive, positive)),
+        lit("gamma", st.tuples(positive, positive)),
+        lit("scipy", scipy_laws),
     )
 
 

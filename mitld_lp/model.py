@@ -67,10 +67,6 @@ __all__ = [
 DEFAULT_EPSILON = defaults.EPSILON
 """The truncation budget used when a model gives no ``epsilon``."""
 
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-# Words the formula grammar reserves: a proposition of that name could not be written.
-_RESERVED = frozenset({"true", "false", "F", "G", "X", "U", "R", "D"})
-
 
 class ModelError(ValueError):
     """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``."""

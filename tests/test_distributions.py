@@ -590,3 +590,18 @@ def test_chi_square_rejects_pmf_used_as_hazard(make: Callable[[], FirstOccurrenc
     samples = sample_through_hazards(wrong, SAMPLES, np.random.default_rng(3), HORIZON)  # type: ignore[arg-type]
     probs = d.pmf(np.arange(1, HORIZON + 1))
     assert chi_square_pvalue(samples, probs, 0.0) < 1e-6
+
+
+def test_import_does_not_load_scipy_stats() -> None:
+    """``import mitld_lp`` must not pay for ``scipy.stats`` (~0.6 s); a scipy family
+    imports it when first built."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, mitld_lp; assert 'scipy.stats' not in sys.modules, 'at import'; "
+        "mitld_lp.distributions.poisson(2.0); assert 'scipy.stats' in sys.modules"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr

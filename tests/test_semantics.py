@@ -240,8 +240,19 @@ def test_bounded_formulas_match_the_two_valued_evaluator(f: Formula, data: st.Da
 
 
 @given(formulas(max_depth=5, max_bound=6), traces(min_len=15, max_len=20))
-def test_depth_five_on_length_twenty_is_fast_and_total(
+def test_depth_five_on_length_twenty_is_decided_and_monotone(
     f: Formula, w: tuple[frozenset[str], ...]
 ) -> None:
+    """A bounded formula is decided wherever its horizon fits in the trace, and a verdict
+    decided on a prefix is the verdict on the whole trace (the strong Kleene reading only
+    gains information as letters arrive)."""
+    h = horizon(f)
     for t in range(0, len(w) + 2, 5):
-        assert holds(f, w, t) in (T, F, U)
+        full = holds(f, w, t)
+        assert isinstance(full, Verdict)
+        if h is not None and t + h < len(w):
+            assert full is not U, (str(f), t, h)
+        for cut in (t, t + 3, len(w) - 1):
+            part = holds(f, w[:cut], t)
+            if part is not U:
+                assert part is full, (str(f), t, cut)

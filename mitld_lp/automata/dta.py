@@ -5,8 +5,8 @@ automaton; this module stores that automaton directly.  State ``i`` *is* an obli
 (a formula still to be satisfied from the next step on, ``states[i]``); its *location*
 is the obligation with every interval replaced by the interval it had in the source
 formula, and its *clock valuation* is how far each bounded operator has progressed
-(see :func:`DTA.location` and :func:`DTA.clocks`), so the automaton reads like the
-paper's Fig. 1.
+(see :meth:`DTA.location`, which returns a :class:`Location`, and :meth:`DTA.clocks`),
+so the automaton reads like the paper's Fig. 1.
 
 Transitions are stored per state as a reduced ordered decision diagram over the
 formula's propositions (tested in sorted order): ``step`` walks it, so a letter is read
@@ -16,21 +16,39 @@ enumerated.  Results are cached per (state, letter).
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
-from mitld_lp.logic.syntax import And, Formula, Interval, Or, Release, Until, subformulas
+from mitld_lp.logic.syntax import And, Formula, Interval, Or, Release, Until, show, subformulas
 
-__all__ = ["DTA", "Diagram"]
+__all__ = ["DTA", "Diagram", "Location"]
 
 Diagram: TypeAlias = "int | tuple[str, Diagram, Diagram]"
 """A leaf is a successor state index; a node ``(p, low, high)`` tests proposition ``p``
 (``high`` when ``p`` is in the letter)."""
 
 
-_CLOCK = re.compile(r" \{x=\d+\}")
+@dataclass(frozen=True, slots=True)
+class Location:
+    """A state of the automaton as the paper draws it: a location and a clock valuation.
+
+    Attributes:
+        obligation: the state's obligation with every interval shown as in the source
+            formula (``F[0,3] A`` for ``F[0,1] A`` two steps in): states that differ only
+            in their clocks have the same text.
+        clocks: for each bounded operator in progress, ``(clock name, elapsed steps)``;
+            the clock is named after the operator in the source formula.
+        label: the obligation with each running operator followed by its clock value,
+            ``F[0,3] A {x=2}``; also ``str(location)``.
+    """
+
+    obligation: str
+    clocks: tuple[tuple[str, int], ...]
+    label: str
+
+    def __str__(self) -> str:
+        return self.label
 
 
 def _walk(d: Diagram, letter: frozenset[str] | set[str]) -> int:
@@ -125,27 +143,36 @@ class DTA:
         ``U[l,u]`` is named after it, e.g. ``"F[0,3] A"``."""
         return tuple((name, v) for name, v, _ in self._clock_view(state))
 
-    def location(self, state: int) -> str:
-        """The obligation of ``state`` with every interval shown as in the source formula
-        and the elapsed time as a clock: ``F[0,3] A {x=1}`` reads "F[0,3] A, one step in"."""
-        return self._located(self.states[state], self._clock_view(state))
+    def location(self, state: int) -> Location:
+        """The location and clock valuation of ``state`` (see :class:`Location`):
+        ``F[0,3] A {x=1}`` reads "F[0,3] A, one step in"."""
+        view = self._clock_view(state)
+        plain = {current: str(source) for _, _, (current, source) in view}
+        timed = {current: f"{source} {{x={v}}}" for _, v, (current, source) in view}
+        text, label = self._located(self.states[state], plain, timed)
+        return Location(text, tuple((name, v) for name, v, _ in view), label)
 
-    def _located(self, f: Formula, view) -> str:
+    def _located(
+        self, f: Formula, plain: dict[Formula, str], timed: dict[Formula, str]
+    ) -> tuple[str, str]:
         # Operands are sorted by their text *without* clock values, so two states of the
         # same location print it the same way whatever their clocks.
         if isinstance(f, And | Or):
             parts = []
             for a in f.args:
-                text = self._located(a, view)
+                text, label = self._located(a, plain, timed)
                 if isinstance(f, And) and isinstance(a, Or):
-                    text = f"({text})"
-                parts.append(text)
-            parts.sort(key=lambda t: (_CLOCK.sub("", t), t))
-            return (" & " if isinstance(f, And) else " | ").join(parts)
-        text = str(f)
-        for _, v, (current, source) in view:
-            text = text.replace(str(current), f"{source} {{x={v}}}", 1)
-        return text
+                    text, label = f"({text})", f"({label})"
+                parts.append((text, label))
+            parts.sort()
+            sep = " & " if isinstance(f, And) else " | "
+            return sep.join(t for t, _ in parts), sep.join(lab for _, lab in parts)
+        return show(f, plain), show(f, timed)
+
+    def guards(self, state: int) -> dict[int, str]:
+        """For each successor of ``state``, the letters that lead to it, as a guard over
+        the atoms in disjunctive form (``"p & !q | !p"``; ``"true"`` for every letter)."""
+        return _guards(self.delta[state])
 
     def _clock_view(self, state: int):
         table = self._source_intervals()
@@ -176,14 +203,14 @@ class DTA:
             '  __init [shape=point, label=""];',
         ]
         for i in range(self.n_states):
-            label = _dot_escape(self.location(i) if i != self.accepting else "accept")
+            label = _dot_escape(self.location(i).label if i != self.accepting else "accept")
             if i == self.rejecting:
                 label = "reject"
             shape = ', peripheries=2' if i == self.accepting else ""
             lines.append(f'  s{i} [label="{i}: {label}"{shape}];')
         lines.append(f"  __init -> s{self.initial};")
         for i in range(self.n_states):
-            for target, guard in sorted(_guards(self.delta[i]).items()):
+            for target, guard in sorted(self.guards(i).items()):
                 lines.append(f'  s{i} -> s{target} [label="{_dot_escape(guard)}"];')
         lines.append("}")
         return "\n".join(lines) + "\n"

@@ -20,10 +20,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from mitld_lp.distributions import DistributionError, from_spec
 from mitld_lp.logic.syntax import (
     And,
     Const,
     Dist,
+    DistLiteral,
     DistSpec,
     Formula,
     Next,
@@ -264,8 +266,17 @@ def horizon(f: Formula) -> int | None:
 
 def check(f: Formula) -> FragmentReport:
     """Check that ``f`` is in the supported fragment and report its NNF, events and
-    horizon.  Raises :class:`FragmentError` naming the offending subformula otherwise."""
+    horizon.  Raises :class:`FragmentError` naming the offending subformula otherwise,
+    also for an inline law whose values are invalid (``D[geometric(1.5)] a``)."""
     events = event_distributions(f)
+    for event, mu in events.items():
+        if isinstance(mu, DistLiteral):
+            try:
+                from_spec(mu)
+            except DistributionError as err:
+                raise FragmentError(
+                    dist(mu, Prop(event)), f"has an invalid distribution: {err.reason}"
+                ) from None
     bad = _not_co_safe(f)
     if bad is not None:
         raise FragmentError(*bad)

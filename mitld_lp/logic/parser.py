@@ -19,9 +19,10 @@ operators (a keyword needs a space before an identifier operand).
 
 Interval bounds are non-negative integers with ``l <= u``.  A distribution ``mu`` is a
 name (:class:`DistRef`, bound later from a model file) or a literal ``family(args)``
-(:class:`DistLiteral`) of one of the shapes in :data:`DIST_FAMILIES`; integers parse to
-``int``, decimals and exponent forms to ``float``.  Only the shape is checked here: the
-values are validated by :mod:`mitld_lp.distributions`.
+(:class:`DistLiteral`) of one of the families of
+:data:`mitld_lp.distributions.FAMILIES`; integers parse to ``int``, decimals and exponent
+forms to ``float``.  A literal is built once to validate its values, so
+``D[geometric(1.5)] a`` is a :class:`ParseError` at the literal.
 
 Every malformed input raises :class:`ParseError` (a ``ValueError``) with the line and
 column of the offending token, never another exception.
@@ -37,8 +38,10 @@ from functools import cache
 from lark import Lark, Token, Tree
 from lark.exceptions import LarkError, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
+from mitld_lp.distributions import FAMILIES, DistributionError, Family, from_spec
 from mitld_lp.logic.syntax import (
     FALSE,
+    RESERVED,
     TRUE,
     And,
     Dist,
@@ -66,7 +69,7 @@ from mitld_lp.logic.syntax import (
     until,
 )
 
-__all__ = ["ParseError", "parse", "parse_distribution", "DIST_FAMILIES", "MAX_DEPTH"]
+__all__ = ["ParseError", "parse", "parse_distribution", "MAX_DEPTH"]
 
 #: Formulas nested deeper than this are refused: every later stage walks formulas
 #: recursively, and a parse error is better than a ``RecursionError`` far away.
@@ -122,28 +125,15 @@ def _rebuild_parse_error(
 
 # --------------------------------------------------------------------------- distributions
 
-#: Literal shapes: family -> (leading identifier arguments, minimum number count,
-#: maximum number count or None, numbers must be integers).
-DIST_FAMILIES: dict[str, tuple[int, int, int | None, bool]] = {
-    "geometric": (0, 1, 1, False),
-    "pmf": (0, 1, None, False),
-    "poisson": (0, 1, 1, False),
-    "uniform": (0, 2, 2, True),
-    "exponential": (0, 1, 1, False),
-    "weibull": (0, 2, 2, False),
-    "gamma": (0, 2, 2, False),
-    "scipy": (1, 0, None, False),
-}
 
-
-def _shape_text(family: str) -> str:
-    names, lo, hi, ints = DIST_FAMILIES[family]
-    kind = "integer" if ints else "number"
-    if names:
-        return f"{family}(name, {kind}s...)"
-    if hi is None:
-        return f"{family}({kind}, ...) with at least {lo} {kind}"
-    return f"{family} takes {lo} {kind}{'s' if lo != 1 else ''}"
+def _shape_text(fam: Family) -> str:
+    kind = "integer" if fam.integers else "number"
+    if fam.named:
+        return f"{fam.name}(name, {kind}s...)"
+    if fam.max_numbers is None:
+        return f"{fam.name}({kind}, ...) with at least {fam.min_numbers} {kind}"
+    lo = fam.min_numbers
+    return f"{fam.name} takes {lo} {kind}{'s' if lo != 1 else ''}"
 
 
 # --------------------------------------------------------------------------- transformer
@@ -159,6 +149,8 @@ class _Build:
 
     def __init__(self, source: str) -> None:
         self.source = source
+        # inline laws by identity, with the token of their family name (for positions)
+        self._literals: dict[int, tuple[DistLiteral, Token]] = {}
 
     def _error(self, reason: str, tok: Token) -> ParseError:
         line, column = _pos(tok)
@@ -190,6 +182,7 @@ class _Build:
         return always(c[1], c[0])
 
     def dist(self, c: list) -> Formula:
+        self._validate(c[1], f"D[{c[1]}] {c[2]}")
         return dist(c[1], c[2])
 
     def until(self, c: list) -> Formula:
@@ -235,6 +228,7 @@ class _Build:
 
     # distributions
     def dist_start(self, c: list) -> DistSpec:
+        self._validate(c[0], str(c[0]))
         return c[0]
 
     def dist_ref(self, c: list) -> DistSpec:
@@ -244,29 +238,41 @@ class _Build:
         family_tok: Token = c[0]
         args: list[tuple[DistArg, Token]] = c[1] if c[1] is not None else []
         family = str(family_tok)
-        if family not in DIST_FAMILIES:
+        fam = FAMILIES.get(family)
+        if fam is None:
             raise self._error(
                 f"unknown distribution family {family!r}; expected one of "
-                f"{', '.join(sorted(DIST_FAMILIES))}",
+                f"{', '.join(sorted(FAMILIES))}",
                 family_tok,
             )
-        names, lo, hi, ints = DIST_FAMILIES[family]
-        n_num = len(args) - names
-        if n_num < lo or (hi is not None and n_num > hi):
+        if fam.arity_error(len(args)) is not None:
             raise self._error(
                 f"{family}(...) has {len(args)} argument{'s' if len(args) != 1 else ''}; "
-                f"{_shape_text(family)}",
+                f"{_shape_text(fam)}",
                 family_tok,
             )
         for i, (value, tok) in enumerate(args):
-            if i < names:
+            if i < int(fam.named):
                 if not isinstance(value, str):
                     raise self._error(f"{family}: argument {i + 1} must be a name", tok)
             elif isinstance(value, str):
                 raise self._error(f"{family}: argument {i + 1} must be a number", tok)
-            elif ints and not isinstance(value, int):
+            elif fam.integers and not isinstance(value, int):
                 raise self._error(f"{family}: argument {i + 1} must be an integer", tok)
-        return DistLiteral(family, tuple(v for v, _ in args))
+        literal = DistLiteral(family, tuple(v for v, _ in args))
+        self._literals[id(literal)] = (literal, family_tok)
+        return literal
+
+    def _validate(self, mu: DistSpec, what: str) -> None:
+        """Build an inline law to check its values (``geometric(1.5)``, ``pmf(0.6, 0.6)``),
+        reporting at the literal's family name; a name is bound later."""
+        if not isinstance(mu, DistLiteral):
+            return
+        _, tok = self._literals[id(mu)]
+        try:
+            from_spec(mu)
+        except DistributionError as err:
+            raise self._error(f"{what}: {err.reason}", tok) from None
 
     def dist_args(self, c: list) -> list[tuple[DistArg, Token]]:
         return c
@@ -367,9 +373,53 @@ def _from_lark(err: UnexpectedInput, text: str, start: str) -> ParseError:
     reason = f"unexpected {shown}"
     if expected:
         reason += f"; expected {_join(expected)}"
+    if isinstance(err, UnexpectedToken):
+        reason += _reserved_hint(text, err.token)
     return ParseError(
         reason, line=line, column=column, text=snippet, expected=expected, source=text
     )
+
+
+_OPERATOR_OF = {
+    "true": "the constant true",
+    "false": "the constant false",
+    "X": "next, X p",
+    "F": "eventually, F p",
+    "G": "always, G p",
+    "U": "until, p U q",
+    "R": "release, p R q",
+    "D": "the distribution eventuality, D[mu] a",
+}
+
+
+@cache
+def _keyword_terminals() -> dict[str, str]:
+    """Terminal name -> reserved word, for the grammar's keyword terminals."""
+    return {
+        t.name: t.pattern.value
+        for t in _parser().terminals
+        if t.pattern.type == "str" and t.pattern.value in RESERVED
+    }
+
+
+def _reserved_hint(text: str, tok: Token) -> str:
+    """A note when the offending token, or the one before it, is a reserved word (a
+    user who writes ``F (D & E)`` means propositions ``D`` and ``E``)."""
+    keywords = _keyword_terminals()
+    word = keywords.get(tok.type)
+    if word is None:
+        end = len(text) if tok.type == "$END" or tok.start_pos is None else tok.start_pos
+        previous = None
+        try:
+            for t in _parser().lex(text[:end]):
+                previous = t
+        except LarkError:
+            return ""
+        word = keywords.get(previous.type) if previous is not None else None
+    if word is None:
+        return ""
+    return (f"; {word!r} is a reserved word ({_OPERATOR_OF[word]}) and cannot name a "
+            "proposition")
 
 
 def _accepts_at(err: UnexpectedToken) -> set[str]:

@@ -19,10 +19,14 @@ precedence rules allow (loosest first: ``->``, ``|``, ``&``, ``U``/``R``, unary)
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
 __all__ = [
+    "RESERVED",
+    "is_proposition_name",
     "Interval",
     "DistRef",
     "DistLiteral",
@@ -39,6 +43,7 @@ __all__ = [
     "Dist",
     "TRUE",
     "FALSE",
+    "flatten",
     "conj",
     "disj",
     "neg",
@@ -51,7 +56,22 @@ __all__ = [
     "dist",
     "atoms",
     "subformulas",
+    "show",
 ]
+
+
+#: The words the parser reads as operators (``grammar.lark`` spells each one as a
+#: terminal; a test checks the two agree): never a proposition, event, region or
+#: distribution name.
+RESERVED = frozenset({"true", "false", "X", "F", "G", "U", "R", "D"})
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+def is_proposition_name(name: object) -> bool:
+    """Whether a formula can write ``name`` as a proposition: letters, digits and ``_``,
+    not starting with a digit, and not one of :data:`RESERVED`."""
+    return isinstance(name, str) and bool(_NAME.match(name)) and name not in RESERVED
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,7 +162,7 @@ class Formula:
         return implies(self, other)
 
     def __str__(self) -> str:
-        return _show(self, 0)
+        return _show(self, 0, None)
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -270,23 +290,31 @@ FALSE = Const(False)
 # --------------------------------------------------------------------------- constructors
 
 
-def _nary(kind: type[And] | type[Or], args: tuple[Formula, ...]) -> Formula:
+def flatten(kind: type[And] | type[Or], args: Iterable[Formula]) -> list[Formula] | Const:
+    """The operands of ``kind(*args)`` with nested ``kind`` nodes flattened, the unit
+    (``true`` for ``And``, ``false`` for ``Or``) dropped and duplicates removed, in order
+    of first occurrence; or the zero (``false``/``true``) when an operand is it.  Shared by
+    the simplifying constructors here and the canonical ones of
+    :mod:`mitld_lp.logic.normal`."""
     unit, zero = (TRUE, FALSE) if kind is And else (FALSE, TRUE)
-    out: list[Formula] = []
-    seen: set[Formula] = set()
+    out: dict[Formula, None] = {}
     for a in args:
         if not isinstance(a, Formula):
             raise TypeError(f"expected a Formula, got {a!r}")
-        parts = a.args if isinstance(a, kind) else (a,)
-        for p in parts:
+        for p in a.args if isinstance(a, kind) else (a,):
             if p == zero:
                 return zero
-            if p == unit or p in seen:
-                continue
-            seen.add(p)
-            out.append(p)
+            if p != unit:
+                out[p] = None
+    return list(out)
+
+
+def _nary(kind: type[And] | type[Or], args: tuple[Formula, ...]) -> Formula:
+    out = flatten(kind, args)
+    if isinstance(out, Const):
+        return out
     if not out:
-        return unit
+        return TRUE if kind is And else FALSE
     if len(out) == 1:
         return out[0]
     return kind(tuple(out))
@@ -406,36 +434,48 @@ def _bracket(iv: Interval | None) -> str:
     return "" if iv is None else str(iv)
 
 
-def _show(f: Formula, ctx: int) -> str:
+def show(f: Formula, replace: Mapping[Formula, str]) -> str:
+    """``str(f)``, except that each subformula that is a key of ``replace`` is printed as
+    its value (parenthesised as the subformula would be).  Used to show an automaton
+    state with the intervals of the source formula and its clock values."""
+    return _show(f, 0, replace)
+
+
+def _show(f: Formula, ctx: int, over: Mapping[Formula, str] | None) -> str:
+    def sub(g: Formula, level: int) -> str:
+        return _show(g, level, over)
+
     match f:
         case Const(v):
             return "true" if v else "false"
         case Prop(name):
             return name
         case Not(Until(Const(True), Not(inner), iv)):
-            text, level = f"G{_bracket(iv)} {_show(inner, _UNARY)}", _UNARY
+            text, level = f"G{_bracket(iv)} {sub(inner, _UNARY)}", _UNARY
         case Not(a):
-            text, level = f"!{_show(a, _UNARY)}", _UNARY
+            text, level = f"!{sub(a, _UNARY)}", _UNARY
         case Next(a):
-            text, level = f"X {_show(a, _UNARY)}", _UNARY
+            text, level = f"X {sub(a, _UNARY)}", _UNARY
         case Dist(mu, a):
-            text, level = f"D[{mu}] {_show(a, _UNARY)}", _UNARY
+            text, level = f"D[{mu}] {sub(a, _UNARY)}", _UNARY
         case Until(Const(True), right, iv):
-            text, level = f"F{_bracket(iv)} {_show(right, _UNARY)}", _UNARY
+            text, level = f"F{_bracket(iv)} {sub(right, _UNARY)}", _UNARY
         case Release(Const(False), right, iv):
             # ``false R p`` is ``G p`` but is a different node from ``!(true U !p)``, so
             # it keeps the R syntax to round-trip.
-            text, level = f"false R{_bracket(iv)} {_show(right, _UNARY)}", _BIN
+            text, level = f"false R{_bracket(iv)} {sub(right, _UNARY)}", _BIN
         case Until(left, right, iv):
-            text = f"{_show(left, _UNARY)} U{_bracket(iv)} {_show(right, _UNARY)}"
+            text = f"{sub(left, _UNARY)} U{_bracket(iv)} {sub(right, _UNARY)}"
             level = _BIN
         case Release(left, right, iv):
-            text = f"{_show(left, _UNARY)} R{_bracket(iv)} {_show(right, _UNARY)}"
+            text = f"{sub(left, _UNARY)} R{_bracket(iv)} {sub(right, _UNARY)}"
             level = _BIN
         case And(args):
-            text, level = " & ".join(_show(a, _AND + 1) for a in args), _AND
+            text, level = " & ".join(sub(a, _AND + 1) for a in args), _AND
         case Or(args):
-            text, level = " | ".join(_show(a, _OR + 1) for a in args), _OR
+            text, level = " | ".join(sub(a, _OR + 1) for a in args), _OR
         case _:
             raise TypeError(f"not a formula: {f!r}")
+    if over is not None and f in over:
+        text = over[f]
     return f"({text})" if level < ctx else text

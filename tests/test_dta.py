@@ -1,0 +1,204 @@
+"""The translation's structure: one canonical normal form, per-call memo tables, the
+record of a state's location, the cost of minimisation and the state budget.
+
+Expected values are hand counts and a brute-force minimisation written here (Moore's
+rounds of signature refinement over explicit letters), not the translation's own.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+
+import mitld_lp.automata.translate as T
+from mitld_lp.automata.dta import DTA, Location
+from mitld_lp.cli import main
+from mitld_lp.hypothesis import formulas
+from mitld_lp.logic import check, nnf, parse
+from mitld_lp.logic import syntax as S
+from mitld_lp.logic.normal import c_and, c_or, c_until, normal_form
+
+PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
+
+
+def examples(n: int) -> settings:
+    return settings(max_examples=n, deadline=None, suppress_health_check=list(HealthCheck))
+
+
+# --------------------------------------------------------------------------- normal form
+
+
+def test_canonical_form_lives_in_the_logic_layer() -> None:
+    p, q = S.Prop("p"), S.Prop("q")
+    # The user's form keeps F[2,5] true (it is UNKNOWN on a one-letter trace); the
+    # canonical form folds it (every step has a successor).
+    assert parse("F[2,5] true") == S.Until(S.TRUE, S.TRUE, S.Interval(2, 5))
+    assert normal_form(nnf(parse("F[2,5] true"))) == S.TRUE
+    assert c_until(S.FALSE, p, S.Interval(1, 2)) == S.FALSE
+    # sorted, absorbed and joined
+    assert c_and([q, p]) == c_and([p, q]) == S.And((p, q))
+    assert c_or([p, c_and([p, q])]) == p
+    f03, f02, f25 = (S.Until(S.TRUE, p, S.Interval(*b)) for b in ((0, 3), (0, 2), (2, 5)))
+    assert c_or([f02, f03]) == f03
+    assert c_or([f02, f25]) == S.Until(S.TRUE, p, S.Interval(0, 5))
+
+
+@examples(150)
+@given(formulas(max_depth=3, max_bound=4))
+def test_canonical_constructors_ignore_operand_order(f: S.Formula) -> None:
+    g = nnf(f)
+    if isinstance(g, S.And | S.Or):
+        make = c_and if isinstance(g, S.And) else c_or
+        assert make(list(g.args)) == make(list(reversed(g.args)))
+
+
+def test_to_dta_reuses_the_nnf_of_the_fragment_report(monkeypatch: pytest.MonkeyPatch) -> None:
+    report = check(parse(PAPER))
+    expected = T.to_dta(parse(PAPER)).n_states
+
+    def no_second_nnf(_f: S.Formula) -> S.Formula:
+        raise AssertionError("the NNF was computed again")
+
+    monkeypatch.setattr(T, "nnf", no_second_nnf)
+    d = T.to_dta(report)
+    assert d.n_states == expected == 17
+
+
+def test_translation_keeps_no_memo_between_calls() -> None:
+    T.to_dta(parse("F[0,50] p & G[0,7] (q -> F[0,3] r)"))
+    T.progress(parse("F[0,3] p"), {"q"})
+    kept = {
+        name: len(v)
+        for name, v in vars(T).items()
+        if isinstance(v, dict | set | list) and not name.startswith("__") and name != "__all__"
+    }
+    assert all(n == 0 for n in kept.values()), kept
+
+
+# --------------------------------------------------------------------------- minimisation
+
+
+def _moore_size(d: DTA) -> int:
+    """Number of Myhill-Nerode classes of ``d``'s states by rounds of signature
+    refinement over the explicit alphabet (2^atoms letters)."""
+    letters = [
+        frozenset(c) for r in range(len(d.atoms) + 1) for c in itertools.combinations(d.atoms, r)
+    ]
+    block = [int(d.is_accepting(s)) for s in range(d.n_states)]
+    while True:
+        sigs = [(block[s], tuple(block[d.step(s, a)] for a in letters)) for s in range(d.n_states)]
+        ids = {sig: i for i, sig in enumerate(sorted(set(sigs)))}
+        new = [ids[sig] for sig in sigs]
+        if len(set(new)) == len(set(block)):
+            return len(set(new))
+        block = new
+
+
+@examples(120)
+@given(formulas(max_depth=4, max_bound=4, props=("p", "q")))
+def test_the_automaton_is_minimal(f: S.Formula) -> None:
+    d = T.to_dta(f, max_states=2000)
+    assert _moore_size(d) == d.n_states
+
+
+@pytest.mark.parametrize("k", [300, 3000])
+def test_minimising_a_chain_is_not_quadratic(k: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``F[0,k] p`` has k+3 states (k+1 windows, accept, and reject: ``F[0,0] p``
+    failing leaves ``false``); minimisation must look at each state O(log n) times, not
+    once per refinement round (k rounds)."""
+    calls = [0]
+    inside = T._inside
+
+    def counted(d, members):
+        calls[0] += 1
+        return inside(d, members)
+
+    monkeypatch.setattr(T, "_inside", counted)
+    d = T.to_dta(parse(f"F[0,{k}] p"))
+    n = d.n_states
+    assert n == k + 3
+    assert calls[0] <= 2 * n * math.log2(n)
+
+
+def test_state_budget_is_checked_while_a_diagram_grows(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Twelve independent events: the first state's diagram alone has 2^12 successors.
+    With a budget of 100 states the translation stops after O(100) combinations."""
+    spec = " & ".join(f"D[geometric(0.5)] e{i} & F(e{i} & F[0,3] A)" for i in range(12))
+    calls = [0]
+    c_and_ = T.c_and
+
+    def counted(args):
+        calls[0] += 1
+        return c_and_(args)
+
+    monkeypatch.setattr(T, "c_and", counted)
+    with pytest.raises(T.TranslationError, match="more than 100 automaton states"):
+        T.to_dta(parse(spec), max_states=100)
+    assert calls[0] < 2**12
+
+
+# --------------------------------------------------------------------------- locations
+
+
+def test_location_is_a_record() -> None:
+    d = T.to_dta(parse("F[0,3] A"))
+    after_one = d.step(d.initial, set())
+    loc = d.location(after_one)
+    assert isinstance(loc, Location)
+    assert loc.obligation == "F[0,3] A"
+    assert loc.clocks == (("F[0,3] A", 1),)
+    assert loc.label == str(loc) == "F[0,3] A {x=1}"
+    assert d.location(d.initial) == Location("F[0,3] A", (), "F[0,3] A")
+
+
+@examples(120)
+@given(formulas(max_depth=4, max_bound=4))
+def test_location_text_is_the_label_without_clock_values(f: S.Formula) -> None:
+    d = T.to_dta(f, max_states=2000)
+    for s in range(d.n_states):
+        loc = d.location(s)
+        assert loc.obligation == re.sub(r" \{x=\d+\}", "", loc.label)
+        assert loc.clocks == d.clocks(s)
+
+
+def test_guards_cover_every_letter_once() -> None:
+    d = T.to_dta(parse("p U[0,2] q"))
+    for s in range(d.n_states):
+        guards = d.guards(s)
+        for letter in ({}, {"p"}, {"q"}, {"p", "q"}):
+            hits = [t for t, g in guards.items() if _guard_holds(g, letter)]
+            assert hits == [d.step(s, letter)]
+
+
+def _guard_holds(guard: str, letter) -> bool:
+    if guard == "true":
+        return True
+    return any(
+        all((lit[1:] not in letter) if lit.startswith("!") else (lit in letter)
+            for lit in term.split(" & "))
+        for term in guard.split(" | ")
+    )
+
+
+def test_minimise_flag_is_gone() -> None:
+    with pytest.raises(TypeError):
+        T.to_dta(parse("F p"), minimise=False)  # type: ignore[call-arg]
+
+
+@pytest.mark.parametrize(
+    ("formula", "line"),
+    [
+        ("F[0,3] p", "states:    6 (3 locations, 1 clock)"),
+        ("true", "states:    1 (1 location, 0 clocks)"),
+        (PAPER, "states:    17 (5 locations, 2 clocks)"),
+    ],
+)
+def test_cli_dta_counts_in_words(
+    formula: str, line: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["dta", formula]) == 0
+    assert line in capsys.readouterr().out.splitlines()

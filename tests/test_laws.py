@@ -1,0 +1,139 @@
+"""Inline laws and reserved words: one registry of families, one set of reserved words,
+laws validated where they are written (with the line and column), and parse errors that
+say when a reserved word was hit."""
+
+from __future__ import annotations
+
+import importlib.resources
+import re
+
+import pytest
+
+from mitld_lp import model as M
+from mitld_lp.cli import main
+from mitld_lp.distributions import FAMILIES, DistributionError, Family, from_spec, from_table
+from mitld_lp.hypothesis import KEYWORDS
+from mitld_lp.logic import check, parse
+from mitld_lp.logic.fragment import FragmentError
+from mitld_lp.logic.parser import ParseError, parse_distribution
+from mitld_lp.logic.syntax import RESERVED, DistLiteral, Prop, dist
+
+# (formula, column of the law's family name, a word of the reason), from issue 12 item 4.
+BAD_LAWS = [
+    ("D[geometric(1.5)] a", 3, "p must be in (0, 1]"),
+    ("D[geometric(0)] a", 3, "p must be in (0, 1]"),
+    ("D[pmf(0.6, 0.6)] a", 3, "masses sum to 1.2 > 1"),
+    ("D[pmf(-0.1, 0.5)] a", 3, "negative"),
+    ("D[poisson(-1)] a", 3, "lam must be"),
+    ("D[uniform(3, 1)] a", 3, "b must be >= a"),
+    ("D[scipy(nonexistent, 1)] a", 3, "unknown scipy.stats distribution 'nonexistent'"),
+    ("F[0,2] p & (q |\n  D[ geometric(2)] b)", 6, "p must be in (0, 1]"),
+]
+
+
+@pytest.mark.parametrize(("text", "column", "why"), BAD_LAWS)
+def test_parse_validates_inline_laws_at_their_position(text: str, column: int, why: str) -> None:
+    with pytest.raises(ParseError) as info:
+        parse(text)
+    err = info.value
+    assert (err.line, err.column) == (text.count("\n") + 1, column)
+    assert why in str(err)
+    assert "\n" not in str(err)
+
+
+@pytest.mark.parametrize(("text", "column", "why"), BAD_LAWS)
+def test_cli_check_refuses_inline_laws_with_exit_2(
+    text: str, column: int, why: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["check", text]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.count("\n") == 1
+    assert f":{column}: " in err and why in err
+
+
+def test_check_validates_laws_of_formulas_built_in_python() -> None:
+    f = dist(DistLiteral("geometric", (1.5,)), Prop("a"))
+    with pytest.raises(FragmentError, match=r"D\[geometric\(1\.5\)\] a has an invalid"):
+        check(f)
+    assert check(dist(DistLiteral("geometric", (0.5,)), Prop("a"))).events
+
+
+def test_parse_distribution_validates_too() -> None:
+    with pytest.raises(ParseError, match="p must be in"):
+        parse_distribution("geometric(3)")
+
+
+def test_one_registry_of_families() -> None:
+    """Every family is a :class:`Family` whose arity the parser, :func:`from_spec` and
+    :func:`from_table` all follow."""
+    examples = {
+        "geometric": (0.5,), "pmf": (0.25, 0.75), "poisson": (2.0,), "uniform": (2, 4),
+        "exponential": (0.5,), "weibull": (1.5, 3.0), "gamma": (2.0, 1.5),
+        "scipy": ("nbinom", 3, 0.5),
+    }
+    assert set(FAMILIES) == set(examples)
+    for name, args in examples.items():
+        fam = FAMILIES[name]
+        assert isinstance(fam, Family) and fam.name == name and fam.description
+        assert fam.arity_error(len(args)) is None
+        law = from_spec(DistLiteral(name, args))
+        text = str(DistLiteral(name, args))
+        assert parse_distribution(text) == DistLiteral(name, args)
+        value = list(args) if fam.takes_list else args[0]
+        tabled = from_table({name: value}, "distributions.mu")
+        assert tabled.label == law.label
+        for k in (1, 2, 5):
+            assert tabled.pmf(k) == pytest.approx(law.pmf(k), abs=1e-15)
+        # one argument too many is refused by all three, unless the family is variadic
+        more = (*args, 1)
+        if fam.max_numbers is not None:
+            assert fam.arity_error(len(more)) is not None
+            with pytest.raises(ParseError):
+                parse_distribution(str(DistLiteral(name, more)))
+            with pytest.raises(DistributionError, match="takes"):
+                from_spec(DistLiteral(name, more))
+
+
+def _grammar_keywords() -> set[str]:
+    text = importlib.resources.files("mitld_lp.logic").joinpath("grammar.lark").read_text()
+    words = re.findall(r'^_?[A-Z_]+:\s*"([^"]+)"\s*$', text, flags=re.MULTILINE)
+    return {w for w in words if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", w)}
+
+
+def test_reserved_words_are_the_grammars_keywords() -> None:
+    assert _grammar_keywords() == RESERVED
+    assert KEYWORDS is RESERVED
+    assert not hasattr(M, "_RESERVED")
+
+
+@pytest.mark.parametrize("word", sorted(RESERVED))
+def test_model_refuses_each_reserved_word_as_a_name(word: str) -> None:
+    src = f'''
+name = "r"
+spec = "F[0,3] A"
+[world]
+type = "gridworld"
+size = [2, 2]
+start = [0, 0]
+[world.regions]
+A = [[1, 1]]
+{word} = [[0, 1]]
+'''
+    with pytest.raises(M.ModelError, match="regions"):
+        M.loads_model(src)
+
+
+@pytest.mark.parametrize(
+    ("text", "word"),
+    [("F (D & E)", "D"), ("p & U", "U"), ("p & F", "F"), ("X & p", "X"), ("G | true", "G")],
+)
+def test_parse_error_names_the_reserved_word(text: str, word: str) -> None:
+    with pytest.raises(ParseError, match=f"'{word}' is a reserved word"):
+        parse(text)
+
+
+def test_no_reserved_word_note_without_one() -> None:
+    with pytest.raises(ParseError) as info:
+        parse("p & (q")
+    assert "reserved" not in str(info.value)
