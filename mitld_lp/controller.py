@@ -12,8 +12,11 @@ with an action, tracking the automaton state, the pending events and the clock i
 from __future__ import annotations
 
 import enum
+import os
+import pickle
 from collections.abc import Hashable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +27,8 @@ from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
 
 __all__ = ["Observation", "Controller", "RunStatus"]
+
+_SAVE_FORMAT = "mitld_lp.Controller/1"
 
 
 class RunStatus(enum.Enum):
@@ -91,6 +96,33 @@ class Controller:
     @property
     def clock(self) -> int:
         return 0 if self._state is None else self._state[2]
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+        """Write the controller (policy, automaton, events, world) to ``path`` so that a
+        robot's process can :meth:`load` it without solving again.  The file is a
+        pickle: load only files you wrote.  Refuses to replace a file unless
+        ``overwrite``."""
+        out = Path(path)
+        if out.exists() and not overwrite:
+            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
+        with out.open("wb") as handle:
+            pickle.dump((_SAVE_FORMAT, self), handle, protocol=pickle.HIGHEST_PROTOCOL)
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Controller:
+        """A controller written by :meth:`save`, reset to step 0.  ``ValueError`` if the
+        file is not one."""
+        source = Path(path)
+        try:
+            with source.open("rb") as handle:
+                tag, controller = pickle.load(handle)
+        except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
+            raise ValueError(f"{source}: not a saved controller ({exc})") from None
+        if tag != _SAVE_FORMAT or not isinstance(controller, cls):
+            raise ValueError(f"{source}: not a saved controller")
+        controller.reset()
+        return controller
 
     def act(self, observation: Observation) -> str | None:
         """The action to take in ``observation.state``; ``None`` once the task is decided."""

@@ -85,3 +85,22 @@ def test_solve_writes_the_policy_file(tmp_path, capsys):
     assert main(["solve", str(MODELS / "bus_grid.toml"), "--policy", str(out), "-q"]) == 2
     assert main(["solve", str(MODELS / "bus_grid.toml"), "--policy",
                  str(tmp_path / "p.txt"), "-q"]) == 2
+
+
+def test_a_saved_controller_acts_as_the_original(corridor, tmp_path):
+    from mitld_lp import Controller, Observation
+
+    path = corridor.controller.save(tmp_path / "robot.ctl")
+    back = Controller.load(path)
+    # Drive both through the same observed run: walk east, the event at step 2.
+    run = [Observation((0, 0)), Observation((1, 0)), Observation((2, 0), frozenset({"b"}))]
+    original = corridor.controller
+    original.reset()
+    assert [original.act(o) for o in run] == [back.act(o) for o in run]
+    assert back.status is original.status and back.status.value == "accepted"
+    with pytest.raises(FileExistsError):
+        corridor.controller.save(path)
+    junk = tmp_path / "junk.ctl"
+    junk.write_bytes(b"not a pickle")
+    with pytest.raises(ValueError, match="not a saved controller"):
+        Controller.load(junk)
