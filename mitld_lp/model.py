@@ -1,6 +1,6 @@
 """Model files: a task, a world and the events' distributions in one TOML file.
 
-The schema (DESIGN.md, "Model files")::
+The schema (also in docs/model-files.md)::
 
     name = "bus_grid"                   # required, non-empty string
     spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
@@ -47,6 +47,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from mitld_lp import defaults
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec, from_table
 from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
@@ -63,8 +64,8 @@ __all__ = [
     "DEFAULT_EPSILON",
 ]
 
-DEFAULT_EPSILON = 0.01
-"""The truncation budget used when a model file gives no ``epsilon``."""
+DEFAULT_EPSILON = defaults.EPSILON
+"""The truncation budget used when a model gives no ``epsilon``."""
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 # Words the formula grammar reserves: a proposition of that name could not be written.
@@ -102,6 +103,71 @@ class Model:
     def events(self) -> frozenset[str]:
         """The external events of the spec."""
         return frozenset(self.distributions)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # A read-only mapping view does not pickle: rebuild it from a plain dict.
+        return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
+                                  self.game, dict(self.distributions), self.source))
+
+    @classmethod
+    def from_game(
+        cls,
+        game: Game[Any],
+        spec: Formula | str,
+        *,
+        distributions: Mapping[str, FirstOccurrence] | None = None,
+        epsilon: float = DEFAULT_EPSILON,
+        name: str = "model",
+    ) -> Model:
+        """A model from a game object and a specification, validated as a file would be.
+
+        ``spec``: a formula or its text; ``distributions`` binds the names used in
+        ``D[name]`` to laws (inline literals such as ``D[geometric(0.3)]`` need none).
+        Raises :class:`ModelError` (source ``<spec>``) when the spec does not parse or is
+        unsupported, a name is unbound or bound but unused, a proposition of the spec is
+        neither a proposition of the game nor an event, a proposition of the game has an
+        event's name, or the game declares events (``event_names``) the spec gives no
+        distribution."""
+        ctx = _Context("<spec>")
+        if not isinstance(game, Game):
+            raise ctx.error(
+                "game", f"must implement the Game protocol (initial, proposition_names, "
+                f"actions, successors, propositions), got {type(game).__name__}"
+            )
+        if not isinstance(epsilon, int | float) or isinstance(epsilon, bool) or not (
+            0.0 < epsilon < 1.0
+        ):
+            raise ctx.error("epsilon", f"must be a number in (0, 1), got {epsilon!r}")
+        named: dict[str, FirstOccurrence] = {}
+        for dname, law in (distributions or {}).items():
+            if not isinstance(law, FirstOccurrence):
+                raise ctx.error(
+                    _join("distributions", str(dname)),
+                    f"must be a distribution (mitld_lp.distributions), got "
+                    f"{type(law).__name__} {law!r}",
+                )
+            named[str(dname)] = law
+        if isinstance(spec, str):
+            formula, report = _parse_spec(spec, ctx)
+            text = spec
+        elif isinstance(spec, Formula):
+            formula, text = spec, str(spec)
+            try:
+                report = check(formula)
+            except FragmentError as exc:
+                raise ctx.error("spec", str(exc)) from exc
+        else:
+            raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
+        bound = _bind_spec(formula, report, named, game, "proposition", None, ctx)
+        return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
+                   distributions=MappingProxyType(bound), source=None)
+
+
+def _unpickle_model(
+    name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
+    distributions: dict[str, FirstOccurrence], source: Path | None,
+) -> Model:
+    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -296,10 +362,60 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
         raise ctx.error("grid", str(exc)) from exc
 
 
+def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+    """``[prism]``: ``file`` (relative to the model file; to the working directory for
+    :func:`loads_model`), optional ``constants`` (name -> boolean or number), ``labels``
+    (the labels that become propositions, default all) and ``events`` (PRISM actions
+    that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
+    from mitld_lp.worlds import WorldError
+    from mitld_lp.worlds.prism import load_prism
+
+    table = ctx.table(doc["prism"], "prism")
+    ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
+    source = Path(ctx.source)
+    base = source.parent if source.is_file() else Path.cwd()
+    path = base / ctx.string(table["file"], "prism.file")
+    constants = ctx.table(table.get("constants", {}), "prism.constants")
+    for cname, value in constants.items():
+        if not isinstance(value, bool | int | float):
+            raise ctx.error(
+                _join("prism.constants", cname),
+                f"must be a boolean or a number, got {_type_name(value)} {_show(value)}",
+            )
+
+    def names(key: str) -> list[str] | None:
+        if key not in table:
+            return None
+        items = ctx.array(table[key], f"prism.{key}")
+        return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
+
+    labels, events = names("labels"), names("events")
+    try:
+        spec_atoms = atoms(parse(str(doc.get("spec", ""))))
+    except ParseError:  # reported with its position when the spec itself is read
+        spec_atoms = frozenset()
+    try:
+        game = load_prism(path, constants=constants, labels=labels, events=events or ())
+    except WorldError as exc:
+        raise ctx.error("prism", str(exc)) from exc
+    # A PRISM action named like an event of the spec but not listed under events would
+    # be offered to the robot as a move of its own: refuse it rather than let the robot
+    # cause the event.
+    robot_actions = {a for s in game.states for a in game.actions(s)}
+    for action in sorted(spec_atoms & robot_actions):
+        raise ctx.error(
+            "prism.events",
+            f"PRISM action {action!r} has the name of a proposition of spec; list it in "
+            "prism.events if it is the effect of that event",
+        )
+    return game
+
+
 _GAME_KINDS: tuple[_GameKind, ...] = (
     _GameKind(
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
     ),
+    _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
 )
 
 _COMMON_REQUIRED = {"name", "spec"}
@@ -398,12 +514,68 @@ def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: _Context) -> Model
     )
 
 
+def _bind_spec(
+    spec: Formula,
+    report: FragmentReport,
+    named: Mapping[str, FirstOccurrence],
+    game: Game[Any],
+    noun: str,
+    table: str | None,
+    ctx: _Context,
+) -> dict[str, FirstOccurrence]:
+    """Bind each event of ``spec`` to its law and check the spec against the game.
+
+    Every name in ``named`` must be used by the spec; no proposition of the game may
+    have an event's name (``table``: where the game's propositions are declared, for the
+    key path); every other proposition of the spec must be a proposition of the game;
+    events the game declares (an optional ``event_names`` attribute) must each get a law.
+    """
+    bound = _bind_events(report.events, named, ctx)
+    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
+    for dname in named:
+        if dname not in used:
+            raise ctx.error(
+                _join("distributions", dname),
+                f"defined but not used by spec (it has no D[{dname}])",
+            )
+
+    events = frozenset(bound)
+    props = frozenset(game.proposition_names)
+    clashes = sorted(events & props)
+    if clashes:
+        where = _join(table, clashes[0]) if table else "spec"
+        raise ctx.error(
+            where,
+            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
+        )
+    unknown = sorted(atoms(spec) - events - props)
+    if unknown:
+        known = ", ".join(sorted(props)) or "none"
+        evs = ", ".join(sorted(events)) or "none"
+        raise ctx.error(
+            "spec",
+            f"proposition {unknown[0]!r} is neither a {noun} nor an event "
+            f"({noun}s: {known}; events: {evs})",
+        )
+    game_events = frozenset(getattr(game, "event_names", frozenset()))
+    lawless = sorted(game_events - events)
+    if lawless:
+        raise ctx.error(
+            "spec",
+            f"the game reacts to event {lawless[0]!r} but the spec gives it no distribution "
+            f"(add D[mu] {lawless[0]} to the spec)",
+        )
+    return bound
+
+
 def _load(text: str, source: str, path: Path | None) -> Model:
     ctx = _Context(source)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise ctx.error("", "TOML nested too deeply to read") from None
 
     present = [k for k in _GAME_KINDS if k.table in doc]
     if len(present) > 1:
@@ -447,28 +619,8 @@ def _load(text: str, source: str, path: Path | None) -> Model:
             ) from exc
 
     spec, report = _parse_spec(spec_text, ctx)
-    bound = _bind_events(report.events, named, ctx)
-    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
-    for dname in named:
-        if dname not in used:
-            raise ctx.error(
-                _join("distributions", dname),
-                f"defined but not used by spec (it has no D[{dname}])",
-            )
-
-    events = frozenset(bound)
-    props = game.proposition_names
-    noun = kind.proposition_noun
-    clashes = sorted(events & props)
-    if clashes:
-        where = _join(kind.extra_tables[0], clashes[0]) if kind.extra_tables else kind.table
-        raise ctx.error(
-            where,
-            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
-        )
-    unknown = sorted(atoms(spec) - events - props)
-    if unknown:
-        raise ctx.error("spec", f"proposition {unknown[0]!r} is neither a {noun} nor an event")
+    where = kind.extra_tables[0] if kind.extra_tables else kind.table
+    bound = _bind_spec(spec, report, named, game, kind.proposition_noun, where, ctx)
 
     return Model(
         name=name,

@@ -152,11 +152,11 @@ def test_slowly_draining_component_converges() -> None:
 
 
 def test_geometric_one_in_a_million_event_converges() -> None:
-    from mitld_lp import GridWorld, synthesize
+    from mitld_lp import GridWorld, Model, synthesize
 
     world = GridWorld.make(3, 3, start=(0, 0), slip=0.1, regions={"A": [(1, 2)]})
     spec = "D[geometric(0.000001)] e & F(e & F[0,3] A)"
-    result = synthesize(world, spec, method="vi")
+    result = synthesize(Model.from_game(world, spec), method="vi")
     mdp = result.mdp
     r = interval_iteration(mdp, mdp.target, max_iterations=100_000, progress=False)
     assert r.status == Status.OPTIMAL, r.message
