@@ -30,16 +30,12 @@ from typing import Any
 import numpy as np
 from _common import markdown_table, out_dir, parser, shown, text_table, write_text
 
-from mitld_lp import GridWorld
-from mitld_lp.automata.sta import make_sta
-from mitld_lp.automata.translate import to_dta
-from mitld_lp.logic.parser import parse
+from mitld_lp import GridWorld, Model
 from mitld_lp.mdp import MDP
-from mitld_lp.model import bind_distributions
-from mitld_lp.product import product
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import reduce
+from mitld_lp.synthesis import build_product
 from mitld_lp.testing import random_mdp
 
 SPEC = ("(D[geometric(0.8)] b1 & F(b1 & F[0,3] A)) | "
@@ -50,9 +46,9 @@ ROUTES = ("topo", "topo-cvx", "mono", "highs", "ii", "ii-flat")
 def bus_mdp(n: int) -> MDP:
     world = GridWorld.make(n, n, start=(0, 0), slip=0.1,
                            regions={"A": [(1, 2)], "B": [(3, 0)]})
-    spec = parse(SPEC)
-    sta = make_sta(to_dta(spec), bind_distributions(spec), 0.01)
-    return product(world, sta, progress=False)
+    model = Model.from_game(world, SPEC)
+    return build_product(model.game, model.spec, model.distributions,
+                         epsilon=model.epsilon, progress=False).mdp
 
 
 def undecided(mdp: MDP) -> MDP:

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from conftest import HAND, HAND_VALUES, build_mdp
 
 from mitld_lp.mdp import MDP
+from mitld_lp.model import Model
 from mitld_lp.solvers import (
     LPResult,
     Status,
@@ -336,20 +337,21 @@ def test_time_limit_is_a_status() -> None:
 # ------------------------------------------------------------------------------------
 
 
-def _inaccurate_case() -> tuple[object, str, dict[str, object]]:
+def _inaccurate_case() -> Model:
+    """Issue 12's 71-state product on which Clarabel returned 'inaccurate'."""
     from mitld_lp import GridWorld
     from mitld_lp.distributions import pmf
 
     world = GridWorld.make(2, 3, start=(1, 1), slip=0.2, regions={"A": [(0, 1)]})
     spec = "(D[exponential(0.7)] e2) & ((D[mu1] e1) & (F[3,5] (!A)))"
-    return world, spec, {"mu1": pmf([0, 0.75, 0, 0, 0.25])}
+    return Model.from_game(world, spec, distributions={"mu1": pmf([0, 0.75, 0, 0, 0.25])})
 
 
 def test_inaccurate_clarabel_solve_is_retried() -> None:
-    from mitld_lp import Model, synthesize
+    from mitld_lp import synthesize
 
-    world, spec, laws = _inaccurate_case()
-    mdp = synthesize(Model.from_game(world, spec, distributions=laws), method="vi").mdp
+    model = _inaccurate_case()
+    mdp = synthesize(model, method="vi").mdp
     highs = solve_lp(mdp, mdp.target, solver="HIGHS", decompose=False)
     assert highs.status == Status.OPTIMAL and highs.value == pytest.approx(1.0, abs=1e-9)
     for backend in ("cvxpy", "direct"):
@@ -357,7 +359,7 @@ def test_inaccurate_clarabel_solve_is_retried() -> None:
         assert r.status == Status.OPTIMAL, r.message
         assert "retried" in r.message
         assert r.value == pytest.approx(1.0, abs=1e-8)
-    result = synthesize(Model.from_game(world, spec, distributions=laws))
+    result = synthesize(model)
     assert result.certified and result.lower == pytest.approx(1.0, abs=1e-9)
 
 
@@ -365,11 +367,10 @@ def test_unfixable_lp_is_replaced_by_the_iteration_policy(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     import mitld_lp.solvers.lp as lp_module
-    from mitld_lp import Model, synthesize
+    from mitld_lp import synthesize
 
     monkeypatch.setattr(lp_module, "_retries", lambda settings: iter(()))
-    world, spec, laws = _inaccurate_case()
-    result = synthesize(Model.from_game(world, spec, distributions=laws), decompose=False)
+    result = synthesize(_inaccurate_case(), decompose=False)
     assert result.lower_model.lp is not None
     assert result.lower_model.lp.status == Status.INACCURATE
     assert result.certified and result.status == Status.OPTIMAL

@@ -42,6 +42,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
 from tqdm.auto import tqdm
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
@@ -60,6 +61,7 @@ from mitld_lp.solvers.topological import (
     improve_policy,
     solve_chain,
     solve_single_states,
+    state_graph,
 )
 
 __all__ = ["interval_iteration", "evaluate_policy"]
@@ -69,7 +71,7 @@ logger = logging.getLogger(__name__)
 _PROGRESS_MIN_STATES = 10_000
 """Below this many reduced states no progress bar is shown (the run is instant)."""
 
-_SWEEPS_BEFORE_POLICY = 500
+_SWEEPS_BEFORE_POLICY = 100
 """Sweeps of a component before it is jumped by policy evaluation (module docs)."""
 
 
@@ -159,11 +161,21 @@ def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
 
 
 def _topological(q: Quotient, lo: np.ndarray, hi: np.ndarray, tol: float,
-                 budget: _Budget, bar: tqdm) -> None:
-    """Fill ``lo`` and ``hi`` level by level (module docs); stops early out of budget."""
+                 budget: _Budget, bar: tqdm, *, from_initial: bool) -> None:
+    """Fill ``lo`` and ``hi`` level by level (module docs); stops early out of budget.
+    ``from_initial``: only the states the initial state can reach (their successors are
+    reachable too, so nothing they need is skipped); the others keep ``[0, 1]``."""
     blk = blocks(q)
+    wanted = None
+    if from_initial:
+        order = csgraph.breadth_first_order(state_graph(q), q.initial, directed=True,
+                                            return_predecessors=False)
+        wanted = np.zeros(q.n_states, dtype=bool)
+        wanted[np.asarray(order)] = True
     for level in range(blk.n_levels):
         states = blk.states_at(level)
+        if wanted is not None:
+            states = states[wanted[states]]
         single = blk.single(states)
         solve_single_states(q, blk, states[single], lo)
         solve_single_states(q, blk, states[single], hi)
@@ -197,12 +209,13 @@ def interval_iteration(
     ``topological=False`` sweeps the whole quotient at once and stops when the gap
     ``upper - lower`` is below ``tol`` at the initial state (``gap="initial"``, the
     default) or at every state (``gap="max"``).  ``topological=True`` (module docs)
-    brings every component below ``tol`` in turn, so the gap is below ``tol``
-    everywhere.  Either way the bounds are valid everywhere, and if the initial state is
-    decided by the graph analysis (target or prob-0) no iteration is needed with
-    ``gap="initial"``.  ``max_iterations`` counts sweeps (over all components);
-    reaching it gives status ``MAX_ITERATIONS``, reaching ``time_limit`` seconds
-    ``TIME_LIMIT``, both with the bracket so far (``[0, 1]`` where nothing was done).
+    brings every component below ``tol`` in turn: with ``gap="initial"`` every one the
+    initial state can reach, with ``gap="max"`` all of them.  Either way the bounds are
+    valid everywhere, and if the initial state is decided by the graph analysis (target
+    or prob-0) no iteration is needed with ``gap="initial"``.  ``max_iterations``
+    counts sweeps (over all components); reaching it gives status ``MAX_ITERATIONS``,
+    reaching ``time_limit`` seconds ``TIME_LIMIT``, both with the bracket so far
+    (``[0, 1]`` where nothing was done).
     ``quotient``: ``reduce(mdp, target)`` if the caller already has it.
     """
     start = time.perf_counter()
@@ -219,7 +232,7 @@ def interval_iteration(
     try:
         if n and not decided:
             if topological:
-                _topological(q, lo, hi, tol, budget, bar)
+                _topological(q, lo, hi, tol, budget, bar, from_initial=gap == "initial")
             else:
                 _sweeps(Block.of(q, np.arange(n)), lo, hi, tol, budget, gap, q.initial, bar)
     finally:
