@@ -352,8 +352,9 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=("lp", "vi"), default="lp")
     p.add_argument("--solver", type=_solver_name, default="CLARABEL",
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
-    p.add_argument("--backend", choices=("cvxpy", "direct"), default="cvxpy",
-                   help="direct: call Clarabel on the sparse matrices, no cvxpy")
+    p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
+                   help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
+                        "(any solver); auto (default): direct for Clarabel, else cvxpy")
     p.add_argument("--no-decompose", action="store_true",
                    help="solve one monolithic LP instead of one LP per strongly connected "
                         "block in topological order")
@@ -368,6 +369,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import synthesize
 
+    if args.backend == "direct" and args.solver != "CLARABEL":
+        raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
+                         "use --backend cvxpy (or auto) for other solvers")
     policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
                                                (".csv", ".json"))
     model = load_model(args.model)

@@ -370,7 +370,7 @@ def synthesize(
     epsilon: float | None = None,
     method: Method = "lp",
     solver: str = "CLARABEL",
-    backend: str = "cvxpy",
+    backend: str = "auto",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
@@ -385,8 +385,9 @@ def synthesize(
 
     ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
     made from any game with :meth:`Model.from_game`; ``epsilon`` overrides its
-    truncation budget.  ``method``: ``"lp"`` (occupancy LP through cvxpy, or
-    ``backend="direct"`` Clarabel) or ``"vi"`` (interval iteration alone).  Interval
+    truncation budget.  ``method``: ``"lp"`` (occupancy LP through Clarabel, called
+    directly, or through cvxpy with ``backend="cvxpy"``, which also takes any other
+    ``solver`` cvxpy has) or ``"vi"`` (interval iteration alone).  Interval
     iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
     per event instead of ``epsilon``.
     ``decompose``: the LP block by block in topological order (default) or as one LP.

@@ -80,7 +80,7 @@ __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 
 logger = logging.getLogger(__name__)
 
-Backend = Literal["cvxpy", "direct"]
+Backend = Literal["auto", "cvxpy", "direct"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -589,7 +589,7 @@ def solve_lp(
     *,
     quotient: Quotient | None = None,
     solver: str = "CLARABEL",
-    backend: Backend = "cvxpy",
+    backend: Backend = "auto",
     tol: float = 1e-9,
     everywhere: bool = False,
     decompose: bool = True,
@@ -608,7 +608,9 @@ def solve_lp(
             (``"CLARABEL"``, ``"HIGHS"``, ``"SCS"``, ...); with ``"direct"`` only
             ``"CLARABEL"``.
         backend: ``"cvxpy"`` builds a cvxpy problem; ``"direct"`` calls
-            ``clarabel.DefaultSolver`` on the sparse matrices (faster on large models).
+            ``clarabel.DefaultSolver`` on the sparse matrices (the same solver without
+            cvxpy's canonicalisation and its ~1 s import); ``"auto"`` (default) is
+            ``"direct"`` for Clarabel and ``"cvxpy"`` for any other solver.
         tol: accuracy passed to the solver (gap and feasibility tolerances).
         everywhere: start weight 1 on every reduced state instead of only the initial
             one, so ``values`` and the policy are exact / optimal in every state.
@@ -623,6 +625,8 @@ def solve_lp(
     as a :class:`Status` with the solver's message; nothing is raised for it.
     """
     start = time.perf_counter()
+    if backend == "auto":
+        backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
     lp = occupancy_lp(mdp, target, everywhere=everywhere, quotient=quotient)
     q = lp.quotient
     shape = (q.n_states, q.n_choices)
