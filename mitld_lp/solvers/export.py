@@ -112,6 +112,21 @@ def _drn_action(name: str) -> str:
     return _TOKEN.sub("_", name.strip()) or "_"
 
 
+def _valuation(record: object) -> str:
+    """A state's valuation for the DRN comment line: ``var=value`` joined by `` & ``."""
+    game = getattr(record, "game", None)
+    if game is None or not hasattr(record, "pending"):
+        return str(record) if isinstance(record, str) else f"state={_compact(record)}"
+    pending = ",".join(sorted(record.pending))  # type: ignore[attr-defined]
+    return (f"game={_compact(game)} & q={record.automaton} & "  # type: ignore[attr-defined]
+            f"pending={{{pending}}} & clock={record.clock}")  # type: ignore[attr-defined]
+
+
+def _compact(value: object) -> str:
+    """``value`` on one line without spaces (a DRN line is split on whitespace)."""
+    return "".join(str(value).split())
+
+
 def write_drn(
     mdp: MDP,
     target: np.ndarray,
@@ -119,15 +134,22 @@ def write_drn(
     *,
     overwrite: bool = False,
     truncated_label: bool = True,
+    valuations: bool = True,
 ) -> Path:
     """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``).
 
     State ``i`` of the file is state ``i`` of ``mdp``; its choices appear in row order
     with the action names of ``mdp.action_names`` (whitespace replaced by ``_``) or
-    ``absorb``.  Labels: ``init``; ``target`` on the states of ``target`` (so
+    ``absorb`` as choice labels (Storm's DRN parser keeps them with
+    ``build_choice_labeling``, so a scheduler Storm computes maps back action by
+    action).  Labels: ``init``; ``target`` on the states of ``target`` (so
     ``Pmax=? [F "target"]`` in Storm is the quantity :func:`solve_lp` computes);
-    ``sink``; ``truncated`` (unless ``truncated_label=False``).  Probabilities are
-    written with Python's shortest round-trip ``repr``.
+    ``sink``; ``truncated`` (unless ``truncated_label=False``).  With ``valuations``,
+    each ``state`` line is followed by the state's valuation as Storm's own exporter
+    writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
+    state, the automaton state, the events still pending, the clock), or
+    ``//[target]`` / ``//[sink]`` / ``//[truncated]`` for the absorbing states.
+    Probabilities are written with Python's shortest round-trip ``repr``.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
@@ -170,12 +192,15 @@ def write_drn(
             groups = row_groups[lo : hi + 1].tolist()
             acts = actions[c_lo:c_hi].tolist()
             lines: list[str] = []
+            records = mdp.states[lo:hi] if valuations else ()
             for s in range(lo, hi):
                 labels = (["init"] if s == mdp.initial else []) + [
                     name for name, mask in marks if mask[s]
                 ]
                 head = f"state {s}"
                 lines.append(f"{head} {' '.join(labels)}" if labels else head)
+                if valuations:
+                    lines.append(f"//[{_valuation(records[s - lo])}]")
                 for c in range(groups[s - lo], groups[s - lo + 1]):
                     a = acts[c - c_lo]
                     lines.append(f"\taction {names[a] if a != ABSORB else 'absorb'}")
