@@ -253,14 +253,12 @@ def _cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
     from mitld_lp.automata.translate import to_dta
 
+    path = args.dot and _output_path(args.dot, args.force, "--dot", (".dot", ".gv"))
     formula = parse(args.formula)
     dta = to_dta(check(formula))
-    if args.dot:
-        path = Path(args.dot)
-        if path.exists() and not args.force:
-            raise FileExistsError(f"{path}: exists; pass --force to overwrite it")
-        path.write_text(dta.to_dot())
-        print(f"wrote {path} ({_count(dta.n_states, 'state')})")
+    if path:
+        _write(path, lambda p: p.write_text(dta.to_dot()))
+        _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
         return EXIT_OK
     shown = [dta.location(i) for i in range(dta.n_states)]
     locations = {loc.obligation for loc in shown}

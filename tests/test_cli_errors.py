@@ -70,6 +70,17 @@ def test_bad_output_paths_are_refused_before_any_work(tmp_path, capsys, where, s
     assert says in line
 
 
+def test_dta_dot_paths_are_checked_like_the_others(tmp_path, capsys):
+    assert "does not exist" in _one_error_line(
+        capsys, 2, ["dta", "F[0,1] p", "--dot", "/nonexistent/x.dot"])
+    assert "suffix must be one of .dot, .gv" in _one_error_line(
+        capsys, 2, ["dta", "F[0,1] p", "--dot", str(tmp_path / "x.png")])
+    full = tmp_path / "full.dot"
+    full.symlink_to("/dev/full")
+    assert "cannot write" in _one_error_line(
+        capsys, 2, ["dta", "F[0,1] p", "--dot", str(full), "--force"])
+
+
 def test_lp_suffix_and_same_file_are_refused(tmp_path, capsys):
     assert "suffix must be one of .mps, .lp" in _one_error_line(
         capsys, 2, ["export", BUS, "--lp", str(tmp_path / "out.txt")])
