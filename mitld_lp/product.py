@@ -7,13 +7,21 @@ probability ``P(s' | s, a, E)``; the automaton reads the label ``L(s') = props(s
 So the product's transitions are::
 
     P((s, q, Y, c) --a--> (s', q', Y \\ E, c'))  =  p_STA(E | Y, c) * P(s' | s, a, E)
-    with q' = delta(q, props(s') | E).
+    with q' = delta(q, props(s') | E) and c' = STA.advance(Y \\ E, c).
 
 At step 0 no event has happened: the initial state is ``(s0, delta(q0, props(s0)), U, 0)``.
 Accepting automaton states collapse into one absorbing ``target`` state, rejecting ones
 into ``sink``, and outcomes that cross a truncation point into ``truncated``; the three
 are kept apart in the MDP's masks, so one build yields both the lower model (truncated
-loses) and the upper model (truncated wins).
+loses) and the upper model (truncated wins).  They are the :class:`Absorbing` members.
+
+The construction (:func:`product`) numbers every factor with integers -- game states,
+situations ``(Y, c)``, automaton states -- asks each factor once per distinct question
+(the game per (state, action, events), the STA per situation, the automaton per (state,
+letter)) and joins the answers for a whole batch of product states at a time in numpy.
+A product state is the integer ``(g * n_q + q) * n_sit + sid``; ``MDP.states`` makes its
+record (:class:`ProductState`) when asked.  Budgets (:func:`estimate_size`, states,
+memory) are checked before the work that would exceed them.
 """
 
 from __future__ import annotations
@@ -826,6 +834,21 @@ class ProductStates(Sequence[Hashable]):
     def __repr__(self) -> str:
         return f"ProductStates(<{len(self)} states>)"
 
+    def distinct_factors(self) -> tuple[int, int, int, int, int]:
+        """Ordinary states, and the distinct game states, automaton states, pending sets
+        and clock values among them."""
+        keys = self._keys[self._keys >= 0]
+        rest, sid = np.divmod(keys, self._n_sit)
+        g, q = np.divmod(rest, self._n_q)
+        sits = [self._situations[i] for i in np.unique(sid).tolist()]
+        return (
+            int(keys.size),
+            int(np.unique(g).size),
+            int(np.unique(q).size),
+            len({p for p, _ in sits}),
+            len({c for _, c in sits}),
+        )
+
     def position(self, state: Hashable) -> int | None:
         """The index of the state whose record is ``state``, None if there is none."""
         if isinstance(state, Absorbing):
@@ -853,18 +876,30 @@ class ProductStates(Sequence[Hashable]):
 
 
 def component_counts(mdp: MDP) -> Mapping[str, int]:
-    """Sizes for people: states by kind, distinct automaton states and clock values."""
-    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    """Sizes for people: states by kind, distinct game states, automaton states, pending
+    sets and clock values among the ordinary states."""
+    states = mdp.states
+    if isinstance(states, ProductStates):  # from the integer codes, no records made
+        distinct = states.distinct_factors()
+    else:
+        ordinary = [s for s in states if isinstance(s, ProductState)]
+        distinct = (
+            len(ordinary),
+            len({s.game for s in ordinary}),
+            len({s.automaton for s in ordinary}),
+            len({s.pending for s in ordinary}),
+            len({s.clock for s in ordinary}),
+        )
     return {
         "states": mdp.n_states,
         "choices": mdp.n_choices,
         "transitions": mdp.n_transitions,
-        "ordinary_states": len(ordinary),
+        "ordinary_states": distinct[0],
         "target_states": int(mdp.target.sum()),
         "sink_states": int(mdp.sink.sum()),
         "truncated_states": int(mdp.truncated.sum()),
-        "game_states": len({s.game for s in ordinary}),
-        "automaton_states": len({s.automaton for s in ordinary}),
-        "event_situations": len({s.pending for s in ordinary}),
-        "clock_values": len({s.clock for s in ordinary}),
+        "game_states": distinct[1],
+        "automaton_states": distinct[2],
+        "event_situations": distinct[3],
+        "clock_values": distinct[4],
     }

@@ -640,3 +640,18 @@ def test_default_memory_budget_is_half_the_machine():
 
     ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     assert default_max_memory() == ram // 2
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in MODELS.glob("*.toml")))
+def test_component_counts_from_codes_equal_the_counts_over_records(name):
+    from dataclasses import replace
+
+    from mitld_lp.product import component_counts
+
+    m = load_model(MODELS / name)
+    mdp = product(m.game, make_sta(to_dta(m.spec), m.distributions, m.epsilon))
+    by_records = component_counts(replace(mdp, states=tuple(mdp.states)))
+    assert component_counts(mdp) == by_records
+    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    assert by_records["clock_values"] == len({s.clock for s in ordinary})
+    assert by_records["ordinary_states"] + 3 >= mdp.n_states
