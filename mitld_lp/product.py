@@ -94,6 +94,7 @@ _CODE = {Absorbing.TARGET: -1, Absorbing.SINK: -2, Absorbing.TRUNCATED: -3}
 _ABSORBING = {code: a for a, code in _CODE.items()}
 _KIND = {-1: 1, -2: 2, -3: 3}  # code -> the MDP's mask (1 target, 2 sink, 3 truncated)
 _BATCH_ENTRIES = 1 << 18  # transitions (before merging) per batch of expanded states
+_MAX_INDEX = 2**31 - 1  # states: the matrix's column indices are int32
 
 
 class _Grow:
@@ -564,6 +565,11 @@ class _Budget:
 
     def check(self, states: int) -> None:
         """Raise :class:`ProductTooLarge` if ``states`` states would exceed a budget."""
+        if states > _MAX_INDEX:  # the matrix's column indices are int32
+            raise ProductTooLarge(
+                f"the product has more than {_MAX_INDEX:,} states ({self.estimate}), more "
+                "than an MDP can index; loosen epsilon or shrink the model"
+            )
         if states > self.max_states:
             raise ProductTooLarge(
                 f"the product has more than {self.max_states:,} reachable states "
@@ -600,19 +606,17 @@ class _Found:
     def intern(self, keys: np.ndarray) -> np.ndarray:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
         The budget is checked before the new states are stored."""
-        ids = self.index.find(keys)
-        miss = ids < 0
-        if miss.any():
-            uniq, first, inverse = np.unique(keys[miss], return_index=True, return_inverse=True)
+        uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        ids = self.index.find(uniq)
+        new = np.flatnonzero(ids < 0)
+        if new.size:
             n = self.keys.size
-            self.budget.check(n + uniq.size)
-            order = np.argsort(first, kind="stable")
-            new_ids = np.empty(uniq.size, dtype=np.int64)
-            new_ids[order] = np.arange(n, n + uniq.size)
-            self.index.insert(uniq, new_ids)
-            self.keys.extend(uniq[order])
-            ids[miss] = new_ids[inverse]
-        return ids
+            self.budget.check(n + new.size)
+            new = new[np.argsort(first[new], kind="stable")]
+            ids[new] = np.arange(n, n + new.size)
+            self.index.insert(uniq[new], ids[new])
+            self.keys.extend(uniq[new])
+        return ids[inverse]
 
 
 def _expand(
