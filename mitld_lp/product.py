@@ -120,47 +120,60 @@ class _Grow:
 
 
 _MISSING = np.iinfo(np.int64).min
-_DENSE_LIMIT = 1 << 24  # key spaces up to this size are memoised in a plain array
+_DENSE_LIMIT = 1 << 22  # keys below this are memoised in a plain array (32 MB at most)
 
 
 class _Memo:
     """A memo ``key -> int`` for arrays of non-negative keys, filled on demand.
 
-    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  A key space
-    of at most ``_DENSE_LIMIT`` (``space``, or grown with the keys) is a plain array
-    (one gather per call); a larger one a dict asked once per distinct key of a call.
+    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  While the
+    keys stay below ``_DENSE_LIMIT`` the memo is a plain array (one gather per call);
+    beyond, a hash index (:class:`_Index`), so that sparse keys cost no more memory than
+    the entries stored.
     """
 
-    def __init__(self, compute: Any, space: int | None) -> None:
+    def __init__(self, compute: Any, space: int = 0) -> None:
         self.compute = compute
-        self.dense = space is not None and space <= _DENSE_LIMIT
-        self.table = np.full(max(space or 0, 64) if self.dense else 0, _MISSING)
-        self.map: dict[int, int] = {}
+        self.table: np.ndarray | None = None
+        self.index: _Index | None = None
+        if space <= _DENSE_LIMIT:
+            self.table = np.full(max(space, min(64, _DENSE_LIMIT)), _MISSING)
+        else:
+            self.index = _Index()
 
-    def __call__(self, keys: np.ndarray) -> np.ndarray:
-        if not self.dense:
-            uniq, inverse = np.unique(keys, return_inverse=True)
-            get = self.map.get
-            vals = np.fromiter(
-                (get(k, _MISSING) for k in uniq.tolist()), dtype=np.int64, count=uniq.size
-            )
-            miss = vals == _MISSING
-            if miss.any():
-                vals[miss] = self.compute(uniq[miss])
-                self.map.update(zip(uniq[miss].tolist(), vals[miss].tolist(), strict=True))
-            return vals[inverse]
-        top = int(keys.max(initial=-1)) + 1
-        if top > self.table.size:
+    def _grow(self, top: int) -> None:
+        assert self.table is not None
+        if top <= _DENSE_LIMIT:
             bigger = np.full(max(top, 2 * self.table.size), _MISSING)
             bigger[: self.table.size] = self.table
             self.table = bigger
-        vals = self.table[keys]
+        else:  # too sparse for an array: move the entries to a hash index
+            known = np.flatnonzero(self.table != _MISSING)
+            self.index = _Index()
+            self.index.insert(known, self.table[known])
+            self.table = None
+
+    def __call__(self, keys: np.ndarray) -> np.ndarray:
+        if self.table is not None:
+            top = int(keys.max(initial=-1)) + 1
+            if top > self.table.size:
+                self._grow(top)
+        if self.table is not None:
+            vals = self.table[keys]
+            miss = vals == _MISSING
+            if miss.any():
+                new = np.unique(keys[miss])
+                self.table[new] = self.compute(new)
+                vals[miss] = self.table[keys[miss]]
+            return vals
+        assert self.index is not None
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        vals = self.index.find(uniq, absent=_MISSING)
         miss = vals == _MISSING
         if miss.any():
-            new = np.unique(keys[miss])
-            self.table[new] = self.compute(new)
-            vals[miss] = self.table[keys[miss]]
-        return vals
+            vals[miss] = self.compute(uniq[miss])
+            self.index.insert(uniq[miss], vals[miss])
+        return vals[inverse]
 
 
 class _Index:
@@ -181,12 +194,12 @@ class _Index:
         )
         return (h >> np.uint64(64 - self.bits)).view(np.int64)
 
-    def find(self, keys: np.ndarray) -> np.ndarray:
-        """The id of each key, -1 where absent."""
+    def find(self, keys: np.ndarray, absent: int = -1) -> np.ndarray:
+        """The id of each key, ``absent`` where absent."""
         at = self._home(keys)
         found = self.keys[at]
         hit = found == keys
-        out = np.where(hit, self.ids[at], -1).astype(np.int64)
+        out = np.where(hit, self.ids[at], np.int64(absent)).astype(np.int64)
         todo = np.flatnonzero(~hit & (found != self._EMPTY))
         mask = (1 << self.bits) - 1
         at = at[todo]
@@ -273,7 +286,7 @@ class _Layers:
         self.slot_owner: list[int] = []
         self.slot_aid = _Grow(np.int64)
         self.action_id: dict[str, int] = {}
-        self._rows = _Memo(self._new_rows, 0 if n_occ <= 64 else None)
+        self._rows = _Memo(self._new_rows)
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
         self.row_start, self.row_len = _Grow(np.int64), _Grow(np.int64)
         self.row_succ, self.row_prob = _Grow(np.int64), _Grow(np.float64)
@@ -359,7 +372,7 @@ class _Layers:
     def rows(self, slots: np.ndarray, occ: np.ndarray) -> np.ndarray:
         """The successor row of each (action slot, event outcome)."""
         if self.ignores_events:  # one row per slot, asked with no events
-            return self._rows(slots * self.n_occ)
+            return self._rows(slots)
         return self._rows(slots * self.n_occ + occ)
 
     def _new_rows(self, keys: np.ndarray) -> np.ndarray:
@@ -372,7 +385,7 @@ class _Layers:
         owner, names, occ_sets = self.slot_owner, self.slot_action, self.occ_sets
         out = np.empty(keys.size, dtype=np.int64)
         for i, key in enumerate(keys.tolist()):
-            slot, o = divmod(key, self.n_occ)
+            slot, o = (key, 0) if self.ignores_events else divmod(key, self.n_occ)
             succ = self.game.successors(self.game_states[owner[slot]], names[slot], occ_sets[o])
             hit = same.get(id(succ))
             if hit is None or hit[0] is not succ:

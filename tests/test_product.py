@@ -655,3 +655,19 @@ def test_component_counts_from_codes_equal_the_counts_over_records(name):
     ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
     assert by_records["clock_values"] == len({s.clock for s in ordinary})
     assert by_records["ordinary_states"] + 3 >= mdp.n_states
+
+
+@pytest.mark.parametrize("seed", [1, 5])
+def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, monkeypatch):
+    """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("mitld_lp.product"), "_DENSE_LIMIT", 8)
+    rng = np.random.default_rng(seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    sta = make_sta(to_dta(parse(text)), dists, 0.01)
+    assert_same_mdp(product(game, sta), _reference()(game, sta))
+    m = load_model(MODELS / "red_light.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
