@@ -851,6 +851,16 @@ class ProductStates(Sequence[Hashable]):
     def __repr__(self) -> str:
         return f"ProductStates(<{len(self)} states>)"
 
+    def __contains__(self, state: object) -> bool:
+        return self.position(state) is not None
+
+    def index(self, state: Any, start: int = 0, stop: int | None = None) -> int:
+        """The index of ``state`` (its record) in ``[start, stop)``; ValueError if none."""
+        i = self.position(state)
+        if i is None or i < start or (stop is not None and i >= stop):
+            raise ValueError(f"{state!r} is not a state of this product")
+        return i
+
     def distinct_factors(self) -> tuple[int, int, int, int, int]:
         """Ordinary states, and the distinct game states, automaton states, pending sets
         and clock values among them."""
@@ -866,7 +876,7 @@ class ProductStates(Sequence[Hashable]):
             len({c for _, c in sits}),
         )
 
-    def position(self, state: Hashable) -> int | None:
+    def position(self, state: object) -> int | None:
         """The index of the state whose record is ``state``, None if there is none."""
         if isinstance(state, Absorbing):
             key = _CODE[state]

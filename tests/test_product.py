@@ -568,8 +568,11 @@ def test_array_build_equals_the_state_at_a_time_build_on_random_games(seed):
     assert_same_mdp(mdp, _reference()(game, sta))
     # every record maps back to its index
     for i, s in enumerate(mdp.states):
-        assert mdp.states.position(s) == i
-    assert mdp.states.position(ProductState(999, 0, frozenset(), 0)) is None
+        assert mdp.states.position(s) == i and mdp.states.index(s) == i and s in mdp.states
+    stranger = ProductState(999, 0, frozenset(), 0)
+    assert mdp.states.position(stranger) is None and stranger not in mdp.states
+    with pytest.raises(ValueError, match="not a state"):
+        mdp.states.index(stranger)
 
 
 # --------------------------------------------------------------------------- budgets
