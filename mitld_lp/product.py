@@ -268,13 +268,7 @@ class _Layers:
             )
         n_occ = 1 << len(self.events)
         self.n_occ = n_occ
-        self.occ_sets = [
-            frozenset(e for i, e in enumerate(self.events) if m >> i & 1) for m in range(n_occ)
-        ]
-        self.occ_bits = np.array(
-            [sum(1 << self.atoms[e] for e in o if e in self.atoms) for o in self.occ_sets],
-            dtype=np.int64,
-        )
+        self._occ_sets: dict[int, frozenset[str]] = {}
         # game
         self.gid: dict[Hashable, int] = {}
         self.game_states: list[Hashable] = []
@@ -316,6 +310,23 @@ class _Layers:
         rest, sid = np.divmod(keys, self.n_sit)
         g, q = np.divmod(rest, self.n_q)
         return g, q, sid
+
+    def occ_set(self, mask: int) -> frozenset[str]:
+        """The events of an outcome's bit mask (over the sorted events)."""
+        hit = self._occ_sets.get(mask)
+        if hit is None:
+            hit = self._occ_sets[mask] = frozenset(
+                e for i, e in enumerate(self.events) if mask >> i & 1
+            )
+        return hit
+
+    def occ_letter(self, masks: np.ndarray) -> np.ndarray:
+        """The events of outcome bit masks as bit masks over the automaton's atoms."""
+        out = np.zeros(masks.size, dtype=np.int64)
+        for i, e in enumerate(self.events):
+            if e in self.atoms:
+                out |= ((masks >> i) & 1) << self.atoms[e]
+        return out
 
     # ---------------------------------------------------------------- game
     def game_state(self, s: Hashable) -> int:
@@ -382,11 +393,11 @@ class _Layers:
         new_rows: list[tuple[tuple[Any, float], ...]] = []
         same = self.row_by_object
         base = self.row_start.size
-        owner, names, occ_sets = self.slot_owner, self.slot_action, self.occ_sets
+        owner, names, occ_set = self.slot_owner, self.slot_action, self.occ_set
         out = np.empty(keys.size, dtype=np.int64)
         for i, key in enumerate(keys.tolist()):
             slot, o = (key, 0) if self.ignores_events else divmod(key, self.n_occ)
-            succ = self.game.successors(self.game_states[owner[slot]], names[slot], occ_sets[o])
+            succ = self.game.successors(self.game_states[owner[slot]], names[slot], occ_set(o))
             hit = same.get(id(succ))
             if hit is None or hit[0] is not succ:
                 hit = same[id(succ)] = (succ, base + len(new_rows))
@@ -668,7 +679,7 @@ def _expand(
     g2 = f.row_succ.view[e_at[moving]]
     e_pm = e_pair[moving]
     f.flush()
-    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_bits[p_occ[e_pm]])
+    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_letter(p_occ[e_pm]))
     e_key[moving] = np.where(q2 < 0, q2, f.key(g2, q2, p_next[e_pm]))
     cols = intern(e_key).astype(np.int32)
     e_choice = p_choice[e_pair]
