@@ -5,8 +5,10 @@ and Poisson, the latter truncated) -- and a task with a deadline (``--deadlines`
 after each event at a region in a different corner.  For each row, in the same run and
 on the same model: the array construction (:func:`mitld_lp.product.product`) and its
 peer, the first state-at-a-time construction (``_reference_product.py``), which must
-give the same MDP.  Printed: reachable states, transitions, seconds and transitions
-per second of each, the speed-up, and the peak memory per transition of the array
+give the same MDP.  Printed: reachable states, transitions, wall and CPU seconds of
+each (the CPU time of this process: on a shared machine the wall time varies with the
+load), transitions per CPU second, the speed-up (wall, and CPU in parentheses), and
+the peak memory per transition of the array
 construction (tracemalloc's peak during a second build, divided by the transitions;
 numpy's buffers are traced).
 
@@ -60,7 +62,9 @@ class Row:
     states: int
     transitions: int
     seconds: float
+    cpu: float
     reference_seconds: float | None
+    reference_cpu: float | None
     bytes_per_transition: float | None
 
 
@@ -75,14 +79,15 @@ def _same(a: MDP, b: MDP) -> bool:
 
 def measure(n: int, deadline: int, epsilon: float, *, reference: bool, memory: bool) -> Row:
     game, sta = world(n), task(deadline, epsilon)
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     mdp = product(game, sta, progress=False)
-    seconds = time.perf_counter() - t
-    ref_seconds = None
+    seconds, cpu = time.perf_counter() - t, time.process_time() - c
+    ref_seconds = ref_cpu = None
     if reference:
-        t = time.perf_counter()
+        game, sta = world(n), task(deadline, epsilon)  # fresh caches: same work to do
+        t, c = time.perf_counter(), time.process_time()
         ref = reference_product(game, sta)
-        ref_seconds = time.perf_counter() - t
+        ref_seconds, ref_cpu = time.perf_counter() - t, time.process_time() - c
         if not _same(mdp, ref):
             raise SystemExit(f"{n}x{n}, deadline {deadline}: the two constructions differ")
         del ref
@@ -94,7 +99,8 @@ def measure(n: int, deadline: int, epsilon: float, *, reference: bool, memory: b
         mdp = product(game, sta, progress=False)
         per = tracemalloc.get_traced_memory()[1] / max(mdp.n_transitions, 1)
         tracemalloc.stop()
-    return Row(n, deadline, mdp.n_states, mdp.n_transitions, seconds, ref_seconds, per)
+    return Row(n, deadline, mdp.n_states, mdp.n_transitions, seconds, cpu, ref_seconds, ref_cpu,
+               per)
 
 
 def main(argv: list[str] | None = None) -> list[Row]:
@@ -113,21 +119,23 @@ def main(argv: list[str] | None = None) -> list[Row]:
         (n, d) for d in args.deadlines for n in args.sizes
     ]
     print(f"{'grid':>7} {'T':>3} {'states':>10} {'transitions':>12} {'seconds':>8} "
-          f"{'trans/s':>11} {'ref s':>8} {'ref trans/s':>11} {'speed-up':>8} {'B/trans':>8}")
+          f"{'cpu s':>7} {'trans/cpu s':>11} {'ref s':>8} {'ref cpu s':>9} "
+          f"{'ref trans/cpu s':>15} {'speed-up (cpu)':>14} {'B/trans':>8}")
     rows = []
     for n, d in rows_wanted:
         r = measure(n, d, args.epsilon, reference=not args.no_reference,
                     memory=not args.no_memory)
         rows.append(r)
-        rate = r.transitions / r.seconds
-        if r.reference_seconds is None:
-            ref = f"{'-':>8} {'-':>11} {'-':>8}"
+        rate = r.transitions / r.cpu
+        if r.reference_seconds is None or r.reference_cpu is None:
+            ref = f"{'-':>8} {'-':>9} {'-':>15} {'-':>14}"
         else:
-            ref = (f"{r.reference_seconds:>8.2f} {r.transitions / r.reference_seconds:>11,.0f} "
-                   f"{r.reference_seconds / r.seconds:>7.1f}x")
+            ref = (f"{r.reference_seconds:>8.2f} {r.reference_cpu:>9.2f} "
+                   f"{r.transitions / r.reference_cpu:>15,.0f} "
+                   f"{r.reference_seconds / r.seconds:>5.1f}x ({r.reference_cpu / r.cpu:.1f}x)")
         per = "-" if r.bytes_per_transition is None else f"{r.bytes_per_transition:.1f}"
         print(f"{n:>3}x{n:<3} {d:>3} {r.states:>10,} {r.transitions:>12,} {r.seconds:>8.2f} "
-              f"{rate:>11,.0f} {ref} {per:>8}", flush=True)
+              f"{r.cpu:>7.2f} {rate:>11,.0f} {ref} {per:>8}", flush=True)
     return rows
 
 

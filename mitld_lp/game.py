@@ -68,7 +68,10 @@ class Game(Protocol[S]):
 
     Optional: a game whose dynamics never depend on the events may say so with a class
     attribute ``ignores_events = True``; the product construction then asks
-    :meth:`successors` once per (state, action) instead of once per event outcome.
+    :meth:`successors` once per (state, action) instead of once per event outcome.  A
+    game that knows how many states it has may give it as ``n_states`` (an int); the
+    product's size is then bounded before it is built
+    (:func:`mitld_lp.product.estimate_size`).
     """
 
     @property

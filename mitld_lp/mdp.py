@@ -19,7 +19,7 @@ Three disjoint absorbing classes are kept apart:
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,7 +56,7 @@ class MDP:
     target: np.ndarray
     sink: np.ndarray
     truncated: np.ndarray
-    states: tuple[Hashable, ...]
+    states: Sequence[Hashable]
 
     @property
     def n_states(self) -> int:

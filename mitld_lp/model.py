@@ -11,6 +11,7 @@ The schema (also in docs/model-files.md)::
     start = [0, 0]                      # required, a free cell
     slip = 0.1                          # optional, in [0, 0.5], default 0
     obstacles = [[2, 2]]                # optional, cells, default none
+    stay = false                        # optional: a "stay" action (no slip), default off
 
     [regions]                           # optional (grid only): name -> non-empty cells
     A = [[1, 2]]

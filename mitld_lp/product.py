@@ -7,13 +7,21 @@ probability ``P(s' | s, a, E)``; the automaton reads the label ``L(s') = props(s
 So the product's transitions are::
 
     P((s, q, Y, c) --a--> (s', q', Y \\ E, c'))  =  p_STA(E | Y, c) * P(s' | s, a, E)
-    with q' = delta(q, props(s') | E).
+    with q' = delta(q, props(s') | E) and c' = STA.advance(Y \\ E, c).
 
 At step 0 no event has happened: the initial state is ``(s0, delta(q0, props(s0)), U, 0)``.
 Accepting automaton states collapse into one absorbing ``target`` state, rejecting ones
 into ``sink``, and outcomes that cross a truncation point into ``truncated``; the three
 are kept apart in the MDP's masks, so one build yields both the lower model (truncated
-loses) and the upper model (truncated wins).
+loses) and the upper model (truncated wins).  They are the :class:`Absorbing` members.
+
+The construction (:func:`product`) numbers every factor with integers -- game states,
+situations ``(Y, c)``, automaton states -- asks each factor once per distinct question
+(the game per (state, action, events), the STA per situation, the automaton per (state,
+letter)) and joins the answers for a whole batch of product states at a time in numpy.
+A product state is the integer ``(g * n_q + q) * n_sit + sid``; ``MDP.states`` makes its
+record (:class:`ProductState`) when asked.  Budgets (:func:`estimate_size`, states,
+memory) are checked before the work that would exceed them.
 """
 
 from __future__ import annotations
@@ -23,12 +31,13 @@ import logging
 import os
 from collections.abc import Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, cast, overload
+from typing import Any, overload
 
 import numpy as np
 import scipy.sparse as sp
 from tqdm.auto import tqdm
 
+from mitld_lp import defaults
 from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
@@ -86,6 +95,7 @@ _CODE = {Absorbing.TARGET: -1, Absorbing.SINK: -2, Absorbing.TRUNCATED: -3}
 _ABSORBING = {code: a for a, code in _CODE.items()}
 _KIND = {-1: 1, -2: 2, -3: 3}  # code -> the MDP's mask (1 target, 2 sink, 3 truncated)
 _BATCH_ENTRIES = 1 << 18  # transitions (before merging) per batch of expanded states
+_MAX_INDEX = 2**31 - 1  # states: the matrix's column indices are int32
 
 
 class _Grow:
@@ -111,47 +121,60 @@ class _Grow:
 
 
 _MISSING = np.iinfo(np.int64).min
-_DENSE_LIMIT = 1 << 24  # key spaces up to this size are memoised in a plain array
+_DENSE_LIMIT = 1 << 22  # keys below this are memoised in a plain array (32 MB at most)
 
 
 class _Memo:
     """A memo ``key -> int`` for arrays of non-negative keys, filled on demand.
 
-    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  A key space
-    of at most ``_DENSE_LIMIT`` (``space``, or grown with the keys) is a plain array
-    (one gather per call); a larger one a dict asked once per distinct key of a call.
+    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  While the
+    keys stay below ``_DENSE_LIMIT`` the memo is a plain array (one gather per call);
+    beyond, a hash index (:class:`_Index`), so that sparse keys cost no more memory than
+    the entries stored.
     """
 
-    def __init__(self, compute: Any, space: int | None) -> None:
+    def __init__(self, compute: Any, space: int = 0) -> None:
         self.compute = compute
-        self.dense = space is not None and space <= _DENSE_LIMIT
-        self.table = np.full(max(space or 0, 64) if self.dense else 0, _MISSING)
-        self.map: dict[int, int] = {}
+        self.table: np.ndarray | None = None
+        self.index: _Index | None = None
+        if space <= _DENSE_LIMIT:
+            self.table = np.full(max(space, min(64, _DENSE_LIMIT)), _MISSING)
+        else:
+            self.index = _Index()
 
-    def __call__(self, keys: np.ndarray) -> np.ndarray:
-        if not self.dense:
-            uniq, inverse = np.unique(keys, return_inverse=True)
-            get = self.map.get
-            vals = np.fromiter(
-                (get(k, _MISSING) for k in uniq.tolist()), dtype=np.int64, count=uniq.size
-            )
-            miss = vals == _MISSING
-            if miss.any():
-                vals[miss] = self.compute(uniq[miss])
-                self.map.update(zip(uniq[miss].tolist(), vals[miss].tolist(), strict=True))
-            return vals[inverse]
-        top = int(keys.max(initial=-1)) + 1
-        if top > self.table.size:
+    def _grow(self, top: int) -> None:
+        assert self.table is not None
+        if top <= _DENSE_LIMIT:
             bigger = np.full(max(top, 2 * self.table.size), _MISSING)
             bigger[: self.table.size] = self.table
             self.table = bigger
-        vals = self.table[keys]
+        else:  # too sparse for an array: move the entries to a hash index
+            known = np.flatnonzero(self.table != _MISSING)
+            self.index = _Index()
+            self.index.insert(known, self.table[known])
+            self.table = None
+
+    def __call__(self, keys: np.ndarray) -> np.ndarray:
+        if self.table is not None:
+            top = int(keys.max(initial=-1)) + 1
+            if top > self.table.size:
+                self._grow(top)
+        if self.table is not None:
+            vals = self.table[keys]
+            miss = vals == _MISSING
+            if miss.any():
+                new = np.unique(keys[miss])
+                self.table[new] = self.compute(new)
+                vals[miss] = self.table[keys[miss]]
+            return vals
+        assert self.index is not None
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        vals = self.index.find(uniq, absent=_MISSING)
         miss = vals == _MISSING
         if miss.any():
-            new = np.unique(keys[miss])
-            self.table[new] = self.compute(new)
-            vals[miss] = self.table[keys[miss]]
-        return vals
+            vals[miss] = self.compute(uniq[miss])
+            self.index.insert(uniq[miss], vals[miss])
+        return vals[inverse]
 
 
 class _Index:
@@ -172,12 +195,12 @@ class _Index:
         )
         return (h >> np.uint64(64 - self.bits)).view(np.int64)
 
-    def find(self, keys: np.ndarray) -> np.ndarray:
-        """The id of each key, -1 where absent."""
+    def find(self, keys: np.ndarray, absent: int = -1) -> np.ndarray:
+        """The id of each key, ``absent`` where absent."""
         at = self._home(keys)
         found = self.keys[at]
         hit = found == keys
-        out = np.where(hit, self.ids[at], -1).astype(np.int64)
+        out = np.where(hit, self.ids[at], np.int64(absent)).astype(np.int64)
         todo = np.flatnonzero(~hit & (found != self._EMPTY))
         mask = (1 << self.bits) - 1
         at = at[todo]
@@ -246,13 +269,7 @@ class _Layers:
             )
         n_occ = 1 << len(self.events)
         self.n_occ = n_occ
-        self.occ_sets = [
-            frozenset(e for i, e in enumerate(self.events) if m >> i & 1) for m in range(n_occ)
-        ]
-        self.occ_bits = np.array(
-            [sum(1 << self.atoms[e] for e in o if e in self.atoms) for o in self.occ_sets],
-            dtype=np.int64,
-        )
+        self._occ_sets: dict[int, frozenset[str]] = {}
         # game
         self.gid: dict[Hashable, int] = {}
         self.game_states: list[Hashable] = []
@@ -264,7 +281,7 @@ class _Layers:
         self.slot_owner: list[int] = []
         self.slot_aid = _Grow(np.int64)
         self.action_id: dict[str, int] = {}
-        self._rows = _Memo(self._new_rows, 0 if n_occ <= 64 else None)
+        self._rows = _Memo(self._new_rows)
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
         self.row_start, self.row_len = _Grow(np.int64), _Grow(np.int64)
         self.row_succ, self.row_prob = _Grow(np.int64), _Grow(np.float64)
@@ -294,6 +311,23 @@ class _Layers:
         rest, sid = np.divmod(keys, self.n_sit)
         g, q = np.divmod(rest, self.n_q)
         return g, q, sid
+
+    def occ_set(self, mask: int) -> frozenset[str]:
+        """The events of an outcome's bit mask (over the sorted events)."""
+        hit = self._occ_sets.get(mask)
+        if hit is None:
+            hit = self._occ_sets[mask] = frozenset(
+                e for i, e in enumerate(self.events) if mask >> i & 1
+            )
+        return hit
+
+    def occ_letter(self, masks: np.ndarray) -> np.ndarray:
+        """The events of outcome bit masks as bit masks over the automaton's atoms."""
+        out = np.zeros(masks.size, dtype=np.int64)
+        for i, e in enumerate(self.events):
+            if e in self.atoms:
+                out |= ((masks >> i) & 1) << self.atoms[e]
+        return out
 
     # ---------------------------------------------------------------- game
     def game_state(self, s: Hashable) -> int:
@@ -350,7 +384,7 @@ class _Layers:
     def rows(self, slots: np.ndarray, occ: np.ndarray) -> np.ndarray:
         """The successor row of each (action slot, event outcome)."""
         if self.ignores_events:  # one row per slot, asked with no events
-            return self._rows(slots * self.n_occ)
+            return self._rows(slots)
         return self._rows(slots * self.n_occ + occ)
 
     def _new_rows(self, keys: np.ndarray) -> np.ndarray:
@@ -360,11 +394,11 @@ class _Layers:
         new_rows: list[tuple[tuple[Any, float], ...]] = []
         same = self.row_by_object
         base = self.row_start.size
-        owner, names, occ_sets = self.slot_owner, self.slot_action, self.occ_sets
+        owner, names, occ_set = self.slot_owner, self.slot_action, self.occ_set
         out = np.empty(keys.size, dtype=np.int64)
         for i, key in enumerate(keys.tolist()):
-            slot, o = divmod(key, self.n_occ)
-            succ = self.game.successors(self.game_states[owner[slot]], names[slot], occ_sets[o])
+            slot, o = (key, 0) if self.ignores_events else divmod(key, self.n_occ)
+            succ = self.game.successors(self.game_states[owner[slot]], names[slot], occ_set(o))
             hit = same.get(id(succ))
             if hit is None or hit[0] is not succ:
                 hit = same[id(succ)] = (succ, base + len(new_rows))
@@ -482,7 +516,7 @@ def product(
     game: Game[Any],
     sta: STA,
     *,
-    max_states: int = 5_000_000,
+    max_states: int = defaults.MAX_STATES,
     max_memory: int | None = None,
     progress: bool | None = None,
 ) -> MDP:
@@ -556,6 +590,11 @@ class _Budget:
 
     def check(self, states: int) -> None:
         """Raise :class:`ProductTooLarge` if ``states`` states would exceed a budget."""
+        if states > _MAX_INDEX:  # the matrix's column indices are int32
+            raise ProductTooLarge(
+                f"the product has more than {_MAX_INDEX:,} states ({self.estimate}), more "
+                "than an MDP can index; loosen epsilon or shrink the model"
+            )
         if states > self.max_states:
             raise ProductTooLarge(
                 f"the product has more than {self.max_states:,} reachable states "
@@ -592,19 +631,17 @@ class _Found:
     def intern(self, keys: np.ndarray) -> np.ndarray:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
         The budget is checked before the new states are stored."""
-        ids = self.index.find(keys)
-        miss = ids < 0
-        if miss.any():
-            uniq, first, inverse = np.unique(keys[miss], return_index=True, return_inverse=True)
+        uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        ids = self.index.find(uniq)
+        new = np.flatnonzero(ids < 0)
+        if new.size:
             n = self.keys.size
-            self.budget.check(n + uniq.size)
-            order = np.argsort(first, kind="stable")
-            new_ids = np.empty(uniq.size, dtype=np.int64)
-            new_ids[order] = np.arange(n, n + uniq.size)
-            self.index.insert(uniq, new_ids)
-            self.keys.extend(uniq[order])
-            ids[miss] = new_ids[inverse]
-        return ids
+            self.budget.check(n + new.size)
+            new = new[np.argsort(first[new], kind="stable")]
+            ids[new] = np.arange(n, n + new.size)
+            self.index.insert(uniq[new], ids[new])
+            self.keys.extend(uniq[new])
+        return ids[inverse]
 
 
 def _expand(
@@ -643,7 +680,7 @@ def _expand(
     g2 = f.row_succ.view[e_at[moving]]
     e_pm = e_pair[moving]
     f.flush()
-    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_bits[p_occ[e_pm]])
+    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_letter(p_occ[e_pm]))
     e_key[moving] = np.where(q2 < 0, q2, f.key(g2, q2, p_next[e_pm]))
     cols = intern(e_key).astype(np.int32)
     e_choice = p_choice[e_pair]
@@ -759,7 +796,7 @@ def _assemble(
         truncated=kind == 3,
         # the MDP's field is typed as a tuple; the lazy sequence answers len, [i] and
         # iteration as a tuple would
-        states=cast(tuple, ProductStates(keys, f.game_states, f.situations, f.n_q, f.n_sit)),
+        states=ProductStates(keys, f.game_states, f.situations, f.n_q, f.n_sit),
     )
     log.info(
         "product: %d states, %d choices, %d transitions", n, mdp.n_choices, mdp.n_transitions
@@ -826,7 +863,32 @@ class ProductStates(Sequence[Hashable]):
     def __repr__(self) -> str:
         return f"ProductStates(<{len(self)} states>)"
 
-    def position(self, state: Hashable) -> int | None:
+    def __contains__(self, state: object) -> bool:
+        return self.position(state) is not None
+
+    def index(self, state: Any, start: int = 0, stop: int | None = None) -> int:
+        """The index of ``state`` (its record) in ``[start, stop)``; ValueError if none."""
+        i = self.position(state)
+        if i is None or i < start or (stop is not None and i >= stop):
+            raise ValueError(f"{state!r} is not a state of this product")
+        return i
+
+    def distinct_factors(self) -> tuple[int, int, int, int, int]:
+        """Ordinary states, and the distinct game states, automaton states, pending sets
+        and clock values among them."""
+        keys = self._keys[self._keys >= 0]
+        rest, sid = np.divmod(keys, self._n_sit)
+        g, q = np.divmod(rest, self._n_q)
+        sits = [self._situations[i] for i in np.unique(sid).tolist()]
+        return (
+            int(keys.size),
+            int(np.unique(g).size),
+            int(np.unique(q).size),
+            len({p for p, _ in sits}),
+            len({c for _, c in sits}),
+        )
+
+    def position(self, state: object) -> int | None:
         """The index of the state whose record is ``state``, None if there is none."""
         if isinstance(state, Absorbing):
             key = _CODE[state]
@@ -853,18 +915,30 @@ class ProductStates(Sequence[Hashable]):
 
 
 def component_counts(mdp: MDP) -> Mapping[str, int]:
-    """Sizes for people: states by kind, distinct automaton states and clock values."""
-    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    """Sizes for people: states by kind, distinct game states, automaton states, pending
+    sets and clock values among the ordinary states."""
+    states = mdp.states
+    if isinstance(states, ProductStates):  # from the integer codes, no records made
+        distinct = states.distinct_factors()
+    else:
+        ordinary = [s for s in states if isinstance(s, ProductState)]
+        distinct = (
+            len(ordinary),
+            len({s.game for s in ordinary}),
+            len({s.automaton for s in ordinary}),
+            len({s.pending for s in ordinary}),
+            len({s.clock for s in ordinary}),
+        )
     return {
         "states": mdp.n_states,
         "choices": mdp.n_choices,
         "transitions": mdp.n_transitions,
-        "ordinary_states": len(ordinary),
+        "ordinary_states": distinct[0],
         "target_states": int(mdp.target.sum()),
         "sink_states": int(mdp.sink.sum()),
         "truncated_states": int(mdp.truncated.sum()),
-        "game_states": len({s.game for s in ordinary}),
-        "automaton_states": len({s.automaton for s in ordinary}),
-        "event_situations": len({s.pending for s in ordinary}),
-        "clock_values": len({s.clock for s in ordinary}),
+        "game_states": distinct[1],
+        "automaton_states": distinct[2],
+        "event_situations": distinct[3],
+        "clock_values": distinct[4],
     }

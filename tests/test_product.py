@@ -568,8 +568,11 @@ def test_array_build_equals_the_state_at_a_time_build_on_random_games(seed):
     assert_same_mdp(mdp, _reference()(game, sta))
     # every record maps back to its index
     for i, s in enumerate(mdp.states):
-        assert mdp.states.position(s) == i
-    assert mdp.states.position(ProductState(999, 0, frozenset(), 0)) is None
+        assert mdp.states.position(s) == i and mdp.states.index(s) == i and s in mdp.states
+    stranger = ProductState(999, 0, frozenset(), 0)
+    assert mdp.states.position(stranger) is None and stranger not in mdp.states
+    with pytest.raises(ValueError, match="not a state"):
+        mdp.states.index(stranger)
 
 
 # --------------------------------------------------------------------------- budgets
@@ -636,7 +639,39 @@ def test_the_memory_budget_is_checked_before_the_states_are_stored():
 
 
 def test_default_memory_budget_is_half_the_machine():
-    import os
+    meminfo = Path("/proc/meminfo")
+    if not meminfo.exists():
+        pytest.skip("no /proc/meminfo to compare with")
+    kb = int(re.search(r"MemTotal:\s+(\d+) kB", meminfo.read_text()).group(1))
+    assert default_max_memory() == kb * 1024 // 2
 
-    ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    assert default_max_memory() == ram // 2
+
+@pytest.mark.parametrize("name", sorted(p.name for p in MODELS.glob("*.toml")))
+def test_component_counts_from_codes_equal_the_counts_over_records(name):
+    from dataclasses import replace
+
+    from mitld_lp.product import component_counts
+
+    m = load_model(MODELS / name)
+    mdp = product(m.game, make_sta(to_dta(m.spec), m.distributions, m.epsilon))
+    by_records = component_counts(replace(mdp, states=tuple(mdp.states)))
+    assert component_counts(mdp) == by_records
+    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    assert by_records["clock_values"] == len({s.clock for s in ordinary})
+    assert by_records["ordinary_states"] + 3 >= mdp.n_states
+
+
+@pytest.mark.parametrize("seed", [1, 5])
+def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, monkeypatch):
+    """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("mitld_lp.product"), "_DENSE_LIMIT", 8)
+    rng = np.random.default_rng(seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    sta = make_sta(to_dta(parse(text)), dists, 0.01)
+    assert_same_mdp(product(game, sta), _reference()(game, sta))
+    m = load_model(MODELS / "red_light.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
