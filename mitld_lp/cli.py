@@ -493,7 +493,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         _out(f"certified:    [{r.lower:.7f}, {r.upper:.7f}]  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:
-            _out(f"note:         {sim.beyond_model} runs had an event after its truncation point")
+            _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
+                 "truncation point")
     return EXIT_OK
 
 

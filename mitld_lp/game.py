@@ -71,7 +71,10 @@ class Game(Protocol[S]):
     :meth:`successors` once per (state, action) instead of once per event outcome.  A
     game that knows how many states it has may give it as ``n_states`` (an int); the
     product's size is then bounded before it is built
-    (:func:`mitld_lp.product.estimate_size`).
+    (:func:`mitld_lp.product.estimate_size`).  A game whose dynamics react to named
+    events lists them as ``event_names`` (a frozenset): a specification must then give
+    each of them a distribution, or it would silently never happen
+    (:meth:`mitld_lp.Model.from_game` checks it).
     """
 
     @property
@@ -272,6 +275,11 @@ class ExplicitGame(Generic[S]):
     def n_states(self) -> int:
         """The number of states of the tables."""
         return len(self.transitions)
+
+    @property
+    def event_names(self) -> frozenset[str]:
+        """The events ``event_transitions`` reacts to."""
+        return frozenset().union(*(events for _, _, events in self.event_transitions))
 
     def actions(self, state: S) -> tuple[str, ...]:
         """The actions listed for ``state``, in table order."""

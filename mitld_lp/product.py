@@ -512,6 +512,20 @@ def estimate_size(game: Game[Any], sta: STA) -> SizeEstimate:
     return SizeEstimate(game_states, max(automaton, 0), situations)
 
 
+def _check_alphabet(game: Game[Any], sta: STA) -> None:
+    props = frozenset(game.proposition_names)
+    unknown = sorted(set(sta.dta.atoms) - props - sta.events)
+    if unknown:
+        raise ValueError(
+            f"proposition {unknown[0]!r} of the formula is neither a proposition of the game "
+            f"({', '.join(sorted(props)) or 'none'}) nor an event "
+            f"({', '.join(sorted(sta.events)) or 'none'})"
+        )
+    lawless = sorted(frozenset(getattr(game, "event_names", ())) - sta.events)
+    if lawless:
+        raise ValueError(f"the game reacts to event {lawless[0]!r}, which has no distribution")
+
+
 def product(
     game: Game[Any],
     sta: STA,
@@ -538,7 +552,13 @@ def product(
     the transitions per state as measured so far.  Either raises
     :class:`ProductTooLarge` naming the numbers.
     ``progress``: show a progress bar (None: only on a terminal, for large builds).
+
+    Raises ``ValueError`` when the automaton reads a proposition that is neither a
+    proposition of the game nor an event of the STA (it could never be true, so the
+    answer would be a silent 0), or when the game reacts to events (``event_names``)
+    the STA gives no distribution.
     """
+    _check_alphabet(game, sta)
     budget = _Budget(
         max_states,
         default_max_memory() if max_memory is None else max_memory,

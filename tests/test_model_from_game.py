@@ -87,3 +87,22 @@ def test_a_model_pickles_and_keeps_its_laws():
     assert back.distributions["door"].hazard(3) == pytest.approx(0.5)
     with pytest.raises(TypeError):
         back.distributions["x"] = None  # still read-only
+
+
+def test_an_explicit_game_declares_the_events_of_its_event_transitions():
+    from mitld_lp import ExplicitGame
+
+    game = ExplicitGame(
+        initial=0,
+        transitions={0: {"go": {0: 1.0}}, 1: {"go": {1: 1.0}}},
+        labels={1: {"A"}},
+        event_transitions={(0, "go", frozenset({"door"})): {1: 1.0}},
+    )
+    assert game.event_names == {"door"}
+    # Before, F[0,3] A here was 0.0 "certified": the door event never happened.
+    with pytest.raises(ModelError, match="reacts to event 'door'"):
+        Model.from_game(game, "F[0,3] A")
+    # With a law it opens at step K ~ geometric(1/2) and the robot is through at once:
+    # A within 3 steps iff K <= 3.
+    r = synthesize(Model.from_game(game, "D[geometric(0.5)] door & F[0,3] A"))
+    assert r.lower == pytest.approx(1 - 0.5**3, abs=1e-9)

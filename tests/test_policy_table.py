@@ -104,3 +104,15 @@ def test_a_saved_controller_acts_as_the_original(corridor, tmp_path):
     junk.write_bytes(b"not a pickle")
     with pytest.raises(ValueError, match="not a saved controller"):
         Controller.load(junk)
+
+
+def test_a_result_pickles_and_its_controller_still_acts(corridor):
+    import pickle
+
+    from mitld_lp import Observation
+
+    back = pickle.loads(pickle.dumps(corridor))
+    assert back.lower == corridor.lower and back.model.name == corridor.model.name
+    assert back.policy_table() == corridor.policy_table()
+    back.controller.reset()
+    assert back.controller.act(Observation((0, 0))) == "E"

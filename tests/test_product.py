@@ -675,3 +675,12 @@ def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, mo
     m = load_model(MODELS / "red_light.toml")
     sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
     assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
+
+
+def test_product_refuses_a_proposition_it_could_never_see():
+    from mitld_lp import GridWorld, make_sta, parse, to_dta
+
+    world = GridWorld.make(2, 1, start=(0, 0), regions={"A": [(1, 0)]})
+    sta = make_sta(to_dta(parse("F[0,3] a")), {}, 0.01)
+    with pytest.raises(ValueError, match=r"proposition 'a' of the formula is neither .*\(A\)"):
+        product(world, sta)
