@@ -81,10 +81,11 @@ from pathlib import Path
 from typing import Any
 
 HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
 if str(HERE) not in sys.path:  # run as a script or imported by the tests
     sys.path.insert(0, str(HERE))
-
-from _common import ROOT, out_dir, shown, text_table, write_text  # noqa: E402
+# The parent imports experiments/_common.py where it needs it (it loads matplotlib): the
+# children, one per route and instance, start without it.
 
 RESULTS = HERE / "results"
 QUICK_OUT = HERE / "out" / "quick"
@@ -107,7 +108,7 @@ SOLVE_ROUTES = ROUTES[1:]
 NEEDS_MDP = ("topo_lp", "mono_lp", "highs_lp", "ii")
 # Extra numbers a route reports (besides status, seconds, value) that go to the CSV.
 EXTRA = {
-    "build": ("states", "choices", "transitions", "delta_mb", "drn_write_s"),
+    "build": ("states", "choices", "transitions", "delta_mb", "child_mb", "drn_write_s"),
     "default": ("states", "upper", "certified"),
     "ii": ("upper", "iterations"),
     "storm_drn": ("parse_s", "check_s"),
@@ -241,9 +242,10 @@ def work_build(inst: Instance, work: Path, arm: Any) -> dict[str, Any]:
     t = time.perf_counter()
     write_drn(mdp, mdp.target, work / "model.drn", overwrite=True)
     drn_s = time.perf_counter() - t
+    # peak_mb: when the product was done (the pickle and the DRN writer come after)
     return dict(status="built", seconds=seconds, states=mdp.n_states, choices=mdp.n_choices,
                 transitions=mdp.n_transitions, delta_mb=peak - before,
-                drn_write_s=drn_s, peak_mb_at_build=peak)
+                drn_write_s=drn_s, peak_mb=peak)
 
 
 def work_default(inst: Instance, work: Path, arm: Any) -> dict[str, Any]:
@@ -406,9 +408,15 @@ def run_route(route: str, inst: Instance, work: Path, budget: float,
         return RouteRun("failed", peak_mb=peak, proc_s=proc_s,
                         note=f"exit {code}: {tail[0][:200]}")
     out = json.loads(report.read_text(encoding="utf-8"))
-    keys = ("status", "seconds", "value", "note")
+    if out["status"] == "unavailable":  # nothing ran: no time, no memory to speak of
+        return RouteRun("unavailable", note=out.get("note", ""))
+    extra = {k: v for k, v in out.items()
+             if k not in ("status", "seconds", "value", "note", "peak_mb")}
+    if "peak_mb" in out:  # the child says at what point its peak counts
+        extra["child_mb"] = peak
+        peak = float(out["peak_mb"])
     return RouteRun(out["status"], out.get("seconds"), out.get("value"), peak, proc_s,
-                    {k: v for k, v in out.items() if k not in keys}, out.get("note", ""))
+                    extra, out.get("note", ""))
 
 
 @dataclass(frozen=True, slots=True)
@@ -419,10 +427,20 @@ class Row:
     runs: dict[str, RouteRun]
     budget: float
 
+    def values(self) -> list[float]:
+        return [r.value for r in self.runs.values()
+                if r.value is not None and math.isfinite(r.value)]
+
     def value_spread(self) -> float:
-        values = [r.value for r in self.runs.values()
-                  if r.value is not None and math.isfinite(r.value)]
+        values = self.values()
         return max(values) - min(values) if len(values) >= 2 else float("nan")
+
+    def relative_spread(self) -> float:
+        """The spread over the largest value (the bus values fall to 1e-4 on big grids,
+        where an absolute 1e-8 says less)."""
+        values = self.values()
+        top = max(values, default=0.0)
+        return self.value_spread() / top if top > 0 else float("nan")
 
     def seconds(self, route: str, part: str | None = None) -> float | None:
         run = self.runs.get(route)
@@ -435,20 +453,26 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return a / b if a is not None and b else None
 
 
+RATIO_KEYS = ("default/storm_prism", "default/storm_check", "ii/storm_check")
+
+
 def ratios(row: Row) -> dict[str, float | None]:
+    """The speed ratios printed per row (keys: ``RATIO_KEYS``); None where a side is
+    missing."""
     check = row.seconds("storm_drn", "check_s")
-    return {
-        "default/storm_prism": _ratio(row.seconds("default"), row.seconds("storm_prism")),
-        "default/storm_check": _ratio(row.seconds("default"), check),
-        "ii/storm_check": _ratio(row.seconds("ii"), check),
-    }
+    return dict(zip(RATIO_KEYS, (
+        _ratio(row.seconds("default"), row.seconds("storm_prism")),
+        _ratio(row.seconds("default"), check),
+        _ratio(row.seconds("ii"), check),
+    ), strict=True))
 
 
 def run_instance(inst: Instance, budget: float, mem_budget_mb: float | None,
                  too_big: dict[tuple[str, str], int], work_root: Path) -> Row:
     """All routes on ``inst``; ``too_big[(family, route)]`` is the smallest state count
     at which the route went over its budget (then larger instances skip it unrun)."""
-    work = out_dir(work_root / inst.name)
+    work = work_root / inst.name
+    work.mkdir(parents=True, exist_ok=True)
     runs: dict[str, RouteRun] = {}
 
     def estimate_skip(route: str, states: int | None) -> RouteRun | None:
@@ -512,12 +536,9 @@ def csv_header() -> list[str]:
         if route in ("default", "storm_prism"):
             head.append(f"{route}_proc_s")
         head.append(f"{route}_note")
-    head += ["max_diff", *[f"ratio_{k.replace('/', '_over_')}" for k in ratios_keys()]]
+    head += ["max_diff", "max_rel_diff"]
+    head += [f"ratio_{k.replace('/', '_over_')}" for k in RATIO_KEYS]
     return head
-
-
-def ratios_keys() -> tuple[str, ...]:
-    return ("default/storm_prism", "default/storm_check", "ii/storm_check")
 
 
 def csv_row(row: Row) -> list[object]:
@@ -532,7 +553,7 @@ def csv_row(row: Row) -> list[object]:
         if route in ("default", "storm_prism"):
             cells.append(_num(run.proc_s, ".3f"))
         cells.append(run.note)
-    cells.append(_num(row.value_spread(), ".3g"))
+    cells += [_num(row.value_spread(), ".3g"), _num(row.relative_spread(), ".3g")]
     cells += [_num(v, ".3g") for v in ratios(row).values()]
     return cells
 
@@ -591,32 +612,40 @@ def machine_text(load_note: str) -> str:
 
 
 def plot(rows: Sequence[Row], path: Path) -> Path:
+    """Seconds against product states, log-log, one panel per family; a line per route
+    and deadline (marker: deadline)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
+    # (label, route, part of its time or None for all of it, line style)
+    series = [("build", "build", None, "k:"), ("default", "default", None, "C0-"),
+              ("topo_lp", "topo_lp", None, "C1-"), ("mono_lp", "mono_lp", None, "C2-"),
+              ("highs_lp", "highs_lp", None, "C3-"), ("ii", "ii", None, "C4-"),
+              ("Storm check (DRN)", "storm_drn", "check_s", "C5--"),
+              ("Storm parse+check (DRN)", "storm_drn", None, "C7--"),
+              ("Storm whole run (PRISM)", "storm_prism", None, "C6--")]
     fig, axes = plt.subplots(1, 2, figsize=(12, 5), sharey=True)
-    styles = {"build": "k:", "default": "C0-", "topo_lp": "C1-", "mono_lp": "C2-",
-              "highs_lp": "C3-", "ii": "C4-", "storm_drn": "C5--", "storm_prism": "C6--"}
     for ax, family in zip(axes, ("bus", "events"), strict=True):
-        mine = [r for r in rows if r.inst.family == family and r.runs["build"].extra]
-        for route, style in styles.items():
-            for d in sorted({r.inst.d for r in mine}):
-                pts = sorted((r.runs["build"].extra["states"], r.seconds(route))
-                             for r in mine if r.inst.d == d and r.seconds(route))
-                if not pts:
-                    continue
-                label = route if d == min(r.inst.d for r in mine) else None
-                marker = "os^vD<>"[sorted({r.inst.d for r in mine}).index(d) % 7]
-                ax.loglog([p[0] for p in pts], [p[1] for p in pts], style, marker=marker,
-                          label=label, alpha=0.85)
+        mine = [r for r in rows if r.inst.family == family and "states" in r.runs["build"].extra]
         ds = sorted({r.inst.d for r in mine})
+        for label, route, part, style in series:
+            for i, d in enumerate(ds):
+                pts = sorted((r.runs["build"].extra["states"], r.seconds(route, part))
+                             for r in mine if r.inst.d == d and r.seconds(route, part))
+                if pts:
+                    ax.loglog([p[0] for p in pts], [p[1] for p in pts], style,
+                              marker="os^vD<>"[i % 7], label=label if i == 0 else None,
+                              alpha=0.85)
         ax.set_title(f"{family} family (markers: deadline {', '.join(map(str, ds))})")
-        ax.set_xlabel("product states")
+        ax.set_xlabel("product states (ours)")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-    axes[0].set_ylabel("seconds (route's own work; skipped routes omitted)")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    axes[0].set_ylabel("seconds (the route's own work; skipped routes omitted)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -695,6 +724,7 @@ def main(argv: list[str] | None = None) -> list[Row]:
         worker_main(args.worker, Instance(**json.loads(args.instance)), args.work,
                     args.budget)
         return []
+    from _common import out_dir, shown, text_table, write_text
     for name in ("budget",):
         if getattr(args, name) <= 0:
             ap.error(f"--{name}: must be positive, got {getattr(args, name)}")
