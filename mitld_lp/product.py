@@ -38,6 +38,7 @@ import scipy.sparse as sp
 from tqdm.auto import tqdm
 
 from mitld_lp import defaults
+from mitld_lp.arrays import unique
 from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
@@ -163,7 +164,7 @@ class _Memo:
             vals = self.table[keys]
             miss = vals == _MISSING
             if miss.any():
-                new = np.unique(keys[miss])
+                new = unique(keys[miss])
                 self.table[new] = self.compute(new)
                 vals[miss] = self.table[keys[miss]]
             return vals
@@ -357,7 +358,7 @@ class _Layers:
     def ensure_actions(self, gs: np.ndarray) -> None:
         """Ask the game for the actions of the game states ``gs`` not yet asked."""
         self.flush()
-        missing = np.unique(gs[self.act_count.view[gs] < 0])
+        missing = unique(gs[self.act_count.view[gs] < 0])
         aids = []
         for g in missing.tolist():
             acts = self.game.actions(self.game_states[g])
@@ -421,7 +422,7 @@ class _Layers:
 
     def ensure_outcomes(self, sids: np.ndarray) -> None:
         """The STA's outcomes of the situations ``sids`` not yet expanded."""
-        missing = np.unique(sids[self.out_count.view[sids] < 0])
+        missing = unique(sids[self.out_count.view[sids] < 0])
         bit = {e: 1 << i for i, e in enumerate(self.events)}
         for i in missing.tolist():
             pending, clock = self.situations[i]
@@ -899,11 +900,11 @@ class ProductStates(Sequence[Hashable]):
         keys = self._keys[self._keys >= 0]
         rest, sid = np.divmod(keys, self._n_sit)
         g, q = np.divmod(rest, self._n_q)
-        sits = [self._situations[i] for i in np.unique(sid).tolist()]
+        sits = [self._situations[i] for i in unique(sid).tolist()]
         return (
             int(keys.size),
-            int(np.unique(g).size),
-            int(np.unique(q).size),
+            int(unique(g).size),
+            int(unique(q).size),
             len({p for p, _ in sits}),
             len({c for _, c in sits}),
         )

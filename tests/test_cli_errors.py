@@ -121,10 +121,15 @@ def test_a_deeply_nested_toml_is_a_model_error(tmp_path, capsys):
     assert "nested too deeply" in line
 
 
-def test_a_time_limit_is_a_status_not_a_hang(capsys):
-    # Either the solvers answer with the status (and their bracket so far) or, if a stage
-    # that cannot stop itself is still running, the watchdog stops it: exit 3 both ways.
-    assert main(["solve", PATROL, "--json", "--time-limit", "0.01"]) == 3
+def test_a_time_limit_is_a_status_not_a_hang(capsys, tmp_path):
+    # A 64x64 bus grid with deadline 10 takes seconds to build and solve.  Either the
+    # solvers answer with the status (and their bracket so far) or, if a stage that
+    # cannot stop itself is still running, the watchdog stops it: exit 3 both ways.
+    big = tmp_path / "big.toml"
+    big.write_text(Path(BUS).read_text().replace("size = [4, 4]", "size = [64, 64]")
+                   .replace("F[0,3]", "F[0,10]").replace("A = [[1, 2]]", "A = [[16, 32]]")
+                   .replace("B = [[3, 0]]", "B = [[48, 0]]"))
+    assert main(["solve", str(big), "--json", "--time-limit", "0.01"]) == 3
     captured = capsys.readouterr()
     assert json.loads(captured.out)["status"] == "time_limit"
 

@@ -211,3 +211,12 @@ def test_quotient_has_no_end_components(seed: int) -> None:
     inner = np.ones(n + 1, dtype=bool)
     inner[n] = False
     assert maximal_end_components(quotient_mdp, inner).n_mecs == 0
+
+
+def test_unique_is_numpys_unique():
+    from mitld_lp.arrays import unique
+
+    rng = np.random.default_rng(3)
+    for size in (0, 1, 7, 1000):
+        a = rng.integers(-5, 20, size=size)
+        np.testing.assert_array_equal(unique(a), np.unique(a))

@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
+from mitld_lp.arrays import unique
 from mitld_lp.solvers.quotient import Quotient, segmented_argmax
 from mitld_lp.solvers.result import read_only
 
@@ -131,7 +132,7 @@ def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
     coo = graph.tocoo()
     src, dst = comp[coo.row], comp[coo.col]
     cross = src != dst
-    pairs = np.unique(src[cross] * n_comp + dst[cross])
+    pairs = unique(src[cross] * n_comp + dst[cross])
     up, down = pairs // n_comp, pairs % n_comp  # edge up -> down between components
     out_degree = np.bincount(up, minlength=n_comp)
     order = np.argsort(down, kind="stable")
@@ -144,7 +145,7 @@ def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
         level[frontier] = k
         above = preds[gather_ranges(pred_ptr[frontier], pred_ptr[frontier + 1])]
         np.subtract.at(out_degree, above, 1)
-        frontier = np.unique(above[out_degree[above] == 0])
+        frontier = unique(above[out_degree[above] == 0])
         k += 1
     if np.any(level < 0):  # pragma: no cover - the graph of SCCs is acyclic
         raise AssertionError("the component graph has a cycle")
