@@ -66,9 +66,9 @@ if str(ROOT / "experiments") not in sys.path:
 fuzz = importlib.import_module("fuzz")  # experiments/fuzz.py: the generators
 
 PYTHON = sys.executable
-# Sized so that the whole file takes about 30 s on a loaded two-core machine.
+# Sized so that the whole file takes 15-60 s on a two-core machine (loaded: the longer).
 FAST = settings(max_examples=100, deadline=None)
-SLOW = settings(max_examples=60, deadline=None,
+SLOW = settings(max_examples=100, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 
 #: Bugs found by fuzzing, open on this branch: name -> (exception type name, message
@@ -78,6 +78,9 @@ KNOWN_BUGS: dict[str, tuple[str, str]] = {
     "uniform-huge": ("MemoryError|ValueError", r"Unable to allocate|Maximum allowed dimension"),
     # distributions.pmf sums the masses with math.fsum, which overflows
     "pmf-overflow": ("OverflowError", r"intermediate overflow in fsum"),
+    # model._show echoes a user's string value raw: a ModelError message may hold a newline,
+    # NUL or a terminal escape (the CLI escapes it; a library caller gets it raw)
+    "model-message-raw": ("ModelError", r"[^\S ]|[\x00-\x1f\x7f-\x9f]|[^\x00-\x7f]"),
     # cli._cmd_dta writes --dot without cli._output_path's checks
     "dta-dot-path": ("FileNotFoundError|IsADirectoryError|OSError|PermissionError",
                      r"Errno|No such file|Is a directory"),
@@ -181,15 +184,15 @@ def _cheap(text: str) -> bool:
     grid = doc.get("grid")
     size = grid.get("size") if isinstance(grid, dict) else None
     if isinstance(size, list) and all(isinstance(v, int) for v in size):
-        if math.prod(abs(v) for v in size) > 10**5:
+        if math.prod(abs(v) for v in size) > 10**4:
             return False
     numbers: list[Any] = [doc.get("distributions"), doc.get("spec")]
     flat = re.findall(r"\d+(?:\.\d*)?(?:[eE][+-]?\d+)?", repr(numbers))
     return all(float(x) <= 10**4 or float(x) >= 10**10 for x in flat)
 
 
-@settings(FAST, max_examples=200)
-@given(st.randoms(use_true_random=False), st.sampled_from(sorted(DOCS)))
+@settings(FAST, max_examples=250)
+@given(st.randoms(use_true_random=True), st.sampled_from(sorted(DOCS)))
 def test_mutated_model_files_give_model_errors(rng, base):
     text = fuzz.mutate_model(rng, DOCS[base])
     assume(_cheap(text))
@@ -197,8 +200,10 @@ def test_mutated_model_files_give_model_errors(rng, base):
         model = loads_model(text, source="fuzzed.toml")
     except ModelError as exc:
         event("ModelError")
-        assert str(exc).startswith("fuzzed.toml"), exc
-        assert "\n" not in str(exc) or "spec" in str(exc)
+        message = str(exc)
+        assert message.startswith("fuzzed.toml:") and len(message) > 13, message
+        if not message.isprintable():
+            assert _known("ModelError", message), message
         return
     except Exception as exc:  # noqa: BLE001 - only a known bug may get here
         assert _known(type(exc).__name__, str(exc)), f"{type(exc).__name__}: {exc}"
@@ -220,6 +225,15 @@ def _with_law(table: str) -> str:
     return fuzz.to_toml(DOCS["bus_grid"]).replace("{ geometric = 0.8 }", table, 1)
 
 
+@pytest.mark.xfail(strict=True, reason="model._show writes a user's string raw into the "
+                   "message: a ModelError can span lines or carry control characters")
+def test_model_error_messages_are_one_printable_line():
+    doc = dict(DOCS["bus_grid"], epsilon="x\ny\x1b[2J")
+    with pytest.raises(ModelError) as info:
+        loads_model(fuzz.to_toml(doc))
+    assert "epsilon" in str(info.value) and str(info.value).isprintable()
+
+
 @pytest.mark.xfail(strict=True, reason="issue 12 item 7: distributions.uniform allocates "
                    "its table before checking its size (MemoryError, not a ModelError)")
 def test_uniform_with_a_huge_bound_is_a_model_error():
@@ -235,27 +249,30 @@ def test_pmf_with_huge_masses_is_a_model_error():
 
 
 @pytest.mark.xfail(strict=True, reason="issue 12 item 11: a grid of 10^12 cells is built "
-                   "before any budget check (out of memory under a 512 MB limit)")
+                   "before any budget check (not refused within 5 s; out of memory later)")
 def test_huge_grid_is_refused_before_it_is_built(tmp_path):
     doc = dict(DOCS["bus_grid"])
     doc["grid"] = dict(doc["grid"], size=[10**6, 10**6])
     path = tmp_path / "huge.toml"
     path.write_text(fuzz.to_toml(doc))
-    # 512 MB: twice what the interpreter needs to import the command (about 260 MB)
-    limit = "import resource; resource.setrlimit(resource.RLIMIT_AS, (2**29, 2**29))"
-    code = (f"{limit}\nfrom mitld_lp.cli import main\n"
+    # In a child: 400 MB of address space (importing the command takes about 260 MB), and
+    # SIGALRM 5 s after the import, where a budget checked before the work answers at once.
+    code = ("import resource, signal\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (400 << 20, 400 << 20))\n"
+            "from mitld_lp.cli import main\n"
+            "signal.alarm(5)\n"
             f"raise SystemExit(main(['info', {str(path)!r}, '--max-states', '1000']))")
     run = subprocess.run([PYTHON, "-c", code], capture_output=True, text=True, timeout=120,
                          cwd=ROOT, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
-    assert run.returncode in (2, 3), run.stderr[-300:]
-    assert "out of memory" not in run.stderr and "error" in run.stderr + run.stdout
+    assert run.returncode in (2, 3), (run.returncode, run.stderr[-300:])
+    assert "out of memory" not in run.stderr and run.stderr.strip()
 
 
 # --------------------------------------------------------------------------- command lines
 
 
 @SLOW
-@given(st.randoms(use_true_random=False))
+@given(st.randoms(use_true_random=True))  # drawn as in the campaign: more runs get to work
 def test_random_command_lines(rng):
     folder = Path(tempfile.mkdtemp(prefix="fuzz-cli-"))
     try:
@@ -265,7 +282,9 @@ def test_random_command_lines(rng):
         code, _, err = _run(argv)
         event(f"{argv[0] or 'no verb'}: exit {code}")
         if code == 1:  # only a known bug may say "internal error"
-            assert _internal_line_known(err), (argv, err)
+            bug = _internal_line_known(err)
+            assert bug, (argv, err)
+            assert bug != "dta-dot-path" or ("dta" in argv and "--dot" in argv), (argv, err)
         else:
             assert code in (0, 2, 3), (argv, code, err)
         assert fuzz.stderr_problems(code, err) == [], (argv, err)
