@@ -36,6 +36,7 @@ from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
 from mitld_lp.model import ModelError
 from mitld_lp.product import ProductTooLarge
+from mitld_lp.text import printable
 
 if TYPE_CHECKING:
     from mitld_lp.model import Model
@@ -189,12 +190,6 @@ def _out(text: str = "") -> None:
     cancelled = getattr(_command, "cancelled", None)
     if cancelled is None or not cancelled.is_set():
         print(text)
-
-
-def _printable(text: str) -> str:
-    """One line of printable characters: control characters (newlines, terminal escapes)
-    that a user's names may carry are shown escaped."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 # --------------------------------------------------------------------------- check
@@ -558,7 +553,7 @@ class _StageLines(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
-            self.last = _printable(record.getMessage())
+            self.last = printable(record.getMessage())
             print(f"{PROG}: {self.last}", file=sys.stderr, flush=True)
         except Exception:  # noqa: BLE001 - logging must never break the command
             self.handleError(record)
@@ -587,7 +582,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _say(message: str) -> None:
-    print(f"{PROG}: {_printable(message)}", file=sys.stderr, flush=True)
+    print(f"{PROG}: {printable(message)}", file=sys.stderr, flush=True)
 
 
 _WATCHDOG_GRACE = 1.0

@@ -55,6 +55,7 @@ from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
 from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.text import printable
 
 __all__ = [
     "Model",
@@ -70,7 +71,11 @@ DEFAULT_EPSILON = defaults.EPSILON
 
 
 class ModelError(ValueError):
-    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``."""
+    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``, one
+    line of printable characters (a user's names are shown escaped)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(printable(message))
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,7 +176,8 @@ def _unpickle_model(
 
 
 def _key(part: str) -> str:
-    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else f'"{part}"'
+    """A key of a key path as TOML writes it: bare, or quoted with escapes."""
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else _show(part)
 
 
 def _join(path: str, key: str) -> str:
