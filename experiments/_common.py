@@ -1,8 +1,10 @@
 """Shared helpers of the experiment scripts (not a study itself).
 
 Every script: ``main(argv=None)`` with ``--quick`` (a reduced setting, used by the tests)
-and ``--out DIR`` (default ``experiments/out`` beside the scripts); it prints the table it
-reproduces and writes its figures and tables into ``DIR``.
+and ``--out DIR``; it prints the table it reproduces and writes its figures and tables
+into ``DIR``.  ``DIR`` defaults to ``experiments/out`` beside the scripts for a full run
+and to the scratch folder ``experiments/out/quick`` (not committed) for a quick one, so a
+quick run never writes over the committed results.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 MODELS = ROOT / "models"
 DEFAULT_OUT = HERE / "out"
+QUICK_OUT = DEFAULT_OUT / "quick"
 
 
 def parser(description: str) -> argparse.ArgumentParser:
@@ -28,12 +31,15 @@ def parser(description: str) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--quick", action="store_true",
                     help="reduced setting (seconds; what the tests run)")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                    help=f"directory for figures and tables (default {DEFAULT_OUT})")
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"directory for figures and tables (default {DEFAULT_OUT}, "
+                         f"with --quick {QUICK_OUT})")
     return ap
 
 
-def out_dir(path: Path) -> Path:
+def out_dir(args: argparse.Namespace) -> Path:
+    """The output folder of a run (see the module docstring), created if needed."""
+    path = args.out if args.out is not None else QUICK_OUT if args.quick else DEFAULT_OUT
     path.mkdir(parents=True, exist_ok=True)
     return path
 

@@ -1,15 +1,22 @@
 """Benchmark: product construction throughput and memory on growing grids.
 
-Each row: an n x n grid (n = 8 .. 64) with three events -- one memoryless
-(geometric), two not (pmf and Poisson, the latter truncated) -- and a task with a
-deadline (``--deadline``, default 4) after each event at a region in a different
-corner.  Printed: reachable
-states, transitions, seconds, transitions per second, and peak memory per
-transition (tracemalloc's peak during the build, divided by the transitions).
+Each row: an n x n grid with three events -- one memoryless (geometric), two not (pmf
+and Poisson, the latter truncated) -- and a task with a deadline (``--deadlines``)
+after each event at a region in a different corner.  For each row, in the same run and
+on the same model: the array construction (:func:`mitld_lp.product.product`) and its
+peer, the first state-at-a-time construction (``_reference_product.py``), which must
+give the same MDP.  Printed: reachable states, transitions, wall and CPU seconds of
+each (the CPU time of this process: on a shared machine the wall time varies with the
+load), transitions per CPU second, the speed-up (wall, and CPU in parentheses), and
+the peak memory per transition of the array
+construction (tracemalloc's peak during a second build, divided by the transitions;
+numpy's buffers are traced).
 
-Targets (issue 4): >= 200k transitions/s and <= 150 bytes per transition.
+Targets (issue 9): 3x the state-at-a-time construction, under 40 bytes per transition;
+a 1e6-state product in under 20 s and under 1 GB.
 
-Run: ``python experiments/bench_product.py [--sizes 8 16 32 64]``.
+Run: ``python experiments/bench_product.py [--sizes 16 32 64] [--deadlines 4 12]``;
+``--quick`` runs two small rows.  The script prints its table and writes nothing.
 """
 
 from __future__ import annotations
@@ -17,11 +24,16 @@ from __future__ import annotations
 import argparse
 import time
 import tracemalloc
+from dataclasses import dataclass
 
-from mitld_lp.automata.sta import make_sta
+import numpy as np
+from _reference_product import reference_product
+
+from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.parser import parse
+from mitld_lp.mdp import MDP
 from mitld_lp.model import bind_distributions
 from mitld_lp.product import product
 
@@ -38,42 +50,93 @@ def world(n: int) -> GridWorld:
     )
 
 
-def build(
-    n: int, deadline: int, epsilon: float, measure_memory: bool
-) -> tuple[int, int, float, float]:
+def task(deadline: int, epsilon: float) -> STA:
     spec = parse(SPEC.format(d=deadline))
-    sta = make_sta(to_dta(spec), bind_distributions(spec), epsilon)
-    game = world(n)
-    if measure_memory:
-        tracemalloc.start()
-    t = time.perf_counter()
+    return make_sta(to_dta(spec), bind_distributions(spec), epsilon)
+
+
+@dataclass(frozen=True, slots=True)
+class Row:
+    n: int
+    deadline: int
+    states: int
+    transitions: int
+    seconds: float
+    cpu: float
+    reference_seconds: float | None
+    reference_cpu: float | None
+    bytes_per_transition: float | None
+
+
+def _same(a: MDP, b: MDP) -> bool:
+    return (
+        a.n_states == b.n_states
+        and np.array_equal(a.row_groups, b.row_groups)
+        and np.array_equal(a.matrix.indices, b.matrix.indices)
+        and np.array_equal(a.matrix.data, b.matrix.data)
+    )
+
+
+def measure(n: int, deadline: int, epsilon: float, *, reference: bool, memory: bool) -> Row:
+    game, sta = world(n), task(deadline, epsilon)
+    t, c = time.perf_counter(), time.process_time()
     mdp = product(game, sta, progress=False)
-    seconds = time.perf_counter() - t
-    peak = 0.0
-    if measure_memory:
-        _, peak = tracemalloc.get_traced_memory()
+    seconds, cpu = time.perf_counter() - t, time.process_time() - c
+    ref_seconds = ref_cpu = None
+    if reference:
+        game, sta = world(n), task(deadline, epsilon)  # fresh caches: same work to do
+        t, c = time.perf_counter(), time.process_time()
+        ref = reference_product(game, sta)
+        ref_seconds, ref_cpu = time.perf_counter() - t, time.process_time() - c
+        if not _same(mdp, ref):
+            raise SystemExit(f"{n}x{n}, deadline {deadline}: the two constructions differ")
+        del ref
+    per = None
+    if memory:
+        del mdp
+        game, sta = world(n), task(deadline, epsilon)  # fresh caches
+        tracemalloc.start()
+        mdp = product(game, sta, progress=False)
+        per = tracemalloc.get_traced_memory()[1] / max(mdp.n_transitions, 1)
         tracemalloc.stop()
-    return mdp.n_states, mdp.n_transitions, seconds, peak
+    return Row(n, deadline, mdp.n_states, mdp.n_transitions, seconds, cpu, ref_seconds, ref_cpu,
+               per)
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[8, 16, 32, 64])
+def main(argv: list[str] | None = None) -> list[Row]:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="two small rows (seconds)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[16, 32, 64])
+    ap.add_argument("--deadlines", type=int, nargs="+", default=[4, 12],
+                    help="steps allowed after each event")
     ap.add_argument("--epsilon", type=float, default=0.01)
-    ap.add_argument("--deadline", type=int, default=4, help="steps allowed after each event")
+    ap.add_argument("--no-reference", action="store_true",
+                    help="skip the state-at-a-time peer (for the largest rows)")
     ap.add_argument("--no-memory", action="store_true",
-                    help="skip tracemalloc (it slows the build down about 2x)")
+                    help="skip the tracemalloc build (it slows the build down)")
     args = ap.parse_args(argv)
-    print(f"{'grid':>6} {'states':>10} {'transitions':>12} {'seconds':>8} "
-          f"{'trans/s':>10} {'bytes/trans':>12}")
-    for n in args.sizes:
-        states, trans, seconds, _ = build(n, args.deadline, args.epsilon, False)
-        per = float("nan")
-        if not args.no_memory:
-            _, _, _, peak = build(n, args.deadline, args.epsilon, True)
-            per = peak / trans
-        print(f"{n:>3}x{n:<2} {states:>10,} {trans:>12,} {seconds:>8.2f} "
-              f"{trans / seconds:>10,.0f} {per:>12.0f}")
+    rows_wanted = [(8, 4), (16, 4)] if args.quick else [
+        (n, d) for d in args.deadlines for n in args.sizes
+    ]
+    print(f"{'grid':>7} {'T':>3} {'states':>10} {'transitions':>12} {'seconds':>8} "
+          f"{'cpu s':>7} {'trans/cpu s':>11} {'ref s':>8} {'ref cpu s':>9} "
+          f"{'ref trans/cpu s':>15} {'speed-up (cpu)':>14} {'B/trans':>8}")
+    rows = []
+    for n, d in rows_wanted:
+        r = measure(n, d, args.epsilon, reference=not args.no_reference,
+                    memory=not args.no_memory)
+        rows.append(r)
+        rate = r.transitions / r.cpu
+        if r.reference_seconds is None or r.reference_cpu is None:
+            ref = f"{'-':>8} {'-':>9} {'-':>15} {'-':>14}"
+        else:
+            ref = (f"{r.reference_seconds:>8.2f} {r.reference_cpu:>9.2f} "
+                   f"{r.transitions / r.reference_cpu:>15,.0f} "
+                   f"{r.reference_seconds / r.seconds:>5.1f}x ({r.reference_cpu / r.cpu:.1f}x)")
+        per = "-" if r.bytes_per_transition is None else f"{r.bytes_per_transition:.1f}"
+        print(f"{n:>3}x{n:<3} {d:>3} {r.states:>10,} {r.transitions:>12,} {r.seconds:>8.2f} "
+              f"{r.cpu:>7.2f} {rate:>11,.0f} {ref} {per:>8}", flush=True)
+    return rows
 
 
 if __name__ == "__main__":

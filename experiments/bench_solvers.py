@@ -1,97 +1,132 @@
-"""Benchmark: the solvers on the same product MDPs of growing size.
+"""Benchmark: the solvers on the same MDPs, block by block against the monolithic LP.
 
-For grid worlds of growing size (products of about 1e3 to 1e5 states; two buses, one
-geometric and one with a pmf arrival time, deadlines of 3 steps) each row solves the
-lower model by
+Models: the bus family of the README (an n x n grid, two geometric buses, stations A
+and B, deadline 3) for n = 16, 32, 64, and a random MDP with local successors (long
+chains, many small end components).  Each row solves the lower model (quotient built
+once per model, outside the timings) by
 
-* the occupancy LP through cvxpy with Clarabel,
-* the same LP by a direct Clarabel call on the sparse matrices (no cvxpy),
-* the same LP through cvxpy with HiGHS,
-* interval iteration (tolerance 1e-9),
+* ``topo``: the default LP route, block by block in topological order (direct Clarabel),
+* ``topo-cvx``: the same through cvxpy + Clarabel (what ``synthesize`` runs),
+* ``mono``: the one monolithic LP, direct Clarabel (the route before issue 9),
+* ``highs``: the monolithic LP through cvxpy + HiGHS (the peer),
+* ``ii``: interval iteration in topological order, ``ii-flat``: the plain sweeps,
 
-and prints the seconds of each, the value each reports at the initial state, and the
-largest difference between them.  Also: the canonical model end to end in-process
-(``synthesize`` on models/bus_grid.toml, warm).
+and prints seconds, the ratio of each route to ``topo``, and the largest difference of
+the values at the initial state.  A route is skipped (printed ``skip``) on models above
+its state budget (``--mono-max``, default 30,000 reduced states: the monolithic Clarabel
+LP takes minutes beyond).  Tests never time anything; the figures are printed here.
 
-Targets (issue 5): canonical end to end < 0.5 s; at 1e5 states interval iteration
-< 5 s, direct Clarabel < 60 s, cvxpy+Clarabel within 2x of direct Clarabel.
-
-Run: ``python experiments/bench_solvers.py [--sizes 6 20 64 150] [--skip-cvxpy-above N]``.
+Run: ``python experiments/bench_solvers.py [--quick] [--sizes 16 32 64] [--out DIR]``.
+``--quick`` (small sizes) writes to a scratch folder, never over committed results.
 """
 
 from __future__ import annotations
 
-import argparse
 import time
-from pathlib import Path
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
 
-from mitld_lp import GridWorld, load_model, synthesize
-from mitld_lp.automata.sta import make_sta
-from mitld_lp.automata.translate import to_dta
-from mitld_lp.logic.parser import parse
-from mitld_lp.model import bind_distributions
-from mitld_lp.product import product
+import numpy as np
+from _common import markdown_table, out_dir, parser, shown, text_table, write_text
+
+from mitld_lp import GridWorld, Model
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.solvers.quotient import reduce
+from mitld_lp.synthesis import build_product
+from mitld_lp.testing import random_mdp
 
-SPEC = ("(D[geometric(0.3)] b1 & F(b1 & F[0,3] A)) | "
-        "(D[pmf(0.1, 0.2, 0.3, 0.2, 0.2)] b2 & F(b2 & F[0,3] B))")
-MODELS = Path(__file__).resolve().parent.parent / "models"
+SPEC = ("(D[geometric(0.8)] b1 & F(b1 & F[0,3] A)) | "
+        "(D[geometric(0.3)] b2 & F(b2 & F[0,3] B))")
+ROUTES = ("topo", "topo-cvx", "mono", "highs", "ii", "ii-flat")
 
 
-def grid_mdp(n: int):
+def bus_mdp(n: int) -> MDP:
     world = GridWorld.make(n, n, start=(0, 0), slip=0.1,
-                           regions={"A": [(1, 2)], "B": [(min(3, n - 1), 0)]})
-    spec = parse(SPEC)
-    sta = make_sta(to_dta(spec), bind_distributions(spec), 0.01)
-    return product(world, sta, progress=False)
+                           regions={"A": [(1, 2)], "B": [(3, 0)]})
+    model = Model.from_game(world, SPEC)
+    return build_product(model.game, model.spec, model.distributions,
+                         epsilon=model.epsilon, progress=False).mdp
 
 
-def timed(fn, *args, **kwargs):
+def undecided(mdp: MDP) -> MDP:
+    """``mdp`` started in its first state that is neither target nor prob-0 (a random
+    MDP's state 0 may be decided by the graph analysis, which would time nothing)."""
+    q = reduce(mdp, mdp.target)
+    return replace(mdp, initial=int(np.flatnonzero(q.state_map >= 0)[0]))
+
+
+def timed(fn: Callable[[], Any]) -> tuple[Any, float]:
     t = time.perf_counter()
-    out = fn(*args, **kwargs)
+    out = fn()
     return out, time.perf_counter() - t
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[6, 20, 64, 150])
-    ap.add_argument("--skip-cvxpy-above", type=int, default=200_000,
-                    help="skip the cvxpy rows for larger products")
-    args = ap.parse_args(argv)
+def run_model(name: str, mdp: MDP, mono_max: int) -> list[object]:
+    q = reduce(mdp, mdp.target)
+    t = mdp.target
+    calls: dict[str, Callable[[], Any]] = {
+        "topo": lambda: solve_lp(mdp, t, quotient=q, backend="direct"),
+        "topo-cvx": lambda: solve_lp(mdp, t, quotient=q),
+        "mono": lambda: solve_lp(mdp, t, quotient=q, backend="direct", decompose=False),
+        "highs": lambda: solve_lp(mdp, t, quotient=q, solver="HIGHS", decompose=False),
+        "ii": lambda: interval_iteration(mdp, t, quotient=q, progress=False),
+        "ii-flat": lambda: interval_iteration(mdp, t, quotient=q, progress=False,
+                                              topological=False),
+    }
+    seconds: dict[str, float] = {}
+    values: list[float] = []
+    flags: dict[str, str] = {}
+    for route in ROUTES:
+        if route == "mono" and q.n_states > mono_max:
+            continue
+        res, secs = timed(calls[route])
+        seconds[route] = secs
+        ok = res.status.value == "optimal"
+        flags[route] = "" if ok else "!"
+        if route.startswith("ii"):
+            values += [res.value_lower, res.value_upper]
+        elif ok:
+            values.append(res.value)
+    base = seconds["topo"]
+    cells: list[object] = [name, f"{mdp.n_states:,}", f"{q.n_states:,}"]
+    for route in ROUTES:
+        if route not in seconds:
+            cells.append(f"skip (> {mono_max:,})")
+            continue
+        ratio = "" if route == "topo" else f" ({seconds[route] / base:.1f}x)"
+        cells.append(f"{seconds[route]:.2f}{flags[route]}{ratio}")
+    cells += [f"{values[0]:.9f}", f"{max(values) - min(values):.1e}"]
+    print(text_table(HEADER, [cells]).splitlines()[-1], flush=True)
+    return cells
 
-    model = load_model(MODELS / "bus_grid.toml")
-    synthesize(model)  # warm: imports, caches
-    r, secs = timed(synthesize, model)
-    print(f"canonical model end to end (warm): {secs:.3f} s, value {r.value:.7f}, "
-          f"certified {r.certified}")
-    print()
-    header = (f"{'grid':>6} {'states':>9} {'trans':>10} | {'cvxpy+Clar':>10} {'Clarabel':>9} "
-              f"{'cvxpy+HiGHS':>11} {'interval':>9} | {'value':>10} {'max diff':>9}")
-    print(header)
-    for n in args.sizes:
-        mdp = grid_mdp(n)
-        t = mdp.target
-        rows = {}
-        if mdp.n_states <= args.skip_cvxpy_above:
-            rows["cvxpy+Clar"] = timed(solve_lp, mdp, t, solver="CLARABEL")
-        rows["Clarabel"] = timed(solve_lp, mdp, t, backend="direct")
-        if mdp.n_states <= args.skip_cvxpy_above:
-            rows["cvxpy+HiGHS"] = timed(solve_lp, mdp, t, solver="HIGHS")
-        it, it_s = timed(interval_iteration, mdp, t, progress=False)
-        values = [res.value for res, _ in rows.values()] + [it.value_lower, it.value_upper]
-        cells = []
-        for name in ("cvxpy+Clar", "Clarabel", "cvxpy+HiGHS"):
-            if name in rows:
-                res, s = rows[name]
-                cells.append(f"{s:>{len(name) if len(name) > 9 else 9}.2f}"
-                             + ("" if res.status.value == "optimal" else "!"))
-            else:
-                cells.append(f"{'-':>{len(name) if len(name) > 9 else 9}}")
-        print(f"{n:>3}x{n:<2} {mdp.n_states:>9,} {mdp.n_transitions:>10,} | "
-              f"{cells[0]:>10} {cells[1]:>9} {cells[2]:>11} {it_s:>9.2f} | "
-              f"{it.value_lower:>10.7f} {max(values) - min(values):>9.1e}")
-    print("\n'!' marks a solver status other than optimal.")
+
+HEADER = ("model", "states", "reduced", *(f"{r} s" for r in ROUTES), "value", "max diff")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = parser(__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=None,
+                    help="grid sizes n of the bus family (default 16 32 64)")
+    ap.add_argument("--random-states", type=int, default=None,
+                    help="states of the random local MDP (default 100,000)")
+    ap.add_argument("--mono-max", type=int, default=30_000,
+                    help="skip the monolithic Clarabel LP above this many reduced states")
+    args = ap.parse_args(argv)
+    sizes = args.sizes or ([4, 8] if args.quick else [16, 32, 64])
+    n_random = args.random_states or (2_000 if args.quick else 100_000)
+    out = out_dir(args)
+    print(text_table(HEADER, []).splitlines()[0])
+    rows = [run_model(f"bus {n}x{n}", bus_mdp(n), args.mono_max) for n in sizes]
+    rows.append(run_model(f"random local {n_random:,}",
+                          undecided(random_mdp(n_random, seed=1, locality=8,
+                                               self_loop_fraction=0.2)),
+                          args.mono_max))
+    print("\n'!' marks a status other than optimal; (Nx) is the time over 'topo'.")
+    path = write_text(out / "bench_solvers.md", markdown_table(HEADER, rows))
+    print(f"wrote {shown(path)}")
 
 
 if __name__ == "__main__":

@@ -79,7 +79,7 @@ def sizes(dta: mitld_lp.DTA, formula) -> Sizes:
 def main(argv: list[str] | None = None) -> Sizes:
     ap = C.parser(__doc__.splitlines()[0])
     args = ap.parse_args(argv)
-    out = C.out_dir(args.out)
+    out = C.out_dir(args)
     start = time.perf_counter()
     formula = mitld_lp.parse(SPEC)
     dta = mitld_lp.to_dta(formula)

@@ -166,7 +166,7 @@ Notes
   way the Cartesian count grows with the square of T, while the reachable product stays
   in the hundreds.
 * The paper's grid layout is not in the paper (its figure is missing), so the paper's
-  values are NOT expected to match ours; ours are for the layout of DESIGN.md (start
+  values are NOT expected to match ours; ours are for the layout of models/bus_grid.toml (start
   (0,0), A = (1,2), B = (3,0), slip 0.1).  What must hold, and is asserted: lower rises
   with T toward the exact value, upper falls to it, upper - lower <= eps_achieved, and the
   exact row (clock reduction: geometric buses need no clock, nothing truncated) equals
@@ -178,7 +178,7 @@ Notes
 def main(argv: list[str] | None = None) -> list[Row]:
     ap = C.parser(__doc__.splitlines()[0])
     args = ap.parse_args(argv)
-    out = C.out_dir(args.out)
+    out = C.out_dir(args)
     Ts = (3, 5) if args.quick else (3, 4, 5)
     start = time.perf_counter()
     all_rows: list[Row] = []

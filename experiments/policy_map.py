@@ -172,7 +172,7 @@ def main(argv: list[str] | None = None) -> list[list[Panel]]:
     ap = C.parser(__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0, help="seed of the sampled run")
     args = ap.parse_args(argv)
-    out = C.out_dir(args.out)
+    out = C.out_dir(args)
     start = time.perf_counter()
     cases = MODELS[:1] if args.quick else MODELS
     fig, axes = plt.subplots(len(cases), 3, figsize=(13, 4.9 * len(cases)),

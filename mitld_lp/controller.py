@@ -12,8 +12,11 @@ with an action, tracking the automaton state, the pending events and the clock i
 from __future__ import annotations
 
 import enum
+import os
+import pickle
 from collections.abc import Hashable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,9 +24,11 @@ import numpy as np
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
-from mitld_lp.product import ProductState
+from mitld_lp.product import ProductState, ProductStates
 
 __all__ = ["Observation", "Controller", "RunStatus"]
+
+_SAVE_FORMAT = "mitld_lp.Controller/1"
 
 
 class RunStatus(enum.Enum):
@@ -64,7 +69,14 @@ class Controller:
     beyond_model: bool = False
 
     def __post_init__(self) -> None:
-        self._index = {s: i for i, s in enumerate(self.mdp.states)}
+        if not isinstance(self.mdp.states, ProductStates):  # a hand-made MDP: index it
+            self._index = {s: i for i, s in enumerate(self.mdp.states)}
+
+    def _position(self, state: ProductState) -> int | None:
+        states = self.mdp.states
+        if isinstance(states, ProductStates):
+            return states.position(state)
+        return self._index.get(state)
 
     def reset(self) -> None:
         """Start a new run (the next ``act`` is step 0)."""
@@ -84,6 +96,33 @@ class Controller:
     @property
     def clock(self) -> int:
         return 0 if self._state is None else self._state[2]
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+        """Write the controller (policy, automaton, events, world) to ``path`` so that a
+        robot's process can :meth:`load` it without solving again.  The file is a
+        pickle: load only files you wrote.  Refuses to replace a file unless
+        ``overwrite``."""
+        out = Path(path)
+        if out.exists() and not overwrite:
+            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
+        with out.open("wb") as handle:
+            pickle.dump((_SAVE_FORMAT, self), handle, protocol=pickle.HIGHEST_PROTOCOL)
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Controller:
+        """A controller written by :meth:`save`, reset to step 0.  ``ValueError`` if the
+        file is not one."""
+        source = Path(path)
+        try:
+            with source.open("rb") as handle:
+                tag, controller = pickle.load(handle)
+        except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
+            raise ValueError(f"{source}: not a saved controller ({exc})") from None
+        if tag != _SAVE_FORMAT or not isinstance(controller, cls):
+            raise ValueError(f"{source}: not a saved controller")
+        controller.reset()
+        return controller
 
     def act(self, observation: Observation) -> str | None:
         """The action to take in ``observation.state``; ``None`` once the task is decided."""
@@ -105,14 +144,9 @@ class Controller:
                 raise ValueError(f"events observed a second time: {sorted(again)}")
             q = dta.step(q0, label)
             pending = pending0 - observation.events
-            clock = clock0 + 1
-            limits = [
-                c.truncation for a, c in self.sta.clocks.items()
-                if a in pending and c.truncation is not None
-            ]
-            if limits and clock >= min(limits):
-                self.beyond_model = True
-            clock = min(clock, self.sta.cap(pending))
+            step = self.sta.advance(pending, clock0)
+            clock = step.clock
+            self.beyond_model = self.beyond_model or step.truncated
         self._state = (q, pending, clock)
         self.steps += 1
         if dta.is_accepting(q):
@@ -121,7 +155,7 @@ class Controller:
         if dta.is_rejecting(q):
             self.status = RunStatus.REJECTED
             return None
-        i = self._index.get(ProductState(observation.state, q, pending, clock))
+        i = self._position(ProductState(observation.state, q, pending, clock))
         if i is not None and self.hopeless is not None and self.hopeless[i]:
             self.status = RunStatus.REJECTED
             return None

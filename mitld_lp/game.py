@@ -65,6 +65,16 @@ class Game(Protocol[S]):
 
     The robot moves first (:meth:`actions`), then the environment chooses the events of
     the step, then the world moves (:meth:`successors`).
+
+    Optional: a game whose dynamics never depend on the events may say so with a class
+    attribute ``ignores_events = True``; the product construction then asks
+    :meth:`successors` once per (state, action) instead of once per event outcome.  A
+    game that knows how many states it has may give it as ``n_states`` (an int); the
+    product's size is then bounded before it is built
+    (:func:`mitld_lp.product.estimate_size`).  A game whose dynamics react to named
+    events lists them as ``event_names`` (a frozenset): a specification must then give
+    each of them a distribution, or it would silently never happen
+    (:meth:`mitld_lp.Model.from_game` checks it).
     """
 
     @property
@@ -225,6 +235,20 @@ class ExplicitGame(Generic[S]):
         object.__setattr__(self, "proposition_names", names)
         object.__setattr__(self, "event_transitions", MappingProxyType(overrides))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # The frozen tables are read-only views (which do not pickle): rebuild the game
+        # from plain copies of them, validating again.
+        return (
+            ExplicitGame,
+            (
+                self.initial,
+                {s: dict(row) for s, row in self.transitions.items()},
+                dict(self.labels),
+                self.proposition_names,
+                dict(self.event_transitions),
+            ),
+        )
+
     def _key(self) -> tuple[Any, ...]:
         return (
             self.initial,
@@ -246,6 +270,16 @@ class ExplicitGame(Generic[S]):
     def states(self) -> tuple[S, ...]:
         """Every state of the tables, in the order given."""
         return tuple(self.transitions)
+
+    @property
+    def n_states(self) -> int:
+        """The number of states of the tables."""
+        return len(self.transitions)
+
+    @property
+    def event_names(self) -> frozenset[str]:
+        """The events ``event_transitions`` reacts to."""
+        return frozenset().union(*(events for _, _, events in self.event_transitions))
 
     def actions(self, state: S) -> tuple[str, ...]:
         """The actions listed for ``state``, in table order."""
@@ -298,6 +332,56 @@ def _subsets(events: frozenset[str]) -> tuple[frozenset[str], ...]:
     return tuple(frozenset(c) for r in range(len(items) + 1) for c in combinations(items, r))
 
 
+def _check_labels(game: Game[Any], state: Any, names: frozenset[str]) -> frozenset[str]:
+    """``propositions(state)``: a frozenset within ``names``."""
+    props = game.propositions(state)
+    if not isinstance(props, frozenset):
+        raise GameError(f"state {state!r}: propositions must be a frozenset, got {props!r}")
+    if not props <= names:
+        raise GameError(
+            f"state {state!r}: propositions {sorted(props - names)} are not in "
+            "proposition_names"
+        )
+    return props
+
+
+def _check_actions(game: Game[Any], state: Any) -> tuple[str, ...]:
+    """``actions(state)``: a non-empty tuple of distinct strings."""
+    acts = game.actions(state)
+    if not isinstance(acts, tuple) or not acts:
+        raise GameError(f"state {state!r}: actions must be a non-empty tuple, got {acts!r}")
+    if not all(isinstance(a, str) for a in acts) or len(set(acts)) != len(acts):
+        raise GameError(f"state {state!r}: actions must be distinct strings, got {acts!r}")
+    return acts
+
+
+def _check_distribution(dist: Any, where: str, tolerance: float) -> tuple[Any, ...]:
+    """One ``successors`` answer: a non-empty tuple of ``(next, p)`` pairs with distinct
+    hashable next states and ``p`` in (0, 1] summing to 1 within ``tolerance``.
+    Returns the next states in order."""
+    if not isinstance(dist, tuple) or not dist:
+        raise GameError(f"{where}: successors must be a non-empty tuple, got {dist!r}")
+    nexts: dict[Any, None] = {}
+    total = 0.0
+    for item in dist:
+        if not isinstance(item, tuple) or len(item) != 2:
+            raise GameError(f"{where}: expected (next_state, probability), got {item!r}")
+        nxt, p = item
+        if not _is_real(p) or not (0.0 < float(p) <= 1.0):
+            raise GameError(f"{where}: probability of {nxt!r} must be in (0, 1], got {p!r}")
+        try:
+            fresh = nxt not in nexts
+        except TypeError:
+            raise GameError(f"{where}: next state {nxt!r} is not hashable") from None
+        if not fresh:
+            raise GameError(f"{where}: next state {nxt!r} is listed twice")
+        nexts[nxt] = None
+        total += float(p)
+    if abs(total - 1.0) > tolerance:
+        raise GameError(f"{where}: probabilities sum to {total!r}, not 1")
+    return tuple(nexts)
+
+
 def check_game(
     game: Game[Any],
     events: Iterable[str] = (),
@@ -332,20 +416,8 @@ def check_game(
     all_props: set[str] = set()
     while stack:
         state = stack.pop()
-        props = game.propositions(state)
-        if not isinstance(props, frozenset):
-            raise GameError(f"state {state!r}: propositions must be a frozenset, got {props!r}")
-        if not props <= names:
-            raise GameError(
-                f"state {state!r}: propositions {sorted(props - names)} are not in "
-                "proposition_names"
-            )
-        all_props |= props
-        acts = game.actions(state)
-        if not isinstance(acts, tuple) or not acts:
-            raise GameError(f"state {state!r}: actions must be a non-empty tuple, got {acts!r}")
-        if not all(isinstance(a, str) for a in acts) or len(set(acts)) != len(acts):
-            raise GameError(f"state {state!r}: actions must be distinct strings, got {acts!r}")
+        all_props |= _check_labels(game, state, names)
+        acts = _check_actions(game, state)
         all_actions.update(acts)
         for action in acts:
             choices += 1
@@ -353,29 +425,9 @@ def check_game(
                 where = f"state {state!r}, action {action!r}"
                 if ev:
                     where += f", events {sorted(ev)}"
-                dist = game.successors(state, action, ev)
-                if not isinstance(dist, tuple) or not dist:
-                    raise GameError(f"{where}: successors must be a non-empty tuple, got {dist!r}")
-                nexts: set[Any] = set()
-                total = 0.0
-                for item in dist:
-                    if not isinstance(item, tuple) or len(item) != 2:
-                        raise GameError(
-                            f"{where}: expected (next_state, probability), got {item!r}"
-                        )
-                    nxt, p = item
-                    if not _is_real(p) or not (0.0 < float(p) <= 1.0):
-                        raise GameError(
-                            f"{where}: probability of {nxt!r} must be in (0, 1], got {p!r}"
-                        )
-                    try:
-                        fresh = nxt not in nexts
-                    except TypeError:
-                        raise GameError(f"{where}: next state {nxt!r} is not hashable") from None
-                    if not fresh:
-                        raise GameError(f"{where}: next state {nxt!r} is listed twice")
-                    nexts.add(nxt)
-                    total += float(p)
+                nexts = _check_distribution(game.successors(state, action, ev), where, tolerance)
+                transitions += len(nexts)
+                for nxt in nexts:
                     if nxt not in seen:
                         if len(seen) >= max_states:
                             raise GameError(
@@ -383,9 +435,6 @@ def check_game(
                             )
                         seen.add(nxt)
                         stack.append(nxt)
-                if abs(total - 1.0) > tolerance:
-                    raise GameError(f"{where}: probabilities sum to {total!r}, not 1")
-                transitions += len(dist)
     return GameCheck(
         states=len(seen),
         choices=choices,

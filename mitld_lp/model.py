@@ -1,6 +1,6 @@
 """Model files: a task, a world and the events' distributions in one TOML file.
 
-The schema (DESIGN.md, "Model files")::
+The schema (also in docs/model-files.md)::
 
     name = "bus_grid"                   # required, non-empty string
     spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
@@ -11,6 +11,7 @@ The schema (DESIGN.md, "Model files")::
     start = [0, 0]                      # required, a free cell
     slip = 0.1                          # optional, in [0, 0.5], default 0
     obstacles = [[2, 2]]                # optional, cells, default none
+    stay = false                        # optional: a "stay" action (no slip), default off
 
     [regions]                           # optional (grid only): name -> non-empty cells
     A = [[1, 2]]
@@ -47,12 +48,14 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from mitld_lp import defaults
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec, from_table
 from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
-from mitld_lp.logic.syntax import RESERVED, DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.text import printable
 
 __all__ = [
     "Model",
@@ -63,14 +66,16 @@ __all__ = [
     "DEFAULT_EPSILON",
 ]
 
-DEFAULT_EPSILON = 0.01
-"""The truncation budget used when a model file gives no ``epsilon``."""
-
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+DEFAULT_EPSILON = defaults.EPSILON
+"""The truncation budget used when a model gives no ``epsilon``."""
 
 
 class ModelError(ValueError):
-    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``."""
+    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``, one
+    line of printable characters (a user's names are shown escaped)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(printable(message))
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,12 +106,78 @@ class Model:
         """The external events of the spec."""
         return frozenset(self.distributions)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # A read-only mapping view does not pickle: rebuild it from a plain dict.
+        return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
+                                  self.game, dict(self.distributions), self.source))
+
+    @classmethod
+    def from_game(
+        cls,
+        game: Game[Any],
+        spec: Formula | str,
+        *,
+        distributions: Mapping[str, FirstOccurrence] | None = None,
+        epsilon: float = DEFAULT_EPSILON,
+        name: str = "model",
+    ) -> Model:
+        """A model from a game object and a specification, validated as a file would be.
+
+        ``spec``: a formula or its text; ``distributions`` binds the names used in
+        ``D[name]`` to laws (inline literals such as ``D[geometric(0.3)]`` need none).
+        Raises :class:`ModelError` (source ``<spec>``) when the spec does not parse or is
+        unsupported, a name is unbound or bound but unused, a proposition of the spec is
+        neither a proposition of the game nor an event, a proposition of the game has an
+        event's name, or the game declares events (``event_names``) the spec gives no
+        distribution."""
+        ctx = _Context("<spec>")
+        if not isinstance(game, Game):
+            raise ctx.error(
+                "game", f"must implement the Game protocol (initial, proposition_names, "
+                f"actions, successors, propositions), got {type(game).__name__}"
+            )
+        if not isinstance(epsilon, int | float) or isinstance(epsilon, bool) or not (
+            0.0 < epsilon < 1.0
+        ):
+            raise ctx.error("epsilon", f"must be a number in (0, 1), got {epsilon!r}")
+        named: dict[str, FirstOccurrence] = {}
+        for dname, law in (distributions or {}).items():
+            if not isinstance(law, FirstOccurrence):
+                raise ctx.error(
+                    _join("distributions", str(dname)),
+                    f"must be a distribution (mitld_lp.distributions), got "
+                    f"{type(law).__name__} {law!r}",
+                )
+            named[str(dname)] = law
+        if isinstance(spec, str):
+            formula, report = _parse_spec(spec, ctx)
+            text = spec
+        elif isinstance(spec, Formula):
+            formula, text = spec, str(spec)
+            try:
+                report = check(formula)
+            except FragmentError as exc:
+                raise ctx.error("spec", str(exc)) from exc
+        else:
+            raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
+        bound = _bind_spec(formula, report, named, game, "proposition", None, ctx)
+        return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
+                   distributions=MappingProxyType(bound), source=None)
+
+
+def _unpickle_model(
+    name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
+    distributions: dict[str, FirstOccurrence], source: Path | None,
+) -> Model:
+    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source)
+
 
 # --------------------------------------------------------------------------- helpers
 
 
 def _key(part: str) -> str:
-    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else f'"{part}"'
+    """A key of a key path as TOML writes it: bare, or quoted with escapes."""
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else _show(part)
 
 
 def _join(path: str, key: str) -> str:
@@ -222,82 +293,109 @@ class _GameKind:
 
 
 def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
-    grid = ctx.table(doc["grid"], "grid")
-    ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles"})
+    """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
+    values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
+    from mitld_lp.gridworld import GridError
 
+    grid = ctx.table(doc["grid"], "grid")
+    ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})
     size = grid["size"]
     if not isinstance(size, list) or len(size) != 2:
         raise ctx.error("grid.size", f"must be [width, height], got {_show(size)}")
     width = ctx.integer(size[0], "grid.size[0]")
     height = ctx.integer(size[1], "grid.size[1]")
-    for i, v in enumerate((width, height)):
-        if v < 1:
-            raise ctx.error(f"grid.size[{i}]", f"must be a positive integer, got {v}")
 
-    def on_grid(value: Any, path: str) -> tuple[int, int]:
-        cell = ctx.pair(value, path)
-        x, y = cell
-        if not (0 <= x < width and 0 <= y < height):
-            raise ctx.error(
-                path,
-                f"cell {_show(value)} is off the {width}x{height} grid "
-                f"(x in 0..{width - 1}, y in 0..{height - 1})",
-            )
-        return cell
-
-    def cells(value: Any, path: str) -> list[tuple[int, int]]:
-        out: list[tuple[int, int]] = []
+    def cells(value: Any, path: str) -> Any:
         for i, v in enumerate(ctx.array(value, path)):
-            cell = on_grid(v, f"{path}[{i}]")
-            if cell in out:
-                raise ctx.error(f"{path}[{i}]", f"cell {_show(v)} is listed twice")
-            out.append(cell)
-        return out
+            ctx.pair(v, f"{path}[{i}]")
+        return value
 
-    slip = 0.0
     if "slip" in grid:
-        slip = ctx.number(grid["slip"], "grid.slip")
-        if not 0.0 <= slip <= 0.5:
-            raise ctx.error("grid.slip", f"must be in [0, 0.5], got {_show(grid['slip'])}")
+        ctx.number(grid["slip"], "grid.slip")
+    stay = grid.get("stay", False)
+    if not isinstance(stay, bool):
+        raise ctx.error("grid.stay", f"must be a boolean, got {_type_name(stay)} {_show(stay)}")
     obstacles = cells(grid.get("obstacles", []), "grid.obstacles")
-    start = on_grid(grid["start"], "grid.start")
-    if start in obstacles:
-        raise ctx.error("grid.start", f"cell {_show(grid['start'])} is an obstacle")
-
-    regions: dict[str, frozenset[tuple[int, int]]] = {}
+    ctx.pair(grid["start"], "grid.start")
     table = ctx.table(doc.get("regions", {}), "regions")
-    for name, value in table.items():
-        path = _join("regions", name)
-        if not _IDENT.match(name) or name in RESERVED:
-            raise ctx.error(
-                path,
-                f"region name {_show(name)} is not a proposition name (letters, digits, "
-                f"'_', not starting with a digit, not one of {', '.join(sorted(RESERVED))})",
-            )
-        rcells = cells(value, path)
-        if not rcells:
-            raise ctx.error(path, "must list at least one cell")
-        for i, c in enumerate(rcells):
-            if c in obstacles:
-                raise ctx.error(f"{path}[{i}]", f"cell {_show(list(c))} is an obstacle")
-        regions[name] = frozenset(rcells)
+    regions: Any = {name: cells(value, _join("regions", name)) for name, value in table.items()}
     try:
         return GridWorld(
             width=width,
             height=height,
-            start=start,
-            slip=slip,
-            obstacles=frozenset(obstacles),
-            regions=tuple(regions.items()),
+            # the values as written (lists), so that messages show them as written;
+            # GridWorld validates and normalises them
+            start=grid["start"],
+            slip=grid.get("slip", 0.0),
+            obstacles=obstacles,
+            regions=regions,
+            stay=stay,
         )
-    except ValueError as exc:  # every check above should have caught it first
-        raise ctx.error("grid", str(exc)) from exc
+    except GridError as exc:
+        head, *rest = exc.parts
+        if head in ("width", "height"):
+            path = f"grid.size[{0 if head == 'width' else 1}]"
+        else:
+            path = "regions" if head == "regions" else f"grid.{head}"
+        for part in rest:
+            path = f"{path}[{part}]" if isinstance(part, int) else _join(path, part)
+        raise ctx.error(path, exc.message) from None
+
+
+def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+    """``[prism]``: ``file`` (relative to the model file; to the working directory for
+    :func:`loads_model`), optional ``constants`` (name -> boolean or number), ``labels``
+    (the labels that become propositions, default all) and ``events`` (PRISM actions
+    that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
+    from mitld_lp.worlds import WorldError
+    from mitld_lp.worlds.prism import load_prism
+
+    table = ctx.table(doc["prism"], "prism")
+    ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
+    source = Path(ctx.source)
+    base = source.parent if source.is_file() else Path.cwd()
+    path = base / ctx.string(table["file"], "prism.file")
+    constants = ctx.table(table.get("constants", {}), "prism.constants")
+    for cname, value in constants.items():
+        if not isinstance(value, bool | int | float):
+            raise ctx.error(
+                _join("prism.constants", cname),
+                f"must be a boolean or a number, got {_type_name(value)} {_show(value)}",
+            )
+
+    def names(key: str) -> list[str] | None:
+        if key not in table:
+            return None
+        items = ctx.array(table[key], f"prism.{key}")
+        return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
+
+    labels, events = names("labels"), names("events")
+    try:
+        spec_atoms = atoms(parse(str(doc.get("spec", ""))))
+    except ParseError:  # reported with its position when the spec itself is read
+        spec_atoms = frozenset()
+    try:
+        game = load_prism(path, constants=constants, labels=labels, events=events or ())
+    except WorldError as exc:
+        raise ctx.error("prism", str(exc)) from exc
+    # A PRISM action named like an event of the spec but not listed under events would
+    # be offered to the robot as a move of its own: refuse it rather than let the robot
+    # cause the event.
+    robot_actions = {a for s in game.states for a in game.actions(s)}
+    for action in sorted(spec_atoms & robot_actions):
+        raise ctx.error(
+            "prism.events",
+            f"PRISM action {action!r} has the name of a proposition of spec; list it in "
+            "prism.events if it is the effect of that event",
+        )
+    return game
 
 
 _GAME_KINDS: tuple[_GameKind, ...] = (
     _GameKind(
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
     ),
+    _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
 )
 
 _COMMON_REQUIRED = {"name", "spec"}
@@ -396,12 +494,68 @@ def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: _Context) -> Model
     )
 
 
+def _bind_spec(
+    spec: Formula,
+    report: FragmentReport,
+    named: Mapping[str, FirstOccurrence],
+    game: Game[Any],
+    noun: str,
+    table: str | None,
+    ctx: _Context,
+) -> dict[str, FirstOccurrence]:
+    """Bind each event of ``spec`` to its law and check the spec against the game.
+
+    Every name in ``named`` must be used by the spec; no proposition of the game may
+    have an event's name (``table``: where the game's propositions are declared, for the
+    key path); every other proposition of the spec must be a proposition of the game;
+    events the game declares (an optional ``event_names`` attribute) must each get a law.
+    """
+    bound = _bind_events(report.events, named, ctx)
+    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
+    for dname in named:
+        if dname not in used:
+            raise ctx.error(
+                _join("distributions", dname),
+                f"defined but not used by spec (it has no D[{dname}])",
+            )
+
+    events = frozenset(bound)
+    props = frozenset(game.proposition_names)
+    clashes = sorted(events & props)
+    if clashes:
+        where = _join(table, clashes[0]) if table else "spec"
+        raise ctx.error(
+            where,
+            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
+        )
+    unknown = sorted(atoms(spec) - events - props)
+    if unknown:
+        known = ", ".join(sorted(props)) or "none"
+        evs = ", ".join(sorted(events)) or "none"
+        raise ctx.error(
+            "spec",
+            f"proposition {unknown[0]!r} is neither a {noun} nor an event "
+            f"({noun}s: {known}; events: {evs})",
+        )
+    game_events = frozenset(getattr(game, "event_names", frozenset()))
+    lawless = sorted(game_events - events)
+    if lawless:
+        raise ctx.error(
+            "spec",
+            f"the game reacts to event {lawless[0]!r} but the spec gives it no distribution "
+            f"(add D[mu] {lawless[0]} to the spec)",
+        )
+    return bound
+
+
 def _load(text: str, source: str, path: Path | None) -> Model:
     ctx = _Context(source)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise ctx.error("", "TOML nested too deeply to read") from None
 
     present = [k for k in _GAME_KINDS if k.table in doc]
     if len(present) > 1:
@@ -445,28 +599,8 @@ def _load(text: str, source: str, path: Path | None) -> Model:
             ) from exc
 
     spec, report = _parse_spec(spec_text, ctx)
-    bound = _bind_events(report.events, named, ctx)
-    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
-    for dname in named:
-        if dname not in used:
-            raise ctx.error(
-                _join("distributions", dname),
-                f"defined but not used by spec (it has no D[{dname}])",
-            )
-
-    events = frozenset(bound)
-    props = game.proposition_names
-    noun = kind.proposition_noun
-    clashes = sorted(events & props)
-    if clashes:
-        where = _join(kind.extra_tables[0], clashes[0]) if kind.extra_tables else kind.table
-        raise ctx.error(
-            where,
-            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
-        )
-    unknown = sorted(atoms(spec) - events - props)
-    if unknown:
-        raise ctx.error("spec", f"proposition {unknown[0]!r} is neither a {noun} nor an event")
+    where = kind.extra_tables[0] if kind.extra_tables else kind.table
+    bound = _bind_spec(spec, report, named, game, kind.proposition_noun, where, ctx)
 
     return Model(
         name=name,

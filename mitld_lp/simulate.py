@@ -19,7 +19,11 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.controller import Controller, Observation, RunStatus
 from mitld_lp.game import Game
 
-__all__ = ["SimulationResult", "simulate", "rollout", "Step"]
+__all__ = ["SimulationResult", "simulate", "rollout", "Step", "MAX_RUNS"]
+
+MAX_RUNS = 100_000_000
+"""The most runs :func:`simulate` accepts: at tens of thousands of runs a second, more
+would take days, and the interval's half-width is already below 1e-4."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,13 +53,21 @@ class SimulationResult:
 
 
 def _wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """The Wilson score interval of ``k`` successes in ``n`` runs (95% by default).
+
+    In exact arithmetic its lower end is 0 when ``k = 0`` and its upper end 1 when
+    ``k = n``; the floating-point formula misses them by an ulp either way, which would
+    exclude a true value of exactly 0 or 1, so the ends are set there exactly.
+    """
     if n == 0:
         return 0.0, 1.0
     p = k / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    low = 0.0 if k == 0 else max(0.0, centre - half)
+    high = 1.0 if k == n else min(1.0, centre + half)
+    return low, high
 
 
 def _sample_successor(rng: np.random.Generator, succ) -> Any:
@@ -107,7 +119,15 @@ def simulate(
     max_steps: int = 1000,
     progress: bool | None = None,
 ) -> SimulationResult:
-    """Estimate the probability that ``controller`` satisfies the task."""
+    """Estimate the probability that ``controller`` satisfies the task.
+
+    Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
+    ``1..MAX_RUNS``, ``max_steps`` not an integer ``>= 0``, or ``seed`` negative.
+    """
+    _check_count("runs", runs, 1, MAX_RUNS)
+    _check_count("max_steps", max_steps, 0, None)
+    if seed is not None:
+        _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
     ok = beyond = undecided = 0
     for _ in tqdm(range(runs), disable=(not progress) if progress is not None else None,
@@ -117,4 +137,12 @@ def simulate(
         undecided += status is RunStatus.RUNNING
         beyond += controller.beyond_model
     lo, hi = _wilson(ok, runs)
-    return SimulationResult(runs, ok, ok / runs if runs else 0.0, lo, hi, beyond, undecided, seed)
+    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed)
+
+
+def _check_count(name: str, value: object, low: int, high: int | None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise ValueError(f"{name}: must be an integer, got {value!r}")
+    if value < low or (high is not None and value > high):
+        bound = f"in {low}..{high:,}" if high is not None else f">= {low}"
+        raise ValueError(f"{name}: must be {bound}, got {value!r}")

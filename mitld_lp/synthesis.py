@@ -22,32 +22,40 @@ does better.  So the true optimum lies in ``[lower, upper]``, and
 
 from __future__ import annotations
 
+import csv
+import json
 import logging
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
+from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
-from mitld_lp.logic.parser import parse
 from mitld_lp.logic.syntax import Formula
-from mitld_lp.mdp import MDP, prob0_max
-from mitld_lp.model import Model, bind_distributions
+from mitld_lp.mdp import MDP
+from mitld_lp.model import Model
 from mitld_lp.product import product
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
 from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.solvers.quotient import Quotient, reduce
 from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["synthesize", "SynthesisResult", "ModelSolution", "Check", "Sizes"]
+__all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check",
+           "Sizes"]
 
 log = logging.getLogger(__name__)
+
+_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
 
 Method = Literal["lp", "vi"]
 
@@ -73,6 +81,7 @@ class ModelSolution:
     bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
     lp: LPResult | None
     iteration: IterationResult
+    quotient: Quotient  # the reduction both solvers worked on (its prob0: no hope)
     checks: tuple[Check, ...]
 
     @property
@@ -115,6 +124,7 @@ class SynthesisResult:
     dta: DTA
     sta: STA
     mdp: MDP
+    model: Model
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -126,9 +136,90 @@ class SynthesisResult:
     def seconds(self) -> float:
         return float(sum(self.timings.values()))
 
+    def __repr__(self) -> str:
+        return (
+            f"SynthesisResult(model={self.model.name!r}, lower={self.lower:.7g}, "
+            f"upper={self.upper:.7g}, certified={self.certified}, "
+            f"status={self.status.value!r}, states={self.sizes.states})"
+        )
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        rows = [
+            ("model", self.model.name),
+            ("spec", str(self.model.spec)),
+            ("optimum in", f"[{self.lower:.7f}, {self.upper:.7f}]"),
+            ("certified", "yes" if self.certified else "NO: " + "; ".join(
+                c.name for c in self.failed_checks)),
+            ("status", self.status.value),
+            ("epsilon achieved", f"{self.epsilon_achieved:.3g}"),
+            ("sizes", f"{self.sizes.dta_states} automaton states, {self.sizes.states} "
+                      f"states, {self.sizes.transitions} transitions"),
+        ]
+        body = "".join(
+            f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(v)}</td></tr>"
+            for k, v in rows
+        )
+        return f"<table>{body}</table>"
+
+    def policy_table(self) -> list[dict[str, Any]]:
+        """The policy as data: one row per product state that is still undecided.
+
+        Keys: ``game_state`` (the game's own state), ``automaton_state`` (the obligation
+        still to satisfy, as formula text), ``pending`` (the events that have not
+        happened, sorted), ``clock`` (steps counted for the pending events, capped where
+        their hazards stop changing), ``action`` (the policy's action), ``value`` (the
+        probability that the policy satisfies the task from there, truncation counted as
+        failure: exact, from a linear solve on the policy's Markov chain).
+        """
+        from mitld_lp.product import ProductState
+        from mitld_lp.solvers.iteration import evaluate_policy
+
+        mdp, policy = self.mdp, self.policy
+        values = evaluate_policy(mdp, mdp.target, policy)
+        obligations = self.dta.states
+        rows: list[dict[str, Any]] = []
+        for i, state in enumerate(mdp.states):
+            if not isinstance(state, ProductState) or policy[i] < 0:
+                continue
+            rows.append({
+                "game_state": state.game,
+                "automaton_state": str(obligations[state.automaton]),
+                "pending": sorted(state.pending),
+                "clock": state.clock,
+                "action": mdp.action_name(int(policy[i])),
+                "value": float(values[i]),
+            })
+        return rows
+
+    def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+        """Write :meth:`policy_table` to ``path``: ``.csv`` (one row per state, pending
+        events joined by spaces) or ``.json`` (a list of objects).  Refuses to replace an
+        existing file unless ``overwrite``."""
+        out = Path(path)
+        suffix = out.suffix.lower()
+        if suffix not in (".csv", ".json"):
+            raise ValueError(f"{out}: the suffix must be .csv or .json")
+        if out.exists() and not overwrite:
+            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
+        rows = self.policy_table()
+        if suffix == ".json":
+            out.write_text(json.dumps(rows, default=str) + "\n")
+            return out
+        with out.open("w", newline="") as handle:
+            writer: csv.DictWriter[str] = csv.DictWriter(handle, fieldnames=list(_POLICY_COLUMNS))
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({**row, "game_state": str(row["game_state"]),
+                                 "pending": " ".join(row["pending"]),
+                                 "value": repr(row["value"])})
+        return out
+
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record (the CLI's ``--json``)."""
         return {
+            "model": self.model.name,
             "status": self.status.value,
             "lower": self.lower,
             "upper": self.upper,
@@ -171,6 +262,10 @@ def _close(name: str, a: float, b: float, tol: float) -> Check:
     return Check(name, ok, f"{a:.10g} vs {b:.10g} (|diff| = {abs(a - b):.2e}, tol {tol:g})")
 
 
+_NUMERICAL = (Status.INACCURATE, Status.MAX_ITERATIONS)
+"""LP outcomes that the interval-iteration policy may stand in for."""
+
+
 def _solve_model(
     mdp: MDP,
     target: np.ndarray,
@@ -182,26 +277,43 @@ def _solve_model(
     tol: float,
     certify_tol: float,
     progress: bool,
+    decompose: bool = True,
+    deadline: float = float("inf"),
 ) -> ModelSolution:
-    it = interval_iteration(mdp, target, tol=tol, progress=progress)
+    """Solve one model by ``method`` and certify it (module docs).
+
+    The model is reduced once and every solver works on that :class:`Quotient`.  An LP
+    that does not come back optimal (after its own retries) is replaced by the
+    interval-iteration policy, certified the same way (exact value inside the bracket).
+    """
+    quotient = reduce(mdp, target)
+
+    def remaining() -> float | None:
+        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
+
+    it = interval_iteration(mdp, target, quotient=quotient, tol=tol, progress=progress,
+                            time_limit=remaining())
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
     lp: LPResult | None = None
+    policy, value, status = it.policy, it.value_lower, it.status
     if method == "lp":
-        lp = solve_lp(mdp, target, solver=solver, backend=backend, tol=tol)  # type: ignore[arg-type]
-        ok = lp.status is Status.OPTIMAL and lp.policy is not None
-        checks.append(Check("LP solved", ok, f"{lp.status.value}: {lp.message}"))
-        if ok:
-            assert lp.policy is not None
-            policy, value = lp.policy, lp.value
+        lp = solve_lp(mdp, target, quotient=quotient, solver=solver, backend=backend,  # type: ignore[arg-type]
+                      tol=tol, decompose=decompose, time_limit=remaining())
+        if lp.status is Status.OPTIMAL and lp.policy is not None:
+            policy, value, status = lp.policy, lp.value, lp.status
+            checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
             checks.append(_close("LP primal = dual", lp.primal_objective, lp.dual_objective,
                                  certify_tol))
-        else:
-            policy, value = it.policy, it.value_lower
-        status = lp.status
-    else:
-        policy, value, status = it.policy, it.value_lower, it.status
+        elif lp.status in _NUMERICAL and it.status is Status.OPTIMAL:
+            # A numerical failure after the LP's own retries: the answer is the converged
+            # iteration's, certified below like method "vi"; the LP's word is kept.
+            checks.append(Check("LP replaced by the iteration policy", True,
+                                f"{lp.status.value}: {lp.message}"))
+        else:  # a usage error (solver not installed), a time limit, or no fallback
+            status = lp.status
+            checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
     exact = float(evaluate_policy(mdp, target, policy)[mdp.initial])
     lo, hi = it.value_lower, it.value_upper
     checks.append(Check(
@@ -211,66 +323,96 @@ def _solve_model(
     ))
     checks.append(_close("policy value = optimum", exact, value, certify_tol))
     checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
-    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, tuple(checks))
+    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, quotient,
+                         tuple(checks))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Built:
+    """What :func:`build_product` returns: the automaton, the STA and the product MDP,
+    with the seconds each construction took (``automaton``, ``product``)."""
+
+    dta: DTA
+    sta: STA
+    mdp: MDP
+    timings: Mapping[str, float]
+
+
+def build_product(
+    game: Game[Any],
+    formula: Formula,
+    laws: Mapping[str, FirstOccurrence],
+    *,
+    epsilon: float = defaults.EPSILON,
+    clock_reduction: bool = True,
+    truncation: Mapping[str, int] | None = None,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+    progress: bool | None = None,
+) -> Built:
+    """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
+    ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
+    then the reachable ``product`` with ``game``, within ``max_states`` states and
+    ``max_memory`` bytes (default: half the machine's memory), both checked before the
+    work that would exceed them.  The only place that wires the stages."""
+    t0 = time.perf_counter()
+    dta = to_dta(formula)
+    sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
+    t1 = time.perf_counter()
+    mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
+    t2 = time.perf_counter()
+    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
 
 
 def synthesize(
-    model_or_game: Model | Game[Any],
-    spec: Formula | str | None = None,
+    model: Model,
     *,
     epsilon: float | None = None,
-    distributions: Mapping[str, FirstOccurrence] | None = None,
     method: Method = "lp",
     solver: str = "CLARABEL",
-    backend: str = "cvxpy",
+    backend: str = "auto",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
-    max_states: int = 5_000_000,
-    tol: float = 1e-9,
-    certify_tol: float = 1e-6,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+    tol: float = defaults.TOL,
+    certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
+    decompose: bool = True,
+    time_limit: float | None = None,
 ) -> SynthesisResult:
-    """Maximise the probability that the game's run satisfies the MITLD ``spec``.
+    """Maximise the probability that the model's world satisfies its MITLD spec.
 
-    ``model_or_game``: a loaded :class:`Model` (its spec, epsilon and distributions are
-    the defaults) or any :class:`Game` together with ``spec`` (a formula or its text) and,
-    for ``D[name]`` references, ``distributions`` mapping names to laws.
-    ``method``: ``"lp"`` (occupancy LP through cvxpy, or ``backend="direct"`` Clarabel)
-    or ``"vi"`` (interval iteration alone).  Interval iteration always runs, as the
-    cross-check.  ``truncation`` fixes truncation points per event instead of ``epsilon``.
+    ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
+    made from any game with :meth:`Model.from_game`; ``epsilon`` overrides its
+    truncation budget.  ``method``: ``"lp"`` (occupancy LP through Clarabel, called
+    directly, or through cvxpy with ``backend="cvxpy"``, which also takes any other
+    ``solver`` cvxpy has) or ``"vi"`` (interval iteration alone).  Interval
+    iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
+    per event instead of ``epsilon``.
+    ``decompose``: the LP block by block in topological order (default) or as one LP.
+    ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
     """
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    if isinstance(model_or_game, Model):
-        model = model_or_game
-        game = model.game
-        formula = model.spec if spec is None else (parse(spec) if isinstance(spec, str) else spec)
-        laws = dict(model.distributions) if spec is None else bind_distributions(
-            formula, distributions)
-        eps = model.epsilon if epsilon is None else epsilon
-    else:
-        if spec is None:
-            raise ValueError("spec: required when a game (not a model) is given")
-        game = model_or_game
-        formula = parse(spec) if isinstance(spec, str) else spec
-        laws = bind_distributions(formula, distributions)
-        eps = 0.01 if epsilon is None else epsilon
-    timings["parse"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    dta = to_dta(formula)
-    sta = make_sta(dta, laws, eps, clock_reduction=clock_reduction, truncation=truncation)
-    timings["automaton"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    mdp = product(game, sta, max_states=max_states, progress=progress or None)
-    timings["product"] = time.perf_counter() - t0
+    if not isinstance(model, Model):
+        raise TypeError(
+            f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
+            f"got {type(model).__name__}"
+        )
+    eps = model.epsilon if epsilon is None else epsilon
+    built = build_product(
+        model.game, model.spec, model.distributions, epsilon=eps,
+        clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
+        max_memory=max_memory, progress=progress or None,
+    )
+    dta, sta, mdp = built.dta, built.sta, built.mdp
+    timings: dict[str, float] = dict(built.timings)
 
     t0 = time.perf_counter()
     common = dict(method=method, solver=solver, backend=backend, tol=tol,
-                  certify_tol=certify_tol, progress=progress)
+                  certify_tol=certify_tol, progress=progress, decompose=decompose,
+                  deadline=float("inf") if time_limit is None else t0 + time_limit)
     low = _solve_model(mdp, mdp.target, "lower", **common)  # type: ignore[arg-type]
     if mdp.truncated.any():
         high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
@@ -291,8 +433,8 @@ def synthesize(
         method=method,
         policy=low.policy,
         randomized=randomized,
-        controller=Controller(game, sta, mdp, low.policy,
-                              hopeless=prob0_max(mdp, mdp.target | mdp.truncated)),
+        controller=Controller(model.game, sta, mdp, low.policy,
+                              hopeless=high.quotient.prob0),
         epsilon=eps,
         epsilon_achieved=sta.epsilon_achieved,
         truncation_points=sta.truncation_points,
@@ -303,6 +445,7 @@ def synthesize(
         dta=dta,
         sta=sta,
         mdp=mdp,
+        model=model,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

@@ -49,19 +49,34 @@ def test_solve_human_output(capsys):
     assert "certified:    yes" in text and "0.9244053" in text
 
 
-def test_solver_failure_exits_3_with_the_status(capsys):
-    assert main(["solve", BUS, "--solver", "NO_SUCH_SOLVER", "--json"]) == 3
+def test_an_unknown_solver_is_refused_before_any_work(capsys):
+    assert main(["solve", BUS, "--solver", "NO_SUCH_SOLVER", "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""  # no JSON with NaN in it, no work done
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "unknown or not installed LP solver 'NO_SUCH_SOLVER'" in err[0]
+    assert "CLARABEL" in err[0]  # the installed ones are named
+
+
+def test_solver_names_are_taken_in_any_case(capsys):
+    assert main(["solve", BUS, "--json", "--solver", "highs", "-q"]) == 0
     out = _json(capsys)
-    assert out["certified"] is False
-    assert any("LP solved" in f for f in out["failed_checks"])
+    assert out["lp"]["solver"] == "HIGHS"
+    assert out["lower"] == pytest.approx(0.9244053, abs=1e-6)
+
+
+def test_a_budget_stop_exits_3_with_one_line(capsys):
+    assert main(["solve", BUS, "--max-states", "10", "-q"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mitld-lp: stopped:") and "10" in err[0]
 
 
 def test_info_counts(capsys):
     assert main(["info", BUS, "--json"]) == 0
     out = _json(capsys)
     # Geometric events need no clock: one clock value; 16 cells at most.
-    assert out["clock values"] == 1
-    assert out["game states"] <= 16
+    assert out["clock_values"] == 1
+    assert out["game_states"] <= 16
     assert out["truncation_points"] == {}
     assert out["epsilon_achieved"] == 0
 
@@ -81,7 +96,6 @@ def test_info_without_clock_reduction_grows_with_the_truncation_point(capsys):
     [
         ["solve", "no/such/model.toml"],
         ["info", str(MODELS)],  # a directory
-        ["solve", BUS, "--max-states", "10"],
         ["dta", "G p"],
         ["dta", "F[3,1] p"],
         ["export", BUS],

@@ -10,22 +10,16 @@ import numpy as np
 import pytest
 import stormpy
 import stormpy.environments
+from conftest import HAND_CHOICES, build_mdp
 
-from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers import interval_iteration, solve_lp, write_drn, write_lp
+from mitld_lp.solvers.quotient import prob0_max
+from mitld_lp.testing import random_mdp
 
+# The shared HAND MDP with a state 7 that reaches target, sink or truncated (8).
 HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-        [("h", {3: 0.5, 8: 0.25, 2: 0.25})],
-        [],
-    ],
+    [*HAND_CHOICES, [("h", {3: 0.5, 8: 0.25, 2: 0.25})], []],
     target=[3],
     sink=[2],
     truncated=[8],
@@ -137,3 +131,60 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="everywhere=True"):
         write_lp(decided, decided.target, tmp_path / "d.mps")
     write_lp(decided, decided.target, tmp_path / "d.mps", everywhere=True)
+
+
+def test_drn_is_the_same_whatever_the_chunk(tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    import mitld_lp.solvers.export as export
+
+    mdp = random_mdp(60, seed=9, locality=4)
+    whole = write_drn(mdp, mdp.target, tmp_path / "whole.drn")
+    monkeypatch.setattr(export, "_DRN_CHUNK", 7)  # 60 states: 9 chunks, the last short
+    chunked = write_drn(mdp, mdp.target, tmp_path / "chunked.drn")
+    assert chunked.read_bytes() == whole.read_bytes()
+    values, _ = storm_pmax(chunked)
+    ours = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    np.testing.assert_allclose(values, ours.lower, atol=1e-8)
+
+
+def test_storms_scheduler_on_our_drn_maps_back_to_our_value(tmp_path):
+    """The DRN carries valuations and action names: Storm's optimal scheduler, read
+    back by choice label, is a policy of ours, and its exact value is our optimum."""
+    from stormpy.core._building import DirectEncodingParserOptions
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.solvers.iteration import evaluate_policy
+
+    models = Path(__file__).resolve().parent.parent / "models"
+    r = synthesize(load_model(models / "red_light.toml"))
+    mdp = r.mdp
+    path = write_drn(mdp, mdp.target, tmp_path / "m.drn")
+    lines = path.read_text().splitlines()
+    # every state line is followed by its valuation, the product state it stands for
+    first = lines.index("state 0 init")
+    s0 = mdp.states[0]
+    assert lines[first + 1] == (f"//[game=({s0.game[0]},{s0.game[1]}) & q={s0.automaton} & "
+                                f"pending={{{','.join(sorted(s0.pending))}}} & clock={s0.clock}]")
+    assert sum(1 for line in lines if line.startswith("//[")) == mdp.n_states
+
+    options = DirectEncodingParserOptions()
+    options.build_choice_labeling = True
+    model = stormpy.build_model_from_drn(str(path), options=options)
+    prop = stormpy.parse_properties('Pmax=? [F "target"]')[0]
+    checked = stormpy.model_checking(model, prop, extract_scheduler=True)
+    scheduler = checked.get_scheduler()
+    matrix, labels = model.transition_matrix, model.choice_labeling
+    policy = np.full(mdp.n_states, -1, dtype=np.int64)
+    for s in range(mdp.n_states):
+        row = matrix.get_row_group_start(s) + scheduler.get_choice(s).get_deterministic_choice()
+        (name,) = labels.get_labels_of_choice(row)
+        if name == "absorb":
+            continue
+        # our choice of that name in our state s: the labels are what maps back
+        ours = [c for c in mdp.choices(s) if mdp.action_name(c) == name]
+        assert len(ours) == 1
+        policy[s] = ours[0]
+    value = evaluate_policy(mdp, mdp.target, policy)[mdp.initial]
+    assert value == pytest.approx(r.lower, abs=1e-6)
+    storm = checked.get_value_vector()[model.initial_states[0]]
+    assert value == pytest.approx(storm, abs=1e-6)

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mitld_lp.game import Game, check_game
-from mitld_lp.gridworld import ACTIONS, GridWorld
+from mitld_lp.gridworld import ACTIONS, GridError, GridWorld
 
 
 def dist(g: GridWorld, cell: tuple[int, int], action: str) -> dict[tuple[int, int], float]:
@@ -104,30 +104,81 @@ def test_propositions_from_regions() -> None:
 
 
 @pytest.mark.parametrize(
-    "kwargs, match",
+    "kwargs, path, match",
     [
-        ({"width": 0, "height": 3}, "width: must be a positive integer"),
-        ({"width": 3, "height": -1}, "height: must be a positive integer"),
-        ({"width": True, "height": 3}, "width: must be a positive integer"),
-        ({"width": 3, "height": 3, "slip": 0.6}, r"slip: must be in \[0, 0.5\], got 0.6"),
-        ({"width": 3, "height": 3, "slip": -0.1}, r"slip: must be in \[0, 0.5\]"),
-        ({"width": 3, "height": 3, "slip": True}, "slip: must be a number"),
-        ({"width": 3, "height": 3, "start": (3, 0)}, r"start: \(3, 0\) is off the 3x3 grid"),
-        (
-            {"width": 3, "height": 3, "start": (1, 1), "obstacles": frozenset({(1, 1)})},
-            "start: .* is an obstacle",
-        ),
-        ({"width": 3, "height": 3, "obstacles": frozenset({(0, 5)})}, "obstacles: .* off"),
-        ({"width": 3, "height": 3, "regions": (("A", frozenset({(9, 9)})),)}, "regions.A: .* off"),
-        (
-            {"width": 3, "height": 3, "regions": (("A", frozenset()), ("A", frozenset()))},
-            "regions.A: given twice",
-        ),
+        ({"width": 0, "height": 3}, "width", "must be a positive integer, got 0"),
+        ({"width": 3, "height": -1}, "height", "must be a positive integer"),
+        ({"width": True, "height": 3}, "width", "must be a positive integer"),
+        ({"width": 3, "height": 3, "slip": 0.6}, "slip", r"must be in \[0, 0.5\], got 0.6"),
+        ({"width": 3, "height": 3, "slip": -0.1}, "slip", r"must be in \[0, 0.5\]"),
+        ({"width": 3, "height": 3, "slip": True}, "slip", "must be a number"),
+        ({"width": 3, "height": 3, "start": (3, 0)}, "start",
+         r"cell \(3, 0\) is off the 3x3 grid \(x in 0..2, y in 0..2\)"),
+        ({"width": 3, "height": 3, "start": (1, 1), "obstacles": frozenset({(1, 1)})},
+         "start", r"cell \(1, 1\) is an obstacle"),
+        ({"width": 3, "height": 3, "obstacles": frozenset({(0, 5)})}, "obstacles", "off"),
+        ({"width": 3, "height": 3, "obstacles": [(0, 1), (0, 5)]}, "obstacles[1]", "off"),
+        ({"width": 3, "height": 3, "obstacles": [(0, 1), (2, 2), (0, 1)]}, "obstacles[2]",
+         r"cell \(0, 1\) is listed twice"),
+        ({"width": 3, "height": 3, "regions": (("A", frozenset({(9, 9)})),)}, "regions.A",
+         "off"),
+        ({"width": 3, "height": 3, "regions": {"A": [(0, 0), (2, 2)]}, "obstacles": [(2, 2)]},
+         "regions.A[1]", r"cell \(2, 2\) is an obstacle"),
+        ({"width": 3, "height": 3, "regions": (("A", {(1, 1)}), ("A", {(1, 2)}))},
+         "regions.A", "given twice"),
+        # names a formula cannot write, and empty regions (issue 12)
+        ({"width": 3, "height": 3, "regions": {"F": [(1, 1)]}}, "regions.F",
+         r'region name "F" is not a proposition name .*not one of D, F, G, R, U, X'),
+        ({"width": 3, "height": 3, "regions": {"a b": [(1, 1)]}}, 'regions."a b"',
+         "not a proposition name"),
+        ({"width": 3, "height": 3, "regions": {"true": [(1, 1)]}}, "regions.true",
+         "not a proposition name"),
+        ({"width": 3, "height": 3, "regions": {"2A": [(1, 1)]}}, "regions.2A",
+         "not a proposition name"),
+        ({"width": 3, "height": 3, "regions": {"A": []}}, "regions.A",
+         "must list at least one cell"),
+        ({"width": 3, "height": 3, "stay": 1}, "stay", "must be True or False"),
     ],
 )
-def test_invalid(kwargs: dict, match: str) -> None:
-    with pytest.raises(ValueError, match=match):
+def test_invalid(kwargs: dict, path: str, match: str) -> None:
+    with pytest.raises(GridError, match=match) as err:
         GridWorld(**kwargs)
+    assert err.value.path == path
+    assert str(err.value).startswith(f"{path}: ")
+
+
+def test_make_names_the_index_of_a_bad_cell() -> None:
+    with pytest.raises(GridError) as err:
+        GridWorld.make(4, 4, regions={"A": [(1, 1), (1, 1)]})
+    assert err.value.parts == ("regions", "A", 1) and "listed twice" in str(err.value)
+
+
+def test_stay_is_an_extra_exact_action() -> None:
+    plain = GridWorld.make(3, 3, slip=0.2)
+    assert plain.actions((1, 1)) == ACTIONS
+    with pytest.raises(ValueError, match="no move 'stay'"):
+        plain.successors((1, 1), "stay", frozenset())
+    g = GridWorld.make(3, 3, slip=0.2, stay=True)
+    assert g.actions((1, 1)) == ("N", "S", "E", "W", "stay")
+    assert g.successors((1, 1), "stay", frozenset()) == (((1, 1), 1.0),)
+    assert g.successors((1, 1), "N", frozenset()) == plain.successors((1, 1), "N", frozenset())
+    assert check_game(g).choices == 5 * 9
+    assert g != plain
+
+
+def test_a_huge_grid_is_not_tabulated() -> None:
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        g = GridWorld.make(2000, 2000, start=(5, 5), obstacles=[(1, 1)], regions={"A": [(0, 0)]})
+        assert g.n_states == 2000 * 2000 - 1
+        assert g.successors((5, 5), "E", frozenset()) == (((6, 5), 1.0),)
+        assert g.propositions((0, 0)) == frozenset({"A"}) and g.propositions((7, 7)) == set()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 5e6  # a table of 4e6 cells x 4 moves would take gigabytes
 
 
 @st.composite
@@ -173,3 +224,29 @@ def test_matches_a_naive_rule(g: GridWorld) -> None:
                 want[t] = want.get(t, 0.0) + p
             want = {c: p for c, p in want.items() if p > 0}
             assert_dist(dict(g.successors(cell, a, frozenset())), want)
+
+
+MODEL = """
+name = "t"
+spec = "F[0,3] A"
+[grid]
+size = [3, 3]
+start = [0, 0]
+{extra}
+[regions]
+A = [[2, 2]]
+"""
+
+
+def test_model_files_get_the_stay_action_and_the_grid_errors_with_key_paths() -> None:
+    from mitld_lp.model import ModelError, loads_model
+
+    world = loads_model(MODEL.format(extra="stay = true"), "m.toml").game
+    assert world.actions((0, 0))[-1] == "stay"
+    assert loads_model(MODEL.format(extra=""), "m.toml").game.actions((0, 0)) == ACTIONS
+    with pytest.raises(ModelError, match=r"^m\.toml: grid\.stay: must be a boolean, got an "
+                                         r"integer 1$"):
+        loads_model(MODEL.format(extra="stay = 1"), "m.toml")
+    with pytest.raises(ModelError, match=r"^m\.toml: grid\.obstacles\[1\]: cell \[2, 2\] is "
+                                         r"listed twice$"):
+        loads_model(MODEL.format(extra="obstacles = [[2, 2], [2, 2]]"), "m.toml")

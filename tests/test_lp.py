@@ -9,14 +9,17 @@ untouched MDP, no graph analysis, no MEC collapse); its least solution is Pmax.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import cvxpy as cp
 import numpy as np
 import pytest
 import scipy.optimize
 import scipy.sparse as sp
+from conftest import HAND, HAND_VALUES, build_mdp
 
-from mitld_lp.mdp import MDP, build_mdp, prob0_max, random_mdp
+from mitld_lp.mdp import MDP
+from mitld_lp.model import Model
 from mitld_lp.solvers import (
     LPResult,
     Status,
@@ -25,26 +28,10 @@ from mitld_lp.solvers import (
     occupancy_lp,
     solve_lp,
 )
+from mitld_lp.solvers.quotient import prob0_max
+from mitld_lp.testing import random_mdp
 
-# The MDP of tests/test_mdp.py: 0 has a self-loop and 'go'; {1, 4} is a two-state MEC
-# whose best exit 'd' (1/2 to target) is at 4, the other exit 'a' at 1; 6 reaches the
-# target with probability 1 by looping.  By hand:
-#   v(1) = v(4) = max(0.3 + 0.7 v(0), 0.5),  v(0) = max(v(0), 0.5 v(1))
-#   with 'a': v(1) = 0.3 / 0.65 < 0.5, so 'd': v(1) = v(4) = 1/2, v(0) = 1/4;  v(6) = 1.
-HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-    ],
-    target=[3],
-    sink=[2],
-)
-HAND_VALUES = np.array([0.25, 0.5, 0.0, 1.0, 0.5, 0.0, 1.0])
+# HAND and its hand values: tests/conftest.py.
 
 # A self-loop next to an exit: 0 'wait' (loop) | 'try' -> 0.6 target, 0.4 sink.
 LOOP = build_mdp(
@@ -218,9 +205,9 @@ def test_iteration_limit_is_a_status() -> None:
     mdp = random_mdp(60, seed=1)
     r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"max_iter": 1})
     assert r.status == Status.MAX_ITERATIONS and "MaxIterations" in r.message
-    r = solve_lp(mdp, mdp.target, solver_options={"max_iter": 1})
-    assert not r.status.has_solution or r.status == Status.INACCURATE
-    assert r.message.startswith("cvxpy/CLARABEL")
+    r = solve_lp(mdp, mdp.target, backend="cvxpy", solver_options={"max_iter": 1})
+    assert r.status == Status.MAX_ITERATIONS and r.values is None
+    assert r.message.startswith("cvxpy/CLARABEL: user_limit")
     r = solve_lp(mdp, mdp.target, backend="direct", solver_options={"no_such": 1})
     assert r.status == Status.FAILED and "no_such" in r.message
 
@@ -287,3 +274,119 @@ def test_result_arrays_are_read_only() -> None:
     with pytest.raises(ValueError):
         r.values[0] = 0.0
     assert sp.issparse(occupancy_lp(LOOP, LOOP.target).a_eq)
+
+
+# ------------------------------------------------------------------------------------
+# Block by block (the default) against the one monolithic LP and the value LP.
+# ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_topological_lp_matches_monolithic_and_value_lp(seed: int) -> None:
+    # Local successors: long chains of small components, many end components.
+    mdp = random_mdp(120, seed=100 + seed, locality=3 + seed % 4, self_loop_fraction=0.25,
+                     sink_fraction=0.08, max_choices=3)
+    target = mdp.target
+    ref = reference_values(mdp, target)
+    maybe = ~target & ~prob0_max(mdp, target)
+    mdp = replace(mdp, initial=int(np.argmin(np.where(maybe, np.abs(ref - 0.5), np.inf))))
+    blocks = solve_lp(mdp, target, backend="direct")
+    whole = solve_lp(mdp, target, backend="direct", decompose=False)
+    assert blocks.status == whole.status == Status.OPTIMAL, blocks.message
+    assert blocks.values is not None and blocks.policy is not None
+    # Every block is solved with b = 1: the values are exact everywhere, not only
+    # where the initial state's flow goes.
+    np.testing.assert_allclose(blocks.values, ref, atol=1e-7)
+    assert blocks.value == pytest.approx(whole.value, abs=1e-7)
+    check_certificates(mdp, target, blocks, 1e-6)
+    np.testing.assert_allclose(evaluate_policy(mdp, target, blocks.policy), ref, atol=1e-7)
+    # The occupancy is a feasible flow of the monolithic LP from the initial state.
+    lp = occupancy_lp(mdp, target)
+    y = blocks.occupancy[lp.quotient.choice_origin]
+    np.testing.assert_allclose(lp.a_eq @ y, lp.b_eq, atol=1e-9)
+    assert blocks.primal_objective == pytest.approx(ref[mdp.initial], abs=1e-7)
+
+
+def test_topological_lp_of_hand_mdp_needs_one_block() -> None:
+    # MEC{0} <-> MEC{1,4} is the one non-trivial component; 6 is a single state with a
+    # self-loop: v(6) = 0.5 / (1 - 0.5) = 1 exactly, no LP.
+    r = solve_lp(HAND, HAND.target)
+    assert r.status == Status.OPTIMAL and r.message.startswith("clarabel: 1 block LP")
+    assert r.values is not None
+    assert r.values[6] == 1.0
+    np.testing.assert_allclose(r.values, HAND_VALUES, atol=1e-8)
+
+
+def test_acyclic_model_needs_no_solver() -> None:
+    mdp = build_mdp([[("go", {1: 0.5, 2: 0.5}), ("wait", {0: 0.9, 2: 0.1})],
+                     [("go", {3: 0.6, 2: 0.4})], [], []], target=[3], sink=[2])
+    r = solve_lp(mdp, mdp.target)
+    assert r.status == Status.OPTIMAL and r.iterations == 0 and r.solver == ""
+    assert r.value == pytest.approx(0.3, abs=1e-15)  # 'go' twice: 0.5 * 0.6
+
+
+def test_time_limit_is_a_status() -> None:
+    mdp = random_mdp(200, seed=4, locality=None)
+    for decompose in (True, False):
+        r = solve_lp(mdp, mdp.target, time_limit=0.0, decompose=decompose)
+        assert r.status == Status.TIME_LIMIT and r.values is None
+
+
+# ------------------------------------------------------------------------------------
+# Issue 12: an inaccurate Clarabel solve is retried, then replaced (not reported).
+# ------------------------------------------------------------------------------------
+
+
+def _inaccurate_case() -> Model:
+    """Issue 12's 71-state product on which Clarabel returned 'inaccurate'."""
+    from mitld_lp import GridWorld
+    from mitld_lp.distributions import pmf
+
+    world = GridWorld.make(2, 3, start=(1, 1), slip=0.2, regions={"A": [(0, 1)]})
+    spec = "(D[exponential(0.7)] e2) & ((D[mu1] e1) & (F[3,5] (!A)))"
+    return Model.from_game(world, spec, distributions={"mu1": pmf([0, 0.75, 0, 0, 0.25])})
+
+
+def test_inaccurate_clarabel_solve_is_retried() -> None:
+    from mitld_lp import synthesize
+
+    model = _inaccurate_case()
+    mdp = synthesize(model, method="vi").mdp
+    highs = solve_lp(mdp, mdp.target, solver="HIGHS", decompose=False)
+    assert highs.status == Status.OPTIMAL and highs.value == pytest.approx(1.0, abs=1e-9)
+    for backend in ("cvxpy", "direct"):
+        r = solve_lp(mdp, mdp.target, backend=backend, decompose=False)  # type: ignore[arg-type]
+        assert r.status == Status.OPTIMAL, r.message
+        assert "retried" in r.message
+        assert r.value == pytest.approx(1.0, abs=1e-8)
+    result = synthesize(model)
+    assert result.certified and result.lower == pytest.approx(1.0, abs=1e-9)
+
+
+def test_unfixable_lp_is_replaced_by_the_iteration_policy(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import mitld_lp.solvers.lp as lp_module
+    from mitld_lp import synthesize
+
+    monkeypatch.setattr(lp_module, "_retries", lambda settings: iter(()))
+    result = synthesize(_inaccurate_case(), decompose=False)
+    assert result.lower_model.lp is not None
+    assert result.lower_model.lp.status == Status.INACCURATE
+    assert result.certified and result.status == Status.OPTIMAL
+    assert result.lower == pytest.approx(1.0, abs=1e-9)
+    names = [c.name for c in result.lower_model.checks]
+    assert "LP replaced by the iteration policy" in names
+
+
+def test_synthesize_time_limit_is_a_status_not_a_hang() -> None:
+    from mitld_lp import load_model, synthesize
+
+    model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
+    result = synthesize(model, time_limit=0.0)
+    assert result.status == Status.TIME_LIMIT and not result.certified
+    assert result.lower_model.iteration.status == Status.TIME_LIMIT
+    assert result.lower_model.lp is not None
+    assert result.lower_model.lp.status == Status.TIME_LIMIT
+    # The bracket so far is still a bracket of the true optimum (Storm: 0.9244053).
+    assert result.lower_model.bracket[0] <= 0.9244053 <= result.lower_model.bracket[1]

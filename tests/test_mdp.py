@@ -5,37 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import HAND, build_mdp
 
-from mitld_lp.mdp import (
-    ABSORB,
-    MDP,
-    build_mdp,
-    maximal_end_components,
-    prob0_max,
-    prob1_max,
-    random_mdp,
-    reduce,
-)
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.solvers.quotient import maximal_end_components, prob0_max, prob1_max, reduce
+from mitld_lp.testing import random_mdp
 
-# 0: 'stay' self-loop | 'go' -> 1 or 2           (0 alone is an end component)
-# 1: 'a' -> 3 (target) or 0 | 'b' -> 4           (1, 4 form a MEC with exits a, d)
-# 2: sink   3: target
-# 4: 'c' -> 1 | 'd' -> 3 or 2
-# 5: 'e' -> 2 only                               (prob 0, not absorbing)
-# 6: 'f' -> 6 or 3 | 'g' -> 2                    (prob 1 by f)
-HAND = build_mdp(
-    [
-        [("stay", {0: 1.0}), ("go", {1: 0.5, 2: 0.5})],
-        [("a", {3: 0.3, 0: 0.7}), ("b", {4: 1.0})],
-        [],
-        [],
-        [("c", {1: 1.0}), ("d", {3: 0.5, 2: 0.5})],
-        [("e", {2: 1.0})],
-        [("f", {6: 0.5, 3: 0.5}), ("g", {2: 1.0})],
-    ],
-    target=[3],
-    sink=[2],
-)
+# HAND (tests/conftest.py): 0 loops or goes; {1, 4} a MEC; 2 sink, 3 target; 5 -> sink
+# only (prob 0, not absorbing); 6 reaches the target with probability 1 by looping.
 
 
 def mask(n: int, idx: list[int]) -> np.ndarray:
@@ -234,3 +211,12 @@ def test_quotient_has_no_end_components(seed: int) -> None:
     inner = np.ones(n + 1, dtype=bool)
     inner[n] = False
     assert maximal_end_components(quotient_mdp, inner).n_mecs == 0
+
+
+def test_unique_is_numpys_unique():
+    from mitld_lp.arrays import unique
+
+    rng = np.random.default_rng(3)
+    for size in (0, 1, 7, 1000):
+        a = rng.integers(-5, 20, size=size)
+        np.testing.assert_array_equal(unique(a), np.unique(a))

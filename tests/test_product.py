@@ -1,7 +1,7 @@
 """Independent checks of the product construction (``mitld_lp.product``).
 
 The reference is a brute-force product written here from the paper's definitions (the
-STA's four cases, the product MDP of Section III-C) with DESIGN.md's fixes (the hazard
+STA's four cases, the product MDP of Section III-C) with this package's corrections (the hazard
 instead of the pmf; events never at step 0; the automaton reads the step-0 label first):
 
 * the grid moves are recomputed here (intended cell ``1 - 2 slip``, each perpendicular
@@ -40,7 +40,15 @@ from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic import parse
 from mitld_lp.logic.syntax import FALSE, TRUE
 from mitld_lp.model import load_model
-from mitld_lp.product import ProductState, ProductTooLarge, product
+from mitld_lp.product import (
+    BYTES_PER_STATE,
+    BYTES_PER_TRANSITION,
+    ProductState,
+    ProductTooLarge,
+    default_max_memory,
+    estimate_size,
+    product,
+)
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
@@ -468,3 +476,211 @@ def test_formula_false_at_step_zero_gives_an_initial_sink():
     mdp = product(game, make_sta(to_dta(parse("A & F[0,3] A")), {}, 0.01))
     assert bool(mdp.sink[mdp.initial])
     assert product_value(mdp) == 0.0
+
+
+# --------------------------------------------------------------------------- the array build
+
+
+def _reference():
+    """The first, state-at-a-time construction (experiments/_reference_product.py)."""
+    import sys
+
+    experiments = str(Path(__file__).resolve().parent.parent / "experiments")
+    if experiments not in sys.path:
+        sys.path.insert(0, experiments)
+    from _reference_product import reference_product
+
+    return reference_product
+
+
+def assert_same_mdp(a, b) -> None:
+    """Equal state for state, in the same order, and bit for bit in every array."""
+    assert a.n_states == b.n_states and a.initial == b.initial
+    assert list(a.states) == list(b.states)
+    assert a.action_names == b.action_names
+    for name in ("row_groups", "choice_actions", "target", "sink", "truncated"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(a.matrix, name), getattr(b.matrix, name)), name
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in MODELS.glob("*.toml")))
+def test_array_build_equals_the_state_at_a_time_build_on_the_models(name):
+    m = load_model(MODELS / name)
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_array_build_equals_the_state_at_a_time_build_on_the_example(case):
+    dists, _, kw, _ = CASES[case]
+    game = GridWorld.make(2, 2, start=(0, 0), slip=0.1, regions=GRID)
+    sta = make_sta(to_dta(parse(PAPER)), dists, 0.01, **kw)
+    assert_same_mdp(product(game, sta), _reference()(game, sta))
+
+
+RANDOM_SPECS = (
+    ("D[mu1] e1 & F(e1 & F[0,2] A)", {"e1": pmf([0.2, 0.5, 0.3])}),
+    ("(D[mu1] e1 & F(e1 & F[0,3] A)) | (D[mu2] e2 & F[1,4] (e2 & B))",
+     {"e1": geometric(0.4), "e2": pmf([0.1, 0.3, 0.2, 0.4])}),
+    ("!B U[0,5] (A & (D[mu1] e1 & F e1))", {"e1": pmf([0.5, 0.25])}),
+    ("F[0,4] A & G[0,3] !B", {}),
+)
+
+
+def _random_game(rng: np.random.Generator, events: list[str]):
+    from mitld_lp.game import ExplicitGame
+
+    n = int(rng.integers(2, 9))
+    names = ["a", "b", "c"]
+
+    def dist():
+        k = int(rng.integers(1, min(n, 3) + 1))
+        succ = rng.choice(n, size=k, replace=False)
+        w = rng.random(k) + 0.05
+        return {int(s): float(x) for s, x in zip(succ, w / w.sum(), strict=True)}
+
+    transitions = {}
+    for s in range(n):
+        acts = list(rng.permutation(names)[: int(rng.integers(1, 4))])
+        transitions[s] = {a: dist() for a in acts}
+    labels = {s: {p for p in "AB" if rng.random() < 0.35} for s in range(n)}
+    overrides = {}
+    for s in range(n):
+        for a in transitions[s]:
+            if events and rng.random() < 0.4:
+                happened = frozenset(e for e in events if rng.random() < 0.6)
+                overrides[s, a, happened] = dist()
+    return ExplicitGame(
+        initial=0, transitions=transitions, labels=labels,
+        proposition_names=frozenset("AB"), event_transitions=overrides,
+    )
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_array_build_equals_the_state_at_a_time_build_on_random_games(seed):
+    rng = np.random.default_rng(seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    kw = {"clock_reduction": False, "truncation": dict.fromkeys(dists, 3)} if seed % 3 == 0 else {}
+    sta = make_sta(to_dta(parse(text)), dists, 0.01, **kw)
+    mdp = product(game, sta)
+    assert_same_mdp(mdp, _reference()(game, sta))
+    # every record maps back to its index
+    for i, s in enumerate(mdp.states):
+        assert mdp.states.position(s) == i and mdp.states.index(s) == i and s in mdp.states
+    stranger = ProductState(999, 0, frozenset(), 0)
+    assert mdp.states.position(stranger) is None and stranger not in mdp.states
+    with pytest.raises(ValueError, match="not a state"):
+        mdp.states.index(stranger)
+
+
+# --------------------------------------------------------------------------- budgets
+
+
+def test_size_estimate_counts_the_factors():
+    game = GridWorld.make(3, 3, obstacles=[(2, 2)], regions={"A": [(1, 1)]})
+    dists = {"a": geometric(0.5), "b": pmf([0.2, 0.3, 0.5])}  # caps 0 and 2
+    sta = make_sta(to_dta(parse("D[mu1] a & D[mu2] b & F(a & F[0,2] A) & F b")), dists, 0.01)
+    # situations by enumeration: every pending set with clocks 0..max cap of the set
+    caps = {"a": 0, "b": 2}
+    situations = sum(
+        max((caps[e] for e in pend), default=0) + 1
+        for r in range(3) for pend in itertools.combinations("ab", r)
+    )
+    assert situations == 1 + 1 + 3 + 3
+    est = estimate_size(game, sta)
+    dta = sta.dta
+    live = [q for q in range(dta.n_states) if not dta.is_accepting(q) and not dta.is_rejecting(q)]
+    assert (est.game_states, est.automaton_states, est.situations) == (8, len(live), 8)
+    assert est.states == 8 * len(live) * 8 + 3
+    assert product(game, sta).n_states <= est.states
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_size_estimate_bounds_random_products(seed):
+    rng = np.random.default_rng(100 + seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    sta = make_sta(to_dta(parse(text)), dists, 0.01)
+    est = estimate_size(game, sta)
+    assert est.game_states == len(game.transitions)
+    assert product(game, sta).n_states <= est.states
+
+
+def test_a_huge_grid_is_refused_at_the_state_budget_without_being_tabulated():
+    import tracemalloc
+
+    sta = make_sta(to_dta(parse("F[0,30] A")), {}, 0.01)
+    tracemalloc.start()
+    try:
+        game = GridWorld.make(1000, 1000, start=(500, 500), regions={"A": [(0, 0)]})
+        with pytest.raises(ProductTooLarge) as err:
+            product(game, sta, max_states=1000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6  # a tabulated 1000 x 1000 grid takes gigabytes
+    text = str(err.value)
+    assert "1,000 reachable states" in text and "1,000,000 game states" in text
+
+
+def test_the_memory_budget_is_checked_before_the_states_are_stored():
+    m = load_model(MODELS / "patrol.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    mdp = product(m.game, sta, max_memory=10**9)
+    # the whole product at the measured rates, by hand
+    need = mdp.n_states * BYTES_PER_STATE + mdp.n_transitions * BYTES_PER_TRANSITION
+    assert need > 2_000_000
+    with pytest.raises(ProductTooLarge, match=r"more than max_memory = 2\.0 MB") as err:
+        product(m.game, sta, max_memory=2_000_000)
+    found = int(re.search(r"\(([\d,]+) states found", str(err.value)).group(1).replace(",", ""))
+    assert found < mdp.n_states
+
+
+def test_default_memory_budget_is_half_the_machine():
+    meminfo = Path("/proc/meminfo")
+    if not meminfo.exists():
+        pytest.skip("no /proc/meminfo to compare with")
+    kb = int(re.search(r"MemTotal:\s+(\d+) kB", meminfo.read_text()).group(1))
+    assert default_max_memory() == kb * 1024 // 2
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in MODELS.glob("*.toml")))
+def test_component_counts_from_codes_equal_the_counts_over_records(name):
+    from dataclasses import replace
+
+    from mitld_lp.product import component_counts
+
+    m = load_model(MODELS / name)
+    mdp = product(m.game, make_sta(to_dta(m.spec), m.distributions, m.epsilon))
+    by_records = component_counts(replace(mdp, states=tuple(mdp.states)))
+    assert component_counts(mdp) == by_records
+    ordinary = [s for s in mdp.states if isinstance(s, ProductState)]
+    assert by_records["clock_values"] == len({s.clock for s in ordinary})
+    assert by_records["ordinary_states"] + 3 >= mdp.n_states
+
+
+@pytest.mark.parametrize("seed", [1, 5])
+def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, monkeypatch):
+    """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("mitld_lp.product"), "_DENSE_LIMIT", 8)
+    rng = np.random.default_rng(seed)
+    text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
+    game = _random_game(rng, sorted(dists))
+    sta = make_sta(to_dta(parse(text)), dists, 0.01)
+    assert_same_mdp(product(game, sta), _reference()(game, sta))
+    m = load_model(MODELS / "red_light.toml")
+    sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
+    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
+
+
+def test_product_refuses_a_proposition_it_could_never_see():
+    from mitld_lp import GridWorld, make_sta, parse, to_dta
+
+    world = GridWorld.make(2, 1, start=(0, 0), regions={"A": [(1, 0)]})
+    sta = make_sta(to_dta(parse("F[0,3] a")), {}, 0.01)
+    with pytest.raises(ValueError, match=r"proposition 'a' of the formula is neither .*\(A\)"):
+        product(world, sta)

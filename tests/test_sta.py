@@ -2,7 +2,7 @@
 
 Every expected probability is worked out here from the distributions' masses (plain
 arithmetic, ``math``/``scipy.stats`` for the Poisson), never read back from
-``mitld_lp.distributions``; the hazard is DESIGN.md's
+``mitld_lp.distributions``; the hazard is
 ``h(k) = mu(k) / (1 - sum_{j<k} mu(j))`` and events never happen at step 0.
 
 Truncation at ``T``: a run in which a truncated event has not happened by step ``T``
@@ -51,7 +51,7 @@ def hazard_from_masses(masses: list[float], k: int, never: float = 0.0) -> float
     alive = survival_from_masses(masses, k - 1, never)
     m = masses[k - 1] if k <= len(masses) else 0.0
     if alive <= 0.0:
-        return 1.0  # unreachable condition; the convention of DESIGN.md
+        return 1.0  # unreachable condition; the package's convention
     return m / alive
 
 
@@ -353,3 +353,18 @@ def test_simulation_matches_the_chain_of_outcomes():
                 p = per_set.get(E(s), 0.0)
                 se = math.sqrt(max(p * (1 - p), 1e-12) / n)
                 assert abs(emp - p) <= 5 * se + 2e-5, (t, s, emp, p)
+
+
+def test_advance_counts_caps_and_flags_the_truncation_point():
+    # a: pmf on 1..3 (hazard constant, = 1, from step 3: cap 2); b truncated at T = 4.
+    sta = sta_for({"a": pmf([0.2, 0.3, 0.5]), "b": poisson(1.0)}, truncation={"b": 4})
+    assert sta.clocks["a"].cap == 2 and sta.clocks["b"].cap == 3
+    both, a_only, b_only = E({"a", "b"}), E({"a"}), E({"b"})
+    # t -> t + 1 capped at the largest cap of the pending events
+    assert [sta.advance(a_only, t).clock for t in range(5)] == [1, 2, 2, 2, 2]
+    assert [sta.advance(both, t).clock for t in range(3)] == [1, 2, 3]
+    assert sta.advance(E(), 7).clock == 0
+    # the step into t + 1 >= T_b crosses b's truncation point while b is pending
+    assert [sta.advance(b_only, t).truncated for t in range(5)] == [False] * 3 + [True] * 2
+    assert sta.advance(b_only, 3).clock == 3  # held at the last modelled value
+    assert not any(sta.advance(a_only, t).truncated for t in range(6))

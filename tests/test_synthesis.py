@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mitld_lp import GridWorld, Observation, RunStatus, load_model, simulate, synthesize
+from mitld_lp import GridWorld, Model, Observation, RunStatus, load_model, simulate, synthesize
 from mitld_lp.solvers.result import Status
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
@@ -46,7 +46,7 @@ def test_hand_value_deterministic_corridor():
     # A is two moves away and must be occupied at the very step the event happens; the
     # event comes at step 1, 2, 3 with 0.2, 0.3, 0.4 and never with 0.1.  The robot is
     # at A from step 2 on, so it succeeds exactly when 2 <= K <= 3: 0.3 + 0.4.
-    r = synthesize(_corridor(3, 0.0), "D[pmf(0.2, 0.3, 0.4)] b & F(b & F[0,0] A)")
+    r = synthesize(Model.from_game(_corridor(3, 0.0), "D[pmf(0.2, 0.3, 0.4)] b & F(b & F[0,0] A)"))
     assert r.certified, r.failed_checks
     assert r.lower == pytest.approx(0.7, abs=1e-7)
     assert r.upper == pytest.approx(0.7, abs=1e-7)
@@ -56,7 +56,7 @@ def test_hand_value_slippery_corridor():
     # 2x1 corridor, slip 0.1: moving E reaches A with 0.8, else both perpendicular moves
     # leave the grid and the robot stays.  P(at A at step 1) = 0.8, at step 2 = 0.8 +
     # 0.2 * 0.8 = 0.96.  The event is at step 1 or 2 with 1/2 each: 0.5*0.8 + 0.5*0.96.
-    r = synthesize(_corridor(2, 0.1), "D[pmf(0.5, 0.5)] b & F(b & F[0,0] A)")
+    r = synthesize(Model.from_game(_corridor(2, 0.1), "D[pmf(0.5, 0.5)] b & F(b & F[0,0] A)"))
     assert r.certified, r.failed_checks
     assert r.lower == pytest.approx(0.88, abs=1e-7)
     assert r.upper == pytest.approx(0.88, abs=1e-7)
@@ -72,11 +72,12 @@ def test_truncation_bracket_contains_the_exact_value():
     masses = [float(poisson.pmf(k - 1, lam)) for k in range(1, 40)]
     spec_exact = f"D[pmf({', '.join(repr(m) for m in masses)})] b & F(b & F[0,1] A)"
     world = GridWorld.make(4, 1, start=(0, 0), slip=0.1, regions={"A": [(3, 0)]})
-    exact = synthesize(world, spec_exact)
+    exact = synthesize(Model.from_game(world, spec_exact))
     assert exact.truncation_points == {}
     widths = []
     for eps in (0.2, 0.05, 0.01):
-        r = synthesize(world, f"D[poisson({lam})] b & F(b & F[0,1] A)", epsilon=eps)
+        spec = f"D[poisson({lam})] b & F(b & F[0,1] A)"
+        r = synthesize(Model.from_game(world, spec), epsilon=eps)
         assert r.certified, r.failed_checks
         assert r.truncation_points, "a Poisson law has no constant hazard: it is truncated"
         assert r.lower - 1e-7 <= exact.lower <= r.upper + 1e-7

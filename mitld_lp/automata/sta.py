@@ -7,7 +7,7 @@ have not happened yet.  Two facts make it small and exact here:
   age of *every* pending event is the current step ``t``: one clock serves them all
   (the paper keeps one per event; they would always be equal).
 * The per-step probability of a pending event ``a`` at step ``k`` is its *hazard*
-  ``h_a(k) = mu_a(k) / P(K_a > k - 1)`` (DESIGN.md; the paper's ``mu_a(v + tau)`` is right
+  ``h_a(k) = mu_a(k) / P(K_a > k - 1)`` (the paper's ``mu_a(v + tau)`` is right
   only for the geometric distribution).  An event whose hazard is constant from step
   ``k0`` on needs the clock only up to ``k0 - 1`` (memoryless: no clock at all); an
   event whose hazard never becomes constant is truncated at a point ``T_a``: a run still
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
 
-__all__ = ["EventClock", "STA", "EventOutcome", "TRUNCATED", "make_sta"]
+__all__ = ["EventClock", "STA", "EventOutcome", "ClockStep", "TRUNCATED", "make_sta"]
 
 TRUNCATED = -1
 """The clock value of an outcome that ran past a truncation point."""
@@ -60,6 +60,20 @@ class EventClock:
         return 0.0 if self.truncation is None else float(
             self.distribution.survival(self.truncation)
         )
+
+
+@dataclass(frozen=True, slots=True)
+class ClockStep:
+    """The clock after one step (:meth:`STA.advance`).
+
+    ``clock``: ``min(t + 1, cap(pending))``, the value the model keeps; ``truncated``:
+    some pending event ran past its truncation point (``t + 1 >= T_a``), so the model
+    has left its truncated region (the product sends the run to the truncation sink;
+    a controller keeps acting with ``clock``).
+    """
+
+    clock: int
+    truncated: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,6 +118,19 @@ class STA:
         """The largest clock value that still matters while ``pending`` are pending."""
         return max((self.clocks[a].cap for a in pending), default=0)
 
+    def advance(self, pending: frozenset[str], clock: int) -> ClockStep:
+        """The clock one step after ``clock`` while ``pending`` are still pending.
+
+        The one rule of the clock: it counts steps, ``t -> t + 1``; it is capped at
+        ``cap(pending)`` (beyond it no pending hazard changes); and the step crosses a
+        truncation point when some pending event ``a`` has ``t + 1 >= T_a``.
+        """
+        t = clock + 1
+        crossed = any(
+            (T := self.clocks[a].truncation) is not None and t >= T for a in pending
+        )
+        return ClockStep(min(t, self.cap(pending)), crossed)
+
     def outcomes(self, pending: frozenset[str], clock: int) -> tuple[EventOutcome, ...]:
         """The distribution of the events of the next step, from ``clock`` with ``pending``.
 
@@ -124,14 +151,8 @@ class STA:
                 continue
             occurred = frozenset(a for a, yes in zip(events, happened, strict=True) if yes)
             left = pending - occurred
-            t = clock + 1
-            if any(
-                (T := self.clocks[a].truncation) is not None and t >= T for a in left
-            ):
-                nxt = TRUNCATED
-            else:
-                nxt = min(t, self.cap(left))
-            out.append(EventOutcome(occurred, p, left, nxt))
+            step = self.advance(left, clock)
+            out.append(EventOutcome(occurred, p, left, TRUNCATED if step.truncated else step.clock))
         result = tuple(out)
         self._cache[key] = result
         return result

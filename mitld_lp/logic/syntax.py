@@ -19,12 +19,14 @@ precedence rules allow (loosest first: ``->``, ``|``, ``&``, ``U``/``R``, unary)
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
 __all__ = [
     "RESERVED",
+    "is_proposition_name",
     "Interval",
     "DistRef",
     "DistLiteral",
@@ -62,6 +64,14 @@ __all__ = [
 #: terminal; a test checks the two agree): never a proposition, event, region or
 #: distribution name.
 RESERVED = frozenset({"true", "false", "X", "F", "G", "U", "R", "D"})
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+def is_proposition_name(name: object) -> bool:
+    """Whether a formula can write ``name`` as a proposition: letters, digits and ``_``,
+    not starting with a digit, and not one of :data:`RESERVED`."""
+    return isinstance(name, str) and bool(_NAME.match(name)) and name not in RESERVED
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,10 +1,16 @@
 """Solvers for maximal reachability on a :class:`mitld_lp.mdp.MDP`.
 
 * :func:`solve_lp` -- the occupancy-measure LP (cvxpy with any installed LP solver, or
-  Clarabel called directly), its duals as the value function, and the policies;
-* :func:`interval_iteration` -- sound lower / upper bounds by value iteration;
+  Clarabel called directly), block by block in topological order by default
+  (``decompose=False``: one monolithic LP), its duals as the value function, and the
+  policies;
+* :func:`interval_iteration` -- sound lower / upper bounds by value iteration, also in
+  topological order by default;
 * :func:`evaluate_policy` -- the exact value of a deterministic policy;
 * :func:`write_lp`, :func:`write_drn` -- exports for external solvers and Storm.
+
+All of them start from :func:`mitld_lp.solvers.quotient.reduce`; pass its
+:class:`~mitld_lp.solvers.quotient.Quotient` as ``quotient=`` to reduce a model once.
 """
 
 from mitld_lp.solvers.export import write_drn, write_lp

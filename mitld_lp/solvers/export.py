@@ -4,7 +4,7 @@ Both writers refuse to overwrite an existing file unless ``overwrite=True``.
 
 LP names: column ``y<c>`` is the occupancy of original choice ``c``; row ``s<i>`` is the
 flow constraint of original state ``i`` (a maybe state outside any MEC), row ``mec<k>``
-the one of collapsed MEC ``k`` (see :func:`mitld_lp.mdp.maximal_end_components`).
+the one of collapsed MEC ``k`` (see :func:`mitld_lp.solvers.quotient.maximal_end_components`).
 """
 
 from __future__ import annotations
@@ -104,9 +104,27 @@ def write_lp(
 
 _TOKEN = re.compile(r"\s+")
 
+_DRN_CHUNK = 50_000
+"""States whose lines :func:`write_drn` formats before writing them out."""
+
 
 def _drn_action(name: str) -> str:
     return _TOKEN.sub("_", name.strip()) or "_"
+
+
+def _valuation(record: object) -> str:
+    """A state's valuation for the DRN comment line: ``var=value`` joined by `` & ``."""
+    game = getattr(record, "game", None)
+    if game is None or not hasattr(record, "pending"):
+        return str(record) if isinstance(record, str) else f"state={_compact(record)}"
+    pending = ",".join(sorted(record.pending))  # type: ignore[attr-defined]
+    return (f"game={_compact(game)} & q={record.automaton} & "  # type: ignore[attr-defined]
+            f"pending={{{pending}}} & clock={record.clock}")  # type: ignore[attr-defined]
+
+
+def _compact(value: object) -> str:
+    """``value`` on one line without spaces (a DRN line is split on whitespace)."""
+    return "".join(str(value).split())
 
 
 def write_drn(
@@ -116,15 +134,22 @@ def write_drn(
     *,
     overwrite: bool = False,
     truncated_label: bool = True,
+    valuations: bool = True,
 ) -> Path:
     """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``).
 
     State ``i`` of the file is state ``i`` of ``mdp``; its choices appear in row order
     with the action names of ``mdp.action_names`` (whitespace replaced by ``_``) or
-    ``absorb``.  Labels: ``init``; ``target`` on the states of ``target`` (so
+    ``absorb`` as choice labels (Storm's DRN parser keeps them with
+    ``build_choice_labeling``, so a scheduler Storm computes maps back action by
+    action).  Labels: ``init``; ``target`` on the states of ``target`` (so
     ``Pmax=? [F "target"]`` in Storm is the quantity :func:`solve_lp` computes);
-    ``sink``; ``truncated`` (unless ``truncated_label=False``).  Probabilities are
-    written with Python's shortest round-trip ``repr``.
+    ``sink``; ``truncated`` (unless ``truncated_label=False``).  With ``valuations``,
+    each ``state`` line is followed by the state's valuation as Storm's own exporter
+    writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
+    state, the automaton state, the events still pending, the clock), or
+    ``//[target]`` / ``//[sink]`` / ``//[truncated]`` for the absorbing states.
+    Probabilities are written with Python's shortest round-trip ``repr``.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
@@ -132,23 +157,15 @@ def write_drn(
     target = as_state_mask(mdp, target, "target")
     p = _check_target_path(path, overwrite)
     n = mdp.n_states
-    labels: list[list[str]] = [[] for _ in range(n)]
-    labels[mdp.initial].append("init")
     marks = [("target", target), ("sink", np.asarray(mdp.sink, dtype=bool))]
     if truncated_label:
         marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
-    for name, mask in marks:
-        for s in np.flatnonzero(mask).tolist():
-            labels[s].append(name)
-    names = [_drn_action(a) for a in mdp.action_names] + ["absorb"]
+    names = [_drn_action(a) for a in mdp.action_names]
     actions = np.asarray(mdp.choice_actions, dtype=np.int64)
-    action_label = [names[a] if a != ABSORB else "absorb" for a in actions.tolist()]
-
     matrix = sp.csr_array(mdp.matrix)
     matrix.sort_indices()
-    indptr, indices, data = matrix.indptr, matrix.indices.tolist(), matrix.data.tolist()
-    row_groups = mdp.row_groups.tolist()
-    lines = [
+    row_groups = mdp.row_groups
+    header = [
         "// Exported by mitld_lp",
         "@type: MDP",
         "@parameters",
@@ -161,14 +178,35 @@ def write_drn(
         str(mdp.n_choices),
         "@model",
     ]
-    for s in range(n):
-        head = f"state {s}"
-        lines.append(f"{head} {' '.join(labels[s])}" if labels[s] else head)
-        for c in range(row_groups[s], row_groups[s + 1]):
-            lines.append(f"\taction {action_label[c]}")
-            for k in range(int(indptr[c]), int(indptr[c + 1])):
-                if data[k] > 0:
-                    lines.append(f"\t\t{indices[k]} : {data[k]!r}")
-    p.write_text("\n".join(lines) + "\n")
+    with p.open("w", encoding="utf-8") as f:
+        f.write("\n".join(header) + "\n")
+        # Streamed a chunk of states at a time: the text of a 1e6-state model never
+        # sits in memory whole (it took 4.8 GB when it did).
+        for lo in range(0, n, _DRN_CHUNK):
+            hi = min(n, lo + _DRN_CHUNK)
+            c_lo, c_hi = int(row_groups[lo]), int(row_groups[hi])
+            indptr = matrix.indptr[c_lo : c_hi + 1].tolist()
+            cols = matrix.indices[indptr[0] : indptr[-1]].tolist()
+            vals = matrix.data[indptr[0] : indptr[-1]].tolist()
+            base = indptr[0]
+            groups = row_groups[lo : hi + 1].tolist()
+            acts = actions[c_lo:c_hi].tolist()
+            lines: list[str] = []
+            records = mdp.states[lo:hi] if valuations else ()
+            for s in range(lo, hi):
+                labels = (["init"] if s == mdp.initial else []) + [
+                    name for name, mask in marks if mask[s]
+                ]
+                head = f"state {s}"
+                lines.append(f"{head} {' '.join(labels)}" if labels else head)
+                if valuations:
+                    lines.append(f"//[{_valuation(records[s - lo])}]")
+                for c in range(groups[s - lo], groups[s - lo + 1]):
+                    a = acts[c - c_lo]
+                    lines.append(f"\taction {names[a] if a != ABSORB else 'absorb'}")
+                    for k in range(indptr[c - c_lo] - base, indptr[c - c_lo + 1] - base):
+                        if vals[k] > 0:
+                            lines.append(f"\t\t{cols[k]} : {vals[k]!r}")
+            f.write("\n".join(lines) + "\n")
     logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
     return p

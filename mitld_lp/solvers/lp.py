@@ -1,9 +1,9 @@
 r"""The occupancy-measure linear program for maximal reachability, and its duals.
 
-On the MEC quotient :math:`\hat M` of the MDP (see :func:`mitld_lp.mdp.reduce`: target
-and prob-0 states removed, maximal end components collapsed), with one variable
-:math:`y(c) \ge 0` per reduced choice :math:`c` -- the expected number of times
-:math:`c` is taken:
+On the MEC quotient :math:`\hat M` of the MDP (see
+:func:`mitld_lp.solvers.quotient.reduce`: target and prob-0 states removed, maximal end
+components collapsed), with one variable :math:`y(c) \ge 0` per reduced choice
+:math:`c` -- the expected number of times :math:`c` is taken:
 
 .. math::
 
@@ -31,6 +31,17 @@ The dual is the value LP
 so the equality multipliers are the value function: every dual-feasible :math:`v` is an
 upper bound on the optimal reach probability, and at an optimum :math:`v(s)` is exact on
 every state with :math:`b(s) > 0` or positive occupancy.
+
+**Block by block** (``decompose=True``, the default): the quotient's strongly connected
+components are solved level by level, downstream first
+(:mod:`mitld_lp.solvers.topological`).  A single-state component is solved exactly; the
+non-trivial components of one level form one LP of the same form restricted to their
+states, where a choice's objective is its *exit reward*
+:math:`\hat P(c, \mathit{target}) + \sum_{s' \text{ solved}} \hat P(c, s')\, v(s')` and
+:math:`b = \mathbf 1` on every state of the block, so the block's duals are exact values
+on all of it.  The components of one level are independent, so one LP per level is the
+same as one per component (its matrix is block diagonal) with one solver call instead
+of many.  The interior-point method then never sees the fill-in of the whole graph.
 """
 
 from __future__ import annotations
@@ -39,21 +50,46 @@ import importlib
 import logging
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
-from mitld_lp.mdp import MDP, Quotient, lift_policy, reduce
-from mitld_lp.solvers.result import LPResult, Status
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.quotient import (
+    Quotient,
+    greedy_choices,
+    lift_policy,
+    quotient_for,
+    segmented_argmax,
+)
+from mitld_lp.solvers.result import LPResult, Status, read_only
+from mitld_lp.solvers.topological import (
+    Block,
+    Blocks,
+    blocks,
+    gather_ranges,
+    improve_policy,
+    solve_single_states,
+)
 
 __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 
 logger = logging.getLogger(__name__)
 
-Backend = Literal["cvxpy", "direct"]
+Backend = Literal["auto", "cvxpy", "direct"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Matrices:
+    """An LP ``max objective'y  s.t.  a_eq y = b_eq, y >= 0`` as a backend sees it."""
+
+    a_eq: sp.csc_array
+    b_eq: np.ndarray
+    objective: np.ndarray
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -74,22 +110,31 @@ class OccupancyLP:
     quotient: Quotient
 
 
-def occupancy_lp(mdp: MDP, target: np.ndarray, *, everywhere: bool = False) -> OccupancyLP:
-    """Build the occupancy LP of ``mdp`` for reaching ``target`` (see the module docs).
-
-    ``everywhere=False``: ``b = e_initial`` (the LP of the brief: the objective is the
-    optimal probability at the initial state; requires the initial state to be a maybe
-    state, else ``b = 0``).  ``everywhere=True``: ``b = 1`` on every reduced state, so the
-    duals are the exact value function of every state and the occupancy policy is
-    optimal from every state (the objective is then the sum of the values).
-    """
-    q = reduce(mdp, target)
-    n, m = q.n_states, q.n_choices
-    owner = q.choice_state()
-    exits = sp.csc_array((np.ones(m), (owner, np.arange(m))), shape=(n, m))
-    a_eq = sp.csc_array(exits - q.matrix.T)
+def _flow_matrix(owner: np.ndarray, n_states: int, moves: sp.csr_array) -> sp.csc_array:
+    """``E - P^T`` for choices owned by ``owner`` moving by ``moves`` (rows: choices)."""
+    m = owner.shape[0]
+    exits = sp.csc_array((np.ones(m), (owner, np.arange(m))), shape=(n_states, m))
+    a_eq = sp.csc_array(exits - moves.T)
     a_eq.sum_duplicates()
     a_eq.eliminate_zeros()
+    return a_eq
+
+
+def occupancy_lp(
+    mdp: MDP, target: np.ndarray, *, everywhere: bool = False, quotient: Quotient | None = None
+) -> OccupancyLP:
+    """Build the (monolithic) occupancy LP of ``mdp`` for reaching ``target``.
+
+    ``everywhere=False``: ``b = e_initial`` (the objective is the optimal probability at
+    the initial state; requires the initial state to be a maybe state, else ``b = 0``).
+    ``everywhere=True``: ``b = 1`` on every reduced state, so the duals are the exact
+    value function of every state and the occupancy policy is optimal from every state
+    (the objective is then the sum of the values).  ``quotient``: the reduction of
+    ``mdp`` for ``target`` if the caller has it (else it is computed).
+    """
+    q = quotient_for(mdp, target, quotient)
+    n = q.n_states
+    a_eq = _flow_matrix(q.choice_state(), n, q.matrix)
     if everywhere:
         b_eq = np.ones(n)
     else:
@@ -100,7 +145,7 @@ def occupancy_lp(mdp: MDP, target: np.ndarray, *, everywhere: bool = False) -> O
 
 
 # ---------------------------------------------------------------------------------------
-# Solving
+# Solving one LP
 # ---------------------------------------------------------------------------------------
 
 
@@ -129,6 +174,13 @@ def _tolerance_options(solver: str, tol: float) -> dict[str, Any]:
     return {}
 
 
+def _time_options(solver: str, seconds: float) -> dict[str, Any]:
+    """The solver-specific keyword for a wall-clock limit (none for other solvers)."""
+    if solver in ("CLARABEL", "HIGHS"):
+        return {"time_limit": max(seconds, 1e-3)}
+    return {}
+
+
 _CVXPY_STATUS = {
     "optimal": Status.OPTIMAL,
     "optimal_inaccurate": Status.INACCURATE,
@@ -144,14 +196,8 @@ def _is_fatal(exc: BaseException) -> bool:
     return isinstance(exc, KeyboardInterrupt | SystemExit | GeneratorExit | MemoryError)
 
 
-def _solve_cvxpy(lp: OccupancyLP, solver: str, options: dict[str, Any]) -> _Raw:
+def _solve_cvxpy(lp: _Matrices, solver: str, options: dict[str, Any]) -> _Raw:
     cp: Any = importlib.import_module("cvxpy")
-    installed = cp.installed_solvers()
-    if solver not in installed:
-        return _Raw(
-            Status.FAILED,
-            f"solver {solver!r} is not installed for cvxpy; installed: {', '.join(installed)}",
-        )
     m = lp.objective.shape[0]
     y = cp.Variable(m)
     flow = sp.csc_matrix(lp.a_eq) @ y == lp.b_eq
@@ -187,7 +233,7 @@ _CLARABEL_STATUS = {
 }
 
 
-def _solve_clarabel(lp: OccupancyLP, options: dict[str, Any]) -> _Raw:
+def _solve_clarabel(lp: _Matrices, options: dict[str, Any]) -> _Raw:
     r"""Call Clarabel on the matrices directly (no cvxpy canonicalisation).
 
     Clarabel's form is ``min q'x + x'Px/2  s.t.  Ax + s = b, s in K`` with dual
@@ -230,66 +276,121 @@ def _solve_clarabel(lp: OccupancyLP, options: dict[str, Any]) -> _Raw:
     return _Raw(status, message, x, z[:n], iterations)
 
 
+def _unusable(solver: str, backend: str) -> str | None:
+    """Why ``solver`` cannot be run through ``backend``, or ``None`` if it can (checked
+    before any work: the block route may need no solver call at all)."""
+    if backend == "direct":
+        if solver.upper() != "CLARABEL":
+            return f"backend 'direct' supports only solver 'CLARABEL', got {solver!r}"
+        return None
+    if backend != "cvxpy":
+        return f"unknown backend {backend!r}; expected 'cvxpy' or 'direct'"
+    installed = importlib.import_module("cvxpy").installed_solvers()
+    if solver not in installed:
+        return (f"solver {solver!r} is not installed for cvxpy; "
+                f"installed: {', '.join(installed)}")
+    return None
+
+
+def _run_backend(lp: _Matrices, solver: str, backend: str, options: dict[str, Any]) -> _Raw:
+    """One solve of ``lp`` by ``backend`` / ``solver`` (every failure a status)."""
+    if backend == "cvxpy":
+        return _solve_cvxpy(lp, solver, options)
+    return _solve_clarabel(lp, options)
+
+
+@dataclass(frozen=True, slots=True)
+class _Settings:
+    """How every LP of one :func:`solve_lp` call is solved."""
+
+    solver: str
+    backend: str
+    tol: float
+    extra: Mapping[str, Any]
+    deadline: float  # time.perf_counter() value, inf without a time limit
+
+    def options(self, *, polished: bool = False) -> dict[str, Any]:
+        """The solver's keywords; ``polished``: the answer will be made exact by policy
+        iteration, so Clarabel's iterative refinement of each KKT solve (1.2-1.9x of its
+        time) buys nothing (the values returned are the same to the last digit)."""
+        opts = _tolerance_options(self.solver, self.tol)
+        if polished and self.solver.upper() == "CLARABEL":
+            opts["iterative_refinement_enable"] = False
+        if np.isfinite(self.deadline):
+            opts.update(_time_options(self.solver, self.deadline - time.perf_counter()))
+        return {**opts, **dict(self.extra)}
+
+
+def _retries(settings: _Settings) -> Iterator[tuple[str, dict[str, Any]]]:
+    """Other ways to solve an LP that came back inaccurate (Clarabel only; the user's
+    own ``solver_options`` are kept in every one)."""
+    if settings.solver.upper() != "CLARABEL":
+        return
+    base = settings.options()
+    yield settings.backend, {**base, "static_regularization_constant": 1e-7,
+                             "iterative_refinement_max_iter": 50,
+                             "max_iter": 400, **dict(settings.extra)}
+    other = "direct" if settings.backend == "cvxpy" else "cvxpy"
+    yield other, {**base, "equilibrate_max_iter": 50, "max_iter": 400, **dict(settings.extra)}
+
+
+_DUAL_SLACK = 1e-7
+"""A solve whose duals violate a constraint ``v(s) >= r(c) + sum P(c, s') v(s')`` by more
+than this is not taken as optimal, whatever the solver says (a badly conditioned LP,
+e.g. a component left once in a million steps, can come back "solved" and wrong)."""
+
+
+def _checked(lp: _Matrices, raw: _Raw) -> _Raw:
+    """``raw`` demoted to ``INACCURATE`` if its duals are not feasible (``A' v >= c``)."""
+    if raw.status is not Status.OPTIMAL or raw.v is None:
+        return raw
+    violation = float(np.max(lp.objective - lp.a_eq.T @ raw.v, initial=0.0))
+    if violation <= _DUAL_SLACK:
+        return raw
+    return _Raw(Status.INACCURATE, f"{raw.message}, but its duals violate a Bellman "
+                f"inequality by {violation:.1e}", raw.y, raw.v, raw.iterations)
+
+
+def _solve_one(lp: _Matrices, settings: _Settings, *, retry: bool = True) -> _Raw:
+    """Solve ``lp``; with ``retry``, an inaccurate answer (by the solver's word or by
+    :func:`_checked`) is retried with other settings (see :func:`_retries`) and the
+    first accurate one is kept, else the first answer.  (A block of the topological
+    route is not retried: its answer is polished exactly instead.)"""
+    if time.perf_counter() >= settings.deadline:
+        return _Raw(Status.TIME_LIMIT, "time limit reached before the solve")
+    raw = _run_backend(lp, settings.solver, settings.backend,
+                       settings.options(polished=not retry))
+    if not retry:
+        return raw
+    raw = _checked(lp, raw)
+    if raw.status is not Status.INACCURATE:
+        return raw
+    for backend, options in _retries(settings):
+        if time.perf_counter() >= settings.deadline:
+            break
+        again = _checked(lp, _run_backend(lp, settings.solver, backend, options))
+        logger.info("inaccurate LP retried (%s, %s): %s", backend, sorted(options),
+                    again.message)
+        if again.status is Status.OPTIMAL:
+            return _Raw(again.status, f"{again.message} (retried after: {raw.message})",
+                        again.y, again.v, raw.iterations + again.iterations)
+    return raw
+
+
 # ---------------------------------------------------------------------------------------
 # Policies from the solution
 # ---------------------------------------------------------------------------------------
-
-
-def segmented_argmax(
-    values: np.ndarray, row_groups: np.ndarray, *, tie: float = 0.0,
-    prefer: np.ndarray | None = None,
-) -> np.ndarray:
-    """Per group ``row_groups[i]:row_groups[i+1]`` (all non-empty), the index of the max.
-
-    Entries within ``tie`` of the group's maximum count as tied; among them the one with
-    the largest ``prefer`` wins, then the lowest index.  Fully vectorised.
-    """
-    starts = np.asarray(row_groups[:-1], dtype=np.int64)
-    counts = np.diff(row_groups)
-    best = np.maximum.reduceat(values, starts)
-    tied = values >= np.repeat(best, counts) - tie
-    if prefer is not None:
-        key = np.where(tied, prefer, -np.inf)
-        top = np.maximum.reduceat(key, starts)
-        tied &= key >= np.repeat(top, counts)
-    idx = np.where(tied, np.arange(values.shape[0]), np.iinfo(np.int64).max)
-    return np.minimum.reduceat(idx, starts)
-
-
-def greedy_choices(q: Quotient, v: np.ndarray, *, tie: float = 1e-12) -> np.ndarray:
-    """Per reduced state, the reduced choice maximising ``P(c,target) + sum P(c,s') v(s')``.
-
-    Ties (within ``tie``) go to the choice with the larger one-step probability of
-    entering the target, a cheap measure of progress.  On the quotient every policy
-    leaves the maybe states almost surely (no end components remain), so a greedy
-    policy on exact values is optimal and never loops forever.
-    """
-    scores = q.to_target + q.matrix @ v
-    return segmented_argmax(scores, q.row_groups, tie=tie, prefer=q.to_target)
 
 
 def _visit_threshold(tol: float) -> float:
     return max(1e-7, 100.0 * tol)
 
 
-def _lp_policy(
-    mdp: MDP, q: Quotient, y: np.ndarray, v: np.ndarray, tol: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic and randomised policies on ``mdp`` from occupancies and duals.
-
-    At a reduced state whose outflow exceeds the visit threshold: the choice of largest
-    occupancy; elsewhere the greedy choice on ``v``.  Lifted through the MEC quotient by
-    :func:`mitld_lp.mdp.lift_policy`.
-    """
-    outflow = np.add.reduceat(y, q.row_groups[:-1])
-    visited = outflow > _visit_threshold(tol)
-    by_flow = segmented_argmax(y, q.row_groups)
-    by_value = greedy_choices(q, v)
-    reduced_choice = np.where(visited, by_flow, by_value)
-    policy = lift_policy(mdp, q, reduced_choice)
-
-    occupancy = np.zeros(mdp.n_choices)
-    occupancy[q.choice_origin] = y
+def _randomized(
+    mdp: MDP, q: Quotient, occupancy: np.ndarray, policy: np.ndarray, tol: float
+) -> np.ndarray:
+    """The randomised policy of the occupancies: ``y(c) / sum_{c' of s} y(c')`` at the
+    states whose outflow exceeds the visit threshold, ``policy`` elsewhere."""
     cstate = mdp.choice_state()
     state_flow = np.bincount(cstate, weights=occupancy, minlength=mdp.n_states)
     seen = state_flow > _visit_threshold(tol)
@@ -298,23 +399,201 @@ def _lp_policy(
     randomized[seen_c] = occupancy[seen_c] / state_flow[cstate[seen_c]]
     acting = np.flatnonzero(~seen & (policy >= 0))
     randomized[policy[acting]] = 1.0
-    return policy, randomized
+    return randomized
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a)
-    a.setflags(write=False)
-    return a
+def _occupancy_policy(q: Quotient, y: np.ndarray, v: np.ndarray, tol: float) -> np.ndarray:
+    """Per reduced state: the choice of largest occupancy where the outflow exceeds the
+    visit threshold, the greedy choice on ``v`` elsewhere."""
+    outflow = np.add.reduceat(y, q.row_groups[:-1])
+    visited = outflow > _visit_threshold(tol)
+    by_flow = segmented_argmax(y, q.row_groups)
+    return np.where(visited, by_flow, greedy_choices(q, v))
+
+
+def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -> np.ndarray:
+    r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
+    per state) from the start weights ``b``: ``x = b + P_w^T x`` with
+    ``P_w = sum_c w(c) P_hat(c, .)``, then ``y(c) = w(c) x(owner(c))``.
+
+    Solved in topological order, upstream first: the flow into a level comes only from
+    higher levels, so a single state gets ``x(s) = (b(s) + inflow(s)) / (1 - w'p)`` and a
+    non-trivial component one sparse solve of its own size.  The policy's chain leaves
+    the quotient almost surely, so every one of these systems is invertible.
+    """
+    x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
+    for level in range(blk.n_levels - 1, -1, -1):
+        states = blk.states_at(level)
+        lo, hi = q.row_groups[states], q.row_groups[states + 1]
+        choices = gather_ranges(lo, hi)
+        rows = sp.csr_array(q.matrix[choices])
+        owner_local = np.repeat(np.arange(states.size), hi - lo)
+        w = weights[choices]
+        single = blk.single(states)
+        stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
+                           minlength=states.size)
+        x[states[single]] /= 1.0 - stay[single]
+        if not single.all():
+            inner = np.flatnonzero(~single)
+            block = states[inner]
+            pick = np.isin(owner_local, inner)
+            local = np.full(states.size, -1, dtype=np.int64)
+            local[inner] = np.arange(inner.size)
+            sub = rows[np.flatnonzero(pick)]
+            mix = sp.csr_array((w[pick], (local[owner_local[pick]], np.arange(sub.shape[0]))),
+                               shape=(inner.size, sub.shape[0]))
+            moves = sp.csc_array((mix @ sub[:, block]).T)
+            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - moves)
+            x[block] = np.asarray(spla.spsolve(a, x[block]), dtype=np.float64).ravel()
+        # Push the flow out of this level (its own columns were solved above).
+        y = w * x[states[owner_local]]
+        coo = rows.tocoo()
+        out = blk.level[blk.component[coo.col]] != level
+        np.add.at(x, coo.col[out], coo.data[out] * y[coo.row[out]])
+    owner = q.choice_state()
+    return np.maximum(weights * x[owner], 0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# The two routes
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Answer:
+    """What a route found, in reduced coordinates, before it is mapped back."""
+
+    raw: _Raw  # status, message, iterations (y, v unused)
+    y: np.ndarray  # occupancy per reduced choice, from b
+    v: np.ndarray  # value per reduced state (nan where unknown)
+    reduced_choice: np.ndarray  # the deterministic policy on the quotient
+    primal: float
+    dual: float
+    n_solver_calls: int
+
+
+def _solve_monolithic(lp: OccupancyLP, settings: _Settings) -> _Answer | _Raw:
+    raw = _solve_one(_Matrices(lp.a_eq, lp.b_eq, lp.objective), settings)
+    if raw.y is None or raw.v is None:
+        return raw
+    q = lp.quotient
+    y = np.maximum(raw.y, 0.0)
+    v = np.clip(raw.v, 0.0, 1.0)
+    # Off the visited states (and everywhere if nothing was solved) the greedy fallback
+    # needs numbers; an unsolved state gets the trivially dual-feasible value 1.
+    reduced_choice = _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol)
+    return _Answer(raw, y, v, reduced_choice, float(lp.objective @ y),
+                   float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0)), 1)
+
+
+def _block_lp(block: Block, values: np.ndarray) -> _Matrices:
+    """The occupancy LP of ``block`` with the values downstream as exit rewards and
+    ``b = 1`` on all of it."""
+    exit_reward = block.to_target + block.outer @ values
+    n = block.states.size
+    owner = np.repeat(np.arange(n), np.diff(block.groups))
+    return _Matrices(_flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Polished:
+    """A block's answer after the crossover: exact values of an optimal policy."""
+
+    chosen: np.ndarray  # local choice per state
+    values: np.ndarray
+    weights: np.ndarray  # per local choice: the occupancy policy on its tight choices
+    optimal: bool  # no choice improves on ``values`` by more than the tie tolerance
+
+
+def _polish(block: Block, lp: _Matrices, y: np.ndarray, tol: float) -> _Polished:
+    """Crossover by policy iteration: the policy of largest occupancy is evaluated
+    exactly on the block's chain and improved until no choice gains; an interior-point
+    answer is accurate to its tolerance times the block's expected exit time (a block
+    left once in a million steps loses six digits), the policy's exact value is not.
+    The randomised policy keeps the LP's occupancies on the choices that are tight at
+    the exact values (to ``tol`` over the block's expected exit time)."""
+    groups = block.groups
+    counts = np.diff(groups)
+    start = segmented_argmax(y, groups)
+    chosen, v_ld, exit_time = improve_policy(block, lp.objective, start)
+    v = np.asarray(v_ld, dtype=np.float64)
+    slack = np.asarray(np.repeat(v_ld, counts)
+                       - (lp.objective + block.inner.astype(np.longdouble) @ v_ld),
+                       dtype=np.float64)
+    # A choice that loses ``slack`` per step loses up to slack * (expected steps in the
+    # block) in all: ties are judged on that scale.
+    tie = tol / float(np.max(exit_time))
+    kept = np.where(slack <= tie, y, 0.0)
+    kept_flow = np.add.reduceat(kept, groups[:-1])
+    weights = np.zeros_like(y)
+    has = np.repeat(kept_flow > 0, counts)
+    weights[has] = kept[has] / np.repeat(kept_flow, counts)[has]
+    lone = np.flatnonzero(kept_flow <= 0)
+    weights[chosen[lone]] = 1.0
+    return _Polished(chosen, np.clip(v, 0.0, 1.0), weights,
+                     bool(np.min(slack, initial=0.0) >= -tie))
+
+
+def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _Answer | _Raw:
+    """Level by level (module docs): exact single-state updates, one LP per level of
+    non-trivial components, each answer polished by :func:`_polish`; the occupancy of
+    the resulting randomised policy from ``b_eq`` is the primal point, the values the
+    dual one."""
+    blk: Blocks = blocks(q)
+    values = np.zeros(q.n_states)
+    weights = np.zeros(q.n_choices)
+    reduced_choice = np.zeros(q.n_states, dtype=np.int64)
+    worst = _Raw(Status.OPTIMAL, "")
+    iterations = calls = 0
+    for level in range(blk.n_levels):
+        states = blk.states_at(level)
+        single = blk.single(states)
+        upd = solve_single_states(q, blk, states[single], values)
+        reduced_choice[upd.states] = upd.choices
+        weights[upd.choices] = 1.0
+        rest = states[~single]
+        if rest.size == 0:
+            continue
+        block = Block.of(q, rest)
+        lp = _block_lp(block, values)
+        raw = _solve_one(lp, settings, retry=False)
+        iterations += raw.iterations
+        calls += 1
+        if raw.y is None or raw.v is None:
+            return _Raw(raw.status, f"{raw.message} (block LP of level {level}, "
+                        f"{rest.size} states)", iterations=iterations)
+        polished = _polish(block, lp, np.maximum(raw.y, 0.0), settings.tol)
+        if not polished.optimal and worst.status is Status.OPTIMAL:
+            worst = _Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
+                         "iteration did not settle")
+        elif raw.status is not Status.OPTIMAL:
+            logger.info("block LP of level %d: %s; exact after policy iteration", level,
+                        raw.message)
+        values[rest] = polished.values
+        reduced_choice[rest] = block.choices[polished.chosen]
+        weights[block.choices] = polished.weights
+    y = _policy_flow(q, blk, weights, b_eq)
+    message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
+               f"single states over {blk.n_levels} levels"
+               + (f"; {worst.message}" if worst.message else ""))
+    if calls:
+        solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
+        message = f"{solver_word}: {message}"
+    return _Answer(_Raw(worst.status, message, iterations=iterations), y, values,
+                   reduced_choice, float(q.to_target @ y), float(b_eq @ values), calls)
 
 
 def solve_lp(
     mdp: MDP,
     target: np.ndarray,
     *,
+    quotient: Quotient | None = None,
     solver: str = "CLARABEL",
-    backend: Backend = "cvxpy",
+    backend: Backend = "auto",
     tol: float = 1e-9,
     everywhere: bool = False,
+    decompose: bool = True,
+    time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
 ) -> LPResult:
     """Maximal probability of reaching ``target`` from ``mdp.initial``, by the occupancy LP.
@@ -324,95 +603,94 @@ def solve_lp(
         target: ``(n_states,)`` bool mask of the states that count as reached
             (``mdp.target`` for the lower model, ``mdp.target | mdp.truncated`` for the
             upper one).
+        quotient: ``reduce(mdp, target)`` if the caller already has it.
         solver: with ``backend="cvxpy"`` any LP solver cvxpy has installed, by name
             (``"CLARABEL"``, ``"HIGHS"``, ``"SCS"``, ...); with ``"direct"`` only
             ``"CLARABEL"``.
         backend: ``"cvxpy"`` builds a cvxpy problem; ``"direct"`` calls
-            ``clarabel.DefaultSolver`` on the sparse matrices (faster on large models).
+            ``clarabel.DefaultSolver`` on the sparse matrices (the same solver without
+            cvxpy's canonicalisation and its ~1 s import); ``"auto"`` (default) is
+            ``"direct"`` for Clarabel and ``"cvxpy"`` for any other solver.
         tol: accuracy passed to the solver (gap and feasibility tolerances).
         everywhere: start weight 1 on every reduced state instead of only the initial
             one, so ``values`` and the policy are exact / optimal in every state.
+        decompose: solve block by block in topological order (module docs); ``False``
+            solves the one monolithic LP (the one :func:`write_lp` exports).
+        time_limit: seconds; past it the result has status ``TIME_LIMIT``.
         solver_options: extra keywords for the solver (override the tolerance ones),
             e.g. ``{"max_iter": 50}`` for Clarabel.
 
-    The LP, its dual and how answers map back are in the module docstring.  Every
-    failure (missing solver, solver exception, non-optimal termination) comes back as a
-    :class:`Status` with the solver's message; nothing is raised for it.
+    An inaccurate Clarabel solve is retried with other settings before it is reported.
+    Every failure (missing solver, solver exception, non-optimal termination) comes back
+    as a :class:`Status` with the solver's message; nothing is raised for it.
     """
     start = time.perf_counter()
-    lp = occupancy_lp(mdp, target, everywhere=everywhere)
+    if backend == "auto":
+        backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
+    lp = occupancy_lp(mdp, target, everywhere=everywhere, quotient=quotient)
     q = lp.quotient
     shape = (q.n_states, q.n_choices)
     logger.info(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
         mdp.n_states, q.n_states, q.mecs.n_mecs, q.n_choices,
     )
+    settings = _Settings(solver, backend, tol, dict(solver_options or {}),
+                         start + time_limit if time_limit is not None else np.inf)
 
-    def failed(status: Status, message: str, iterations: int = 0) -> LPResult:
-        logger.warning("LP not solved: %s", message)
+    def failed(raw: _Raw) -> LPResult:
+        logger.warning("LP not solved: %s", raw.message)
         return LPResult(
-            status=status, message=message, value=float("nan"), values=None,
+            status=raw.status, message=raw.message, value=float("nan"), values=None,
             primal_objective=float("nan"), dual_objective=float("nan"), occupancy=None,
             policy=None, randomized=None, solver=solver, backend=backend,
-            iterations=iterations, seconds=time.perf_counter() - start, lp_shape=shape,
+            iterations=raw.iterations, seconds=time.perf_counter() - start, lp_shape=shape,
         )
 
-    options = {**_tolerance_options(solver, tol), **dict(solver_options or {})}
+    unusable = _unusable(solver, backend)
+    if unusable is not None:
+        return failed(_Raw(Status.FAILED, unusable))
     if q.n_states == 0 or (q.initial < 0 and not everywhere):
         # Nothing to optimise: the initial state is decided by the graph analysis.
         reason = "a target state" if q.target[mdp.initial] else "a prob-0 state"
-        raw = _Raw(
-            Status.OPTIMAL,
-            f"initial state is {reason}: decided by graph analysis, no LP solved "
-            "(values of the other maybe states are nan)",
-            np.zeros(q.n_choices),
-            np.full(q.n_states, np.nan),
-        )
-        used_solver = ""
-    elif backend == "cvxpy":
-        raw = _solve_cvxpy(lp, solver, options)
-        used_solver = solver
-    elif backend == "direct":
-        if solver.upper() != "CLARABEL":
-            return failed(Status.FAILED,
-                          f"backend 'direct' supports only solver 'CLARABEL', got {solver!r}")
-        raw = _solve_clarabel(lp, options)
-        used_solver = "CLARABEL"
+        answer: _Answer | _Raw = _Answer(
+            _Raw(Status.OPTIMAL, f"initial state is {reason}: decided by graph analysis, "
+                 "no LP solved (values of the other maybe states are nan)"),
+            np.zeros(q.n_choices), np.full(q.n_states, np.nan),
+            greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
+    elif decompose:
+        answer = _solve_decomposed(q, lp.b_eq, settings)
     else:
-        return failed(Status.FAILED,
-                      f"unknown backend {backend!r}; expected 'cvxpy' or 'direct'")
-    if raw.y is None or raw.v is None:
-        return failed(raw.status, raw.message, raw.iterations)
+        answer = _solve_monolithic(lp, settings)
+    if isinstance(answer, _Raw):
+        return failed(answer)
+    return _result(mdp, q, answer, settings, start, shape)
 
-    y = np.maximum(raw.y, 0.0)
-    v_red = np.clip(raw.v, 0.0, 1.0)
-    values = q.lift(v_red)
-    if q.initial < 0:
-        value = q.initial_value
-    else:
-        value = float(values[mdp.initial])
-    # Off the visited states (and everywhere if nothing was solved) the greedy fallback
-    # needs numbers; an unsolved state gets the trivially dual-feasible value 1.
-    policy, randomized = _lp_policy(mdp, q, y, np.nan_to_num(v_red, nan=1.0), tol)
+
+def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: _Settings, start: float,
+            shape: tuple[int, int]) -> LPResult:
+    """The answer of a route mapped back to ``mdp`` (values, policies, occupancy)."""
+    values = q.lift(answer.v)
+    value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
+    policy = lift_policy(mdp, q, answer.reduced_choice)
     occupancy = np.zeros(mdp.n_choices)
-    occupancy[q.choice_origin] = y
-    primal = float(lp.objective @ y)
-    dual = float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0))
+    occupancy[q.choice_origin] = answer.y
+    randomized = _randomized(mdp, q, occupancy, policy, settings.tol)
     seconds = time.perf_counter() - start
+    raw = answer.raw
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)
     return LPResult(
         status=raw.status,
         message=raw.message,
         value=value,
-        values=_frozen(values),
-        primal_objective=primal,
-        dual_objective=dual,
-        occupancy=_frozen(occupancy),
-        policy=_frozen(policy),
-        randomized=_frozen(randomized),
-        solver=used_solver,
-        backend=backend,
+        values=read_only(values),
+        primal_objective=answer.primal,
+        dual_objective=answer.dual,
+        occupancy=read_only(occupancy),
+        policy=read_only(policy),
+        randomized=read_only(randomized),
+        solver=settings.solver if answer.n_solver_calls else "",
+        backend=settings.backend,
         iterations=raw.iterations,
         seconds=seconds,
         lp_shape=shape,

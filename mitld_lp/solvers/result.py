@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Status", "LPResult", "IterationResult"]
+__all__ = ["Status", "LPResult", "IterationResult", "read_only"]
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as an array that refuses writes (how records hand out their arrays)."""
+    a = np.asarray(a)
+    a.setflags(write=False)
+    return a
 
 
 class Status(enum.Enum):

@@ -1,0 +1,313 @@
+r"""The quotient solved block by block, downstream first.
+
+The product of a timed task is almost acyclic: clocks and the automaton only move
+forward, so most strongly connected components (SCCs) of the quotient's state graph are
+single states and the graph of components is shallow.  The optimal value of a state
+depends only on the states it can reach, so the components can be solved one *level* at
+a time: level 0 are the components with no successor component, level ``k`` those whose
+successor components all have levels below ``k``.  When a level is solved, every value
+its choices can leave to is already known and enters as a constant (an *exit reward*).
+
+A single-state component ``{s}`` is solved exactly: with exit reward
+:math:`r(c) = \hat P(c, \mathit{target}) + \sum_{s' \ne s} \hat P(c, s')\, v(s')` and
+self-loop probability :math:`p(c) = \hat P(c, s) < 1` (the quotient has no end
+components), the Bellman equation :math:`v = \max_c r(c) + p(c)\, v` has the least
+solution
+
+.. math:: v(s) = \max_c \frac{r(c)}{1 - p(c)},
+
+because :math:`r + p v \le v` iff :math:`v \ge r / (1 - p)`.  All single-state
+components of one level are updated at once (one sparse product and a segmented max).
+The non-trivial components of a level are left to the caller (one occupancy LP, or
+interval iteration, per level).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
+
+from mitld_lp.arrays import unique
+from mitld_lp.solvers.quotient import Quotient, segmented_argmax
+from mitld_lp.solvers.result import read_only
+
+__all__ = [
+    "Block",
+    "Blocks",
+    "LevelUpdate",
+    "blocks",
+    "evaluate_chain",
+    "gather_ranges",
+    "graph_blocks",
+    "solve_chain",
+    "improve_policy",
+    "solve_single_states",
+]
+
+POLICY_ROUNDS = 50
+"""At most this many policy improvements per :func:`improve_policy` call."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Blocks:
+    """The SCCs of a quotient's state graph, grouped by level (see the module docs).
+
+    Attributes:
+        component: ``(n_reduced_states,)`` the SCC of each reduced state.
+        level: ``(n_components,)`` the level of each SCC (0: no successor SCC).
+        size: ``(n_components,)`` the number of states of each SCC.
+        by_level: reduced states sorted by the level of their SCC (stable).
+        level_starts: ``(n_levels + 1,)`` the states of level ``k`` are
+            ``by_level[level_starts[k]:level_starts[k+1]]``.
+        self_loop: ``(n_reduced_choices,)`` ``P_hat(c, owner(c))``, the probability
+            that a choice stays where it is.
+    """
+
+    component: np.ndarray
+    level: np.ndarray
+    size: np.ndarray
+    by_level: np.ndarray
+    level_starts: np.ndarray
+    self_loop: np.ndarray
+
+    @property
+    def n_levels(self) -> int:
+        return int(self.level_starts.shape[0] - 1)
+
+    @property
+    def n_components(self) -> int:
+        return int(self.size.shape[0])
+
+    def states_at(self, level: int) -> np.ndarray:
+        return self.by_level[self.level_starts[level] : self.level_starts[level + 1]]
+
+    def single(self, states: np.ndarray) -> np.ndarray:
+        """Which of ``states`` form a component of their own."""
+        return self.size[self.component[states]] == 1
+
+
+def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised."""
+    starts = np.asarray(starts, dtype=np.int64)
+    counts = np.asarray(stops, dtype=np.int64) - starts
+    total = int(counts.sum())
+    offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
+    return offsets + np.arange(total, dtype=np.int64)
+
+
+def state_graph(q: Quotient) -> sp.csr_array:
+    """``(n, n)`` pattern of the quotient: ``s -> s'`` iff a choice of ``s`` may move to ``s'``."""
+    owner = q.choice_state()
+    coo = sp.coo_array(q.matrix)
+    keep = coo.data > 0
+    n = q.n_states
+    return sp.csr_array(
+        (np.ones(int(keep.sum())), (owner[coo.row[keep]], coo.col[keep])), shape=(n, n)
+    )
+
+
+def blocks(q: Quotient) -> Blocks:
+    """The SCCs of ``q``'s state graph and their levels (:func:`graph_blocks`)."""
+    owner = q.choice_state()
+    self_loop = np.asarray(q.matrix[np.arange(q.n_choices), owner]).ravel() if (
+        q.n_states) else np.zeros(0)
+    return graph_blocks(state_graph(q), self_loop)
+
+
+def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
+    """The SCCs of ``graph`` (``scipy.sparse.csgraph``, strong connection) and their
+    levels; ``self_loop`` is stored as given.
+
+    Levels by Kahn's algorithm on the graph of components, run backwards: the
+    components with no successor are level 0; removing a level frees the components
+    whose last successor it held.  Each round touches only the predecessors of the
+    current level, so the whole is linear in the number of edges.
+    """
+    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
+    comp = np.asarray(comp, dtype=np.int64)
+    coo = graph.tocoo()
+    src, dst = comp[coo.row], comp[coo.col]
+    cross = src != dst
+    pairs = unique(src[cross] * n_comp + dst[cross])
+    up, down = pairs // n_comp, pairs % n_comp  # edge up -> down between components
+    out_degree = np.bincount(up, minlength=n_comp)
+    order = np.argsort(down, kind="stable")
+    pred_ptr = np.concatenate([[0], np.cumsum(np.bincount(down, minlength=n_comp))])
+    preds = up[order]
+    level = np.full(n_comp, -1, dtype=np.int64)
+    frontier = np.flatnonzero(out_degree == 0)
+    k = 0
+    while frontier.size:
+        level[frontier] = k
+        above = preds[gather_ranges(pred_ptr[frontier], pred_ptr[frontier + 1])]
+        np.subtract.at(out_degree, above, 1)
+        frontier = unique(above[out_degree[above] == 0])
+        k += 1
+    if np.any(level < 0):  # pragma: no cover - the graph of SCCs is acyclic
+        raise AssertionError("the component graph has a cycle")
+    by_level = np.argsort(level[comp], kind="stable")
+    level_starts = np.searchsorted(level[comp][by_level], np.arange(k + 1))
+    return Blocks(
+        component=read_only(comp),
+        level=read_only(level),
+        size=read_only(np.bincount(comp, minlength=n_comp)),
+        by_level=read_only(by_level),
+        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
+        self_loop=read_only(self_loop),
+    )
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LevelUpdate:
+    """The exact values of single-state components and the choices that attain them."""
+
+    states: np.ndarray
+    values: np.ndarray
+    choices: np.ndarray  # reduced choice per state
+
+
+def solve_single_states(
+    q: Quotient, b: Blocks, states: np.ndarray, values: np.ndarray, *, tie: float = 1e-12
+) -> LevelUpdate:
+    r"""Solve the single-state components ``states`` given ``values`` downstream.
+
+    ``v(s) = max_c r(c) / (1 - p(c))`` (module docs), written into ``values[states]``
+    (what was there is ignored).  Ties (within ``tie``) go to the larger one-step
+    probability of entering the target, as in
+    :func:`mitld_lp.solvers.quotient.greedy_choices`.
+    """
+    states = np.asarray(states, dtype=np.int64)
+    if states.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return LevelUpdate(empty, np.zeros(0), empty)
+    lo, hi = q.row_groups[states], q.row_groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    rows = q.matrix[choices]
+    values[states] = 0.0  # so that the product below sums the other successors only
+    p = b.self_loop[choices]
+    exit_reward = q.to_target[choices] + rows @ values
+    leave = 1.0 - p
+    # leave > 0 on the quotient (no end components); the guard keeps rounding harmless.
+    score = np.divide(exit_reward, leave, out=np.zeros_like(exit_reward), where=leave > 0)
+    np.clip(score, 0.0, 1.0, out=score)
+    groups = np.concatenate([[0], np.cumsum(hi - lo)])
+    best = segmented_argmax(score, groups, tie=tie, prefer=q.to_target[choices])
+    values[states] = score[best]
+    return LevelUpdate(states, score[best], choices[best])
+
+
+# ---------------------------------------------------------------------------------------
+# Non-trivial blocks: their matrices and exact policy iteration on them.
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Block:
+    """States ``states`` of the quotient (a union of components of one level) with
+    their choices: ``inner`` moves inside the block (columns: positions in ``states``),
+    ``outer`` the same rows with the block's own columns zeroed, ``starts`` the first
+    choice of each state."""
+
+    states: np.ndarray
+    choices: np.ndarray
+    inner: sp.csr_array
+    outer: sp.csr_array  # the same rows, all quotient columns, block columns zeroed
+    # (kept, not dropped: eliminating zeros would be a second pass for nothing)
+    starts: np.ndarray
+    to_target: np.ndarray
+
+    @property
+    def groups(self) -> np.ndarray:
+        """``(n_states + 1,)`` the row groups of the block's choices."""
+        return np.append(self.starts, self.choices.shape[0])
+
+    @staticmethod
+    def of(q: Quotient, states: np.ndarray) -> Block:
+        lo, hi = q.row_groups[states], q.row_groups[states + 1]
+        choices = gather_ranges(lo, hi)
+        rows = sp.csr_array(q.matrix[choices])
+        outer = rows.copy()
+        outer.data[np.isin(outer.indices, states)] = 0.0
+        starts = np.concatenate([[0], np.cumsum(hi - lo)[:-1]]).astype(np.int64)
+        return Block(states, choices, sp.csr_array(rows[:, states]), outer, starts,
+                      q.to_target[choices])
+
+    def exits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """``(choices, 2)`` exit rewards from the lower / upper bounds downstream."""
+        return np.column_stack([self.to_target + self.outer @ lo,
+                                self.to_target + self.outer @ hi])
+
+
+def _matvec_ld(m: sp.csr_array, x: np.ndarray) -> np.ndarray:
+    return np.asarray(m.astype(np.longdouble) @ x.astype(np.longdouble))
+
+
+def evaluate_chain(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Value ``v = r + M v`` and exit time ``t = 1 + M t`` of the chain of ``chosen``
+    rows, in extended precision (a float64 LU refined twice)."""
+    k = chosen.shape[0]
+    m = sp.csr_array(inner[chosen])
+    a = sp.csc_array(sp.eye_array(k, format="csc") - m)
+    lu = spla.splu(a)
+    out = []
+    for rhs in (reward[chosen], np.ones(k)):
+        x = lu.solve(rhs).astype(np.longdouble)
+        for _ in range(2):
+            residual = rhs.astype(np.longdouble) + _matvec_ld(m, x) - x
+            x += lu.solve(np.asarray(residual, dtype=np.float64))
+        out.append(x)
+    return out[0], out[1]
+
+
+def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
+                   allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
+    choice indices) to a fixpoint, over the ``allowed`` choices only if given.  Returns
+    the policy, its values and its expected exit times (extended precision).
+
+    Scores are compared in extended precision, so that at the fixpoint no choice beats
+    the policy by more than ~1e-17 of the values' scale (the verified bounds of interval
+    iteration rely on that); a switch needs a gain above that, so rounding cannot make
+    it cycle."""
+    groups = block.groups
+    inner = block.inner.astype(np.longdouble)
+    for _ in range(POLICY_ROUNDS):
+        v, t = evaluate_chain(block.inner, chosen, reward)
+        score = reward + inner @ v
+        if allowed is not None:
+            score = np.where(allowed, score, -np.inf)
+        better = segmented_argmax(score, groups)
+        gain = score[better] - score[chosen]
+        nxt = np.where(gain > 1e-17 * max(1.0, float(np.max(np.abs(v)))), better, chosen)
+        if np.array_equal(nxt, chosen):
+            return chosen, v, t
+        chosen = nxt
+    return chosen, v, t
+
+
+def solve_chain(chain: sp.csr_array, b: np.ndarray) -> np.ndarray:
+    r"""Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``), level by
+    level downstream first: a single state by :math:`x(s) = (b(s) + \sum_{s' \ne s}
+    Q(s, s') x(s')) / (1 - Q(s, s))`, a non-trivial component by one sparse LU of its
+    own size.  No iterative method and no multi-threaded BLAS call, so a loaded machine
+    cannot make it crawl, and no fill-in across components."""
+    chain = sp.csr_array(chain)
+    blk = graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
+    x = np.zeros(b.shape[0])
+    for level in range(blk.n_levels):
+        states = blk.states_at(level)
+        rows = sp.csr_array(chain[states])
+        rhs = np.asarray(b, dtype=np.float64)[states] + rows @ x  # own states are still 0
+        single = blk.single(states)
+        x[states[single]] = rhs[single] / (1.0 - blk.self_loop[states[single]])
+        if not single.all():
+            inner = states[~single]
+            sub = sp.csc_array(sp.csr_array(rows[np.flatnonzero(~single)])[:, inner])
+            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - sub)
+            x[inner] = np.asarray(spla.spsolve(a, rhs[~single]), dtype=np.float64).ravel()
+    return x
