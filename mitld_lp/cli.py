@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from mitld_lp import defaults
-from mitld_lp.automata.translate import TranslationError
+from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
@@ -60,7 +60,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
-_BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge,)
+_BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge)
 
 #: 3: no certified answer (a solver status or a budget stop; the status is printed).
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -242,6 +242,8 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help="an MITLD formula (D[mu] a reads as F a)")
     p.add_argument("--dot", metavar="FILE", help="write the automaton as Graphviz DOT")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--max-states", type=int, default=200_000, metavar="N",
+                   help="refuse automata with more states (checked while it is built)")
 
 
 def _cmd_dta(args: argparse.Namespace) -> int:
@@ -250,7 +252,7 @@ def _cmd_dta(args: argparse.Namespace) -> int:
 
     path = args.dot and _output_path(args.dot, args.force, "--dot", (".dot", ".gv"))
     formula = parse(args.formula)
-    dta = to_dta(check(formula))
+    dta = to_dta(check(formula), max_states=args.max_states)
     if path:
         _write(path, lambda p: p.write_text(dta.to_dot()))
         _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
@@ -563,12 +565,12 @@ def _run(args: argparse.Namespace) -> int:
     """Run the verb; map every exception to an exit code and one line on stderr."""
     try:
         return args.run(args)
+    except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
+        _say(f"stopped: {err}")
+        return EXIT_UNCERTIFIED
     except _USER_ERRORS as err:
         _say(f"error: {err}")
         return EXIT_USAGE
-    except _BUDGET_STOPS as err:
-        _say(f"stopped: {err}")
-        return EXIT_UNCERTIFIED
     except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
         sys.stderr.close()
         return EXIT_OK

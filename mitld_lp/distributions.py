@@ -5,9 +5,8 @@ in ``{1, 2, ...}`` (never step 0) with pmf ``mu(k) = P(K = k)``.  Whatever mass 
 distribution leaves undefined is the probability that the event *never* happens:
 ``never = 1 - sum_k mu(k)``.
 
-The environment model needs the *hazard*, not the pmf (see DESIGN.md, "Per-step
-probability is the hazard"): given that ``a`` has not happened by step ``k-1``, it happens
-at step ``k`` with probability::
+The environment model needs the *hazard*, not the pmf: given that ``a`` has not happened
+by step ``k-1``, it happens at step ``k`` with probability::
 
     h(k) = mu(k) / S(k-1),     S(k) = P(K > k) = 1 - sum_{j<=k} mu(j)   (never included)
 
@@ -78,6 +77,8 @@ __all__ = [
     "HAZARD_ATOL",
     "NEGLIGIBLE_TAIL",
     "MAX_HAZARD_SCAN",
+    "MAX_TABLE_STEPS",
+    "MAX_STEP",
 ]
 
 #: Totals of a pmf table within this of 1 are treated as exactly 1 (no never-mass).
@@ -90,8 +91,12 @@ HAZARD_ATOL = 1e-13
 NEGLIGIBLE_TAIL = 1e-12
 #: Scans for a constant hazard stop here (a power of two); beyond it the answer is None.
 MAX_HAZARD_SCAN = 2**20
-# Searches for a truncation point or a sample stop here (a power of two).
-_MAX_STEP = 2**62
+#: The most steps a per-step table may have (a pmf's masses; a uniform law longer than
+#: this uses its closed form instead).  Three float64 arrays of this length are 24 MiB.
+MAX_TABLE_STEPS = 2**20
+#: Searches for a truncation point or a sample stop here (a power of two); no law may
+#: put mass beyond it (steps are int64 arrays).
+MAX_STEP = 2**62
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -271,7 +276,7 @@ class FirstOccurrence(ABC):
             still = self._sf_pos(hi[idx]) >= vv[idx]
             need[idx[~still]] = False
             grow = idx[still]
-            if grow.size and int(hi[grow].max()) >= _MAX_STEP:
+            if grow.size and int(hi[grow].max()) >= MAX_STEP:
                 raise DistributionError(self.label, "tail too heavy to sample")
             lo[grow] = hi[grow]
             hi[grow] *= 2
@@ -392,7 +397,7 @@ class FirstOccurrence(ABC):
             raise DistributionError(
                 self.label, "survival is positive at every step; truncation eps must be > 0"
             )
-        t = self._first_step_survival_at_most(e, _MAX_STEP)
+        t = self._first_step_survival_at_most(e, MAX_STEP)
         if t is None:
             raise DistributionError(
                 self.label, f"survival is still above eps = {e:.6g} at step 2**62"
@@ -543,6 +548,46 @@ class _Finite(FirstOccurrence):
         return np.where(idx <= self._n, idx.astype(np.float64), np.inf)
 
 
+# --------------------------------------------------------------------------- uniform
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Uniform(FirstOccurrence):
+    """Equally likely on ``a..b`` in closed form, for supports too long for a table:
+    with ``n = b - a + 1``, ``mu(k) = 1/n``, ``S(k) = min(max(b - k, 0), n) / n``,
+    ``h(k) = 1/(b - k + 1)`` on ``a..b`` (0 before, 1 after)."""
+
+    a: int
+    b: int
+
+    @property
+    def _n(self) -> int:
+        return self.b - self.a + 1
+
+    def _pmf_pos(self, k: IntArray) -> FloatArray:
+        return np.where((k >= self.a) & (k <= self.b), 1.0 / self._n, 0.0)
+
+    def _cdf_pos(self, k: IntArray) -> FloatArray:
+        return np.clip(k - self.a + 1, 0, self._n) / self._n
+
+    def _sf_pos(self, k: IntArray) -> FloatArray:
+        return np.clip(self.b - k, 0, self._n) / self._n
+
+    def _hazard_pos(self, k: IntArray) -> FloatArray:
+        left = np.maximum(self.b - k + 1, 1).astype(np.float64)
+        return np.where(k < self.a, 0.0, np.where(k <= self.b, 1.0 / left, 1.0))
+
+    def _never(self) -> float:
+        return 0.0
+
+    def _last_step(self) -> float:
+        return float(self.b)
+
+    def _constant_hazard_from(self) -> int | None:
+        # h(b) = 1 and h = 1 after b; h(b-1) = 1/2 (or 0 before a when a = b)
+        return self.b
+
+
 # --------------------------------------------------------------------------- scipy based
 
 
@@ -570,6 +615,8 @@ class _ScipyBased(FirstOccurrence):
 
     def _scan_constant_hazard(self) -> int | None:
         if math.isfinite(self.last):
+            if self.last > MAX_HAZARD_SCAN:  # the scan would need a table of 2 * last steps
+                return None
             big_k = max(int(self.last), 1)
         else:
             found = self._first_step_survival_at_most(NEGLIGIBLE_TAIL, MAX_HAZARD_SCAN)
@@ -659,8 +706,16 @@ def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
     """``P(K = k) = masses[k-1]`` for ``k = 1..n``; ``never = 1 - sum(masses)``.
 
     Masses must be finite and ``>= 0`` with sum ``<= 1``; a sum within ``MASS_TOLERANCE``
-    of 1 is treated as exactly 1 (the masses are rescaled, no never-mass).
+    of 1 is treated as exactly 1 (the masses are rescaled, no never-mass).  At most
+    :data:`MAX_TABLE_STEPS` masses (checked before the table is made).
     """
+    count = masses.size if isinstance(masses, np.ndarray) else len(masses)
+    if count > MAX_TABLE_STEPS:
+        raise DistributionError(
+            f"pmf(... {count} masses)",
+            f"has {count} masses; a table is limited to MAX_TABLE_STEPS = {MAX_TABLE_STEPS} "
+            "steps",
+        )
     values = np.asarray(masses).ravel().tolist() if isinstance(masses, np.ndarray) else list(masses)
     label = _label("pmf", *values)
     if not values:
@@ -675,15 +730,21 @@ def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
         if v < 0:
             raise DistributionError(label, f"mass m{i} (step {i}) is negative: {v!r}")
         m[i - 1] = v
-    total = math.fsum(m.tolist())
+    try:
+        total = math.fsum(m.tolist())
+    except OverflowError:  # finite masses whose exact sum is beyond the largest float
+        raise DistributionError(label, "masses sum to more than the largest float > 1") from None
     if total > 1 + MASS_TOLERANCE:
         raise DistributionError(label, f"masses sum to {total:.12g} > 1")
     return _Finite(label, m)
 
 
 def uniform(a: int, b: int) -> FirstOccurrence:
-    """Equally likely on the steps ``a..b`` inclusive, ``1 <= a <= b``:
-    ``P(K = k) = 1/(b-a+1)``, hazard ``1/(b-k+1)`` for ``a <= k <= b``."""
+    """Equally likely on the steps ``a..b`` inclusive, ``1 <= a <= b <= MAX_STEP``:
+    ``P(K = k) = 1/(b-a+1)``, hazard ``1/(b-k+1)`` for ``a <= k <= b``.
+
+    Up to :data:`MAX_TABLE_STEPS` steps it is a table like :func:`pmf`; beyond, the
+    closed forms (no per-step memory)."""
     label = _label("uniform", a, b)
     lo = _integer(label, "a", a)
     hi = _integer(label, "b", b)
@@ -691,6 +752,10 @@ def uniform(a: int, b: int) -> FirstOccurrence:
         raise DistributionError(label, f"a must be >= 1 (step 0 is not allowed), got {lo}")
     if hi < lo:
         raise DistributionError(label, f"b must be >= a = {lo}, got {hi}")
+    if hi > MAX_STEP:
+        raise DistributionError(label, f"b = {hi} is beyond the last step 2**62 = {MAX_STEP}")
+    if hi > MAX_TABLE_STEPS:
+        return _Uniform(label, lo, hi)
     m = np.zeros(hi)
     m[lo - 1 :] = 1.0 / (hi - lo + 1)
     return _Finite(label, m)
@@ -720,7 +785,7 @@ def _freeze(
         with np.errstate(all="ignore"):
             frozen = gen(*args, **kwargs)
             lo, hi = (float(x) for x in frozen.support())
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, ArithmeticError) as exc:
         raise DistributionError(label, f"wrong arguments for scipy.stats.{name}: {exc}") from exc
     if math.isnan(lo) or math.isnan(hi):
         raise DistributionError(

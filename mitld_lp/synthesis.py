@@ -352,11 +352,12 @@ def build_product(
 ) -> Built:
     """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
     ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
-    then the reachable ``product`` with ``game``, within ``max_states`` states and
+    then the reachable ``product`` with ``game``; the automaton and the product each
+    within ``max_states`` states, the product also within
     ``max_memory`` bytes (default: half the machine's memory), both checked before the
     work that would exceed them.  The only place that wires the stages."""
     t0 = time.perf_counter()
-    dta = to_dta(formula)
+    dta = to_dta(formula, max_states=max_states)
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
     mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)

@@ -141,6 +141,15 @@ def test_a_memory_budget_stops_before_the_work(capsys):
     assert main(["info", BUS, "--max-memory", "1G", "-q"]) == 0
 
 
+def test_the_automaton_is_held_to_the_state_budget_too(tmp_path, capsys):
+    # A deadline of a million steps needs a million automaton states: refused at the
+    # budget while the automaton is built, not after (it ran to the time limit before).
+    long = tmp_path / "long.toml"
+    long.write_text(Path(BUS).read_text().replace("F[0,3] A", "F[0,1000000] A"))
+    line = _one_error_line(capsys, 3, ["info", str(long), "--max-states", "1000", "-q"])
+    assert line.startswith("mitld-lp: stopped:") and "more than 1,000 automaton states" in line
+
+
 def test_stage_lines_go_to_stderr_and_quiet_silences_them(capsys):
     assert main(["info", BUS]) == 0
     err = capsys.readouterr().err

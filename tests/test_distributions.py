@@ -605,3 +605,86 @@ def test_import_does_not_load_scipy_stats() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+# --------------------------------------------------------------------------- budgets
+
+
+def test_pmf_masses_beyond_float_range_are_a_distribution_error() -> None:
+    with pytest.raises(DistributionError, match="masses sum to more than"):
+        D.pmf([1e308, 1e308])
+
+
+def test_uniform_beyond_the_last_step_is_refused_with_the_numbers() -> None:
+    with pytest.raises(DistributionError, match=r"distributions\.mu\.uniform: b = 10{20}"):
+        D.from_table({"uniform": [1, 1e20]}, "distributions.mu")
+
+
+def test_pmf_table_budget_is_checked_before_the_table_is_made() -> None:
+    with pytest.raises(DistributionError, match=f"{D.MAX_TABLE_STEPS + 1} masses"):
+        D.pmf(np.zeros(D.MAX_TABLE_STEPS + 1))
+
+
+def _peak_bytes(build: Callable[[], object]) -> int:
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        build()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_huge_uniform_uses_its_closed_form() -> None:
+    """uniform(1, 10**11): a table would be 745 GiB.  Hand values with n = b = 10**11:
+    h(k) = 1/(b-k+1), S(k) = (b-k)/b, and S(T) <= 0.01 first at T = 0.99 b."""
+    b = 10**11
+    law = D.uniform(1, b)
+    assert _peak_bytes(lambda: D.uniform(1, b).hazard(np.arange(1, 1000))) < 1_000_000
+    assert law.hazard(1) == 1 / b
+    assert law.hazard(b - 1) == 0.5
+    assert law.hazard(b) == law.hazard(b + 7) == 1.0
+    assert law.survival(b // 2) == 0.5
+    assert law.pmf(12345) == 1 / b and law.pmf(b + 1) == 0.0
+    assert law.cdf(b // 4) == 0.25
+    assert law.constant_hazard_from == b
+    assert law.truncation_point(0.01) == 99 * b // 100
+    assert law.never == 0.0
+
+
+@pytest.mark.parametrize(("a", "b"), [(1, 1), (1, 6), (12, 18), (3, 40)])
+def test_closed_form_uniform_agrees_with_the_table(a: int, b: int) -> None:
+    table = D.uniform(a, b)
+    closed = D._Uniform(f"uniform({a}, {b})", a, b)
+    k = np.arange(0, b + 5)
+    for f in ("pmf", "cdf", "survival", "hazard"):
+        assert np.allclose(getattr(closed, f)(k), getattr(table, f)(k), rtol=0, atol=1e-15), f
+    assert closed.constant_hazard_from == table.constant_hazard_from
+    for eps in (0.0, 0.05, 0.3, 0.9):
+        assert closed.truncation_point(eps) == table.truncation_point(eps)
+
+
+def test_long_finite_scipy_support_is_not_scanned_with_a_table() -> None:
+    """zipfian's support ends at n: a constant-hazard scan would tabulate 2n steps
+    (13 GB at n = 1e9); past MAX_HAZARD_SCAN the answer is None (use truncation)."""
+    n = 4 * D.MAX_HAZARD_SCAN
+    law = D.from_spec(DistLiteral("scipy", ("zipfian", 1.1, n)))
+    assert _peak_bytes(lambda: law.constant_hazard_from) < 4_000_000
+    assert law.constant_hazard_from is None
+
+
+_ANY = st.one_of(
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["nbinom", "zipfian", "expon", "nonexistent", "_private", "rv_discrete"]),
+)
+
+
+@given(st.sampled_from(sorted(D.FAMILIES)), st.lists(_ANY, max_size=4))
+def test_builders_raise_only_distribution_errors(family: str, args: list) -> None:
+    try:
+        law = D.from_spec(DistLiteral(family, tuple(args)))
+    except DistributionError:
+        return
+    assert 0.0 <= law.never <= 1.0

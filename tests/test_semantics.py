@@ -1,5 +1,5 @@
 """The reference evaluator: every operator on hand-worked traces (expected verdicts worked
-out from the definitions in DESIGN.md), and a cross-check against an independent
+out from the definitions in mitld_lp.logic.semantics), and a cross-check against an independent
 brute-force two-valued evaluator on infinite extensions of the trace."""
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ Expected values come from three routes that do not share code with the translati
 * hand counts (sizes of the automata of ``F[0,k] p`` and ``G[0,k] p``) and a brute-force
   Myhill-Nerode count of the residual languages written with ``holds`` only.
 
-Semantic differences between ``mtl`` (0.4.1) and DESIGN.md, found by experiment (each
+Semantic differences between ``mtl`` (0.4.1) and our semantics, found by experiment (each
 one is pinned by a ``test_mtl_difference_*`` test below so that a change of ``mtl`` is
 noticed):
 

@@ -24,9 +24,9 @@ The letter is never enumerated: one step of a state is unfolded symbolically int
 boolean combination of current-step literals and next-step obligations, and Shannon
 expansion over the literals (in sorted order) yields a reduced ordered decision
 diagram whose leaves are the successor obligations.  The reachable automaton is then
-minimised by Hopcroft's partition refinement on those diagrams (a block is split by
-the function "letter -> successor in the splitter", itself a reduced ordered diagram,
-so equal keys mean equal behaviour), which makes its size independent of how an
+minimised by partition refinement on those diagrams (ordered and reduced, they are
+canonical, so equal signatures mean equal transition functions; a round recomputes only
+the states whose successors changed block), which makes its size independent of how an
 equivalent formula was written, as far as the obligations' languages coincide.  Each
 call of :func:`to_dta` owns its memo tables (a :class:`_Translation`), so nothing is
 kept between calls.
@@ -57,7 +57,7 @@ from mitld_lp.logic.syntax import (
     Until,
 )
 
-__all__ = ["to_dta", "progress", "TranslationError"]
+__all__ = ["to_dta", "progress", "TranslationError", "AutomatonTooLarge"]
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,11 @@ _RawDiagram = Any
 class TranslationError(ValueError):
     """The formula is outside what the translation accepts (names the subformula), or
     its automaton exceeds the state budget."""
+
+
+class AutomatonTooLarge(TranslationError):
+    """The automaton would exceed its state budget (``max_states``); raised before the
+    work that would exceed it."""
 
 
 # --------------------------------------------------------------------------- progression
@@ -175,10 +180,11 @@ class _Translation:
         self._diagrams: dict[Formula, _RawDiagram] = {}
         self._canonical: dict[Formula, Formula] = {}
 
-    def too_many(self) -> TranslationError:
-        return TranslationError(
-            f"{self.what}: more than {self.max_leaves} automaton states; the formula's "
-            "bounds are too large for an explicit automaton"
+    def too_many(self) -> AutomatonTooLarge:
+        return AutomatonTooLarge(
+            f"{self.what}: more than {self.max_leaves:,} automaton states; the formula's "
+            "bounds are too large for an explicit automaton (raise max_states, or "
+            "shorten the bounds)"
         )
 
     def unfold(self, f: Formula) -> Formula:
@@ -269,6 +275,8 @@ def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
     are found, or one state's transition diagram has more than ``max_states``
     successors, before the rest is built.
     """
+    if isinstance(max_states, bool) or not isinstance(max_states, int) or max_states < 1:
+        raise TranslationError(f"max_states must be a positive integer, got {max_states!r}")
     if isinstance(spec, FragmentReport):
         formula, in_nnf = spec.formula, spec.nnf
     else:
@@ -352,72 +360,54 @@ def _relabel(d: Diagram, label: list[int]) -> Diagram:
     return low if low == high else (d[0], low, high)
 
 
-def _inside(d: Diagram, members: set[int]) -> Any:
-    """The reduced diagram of "the successor is in ``members``" (leaves True/False)."""
-    if isinstance(d, int):
-        return d in members
-    low, high = _inside(d[1], members), _inside(d[2], members)
-    return low if low == high else (d[0], low, high)
-
-
 def _coarsest_partition(succ: list[Diagram], accepting: int | None) -> list[int]:
     """The block of each state in the coarsest partition that separates ``accepting``
     from the others and is stable: two states of a block have, for every letter,
     successors in the same block (the Myhill-Nerode classes; unique, so any refinement
     order gives it).
 
-    Hopcroft's algorithm: a splitter block ``C`` splits every block ``B`` by the key
-    "which letters lead into ``C``" (a reduced diagram, so equal keys mean equal
-    functions); only predecessors of ``C`` are looked at (the others have the key
-    "none"), and after a split only all parts but the largest need to become splitters
-    (for a part ``B_i`` the key of ``B`` and of the other parts determine it).  Each
-    state is in a splitter ``O(log n)`` times, so the time is ``O(m log n)`` diagram
-    walks instead of the ``O(n^2)`` of rounds of signature refinement on a chain such as
-    ``F[0,k] p``."""
+    Moore's rounds of signature refinement (a state's signature is its diagram with
+    successors replaced by their blocks; ordered and reduced, so equal signatures mean
+    equal transition functions), but a round recomputes only the states whose signature
+    may have changed: the predecessors of the states that changed block in the round
+    before.  The other states of a block share one signature, so one of them stands for
+    all (the states that differ from it leave the block).  A chain such as ``F[0,k] p`` needs k
+    rounds that each move one state: O(k) signatures instead of the O(k^2) of
+    recomputing every state in every round; a shallow automaton needs few rounds over
+    all states, as before."""
     n = len(succ)
-    preds: list[list[int]] = [[] for _ in range(n)]
+    preds: list[set[int]] = [set() for _ in range(n)]
     for s, d in enumerate(succ):
-        for t in set(_leaves(d)):
-            preds[t].append(s)
-    block = [0] * n
-    members: list[set[int]] = [set(range(n))]
-    if accepting is None or n == 1:
-        return block
-    members[0].discard(accepting)
-    members.append({accepting})
-    block[accepting] = 1
-    work = [1]  # either initial block will do: its key determines the other's
-    in_work = {1}
-    while work:
-        c = work.pop()
-        in_work.discard(c)
-        splitter = set(members[c])
-        touched: dict[int, dict[Any, list[int]]] = {}
-        for s in {p for t in splitter for p in preds[t]}:
-            touched.setdefault(block[s], {}).setdefault(_inside(succ[s], splitter), []).append(s)
-        for b, groups in touched.items():
-            parts = list(groups.values())
-            rest = members[b]
-            for part in parts:
-                rest.difference_update(part)
-            if not rest:  # every state of b leads into c: one part keeps b's number
-                members[b] = rest = set(parts.pop())
-                if not parts:
+        for t in _leaves(d):
+            preds[t].add(s)
+    block = [int(s == accepting) for s in range(n)]
+    members: list[set[int]] = [set(range(n)), set()]
+    if accepting is not None:
+        members[0].discard(accepting)
+        members[1].add(accepting)
+    dirty: set[int] = set(range(n))
+    while dirty:
+        # Invariant: in each block, the states that are not dirty share one signature.
+        by_block: dict[int, dict[Diagram, list[int]]] = {}
+        for s in dirty:
+            sig = _relabel(succ[s], block)
+            by_block.setdefault(block[s], {}).setdefault(sig, []).append(s)
+        staying: dict[int, Diagram] = {}
+        for b, by_sig in by_block.items():
+            ref = next((r for r in members[b] if r not in dirty), None)
+            staying[b] = next(iter(by_sig)) if ref is None else _relabel(succ[ref], block)
+        moved: list[int] = []
+        for b, by_sig in by_block.items():
+            for sig, group in by_sig.items():
+                if sig == staying[b]:
                     continue
-            ids = [b]
-            for part in parts:
-                nid = len(members)
-                members.append(set(part))
-                for s in part:
-                    block[s] = nid
-                ids.append(nid)
-            if b in in_work:
-                new = ids[1:]
-            else:
-                largest = max(ids, key=lambda i: len(members[i]))
-                new = [i for i in ids if i != largest]
-            work.extend(new)
-            in_work.update(new)
+                new = len(members)
+                members.append(set(group))
+                members[b].difference_update(group)
+                for s in group:
+                    block[s] = new
+                moved.extend(group)
+        dirty = {p for t in moved for p in preds[t]}
     return block
 
 
