@@ -115,3 +115,13 @@ def test_dta_figure(tmp_path, capsys):
         assert _is_png(tmp_path / "paper_dta.png")
     else:
         assert "only the DOT file was written" in text
+
+
+def test_bench_big_component_routes_agree(tmp_path, capsys):
+    rows, text = _run("bench_big_component", tmp_path, capsys)
+    assert (tmp_path / "bench_big_component.md").is_file()
+    values = [float(r[2]) for r in rows]
+    # the block-by-block Clarabel LP, HiGHS's simplex and interval iteration: one value
+    assert max(values) - min(values) < 1e-6
+    assert {r[3] for r in rows} == {"optimal"}
+    assert "largest block" in text
