@@ -221,20 +221,17 @@ def _storm_value(model: Any, prop: Any, env: Any) -> tuple[float, float]:
 
 
 def work_build(inst: Instance, work: Path, arm: Any) -> dict[str, Any]:
-    from mitld_lp.automata.sta import make_sta
-    from mitld_lp.automata.translate import to_dta
-    from mitld_lp.logic.parser import parse
-    from mitld_lp.model import bind_distributions
-    from mitld_lp.product import product
+    from mitld_lp import Model
     from mitld_lp.solvers import write_drn
+    from mitld_lp.synthesis import build_product
 
-    world, spec = inst.world(), parse(inst.spec())
+    model = Model.from_game(inst.world(), inst.spec(), epsilon=inst.epsilon)
     before = _maxrss_mb()
     arm()
     t = time.perf_counter()
-    # the same stages, in the same order, as synthesize() runs them
-    sta = make_sta(to_dta(spec), bind_distributions(spec), inst.epsilon)
-    mdp = product(world, sta, max_states=50_000_000, progress=False)
+    # the stages exactly as synthesize() wires them
+    mdp = build_product(model.game, model.spec, model.distributions, epsilon=model.epsilon,
+                        max_states=50_000_000, progress=False).mdp
     seconds = time.perf_counter() - t
     signal.setitimer(signal.ITIMER_REAL, 0)
     peak = _maxrss_mb()
