@@ -189,7 +189,7 @@ def _close(h: FloatArray, ref: float) -> npt.NDArray[np.bool_]:
     return np.abs(h - ref) <= HAZARD_RTOL * abs(ref) + HAZARD_ATOL
 
 
-def _constant_from(h: FloatArray, close: npt.NDArray[np.bool_]) -> int:
+def _constant_from(close: npt.NDArray[np.bool_]) -> int:
     """The smallest ``k0`` (1-based) with ``close[k0-1:]`` all true (the last entry is)."""
     bad = np.flatnonzero(~close)
     return 1 if bad.size == 0 else int(bad[-1]) + 2
@@ -533,7 +533,7 @@ class _Finite(FirstOccurrence):
         # The hazard after the table is constant (1 or 0), so 1..n+1 decides it; it is
         # computed exactly (m/S is exactly 1 or 0 there), so compare exactly.
         h = self._hazard_pos(np.arange(1, self._n + 2, dtype=np.int64))
-        return _constant_from(h, h == h[-1])
+        return _constant_from(h == h[-1])
 
     def _first_step_survival_at_most(self, eps: float, cap: int) -> int | None:
         ok = np.flatnonzero(self._surv <= eps)
@@ -630,7 +630,7 @@ class _ScipyBased(FirstOccurrence):
         if not _close(self._hazard_pos(probe), ref).all():
             return None
         h = self._hazard_pos(np.arange(1, end + 1, dtype=np.int64))
-        k0 = _constant_from(h, _close(h, ref))
+        k0 = _constant_from(_close(h, ref))
         return k0 if k0 <= big_k else None
 
 
