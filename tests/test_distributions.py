@@ -18,6 +18,7 @@ from scipy import stats
 
 from mitld_lp import distributions as D
 from mitld_lp.distributions import DistributionError, FirstOccurrence
+from mitld_lp.distributions.closed import Uniform
 from mitld_lp.logic.syntax import DistLiteral, DistRef
 
 # --------------------------------------------------------------------------- helpers
@@ -656,7 +657,7 @@ def test_huge_uniform_uses_its_closed_form() -> None:
 @pytest.mark.parametrize(("a", "b"), [(1, 1), (1, 6), (12, 18), (3, 40)])
 def test_closed_form_uniform_agrees_with_the_table(a: int, b: int) -> None:
     table = D.uniform(a, b)
-    closed = D._Uniform(f"uniform({a}, {b})", a, b)
+    closed = Uniform(f"uniform({a}, {b})", a, b)
     k = np.arange(0, b + 5)
     for f in ("pmf", "cdf", "survival", "hazard"):
         assert np.allclose(getattr(closed, f)(k), getattr(table, f)(k), rtol=0, atol=1e-15), f

@@ -4,7 +4,9 @@ say when a reserved word was hit."""
 
 from __future__ import annotations
 
+import ast
 import importlib.resources
+import pathlib
 import re
 
 import pytest
@@ -137,3 +139,58 @@ def test_no_reserved_word_note_without_one() -> None:
     with pytest.raises(ParseError) as info:
         parse("p & (q")
     assert "reserved" not in str(info.value)
+
+
+# --------------------------------------------------------------------------- layering
+
+
+def _imports(path: pathlib.Path) -> list[tuple[str, bool]]:
+    """Every module ``path`` imports, with whether the import sits inside a function."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    found: list[tuple[str, bool]] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            nested = in_function or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
+            if isinstance(child, ast.Import):
+                found.extend((alias.name, nested) for alias in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.module:
+                found.extend((f"{child.module}.{alias.name}", nested) for alias in child.names)
+            visit(child, nested)
+
+    visit(tree, False)
+    return found
+
+
+_PACKAGE = pathlib.Path(__file__).resolve().parent.parent / "mitld_lp"
+
+
+def test_the_laws_never_import_the_formula_layer() -> None:
+    """``logic/`` imports ``distributions/``, never the reverse, and no import inside a
+    function holds a cycle apart (only scipy is imported lazily, for speed)."""
+    files = sorted((_PACKAGE / "distributions").glob("*.py"))
+    assert {f.name for f in files} >= {"__init__.py", "law.py", "families.py", "literal.py"}
+    for f in files:
+        for module, in_function in _imports(f):
+            assert not module.startswith("mitld_lp.logic"), f"{f.name} imports {module}"
+            if in_function:
+                assert module.startswith("scipy"), f"{f.name} imports {module} in a function"
+    for f in ("syntax.py", "parser.py", "fragment.py"):
+        lazy = [m for m, inside in _imports(_PACKAGE / "logic" / f) if inside]
+        assert not [m for m in lazy if m.startswith("mitld_lp")], (f, lazy)
+
+
+def test_no_module_of_the_laws_is_over_600_lines() -> None:
+    for f in sorted((_PACKAGE / "distributions").glob("*.py")):
+        assert len(f.read_text(encoding="utf-8").splitlines()) <= 600, f.name
+
+
+def test_the_literal_node_is_the_laws_and_prints_as_before() -> None:
+    """The formula layer's ``DistLiteral`` is the laws' own node; its text is the
+    literal the parser reads back (an integral float keeps ``.0``)."""
+    from mitld_lp import distributions, logic
+
+    assert DistLiteral is distributions.DistLiteral is logic.syntax.DistLiteral
+    lit = DistLiteral("scipy", ("nbinom", 3.0, 0.5, 1))
+    assert str(lit) == "scipy(nbinom, 3.0, 0.5, 1)"
+    assert parse_distribution(str(lit)) == lit

@@ -38,15 +38,20 @@ from functools import cache
 from lark import Lark, Token, Tree
 from lark.exceptions import LarkError, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
-from mitld_lp.distributions import FAMILIES, DistributionError, Family, from_spec
+from mitld_lp.distributions import (
+    FAMILIES,
+    DistArg,
+    DistLiteral,
+    DistributionError,
+    Family,
+    from_spec,
+)
 from mitld_lp.logic.syntax import (
     FALSE,
     RESERVED,
     TRUE,
     And,
     Dist,
-    DistArg,
-    DistLiteral,
     DistRef,
     DistSpec,
     Formula,

@@ -18,11 +18,14 @@ precedence rules allow (loosest first: ``->``, ``|``, ``&``, ``U``/``R``, unary)
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TypeAlias
+
+# The law literal node lives with the laws (it builds its law once); the formula layer
+# imports the laws, never the reverse.
+from mitld_lp.distributions import DistArg, DistLiteral
 
 __all__ = [
     "RESERVED",
@@ -30,6 +33,7 @@ __all__ = [
     "Interval",
     "DistRef",
     "DistLiteral",
+    "DistArg",
     "DistSpec",
     "Formula",
     "Const",
@@ -108,34 +112,6 @@ class DistRef:
 
     def __str__(self) -> str:
         return self.name
-
-
-DistArg: TypeAlias = int | float | str
-
-
-def _format_arg(a: DistArg) -> str:
-    if isinstance(a, str):
-        return a
-    if isinstance(a, float):
-        if math.isfinite(a) and a == int(a) and abs(a) < 1e16:
-            return f"{int(a)}.0"
-        return repr(a)
-    return str(a)
-
-
-@dataclass(frozen=True, slots=True)
-class DistLiteral:
-    """An inline distribution literal such as ``geometric(0.3)`` or ``scipy(nbinom, 3, 0.5)``.
-
-    Only the shape is known here (family name and arguments); whether the parameters
-    define a probability distribution is checked by :mod:`mitld_lp.distributions`.
-    """
-
-    family: str
-    args: tuple[DistArg, ...]
-
-    def __str__(self) -> str:
-        return f"{self.family}({', '.join(_format_arg(a) for a in self.args)})"
 
 
 DistSpec: TypeAlias = DistRef | DistLiteral

@@ -1,0 +1,82 @@
+"""The written forms of a law and their one way to a built law: the formula literal
+``D[family(args)]`` (:class:`DistLiteral`, a node of the formula AST) and a model file's
+inline table ``{ family = value }`` (:func:`from_table`), both through
+:data:`~.families.FAMILIES`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from mitld_lp.distributions.families import FAMILIES, build
+from mitld_lp.distributions.law import DistributionError, FirstOccurrence
+from mitld_lp.distributions.printing import DistArg, literal_text
+
+__all__ = ["DistLiteral", "from_spec", "from_table"]
+
+
+@dataclass(frozen=True, slots=True)
+class DistLiteral:
+    """An inline distribution literal such as ``geometric(0.3)`` or
+    ``scipy(nbinom, 3, 0.5)``: the family name and the arguments as written.
+
+    Only the shape is known here; whether the arguments define a law is checked when
+    it is built (:func:`from_spec`).
+    """
+
+    family: str
+    args: tuple[DistArg, ...]
+
+    def __str__(self) -> str:
+        return literal_text(self.family, self.args)
+
+
+def from_spec(spec: object) -> FirstOccurrence:
+    """The law of an inline formula literal such as ``geometric(0.3)``,
+    ``pmf(0.1, 0.3, 0.6)`` or ``scipy(nbinom, 3, 0.5)``.  Its label is ``str(spec)``.  A
+    name (``D[mu]``) is an error: it is bound by the model."""
+    if not isinstance(spec, DistLiteral):
+        raise DistributionError(
+            str(spec), "is a name, not a distribution literal; bind it in the model file"
+        )
+    return build(spec.family, spec.args, str(spec))
+
+
+def from_table(value: object, path: str) -> FirstOccurrence:
+    """The distribution of a model file's inline table with exactly one key, e.g.
+    ``{ geometric = 0.8 }``, ``{ pmf = [0.1, 0.3, 0.6] }``, ``{ poisson = 2.5 }``,
+    ``{ uniform = [1, 6] }``, ``{ exponential = 0.5 }``, ``{ weibull = [1.5, 3.0] }``,
+    ``{ gamma = [2.0, 1.5] }``, ``{ scipy = ["nbinom", 3, 0.5] }``.
+
+    Errors name the key path: ``distributions.mu2.pmf: masses sum to 1.2 > 1``.
+    """
+    example = "{ geometric = 0.8 }"
+    if not isinstance(value, Mapping):
+        raise DistributionError(
+            path,
+            f"must be an inline table with one distribution key such as {example}, got {value!r}",
+        )
+    if len(value) != 1:
+        keys = ", ".join(str(k) for k in value) or "none"
+        raise DistributionError(
+            path, f"must have exactly one distribution key ({', '.join(FAMILIES)}), got {keys}"
+        )
+    ((family, arg),) = value.items()
+    where = f"{path}.{family}"
+    if family not in FAMILIES:
+        raise DistributionError(
+            path, f"unknown distribution {family!r}; expected one of {', '.join(FAMILIES)}"
+        )
+    if FAMILIES[family].takes_list:
+        if not isinstance(arg, list | tuple):
+            raise DistributionError(where, f"must be a list, got {arg!r}")
+        args = list(arg)
+    else:
+        if isinstance(arg, list | tuple | Mapping | str):
+            raise DistributionError(where, f"must be a number, got {arg!r}")
+        args = [arg]
+    try:
+        return build(str(family), args, where)
+    except DistributionError as exc:
+        raise DistributionError(where, exc.reason) from exc
