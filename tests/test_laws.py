@@ -194,3 +194,73 @@ def test_the_literal_node_is_the_laws_and_prints_as_before() -> None:
     lit = DistLiteral("scipy", ("nbinom", 3.0, 0.5, 1))
     assert str(lit) == "scipy(nbinom, 3.0, 0.5, 1)"
     assert parse_distribution(str(lit)) == lit
+
+
+# --------------------------------------------------------------------------- built once
+
+_INLINE_MODEL = """
+name = "inline"
+spec = "(D[poisson(2.5)] e & F(e & F[0,2] A)) | (D[pmf(0.25, 0.75)] f & F(f & B))"
+[grid]
+size = [3, 2]
+start = [0, 0]
+[regions]
+A = [[2, 1]]
+B = [[0, 1]]
+"""
+
+
+@pytest.fixture
+def builds(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The text of every literal whose law is built from the registry, in order."""
+    from mitld_lp.distributions import literal
+
+    seen: list[str] = []
+    real = literal.build
+
+    def counting(family: str, args: tuple, where: str):  # type: ignore[no-untyped-def]
+        seen.append(where)
+        return real(family, args, where)
+
+    monkeypatch.setattr(literal, "build", counting)
+    return seen
+
+
+def test_each_inline_law_is_built_once_per_load(builds: list[str]) -> None:
+    """Parsing validates each literal by building its law; the fragment check and the
+    binding of events reuse it (before: three builds per literal and load)."""
+    model = M.loads_model(_INLINE_MODEL)
+    assert sorted(builds) == ["pmf(0.25, 0.75)", "poisson(2.5)"]
+    literals = {e: mu for e, mu in check(model.spec).events}
+    for event in ("e", "f"):
+        assert isinstance(literals[event], DistLiteral)
+        assert model.distributions[event] is literals[event].law
+    assert model.distributions["f"].pmf(2) == 0.75
+    assert len(builds) == 2  # check() above built nothing either
+
+
+def test_parse_then_check_then_bind_build_a_literal_once(builds: list[str]) -> None:
+    f = parse("D[geometric(0.25)] a & F(a & b)")
+    report = check(f)
+    bound = M.bind_distributions(f)
+    (_, mu), = report.events
+    assert builds == ["geometric(0.25)"]
+    assert bound["a"] is from_spec(mu) is mu.law
+    assert bound["a"].hazard(7) == 0.25
+
+
+def test_a_literal_equal_to_another_is_still_its_own_node() -> None:
+    """The kept law is not part of the node's value: equality, hashing and pickling
+    see the family and arguments only."""
+    import pickle
+
+    a, b = DistLiteral("geometric", (0.5,)), DistLiteral("geometric", (0.5,))
+    assert a.law is not b.law and a.law is a.law
+    assert a == b and hash(a) == hash(b)
+    f = dist(a, Prop("e"))
+    g = pickle.loads(pickle.dumps(f))
+    assert g == f and g.mu.law.pmf(2) == 0.25
+    bad = DistLiteral("geometric", (1.5,))  # making a literal checks nothing
+    for _ in range(2):
+        with pytest.raises(DistributionError, match=r"p must be in \(0, 1\]"):
+            bad.law  # noqa: B018

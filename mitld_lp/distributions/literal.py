@@ -2,12 +2,17 @@
 ``D[family(args)]`` (:class:`DistLiteral`, a node of the formula AST) and a model file's
 inline table ``{ family = value }`` (:func:`from_table`), both through
 :data:`~.families.FAMILIES`.
+
+A literal builds its law once, the first time :attr:`DistLiteral.law` is read (the
+parser reads it to validate the values at the literal's position), and keeps it: every
+later stage that needs the law of that node (the fragment check, the binding of events to
+laws) gets the same object instead of building it again.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from mitld_lp.distributions.families import FAMILIES, build
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
@@ -21,26 +26,44 @@ class DistLiteral:
     """An inline distribution literal such as ``geometric(0.3)`` or
     ``scipy(nbinom, 3, 0.5)``: the family name and the arguments as written.
 
-    Only the shape is known here; whether the arguments define a law is checked when
-    it is built (:func:`from_spec`).
+    Equality and hashing are by ``(family, args)``.  Making one checks nothing; whether
+    the arguments define a law is known when :attr:`law` is first read.
     """
 
     family: str
     args: tuple[DistArg, ...]
+    _law: FirstOccurrence | None = field(default=None, init=False, repr=False, compare=False)
 
     def __str__(self) -> str:
         return literal_text(self.family, self.args)
 
+    def __reduce__(self) -> tuple[type[DistLiteral], tuple[str, tuple[DistArg, ...]]]:
+        # The built law is a cache (it may hold a scipy object): pickle the text only.
+        return (DistLiteral, (self.family, self.args))
+
+    @property
+    def law(self) -> FirstOccurrence:
+        """The law this literal writes, built from :data:`FAMILIES` on first read and
+        kept (its label is ``str(self)``).  Raises :class:`DistributionError` for an
+        unknown family, a wrong number of arguments or invalid values (each read of an
+        invalid literal raises again)."""
+        law = self._law
+        if law is None:
+            law = build(self.family, self.args, str(self))
+            object.__setattr__(self, "_law", law)
+        return law
+
 
 def from_spec(spec: object) -> FirstOccurrence:
     """The law of an inline formula literal such as ``geometric(0.3)``,
-    ``pmf(0.1, 0.3, 0.6)`` or ``scipy(nbinom, 3, 0.5)``.  Its label is ``str(spec)``.  A
-    name (``D[mu]``) is an error: it is bound by the model."""
+    ``pmf(0.1, 0.3, 0.6)`` or ``scipy(nbinom, 3, 0.5)``: its :attr:`DistLiteral.law`
+    (the same object on every call for one literal).  A name (``D[mu]``) is an error: it
+    is bound by the model."""
     if not isinstance(spec, DistLiteral):
         raise DistributionError(
             str(spec), "is a name, not a distribution literal; bind it in the model file"
         )
-    return build(spec.family, spec.args, str(spec))
+    return spec.law
 
 
 def from_table(value: object, path: str) -> FirstOccurrence:

@@ -21,8 +21,9 @@ Interval bounds are non-negative integers with ``l <= u``.  A distribution ``mu`
 name (:class:`DistRef`, bound later from a model file) or a literal ``family(args)``
 (:class:`DistLiteral`) of one of the families of
 :data:`mitld_lp.distributions.FAMILIES`; integers parse to ``int``, decimals and exponent
-forms to ``float``.  A literal is built once to validate its values, so
-``D[geometric(1.5)] a`` is a :class:`ParseError` at the literal.
+forms to ``float``.  A literal's law is built here, once, to validate its values, so
+``D[geometric(1.5)] a`` is a :class:`ParseError` at the literal; the literal keeps the
+law (:attr:`DistLiteral.law`) for the stages after parsing.
 
 Every malformed input raises :class:`ParseError` (a ``ValueError``) with the line and
 column of the offending token, never another exception.
@@ -44,7 +45,6 @@ from mitld_lp.distributions import (
     DistLiteral,
     DistributionError,
     Family,
-    from_spec,
 )
 from mitld_lp.logic.syntax import (
     FALSE,
@@ -270,12 +270,13 @@ class _Build:
 
     def _validate(self, mu: DistSpec, what: str) -> None:
         """Build an inline law to check its values (``geometric(1.5)``, ``pmf(0.6, 0.6)``),
-        reporting at the literal's family name; a name is bound later."""
+        reporting at the literal's family name; a name is bound later.  The literal keeps
+        the law it built (:attr:`DistLiteral.law`), so the later stages reuse it."""
         if not isinstance(mu, DistLiteral):
             return
         _, tok = self._literals[id(mu)]
         try:
-            from_spec(mu)
+            mu.law  # noqa: B018 - built here, kept by the literal
         except DistributionError as err:
             raise self._error(f"{what}: {err.reason}", tok) from None
 
