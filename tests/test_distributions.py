@@ -9,8 +9,10 @@ from __future__ import annotations
 import math
 import pickle
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -394,7 +396,9 @@ def test_sample_shapes_and_edge_cases() -> None:
         (lambda: D.scipy_discrete("poisson"), r"wrong arguments for scipy\.stats\.poisson"),
         (lambda: D.scipy_discrete("dlaplace", 0.5), r"support starts at -inf < 0"),
         (lambda: D.scipy_discrete("norm"), r"continuous, not discrete"),
-        (lambda: D.scipy_discrete("poisson", float("nan")), r"argument 1 is nan"),
+        (lambda: D.scipy_discrete("poisson", float("nan")), r"argument 1 must be a finite.*nan"),
+        (lambda: D.scipy_discrete("nbinom", math.inf, 0.5), r"argument 1 must be a finite.*inf"),
+        (lambda: D.discretised("expon", 0, -math.inf), r"argument 2 must be a finite.*-inf"),
         (lambda: D.discretised("norm", 5, 1), r"mass on step 0"),
         (lambda: D.discretised("expon", -1.0), r"mass on step 0"),
         (lambda: D.discretised("poisson", 2), r"discrete, not continuous"),
@@ -404,6 +408,86 @@ def test_sample_shapes_and_edge_cases() -> None:
 def test_invalid_parameters(make: Callable[[], FirstOccurrence], pattern: str) -> None:
     with pytest.raises(DistributionError, match=pattern):
         make()
+
+
+# Every family's numeric parameters, one at a time set to a value no float holds
+# (issue 16 item 9: poisson(10^400) was an OverflowError traceback).
+_VALID = {
+    "geometric": (0.5,), "pmf": (0.25, 0.75), "poisson": (2.0,), "uniform": (2, 4),
+    "exponential": (0.5,), "weibull": (1.5, 3.0), "gamma": (2.0, 1.5),
+    "scipy": ("nbinom", 3, 0.5),
+}
+
+
+@pytest.mark.parametrize("family", sorted(_VALID))
+@pytest.mark.parametrize(
+    ("huge", "digits"), [(10**400, 401), (-(10**400), 401), (10**5000, 5001)],
+    ids=["1e400", "-1e400", "1e5000"],
+)
+def test_integers_beyond_the_float_range_are_distribution_errors(
+    family: str, huge: int, digits: int
+) -> None:
+    args = _VALID[family]
+    first = 1 if family == "scipy" else 0
+    assert D.from_spec(DistLiteral(family, args)).pmf(3) >= 0  # the valid law builds
+    for i in range(first, len(args)):
+        bad = (*args[:i], huge, *args[i + 1 :])
+        with pytest.raises(DistributionError) as info:
+            D.from_spec(DistLiteral(family, bad))
+        message = str(info.value)
+        assert "\n" not in message and len(message) < 300, message
+        assert f"integer of {digits} digits" in message
+
+
+@pytest.mark.parametrize("family", sorted(_VALID))
+@pytest.mark.parametrize(
+    "value", [math.nan, math.inf, -math.inf, 10**400], ids=["nan", "inf", "-inf", "1e400"]
+)
+def test_model_file_tables_refuse_values_no_float_holds(family: str, value: float) -> None:
+    """The model file route (``{ family = value }``): the error names the key path."""
+    args = list(_VALID[family])
+    at = 1 if family == "scipy" else 0
+    args[at] = value
+    table = {family: args if D.FAMILIES[family].takes_list else args[0]}
+    with pytest.raises(DistributionError) as info:
+        D.from_table(table, "distributions.mu")
+    assert str(info.value).startswith(f"distributions.mu.{family}: ")
+
+
+def test_scipy_parameters_it_evaluates_to_nan_are_refused() -> None:
+    """scipy accepts hypergeom(M=1e300, n=5, N=10) but its pmf there is nan (by hand:
+    the pmf of a hypergeometric is a number in [0, 1] at every step)."""
+    assert math.isnan(stats.hypergeom(1e300, 5, 10).pmf(0))
+    with pytest.raises(DistributionError, match=r"scipy\.stats\.hypergeom cannot evaluate"):
+        D.scipy_discrete("hypergeom", 1e300, 5, 10)
+    assert D.scipy_discrete("hypergeom", 20, 5, 10).pmf(1) == pytest.approx(
+        stats.hypergeom(20, 5, 10).pmf(0)
+    )
+
+
+def test_a_value_that_is_not_a_number_is_an_error_at_its_step() -> None:
+    """A law whose hazard is nan from step 3 on (as scipy gives far out for some laws):
+    the nan never reaches the automaton, the error names the law and the step."""
+
+    @dataclass(frozen=True, slots=True, eq=False)
+    class NanAfterTwo(Uniform):
+        def _hazard_pos(self, k: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+            return np.where(k >= 3, math.nan, 0.5)
+
+    law = NanAfterTwo("nan_after_two", 1, 10)
+    assert law.hazard(2) == 0.5 and list(law.hazard([0, 1, 2])) == [0.0, 0.5, 0.5]
+    with pytest.raises(DistributionError, match=r"^nan_after_two: the hazard at step 3 is not"):
+        law.hazard([1, 2, 3, 4])
+
+
+def test_a_long_label_is_quoted_as_an_excerpt() -> None:
+    """A law of thousands of masses: the error line quotes its start and end only."""
+    masses = [0.001] * 1001
+    with pytest.raises(DistributionError) as info:
+        D.pmf(masses)
+    message = str(info.value)
+    assert message.startswith("pmf(0.001, 0.001") and message.endswith("masses sum to 1.001 > 1")
+    assert " ... " in message and len(message) < 150
 
 
 def test_distribution_error_is_value_error_and_pickles() -> None:
@@ -677,6 +761,7 @@ def test_long_finite_scipy_support_is_not_scanned_with_a_table() -> None:
 
 _ANY = st.one_of(
     st.integers(-(10**30), 10**30),
+    st.integers(-(10**400), 10**400),
     st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from(["nbinom", "zipfian", "expon", "nonexistent", "_private", "rv_discrete"]),
 )

@@ -264,3 +264,78 @@ def test_a_literal_equal_to_another_is_still_its_own_node() -> None:
     for _ in range(2):
         with pytest.raises(DistributionError, match=r"p must be in \(0, 1\]"):
             bad.law  # noqa: B018
+
+
+# --------------------------------------------------------------------------- huge values
+
+_BIG = str(10**400)
+# One literal per family with its first number replaced by 10^400 (issue 16 item 9).
+_HUGE_LITERALS = [
+    f"geometric({_BIG})", f"pmf(0.5, {_BIG})", f"poisson({_BIG})", f"uniform(1, {_BIG})",
+    f"exponential({_BIG})", f"weibull(1.5, {_BIG})", f"gamma({_BIG}, 1.5)",
+    f"scipy(nbinom, {_BIG}, 0.5)", f"poisson(-{_BIG})",
+]
+
+
+def test_poisson_of_ten_to_the_400_is_one_line_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    """The reproduction of issue 16 item 9: an OverflowError traceback (exit 1) before."""
+    assert main(["check", f"D[poisson({_BIG})] e & F e"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.count("\n") == 1 and len(err) < 300
+    assert err.startswith("mitld-lp: error: 1:3: D[poisson(1000")
+    assert "lam is beyond the float range" in err and "integer of 401 digits" in err
+
+
+@pytest.mark.parametrize("literal", _HUGE_LITERALS)
+def test_huge_parameters_of_every_family_are_parse_errors_at_the_literal(
+    literal: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = f"F[0,2] p & (q |\n  D[{literal}] b)"
+    with pytest.raises(ParseError) as info:
+        parse(text)
+    assert (info.value.line, info.value.column) == (2, 5)
+    assert "beyond the float range" in str(info.value) and "401 digits" in str(info.value)
+    assert main(["check", text]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "2:5: " in err
+
+
+def _grid_model(spec: str, law: str = "") -> str:
+    table = f"[distributions]\nmu = {{ {law} }}\n" if law else ""
+    return (f'name = "big"\nspec = "{spec}"\n[grid]\nsize = [2, 2]\nstart = [0, 0]\n'
+            f"[regions]\nA = [[1, 1]]\n{table}")
+
+
+@pytest.mark.parametrize(
+    ("law", "why"),
+    [
+        ("poisson = inf", "lam must be a finite number > 0, got inf"),
+        ("geometric = nan", "p must be in (0, 1]"),
+        ('scipy = ["nbinom", inf, 0.5]', "argument 1 must be a finite number, got inf"),
+        ('scipy = ["nbinom", 0.5, nan]', "argument 2 must be a finite number, got nan"),
+        ("weibull = [1.5, -inf]", "scale must be a finite number > 0"),
+        ("uniform = [1, 1e300]", "b = an integer of 301 digits is beyond the last step"),
+        ('scipy = ["hypergeom", 1e300, 5, 10]', "scipy.stats.hypergeom cannot evaluate"),
+    ],
+)
+def test_model_files_refuse_values_no_float_holds_at_their_key_path(
+    law: str, why: str, tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """TOML writes inf and nan as floats (and no integer beyond 64 bits): each is one
+    line naming the file and the key path; ``nbinom(inf, 0.5)`` was solved to nan."""
+    path = tmp_path / "big.toml"
+    path.write_text(_grid_model("D[mu] e & F(e & F[0,1] A)", law), encoding="utf-8")
+    with pytest.raises(M.ModelError) as info:
+        M.load_model(path)
+    family = law.split()[0]
+    assert f"big.toml: distributions.mu.{family}: " in str(info.value)
+    assert why in str(info.value)
+    assert main(["solve", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and why in err
+
+
+def test_a_model_files_inline_huge_literal_is_a_spec_error_with_its_position() -> None:
+    with pytest.raises(M.ModelError, match=r"<string>: spec: 1:3: D\[poisson\(1000.* digits"):
+        M.loads_model(_grid_model(f"D[poisson({_BIG})] e & F(e & F[0,1] A)"))

@@ -12,6 +12,8 @@ Families (all over the steps 1, 2, ...):
   ``gamma(shape, scale)``: a continuous ``X >= 0`` with cdf ``F`` read at whole steps,
   ``K = ceil(X)``: ``mu(k) = F(k) - F(k-1)``.
 
+Every numeric parameter must be a finite float (an integer beyond the float range, a nan
+or an infinity is a :class:`DistributionError`, never an ``OverflowError``).
 :data:`FAMILIES` is the one table of them that the parser, the model loader and
 :mod:`.literal` consult.
 """
@@ -36,7 +38,7 @@ from mitld_lp.distributions.law import (
     DistributionError,
     FirstOccurrence,
 )
-from mitld_lp.distributions.printing import literal_text
+from mitld_lp.distributions.printing import int_text, literal_text
 
 __all__ = [
     "geometric",
@@ -69,7 +71,13 @@ def _is_number(x: object) -> bool:
 def _real(where: str, name: str, x: Any) -> float:
     if not _is_number(x):
         raise DistributionError(where, f"{name} must be a number, got {x!r}")
-    return float(x)
+    try:
+        return float(x)
+    except OverflowError:  # an int beyond the largest float (about 1.8e308)
+        raise DistributionError(
+            where,
+            f"{name} is beyond the float range (at most about 1.8e308), got {int_text(int(x))}",
+        ) from None
 
 
 def _positive(where: str, name: str, x: object) -> float:
@@ -81,6 +89,8 @@ def _positive(where: str, name: str, x: object) -> float:
 
 def _integer(where: str, name: str, x: object) -> int:
     v = _real(where, name, x)
+    if isinstance(x, int | np.integer):
+        return int(x)  # exactly: through a float, 2**62 + 1 would become 2**62
     if not (math.isfinite(v) and v == math.floor(v)):
         raise DistributionError(where, f"{name} must be an integer, got {x!r}")
     return int(v)
@@ -90,8 +100,8 @@ def _scipy_args(label: str, args: Sequence[object]) -> list[float]:
     out = []
     for i, a in enumerate(args, start=1):
         v = _real(label, f"argument {i}", a)
-        if math.isnan(v):
-            raise DistributionError(label, f"argument {i} is nan")
+        if not math.isfinite(v):
+            raise DistributionError(label, f"argument {i} must be a finite number, got {v!r}")
         out.append(v)
     return out
 
@@ -156,11 +166,15 @@ def uniform(a: int, b: int) -> FirstOccurrence:
     lo = _integer(label, "a", a)
     hi = _integer(label, "b", b)
     if lo < 1:
-        raise DistributionError(label, f"a must be >= 1 (step 0 is not allowed), got {lo}")
-    if hi < lo:
-        raise DistributionError(label, f"b must be >= a = {lo}, got {hi}")
+        raise DistributionError(
+            label, f"a must be >= 1 (step 0 is not allowed), got {int_text(lo)}"
+        )
     if hi > MAX_STEP:
-        raise DistributionError(label, f"b = {hi} is beyond the last step 2**62 = {MAX_STEP}")
+        raise DistributionError(
+            label, f"b = {int_text(hi)} is beyond the last step 2**62 = {MAX_STEP}"
+        )
+    if hi < lo:
+        raise DistributionError(label, f"b must be >= a = {int_text(lo)}, got {int_text(hi)}")
     if hi > MAX_TABLE_STEPS:
         return Uniform(label, lo, hi)
     m = np.zeros(hi)

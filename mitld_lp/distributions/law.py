@@ -36,6 +36,8 @@ from typing import Any, overload
 import numpy as np
 import numpy.typing as npt
 
+from mitld_lp.text import excerpt
+
 __all__ = [
     "DistributionError",
     "FirstOccurrence",
@@ -72,7 +74,9 @@ Steps = int | np.integer[Any] | npt.NDArray[Any] | Sequence[int]
 
 class DistributionError(ValueError):
     """An invalid distribution: ``where`` names it (or the model-file key path), ``reason``
-    says which parameter is wrong and why, e.g. ``geometric(1.5): p must be in (0, 1]``."""
+    says which parameter is wrong and why, e.g. ``geometric(1.5): p must be in (0, 1]``.
+    ``str()`` is one line; a long ``where`` (a literal of thousands of masses) is quoted
+    as an excerpt."""
 
     def __init__(self, where: str, reason: str) -> None:
         super().__init__(where, reason)
@@ -80,7 +84,7 @@ class DistributionError(ValueError):
         self.reason = reason
 
     def __str__(self) -> str:
-        return f"{self.where}: {self.reason}"
+        return f"{excerpt(self.where)}: {self.reason}"
 
 
 # --------------------------------------------------------------------------- helpers
@@ -176,18 +180,27 @@ class FirstOccurrence(ABC):
         return hi
 
     def _survival_at(self, k: int) -> float:
-        return 1.0 if k <= 0 else float(self._sf_pos(np.array([k], dtype=np.int64))[0])
+        return float(self._evaluate(k, self._sf_pos, 1.0, "survival"))
 
     def _evaluate(
-        self, k: Steps, hook: Callable[[IntArray], FloatArray], before: float
+        self, k: Steps, hook: Callable[[IntArray], FloatArray], before: float, what: str
     ) -> Any:
         """``hook`` at the steps ``k >= 1`` and ``before`` at the others, shaped like ``k``
-        (a float for a scalar)."""
+        (a float for a scalar).  A value that is not a number (scipy cannot evaluate some
+        laws at extreme parameters or far out in the tail) is a :class:`DistributionError`
+        naming the step, never a nan passed on to the automaton."""
         ks, scalar = _steps(k)
         out = np.full(ks.shape, before)
         pos = ks >= 1
         if pos.any():
             out[pos] = hook(ks[pos])
+            nan = np.isnan(out)
+            if nan.any():
+                raise DistributionError(
+                    self.label,
+                    f"the {what} at step {int(ks[nan].flat[0])} is not a number (the law "
+                    "cannot be evaluated there)",
+                )
         return _out(out, scalar)
 
     def _sample_from(self, v: FloatArray) -> FloatArray:
@@ -233,7 +246,7 @@ class FirstOccurrence(ABC):
     def pmf(self, k: npt.NDArray[Any] | Sequence[int]) -> FloatArray: ...
     def pmf(self, k: Steps) -> float | FloatArray:
         """``mu(k) = P(K = k)``; 0 for ``k <= 0``."""
-        return self._evaluate(k, self._pmf_pos, 0.0)
+        return self._evaluate(k, self._pmf_pos, 0.0, "pmf")
 
     @overload
     def cdf(self, k: int | np.integer[Any]) -> float: ...
@@ -241,7 +254,7 @@ class FirstOccurrence(ABC):
     def cdf(self, k: npt.NDArray[Any] | Sequence[int]) -> FloatArray: ...
     def cdf(self, k: Steps) -> float | FloatArray:
         """``P(K <= k) = sum_{j<=k} mu(j)``; 0 for ``k <= 0``.  ``cdf(k) + survival(k) = 1``."""
-        return self._evaluate(k, self._cdf_pos, 0.0)
+        return self._evaluate(k, self._cdf_pos, 0.0, "cdf")
 
     @overload
     def survival(self, k: int | np.integer[Any]) -> float: ...
@@ -249,7 +262,7 @@ class FirstOccurrence(ABC):
     def survival(self, k: npt.NDArray[Any] | Sequence[int]) -> FloatArray: ...
     def survival(self, k: Steps) -> float | FloatArray:
         """``S(k) = P(K > k)``, the never-mass included; ``S(k) = 1`` for ``k <= 0``."""
-        return self._evaluate(k, self._sf_pos, 1.0)
+        return self._evaluate(k, self._sf_pos, 1.0, "survival")
 
     @overload
     def hazard(self, k: int | np.integer[Any]) -> float: ...
@@ -263,7 +276,7 @@ class FirstOccurrence(ABC):
         (so a finite table with total 1 has hazard 1 at and after its last support step).
         ``h(k) = 0`` for ``k <= 0``.
         """
-        return self._evaluate(k, self._hazard_pos, 0.0)
+        return self._evaluate(k, self._hazard_pos, 0.0, "hazard")
 
     @property
     def never(self) -> float:

@@ -10,7 +10,8 @@ Survival is never computed as ``1 - cdf``, so tails far below machine epsilon st
 accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the import takes
 ~0.6 s, which ``import mitld_lp`` and a model with only geometric and table laws should
 not pay.  The families that use these adapters validate their numbers first
-(:mod:`.families`); here the frozen law's support is checked.
+(:mod:`.families`); here the frozen law's support is checked, and its values at step 1
+must be numbers (scipy accepts some parameters it then evaluates to nan).
 """
 
 from __future__ import annotations
@@ -171,6 +172,21 @@ def _freeze(
     return frozen, lo, hi
 
 
+def _evaluable(law: ScipyBased, name: str) -> ScipyBased:
+    """``law``, once its pmf, survival and hazard at step 1 are numbers (a
+    :class:`DistributionError` naming the first that is not)."""
+    try:
+        with np.errstate(all="ignore"):
+            law.pmf(1)
+            law.survival(1)
+            law.hazard(1)
+    except DistributionError as err:
+        raise DistributionError(
+            law.label, f"scipy.stats.{name} cannot evaluate these parameters: {err.reason}"
+        ) from None
+    return law
+
+
 def shifted(label: str, name: str, gen: Any, args: Sequence[float]) -> FirstOccurrence:
     """The discrete ``gen`` at ``args`` as a first-occurrence law: ``K = 1 + X`` if its
     support starts at 0, ``K = X`` if it starts at 1 or later; below 0 is an error."""
@@ -182,7 +198,7 @@ def shifted(label: str, name: str, gen: Any, args: Sequence[float]) -> FirstOccu
     if lo != math.floor(lo):
         raise DistributionError(label, f"support must start at an integer, got {lo:g}")
     shift = 1 if lo == 0 else 0
-    return ShiftedDiscrete(label, frozen, hi + shift, shift=shift)
+    return _evaluable(ShiftedDiscrete(label, frozen, hi + shift, shift=shift), name)
 
 
 def discretised(
@@ -199,4 +215,4 @@ def discretised(
     if f0 > 0:
         raise DistributionError(label, f"mass on step 0: F(0) = {f0:.6g} > 0")
     last = float(math.ceil(hi)) if math.isfinite(hi) else math.inf
-    return Discretised(label, frozen, last)
+    return _evaluable(Discretised(label, frozen, last), name)

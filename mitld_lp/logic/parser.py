@@ -73,6 +73,7 @@ from mitld_lp.logic.syntax import (
     release,
     until,
 )
+from mitld_lp.text import excerpt
 
 __all__ = ["ParseError", "parse", "parse_distribution", "MAX_DEPTH"]
 
@@ -271,14 +272,15 @@ class _Build:
     def _validate(self, mu: DistSpec, what: str) -> None:
         """Build an inline law to check its values (``geometric(1.5)``, ``pmf(0.6, 0.6)``),
         reporting at the literal's family name; a name is bound later.  The literal keeps
-        the law it built (:attr:`DistLiteral.law`), so the later stages reuse it."""
+        the law it built (:attr:`DistLiteral.law`), so the later stages reuse it.  The
+        message quotes a long literal as an excerpt."""
         if not isinstance(mu, DistLiteral):
             return
         _, tok = self._literals[id(mu)]
         try:
             mu.law  # noqa: B018 - built here, kept by the literal
         except DistributionError as err:
-            raise self._error(f"{what}: {err.reason}", tok) from None
+            raise self._error(f"{excerpt(what)}: {err.reason}", tok) from None
 
     def dist_args(self, c: list) -> list[tuple[DistArg, Token]]:
         return c
