@@ -124,6 +124,6 @@ def test_installed_script() -> None:
     assert bad.returncode == 2
     assert bad.stdout == ""
     assert bad.stderr.strip().splitlines() == [
-        "mitld-lp: error: G p is not co-safe: unbounded always/release cannot be decided on "
+        "mitld-lp: error: 1:1: G p is not co-safe: unbounded always/release cannot be decided on "
         "a finite prefix"
     ]

@@ -418,3 +418,31 @@ def test_distribution_soup_only_raises_parse_error(tokens: list[str]) -> None:
         parse_distribution(" ".join(tokens))
     except ParseError:
         pass
+
+
+# --------------------------------------------------------------------------- source
+
+
+def test_parse_source_keeps_the_laws_the_simplification_drops() -> None:
+    from mitld_lp.logic.parser import parse_source
+
+    text = "(D[mu] e & false) |\n  !(F(e & A) -> D[nu] x)"
+    src = parse_source(text)
+    assert src.formula == parse(text)
+    assert [(str(s.dist), s.positive, s.negation, s.line, s.column) for s in src.laws] == [
+        ("D[mu] e", True, None, 1, 2),
+        ("D[nu] x", False, "!(F(e & A) -> D[nu] x)", 2, 17),
+    ]
+    # where each subformula is first written (1-based line and column)
+    assert src.position(parse("F(e & A)")) == (2, 5)
+    assert src.position(parse("e & A")) == (2, 7)
+    assert src.position(parse("A")) == (2, 11)
+    assert src.position(parse("q")) is None
+
+
+def test_parse_source_refuses_a_deep_operand_the_simplification_drops() -> None:
+    from mitld_lp.logic.parser import parse_source
+
+    deep = "X " * (MAX_DEPTH + 5) + "p"
+    with pytest.raises(ParseError, match="nested too deeply"):
+        parse_source(f"(D[mu] ({deep}) & false) | q")

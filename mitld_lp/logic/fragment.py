@@ -21,6 +21,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from mitld_lp.distributions import DistributionError, from_spec
+from mitld_lp.logic.parser import parse_source
+from mitld_lp.logic.source import Source
 from mitld_lp.logic.syntax import (
     And,
     Const,
@@ -57,15 +59,22 @@ _NOT_CO_SAFE = "unbounded always/release cannot be decided on a finite prefix"
 
 
 class FragmentError(ValueError):
-    """A formula outside the supported fragment; the message names the subformula."""
+    """A formula outside the supported fragment; the message names the subformula, and
+    starts with ``line:column`` when the formula's text is known (``line`` and
+    ``column`` are then set, else ``None``)."""
 
-    def __init__(self, subformula: Formula, why: str) -> None:
+    def __init__(
+        self, subformula: Formula, why: str, line: int | None = None, column: int | None = None
+    ) -> None:
         self.subformula = subformula
         self.why = why
-        super().__init__(f"{subformula} {why}")
+        self.line = line
+        self.column = column
+        where = f"{line}:{column}: " if line is not None else ""
+        super().__init__(f"{where}{subformula} {why}")
 
     def __reduce__(self):
-        return (type(self), (self.subformula, self.why))
+        return (type(self), (self.subformula, self.why, self.line, self.column))
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,32 +157,48 @@ def _with_polarity(f: Formula) -> Iterator[tuple[Formula, bool, Formula | None, 
                 stack.append((left, positive, g, negation))
 
 
-def event_distributions(f: Formula) -> dict[str, DistSpec]:
+def event_distributions(f: Formula | Source) -> dict[str, DistSpec]:
     """Each event proposition of ``f`` with its distribution.
+
+    For a :class:`~mitld_lp.logic.source.Source` every ``D[mu] a`` its text writes
+    counts, also one the simplification dropped (``D[mu] a & false``), with its polarity
+    counted on the text; errors then carry its line and column.
 
     Raises :class:`FragmentError` when a ``D[mu]`` is not directly followed by a
     proposition, occurs under negation, or when one event gets two different
     distributions.
     """
+    if isinstance(f, Source):
+        sites = [
+            (site.dist, site.positive, None, site.negation, (site.line, site.column))
+            for site in f.laws
+        ]
+    else:
+        sites = [
+            (g, positive, parent, None if negation is None else str(negation), None)
+            for g, positive, parent, negation in _with_polarity(f)
+            if isinstance(g, Dist)
+        ]
     found: dict[str, DistSpec] = {}
-    for g, positive, parent, negation in _with_polarity(f):
-        if not isinstance(g, Dist):
-            continue
+    for g, positive, parent, negation, where in sites:
+        assert isinstance(g, Dist)
+        at = where or (None, None)
         if not isinstance(g.arg, Prop):
             raise FragmentError(
-                g, "is not supported: D[mu] must apply directly to an event proposition"
+                g, "is not supported: D[mu] must apply directly to an event proposition", *at
             )
         if not positive:
             why = "is not supported: a distribution eventuality occurs under negation"
             if isinstance(parent, Not):
                 raise FragmentError(parent, why)
-            raise FragmentError(g, f"{why} (in {negation})")
+            raise FragmentError(g, f"{why} (in {negation})", *at)
         event = g.arg.name
         if event in found and found[event] != g.mu:
             raise FragmentError(
                 g,
                 f"is not supported: event {event} already has the distribution "
                 f"{found[event]}; each event gets exactly one",
+                *at,
             )
         found[event] = g.mu
     return found
@@ -264,11 +289,20 @@ def horizon(f: Formula) -> int | None:
 # --------------------------------------------------------------------------- check
 
 
-def check(f: Formula) -> FragmentReport:
+def check(f: Formula | Source | str) -> FragmentReport:
     """Check that ``f`` is in the supported fragment and report its NNF, events and
     horizon.  Raises :class:`FragmentError` naming the offending subformula otherwise,
-    also for an inline law whose values are invalid (``D[geometric(1.5)] a``)."""
-    events = event_distributions(f)
+    also for an inline law whose values are invalid (``D[geometric(1.5)] a``).
+
+    ``f`` may be the formula's text (parsed with
+    :func:`~mitld_lp.logic.parser.parse_source`, so :class:`ParseError` too) or its
+    :class:`~mitld_lp.logic.source.Source`: then every ``D[mu] a`` the text writes binds
+    its event, also where the simplification dropped it (``(D[mu] e & false) | F e``
+    declares the event ``e``), and errors carry the line and column of the subformula.
+    """
+    source = parse_source(f) if isinstance(f, str) else f
+    formula = source.formula if isinstance(source, Source) else source
+    events = event_distributions(source)
     for event, mu in events.items():
         if isinstance(mu, DistLiteral):
             try:
@@ -277,13 +311,14 @@ def check(f: Formula) -> FragmentReport:
                 raise FragmentError(
                     dist(mu, Prop(event)), f"has an invalid distribution: {err.reason}"
                 ) from None
-    bad = _not_co_safe(f)
+    bad = _not_co_safe(formula)
     if bad is not None:
-        raise FragmentError(*bad)
+        where = source.position(bad[0]) if isinstance(source, Source) else None
+        raise FragmentError(*bad, *(where or (None, None)))
     return FragmentReport(
-        formula=f,
-        nnf=nnf(f),
+        formula=formula,
+        nnf=nnf(formula),
         events=tuple(sorted(events.items())),
         co_safe=True,
-        horizon=horizon(f),
+        horizon=horizon(formula),
     )

@@ -39,6 +39,7 @@ from lark import Lark, Token, Tree
 from lark.exceptions import LarkError, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from mitld_lp.distributions import FAMILIES, DistributionError, Family, from_spec
+from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
     FALSE,
     RESERVED,
@@ -69,7 +70,7 @@ from mitld_lp.logic.syntax import (
     until,
 )
 
-__all__ = ["ParseError", "parse", "parse_distribution", "MAX_DEPTH"]
+__all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
 
 #: Formulas nested deeper than this are refused: every later stage walks formulas
 #: recursively, and a parse error is better than a ``RecursionError`` far away.
@@ -464,15 +465,17 @@ def _parser() -> Lark:
         lexer="basic",
         start=["start", "dist_start"],
         maybe_placeholders=True,
+        propagate_positions=True,
     )
 
 
-def _run(text: str, start: str) -> object:
+def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
+    """The parse tree of ``text`` and the value built for each of its nodes (by id)."""
     if not isinstance(text, str):
         raise TypeError(f"expected a str to parse, got {type(text).__name__}")
     try:
         tree = _parser().parse(text, start=start)
-        return _transform(tree, _Build(text))
+        return tree, _transform(tree, _Build(text))
     except ParseError:
         raise
     except UnexpectedInput as err:
@@ -486,9 +489,9 @@ def _run(text: str, start: str) -> object:
         ) from None
 
 
-def _transform(tree: Tree, builder: _Build) -> object:
+def _transform(tree: Tree, builder: _Build) -> dict[int, object]:
     """Apply ``builder``'s rule methods bottom-up, iteratively (deep input must not
-    overflow the Python stack)."""
+    overflow the Python stack); the value of every node, by ``id``."""
     results: dict[int, object] = {}
     stack: list[tuple[Tree, bool]] = [(tree, False)]
     while stack:
@@ -499,10 +502,10 @@ def _transform(tree: Tree, builder: _Build) -> object:
                 if isinstance(child, Tree):
                     stack.append((child, False))
             continue
-        children = [results.pop(id(ch)) if isinstance(ch, Tree) else ch for ch in node.children]
+        children = [results[id(ch)] if isinstance(ch, Tree) else ch for ch in node.children]
         method = getattr(builder, str(node.data))
         results[id(node)] = method(children)
-    return results[id(tree)]
+    return results
 
 
 def _too_deep(text: str) -> ParseError:
@@ -541,16 +544,32 @@ def parse(text: str) -> Formula:
     an empty interval ``[l,u]`` with ``l > u``, a distribution literal of the wrong shape
     and nesting deeper than :data:`MAX_DEPTH`.
     """
-    result = _run(text, "start")
+    return parse_source(text).formula
+
+
+def parse_source(text: str) -> Source:
+    """Parse one MITLD formula and keep what its text says beyond the simplified formula:
+    every ``D[mu] a`` written (also one a constant absorbed, as in ``D[mu] a & false``)
+    and where each subformula is written (see :mod:`mitld_lp.logic.source`).  Raises
+    :class:`ParseError` as :func:`parse` does."""
+    tree, built = _run(text, "start")
+    result = built[id(tree)]
     assert isinstance(result, Formula)
     if _depth(result) > MAX_DEPTH:
         raise _too_deep(text)
-    return result
+    try:
+        source = source_of(text, tree, built)
+    except RecursionError:  # a deep operand that the simplification dropped
+        raise _too_deep(text) from None
+    if any(_depth(site.dist) > MAX_DEPTH for site in source.laws):
+        raise _too_deep(text)
+    return source
 
 
 def parse_distribution(text: str) -> DistSpec:
     """Parse a distribution as written inside ``D[...]``: a name (``mu1`` ->
     :class:`DistRef`) or a literal (``geometric(0.3)`` -> :class:`DistLiteral`)."""
-    result = _run(text, "dist_start")
+    tree, built = _run(text, "dist_start")
+    result = built[id(tree)]
     assert isinstance(result, DistRef | DistLiteral)
     return result
