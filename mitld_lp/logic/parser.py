@@ -4,15 +4,16 @@ Syntax (see ``grammar.lark`` beside this file)::
 
     true  false  a  !p  p & q  p | q  p -> q  p U q  p U[l,u] q  p R q  p R[l,u] q
     F p  F[l,u] p  G p  G[l,u] p  X p  D[mu] a        F<=k p == F[0,k] p (also G<=k, U<=k, R<=k)
+    p W q  (weak until, no interval: p U q | G p)
 
-Precedence, loosest first: ``->`` (right-associative), ``|``, ``&``, ``U``/``R``
+Precedence, loosest first: ``->`` (right-associative), ``|``, ``&``, ``U``/``R``/``W``
 (right-associative: ``p U q U r == p U (q U r)``; :func:`str` parenthesises nested binary
 temporal operators anyway), unary (``! X F G D``).  Synonyms: ``¬ ~`` for ``!``, ``∧ &&``
 for ``&``, ``∨ ||`` for ``|``, ``→`` for ``->``, ``◇`` for ``F``, ``□`` for ``G``, ``𝒰`` for
 ``U``, ``⊤``/``⊥`` for ``true``/``false``, ``≤`` for ``<=``.
 
 Identifiers are ASCII letters, digits and ``_``, not starting with a digit.  The words
-``true false X F G U R D`` are reserved: an identifier is read whole and is an operator
+``true false X F G U R W D`` are reserved: an identifier is read whole and is an operator
 only when it is exactly one of them.  So ``F1``, ``Fx``, ``Xp`` and ``Up`` are
 propositions, while ``F p``, ``F(p)``, ``F[0,3] p``, ``F<=3 p`` and ``X!p`` apply the
 operators (a keyword needs a space before an identifier operand).
@@ -68,6 +69,7 @@ from mitld_lp.logic.syntax import (
     nxt,
     release,
     until,
+    weak,
 )
 
 __all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
@@ -192,6 +194,9 @@ class _Build:
     def release(self, c: list) -> Formula:
         return release(c[0], c[2], c[1])
 
+    def weak(self, c: list) -> Formula:
+        return weak(c[0], c[1])
+
     def conj(self, c: list) -> Formula:
         return conj(*c)
 
@@ -309,7 +314,7 @@ _FORMULA_START = frozenset(
         "_LPAR",
     }
 )
-_OPERATORS = frozenset({"_AND", "_OR", "_IMPLIES", "_UNTIL", "_SCRIPT_U", "_RELEASE"})
+_OPERATORS = frozenset({"_AND", "_OR", "_IMPLIES", "_UNTIL", "_SCRIPT_U", "_RELEASE", "_WEAK"})
 _DESCRIBE = {
     "_RPAR": "')'",
     "_LPAR": "'('",
@@ -389,6 +394,7 @@ _OPERATOR_OF = {
     "G": "always, G p",
     "U": "until, p U q",
     "R": "release, p R q",
+    "W": "weak until, p W q",
     "D": "the distribution eventuality, D[mu] a",
 }
 
@@ -417,6 +423,8 @@ def _reserved_hint(text: str, tok: Token) -> str:
         except LarkError:
             return ""
         word = keywords.get(previous.type) if previous is not None else None
+    if word == "W" and tok.type in ("LSQB", "LE"):
+        return "; the weak until W takes no interval (p W q is p U q | G p)"
     if word is None:
         return ""
     return (f"; {word!r} is a reserved word ({_OPERATOR_OF[word]}) and cannot name a "
