@@ -207,6 +207,7 @@ def _report_json(report: FragmentReport) -> dict[str, object]:
         "events": {event: str(mu) for event, mu in report.events},
         "horizon": report.horizon,
         "co_safe": report.co_safe,
+        "class": report.fragment,
         "supported": True,
     }
 
@@ -231,6 +232,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     print(f"nnf:       {report.nnf}")
     print(f"events:    {events}")
     print(f"horizon:   {horizon}")
+    print(f"class:     {report.fragment}")
     print("supported: yes")
     return EXIT_OK
 
@@ -269,6 +271,7 @@ def _cmd_dta(args: argparse.Namespace) -> int:
         tag = " (initial)" if i == dta.initial else ""
         tag += " (accepting)" if dta.is_accepting(i) else ""
         tag += " (rejecting)" if dta.is_rejecting(i) else ""
+        tag += " (safe)" if dta.is_safe(i) else ""
         print(f"  {i}{tag}: {loc}")
         for target, guard in sorted(dta.guards(i).items()):
             print(f"      --[{guard}]--> {target}")

@@ -1,4 +1,4 @@
-"""The supported fragment (MITLD^-, co-safe): negation normal form and the checks.
+"""The supported fragment: negation normal form, the events and the formula's class.
 
 A formula is supported when
 
@@ -6,13 +6,24 @@ A formula is supported when
   (the *event*), never under negation (polarity is counted through ``!``; ``p -> q`` is
   sugar for ``!p | q`` and so counts the left side as negated), and each event has one
   distribution (the same one repeated is fine);
-* it is *syntactically co-safe*: in negation normal form there is no unbounded release
-  (``G p``, ``p R q``, ``!(p U q)``, ...), so a run satisfies it exactly when some finite
-  prefix already decides it, which is what the automaton's reach objective measures.
-  ``D[mu] a`` reads as ``F a`` and is fine; bounded ``G[l,u]``/``R[l,u]`` are fine.
+* it is an *obligation* formula, syntactically: in negation normal form (where
+  ``D[mu] a`` reads as ``F a``) no unbounded until (``F``, ``U``, ``D``) has an unbounded
+  release (``G``, ``R``, ``W``) inside it and no unbounded release has an unbounded until
+  inside it.  Bounded operators, ``X``, ``&`` and ``|`` combine freely.  Its class is then
+
+  - **co-safe**: no unbounded release; a run satisfies it exactly when a finite prefix
+    already decides it true (a reach objective);
+  - **safety**: no unbounded until; a run violates it exactly when a finite prefix
+    already decides it false (``G !h``, ``G (p -> F[0,3] q)``, ``!h W goal``);
+  - **obligation**: both kinds, combined by ``&``/``|`` (``G !h & F goal``).
+
+  Outside are *persistence* (an unbounded until over an unbounded release, ``F G p``),
+  *recurrence* (the reverse, ``G F p``) and their combinations (*reactivity*).
+  Formulas without unbounded operators are counted co-safe.
 
 :func:`check` runs all checks and returns a :class:`FragmentReport`; anything outside the
-fragment raises :class:`FragmentError` naming the offending subformula.
+fragment raises :class:`FragmentError` naming the offending subformula (and, given the
+formula's text, its line and column).
 """
 
 from __future__ import annotations
@@ -51,11 +62,37 @@ __all__ = [
     "nnf",
     "event_distributions",
     "is_co_safe",
+    "classify",
+    "CO_SAFE",
+    "SAFETY",
+    "OBLIGATION",
+    "PERSISTENCE",
+    "RECURRENCE",
+    "REACTIVITY",
+    "SUPPORTED",
     "horizon",
     "check",
 ]
 
-_NOT_CO_SAFE = "unbounded always/release cannot be decided on a finite prefix"
+#: The classes of :func:`classify`; the first three are supported.
+CO_SAFE = "co-safe"
+SAFETY = "safety"
+OBLIGATION = "obligation"
+PERSISTENCE = "persistence"
+RECURRENCE = "recurrence"
+REACTIVITY = "reactivity"
+SUPPORTED = (CO_SAFE, SAFETY, OBLIGATION)
+
+_OUTSIDE = {
+    PERSISTENCE: "an unbounded eventually/until over an unbounded always/release, like "
+    "F G p, holds when something holds forever from an unknown step on",
+    RECURRENCE: "an unbounded always/release over an unbounded eventually/until, like "
+    "G F p, asks for something infinitely often",
+}
+_SUPPORTED_TEXT = (
+    "supported are co-safe, safety and obligation formulas (&/| combinations of formulas "
+    "without unbounded G/R/W and formulas without unbounded F/U)"
+)
 
 
 class FragmentError(ValueError):
@@ -79,15 +116,17 @@ class FragmentError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class FragmentReport:
-    """What :func:`check` found: the formula as given, its negation normal form, each
-    event with its distribution (sorted by event name), whether it is co-safe (always
-    true in a report: :func:`check` raises otherwise) and its :func:`horizon`."""
+    """What :func:`check` found: the formula (as given, or as its text simplifies), its
+    negation normal form, each event with its distribution (sorted by event name),
+    whether it is co-safe, its :func:`horizon` and its class (``fragment``: one of
+    :data:`SUPPORTED`, :func:`check` raises otherwise)."""
 
     formula: Formula
     nnf: Formula
     events: tuple[tuple[str, DistSpec], ...]
     co_safe: bool
     horizon: int | None
+    fragment: str
 
 
 # --------------------------------------------------------------------------- NNF
@@ -207,28 +246,121 @@ def event_distributions(f: Formula | Source) -> dict[str, DistSpec]:
 # --------------------------------------------------------------------------- co-safety
 
 
-def _not_co_safe(f: Formula) -> tuple[Formula, str] | None:
-    """The first subformula that makes ``f`` not co-safe, as written by the user (a
-    negated unbounded until is named with its ``!``), and why; or None."""
-    for g, positive, parent, negation in _with_polarity(f):
+@dataclass(frozen=True, slots=True)
+class _Shape:
+    """What the negation normal form of a subformula contains: an unbounded until, an
+    unbounded release, an until with a release inside (persistence), a release with an
+    until inside (recurrence)."""
+
+    until: bool = False
+    release: bool = False
+    persistence: bool = False
+    recurrence: bool = False
+
+    def join(self, other: _Shape) -> _Shape:
+        return _Shape(*(a or b for a, b in zip(self.astuple(), other.astuple(), strict=True)))
+
+    def astuple(self) -> tuple[bool, bool, bool, bool]:
+        return (self.until, self.release, self.persistence, self.recurrence)
+
+    @property
+    def kind(self) -> str:
+        if self.persistence and self.recurrence:
+            return REACTIVITY
+        if self.persistence:
+            return PERSISTENCE
+        if self.recurrence:
+            return RECURRENCE
+        if self.until and self.release:
+            return OBLIGATION
+        return SAFETY if self.release else CO_SAFE
+
+
+def _shapes(f: Formula) -> tuple[_Shape, tuple[Formula, str, str] | None]:
+    """The :class:`_Shape` of ``f`` and the innermost subformula that makes it
+    persistence or recurrence (as written: an operator that is negated is named with its
+    ``!``), a note, and that class; polarity is counted through ``!``."""
+    memo: dict[tuple[int, bool], _Shape] = {}
+    worst: list[tuple[Formula, str, str]] = []
+
+    def shape(g: Formula, positive: bool, parent: Formula | None) -> _Shape:
+        key = (id(g), positive)
+        hit = memo.get(key)
+        if hit is not None:
+            return hit
         match g:
-            case Release(_, _, None) if positive:
-                return g, f"is not co-safe: {_NOT_CO_SAFE}"
-            case Until(_, _, None) | Dist() if not positive:
-                if isinstance(parent, Not):
-                    return parent, f"is not co-safe: {_NOT_CO_SAFE}"
-                return g, (
-                    f"is not co-safe: under negation (in {negation}) it is an unbounded "
-                    "release (always), which cannot be decided on a finite prefix"
-                )
-    return None
+            case Const() | Prop():
+                out = _Shape()
+            case Not(a):
+                out = shape(a, not positive, g)
+            case Next(a):
+                out = shape(a, positive, g)
+            case And(args) | Or(args):
+                out = _Shape()
+                for a in args:
+                    out = out.join(shape(a, positive, g))
+            case Until(left, right, iv) | Release(left, right, iv):
+                inner = shape(left, positive, g).join(shape(right, positive, g))
+                out = inner
+                if iv is None:
+                    eventual = isinstance(g, Until) == positive
+                    out = _nest(inner, eventual, _as_written(g, positive, parent), worst)
+            case Dist(_, a):  # F a
+                named = _as_written(g, positive, parent)
+                out = _nest(shape(a, positive, g), positive, named, worst)
+            case _:
+                raise TypeError(f"not a formula: {g!r}")
+        memo[key] = out
+        return out
+
+    top = shape(f, True, None)
+    return top, (worst[0] if worst else None)
+
+
+def _as_written(g: Formula, positive: bool, parent: Formula | None) -> tuple[Formula, str]:
+    """How to name operator ``g`` in a message: with the ``!`` just above it when that
+    negation turns it into its dual (``G p`` is ``!(true U !p)``), or with a note when a
+    negation further up does."""
+    if positive:
+        return g, ""
+    if isinstance(parent, Not):
+        return parent, ""
+    return g, " under negation"
+
+
+def _nest(
+    inner: _Shape,
+    eventual: bool,
+    named: tuple[Formula, str],
+    worst: list[tuple[Formula, str, str]],
+) -> _Shape:
+    """The shape of an unbounded until (``eventual``) or release over operands of shape
+    ``inner``; the first nesting found (none is below it) is kept in ``worst`` under
+    ``named``: the operator, or the ``!`` above it when it is negated (``G p`` is
+    ``!(true U !p)``)."""
+    if eventual:
+        out = _Shape(True, inner.release, inner.persistence or inner.release, inner.recurrence)
+        nested = inner.release
+    else:
+        out = _Shape(inner.until, True, inner.persistence, inner.recurrence or inner.until)
+        nested = inner.until
+    if nested and not worst:
+        worst.append((*named, PERSISTENCE if eventual else RECURRENCE))
+    return out
+
+
+def classify(f: Formula) -> str:
+    """The syntactic class of ``f`` (see the module docstring): :data:`CO_SAFE`,
+    :data:`SAFETY`, :data:`OBLIGATION`, :data:`PERSISTENCE`, :data:`RECURRENCE` or
+    :data:`REACTIVITY`.  Counted by polarity, so it also answers for ``!D[mu] a`` (a
+    release), which :func:`nnf` refuses."""
+    return _shapes(f)[0].kind
 
 
 def is_co_safe(f: Formula) -> bool:
     """True when the negation normal form of ``f`` has no unbounded release, i.e. no
-    unbounded until or ``D`` under negation and no unbounded release outside it.  (Counted
-    by polarity, so it also answers for ``!D[mu] a``, which :func:`nnf` refuses.)"""
-    return _not_co_safe(f) is None
+    unbounded until or ``D`` under negation and no unbounded release outside it."""
+    return classify(f) == CO_SAFE
 
 
 # --------------------------------------------------------------------------- horizon
@@ -311,14 +443,19 @@ def check(f: Formula | Source | str) -> FragmentReport:
                 raise FragmentError(
                     dist(mu, Prop(event)), f"has an invalid distribution: {err.reason}"
                 ) from None
-    bad = _not_co_safe(formula)
-    if bad is not None:
-        where = source.position(bad[0]) if isinstance(source, Source) else None
-        raise FragmentError(*bad, *(where or (None, None)))
+    shape, worst = _shapes(formula)
+    if worst is not None:
+        named, note, kind = worst
+        where = source.position(named) if isinstance(source, Source) else None
+        raise FragmentError(
+            named, f"is{note} a {kind} formula ({_OUTSIDE[kind]}); {_SUPPORTED_TEXT}",
+            *(where or (None, None)),
+        )
     return FragmentReport(
         formula=formula,
         nnf=nnf(formula),
         events=tuple(sorted(events.items())),
-        co_safe=True,
+        co_safe=shape.kind == CO_SAFE,
         horizon=horizon(formula),
+        fragment=shape.kind,
     )
