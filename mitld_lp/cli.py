@@ -33,7 +33,7 @@ from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
-from mitld_lp.logic.parser import ParseError, parse
+from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.model import ModelError
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.text import printable
@@ -207,6 +207,7 @@ def _report_json(report: FragmentReport) -> dict[str, object]:
         "events": {event: str(mu) for event, mu in report.events},
         "horizon": report.horizon,
         "co_safe": report.co_safe,
+        "class": report.fragment,
         "supported": True,
     }
 
@@ -214,7 +215,7 @@ def _report_json(report: FragmentReport) -> dict[str, object]:
 def _cmd_check(args: argparse.Namespace) -> int:
     """Parse and classify a formula: normalised form, NNF, events, horizon."""
     try:
-        report = check(parse(args.formula))
+        report = check(parse_source(args.formula))
     except _USER_ERRORS as err:
         if args.json:
             out: dict[str, object] = {"supported": False, "error": str(err)}
@@ -231,6 +232,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     print(f"nnf:       {report.nnf}")
     print(f"events:    {events}")
     print(f"horizon:   {horizon}")
+    print(f"class:     {report.fragment}")
     print("supported: yes")
     return EXIT_OK
 
@@ -251,8 +253,9 @@ def _cmd_dta(args: argparse.Namespace) -> int:
     from mitld_lp.automata.translate import to_dta
 
     path = args.dot and _output_path(args.dot, args.force, "--dot", (".dot", ".gv"))
-    formula = parse(args.formula)
-    dta = to_dta(check(formula), max_states=args.max_states)
+    report = check(parse_source(args.formula))
+    formula = report.formula
+    dta = to_dta(report, max_states=args.max_states)
     if path:
         _write(path, lambda p: p.write_text(dta.to_dot()))
         _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
@@ -268,6 +271,7 @@ def _cmd_dta(args: argparse.Namespace) -> int:
         tag = " (initial)" if i == dta.initial else ""
         tag += " (accepting)" if dta.is_accepting(i) else ""
         tag += " (rejecting)" if dta.is_rejecting(i) else ""
+        tag += " (safe)" if dta.is_safe(i) else ""
         print(f"  {i}{tag}: {loc}")
         for target, guard in sorted(dta.guards(i).items()):
             print(f"      --[{guard}]--> {target}")

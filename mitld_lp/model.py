@@ -53,7 +53,7 @@ from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec
 from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
-from mitld_lp.logic.parser import ParseError, parse
+from mitld_lp.logic.parser import ParseError, parse, parse_source
 from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
 from mitld_lp.text import printable
 
@@ -409,14 +409,14 @@ def _parse_spec(text: str, ctx: _Context) -> tuple[Formula, FragmentReport]:
     """Parse the spec (errors carry ``line:column`` within the spec string) and check it
     is in the supported co-safe fragment."""
     try:
-        formula = parse(text)
+        source = parse_source(text)
     except ParseError as exc:
         raise ctx.error("spec", f"{exc.line}:{exc.column}: {exc.reason}") from exc
     try:
-        report = check(formula)
+        report = check(source)  # the events of every D[mu] a written, also folded ones
     except FragmentError as exc:
         raise ctx.error("spec", str(exc)) from exc
-    return formula, report
+    return report.formula, report
 
 
 def _bind_events(
@@ -510,6 +510,12 @@ def _bind_spec(
     key path); every other proposition of the spec must be a proposition of the game;
     events the game declares (an optional ``event_names`` attribute) must each get a law.
     """
+    if not report.co_safe:  # the automaton has them; the product and solvers do not yet
+        raise ctx.error(
+            "spec",
+            f"a {report.fragment} specification: safety/obligation tasks are not yet "
+            "solvable (only co-safe ones are: no unbounded G, R or W in negation normal form)",
+        )
     bound = _bind_events(report.events, named, ctx)
     used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
     for dname in named:

@@ -37,6 +37,27 @@ def test_check_bounded_formula(capsys: pytest.CaptureFixture[str]) -> None:
     assert lines["horizon"].strip() == "4"  # q read at step 3 + 1
 
 
+@pytest.mark.parametrize(
+    ("formula", "fragment"),
+    [
+        ("F[0,3] p & D[mu] b", "co-safe"),
+        ("G !h", "safety"),
+        ("!h W goal", "safety"),
+        ("G (p -> F[0,3] q)", "safety"),
+        ("G !h & (D[mu] bus & F(bus & F[0,3] stop))", "obligation"),
+    ],
+)
+def test_check_reports_the_class(
+    formula: str, fragment: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["check", formula]) == 0
+    lines = dict(line.split(":", 1) for line in capsys.readouterr().out.splitlines())
+    assert lines["class"].strip() == fragment
+    assert main(["check", "--json", formula]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["class"] == fragment and data["co_safe"] == (fragment == "co-safe")
+
+
 def test_check_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["check", "--json", "F[0,3] p & D[pmf(0.1, 0.3)] b"]) == 0
     data = json.loads(capsys.readouterr().out)
@@ -46,6 +67,7 @@ def test_check_json(capsys: pytest.CaptureFixture[str]) -> None:
         "events": {"b": "pmf(0.1, 0.3)"},
         "horizon": None,
         "co_safe": True,
+        "class": "co-safe",
         "supported": True,
     }
 
@@ -62,8 +84,8 @@ def test_check_json(capsys: pytest.CaptureFixture[str]) -> None:
         ("D[mu] a -> p", "under negation"),
         ("D[mu] a & D[nu] a", "already has the distribution"),
         ("D[mu] (a | b)", "directly to an event"),
-        ("G p", "G p is not co-safe"),  # not co-safe
-        ("F G p", "G p is not co-safe"),
+        ("G F p", "1:1: G F p is a recurrence formula"),  # not an obligation
+        ("p & F G p", "1:5: F G p is a persistence formula"),
     ],
 )
 def test_check_errors_exit_2_with_one_line(
@@ -120,10 +142,12 @@ def test_installed_script() -> None:
     ok = subprocess.run([script, "check", PAPER], capture_output=True, text=True, timeout=60)
     assert ok.returncode == 0, ok.stderr
     assert "supported: yes" in ok.stdout
-    bad = subprocess.run([script, "check", "G p"], capture_output=True, text=True, timeout=60)
+    bad = subprocess.run([script, "check", "G F p"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2
     assert bad.stdout == ""
     assert bad.stderr.strip().splitlines() == [
-        "mitld-lp: error: G p is not co-safe: unbounded always/release cannot be decided on "
-        "a finite prefix"
+        "mitld-lp: error: 1:1: G F p is a recurrence formula (an unbounded always/release over "
+        "an unbounded eventually/until, like G F p, asks for something infinitely often); "
+        "supported are co-safe, safety and obligation formulas (&/| combinations of formulas "
+        "without unbounded G/R/W and formulas without unbounded F/U)"
     ]

@@ -96,7 +96,7 @@ def test_info_without_clock_reduction_grows_with_the_truncation_point(capsys):
     [
         ["solve", "no/such/model.toml"],
         ["info", str(MODELS)],  # a directory
-        ["dta", "G p"],
+        ["dta", "G F p"],
         ["dta", "F[3,1] p"],
         ["export", BUS],
         ["simulate", BUS, "-n", "0"],

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import mitld_lp.automata.translate as T
-from mitld_lp.automata.dta import DTA, Location
+from mitld_lp.automata.dta import DTA, KINDS, Location
 from mitld_lp.cli import main
 from mitld_lp.hypothesis import formulas
 from mitld_lp.logic import check, nnf, parse
@@ -82,12 +82,12 @@ def test_translation_keeps_no_memo_between_calls() -> None:
 
 
 def _moore_size(d: DTA) -> int:
-    """Number of Myhill-Nerode classes of ``d``'s states by rounds of signature
-    refinement over the explicit alphabet (2^atoms letters)."""
+    """Number of Myhill-Nerode classes of ``d``'s states (labelled by their kinds) by
+    rounds of signature refinement over the explicit alphabet (2^atoms letters)."""
     letters = [
         frozenset(c) for r in range(len(d.atoms) + 1) for c in itertools.combinations(d.atoms, r)
     ]
-    block = [int(d.is_accepting(s)) for s in range(d.n_states)]
+    block = [KINDS.index(d.kind(s)) for s in range(d.n_states)]
     while True:
         sigs = [(block[s], tuple(block[d.step(s, a)] for a in letters)) for s in range(d.n_states)]
         ids = {sig: i for i, sig in enumerate(sorted(set(sigs)))}
@@ -215,3 +215,21 @@ def test_cli_dta_honours_max_states(capsys: pytest.CaptureFixture[str]) -> None:
 def test_max_states_must_be_a_positive_integer(bad: object) -> None:
     with pytest.raises(T.TranslationError, match="max_states"):
         T.to_dta(parse("F p"), max_states=bad)  # type: ignore[arg-type]
+
+
+def test_cli_dta_marks_the_safe_states(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["dta", "G p | F q"]) == 0
+    out = capsys.readouterr().out
+    assert "  0 (initial) (safe): F q | false R p" in out.splitlines()
+    assert out.count("(safe)") == 1 and "(accepting)" in out
+    dot = T.to_dta(parse("G p | F q")).to_dot()
+    assert dot.count("(safe)") == 1
+
+
+def test_kinds_cover_every_state_and_persistent_is_safe_or_accept() -> None:
+    d = T.to_dta(parse("G !h & (D[mu] bus & F(bus & F[0,3] stop))"))
+    assert len(d.kinds) == d.n_states and set(d.kinds) <= set(KINDS)
+    assert d.kind(d.rejecting) == "reject"
+    assert d.persistent == {s for s in range(d.n_states) if d.kind(s) in ("safe", "accept")}
+    with pytest.raises(ValueError, match="at least one letter"):
+        d.accepts_lasso([], [])

@@ -10,9 +10,17 @@ from hypothesis import strategies as st
 
 from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic.fragment import (
+    CO_SAFE,
+    OBLIGATION,
+    PERSISTENCE,
+    REACTIVITY,
+    RECURRENCE,
+    SAFETY,
+    SUPPORTED,
     FragmentError,
     FragmentReport,
     check,
+    classify,
     event_distributions,
     horizon,
     is_co_safe,
@@ -192,18 +200,107 @@ def test_co_safe_strategy_yields_co_safe_formulas(f: Formula) -> None:
 @pytest.mark.parametrize(
     ("text", "named"),
     [
-        ("G p", "G p is not co-safe"),
-        ("p & (q R p)", "q R p is not co-safe"),
-        ("!(p U q) | q", "!(p U q) is not co-safe"),
-        ("!(r & p U q)", "p U q is not co-safe: under negation (in !(r & p U q)) it is an"),
-        ("F G p", "G p is not co-safe"),
+        ("G F p", "1:1: G F p is a recurrence formula"),
+        ("p & (q R F p)", "1:6: q R F p is a recurrence formula"),
+        ("!(!F p U q) | q", "1:1: !(!F p U q) is a recurrence formula"),
+        ("!(r & G p U q)", "1:7: G p U q is under negation a recurrence formula"),
+        ("F G p", "1:1: F G p is a persistence formula"),
+        ("G F G p", "1:3: F G p is a persistence formula"),  # the innermost nesting
+        ("q & (G p) U r", "1:5: G p U r is a persistence formula"),
+        ("G F p | F G q", "1:1: G F p is a recurrence formula"),
+        ("X\n  (p | G (q -> F r))", "2:8: G (!q | F r) is a recurrence formula"),
     ],
 )
-def test_check_names_the_non_co_safe_subformula(text: str, named: str) -> None:
+def test_check_names_the_subformula_outside_and_its_class(text: str, named: str) -> None:
     with pytest.raises(FragmentError) as info:
-        check(parse(text))
+        check(text)
     assert str(info.value).startswith(named)
-    assert "finite prefix" in str(info.value)
+    assert "supported are co-safe, safety and obligation formulas" in str(info.value)
+    assert "\n" not in str(info.value)
+    # the formula alone (no text) names the same subformula, without a position
+    with pytest.raises(FragmentError) as again:
+        check(parse(text))
+    assert str(again.value) == str(info.value).split(": ", 1)[1]
+    assert again.value.line is None
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("p", CO_SAFE),
+        ("F[0,3] p & X q", CO_SAFE),
+        ("F p", CO_SAFE),
+        ("D[mu] a & F(a & F[0,3] b)", CO_SAFE),
+        ("!G p", CO_SAFE),
+        ("G[0,3] F p", CO_SAFE),
+        ("G p", SAFETY),
+        ("G !h", SAFETY),
+        ("G (p -> F[0,3] q)", SAFETY),
+        ("!h W goal", SAFETY),
+        ("!(p U q)", SAFETY),
+        ("F[0,3] G p", SAFETY),
+        ("X G p", SAFETY),
+        ("q -> G p", SAFETY),
+        ("G p R q", SAFETY),
+        ("G !h & F goal", OBLIGATION),
+        ("G !h & D[mu] bus & F(bus & F[0,3] stop)", OBLIGATION),
+        ("G p | F q", OBLIGATION),
+        ("X (G p | F q)", OBLIGATION),
+        ("F[0,2] (G p | F q)", OBLIGATION),
+        ("(G p | F q) & (G r | F s)", OBLIGATION),
+        ("G F p", RECURRENCE),
+        ("G (p | F q)", RECURRENCE),
+        ("p W F q", RECURRENCE),
+        ("!D[mu] a", SAFETY),  # counted by polarity (check refuses it for the negation)
+        ("F G p", PERSISTENCE),
+        ("G p U q", PERSISTENCE),
+        ("p U (q & G r)", PERSISTENCE),
+        ("G F p | F G p", REACTIVITY),
+        ("G F G p", REACTIVITY),
+    ],
+)
+def test_classify_by_hand(text: str, fragment: str) -> None:
+    assert classify(parse(text)) == fragment
+    assert is_co_safe(parse(text)) == (fragment == CO_SAFE)
+    if fragment in SUPPORTED and "!D" not in text:
+        report = check(text)
+        assert report.fragment == fragment
+        assert report.co_safe == (fragment == CO_SAFE)
+    elif "!D" not in text:
+        with pytest.raises(FragmentError):
+            check(text)
+
+
+def _unbounded(f: Formula) -> tuple[bool, bool]:
+    """Whether the NNF of ``f`` (D read as F) has an unbounded until and an unbounded
+    release, by walking it."""
+    g = nnf(f)
+    ops = [h for h in subformulas(g) if isinstance(h, Until | Release | Dist)]
+    until = any(isinstance(h, Dist) or isinstance(h, Until) and h.interval is None for h in ops)
+    rel = any(isinstance(h, Release) and h.interval is None for h in ops)
+    return until, rel
+
+
+def _nests(f: Formula) -> bool:
+    """Whether in the NNF some unbounded until has an unbounded release below it or the
+    other way round."""
+    for h in subformulas(nnf(f)):
+        if isinstance(h, Until | Release) and h.interval is None:
+            below = [x for x in (h.left, h.right) for x in subformulas(x)]
+            other = Release if isinstance(h, Until) else Until
+            if any(isinstance(x, other) and x.interval is None for x in below):
+                return True
+    return False
+
+
+@given(formulas(max_depth=5, max_bound=3))
+def test_classify_agrees_with_the_negation_normal_form(f: Formula) -> None:
+    fragment = classify(f)
+    until, rel = _unbounded(f)
+    if _nests(f):
+        assert fragment in (PERSISTENCE, RECURRENCE, REACTIVITY)
+    else:
+        assert fragment == (OBLIGATION if until and rel else SAFETY if rel else CO_SAFE)
 
 
 # --------------------------------------------------------------------------- horizon
@@ -295,7 +392,8 @@ def test_check_until_with_lower_bound() -> None:
 
 def test_fragment_error_pickles() -> None:
     with pytest.raises(FragmentError) as info:
-        check(parse("G p"))
+        check("G F p")
     again = pickle.loads(pickle.dumps(info.value))
     assert str(again) == str(info.value)
     assert again.subformula == info.value.subformula
+    assert (again.line, again.column) == (info.value.line, info.value.column) == (1, 1)

@@ -128,7 +128,7 @@ def test_propositions_from_regions() -> None:
          "regions.A", "given twice"),
         # names a formula cannot write, and empty regions (issue 12)
         ({"width": 3, "height": 3, "regions": {"F": [(1, 1)]}}, "regions.F",
-         r'region name "F" is not a proposition name .*not one of D, F, G, R, U, X'),
+         r'region name "F" is not a proposition name .*not one of D, F, G, R, U, W, X'),
         ({"width": 3, "height": 3, "regions": {"a b": [(1, 1)]}}, 'regions."a b"',
          "not a proposition name"),
         ({"width": 3, "height": 3, "regions": {"true": [(1, 1)]}}, "regions.true",

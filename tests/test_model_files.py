@@ -373,7 +373,7 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
     (
         "non-co-safe spec",
         edit("F(b1 & F[0,3] A)", "F(b1 & F[0,3] A) & G !B"),
-        ("spec", "not co-safe"),
+        ("spec", "obligation", "not yet solvable"),
     ),
     (
         "proposition neither region nor event",

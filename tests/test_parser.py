@@ -418,3 +418,66 @@ def test_distribution_soup_only_raises_parse_error(tokens: list[str]) -> None:
         parse_distribution(" ".join(tokens))
     except ParseError:
         pass
+
+
+# --------------------------------------------------------------------------- source
+
+
+def test_parse_source_keeps_the_laws_the_simplification_drops() -> None:
+    from mitld_lp.logic.parser import parse_source
+
+    text = "(D[mu] e & false) |\n  !(F(e & A) -> D[nu] x)"
+    src = parse_source(text)
+    assert src.formula == parse(text)
+    assert [(str(s.dist), s.positive, s.negation, s.line, s.column) for s in src.laws] == [
+        ("D[mu] e", True, None, 1, 2),
+        ("D[nu] x", False, "!(F(e & A) -> D[nu] x)", 2, 17),
+    ]
+    # where each subformula is first written (1-based line and column)
+    assert src.position(parse("F(e & A)")) == (2, 5)
+    assert src.position(parse("e & A")) == (2, 7)
+    assert src.position(parse("A")) == (2, 11)
+    assert src.position(parse("q")) is None
+
+
+def test_parse_source_refuses_a_deep_operand_the_simplification_drops() -> None:
+    from mitld_lp.logic.parser import parse_source
+
+    deep = "X " * (MAX_DEPTH + 5) + "p"
+    with pytest.raises(ParseError, match="nested too deeply"):
+        parse_source(f"(D[mu] ({deep}) & false) | q")
+
+
+# --------------------------------------------------------------------------- weak until
+
+
+def test_weak_until_is_a_release_and_prints_back() -> None:
+    from mitld_lp.logic.syntax import weak
+
+    h, goal = Prop("h"), Prop("goal")
+    assert parse("!h W goal") == release(goal, disj(neg(h), goal))
+    assert str(parse("!h W goal")) == "!h W goal"
+    assert parse("p W q W r") == weak(p, weak(q, r))  # right-associative like U and R
+    assert parse("p & q W r | s") == disj(conj(p, weak(q, r)), s)
+    assert parse("F p W q") == weak(eventually(p), q)  # unary binds tighter
+    assert str(parse("(p | q) W r")) == "(p | q) W r"
+    assert str(parse("p W p")) == "p W p"
+    # the same node written as a release prints as W, and the operand order is kept
+    assert str(parse("r R (p | r)")) == "p W r"
+    assert str(parse("r R (r | p)")) == "r R (r | p)"
+
+
+@given(formulas(max_depth=3), formulas(max_depth=3))
+def test_weak_until_round_trips(a: Formula, b: Formula) -> None:
+    from mitld_lp.logic.syntax import weak
+
+    f = weak(a, b)
+    assert parse(str(f)) == f
+    g = disj(p, weak(a, b), q)
+    assert parse(str(g)) == g
+
+
+@pytest.mark.parametrize("text", ["p W[0,3] q", "p W<=3 q"])
+def test_weak_until_takes_no_interval(text: str) -> None:
+    with pytest.raises(ParseError, match=r"^1:4: .*the weak until W takes no interval"):
+        parse(text)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic.fragment import horizon
 from mitld_lp.logic.parser import parse
-from mitld_lp.logic.semantics import Verdict, holds
+from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
 from mitld_lp.logic.syntax import (
     TRUE,
     And,
@@ -158,47 +158,9 @@ def test_verdict_is_not_a_bool() -> None:
 
 
 def ev2(f: Formula, w: list[frozenset[str]], t: int) -> bool:
-    """Two-valued truth on the infinite word w + (last letter of w) forever, straight from
-    the definitions; any witness beyond len(w) + 1 behaves like one at len(w) + 1."""
-    n = len(w)
-    cap = n + 2
-
-    def letter(i: int) -> frozenset[str]:
-        return w[min(i, n - 1)]
-
-    cache: dict[tuple[int, int], bool] = {}
-
-    def go(g: Formula, i: int) -> bool:
-        key = (id(g), i)
-        if key in cache:
-            return cache[key]
-        match g:
-            case Const(v):
-                out = v
-            case Prop(name):
-                out = name in letter(i)
-            case Not(a):
-                out = not go(a, i)
-            case And(args):
-                out = all(go(a, i) for a in args)
-            case Or(args):
-                out = any(go(a, i) for a in args)
-            case Next(a):
-                out = go(a, i + 1)
-            case Dist(_, a):
-                out = any(go(a, j) for j in range(i, max(i, cap) + 1))
-            case Until(a, b, iv):
-                js = range(i, max(i, cap) + 1) if iv is None else range(i + iv.lo, i + iv.hi + 1)
-                out = any(go(b, j) and all(go(a, k) for k in range(i, j)) for j in js)
-            case Release(a, b, iv):
-                js = range(i, max(i, cap) + 1) if iv is None else range(i + iv.lo, i + iv.hi + 1)
-                out = all(go(b, j) or any(go(a, k) for k in range(i, j)) for j in js)
-            case _:
-                raise TypeError(g)
-        cache[key] = out
-        return out
-
-    return go(f, t)
+    """Two-valued truth at step ``t`` on the infinite word w + (last letter of w) forever,
+    straight from the definitions (:func:`brute_lasso`)."""
+    return brute_lasso(f, w[:-1], w[-1:], t)
 
 
 def _as_bool(v: Verdict) -> bool:
@@ -256,3 +218,117 @@ def test_depth_five_on_length_twenty_is_decided_and_monotone(
             part = holds(f, w[:cut], t)
             if part is not U:
                 assert part is full, (str(f), t, cut)
+
+
+# --------------------------------------------------------------------------- lassos
+
+E_, P_, Q_ = frozenset(), frozenset({"p"}), frozenset({"q"})
+
+# formula, prefix, loop, truth on prefix loop loop ..., worked out from the definitions
+LASSO_HAND = [
+    ("G p", [], [P_], True),
+    ("G p", [P_, P_], [P_, E_], False),  # p fails at the second step of every loop pass
+    ("F p", [E_], [E_], False),
+    ("F p", [E_], [E_, E_, P_], True),
+    ("G F p", [], [E_, P_], True),
+    ("G F p", [P_], [E_], False),
+    ("F G p", [], [E_, P_], False),
+    ("F G p", [E_, E_], [P_], True),
+    ("p U q", [P_, P_], [Q_], True),  # q at step 2, p at 0 and 1
+    ("p U q", [P_, E_], [Q_], False),  # p missing at step 1, before the only q
+    ("p U q", [], [Q_], True),  # q at once: nothing asked of p
+    ("p W q", [], [P_], True),  # q never comes, p forever
+    ("p W q", [P_], [E_], False),
+    ("p W q", [E_], [Q_], False),  # neither p nor q at step 0
+    ("p W q", [Q_], [E_], True),  # q at once
+    ("X X p", [E_], [E_, P_], True),  # steps: E_ E_ P_ E_ P_ ...
+    ("X X X p", [E_], [E_, P_], False),
+    ("F[2,2] p", [E_], [E_, P_], True),
+    ("F[3,4] p", [E_], [P_, E_, E_], True),  # steps 3, 4 are E_, P_ (wrapped once)
+    ("G[1,3] !p", [P_], [E_, E_, E_, P_], True),
+    ("G (p -> F[0,1] q)", [], [P_, Q_, E_], True),
+    ("G (p -> F[0,1] q)", [], [P_, E_, Q_], False),
+    ("p R q", [Q_], [Q_, E_], False),  # q fails at step 2 and no p released it before
+    ("!p R q", [Q_], [Q_, E_], True),  # !p at step 0 releases q from step 1 on
+    ("D[mu] q", [E_], [E_, Q_], True),
+]
+
+
+@pytest.mark.parametrize(("text", "prefix", "loop", "truth"), LASSO_HAND)
+def test_lasso_hand_worked(text: str, prefix: list, loop: list, truth: bool) -> None:
+    assert holds_lasso(parse(text), prefix, loop) is truth
+
+
+def test_lasso_needs_a_loop() -> None:
+    with pytest.raises(ValueError, match="at least one letter"):
+        holds_lasso(parse("p"), [P_], [])
+
+
+def brute_lasso(f: Formula, prefix: list, loop: list, t: int = 0) -> bool:
+    """Truth at step ``t`` of ``prefix loop loop ...`` with the quantifiers of the
+    definitions written out: an unbounded witness is searched up to
+    ``len(prefix) + len(loop)`` steps ahead (a first witness further away would repeat
+    one period earlier)."""
+    k, m = len(prefix), len(loop)
+
+    def letter(i: int) -> frozenset[str]:
+        return frozenset(prefix[i] if i < k else loop[(i - k) % m])
+
+    def canon(i: int) -> int:  # positions with the same future
+        return i if i < k else k + (i - k) % m
+
+    cache: dict[tuple[int, int], bool] = {}
+
+    def go(g: Formula, i: int) -> bool:
+        key = (id(g), canon(i))
+        if key in cache:
+            return cache[key]
+        match g:
+            case Const(v):
+                out = v
+            case Prop(name):
+                out = name in letter(i)
+            case Not(a):
+                out = not go(a, i)
+            case And(args):
+                out = all(go(a, i) for a in args)
+            case Or(args):
+                out = any(go(a, i) for a in args)
+            case Next(a):
+                out = go(a, i + 1)
+            case Dist(_, a):
+                out = any(go(a, j) for j in range(i, i + k + m + 1))
+            case Until(a, b, iv):
+                js = range(i, i + k + m + 1) if iv is None else range(i + iv.lo, i + iv.hi + 1)
+                out = any(go(b, j) and all(go(a, x) for x in range(i, j)) for j in js)
+            case Release(a, b, iv):
+                js = range(i, i + k + m + 1) if iv is None else range(i + iv.lo, i + iv.hi + 1)
+                out = all(go(b, j) or any(go(a, x) for x in range(i, j)) for j in js)
+            case _:
+                raise TypeError(g)
+        cache[key] = out
+        return out
+
+    return go(f, t)
+
+
+@given(
+    formulas(max_depth=5, max_bound=4, with_dist=True),
+    traces(min_len=0, max_len=5),
+    traces(min_len=1, max_len=4),
+)
+def test_lasso_matches_the_quantifiers(f: Formula, prefix, loop) -> None:
+    assert holds_lasso(f, prefix, loop) == brute_lasso(f, list(prefix), list(loop))
+
+
+@given(
+    formulas(max_depth=5, max_bound=4),
+    traces(min_len=0, max_len=4),
+    traces(min_len=1, max_len=4),
+    st.integers(1, 3),
+)
+def test_lasso_agrees_with_decided_kleene_verdicts(f: Formula, prefix, loop, passes) -> None:
+    """A prefix the three-valued reading decides decides every infinite extension."""
+    v = holds(f, list(prefix) + list(loop) * passes)
+    if v is not U:
+        assert holds_lasso(f, prefix, loop) == (v is T)

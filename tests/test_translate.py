@@ -205,6 +205,8 @@ def ours(t) -> S.Formula:
             return S.until(ours(a), ours(b))
         case ("Fu", a):
             return S.eventually(ours(a))
+        case ("Gu", a):
+            return S.always(ours(a))
     raise AssertionError(t)
 
 
@@ -229,6 +231,8 @@ def theirs(t):
             return theirs(a).until(theirs(b))
         case ("Fu", a):
             return sugar.env(theirs(a))
+        case ("Gu", a):
+            return sugar.alw(theirs(a))
     raise AssertionError(t)
 
 

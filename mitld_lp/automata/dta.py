@@ -1,4 +1,4 @@
-"""The discrete-time deterministic timed automaton (DTA) of a co-safe MITL formula.
+"""The discrete-time deterministic timed automaton (DTA) of an MITL obligation formula.
 
 In discrete time the reachable (location, clock valuation) pairs of a DTA form a finite
 automaton; this module stores that automaton directly.  State ``i`` *is* an obligation
@@ -12,6 +12,15 @@ Transitions are stored per state as a reduced ordered decision diagram over the
 formula's propositions (tested in sorted order): ``step`` walks it, so a letter is read
 in time linear in the number of propositions and the alphabet ``2^AP`` is never
 enumerated.  Results are cached per (state, letter).
+
+Each state has a *kind* (:data:`ACCEPT`, :data:`REJECT`, :data:`SAFE`, :data:`OPEN`)
+that says how it counts for acceptance: an infinite run is accepted when it reaches the
+accepting state (``true``), or when it stays forever, from some step on, in
+:data:`SAFE` states (a safety obligation kept for ever, ``G !h``, or kept while a
+guarantee is still pending, ``G !h | F goal`` never reaching ``goal``).  A finite prefix
+is a good prefix when it reaches the accepting state and a bad one when it reaches the
+rejecting state.  For a co-safe formula no state is :data:`SAFE` and acceptance is
+reaching ``true``, as before.
 """
 
 from __future__ import annotations
@@ -22,7 +31,20 @@ from typing import TypeAlias
 
 from mitld_lp.logic.syntax import And, Formula, Interval, Or, Release, Until, show, subformulas
 
-__all__ = ["DTA", "Diagram", "Location"]
+__all__ = ["DTA", "Diagram", "Location", "ACCEPT", "REJECT", "SAFE", "OPEN", "KINDS"]
+
+#: The accepting state ``true``: absorbing, every run through it is accepted.
+ACCEPT = "accept"
+#: The rejecting state ``false``: absorbing, no run through it is accepted.
+REJECT = "reject"
+#: A state on a cycle whose runs are accepted if they stay on its strongly connected
+#: component forever: the obligation left there holds on every such run (it is a safety
+#: obligation still kept, possibly beside guarantees that are still pending).
+SAFE = "safe"
+#: Any other state: a run must leave it (towards ``true`` or into safe states) to be
+#: accepted.
+OPEN = "open"
+KINDS = (ACCEPT, REJECT, SAFE, OPEN)
 
 Diagram: TypeAlias = "int | tuple[str, Diagram, Diagram]"
 """A leaf is a successor state index; a node ``(p, low, high)`` tests proposition ``p``
@@ -72,6 +94,13 @@ class DTA:
         rejecting: index of the rejecting state (absorbing; from it no word is
             accepted), ``None`` if unreachable.
         delta: per state, the decision diagram of its transition function.
+        kinds: per state, one of :data:`KINDS`.  No two states of different kinds are
+            merged by minimisation, and every strongly connected component is all
+            :data:`SAFE` or has no :data:`SAFE` state.
+        fragment: the class of the formula (:func:`mitld_lp.logic.fragment.classify`):
+            ``"co-safe"``, ``"safety"`` or ``"obligation"``, for which the acceptance
+            above is exact; for any other class no state is :data:`SAFE` and only good
+            prefixes are accepted.
     """
 
     formula: Formula
@@ -81,6 +110,8 @@ class DTA:
     accepting: int | None
     rejecting: int | None
     delta: tuple[Diagram, ...]
+    kinds: tuple[str, ...]
+    fragment: str
     _cache: dict[tuple[int, frozenset[str]], int] = field(default_factory=dict, repr=False)
 
     @property
@@ -102,6 +133,50 @@ class DTA:
 
     def is_rejecting(self, state: int) -> bool:
         return state == self.rejecting
+
+    def kind(self, state: int) -> str:
+        """The kind of ``state``: one of :data:`KINDS`."""
+        return self.kinds[state]
+
+    def is_safe(self, state: int) -> bool:
+        """Whether ``state`` is :data:`SAFE`: a run staying on its component forever is
+        accepted."""
+        return self.kinds[state] == SAFE
+
+    @property
+    def persistent(self) -> frozenset[int]:
+        """The states in which staying forever is acceptance: the :data:`SAFE` ones and
+        the accepting one.  A run is accepted exactly when from some step on it never
+        leaves this set; so the best probability of the formula in a product is the best
+        probability of reaching an end component that keeps within it."""
+        return frozenset(i for i, k in enumerate(self.kinds) if k in (SAFE, ACCEPT))
+
+    def accepts_lasso(self, prefix: Iterable[Iterable[str]], loop: Iterable[Iterable[str]]) -> bool:
+        """Whether the infinite word ``prefix loop loop ...`` is accepted: its run ends in
+        a cycle of :attr:`persistent` states (``loop`` must not be empty)."""
+        word = [frozenset(letter) for letter in loop]
+        if not word:
+            raise ValueError("the loop of a lasso must have at least one letter")
+        s = self.initial
+        for letter in prefix:
+            s = self.step(s, letter)
+        seen: dict[int, int] = {}  # state at the start of a loop pass -> pass number
+        starts: list[int] = []
+        while s not in seen:
+            seen[s] = len(starts)
+            starts.append(s)
+            for letter in word:
+                s = self.step(s, letter)
+        # The passes from the first visit of ``s`` on repeat for ever: every state they
+        # visit is visited infinitely often.
+        keep = self.persistent
+        for start in starts[seen[s]:]:
+            t = start
+            for letter in word:
+                if t not in keep:
+                    return False
+                t = self.step(t, letter)
+        return True
 
     def run(self, trace: Iterable[Iterable[str]]) -> bool:
         """True when the run on the finite ``trace`` reaches the accepting state."""
@@ -206,6 +281,8 @@ class DTA:
             label = _dot_escape(self.location(i).label if i != self.accepting else "accept")
             if i == self.rejecting:
                 label = "reject"
+            if self.is_safe(i):
+                label += " (safe)"
             shape = ', peripheries=2' if i == self.accepting else ""
             lines.append(f'  s{i} [label="{i}: {label}"{shape}];')
         lines.append(f"  __init -> s{self.initial};")

@@ -1,4 +1,5 @@
-"""MITL (discrete time, co-safe fragment) to a minimal DTA, by formula progression.
+"""MITL (discrete time; co-safe, safety and obligation formulas) to a minimal DTA, by
+formula progression.
 
 A state is an *obligation*: a formula in negation normal form that the rest of the
 trace must satisfy.  Reading a letter ``sigma`` (the propositions true at this step)
@@ -18,7 +19,13 @@ The result is put in the canonical normal form of :mod:`mitld_lp.logic.normal`
 ``a U[0,2] b | a U[2,5] b == a U[0,5] b``).  Every rule used preserves the
 strong Kleene reading on finite prefixes, so the automaton accepts a finite trace
 exactly when :func:`mitld_lp.logic.semantics.holds` says TRUE.  The accepting state is
-``true``; reaching it is the acceptance condition.
+``true``; reaching it is the acceptance condition of a co-safe formula.
+
+A safety or obligation formula is also satisfied by runs that never reach ``true``
+(``G !h``): each strongly connected component of the automaton is marked *safe* when a
+run that stays in it forever satisfies the formula, which one cycle of the component
+decides (:func:`_safe_states`).  An infinite run is accepted when it reaches ``true`` or
+stays, from some step on, in safe states (see :mod:`mitld_lp.automata.dta`).
 
 The letter is never enumerated: one step of a state is unfolded symbolically into a
 boolean combination of current-step literals and next-step obligations, and Shannon
@@ -34,14 +41,16 @@ kept between calls.
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from mitld_lp.automata.dta import DTA, Diagram
-from mitld_lp.logic.fragment import FragmentReport, nnf
+from mitld_lp.automata.dta import ACCEPT, DTA, OPEN, REJECT, SAFE, Diagram
+from mitld_lp.logic.fragment import CO_SAFE, SUPPORTED, FragmentReport, classify, nnf
 from mitld_lp.logic.normal import c_and, c_next, c_or, c_release, c_until, canonical, normal_form
+from mitld_lp.logic.semantics import holds_lasso
 from mitld_lp.logic.syntax import (
     FALSE,
     TRUE,
@@ -262,14 +271,18 @@ def progress(obligation: Formula, letter: frozenset[str] | set[str]) -> Formula:
 
 
 def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
-    """The minimal DTA accepting the finite prefixes that decide the formula true.
+    """The minimal DTA of the formula: its accepting state is reached by the finite
+    prefixes that decide the formula true, and its safe states (``DTA.kinds``) are those
+    where staying forever satisfies it.
 
     ``spec`` is a formula, or the :class:`~mitld_lp.logic.fragment.FragmentReport` that
-    :func:`~mitld_lp.logic.fragment.check` made of it (its negation normal form is used
-    as it is, not computed again).  The formula may use any operator; distribution
-    eventualities read as ``F``.  The automaton is exact for the whole co-safe fragment
-    (every obligation is decided on a finite prefix); for other formulas it accepts the
-    good prefixes.
+    :func:`~mitld_lp.logic.fragment.check` made of it (its negation normal form and
+    class are used as they are, not computed again).  The formula may use any operator;
+    distribution eventualities read as ``F``.  The automaton is exact for co-safe, safety
+    and obligation formulas: an infinite run satisfies the formula exactly when it
+    reaches the accepting state or stays in safe states from some step on (for a co-safe
+    formula no state is safe).  For other classes (``G F p``) no state is marked safe and
+    only the good prefixes are accepted.
 
     Raises :class:`TranslationError` as soon as more than ``max_states`` obligations
     are found, or one state's transition diagram has more than ``max_states``
@@ -318,7 +331,10 @@ def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
 
     n = len(obligations)
     accepting_raw = index.get(TRUE)
-    block = _coarsest_partition(succ, accepting_raw)
+    fragment = spec.fragment if isinstance(spec, FragmentReport) else classify(formula)
+    safe_raw = _safe_states(obligations, succ, accepting_raw, fragment)
+    label = [1 if i == accepting_raw else 2 if safe_raw[i] else 0 for i in range(n)]
+    block = _coarsest_partition(succ, label)
 
     # Number the blocks in discovery order and keep the first obligation of each as its
     # representative, so printing is deterministic.
@@ -331,15 +347,18 @@ def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
     final = [order[b] for b in block]
     reps: list[Formula] = [obligations[i] for i in first]
     delta: list[Diagram] = [_relabel(succ[i], final) for i in first]
+    kinds = [SAFE if safe_raw[i] else OPEN for i in first]
 
     accepting = final[accepting_raw] if accepting_raw is not None else None
     rejecting = None
     for s in range(len(order)):
-        if s != accepting and all(t == s for t in _leaves(delta[s])):
+        if s != accepting and kinds[s] == OPEN and all(t == s for t in _leaves(delta[s])):
             rejecting = s  # absorbing and not accepting: nothing is accepted from it
             reps[s] = FALSE
+            kinds[s] = REJECT
     if accepting is not None:
         reps[accepting] = TRUE
+        kinds[accepting] = ACCEPT
     atoms = tuple(sorted({a for d in delta for a in _tests(d)}))
     log.debug("DTA for %s: %d obligations, %d states after minimisation", formula, n, len(order))
     return DTA(
@@ -350,7 +369,126 @@ def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
         accepting=accepting,
         rejecting=rejecting,
         delta=tuple(delta),
+        kinds=tuple(kinds),
+        fragment=fragment,
     )
+
+
+# --------------------------------------------------------------------------- safe states
+
+
+def _safe_states(
+    obligations: list[Formula], succ: list[Diagram], accepting: int | None, fragment: str
+) -> list[bool]:
+    """For each state, whether a run that stays in its strongly connected component
+    forever satisfies the obligation (and the component is a cycle, not a state the
+    run passes once).  The accepting state is not counted (it is its own kind).
+
+    For a safety or obligation formula every run that stays in one component has the
+    same verdict (the language is recognised by a weak automaton: were one cycle of a
+    component accepting and another rejecting, the word that alternates ever longer
+    blocks of the two would be accepted by no weak automaton and rejected by none), so
+    one cycle decides the component: the obligation of one of its states must hold on
+    the infinite word that repeats the cycle's letters (:func:`holds_lasso`).  A
+    co-safe formula has none (a co-safe obligation that holds is decided true after
+    finitely many steps, i.e. the run reaches ``true``); nor does a formula outside the
+    supported classes get any (its automaton accepts good prefixes only)."""
+    n = len(obligations)
+    safe = [False] * n
+    if fragment == CO_SAFE or fragment not in SUPPORTED:
+        return safe
+    graph = [sorted(set(_leaves(d))) for d in succ]
+    for component in _components(graph):
+        rep = component[0]
+        if rep == accepting or (len(component) == 1 and rep not in graph[rep]):
+            continue
+        loop = _cycle(rep, set(component), graph, succ)
+        if holds_lasso(obligations[rep], (), loop):
+            for s in component:
+                safe[s] = True
+    return safe
+
+
+def _components(graph: list[list[int]]) -> list[list[int]]:
+    """The strongly connected components of ``graph`` (Tarjan's algorithm, iterative)."""
+    n = len(graph)
+    index = [-1] * n
+    low = [0] * n
+    on_stack = [False] * n
+    stack: list[int] = []
+    out: list[list[int]] = []
+    counter = 0
+    for root in range(n):
+        if index[root] >= 0:
+            continue
+        work = [(root, 0)]
+        while work:
+            v, i = work.pop()
+            if i == 0:
+                index[v] = low[v] = counter
+                counter += 1
+                stack.append(v)
+                on_stack[v] = True
+            if i < len(graph[v]):
+                work.append((v, i + 1))
+                w = graph[v][i]
+                if index[w] < 0:
+                    work.append((w, 0))
+                elif on_stack[w]:
+                    low[v] = min(low[v], index[w])
+                continue
+            if low[v] == index[v]:
+                component = []
+                while True:
+                    w = stack.pop()
+                    on_stack[w] = False
+                    component.append(w)
+                    if w == v:
+                        break
+                out.append(sorted(component))
+            if work:
+                parent = work[-1][0]
+                low[parent] = min(low[parent], low[v])
+    return out
+
+
+def _cycle(
+    start: int, members: set[int], graph: list[list[int]], succ: list[Diagram]
+) -> list[frozenset[str]]:
+    """The letters of a shortest cycle from ``start`` back to it inside ``members``
+    (breadth first); each letter sets exactly the propositions its diagram path tests
+    true."""
+    parent: dict[int, int] = {}
+    queue = deque([start])
+    while queue:
+        v = queue.popleft()
+        for w in graph[v]:
+            if w not in members or w in parent:
+                continue
+            parent[w] = v
+            if w == start:
+                path = [start]
+                while len(path) == 1 or path[-1] != start:
+                    path.append(parent[path[-1]])
+                path.reverse()
+                return [_letter(succ[a], b) for a, b in itertools.pairwise(path)]
+            queue.append(w)
+    raise AssertionError(f"state {start} lies on no cycle of its component")
+
+
+def _letter(d: Diagram, target: int) -> frozenset[str]:
+    """A letter that ``d`` sends to ``target``."""
+    stack: list[tuple[Diagram, frozenset[str]]] = [(d, frozenset())]
+    while stack:
+        node, letter = stack.pop()
+        if isinstance(node, int):
+            if node == target:
+                return letter
+            continue
+        p, low, high = node
+        stack.append((low, letter))
+        stack.append((high, letter | {p}))
+    raise AssertionError(f"no letter leads to state {target}")
 
 
 def _relabel(d: Diagram, label: list[int]) -> Diagram:
@@ -360,11 +498,13 @@ def _relabel(d: Diagram, label: list[int]) -> Diagram:
     return low if low == high else (d[0], low, high)
 
 
-def _coarsest_partition(succ: list[Diagram], accepting: int | None) -> list[int]:
-    """The block of each state in the coarsest partition that separates ``accepting``
-    from the others and is stable: two states of a block have, for every letter,
-    successors in the same block (the Myhill-Nerode classes; unique, so any refinement
-    order gives it).
+def _coarsest_partition(succ: list[Diagram], label: list[int]) -> list[int]:
+    """The block of each state in the coarsest partition that separates states of
+    different ``label`` (accepting, safe, other) and is stable: two states of a block
+    have, for every letter, successors in the same block (the Myhill-Nerode classes of
+    the labelled automaton; unique, so any refinement order gives it).  Merged states
+    have the same label at every step of every word, so the quotient accepts what the
+    automaton accepts, on finite prefixes and on infinite runs alike.
 
     Moore's rounds of signature refinement (a state's signature is its diagram with
     successors replaced by their blocks; ordered and reduced, so equal signatures mean
@@ -380,11 +520,10 @@ def _coarsest_partition(succ: list[Diagram], accepting: int | None) -> list[int]
     for s, d in enumerate(succ):
         for t in _leaves(d):
             preds[t].add(s)
-    block = [int(s == accepting) for s in range(n)]
-    members: list[set[int]] = [set(range(n)), set()]
-    if accepting is not None:
-        members[0].discard(accepting)
-        members[1].add(accepting)
+    block = list(label)
+    members: list[set[int]] = [set() for _ in range(max(label, default=0) + 1)]
+    for s, b in enumerate(block):
+        members[b].add(s)
     dirty: set[int] = set(range(n))
     while dirty:
         # Invariant: in each block, the states that are not dirty share one signature.

@@ -1,16 +1,18 @@
-"""MITLD formulas: the AST, the parser, the supported fragment and a reference evaluator."""
+"""MITLD formulas: the AST, the parser, the supported fragment and reference evaluators."""
 
 from mitld_lp.logic.fragment import (
     FragmentError,
     FragmentReport,
     check,
+    classify,
     event_distributions,
     horizon,
     is_co_safe,
     nnf,
 )
-from mitld_lp.logic.parser import ParseError, parse, parse_distribution
-from mitld_lp.logic.semantics import Verdict, holds
+from mitld_lp.logic.parser import ParseError, parse, parse_distribution, parse_source
+from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
+from mitld_lp.logic.source import LawSite, Source
 from mitld_lp.logic.syntax import (
     FALSE,
     TRUE,
@@ -40,20 +42,26 @@ from mitld_lp.logic.syntax import (
     release,
     subformulas,
     until,
+    weak,
 )
 
 __all__ = [
     "parse",
     "parse_distribution",
+    "parse_source",
+    "Source",
+    "LawSite",
     "ParseError",
     "nnf",
     "check",
+    "classify",
     "is_co_safe",
     "event_distributions",
     "horizon",
     "FragmentError",
     "FragmentReport",
     "holds",
+    "holds_lasso",
     "Verdict",
     "Formula",
     "Const",
@@ -77,6 +85,7 @@ __all__ = [
     "implies",
     "until",
     "release",
+    "weak",
     "eventually",
     "always",
     "nxt",

@@ -4,15 +4,16 @@ Syntax (see ``grammar.lark`` beside this file)::
 
     true  false  a  !p  p & q  p | q  p -> q  p U q  p U[l,u] q  p R q  p R[l,u] q
     F p  F[l,u] p  G p  G[l,u] p  X p  D[mu] a        F<=k p == F[0,k] p (also G<=k, U<=k, R<=k)
+    p W q  (weak until, no interval: p U q | G p)
 
-Precedence, loosest first: ``->`` (right-associative), ``|``, ``&``, ``U``/``R``
+Precedence, loosest first: ``->`` (right-associative), ``|``, ``&``, ``U``/``R``/``W``
 (right-associative: ``p U q U r == p U (q U r)``; :func:`str` parenthesises nested binary
 temporal operators anyway), unary (``! X F G D``).  Synonyms: ``¬ ~`` for ``!``, ``∧ &&``
 for ``&``, ``∨ ||`` for ``|``, ``→`` for ``->``, ``◇`` for ``F``, ``□`` for ``G``, ``𝒰`` for
 ``U``, ``⊤``/``⊥`` for ``true``/``false``, ``≤`` for ``<=``.
 
 Identifiers are ASCII letters, digits and ``_``, not starting with a digit.  The words
-``true false X F G U R D`` are reserved: an identifier is read whole and is an operator
+``true false X F G U R W D`` are reserved: an identifier is read whole and is an operator
 only when it is exactly one of them.  So ``F1``, ``Fx``, ``Xp`` and ``Up`` are
 propositions, while ``F p``, ``F(p)``, ``F[0,3] p``, ``F<=3 p`` and ``X!p`` apply the
 operators (a keyword needs a space before an identifier operand).
@@ -46,6 +47,7 @@ from mitld_lp.distributions import (
     DistributionError,
     Family,
 )
+from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
     FALSE,
     RESERVED,
@@ -72,10 +74,11 @@ from mitld_lp.logic.syntax import (
     nxt,
     release,
     until,
+    weak,
 )
 from mitld_lp.text import excerpt
 
-__all__ = ["ParseError", "parse", "parse_distribution", "MAX_DEPTH"]
+__all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
 
 #: Formulas nested deeper than this are refused: every later stage walks formulas
 #: recursively, and a parse error is better than a ``RecursionError`` far away.
@@ -197,6 +200,9 @@ class _Build:
     def release(self, c: list) -> Formula:
         return release(c[0], c[2], c[1])
 
+    def weak(self, c: list) -> Formula:
+        return weak(c[0], c[1])
+
     def conj(self, c: list) -> Formula:
         return conj(*c)
 
@@ -316,7 +322,7 @@ _FORMULA_START = frozenset(
         "_LPAR",
     }
 )
-_OPERATORS = frozenset({"_AND", "_OR", "_IMPLIES", "_UNTIL", "_SCRIPT_U", "_RELEASE"})
+_OPERATORS = frozenset({"_AND", "_OR", "_IMPLIES", "_UNTIL", "_SCRIPT_U", "_RELEASE", "_WEAK"})
 _DESCRIBE = {
     "_RPAR": "')'",
     "_LPAR": "'('",
@@ -396,6 +402,7 @@ _OPERATOR_OF = {
     "G": "always, G p",
     "U": "until, p U q",
     "R": "release, p R q",
+    "W": "weak until, p W q",
     "D": "the distribution eventuality, D[mu] a",
 }
 
@@ -424,6 +431,8 @@ def _reserved_hint(text: str, tok: Token) -> str:
         except LarkError:
             return ""
         word = keywords.get(previous.type) if previous is not None else None
+    if word == "W" and tok.type in ("LSQB", "LE"):
+        return "; the weak until W takes no interval (p W q is p U q | G p)"
     if word is None:
         return ""
     return (f"; {word!r} is a reserved word ({_OPERATOR_OF[word]}) and cannot name a "
@@ -472,15 +481,17 @@ def _parser() -> Lark:
         lexer="basic",
         start=["start", "dist_start"],
         maybe_placeholders=True,
+        propagate_positions=True,
     )
 
 
-def _run(text: str, start: str) -> object:
+def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
+    """The parse tree of ``text`` and the value built for each of its nodes (by id)."""
     if not isinstance(text, str):
         raise TypeError(f"expected a str to parse, got {type(text).__name__}")
     try:
         tree = _parser().parse(text, start=start)
-        return _transform(tree, _Build(text))
+        return tree, _transform(tree, _Build(text))
     except ParseError:
         raise
     except UnexpectedInput as err:
@@ -494,9 +505,9 @@ def _run(text: str, start: str) -> object:
         ) from None
 
 
-def _transform(tree: Tree, builder: _Build) -> object:
+def _transform(tree: Tree, builder: _Build) -> dict[int, object]:
     """Apply ``builder``'s rule methods bottom-up, iteratively (deep input must not
-    overflow the Python stack)."""
+    overflow the Python stack); the value of every node, by ``id``."""
     results: dict[int, object] = {}
     stack: list[tuple[Tree, bool]] = [(tree, False)]
     while stack:
@@ -507,10 +518,10 @@ def _transform(tree: Tree, builder: _Build) -> object:
                 if isinstance(child, Tree):
                     stack.append((child, False))
             continue
-        children = [results.pop(id(ch)) if isinstance(ch, Tree) else ch for ch in node.children]
+        children = [results[id(ch)] if isinstance(ch, Tree) else ch for ch in node.children]
         method = getattr(builder, str(node.data))
         results[id(node)] = method(children)
-    return results[id(tree)]
+    return results
 
 
 def _too_deep(text: str) -> ParseError:
@@ -549,16 +560,32 @@ def parse(text: str) -> Formula:
     an empty interval ``[l,u]`` with ``l > u``, a distribution literal of the wrong shape
     and nesting deeper than :data:`MAX_DEPTH`.
     """
-    result = _run(text, "start")
+    return parse_source(text).formula
+
+
+def parse_source(text: str) -> Source:
+    """Parse one MITLD formula and keep what its text says beyond the simplified formula:
+    every ``D[mu] a`` written (also one a constant absorbed, as in ``D[mu] a & false``)
+    and where each subformula is written (see :mod:`mitld_lp.logic.source`).  Raises
+    :class:`ParseError` as :func:`parse` does."""
+    tree, built = _run(text, "start")
+    result = built[id(tree)]
     assert isinstance(result, Formula)
     if _depth(result) > MAX_DEPTH:
         raise _too_deep(text)
-    return result
+    try:
+        source = source_of(text, tree, built)
+    except RecursionError:  # a deep operand that the simplification dropped
+        raise _too_deep(text) from None
+    if any(_depth(site.dist) > MAX_DEPTH for site in source.laws):
+        raise _too_deep(text)
+    return source
 
 
 def parse_distribution(text: str) -> DistSpec:
     """Parse a distribution as written inside ``D[...]``: a name (``mu1`` ->
     :class:`DistRef`) or a literal (``geometric(0.3)`` -> :class:`DistLiteral`)."""
-    result = _run(text, "dist_start")
+    tree, built = _run(text, "dist_start")
+    result = built[id(tree)]
     assert isinstance(result, DistRef | DistLiteral)
     return result

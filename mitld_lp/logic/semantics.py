@@ -21,6 +21,11 @@ by the trace's letters reaches ``true`` (``false``), and progression folds const
 exactly these Kleene steps.  It is not a tautology checker: ``p | !p`` beyond the trace
 end is UNKNOWN, as is its progression.
 
+:func:`holds_lasso` is the two-valued truth on an infinite *ultimately periodic* word
+``u v v v ...`` (a lasso): exactly the semantics of the operators on infinite runs, the
+reference for safety and obligation formulas, which a finite prefix cannot always
+decide.
+
 Beyond the trace every letter is unknown, so every subformula has one value at all
 steps ``i >= n``; the evaluator computes that value once per subformula, which makes the
 infinite windows of unbounded operators finite.  Values are memoised per (subformula,
@@ -47,7 +52,7 @@ from mitld_lp.logic.syntax import (
     Until,
 )
 
-__all__ = ["Verdict", "holds", "Trace"]
+__all__ = ["Verdict", "holds", "holds_lasso", "Trace"]
 
 Trace = Sequence[Set[str]]
 
@@ -167,3 +172,92 @@ class _Evaluator:
         if hi is None or hi >= 1:
             beyond = max(beyond, min(br, bl))
         return out, beyond
+
+
+def holds_lasso(f: Formula, prefix: Trace, loop: Trace) -> bool:
+    """Whether ``f`` holds at step 0 of the infinite word ``prefix loop loop loop ...``.
+
+    The word has ``n = len(prefix) + len(loop)`` distinct positions; the step after the
+    last one is the first step of ``loop``.  Every subformula is evaluated at each
+    position from its definition:
+
+    * ``X a`` at ``i`` is ``a`` at the next position;
+    * ``a U b`` is the least solution of ``v(i) = b(i) | (a(i) & v(next(i)))`` and
+      ``a R b`` the greatest solution of ``v(i) = b(i) & (a(i) | v(next(i)))`` (the
+      strict until: ``a`` is needed before the witness of ``b``, not at it);
+    * ``a U[l,u] b`` at ``i`` is ``OR_{k=l}^{u} (b@i+k AND AND_{m<k} a@i+m)`` and its dual
+      for ``R[l,u]``, counting steps along the lasso;
+    * ``D[mu] a`` reads as ``F a``.
+
+    Raises ``ValueError`` for an empty ``loop``."""
+    if not loop:
+        raise ValueError("the loop of a lasso must have at least one letter")
+    return _Lasso([*prefix, *loop], len(prefix)).values(f)[0]
+
+
+class _Lasso:
+    """Boolean vectors over the positions of a lasso, per subformula (by ``id``)."""
+
+    def __init__(self, word: list, start: int) -> None:
+        self.word = [frozenset(letter) for letter in word]
+        self.n = len(self.word)
+        self.next = [*range(1, self.n), start]
+        self.memo: dict[int, list[bool]] = {}
+
+    def values(self, f: Formula) -> list[bool]:
+        hit = self.memo.get(id(f))
+        if hit is None:
+            hit = self.memo[id(f)] = self._compute(f)
+        return hit
+
+    def _compute(self, f: Formula) -> list[bool]:
+        match f:
+            case Const(v):
+                return [v] * self.n
+            case Prop(name):
+                return [name in letter for letter in self.word]
+            case Not(a):
+                return [not x for x in self.values(a)]
+            case And(args):
+                vs = [self.values(a) for a in args]
+                return [all(v[i] for v in vs) for i in range(self.n)]
+            case Or(args):
+                vs = [self.values(a) for a in args]
+                return [any(v[i] for v in vs) for i in range(self.n)]
+            case Next(a):
+                va = self.values(a)
+                return [va[j] for j in self.next]
+            case Until(left, right, iv):
+                return self._until(self.values(left), self.values(right), iv)
+            case Release(left, right, iv):
+                vl, vr = self.values(left), self.values(right)
+                dual = self._until([not x for x in vl], [not x for x in vr], iv)
+                return [not x for x in dual]
+            case Dist(_, a):
+                return self._until([True] * self.n, self.values(a), None)
+            case _:
+                raise TypeError(f"not a formula: {f!r}")
+
+    def _until(self, vl: list[bool], vr: list[bool], iv: Interval | None) -> list[bool]:
+        n, nxt = self.n, self.next
+        if iv is None:  # least fixpoint, from all-false; each round settles one more step
+            out = [False] * n
+            changed = True
+            while changed:
+                changed = False
+                for i in range(n):
+                    if not out[i] and (vr[i] or (vl[i] and out[nxt[i]])):
+                        out[i] = changed = True
+            return out
+        out = []
+        for i in range(n):
+            j, found = i, False  # left held on the steps i .. before j
+            for k in range(iv.hi + 1):
+                if k >= iv.lo and vr[j]:
+                    found = True
+                    break
+                if not vl[j]:
+                    break
+                j = nxt[j]
+            out.append(found)
+        return out

@@ -3,7 +3,7 @@
 Core nodes: ``Const`` (true/false), ``Prop``, ``Not``, ``And``, ``Or``, ``Until`` (with an
 optional integer interval), ``Release`` (its dual, needed for negation normal form),
 ``Next`` and ``Dist`` (the distribution eventuality ``D[mu] a``).  Everything else --
-``F``, ``G``, ``->``, ``F<=k`` -- is sugar that builds core nodes.
+``F``, ``G``, ``W``, ``->``, ``F<=k`` -- is sugar that builds core nodes.
 
 The node classes are plain records; the *smart constructors* (``conj``, ``disj``, ``neg``,
 ``until``, ``release``, ``eventually``, ``always``, ``implies``, ``nxt``, ``dist``)
@@ -54,6 +54,7 @@ __all__ = [
     "implies",
     "until",
     "release",
+    "weak",
     "eventually",
     "always",
     "nxt",
@@ -67,7 +68,7 @@ __all__ = [
 #: The words the parser reads as operators (``grammar.lark`` spells each one as a
 #: terminal; a test checks the two agree): never a proposition, event, region or
 #: distribution name.
-RESERVED = frozenset({"true", "false", "X", "F", "G", "U", "R", "D"})
+RESERVED = frozenset({"true", "false", "X", "F", "G", "U", "R", "W", "D"})
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
@@ -353,6 +354,14 @@ def release(
     return Release(left, right, iv)
 
 
+def weak(left: Formula, right: Formula) -> Formula:
+    """The weak until ``left W right == (left U right) | G left``: ``left`` holds at every
+    step before the first ``right``, and forever if ``right`` never comes.  Kept in core
+    form as ``right R (left | right)`` (equal with the strict until: a step with neither
+    ``left`` nor ``right`` is allowed only after a ``right``), printed back as ``W``."""
+    return release(right, disj(left, right))
+
+
 def eventually(arg: Formula, interval: Interval | tuple[int, int] | None = None) -> Formula:
     """``F[l,u] arg == true U[l,u] arg``."""
     return until(TRUE, arg, interval)
@@ -436,6 +445,13 @@ def _show(f: Formula, ctx: int, over: Mapping[Formula, str] | None) -> str:
             text, level = f"D[{mu}] {sub(a, _UNARY)}", _UNARY
         case Until(Const(True), right, iv):
             text, level = f"F{_bracket(iv)} {sub(right, _UNARY)}", _UNARY
+        case Release(right, Or(args), None) if args[-1] == right:
+            # ``a W b`` is ``b R (a | b)`` with ``b`` the last operand, as ``weak`` builds it
+            left = args[0] if len(args) == 2 else Or(args[:-1])
+            text = f"{sub(left, _UNARY)} W {sub(right, _UNARY)}"
+            level = _BIN
+        case Release(right, same, None) if same == right:
+            text, level = f"{sub(right, _UNARY)} W {sub(right, _UNARY)}", _BIN
         case Release(Const(False), right, iv):
             # ``false R p`` is ``G p`` but is a different node from ``!(true U !p)``, so
             # it keeps the R syntax to round-trip.
