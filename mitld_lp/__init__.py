@@ -7,7 +7,7 @@ Only light modules are imported here; the solver stack is imported where it is u
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.controller import Controller, Observation, RunStatus
+from mitld_lp.controller import Controller, ControllerFileError, Observation, RunStatus
 from mitld_lp.game import ExplicitGame, Game
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.parser import ParseError, parse, parse_distribution
@@ -76,6 +76,7 @@ __all__ = [
     "synthesize",
     "SynthesisResult",
     "Controller",
+    "ControllerFileError",
     "Observation",
     "RunStatus",
     "simulate",

@@ -420,7 +420,8 @@ def _time_left(args: argparse.Namespace) -> float | None:
 
 def _args_export(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("--lp", metavar="FILE", help="the occupancy LP, as .mps or .lp")
+    p.add_argument("--lp", metavar="FILE",
+                   help="the occupancy LP, whose optimum is the value, as .mps or .lp")
     p.add_argument("--drn", metavar="FILE", help="the product MDP in Storm's DRN format")
     p.add_argument("--upper", action="store_true",
                    help="count the truncation sink as winning (the upper model)")
@@ -440,7 +441,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     mdp = _build(args)[1].mdp
     target = mdp.target | mdp.truncated if args.upper else mdp.target
     if lp:
-        _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True, everywhere=True))
+        _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _out(f"wrote {lp}")
     if drn:
         _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))

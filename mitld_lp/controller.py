@@ -7,28 +7,31 @@ with an action, tracking the automaton state, the pending events and the clock i
     action = controller.act(Observation(state=s1, events=frozenset({"b1"})))
 
 ``act`` returns ``None`` once the task is decided (``status`` says how).
+
+A controller is saved as a file of plain tables (:meth:`Controller.save`, format in
+:mod:`mitld_lp.controller_file`) that :meth:`Controller.load` parses without running
+anything from it, in a process that needs neither the world's class nor a solver.
 """
 
 from __future__ import annotations
 
 import enum
 import os
-import pickle
 from collections.abc import Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from mitld_lp.automata.sta import STA
+from mitld_lp import defaults
+from mitld_lp.automata.sta import STA, ClockStep
+from mitld_lp.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
 
-__all__ = ["Observation", "Controller", "RunStatus"]
-
-_SAVE_FORMAT = "mitld_lp.Controller/1"
+__all__ = ["Observation", "Controller", "ControllerFileError", "RunStatus"]
 
 
 class RunStatus(enum.Enum):
@@ -40,50 +43,167 @@ class RunStatus(enum.Enum):
 @dataclass(frozen=True, slots=True)
 class Observation:
     """What the robot sees after a step: the game state it is in and the external events
-    that happened in the step that led there (none at step 0)."""
+    that happened in the step that led there (none at step 0).
+
+    ``events`` is any collection of event names (stored as a frozenset).  A bare string
+    is refused with ``TypeError``: ``events="b1"`` would otherwise read as the events
+    ``"b"`` and ``"1"``; write ``events={"b1"}``.  ``state`` must be hashable.
+    """
 
     state: Hashable
     events: frozenset[str] = frozenset()
 
+    def __post_init__(self) -> None:
+        try:
+            hash(self.state)
+        except TypeError:
+            raise TypeError(
+                f"Observation.state: a world state is hashable, got {type(self.state).__name__}"
+            ) from None
+        events: Any = self.events
+        if isinstance(events, str | bytes):
+            raise TypeError(
+                f"Observation.events: expected a set of event names, got the string "
+                f"{events!r}; write events={{{events!r}}} for that one event"
+            )
+        if not isinstance(events, frozenset):
+            try:
+                events = frozenset(events)
+            except TypeError:
+                raise TypeError(
+                    "Observation.events: expected a set of event names, got "
+                    f"{type(events).__name__}"
+                ) from None
+            object.__setattr__(self, "events", events)
+        for e in events:
+            if not isinstance(e, str):
+                raise TypeError(f"Observation.events: an event name is a string, got {e!r}")
 
-@dataclass(slots=True, eq=False)
-class Controller:
-    """A deterministic stationary policy on product states, run on the original game.
 
-    Beyond a truncation point (an event later than the model looked) it keeps acting
-    with the clock held at the last modelled value and sets ``beyond_model``.
-    """
+class _Plan(Protocol):
+    """What :meth:`Controller.act` asks: the model in memory (:class:`_LivePlan`) or its
+    tables read from a file (:class:`mitld_lp.controller_file.SavedPlan`)."""
+
+    @property
+    def events(self) -> frozenset[str]: ...
+    @property
+    def initial(self) -> int: ...
+    @property
+    def accepting(self) -> int | None: ...
+    @property
+    def rejecting(self) -> int | None: ...
+
+    def read(self, q: int, state: Hashable, events: frozenset[str]) -> int: ...
+    def advance(self, pending: frozenset[str], clock: int) -> ClockStep: ...
+    def lookup(
+        self, state: Hashable, q: int, pending: frozenset[str], clock: int
+    ) -> tuple[str | None, bool]: ...
+    def fallback(self, state: Hashable) -> str: ...
+    def tables(self, max_states: int) -> SavedPlan: ...
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _LivePlan:
+    """The synthesised model itself: the world, the STA, the product MDP, the policy
+    (a choice per state, -1 where there is none) and the optional hopeless mask."""
 
     game: Game[Any]
     sta: STA
     mdp: MDP
     policy: np.ndarray
-    hopeless: np.ndarray | None = None
-    """Optional ``(n_states,)`` mask of states from which no policy can satisfy the task
-    even if every truncated event came in time (``prob0_max`` of the upper model); the
-    controller reports ``REJECTED`` there instead of acting on forever."""
+    hopeless: np.ndarray | None
     _index: dict[Hashable, int] = field(default_factory=dict, repr=False)
-    _state: tuple[int, frozenset[str], int] | None = field(default=None, repr=False)
-    status: RunStatus = RunStatus.RUNNING
-    steps: int = 0
-    beyond_model: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.mdp.states, ProductStates):  # a hand-made MDP: index it
-            self._index = {s: i for i, s in enumerate(self.mdp.states)}
+            self._index.update((s, i) for i, s in enumerate(self.mdp.states))
 
-    def _position(self, state: ProductState) -> int | None:
+    @property
+    def events(self) -> frozenset[str]:
+        return self.sta.events
+
+    @property
+    def initial(self) -> int:
+        return self.sta.dta.initial
+
+    @property
+    def accepting(self) -> int | None:
+        return self.sta.dta.accepting
+
+    @property
+    def rejecting(self) -> int | None:
+        return self.sta.dta.rejecting
+
+    def read(self, q: int, state: Hashable, events: frozenset[str]) -> int:
+        return self.sta.dta.step(q, self.game.propositions(state) | events)
+
+    def advance(self, pending: frozenset[str], clock: int) -> ClockStep:
+        return self.sta.advance(pending, clock)
+
+    def lookup(
+        self, state: Hashable, q: int, pending: frozenset[str], clock: int
+    ) -> tuple[str | None, bool]:
+        record = ProductState(state, q, pending, clock)
         states = self.mdp.states
-        if isinstance(states, ProductStates):
-            return states.position(state)
-        return self._index.get(state)
+        i = states.position(record) if isinstance(states, ProductStates) else (
+            self._index.get(record))
+        if i is None:
+            return None, False
+        lost = self.hopeless is not None and bool(self.hopeless[i])
+        c = int(self.policy[i])
+        return (None if c < 0 else self.mdp.action_name(c)), lost
 
-    def reset(self) -> None:
-        """Start a new run (the next ``act`` is step 0)."""
-        self._state = None
+    def fallback(self, state: Hashable) -> str:
+        return self.game.actions(state)[0]
+
+    def tables(self, max_states: int) -> SavedPlan:
+        return tabulate(self.game, self.sta, self.mdp, self.policy, self.hopeless,
+                        max_states=max_states)
+
+
+class Controller:
+    """A deterministic stationary policy on product states, run on the original game.
+
+    ``Controller(game, sta, mdp, policy, hopeless=None)``: ``policy`` gives a choice of
+    ``mdp`` per state (-1: none, any action will do); the optional ``hopeless`` mask
+    marks states from which no policy can satisfy the task even if every truncated event
+    came in time (``prob0_max`` of the upper model): the controller reports
+    ``REJECTED`` there instead of acting on forever.
+
+    Beyond a truncation point (an event later than the model looked) it keeps acting
+    with the clock held at the last modelled value and sets ``beyond_model``.
+    """
+
+    __slots__ = ("_plan", "_state", "status", "steps", "beyond_model")
+
+    def __init__(
+        self,
+        game: Game[Any],
+        sta: STA,
+        mdp: MDP,
+        policy: np.ndarray,
+        hopeless: np.ndarray | None = None,
+    ) -> None:
+        self._begin(_LivePlan(game, sta, mdp, policy, hopeless))
+
+    def _begin(self, plan: _Plan) -> None:
+        self._plan: _Plan = plan
+        self._state: tuple[int, frozenset[str], int] | None = None
         self.status = RunStatus.RUNNING
         self.steps = 0
         self.beyond_model = False
+
+    def __repr__(self) -> str:
+        return f"Controller(status={self.status.value}, steps={self.steps})"
+
+    def reset(self) -> None:
+        """Start a new run (the next ``act`` is step 0)."""
+        self._begin(self._plan)
+
+    @property
+    def events(self) -> frozenset[str]:
+        """The task's external events."""
+        return self._plan.events
 
     @property
     def automaton_state(self) -> int | None:
@@ -91,76 +211,89 @@ class Controller:
 
     @property
     def pending(self) -> frozenset[str]:
-        return self.sta.events if self._state is None else self._state[1]
+        return self._plan.events if self._state is None else self._state[1]
 
     @property
     def clock(self) -> int:
         return 0 if self._state is None else self._state[2]
 
-    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """Write the controller (policy, automaton, events, world) to ``path`` so that a
-        robot's process can :meth:`load` it without solving again.  The file is a
-        pickle: load only files you wrote.  Refuses to replace a file unless
-        ``overwrite``."""
+    def save(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        overwrite: bool = False,
+        max_states: int = defaults.MAX_STATES,
+    ) -> Path:
+        """Write the controller to ``path`` (by convention ``*.npz``) as plain tables:
+        the policy over product states, the automaton's transition diagrams, the clock
+        rule, and every world state it may observe with its propositions (see
+        :mod:`mitld_lp.controller_file`).  :meth:`load` reads it back in any process,
+        without the world's class.  The file holds data only, never pickled objects.
+
+        Raises ``FileExistsError`` if ``path`` exists and not ``overwrite``;
+        ``ValueError`` (before writing) if a world state is not made of None, booleans,
+        numbers, strings and tuples, or if the world states to tabulate exceed
+        ``max_states``.
+        """
         out = Path(path)
         if out.exists() and not overwrite:
             raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
-        with out.open("wb") as handle:
-            pickle.dump((_SAVE_FORMAT, self), handle, protocol=pickle.HIGHEST_PROTOCOL)
+        _write_bytes(out, self._plan.tables(max_states).to_bytes())
         return out
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Controller:
-        """A controller written by :meth:`save`, reset to step 0.  ``ValueError`` if the
-        file is not one."""
-        source = Path(path)
-        try:
-            with source.open("rb") as handle:
-                tag, controller = pickle.load(handle)
-        except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
-            raise ValueError(f"{source}: not a saved controller ({exc})") from None
-        if tag != _SAVE_FORMAT or not isinstance(controller, cls):
-            raise ValueError(f"{source}: not a saved controller")
-        controller.reset()
+        """The controller :meth:`save` wrote to ``path``, reset to step 0.
+
+        The file is parsed as data (NumPy arrays with ``allow_pickle=False`` and JSON);
+        nothing in it is executed.  A file that is not a controller of this format
+        version (foreign, damaged, truncated, another version, unreadable) raises
+        :class:`ControllerFileError` (a ``ValueError``) naming the file and the fault.
+        """
+        controller = cls.__new__(cls)
+        controller._begin(read_plan(Path(path)))
         return controller
 
     def act(self, observation: Observation) -> str | None:
         """The action to take in ``observation.state``; ``None`` once the task is decided."""
-        dta = self.sta.dta
-        label = self.game.propositions(observation.state) | observation.events
+        plan = self._plan
+        state, events = observation.state, observation.events
         if self._state is None:
-            if observation.events:
-                raise ValueError(
-                    f"step 0: no event can have happened yet, got {sorted(observation.events)}"
-                )
-            q, pending, clock = dta.step(dta.initial, label), self.sta.events, 0
+            if events:
+                raise ValueError(f"step 0: no event can have happened yet, got {sorted(events)}")
+            q, pending, clock = plan.read(plan.initial, state, events), plan.events, 0
         else:
             q0, pending0, clock0 = self._state
-            unknown = observation.events - self.sta.events
+            unknown = events - plan.events
             if unknown:
                 raise ValueError(f"unknown events observed: {sorted(unknown)}")
-            again = observation.events - pending0
+            again = events - pending0
             if again:
                 raise ValueError(f"events observed a second time: {sorted(again)}")
-            q = dta.step(q0, label)
-            pending = pending0 - observation.events
-            step = self.sta.advance(pending, clock0)
+            q = plan.read(q0, state, events)
+            pending = pending0 - events
+            step = plan.advance(pending, clock0)
             clock = step.clock
             self.beyond_model = self.beyond_model or step.truncated
         self._state = (q, pending, clock)
         self.steps += 1
-        if dta.is_accepting(q):
+        if q == plan.accepting:
             self.status = RunStatus.ACCEPTED
             return None
-        if dta.is_rejecting(q):
+        if q == plan.rejecting:
             self.status = RunStatus.REJECTED
             return None
-        i = self._position(ProductState(observation.state, q, pending, clock))
-        if i is not None and self.hopeless is not None and self.hopeless[i]:
+        action, hopeless = plan.lookup(state, q, pending, clock)
+        if hopeless:
             self.status = RunStatus.REJECTED
             return None
-        if i is None or self.policy[i] < 0:
-            # Not a state of the model: the value there is 0 (it was never reached by the
-            # product construction, or it cannot reach the target); any action will do.
-            return self.game.actions(observation.state)[0]
-        return self.mdp.action_name(int(self.policy[i]))
+        # No action: not a state of the model (never reached by the product
+        # construction, or past a truncation point), or one that cannot reach the
+        # target (its value is 0); any action will do.
+        return plan.fallback(state) if action is None else action
+
+
+def _write_bytes(path: Path, data: bytes) -> None:
+    """Write the saved controller's bytes to ``path``."""
+    with path.open("wb") as handle:
+        handle.write(data)

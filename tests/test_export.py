@@ -127,10 +127,6 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
     write_lp(HAND, HAND.target, path, overwrite=True)
     with pytest.raises(ValueError, match="unknown LP format"):
         write_lp(HAND, HAND.target, tmp_path / "x.txt")
-    decided = replace(HAND, initial=3)
-    with pytest.raises(ValueError, match="everywhere=True"):
-        write_lp(decided, decided.target, tmp_path / "d.mps")
-    write_lp(decided, decided.target, tmp_path / "d.mps", everywhere=True)
 
 
 def test_drn_is_the_same_whatever_the_chunk(tmp_path: Path,

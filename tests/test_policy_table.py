@@ -101,8 +101,8 @@ def test_a_saved_controller_acts_as_the_original(corridor, tmp_path):
     with pytest.raises(FileExistsError):
         corridor.controller.save(path)
     junk = tmp_path / "junk.ctl"
-    junk.write_bytes(b"not a pickle")
-    with pytest.raises(ValueError, match="not a saved controller"):
+    junk.write_bytes(b"not a controller")
+    with pytest.raises(ValueError, match="cannot load the controller"):
         Controller.load(junk)
 
 

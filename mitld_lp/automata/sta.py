@@ -22,13 +22,15 @@ of events that happen at step ``k = t + 1``.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
 
-__all__ = ["EventClock", "STA", "EventOutcome", "ClockStep", "TRUNCATED", "make_sta"]
+__all__ = [
+    "EventClock", "STA", "EventOutcome", "ClockStep", "TRUNCATED", "advance_clock", "make_sta",
+]
 
 TRUNCATED = -1
 """The clock value of an outcome that ran past a truncation point."""
@@ -114,22 +116,12 @@ class STA:
             keep *= 1.0 - c.tail
         return 1.0 - keep
 
-    def cap(self, pending: frozenset[str]) -> int:
-        """The largest clock value that still matters while ``pending`` are pending."""
-        return max((self.clocks[a].cap for a in pending), default=0)
-
     def advance(self, pending: frozenset[str], clock: int) -> ClockStep:
-        """The clock one step after ``clock`` while ``pending`` are still pending.
-
-        The one rule of the clock: it counts steps, ``t -> t + 1``; it is capped at
-        ``cap(pending)`` (beyond it no pending hazard changes); and the step crosses a
-        truncation point when some pending event ``a`` has ``t + 1 >= T_a``.
-        """
-        t = clock + 1
-        crossed = any(
-            (T := self.clocks[a].truncation) is not None and t >= T for a in pending
+        """The clock one step after ``clock`` while ``pending`` are still pending
+        (:func:`advance_clock` with this STA's caps and truncation points)."""
+        return advance_clock(
+            pending, clock, {a: c.cap for a, c in self.clocks.items()}, self.truncation_points
         )
-        return ClockStep(min(t, self.cap(pending)), crossed)
 
     def outcomes(self, pending: frozenset[str], clock: int) -> tuple[EventOutcome, ...]:
         """The distribution of the events of the next step, from ``clock`` with ``pending``.
@@ -156,6 +148,22 @@ class STA:
         result = tuple(out)
         self._cache[key] = result
         return result
+
+
+def advance_clock(
+    pending: Iterable[str], clock: int, caps: Mapping[str, int], truncations: Mapping[str, int]
+) -> ClockStep:
+    """The clock one step after ``clock`` while ``pending`` are still pending.
+
+    The one rule of the clock: it counts steps, ``t -> t + 1``; it is capped at
+    ``max(caps[a] for a in pending)`` (beyond it no pending hazard changes); and the step
+    crosses a truncation point when some pending event ``a`` has ``t + 1 >= T_a``
+    (``truncations[a]``; an event without one is exact).  :meth:`STA.advance` and a
+    controller loaded from a file (which has no distributions) both step through it.
+    """
+    t = clock + 1
+    crossed = any((T := truncations.get(a)) is not None and t >= T for a in pending)
+    return ClockStep(min(t, max((caps[a] for a in pending), default=0)), crossed)
 
 
 def make_sta(

@@ -1,4 +1,5 @@
-"""Export the occupancy LP (MPS / CPLEX-LP, via HiGHS) and the MDP (Storm's DRN format).
+"""Export the occupancy LP (MPS / CPLEX-LP, via HiGHS), whose optimum is the value, and
+the MDP (Storm's DRN format).
 
 Both writers refuse to overwrite an existing file unless ``overwrite=True``.
 
@@ -42,54 +43,64 @@ def write_lp(
     path: str | os.PathLike[str],
     *,
     overwrite: bool = False,
-    everywhere: bool = False,
 ) -> Path:
-    """Write the occupancy LP of :func:`mitld_lp.solvers.solve_lp` to ``path``.
+    """Write to ``path`` the LP whose optimum is the value: the maximal probability of
+    reaching ``target`` from the initial state.
 
-    The format follows the suffix: ``.mps`` (free MPS) or ``.lp`` (CPLEX LP).  The model
-    goes through HiGHS (``Highs.passModel`` then ``Highs.writeModel``), so any solver
-    reading those formats sees exactly the LP we solve: maximise
-    ``sum_c y(c) P(c, target)`` subject to the flow equalities and ``y >= 0``.
+    The format follows the suffix: ``.mps`` (free MPS) or ``.lp`` (CPLEX LP).  The LP is
+    the occupancy LP that :func:`mitld_lp.solvers.solve_lp` solves (as one LP), with
+    start weight 1 on the initial state: over the reduced states (target and prob-0
+    states removed, end components collapsed; see
+    :func:`mitld_lp.solvers.quotient.reduce`), maximise ``sum_c y(c) P(c, target)``
+    subject to ``sum_{c of s} y(c) - sum_c' y(c') P(c', s) = [s = initial]`` and
+    ``y >= 0``.  Where graph analysis already decides the initial state (a target state:
+    1; a prob-0 state: 0), the LP is the one row ``s<initial>: sum_{c of initial} y(c)
+    = 1`` with that value as every column's objective coefficient.  Either way any solver
+    that reads the file finds the value as its optimal objective.  The model goes
+    through HiGHS (``Highs.passModel`` then ``Highs.writeModel``); the command line's
+    ``export --lp`` writes this same LP.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
-        ValueError: unknown suffix, or the initial state is decided by graph analysis
-            (target or prob-0) and ``everywhere`` is false, so the LP would be empty.
+        ValueError: unknown suffix.
         OSError: HiGHS failed to write the file.
     """
     p = Path(path)
     if p.suffix.lower() not in _LP_SUFFIXES:
         raise ValueError(f"{p}: unknown LP format {p.suffix!r}; use one of {_LP_SUFFIXES}")
     p = _check_target_path(p, overwrite)
-    lp = occupancy_lp(mdp, target, everywhere=everywhere)
+    lp = occupancy_lp(mdp, target)
     q = lp.quotient
-    if q.initial < 0 and not everywhere:
-        raise ValueError(
-            "the initial state is a target or prob-0 state: its value is decided without "
-            "an LP; pass everywhere=True to export the LP of all the other states"
-        )
+    if q.initial >= 0:
+        a = sp.csc_array(lp.a_eq)
+        b, objective = lp.b_eq, lp.objective
+        columns = q.choice_origin
+        plain = np.flatnonzero((q.state_map >= 0) & (q.mecs.mec_of < 0))
+        rows = [f"s{i}" for i in plain.tolist()] + [f"mec{k}" for k in range(q.mecs.n_mecs)]
+    else:  # decided by graph analysis: one row, the initial state's choices
+        columns = np.arange(mdp.row_groups[mdp.initial], mdp.row_groups[mdp.initial + 1])
+        a = sp.csc_array(np.ones((1, columns.size)))
+        b, objective = np.ones(1), np.full(columns.size, q.initial_value)
+        rows = [f"s{mdp.initial}"]
+    n_rows, n_cols = len(rows), columns.size
     highspy: Any = importlib.import_module("highspy")
-    a = sp.csc_array(lp.a_eq)
     model = highspy.HighsLp()
-    model.num_col_ = q.n_choices
-    model.num_row_ = q.n_states
+    model.num_col_ = n_cols
+    model.num_row_ = n_rows
     model.sense_ = highspy.ObjSense.kMaximize
-    model.col_cost_ = np.asarray(lp.objective, dtype=np.float64)
-    model.col_lower_ = np.zeros(q.n_choices)
-    model.col_upper_ = np.full(q.n_choices, highspy.kHighsInf)
-    model.row_lower_ = np.asarray(lp.b_eq, dtype=np.float64)
-    model.row_upper_ = np.asarray(lp.b_eq, dtype=np.float64)
+    model.col_cost_ = np.asarray(objective, dtype=np.float64)
+    model.col_lower_ = np.zeros(n_cols)
+    model.col_upper_ = np.full(n_cols, highspy.kHighsInf)
+    model.row_lower_ = np.asarray(b, dtype=np.float64)
+    model.row_upper_ = np.asarray(b, dtype=np.float64)
     model.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    model.a_matrix_.num_col_ = q.n_choices
-    model.a_matrix_.num_row_ = q.n_states
+    model.a_matrix_.num_col_ = n_cols
+    model.a_matrix_.num_row_ = n_rows
     model.a_matrix_.start_ = np.asarray(a.indptr, dtype=np.int32)
     model.a_matrix_.index_ = np.asarray(a.indices, dtype=np.int32)
     model.a_matrix_.value_ = np.asarray(a.data, dtype=np.float64)
-    model.col_names_ = [f"y{c}" for c in q.choice_origin.tolist()]
-    plain = np.flatnonzero((q.state_map >= 0) & (q.mecs.mec_of < 0))
-    model.row_names_ = [f"s{i}" for i in plain.tolist()] + [
-        f"mec{k}" for k in range(q.mecs.n_mecs)
-    ]
+    model.col_names_ = [f"y{c}" for c in columns.tolist()]
+    model.row_names_ = rows
     highs = highspy.Highs()
     highs.setOptionValue("output_flag", False)
     status = highs.passModel(model)
@@ -98,7 +109,7 @@ def write_lp(
     status = highs.writeModel(str(p))
     if status == highspy.HighsStatus.kError or not p.exists():
         raise OSError(f"{p}: HiGHS failed to write the model ({status})")
-    logger.info("wrote LP (%d rows, %d columns) to %s", q.n_states, q.n_choices, p)
+    logger.info("wrote LP (%d rows, %d columns) to %s", n_rows, n_cols, p)
     return p
 
 
