@@ -22,6 +22,7 @@ import json
 import logging
 import math
 import os
+import re
 import sys
 import threading
 import time
@@ -36,10 +37,12 @@ from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
 from mitld_lp.model import ModelError
 from mitld_lp.product import ProductTooLarge
+from mitld_lp.sweep.spec import SweepError
 from mitld_lp.text import printable
 
 if TYPE_CHECKING:
     from mitld_lp.model import Model
+    from mitld_lp.sweep.rows import Settings
     from mitld_lp.synthesis import Built
 
 PROG = "mitld-lp"
@@ -57,6 +60,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
     TranslationError,
     UsageError,
     FileExistsError,
+    SweepError,
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
@@ -370,18 +374,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
                                                (".csv", ".json"))
     model = load_model(args.model)
-    r = synthesize(
-        model,
-        epsilon=args.epsilon,
-        method=args.method,
-        solver=args.solver,
-        backend=args.backend,
-        clock_reduction=not args.no_clock_reduction,
-        max_states=args.max_states,
-        max_memory=args.max_memory,
-        decompose=not args.no_decompose,
-        time_limit=_time_left(args),
-    )
+    r = synthesize(model, **_solve_settings(args).synthesize_kwargs())
     summary = r.summary()
     if policy_file:
         _write(policy_file, lambda p: r.write_policy(p, overwrite=True))
@@ -495,6 +488,78 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- many runs
+
+
+def _solve_settings(args: argparse.Namespace) -> Settings:
+    """``solve``'s options as :class:`mitld_lp.sweep.rows.Settings` (time left now)."""
+    from mitld_lp.sweep.rows import Settings
+
+    return Settings(method=args.method, solver=args.solver, backend=args.backend,
+                    clock_reduction=not args.no_clock_reduction,
+                    decompose=not args.no_decompose, time_limit=_time_left(args),
+                    max_states=args.max_states, max_memory=args.max_memory,
+                    epsilon=args.epsilon)
+
+
+def _batch_exit(records: list[dict[str, Any]]) -> int:
+    """The exit status of many runs: 1 if one hit a bug, else 2 if a model file was
+    wrong, else 3 if one has no certified answer, else 0."""
+    statuses = {r["status"] for r in records}
+    if "error" in statuses:
+        return EXIT_INTERNAL
+    if "model_error" in statuses:
+        return EXIT_USAGE
+    return EXIT_OK if all(r.get("certified") for r in records) else EXIT_UNCERTIFIED
+
+
+def _args_sweep(p: argparse.ArgumentParser) -> None:
+    p.add_argument("sweep", help="a sweep file (models/sweeps/*.toml; see docs/sweeps.md)")
+    p.add_argument("-o", "--out", metavar="RESULTS",
+                   help="the results file, .csv or .parquet (default: NAME.csv here, NAME "
+                        "the sweep's name); points already in it are not solved again")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_bounded_int(1, 1024), default=1, metavar="N",
+                       help="solve N points at a time, in local processes")
+    where.add_argument("--dask", metavar="ADDRESS",
+                       help="solve the points on the Dask scheduler at ADDRESS "
+                            "(tcp://host:8786)")
+    p.add_argument("--retries", type=_bounded_int(0, 100), default=2, metavar="N",
+                   help="Dask: run a failed task up to N more times (default 2)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="solve again the points whose row has a failure status")
+    p.add_argument("--force", action="store_true",
+                   help="start RESULTS anew, even when it holds another sweep's rows")
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    """Solve every point of a sweep not yet in its results file; print a summary."""
+    from collections import Counter
+
+    from mitld_lp.sweep import load_sweep, run_sweep
+
+    sw = load_sweep(args.sweep)
+    out = Path(args.out or re.sub(r"[^\w.-]", "_", sw.name) + ".csv")
+    if not args.verbose:  # the bar says how far it is; each point's stages would drown it
+        logging.getLogger("mitld_lp").setLevel(logging.WARNING)
+    run = run_sweep(sw, out, workers=args.workers, dask=args.dask, retries=args.retries,
+                    force=args.force, retry_failed=args.retry_failed,
+                    progress=not args.quiet)
+    statuses = Counter(r["status"] for r in run.rows)
+    _out(f"sweep:      {sw.name} ({_count(len(run.rows), 'point')}: {run.computed} solved "
+         f"now, {run.reused} already in {out})")
+    _out("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
+    _out(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
+    shown: set[tuple[str, str]] = set()
+    for r in run.failed:
+        if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
+            shown.add((r["status"], r["error"]))
+            at = ", ".join(f"{c} = {json.dumps(r[c])}" for c in sw.columns)
+            _out(f"  {r['status']} at {at or 'the base model'}: {r['error']}")
+    _out(f"results:    {out}")
+    return _batch_exit(list(run.rows))
+
+
 # --------------------------------------------------------------------------- registry
 
 #: (verb, one-line help, add arguments, run).  Add a verb by appending one row.
@@ -509,6 +574,8 @@ _VERBS: list[
     ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)", _args_export, _cmd_export),
     ("simulate", "Monte-Carlo rollouts of the synthesised controller", _args_simulate,
      _cmd_simulate),
+    ("sweep", "solve a model at every point of a sweep, into a results file", _args_sweep,
+     _cmd_sweep),
 ]
 
 
