@@ -110,12 +110,25 @@ def test_a_point_with_no_slip_has_the_hand_computed_value(files):
     assert checked == 4
 
 
-def test_serial_and_pool_give_the_same_rows(files, capsys):
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  protocol="tcp", dashboard_address=None) as local:
+        yield local
+
+
+def test_serial_pool_and_dask_give_the_same_rows(files, capsys, cluster):
     serial = run_sweep(files / "tiny_sweep.toml", "serial.csv")
     assert main(["sweep", "tiny_sweep.toml", "-o", "pool.csv", "--workers", "2", "-q"]) == 0
+    address = cluster.scheduler_address
+    assert address.startswith("tcp://127.0.0.1:")
+    assert main(["sweep", "tiny_sweep.toml", "-o", "dask.csv", "--dask", address, "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "12 solved now, 0 already in dask.csv" in out
     expected = _by_point(serial.rows)
     assert len(expected) == 12
-    for name in ("serial.csv", "pool.csv"):
+    for name in ("serial.csv", "pool.csv", "dask.csv"):
         columns, rows, dropped = read_results(files / name)
         assert dropped == 0 and len(rows) == 12
         assert _by_point(rows) == expected, name

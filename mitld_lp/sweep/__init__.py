@@ -113,7 +113,7 @@ def run_sweep(
     from mitld_lp.sweep import engines
 
     if dask is not None:
-        raise SweepError("dask: not available yet")
+        finished = engines.dask_cluster(tasks, dask, retries)
     elif workers > 1 and len(tasks) > 1:
         finished = engines.process_pool(tasks, workers)
     else:
