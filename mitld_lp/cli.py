@@ -18,6 +18,7 @@ This module is the only place in the package that prints.
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import logging
 import math
@@ -286,8 +287,12 @@ def _count(n: int, noun: str) -> str:
 # --------------------------------------------------------------------------- model verbs
 
 
-def _args_model(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", help="a model file (models/*.toml)")
+def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
+    if many:
+        p.add_argument("model", nargs="+", help="model files or glob patterns (a batch: "
+                       "one line per model)")
+    else:
+        p.add_argument("model", help="a model file (models/*.toml)")
     p.add_argument("--epsilon", type=_probability_budget,
                    help="truncation budget in (0, 1) (default: the model's)")
     p.add_argument(
@@ -347,7 +352,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _args_solve(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
+    _args_model(p, many=True)
     p.add_argument("--method", choices=("lp", "vi"), default="lp")
     p.add_argument("--solver", type=_solver_name, default="CLARABEL",
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
@@ -371,6 +376,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
                          "use --backend cvxpy (or auto) for other solvers")
+    if len(args.model) > 1 or _is_pattern(args.model[0]):
+        return _solve_batch(args)
+    args.model = args.model[0]
     policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
                                                (".csv", ".json"))
     model = load_model(args.model)
@@ -502,6 +510,11 @@ def _solve_settings(args: argparse.Namespace) -> Settings:
                     epsilon=args.epsilon)
 
 
+def _is_pattern(name: str) -> bool:
+    """A glob pattern the shell did not expand (and no file of that name)."""
+    return glob.has_magic(name) and not Path(name).exists()
+
+
 def _batch_exit(records: list[dict[str, Any]]) -> int:
     """The exit status of many runs: 1 if one hit a bug, else 2 if a model file was
     wrong, else 3 if one has no certified answer, else 0."""
@@ -511,6 +524,43 @@ def _batch_exit(records: list[dict[str, Any]]) -> int:
     if "model_error" in statuses:
         return EXIT_USAGE
     return EXIT_OK if all(r.get("certified") for r in records) else EXIT_UNCERTIFIED
+
+
+def _solve_batch(args: argparse.Namespace) -> int:
+    """``solve a.toml b.toml 'models/*.toml'``: each model file in turn, one line each
+    (a JSON object with ``--json``); a model that fails is its line, not the end."""
+    from mitld_lp.model import load_model
+    from mitld_lp.sweep.rows import MODEL_ERROR, run_model
+
+    if args.policy:
+        raise UsageError("--policy writes the policy of one model; give one model file")
+    records: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for name in args.model:
+        matches = sorted(glob.glob(name, recursive=True)) if _is_pattern(name) else [name]
+        if not matches:
+            records.append({"file": name, "status": MODEL_ERROR, "certified": False,
+                            "error": "no file matches this pattern"})
+            _batch_line(records[-1], args.json)
+        for path in (m for m in matches if m not in seen):
+            seen.add(path)
+            outcome = run_model(lambda path=path: load_model(path), _solve_settings(args))
+            records.append({"file": path, **outcome.summary} if outcome.summary else {
+                "file": path, "status": outcome.status, "certified": False,
+                "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
+            _batch_line(records[-1], args.json)
+    return _batch_exit(records)
+
+
+def _batch_line(record: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        _out(_dumps(record))
+    elif "error" in record:
+        _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
+    else:
+        _out(f"{printable(record['file'])}: [{record['lower']:.7f}, {record['upper']:.7f}] "
+             f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
+             f"{record['states']} states, {record['seconds']:.3f} s)")
 
 
 def _args_sweep(p: argparse.ArgumentParser) -> None:
