@@ -34,9 +34,9 @@ Every error is a :class:`ModelError` whose message starts with the source (the f
 path) and names the key path and the offending value, e.g.
 ``models/x.toml: grid.slip: must be in [0, 0.5], got 0.7``.
 
-Game kinds: the loader dispatches on which game table is present (today only
-``[grid]``); a new kind is one entry in ``_GAME_KINDS`` with the top-level tables it
-owns and a builder.
+Game kinds: the loader dispatches on which game table is present (``[grid]``,
+``[prism]``, ``[gym]``, ``[python]``); a new kind is one entry in ``_GAME_KINDS`` with
+the top-level tables it owns and a builder.
 """
 
 from __future__ import annotations
@@ -400,7 +400,18 @@ _GAME_KINDS: tuple[_GameKind, ...] = (
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
     ),
     _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
+    # worlds named by code (mitld_lp.worlds.loaders): a gymnasium environment, a factory
+    _GameKind(table="gym", extra_tables=(), proposition_noun="label",
+              build=lambda doc, ctx: _loaders().gym_world(doc, ctx)),
+    _GameKind(table="python", extra_tables=(), proposition_noun="proposition",
+              build=lambda doc, ctx: _loaders().python_world(doc, ctx)),
 )
+
+
+def _loaders() -> Any:
+    from mitld_lp.worlds import loaders
+
+    return loaders
 
 _COMMON_REQUIRED = {"name", "spec"}
 _COMMON_OPTIONAL = {"epsilon", "distributions", "constants"}
