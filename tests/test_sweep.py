@@ -8,6 +8,7 @@ import csv
 import itertools
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -297,3 +298,85 @@ def test_points_and_set_and_a_whole_law_varied(files):
     assert all(r["lower"] == pytest.approx(1.0, abs=1e-9) for r in run.rows)
     assert [r["distributions.mu"] for r in run.rows][:2] == [{"geometric": 0.5},
                                                             {"uniform": [1, 4]}]
+
+
+SLOW_WORLD = """\
+import time
+from mitld_lp import GridWorld
+
+def corridor(n=3, pause=0.0):
+    time.sleep(pause)
+    return GridWorld.make(n, 1, start=(0, 0), regions={"goal": [(n - 1, 0)]})
+"""
+
+
+def test_a_killed_sweep_run_again_computes_only_the_missing_points(files, capsys):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (files / "slow_world.py").write_text(SLOW_WORLD)
+    (files / "slow.toml").write_text('name = "slow"\nspec = "F[0,6] goal"\n[python]\n'
+                                     'world = "slow_world:corridor"\n'
+                                     "kwargs = { n = 2, pause = 0.25 }\n")
+    (files / "s.toml").write_text('name = "s"\nmodel = "slow.toml"\n[vary]\n'
+                                  f"python.kwargs.n = {list(range(2, 14))}\n")
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    proc = subprocess.Popen([sys.executable, "-m", "mitld_lp", "sweep", "s.toml", "-o", "r.csv",
+                             "-q"], cwd=files, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            path = files / "r.csv"
+            if path.exists() and path.read_text().count("\n") >= 4:  # header + 3 rows
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, "the sweep ended before it could be killed"
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait()
+    present = len(read_results(files / "r.csv")[1])
+    assert 3 <= present < 12
+    assert main(["sweep", "s.toml", "-o", "r.csv", "-q"]) == 0
+    out = capsys.readouterr().out
+    assert f"{12 - present} solved now, {present} already in r.csv" in out
+    columns, rows, dropped = read_results(files / "r.csv")
+    assert dropped == 0 and len(rows) == 12
+    assert sorted(r["python.kwargs.n"] for r in rows) == list(range(2, 14))
+    # a corridor of n cells is crossed in n - 1 moves: within 6 steps for n <= 7
+    assert all(r["lower"] == pytest.approx(1.0 if r["python.kwargs.n"] <= 7 else 0.0)
+               for r in rows)
+
+
+DYING_WORLD = """\
+import os
+from pathlib import Path
+from mitld_lp import GridWorld
+
+def corridor(n=3, marker=""):
+    if n == 3 and not Path(marker).exists():  # the first worker to load it dies
+        Path(marker).write_text("died once")
+        os._exit(1)
+    return GridWorld.make(n, 1, start=(0, 0), regions={"goal": [(n - 1, 0)]})
+"""
+
+
+def test_a_lost_dask_worker_s_point_runs_again_elsewhere(files):
+    distributed = pytest.importorskip("dask.distributed")
+    (files / "dying_world.py").write_text(DYING_WORLD)
+    marker = files / "died"
+    (files / "dying.toml").write_text(
+        'name = "dying"\nspec = "F[0,3] goal"\n[python]\nworld = "dying_world:corridor"\n'
+        f'kwargs = {{ n = 2, marker = "{marker}" }}\n')
+    (files / "s.toml").write_text('name = "s"\nmodel = "dying.toml"\n[vary]\n'
+                                  "python.kwargs.n = [2, 3, 4]\n")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as local:
+        run = run_sweep(files / "s.toml", "r.csv", dask=local.scheduler_address)
+    assert marker.exists()  # a worker did die
+    assert [r["status"] for r in run.rows] == ["optimal"] * 3
+    assert [r["lower"] for r in run.rows] == pytest.approx([1.0, 1.0, 1.0])
