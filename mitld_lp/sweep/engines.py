@@ -36,8 +36,10 @@ def process_pool(tasks: Sequence[PointTask], workers: int) -> Finished:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    pool = ProcessPoolExecutor(max_workers=workers,
-                               mp_context=multiprocessing.get_context("forkserver"))
+    context = multiprocessing.get_context("forkserver")
+    # the server imports the solver stack once; each worker is forked from it
+    context.set_forkserver_preload(["mitld_lp.sweep.rows", "mitld_lp.synthesis"])
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
     try:
         futures = {pool.submit(solve_point, task): task for task in tasks}
         for future in as_completed(futures):
