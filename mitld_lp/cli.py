@@ -610,6 +610,70 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return _batch_exit(list(run.rows))
 
 
+def _size(text: str) -> tuple[int, int]:
+    """A picture size in pixels, ``WIDTHxHEIGHT``."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m or not all(100 <= int(v) <= 20_000 for v in m.groups()):
+        raise argparse.ArgumentTypeError(
+            f"must be WIDTHxHEIGHT in pixels, each in 100..20000, got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+def _args_plot(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="a model file of a grid world (draws its policy) or a "
+                                 "sweep's results file, .csv or .parquet (draws a column)")
+    p.add_argument("-o", "--out", required=True, metavar="FILE",
+                   help="the picture: .png, .svg or .pdf")
+    p.add_argument("--situation", action="append", metavar="S",
+                   help='model: a panel for this situation, e.g. "occurred=b1" or '
+                        '"pending=b2; automaton=3; clock=0" (repeat for more panels; '
+                        "default: the initial one)")
+    p.add_argument("--x", help="results: the parameter on the x axis (its last key will do)")
+    p.add_argument("--y", help="results: the column on the y axis (lower, upper, states...)")
+    p.add_argument("--by", action="append", metavar="PARAMETER",
+                   help="results: one line per value of PARAMETER (repeatable; default: "
+                        "every other parameter that varies)")
+    p.add_argument("--size", type=_size, default=(800, 600), metavar="WxH",
+                   help="the picture's size in pixels (default 800x600)")
+    p.add_argument("--epsilon", type=_probability_budget,
+                   help="model: truncation budget in (0, 1) (default: the model's)")
+    p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_STATES,
+                   metavar="N", help="model: refuse products larger than N states (exit 3)")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    """Draw a grid world's policy, or a column of a sweep's results."""
+    from mitld_lp import plot
+
+    out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
+    table = Path(args.input).suffix.lower() in (".csv", ".parquet")
+    if table and (args.x is None or args.y is None):
+        raise UsageError(f"plot {args.input}: a results file needs --x and --y")
+    wrong = ("--situation" if args.situation else None) if table else (
+        "--x" if args.x else "--y" if args.y else "--by" if args.by else None)
+    if wrong:
+        raise UsageError(f"plot {args.input}: {wrong} applies to "
+                         f"{'a model file' if table else 'a results file'}")
+    try:
+        if table:
+            fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
+        else:
+            from mitld_lp.model import load_model
+            from mitld_lp.synthesis import synthesize
+
+            situations = [plot.parse_situation(s) for s in args.situation or [""]]
+            model = load_model(args.input)
+            result = synthesize(model, epsilon=args.epsilon, max_states=args.max_states,
+                                time_limit=_time_left(args))
+            fig = plot.policy_figure(result, situations, size=args.size)
+    except plot.PlotError as err:
+        raise UsageError(str(err)) from None
+    _write(out, lambda p: plot.save(fig, p))
+    _out(f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- registry
 
 #: (verb, one-line help, add arguments, run).  Add a verb by appending one row.
@@ -626,6 +690,8 @@ _VERBS: list[
      _cmd_simulate),
     ("sweep", "solve a model at every point of a sweep, into a results file", _args_sweep,
      _cmd_sweep),
+    ("plot", "draw a grid world's policy, or a column of a sweep's results", _args_plot,
+     _cmd_plot),
 ]
 
 
