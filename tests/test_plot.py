@@ -4,7 +4,9 @@ when the policies do, the docs' own pictures."""
 
 from __future__ import annotations
 
+import importlib
 import struct
+import sys
 from pathlib import Path
 
 import pytest
@@ -173,3 +175,20 @@ def test_plot_a_sweep_from_the_command_line(tmp_path, monkeypatch, capsys):
         assert main(["plot", "s.csv", *argv, "-o", "c.png", "-q"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
+
+
+def test_the_docs_pictures_are_the_script_s(tmp_path, capsys):
+    """The pictures docs/sweeps.md shows are experiments/docs_figures.py's: the test
+    suite runs the script, and the committed pictures have the sizes it draws."""
+    experiments = ROOT / "experiments"
+    if str(experiments) not in sys.path:
+        sys.path.insert(0, str(experiments))
+    written = importlib.import_module("docs_figures").main(["--quick", "--out", str(tmp_path)])
+    capsys.readouterr()
+    expected = {"bus_policy.png": (1200, 430), "bus_sweep.png": (720, 480)}
+    assert {p.name for p in written.values()} == set(expected)
+    for name, size in expected.items():
+        assert png_size(tmp_path / name) == size
+        committed = ROOT / "docs" / "img" / name
+        assert png_size(committed) == size
+        assert f"img/{name}" in (ROOT / "docs" / "sweeps.md").read_text()
