@@ -515,15 +515,25 @@ def _is_pattern(name: str) -> bool:
     return glob.has_magic(name) and not Path(name).exists()
 
 
-def _batch_exit(records: list[dict[str, Any]]) -> int:
-    """The exit status of many runs: 1 if one hit a bug, else 2 if a model file was
-    wrong, else 3 if one has no certified answer, else 0."""
-    statuses = {r["status"] for r in records}
+def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
+    """The exit status of many runs: 1 if one hit a bug, else 2 if a model was wrong,
+    else 3 if one has no certified answer, else 0; said in one line on stderr (the runs'
+    own lines name each failure)."""
+    statuses = [r["status"] for r in records]
+    failed = sum(1 for r in records if not r.get("certified"))
+    of = f"{failed} of {_count(len(records), noun)}"
     if "error" in statuses:
+        _say(f"internal error: {statuses.count('error')} of {_count(len(records), noun)} "
+             "failed unexpectedly (see their lines; please report this)")
         return EXIT_INTERNAL
     if "model_error" in statuses:
+        _say(f"error: {statuses.count('model_error')} of {_count(len(records), noun)} "
+             "could not be read (see their lines)")
         return EXIT_USAGE
-    return EXIT_OK if all(r.get("certified") for r in records) else EXIT_UNCERTIFIED
+    if failed:
+        _say(f"stopped: {of} without a certified answer (see their lines)")
+        return EXIT_UNCERTIFIED
+    return EXIT_OK
 
 
 def _solve_batch(args: argparse.Namespace) -> int:
@@ -549,7 +559,7 @@ def _solve_batch(args: argparse.Namespace) -> int:
                 "file": path, "status": outcome.status, "certified": False,
                 "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
             _batch_line(records[-1], args.json)
-    return _batch_exit(records)
+    return _batch_exit(records, "model")
 
 
 def _batch_line(record: dict[str, Any], as_json: bool) -> None:
@@ -607,7 +617,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             at = ", ".join(f"{c} = {json.dumps(r[c])}" for c in sw.columns)
             _out(f"  {r['status']} at {at or 'the base model'}: {r['error']}")
     _out(f"results:    {out}")
-    return _batch_exit(list(run.rows))
+    return _batch_exit(list(run.rows), "point")
 
 
 def _size(text: str) -> tuple[int, int]:

@@ -50,7 +50,10 @@ def test_a_failing_model_is_its_line_and_the_exit_status_says_so(folder, capsys)
                                      .replace("slip = 0.1", "slip = 0.7"))
     code = main(["solve", "bad.toml", "bus_grid.toml", "nothing*.toml", "--json", "-q"])
     assert code == 2
-    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    captured = capsys.readouterr()
+    assert captured.err.strip().splitlines() == [
+        "mitld-lp: error: 2 of 3 models could not be read (see their lines)"]
+    lines = [json.loads(line) for line in captured.out.splitlines()]
     assert [(x["file"], x["status"]) for x in lines] == [
         ("bad.toml", "model_error"), ("bus_grid.toml", "optimal"),
         ("nothing*.toml", "model_error")]
@@ -61,8 +64,11 @@ def test_a_failing_model_is_its_line_and_the_exit_status_says_so(folder, capsys)
 
 def test_a_budget_stop_in_a_batch_exits_3(folder, capsys):
     code = main(["solve", "bus_grid.toml", "red_light.toml", "--max-states", "60", "-q"])
-    out = capsys.readouterr().out.splitlines()
+    captured = capsys.readouterr()
+    out = captured.out.splitlines()
     assert code == 3
+    assert captured.err == ("mitld-lp: stopped: 1 of 2 models without a certified answer "
+                            "(see their lines)\n")
     assert out[0].startswith("bus_grid.toml: budget: ")
     assert out[1].startswith("red_light.toml: [")  # 55 states: within the budget
 

@@ -115,7 +115,7 @@ def test_a_point_with_no_slip_has_the_hand_computed_value(files):
 def cluster():
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  protocol="tcp", dashboard_address=None) as local:
+                                  protocol="tcp", dashboard_address=":0") as local:
         yield local
 
 
@@ -375,7 +375,7 @@ def test_a_lost_dask_worker_s_point_runs_again_elsewhere(files):
     (files / "s.toml").write_text('name = "s"\nmodel = "dying.toml"\n[vary]\n'
                                   "python.kwargs.n = [2, 3, 4]\n")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as local:
+                                  dashboard_address=":0") as local:
         run = run_sweep(files / "s.toml", "r.csv", dask=local.scheduler_address)
     assert marker.exists()  # a worker did die
     assert [r["status"] for r in run.rows] == ["optimal"] * 3
