@@ -244,7 +244,7 @@ def draw_panel(ax: Axes, pm: PolicyMap, game: GridWorld, title: str, norm: Any) 
         if view.kind != OPEN:
             ax.text(x, y, {DONE: "done", FAILED: "failed", UNREACHED: "not\nreached"}[
                 view.kind], ha="center", va="center", fontsize=small * 0.85, color="0.25")
-        elif view.action in MOVES:
+        elif view.action is not None and view.action in MOVES:
             dx, dy = MOVES[view.action]
             ax.annotate("", xy=(x + 0.3 * dx, y + 0.3 * dy), xytext=(x - 0.3 * dx, y - 0.3 * dy),
                         arrowprops={"arrowstyle": "-|>", "lw": 2, "color": "white",

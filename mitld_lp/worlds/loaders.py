@@ -85,8 +85,7 @@ def _labels(ctx: _Context, table: dict[str, Any], env: Any, n_states: int, env_i
     for letter, name in letters.items():
         _proposition(ctx, ctx.string(name, f"gym.labels.{letter}"), f"gym.labels.{letter}")
     desc = getattr(env.unwrapped, "desc", None)  # an environment, not a world
-    cells = 0 if desc is None else len(desc) * len(desc[0])
-    if cells != n_states:
+    if desc is None or len(desc) * len(desc[0]) != n_states:
         raise ctx.error("gym.labels", f"{env_id} has no map with one cell per state to read "
                         f"propositions off ({n_states} states); give gym.propositions = "
                         "{ name = [states] }")
