@@ -70,14 +70,12 @@ EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2
 
 
 def _probability_budget(text: str) -> float:
-    """An ``--epsilon``: a number strictly between 0 and 1."""
+    """An ``--epsilon``: a number strictly between 0 and 1 (:func:`defaults.check_epsilon`)."""
     try:
-        value = float(text)
+        return defaults.check_epsilon(float(text))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}") from None
-    if not 0.0 < value < 1.0:  # also refuses nan and inf
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
-    return value
+        raise argparse.ArgumentTypeError(
+            f"must be a number in (0, 1), got {text!r}") from None
 
 
 def _bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
@@ -125,7 +123,7 @@ def _seconds(text: str) -> float:
 def _solver_name(text: str) -> str:
     """An LP solver name, in any case; checked against cvxpy's installed solvers."""
     name = text.strip().upper()
-    if name == "CLARABEL":  # the default needs no cvxpy import to be checked
+    if name == defaults.SOLVER:  # the default needs no cvxpy import to be checked
         return name
     import cvxpy
 
@@ -242,8 +240,9 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help="an MITLD formula (D[mu] a reads as F a)")
     p.add_argument("--dot", metavar="FILE", help="write the automaton as Graphviz DOT")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
-    p.add_argument("--max-states", type=int, default=200_000, metavar="N",
-                   help="refuse automata with more states (checked while it is built)")
+    p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_AUTOMATON_STATES,
+                   metavar="N", help="refuse automata with more states (checked while it "
+                                     "is built; exit 3)")
 
 
 def _cmd_dta(args: argparse.Namespace) -> int:
@@ -292,7 +291,11 @@ def _args_model(p: argparse.ArgumentParser) -> None:
         help="give every event an age clock, truncated as in the paper",
     )
     p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_STATES,
-                   metavar="N", help="refuse products larger than N states (exit 3)")
+                   metavar="N", help="refuse products (and automata) larger than N states "
+                                     "(exit 3)")
+    p.add_argument("--max-automaton-states", type=_bounded_int(1),
+                   default=defaults.MAX_AUTOMATON_STATES, metavar="N",
+                   help="refuse automata larger than N states (exit 3)")
     p.add_argument("--max-memory", type=_memory_size, metavar="SIZE",
                    help="refuse products needing more memory, e.g. 4G or 500M "
                         "(default: half the machine's memory; exit 3)")
@@ -308,7 +311,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
         clock_reduction=not args.no_clock_reduction, max_states=args.max_states,
-        max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, max_memory=args.max_memory,
     )
     return model, built
 
@@ -345,7 +348,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _args_solve(p: argparse.ArgumentParser) -> None:
     _args_model(p)
     p.add_argument("--method", choices=("lp", "vi"), default="lp")
-    p.add_argument("--solver", type=_solver_name, default="CLARABEL",
+    p.add_argument("--solver", type=_solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
     p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
                    help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
@@ -378,6 +381,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         backend=args.backend,
         clock_reduction=not args.no_clock_reduction,
         max_states=args.max_states,
+        max_automaton_states=args.max_automaton_states,
         max_memory=args.max_memory,
         decompose=not args.no_decompose,
         time_limit=_time_left(args),
@@ -444,17 +448,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-_MAX_RUNS = 100_000_000
-"""More rollouts than this would take days; the estimate's 95% CI is then +-1e-4."""
-_MAX_STEPS = 1_000_000
-
-
 def _args_simulate(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("-n", "--runs", type=_bounded_int(1, _MAX_RUNS), default=10_000,
-                   help=f"number of rollouts (1..{_MAX_RUNS:,})")
+    p.add_argument("-n", "--runs", type=_bounded_int(1, defaults.MAX_RUNS),
+                   default=defaults.RUNS, help=f"number of rollouts (1..{defaults.MAX_RUNS:,})")
     p.add_argument("--seed", type=_bounded_int(0), default=0, help="a non-negative seed")
-    p.add_argument("--max-steps", type=_bounded_int(1, _MAX_STEPS), default=500,
+    p.add_argument("--max-steps", type=_bounded_int(1, defaults.MAX_STEPS_LIMIT),
+                   default=defaults.MAX_STEPS,
                    help="steps after which a run still undecided counts as undecided")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -468,6 +468,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
+                   max_automaton_states=args.max_automaton_states,
                    time_limit=_time_left(args))
     sim = simulate(model.game, r.sta, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)

@@ -15,15 +15,12 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from mitld_lp import defaults
 from mitld_lp.automata.sta import STA
 from mitld_lp.controller import Controller, Observation, RunStatus
 from mitld_lp.game import Game
 
-__all__ = ["SimulationResult", "simulate", "rollout", "Step", "MAX_RUNS"]
-
-MAX_RUNS = 100_000_000
-"""The most runs :func:`simulate` accepts: at tens of thousands of runs a second, more
-would take days, and the interval's half-width is already below 1e-4."""
+__all__ = ["SimulationResult", "simulate", "rollout", "Step"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,7 +83,7 @@ def rollout(
     controller: Controller,
     rng: np.random.Generator,
     *,
-    max_steps: int = 1000,
+    max_steps: int = defaults.MAX_STEPS,
     record: bool = False,
 ) -> tuple[RunStatus, list[Step]]:
     """One run: returns the controller's final status and (if ``record``) the steps."""
@@ -114,18 +111,19 @@ def simulate(
     sta: STA,
     controller: Controller,
     *,
-    runs: int = 10_000,
+    runs: int = defaults.RUNS,
     seed: int | None = 0,
-    max_steps: int = 1000,
+    max_steps: int = defaults.MAX_STEPS,
     progress: bool | None = None,
 ) -> SimulationResult:
     """Estimate the probability that ``controller`` satisfies the task.
 
     Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
-    ``1..MAX_RUNS``, ``max_steps`` not an integer ``>= 0``, or ``seed`` negative.
+    ``1..defaults.MAX_RUNS``, ``max_steps`` not an integer in
+    ``0..defaults.MAX_STEPS_LIMIT``, or ``seed`` negative.
     """
-    _check_count("runs", runs, 1, MAX_RUNS)
-    _check_count("max_steps", max_steps, 0, None)
+    _check_count("runs", runs, 1, defaults.MAX_RUNS)
+    _check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
     if seed is not None:
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)

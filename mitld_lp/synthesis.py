@@ -347,17 +347,20 @@ def build_product(
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     progress: bool | None = None,
 ) -> Built:
     """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
     ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
-    then the reachable ``product`` with ``game``; the automaton and the product each
-    within ``max_states`` states, the product also within
-    ``max_memory`` bytes (default: half the machine's memory), both checked before the
-    work that would exceed them.  The only place that wires the stages."""
+    then the reachable ``product`` with ``game``.  Budgets, each checked before the work
+    that would exceed it: no state space built here has more than ``max_states``
+    states; the automaton, whose states cost thousands of times more than the
+    product's, also no more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`);
+    the product needs at most ``max_memory`` bytes (default: half the machine's
+    memory).  The only place that wires the stages."""
     t0 = time.perf_counter()
-    dta = to_dta(formula, max_states=max_states)
+    dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
     mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
@@ -370,11 +373,12 @@ def synthesize(
     *,
     epsilon: float | None = None,
     method: Method = "lp",
-    solver: str = "CLARABEL",
+    solver: str = defaults.SOLVER,
     backend: str = "auto",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
@@ -390,7 +394,7 @@ def synthesize(
     directly, or through cvxpy with ``backend="cvxpy"``, which also takes any other
     ``solver`` cvxpy has) or ``"vi"`` (interval iteration alone).  Interval
     iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
-    per event instead of ``epsilon``.
+    per event instead of ``epsilon``.  The budgets are :func:`build_product`'s.
     ``decompose``: the LP block by block in topological order (default) or as one LP.
     ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
     """
@@ -401,11 +405,12 @@ def synthesize(
             f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
             f"got {type(model).__name__}"
         )
-    eps = model.epsilon if epsilon is None else epsilon
+    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
     built = build_product(
         model.game, model.spec, model.distributions, epsilon=eps,
         clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
-        max_memory=max_memory, progress=progress or None,
+        max_automaton_states=max_automaton_states, max_memory=max_memory,
+        progress=progress or None,
     )
     dta, sta, mdp = built.dta, built.sta, built.mdp
     timings: dict[str, float] = dict(built.timings)

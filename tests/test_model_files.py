@@ -383,9 +383,10 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
     (
         "epsilon too large",
         edit("epsilon = 0.01", "epsilon = 1.5"),
-        ("epsilon: must be in (0, 1), got 1.5",),
+        ("epsilon: must be a number in (0, 1), got 1.5",),
     ),
-    ("epsilon zero", edit("epsilon = 0.01", "epsilon = 0"), ("epsilon: must be in (0, 1), got 0",)),
+    ("epsilon zero", edit("epsilon = 0.01", "epsilon = 0"),
+     ("epsilon: must be a number in (0, 1), got 0",)),
     (
         "epsilon a string",
         edit("epsilon = 0.01", 'epsilon = "small"'),

@@ -54,7 +54,8 @@ def test_a_true_value_of_exactly_0_or_1_is_inside_the_interval(spec, value, runs
         ({"runs": 10**12}, "runs: must be in 1"),
         ({"runs": 2.5}, "runs: must be an integer, got 2.5"),
         ({"runs": True}, "runs: must be an integer"),
-        ({"max_steps": -1}, "max_steps: must be >= 0, got -1"),
+        ({"max_steps": -1}, r"max_steps: must be in 0\.\.1,000,000, got -1"),
+        ({"max_steps": 10**7}, r"max_steps: must be in 0\.\.1,000,000, got 10000000"),
         ({"seed": -1}, "seed: must be >= 0, got -1"),
     ],
 )

@@ -39,6 +39,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA, Diagram
 from mitld_lp.logic.fragment import FragmentReport, nnf
 from mitld_lp.logic.normal import c_and, c_next, c_or, c_release, c_until, canonical, normal_form
@@ -261,7 +262,9 @@ def progress(obligation: Formula, letter: frozenset[str] | set[str]) -> Formula:
 # --------------------------------------------------------------------------- construction
 
 
-def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
+def to_dta(
+    spec: Formula | FragmentReport, *, max_states: int = defaults.MAX_AUTOMATON_STATES
+) -> DTA:
     """The minimal DTA accepting the finite prefixes that decide the formula true.
 
     ``spec`` is a formula, or the :class:`~mitld_lp.logic.fragment.FragmentReport` that
