@@ -29,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from mitld_lp import defaults
+from mitld_lp import defaults, files
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
@@ -56,6 +56,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
     DistributionError,
     TranslationError,
     UsageError,
+    files.OutputPathError,
     FileExistsError,
 )
 
@@ -139,23 +140,19 @@ def _solver_name(text: str) -> str:
 
 
 def _output_path(given: str, force: bool, what: str, suffixes: tuple[str, ...] = ()) -> Path:
-    """Check, before any work, that ``given`` can be written: its folder exists, it is no
-    folder itself, its suffix is one of ``suffixes``, and it exists only with ``--force``."""
-    path = Path(given)
-    if suffixes and path.suffix.lower() not in suffixes:
-        raise UsageError(f"{what} {given}: the suffix must be one of {', '.join(suffixes)}")
-    if path.is_dir():
-        raise UsageError(f"{what} {given}: is a directory")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise UsageError(f"{what} {given}: the folder {parent} does not exist")
-    if path.exists() and not force:
-        raise FileExistsError(f"{given}: exists; pass --force to overwrite it")
-    return path
+    """Check, before any work, that ``given`` can be written (the one rule,
+    :func:`mitld_lp.files.writable_path`)."""
+    return files.writable_path(given, overwrite=force, suffixes=suffixes, what=what,
+                               force="--force")
+
+
+_DOT_SUFFIXES = (".dot", ".gv")
 
 
 def _write(path: Path, write: Callable[[Path], object]) -> None:
-    """Run ``write(path)``; an OS error (disk full, no permission) is a one-line error."""
+    """Run ``write(path)`` (a writer of :mod:`mitld_lp.files`, which replaces the file
+    only once it is complete); an OS error (disk full, no permission) is a one-line
+    error."""
     try:
         write(path)
     except OSError as exc:
@@ -249,11 +246,12 @@ def _cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
     from mitld_lp.automata.translate import to_dta
 
-    path = args.dot and _output_path(args.dot, args.force, "--dot", (".dot", ".gv"))
+    path = None if args.dot is None else _output_path(args.dot, args.force, "--dot",
+                                                       _DOT_SUFFIXES)
     formula = parse(args.formula)
     dta = to_dta(check(formula), max_states=args.max_states)
     if path:
-        _write(path, lambda p: p.write_text(dta.to_dot()))
+        _write(path, lambda p: files.write_text(p, dta.to_dot(), overwrite=True))
         _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
         return EXIT_OK
     shown = [dta.location(i) for i in range(dta.n_states)]
@@ -370,8 +368,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
                          "use --backend cvxpy (or auto) for other solvers")
-    policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
-                                               (".csv", ".json"))
+    policy_file = None if args.policy is None else _output_path(
+        args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     model = load_model(args.model)
     r = synthesize(
         model,
@@ -388,7 +386,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     )
     summary = r.summary()
     if policy_file:
-        _write(policy_file, lambda p: r.write_policy(p, overwrite=True))
+        _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
         summary["policy_file"] = str(policy_file)
     if args.json:
         _out(_dumps(summary))
@@ -429,14 +427,14 @@ def _args_export(p: argparse.ArgumentParser) -> None:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
-    from mitld_lp.solvers.export import write_drn, write_lp
+    from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
 
-    if not args.lp and not args.drn:
+    if args.lp is None and args.drn is None:
         raise UsageError("export: nothing to do; give --lp FILE and/or --drn FILE")
-    lp = args.lp and _output_path(args.lp, args.force, "--lp", (".mps", ".lp"))
-    drn = args.drn and _output_path(args.drn, args.force, "--drn", (".drn",))
-    if lp and drn and lp.resolve() == drn.resolve():
-        raise UsageError(f"--lp and --drn name the same file {args.lp}")
+    lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
+    drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
+                                                     DRN_SUFFIXES)
+    files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
     mdp = _build(args)[1].mdp
     target = mdp.target | mdp.truncated if args.upper else mdp.target
     if lp:
@@ -566,6 +564,8 @@ def _run(args: argparse.Namespace) -> int:
     """Run the verb; map every exception to an exit code and one line on stderr."""
     try:
         return args.run(args)
+    except files.WriteAbandoned:  # interrupted from outside, which has said so
+        return EXIT_INTERRUPTED
     except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
         _say(f"stopped: {err}")
         return EXIT_UNCERTIFIED
@@ -638,11 +638,13 @@ def main(argv: list[str] | None = None) -> int:
                     print(_dumps({"status": "time_limit", "time_limit": args.time_limit}),
                           flush=True)
                 cancelled.set()
+                files.abandon(worker)
                 _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
                 _worker = worker
                 return EXIT_UNCERTIFIED
     except KeyboardInterrupt:
         cancelled.set()
+        files.abandon(worker)  # a file half written is removed; the old one stays
         _say("interrupted")
         _worker = worker
         return EXIT_INTERRUPTED

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp import files
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
@@ -102,10 +103,8 @@ class Controller:
         robot's process can :meth:`load` it without solving again.  The file is a
         pickle: load only files you wrote.  Refuses to replace a file unless
         ``overwrite``."""
-        out = Path(path)
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
-        with out.open("wb") as handle:
+        out = files.writable_path(path, overwrite=overwrite)
+        with files.replacing(out, "wb") as handle:
             pickle.dump((_SAVE_FORMAT, self), handle, protocol=pickle.HIGHEST_PROTOCOL)
         return out
 

@@ -22,8 +22,6 @@ does better.  So the true optimum lies in ``[lower, upper]``, and
 
 from __future__ import annotations
 
-import csv
-import json
 import logging
 import os
 import time
@@ -54,8 +52,6 @@ __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolu
            "Sizes"]
 
 log = logging.getLogger(__name__)
-
-_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
 
 Method = Literal["lp", "vi"]
 
@@ -194,27 +190,10 @@ class SynthesisResult:
         return rows
 
     def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """Write :meth:`policy_table` to ``path``: ``.csv`` (one row per state, pending
-        events joined by spaces) or ``.json`` (a list of objects).  Refuses to replace an
-        existing file unless ``overwrite``."""
-        out = Path(path)
-        suffix = out.suffix.lower()
-        if suffix not in (".csv", ".json"):
-            raise ValueError(f"{out}: the suffix must be .csv or .json")
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
-        rows = self.policy_table()
-        if suffix == ".json":
-            out.write_text(json.dumps(rows, default=str) + "\n")
-            return out
-        with out.open("w", newline="") as handle:
-            writer: csv.DictWriter[str] = csv.DictWriter(handle, fieldnames=list(_POLICY_COLUMNS))
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({**row, "game_state": str(row["game_state"]),
-                                 "pending": " ".join(row["pending"]),
-                                 "value": repr(row["value"])})
-        return out
+        """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write_policy`)."""
+        from mitld_lp.files import write_policy
+
+        return write_policy(self, path, overwrite=overwrite)
 
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record (the CLI's ``--json``)."""
