@@ -29,7 +29,6 @@ import mitld_lp
 from mitld_lp.gridworld import MOVES
 from mitld_lp.product import ProductState
 from mitld_lp.simulate import rollout
-from mitld_lp.solvers.iteration import evaluate_policy
 
 MODELS = (("case 1", "bus_grid.toml"), ("case 2", "bus_grid_case2.toml"))
 STATION_COLOURS = {"A": "tab:red", "B": "tab:green"}
@@ -50,7 +49,7 @@ def situations(result: mitld_lp.SynthesisResult, game) -> list[Panel]:
     init = mdp.states[mdp.initial]
     assert isinstance(init, ProductState), "the initial state is already decided"
     q0, events = init.automaton, sta.events
-    values = evaluate_policy(mdp, mdp.target, result.policy)
+    policy, values = result.lower_model.policy, result.lower_model.policy_values
     # index: (cell, automaton state, pending) -> the state with the smallest clock
     # (the one entered right after the situation arises)
     index: dict[tuple[Hashable, int, frozenset[str]], tuple[int, int]] = {}
@@ -77,8 +76,8 @@ def situations(result: mitld_lp.SynthesisResult, game) -> list[Panel]:
                 continue
             i = hit[1]
             vals[cell] = float(values[i])
-            if result.policy[i] >= 0:
-                actions[cell] = mdp.action_name(int(result.policy[i]))
+            if policy[i] >= 0:
+                actions[cell] = mdp.action_name(int(policy[i]))
         return Panel(title, autom, pending, actions, vals)
 
     b1, b2 = sorted(events)
@@ -142,11 +141,11 @@ def _set(s: frozenset[str]) -> str:
     return "{" + ", ".join(sorted(s)) + "}" if s else "{}"
 
 
-def trajectory(result: mitld_lp.SynthesisResult, game, seed: int) -> list[str]:
+def trajectory(result: mitld_lp.SynthesisResult, seed: int) -> list[str]:
     """One sampled run in the paper's notation: ((x, y), events, pending), (location,
     clocks) and the action taken."""
     dta = result.dta
-    status, steps = rollout(game, result.sta, result.controller, np.random.default_rng(seed),
+    status, steps = rollout(result.model, result.controller, np.random.default_rng(seed),
                             max_steps=100, record=True)
     lines = []
     used: set[int] = set()
@@ -206,7 +205,7 @@ def main(argv: list[str] | None = None) -> list[list[Panel]]:
     print(f"A sampled run of {case} (seed {args.seed}), in the paper's notation (Sec. V):")
     print("  t  ((cell, events of the last step, pending events), (automaton state, "
           "deadline clocks))  action")
-    print("\n".join(trajectory(result, model.game, args.seed)))
+    print("\n".join(trajectory(result, args.seed)))
     print()
     sm = plt.cm.ScalarMappable(norm=norm, cmap="viridis")
     fig.colorbar(sm, ax=axes, shrink=0.8, label="probability of success from the cell "

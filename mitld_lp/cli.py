@@ -393,15 +393,15 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     else:
         _out(f"model:        {model.name}  ({model.spec})")
         _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]"
-              f"  (epsilon achieved {r.epsilon_achieved:.3g})")
-        _out(f"value:        {r.value:.7f}  ({r.method}, status {r.status.value})")
+              f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
+        _out(f"value:        {r.lower_model.value:.7f}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")
-        _out(f"sizes:        {r.sizes.dta_states} automaton states, {r.sizes.states} states,"
-              f" {r.sizes.choices} choices, {r.sizes.transitions} transitions")
-        if r.truncation_points:
-            _out(f"truncation:   {dict(r.truncation_points)}")
+        _out(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"
+             f" {r.mdp.n_choices} choices, {r.mdp.n_transitions} transitions")
+        if r.sta.truncation_points:
+            _out(f"truncation:   {r.sta.truncation_points}")
         _out("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
         if policy_file:
             _out(f"policy:       {policy_file}")
@@ -468,7 +468,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
                    time_limit=_time_left(args))
-    sim = simulate(model.game, r.sta, r.controller, runs=args.runs, seed=args.seed,
+    sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
         "runs": sim.runs,

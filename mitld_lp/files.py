@@ -32,6 +32,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Literal
 
+from mitld_lp.report import POLICY_COLUMNS, policy_table
+
 if TYPE_CHECKING:
     from mitld_lp.synthesis import SynthesisResult
 
@@ -270,19 +272,17 @@ def write_text(
 
 
 POLICY_SUFFIXES = (".csv", ".json")
-POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
-"""The columns of the policy file, in order."""
 
 
 def write_policy(
     result: SynthesisResult, path: PathLike, *, overwrite: bool = False
 ) -> Path:
-    """Write ``result``'s policy table (:meth:`SynthesisResult.policy_table`) to
-    ``path``: ``.csv`` (one row per state, the columns of :data:`POLICY_COLUMNS`,
-    pending events joined by spaces, values with every digit) or ``.json`` (a list of
-    objects), under the rule."""
+    """Write ``result``'s policy table (:func:`mitld_lp.report.policy_table`) to
+    ``path``: ``.csv`` (one row per state, the columns of
+    :data:`~mitld_lp.report.POLICY_COLUMNS`, pending events joined by spaces, values
+    with every digit) or ``.json`` (a list of objects), under the rule."""
     out = writable_path(path, overwrite=overwrite, suffixes=POLICY_SUFFIXES)
-    rows = result.policy_table()
+    rows = policy_table(result)
     if out.suffix.lower() == ".json":
         with replacing(out) as handle:
             handle.write(json.dumps(rows, default=str) + "\n")

@@ -66,8 +66,8 @@ def test_controller_and_its_automaton_act_the_same_after_a_round_trip(name):
             assert copy.mdp.states.position(s) == i
     assert np.array_equal(copy.policy, r.controller.policy)
     # the same rollouts from the same seed
-    a = simulate(m.game, r.sta, r.controller, runs=200, seed=3)
-    b = simulate(roundtrip(m.game), sta, copy, runs=200, seed=3)
+    a = simulate(m, r.controller, runs=200, seed=3)
+    b = simulate(roundtrip(m), copy, runs=200, seed=3)
     assert (a.successes, a.beyond_model, a.undecided) == (b.successes, b.beyond_model, b.undecided)
     copy.reset()
     r.controller.reset()

@@ -368,7 +368,7 @@ def test_from_game_and_synthesize(game, spec, named, epsilon, override):
     event(f"synthesize: certified={r.certified}")
     assert 0.0 <= r.lower <= r.upper + 1e-9 and r.upper <= 1.0 + 1e-9, (r.lower, r.upper)
     if r.certified:  # the bracket is as tight as the truncation promised
-        assert r.upper - r.lower <= r.epsilon_achieved + 1e-6, (r.lower, r.upper)
+        assert r.upper - r.lower <= r.sta.epsilon_achieved + 1e-6, (r.lower, r.upper)
 
 
 def _law(text: str):
