@@ -28,7 +28,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -43,10 +43,11 @@ from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.product import product
-from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
-from mitld_lp.solvers.lp import Backend, solve_lp
-from mitld_lp.solvers.quotient import Quotient, reduce
-from mitld_lp.solvers.result import IterationResult, LPResult, Status, read_only
+
+if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
+    from mitld_lp.solvers.lp import Backend
+    from mitld_lp.solvers.quotient import Quotient
+    from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check"]
 
@@ -121,6 +122,8 @@ class SynthesisResult:
     @property
     def status(self) -> Status:
         """``OPTIMAL`` when both solves succeeded, else the first other status."""
+        from mitld_lp.solvers.result import Status
+
         return next((m.status for m in (self.lower_model, self.upper_model)
                      if m.status is not Status.OPTIMAL), Status.OPTIMAL)
 
@@ -192,6 +195,11 @@ def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> Mo
     interval-iteration policy, certified the same way (exact value inside the bracket)
     when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``).
     """
+    from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+    from mitld_lp.solvers.lp import solve_lp
+    from mitld_lp.solvers.quotient import reduce
+    from mitld_lp.solvers.result import Status, read_only
+
     quotient = reduce(mdp, target)
     tol, certify_tol = how.tol, how.certify_tol
 
