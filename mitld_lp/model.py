@@ -31,8 +31,8 @@ Every error is a :class:`ModelError` whose message starts with the source (the f
 path) and names the key path and the offending value, e.g.
 ``models/x.toml: grid.slip: must be in [0, 0.5], got 0.7``.
 
-Game kinds: the loader dispatches on which game table is present (today only
-``[grid]``); a new kind is one entry in ``_GAME_KINDS`` with the top-level tables it
+Game kinds: the loader dispatches on which game table is present (``[grid]`` or
+``[prism]``); a new kind is one entry in ``_GAME_KINDS`` with the top-level tables it
 owns and a builder.
 """
 

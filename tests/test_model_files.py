@@ -462,7 +462,8 @@ def _never_built(doc: dict[str, Any], ctx: Any) -> GridWorld:
 
 @pytest.fixture
 def with_maze_kind(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Only [grid] exists today; register a second game kind to check the dispatch."""
+    """A game kind registered for the test (beside [grid] and [prism]), to check the
+    dispatch."""
     maze = model_module._GameKind(
         table="maze", extra_tables=(), proposition_noun="room", build=_never_built
     )
