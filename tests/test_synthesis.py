@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import reference_values
 
 from mitld_lp import GridWorld, Model, Observation, RunStatus, load_model, simulate, synthesize
 from mitld_lp.solvers.result import Status
@@ -164,13 +165,23 @@ def test_solver_failure_is_a_status_not_an_exception():
     assert r.lower == pytest.approx(STORM_CASE1, abs=1e-6)
 
 
-def test_policy_is_a_choice_of_each_state():
-    r = synthesize(load_model(BUS_CASE1))
+@pytest.mark.parametrize("path", [BUS_CASE1, RED_LIGHT])  # red_light: truncated
+def test_policy_is_optimal_in_every_state(path):
+    # Pmax of every product state by the value LP (scipy, no graph analysis, no end
+    # components collapsed), against the exact value of the returned policy in that
+    # state: the policy is optimal everywhere, not only where it goes from the start.
+    r = synthesize(load_model(path))
     mdp = r.mdp
-    live = ~(mdp.target | mdp.sink | mdp.truncated)
-    rows = r.lower_model.policy[live]
-    starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
-    assert np.all((rows >= starts) & (rows < ends))
+    for model, target in ((r.lower_model, mdp.target),
+                          (r.upper_model, mdp.target | mdp.truncated)):
+        live = ~(mdp.target | mdp.sink | mdp.truncated)
+        rows = model.policy[live]
+        starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
+        assert np.all((rows >= starts) & (rows < ends))
+        pmax = reference_values(mdp, target)
+        np.testing.assert_allclose(model.policy_values, pmax, atol=1e-6)
+        assert model.policy_values[mdp.initial] == pytest.approx(
+            r.lower if model is r.lower_model else r.upper, abs=1e-6)
 
 
 def test_controller_rejects_once_both_deadlines_are_missed():
