@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from mitld_lp import defaults, files
+from mitld_lp.arguments import bounded_int, memory_size, probability_budget, seconds, solver_name
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
@@ -65,75 +66,6 @@ _BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge
 
 #: 3: no certified answer (a solver status or a budget stop; the status is printed).
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
-
-
-# --------------------------------------------------------------------------- argument types
-
-
-def _probability_budget(text: str) -> float:
-    """An ``--epsilon``: a number strictly between 0 and 1 (:func:`defaults.check_epsilon`)."""
-    try:
-        return defaults.check_epsilon(float(text))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a number in (0, 1), got {text!r}") from None
-
-
-def _bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
-    def parse_int(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-        if value < low or (high is not None and value > high):
-            bound = f">= {low:,}" if high is None else f"in {low:,}..{high:,}"
-            raise argparse.ArgumentTypeError(f"must be an integer {bound}, got {text}")
-        return value
-
-    parse_int.__name__ = "integer"
-    return parse_int
-
-
-_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-
-
-def _memory_size(text: str) -> int:
-    """A byte count with an optional binary unit: ``500M``, ``4G``, ``1.5G``."""
-    body = text.strip().upper().removesuffix("B").removesuffix("I")
-    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
-    try:
-        value = float(body[: len(body) - len(unit)]) * _UNITS[unit]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a size such as 4G or 500M, got {text!r}") from None
-    if not 1 <= value < float(1 << 60):
-        raise argparse.ArgumentTypeError(f"must be a positive size, got {text!r}")
-    return int(value)
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not value > 0.0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
-    return value
-
-
-def _solver_name(text: str) -> str:
-    """An LP solver name, in any case; checked against cvxpy's installed solvers."""
-    name = text.strip().upper()
-    if name == defaults.SOLVER:  # the default needs no cvxpy import to be checked
-        return name
-    import cvxpy
-
-    installed = cvxpy.installed_solvers()
-    if name not in installed:
-        raise argparse.ArgumentTypeError(
-            f"unknown or not installed LP solver {text!r} (installed: {', '.join(installed)})"
-        )
-    return name
 
 
 # --------------------------------------------------------------------------- output files
@@ -237,7 +169,7 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help="an MITLD formula (D[mu] a reads as F a)")
     p.add_argument("--dot", metavar="FILE", help="write the automaton as Graphviz DOT")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
-    p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_AUTOMATON_STATES,
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_AUTOMATON_STATES,
                    metavar="N", help="refuse automata with more states (checked while it "
                                      "is built; exit 3)")
 
@@ -281,20 +213,20 @@ def _count(n: int, noun: str) -> str:
 
 def _args_model(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="a model file (models/*.toml)")
-    p.add_argument("--epsilon", type=_probability_budget,
+    p.add_argument("--epsilon", type=probability_budget,
                    help="truncation budget in (0, 1) (default: the model's)")
     p.add_argument(
         "--no-clock-reduction",
         action="store_true",
         help="give every event an age clock, truncated as in the paper",
     )
-    p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_STATES,
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
                    metavar="N", help="refuse products (and automata) larger than N states "
                                      "(exit 3)")
-    p.add_argument("--max-automaton-states", type=_bounded_int(1),
+    p.add_argument("--max-automaton-states", type=bounded_int(1),
                    default=defaults.MAX_AUTOMATON_STATES, metavar="N",
                    help="refuse automata larger than N states (exit 3)")
-    p.add_argument("--max-memory", type=_memory_size, metavar="SIZE",
+    p.add_argument("--max-memory", type=memory_size, metavar="SIZE",
                    help="refuse products needing more memory, e.g. 4G or 500M "
                         "(default: half the machine's memory; exit 3)")
 
@@ -346,7 +278,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _args_solve(p: argparse.ArgumentParser) -> None:
     _args_model(p)
     p.add_argument("--method", choices=("lp", "vi"), default="lp")
-    p.add_argument("--solver", type=_solver_name, default=defaults.SOLVER,
+    p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
     p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
                    help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
@@ -448,10 +380,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _args_simulate(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("-n", "--runs", type=_bounded_int(1, defaults.MAX_RUNS),
+    p.add_argument("-n", "--runs", type=bounded_int(1, defaults.MAX_RUNS),
                    default=defaults.RUNS, help=f"number of rollouts (1..{defaults.MAX_RUNS:,})")
-    p.add_argument("--seed", type=_bounded_int(0), default=0, help="a non-negative seed")
-    p.add_argument("--max-steps", type=_bounded_int(1, defaults.MAX_STEPS_LIMIT),
+    p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
+    p.add_argument("--max-steps", type=bounded_int(1, defaults.MAX_STEPS_LIMIT),
                    default=defaults.MAX_STEPS,
                    help="steps after which a run still undecided counts as undecided")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -532,7 +464,7 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="no progress lines on stderr, only the answer and errors")
         p.add_argument("-v", "--verbose", action="store_true",
                        help="also the details of every stage (solver messages)")
-        p.add_argument("--time-limit", type=_seconds, metavar="SECONDS",
+        p.add_argument("--time-limit", type=seconds, metavar="SECONDS",
                        help="stop after SECONDS with status time_limit (exit 3)")
         p.set_defaults(run=run)
     return parser
