@@ -91,6 +91,16 @@ def test_two_outputs_naming_one_file_are_refused(tmp_path):
     files.distinct_outputs([("--lp", a), ("--drn", tmp_path / "b.drn")])
 
 
+def test_cli_refuses_two_outputs_naming_one_file(tmp_path, capsys):
+    a = tmp_path / "a.lp"
+    (tmp_path / "alias.drn").symlink_to(a)
+    argv = ["export", str(BUS), "--lp", str(a), "--drn", str(tmp_path / "alias.drn"),
+            "--force", "-q"]
+    assert main(argv) == 2
+    assert "--lp and --drn name the same file" in capsys.readouterr().err
+    assert _listing(tmp_path) == ["alias.drn"]  # refused before any work
+
+
 def test_cli_refuses_an_empty_output_path(tmp_path, capsys):
     for argv in (["solve", str(BUS), "--policy", ""], ["dta", "F p", "--dot", ""],
                  ["export", str(BUS), "--drn", ""]):
@@ -107,6 +117,56 @@ def test_cli_refuses_a_dangling_symlink_without_force(tmp_path, capsys):
     assert not (tmp_path / "target.csv").exists()
     assert main(["solve", str(BUS), "--policy", str(link), "--force", "-q"]) == 0
     assert (tmp_path / "target.csv").read_text().startswith("game_state,")
+
+
+@pytest.fixture(scope="module")
+def solved():
+    from mitld_lp import GridWorld, Model, synthesize
+
+    world = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)]})
+    return synthesize(Model.from_game(world, "D[pmf(0.2, 0.3, 0.4)] b & F(b & F[0,0] A)"))
+
+
+def _writers(result):
+    """Every file writer of the package: (name, suffix, write(path, overwrite))."""
+    from mitld_lp.solvers.export import write_drn, write_lp
+
+    mdp = result.mdp
+    return [
+        ("policy csv", ".csv", lambda p, o: result.write_policy(p, overwrite=o)),
+        ("policy json", ".json", lambda p, o: files.write_policy(result, p, overwrite=o)),
+        ("drn", ".drn", lambda p, o: write_drn(mdp, mdp.target, p, overwrite=o)),
+        ("lp", ".lp", lambda p, o: write_lp(mdp, mdp.target, p, overwrite=o,
+                                            everywhere=True)),
+        ("mps", ".mps", lambda p, o: write_lp(mdp, mdp.target, p, overwrite=o,
+                                              everywhere=True)),
+        ("dot", ".dot", lambda p, o: files.write_text(p, result.dta.to_dot(), overwrite=o)),
+        ("controller", ".ctl", lambda p, o: result.controller.save(p, overwrite=o)),
+    ]
+
+
+def test_every_writer_follows_the_rule_and_replaces_in_one_step(tmp_path, solved):
+    for name, suffix, write in _writers(solved):
+        folder = tmp_path / name.replace(" ", "_")
+        folder.mkdir()
+        out = folder / f"out{suffix}"
+        out.write_bytes(OLD)
+        with pytest.raises(FileExistsError):
+            write(out, False)
+        assert out.read_bytes() == OLD, name
+        dangling = folder / f"dangling{suffix}"
+        dangling.symlink_to(folder / f"nowhere{suffix}")
+        with pytest.raises(FileExistsError, match="dangling symlink"):
+            write(dangling, False)
+        assert not (folder / f"nowhere{suffix}").exists(), name
+        with pytest.raises(files.OutputPathError, match="the path is empty"):
+            write("", True)
+        inode = out.stat().st_ino
+        write(out, True)
+        # a new file renamed over the old one (another inode), complete, nothing left over
+        assert out.stat().st_ino != inode and out.read_bytes() != OLD, name
+        assert out.stat().st_size > 0, name
+        assert _listing(folder) == [f"dangling{suffix}", f"out{suffix}"], name
 
 
 # --------------------------------------------------------------------------- the writing
