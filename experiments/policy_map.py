@@ -82,11 +82,11 @@ def _set(s: frozenset[str]) -> str:
     return "{" + ", ".join(sorted(s)) + "}" if s else "{}"
 
 
-def trajectory(result: mitld_lp.SynthesisResult, game, seed: int) -> list[str]:
+def trajectory(result: mitld_lp.SynthesisResult, seed: int) -> list[str]:
     """One sampled run in the paper's notation: ((x, y), events, pending), (location,
     clocks) and the action taken."""
     dta = result.dta
-    status, steps = rollout(game, result.sta, result.controller, np.random.default_rng(seed),
+    status, steps = rollout(result.model, result.controller, np.random.default_rng(seed),
                             max_steps=100, record=True)
     lines = []
     used: set[int] = set()
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> list[list[Panel]]:
     print(f"A sampled run of {case} (seed {args.seed}), in the paper's notation (Sec. V):")
     print("  t  ((cell, events of the last step, pending events), (automaton state, "
           "deadline clocks))  action")
-    print("\n".join(trajectory(result, model.game, args.seed)))
+    print("\n".join(trajectory(result, args.seed)))
     print()
     sm = plt.cm.ScalarMappable(norm=norm, cmap="viridis")
     fig.colorbar(sm, ax=axes, shrink=0.8, label="probability of success from the cell "

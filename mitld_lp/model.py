@@ -140,10 +140,10 @@ class Model:
                 "game", f"must implement the Game protocol (initial, proposition_names, "
                 f"actions, successors, propositions), got {type(game).__name__}"
             )
-        if not isinstance(epsilon, int | float) or isinstance(epsilon, bool) or not (
-            0.0 < epsilon < 1.0
-        ):
-            raise ctx.error("epsilon", f"must be a number in (0, 1), got {epsilon!r}")
+        try:
+            epsilon = defaults.check_epsilon(epsilon)
+        except ValueError as err:
+            raise ctx.error("epsilon", str(err)) from None
         named: dict[str, FirstOccurrence] = {}
         for dname, law in (distributions or {}).items():
             if not isinstance(law, FirstOccurrence):
@@ -596,9 +596,11 @@ def _load(text: str, source: str, path: Path | None) -> Model:
     spec_text = ctx.string(doc["spec"], "spec")
     epsilon = DEFAULT_EPSILON
     if "epsilon" in doc:
-        epsilon = ctx.number(doc["epsilon"], "epsilon")
-        if not 0.0 < epsilon < 1.0:
-            raise ctx.error("epsilon", f"must be in (0, 1), got {_show(doc['epsilon'])}")
+        ctx.number(doc["epsilon"], "epsilon")
+        try:
+            epsilon = defaults.check_epsilon(doc["epsilon"])
+        except ValueError as err:
+            raise ctx.error("epsilon", str(err)) from None
 
     # {name} in the spec stands for a value under [constants] (mitld_lp.constants)
     spec_text = substitute(spec_text, ctx.table(doc.get("constants", {}), "constants"),

@@ -143,7 +143,6 @@ def policy_map(result: SynthesisResult, situation: Situation = Situation()) -> P
     :class:`PlotError` for a world that is no grid or a situation naming unknown
     events or automaton states."""
     from mitld_lp.product import ProductState
-    from mitld_lp.solvers.iteration import evaluate_policy
 
     game = _grid(result)
     mdp, dta, events = result.mdp, result.dta, result.sta.events
@@ -164,7 +163,7 @@ def policy_map(result: SynthesisResult, situation: Situation = Situation()) -> P
     if not 0 <= q0 < dta.n_states:
         raise PlotError(f"situation: automaton: no state {q0} (the automaton has "
                         f"{dta.n_states}: 0..{dta.n_states - 1})")
-    values = evaluate_policy(mdp, mdp.target, result.policy)
+    policy, values = result.lower_model.policy, result.lower_model.policy_values
     index: dict[tuple[Hashable, int, frozenset[str]], tuple[int, int]] = {}
     for i, s in enumerate(mdp.states):
         if isinstance(s, ProductState) and (situation.clock is None or
@@ -188,7 +187,7 @@ def policy_map(result: SynthesisResult, situation: Situation = Situation()) -> P
             cells[cell] = CellView(kind, q if kind == UNREACHED else entered)
             continue
         i = hit[1]
-        action = mdp.action_name(int(result.policy[i])) if result.policy[i] >= 0 else None
+        action = mdp.action_name(int(policy[i])) if policy[i] >= 0 else None
         cells[cell] = CellView(OPEN, q, action, float(values[i]))
     return PolicyMap(situation, pending, cells)
 

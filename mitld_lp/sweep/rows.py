@@ -93,12 +93,13 @@ class Settings:
     ``[solve]`` table (all but ``epsilon``) or ``solve``'s options set."""
 
     method: str = "lp"
-    solver: str = "CLARABEL"
+    solver: str = defaults.SOLVER
     backend: str = "auto"
     clock_reduction: bool = True
     decompose: bool = True
     time_limit: float | None = None
     max_states: int = defaults.MAX_STATES
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES
     max_memory: int | None = None
     epsilon: float | None = None
 
@@ -111,7 +112,9 @@ class Settings:
         return {"epsilon": self.epsilon, "method": self.method, "solver": self.solver,
                 "backend": self.backend, "clock_reduction": self.clock_reduction,
                 "decompose": self.decompose, "time_limit": self.time_limit,
-                "max_states": self.max_states, "max_memory": self.max_memory}
+                "max_states": self.max_states,
+                "max_automaton_states": self.max_automaton_states,
+                "max_memory": self.max_memory}
 
 
 def classify(exc: BaseException) -> tuple[str, str]:
