@@ -42,6 +42,7 @@ from mitld_lp.arrays import unique
 from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.task import check_alphabet
 
 __all__ = [
     "Absorbing",
@@ -513,20 +514,6 @@ def estimate_size(game: Game[Any], sta: STA) -> SizeEstimate:
     return SizeEstimate(game_states, max(automaton, 0), situations)
 
 
-def _check_alphabet(game: Game[Any], sta: STA) -> None:
-    props = frozenset(game.proposition_names)
-    unknown = sorted(set(sta.dta.atoms) - props - sta.events)
-    if unknown:
-        raise ValueError(
-            f"proposition {unknown[0]!r} of the formula is neither a proposition of the game "
-            f"({', '.join(sorted(props)) or 'none'}) nor an event "
-            f"({', '.join(sorted(sta.events)) or 'none'})"
-        )
-    lawless = sorted(frozenset(getattr(game, "event_names", ())) - sta.events)
-    if lawless:
-        raise ValueError(f"the game reacts to event {lawless[0]!r}, which has no distribution")
-
-
 def product(
     game: Game[Any],
     sta: STA,
@@ -554,12 +541,12 @@ def product(
     :class:`ProductTooLarge` naming the numbers.
     ``progress``: show a progress bar (None: only on a terminal, for large builds).
 
-    Raises ``ValueError`` when the automaton reads a proposition that is neither a
-    proposition of the game nor an event of the STA (it could never be true, so the
-    answer would be a silent 0), or when the game reacts to events (``event_names``)
-    the STA gives no distribution.
+    Raises :class:`mitld_lp.task.BindError` (a ``ValueError``) when the task does not fit
+    the game (:func:`mitld_lp.task.check_alphabet`: a proposition the automaton reads
+    that is neither a proposition of the game nor an event of the STA, an event with a
+    proposition's name, an event the game reacts to without a law).
     """
-    _check_alphabet(game, sta)
+    check_alphabet(game, sta.dta.atoms, sta.events)
     budget = _Budget(
         max_states,
         default_max_memory() if max_memory is None else max_memory,

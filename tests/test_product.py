@@ -682,5 +682,6 @@ def test_product_refuses_a_proposition_it_could_never_see():
 
     world = GridWorld.make(2, 1, start=(0, 0), regions={"A": [(1, 0)]})
     sta = make_sta(to_dta(parse("F[0,3] a")), {}, 0.01)
-    with pytest.raises(ValueError, match=r"proposition 'a' of the formula is neither .*\(A\)"):
+    with pytest.raises(ValueError, match=r"proposition 'a' is neither a proposition nor an event "
+                       r"\(propositions: A; events: none\)"):
         product(world, sta)
