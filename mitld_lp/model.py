@@ -50,7 +50,7 @@ from typing import Any
 
 from mitld_lp import defaults
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_table
-from mitld_lp.game import Game
+from mitld_lp.game import Game, GameError, world_members
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse
@@ -127,16 +127,17 @@ class Model:
         ``spec``: a formula or its text; ``distributions`` binds the names used in
         ``D[name]`` to laws (inline literals such as ``D[geometric(0.3)]`` need none).
         Raises :class:`ModelError` (source ``<spec>``) when the spec does not parse or is
-        unsupported, a name is unbound or bound but unused, a proposition of the spec is
-        neither a proposition of the game nor an event, a proposition of the game has an
-        event's name, or the game declares events (``event_names``) the spec gives no
-        distribution."""
+        unsupported, the game's members are missing or wrong
+        (:func:`mitld_lp.game.world_members`), or the task does not fit the game
+        (:func:`mitld_lp.task.bind`: a name is unbound or bound but unused, a
+        proposition of the spec is neither a proposition of the game nor an event, a
+        proposition of the game has an event's name, or the game reacts to events
+        (``event_names``) the spec gives no distribution)."""
         ctx = _Context("<spec>")
-        if not isinstance(game, Game):
-            raise ctx.error(
-                "game", f"must implement the Game protocol (initial, proposition_names, "
-                f"actions, successors, propositions), got {type(game).__name__}"
-            )
+        try:
+            world_members(game)
+        except GameError as exc:
+            raise ctx.error("game", str(exc)) from exc
         if not isinstance(epsilon, int | float) or isinstance(epsilon, bool) or not (
             0.0 < epsilon < 1.0
         ):

@@ -40,7 +40,7 @@ from tqdm.auto import tqdm
 from mitld_lp import defaults
 from mitld_lp.arrays import unique
 from mitld_lp.automata.sta import STA, TRUNCATED
-from mitld_lp.game import Game
+from mitld_lp.game import Game, WorldMembers, world_members
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.task import check_alphabet
 
@@ -259,9 +259,9 @@ class _Layers:
       ``A`` atoms, coded as the next state or an absorbing code.
     """
 
-    def __init__(self, game: Game[Any], sta: STA) -> None:
+    def __init__(self, game: Game[Any], members: WorldMembers, sta: STA) -> None:
         self.game, self.sta, self.dta = game, sta, sta.dta
-        self.ignores_events = getattr(game, "ignores_events", False) is True
+        self.ignores_events = members.ignores_events
         self.atoms = {a: i for i, a in enumerate(self.dta.atoms)}
         self.events = sorted(sta.events)
         if len(self.atoms) > 62 or len(self.events) > 30:
@@ -475,7 +475,7 @@ class SizeEstimate:
     state is a game state, a non-absorbing automaton state and a situation (the pending
     events and a clock value at most ``cap(pending)``), plus the three absorbing states.
     ``game_states`` is None (and so is ``states``) for a game that does not say how many
-    states it has (an ``n_states`` attribute).
+    states it has (:attr:`mitld_lp.game.WorldMembers.n_states`).
     """
 
     game_states: int | None
@@ -509,9 +509,7 @@ def estimate_size(game: Game[Any], sta: STA) -> SizeEstimate:
     automaton = dta.n_states - (dta.accepting is not None) - (dta.rejecting is not None)
     caps = sorted(c.cap for c in sta.clocks.values())
     situations = 1 + sum((1 << i) * (c + 1) for i, c in enumerate(caps))
-    n = getattr(game, "n_states", None)
-    game_states = n if isinstance(n, int) and not isinstance(n, bool) and n >= 0 else None
-    return SizeEstimate(game_states, max(automaton, 0), situations)
+    return SizeEstimate(world_members(game).n_states, max(automaton, 0), situations)
 
 
 def product(
@@ -546,14 +544,14 @@ def product(
     that is neither a proposition of the game nor an event of the STA, an event with a
     proposition's name, an event the game reacts to without a law).
     """
-    check_alphabet(game, sta.dta.atoms, sta.events)
+    members = check_alphabet(game, sta.dta.atoms, sta.events)
     budget = _Budget(
         max_states,
         default_max_memory() if max_memory is None else max_memory,
         estimate_size(game, sta),
     )
     log.info("product: %s", budget.estimate)
-    f = _Layers(game, sta)
+    f = _Layers(game, members, sta)
     states = _Found(f, budget)
     g0 = f.game_state(game.initial)
     f.flush()

@@ -27,7 +27,7 @@ from types import MappingProxyType
 from typing import Any
 
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec
-from mitld_lp.game import Game
+from mitld_lp.game import Game, WorldMembers, world_members
 from mitld_lp.logic.fragment import FragmentReport
 from mitld_lp.logic.syntax import DistLiteral, DistRef, Formula, atoms
 from mitld_lp.text import printable
@@ -120,11 +120,14 @@ def check_alphabet(
     events: Iterable[str],
     *,
     noun: str = "proposition",
-) -> None:
+) -> WorldMembers:
     """Check that a task reading ``propositions`` (events included) with laws for
-    ``events`` fits ``world`` (see the module docstring).  ``noun`` is what the world
-    calls its propositions in messages (a grid's are regions, a PRISM file's labels).
-    Raises :class:`BindError`."""
+    ``events`` fits ``world`` (see the module docstring), and return the world's
+    declared members.  ``noun`` is what the world calls its propositions in messages (a
+    grid's are regions, a PRISM file's labels).  Raises :class:`BindError`, or
+    :class:`mitld_lp.game.GameError` when the world's members are missing or wrong
+    (:func:`mitld_lp.game.world_members`)."""
+    members = world_members(world)
     events = frozenset(events)
     props = frozenset(world.proposition_names)
     clashes = sorted(events & props)
@@ -142,13 +145,14 @@ def check_alphabet(
             f"proposition {unknown[0]!r} is neither a {noun} nor an event "
             f"({noun}s: {known}; events: {evs})",
         )
-    lawless = sorted(frozenset(getattr(world, "event_names", frozenset())) - events)
+    lawless = sorted(members.event_names - events)
     if lawless:
         raise BindError(
             ("spec",),
             f"the game reacts to event {lawless[0]!r} but the spec gives it no distribution "
             f"(add D[mu] {lawless[0]} to the spec)",
         )
+    return members
 
 
 def bind(
