@@ -38,7 +38,7 @@ import scipy.sparse as sp
 from tqdm.auto import tqdm
 
 from mitld_lp import defaults
-from mitld_lp.arrays import unique
+from mitld_lp.arrays import Grow, Index, Memo, concatenate, merge, ranks, unique
 from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game, WorldMembers, world_members
 from mitld_lp.mdp import ABSORB, MDP
@@ -100,150 +100,6 @@ _BATCH_ENTRIES = 1 << 18  # transitions (before merging) per batch of expanded s
 _MAX_INDEX = 2**31 - 1  # states: the matrix's column indices are int32
 
 
-class _Grow:
-    """A numpy array that grows by doubling (amortised O(1) appends of blocks)."""
-
-    def __init__(self, dtype: Any) -> None:
-        self.data = np.empty(64, dtype=dtype)
-        self.size = 0
-
-    def extend(self, values: Any) -> None:
-        values = np.asarray(values, dtype=self.data.dtype)
-        need = self.size + values.size
-        if need > self.data.size:
-            bigger = np.empty(max(need, 2 * self.data.size), dtype=self.data.dtype)
-            bigger[: self.size] = self.data[: self.size]
-            self.data = bigger
-        self.data[self.size : need] = values
-        self.size = need
-
-    @property
-    def view(self) -> np.ndarray:
-        return self.data[: self.size]
-
-
-_MISSING = np.iinfo(np.int64).min
-_DENSE_LIMIT = 1 << 22  # keys below this are memoised in a plain array (32 MB at most)
-
-
-class _Memo:
-    """A memo ``key -> int`` for arrays of non-negative keys, filled on demand.
-
-    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  While the
-    keys stay below ``_DENSE_LIMIT`` the memo is a plain array (one gather per call);
-    beyond, a hash index (:class:`_Index`), so that sparse keys cost no more memory than
-    the entries stored.
-    """
-
-    def __init__(self, compute: Any, space: int = 0) -> None:
-        self.compute = compute
-        self.table: np.ndarray | None = None
-        self.index: _Index | None = None
-        if space <= _DENSE_LIMIT:
-            self.table = np.full(max(space, min(64, _DENSE_LIMIT)), _MISSING)
-        else:
-            self.index = _Index()
-
-    def _grow(self, top: int) -> None:
-        assert self.table is not None
-        if top <= _DENSE_LIMIT:
-            bigger = np.full(max(top, 2 * self.table.size), _MISSING)
-            bigger[: self.table.size] = self.table
-            self.table = bigger
-        else:  # too sparse for an array: move the entries to a hash index
-            known = np.flatnonzero(self.table != _MISSING)
-            self.index = _Index()
-            self.index.insert(known, self.table[known])
-            self.table = None
-
-    def __call__(self, keys: np.ndarray) -> np.ndarray:
-        if self.table is not None:
-            top = int(keys.max(initial=-1)) + 1
-            if top > self.table.size:
-                self._grow(top)
-        if self.table is not None:
-            vals = self.table[keys]
-            miss = vals == _MISSING
-            if miss.any():
-                new = unique(keys[miss])
-                self.table[new] = self.compute(new)
-                vals[miss] = self.table[keys[miss]]
-            return vals
-        assert self.index is not None
-        uniq, inverse = np.unique(keys, return_inverse=True)
-        vals = self.index.find(uniq, absent=_MISSING)
-        miss = vals == _MISSING
-        if miss.any():
-            vals[miss] = self.compute(uniq[miss])
-            self.index.insert(uniq[miss], vals[miss])
-        return vals[inverse]
-
-
-class _Index:
-    """Product state ids by key: open addressing over arrays, probed for a whole batch
-    of keys at once (linear probing, load at most 1/2, Fibonacci hashing)."""
-
-    _EMPTY = -(1 << 62)
-
-    def __init__(self) -> None:
-        self.bits = 16
-        self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
-        self.ids = np.zeros(1 << self.bits, dtype=np.int32)
-        self.size = 0
-
-    def _home(self, keys: np.ndarray) -> np.ndarray:
-        h = np.ascontiguousarray(keys, dtype=np.int64).view(np.uint64) * np.uint64(
-            0x9E3779B97F4A7C15
-        )
-        return (h >> np.uint64(64 - self.bits)).view(np.int64)
-
-    def find(self, keys: np.ndarray, absent: int = -1) -> np.ndarray:
-        """The id of each key, ``absent`` where absent."""
-        at = self._home(keys)
-        found = self.keys[at]
-        hit = found == keys
-        out = np.where(hit, self.ids[at], np.int64(absent)).astype(np.int64)
-        todo = np.flatnonzero(~hit & (found != self._EMPTY))
-        mask = (1 << self.bits) - 1
-        at = at[todo]
-        while todo.size:
-            at = (at + 1) & mask
-            found = self.keys[at]
-            hit = found == keys[todo]
-            out[todo[hit]] = self.ids[at[hit]]
-            go_on = ~hit & (found != self._EMPTY)
-            todo, at = todo[go_on], at[go_on]
-        return out
-
-    def insert(self, keys: np.ndarray, ids: np.ndarray) -> None:
-        """Add distinct keys that are not in the index yet."""
-        if 2 * (self.size + keys.size) > (1 << self.bits):
-            old_keys, old_ids = self.keys[self.keys != self._EMPTY], self.ids[
-                self.keys != self._EMPTY]
-            while 2 * (self.size + keys.size) > (1 << self.bits):
-                self.bits += 1
-            self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
-            self.ids = np.zeros(1 << self.bits, dtype=np.int32)
-            self.size = 0
-            self.insert(old_keys, old_ids)
-        pos = self._home(keys)
-        todo = np.arange(keys.size)
-        mask = (1 << self.bits) - 1
-        while todo.size:
-            at = pos[todo]
-            free = self.keys[at] == self._EMPTY
-            # one winner per free slot; the others probe on
-            _, first = np.unique(at[free], return_index=True)
-            win = todo[free][first]
-            self.keys[pos[win]] = keys[win]
-            self.ids[pos[win]] = ids[win]
-            placed = np.zeros(keys.size, dtype=bool)
-            placed[win] = True
-            todo = todo[~placed[todo]]
-            pos[todo] = (pos[todo] + 1) & mask
-        self.size += keys.size
-
-
 class _Layers:
     """The factors of the product, each expanded once and kept as integer arrays.
 
@@ -276,17 +132,17 @@ class _Layers:
         self.gid: dict[Hashable, int] = {}
         self.game_states: list[Hashable] = []
         self._new_props: list[int] = []
-        self.props = _Grow(np.int64)
-        self.act_start = _Grow(np.int64)
-        self.act_count = _Grow(np.int64)  # -1: actions not asked yet
+        self.props = Grow(np.int64)
+        self.act_start = Grow(np.int64)
+        self.act_count = Grow(np.int64)  # -1: actions not asked yet
         self.slot_action: list[str] = []  # per action slot: its name, game state, action id
         self.slot_owner: list[int] = []
-        self.slot_aid = _Grow(np.int64)
+        self.slot_aid = Grow(np.int64)
         self.action_id: dict[str, int] = {}
-        self._rows = _Memo(self._new_rows)
+        self._rows = Memo(self._new_rows)
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
-        self.row_start, self.row_len = _Grow(np.int64), _Grow(np.int64)
-        self.row_succ, self.row_prob = _Grow(np.int64), _Grow(np.float64)
+        self.row_start, self.row_len = Grow(np.int64), Grow(np.int64)
+        self.row_succ, self.row_prob = Grow(np.int64), Grow(np.float64)
         self.row_start.extend([0])
         self.row_len.extend([1])
         self.row_succ.extend([-1])
@@ -294,16 +150,16 @@ class _Layers:
         # events
         self.sid: dict[tuple[frozenset[str], int], int] = {}
         self.situations: list[tuple[frozenset[str], int]] = []
-        self.out_start, self.out_count = _Grow(np.int64), _Grow(np.int64)
+        self.out_start, self.out_count = Grow(np.int64), Grow(np.int64)
         self.out_occ, self.out_prob, self.out_next = (
-            _Grow(np.int64), _Grow(np.float64), _Grow(np.int64)
+            Grow(np.int64), Grow(np.float64), Grow(np.int64)
         )
         # product keys: ((g * n_q) + q) * n_sit + sid; n_sit bounds the situations
         self.n_q = self.dta.n_states
         caps = max((c.cap for c in sta.clocks.values()), default=0)
         self.n_sit = n_occ * (caps + 1)
         # automaton
-        self._delta = _Memo(self._new_steps, self.dta.n_states << len(self.atoms))
+        self._delta = Memo(self._new_steps, self.dta.n_states << len(self.atoms))
 
     def key(self, g: Any, q: Any, sid: Any) -> Any:
         """The product key of ``(g, q, sid)`` (arrays or ints)."""
@@ -560,7 +416,7 @@ def product(
     initial = int(states.intern(q0 if q0[0] < 0 else f.key(g0, q0, sid0))[0])
 
     chunks: list[tuple[np.ndarray, ...]] = []  # per batch: cols, vals, row lengths, actions
-    state_choices = _Grow(np.int64)
+    state_choices = Grow(np.int64)
     bar = None if progress is False else tqdm(
         total=None, unit=" states", disable=None if progress is None else not progress,
         leave=False, mininterval=0.5, desc="product",
@@ -631,8 +487,8 @@ class _Found:
 
     def __init__(self, f: _Layers, budget: _Budget) -> None:
         self.f, self.budget = f, budget
-        self.index = _Index()
-        self.keys = _Grow(np.int64)  # per state: its key (>= 0) or absorbing code (< 0)
+        self.index = Index()
+        self.keys = Grow(np.int64)  # per state: its key (>= 0) or absorbing code (< 0)
 
     def intern(self, keys: np.ndarray) -> np.ndarray:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
@@ -665,12 +521,12 @@ def _expand(
     # choices: one per (state, action slot)
     n_act = f.act_count.view[g]
     c_state = np.repeat(np.arange(g.size), n_act)
-    c_slot = f.act_start.view[g][c_state] + _ranks(n_act)
+    c_slot = f.act_start.view[g][c_state] + ranks(n_act)
     # pairs: one per (choice, event outcome)
     c_sid = sid[c_state]
     n_out = f.out_count.view[c_sid]
     p_choice = np.repeat(np.arange(c_slot.size), n_out)
-    p_out = f.out_start.view[c_sid][p_choice] + _ranks(n_out)
+    p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
     p_occ = f.out_occ.view[p_out]
     p_next = f.out_next.view[p_out]
     p_row = np.zeros(p_choice.size, dtype=np.int64)  # row 0: crossed a truncation point
@@ -679,7 +535,7 @@ def _expand(
     # entries: one per (pair, game successor)
     n_succ = f.row_len.view[p_row]
     e_pair = np.repeat(np.arange(p_choice.size), n_succ)
-    e_at = f.row_start.view[p_row][e_pair] + _ranks(n_succ)
+    e_at = f.row_start.view[p_row][e_pair] + ranks(n_succ)
     vals = f.out_prob.view[p_out][e_pair] * f.row_prob.view[e_at]
     e_key = np.full(e_pair.size, _CODE[Absorbing.TRUNCATED], dtype=np.int64)
     moving = alive[e_pair]
@@ -690,7 +546,7 @@ def _expand(
     e_key[moving] = np.where(q2 < 0, q2, f.key(g2, q2, p_next[e_pm]))
     cols = intern(e_key).astype(np.int32)
     e_choice = p_choice[e_pair]
-    cols, vals, row_len = _merge(e_choice, cols, vals, c_slot.size)
+    cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
     actions = f.slot_aid.view[c_slot]
     choices = np.ones(keys.size, dtype=np.int64)
     choices[ordinary] = n_act
@@ -712,52 +568,6 @@ def _expand(
     )
 
 
-def _ranks(counts: np.ndarray) -> np.ndarray:
-    """``0 .. counts[i] - 1`` for each ``i``, concatenated."""
-    total = int(counts.sum())
-    starts = np.cumsum(counts) - counts
-    return np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
-
-
-def _merge(
-    choice: np.ndarray, cols: np.ndarray, vals: np.ndarray, n_choices: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sum the entries of one choice that go to one state, in the order they come (so the
-    sums are bit for bit those of a loop), keeping each row's first-occurrence order.
-    Returns the merged cols, vals and the length of each choice's row."""
-    key = choice * (int(cols.max(initial=0)) + 1) + cols
-    order = np.argsort(key, kind="stable")
-    sk = key[order]
-    start = np.ones(sk.size, dtype=bool)
-    start[1:] = sk[1:] != sk[:-1]
-    if start.all():
-        return cols, vals, np.bincount(choice, minlength=n_choices)
-    group = np.cumsum(start) - 1
-    heads = np.flatnonzero(start)
-    rank = np.arange(sk.size) - heads[group]
-    sv = vals[order]
-    total = np.zeros(heads.size)
-    for r in range(int(rank.max()) + 1):  # a handful of rounds: summation order kept
-        at = rank == r
-        total[group[at]] += sv[at]
-    first = order[heads]  # each group's first entry in stream order
-    keep = np.argsort(first, kind="stable")
-    kept = first[keep]
-    return cols[kept], total[keep], np.bincount(choice[kept], minlength=n_choices)
-
-
-def _concatenate(parts: list[Any], dtype: Any) -> np.ndarray:
-    """``np.concatenate(parts)``, freeing each part once copied (peak: the result plus
-    one part, not twice the result)."""
-    out = np.empty(sum(p.size for p in parts), dtype=dtype)
-    at = 0
-    for i, part in enumerate(parts):
-        out[at : at + part.size] = part
-        at += part.size
-        parts[i] = None
-    return out
-
-
 def _assemble(
     f: _Layers,
     chunks: list[tuple[np.ndarray, ...]],
@@ -768,10 +578,10 @@ def _assemble(
     """The MDP from the batches' rows, with a record per state."""
     columns = [list(c) for c in zip(*chunks, strict=True)]
     chunks.clear()
-    cols = _concatenate(columns[0], np.int32)
-    vals = _concatenate(columns[1], np.float64)
-    row_len = _concatenate(columns[2], np.int64)
-    actions = _concatenate(columns[3], np.int32)
+    cols = concatenate(columns[0], np.int32)
+    vals = concatenate(columns[1], np.float64)
+    row_len = concatenate(columns[2], np.int64)
+    actions = concatenate(columns[3], np.int32)
     indptr = np.zeros(row_len.size + 1, dtype=np.int64)
     np.cumsum(row_len, out=indptr[1:])
     del row_len

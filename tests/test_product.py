@@ -666,7 +666,7 @@ def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, mo
     """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("mitld_lp.product"), "_DENSE_LIMIT", 8)
+    monkeypatch.setattr(importlib.import_module("mitld_lp.arrays"), "DENSE_LIMIT", 8)
     rng = np.random.default_rng(seed)
     text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
     game = _random_game(rng, sorted(dists))
