@@ -685,3 +685,17 @@ def test_product_refuses_a_proposition_it_could_never_see():
     with pytest.raises(ValueError, match=r"proposition 'a' is neither a proposition nor an event "
                        r"\(propositions: A; events: none\)"):
         product(world, sta)
+
+
+def test_key_codec_numbers_every_triple_once_and_decodes_ints_and_arrays():
+    from mitld_lp.product.states import KeyCodec
+
+    codec = KeyCodec(n_q=5, n_sit=7)
+    triples = [(g, q, s) for g in range(4) for q in range(5) for s in range(7)]
+    keys = [codec.key(*t) for t in triples]
+    assert sorted(keys) == list(range(4 * 5 * 7))  # a bijection onto 0 .. 139
+    assert [codec.unkey(k) for k in keys] == triples
+    g, q, s = (np.array(c) for c in zip(*triples, strict=True))
+    back = codec.unkey(codec.key(g, q, s))
+    assert all(np.array_equal(a, b) for a, b in zip(back, (g, q, s), strict=True))
+    assert codec.fits((1 << 62) // 35) and not codec.fits((1 << 62) // 35 + 1)
