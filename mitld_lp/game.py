@@ -31,9 +31,10 @@ from collections.abc import Hashable, Iterable, Mapping
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, fields
 from itertools import combinations
-from numbers import Real
 from types import MappingProxyType
 from typing import Any, Generic, Protocol, TypeVar, cast, runtime_checkable
+
+from mitld_lp.successors import PROBABILITY_TOLERANCE, is_real, place
 
 __all__ = [
     "Game",
@@ -47,9 +48,6 @@ __all__ = [
 ]
 
 S = TypeVar("S", bound=Hashable)
-
-PROBABILITY_TOLERANCE = 1e-9
-"""How far a successor distribution's total may be from 1."""
 
 Distribution = tuple[tuple[Any, float], ...]
 _NO_PROPS: frozenset[str] = frozenset()
@@ -203,10 +201,6 @@ def world_members(world: object) -> WorldMembers:
 # --------------------------------------------------------------------------- validation
 
 
-def _is_real(x: object) -> bool:
-    return isinstance(x, Real) and not isinstance(x, bool)
-
-
 def _freeze_distribution(
     value: Mapping[Any, float] | Iterable[tuple[Any, float]], where: str
 ) -> Distribution:
@@ -221,7 +215,7 @@ def _freeze_distribution(
             nxt, p = item
         except (TypeError, ValueError):
             raise GameError(f"{where}: expected (next_state, probability), got {item!r}") from None
-        if not _is_real(p) or not math.isfinite(float(p)):
+        if not is_real(p) or not math.isfinite(float(p)):
             raise GameError(f"{where}: probability of {nxt!r} must be a number, got {p!r}")
         p = float(p)
         if p < 0.0 or p > 1.0:
@@ -467,7 +461,7 @@ def _check_distribution(dist: Any, where: str, tolerance: float) -> tuple[Any, .
         if not isinstance(item, tuple) or len(item) != 2:
             raise GameError(f"{where}: expected (next_state, probability), got {item!r}")
         nxt, p = item
-        if not _is_real(p) or not (0.0 < float(p) <= 1.0):
+        if not is_real(p) or not (0.0 < float(p) <= 1.0):
             raise GameError(f"{where}: probability of {nxt!r} must be in (0, 1], got {p!r}")
         try:
             fresh = nxt not in nexts
@@ -522,9 +516,7 @@ def check_game(
         for action in acts:
             choices += 1
             for ev in event_sets:
-                where = f"state {state!r}, action {action!r}"
-                if ev:
-                    where += f", events {sorted(ev)}"
+                where = place(state, action, ev)
                 nexts = _check_distribution(game.successors(state, action, ev), where, tolerance)
                 transitions += len(nexts)
                 for nxt in nexts:

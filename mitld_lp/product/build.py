@@ -95,6 +95,7 @@ def product(
         batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
     if bar is not None:
         bar.close()
+    f.check_rows()  # the rows not checked yet: every distribution read is checked
     keys = states.keys.view.copy()
     del states  # the index is not needed any more: free it before the matrix is assembled
     return _assemble(f, chunks, state_choices.view, keys, initial)

@@ -15,11 +15,14 @@ import numpy as np
 
 from mitld_lp.arrays import Grow, Memo, unique
 from mitld_lp.automata.sta import STA, TRUNCATED
-from mitld_lp.game import Game, WorldMembers
+from mitld_lp.game import Game, GameError, WorldMembers
 from mitld_lp.product.budget import ProductTooLarge
 from mitld_lp.product.states import CODE, Absorbing, KeyCodec
+from mitld_lp.successors import as_probabilities, distribution_fault, distribution_faults, place
 
 __all__ = ["Layers"]
+
+_CHECK_ROWS = 4096  # successor rows checked together (numpy's cost per call amortised)
 
 
 class Layers:
@@ -28,8 +31,9 @@ class Layers:
     * the game: states interned as ``g``; per ``g`` its action slots (``act_start[g]``
       ``.. + act_count[g]`` index ``slot_action``) and its propositions as a bit mask
       over the automaton's atoms; per (slot, event outcome) one successor row
-      (``row_start``/``row_len`` into ``row_succ``/``row_prob``), row 0 standing for
-      "the outcome crossed a truncation point";
+      (``row_start``/``row_len`` into ``row_succ``/``row_prob``; ``row_asked``: the
+      memo key it was first asked for), row 0 standing for "the outcome crossed a
+      truncation point"; every row is checked to be a distribution (:meth:`check_rows`);
     * the events: situations ``(pending, clock)`` interned as ``sid``; per ``sid`` its
       outcomes (``out_*``: the events that happened as a bit mask over the STA's events,
       the probability, the next situation or -1 when truncated);
@@ -65,10 +69,13 @@ class Layers:
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
         self.row_start, self.row_len = Grow(np.int64), Grow(np.int64)
         self.row_succ, self.row_prob = Grow(np.int64), Grow(np.float64)
+        self.row_asked = Grow(np.int64)
         self.row_start.extend([0])
         self.row_len.extend([1])
         self.row_succ.extend([-1])
         self.row_prob.extend([1.0])
+        self.row_asked.extend([-1])
+        self.rows_checked = 1
         # events
         self.sid: dict[tuple[frozenset[str], int], int] = {}
         self.situations: list[tuple[frozenset[str], int]] = []
@@ -139,17 +146,57 @@ class Layers:
                 aids.append(self.action_id.setdefault(a, len(self.action_id)))
         self.slot_aid.extend(aids)
 
-    def _add_rows(self, rows: list[tuple[tuple[Any, float], ...]]) -> None:
-        """Store successor rows (pairs ``(game state, probability)``) as rows of ``g``."""
-        lengths = [len(r) for r in rows]
-        starts = np.cumsum([0, *lengths[:-1]], dtype=np.int64) + self.row_succ.size
+    def _add_rows(self, rows: list[tuple[tuple[Any, float], ...]], asked: list[int]) -> None:
+        """Store successor rows (pairs ``(game state, probability)``) as rows of ``g``;
+        ``asked``: the memo key of each.  Answers that are not pairs of a hashable state
+        and a number are refused here; the probabilities are checked in
+        :meth:`check_rows`.  Raises :class:`mitld_lp.game.GameError`."""
+        gid = self.gid
+        try:
+            lengths = np.array([len(r) for r in rows], dtype=np.int64)
+            probs = as_probabilities([p for r in rows for _, p in r])
+            succ = [gid[s] if s in gid else self.game_state(s) for r in rows for s, _ in r]
+        except (TypeError, ValueError):  # not pairs of a hashable state and a number?
+            for row, key in zip(rows, asked, strict=True):
+                why = distribution_fault(row)
+                if why:
+                    raise GameError(f"{self._place(key)}: {why}") from None
+            raise  # no: an error of the world's own (its propositions)
+        starts = np.cumsum(lengths) - lengths + self.row_succ.size
         self.row_start.extend(starts)
         self.row_len.extend(lengths)
-        gid = self.gid
-        self.row_succ.extend(
-            [gid[s] if s in gid else self.game_state(s) for r in rows for s, _ in r]
-        )
-        self.row_prob.extend([p for r in rows for _, p in r])
+        self.row_succ.extend(succ)
+        self.row_prob.extend(probs)
+        self.row_asked.extend(asked)
+        if self.row_len.size - self.rows_checked >= _CHECK_ROWS:
+            self.check_rows()
+
+    def check_rows(self) -> None:
+        """Check that the rows stored since the last call are distributions, all at once
+        (:func:`mitld_lp.game.distribution_faults`); the build calls it once more at
+        its end.  Raises :class:`mitld_lp.game.GameError` naming the state, action and
+        events of the first row that is not."""
+        first = self.rows_checked
+        if first == self.row_len.size:
+            return
+        lengths = self.row_len.view[first:]
+        probs = self.row_prob.view[int(self.row_start.view[first]) :]
+        faults = distribution_faults(lengths, probs)
+        if faults.size:
+            i = first + int(faults[0])
+            start = int(self.row_start.view[i])
+            at = slice(start, start + int(self.row_len.view[i]))
+            nexts = [self.game_states[g] for g in self.row_succ.view[at].tolist()]
+            row = tuple(zip(nexts, self.row_prob.view[at].tolist(), strict=True))
+            why = distribution_fault(row) or "not a distribution"
+            raise GameError(f"{self._place(int(self.row_asked.view[i]))}: {why}")
+        self.rows_checked = self.row_len.size
+
+    def _place(self, key: int) -> str:
+        """The state, action and events of a row's memo key, for messages."""
+        slot, o = (key, 0) if self.ignores_events else divmod(key, self.n_occ)
+        events = () if self.ignores_events else self.occ_set(o)
+        return place(self.game_states[self.slot_owner[slot]], self.slot_action[slot], events)
 
     def rows(self, slots: np.ndarray, occ: np.ndarray) -> np.ndarray:
         """The successor row of each (action slot, event outcome)."""
@@ -162,6 +209,7 @@ class Layers:
         answers with the very same object for several of them, as a precomputed table
         does, gets one row for them."""
         new_rows: list[tuple[tuple[Any, float], ...]] = []
+        asked: list[int] = []
         same = self.row_by_object
         base = self.row_start.size
         owner, names, occ_set = self.slot_owner, self.slot_action, self.occ_set
@@ -173,9 +221,10 @@ class Layers:
             if hit is None or hit[0] is not succ:
                 hit = same[id(succ)] = (succ, base + len(new_rows))
                 new_rows.append(succ)
+                asked.append(key)
             out[i] = hit[1]
         if new_rows:
-            self._add_rows(new_rows)
+            self._add_rows(new_rows, asked)
         return out
 
     # ---------------------------------------------------------------- events
