@@ -150,7 +150,7 @@ def test_action_names_unlabelled_commands_and_events(tmp_path: Path) -> None:
     assert set(game.actions((1,))) == {"go", "robot_cmd2", "robot_cmd3"}
     # the event is never offered to the robot
     assert game.actions((3,)) == ("robot_cmd2",)
-    assert game.events == {"bus"}
+    assert game.event_names == {"bus"}
     check = check_game(game, events=["bus"])
     assert check.states == 4 and check.actions == {"go", "robot_cmd2", "robot_cmd3"}
     # robot first, then the event's command where enabled: from x=2, go reaches x=3

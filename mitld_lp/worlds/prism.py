@@ -106,14 +106,19 @@ class PrismGame:
         return self.robot.proposition_names
 
     @property
-    def events(self) -> frozenset[str]:
-        """The event actions whose commands change the world."""
+    def event_names(self) -> frozenset[str]:
+        """The events the world reacts to: the event actions whose commands change it."""
         return frozenset(self.effects)
 
     @property
     def states(self) -> tuple[State, ...]:
         """Every state Storm built."""
         return self.robot.states
+
+    @property
+    def n_states(self) -> int:
+        """The number of states Storm built."""
+        return self.robot.n_states
 
     def valuation(self, state: State) -> dict[str, Hashable]:
         """The state's variables by name, e.g. ``{"x": 2, "open": False}``."""
