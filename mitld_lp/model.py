@@ -561,7 +561,7 @@ def _load(text: str, source: str, path: Path | None) -> Model:
                 f"{_type_name(value)} {_show(value)}",
             )
         try:
-            named[dname] = from_table(value, dpath)
+            named[dname] = from_table(value, dpath, None if path is None else path.parent)
         except DistributionError as exc:
             message = str(exc)
             raise ModelError(
