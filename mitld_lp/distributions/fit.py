@@ -46,7 +46,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -315,7 +315,7 @@ def kaplan_meier(obs: Observations) -> npt.NDArray[np.float64]:
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(at_risk > 0, 1.0 - ev / at_risk, 1.0)
     factor[0] = 1.0
-    return np.cumprod(factor)
+    return np.cumprod(factor).astype(np.float64)
 
 
 def _fit_empirical(obs: Observations, conf: float, label: str) -> Fit:
@@ -545,7 +545,7 @@ def _region_boundary(
                 return lo
         for _ in range(200):
             if math.isfinite(f_hi):
-                return float(optimize.brentq(excess, lo, hi, args=(u,), xtol=1e-12))
+                return float(cast(float, optimize.brentq(excess, lo, hi, args=(u,), xtol=1e-12)))
             mid = (lo + hi) / 2.0
             f_mid = excess(mid, u)
             if f_mid < 0:
