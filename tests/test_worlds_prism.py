@@ -216,7 +216,7 @@ def test_errors_name_the_file_and_the_problem(tmp_path: Path) -> None:
     with pytest.raises(WorldError, match="JANI files are not supported"):
         load_prism(write(tmp_path, "{}", "m.jani"))
     bad = write(tmp_path, "mdp\nmodule m\n x : [0..2] init 0\n [] x<1 -> (x'=x+1);\nendmodule\n")
-    with pytest.raises(WorldError, match=r"PRISM parse error: Parsing error at 4:2: +expecting"):
+    with pytest.raises(WorldError, match=r"m\.prism:4:2: PRISM parse error: expecting \";\" at"):
         load_prism(bad)
     src = write(tmp_path, LABELLED)
     with pytest.raises(WorldError, match=r"constants N have no value"):

@@ -53,7 +53,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import re
 from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +60,7 @@ from typing import Any
 
 from mitld_lp.game import ExplicitGame
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_program import storm_error, storm_quiet
 
 __all__ = ["PrismGame", "load_prism", "DEADLOCK_ACTION"]
 
@@ -163,12 +163,6 @@ def _stormpy() -> Any:
     return stormpy
 
 
-def _storm_message(exc: BaseException) -> str:
-    """Storm's message without its C++ exception class (``WrongFormatException: ...``)."""
-    text = str(exc).strip()
-    return re.sub(r"^[A-Za-z]+Exception:\s*", "", text).replace("\n\t", "\n    ")
-
-
 def _check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
     declared = {c.name: c for c in program.constants}
     for name, value in constants.items():
@@ -232,9 +226,10 @@ def load_prism(
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     stormpy = _stormpy()
     try:
-        program = stormpy.parse_prism_program(where)
+        with storm_quiet():
+            program = stormpy.parse_prism_program(where)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise WorldError(f"{where}: PRISM parse error: {_storm_message(exc)}") from None
+        raise storm_error(exc, where) from None
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
@@ -263,9 +258,10 @@ def load_prism(
 
     if given:
         try:
-            program, _ = stormpy.instantiate_constants(program, given)
+            with storm_quiet():
+                program, _ = stormpy.instantiate_constants(program, given)
         except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            raise WorldError(f"{where}: constants: {_storm_message(exc)}") from None
+            raise storm_error(exc, where) from None
     options = stormpy.BuilderOptions()
     # Every label, always: a label left out of the build would be false in every state.
     options.set_build_all_labels()
@@ -273,10 +269,10 @@ def load_prism(
     options.set_build_choice_origins()
     options.set_build_state_valuations()
     try:
-        model = stormpy.build_model(program, options=options)
+        with storm_quiet():
+            model = stormpy.build_model(program, options=options)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        message = _storm_message(exc)
-        raise WorldError(f"{where}: Storm could not build the model: {message}") from None
+        raise storm_error(exc, where) from None
     built = set(model.labeling.get_labels())
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
@@ -288,7 +284,7 @@ def _valuations(model: Any) -> tuple[tuple[str, ...], list[State]]:
     valuations = model.state_valuations
     if model.nr_states == 0:
         return (), []
-    order = tuple(json.loads(str(valuations.to_json(0))))
+    order = tuple(json.loads(str(valuations.to_json(0))) or ())  # null: no variables
     by_name = {v.name: v for v in valuations.get_all_variables()}
     columns = []
     for name in order:
@@ -300,6 +296,8 @@ def _valuations(model: Any) -> tuple[tuple[str, ...], list[State]]:
             columns.append(valuations.get_int64_values(var))
         else:  # pragma: no cover - PRISM state variables are booleans and integers
             columns.append([valuations.get_value(s, var) for s in range(model.nr_states)])
+    if not columns:  # no variables: every state is the empty valuation (one state)
+        return order, [()] * model.nr_states
     return order, [tuple(row) for row in zip(*columns, strict=True)]
 
 
