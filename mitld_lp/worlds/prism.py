@@ -41,10 +41,19 @@ interleaving of moves and events reaches is built), and a PRISM user writes an e
 they would write any other action.  An event's command must be unique where enabled
 (one choice per state): an event is the environment's, not a choice.
 
-Errors are :class:`mitld_lp.worlds.WorldError` naming the file and what is wrong: a
-missing file, PRISM's own parse message with its line and column, an undefined
+Checks.  Storm builds with its exploration checks on, so an update that leaves a
+variable's range or probabilities that do not sum to 1 in some state stop the build
+(without them Storm stores values modulo the range); before it builds, every variable
+must have a non-empty range holding its initial value and every command with constant
+probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
+
+Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
+wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
+PRISM's parse message as ``FILE:LINE:COLUMN`` with a short excerpt, the module and
+command of an update out of range or of probabilities that do not sum to 1, an undefined
 constant, a label or event action the file does not define, a model that is not an
-MDP, a state where only event commands are enabled.  Without stormpy the error says
+MDP, a state where only event commands are enabled.  Storm's own log never reaches
+standard output.  Without stormpy the error says
 ``pip install -e '.[prism]'``.
 """
 
@@ -60,7 +69,7 @@ from typing import Any
 
 from mitld_lp.game import ExplicitGame
 from mitld_lp.worlds import WorldError
-from mitld_lp.worlds.prism_program import storm_error, storm_quiet
+from mitld_lp.worlds.prism_program import check_program, storm_error, storm_quiet
 
 __all__ = ["PrismGame", "load_prism", "DEADLOCK_ACTION"]
 
@@ -163,6 +172,23 @@ def _stormpy() -> Any:
     return stormpy
 
 
+def _check_utf8(path: Path, where: str) -> None:
+    """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise WorldError(
+            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+            "a PRISM file is UTF-8"
+        ) from None
+
+
 def _check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
     declared = {c.name: c for c in program.constants}
     for name, value in constants.items():
@@ -224,6 +250,7 @@ def load_prism(
         raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
+    _check_utf8(p, where)
     stormpy = _stormpy()
     try:
         with storm_quiet():
@@ -262,7 +289,16 @@ def load_prism(
                 program, _ = stormpy.instantiate_constants(program, given)
         except (RuntimeError, stormpy.exceptions.StormError) as exc:
             raise storm_error(exc, where) from None
+    try:
+        with storm_quiet():
+            plain = program.substitute_constants()
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None
+    check_program(plain, where)
     options = stormpy.BuilderOptions()
+    # Refuse updates out of a variable's range and probabilities that do not sum to 1
+    # where they depend on the state (without the checks Storm wraps values around).
+    options.set_exploration_checks(True)
     # Every label, always: a label left out of the build would be false in every state.
     options.set_build_all_labels()
     options.set_build_choice_labels()
@@ -272,7 +308,7 @@ def load_prism(
         with storm_quiet():
             model = stormpy.build_model(program, options=options)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
+        raise storm_error(exc, where, program) from None
     built = set(model.labeling.get_labels())
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
