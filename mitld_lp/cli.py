@@ -303,7 +303,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import build_product
 
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     built = build_product(
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
@@ -369,7 +369,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
                          "use --backend cvxpy (or auto) for other solvers")
     policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
                                                (".csv", ".json"))
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     r = synthesize(
         model,
         epsilon=args.epsilon,
@@ -465,7 +465,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.simulate import simulate
     from mitld_lp.synthesis import synthesize
 
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    time_limit=_time_left(args))

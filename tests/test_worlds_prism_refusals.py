@@ -17,7 +17,7 @@ import pytest
 
 from mitld_lp.model import ModelError, load_model
 from mitld_lp.worlds import WorldError
-from mitld_lp.worlds.prism import load_prism
+from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
 pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("stormpy") is None, reason="needs stormpy: pip install -e '.[prism]'"
@@ -205,3 +205,67 @@ def test_cli_refuses_with_one_line_and_exit_2(tmp_path: Path, body: str | bytes,
     line = one_line(run)
     assert line.startswith(f"mitld-lp: error: {tmp_path / 'm.toml'}: prism: {tmp_path / 'm.prism'}")
     assert re.search(expected, line), line
+
+
+# --------------------------------------------------------------------------- budgets
+
+
+# 2000 x 2000 = 4,000,000 states, all reachable: building it takes minutes and gigabytes,
+# so these tests finish only because the budget is checked before Storm runs.
+HUGE = """mdp
+module m
+  x : [0..1999] init 0;
+  y : [0..1999] init 0;
+  [a] x<1999 -> (x'=x+1);
+  [b] y<1999 -> (y'=y+1);
+  [c] x=1999 -> (x'=0);
+endmodule
+label "goal" = x=1999 & y=1999;
+"""
+
+
+def test_state_budget_is_checked_before_storm_builds(tmp_path: Path) -> None:
+    with pytest.raises(PrismTooLarge, match=r"m\.prism: at most 4,000,000 states from the "
+                       r"variables' ranges \(x: 2,000 x y: 2,000\), more than max_states = "
+                       r"1,000; Storm was not run: raise max_states \(--max-states\)"):
+        load_prism(prism(tmp_path, HUGE), max_states=1000)
+    # the default budget (5,000,000 states) passes this bound; the memory budget does not
+    with pytest.raises(PrismTooLarge, match=r"would need about 4\.1 GB \(1024 bytes per "
+                       r"state\), more than max_memory = 1\.1 GB; .*--max-memory"):
+        load_prism(prism(tmp_path, HUGE), max_memory=1 << 30)
+
+
+def test_budget_stop_is_a_world_error_and_a_product_budget(tmp_path: Path) -> None:
+    from mitld_lp.product import ProductTooLarge
+
+    with pytest.raises(WorldError):
+        load_prism(prism(tmp_path, HUGE), max_states=1000)
+    with pytest.raises(ProductTooLarge):
+        load_prism(prism(tmp_path, HUGE), max_states=1000)
+
+
+def test_bound_is_the_product_of_every_variables_range(tmp_path: Path) -> None:
+    # global g: 3 values, module a: x 4 values and b bool, module c (renamed a): y 4, d bool
+    text = ("mdp\nglobal g : [0..2] init 0;\nmodule a\n  x : [0..3] init 0;\n"
+            "  b : bool init false;\n  [] x<3 -> (x'=x+1);\n  [] x=3 -> (b'=!b)&(x'=0);\n"
+            "  [] true -> (g'=min(g+1,2));\n"
+            "endmodule\nmodule c = a [x=y, b=d] endmodule\n")
+    src = prism(tmp_path, text)
+    bound = 3 * 4 * 2 * 4 * 2
+    game = load_prism(src, max_states=bound)  # the bound itself is within the budget
+    assert len(game.states) == bound  # every valuation is reachable: the bound is tight
+    with pytest.raises(PrismTooLarge, match=rf"at most {bound} states .*max_states = {bound - 1}"):
+        load_prism(src, max_states=bound - 1)
+
+
+def test_model_file_passes_the_budget_to_the_prism_world(tmp_path: Path) -> None:
+    m = model_file(tmp_path, prism(tmp_path, HUGE))
+    with pytest.raises(PrismTooLarge, match=rf"^{re.escape(str(m))}: prism: .*m\.prism: at most"):
+        load_model(m, max_states=1000)
+
+
+def test_cli_budget_stop_is_one_line_exit_3(tmp_path: Path) -> None:
+    m = model_file(tmp_path, prism(tmp_path, HUGE))
+    line = one_line(cli("solve", str(m), "--max-states", "1000", "--max-memory", "1G"), code=3)
+    assert line.startswith(f"mitld-lp: stopped: {m}: prism: ")
+    assert "more than max_states = 1,000" in line and "--max-states" in line

@@ -26,7 +26,7 @@ import re
 import sys
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
@@ -180,23 +180,34 @@ _SYNC_SUM = re.compile(
 _NEGATIVE = re.compile(r"negative probabilities in '(.*)'")
 
 
-def _find(program: Any, want: Any) -> str | None:
-    """The first command ``want(command)`` accepts, as :func:`command_label` names it."""
-    for module in program.modules:
-        for k, command in enumerate(module.commands, start=1):
-            if want(command):
-                return command_label(module, k, command)
-    return None
+def _finder(program: Any, shown: Any) -> Callable[[Callable[[Any], bool]], str]:
+    """``find(want)``: ``"<command label>: "`` of the first command of ``program`` that
+    ``want`` accepts, quoted from ``shown`` (the same commands as the user wrote them);
+    ``""`` if there is none."""
+
+    def find(want: Callable[[Any], bool]) -> str:
+        for i, module in enumerate(program.modules):
+            for k, command in enumerate(module.commands, start=1):
+                if want(command):
+                    original = shown.modules[i]
+                    return f"{command_label(original, k, original.commands[k - 1])}: "
+        return ""
+
+    return find
 
 
-def storm_error(exc: BaseException, where: str, program: Any = None) -> WorldError:
+def storm_error(
+    exc: BaseException, where: str, program: Any = None, shown: Any = None
+) -> WorldError:
     """Storm's exception ``exc`` as a :class:`WorldError` of one line.
 
     A parse error becomes ``FILE:LINE:COLUMN: PRISM parse error: expecting X at "..."``
     (an excerpt of the file at the position); ``Error in FILE, line N: ...`` becomes
     ``FILE:N: ...``; an update out of a variable's range and probabilities that do not
     sum to 1 name the module and command of ``program`` (the program Storm was
-    building).  Anything else is Storm's first line, cut to a reasonable length."""
+    building), quoted from ``shown`` (default ``program``): the same commands before
+    commands without an action were given one.  Anything else is Storm's first line,
+    cut to a reasonable length."""
     text = _CLASS.sub("", str(exc).strip())
     m = _PARSE.search(text)
     if m:
@@ -209,19 +220,18 @@ def storm_error(exc: BaseException, where: str, program: Any = None) -> WorldErr
     if m:
         return WorldError(f"{where}:{m[1]}: {excerpt(m[2], 200)}")
     if program is not None:
+        find = _finder(program, program if shown is None else shown)
         m = _OUT_OF_RANGE.match(first)
         if m:
             update, value, name = m[1], m[2], m[3]
-            found = _find(program, lambda c: any(str(u) == update for u in c.updates))
-            at = f"{found}: " if found else ""
+            at = find(lambda c: any(str(u) == update for u in c.updates))
             return WorldError(
                 f"{where}: {at}an update gives {name!r} the value {value}, outside its "
                 f"range{_range(program, name)}"
             )
         m = _SUM.match(first)
         if m:
-            found = _find(program, lambda c, text=m[1]: str(c) == text)
-            at = f"{found}: " if found else ""
+            at = find(lambda c, text=m[1]: str(c) == text)
             return WorldError(f"{where}: {at}probabilities sum to {m[2]} in a state, not 1")
         m = _SYNC_SUM.match(first)
         if m:
@@ -231,11 +241,9 @@ def storm_error(exc: BaseException, where: str, program: Any = None) -> WorldErr
             )
         m = _NEGATIVE.search(first)
         if m:
-            found = _find(
-                program,
-                lambda c, text=m[1]: any(str(u.probability_expression) == text for u in c.updates),
+            at = find(
+                lambda c, text=m[1]: any(str(u.probability_expression) == text for u in c.updates)
             )
-            at = f"{found}: " if found else ""
             return WorldError(f"{where}: {at}a probability is negative in a state")
     return WorldError(f"{where}: Storm: {excerpt(first, 200)}")
 
