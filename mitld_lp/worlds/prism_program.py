@@ -265,7 +265,9 @@ def _flush_c_streams() -> None:
 def storm_quiet() -> Iterator[None]:
     """Run the block with file descriptor 1 (standard output) sent to a temporary file;
     afterwards the lines Storm wrote there go to the debug log.  Storm's logger prints
-    its errors and warnings on stdout, which must carry nothing but the answer."""
+    its errors and warnings on stdout, which must carry nothing but the answer.  The
+    descriptor is the process's: what another thread prints to stdout meanwhile is
+    logged the same way (the command line prints nothing while a world loads)."""
     with _QUIET:
         with contextlib.suppress(ValueError, OSError):
             sys.stdout.flush()
