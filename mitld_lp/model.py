@@ -212,10 +212,13 @@ def _type_name(value: Any) -> str:
 
 
 class _Context:
-    """Error reporting for one source."""
+    """Error reporting for one source, and the budgets a world built while loading gets."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(
+        self, source: str, max_states: int = defaults.MAX_STATES, max_memory: int | None = None
+    ) -> None:
         self.source = source
+        self.max_states, self.max_memory = max_states, max_memory
 
     def error(self, path: str, message: str) -> ModelError:
         where = f"{path}: " if path else ""
@@ -353,7 +356,7 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     (the labels that become propositions, default all) and ``events`` (PRISM actions
     that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
     from mitld_lp.worlds import WorldError
-    from mitld_lp.worlds.prism import load_prism
+    from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
     table = ctx.table(doc["prism"], "prism")
     ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
@@ -376,7 +379,10 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
 
     labels, events = names("labels"), names("events")
     try:
-        return load_prism(path, constants=constants, labels=labels, events=events or ())
+        return load_prism(path, constants=constants, labels=labels, events=events or (),
+                          max_states=ctx.max_states, max_memory=ctx.max_memory)
+    except PrismTooLarge as exc:  # a budget stop, not a mistake in the file
+        raise PrismTooLarge(f"{ctx.source}: prism: {exc}") from exc
     except WorldError as exc:
         raise ctx.error("prism", str(exc)) from exc
 
@@ -511,8 +517,10 @@ def _bind(
         raise ctx.error(_bind_path(exc, table), exc.reason) from exc
 
 
-def _load(text: str, source: str, path: Path | None) -> Model:
-    ctx = _Context(source)
+def _load(
+    text: str, source: str, path: Path | None, max_states: int, max_memory: int | None
+) -> Model:
+    ctx = _Context(source, max_states, max_memory)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -584,15 +592,28 @@ def _load(text: str, source: str, path: Path | None) -> Model:
     )
 
 
-def loads_model(text: str, source: str = "<string>") -> Model:
+def loads_model(
+    text: str,
+    source: str = "<string>",
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
     """Load a model from TOML ``text``; ``source`` prefixes every error message.
+    ``max_states`` and ``max_memory`` bound a world built while loading (a ``[prism]``
+    program, checked before Storm runs), as they bound the product later.
 
     Raises :class:`ModelError`.  The returned model's ``source`` is ``None``."""
-    return _load(text, source, None)
+    return _load(text, source, None, max_states, max_memory)
 
 
-def load_model(path: str | os.PathLike[str]) -> Model:
-    """Load and validate the model file at ``path``.
+def load_model(
+    path: str | os.PathLike[str],
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
+    """Load and validate the model file at ``path`` (budgets as for :func:`loads_model`).
 
     Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
     file cannot be read or is not UTF-8."""
@@ -604,4 +625,4 @@ def load_model(path: str | os.PathLike[str]) -> Model:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
-    return _load(text, source, p)
+    return _load(text, source, p, max_states, max_memory)
