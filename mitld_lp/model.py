@@ -510,12 +510,6 @@ def _bind_spec(
     key path); every other proposition of the spec must be a proposition of the game;
     events the game declares (an optional ``event_names`` attribute) must each get a law.
     """
-    if not report.co_safe:  # the automaton has them; the product and solvers do not yet
-        raise ctx.error(
-            "spec",
-            f"a {report.fragment} specification: safety/obligation tasks are not yet "
-            "solvable (only co-safe ones are: no unbounded G, R or W in negation normal form)",
-        )
     bound = _bind_events(report.events, named, ctx)
     used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
     for dname in named:

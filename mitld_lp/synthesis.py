@@ -28,13 +28,14 @@ import logging
 import os
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from mitld_lp import defaults
+from mitld_lp.acceptance import Acceptance, acceptance
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
@@ -45,6 +46,7 @@ from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.product import product
+from mitld_lp.solvers.accepting import escapes, keep_inside
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import Quotient, reduce
@@ -55,7 +57,8 @@ __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolu
 
 log = logging.getLogger(__name__)
 
-_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
+_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
+                   "accepting_component")
 
 Method = Literal["lp", "vi"]
 
@@ -125,6 +128,7 @@ class SynthesisResult:
     sta: STA
     mdp: MDP
     model: Model
+    acceptance: Acceptance  # the target the bracket is about (its goal, its components)
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -171,13 +175,17 @@ class SynthesisResult:
         happened, sorted), ``clock`` (steps counted for the pending events, capped where
         their hazards stop changing), ``action`` (the policy's action), ``value`` (the
         probability that the policy satisfies the task from there, truncation counted as
-        failure: exact, from a linear solve on the policy's Markov chain).
+        failure: exact, from a linear solve on the policy's Markov chain),
+        ``accepting_component`` (whether the state lies in an accepting end component of
+        a task with a safety part: the task is then kept by playing ``action`` forever,
+        an action that never leaves the component; always false for a co-safe task).
         """
         from mitld_lp.product import ProductState
         from mitld_lp.solvers.iteration import evaluate_policy
 
         mdp, policy = self.mdp, self.policy
-        values = evaluate_policy(mdp, mdp.target, policy)
+        goal = self.acceptance.goal
+        values = evaluate_policy(mdp, goal, policy)
         obligations = self.dta.states
         rows: list[dict[str, Any]] = []
         for i, state in enumerate(mdp.states):
@@ -190,6 +198,7 @@ class SynthesisResult:
                 "clock": state.clock,
                 "action": mdp.action_name(int(policy[i])),
                 "value": float(values[i]),
+                "accepting_component": bool(goal[i]),
             })
         return rows
 
@@ -327,6 +336,23 @@ def _solve_model(
                          tuple(checks))
 
 
+def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
+    """For a task with a safety part: ``solution`` whose policy plays, in the accepting
+    end components, an internal choice (never one that can leave them), with the check
+    that no state of them escapes under the policy.  Unchanged for a co-safe task."""
+    if accept.components is None:
+        return solution
+    policy = keep_inside(accept.components, solution.policy)
+    leaving = np.flatnonzero(escapes(mdp, policy, accept.goal))
+    check = Check(
+        "policy stays in the accepting end components",
+        leaving.size == 0,
+        f"{int(accept.goal.sum())} states in {accept.components.mecs.n_mecs} components; "
+        + (f"states {leaving[:10].tolist()} can leave" if leaving.size else "none can leave"),
+    )
+    return replace(solution, policy=policy, checks=(*solution.checks, check))
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Built:
     """What :func:`build_product` returns: the automaton, the STA and the product MDP,
@@ -414,11 +440,13 @@ def synthesize(
     common = dict(method=method, solver=solver, backend=backend, tol=tol,
                   certify_tol=certify_tol, progress=progress, decompose=decompose,
                   deadline=float("inf") if time_limit is None else t0 + time_limit)
-    low = _solve_model(mdp, mdp.target, "lower", **common)  # type: ignore[arg-type]
+    accept = acceptance(mdp, dta)
+    low = _solve_model(mdp, accept.goal, "lower", **common)  # type: ignore[arg-type]
     if mdp.truncated.any():
-        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
+        high = _solve_model(mdp, accept.goal | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
     else:
         high = low
+    low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
 
     statuses = {low.status, high.status}
@@ -447,6 +475,7 @@ def synthesize(
         sta=sta,
         mdp=mdp,
         model=model,
+        acceptance=accept,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
