@@ -460,7 +460,8 @@ def _args_simulate(p: argparse.ArgumentParser) -> None:
                    help=f"number of rollouts (1..{_MAX_RUNS:,})")
     p.add_argument("--seed", type=_bounded_int(0), default=0, help="a non-negative seed")
     p.add_argument("--max-steps", type=_bounded_int(1, _MAX_STEPS), default=500,
-                   help="steps after which a run still undecided counts as undecided")
+                   help="steps each run is watched (a run keeping a safety part unviolated "
+                        "that long counts as a success; undecided ones as failures)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -485,13 +486,18 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "consistent": sim.ci_low <= r.upper and sim.ci_high >= r.lower,
         "beyond_model": sim.beyond_model,
         "undecided": sim.undecided,
+        "horizon": sim.horizon,
+        "kept": sim.kept,
         "seed": sim.seed,
     }
     if args.json:
         _out(_dumps(out))
     else:
         _out(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
-              f"  ({sim.successes}/{sim.runs}, seed {sim.seed})")
+              f"  ({sim.successes}/{sim.runs}, seed {sim.seed}, horizon {sim.horizon} steps)")
+        if sim.kept:
+            _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
+                 "(counted as successes)")
         _out(f"certified:    [{r.lower:.7f}, {r.upper:.7f}]  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:

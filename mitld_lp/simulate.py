@@ -50,6 +50,8 @@ class SimulationResult:
     beyond_model: int  # runs in which an event came later than its truncation point
     undecided: int  # runs stopped at max_steps without a verdict (counted as failures)
     seed: int | None
+    horizon: int = 0  # max_steps: the steps each run was watched for a violation
+    kept: int = 0  # successes that were keeping a safety part, unviolated, at the horizon
 
 
 def _wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -121,6 +123,12 @@ def simulate(
 ) -> SimulationResult:
     """Estimate the probability that ``controller`` satisfies the task.
 
+    Each run is watched for ``max_steps`` steps (the result's ``horizon``).  A task with
+    a safety part (``G !h``) is never decided by a finite run: a run that reaches the
+    horizon in a persistent automaton state (the safety part kept, nothing left to do)
+    counts as a success (``kept``); a violation after the horizon is not seen, so choose
+    the horizon well beyond the steps the task needs.
+
     Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
     ``1..MAX_RUNS``, ``max_steps`` not an integer ``>= 0``, or ``seed`` negative.
     """
@@ -129,15 +137,19 @@ def simulate(
     if seed is not None:
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
-    ok = beyond = undecided = 0
+    ok = beyond = undecided = kept = 0
+    persistent = sta.dta.persistent
     for _ in tqdm(range(runs), disable=(not progress) if progress is not None else None,
                   leave=False, desc="simulate"):
         status, _ = rollout(game, sta, controller, rng, max_steps=max_steps)
-        ok += status is RunStatus.ACCEPTED
-        undecided += status is RunStatus.RUNNING
+        keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent
+        ok += status is RunStatus.ACCEPTED or keeping
+        kept += keeping
+        undecided += status is RunStatus.RUNNING and not keeping
         beyond += controller.beyond_model
     lo, hi = _wilson(ok, runs)
-    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed)
+    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed,
+                            max_steps, kept)
 
 
 def _check_count(name: str, value: object, low: int, high: int | None) -> None:
