@@ -438,8 +438,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     drn = args.drn and _output_path(args.drn, args.force, "--drn", (".drn",))
     if lp and drn and lp.resolve() == drn.resolve():
         raise UsageError(f"--lp and --drn name the same file {args.lp}")
-    mdp = _build(args)[1].mdp
-    target = mdp.target | mdp.truncated if args.upper else mdp.target
+    from mitld_lp.acceptance import acceptance
+
+    built = _build(args)[1]
+    mdp = built.mdp
+    goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
+    target = goal | mdp.truncated if args.upper else goal
     if lp:
         _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _out(f"wrote {lp}")

@@ -250,3 +250,33 @@ def test_grid_against_storm_ltl(slip: float, tmp_path) -> None:
         assert r.certified, spec
         assert r.lower == pytest.approx(theirs, abs=1e-6), (spec, theirs)
         assert r.upper == pytest.approx(theirs, abs=1e-6), (spec, theirs)
+
+
+_CROSS_FILE = """name = "cross"
+spec = "G !hazard & F[0,3] goal"
+[grid]
+size = [3, 3]
+start = [0, 1]
+slip = 0.1
+obstacles = [[0, 0], [0, 2], [2, 0], [2, 2]]
+[regions]
+goal = [[1, 1]]
+hazard = [[1, 0], [1, 2]]
+"""
+
+
+def test_exported_drn_gives_storm_the_value(tmp_path) -> None:
+    """``export --drn`` labels the accepting end components ``accept``: Storm's
+    ``Pmax=? [F "accept"]`` on the file is the closed form (1 - 0.2^3) * 0.8."""
+    stormpy = pytest.importorskip("stormpy")
+    from mitld_lp.cli import main
+
+    model = tmp_path / "cross.toml"
+    model.write_text(_CROSS_FILE)
+    drn = tmp_path / "cross.drn"
+    assert main(["export", str(model), "--drn", str(drn), "-q"]) == 0
+    parsed = stormpy.build_model_from_drn(str(drn))
+    prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
+    result = stormpy.model_checking(parsed, prop, only_initial_states=True)
+    theirs = float(result.get_value_vector()[parsed.initial_states[0]])
+    assert theirs == pytest.approx((1 - 0.2**3) * 0.8, abs=1e-6)
