@@ -54,7 +54,14 @@ from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse, parse_source
-from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.logic.syntax import (
+    DistLiteral,
+    DistRef,
+    DistSpec,
+    Formula,
+    atoms,
+    is_proposition_name,
+)
 from mitld_lp.text import printable
 
 __all__ = [
@@ -118,6 +125,7 @@ class Model:
         spec: Formula | str,
         *,
         distributions: Mapping[str, FirstOccurrence] | None = None,
+        events: Mapping[str, FirstOccurrence] | None = None,
         epsilon: float = DEFAULT_EPSILON,
         name: str = "model",
     ) -> Model:
@@ -129,7 +137,9 @@ class Model:
         unsupported, a name is unbound or bound but unused, a proposition of the spec is
         neither a proposition of the game nor an event, a proposition of the game has an
         event's name, or the game declares events (``event_names``) the spec gives no
-        distribution."""
+        distribution.  ``events`` gives events of the world their laws without the spec
+        asking that they happen (a model file's ``[events]``): the spec may use them as
+        propositions, ``G (door -> F[0,3] stop)``."""
         ctx = _Context("<spec>")
         if not isinstance(game, Game):
             raise ctx.error(
@@ -140,15 +150,8 @@ class Model:
             0.0 < epsilon < 1.0
         ):
             raise ctx.error("epsilon", f"must be a number in (0, 1), got {epsilon!r}")
-        named: dict[str, FirstOccurrence] = {}
-        for dname, law in (distributions or {}).items():
-            if not isinstance(law, FirstOccurrence):
-                raise ctx.error(
-                    _join("distributions", str(dname)),
-                    f"must be a distribution (mitld_lp.distributions), got "
-                    f"{type(law).__name__} {law!r}",
-                )
-            named[str(dname)] = law
+        named = _law_objects(distributions or {}, "distributions", ctx)
+        declared = _law_objects(events or {}, "events", ctx)
         if isinstance(spec, str):
             formula, report = _parse_spec(spec, ctx)
             text = spec
@@ -160,7 +163,7 @@ class Model:
                 raise ctx.error("spec", str(exc)) from exc
         else:
             raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
-        bound = _bind_spec(formula, report, named, game, "proposition", None, ctx)
+        bound = _bind_spec(formula, report, named, game, "proposition", None, ctx, declared)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
                    distributions=MappingProxyType(bound), source=None)
 
@@ -399,7 +402,7 @@ _GAME_KINDS: tuple[_GameKind, ...] = (
 )
 
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "events"}
 
 
 # --------------------------------------------------------------------------- the spec
@@ -502,8 +505,13 @@ def _bind_spec(
     noun: str,
     table: str | None,
     ctx: _Context,
+    declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> dict[str, FirstOccurrence]:
     """Bind each event of ``spec`` to its law and check the spec against the game.
+
+    ``declared``: the events the world declares with their laws (``[events]``), which
+    the spec may read as propositions without demanding that they happen; an event may
+    not get a law both there and from a ``D[mu]`` of the spec.
 
     Every name in ``named`` must be used by the spec; no proposition of the game may
     have an event's name (``table``: where the game's propositions are declared, for the
@@ -511,6 +519,18 @@ def _bind_spec(
     events the game declares (an optional ``event_names`` attribute) must each get a law.
     """
     bound = _bind_events(report.events, named, ctx)
+    for event, law in (declared or {}).items():
+        if not is_proposition_name(event):
+            raise ctx.error(_join("events", event),
+                            f"{event!r} is not a name a formula can read (letters, digits, _; "
+                            "not a reserved word)")
+        if event in bound:
+            raise ctx.error(
+                _join("events", event),
+                f"event {event!r} also gets a law from the spec's D[...] {event}; give it "
+                "one law, in one place",
+            )
+        bound[event] = law
     used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
     for dname in named:
         if dname not in used:
@@ -522,6 +542,9 @@ def _bind_spec(
     events = frozenset(bound)
     props = frozenset(game.proposition_names)
     clashes = sorted(events & props)
+    if clashes and clashes[0] in (declared or {}):
+        raise ctx.error(_join("events", clashes[0]),
+                        f"event {clashes[0]!r} has the name of a {noun} of the world")
     if clashes:
         where = _join(table, clashes[0]) if table else "spec"
         raise ctx.error(
@@ -546,6 +569,44 @@ def _bind_spec(
             f"(add D[mu] {lawless[0]} to the spec)",
         )
     return bound
+
+
+def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, FirstOccurrence]:
+    """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
+    an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
+    laws: dict[str, FirstOccurrence] = {}
+    for name, value in ctx.table(doc.get(key, {}), key).items():
+        path = _join(key, name)
+        if not isinstance(value, dict):
+            raise ctx.error(
+                path,
+                f"must be an inline table such as {{ geometric = 0.5 }}, got "
+                f"{_type_name(value)} {_show(value)}",
+            )
+        try:
+            laws[name] = from_table(value, path)
+        except DistributionError as exc:
+            message = str(exc)
+            raise ModelError(
+                f"{ctx.source}: {message}" if path in message
+                else f"{ctx.source}: {path}: {message}"
+            ) from exc
+    return laws
+
+
+def _law_objects(laws: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, FirstOccurrence]:
+    """``Model.from_game``'s ``distributions`` or ``events``: each value a law object
+    (errors at ``key.name``)."""
+    out: dict[str, FirstOccurrence] = {}
+    for name, law in laws.items():
+        if not isinstance(law, FirstOccurrence):
+            raise ctx.error(
+                _join(key, str(name)),
+                f"must be a distribution (mitld_lp.distributions), got "
+                f"{type(law).__name__} {law!r}",
+            )
+        out[str(name)] = law
+    return out
 
 
 def _load(text: str, source: str, path: Path | None) -> Model:
@@ -581,26 +642,12 @@ def _load(text: str, source: str, path: Path | None) -> Model:
 
     game = kind.build(doc, ctx)
 
-    named: dict[str, FirstOccurrence] = {}
-    for dname, value in ctx.table(doc.get("distributions", {}), "distributions").items():
-        dpath = _join("distributions", dname)
-        if not isinstance(value, dict):
-            raise ctx.error(
-                dpath,
-                f"must be an inline table such as {{ geometric = 0.5 }}, got "
-                f"{_type_name(value)} {_show(value)}",
-            )
-        try:
-            named[dname] = from_table(value, dpath)
-        except DistributionError as exc:
-            message = str(exc)
-            raise ModelError(
-                f"{source}: {message}" if dpath in message else f"{source}: {dpath}: {message}"
-            ) from exc
+    named = _law_tables(doc, "distributions", ctx)
+    declared = _law_tables(doc, "events", ctx)
 
     spec, report = _parse_spec(spec_text, ctx)
     where = kind.extra_tables[0] if kind.extra_tables else kind.table
-    bound = _bind_spec(spec, report, named, game, kind.proposition_noun, where, ctx)
+    bound = _bind_spec(spec, report, named, game, kind.proposition_noun, where, ctx, declared)
 
     return Model(
         name=name,
