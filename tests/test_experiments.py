@@ -125,3 +125,17 @@ def test_bench_big_component_routes_agree(tmp_path, capsys):
     assert max(values) - min(values) < 1e-6
     assert {r[3] for r in rows} == {"optimal"}
     assert "largest block" in text
+
+
+def test_safety_tasks(tmp_path, capsys):
+    """Storm's Pmax [F "accept"] on the exported product equals our bracket's lower end
+    (exact models) and lies in the bracket; the figure is written."""
+    rows, text = _run("safety_tasks", tmp_path, capsys)
+    assert {r.model for r in rows} == {"bus_grid", "bus_puddle"}
+    for r in rows:
+        assert r.certified
+        if r.storm is not None:
+            assert r.storm == pytest.approx(r.lower, abs=1e-6)
+    puddle = next(r for r in rows if r.model == "bus_puddle")
+    assert puddle.spec_class == "obligation" and puddle.upper < 0.9244053 - 0.1
+    assert _is_png(tmp_path / "safety_policy.png")
