@@ -372,8 +372,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
                                                      DRN_SUFFIXES)
     files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
-    mdp = _build(args)[1].mdp
-    target = mdp.target | mdp.truncated if args.upper else mdp.target
+    from mitld_lp.acceptance import acceptance
+
+    built = _build(args)[1]
+    mdp = built.mdp
+    goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
+    target = goal | mdp.truncated if args.upper else goal
     if lp:
         _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _out(f"wrote {lp}")
@@ -390,7 +394,8 @@ def _args_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
     p.add_argument("--max-steps", type=bounded_int(1, defaults.MAX_STEPS_LIMIT),
                    default=defaults.MAX_STEPS,
-                   help="steps after which a run still undecided counts as undecided")
+                   help="steps each run is watched (a run keeping a safety part unviolated "
+                        "that long counts as a success; undecided ones as failures)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -416,13 +421,18 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "consistent": sim.ci_low <= r.upper and sim.ci_high >= r.lower,
         "beyond_model": sim.beyond_model,
         "undecided": sim.undecided,
+        "horizon": sim.horizon,
+        "kept": sim.kept,
         "seed": sim.seed,
     }
     if args.json:
         _out(_dumps(out))
     else:
         _out(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
-              f"  ({sim.successes}/{sim.runs}, seed {sim.seed})")
+              f"  ({sim.successes}/{sim.runs}, seed {sim.seed}, horizon {sim.horizon} steps)")
+        if sim.kept:
+            _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
+                 "(counted as successes)")
         _out(f"certified:    [{r.lower:.7f}, {r.upper:.7f}]  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:

@@ -123,6 +123,7 @@ class Model:
         spec: Formula | str,
         *,
         distributions: Mapping[str, FirstOccurrence] | None = None,
+        events: Mapping[str, FirstOccurrence] | None = None,
         epsilon: float = DEFAULT_EPSILON,
         name: str = "model",
     ) -> Model:
@@ -136,7 +137,9 @@ class Model:
         (:func:`mitld_lp.task.bind`: a name is unbound or bound but unused, a
         proposition of the spec is neither a proposition of the game nor an event, a
         proposition of the game has an event's name, or the game reacts to events
-        (``event_names``) the spec gives no distribution)."""
+        (``event_names``) the spec gives no distribution).  ``events`` gives events of
+        the world their laws without the spec asking that they happen (a model file's
+        ``[events]``): the spec may use them as propositions, ``G (door -> F[0,3] stop)``."""
         ctx = _Context("<spec>")
         try:
             world_members(game)
@@ -157,7 +160,7 @@ class Model:
                 raise ctx.error("spec", str(exc)) from exc
         else:
             raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
-        task = _bind(game, report, distributions, "proposition", None, ctx)
+        task = _bind(game, report, distributions, "proposition", None, ctx, events)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
                    distributions=task.laws, source=None)
 
@@ -425,7 +428,7 @@ def _loaders() -> Any:
     return loaders
 
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "constants"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants"}
 
 
 # --------------------------------------------------------------------------- the spec
@@ -489,8 +492,8 @@ def _bind_path(exc: BindError, table: str | None) -> str:
     """The key path of a binding fault: a proposition of the world is named under
     ``table`` (where the world's propositions are declared) when there is one."""
     match exc.key:
-        case ("distributions", name):
-            return _join("distributions", name)
+        case ("distributions" | "events" as key, name):
+            return _join(key, name)
         case ("proposition", name) if table:
             return _join(table, name)
     return "spec"
@@ -503,18 +506,36 @@ def _bind(
     noun: str,
     table: str | None,
     ctx: _Context,
+    declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> Task:
     """:func:`mitld_lp.task.bind`, its faults as :class:`ModelError` with key paths."""
-    if not report.co_safe:  # the automaton has them; the product and solvers do not yet
-        raise ctx.error(
-            "spec",
-            f"a {report.fragment} specification: safety/obligation tasks are not yet "
-            "solvable (only co-safe ones are: no unbounded G, R or W in negation normal form)",
-        )
     try:
-        return bind(game, report, named, noun=noun)
+        return bind(game, report, named, noun=noun, declared=declared)
     except BindError as exc:
         raise ctx.error(_bind_path(exc, table), exc.reason) from exc
+
+
+def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, FirstOccurrence]:
+    """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
+    an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
+    laws: dict[str, FirstOccurrence] = {}
+    for name, value in ctx.table(doc.get(key, {}), key).items():
+        path = _join(key, name)
+        if not isinstance(value, dict):
+            raise ctx.error(
+                path,
+                f"must be an inline table such as {{ geometric = 0.5 }}, got "
+                f"{_type_name(value)} {_show(value)}",
+            )
+        try:
+            laws[name] = from_table(value, path)
+        except DistributionError as exc:
+            message = str(exc)
+            raise ModelError(
+                f"{ctx.source}: {message}" if path in message
+                else f"{ctx.source}: {path}: {message}"
+            ) from exc
+    return laws
 
 
 def _load(
@@ -559,26 +580,12 @@ def _load(
 
     game = kind.build(doc, ctx)
 
-    named: dict[str, FirstOccurrence] = {}
-    for dname, value in ctx.table(doc.get("distributions", {}), "distributions").items():
-        dpath = _join("distributions", dname)
-        if not isinstance(value, dict):
-            raise ctx.error(
-                dpath,
-                f"must be an inline table such as {{ geometric = 0.5 }}, got "
-                f"{_type_name(value)} {_show(value)}",
-            )
-        try:
-            named[dname] = from_table(value, dpath)
-        except DistributionError as exc:
-            message = str(exc)
-            raise ModelError(
-                f"{source}: {message}" if dpath in message else f"{source}: {dpath}: {message}"
-            ) from exc
+    named = _law_tables(doc, "distributions", ctx)
+    declared = _law_tables(doc, "events", ctx)
 
     spec, report = _parse_spec(spec_text, ctx)
     where = kind.extra_tables[0] if kind.extra_tables else kind.table
-    task = _bind(game, report, named, kind.proposition_noun, where, ctx)
+    task = _bind(game, report, named, kind.proposition_noun, where, ctx, declared)
     kind.check_task(game, task, ctx)
 
     return Model(

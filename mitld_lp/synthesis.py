@@ -26,7 +26,7 @@ import logging
 import os
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -45,6 +45,7 @@ from mitld_lp.model import Model
 from mitld_lp.product import product
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
+    from mitld_lp.acceptance import Acceptance
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -106,6 +107,7 @@ class SynthesisResult:
     upper_model: ModelSolution
     controller: Controller
     timings: Mapping[str, float]  # seconds per stage: automaton, product, solve
+    acceptance: Acceptance  # the target the bracket is about (its goal, its components)
 
     @property
     def lower(self) -> float:
@@ -246,6 +248,25 @@ def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> Mo
                          tuple(checks))
 
 
+def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
+    """For a task with a safety part: ``solution`` whose policy plays, in the accepting
+    end components, an internal choice (never one that can leave them), with the check
+    that no state of them escapes under the policy.  Unchanged for a co-safe task."""
+    if accept.components is None:
+        return solution
+    from mitld_lp.solvers.accepting import escapes, keep_inside
+
+    policy = keep_inside(accept.components, solution.policy)
+    leaving = np.flatnonzero(escapes(mdp, policy, accept.goal))
+    check = Check(
+        "policy stays in the accepting end components",
+        leaving.size == 0,
+        f"{int(accept.goal.sum())} states in {accept.components.mecs.n_mecs} components; "
+        + (f"states {leaving[:10].tolist()} can leave" if leaving.size else "none can leave"),
+    )
+    return replace(solution, policy=policy, checks=(*solution.checks, check))
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Built:
     """What :func:`build_product` returns: the automaton, the STA and the product MDP,
@@ -337,11 +358,15 @@ def synthesize(
     t0 = time.perf_counter()
     how = _Settings(method, solver, backend, tol, certify_tol, progress, decompose,
                     float("inf") if time_limit is None else t0 + time_limit)
-    low = _solve_model(mdp, mdp.target, "lower", how)
+    from mitld_lp.acceptance import acceptance
+
+    accept = acceptance(mdp, built.dta)
+    low = _solve_model(mdp, accept.goal, "lower", how)
     if mdp.truncated.any():
-        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", how)
+        high = _solve_model(mdp, accept.goal | mdp.truncated, "upper", how)
     else:
         high = low
+    low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
 
     result = SynthesisResult(
@@ -356,6 +381,7 @@ def synthesize(
         controller=Controller(model.game, built.sta, mdp, low.policy,
                               hopeless=high.quotient.prob0),
         timings=timings,
+        acceptance=accept,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
