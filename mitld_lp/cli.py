@@ -361,6 +361,14 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    _constrained().args_constraints(p)
+
+
+def _constrained() -> Any:
+    """The constrained-synthesis command line (its own module)."""
+    from mitld_lp import cli_constrained
+
+    return cli_constrained
 
 
 def _cmd_solve(args: argparse.Namespace) -> int:
@@ -374,6 +382,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
                                                (".csv", ".json"))
     model = load_model(args.model)
+    if _constrained().wanted(args, model):
+        return _constrained().solve(args, model, policy_file or None)
     r = synthesize(
         model,
         epsilon=args.epsilon,
@@ -514,6 +524,8 @@ _VERBS: list[
     ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)", _args_export, _cmd_export),
     ("simulate", "Monte-Carlo rollouts of the synthesised controller", _args_simulate,
      _cmd_simulate),
+    ("pareto", "the certified curve of success probability against steps, cost or a risk",
+     lambda p: _constrained().args_pareto(p), lambda a: _constrained().cmd_pareto(a)),
 ]
 
 

@@ -36,7 +36,7 @@ from mitld_lp.constraints import (
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.literal import from_spec
 from mitld_lp.logic import check
-from mitld_lp.logic.syntax import DistLiteral
+from mitld_lp.logic.syntax import DistLiteral, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.product import ProductState, product
@@ -163,6 +163,13 @@ def _laws(model: Model, constraints: tuple[Constraint, ...]) -> dict[str, FirstO
     for c in constraints:
         if c.formula is None:
             continue
+        events = {e for e, _ in check(c.formula).events}
+        unknown = sorted(atoms(c.formula) - set(model.game.proposition_names) - events
+                         - set(laws))
+        if unknown:
+            raise ConstraintError(
+                f"constraint {str(c)!r}: proposition {unknown[0]!r} is neither a proposition "
+                f"of the world ({', '.join(sorted(model.game.proposition_names))}) nor an event")
         for event, mu in check(c.formula).events:
             if event in task:
                 if task[event] != mu:
