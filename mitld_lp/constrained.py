@@ -44,7 +44,7 @@ from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optim
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 
 __all__ = ["synthesize_constrained", "ConstrainedResult", "ConstraintValue",
-           "ConstrainedController", "quantity_of"]
+           "ConstrainedController", "quantity_of", "rows_for"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,6 +156,16 @@ def quantity_of(c: Constraint, component: int, model: str) -> Quantity:
     return Quantity("prob", component, 1.0 if holds_when_truncated else 0.0)
 
 
+def rows_for(cons: tuple[Constraint, ...], model: str) -> list[Row]:
+    """The LP rows of ``cons`` in the ``"lower"`` or ``"upper"`` model; the ``i``-th
+    probability constraint reads joint component ``i`` (the task is component 0)."""
+    out, k = [], 0
+    for c in cons:
+        k += c.kind == "prob"
+        out.append(Row(quantity_of(c, k if c.kind == "prob" else 0, model), c.sense, c.bound))
+    return out
+
+
 def _laws(model: Model, constraints: tuple[Constraint, ...]) -> dict[str, FirstOccurrence]:
     """The model's laws and those of the constraints' new events (inline literals)."""
     laws = dict(model.distributions)
@@ -230,15 +240,8 @@ def synthesize_constrained(
     merged = merge(mdp, joint)
     cost_vec = _cost_vector(mdp, cost_map)
     t1 = time.perf_counter()
-    component = {}
-    k = 0
-    for i, c in enumerate(cons):
-        if c.kind == "prob":
-            k += 1
-            component[i] = k
     def rows(which: str) -> list[Row]:
-        return [Row(quantity_of(c, component.get(i, 0), which), c.sense, c.bound)
-                for i, c in enumerate(cons)]
+        return rows_for(cons, which)
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
     low = optimise(merged, task_lo, True, rows("lower"), costs=cost_vec)

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mitld_lp.constrained import synthesize_constrained
-from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint
+from mitld_lp.constrained import rows_for, synthesize_constrained
+from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint, parse_constraints
 from mitld_lp.model import Model
-from mitld_lp.solvers.constrained import OPTIMAL, Row, optimise
+from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
 
 __all__ = ["ParetoPoint", "pareto", "write_csv", "plot"]
@@ -63,13 +63,14 @@ def _range(model: Model, against: str) -> tuple[float, float]:
         probe = synthesize_constrained(model, [lo_c])  # P(phi) <= 1: phi joins the product
         assert probe.status == OPTIMAL
         own = sum(1 for t in model.constraints if t.lstrip().startswith("P"))
-        least = optimise(probe.merged, Quantity("prob", own + 1, 1.0), False, [])
+        rows = rows_for(parse_constraints(model.constraints), "lower")
+        least = optimise(probe.merged, Quantity("prob", own + 1, 1.0), False, rows)
         top = probe.constraints[-1].value
         return float(least.objective), float(top)
     from mitld_lp.constrained import _cost_vector
     costs = _cost_vector(base.mdp, dict(model.costs))
-    least = optimise(base.merged, Quantity(lo_c.kind), False, [Row(Quantity("prob"), ">=", 0.0)],
-                     costs=costs)
+    own = rows_for(parse_constraints(model.constraints), "lower")
+    least = optimise(base.merged, Quantity(lo_c.kind), False, own, costs=costs)
     return float(least.objective), float(base.secondary or 0.0)
 
 
