@@ -125,3 +125,18 @@ def test_bench_big_component_routes_agree(tmp_path, capsys):
     assert max(values) - min(values) < 1e-6
     assert {r[3] for r in rows} == {"optimal"}
     assert "largest block" in text
+
+
+def test_constraints(tmp_path, capsys):
+    rows, points, (best, fast) = _run("constraints", tmp_path, capsys)[0]
+    assert _is_png(tmp_path / "constraints_steps.png")
+    assert (tmp_path / "constraints_risk.csv").is_file()
+    for row in rows:
+        assert row[7]  # certified
+        assert abs(row[1] - row[3]) <= 1e-6  # ours against Storm's multi-objective value
+        assert row[5] <= row[0] + 1e-6  # the risk bound holds on the policy
+    # no risk bound: the puddle changes nothing, Storm's value of the plain bus case
+    assert rows[-1][0] == 1.0 and rows[-1][1] == pytest.approx(STORM["bus_grid"], abs=1e-6)
+    assert [p.lower for p in points] == sorted(p.lower for p in points)
+    assert all(p.certified for p in points)
+    assert fast.steps <= best.steps + 1e-9 and fast.lower >= best.lower - 2e-6
