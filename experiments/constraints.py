@@ -1,7 +1,7 @@
 """Constraints on risk and time (issue 19) on the bus case with a puddle.
 
-The bus world of ``models/bus_grid.toml`` with two puddle cells on the bottom row (the
-direct way to station B).  Printed and written:
+``models/bus_puddle.toml``: the bus world of ``models/bus_grid.toml`` with two puddle
+cells on the bottom row (the direct way to station B).  Printed and written:
 
 1. the best success probability under a risk bound ``P(F puddle) <= r`` for several
    ``r``, each certified, beside Storm's multi-objective value on the DRN of the same
@@ -25,25 +25,6 @@ from mitld_lp.model import loads_model
 from mitld_lp.pareto import pareto, plot
 from mitld_lp.pareto import write_csv as write_pareto_csv
 
-MODEL = """
-name = "bus_puddle"
-spec = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
-
-[grid]
-size = [4, 4]
-start = [0, 0]
-slip = 0.1
-obstacles = []
-
-[regions]
-A = [[1, 2]]
-B = [[3, 0]]
-puddle = [[1, 0], [2, 0]]
-
-[distributions]
-mu1 = { geometric = 0.8 }
-mu2 = { geometric = 0.3 }
-"""
 RISK = 0.05
 
 
@@ -75,7 +56,9 @@ def _storm(drn: Path, query: str) -> tuple[float, float, float]:
 def main(argv: list[str] | None = None):
     args = _common.parser(__doc__.splitlines()[0]).parse_args(argv)
     out = _common.out_dir(args)
-    model = loads_model(MODEL, "bus_puddle")
+    path = _common.model_path("bus_puddle.toml")
+    text = path.read_text(encoding="utf-8")
+    model = loads_model(text, str(path))
     risks = [0.0, 0.05, 1.0] if args.quick else [0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 1.0]
     rows = []
     print("1. best success probability under P(F puddle) <= r (certified), Storm's "
@@ -102,8 +85,8 @@ def main(argv: list[str] | None = None):
                        "storm_cpu_s"], rows)
 
     print(f"\n2. success probability against E(steps) <= b, with P(F puddle) <= {RISK}")
-    risky = loads_model(MODEL.replace('spec = ', f'constraints = ["P(F puddle) <= {RISK}"]\n'
-                                      'spec = '), "bus_puddle")
+    risky = loads_model(text.replace('spec = ', f'constraints = ["P(F puddle) <= {RISK}"]\n'
+                                     'spec = ', 1), str(path))
     points = pareto(risky, "steps", 4 if args.quick else 12)
     write_pareto_csv(points, out / "constraints_steps.csv")
     left = plot(points, out / "constraints_steps.png", "steps",

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -207,26 +208,7 @@ def test_matches_an_occupancy_lp_written_with_linprog(seed):
 
 # ----------------------------------------------------------------- Storm
 
-BUS_PUDDLE = """
-name = "bus_puddle"
-spec = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
-
-[grid]
-size = [4, 4]
-start = [0, 0]
-slip = 0.1
-obstacles = []
-
-[regions]
-A = [[1, 2]]
-B = [[3, 0]]
-puddle = [[1, 0], [2, 0]]
-
-[distributions]
-mu1 = { geometric = 0.8 }
-mu2 = { geometric = 0.3 }
-"""
-
+BUS_PUDDLE = (Path(__file__).resolve().parent.parent / "models" / "bus_puddle.toml").read_text()
 
 def _drn(result, path):
     """The merged model as DRN: labels target (task accepted) and hazard (the first
