@@ -4,13 +4,12 @@ Each row: an n x n grid with three events -- one memoryless (geometric), two not
 and Poisson, the latter truncated) -- and a task with a deadline (``--deadlines``)
 after each event at a region in a different corner.  For each row, in the same run and
 on the same model: the array construction (:func:`mitld_lp.product.product`) and its
-peer, the first state-at-a-time construction (``_reference_product.py``), which must
-give the same MDP.  Printed: reachable states, transitions, wall and CPU seconds of
-each (the CPU time of this process: on a shared machine the wall time varies with the
-load), transitions per CPU second, the speed-up (wall, and CPU in parentheses), and
-the peak memory per transition of the array
-construction (tracemalloc's peak during a second build, divided by the transitions;
-numpy's buffers are traced).
+peer, the first state-at-a-time construction (:mod:`mitld_lp.testing.reference_product`),
+which must give the same MDP.  Printed: reachable states, transitions, wall and CPU
+seconds of each (the CPU time of this process: on a shared machine the wall time varies
+with the load), transitions per CPU second, the speed-up (wall, and CPU in parentheses),
+and the peak memory per transition of the array construction (tracemalloc's peak during
+a second build, divided by the transitions; numpy's buffers are traced).
 
 Targets (issue 9): 3x the state-at-a-time construction, under 40 bytes per transition;
 a 1e6-state product in under 20 s and under 1 GB.
@@ -27,7 +26,6 @@ import tracemalloc
 from dataclasses import dataclass
 
 import numpy as np
-from _reference_product import reference_product
 
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
@@ -36,6 +34,7 @@ from mitld_lp.logic.parser import parse
 from mitld_lp.mdp import MDP
 from mitld_lp.model import bind_distributions
 from mitld_lp.product import product
+from mitld_lp.testing import reference_product
 
 SPEC = (
     "D[geometric(0.2)] a & D[pmf(0.1, 0.2, 0.3, 0.4)] b & D[poisson(3.0)] c"

@@ -258,8 +258,8 @@ def work_default(inst: Instance, work: Path, arm: Any) -> dict[str, Any]:
     else:  # synthesize(game, spec)
         r = synthesize(world, spec, epsilon=inst.epsilon)
     seconds = time.perf_counter() - t
-    return dict(status=r.status.value, seconds=seconds, value=r.value, upper=r.upper,
-                certified=r.certified, states=r.sizes.states)
+    return dict(status=r.status.value, seconds=seconds, value=r.lower_model.value,
+                upper=r.upper, certified=r.certified, states=r.mdp.n_states)
 
 
 def _work_lp(work: Path, arm: Any, solver: str, decompose: bool) -> dict[str, Any]:

@@ -88,9 +88,9 @@ def main(argv: list[str] | None = None):
     risky = loads_model(text.replace('spec = ', f'constraints = ["P(F puddle) <= {RISK}"]\n'
                                      'spec = ', 1), str(path))
     points = pareto(risky, "steps", 4 if args.quick else 12)
-    write_pareto_csv(points, out / "constraints_steps.csv")
+    write_pareto_csv(points, out / "constraints_steps.csv", overwrite=True)
     left = plot(points, out / "constraints_steps.png", "steps",
-                f"bus with puddle, P(F puddle) <= {RISK}")
+                f"bus with puddle, P(F puddle) <= {RISK}", overwrite=True)
     for p in points:
         print(f"  E(steps) <= {p.bound:7.4f}: [{p.lower:.6f}, {p.upper:.6f}] "
               f"({p.status}{'' if p.certified else ', not certified'})")

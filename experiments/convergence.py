@@ -50,8 +50,8 @@ def sweep(model: mitld_lp.Model, epsilons: tuple[float, ...]) -> list[Point]:
     for eps in epsilons:
         t0 = time.perf_counter()
         r = mitld_lp.synthesize(model, epsilon=eps)
-        points.append(Point(eps, dict(r.truncation_points), r.epsilon_achieved,
-                            r.sizes.states, r.sizes.transitions, r.lower, r.upper,
+        points.append(Point(eps, dict(r.sta.truncation_points), r.sta.epsilon_achieved,
+                            r.mdp.n_states, r.mdp.n_transitions, r.lower, r.upper,
                             r.certified, time.perf_counter() - t0))
     return points
 

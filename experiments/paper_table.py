@@ -98,19 +98,19 @@ def run_case(case: str, model_file: str, Ts: tuple[int, ...]) -> tuple[list[Row]
             if a != slow:
                 keep_others *= 1.0 - tails[a]
         keep_all = keep_others * (1.0 - tails[slow])
-        assert abs(r.epsilon_achieved - (1.0 - keep_all)) <= 1e-12, r.epsilon_achieved
+        assert abs(r.sta.epsilon_achieved - (1.0 - keep_all)) <= 1e-12, r.sta.epsilon_achieved
         fast_part = (1.0 - keep_others) * (1.0 - tails[slow])
-        assert abs(r.epsilon_achieved - (eps_paper + fast_part)) <= 1e-12
+        assert abs(r.sta.epsilon_achieved - (eps_paper + fast_part)) <= 1e-12
         z, text = cartesian_count(cells, len(events), T)
         counts.append(f"  T = {T}: {text}")
-        rows.append(Row(case, model.name, T, eps_paper, r.epsilon_achieved, z,
-                        PAPER_SIZES[T], r.sizes.states, r.lower, r.upper,
+        rows.append(Row(case, model.name, T, eps_paper, r.sta.epsilon_achieved, z,
+                        PAPER_SIZES[T], r.mdp.n_states, r.lower, r.upper,
                         PAPER_VALUES[model_file][T], r.certified, seconds))
     t0 = time.perf_counter()
     r = mitld_lp.synthesize(model)  # clock reduction: geometric events need no clock
     seconds = time.perf_counter() - t0
-    rows.append(Row(case, model.name, None, None, r.epsilon_achieved, None, None,
-                    r.sizes.states, r.lower, r.upper, None, r.certified, seconds))
+    rows.append(Row(case, model.name, None, None, r.sta.epsilon_achieved, None, None,
+                    r.mdp.n_states, r.lower, r.upper, None, r.certified, seconds))
     return rows, counts
 
 

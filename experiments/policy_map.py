@@ -5,8 +5,10 @@ One panel per main situation of the automaton and the events: waiting for both b
 state the DTA reaches from its initial state on a letter with b1, pending {b2}); bus 2
 just arrived (likewise with b2, pending {b1}).  In each, an arrow per cell shows the
 deterministic policy's action and the cell's colour the probability of success from
-there.  The product states are found by decoding ``mdp.states`` and stepping the DTA,
-never by index.  Then one sampled run (fixed seed) is printed in the paper's notation.
+there.  The panels are the library's (``mitld_lp.plot.policy_map``: product states
+found by decoding ``mdp.states`` and stepping the DTA, never by index; ``mitld-lp plot``
+draws the same for any grid world).  Then one sampled run (fixed seed) is printed in
+the paper's notation.
 
 Run: ``python experiments/policy_map.py [--quick] [--out DIR] [--seed N]``.
 Writes ``policy_map.png``.
@@ -23,16 +25,12 @@ import _common as C
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import Normalize
-from matplotlib.patches import Rectangle
 
 import mitld_lp
-from mitld_lp.gridworld import MOVES
-from mitld_lp.product import ProductState
+from mitld_lp.plot import PolicyMap, Situation, draw_panel, policy_map
 from mitld_lp.simulate import rollout
-from mitld_lp.solvers.iteration import evaluate_policy
 
 MODELS = (("case 1", "bus_grid.toml"), ("case 2", "bus_grid_case2.toml"))
-STATION_COLOURS = {"A": "tab:red", "B": "tab:green"}
 
 
 @dataclass(frozen=True)
@@ -42,46 +40,26 @@ class Panel:
     pending: frozenset[str]
     actions: dict[Hashable, str]  # per cell: the policy's action
     values: dict[Hashable, float]  # per cell: success probability under the policy
+    map: PolicyMap  # the library's view of the situation, which the panel draws
 
 
-def situations(result: mitld_lp.SynthesisResult, game) -> list[Panel]:
-    """The three panels, found by decoding the product's states."""
-    mdp, dta, sta = result.mdp, result.dta, result.sta
-    init = mdp.states[mdp.initial]
-    assert isinstance(init, ProductState), "the initial state is already decided"
-    q0, events = init.automaton, sta.events
-    values = evaluate_policy(mdp, mdp.target, result.policy)
-    # index: (cell, automaton state, pending) -> the state with the smallest clock
-    # (the one entered right after the situation arises)
-    index: dict[tuple[Hashable, int, frozenset[str]], tuple[int, int]] = {}
-    for i, s in enumerate(mdp.states):
-        if isinstance(s, ProductState):
-            key = (s.game, s.automaton, s.pending)
-            if key not in index or s.clock < index[key][0]:
-                index[key] = (s.clock, i)
+def situations(result: mitld_lp.SynthesisResult) -> list[Panel]:
+    """The three panels, from the library's policy map of each situation."""
+    events = result.sta.events
+    b1, b2 = sorted(events)
 
     def panel(title: str, occurred: frozenset[str]) -> Panel:
-        pending = events - occurred
-        autom: dict[Hashable, int | None] = {}
-        actions: dict[Hashable, str] = {}
-        vals: dict[Hashable, float] = {}
-        for cell in game.cells:
-            # the DTA reads the cell's propositions together with the events just seen
-            q = dta.step(q0, game.propositions(cell) | occurred) if occurred else q0
-            if q in (dta.accepting, dta.rejecting):
-                autom[cell] = None
-                continue
-            autom[cell] = q
-            hit = index.get((cell, q, pending))
-            if hit is None:  # not reachable in this situation
-                continue
-            i = hit[1]
-            vals[cell] = float(values[i])
-            if result.policy[i] >= 0:
-                actions[cell] = mdp.action_name(int(result.policy[i]))
-        return Panel(title, autom, pending, actions, vals)
+        pm = policy_map(result, Situation(occurred=occurred))
+        live = {c: v for c, v in pm.cells.items() if v.kind in ("open", "unreached")}
+        return Panel(
+            title,
+            {c: (v.automaton if c in live else None) for c, v in pm.cells.items()},
+            pm.pending,
+            {c: v.action for c, v in live.items() if v.action is not None},
+            {c: v.value for c, v in live.items() if v.value is not None},
+            pm,
+        )
 
-    b1, b2 = sorted(events)
     return [
         panel(f"waiting for both buses\npending {{{b1}, {b2}}}", frozenset()),
         panel(f"bus 1 ({b1}) just arrived\npending {{{b2}}}", frozenset({b1})),
@@ -89,64 +67,26 @@ def situations(result: mitld_lp.SynthesisResult, game) -> list[Panel]:
     ]
 
 
-def draw(ax, panel: Panel, game, dta, norm) -> None:
-    width = max(c[0] for c in game.cells) + 1
-    height = max(c[1] for c in game.cells) + 1
-    cmap = plt.get_cmap("viridis")
-    regions = game.region_map
-    for cell in game.cells:
-        x, y = cell
-        v = panel.values.get(cell)
-        face = cmap(norm(v)) if v is not None else "0.85"
-        ax.add_patch(Rectangle((x - 0.5, y - 0.5), 1, 1, facecolor=face, edgecolor="white",
-                               linewidth=2))
-        for name, cells in regions.items():
-            if cell in cells:
-                ax.add_patch(Rectangle((x - 0.46, y - 0.46), 0.92, 0.92, fill=False,
-                                       edgecolor=STATION_COLOURS.get(name, "k"), linewidth=3))
-                ax.text(x - 0.4, y + 0.38, name, fontsize=12, fontweight="bold", va="top",
-                        color=STATION_COLOURS.get(name, "k"))
-        if cell == game.initial:
-            ax.text(x + 0.4, y - 0.4, "start", fontsize=7, ha="right", va="bottom",
-                    color="white")
-        if panel.automaton.get(cell) is None:
-            ax.text(x, y, "caught", ha="center", va="center", fontsize=8, color="k")
-            continue
-        a = panel.actions.get(cell)
-        if a is not None:
-            dx, dy = MOVES[a]
-            ax.annotate("", xy=(x + 0.32 * dx, y + 0.32 * dy),
-                        xytext=(x - 0.32 * dx, y - 0.32 * dy),
-                        arrowprops=dict(arrowstyle="-|>", lw=2.2, color="white",
-                                        mutation_scale=18))
-            ax.text(x + 0.42, y + 0.42, a, fontsize=7, ha="right", va="top", color="white")
-        elif panel.values.get(cell) is None:
-            ax.text(x, y, "not\nreached", ha="center", va="center", fontsize=7,
-                    color="0.3")
-    ax.set_xlim(-0.5, width - 0.5)
-    ax.set_ylim(-0.5, height - 0.5)
-    ax.set_xticks(range(width))
-    ax.set_yticks(range(height))
-    ax.set_xlabel("x (E is +x)")
-    ax.set_ylabel("y (N is +y)")
-    ax.set_aspect("equal")
+def draw(ax, result: mitld_lp.SynthesisResult, panel: Panel, norm) -> None:
+    """The library's panel, titled with the situation and its automaton locations."""
+    dta = result.dta
     qs = {q for q in panel.automaton.values() if q is not None}
     loc = ", ".join(
         f"q{q}" + (" [" + ", ".join(f"{n}: x={v}" for n, v in dta.clocks(q)) + "]"
                    if dta.clocks(q) else "")
         for q in sorted(qs))
-    ax.set_title(f"{panel.title}\nautomaton {loc}", fontsize=9)
+    draw_panel(ax, panel.map, result.model.game, f"{panel.title}\nautomaton {loc}", norm)
 
 
 def _set(s: frozenset[str]) -> str:
     return "{" + ", ".join(sorted(s)) + "}" if s else "{}"
 
 
-def trajectory(result: mitld_lp.SynthesisResult, game, seed: int) -> list[str]:
+def trajectory(result: mitld_lp.SynthesisResult, seed: int) -> list[str]:
     """One sampled run in the paper's notation: ((x, y), events, pending), (location,
     clocks) and the action taken."""
     dta = result.dta
-    status, steps = rollout(game, result.sta, result.controller, np.random.default_rng(seed),
+    status, steps = rollout(result.model, result.controller, np.random.default_rng(seed),
                             max_steps=100, record=True)
     lines = []
     used: set[int] = set()
@@ -182,19 +122,18 @@ def main(argv: list[str] | None = None) -> list[list[Panel]]:
         model = mitld_lp.load_model(C.model_path(model_file))
         result = mitld_lp.synthesize(model)
         assert result.certified, result.failed_checks
-        solved[case] = (model, result, situations(result, model.game))
+        solved[case] = (model, result, situations(result))
     lowest = min(v for case, _ in cases for p in solved[case][2] for v in p.values.values())
     norm = Normalize(math.floor(lowest * 10) / 10, 1.0)
     all_panels = []
     for row, (case, model_file) in zip(axes, cases, strict=True):
         model, result, panels = solved[case]
-        game = model.game
         all_panels.append(panels)
         laws = ", ".join(f"{a} ~ {d}" for a, d in sorted(model.distributions.items()))
         print(f"{case} ({model_file}: {laws}): optimum {result.lower:.7f}")
         print("  policy per cell (x, y):action in each situation")
         for ax, panel in zip(row, panels, strict=True):
-            draw(ax, panel, game, result.dta, norm)
+            draw(ax, result, panel, norm)
             name = panel.title.splitlines()[0]
             acts = " ".join(f"{c}:{panel.actions[c]}" for c in sorted(panel.actions))
             print(f"  {name}: {acts}")
@@ -206,13 +145,13 @@ def main(argv: list[str] | None = None) -> list[list[Panel]]:
     print(f"A sampled run of {case} (seed {args.seed}), in the paper's notation (Sec. V):")
     print("  t  ((cell, events of the last step, pending events), (automaton state, "
           "deadline clocks))  action")
-    print("\n".join(trajectory(result, model.game, args.seed)))
+    print("\n".join(trajectory(result, args.seed)))
     print()
     sm = plt.cm.ScalarMappable(norm=norm, cmap="viridis")
     fig.colorbar(sm, ax=axes, shrink=0.8, label="probability of success from the cell "
                  "(policy's exact value)")
     fig.suptitle("Optimal policy of the bus-catching task: arrow = action of the deterministic"
-                 " policy; 'caught' = the task is satisfied on arrival there", fontsize=12)
+                 " policy; 'done' = the task is satisfied on arrival there", fontsize=12)
     png = out / "policy_map.png"
     fig.savefig(png, dpi=110)
     plt.close(fig)

@@ -1,7 +1,9 @@
 """mitld_lp: policy synthesis for MITLD (Metric Interval Temporal Logic with distribution
 eventualities) by occupancy-measure linear programming.
 
-Only light modules are imported here; the solver stack is imported where it is used.
+``import mitld_lp`` loads no solver stack (cvxpy, Clarabel, HiGHS, scipy's linear
+algebra, ``mitld_lp.solvers``): :func:`synthesize` imports it at its first solve
+(tests/test_imports.py checks this in a fresh interpreter).
 """
 
 from mitld_lp.automata.dta import DTA

@@ -18,10 +18,12 @@ This module is the only place in the package that prints.
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import logging
 import math
 import os
+import re
 import sys
 import threading
 import time
@@ -29,17 +31,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from mitld_lp import defaults
+from mitld_lp import defaults, files
+from mitld_lp.arguments import bounded_int, memory_size, probability_budget, seconds, solver_name
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.model import ModelError
 from mitld_lp.product import ProductTooLarge
+from mitld_lp.sweep.spec import SweepError
 from mitld_lp.text import printable
 
 if TYPE_CHECKING:
     from mitld_lp.model import Model
+    from mitld_lp.sweep.rows import Settings
     from mitld_lp.synthesis import Built
 
 PROG = "mitld-lp"
@@ -56,7 +61,9 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
     DistributionError,
     TranslationError,
     UsageError,
+    files.OutputPathError,
     FileExistsError,
+    SweepError,
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
@@ -66,98 +73,23 @@ _BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
-# --------------------------------------------------------------------------- argument types
-
-
-def _probability_budget(text: str) -> float:
-    """An ``--epsilon``: a number strictly between 0 and 1."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}") from None
-    if not 0.0 < value < 1.0:  # also refuses nan and inf
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
-    return value
-
-
-def _bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
-    def parse_int(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-        if value < low or (high is not None and value > high):
-            bound = f">= {low:,}" if high is None else f"in {low:,}..{high:,}"
-            raise argparse.ArgumentTypeError(f"must be an integer {bound}, got {text}")
-        return value
-
-    parse_int.__name__ = "integer"
-    return parse_int
-
-
-_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-
-
-def _memory_size(text: str) -> int:
-    """A byte count with an optional binary unit: ``500M``, ``4G``, ``1.5G``."""
-    body = text.strip().upper().removesuffix("B").removesuffix("I")
-    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
-    try:
-        value = float(body[: len(body) - len(unit)]) * _UNITS[unit]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a size such as 4G or 500M, got {text!r}") from None
-    if not 1 <= value < float(1 << 60):
-        raise argparse.ArgumentTypeError(f"must be a positive size, got {text!r}")
-    return int(value)
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not value > 0.0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
-    return value
-
-
-def _solver_name(text: str) -> str:
-    """An LP solver name, in any case; checked against cvxpy's installed solvers."""
-    name = text.strip().upper()
-    if name == "CLARABEL":  # the default needs no cvxpy import to be checked
-        return name
-    import cvxpy
-
-    installed = cvxpy.installed_solvers()
-    if name not in installed:
-        raise argparse.ArgumentTypeError(
-            f"unknown or not installed LP solver {text!r} (installed: {', '.join(installed)})"
-        )
-    return name
-
-
 # --------------------------------------------------------------------------- output files
 
 
 def _output_path(given: str, force: bool, what: str, suffixes: tuple[str, ...] = ()) -> Path:
-    """Check, before any work, that ``given`` can be written: its folder exists, it is no
-    folder itself, its suffix is one of ``suffixes``, and it exists only with ``--force``."""
-    path = Path(given)
-    if suffixes and path.suffix.lower() not in suffixes:
-        raise UsageError(f"{what} {given}: the suffix must be one of {', '.join(suffixes)}")
-    if path.is_dir():
-        raise UsageError(f"{what} {given}: is a directory")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise UsageError(f"{what} {given}: the folder {parent} does not exist")
-    if path.exists() and not force:
-        raise FileExistsError(f"{given}: exists; pass --force to overwrite it")
-    return path
+    """Check, before any work, that ``given`` can be written (the one rule,
+    :func:`mitld_lp.files.writable_path`)."""
+    return files.writable_path(given, overwrite=force, suffixes=suffixes, what=what,
+                               force="--force")
+
+
+_DOT_SUFFIXES = (".dot", ".gv")
 
 
 def _write(path: Path, write: Callable[[Path], object]) -> None:
-    """Run ``write(path)``; an OS error (disk full, no permission) is a one-line error."""
+    """Run ``write(path)`` (a writer of :mod:`mitld_lp.files`, which replaces the file
+    only once it is complete); an OS error (disk full, no permission) is a one-line
+    error."""
     try:
         write(path)
     except OSError as exc:
@@ -244,20 +176,22 @@ def _args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help="an MITLD formula (D[mu] a reads as F a)")
     p.add_argument("--dot", metavar="FILE", help="write the automaton as Graphviz DOT")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
-    p.add_argument("--max-states", type=int, default=200_000, metavar="N",
-                   help="refuse automata with more states (checked while it is built)")
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_AUTOMATON_STATES,
+                   metavar="N", help="refuse automata with more states (checked while it "
+                                     "is built; exit 3)")
 
 
 def _cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
     from mitld_lp.automata.translate import to_dta
 
-    path = args.dot and _output_path(args.dot, args.force, "--dot", (".dot", ".gv"))
+    path = None if args.dot is None else _output_path(args.dot, args.force, "--dot",
+                                                       _DOT_SUFFIXES)
     report = check(parse_source(args.formula))
     formula = report.formula
     dta = to_dta(report, max_states=args.max_states)
     if path:
-        _write(path, lambda p: p.write_text(dta.to_dot()))
+        _write(path, lambda p: files.write_text(p, dta.to_dot(), overwrite=True))
         _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
         return EXIT_OK
     shown = [dta.location(i) for i in range(dta.n_states)]
@@ -286,18 +220,26 @@ def _count(n: int, noun: str) -> str:
 # --------------------------------------------------------------------------- model verbs
 
 
-def _args_model(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", help="a model file (models/*.toml)")
-    p.add_argument("--epsilon", type=_probability_budget,
+def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
+    if many:
+        p.add_argument("model", nargs="+", help="model files or glob patterns (a batch: "
+                       "one line per model)")
+    else:
+        p.add_argument("model", help="a model file (models/*.toml)")
+    p.add_argument("--epsilon", type=probability_budget,
                    help="truncation budget in (0, 1) (default: the model's)")
     p.add_argument(
         "--no-clock-reduction",
         action="store_true",
         help="give every event an age clock, truncated as in the paper",
     )
-    p.add_argument("--max-states", type=_bounded_int(1), default=defaults.MAX_STATES,
-                   metavar="N", help="refuse products larger than N states (exit 3)")
-    p.add_argument("--max-memory", type=_memory_size, metavar="SIZE",
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
+                   metavar="N", help="refuse products (and automata) larger than N states "
+                                     "(exit 3)")
+    p.add_argument("--max-automaton-states", type=bounded_int(1),
+                   default=defaults.MAX_AUTOMATON_STATES, metavar="N",
+                   help="refuse automata larger than N states (exit 3)")
+    p.add_argument("--max-memory", type=memory_size, metavar="SIZE",
                    help="refuse products needing more memory, e.g. 4G or 500M "
                         "(default: half the machine's memory; exit 3)")
 
@@ -312,7 +254,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
         clock_reduction=not args.no_clock_reduction, max_states=args.max_states,
-        max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, max_memory=args.max_memory,
     )
     return model, built
 
@@ -347,9 +289,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _args_solve(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
+    _args_model(p, many=True)
     p.add_argument("--method", choices=("lp", "vi"), default="lp")
-    p.add_argument("--solver", type=_solver_name, default="CLARABEL",
+    p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
     p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
                    help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
@@ -379,41 +321,33 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
                          "use --backend cvxpy (or auto) for other solvers")
-    policy_file = args.policy and _output_path(args.policy, args.force, "--policy",
-                                               (".csv", ".json"))
+    if len(args.model) > 1 or _is_pattern(args.model[0]):
+        return _solve_batch(args)
+    args.model = args.model[0]
+    policy_file = None if args.policy is None else _output_path(
+        args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     model = load_model(args.model)
     if _constrained().wanted(args, model):
-        return _constrained().solve(args, model, policy_file or None)
-    r = synthesize(
-        model,
-        epsilon=args.epsilon,
-        method=args.method,
-        solver=args.solver,
-        backend=args.backend,
-        clock_reduction=not args.no_clock_reduction,
-        max_states=args.max_states,
-        max_memory=args.max_memory,
-        decompose=not args.no_decompose,
-        time_limit=_time_left(args),
-    )
+        return _constrained().solve(args, model, policy_file)
+    r = synthesize(model, **_solve_settings(args).synthesize_kwargs())
     summary = r.summary()
     if policy_file:
-        _write(policy_file, lambda p: r.write_policy(p, overwrite=True))
+        _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
         summary["policy_file"] = str(policy_file)
     if args.json:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
         _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]"
-              f"  (epsilon achieved {r.epsilon_achieved:.3g})")
-        _out(f"value:        {r.value:.7f}  ({r.method}, status {r.status.value})")
+              f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
+        _out(f"value:        {r.lower_model.value:.7f}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")
-        _out(f"sizes:        {r.sizes.dta_states} automaton states, {r.sizes.states} states,"
-              f" {r.sizes.choices} choices, {r.sizes.transitions} transitions")
-        if r.truncation_points:
-            _out(f"truncation:   {dict(r.truncation_points)}")
+        _out(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"
+             f" {r.mdp.n_choices} choices, {r.mdp.n_transitions} transitions")
+        if r.sta.truncation_points:
+            _out(f"truncation:   {r.sta.truncation_points}")
         _out("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
         if policy_file:
             _out(f"policy:       {policy_file}")
@@ -440,14 +374,14 @@ def _args_export(p: argparse.ArgumentParser) -> None:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
-    from mitld_lp.solvers.export import write_drn, write_lp
+    from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
 
-    if not args.lp and not args.drn:
+    if args.lp is None and args.drn is None:
         raise UsageError("export: nothing to do; give --lp FILE and/or --drn FILE")
-    lp = args.lp and _output_path(args.lp, args.force, "--lp", (".mps", ".lp"))
-    drn = args.drn and _output_path(args.drn, args.force, "--drn", (".drn",))
-    if lp and drn and lp.resolve() == drn.resolve():
-        raise UsageError(f"--lp and --drn name the same file {args.lp}")
+    lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
+    drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
+                                                     DRN_SUFFIXES)
+    files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
     mdp = _build(args)[1].mdp
     target = mdp.target | mdp.truncated if args.upper else mdp.target
     if lp:
@@ -459,17 +393,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-_MAX_RUNS = 100_000_000
-"""More rollouts than this would take days; the estimate's 95% CI is then +-1e-4."""
-_MAX_STEPS = 1_000_000
-
-
 def _args_simulate(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("-n", "--runs", type=_bounded_int(1, _MAX_RUNS), default=10_000,
-                   help=f"number of rollouts (1..{_MAX_RUNS:,})")
-    p.add_argument("--seed", type=_bounded_int(0), default=0, help="a non-negative seed")
-    p.add_argument("--max-steps", type=_bounded_int(1, _MAX_STEPS), default=500,
+    p.add_argument("-n", "--runs", type=bounded_int(1, defaults.MAX_RUNS),
+                   default=defaults.RUNS, help=f"number of rollouts (1..{defaults.MAX_RUNS:,})")
+    p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
+    p.add_argument("--max-steps", type=bounded_int(1, defaults.MAX_STEPS_LIMIT),
+                   default=defaults.MAX_STEPS,
                    help="steps after which a run still undecided counts as undecided")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -483,8 +413,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
+                   max_automaton_states=args.max_automaton_states,
                    time_limit=_time_left(args))
-    sim = simulate(model.game, r.sta, r.controller, runs=args.runs, seed=args.seed,
+    sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
         "runs": sim.runs,
@@ -510,6 +441,195 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- many runs
+
+
+def _solve_settings(args: argparse.Namespace) -> Settings:
+    """``solve``'s options as :class:`mitld_lp.sweep.rows.Settings` (time left now)."""
+    from mitld_lp.sweep.rows import Settings
+
+    return Settings(method=args.method, solver=args.solver, backend=args.backend,
+                    clock_reduction=not args.no_clock_reduction,
+                    decompose=not args.no_decompose, time_limit=_time_left(args),
+                    max_states=args.max_states,
+                    max_automaton_states=args.max_automaton_states,
+                    max_memory=args.max_memory, epsilon=args.epsilon)
+
+
+def _is_pattern(name: str) -> bool:
+    """A glob pattern the shell did not expand (and no file of that name)."""
+    return glob.has_magic(name) and not Path(name).exists()
+
+
+def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
+    """The exit status of many runs: 1 if one hit a bug, else 2 if a model was wrong,
+    else 3 if one has no certified answer, else 0; said in one line on stderr (the runs'
+    own lines name each failure)."""
+    statuses = [r["status"] for r in records]
+    failed = sum(1 for r in records if not r.get("certified"))
+    of = f"{failed} of {_count(len(records), noun)}"
+    if "error" in statuses:
+        _say(f"internal error: {statuses.count('error')} of {_count(len(records), noun)} "
+             "failed unexpectedly (see their lines; please report this)")
+        return EXIT_INTERNAL
+    if "model_error" in statuses:
+        _say(f"error: {statuses.count('model_error')} of {_count(len(records), noun)} "
+             "could not be read (see their lines)")
+        return EXIT_USAGE
+    if failed:
+        _say(f"stopped: {of} without a certified answer (see their lines)")
+        return EXIT_UNCERTIFIED
+    return EXIT_OK
+
+
+def _solve_batch(args: argparse.Namespace) -> int:
+    """``solve a.toml b.toml 'models/*.toml'``: each model file in turn, one line each
+    (a JSON object with ``--json``); a model that fails is its line, not the end."""
+    from mitld_lp.model import load_model
+    from mitld_lp.sweep.rows import MODEL_ERROR, run_model
+
+    if args.policy:
+        raise UsageError("--policy writes the policy of one model; give one model file")
+    records: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for name in args.model:
+        matches = sorted(glob.glob(name, recursive=True)) if _is_pattern(name) else [name]
+        if not matches:
+            records.append({"file": name, "status": MODEL_ERROR, "certified": False,
+                            "error": "no file matches this pattern"})
+            _batch_line(records[-1], args.json)
+        for path in (m for m in matches if m not in seen):
+            seen.add(path)
+            outcome = run_model(lambda path=path: load_model(path), _solve_settings(args))
+            records.append({"file": path, **outcome.summary} if outcome.summary else {
+                "file": path, "status": outcome.status, "certified": False,
+                "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
+            _batch_line(records[-1], args.json)
+    return _batch_exit(records, "model")
+
+
+def _batch_line(record: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        _out(_dumps(record))
+    elif "error" in record:
+        _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
+    else:
+        _out(f"{printable(record['file'])}: [{record['lower']:.7f}, {record['upper']:.7f}] "
+             f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
+             f"{record['states']} states, {record['seconds']:.3f} s)")
+
+
+def _args_sweep(p: argparse.ArgumentParser) -> None:
+    p.add_argument("sweep", help="a sweep file (models/sweeps/*.toml; see docs/sweeps.md)")
+    p.add_argument("-o", "--out", metavar="RESULTS",
+                   help="the results file, .csv or .parquet (default: NAME.csv here, NAME "
+                        "the sweep's name); points already in it are not solved again")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=bounded_int(1, 1024), default=1, metavar="N",
+                       help="solve N points at a time, in local processes")
+    where.add_argument("--dask", metavar="ADDRESS",
+                       help="solve the points on the Dask scheduler at ADDRESS "
+                            "(tcp://host:8786)")
+    p.add_argument("--retries", type=bounded_int(0, 100), default=2, metavar="N",
+                   help="Dask: run a failed task up to N more times (default 2)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="solve again the points whose row has a failure status")
+    p.add_argument("--force", action="store_true",
+                   help="start RESULTS anew, even when it holds another sweep's rows")
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    """Solve every point of a sweep not yet in its results file; print a summary."""
+    from collections import Counter
+
+    from mitld_lp.sweep import load_sweep, run_sweep
+
+    sw = load_sweep(args.sweep)
+    out = Path(args.out or re.sub(r"[^\w.-]", "_", sw.name) + ".csv")
+    if not args.verbose:  # the bar says how far it is; each point's stages would drown it
+        logging.getLogger("mitld_lp").setLevel(logging.WARNING)
+    run = run_sweep(sw, out, workers=args.workers, dask=args.dask, retries=args.retries,
+                    force=args.force, retry_failed=args.retry_failed,
+                    progress=not args.quiet)
+    statuses = Counter(r["status"] for r in run.rows)
+    _out(f"sweep:      {sw.name} ({_count(len(run.rows), 'point')}: {run.computed} solved "
+         f"now, {run.reused} already in {out})")
+    _out("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
+    _out(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
+    shown: set[tuple[str, str]] = set()
+    for r in run.failed:
+        if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
+            shown.add((r["status"], r["error"]))
+            at = ", ".join(f"{c} = {json.dumps(r[c])}" for c in sw.columns)
+            _out(f"  {r['status']} at {at or 'the base model'}: {r['error']}")
+    _out(f"results:    {out}")
+    return _batch_exit(list(run.rows), "point")
+
+
+def _size(text: str) -> tuple[int, int]:
+    """A picture size in pixels, ``WIDTHxHEIGHT``."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m or not all(100 <= int(v) <= 20_000 for v in m.groups()):
+        raise argparse.ArgumentTypeError(
+            f"must be WIDTHxHEIGHT in pixels, each in 100..20000, got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+def _args_plot(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="a model file of a grid world (draws its policy) or a "
+                                 "sweep's results file, .csv or .parquet (draws a column)")
+    p.add_argument("-o", "--out", required=True, metavar="FILE",
+                   help="the picture: .png, .svg or .pdf")
+    p.add_argument("--situation", action="append", metavar="S",
+                   help='model: a panel for this situation, e.g. "occurred=b1" or '
+                        '"pending=b2; automaton=3; clock=0" (repeat for more panels; '
+                        "default: the initial one)")
+    p.add_argument("--x", help="results: the parameter on the x axis (its last key will do)")
+    p.add_argument("--y", help="results: the column on the y axis (lower, upper, states...)")
+    p.add_argument("--by", action="append", metavar="PARAMETER",
+                   help="results: one line per value of PARAMETER (repeatable; default: "
+                        "every other parameter that varies)")
+    p.add_argument("--size", type=_size, default=(800, 600), metavar="WxH",
+                   help="the picture's size in pixels (default 800x600)")
+    p.add_argument("--epsilon", type=probability_budget,
+                   help="model: truncation budget in (0, 1) (default: the model's)")
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
+                   metavar="N", help="model: refuse products larger than N states (exit 3)")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    """Draw a grid world's policy, or a column of a sweep's results."""
+    from mitld_lp import plot
+
+    out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
+    table = Path(args.input).suffix.lower() in (".csv", ".parquet")
+    if table and (args.x is None or args.y is None):
+        raise UsageError(f"plot {args.input}: a results file needs --x and --y")
+    wrong = ("--situation" if args.situation else None) if table else (
+        "--x" if args.x else "--y" if args.y else "--by" if args.by else None)
+    if wrong:
+        raise UsageError(f"plot {args.input}: {wrong} applies to "
+                         f"{'a model file' if table else 'a results file'}")
+    try:
+        if table:
+            fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
+        else:
+            from mitld_lp.model import load_model
+            from mitld_lp.synthesis import synthesize
+
+            situations = [plot.parse_situation(s) for s in args.situation or [""]]
+            model = load_model(args.input)
+            result = synthesize(model, epsilon=args.epsilon, max_states=args.max_states,
+                                time_limit=_time_left(args))
+            fig = plot.policy_figure(result, situations, size=args.size)
+    except plot.PlotError as err:
+        raise UsageError(str(err)) from None
+    _write(out, lambda p: plot.save(fig, p))
+    _out(f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- registry
 
 #: (verb, one-line help, add arguments, run).  Add a verb by appending one row.
@@ -524,6 +644,10 @@ _VERBS: list[
     ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)", _args_export, _cmd_export),
     ("simulate", "Monte-Carlo rollouts of the synthesised controller", _args_simulate,
      _cmd_simulate),
+    ("sweep", "solve a model at every point of a sweep, into a results file", _args_sweep,
+     _cmd_sweep),
+    ("plot", "draw a grid world's policy, or a column of a sweep's results", _args_plot,
+     _cmd_plot),
     ("pareto", "the certified curve of success probability against steps, cost or a risk",
      lambda p: _constrained().args_pareto(p), lambda a: _constrained().cmd_pareto(a)),
 ]
@@ -550,7 +674,7 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="no progress lines on stderr, only the answer and errors")
         p.add_argument("-v", "--verbose", action="store_true",
                        help="also the details of every stage (solver messages)")
-        p.add_argument("--time-limit", type=_seconds, metavar="SECONDS",
+        p.add_argument("--time-limit", type=seconds, metavar="SECONDS",
                        help="stop after SECONDS with status time_limit (exit 3)")
         p.set_defaults(run=run)
     return parser
@@ -582,6 +706,8 @@ def _run(args: argparse.Namespace) -> int:
     """Run the verb; map every exception to an exit code and one line on stderr."""
     try:
         return args.run(args)
+    except files.WriteAbandoned:  # interrupted from outside, which has said so
+        return EXIT_INTERRUPTED
     except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
         _say(f"stopped: {err}")
         return EXIT_UNCERTIFIED
@@ -654,11 +780,13 @@ def main(argv: list[str] | None = None) -> int:
                     print(_dumps({"status": "time_limit", "time_limit": args.time_limit}),
                           flush=True)
                 cancelled.set()
+                files.abandon(worker)
                 _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
                 _worker = worker
                 return EXIT_UNCERTIFIED
     except KeyboardInterrupt:
         cancelled.set()
+        files.abandon(worker)  # a file half written is removed; the old one stays
         _say("interrupted")
         _worker = worker
         return EXIT_INTERRUPTED

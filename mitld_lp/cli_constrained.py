@@ -79,13 +79,15 @@ def solve(args: argparse.Namespace, model: Any, policy_file: Path | None) -> int
 
 
 def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
+    from mitld_lp import files
     from mitld_lp.cli import _write
 
     def write(p: Path) -> None:
-        if p.suffix == ".json":
-            p.write_text(json.dumps(rows, default=repr, indent=1))
+        if p.suffix.lower() == ".json":
+            with files.replacing(p) as fh:
+                fh.write(json.dumps(rows, default=repr, indent=1))
             return
-        with p.open("w", newline="") as fh:
+        with files.replacing(p, newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["action"])
             w.writeheader()
             for row in rows:
@@ -96,12 +98,13 @@ def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def args_pareto(p: argparse.ArgumentParser) -> None:
-    from mitld_lp.cli import _args_model, _bounded_int
+    from mitld_lp.arguments import bounded_int
+    from mitld_lp.cli import _args_model
 
     _args_model(p)
     p.add_argument("--against", required=True, metavar="Q",
                    help="steps, cost, or 'P(FORMULA)' (a risk bounded from above)")
-    p.add_argument("--points", type=_bounded_int(2, 1000), default=11)
+    p.add_argument("--points", type=bounded_int(2, 1000), default=11)
     p.add_argument("--csv", metavar="FILE", required=True, help="the points (.csv)")
     p.add_argument("--plot", metavar="FILE", help="the curve (.png), certified points only")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
@@ -120,10 +123,10 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         points = pareto(model, args.against, args.points)
     except ConstraintError as exc:
         raise _usage(exc) from None
-    _write(out_csv, lambda p: write_csv(points, p))
+    _write(out_csv, lambda p: write_csv(points, p, overwrite=True))
     _out(f"wrote {out_csv}")
     if out_png:
-        left = plot(points, out_png, args.against, model.name)
+        left = plot(points, out_png, args.against, model.name, overwrite=True)
         _out(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
     for p in points:
         _out(f"{p.bound:12.6g}  [{p.lower:.6f}, {p.upper:.6f}]  {p.status}"

@@ -44,7 +44,7 @@ from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optim
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 
 __all__ = ["synthesize_constrained", "ConstrainedResult", "ConstraintValue",
-           "ConstrainedController", "quantity_of", "rows_for"]
+           "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,7 +197,7 @@ def _laws(model: Model, constraints: tuple[Constraint, ...]) -> dict[str, FirstO
     return laws
 
 
-def _cost_vector(mdp: MDP, costs: Mapping[str, float]) -> np.ndarray:
+def cost_vector(mdp: MDP, costs: Mapping[str, float]) -> np.ndarray:
     unknown = sorted(set(costs) - set(mdp.action_names))
     if unknown:
         raise ConstraintError(
@@ -238,7 +238,7 @@ def synthesize_constrained(
     sta = make_sta(joint.dta, laws, eps)
     mdp = product(model.game, sta, max_states=max_states, max_memory=max_memory)
     merged = merge(mdp, joint)
-    cost_vec = _cost_vector(mdp, cost_map)
+    cost_vec = cost_vector(mdp, cost_map)
     t1 = time.perf_counter()
     def rows(which: str) -> list[Row]:
         return rows_for(cons, which)

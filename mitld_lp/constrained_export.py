@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from mitld_lp import files
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.solvers.constrained_model import Merged
 
@@ -22,9 +23,6 @@ __all__ = ["write_merged_drn"]
 def write_merged_drn(merged: Merged, path: str | os.PathLike[str], *,
                      overwrite: bool = False) -> Path:
     """Write ``merged`` to ``path`` (see the module docstring)."""
-    out = Path(path)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
     mdp = merged.mdp
     k = merged.verdicts.shape[1]
     lines = ["@type: MDP", "@parameters", "", "@reward_models", "steps", "@nr_states",
@@ -42,5 +40,5 @@ def write_merged_drn(merged: Merged, path: str | os.PathLike[str], *,
             lines.extend(f"\t\t{int(t)} : {float(p)!r}"
                          for t, p in zip(cols[indptr[c]:indptr[c + 1]],
                                          vals[indptr[c]:indptr[c + 1]], strict=True))
-    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return out
+    return files.write_text(path, "\n".join(lines) + "\n", overwrite=overwrite,
+                            suffixes=(".drn",))

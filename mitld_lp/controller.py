@@ -24,7 +24,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from mitld_lp import defaults
+from mitld_lp import defaults, files
 from mitld_lp.automata.sta import STA, ClockStep
 from mitld_lp.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate
 from mitld_lp.game import Game
@@ -229,16 +229,18 @@ class Controller:
         rule, and every world state it may observe with its propositions (see
         :mod:`mitld_lp.controller_file`).  :meth:`load` reads it back in any process,
         without the world's class.  The file holds data only, never pickled objects.
+        The path follows the package's one rule for output files (:mod:`mitld_lp.files`):
+        checked before any work, written to a temporary file renamed into place.
 
         Raises ``FileExistsError`` if ``path`` exists and not ``overwrite``;
         ``ValueError`` (before writing) if a world state is not made of None, booleans,
         numbers, strings and tuples, or if the world states to tabulate exceed
         ``max_states``.
         """
-        out = Path(path)
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
-        _write_bytes(out, self._plan.tables(max_states).to_bytes())
+        out = files.writable_path(path, overwrite=overwrite)
+        data = self._plan.tables(max_states).to_bytes()
+        with files.replacing(out, "wb") as handle:
+            handle.write(data)
         return out
 
     @classmethod
@@ -291,9 +293,3 @@ class Controller:
         # construction, or past a truncation point), or one that cannot reach the
         # target (its value is 0); any action will do.
         return plan.fallback(state) if action is None else action
-
-
-def _write_bytes(path: Path, data: bytes) -> None:
-    """Write the saved controller's bytes to ``path``."""
-    with path.open("wb") as handle:
-        handle.write(data)

@@ -19,6 +19,9 @@ The schema (also in docs/model-files.md)::
     [distributions]                     # optional: name -> inline table (see
     mu1 = { geometric = 0.8 }           # mitld_lp.distributions.from_table)
 
+    [constants]                         # optional: name -> value, written {name} in
+    T = 3                               # the spec (mitld_lp.constants)
+
 Every key is validated: unknown keys, wrong types (``true`` is not a number) and
 out-of-range values are errors.  The specification is parsed and checked to be in the
 co-safe fragment; each of its events gets exactly one distribution, either a name bound
@@ -31,9 +34,9 @@ Every error is a :class:`ModelError` whose message starts with the source (the f
 path) and names the key path and the offending value, e.g.
 ``models/x.toml: grid.slip: must be in [0, 0.5], got 0.7``.
 
-Game kinds: the loader dispatches on which game table is present (today only
-``[grid]``); a new kind is one entry in ``_GAME_KINDS`` with the top-level tables it
-owns and a builder.
+Game kinds: the loader dispatches on which game table is present (``[grid]``,
+``[prism]``, ``[gym]``, ``[python]``); a new kind is one entry in ``_GAME_KINDS`` with
+the top-level tables it owns and a builder.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ from types import MappingProxyType
 from typing import Any
 
 from mitld_lp import defaults
+from mitld_lp.constants import substitute
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec, from_table
 from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
@@ -142,10 +146,10 @@ class Model:
                 "game", f"must implement the Game protocol (initial, proposition_names, "
                 f"actions, successors, propositions), got {type(game).__name__}"
             )
-        if not isinstance(epsilon, int | float) or isinstance(epsilon, bool) or not (
-            0.0 < epsilon < 1.0
-        ):
-            raise ctx.error("epsilon", f"must be a number in (0, 1), got {epsilon!r}")
+        try:
+            epsilon = defaults.check_epsilon(epsilon)
+        except ValueError as err:
+            raise ctx.error("epsilon", str(err)) from None
         named: dict[str, FirstOccurrence] = {}
         for dname, law in (distributions or {}).items():
             if not isinstance(law, FirstOccurrence):
@@ -404,10 +408,21 @@ _GAME_KINDS: tuple[_GameKind, ...] = (
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
     ),
     _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
+    # worlds named by code (mitld_lp.worlds.loaders): a gymnasium environment, a factory
+    _GameKind(table="gym", extra_tables=(), proposition_noun="label",
+              build=lambda doc, ctx: _loaders().gym_world(doc, ctx)),
+    _GameKind(table="python", extra_tables=(), proposition_noun="proposition",
+              build=lambda doc, ctx: _loaders().python_world(doc, ctx)),
 )
 
+
+def _loaders() -> Any:
+    from mitld_lp.worlds import loaders
+
+    return loaders
+
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "constraints", "costs"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "constants", "constraints", "costs"}
 
 
 # --------------------------------------------------------------------------- the spec
@@ -589,9 +604,16 @@ def _load(text: str, source: str, path: Path | None) -> Model:
     spec_text = ctx.string(doc["spec"], "spec")
     epsilon = DEFAULT_EPSILON
     if "epsilon" in doc:
-        epsilon = ctx.number(doc["epsilon"], "epsilon")
-        if not 0.0 < epsilon < 1.0:
-            raise ctx.error("epsilon", f"must be in (0, 1), got {_show(doc['epsilon'])}")
+        ctx.number(doc["epsilon"], "epsilon")
+        try:
+            epsilon = defaults.check_epsilon(doc["epsilon"])
+        except ValueError as err:
+            raise ctx.error("epsilon", str(err)) from None
+
+    # {name} in the spec stands for a value under [constants] (mitld_lp.constants)
+    spec_text = substitute(spec_text, ctx.table(doc.get("constants", {}), "constants"),
+                           ctx.error)
+    doc = {**doc, "spec": spec_text}
 
     game = kind.build(doc, ctx)
 

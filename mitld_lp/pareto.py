@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mitld_lp import files
 from mitld_lp.constrained import rows_for, synthesize_constrained
 from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint, parse_constraints
 from mitld_lp.model import Model
@@ -67,8 +68,8 @@ def _range(model: Model, against: str) -> tuple[float, float]:
         least = optimise(probe.merged, Quantity("prob", own + 1, 1.0), False, rows)
         top = probe.constraints[-1].value
         return float(least.objective), float(top)
-    from mitld_lp.constrained import _cost_vector
-    costs = _cost_vector(base.mdp, dict(model.costs))
+    from mitld_lp.constrained import cost_vector
+    costs = cost_vector(base.mdp, dict(model.costs))
     own = rows_for(parse_constraints(model.constraints), "lower")
     least = optimise(base.merged, Quantity(lo_c.kind), False, own, costs=costs)
     return float(least.objective), float(base.secondary or 0.0)
@@ -88,17 +89,23 @@ def pareto(model: Model, against: str, points: int = 11) -> list[ParetoPoint]:
     return out
 
 
-def write_csv(points: list[ParetoPoint], path: Path) -> None:
-    with path.open("w", newline="") as fh:
+def write_csv(points: list[ParetoPoint], path: Path, *, overwrite: bool = False) -> Path:
+    """The points as CSV (:data:`_COLUMNS`), under the output-file rule."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".csv",))
+    with files.replacing(out, newline="") as fh:
         w = csv.writer(fh)
         w.writerow(_COLUMNS)
         for p in points:
             w.writerow([repr(p.bound), repr(p.lower), repr(p.upper), repr(p.achieved), p.status,
                         p.certified])
+    return out
 
 
-def plot(points: list[ParetoPoint], path: Path, against: str, title: str) -> int:
-    """Draw the certified points (the bracket as a band); returns how many were left out."""
+def plot(points: list[ParetoPoint], path: Path, against: str, title: str, *,
+         overwrite: bool = False) -> int:
+    """Draw the certified points (the bracket as a band) as a PNG, under the output-file
+    rule; returns how many were left out."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".png",))
     import matplotlib
 
     matplotlib.use("Agg")
@@ -116,6 +123,7 @@ def plot(points: list[ParetoPoint], path: Path, against: str, title: str) -> int
     ax.set_title(title)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with files.replacing_path(out) as scratch:
+        fig.savefig(scratch, dpi=120)
     plt.close(fig)
     return len(points) - len(good)

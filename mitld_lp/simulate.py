@@ -1,9 +1,10 @@
-"""Monte-Carlo rollouts of a controller in the *untruncated* world.
+"""Monte-Carlo rollouts of a controller in the *untruncated* world of a model.
 
-Event times are drawn from their real distributions by inverse CDF (not through the
-hazards the product uses), the game moves by its own successor distributions, and
-success is decided by the automaton on the trace of labels.  The estimate comes with a
-Wilson 95% confidence interval.
+The world is the model's: event times are drawn from the events' real laws
+(``model.distributions``) by inverse CDF, not through the hazards the product uses, and
+the game (``model.game``) moves by its own successor distributions.  The controller
+only chooses the actions; success is decided by its automaton on the trace of labels.
+The estimate comes with a Wilson 95% confidence interval.
 """
 
 from __future__ import annotations
@@ -15,15 +16,11 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from mitld_lp.automata.sta import STA
+from mitld_lp import defaults
 from mitld_lp.controller import Controller, Observation, RunStatus
-from mitld_lp.game import Game
+from mitld_lp.model import Model
 
-__all__ = ["SimulationResult", "simulate", "rollout", "Step", "MAX_RUNS"]
-
-MAX_RUNS = 100_000_000
-"""The most runs :func:`simulate` accepts: at tens of thousands of runs a second, more
-would take days, and the interval's half-width is already below 1e-4."""
+__all__ = ["SimulationResult", "simulate", "rollout", "Step"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,16 +78,19 @@ def _sample_successor(rng: np.random.Generator, succ) -> Any:
 
 
 def rollout(
-    game: Game[Any],
-    sta: STA,
+    model: Model,
     controller: Controller,
     rng: np.random.Generator,
     *,
-    max_steps: int = 1000,
+    max_steps: int = defaults.MAX_STEPS,
     record: bool = False,
 ) -> tuple[RunStatus, list[Step]]:
-    """One run: returns the controller's final status and (if ``record``) the steps."""
-    times = {a: float(c.distribution.sample(rng, 1)[0]) for a, c in sta.clocks.items()}
+    """One run of ``controller`` in ``model``'s world: returns the controller's final
+    status and (if ``record``) the steps.  Each event's time is drawn from its law once,
+    at the start (events in name order, so a seed gives the same run)."""
+    game = model.game
+    times = {a: float(law.sample(rng, 1)[0])
+             for a, law in sorted(model.distributions.items())}
     controller.reset()
     s = game.initial
     events: frozenset[str] = frozenset()
@@ -110,29 +110,30 @@ def rollout(
 
 
 def simulate(
-    game: Game[Any],
-    sta: STA,
+    model: Model,
     controller: Controller,
     *,
-    runs: int = 10_000,
+    runs: int = defaults.RUNS,
     seed: int | None = 0,
-    max_steps: int = 1000,
+    max_steps: int = defaults.MAX_STEPS,
     progress: bool | None = None,
 ) -> SimulationResult:
-    """Estimate the probability that ``controller`` satisfies the task.
+    """Estimate the probability that ``controller`` satisfies ``model``'s task in the
+    model's untruncated world (module docs).
 
     Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
-    ``1..MAX_RUNS``, ``max_steps`` not an integer ``>= 0``, or ``seed`` negative.
+    ``1..defaults.MAX_RUNS``, ``max_steps`` not an integer in
+    ``0..defaults.MAX_STEPS_LIMIT``, or ``seed`` negative.
     """
-    _check_count("runs", runs, 1, MAX_RUNS)
-    _check_count("max_steps", max_steps, 0, None)
+    _check_count("runs", runs, 1, defaults.MAX_RUNS)
+    _check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
     if seed is not None:
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
     ok = beyond = undecided = 0
     for _ in tqdm(range(runs), disable=(not progress) if progress is not None else None,
                   leave=False, desc="simulate"):
-        status, _ = rollout(game, sta, controller, rng, max_steps=max_steps)
+        status, _ = rollout(model, controller, rng, max_steps=max_steps)
         ok += status is RunStatus.ACCEPTED
         undecided += status is RunStatus.RUNNING
         beyond += controller.beyond_model

@@ -22,8 +22,6 @@ does better.  So the true optimum lies in ``[lower, upper]``, and
 
 from __future__ import annotations
 
-import csv
-import json
 import logging
 import os
 import time
@@ -34,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from mitld_lp import defaults
+from mitld_lp import defaults, report
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
@@ -45,20 +43,16 @@ from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.product import product
-from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
-from mitld_lp.solvers.lp import solve_lp
-from mitld_lp.solvers.quotient import Quotient, reduce
-from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.constrained import ConstrainedResult
+    from mitld_lp.solvers.lp import Backend
+    from mitld_lp.solvers.quotient import Quotient
+    from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check",
-           "Sizes"]
+__all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check"]
 
 log = logging.getLogger(__name__)
-
-_POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
 
 Method = Literal["lp", "vi"]
 
@@ -80,7 +74,7 @@ class ModelSolution:
     status: Status
     value: float  # the method's optimum at the initial state
     policy: np.ndarray  # deterministic: a choice row per state, -1 where absorbing
-    policy_value: float  # exact value of ``policy`` at the initial state
+    policy_values: np.ndarray  # exact value of ``policy`` in every state (read-only)
     bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
     lp: LPResult | None
     iteration: IterationResult
@@ -92,42 +86,52 @@ class ModelSolution:
         return all(c.passed for c in self.checks)
 
 
-@dataclass(frozen=True, slots=True)
-class Sizes:
-    dta_states: int
-    states: int
-    choices: int
-    transitions: int
-
-
 @dataclass(frozen=True, slots=True, eq=False)
 class SynthesisResult:
     """What :func:`synthesize` returns (see the module docstring for the bracket).
 
-    ``status`` is ``OPTIMAL`` when every solve succeeded; ``certified`` tells whether all
-    checks passed, and ``failed_checks`` which did not.
+    Each quantity has one name: the answer is ``lower``, ``upper``, ``certified`` and
+    ``status`` (read from the two models); the policy, the method's optimum, the LP's
+    and the iteration's records are those of ``lower_model`` (and ``upper_model``); the
+    truncation points and the epsilon achieved are the ``sta``'s; the sizes are the
+    ``dta``'s and the ``mdp``'s.
     """
 
-    status: Status
-    lower: float
-    upper: float
-    value: float
-    certified: bool
-    method: str
-    policy: np.ndarray
-    randomized: np.ndarray | None
-    controller: Controller
-    epsilon: float
-    epsilon_achieved: float
-    truncation_points: Mapping[str, int]
-    sizes: Sizes
-    timings: Mapping[str, float]
-    lower_model: ModelSolution
-    upper_model: ModelSolution
+    model: Model
+    method: Method
+    epsilon: float  # the truncation budget asked for (the model's unless overridden)
     dta: DTA
     sta: STA
     mdp: MDP
-    model: Model
+    lower_model: ModelSolution
+    upper_model: ModelSolution
+    controller: Controller
+    timings: Mapping[str, float]  # seconds per stage: automaton, product, solve
+
+    @property
+    def lower(self) -> float:
+        """What the returned policy achieves in the real world: its exact value in the
+        lower model (runs past a truncation point count as failures)."""
+        return float(self.lower_model.policy_values[self.mdp.initial])
+
+    @property
+    def upper(self) -> float:
+        """No policy does better: interval iteration's sound upper bound on the upper
+        model (runs past a truncation point count as successes)."""
+        return self.upper_model.bracket[1]
+
+    @property
+    def status(self) -> Status:
+        """``OPTIMAL`` when both solves succeeded, else the first other status."""
+        from mitld_lp.solvers.result import Status
+
+        return next((m.status for m in (self.lower_model, self.upper_model)
+                     if m.status is not Status.OPTIMAL), Status.OPTIMAL)
+
+    @property
+    def certified(self) -> bool:
+        """Every check of both models passed."""
+        return self.lower_model.certified and self.upper_model.certified
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -143,121 +147,25 @@ class SynthesisResult:
         return (
             f"SynthesisResult(model={self.model.name!r}, lower={self.lower:.7g}, "
             f"upper={self.upper:.7g}, certified={self.certified}, "
-            f"status={self.status.value!r}, states={self.sizes.states})"
+            f"status={self.status.value!r}, states={self.mdp.n_states})"
         )
 
     def _repr_html_(self) -> str:
-        from html import escape
-
-        rows = [
-            ("model", self.model.name),
-            ("spec", str(self.model.spec)),
-            ("optimum in", f"[{self.lower:.7f}, {self.upper:.7f}]"),
-            ("certified", "yes" if self.certified else "NO: " + "; ".join(
-                c.name for c in self.failed_checks)),
-            ("status", self.status.value),
-            ("epsilon achieved", f"{self.epsilon_achieved:.3g}"),
-            ("sizes", f"{self.sizes.dta_states} automaton states, {self.sizes.states} "
-                      f"states, {self.sizes.transitions} transitions"),
-        ]
-        body = "".join(
-            f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(v)}</td></tr>"
-            for k, v in rows
-        )
-        return f"<table>{body}</table>"
+        return report.html(self)
 
     def policy_table(self) -> list[dict[str, Any]]:
-        """The policy as data: one row per product state that is still undecided.
-
-        Keys: ``game_state`` (the game's own state), ``automaton_state`` (the obligation
-        still to satisfy, as formula text), ``pending`` (the events that have not
-        happened, sorted), ``clock`` (steps counted for the pending events, capped where
-        their hazards stop changing), ``action`` (the policy's action), ``value`` (the
-        probability that the policy satisfies the task from there, truncation counted as
-        failure: exact, from a linear solve on the policy's Markov chain).
-        """
-        from mitld_lp.product import ProductState
-        from mitld_lp.solvers.iteration import evaluate_policy
-
-        mdp, policy = self.mdp, self.policy
-        values = evaluate_policy(mdp, mdp.target, policy)
-        obligations = self.dta.states
-        rows: list[dict[str, Any]] = []
-        for i, state in enumerate(mdp.states):
-            if not isinstance(state, ProductState) or policy[i] < 0:
-                continue
-            rows.append({
-                "game_state": state.game,
-                "automaton_state": str(obligations[state.automaton]),
-                "pending": sorted(state.pending),
-                "clock": state.clock,
-                "action": mdp.action_name(int(policy[i])),
-                "value": float(values[i]),
-            })
-        return rows
+        """The policy as data (:func:`mitld_lp.report.policy_table`)."""
+        return report.policy_table(self)
 
     def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """Write :meth:`policy_table` to ``path``: ``.csv`` (one row per state, pending
-        events joined by spaces) or ``.json`` (a list of objects).  Refuses to replace an
-        existing file unless ``overwrite``."""
-        out = Path(path)
-        suffix = out.suffix.lower()
-        if suffix not in (".csv", ".json"):
-            raise ValueError(f"{out}: the suffix must be .csv or .json")
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: exists; pass overwrite=True to replace it")
-        rows = self.policy_table()
-        if suffix == ".json":
-            out.write_text(json.dumps(rows, default=str) + "\n")
-            return out
-        with out.open("w", newline="") as handle:
-            writer: csv.DictWriter[str] = csv.DictWriter(handle, fieldnames=list(_POLICY_COLUMNS))
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({**row, "game_state": str(row["game_state"]),
-                                 "pending": " ".join(row["pending"]),
-                                 "value": repr(row["value"])})
-        return out
+        """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write_policy`)."""
+        from mitld_lp.files import write_policy
+
+        return write_policy(self, path, overwrite=overwrite)
 
     def summary(self) -> dict[str, Any]:
-        """A JSON-ready record (the CLI's ``--json``)."""
-        return {
-            "model": self.model.name,
-            "status": self.status.value,
-            "lower": self.lower,
-            "upper": self.upper,
-            "value": self.value,
-            "certified": self.certified,
-            "failed_checks": [f"{c.name}: {c.detail}" for c in self.failed_checks],
-            "method": self.method,
-            "states": self.sizes.states,
-            "choices": self.sizes.choices,
-            "transitions": self.sizes.transitions,
-            "dta_states": self.sizes.dta_states,
-            "epsilon": self.epsilon,
-            "epsilon_achieved": self.epsilon_achieved,
-            "truncation_points": dict(self.truncation_points),
-            "seconds": self.seconds,
-            "timings": dict(self.timings),
-            "lp": None
-            if self.lower_model.lp is None
-            else {
-                "status": self.lower_model.lp.status.value,
-                "solver": self.lower_model.lp.solver,
-                "backend": self.lower_model.lp.backend,
-                "primal_objective": self.lower_model.lp.primal_objective,
-                "dual_objective": self.lower_model.lp.dual_objective,
-                "iterations": self.lower_model.lp.iterations,
-                "seconds": self.lower_model.lp.seconds,
-                "message": self.lower_model.lp.message,
-            },
-            "iteration": {
-                "status": self.lower_model.iteration.status.value,
-                "lower": self.lower_model.iteration.value_lower,
-                "upper": self.upper_model.iteration.value_upper,
-                "iterations": self.lower_model.iteration.iterations,
-            },
-        }
+        """A JSON-ready record, the CLI's ``--json`` (:func:`mitld_lp.report.summary`)."""
+        return report.summary(self)
 
 
 def _close(name: str, a: float, b: float, tol: float) -> Check:
@@ -265,51 +173,59 @@ def _close(name: str, a: float, b: float, tol: float) -> Check:
     return Check(name, ok, f"{a:.10g} vs {b:.10g} (|diff| = {abs(a - b):.2e}, tol {tol:g})")
 
 
-_NUMERICAL = (Status.INACCURATE, Status.MAX_ITERATIONS)
-"""LP outcomes that the interval-iteration policy may stand in for."""
+@dataclass(frozen=True, slots=True)
+class _Settings:
+    """How each of the two models is solved and certified (:func:`synthesize`'s
+    arguments, typed once)."""
+
+    method: Method
+    solver: str
+    backend: Backend
+    tol: float
+    certify_tol: float
+    progress: bool
+    decompose: bool
+    deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
 
-def _solve_model(
-    mdp: MDP,
-    target: np.ndarray,
-    which: str,
-    *,
-    method: Method,
-    solver: str,
-    backend: str,
-    tol: float,
-    certify_tol: float,
-    progress: bool,
-    decompose: bool = True,
-    deadline: float = float("inf"),
-) -> ModelSolution:
-    """Solve one model by ``method`` and certify it (module docs).
+def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> ModelSolution:
+    """Solve one model by ``how.method`` and certify it (module docs).
 
     The model is reduced once and every solver works on that :class:`Quotient`.  An LP
     that does not come back optimal (after its own retries) is replaced by the
-    interval-iteration policy, certified the same way (exact value inside the bracket).
+    interval-iteration policy, certified the same way (exact value inside the bracket)
+    when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``).
     """
+    from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+    from mitld_lp.solvers.lp import solve_lp
+    from mitld_lp.solvers.quotient import reduce
+    from mitld_lp.solvers.result import Status, read_only
+
     quotient = reduce(mdp, target)
+    tol, certify_tol = how.tol, how.certify_tol
 
     def remaining() -> float | None:
-        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
+        if how.deadline == float("inf"):
+            return None
+        return max(0.0, how.deadline - time.perf_counter())
 
-    it = interval_iteration(mdp, target, quotient=quotient, tol=tol, progress=progress,
+    it = interval_iteration(mdp, target, quotient=quotient, tol=tol, progress=how.progress,
                             time_limit=remaining())
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
     lp: LPResult | None = None
     policy, value, status = it.policy, it.value_lower, it.status
-    if method == "lp":
-        lp = solve_lp(mdp, target, quotient=quotient, solver=solver, backend=backend,  # type: ignore[arg-type]
-                      tol=tol, decompose=decompose, time_limit=remaining())
+    if how.method == "lp":
+        lp = solve_lp(mdp, target, quotient=quotient, solver=how.solver, backend=how.backend,
+                      tol=tol, decompose=how.decompose, time_limit=remaining())
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
             checks.append(_close("LP primal = dual", lp.primal_objective, lp.dual_objective,
                                  certify_tol))
-        elif lp.status in _NUMERICAL and it.status is Status.OPTIMAL:
+        elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
+                it.status is Status.OPTIMAL):
             # A numerical failure after the LP's own retries: the answer is the converged
             # iteration's, certified below like method "vi"; the LP's word is kept.
             checks.append(Check("LP replaced by the iteration policy", True,
@@ -317,7 +233,8 @@ def _solve_model(
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    exact = float(evaluate_policy(mdp, target, policy)[mdp.initial])
+    values = read_only(evaluate_policy(mdp, target, policy))
+    exact = float(values[mdp.initial])
     lo, hi = it.value_lower, it.value_upper
     checks.append(Check(
         "policy value within iteration bracket",
@@ -326,7 +243,7 @@ def _solve_model(
     ))
     checks.append(_close("policy value = optimum", exact, value, certify_tol))
     checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
-    return ModelSolution(which, status, value, policy, exact, (lo, hi), lp, it, quotient,
+    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, quotient,
                          tuple(checks))
 
 
@@ -350,17 +267,20 @@ def build_product(
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     progress: bool | None = None,
 ) -> Built:
     """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
     ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
-    then the reachable ``product`` with ``game``; the automaton and the product each
-    within ``max_states`` states, the product also within
-    ``max_memory`` bytes (default: half the machine's memory), both checked before the
-    work that would exceed them.  The only place that wires the stages."""
+    then the reachable ``product`` with ``game``.  Budgets, each checked before the work
+    that would exceed it: no state space built here has more than ``max_states``
+    states; the automaton, whose states cost thousands of times more than the
+    product's, also no more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`);
+    the product needs at most ``max_memory`` bytes (default: half the machine's
+    memory).  The only place that wires the stages."""
     t0 = time.perf_counter()
-    dta = to_dta(formula, max_states=max_states)
+    dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
     mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
@@ -373,11 +293,12 @@ def synthesize(
     *,
     epsilon: float | None = None,
     method: Method = "lp",
-    solver: str = "CLARABEL",
-    backend: str = "auto",
+    solver: str = defaults.SOLVER,
+    backend: Backend = "auto",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
     max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
@@ -395,7 +316,7 @@ def synthesize(
     directly, or through cvxpy with ``backend="cvxpy"``, which also takes any other
     ``solver`` cvxpy has) or ``"vi"`` (interval iteration alone).  Interval
     iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
-    per event instead of ``epsilon``.
+    per event instead of ``epsilon``.  The budgets are :func:`build_product`'s.
     ``decompose``: the LP block by block in topological order (default) or as one LP.
     ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
     ``constraints`` / ``then`` (or constraints in the model): a constrained synthesis,
@@ -414,52 +335,38 @@ def synthesize(
             f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
             f"got {type(model).__name__}"
         )
-    eps = model.epsilon if epsilon is None else epsilon
+    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
     built = build_product(
         model.game, model.spec, model.distributions, epsilon=eps,
         clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
-        max_memory=max_memory, progress=progress or None,
+        max_automaton_states=max_automaton_states, max_memory=max_memory,
+        progress=progress or None,
     )
-    dta, sta, mdp = built.dta, built.sta, built.mdp
+    mdp = built.mdp
     timings: dict[str, float] = dict(built.timings)
 
     t0 = time.perf_counter()
-    common = dict(method=method, solver=solver, backend=backend, tol=tol,
-                  certify_tol=certify_tol, progress=progress, decompose=decompose,
-                  deadline=float("inf") if time_limit is None else t0 + time_limit)
-    low = _solve_model(mdp, mdp.target, "lower", **common)  # type: ignore[arg-type]
+    how = _Settings(method, solver, backend, tol, certify_tol, progress, decompose,
+                    float("inf") if time_limit is None else t0 + time_limit)
+    low = _solve_model(mdp, mdp.target, "lower", how)
     if mdp.truncated.any():
-        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", **common)  # type: ignore[arg-type]
+        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", how)
     else:
         high = low
     timings["solve"] = time.perf_counter() - t0
 
-    statuses = {low.status, high.status}
-    status = Status.OPTIMAL if statuses == {Status.OPTIMAL} else next(
-        s for s in (low.status, high.status) if s is not Status.OPTIMAL)
-    randomized = low.lp.randomized if low.lp is not None else None
     result = SynthesisResult(
-        status=status,
-        lower=low.policy_value,
-        upper=high.bracket[1],
-        value=low.value,
-        certified=low.certified and high.certified,
+        model=model,
         method=method,
-        policy=low.policy,
-        randomized=randomized,
-        controller=Controller(model.game, sta, mdp, low.policy,
-                              hopeless=high.quotient.prob0),
         epsilon=eps,
-        epsilon_achieved=sta.epsilon_achieved,
-        truncation_points=sta.truncation_points,
-        sizes=Sizes(dta.n_states, mdp.n_states, mdp.n_choices, mdp.n_transitions),
-        timings=timings,
+        dta=built.dta,
+        sta=built.sta,
+        mdp=mdp,
         lower_model=low,
         upper_model=high,
-        dta=dta,
-        sta=sta,
-        mdp=mdp,
-        model=model,
+        controller=Controller(model.game, built.sta, mdp, low.policy,
+                              hopeless=high.quotient.prob0),
+        timings=timings,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

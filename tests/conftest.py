@@ -1,5 +1,7 @@
 """Shared pytest configuration (a deterministic hypothesis profile for CI) and the small
-hand-built MDPs the solver tests share (``from conftest import HAND, build_mdp``)."""
+hand-built MDPs the solver tests share (``from conftest import HAND, build_mdp``), and
+Pmax by the classic value LP (``reference_values``), a route that shares nothing with
+the package's solvers."""
 
 from __future__ import annotations
 
@@ -7,6 +9,7 @@ import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import scipy.optimize
 import scipy.sparse as sp
 from hypothesis import HealthCheck, settings
 
@@ -105,3 +108,22 @@ HAND_CHOICES: list[list[tuple[str, dict[int, float]]]] = [
 ]
 HAND = build_mdp(HAND_CHOICES, target=[3], sink=[2])
 HAND_VALUES = np.array([0.25, 0.5, 0.0, 1.0, 0.5, 0.0, 1.0])
+
+
+def reference_values(mdp: MDP, target: np.ndarray) -> np.ndarray:
+    """Pmax by the value LP on the raw MDP (scipy linprog / HiGHS): ``min sum v`` s.t.
+    ``v(s) >= sum P(c,.) v`` for every choice ``c`` of ``s``, ``v(target) = 1``,
+    ``0 <= v <= 1``, no graph analysis and no end-component collapse; its least
+    solution is Pmax."""
+    n = mdp.n_states
+    dense = mdp.matrix.toarray()
+    owner = mdp.choice_state()
+    rows = np.flatnonzero(~target[owner])
+    a_ub = dense[rows] - np.eye(n)[owner[rows]]  # P(c,.) v - v(s) <= 0
+    bounds = [(1.0, 1.0) if target[s] else (0.0, 1.0) for s in range(n)]
+    res = scipy.optimize.linprog(
+        np.ones(n), A_ub=a_ub, b_ub=np.zeros(rows.size), bounds=bounds, method="highs",
+        options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
+    )
+    assert res.status == 0, res.message
+    return np.asarray(res.x)

@@ -8,9 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mitld_lp.automata.sta import make_sta
+from mitld_lp.automata.translate import to_dta
 from mitld_lp.cli import main
 from mitld_lp.model import load_model
+from mitld_lp.product import ProductState
 from mitld_lp.synthesis import synthesize
+from mitld_lp.testing import reference_product
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 BUS = str(MODELS / "bus_grid.toml")
@@ -74,10 +78,24 @@ def test_a_budget_stop_exits_3_with_one_line(capsys):
 def test_info_counts(capsys):
     assert main(["info", BUS, "--json"]) == 0
     out = _json(capsys)
-    # Geometric events need no clock: one clock value; 16 cells at most.
-    assert out["clock_values"] == 1
-    assert out["game_states"] <= 16
-    assert out["truncation_points"] == {}
+    # every count from the state-at-a-time reference construction, counted here
+    m = load_model(BUS)
+    ref = reference_product(m.game, make_sta(to_dta(m.spec), m.distributions, m.epsilon))
+    ordinary = [s for s in ref.states if isinstance(s, ProductState)]
+    expected = {
+        "states": ref.n_states, "choices": ref.n_choices, "transitions": ref.n_transitions,
+        "ordinary_states": len(ordinary), "target_states": int(ref.target.sum()),
+        "sink_states": int(ref.sink.sum()), "truncated_states": int(ref.truncated.sum()),
+        "game_states": len({s.game for s in ordinary}),
+        "automaton_states": len({s.automaton for s in ordinary}),
+        "event_situations": len({s.pending for s in ordinary}),
+        "clock_values": len({s.clock for s in ordinary}),
+    }
+    assert {k: out[k] for k in expected} == expected
+    # by hand: geometric events need no clock; the robot can reach each of the 16 cells;
+    # any of the four sets of the two buses can still be pending; nothing is truncated
+    assert (out["clock_values"], out["game_states"], out["event_situations"]) == (1, 16, 4)
+    assert out["truncated_states"] == 0 and out["truncation_points"] == {}
     assert out["epsilon_achieved"] == 0
 
 

@@ -91,7 +91,7 @@ def recorded_runs(world, result, runs, seed):
     rng = np.random.default_rng(seed)
     out, beyond = [], 0
     for _ in range(runs):
-        status, steps = rollout(world, result.sta, result.controller, rng, max_steps=40,
+        status, steps = rollout(result.model, result.controller, rng, max_steps=40,
                                 record=True)
         beyond += result.controller.beyond_model
         out.append(([(s.state, sorted(s.events)) for s in steps],
@@ -151,7 +151,7 @@ def test_loaded_controller_acts_as_the_original_on_the_bundled_models(
     copy = Controller.load(r.controller.save(tmp_path / "c.npz"))
     rng = np.random.default_rng(2)
     for _ in range(200):
-        status, steps = rollout(m.game, r.sta, r.controller, rng, max_steps=60, record=True)
+        status, steps = rollout(m, r.controller, rng, max_steps=60, record=True)
         copy.reset()
         assert [copy.act(Observation(s.state, s.events)) for s in steps] == [
             s.action for s in steps]
@@ -168,9 +168,9 @@ def test_loaded_controller_follows_the_policy_table_state_by_state(tmp_path: Pat
     plan = copy._plan  # the tables; asked state by state without a run
     checked = 0
     for i, s in enumerate(r.mdp.states):
-        if isinstance(s, ProductState) and r.policy[i] >= 0:
+        if isinstance(s, ProductState) and r.lower_model.policy[i] >= 0:
             action, _ = plan.lookup(s.game, s.automaton, s.pending, s.clock)
-            assert action == r.mdp.action_names[r.mdp.choice_actions[r.policy[i]]]
+            assert action == r.mdp.action_names[r.mdp.choice_actions[r.lower_model.policy[i]]]
             checked += 1
     assert checked > 300
 
@@ -423,8 +423,8 @@ def test_controller_pickled_in_memory_acts_the_same(name):
     for q in range(sta.dta.n_states):
         assert sta.dta.delta[q] == r.sta.dta.delta[q]
     copy = roundtrip(r.controller)
-    a = simulate(m.game, r.sta, r.controller, runs=200, seed=3)
-    b = simulate(roundtrip(m.game), sta, copy, runs=200, seed=3)
+    a = simulate(m, r.controller, runs=200, seed=3)
+    b = simulate(roundtrip(m), copy, runs=200, seed=3)
     assert (a.successes, a.beyond_model, a.undecided) == (b.successes, b.beyond_model, b.undecided)
     copy.reset()
     r.controller.reset()

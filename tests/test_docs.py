@@ -4,7 +4,8 @@ docs/README.md, "Code blocks in these pages"):
 * ``python``: executed in order, in one fresh namespace per page;
 * ``bash``: every line is a ``mitld-lp`` command, run through ``mitld_lp.cli.main``; it
   must exit 0, or the status a trailing ``# exit N`` names;
-* ``toml`` / ``prism`` with ``file=NAME``: written to NAME for the blocks after it;
+* ``toml`` / ``prism`` / ``python`` with ``file=NAME``: written to NAME for the blocks
+  after it (not run);
   ``toml`` without a name: a complete model file, loaded with ``loads_model``;
 * ``text``: output shown to the reader, not code;
 * a fence right after ``<!-- not run: REASON -->`` is skipped (the install commands).
@@ -138,14 +139,14 @@ def test_page_runs(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
         if b.skipped is not None or b.lang in SHOWN:
             continue
         where = f"{page.name}:{b.line}"
-        if b.lang == "python":
+        if "file" in b.options:
+            (tmp_path / b.options["file"]).write_text(b.code, encoding="utf-8")
+        elif b.lang == "python":
             code = compile(b.code, where, "exec")
             with contextlib.redirect_stdout(io.StringIO()):
                 exec(code, namespace)  # noqa: S102 - running the documentation is the test
         elif b.lang == "bash":
             _run_bash(b)
-        elif "file" in b.options:
-            (tmp_path / b.options["file"]).write_text(b.code, encoding="utf-8")
         elif b.lang == "toml":
             loads_model(b.code, source=where)
         else:

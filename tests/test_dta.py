@@ -7,8 +7,12 @@ rounds of signature refinement over explicit letters), not the translation's own
 
 from __future__ import annotations
 
+import gc
 import itertools
+import json
 import re
+import subprocess
+import sys
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -67,15 +71,39 @@ def test_to_dta_reuses_the_nnf_of_the_fragment_report(monkeypatch: pytest.Monkey
     assert d.n_states == expected == 17
 
 
+_DUMP = """
+import json, sys
+import mitld_lp.automata.translate as T
+from mitld_lp.logic import parse
+
+def dump(d):
+    label = [d.location(s).label for s in range(d.n_states)]
+    assert len(set(label)) == len(label)  # a state is its obligation: labels name states
+    return sorted((label[s], d.is_accepting(s), d.is_rejecting(s),
+                   sorted((g, label[t]) for t, g in d.guards(s).items()))
+                  for s in range(d.n_states))
+"""
+
+
 def test_translation_keeps_no_memo_between_calls() -> None:
-    T.to_dta(parse("F[0,50] p & G[0,7] (q -> F[0,3] r)"))
+    """The memo tables of a translation live in one ``_Translation`` object per call:
+    none survives the call, and an automaton does not depend on what was translated
+    before it -- it is the one a fresh interpreter builds (compared state by state by
+    their obligations, so the numbering may differ)."""
+    spec = "F[0,50] p & G[0,7] (q -> F[0,3] r)"
+    for other in ("F[0,3] p", "G[0,7] (q -> F[0,3] r)", "p U[0,4] r", "F[0,50] p"):
+        T.to_dta(parse(other))
     T.progress(parse("F[0,3] p"), {"q"})
-    kept = {
-        name: len(v)
-        for name, v in vars(T).items()
-        if isinstance(v, dict | set | list) and not name.startswith("__") and name != "__all__"
-    }
-    assert all(n == 0 for n in kept.values()), kept
+    gc.collect()
+    assert [o for o in gc.get_objects() if isinstance(o, T._Translation)] == []
+    namespace: dict = {}
+    exec(_DUMP, namespace)
+    here = json.loads(json.dumps(namespace["dump"](T.to_dta(parse(spec)))))
+    fresh = subprocess.run(
+        [sys.executable, "-c", _DUMP + f"print(json.dumps(dump(T.to_dta(parse({spec!r})))))"],
+        capture_output=True, text=True, check=True, timeout=120)
+    assert here == json.loads(fresh.stdout)
+    assert len(here) == T.to_dta(parse(spec)).n_states > 50
 
 
 # --------------------------------------------------------------------------- minimisation
@@ -184,9 +212,47 @@ def _guard_holds(guard: str, letter) -> bool:
     )
 
 
-def test_minimise_flag_is_gone() -> None:
+def _equivalent_pairs(d: DTA) -> list[tuple[int, int]]:
+    """The pairs of states no word tells apart, by table filling (a pair is marked when
+    one accepts and the other not, or some letter leads to a marked pair), a route apart
+    from :func:`_moore_size`'s rounds of refinement."""
+    letters = [frozenset(c) for r in range(len(d.atoms) + 1)
+               for c in itertools.combinations(d.atoms, r)]
+    pairs = list(itertools.combinations(range(d.n_states), 2))
+    marked = {(i, j) for i, j in pairs if d.is_accepting(i) != d.is_accepting(j)}
+    changed = True
+    while changed:
+        changed = False
+        for i, j in pairs:
+            if (i, j) in marked:
+                continue
+            for a in letters:
+                x, y = sorted((d.step(i, a), d.step(j, a)))
+                if x != y and (x, y) in marked:
+                    marked.add((i, j))
+                    changed = True
+                    break
+    return [p for p in pairs if p not in marked]
+
+
+@pytest.mark.parametrize(
+    ("formula", "states"),
+    [
+        ("F[0,3] p", 6),  # windows x = 0..3, accept, reject
+        ("p U[0,2] q", 5),  # windows x = 0..2, accept, reject
+        # both pending at x = 0..2, only p or only q pending at x = 1, 2, accept, reject
+        ("F[0,2] p & F[0,2] q", 9),
+        (PAPER, 17),  # the minimal size (_moore_size agrees); 26 obligations before
+    ],
+)
+def test_the_automaton_is_always_minimal(formula: str, states: int) -> None:
+    """There is no way to skip minimisation: no two states accept the same continuations
+    (Myhill-Nerode), at the hand-counted sizes (so no state is unreachable either)."""
+    d = T.to_dta(parse(formula))
+    assert _equivalent_pairs(d) == []
+    assert d.n_states == states
     with pytest.raises(TypeError):
-        T.to_dta(parse("F p"), minimise=False)  # type: ignore[call-arg]
+        T.to_dta(parse(formula), minimise=False)  # type: ignore[call-arg]
 
 
 @pytest.mark.parametrize(

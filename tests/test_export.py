@@ -125,7 +125,7 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
     with pytest.raises(FileExistsError, match="overwrite=True"):
         write_lp(HAND, HAND.target, path)
     write_lp(HAND, HAND.target, path, overwrite=True)
-    with pytest.raises(ValueError, match="unknown LP format"):
+    with pytest.raises(ValueError, match="the suffix must be one of .mps, .lp"):
         write_lp(HAND, HAND.target, tmp_path / "x.txt")
 
 

@@ -14,9 +14,8 @@ from pathlib import Path
 import cvxpy as cp
 import numpy as np
 import pytest
-import scipy.optimize
 import scipy.sparse as sp
-from conftest import HAND, HAND_VALUES, build_mdp
+from conftest import HAND, HAND_VALUES, build_mdp, reference_values
 
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
@@ -53,22 +52,6 @@ RING = build_mdp(
 )
 
 BACKENDS = [("cvxpy", "CLARABEL"), ("cvxpy", "HIGHS"), ("direct", "CLARABEL")]
-
-
-def reference_values(mdp: MDP, target: np.ndarray) -> np.ndarray:
-    """Pmax by the value LP on the raw MDP (scipy linprog / HiGHS)."""
-    n = mdp.n_states
-    dense = mdp.matrix.toarray()
-    owner = mdp.choice_state()
-    rows = np.flatnonzero(~target[owner])
-    a_ub = dense[rows] - np.eye(n)[owner[rows]]  # P(c,.) v - v(s) <= 0
-    bounds = [(1.0, 1.0) if target[s] else (0.0, 1.0) for s in range(n)]
-    res = scipy.optimize.linprog(
-        np.ones(n), A_ub=a_ub, b_ub=np.zeros(rows.size), bounds=bounds, method="highs",
-        options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
-    )
-    assert res.status == 0, res.message
-    return np.asarray(res.x)
 
 
 def check_certificates(mdp: MDP, target: np.ndarray, r: LPResult, tol: float) -> None:
@@ -268,12 +251,28 @@ def test_upper_model_target_includes_truncated() -> None:
     assert upper.value == pytest.approx(0.75, abs=1e-8)
 
 
-def test_result_arrays_are_read_only() -> None:
-    r = solve_lp(LOOP, LOOP.target)
-    assert r.values is not None
-    with pytest.raises(ValueError):
-        r.values[0] = 0.0
-    assert sp.issparse(occupancy_lp(LOOP, LOOP.target).a_eq)
+def test_the_lp_is_the_hand_written_one_and_its_arrays_are_read_only() -> None:
+    # RING's ring {0, 1, 2} is one end component: collapsed to one LP row, whose two
+    # exits bail (choice 1) and jump (choice 4) leave it for good.  By hand: the flow
+    # y(bail) + y(jump) = 1 (start weight 1, nothing flows back), the objective
+    # 0.2 y(bail) + 0.9 y(jump); the optimum sends all the flow through jump.
+    lp = occupancy_lp(RING, RING.target)
+    assert sp.issparse(lp.a_eq)
+    np.testing.assert_array_equal(lp.a_eq.toarray(), [[1.0, 1.0]])
+    np.testing.assert_array_equal(lp.b_eq, [1.0])
+    np.testing.assert_array_equal(lp.objective, [0.2, 0.9])
+    np.testing.assert_array_equal(lp.quotient.choice_origin, [1, 4])
+    r = solve_lp(RING, RING.target)
+    assert r.occupancy is not None and r.values is not None
+    np.testing.assert_allclose(r.occupancy, [0, 0, 0, 0, 1, 0, 0], atol=1e-8)
+    np.testing.assert_allclose(r.values, reference_values(RING, RING.target), atol=1e-8)
+    arrays = {name: getattr(r, name) for name in ("values", "occupancy", "policy",
+                                                   "randomized")}
+    for name, array in arrays.items():
+        assert isinstance(array, np.ndarray) and not array.flags.writeable, name
+        with pytest.raises(ValueError):
+            array[0] = 0
+    np.testing.assert_allclose(r.values, reference_values(RING, RING.target), atol=1e-8)
 
 
 # ------------------------------------------------------------------------------------

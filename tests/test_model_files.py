@@ -383,9 +383,10 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
     (
         "epsilon too large",
         edit("epsilon = 0.01", "epsilon = 1.5"),
-        ("epsilon: must be in (0, 1), got 1.5",),
+        ("epsilon: must be a number in (0, 1), got 1.5",),
     ),
-    ("epsilon zero", edit("epsilon = 0.01", "epsilon = 0"), ("epsilon: must be in (0, 1), got 0",)),
+    ("epsilon zero", edit("epsilon = 0.01", "epsilon = 0"),
+     ("epsilon: must be a number in (0, 1), got 0",)),
     (
         "epsilon a string",
         edit("epsilon = 0.01", 'epsilon = "small"'),
@@ -461,7 +462,8 @@ def _never_built(doc: dict[str, Any], ctx: Any) -> GridWorld:
 
 @pytest.fixture
 def with_maze_kind(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Only [grid] exists today; register a second game kind to check the dispatch."""
+    """A game kind registered for the test (beside [grid] and [prism]), to check the
+    dispatch."""
     maze = model_module._GameKind(
         table="maze", extra_tables=(), proposition_noun="room", build=_never_built
     )

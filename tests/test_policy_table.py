@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import csv
 import json
+import re
+from html import escape
 from pathlib import Path
 
 import pytest
 
 from mitld_lp import GridWorld, Model, synthesize
 from mitld_lp.cli import main
+from mitld_lp.testing import reference_product
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 SPEC = "D[pmf(0.2, 0.3, 0.4)] b & F(b & F[0,0] A)"
@@ -64,10 +67,25 @@ def test_csv_and_json_files_round_trip(corridor, tmp_path):
         corridor.write_policy(tmp_path / "p.txt")
 
 
-def test_repr_is_short_and_html_escapes(corridor):
+def test_repr_and_html_say_the_hand_worked_answer(corridor):
+    # the sizes from the state-at-a-time reference construction; the bracket by hand:
+    # the event comes at step 2 or 3 (0.3 + 0.4) when the robot has just reached A, and
+    # the law's tail (0.1: never) has a constant hazard, so nothing is truncated
+    reference = reference_product(corridor.model.game, corridor.sta)
     text = repr(corridor)
-    assert len(text) < 200 and "lower=0.7" in text and "certified=True" in text
-    assert "&amp;" in corridor._repr_html_()
+    assert len(text) < 200
+    fields = dict(re.findall(r"(\w+)=([^,)]+)", text))
+    assert float(fields["lower"]) == float(fields["upper"]) == pytest.approx(0.7, abs=1e-9)
+    assert fields["certified"] == "True" and fields["status"] == "'optimal'"
+    assert int(fields["states"]) == reference.n_states
+    page = corridor._repr_html_()
+    rows = dict(re.findall(r"<tr><th[^>]*>(.*?)</th><td>(.*?)</td></tr>", page))
+    assert rows["spec"] == escape(str(corridor.model.spec)) and "&amp;" in rows["spec"]
+    assert rows["optimum in"] == "[0.7000000, 0.7000000]"
+    assert rows["certified"] == "yes" and rows["epsilon achieved"] == "0"
+    # two automaton states: the task pending, and accepted (an eventuality never fails)
+    assert rows["sizes"] == (f"2 automaton states, {reference.n_states} states, "
+                             f"{reference.n_transitions} transitions")
 
 
 def test_solve_writes_the_policy_file(tmp_path, capsys):

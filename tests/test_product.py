@@ -49,6 +49,7 @@ from mitld_lp.product import (
     estimate_size,
     product,
 )
+from mitld_lp.testing import reference_product
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
@@ -481,18 +482,6 @@ def test_formula_false_at_step_zero_gives_an_initial_sink():
 # --------------------------------------------------------------------------- the array build
 
 
-def _reference():
-    """The first, state-at-a-time construction (experiments/_reference_product.py)."""
-    import sys
-
-    experiments = str(Path(__file__).resolve().parent.parent / "experiments")
-    if experiments not in sys.path:
-        sys.path.insert(0, experiments)
-    from _reference_product import reference_product
-
-    return reference_product
-
-
 def assert_same_mdp(a, b) -> None:
     """Equal state for state, in the same order, and bit for bit in every array."""
     assert a.n_states == b.n_states and a.initial == b.initial
@@ -508,7 +497,7 @@ def assert_same_mdp(a, b) -> None:
 def test_array_build_equals_the_state_at_a_time_build_on_the_models(name):
     m = load_model(MODELS / name)
     sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
-    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
+    assert_same_mdp(product(m.game, sta), reference_product(m.game, sta))
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -516,7 +505,7 @@ def test_array_build_equals_the_state_at_a_time_build_on_the_example(case):
     dists, _, kw, _ = CASES[case]
     game = GridWorld.make(2, 2, start=(0, 0), slip=0.1, regions=GRID)
     sta = make_sta(to_dta(parse(PAPER)), dists, 0.01, **kw)
-    assert_same_mdp(product(game, sta), _reference()(game, sta))
+    assert_same_mdp(product(game, sta), reference_product(game, sta))
 
 
 RANDOM_SPECS = (
@@ -565,7 +554,7 @@ def test_array_build_equals_the_state_at_a_time_build_on_random_games(seed):
     kw = {"clock_reduction": False, "truncation": dict.fromkeys(dists, 3)} if seed % 3 == 0 else {}
     sta = make_sta(to_dta(parse(text)), dists, 0.01, **kw)
     mdp = product(game, sta)
-    assert_same_mdp(mdp, _reference()(game, sta))
+    assert_same_mdp(mdp, reference_product(game, sta))
     # every record maps back to its index
     for i, s in enumerate(mdp.states):
         assert mdp.states.position(s) == i and mdp.states.index(s) == i and s in mdp.states
@@ -671,10 +660,10 @@ def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, mo
     text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
     game = _random_game(rng, sorted(dists))
     sta = make_sta(to_dta(parse(text)), dists, 0.01)
-    assert_same_mdp(product(game, sta), _reference()(game, sta))
+    assert_same_mdp(product(game, sta), reference_product(game, sta))
     m = load_model(MODELS / "red_light.toml")
     sta = make_sta(to_dta(m.spec), m.distributions, m.epsilon)
-    assert_same_mdp(product(m.game, sta), _reference()(m.game, sta))
+    assert_same_mdp(product(m.game, sta), reference_product(m.game, sta))
 
 
 def test_product_refuses_a_proposition_it_could_never_see():

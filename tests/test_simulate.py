@@ -29,9 +29,10 @@ def test_wilson_interval_contains_the_end_point_it_contains_in_exact_arithmetic(
         assert _wilson(0, n)[1] == pytest.approx(Z * Z / (n + Z * Z), rel=1e-12)
 
 
-def _world_and_result(spec: str):
+def _model_and_result(spec: str):
     world = GridWorld.make(4, 1, start=(0, 0), regions={"A": [(3, 0)]})  # no slip
-    return world, synthesize(Model.from_game(world, spec))
+    model = Model.from_game(world, spec)
+    return model, synthesize(model)
 
 
 @pytest.mark.parametrize(
@@ -39,9 +40,9 @@ def _world_and_result(spec: str):
     [("F[0,3] A", 1.0, 13), ("F[0,2] A", 0.0, 12)],  # A is 3 moves east
 )
 def test_a_true_value_of_exactly_0_or_1_is_inside_the_interval(spec, value, runs):
-    world, r = _world_and_result(spec)
+    model, r = _model_and_result(spec)
     assert r.lower == r.upper == value
-    sim = simulate(world, r.sta, r.controller, runs=runs, seed=1)
+    sim = simulate(model, r.controller, runs=runs, seed=1)
     assert sim.successes == runs * value
     assert sim.ci_low <= r.upper and r.lower <= sim.ci_high  # what the CLI calls consistent
 
@@ -54,11 +55,12 @@ def test_a_true_value_of_exactly_0_or_1_is_inside_the_interval(spec, value, runs
         ({"runs": 10**12}, "runs: must be in 1"),
         ({"runs": 2.5}, "runs: must be an integer, got 2.5"),
         ({"runs": True}, "runs: must be an integer"),
-        ({"max_steps": -1}, "max_steps: must be >= 0, got -1"),
+        ({"max_steps": -1}, r"max_steps: must be in 0\.\.1,000,000, got -1"),
+        ({"max_steps": 10**7}, r"max_steps: must be in 0\.\.1,000,000, got 10000000"),
         ({"seed": -1}, "seed: must be >= 0, got -1"),
     ],
 )
 def test_bad_arguments_are_refused_naming_the_argument(kwargs, message):
-    world, r = _world_and_result("F[0,3] A")
+    model, r = _model_and_result("F[0,3] A")
     with pytest.raises(ValueError, match=message):
-        simulate(world, r.sta, r.controller, **kwargs)
+        simulate(model, r.controller, **kwargs)

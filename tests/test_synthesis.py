@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import reference_values
 
 from mitld_lp import GridWorld, Model, Observation, RunStatus, load_model, simulate, synthesize
 from mitld_lp.solvers.result import Status
@@ -31,11 +32,11 @@ def test_canonical_model_matches_storm(path, expected, method, backend):
     assert r.status is Status.OPTIMAL
     assert r.certified, r.failed_checks
     # Geometric buses are memoryless: nothing is truncated and the bracket is a point.
-    assert r.epsilon_achieved == 0.0
-    assert r.truncation_points == {}
+    assert r.sta.epsilon_achieved == 0.0
+    assert r.sta.truncation_points == {}
     assert r.lower == pytest.approx(expected, abs=1e-6)
     assert r.upper == pytest.approx(expected, abs=1e-6)
-    assert r.value == pytest.approx(expected, abs=1e-6)
+    assert r.lower_model.value == pytest.approx(expected, abs=1e-6)
 
 
 def _corridor(width: int, slip: float) -> GridWorld:
@@ -73,16 +74,16 @@ def test_truncation_bracket_contains_the_exact_value():
     spec_exact = f"D[pmf({', '.join(repr(m) for m in masses)})] b & F(b & F[0,1] A)"
     world = GridWorld.make(4, 1, start=(0, 0), slip=0.1, regions={"A": [(3, 0)]})
     exact = synthesize(Model.from_game(world, spec_exact))
-    assert exact.truncation_points == {}
+    assert exact.sta.truncation_points == {}
     widths = []
     for eps in (0.2, 0.05, 0.01):
         spec = f"D[poisson({lam})] b & F(b & F[0,1] A)"
         r = synthesize(Model.from_game(world, spec), epsilon=eps)
         assert r.certified, r.failed_checks
-        assert r.truncation_points, "a Poisson law has no constant hazard: it is truncated"
+        assert r.sta.truncation_points, "a Poisson law has no constant hazard: it is truncated"
         assert r.lower - 1e-7 <= exact.lower <= r.upper + 1e-7
-        assert r.upper - r.lower <= r.epsilon_achieved + 1e-7
-        assert r.epsilon_achieved <= eps
+        assert r.upper - r.lower <= r.sta.epsilon_achieved + 1e-7
+        assert r.sta.epsilon_achieved <= eps
         widths.append(r.upper - r.lower)
     assert widths[0] >= widths[1] >= widths[2]
 
@@ -122,7 +123,7 @@ def test_controller_follows_the_policy_and_tracks_the_automaton():
 def test_simulation_confidence_interval_contains_the_certified_value():
     model = load_model(RED_LIGHT)
     r = synthesize(model)
-    sim = simulate(model.game, r.sta, r.controller, runs=20000, seed=7, max_steps=200)
+    sim = simulate(model, r.controller, runs=20000, seed=7, max_steps=200)
     # The controller's true value lies between its value in the lower model and the
     # upper bound; the 95% interval must meet that range.
     assert sim.ci_low <= r.upper + 1e-9 and sim.ci_high >= r.lower - 1e-9
@@ -134,7 +135,7 @@ def test_simulation_confidence_interval_contains_the_certified_value():
 def test_simulation_of_canonical_model():
     model = load_model(BUS_CASE2)
     r = synthesize(model)
-    sim = simulate(model.game, r.sta, r.controller, runs=3000, seed=3, max_steps=60)
+    sim = simulate(model, r.controller, runs=3000, seed=3, max_steps=60)
     assert sim.ci_low <= STORM_CASE2 <= sim.ci_high
 
 
@@ -164,13 +165,23 @@ def test_solver_failure_is_a_status_not_an_exception():
     assert r.lower == pytest.approx(STORM_CASE1, abs=1e-6)
 
 
-def test_policy_is_a_choice_of_each_state():
-    r = synthesize(load_model(BUS_CASE1))
+@pytest.mark.parametrize("path", [BUS_CASE1, RED_LIGHT])  # red_light: truncated
+def test_policy_is_optimal_in_every_state(path):
+    # Pmax of every product state by the value LP (scipy, no graph analysis, no end
+    # components collapsed), against the exact value of the returned policy in that
+    # state: the policy is optimal everywhere, not only where it goes from the start.
+    r = synthesize(load_model(path))
     mdp = r.mdp
-    live = ~(mdp.target | mdp.sink | mdp.truncated)
-    rows = r.policy[live]
-    starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
-    assert np.all((rows >= starts) & (rows < ends))
+    for model, target in ((r.lower_model, mdp.target),
+                          (r.upper_model, mdp.target | mdp.truncated)):
+        live = ~(mdp.target | mdp.sink | mdp.truncated)
+        rows = model.policy[live]
+        starts, ends = mdp.row_groups[:-1][live], mdp.row_groups[1:][live]
+        assert np.all((rows >= starts) & (rows < ends))
+        pmax = reference_values(mdp, target)
+        np.testing.assert_allclose(model.policy_values, pmax, atol=1e-6)
+        assert model.policy_values[mdp.initial] == pytest.approx(
+            r.lower if model is r.lower_model else r.upper, abs=1e-6)
 
 
 def test_controller_rejects_once_both_deadlines_are_missed():

@@ -102,7 +102,7 @@ def test_bundled_task_brackets_storms_value_of_a_hand_written_product(tmp_path: 
     storm = storm_pmax(write(tmp_path, _hand_product(7, hazards)), 'Pmax=? [F "goal"]')
     assert r.certified
     assert r.lower - 1e-6 <= storm <= r.upper + 1e-6
-    assert r.upper - r.lower <= r.epsilon_achieved + 1e-6
+    assert r.upper - r.lower <= r.sta.epsilon_achieved + 1e-6
     assert 0.5 < storm < 0.99  # the task is neither trivial nor hopeless
 
 
@@ -306,4 +306,4 @@ def test_corridor_tightest_deadline_by_hand() -> None:
     r = synthesize(Model.from_game(m.game, "D[poisson(2)] opened & F[0,4] goal"))
     hand = 0.8**4 * float(stats.poisson.cdf(2, 2))
     assert r.lower - 1e-9 <= hand <= r.upper + 1e-9
-    assert r.upper - r.lower <= r.epsilon_achieved + 1e-9
+    assert r.upper - r.lower <= r.sta.epsilon_achieved + 1e-9

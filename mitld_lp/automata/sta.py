@@ -25,6 +25,7 @@ import itertools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
+from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
 
@@ -196,8 +197,11 @@ def make_sta(
     }
     cut = [a for a in distributions if a not in exact]
     auto = [a for a in cut if a not in truncation]
-    if auto and not (0.0 < epsilon < 1.0):
-        raise ValueError(f"epsilon: must be in (0, 1), got {epsilon!r}")
+    if auto:
+        try:
+            defaults.check_epsilon(epsilon)
+        except ValueError as err:
+            raise ValueError(f"epsilon: {err}") from None
     clocks: dict[str, EventClock] = {}
     for a, d in sorted(distributions.items()):
         if a in exact:

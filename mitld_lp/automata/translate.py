@@ -47,6 +47,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from mitld_lp import defaults
 from mitld_lp.automata.dta import ACCEPT, DTA, OPEN, REJECT, SAFE, Diagram
 from mitld_lp.logic.fragment import CO_SAFE, SUPPORTED, FragmentReport, classify, nnf
 from mitld_lp.logic.normal import c_and, c_next, c_or, c_release, c_until, canonical, normal_form
@@ -270,7 +271,9 @@ def progress(obligation: Formula, letter: frozenset[str] | set[str]) -> Formula:
 # --------------------------------------------------------------------------- construction
 
 
-def to_dta(spec: Formula | FragmentReport, *, max_states: int = 200_000) -> DTA:
+def to_dta(
+    spec: Formula | FragmentReport, *, max_states: int = defaults.MAX_AUTOMATON_STATES
+) -> DTA:
     """The minimal DTA of the formula: its accepting state is reached by the finite
     prefixes that decide the formula true, and its safe states (``DTA.kinds``) are those
     where staying forever satisfies it.

@@ -1,7 +1,10 @@
 """Export the occupancy LP (MPS / CPLEX-LP, via HiGHS), whose optimum is the value, and
 the MDP (Storm's DRN format).
 
-Both writers refuse to overwrite an existing file unless ``overwrite=True``.
+Both writers follow the package's one rule for output files (:mod:`mitld_lp.files`):
+they refuse to overwrite an existing file unless ``overwrite=True``, and write to a
+temporary file renamed over the target once complete, so an interrupted or failed write
+leaves the target as it was.
 
 LP names: column ``y<c>`` is the occupancy of original choice ``c``; row ``s<i>`` is the
 flow constraint of original state ``i`` (a maybe state outside any MEC), row ``mec<k>``
@@ -20,21 +23,16 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp import files
 from mitld_lp.mdp import ABSORB, MDP, as_state_mask
 from mitld_lp.solvers.lp import occupancy_lp
 
-__all__ = ["write_lp", "write_drn"]
+__all__ = ["write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
 
 logger = logging.getLogger(__name__)
 
-_LP_SUFFIXES = (".mps", ".lp")
-
-
-def _check_target_path(path: str | os.PathLike[str], overwrite: bool) -> Path:
-    p = Path(path)
-    if p.exists() and not overwrite:
-        raise FileExistsError(f"{p}: file exists; pass overwrite=True to replace it")
-    return p
+LP_SUFFIXES = (".mps", ".lp")
+DRN_SUFFIXES = (".drn",)
 
 
 def write_lp(
@@ -62,13 +60,11 @@ def write_lp(
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
-        ValueError: unknown suffix.
+        ValueError: a path :func:`mitld_lp.files.writable_path` refuses (a suffix other
+            than ``.mps``/``.lp``).
         OSError: HiGHS failed to write the file.
     """
-    p = Path(path)
-    if p.suffix.lower() not in _LP_SUFFIXES:
-        raise ValueError(f"{p}: unknown LP format {p.suffix!r}; use one of {_LP_SUFFIXES}")
-    p = _check_target_path(p, overwrite)
+    p = files.writable_path(path, overwrite=overwrite, suffixes=LP_SUFFIXES)
     lp = occupancy_lp(mdp, target)
     q = lp.quotient
     if q.initial >= 0:
@@ -106,9 +102,10 @@ def write_lp(
     status = highs.passModel(model)
     if status == highspy.HighsStatus.kError:
         raise OSError(f"{p}: HiGHS rejected the model ({status})")
-    status = highs.writeModel(str(p))
-    if status == highspy.HighsStatus.kError or not p.exists():
-        raise OSError(f"{p}: HiGHS failed to write the model ({status})")
+    with files.replacing_path(p) as scratch:
+        status = highs.writeModel(str(scratch))
+        if status == highspy.HighsStatus.kError or not scratch.exists():
+            raise OSError(f"{p}: HiGHS failed to write the model ({status})")
     logger.info("wrote LP (%d rows, %d columns) to %s", n_rows, n_cols, p)
     return p
 
@@ -164,9 +161,10 @@ def write_drn(
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
+        ValueError: a path :func:`mitld_lp.files.writable_path` refuses.
     """
     target = as_state_mask(mdp, target, "target")
-    p = _check_target_path(path, overwrite)
+    p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)
     n = mdp.n_states
     marks = [("target", target), ("sink", np.asarray(mdp.sink, dtype=bool))]
     if truncated_label:
@@ -189,7 +187,7 @@ def write_drn(
         str(mdp.n_choices),
         "@model",
     ]
-    with p.open("w", encoding="utf-8") as f:
+    with files.replacing(p) as f:
         f.write("\n".join(header) + "\n")
         # Streamed a chunk of states at a time: the text of a 1e6-state model never
         # sits in memory whole (it took 4.8 GB when it did).

@@ -45,6 +45,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 from tqdm.auto import tqdm
 
+from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.solvers.quotient import (
     Quotient,
@@ -197,7 +198,7 @@ def interval_iteration(
     target: np.ndarray,
     *,
     quotient: Quotient | None = None,
-    tol: float = 1e-9,
+    tol: float = defaults.TOL,
     max_iterations: int = 1_000_000,
     progress: bool = True,
     gap: Literal["initial", "max"] = "initial",

@@ -58,6 +58,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.quotient import (
     Quotient,
@@ -588,9 +589,9 @@ def solve_lp(
     target: np.ndarray,
     *,
     quotient: Quotient | None = None,
-    solver: str = "CLARABEL",
+    solver: str = defaults.SOLVER,
     backend: Backend = "auto",
-    tol: float = 1e-9,
+    tol: float = defaults.TOL,
     everywhere: bool = False,
     decompose: bool = True,
     time_limit: float | None = None,

@@ -1,8 +1,7 @@
-"""Random MDPs for the tests and the benchmarks.
-
-Not a fixture of one test file: ``tests/`` and ``experiments/bench_solvers.py`` both draw
-from the same generator (the benchmark's "random local MDP"), and neither may import
-the other, so it lives in the package.
+"""Helpers shared by the tests and the benchmarks, which may not import each other:
+random MDPs (the benchmarks' "random local MDP"), the state-at-a-time reference product
+(:mod:`mitld_lp.testing.reference_product`) and the fuzzing generators
+(:mod:`mitld_lp.testing.fuzz`).  Not used by the library.
 """
 
 from __future__ import annotations
@@ -11,8 +10,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.testing.reference_product import reference_product
 
-__all__ = ["random_mdp"]
+__all__ = ["random_mdp", "reference_product"]
 
 
 def random_mdp(

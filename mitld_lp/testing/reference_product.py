@@ -1,9 +1,9 @@
 """The product construction as it was written first: one state at a time, in Python.
 
 Kept as the peer of ``experiments/bench_product.py`` (the speed-up is measured against it
-in the same run) and as an independent reference in ``tests/test_product.py`` (the
-array construction of :func:`mitld_lp.product.product` must give the same MDP, state
-for state and bit for bit).  Not part of the library.
+in the same run) and as an independent reference in the tests (the array construction of
+:func:`mitld_lp.product.product` must give the same MDP, state for state and bit for
+bit).  Not used by the library.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from typing import Any, cast
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp import defaults
 from mitld_lp.automata.sta import STA, TRUNCATED
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
@@ -24,7 +25,7 @@ def reference_product(
     game: Game[Any],
     sta: STA,
     *,
-    max_states: int = 5_000_000,
+    max_states: int = defaults.MAX_STATES,
 ) -> MDP:
     """The reachable product MDP of ``game`` and ``sta``, breadth first, one state at
     a time (the semantics of :mod:`mitld_lp.product`)."""

@@ -1,0 +1,81 @@
+"""The command line's argument types: each parses the text of one option and returns
+its value, or raises :class:`argparse.ArgumentTypeError` with the reason (argparse names
+the option; the command prints one line and exits 2)."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+from mitld_lp import defaults
+
+__all__ = ["probability_budget", "bounded_int", "memory_size", "seconds", "solver_name"]
+
+
+def probability_budget(text: str) -> float:
+    """An ``--epsilon``: a number strictly between 0 and 1 (:func:`defaults.check_epsilon`)."""
+    try:
+        return defaults.check_epsilon(float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a number in (0, 1), got {text!r}") from None
+
+
+def bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
+    """An integer in ``low..high`` (``high`` None: no upper bound)."""
+
+    def parse_int(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if value < low or (high is not None and value > high):
+            bound = f">= {low:,}" if high is None else f"in {low:,}..{high:,}"
+            raise argparse.ArgumentTypeError(f"must be an integer {bound}, got {text}")
+        return value
+
+    parse_int.__name__ = "integer"
+    return parse_int
+
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def memory_size(text: str) -> int:
+    """A byte count with an optional binary unit: ``500M``, ``4G``, ``1.5G``."""
+    body = text.strip().upper().removesuffix("B").removesuffix("I")
+    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
+    try:
+        value = float(body[: len(body) - len(unit)]) * _UNITS[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a size such as 4G or 500M, got {text!r}") from None
+    if not 1 <= value < float(1 << 60):
+        raise argparse.ArgumentTypeError(f"must be a positive size, got {text!r}")
+    return int(value)
+
+
+def seconds(text: str) -> float:
+    """A positive, finite number of seconds (``--time-limit``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not value > 0.0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
+    return value
+
+
+def solver_name(text: str) -> str:
+    """An LP solver name, in any case; checked against cvxpy's installed solvers."""
+    name = text.strip().upper()
+    if name == defaults.SOLVER:  # the default needs no cvxpy import to be checked
+        return name
+    import cvxpy
+
+    installed = cvxpy.installed_solvers()
+    if name not in installed:
+        raise argparse.ArgumentTypeError(
+            f"unknown or not installed LP solver {text!r} (installed: {', '.join(installed)})"
+        )
+    return name

@@ -1,0 +1,297 @@
+"""Every file the package writes goes through here: one rule for where a file may be
+written, and one way of writing it.
+
+The rule (:func:`writable_path`), checked before any work: the path is not empty and
+not a folder, its folder exists, its suffix is one the format allows, and it names no
+existing file -- a dangling symlink counts as existing -- unless the caller allows
+overwriting (``overwrite=True``, the command line's ``--force``).  Two outputs of one
+command must not name the same file (:func:`distinct_outputs`).
+
+The writing (:func:`replacing` for a stream, :func:`replacing_path` for a writer that
+takes a file name): the content goes to a temporary file beside the target, which is
+renamed over the target only once it is complete.  A write that fails or is interrupted
+(Ctrl-C) leaves the target exactly as it was and removes the temporary file; a command
+that stops a writing thread from outside (the command line on Ctrl-C or a time limit)
+calls :func:`abandon` with that thread.  With ``overwrite`` a symlink is written through
+(its target is replaced, the link kept), and a target that is not a regular file (a
+device such as ``/dev/null``) is written directly: there is nothing to rename over.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import os
+import secrets
+import shutil
+import stat
+import threading
+import weakref
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import IO, TYPE_CHECKING, Literal
+
+from mitld_lp.report import POLICY_COLUMNS, policy_table
+
+if TYPE_CHECKING:
+    from mitld_lp.synthesis import SynthesisResult
+
+__all__ = [
+    "OutputPathError",
+    "WriteAbandoned",
+    "writable_path",
+    "distinct_outputs",
+    "replacing",
+    "replacing_path",
+    "write_text",
+    "write_policy",
+    "POLICY_SUFFIXES",
+    "abandon",
+]
+
+PathLike = str | os.PathLike[str]
+
+
+class OutputPathError(ValueError):
+    """An output path that cannot be written: names the path and why."""
+
+
+class WriteAbandoned(Exception):
+    """The writing thread was abandoned (:func:`abandon`): nothing was renamed into
+    place and the temporary file is gone."""
+
+
+# --------------------------------------------------------------------------- the rule
+
+
+def writable_path(
+    path: PathLike,
+    *,
+    overwrite: bool = False,
+    suffixes: Iterable[str] = (),
+    what: str = "",
+    force: str = "overwrite=True",
+) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if a file may be written there (module docs).
+
+    ``suffixes``: the allowed suffixes, lower case with the dot (any case is accepted in
+    the path); none: any.  ``what`` names the path in messages (``--drn``); ``force``
+    is how the caller allows overwriting, quoted in the message.
+
+    Raises:
+        OutputPathError: empty path, wrong suffix, a folder, or no such folder.
+        FileExistsError: the path exists (or is a dangling symlink) and not ``overwrite``.
+    """
+    text = os.fspath(path)
+    label = f"{what} {text}" if what else text
+    if text == "":
+        raise OutputPathError(f"{what or 'output path'}: the path is empty")
+    out = Path(text)
+    allowed = tuple(suffixes)
+    if allowed and out.suffix.lower() not in allowed:
+        raise OutputPathError(f"{label}: the suffix must be one of {', '.join(allowed)}")
+    if out.is_dir():
+        raise OutputPathError(f"{label}: is a directory")
+    folder = out.parent
+    if not folder.is_dir():
+        raise OutputPathError(f"{label}: the folder {folder} does not exist")
+    if os.path.lexists(out) and not overwrite:
+        dangling = out.is_symlink() and not out.exists()
+        raise FileExistsError(
+            f"{text}: exists{' (a dangling symlink)' if dangling else ''}; "
+            f"pass {force} to replace it")
+    return out
+
+
+def distinct_outputs(named: Iterable[tuple[str, Path]]) -> None:
+    """Refuse two outputs that are one file: ``named`` pairs a name (``--lp``) with a
+    path already checked by :func:`writable_path`.  Raises :class:`OutputPathError`."""
+    seen: dict[str, str] = {}
+    for what, path in named:
+        key = os.path.realpath(path)
+        if key in seen:
+            raise OutputPathError(f"{seen[key]} and {what} name the same file {path}")
+        seen[key] = what
+
+
+# --------------------------------------------------------------------------- the writing
+
+_lock = threading.Lock()
+_scratch: dict[Path, threading.Thread] = {}
+"""Temporary files and folders being written, and the thread writing each."""
+_abandoned: weakref.WeakSet[threading.Thread] = weakref.WeakSet()
+
+
+def abandon(thread: threading.Thread) -> None:
+    """Stop ``thread``'s writes: remove its temporary files now, and make it raise
+    :class:`WriteAbandoned` instead of renaming or starting another write.  Called by
+    the thread that interrupts ``thread`` (which may be stuck in a native call)."""
+    with _lock:
+        _abandoned.add(thread)
+        mine = [p for p, owner in _scratch.items() if owner is thread]
+        for p in mine:
+            _remove(p)
+            del _scratch[p]
+
+
+def _remove(scratch: Path) -> None:
+    if scratch.is_dir() and not scratch.is_symlink():
+        shutil.rmtree(scratch, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            scratch.unlink()
+
+
+def _destination(path: Path) -> Path:
+    """Where the bytes go: the final file a symlink points to (checked by the rule)."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def _is_stream(path: Path) -> bool:
+    """An existing target that is no regular file (a device, a FIFO): write in place."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return False
+    return not stat.S_ISREG(mode)
+
+
+def _new_scratch(final: Path, folder: bool) -> Path:
+    """A new temporary file (or folder) beside ``final``, registered to this thread."""
+    me = threading.current_thread()
+    with _lock:
+        _check_live(final)
+        while True:
+            scratch = final.with_name(f".{final.name}.{secrets.token_hex(4)}.part")
+            try:
+                if folder:
+                    scratch.mkdir()
+                else:
+                    os.close(os.open(scratch, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+            except FileExistsError:
+                continue
+            _scratch[scratch] = me
+            return scratch
+
+
+def _check_live(final: Path) -> None:
+    """Raise :class:`WriteAbandoned` if this thread's writes were abandoned."""
+    if threading.current_thread() in _abandoned:
+        raise WriteAbandoned(f"{final}: not written (interrupted)")
+
+
+def _commit(written: Path, final: Path) -> None:
+    """Rename the complete file ``written`` over ``final`` (keeping the mode of the
+    file it replaces), unless this thread was abandoned meanwhile."""
+    try:
+        with contextlib.suppress(FileNotFoundError):
+            os.chmod(written, stat.S_IMODE(final.stat().st_mode))
+        fd = os.open(written, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except FileNotFoundError:  # removed by abandon() while it was written
+        _check_live(final)
+        raise
+    with _lock:
+        _check_live(final)
+        os.replace(written, final)
+
+
+@contextlib.contextmanager
+def replacing_path(path: Path) -> Iterator[Path]:
+    """A temporary file name beside ``path`` with the same name (so the same suffix),
+    for writers that take a file name (HiGHS); renamed over ``path`` when the block ends
+    without an exception.  ``path`` has passed :func:`writable_path`."""
+    final = _destination(path)
+    if _is_stream(final):
+        yield final
+        return
+    scratch = _new_scratch(final, folder=True)
+    inside = scratch / final.name
+    try:
+        yield inside
+        _check_live(final)
+        if not inside.is_file():
+            raise OSError(f"{path}: the writer produced no file")
+        _commit(inside, final)
+    finally:
+        with _lock:
+            _scratch.pop(scratch, None)
+        _remove(scratch)
+
+
+@contextlib.contextmanager
+def replacing(
+    path: Path,
+    mode: Literal["w", "wb"] = "w",
+    *,
+    encoding: str = "utf-8",
+    newline: str | None = None,
+) -> Iterator[IO]:
+    """An open temporary file beside ``path``, renamed over it when the block ends
+    without an exception (module docs).  ``path`` has passed :func:`writable_path`.
+    ``encoding`` and ``newline`` apply to text mode ``"w"``."""
+    final = _destination(path)
+    if _is_stream(final):
+        with _open(final, mode, encoding, newline) as handle:
+            yield handle
+        return
+    scratch = _new_scratch(final, folder=False)
+    try:
+        with _open(scratch, mode, encoding, newline) as handle:
+            yield handle
+        _commit(scratch, final)
+    finally:
+        with _lock:
+            _scratch.pop(scratch, None)
+        with contextlib.suppress(FileNotFoundError):
+            scratch.unlink()
+
+
+def _open(path: Path, mode: str, encoding: str, newline: str | None) -> IO:
+    if "b" in mode:
+        return path.open("wb")
+    return path.open("w", encoding=encoding, newline=newline)
+
+
+def write_text(
+    path: PathLike,
+    text: str,
+    *,
+    overwrite: bool = False,
+    suffixes: Iterable[str] = (),
+) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` under the rule, replacing the file in one step."""
+    out = writable_path(path, overwrite=overwrite, suffixes=suffixes)
+    with replacing(out) as handle:
+        handle.write(text)
+    return out
+
+
+POLICY_SUFFIXES = (".csv", ".json")
+
+
+def write_policy(
+    result: SynthesisResult, path: PathLike, *, overwrite: bool = False
+) -> Path:
+    """Write ``result``'s policy table (:func:`mitld_lp.report.policy_table`) to
+    ``path``: ``.csv`` (one row per state, the columns of
+    :data:`~mitld_lp.report.POLICY_COLUMNS`, pending events joined by spaces, values
+    with every digit) or ``.json`` (a list of objects), under the rule."""
+    out = writable_path(path, overwrite=overwrite, suffixes=POLICY_SUFFIXES)
+    rows = policy_table(result)
+    if out.suffix.lower() == ".json":
+        with replacing(out) as handle:
+            handle.write(json.dumps(rows, default=str) + "\n")
+        return out
+    with replacing(out, newline="") as handle:
+        writer: csv.DictWriter[str] = csv.DictWriter(handle, fieldnames=list(POLICY_COLUMNS))
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({**row, "game_state": str(row["game_state"]),
+                             "pending": " ".join(row["pending"]),
+                             "value": repr(row["value"])})
+    return out
