@@ -329,7 +329,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     if _constrained().wanted(args, model):
         return _constrained().solve(args, model, policy_file)
-    r = synthesize(model, **_solve_settings(args).synthesize_kwargs())
+    r = _constrained().unconstrained(
+        synthesize(model, **_solve_settings(args).synthesize_kwargs()), "solve")
     summary = r.summary()
     if policy_file:
         _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
@@ -411,10 +412,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.synthesis import synthesize
 
     model = load_model(args.model)
-    r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-                   max_states=args.max_states, max_memory=args.max_memory,
-                   max_automaton_states=args.max_automaton_states,
-                   time_limit=_time_left(args))
+    r = _constrained().unconstrained(synthesize(
+        model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
+        max_states=args.max_states, max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, time_limit=_time_left(args)),
+        "simulate")
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
@@ -620,8 +622,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
             model = load_model(args.input)
-            result = synthesize(model, epsilon=args.epsilon, max_states=args.max_states,
-                                time_limit=_time_left(args))
+            result = _constrained().unconstrained(synthesize(
+                model, epsilon=args.epsilon, max_states=args.max_states,
+                time_limit=_time_left(args)), "plot")
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None

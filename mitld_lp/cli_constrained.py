@@ -11,7 +11,7 @@ from typing import Any
 
 from mitld_lp.constraints import THEN, ConstraintError
 
-__all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto"]
+__all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto", "unconstrained"]
 
 
 def args_constraints(p: argparse.ArgumentParser) -> None:
@@ -25,6 +25,19 @@ def args_constraints(p: argparse.ArgumentParser) -> None:
 def wanted(args: argparse.Namespace, model: Any) -> bool:
     """Whether ``solve`` is a constrained synthesis."""
     return bool(args.constraint or args.then or model.constraints)
+
+
+def unconstrained(result: Any, verb: str) -> Any:
+    """``result`` if it is a plain synthesis; a usage error for a model whose file carries
+    constraints (only ``solve`` and ``pareto`` take them)."""
+    from mitld_lp.cli import UsageError
+    from mitld_lp.synthesis import SynthesisResult
+
+    if isinstance(result, SynthesisResult):
+        return result
+    raise UsageError(f"{verb}: the model has constraints, which only solve and pareto "
+                     "take (the randomised controller runs from Python: "
+                     "mitld_lp.constrained_runs)")
 
 
 def _usage(exc: ConstraintError) -> Exception:

@@ -39,7 +39,7 @@ from mitld_lp.logic import check
 from mitld_lp.logic.syntax import DistLiteral, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.product import ProductState, product
+from mitld_lp.product import ProductState, ProductStates, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 
@@ -245,7 +245,7 @@ def synthesize_constrained(
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
     low = optimise(merged, task_lo, True, rows("lower"), costs=cost_vec)
-    common = dict(merged=merged, joint=joint, sta=sta, mdp=mdp)
+    common: dict[str, Any] = dict(merged=merged, joint=joint, sta=sta, mdp=mdp)
     if low.status != OPTIMAL:
         return _unsolved(low, cons, rows("lower"), cost_vec, then, t1 - t0, **common)
     chosen = low
@@ -360,7 +360,9 @@ class ConstrainedController:
             self.beyond_model = self.beyond_model or step.truncated
         if self.joint.terminal(self.q):
             return None
-        i = self.mdp.states.position(ProductState(state, self.q, self.pending, self.clock))
+        states = self.mdp.states
+        record = ProductState(state, self.q, self.pending, self.clock)
+        i = states.position(record) if isinstance(states, ProductStates) else None
         s = -1 if i is None else int(self.merged.of_product[i])
         if s < 0 or self.merged.absorbing[s]:
             return self.game.actions(state)[0]

@@ -330,3 +330,35 @@ def test_cli_solve_with_constraint_and_infeasible_exit(tmp_path, capsys):
     assert "tightest feasible bound" in capsys.readouterr().out
     assert main(["solve", str(path), "--constraint", "P(F nowhere) <= 0.5", "-q"]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_cli_pareto_writes_certified_points_and_refuses_to_overwrite(tmp_path, capsys):
+    from mitld_lp.cli import main
+
+    path = tmp_path / "m.toml"
+    path.write_text(BUS_PUDDLE)
+    csv_file, png = tmp_path / "c.csv", tmp_path / "c.png"
+    args = ["pareto", str(path), "--against", "P(F puddle)", "--points", "3",
+            "--csv", str(csv_file), "--plot", str(png), "-q"]
+    assert main(args) == 0
+    lines = csv_file.read_text().splitlines()
+    assert lines[0].startswith("bound,probability_lower") and len(lines) == 4
+    lows = [float(line.split(",")[1]) for line in lines[1:]]
+    assert lows == sorted(lows) and all(line.endswith(",True") for line in lines[1:])
+    # the least risk is 0, where the best success is 0.1856621 (Storm, experiments)
+    assert float(lines[1].split(",")[0]) == pytest.approx(0.0, abs=1e-7)
+    assert lows[0] == pytest.approx(0.1856621, abs=1e-6)
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    capsys.readouterr()
+    assert main(args) == 2
+    assert "exists" in capsys.readouterr().err
+
+
+def test_cli_simulate_refuses_a_model_with_constraints(tmp_path, capsys):
+    from mitld_lp.cli import main
+
+    path = tmp_path / "m.toml"
+    path.write_text(BUS_PUDDLE.replace('spec = ', 'constraints = ["P(F puddle) <= 0.05"]\nspec = '))
+    assert main(["simulate", str(path), "-n", "10", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "constraints" in err and len(err.strip().splitlines()) == 1

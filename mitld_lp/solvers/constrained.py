@@ -143,7 +143,7 @@ def optimise(
         (np.ones(stays.size), (pos[stays], np.arange(stays.size))),
         shape=(states.size, stays.size),
     )
-    a_eq = sp.hstack([owner - inflow, stay_cols], format="csc")
+    a_eq = sp.csc_array(sp.hstack([owner - inflow, stay_cols], format="csc"))
     b_eq = np.zeros(states.size)
     b_eq[pos[mdp.initial]] = 1.0
     # value rows

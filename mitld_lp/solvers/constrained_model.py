@@ -240,7 +240,7 @@ def evaluate(
     live = ~merged.absorbing
     weighted = sp.diags_array(prob) @ mdp.matrix
     owner = sp.csr_array((np.ones(cs.size), (cs, np.arange(cs.size))), shape=(m, cs.size))
-    chain = (owner @ weighted).tocsr()
+    chain = sp.csr_array(owner @ weighted)
     # states that can leave (reach an absorbing state or a positive stay) under the policy
     exits = (stay > 0) | merged.absorbing
     coo = chain.tocoo()
@@ -267,7 +267,7 @@ def evaluate(
         rhs = np.zeros(t_idx.size)
         rhs[np.searchsorted(t_idx, mdp.initial)] = 1.0
         y = spla.spsolve((sp.eye_array(t_idx.size, format="csc") - qtt.T).tocsc(), rhs)
-        visits[t_idx] = np.atleast_1d(y)
+        visits[t_idx] = np.atleast_1d(np.asarray(y, dtype=np.float64))
         b_idx = np.flatnonzero(bottom)
         if b_idx.size:
             entry[b_idx] = chain[t_idx][:, b_idx].T @ visits[t_idx]
