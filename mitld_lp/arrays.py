@@ -1,10 +1,26 @@
-"""Small array kernels shared by the product construction and the solvers."""
+"""Array kernels shared by the product construction and the solvers: integer sets
+(:func:`unique`), a growable array (:class:`Grow`), a hash index (:class:`Index`), a
+memo over integer keys (:class:`Memo`), and the row helpers of a batched sparse build
+(:func:`ranks`, :func:`merge`, :func:`concatenate`).  Each works on a whole batch of
+keys or entries at once, in numpy."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["unique"]
+__all__ = [
+    "unique",
+    "Grow",
+    "Index",
+    "Memo",
+    "MISSING",
+    "DENSE_LIMIT",
+    "ranks",
+    "merge",
+    "concatenate",
+]
 
 
 def unique(values: np.ndarray) -> np.ndarray:
@@ -22,3 +38,193 @@ def unique(values: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(flat[1:], flat[:-1], out=keep[1:])
     return flat[keep]
+
+
+class Grow:
+    """A numpy array that grows by doubling (amortised O(1) appends of blocks)."""
+
+    def __init__(self, dtype: Any) -> None:
+        self.data = np.empty(64, dtype=dtype)
+        self.size = 0
+
+    def extend(self, values: Any) -> None:
+        values = np.asarray(values, dtype=self.data.dtype)
+        need = self.size + values.size
+        if need > self.data.size:
+            bigger = np.empty(max(need, 2 * self.data.size), dtype=self.data.dtype)
+            bigger[: self.size] = self.data[: self.size]
+            self.data = bigger
+        self.data[self.size : need] = values
+        self.size = need
+
+    @property
+    def view(self) -> np.ndarray:
+        return self.data[: self.size]
+
+
+MISSING = np.iinfo(np.int64).min
+DENSE_LIMIT = 1 << 22  # keys below this are memoised in a plain array (32 MB at most)
+
+
+class Memo:
+    """A memo ``key -> int`` for arrays of non-negative keys, filled on demand.
+
+    ``compute(keys)`` gives the values of distinct, sorted, unknown keys.  While the
+    keys stay below ``DENSE_LIMIT`` the memo is a plain array (one gather per call);
+    beyond, a hash index (:class:`Index`), so that sparse keys cost no more memory than
+    the entries stored.
+    """
+
+    def __init__(self, compute: Any, space: int = 0) -> None:
+        self.compute = compute
+        self.table: np.ndarray | None = None
+        self.index: Index | None = None
+        if space <= DENSE_LIMIT:
+            self.table = np.full(max(space, min(64, DENSE_LIMIT)), MISSING)
+        else:
+            self.index = Index()
+
+    def _grow(self, top: int) -> None:
+        assert self.table is not None
+        if top <= DENSE_LIMIT:
+            bigger = np.full(max(top, 2 * self.table.size), MISSING)
+            bigger[: self.table.size] = self.table
+            self.table = bigger
+        else:  # too sparse for an array: move the entries to a hash index
+            known = np.flatnonzero(self.table != MISSING)
+            self.index = Index()
+            self.index.insert(known, self.table[known])
+            self.table = None
+
+    def __call__(self, keys: np.ndarray) -> np.ndarray:
+        if self.table is not None:
+            top = int(keys.max(initial=-1)) + 1
+            if top > self.table.size:
+                self._grow(top)
+        if self.table is not None:
+            vals = self.table[keys]
+            miss = vals == MISSING
+            if miss.any():
+                new = unique(keys[miss])
+                self.table[new] = self.compute(new)
+                vals[miss] = self.table[keys[miss]]
+            return vals
+        assert self.index is not None
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        vals = self.index.find(uniq, absent=MISSING)
+        miss = vals == MISSING
+        if miss.any():
+            vals[miss] = self.compute(uniq[miss])
+            self.index.insert(uniq[miss], vals[miss])
+        return vals[inverse]
+
+
+class Index:
+    """Ids (int32) by int64 key: open addressing over arrays, probed for a whole batch
+    of keys at once (linear probing, load at most 1/2, Fibonacci hashing)."""
+
+    _EMPTY = -(1 << 62)
+
+    def __init__(self) -> None:
+        self.bits = 16
+        self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
+        self.ids = np.zeros(1 << self.bits, dtype=np.int32)
+        self.size = 0
+
+    def _home(self, keys: np.ndarray) -> np.ndarray:
+        h = np.ascontiguousarray(keys, dtype=np.int64).view(np.uint64) * np.uint64(
+            0x9E3779B97F4A7C15
+        )
+        return (h >> np.uint64(64 - self.bits)).view(np.int64)
+
+    def find(self, keys: np.ndarray, absent: int = -1) -> np.ndarray:
+        """The id of each key, ``absent`` where absent."""
+        at = self._home(keys)
+        found = self.keys[at]
+        hit = found == keys
+        out = np.where(hit, self.ids[at], np.int64(absent)).astype(np.int64)
+        todo = np.flatnonzero(~hit & (found != self._EMPTY))
+        mask = (1 << self.bits) - 1
+        at = at[todo]
+        while todo.size:
+            at = (at + 1) & mask
+            found = self.keys[at]
+            hit = found == keys[todo]
+            out[todo[hit]] = self.ids[at[hit]]
+            go_on = ~hit & (found != self._EMPTY)
+            todo, at = todo[go_on], at[go_on]
+        return out
+
+    def insert(self, keys: np.ndarray, ids: np.ndarray) -> None:
+        """Add distinct keys that are not in the index yet."""
+        if 2 * (self.size + keys.size) > (1 << self.bits):
+            old_keys, old_ids = self.keys[self.keys != self._EMPTY], self.ids[
+                self.keys != self._EMPTY]
+            while 2 * (self.size + keys.size) > (1 << self.bits):
+                self.bits += 1
+            self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
+            self.ids = np.zeros(1 << self.bits, dtype=np.int32)
+            self.size = 0
+            self.insert(old_keys, old_ids)
+        pos = self._home(keys)
+        todo = np.arange(keys.size)
+        mask = (1 << self.bits) - 1
+        while todo.size:
+            at = pos[todo]
+            free = self.keys[at] == self._EMPTY
+            # one winner per free slot; the others probe on
+            _, first = np.unique(at[free], return_index=True)
+            win = todo[free][first]
+            self.keys[pos[win]] = keys[win]
+            self.ids[pos[win]] = ids[win]
+            placed = np.zeros(keys.size, dtype=bool)
+            placed[win] = True
+            todo = todo[~placed[todo]]
+            pos[todo] = (pos[todo] + 1) & mask
+        self.size += keys.size
+
+
+def ranks(counts: np.ndarray) -> np.ndarray:
+    """``0 .. counts[i] - 1`` for each ``i``, concatenated."""
+    total = int(counts.sum())
+    starts = np.cumsum(counts) - counts
+    return np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
+
+
+def merge(
+    choice: np.ndarray, cols: np.ndarray, vals: np.ndarray, n_choices: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sum the entries of one choice that go to one state, in the order they come (so the
+    sums are bit for bit those of a loop), keeping each row's first-occurrence order.
+    Returns the merged cols, vals and the length of each choice's row."""
+    key = choice * (int(cols.max(initial=0)) + 1) + cols
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    start = np.ones(sk.size, dtype=bool)
+    start[1:] = sk[1:] != sk[:-1]
+    if start.all():
+        return cols, vals, np.bincount(choice, minlength=n_choices)
+    group = np.cumsum(start) - 1
+    heads = np.flatnonzero(start)
+    rank = np.arange(sk.size) - heads[group]
+    sv = vals[order]
+    total = np.zeros(heads.size)
+    for r in range(int(rank.max()) + 1):  # a handful of rounds: summation order kept
+        at = rank == r
+        total[group[at]] += sv[at]
+    first = order[heads]  # each group's first entry in stream order
+    keep = np.argsort(first, kind="stable")
+    kept = first[keep]
+    return cols[kept], total[keep], np.bincount(choice[kept], minlength=n_choices)
+
+
+def concatenate(parts: list[Any], dtype: Any) -> np.ndarray:
+    """``np.concatenate(parts)``, freeing each part once copied (peak: the result plus
+    one part, not twice the result)."""
+    out = np.empty(sum(p.size for p in parts), dtype=dtype)
+    at = 0
+    for i, part in enumerate(parts):
+        out[at : at + part.size] = part
+        at += part.size
+        parts[i] = None
+    return out

@@ -249,7 +249,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import build_product
 
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     built = build_product(
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
@@ -326,7 +326,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     if _constrained().wanted(args, model):
         return _constrained().solve(args, model, policy_file)
     r = _constrained().unconstrained(
@@ -411,7 +411,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.simulate import simulate
     from mitld_lp.synthesis import synthesize
 
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     r = _constrained().unconstrained(synthesize(
         model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
         max_states=args.max_states, max_memory=args.max_memory,
@@ -502,7 +502,10 @@ def _solve_batch(args: argparse.Namespace) -> int:
             _batch_line(records[-1], args.json)
         for path in (m for m in matches if m not in seen):
             seen.add(path)
-            outcome = run_model(lambda path=path: load_model(path), _solve_settings(args))
+            outcome = run_model(
+                lambda path=path: load_model(path, max_states=args.max_states,
+                                             max_memory=args.max_memory),
+                _solve_settings(args))
             records.append({"file": path, **outcome.summary} if outcome.summary else {
                 "file": path, "status": outcome.status, "certified": False,
                 "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
@@ -621,7 +624,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             from mitld_lp.synthesis import synthesize
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
-            model = load_model(args.input)
+            model = load_model(args.input, max_states=args.max_states)
             result = _constrained().unconstrained(synthesize(
                 model, epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args)), "plot")

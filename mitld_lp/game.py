@@ -18,19 +18,23 @@ construction what the formula decides:
   adds the step's events to form the paper's label ``L(s')``.
 
 Implement :class:`Game` for any world (it is a structural protocol, no base class is
-needed), use :class:`ExplicitGame` for small worlds written as tables, and run
-:func:`check_game` on a new implementation before trusting it.
+needed), say which events its moves react to (:class:`WorldMembers`), use
+:class:`ExplicitGame` for small worlds written as tables, and run :func:`check_game` on
+a new implementation before trusting it.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Hashable, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Set as AbstractSet
+from dataclasses import dataclass, field, fields
 from itertools import combinations
-from numbers import Real
 from types import MappingProxyType
 from typing import Any, Generic, Protocol, TypeVar, cast, runtime_checkable
+
+from mitld_lp.successors import PROBABILITY_TOLERANCE, is_real, place
 
 __all__ = [
     "Game",
@@ -39,12 +43,11 @@ __all__ = [
     "GameCheck",
     "check_game",
     "PROBABILITY_TOLERANCE",
+    "WorldMembers",
+    "world_members",
 ]
 
 S = TypeVar("S", bound=Hashable)
-
-PROBABILITY_TOLERANCE = 1e-9
-"""How far a successor distribution's total may be from 1."""
 
 Distribution = tuple[tuple[Any, float], ...]
 _NO_PROPS: frozenset[str] = frozenset()
@@ -66,15 +69,8 @@ class Game(Protocol[S]):
     The robot moves first (:meth:`actions`), then the environment chooses the events of
     the step, then the world moves (:meth:`successors`).
 
-    Optional: a game whose dynamics never depend on the events may say so with a class
-    attribute ``ignores_events = True``; the product construction then asks
-    :meth:`successors` once per (state, action) instead of once per event outcome.  A
-    game that knows how many states it has may give it as ``n_states`` (an int); the
-    product's size is then bounded before it is built
-    (:func:`mitld_lp.product.estimate_size`).  A game whose dynamics react to named
-    events lists them as ``event_names`` (a frozenset): a specification must then give
-    each of them a distribution, or it would silently never happen
-    (:meth:`mitld_lp.Model.from_game` checks it).
+    Beyond these members a world says which events its moves react to, and may say
+    more: the members of :class:`WorldMembers`, read by :func:`world_members`.
     """
 
     @property
@@ -100,11 +96,109 @@ class Game(Protocol[S]):
         ...
 
 
+# --------------------------------------------------------------------------- members
+
+
+@dataclass(frozen=True, slots=True)
+class WorldMembers:
+    """The members a world declares beyond :class:`Game`, with their defaults.
+
+    Attributes:
+        event_names: the events whose occurrence changes the world's moves (a frozenset
+            of names).  A specification must give each a law, or it would silently never
+            happen.  Required, unless ``ignores_events`` is true (then empty).
+        ignores_events: the moves never depend on the step's events; the product asks
+            :meth:`Game.successors` once per (state, action) instead of once per event
+            outcome.  Default false.
+        n_states: how many states the world has (a non-negative int), so that the
+            product's size is bounded before it is built
+            (:func:`mitld_lp.product.estimate_size`).  Default None: unknown.
+    """
+
+    event_names: frozenset[str] = frozenset()
+    ignores_events: bool = False
+    n_states: int | None = None
+
+
+_DEFAULT = WorldMembers()
+_ABSENT = object()
+_GAME_MEMBERS = "initial, proposition_names, actions, successors, propositions"
+
+
+def _public_names(world: object) -> list[str]:
+    return [n for n in dir(world) if not n.startswith("_")]
+
+
+def _member_values(world: object) -> dict[str, object]:
+    """The members of :class:`WorldMembers` that ``world`` has.  A public name of the
+    world that is close to a member it lacks (``ignore_events``) is refused as a
+    misspelling: a misspelt member would otherwise silently take its default."""
+    given: dict[str, object] = {}
+    names = _public_names(world)
+    for member in (f.name for f in fields(WorldMembers)):
+        value = getattr(world, member, _ABSENT)  # the one place a member is looked up
+        if value is not _ABSENT:
+            given[member] = value
+            continue
+        near = difflib.get_close_matches(member, names, n=1, cutoff=0.9)
+        if near:
+            raise GameError(
+                f"{type(world).__name__}.{near[0]} is not a member of a world; did you mean "
+                f"{member}? (the members are listed in docs/worlds.md)"
+            )
+    return given
+
+
+def _event_hint(world: object) -> str:
+    """`` (Kind.events = ['door'] is not a member of a world)`` when the world has a
+    public name with ``event`` in it (a misspelt ``event_names``), else empty."""
+    near = [n for n in _public_names(world) if "event" in n.lower()]
+    if not near:
+        return ""
+    value = getattr(world, near[0])
+    shown = ""
+    names = isinstance(value, AbstractSet) and all(isinstance(e, str) for e in value)
+    if names and len(value) <= 5:
+        shown = f" = {sorted(value)}"
+    return f" ({type(world).__name__}.{near[0]}{shown} is not a member of a world)"
+
+
+def world_members(world: object) -> WorldMembers:
+    """The :class:`WorldMembers` of ``world``, checked: a :class:`Game`; ``event_names``
+    a set of names, given unless ``ignores_events`` is true (and then empty);
+    ``ignores_events`` a bool; ``n_states`` a non-negative int.  Raises
+    :class:`GameError` naming the member."""
+    kind = type(world).__name__
+    if not isinstance(world, Game):
+        raise GameError(f"must implement the Game protocol ({_GAME_MEMBERS}), got {kind}")
+    given = _member_values(world)
+    ignores = given.get("ignores_events", _DEFAULT.ignores_events)
+    if not isinstance(ignores, bool):
+        raise GameError(f"{kind}.ignores_events must be True or False, got {ignores!r}")
+    events = given.get("event_names", _ABSENT)
+    if events is _ABSENT:
+        if not ignores:
+            hint = _event_hint(world)
+            raise GameError(
+                f"{kind} does not say which events its moves react to{hint}: give it "
+                "event_names (a frozenset of event names, frozenset() if none) or "
+                "ignores_events = True"
+            )
+        events = _DEFAULT.event_names
+    if not isinstance(events, AbstractSet) or not all(isinstance(e, str) for e in events):
+        raise GameError(f"{kind}.event_names must be a frozenset of names, got {events!r}")
+    if ignores and events:
+        raise GameError(
+            f"{kind} says ignores_events = True but reacts to events {sorted(events)} "
+            "(event_names)"
+        )
+    n = given.get("n_states", _DEFAULT.n_states)
+    if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 0):
+        raise GameError(f"{kind}.n_states must be a non-negative int or None, got {n!r}")
+    return WorldMembers(frozenset(events), ignores, n)
+
+
 # --------------------------------------------------------------------------- validation
-
-
-def _is_real(x: object) -> bool:
-    return isinstance(x, Real) and not isinstance(x, bool)
 
 
 def _freeze_distribution(
@@ -121,7 +215,7 @@ def _freeze_distribution(
             nxt, p = item
         except (TypeError, ValueError):
             raise GameError(f"{where}: expected (next_state, probability), got {item!r}") from None
-        if not _is_real(p) or not math.isfinite(float(p)):
+        if not is_real(p) or not math.isfinite(float(p)):
             raise GameError(f"{where}: probability of {nxt!r} must be a number, got {p!r}")
         p = float(p)
         if p < 0.0 or p > 1.0:
@@ -367,7 +461,7 @@ def _check_distribution(dist: Any, where: str, tolerance: float) -> tuple[Any, .
         if not isinstance(item, tuple) or len(item) != 2:
             raise GameError(f"{where}: expected (next_state, probability), got {item!r}")
         nxt, p = item
-        if not _is_real(p) or not (0.0 < float(p) <= 1.0):
+        if not is_real(p) or not (0.0 < float(p) <= 1.0):
             raise GameError(f"{where}: probability of {nxt!r} must be in (0, 1], got {p!r}")
         try:
             fresh = nxt not in nexts
@@ -422,9 +516,7 @@ def check_game(
         for action in acts:
             choices += 1
             for ev in event_sets:
-                where = f"state {state!r}, action {action!r}"
-                if ev:
-                    where += f", events {sorted(ev)}"
+                where = place(state, action, ev)
                 nexts = _check_distribution(game.successors(state, action, ev), where, tolerance)
                 transitions += len(nexts)
                 for nxt in nexts:

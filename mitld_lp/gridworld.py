@@ -126,7 +126,7 @@ class GridWorld:
     )
 
     ignores_events: ClassVar[bool] = True
-    """The moves do not depend on the external events (see :class:`mitld_lp.game.Game`)."""
+    """The moves do not depend on the external events (:class:`mitld_lp.game.WorldMembers`)."""
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):

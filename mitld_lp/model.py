@@ -53,12 +53,13 @@ from typing import Any
 
 from mitld_lp import defaults
 from mitld_lp.constants import substitute
-from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec, from_table
-from mitld_lp.game import Game
+from mitld_lp.distributions import DistributionError, FirstOccurrence, from_table
+from mitld_lp.game import Game, GameError, world_members
 from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
-from mitld_lp.logic.parser import ParseError, parse, parse_source
-from mitld_lp.logic.syntax import DistLiteral, DistRef, DistSpec, Formula, atoms
+from mitld_lp.logic.parser import ParseError, parse_source
+from mitld_lp.logic.syntax import Formula, atoms
+from mitld_lp.task import BindError, Task, bind, resolve_laws
 from mitld_lp.text import printable
 
 __all__ = [
@@ -136,29 +137,21 @@ class Model:
         ``spec``: a formula or its text; ``distributions`` binds the names used in
         ``D[name]`` to laws (inline literals such as ``D[geometric(0.3)]`` need none).
         Raises :class:`ModelError` (source ``<spec>``) when the spec does not parse or is
-        unsupported, a name is unbound or bound but unused, a proposition of the spec is
-        neither a proposition of the game nor an event, a proposition of the game has an
-        event's name, or the game declares events (``event_names``) the spec gives no
-        distribution."""
+        unsupported, the game's members are missing or wrong
+        (:func:`mitld_lp.game.world_members`), or the task does not fit the game
+        (:func:`mitld_lp.task.bind`: a name is unbound or bound but unused, a
+        proposition of the spec is neither a proposition of the game nor an event, a
+        proposition of the game has an event's name, or the game reacts to events
+        (``event_names``) the spec gives no distribution)."""
         ctx = _Context("<spec>")
-        if not isinstance(game, Game):
-            raise ctx.error(
-                "game", f"must implement the Game protocol (initial, proposition_names, "
-                f"actions, successors, propositions), got {type(game).__name__}"
-            )
+        try:
+            world_members(game)
+        except GameError as exc:
+            raise ctx.error("game", str(exc)) from exc
         try:
             epsilon = defaults.check_epsilon(epsilon)
         except ValueError as err:
             raise ctx.error("epsilon", str(err)) from None
-        named: dict[str, FirstOccurrence] = {}
-        for dname, law in (distributions or {}).items():
-            if not isinstance(law, FirstOccurrence):
-                raise ctx.error(
-                    _join("distributions", str(dname)),
-                    f"must be a distribution (mitld_lp.distributions), got "
-                    f"{type(law).__name__} {law!r}",
-                )
-            named[str(dname)] = law
         if isinstance(spec, str):
             formula, report = _parse_spec(spec, ctx)
             text = spec
@@ -170,9 +163,9 @@ class Model:
                 raise ctx.error("spec", str(exc)) from exc
         else:
             raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
-        bound = _bind_spec(formula, report, named, game, "proposition", None, ctx)
+        task = _bind(game, report, distributions, "proposition", None, ctx)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
-                   distributions=MappingProxyType(bound), source=None)
+                   distributions=task.laws, source=None)
 
 
 def _unpickle_model(
@@ -227,10 +220,13 @@ def _type_name(value: Any) -> str:
 
 
 class _Context:
-    """Error reporting for one source."""
+    """Error reporting for one source, and the budgets a world built while loading gets."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(
+        self, source: str, max_states: int = defaults.MAX_STATES, max_memory: int | None = None
+    ) -> None:
         self.source = source
+        self.max_states, self.max_memory = max_states, max_memory
 
     def error(self, path: str, message: str) -> ModelError:
         where = f"{path}: " if path else ""
@@ -287,6 +283,10 @@ class _Context:
 # --------------------------------------------------------------------------- game kinds
 
 
+def _no_check(game: Game[Any], task: Task, ctx: _Context) -> None:
+    """A kind with nothing to check beyond :func:`mitld_lp.task.bind`."""
+
+
 @dataclass(frozen=True, slots=True)
 class _GameKind:
     """A kind of world a model file may describe.
@@ -296,12 +296,16 @@ class _GameKind:
         extra_tables: other top-level tables this kind owns (``regions``).
         proposition_noun: what the kind calls a robot proposition, for messages.
         build: ``(document, context) -> game``; validates its own tables.
+        check_task: ``(game, task, context)``: what this kind refuses of a task bound to
+            its game beyond :func:`mitld_lp.task.bind` (the spec is read once, after the
+            game is built).
     """
 
     table: str
     extra_tables: tuple[str, ...]
     proposition_noun: str
     build: Callable[[dict[str, Any], _Context], Game[Any]]
+    check_task: Callable[[Game[Any], Task, _Context], None] = _no_check
 
 
 def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
@@ -360,7 +364,7 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     (the labels that become propositions, default all) and ``events`` (PRISM actions
     that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
     from mitld_lp.worlds import WorldError
-    from mitld_lp.worlds.prism import load_prism
+    from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
     table = ctx.table(doc["prism"], "prism")
     ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
@@ -383,31 +387,38 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
 
     labels, events = names("labels"), names("events")
     try:
-        spec_atoms = atoms(parse(str(doc.get("spec", ""))))
-    except ParseError:  # reported with its position when the spec itself is read
-        spec_atoms = frozenset()
-    try:
-        game = load_prism(path, constants=constants, labels=labels, events=events or ())
+        return load_prism(path, constants=constants, labels=labels, events=events or (),
+                          max_states=ctx.max_states, max_memory=ctx.max_memory)
+    except PrismTooLarge as exc:  # a budget stop, not a mistake in the file
+        raise PrismTooLarge(f"{ctx.source}: prism: {exc}") from exc
     except WorldError as exc:
         raise ctx.error("prism", str(exc)) from exc
-    # A PRISM action named like an event of the spec but not listed under events would
-    # be offered to the robot as a move of its own: refuse it rather than let the robot
-    # cause the event.
+
+
+def _check_prism_task(game: Game[Any], task: Task, ctx: _Context) -> None:
+    """A PRISM action named like a proposition of the spec but not listed under
+    ``prism.events`` would be offered to the robot as a move of its own: refuse it
+    rather than let the robot cause the event."""
+    from mitld_lp.worlds.prism import PrismGame
+
+    assert isinstance(game, PrismGame)
     robot_actions = {a for s in game.states for a in game.actions(s)}
-    for action in sorted(spec_atoms & robot_actions):
+    for action in sorted(atoms(task.formula) & robot_actions):
         raise ctx.error(
             "prism.events",
             f"PRISM action {action!r} has the name of a proposition of spec; list it in "
             "prism.events if it is the effect of that event",
         )
-    return game
 
 
 _GAME_KINDS: tuple[_GameKind, ...] = (
     _GameKind(
-        table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid
+        table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid,
     ),
-    _GameKind(table="prism", extra_tables=(), proposition_noun="label", build=_build_prism),
+    _GameKind(
+        table="prism", extra_tables=(), proposition_noun="label", build=_build_prism,
+        check_task=_check_prism_task,
+    ),
     # worlds named by code (mitld_lp.worlds.loaders): a gymnasium environment, a factory
     _GameKind(table="gym", extra_tables=(), proposition_noun="label",
               build=lambda doc, ctx: _loaders().gym_world(doc, ctx)),
@@ -442,57 +453,22 @@ def _parse_spec(text: str, ctx: _Context) -> tuple[Formula, FragmentReport]:
     return report.formula, report
 
 
-def _bind_events(
-    events: tuple[tuple[str, DistSpec], ...],
-    named: Mapping[str, FirstOccurrence],
-    ctx: _Context,
-) -> dict[str, FirstOccurrence]:
-    """One distribution per event: a ``DistRef`` is looked up in ``named``, a
-    ``DistLiteral`` is built.  Two different distributions for one event are an error."""
-    given: dict[str, DistSpec] = {}
-    bound: dict[str, FirstOccurrence] = {}
-    for event, mu in events:
-        if event in given:
-            if given[event] != mu:
-                raise ctx.error(
-                    "spec",
-                    f"event {event!r} is given two distributions, D[{given[event]}] and D[{mu}]",
-                )
-            continue
-        given[event] = mu
-        match mu:
-            case DistRef(name):
-                if name not in named:
-                    known = ", ".join(sorted(named)) or "none"
-                    raise ctx.error(
-                        "spec",
-                        f"distribution {name!r} (of event {event!r}) is not defined under "
-                        f"[distributions] (defined: {known})",
-                    )
-                bound[event] = named[name]
-            case DistLiteral():
-                try:
-                    bound[event] = from_spec(mu)
-                except DistributionError as exc:
-                    reason = getattr(exc, "reason", str(exc))
-                    raise ctx.error("spec", f"D[{mu}] {event}: {reason}") from exc
-            case _:
-                raise ctx.error("spec", f"event {event!r}: unknown distribution {mu!r}")
-    return bound
-
-
 def bind_distributions(
     spec: Formula, named: Mapping[str, FirstOccurrence] | None = None, source: str = "<spec>"
 ) -> dict[str, FirstOccurrence]:
     """The distribution of each external event of ``spec``: ``D[name]`` looked up in
-    ``named``, an inline literal built.  Raises :class:`ModelError` naming the problem
-    (an unsupported formula, an unknown name, a bad literal)."""
+    ``named``, an inline literal built (:func:`mitld_lp.task.resolve_laws`).  Raises
+    :class:`ModelError` naming the problem (an unsupported formula, an unknown name, a
+    bad literal, a name bound but not used)."""
     ctx = _Context(source)
     try:
         report = check(spec)
     except FragmentError as exc:
         raise ctx.error("spec", str(exc)) from exc
-    return _bind_events(report.events, named or {}, ctx)
+    try:
+        return resolve_laws(report, named)
+    except BindError as exc:
+        raise ctx.error(_bind_path(exc, None), exc.reason) from exc
 
 
 # --------------------------------------------------------------------------- loading
@@ -517,68 +493,42 @@ def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: _Context) -> Model
     )
 
 
-def _bind_spec(
-    spec: Formula,
-    report: FragmentReport,
-    named: Mapping[str, FirstOccurrence],
+def _bind_path(exc: BindError, table: str | None) -> str:
+    """The key path of a binding fault: a proposition of the world is named under
+    ``table`` (where the world's propositions are declared) when there is one."""
+    match exc.key:
+        case ("distributions", name):
+            return _join("distributions", name)
+        case ("proposition", name) if table:
+            return _join(table, name)
+    return "spec"
+
+
+def _bind(
     game: Game[Any],
+    report: FragmentReport,
+    named: Mapping[str, FirstOccurrence] | None,
     noun: str,
     table: str | None,
     ctx: _Context,
-) -> dict[str, FirstOccurrence]:
-    """Bind each event of ``spec`` to its law and check the spec against the game.
-
-    Every name in ``named`` must be used by the spec; no proposition of the game may
-    have an event's name (``table``: where the game's propositions are declared, for the
-    key path); every other proposition of the spec must be a proposition of the game;
-    events the game declares (an optional ``event_names`` attribute) must each get a law.
-    """
+) -> Task:
+    """:func:`mitld_lp.task.bind`, its faults as :class:`ModelError` with key paths."""
     if not report.co_safe:  # the automaton has them; the product and solvers do not yet
         raise ctx.error(
             "spec",
             f"a {report.fragment} specification: safety/obligation tasks are not yet "
             "solvable (only co-safe ones are: no unbounded G, R or W in negation normal form)",
         )
-    bound = _bind_events(report.events, named, ctx)
-    used = {mu.name for _, mu in report.events if isinstance(mu, DistRef)}
-    for dname in named:
-        if dname not in used:
-            raise ctx.error(
-                _join("distributions", dname),
-                f"defined but not used by spec (it has no D[{dname}])",
-            )
-
-    events = frozenset(bound)
-    props = frozenset(game.proposition_names)
-    clashes = sorted(events & props)
-    if clashes:
-        where = _join(table, clashes[0]) if table else "spec"
-        raise ctx.error(
-            where,
-            f"{noun} {clashes[0]!r} has the name of an event of spec (an event is not a {noun})",
-        )
-    unknown = sorted(atoms(spec) - events - props)
-    if unknown:
-        known = ", ".join(sorted(props)) or "none"
-        evs = ", ".join(sorted(events)) or "none"
-        raise ctx.error(
-            "spec",
-            f"proposition {unknown[0]!r} is neither a {noun} nor an event "
-            f"({noun}s: {known}; events: {evs})",
-        )
-    game_events = frozenset(getattr(game, "event_names", frozenset()))
-    lawless = sorted(game_events - events)
-    if lawless:
-        raise ctx.error(
-            "spec",
-            f"the game reacts to event {lawless[0]!r} but the spec gives it no distribution "
-            f"(add D[mu] {lawless[0]} to the spec)",
-        )
-    return bound
+    try:
+        return bind(game, report, named, noun=noun)
+    except BindError as exc:
+        raise ctx.error(_bind_path(exc, table), exc.reason) from exc
 
 
-def _load(text: str, source: str, path: Path | None) -> Model:
-    ctx = _Context(source)
+def _load(
+    text: str, source: str, path: Path | None, max_states: int, max_memory: int | None
+) -> Model:
+    ctx = _Context(source, max_states, max_memory)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -636,7 +586,8 @@ def _load(text: str, source: str, path: Path | None) -> Model:
 
     spec, report = _parse_spec(spec_text, ctx)
     where = kind.extra_tables[0] if kind.extra_tables else kind.table
-    bound = _bind_spec(spec, report, named, game, kind.proposition_noun, where, ctx)
+    task = _bind(game, report, named, kind.proposition_noun, where, ctx)
+    kind.check_task(game, task, ctx)
 
     constraints, costs = _constraints_and_costs(doc, ctx)
     return Model(
@@ -645,7 +596,7 @@ def _load(text: str, source: str, path: Path | None) -> Model:
         spec_text=spec_text,
         epsilon=epsilon,
         game=game,
-        distributions=MappingProxyType(bound),
+        distributions=task.laws,
         source=path,
         constraints=constraints,
         costs=MappingProxyType(costs),
@@ -673,15 +624,28 @@ def _constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple
     return tuple(texts), costs
 
 
-def loads_model(text: str, source: str = "<string>") -> Model:
+def loads_model(
+    text: str,
+    source: str = "<string>",
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
     """Load a model from TOML ``text``; ``source`` prefixes every error message.
+    ``max_states`` and ``max_memory`` bound a world built while loading (a ``[prism]``
+    program, checked before Storm runs), as they bound the product later.
 
     Raises :class:`ModelError`.  The returned model's ``source`` is ``None``."""
-    return _load(text, source, None)
+    return _load(text, source, None, max_states, max_memory)
 
 
-def load_model(path: str | os.PathLike[str]) -> Model:
-    """Load and validate the model file at ``path``.
+def load_model(
+    path: str | os.PathLike[str],
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
+    """Load and validate the model file at ``path`` (budgets as for :func:`loads_model`).
 
     Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
     file cannot be read or is not UTF-8."""
@@ -693,4 +657,4 @@ def load_model(path: str | os.PathLike[str]) -> Model:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
-    return _load(text, source, p)
+    return _load(text, source, p, max_states, max_memory)

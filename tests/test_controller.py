@@ -47,6 +47,7 @@ def shuttle_world():
     class Shuttle:
         initial = ((0, "lane"), False, 1.0)
         proposition_names = frozenset({"goal", "low"})
+        event_names = frozenset({"open"})
 
         def actions(self, state):
             (cell, _), _, battery = state

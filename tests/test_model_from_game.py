@@ -49,38 +49,11 @@ def test_syntax_errors_keep_line_and_column():
         Model.from_game(WORLD, "F A &")
 
 
-class _EventWorld:
-    """A corridor whose last cell only opens when the event 'door' happens."""
-
-    initial = 0
-    proposition_names = frozenset({"A"})
-    event_names = frozenset({"door"})
-
-    def actions(self, state):
-        return ("E",)
-
-    def successors(self, state, action, events):
-        return ((min(state + 1, 2), 1.0),) if state < 1 or "door" in events else ((state, 1.0),)
-
-    def propositions(self, state):
-        return frozenset({"A"}) if state == 2 else frozenset()
-
-
-def test_an_event_the_game_declares_needs_a_law():
-    with pytest.raises(ModelError, match="reacts to event 'door' but the spec gives it no"):
-        Model.from_game(_EventWorld(), "F[0,4] A")
-    r = synthesize(Model.from_game(_EventWorld(), "D[geometric(0.5)] door & F[0,4] A"))
-    assert r.certified
-    # The robot is at cell 1 after step 1 whatever happens; it moves on to 2 in step
-    # k >= 2 iff the door event happens in step k (an event happens once, so k = 1
-    # leaves it stuck at 1).  A within 4 steps iff K in {2, 3, 4}: 1/4 + 1/8 + 1/16.
-    assert r.lower == pytest.approx(0.25 + 0.125 + 0.0625, abs=1e-7)
-
-
 def test_a_model_pickles_and_keeps_its_laws():
     import pickle
 
-    model = Model.from_game(_EventWorld(), "D[geometric(0.5)] door & F[0,4] A", name="door")
+    # (a world reacting to an event: tests/test_world_members.py)
+    model = Model.from_game(WORLD, "D[geometric(0.5)] door & F(door & F[0,4] A)", name="door")
     back = pickle.loads(pickle.dumps(model))
     assert back.name == "door" and back.spec == model.spec
     assert dict(back.distributions).keys() == {"door"}

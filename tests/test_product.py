@@ -655,7 +655,7 @@ def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, mo
     """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("mitld_lp.product"), "_DENSE_LIMIT", 8)
+    monkeypatch.setattr(importlib.import_module("mitld_lp.arrays"), "DENSE_LIMIT", 8)
     rng = np.random.default_rng(seed)
     text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
     game = _random_game(rng, sorted(dists))
@@ -671,5 +671,20 @@ def test_product_refuses_a_proposition_it_could_never_see():
 
     world = GridWorld.make(2, 1, start=(0, 0), regions={"A": [(1, 0)]})
     sta = make_sta(to_dta(parse("F[0,3] a")), {}, 0.01)
-    with pytest.raises(ValueError, match=r"proposition 'a' of the formula is neither .*\(A\)"):
+    with pytest.raises(ValueError, match=r"proposition 'a' is neither a proposition nor an event "
+                       r"\(propositions: A; events: none\)"):
         product(world, sta)
+
+
+def test_key_codec_numbers_every_triple_once_and_decodes_ints_and_arrays():
+    from mitld_lp.product.states import KeyCodec
+
+    codec = KeyCodec(n_q=5, n_sit=7)
+    triples = [(g, q, s) for g in range(4) for q in range(5) for s in range(7)]
+    keys = [codec.key(*t) for t in triples]
+    assert sorted(keys) == list(range(4 * 5 * 7))  # a bijection onto 0 .. 139
+    assert [codec.unkey(k) for k in keys] == triples
+    g, q, s = (np.array(c) for c in zip(*triples, strict=True))
+    back = codec.unkey(codec.key(g, q, s))
+    assert all(np.array_equal(a, b) for a, b in zip(back, (g, q, s), strict=True))
+    assert codec.fits((1 << 62) // 35) and not codec.fits((1 << 62) // 35 + 1)

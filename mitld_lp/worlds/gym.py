@@ -18,8 +18,8 @@ gymnasium itself is never imported: any object with a ``P`` table works.
   would; such a state must not also be entered by an unflagged transition (it would then
   be both an end and a step, and an error says so).  ``terminal="keep"`` uses the table
   as it is.
-* **events**: a toy-text table has none, so the dynamics ignore the specification's
-  external events (they only label the steps).
+* **events**: a toy-text table has none (the game's ``event_names`` is empty), so the
+  dynamics ignore the specification's external events (they only label the steps).
 
 Errors are :class:`mitld_lp.worlds.WorldError` naming the state and action at fault.
 """

@@ -1,0 +1,239 @@
+"""The construction: breadth first over the reachable product states, a batch of
+states at a time (see :mod:`mitld_lp.product` for the semantics)."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from tqdm.auto import tqdm
+
+from mitld_lp import defaults
+from mitld_lp.arrays import Grow, Index, concatenate, merge, ranks
+from mitld_lp.automata.sta import STA
+from mitld_lp.game import Game
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
+from mitld_lp.product.layers import Layers
+from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
+from mitld_lp.task import check_alphabet
+
+__all__ = ["product"]
+
+log = logging.getLogger(__name__)
+
+BATCH_ENTRIES = 1 << 18
+"""Transitions (before merging) per batch of expanded states."""
+
+
+def product(
+    game: Game[Any],
+    sta: STA,
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+    progress: bool | None = None,
+) -> MDP:
+    """Build the reachable product MDP of ``game`` and ``sta`` (see the module docstring).
+
+    States are numbered breadth first from the initial state, successors in the order
+    (action, event outcome, game successor); a row's entries in the order they first
+    appear, entries to one product state summed in that order.  The queue is expanded
+    in batches of states whose transitions are computed as arrays: each factor (the
+    game's rows per (state, action, events), the STA's outcomes per situation, the
+    automaton's steps per (state, letter)) is asked once and then joined in numpy.
+
+    Budgets, checked before the work: :func:`estimate_size` bounds the product from its
+    factors; when the bound is within ``max_states`` nothing more can go wrong, else
+    (the reachable part may still be small) the states are counted exactly per batch,
+    before a batch's new states are stored, against ``max_states`` and against
+    ``max_memory`` bytes (default :func:`default_max_memory`) at
+    :data:`BYTES_PER_STATE` per state plus :data:`BYTES_PER_TRANSITION` per transition,
+    the transitions per state as measured so far.  Either raises
+    :class:`ProductTooLarge` naming the numbers.
+    ``progress``: show a progress bar (None: only on a terminal, for large builds).
+
+    Raises :class:`mitld_lp.task.BindError` (a ``ValueError``) when the task does not fit
+    the game (:func:`mitld_lp.task.check_alphabet`: a proposition the automaton reads
+    that is neither a proposition of the game nor an event of the STA, an event with a
+    proposition's name, an event the game reacts to without a law).
+    """
+    members = check_alphabet(game, sta.dta.atoms, sta.events)
+    budget = BuildBudget(
+        max_states,
+        default_max_memory() if max_memory is None else max_memory,
+        estimate_size(game, sta),
+    )
+    log.info("product: %s", budget.estimate)
+    f = Layers(game, members, sta)
+    states = _Found(f, budget)
+    g0 = f.game_state(game.initial)
+    f.flush()
+    q0 = f.step(np.array([sta.dta.initial]), f.props.view[[g0]])
+    sid0 = f.situation(sta.events, 0)
+    initial = int(states.intern(q0 if q0[0] < 0 else f.codec.key(g0, q0, sid0))[0])
+
+    chunks: list[tuple[np.ndarray, ...]] = []  # per batch: cols, vals, row lengths, actions
+    state_choices = Grow(np.int64)
+    bar = None if progress is False else tqdm(
+        total=None, unit=" states", disable=None if progress is None else not progress,
+        leave=False, mininterval=0.5, desc="product",
+    )
+    head, batch = 0, 256
+    while head < states.keys.size:
+        keys = states.keys.view[head : head + batch].copy()
+        chunk, n_entries = _expand(f, keys, head, states.intern)
+        chunks.append(chunk)
+        state_choices.extend(chunk[4])
+        budget.expanded += keys.size
+        budget.transitions += chunk[0].size
+        if bar is not None:
+            bar.update(keys.size)
+        head += keys.size
+        batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
+    if bar is not None:
+        bar.close()
+    f.check_rows()  # the rows not checked yet: every distribution read is checked
+    keys = states.keys.view.copy()
+    del states  # the index is not needed any more: free it before the matrix is assembled
+    return _assemble(f, chunks, state_choices.view, keys, initial)
+
+
+class _Found:
+    """The product states found so far: their keys in the order found, and an index."""
+
+    def __init__(self, f: Layers, budget: BuildBudget) -> None:
+        self.f, self.budget = f, budget
+        self.index = Index()
+        self.keys = Grow(np.int64)  # per state: its key (>= 0) or absorbing code (< 0)
+
+    def intern(self, keys: np.ndarray) -> np.ndarray:
+        """Product state ids of ``keys``, new ones numbered in order of first occurrence.
+        The budget is checked before the new states are stored."""
+        uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        ids = self.index.find(uniq)
+        new = np.flatnonzero(ids < 0)
+        if new.size:
+            n = self.keys.size
+            self.budget.check(n + new.size)
+            new = new[np.argsort(first[new], kind="stable")]
+            ids[new] = np.arange(n, n + new.size)
+            self.index.insert(uniq[new], ids[new])
+            self.keys.extend(uniq[new])
+        return ids[inverse]
+
+
+def _expand(
+    f: Layers, keys: np.ndarray, first_id: int, intern: Any
+) -> tuple[tuple[np.ndarray, ...], int]:
+    """The rows of the product states ``keys`` (ids ``first_id, first_id + 1, ...``).
+
+    Returns (cols, vals, row lengths, choice actions, choices per state) and the number
+    of entries before merging (to size the next batch).
+    """
+    ordinary = keys >= 0
+    g, q, sid = f.codec.unkey(keys[ordinary])
+    f.ensure_actions(g)
+    f.ensure_outcomes(sid)
+    # choices: one per (state, action slot)
+    n_act = f.act_count.view[g]
+    c_state = np.repeat(np.arange(g.size), n_act)
+    c_slot = f.act_start.view[g][c_state] + ranks(n_act)
+    # pairs: one per (choice, event outcome)
+    c_sid = sid[c_state]
+    n_out = f.out_count.view[c_sid]
+    p_choice = np.repeat(np.arange(c_slot.size), n_out)
+    p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
+    p_occ = f.out_occ.view[p_out]
+    p_next = f.out_next.view[p_out]
+    p_row = np.zeros(p_choice.size, dtype=np.int64)  # row 0: crossed a truncation point
+    alive = p_next >= 0
+    p_row[alive] = f.rows(c_slot[p_choice[alive]], p_occ[alive])
+    # entries: one per (pair, game successor)
+    n_succ = f.row_len.view[p_row]
+    e_pair = np.repeat(np.arange(p_choice.size), n_succ)
+    e_at = f.row_start.view[p_row][e_pair] + ranks(n_succ)
+    vals = f.out_prob.view[p_out][e_pair] * f.row_prob.view[e_at]
+    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
+    moving = alive[e_pair]
+    g2 = f.row_succ.view[e_at[moving]]
+    e_pm = e_pair[moving]
+    f.flush()
+    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_letter(p_occ[e_pm]))
+    e_key[moving] = np.where(q2 < 0, q2, f.codec.key(g2, q2, p_next[e_pm]))
+    cols = intern(e_key).astype(np.int32)
+    e_choice = p_choice[e_pair]
+    cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
+    actions = f.slot_aid.view[c_slot]
+    choices = np.ones(keys.size, dtype=np.int64)
+    choices[ordinary] = n_act
+    # the absorbing states of the batch (at most three in the whole product): one
+    # self-loop each, inserted where their state falls in the order
+    for i in np.flatnonzero(~ordinary).tolist():
+        before = int(np.count_nonzero(ordinary[:i]))
+        at_choice = int(n_act[:before].sum())
+        at_entry = int(row_len[:at_choice].sum())
+        cols = np.insert(cols, at_entry, first_id + i)
+        vals = np.insert(vals, at_entry, 1.0)
+        row_len = np.insert(row_len, at_choice, 1)
+        actions = np.insert(actions, at_choice, ABSORB)
+        n_act = np.insert(n_act, before, 1)
+        ordinary = ordinary.copy()
+        ordinary[i] = True
+    return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32), choices), int(
+        e_key.size
+    )
+
+
+def _assemble(
+    f: Layers,
+    chunks: list[tuple[np.ndarray, ...]],
+    state_choices: np.ndarray,
+    keys: np.ndarray,
+    initial: int,
+) -> MDP:
+    """The MDP from the batches' rows, with a record per state."""
+    columns = [list(c) for c in zip(*chunks, strict=True)]
+    chunks.clear()
+    cols = concatenate(columns[0], np.int32)
+    vals = concatenate(columns[1], np.float64)
+    row_len = concatenate(columns[2], np.int64)
+    actions = concatenate(columns[3], np.int32)
+    indptr = np.zeros(row_len.size + 1, dtype=np.int64)
+    np.cumsum(row_len, out=indptr[1:])
+    del row_len
+    # action ids in order of first use, as names
+    used = actions >= 0
+    uniq, first = np.unique(actions[used], return_index=True)
+    order = uniq[np.argsort(first)]
+    remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
+    remap[order] = np.arange(order.size, dtype=np.int32)
+    choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
+    choice_actions[used] = remap[actions[used]]
+    by_id = {i: a for a, i in f.action_id.items()}
+    kind = np.zeros(keys.size, dtype=np.int8)
+    for code, k in MASK_OF_CODE.items():
+        kind[keys == code] = k
+    n = keys.size
+    matrix = sp.csr_array((vals, cols, indptr), shape=(actions.size, n))
+    row_groups = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(state_choices, out=row_groups[1:])
+    mdp = MDP(
+        matrix=matrix,
+        row_groups=row_groups,
+        choice_actions=choice_actions,
+        action_names=tuple(by_id[int(i)] for i in order),
+        initial=initial,
+        target=kind == 1,
+        sink=kind == 2,
+        truncated=kind == 3,
+        # the MDP's field is typed as a tuple; the lazy sequence answers len, [i] and
+        # iteration as a tuple would
+        states=ProductStates(keys, f.game_states, f.situations, f.codec),
+    )
+    log.info(
+        "product: %d states, %d choices, %d transitions", n, mdp.n_choices, mdp.n_transitions
+    )
+    return mdp
