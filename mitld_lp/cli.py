@@ -303,6 +303,14 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    _constrained().args_constraints(p)
+
+
+def _constrained() -> Any:
+    """The constrained-synthesis command line (its own module)."""
+    from mitld_lp import cli_constrained
+
+    return cli_constrained
 
 
 def _cmd_solve(args: argparse.Namespace) -> int:
@@ -319,7 +327,10 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    r = synthesize(model, **_solve_settings(args).synthesize_kwargs())
+    if _constrained().wanted(args, model):
+        return _constrained().solve(args, model, policy_file)
+    r = _constrained().unconstrained(
+        synthesize(model, **_solve_settings(args).synthesize_kwargs()), "solve")
     summary = r.summary()
     if policy_file:
         _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
@@ -406,10 +417,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.synthesis import synthesize
 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-                   max_states=args.max_states, max_memory=args.max_memory,
-                   max_automaton_states=args.max_automaton_states,
-                   time_limit=_time_left(args))
+    r = _constrained().unconstrained(synthesize(
+        model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
+        max_states=args.max_states, max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, time_limit=_time_left(args)),
+        "simulate")
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
@@ -623,8 +635,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
             model = load_model(args.input, max_states=args.max_states)
-            result = synthesize(model, epsilon=args.epsilon, max_states=args.max_states,
-                                time_limit=_time_left(args))
+            result = _constrained().unconstrained(synthesize(
+                model, epsilon=args.epsilon, max_states=args.max_states,
+                time_limit=_time_left(args)), "plot")
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
@@ -651,6 +664,8 @@ _VERBS: list[
      _cmd_sweep),
     ("plot", "draw a grid world's policy, or a column of a sweep's results", _args_plot,
      _cmd_plot),
+    ("pareto", "the certified curve of success probability against steps, cost or a risk",
+     lambda p: _constrained().args_pareto(p), lambda a: _constrained().cmd_pareto(a)),
 ]
 
 

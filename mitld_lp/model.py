@@ -46,7 +46,7 @@ import os
 import re
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -96,6 +96,9 @@ class Model:
         distributions: read-only mapping ``event -> FirstOccurrence`` with one entry per
             external event of the spec (the events are exactly its keys).
         source: the file the model was read from, or ``None`` for :func:`loads_model`.
+        constraints: the file's ``constraints`` (texts, checked when loaded; see
+            :mod:`mitld_lp.constraints`).
+        costs: the file's ``[costs]``: cost per action (1 for an action not named).
     """
 
     name: str
@@ -105,6 +108,8 @@ class Model:
     game: Game[Any]
     distributions: Mapping[str, FirstOccurrence]
     source: Path | None = None
+    constraints: tuple[str, ...] = ()
+    costs: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def events(self) -> frozenset[str]:
@@ -114,7 +119,8 @@ class Model:
     def __reduce__(self) -> tuple[Any, ...]:
         # A read-only mapping view does not pickle: rebuild it from a plain dict.
         return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
-                                  self.game, dict(self.distributions), self.source))
+                                  self.game, dict(self.distributions), self.source,
+                                  self.constraints, dict(self.costs)))
 
     @classmethod
     def from_game(
@@ -168,8 +174,10 @@ class Model:
 def _unpickle_model(
     name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
     distributions: dict[str, FirstOccurrence], source: Path | None,
+    constraints: tuple[str, ...] = (), costs: dict[str, float] | None = None,
 ) -> Model:
-    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source)
+    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source,
+                 constraints, MappingProxyType(costs or {}))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -428,7 +436,7 @@ def _loaders() -> Any:
     return loaders
 
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs"}
 
 
 # --------------------------------------------------------------------------- the spec
@@ -588,6 +596,7 @@ def _load(
     task = _bind(game, report, named, kind.proposition_noun, where, ctx, declared)
     kind.check_task(game, task, ctx)
 
+    constraints, costs = _constraints_and_costs(doc, ctx)
     return Model(
         name=name,
         spec=spec,
@@ -596,7 +605,30 @@ def _load(
         game=game,
         distributions=task.laws,
         source=path,
+        constraints=constraints,
+        costs=MappingProxyType(costs),
     )
+
+
+def _constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
+                                                                          dict[str, float]]:
+    """The ``constraints`` list (each read by :func:`mitld_lp.constraints.parse_constraint`)
+    and the ``[costs]`` table (numbers > 0 per action)."""
+    from mitld_lp.constraints import ConstraintError, check_costs, parse_constraint
+
+    texts = doc.get("constraints", [])
+    if not isinstance(texts, list):
+        raise ctx.error("constraints", f"must be a list of strings, got {_type_name(texts)}")
+    for i, text in enumerate(texts):
+        try:
+            parse_constraint(text, f"constraints[{i}]")
+        except ConstraintError as exc:
+            raise ModelError(f"{ctx.source}: {exc}") from None
+    try:
+        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
+    except ConstraintError as exc:
+        raise ModelError(f"{ctx.source}: {exc}") from None
+    return tuple(texts), costs
 
 
 def loads_model(

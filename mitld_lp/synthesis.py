@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -46,6 +46,7 @@ from mitld_lp.product import product
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.acceptance import Acceptance
+    from mitld_lp.constrained import ConstrainedResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -325,7 +326,9 @@ def synthesize(
     progress: bool = False,
     decompose: bool = True,
     time_limit: float | None = None,
-) -> SynthesisResult:
+    constraints: Iterable[Any] = (),
+    then: str | None = None,
+) -> SynthesisResult | ConstrainedResult:
     """Maximise the probability that the model's world satisfies its MITLD spec.
 
     ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
@@ -337,7 +340,15 @@ def synthesize(
     per event instead of ``epsilon``.  The budgets are :func:`build_product`'s.
     ``decompose``: the LP block by block in topological order (default) or as one LP.
     ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
+    ``constraints`` / ``then`` (or constraints in the model): a constrained synthesis,
+    :func:`mitld_lp.constrained.synthesize_constrained`, whose result it returns.
     """
+    if constraints or then or (isinstance(model, Model) and model.constraints):
+        from mitld_lp.constrained import synthesize_constrained
+
+        return synthesize_constrained(model, constraints, then=then, epsilon=epsilon,
+                                      max_states=max_states, max_memory=max_memory,
+                                      certify_tol=certify_tol)
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
     if not isinstance(model, Model):
