@@ -210,3 +210,9 @@ def test_small_probabilities_keep_their_significant_digits(tmp_path, capsys):
     assert main(["solve", str(toml), str(toml), "-q"]) == 0
     batch = capsys.readouterr().out
     assert "2.89e-08" in batch and "0.0000000" not in batch
+
+
+@pytest.mark.parametrize("bad", [-1, float("nan"), float("inf"), "5"])
+def test_synthesize_refuses_a_bad_time_limit(bad):
+    with pytest.raises(ValueError, match="time_limit"):
+        synthesize(load_model(BUS), time_limit=bad)
