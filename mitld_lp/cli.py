@@ -117,6 +117,11 @@ ran out of time.  Its thread may still be finishing a native call, and must not 
 an answer after the stop was reported."""
 
 
+def _prob(x: float) -> str:
+    """A probability for text output: 7 decimals, or 7 significant digits below 1e-3."""
+    return f"{x:.7f}" if x == 0 or abs(x) >= 1e-3 else f"{x:.7g}"
+
+
 def _out(text: str = "") -> None:
     """Print one line of the command's answer on stdout (nothing once cancelled)."""
     cancelled = getattr(_command, "cancelled", None)
@@ -339,9 +344,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
-        _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]"
+        _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
-        _out(f"value:        {r.lower_model.value:.7f}  ({r.method}, status {r.status.value})")
+        _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")
@@ -445,7 +450,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if sim.kept:
             _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
                  "(counted as successes)")
-        _out(f"certified:    [{r.lower:.7f}, {r.upper:.7f}]  "
+        _out(f"certified:    [{_prob(r.lower)}, {_prob(r.upper)}]  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:
             _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
@@ -529,7 +534,7 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
     elif "error" in record:
         _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
     else:
-        _out(f"{printable(record['file'])}: [{record['lower']:.7f}, {record['upper']:.7f}] "
+        _out(f"{printable(record['file'])}: [{_prob(record['lower'])}, {_prob(record['upper'])}] "
              f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
              f"{record['states']} states, {record['seconds']:.3f} s)")
 

@@ -351,6 +351,10 @@ def synthesize(
                                       certify_tol=certify_tol)
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
+    if time_limit is not None and not (isinstance(time_limit, (int, float))
+                                       and 0 <= time_limit < float("inf")):
+        raise ValueError(f"time_limit: must be a finite number of seconds >= 0 or None, "
+                         f"got {time_limit!r}")
     if not isinstance(model, Model):
         raise TypeError(
             f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
