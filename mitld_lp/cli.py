@@ -117,6 +117,11 @@ ran out of time.  Its thread may still be finishing a native call, and must not 
 an answer after the stop was reported."""
 
 
+def _prob(x: float) -> str:
+    """A probability for text output: 7 decimals, or 7 significant digits below 1e-3."""
+    return f"{x:.7f}" if x == 0 or abs(x) >= 1e-3 else f"{x:.7g}"
+
+
 def _out(text: str = "") -> None:
     """Print one line of the command's answer on stdout (nothing once cancelled)."""
     cancelled = getattr(_command, "cancelled", None)
@@ -249,7 +254,7 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import build_product
 
-    model = load_model(args.model)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     built = build_product(
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
@@ -303,6 +308,14 @@ def _args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    _constrained().args_constraints(p)
+
+
+def _constrained() -> Any:
+    """The constrained-synthesis command line (its own module)."""
+    from mitld_lp import cli_constrained
+
+    return cli_constrained
 
 
 def _cmd_solve(args: argparse.Namespace) -> int:
@@ -318,8 +331,11 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model)
-    r = synthesize(model, **_solve_settings(args).synthesize_kwargs())
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    if _constrained().wanted(args, model):
+        return _constrained().solve(args, model, policy_file)
+    r = _constrained().unconstrained(
+        synthesize(model, **_solve_settings(args).synthesize_kwargs()), "solve")
     summary = r.summary()
     if policy_file:
         _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
@@ -328,9 +344,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
-        _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]"
+        _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
-        _out(f"value:        {r.lower_model.value:.7f}  ({r.method}, status {r.status.value})")
+        _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")
@@ -372,8 +388,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
                                                      DRN_SUFFIXES)
     files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
-    mdp = _build(args)[1].mdp
-    target = mdp.target | mdp.truncated if args.upper else mdp.target
+    from mitld_lp.acceptance import acceptance
+
+    built = _build(args)[1]
+    mdp = built.mdp
+    goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
+    target = goal | mdp.truncated if args.upper else goal
     if lp:
         _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _out(f"wrote {lp}")
@@ -390,7 +410,8 @@ def _args_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
     p.add_argument("--max-steps", type=bounded_int(1, defaults.MAX_STEPS_LIMIT),
                    default=defaults.MAX_STEPS,
-                   help="steps after which a run still undecided counts as undecided")
+                   help="steps each run is watched (a run keeping a safety part unviolated "
+                        "that long counts as a success; undecided ones as failures)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -400,11 +421,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.simulate import simulate
     from mitld_lp.synthesis import synthesize
 
-    model = load_model(args.model)
-    r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-                   max_states=args.max_states, max_memory=args.max_memory,
-                   max_automaton_states=args.max_automaton_states,
-                   time_limit=_time_left(args))
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    r = _constrained().unconstrained(synthesize(
+        model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
+        max_states=args.max_states, max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, time_limit=_time_left(args)),
+        "simulate")
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     out = {
@@ -416,14 +438,19 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "consistent": sim.ci_low <= r.upper and sim.ci_high >= r.lower,
         "beyond_model": sim.beyond_model,
         "undecided": sim.undecided,
+        "horizon": sim.horizon,
+        "kept": sim.kept,
         "seed": sim.seed,
     }
     if args.json:
         _out(_dumps(out))
     else:
         _out(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
-              f"  ({sim.successes}/{sim.runs}, seed {sim.seed})")
-        _out(f"certified:    [{r.lower:.7f}, {r.upper:.7f}]  "
+              f"  ({sim.successes}/{sim.runs}, seed {sim.seed}, horizon {sim.horizon} steps)")
+        if sim.kept:
+            _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
+                 "(counted as successes)")
+        _out(f"certified:    [{_prob(r.lower)}, {_prob(r.upper)}]  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:
             _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
@@ -490,7 +517,10 @@ def _solve_batch(args: argparse.Namespace) -> int:
             _batch_line(records[-1], args.json)
         for path in (m for m in matches if m not in seen):
             seen.add(path)
-            outcome = run_model(lambda path=path: load_model(path), _solve_settings(args))
+            outcome = run_model(
+                lambda path=path: load_model(path, max_states=args.max_states,
+                                             max_memory=args.max_memory),
+                _solve_settings(args))
             records.append({"file": path, **outcome.summary} if outcome.summary else {
                 "file": path, "status": outcome.status, "certified": False,
                 "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
@@ -504,7 +534,7 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
     elif "error" in record:
         _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
     else:
-        _out(f"{printable(record['file'])}: [{record['lower']:.7f}, {record['upper']:.7f}] "
+        _out(f"{printable(record['file'])}: [{_prob(record['lower'])}, {_prob(record['upper'])}] "
              f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
              f"{record['states']} states, {record['seconds']:.3f} s)")
 
@@ -609,9 +639,10 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             from mitld_lp.synthesis import synthesize
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
-            model = load_model(args.input)
-            result = synthesize(model, epsilon=args.epsilon, max_states=args.max_states,
-                                time_limit=_time_left(args))
+            model = load_model(args.input, max_states=args.max_states)
+            result = _constrained().unconstrained(synthesize(
+                model, epsilon=args.epsilon, max_states=args.max_states,
+                time_limit=_time_left(args)), "plot")
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
@@ -638,6 +669,8 @@ _VERBS: list[
      _cmd_sweep),
     ("plot", "draw a grid world's policy, or a column of a sweep's results", _args_plot,
      _cmd_plot),
+    ("pareto", "the certified curve of success probability against steps, cost or a risk",
+     lambda p: _constrained().args_pareto(p), lambda a: _constrained().cmd_pareto(a)),
 ]
 
 

@@ -41,12 +41,11 @@ the top-level tables it owns and a builder.
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -59,8 +58,8 @@ from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
+from mitld_lp.model_keys import ModelError, _Context, _join, _show, _type_name
 from mitld_lp.task import BindError, Task, bind, resolve_laws
-from mitld_lp.text import printable
 
 __all__ = [
     "Model",
@@ -74,13 +73,6 @@ __all__ = [
 DEFAULT_EPSILON = defaults.EPSILON
 """The truncation budget used when a model gives no ``epsilon``."""
 
-
-class ModelError(ValueError):
-    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``, one
-    line of printable characters (a user's names are shown escaped)."""
-
-    def __init__(self, message: str) -> None:
-        super().__init__(printable(message))
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +88,9 @@ class Model:
         distributions: read-only mapping ``event -> FirstOccurrence`` with one entry per
             external event of the spec (the events are exactly its keys).
         source: the file the model was read from, or ``None`` for :func:`loads_model`.
+        constraints: the file's ``constraints`` (texts, checked when loaded; see
+            :mod:`mitld_lp.constraints`).
+        costs: the file's ``[costs]``: cost per action (1 for an action not named).
     """
 
     name: str
@@ -105,6 +100,8 @@ class Model:
     game: Game[Any]
     distributions: Mapping[str, FirstOccurrence]
     source: Path | None = None
+    constraints: tuple[str, ...] = ()
+    costs: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def events(self) -> frozenset[str]:
@@ -114,7 +111,8 @@ class Model:
     def __reduce__(self) -> tuple[Any, ...]:
         # A read-only mapping view does not pickle: rebuild it from a plain dict.
         return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
-                                  self.game, dict(self.distributions), self.source))
+                                  self.game, dict(self.distributions), self.source,
+                                  self.constraints, dict(self.costs)))
 
     @classmethod
     def from_game(
@@ -123,6 +121,7 @@ class Model:
         spec: Formula | str,
         *,
         distributions: Mapping[str, FirstOccurrence] | None = None,
+        events: Mapping[str, FirstOccurrence] | None = None,
         epsilon: float = DEFAULT_EPSILON,
         name: str = "model",
     ) -> Model:
@@ -136,7 +135,9 @@ class Model:
         (:func:`mitld_lp.task.bind`: a name is unbound or bound but unused, a
         proposition of the spec is neither a proposition of the game nor an event, a
         proposition of the game has an event's name, or the game reacts to events
-        (``event_names``) the spec gives no distribution)."""
+        (``event_names``) the spec gives no distribution).  ``events`` gives events of
+        the world their laws without the spec asking that they happen (a model file's
+        ``[events]``): the spec may use them as propositions, ``G (door -> F[0,3] stop)``."""
         ctx = _Context("<spec>")
         try:
             world_members(game)
@@ -157,7 +158,7 @@ class Model:
                 raise ctx.error("spec", str(exc)) from exc
         else:
             raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
-        task = _bind(game, report, distributions, "proposition", None, ctx)
+        task = _bind(game, report, distributions, "proposition", None, ctx, events)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
                    distributions=task.laws, source=None)
 
@@ -165,108 +166,11 @@ class Model:
 def _unpickle_model(
     name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
     distributions: dict[str, FirstOccurrence], source: Path | None,
+    constraints: tuple[str, ...] = (), costs: dict[str, float] | None = None,
 ) -> Model:
-    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source)
+    return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source,
+                 constraints, MappingProxyType(costs or {}))
 
-
-# --------------------------------------------------------------------------- helpers
-
-
-def _key(part: str) -> str:
-    """A key of a key path as TOML writes it: bare, or quoted with escapes."""
-    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else _show(part)
-
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{_key(key)}" if path else _key(key)
-
-
-def _show(value: Any) -> str:
-    """A value the way TOML writes it (``true``, ``"text"``, ``[1, 2]``)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_show(v)}" for k, v in value.items()) + " }"
-    return repr(value)
-
-
-def _type_name(value: Any) -> str:
-    match value:
-        case bool():
-            return "a boolean"
-        case int():
-            return "an integer"
-        case float():
-            return "a float"
-        case str():
-            return "a string"
-        case list():
-            return "an array"
-        case dict():
-            return "a table"
-    return type(value).__name__
-
-
-class _Context:
-    """Error reporting for one source."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def error(self, path: str, message: str) -> ModelError:
-        where = f"{path}: " if path else ""
-        return ModelError(f"{self.source}: {where}{message}")
-
-    def table(self, value: Any, path: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.error(path, f"must be a table, got {_type_name(value)} {_show(value)}")
-        return value
-
-    def keys(
-        self, table: dict[str, Any], path: str, required: set[str], optional: set[str]
-    ) -> None:
-        allowed = required | optional
-        for k in table:
-            if k not in allowed:
-                raise self.error(
-                    _join(path, k), f"unknown key (allowed: {', '.join(sorted(allowed))})"
-                )
-        for k in sorted(required):
-            if k not in table:
-                raise self.error(_join(path, k), "missing (required)")
-
-    def string(self, value: Any, path: str) -> str:
-        if not isinstance(value, str):
-            raise self.error(path, f"must be a string, got {_type_name(value)} {_show(value)}")
-        if not value.strip():
-            raise self.error(path, "must not be empty")
-        return value
-
-    def number(self, value: Any, path: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(path, f"must be a number, got {_type_name(value)} {_show(value)}")
-        if not math.isfinite(value):
-            raise self.error(path, f"must be finite, got {_show(value)}")
-        return float(value)
-
-    def integer(self, value: Any, path: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(path, f"must be an integer, got {_type_name(value)} {_show(value)}")
-        return value
-
-    def array(self, value: Any, path: str) -> list[Any]:
-        if not isinstance(value, list):
-            raise self.error(path, f"must be an array, got {_type_name(value)} {_show(value)}")
-        return value
-
-    def pair(self, value: Any, path: str) -> tuple[int, int]:
-        if not isinstance(value, list) or len(value) != 2:
-            raise self.error(path, f"must be a pair [x, y] of integers, got {_show(value)}")
-        return (self.integer(value[0], f"{path}[0]"), self.integer(value[1], f"{path}[1]"))
 
 
 # --------------------------------------------------------------------------- game kinds
@@ -353,7 +257,7 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     (the labels that become propositions, default all) and ``events`` (PRISM actions
     that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
     from mitld_lp.worlds import WorldError
-    from mitld_lp.worlds.prism import load_prism
+    from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
     table = ctx.table(doc["prism"], "prism")
     ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
@@ -376,7 +280,10 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
 
     labels, events = names("labels"), names("events")
     try:
-        return load_prism(path, constants=constants, labels=labels, events=events or ())
+        return load_prism(path, constants=constants, labels=labels, events=events or (),
+                          max_states=ctx.max_states, max_memory=ctx.max_memory)
+    except PrismTooLarge as exc:  # a budget stop, not a mistake in the file
+        raise PrismTooLarge(f"{ctx.source}: prism: {exc}") from exc
     except WorldError as exc:
         raise ctx.error("prism", str(exc)) from exc
 
@@ -419,7 +326,7 @@ def _loaders() -> Any:
     return loaders
 
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "constants"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs"}
 
 
 # --------------------------------------------------------------------------- the spec
@@ -483,8 +390,8 @@ def _bind_path(exc: BindError, table: str | None) -> str:
     """The key path of a binding fault: a proposition of the world is named under
     ``table`` (where the world's propositions are declared) when there is one."""
     match exc.key:
-        case ("distributions", name):
-            return _join("distributions", name)
+        case ("distributions" | "events" as key, name):
+            return _join(key, name)
         case ("proposition", name) if table:
             return _join(table, name)
     return "spec"
@@ -497,22 +404,44 @@ def _bind(
     noun: str,
     table: str | None,
     ctx: _Context,
+    declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> Task:
     """:func:`mitld_lp.task.bind`, its faults as :class:`ModelError` with key paths."""
-    if not report.co_safe:  # the automaton has them; the product and solvers do not yet
-        raise ctx.error(
-            "spec",
-            f"a {report.fragment} specification: safety/obligation tasks are not yet "
-            "solvable (only co-safe ones are: no unbounded G, R or W in negation normal form)",
-        )
     try:
-        return bind(game, report, named, noun=noun)
+        return bind(game, report, named, noun=noun, declared=declared)
     except BindError as exc:
         raise ctx.error(_bind_path(exc, table), exc.reason) from exc
 
 
-def _load(text: str, source: str, path: Path | None) -> Model:
-    ctx = _Context(source)
+def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, FirstOccurrence]:
+    """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
+    an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
+    laws: dict[str, FirstOccurrence] = {}
+    source = Path(ctx.source)  # a fit's data file is read beside the model file
+    base = source.parent if source.is_file() else None
+    for name, value in ctx.table(doc.get(key, {}), key).items():
+        path = _join(key, name)
+        if not isinstance(value, dict):
+            raise ctx.error(
+                path,
+                f"must be an inline table such as {{ geometric = 0.5 }}, got "
+                f"{_type_name(value)} {_show(value)}",
+            )
+        try:
+            laws[name] = from_table(value, path, base)
+        except DistributionError as exc:
+            message = str(exc)
+            raise ModelError(
+                f"{ctx.source}: {message}" if path in message
+                else f"{ctx.source}: {path}: {message}"
+            ) from exc
+    return laws
+
+
+def _load(
+    text: str, source: str, path: Path | None, max_states: int, max_memory: int | None
+) -> Model:
+    ctx = _Context(source, max_states, max_memory)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -551,28 +480,15 @@ def _load(text: str, source: str, path: Path | None) -> Model:
 
     game = kind.build(doc, ctx)
 
-    named: dict[str, FirstOccurrence] = {}
-    for dname, value in ctx.table(doc.get("distributions", {}), "distributions").items():
-        dpath = _join("distributions", dname)
-        if not isinstance(value, dict):
-            raise ctx.error(
-                dpath,
-                f"must be an inline table such as {{ geometric = 0.5 }}, got "
-                f"{_type_name(value)} {_show(value)}",
-            )
-        try:
-            named[dname] = from_table(value, dpath, None if path is None else path.parent)
-        except DistributionError as exc:
-            message = str(exc)
-            raise ModelError(
-                f"{source}: {message}" if dpath in message else f"{source}: {dpath}: {message}"
-            ) from exc
+    named = _law_tables(doc, "distributions", ctx)
+    declared = _law_tables(doc, "events", ctx)
 
     spec, report = _parse_spec(spec_text, ctx)
     where = kind.extra_tables[0] if kind.extra_tables else kind.table
-    task = _bind(game, report, named, kind.proposition_noun, where, ctx)
+    task = _bind(game, report, named, kind.proposition_noun, where, ctx, declared)
     kind.check_task(game, task, ctx)
 
+    constraints, costs = _constraints_and_costs(doc, ctx)
     return Model(
         name=name,
         spec=spec,
@@ -581,18 +497,54 @@ def _load(text: str, source: str, path: Path | None) -> Model:
         game=game,
         distributions=task.laws,
         source=path,
+        constraints=constraints,
+        costs=MappingProxyType(costs),
     )
 
 
-def loads_model(text: str, source: str = "<string>") -> Model:
+def _constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
+                                                                          dict[str, float]]:
+    """The ``constraints`` list (each read by :func:`mitld_lp.constraints.parse_constraint`)
+    and the ``[costs]`` table (numbers > 0 per action)."""
+    from mitld_lp.constraints import ConstraintError, check_costs, parse_constraint
+
+    texts = doc.get("constraints", [])
+    if not isinstance(texts, list):
+        raise ctx.error("constraints", f"must be a list of strings, got {_type_name(texts)}")
+    for i, text in enumerate(texts):
+        try:
+            parse_constraint(text, f"constraints[{i}]")
+        except ConstraintError as exc:
+            raise ModelError(f"{ctx.source}: {exc}") from None
+    try:
+        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
+    except ConstraintError as exc:
+        raise ModelError(f"{ctx.source}: {exc}") from None
+    return tuple(texts), costs
+
+
+def loads_model(
+    text: str,
+    source: str = "<string>",
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
     """Load a model from TOML ``text``; ``source`` prefixes every error message.
+    ``max_states`` and ``max_memory`` bound a world built while loading (a ``[prism]``
+    program, checked before Storm runs), as they bound the product later.
 
     Raises :class:`ModelError`.  The returned model's ``source`` is ``None``."""
-    return _load(text, source, None)
+    return _load(text, source, None, max_states, max_memory)
 
 
-def load_model(path: str | os.PathLike[str]) -> Model:
-    """Load and validate the model file at ``path``.
+def load_model(
+    path: str | os.PathLike[str],
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+) -> Model:
+    """Load and validate the model file at ``path`` (budgets as for :func:`loads_model`).
 
     Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
     file cannot be read or is not UTF-8."""
@@ -604,4 +556,4 @@ def load_model(path: str | os.PathLike[str]) -> Model:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
-    return _load(text, source, p)
+    return _load(text, source, p, max_states, max_memory)

@@ -14,7 +14,8 @@ if TYPE_CHECKING:
 
 __all__ = ["POLICY_COLUMNS", "policy_table", "summary", "html"]
 
-POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value")
+POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
+                  "accepting_component")
 """The keys of a :func:`policy_table` row, in the order the CSV file writes them."""
 
 
@@ -27,11 +28,15 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     stop changing), ``action`` (the policy's action), ``value`` (the probability that
     the policy satisfies the task from there, truncation counted as failure: exact, from
     the linear solve on the policy's Markov chain that certified it,
-    ``result.lower_model.policy_values``).
+    ``result.lower_model.policy_values``), ``accepting_component`` (whether the state
+    lies in an accepting end component of a task with a safety part: the task is then
+    kept by playing ``action`` forever, an action that never leaves the component;
+    always false for a co-safe task).
     """
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
     obligations = result.dta.states
+    goal = result.acceptance.goal
     rows: list[dict[str, Any]] = []
     for i, state in enumerate(mdp.states):
         if not isinstance(state, ProductState) or policy[i] < 0:
@@ -43,6 +48,7 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
             "clock": state.clock,
             "action": mdp.action_name(int(policy[i])),
             "value": float(values[i]),
+            "accepting_component": bool(goal[i]),
         })
     return rows
 

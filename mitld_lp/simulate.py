@@ -47,6 +47,8 @@ class SimulationResult:
     beyond_model: int  # runs in which an event came later than its truncation point
     undecided: int  # runs stopped at max_steps without a verdict (counted as failures)
     seed: int | None
+    horizon: int = 0  # max_steps: the steps each run was watched for a violation
+    kept: int = 0  # successes that were keeping a safety part, unviolated, at the horizon
 
 
 def _wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -121,6 +123,12 @@ def simulate(
     """Estimate the probability that ``controller`` satisfies ``model``'s task in the
     model's untruncated world (module docs).
 
+    Each run is watched for ``max_steps`` steps (the result's ``horizon``).  A task with
+    a safety part (``G !h``) is never decided by a finite run: a run that reaches the
+    horizon in a persistent automaton state (the safety part kept, nothing left to do)
+    counts as a success (``kept``); a violation after the horizon is not seen, so choose
+    the horizon well beyond the steps the task needs.
+
     Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
     ``1..defaults.MAX_RUNS``, ``max_steps`` not an integer in
     ``0..defaults.MAX_STEPS_LIMIT``, or ``seed`` negative.
@@ -130,15 +138,19 @@ def simulate(
     if seed is not None:
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
-    ok = beyond = undecided = 0
+    ok = beyond = undecided = kept = 0
+    persistent = _persistent_states(model)
     for _ in tqdm(range(runs), disable=(not progress) if progress is not None else None,
                   leave=False, desc="simulate"):
         status, _ = rollout(model, controller, rng, max_steps=max_steps)
-        ok += status is RunStatus.ACCEPTED
-        undecided += status is RunStatus.RUNNING
+        keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent
+        ok += status is RunStatus.ACCEPTED or keeping
+        kept += keeping
+        undecided += status is RunStatus.RUNNING and not keeping
         beyond += controller.beyond_model
     lo, hi = _wilson(ok, runs)
-    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed)
+    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed,
+                            max_steps, kept)
 
 
 def _check_count(name: str, value: object, low: int, high: int | None) -> None:
@@ -147,3 +159,15 @@ def _check_count(name: str, value: object, low: int, high: int | None) -> None:
     if value < low or (high is not None and value > high):
         bound = f"in {low}..{high:,}" if high is not None else f">= {low}"
         raise ValueError(f"{name}: must be {bound}, got {value!r}")
+
+
+def _persistent_states(model: Model) -> frozenset[int]:
+    """The automaton states in which staying forever satisfies ``model``'s task (none
+    for a co-safe task, whose runs end when decided).  The controller tracks the minimal
+    DTA of the same spec, and the translation is deterministic, so a fresh translation
+    numbers its states as the controller's (a saved controller need not carry them)."""
+    from mitld_lp.automata.translate import to_dta
+    from mitld_lp.logic.fragment import check
+
+    report = check(model.spec)
+    return frozenset() if report.co_safe else frozenset(to_dta(report).persistent)

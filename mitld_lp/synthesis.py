@@ -25,8 +25,8 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -45,6 +45,8 @@ from mitld_lp.model import Model
 from mitld_lp.product import product
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
+    from mitld_lp.acceptance import Acceptance
+    from mitld_lp.constrained import ConstrainedResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -106,6 +108,7 @@ class SynthesisResult:
     upper_model: ModelSolution
     controller: Controller
     timings: Mapping[str, float]  # seconds per stage: automaton, product, solve
+    acceptance: Acceptance  # the target the bracket is about (its goal, its components)
 
     @property
     def lower(self) -> float:
@@ -246,6 +249,25 @@ def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> Mo
                          tuple(checks))
 
 
+def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
+    """For a task with a safety part: ``solution`` whose policy plays, in the accepting
+    end components, an internal choice (never one that can leave them), with the check
+    that no state of them escapes under the policy.  Unchanged for a co-safe task."""
+    if accept.components is None:
+        return solution
+    from mitld_lp.solvers.accepting import escapes, keep_inside
+
+    policy = keep_inside(accept.components, solution.policy)
+    leaving = np.flatnonzero(escapes(mdp, policy, accept.goal))
+    check = Check(
+        "policy stays in the accepting end components",
+        leaving.size == 0,
+        f"{int(accept.goal.sum())} states in {accept.components.mecs.n_mecs} components; "
+        + (f"states {leaving[:10].tolist()} can leave" if leaving.size else "none can leave"),
+    )
+    return replace(solution, policy=policy, checks=(*solution.checks, check))
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Built:
     """What :func:`build_product` returns: the automaton, the STA and the product MDP,
@@ -304,7 +326,9 @@ def synthesize(
     progress: bool = False,
     decompose: bool = True,
     time_limit: float | None = None,
-) -> SynthesisResult:
+    constraints: Iterable[Any] = (),
+    then: str | None = None,
+) -> SynthesisResult | ConstrainedResult:
     """Maximise the probability that the model's world satisfies its MITLD spec.
 
     ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
@@ -316,9 +340,21 @@ def synthesize(
     per event instead of ``epsilon``.  The budgets are :func:`build_product`'s.
     ``decompose``: the LP block by block in topological order (default) or as one LP.
     ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
+    ``constraints`` / ``then`` (or constraints in the model): a constrained synthesis,
+    :func:`mitld_lp.constrained.synthesize_constrained`, whose result it returns.
     """
+    if constraints or then or (isinstance(model, Model) and model.constraints):
+        from mitld_lp.constrained import synthesize_constrained
+
+        return synthesize_constrained(model, constraints, then=then, epsilon=epsilon,
+                                      max_states=max_states, max_memory=max_memory,
+                                      certify_tol=certify_tol)
     if method not in ("lp", "vi"):
         raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
+    if time_limit is not None and not (isinstance(time_limit, (int, float))
+                                       and 0 <= time_limit < float("inf")):
+        raise ValueError(f"time_limit: must be a finite number of seconds >= 0 or None, "
+                         f"got {time_limit!r}")
     if not isinstance(model, Model):
         raise TypeError(
             f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
@@ -337,11 +373,15 @@ def synthesize(
     t0 = time.perf_counter()
     how = _Settings(method, solver, backend, tol, certify_tol, progress, decompose,
                     float("inf") if time_limit is None else t0 + time_limit)
-    low = _solve_model(mdp, mdp.target, "lower", how)
+    from mitld_lp.acceptance import acceptance
+
+    accept = acceptance(mdp, built.dta)
+    low = _solve_model(mdp, accept.goal, "lower", how)
     if mdp.truncated.any():
-        high = _solve_model(mdp, mdp.target | mdp.truncated, "upper", how)
+        high = _solve_model(mdp, accept.goal | mdp.truncated, "upper", how)
     else:
         high = low
+    low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
 
     result = SynthesisResult(
@@ -356,6 +396,7 @@ def synthesize(
         controller=Controller(model.game, built.sta, mdp, low.policy,
                               hopeless=high.quotient.prob0),
         timings=timings,
+        acceptance=accept,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

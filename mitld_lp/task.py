@@ -29,7 +29,7 @@ from typing import Any
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec
 from mitld_lp.game import Game, WorldMembers, world_members
 from mitld_lp.logic.fragment import FragmentReport
-from mitld_lp.logic.syntax import DistLiteral, DistRef, Formula, atoms
+from mitld_lp.logic.syntax import DistLiteral, DistRef, Formula, atoms, is_proposition_name
 from mitld_lp.text import printable
 
 __all__ = ["BindError", "Task", "bind", "resolve_laws", "check_alphabet"]
@@ -161,10 +161,29 @@ def bind(
     named: Mapping[str, FirstOccurrence] | None = None,
     *,
     noun: str = "proposition",
+    declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> Task:
     """The task of ``report``'s formula on ``world``: each event's law
     (:func:`resolve_laws`), checked against the world (:func:`check_alphabet`).
+
+    ``declared``: events of the world given their laws without the spec asking that
+    they happen (a model file's ``[events]``); the spec may read them as propositions.
+    An event gets its law in one place: there or from a ``D[mu]`` of the spec.
     Raises :class:`BindError`."""
     laws = resolve_laws(report, named)
+    for event, law in (declared or {}).items():
+        where = ("events", str(event))
+        if not isinstance(law, FirstOccurrence):
+            raise BindError(where, f"must be a distribution (mitld_lp.distributions), got "
+                                   f"{type(law).__name__} {law!r}")
+        if not is_proposition_name(event):
+            raise BindError(where, f"{event!r} is not a name a formula can read (letters, "
+                                   "digits, _; not a reserved word)")
+        if event in laws:
+            raise BindError(where, f"event {event!r} also gets a law from the spec's D[...] "
+                                   f"{event}; give it one law, in one place")
+        if event in world.proposition_names:
+            raise BindError(where, f"event {event!r} has the name of a {noun} of the world")
+        laws[event] = law
     check_alphabet(world, atoms(report.formula), laws, noun=noun)
     return Task(world, report.formula, MappingProxyType(laws))

@@ -188,3 +188,31 @@ def test_storm_checks_the_exported_product(tmp_path):
             assert sol.lp.value == pytest.approx(storm[r.mdp.initial], abs=1e-5)
             assert np.all(sol.iteration.lower <= storm + 1e-5)
             assert np.all(storm <= sol.iteration.upper + 1e-5)
+
+
+def test_small_probabilities_keep_their_significant_digits(tmp_path, capsys):
+    """Two steps that each succeed with probability 1.7e-4: the value is 1.7e-4**2 =
+    2.89e-8, which a fixed 7-decimal format would print as 0.0000000."""
+    (tmp_path / "chain.prism").write_text(
+        "mdp\nmodule chain\n  x : [0..3] init 0;\n"
+        "  [go] x < 2 -> 0.00017 : (x'=x+1) + 0.99983 : (x'=3);\n"
+        "  [stay] x >= 2 -> true;\nendmodule\nlabel \"goal\" = x = 2;\n")
+    toml = tmp_path / "chain.toml"
+    toml.write_text('name = "chain"\nspec = "F[0,3] goal"\nepsilon = 0.01\n'
+                    '[prism]\nfile = "chain.prism"\nevents = []\n')
+    assert main(["solve", str(toml), "-q"]) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if x.startswith("optimum in:"))
+    lower, upper = (float(v) for v in line.split("[")[1].split("]")[0].split(","))
+    assert lower == pytest.approx(1.7e-4 ** 2, rel=1e-6)
+    assert upper == pytest.approx(1.7e-4 ** 2, rel=1e-6)
+    assert "0.0000000" not in text
+    assert main(["solve", str(toml), str(toml), "-q"]) == 0
+    batch = capsys.readouterr().out
+    assert "2.89e-08" in batch and "0.0000000" not in batch
+
+
+@pytest.mark.parametrize("bad", [-1, float("nan"), float("inf"), "5"])
+def test_synthesize_refuses_a_bad_time_limit(bad):
+    with pytest.raises(ValueError, match="time_limit"):
+        synthesize(load_model(BUS), time_limit=bad)

@@ -158,3 +158,39 @@ def test_bench_big_component_routes_agree(tmp_path):
     assert max(values) - min(values) < 1e-6
     assert {r[3] for r in rows} == {"optimal"}
     assert "largest block" in text
+
+
+def test_safety_tasks(tmp_path):
+    """Storm's Pmax [F "accept"] on the exported product equals our bracket's lower end
+    (exact models) and lies in the bracket; the figure is written."""
+    _run("safety_tasks", tmp_path)
+    lines = (tmp_path / "safety_tasks.md").read_text(encoding="utf-8").splitlines()
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines
+            if line.startswith("| ") and not line.startswith("| model")]
+    assert {r[0] for r in rows} == {"bus_grid", "bus_puddle"}
+    for _, _, lower, _, certified, storm, *_ in rows:
+        assert certified == "True"
+        assert float(storm) == pytest.approx(float(lower), abs=1e-6)
+    puddle = next(r for r in rows if r[0] == "bus_puddle")
+    assert puddle[1] == "obligation" and float(puddle[3]) < 0.9244053 - 0.1
+    assert _is_png(tmp_path / "safety_policy.png")
+
+
+def test_constraints(tmp_path):
+    text = _run("constraints", tmp_path)
+    assert _is_png(tmp_path / "constraints_steps.png")
+    rows = _csv(tmp_path / "constraints_risk.csv")
+    assert rows
+    for row in rows:
+        assert row["certified"] == "True"
+        # ours against Storm's multi-objective value on the same model
+        assert abs(float(row["lower"]) - float(row["storm"])) <= 1e-6
+        assert float(row["risk_value"]) <= float(row["risk_bound"]) + 1e-6
+    # no risk bound: the puddle changes nothing, Storm's value of the plain bus case
+    assert float(rows[-1]["risk_bound"]) == 1.0
+    assert float(rows[-1]["lower"]) == pytest.approx(STORM["bus_grid"], abs=1e-6)
+    points = _csv(tmp_path / "constraints_steps.csv")
+    lows = [float(p["probability_lower"]) for p in points]
+    assert lows == sorted(lows) and all(p["certified"] == "True" for p in points)
+    best, fast = re.findall(r"P = ([0-9.]+), E\(steps\) = ([0-9.]+)", text)
+    assert float(fast[1]) <= float(best[1]) and float(fast[0]) >= float(best[0]) - 2e-6

@@ -48,14 +48,14 @@ def test_drn_read_back_by_storm(tmp_path: Path) -> None:
     path = write_drn(HAND, HAND.target, tmp_path / "hand.drn")
     values, labels = storm_pmax(path)
     # State ids are kept: the labels sit where we put them.
-    assert labels[0] == {"init"} and labels[3] == {"target"} and labels[2] == {"sink"}
+    assert labels[0] == {"init"} and labels[3] == {"target", "accept"} and labels[2] == {"sink"}
     assert labels[8] == {"truncated"}
     np.testing.assert_allclose(values, [0.25, 0.5, 0, 1, 0.5, 0, 1, 0.5, 0], atol=1e-9)
     # The upper model: truncated counts as reached.
     upper = write_drn(HAND, HAND.target | HAND.truncated, tmp_path / "upper.drn",
                       truncated_label=False)
     values, labels = storm_pmax(upper)
-    assert labels[8] == {"target"}
+    assert labels[8] == {"target", "accept"}
     assert values[7] == pytest.approx(0.75, abs=1e-9)
 
 

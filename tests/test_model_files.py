@@ -371,9 +371,9 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
         ("spec: 2:18:",),
     ),  # the second "&" of line 2
     (
-        "non-co-safe spec",
-        edit("F(b1 & F[0,3] A)", "F(b1 & F[0,3] A) & G !B"),
-        ("spec", "obligation", "not yet solvable"),
+        "recurrence spec",
+        edit("F(b1 & F[0,3] A)", "F(b1 & F[0,3] A) & G F B"),
+        ("spec", "G F B is a recurrence formula"),
     ),
     (
         "proposition neither region nor event",

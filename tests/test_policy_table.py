@@ -48,7 +48,7 @@ def test_rows_carry_the_hand_worked_values(corridor):
     assert on_a["action"] in {"N", "S", "E"}
     assert "b" in on_a["automaton_state"]
     assert set(first) == {"game_state", "automaton_state", "pending", "clock", "action",
-                          "value"}
+                          "value", "accepting_component"}
 
 
 def test_csv_and_json_files_round_trip(corridor, tmp_path):

@@ -292,26 +292,25 @@ def test_agrees_with_mtl_by_hand(text: str, their_text: str, trace: list, truth:
     assert to_dta(parse(text)).accepts_lasso(trace[:-1], trace[-1:]) is truth
 
 
-# --------------------------------------------------------------------------- not yet solved
+# --------------------------------------------------------------------------- refused
 
 
-@pytest.mark.parametrize("spec", ["G !A", "!B W A", "G !B & F A", "F[0,2] A & G (B -> X !B)"])
-def test_models_refuse_safety_and_obligation_specs_for_now(spec: str, tmp_path, capsys) -> None:
-    """The automaton is there; the product and the solvers are not yet: a model with such
-    a spec is refused where the spec is bound, in one line, by every route."""
+@pytest.mark.parametrize("spec", ["G F A", "F G !B", "G !B & G F A"])
+def test_models_refuse_recurrence_and_persistence_specs(spec: str, tmp_path, capsys) -> None:
+    """Safety and obligation specs are solved (tests/test_safety.py); recurrence and
+    persistence ones are refused where the spec is bound, in one line, by every route."""
     from mitld_lp import GridWorld, Model, ModelError, loads_model
     from mitld_lp.cli import main
 
     world = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)], "B": [(1, 0)]})
-    with pytest.raises(ModelError, match="spec: a (safety|obligation) specification: "
-                                         "safety/obligation tasks are not yet solvable"):
+    with pytest.raises(ModelError, match=r"spec: 1:\d+: .* is a (recurrence|persistence) formula"):
         Model.from_game(world, spec)
     text = (f'name = "x"\nspec = "{spec}"\n[grid]\nsize = [3, 1]\nstart = [0, 0]\n'
             '[regions]\nA = [[2, 0]]\nB = [[1, 0]]\n')
-    with pytest.raises(ModelError, match="not yet solvable"):
+    with pytest.raises(ModelError, match="(recurrence|persistence) formula"):
         loads_model(text)
     path = tmp_path / "x.toml"
     path.write_text(text)
     assert main(["solve", str(path)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "not yet solvable" in err
+    assert err.count("\n") == 1 and "formula" in err

@@ -216,7 +216,7 @@ def test_errors_name_the_file_and_the_problem(tmp_path: Path) -> None:
     with pytest.raises(WorldError, match="JANI files are not supported"):
         load_prism(write(tmp_path, "{}", "m.jani"))
     bad = write(tmp_path, "mdp\nmodule m\n x : [0..2] init 0\n [] x<1 -> (x'=x+1);\nendmodule\n")
-    with pytest.raises(WorldError, match=r"PRISM parse error: Parsing error at 4:2: +expecting"):
+    with pytest.raises(WorldError, match=r"m\.prism:4:2: PRISM parse error: expecting \";\" at"):
         load_prism(bad)
     src = write(tmp_path, LABELLED)
     with pytest.raises(WorldError, match=r"constants N have no value"):
@@ -307,3 +307,102 @@ def test_corridor_tightest_deadline_by_hand() -> None:
     hand = 0.8**4 * float(stats.poisson.cdf(2, 2))
     assert r.lower - 1e-9 <= hand <= r.upper + 1e-9
     assert r.upper - r.lower <= r.sta.epsilon_achieved + 1e-9
+
+
+# --------------------------------------------------------------------------- the copy
+
+
+RICH = """
+mdp
+global g : [0..2] init 0;
+module door
+  open : bool init false;
+  [opened] !open -> 0.5 : (open'=true) + 0.5 : true;
+  [close] open -> (open'=false);
+endmodule
+module robot
+  x : [0..3] init 0;
+  [go] x<3 -> 0.7 : (x'=x+1) + 0.3 : true;
+  [go] x=1 -> (x'=0);
+  [] x>0 -> (x'=x-1) & (g'=min(g+1, 2));
+  [opened] true -> true;
+  [close] true -> (x'=0);
+endmodule
+label "goal" = x=3;
+label "gate" = open & x>=2;
+"""
+
+
+def _storm_by_state(source: Path) -> dict:
+    """Storm's MDP read one state and one choice at a time through stormpy's own
+    accessors (the route the arrays of the game must agree with): valuation ->
+    (labels, [(action or None, command positions, {valuation: probability})])."""
+    import json
+
+    import stormpy
+    program = stormpy.parse_prism_program(str(source))
+    options = stormpy.BuilderOptions()
+    options.set_build_all_labels()
+    options.set_build_choice_labels()
+    options.set_build_choice_origins()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(program, options=options)
+    position = {c.global_index: f"{m.name}_cmd{k}" for m in program.modules
+                for k, c in enumerate(m.commands, start=1)}
+    order = ["g", "open", "x"]
+
+    def value(s: int) -> tuple:
+        v = json.loads(str(model.state_valuations.to_json(s)))
+        return tuple(v[name] for name in order)
+
+    out = {}
+    matrix = model.transition_matrix
+    for s in range(model.nr_states):
+        rows = []
+        for c in range(matrix.get_row_group_start(s), matrix.get_row_group_end(s)):
+            labels = model.choice_labeling.get_labels_of_choice(c)
+            origin = "+".join(position[i] for i in sorted(model.choice_origins.get_command_set(c)))
+            dist = {value(e.column): e.value for e in matrix.get_row(c)}
+            rows.append((next(iter(labels)) if labels else None, origin, dist))
+        props = set(model.labeling.get_labels_of_state(s)) & {"goal", "gate"}
+        out[value(s)] = (props, rows)
+    return out
+
+
+@needs_storm
+def test_arrays_agree_with_storm_read_state_by_state(tmp_path: Path) -> None:
+    src = write(tmp_path, RICH)
+    game = load_prism(src, events=["opened"])
+    storm = _storm_by_state(src)
+    assert game.variables == ("g", "open", "x")
+    assert set(game.states) == set(storm) and len(game.states) == len(storm)
+    for state, (props, rows) in storm.items():
+        assert game.propositions(state) == props
+        robot = [(a, o, d) for a, o, d in rows if a != "opened"]
+        named = [a if a is not None else o for a, o, _ in robot]
+        names = [f"{n}@{o}" if named.count(n) > 1 else n
+                 for n, (_, o, _) in zip(named, robot, strict=True)]
+        assert sorted(game.actions(state)) == sorted(names)
+        assert sum(a == "opened" for a, _, _ in rows) <= 1
+        for name, (_, _, dist) in zip(names, robot, strict=True):
+            assert dict(game.successors(state, name, frozenset())) == pytest.approx(dist)
+            # then the event at each state reached, where its command is enabled
+            moved: dict = {}
+            for t, p in dist.items():
+                after = [d for a, _, d in storm[t][1] if a == "opened"]
+                for u, q in (after[0] if after else {t: 1.0}).items():
+                    moved[u] = moved.get(u, 0.0) + p * q
+            got = dict(game.successors(state, name, frozenset({"opened", "other"})))
+            assert got == pytest.approx(moved)
+    # x=1: the two [go] commands overlap and are told apart by their commands
+    assert {"go@robot_cmd1", "go@robot_cmd2"} <= set(game.actions((0, False, 1)))
+
+
+@needs_storm
+def test_program_whose_variables_storm_made_constants(tmp_path: Path) -> None:
+    # x is never assigned: Storm makes it a constant, the MDP has one state, no variables
+    game = load_prism(write(tmp_path, 'mdp\nmodule m\n x : [0..2] init 1;\n [] true -> true;\n'
+                                      'endmodule\nlabel "one" = x=1;\n'))
+    assert game.variables == () and game.states == ((),) and game.initial == ()
+    assert game.propositions(()) == {"one"} and game.actions(()) == ("m_cmd1",)
+    assert game.successors((), "m_cmd1", frozenset()) == (((), 1.0),)

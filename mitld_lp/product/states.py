@@ -171,6 +171,15 @@ class ProductStates(Sequence[Hashable]):
             len({c for _, c in sits}),
         )
 
+    def automaton_states(self) -> np.ndarray:
+        """``(n_states,)`` int64: the automaton state of each state, -1 for the absorbing
+        ones (from the integer codes, no records made)."""
+        keys = self._keys
+        out = np.full(keys.size, -1, dtype=np.int64)
+        ordinary = keys >= 0
+        out[ordinary] = self._codec.unkey(keys[ordinary])[1]
+        return out
+
     def position(self, state: object) -> int | None:
         """The index of the state whose record is ``state``, None if there is none."""
         if isinstance(state, Absorbing):

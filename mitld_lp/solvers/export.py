@@ -150,8 +150,10 @@ def write_drn(
     with the action names of ``mdp.action_names`` (whitespace replaced by ``_``) or
     ``absorb`` as choice labels (Storm's DRN parser keeps them with
     ``build_choice_labeling``, so a scheduler Storm computes maps back action by
-    action).  Labels: ``init``; ``target`` on the states of ``target`` (so
-    ``Pmax=? [F "target"]`` in Storm is the quantity :func:`solve_lp` computes);
+    action).  Labels: ``init``; ``target`` and ``accept`` on the states of ``target``
+    (so ``Pmax=? [F "accept"]`` in Storm is the quantity :func:`solve_lp` computes; for
+    a task with a safety part the caller passes the union of its accepting end
+    components, :func:`mitld_lp.acceptance.acceptance`);
     ``sink``; ``truncated`` (unless ``truncated_label=False``).  With ``valuations``,
     each ``state`` line is followed by the state's valuation as Storm's own exporter
     writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
@@ -166,7 +168,8 @@ def write_drn(
     target = as_state_mask(mdp, target, "target")
     p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)
     n = mdp.n_states
-    marks = [("target", target), ("sink", np.asarray(mdp.sink, dtype=bool))]
+    marks = [("target", target), ("accept", target),
+             ("sink", np.asarray(mdp.sink, dtype=bool))]
     if truncated_label:
         marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
     names = [_drn_action(a) for a in mdp.action_names]

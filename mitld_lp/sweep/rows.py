@@ -184,7 +184,10 @@ def solve_point(task: PointTask) -> dict[str, Any]:
     """The result columns of one point (runs in a worker process or a Dask task)."""
     from mitld_lp.model import loads_model
 
-    return record(run_model(lambda: loads_model(task.model_text, task.source), task.settings))
+    return record(run_model(lambda: loads_model(task.model_text, task.source,
+                                               max_states=task.settings.max_states,
+                                               max_memory=task.settings.max_memory),
+                            task.settings))
 
 
 def failed(status: str, message: str) -> dict[str, Any]:

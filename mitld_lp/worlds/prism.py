@@ -1,9 +1,10 @@
 """A PRISM MDP as a :class:`mitld_lp.game.Game`, built by Storm through stormpy.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
-gives its undefined constants their values, builds the MDP's reachable states with
-Storm and copies everything the product construction needs into plain Python tables
-(so the game pickles and Storm is not needed afterwards):
+gives its undefined constants their values, checks the program and bounds its states
+(within ``max_states`` and ``max_memory``, before Storm runs), builds the MDP's reachable
+states with Storm and copies it into numpy arrays without a loop over states
+(:mod:`mitld_lp.worlds.prism_tables`; the game pickles and needs Storm no more):
 
 * **states** are tuples of the PRISM variables' values, in the order
   :attr:`PrismGame.variables` lists them (``game.valuation(s)`` gives them by name);
@@ -41,28 +42,42 @@ interleaving of moves and events reaches is built), and a PRISM user writes an e
 they would write any other action.  An event's command must be unique where enabled
 (one choice per state): an event is the environment's, not a choice.
 
-Errors are :class:`mitld_lp.worlds.WorldError` naming the file and what is wrong: a
-missing file, PRISM's own parse message with its line and column, an undefined
+Checks.  Storm builds with its exploration checks on, so an update that leaves a
+variable's range or probabilities that do not sum to 1 in some state stop the build
+(without them Storm stores values modulo the range); before it builds, every variable
+must have a non-empty range holding its initial value and every command with constant
+probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
+
+Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
+wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
+PRISM's parse message as ``FILE:LINE:COLUMN`` with a short excerpt, the module and
+command of an update out of range or of probabilities that do not sum to 1, an undefined
 constant, a label or event action the file does not define, a model that is not an
-MDP, a state where only event commands are enabled.  Without stormpy the error says
+MDP, a state where only event commands are enabled.  Storm's own log never reaches
+standard output.  Without stormpy the error says
 ``pip install -e '.[prism]'``.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import os
-import re
 from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mitld_lp.game import ExplicitGame
-from mitld_lp.worlds import WorldError
+import numpy as np
 
-__all__ = ["PrismGame", "load_prism", "DEADLOCK_ACTION"]
+from mitld_lp import defaults
+from mitld_lp.game import GameError
+from mitld_lp.product import ProductTooLarge, default_max_memory
+from mitld_lp.product.budget import _bytes  # the product's budget messages write sizes so
+from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_program import SizeBound, check_program, storm_error, storm_quiet
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, Tables, read_model
+
+__all__ = ["PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "BYTES_PER_STATE"]
 
 log = logging.getLogger(__name__)
 
@@ -71,10 +86,20 @@ State = tuple[Hashable, ...]
 
 _Distribution = tuple[tuple[State, float], ...]
 
-DEADLOCK_ACTION = "deadlock"
-"""The name of the self-loop Storm adds where no PRISM command is enabled."""
-
 _INSTALL = "pip install -e '.[prism]'"
+
+BYTES_PER_STATE = 1024
+"""Memory per state of a PRISM world while it is built, for the budget checked before
+Storm runs: Storm's explicit model with valuations, labels and choice origins (measured
+about 550 bytes per state with 4 choices and 7 transitions per state, stormpy 2.0) and
+the game's copy (arrays, one tuple and one index entry per state), rounded up."""
+
+
+class PrismTooLarge(WorldError, ProductTooLarge):
+    """The PRISM program may have more states than ``max_states``, or need more than
+    ``max_memory`` bytes, judged from its variables' ranges before Storm builds it: a
+    budget stop (exit 3 on the command line), whose message names the budget and how to
+    raise it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,26 +109,26 @@ class PrismGame:
     Attributes:
         source: the PRISM file.
         variables: the PRISM variables, in the order of a state's values.
-        robot: the robot's part: states, actions, labels and the moves without events.
-        effects: ``event -> state -> distribution``: where each event action's command is
-            enabled, the distribution it moves to; an event absent at a state leaves it.
+        states: every state Storm built, in Storm's order.
+        initial: the initial state.
+        proposition_names: the labels that are propositions.
+        effects: ``event -> array over states``: where each event action's command is
+            enabled, the index of its choice; -1 where it is not (the event leaves the
+            state as it is).
+
+    Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
+    a state's actions and a choice's distribution become tuples when first asked for.
     """
 
     source: str
     variables: tuple[str, ...]
-    robot: ExplicitGame[State]
-    effects: Mapping[str, Mapping[State, _Distribution]]
-    _cache: dict[tuple[State, str, frozenset[str]], _Distribution] = field(
-        default_factory=dict, repr=False, compare=False
-    )
-
-    @property
-    def initial(self) -> State:
-        return self.robot.initial
-
-    @property
-    def proposition_names(self) -> frozenset[str]:
-        return self.robot.proposition_names
+    states: tuple[State, ...]
+    initial: State
+    proposition_names: frozenset[str]
+    effects: Mapping[str, np.ndarray]
+    _tables: Tables = field(repr=False)
+    _index: Mapping[State, int] = field(repr=False)
+    _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def event_names(self) -> frozenset[str]:
@@ -111,46 +136,63 @@ class PrismGame:
         return frozenset(self.effects)
 
     @property
-    def states(self) -> tuple[State, ...]:
-        """Every state Storm built."""
-        return self.robot.states
-
-    @property
     def n_states(self) -> int:
-        """The number of states Storm built."""
-        return self.robot.n_states
+        """How many states Storm built (bounds the product before it is built)."""
+        return len(self.states)
+
 
     def valuation(self, state: State) -> dict[str, Hashable]:
         """The state's variables by name, e.g. ``{"x": 2, "open": False}``."""
         return dict(zip(self.variables, state, strict=True))
 
+    def _at(self, state: State) -> int:
+        try:
+            return self._index[state]
+        except (KeyError, TypeError):
+            raise GameError(f"{state!r} is not a state of {self.source}") from None
+
     def actions(self, state: State) -> tuple[str, ...]:
-        return self.robot.actions(state)
+        s = self._at(state)
+        key = ("actions", s)
+        found = self._cache.get(key)
+        if found is None:
+            t = self._tables
+            row = t.names[t.choices[s] : t.choices[s + 1]]
+            found = self._cache[key] = tuple(a for a in row.tolist() if a is not None)
+        return found
 
     def propositions(self, state: State) -> frozenset[str]:
-        return self.robot.propositions(state)
+        return self._tables.labels[self._at(state)]
+
+    def _distribution(self, choice: int) -> dict[int, float]:
+        t = self._tables
+        lo, hi = t.branches[choice], t.branches[choice + 1]
+        return dict(zip(t.targets[lo:hi].tolist(), t.probabilities[lo:hi].tolist(), strict=True))
 
     def successors(
         self, state: State, action: str, events: frozenset[str]
     ) -> tuple[tuple[State, float], ...]:
         """The robot's move, then each event's effect in name order (module docstring)."""
-        acting = events & self.effects.keys()
-        base = self.robot.successors(state, action, frozenset())
-        if not acting:
-            return base
-        key = (state, action, frozenset(acting))
-        cached = self._cache.get(key)
-        if cached is not None:
-            return cached
-        dist: dict[State, float] = dict(base)
+        s = self._at(state)
+        acting = frozenset(events & self.effects.keys())
+        key = (s, action, acting)
+        found = self._cache.get(key)
+        if found is not None:
+            return found
+        t = self._tables
+        row = t.names[t.choices[s] : t.choices[s + 1]].tolist()
+        if action not in row:
+            raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
+        dist = self._distribution(int(t.choices[s]) + row.index(action))
         for event in sorted(acting):
             effect = self.effects[event]
-            moved: dict[State, float] = {}
-            for t, p in dist.items():
-                for u, q in effect.get(t, ((t, 1.0),)):
-                    moved[u] = moved.get(u, 0.0) + p * q
+            moved: dict[int, float] = {}
+            for u, p in dist.items():
+                c = int(effect[u])
+                for v, q in (self._distribution(c) if c >= 0 else {u: 1.0}).items():
+                    moved[v] = moved.get(v, 0.0) + p * q
             dist = moved
-        out = tuple(dist.items())
+        out = tuple((self.states[u], p) for u, p in dist.items())
         self._cache[key] = out
         return out
 
@@ -168,10 +210,21 @@ def _stormpy() -> Any:
     return stormpy
 
 
-def _storm_message(exc: BaseException) -> str:
-    """Storm's message without its C++ exception class (``WrongFormatException: ...``)."""
-    text = str(exc).strip()
-    return re.sub(r"^[A-Za-z]+Exception:\s*", "", text).replace("\n\t", "\n    ")
+def _check_utf8(path: Path, where: str) -> None:
+    """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise WorldError(
+            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+            "a PRISM file is UTF-8"
+        ) from None
 
 
 def _check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
@@ -219,6 +272,8 @@ def load_prism(
     constants: Mapping[str, bool | int | float] | None = None,
     labels: Iterable[str] | None = None,
     events: Iterable[str] = (),
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
 ) -> PrismGame:
     """Build the PRISM MDP at ``path`` with Storm and return it as a game.
 
@@ -227,19 +282,30 @@ def load_prism(
     of the file).  ``events``: PRISM actions that are external events' effects (module
     docstring); their names must match the events of the specification.
 
-    Raises :class:`mitld_lp.worlds.WorldError`.
+    Budgets, checked before Storm runs: the program's states are at most the product of
+    its variables' ranges (:class:`mitld_lp.worlds.prism_program.SizeBound`); that bound
+    must be within ``max_states`` and, at :data:`BYTES_PER_STATE` bytes each, within
+    ``max_memory`` (default :func:`mitld_lp.product.default_max_memory`).
+
+    Raises :class:`mitld_lp.worlds.WorldError` (:class:`PrismTooLarge` for a budget).
     """
+    for name, value in (("max_states", max_states), ("max_memory", max_memory)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 1):
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
     where = os.fspath(path)
     p = Path(path)
     if not p.is_file():
         raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
+    _check_utf8(p, where)
     stormpy = _stormpy()
     try:
-        program = stormpy.parse_prism_program(where)
+        with storm_quiet():
+            program = stormpy.parse_prism_program(where)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise WorldError(f"{where}: PRISM parse error: {_storm_message(exc)}") from None
+        raise storm_error(exc, where) from None
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
@@ -268,124 +334,96 @@ def load_prism(
 
     if given:
         try:
-            program, _ = stormpy.instantiate_constants(program, given)
+            with storm_quiet():
+                program, _ = stormpy.instantiate_constants(program, given)
         except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            raise WorldError(f"{where}: constants: {_storm_message(exc)}") from None
+            raise storm_error(exc, where) from None
+    try:
+        with storm_quiet():
+            plain = program.substitute_constants()
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None
+    _check_budget(check_program(plain, where), where, max_states,
+                  default_max_memory() if max_memory is None else max_memory)
+    program, action_names = _name_unlabelled_commands(program, where, stormpy)
     options = stormpy.BuilderOptions()
+    # Refuse updates out of a variable's range and probabilities that do not sum to 1
+    # where they depend on the state (without the checks Storm wraps values around).
+    options.set_exploration_checks(True)
     # Every label, always: a label left out of the build would be false in every state.
     options.set_build_all_labels()
     options.set_build_choice_labels()
     options.set_build_choice_origins()
     options.set_build_state_valuations()
     try:
-        model = stormpy.build_model(program, options=options)
+        with storm_quiet():
+            model = stormpy.build_model(program, options=options)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        message = _storm_message(exc)
-        raise WorldError(f"{where}: Storm could not build the model: {message}") from None
+        raise storm_error(exc, where, program, plain) from None
     built = set(model.labeling.get_labels())
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    return _tables(model, where, chosen, event_set, _command_names(program))
-
-
-def _valuations(model: Any) -> tuple[tuple[str, ...], list[State]]:
-    """The variables (in Storm's order) and each state's values, read per variable."""
-    valuations = model.state_valuations
-    if model.nr_states == 0:
-        return (), []
-    order = tuple(json.loads(str(valuations.to_json(0))))
-    by_name = {v.name: v for v in valuations.get_all_variables()}
-    columns = []
-    for name in order:
-        var = by_name[name]
-        if var.has_boolean_type():  # a bit vector: the states where it is true
-            true = set(valuations.get_boolean_values(var))
-            columns.append([s in true for s in range(model.nr_states)])
-        elif var.has_integer_type():
-            columns.append(valuations.get_int64_values(var))
-        else:  # pragma: no cover - PRISM state variables are booleans and integers
-            columns.append([valuations.get_value(s, var) for s in range(model.nr_states)])
-    return order, [tuple(row) for row in zip(*columns, strict=True)]
-
-
-def _tables(
-    model: Any,
-    where: str,
-    chosen: frozenset[str],
-    events: frozenset[str],
-    command_names: Mapping[int, str],
-) -> PrismGame:
-    """Copy Storm's sparse MDP into the game's tables (labels and choice labels are read
-    per label, valuations per variable: the bindings are slow per call)."""
-    variables, states = _valuations(model)
-
-    def show(s: int) -> str:
-        return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
+    command_names = _command_names(program)
 
     def origin(choice: int) -> str:
-        """The commands a choice comes from, ``robot_cmd2`` (``deadlock``: none)."""
+        """The commands a choice comes from, ``robot_cmd2``."""
         cmds = sorted(model.choice_origins.get_command_set(choice))
         return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
 
-    state_labels: list[set[str]] = [set() for _ in states]
-    for label in chosen:
-        for s in model.labeling.get_states(label):
-            state_labels[s].add(label)
-    choice_label: dict[int, str] = {}
-    for label in model.choice_labeling.get_labels():
-        for c in model.choice_labeling.get_choices(label):
-            choice_label[c] = label
-
-    matrix = model.transition_matrix
-    transitions: dict[State, dict[str, tuple[tuple[State, float], ...]]] = {}
-    effects: dict[str, dict[State, _Distribution]] = {e: {} for e in events}
-    labelling: dict[State, frozenset[str]] = {}
-    for s in range(model.nr_states):
-        state = states[s]
-        labelling[state] = frozenset(state_labels[s])
-        named: list[tuple[str, int, _Distribution]] = []  # (name, choice, distribution)
-        for choice in range(matrix.get_row_group_start(s), matrix.get_row_group_end(s)):
-            dist = tuple((states[e.column], float(e.value)) for e in matrix.get_row(choice))
-            act = choice_label.get(choice)
-            if act in events:
-                if state in effects[act]:
-                    raise WorldError(
-                        f"{where}: event {act!r} has two enabled commands at state "
-                        f"{show(s)}; an event's effect must be one command per state"
-                    )
-                effects[act][state] = dist
-                continue
-            named.append((act if act is not None else origin(choice), choice, dist))
-        if not named:
-            raise WorldError(
-                f"{where}: at state {show(s)} only event commands are enabled; the robot "
-                "needs an action there (e.g. [wait] true -> true;)"
-            )
-        counts: dict[str, int] = {}
-        for name, _, _ in named:
-            counts[name] = counts.get(name, 0) + 1
-        row: dict[str, tuple[tuple[State, float], ...]] = {}
-        for name, choice, dist in named:
-            if counts[name] > 1:
-                name = f"{name}@{origin(choice)}"
-            if name in row:
-                raise WorldError(f"{where}: two choices named {name!r} at state {show(s)}")
-            row[name] = dist
-        transitions[state] = row
-
-    initial = list(model.initial_states)
-    if len(initial) != 1:
-        raise WorldError(
-            f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
-        )
-    robot = ExplicitGame(
-        initial=states[initial[0]],
-        transitions=transitions,
-        labels=labelling,
-        proposition_names=chosen,
-    )
+    tables = read_model(model, where, chosen, event_set, action_names, origin)
     log.info(
         "%s: %d states, %d choices, labels %s, events %s",
-        where, model.nr_states, model.nr_choices, sorted(chosen), sorted(events),
+        where, model.nr_states, model.nr_choices, sorted(chosen), sorted(event_set),
     )
-    return PrismGame(source=where, variables=variables, robot=robot, effects=effects)
+    return PrismGame(
+        source=where,
+        variables=tables.variables,
+        states=tables.states,
+        initial=tables.states[tables.initial],
+        proposition_names=chosen,
+        effects=tables.effects,
+        _tables=tables,
+        _index=dict(zip(tables.states, range(len(tables.states)), strict=True)),
+    )
+
+
+def _check_budget(bound: SizeBound, where: str, max_states: int, max_memory: int) -> None:
+    """Refuse before Storm runs when the bound on the states exceeds a budget."""
+    if bound.states > max_states:
+        raise PrismTooLarge(
+            f"{where}: {bound}, more than max_states = {max_states:,}; Storm was not run: "
+            f"raise max_states (--max-states) to {bound.states:,} or narrow the ranges"
+        )
+    need = bound.states * BYTES_PER_STATE
+    if need > max_memory:
+        raise PrismTooLarge(
+            f"{where}: {bound}, which would need about {_bytes(need)} ({BYTES_PER_STATE} "
+            f"bytes per state), more than max_memory = {_bytes(max_memory)}; Storm was not "
+            "run: raise max_memory (--max-memory) or narrow the ranges"
+        )
+
+
+def _name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:
+    """Give every command without an action a fresh action of its own (it synchronises
+    with nothing, as before), so that Storm's choice labels name every choice; returns
+    the program and ``fresh action -> <module>_cmd<k>``."""
+    taken = {c.action_name for m in program.modules for c in m.commands}
+    taken |= {m.name for m in program.modules} | {c.name for c in program.constants}
+    taken |= {v.name for v in program.variables} | {lab.name for lab in program.labels}
+    fresh: dict[int, str] = {}
+    names: dict[str, str] = {}
+    for module in program.modules:
+        for k, cmd in enumerate(module.commands, start=1):
+            if not cmd.is_labeled:
+                action = f"_mitld_cmd{cmd.global_index}"
+                while action in taken:
+                    action = "_" + action
+                fresh[cmd.global_index] = action
+                names[action] = f"{module.name}_cmd{k}"
+    if not fresh:
+        return program, names
+    try:
+        with storm_quiet():
+            return program.label_unlabelled_commands(fresh), names
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None

@@ -1,0 +1,148 @@
+"""The command line of constrained synthesis: ``solve --constraint/--then`` and
+``pareto``.  Wired into :mod:`mitld_lp.cli` (which owns exit codes and error lines)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+from mitld_lp.constraints import THEN, ConstraintError
+
+__all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto", "unconstrained"]
+
+
+def args_constraints(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--constraint", action="append", default=[], metavar="C",
+                   help="'P(FORMULA) <= x', 'P(FORMULA) >= x', 'E(steps) <= x' or "
+                        "'E(cost) <= x' (repeatable; see docs/constraints.md)")
+    p.add_argument("--then", choices=THEN,
+                   help="then minimise expected steps / cost among the optimal policies")
+
+
+def wanted(args: argparse.Namespace, model: Any) -> bool:
+    """Whether ``solve`` is a constrained synthesis."""
+    return bool(args.constraint or args.then or model.constraints)
+
+
+def unconstrained(result: Any, verb: str) -> Any:
+    """``result`` if it is a plain synthesis; a usage error for a model whose file carries
+    constraints (only ``solve`` and ``pareto`` take them)."""
+    from mitld_lp.cli import UsageError
+    from mitld_lp.synthesis import SynthesisResult
+
+    if isinstance(result, SynthesisResult):
+        return result
+    raise UsageError(f"{verb}: the model has constraints, which only solve and pareto "
+                     "take (the randomised controller runs from Python: "
+                     "mitld_lp.constrained_runs)")
+
+
+def _usage(exc: ConstraintError) -> Exception:
+    from mitld_lp.cli import UsageError
+
+    return UsageError(str(exc))
+
+
+def solve(args: argparse.Namespace, model: Any, policy_file: Path | None) -> int:
+    """Run the constrained synthesis and print it; exit 0 when certified, 3 when
+    infeasible, failed or not certified."""
+    from mitld_lp.cli import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out
+    from mitld_lp.constrained import synthesize_constrained
+
+    try:
+        r = synthesize_constrained(model, args.constraint, then=args.then,
+                                   epsilon=args.epsilon, max_states=args.max_states,
+                                   max_memory=args.max_memory)
+    except ConstraintError as exc:
+        raise _usage(exc) from None
+    summary = r.summary()
+    if policy_file is not None and r.prob is not None:
+        _write_policy(r.policy_table(), policy_file)
+        summary["policy_file"] = str(policy_file)
+    if args.json:
+        _out(_dumps(summary))
+    else:
+        _out(f"model:        {model.name}  ({model.spec})")
+        _out(f"status:       {r.status}")
+        if r.status == "optimal":
+            _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]  (LP {r.value:.7f})")
+            _out(f"E(steps):     {r.steps:.6g}")
+            if r.then:
+                _out(f"then {r.then}: {r.secondary:.6g}")
+            _out("certified:    " + ("yes" if r.certified else "NO"))
+            for name, ok, detail in r.checks:
+                if not ok:
+                    _out(f"  failed: {name}: {detail}")
+        for c in r.constraints:
+            if r.status == "optimal":
+                _out(f"constraint:   {c.constraint}: {c.value:.7g}"
+                     f" ({'holds' if c.holds else 'VIOLATED'})")
+            else:
+                tight = "none (the others are infeasible)" if c.feasible_bound is None else (
+                    f"{c.feasible_bound:.7g}")
+                _out(f"constraint:   {c.constraint}: tightest feasible bound {tight}")
+        _out(f"sizes:        {r.merged.mdp.n_states} states ({r.mdp.n_states} in the product), "
+             f"{summary['randomized_states']} randomised")
+        if policy_file is not None and r.prob is not None:
+            _out(f"policy:       {policy_file}")
+    return EXIT_OK if r.status == "optimal" and r.certified else EXIT_UNCERTIFIED
+
+
+def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
+    from mitld_lp import files
+    from mitld_lp.cli import _write
+
+    def write(p: Path) -> None:
+        if p.suffix.lower() == ".json":
+            with files.replacing(p) as fh:
+                fh.write(json.dumps(rows, default=repr, indent=1))
+            return
+        with files.replacing(p, newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["action"])
+            w.writeheader()
+            for row in rows:
+                w.writerow({k: json.dumps(v, default=repr) if isinstance(v, list | tuple)
+                            else v for k, v in row.items()})
+
+    _write(path, write)
+
+
+def args_pareto(p: argparse.ArgumentParser) -> None:
+    from mitld_lp.arguments import bounded_int
+    from mitld_lp.cli import _args_model
+
+    _args_model(p)
+    p.add_argument("--against", required=True, metavar="Q",
+                   help="steps, cost, or 'P(FORMULA)' (a risk bounded from above)")
+    p.add_argument("--points", type=bounded_int(2, 1000), default=11)
+    p.add_argument("--csv", metavar="FILE", required=True, help="the points (.csv)")
+    p.add_argument("--plot", metavar="FILE", help="the curve (.png), certified points only")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def cmd_pareto(args: argparse.Namespace) -> int:
+    """Trace the certified trade-off curve."""
+    from mitld_lp.cli import EXIT_OK, EXIT_UNCERTIFIED, _out, _output_path, _write
+    from mitld_lp.model import load_model
+    from mitld_lp.pareto import pareto, plot, write_csv
+
+    out_csv = _output_path(args.csv, args.force, "--csv", (".csv",))
+    out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
+    model = load_model(args.model)
+    try:
+        points = pareto(model, args.against, args.points)
+    except ConstraintError as exc:
+        raise _usage(exc) from None
+    _write(out_csv, lambda p: write_csv(points, p, overwrite=True))
+    _out(f"wrote {out_csv}")
+    if out_png:
+        left = plot(points, out_png, args.against, model.name, overwrite=True)
+        _out(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
+    for p in points:
+        _out(f"{p.bound:12.6g}  [{p.lower:.6f}, {p.upper:.6f}]  {p.status}"
+             f"{'' if p.certified else ' (not certified)'}")
+    return EXIT_OK if all(p.certified or p.status == "infeasible" for p in points) else (
+        EXIT_UNCERTIFIED)

@@ -1,0 +1,123 @@
+"""Key paths of a model file: the one place a TOML value is checked for its type and
+range, and every fault becomes a :class:`ModelError` naming ``SOURCE: KEY.PATH``.
+
+Used by the model loader (:mod:`mitld_lp.model`) and the world tables a model file names
+(:mod:`mitld_lp.worlds.loaders`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+from mitld_lp import defaults
+from mitld_lp.text import printable
+
+
+class ModelError(ValueError):
+    """A model file is invalid.  The message is ``SOURCE: KEY.PATH: what is wrong``, one
+    line of printable characters (a user's names are shown escaped)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(printable(message))
+
+
+def _key(part: str) -> str:
+    """A key of a key path as TOML writes it: bare, or quoted with escapes."""
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else _show(part)
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{_key(key)}" if path else _key(key)
+
+
+def _show(value: Any) -> str:
+    """A value the way TOML writes it (``true``, ``"text"``, ``[1, 2]``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{_key(k)} = {_show(v)}" for k, v in value.items()) + " }"
+    return repr(value)
+
+
+def _type_name(value: Any) -> str:
+    match value:
+        case bool():
+            return "a boolean"
+        case int():
+            return "an integer"
+        case float():
+            return "a float"
+        case str():
+            return "a string"
+        case list():
+            return "an array"
+        case dict():
+            return "a table"
+    return type(value).__name__
+
+
+class _Context:
+    """Error reporting for one source, and the budgets a world built while loading gets."""
+
+    def __init__(
+        self, source: str, max_states: int = defaults.MAX_STATES, max_memory: int | None = None
+    ) -> None:
+        self.source = source
+        self.max_states, self.max_memory = max_states, max_memory
+
+    def error(self, path: str, message: str) -> ModelError:
+        where = f"{path}: " if path else ""
+        return ModelError(f"{self.source}: {where}{message}")
+
+    def table(self, value: Any, path: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(path, f"must be a table, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def keys(
+        self, table: dict[str, Any], path: str, required: set[str], optional: set[str]
+    ) -> None:
+        allowed = required | optional
+        for k in table:
+            if k not in allowed:
+                raise self.error(
+                    _join(path, k), f"unknown key (allowed: {', '.join(sorted(allowed))})"
+                )
+        for k in sorted(required):
+            if k not in table:
+                raise self.error(_join(path, k), "missing (required)")
+
+    def string(self, value: Any, path: str) -> str:
+        if not isinstance(value, str):
+            raise self.error(path, f"must be a string, got {_type_name(value)} {_show(value)}")
+        if not value.strip():
+            raise self.error(path, "must not be empty")
+        return value
+
+    def number(self, value: Any, path: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(path, f"must be a number, got {_type_name(value)} {_show(value)}")
+        if not math.isfinite(value):
+            raise self.error(path, f"must be finite, got {_show(value)}")
+        return float(value)
+
+    def integer(self, value: Any, path: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(path, f"must be an integer, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def array(self, value: Any, path: str) -> list[Any]:
+        if not isinstance(value, list):
+            raise self.error(path, f"must be an array, got {_type_name(value)} {_show(value)}")
+        return value
+
+    def pair(self, value: Any, path: str) -> tuple[int, int]:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.error(path, f"must be a pair [x, y] of integers, got {_show(value)}")
+        return (self.integer(value[0], f"{path}[0]"), self.integer(value[1], f"{path}[1]"))

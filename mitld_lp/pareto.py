@@ -1,0 +1,129 @@
+"""The trade-off curve: the best (constrained) success probability against a bound on a
+second quantity (expected steps, expected cost, or the probability of a formula).
+
+Each point is a constrained synthesis (:func:`mitld_lp.constrained.synthesize_constrained`)
+with the bound as one more constraint, so each comes with its certificate; the curve is
+drawn from the certified points only.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mitld_lp import files
+from mitld_lp.constrained import rows_for, synthesize_constrained
+from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint, parse_constraints
+from mitld_lp.model import Model
+from mitld_lp.solvers.constrained import OPTIMAL, optimise
+from mitld_lp.solvers.constrained_model import Quantity
+
+__all__ = ["ParetoPoint", "pareto", "write_csv", "plot"]
+
+_COLUMNS = ("bound", "probability_lower", "probability_upper", "achieved", "status",
+            "certified")
+
+
+@dataclass(frozen=True, slots=True)
+class ParetoPoint:
+    """One point: the bound on the second quantity, the certified bracket on the best
+    success probability under it, and the second quantity's exact value on the policy."""
+
+    bound: float
+    lower: float
+    upper: float
+    achieved: float
+    status: str
+    certified: bool
+
+
+def against_constraint(against: str, bound: float) -> Constraint:
+    """``steps`` / ``cost`` / ``P(FORMULA)`` as the constraint ``... <= bound``."""
+    if against in ("steps", "cost"):
+        return Constraint(against, "<=", bound, None, f"E({against}) <= {bound!r}")
+    text = f"{against} <= {bound!r}"
+    c = parse_constraint(text, "--against")
+    if c.kind != "prob":
+        raise ConstraintError(f"--against: expected steps, cost or P(FORMULA), got {against!r}")
+    return c
+
+
+def _range(model: Model, against: str) -> tuple[float, float]:
+    """The bounds worth tracing: from the least value of the quantity any policy (meeting
+    the model's constraints) achieves to its value on the fastest optimal policy."""
+    lo_c = against_constraint(against, 1.0 if against.startswith("P") else 0.0)
+    base = synthesize_constrained(model, [], then="min-cost" if against == "cost" else
+                                  "min-steps" if against == "steps" else None)
+    if base.status != OPTIMAL:
+        raise ConstraintError(f"the model's own constraints are {base.status}")
+    if lo_c.kind == "prob":
+        probe = synthesize_constrained(model, [lo_c])  # P(phi) <= 1: phi joins the product
+        assert probe.status == OPTIMAL
+        own = sum(1 for t in model.constraints if t.lstrip().startswith("P"))
+        rows = rows_for(parse_constraints(model.constraints), "lower")
+        least = optimise(probe.merged, Quantity("prob", own + 1, 1.0), False, rows)
+        top = probe.constraints[-1].value
+        return float(least.objective), float(top)
+    from mitld_lp.constrained import cost_vector
+    costs = cost_vector(base.mdp, dict(model.costs))
+    own = rows_for(parse_constraints(model.constraints), "lower")
+    least = optimise(base.merged, Quantity(lo_c.kind), False, own, costs=costs)
+    return float(least.objective), float(base.secondary or 0.0)
+
+
+def pareto(model: Model, against: str, points: int = 11) -> list[ParetoPoint]:
+    """``points`` certified points, bounds evenly spaced over the range worth tracing."""
+    lo, hi = _range(model, against)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")
+    out = []
+    for b in np.linspace(lo, max(hi, lo), points):
+        c = against_constraint(against, float(b) + 1e-9)
+        r = synthesize_constrained(model, [c])
+        achieved = r.constraints[-1].value if r.constraints else float("nan")
+        out.append(ParetoPoint(float(b), r.lower, r.upper, achieved, r.status, r.certified))
+    return out
+
+
+def write_csv(points: list[ParetoPoint], path: Path, *, overwrite: bool = False) -> Path:
+    """The points as CSV (:data:`_COLUMNS`), under the output-file rule."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".csv",))
+    with files.replacing(out, newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(_COLUMNS)
+        for p in points:
+            w.writerow([repr(p.bound), repr(p.lower), repr(p.upper), repr(p.achieved), p.status,
+                        p.certified])
+    return out
+
+
+def plot(points: list[ParetoPoint], path: Path, against: str, title: str, *,
+         overwrite: bool = False) -> int:
+    """Draw the certified points (the bracket as a band) as a PNG, under the output-file
+    rule; returns how many were left out."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".png",))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    good = [p for p in points if p.certified]
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    if good:
+        x = [p.bound for p in good]
+        ax.fill_between(x, [p.lower for p in good], [p.upper for p in good], alpha=0.3,
+                        label="certified bracket")
+        ax.plot(x, [p.lower for p in good], "o-", label="achieved (lower)")
+    ax.set_xlabel(f"bound on {'E(' + against + ')' if against in ('steps', 'cost') else against}")
+    ax.set_ylabel("success probability")
+    ax.set_title(title)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    with files.replacing_path(out) as scratch:
+        fig.savefig(scratch, dpi=120)
+    plt.close(fig)
+    return len(points) - len(good)

@@ -1,0 +1,200 @@
+r"""The constrained occupancy LP: one LP over the whole merged product, solved by Clarabel.
+
+Variables: ``x_c >= 0`` per choice of a non-absorbing state (the expected number of
+times the choice is taken) and ``z_s >= 0`` per state where a run may stay for ever
+(the probability of staying there; see :mod:`mitld_lp.solvers.constrained_model`).
+Rows::
+
+    sum_{c of s} x_c + z_s - sum_c P(s | c) x_c = [s = initial]   per non-absorbing s
+    sum_c w_i(c) x_c + sum_s u_i(s) z_s  <= b_i  (or >= b_i)      per constraint i
+
+and the objective ``max sum_c w_0(c) x_c + sum_s u_0(s) z_s`` (the task's probability),
+or ``min`` expected steps / cost for the lexicographic second stage.  The constraint rows
+couple every part of the product, so the block-by-block decomposition of the
+unconstrained LP does not apply: the LP is solved whole.
+
+The policy read off a solution is randomised and stationary (with a stay):
+``pi(c | s) = x_c / (sum_{c' of s} x_c' + z_s)`` and ``pi(stay | s) = z_s / (...)``.
+Its values are then computed exactly on its Markov chain
+(:func:`~mitld_lp.solvers.constrained_model.evaluate`), never taken from the LP.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evaluate
+
+__all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED"]
+
+OPTIMAL, INFEASIBLE, FAILED = "optimal", "infeasible", "failed"
+
+_ZERO_SHARE = 1e-9  # a choice with less than this share of its state's visits is dropped
+
+
+@dataclass(frozen=True, slots=True)
+class Row:
+    """A constraint row: ``quantity sense bound``."""
+
+    quantity: Quantity
+    sense: str
+    bound: float
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Solved:
+    """One LP and the policy read off it.
+
+    Attributes:
+        status: :data:`OPTIMAL`, :data:`INFEASIBLE` or :data:`FAILED`.
+        objective: the LP's optimum (nan without a solution).
+        prob: per merged choice, the probability the policy takes it.
+        stay: per merged state, the probability the policy stays there for ever.
+        values: the exact value on the policy's chain of the objective, then of each row.
+        message: the solver's word.
+    """
+
+    status: str
+    objective: float
+    prob: np.ndarray | None
+    stay: np.ndarray | None
+    values: tuple[float, ...]
+    message: str
+
+
+def _counts_steps(q: Quantity) -> bool:
+    return q.kind in ("steps", "cost")
+
+
+def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_array,
+              b_ub: np.ndarray, tol: float) -> tuple[str, np.ndarray | None, str]:
+    """``min c'v  s.t.  a_eq v = b_eq, a_ub v <= b_ub, v >= 0`` by Clarabel (form
+    ``Av + s = b, s in {0}^n x R_+^m``)."""
+    clarabel: Any = importlib.import_module("clarabel")
+    n = c.size
+    a = sp.vstack([a_eq, a_ub, -sp.eye_array(n, format="csc")], format="csc")
+    b = np.concatenate([b_eq, b_ub, np.zeros(n)])
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
+        setattr(settings, key, tol)
+    settings.max_iter = 500
+    try:
+        solution = clarabel.DefaultSolver(
+            sp.csc_matrix((n, n)), c, sp.csc_matrix(a), b,
+            [clarabel.ZeroConeT(b_eq.size), clarabel.NonnegativeConeT(b_ub.size + n)],
+            settings,
+        ).solve()
+    except Exception as exc:  # pyo3 panics included
+        return FAILED, None, f"clarabel: {type(exc).__name__}: {exc}"
+    word = str(solution.status)
+    if word in ("Solved", "AlmostSolved"):
+        return OPTIMAL, np.asarray(solution.x, dtype=np.float64), f"clarabel: {word}"
+    if word in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+        return INFEASIBLE, None, f"clarabel: {word}"
+    return FAILED, None, f"clarabel: {word}"
+
+
+def optimise(
+    merged: Merged,
+    objective: Quantity,
+    maximise: bool,
+    rows: list[Row],
+    *,
+    costs: np.ndarray | None = None,
+    tol: float = 1e-10,
+) -> Solved:
+    """Optimise ``objective`` over the randomised stationary policies (with stays) of
+    ``merged`` subject to ``rows`` (the LP of the module docstring); the policy's exact
+    values come with it.  Stays in undecided states are closed when the objective or a
+    row counts steps or costs."""
+    mdp = merged.mdp
+    quantities = [objective, *(r.quantity for r in rows)]
+    timed = any(_counts_steps(q) for q in quantities)
+    allow_stay = merged.stay_ok & ~(merged.undecided & timed)
+    cols = [columns(merged, q, costs) for q in quantities]
+    cs = mdp.choice_state()
+    live = ~merged.absorbing
+    live_choices = np.flatnonzero(live[cs])
+    stays = np.flatnonzero(allow_stay)
+    if not live[mdp.initial]:  # decided before any step
+        prob = np.zeros(mdp.n_choices)
+        stay = np.zeros(mdp.n_states)
+        values = _exact(merged, prob, stay, quantities, cols)
+        feasible = all(_meets(r, v) for r, v in zip(rows, values[1:], strict=True))
+        return Solved(OPTIMAL if feasible else INFEASIBLE, values[0], prob, stay, values,
+                      "decided at the initial state")
+    states = np.flatnonzero(live)
+    pos = np.full(mdp.n_states, -1, dtype=np.int64)
+    pos[states] = np.arange(states.size)
+    sub = mdp.matrix[live_choices]
+    # flow rows: out - in = [s = initial]
+    owner = sp.csr_array(
+        (np.ones(live_choices.size), (pos[cs[live_choices]], np.arange(live_choices.size))),
+        shape=(states.size, live_choices.size),
+    )
+    inflow = sp.csr_array(sub.T)[states]
+    stay_cols = sp.csr_array(
+        (np.ones(stays.size), (pos[stays], np.arange(stays.size))),
+        shape=(states.size, stays.size),
+    )
+    a_eq = sp.csc_array(sp.hstack([owner - inflow, stay_cols], format="csc"))
+    b_eq = np.zeros(states.size)
+    b_eq[pos[mdp.initial]] = 1.0
+    # value rows
+    def vec(i: int) -> np.ndarray:
+        per_choice, per_stay = cols[i]
+        return np.concatenate([per_choice[live_choices], per_stay[stays]])
+
+    ub_rows, ub_b = [], []
+    for i, r in enumerate(rows, start=1):
+        sign = 1.0 if r.sense == "<=" else -1.0
+        ub_rows.append(sign * vec(i))
+        ub_b.append(sign * r.bound)
+    n_var = live_choices.size + stays.size
+    a_ub = sp.csc_array(np.array(ub_rows).reshape(len(rows), n_var))
+    c = vec(0) * (-1.0 if maximise else 1.0)
+    status, v, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol)
+    if v is None:
+        return Solved(status, float("nan"), None, None, (), message)
+    lp_value = float(vec(0) @ v)
+    prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v)
+    values = _exact(merged, prob, stay, quantities, cols)
+    return Solved(OPTIMAL, lp_value, prob, stay, values, message)
+
+
+def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
+    return value <= row.bound + tol if row.sense == "<=" else value >= row.bound - tol
+
+
+def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.ndarray,
+            cs: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``pi(c | s)`` and ``pi(stay | s)`` from the occupancy ``v``; shares below
+    :data:`_ZERO_SHARE` of a state's visits are dropped (interior-point noise), and a
+    state the solution never visits takes its first choice."""
+    x = np.zeros(n_choices)
+    x[live_choices] = np.maximum(v[: live_choices.size], 0.0)
+    z = np.zeros(n_states)
+    z[stays] = np.maximum(v[live_choices.size:], 0.0)
+    total = np.bincount(cs, weights=x, minlength=n_states) + z
+    x[x < _ZERO_SHARE * total[cs]] = 0.0
+    z[z < _ZERO_SHARE * total] = 0.0
+    total = np.bincount(cs, weights=x, minlength=n_states) + z
+    empty = total <= 0
+    first = np.zeros(n_choices, dtype=bool)
+    starts = np.flatnonzero(np.diff(np.concatenate([[-1], cs])))  # first choice per state
+    first[starts] = True
+    x[first & empty[cs]] = 1.0
+    total[empty] = 1.0
+    return x / total[cs], z / total
+
+
+def _exact(merged: Merged, prob: np.ndarray, stay: np.ndarray, quantities: list[Quantity],
+           cols: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, ...]:
+    asked = [(pc, ps, _counts_steps(q)) for q, (pc, ps) in zip(quantities, cols, strict=True)]
+    return evaluate(merged, prob, stay, asked).values

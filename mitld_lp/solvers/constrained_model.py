@@ -1,0 +1,287 @@
+"""The model a constrained synthesis solves: the product of the world with the joint
+automaton (task and constraints), its terminal states merged, and what each choice is
+worth for each quantity.
+
+* **Merging** (:func:`merge`): product states whose joint automaton state is terminal
+  (every component decided) become one absorbing state per verdict tuple; states only
+  reachable through them are dropped.  The ``truncated`` state stays.
+* **Decided task** (:attr:`Merged.undecided`): a state is *undecided* when its task
+  component has neither accepted nor rejected and some policy still reaches task
+  acceptance or truncation from it (graph reachability); expected steps and costs
+  count the actions taken in undecided states only.
+* **End components**: a run may stay for ever in an end component of the
+  non-absorbing states; it then decides nothing more (a component that accepts or
+  rejects leaves the component's automaton state, which an end component cannot do),
+  so every component undecided there counts as not satisfied.  The LP gives each state
+  of an end component a *stay* column worth that verdict; in an undecided state a stay
+  costs infinitely many steps, so stays there are closed when steps or costs are
+  bounded or minimised.  No end component is collapsed: collapsing would lose the steps
+  spent in it.
+* **Exact evaluation** (:func:`evaluate`): the values of a randomised policy (a
+  distribution over choices and a stay probability per state) from one sparse solve on
+  its Markov chain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
+
+from mitld_lp.automata.joint import ACCEPTED, UNDECIDED, Joint
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.solvers.quotient import backward_reachable, maximal_end_components
+
+__all__ = ["Merged", "merge", "Quantity", "columns", "evaluate", "Evaluation"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Merged:
+    """The merged model.
+
+    Attributes:
+        mdp: the merged MDP (absorbing states: one per verdict tuple, and truncated).
+        origin: per merged state, its product state index (-1 for a verdict state).
+        of_product: per product state, its merged state (-1: merged away or dropped).
+        joint_state: per merged state, its joint automaton state (-1 if absorbing).
+        verdicts: per merged state, the components' verdicts (a verdict state's tuple;
+            for a non-absorbing state its joint state's; for truncated all undecided).
+        absorbing, truncated, undecided: bool masks over merged states.
+        stay_ok: per merged state, whether it lies in an end component of the
+            non-absorbing states (a run may stay there for ever).
+        internal: per merged choice, whether it keeps the run in its end component.
+    """
+
+    mdp: MDP
+    origin: np.ndarray
+    of_product: np.ndarray
+    joint_state: np.ndarray
+    verdicts: np.ndarray
+    absorbing: np.ndarray
+    truncated: np.ndarray
+    undecided: np.ndarray
+    stay_ok: np.ndarray
+    internal: np.ndarray
+
+
+def merge(mdp: MDP, joint: Joint) -> Merged:
+    """:class:`Merged` of the product ``mdp`` of a world with ``joint.dta``."""
+    n = mdp.n_states
+    k = len(joint.parts)
+    jstate = np.full(n, -1, dtype=np.int64)
+    trunc = np.zeros(n, dtype=bool)
+    for i, rec in enumerate(mdp.states):
+        if isinstance(rec, ProductState):
+            jstate[i] = rec.automaton
+        elif rec is Absorbing.TRUNCATED:
+            trunc[i] = True
+        else:  # the joint automaton has no accepting or rejecting state
+            raise ValueError(f"unexpected absorbing state {rec!r} in a joint product")
+    term_j = np.array([joint.terminal(j) for j in range(joint.dta.n_states)], dtype=bool)
+    terminal = (jstate >= 0) & term_j[np.maximum(jstate, 0)]
+    vtab = np.array(joint.verdicts, dtype=np.int64).reshape(-1, k)
+    # verdict states: one per distinct verdict tuple among terminal states
+    tuples = vtab[jstate[terminal]] if terminal.any() else np.zeros((0, k), dtype=np.int64)
+    uniq, which = np.unique(tuples, axis=0, return_inverse=True)
+    keep = ~terminal
+    n_keep = int(keep.sum())
+    to_new = np.full(n, -1, dtype=np.int64)
+    to_new[keep] = np.arange(n_keep)
+    to_new[terminal] = n_keep + which.reshape(-1)
+    n_new = n_keep + uniq.shape[0]
+    # rows of the kept non-absorbing states, columns remapped
+    cstate = mdp.choice_state()
+    active = keep & ~trunc
+    rows = np.flatnonzero(active[cstate])
+    sub = mdp.matrix[rows]
+    sub = sp.csr_array((sub.data, to_new[sub.indices], sub.indptr), shape=(rows.size, n_new))
+    sub.sum_duplicates()
+    # forward reachability from the initial state
+    start = int(to_new[mdp.initial])
+    owner = to_new[cstate[rows]]
+    coo = sub.tocoo()
+    graph = sp.csr_array((np.ones(coo.nnz), (owner[coo.row], coo.col)), shape=(n_new, n_new))
+    order = csgraph.breadth_first_order(graph, start, directed=True, return_predecessors=False)
+    reach = np.zeros(n_new, dtype=bool)
+    reach[np.asarray(order)] = True
+    # renumber the reachable merged states
+    final = np.full(n_new, -1, dtype=np.int64)
+    final[reach] = np.arange(int(reach.sum()))
+    m = int(reach.sum())
+    origin_all = np.full(n_new, -1, dtype=np.int64)
+    origin_all[to_new[keep]] = np.flatnonzero(keep)
+    origin = origin_all[reach]
+    is_abs_all = np.zeros(n_new, dtype=bool)
+    is_abs_all[n_keep:] = True
+    is_abs_all[to_new[trunc]] = True
+    absorbing = is_abs_all[reach]
+    truncated = np.zeros(m, dtype=bool)
+    truncated[final[to_new[trunc]][final[to_new[trunc]] >= 0]] = True
+    js = np.full(m, -1, dtype=np.int64)
+    ordinary = (origin >= 0) & ~truncated
+    js[ordinary] = jstate[origin[ordinary]]
+    verdicts = np.full((m, k), UNDECIDED, dtype=np.int64)
+    verdicts[ordinary] = vtab[js[ordinary]]
+    verdict_states = np.flatnonzero(reach[n_keep:]) + n_keep
+    verdicts[final[verdict_states]] = uniq[verdict_states - n_keep]
+    # assemble the merged MDP: kept rows of reachable states, self-loops for absorbing
+    row_keep = reach[owner]
+    sub = sub[np.flatnonzero(row_keep)]
+    sub = sp.csr_array((sub.data, final[sub.indices], sub.indptr), shape=(sub.shape[0], m))
+    row_owner = final[owner[row_keep]]
+    per_state = np.bincount(row_owner, minlength=m)
+    per_state[absorbing] = 1
+    row_groups = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(per_state, out=row_groups[1:])
+    n_choices = int(row_groups[-1])
+    # the kept rows come ordered by owner (the product numbers choices state by state)
+    rank = np.arange(row_owner.size) - np.searchsorted(row_owner, row_owner, side="left")
+    target_row = row_groups[row_owner] + rank
+    abs_rows = row_groups[:-1][absorbing]
+    coo = sub.tocoo()
+    r = np.concatenate([target_row[coo.row], abs_rows])
+    c = np.concatenate([coo.col, np.flatnonzero(absorbing)])
+    v = np.concatenate([coo.data, np.ones(int(absorbing.sum()))])
+    matrix = sp.csr_array((v, (r, c)), shape=(n_choices, m))
+    actions = np.full(n_choices, ABSORB, dtype=np.int32)
+    src_rows = rows[row_keep]
+    actions[target_row] = mdp.choice_actions[src_rows]
+    task_acc = verdicts[:, 0] == ACCEPTED
+    new = MDP(
+        matrix=matrix,
+        row_groups=row_groups,
+        choice_actions=actions,
+        action_names=mdp.action_names,
+        initial=int(final[start]),
+        target=absorbing & task_acc,
+        sink=absorbing & ~task_acc & ~truncated,
+        truncated=truncated,
+        states=tuple(range(m)),
+    )
+    of_product = np.full(n, -1, dtype=np.int64)
+    of_product[keep] = final[to_new[keep]]
+    # undecided: task open and task acceptance (or truncation) still reachable
+    e = new.matrix.tocoo()
+    cs = new.choice_state()
+    seeds = task_acc | truncated
+    can = backward_reachable(m, cs[e.row], e.col, seeds)
+    undecided = ~absorbing & (verdicts[:, 0] == UNDECIDED) & can
+    mecs = maximal_end_components(new, ~absorbing)
+    stay_ok = mecs.mec_of >= 0
+    return Merged(new, origin, of_product, js, verdicts, absorbing, truncated, undecided,
+                  stay_ok, np.asarray(mecs.internal))
+
+
+@dataclass(frozen=True, slots=True)
+class Quantity:
+    """A quantity of a run: ``kind`` ``"prob"`` (component ``component`` accepted; for
+    ``component == 0`` the task), ``"steps"`` or ``"cost"``; ``truncated`` is what the
+    truncated state counts as for a probability (1.0 satisfied, 0.0 not)."""
+
+    kind: str
+    component: int = 0
+    truncated: float = 0.0
+
+
+def columns(
+    merged: Merged, q: Quantity, costs: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """What each LP column is worth for ``q``: per merged choice (the expected value
+    collected by taking it: for a probability, the chance to step into an absorbing state
+    that satisfies it; for steps 1 and for cost the action's cost, in undecided states)
+    and per merged state (a stay: the verdict of staying for ever; 0 for steps and
+    costs, whose stays in undecided states are closed)."""
+    mdp = merged.mdp
+    if q.kind == "prob":
+        sat = (merged.verdicts[:, q.component] == ACCEPTED).astype(np.float64)
+        absorbed = np.where(merged.absorbing, sat, 0.0)
+        absorbed[merged.truncated] = q.truncated
+        per_choice = mdp.matrix @ absorbed
+        per_choice[np.repeat(merged.absorbing, np.diff(mdp.row_groups))] = 0.0
+        return per_choice, np.where(merged.absorbing, 0.0, sat)
+    cs = mdp.choice_state()
+    charged = merged.undecided[cs].astype(np.float64)
+    if q.kind == "cost":
+        assert costs is not None
+        acts = mdp.choice_actions
+        charged = charged * np.where(acts >= 0, costs[np.maximum(acts, 0)], 0.0)
+    return charged, np.zeros(mdp.n_states)
+
+
+@dataclass(frozen=True, slots=True)
+class Evaluation:
+    """The exact values of a randomised policy, per quantity asked, and the expected
+    visits of each state (``inf`` steps when the run may stay undecided for ever)."""
+
+    values: tuple[float, ...]
+    visits: np.ndarray
+
+
+def evaluate(
+    merged: Merged,
+    prob: np.ndarray,
+    stay: np.ndarray,
+    quantities: list[tuple[np.ndarray, np.ndarray, bool]],
+) -> Evaluation:
+    """The value of each quantity ``(per_choice, per_stay, counts_steps)`` under the
+    policy taking choice ``c`` with probability ``prob[c]`` and staying in state ``s``
+    for ever with probability ``stay[s]``: ``sum_s y_s r_s`` with ``y`` the expected
+    visits (one sparse solve ``(I - Q)' y = e_init`` over the transient states) and
+    ``r_s`` the value collected per visit.  States the policy can never leave (a closed
+    set of the chain) count as stays; a quantity that counts steps is ``inf`` when an
+    undecided state is stayed in with positive probability."""
+    mdp = merged.mdp
+    m = mdp.n_states
+    cs = mdp.choice_state()
+    live = ~merged.absorbing
+    weighted = sp.diags_array(prob) @ mdp.matrix
+    owner = sp.csr_array((np.ones(cs.size), (cs, np.arange(cs.size))), shape=(m, cs.size))
+    chain = sp.csr_array(owner @ weighted)
+    # states that can leave (reach an absorbing state or a positive stay) under the policy
+    exits = (stay > 0) | merged.absorbing
+    coo = chain.tocoo()
+    pos = coo.data > 0
+    can_leave = backward_reachable(m, coo.row[pos], coo.col[pos], exits)
+    trapped = live & ~can_leave
+    # the bottom sets of the trapped part act as stays; the rest of it is transient
+    bottom = np.zeros(m, dtype=bool)
+    if trapped.any():
+        idx = np.flatnonzero(trapped)
+        inner = chain[idx][:, idx]
+        n_c, lab = csgraph.connected_components(inner, directed=True, connection="strong")
+        ic = inner.tocoo()
+        leaves = np.zeros(n_c, dtype=bool)
+        cross = (lab[ic.row] != lab[ic.col]) & (ic.data > 0)
+        leaves[lab[ic.row[cross]]] = True
+        bottom[idx[~leaves[lab]]] = True
+    transient = live & ~bottom
+    t_idx = np.flatnonzero(transient)
+    visits = np.zeros(m)
+    entry = np.zeros(m)  # probability of first entering each bottom state
+    if transient[mdp.initial]:
+        qtt = chain[t_idx][:, t_idx]
+        rhs = np.zeros(t_idx.size)
+        rhs[np.searchsorted(t_idx, mdp.initial)] = 1.0
+        y = spla.spsolve((sp.eye_array(t_idx.size, format="csc") - qtt.T).tocsc(), rhs)
+        visits[t_idx] = np.atleast_1d(np.asarray(y, dtype=np.float64))
+        b_idx = np.flatnonzero(bottom)
+        if b_idx.size:
+            entry[b_idx] = chain[t_idx][:, b_idx].T @ visits[t_idx]
+    elif bottom[mdp.initial]:
+        entry[mdp.initial] = 1.0
+    out = []
+    for per_choice, per_stay, counts_steps in quantities:
+        r = owner @ (prob * per_choice) + stay * per_stay
+        value = float(visits[transient] @ r[transient])
+        if counts_steps:
+            stuck = (visits * stay)[merged.undecided].sum() + entry[merged.undecided].sum()
+            value = float("inf") if stuck > 1e-12 else value
+        else:
+            # a bottom state is stayed in for ever: its verdict is its stay value
+            value += float(entry[bottom] @ per_stay[bottom])
+        out.append(value)
+    return Evaluation(tuple(out), visits)

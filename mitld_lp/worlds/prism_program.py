@@ -1,0 +1,291 @@
+"""What is checked on a PRISM program before Storm builds it, and Storm's output made quiet.
+
+* :func:`check_program`: every variable has a non-empty range that contains its initial
+  value, and every command whose probabilities are constants has probabilities in
+  [0, 1] summing to 1 (within :data:`mitld_lp.game.PROBABILITY_TOLERANCE`); it returns
+  the :class:`SizeBound` of the program, ``prod over the variables of |range|``, an
+  upper bound on the states Storm can reach, known before anything is built.
+* :func:`storm_error`: one of Storm's exceptions as one line naming the file, and the
+  line, the module and the command where Storm's message allows it (a parse error
+  quotes at most :data:`EXCERPT` characters of the file).
+* :func:`storm_quiet`: Storm's C++ logger writes to the process's standard output; this
+  sends file descriptor 1 elsewhere during a Storm call, so that nothing but the
+  program's answer reaches stdout (the lines go to the debug log).
+
+Every error is a :class:`mitld_lp.worlds.WorldError`, one line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import math
+import os
+import re
+import sys
+import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any
+
+from mitld_lp.game import PROBABILITY_TOLERANCE
+from mitld_lp.worlds import WorldError
+
+__all__ = ["SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT"]
+
+log = logging.getLogger("mitld_lp.worlds.prism")
+
+EXCERPT = 24
+"""At most this many characters of a user's file are quoted in a message."""
+
+_UNSET = "__storm::notinitialized__"  # Storm's text for an expression that is not given
+
+
+def excerpt(text: str, limit: int = EXCERPT) -> str:
+    """``text`` on one line, cut to ``limit`` characters (``...`` marks a cut)."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 3] + "..."
+
+
+# --------------------------------------------------------------------------- the program
+
+
+@dataclass(frozen=True, slots=True)
+class SizeBound:
+    """``states = prod over variables v of values(v)``: every state Storm builds is a
+    valuation of the program's variables (a variable no command assigns is a constant
+    to Storm and counts once), so no more than ``states`` are reachable.
+
+    Attributes:
+        states: the bound.
+        factors: ``(variable, number of values)``, largest first.
+    """
+
+    states: int
+    factors: tuple[tuple[str, int], ...]
+
+    def __str__(self) -> str:
+        shown = [f"{name}: {n:,}" for name, n in self.factors[:4]]
+        more = len(self.factors) - len(shown)
+        rest = f" x {more} more" if more > 0 else ""
+        product = " x ".join(shown) if shown else "no variables"
+        return f"at most {self.states:,} states from the variables' ranges ({product}{rest})"
+
+
+def _owner(module: Any | None) -> str:
+    return f"module {module.name}" if module is not None else "global"
+
+
+def _constant(expr: Any, what: str, where: str) -> int:
+    if expr.contains_variables():
+        raise WorldError(f"{where}: {what} ({excerpt(str(expr))}) must be a constant")
+    return int(expr.evaluate_as_int())
+
+
+def _integer_variables(program: Any) -> list[tuple[Any | None, Any]]:
+    """``(module or None for a global, variable)`` for every integer variable."""
+    owned = [(None, v) for v in program.global_integer_variables]
+    return owned + [(m, v) for m in program.modules for v in m.integer_variables]
+
+
+def _range(program: Any, name: str) -> str:
+    """``[lo..hi]`` of the integer variable ``name`` ('' if it has none)."""
+    for _, var in _integer_variables(program):
+        low, high = var.lower_bound_expression, var.upper_bound_expression
+        if var.name == name and _UNSET not in (str(low), str(high)):
+            with contextlib.suppress(RuntimeError):
+                return f" [{low.evaluate_as_int()}..{high.evaluate_as_int()}]"
+    return ""
+
+
+def _check_variables(program: Any, where: str) -> list[tuple[str, int]]:
+    """Each variable's number of values; refuses empty ranges and initial values out of
+    range (Storm reports neither with the variable's name)."""
+    factors: list[tuple[str, int]] = []
+    checked_init = not program.has_initial_states_expression
+    for module, var in _integer_variables(program):
+        at = f"{where}: {_owner(module)}: variable {var.name!r}"
+        if _UNSET in (str(var.lower_bound_expression), str(var.upper_bound_expression)):
+            raise WorldError(
+                f"{at} has no range; give it one ({var.name} : [lo..hi]) so that the states "
+                "are bounded before Storm builds them"
+            )
+        low = _constant(var.lower_bound_expression, "its lower bound", at)
+        high = _constant(var.upper_bound_expression, "its upper bound", at)
+        if low > high:
+            raise WorldError(f"{at}: its range [{low}..{high}] is empty")
+        init = var.initial_value_expression
+        if checked_init and str(init) != _UNSET and not init.contains_variables():
+            value = int(init.evaluate_as_int())
+            if not low <= value <= high:
+                raise WorldError(
+                    f"{at}: initial value {value} is outside its range [{low}..{high}]"
+                )
+        factors.append((var.name, high - low + 1))
+    booleans = list(program.global_boolean_variables)
+    booleans += [v for m in program.modules for v in m.boolean_variables]
+    factors += [(v.name, 2) for v in booleans]
+    return factors
+
+
+def command_label(module: Any, k: int, command: Any) -> str:
+    """``module m, command 2 ([go] x<3 -> ...)``: how a message names a command."""
+    return f"module {module.name}, command {k} ({excerpt(str(command), 40)})"
+
+
+def _check_probabilities(program: Any, where: str) -> None:
+    """Commands whose update probabilities are constants: each in [0, 1], total 1.
+    (Storm checks the others state by state while it builds.)"""
+    for module in program.modules:
+        for k, command in enumerate(module.commands, start=1):
+            probabilities = [u.probability_expression for u in command.updates]
+            if any(p.contains_variables() for p in probabilities):
+                continue
+            values = [Fraction(str(p.evaluate_as_rational())) for p in probabilities]
+            at = f"{where}: {command_label(module, k, command)}"
+            for p in values:
+                if not 0 <= p <= 1:
+                    raise WorldError(f"{at}: probability {float(p):g} is not in [0, 1]")
+            total = float(sum(values, Fraction(0)))
+            if abs(total - 1.0) > PROBABILITY_TOLERANCE:
+                raise WorldError(f"{at}: probabilities sum to {total:.12g}, not 1")
+
+
+def check_program(program: Any, where: str) -> SizeBound:
+    """Check ``program`` (constants substituted) and bound its states (module doc).
+
+    Raises :class:`WorldError` naming the module, variable or command."""
+    factors = _check_variables(program, where)
+    _check_probabilities(program, where)
+    factors.sort(key=lambda f: -f[1])
+    return SizeBound(states=math.prod(n for _, n in factors), factors=tuple(factors))
+
+
+# --------------------------------------------------------------------------- Storm's errors
+
+
+_CLASS = re.compile(r"^\s*[A-Za-z]+Exception:\s*")
+_PARSE = re.compile(r"Parsing error at (\d+):(\d+):\s*(.*?),?\s*here:[ \t]*\n\t?([^\n]*)")
+_AT_LINE = re.compile(r"^Error in .*?, line (\d+):\s*(.*)$")
+_OUT_OF_RANGE = re.compile(
+    r"^The update (.*) leads to an out-of-bounds value \((-?\d+)\) for the variable '(\w+)'"
+)
+_SUM = re.compile(r"^Probabilities do not sum to one for command '(.*)' \(actually sum to (\S+)\)")
+_SYNC_SUM = re.compile(
+    r"^Sum of update probabilities do not \w+ to one .*\(actually sum to (\S+)\)"
+)
+_NEGATIVE = re.compile(r"negative probabilities in '(.*)'")
+
+
+def _finder(program: Any, shown: Any) -> Callable[[Callable[[Any], bool]], str]:
+    """``find(want)``: ``"<command label>: "`` of the first command of ``program`` that
+    ``want`` accepts, quoted from ``shown`` (the same commands as the user wrote them);
+    ``""`` if there is none."""
+
+    def find(want: Callable[[Any], bool]) -> str:
+        for i, module in enumerate(program.modules):
+            for k, command in enumerate(module.commands, start=1):
+                if want(command):
+                    original = shown.modules[i]
+                    return f"{command_label(original, k, original.commands[k - 1])}: "
+        return ""
+
+    return find
+
+
+def storm_error(
+    exc: BaseException, where: str, program: Any = None, shown: Any = None
+) -> WorldError:
+    """Storm's exception ``exc`` as a :class:`WorldError` of one line.
+
+    A parse error becomes ``FILE:LINE:COLUMN: PRISM parse error: expecting X at "..."``
+    (an excerpt of the file at the position); ``Error in FILE, line N: ...`` becomes
+    ``FILE:N: ...``; an update out of a variable's range and probabilities that do not
+    sum to 1 name the module and command of ``program`` (the program Storm was
+    building), quoted from ``shown`` (default ``program``): the same commands before
+    commands without an action were given one.  Anything else is Storm's first line,
+    cut to a reasonable length."""
+    text = _CLASS.sub("", str(exc).strip())
+    m = _PARSE.search(text)
+    if m:
+        line, column, reason, quoted = int(m[1]), int(m[2]), m[3].strip(), m[4]
+        near = quoted[column - 1 :] if 0 < column <= len(quoted) + 1 else quoted
+        at = f" at {excerpt(near)!r}" if near.strip() else " at the end of the line"
+        return WorldError(f"{where}:{line}:{column}: PRISM parse error: {reason}{at}")
+    first = text.splitlines()[0] if text else type(exc).__name__
+    m = _AT_LINE.match(first)
+    if m:
+        return WorldError(f"{where}:{m[1]}: {excerpt(m[2], 200)}")
+    if program is not None:
+        find = _finder(program, program if shown is None else shown)
+        m = _OUT_OF_RANGE.match(first)
+        if m:
+            update, value, name = m[1], m[2], m[3]
+            at = find(lambda c: any(str(u) == update for u in c.updates))
+            return WorldError(
+                f"{where}: {at}an update gives {name!r} the value {value}, outside its "
+                f"range{_range(program, name)}"
+            )
+        m = _SUM.match(first)
+        if m:
+            at = find(lambda c, text=m[1]: str(c) == text)
+            return WorldError(f"{where}: {at}probabilities sum to {m[2]} in a state, not 1")
+        m = _SYNC_SUM.match(first)
+        if m:
+            return WorldError(
+                f"{where}: the synchronised commands of an action have probabilities "
+                f"summing to {m[1]} in a state, not 1"
+            )
+        m = _NEGATIVE.search(first)
+        if m:
+            at = find(
+                lambda c, text=m[1]: any(str(u.probability_expression) == text for u in c.updates)
+            )
+            return WorldError(f"{where}: {at}a probability is negative in a state")
+    return WorldError(f"{where}: Storm: {excerpt(first, 200)}")
+
+
+# --------------------------------------------------------------------------- Storm's output
+
+
+_QUIET = threading.Lock()
+
+
+def _flush_c_streams() -> None:
+    """Flush C's stdio buffers (where C++'s ``std::cout`` goes), so that what Storm
+    wrote lands in the capture and not on the terminal later."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        ctypes.CDLL(None).fflush(None)
+
+
+@contextlib.contextmanager
+def storm_quiet() -> Iterator[None]:
+    """Run the block with file descriptor 1 (standard output) sent to a temporary file;
+    afterwards the lines Storm wrote there go to the debug log.  Storm's logger prints
+    its errors and warnings on stdout, which must carry nothing but the answer.  The
+    descriptor is the process's: what another thread prints to stdout meanwhile is
+    logged the same way (the command line prints nothing while a world loads)."""
+    with _QUIET:
+        with contextlib.suppress(ValueError, OSError):
+            sys.stdout.flush()
+        try:
+            saved = os.dup(1)
+        except OSError:  # no standard output at all: nothing to protect
+            yield
+            return
+        with tempfile.TemporaryFile() as sink:
+            _flush_c_streams()
+            os.dup2(sink.fileno(), 1)
+            try:
+                yield
+            finally:
+                _flush_c_streams()
+                os.dup2(saved, 1)
+                os.close(saved)
+                sink.seek(0)
+                for line in sink.read().decode("utf-8", "replace").splitlines():
+                    if line.strip():
+                        log.debug("storm: %s", excerpt(line, 200))

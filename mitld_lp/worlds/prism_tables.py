@@ -1,0 +1,263 @@
+"""Storm's sparse MDP copied into numpy arrays, with no Python loop over states.
+
+The transition structure comes from Storm's own binary export (UMB: the offsets of each
+state's choices and of each choice's branches, the branch targets and probabilities, as
+little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.fromfile`;
+the state valuations, state labels and choice labels come from Storm's per-variable and
+per-label calls (one call per variable or label, a bit vector or list each).  Only the
+choices that need their PRISM commands to be told apart (two enabled commands of one
+action in a state) are looked at one by one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tarfile
+import tempfile
+from collections.abc import Callable, Hashable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.game import PROBABILITY_TOLERANCE
+from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_program import storm_quiet
+
+__all__ = ["Tables", "read_model", "DEADLOCK_ACTION"]
+
+DEADLOCK_ACTION = "deadlock"
+"""The name of the self-loop Storm adds where no PRISM command is enabled."""
+
+State = tuple[Hashable, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Tables:
+    """The built MDP as arrays (``n`` states, ``m`` choices, ``b`` branches).
+
+    Attributes:
+        variables: the PRISM variables, in the order of a state's values.
+        states: ``n`` tuples of values (Storm's state order).
+        initial: the index of the initial state.
+        labels: ``n`` frozensets (an object array): the chosen labels true in each state.
+        choices: ``n + 1`` offsets: state ``s`` has choices ``choices[s]:choices[s+1]``.
+        branches: ``m + 1`` offsets: choice ``c`` has branches ``branches[c]:branches[c+1]``.
+        targets, probabilities: the ``b`` branches (state index, probability > 0).
+        names: ``m`` action names (an object array), ``None`` for an event's choice.
+        effects: ``event -> n`` choice indices: the event's choice at each state, -1
+            where its command is not enabled.
+    """
+
+    variables: tuple[str, ...]
+    states: tuple[State, ...]
+    initial: int
+    labels: np.ndarray
+    choices: np.ndarray
+    branches: np.ndarray
+    targets: np.ndarray
+    probabilities: np.ndarray
+    names: np.ndarray
+    effects: Mapping[str, np.ndarray]
+
+
+def _indices(bits: Any) -> np.ndarray:
+    """The set positions of one of Storm's bit vectors."""
+    return np.fromiter(bits, dtype=np.int64)
+
+
+def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
+    """``(choices, branches, targets, probabilities)`` from Storm's UMB export, checked
+    for consistency; branches of probability 0 dropped."""
+    try:
+        choices, branches, targets, probabilities = _export(model, where)
+    except OSError as exc:
+        raise WorldError(
+            f"{where}: cannot write Storm's export to a temporary folder: {exc.strerror or exc}"
+        ) from None
+    n, m, b = len(choices) - 1, len(branches) - 1, len(targets)
+    ok = (
+        choices[0] == 0 and choices[-1] == m and branches[0] == 0 and branches[-1] == b
+        and bool(np.all(np.diff(choices) > 0)) and bool(np.all(np.diff(branches) > 0))
+        and (b == 0 or (targets.min() >= 0 and targets.max() < n))
+    )
+    if not ok:
+        raise WorldError(f"{where}: Storm's UMB export is inconsistent; not supported")
+    positive = probabilities > 0.0
+    if not positive.all():  # a branch of probability 0 is no successor
+        kept = np.add.reduceat(positive.astype(np.int64), branches[:-1])
+        branches = np.concatenate(([0], np.cumsum(kept)))
+        targets, probabilities = targets[positive], probabilities[positive]
+    return choices, branches, targets, probabilities
+
+
+def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
+    """Write ``model`` as an uncompressed UMB archive to a temporary folder and read its
+    four transition arrays straight from the file."""
+    import stormpy.io  # pyright: ignore[reportMissingImports]
+
+    n, m = model.nr_states, model.nr_choices
+    options = stormpy.io.UmbExportOptions()
+    options.compression = stormpy.io.CompressionMode.NO_COMPRESSION
+    unsupported = f"{where}: Storm's UMB export is not as expected; this stormpy is not supported"
+    with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
+        path = os.path.join(folder, "model.umb")
+        with storm_quiet():
+            stormpy.io.export_to_umb(model, path, options=options)
+        with tarfile.open(path) as tar:
+            members = {t.name: t for t in tar.getmembers()}
+            index = tar.extractfile(members["index.json"]) if "index.json" in members else None
+            system = json.loads(index.read()).get("transition-system", {}) if index else {}
+            b = system.get("#branches", -1)
+            if (system.get("#states"), system.get("#choices")) != (n, m) or system.get(
+                "branch-probability-type"
+            ) != {"size": 64, "type": "double"}:
+                raise WorldError(unsupported)
+
+            def read(name: str, dtype: str, count: int) -> np.ndarray:
+                member = members.get(name)
+                if member is None or member.size != count * 8:
+                    raise WorldError(f"{unsupported} ({name})")
+                return np.fromfile(path, dtype=dtype, count=count, offset=member.offset_data)
+
+            return (
+                read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
+                read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
+                read("branch-to-target.bin", "<u8", b).astype(np.int64),
+                read("branch-to-probability.bin", "<f8", b),
+            )
+
+
+def _valuations(model: Any) -> tuple[tuple[str, ...], tuple[State, ...]]:
+    """The variables (in Storm's order) and each state's values, one call per variable."""
+    n = model.nr_states
+    valuations = model.state_valuations
+    order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
+    by_name = {v.name: v for v in valuations.get_all_variables()}
+    columns: list[list[Any]] = []
+    for name in order:
+        var = by_name[name]
+        if var.has_boolean_type():  # a bit vector: the states where it is true
+            column = np.zeros(n, dtype=bool)
+            column[_indices(valuations.get_boolean_values(var))] = True
+            columns.append(column.tolist())
+        else:  # PRISM state variables are booleans and bounded integers
+            columns.append(list(valuations.get_int64_values(var)))
+    if not columns:  # no variables (Storm made them constants): one empty valuation
+        return order, ((),) * n
+    return order, tuple(zip(*columns, strict=True))
+
+
+def _state_labels(model: Any, chosen: frozenset[str]) -> np.ndarray:
+    """Per state, the frozenset of the ``chosen`` labels it satisfies (object array)."""
+    n = model.nr_states
+    names = sorted(chosen)
+    packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
+    for k, label in enumerate(names):
+        packed[_indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
+    if not names:
+        out = np.empty(n, dtype=object)
+        out[:] = [frozenset()] * n
+        return out
+    rows, inverse = np.unique(packed, axis=0, return_inverse=True)
+    bits = np.unpackbits(rows, axis=1)[:, : len(names)]
+    sets = np.empty(len(rows), dtype=object)
+    sets[:] = [frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits]
+    return sets[np.asarray(inverse).reshape(-1)]
+
+
+def read_model(
+    model: Any,
+    where: str,
+    chosen: frozenset[str],
+    events: frozenset[str],
+    action_names: Mapping[str, str],
+    origin: Callable[[int], str],
+) -> Tables:
+    """Copy Storm's ``model`` into :class:`Tables`.
+
+    ``action_names`` maps Storm's choice labels to action names (a command without an
+    action was given a fresh one before the build); a choice without a label is the
+    deadlock self-loop.  ``origin(choice)`` names the commands a choice comes from, used
+    only where two choices of a state would have the same name.  Raises
+    :class:`WorldError` for a state where only events are enabled, an event with two
+    enabled commands in a state, or a distribution whose probabilities do not sum to 1.
+    """
+    variables, states = _valuations(model)
+    choices, branches, targets, probabilities = _structure(model, where)
+    n, m = len(states), len(branches) - 1
+
+    def show(s: int) -> str:
+        return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
+
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))
+    label_names = sorted(model.choice_labeling.get_labels())
+    label_of = np.full(m, -1, dtype=np.int64)  # -1: no label, the deadlock self-loop
+    for k, label in enumerate(label_names):
+        label_of[_indices(model.choice_labeling.get_choices(label))] = k
+    table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
+    names = np.asarray(table, dtype=object)[label_of]  # label -1 picks the last entry
+
+    choice_of = np.repeat(np.arange(m, dtype=np.int64), np.diff(branches))
+    totals = np.bincount(choice_of, weights=probabilities, minlength=m)
+    bad = np.flatnonzero(np.abs(totals - 1.0) > PROBABILITY_TOLERANCE)
+    if bad.size:
+        c = int(bad[0])
+        raise WorldError(
+            f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}: probabilities "
+            f"sum to {totals[c]!r}, not 1"
+        )
+
+    effects: dict[str, np.ndarray] = {}
+    robot = np.ones(m, dtype=bool)
+    for event in sorted(events):
+        mine = np.flatnonzero(names == event) if event in table else np.zeros(0, np.int64)
+        robot[mine] = False
+        at = state_of[mine]
+        twice = np.flatnonzero(np.bincount(at, minlength=n) > 1)
+        if twice.size:
+            raise WorldError(
+                f"{where}: event {event!r} has two enabled commands at state "
+                f"{show(int(twice[0]))}; an event's effect must be one command per state"
+            )
+        effect = np.full(n, -1, dtype=np.int64)
+        effect[at] = mine
+        effects[event] = effect
+    stuck = np.flatnonzero(np.bincount(state_of[robot], minlength=n) == 0)
+    if stuck.size:
+        raise WorldError(
+            f"{where}: at state {show(int(stuck[0]))} only event commands are enabled; the "
+            "robot needs an action there (e.g. [wait] true -> true;)"
+        )
+
+    # Two robot choices of one state with one name: told apart by their commands.
+    key = state_of * (len(table) + 1) + label_of + 1
+    keys, counts = np.unique(key[robot], return_counts=True)
+    clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
+    for c in clash.tolist():
+        names[c] = f"{names[c]}@{origin(c)}"
+    for s in np.unique(state_of[clash]).tolist():
+        mine = slice(choices[s], choices[s + 1])
+        row = [str(x) for x in names[mine][robot[mine]]]
+        for name in sorted({x for x in row if row.count(x) > 1}):
+            raise WorldError(f"{where}: two choices named {name!r} at state {show(s)}")
+    names[~robot] = None
+
+    initial = list(model.initial_states)
+    if len(initial) != 1:
+        raise WorldError(
+            f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
+        )
+    return Tables(
+        variables=variables,
+        states=states,
+        initial=int(initial[0]),
+        labels=_state_labels(model, chosen),
+        choices=choices,
+        branches=branches,
+        targets=targets,
+        probabilities=probabilities,
+        names=names,
+        effects=effects,
+    )
