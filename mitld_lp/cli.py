@@ -344,6 +344,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
+        if summary.get("robust"):
+            _out("robust:       worst case over the bands " + ", ".join(
+                f"{e} ~ {law}" for e, law in summary["bands"].items()))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
         _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")
@@ -390,6 +393,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
     from mitld_lp.acceptance import acceptance
 
+    if _robust_export(args, lp, drn):
+        return EXIT_OK
     built = _build(args)[1]
     mdp = built.mdp
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
@@ -401,6 +406,37 @@ def _cmd_export(args: argparse.Namespace) -> int:
         _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))
         _out(f"wrote {drn}")
     return EXIT_OK
+
+
+def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) -> bool:
+    """A model with a law known only within a band: its interval MDP as DRN (the robust
+    optimum is no one LP: --lp is refused).  False for any other model."""
+    from mitld_lp.model import load_model
+    from mitld_lp.robust_synthesis import is_robust
+
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    if not is_robust(model.distributions):
+        return False
+    if lp:
+        raise UsageError("export --lp: a law known only within a band has a robust optimum "
+                         "(a max-min), which is no single LP; export --drn writes the "
+                         "interval MDP")
+    from mitld_lp.automata.sta import make_sta
+    from mitld_lp.automata.translate import to_dta
+    from mitld_lp.product import robust_product
+    from mitld_lp.solvers.robust_export import write_interval_drn
+
+    sta = make_sta(to_dta(model.spec, max_states=min(args.max_states,
+                                                     args.max_automaton_states)),
+                   model.distributions, model.epsilon if args.epsilon is None else args.epsilon,
+                   clock_reduction=not args.no_clock_reduction)
+    imdp = robust_product(model.game, sta, max_states=args.max_states,
+                          max_memory=args.max_memory)
+    target = imdp.target | imdp.truncated if args.upper else imdp.target
+    assert drn is not None  # export checked that one of the two is given
+    _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
+    _out(f"wrote {drn} (interval MDP)")
+    return True
 
 
 def _args_simulate(p: argparse.ArgumentParser) -> None:
@@ -429,13 +465,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "simulate")
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
+    robust = r.summary().get("robust", False)
     out = {
         "runs": sim.runs,
         "successes": sim.successes,
         "estimate": sim.estimate,
         "ci95": [sim.ci_low, sim.ci_high],
         "certified_bracket": [r.lower, r.upper],
-        "consistent": sim.ci_low <= r.upper and sim.ci_high >= r.lower,
+        # a robust bracket bounds the worst law of the bands; runs follow the nominal laws
+        "consistent": (sim.ci_low <= r.upper or robust) and sim.ci_high >= r.lower,
         "beyond_model": sim.beyond_model,
         "undecided": sim.undecided,
         "horizon": sim.horizon,
@@ -455,6 +493,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if sim.beyond_model:
             _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
                  "truncation point")
+        if robust:
+            _out("note:         runs follow each band's nominal law; the bracket is the "
+                 "worst case over the bands")
     return EXIT_OK
 
 

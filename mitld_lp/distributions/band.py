@@ -12,12 +12,13 @@ Three shapes of band:
   fitted geometric or exponential law); memoryless, no clock, exact.
 * :class:`TableBand`: a band ``S_lo(k) <= S(k) <= S_hi(k)`` on the survival function given
   as a table for ``k = 0..n`` and constant beyond (Kaplan-Meier with a simultaneous band).
-* :class:`EnvelopeBand`: the survival band between finitely many laws,
-  ``S_lo(k) = min_j S_j(k)``, ``S_hi(k) = max_j S_j(k)`` (``poisson([2, 3])``, the
-  likelihood region of a fitted family).
+* :class:`EnvelopeBand`: finitely many laws of one family (``poisson([2, 3])``, the
+  likelihood region of a fitted family): ``h(k)`` between the least and the greatest of
+  their hazards at step ``k``.
 
-A survival band gives per-step hazard bands, conservatively: every law whose survival
-lies in the band has ``h(k) = 1 - S(k)/S(k-1)`` inside::
+A survival band with no family behind it (:class:`TableBand`) gives per-step hazard
+bands conservatively: every law whose survival lies in the band has
+``h(k) = 1 - S(k)/S(k-1)`` inside::
 
     h_lo(k) = clip(1 - S_hi(k) / S_lo(k-1), 0, 1),  h_hi(k) = clip(1 - S_lo(k) / S_hi(k-1), 0, 1)
 
@@ -223,21 +224,27 @@ class TableBand(Band):
 
 @dataclass(frozen=True, slots=True, eq=False)
 class EnvelopeBand(Band):
-    """The survival band between ``laws``: ``S_lo = min_j S_j``, ``S_hi = max_j S_j``."""
+    """The laws of a parametric family between ``laws`` (the ends of a parameter
+    interval, points of a likelihood region's boundary): at step ``k`` the hazard may be
+    anything between the least and the greatest of their hazards,
+    ``[min_j h_j(k), max_j h_j(k)]``, and ``S_hi(k) = max_j S_j(k)``.  For a family whose
+    hazard is monotone in its parameter (geometric, poisson, exponential: larger
+    parameter, stochastically smaller in the hazard-rate order) the two ends bound every
+    law between; the adversary may still change hazards from step to step, so this band
+    contains every law of the family and more."""
 
     laws: tuple[FirstOccurrence, ...]
 
-    def _envelope(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
-        s = np.vstack([np.asarray(law.survival(k), dtype=np.float64) for law in self.laws])
-        return s.min(axis=0), s.max(axis=0)
+    def _each(self, k: IntArray, what: str) -> FloatArray:
+        return np.vstack([np.asarray(getattr(law, what)(k), dtype=np.float64)
+                          for law in self.laws])
 
     def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
-        lo_prev, hi_prev = self._envelope(k - 1)
-        lo, hi = self._envelope(k)
-        return hazard_band_from_survival(lo_prev, hi_prev, lo, hi)
+        h = self._each(k, "hazard")
+        return h.min(axis=0), h.max(axis=0)
 
     def _sf_hi_pos(self, k: IntArray) -> FloatArray:
-        return self._envelope(k)[1]
+        return self._each(k, "survival").max(axis=0)
 
     def _band_constant_from(self) -> int | None:
         return None
@@ -266,8 +273,9 @@ INTERVAL_FAMILIES = ("geometric", "poisson", "exponential")
 
 def interval(family: str, lo: object, hi: object, where: str) -> FirstOccurrence:
     """The band of ``family`` with its parameter anywhere in ``[lo, hi]``, e.g.
-    ``geometric([0.2, 0.4])``: hazard in ``[0.2, 0.4]`` at every step.  Its nominal law
-    is the family at the middle of the interval.  Errors name ``where``."""
+    ``geometric([0.2, 0.4])``: hazard in ``[0.2, 0.4]`` at every step (a geometric's
+    lower end may be 0: the event may never come).  Its nominal law is the family at the
+    middle of the interval.  Errors name ``where``."""
     from mitld_lp.distributions.families import build
     from mitld_lp.distributions.printing import literal_text
 
@@ -275,10 +283,18 @@ def interval(family: str, lo: object, hi: object, where: str) -> FirstOccurrence
         raise DistributionError(
             where, f"an interval parameter is allowed for {', '.join(INTERVAL_FAMILIES)} "
             f"(one parameter, survival monotone in it), not {family}")
-    ends = [build(family, [x], where) for x in (lo, hi)]  # validates both numbers
-    a, b = float(lo), float(hi)  # type: ignore[arg-type]
+    if family == "geometric" and isinstance(lo, int | float) and lo == 0:
+        # a hazard that may be 0: the event may never come (no law geometric(0) exists)
+        ends = [build(family, [hi], where)]
+        a, b = 0.0, float(hi)  # type: ignore[arg-type]
+    else:
+        ends = [build(family, [x], where) for x in (lo, hi)]  # validates both numbers
+        a, b = float(lo), float(hi)  # type: ignore[arg-type]
     if not a <= b:
         raise DistributionError(where, f"the interval's lower end {lo!r} exceeds its upper "
                                 f"end {hi!r}")
     label = literal_text(family, ([a, b],))
-    return band_of_laws(label, build(family, [(a + b) / 2.0], where), ends)
+    nominal = build(family, [(a + b) / 2.0], where)
+    if a == 0.0:
+        return ConstantBand(label, nominal, 0.0, b)
+    return band_of_laws(label, nominal, ends)
