@@ -1,0 +1,289 @@
+"""The command line's verbs over many runs: batches of model files (``solve a.toml
+b.toml``), sweeps (``sweep``), pictures (``plot``) and Monte-Carlo rollouts
+(``simulate``).  Imported by :mod:`mitld_lp.cli` when one of them runs; shares its
+output helpers."""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import logging
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mitld_lp import defaults
+from mitld_lp.arguments import bounded_int, probability_budget
+from mitld_lp.cli import (
+    EXIT_INTERNAL,
+    EXIT_OK,
+    EXIT_UNCERTIFIED,
+    EXIT_USAGE,
+    UsageError,
+    _args_model,
+    _constrained,
+    _count,
+    _dumps,
+    _out,
+    _output_path,
+    _prob,
+    _say,
+    _time_left,
+    _write,
+)
+from mitld_lp.text import printable
+
+if TYPE_CHECKING:
+    from mitld_lp.sweep.rows import Settings
+
+
+
+def solve_settings(args: argparse.Namespace) -> Settings:
+    """``solve``'s options as :class:`mitld_lp.sweep.rows.Settings` (time left now)."""
+    from mitld_lp.sweep.rows import Settings
+
+    return Settings(method=args.method, solver=args.solver, backend=args.backend,
+                    clock_reduction=not args.no_clock_reduction,
+                    decompose=not args.no_decompose, time_limit=_time_left(args),
+                    max_states=args.max_states,
+                    max_automaton_states=args.max_automaton_states,
+                    max_memory=args.max_memory, epsilon=args.epsilon)
+
+
+def is_pattern(name: str) -> bool:
+    """A glob pattern the shell did not expand (and no file of that name)."""
+    return glob.has_magic(name) and not Path(name).exists()
+
+
+def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
+    """The exit status of many runs: 1 if one hit a bug, else 2 if a model was wrong,
+    else 3 if one has no certified answer, else 0; said in one line on stderr (the runs'
+    own lines name each failure)."""
+    statuses = [r["status"] for r in records]
+    failed = sum(1 for r in records if not r.get("certified"))
+    of = f"{failed} of {_count(len(records), noun)}"
+    if "error" in statuses:
+        _say(f"internal error: {statuses.count('error')} of {_count(len(records), noun)} "
+             "failed unexpectedly (see their lines; please report this)")
+        return EXIT_INTERNAL
+    if "model_error" in statuses:
+        _say(f"error: {statuses.count('model_error')} of {_count(len(records), noun)} "
+             "could not be read (see their lines)")
+        return EXIT_USAGE
+    if failed:
+        _say(f"stopped: {of} without a certified answer (see their lines)")
+        return EXIT_UNCERTIFIED
+    return EXIT_OK
+
+
+def solve_batch(args: argparse.Namespace) -> int:
+    """``solve a.toml b.toml 'models/*.toml'``: each model file in turn, one line each
+    (a JSON object with ``--json``); a model that fails is its line, not the end."""
+    from mitld_lp.model import load_model
+    from mitld_lp.sweep.rows import MODEL_ERROR, run_model
+
+    if args.policy:
+        raise UsageError("--policy writes the policy of one model; give one model file")
+    records: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for name in args.model:
+        matches = sorted(glob.glob(name, recursive=True)) if is_pattern(name) else [name]
+        if not matches:
+            records.append({"file": name, "status": MODEL_ERROR, "certified": False,
+                            "error": "no file matches this pattern"})
+            _batch_line(records[-1], args.json)
+        for path in (m for m in matches if m not in seen):
+            seen.add(path)
+            outcome = run_model(
+                lambda path=path: load_model(path, max_states=args.max_states,
+                                             max_memory=args.max_memory),
+                solve_settings(args))
+            records.append({"file": path, **outcome.summary} if outcome.summary else {
+                "file": path, "status": outcome.status, "certified": False,
+                "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
+            _batch_line(records[-1], args.json)
+    return _batch_exit(records, "model")
+
+
+def _batch_line(record: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        _out(_dumps(record))
+    elif "error" in record:
+        _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
+    else:
+        _out(f"{printable(record['file'])}: [{_prob(record['lower'])}, {_prob(record['upper'])}] "
+             f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
+             f"{record['states']} states, {record['seconds']:.3f} s)")
+
+
+def args_sweep(p: argparse.ArgumentParser) -> None:
+    p.add_argument("sweep", help="a sweep file (models/sweeps/*.toml; see docs/sweeps.md)")
+    p.add_argument("-o", "--out", metavar="RESULTS",
+                   help="the results file, .csv or .parquet (default: NAME.csv here, NAME "
+                        "the sweep's name); points already in it are not solved again")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=bounded_int(1, 1024), default=1, metavar="N",
+                       help="solve N points at a time, in local processes")
+    where.add_argument("--dask", metavar="ADDRESS",
+                       help="solve the points on the Dask scheduler at ADDRESS "
+                            "(tcp://host:8786)")
+    p.add_argument("--retries", type=bounded_int(0, 100), default=2, metavar="N",
+                   help="Dask: run a failed task up to N more times (default 2)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="solve again the points whose row has a failure status")
+    p.add_argument("--force", action="store_true",
+                   help="start RESULTS anew, even when it holds another sweep's rows")
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """Solve every point of a sweep not yet in its results file; print a summary."""
+    from collections import Counter
+
+    from mitld_lp.sweep import load_sweep, run_sweep
+
+    sw = load_sweep(args.sweep)
+    out = Path(args.out or re.sub(r"[^\w.-]", "_", sw.name) + ".csv")
+    if not args.verbose:  # the bar says how far it is; each point's stages would drown it
+        logging.getLogger("mitld_lp").setLevel(logging.WARNING)
+    run = run_sweep(sw, out, workers=args.workers, dask=args.dask, retries=args.retries,
+                    force=args.force, retry_failed=args.retry_failed,
+                    progress=not args.quiet)
+    statuses = Counter(r["status"] for r in run.rows)
+    _out(f"sweep:      {sw.name} ({_count(len(run.rows), 'point')}: {run.computed} solved "
+         f"now, {run.reused} already in {out})")
+    _out("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
+    _out(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
+    shown: set[tuple[str, str]] = set()
+    for r in run.failed:
+        if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
+            shown.add((r["status"], r["error"]))
+            at = ", ".join(f"{c} = {json.dumps(r[c])}" for c in sw.columns)
+            _out(f"  {r['status']} at {at or 'the base model'}: {r['error']}")
+    _out(f"results:    {out}")
+    return _batch_exit(list(run.rows), "point")
+
+
+def _size(text: str) -> tuple[int, int]:
+    """A picture size in pixels, ``WIDTHxHEIGHT``."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m or not all(100 <= int(v) <= 20_000 for v in m.groups()):
+        raise argparse.ArgumentTypeError(
+            f"must be WIDTHxHEIGHT in pixels, each in 100..20000, got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+def args_plot(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="a model file of a grid world (draws its policy) or a "
+                                 "sweep's results file, .csv or .parquet (draws a column)")
+    p.add_argument("-o", "--out", required=True, metavar="FILE",
+                   help="the picture: .png, .svg or .pdf")
+    p.add_argument("--situation", action="append", metavar="S",
+                   help='model: a panel for this situation, e.g. "occurred=b1" or '
+                        '"pending=b2; automaton=3; clock=0" (repeat for more panels; '
+                        "default: the initial one)")
+    p.add_argument("--x", help="results: the parameter on the x axis (its last key will do)")
+    p.add_argument("--y", help="results: the column on the y axis (lower, upper, states...)")
+    p.add_argument("--by", action="append", metavar="PARAMETER",
+                   help="results: one line per value of PARAMETER (repeatable; default: "
+                        "every other parameter that varies)")
+    p.add_argument("--size", type=_size, default=(800, 600), metavar="WxH",
+                   help="the picture's size in pixels (default 800x600)")
+    p.add_argument("--epsilon", type=probability_budget,
+                   help="model: truncation budget in (0, 1) (default: the model's)")
+    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
+                   metavar="N", help="model: refuse products larger than N states (exit 3)")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    """Draw a grid world's policy, or a column of a sweep's results."""
+    from mitld_lp import plot
+
+    out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
+    table = Path(args.input).suffix.lower() in (".csv", ".parquet")
+    if table and (args.x is None or args.y is None):
+        raise UsageError(f"plot {args.input}: a results file needs --x and --y")
+    wrong = ("--situation" if args.situation else None) if table else (
+        "--x" if args.x else "--y" if args.y else "--by" if args.by else None)
+    if wrong:
+        raise UsageError(f"plot {args.input}: {wrong} applies to "
+                         f"{'a model file' if table else 'a results file'}")
+    try:
+        if table:
+            fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
+        else:
+            from mitld_lp.model import load_model
+            from mitld_lp.synthesis import synthesize
+
+            situations = [plot.parse_situation(s) for s in args.situation or [""]]
+            model = load_model(args.input, max_states=args.max_states)
+            result = _constrained().unconstrained(synthesize(
+                model, epsilon=args.epsilon, max_states=args.max_states,
+                time_limit=_time_left(args)), "plot")
+            fig = plot.policy_figure(result, situations, size=args.size)
+    except plot.PlotError as err:
+        raise UsageError(str(err)) from None
+    _write(out, lambda p: plot.save(fig, p))
+    _out(f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
+    return EXIT_OK
+
+
+def args_simulate(p: argparse.ArgumentParser) -> None:
+    _args_model(p)
+    p.add_argument("-n", "--runs", type=bounded_int(1, defaults.MAX_RUNS),
+                   default=defaults.RUNS, help=f"number of rollouts (1..{defaults.MAX_RUNS:,})")
+    p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
+    p.add_argument("--max-steps", type=bounded_int(1, defaults.MAX_STEPS_LIMIT),
+                   default=defaults.MAX_STEPS,
+                   help="steps each run is watched (a run keeping a safety part unviolated "
+                        "that long counts as a success; undecided ones as failures)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
+    from mitld_lp.model import load_model
+    from mitld_lp.simulate import simulate
+    from mitld_lp.synthesis import synthesize
+
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    r = _constrained().unconstrained(synthesize(
+        model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
+        max_states=args.max_states, max_memory=args.max_memory,
+        max_automaton_states=args.max_automaton_states, time_limit=_time_left(args)),
+        "simulate")
+    sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
+                   max_steps=args.max_steps)
+    robust = r.summary().get("robust", False)
+    out = {
+        "runs": sim.runs,
+        "successes": sim.successes,
+        "estimate": sim.estimate,
+        "ci95": [sim.ci_low, sim.ci_high],
+        "certified_bracket": [r.lower, r.upper],
+        # a robust bracket bounds the worst law of the bands; runs follow the nominal laws
+        "consistent": (sim.ci_low <= r.upper or robust) and sim.ci_high >= r.lower,
+        "beyond_model": sim.beyond_model,
+        "undecided": sim.undecided,
+        "horizon": sim.horizon,
+        "kept": sim.kept,
+        "seed": sim.seed,
+    }
+    if args.json:
+        _out(_dumps(out))
+    else:
+        _out(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
+              f"  ({sim.successes}/{sim.runs}, seed {sim.seed}, horizon {sim.horizon} steps)")
+        if sim.kept:
+            _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
+                 "(counted as successes)")
+        _out(f"certified:    [{_prob(r.lower)}, {_prob(r.upper)}]  "
+              + ("consistent" if out["consistent"] else "INCONSISTENT"))
+        if sim.beyond_model:
+            _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
+                 "truncation point")
+        if robust:
+            _out("note:         runs follow each band's nominal law; the bracket is the "
+                 "worst case over the bands")
+    return EXIT_OK
