@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.distributions.families import build
 from mitld_lp.distributions.law import (
     MAX_STEP,
     DistributionError,
@@ -48,6 +49,7 @@ from mitld_lp.distributions.law import (
     _out,
     _steps,
 )
+from mitld_lp.distributions.printing import literal_text
 
 __all__ = ["Band", "ConstantBand", "TableBand", "EnvelopeBand", "band_of_laws",
            "hazard_band_from_survival"]
@@ -276,9 +278,6 @@ def interval(family: str, lo: object, hi: object, where: str) -> FirstOccurrence
     ``geometric([0.2, 0.4])``: hazard in ``[0.2, 0.4]`` at every step (a geometric's
     lower end may be 0: the event may never come).  Its nominal law is the family at the
     middle of the interval.  Errors name ``where``."""
-    from mitld_lp.distributions.families import build
-    from mitld_lp.distributions.printing import literal_text
-
     if family not in INTERVAL_FAMILIES:
         raise DistributionError(
             where, f"an interval parameter is allowed for {', '.join(INTERVAL_FAMILIES)} "

@@ -51,6 +51,7 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
+from mitld_lp.distributions import scipy_laws
 from mitld_lp.distributions.band import ConstantBand, TableBand, band_of_laws
 from mitld_lp.distributions.families import (
     discretised,
@@ -368,8 +369,6 @@ def _family(name: str, where: str) -> tuple[_Family, Any]:
         return _Family(("n", "p"), ("log", "logit"),
                        lambda th: scipy_discrete("nbinom", float(th[0]), float(th[1])),
                        lambda o: np.array([1.0, 1.0 / max(_mean_event(o), 1.5)])), None
-    from mitld_lp.distributions import scipy_laws
-
     scipy_name = {"exponential": "expon", "weibull": "weibull_min"}.get(name, name)
     gen = scipy_laws.generator(where, scipy_name)
     if not isinstance(gen, scipy_laws.stats().rv_continuous):
