@@ -368,79 +368,18 @@ def _time_left(args: argparse.Namespace) -> float | None:
     return max(args.time_limit - (time.monotonic() - args.started), 0.0)
 
 
-def _args_export(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
-    p.add_argument("--lp", metavar="FILE",
-                   help="the occupancy LP, whose optimum is the value, as .mps or .lp")
-    p.add_argument("--drn", metavar="FILE", help="the product MDP in Storm's DRN format")
-    p.add_argument("--upper", action="store_true",
-                   help="count the truncation sink as winning (the upper model)")
-    p.add_argument("--force", action="store_true", help="overwrite existing files")
-
-
-def _cmd_export(args: argparse.Namespace) -> int:
-    """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
-    from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
-
-    if args.lp is None and args.drn is None:
-        raise UsageError("export: nothing to do; give --lp FILE and/or --drn FILE")
-    lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
-    drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
-                                                     DRN_SUFFIXES)
-    files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
-    from mitld_lp.acceptance import acceptance
-
-    if _robust_export(args, lp, drn):
-        return EXIT_OK
-    built = _build(args)[1]
-    mdp = built.mdp
-    goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
-    target = goal | mdp.truncated if args.upper else goal
-    if lp:
-        _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
-        _out(f"wrote {lp}")
-    if drn:
-        _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))
-        _out(f"wrote {drn}")
-    return EXIT_OK
-
-
-def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) -> bool:
-    """A model with a law known only within a band: its interval MDP as DRN (the robust
-    optimum is no one LP: --lp is refused).  False for any other model."""
-    from mitld_lp.model import load_model
-    from mitld_lp.robust_synthesis import is_robust
-
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    if not is_robust(model.distributions):
-        return False
-    if lp:
-        raise UsageError("export --lp: a law known only within a band has a robust optimum "
-                         "(a max-min), which is no single LP; export --drn writes the "
-                         "interval MDP")
-    from mitld_lp.automata.sta import make_sta
-    from mitld_lp.automata.translate import to_dta
-    from mitld_lp.product import robust_product
-    from mitld_lp.solvers.robust_export import write_interval_drn
-
-    sta = make_sta(to_dta(model.spec, max_states=min(args.max_states,
-                                                     args.max_automaton_states)),
-                   model.distributions, model.epsilon if args.epsilon is None else args.epsilon,
-                   clock_reduction=not args.no_clock_reduction)
-    imdp = robust_product(model.game, sta, max_states=args.max_states,
-                          max_memory=args.max_memory)
-    target = imdp.target | imdp.truncated if args.upper else imdp.target
-    assert drn is not None  # export checked that one of the two is given
-    _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
-    _out(f"wrote {drn} (interval MDP)")
-    return True
-
-
 def _runs() -> Any:
     """The verbs over many runs (batches, sweeps, plots), imported when used."""
     from mitld_lp import cli_runs
 
     return cli_runs
+
+
+def _export() -> Any:
+    """The export verb (LP, DRN, interval DRN), imported when used."""
+    from mitld_lp import cli_export
+
+    return cli_export
 
 
 # --------------------------------------------------------------------------- registry
@@ -454,7 +393,8 @@ _VERBS: list[
     ("info", "build the product of a model and print its sizes", _args_info, _cmd_info),
     ("solve", "synthesise the optimal policy and its certified bracket", _args_solve,
      _cmd_solve),
-    ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)", _args_export, _cmd_export),
+    ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)",
+     lambda p: _export().args_export(p), lambda a: _export().cmd_export(a)),
     ("simulate", "Monte-Carlo rollouts of the synthesised controller",
      lambda p: _runs().args_simulate(p), lambda a: _runs().cmd_simulate(a)),
     ("sweep", "solve a model at every point of a sweep, into a results file",

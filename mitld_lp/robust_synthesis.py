@@ -295,6 +295,23 @@ def synthesize_robust(
     return result
 
 
+def interval_model(
+    model: Model,
+    *,
+    epsilon: float | None = None,
+    clock_reduction: bool = True,
+    max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
+    max_memory: int | None = None,
+) -> IntervalMDP:
+    """The interval MDP that :func:`synthesize_robust` solves for ``model`` (for export:
+    :func:`mitld_lp.solvers.robust_export.write_interval_drn`)."""
+    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
+    dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
+    sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
+    return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory)
+
+
 def structure_mdp(imdp: IntervalMDP) -> MDP:
     """An MDP with ``imdp``'s states and choices whose row of each choice is its first
     branch (the structure a controller reads; no value is computed on it)."""
