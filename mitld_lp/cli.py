@@ -343,7 +343,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(f"model:        {model.name}  ({model.spec})")
         if summary.get("robust"):
             _out("robust:       worst case over the bands " + ", ".join(
-                f"{e} ~ {law}" for e, law in summary["bands"].items()))
+                f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
+                for (e, law), h in zip(summary["bands"].items(),
+                                       summary["first_step_hazards"].values(), strict=True)))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
         _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")

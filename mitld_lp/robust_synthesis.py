@@ -192,6 +192,16 @@ class RobustResult:
         return {e: str(c.distribution) for e, c in sorted(self.sta.clocks.items())
                 if c.distribution.is_ambiguous}
 
+    def first_step_hazards(self) -> dict[str, tuple[float, float]]:
+        """Each event with a band: ``(h_lo(1), h_hi(1))``, how much its band leaves open
+        at the first step (wide for a fit from few observations)."""
+        out = {}
+        for e, c in sorted(self.sta.clocks.items()):
+            if c.distribution.is_ambiguous:
+                lo, hi = c.distribution.hazard_band(1)
+                out[e] = (float(lo), float(hi))
+        return out
+
     def __repr__(self) -> str:
         return (f"RobustResult(model={self.model.name!r}, lower={self.lower:.7g}, "
                 f"upper={self.upper:.7g}, certified={self.certified}, "
@@ -222,6 +232,7 @@ class RobustResult:
             "certified": self.certified,
             "failed_checks": [f"{c.name}: {c.detail}" for c in self.failed_checks],
             "method": self.method, "bands": self.bands(),
+            "first_step_hazards": {e: list(b) for e, b in self.first_step_hazards().items()},
             "states": m.n_states, "choices": m.n_choices, "transitions": m.n_transitions,
             "ambiguous_choices": m.ambiguous_choices, "dta_states": self.dta.n_states,
             "epsilon": self.epsilon, "epsilon_achieved": self.sta.epsilon_achieved,

@@ -246,3 +246,32 @@ def test_cli_solve_export_and_bad_data(tmp_path: Path, capsys) -> None:
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "distributions.mu2" in err[0] and "bus2_arrivals.csv:3: time must be >= 0" in err[0]
+
+
+@pytest.mark.parametrize("n_copies", [1, 5])
+def test_the_answer_says_how_wide_the_data_leave_the_band(tmp_path: Path, capsys,
+                                                          n_copies: int) -> None:
+    """Few observations give a confident-looking fit only if nobody says how wide its band
+    is: the summary carries the first step's hazard interval, which for a geometric fit is
+    the exact binomial (Clopper-Pearson) interval of events in steps watched (scipy's
+    ``binomtest`` here), for 12 observations and for 60."""
+    from scipy import stats
+
+    rows = [(3, 0), (1, 0), (4, 1), (2, 0), (2, 0), (5, 1), (1, 0), (3, 0), (6, 1),
+            (2, 0), (4, 0), (4, 0)] * n_copies
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "bus2_arrivals.csv").write_text(
+        "time,censored\n" + "".join(f"{t},{c}\n" for t, c in rows))
+    model = tmp_path / "m.toml"
+    model.write_text((MODELS / "bus_fit.toml").read_text())
+    assert main(["solve", str(model), "--json", "-q"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    events = sum(1 for _, c in rows if not c)
+    exposure = sum(t for t, _ in rows)
+    ci = stats.binomtest(events, exposure).proportion_ci(0.95, method="exact")
+    lo, hi = out["first_step_hazards"]["b2"]
+    assert lo == pytest.approx(ci.low, abs=1e-9) and hi == pytest.approx(ci.high, abs=1e-9)
+    assert out["first_step_hazards"]["b1"] == [0.7, 0.9]
+    assert main(["solve", str(model), "-q"]) == 0
+    text = capsys.readouterr().out
+    assert f"hazard at step 1 in [{lo:.7f}, {hi:.7f}]" in text
