@@ -341,6 +341,11 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
+        if summary.get("robust"):
+            _out("robust:       worst case over the bands " + ", ".join(
+                f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
+                for (e, law), h in zip(summary["bands"].items(),
+                                       summary["first_step_hazards"].values(), strict=True)))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
         _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")
@@ -365,46 +370,18 @@ def _time_left(args: argparse.Namespace) -> float | None:
     return max(args.time_limit - (time.monotonic() - args.started), 0.0)
 
 
-def _args_export(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
-    p.add_argument("--lp", metavar="FILE",
-                   help="the occupancy LP, whose optimum is the value, as .mps or .lp")
-    p.add_argument("--drn", metavar="FILE", help="the product MDP in Storm's DRN format")
-    p.add_argument("--upper", action="store_true",
-                   help="count the truncation sink as winning (the upper model)")
-    p.add_argument("--force", action="store_true", help="overwrite existing files")
-
-
-def _cmd_export(args: argparse.Namespace) -> int:
-    """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
-    from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
-
-    if args.lp is None and args.drn is None:
-        raise UsageError("export: nothing to do; give --lp FILE and/or --drn FILE")
-    lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
-    drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
-                                                     DRN_SUFFIXES)
-    files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
-    from mitld_lp.acceptance import acceptance
-
-    built = _build(args)[1]
-    mdp = built.mdp
-    goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
-    target = goal | mdp.truncated if args.upper else goal
-    if lp:
-        _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
-        _out(f"wrote {lp}")
-    if drn:
-        _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))
-        _out(f"wrote {drn}")
-    return EXIT_OK
-
-
 def _runs() -> Any:
     """The verbs over many runs (batches, sweeps, plots), imported when used."""
     from mitld_lp import cli_runs
 
     return cli_runs
+
+
+def _export() -> Any:
+    """The export verb (LP, DRN, interval DRN), imported when used."""
+    from mitld_lp import cli_export
+
+    return cli_export
 
 
 # --------------------------------------------------------------------------- registry
@@ -418,7 +395,8 @@ _VERBS: list[
     ("info", "build the product of a model and print its sizes", _args_info, _cmd_info),
     ("solve", "synthesise the optimal policy and its certified bracket", _args_solve,
      _cmd_solve),
-    ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)", _args_export, _cmd_export),
+    ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)",
+     lambda p: _export().args_export(p), lambda a: _export().cmd_export(a)),
     ("simulate", "Monte-Carlo rollouts of the synthesised controller",
      lambda p: _runs().args_simulate(p), lambda a: _runs().cmd_simulate(a)),
     ("sweep", "solve a model at every point of a sweep, into a results file",

@@ -31,9 +31,10 @@ def unconstrained(result: Any, verb: str) -> Any:
     """``result`` if it is a plain synthesis; a usage error for a model whose file carries
     constraints (only ``solve`` and ``pareto`` take them)."""
     from mitld_lp.cli import UsageError
+    from mitld_lp.robust_synthesis import RobustResult
     from mitld_lp.synthesis import SynthesisResult
 
-    if isinstance(result, SynthesisResult):
+    if isinstance(result, SynthesisResult | RobustResult):
         return result
     raise UsageError(f"{verb}: the model has constraints, which only solve and pareto "
                      "take (the randomised controller runs from Python: "

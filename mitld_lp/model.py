@@ -417,6 +417,8 @@ def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, Fi
     """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
     an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
     laws: dict[str, FirstOccurrence] = {}
+    source = Path(ctx.source)  # a fit's data file is read beside the model file
+    base = source.parent if source.is_file() else None
     for name, value in ctx.table(doc.get(key, {}), key).items():
         path = _join(key, name)
         if not isinstance(value, dict):
@@ -426,7 +428,7 @@ def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, Fi
                 f"{_type_name(value)} {_show(value)}",
             )
         try:
-            laws[name] = from_table(value, path)
+            laws[name] = from_table(value, path, base)
         except DistributionError as exc:
             message = str(exc)
             raise ModelError(

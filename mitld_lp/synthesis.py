@@ -47,6 +47,7 @@ from mitld_lp.product import product
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.acceptance import Acceptance
     from mitld_lp.constrained import ConstrainedResult
+    from mitld_lp.robust_synthesis import RobustResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -328,7 +329,7 @@ def synthesize(
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
     then: str | None = None,
-) -> SynthesisResult | ConstrainedResult:
+) -> SynthesisResult | ConstrainedResult | RobustResult:
     """Maximise the probability that the model's world satisfies its MITLD spec.
 
     ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
@@ -341,8 +342,20 @@ def synthesize(
     ``decompose``: the LP block by block in topological order (default) or as one LP.
     ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
     ``constraints`` / ``then`` (or constraints in the model): a constrained synthesis,
-    :func:`mitld_lp.constrained.synthesize_constrained`, whose result it returns.
+    :func:`mitld_lp.constrained.synthesize_constrained`, whose result it returns.  A
+    model with a law known only within a band (an interval parameter, a fit): the robust
+    synthesis, :func:`mitld_lp.robust_synthesis.synthesize_robust`, whose result it
+    returns.
     """
+    if isinstance(model, Model) and any(d.is_ambiguous for d in model.distributions.values()):
+        from mitld_lp.robust_synthesis import synthesize_robust  # a law known roughly
+
+        return synthesize_robust(
+            model, epsilon=epsilon, method=method, clock_reduction=clock_reduction,
+            truncation=truncation, max_states=max_states, max_memory=max_memory,
+            max_automaton_states=max_automaton_states, tol=tol, certify_tol=certify_tol,
+            progress=progress, time_limit=time_limit,
+            constraints=bool(constraints or then or model.constraints))
     if constraints or then or (isinstance(model, Model) and model.constraints):
         from mitld_lp.constrained import synthesize_constrained
 

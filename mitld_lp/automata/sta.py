@@ -30,7 +30,8 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
 
 __all__ = [
-    "EventClock", "STA", "EventOutcome", "ClockStep", "TRUNCATED", "advance_clock", "make_sta",
+    "EventClock", "STA", "EventOutcome", "Ambiguity", "ClockStep", "TRUNCATED", "advance_clock",
+    "make_sta",
 ]
 
 TRUNCATED = -1
@@ -57,11 +58,18 @@ class EventClock:
         """Probability that the event happens in the step after ``clock`` steps."""
         return float(self.distribution.hazard(min(clock, self.cap) + 1))
 
+    def band(self, clock: int) -> tuple[float, float]:
+        """The hazards the law allows in the step after ``clock`` steps (both
+        :meth:`hazard` for a law known exactly)."""
+        lo, hi = self.distribution.hazard_band(min(clock, self.cap) + 1)
+        return float(lo), float(hi)
+
     @property
     def tail(self) -> float:
-        """P(K > truncation): the probability mass the truncation cuts off."""
+        """P(K > truncation): the probability mass the truncation cuts off (for a band,
+        the most any law of the band leaves)."""
         return 0.0 if self.truncation is None else float(
-            self.distribution.survival(self.truncation)
+            self.distribution.survival_upper(self.truncation)
         )
 
 
@@ -81,12 +89,27 @@ class ClockStep:
 
 @dataclass(frozen=True, slots=True)
 class EventOutcome:
-    """One outcome of a step's events: which happened, its probability, what follows."""
+    """One outcome of a step's events: which happened, its probability, what follows.
+
+    In :meth:`STA.robust_outcomes` the probability is that of the events known exactly
+    only, and ``branch`` says which ambiguous events happened (bit ``i``: the ``i``-th of
+    the situation's :class:`Ambiguity`); elsewhere ``branch`` is 0."""
 
     occurred: frozenset[str]
     probability: float
     pending: frozenset[str]
     clock: int  # TRUNCATED when the outcome crosses a truncation point
+    branch: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Ambiguity:
+    """The pending events of a situation whose hazard for the next step is an interval
+    (``lo < hi``), in order, with their intervals: nature picks each hazard inside."""
+
+    events: tuple[str, ...]
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -102,6 +125,11 @@ class STA:
     @property
     def events(self) -> frozenset[str]:
         return frozenset(self.clocks)
+
+    @property
+    def is_ambiguous(self) -> bool:
+        """Whether some event's law is a band (the product is then an interval MDP)."""
+        return any(c.distribution.is_ambiguous for c in self.clocks.values())
 
     @property
     def truncation_points(self) -> dict[str, int]:
@@ -134,21 +162,51 @@ class STA:
         if hit is not None:
             return hit
         events = sorted(pending)
-        hazards = [self.clocks[a].hazard(clock) for a in events]
+        result = self._outcomes(pending, clock, events, [self.clocks[a].hazard(clock)
+                                                         for a in events], ())
+        self._cache[key] = result
+        return result
+
+    def robust_outcomes(
+        self, pending: frozenset[str], clock: int
+    ) -> tuple[tuple[EventOutcome, ...], Ambiguity]:
+        """The next step's outcomes when some hazards are intervals: the events whose
+        hazard at this step is an interval (:class:`Ambiguity`) are left to nature; each
+        outcome's probability is the product over the other events only, and its
+        ``branch`` says which ambiguous events happened.  For every branch the
+        probabilities sum to 1.  With no ambiguous event this is :meth:`outcomes`."""
+        bands = {a: self.clocks[a].band(clock) for a in sorted(pending)}
+        open_ = tuple(a for a, (lo, hi) in bands.items() if lo < hi)
+        exact = [a for a in bands if a not in open_]
+        events = [*exact, *open_]
+        hazards = [bands[a][0] for a in exact] + [0.5] * len(open_)
+        outs = self._outcomes(pending, clock, events, hazards, open_)
+        return outs, Ambiguity(open_, tuple(bands[a][0] for a in open_),
+                               tuple(bands[a][1] for a in open_))
+
+    def _outcomes(
+        self, pending: frozenset[str], clock: int, events: list[str], hazards: list[float],
+        ambiguous: tuple[str, ...],
+    ) -> tuple[EventOutcome, ...]:
+        """``p(E) = prod_{a in E} h_a prod_{b not in E} (1 - h_b)`` over the events not in
+        ``ambiguous``; each ambiguous event's outcome is a bit of the branch."""
         out = []
         for happened in itertools.product((False, True), repeat=len(events)):
             p = 1.0
-            for h, yes in zip(hazards, happened, strict=True):
-                p *= h if yes else 1.0 - h
+            branch = 0
+            for a, h, yes in zip(events, hazards, happened, strict=True):
+                if a in ambiguous:
+                    branch |= int(yes) << ambiguous.index(a)
+                else:
+                    p *= h if yes else 1.0 - h
             if p <= 0.0:
                 continue
             occurred = frozenset(a for a, yes in zip(events, happened, strict=True) if yes)
             left = pending - occurred
             step = self.advance(left, clock)
-            out.append(EventOutcome(occurred, p, left, TRUNCATED if step.truncated else step.clock))
-        result = tuple(out)
-        self._cache[key] = result
-        return result
+            out.append(EventOutcome(occurred, p, left,
+                                    TRUNCATED if step.truncated else step.clock, branch))
+        return tuple(out)
 
 
 def advance_clock(

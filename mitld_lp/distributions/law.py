@@ -328,6 +328,26 @@ class FirstOccurrence(ABC):
             )
         return t
 
+    # ------------------------------------------------------------------ ambiguity
+    # A law known exactly is its own band; :mod:`.band` overrides these three.
+
+    @property
+    def is_ambiguous(self) -> bool:
+        """Whether the law is a band (:mod:`.band`): its per-step hazard is known only
+        within an interval chosen step by step by an adversary (docs/semantics.md)."""
+        return False
+
+    def hazard_band(self, k: Steps) -> tuple[Any, Any]:
+        """``(h_lo(k), h_hi(k))``: the hazards the law allows at step ``k``; for a law
+        known exactly both are :meth:`hazard`."""
+        h = self.hazard(k)
+        return h, h
+
+    def survival_upper(self, k: Steps) -> Any:
+        """The largest ``P(K > k)`` the law allows; for a law known exactly,
+        :meth:`survival`.  Truncation cuts at most this much."""
+        return self.survival(k)
+
     def sample(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> FloatArray:
         """Independent first-occurrence steps by inverse cdf, as floats (``inf`` = never).
 

@@ -13,8 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
+from mitld_lp.distributions.band import interval
 from mitld_lp.distributions.families import FAMILIES, build
+from mitld_lp.distributions.fit import fit_table
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
 from mitld_lp.distributions.printing import DistArg, literal_text
 
@@ -66,11 +69,14 @@ def from_spec(spec: object) -> FirstOccurrence:
     return spec.law
 
 
-def from_table(value: object, path: str) -> FirstOccurrence:
+def from_table(value: object, path: str, base: Path | None = None) -> FirstOccurrence:
     """The distribution of a model file's inline table with exactly one key, e.g.
     ``{ geometric = 0.8 }``, ``{ pmf = [0.1, 0.3, 0.6] }``, ``{ poisson = 2.5 }``,
     ``{ uniform = [1, 6] }``, ``{ exponential = 0.5 }``, ``{ weibull = [1.5, 3.0] }``,
-    ``{ gamma = [2.0, 1.5] }``, ``{ scipy = ["nbinom", 3, 0.5] }``.
+    ``{ gamma = [2.0, 1.5] }``, ``{ scipy = ["nbinom", 3, 0.5] }``; a band: an interval
+    parameter ``{ geometric = [0.2, 0.4] }`` (:func:`~.band.interval`) or a fit
+    ``{ fit = "geometric", data = "arrivals.csv", confidence = 0.95 }``
+    (:func:`~.fit.fit_table`, ``data`` relative to ``base``).
 
     Errors name the key path: ``distributions.mu2.pmf: masses sum to 1.2 > 1``.
     """
@@ -80,6 +86,8 @@ def from_table(value: object, path: str) -> FirstOccurrence:
             path,
             f"must be an inline table with one distribution key such as {example}, got {value!r}",
         )
+    if "fit" in value:
+        return fit_table(value, path, base)
     if len(value) != 1:
         keys = ", ".join(str(k) for k in value) or "none"
         raise DistributionError(
@@ -96,8 +104,11 @@ def from_table(value: object, path: str) -> FirstOccurrence:
             raise DistributionError(where, f"must be a list, got {arg!r}")
         args = list(arg)
     else:
+        if isinstance(arg, list | tuple) and len(arg) == 2:
+            return interval(str(family), arg[0], arg[1], where)
         if isinstance(arg, list | tuple | Mapping | str):
-            raise DistributionError(where, f"must be a number, got {arg!r}")
+            raise DistributionError(where, f"must be a number, got {arg!r} (an interval "
+                                    "is written [lo, hi])")
         args = [arg]
     try:
         return build(str(family), args, where)

@@ -39,11 +39,12 @@ from mitld_lp.product.budget import (
     default_max_memory,
     estimate_size,
 )
-from mitld_lp.product.build import product
+from mitld_lp.product.build import product, robust_product
 from mitld_lp.product.states import Absorbing, ProductState, ProductStates, component_counts
 
 __all__ = [
     "Absorbing",
+    "robust_product",
     "BYTES_PER_STATE",
     "BYTES_PER_TRANSITION",
     "SizeEstimate",

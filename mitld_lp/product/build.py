@@ -14,13 +14,14 @@ from mitld_lp import defaults
 from mitld_lp.arrays import Grow, Index, concatenate, merge, ranks
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game
+from mitld_lp.imdp import IntervalMDP
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
 from mitld_lp.task import check_alphabet
 
-__all__ = ["product"]
+__all__ = ["product", "robust_product"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +61,33 @@ def product(
     that is neither a proposition of the game nor an event of the STA, an event with a
     proposition's name, an event the game reacts to without a law).
     """
+    built = _build(game, sta, max_states, max_memory, progress, robust=False)
+    assert isinstance(built, MDP)
+    return built
+
+
+def robust_product(
+    game: Game[Any],
+    sta: STA,
+    *,
+    max_states: int = defaults.MAX_STATES,
+    max_memory: int | None = None,
+    progress: bool | None = None,
+) -> IntervalMDP:
+    """The product as an interval MDP (:mod:`mitld_lp.imdp`) when some event's law is a
+    band: built like :func:`product`, but a choice's rows are kept apart by which
+    ambiguous events happened (its branches), each weighted by the events known exactly
+    only, and each choice carries the hazard intervals of its ambiguous events.  With no
+    band every choice has one branch, its row in :func:`product`, bit for bit."""
+    built = _build(game, sta, max_states, max_memory, progress, robust=True)
+    assert isinstance(built, IntervalMDP)
+    return built
+
+
+def _build(
+    game: Game[Any], sta: STA, max_states: int, max_memory: int | None,
+    progress: bool | None, *, robust: bool,
+) -> MDP | IntervalMDP:
     members = check_alphabet(game, sta.dta.atoms, sta.events)
     budget = BuildBudget(
         max_states,
@@ -67,7 +95,7 @@ def product(
         estimate_size(game, sta),
     )
     log.info("product: %s", budget.estimate)
-    f = Layers(game, members, sta)
+    f = Layers(game, members, sta, robust)
     states = _Found(f, budget)
     g0 = f.game_state(game.initial)
     f.flush()
@@ -75,7 +103,9 @@ def product(
     sid0 = f.situation(sta.events, 0)
     initial = int(states.intern(q0 if q0[0] < 0 else f.codec.key(g0, q0, sid0))[0])
 
-    chunks: list[tuple[np.ndarray, ...]] = []  # per batch: cols, vals, row lengths, actions
+    # per batch: cols, vals, row lengths, actions (robust: then branches and bands per
+    # choice, the bands' lo, hi and events)
+    chunks: list[tuple[np.ndarray, ...]] = []
     state_choices = Grow(np.int64)
     bar = None if progress is False else tqdm(
         total=None, unit=" states", disable=None if progress is None else not progress,
@@ -165,7 +195,21 @@ def _expand(
     e_key[moving] = np.where(q2 < 0, q2, f.codec.key(g2, q2, p_next[e_pm]))
     cols = intern(e_key).astype(np.int32)
     e_choice = p_choice[e_pair]
-    cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
+    extra: list[np.ndarray] = []
+    if f.robust:  # one row per (choice, branch), with the choice's hazard intervals
+        n_bands = f.band_count.view[c_sid]
+        n_branch = np.left_shift(1, n_bands)
+        first_branch = np.cumsum(n_branch) - n_branch
+        p_branch = first_branch[p_choice] + f.out_branch.view[p_out]
+        e_branch = p_branch[e_pair]
+        grouped = np.argsort(e_branch, kind="stable")  # a branch's entries together, in order
+        cols, vals, row_len = merge(e_branch[grouped], cols[grouped], vals[grouped],
+                                    int(n_branch.sum()))
+        at = np.repeat(f.band_start.view[c_sid], n_bands) + ranks(n_bands)
+        extra = [n_branch, n_bands, f.band_lo.view[at], f.band_hi.view[at],
+                 f.band_event.view[at]]
+    else:
+        cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
     actions = f.slot_aid.view[c_slot]
     choices = np.ones(keys.size, dtype=np.int64)
     choices[ordinary] = n_act
@@ -174,17 +218,20 @@ def _expand(
     for i in np.flatnonzero(~ordinary).tolist():
         before = int(np.count_nonzero(ordinary[:i]))
         at_choice = int(n_act[:before].sum())
-        at_entry = int(row_len[:at_choice].sum())
+        at_row = int(extra[0][:at_choice].sum()) if extra else at_choice
+        at_entry = int(row_len[:at_row].sum())
         cols = np.insert(cols, at_entry, first_id + i)
         vals = np.insert(vals, at_entry, 1.0)
-        row_len = np.insert(row_len, at_choice, 1)
+        row_len = np.insert(row_len, at_row, 1)
         actions = np.insert(actions, at_choice, ABSORB)
+        if extra:  # one branch, no hazard interval
+            extra[0] = np.insert(extra[0], at_choice, 1)
+            extra[1] = np.insert(extra[1], at_choice, 0)
         n_act = np.insert(n_act, before, 1)
         ordinary = ordinary.copy()
         ordinary[i] = True
-    return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32), choices), int(
-        e_key.size
-    )
+    return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32), choices,
+            *extra), int(e_key.size)
 
 
 def _assemble(
@@ -193,8 +240,8 @@ def _assemble(
     state_choices: np.ndarray,
     keys: np.ndarray,
     initial: int,
-) -> MDP:
-    """The MDP from the batches' rows, with a record per state."""
+) -> MDP | IntervalMDP:
+    """The MDP (or the interval MDP) from the batches' rows, with a record per state."""
     columns = [list(c) for c in zip(*chunks, strict=True)]
     chunks.clear()
     cols = concatenate(columns[0], np.int32)
@@ -204,6 +251,7 @@ def _assemble(
     indptr = np.zeros(row_len.size + 1, dtype=np.int64)
     np.cumsum(row_len, out=indptr[1:])
     del row_len
+    n_rows = indptr.size - 1
     # action ids in order of first use, as names
     used = actions >= 0
     uniq, first = np.unique(actions[used], return_index=True)
@@ -217,11 +265,10 @@ def _assemble(
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
     n = keys.size
-    matrix = sp.csr_array((vals, cols, indptr), shape=(actions.size, n))
+    matrix = sp.csr_array((vals, cols, indptr), shape=(n_rows, n))
     row_groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(state_choices, out=row_groups[1:])
-    mdp = MDP(
-        matrix=matrix,
+    common: dict[str, Any] = dict(
         row_groups=row_groups,
         choice_actions=choice_actions,
         action_names=tuple(by_id[int(i)] for i in order),
@@ -233,6 +280,20 @@ def _assemble(
         # iteration as a tuple would
         states=ProductStates(keys, f.game_states, f.situations, f.codec),
     )
+    if f.robust:
+        branch_groups, band_groups = (
+            np.concatenate([[0], np.cumsum(concatenate(c, np.int64))]) for c in columns[5:7])
+        imdp = IntervalMDP(
+            branches=matrix, branch_groups=branch_groups, band_groups=band_groups,
+            band_lo=concatenate(columns[7], np.float64),
+            band_hi=concatenate(columns[8], np.float64),
+            band_events=tuple(f.events[int(i)] for i in concatenate(columns[9], np.int64)),
+            **common,
+        )
+        log.info("robust product: %d states, %d choices (%d with ambiguous events), %d "
+                 "branches", n, imdp.n_choices, imdp.ambiguous_choices, imdp.n_branches)
+        return imdp
+    mdp = MDP(matrix=matrix, **common)
     log.info(
         "product: %d states, %d choices, %d transitions", n, mdp.n_choices, mdp.n_transitions
     )

@@ -41,8 +41,11 @@ class Layers:
       ``A`` atoms, coded as the next state or an absorbing code.
     """
 
-    def __init__(self, game: Game[Any], members: WorldMembers, sta: STA) -> None:
+    def __init__(
+        self, game: Game[Any], members: WorldMembers, sta: STA, robust: bool = False
+    ) -> None:
         self.game, self.sta, self.dta = game, sta, sta.dta
+        self.robust = robust
         self.ignores_events = members.ignores_events
         self.atoms = {a: i for i, a in enumerate(self.dta.atoms)}
         self.events = sorted(sta.events)
@@ -82,6 +85,12 @@ class Layers:
         self.out_start, self.out_count = Grow(np.int64), Grow(np.int64)
         self.out_occ, self.out_prob, self.out_next = (
             Grow(np.int64), Grow(np.float64), Grow(np.int64)
+        )
+        # robust: each outcome's branch, each situation's hazard intervals (band_*)
+        self.out_branch = Grow(np.int64)
+        self.band_start, self.band_count = Grow(np.int64), Grow(np.int64)
+        self.band_lo, self.band_hi, self.band_event = (
+            Grow(np.float64), Grow(np.float64), Grow(np.int64)
         )
         # product keys (KeyCodec); n_sit bounds the situations
         caps = max((c.cap for c in sta.clocks.values()), default=0)
@@ -236,6 +245,8 @@ class Layers:
             self.situations.append(key)
             self.out_count.extend([-1])
             self.out_start.extend([0])
+            self.band_start.extend([0])
+            self.band_count.extend([0])
         return i
 
     def ensure_outcomes(self, sids: np.ndarray) -> None:
@@ -244,7 +255,16 @@ class Layers:
         bit = {e: 1 << i for i, e in enumerate(self.events)}
         for i in missing.tolist():
             pending, clock = self.situations[i]
-            outs = self.sta.outcomes(pending, clock)
+            if self.robust:
+                outs, amb = self.sta.robust_outcomes(pending, clock)
+                self.out_branch.extend([o.branch for o in outs])
+                self.band_start.data[i] = self.band_lo.size
+                self.band_count.data[i] = len(amb.events)
+                self.band_lo.extend(amb.lo)
+                self.band_hi.extend(amb.hi)
+                self.band_event.extend([self.events.index(e) for e in amb.events])
+            else:
+                outs = self.sta.outcomes(pending, clock)
             self.out_start.data[i] = self.out_occ.size
             self.out_count.data[i] = len(outs)
             self.out_occ.extend([sum(bit[e] for e in o.occurred) for o in outs])

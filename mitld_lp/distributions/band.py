@@ -1,0 +1,299 @@
+"""Laws known only within a band: the per-step hazard may be anything inside an interval
+``[h_lo(k), h_hi(k)]``, chosen at every step by an adversary (docs/semantics.md).
+
+A band keeps a *nominal* law (the fitted point law, or the centre of an interval), whose
+pmf, survival, hazard and samples it answers with, so that everything that needs one law
+(simulation, printing) has one; the solvers read :meth:`~.law.FirstOccurrence.hazard_band`
+and :meth:`~.law.FirstOccurrence.survival_upper` instead.
+
+Three shapes of band:
+
+* :class:`ConstantBand`: ``h(k) in [lo, hi]`` at every step (``geometric([0.2, 0.4])``, a
+  fitted geometric or exponential law); memoryless, no clock, exact.
+* :class:`TableBand`: a band ``S_lo(k) <= S(k) <= S_hi(k)`` on the survival function given
+  as a table for ``k = 0..n`` and constant beyond (Kaplan-Meier with a simultaneous band).
+* :class:`EnvelopeBand`: finitely many laws of one family (``poisson([2, 3])``, the
+  likelihood region of a fitted family): ``h(k)`` between the least and the greatest of
+  their hazards at step ``k``.
+
+A survival band with no family behind it (:class:`TableBand`) gives per-step hazard
+bands conservatively: every law whose survival lies in the band has
+``h(k) = 1 - S(k)/S(k-1)`` inside::
+
+    h_lo(k) = clip(1 - S_hi(k) / S_lo(k-1), 0, 1),  h_hi(k) = clip(1 - S_lo(k) / S_hi(k-1), 0, 1)
+
+(``h_lo = 0`` where ``S_lo(k-1) = 0``; ``h = 1`` where ``S_hi(k-1) = 0``: the step cannot
+be reached, the convention of :mod:`.law`).  The adversary may combine these hazards in
+ways no single law of the band does, so a guarantee under the hazard band holds for every
+law of the survival band.  A truncation point is the first ``T`` with ``S_hi(T) <= eps``.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.distributions.families import build
+from mitld_lp.distributions.law import (
+    MAX_STEP,
+    DistributionError,
+    FirstOccurrence,
+    FloatArray,
+    IntArray,
+    Steps,
+    _out,
+    _steps,
+)
+from mitld_lp.distributions.printing import literal_text
+
+__all__ = ["Band", "ConstantBand", "TableBand", "EnvelopeBand", "band_of_laws",
+           "hazard_band_from_survival"]
+
+
+def hazard_band_from_survival(
+    s_lo_prev: FloatArray, s_hi_prev: FloatArray, s_lo: FloatArray, s_hi: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The per-step hazard band of a survival band (module docstring): ``S(k-1)`` in
+    ``[s_lo_prev, s_hi_prev]`` and ``S(k)`` in ``[s_lo, s_hi]`` give
+    ``h(k) in [1 - s_hi / s_lo_prev, 1 - s_lo / s_hi_prev]`` clipped to ``[0, 1]``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo = np.where(s_lo_prev > 0, 1.0 - s_hi / s_lo_prev, 0.0)
+        hi = np.where(s_hi_prev > 0, 1.0 - s_lo / s_hi_prev, 1.0)
+    lo = np.clip(lo, 0.0, 1.0)
+    hi = np.clip(hi, 0.0, 1.0)
+    lo = np.where(s_hi_prev > 0, lo, 1.0)  # unreachable step: h = 1 by convention
+    return np.minimum(lo, hi), hi
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Band(FirstOccurrence):
+    """A law known only within a band (module docstring); its point answers are those of
+    ``nominal``."""
+
+    nominal: FirstOccurrence
+
+    # ------------------------------------------------------------ the band's hooks
+    @abstractmethod
+    def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        """``(h_lo(k), h_hi(k))`` for steps ``k >= 1``."""
+
+    @abstractmethod
+    def _sf_hi_pos(self, k: IntArray) -> FloatArray:
+        """``S_hi(k)`` for steps ``k >= 1``."""
+
+    @abstractmethod
+    def _band_constant_from(self) -> int | None:
+        """The first step from which ``h_lo`` and ``h_hi`` are both constant (None: never)."""
+
+    # ------------------------------------------------------------ the nominal law
+    def _pmf_pos(self, k: IntArray) -> FloatArray:
+        return np.asarray(self.nominal.pmf(k), dtype=np.float64)
+
+    def _cdf_pos(self, k: IntArray) -> FloatArray:
+        return np.asarray(self.nominal.cdf(k), dtype=np.float64)
+
+    def _sf_pos(self, k: IntArray) -> FloatArray:
+        return np.asarray(self.nominal.survival(k), dtype=np.float64)
+
+    def _hazard_pos(self, k: IntArray) -> FloatArray:
+        return np.asarray(self.nominal.hazard(k), dtype=np.float64)
+
+    def _never(self) -> float:
+        return self.nominal.never
+
+    def _last_step(self) -> float:
+        return math.inf
+
+    def _constant_hazard_from(self) -> int | None:
+        """Both the nominal hazard and the band are constant from this step on (the clock
+        the STA keeps serves both)."""
+        a, b = self.nominal.constant_hazard_from, self._band_constant_from()
+        return None if a is None or b is None else max(a, b)
+
+    def _sample_from(self, v: FloatArray) -> FloatArray:
+        return self.nominal._sample_from(v)
+
+    # ------------------------------------------------------------ the band
+    @property
+    def is_ambiguous(self) -> bool:
+        return True
+
+    def hazard_band(self, k: Steps) -> tuple[Any, Any]:
+        """``(h_lo(k), h_hi(k))``, both 0 for ``k <= 0`` (no event at step 0)."""
+        ks, scalar = _steps(k)
+        lo = np.zeros(ks.shape)
+        hi = np.zeros(ks.shape)
+        pos = ks >= 1
+        if pos.any():
+            lo[pos], hi[pos] = self._band_pos(ks[pos])
+        return _out(lo, scalar), _out(hi, scalar)
+
+    def survival_upper(self, k: Steps) -> Any:
+        """``S_hi(k)``, 1 for ``k <= 0``."""
+        ks, scalar = _steps(k)
+        out = np.ones(ks.shape)
+        pos = ks >= 1
+        if pos.any():
+            out[pos] = self._sf_hi_pos(ks[pos])
+        return _out(out, scalar)
+
+    def truncation_point(self, eps: float) -> int:
+        """The smallest ``T >= 0`` with ``S_hi(T) <= eps`` (every law of the band has
+        survived past ``T`` with probability at most ``eps``)."""
+        e = float(eps)
+        if not e >= 0:
+            raise DistributionError(self.label, f"truncation eps must be >= 0, got {eps!r}")
+        if e >= 1.0:
+            return 0
+        lo, hi = 0, 1  # invariant: S_hi(lo) > eps
+        while float(self.survival_upper(hi)) > e:
+            if hi >= MAX_STEP:
+                raise DistributionError(
+                    self.label,
+                    f"the band's upper survival is still above eps = {e:.6g} at step 2**62 "
+                    "(the band allows an event that never happens)",
+                )
+            lo, hi = hi, 2 * hi
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if float(self.survival_upper(mid)) <= e:
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ConstantBand(Band):
+    """``h(k) in [lo, hi]`` at every step ``k >= 1``: ``S_hi(k) = (1 - lo)^k``."""
+
+    lo: float
+    hi: float
+
+    def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        return np.full(k.shape, self.lo), np.full(k.shape, self.hi)
+
+    def _sf_hi_pos(self, k: IntArray) -> FloatArray:
+        if self.lo >= 1.0:
+            return np.zeros(k.shape)
+        return np.exp(k * math.log1p(-self.lo))
+
+    def _band_constant_from(self) -> int | None:
+        return 1
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TableBand(Band):
+    """A survival band as tables ``s_lo[k], s_hi[k]`` for ``k = 0..n`` (``s[0] = 1``),
+    constant beyond ``n``."""
+
+    s_lo: FloatArray = field(repr=False)
+    s_hi: FloatArray = field(repr=False)
+
+    def __post_init__(self) -> None:
+        lo = np.array(self.s_lo, dtype=np.float64)
+        hi = np.array(self.s_hi, dtype=np.float64)
+        if lo.shape != hi.shape or lo.ndim != 1 or lo.size < 1:
+            raise ValueError("TableBand: s_lo and s_hi must be 1-D tables of one length")
+        if not (np.all(lo >= 0) and np.all(lo <= hi) and np.all(hi <= 1)):
+            raise ValueError("TableBand: need 0 <= s_lo <= s_hi <= 1")
+        lo[0] = hi[0] = 1.0
+        lo.setflags(write=False)
+        hi.setflags(write=False)
+        object.__setattr__(self, "s_lo", lo)
+        object.__setattr__(self, "s_hi", hi)
+
+    def _at(self, table: FloatArray, k: IntArray) -> FloatArray:
+        return table[np.minimum(k, table.size - 1)]
+
+    def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        return hazard_band_from_survival(
+            self._at(self.s_lo, k - 1), self._at(self.s_hi, k - 1),
+            self._at(self.s_lo, k), self._at(self.s_hi, k),
+        )
+
+    def _sf_hi_pos(self, k: IntArray) -> FloatArray:
+        return self._at(self.s_hi, k)
+
+    def _band_constant_from(self) -> int | None:
+        return int(self.s_lo.size)  # S(k-1) and S(k) both past the table from k = n + 1
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EnvelopeBand(Band):
+    """The laws of a parametric family between ``laws`` (the ends of a parameter
+    interval, points of a likelihood region's boundary): at step ``k`` the hazard may be
+    anything between the least and the greatest of their hazards,
+    ``[min_j h_j(k), max_j h_j(k)]``, and ``S_hi(k) = max_j S_j(k)``.  For a family whose
+    hazard is monotone in its parameter (geometric, poisson, exponential: larger
+    parameter, stochastically smaller in the hazard-rate order) the two ends bound every
+    law between; the adversary may still change hazards from step to step, so this band
+    contains every law of the family and more."""
+
+    laws: tuple[FirstOccurrence, ...]
+
+    def _each(self, k: IntArray, what: str) -> FloatArray:
+        return np.vstack([np.asarray(getattr(law, what)(k), dtype=np.float64)
+                          for law in self.laws])
+
+    def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        h = self._each(k, "hazard")
+        return h.min(axis=0), h.max(axis=0)
+
+    def _sf_hi_pos(self, k: IntArray) -> FloatArray:
+        return self._each(k, "survival").max(axis=0)
+
+    def _band_constant_from(self) -> int | None:
+        return None
+
+
+def band_of_laws(
+    label: str, nominal: FirstOccurrence, laws: Sequence[FirstOccurrence]
+) -> FirstOccurrence:
+    """The band spanned by ``laws`` (with ``nominal`` among the point answers): a
+    :class:`ConstantBand` over their hazards when every one is memoryless (the exact band
+    of a geometric or exponential family), else their :class:`EnvelopeBand`.  A band of
+    one hazard is the nominal law itself (a point: nothing is ambiguous)."""
+    every = (nominal, *laws)
+    if all(law.is_memoryless for law in every):
+        h = [float(law.hazard(1)) for law in every]
+        if min(h) == max(h):
+            return nominal
+        return ConstantBand(label, nominal, min(h), max(h))
+    return EnvelopeBand(label, nominal, tuple(every))
+
+
+#: Families whose one parameter may be an interval: their survival is monotone in it, so
+#: the laws at its two ends bound the survival of every law between.
+INTERVAL_FAMILIES = ("geometric", "poisson", "exponential")
+
+
+def interval(family: str, lo: object, hi: object, where: str) -> FirstOccurrence:
+    """The band of ``family`` with its parameter anywhere in ``[lo, hi]``, e.g.
+    ``geometric([0.2, 0.4])``: hazard in ``[0.2, 0.4]`` at every step (a geometric's
+    lower end may be 0: the event may never come).  Its nominal law is the family at the
+    middle of the interval.  Errors name ``where``."""
+    if family not in INTERVAL_FAMILIES:
+        raise DistributionError(
+            where, f"an interval parameter is allowed for {', '.join(INTERVAL_FAMILIES)} "
+            f"(one parameter, survival monotone in it), not {family}")
+    if family == "geometric" and isinstance(lo, int | float) and lo == 0:
+        # a hazard that may be 0: the event may never come (no law geometric(0) exists)
+        ends = [build(family, [hi], where)]
+        a, b = 0.0, float(hi)  # type: ignore[arg-type]
+    else:
+        ends = [build(family, [x], where) for x in (lo, hi)]  # validates both numbers
+        a, b = float(lo), float(hi)  # type: ignore[arg-type]
+    if not a <= b:
+        raise DistributionError(where, f"the interval's lower end {lo!r} exceeds its upper "
+                                f"end {hi!r}")
+    label = literal_text(family, ([a, b],))
+    nominal = build(family, [(a + b) / 2.0], where)
+    if a == 0.0:
+        return ConstantBand(label, nominal, 0.0, b)
+    return band_of_laws(label, nominal, ends)

@@ -1,0 +1,329 @@
+"""Robust synthesis: the policy that maximises the worst-case probability of the task when
+some event's law is a band (docs/semantics.md, "Laws known roughly").
+
+    spec --to_dta--> DTA --make_sta--> STA --robust_product--> interval MDP
+         --vertex_rows--> robust game --robust interval iteration--> bracket, policy
+
+Each of the two models (truncation losing / winning) is solved and certified:
+
+* robust interval iteration brackets the robust optimum ``V* = max_robot min_nature``
+  on every state (:func:`mitld_lp.solvers.robust.robust_interval_iteration`);
+* a robot policy is read off its lower bound, and the policy's own robust value (what it
+  guarantees against every adversary) is bracketed by the same iteration on the game
+  the policy leaves (its lower bound is the ``lower`` reported: sound, as every value of
+  the iteration from below) and computed again by the LP of
+  :mod:`mitld_lp.solvers.robust_lp` (Clarabel); the two must agree;
+* the policy's value must lie in the bracket and reach its upper bound, and be a fixed
+  point of the robust Bellman operator (one sweep: then it is the least fixed point,
+  the robust value).
+
+``lower`` is the policy's exact robust value in the lower model: whatever law of the band
+the events follow, even one chosen step by step against the robot, the policy achieves
+at least that.  ``upper`` is the iteration's upper bound in the upper model: no policy
+guarantees more.  With bands that are points every step is today's
+:func:`mitld_lp.synthesis.synthesize` (and the model takes that route).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp import defaults
+from mitld_lp.acceptance import Acceptance
+from mitld_lp.automata.dta import DTA, SAFE
+from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.translate import to_dta
+from mitld_lp.controller import Controller
+from mitld_lp.distributions import DistributionError, FirstOccurrence
+from mitld_lp.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.model import Model
+from mitld_lp.product import ProductState, robust_product
+from mitld_lp.solvers.result import Status, read_only
+from mitld_lp.solvers.robust import (
+    RobustIteration,
+    bellman_residual,
+    robust_interval_iteration,
+    robust_policy,
+)
+from mitld_lp.solvers.robust_graph import RobustGame
+from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
+from mitld_lp.synthesis import Check, _close
+
+__all__ = ["is_robust", "synthesize_robust", "RobustResult", "RobustModelSolution",
+           "robust_game"]
+
+log = logging.getLogger(__name__)
+
+
+def is_robust(laws: Mapping[str, FirstOccurrence]) -> bool:
+    """Whether some law is a band (the task is then solved robustly)."""
+    return any(law.is_ambiguous for law in laws.values())
+
+
+def robust_game(imdp: IntervalMDP) -> RobustGame:
+    """The robust game of ``imdp``: nature's rows are the vertex distributions."""
+    v = vertex_rows(imdp)
+    return RobustGame(v.matrix, v.groups, imdp.row_groups)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RobustModelSolution:
+    """The robust solution of one model (lower: truncation loses; upper: it wins)."""
+
+    which: str
+    status: Status
+    value: float  # the policy's robust value at the initial state (from below)
+    iteration: RobustIteration  # the robust optimum's bracket on every state
+    policy: np.ndarray  # a choice per state, -1 where absorbing
+    policy_values: np.ndarray  # the policy's robust value per state, from below (read-only)
+    evaluation: RobustIteration  # the policy's robust value by iteration
+    lp: PolicyLP | None  # the policy's robust value by the LP (method "lp")
+    bracket: tuple[float, float]  # the robust optimum's bracket at the initial state
+    checks: tuple[Check, ...]
+
+    @property
+    def certified(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
+           method: str, tol: float, certify_tol: float,
+           deadline: float) -> RobustModelSolution:
+    def remaining() -> float | None:
+        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
+
+    s0 = imdp.initial
+    it = robust_interval_iteration(game, target, tol=tol, time_limit=remaining())
+    choice = robust_policy(game, target, it.lower, tie=max(tol, 1e-12))
+    ev = robust_interval_iteration(game.restrict(choice), target, tol=tol,
+                                   time_limit=remaining())
+    checks = [Check("robust iteration converged", it.status is Status.OPTIMAL, it.message),
+              Check("policy evaluation converged", ev.status is Status.OPTIMAL, ev.message)]
+    values = ev.lower
+    status = it.status if it.status is not Status.OPTIMAL else ev.status
+    lp = None
+    if method == "lp":
+        lp = policy_lp(game, target, choice, tol=tol, time_limit=remaining())
+        checks.append(Check("policy LP solved", lp.status is Status.OPTIMAL,
+                            f"{lp.status.value}: {lp.message}"))
+        if lp.values is not None:
+            checks.append(_close("policy LP = policy iteration", float(lp.values[s0]),
+                                 float(ev.lower[s0]), certify_tol))
+    lo, hi = float(it.lower[s0]), float(it.upper[s0])
+    v0 = float(values[s0])
+    checks.append(Check("policy value within robust bracket",
+                        lo - certify_tol <= v0 <= hi + certify_tol,
+                        f"policy {v0:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}"))
+    checks.append(_close("policy value = robust optimum (upper bound)", v0, hi, certify_tol))
+    residual = bellman_residual(game, target, values)
+    checks.append(Check("policy values are a robust Bellman fixed point",
+                        residual <= certify_tol,
+                        f"max |B V - V| = {residual:.2e} (tol {certify_tol:g})"))
+    absorbing = np.asarray(imdp.choice_actions)[choice] == ABSORB
+    return RobustModelSolution(which, status, v0, it, read_only(np.where(absorbing, -1, choice)),
+                               read_only(np.asarray(values, dtype=np.float64)), ev, lp,
+                               (lo, hi), tuple(checks))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RobustResult:
+    """What :func:`synthesize_robust` returns: the same reading as
+    :class:`~mitld_lp.synthesis.SynthesisResult` (``lower``, ``upper``, ``certified``,
+    ``status``, ``controller``, ``summary()``, ``policy_table()``), for the robust
+    optimum; ``imdp`` is the interval MDP (also ``mdp`` for the sizes and records)."""
+
+    model: Model
+    method: str
+    epsilon: float
+    dta: DTA
+    sta: STA
+    imdp: IntervalMDP
+    lower_model: RobustModelSolution
+    upper_model: RobustModelSolution
+    controller: Controller
+    timings: Mapping[str, float]
+
+    @property
+    def mdp(self) -> IntervalMDP:
+        return self.imdp
+
+    @property
+    def acceptance(self) -> Acceptance:
+        return Acceptance(np.asarray(self.imdp.target, dtype=bool), None)
+
+    @property
+    def lower(self) -> float:
+        """What the policy guarantees against every law of the bands, truncation lost."""
+        return float(self.lower_model.policy_values[self.imdp.initial])
+
+    @property
+    def upper(self) -> float:
+        """No policy guarantees more (robust iteration's upper bound, truncation won)."""
+        return self.upper_model.bracket[1]
+
+    @property
+    def status(self) -> Status:
+        return next((m.status for m in (self.lower_model, self.upper_model)
+                     if m.status is not Status.OPTIMAL), Status.OPTIMAL)
+
+    @property
+    def certified(self) -> bool:
+        return self.lower_model.certified and self.upper_model.certified
+
+    @property
+    def failed_checks(self) -> tuple[Check, ...]:
+        return tuple(c for m in (self.lower_model, self.upper_model) for c in m.checks
+                     if not c.passed)
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(self.timings.values()))
+
+    def bands(self) -> dict[str, str]:
+        """Each event with a band: its law's label."""
+        return {e: str(c.distribution) for e, c in sorted(self.sta.clocks.items())
+                if c.distribution.is_ambiguous}
+
+    def first_step_hazards(self) -> dict[str, tuple[float, float]]:
+        """Each event with a band: ``(h_lo(1), h_hi(1))``, how much its band leaves open
+        at the first step (wide for a fit from few observations)."""
+        out = {}
+        for e, c in sorted(self.sta.clocks.items()):
+            if c.distribution.is_ambiguous:
+                lo, hi = c.distribution.hazard_band(1)
+                out[e] = (float(lo), float(hi))
+        return out
+
+    def __repr__(self) -> str:
+        return (f"RobustResult(model={self.model.name!r}, lower={self.lower:.7g}, "
+                f"upper={self.upper:.7g}, certified={self.certified}, "
+                f"status={self.status.value!r}, states={self.imdp.n_states})")
+
+    def policy_table(self) -> list[dict[str, Any]]:
+        """One row per undecided state: as :func:`mitld_lp.report.policy_table`, the
+        value being the policy's robust value (truncation lost)."""
+        m, low = self.imdp, self.lower_model
+        rows = []
+        for i, state in enumerate(m.states):
+            c = int(low.policy[i])
+            if not isinstance(state, ProductState) or c < 0:
+                continue
+            rows.append({"game_state": state.game,
+                         "automaton_state": str(self.dta.states[state.automaton]),
+                         "pending": sorted(state.pending), "clock": state.clock,
+                         "action": m.action_name(c), "value": float(low.policy_values[i]),
+                         "accepting_component": False})
+        return rows
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-ready record (the command line's ``--json``)."""
+        low, high, m = self.lower_model, self.upper_model, self.imdp
+        return {
+            "model": self.model.name, "status": self.status.value, "robust": True,
+            "lower": self.lower, "upper": self.upper, "value": self.lower,
+            "certified": self.certified,
+            "failed_checks": [f"{c.name}: {c.detail}" for c in self.failed_checks],
+            "method": self.method, "bands": self.bands(),
+            "first_step_hazards": {e: list(b) for e, b in self.first_step_hazards().items()},
+            "states": m.n_states, "choices": m.n_choices, "transitions": m.n_transitions,
+            "ambiguous_choices": m.ambiguous_choices, "dta_states": self.dta.n_states,
+            "epsilon": self.epsilon, "epsilon_achieved": self.sta.epsilon_achieved,
+            "truncation_points": dict(self.sta.truncation_points),
+            "seconds": self.seconds, "timings": dict(self.timings),
+            "lp": None if low.lp is None else {"status": low.lp.status.value,
+                                               "variables": low.lp.variables,
+                                               "constraints": low.lp.constraints,
+                                               "message": low.lp.message},
+            "iteration": {"status": low.iteration.status.value,
+                          "lower": low.bracket[0], "upper": high.bracket[1],
+                          "sweeps": low.iteration.sweeps},
+        }
+
+
+def _refuse(model: Model, dta: DTA, constraints: bool) -> None:
+    law = next((str(d) for d in model.distributions.values() if d.is_ambiguous),
+               "robust synthesis")
+    if constraints:
+        raise DistributionError(law, "constraints with a law known only within a band are "
+                                "not supported (robust synthesis maximises the task alone)")
+    if SAFE in dta.kinds:
+        raise DistributionError(law, "a law known only within a band is solved for co-safe "
+                                "tasks only (this task has a safety part)")
+
+
+def synthesize_robust(
+    model: Model,
+    *,
+    epsilon: float | None = None,
+    method: str = "lp",
+    clock_reduction: bool = True,
+    truncation: Mapping[str, int] | None = None,
+    max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
+    max_memory: int | None = None,
+    tol: float = defaults.TOL,
+    certify_tol: float = defaults.CERTIFY_TOL,
+    progress: bool = False,
+    time_limit: float | None = None,
+    constraints: bool = False,
+) -> RobustResult:
+    """The robust synthesis of ``model`` (module docstring); the arguments are
+    :func:`mitld_lp.synthesis.synthesize`'s (``method="lp"``: the policy's value by the
+    LP and by iteration; ``"vi"``: by iteration only).  Raises
+    :class:`DistributionError` for a task it does not solve (a safety part, constraints)."""
+    if method not in ("lp", "vi"):
+        raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
+    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
+    t0 = time.perf_counter()
+    dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
+    _refuse(model, dta, constraints)
+    sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction,
+                   truncation=truncation)
+    t1 = time.perf_counter()
+    imdp = robust_product(model.game, sta, max_states=max_states, max_memory=max_memory,
+                          progress=progress or None)
+    t2 = time.perf_counter()
+    game = robust_game(imdp)
+    deadline = float("inf") if time_limit is None else t2 + time_limit
+    target = np.asarray(imdp.target, dtype=bool)
+    low = _solve(game, imdp, target, "lower", method, tol, certify_tol, deadline)
+    high = low if not imdp.truncated.any() else _solve(
+        game, imdp, target | imdp.truncated, "upper", method, tol, certify_tol, deadline)
+    timings = {"automaton": t1 - t0, "product": t2 - t1, "solve": time.perf_counter() - t2}
+    controller = Controller(model.game, sta, structure_mdp(imdp), low.policy,
+                            hopeless=high.iteration.prob0)
+    result = RobustResult(model, method, eps, dta, sta, imdp, low, high, controller, timings)
+    log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
+             result.certified)
+    return result
+
+
+def interval_model(
+    model: Model,
+    *,
+    epsilon: float | None = None,
+    clock_reduction: bool = True,
+    max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
+    max_memory: int | None = None,
+) -> IntervalMDP:
+    """The interval MDP that :func:`synthesize_robust` solves for ``model`` (for export:
+    :func:`mitld_lp.solvers.robust_export.write_interval_drn`)."""
+    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
+    dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
+    sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
+    return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory)
+
+
+def structure_mdp(imdp: IntervalMDP) -> MDP:
+    """An MDP with ``imdp``'s states and choices whose row of each choice is its first
+    branch (the structure a controller reads; no value is computed on it)."""
+    return point_mdp(imdp, sp.csr_array(imdp.branches[imdp.branch_groups[:-1]]))
