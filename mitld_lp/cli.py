@@ -412,7 +412,10 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
 
     def error(self, message: str) -> NoReturn:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+        if self.prog == PROG and "required: VERB" in message:  # bare `mitld-lp`
+            message = "give a command: " + ", ".join(v for v, *_ in _VERBS)
+        where = "" if self.prog == PROG else f"{self.prog}: "  # the line says PROG once
+        raise UsageError(f"{where}{message} (see {self.prog} --help)")
 
 
 def _build_parser() -> argparse.ArgumentParser:
