@@ -60,6 +60,7 @@ import scipy.sparse.linalg as spla
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
+from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.quotient import (
     Quotient,
     greedy_choices,
@@ -206,7 +207,8 @@ def _solve_cvxpy(lp: _Matrices, solver: str, options: dict[str, Any]) -> _Raw:
     try:
         with warnings.catch_warnings():  # "may be inaccurate": reported as the status
             warnings.simplefilter("ignore", UserWarning)
-            problem.solve(solver=solver, **options)
+            with native_quiet(solver.lower()):  # HiGHS's banner is no answer
+                problem.solve(solver=solver, **options)
     except BaseException as exc:  # a solver error must become a status, not a crash
         if _is_fatal(exc):
             raise
