@@ -556,7 +556,14 @@ def main(argv: list[str] | None = None) -> int:
 def run() -> None:
     """The ``mitld-lp`` console script: :func:`main`, then exit at once if the command's
     thread is still busy (interrupted or out of time)."""
-    code = main()
+    import signal
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
+    try:
+        code = main()
+    except KeyboardInterrupt:  # before the command started (reading the arguments)
+        _say("interrupted")
+        code = EXIT_INTERRUPTED
     if _worker is not None and _worker.is_alive():
         sys.stdout.flush()
         sys.stderr.flush()
