@@ -484,9 +484,37 @@ def _solve_monolithic(lp: OccupancyLP, settings: _Settings) -> _Answer | _Raw:
     v = np.clip(raw.v, 0.0, 1.0)
     # Off the visited states (and everywhere if nothing was solved) the greedy fallback
     # needs numbers; an unsolved state gets the trivially dual-feasible value 1.
-    reduced_choice = _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol)
+    reduced_choice = _crossover(
+        q, _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol))
     return _Answer(raw, y, v, reduced_choice, float(lp.objective @ y),
                    float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0)), 1)
+
+
+def _crossover(q: Quotient, start: np.ndarray) -> np.ndarray:
+    """``start`` (a reduced choice per state) made optimal in every state, not only
+    where it goes: the one LP's occupancies say nothing where the optimal policy never
+    goes, and its duals there are any feasible upper bounds.  Level by level downstream
+    first, single states exactly and each block by policy iteration from ``start`` with
+    the exact values below as exit rewards (what the decomposed route's polish does)."""
+    blk = blocks(q)
+    values = np.zeros(q.n_states)
+    chosen = np.array(start, dtype=np.int64)
+    local = np.zeros(q.n_choices, dtype=np.int64)
+    for level in range(blk.n_levels):
+        states = blk.states_at(level)
+        single = blk.single(states)
+        upd = solve_single_states(q, blk, states[single], values)
+        chosen[upd.states] = upd.choices
+        rest = states[~single]
+        if rest.size == 0:
+            continue
+        block = Block.of(q, rest)
+        local[block.choices] = np.arange(block.choices.size)
+        pick, v, _ = improve_policy(block, block.to_target + block.outer @ values,
+                                    local[chosen[rest]])
+        values[rest] = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
+        chosen[rest] = block.choices[pick]
+    return chosen
 
 
 def _block_lp(block: Block, values: np.ndarray) -> _Matrices:
