@@ -552,15 +552,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _limited(argv: list[str]) -> argparse.Namespace | None:
-    """The arguments of a command with ``--time-limit`` (None without one, or when the
-    arguments are wrong: :func:`main` says so)."""
+    """The arguments of a command with ``--time-limit`` (None without one, when the
+    arguments are wrong, :func:`main` says so, and for ``sweep``, whose worker processes
+    a killed parent would leave running: its points have their own limits)."""
     if "--time-limit" not in " ".join(argv):
         return None
     try:
         args = _build_parser().parse_args(argv)
     except (UsageError, SystemExit):
         return None
-    return args if args.time_limit is not None else None
+    return args if args.time_limit is not None and args.verb != "sweep" else None
 
 
 def _time_stop(args: argparse.Namespace, where: str) -> None:
