@@ -6,6 +6,7 @@ algebra, ``mitld_lp.solvers``): :func:`synthesize` imports it at its first solve
 (tests/test_imports.py checks this in a fresh interpreter).
 """
 
+from mitld_lp import startup  # noqa: F401 - first: Ctrl-C while the command line imports
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from mitld_lp import defaults, files
+from mitld_lp import defaults, files, watch
 from mitld_lp.arguments import bounded_int, memory_size, probability_budget, seconds, solver_name
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
@@ -412,7 +412,10 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
 
     def error(self, message: str) -> NoReturn:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+        if self.prog == PROG and "required: VERB" in message:  # bare `mitld-lp`
+            message = "give a command: " + ", ".join(v for v, *_ in _VERBS)
+        where = "" if self.prog == PROG else f"{self.prog}: "  # the line says PROG once
+        raise UsageError(f"{where}{message} (see {self.prog} --help)")
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -530,19 +533,17 @@ def main(argv: list[str] | None = None) -> int:
         while worker.is_alive():
             worker.join(0.1)
             if deadline is not None and time.monotonic() >= deadline and worker.is_alive():
-                where = f" (last stage: {handler.last})" if handler.last else ""
-                if getattr(args, "json", False):
-                    print(_dumps({"status": "time_limit", "time_limit": args.time_limit}),
-                          flush=True)
                 cancelled.set()
                 files.abandon(worker)
-                _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
+                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "")
+                watch.report(watch.SAID)
                 _worker = worker
                 return EXIT_UNCERTIFIED
     except KeyboardInterrupt:
         cancelled.set()
         files.abandon(worker)  # a file half written is removed; the old one stays
         _say("interrupted")
+        watch.report(watch.SAID)
         _worker = worker
         return EXIT_INTERRUPTED
     finally:
@@ -550,10 +551,43 @@ def main(argv: list[str] | None = None) -> int:
     return outcome[0] if outcome else EXIT_INTERNAL
 
 
+def _limited(argv: list[str]) -> argparse.Namespace | None:
+    """The arguments of a command with ``--time-limit`` (None without one, when the
+    arguments are wrong, :func:`main` says so, and for ``sweep``, whose worker processes
+    a killed parent would leave running: its points have their own limits)."""
+    if "--time-limit" not in " ".join(argv):
+        return None
+    try:
+        args = _build_parser().parse_args(argv)
+    except (UsageError, SystemExit):
+        return None
+    return args if args.time_limit is not None and args.verb != "sweep" else None
+
+
+def _time_stop(args: argparse.Namespace, where: str) -> None:
+    """The time-limit stop: the JSON status with ``--json``, and the stop line."""
+    if getattr(args, "json", False):
+        print(_dumps({"status": "time_limit", "time_limit": args.time_limit}), flush=True)
+    _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
+
+
 def run() -> None:
     """The ``mitld-lp`` console script: :func:`main`, then exit at once if the command's
     thread is still busy (interrupted or out of time)."""
-    code = main()
+    import signal
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
+    limited = _limited(sys.argv[1:])
+    if limited is not None:  # the limit is kept from a parent process (watch.py)
+        code = watch.watched(limited.time_limit, lambda: _time_stop(
+            limited, " (inside a long native call)"))
+        if code is not None:
+            sys.exit(code)
+    try:
+        code = main()
+    except KeyboardInterrupt:  # before the command started (reading the arguments)
+        _say("interrupted")
+        code = EXIT_INTERRUPTED
     if _worker is not None and _worker.is_alive():
         sys.stdout.flush()
         sys.stderr.flush()

@@ -32,6 +32,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Literal
 
+from mitld_lp import watch
 from mitld_lp.report import POLICY_COLUMNS, policy_table
 
 if TYPE_CHECKING:
@@ -172,6 +173,7 @@ def _new_scratch(final: Path, folder: bool) -> Path:
             except FileExistsError:
                 continue
             _scratch[scratch] = me
+            watch.report(str(scratch))  # a watching parent removes it if it kills us
             return scratch
 
 

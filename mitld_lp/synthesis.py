@@ -246,8 +246,25 @@ def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> Mo
     ))
     checks.append(_close("policy value = optimum", exact, value, certify_tol))
     checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
+    checks.append(_bellman(mdp, target, values, certify_tol))
     return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, quotient,
                          tuple(checks))
+
+
+def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
+    """The policy is optimal from every state, not only where it goes: no choice of any
+    state does better against the policy's exact values ``V`` than ``V`` itself,
+    ``max_c P(c) . V <= V(s) + tol`` (one sweep).  Then ``V`` is a pre-fixed point of
+    the Bellman operator, so ``V >= V*`` (the least one), and ``V <= V*`` as a policy's
+    values: the policy is optimal in every state."""
+    v = np.where(target, 1.0, values)
+    best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
+    gap = np.where(target, 0.0, best - v)
+    worst = int(np.argmax(gap)) if gap.size else 0
+    over = float(gap[worst]) if gap.size else 0.0
+    return Check("policy optimal in every state (Bellman)", over <= tol,
+                 f"max_s (max_c P(c).V - V(s)) = {over:.2e} (tol {tol:g})"
+                 + (f" at state {mdp.states[worst]}" if over > tol else ""))
 
 
 def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:

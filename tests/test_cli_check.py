@@ -111,6 +111,10 @@ def test_check_json_error(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_usage_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([]) == 2
+    # bare `mitld-lp`: one line naming the commands, the program named once
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].count("mitld-lp:") == 1, err
+    assert "give a command: check," in err[0] and " solve," in err[0] and "--help" in err[0]
     assert main(["frobnicate"]) == 2
     assert main(["check"]) == 2
     assert main(["--help"]) == 0

@@ -46,7 +46,7 @@ def _one_error_line(capsys, code: int, argv: list[str]) -> str:
         (["info", BUS, "--max-memory", "lots"], "--max-memory: must be a size such as 4G"),
         (["info", BUS, "--max-memory", "0"], "--max-memory: must be a positive size"),
         (["frobnicate"], "invalid choice: 'frobnicate'"),
-        ([], "the following arguments are required: VERB"),
+        ([], "give a command: check,"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2(capsys, argv, says):

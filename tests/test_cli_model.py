@@ -216,3 +216,21 @@ def test_small_probabilities_keep_their_significant_digits(tmp_path, capsys):
 def test_synthesize_refuses_a_bad_time_limit(bad):
     with pytest.raises(ValueError, match="time_limit"):
         synthesize(load_model(BUS), time_limit=bad)
+
+
+def test_stage_line_and_summary_count_the_same_automaton(capsys) -> None:
+    """The product's stage line counts the automaton states a product state can be in
+    (accepting and rejecting ones collapse into the absorbing target and sink); the
+    summary counts them all. Both are read off the same automaton, built here."""
+    import logging
+    import re
+
+    path = Path(__file__).resolve().parents[1] / "models" / "bus_grid.toml"
+    logging.getLogger("mitld_lp").handlers.clear()
+    assert main(["solve", str(path)]) == 0
+    out, err = capsys.readouterr()
+    stage = int(re.search(r"x (\d+) non-absorbing automaton states x", err).group(1))
+    total = int(re.search(r"sizes: +(\d+) automaton states", out).group(1))
+    dta = to_dta(load_model(path).spec)
+    absorbing = (dta.accepting is not None) + (dta.rejecting is not None)
+    assert total == dta.n_states and stage == dta.n_states - absorbing

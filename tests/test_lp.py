@@ -365,7 +365,7 @@ def test_inaccurate_clarabel_solve_is_retried() -> None:
 def test_unfixable_lp_is_replaced_by_the_iteration_policy(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    import mitld_lp.solvers.lp as lp_module
+    import mitld_lp.solvers.lp_backends as lp_module
     from mitld_lp import synthesize
 
     monkeypatch.setattr(lp_module, "_retries", lambda settings: iter(()))

@@ -77,7 +77,8 @@ class SizeEstimate:
         total = "unknown" if self.states is None else f"{self.states:,}"
         return (
             f"at most {total} states from the factors: {game} game states x "
-            f"{self.automaton_states:,} automaton states x {self.situations:,} event "
+            f"{self.automaton_states:,} non-absorbing automaton states x "
+            f"{self.situations:,} event "
             "situations (pending events, clock)"
         )
 

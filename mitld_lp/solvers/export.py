@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from mitld_lp import files
 from mitld_lp.mdp import ABSORB, MDP, as_state_mask
+from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.lp import occupancy_lp
 
 __all__ = ["write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
@@ -97,12 +98,13 @@ def write_lp(
     model.a_matrix_.value_ = np.asarray(a.data, dtype=np.float64)
     model.col_names_ = [f"y{c}" for c in columns.tolist()]
     model.row_names_ = rows
-    highs = highspy.Highs()
-    highs.setOptionValue("output_flag", False)
-    status = highs.passModel(model)
+    with native_quiet("highs"):  # its banner, printed before output_flag can be set
+        highs = highspy.Highs()
+        highs.setOptionValue("output_flag", False)
+        status = highs.passModel(model)
     if status == highspy.HighsStatus.kError:
         raise OSError(f"{p}: HiGHS rejected the model ({status})")
-    with files.replacing_path(p) as scratch:
+    with files.replacing_path(p) as scratch, native_quiet("highs"):
         status = highs.writeModel(str(scratch))
         if status == highspy.HighsStatus.kError or not scratch.exists():
             raise OSError(f"{p}: HiGHS failed to write the model ({status})")

@@ -46,11 +46,9 @@ of many.  The interior-point method then never sees the fill-in of the whole gra
 
 from __future__ import annotations
 
-import importlib
 import logging
 import time
-import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -60,6 +58,7 @@ import scipy.sparse.linalg as spla
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers.lp_backends import Matrices, Raw, Settings, solve_one, unusable_reason
 from mitld_lp.solvers.quotient import (
     Quotient,
     greedy_choices,
@@ -82,15 +81,6 @@ __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 logger = logging.getLogger(__name__)
 
 Backend = Literal["auto", "cvxpy", "direct"]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class _Matrices:
-    """An LP ``max objective'y  s.t.  a_eq y = b_eq, y >= 0`` as a backend sees it."""
-
-    a_eq: sp.csc_array
-    b_eq: np.ndarray
-    objective: np.ndarray
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -143,239 +133,6 @@ def occupancy_lp(
         if q.initial >= 0:
             b_eq[q.initial] = 1.0
     return OccupancyLP(a_eq, b_eq, np.asarray(q.to_target, dtype=np.float64), q)
-
-
-# ---------------------------------------------------------------------------------------
-# Solving one LP
-# ---------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class _Raw:
-    """What a backend returns, in the LP's own (reduced) coordinates."""
-
-    status: Status
-    message: str
-    y: np.ndarray | None = None
-    v: np.ndarray | None = None
-    iterations: int = 0
-
-
-def _tolerance_options(solver: str, tol: float) -> dict[str, Any]:
-    """The solver-specific keywords that set the requested accuracy."""
-    if solver == "CLARABEL":
-        return {"tol_gap_abs": tol, "tol_gap_rel": tol, "tol_feas": tol}
-    if solver == "HIGHS":
-        tol = max(tol, 1e-10)  # HiGHS rejects feasibility tolerances below 1e-10
-        return {"primal_feasibility_tolerance": tol, "dual_feasibility_tolerance": tol}
-    if solver == "SCS":
-        return {"eps_abs": tol, "eps_rel": tol}
-    if solver in ("ECOS", "ECOS_BB"):
-        return {"abstol": tol, "reltol": tol, "feastol": tol}
-    return {}
-
-
-def _time_options(solver: str, seconds: float) -> dict[str, Any]:
-    """The solver-specific keyword for a wall-clock limit (none for other solvers)."""
-    if solver in ("CLARABEL", "HIGHS"):
-        return {"time_limit": max(seconds, 1e-3)}
-    return {}
-
-
-_CVXPY_STATUS = {
-    "optimal": Status.OPTIMAL,
-    "optimal_inaccurate": Status.INACCURATE,
-    "infeasible": Status.INFEASIBLE,
-    "infeasible_inaccurate": Status.INFEASIBLE,
-    "unbounded": Status.UNBOUNDED,
-    "unbounded_inaccurate": Status.UNBOUNDED,
-    "user_limit": Status.MAX_ITERATIONS,
-}
-
-
-def _is_fatal(exc: BaseException) -> bool:
-    return isinstance(exc, KeyboardInterrupt | SystemExit | GeneratorExit | MemoryError)
-
-
-def _solve_cvxpy(lp: _Matrices, solver: str, options: dict[str, Any]) -> _Raw:
-    cp: Any = importlib.import_module("cvxpy")
-    m = lp.objective.shape[0]
-    y = cp.Variable(m)
-    flow = sp.csc_matrix(lp.a_eq) @ y == lp.b_eq
-    problem = cp.Problem(cp.Maximize(lp.objective @ y), [flow, y >= 0])
-    try:
-        with warnings.catch_warnings():  # "may be inaccurate": reported as the status
-            warnings.simplefilter("ignore", UserWarning)
-            problem.solve(solver=solver, **options)
-    except BaseException as exc:  # a solver error must become a status, not a crash
-        if _is_fatal(exc):
-            raise
-        return _Raw(Status.FAILED, f"cvxpy/{solver}: {type(exc).__name__}: {exc}")
-    status = _CVXPY_STATUS.get(str(problem.status), Status.FAILED)
-    stats = problem.solver_stats
-    iterations = int(stats.num_iters) if stats is not None and stats.num_iters else 0
-    message = f"cvxpy/{solver}: {problem.status}"
-    if not status.has_solution or y.value is None or flow.dual_value is None:
-        return _Raw(status if status != Status.OPTIMAL else Status.FAILED, message, None, None,
-                    iterations)
-    v = np.asarray(flow.dual_value, dtype=np.float64).reshape(-1)
-    return _Raw(status, message, np.asarray(y.value, dtype=np.float64), v, iterations)
-
-
-_CLARABEL_STATUS = {
-    "Solved": Status.OPTIMAL,
-    "AlmostSolved": Status.INACCURATE,
-    "PrimalInfeasible": Status.INFEASIBLE,
-    "AlmostPrimalInfeasible": Status.INFEASIBLE,
-    "DualInfeasible": Status.UNBOUNDED,
-    "AlmostDualInfeasible": Status.UNBOUNDED,
-    "MaxIterations": Status.MAX_ITERATIONS,
-    "MaxTime": Status.TIME_LIMIT,
-}
-
-
-def _solve_clarabel(lp: _Matrices, options: dict[str, Any]) -> _Raw:
-    r"""Call Clarabel on the matrices directly (no cvxpy canonicalisation).
-
-    Clarabel's form is ``min q'x + x'Px/2  s.t.  Ax + s = b, s in K`` with dual
-    ``Px + q + A'z = 0, z in K*``.  Here ``x = y``, ``q = -objective``, ``P = 0``,
-    ``A = [A_eq; -I]``, ``b = [b_eq; 0]``, ``K = {0}^n x R_+^m``.  The dual equation reads
-    ``A_eq' z_eq = objective + z_nn >= objective``: ``z_eq`` is the value function ``v``.
-    """
-    clarabel: Any = importlib.import_module("clarabel")
-    n, m = lp.b_eq.shape[0], lp.objective.shape[0]
-    a = sp.vstack([lp.a_eq, -sp.eye_array(m, format="csc")], format="csc")
-    b = np.concatenate([lp.b_eq, np.zeros(m)])
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    for key, val in options.items():
-        if not hasattr(settings, key):
-            return _Raw(Status.FAILED, f"clarabel: unknown setting {key!r}")
-        setattr(settings, key, val)
-    try:
-        solver = clarabel.DefaultSolver(
-            sp.csc_matrix((m, m)),
-            -lp.objective,
-            sp.csc_matrix(a),
-            b,
-            [clarabel.ZeroConeT(n), clarabel.NonnegativeConeT(m)],
-            settings,
-        )
-        solution = solver.solve()
-    except BaseException as exc:  # includes pyo3's PanicException
-        if _is_fatal(exc):
-            raise
-        return _Raw(Status.FAILED, f"clarabel: {type(exc).__name__}: {exc}")
-    word = str(solution.status)
-    status = _CLARABEL_STATUS.get(word, Status.FAILED)
-    message = f"clarabel: {word}"
-    iterations = int(solution.iterations)
-    if not status.has_solution:
-        return _Raw(status, message, None, None, iterations)
-    x = np.asarray(solution.x, dtype=np.float64)
-    z = np.asarray(solution.z, dtype=np.float64)
-    return _Raw(status, message, x, z[:n], iterations)
-
-
-def _unusable(solver: str, backend: str) -> str | None:
-    """Why ``solver`` cannot be run through ``backend``, or ``None`` if it can (checked
-    before any work: the block route may need no solver call at all)."""
-    if backend == "direct":
-        if solver.upper() != "CLARABEL":
-            return f"backend 'direct' supports only solver 'CLARABEL', got {solver!r}"
-        return None
-    if backend != "cvxpy":
-        return f"unknown backend {backend!r}; expected 'cvxpy' or 'direct'"
-    installed = importlib.import_module("cvxpy").installed_solvers()
-    if solver not in installed:
-        return (f"solver {solver!r} is not installed for cvxpy; "
-                f"installed: {', '.join(installed)}")
-    return None
-
-
-def _run_backend(lp: _Matrices, solver: str, backend: str, options: dict[str, Any]) -> _Raw:
-    """One solve of ``lp`` by ``backend`` / ``solver`` (every failure a status)."""
-    if backend == "cvxpy":
-        return _solve_cvxpy(lp, solver, options)
-    return _solve_clarabel(lp, options)
-
-
-@dataclass(frozen=True, slots=True)
-class _Settings:
-    """How every LP of one :func:`solve_lp` call is solved."""
-
-    solver: str
-    backend: str
-    tol: float
-    extra: Mapping[str, Any]
-    deadline: float  # time.perf_counter() value, inf without a time limit
-
-    def options(self, *, polished: bool = False) -> dict[str, Any]:
-        """The solver's keywords; ``polished``: the answer will be made exact by policy
-        iteration, so Clarabel's iterative refinement of each KKT solve (1.2-1.9x of its
-        time) buys nothing (the values returned are the same to the last digit)."""
-        opts = _tolerance_options(self.solver, self.tol)
-        if polished and self.solver.upper() == "CLARABEL":
-            opts["iterative_refinement_enable"] = False
-        if np.isfinite(self.deadline):
-            opts.update(_time_options(self.solver, self.deadline - time.perf_counter()))
-        return {**opts, **dict(self.extra)}
-
-
-def _retries(settings: _Settings) -> Iterator[tuple[str, dict[str, Any]]]:
-    """Other ways to solve an LP that came back inaccurate (Clarabel only; the user's
-    own ``solver_options`` are kept in every one)."""
-    if settings.solver.upper() != "CLARABEL":
-        return
-    base = settings.options()
-    yield settings.backend, {**base, "static_regularization_constant": 1e-7,
-                             "iterative_refinement_max_iter": 50,
-                             "max_iter": 400, **dict(settings.extra)}
-    other = "direct" if settings.backend == "cvxpy" else "cvxpy"
-    yield other, {**base, "equilibrate_max_iter": 50, "max_iter": 400, **dict(settings.extra)}
-
-
-_DUAL_SLACK = 1e-7
-"""A solve whose duals violate a constraint ``v(s) >= r(c) + sum P(c, s') v(s')`` by more
-than this is not taken as optimal, whatever the solver says (a badly conditioned LP,
-e.g. a component left once in a million steps, can come back "solved" and wrong)."""
-
-
-def _checked(lp: _Matrices, raw: _Raw) -> _Raw:
-    """``raw`` demoted to ``INACCURATE`` if its duals are not feasible (``A' v >= c``)."""
-    if raw.status is not Status.OPTIMAL or raw.v is None:
-        return raw
-    violation = float(np.max(lp.objective - lp.a_eq.T @ raw.v, initial=0.0))
-    if violation <= _DUAL_SLACK:
-        return raw
-    return _Raw(Status.INACCURATE, f"{raw.message}, but its duals violate a Bellman "
-                f"inequality by {violation:.1e}", raw.y, raw.v, raw.iterations)
-
-
-def _solve_one(lp: _Matrices, settings: _Settings, *, retry: bool = True) -> _Raw:
-    """Solve ``lp``; with ``retry``, an inaccurate answer (by the solver's word or by
-    :func:`_checked`) is retried with other settings (see :func:`_retries`) and the
-    first accurate one is kept, else the first answer.  (A block of the topological
-    route is not retried: its answer is polished exactly instead.)"""
-    if time.perf_counter() >= settings.deadline:
-        return _Raw(Status.TIME_LIMIT, "time limit reached before the solve")
-    raw = _run_backend(lp, settings.solver, settings.backend,
-                       settings.options(polished=not retry))
-    if not retry:
-        return raw
-    raw = _checked(lp, raw)
-    if raw.status is not Status.INACCURATE:
-        return raw
-    for backend, options in _retries(settings):
-        if time.perf_counter() >= settings.deadline:
-            break
-        again = _checked(lp, _run_backend(lp, settings.solver, backend, options))
-        logger.info("inaccurate LP retried (%s, %s): %s", backend, sorted(options),
-                    again.message)
-        if again.status is Status.OPTIMAL:
-            return _Raw(again.status, f"{again.message} (retried after: {raw.message})",
-                        again.y, again.v, raw.iterations + again.iterations)
-    return raw
 
 
 # ---------------------------------------------------------------------------------------
@@ -464,7 +221,7 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
 class _Answer:
     """What a route found, in reduced coordinates, before it is mapped back."""
 
-    raw: _Raw  # status, message, iterations (y, v unused)
+    raw: Raw  # status, message, iterations (y, v unused)
     y: np.ndarray  # occupancy per reduced choice, from b
     v: np.ndarray  # value per reduced state (nan where unknown)
     reduced_choice: np.ndarray  # the deterministic policy on the quotient
@@ -473,8 +230,8 @@ class _Answer:
     n_solver_calls: int
 
 
-def _solve_monolithic(lp: OccupancyLP, settings: _Settings) -> _Answer | _Raw:
-    raw = _solve_one(_Matrices(lp.a_eq, lp.b_eq, lp.objective), settings)
+def _solve_monolithic(lp: OccupancyLP, settings: Settings) -> _Answer | Raw:
+    raw = solve_one(Matrices(lp.a_eq, lp.b_eq, lp.objective), settings)
     if raw.y is None or raw.v is None:
         return raw
     q = lp.quotient
@@ -482,18 +239,46 @@ def _solve_monolithic(lp: OccupancyLP, settings: _Settings) -> _Answer | _Raw:
     v = np.clip(raw.v, 0.0, 1.0)
     # Off the visited states (and everywhere if nothing was solved) the greedy fallback
     # needs numbers; an unsolved state gets the trivially dual-feasible value 1.
-    reduced_choice = _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol)
+    reduced_choice = _crossover(
+        q, _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol))
     return _Answer(raw, y, v, reduced_choice, float(lp.objective @ y),
                    float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0)), 1)
 
 
-def _block_lp(block: Block, values: np.ndarray) -> _Matrices:
+def _crossover(q: Quotient, start: np.ndarray) -> np.ndarray:
+    """``start`` (a reduced choice per state) made optimal in every state, not only
+    where it goes: the one LP's occupancies say nothing where the optimal policy never
+    goes, and its duals there are any feasible upper bounds.  Level by level downstream
+    first, single states exactly and each block by policy iteration from ``start`` with
+    the exact values below as exit rewards (what the decomposed route's polish does)."""
+    blk = blocks(q)
+    values = np.zeros(q.n_states)
+    chosen = np.array(start, dtype=np.int64)
+    local = np.zeros(q.n_choices, dtype=np.int64)
+    for level in range(blk.n_levels):
+        states = blk.states_at(level)
+        single = blk.single(states)
+        upd = solve_single_states(q, blk, states[single], values)
+        chosen[upd.states] = upd.choices
+        rest = states[~single]
+        if rest.size == 0:
+            continue
+        block = Block.of(q, rest)
+        local[block.choices] = np.arange(block.choices.size)
+        pick, v, _ = improve_policy(block, block.to_target + block.outer @ values,
+                                    local[chosen[rest]])
+        values[rest] = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
+        chosen[rest] = block.choices[pick]
+    return chosen
+
+
+def _block_lp(block: Block, values: np.ndarray) -> Matrices:
     """The occupancy LP of ``block`` with the values downstream as exit rewards and
     ``b = 1`` on all of it."""
     exit_reward = block.to_target + block.outer @ values
     n = block.states.size
     owner = np.repeat(np.arange(n), np.diff(block.groups))
-    return _Matrices(_flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
+    return Matrices(_flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -506,7 +291,7 @@ class _Polished:
     optimal: bool  # no choice improves on ``values`` by more than the tie tolerance
 
 
-def _polish(block: Block, lp: _Matrices, y: np.ndarray, tol: float) -> _Polished:
+def _polish(block: Block, lp: Matrices, y: np.ndarray, tol: float) -> _Polished:
     """Crossover by policy iteration: the policy of largest occupancy is evaluated
     exactly on the block's chain and improved until no choice gains; an interior-point
     answer is accurate to its tolerance times the block's expected exit time (a block
@@ -535,7 +320,7 @@ def _polish(block: Block, lp: _Matrices, y: np.ndarray, tol: float) -> _Polished
                      bool(np.min(slack, initial=0.0) >= -tie))
 
 
-def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _Answer | _Raw:
+def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by :func:`_polish`; the occupancy of
     the resulting randomised policy from ``b_eq`` is the primal point, the values the
@@ -544,7 +329,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _An
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
     reduced_choice = np.zeros(q.n_states, dtype=np.int64)
-    worst = _Raw(Status.OPTIMAL, "")
+    worst = Raw(Status.OPTIMAL, "")
     iterations = calls = 0
     for level in range(blk.n_levels):
         states = blk.states_at(level)
@@ -557,15 +342,15 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _An
             continue
         block = Block.of(q, rest)
         lp = _block_lp(block, values)
-        raw = _solve_one(lp, settings, retry=False)
+        raw = solve_one(lp, settings, retry=False)
         iterations += raw.iterations
         calls += 1
         if raw.y is None or raw.v is None:
-            return _Raw(raw.status, f"{raw.message} (block LP of level {level}, "
+            return Raw(raw.status, f"{raw.message} (block LP of level {level}, "
                         f"{rest.size} states)", iterations=iterations)
         polished = _polish(block, lp, np.maximum(raw.y, 0.0), settings.tol)
         if not polished.optimal and worst.status is Status.OPTIMAL:
-            worst = _Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
+            worst = Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
                          "iteration did not settle")
         elif raw.status is not Status.OPTIMAL:
             logger.info("block LP of level %d: %s; exact after policy iteration", level,
@@ -580,7 +365,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: _Settings) -> _An
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
         message = f"{solver_word}: {message}"
-    return _Answer(_Raw(worst.status, message, iterations=iterations), y, values,
+    return _Answer(Raw(worst.status, message, iterations=iterations), y, values,
                    reduced_choice, float(q.to_target @ y), float(b_eq @ values), calls)
 
 
@@ -635,10 +420,10 @@ def solve_lp(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
         mdp.n_states, q.n_states, q.mecs.n_mecs, q.n_choices,
     )
-    settings = _Settings(solver, backend, tol, dict(solver_options or {}),
+    settings = Settings(solver, backend, tol, dict(solver_options or {}),
                          start + time_limit if time_limit is not None else np.inf)
 
-    def failed(raw: _Raw) -> LPResult:
+    def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)
         return LPResult(
             status=raw.status, message=raw.message, value=float("nan"), values=None,
@@ -647,14 +432,14 @@ def solve_lp(
             iterations=raw.iterations, seconds=time.perf_counter() - start, lp_shape=shape,
         )
 
-    unusable = _unusable(solver, backend)
+    unusable = unusable_reason(solver, backend)
     if unusable is not None:
-        return failed(_Raw(Status.FAILED, unusable))
+        return failed(Raw(Status.FAILED, unusable))
     if q.n_states == 0 or (q.initial < 0 and not everywhere):
         # Nothing to optimise: the initial state is decided by the graph analysis.
         reason = "a target state" if q.target[mdp.initial] else "a prob-0 state"
-        answer: _Answer | _Raw = _Answer(
-            _Raw(Status.OPTIMAL, f"initial state is {reason}: decided by graph analysis, "
+        answer: _Answer | Raw = _Answer(
+            Raw(Status.OPTIMAL, f"initial state is {reason}: decided by graph analysis, "
                  "no LP solved (values of the other maybe states are nan)"),
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
             greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
@@ -662,12 +447,12 @@ def solve_lp(
         answer = _solve_decomposed(q, lp.b_eq, settings)
     else:
         answer = _solve_monolithic(lp, settings)
-    if isinstance(answer, _Raw):
+    if isinstance(answer, Raw):
         return failed(answer)
     return _result(mdp, q, answer, settings, start, shape)
 
 
-def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: _Settings, start: float,
+def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: Settings, start: float,
             shape: tuple[int, int]) -> LPResult:
     """The answer of a route mapped back to ``mdp`` (values, policies, occupancy)."""
     values = q.lift(answer.v)

@@ -18,20 +18,16 @@ Every error is a :class:`mitld_lp.worlds.WorldError`, one line.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import logging
 import math
-import os
 import re
-import sys
-import tempfile
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
 from mitld_lp.game import PROBABILITY_TOLERANCE
+from mitld_lp.quiet import native_quiet
 from mitld_lp.worlds import WorldError
 
 __all__ = ["SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT"]
@@ -251,41 +247,7 @@ def storm_error(
 # --------------------------------------------------------------------------- Storm's output
 
 
-_QUIET = threading.Lock()
-
-
-def _flush_c_streams() -> None:
-    """Flush C's stdio buffers (where C++'s ``std::cout`` goes), so that what Storm
-    wrote lands in the capture and not on the terminal later."""
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        ctypes.CDLL(None).fflush(None)
-
-
-@contextlib.contextmanager
-def storm_quiet() -> Iterator[None]:
-    """Run the block with file descriptor 1 (standard output) sent to a temporary file;
-    afterwards the lines Storm wrote there go to the debug log.  Storm's logger prints
-    its errors and warnings on stdout, which must carry nothing but the answer.  The
-    descriptor is the process's: what another thread prints to stdout meanwhile is
-    logged the same way (the command line prints nothing while a world loads)."""
-    with _QUIET:
-        with contextlib.suppress(ValueError, OSError):
-            sys.stdout.flush()
-        try:
-            saved = os.dup(1)
-        except OSError:  # no standard output at all: nothing to protect
-            yield
-            return
-        with tempfile.TemporaryFile() as sink:
-            _flush_c_streams()
-            os.dup2(sink.fileno(), 1)
-            try:
-                yield
-            finally:
-                _flush_c_streams()
-                os.dup2(saved, 1)
-                os.close(saved)
-                sink.seek(0)
-                for line in sink.read().decode("utf-8", "replace").splitlines():
-                    if line.strip():
-                        log.debug("storm: %s", excerpt(line, 200))
+def storm_quiet() -> contextlib.AbstractContextManager[None]:
+    """Storm's output (its logger prints errors and warnings on stdout, which must carry
+    nothing but the answer) sent to the debug log: :func:`mitld_lp.quiet.native_quiet`."""
+    return native_quiet("storm")
