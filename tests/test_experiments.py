@@ -214,3 +214,14 @@ def test_robust_coverage(tmp_path):
         assert 0 <= float(row["band_coverage"]) <= float(row["value_at_least_bound"]) <= 1
         assert float(row["true_optimum"]) == pytest.approx(STORM["bus_grid"], abs=1e-6)
         assert float(row["storm_abs_diff_first"]) <= 1e-6
+
+
+def test_bench_drn(tmp_path):
+    """The DRN writer's benchmark: every size written and read back by Storm."""
+    _run("bench_drn", tmp_path)
+    rows = _csv(tmp_path / "bench_drn.csv")
+    assert [int(r["n"]) for r in rows] == [8, 16]
+    for r in rows:
+        assert int(r["transitions"]) > int(r["states"]) > 0
+        assert float(r["storm_read_cpu_s"]) > 0
+    assert not list(tmp_path.glob("*.drn"))  # the scratch files are removed

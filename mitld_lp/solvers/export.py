@@ -17,6 +17,7 @@ import importlib
 import logging
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +25,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import files
-from mitld_lp.mdp import ABSORB, MDP, as_state_mask
+from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.lp import occupancy_lp
 
-__all__ = ["write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
+__all__ = ["drn_text", "write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
 
 logger = logging.getLogger(__name__)
 
@@ -115,7 +116,7 @@ def write_lp(
 _TOKEN = re.compile(r"\s+")
 
 _DRN_CHUNK = 50_000
-"""States whose lines :func:`write_drn` formats before writing them out."""
+"""States whose lines :func:`drn_text` formats at a time."""
 
 
 def _drn_action(name: str) -> str:
@@ -135,6 +136,117 @@ def _valuation(record: object) -> str:
 def _compact(value: object) -> str:
     """``value`` on one line without spaces (a DRN line is split on whitespace)."""
     return "".join(str(value).split())
+
+
+class _Valuations:
+    """:func:`_valuation` with the parts that many states share (a game state, a set of
+    pending events) formatted once."""
+
+    def __init__(self) -> None:
+        self.games: dict[object, str] = {}
+        self.pending: dict[object, str] = {}
+
+    def __call__(self, record: object) -> str:
+        game = getattr(record, "game", None)
+        if game is None or not hasattr(record, "pending"):
+            return _valuation(record)
+        g = self.games.get(game)
+        if g is None:
+            g = self.games[game] = _compact(game)
+        pend = record.pending  # type: ignore[attr-defined]
+        p = self.pending.get(pend)
+        if p is None:
+            p = self.pending[pend] = ",".join(sorted(pend))
+        return (f"game={g} & q={record.automaton} & "  # type: ignore[attr-defined]
+                f"pending={{{p}}} & clock={record.clock}")  # type: ignore[attr-defined]
+
+
+def _strings(values: np.ndarray, fmt: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(table, index)``: ``fmt`` of each distinct entry of ``values`` once, as an object
+    array, and where each entry's string is in it."""
+    distinct, index = np.unique(values, return_inverse=True)
+    table = np.empty(distinct.shape[0], dtype=object)
+    table[:] = [fmt(v) for v in distinct.tolist()]
+    return table, index
+
+
+def _successors(cols: np.ndarray) -> np.ndarray:
+    """``"\\t\\t{c} : "`` for each entry of ``cols`` (object array): the successors of a
+    chunk lie in a narrow range of states, so a table over that range is made without
+    sorting (a sort of the distinct ones if the range is wide)."""
+    if cols.size == 0:
+        return np.empty(0, dtype=object)
+    low, high = int(cols.min()), int(cols.max())
+    if high - low > cols.size:
+        table, index = _strings(cols, lambda c: f"\t\t{c} : ")
+        return table[index]
+    table = np.empty(high - low + 1, dtype=object)
+    table[:] = [f"\t\t{c} : " for c in range(low, high + 1)]
+    return table[cols - low]
+
+
+def drn_text(mdp: MDP, marks: list[tuple[str, np.ndarray]], *,
+             valuations: bool = True) -> Iterator[str]:
+    """The ``@model`` section of ``mdp``'s DRN text, a chunk of :data:`_DRN_CHUNK`
+    states at a time (the text of a 1e6-state model never sits in memory whole).
+
+    ``marks``: ``(label, state mask)`` in the order the labels are written after
+    ``init``.  Vectorised: every distinct successor, probability, action and label set
+    of a chunk is formatted once, and the chunk's lines are one ``join`` of those
+    pieces put in place by array indexing; only the valuations are formatted state by
+    state.  Successors are listed in increasing order, zero entries left out.
+    """
+    n = mdp.n_states
+    matrix = mdp.matrix
+    row_groups = np.asarray(mdp.row_groups, dtype=np.int64)
+    actions = np.asarray(mdp.choice_actions, dtype=np.int64)
+    action_lines = np.array([f"\taction {_drn_action(a)}\n" for a in mdp.action_names]
+                            + ["\taction absorb\n"], dtype=object)
+    codes = np.zeros(n, dtype=np.int64)
+    codes[int(mdp.initial)] = 1
+    for bit, (_, mask) in enumerate(marks, start=1):
+        codes |= np.asarray(mask, dtype=np.int64) << bit
+    valuation = _Valuations()
+    for lo in range(0, n, _DRN_CHUNK):
+        hi = min(n, lo + _DRN_CHUNK)
+        c_lo, c_hi = int(row_groups[lo]), int(row_groups[hi])
+        p_lo, p_hi = int(matrix.indptr[c_lo]), int(matrix.indptr[c_hi])
+        rows = sp.csr_array((np.array(matrix.data[p_lo:p_hi]),
+                             np.array(matrix.indices[p_lo:p_hi]),
+                             np.asarray(matrix.indptr[c_lo:c_hi + 1], dtype=np.int64) - p_lo),
+                            shape=(c_hi - c_lo, n))
+        rows.sort_indices()
+        keep = rows.data > 0
+        cols, vals = rows.indices[keep], rows.data[keep]
+        entry_row = np.repeat(np.arange(c_hi - c_lo), np.diff(rows.indptr))[keep]
+        row_len = np.bincount(entry_row, minlength=c_hi - c_lo)
+        # Places: per state its header, then per choice its action line and two pieces
+        # (successor, probability) per entry.
+        size = 1 + 2 * row_len
+        before = np.concatenate([[0], np.cumsum(size)])  # pieces of earlier choices
+        owner = np.repeat(np.arange(hi - lo), np.diff(row_groups[lo:hi + 1]))
+        choice_at = owner + 1 + before[:-1]
+        state_at = np.arange(hi - lo) + before[row_groups[lo:hi] - c_lo]
+        first = np.concatenate([[0], np.cumsum(row_len)])
+        entry_at = choice_at[entry_row] + 1 + 2 * (np.arange(cols.size) - first[entry_row])
+        pieces = np.empty(hi - lo + c_hi - c_lo + 2 * cols.size, dtype=object)
+        pieces[choice_at] = action_lines[actions[c_lo:c_hi]]
+        pieces[entry_at] = _successors(cols)
+        table, index = _strings(vals, lambda v: f"{v!r}\n")
+        pieces[entry_at + 1] = table[index]
+        labels = {code: "".join(" " + name for bit, name in enumerate(
+            ["init", *(m for m, _ in marks)]) if code >> bit & 1)
+                  for code in np.unique(codes[lo:hi]).tolist()}
+        chunk_codes = codes[lo:hi].tolist()
+        if valuations:
+            records = mdp.states[lo:hi]
+            heads = [f"state {s}{labels[code]}\n//[{valuation(rec)}]\n" for s, code, rec
+                     in zip(range(lo, hi), chunk_codes, records, strict=True)]
+        else:
+            heads = [f"state {s}{labels[code]}\n" for s, code in
+                     zip(range(lo, hi), chunk_codes, strict=True)]
+        pieces[state_at] = heads
+        yield "".join(pieces.tolist())
 
 
 def write_drn(
@@ -174,11 +286,6 @@ def write_drn(
              ("sink", np.asarray(mdp.sink, dtype=bool))]
     if truncated_label:
         marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
-    names = [_drn_action(a) for a in mdp.action_names]
-    actions = np.asarray(mdp.choice_actions, dtype=np.int64)
-    matrix = sp.csr_array(mdp.matrix)
-    matrix.sort_indices()
-    row_groups = mdp.row_groups
     header = [
         "// Exported by mitld_lp",
         "@type: MDP",
@@ -194,33 +301,7 @@ def write_drn(
     ]
     with files.replacing(p) as f:
         f.write("\n".join(header) + "\n")
-        # Streamed a chunk of states at a time: the text of a 1e6-state model never
-        # sits in memory whole (it took 4.8 GB when it did).
-        for lo in range(0, n, _DRN_CHUNK):
-            hi = min(n, lo + _DRN_CHUNK)
-            c_lo, c_hi = int(row_groups[lo]), int(row_groups[hi])
-            indptr = matrix.indptr[c_lo : c_hi + 1].tolist()
-            cols = matrix.indices[indptr[0] : indptr[-1]].tolist()
-            vals = matrix.data[indptr[0] : indptr[-1]].tolist()
-            base = indptr[0]
-            groups = row_groups[lo : hi + 1].tolist()
-            acts = actions[c_lo:c_hi].tolist()
-            lines: list[str] = []
-            records = mdp.states[lo:hi] if valuations else ()
-            for s in range(lo, hi):
-                labels = (["init"] if s == mdp.initial else []) + [
-                    name for name, mask in marks if mask[s]
-                ]
-                head = f"state {s}"
-                lines.append(f"{head} {' '.join(labels)}" if labels else head)
-                if valuations:
-                    lines.append(f"//[{_valuation(records[s - lo])}]")
-                for c in range(groups[s - lo], groups[s - lo + 1]):
-                    a = acts[c - c_lo]
-                    lines.append(f"\taction {names[a] if a != ABSORB else 'absorb'}")
-                    for k in range(indptr[c - c_lo] - base, indptr[c - c_lo + 1] - base):
-                        if vals[k] > 0:
-                            lines.append(f"\t\t{cols[k]} : {vals[k]!r}")
-            f.write("\n".join(lines) + "\n")
+        for text in drn_text(mdp, marks, valuations=valuations):
+            f.write(text)
     logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
     return p
