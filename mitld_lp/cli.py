@@ -572,8 +572,8 @@ def _time_stop(args: argparse.Namespace, where: str) -> None:
 
 
 def run() -> None:
-    """The ``mitld-lp`` console script: :func:`main`, then exit at once if the command's
-    thread is still busy (interrupted or out of time)."""
+    """The ``mitld-lp`` console script: :func:`main`, then exit at once if interrupted
+    or out of time (its thread may be in a native call the shutdown would abort)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
@@ -588,7 +588,8 @@ def run() -> None:
     except KeyboardInterrupt:  # before the command started (reading the arguments)
         _say("interrupted")
         code = EXIT_INTERRUPTED
-    if _worker is not None and _worker.is_alive():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # done: a late Ctrl-C changes nothing
+    if _worker is not None:  # interrupted or out of time: no finalisation under a thread
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
