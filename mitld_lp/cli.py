@@ -445,8 +445,7 @@ def _version() -> str:
 
 
 class _StageLines(logging.Handler):
-    """The library's log records as one printable line each on stderr; remembers the
-    last one so that a stop can say where it happened."""
+    """Log records as printable lines on stderr; the last one says where a stop was."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -512,11 +511,6 @@ def main(argv: list[str] | None = None) -> int:
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
     args.started = time.monotonic()
     cancelled = threading.Event()
-    handler = _StageLines()
-    package_log = logging.getLogger("mitld_lp")
-    if not args.quiet:
-        package_log.addHandler(handler)
-        package_log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
     outcome: list[int] = []
 
     def work() -> None:
@@ -524,6 +518,12 @@ def main(argv: list[str] | None = None) -> int:
         outcome.append(_run(args))
 
     worker = threading.Thread(target=work, name=PROG, daemon=True)
+    handler = _StageLines()  # this command's lines only, not an abandoned one's
+    handler.addFilter(lambda record: record.thread == worker.ident)
+    package_log = logging.getLogger("mitld_lp")
+    if not args.quiet:
+        package_log.addHandler(handler)
+        package_log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
     # The solvers get the limit itself and answer with a status; the watchdog stops a
     # stage that cannot (the product, a native call) shortly after it.
     deadline = None if args.time_limit is None else (

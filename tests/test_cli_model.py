@@ -234,3 +234,27 @@ def test_stage_line_and_summary_count_the_same_automaton(capsys) -> None:
     dta = to_dta(load_model(path).spec)
     absorbing = (dta.accepting is not None) + (dta.rejecting is not None)
     assert total == dta.n_states and stage == dta.n_states - absorbing
+
+
+def test_a_commands_stage_lines_are_its_own(capsys) -> None:
+    """Lines logged by another thread meanwhile (an abandoned command's, in a program
+    that runs several) are not this command's: they stay off its stderr."""
+    import logging
+    import threading
+
+    stop = threading.Event()
+
+    def chatter() -> None:
+        while not stop.is_set():
+            logging.getLogger("mitld_lp.elsewhere").info("stray line")
+            stop.wait(0.001)
+
+    other = threading.Thread(target=chatter)
+    other.start()
+    try:
+        assert main(["solve", BUS]) == 0
+    finally:
+        stop.set()
+        other.join()
+    err = capsys.readouterr().err
+    assert "stray line" not in err and "mitld-lp: product:" in err
