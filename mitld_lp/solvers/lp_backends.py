@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.result import Status
 
-__all__ = ["Matrices", "Raw", "Settings", "solve_one", "unusable_reason"]
+__all__ = ["CLARABEL_STATUS", "Matrices", "Raw", "Settings", "solve_one", "unusable_reason"]
 
 logger = logging.getLogger("mitld_lp.solvers.lp")
 
@@ -112,7 +112,7 @@ def _solve_cvxpy(lp: Matrices, solver: str, options: dict[str, Any]) -> Raw:
     return Raw(status, message, np.asarray(y.value, dtype=np.float64), v, iterations)
 
 
-_CLARABEL_STATUS = {
+CLARABEL_STATUS = {  # Clarabel's status words as ours (every Clarabel caller)
     "Solved": Status.OPTIMAL,
     "AlmostSolved": Status.INACCURATE,
     "PrimalInfeasible": Status.INFEASIBLE,
@@ -157,7 +157,7 @@ def _solve_clarabel(lp: Matrices, options: dict[str, Any]) -> Raw:
             raise
         return Raw(Status.FAILED, f"clarabel: {type(exc).__name__}: {exc}")
     word = str(solution.status)
-    status = _CLARABEL_STATUS.get(word, Status.FAILED)
+    status = CLARABEL_STATUS.get(word, Status.FAILED)
     message = f"clarabel: {word}"
     iterations = int(solution.iterations)
     if not status.has_solution:

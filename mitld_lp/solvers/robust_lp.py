@@ -33,21 +33,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
+from mitld_lp.solvers.lp_backends import CLARABEL_STATUS
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust_graph import RobustGame, positive_attractor
 
 __all__ = ["PolicyLP", "policy_lp"]
-
-_STATUS = {
-    "Solved": Status.OPTIMAL,
-    "AlmostSolved": Status.INACCURATE,
-    "PrimalInfeasible": Status.INFEASIBLE,
-    "AlmostPrimalInfeasible": Status.INFEASIBLE,
-    "DualInfeasible": Status.UNBOUNDED,
-    "AlmostDualInfeasible": Status.UNBOUNDED,
-    "MaxIterations": Status.MAX_ITERATIONS,
-    "MaxTime": Status.TIME_LIMIT,
-}
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -116,7 +106,7 @@ def policy_lp(
         return PolicyLP(Status.FAILED, None, n_var, rows.size,
                         f"clarabel: {type(exc).__name__}: {exc}")
     word = str(solution.status)
-    status = _STATUS.get(word, Status.FAILED)
+    status = CLARABEL_STATUS.get(word, Status.FAILED)
     if not status.has_solution:
         return PolicyLP(status, None, n_var, rows.size, f"clarabel: {word}")
     values[unknown] = np.clip(np.asarray(solution.x, dtype=np.float64), 0.0, 1.0)
