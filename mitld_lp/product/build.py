@@ -265,7 +265,10 @@ def _assemble(
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
     n = keys.size
-    matrix = sp.csr_array((vals, cols, indptr), shape=(n_rows, n))
+    # int32 indices where they fit: 12 bytes a transition, not 16
+    index = np.int32 if max(int(indptr[-1]), n) < 2**31 else np.int64
+    matrix = sp.csr_array((vals, cols.astype(index, copy=False), indptr.astype(index)),
+                          shape=(n_rows, n))
     row_groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(state_choices, out=row_groups[1:])
     common: dict[str, Any] = dict(
