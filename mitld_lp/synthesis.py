@@ -191,20 +191,20 @@ class _Settings:
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
 
-def _solve_model(mdp: MDP, target: np.ndarray, which: str, how: _Settings) -> ModelSolution:
+def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> ModelSolution:
     """Solve one model by ``how.method`` and certify it (module docs).
 
-    The model is reduced once and every solver works on that :class:`Quotient`.  An LP
+    Every solver works on the model's :class:`Quotient` (made by the one analysis of the
+    product both models share, :func:`mitld_lp.solvers.analysis.analyse`).  An LP
     that does not come back optimal (after its own retries) is replaced by the
     interval-iteration policy, certified the same way (exact value inside the bracket)
     when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``).
     """
     from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
     from mitld_lp.solvers.lp import solve_lp
-    from mitld_lp.solvers.quotient import reduce
     from mitld_lp.solvers.result import Status, read_only
 
-    quotient = reduce(mdp, target)
+    target = np.asarray(quotient.target)
     tol, certify_tol = how.tol, how.certify_tol
 
     def remaining() -> float | None:
@@ -405,12 +405,12 @@ def synthesize(
                     float("inf") if time_limit is None else t0 + time_limit)
     from mitld_lp.acceptance import acceptance
 
+    from mitld_lp.solvers.analysis import analyse
+
     accept = acceptance(mdp, built.dta)
-    low = _solve_model(mdp, accept.goal, "lower", how)
-    if mdp.truncated.any():
-        high = _solve_model(mdp, accept.goal | mdp.truncated, "upper", how)
-    else:
-        high = low
+    low_q, high_q = analyse(mdp, accept.goal, mdp.truncated)
+    low = _solve_model(mdp, low_q, "lower", how)
+    high = low if high_q is low_q else _solve_model(mdp, high_q, "upper", how)
     low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
 

@@ -222,7 +222,7 @@ def interval_iteration(
     start = time.perf_counter()
     q = quotient_for(mdp, target, quotient)
     n = q.n_states
-    lo, hi = np.zeros(n), np.ones(n)
+    lo, hi = np.zeros(n), np.where(q.zero, 0.0, 1.0)
     budget = _Budget(max_iterations,
                      start + time_limit if time_limit is not None else np.inf)
     bar = tqdm(

@@ -124,15 +124,19 @@ def occupancy_lp(
     ``mdp`` for ``target`` if the caller has it (else it is computed).
     """
     q = quotient_for(mdp, target, quotient)
-    n = q.n_states
-    a_eq = _flow_matrix(q.choice_state(), n, q.matrix)
+    a_eq = _flow_matrix(q.choice_state(), q.n_states, q.matrix)
+    return OccupancyLP(a_eq, _start_weights(q, everywhere),
+                       np.asarray(q.to_target, dtype=np.float64), q)
+
+
+def _start_weights(q: Quotient, everywhere: bool) -> np.ndarray:
+    """``b``: 1 on every reduced state, or on the initial one (if it is one)."""
     if everywhere:
-        b_eq = np.ones(n)
-    else:
-        b_eq = np.zeros(n)
-        if q.initial >= 0:
-            b_eq[q.initial] = 1.0
-    return OccupancyLP(a_eq, b_eq, np.asarray(q.to_target, dtype=np.float64), q)
+        return np.ones(q.n_states)
+    b_eq = np.zeros(q.n_states)
+    if q.initial >= 0:
+        b_eq[q.initial] = 1.0
+    return b_eq
 
 
 # ---------------------------------------------------------------------------------------
@@ -328,11 +332,14 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Ans
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
-    reduced_choice = np.zeros(q.n_states, dtype=np.int64)
+    # a state known to have value 0 takes its first choice and is not solved
+    reduced_choice = np.asarray(q.row_groups[:-1], dtype=np.int64).copy()
+    weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = 0
     for level in range(blk.n_levels):
         states = blk.states_at(level)
+        states = states[~q.zero[states]]
         single = blk.single(states)
         upd = solve_single_states(q, blk, states[single], values)
         reduced_choice[upd.states] = upd.choices
@@ -413,8 +420,8 @@ def solve_lp(
     start = time.perf_counter()
     if backend == "auto":
         backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
-    lp = occupancy_lp(mdp, target, everywhere=everywhere, quotient=quotient)
-    q = lp.quotient
+    q = quotient_for(mdp, target, quotient)
+    b_eq = _start_weights(q, everywhere)
     shape = (q.n_states, q.n_choices)
     logger.info(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
@@ -444,9 +451,10 @@ def solve_lp(
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
             greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
     elif decompose:
-        answer = _solve_decomposed(q, lp.b_eq, settings)
-    else:
-        answer = _solve_monolithic(lp, settings)
+        answer = _solve_decomposed(q, b_eq, settings)
+    else:  # the whole LP is built only here
+        answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
+                                                quotient=q), settings)
     if isinstance(answer, Raw):
         return failed(answer)
     return _result(mdp, q, answer, settings, start, shape)

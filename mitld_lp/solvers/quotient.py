@@ -13,6 +13,7 @@ never on the probabilities themselves, so they are exact.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,6 +21,9 @@ from scipy.sparse import csgraph
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.solvers.result import read_only
+
+if TYPE_CHECKING:
+    from mitld_lp.solvers.topological import Blocks
 
 __all__ = [
     "EndComponents",
@@ -211,6 +215,13 @@ class Quotient:
         initial: the reduced initial state, or ``-1`` if the initial state was removed.
         initial_value: the value of the initial state if it was removed (1.0 if it is a
             target state, 0.0 if it is prob-0), else ``nan``.
+        order: the strongly connected components of the reduced states in levels,
+            downstream first (:class:`~mitld_lp.solvers.topological.Blocks`), from the
+            one analysis that made the quotient; every solver walks it.
+        zero: ``(n_reduced_states,)`` bool, reduced states known to have value 0: a
+            quotient shared with a larger target (:func:`mitld_lp.solvers.analysis.
+            analyse`) keeps the states that reach only the larger one; empty for
+            :func:`reduce`'s own.
     """
 
     target: np.ndarray
@@ -224,6 +235,8 @@ class Quotient:
     choice_origin: np.ndarray
     initial: int
     initial_value: float
+    order: Blocks
+    zero: np.ndarray
 
     @property
     def n_states(self) -> int:
@@ -255,54 +268,12 @@ def reduce(mdp: MDP, target: np.ndarray) -> Quotient:
     See :class:`Quotient`.  A choice internal to a MEC is dropped (it only moves inside
     the MEC); every other choice of a maybe state is kept, with its transitions into a
     MEC redirected to the MEC's reduced state (so a choice may keep a self-loop of
-    probability < 1 on its collapsed MEC).
+    probability < 1 on its collapsed MEC).  One model's
+    :func:`mitld_lp.solvers.analysis.analyse`.
     """
-    target = as_state_mask(mdp, target, "target")
-    n = mdp.n_states
-    prob0 = prob0_max(mdp, target) & ~target
-    maybe = ~target & ~prob0
-    mecs = maximal_end_components(mdp, maybe)
+    from mitld_lp.solvers.analysis import analyse
 
-    plain = maybe & (mecs.mec_of < 0)
-    n_plain = int(plain.sum())
-    state_map = np.full(n, -1, dtype=np.int64)
-    state_map[plain] = np.arange(n_plain)
-    in_mec = mecs.mec_of >= 0
-    state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
-    n_red = n_plain + mecs.n_mecs
-
-    cstate = mdp.choice_state()
-    kept = np.flatnonzero(maybe[cstate] & ~mecs.internal)
-    order = np.argsort(state_map[cstate[kept]], kind="stable")
-    origin = kept[order]
-    counts = np.bincount(state_map[cstate[origin]], minlength=n_red)
-    row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-
-    rows = sp.csr_array(mdp.matrix)[origin]
-    keep_cols = np.flatnonzero(maybe)
-    aggregate = sp.csr_array(
-        (np.ones(keep_cols.size), (keep_cols, state_map[keep_cols])), shape=(n, n_red)
-    )
-    matrix = sp.csr_array(rows @ aggregate)
-    matrix.sum_duplicates()
-    matrix.eliminate_zeros()
-    to_target = np.asarray(rows @ target.astype(np.float64)).ravel()
-
-    init = int(mdp.initial)
-    initial_value = 1.0 if target[init] else (0.0 if prob0[init] else float("nan"))
-    return Quotient(
-        target=read_only(target.copy()),
-        prob0=read_only(prob0),
-        state_map=read_only(state_map),
-        mecs=mecs,
-        n_plain=n_plain,
-        matrix=matrix,
-        to_target=read_only(to_target),
-        row_groups=read_only(row_groups),
-        choice_origin=read_only(origin),
-        initial=int(state_map[init]),
-        initial_value=initial_value,
-    )
+    return analyse(mdp, as_state_mask(mdp, target, "target"))[0]
 
 
 def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None) -> Quotient:

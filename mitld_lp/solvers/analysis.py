@@ -1,0 +1,248 @@
+r"""One graph analysis of a product, shared by both truncation models.
+
+The product is solved twice: its truncated states count as losing (the *lower* model)
+and as winning (the *upper* one).  Both models have the same support graph, so one
+analysis serves both:
+
+* the **state graph** is a view of the product's matrix (a state's choices are
+  consecutive rows, so its successors are a slice of the matrix's column indices): no
+  copy;
+* one **strongly connected decomposition** of it, and its components in levels
+  (level 0 has no successor component; every edge between components goes down);
+* walking the levels upwards, which components can reach the goal and which the goal
+  or a truncated state: the prob-0 sets of both models (``Pmax = 0`` iff no path);
+* the **maximal end components** of the upper model's *maybe* states (neither target
+  nor prob-0), searched only among the states of non-trivial components (and single
+  states with a choice that stays put): an end component is strongly connected, so it
+  lies inside one component.  They are the lower model's end components too: an end
+  component's states reach the same states, so it lies either wholly among the lower
+  model's maybe states or wholly outside them;
+* one **quotient** (:class:`~mitld_lp.solvers.quotient.Quotient`): the upper model's
+  maybe states with those end components collapsed, and its matrix, shared by the two
+  models, which differ only in the one-step probability of reaching their target.  A
+  state of the lower model that can reach a truncated state but not the goal is kept
+  in it with its value known to be 0 (``Quotient.zero``): the solvers skip it.
+
+The solvers walk the components in the order the analysis found (``Quotient.order``)
+and never decompose the graph again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from mitld_lp.arrays import unique
+from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.quotient import EndComponents, Quotient, maximal_end_components
+from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.topological import Blocks, gather_ranges, graph_view
+
+__all__ = ["analyse"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Levels:
+    """Components of the state graph, their levels and which targets they can reach."""
+
+    component: np.ndarray  # (n,) the component of each state
+    level: np.ndarray  # (n_components,)
+    reach: np.ndarray  # (n_components, k) bool: can reach target set j
+
+
+def _levels(graph: sp.csr_array, seeds: np.ndarray) -> _Levels:
+    """The strongly connected components of ``graph``, their levels (Kahn's algorithm
+    run backwards: sinks are level 0, a component's level is one more than its highest
+    successor's) and, propagated up the same walk, which components can reach a state
+    of each seed set (``seeds``: ``(n, k)`` bool)."""
+    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
+    comp = np.asarray(comp, dtype=np.int64)
+    owner = np.repeat(np.arange(graph.shape[0]), np.diff(graph.indptr))
+    up, down = comp[owner], comp[graph.indices]
+    del owner
+    cross = up != down
+    up, down = up[cross], down[cross]
+    del cross
+    out_degree = np.bincount(up, minlength=n_comp)
+    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
+    # the duplicates: its data are the multiplicities the out-degrees counted)
+    preds_of = sp.csr_array((np.ones(up.size, dtype=np.int64), (down, up)),
+                            shape=(n_comp, n_comp))
+    del up, down
+    pred_ptr, preds, times = preds_of.indptr, preds_of.indices, preds_of.data
+    k = seeds.shape[1]
+    reach = np.zeros((n_comp, k), dtype=bool)
+    for j in range(k):
+        reach[comp[seeds[:, j]], j] = True
+    level = np.full(n_comp, -1, dtype=np.int64)
+    frontier = np.flatnonzero(out_degree == 0)
+    depth = 0
+    while frontier.size:
+        level[frontier] = depth
+        lo, hi = pred_ptr[frontier], pred_ptr[frontier + 1]
+        at = gather_ranges(lo, hi)
+        above = np.asarray(preds[at], dtype=np.int64)
+        below = np.repeat(frontier, hi - lo)
+        for j in range(k):  # the frontier's reach is final: its successors are done
+            reach[above[reach[below, j]], j] = True
+        np.subtract.at(out_degree, above, times[at])
+        frontier = unique(above[out_degree[above] == 0])
+        depth += 1
+    if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
+        raise AssertionError("the component graph has a cycle")
+    return _Levels(comp, level, reach)
+
+
+def _end_components(mdp: MDP, comp: np.ndarray,
+                    maybe: np.ndarray) -> EndComponents:
+    """The maximal end components of the ``maybe`` states (module docs): searched by
+    :func:`~mitld_lp.solvers.quotient.maximal_end_components` on the sub-MDP of the
+    candidates, with one extra absorbing state standing for everything else."""
+    n = mdp.n_states
+    size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
+    m = mdp.matrix
+    owner = np.repeat(np.arange(n), np.diff(m.indptr[mdp.row_groups]))
+    stays = (m.indices == owner).astype(np.int64)
+    del owner
+    row_len = np.diff(m.indptr)
+    pure = np.add.reduceat(stays, m.indptr[:-1]) == row_len if stays.size else row_len == 0
+    del stays
+    loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
+    cand = np.flatnonzero(maybe & ((size[comp] > 1) | loops))
+    mec_of = np.full(n, -1, dtype=np.int64)
+    internal = np.zeros(mdp.n_choices, dtype=bool)
+    if cand.size == 0:
+        return EndComponents(read_only(mec_of), read_only(internal), 0)
+    lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
+    choices = gather_ranges(lo, hi)
+    rows = sp.csr_array(m[choices])
+    local = np.full(n, cand.size, dtype=np.int64)  # the extra state: "elsewhere"
+    local[cand] = np.arange(cand.size)
+    k = cand.size + 1
+    sub = sp.csr_array((rows.data, local[rows.indices], rows.indptr), shape=(rows.shape[0], k))
+    sub = sp.csr_array(sp.vstack([sub, sp.csr_array(([1.0], ([0], [cand.size])),
+                                                     shape=(1, k))]))
+    row_groups = np.concatenate([[0], np.cumsum(hi - lo), [choices.size + 1]])
+    no = np.zeros(k, dtype=bool)
+    small = MDP(matrix=sub, row_groups=row_groups,
+                choice_actions=np.zeros(choices.size + 1, dtype=np.int32), action_names=(),
+                initial=0, target=no, sink=no, truncated=no, states=range(k))
+    found = maximal_end_components(small, np.arange(k) < cand.size)
+    mec_of[cand] = found.mec_of[: cand.size]
+    internal[choices] = found.internal[: choices.size]
+    return EndComponents(read_only(mec_of), read_only(internal), found.n_mecs)
+
+
+def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
+           level_of: np.ndarray) -> Blocks:
+    """The quotient's components (``comp_of``, per reduced state, ids of the product's
+    components) and levels (``level_of`` per product component), renumbered densely."""
+    n = row_groups.shape[0] - 1
+    ids = unique(comp_of)
+    component = np.searchsorted(ids, comp_of)
+    raw_level = level_of[ids]
+    used = unique(raw_level)
+    level = np.searchsorted(used, raw_level)
+    state_level = level[component]
+    by_level = np.argsort(state_level, kind="stable")
+    level_starts = np.searchsorted(state_level[by_level], np.arange(used.size + 1))
+    n_choices = q_matrix.shape[0]
+    owner = np.repeat(np.arange(n), np.diff(row_groups))
+    entry_row = np.repeat(np.arange(n_choices), np.diff(q_matrix.indptr))
+    hit = q_matrix.indices == owner[entry_row]
+    self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
+    return Blocks(
+        component=read_only(component),
+        level=read_only(level),
+        size=read_only(np.bincount(component, minlength=ids.size)),
+        by_level=read_only(by_level),
+        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
+        self_loop=read_only(self_loop),
+    )
+
+
+def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
+            ) -> tuple[Quotient, Quotient]:
+    """The quotients for reaching ``goal`` and for reaching ``goal | extra`` (module
+    docs), from one analysis, sharing their matrix, end components and block order.
+    With ``extra`` None or empty both are the same object."""
+    goal = as_state_mask(mdp, goal, "goal")
+    extra = np.zeros_like(goal) if extra is None else as_state_mask(mdp, extra, "extra")
+    extra = extra & ~goal
+    m = sp.csr_array(mdp.matrix)
+    if m.nnz and not bool(np.all(m.data > 0)):  # a zero entry is not an edge
+        m = m.copy()
+        m.eliminate_zeros()
+        mdp = _with_matrix(mdp, m)
+    wide = goal | extra
+    graph = graph_view(m, mdp.row_groups)
+    levels = _levels(graph, np.column_stack([goal, wide]))
+    reach = levels.reach[levels.component]
+    maybe = reach[:, 1] & ~wide
+    mecs = _end_components(mdp, levels.component, maybe)
+    del graph
+
+    n = mdp.n_states
+    plain = maybe & (mecs.mec_of < 0)
+    n_plain = int(plain.sum())
+    state_map = np.full(n, -1, dtype=np.int64)
+    state_map[plain] = np.arange(n_plain)
+    in_mec = mecs.mec_of >= 0
+    state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
+    n_red = n_plain + mecs.n_mecs
+
+    cstate = mdp.choice_state()
+    kept = np.flatnonzero(maybe[cstate] & ~mecs.internal)
+    if mecs.n_mecs:
+        kept = kept[np.argsort(state_map[cstate[kept]], kind="stable")]
+    counts = np.bincount(state_map[cstate[kept]], minlength=n_red)
+    del cstate
+    row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    rows = sp.csr_array(m[kept]) if kept.size != mdp.n_choices else m.copy()
+    to_goal = np.asarray(rows @ goal.astype(np.float64)).ravel()
+    to_extra = np.asarray(rows @ extra.astype(np.float64)).ravel() if extra.any() else None
+    cols = state_map[rows.indices]
+    gone = cols < 0
+    data = rows.data
+    data[gone] = 0.0
+    cols[gone] = 0
+    index = np.int32 if n_red < 2**31 and rows.nnz < 2**31 else np.int64
+    matrix = sp.csr_array((data, cols.astype(index), rows.indptr.astype(index)),
+                          shape=(kept.size, n_red))
+    del rows, cols, gone
+    if mecs.n_mecs:
+        matrix.sum_duplicates()
+    matrix.eliminate_zeros()
+
+    comp_of = np.zeros(n_red, dtype=np.int64)
+    comp_of[state_map[maybe]] = levels.component[maybe]
+    order = _order(matrix, row_groups, comp_of, levels.level)
+    init = int(mdp.initial)
+
+    def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
+        prob0 = ~reach[:, j] & ~target
+        zero = np.zeros(n_red, dtype=bool)
+        zero[state_map[maybe & prob0]] = True
+        initial_value = 1.0 if target[init] else (0.0 if prob0[init] else float("nan"))
+        return Quotient(
+            target=read_only(target.copy()), prob0=read_only(prob0),
+            state_map=read_only(state_map), mecs=mecs, n_plain=n_plain, matrix=matrix,
+            to_target=read_only(to_target), row_groups=read_only(row_groups),
+            choice_origin=read_only(kept), initial=int(state_map[init]),
+            initial_value=initial_value if state_map[init] < 0 else float("nan"),
+            order=order, zero=read_only(zero))
+
+    if to_extra is None:
+        one = quotient(goal, to_goal, 1)
+        return one, one
+    return quotient(goal, to_goal, 0), quotient(wide, to_goal + to_extra, 1)
+
+
+def _with_matrix(mdp: MDP, matrix: sp.csr_array) -> MDP:
+    return MDP(matrix=matrix, row_groups=mdp.row_groups, choice_actions=mdp.choice_actions,
+               action_names=mdp.action_names, initial=mdp.initial, target=mdp.target,
+               sink=mdp.sink, truncated=mdp.truncated, states=mdp.states)
+

@@ -1,0 +1,108 @@
+"""The one graph analysis both truncation models share (mitld_lp.solvers.analysis),
+checked against references written differently: reachability by boolean matrix
+closure, end components by the naive refinement of test_mdp, values by dense value
+iteration on the raw MDP, components by scipy on the dense quotient graph."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+from test_mdp import naive_mecs
+
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.analysis import analyse
+from mitld_lp.solvers.iteration import interval_iteration
+from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.testing import random_mdp
+
+
+def _split(mdp: MDP, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The random MDP's targets split into a goal and an 'extra' (truncated) set."""
+    rng = np.random.default_rng(seed)
+    extra = mdp.target & (rng.random(mdp.n_states) < 0.5)
+    return mdp.target & ~extra, extra
+
+
+def _can_reach(mdp: MDP, seeds: np.ndarray) -> np.ndarray:
+    """States with a path to ``seeds``: closure of the dense adjacency by squaring."""
+    adj = np.zeros((mdp.n_states, mdp.n_states), dtype=bool)
+    dense = mdp.matrix.toarray() > 0
+    for s in range(mdp.n_states):
+        adj[s] = dense[mdp.choices(s)].any(axis=0)
+    reach = adj | np.eye(mdp.n_states, dtype=bool)
+    for _ in range(int(np.ceil(np.log2(mdp.n_states))) + 1):
+        reach = (reach.astype(np.int64) @ reach.astype(np.int64)) > 0
+    return reach[:, seeds].any(axis=1)
+
+
+def _dense_values(mdp: MDP, target: np.ndarray, sweeps: int = 20_000) -> np.ndarray:
+    """Maximal reach probabilities by plain value iteration from 0 on the raw MDP."""
+    p = mdp.matrix.toarray()
+    v = target.astype(float)
+    starts = mdp.row_groups[:-1]
+    for _ in range(sweeps):
+        v = np.where(target, 1.0, np.maximum.reduceat(p @ v, starts))
+    return v
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_shared_analysis_matches_references(seed: int) -> None:
+    mdp = random_mdp(40 + 5 * seed, seed=seed, target_fraction=0.15, sink_fraction=0.1,
+                     self_loop_fraction=0.3, max_successors=3,
+                     locality=None if seed % 2 else 4)
+    goal, extra = _split(mdp, seed)
+    low, high = analyse(mdp, goal, extra)
+    wide = goal | extra
+    assert np.array_equal(low.prob0, ~_can_reach(mdp, goal) & ~goal)
+    assert np.array_equal(high.prob0, ~_can_reach(mdp, wide) & ~wide)
+    maybe = ~wide & ~high.prob0
+    assert np.array_equal(high.state_map >= 0, maybe)
+    got = {frozenset(high.mecs.states_of(k).tolist()) for k in range(high.mecs.n_mecs)}
+    assert got == naive_mecs(mdp, set(np.flatnonzero(maybe).tolist()))
+    # one matrix for both; the lower model keeps the states that reach only `extra`
+    assert low.matrix is high.matrix
+    kept_zero = np.zeros(low.n_states, dtype=bool)
+    kept_zero[low.state_map[maybe & low.prob0]] = True
+    assert np.array_equal(low.zero, kept_zero) and not high.zero.any()
+    # the order: components strongly connected, every edge between them going down
+    order = high.order
+    dense = (high.matrix.toarray() > 0)
+    graph = np.zeros((high.n_states, high.n_states), dtype=bool)
+    for r in range(high.n_states):
+        graph[r] = dense[high.row_groups[r]:high.row_groups[r + 1]].any(axis=0)
+    _, scc = csgraph.connected_components(sp.csr_array(graph.astype(float)),
+                                          directed=True, connection="strong")
+    same = order.component[:, None] == order.component[None, :]
+    assert np.array_equal(same, scc[:, None] == scc[None, :])
+    src, dst = np.nonzero(graph)
+    cross = order.component[src] != order.component[dst]
+    level = order.level[order.component]
+    assert np.all(level[src[cross]] > level[dst[cross]])
+    # values of both models, by the solvers on the shared quotients
+    for q, target in ((low, goal), (high, wide)):
+        want = _dense_values(mdp, target)
+        it = interval_iteration(mdp, target, quotient=q, gap="max", progress=False)
+        assert np.allclose(it.lower, want, atol=1e-8) and np.allclose(it.upper, want, atol=1e-8)
+        lp = solve_lp(mdp, target, quotient=q, everywhere=True)
+        assert lp.values is not None and np.allclose(lp.values, want, atol=1e-8)
+
+
+def test_no_extra_gives_one_quotient() -> None:
+    mdp = random_mdp(50, seed=3)
+    low, high = analyse(mdp, mdp.target, np.zeros(mdp.n_states, dtype=bool))
+    assert low is high and not low.zero.any()
+
+
+def test_zero_entries_are_not_edges() -> None:
+    # state 0 -> 1 with probability 0 stored explicitly: 0 cannot reach the target 1
+    m = sp.csr_array((np.array([1.0, 0.0, 1.0, 1.0]), np.array([0, 1, 1, 2]),
+                      np.array([0, 2, 3, 4])), shape=(3, 3))
+    no = np.zeros(3, dtype=bool)
+    mdp = MDP(matrix=m, row_groups=np.array([0, 1, 2, 3]),
+              choice_actions=np.array([0, -1, -1], dtype=np.int32), action_names=("a",),
+              initial=0, target=np.array([False, True, False]), sink=no, truncated=no,
+              states=(0, 1, 2))
+    low, _ = analyse(mdp, mdp.target)
+    assert low.prob0[0] and low.initial == -1 and low.initial_value == 0.0
