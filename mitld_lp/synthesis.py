@@ -404,7 +404,6 @@ def synthesize(
     how = _Settings(method, solver, backend, tol, certify_tol, progress, decompose,
                     float("inf") if time_limit is None else t0 + time_limit)
     from mitld_lp.acceptance import acceptance
-
     from mitld_lp.solvers.analysis import analyse
 
     accept = acceptance(mdp, built.dta)
