@@ -221,7 +221,8 @@ def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> Mo
     policy, value, status = it.policy, it.value_lower, it.status
     if how.method == "lp":
         lp = solve_lp(mdp, target, quotient=quotient, solver=how.solver, backend=how.backend,
-                      tol=tol, decompose=how.decompose, time_limit=remaining())
+                      tol=tol, decompose=how.decompose, time_limit=remaining(),
+                      bounds=(it.lower, it.upper))
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))

@@ -285,6 +285,25 @@ def _block_lp(block: Block, values: np.ndarray) -> Matrices:
     return Matrices(_flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
 
 
+def _may_be_optimal(block: Block, reward: np.ndarray, lo: np.ndarray,
+                    hi: np.ndarray) -> np.ndarray:
+    r"""The block's choices that can be optimal, given sound bounds ``lo <= v* <= hi``
+    on its states: a choice whose upper Q-bound :math:`r(c) + \sum_{s'} P(c, s')
+    hi(s')` is below its state's lower bound is not (it loses to the optimum).  Each
+    state keeps its choice of largest upper Q-bound, so rounding never empties a state."""
+    groups = block.groups
+    q_hi = reward + block.inner @ hi
+    keep = q_hi >= np.repeat(lo, np.diff(groups)) - _PRUNE_MARGIN
+    keep[segmented_argmax(q_hi, groups)] = True
+    return keep
+
+
+_PRUNE_MARGIN = 1e-12
+"""A choice is left out only if its upper Q-bound is below the state's lower bound by
+more than this (rounding in the bounds); what is left out is checked afterwards anyway
+(:func:`_polish` improves over every choice of the block)."""
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class _Polished:
     """A block's answer after the crossover: exact values of an optimal policy."""
@@ -324,11 +343,15 @@ def _polish(block: Block, lp: Matrices, y: np.ndarray, tol: float) -> _Polished:
                      bool(np.min(slack, initial=0.0) >= -tie))
 
 
-def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Answer | Raw:
+def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
+                      bounds: tuple[np.ndarray, np.ndarray] | None) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by :func:`_polish`; the occupancy of
     the resulting randomised policy from ``b_eq`` is the primal point, the values the
-    dual one."""
+    dual one.  With sound ``bounds`` on the reduced states' values, a block's LP has
+    only the columns of the choices that may be optimal (:func:`_may_be_optimal`); the
+    polish then checks every choice of the block against the exact values, so the
+    values are those of the whole LP (its duals satisfy every constraint)."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
@@ -336,7 +359,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Ans
     reduced_choice = np.asarray(q.row_groups[:-1], dtype=np.int64).copy()
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
-    iterations = calls = 0
+    iterations = calls = n_columns = n_kept = 0
     for level in range(blk.n_levels):
         states = blk.states_at(level)
         states = states[~q.zero[states]]
@@ -349,13 +372,20 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Ans
             continue
         block = Block.of(q, rest)
         lp = _block_lp(block, values)
-        raw = solve_one(lp, settings, retry=False)
+        columns = (np.arange(block.choices.size) if bounds is None else np.flatnonzero(
+            _may_be_optimal(block, lp.objective, bounds[0][rest], bounds[1][rest])))
+        raw = solve_one(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
+                                 lp.objective[columns]), settings, retry=False)
         iterations += raw.iterations
         calls += 1
+        n_columns += block.choices.size
+        n_kept += columns.size
         if raw.y is None or raw.v is None:
             return Raw(raw.status, f"{raw.message} (block LP of level {level}, "
                         f"{rest.size} states)", iterations=iterations)
-        polished = _polish(block, lp, np.maximum(raw.y, 0.0), settings.tol)
+        y = np.zeros(block.choices.size)
+        y[columns] = np.maximum(raw.y, 0.0)
+        polished = _polish(block, lp, y, settings.tol)
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
                          "iteration did not settle")
@@ -368,6 +398,8 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings) -> _Ans
     y = _policy_flow(q, blk, weights, b_eq)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
+               + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"
+                  if bounds is not None and calls else "")
                + (f"; {worst.message}" if worst.message else ""))
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
@@ -388,6 +420,7 @@ def solve_lp(
     decompose: bool = True,
     time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> LPResult:
     """Maximal probability of reaching ``target`` from ``mdp.initial``, by the occupancy LP.
 
@@ -412,6 +445,11 @@ def solve_lp(
         time_limit: seconds; past it the result has status ``TIME_LIMIT``.
         solver_options: extra keywords for the solver (override the tolerance ones),
             e.g. ``{"max_iter": 50}`` for Clarabel.
+        bounds: sound lower and upper bounds on the optimal value of every state
+            (``(n_states,)`` each, interval iteration's ``lower`` and ``upper``): with
+            ``decompose``, a block's LP leaves out the choices they prove suboptimal
+            (every choice is still checked against the exact values afterwards, so a
+            wrong bound costs time, never the answer).
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -451,13 +489,28 @@ def solve_lp(
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
             greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
     elif decompose:
-        answer = _solve_decomposed(q, b_eq, settings)
+        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds))
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
     if isinstance(answer, Raw):
         return failed(answer)
     return _result(mdp, q, answer, settings, start, shape)
+
+
+def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per-state ``bounds`` read on the reduced states (a collapsed end component's
+    members share their value, so any member speaks for it)."""
+    if bounds is None:
+        return None
+    kept = np.flatnonzero(q.state_map >= 0)
+    rep = np.zeros(q.n_states, dtype=np.int64)
+    rep[q.state_map[kept]] = kept
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    if lo.shape != q.state_map.shape or hi.shape != q.state_map.shape:
+        raise ValueError(f"bounds: expected two arrays of shape {q.state_map.shape}")
+    return lo[rep], hi[rep]
 
 
 def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: Settings, start: float,

@@ -1,0 +1,61 @@
+"""Block LPs over the choices the interval-iteration bounds leave possible: the values
+are those of the whole LP (dense value iteration on the raw MDP), the columns left out
+are exactly the provably suboptimal ones, and wrong bounds cost time, not the answer."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from test_analysis import _dense_values
+
+from mitld_lp.solvers.iteration import interval_iteration
+from mitld_lp.solvers.lp import _may_be_optimal, solve_lp
+from mitld_lp.solvers.quotient import reduce
+from mitld_lp.solvers.topological import Block
+from mitld_lp.testing import random_mdp
+
+
+def _mdp(seed: int):  # big strongly connected parts: the block LPs do the work
+    return random_mdp(80, seed=seed, target_fraction=0.08, sink_fraction=0.08,
+                      self_loop_fraction=0.0, max_choices=4, max_successors=3)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pruned_block_lps_give_the_whole_lps_values(seed: int) -> None:
+    mdp = _mdp(seed)
+    want = _dense_values(mdp, mdp.target)
+    it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    plain = solve_lp(mdp, mdp.target, everywhere=True)
+    pruned = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
+    kept, total = map(int, re.search(r"\((\d+) of (\d+) block columns may be optimal",
+                                      pruned.message).groups())
+    assert 0 < kept < total  # some choices were left out, not all
+    for r in (plain, pruned):
+        assert r.values is not None and np.allclose(r.values, want, atol=1e-8)
+        assert r.status.value == "optimal"
+    # wrong bounds (lower above the truth) prune optimal choices: the polish restores
+    wrong = solve_lp(mdp, mdp.target, everywhere=True,
+                     bounds=(np.minimum(want + 0.3, 1.0), np.minimum(want + 0.3, 1.0)))
+    assert wrong.values is not None and np.allclose(wrong.values, want, atol=1e-8)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_left_out_are_exactly_the_suboptimal_choices(seed: int) -> None:
+    mdp = _mdp(seed)
+    q = reduce(mdp, mdp.target)
+    want = _dense_values(mdp, mdp.target)
+    v_red = np.zeros(q.n_states)
+    kept = np.flatnonzero(q.state_map >= 0)
+    v_red[q.state_map[kept]] = want[kept]
+    states = np.arange(q.n_states)
+    block = Block.of(q, states)
+    reward = q.to_target[block.choices]  # no states downstream: the whole quotient
+    keep = _may_be_optimal(block, reward, v_red, v_red)  # exact bounds
+    q_star = reward + block.inner @ v_red
+    owner = np.repeat(states, np.diff(block.groups))
+    best = q_star >= v_red[owner] - 1e-9
+    assert np.all(keep[best])  # no optimal choice is left out
+    loses = q_star < v_red[owner] - 1e-6
+    assert not np.any(keep & loses)  # every clearly losing one is
