@@ -237,7 +237,7 @@ def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> Mo
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    values = read_only(evaluate_policy(mdp, target, policy))
+    values = read_only(evaluate_policy(mdp, target, policy, layers=quotient.layers))
     exact = float(values[mdp.initial])
     lo, hi = it.value_lower, it.value_upper
     checks.append(Check(

@@ -106,3 +106,38 @@ def test_zero_entries_are_not_edges() -> None:
               states=(0, 1, 2))
     low, _ = analyse(mdp, mdp.target)
     assert low.prob0[0] and low.initial == -1 and low.initial_value == 0.0
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_policy_evaluated_on_the_analysis_layers(seed: int) -> None:
+    """A random policy's chain solved in the product's order (no decomposition of its
+    own) gives the values of a dense solve of the chain."""
+    from mitld_lp.mdp import absorbing_states
+    from mitld_lp.solvers.iteration import evaluate_policy
+
+    mdp = random_mdp(60, seed=seed, self_loop_fraction=0.2, locality=None if seed % 2 else 5)
+    low, _ = analyse(mdp, mdp.target)
+    rng = np.random.default_rng(seed)
+    lo, hi = mdp.row_groups[:-1], mdp.row_groups[1:]
+    policy = lo + (rng.random(mdp.n_states) * (hi - lo)).astype(np.int64)
+    policy[mdp.target | absorbing_states(mdp)] = -1
+    p = mdp.matrix.toarray()
+    chain = np.zeros((mdp.n_states, mdp.n_states))
+    acting = policy >= 0
+    chain[acting] = p[policy[acting]]
+    reach = _can_reach_chain(chain, mdp.target)
+    solve = acting & reach & ~mdp.target
+    want = mdp.target.astype(float)
+    sub = chain[np.ix_(solve, solve)]
+    rhs = chain[np.ix_(solve, mdp.target)].sum(axis=1)
+    want[solve] = np.linalg.solve(np.eye(int(solve.sum())) - sub, rhs)
+    got = evaluate_policy(mdp, mdp.target, policy, layers=low.layers)
+    assert np.allclose(got, want, atol=1e-10)
+    assert np.allclose(evaluate_policy(mdp, mdp.target, policy), want, atol=1e-10)
+
+
+def _can_reach_chain(chain: np.ndarray, target: np.ndarray) -> np.ndarray:
+    reach = target.copy()
+    for _ in range(chain.shape[0]):
+        reach = reach | ((chain > 0) @ reach.astype(float) > 0)
+    return reach

@@ -39,7 +39,7 @@ from mitld_lp.arrays import unique
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.quotient import EndComponents, Quotient, maximal_end_components
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.topological import Blocks, gather_ranges, graph_view
+from mitld_lp.solvers.topological import Blocks, blocks_from, gather_ranges, graph_view
 
 __all__ = ["analyse"]
 
@@ -104,12 +104,12 @@ def _end_components(mdp: MDP, comp: np.ndarray,
     n = mdp.n_states
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
     m = mdp.matrix
-    owner = np.repeat(np.arange(n), np.diff(m.indptr[mdp.row_groups]))
-    stays = (m.indices == owner).astype(np.int64)
-    del owner
-    row_len = np.diff(m.indptr)
-    pure = np.add.reduceat(stays, m.indptr[:-1]) == row_len if stays.size else row_len == 0
-    del stays
+    # a choice that stays put: all its entries (no zeros are stored) in its own column
+    first = m.indptr[:-1]
+    lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
+    hi = np.maximum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
+    pure = (lo == hi) & (lo == mdp.choice_state())
+    del lo, hi
     loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
     cand = np.flatnonzero(maybe & ((size[comp] > 1) | loops))
     mec_of = np.full(n, -1, dtype=np.int64)
@@ -139,29 +139,15 @@ def _end_components(mdp: MDP, comp: np.ndarray,
 def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
            level_of: np.ndarray) -> Blocks:
     """The quotient's components (``comp_of``, per reduced state, ids of the product's
-    components) and levels (``level_of`` per product component), renumbered densely."""
+    components) and levels (``level_of`` per product component), with each reduced
+    choice's probability of staying where it is."""
     n = row_groups.shape[0] - 1
-    ids = unique(comp_of)
-    component = np.searchsorted(ids, comp_of)
-    raw_level = level_of[ids]
-    used = unique(raw_level)
-    level = np.searchsorted(used, raw_level)
-    state_level = level[component]
-    by_level = np.argsort(state_level, kind="stable")
-    level_starts = np.searchsorted(state_level[by_level], np.arange(used.size + 1))
     n_choices = q_matrix.shape[0]
     owner = np.repeat(np.arange(n), np.diff(row_groups))
     entry_row = np.repeat(np.arange(n_choices), np.diff(q_matrix.indptr))
     hit = q_matrix.indices == owner[entry_row]
     self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
-    return Blocks(
-        component=read_only(component),
-        level=read_only(level),
-        size=read_only(np.bincount(component, minlength=ids.size)),
-        by_level=read_only(by_level),
-        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
-        self_loop=read_only(self_loop),
-    )
+    return blocks_from(comp_of, level_of, self_loop)
 
 
 def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
@@ -220,6 +206,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     comp_of = np.zeros(n_red, dtype=np.int64)
     comp_of[state_map[maybe]] = levels.component[maybe]
     order = _order(matrix, row_groups, comp_of, levels.level)
+    layers = (read_only(levels.component), read_only(levels.level))
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
@@ -233,7 +220,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
             to_target=read_only(to_target), row_groups=read_only(row_groups),
             choice_origin=read_only(kept), initial=int(state_map[init]),
             initial_value=initial_value if state_map[init] < 0 else float("nan"),
-            order=order, zero=read_only(zero))
+            order=order, zero=read_only(zero), layers=layers)
 
     if to_extra is None:
         one = quotient(goal, to_goal, 1)

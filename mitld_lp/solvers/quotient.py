@@ -222,6 +222,9 @@ class Quotient:
             quotient shared with a larger target (:func:`mitld_lp.solvers.analysis.
             analyse`) keeps the states that reach only the larger one; empty for
             :func:`reduce`'s own.
+        layers: the component of each *original* state in the product's support graph
+            and the level of each component: the order in which a policy's chain is
+            evaluated (:func:`mitld_lp.solvers.iteration.evaluate_policy`).
     """
 
     target: np.ndarray
@@ -237,6 +240,7 @@ class Quotient:
     initial_value: float
     order: Blocks
     zero: np.ndarray
+    layers: tuple[np.ndarray, np.ndarray]
 
     @property
     def n_states(self) -> int:

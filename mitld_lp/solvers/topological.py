@@ -40,6 +40,7 @@ __all__ = [
     "Blocks",
     "LevelUpdate",
     "blocks",
+    "blocks_from",
     "evaluate_chain",
     "gather_ranges",
     "graph_blocks",
@@ -124,6 +125,31 @@ def blocks(q: Quotient) -> Blocks:
     """The SCCs of ``q``'s state graph and their levels: the order the analysis that
     made ``q`` found (:mod:`mitld_lp.solvers.analysis`), not computed again."""
     return q.order
+
+
+def blocks_from(component: np.ndarray, level_of: np.ndarray, self_loop: np.ndarray,
+                ) -> Blocks:
+    """The :class:`Blocks` of states whose components (``component``, ids of a larger
+    graph's) and levels (``level_of[component]``) are known: ids and levels renumbered
+    densely, the order kept.  A layering of a graph is one of every subgraph (an edge
+    between components goes down there too), so a decomposition found once serves
+    every chain of every policy on it."""
+    ids = unique(component)
+    dense = np.searchsorted(ids, component)
+    raw = np.asarray(level_of)[ids]
+    used = unique(raw)
+    level = np.searchsorted(used, raw)
+    state_level = level[dense]
+    by_level = np.argsort(state_level, kind="stable")
+    level_starts = np.searchsorted(state_level[by_level], np.arange(used.size + 1))
+    return Blocks(
+        component=read_only(dense),
+        level=read_only(level),
+        size=read_only(np.bincount(dense, minlength=ids.size)),
+        by_level=read_only(by_level),
+        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
+        self_loop=read_only(np.asarray(self_loop, dtype=np.float64)),
+    )
 
 
 def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
@@ -298,14 +324,19 @@ def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
     return chosen, v, t
 
 
-def solve_chain(chain: sp.csr_array, b: np.ndarray) -> np.ndarray:
+def solve_chain(chain: sp.csr_array, b: np.ndarray,
+                layers: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     r"""Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``), level by
     level downstream first: a single state by :math:`x(s) = (b(s) + \sum_{s' \ne s}
     Q(s, s') x(s')) / (1 - Q(s, s))`, a non-trivial component by one sparse LU of its
     own size.  No iterative method and no multi-threaded BLAS call, so a loaded machine
-    cannot make it crawl, and no fill-in across components."""
+    cannot make it crawl, and no fill-in across components.  ``layers``: the component
+    of each state and the level of each component in a graph that contains the chain's
+    (the analysis of its MDP, :func:`blocks_from`); else the chain is decomposed here.
+    A level's states in non-trivial components are solved together by one LU."""
     chain = sp.csr_array(chain)
-    blk = graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
+    blk = (graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
+           if layers is None else blocks_from(layers[0], layers[1], chain.diagonal()))
     x = np.zeros(b.shape[0])
     for level in range(blk.n_levels):
         states = blk.states_at(level)
