@@ -225,3 +225,21 @@ def test_bench_drn(tmp_path):
         assert int(r["transitions"]) > int(r["states"]) > 0
         assert float(r["storm_read_cpu_s"]) > 0
     assert not list(tmp_path.glob("*.drn"))  # the scratch files are removed
+
+
+def test_bench_sweeps(tmp_path):
+    """The sweeps benchmark: every instance solved, certified and agreeing with each of
+    Storm's sound methods on the DRN; costs counted in sweeps; the case as processes."""
+    _run("bench_sweeps", tmp_path)
+    rows = _csv(tmp_path / "bench_sweeps.csv")
+    solved = [r for r in rows if r["states"]]
+    assert [r["instance"] for r in solved] == ["bus_n8_d3", "events_n8_d4"]
+    for r in solved:
+        assert r["storm_agrees"] == "True" and r["certified"] == "True"
+        assert float(r["sweep_ms"]) > 0 and float(r["solve_sweeps"]) > 0
+        assert float(r["storm_check_cpu"]) > 0
+        assert r["storm_best"] in {"sound_value_iteration", "interval_iteration",
+                                   "optimistic_value_iteration", "topological"}
+    (case,) = [r for r in rows if not r["states"]]
+    assert float(case["whole_cpu"]) > 0 and float(case["storm_prism_cpu"]) > 0
+    assert (tmp_path / "bench_sweeps.md").read_text().startswith("| instance |")
