@@ -10,8 +10,9 @@ whose three clocks are not memoryless, so both truncation models are solved):
 * ``ours``: a fresh child process runs ``synthesize`` with its defaults on the model
   (the whole default route: automaton, product, analysis, interval iteration, pruned
   block LPs through Clarabel, exact evaluation, certificate); the *solve stage* is
-  everything after the product is built (``SynthesisResult.solve_cpu``).  Its peak memory over the resident size before the run, per
-  transition, is ``bytes_per_transition``; it then writes the DRN;
+  everything after the product is built (``SynthesisResult.solve_cpu``).  Its peak
+  memory over the resident size before the run, per transition, is
+  ``bytes_per_transition``; it then writes the DRN;
 * ``storm_check``: another child reads that DRN with stormpy and checks
   ``Pmax=? [F "target"]`` with each of Storm's sound methods (sound value iteration,
   interval iteration, optimistic value iteration, topological; ``force_soundness``,
@@ -72,10 +73,10 @@ def _rss_kb() -> int:
 
 
 def work_ours(inst: Instance, work: Path) -> dict[str, Any]:
-    import numpy as np
-
     import clarabel  # noqa: F401  (imports before the clock, as Storm's are)
+    import numpy as np
     import scipy.sparse.csgraph  # noqa: F401
+
     from mitld_lp import Model, synthesize
     from mitld_lp.solvers import write_drn
 
