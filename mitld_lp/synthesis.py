@@ -192,16 +192,18 @@ class _Settings:
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
 
-def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> ModelSolution:
+def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
+                 how: _Settings) -> ModelSolution:
     """Solve one model by ``how.method`` and certify it (module docs).
 
     Every solver works on the model's :class:`Quotient` (made by the one analysis of the
-    product both models share, :func:`mitld_lp.solvers.analysis.analyse`).  An LP
+    product both models share, :func:`mitld_lp.solvers.analysis.analyse`); ``it`` is its
+    interval iteration (both models are iterated in one pass, :func:`_iterate`).  An LP
     that does not come back optimal (after its own retries) is replaced by the
     interval-iteration policy, certified the same way (exact value inside the bracket)
     when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``).
     """
-    from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+    from mitld_lp.solvers.iteration import evaluate_policy
     from mitld_lp.solvers.lp import solve_lp
     from mitld_lp.solvers.result import Status, read_only
 
@@ -213,8 +215,6 @@ def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> Mo
             return None
         return max(0.0, how.deadline - time.perf_counter())
 
-    it = interval_iteration(mdp, target, quotient=quotient, tol=tol, progress=how.progress,
-                            time_limit=remaining())
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
@@ -251,6 +251,15 @@ def _solve_model(mdp: MDP, quotient: Quotient, which: str, how: _Settings) -> Mo
     checks.append(_bellman(mdp, target, values, certify_tol))
     return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, quotient,
                          tuple(checks))
+
+
+def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
+    """Interval iteration of the models in one pass over their shared quotient."""
+    from mitld_lp.solvers.iteration import interval_iterations
+
+    left = None if how.deadline == float("inf") else max(0.0, how.deadline - time.perf_counter())
+    return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
+                               time_limit=left)
 
 
 def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
@@ -410,8 +419,13 @@ def synthesize(
 
     accept = acceptance(mdp, built.dta)
     low_q, high_q = analyse(mdp, accept.goal, mdp.truncated)
-    low = _solve_model(mdp, low_q, "lower", how)
-    high = low if high_q is low_q else _solve_model(mdp, high_q, "upper", how)
+    if high_q is low_q:
+        (low_it,) = _iterate(mdp, [low_q], how)
+        low = high = _solve_model(mdp, low_q, low_it, "lower", how)
+    else:
+        low_it, high_it = _iterate(mdp, [low_q, high_q], how)
+        low = _solve_model(mdp, low_q, low_it, "lower", how)
+        high = _solve_model(mdp, high_q, high_it, "upper", how)
     low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0

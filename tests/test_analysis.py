@@ -141,3 +141,27 @@ def _can_reach_chain(chain: np.ndarray, target: np.ndarray) -> np.ndarray:
     for _ in range(chain.shape[0]):
         reach = reach | ((chain > 0) @ reach.astype(float) > 0)
     return reach
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_both_models_iterated_in_one_pass(seed: int) -> None:
+    """interval_iterations on the two shared quotients: each model's bounds bracket its
+    values (dense value iteration), within the tolerance, like each model alone."""
+    from mitld_lp.solvers.iteration import interval_iterations
+
+    mdp = random_mdp(50 + 5 * seed, seed=seed, target_fraction=0.15, sink_fraction=0.1,
+                     self_loop_fraction=0.2, max_successors=3,
+                     locality=None if seed % 2 else 4)
+    goal, extra = _split(mdp, seed)
+    low, high = analyse(mdp, goal, extra)
+    both = interval_iterations(mdp, [low, high], gap="max", progress=False, tol=1e-9)
+    for q, target, it in ((low, goal, both[0]), (high, goal | extra, both[1])):
+        want = _dense_values(mdp, target)
+        assert it.status.value == "optimal"
+        assert np.all(it.lower <= want + 1e-12) and np.all(want <= it.upper + 1e-12)
+        assert np.max(it.upper - it.lower) < 1e-9
+        alone = interval_iteration(mdp, target, quotient=q, gap="max", progress=False)
+        assert np.allclose(alone.lower, it.lower, atol=1e-9)
+    with pytest.raises(ValueError, match="share their matrix"):
+        other = analyse(mdp, goal)[0]
+        interval_iterations(mdp, [low, other], progress=False)

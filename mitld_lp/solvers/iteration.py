@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -59,13 +60,13 @@ from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
     blocks,
+    gather_ranges,
     improve_policy,
     solve_chain,
-    solve_single_states,
     state_graph,
 )
 
-__all__ = ["interval_iteration", "evaluate_policy"]
+__all__ = ["interval_iteration", "interval_iterations", "evaluate_policy"]
 
 logger = logging.getLogger(__name__)
 
@@ -98,32 +99,33 @@ class _Budget:
         return True
 
 
-def _sweeps(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float, budget: _Budget,
-            width: Literal["initial", "max"], initial: int, bar: tqdm,
+def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
+            budget: _Budget, width: Literal["initial", "max"], initial: int, bar: tqdm,
             limit: int | None = None) -> bool:
-    """Iterate the block's bounds (``lo``, ``hi`` at ``block.states``) in place until
-    the gap is below ``tol`` (at ``initial`` or over the block); ``False`` if the budget
-    or ``limit`` sweeps ran out first."""
-    exit2 = block.exits(lo, hi)
-    local = np.column_stack([lo[block.states], hi[block.states]])
+    """Iterate the block's bounds in place (``bounds[block.states]``: a lower and an
+    upper column per model, ``exits`` their exit rewards per choice) until every
+    model's gap is below ``tol`` (at ``initial`` or over the block); ``False`` if the
+    budget or ``limit`` sweeps ran out first.  One sparse product serves every column."""
+    local = bounds[block.states]
 
     def gap() -> float:
+        spread = local[:, 1::2] - local[:, 0::2]
         if width == "initial" and initial >= 0:
-            return float(local[initial, 1] - local[initial, 0])
-        return float(np.max(local[:, 1] - local[:, 0], initial=0.0))
+            return float(np.max(spread[initial]))
+        return float(np.max(spread, initial=0.0))
 
     done = 0
     try:
         while gap() >= tol:
             if (limit is not None and done >= limit) or not budget.spend():
                 return False
-            local = np.maximum.reduceat(block.inner @ local + exit2, block.starts, axis=0)
+            local = np.maximum.reduceat(block.inner @ local + exits, block.starts, axis=0)
             done += 1
             if done % 100 == 0:
                 bar.update(100)
         return True
     finally:
-        lo[block.states], hi[block.states] = local[:, 0], local[:, 1]
+        bounds[block.states] = local
 
 
 def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
@@ -161,11 +163,32 @@ def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     return lower_ok and upper_ok
 
 
-def _topological(q: Quotient, lo: np.ndarray, hi: np.ndarray, tol: float,
+def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
+                   bounds: np.ndarray) -> None:
+    r"""The single-state components ``states`` solved exactly from the bounds
+    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` as in
+    :func:`mitld_lp.solvers.topological.solve_single_states` (``rewards``: the one-step
+    probability of the target per choice and column)."""
+    if states.size == 0:
+        return
+    lo, hi = q.row_groups[states], q.row_groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    bounds[states] = 0.0  # so that the product below sums the other successors only
+    reward = rewards[choices] + q.matrix[choices] @ bounds
+    leave = (1.0 - q.order.self_loop[choices])[:, None]
+    score = np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0)
+    np.clip(score, 0.0, 1.0, out=score)
+    bounds[states] = np.maximum.reduceat(score, np.concatenate([[0], np.cumsum(hi - lo)[:-1]]),
+                                         axis=0)
+
+
+def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
                  budget: _Budget, bar: tqdm, *, from_initial: bool) -> None:
-    """Fill ``lo`` and ``hi`` level by level (module docs); stops early out of budget.
-    ``from_initial``: only the states the initial state can reach (their successors are
-    reachable too, so nothing they need is skipped); the others keep ``[0, 1]``."""
+    """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
+    one-step target probabilities) level by level (module docs); stops early out of
+    budget.  ``from_initial``: only the states the initial state can reach (their
+    successors are reachable too, so nothing they need is skipped); the others keep
+    ``[0, 1]``."""
     blk = blocks(q)
     wanted = None
     if from_initial:
@@ -178,18 +201,24 @@ def _topological(q: Quotient, lo: np.ndarray, hi: np.ndarray, tol: float,
         if wanted is not None:
             states = states[wanted[states]]
         single = blk.single(states)
-        solve_single_states(q, blk, states[single], lo)
-        solve_single_states(q, blk, states[single], hi)
+        _single_states(q, states[single], rewards, bounds)
         rest = states[~single]
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        if _sweeps(block, lo, hi, tol, budget, "max", -1, bar, _SWEEPS_BEFORE_POLICY):
+        exits = rewards[block.choices] + block.outer @ bounds
+        if _sweeps(block, exits, bounds, tol, budget, "max", -1, bar, _SWEEPS_BEFORE_POLICY):
             continue
-        if (budget.stopped is None and _jump(block, lo, hi, tol)
-                and float(np.max(hi[rest] - lo[rest])) < tol):
-            continue
-        if not _sweeps(block, lo, hi, tol, budget, "max", -1, bar):
+        if budget.stopped is None:
+            proven = True
+            for j in range(bounds.shape[1] // 2):
+                model = replace(block, to_target=rewards[block.choices, 2 * j])
+                lo, hi = bounds[:, 2 * j], bounds[:, 2 * j + 1]  # views: written through
+                proven &= _jump(model, lo, hi, tol)
+            spread = bounds[rest][:, 1::2] - bounds[rest][:, 0::2]
+            if proven and float(np.max(spread)) < tol:
+                continue
+        if not _sweeps(block, exits, bounds, tol, budget, "max", -1, bar):
             return
 
 
@@ -219,10 +248,41 @@ def interval_iteration(
     (``[0, 1]`` where nothing was done).
     ``quotient``: ``reduce(mdp, target)`` if the caller already has it.
     """
-    start = time.perf_counter()
     q = quotient_for(mdp, target, quotient)
-    n = q.n_states
-    lo, hi = np.zeros(n), np.where(q.zero, 0.0, 1.0)
+    (result,) = interval_iterations(mdp, [q], tol=tol, max_iterations=max_iterations,
+                                    progress=progress, gap=gap, topological=topological,
+                                    time_limit=time_limit)
+    return result
+
+
+def interval_iterations(
+    mdp: MDP,
+    quotients: Sequence[Quotient],
+    *,
+    tol: float = defaults.TOL,
+    max_iterations: int = 1_000_000,
+    progress: bool = True,
+    gap: Literal["initial", "max"] = "initial",
+    topological: bool = True,
+    time_limit: float | None = None,
+) -> list[IterationResult]:
+    """:func:`interval_iteration` of several models in one pass: ``quotients`` share
+    their matrix and block order (both truncation models of a product, from
+    :func:`mitld_lp.solvers.analysis.analyse`) and differ in their one-step target
+    probabilities; each sweep updates the lower and upper bounds of every model with one
+    sparse product.  One result per quotient; the sweep count and the seconds are the
+    pass's."""
+    start = time.perf_counter()
+    q = quotients[0]
+    if any(other.matrix is not q.matrix or other.order is not q.order
+           for other in quotients[1:]):
+        raise ValueError("quotients: iterated together only when they share their matrix "
+                         "and block order (one analysis)")
+    n, k = q.n_states, len(quotients)
+    rewards = np.repeat(np.column_stack([o.to_target for o in quotients]), 2, axis=1)
+    bounds = np.zeros((n, 2 * k))
+    for j, o in enumerate(quotients):
+        bounds[:, 2 * j + 1] = np.where(o.zero, 0.0, 1.0)
     budget = _Budget(max_iterations,
                      start + time_limit if time_limit is not None else np.inf)
     bar = tqdm(
@@ -233,13 +293,25 @@ def interval_iteration(
     try:
         if n and not decided:
             if topological:
-                _topological(q, lo, hi, tol, budget, bar, from_initial=gap == "initial")
+                _topological(q, rewards, bounds, tol, budget, bar,
+                             from_initial=gap == "initial")
             else:
-                _sweeps(Block.of(q, np.arange(n)), lo, hi, tol, budget, gap, q.initial, bar)
+                whole = Block.of(q, np.arange(n))
+                _sweeps(whole, rewards[whole.choices] + whole.outer @ bounds, bounds, tol,
+                        budget, gap, q.initial, bar)
     finally:
         bar.close()
-    bounds = np.column_stack([lo, hi])
     np.clip(bounds, 0.0, 1.0, out=bounds)  # rounding can push the upper bound past 1
+    seconds = time.perf_counter() - start
+    return [_result(mdp, o, bounds[:, 2 * j:2 * j + 2], tol, gap, decided, budget, seconds,
+                    time_limit) for j, o in enumerate(quotients)]
+
+
+def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
+            gap: Literal["initial", "max"], decided: bool, budget: _Budget, seconds: float,
+            time_limit: float | None) -> IterationResult:
+    """One model's bounds of the pass as its :class:`IterationResult`."""
+    n = q.n_states
     width = 0.0 if n == 0 or decided else (
         float(bounds[q.initial, 1] - bounds[q.initial, 0]) if gap == "initial"
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
@@ -247,7 +319,6 @@ def interval_iteration(
     lower = q.lift(bounds[:, 0])
     upper = q.lift(bounds[:, 1])
     policy = lift_policy(mdp, q, greedy_choices(q, bounds[:, 0]) if n else np.zeros(0, int))
-    seconds = time.perf_counter() - start
     message = (
         f"gap ({gap}) {width:.3e} {'<' if status == Status.OPTIMAL else '>='} tol {tol:.1e} "
         f"after {budget.iterations} iterations"
