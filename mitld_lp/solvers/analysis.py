@@ -29,7 +29,7 @@ and never decompose the graph again.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -162,7 +162,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     if m.nnz and not bool(np.all(m.data > 0)):  # a zero entry is not an edge
         m = m.copy()
         m.eliminate_zeros()
-        mdp = _with_matrix(mdp, m)
+        mdp = replace(mdp, matrix=m)
     wide = goal | extra
     graph = graph_view(m, mdp.row_groups)
     levels = _levels(graph, np.column_stack([goal, wide]))
@@ -226,10 +226,4 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
         one = quotient(goal, to_goal, 1)
         return one, one
     return quotient(goal, to_goal, 0), quotient(wide, to_goal + to_extra, 1)
-
-
-def _with_matrix(mdp: MDP, matrix: sp.csr_array) -> MDP:
-    return MDP(matrix=matrix, row_groups=mdp.row_groups, choice_actions=mdp.choice_actions,
-               action_names=mdp.action_names, initial=mdp.initial, target=mdp.target,
-               sink=mdp.sink, truncated=mdp.truncated, states=mdp.states)
 
