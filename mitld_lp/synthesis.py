@@ -191,6 +191,12 @@ class _Settings:
     decompose: bool
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
+    def remaining(self) -> float | None:
+        """Seconds left before the deadline (None: no deadline)."""
+        if self.deadline == float("inf"):
+            return None
+        return max(0.0, self.deadline - time.perf_counter())
+
 
 def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
                  how: _Settings) -> ModelSolution:
@@ -210,11 +216,6 @@ def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
     target = np.asarray(quotient.target)
     tol, certify_tol = how.tol, how.certify_tol
 
-    def remaining() -> float | None:
-        if how.deadline == float("inf"):
-            return None
-        return max(0.0, how.deadline - time.perf_counter())
-
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
@@ -222,7 +223,7 @@ def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
     policy, value, status = it.policy, it.value_lower, it.status
     if how.method == "lp":
         lp = solve_lp(mdp, target, quotient=quotient, solver=how.solver, backend=how.backend,
-                      tol=tol, decompose=how.decompose, time_limit=remaining(),
+                      tol=tol, decompose=how.decompose, time_limit=how.remaining(),
                       bounds=(it.lower, it.upper))
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
@@ -257,9 +258,8 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     """Interval iteration of the models in one pass over their shared quotient."""
     from mitld_lp.solvers.iteration import interval_iterations
 
-    left = None if how.deadline == float("inf") else max(0.0, how.deadline - time.perf_counter())
     return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
-                               time_limit=left)
+                               time_limit=how.remaining())
 
 
 def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
