@@ -383,36 +383,53 @@ def evaluate_policy(
             f"policy: choice not owned by its state in states {bad[:10].tolist()}"
         )
     states = np.flatnonzero(acting)
-    chain = sp.csr_array(sp.csr_array(mdp.matrix)[policy[states]])  # rows: acting states
-    coo = sp.coo_array(chain)
-    keep = coo.data > 0
-    src, dst = states[coo.row[keep]], np.asarray(coo.col[keep], dtype=np.int64)
-    can = backward_reachable(n, src, dst, target)
+    chain = sp.csr_array(mdp.matrix)[policy[states]]  # rows: acting states
+    counts = np.diff(chain.indptr)
+    positive = chain.data > 0
+    can = backward_reachable(n, np.repeat(states.astype(chain.indices.dtype), counts)[positive],
+                             chain.indices[positive], target)
+    del positive
     solve = acting & can
     values = np.where(target, 1.0, 0.0)
     if not solve.any():
         return values
-    rows = np.flatnonzero(solve[states])  # positions in `chain` of the states to solve
     idx = np.flatnonzero(solve)
-    sub = chain[rows]
-    a = sp.eye_array(idx.size, format="csc") - sp.csc_array(sub[:, idx])
-    b = np.asarray(sub @ target.astype(np.float64)).ravel()
-    x = _solve_transient(a, b, method, None if layers is None
-                         else (np.asarray(layers[0])[idx], layers[1]))
+    rows = np.flatnonzero(solve[states])  # positions in `chain` of the states to solve
+    b = (chain @ target.astype(np.float64))[rows]
+    sub = _restricted(chain, rows, solve[states], idx, n)
+    del chain  # the policy's rows are not needed while the system is solved
+    x = _solve_transient(sub, b, method,
+                         None if layers is None else (np.asarray(layers[0])[idx], layers[1]))
     values[idx] = np.clip(x, 0.0, 1.0)
     return values
 
 
+def _restricted(chain: sp.csr_array, rows: np.ndarray, row_kept: np.ndarray,
+                idx: np.ndarray, n: int) -> sp.csr_array:
+    """``chain[rows][:, idx]`` as a square CSR matrix, made in one pass over ``chain``'s
+    entries (SciPy's row and column indexing would copy the chain twice more)."""
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[idx] = np.arange(idx.size)
+    col = pos[chain.indices]
+    del pos
+    keep = (col >= 0) & np.repeat(row_kept, np.diff(chain.indptr))
+    ends = np.concatenate([[0], np.cumsum(keep)])
+    per_row = (ends[chain.indptr[1:]] - ends[chain.indptr[:-1]])[rows]
+    indptr = np.concatenate([[0], np.cumsum(per_row)])
+    return sp.csr_array((chain.data[keep], col[keep], indptr), shape=(idx.size, idx.size))
+
+
 def _solve_transient(
-    a: sp.csc_array, b: np.ndarray, method: Literal["auto", "direct", "iterative"],
+    chain: sp.csr_array, b: np.ndarray, method: Literal["auto", "direct", "iterative"],
     layers: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Solve ``(I - Q) x = b`` for a transient sub-stochastic ``Q``: by components in
-    topological order (``"auto"``, :func:`mitld_lp.solvers.topological.solve_chain`),
-    one sparse LU (``"direct"``) or BiCGSTAB to a residual of 1e-12 (``"iterative"``)."""
+    """Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``): by
+    components in topological order (``"auto"``,
+    :func:`mitld_lp.solvers.topological.solve_chain`), one sparse LU of ``I - Q``
+    (``"direct"``) or BiCGSTAB to a residual of 1e-12 (``"iterative"``)."""
     if method == "auto":
-        return solve_chain(sp.csr_array(sp.eye_array(b.shape[0], format="csr") - a), b,
-                           layers)
+        return solve_chain(chain, b, layers)
+    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     if method == "direct":
         return np.asarray(spla.spsolve(a, b), dtype=np.float64).ravel()
     x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)

@@ -69,11 +69,13 @@ def backward_reachable(
     seed_idx = np.flatnonzero(seeds)
     if seed_idx.size == 0:
         return np.zeros(n, dtype=bool)
-    rows = np.concatenate([succ, np.full(seed_idx.size, n, dtype=np.int64)])
-    cols = np.concatenate([source, seed_idx])
-    graph = sp.csr_matrix(
+    index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes an edge if it can
+    rows = np.concatenate([succ, np.full(seed_idx.size, n)], dtype=index)
+    cols = np.concatenate([source, seed_idx], dtype=index)
+    graph = sp.csr_array(
         (np.ones(rows.size, dtype=np.float64), (rows, cols)), shape=(n + 1, n + 1)
     )
+    del rows, cols
     order = csgraph.breadth_first_order(graph, n, directed=True, return_predecessors=False)
     reached = np.zeros(n + 1, dtype=bool)
     reached[np.asarray(order)] = True
