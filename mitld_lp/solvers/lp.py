@@ -54,7 +54,6 @@ from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
@@ -71,6 +70,7 @@ from mitld_lp.solvers.topological import (
     Block,
     Blocks,
     blocks,
+    chain_lu,
     gather_ranges,
     improve_policy,
     solve_single_states,
@@ -206,7 +206,7 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
                                shape=(inner.size, sub.shape[0]))
             moves = sp.csc_array((mix @ sub[:, block]).T)
             a = sp.csc_array(sp.eye_array(inner.size, format="csc") - moves)
-            x[block] = np.asarray(spla.spsolve(a, x[block]), dtype=np.float64).ravel()
+            x[block] = chain_lu(a).solve(x[block])
         # Push the flow out of this level (its own columns were solved above).
         y = w * x[states[owner_local]]
         coo = rows.tocoo()
