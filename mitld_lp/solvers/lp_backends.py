@@ -203,10 +203,13 @@ class Settings:
     def options(self, *, polished: bool = False) -> dict[str, Any]:
         """The solver's keywords; ``polished``: the answer will be made exact by policy
         iteration, so Clarabel's iterative refinement of each KKT solve (1.2-1.9x of its
-        time) buys nothing (the values returned are the same to the last digit)."""
+        time) buys nothing (the values returned are the same to the last digit), and its
+        KKT systems are factorised by faer's supernodal LDL on one thread (0.7-0.8x of
+        QDLDL's time on the bus blocks; ``experiments/bench_sweeps.py``)."""
         opts = _tolerance_options(self.solver, self.tol)
         if polished and self.solver.upper() == "CLARABEL":
-            opts["iterative_refinement_enable"] = False
+            opts.update(iterative_refinement_enable=False, direct_solve_method="faer",
+                        max_threads=1)
         if np.isfinite(self.deadline):
             opts.update(_time_options(self.solver, self.deadline - time.perf_counter()))
         return {**opts, **dict(self.extra)}
