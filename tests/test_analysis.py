@@ -165,3 +165,39 @@ def test_both_models_iterated_in_one_pass(seed: int) -> None:
     with pytest.raises(ValueError, match="share their matrix"):
         other = analyse(mdp, goal)[0]
         interval_iterations(mdp, [low, other], progress=False)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_walk_visits_each_state_once_below_before_above(seed: int) -> None:
+    """Blocks.walk, the one level loop of the solvers: every state not skipped exactly
+    once, split into single and non-trivial by scipy's components of the dense quotient
+    graph, and every edge between components leads to a level walked earlier
+    (downstream first) or later (upstream first)."""
+    mdp = random_mdp(50 + 7 * seed, seed=seed, target_fraction=0.1, sink_fraction=0.1,
+                     self_loop_fraction=0.3, max_successors=3,
+                     locality=None if seed % 2 else 5)
+    q, _ = analyse(mdp, mdp.target)
+    n = q.n_states
+    owner = np.repeat(np.arange(n), np.diff(q.row_groups))
+    dense = np.zeros((n, n), dtype=bool)
+    m = q.matrix.toarray() > 0
+    for c in range(q.n_choices):
+        dense[owner[c]] |= m[c]
+    n_comp, comp = csgraph.connected_components(sp.csr_array(dense), directed=True,
+                                                connection="strong")
+    size = np.bincount(comp, minlength=n_comp)
+    skip = np.random.default_rng(seed).random(n) < 0.2
+    for upstream in (False, True):
+        when = np.full(n, -1)
+        for k, level in enumerate(q.order.walk(skip=skip, upstream_first=upstream)):
+            assert np.array_equal(np.sort(level.states),
+                                  np.sort(np.concatenate([level.single, level.rest])))
+            assert (size[comp[level.single]] == 1).all()
+            assert (size[comp[level.rest]] > 1).all()
+            assert (when[level.states] == -1).all()
+            when[level.states] = k
+        assert np.array_equal(when >= 0, ~skip)
+        src, dst = np.nonzero(dense)
+        cross = (comp[src] != comp[dst]) & ~skip[src] & ~skip[dst]
+        earlier = when[dst[cross]] < when[src[cross]]
+        assert earlier.all() if not upstream else (~earlier).all()

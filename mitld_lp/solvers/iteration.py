@@ -60,8 +60,8 @@ from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
     blocks,
-    gather_ranges,
     improve_policy,
+    single_scores,
     solve_chain,
     state_graph,
 )
@@ -166,20 +166,13 @@ def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
 def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
                    bounds: np.ndarray) -> None:
     r"""The single-state components ``states`` solved exactly from the bounds
-    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` as in
-    :func:`mitld_lp.solvers.topological.solve_single_states` (``rewards``: the one-step
-    probability of the target per choice and column)."""
+    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` scored by
+    :func:`mitld_lp.solvers.topological.single_scores` as the LP's single states are
+    (``rewards``: the one-step probability of the target per choice and column)."""
     if states.size == 0:
         return
-    lo, hi = q.row_groups[states], q.row_groups[states + 1]
-    choices = gather_ranges(lo, hi)
-    bounds[states] = 0.0  # so that the product below sums the other successors only
-    reward = rewards[choices] + q.matrix[choices] @ bounds
-    leave = (1.0 - q.order.self_loop[choices])[:, None]
-    score = np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0)
-    np.clip(score, 0.0, 1.0, out=score)
-    bounds[states] = np.maximum.reduceat(score, np.concatenate([[0], np.cumsum(hi - lo)[:-1]]),
-                                         axis=0)
+    _, score, groups = single_scores(q, q.order, states, rewards, bounds)
+    bounds[states] = np.maximum.reduceat(score, groups[:-1], axis=0)
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
@@ -190,19 +183,15 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     successors are reachable too, so nothing they need is skipped); the others keep
     ``[0, 1]``."""
     blk = blocks(q)
-    wanted = None
+    skip = None
     if from_initial:
         order = csgraph.breadth_first_order(state_graph(q), q.initial, directed=True,
                                             return_predecessors=False)
-        wanted = np.zeros(q.n_states, dtype=bool)
-        wanted[np.asarray(order)] = True
-    for level in range(blk.n_levels):
-        states = blk.states_at(level)
-        if wanted is not None:
-            states = states[wanted[states]]
-        single = blk.single(states)
-        _single_states(q, states[single], rewards, bounds)
-        rest = states[~single]
+        skip = np.ones(q.n_states, dtype=bool)
+        skip[np.asarray(order)] = False
+    for level in blk.walk(skip=skip):
+        _single_states(q, level.single, rewards, bounds)
+        rest = level.rest
         if rest.size == 0:
             continue
         block = Block.of(q, rest)

@@ -184,20 +184,20 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
     the quotient almost surely, so every one of these systems is invertible.
     """
     x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
-    for level in range(blk.n_levels - 1, -1, -1):
-        states = blk.states_at(level)
+    for level in blk.walk(upstream_first=True):
+        states = np.concatenate([level.single, level.rest])
+        n_single = level.single.size
         lo, hi = q.row_groups[states], q.row_groups[states + 1]
         choices = gather_ranges(lo, hi)
         rows = sp.csr_array(q.matrix[choices])
         owner_local = np.repeat(np.arange(states.size), hi - lo)
         w = weights[choices]
-        single = blk.single(states)
         stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
                            minlength=states.size)
-        x[states[single]] /= 1.0 - stay[single]
-        if not single.all():
-            inner = np.flatnonzero(~single)
-            block = states[inner]
+        x[level.single] /= 1.0 - stay[:n_single]
+        if level.rest.size:
+            inner = np.arange(n_single, states.size)
+            block = level.rest
             pick = np.isin(owner_local, inner)
             local = np.full(states.size, -1, dtype=np.int64)
             local[inner] = np.arange(inner.size)
@@ -210,7 +210,7 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
         # Push the flow out of this level (its own columns were solved above).
         y = w * x[states[owner_local]]
         coo = rows.tocoo()
-        out = blk.level[blk.component[coo.col]] != level
+        out = blk.level[blk.component[coo.col]] != level.index
         np.add.at(x, coo.col[out], coo.data[out] * y[coo.row[out]])
     owner = q.choice_state()
     return np.maximum(weights * x[owner], 0.0)
@@ -259,12 +259,10 @@ def _crossover(q: Quotient, start: np.ndarray) -> np.ndarray:
     values = np.zeros(q.n_states)
     chosen = np.array(start, dtype=np.int64)
     local = np.zeros(q.n_choices, dtype=np.int64)
-    for level in range(blk.n_levels):
-        states = blk.states_at(level)
-        single = blk.single(states)
-        upd = solve_single_states(q, blk, states[single], values)
+    for level in blk.walk():
+        upd = solve_single_states(q, blk, level.single, values)
         chosen[upd.states] = upd.choices
-        rest = states[~single]
+        rest = level.rest
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
@@ -360,14 +358,11 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = 0
-    for level in range(blk.n_levels):
-        states = blk.states_at(level)
-        states = states[~q.zero[states]]
-        single = blk.single(states)
-        upd = solve_single_states(q, blk, states[single], values)
+    for level in blk.walk(skip=q.zero):
+        upd = solve_single_states(q, blk, level.single, values)
         reduced_choice[upd.states] = upd.choices
         weights[upd.choices] = 1.0
-        rest = states[~single]
+        rest = level.rest
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
@@ -381,17 +376,17 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         n_columns += block.choices.size
         n_kept += columns.size
         if raw.y is None or raw.v is None:
-            return Raw(raw.status, f"{raw.message} (block LP of level {level}, "
+            return Raw(raw.status, f"{raw.message} (block LP of level {level.index}, "
                         f"{rest.size} states)", iterations=iterations)
         y = np.zeros(block.choices.size)
         y[columns] = np.maximum(raw.y, 0.0)
         polished = _polish(block, lp, y, settings.tol)
         if not polished.optimal and worst.status is Status.OPTIMAL:
-            worst = Raw(Status.INACCURATE, f"level {level}: {raw.message}, policy "
+            worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
         elif raw.status is not Status.OPTIMAL:
-            logger.info("block LP of level %d: %s; exact after policy iteration", level,
-                        raw.message)
+            logger.info("block LP of level %d: %s; exact after policy iteration",
+                        level.index, raw.message)
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights

@@ -24,7 +24,9 @@ interval iteration, per level).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -38,6 +40,7 @@ from mitld_lp.solvers.result import read_only
 __all__ = [
     "Block",
     "Blocks",
+    "Level",
     "LevelUpdate",
     "blocks",
     "blocks_from",
@@ -46,6 +49,7 @@ __all__ = [
     "graph_blocks",
     "solve_chain",
     "improve_policy",
+    "single_scores",
     "solve_single_states",
 ]
 
@@ -89,6 +93,30 @@ class Blocks:
     def single(self, states: np.ndarray) -> np.ndarray:
         """Which of ``states`` form a component of their own."""
         return self.size[self.component[states]] == 1
+
+    def walk(self, *, skip: np.ndarray | None = None,
+             upstream_first: bool = False) -> Iterator[Level]:
+        """The one level loop every solver runs: the levels downstream first (values
+        need what they lead to), or upstream first (flows need what leads to them), each
+        with its states (less the ``skip`` ones) split into single states and the states
+        of non-trivial components, which the solvers take as one block."""
+        order = range(self.n_levels - 1, -1, -1) if upstream_first else range(self.n_levels)
+        for level in order:
+            states = self.states_at(level)
+            if skip is not None:
+                states = states[~skip[states]]
+            one = self.single(states)
+            yield Level(level, states, states[one], states[~one])
+
+
+class Level(NamedTuple):
+    """One level of a :meth:`Blocks.walk`: its ``states``, of which ``single`` form a
+    component of their own and ``rest`` lie in non-trivial components."""
+
+    index: int
+    states: np.ndarray
+    single: np.ndarray
+    rest: np.ndarray
 
 
 def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
@@ -218,20 +246,33 @@ def solve_single_states(
     if states.size == 0:
         empty = np.zeros(0, dtype=np.int64)
         return LevelUpdate(empty, np.zeros(0), empty)
-    lo, hi = q.row_groups[states], q.row_groups[states + 1]
-    choices = gather_ranges(lo, hi)
-    rows = q.matrix[choices]
-    values[states] = 0.0  # so that the product below sums the other successors only
-    p = b.self_loop[choices]
-    exit_reward = q.to_target[choices] + rows @ values
-    leave = 1.0 - p
-    # leave > 0 on the quotient (no end components); the guard keeps rounding harmless.
-    score = np.divide(exit_reward, leave, out=np.zeros_like(exit_reward), where=leave > 0)
-    np.clip(score, 0.0, 1.0, out=score)
-    groups = np.concatenate([[0], np.cumsum(hi - lo)])
+    choices, score, groups = single_scores(q, b, states, q.to_target, values)
     best = segmented_argmax(score, groups, tie=tie, prefer=q.to_target[choices])
     values[states] = score[best]
     return LevelUpdate(states, score[best], choices[best])
+
+
+def single_scores(q: Quotient, b: Blocks, states: np.ndarray, rewards: np.ndarray,
+                  values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""The choices of the single-state components ``states`` scored against
+    ``values`` downstream: :math:`(r(c) + \sum_{s' \ne s} P(c, s') v(s')) / (1 - p(c))`
+    clipped to [0, 1], with ``r = rewards[c]`` the one-step probability of the target and
+    ``p(c)`` the choice's self-loop (module docs).  ``rewards`` and ``values`` may carry
+    a column per model (the iteration's bounds): every column is scored at once.
+    Returns the choices, their scores and the first position of each state's choices
+    (its last entry the total); ``values[states]`` is set to 0 (their own successors are
+    not summed)."""
+    lo, hi = q.row_groups[states], q.row_groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    values[states] = 0.0
+    reward = rewards[choices] + q.matrix[choices] @ values
+    leave = 1.0 - b.self_loop[choices]
+    if reward.ndim == 2:
+        leave = leave[:, None]
+    # leave > 0 on the quotient (no end components); the guard keeps rounding harmless.
+    score = np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0)
+    np.clip(score, 0.0, 1.0, out=score)
+    return choices, score, np.concatenate([[0], np.cumsum(hi - lo)])
 
 
 # ---------------------------------------------------------------------------------------
@@ -343,15 +384,15 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
     blk = (graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
            if layers is None else blocks_from(layers[0], layers[1], chain.diagonal()))
     x = np.zeros(b.shape[0])
-    for level in range(blk.n_levels):
-        states = blk.states_at(level)
-        rows = sp.csr_array(chain[states])
-        rhs = np.asarray(b, dtype=np.float64)[states] + rows @ x  # own states are still 0
-        single = blk.single(states)
-        x[states[single]] = rhs[single] / (1.0 - blk.self_loop[states[single]])
-        if not single.all():
-            inner = states[~single]
-            sub = sp.csc_array(sp.csr_array(rows[np.flatnonzero(~single)])[:, inner])
+    b = np.asarray(b, dtype=np.float64)
+    for level in blk.walk():
+        one, inner = level.single, level.rest
+        # the level's own states are still 0 in x: the right-hand sides see only below
+        x[one] = (b[one] + chain[one] @ x) / (1.0 - blk.self_loop[one])
+        if inner.size:
+            rows = sp.csr_array(chain[inner])
+            rhs = b[inner] + rows @ x
+            sub = sp.csc_array(rows[:, inner])
             a = sp.csc_array(sp.eye_array(inner.size, format="csc") - sub)
-            x[inner] = chain_lu(a).solve(rhs[~single])
+            x[inner] = chain_lu(a).solve(rhs)
     return x
