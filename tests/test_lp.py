@@ -306,6 +306,31 @@ def test_topological_lp_matches_monolithic_and_value_lp(seed: int) -> None:
     assert blocks.primal_objective == pytest.approx(ref[mdp.initial], abs=1e-7)
 
 
+@pytest.mark.parametrize("faer", [True, False])
+def test_block_lps_factorised_with_or_without_faer(monkeypatch: pytest.MonkeyPatch,
+                                                   faer: bool) -> None:
+    """The block LPs ask Clarabel for faer's factorisation only where the installed
+    build has it; without it (QDLDL) the values are the same, the reference's."""
+    from mitld_lp.solvers import lp_backends
+
+    asked: list[dict[str, object]] = []
+    real = lp_backends._solve_clarabel
+
+    def spy(lp: object, options: dict[str, object]) -> object:
+        asked.append(dict(options))
+        return real(lp, options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(lp_backends, "clarabel_has_faer", lambda: faer)
+    monkeypatch.setattr(lp_backends, "_solve_clarabel", spy)
+    mdp = random_mdp(120, seed=7, locality=4, self_loop_fraction=0.25, sink_fraction=0.08,
+                     max_choices=3)
+    r = solve_lp(mdp, mdp.target, backend="direct")
+    assert r.status == Status.OPTIMAL and r.values is not None
+    assert asked, "the model has non-trivial blocks, so Clarabel must have been called"
+    assert all((o.get("direct_solve_method") == "faer") == faer for o in asked)
+    np.testing.assert_allclose(r.values, reference_values(mdp, mdp.target), atol=1e-7)
+
+
 def test_topological_lp_of_hand_mdp_needs_one_block() -> None:
     # MEC{0} <-> MEC{1,4} is the one non-trivial component; 6 is a single state with a
     # self-loop: v(6) = 0.5 / (1 - 0.5) = 1 exactly, no LP.

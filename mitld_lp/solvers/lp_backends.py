@@ -5,6 +5,7 @@ settings.  What the LP means is :mod:`mitld_lp.solvers.lp`'s business."""
 
 from __future__ import annotations
 
+import functools
 import importlib
 import logging
 import time
@@ -48,6 +49,23 @@ class Raw:
     y: np.ndarray | None = None
     v: np.ndarray | None = None
     iterations: int = 0
+
+
+@functools.cache
+def clarabel_has_faer() -> bool:
+    """Whether the installed Clarabel factorises with faer (a build without it refuses
+    the setting when a solver is made, so a one-variable solver is made once to ask)."""
+    clarabel: Any = importlib.import_module("clarabel")
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    try:
+        settings.direct_solve_method = "faer"
+        clarabel.DefaultSolver(sp.csc_matrix((1, 1)), np.zeros(1),
+                               sp.csc_matrix(-np.eye(1)), np.zeros(1),
+                               [clarabel.NonnegativeConeT(1)], settings)
+    except Exception:  # noqa: BLE001 - any refusal means: not this build
+        return False
+    return True
 
 
 def _tolerance_options(solver: str, tol: float) -> dict[str, Any]:
@@ -208,8 +226,9 @@ class Settings:
         QDLDL's time on the bus blocks; ``experiments/bench_sweeps.py``)."""
         opts = _tolerance_options(self.solver, self.tol)
         if polished and self.solver.upper() == "CLARABEL":
-            opts.update(iterative_refinement_enable=False, direct_solve_method="faer",
-                        max_threads=1)
+            opts["iterative_refinement_enable"] = False
+            if clarabel_has_faer():
+                opts.update(direct_solve_method="faer", max_threads=1)
         if np.isfinite(self.deadline):
             opts.update(_time_options(self.solver, self.deadline - time.perf_counter()))
         return {**opts, **dict(self.extra)}
