@@ -11,7 +11,7 @@ import pytest
 from test_analysis import _dense_values
 
 from mitld_lp.solvers.iteration import interval_iteration
-from mitld_lp.solvers.lp import _may_be_optimal, solve_lp
+from mitld_lp.solvers.lp import _may_be_optimal, _tightened, solve_lp
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block
 from mitld_lp.testing import random_mdp
@@ -59,3 +59,43 @@ def test_left_out_are_exactly_the_suboptimal_choices(seed: int) -> None:
     assert np.all(keep[best])  # no optimal choice is left out
     loses = q_star < v_red[owner] - 1e-6
     assert not np.any(keep & loses)  # every clearly losing one is
+
+
+def _whole_block(seed: int):
+    """The random MDP's quotient as one block, its one-step target probabilities and
+    the dense value iteration's values on its states."""
+    mdp = _mdp(seed)
+    q = reduce(mdp, mdp.target)
+    want = _dense_values(mdp, mdp.target)
+    v_red = np.zeros(q.n_states)
+    kept = np.flatnonzero(q.state_map >= 0)
+    v_red[q.state_map[kept]] = want[kept]
+    block = Block.of(q, np.arange(q.n_states))
+    return block, q.to_target[block.choices], v_red
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pruning_is_scale_free(seed: int) -> None:
+    """Values are linear in the one-step target probabilities: scaled by 1e-15 (values
+    like the bus blocks' 1e-19..1e-9), the same choices are left out, none of them
+    optimal (an absolute margin would keep every choice there)."""
+    block, reward, v = _whole_block(seed)
+    keep = _may_be_optimal(block, reward, v, v)
+    tiny = _may_be_optimal(block, reward * 1e-15, v * 1e-15, v * 1e-15)
+    assert not keep.all()
+    assert np.array_equal(keep, tiny)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_tightened_bounds_stay_sound_and_prune_more(seed: int) -> None:
+    block, reward, v = _whole_block(seed)
+    lo, hi = np.zeros_like(v), np.ones_like(v)  # sound, and useless for pruning
+    t_lo, t_hi = _tightened(block, reward, lo, hi)
+    assert np.all(t_lo <= v + 1e-12) and np.all(t_hi >= v - 1e-12)
+    assert np.all(t_lo >= lo) and np.all(t_hi <= hi)
+    before = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
+    after = _may_be_optimal(block, reward, t_lo, t_hi)
+    assert int(np.count_nonzero(after)) < before
+    q_star = reward + block.inner @ v
+    owner = np.repeat(np.arange(v.size), np.diff(block.groups))
+    assert np.all(after[q_star >= v[owner] - 1e-12])  # no optimal choice left out

@@ -291,15 +291,45 @@ def _may_be_optimal(block: Block, reward: np.ndarray, lo: np.ndarray,
     state keeps its choice of largest upper Q-bound, so rounding never empties a state."""
     groups = block.groups
     q_hi = reward + block.inner @ hi
-    keep = q_hi >= np.repeat(lo, np.diff(groups)) - _PRUNE_MARGIN
+    keep = q_hi >= np.repeat(lo * (1.0 - _PRUNE_MARGIN), np.diff(groups))
     keep[segmented_argmax(q_hi, groups)] = True
     return keep
 
 
-_PRUNE_MARGIN = 1e-12
+_PRUNE_MARGIN = 1e-9
 """A choice is left out only if its upper Q-bound is below the state's lower bound by
-more than this (rounding in the bounds); what is left out is checked afterwards anyway
-(:func:`_polish` improves over every choice of the block)."""
+more than this fraction of it (rounding in the bounds is ~1e-16 of a value; values on
+a block can be 1e-19, so an absolute margin would keep every choice there); what is
+left out is checked afterwards anyway (:func:`_polish` improves over every choice of
+the block)."""
+
+
+def _tightened(block: Block, reward: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sound bounds on the block's values made tight enough to prune: both swept (the
+    Bellman operator with the exact exit rewards ``reward``, each bound kept if the
+    sweep does not improve it) in rounds of :data:`_TIGHTEN_ROUND` sweeps until a round
+    leaves out no further choice, at most :data:`_TIGHTEN_MAX` sweeps.  The iteration
+    stops at an absolute gap, which says nothing on a block whose values are far below
+    it (1e-19 to 1e-9 on the bus blocks of ``experiments/bench_sweeps.py``): there only
+    relative precision tells the choices apart, and a sweep costs a small fraction of
+    the LP it shrinks."""
+    lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+    starts = block.groups[:-1]
+    kept = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
+    for _ in range(_TIGHTEN_MAX // _TIGHTEN_ROUND):
+        for _ in range(_TIGHTEN_ROUND):
+            np.maximum(lo, np.maximum.reduceat(reward + block.inner @ lo, starts), out=lo)
+            np.minimum(hi, np.maximum.reduceat(reward + block.inner @ hi, starts), out=hi)
+        now = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
+        if now >= kept:
+            break
+        kept = now
+    return lo, hi
+
+
+_TIGHTEN_ROUND = 25
+_TIGHTEN_MAX = 500
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -313,19 +343,21 @@ class _Polished:
 
 
 def _polish(block: Block, lp: Matrices, y: np.ndarray, duals: np.ndarray,
-            tol: float) -> _Polished:
+            columns: np.ndarray, tol: float) -> _Polished:
     """Crossover by policy iteration: the policy greedy on the LP's duals (its value
-    function) is evaluated exactly on the block's chain and improved until no choice
-    gains; an interior-point answer is accurate to its tolerance times the block's
-    expected exit time (a block left once in a million steps loses six digits), the
-    policy's exact value is not.  (Started from the duals' greedy policy, policy
-    iteration takes about half the rounds it takes from the choices of largest
-    occupancy on the bus blocks: 8 vs 14 at n = 128, d = 3.)  The randomised policy keeps
-    the LP's occupancies on the choices that are tight at the exact values (to ``tol``
-    over the block's expected exit time)."""
+    function) over the LP's ``columns`` is evaluated exactly on the block's chain and
+    improved, over every choice of the block, until no choice gains; an interior-point
+    answer is accurate to its tolerance times the block's expected exit time (a block
+    left once in a million steps loses six digits), the policy's exact value is not.
+    (Started so, policy iteration took 1-2 rounds on the bus blocks where it took 14
+    from the choices of largest occupancy.)  The randomised policy keeps the LP's
+    occupancies on the choices that are tight at the exact values (to ``tol`` over the
+    block's expected exit time)."""
     groups = block.groups
     counts = np.diff(groups)
-    start = segmented_argmax(lp.objective + block.inner @ duals, groups)
+    score = np.full(y.size, -np.inf)
+    score[columns] = (lp.objective + block.inner @ duals)[columns]
+    start = segmented_argmax(score, groups)  # among the LP's columns: its duals fit them
     chosen, v_ld, exit_time = improve_policy(block, lp.objective, start)
     v = np.asarray(v_ld, dtype=np.float64)
     slack = np.asarray(np.repeat(v_ld, counts)
@@ -372,7 +404,9 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         block = Block.of(q, rest)
         lp = _block_lp(block, values)
         columns = (np.arange(block.choices.size) if bounds is None else np.flatnonzero(
-            _may_be_optimal(block, lp.objective, bounds[0][rest], bounds[1][rest])))
+            _may_be_optimal(block, lp.objective,
+                            *_tightened(block, lp.objective, bounds[0][rest],
+                                        bounds[1][rest]))))
         raw = solve_one(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
                                  lp.objective[columns]), settings, retry=False)
         iterations += raw.iterations
@@ -384,7 +418,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
                         f"{rest.size} states)", iterations=iterations)
         y = np.zeros(block.choices.size)
         y[columns] = np.maximum(raw.y, 0.0)
-        polished = _polish(block, lp, y, raw.v, settings.tol)
+        polished = _polish(block, lp, y, raw.v, columns, settings.tol)
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
