@@ -22,6 +22,19 @@ def _mdp(seed: int):  # big strongly connected parts: the block LPs do the work
                       self_loop_fraction=0.0, max_choices=4, max_successors=3)
 
 
+def _whole_block(seed: int):
+    """The random MDP's quotient as one block, its one-step target probabilities and
+    the dense value iteration's values on its states."""
+    mdp = _mdp(seed)
+    q = reduce(mdp, mdp.target)
+    want = _dense_values(mdp, mdp.target)
+    v_red = np.zeros(q.n_states)
+    kept = np.flatnonzero(q.state_map >= 0)
+    v_red[q.state_map[kept]] = want[kept]
+    block = Block.of(q, np.arange(q.n_states))
+    return block, q.to_target[block.choices], v_red
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_pruned_block_lps_give_the_whole_lps_values(seed: int) -> None:
     mdp = _mdp(seed)
@@ -43,35 +56,14 @@ def test_pruned_block_lps_give_the_whole_lps_values(seed: int) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_left_out_are_exactly_the_suboptimal_choices(seed: int) -> None:
-    mdp = _mdp(seed)
-    q = reduce(mdp, mdp.target)
-    want = _dense_values(mdp, mdp.target)
-    v_red = np.zeros(q.n_states)
-    kept = np.flatnonzero(q.state_map >= 0)
-    v_red[q.state_map[kept]] = want[kept]
-    states = np.arange(q.n_states)
-    block = Block.of(q, states)
-    reward = q.to_target[block.choices]  # no states downstream: the whole quotient
+    block, reward, v_red = _whole_block(seed)  # no states downstream: the whole quotient
     keep = _may_be_optimal(block, reward, v_red, v_red)  # exact bounds
     q_star = reward + block.inner @ v_red
-    owner = np.repeat(states, np.diff(block.groups))
+    owner = np.repeat(np.arange(v_red.size), np.diff(block.groups))
     best = q_star >= v_red[owner] - 1e-9
     assert np.all(keep[best])  # no optimal choice is left out
     loses = q_star < v_red[owner] - 1e-6
     assert not np.any(keep & loses)  # every clearly losing one is
-
-
-def _whole_block(seed: int):
-    """The random MDP's quotient as one block, its one-step target probabilities and
-    the dense value iteration's values on its states."""
-    mdp = _mdp(seed)
-    q = reduce(mdp, mdp.target)
-    want = _dense_values(mdp, mdp.target)
-    v_red = np.zeros(q.n_states)
-    kept = np.flatnonzero(q.state_map >= 0)
-    v_red[q.state_map[kept]] = want[kept]
-    block = Block.of(q, np.arange(q.n_states))
-    return block, q.to_target[block.choices], v_red
 
 
 @pytest.mark.parametrize("seed", range(4))
