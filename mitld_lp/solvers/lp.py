@@ -313,15 +313,23 @@ def _tightened(block: Block, reward: np.ndarray, lo: np.ndarray,
     stops at an absolute gap, which says nothing on a block whose values are far below
     it (1e-19 to 1e-9 on the bus blocks of ``experiments/bench_sweeps.py``): there only
     relative precision tells the choices apart, and a sweep costs a small fraction of
-    the LP it shrinks."""
+    the LP it shrinks.  The sweeps run over the choices not yet left out (action
+    elimination): an optimal choice is never left out, so the maximum over the rest
+    still bounds the values from above, and any maximum bounds them from below."""
     lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
-    starts = block.groups[:-1]
-    kept = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
+    owner = np.repeat(np.arange(lo.size), np.diff(block.groups))
+    keep = _may_be_optimal(block, reward, lo, hi)
+    kept = int(np.count_nonzero(keep))
     for _ in range(_TIGHTEN_MAX // _TIGHTEN_ROUND):
+        alive = np.flatnonzero(keep)
+        inner, r = sp.csr_array(block.inner[alive]), reward[alive]
+        # each state keeps a choice, so its first one left starts its group
+        starts = np.flatnonzero(np.diff(owner[alive], prepend=-1))
         for _ in range(_TIGHTEN_ROUND):
-            np.maximum(lo, np.maximum.reduceat(reward + block.inner @ lo, starts), out=lo)
-            np.minimum(hi, np.maximum.reduceat(reward + block.inner @ hi, starts), out=hi)
-        now = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
+            np.maximum(lo, np.maximum.reduceat(r + inner @ lo, starts), out=lo)
+            np.minimum(hi, np.maximum.reduceat(r + inner @ hi, starts), out=hi)
+        keep = _may_be_optimal(block, reward, lo, hi)
+        now = int(np.count_nonzero(keep))
         if now >= kept:
             break
         kept = now
