@@ -196,16 +196,14 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
                            minlength=states.size)
         x[level.single] /= 1.0 - stay[:n_single]
         if level.rest.size:
-            inner = np.arange(n_single, states.size)
-            block = level.rest
-            pick = np.isin(owner_local, inner)
-            local = np.full(states.size, -1, dtype=np.int64)
-            local[inner] = np.arange(inner.size)
+            block = level.rest  # the tail of ``states``: local index = owner - n_single
+            pick = owner_local >= n_single
             sub = rows[np.flatnonzero(pick)]
-            mix = sp.csr_array((w[pick], (local[owner_local[pick]], np.arange(sub.shape[0]))),
-                               shape=(inner.size, sub.shape[0]))
+            mix = sp.csr_array((w[pick], (owner_local[pick] - n_single,
+                                          np.arange(sub.shape[0]))),
+                               shape=(block.size, sub.shape[0]))
             moves = sp.csc_array((mix @ sub[:, block]).T)
-            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - moves)
+            a = sp.csc_array(sp.eye_array(block.size, format="csc") - moves)
             x[block] = chain_lu(a).solve(x[block])
         # Push the flow out of this level (its own columns were solved above).
         y = w * x[states[owner_local]]
