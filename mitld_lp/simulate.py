@@ -14,11 +14,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from mitld_lp import defaults
 from mitld_lp.controller import Controller, Observation, RunStatus
 from mitld_lp.model import Model
+from mitld_lp.progress import bar as progress_bar
 
 __all__ = ["SimulationResult", "simulate", "rollout", "Step"]
 
@@ -140,14 +140,16 @@ def simulate(
     rng = np.random.default_rng(seed)
     ok = beyond = undecided = kept = 0
     persistent = _persistent_states(model)
-    for _ in tqdm(range(runs), disable=(not progress) if progress is not None else None,
-                  leave=False, desc="simulate"):
+    bar = progress_bar(progress, total=runs, leave=False, desc="simulate")
+    for _ in range(runs):
         status, _ = rollout(model, controller, rng, max_steps=max_steps)
         keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent
         ok += status is RunStatus.ACCEPTED or keeping
         kept += keeping
         undecided += status is RunStatus.RUNNING and not keeping
         beyond += controller.beyond_model
+        bar.update()
+    bar.close()
     lo, hi = _wilson(ok, runs)
     return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed,
                             max_steps, kept)

@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from tqdm.auto import tqdm
 
 from mitld_lp import defaults
 from mitld_lp.arrays import Grow, Index, concatenate, merge, ranks
@@ -19,6 +18,7 @@ from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
+from mitld_lp.progress import bar as progress_bar
 from mitld_lp.task import check_alphabet
 
 __all__ = ["product", "robust_product"]
@@ -107,10 +107,8 @@ def _build(
     # choice, the bands' lo, hi and events)
     chunks: list[tuple[np.ndarray, ...]] = []
     state_choices = Grow(np.int64)
-    bar = None if progress is False else tqdm(
-        total=None, unit=" states", disable=None if progress is None else not progress,
-        leave=False, mininterval=0.5, desc="product",
-    )
+    bar = progress_bar(progress, total=None, unit=" states", leave=False, mininterval=0.5,
+                       desc="product")
     head, batch = 0, 256
     while head < states.keys.size:
         keys = states.keys.view[head : head + batch].copy()
@@ -119,12 +117,10 @@ def _build(
         state_choices.extend(chunk[4])
         budget.expanded += keys.size
         budget.transitions += chunk[0].size
-        if bar is not None:
-            bar.update(keys.size)
+        bar.update(keys.size)
         head += keys.size
         batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
-    if bar is not None:
-        bar.close()
+    bar.close()
     f.check_rows()  # the rows not checked yet: every distribution read is checked
     keys = states.keys.view.copy()
     del states  # the index is not needed any more: free it before the matrix is assembled

@@ -44,10 +44,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
-from tqdm.auto import tqdm
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
+from mitld_lp.progress import Bar
+from mitld_lp.progress import bar as progress_bar
 from mitld_lp.solvers.quotient import (
     Quotient,
     backward_reachable,
@@ -100,7 +101,7 @@ class _Budget:
 
 
 def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
-            budget: _Budget, width: Literal["initial", "max"], initial: int, bar: tqdm,
+            budget: _Budget, width: Literal["initial", "max"], initial: int, bar: Bar,
             limit: int | None = None) -> bool:
     """Iterate the block's bounds in place (``bounds[block.states]``: a lower and an
     upper column per model, ``exits`` their exit rewards per choice) until every
@@ -176,7 +177,7 @@ def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
-                 budget: _Budget, bar: tqdm, *, from_initial: bool) -> None:
+                 budget: _Budget, bar: Bar, *, from_initial: bool) -> None:
     """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
     one-step target probabilities) level by level (module docs); stops early out of
     budget.  ``from_initial``: only the states the initial state can reach (their
@@ -274,10 +275,8 @@ def interval_iterations(
         bounds[:, 2 * j + 1] = np.where(o.zero, 0.0, 1.0)
     budget = _Budget(max_iterations,
                      start + time_limit if time_limit is not None else np.inf)
-    bar = tqdm(
-        total=None, desc="interval iteration", unit="it", leave=False,
-        disable=not progress or n < _PROGRESS_MIN_STATES,
-    )
+    bar = progress_bar(bool(progress) and n >= _PROGRESS_MIN_STATES, total=None,
+                       desc="interval iteration", unit="it", leave=False)
     decided = gap == "initial" and q.initial < 0
     try:
         if n and not decided:

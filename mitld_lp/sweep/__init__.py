@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mitld_lp.progress import bar as progress_bar
 from mitld_lp.sweep.results import Results, point_key
 from mitld_lp.sweep.rows import RESULT_COLUMNS, TIME_COLUMNS, PointTask, Settings
 from mitld_lp.sweep.spec import Sweep, SweepError, load_sweep
@@ -118,10 +119,8 @@ def run_sweep(
         finished = engines.process_pool(tasks, workers)
     else:
         finished = engines.serial(tasks)
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=len(tasks), desc=sw.name, unit="point", disable=not progress,
-               leave=False)
+    bar = progress_bar(bool(progress), total=len(tasks), desc=sw.name, unit="point",
+                       leave=False)
     computed = 0
     try:
         for task, result in finished:
