@@ -32,12 +32,11 @@ column of the offending token, never another exception.
 
 from __future__ import annotations
 
-import importlib.resources
 import math
 from collections.abc import Iterable
 from functools import cache
 
-from lark import Lark, Token, Tree
+from lark import Token, Tree
 from lark.exceptions import LarkError, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from mitld_lp.distributions import (
@@ -47,6 +46,7 @@ from mitld_lp.distributions import (
     DistributionError,
     Family,
 )
+from mitld_lp.logic import tables
 from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
     FALSE,
@@ -412,7 +412,7 @@ def _keyword_terminals() -> dict[str, str]:
     """Terminal name -> reserved word, for the grammar's keyword terminals."""
     return {
         t.name: t.pattern.value
-        for t in _parser().terminals
+        for t in tables.parser().terminals
         if t.pattern.type == "str" and t.pattern.value in RESERVED
     }
 
@@ -426,7 +426,7 @@ def _reserved_hint(text: str, tok: Token) -> str:
         end = len(text) if tok.type == "$END" or tok.start_pos is None else tok.start_pos
         previous = None
         try:
-            for t in _parser().lex(text[:end]):
+            for t in tables.parser().lex(text[:end]):
                 previous = t
         except LarkError:
             return ""
@@ -454,7 +454,7 @@ def _accepts_at(err: UnexpectedToken) -> set[str]:
 def _accepts_before(prefix: str, start: str) -> set[str]:
     """The terminals the parser accepts after ``prefix`` (which lexes and parses)."""
     try:
-        ip = _parser().parse_interactive(prefix, start=start)
+        ip = tables.parser().parse_interactive(prefix, start=start)
         ip.exhaust_lexer()
         return set(ip.accepts())
     except Exception:  # noqa: BLE001 - only used to phrase an error message
@@ -464,33 +464,12 @@ def _accepts_before(prefix: str, start: str) -> set[str]:
 # --------------------------------------------------------------------------- entry points
 
 
-@cache
-def _grammar() -> str:
-    return (
-        importlib.resources.files("mitld_lp.logic")
-        .joinpath("grammar.lark")
-        .read_text(encoding="utf-8")
-    )
-
-
-@cache
-def _parser() -> Lark:
-    return Lark(
-        _grammar(),
-        parser="lalr",
-        lexer="basic",
-        start=["start", "dist_start"],
-        maybe_placeholders=True,
-        propagate_positions=True,
-    )
-
-
 def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
     """The parse tree of ``text`` and the value built for each of its nodes (by id)."""
     if not isinstance(text, str):
         raise TypeError(f"expected a str to parse, got {type(text).__name__}")
     try:
-        tree = _parser().parse(text, start=start)
+        tree = tables.parser().parse(text, start=start)
         return tree, _transform(tree, _Build(text))
     except ParseError:
         raise
