@@ -186,8 +186,12 @@ def whole_processes(work: Path, repeats: int) -> dict[str, float]:
 
 
 def _cpu_of(argv: list[str]) -> float:
+    # bytecode is cached as on an installed package: with PYTHONDONTWRITEBYTECODE set
+    # (some CI images set it), an editable checkout would recompile every module on every
+    # run, while the installed stormpy's bytecode was written at installation
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     proc = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
+                            stderr=subprocess.PIPE, env=env)
     _, status, usage = os.wait4(proc.pid, 0)
     err = proc.stderr.read().decode() if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:

@@ -37,3 +37,46 @@ def test_the_probe_sees_the_stack_once_a_solve_needed_it():
         "from mitld_lp import load_model, synthesize\n"
         "synthesize(load_model('models/bus_grid.toml'))")
     assert {"clarabel", "mitld_lp.solvers.lp", "scipy.sparse.linalg"} <= set(loaded)
+
+
+def test_a_solve_nobody_watches_imports_no_progress_bar():
+    # standard error is a pipe here: no bar is shown, so tqdm (and asyncio) stay out
+    solved = _loaded_after(
+        "from mitld_lp import load_model, synthesize\n"
+        "synthesize(load_model('models/bus_grid.toml'))\n"
+        "heavy_seen = 'tqdm' in sys.modules or 'asyncio' in sys.modules\n"
+        "assert not heavy_seen, sorted(m for m in sys.modules if 'tqdm' in m)")
+    assert "mitld_lp.solvers.lp" in solved
+    shown = subprocess.run(
+        [sys.executable, "-c", "import sys\nfrom mitld_lp.progress import bar\n"
+         "b = bar(True, total=2, disable=True)\nb.update(); b.close()\n"
+         "print('tqdm' in sys.modules)"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    assert shown.stdout.split()[-1] == "True"
+
+
+def _blas(argv0: str, env: dict[str, str]) -> tuple[str, int]:
+    """``OPENBLAS_NUM_THREADS`` and the process's thread count after importing the
+    package and SciPy's linear algebra, with ``sys.argv[0]`` set as the command's."""
+    probe = (f"import sys\nsys.argv[0] = {argv0!r}\n"
+             "import os, mitld_lp, numpy, scipy.sparse.linalg\n"
+             "print(os.environ.get('OPENBLAS_NUM_THREADS'), "
+             "len(os.listdir('/proc/self/task')))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120, check=True, env=env)
+    value, threads = run.stdout.split()
+    return value, int(threads)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
+def test_the_command_line_starts_blas_with_one_thread_unless_told_otherwise():
+    import os
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")}
+    assert _blas("-m", env) == ("1", 1)  # the command: no BLAS thread pools
+    library, threads = _blas("-c", env)  # a program importing the package: untouched
+    assert library == "None"
+    if (os.cpu_count() or 1) > 1:  # OpenBLAS's pools are there, so the probe sees them
+        assert threads > 1
+    assert _blas("-m", {**env, "OPENBLAS_NUM_THREADS": "2"})[0] == "2"  # the user's own
