@@ -310,7 +310,6 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       the other prob-0 states get their first choice (every choice has value 0 there).
     """
     n = mdp.n_states
-    cstate = mdp.choice_state()
     policy = np.asarray(mdp.row_groups[:-1], dtype=np.int64).copy()
     policy[quotient.target | absorbing_states(mdp)] = -1
 
@@ -322,6 +321,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     if mecs.n_mecs == 0:
         return policy
     exits = chosen[quotient.n_plain :]
+    cstate = mdp.choice_state()  # one entry a choice: only where there are MECs
     owners = cstate[exits]
     policy[owners] = exits
     # BFS on the reversed internal-choice graph from the owners (virtual root n).
