@@ -80,7 +80,7 @@ class ModelSolution:
     bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
     lp: LPResult | None
     iteration: IterationResult
-    quotient: Quotient  # the reduction both solvers worked on (its prob0: no hope)
+    prob0: np.ndarray  # (n_states,) bool: the states from which the target is unreachable
     checks: tuple[Check, ...]
 
     @property
@@ -198,33 +198,38 @@ class _Settings:
         return max(0.0, self.deadline - time.perf_counter())
 
 
-def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
-                 how: _Settings) -> ModelSolution:
-    """Solve one model by ``how.method`` and certify it (module docs).
-
-    Every solver works on the model's :class:`Quotient` (made by the one analysis of the
-    product both models share, :func:`mitld_lp.solvers.analysis.analyse`); ``it`` is its
-    interval iteration (both models are iterated in one pass, :func:`_iterate`).  An LP
-    that does not come back optimal (after its own retries) is replaced by the
-    interval-iteration policy, certified the same way (exact value inside the bracket)
-    when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``).
-    """
-    from mitld_lp.solvers.iteration import evaluate_policy
+def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
+              how: _Settings) -> LPResult | None:
+    """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
+    :class:`Quotient`, made by the one analysis of the product both models share
+    (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
+    iteration (both models are iterated in one pass, :func:`_iterate`)."""
+    if how.method != "lp":
+        return None
     from mitld_lp.solvers.lp import solve_lp
+
+    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
+                    backend=how.backend, tol=how.tol, decompose=how.decompose,
+                    time_limit=how.remaining(), bounds=(it.lower, it.upper))
+
+
+def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
+               layers: tuple[np.ndarray, np.ndarray], it: IterationResult,
+               lp: LPResult | None, which: str, how: _Settings) -> ModelSolution:
+    """One model's answer and its certificate (module docs), on the product alone: the
+    quotient's matrix is released by then.  An LP that did not come back optimal (after
+    its own retries) is replaced by the interval-iteration policy, certified the same way
+    (exact value inside the bracket) when it failed numerically (``INACCURATE``,
+    ``MAX_ITERATIONS``)."""
+    from mitld_lp.solvers.iteration import evaluate_policy
     from mitld_lp.solvers.result import Status, read_only
 
-    target = np.asarray(quotient.target)
-    tol, certify_tol = how.tol, how.certify_tol
-
+    certify_tol = how.certify_tol
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
-    lp: LPResult | None = None
     policy, value, status = it.policy, it.value_lower, it.status
-    if how.method == "lp":
-        lp = solve_lp(mdp, target, quotient=quotient, solver=how.solver, backend=how.backend,
-                      tol=tol, decompose=how.decompose, time_limit=how.remaining(),
-                      bounds=(it.lower, it.upper))
+    if lp is not None:
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
@@ -239,7 +244,7 @@ def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    values = read_only(evaluate_policy(mdp, target, policy, layers=quotient.layers))
+    values = read_only(evaluate_policy(mdp, target, policy, layers=layers))
     exact = float(values[mdp.initial])
     lo, hi = it.value_lower, it.value_upper
     checks.append(Check(
@@ -250,7 +255,7 @@ def _solve_model(mdp: MDP, quotient: Quotient, it: IterationResult, which: str,
     checks.append(_close("policy value = optimum", exact, value, certify_tol))
     checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
     checks.append(_bellman(mdp, target, values, certify_tol))
-    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, quotient,
+    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, prob0,
                          tuple(checks))
 
 
@@ -418,14 +423,17 @@ def synthesize(
     from mitld_lp.solvers.analysis import analyse
 
     accept = acceptance(mdp, built.dta)
-    low_q, high_q = analyse(mdp, accept.goal, mdp.truncated)
-    if high_q is low_q:
-        (low_it,) = _iterate(mdp, [low_q], how)
-        low = high = _solve_model(mdp, low_q, low_it, "lower", how)
-    else:
-        low_it, high_it = _iterate(mdp, [low_q, high_q], how)
-        low = _solve_model(mdp, low_q, low_it, "lower", how)
-        high = _solve_model(mdp, high_q, high_it, "upper", how)
+    quotients = analyse(mdp, accept.goal, mdp.truncated)
+    quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
+    its = _iterate(mdp, quotients, how)
+    lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
+    # The certificates work on the product: the reduced matrix (a second copy of most
+    # transitions) is released before the exact evaluations, where memory peaks.
+    kept = [(np.asarray(q.target), q.prob0, q.layers) for q in quotients]
+    del quotients
+    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
+                 zip(kept, its, lps, ("lower", "upper"), strict=False)]
+    low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     low = _keeping(mdp, accept, low)
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0
@@ -440,7 +448,7 @@ def synthesize(
         lower_model=low,
         upper_model=high,
         controller=Controller(model.game, built.sta, mdp, low.policy,
-                              hopeless=high.quotient.prob0),
+                              hopeless=high.prob0),
         timings=timings,
         acceptance=accept,
         solve_cpu=solve_cpu,

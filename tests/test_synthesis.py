@@ -198,3 +198,35 @@ def test_controller_rejects_once_both_deadlines_are_missed():
     assert c.status is RunStatus.RUNNING
     assert c.act(Observation((3, 3))) is None
     assert c.status is RunStatus.REJECTED
+
+
+def test_the_reduced_matrix_is_released_before_the_exact_evaluations(monkeypatch):
+    # The quotients (each holding a copy of most transitions) are garbage by the time the
+    # policies are evaluated, where memory peaks; counted among the objects the collector
+    # tracks, at the LP (where they must be alive: the count can be positive) and at
+    # each evaluation.
+    import gc
+
+    from mitld_lp.solvers import iteration, lp
+    from mitld_lp.solvers.quotient import Quotient
+
+    def alive() -> int:
+        return sum(isinstance(o, Quotient) for o in gc.get_objects())
+
+    seen: dict[str, list[int]] = {"lp": [], "evaluate": []}
+
+    def counting(name, fn):
+        def wrapped(*args, **kwargs):
+            seen[name].append(alive())
+            return fn(*args, **kwargs)
+        return wrapped
+
+    monkeypatch.setattr(lp, "solve_lp", counting("lp", lp.solve_lp))
+    monkeypatch.setattr(iteration, "evaluate_policy",
+                        counting("evaluate", iteration.evaluate_policy))
+    r = synthesize(load_model(RED_LIGHT))  # truncated: two models, two quotients
+    assert r.sta.truncation_points and r.certified
+    assert len(seen["lp"]) == 2 and min(seen["lp"]) == 2
+    assert seen["evaluate"] == [0, 0]
+    assert r.upper_model.prob0.dtype == bool and r.upper_model.prob0.shape == (
+        r.mdp.n_states,)
