@@ -1,9 +1,10 @@
-"""The stored LALR tables (``mitld_lp/logic/_lalr_tables.py``) are the grammar's:
+"""The stored LALR tables (``mitld_lp/logic/lalr_tables.json``) are the grammar's:
 written from the current ``grammar.lark``, and the parser loaded from them reads every
 formula -- trees, positions, errors -- as a parser built from the grammar does."""
 
 from __future__ import annotations
 
+import json
 import tomllib
 from pathlib import Path
 
@@ -15,12 +16,15 @@ from lark import Lark
 from lark.exceptions import UnexpectedInput
 
 from mitld_lp.hypothesis import formulas
-from mitld_lp.logic import _lalr_tables, tables
+from mitld_lp.logic import tables
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The file as stored, read as the package reads it, whatever its digest and lark version.
+FILE = json.loads((ROOT / "mitld_lp" / "logic" / tables.TABLES).read_text(encoding="utf-8"),
+                  object_pairs_hook=tables._int_keys)
 
 #: Both parsers, built once: the one from the grammar is what the tables replace.
-STORED = Lark.load({"data": _lalr_tables.DATA, "memo": _lalr_tables.MEMO})
+STORED = Lark.load({"data": FILE["data"], "memo": FILE["memo"]})
 BUILT = Lark(tables.grammar(), **tables.OPTIONS)
 
 WRONG = ["F[0,3 a", "a &", "D[mu] (a & b)", "F[3,1] a", "a U U b", "((a)", "G[0,] a",
@@ -40,7 +44,7 @@ def _reading(parser: Lark, text: str, start: str = "start") -> object:
 
 
 def test_the_tables_were_written_from_this_grammar():
-    assert _lalr_tables.GRAMMAR_SHA256 == tables.grammar_digest(), (
+    assert FILE["grammar_sha256"] == tables.grammar_digest(), (
         "grammar.lark or the parser's options changed: regenerate the tables with "
         'python -c "import mitld_lp.logic.tables as t; t.write()"')
 
@@ -73,14 +77,14 @@ def test_stored_and_built_parsers_read_generated_formulas_alike(formula, cut):
     assert _reading(STORED, text[:cut]) == _reading(BUILT, text[:cut])
 
 
-@pytest.mark.skipif(_lalr_tables.LARK_VERSION != lark.__version__,
+@pytest.mark.skipif(FILE["lark_version"] != lark.__version__,
                     reason="the tables were written by another lark release")
 def test_the_parser_in_use_is_the_stored_one():
-    assert tables.stored() is _lalr_tables
+    assert tables.stored() == FILE
 
 
 def test_stale_tables_are_not_used(monkeypatch):
-    monkeypatch.setattr(_lalr_tables, "GRAMMAR_SHA256", "0" * 64)
+    monkeypatch.setattr(tables, "grammar_digest", lambda: "0" * 64)
     assert tables.stored() is None
     tables.parser.cache_clear()
     try:
@@ -88,3 +92,8 @@ def test_stale_tables_are_not_used(monkeypatch):
         assert _reading(fresh, "F[0,3] a") == _reading(BUILT, "F[0,3] a")
     finally:
         tables.parser.cache_clear()
+
+
+def test_missing_tables_are_built(monkeypatch):
+    monkeypatch.setattr(tables, "TABLES", "no_such_tables.json")
+    assert tables.stored() is None

@@ -1,12 +1,12 @@
 """The formula parser, loaded from stored LALR tables instead of built at every start.
 
 Building the LALR(1) parser from ``grammar.lark`` takes about 35 ms of CPU, a tenth of
-solving the bundled case study from the command line.  ``_lalr_tables.py`` beside this
-file holds the built parser as a Python literal (compiled to bytecode like any module),
-with the SHA-256 of the grammar and the options, and the lark version that wrote it.
-:func:`parser` loads it when both still match and builds from the grammar otherwise, so
-an edited grammar or another lark release is never parsed with stale tables, only more
-slowly.  After editing the grammar, regenerate the tables with::
+solving the bundled case study from the command line.  ``lalr_tables.json`` beside this
+file holds the built parser (lark's own serialisation, 1.5 ms to read), with the SHA-256
+of the grammar and the options, and the lark version that wrote it.  :func:`parser`
+loads it when both still match and builds from the grammar otherwise, so an edited
+grammar or another lark release is never parsed with stale tables, only more slowly.
+After editing the grammar, regenerate the tables with::
 
     python -c "import mitld_lp.logic.tables as t; t.write()"
 
@@ -18,16 +18,20 @@ from __future__ import annotations
 
 import hashlib
 import importlib.resources
+import json
 from functools import cache
 from pathlib import Path
-from types import ModuleType
+from typing import Any
 
 import lark
 from lark import Lark
 from lark.grammar import Rule
 from lark.lexer import TerminalDef
 
-__all__ = ["OPTIONS", "grammar", "grammar_digest", "parser", "stored", "write"]
+__all__ = ["OPTIONS", "TABLES", "grammar", "grammar_digest", "parser", "stored", "write"]
+
+#: The stored tables' file, beside this module.
+TABLES = "lalr_tables.json"
 
 #: The parser's options, part of the digest: changing one invalidates the tables.
 OPTIONS: dict[str, object] = dict(
@@ -53,13 +57,21 @@ def grammar_digest() -> str:
     return hashlib.sha256(f"{grammar()}\n{sorted(OPTIONS.items())!r}".encode()).hexdigest()
 
 
-def stored() -> ModuleType | None:
-    """The stored tables' module if they were written from this grammar by this lark."""
+def _int_keys(pairs: list[tuple[str, Any]]) -> dict[Any, Any]:
+    """JSON's keys are strings: lark's tables number their states and memo entries."""
+    return {int(k) if k.isdigit() else k: v for k, v in pairs}
+
+
+def stored() -> dict[str, Any] | None:
+    """The stored tables if they were written from this grammar by this lark."""
     try:
-        from mitld_lp.logic import _lalr_tables as tables
-    except ImportError:
+        text = importlib.resources.files("mitld_lp.logic").joinpath(TABLES).read_text(
+            encoding="utf-8")
+    except FileNotFoundError:
         return None
-    if tables.GRAMMAR_SHA256 != grammar_digest() or tables.LARK_VERSION != lark.__version__:
+    tables = json.loads(text, object_pairs_hook=_int_keys)
+    if (tables.get("grammar_sha256") != grammar_digest()
+            or tables.get("lark_version") != lark.__version__):
         return None
     return tables
 
@@ -69,22 +81,15 @@ def parser() -> Lark:
     """The formula parser: from the stored tables when they are current (see above)."""
     tables = stored()
     if tables is not None:
-        return Lark.load({"data": tables.DATA, "memo": tables.MEMO})
+        return Lark.load({"data": tables["data"], "memo": tables["memo"]})
     return Lark(grammar(), **OPTIONS)
 
 
 def write(path: Path | None = None) -> None:
     """Build the parser from the grammar and write its tables to ``path`` (default:
-    ``_lalr_tables.py`` beside this file)."""
-    path = path if path is not None else Path(__file__).with_name("_lalr_tables.py")
+    :data:`TABLES` beside this file)."""
+    path = path if path is not None else Path(__file__).with_name(TABLES)
     data, memo = Lark(grammar(), **OPTIONS).memo_serialize([TerminalDef, Rule])
-    path.write_text(
-        '"""LALR tables of ``grammar.lark``, written by :func:`mitld_lp.logic.tables.write`;\n'
-        'do not edit (see :mod:`mitld_lp.logic.tables`)."""\n'
-        "# ruff: noqa: E501\n\n"
-        f"GRAMMAR_SHA256 = {grammar_digest()!r}\n"
-        f"LARK_VERSION = {lark.__version__!r}\n"
-        f"DATA = {data!r}\n"
-        f"MEMO = {memo!r}\n",
-        encoding="utf-8",
-    )
+    tables = {"grammar_sha256": grammar_digest(), "lark_version": lark.__version__,
+              "data": data, "memo": memo}
+    path.write_text(json.dumps(tables, separators=(",", ":")) + "\n", encoding="utf-8")
