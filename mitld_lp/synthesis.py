@@ -423,20 +423,17 @@ def synthesize(
     from mitld_lp.acceptance import acceptance
     from mitld_lp.solvers.analysis import analyse
 
-    # Between stages the freed temporaries go back to the system (mitld_lp.heap).
-    release_free_memory()  # the builder's
+    # The builder's freed temporaries go back to the system (mitld_lp.heap).
+    release_free_memory()
     accept = acceptance(mdp, built.dta)
     quotients = analyse(mdp, accept.goal, mdp.truncated)
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
-    release_free_memory()  # the analysis's
     its = _iterate(mdp, quotients, how)
-    release_free_memory()  # the iteration's
     lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
     kept = [(np.asarray(q.target), q.prob0, q.layers) for q in quotients]
     del quotients
-    release_free_memory()  # the LPs' and the quotients'
     solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
                  zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
