@@ -59,17 +59,20 @@ def _levels(graph: sp.csr_array, seeds: np.ndarray) -> _Levels:
     successor's) and, propagated up the same walk, which components can reach a state
     of each seed set (``seeds``: ``(n, k)`` bool)."""
     n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
+    # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
+    index = graph.indices.dtype
+    small = np.asarray(comp, dtype=index)
     comp = np.asarray(comp, dtype=np.int64)
-    owner = np.repeat(np.arange(graph.shape[0]), np.diff(graph.indptr))
-    up, down = comp[owner], comp[graph.indices]
-    del owner
+    owner = np.repeat(np.arange(graph.shape[0], dtype=index), np.diff(graph.indptr))
+    up, down = small[owner], small[graph.indices]
+    del owner, small
     cross = up != down
     up, down = up[cross], down[cross]
     del cross
     out_degree = np.bincount(up, minlength=n_comp)
     # predecessors grouped by component, by a counting sort (coo -> csr, which sums
     # the duplicates: its data are the multiplicities the out-degrees counted)
-    preds_of = sp.csr_array((np.ones(up.size, dtype=np.int64), (down, up)),
+    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
                             shape=(n_comp, n_comp))
     del up, down
     pred_ptr, preds, times = preds_of.indptr, preds_of.indices, preds_of.data
@@ -187,16 +190,24 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     counts = np.bincount(state_map[cstate[kept]], minlength=n_red)
     del cstate
     row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    rows = sp.csr_array(m[kept]) if kept.size != mdp.n_choices else m.copy()
-    to_goal = np.asarray(rows @ goal.astype(np.float64)).ravel()
-    to_extra = np.asarray(rows @ extra.astype(np.float64)).ravel() if extra.any() else None
-    cols = state_map[rows.indices]
-    gone = cols < 0
-    data = rows.data
+    index = np.int32 if n_red < 2**31 and m.nnz < 2**31 else np.int64
+    # Each entry's column as a reduced state (a removed one as the extra column n_red),
+    # then the kept rows of that: one copy of the kept entries, in the index type.
+    column = np.where(state_map >= 0, state_map, n_red).astype(index)
+    mapped = sp.csr_array((m.data, column[m.indices], m.indptr), shape=(m.shape[0], n_red + 1))
+    del column
+    rows = sp.csr_array(mapped[kept]) if kept.size != mdp.n_choices else mapped.copy()
+    del mapped
+    # one pass over the product for both targets' one-step probabilities
+    one_step = m @ np.column_stack([goal, extra]).astype(np.float64)
+    to_goal = np.ascontiguousarray(one_step[kept, 0])
+    to_extra = np.ascontiguousarray(one_step[kept, 1]) if extra.any() else None
+    del one_step
+    data, cols = rows.data, rows.indices
+    gone = cols == n_red
     data[gone] = 0.0
     cols[gone] = 0
-    index = np.int32 if n_red < 2**31 and rows.nnz < 2**31 else np.int64
-    matrix = sp.csr_array((data, cols.astype(index), rows.indptr.astype(index)),
+    matrix = sp.csr_array((data, cols, rows.indptr.astype(index)),
                           shape=(kept.size, n_red))
     del rows, cols, gone
     if mecs.n_mecs:
