@@ -194,7 +194,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     # Each entry's column as a reduced state (a removed one as the extra column n_red),
     # then the kept rows of that: one copy of the kept entries, in the index type.
     column = np.where(state_map >= 0, state_map, n_red).astype(index)
-    mapped = sp.csr_array((m.data, column[m.indices], m.indptr), shape=(m.shape[0], n_red + 1))
+    mapped = sp.csr_array((m.data, column[m.indices], m.indptr.astype(index, copy=False)),
+                          shape=(m.shape[0], n_red + 1))
     del column
     rows = sp.csr_array(mapped[kept]) if kept.size != mdp.n_choices else mapped.copy()
     del mapped
