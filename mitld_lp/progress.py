@@ -29,10 +29,11 @@ class _Off:
 
 
 def bar(shown: bool | None, **options: Any) -> Bar:
-    """A tqdm bar with ``options`` if ``shown`` (None: when standard error is a terminal,
-    tqdm's own rule for ``disable=None``), else a bar that does nothing."""
+    """A tqdm bar with ``options`` if ``shown``, else a bar that does nothing.  None:
+    tqdm's own rule for ``disable=None``, a bar in a notebook (its widget) or where
+    standard error is a terminal, none in a pipe."""
     if shown is None:
-        shown = sys.stderr.isatty()
+        shown = "ipykernel" in sys.modules or bool(sys.stderr and sys.stderr.isatty())
     if not shown:
         return _Off()
     from tqdm.auto import tqdm
