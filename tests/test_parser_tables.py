@@ -94,6 +94,24 @@ def test_stale_tables_are_not_used(monkeypatch):
         tables.parser.cache_clear()
 
 
-def test_missing_tables_are_built(monkeypatch):
-    monkeypatch.setattr(tables, "TABLES", "no_such_tables.json")
-    assert tables.stored() is None
+@pytest.mark.parametrize("damage", [
+    "missing", {"data": {}, "memo": {}}, {"data": {"x": 1}, "memo": {0: {}}}, "not json"])
+def test_missing_or_damaged_tables_are_built_from_the_grammar(monkeypatch, caplog, damage):
+    if damage == "missing":
+        monkeypatch.setattr(tables, "TABLES", "no_such_tables.json")
+        assert tables.stored() is None
+    elif damage == "not json":
+        def unreadable():
+            raise json.JSONDecodeError("Expecting value", "", 0)
+        monkeypatch.setattr(tables, "stored", unreadable)
+    else:
+        monkeypatch.setattr(tables, "stored", lambda: damage)
+    tables.parser.cache_clear()
+    try:
+        fresh = tables.parser()
+        for text in ["F[0,3] a", "D[mu] b & G !c", "a U[1,2]"]:
+            assert _reading(fresh, text) == _reading(BUILT, text)
+    finally:
+        tables.parser.cache_clear()
+    if damage != "missing":
+        assert "unusable" in caplog.text

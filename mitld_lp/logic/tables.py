@@ -19,16 +19,20 @@ from __future__ import annotations
 import hashlib
 import importlib.resources
 import json
+import logging
 from functools import cache
 from pathlib import Path
 from typing import Any
 
 import lark
 from lark import Lark
+from lark.exceptions import LarkError
 from lark.grammar import Rule
 from lark.lexer import TerminalDef
 
 __all__ = ["OPTIONS", "TABLES", "grammar", "grammar_digest", "parser", "stored", "write"]
+
+log = logging.getLogger(__name__)
 
 #: The stored tables' file, beside this module.
 TABLES = "lalr_tables.json"
@@ -78,10 +82,17 @@ def stored() -> dict[str, Any] | None:
 
 @cache
 def parser() -> Lark:
-    """The formula parser: from the stored tables when they are current (see above)."""
-    tables = stored()
-    if tables is not None:
-        return Lark.load({"data": tables["data"], "memo": tables["memo"]})
+    """The formula parser: from the stored tables when they are current (see above); a
+    file that cannot be read as tables (damaged in packaging) is logged and the parser
+    built from the grammar."""
+    try:
+        tables = stored()
+        if tables is not None:
+            return Lark.load({"data": tables["data"], "memo": tables["memo"]})
+    except (ValueError, KeyError, TypeError, AttributeError, AssertionError,
+            LarkError) as err:  # lark checks its tables with assert
+        log.warning("parser tables %s unusable (%s: %s); building the parser from the "
+                    "grammar", TABLES, type(err).__name__, err)
     return Lark(grammar(), **OPTIONS)
 
 
