@@ -1,17 +1,17 @@
 """Freed memory handed back to the operating system after the product is built.
 
 The builder allocates and frees arrays of one entry per transition or choice, megabytes
-to hundreds of megabytes each.  glibc serves most of them from its heap (its threshold
+to hundreds of megabytes each. glibc serves most of them from its heap (its threshold
 for a separate mapping rises to 32 MB once such a mapping is freed) and keeps what the
 builder frees as holes that the solvers' arrays, of other sizes, do not fit: the process
-stays larger than what it holds.  ``malloc_trim(0)`` returns every free page inside the
-heap to the system; :func:`release_free_memory` calls it once, between the build and
-the analysis.  On the events family at 1.56M states (39M transitions) the peak went
-from 60.5 to 53.8 bytes a transition, for the trim's 38 ms and the pages the analysis
-then touches afresh.  Trimming again between the later stages freed no more at peak
-there and cost 5-10% of the solve stage at 1e5 states in pages touched again
-(``experiments/bench_sweeps.py``).  Dask's workers trim the same way.  With another C
-library (macOS, musl) it does nothing.
+stays larger than what it holds. ``malloc_trim(0)`` returns every free page inside the
+heap to the system; :func:`release_free_memory` is called once, between the build and
+the analysis, for products of at least a million transitions. On the events family at
+1.56M states (39M transitions) the peak went from 60.5 to 53.8 bytes a transition, for
+the trim's 38 ms and the pages the analysis then touches afresh. Trimming again between
+the later stages freed no more at peak there and cost 5-10% of the solve stage at 1e5
+states in pages touched again (``experiments/bench_sweeps.py``). Dask's workers trim the
+same way. With another C library (macOS, musl) it does nothing.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, NoReturn
 
 import numpy as np
 
@@ -56,6 +56,11 @@ if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package
 __all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check"]
 
 log = logging.getLogger(__name__)
+
+#: The product size from which its builder's freed memory is handed back to the system
+#: (:mod:`mitld_lp.heap`).  Below it the process's heap is tens of megabytes: its holes
+#: do not matter, while the pages touched again cost a few percent of a short solve.
+TRIM_FROM_TRANSITIONS = 1_000_000
 
 Method = Literal["lp", "vi"]
 
@@ -87,6 +92,14 @@ class ModelSolution:
     @property
     def certified(self) -> bool:
         return all(c.passed for c in self.checks)
+
+    @property
+    def quotient(self) -> NoReturn:
+        """Gone: the reduction is released before the exact evaluations (its matrix was
+        a second copy of most transitions); what the result needs of it is ``prob0``."""
+        raise AttributeError("ModelSolution.quotient was removed: the reduction is freed "
+                             "once the LPs are solved; use ModelSolution.prob0, or "
+                             "mitld_lp.solvers.quotient.reduce(mdp, target) to rebuild it")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -424,7 +437,8 @@ def synthesize(
     from mitld_lp.solvers.analysis import analyse
 
     # The builder's freed temporaries go back to the system (mitld_lp.heap).
-    release_free_memory()
+    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
+        release_free_memory()
     accept = acceptance(mdp, built.dta)
     quotients = analyse(mdp, accept.goal, mdp.truncated)
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)

@@ -230,3 +230,18 @@ def test_the_reduced_matrix_is_released_before_the_exact_evaluations(monkeypatch
     assert seen["evaluate"] == [0, 0]
     assert r.upper_model.prob0.dtype == bool and r.upper_model.prob0.shape == (
         r.mdp.n_states,)
+    with pytest.raises(AttributeError, match="prob0"):
+        r.upper_model.quotient  # noqa: B018 - the removed field says where to look
+
+
+def test_the_builders_memory_is_trimmed_only_for_large_products(monkeypatch):
+    import mitld_lp.synthesis as synthesis_module
+
+    calls = []
+    monkeypatch.setattr(synthesis_module, "release_free_memory", lambda: calls.append(1))
+    model = load_model(BUS_CASE1)  # 6,153 transitions
+    synthesize(model)
+    assert calls == []
+    monkeypatch.setattr(synthesis_module, "TRIM_FROM_TRANSITIONS", 6_000)
+    synthesize(model)
+    assert calls == [1]
