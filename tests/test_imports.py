@@ -68,6 +68,17 @@ def _blas(argv0: str, env: dict[str, str]) -> tuple[str, int]:
     return value, int(threads)
 
 
+def _openblas_pools() -> bool:
+    """Whether NumPy's BLAS is OpenBLAS (which starts its pool at import) and this
+    process may run on more than one core (OpenBLAS sizes the pool by the affinity)."""
+    import os
+
+    import numpy as np
+
+    blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"]
+    return "openblas" in blas.lower() and len(os.sched_getaffinity(0)) > 1
+
+
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
 def test_the_command_line_starts_blas_with_one_thread_unless_told_otherwise():
     import os
@@ -77,6 +88,20 @@ def test_the_command_line_starts_blas_with_one_thread_unless_told_otherwise():
     assert _blas("-m", env) == ("1", 1)  # the command: no BLAS thread pools
     library, threads = _blas("-c", env)  # a program importing the package: untouched
     assert library == "None"
-    if (os.cpu_count() or 1) > 1:  # OpenBLAS's pools are there, so the probe sees them
+    if _openblas_pools():  # the pools are there, so the probe can see them
         assert threads > 1
     assert _blas("-m", {**env, "OPENBLAS_NUM_THREADS": "2"})[0] == "2"  # the user's own
+
+
+def test_progress_bars_follow_tqdms_rule(monkeypatch):
+    # None: a bar where standard error is a terminal or in a notebook (tqdm's widget),
+    # none in a pipe (here: pytest captures standard error)
+    from mitld_lp import progress
+
+    monkeypatch.delitem(sys.modules, "ipykernel", raising=False)
+    assert isinstance(progress.bar(None, total=1), progress._Off)
+    monkeypatch.setitem(sys.modules, "ipykernel", object())
+    shown = progress.bar(None, total=1, disable=True)  # disable: tqdm draws nothing
+    assert not isinstance(shown, progress._Off)
+    shown.close()
+    assert isinstance(progress.bar(False, total=1), progress._Off)
