@@ -151,6 +151,25 @@ class DTA:
         probability of reaching an end component that keeps within it."""
         return frozenset(i for i, k in enumerate(self.kinds) if k in (SAFE, ACCEPT))
 
+    def complement(self) -> DTA:
+        """The automaton of ``not formula``: the same states and transitions with the
+        acceptance swapped.  A run's acceptance is decided by the strongly connected
+        component it ends in (each is all :data:`SAFE` or has no :data:`SAFE` state; the
+        accepting and rejecting states are absorbing), so the complement accepts exactly
+        the runs this one rejects: ``ACCEPT <-> REJECT``, ``SAFE <-> OPEN``.  An
+        ``OPEN`` state on no cycle becomes ``SAFE``, which no run can stay in.  The
+        classes swap (co-safe <-> safety; obligation stays obligation); exact for the
+        classes whose acceptance is exact (:attr:`fragment`)."""
+        from mitld_lp.logic.syntax import Not
+
+        swap = {ACCEPT: REJECT, REJECT: ACCEPT, SAFE: OPEN, OPEN: SAFE}
+        fragment = {"co-safe": "safety", "safety": "co-safe"}.get(self.fragment,
+                                                                  self.fragment)
+        return DTA(formula=Not(self.formula), atoms=self.atoms, states=self.states,
+                   initial=self.initial, accepting=self.rejecting, rejecting=self.accepting,
+                   delta=self.delta, kinds=tuple(swap[k] for k in self.kinds),
+                   fragment=fragment)
+
     def accepts_lasso(self, prefix: Iterable[Iterable[str]], loop: Iterable[Iterable[str]]) -> bool:
         """Whether the infinite word ``prefix loop loop ...`` is accepted: its run ends in
         a cycle of :attr:`persistent` states (``loop`` must not be empty)."""
