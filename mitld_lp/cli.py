@@ -36,12 +36,13 @@ from mitld_lp.distributions import DistributionError
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.model import ModelError
+from mitld_lp.problem import ProblemError
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.text import printable
 
 if TYPE_CHECKING:
-    from mitld_lp.model import Model
+    from mitld_lp.problem import Posed
     from mitld_lp.synthesis import Built
 
 PROG = "mitld-lp"
@@ -61,6 +62,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
     files.OutputPathError,
     FileExistsError,
     SweepError,
+    ProblemError,
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
@@ -235,30 +237,29 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
         action="store_true",
         help="give every event an age clock, truncated as in the paper",
     )
-    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
-                   metavar="N", help="refuse products (and automata) larger than N states "
-                                     "(exit 3)")
-    p.add_argument("--max-automaton-states", type=bounded_int(1),
-                   default=defaults.MAX_AUTOMATON_STATES, metavar="N",
-                   help="refuse automata larger than N states (exit 3)")
+    p.add_argument("--max-states", type=bounded_int(1), metavar="N",
+                   help="refuse products (and automata) larger than N states (exit 3; "
+                        "default: the model file's [budgets], else "
+                        f"{defaults.MAX_STATES:,})")
+    p.add_argument("--max-automaton-states", type=bounded_int(1), metavar="N",
+                   help="refuse automata larger than N states (exit 3; default: the model "
+                        f"file's [budgets], else {defaults.MAX_AUTOMATON_STATES:,})")
     p.add_argument("--max-memory", type=memory_size, metavar="SIZE",
-                   help="refuse products needing more memory, e.g. 4G or 500M "
-                        "(default: half the machine's memory; exit 3)")
+                   help="refuse products needing more memory, e.g. 4G or 500M (exit 3; "
+                        "default: the model file's [budgets], else half the machine's "
+                        "memory)")
 
 
-def _build(args: argparse.Namespace) -> tuple[Model, Built]:
-    """Model file -> (model, its automaton, STA and product MDP)."""
+def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
+    """Model file -> (the problem it poses, its automaton, STA and product MDP); a model
+    with constraints is refused naming ``verb`` (its product would be another
+    problem's)."""
     from mitld_lp.model import load_model
-    from mitld_lp.synthesis import build_product
+    from mitld_lp.synthesis import build_posed
 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    built = build_product(
-        model.game, model.spec, model.distributions,
-        epsilon=model.epsilon if args.epsilon is None else args.epsilon,
-        clock_reduction=not args.no_clock_reduction, max_states=args.max_states,
-        max_automaton_states=args.max_automaton_states, max_memory=args.max_memory,
-    )
-    return model, built
+    posed = _runs().posed_model(args, model, verb)
+    return posed, build_posed(posed)
 
 
 def _args_info(p: argparse.ArgumentParser) -> None:
@@ -270,15 +271,17 @@ def _cmd_info(args: argparse.Namespace) -> int:
     """The product's sizes, truncation points and the epsilon achieved."""
     from mitld_lp.product import component_counts
 
-    model, built = _build(args)
+    posed, built = _build(args, "info")
+    model = posed.model
     sta, mdp = built.sta, built.mdp
     out: dict[str, Any] = {
         "model": model.name,
         "spec": str(model.spec),
+        "objective": posed.problem.objective,
         "dta_states": sta.dta.n_states,
         **component_counts(mdp),
         "truncation_points": sta.truncation_points,
-        "epsilon": model.epsilon if args.epsilon is None else args.epsilon,
+        "epsilon": model.epsilon if posed.settings.epsilon is None else posed.settings.epsilon,
         "epsilon_achieved": sta.epsilon_achieved,
     }
     if args.json:
@@ -318,7 +321,8 @@ def _constrained() -> Any:
 def _cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
     from mitld_lp.model import load_model
-    from mitld_lp.synthesis import synthesize
+    from mitld_lp.problem import CONSTRAINED, pose
+    from mitld_lp.synthesis import solve
 
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
@@ -329,10 +333,11 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    if _constrained().wanted(args, model):
-        return _constrained().solve(args, model, policy_file)
-    r = _constrained().unconstrained(
-        synthesize(model, **_runs().solve_settings(args).synthesize_kwargs()), "solve")
+    posed = pose(model, args.constraint, then=args.then,
+                 settings=_runs().solve_settings(args))
+    if posed.route == CONSTRAINED:
+        return _constrained().solve(args, posed, policy_file)
+    r = solve(posed)
     summary = r.summary()
     if policy_file:
         _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
@@ -341,14 +346,17 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
-        if summary.get("robust"):
+        if r.objective == "min":
+            _out("objective:    min (the least probability of the task; the policy's "
+                 "guarantee is the upper end)")
+        if summary["robust"]:
             _out("robust:       worst case over the bands " + ", ".join(
                 f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
                 for (e, law), h in zip(summary["bands"].items(),
                                        summary["first_step_hazards"].values(), strict=True)))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
-        _out(f"value:        {_prob(r.lower_model.value)}  ({r.method}, status {r.status.value})")
+        _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")

@@ -22,22 +22,17 @@ def args_constraints(p: argparse.ArgumentParser) -> None:
                    help="then minimise expected steps / cost among the optimal policies")
 
 
-def wanted(args: argparse.Namespace, model: Any) -> bool:
-    """Whether ``solve`` is a constrained synthesis."""
-    return bool(args.constraint or args.then or model.constraints)
-
-
-def unconstrained(result: Any, verb: str) -> Any:
-    """``result`` if it is a plain synthesis; a usage error for a model whose file carries
-    constraints (only ``solve`` and ``pareto`` take them)."""
+def unconstrained(posed: Any, verb: str) -> Any:
+    """``posed`` if it is not a constrained problem; a usage error naming the verb for a
+    model whose file carries constraints (only ``solve``, ``sweep`` and ``pareto`` take
+    them)."""
     from mitld_lp.cli import UsageError
-    from mitld_lp.robust_synthesis import RobustResult
-    from mitld_lp.synthesis import SynthesisResult
+    from mitld_lp.problem import CONSTRAINED
 
-    if isinstance(result, SynthesisResult | RobustResult):
-        return result
-    raise UsageError(f"{verb}: the model has constraints, which only solve and pareto "
-                     "take (the randomised controller runs from Python: "
+    if posed.route != CONSTRAINED:
+        return posed
+    raise UsageError(f"{verb}: the model has constraints, which only solve, sweep and "
+                     "pareto take (the randomised controller runs from Python: "
                      "mitld_lp.constrained_runs)")
 
 
@@ -47,16 +42,15 @@ def _usage(exc: ConstraintError) -> Exception:
     return UsageError(str(exc))
 
 
-def solve(args: argparse.Namespace, model: Any, policy_file: Path | None) -> int:
-    """Run the constrained synthesis and print it; exit 0 when certified, 3 when
-    infeasible, failed or not certified."""
+def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int:
+    """Run the constrained synthesis of a posed problem and print it; exit 0 when
+    certified, 3 when infeasible, failed or not certified."""
     from mitld_lp.cli import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out
-    from mitld_lp.constrained import synthesize_constrained
+    from mitld_lp.constrained import solve_constrained
 
+    model = posed.model
     try:
-        r = synthesize_constrained(model, args.constraint, then=args.then,
-                                   epsilon=args.epsilon, max_states=args.max_states,
-                                   max_memory=args.max_memory)
+        r = solve_constrained(posed)
     except ConstraintError as exc:
         raise _usage(exc) from None
     summary = r.summary()
@@ -67,6 +61,8 @@ def solve(args: argparse.Namespace, model: Any, policy_file: Path | None) -> int
         _out(_dumps(summary))
     else:
         _out(f"model:        {model.name}  ({model.spec})")
+        if r.objective == "min":
+            _out("objective:    min (the least probability of the task)")
         _out(f"status:       {r.status}")
         if r.status == "optimal":
             _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]  (LP {r.value:.7f})")
@@ -132,9 +128,11 @@ def cmd_pareto(args: argparse.Namespace) -> int:
 
     out_csv = _output_path(args.csv, args.force, "--csv", (".csv",))
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
-    model = load_model(args.model)
+    from mitld_lp.cli_runs import model_options
+
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     try:
-        points = pareto(model, args.against, args.points)
+        points = pareto(model, args.against, args.points, **model_options(args))
     except ConstraintError as exc:
         raise _usage(exc) from None
     _write(out_csv, lambda p: write_csv(points, p, overwrite=True))

@@ -37,7 +37,11 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     if _robust_export(args, lp, drn):
         return EXIT_OK
-    built = _build(args)[1]
+    posed, built = _build(args, "export")
+    if posed.minimise:
+        raise UsageError("export: the model's objective is min; its LP and DRN would be "
+                         "those of the complement's maximum (not exported, to keep the "
+                         "files' optimum the task's)")
     mdp = built.mdp
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
     target = goal | mdp.truncated if args.upper else goal
@@ -53,6 +57,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) -> bool:
     """A model with a law known only within a band: its interval MDP as DRN (the robust
     optimum is a max-min, no one LP: --lp is refused).  False for any other model."""
+    from mitld_lp.cli_runs import posed_model
     from mitld_lp.model import load_model
     from mitld_lp.robust_synthesis import interval_model, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
@@ -60,14 +65,19 @@ def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     if not is_robust(model.distributions):
         return False
+    posed = posed_model(args, model, "export")
+    if posed.minimise:
+        raise UsageError("export: the model's objective is min; not exported (the "
+                         "interval MDP would be the complement's)")
     if lp:
         raise UsageError("export --lp: a law known only within a band has a robust optimum "
                          "(a max-min), which is no single LP; export --drn writes the "
                          "interval MDP")
-    imdp = interval_model(model, epsilon=args.epsilon,
-                          clock_reduction=not args.no_clock_reduction,
-                          max_states=args.max_states, max_memory=args.max_memory,
-                          max_automaton_states=args.max_automaton_states)
+    s = posed.settings
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+    imdp = interval_model(model, epsilon=s.epsilon, clock_reduction=s.clock_reduction,
+                          max_states=s.max_states, max_memory=s.max_memory,
+                          max_automaton_states=s.max_automaton_states)
     target = imdp.target | imdp.truncated if args.upper else imdp.target
     assert drn is not None  # export checked that one of the two is given
     _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))

@@ -35,20 +35,34 @@ from mitld_lp.cli import (
 from mitld_lp.text import printable
 
 if TYPE_CHECKING:
-    from mitld_lp.sweep.rows import Settings
+    from mitld_lp.problem import Posed, Settings
 
+
+def model_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The settings every model verb's options set (:func:`mitld_lp.cli._args_model`),
+    as :func:`mitld_lp.synthesis.synthesize`'s keywords (time left now)."""
+    return {"epsilon": args.epsilon, "clock_reduction": not args.no_clock_reduction,
+            "max_states": args.max_states, "max_automaton_states": args.max_automaton_states,
+            "max_memory": args.max_memory, "time_limit": _time_left(args)}
 
 
 def solve_settings(args: argparse.Namespace) -> Settings:
-    """``solve``'s options as :class:`mitld_lp.sweep.rows.Settings` (time left now)."""
-    from mitld_lp.sweep.rows import Settings
+    """``solve``'s options as one :class:`mitld_lp.problem.Settings` (time left now)."""
+    from mitld_lp.problem import settings_from
 
-    return Settings(method=args.method, solver=args.solver, backend=args.backend,
-                    clock_reduction=not args.no_clock_reduction,
-                    decompose=not args.no_decompose, time_limit=_time_left(args),
-                    max_states=args.max_states,
-                    max_automaton_states=args.max_automaton_states,
-                    max_memory=args.max_memory, epsilon=args.epsilon)
+    return settings_from(method=args.method, solver=args.solver, backend=args.backend,
+                         decompose=False if args.no_decompose else None,
+                         **model_options(args))
+
+
+def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:
+    """The problem a verb that takes no constraints (``simulate``, ``plot``, ``info``,
+    ``export``) poses for ``model``: refused, naming the verb, when the model file
+    carries constraints."""
+    from mitld_lp.problem import pose, settings_from
+
+    return _constrained().unconstrained(
+        pose(model, settings=settings_from(**model_options(args))), verb)
 
 
 def is_pattern(name: str) -> bool:
@@ -98,7 +112,7 @@ def solve_batch(args: argparse.Namespace) -> int:
             outcome = run_model(
                 lambda path=path: load_model(path, max_states=args.max_states,
                                              max_memory=args.max_memory),
-                solve_settings(args))
+                solve_settings(args), constraints=tuple(args.constraint), then=args.then)
             records.append({"file": path, **outcome.summary} if outcome.summary else {
                 "file": path, "status": outcome.status, "certified": False,
                 "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
@@ -191,8 +205,9 @@ def args_plot(p: argparse.ArgumentParser) -> None:
                    help="the picture's size in pixels (default 800x600)")
     p.add_argument("--epsilon", type=probability_budget,
                    help="model: truncation budget in (0, 1) (default: the model's)")
-    p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
-                   metavar="N", help="model: refuse products larger than N states (exit 3)")
+    p.add_argument("--max-states", type=bounded_int(1), metavar="N",
+                   help="model: refuse products larger than N states (exit 3; default: the "
+                        "model file's [budgets], else 5,000,000)")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
 
 
@@ -214,13 +229,15 @@ def cmd_plot(args: argparse.Namespace) -> int:
             fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
         else:
             from mitld_lp.model import load_model
-            from mitld_lp.synthesis import synthesize
+            from mitld_lp.problem import pose, settings_from
+            from mitld_lp.synthesis import solve
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
             model = load_model(args.input, max_states=args.max_states)
-            result = _constrained().unconstrained(synthesize(
-                model, epsilon=args.epsilon, max_states=args.max_states,
-                time_limit=_time_left(args)), "plot")
+            posed = _constrained().unconstrained(pose(model, settings=settings_from(
+                epsilon=args.epsilon, max_states=args.max_states,
+                time_limit=_time_left(args))), "plot")
+            result = solve(posed)
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
@@ -245,14 +262,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
     from mitld_lp.model import load_model
     from mitld_lp.simulate import simulate
-    from mitld_lp.synthesis import synthesize
+    from mitld_lp.synthesis import solve
 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    r = _constrained().unconstrained(synthesize(
-        model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
-        max_states=args.max_states, max_memory=args.max_memory,
-        max_automaton_states=args.max_automaton_states, time_limit=_time_left(args)),
-        "simulate")
+    r = solve(posed_model(args, model, "simulate"))
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     robust = r.summary().get("robust", False)

@@ -18,28 +18,26 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from mitld_lp import defaults
 from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint, joint_automaton
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
+from mitld_lp.checks import Check
 from mitld_lp.constraints import (
     LEXICOGRAPHIC_TOL,
-    THEN,
     Constraint,
     ConstraintError,
-    parse_constraints,
 )
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.literal import from_spec
 from mitld_lp.logic import check
-from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.logic.syntax import DistLiteral, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
+from mitld_lp.problem import CONSTRAINED, Posed, check_constrained, pose, settings_from
 from mitld_lp.product import ProductState, ProductStates, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
@@ -91,6 +89,20 @@ class ConstrainedResult:
     prob: np.ndarray | None
     stay: np.ndarray | None
     timings: dict[str, float] = field(default_factory=dict)
+    objective: str = "max"
+    model: Model | None = None
+    epsilon: float = float("nan")
+    route: ClassVar[str] = CONSTRAINED
+    method: ClassVar[str] = "lp"
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(self.timings.values()))
+
+    @property
+    def failed_checks(self) -> tuple[Check, ...]:
+        """The checks that failed, as :class:`~mitld_lp.checks.Check` records."""
+        return tuple(Check(n, ok, d) for n, ok, d in self.checks if not ok)
 
     def policy_table(self) -> list[dict[str, Any]]:
         """One row per (state, action) the policy takes with positive probability: the
@@ -119,24 +131,16 @@ class ConstrainedResult:
                 "probability": p}
 
     def summary(self) -> dict[str, Any]:
-        """The numbers, as plain data (the CLI prints it as JSON)."""
-        return {
-            "status": self.status, "lower": self.lower, "upper": self.upper,
-            "lp_value": self.value, "certified": self.certified,
-            "expected_steps": self.steps,
-            "constraints": [
-                {"constraint": str(c.constraint), "value": c.value, "bound": c.constraint.bound,
-                 "holds": c.holds, **({"feasible_bound": c.feasible_bound}
-                                      if self.status == INFEASIBLE else {})}
-                for c in self.constraints
-            ],
-            "then": self.then, "secondary": self.secondary,
-            "checks": [{"name": n, "ok": ok, "detail": d} for n, ok, d in self.checks],
-            "message": self.message,
-            "states": self.merged.mdp.n_states, "product_states": self.mdp.n_states,
-            "randomized_states": int(np.count_nonzero(self._mixed())) if self.prob is not None
-            else 0,
-        }
+        """The numbers, as plain data (the command line's ``--json``,
+        :func:`mitld_lp.report.summary`)."""
+        from mitld_lp.report import summary
+
+        return summary(self)
+
+    @property
+    def randomized_states(self) -> int:
+        """How many states the policy randomises in."""
+        return 0 if self.prob is None else int(np.count_nonzero(self._mixed()))
 
     def _mixed(self) -> np.ndarray:
         assert self.prob is not None and self.stay is not None
@@ -213,46 +217,62 @@ def synthesize_constrained(
     *,
     then: str | None = None,
     costs: Mapping[str, float] | None = None,
-    epsilon: float | None = None,
-    max_states: int = defaults.MAX_STATES,
-    max_memory: int | None = None,
-    certify_tol: float = defaults.CERTIFY_TOL,
     seed: int | None = 0,
+    **options: Any,
 ) -> ConstrainedResult:
     """Maximise the task's probability subject to ``constraints`` (texts or records;
     the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
     or ``"min-cost"``), minimise the expected steps / cost among the policies within
     :data:`LEXICOGRAPHIC_TOL` of that probability.  ``costs``: per action (default
     the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
-    controller's generator.  See the module docstring for what is certified."""
-    if then is not None and then not in THEN:
-        raise ConstraintError(f"then: must be one of {', '.join(THEN)}, got {then!r}")
-    cons = parse_constraints(model.constraints) + parse_constraints(constraints)
+    controller's generator.  ``options``: :func:`mitld_lp.synthesis.synthesize`'s
+    settings (epsilon, budgets, truncation, ...), each honoured or refused by name
+    (:func:`mitld_lp.problem.pose`).  See the module docstring for what is certified."""
+    posed = pose(model, constraints, then=then, settings=settings_from(**options))
+    return solve_constrained(posed, costs=costs, seed=seed)
+
+
+def solve_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
+                      seed: int | None = 0) -> ConstrainedResult:
+    """The constrained LP of a posed problem (one with no constraint is solved too: the
+    trade-off curve's end points); refuses, naming it, a problem that LP does not solve
+    (:func:`mitld_lp.problem.check_constrained`)."""
+    check_constrained(posed)
+    model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
+        posed.problem.then
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     cost_map = dict(model.costs if costs is None else costs)
     t0 = time.perf_counter()
+    deadline = None if s.time_limit is None else t0 + s.time_limit
     laws = _laws(model, cons)
     formulas = [c.formula for c in cons if c.kind == "prob"]
-    parts = [to_dta(model.spec, max_states=max_states),
-             *(to_dta(f, max_states=max_states) for f in formulas if f is not None)]
-    for part, text in zip(parts, ["the task", *map(str, formulas)], strict=True):
-        if part.fragment != CO_SAFE:  # the joint automaton reads acceptance by reaching
-            raise ConstraintError(
-                f"{text}: class {part.fragment}; constraints are solved for co-safe "
-                "tasks and constraint formulas (a safety part such as G !h can be written "
-                "as the constraint P(F h) <= 0)")
-    joint = joint_automaton(parts, max_states=max_states)
-    eps = model.epsilon if epsilon is None else epsilon
-    sta = make_sta(joint.dta, laws, eps)
-    mdp = product(model.game, sta, max_states=max_states, max_memory=max_memory)
+    cap = min(s.max_states, s.max_automaton_states)
+    task = to_dta(model.spec, max_states=cap)
+    parts = [task.complement() if posed.minimise else task,
+             *(to_dta(f, max_states=cap) for f in formulas if f is not None)]
+    joint = joint_automaton(parts, max_states=cap)
+    eps = model.epsilon if s.epsilon is None else s.epsilon
+    sta = make_sta(joint.dta, laws, eps, clock_reduction=s.clock_reduction,
+                   truncation=s.truncation_map)
+    mdp = product(model.game, sta, max_states=s.max_states, max_memory=s.max_memory)
     merged = merge(mdp, joint)
     cost_vec = cost_vector(mdp, cost_map)
     t1 = time.perf_counter()
+
     def rows(which: str) -> list[Row]:
         return rows_for(cons, which)
+
+    def lp(objective: Quantity, maximise: bool, lp_rows: list[Row]) -> Solved:
+        left = None if deadline is None else max(deadline - time.perf_counter(), 0.0)
+        return optimise(merged, objective, maximise, lp_rows, costs=cost_vec,
+                        tol=s.tol * 0.1, time_limit=left)
+
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    low = optimise(merged, task_lo, True, rows("lower"), costs=cost_vec)
-    common: dict[str, Any] = dict(merged=merged, joint=joint, sta=sta, mdp=mdp)
+    low = lp(task_lo, True, rows("lower"))
+    common: dict[str, Any] = dict(merged=merged, joint=joint, sta=sta, mdp=mdp,
+                                  objective=posed.problem.objective, model=model,
+                                  epsilon=eps)
     if low.status != OPTIMAL:
         return _unsolved(low, cons, rows("lower"), cost_vec, then, t1 - t0, **common)
     chosen = low
@@ -260,14 +280,14 @@ def synthesize_constrained(
     if then is not None:
         q2 = Quantity("steps" if then == "min-steps" else "cost")
         keep = Row(task_lo, ">=", low.objective - LEXICOGRAPHIC_TOL)
-        second = optimise(merged, q2, False, [*rows("lower"), keep], costs=cost_vec)
+        second = lp(q2, False, [*rows("lower"), keep])
         if second.status != OPTIMAL:
             return _unsolved(second, cons, rows("lower"), cost_vec, then, t1 - t0, **common)
         chosen = second
         secondary = second.values[0]
     high = low
     if merged.truncated.any():
-        high = optimise(merged, task_hi, True, rows("upper"), costs=cost_vec)
+        high = lp(task_hi, True, rows("upper"))
     # exact values of the chosen policy: the task, each constraint, the steps
     assert chosen.prob is not None and chosen.stay is not None
     from mitld_lp.solvers.constrained_model import columns, evaluate
@@ -278,6 +298,7 @@ def synthesize_constrained(
     values = tuple(ConstraintValue(c, v, c.holds(v)) for c, v in zip(cons, con_vals, strict=True))
     upper = high.objective if high.status == OPTIMAL else float("nan")
     want = low.objective - (LEXICOGRAPHIC_TOL if then else 0.0)
+    certify_tol = s.certify_tol
     checks = (
         ("lower LP", low.status == OPTIMAL, low.message),
         ("upper LP", high.status == OPTIMAL, high.message),
@@ -290,8 +311,11 @@ def synthesize_constrained(
     )
     controller = ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
                                        chosen.stay, seed=seed)
+    value = low.objective
+    if posed.minimise:  # Pmin(task) = 1 - Pmax(not task): the bracket read back
+        lower, upper, value = 1.0 - upper, 1.0 - lower, 1.0 - value
     return ConstrainedResult(
-        status=OPTIMAL, lower=lower, upper=upper, value=low.objective,
+        status=OPTIMAL, lower=lower, upper=upper, value=value,
         certified=all(ok for _, ok, _ in checks), constraints=values, then=then,
         secondary=secondary, steps=steps, checks=checks, message=chosen.message,
         controller=controller, prob=chosen.prob, stay=chosen.stay,
@@ -349,6 +373,7 @@ class ConstrainedController:
 
     @property
     def verdicts(self) -> tuple[int, ...]:
+        """Per component: accepted, rejected or undecided."""
         if self.q is None:
             return tuple(UNDECIDED for _ in self.joint.parts)
         return self.joint.verdicts[self.q]
@@ -378,13 +403,17 @@ class ConstrainedController:
         if not self.staying and self.rng.random() < self.stay_prob[s]:
             self.staying = True
         if self.staying:  # keep to the end component: its internal actions, uniformly
-            inside = lo + np.flatnonzero(m.internal[lo:hi])
-            return m.mdp.action_name(int(self.rng.choice(inside)))
+            return self._inside(m.internal, lo, hi)
         weights = self.prob[lo:hi]
         c = lo + int(self.rng.choice(hi - lo, p=weights / weights.sum()))
         if m.undecided[s]:
             self.charged += 1
         return m.mdp.action_name(c)
+
+    def _inside(self, mask: np.ndarray, lo: int, hi: int) -> str:
+        """One of the state's choices in ``mask[lo:hi]``, uniformly."""
+        inside = lo + np.flatnonzero(mask[lo:hi])
+        return self.merged.mdp.action_name(int(self.rng.choice(inside)))
 
     @property
     def settled(self) -> bool:

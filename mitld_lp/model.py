@@ -91,6 +91,11 @@ class Model:
         constraints: the file's ``constraints`` (texts, checked when loaded; see
             :mod:`mitld_lp.constraints`).
         costs: the file's ``[costs]``: cost per action (1 for an action not named).
+        objective: ``"max"`` (the default) or ``"min"``: the probability of the task is
+            maximised or minimised (PRISM's ``Pmax`` / ``Pmin``).
+        budgets: the file's ``[budgets]`` (``max_states``, ``max_automaton_states``,
+            ``max_memory`` in bytes, ``time_limit`` in seconds): used where the caller
+            sets none (:class:`mitld_lp.problem.Settings`).
     """
 
     name: str
@@ -102,6 +107,8 @@ class Model:
     source: Path | None = None
     constraints: tuple[str, ...] = ()
     costs: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    objective: str = "max"
+    budgets: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def events(self) -> frozenset[str]:
@@ -112,7 +119,8 @@ class Model:
         # A read-only mapping view does not pickle: rebuild it from a plain dict.
         return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
                                   self.game, dict(self.distributions), self.source,
-                                  self.constraints, dict(self.costs)))
+                                  self.constraints, dict(self.costs), self.objective,
+                                  dict(self.budgets)))
 
     @classmethod
     def from_game(
@@ -124,6 +132,7 @@ class Model:
         events: Mapping[str, FirstOccurrence] | None = None,
         epsilon: float = DEFAULT_EPSILON,
         name: str = "model",
+        objective: str = "max",
     ) -> Model:
         """A model from a game object and a specification, validated as a file would be.
 
@@ -159,17 +168,21 @@ class Model:
         else:
             raise ctx.error("spec", f"must be a formula or its text, got {type(spec).__name__}")
         task = _bind(game, report, distributions, "proposition", None, ctx, events)
+        if objective not in OBJECTIVES:
+            raise ctx.error("objective", f"must be 'max' or 'min', got {objective!r}")
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
-                   distributions=task.laws, source=None)
+                   distributions=task.laws, source=None, objective=objective)
 
 
 def _unpickle_model(
     name: str, spec: Formula, spec_text: str, epsilon: float, game: Game[Any],
     distributions: dict[str, FirstOccurrence], source: Path | None,
     constraints: tuple[str, ...] = (), costs: dict[str, float] | None = None,
+    objective: str = "max", budgets: dict[str, float] | None = None,
 ) -> Model:
     return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source,
-                 constraints, MappingProxyType(costs or {}))
+                 constraints, MappingProxyType(costs or {}), objective,
+                 MappingProxyType(budgets or {}))
 
 
 
@@ -326,7 +339,9 @@ def _loaders() -> Any:
     return loaders
 
 _COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs"}
+_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs",
+                    "objective", "budgets"}
+OBJECTIVES = ("max", "min")
 
 
 # --------------------------------------------------------------------------- the spec
@@ -439,15 +454,23 @@ def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, Fi
 
 
 def _load(
-    text: str, source: str, path: Path | None, max_states: int, max_memory: int | None
+    text: str, source: str, path: Path | None, max_states: int | None,
+    max_memory: int | None
 ) -> Model:
-    ctx = _Context(source, max_states, max_memory)
+    ctx = _Context(source)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
         raise ctx.error("", "TOML nested too deeply to read") from None
+    budgets = _budgets(doc, ctx)
+    # the caller's budgets first, then the file's, then the defaults (a world built while
+    # loading, a [prism] program, is bounded by them)
+    ctx.max_states = int(max_states if max_states is not None else
+                         budgets.get("max_states", defaults.MAX_STATES))
+    mem = max_memory if max_memory is not None else budgets.get("max_memory")
+    ctx.max_memory = None if mem is None else int(mem)
 
     present = [k for k in _GAME_KINDS if k.table in doc]
     if len(present) > 1:
@@ -489,6 +512,9 @@ def _load(
     kind.check_task(game, task, ctx)
 
     constraints, costs = _constraints_and_costs(doc, ctx)
+    objective = doc.get("objective", "max")
+    if objective not in OBJECTIVES:
+        raise ctx.error("objective", f"must be \"max\" or \"min\", got {_show(objective)}")
     return Model(
         name=name,
         spec=spec,
@@ -499,7 +525,46 @@ def _load(
         source=path,
         constraints=constraints,
         costs=MappingProxyType(costs),
+        objective=objective,
+        budgets=MappingProxyType(budgets),
     )
+
+
+#: The ``[budgets]`` a model file may set, with the check of each value.
+_BUDGET_KEYS = ("max_states", "max_automaton_states", "max_memory", "time_limit")
+
+
+def _budgets(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
+    """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
+    or a text such as ``"4G"``) of memory, a positive number of seconds."""
+    from argparse import ArgumentTypeError
+
+    from mitld_lp.arguments import memory_size
+
+    if "budgets" not in doc:
+        return {}
+    table = ctx.table(doc["budgets"], "budgets")
+    ctx.keys(table, "budgets", set(), set(_BUDGET_KEYS))
+    out: dict[str, float] = {}
+    for key, value in table.items():
+        where = f"budgets.{key}"
+        if key == "max_memory" and isinstance(value, str):
+            try:
+                out[key] = memory_size(value)
+            except ArgumentTypeError as exc:
+                raise ctx.error(where, str(exc)) from None
+            continue
+        if key == "time_limit":
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (
+                    0 < value < float("inf")):
+                raise ctx.error(where, f"must be a positive number of seconds, got "
+                                       f"{_show(value)}")
+            out[key] = float(value)
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ctx.error(where, f"must be a whole number >= 1, got {_show(value)}")
+        out[key] = value
+    return out
 
 
 def _constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
@@ -527,7 +592,7 @@ def loads_model(
     text: str,
     source: str = "<string>",
     *,
-    max_states: int = defaults.MAX_STATES,
+    max_states: int | None = None,
     max_memory: int | None = None,
 ) -> Model:
     """Load a model from TOML ``text``; ``source`` prefixes every error message.
@@ -541,7 +606,7 @@ def loads_model(
 def load_model(
     path: str | os.PathLike[str],
     *,
-    max_states: int = defaults.MAX_STATES,
+    max_states: int | None = None,
     max_memory: int | None = None,
 ) -> Model:
     """Load and validate the model file at ``path`` (budgets as for :func:`loads_model`).

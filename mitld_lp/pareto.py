@@ -12,6 +12,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -52,16 +53,17 @@ def against_constraint(against: str, bound: float) -> Constraint:
     return c
 
 
-def _range(model: Model, against: str) -> tuple[float, float]:
+def _range(model: Model, against: str, options: dict[str, Any]) -> tuple[float, float]:
     """The bounds worth tracing: from the least value of the quantity any policy (meeting
     the model's constraints) achieves to its value on the fastest optimal policy."""
     lo_c = against_constraint(against, 1.0 if against.startswith("P") else 0.0)
     base = synthesize_constrained(model, [], then="min-cost" if against == "cost" else
-                                  "min-steps" if against == "steps" else None)
+                                  "min-steps" if against == "steps" else None, **options)
     if base.status != OPTIMAL:
         raise ConstraintError(f"the model's own constraints are {base.status}")
     if lo_c.kind == "prob":
-        probe = synthesize_constrained(model, [lo_c])  # P(phi) <= 1: phi joins the product
+        # P(phi) <= 1: phi joins the product
+        probe = synthesize_constrained(model, [lo_c], **options)
         assert probe.status == OPTIMAL
         own = sum(1 for t in model.constraints if t.lstrip().startswith("P"))
         rows = rows_for(parse_constraints(model.constraints), "lower")
@@ -75,15 +77,17 @@ def _range(model: Model, against: str) -> tuple[float, float]:
     return float(least.objective), float(base.secondary or 0.0)
 
 
-def pareto(model: Model, against: str, points: int = 11) -> list[ParetoPoint]:
-    """``points`` certified points, bounds evenly spaced over the range worth tracing."""
-    lo, hi = _range(model, against)
+def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list[ParetoPoint]:
+    """``points`` certified points, bounds evenly spaced over the range worth tracing.
+    ``options``: :func:`mitld_lp.synthesis.synthesize`'s settings, used for every point
+    (each honoured or refused by name: :func:`mitld_lp.problem.pose`)."""
+    lo, hi = _range(model, against, options)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")
     out = []
     for b in np.linspace(lo, max(hi, lo), points):
         c = against_constraint(against, float(b) + 1e-9)
-        r = synthesize_constrained(model, [c])
+        r = synthesize_constrained(model, [c], **options)
         achieved = r.constraints[-1].value if r.constraints else float("nan")
         out.append(ParetoPoint(float(b), r.lower, r.upper, achieved, r.status, r.certified))
     return out

@@ -12,7 +12,7 @@ from mitld_lp.product import ProductState
 if TYPE_CHECKING:
     from mitld_lp.synthesis import SynthesisResult
 
-__all__ = ["POLICY_COLUMNS", "policy_table", "summary", "html"]
+__all__ = ["POLICY_COLUMNS", "SUMMARY_KEYS", "policy_table", "summary", "html"]
 
 POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
                   "accepting_component")
@@ -53,49 +53,90 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     return rows
 
 
-def summary(result: SynthesisResult) -> dict[str, Any]:
-    """A JSON-ready record of ``result`` (the command line's ``--json``).
+#: The keys of every result's :func:`summary` (the command line's ``--json``), whatever
+#: the route; a part a route does not have is ``None``, ``[]``, ``{}``, ``0`` or false.
+SUMMARY_KEYS = (
+    "model", "objective", "route", "status", "certified", "lower", "upper", "value",
+    "failed_checks", "checks", "method", "states", "choices", "transitions",
+    "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
+    "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
+    "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
+    "randomized_states", "message",
+)
 
-    ``value`` is the lower model's optimum by the method (``lower_model.value``);
-    ``lower``, ``upper``: the certified bracket; the sizes are the automaton's and the
-    product's; ``lp`` and ``iteration`` the lower model's solver records.
+
+def summary(result: Any) -> dict[str, Any]:
+    """A JSON-ready record of any synthesis result (the command line's ``--json``), with
+    the keys :data:`SUMMARY_KEYS` on every route (docs/results.md).
+
+    ``lower``, ``upper``: the certified bracket (in the task's terms also for
+    ``objective = "min"``); ``value``: the method's optimum (the lower model's);
+    ``states`` / ``choices`` / ``transitions``: the model the solver worked on (for the
+    constrained route the merged product, ``product_states`` the product's);
+    ``lp`` and ``iteration``: the lower model's solver records where the route has them.
     """
-    low, high, mdp, sta = result.lower_model, result.upper_model, result.mdp, result.sta
+    out = dict.fromkeys(SUMMARY_KEYS)
+    mdp, sta = result.mdp, result.sta
+    out.update(
+        model=None if result.model is None else result.model.name,
+        objective=result.objective, route=result.route, certified=bool(result.certified),
+        lower=result.lower, upper=result.upper, value=result.value,
+        failed_checks=[f"{c.name}: {c.detail}" for c in result.failed_checks],
+        method=getattr(result, "method", "lp"), product_states=mdp.n_states,
+        epsilon=result.epsilon, epsilon_achieved=sta.epsilon_achieved,
+        truncation_points=dict(sta.truncation_points), seconds=result.seconds,
+        timings=dict(result.timings), robust=False, bands={}, first_step_hazards={},
+        ambiguous_choices=0, constraints=[], randomized_states=0,
+    )
+    if result.route == "constrained":
+        out.update(_constrained_part(result))
+        return out
+    low, high = result.lower_model, result.upper_model
+    models = (low,) if high is low else (low, high)
+    out.update(
+        status=result.status.value, states=mdp.n_states, choices=mdp.n_choices,
+        transitions=mdp.n_transitions, dta_states=result.dta.n_states,
+        checks=[{"name": c.name, "ok": c.passed, "detail": c.detail}
+                for m in models for c in m.checks],
+    )
+    if result.route == "robust":
+        out.update(robust=True, bands=result.bands(),
+                   first_step_hazards={e: list(b) for e, b in
+                                       result.first_step_hazards().items()},
+                   ambiguous_choices=mdp.ambiguous_choices)
+        out["lp"] = None if low.lp is None else {
+            "status": low.lp.status.value, "variables": low.lp.variables,
+            "constraints": low.lp.constraints, "message": low.lp.message}
+        out["iteration"] = {"status": low.iteration.status.value, "lower": low.bracket[0],
+                            "upper": high.bracket[1], "iterations": low.iteration.sweeps}
+        return out
     lp = low.lp
+    out["lp"] = None if lp is None else {
+        "status": lp.status.value, "solver": lp.solver, "backend": lp.backend,
+        "primal_objective": lp.primal_objective, "dual_objective": lp.dual_objective,
+        "iterations": lp.iterations, "seconds": lp.seconds, "message": lp.message}
+    out["iteration"] = {"status": low.iteration.status.value,
+                        "lower": low.iteration.value_lower,
+                        "upper": high.iteration.value_upper,
+                        "iterations": low.iteration.iterations}
+    return out
+
+
+def _constrained_part(result: Any) -> dict[str, Any]:
+    """The keys a constrained result fills (its model is the merged product)."""
+    merged = result.merged.mdp
+    infeasible = result.status == "infeasible"
     return {
-        "model": result.model.name,
-        "status": result.status.value,
-        "lower": result.lower,
-        "upper": result.upper,
-        "value": low.value,
-        "certified": result.certified,
-        "failed_checks": [f"{c.name}: {c.detail}" for c in result.failed_checks],
-        "method": result.method,
-        "states": mdp.n_states,
-        "choices": mdp.n_choices,
-        "transitions": mdp.n_transitions,
-        "dta_states": result.dta.n_states,
-        "epsilon": result.epsilon,
-        "epsilon_achieved": sta.epsilon_achieved,
-        "truncation_points": dict(sta.truncation_points),
-        "seconds": result.seconds,
-        "timings": dict(result.timings),
-        "lp": None if lp is None else {
-            "status": lp.status.value,
-            "solver": lp.solver,
-            "backend": lp.backend,
-            "primal_objective": lp.primal_objective,
-            "dual_objective": lp.dual_objective,
-            "iterations": lp.iterations,
-            "seconds": lp.seconds,
-            "message": lp.message,
-        },
-        "iteration": {
-            "status": low.iteration.status.value,
-            "lower": low.iteration.value_lower,
-            "upper": high.iteration.value_upper,
-            "iterations": low.iteration.iterations,
-        },
+        "status": result.status, "states": merged.n_states, "choices": merged.n_choices,
+        "transitions": merged.n_transitions, "dta_states": result.joint.dta.n_states,
+        "checks": [{"name": n, "ok": ok, "detail": d} for n, ok, d in result.checks],
+        "constraints": [
+            {"constraint": str(c.constraint), "value": c.value, "bound": c.constraint.bound,
+             "holds": c.holds, **({"feasible_bound": c.feasible_bound} if infeasible else {})}
+            for c in result.constraints],
+        "then": result.then, "secondary": result.secondary,
+        "expected_steps": result.steps, "message": result.message,
+        "randomized_states": result.randomized_states,
     }
 
 

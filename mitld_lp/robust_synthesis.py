@@ -30,21 +30,24 @@ import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.acceptance import Acceptance
-from mitld_lp.automata.dta import DTA, SAFE
+from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
+from mitld_lp.checks import Check, close
 from mitld_lp.controller import Controller
-from mitld_lp.distributions import DistributionError, FirstOccurrence
+from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
+from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
 from mitld_lp.product import ProductState, robust_product
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
@@ -55,7 +58,6 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
-from mitld_lp.synthesis import Check, _close
 
 __all__ = ["is_robust", "synthesize_robust", "RobustResult", "RobustModelSolution",
            "robust_game"]
@@ -115,14 +117,14 @@ def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
         checks.append(Check("policy LP solved", lp.status is Status.OPTIMAL,
                             f"{lp.status.value}: {lp.message}"))
         if lp.values is not None:
-            checks.append(_close("policy LP = policy iteration", float(lp.values[s0]),
+            checks.append(close("policy LP = policy iteration", float(lp.values[s0]),
                                  float(ev.lower[s0]), certify_tol))
     lo, hi = float(it.lower[s0]), float(it.upper[s0])
     v0 = float(values[s0])
     checks.append(Check("policy value within robust bracket",
                         lo - certify_tol <= v0 <= hi + certify_tol,
                         f"policy {v0:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}"))
-    checks.append(_close("policy value = robust optimum (upper bound)", v0, hi, certify_tol))
+    checks.append(close("policy value = robust optimum (upper bound)", v0, hi, certify_tol))
     residual = bellman_residual(game, target, values)
     checks.append(Check("policy values are a robust Bellman fixed point",
                         residual <= certify_tol,
@@ -150,6 +152,8 @@ class RobustResult:
     upper_model: RobustModelSolution
     controller: Controller
     timings: Mapping[str, float]
+    objective: str = "max"
+    route: ClassVar[str] = ROBUST
 
     @property
     def mdp(self) -> IntervalMDP:
@@ -161,13 +165,25 @@ class RobustResult:
 
     @property
     def lower(self) -> float:
-        """What the policy guarantees against every law of the bands, truncation lost."""
+        """What the policy guarantees against every law of the bands, truncation lost
+        (``objective="min"``: no policy guarantees less, ``1 - upper`` of the
+        complement)."""
+        if self.objective == "min":
+            return 1.0 - self.upper_model.bracket[1]
         return float(self.lower_model.policy_values[self.imdp.initial])
 
     @property
     def upper(self) -> float:
-        """No policy guarantees more (robust iteration's upper bound, truncation won)."""
+        """No policy guarantees more (robust iteration's upper bound, truncation won);
+        ``objective="min"``: what the returned policy guarantees at most."""
+        if self.objective == "min":
+            return 1.0 - float(self.lower_model.policy_values[self.imdp.initial])
         return self.upper_model.bracket[1]
+
+    @property
+    def value(self) -> float:
+        v = self.lower_model.value
+        return 1.0 - v if self.objective == "min" else v
 
     @property
     def status(self) -> Status:
@@ -180,8 +196,9 @@ class RobustResult:
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
-        return tuple(c for m in (self.lower_model, self.upper_model) for c in m.checks
-                     if not c.passed)
+        models = (self.lower_model,) if self.upper_model is self.lower_model else (
+            self.lower_model, self.upper_model)
+        return tuple(c for m in models for c in m.checks if not c.passed)
 
     @property
     def seconds(self) -> float:
@@ -224,83 +241,51 @@ class RobustResult:
         return rows
 
     def summary(self) -> dict[str, Any]:
-        """A JSON-ready record (the command line's ``--json``)."""
-        low, high, m = self.lower_model, self.upper_model, self.imdp
-        return {
-            "model": self.model.name, "status": self.status.value, "robust": True,
-            "lower": self.lower, "upper": self.upper, "value": self.lower,
-            "certified": self.certified,
-            "failed_checks": [f"{c.name}: {c.detail}" for c in self.failed_checks],
-            "method": self.method, "bands": self.bands(),
-            "first_step_hazards": {e: list(b) for e, b in self.first_step_hazards().items()},
-            "states": m.n_states, "choices": m.n_choices, "transitions": m.n_transitions,
-            "ambiguous_choices": m.ambiguous_choices, "dta_states": self.dta.n_states,
-            "epsilon": self.epsilon, "epsilon_achieved": self.sta.epsilon_achieved,
-            "truncation_points": dict(self.sta.truncation_points),
-            "seconds": self.seconds, "timings": dict(self.timings),
-            "lp": None if low.lp is None else {"status": low.lp.status.value,
-                                               "variables": low.lp.variables,
-                                               "constraints": low.lp.constraints,
-                                               "message": low.lp.message},
-            "iteration": {"status": low.iteration.status.value,
-                          "lower": low.bracket[0], "upper": high.bracket[1],
-                          "sweeps": low.iteration.sweeps},
-        }
+        """A JSON-ready record (the command line's ``--json``,
+        :func:`mitld_lp.report.summary`)."""
+        from mitld_lp.report import summary
+
+        return summary(self)
 
 
-def _refuse(model: Model, dta: DTA, constraints: bool) -> None:
-    law = next((str(d) for d in model.distributions.values() if d.is_ambiguous),
-               "robust synthesis")
-    if constraints:
-        raise DistributionError(law, "constraints with a law known only within a band are "
-                                "not supported (robust synthesis maximises the task alone)")
-    if SAFE in dta.kinds:
-        raise DistributionError(law, "a law known only within a band is solved for co-safe "
-                                "tasks only (this task has a safety part)")
-
-
-def synthesize_robust(
-    model: Model,
-    *,
-    epsilon: float | None = None,
-    method: str = "lp",
-    clock_reduction: bool = True,
-    truncation: Mapping[str, int] | None = None,
-    max_states: int = defaults.MAX_STATES,
-    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
-    max_memory: int | None = None,
-    tol: float = defaults.TOL,
-    certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool = False,
-    time_limit: float | None = None,
-    constraints: bool = False,
-) -> RobustResult:
-    """The robust synthesis of ``model`` (module docstring); the arguments are
-    :func:`mitld_lp.synthesis.synthesize`'s (``method="lp"``: the policy's value by the
-    LP and by iteration; ``"vi"``: by iteration only).  Raises
-    :class:`DistributionError` for a task it does not solve (a safety part, constraints)."""
-    if method not in ("lp", "vi"):
-        raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
-    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
+def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
+    """The robust synthesis (module docstring) of a posed problem, or of ``model`` with
+    :func:`mitld_lp.synthesis.synthesize`'s keyword ``options`` (posed here:
+    :class:`~mitld_lp.problem.ProblemError` for a combination it does not solve, e.g.
+    a safety part or constraints).  ``method="lp"``: the policy's value by the LP and by
+    iteration; ``"vi"``: by iteration only."""
+    if not isinstance(model, Posed):
+        model = pose(model, settings=settings_from(**options))
+    posed = model
+    if posed.route == CONSTRAINED or posed.fragment != CO_SAFE:
+        raise ProblemError(f"synthesize_robust: a {posed.fragment} task"
+                           + (" with constraints" if posed.route == CONSTRAINED else "")
+                           + " is not solved robustly (co-safe tasks only)")
+    model, s = posed.model, posed.settings
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+    eps = model.epsilon if s.epsilon is None else s.epsilon
     t0 = time.perf_counter()
-    dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
-    _refuse(model, dta, constraints)
-    sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction,
-                   truncation=truncation)
+    dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
+    if posed.minimise:
+        dta = dta.complement()
+    sta = make_sta(dta, model.distributions, eps, clock_reduction=s.clock_reduction,
+                   truncation=s.truncation_map)
     t1 = time.perf_counter()
-    imdp = robust_product(model.game, sta, max_states=max_states, max_memory=max_memory,
-                          progress=progress or None)
+    imdp = robust_product(model.game, sta, max_states=s.max_states, max_memory=s.max_memory,
+                          progress=s.progress or None)
     t2 = time.perf_counter()
     game = robust_game(imdp)
-    deadline = float("inf") if time_limit is None else t2 + time_limit
+    deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
     target = np.asarray(imdp.target, dtype=bool)
-    low = _solve(game, imdp, target, "lower", method, tol, certify_tol, deadline)
+    low = _solve(game, imdp, target, "lower", s.method, s.tol, s.certify_tol, deadline)
     high = low if not imdp.truncated.any() else _solve(
-        game, imdp, target | imdp.truncated, "upper", method, tol, certify_tol, deadline)
+        game, imdp, target | imdp.truncated, "upper", s.method, s.tol, s.certify_tol,
+        deadline)
     timings = {"automaton": t1 - t0, "product": t2 - t1, "solve": time.perf_counter() - t2}
     controller = Controller(model.game, sta, structure_mdp(imdp), low.policy,
                             hopeless=high.iteration.prob0)
-    result = RobustResult(model, method, eps, dta, sta, imdp, low, high, controller, timings)
+    result = RobustResult(model, s.method, eps, dta, sta, imdp, low, high, controller,
+                          timings, posed.problem.objective)
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result

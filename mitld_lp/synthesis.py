@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NoReturn
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, NoReturn, TypeAlias
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from mitld_lp import defaults, report
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
+from mitld_lp.checks import Check, close
 from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
@@ -43,6 +44,7 @@ from mitld_lp.heap import release_free_memory
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
+from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, Posed, pose, settings_from
 from mitld_lp.product import product
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
@@ -63,15 +65,6 @@ log = logging.getLogger(__name__)
 TRIM_FROM_TRANSITIONS = 1_000_000
 
 Method = Literal["lp", "vi"]
-
-
-@dataclass(frozen=True, slots=True)
-class Check:
-    """One certification check: what was compared, whether it passed, the numbers."""
-
-    name: str
-    passed: bool
-    detail: str
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -111,6 +104,12 @@ class SynthesisResult:
     and the iteration's records are those of ``lower_model`` (and ``upper_model``); the
     truncation points and the epsilon achieved are the ``sta``'s; the sizes are the
     ``dta``'s and the ``mdp``'s.
+
+    ``objective="min"``: the two models solve the complement (``dta`` is its automaton,
+    the policy maximises the probability of ``not task``); ``lower`` and ``upper`` are
+    read back in the task's terms, ``Pmin(task) = 1 - Pmax(not task)``: ``upper`` is
+    then what the returned policy guarantees (at most that probability of the task),
+    ``lower`` what no policy beats.
     """
 
     model: Model
@@ -125,18 +124,32 @@ class SynthesisResult:
     timings: Mapping[str, float]  # seconds per stage: automaton, product, solve
     acceptance: Acceptance  # the target the bracket is about (its goal, its components)
     solve_cpu: float = float("nan")  # CPU seconds of the solve stage (all threads)
+    objective: str = "max"
+    route: ClassVar[str] = PLAIN
 
     @property
     def lower(self) -> float:
         """What the returned policy achieves in the real world: its exact value in the
-        lower model (runs past a truncation point count as failures)."""
+        lower model (runs past a truncation point count as failures).  For
+        ``objective="min"``: no policy makes the task less likely."""
+        if self.objective == "min":
+            return 1.0 - self.upper_model.bracket[1]
         return float(self.lower_model.policy_values[self.mdp.initial])
 
     @property
     def upper(self) -> float:
         """No policy does better: interval iteration's sound upper bound on the upper
-        model (runs past a truncation point count as successes)."""
+        model (runs past a truncation point count as successes).  For
+        ``objective="min"``: the returned policy keeps the task at most this likely."""
+        if self.objective == "min":
+            return 1.0 - float(self.lower_model.policy_values[self.mdp.initial])
         return self.upper_model.bracket[1]
+
+    @property
+    def value(self) -> float:
+        """The method's optimum in the task's terms (the lower model's)."""
+        v = self.lower_model.value
+        return 1.0 - v if self.objective == "min" else v
 
     @property
     def status(self) -> Status:
@@ -153,9 +166,11 @@ class SynthesisResult:
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
-        return tuple(
-            c for m in (self.lower_model, self.upper_model) for c in m.checks if not c.passed
-        )
+        """The checks that failed, each once (the two models are one when nothing is
+        truncated)."""
+        models = (self.lower_model,) if self.upper_model is self.lower_model else (
+            self.lower_model, self.upper_model)
+        return tuple(c for m in models for c in m.checks if not c.passed)
 
     @property
     def seconds(self) -> float:
@@ -184,11 +199,6 @@ class SynthesisResult:
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record, the CLI's ``--json`` (:func:`mitld_lp.report.summary`)."""
         return report.summary(self)
-
-
-def _close(name: str, a: float, b: float, tol: float) -> Check:
-    ok = bool(np.isfinite(a) and np.isfinite(b) and abs(a - b) <= tol)
-    return Check(name, ok, f"{a:.10g} vs {b:.10g} (|diff| = {abs(a - b):.2e}, tol {tol:g})")
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,7 +234,8 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
 
     return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
                     backend=how.backend, tol=how.tol, decompose=how.decompose,
-                    time_limit=how.remaining(), bounds=(it.lower, it.upper))
+                    time_limit=how.remaining(), bounds=(it.lower, it.upper),
+                    everywhere=quotient.initial < 0)
 
 
 def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
@@ -247,7 +258,7 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
-            checks.append(_close("LP primal = dual", lp.primal_objective, lp.dual_objective,
+            checks.append(close("LP primal = dual", lp.primal_objective, lp.dual_objective,
                                  certify_tol))
         elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
                 it.status is Status.OPTIMAL):
@@ -266,19 +277,25 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         lo - certify_tol <= exact <= hi + certify_tol,
         f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
     ))
-    checks.append(_close("policy value = optimum", exact, value, certify_tol))
-    checks.append(_close("optimum = iteration upper bound", value, hi, certify_tol))
+    checks.append(close("policy value = optimum", exact, value, certify_tol))
+    checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
     checks.append(_bellman(mdp, target, values, certify_tol))
     return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, prob0,
                          tuple(checks))
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
-    """Interval iteration of the models in one pass over their shared quotient."""
+    """Interval iteration of the models in one pass over their shared quotient.  When the
+    graph analysis decides the initial state, every component is still brought below the
+    tolerance (``gap="max"``), as the LP then solves every state (``everywhere``): the
+    certified policy is optimal in every state the Bellman check reads, not only where
+    the initial state leads."""
     from mitld_lp.solvers.iteration import interval_iterations
 
+    decided = quotients[0].initial < 0
     return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
-                               time_limit=how.remaining())
+                               time_limit=how.remaining(),
+                               gap="max" if decided else "initial")
 
 
 def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
@@ -339,22 +356,40 @@ def build_product(
     max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     progress: bool | None = None,
+    complement: bool = False,
 ) -> Built:
-    """The stages up to the MDP: ``to_dta(formula)``, ``make_sta`` with the events'
-    ``laws`` and the truncation budget ``epsilon`` (or the fixed ``truncation`` points),
-    then the reachable ``product`` with ``game``.  Budgets, each checked before the work
-    that would exceed it: no state space built here has more than ``max_states``
-    states; the automaton, whose states cost thousands of times more than the
-    product's, also no more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`);
-    the product needs at most ``max_memory`` bytes (default: half the machine's
-    memory).  The only place that wires the stages."""
+    """The stages up to the MDP: ``to_dta(formula)`` (its complement with
+    ``complement``, for a minimised task), ``make_sta`` with the events' ``laws`` and
+    the truncation budget ``epsilon`` (or the fixed ``truncation`` points), then the
+    reachable ``product`` with ``game``.  Budgets, each checked before the work that
+    would exceed it: no state space built here has more than ``max_states`` states; the
+    automaton, whose states cost thousands of times more than the product's, also no
+    more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`); the product needs at
+    most ``max_memory`` bytes (default: half the machine's memory)."""
     t0 = time.perf_counter()
     dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
+    if complement:
+        dta = dta.complement()
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
     mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
     t2 = time.perf_counter()
     return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
+
+
+def build_posed(posed: Posed, *, progress: bool | None = None) -> Built:
+    """:func:`build_product` of a posed problem's task with its settings."""
+    model, s = posed.model, posed.settings
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+    return build_product(
+        model.game, model.spec, model.distributions,
+        epsilon=model.epsilon if s.epsilon is None else s.epsilon,
+        clock_reduction=s.clock_reduction, truncation=s.truncation_map,
+        max_states=s.max_states, max_automaton_states=s.max_automaton_states,
+        max_memory=s.max_memory, progress=progress, complement=posed.minimise)
+
+
+Result: TypeAlias = "SynthesisResult | ConstrainedResult | RobustResult"
 
 
 def synthesize(
@@ -366,18 +401,20 @@ def synthesize(
     backend: Backend = "auto",
     clock_reduction: bool = True,
     truncation: Mapping[str, int] | None = None,
-    max_states: int = defaults.MAX_STATES,
-    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
+    max_states: int | None = None,
+    max_automaton_states: int | None = None,
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
-    decompose: bool = True,
+    decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
     then: str | None = None,
-) -> SynthesisResult | ConstrainedResult | RobustResult:
-    """Maximise the probability that the model's world satisfies its MITLD spec.
+    objective: str | None = None,
+) -> Result:
+    """Maximise (or, with ``objective="min"`` or the model's own objective, minimise)
+    the probability that the model's world satisfies its MITLD spec.
 
     ``model``: a :class:`Model`, loaded from a file (:func:`mitld_lp.load_model`) or
     made from any game with :meth:`Model.from_game`; ``epsilon`` overrides its
@@ -385,54 +422,51 @@ def synthesize(
     directly, or through cvxpy with ``backend="cvxpy"``, which also takes any other
     ``solver`` cvxpy has) or ``"vi"`` (interval iteration alone).  Interval
     iteration always runs, as the cross-check.  ``truncation`` fixes truncation points
-    per event instead of ``epsilon``.  The budgets are :func:`build_product`'s.
-    ``decompose``: the LP block by block in topological order (default) or as one LP.
-    ``time_limit``: seconds for the solve stage; past it the status is ``TIME_LIMIT``.
-    ``constraints`` / ``then`` (or constraints in the model): a constrained synthesis,
-    :func:`mitld_lp.constrained.synthesize_constrained`, whose result it returns.  A
-    model with a law known only within a band (an interval parameter, a fit): the robust
-    synthesis, :func:`mitld_lp.robust_synthesis.synthesize_robust`, whose result it
-    returns.
+    per event instead of ``epsilon``.  The budgets are :func:`build_product`'s (``None``:
+    the model file's ``[budgets]``, else the defaults).  ``decompose``: the LP block by
+    block in topological order (``None``, the default, or ``True``) or as one LP
+    (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
+    ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
+    constrained synthesis (:mod:`mitld_lp.constrained`); a law known only within a band:
+    the robust synthesis (:mod:`mitld_lp.robust_synthesis`).
+
+    The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
+    solves, or an option its route cannot honour, raises
+    :class:`~mitld_lp.problem.ProblemError` naming it.
     """
-    if isinstance(model, Model) and any(d.is_ambiguous for d in model.distributions.values()):
-        from mitld_lp.robust_synthesis import synthesize_robust  # a law known roughly
+    settings = settings_from(
+        method=method, solver=solver, backend=backend, clock_reduction=clock_reduction,
+        decompose=decompose, time_limit=time_limit, max_states=max_states,
+        max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
+        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress)
+    return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
-        return synthesize_robust(
-            model, epsilon=epsilon, method=method, clock_reduction=clock_reduction,
-            truncation=truncation, max_states=max_states, max_memory=max_memory,
-            max_automaton_states=max_automaton_states, tol=tol, certify_tol=certify_tol,
-            progress=progress, time_limit=time_limit,
-            constraints=bool(constraints or then or model.constraints))
-    if constraints or then or (isinstance(model, Model) and model.constraints):
-        from mitld_lp.constrained import synthesize_constrained
 
-        return synthesize_constrained(model, constraints, then=then, epsilon=epsilon,
-                                      max_states=max_states, max_memory=max_memory,
-                                      certify_tol=certify_tol)
-    if method not in ("lp", "vi"):
-        raise ValueError(f"method: must be 'lp' or 'vi', got {method!r}")
-    if time_limit is not None and not (isinstance(time_limit, (int, float))
-                                       and 0 <= time_limit < float("inf")):
-        raise ValueError(f"time_limit: must be a finite number of seconds >= 0 or None, "
-                         f"got {time_limit!r}")
-    if not isinstance(model, Model):
-        raise TypeError(
-            f"synthesize: expected a Model (load_model(path) or Model.from_game(game, spec)), "
-            f"got {type(model).__name__}"
-        )
-    eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
-    built = build_product(
-        model.game, model.spec, model.distributions, epsilon=eps,
-        clock_reduction=clock_reduction, truncation=truncation, max_states=max_states,
-        max_automaton_states=max_automaton_states, max_memory=max_memory,
-        progress=progress or None,
-    )
+def solve(posed: Posed) -> Result:
+    """Solve a posed problem on its route (:mod:`mitld_lp.problem`)."""
+    if posed.route == ROBUST:
+        from mitld_lp.robust_synthesis import synthesize_robust
+
+        return synthesize_robust(posed)
+    if posed.route == CONSTRAINED:
+        from mitld_lp.constrained import solve_constrained
+
+        return solve_constrained(posed)
+    return _solve_plain(posed)
+
+
+def _solve_plain(posed: Posed) -> SynthesisResult:
+    """The plain route: point laws, no constraints, any supported task class."""
+    model, s = posed.model, posed.settings
+    eps = model.epsilon if s.epsilon is None else s.epsilon
+    built = build_posed(posed, progress=s.progress or None)
     mdp = built.mdp
     timings: dict[str, float] = dict(built.timings)
 
     t0, c0 = time.perf_counter(), time.process_time()
-    how = _Settings(method, solver, backend, tol, certify_tol, progress, decompose,
-                    float("inf") if time_limit is None else t0 + time_limit)
+    how = _Settings(s.method, s.solver, s.backend, s.tol, s.certify_tol,  # type: ignore[arg-type]
+                    s.progress, s.decompose is not False,
+                    float("inf") if s.time_limit is None else t0 + s.time_limit)
     from mitld_lp.acceptance import acceptance
     from mitld_lp.solvers.analysis import analyse
 
@@ -451,13 +485,16 @@ def synthesize(
     solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
                  zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
-    low = _keeping(mdp, accept, low)
+    kept_low = _keeping(mdp, accept, low)
+    if high is low:
+        high = kept_low
+    low = kept_low
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0
 
     result = SynthesisResult(
         model=model,
-        method=method,
+        method=s.method,  # type: ignore[arg-type]
         epsilon=eps,
         dta=built.dta,
         sta=built.sta,
@@ -469,6 +506,7 @@ def synthesize(
         timings=timings,
         acceptance=accept,
         solve_cpu=solve_cpu,
+        objective=posed.problem.objective,
     )
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

@@ -369,9 +369,9 @@ def test_constraints_on_a_task_with_a_safety_part_are_refused_not_misread() -> N
     (G !h) would be counted as failing where it is kept, so it is refused by name."""
     from mitld_lp import GridWorld, Model
     from mitld_lp.constrained import synthesize_constrained
-    from mitld_lp.constraints import ConstraintError
+    from mitld_lp.problem import ProblemError
 
     world = GridWorld.make(3, 1, start=(0, 0), slip=0.0, regions={"A": [(2, 0)], "h": [(1, 0)]})
     model = Model.from_game(world, "G !h | F A")
-    with pytest.raises(ConstraintError, match="the task: class obligation"):
+    with pytest.raises(ProblemError, match="an obligation task with constraints"):
         synthesize_constrained(model, ["P(F h) <= 0.5"])

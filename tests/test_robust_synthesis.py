@@ -15,7 +15,8 @@ from mitld_lp import ExplicitGame, Model, load_model, synthesize
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.cli import main
-from mitld_lp.distributions import DistributionError, from_table, geometric
+from mitld_lp.distributions import from_table, geometric
+from mitld_lp.problem import ProblemError
 from mitld_lp.product import product, robust_product
 from mitld_lp.robust_synthesis import RobustResult, synthesize_robust
 from mitld_lp.solvers.robust_export import write_interval_drn
@@ -215,10 +216,10 @@ def test_refused_with_constraints_or_a_safety_part() -> None:
                          labels={"here": {"ok"}})
     m = Model.from_game(still, "G ok & D[mu] b & F[0,4] b",
                         distributions={"mu": band(0.2, 0.4)})
-    with pytest.raises(DistributionError, match="co-safe tasks only"):
+    with pytest.raises(ProblemError, match="co-safe tasks only"):
         synthesize(m)
     m = Model.from_game(still, "D[mu] b & F[0,4] b", distributions={"mu": band(0.2, 0.4)})
-    with pytest.raises(DistributionError, match="constraints"):
+    with pytest.raises(ProblemError, match="constraints with a law known only within a band"):
         synthesize(m, constraints=["E(steps) <= 3"])
 
 

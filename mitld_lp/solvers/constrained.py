@@ -32,7 +32,7 @@ from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evalua
 
 __all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED"]
 
-OPTIMAL, INFEASIBLE, FAILED = "optimal", "infeasible", "failed"
+OPTIMAL, INFEASIBLE, FAILED, TIME_LIMIT = "optimal", "infeasible", "failed", "time_limit"
 
 _ZERO_SHARE = 1e-9  # a choice with less than this share of its state's visits is dropped
 
@@ -72,9 +72,11 @@ def _counts_steps(q: Quantity) -> bool:
 
 
 def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_array,
-              b_ub: np.ndarray, tol: float) -> tuple[str, np.ndarray | None, str]:
+              b_ub: np.ndarray, tol: float, time_limit: float | None = None,
+              ) -> tuple[str, np.ndarray | None, str]:
     """``min c'v  s.t.  a_eq v = b_eq, a_ub v <= b_ub, v >= 0`` by Clarabel (form
-    ``Av + s = b, s in {0}^n x R_+^m``)."""
+    ``Av + s = b, s in {0}^n x R_+^m``); ``time_limit`` seconds (status
+    ``time_limit`` past it)."""
     clarabel: Any = importlib.import_module("clarabel")
     n = c.size
     a = sp.vstack([a_eq, a_ub, -sp.eye_array(n, format="csc")], format="csc")
@@ -84,6 +86,8 @@ def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_
     for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
         setattr(settings, key, tol)
     settings.max_iter = 500
+    if time_limit is not None:
+        settings.time_limit = max(float(time_limit), 1e-3)
     try:
         solution = clarabel.DefaultSolver(
             sp.csc_matrix((n, n)), c, sp.csc_matrix(a), b,
@@ -97,6 +101,8 @@ def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_
         return OPTIMAL, np.asarray(solution.x, dtype=np.float64), f"clarabel: {word}"
     if word in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
         return INFEASIBLE, None, f"clarabel: {word}"
+    if word == "MaxTime":
+        return TIME_LIMIT, None, f"clarabel: {word} (time limit {time_limit} s)"
     return FAILED, None, f"clarabel: {word}"
 
 
@@ -108,6 +114,7 @@ def optimise(
     *,
     costs: np.ndarray | None = None,
     tol: float = 1e-10,
+    time_limit: float | None = None,
 ) -> Solved:
     """Optimise ``objective`` over the randomised stationary policies (with stays) of
     ``merged`` subject to ``rows`` (the LP of the module docstring); the policy's exact
@@ -159,7 +166,8 @@ def optimise(
     n_var = live_choices.size + stays.size
     a_ub = sp.csc_array(np.array(ub_rows).reshape(len(rows), n_var))
     c = vec(0) * (-1.0 if maximise else 1.0)
-    status, v, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol)
+    status, v, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol,
+                                   time_limit)
     if v is None:
         return Solved(status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)

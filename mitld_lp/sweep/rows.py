@@ -20,14 +20,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
+from mitld_lp.constraints import ConstraintError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.game import GameError
 from mitld_lp.gridworld import GridError
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import Model, ModelError
+from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.text import printable
 from mitld_lp.worlds import WorldError
@@ -53,7 +54,7 @@ MODEL_ERROR, BUDGET, ERROR, LOST = "model_error", "budget", "error", "lost"
 #: Exceptions meaning "this input is wrong".
 INPUT_ERRORS: tuple[type[Exception], ...] = (
     ModelError, ParseError, FragmentError, DistributionError, TranslationError, WorldError,
-    GameError, GridError,
+    GameError, GridError, ProblemError, ConstraintError,
 )
 #: Exceptions meaning "a budget stopped the work" (checked first: some subclass the above).
 BUDGET_STOPS: tuple[type[BaseException], ...] = (ProductTooLarge, AutomatonTooLarge, MemoryError)
@@ -87,36 +88,6 @@ RESERVED_COLUMNS = frozenset(META_COLUMNS) | frozenset(RESULT_COLUMNS)
 _STAGES = ("automaton", "product", "solve")
 
 
-@dataclass(frozen=True, slots=True)
-class Settings:
-    """How a model is solved: the keyword arguments of ``synthesize`` that a sweep's
-    ``[solve]`` table (all but ``epsilon``) or ``solve``'s options set."""
-
-    method: str = "lp"
-    solver: str = defaults.SOLVER
-    backend: str = "auto"
-    clock_reduction: bool = True
-    decompose: bool = True
-    time_limit: float | None = None
-    max_states: int = defaults.MAX_STATES
-    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES
-    max_memory: int | None = None
-    epsilon: float | None = None
-
-    def identity(self) -> dict[str, Any]:
-        """The settings that change an answer (part of a sweep's identity)."""
-        return {"method": self.method, "solver": self.solver, "backend": self.backend,
-                "clock_reduction": self.clock_reduction, "decompose": self.decompose}
-
-    def synthesize_kwargs(self) -> dict[str, Any]:
-        return {"epsilon": self.epsilon, "method": self.method, "solver": self.solver,
-                "backend": self.backend, "clock_reduction": self.clock_reduction,
-                "decompose": self.decompose, "time_limit": self.time_limit,
-                "max_states": self.max_states,
-                "max_automaton_states": self.max_automaton_states,
-                "max_memory": self.max_memory}
-
-
 def classify(exc: BaseException) -> tuple[str, str]:
     """``(status, one-line message)`` of an exception raised while solving a model."""
     first = str(exc).splitlines()[0] if str(exc) else ""
@@ -138,14 +109,18 @@ class Outcome:
     wall_seconds: float
 
 
-def run_model(load: Callable[[], Model], settings: Settings) -> Outcome:
-    """Load a model with ``load()`` and synthesise it with ``settings``; every failure
-    but an interrupt becomes an :class:`Outcome` with its status."""
-    from mitld_lp.synthesis import synthesize
+def run_model(load: Callable[[], Model], settings: Settings,
+              constraints: tuple[str, ...] = (), then: str | None = None) -> Outcome:
+    """Load a model with ``load()`` and solve the problem it poses with ``settings``,
+    ``constraints`` (after the model's own) and ``then`` (:func:`mitld_lp.problem.pose`:
+    every route, the constrained one included); every failure but an interrupt becomes
+    an :class:`Outcome` with its status."""
+    from mitld_lp.problem import pose
+    from mitld_lp.synthesis import solve
 
     start = time.perf_counter()
     try:
-        summary = synthesize(load(), **settings.synthesize_kwargs()).summary()
+        summary = solve(pose(load(), constraints, then=then, settings=settings)).summary()
     except Exception as exc:  # noqa: BLE001 - a point's failure is its record
         status, message = classify(exc)
         return Outcome(None, status, message, time.perf_counter() - start)

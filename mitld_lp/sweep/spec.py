@@ -58,7 +58,8 @@ from pathlib import Path
 from typing import Any
 
 from mitld_lp.model import ModelError, loads_model
-from mitld_lp.sweep.rows import RESERVED_COLUMNS, Settings
+from mitld_lp.problem import ProblemError, Settings
+from mitld_lp.sweep.rows import RESERVED_COLUMNS
 from mitld_lp.text import printable
 
 __all__ = [
@@ -224,7 +225,7 @@ class _Ctx:
 
 
 def _setting(table: dict[str, Any], ctx: _Ctx) -> Settings:
-    allowed = set(Settings.__dataclass_fields__) - {"epsilon"}  # epsilon is the model's
+    allowed = _SOLVE_KEYS  # epsilon is the model's
     for k in table:
         if k not in allowed:
             raise ctx.error(f"solve.{_part(k)}", f"unknown key (allowed: "
@@ -240,7 +241,11 @@ def _setting(table: dict[str, Any], ctx: _Ctx) -> Settings:
                 raise ctx.error(where, f"must be a positive number of seconds, got "
                                 f"{_toml_value(v)}")
             v = float(v)
-        elif k in ("max_states", "max_memory"):
+        elif k in ("tol", "certify_tol"):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < 1:
+                raise ctx.error(where, f"must be a number in (0, 1), got {_toml_value(v)}")
+            v = float(v)
+        elif k in ("max_states", "max_automaton_states", "max_memory"):
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ctx.error(where, f"must be a positive integer, got {_toml_value(v)}")
         else:
@@ -251,10 +256,16 @@ def _setting(table: dict[str, Any], ctx: _Ctx) -> Settings:
             if k == "solver":
                 v = v.strip().upper()
         values[k] = v
-    settings = Settings(**values)
-    if settings.backend == "direct" and settings.solver != "CLARABEL":
-        raise ctx.error("solve.backend", f'"direct" runs only Clarabel, not {settings.solver}')
-    return settings
+    try:
+        return Settings(**values).checked()
+    except ProblemError as exc:
+        raise ctx.error("solve", str(exc)) from None
+
+
+#: The keys of a sweep's ``[solve]`` table: the settings a point is solved with.
+_SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "decompose",
+                         "time_limit", "max_states", "max_automaton_states", "max_memory",
+                         "tol", "certify_tol"})
 
 
 def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Ctx) -> list[tuple[KeyPath, list]]:

@@ -1,0 +1,287 @@
+"""One problem, one pipeline: every combination of task class, laws and extras is either
+solved, on exactly the problem posed, or refused naming the combination; the command
+line's verbs pose their problem in the same one place (mitld_lp.problem).
+
+The expected values come from hand calculations on small worlds built here, or from a
+different route to the same number (noted at each test).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitld_lp import ExplicitGame, GridWorld, Model, load_model, synthesize
+from mitld_lp.cli import main
+from mitld_lp.distributions.band import interval
+from mitld_lp.problem import ProblemError
+from mitld_lp.report import SUMMARY_KEYS
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+
+
+def _fork() -> ExplicitGame:
+    """One choice between two gambles: ``a`` reaches A w.p. 0.6 (else B), ``b`` reaches A
+    w.p. 0.2 (else C); A, B, C absorbing.  By hand: Pmax(F A) = 0.6, Pmin(F A) = 0.2,
+    Pmax(G !A) = 0.8, Pmin(G !A) = 0.4."""
+    return ExplicitGame(
+        initial="s",
+        transitions={"s": {"a": {"A": 0.6, "B": 0.4}, "b": {"A": 0.2, "C": 0.8}},
+                     "A": {"wait": {"A": 1.0}}, "B": {"wait": {"B": 1.0}},
+                     "C": {"wait": {"C": 1.0}}},
+        labels={"A": {"A"}, "B": {"B"}, "C": {"C"}})
+
+
+@pytest.mark.parametrize(("spec", "objective", "expected"), [
+    ("F A", "max", 0.6), ("F A", "min", 0.2), ("G !A", "max", 0.8), ("G !A", "min", 0.4),
+    ("G !A | F B", "max", 0.8), ("G !A | F B", "min", 0.4),
+])
+def test_objective_min_and_max_by_hand(spec: str, objective: str, expected: float) -> None:
+    """Pmin is the complement's maximum read back: the hand values of the fork, for a
+    co-safe, a safety and an obligation task."""
+    model = Model.from_game(_fork(), spec, objective=objective)
+    r = synthesize(model)
+    assert r.certified, r.failed_checks
+    assert r.lower == pytest.approx(expected, abs=1e-9)
+    assert r.upper == pytest.approx(expected, abs=1e-9)
+    assert r.summary()["objective"] == objective
+    # the policy plays the gamble that makes A least (most) likely
+    best = "b" if (objective == "min") == (spec == "F A") else "a"
+    first = int(r.lower_model.policy[r.mdp.initial])
+    assert r.mdp.action_name(first) == best
+
+
+def test_objective_min_with_a_constraint_by_hand() -> None:
+    """min P(G !A) s.t. P(F B) <= 0.2: play a w.p. 1 - q with 0.4 (1 - q) <= 0.2, so
+    q >= 0.5, and P(G !A) = 0.4 + 0.4 q is least at q = 0.5: 0.6 (by hand); the
+    constrained LP on the complement (F A, co-safe) read back."""
+    model = Model.from_game(_fork(), "G !A", objective="min")
+    r = synthesize(model, constraints=["P(F B) <= 0.2"])
+    assert r.route == "constrained" and r.certified
+    assert r.lower == pytest.approx(0.6, abs=1e-7)
+    assert r.upper == pytest.approx(0.6, abs=1e-7)
+    assert r.constraints[0].value == pytest.approx(0.2, abs=1e-7)
+
+
+def test_objective_in_a_model_file(tmp_path: Path) -> None:
+    text = (MODELS / "bus_grid.toml").read_text().replace(
+        'epsilon = 0.01', 'epsilon = 0.01\nobjective = "min"')
+    path = tmp_path / "bus_min.toml"
+    path.write_text(text)
+    r = synthesize(load_model(path))
+    top = synthesize(load_model(MODELS / "bus_grid.toml"))
+    assert r.certified and r.lower <= r.upper + 1e-9
+    assert r.upper <= top.lower + 1e-9  # the least can not exceed the greatest
+    bad = path.with_name("bad.toml")
+    bad.write_text(text.replace('objective = "min"', 'objective = "least"'))
+    with pytest.raises(Exception, match="objective: must be"):
+        load_model(bad)
+
+
+# --------------------------------------------------------------------------- options
+
+
+def test_options_are_refused_by_name_on_every_route() -> None:
+    """synthesize(model, constraints=[...], method="nonsense", truncation=...) returned a
+    certified answer on the constrained route; every route now refuses both."""
+    model = load_model(MODELS / "bus_risk.toml")
+    for extra in ({}, {"constraints": ["P(F puddle) <= 0.05"]}):
+        with pytest.raises(ProblemError, match="method"):
+            synthesize(model, method="nonsense", **extra)
+        with pytest.raises(ProblemError, match="'nonexistent' is not an event"):
+            synthesize(model, truncation={"nonexistent": 3}, **extra)
+    with pytest.raises(ProblemError, match="method 'vi' with constraints"):
+        synthesize(model, method="vi", constraints=["P(F puddle) <= 0.05"])
+    with pytest.raises(ProblemError, match="decompose with constraints"):
+        synthesize(model, decompose=True, constraints=["P(F puddle) <= 0.05"])
+    with pytest.raises(ProblemError, match="solver HIGHS"):
+        synthesize(model, solver="highs", constraints=["P(F puddle) <= 0.05"])
+
+
+def test_constrained_route_honours_truncation_and_epsilon() -> None:
+    """The constrained route takes the same truncation settings as the plain one: with
+    no constraint binding, both give the same bracket (two routes, one problem)."""
+    model = load_model(MODELS / "red_light.toml")
+    for kwargs in ({"epsilon": 0.05}, {"truncation": {"g": 3}}, {"clock_reduction": False}):
+        plain = synthesize(model, **kwargs)
+        con = synthesize(model, constraints=["E(steps) <= 1000"], **kwargs)
+        assert con.certified and plain.certified
+        assert con.lower == pytest.approx(plain.lower, abs=1e-6)
+        assert con.upper == pytest.approx(plain.upper, abs=1e-6)
+
+
+# --------------------------------------------------------------------------- bands
+
+
+def _bus_fit_with(tmp_path: Path, extra: str) -> Path:
+    shutil.copytree(MODELS / "data", tmp_path / "data")
+    path = tmp_path / "fit.toml"
+    path.write_text((MODELS / "bus_fit.toml").read_text().replace(
+        'epsilon = 0.01', 'epsilon = 0.01\n' + extra))
+    return path
+
+
+@pytest.mark.parametrize("argv", [
+    ["--constraint", "P(F[0,5] A) <= 0.5"], ["--then", "min-steps"]])
+def test_bands_with_constraints_are_refused_not_replaced_by_a_point_law(
+        argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """bus_fit with a constraint printed 0.9181216 certified: the bands were replaced by
+    a point law (the robust optimum alone is 0.8999750, and a constraint can only lower
+    it).  Now refused, naming the bands and the extra."""
+    code = main(["solve", str(MODELS / "bus_fit.toml"), "-q", *argv])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "known only within a band" in err and ("constraints" in err or "then" in err)
+
+
+def test_bands_with_constraints_in_the_model_file_and_pareto_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _bus_fit_with(tmp_path, 'constraints = ["P(F[0,5] A) <= 0.5"]')
+    assert main(["solve", str(path), "-q"]) == 2
+    assert "known only within a band" in capsys.readouterr().err
+    assert main(["pareto", str(MODELS / "bus_fit.toml"), "--against", "steps", "--csv",
+                 str(tmp_path / "p.csv"), "-q"]) == 2
+    assert "known only within a band" in capsys.readouterr().err
+    assert not (tmp_path / "p.csv").exists()
+
+
+def test_bands_with_a_safety_part_are_refused_by_name() -> None:
+    world = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)], "h": [(1, 1 - 1)]})
+    m = Model.from_game(world, "G !h & D[mu] b & F(b & F[0,2] A)",
+                        distributions={"mu": interval("geometric", 0.2, 0.4, "mu")})
+    with pytest.raises(ProblemError, match="with a law known only within a band"):
+        synthesize(m)
+
+
+# --------------------------------------------------------------------------- batches, sweeps
+
+
+def test_a_batch_honours_the_constraint(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A batch dropped --constraint (0.9244053 certified for both files); alone the model
+    answers the constrained problem, and the batch must answer the same for each file."""
+    copy = tmp_path / "copy.toml"
+    shutil.copy(MODELS / "bus_risk.toml", copy)
+    alone = synthesize(load_model(copy), constraints=["P(F puddle) <= 0.05"])
+    assert alone.lower < 0.9  # the constraint binds (0.9244 without it)
+    code = main(["solve", str(MODELS / "bus_risk.toml"), str(copy), "--json", "-q",
+                 "--constraint", "P(F puddle) <= 0.05"])
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert code == 0 and len(rows) == 2
+    for row in rows:
+        assert row["lower"] == pytest.approx(alone.lower, abs=1e-7)
+        assert row["constraints"][0]["value"] <= 0.05 + 1e-6
+
+
+def test_a_batch_of_one_constrained_model_file(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A batch of one model file with constraints exited 1 (KeyError: 'seconds')."""
+    path = tmp_path / "risk.toml"
+    path.write_text((MODELS / "bus_risk.toml").read_text().replace(
+        'epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["P(F puddle) <= 0.05"]'))
+    code = main(["solve", str(tmp_path / "*.toml"), "-q"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "certified yes" in out
+
+
+def test_a_sweep_over_a_constrained_model_file(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A sweep over a model file with constraints exited 1 (KeyError: 'value'); each
+    point is now the constrained problem: its row equals the library's constrained
+    answer for that point's model."""
+    text = (MODELS / "bus_risk.toml").read_text().replace(
+        'epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["P(F puddle) <= 0.05"]')
+    (tmp_path / "risk.toml").write_text(text)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('name = "risk"\nmodel = "risk.toml"\n[vary]\n'
+                     "distributions.mu2.geometric = [0.2, 0.5]\n")
+    out = tmp_path / "risk.csv"
+    code = main(["sweep", str(sweep), "-o", str(out), "-q"])
+    assert code == 0, capsys.readouterr()
+    import csv
+
+    rows = list(csv.DictReader(out.open()))
+    assert [r["status"] for r in rows] == ["optimal"] * 2
+    for row, p in zip(rows, (0.2, 0.5), strict=True):
+        point = tmp_path / f"p{p}.toml"
+        point.write_text(text.replace("mu2 = { geometric = 0.3 }",
+                                      f"mu2 = {{ geometric = {p} }}"))
+        alone = synthesize(load_model(point))
+        assert alone.route == "constrained"
+        assert float(row["lower"]) == pytest.approx(alone.lower, abs=1e-9)
+
+
+# --------------------------------------------------------------------------- other verbs
+
+
+@pytest.mark.parametrize("verb", [["export", "--drn", "x.drn"], ["info"],
+                                  ["simulate", "-n", "10"]])
+def test_verbs_that_take_no_constraints_refuse_a_constrained_model(
+        verb: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """export wrote the unconstrained model of a file with constraints and exited 0."""
+    path = tmp_path / "risk.toml"
+    path.write_text((MODELS / "bus_risk.toml").read_text().replace(
+        'epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["P(F puddle) <= 0.05"]'))
+    argv = [verb[0], str(path), *[str(tmp_path / v) if v.endswith(".drn") else v
+                                  for v in verb[1:]], "-q"]
+    assert main(argv) == 2
+    assert f"{verb[0]}: the model has constraints" in capsys.readouterr().err
+    assert not (tmp_path / "x.drn").exists()
+
+
+# --------------------------------------------------------------------------- one schema
+
+
+def test_one_json_schema_on_every_route(capsys: pytest.CaptureFixture[str]) -> None:
+    for argv in (["solve", str(MODELS / "bus_grid.toml")],
+                 ["solve", str(MODELS / "bus_fit.toml")],
+                 ["solve", str(MODELS / "bus_risk.toml"), "--constraint",
+                  "P(F puddle) <= 0.05"]):
+        assert main([*argv, "--json", "-q"]) == 0
+        record = json.loads(capsys.readouterr().out)
+        assert tuple(record) == SUMMARY_KEYS
+
+
+# --------------------------------------------------------------------------- optimal everywhere
+
+
+def _optimal_values(r) -> np.ndarray:  # noqa: ANN001 - a SynthesisResult
+    """Value iteration written here: the least fixed point of V = max_c P(c) V with V = 1
+    on the result's reachability target (its accepting end components), 20,000 sweeps
+    from 0 on a product of 69 states."""
+    mdp, goal = r.mdp, r.acceptance.goal
+    v = goal.astype(float)
+    for _ in range(20_000):
+        nxt = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
+        nxt[goal] = 1.0
+        if np.max(np.abs(nxt - v)) < 1e-13:
+            break
+        v = nxt
+    return v
+
+
+@pytest.mark.parametrize("deadline", [3, 5, 6, 7])
+def test_obligation_policy_optimal_everywhere_when_the_start_is_decided(deadline: int) -> None:
+    """G (dock -> F[0,5] goal) on a 5x4 grid answered [1, 1] and certified: NO (the start
+    is decided by graph analysis, no LP was solved, the policy elsewhere was left 0.17
+    below optimal).  Now certified, and the policy's values equal value iteration's in
+    every state."""
+    world = GridWorld.make(5, 4, start=(0, 0), slip=0.1,
+                           regions={"dock": [(2, 1)], "goal": [(4, 3)]})
+    r = synthesize(Model.from_game(world, f"G (dock -> F[0,{deadline}] goal)"))
+    assert r.certified, r.failed_checks
+    assert r.lower == pytest.approx(1.0) and r.upper == pytest.approx(1.0)
+    best = _optimal_values(r)
+    assert np.max(np.abs(r.lower_model.policy_values - best)) < 1e-6
+
+
+def test_a_failed_check_is_reported_once_when_nothing_is_truncated() -> None:
+    world = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)]})
+    r = synthesize(Model.from_game(world, "F A"))
+    assert r.upper_model is r.lower_model
+    assert len(r.failed_checks) == len({c.name for c in r.failed_checks})
