@@ -117,7 +117,8 @@ class ConstrainedResult:
             s = int(cs[c])
             if m.absorbing[s]:
                 continue
-            rows.append(self._row(s, m.mdp.action_name(c), float(self.prob[c])))
+            name = "keep" if m.keep[c] else m.mdp.action_name(c)
+            rows.append(self._row(s, name, float(self.prob[c])))
         for s in np.flatnonzero(self.stay > 0).tolist():
             rows.append(self._row(int(s), "stay", float(self.stay[s])))
         return rows
@@ -368,15 +369,18 @@ class ConstrainedController:
         self.pending = self.sta.events
         self.clock = 0
         self.staying = False
+        self.keeping = False
         self.charged = 0
         self.beyond_model = False
 
     @property
     def verdicts(self) -> tuple[int, ...]:
-        """Per component: accepted, rejected or undecided."""
+        """Per component: accepted, rejected or undecided (the task accepted once the run
+        keeps its safety part in an end component for ever)."""
         if self.q is None:
             return tuple(UNDECIDED for _ in self.joint.parts)
-        return self.joint.verdicts[self.q]
+        v = self.joint.verdicts[self.q]
+        return (ACCEPTED, *v[1:]) if self.keeping else v
 
     def act(self, state: Any, events: frozenset[str] = frozenset()) -> str | None:
         """The action in world ``state`` after ``events``; None once nothing is left to
@@ -400,12 +404,17 @@ class ConstrainedController:
             return self.game.actions(state)[0]
         m = self.merged
         lo, hi = int(m.mdp.row_groups[s]), int(m.mdp.row_groups[s + 1])
+        if self.keeping:  # the task's safety part kept: its end component, for ever
+            return self._inside(m.keep_internal, lo, hi)
         if not self.staying and self.rng.random() < self.stay_prob[s]:
             self.staying = True
         if self.staying:  # keep to the end component: its internal actions, uniformly
             return self._inside(m.internal, lo, hi)
         weights = self.prob[lo:hi]
         c = lo + int(self.rng.choice(hi - lo, p=weights / weights.sum()))
+        if m.keep[c]:
+            self.keeping = True
+            return self._inside(m.keep_internal, lo, hi)
         if m.undecided[s]:
             self.charged += 1
         return m.mdp.action_name(c)
@@ -419,7 +428,8 @@ class ConstrainedController:
     def settled(self) -> bool:
         """Nothing can change any more: every component is decided, or the run stays in
         an end component for ever."""
-        return self.staying or (self.q is not None and self.joint.terminal(self.q))
+        return self.staying or self.keeping or (
+            self.q is not None and self.joint.terminal(self.q))
 
     @property
     def task_status(self) -> str:

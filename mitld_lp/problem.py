@@ -278,10 +278,8 @@ def check_constrained(posed: Posed) -> None:
             f"constrained synthesis with a law known only within a band "
             f"({_band(posed.model)}): the robust constrained optimum is not solved yet; "
             "give the event a point law")
-    if fragment != CO_SAFE:
-        raise ProblemError(f"{what} with constraints: constraints are solved for co-safe "
-                           "tasks only (a safety part such as G !h can be written as the "
-                           "constraint P(F h) <= 0)")
+    if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
+        raise ProblemError(f"{what} with constraints: not a supported class")
     for c in cons:
         if c.formula is not None and check(c.formula).fragment != CO_SAFE:
             raise ProblemError(f"constraint {c}: class {check(c.formula).fragment}; "

@@ -285,3 +285,89 @@ def test_a_failed_check_is_reported_once_when_nothing_is_truncated() -> None:
     r = synthesize(Model.from_game(world, "F A"))
     assert r.upper_model is r.lower_model
     assert len(r.failed_checks) == len({c.name for c in r.failed_checks})
+
+
+# --------------------------------------------------------------------------- safety + constraints
+
+
+def _gamble() -> ExplicitGame:
+    """``safe`` stays clear of h for ever; ``go`` reaches g w.p. 0.7, else h."""
+    return ExplicitGame(
+        initial="s",
+        transitions={"s": {"safe": {"s1": 1.0}, "go": {"h": 0.3, "g": 0.7}},
+                     "s1": {"wait": {"s1": 1.0}}, "h": {"wait": {"h": 1.0}},
+                     "g": {"wait": {"g": 1.0}}},
+        labels={"h": {"h"}, "g": {"g"}})
+
+
+def test_a_safety_task_with_a_constraint_by_hand() -> None:
+    """max P(G !h) s.t. P(F g) >= 0.5: play go w.p. q >= 5/7, P(G !h) = 1 - 0.3 q, so
+    1 - 0.3 * 5/7 (by hand); the controller's runs agree within their 4-sigma band."""
+    from mitld_lp.constrained_runs import run_constrained
+
+    r = synthesize(Model.from_game(_gamble(), "G !h"), constraints=["P(F g) >= 0.5"])
+    assert r.route == "constrained" and r.certified, r.checks
+    want = 1 - 0.3 * 5 / 7
+    assert r.lower == pytest.approx(want, abs=1e-7)
+    assert r.upper == pytest.approx(want, abs=1e-7)
+    runs = run_constrained(r, runs=4000, seed=3)
+    sigma = (want * (1 - want) / runs.runs) ** 0.5
+    assert abs(runs.accepted[0] / runs.runs - want) < 4 * sigma
+    assert abs(runs.accepted[1] / runs.runs - 0.5) < 4 * (0.25 / runs.runs) ** 0.5
+
+
+def _joint_drn(result, path: Path) -> None:  # noqa: ANN001 - a ConstrainedResult
+    """The product of the world with the joint automaton (before any merging) as DRN,
+    labelled ``rejected`` (the task's automaton rejected) and ``c1`` (the first
+    constraint's formula accepted)."""
+    from mitld_lp.automata.joint import ACCEPTED, REJECTED
+    from mitld_lp.product import ProductState
+
+    mdp, joint = result.mdp, result.joint
+    lines = ["@type: MDP", "@parameters", "", "@reward_models", "", "@nr_states",
+             str(mdp.n_states), "@nr_choices", str(mdp.n_choices), "@model"]
+    for s in range(mdp.n_states):
+        rec = mdp.states[s]
+        labels = ["init"] if s == mdp.initial else []
+        if isinstance(rec, ProductState):
+            v = joint.verdicts[rec.automaton]
+            labels += ["rejected"] * (v[0] == REJECTED) + ["c1"] * (v[1] == ACCEPTED)
+        lines.append(f"state {s} {' '.join(labels)}".rstrip())
+        for k, c in enumerate(range(mdp.row_groups[s], mdp.row_groups[s + 1])):
+            lines.append(f"\taction {k}")
+            row = mdp.matrix[[c]].tocoo()
+            lines += [f"\t\t{j} : {float(p)!r}" for j, p in zip(row.col, row.data,
+                                                                  strict=True)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize(("spec", "constraint", "query"), [
+    ("G !puddle", "P(F[0,8] goal) >= 0.5", 'P>=0.5 [F "c1"]'),
+    ("G (dock -> F[0,4] goal) & G !puddle", "P(F[0,8] goal) >= 0.5", 'P>=0.5 [F "c1"]'),
+    ("G (dock -> F[0,4] goal) & G !puddle", "P(F dock) >= 0.5", 'P>=0.5 [F "c1"]'),
+])
+def test_safety_with_a_constraint_matches_storms_multi_objective_engine(
+        tmp_path: Path, spec: str, constraint: str, query: str) -> None:
+    """Safety tasks (one timed) with a co-safe constraint that binds, on a slippery grid:
+    Storm's multi-objective engine on the joint product (G !rejected is the acceptance
+    of a safety automaton) gives the same optimum."""
+    stormpy = pytest.importorskip("stormpy")
+    import stormpy.environments as env_mod
+
+    world = GridWorld.make(4, 3, start=(0, 0), slip=0.2,
+                           regions={"dock": [(1, 1)], "goal": [(3, 2)],
+                                    "puddle": [(2, 1), (2, 0)]})
+    r = synthesize(Model.from_game(world, spec), constraints=[constraint])
+    assert r.route == "constrained" and r.certified, r.checks
+    _joint_drn(r, tmp_path / "joint.drn")
+    model = stormpy.build_model_from_drn(str(tmp_path / "joint.drn"))
+    env = stormpy.Environment()
+    multi = env.modelchecker().multi()
+    multi.precision = stormpy.Rational("1/1000000000")
+    multi.precision_type = env_mod.MultiObjectivePrecisionType.ABSOLUTE
+    prop = stormpy.parse_properties(f'multi(Pmax=? [G !"rejected"], {query})')[0]
+    want = stormpy.model_checking(model, prop, environment=env).get_value(
+        model.initial_states[0])
+    assert 0.05 < want < 0.999  # a constraint that binds
+    assert r.lower == pytest.approx(want, abs=1e-6)
+    assert r.constraints[0].value >= 0.5 - 1e-6

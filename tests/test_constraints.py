@@ -364,14 +364,21 @@ def test_cli_simulate_refuses_a_model_with_constraints(tmp_path, capsys):
     assert "constraints" in err and len(err.strip().splitlines()) == 1
 
 
-def test_constraints_on_a_task_with_a_safety_part_are_refused_not_misread() -> None:
+def test_constraints_on_a_task_with_a_safety_part_are_kept_not_misread() -> None:
     """The joint automaton reads acceptance by reaching: a task with a safety part
-    (G !h) would be counted as failing where it is kept, so it is refused by name."""
+    (G !h | F A) would be counted as failing where it is kept.  Its end components are
+    now kept: on a 3x1 line (h in the middle, A at the end) the robot satisfies the task
+    either by staying clear of h (bumping the west wall) or by walking through h to A;
+    by hand the optimum is 1 whatever the constraint, P(F h) = 0 when it must stay clear
+    and P(F A) >= 0.5 when it must walk."""
     from mitld_lp import GridWorld, Model
     from mitld_lp.constrained import synthesize_constrained
-    from mitld_lp.problem import ProblemError
 
     world = GridWorld.make(3, 1, start=(0, 0), slip=0.0, regions={"A": [(2, 0)], "h": [(1, 0)]})
     model = Model.from_game(world, "G !h | F A")
-    with pytest.raises(ProblemError, match="an obligation task with constraints"):
-        synthesize_constrained(model, ["P(F h) <= 0.5"])
+    r = synthesize_constrained(model, ["P(F h) <= 0"])
+    assert r.certified and r.lower == pytest.approx(1.0, abs=1e-7)
+    assert r.constraints[0].value == pytest.approx(0.0, abs=1e-7)
+    r = synthesize_constrained(model, ["P(F A) >= 0.5"])
+    assert r.certified and r.lower == pytest.approx(1.0, abs=1e-7)
+    assert r.constraints[0].value >= 0.5 - 1e-7

@@ -17,6 +17,19 @@ worth for each quantity.
   costs infinitely many steps, so stays there are closed when steps or costs are
   bounded or minimised.  No end component is collapsed: collapsing would lose the steps
   spent in it.
+* **Keeping a safety part** (:attr:`Merged.keep`): a task with a safety part (its
+  automaton has :data:`~mitld_lp.automata.dta.SAFE` states) is satisfied by a run that
+  stays for ever in states where the task's automaton state is persistent.  Each state of
+  a maximal end component of the non-absorbing states whose task component is
+  persistent gets one more choice, *keep*: into an absorbing state whose verdict is the
+  task accepted and the constraints as they are (a co-safe constraint cannot change
+  inside an end component: an accepted component never becomes undecided again).  A
+  policy that takes it then plays the component's internal choices for ever (the
+  controller does so), which satisfies the task; the task is then *decided* (expected
+  steps and costs stop counting).  With the plain stays above (worth the verdicts, the
+  task not satisfied) these are every outcome an end component can give, so the LP over
+  both is the multi-objective construction of Etessami, Kwiatkowska, Vardi and
+  Yannakakis (2008) for one safety (obligation) objective and co-safe constraints.
 * **Exact evaluation** (:func:`evaluate`): the values of a randomised policy (a
   distribution over choices and a stay probability per state) from one sparse solve on
   its Markov chain.
@@ -25,6 +38,7 @@ worth for each quantity.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -54,6 +68,9 @@ class Merged:
         stay_ok: per merged state, whether it lies in an end component of the
             non-absorbing states (a run may stay there for ever).
         internal: per merged choice, whether it keeps the run in its end component.
+        keep: per merged choice, whether it is a *keep* choice (module docs).
+        keep_internal: per merged choice, whether it keeps the run in its end
+            component of persistent task states (what a kept run plays).
     """
 
     mdp: MDP
@@ -66,6 +83,8 @@ class Merged:
     undecided: np.ndarray
     stay_ok: np.ndarray
     internal: np.ndarray
+    keep: np.ndarray
+    keep_internal: np.ndarray
 
 
 def merge(mdp: MDP, joint: Joint) -> Merged:
@@ -164,6 +183,18 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     )
     of_product = np.full(n, -1, dtype=np.int64)
     of_product[keep] = final[to_new[keep]]
+    task_dta = joint.parts[0]
+    persistent = np.zeros(task_dta.n_states + 1, dtype=bool)  # index -1: not ordinary
+    persistent[[q for q in range(task_dta.n_states) if task_dta.is_safe(q)]] = True
+    comp = np.array([c[0] for c in joint.components] + [-1], dtype=np.int64)
+    kept = _keeping(new, ~absorbing & persistent[comp[js]])
+    if kept is not None:
+        new, verdicts, absorbing, truncated, origin, js, keep_choice, keep_internal = (
+            _with_keeps(new, verdicts, absorbing, truncated, origin, js, *kept))
+        m = new.n_states
+        task_acc = verdicts[:, 0] == ACCEPTED
+    else:
+        keep_choice = keep_internal = np.zeros(new.n_choices, dtype=bool)
     # undecided: task open and task acceptance (or truncation) still reachable
     e = new.matrix.tocoo()
     cs = new.choice_state()
@@ -173,7 +204,62 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     mecs = maximal_end_components(new, ~absorbing)
     stay_ok = mecs.mec_of >= 0
     return Merged(new, origin, of_product, js, verdicts, absorbing, truncated, undecided,
-                  stay_ok, np.asarray(mecs.internal))
+                  stay_ok, np.asarray(mecs.internal), keep_choice, keep_internal)
+
+
+def _keeping(mdp: MDP, persistent: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The states of the maximal end components of ``persistent`` states and their
+    internal choices (None when there is none)."""
+    if not persistent.any():
+        return None
+    mecs = maximal_end_components(mdp, persistent)
+    inside = mecs.mec_of >= 0
+    return (inside, np.asarray(mecs.internal)) if inside.any() else None
+
+
+def _with_keeps(mdp: MDP, verdicts: np.ndarray, absorbing: np.ndarray,
+                truncated: np.ndarray, origin: np.ndarray, js: np.ndarray,
+                inside: np.ndarray, internal: np.ndarray) -> tuple[Any, ...]:
+    """``mdp`` with a *keep* choice appended to each state of ``inside`` (module docs),
+    into one new absorbing state per kept verdict tuple (the task accepted)."""
+    m, rg = mdp.n_states, np.asarray(mdp.row_groups, dtype=np.int64)
+    kept_states = np.flatnonzero(inside)
+    tuples = verdicts[kept_states].copy()
+    tuples[:, 0] = ACCEPTED
+    uniq, which = np.unique(tuples, axis=0, return_inverse=True)
+    u = uniq.shape[0]
+    counts = np.diff(rg)
+    new_counts = np.concatenate([counts + inside, np.ones(u, dtype=np.int64)])
+    new_rg = np.zeros(m + u + 1, dtype=np.int64)
+    np.cumsum(new_counts, out=new_rg[1:])
+    owner = mdp.choice_state()
+    old_pos = new_rg[owner] + (np.arange(owner.size) - rg[owner])
+    keep_pos = new_rg[kept_states] + counts[kept_states]
+    abs_pos = new_rg[m:m + u]
+    coo = mdp.matrix.tocoo()
+    rows = np.concatenate([old_pos[coo.row], keep_pos, abs_pos])
+    cols = np.concatenate([coo.col, m + which.reshape(-1), m + np.arange(u)])
+    vals = np.concatenate([coo.data, np.ones(kept_states.size + u)])
+    n_choices = int(new_rg[-1])
+    matrix = sp.csr_array((vals, (rows, cols)), shape=(n_choices, m + u))
+    actions = np.full(n_choices, ABSORB, dtype=np.int32)
+    actions[old_pos] = mdp.choice_actions
+    keep_choice = np.zeros(n_choices, dtype=bool)
+    keep_choice[keep_pos] = True
+    keep_internal = np.zeros(n_choices, dtype=bool)
+    keep_internal[old_pos] = internal
+    grow = np.zeros(u, dtype=bool)
+    absorbing2 = np.concatenate([absorbing, ~grow])
+    truncated2 = np.concatenate([truncated, grow])
+    verdicts2 = np.concatenate([verdicts, uniq.reshape(u, -1)])
+    task_acc = verdicts2[:, 0] == ACCEPTED
+    new = MDP(matrix=matrix, row_groups=new_rg, choice_actions=actions,
+              action_names=mdp.action_names, initial=mdp.initial,
+              target=absorbing2 & task_acc, sink=absorbing2 & ~task_acc & ~truncated2,
+              truncated=truncated2, states=tuple(range(m + u)))
+    minus = np.full(u, -1, dtype=np.int64)
+    return (new, verdicts2, absorbing2, truncated2, np.concatenate([origin, minus]),
+            np.concatenate([js, minus]), keep_choice, keep_internal)
 
 
 @dataclass(frozen=True, slots=True)
@@ -204,7 +290,7 @@ def columns(
         per_choice[np.repeat(merged.absorbing, np.diff(mdp.row_groups))] = 0.0
         return per_choice, np.where(merged.absorbing, 0.0, sat)
     cs = mdp.choice_state()
-    charged = merged.undecided[cs].astype(np.float64)
+    charged = (merged.undecided[cs] & ~merged.keep).astype(np.float64)
     if q.kind == "cost":
         assert costs is not None
         acts = mdp.choice_actions
