@@ -237,11 +237,6 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
             f"{extra} with a law known only within a band ({_band(model)}): the robust "
             "constrained optimum is not solved yet; give the event a point law, or drop "
             f"the {'constraints' if cons else 'then objective'}")
-    if robust and fragment != CO_SAFE:
-        raise ProblemError(
-            f"{what} with a law known only within a band ({_band(model)}): robust "
-            "synthesis solves co-safe tasks only (a safety part needs robust end "
-            "components, not solved yet)")
     if constrained:
         posed = Posed(problem, s, CONSTRAINED, fragment, robust)
         check_constrained(posed)

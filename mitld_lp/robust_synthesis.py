@@ -37,14 +37,13 @@ import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.acceptance import Acceptance
-from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check, close
 from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.imdp import IntervalMDP, point_mdp, vertex_rows
-from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
@@ -153,6 +152,7 @@ class RobustResult:
     controller: Controller
     timings: Mapping[str, float]
     objective: str = "max"
+    goal: np.ndarray | None = None  # the robust target (a safety part: the kept states)
     route: ClassVar[str] = ROBUST
 
     @property
@@ -161,7 +161,8 @@ class RobustResult:
 
     @property
     def acceptance(self) -> Acceptance:
-        return Acceptance(np.asarray(self.imdp.target, dtype=bool), None)
+        goal = self.imdp.target if self.goal is None else self.goal
+        return Acceptance(np.asarray(goal, dtype=bool), None)
 
     @property
     def lower(self) -> float:
@@ -248,6 +249,51 @@ class RobustResult:
         return summary(self)
 
 
+def _goal(game: RobustGame, imdp: IntervalMDP, dta: DTA,
+          reached: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The robust reachability target of the task and the choices that stay in it: for a
+    co-safe task the states ``reached`` (its accepting state, and truncation in the upper
+    model), nothing to stay by; for a task with a safety part the states from which the
+    robot keeps the run for ever among persistent states (or ``reached``) whatever law
+    of the bands nature plays (:func:`mitld_lp.solvers.robust_graph.keeping`), which
+    satisfies the task, with the choice that keeps it there."""
+    if SAFE not in dta.kinds:
+        return reached, None
+    from mitld_lp.acceptance import persistent_states
+    from mitld_lp.solvers.robust_graph import keeping
+
+    inside, stay = keeping(game, persistent_states(imdp, dta) | reached)  # type: ignore[arg-type]
+    return inside, stay
+
+
+def _kept(solution: RobustModelSolution, game: RobustGame, goal: np.ndarray,
+          stay: np.ndarray | None) -> RobustModelSolution:
+    """A task with a safety part: ``solution`` whose policy plays, on the goal, a choice
+    that keeps the run there whatever nature plays, with the check that it does."""
+    if stay is None:
+        return solution
+    from dataclasses import replace
+
+    policy = np.array(solution.policy)
+    keep = goal & (policy >= 0)
+    policy[keep] = stay[keep]
+    rows_ok = _rows_kept(game, goal, policy[keep])
+    check = Check("policy keeps the task's safety part whatever the bands",
+                  bool(rows_ok), f"{int(keep.sum())} states kept")
+    return replace(solution, policy=read_only(policy), checks=(*solution.checks, check))
+
+
+def _rows_kept(game: RobustGame, goal: np.ndarray, choices: np.ndarray) -> bool:
+    """Whether every vertex row of ``choices`` has its support in ``goal``."""
+    from mitld_lp.solvers.robust_graph import gather
+
+    if choices.size == 0:
+        return True
+    rows = gather(game.vertex_groups[choices], game.vertex_groups[choices + 1])
+    sub = game.matrix[rows]
+    return bool(goal[sub.indices].all())
+
+
 def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
     """The robust synthesis (module docstring) of a posed problem, or of ``model`` with
     :func:`mitld_lp.synthesis.synthesize`'s keyword ``options`` (posed here:
@@ -257,10 +303,9 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
     if not isinstance(model, Posed):
         model = pose(model, settings=settings_from(**options))
     posed = model
-    if posed.route == CONSTRAINED or posed.fragment != CO_SAFE:
-        raise ProblemError(f"synthesize_robust: a {posed.fragment} task"
-                           + (" with constraints" if posed.route == CONSTRAINED else "")
-                           + " is not solved robustly (co-safe tasks only)")
+    if posed.route == CONSTRAINED:
+        raise ProblemError("synthesize_robust: a task with constraints is not solved "
+                           "robustly")
     model, s = posed.model, posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     eps = model.epsilon if s.epsilon is None else s.epsilon
@@ -276,16 +321,20 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
     t2 = time.perf_counter()
     game = robust_game(imdp)
     deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
-    target = np.asarray(imdp.target, dtype=bool)
-    low = _solve(game, imdp, target, "lower", s.method, s.tol, s.certify_tol, deadline)
-    high = low if not imdp.truncated.any() else _solve(
-        game, imdp, target | imdp.truncated, "upper", s.method, s.tol, s.certify_tol,
-        deadline)
+    target, stay = _goal(game, imdp, dta, np.asarray(imdp.target, dtype=bool))
+    low = _kept(_solve(game, imdp, target, "lower", s.method, s.tol, s.certify_tol,
+                       deadline), game, target, stay)
+    if imdp.truncated.any():
+        upper_goal, upper_stay = _goal(game, imdp, dta, imdp.target | imdp.truncated)
+        high = _kept(_solve(game, imdp, upper_goal, "upper", s.method, s.tol,
+                            s.certify_tol, deadline), game, upper_goal, upper_stay)
+    else:
+        high = low
     timings = {"automaton": t1 - t0, "product": t2 - t1, "solve": time.perf_counter() - t2}
     controller = Controller(model.game, sta, structure_mdp(imdp), low.policy,
                             hopeless=high.iteration.prob0)
     result = RobustResult(model, s.method, eps, dta, sta, imdp, low, high, controller,
-                          timings, posed.problem.objective)
+                          timings, posed.problem.objective, read_only(target))
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result

@@ -17,7 +17,6 @@ import pytest
 
 from mitld_lp import ExplicitGame, GridWorld, Model, load_model, synthesize
 from mitld_lp.cli import main
-from mitld_lp.distributions.band import interval
 from mitld_lp.problem import ProblemError
 from mitld_lp.report import SUMMARY_KEYS
 
@@ -149,12 +148,45 @@ def test_bands_with_constraints_in_the_model_file_and_pareto_are_refused(
     assert not (tmp_path / "p.csv").exists()
 
 
-def test_bands_with_a_safety_part_are_refused_by_name() -> None:
-    world = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)], "h": [(1, 1 - 1)]})
-    m = Model.from_game(world, "G !h & D[mu] b & F(b & F[0,2] A)",
-                        distributions={"mu": interval("geometric", 0.2, 0.4, "mu")})
-    with pytest.raises(ProblemError, match="with a law known only within a band"):
-        synthesize(m)
+_SLIPPERY = {"dock": [(1, 1)], "goal": [(3, 2)], "puddle": [(2, 1), (2, 0)]}
+_KEPT = ["G !puddle & D[mu] b & F(b & F[0,3] goal)", "G (b -> F[0,3] goal) & D[mu] b",
+         "G (b -> F[0,2] goal) & D[mu] b & G !puddle"]
+
+
+@pytest.mark.parametrize("spec", _KEPT)
+def test_point_laws_through_the_robust_route_keep_a_safety_part_as_the_plain_route(
+        spec: str) -> None:
+    """Robust acceptance of a safety part (the greatest set the robot keeps runs in
+    against every nature) and the plain route's accepting end components are different
+    algorithms; with a point law they must give one answer."""
+    from mitld_lp.distributions.literal import from_table
+    from mitld_lp.robust_synthesis import synthesize_robust
+
+    world = GridWorld.make(4, 3, start=(0, 0), slip=0.2, regions=_SLIPPERY)
+    m = Model.from_game(world, spec, distributions={"mu": from_table({"geometric": 0.3},
+                                                                     "mu")})
+    plain, robust = synthesize(m), synthesize_robust(m)
+    assert plain.route == "plain" and plain.certified and robust.certified
+    assert 0.05 < plain.lower < 0.95
+    assert robust.lower == pytest.approx(plain.lower, abs=1e-8)
+    assert robust.upper == pytest.approx(plain.upper, abs=1e-8)
+
+
+@pytest.mark.parametrize("spec", _KEPT)
+def test_bands_with_a_safety_part_are_solved_soundly(spec: str) -> None:
+    """A band with a safety part: the robust optimum is at most the optimum at every
+    fixed law of the band (the ends and inside), and the policy's worst case is
+    certified."""
+    from mitld_lp.distributions.literal import from_table
+
+    world = GridWorld.make(4, 3, start=(0, 0), slip=0.2, regions=_SLIPPERY)
+    r = synthesize(Model.from_game(world, spec, distributions={
+        "mu": from_table({"geometric": [0.2, 0.4]}, "mu")}))
+    assert r.route == "robust" and r.certified, r.failed_checks
+    for p in (0.2, 0.27, 0.33, 0.4):
+        fixed = synthesize(Model.from_game(world, spec, distributions={
+            "mu": from_table({"geometric": p}, "mu")}))
+        assert r.upper <= fixed.upper + 1e-9
 
 
 # --------------------------------------------------------------------------- batches, sweeps

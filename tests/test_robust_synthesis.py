@@ -211,13 +211,18 @@ def test_controller_plays_the_robust_policy() -> None:
     assert c.act(Observation(0, frozenset())) in ("right", "stay")
 
 
-def test_refused_with_constraints_or_a_safety_part() -> None:
+def test_a_safety_part_is_kept_robustly_and_constraints_refused() -> None:
+    """G ok & D[mu] b & F[0,4] b with mu's hazard anywhere in [0.2, 0.4]: the safety part
+    always holds, and nature's worst is the lowest hazard at every step, so the robust
+    optimum is P(b within 4 steps) = 1 - 0.8^4 (by hand).  Constraints stay refused."""
     still = ExplicitGame(initial="here", transitions={"here": {"wait": {"here": 1.0}}},
                          labels={"here": {"ok"}})
     m = Model.from_game(still, "G ok & D[mu] b & F[0,4] b",
                         distributions={"mu": band(0.2, 0.4)})
-    with pytest.raises(ProblemError, match="co-safe tasks only"):
-        synthesize(m)
+    r = synthesize(m)
+    assert isinstance(r, RobustResult) and r.certified, r.failed_checks
+    assert r.lower == pytest.approx(1 - 0.8**4, abs=1e-9)
+    assert r.upper == pytest.approx(1 - 0.8**4, abs=1e-9)
     m = Model.from_game(still, "D[mu] b & F[0,4] b", distributions={"mu": band(0.2, 0.4)})
     with pytest.raises(ProblemError, match="constraints with a law known only within a band"):
         synthesize(m, constraints=["E(steps) <= 3"])

@@ -8,6 +8,9 @@ graphs nature can make, not the nominal one.
   complement is where the robust value is 0 (``prob0``).
 * :func:`almost_sure`: where the robot reaches the target with probability 1 against every
   nature: ``nu X. mu Y. T | {s : exists c, forall v: supp(v) in X and supp(v) meets Y}``.
+* :func:`keeping`: where the robot can keep every run inside a set for ever against every
+  nature: ``nu X. K & {s : exists c, forall v: supp(v) in X}`` (robust acceptance of a
+  safety part, ``K`` the persistent states).
 * :func:`end_components`: the maximal end components when nature is held to a subset of
   its rows (the rows optimal for the current lower bound, for deflating the upper bound).
 * :func:`levels`: the strongly connected blocks of the support graph, downstream first.
@@ -22,7 +25,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["RobustGame", "positive_attractor", "almost_sure", "end_components", "levels",
-           "gather", "take_rows"]
+           "gather", "take_rows", "keeping"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -160,6 +163,27 @@ def almost_sure(game: RobustGame, target: np.ndarray, positive: np.ndarray) -> n
         if np.array_equal(y, x):
             return x
         x = y
+
+
+def keeping(game: RobustGame, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(W, stay)``: the greatest ``W`` within ``inside`` whose every state has a choice
+    all of whose vertex rows keep their whole support in ``W`` (module docstring); from
+    ``W`` the robot keeps every run in ``W`` for ever, whatever law of the bands nature
+    plays, by ``stay[s]`` (the first such choice; -1 outside ``W``)."""
+    x = np.asarray(inside, dtype=bool).copy()
+    choice_state = game.choice_state()
+    while True:
+        ok = _segment_all(_rows_inside(game, x), game.vertex_groups) & x[choice_state]
+        nxt = np.zeros_like(x)
+        nxt[choice_state[ok]] = True
+        if np.array_equal(nxt, x):
+            break
+        x = nxt
+    stay = np.full(game.n_states, -1, dtype=np.int64)
+    good = np.flatnonzero(ok)
+    states, first = np.unique(choice_state[good], return_index=True)
+    stay[states] = good[first]
+    return x, stay
 
 
 def end_components(
