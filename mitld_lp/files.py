@@ -30,13 +30,14 @@ import threading
 import weakref
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Literal
+from typing import IO, Any, Literal
 
 from mitld_lp import watch
 from mitld_lp.report import POLICY_COLUMNS, policy_table
 
-if TYPE_CHECKING:
-    from mitld_lp.synthesis import SynthesisResult
+#: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
+#: this module, and an import, even for types only, would make a circle).
+SynthesisResult = Any
 
 __all__ = [
     "OutputPathError",

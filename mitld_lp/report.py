@@ -5,12 +5,13 @@ and the table a notebook shows.  Files are written by :mod:`mitld_lp.files`."""
 from __future__ import annotations
 
 from html import escape
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mitld_lp.product import ProductState
 
-if TYPE_CHECKING:
-    from mitld_lp.synthesis import SynthesisResult
+#: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
+#: this module, and an import, even for types only, would make a circle).
+SynthesisResult = Any
 
 __all__ = ["POLICY_COLUMNS", "SUMMARY_KEYS", "policy_table", "summary", "html"]
 

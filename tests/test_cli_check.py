@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from mitld_lp import cli
 from mitld_lp.cli import main
 
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
@@ -127,7 +126,9 @@ def test_internal_error_exits_1_without_traceback(
     def boom(_f: object) -> None:
         raise RuntimeError("something broke\nsecond line")
 
-    monkeypatch.setattr(cli, "check", boom)
+    from mitld_lp.cli import formulas
+
+    monkeypatch.setattr(formulas, "check", boom)
     assert main(["check", "p"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1

@@ -11,18 +11,17 @@ import json
 import logging
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mitld_lp import defaults
 from mitld_lp.arguments import bounded_int, probability_budget
-from mitld_lp.cli import (
+from mitld_lp.cli.kernel import (
     EXIT_INTERNAL,
     EXIT_OK,
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     UsageError,
     _args_model,
-    _constrained,
     _count,
     _dumps,
     _out,
@@ -31,38 +30,11 @@ from mitld_lp.cli import (
     _say,
     _time_left,
     _write,
+    posed_model,
+    solve_settings,
+    unconstrained,
 )
 from mitld_lp.text import printable
-
-if TYPE_CHECKING:
-    from mitld_lp.problem import Posed, Settings
-
-
-def model_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The settings every model verb's options set (:func:`mitld_lp.cli._args_model`),
-    as :func:`mitld_lp.synthesis.synthesize`'s keywords (time left now)."""
-    return {"epsilon": args.epsilon, "clock_reduction": not args.no_clock_reduction,
-            "max_states": args.max_states, "max_automaton_states": args.max_automaton_states,
-            "max_memory": args.max_memory, "time_limit": _time_left(args)}
-
-
-def solve_settings(args: argparse.Namespace) -> Settings:
-    """``solve``'s options as one :class:`mitld_lp.problem.Settings` (time left now)."""
-    from mitld_lp.problem import settings_from
-
-    return settings_from(method=args.method, solver=args.solver, backend=args.backend,
-                         decompose=False if args.no_decompose else None,
-                         **model_options(args))
-
-
-def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:
-    """The problem a verb that takes no constraints (``simulate``, ``plot``, ``info``,
-    ``export``) poses for ``model``: refused, naming the verb, when the model file
-    carries constraints."""
-    from mitld_lp.problem import pose, settings_from
-
-    return _constrained().unconstrained(
-        pose(model, settings=settings_from(**model_options(args))), verb)
 
 
 def is_pattern(name: str) -> bool:
@@ -234,7 +206,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
             model = load_model(args.input, max_states=args.max_states)
-            posed = _constrained().unconstrained(pose(model, settings=settings_from(
+            posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
             result = solve(posed)

@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 from mitld_lp import files
-from mitld_lp.cli import EXIT_OK, UsageError, _args_model, _build, _out, _output_path, _write
+from mitld_lp.cli.kernel import EXIT_OK, UsageError, _args_model, _build, _out, _output_path, _write
 
 __all__ = ["args_export", "cmd_export"]
 
@@ -57,7 +57,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) -> bool:
     """A model with a law known only within a band: its interval MDP as DRN (the robust
     optimum is a max-min, no one LP: --lp is refused).  False for any other model."""
-    from mitld_lp.cli_runs import posed_model
+    from mitld_lp.cli.kernel import posed_model
     from mitld_lp.model import load_model
     from mitld_lp.robust_synthesis import interval_model, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn

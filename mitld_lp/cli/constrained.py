@@ -11,7 +11,7 @@ from typing import Any
 
 from mitld_lp.constraints import THEN, ConstraintError
 
-__all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto", "unconstrained"]
+__all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto"]
 
 
 def args_constraints(p: argparse.ArgumentParser) -> None:
@@ -22,22 +22,8 @@ def args_constraints(p: argparse.ArgumentParser) -> None:
                    help="then minimise expected steps / cost among the optimal policies")
 
 
-def unconstrained(posed: Any, verb: str) -> Any:
-    """``posed`` if it is not a constrained problem; a usage error naming the verb for a
-    model whose file carries constraints (only ``solve``, ``sweep`` and ``pareto`` take
-    them)."""
-    from mitld_lp.cli import UsageError
-    from mitld_lp.problem import CONSTRAINED
-
-    if posed.route != CONSTRAINED:
-        return posed
-    raise UsageError(f"{verb}: the model has constraints, which only solve, sweep and "
-                     "pareto take (the randomised controller runs from Python: "
-                     "mitld_lp.constrained_runs)")
-
-
 def _usage(exc: ConstraintError) -> Exception:
-    from mitld_lp.cli import UsageError
+    from mitld_lp.cli.kernel import UsageError
 
     return UsageError(str(exc))
 
@@ -45,7 +31,7 @@ def _usage(exc: ConstraintError) -> Exception:
 def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int:
     """Run the constrained synthesis of a posed problem and print it; exit 0 when
     certified, 3 when infeasible, failed or not certified."""
-    from mitld_lp.cli import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out
+    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out
     from mitld_lp.constrained import solve_constrained
 
     model = posed.model
@@ -90,7 +76,7 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
 
 def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
     from mitld_lp import files
-    from mitld_lp.cli import _write
+    from mitld_lp.cli.kernel import _write
 
     def write(p: Path) -> None:
         if p.suffix.lower() == ".json":
@@ -109,7 +95,7 @@ def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
 
 def args_pareto(p: argparse.ArgumentParser) -> None:
     from mitld_lp.arguments import bounded_int
-    from mitld_lp.cli import _args_model
+    from mitld_lp.cli.kernel import _args_model
 
     _args_model(p)
     p.add_argument("--against", required=True, metavar="Q",
@@ -122,13 +108,13 @@ def args_pareto(p: argparse.ArgumentParser) -> None:
 
 def cmd_pareto(args: argparse.Namespace) -> int:
     """Trace the certified trade-off curve."""
-    from mitld_lp.cli import EXIT_OK, EXIT_UNCERTIFIED, _out, _output_path, _write
+    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _out, _output_path, _write
     from mitld_lp.model import load_model
     from mitld_lp.pareto import pareto, plot, write_csv
 
     out_csv = _output_path(args.csv, args.force, "--csv", (".csv",))
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
-    from mitld_lp.cli_runs import model_options
+    from mitld_lp.cli.kernel import model_options
 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
     try:

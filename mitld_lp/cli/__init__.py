@@ -1,0 +1,274 @@
+"""The ``mitld-lp`` command: the registry of verbs, the worker thread, Ctrl-C and the
+time limit.  What the verbs share is :mod:`mitld_lp.cli.kernel`; each verb lives in a
+module of this package, imported only when it runs.
+
+Each verb is a pair of functions, ``_args_<verb>(parser)`` adding its arguments and
+``_cmd_<verb>(args) -> int`` running it, registered once in :data:`_VERBS`.  Exit codes:
+
+* 0 -- done (a certified answer, for ``solve``);
+* 2 -- the input is wrong (a bad argument, formula, model file or output path): one line
+  ``mitld-lp: error: <reason>`` on stderr, checked before any work where it can be;
+* 3 -- a solver or budget stop: the answer is not certified, a budget (``--max-states``,
+  ``--time-limit``) was hit; the status is printed;
+* 130 -- interrupted (Ctrl-C), within a fraction of a second, whatever the stage;
+* 1 -- a bug: a one-line internal error.
+
+Every message is one line of printable characters (names a user wrote are escaped).
+This module is the only place in the package that prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, NoReturn
+
+from mitld_lp import files, watch
+from mitld_lp.arguments import seconds
+from mitld_lp.cli.kernel import (
+    _BUDGET_STOPS,
+    _USER_ERRORS,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_UNCERTIFIED,
+    EXIT_USAGE,
+    PROG,
+    UsageError,
+    _command,
+    _dumps,
+    _say,
+)
+from mitld_lp.text import printable
+
+__all__ = ["main", "run", "UsageError", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE",
+           "EXIT_UNCERTIFIED", "EXIT_INTERRUPTED", "PROG"]
+
+
+def _verb(module: str, name: str) -> Callable[..., Any]:
+    """``mitld_lp.cli.<module>.<name>``, imported when the verb is asked for."""
+    def call(arg: Any) -> Any:
+        return getattr(importlib.import_module(f"mitld_lp.cli.{module}"), name)(arg)
+
+    return call
+
+
+# --------------------------------------------------------------------------- registry
+
+#: (verb, one-line help, add arguments, run).  Add a verb by appending one row.
+_VERBS: list[
+    tuple[str, str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]
+] = [
+    ("check", "parse a formula and check it is in the supported fragment",
+     _verb("formulas", "args_check"), _verb("formulas", "cmd_check")),
+    ("dta", "print the formula's automaton, or write it as DOT",
+     _verb("formulas", "args_dta"), _verb("formulas", "cmd_dta")),
+    ("info", "build the product of a model and print its sizes",
+     _verb("solve", "args_info"), _verb("solve", "cmd_info")),
+    ("solve", "synthesise the optimal policy and its certified bracket",
+     _verb("solve", "args_solve"), _verb("solve", "cmd_solve")),
+    ("export", "write the LP (MPS/LP) and the MDP (Storm DRN)",
+     _verb("export", "args_export"), _verb("export", "cmd_export")),
+    ("simulate", "Monte-Carlo rollouts of the synthesised controller",
+     _verb("runs", "args_simulate"), _verb("runs", "cmd_simulate")),
+    ("sweep", "solve a model at every point of a sweep, into a results file",
+     _verb("runs", "args_sweep"), _verb("runs", "cmd_sweep")),
+    ("plot", "draw a grid world's policy, or a column of a sweep's results",
+     _verb("runs", "args_plot"), _verb("runs", "cmd_plot")),
+    ("pareto", "the certified curve of success probability against steps, cost or a risk",
+     _verb("constrained", "args_pareto"), _verb("constrained", "cmd_pareto")),
+]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
+
+    def error(self, message: str) -> NoReturn:  # type: ignore[override]
+        if self.prog == PROG and "required: VERB" in message:  # bare `mitld-lp`
+            message = "give a command: " + ", ".join(v for v, *_ in _VERBS)
+        where = "" if self.prog == PROG else f"{self.prog}: "  # the line says PROG once
+        raise UsageError(f"{where}{message} (see {self.prog} --help)")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog=PROG,
+        description="Policy synthesis for MITLD specifications by occupancy-measure LP.",
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {_version()}")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    for verb, help_text, add_args, run in _VERBS:
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        add_args(p)
+        p.add_argument("-q", "--quiet", action="store_true",
+                       help="no progress lines on stderr, only the answer and errors")
+        p.add_argument("-v", "--verbose", action="store_true",
+                       help="also the details of every stage (solver messages)")
+        p.add_argument("--time-limit", type=seconds, metavar="SECONDS",
+                       help="stop after SECONDS with status time_limit (exit 3)")
+        p.set_defaults(run=run)
+    return parser
+
+
+def _version() -> str:
+    from mitld_lp import __version__
+
+    return __version__
+
+
+class _StageLines(logging.Handler):
+    """Log records as printable lines on stderr; the last one says where a stop was."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.last = ""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.last = printable(record.getMessage())
+            print(f"{PROG}: {self.last}", file=sys.stderr, flush=True)
+        except Exception:  # noqa: BLE001 - logging must never break the command
+            self.handleError(record)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the verb; map every exception to an exit code and one line on stderr."""
+    try:
+        return args.run(args)
+    except files.WriteAbandoned:  # interrupted from outside, which has said so
+        return EXIT_INTERRUPTED
+    except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
+        _say(f"stopped: {err}")
+        return EXIT_UNCERTIFIED
+    except _USER_ERRORS as err:
+        _say(f"error: {err}")
+        return EXIT_USAGE
+    except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
+        sys.stderr.close()
+        return EXIT_OK
+    except MemoryError:
+        _say("stopped: out of memory (lower --max-states, or give the machine more memory)")
+        return EXIT_UNCERTIFIED
+    except Exception as err:  # noqa: BLE001 - the CLI never shows a traceback
+        first = str(err).splitlines()[0] if str(err) else ""
+        _say(f"internal error: {type(err).__name__}: {first} (please report this)")
+        return EXIT_INTERNAL
+
+
+_WATCHDOG_GRACE = 1.0
+"""Seconds past ``--time-limit`` before the command is stopped from outside."""
+
+#: The thread running the current command, if it is still running after ``main`` has
+#: returned (interrupted or out of time): :func:`run` then ends the process at once.
+_worker: threading.Thread | None = None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); return the exit status.
+
+    The command runs in a worker thread while this thread waits, so that Ctrl-C and
+    ``--time-limit`` take effect within a tenth of a second whatever the stage is doing
+    (the numerical kernels release the interpreter lock)."""
+    global _worker
+    try:
+        args = _build_parser().parse_args(argv)
+    except UsageError as err:
+        _say(f"error: {err}")
+        return EXIT_USAGE
+    except SystemExit as stop:  # --help and --version have printed and exit 0
+        return stop.code if isinstance(stop.code, int) else EXIT_USAGE
+    args.started = time.monotonic()
+    cancelled = threading.Event()
+    outcome: list[int] = []
+
+    def work() -> None:
+        _command.cancelled = cancelled
+        outcome.append(_run(args))
+
+    worker = threading.Thread(target=work, name=PROG, daemon=True)
+    handler = _StageLines()  # this command's lines only, not an abandoned one's
+    handler.addFilter(lambda record: record.thread == worker.ident)
+    package_log = logging.getLogger("mitld_lp")
+    if not args.quiet:
+        package_log.addHandler(handler)
+        package_log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
+    # The solvers get the limit itself and answer with a status; the watchdog stops a
+    # stage that cannot (the product, a native call) shortly after it.
+    deadline = None if args.time_limit is None else (
+        args.started + args.time_limit + _WATCHDOG_GRACE)
+    try:
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.1)
+            if deadline is not None and time.monotonic() >= deadline and worker.is_alive():
+                cancelled.set()
+                files.abandon(worker)
+                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "")
+                watch.report(watch.SAID)
+                _worker = worker
+                return EXIT_UNCERTIFIED
+    except KeyboardInterrupt:
+        cancelled.set()
+        files.abandon(worker)  # a file half written is removed; the old one stays
+        _say("interrupted")
+        watch.report(watch.SAID)
+        _worker = worker
+        return EXIT_INTERRUPTED
+    finally:
+        package_log.removeHandler(handler)
+    return outcome[0] if outcome else EXIT_INTERNAL
+
+
+def _limited(argv: list[str]) -> argparse.Namespace | None:
+    """The arguments of a command with ``--time-limit`` (None without one, when the
+    arguments are wrong, :func:`main` says so, and for ``sweep``, whose worker processes
+    a killed parent would leave running: its points have their own limits)."""
+    if "--time-limit" not in " ".join(argv):
+        return None
+    try:
+        args = _build_parser().parse_args(argv)
+    except (UsageError, SystemExit):
+        return None
+    return args if args.time_limit is not None and args.verb != "sweep" else None
+
+
+def _time_stop(args: argparse.Namespace, where: str) -> None:
+    """The time-limit stop: the JSON status with ``--json``, and the stop line."""
+    if getattr(args, "json", False):
+        print(_dumps({"status": "time_limit", "time_limit": args.time_limit}), flush=True)
+    _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
+
+
+def run() -> None:
+    """The ``mitld-lp`` console script: :func:`main`, then exit at once if interrupted
+    or out of time (its thread may be in a native call the shutdown would abort)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
+    limited = _limited(sys.argv[1:])
+    if limited is not None:  # the limit is kept from a parent process (watch.py)
+        code = watch.watched(limited.time_limit, lambda: _time_stop(
+            limited, " (inside a long native call)"))
+        if code is not None:
+            sys.exit(code)
+    try:
+        code = main()
+    except KeyboardInterrupt:  # before the command started (reading the arguments)
+        _say("interrupted")
+        code = EXIT_INTERRUPTED
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # done: a late Ctrl-C changes nothing
+    if _worker is not None:  # interrupted or out of time: no finalisation under a thread
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    run()

@@ -1,0 +1,129 @@
+"""The command line's ``info`` (the product's sizes) and ``solve`` (the certified answer)
+verbs; a batch of model files goes to :mod:`mitld_lp.cli.runs`, a constrained problem's
+printing to :mod:`mitld_lp.cli.constrained`."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from mitld_lp import defaults, files
+from mitld_lp.arguments import solver_name
+from mitld_lp.cli import constrained, runs
+from mitld_lp.cli.kernel import (
+    EXIT_OK,
+    EXIT_UNCERTIFIED,
+    UsageError,
+    _args_model,
+    _build,
+    _dumps,
+    _out,
+    _output_path,
+    _prob,
+    _write,
+    solve_settings,
+)
+
+__all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
+
+
+def args_info(p: argparse.ArgumentParser) -> None:
+    _args_model(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """The product's sizes, truncation points and the epsilon achieved."""
+    from mitld_lp.product import component_counts
+
+    posed, built = _build(args, "info")
+    model = posed.model
+    sta, mdp = built.sta, built.mdp
+    out: dict[str, Any] = {
+        "model": model.name,
+        "spec": str(model.spec),
+        "objective": posed.problem.objective,
+        "dta_states": sta.dta.n_states,
+        **component_counts(mdp),
+        "truncation_points": sta.truncation_points,
+        "epsilon": model.epsilon if posed.settings.epsilon is None else posed.settings.epsilon,
+        "epsilon_achieved": sta.epsilon_achieved,
+    }
+    if args.json:
+        _out(_dumps(out))
+    else:
+        width = max(map(len, out))
+        for k, v in out.items():
+            _out(f"{k + ':':<{width + 1}} {v}")
+    return EXIT_OK
+
+
+def args_solve(p: argparse.ArgumentParser) -> None:
+    _args_model(p, many=True)
+    p.add_argument("--method", choices=("lp", "vi"), default="lp")
+    p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
+                   help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
+    p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
+                   help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
+                        "(any solver); auto (default): direct for Clarabel, else cvxpy")
+    p.add_argument("--no-decompose", action="store_true",
+                   help="solve one monolithic LP instead of one LP per strongly connected "
+                        "block in topological order")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--policy", metavar="FILE",
+                   help="write the policy table (.csv or .json): one row per state")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    constrained.args_constraints(p)
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    """Synthesise the policy: the certified bracket, the value, the sizes."""
+    from mitld_lp.model import load_model
+    from mitld_lp.problem import CONSTRAINED, pose
+    from mitld_lp.synthesis import solve
+
+    if args.backend == "direct" and args.solver != "CLARABEL":
+        raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
+                         "use --backend cvxpy (or auto) for other solvers")
+    if len(args.model) > 1 or runs.is_pattern(args.model[0]):
+        return runs.solve_batch(args)
+    args.model = args.model[0]
+    policy_file = None if args.policy is None else _output_path(
+        args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    posed = pose(model, args.constraint, then=args.then,
+                 settings=solve_settings(args))
+    if posed.route == CONSTRAINED:
+        return constrained.solve(args, posed, policy_file)
+    r = solve(posed)
+    summary = r.summary()
+    if policy_file:
+        _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
+        summary["policy_file"] = str(policy_file)
+    if args.json:
+        _out(_dumps(summary))
+    else:
+        _out(f"model:        {model.name}  ({model.spec})")
+        if r.objective == "min":
+            _out("objective:    min (the least probability of the task; the policy's "
+                 "guarantee is the upper end)")
+        if summary["robust"]:
+            _out("robust:       worst case over the bands " + ", ".join(
+                f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
+                for (e, law), h in zip(summary["bands"].items(),
+                                       summary["first_step_hazards"].values(), strict=True)))
+        _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
+              f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
+        _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
+        _out("certified:    " + ("yes" if r.certified else "NO"))
+        for c in r.failed_checks:
+            _out(f"  failed: {c.name}: {c.detail}")
+        _out(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"
+             f" {r.mdp.n_choices} choices, {r.mdp.n_transitions} transitions")
+        if r.sta.truncation_points:
+            _out(f"truncation:   {r.sta.truncation_points}")
+        _out("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
+        if policy_file:
+            _out(f"policy:       {policy_file}")
+    return EXIT_OK if r.certified else EXIT_UNCERTIFIED
+
