@@ -36,7 +36,8 @@ from mitld_lp.mdp import MDP
 from mitld_lp.model import Model, ModelError, load_model, loads_model
 from mitld_lp.product import ProductState, product
 from mitld_lp.simulate import simulate
-from mitld_lp.synthesis import SynthesisResult, synthesize
+from mitld_lp.problem import Problem, ProblemError, Settings, pose
+from mitld_lp.synthesis import SynthesisResult, solve, synthesize
 
 __version__ = "0.1.0"
 
@@ -83,4 +84,35 @@ __all__ = [
     "Observation",
     "RunStatus",
     "simulate",
+    "pose",
+    "solve",
+    "Problem",
+    "Settings",
+    "ProblemError",
+    "fit_law",
+    "synthesize_constrained",
+    "run_sweep",
+    "load_sweep",
 ]
+
+#: Names whose modules pull in the solver stack or optional packages: imported on first
+#: use, so that ``import mitld_lp`` stays light (tests/test_imports.py).  (The sweep
+#: and pareto functions keep their modules' names, ``mitld_lp.sweep.sweep`` and
+#: ``mitld_lp.pareto.pareto``: a package attribute cannot be both.)
+_LAZY = {
+    "fit_law": "mitld_lp.distributions.fit",
+    "synthesize_constrained": "mitld_lp.constrained",
+    "run_sweep": "mitld_lp.sweep",
+    "load_sweep": "mitld_lp.sweep",
+}
+
+
+def __getattr__(name: str) -> object:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'mitld_lp' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
