@@ -34,9 +34,9 @@ from mitld_lp.logic.syntax import (
 )
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model, ModelError, load_model, loads_model
+from mitld_lp.problem import Problem, ProblemError, Settings, pose
 from mitld_lp.product import ProductState, product
 from mitld_lp.simulate import simulate
-from mitld_lp.problem import Problem, ProblemError, Settings, pose
 from mitld_lp.synthesis import SynthesisResult, solve, synthesize
 
 __version__ = "0.1.0"
