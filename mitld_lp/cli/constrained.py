@@ -31,7 +31,7 @@ def _usage(exc: ConstraintError) -> Exception:
 def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int:
     """Run the constrained synthesis of a posed problem and print it; exit 0 when
     certified, 3 when infeasible, failed or not certified."""
-    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out
+    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out, print_head
     from mitld_lp.constrained import solve_constrained
 
     model = posed.model
@@ -46,9 +46,7 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
     if args.json:
         _out(_dumps(summary))
     else:
-        _out(f"model:        {model.name}  ({model.spec})")
-        if r.objective == "min":
-            _out("objective:    min (the least probability of the task)")
+        print_head(model, r.objective)
         _out(f"status:       {r.status}")
         if r.status == "optimal":
             _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]  (LP {r.value:.7f})")

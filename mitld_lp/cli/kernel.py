@@ -208,3 +208,12 @@ def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:
     from mitld_lp.problem import pose, settings_from
 
     return unconstrained(pose(model, settings=settings_from(**model_options(args))), verb)
+
+
+def print_head(model: Any, objective: str) -> None:
+    """The first lines of a ``solve`` answer: the model, its task and a minimised
+    objective."""
+    _out(f"model:        {model.name}  ({model.spec})")
+    if objective == "min":
+        _out("objective:    min (the least probability of the task; the policy's "
+             "guarantee is the upper end)")

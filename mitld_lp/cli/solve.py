@@ -21,6 +21,7 @@ from mitld_lp.cli.kernel import (
     _output_path,
     _prob,
     _write,
+    print_head,
     solve_settings,
 )
 
@@ -103,10 +104,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.json:
         _out(_dumps(summary))
     else:
-        _out(f"model:        {model.name}  ({model.spec})")
-        if r.objective == "min":
-            _out("objective:    min (the least probability of the task; the policy's "
-                 "guarantee is the upper end)")
+        print_head(model, r.objective)
         if summary["robust"]:
             _out("robust:       worst case over the bands " + ", ".join(
                 f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
