@@ -92,6 +92,7 @@ class ConstrainedResult:
     objective: str = "max"
     model: Model | None = None
     epsilon: float = float("nan")
+    bands: Mapping[str, str] = field(default_factory=dict)  # laws known within a band
     route: ClassVar[str] = CONSTRAINED
     method: ClassVar[str] = "lp"
 
@@ -239,12 +240,22 @@ def solve_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
     trade-off curve's end points); refuses, naming it, a problem that LP does not solve
     (:func:`mitld_lp.problem.check_constrained`)."""
     check_constrained(posed)
-    model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
-        posed.problem.then
-    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
-    cost_map = dict(model.costs if costs is None else costs)
+    if posed.robust:
+        from mitld_lp.robust_constrained import solve_robust_constrained
+
+        return solve_robust_constrained(posed, costs=costs, seed=seed)
+    s = posed.settings
     t0 = time.perf_counter()
-    deadline = None if s.time_limit is None else t0 + s.time_limit
+    joint, sta = joint_sta(posed)
+    mdp = product(posed.model.game, sta, max_states=s.max_states, max_memory=s.max_memory)
+    return solve_merged(posed, mdp, joint, sta, t0, costs=costs, seed=seed)
+
+
+def joint_sta(posed: Posed) -> tuple[Joint, STA]:
+    """The joint automaton of the task (its complement for ``objective="min"``) and the
+    constraints' formulas, with the events' laws and the truncation settings."""
+    model, s, cons = posed.model, posed.settings, posed.problem.constraints
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     laws = _laws(model, cons)
     formulas = [c.formula for c in cons if c.kind == "prob"]
     cap = min(s.max_states, s.max_automaton_states)
@@ -255,7 +266,19 @@ def solve_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
     eps = model.epsilon if s.epsilon is None else s.epsilon
     sta = make_sta(joint.dta, laws, eps, clock_reduction=s.clock_reduction,
                    truncation=s.truncation_map)
-    mdp = product(model.game, sta, max_states=s.max_states, max_memory=s.max_memory)
+    return joint, sta
+
+
+def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
+                 costs: Mapping[str, float] | None = None,
+                 seed: int | None = 0) -> ConstrainedResult:
+    """The constrained LPs on the product ``mdp`` of the world with ``joint`` (module
+    docs), the chosen policy's exact values and the certificate."""
+    model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
+        posed.problem.then
+    cost_map = dict(model.costs if costs is None else costs)
+    deadline = None if s.time_limit is None else t0 + s.time_limit
+    eps = model.epsilon if s.epsilon is None else s.epsilon
     merged = merge(mdp, joint)
     cost_vec = cost_vector(mdp, cost_map)
     t1 = time.perf_counter()

@@ -231,12 +231,6 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     constrained = bool(cons or then)
     problem = Problem(model, cons, then, goal)
     what = _task_words(fragment, goal)
-    if robust and constrained:
-        extra = "constraints" if cons else f"then = {then}"
-        raise ProblemError(
-            f"{extra} with a law known only within a band ({_band(model)}): the robust "
-            "constrained optimum is not solved yet; give the event a point law, or drop "
-            f"the {'constraints' if cons else 'then objective'}")
     if constrained:
         posed = Posed(problem, s, CONSTRAINED, fragment, robust)
         check_constrained(posed)
@@ -268,11 +262,14 @@ def check_constrained(posed: Posed) -> None:
 
     s, cons, fragment = posed.settings, posed.problem.constraints, posed.fragment
     what = _task_words(fragment, posed.problem.objective)
-    if posed.robust:
+    if posed.robust and (posed.problem.then is not None
+                         or any(c.kind != "prob" for c in cons)):
+        what_else = (f"then = {posed.problem.then}" if posed.problem.then is not None else
+                     next(str(c) for c in cons if c.kind != "prob"))
         raise ProblemError(
-            f"constrained synthesis with a law known only within a band "
-            f"({_band(posed.model)}): the robust constrained optimum is not solved yet; "
-            "give the event a point law")
+            f"{what_else} with a law known only within a band ({_band(posed.model)}): the "
+            "worst case of expected steps or costs is not solved; give the event a point "
+            "law, or bound probabilities only")
     if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
         raise ProblemError(f"{what} with constraints: not a supported class")
     for c in cons:

@@ -138,6 +138,7 @@ def _constrained_part(result: Any) -> dict[str, Any]:
         "then": result.then, "secondary": result.secondary,
         "expected_steps": result.steps, "message": result.message,
         "randomized_states": result.randomized_states,
+        "robust": bool(result.bands), "bands": dict(result.bands),
     }
 
 

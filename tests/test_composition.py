@@ -124,28 +124,90 @@ def _bus_fit_with(tmp_path: Path, extra: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize("argv", [
-    ["--constraint", "P(F[0,5] A) <= 0.5"], ["--then", "min-steps"]])
-def test_bands_with_constraints_are_refused_not_replaced_by_a_point_law(
-        argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
-    """bus_fit with a constraint printed 0.9181216 certified: the bands were replaced by
-    a point law (the robust optimum alone is 0.8999750, and a constraint can only lower
-    it).  Now refused, naming the bands and the extra."""
-    code = main(["solve", str(MODELS / "bus_fit.toml"), "-q", *argv])
-    err = capsys.readouterr().err
-    assert code == 2
-    assert "known only within a band" in err and ("constraints" in err or "then" in err)
-
-
-def test_bands_with_constraints_in_the_model_file_and_pareto_are_refused(
+def test_bands_with_then_or_expected_steps_are_refused_not_replaced_by_a_point_law(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    path = _bus_fit_with(tmp_path, 'constraints = ["P(F[0,5] A) <= 0.5"]')
-    assert main(["solve", str(path), "-q"]) == 2
-    assert "known only within a band" in capsys.readouterr().err
+    """bus_fit with --then min-steps printed a certified answer for a point law; the worst
+    case of expected steps is not solved with bands: refused, naming both."""
+    for argv in (["--then", "min-steps"], ["--constraint", "E(steps) <= 9"]):
+        code = main(["solve", str(MODELS / "bus_fit.toml"), "-q", *argv])
+        err = capsys.readouterr().err
+        assert code == 2
+        assert "known only within a band" in err and ("then" in err or "E(steps)" in err)
     assert main(["pareto", str(MODELS / "bus_fit.toml"), "--against", "steps", "--csv",
                  str(tmp_path / "p.csv"), "-q"]) == 2
     assert "known only within a band" in capsys.readouterr().err
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_bands_with_a_constraint_in_the_model_file_are_not_a_point_law(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """bus_fit with constraints in its file printed 0.9244053 certified (the bands
+    replaced by a point law; the robust answer alone is 0.9201836 there).  A constraint
+    can only lower the robust optimum: the bracket's lower end is at most the robust
+    answer without it."""
+    path = _bus_fit_with(tmp_path, 'constraints = ["P(F[0,5] A) <= 0.5"]')
+    alone = synthesize(load_model(MODELS / "bus_fit.toml"))
+    assert main(["solve", str(path), "-q", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["robust"] and record["certified"]
+    assert record["lower"] <= alone.upper + 1e-9
+
+
+def _bus_risk_band(hazard: str) -> Model:
+    from mitld_lp import loads_model
+
+    text = (MODELS / "bus_risk.toml").read_text()
+    return loads_model(text.replace("mu1 = { geometric = 0.8 }",
+                                    f"mu1 = {{ geometric = {hazard} }}"), "bus_risk_band")
+
+
+def _rollouts(result, p1: float, runs: int, seed: int) -> tuple[float, float]:  # noqa: ANN001
+    """Success and puddle rates of the result's controller in the grid, bus 1 arriving
+    at step ~ geometric(p1) and bus 2 ~ geometric(0.3), drawn here with numpy."""
+    from mitld_lp.automata.joint import ACCEPTED
+
+    rng = np.random.default_rng(seed)
+    ctrl = result.controller
+    ctrl.rng = rng
+    game = ctrl.game
+    won = wet = 0
+    for _ in range(runs):
+        times = {"b1": int(rng.geometric(p1)), "b2": int(rng.geometric(0.3))}
+        ctrl.reset()
+        s, events = game.initial, frozenset()
+        for t in range(200):
+            action = ctrl.act(s, events)
+            if action is None or ctrl.settled:
+                break
+            events = frozenset(a for a, k in times.items() if k == t + 1)
+            succ = game.successors(s, action, events)
+            probs = np.array([q for _, q in succ])
+            s = succ[int(rng.choice(len(succ), p=probs / probs.sum()))][0]
+        won += ctrl.verdicts[0] == ACCEPTED
+        wet += ctrl.verdicts[1] == ACCEPTED
+    return won / runs, wet / runs
+
+
+def test_bands_with_a_probability_constraint_get_a_sound_bracket() -> None:
+    """Bus 1's hazard anywhere in [0.7, 0.9], the puddle's risk at most 0.05.  upper is
+    the constrained optimum at the middle law (geometric(0.8), a law of the band);
+    lower is at most the constrained optimum at every fixed law of the band, and the
+    controller, run against the band's ends with the buses drawn here, succeeds at
+    least that often and keeps the risk (4-sigma bands)."""
+    r = synthesize(_bus_risk_band("[0.7, 0.9]"), constraints=["P(F puddle) <= 0.05"])
+    assert r.route == "constrained" and r.certified, r.checks
+    assert r.summary()["robust"] and r.summary()["bands"]
+    fixed = {p: synthesize(_bus_risk_band(str(p)), constraints=["P(F puddle) <= 0.05"])
+             for p in (0.7, 0.75, 0.8, 0.85, 0.9)}
+    assert r.upper == pytest.approx(fixed[0.8].upper, abs=1e-8)
+    assert all(r.lower <= f.lower + 1e-9 for f in fixed.values())
+    assert r.lower > 0.4  # a bracket, not a vacuous one
+    assert r.constraints[0].holds and r.constraints[0].value <= 0.05 + 1e-6
+    for p1 in (0.7, 0.9):
+        success, risk = _rollouts(r, p1, runs=1500, seed=int(p1 * 10))
+        assert success >= r.lower - 4 * (0.25 / 1500) ** 0.5
+        assert risk <= 0.05 + 4 * (0.05 * 0.95 / 1500) ** 0.5
+
 
 
 _SLIPPERY = {"dock": [(1, 1)], "goal": [(3, 2)], "puddle": [(2, 1), (2, 0)]}

@@ -48,6 +48,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
     else:
         print_head(model, r.objective)
         _out(f"status:       {r.status}")
+        if r.bands:
+            _out("robust:       worst case over the bands "
+                 + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
         if r.status == "optimal":
             _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]  (LP {r.value:.7f})")
             _out(f"E(steps):     {r.steps:.6g}")

@@ -71,6 +71,10 @@ class Merged:
         keep: per merged choice, whether it is a *keep* choice (module docs).
         keep_internal: per merged choice, whether it keeps the run in its end
             component of persistent task states (what a kept run plays).
+        state_map: per product state, its merged state (a verdict state for a merged
+            terminal one; -1: not reachable in the merged model).
+        choice_origin: per merged choice, the product choice it is (-1: an absorbing
+            state's self-loop or a *keep* choice).
     """
 
     mdp: MDP
@@ -85,6 +89,8 @@ class Merged:
     internal: np.ndarray
     keep: np.ndarray
     keep_internal: np.ndarray
+    state_map: np.ndarray
+    choice_origin: np.ndarray
 
 
 def merge(mdp: MDP, joint: Joint) -> Merged:
@@ -169,6 +175,9 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     actions = np.full(n_choices, ABSORB, dtype=np.int32)
     src_rows = rows[row_keep]
     actions[target_row] = mdp.choice_actions[src_rows]
+    choice_origin = np.full(n_choices, -1, dtype=np.int64)
+    choice_origin[target_row] = src_rows
+    state_map = np.where(to_new >= 0, final[np.maximum(to_new, 0)], -1)
     task_acc = verdicts[:, 0] == ACCEPTED
     new = MDP(
         matrix=matrix,
@@ -189,8 +198,11 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     comp = np.array([c[0] for c in joint.components] + [-1], dtype=np.int64)
     kept = _keeping(new, ~absorbing & persistent[comp[js]])
     if kept is not None:
-        new, verdicts, absorbing, truncated, origin, js, keep_choice, keep_internal = (
+        new, verdicts, absorbing, truncated, origin, js, keep_choice, keep_internal, pos = (
             _with_keeps(new, verdicts, absorbing, truncated, origin, js, *kept))
+        moved = np.full(new.n_choices, -1, dtype=np.int64)
+        moved[pos] = choice_origin
+        choice_origin = moved
         m = new.n_states
         task_acc = verdicts[:, 0] == ACCEPTED
     else:
@@ -204,7 +216,8 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     mecs = maximal_end_components(new, ~absorbing)
     stay_ok = mecs.mec_of >= 0
     return Merged(new, origin, of_product, js, verdicts, absorbing, truncated, undecided,
-                  stay_ok, np.asarray(mecs.internal), keep_choice, keep_internal)
+                  stay_ok, np.asarray(mecs.internal), keep_choice, keep_internal, state_map,
+                  choice_origin)
 
 
 def _keeping(mdp: MDP, persistent: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -259,7 +272,7 @@ def _with_keeps(mdp: MDP, verdicts: np.ndarray, absorbing: np.ndarray,
               truncated=truncated2, states=tuple(range(m + u)))
     minus = np.full(u, -1, dtype=np.int64)
     return (new, verdicts2, absorbing2, truncated2, np.concatenate([origin, minus]),
-            np.concatenate([js, minus]), keep_choice, keep_internal)
+            np.concatenate([js, minus]), keep_choice, keep_internal, old_pos)
 
 
 @dataclass(frozen=True, slots=True)

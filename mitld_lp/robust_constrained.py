@@ -1,0 +1,280 @@
+"""Constraints when some law is known only within a band: a sound bracket on the robust
+constrained optimum (docs/robust.md, "Constraints").
+
+The robust constrained optimum is the best probability of the task the robot can
+guarantee whatever law of the bands the events follow, over the policies whose every
+constraint holds whatever law of the bands they follow::
+
+    V* = max { min_nu P_nu^pi(task) : pi such that for all nu, every constraint holds }
+
+It is bracketed by two computations on the interval MDP of the joint product:
+
+* ``upper``: the constrained optimum (upper model, truncation won) at one law of the
+  bands, the *middle law* (every hazard at the middle of its interval, at every step).
+  A policy that meets the constraints under every law meets them under that one, and
+  its worst case is at most its value there, so ``V* <= upper``.
+* ``lower``: a policy optimal at the middle law, evaluated against every law of the
+  bands: the task's worst case from below, and each constraint's worst case (from above
+  for ``P(.) <= x``, from below for ``P(.) >= x``) by robust interval iteration, nature
+  choosing the corner of the hazard box for each of the policy's choices.  When every
+  constraint's worst case is within its bound, the policy is one of those ``V*`` ranges
+  over, so ``lower <= V*``.  A constraint that binds at the middle law is usually broken
+  by a worse law, so the middle-law LP is solved again with each broken bound tightened
+  by what the bands added to it (a few rounds, :data:`ROUNDS`), until the policy meets
+  every bound against every law; if none does, no lower bound is certified (``lower`` is
+  NaN) and the answer says which constraint the bands can break.
+
+The width ``upper - lower`` is what the bands leave open beyond the truncation; the
+answer says it.  Expected-steps and cost constraints and ``then`` need the worst case of
+an expected total, not solved with bands: refused by name (:mod:`mitld_lp.problem`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.automata.joint import ACCEPTED
+from mitld_lp.constrained import (
+    ConstrainedResult,
+    ConstraintValue,
+    joint_sta,
+    quantity_of,
+    solve_merged,
+)
+from mitld_lp.constraints import CONSTRAINT_TOL
+from mitld_lp.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
+from mitld_lp.problem import Posed
+from mitld_lp.product import robust_product
+from mitld_lp.solvers.constrained import OPTIMAL
+from mitld_lp.solvers.constrained_model import Merged, Quantity
+from mitld_lp.solvers.robust import robust_interval_iteration
+from mitld_lp.solvers.robust_graph import RobustGame
+
+__all__ = ["solve_robust_constrained", "middle_rows", "worst_case", "ROUNDS"]
+
+ROUNDS = 8
+"""How many times the middle-law LP is solved again with tightened bounds."""
+
+
+def middle_rows(imdp: IntervalMDP) -> sp.csr_array:
+    """Per choice, its distribution at the middle law: every ambiguous event's hazard at
+    the middle of its interval, ``sum_b prod_i h_i^{b_i} (1 - h_i)^{1 - b_i} B(c, b)``."""
+    k = np.diff(imdp.band_groups).astype(np.int64)
+    rows, cols, vals = [], [], []
+    for kk in np.unique(k).tolist():
+        cs = np.flatnonzero(k == kk)
+        n = 1 << kk
+        w = np.ones((cs.size, n))
+        if kk:
+            at = imdp.band_groups[cs][:, None] + np.arange(kk)[None, :]
+            mid = 0.5 * (imdp.band_lo[at] + imdp.band_hi[at])  # (m, k)
+            bits = (np.arange(n)[:, None] >> np.arange(kk)[None, :]) & 1  # (n, k)
+            for i in range(kk):
+                w *= np.where(bits[None, :, i] == 1, mid[:, i:i + 1], 1.0 - mid[:, i:i + 1])
+        rows.append(np.repeat(cs, n))
+        cols.append((imdp.branch_groups[cs][:, None] + np.arange(n)[None, :]).ravel())
+        vals.append(w.ravel())
+    weights = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(imdp.n_choices, imdp.n_branches))
+    out = sp.csr_array(weights @ imdp.branches)
+    out.eliminate_zeros()
+    out.sort_indices()
+    return out
+
+
+def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarray,
+               q: Quantity, *, nature_maximises: bool, tol: float) -> tuple[float, float]:
+    """Sound bounds ``(lo, hi)`` at the initial state on the probability of ``q`` under
+    the randomised policy ``(prob, stay)`` of ``merged`` when nature picks, for each of the
+    policy's choices and each step, a corner of the choice's hazard box (vertex rows
+    ``vr`` of the product, mapped to the merged states) to minimise it (or to maximise
+    it, ``nature_maximises``).  Nature choosing per choice has at least the power of one
+    hazard per step, so the bounds hold for every law of the bands.
+
+    The robust game: each live merged state has one choice, to a node per policy choice
+    (weight ``prob[c]``) and to WIN or LOSE for its stay (worth the stay's verdict); a
+    node's rows are its choice's vertex rows (nature's rows when it minimises; the
+    player's choices, one row each, when it maximises)."""
+    mdp = merged.mdp
+    m = mdp.n_states
+    rg = np.asarray(mdp.row_groups)
+    cs = mdp.choice_state()
+    live = ~merged.absorbing
+    used = np.flatnonzero((prob > 0) & live[cs])
+    node = np.full(mdp.n_choices, -1, dtype=np.int64)
+    node[used] = m + np.arange(used.size)
+    win, lose = m + used.size, m + used.size + 1
+    n = lose + 1
+    if q.kind != "prob":
+        raise ValueError("worst_case: probabilities only")
+    sat = merged.verdicts[:, q.component] == ACCEPTED
+    target = np.zeros(n, dtype=bool)
+    target[:m] = merged.absorbing & sat
+    target[:m][merged.truncated] = q.truncated == 1.0
+    target[win] = True
+    # rows: (player choices of each state) -> list of (vertex rows)
+    r_rows: list[np.ndarray] = []
+    r_cols: list[np.ndarray] = []
+    r_vals: list[np.ndarray] = []
+    rows_per_choice: list[int] = []
+    choices_per_state = np.zeros(n, dtype=np.int64)
+    row_count = 0
+
+    def add_row(cols: np.ndarray, vals: np.ndarray) -> None:
+        nonlocal row_count
+        r_rows.append(np.full(cols.size, row_count, dtype=np.int64))
+        r_cols.append(cols.astype(np.int64))
+        r_vals.append(vals.astype(np.float64))
+        row_count += 1
+
+    # merged states, in order: one choice each
+    for s in range(m):
+        choices_per_state[s] = 1
+        rows_per_choice.append(1)
+        if not live[s]:
+            add_row(np.array([s]), np.array([1.0]))
+            continue
+        cols = [node[c] for c in range(rg[s], rg[s + 1]) if node[c] >= 0]
+        vals = [prob[c] for c in range(rg[s], rg[s + 1]) if node[c] >= 0]
+        if stay[s] > 0:
+            cols.append(win if sat[s] else lose)
+            vals.append(stay[s])
+        add_row(np.array(cols, dtype=np.int64), np.array(vals))
+    vm = vr.matrix
+    for c in used.tolist():
+        origin = int(merged.choice_origin[c])
+        if origin < 0:  # a keep choice: into its verdict state
+            row = mdp.matrix[[c]].tocoo()
+            vertex = [(row.col, row.data)]
+        else:
+            lo, hi = int(vr.groups[origin]), int(vr.groups[origin + 1])
+            vertex = []
+            for r in range(lo, hi):
+                a, b = vm.indptr[r], vm.indptr[r + 1]
+                mapped = merged.state_map[vm.indices[a:b]]
+                if (mapped < 0).any():
+                    raise AssertionError("a vertex row leaves the merged model")
+                vertex.append((mapped, vm.data[a:b]))
+        if nature_maximises:  # the player picks: one choice per vertex row
+            choices_per_state[node[c]] = len(vertex)
+            for cols_, vals_ in vertex:
+                rows_per_choice.append(1)
+                add_row(cols_, vals_)
+        else:
+            choices_per_state[node[c]] = 1
+            rows_per_choice.append(len(vertex))
+            for cols_, vals_ in vertex:
+                add_row(cols_, vals_)
+    for sink in (win, lose):
+        choices_per_state[sink] = 1
+        rows_per_choice.append(1)
+        add_row(np.array([sink]), np.array([1.0]))
+    matrix = sp.csr_array((np.concatenate(r_vals), (np.concatenate(r_rows),
+                                                    np.concatenate(r_cols))),
+                          shape=(row_count, n))
+    matrix.sum_duplicates()
+    vertex_groups = np.zeros(len(rows_per_choice) + 1, dtype=np.int64)
+    np.cumsum(rows_per_choice, out=vertex_groups[1:])
+    row_groups = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(choices_per_state, out=row_groups[1:])
+    it = robust_interval_iteration(RobustGame(matrix, vertex_groups, row_groups), target,
+                                   tol=tol)
+    s0 = mdp.initial
+    return float(it.lower[s0]), float(it.upper[s0])
+
+
+def solve_robust_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
+                             seed: int | None = 0) -> ConstrainedResult:
+    """The sound bracket of the module docstring for a posed problem with constraints and
+    a band."""
+    s = posed.settings
+    t0 = time.perf_counter()
+    joint, sta = joint_sta(posed)
+    imdp = robust_product(posed.model.game, sta, max_states=s.max_states,
+                          max_memory=s.max_memory)
+    middle = point_mdp(imdp, middle_rows(imdp))
+    nominal = solve_merged(posed, middle, joint, sta, t0, costs=costs, seed=seed)
+    bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
+             if c.distribution.is_ambiguous}
+    if nominal.status != OPTIMAL:  # infeasible at one law of the bands: at every law too
+        return replace(nominal, bands=bands, message=(
+            f"{nominal.message}; at the middle law of the bands (a law within them: no "
+            "policy meets the constraints under every law either)"))
+    t1 = time.perf_counter()
+    minimise = posed.minimise
+    # the nominal answer is read in the task's terms; the robust evaluation works on the
+    # maximised automaton (the complement's for a minimised task)
+    raw_upper = 1.0 - nominal.lower if minimise else nominal.upper
+    vr = vertex_rows(imdp)
+    cons = posed.problem.constraints
+    chosen, values = nominal, _worst_constraints(nominal, vr, cons, s.tol)
+    margins = [0.0] * len(cons)
+    rounds = 0
+    while not all(v.holds for v in values) and rounds < ROUNDS:
+        rounds += 1
+        for i, v in enumerate(values):  # what the bands added, and a little more
+            if not v.holds:
+                excess = abs(v.value - v.constraint.bound)
+                margins[i] += 1.5 * excess + 1e-9
+        tight = tuple(replace(c, bound=c.bound - margins[i] if c.sense == "<=" else
+                              c.bound + margins[i]) for i, c in enumerate(cons))
+        again = solve_merged(replace(posed, problem=replace(posed.problem, constraints=tight)),
+                             middle, joint, sta, t0, costs=costs, seed=seed)
+        if again.status != OPTIMAL:
+            break
+        chosen, values = again, _worst_constraints(again, vr, cons, s.tol)
+    assert chosen.prob is not None and chosen.stay is not None
+    task_lo, _ = worst_case(chosen.merged, vr, chosen.prob, chosen.stay,
+                            Quantity("prob", 0, 0.0), nature_maximises=False, tol=s.tol)
+    robust_ok = all(v.holds for v in values)
+    lower = task_lo if robust_ok else float("nan")
+    width = raw_upper - lower
+    checks = (*chosen.checks,
+              ("constraints hold against every law of the bands", robust_ok,
+               "; ".join(f"{v.constraint}: worst case {v.value!r}" for v in values)
+               or "no constraint"),
+              ("robust lower <= upper", bool(robust_ok and lower <= raw_upper + s.certify_tol),
+               f"{lower!r} <= {raw_upper!r}"))
+    eps = nominal.sta.epsilon_achieved
+    tightened = (f" (its bounds tightened in {rounds} rounds by "
+                 + ", ".join(f"{m:.3g}" for m in margins) + ")") if rounds else ""
+    message = (f"robust bracket: a policy optimal at the middle law of the bands{tightened} "
+               f"against their worst law (lower) and the optimum at the middle law (upper); "
+               f"width "
+               f"{width:.3g}" + (f", wider than the truncation's {eps:.3g}: the bands leave "
+                                 "it open" if width > eps + s.certify_tol else "")
+               if robust_ok else
+               "the policy optimal at the middle law of the bands breaks a constraint under "
+               "some law of the bands: no certified lower bound")
+    if minimise:
+        lower, upper = 1.0 - raw_upper, 1.0 - lower
+    else:
+        upper = raw_upper
+    timings = {**nominal.timings, "robust": time.perf_counter() - t1}
+    return replace(chosen, lower=lower, upper=upper, value=nominal.value,
+                   constraints=tuple(values),
+                   certified=all(ok for _, ok, _ in checks), checks=checks,
+                   message=message, bands=bands, timings=timings)
+
+
+def _worst_constraints(result: ConstrainedResult, vr: VertexRows, cons: tuple[Any, ...],
+                       tol: float) -> list[ConstraintValue]:
+    """Each constraint of ``cons`` (the user's bounds) against every law of the bands,
+    under ``result``'s policy: its worst case and whether that is within the bound."""
+    assert result.prob is not None and result.stay is not None
+    out = []
+    for k, c in enumerate(cons, start=1):
+        lo, hi = worst_case(result.merged, vr, result.prob, result.stay,
+                            quantity_of(c, k, "lower"), nature_maximises=c.sense == "<=",
+                            tol=tol)
+        worst = hi if c.sense == "<=" else lo
+        holds = worst <= c.bound + CONSTRAINT_TOL if c.sense == "<=" else (
+            worst >= c.bound - CONSTRAINT_TOL)
+        out.append(ConstraintValue(c, worst, holds))
+    return out
