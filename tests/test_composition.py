@@ -465,3 +465,128 @@ def test_safety_with_a_constraint_matches_storms_multi_objective_engine(
     assert 0.05 < want < 0.999  # a constraint that binds
     assert r.lower == pytest.approx(want, abs=1e-6)
     assert r.constraints[0].value >= 0.5 - 1e-6
+
+
+# --------------------------------------------------------------------------- the whole matrix
+
+
+_TASKS = {  # class -> (spec, whether the event is asked for by D[mu] b in the spec)
+    "co-safe": ("D[mu] b & F(b & F[0,3] goal)", True),
+    "safety": ("G (b -> F[0,3] goal)", False),
+    "obligation": ("G !puddle & D[mu] b & F(b & F[0,3] goal)", True),
+}
+
+
+def _laws() -> dict[str, tuple[object, list[object]]]:
+    """law kind -> (the law, point laws within it): a point law, a band, a fit from 40
+    arrival times drawn here (its band over the 95% interval of p)."""
+    from mitld_lp import fit_law
+    from mitld_lp.distributions.literal import from_table
+
+    def geo(p: float) -> object:
+        return from_table({"geometric": p}, "mu")
+
+    fit = fit_law(np.random.default_rng(0).geometric(0.3, 40))
+    (par,) = fit.parameters
+    return {
+        "point": (geo(0.3), [geo(0.3)]),
+        "band": (from_table({"geometric": [0.2, 0.4]}, "mu"), [geo(p) for p in (0.2, 0.3, 0.4)]),
+        "fitted": (fit.band, [geo(p) for p in (par.lo, 0.5 * (par.lo + par.hi), par.hi)]),
+    }
+
+
+def _model(task: str, law: object) -> Model:
+    spec, asks = _TASKS[task]
+    world = GridWorld.make(4, 3, start=(0, 0), slip=0.2, regions=_SLIPPERY)
+    if asks:
+        return Model.from_game(world, spec, distributions={"mu": law})
+    return Model.from_game(world, spec, events={"b": law})
+
+
+_EXTRAS = {"none": {}, "constraints": {"constraints": ["P(F puddle) <= 0.3"]},
+           "then": {"then": "min-steps"}}
+
+
+@pytest.mark.parametrize("task", sorted(_TASKS))
+@pytest.mark.parametrize("law", ["point", "band", "fitted"])
+@pytest.mark.parametrize("extra", sorted(_EXTRAS))
+def test_every_cell_of_the_composition_matrix(task: str, law: str, extra: str) -> None:
+    """Each cell is solved within the bounds of an independent route, or refused naming
+    the combination.  The independent route is the same problem at point laws of the
+    band, solved on its own: the robust (constrained) optimum is at most the optimum at
+    any of them, and with a point law the robust route (another algorithm) agrees; a
+    constraint or a lexicographic second objective can only lower the optimum."""
+    the_law, points = _laws()[law]
+    model = _model(task, the_law)
+    kwargs = _EXTRAS[extra]
+    if law != "point" and extra == "then":
+        with pytest.raises(ProblemError, match="then = min-steps with a law known only "
+                                               "within a band"):
+            synthesize(model, **kwargs)
+        return
+    r = synthesize(model, **kwargs)
+    assert r.certified, r.summary()["failed_checks"]
+    assert -1e-9 <= r.lower <= r.upper + 1e-9 <= 1 + 2e-9
+    at_points = [synthesize(_model(task, p), **kwargs) for p in points]
+    free = [synthesize(_model(task, p)) for p in points]
+    for fixed, alone in zip(at_points, free, strict=True):
+        assert r.lower <= fixed.upper + 1e-9  # no bracket claims more than a law allows
+        assert fixed.lower <= alone.upper + 1e-9  # extras only lower the optimum
+    if law == "point" and extra == "none":
+        from mitld_lp.robust_synthesis import synthesize_robust
+
+        other = synthesize_robust(model)
+        assert other.lower == pytest.approx(r.lower, abs=1e-8)
+    if extra == "constraints":
+        assert all(c.holds for c in r.constraints)
+    if extra == "then":
+        assert r.lower >= synthesize(model).lower - 1e-5
+
+
+_GRID_FILE = """name = "walk"
+spec = "G !puddle & D[mu] b & F(b & F[0,3] goal)"
+{extra}
+[grid]
+size = [4, 3]
+start = [0, 0]
+slip = 0.2
+obstacles = []
+[regions]
+goal = [[3, 2]]
+puddle = [[2, 1], [2, 0]]
+dock = [[1, 1]]
+[distributions]
+mu = {{ geometric = {law} }}
+"""
+
+
+@pytest.mark.parametrize("law", ["0.3", "[0.2, 0.4]"])
+@pytest.mark.parametrize("extra", ["", 'constraints = ["P(F puddle) <= 0.3"]'])
+def test_every_verb_on_every_kind_of_model_file(tmp_path: Path, law: str, extra: str,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """Each verb on a model file with a point law or a band, with or without constraints:
+    done (0, or 3 with a status), or refused by one line naming the combination (2);
+    never an internal error, never a file written for a refused combination."""
+    path = tmp_path / "walk.toml"
+    path.write_text(_GRID_FILE.format(extra=extra, law=law))
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('name = "walk"\nmodel = "walk.toml"\n[vary]\nepsilon = [0.01, 0.02]\n')
+    verbs = {
+        "solve": ["solve", str(path)],
+        "simulate": ["simulate", str(path), "-n", "50"],
+        "export": ["export", str(path), "--drn", str(tmp_path / "out.drn")],
+        "plot": ["plot", str(path), "-o", str(tmp_path / "out.png")],
+        "pareto": ["pareto", str(path), "--against", "P(F puddle)", "--points", "2",
+                   "--csv", str(tmp_path / "out.csv")],
+        "sweep": ["sweep", str(sweep), "-o", str(tmp_path / "out_sweep.csv")],
+    }
+    for verb, argv in verbs.items():
+        code = main([*argv, "-q"])
+        err = capsys.readouterr().err
+        assert code in (0, 2, 3), (verb, code, err)
+        if code == 2:
+            assert err.count("\n") == 1 and ("constraints" in err or "band" in err), (verb, err)
+            written = [a for a in argv if a.startswith(str(tmp_path / "out"))]
+            assert not any(Path(w).exists() for w in written), verb
+        if verb in ("solve", "sweep"):
+            assert code == 0, (verb, err)
