@@ -58,7 +58,15 @@ from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
-from mitld_lp.model_keys import ModelError, _Context, _join, _show, _type_name
+from mitld_lp.model_keys import (
+    ModelError,
+    _Context,
+    _join,
+    _show,
+    _type_name,
+    budgets_table,
+    constraints_and_costs,
+)
 from mitld_lp.task import BindError, Task, bind, resolve_laws
 
 __all__ = [
@@ -464,7 +472,7 @@ def _load(
         raise _toml_error(exc, text, ctx) from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
         raise ctx.error("", "TOML nested too deeply to read") from None
-    budgets = _budgets(doc, ctx)
+    budgets = budgets_table(doc, ctx)
     # the caller's budgets first, then the file's, then the defaults (a world built while
     # loading, a [prism] program, is bounded by them)
     ctx.max_states = int(max_states if max_states is not None else
@@ -511,7 +519,7 @@ def _load(
     task = _bind(game, report, named, kind.proposition_noun, where, ctx, declared)
     kind.check_task(game, task, ctx)
 
-    constraints, costs = _constraints_and_costs(doc, ctx)
+    constraints, costs = constraints_and_costs(doc, ctx)
     objective = doc.get("objective", "max")
     if objective not in OBJECTIVES:
         raise ctx.error("objective", f"must be \"max\" or \"min\", got {_show(objective)}")
@@ -528,64 +536,6 @@ def _load(
         objective=objective,
         budgets=MappingProxyType(budgets),
     )
-
-
-#: The ``[budgets]`` a model file may set, with the check of each value.
-_BUDGET_KEYS = ("max_states", "max_automaton_states", "max_memory", "time_limit")
-
-
-def _budgets(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
-    """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
-    or a text such as ``"4G"``) of memory, a positive number of seconds."""
-    from argparse import ArgumentTypeError
-
-    from mitld_lp.arguments import memory_size
-
-    if "budgets" not in doc:
-        return {}
-    table = ctx.table(doc["budgets"], "budgets")
-    ctx.keys(table, "budgets", set(), set(_BUDGET_KEYS))
-    out: dict[str, float] = {}
-    for key, value in table.items():
-        where = f"budgets.{key}"
-        if key == "max_memory" and isinstance(value, str):
-            try:
-                out[key] = memory_size(value)
-            except ArgumentTypeError as exc:
-                raise ctx.error(where, str(exc)) from None
-            continue
-        if key == "time_limit":
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (
-                    0 < value < float("inf")):
-                raise ctx.error(where, f"must be a positive number of seconds, got "
-                                       f"{_show(value)}")
-            out[key] = float(value)
-            continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ctx.error(where, f"must be a whole number >= 1, got {_show(value)}")
-        out[key] = value
-    return out
-
-
-def _constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
-                                                                          dict[str, float]]:
-    """The ``constraints`` list (each read by :func:`mitld_lp.constraints.parse_constraint`)
-    and the ``[costs]`` table (numbers > 0 per action)."""
-    from mitld_lp.constraints import ConstraintError, check_costs, parse_constraint
-
-    texts = doc.get("constraints", [])
-    if not isinstance(texts, list):
-        raise ctx.error("constraints", f"must be a list of strings, got {_type_name(texts)}")
-    for i, text in enumerate(texts):
-        try:
-            parse_constraint(text, f"constraints[{i}]")
-        except ConstraintError as exc:
-            raise ModelError(f"{ctx.source}: {exc}") from None
-    try:
-        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
-    except ConstraintError as exc:
-        raise ModelError(f"{ctx.source}: {exc}") from None
-    return tuple(texts), costs
 
 
 def loads_model(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from typing import Any
 
 from mitld_lp import defaults
@@ -121,3 +122,61 @@ class _Context:
         if not isinstance(value, list) or len(value) != 2:
             raise self.error(path, f"must be a pair [x, y] of integers, got {_show(value)}")
         return (self.integer(value[0], f"{path}[0]"), self.integer(value[1], f"{path}[1]"))
+
+
+#: The ``[budgets]`` a model file may set, with the check of each value.
+_BUDGET_KEYS = ("max_states", "max_automaton_states", "max_memory", "time_limit")
+
+
+def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
+    """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
+    or a text such as ``"4G"``) of memory, a positive number of seconds."""
+    from argparse import ArgumentTypeError
+
+    from mitld_lp.arguments import memory_size
+
+    if "budgets" not in doc:
+        return {}
+    table = ctx.table(doc["budgets"], "budgets")
+    ctx.keys(table, "budgets", set(), set(_BUDGET_KEYS))
+    out: dict[str, float] = {}
+    for key, value in table.items():
+        where = f"budgets.{key}"
+        if key == "max_memory" and isinstance(value, str):
+            try:
+                out[key] = memory_size(value)
+            except ArgumentTypeError as exc:
+                raise ctx.error(where, str(exc)) from None
+            continue
+        if key == "time_limit":
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (
+                    0 < value < float("inf")):
+                raise ctx.error(where, f"must be a positive number of seconds, got "
+                                       f"{_show(value)}")
+            out[key] = float(value)
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ctx.error(where, f"must be a whole number >= 1, got {_show(value)}")
+        out[key] = value
+    return out
+
+
+def constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
+                                                                          dict[str, float]]:
+    """The ``constraints`` list (each read by :func:`mitld_lp.constraints.parse_constraint`)
+    and the ``[costs]`` table (numbers > 0 per action)."""
+    from mitld_lp.constraints import ConstraintError, check_costs, parse_constraint
+
+    texts = doc.get("constraints", [])
+    if not isinstance(texts, list):
+        raise ctx.error("constraints", f"must be a list of strings, got {_type_name(texts)}")
+    for i, text in enumerate(texts):
+        try:
+            parse_constraint(text, f"constraints[{i}]")
+        except ConstraintError as exc:
+            raise ModelError(f"{ctx.source}: {exc}") from None
+    try:
+        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
+    except ConstraintError as exc:
+        raise ModelError(f"{ctx.source}: {exc}") from None
+    return tuple(texts), costs
