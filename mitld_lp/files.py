@@ -15,6 +15,15 @@ that stops a writing thread from outside (the command line on Ctrl-C or a time l
 calls :func:`abandon` with that thread.  With ``overwrite`` a symlink is written through
 (its target is replaced, the link kept), and a target that is not a regular file (a
 device such as ``/dev/null``) is written directly: there is nothing to rename over.
+A path under ``/proc`` or ``/sys`` (the kernel's own tables, which take no new file)
+is refused by the rule.
+
+Every file the package *reads* on a user's word (a fit's data, a sweep's results, a
+controller file) goes through :func:`read_bytes` or :func:`read_text`: it is opened only
+if it is a regular file (a FIFO would block for ever, ``/dev/zero`` never ends), and
+read only up to a ceiling (:func:`read_limit`, derived from the memory budget), the
+size checked before the first byte is read.  :func:`check_zip` checks a zip archive's
+declared sizes before anything is inflated.
 """
 
 from __future__ import annotations
@@ -27,12 +36,24 @@ import secrets
 import shutil
 import stat
 import threading
+import time
 import weakref
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Literal
 
 from mitld_lp import watch
+from mitld_lp.file_rules import (
+    InputFileError,
+    OutputPathError,
+    _kernel_folder,
+    check_zip,
+    open_archive,
+    open_regular,
+    read_bytes,
+    read_limit,
+    read_text,
+)
 from mitld_lp.report import POLICY_COLUMNS, policy_table
 
 if TYPE_CHECKING:
@@ -49,13 +70,17 @@ __all__ = [
     "write_policy",
     "POLICY_SUFFIXES",
     "abandon",
+    "abandoned",
+    "InputFileError",
+    "read_limit",
+    "open_regular",
+    "read_bytes",
+    "read_text",
+    "check_zip",
+    "open_archive",
 ]
 
 PathLike = str | os.PathLike[str]
-
-
-class OutputPathError(ValueError):
-    """An output path that cannot be written: names the path and why."""
 
 
 class WriteAbandoned(Exception):
@@ -97,6 +122,10 @@ def writable_path(
     folder = out.parent
     if not folder.is_dir():
         raise OutputPathError(f"{label}: the folder {folder} does not exist")
+    kernel = _kernel_folder(folder)
+    if kernel is not None:
+        raise OutputPathError(f"{label}: is under {kernel}, the kernel's own tables, where "
+                              "no file can be written")
     if os.path.lexists(out) and not overwrite:
         dangling = out.is_symlink() and not out.exists()
         raise FileExistsError(
@@ -134,6 +163,21 @@ def abandon(thread: threading.Thread) -> None:
         for p in mine:
             _remove(p)
             del _scratch[p]
+
+
+def abandoned(thread: threading.Thread | None = None, timeout: float = 0.0) -> bool:
+    """Whether ``thread`` (default: this one) was abandoned (:func:`abandon`), waiting up
+    to ``timeout`` seconds for it to be."""
+    me = threading.current_thread() if thread is None else thread
+    end = time.monotonic() + timeout
+    while True:
+        with _lock:
+            if me in _abandoned:
+                return True
+        left = end - time.monotonic()
+        if left <= 0:
+            return False
+        time.sleep(min(left, 0.02))
 
 
 def _remove(scratch: Path) -> None:
