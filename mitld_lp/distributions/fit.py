@@ -42,7 +42,9 @@ and lines starting with ``#`` are skipped.
 from __future__ import annotations
 
 import csv
+import logging
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +53,7 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
+from mitld_lp import file_rules
 from mitld_lp.distributions import scipy_laws
 from mitld_lp.distributions.band import ConstantBand, TableBand, band_of_laws
 from mitld_lp.distributions.families import (
@@ -65,6 +68,8 @@ from mitld_lp.distributions.families import (
 )
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
 from mitld_lp.distributions.printing import literal_text
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "MIN_OBSERVATIONS", "DIRECTIONS", "FIT_FAMILIES", "Observations", "Parameter", "Fit",
@@ -186,13 +191,16 @@ def _checked(obs: Observations) -> Observations:
     return obs
 
 
-def read_observations(path: str | Path, source: str | None = None) -> Observations:
+def read_observations(path: str | Path, source: str | None = None, *,
+                      max_memory: int | None = None) -> Observations:
     """The observations of a CSV file (module docstring).  Errors name ``source``
-    (default: the path) and the line: ``arrivals.csv:4: time must be >= 0, got -2``."""
+    (default: the path) and the line: ``arrivals.csv:4: time must be >= 0, got -2``.
+    Only a regular file is read, and only up to :func:`mitld_lp.files.read_limit` of
+    ``max_memory`` (default: of half the machine's memory); a larger one is refused
+    before it is read."""
     name = str(path) if source is None else source
     try:
-        with open(path, encoding="utf-8", newline="") as fh:
-            lines = fh.read().splitlines()
+        lines = file_rules.read_text(path, file_rules.read_limit(max_memory)).splitlines()
     except OSError as exc:
         raise DistributionError(name, f"cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
@@ -445,6 +453,19 @@ def _scipy_start(obs: Observations, gen: Any, where: str) -> np.ndarray:
 
 
 def _fit_numeric(obs: Observations, name: str, conf: float, label: str) -> Fit:
+    """:func:`_fit_scipy`, the numerical warnings of scipy's optimisers (an infinite
+    likelihood met on the way, which the fit handles) logged at debug level (``-v``)
+    instead of printed on stderr."""
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        try:
+            return _fit_scipy(obs, name, conf, label)
+        finally:
+            for w in {(w.category.__name__, str(w.message)) for w in seen}:
+                log.debug("fit %s to %s: %s: %s", name, obs.source, *w)
+
+
+def _fit_scipy(obs: Observations, name: str, conf: float, label: str) -> Fit:
     from scipy import optimize, stats
 
     where = obs.source
