@@ -69,8 +69,6 @@ from mitld_lp.distributions.families import (
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
 from mitld_lp.distributions.printing import literal_text
 
-log = logging.getLogger(__name__)
-
 __all__ = [
     "MIN_OBSERVATIONS", "DIRECTIONS", "FIT_FAMILIES", "Observations", "Parameter", "Fit",
     "observations", "read_observations", "fit_law", "kaplan_meier", "fit_table",
@@ -125,9 +123,7 @@ def observations(
     flags = [False] * len(values) if censored is None else list(
         np.asarray(censored, dtype=object).ravel())
     if len(flags) != len(values):
-        raise DistributionError(
-            source, f"{len(values)} times but {len(flags)} censoring flags"
-        )
+        raise DistributionError(source, f"{len(values)} times but {len(flags)} censoring flags")
     out = np.empty(len(values), dtype=np.int64)
     cens = np.empty(len(values), dtype=bool)
     for i, (t, c) in enumerate(zip(values, flags, strict=True)):
@@ -195,9 +191,7 @@ def read_observations(path: str | Path, source: str | None = None, *,
                       max_memory: int | None = None) -> Observations:
     """The observations of a CSV file (module docstring).  Errors name ``source``
     (default: the path) and the line: ``arrivals.csv:4: time must be >= 0, got -2``.
-    Only a regular file is read, and only up to :func:`mitld_lp.files.read_limit` of
-    ``max_memory`` (default: of half the machine's memory); a larger one is refused
-    before it is read."""
+    Only a regular file is read, up to ``file_rules.read_limit(max_memory)``."""
     name = str(path) if source is None else source
     try:
         lines = file_rules.read_text(path, file_rules.read_limit(max_memory)).splitlines()
@@ -453,16 +447,13 @@ def _scipy_start(obs: Observations, gen: Any, where: str) -> np.ndarray:
 
 
 def _fit_numeric(obs: Observations, name: str, conf: float, label: str) -> Fit:
-    """:func:`_fit_scipy`, the numerical warnings of scipy's optimisers (an infinite
-    likelihood met on the way, which the fit handles) logged at debug level (``-v``)
-    instead of printed on stderr."""
-    with warnings.catch_warnings(record=True) as seen:
+    with warnings.catch_warnings(record=True) as seen:  # scipy's: logged for -v, not shown
         warnings.simplefilter("always")
         try:
             return _fit_scipy(obs, name, conf, label)
         finally:
             for w in {(w.category.__name__, str(w.message)) for w in seen}:
-                log.debug("fit %s to %s: %s: %s", name, obs.source, *w)
+                logging.getLogger(__name__).debug("fit %s: %s: %s", obs.source, *w)
 
 
 def _fit_scipy(obs: Observations, name: str, conf: float, label: str) -> Fit:
