@@ -20,7 +20,7 @@ import uuid
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from mitld_lp.sweep.rows import LOST, PointTask, failed, solve_point
+from mitld_lp.sweep.rows import LOST, MODEL_ERROR, PointTask, failed, solve_point
 from mitld_lp.sweep.spec import SweepError
 
 __all__ = ["serial", "process_pool", "dask_cluster", "check_address"]
@@ -47,6 +47,9 @@ def process_pool(tasks: Sequence[PointTask], workers: int) -> Finished:
             task = futures[future]
             try:
                 yield task, future.result()
+            except KeyboardInterrupt:  # raised by the point's own code (a [python] world)
+                # in its worker: this process's interrupts arrive in the main thread
+                yield task, failed(MODEL_ERROR, "the point's own code raised KeyboardInterrupt")
             except Exception as exc:  # noqa: BLE001 - a broken pool loses its points
                 yield task, failed(LOST, f"{type(exc).__name__}: {exc}")
     finally:
