@@ -56,11 +56,12 @@ mu = { geometric = 0.5 }
 _SWEEP = """name = "s"
 model = "tiny.toml"
 [vary]
-constants.T = [1, 2, 3, 4, 5, 6]
-distributions.mu.geometric = [0.3, 0.6]
+constants.T = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]
+distributions.mu.geometric = [0.2, 0.4, 0.6, 0.8]
 """
-SWEEP_POINTS = 12
-"""Points of the scratch sweep (6 deadlines x 2 laws)."""
+SWEEP_POINTS = 40
+"""Points of the scratch sweep (10 deadlines x 4 laws): long enough for two sweeps to
+overlap and for a kill to land in the middle."""
 
 _WORLD = '''\
 import math
@@ -267,8 +268,8 @@ def random_case(rng: random.Random, files: SurfaceFiles, kind: str | None = None
         out = files.fresh("c.csv")
         argv = ["sweep", str(f / "s.toml"), "-o", str(out), "-q"]
         kill = rng.choice((None, 9, 2, 15))
-        return Case(kind, argv, twin=list(argv), twin_delay=rng.uniform(0.0, 1.5), kill=kill,
-                    kill_after=rng.uniform(0.5, 3.0), results=out,
+        return Case(kind, argv, twin=list(argv), twin_delay=rng.uniform(0.0, 2.0), kill=kill,
+                    kill_after=rng.uniform(0.5, 4.0), results=out,
                     show=f"two sweeps, the first {'killed by ' + str(kill) if kill else 'kept'}")
     if kind == "controller file":
         good = f / "good.npz"
