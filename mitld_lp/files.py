@@ -18,12 +18,10 @@ device such as ``/dev/null``) is written directly: there is nothing to rename ov
 A path under ``/proc`` or ``/sys`` (the kernel's own tables, which take no new file)
 is refused by the rule.
 
-Every file the package *reads* on a user's word (a fit's data, a sweep's results, a
-controller file) goes through :func:`read_bytes` or :func:`read_text`: it is opened only
-if it is a regular file (a FIFO would block for ever, ``/dev/zero`` never ends), and
-read only up to a ceiling (:func:`read_limit`, derived from the memory budget), the
-size checked before the first byte is read.  :func:`check_zip` checks a zip archive's
-declared sizes before anything is inflated.
+The readers of the files a user names (:func:`read_bytes`, :func:`read_text`,
+:func:`open_archive`, :func:`check_zip`: regular files only, bounded, sizes checked
+before reading or inflating) live in :mod:`mitld_lp.file_rules`, which imports nothing
+of the package so that every reader may use it, and are re-exported here.
 """
 
 from __future__ import annotations
