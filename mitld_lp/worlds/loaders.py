@@ -38,8 +38,9 @@ and the state, ``m.toml: python.world: bw:make: W.successors(state 0, action 'a'
 probabilities sum to 0.99, not 1``.  ``SystemExit`` raised by the world is such an
 error too; ``KeyboardInterrupt`` raised by it is an interrupt: in the main thread it
 propagates, and under the command line (whose command runs in a worker thread) it
-interrupts the command as Ctrl-C does (``interrupted``, exit 130).  A factory that
-returns one of this package's own worlds (a ``GridWorld``) is not wrapped.
+interrupts the command as Ctrl-C does (``interrupted``, exit 130); in any other thread
+(a Dask worker's) it is an error of the world.  A factory that returns one of this
+package's own worlds (a ``GridWorld``) is not wrapped.
 
 Errors are :class:`mitld_lp.model.ModelError` naming the key path (``gym.env``,
 ``python.world``, ...).
@@ -191,7 +192,8 @@ def python_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     try:
         game = factory(**kwargs)
     except KeyboardInterrupt:
-        _interrupt()
+        _interrupt(lambda: ctx.error("python.world", f"{target}(**kwargs) raised "
+                                     "KeyboardInterrupt"))
     except (Exception, SystemExit) as exc:  # noqa: BLE001 - the factory's own code failed
         raise ctx.error("python.kwargs" if isinstance(exc, TypeError) else "python.world",
                         f"{target}(**kwargs) raised {_raised(exc)}") from None
@@ -232,16 +234,26 @@ def _raised(exc: BaseException) -> str:
         f"({exc.code!r})" if isinstance(exc, SystemExit) else "")
 
 
-def _interrupt() -> NoReturn:
+_COMMAND_THREAD = "mitld-lp"
+"""The name of the thread the command line runs its command in (``mitld_lp.cli``)."""
+
+
+def _interrupt(error: Callable[[], BaseException]) -> NoReturn:
     """A ``KeyboardInterrupt`` raised by the user's code, handled as Ctrl-C would be: in
-    the main thread it propagates; in another (the command line's worker) the main
-    thread is interrupted, which stops the command and abandons this thread."""
-    if threading.current_thread() is threading.main_thread():
+    the main thread it propagates; in the command line's worker thread the main thread
+    is interrupted, which stops the command and abandons this thread.  In any other
+    thread (a Dask worker's, an application's) nobody pressed Ctrl-C, and interrupting
+    that process's main thread would stop more than this task: there it is ``error()``,
+    an error of the world."""
+    me = threading.current_thread()
+    if me is threading.main_thread():
         raise KeyboardInterrupt
+    if me.name != _COMMAND_THREAD:
+        raise error()
     _thread.interrupt_main()
     if files.abandoned(timeout=5.0):
         raise files.WriteAbandoned("interrupted (the world raised KeyboardInterrupt)")
-    raise KeyboardInterrupt
+    raise error()
 
 
 class GuardedWorld:
@@ -271,17 +283,21 @@ class GuardedWorld:
         """The user's world itself."""
         return self._world
 
-    def _fail(self, method: str, where: str | None, why: str) -> NoReturn:
+    def _error(self, method: str, where: str | None, why: str) -> WorldContractError:
         kind = type(self._world).__name__
         at = f"({where})" if where is not None else ""
-        raise WorldContractError(f"{self._label}: {kind}.{method}{at}: {why}")
+        return WorldContractError(f"{self._label}: {kind}.{method}{at}: {why}")
+
+    def _fail(self, method: str, where: str | None, why: str) -> NoReturn:
+        raise self._error(method, where, why)
 
     def _call(self, method: str, where: Callable[[], str] | None, call: Callable[[], Any],
               attribute: bool = False) -> Any:
         try:
             return call()
         except KeyboardInterrupt:
-            _interrupt()
+            _interrupt(lambda: self._error(method, None if where is None else where(),
+                                           "raised KeyboardInterrupt"))
         except AttributeError:
             if attribute:
                 raise
