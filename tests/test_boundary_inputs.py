@@ -425,3 +425,28 @@ def test_keyboard_interrupt_and_system_exit_in_a_world(tmp_path, mode, code, say
     run = _child(["solve", f"{mode}.toml", "-q"], cwd=tmp_path, timeout=60)
     lines = run.stderr.strip().splitlines()
     assert run.returncode == code and len(lines) == 1 and says in lines[0], run.stderr
+
+
+def test_keyboard_interrupt_in_a_world_off_the_command_line_is_an_error_of_the_world(
+        world_folder):
+    # in a thread nobody interrupts (a Dask worker's): the process's main thread must not
+    # be interrupted; the world's KeyboardInterrupt is its error, naming method and state
+    import threading
+
+    from mitld_lp import synthesize
+    from mitld_lp.worlds.loaders import WorldContractError
+
+    model = load_model(_world_model(world_folder, "successors_kbd"))
+    caught: list[BaseException] = []
+
+    def solve() -> None:
+        try:
+            synthesize(model)
+        except BaseException as exc:  # noqa: BLE001 - what reached the thread is the test
+            caught.append(exc)
+
+    thread = threading.Thread(target=solve, name="not-the-command")
+    thread.start()
+    thread.join(60)
+    assert len(caught) == 1 and isinstance(caught[0], WorldContractError), caught
+    assert "W.successors(state 1, action 'a'): raised KeyboardInterrupt" in str(caught[0])
