@@ -11,7 +11,16 @@ What is run (each input through :func:`mitld_lp.cli.main`, as a user would type 
   hundreds of levels deep, the text cut or spliced), then ``info FILE --max-states N
   --time-limit T``;
 * command lines: random arguments for every verb on tiny models, with output files that
-  already exist (they must not change without ``--force``).
+  already exist (they must not change without ``--force``);
+* the surfaces of issue 29 (:mod:`mitld_lp.testing.fuzz_surfaces`), each run in a fresh
+  process whose peak memory (``ru_maxrss``) is compared with the ``--max-memory`` it was
+  given: laws fitted to data files that are links to ``/dev/zero``, FIFOs, sparse 50 GB
+  files, junk; models with 1-10 events whose laws are bands; sweeps whose results file is
+  a device, a FIFO, under ``/proc``, or whose ``--dask`` is no address; two sweeps
+  writing one results file at once, the first killed (SIGKILL, SIGINT, SIGTERM) at a
+  random moment, then a third run to the end (the file must never hold a point twice or
+  a cut line before the last); controller files truncated, flipped, forged, zip bombs,
+  FIFOs; ``[python]`` worlds breaking the contract in 27 ways.
 
 Each outcome is classified by the exit code (0 ok, 2 user error, 3 stop, 1 internal
 error) or by how the worker ended (killed by a signal or the memory limit: crash; over
@@ -23,10 +32,11 @@ The workers are started with ``resource.setrlimit(RLIMIT_AS, ...)`` (default 2 G
 ``preexec_fn``; a worker that dies, times out, or leaves a command thread running (a
 ``--time-limit`` stop) is replaced before the next run.
 
-Usage: ``python experiments/fuzz.py --quick`` (about 100 of each, into the scratch
-folder ``experiments/out``); ``python experiments/fuzz.py`` (10,000 formulas, 2,000
-model files, 500 command lines) writes ``experiments/results/fuzz.md``; ``--formulas N
---models N --cli N`` choose the counts.
+Usage: ``python experiments/fuzz.py --quick`` (about 100 of each, 60 surface cases, into
+the scratch folder ``experiments/out``); ``python experiments/fuzz.py`` (10,000 formulas,
+2,000 model files, 500 command lines, 300 surface cases) writes
+``experiments/results/fuzz.md``; ``--formulas N --models N --cli N --surfaces N`` choose
+the counts.
 """
 
 from __future__ import annotations
@@ -60,6 +70,7 @@ from mitld_lp.testing.fuzz import (
     run_main,
     stderr_problems,
 )
+from mitld_lp.testing.fuzz_surfaces import KINDS, SurfaceFiles, random_case, results_damage
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -255,7 +266,166 @@ def campaign(n_formulas: int, n_models: int, n_cli: int, seed: int, folder: Path
     return tallies
 
 
-def report(tallies: list[Tally], args: argparse.Namespace, seconds: float) -> str:
+# --------------------------------------------------------------------------- the surfaces
+
+SURFACE_OUTCOMES = ("ok (0)", "user error (2)", "budget stop (3)", "interrupted (130)",
+                    "killed (by the campaign)", "internal error (1)", "crash", "timeout",
+                    "over budget", "damaged file")
+
+
+@dataclass
+class SurfaceTally:
+    """Counts of the surface campaign, per kind of case."""
+
+    outcomes: dict[str, Counter[str]] = field(default_factory=dict)
+    problems: Counter[str] = field(default_factory=Counter)
+    examples: dict[str, str] = field(default_factory=dict)
+    peak: dict[str, float] = field(default_factory=dict)  # per kind: most MB above base
+    seconds: float = 0.0
+
+    def add(self, kind: str, outcome: str, key: str | None, show: str) -> None:
+        self.outcomes.setdefault(kind, Counter())[outcome] += 1
+        if key is not None:
+            self.problems[f"{kind}: {key}"] += 1
+            self.examples.setdefault(f"{kind}: {key}", show)
+
+
+def _spawn(argv: list[str], python: str | None, cwd: Path, memory: int) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MALLOC_ARENA_MAX="2")
+    cmd = [sys.executable, "-c", python] if python else [sys.executable, "-m", "mitld_lp",
+                                                          *argv]
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
+    return subprocess.Popen(cmd, cwd=cwd, env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=limit)
+
+
+def _reap(proc: subprocess.Popen, seconds: float,
+          kill: tuple[int, float] | None = None) -> tuple[int | None, str, float]:
+    """Wait for ``proc`` (``kill``: send that signal after so many seconds): its exit
+    code (None: over ``seconds``, killed), its stderr and its peak RSS in MB."""
+    t0 = time.monotonic()
+    err_chunks: list[str] = []
+    reader = threading.Thread(target=lambda: err_chunks.append(proc.stderr.read()),
+                              daemon=True)
+    reader.start()
+    sent = False
+    while True:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            reader.join(5)
+            return proc.returncode, "".join(err_chunks), usage.ru_maxrss / 1024
+        now = time.monotonic() - t0
+        if kill is not None and not sent and now >= kill[1]:
+            proc.send_signal(kill[0])
+            sent = True
+        if now > seconds:
+            proc.kill()
+            _, status, usage = os.wait4(proc.pid, 0)
+            reader.join(5)
+            return None, "".join(err_chunks), usage.ru_maxrss / 1024
+        time.sleep(0.02)
+
+
+def _surface_outcome(code: int | None, killed: bool = False) -> str:
+    if code is None:
+        return "timeout"
+    if killed and code in (-9, -15, 130, -2):
+        return "killed (by the campaign)"
+    return {0: "ok (0)", 2: "user error (2)", 3: "budget stop (3)", 130: "interrupted (130)",
+            1: "internal error (1)"}.get(code, "crash")
+
+
+def surfaces(n: int, seed: int, folder: Path, memory: int, progress: bool = True
+             ) -> SurfaceTally:
+    """Run ``n`` surface cases (module docstring), each in a fresh process."""
+    rng = random.Random(seed)
+    files = SurfaceFiles(folder / "surfaces")
+    files.prepare()
+    tally = SurfaceTally()
+    t0 = time.perf_counter()
+    # the base: the peak of a tiny solve, what importing and solving cost before any budget
+    _, _, base = _reap(_spawn(["solve", str(files.folder / "tiny.toml"), "-q"], None,
+                              files.folder, memory), 120)
+    kinds = [KINDS[i % len(KINDS)] for i in range(n)]
+    rng.shuffle(kinds)
+    for i, kind in enumerate(kinds):
+        case = random_case(rng, files, kind)
+        first = _spawn(case.argv, case.python, files.folder, memory)
+        kill = (case.kill, case.kill_after) if case.kill else None
+        twin = None
+        if case.twin is not None:
+            time.sleep(case.twin_delay)
+            twin = _spawn(case.twin, None, files.folder, memory)
+        code, err, peak = _reap(first, 180, kill)
+        runs = [(code, err, peak, kill is not None)]
+        if twin is not None:
+            runs.append((*_reap(twin, 180), False))
+        problems = []
+        for c, e, pk, killed in runs:
+            outcome = _surface_outcome(c, killed)
+            tally.peak[kind] = max(tally.peak.get(kind, 0.0), pk - base)
+            key = None
+            if outcome in ("internal error (1)", "crash", "timeout"):
+                key = f"{outcome}: {_normalise(_said(e))}"
+            elif case.max_memory is not None and (pk - base) * 2**20 > 1.5 * case.max_memory:
+                outcome, key = "over budget", (f"{pk - base:.0f} MB above the base under "
+                                               f"--max-memory {case.max_memory >> 20} MB")
+            elif c == 2 and sum("error:" in line for line in e.splitlines()) != 1:
+                key = "exit 2 without exactly one error line"
+            tally.add(kind, outcome, key, case.show + (f" -> {_said(e)}" if key else ""))
+            problems.append(key)
+        if case.results is not None:
+            damage = results_damage(case.results)
+            if not damage:  # a third run to the end: every point once
+                c, e, _ = _reap(_spawn(case.argv, None, files.folder, memory), 180)
+                damage = results_damage(case.results)
+                if c not in (0, 3) and not damage:
+                    damage = [f"the run after them ended with {c}: {_said(e)}"]
+            if damage:
+                tally.add(kind, "damaged file", "; ".join(damage), case.show)
+        if progress and (i + 1) % max(1, n // 10) == 0:
+            print(f"  surfaces: {i + 1}/{n}", file=sys.stderr, flush=True)
+    tally.seconds = time.perf_counter() - t0
+    return tally
+
+
+def _said(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    said = [line for line in lines if "error" in line or "stopped" in line]
+    return (said or lines or [""])[-1][:300]
+
+
+def surface_report(t: SurfaceTally) -> list[str]:
+    lines = ["", "## The surfaces of issue 29", "",
+             "| kind | runs | " + " | ".join(SURFACE_OUTCOMES) + " | peak MB above base |",
+             "|---|---:|" + "---:|" * len(SURFACE_OUTCOMES) + "---:|"]
+    for kind in KINDS:
+        c = t.outcomes.get(kind, Counter())
+        lines.append(f"| {kind} | {sum(c.values())} | "
+                     + " | ".join(str(c[o]) for o in SURFACE_OUTCOMES)
+                     + f" | {t.peak.get(kind, 0.0):.0f} |")
+    lines += ["", "Each case runs in a fresh process under the worker's memory limit. *over "
+              "budget*: a run whose peak RSS above the base (a tiny solve) exceeded 1.5 "
+              "times the `--max-memory` it was given. *damaged file*: after two sweeps "
+              "wrote one results file at once (the first perhaps killed) and a third ran to "
+              "the end, a point twice, a cut line before the last, or more rows than "
+              "points. A run killed by the campaign is not a crash. "
+              f"{t.seconds:.0f} s in all.", "", "### Failures, grouped", ""]
+    for key, count in t.problems.most_common():
+        lines.append(f"- {count}x: {key}  \n  e.g. `{t.examples[key][:400]}`")
+    if not t.problems:
+        lines.append("none")
+    return lines
+
+
+def report(tallies: list[Tally], args: argparse.Namespace, seconds: float,
+           surface: SurfaceTally | None = None) -> str:
     """The summary table and the failures, as Markdown."""
     lines = [
         "# Fuzz campaign (experiments/fuzz.py)",
@@ -291,6 +461,8 @@ def report(tallies: list[Tally], args: argparse.Namespace, seconds: float) -> st
             lines.append(f"- {t.name}, {count}x: {key}  \n  e.g. `{t.examples[key][:500]}`")
     if not any_failure:
         lines.append("none")
+    if surface is not None:
+        lines += surface_report(surface)
     return "\n".join(lines) + "\n"
 
 
@@ -303,6 +475,7 @@ def main(argv: list[str] | None = None) -> list[Tally]:
     ap.add_argument("--formulas", type=int)
     ap.add_argument("--models", type=int)
     ap.add_argument("--cli", type=int)
+    ap.add_argument("--surfaces", type=int)
     ap.add_argument("--seed", type=int, default=12)
     ap.add_argument("--memory-gb", type=float, default=2.0)
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
@@ -318,7 +491,9 @@ def main(argv: list[str] | None = None) -> list[Tally]:
     t0 = time.perf_counter()
     tallies = campaign(*counts, seed=args.seed, folder=SCRATCH / "fuzz",
                        memory=int(args.memory_gb * 2**30))
-    text = report(tallies, args, time.perf_counter() - t0)
+    n_surfaces = args.surfaces if args.surfaces is not None else (60 if args.quick else 300)
+    surface = surfaces(n_surfaces, args.seed, SCRATCH / "fuzz", int(args.memory_gb * 2**30))
+    text = report(tallies, args, time.perf_counter() - t0, surface)
     print(text)
     path = out / "fuzz.md"
     path.write_text(text, encoding="utf-8")

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp import files
 from mitld_lp.automata.dta import Diagram, _walk
 from mitld_lp.automata.sta import STA, ClockStep, advance_clock
 from mitld_lp.game import Game
@@ -437,7 +438,7 @@ def _kind(head: bytes) -> str:
 def _read_arrays(source: Path) -> dict[str, np.ndarray]:
     """The archive's arrays, parsed with ``allow_pickle=False`` (nothing is executed)."""
     try:
-        with source.open("rb") as handle:
+        with files.open_archive(source) as handle:
             head = handle.read(6)
             if head[:4] not in _ZIP_MAGIC:
                 raise _Bad(f"not a controller file: {_kind(head)}")

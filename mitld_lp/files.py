@@ -15,6 +15,13 @@ that stops a writing thread from outside (the command line on Ctrl-C or a time l
 calls :func:`abandon` with that thread.  With ``overwrite`` a symlink is written through
 (its target is replaced, the link kept), and a target that is not a regular file (a
 device such as ``/dev/null``) is written directly: there is nothing to rename over.
+A path under ``/proc`` or ``/sys`` (the kernel's own tables, which take no new file)
+is refused by the rule.
+
+The readers of the files a user names (:func:`read_bytes`, :func:`read_text`,
+:func:`open_archive`, :func:`check_zip`: regular files only, bounded, sizes checked
+before reading or inflating) live in :mod:`mitld_lp.file_rules`, which imports nothing
+of the package so that every reader may use it, and are re-exported here.
 """
 
 from __future__ import annotations
@@ -27,12 +34,24 @@ import secrets
 import shutil
 import stat
 import threading
+import time
 import weakref
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any, Literal
 
 from mitld_lp import watch
+from mitld_lp.file_rules import (
+    InputFileError,
+    OutputPathError,
+    _kernel_folder,
+    check_zip,
+    open_archive,
+    open_regular,
+    read_bytes,
+    read_limit,
+    read_text,
+)
 from mitld_lp.report import POLICY_COLUMNS, policy_table
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
@@ -50,13 +69,17 @@ __all__ = [
     "write_policy",
     "POLICY_SUFFIXES",
     "abandon",
+    "abandoned",
+    "InputFileError",
+    "read_limit",
+    "open_regular",
+    "read_bytes",
+    "read_text",
+    "check_zip",
+    "open_archive",
 ]
 
 PathLike = str | os.PathLike[str]
-
-
-class OutputPathError(ValueError):
-    """An output path that cannot be written: names the path and why."""
 
 
 class WriteAbandoned(Exception):
@@ -98,6 +121,10 @@ def writable_path(
     folder = out.parent
     if not folder.is_dir():
         raise OutputPathError(f"{label}: the folder {folder} does not exist")
+    kernel = _kernel_folder(folder)
+    if kernel is not None:
+        raise OutputPathError(f"{label}: is under {kernel}, the kernel's own tables, where "
+                              "no file can be written")
     if os.path.lexists(out) and not overwrite:
         dangling = out.is_symlink() and not out.exists()
         raise FileExistsError(
@@ -135,6 +162,21 @@ def abandon(thread: threading.Thread) -> None:
         for p in mine:
             _remove(p)
             del _scratch[p]
+
+
+def abandoned(thread: threading.Thread | None = None, timeout: float = 0.0) -> bool:
+    """Whether ``thread`` (default: this one) was abandoned (:func:`abandon`), waiting up
+    to ``timeout`` seconds for it to be."""
+    me = threading.current_thread() if thread is None else thread
+    end = time.monotonic() + timeout
+    while True:
+        with _lock:
+            if me in _abandoned:
+                return True
+        left = end - time.monotonic()
+        if left <= 0:
+            return False
+        time.sleep(min(left, 0.02))
 
 
 def _remove(scratch: Path) -> None:

@@ -28,7 +28,8 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 
-__all__ = ["IntervalMDP", "VertexRows", "vertex_rows", "vertex_weights", "point_mdp"]
+__all__ = ["IntervalMDP", "VertexRows", "vertex_rows", "vertex_weights", "point_mdp",
+           "WEIGHT_BLOCK", "BYTES_PER_WEIGHT"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -120,39 +121,98 @@ class VertexRows:
     groups: np.ndarray
 
 
+WEIGHT_BLOCK = 1 << 21
+"""Vertex weights (``2^k x 2^k`` per choice) computed together in :func:`vertex_rows`:
+the block's dense weights and their sparse triplets stay within ~100 MB, however many
+choices there are; a single choice wider than the block is computed alone."""
+
+BYTES_PER_WEIGHT = 48
+"""Peak bytes per vertex weight of one block in :func:`vertex_rows` (the dense weights,
+the bit tables, the sparse triplets and the CSR conversion)."""
+
+
 def vertex_rows(imdp: IntervalMDP) -> VertexRows:
     """Every choice's ``2^k`` vertex distributions ``sum_b w_b(h_v) B(c, b)`` (module
     docstring); entries of weight 0 (a hazard band reaching 0 or 1) are left out, so the
-    rows' supports are the graph nature can make."""
+    rows' supports are the graph nature can make.  Computed a block of choices at a time
+    (:data:`WEIGHT_BLOCK` weights), so that the transient weights stay bounded; the
+    product's budget (:mod:`mitld_lp.product.budget`) counts the result and the widest
+    block before the product is built."""
     n_c = imdp.n_choices
     k = np.diff(imdp.band_groups).astype(np.int64)
     n_vert = np.left_shift(1, k)
     groups = np.zeros(n_c + 1, dtype=np.int64)
     np.cumsum(n_vert, out=groups[1:])
-    rows, cols, vals = [], [], []
+    ids: list[np.ndarray] = []  # per block: the vertex rows it computed
+    blocks: list[_Block | None] = []
     for kk in np.unique(k).tolist():
         cs = np.flatnonzero(k == kk)
         n = 1 << kk
-        if kk == 0:
-            w = np.ones((cs.size, 1, 1))
-        else:
-            at = imdp.band_groups[cs][:, None] + np.arange(kk)[None, :]
-            w = vertex_weights(imdp.band_lo[at], imdp.band_hi[at])
-        v_row = groups[cs][:, None, None] + np.arange(n)[None, :, None]  # (m, v, 1)
-        b_col = imdp.branch_groups[cs][:, None, None] + np.arange(n)[None, None, :]
-        v_row, b_col = np.broadcast_arrays(v_row, b_col)
-        rows.append(v_row.ravel())
-        cols.append(b_col.ravel())
-        vals.append(w.ravel())
-    weights = sp.csr_array(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-        shape=(int(groups[-1]), imdp.n_branches),
-    )
-    weights.eliminate_zeros()
-    matrix = sp.csr_array(weights @ imdp.branches)
-    matrix.eliminate_zeros()
+        step = max(1, WEIGHT_BLOCK // (n * n))
+        for start in range(0, cs.size, step):
+            block = cs[start : start + step]
+            ids.append((groups[block][:, None] + np.arange(n)[None, :]).ravel())
+            blocks.append(_vertex_block(imdp, block, kk))
+    return VertexRows(_in_order(blocks, ids, int(groups[-1]), imdp.n_states), groups)
+
+
+def _in_order(blocks: list[_Block | None], ids: list[np.ndarray], n_rows: int,
+              n_cols: int) -> sp.csr_array:
+    """One CSR matrix whose row ``ids[i][j]`` is row ``j`` of ``blocks[i]``, filled in
+    place (each block freed once copied): twice the result at the peak, not four
+    times as stacking and then permuting would take."""
+    lengths = np.zeros(n_rows, dtype=np.int64)
+    for rows, block in zip(ids, blocks, strict=True):
+        assert block is not None
+        lengths[rows] = block.lengths
+    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    del lengths
+    index = np.int32 if max(int(indptr[-1]), n_cols) < 2**31 else np.int64
+    indices = np.empty(int(indptr[-1]), dtype=index)
+    data = np.empty(int(indptr[-1]), dtype=np.float64)
+    for i, rows in enumerate(ids):
+        block = blocks[i]
+        assert block is not None
+        first = np.cumsum(block.lengths) - block.lengths  # each row's start in the block
+        at = np.repeat(indptr[rows] - first, block.lengths) + np.arange(block.data.size)
+        indices[at] = block.indices
+        data[at] = block.data
+        blocks[i] = None  # freed as soon as copied
+    matrix = sp.csr_array((data, indices, indptr.astype(index)), shape=(n_rows, n_cols))
     matrix.sort_indices()
-    return VertexRows(matrix, groups)
+    return matrix
+
+
+def _vertex_block(imdp: IntervalMDP, cs: np.ndarray, kk: int) -> _Block:
+    """The vertex rows of the choices ``cs``, each with ``kk`` hazard intervals: ``2^kk``
+    rows per choice, in the order of ``cs``."""
+    n = 1 << kk
+    m = cs.size
+    if kk == 0:
+        w = np.ones((m, 1, 1))
+    else:
+        at = imdp.band_groups[cs][:, None] + np.arange(kk)[None, :]
+        w = vertex_weights(imdp.band_lo[at], imdp.band_hi[at])
+    branch = (imdp.branch_groups[cs][:, None] + np.arange(n)[None, :]).ravel()
+    rows = np.repeat(np.arange(m * n), n)
+    cols = np.broadcast_to((np.arange(m) * n)[:, None, None] + np.arange(n)[None, None, :],
+                           (m, n, n)).ravel()
+    weights = sp.csr_array((w.ravel(), (rows, cols)), shape=(m * n, m * n))
+    del w, rows, cols
+    weights.eliminate_zeros()
+    out = sp.csr_array(weights @ imdp.branches[branch])
+    out.eliminate_zeros()
+    return _Block(np.diff(out.indptr), out.indices.astype(np.int32, copy=False), out.data)
+
+
+@dataclass(frozen=True, slots=True)
+class _Block:
+    """Rows of a block, compactly: their lengths, column indices, values."""
+
+    lengths: np.ndarray
+    indices: np.ndarray
+    data: np.ndarray
 
 
 def point_mdp(imdp: IntervalMDP, rows: sp.csr_array) -> MDP:

@@ -26,6 +26,8 @@ __all__ = [
     "as_probabilities",
     "distribution_faults",
     "distribution_fault",
+    "actions_fault",
+    "propositions_fault",
 ]
 
 PROBABILITY_TOLERANCE = 1e-9
@@ -104,4 +106,32 @@ def distribution_fault(dist: Any, tolerance: float = PROBABILITY_TOLERANCE) -> s
         total += float(p)
     if abs(total - 1.0) > tolerance:
         return f"probabilities sum to {total!r}, not 1"
+    return None
+
+
+def actions_fault(actions: Any) -> str | None:
+    """What makes an answer of :meth:`Game.actions` wrong (it must be a non-empty list or
+    tuple of distinct strings), or None."""
+    if not isinstance(actions, list | tuple):
+        return f"actions must be a tuple of names, got {_short(actions)}"
+    if not actions:
+        return "actions must not be empty (a state with nothing to do needs an action such " \
+               "as 'stay')"
+    for a in actions:
+        if not isinstance(a, str):
+            return f"an action must be a string, got {_short(a)}"
+    if len(set(actions)) != len(actions):
+        return f"actions must be distinct, got {_short(actions)}"
+    return None
+
+
+def propositions_fault(props: Any, names: frozenset[str]) -> str | None:
+    """What makes an answer of :meth:`Game.propositions` wrong (a set of strings among
+    the world's ``proposition_names``), or None."""
+    if not isinstance(props, frozenset | set):
+        return f"propositions must be a frozenset of names, got {_short(props)}"
+    unknown = [p for p in props if p not in names]
+    if unknown:
+        return (f"propositions {_short(sorted(map(str, unknown)))} are not among its "
+                f"proposition_names {_short(sorted(names))}")
     return None

@@ -42,7 +42,9 @@ and lines starting with ``#`` are skipped.
 from __future__ import annotations
 
 import csv
+import logging
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +53,7 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
+from mitld_lp import file_rules
 from mitld_lp.distributions import scipy_laws
 from mitld_lp.distributions.band import ConstantBand, TableBand, band_of_laws
 from mitld_lp.distributions.families import (
@@ -120,9 +123,7 @@ def observations(
     flags = [False] * len(values) if censored is None else list(
         np.asarray(censored, dtype=object).ravel())
     if len(flags) != len(values):
-        raise DistributionError(
-            source, f"{len(values)} times but {len(flags)} censoring flags"
-        )
+        raise DistributionError(source, f"{len(values)} times but {len(flags)} censoring flags")
     out = np.empty(len(values), dtype=np.int64)
     cens = np.empty(len(values), dtype=bool)
     for i, (t, c) in enumerate(zip(values, flags, strict=True)):
@@ -186,13 +187,14 @@ def _checked(obs: Observations) -> Observations:
     return obs
 
 
-def read_observations(path: str | Path, source: str | None = None) -> Observations:
+def read_observations(path: str | Path, source: str | None = None, *,
+                      max_memory: int | None = None) -> Observations:
     """The observations of a CSV file (module docstring).  Errors name ``source``
-    (default: the path) and the line: ``arrivals.csv:4: time must be >= 0, got -2``."""
+    (default: the path) and the line: ``arrivals.csv:4: time must be >= 0, got -2``.
+    Only a regular file is read, up to ``file_rules.read_limit(max_memory)``."""
     name = str(path) if source is None else source
     try:
-        with open(path, encoding="utf-8", newline="") as fh:
-            lines = fh.read().splitlines()
+        lines = file_rules.read_text(path, file_rules.read_limit(max_memory)).splitlines()
     except OSError as exc:
         raise DistributionError(name, f"cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
@@ -445,6 +447,16 @@ def _scipy_start(obs: Observations, gen: Any, where: str) -> np.ndarray:
 
 
 def _fit_numeric(obs: Observations, name: str, conf: float, label: str) -> Fit:
+    with warnings.catch_warnings(record=True) as seen:  # scipy's: logged for -v, not shown
+        warnings.simplefilter("always")
+        try:
+            return _fit_scipy(obs, name, conf, label)
+        finally:
+            for w in {(w.category.__name__, str(w.message)) for w in seen}:
+                logging.getLogger(__name__).debug("fit %s: %s: %s", obs.source, *w)
+
+
+def _fit_scipy(obs: Observations, name: str, conf: float, label: str) -> Fit:
     from scipy import optimize, stats
 
     where = obs.source

@@ -4,6 +4,15 @@
 :class:`BuildBudget` counts the states and transitions as the build goes and refuses,
 before a batch's new states are stored, a product over ``max_states`` states or over
 ``max_memory`` bytes (:data:`BYTES_PER_STATE`, :data:`BYTES_PER_TRANSITION`).
+
+A robust product (some law a band) is solved on nature's vertex distributions
+(:func:`mitld_lp.imdp.vertex_rows`): a choice with ``k`` ambiguous events has ``2^k``
+vertex rows, each over the union of its ``2^k`` branches' successors, computed from
+``2^k x 2^k`` weights.  The budget counts them too, as the build finds the choices
+(:data:`BYTES_PER_VERTEX_ENTRY`, :data:`BYTES_PER_VERTEX_ROW`, and the widest block of
+weights at :data:`mitld_lp.imdp.BYTES_PER_WEIGHT`), and before anything is built
+refuses a task whose start alone, with every event pending, would not fit
+(:meth:`BuildBudget.check_start`).
 """
 
 from __future__ import annotations
@@ -14,11 +23,14 @@ from typing import Any
 
 from mitld_lp.automata.sta import STA
 from mitld_lp.game import Game, world_members
+from mitld_lp.imdp import BYTES_PER_WEIGHT, WEIGHT_BLOCK
 
 __all__ = [
     "ProductTooLarge",
     "BYTES_PER_STATE",
     "BYTES_PER_TRANSITION",
+    "BYTES_PER_VERTEX_ENTRY",
+    "BYTES_PER_VERTEX_ROW",
     "MAX_INDEX",
     "SizeEstimate",
     "BuildBudget",
@@ -41,6 +53,14 @@ class ProductTooLarge(RuntimeError):
 # load 1/4-1/2, the keys, the rows per choice); rounded up.
 BYTES_PER_TRANSITION = 32
 BYTES_PER_STATE = 96
+
+# Robust products: peak bytes per entry and per row of nature's vertex distributions,
+# measured (ru_maxrss, experiments/fuzz.py's band cases) on a model with 8 ambiguous
+# events: 12.0M vertex entries, 0.26M vertex rows, 0.89 GB above the product for the
+# vertex rows, the robust iteration and the policy LP together (74 bytes per entry);
+# rounded up.
+BYTES_PER_VERTEX_ENTRY = 80
+BYTES_PER_VERTEX_ROW = 64
 
 
 def default_max_memory() -> int:
@@ -106,6 +126,42 @@ class BuildBudget:
     estimate: SizeEstimate
     expanded: int = 0  # states whose rows are built
     transitions: int = 0  # their transitions
+    vertex_entries: int = 0  # robust: their choices' vertex rows' entries
+    vertex_rows: int = 0  # and vertex rows
+    weights: int = 0  # and vertex weights (2^k x 2^k per choice)
+    widest: int = 0  # the most ambiguous events of one choice
+
+    def add_vertices(self, entries: int, rows: int, weights: int, widest: int) -> None:
+        """Count the vertex distributions of a batch of expanded states (robust)."""
+        self.vertex_entries += entries
+        self.vertex_rows += rows
+        self.weights += weights
+        self.widest = max(self.widest, widest)
+
+    def _weight_block(self) -> float:
+        """Bytes of the largest block of weights :func:`~mitld_lp.imdp.vertex_rows`
+        holds at once: a block, or one choice wider than a block, or all the weights
+        when they are fewer."""
+        return min(max(WEIGHT_BLOCK, 4**self.widest), self.weights) * BYTES_PER_WEIGHT
+
+    def check_start(self, ambiguous: int) -> None:
+        """Refuse before the build a robust task whose start, with ``ambiguous``
+        events pending whose hazard is an interval, cannot fit ``max_memory``: one choice
+        there has ``2^k`` vertex rows computed from ``4^k`` weights."""
+        def need(k: int) -> int:
+            return 4**k * BYTES_PER_WEIGHT + 2**k * (BYTES_PER_VERTEX_ROW
+                                                      + BYTES_PER_VERTEX_ENTRY)
+
+        if ambiguous == 0 or need(ambiguous) <= self.max_memory:
+            return
+        fits = max((k for k in range(ambiguous) if need(k) <= self.max_memory), default=0)
+        raise ProductTooLarge(
+            f"{ambiguous} events whose law is a band are pending together at the start: "
+            f"nature's vertex distributions of one choice there alone need 2^{ambiguous} "
+            f"vertex rows from 4^{ambiguous} = {4**ambiguous:,} weights, about "
+            f"{_bytes(need(ambiguous))}, more than max_memory = {_bytes(self.max_memory)} "
+            f"(at most {fits} such events fit); raise max_memory, or give fewer events "
+            "a band (an exact law)")
 
     def check(self, states: int) -> None:
         """Raise :class:`ProductTooLarge` if ``states`` states would exceed a budget."""
@@ -122,6 +178,21 @@ class BuildBudget:
             )
         per_state = self.transitions / self.expanded if self.expanded else 0.0
         need = states * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION)
+        if self.vertex_rows:  # counted exactly on the states expanded: the vertex rows
+            # are computed after the build, and the first states (every event pending)
+            # have the most: an average would overstate the rest
+            need += (self.vertex_entries * BYTES_PER_VERTEX_ENTRY
+                     + self.vertex_rows * BYTES_PER_VERTEX_ROW + self._weight_block())
+            if need > self.max_memory:
+                raise ProductTooLarge(
+                    f"the robust product would need about {_bytes(need, 2)}, more than "
+                    f"max_memory = {_bytes(self.max_memory, 2)} ({states:,} states found, "
+                    f"{per_state:.1f} branch transitions each; nature's vertex "
+                    f"distributions of the {self.expanded:,} states expanded: "
+                    f"{self.vertex_rows:,} rows, up to 2^{self.widest} per choice, "
+                    f"{self.vertex_entries:,} entries at {BYTES_PER_VERTEX_ENTRY} bytes); "
+                    f"raise max_memory above {_bytes(need, 2)}, give fewer events a band, "
+                    "loosen epsilon, or shrink the model")
         if need > self.max_memory:
             raise ProductTooLarge(
                 f"the product would need about {_bytes(need)}, more than max_memory = "
@@ -132,8 +203,8 @@ class BuildBudget:
             )
 
 
-def _bytes(n: float) -> str:
+def _bytes(n: float, digits: int = 1) -> str:
     for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
         if n >= size:
-            return f"{n / size:.1f} {unit}"
+            return f"{n / size:.{digits}f} {unit}"
     return f"{n:.0f} bytes"

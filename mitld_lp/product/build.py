@@ -101,6 +101,9 @@ def _build(
     f.flush()
     q0 = f.step(np.array([sta.dta.initial]), f.props.view[[g0]])
     sid0 = f.situation(sta.events, 0)
+    if robust:  # every event pending: the widest choices nature's vertices may have
+        f.ensure_outcomes(np.array([sid0]))
+        budget.check_start(int(f.band_count.view[sid0]))
     initial = int(states.intern(q0 if q0[0] < 0 else f.codec.key(g0, q0, sid0))[0])
 
     # per batch: cols, vals, row lengths, actions (robust: then branches and bands per
@@ -117,6 +120,9 @@ def _build(
         state_choices.extend(chunk[4])
         budget.expanded += keys.size
         budget.transitions += chunk[0].size
+        if robust:  # nature's vertex rows of these choices, before any more is built
+            budget.add_vertices(*_vertex_cost(chunk))
+            budget.check(states.keys.size)
         bar.update(keys.size)
         head += keys.size
         batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
@@ -125,6 +131,23 @@ def _build(
     keys = states.keys.view.copy()
     del states  # the index is not needed any more: free it before the matrix is assembled
     return _assemble(f, chunks, state_choices.view, keys, initial)
+
+
+def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:
+    """Nature's vertex distributions of a robust batch's choices
+    (:func:`mitld_lp.imdp.vertex_rows`): ``(entries, rows, weights, widest)``.  A choice
+    with ``k`` ambiguous events has ``2^k`` vertex rows, each over the union of the
+    successors of its ``2^k`` branches, and ``4^k`` weights."""
+    cols, row_len, n_branch, n_bands = chunk[0], chunk[2], chunk[5], chunk[6]
+    n_branch = n_branch.astype(np.int64)
+    if not n_bands.size or not n_bands.any():  # one vertex row per choice: its row
+        return int(cols.size), int(n_branch.sum()), int(n_branch.sum()), 0
+    branch_choice = np.repeat(np.arange(n_branch.size, dtype=np.int64), n_branch)
+    entry_choice = np.repeat(branch_choice, row_len.astype(np.int64))
+    pairs = np.unique((entry_choice << 32) | cols.astype(np.int64))
+    support = np.bincount(pairs >> 32, minlength=n_branch.size)
+    return (int((n_branch * support).sum()), int(n_branch.sum()),
+            int((n_branch * n_branch).sum()), int(n_bands.max()))
 
 
 class _Found:

@@ -15,14 +15,15 @@ An interrupt stops the engine: the pending points are cancelled and leave no row
 
 from __future__ import annotations
 
+import re
 import uuid
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from mitld_lp.sweep.rows import LOST, PointTask, failed, solve_point
+from mitld_lp.sweep.rows import LOST, MODEL_ERROR, PointTask, failed, solve_point
 from mitld_lp.sweep.spec import SweepError
 
-__all__ = ["serial", "process_pool", "dask_cluster"]
+__all__ = ["serial", "process_pool", "dask_cluster", "check_address"]
 
 Finished = Iterator[tuple[PointTask, dict[str, Any]]]
 
@@ -46,13 +47,33 @@ def process_pool(tasks: Sequence[PointTask], workers: int) -> Finished:
             task = futures[future]
             try:
                 yield task, future.result()
+            except KeyboardInterrupt:  # raised by the point's own code (a [python] world)
+                # in its worker: this process's interrupts arrive in the main thread
+                yield task, failed(MODEL_ERROR, "the point's own code raised KeyboardInterrupt")
             except Exception as exc:  # noqa: BLE001 - a broken pool loses its points
                 yield task, failed(LOST, f"{type(exc).__name__}: {exc}")
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
 
 
+_ADDRESS = re.compile(
+    r"(?:(?:tcp|tls|ucx|ws|wss|inproc)://)?"
+    r"(?:[A-Za-z0-9](?:[A-Za-z0-9._-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])(?::(\d{1,5}))?/?")
+
+
+def check_address(address: str) -> str:
+    """``address`` if it has the form of a Dask scheduler's address (``tcp://host:8786``,
+    ``host:8786``, ``tls://[::1]:8786``); else :class:`SweepError` at once, before
+    dask is imported or any connection tried."""
+    m = _ADDRESS.fullmatch(address) if isinstance(address, str) else None
+    if m is None or (m.group(1) is not None and not 0 < int(m.group(1)) < 65536):
+        raise SweepError(f"--dask {address!r}: not the address of a Dask scheduler; give "
+                         "tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786")
+    return address
+
+
 def dask_cluster(tasks: Sequence[PointTask], address: str, retries: int) -> Finished:
+    check_address(address)
     try:
         from dask.distributed import Client, as_completed
     except ImportError:

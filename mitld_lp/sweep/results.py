@@ -13,11 +13,23 @@ parameter (named by its key path), then :data:`mitld_lp.sweep.rows.RESULT_COLUMN
 
 A results file is only ever extended by the sweep it belongs to: opening it for another
 sweep (another ``sweep_id``), or opening a file that is no results file, is refused.
+It is read only if it is a regular file (not a FIFO or a device), and only up to
+:func:`mitld_lp.files.read_limit`; a path the writing rule refuses (a folder, a folder
+under ``/proc``) is refused before any point.
+
+**One writer at a time**: :class:`Results` holds an advisory lock (``flock``) on the
+file ``.NAME.lock`` beside the results file ``NAME`` from before it reads the file until
+:meth:`Results.close`.  A second sweep that opens the same results file meanwhile (in
+this process or another) is refused at once with one line naming the process that
+holds it, and writes nothing: two writers never duplicate or interleave rows.  The lock
+file is removed when the lock is released; one left by a killed sweep holds no lock.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import os
 import time
@@ -25,6 +37,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from mitld_lp import files
 from mitld_lp.sweep.rows import META_COLUMNS, RESULT_COLUMNS
 from mitld_lp.sweep.spec import SweepError
 
@@ -105,16 +118,16 @@ def read_results(path: str | os.PathLike[str]) -> tuple[list[str], list[dict[str
     p = Path(path)
     suffix = _check_suffix(p)
     try:
+        data = files.read_bytes(p, files.read_limit(share=16 if suffix == ".parquet" else 64))
         if suffix == ".parquet":
             import pyarrow.parquet as pq
 
-            table = pq.read_table(p)
+            table = pq.read_table(io.BytesIO(data))
             columns, raw = list(table.column_names), table.to_pylist()
             rows = [{c: (r[c] if c in RESULT_COLUMNS or c in META_COLUMNS
                          else _read_parameter(r[c])) for c in columns} for r in raw]
             return columns, rows, 0
-        with p.open(newline="", encoding="utf-8") as handle:
-            lines = list(csv.reader(handle))
+        lines = list(csv.reader(io.StringIO(data.decode("utf-8"), newline="")))
     except (OSError, UnicodeDecodeError, csv.Error, ValueError) as exc:
         message = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
         raise SweepError(f"{p}: cannot read as a results file: {message}") from exc
@@ -164,14 +177,21 @@ class Results:
         self.meta = {"sweep": name, "sweep_id": sweep_id}
         self.rows: list[dict[str, Any]] = []
         self._written = 0.0
-        if self.path.is_dir():
-            raise SweepError(f"{self.path}: is a directory")
-        if not self.path.parent.is_dir():
-            raise SweepError(f"{self.path}: the folder {self.path.parent} does not exist")
-        if self.path.exists() and not force:
-            self._adopt(name, sweep_id)
-        else:
-            self.rewrite([])
+        try:
+            files.writable_path(self.path, overwrite=True, what="results file")
+        except files.OutputPathError as exc:
+            raise SweepError(str(exc)) from None
+        self._lock: _Lock | None = _Lock(self.path)
+        try:
+            if self.path.exists() and not force:
+                self._adopt(name, sweep_id)
+            else:
+                if self.path.exists():
+                    _regular(self.path)
+                self.rewrite([])
+        except BaseException:
+            self.release()
+            raise
 
     def _adopt(self, name: str, sweep_id: str) -> None:
         columns, rows, dropped = read_results(self.path)
@@ -244,8 +264,80 @@ class Results:
             self.rewrite(self.rows)
 
     def close(self) -> None:
-        if self.suffix == ".parquet":
-            self.rewrite(self.rows)
+        """Write what is pending, then release the lock."""
+        try:
+            if self.suffix == ".parquet" and self._lock is not None:
+                self.rewrite(self.rows)
+        finally:
+            self.release()
+
+    def __del__(self) -> None:  # an error before close(): the lock goes with the object
+        with contextlib.suppress(Exception):
+            self.release()
+
+    def release(self) -> None:
+        """Release the lock on the results file (once; :meth:`close` does it)."""
+        lock, self._lock = self._lock, None
+        if lock is not None:
+            lock.release()
+
+
+def _regular(path: Path) -> None:
+    """Refuse an existing results path that is no regular file (a device, a FIFO)."""
+    try:
+        files.open_regular(path, "results file").close()
+    except OSError as exc:
+        raise SweepError(str(exc) if isinstance(exc, files.InputFileError)
+                         else f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+class _Lock:
+    """An exclusive advisory lock on ``.NAME.lock`` beside the results file ``NAME``
+    (module docstring), taken without waiting: :class:`SweepError` if another writer
+    holds it."""
+
+    def __init__(self, results: Path) -> None:
+        import fcntl
+
+        self.path = results.with_name(f".{results.name}.lock")
+        for _ in range(100):  # the holder may remove the file between open and flock
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            except OSError as exc:
+                raise SweepError(f"{results}: cannot lock it ({self.path}: "
+                                 f"{exc.strerror or exc})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip()
+                os.close(fd)
+                raise SweepError(
+                    f"{results}: another sweep is writing it (process {holder or '?'} holds "
+                    f"{self.path.name}); wait for it to end, or choose another results "
+                    "file") from None
+            except OSError as exc:
+                os.close(fd)
+                raise SweepError(f"{results}: cannot lock it ({self.path}: "
+                                 f"{exc.strerror or exc})") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+                self.fd: int | None = fd
+                return
+            os.close(fd)  # removed by its last holder meanwhile: lock the new one
+        raise SweepError(f"{results}: cannot lock it ({self.path} keeps changing)")
+
+    def release(self) -> None:
+        fd, self.fd = self.fd, None
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)  # while still held: a waiting opener then retries
+        os.close(fd)
 
 
 def _parameter_column(values: list[Any]) -> tuple[Any, list[Any]]:

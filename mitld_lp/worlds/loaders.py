@@ -28,27 +28,47 @@ script's folder) and ``factory(**kwargs)`` is called: **loading such a model fil
 that code**, so a model file from someone else deserves the care a script from them
 does.  The result must implement the :class:`mitld_lp.game.Game` protocol.
 
+The game is then held to the :class:`~mitld_lp.game.Game` contract on every call
+(:class:`GuardedWorld`): a method that raises, answers ``None``, an empty or repeated
+action list, propositions that are not a set of its ``proposition_names``, or successor
+probabilities that are not a distribution (negative, NaN, summing to 0.99) is a
+:class:`WorldContractError` (a :class:`~mitld_lp.model.ModelError`: exit 2 on the
+command line, ``model_error`` in a sweep) naming the model file, the world, the method
+and the state, ``m.toml: python.world: bw:make: W.successors(state 0, action 'a'):
+probabilities sum to 0.99, not 1``.  ``SystemExit`` raised by the world is such an
+error too; ``KeyboardInterrupt`` raised by it is an interrupt: in the main thread it
+propagates, and under the command line (whose command runs in a worker thread) it
+interrupts the command as Ctrl-C does (``interrupted``, exit 130); in any other thread
+(a Dask worker's) it is an error of the world.  A factory that returns one of this
+package's own worlds (a ``GridWorld``) is not wrapped.
+
 Errors are :class:`mitld_lp.model.ModelError` naming the key path (``gym.env``,
 ``python.world``, ...).
 """
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import importlib
+import inspect
 import sys
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
-from mitld_lp.game import Game
+from mitld_lp import files
+from mitld_lp.game import Game, GameError, world_members
 from mitld_lp.logic.syntax import is_proposition_name
+from mitld_lp.model_keys import ModelError
+from mitld_lp.successors import actions_fault, distribution_fault, place, propositions_fault
 from mitld_lp.worlds import WorldError
 
 if TYPE_CHECKING:
     from mitld_lp.model import _Context
 
-__all__ = ["gym_world", "python_world"]
+__all__ = ["gym_world", "python_world", "GuardedWorld", "WorldContractError"]
 
 _TERMINAL = ("absorb", "keep")
 
@@ -171,11 +191,165 @@ def python_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         raise ctx.error("python.world", f"{target} is not callable")
     try:
         game = factory(**kwargs)
-    except Exception as exc:  # noqa: BLE001 - the factory's own code failed
+    except KeyboardInterrupt:
+        _interrupt(lambda: ctx.error("python.world", f"{target}(**kwargs) raised "
+                                     "KeyboardInterrupt"))
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - the factory's own code failed
         raise ctx.error("python.kwargs" if isinstance(exc, TypeError) else "python.world",
-                        f"{target}(**kwargs) raised {type(exc).__name__}: {exc}") from None
-    if not isinstance(game, Game):
+                        f"{target}(**kwargs) raised {_raised(exc)}") from None
+    if not _is_game(game):
         raise ctx.error("python.world", f"{target} returned {type(game).__name__}, not a game "
                         "(the Game protocol: initial, proposition_names, actions, successors,"
                         " propositions)")
-    return game
+    if type(game).__module__.startswith("mitld_lp."):  # our own world: trusted
+        return game
+    guarded = GuardedWorld(game, f"{ctx.source}: python.world: {target}")
+    try:
+        world_members(guarded)
+    except GameError as exc:
+        raise ctx.error("python.world", f"{target}: {exc}") from None
+    return guarded
+
+
+# --------------------------------------------------------------------------- the guard
+
+_GAME_MEMBERS = ("initial", "proposition_names", "actions", "successors", "propositions")
+
+
+def _is_game(world: object) -> bool:
+    """``isinstance(world, Game)`` without running the world's code (a property)."""
+    absent = object()
+    return all(inspect.getattr_static(world, m, absent) is not absent for m in _GAME_MEMBERS)
+
+
+
+class WorldContractError(ModelError):
+    """A ``[python]`` world broke the :class:`~mitld_lp.game.Game` contract: the message
+    names the model file, the world, the method and the state."""
+
+
+def _raised(exc: BaseException) -> str:
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__ + (
+        f"({exc.code!r})" if isinstance(exc, SystemExit) else "")
+
+
+_COMMAND_THREAD = "mitld-lp"
+"""The name of the thread the command line runs its command in (``mitld_lp.cli``)."""
+
+
+def _interrupt(error: Callable[[], BaseException]) -> NoReturn:
+    """A ``KeyboardInterrupt`` raised by the user's code, handled as Ctrl-C would be: in
+    the main thread it propagates; in the command line's worker thread the main thread
+    is interrupted, which stops the command and abandons this thread.  In any other
+    thread (a Dask worker's, an application's) nobody pressed Ctrl-C, and interrupting
+    that process's main thread would stop more than this task: there it is ``error()``,
+    an error of the world."""
+    me = threading.current_thread()
+    if me is threading.main_thread():
+        raise KeyboardInterrupt
+    if me.name != _COMMAND_THREAD:
+        raise error()
+    _thread.interrupt_main()
+    if files.abandoned(timeout=5.0):
+        raise files.WriteAbandoned("interrupted (the world raised KeyboardInterrupt)")
+    raise error()
+
+
+class GuardedWorld:
+    """A user's world held to the :class:`~mitld_lp.game.Game` contract on every call
+    (module docstring); every other attribute is the world's own."""
+
+    __slots__ = ("_world", "_label", "_names")
+
+    def __init__(self, world: Any, label: str) -> None:
+        self._world = world
+        self._label = label
+        self._names: frozenset[str] | None = None
+
+    def __repr__(self) -> str:
+        return f"GuardedWorld({self._world!r})"
+
+    def __dir__(self) -> list[str]:
+        return dir(self._world)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return self._call(name, None, lambda: getattr(self._world, name), attribute=True)
+
+    @property
+    def world(self) -> Any:
+        """The user's world itself."""
+        return self._world
+
+    def _error(self, method: str, where: str | None, why: str) -> WorldContractError:
+        kind = type(self._world).__name__
+        at = f"({where})" if where is not None else ""
+        return WorldContractError(f"{self._label}: {kind}.{method}{at}: {why}")
+
+    def _fail(self, method: str, where: str | None, why: str) -> NoReturn:
+        raise self._error(method, where, why)
+
+    def _call(self, method: str, where: Callable[[], str] | None, call: Callable[[], Any],
+              attribute: bool = False) -> Any:
+        try:
+            return call()
+        except KeyboardInterrupt:
+            _interrupt(lambda: self._error(method, None if where is None else where(),
+                                           "raised KeyboardInterrupt"))
+        except AttributeError:
+            if attribute:
+                raise
+            self._fail(method, None if where is None else where(), "raised AttributeError")
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - the user's code failed
+            self._fail(method, None if where is None else where(), f"raised {_raised(exc)}")
+
+    @property
+    def initial(self) -> Any:
+        s = self._call("initial", None, lambda: self._world.initial)
+        try:
+            hash(s)
+        except TypeError:
+            self._fail("initial", None, f"the initial state {s!r} is not hashable")
+        return s
+
+    @property
+    def proposition_names(self) -> frozenset[str]:
+        if self._names is None:
+            names = self._call("proposition_names", None,
+                               lambda: self._world.proposition_names)
+            if not isinstance(names, frozenset | set) or not all(
+                    isinstance(n, str) for n in names):
+                self._fail("proposition_names", None,
+                           f"must be a frozenset of names, got {names!r}")
+            self._names = frozenset(names)
+        return self._names
+
+    def actions(self, state: Any) -> tuple[str, ...]:
+        acts = self._call("actions", lambda: f"state {state!r}",
+                          lambda: self._world.actions(state))
+        why = actions_fault(acts)
+        if why:
+            self._fail("actions", f"state {state!r}", why)
+        return tuple(acts)
+
+    def successors(self, state: Any, action: str, events: frozenset[str]) -> Any:
+        where = lambda: place(state, action, events)  # noqa: E731
+        succ = self._call("successors", where,
+                          lambda: self._world.successors(state, action, events))
+        if not isinstance(succ, tuple | list):
+            succ = self._call("successors", where, lambda: tuple(succ)) if (
+                succ is not None and not isinstance(succ, str | bytes | dict)) else succ
+        why = distribution_fault(succ)
+        if why:
+            self._fail("successors", where(), why)
+        return succ
+
+    def propositions(self, state: Any) -> frozenset[str]:
+        props = self._call("propositions", lambda: f"state {state!r}",
+                           lambda: self._world.propositions(state))
+        why = propositions_fault(props, self.proposition_names)
+        if why:
+            self._fail("propositions", f"state {state!r}", why)
+        return props if isinstance(props, frozenset) else frozenset(props)
