@@ -66,7 +66,7 @@ from mitld_lp.successors import actions_fault, distribution_fault, place, propos
 from mitld_lp.worlds import WorldError
 
 if TYPE_CHECKING:
-    from mitld_lp.model import _Context
+    from mitld_lp.model_keys import _Context
 
 __all__ = ["gym_world", "python_world", "GuardedWorld", "WorldContractError"]
 
