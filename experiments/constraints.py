@@ -19,11 +19,11 @@ from pathlib import Path
 
 import _common
 
-from mitld_lp.constrained import synthesize_constrained
 from mitld_lp.constrained_export import write_merged_drn
 from mitld_lp.model import loads_model
 from mitld_lp.pareto import pareto, plot
 from mitld_lp.pareto import write_csv as write_pareto_csv
+from mitld_lp.synthesis import synthesize_constrained
 
 RISK = 0.05
 

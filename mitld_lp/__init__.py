@@ -37,7 +37,7 @@ from mitld_lp.model import Model, ModelError, load_model, loads_model
 from mitld_lp.problem import Problem, ProblemError, Settings, pose
 from mitld_lp.product import ProductState, product
 from mitld_lp.simulate import simulate
-from mitld_lp.synthesis import SynthesisResult, solve, synthesize
+from mitld_lp.synthesis import SynthesisResult, solve, synthesize, synthesize_constrained
 
 __version__ = "0.1.0"
 
@@ -101,7 +101,6 @@ __all__ = [
 #: ``mitld_lp.pareto.pareto``: a package attribute cannot be both.)
 _LAZY = {
     "fit_law": "mitld_lp.distributions.fit",
-    "synthesize_constrained": "mitld_lp.constrained",
     "run_sweep": "mitld_lp.sweep",
     "load_sweep": "mitld_lp.sweep",
 }

@@ -16,7 +16,7 @@ optimum from above.  So the constrained optimum lies in ``[lower, upper]``.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -37,12 +37,12 @@ from mitld_lp.logic import check
 from mitld_lp.logic.syntax import DistLiteral, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, Posed, check_constrained, pose, settings_from
+from mitld_lp.problem import CONSTRAINED, Posed, ProblemError, check_constrained
 from mitld_lp.product import ProductState, ProductStates, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 
-__all__ = ["synthesize_constrained", "ConstrainedResult", "ConstraintValue",
+__all__ = ["ConstrainedResult", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
 
 
@@ -213,37 +213,17 @@ def cost_vector(mdp: MDP, costs: Mapping[str, float]) -> np.ndarray:
     return np.array([costs.get(a, 1.0) for a in mdp.action_names], dtype=np.float64)
 
 
-def synthesize_constrained(
-    model: Model,
-    constraints: Iterable[str | Constraint] = (),
-    *,
-    then: str | None = None,
-    costs: Mapping[str, float] | None = None,
-    seed: int | None = 0,
-    **options: Any,
-) -> ConstrainedResult:
-    """Maximise the task's probability subject to ``constraints`` (texts or records;
-    the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
-    or ``"min-cost"``), minimise the expected steps / cost among the policies within
-    :data:`LEXICOGRAPHIC_TOL` of that probability.  ``costs``: per action (default
-    the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
-    controller's generator.  ``options``: :func:`mitld_lp.synthesis.synthesize`'s
-    settings (epsilon, budgets, truncation, ...), each honoured or refused by name
-    (:func:`mitld_lp.problem.pose`).  See the module docstring for what is certified."""
-    posed = pose(model, constraints, then=then, settings=settings_from(**options))
-    return solve_constrained(posed, costs=costs, seed=seed)
-
-
 def solve_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
                       seed: int | None = 0) -> ConstrainedResult:
-    """The constrained LP of a posed problem (one with no constraint is solved too: the
-    trade-off curve's end points); refuses, naming it, a problem that LP does not solve
-    (:func:`mitld_lp.problem.check_constrained`)."""
+    """The constrained LP of a posed problem with point laws (one with no constraint is
+    solved too: the trade-off curve's end points); refuses, naming it, a problem that LP
+    does not solve (:func:`mitld_lp.problem.check_constrained`).  The entry point for
+    every law is :func:`mitld_lp.synthesis.synthesize_constrained`."""
     check_constrained(posed)
     if posed.robust:
-        from mitld_lp.robust_constrained import solve_robust_constrained
-
-        return solve_robust_constrained(posed, costs=costs, seed=seed)
+        raise ProblemError("solve_constrained: a law known only within a band; "
+                           "mitld_lp.synthesize (or synthesize_constrained) solves it "
+                           "(mitld_lp.robust_constrained)")
     s = posed.settings
     t0 = time.perf_counter()
     joint, sta = joint_sta(posed)

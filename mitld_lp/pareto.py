@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import files
-from mitld_lp.constrained import rows_for, synthesize_constrained
+from mitld_lp.constrained import rows_for
 from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint, parse_constraints
 from mitld_lp.model import Model
 from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
+from mitld_lp.synthesis import synthesize_constrained
 
 __all__ = ["ParetoPoint", "pareto", "write_csv", "plot"]
 

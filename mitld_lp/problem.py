@@ -195,11 +195,14 @@ class Posed:
 
 
 def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None,
-         settings: Settings | None = None, objective: str | None = None) -> Posed:
+         settings: Settings | None = None, objective: str | None = None,
+         constrained: bool = False) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
     texts or :class:`~mitld_lp.constraints.Constraint` records, after the model's own;
-    ``objective``: the model's unless given.  Raises :class:`ProblemError` naming the
-    combination no route solves, or the option the route cannot honour."""
+    ``objective``: the model's unless given; ``constrained``: the constrained LP's
+    route even with no constraint (the trade-off curve's end points).  Raises
+    :class:`ProblemError` naming the combination no route solves, or the option the
+    route cannot honour."""
     from mitld_lp.constraints import THEN, ConstraintError, parse_constraints
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
@@ -228,7 +231,7 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
                 f"truncation: {unknown[0]!r} is not an event of the model (events: "
                 f"{', '.join(sorted(model.distributions)) or 'none'})")
     robust = any(d.is_ambiguous for d in model.distributions.values())
-    constrained = bool(cons or then)
+    constrained = constrained or bool(cons or then)
     problem = Problem(model, cons, then, goal)
     what = _task_words(fragment, goal)
     if constrained:

@@ -55,7 +55,8 @@ if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["synthesize", "build_product", "Built", "SynthesisResult", "ModelSolution", "Check"]
+__all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
+           "SynthesisResult", "ModelSolution", "Check"]
 
 log = logging.getLogger(__name__)
 
@@ -449,10 +450,43 @@ def solve(posed: Posed) -> Result:
 
         return synthesize_robust(posed)
     if posed.route == CONSTRAINED:
-        from mitld_lp.constrained import solve_constrained
-
-        return solve_constrained(posed)
+        return _constrained(posed)
     return _solve_plain(posed)
+
+
+def _constrained(posed: Posed, costs: Mapping[str, float] | None = None,
+                 seed: int | None = 0) -> ConstrainedResult:
+    """The constrained route: the occupancy LP with constraint rows, and for a law known
+    only within a band its sound robust bracket (:mod:`mitld_lp.robust_constrained`)."""
+    if posed.robust:
+        from mitld_lp.robust_constrained import solve_robust_constrained
+
+        return solve_robust_constrained(posed, costs=costs, seed=seed)
+    from mitld_lp.constrained import solve_constrained
+
+    return solve_constrained(posed, costs=costs, seed=seed)
+
+
+def synthesize_constrained(
+    model: Model,
+    constraints: Iterable[Any] = (),
+    *,
+    then: str | None = None,
+    costs: Mapping[str, float] | None = None,
+    seed: int | None = 0,
+    **options: Any,
+) -> ConstrainedResult:
+    """Maximise the task's probability subject to ``constraints`` (texts or records;
+    the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
+    or ``"min-cost"``), minimise the expected steps / cost among the policies within
+    :data:`~mitld_lp.constraints.LEXICOGRAPHIC_TOL` of that probability; by the
+    constrained LP even with no constraint (docs/constraints.md).  ``costs``: per action
+    (default the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
+    controller's generator.  ``options``: :func:`synthesize`'s settings (epsilon,
+    budgets, truncation, ...), each honoured or refused by name (:func:`pose`)."""
+    posed = pose(model, constraints, then=then, settings=settings_from(**options),
+                 constrained=True)
+    return _constrained(posed, costs, seed)
 
 
 def _solve_plain(posed: Posed) -> SynthesisResult:

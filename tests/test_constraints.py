@@ -14,12 +14,11 @@ import pytest
 from scipy.optimize import linprog
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.constrained import synthesize_constrained
 from mitld_lp.constrained_runs import run_constrained
 from mitld_lp.constraints import ConstraintError, parse_constraint
 from mitld_lp.game import ExplicitGame
 from mitld_lp.model import Model, ModelError, loads_model
-from mitld_lp.synthesis import synthesize
+from mitld_lp.synthesis import synthesize, synthesize_constrained
 
 # s0: "safe" reaches the goal with 1/2; "risky" with 0.9, but 0.3 of it through a hazard.
 HAND = ExplicitGame(
@@ -372,7 +371,7 @@ def test_constraints_on_a_task_with_a_safety_part_are_kept_not_misread() -> None
     by hand the optimum is 1 whatever the constraint, P(F h) = 0 when it must stay clear
     and P(F A) >= 0.5 when it must walk."""
     from mitld_lp import GridWorld, Model
-    from mitld_lp.constrained import synthesize_constrained
+    from mitld_lp.synthesis import synthesize_constrained
 
     world = GridWorld.make(3, 1, start=(0, 0), slip=0.0, regions={"A": [(2, 0)], "h": [(1, 0)]})
     model = Model.from_game(world, "G !h | F A")

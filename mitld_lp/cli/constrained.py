@@ -32,11 +32,11 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
     """Run the constrained synthesis of a posed problem and print it; exit 0 when
     certified, 3 when infeasible, failed or not certified."""
     from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out, print_head
-    from mitld_lp.constrained import solve_constrained
+    from mitld_lp.synthesis import solve
 
     model = posed.model
     try:
-        r = solve_constrained(posed)
+        r = solve(posed)
     except ConstraintError as exc:
         raise _usage(exc) from None
     summary = r.summary()
