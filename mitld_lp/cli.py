@@ -403,6 +403,9 @@ _VERBS: list[
      lambda p: _runs().args_sweep(p), lambda a: _runs().cmd_sweep(a)),
     ("plot", "draw a grid world's policy, or a column of a sweep's results",
      lambda p: _runs().args_plot(p), lambda a: _runs().cmd_plot(a)),
+    ("run", "answer JSON observations on stdin with a saved controller's actions",
+     lambda p: __import__("mitld_lp.cli_run").cli_run.args_run(p),
+     lambda a: __import__("mitld_lp.cli_run").cli_run.cmd_run(a)),
     ("pareto", "the certified curve of success probability against steps, cost or a risk",
      lambda p: _constrained().args_pareto(p), lambda a: _constrained().cmd_pareto(a)),
 ]

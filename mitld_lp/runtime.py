@@ -555,7 +555,7 @@ def serve(controller: RuntimeController, lines: Iterable[str], out: IO[str]) -> 
             reply = _answer(controller, line)
         except (ValueError, TypeError, RecursionError) as exc:
             bad += 1
-            reply = {"error": f"line {number}: {_clip(str(exc))}"}
+            reply = {"error": f"line {number}: {_printable(str(exc))[:300]}"}
         out.write(json.dumps(reply) + "\n")
         out.flush()
     return bad
@@ -566,11 +566,13 @@ def _answer(controller: RuntimeController, line: str) -> dict[str, Any]:
         o = json.loads(line)
     except ValueError as exc:
         raise ValueError(f"not JSON ({exc})") from None
-    if not isinstance(o, dict) or "state" not in o:
+    if not isinstance(o, dict):
         raise ValueError('expected an object {"state": ..., "events": [...]}')
     extra = sorted(set(o) - {"state", "events", "reset"})
     if extra:
         raise ValueError(f"unknown key {extra[0]!r} (keys: state, events, reset)")
+    if "state" not in o:
+        raise ValueError('no "state": expected {"state": ..., "events": [...]}')
     events = o.get("events", [])
     if not isinstance(events, list) or not all(isinstance(e, str) for e in events):
         raise ValueError("events: expected a list of event names")
