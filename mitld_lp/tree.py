@@ -23,6 +23,7 @@ Graphviz DOT (``.dot``) or as a plain Python function (``.py``) by :func:`write_
 from __future__ import annotations
 
 import json
+import keyword
 import math
 import os
 from collections import Counter
@@ -70,6 +71,7 @@ class Tree:
     randomised: bool
     samples: int
     same_actions: bool = True
+    automaton: tuple[str, ...] = ()  # per automaton state q, what it stands for
 
     @property
     def size(self) -> int:
@@ -100,6 +102,8 @@ class Tree:
         return json.dumps({"format": FORMAT, "version": 1, "features": list(self.features),
                            "events": list(self.events), "randomised": self.randomised,
                            "states": self.samples, "same_actions": self.same_actions,
+                           "automaton_states": {str(q): text for q, text in
+                                                enumerate(self.automaton)},
                            "nodes": nodes}, indent=1) + "\n"
 
     def to_dot(self) -> str:
@@ -165,7 +169,8 @@ def _plain(v: Any) -> Any:
 
 def _identifier(name: str) -> str:
     text = "".join(c if c.isalnum() or c == "_" else "_" for c in name)
-    return text if text and not text[0].isdigit() else f"f_{text}"
+    text = text if text and not text[0].isdigit() else f"f_{text}"
+    return f"{text}_" if keyword.iskeyword(text) else text
 
 
 def _leaf_json(decision: Any, randomised: bool) -> dict[str, Any]:
@@ -348,7 +353,7 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
         _grow(rows, allowed, list(range(len(rows))), nodes,
               frozenset({names.index("q")}))
         tree = Tree(names, events, tuple(nodes), bool(c.randomised), len(rows),
-                    choices is None)
+                    choices is None, _automaton_texts(result))
         if choices is None:
             return tree
         more = set(_acting(result, tree_controller(result, tree, c))) - set(states)
@@ -356,6 +361,16 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
             return tree
         states = sorted(set(states) | more)
     return tree_of(result, controller, same_actions=True)
+
+
+def _automaton_texts(result: Any) -> tuple[str, ...]:
+    """What each automaton state stands for: the obligation left (a task's automaton)
+    or the states of the task's and each constraint's automaton (a joint one)."""
+    joint = getattr(result, "joint", None)
+    if joint is not None:
+        return tuple(" | ".join(str(part.states[k]) for part, k in zip(
+            joint.parts, comp, strict=True)) for comp in joint.components)
+    return tuple(str(s) for s in result.dta.states)
 
 
 _ROUNDS = 20

@@ -12,7 +12,7 @@ from mitld_lp.controller_file import world_variables
 from mitld_lp.game import Game
 from mitld_lp.gridworld import GridWorld
 
-__all__ = ["state_fields", "state_values", "valuation_text"]
+__all__ = ["state_fields", "state_record", "state_values", "valuation_text"]
 
 
 def state_fields(game: Game[Any]) -> tuple[str, ...]:
@@ -30,6 +30,18 @@ def state_values(game: Game[Any], state: Hashable) -> tuple[Any, ...]:
         return (state,)
     assert isinstance(state, tuple)
     return state
+
+
+def state_record(game: Game[Any], state: Hashable) -> Any:
+    """``state`` as the policy table writes it: a PRISM world's state as an object of
+    its variables by name (``{"open": False, "x": 2}``, which ``mitld-lp run`` reads
+    back), any other world's state as it is (a grid cell ``(x, y)``, a gymnasium
+    observation integer)."""
+    names = world_variables(game)
+    if names is None:
+        return state
+    assert isinstance(state, tuple)
+    return dict(zip(names, state, strict=True))
 
 
 def _text(value: Any) -> str:

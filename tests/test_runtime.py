@@ -187,3 +187,17 @@ def test_the_run_verb_loads_no_solver_stack(tmp_path: Path) -> None:
     reply = json.loads(done.stderr.strip().splitlines()[-1])
     assert reply == {"code": 0, "heavy": []}
     assert json.loads(done.stdout)["action"] in {"N", "E", "S", "W"}
+
+
+def test_a_policy_table_state_is_what_run_reads(tmp_path: Path) -> None:
+    """The policy table names a PRISM world's state by its variables; that record,
+    written as JSON, is an observation ``mitld-lp run`` reads."""
+    pytest.importorskip("stormpy")
+    r = synthesize(load_model(MODELS / "corridor.toml"))
+    rows = r.policy_table()
+    first = next(row for row in rows if row["clock"] == 0
+                 and row["game_state"] == {"open": False, "x": 0})
+    path = r.controller.save(tmp_path / "c.npz")
+    done = run_cli(path, [{"state": first["game_state"], "events": []}])
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["action"] == first["action"]
