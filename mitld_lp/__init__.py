@@ -9,6 +9,7 @@ controller, NumPy alone) imports nothing else of the package.
 """
 
 import importlib
+import importlib.util
 import sys
 import types
 from typing import TYPE_CHECKING, Any
@@ -105,7 +106,9 @@ def __getattr__(name: str) -> Any:
     """A public name, from its module on first use (PEP 562): importing the package
     (for example for :mod:`mitld_lp.runtime`) loads none of them."""
     where = _WHERE.get(name)
-    if where is None:
+    if where is None:  # a submodule, as after the eager imports of old
+        if not name.startswith("__") and importlib.util.find_spec(f"{__name__}.{name}"):
+            return importlib.import_module(f"{__name__}.{name}")
         raise AttributeError(f"module 'mitld_lp' has no attribute {name!r}")
     value = getattr(importlib.import_module(where), name)
     globals()[name] = value
