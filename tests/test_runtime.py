@@ -60,7 +60,7 @@ def test_runtime_imports_numpy_alone(tmp_path: Path) -> None:
     roots = {m.split(".")[0] for m in reply["modules"]}
     assert not roots & set(NOT_HERE), sorted(roots & set(NOT_HERE))
     ours = sorted(m for m in reply["modules"] if m.startswith("mitld_lp"))
-    assert ours == ["mitld_lp", "mitld_lp.runtime", "mitld_lp.startup"]
+    assert ours == ["mitld_lp", "mitld_lp.runtime", "mitld_lp.saved_plan", "mitld_lp.startup"]
 
 
 # --------------------------------------------------------------------------- a world here
