@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint, joint_automaton
+from mitld_lp.automata.joint import Joint, joint_automaton
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check
@@ -31,6 +31,7 @@ from mitld_lp.constraints import (
     Constraint,
     ConstraintError,
 )
+from mitld_lp.controller_random import ConstrainedController
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.literal import from_spec
 from mitld_lp.logic import check
@@ -38,7 +39,7 @@ from mitld_lp.logic.syntax import DistLiteral, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, Posed, ProblemError, check_constrained
-from mitld_lp.product import ProductState, ProductStates, product
+from mitld_lp.product import ProductState, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 
@@ -345,96 +346,3 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
         constraints=tuple(values), then=then, secondary=None, steps=nan, checks=(),
         message=failed.message, controller=None, prob=None, stay=None,
         timings={"build": build}, **common)
-
-
-class ConstrainedController:
-    """Run a randomised constrained policy: track the joint automaton, the pending events
-    and the clock; in each state sample the action from the policy's distribution with
-    a seeded ``numpy`` generator (or, once it has drawn *stay*, keep to the end
-    component for ever with its internal actions).  ``act`` returns None once every
-    component (task and constraints) is decided; :attr:`settled` also says when the run
-    stays in an end component for ever (nothing is decided any more).
-
-    ``verdicts``: per component, accepted / rejected / undecided; ``charged``: the steps
-    taken while the task was undecided (what E(steps) counts).
-    """
-
-    def __init__(self, game: Any, sta: STA, joint: Joint, merged: Merged, mdp: MDP,
-                 prob: np.ndarray, stay: np.ndarray, *, seed: int | None = 0) -> None:
-        self.game, self.sta, self.joint, self.merged, self.mdp = game, sta, joint, merged, mdp
-        self.prob, self.stay_prob = prob, stay
-        self.rng = np.random.default_rng(seed)
-        self.reset()
-
-    def reset(self) -> None:
-        """Start a new run (the generator runs on)."""
-        self.q: int | None = None
-        self.pending = self.sta.events
-        self.clock = 0
-        self.staying = False
-        self.keeping = False
-        self.charged = 0
-        self.beyond_model = False
-
-    @property
-    def verdicts(self) -> tuple[int, ...]:
-        """Per component: accepted, rejected or undecided (the task accepted once the run
-        keeps its safety part in an end component for ever)."""
-        if self.q is None:
-            return tuple(UNDECIDED for _ in self.joint.parts)
-        v = self.joint.verdicts[self.q]
-        return (ACCEPTED, *v[1:]) if self.keeping else v
-
-    def act(self, state: Any, events: frozenset[str] = frozenset()) -> str | None:
-        """The action in world ``state`` after ``events``; None once nothing is left to
-        decide."""
-        if self.q is None:
-            self.q = self.joint.dta.step(self.joint.dta.initial,
-                                         self.game.propositions(state) | events)
-        else:
-            self.q = self.joint.dta.step(self.q, self.game.propositions(state) | events)
-            self.pending = self.pending - events
-            step = self.sta.advance(self.pending, self.clock)
-            self.clock = step.clock
-            self.beyond_model = self.beyond_model or step.truncated
-        if self.joint.terminal(self.q):
-            return None
-        states = self.mdp.states
-        record = ProductState(state, self.q, self.pending, self.clock)
-        i = states.position(record) if isinstance(states, ProductStates) else None
-        s = -1 if i is None else int(self.merged.of_product[i])
-        if s < 0 or self.merged.absorbing[s]:
-            return self.game.actions(state)[0]
-        m = self.merged
-        lo, hi = int(m.mdp.row_groups[s]), int(m.mdp.row_groups[s + 1])
-        if self.keeping:  # the task's safety part kept: its end component, for ever
-            return self._inside(m.keep_internal, lo, hi)
-        if not self.staying and self.rng.random() < self.stay_prob[s]:
-            self.staying = True
-        if self.staying:  # keep to the end component: its internal actions, uniformly
-            return self._inside(m.internal, lo, hi)
-        weights = self.prob[lo:hi]
-        c = lo + int(self.rng.choice(hi - lo, p=weights / weights.sum()))
-        if m.keep[c]:
-            self.keeping = True
-            return self._inside(m.keep_internal, lo, hi)
-        if m.undecided[s]:
-            self.charged += 1
-        return m.mdp.action_name(c)
-
-    def _inside(self, mask: np.ndarray, lo: int, hi: int) -> str:
-        """One of the state's choices in ``mask[lo:hi]``, uniformly."""
-        inside = lo + np.flatnonzero(mask[lo:hi])
-        return self.merged.mdp.action_name(int(self.rng.choice(inside)))
-
-    @property
-    def settled(self) -> bool:
-        """Nothing can change any more: every component is decided, or the run stays in
-        an end component for ever."""
-        return self.staying or self.keeping or (
-            self.q is not None and self.joint.terminal(self.q))
-
-    @property
-    def task_status(self) -> str:
-        v = self.verdicts[0]
-        return "accepted" if v == ACCEPTED else "rejected" if v == REJECTED else "running"

@@ -10,6 +10,7 @@ import numpy as np
 
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.constrained import ConstrainedResult
+from mitld_lp.controller import Observation
 
 __all__ = ["RunStats", "run_constrained"]
 
@@ -46,7 +47,7 @@ def run_constrained(result: ConstrainedResult, *, runs: int = 10_000, seed: int 
         controller.reset()
         s, events = game.initial, frozenset()
         for t in range(max_steps + 1):
-            action = controller.act(s, events)
+            action = controller.act(Observation(s, events))
             if action is None or controller.settled:
                 break
             events = frozenset(a for a, when in times.items() if when == t + 1)

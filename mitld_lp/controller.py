@@ -25,13 +25,15 @@ from typing import Any, Protocol
 import numpy as np
 
 from mitld_lp import defaults, files
-from mitld_lp.automata.sta import STA, ClockStep
+from mitld_lp.automata.sta import STA
 from mitld_lp.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate
 from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
+from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED, Decision, Stepper
 
-__all__ = ["Observation", "Controller", "ControllerFileError", "RunStatus"]
+__all__ = ["Observation", "Controller", "ControllerFileError", "ControllerLike", "RunStatus",
+           "save_tables"]
 
 
 class RunStatus(enum.Enum):
@@ -80,26 +82,40 @@ class Observation:
                 raise TypeError(f"Observation.events: an event name is a string, got {e!r}")
 
 
-class _Plan(Protocol):
-    """What :meth:`Controller.act` asks: the model in memory (:class:`_LivePlan`) or its
-    tables read from a file (:class:`mitld_lp.controller_file.SavedPlan`)."""
+class ControllerLike(Protocol):
+    """What every controller offers (:class:`Controller`, deterministic, and
+    :class:`mitld_lp.ConstrainedController`, randomised), and what :func:`simulate
+    <mitld_lp.simulate.simulate>`, ``mitld-lp simulate``, the exports and the runtime
+    take: ``act`` on an observation (None once the task is decided), ``reset`` to start
+    a new run, the memory (``automaton_state``, ``pending``, ``clock``), the task's
+    ``status``, and ``save``.  A randomised controller draws from ``rng``, a seeded
+    ``numpy.random.Generator`` (``reset(seed=...)`` reseeds it); a deterministic one
+    never draws."""
+
+    randomised: bool
 
     @property
     def events(self) -> frozenset[str]: ...
     @property
-    def initial(self) -> int: ...
+    def status(self) -> RunStatus: ...
     @property
-    def accepting(self) -> int | None: ...
+    def automaton_state(self) -> int | None: ...
     @property
-    def rejecting(self) -> int | None: ...
+    def pending(self) -> frozenset[str]: ...
+    @property
+    def clock(self) -> int: ...
+    @property
+    def beyond_model(self) -> bool: ...
+    @property
+    def settled(self) -> bool: ...
+    @property
+    def steps(self) -> int: ...
 
-    def read(self, q: int, state: Hashable, events: frozenset[str]) -> int: ...
-    def advance(self, pending: frozenset[str], clock: int) -> ClockStep: ...
-    def lookup(
-        self, state: Hashable, q: int, pending: frozenset[str], clock: int
-    ) -> tuple[str | None, bool]: ...
-    def fallback(self, state: Hashable) -> str: ...
-    def tables(self, max_states: int) -> SavedPlan: ...
+    def reset(self, seed: int | None = None) -> None: ...
+    def act(self, observation: Observation) -> str | None: ...
+    def tables(self, max_states: int = defaults.MAX_STATES) -> SavedPlan: ...
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False,
+             max_states: int = defaults.MAX_STATES) -> Path: ...
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -127,31 +143,34 @@ class _LivePlan:
         return self.sta.dta.initial
 
     @property
-    def accepting(self) -> int | None:
-        return self.sta.dta.accepting
-
-    @property
-    def rejecting(self) -> int | None:
-        return self.sta.dta.rejecting
+    def verdicts(self) -> tuple[tuple[int, ...], ...]:
+        dta = self.sta.dta
+        return tuple((ACCEPTED,) if q == dta.accepting else (REJECTED,)
+                     if q == dta.rejecting else (UNDECIDED,) for q in range(dta.n_states))
 
     def read(self, q: int, state: Hashable, events: frozenset[str]) -> int:
         return self.sta.dta.step(q, self.game.propositions(state) | events)
 
-    def advance(self, pending: frozenset[str], clock: int) -> ClockStep:
-        return self.sta.advance(pending, clock)
+    def advance(self, pending: frozenset[str], clock: int) -> tuple[int, bool]:
+        step = self.sta.advance(pending, clock)
+        return step.clock, step.truncated
 
-    def lookup(
-        self, state: Hashable, q: int, pending: frozenset[str], clock: int
-    ) -> tuple[str | None, bool]:
+    def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
         record = ProductState(state, q, pending, clock)
         states = self.mdp.states
         i = states.position(record) if isinstance(states, ProductStates) else (
             self._index.get(record))
         if i is None:
-            return None, False
+            return Decision(())
         lost = self.hopeless is not None and bool(self.hopeless[i])
         c = int(self.policy[i])
-        return (None if c < 0 else self.mdp.action_name(c)), lost
+        return Decision(() if c < 0 else (self.mdp.action_name(c),), lost=lost)
+
+    def lookup(
+        self, state: Hashable, q: int, pending: frozenset[str], clock: int
+    ) -> tuple[str | None, bool]:
+        d = self.decide(state, q, pending, clock)
+        return (d.actions[0] if d.actions else None), d.lost
 
     def fallback(self, state: Hashable) -> str:
         return self.game.actions(state)[0]
@@ -161,7 +180,7 @@ class _LivePlan:
                         max_states=max_states)
 
 
-class Controller:
+class Controller(Stepper):
     """A deterministic stationary policy on product states, run on the original game.
 
     ``Controller(game, sta, mdp, policy, hopeless=None)``: ``policy`` gives a choice of
@@ -174,7 +193,7 @@ class Controller:
     with the clock held at the last modelled value and sets ``beyond_model``.
     """
 
-    __slots__ = ("_plan", "_state", "status", "steps", "beyond_model")
+    randomised = False
 
     def __init__(
         self,
@@ -184,38 +203,24 @@ class Controller:
         policy: np.ndarray,
         hopeless: np.ndarray | None = None,
     ) -> None:
-        self._begin(_LivePlan(game, sta, mdp, policy, hopeless))
-
-    def _begin(self, plan: _Plan) -> None:
-        self._plan: _Plan = plan
-        self._state: tuple[int, frozenset[str], int] | None = None
-        self.status = RunStatus.RUNNING
-        self.steps = 0
-        self.beyond_model = False
+        self._begin(_LivePlan(game, sta, mdp, policy, hopeless), np.random.default_rng(0))
 
     def __repr__(self) -> str:
         return f"Controller(status={self.status.value}, steps={self.steps})"
 
-    def reset(self) -> None:
-        """Start a new run (the next ``act`` is step 0)."""
-        self._begin(self._plan)
-
     @property
-    def events(self) -> frozenset[str]:
-        """The task's external events."""
-        return self._plan.events
+    def status(self) -> RunStatus:
+        return RunStatus(self.status_name)
 
-    @property
-    def automaton_state(self) -> int | None:
-        return None if self._state is None else self._state[0]
+    def reset(self, seed: int | None = None) -> None:
+        """Start a new run (the next ``act`` is step 0); ``seed`` is accepted for the
+        common interface and unused (a deterministic controller never draws)."""
+        self._restart()
 
-    @property
-    def pending(self) -> frozenset[str]:
-        return self._plan.events if self._state is None else self._state[1]
-
-    @property
-    def clock(self) -> int:
-        return 0 if self._state is None else self._state[2]
+    def tables(self, max_states: int = defaults.MAX_STATES) -> SavedPlan:
+        """The controller as plain tables (what :meth:`save` writes)."""
+        plan = self._plan
+        return plan if isinstance(plan, SavedPlan) else plan.tables(max_states)  # type: ignore[attr-defined]
 
     def save(
         self,
@@ -237,59 +242,38 @@ class Controller:
         numbers, strings and tuples, or if the world states to tabulate exceed
         ``max_states``.
         """
-        out = files.writable_path(path, overwrite=overwrite)
-        data = self._plan.tables(max_states).to_bytes()
-        with files.replacing(out, "wb") as handle:
-            handle.write(data)
-        return out
+        return save_tables(self, path, overwrite=overwrite, max_states=max_states)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Controller:
         """The controller :meth:`save` wrote to ``path``, reset to step 0.
 
         The file is parsed as data (NumPy arrays with ``allow_pickle=False`` and JSON);
-        nothing in it is executed.  A file that is not a controller of this format
-        version (foreign, damaged, truncated, another version, unreadable) raises
-        :class:`ControllerFileError` (a ``ValueError``) naming the file and the fault.
+        nothing in it is executed.  A file that is not a deterministic controller of a
+        format version this package reads (foreign, damaged, truncated, another
+        version, unreadable, a randomised controller) raises
+        :class:`ControllerFileError` (a ``ValueError``) naming the file and the fault;
+        :func:`load_controller` loads either kind.
         """
+        plan = read_plan(Path(path))
+        if plan.randomised:
+            raise ControllerFileError(
+                f"{path}: cannot load the controller: a randomised controller; load it "
+                "with mitld_lp.ConstrainedController.load or mitld_lp.load_controller")
         controller = cls.__new__(cls)
-        controller._begin(read_plan(Path(path)))
+        controller._begin(plan, np.random.default_rng(0))
         return controller
 
     def act(self, observation: Observation) -> str | None:
         """The action to take in ``observation.state``; ``None`` once the task is decided."""
-        plan = self._plan
-        state, events = observation.state, observation.events
-        if self._state is None:
-            if events:
-                raise ValueError(f"step 0: no event can have happened yet, got {sorted(events)}")
-            q, pending, clock = plan.read(plan.initial, state, events), plan.events, 0
-        else:
-            q0, pending0, clock0 = self._state
-            unknown = events - plan.events
-            if unknown:
-                raise ValueError(f"unknown events observed: {sorted(unknown)}")
-            again = events - pending0
-            if again:
-                raise ValueError(f"events observed a second time: {sorted(again)}")
-            q = plan.read(q0, state, events)
-            pending = pending0 - events
-            step = plan.advance(pending, clock0)
-            clock = step.clock
-            self.beyond_model = self.beyond_model or step.truncated
-        self._state = (q, pending, clock)
-        self.steps += 1
-        if q == plan.accepting:
-            self.status = RunStatus.ACCEPTED
-            return None
-        if q == plan.rejecting:
-            self.status = RunStatus.REJECTED
-            return None
-        action, hopeless = plan.lookup(state, q, pending, clock)
-        if hopeless:
-            self.status = RunStatus.REJECTED
-            return None
-        # No action: not a state of the model (never reached by the product
-        # construction, or past a truncation point), or one that cannot reach the
-        # target (its value is 0); any action will do.
-        return plan.fallback(state) if action is None else action
+        return self._step(observation.state, observation.events)
+
+
+def save_tables(controller: ControllerLike, path: str | os.PathLike[str], *,
+                overwrite: bool, max_states: int) -> Path:
+    """Write ``controller.tables()`` to ``path`` under the package's rule for outputs."""
+    out = files.writable_path(path, overwrite=overwrite)
+    data = controller.tables(max_states).to_bytes()
+    with files.replacing(out, "wb") as handle:
+        handle.write(data)
+    return out

@@ -8,6 +8,7 @@ from html import escape
 from typing import Any
 
 from mitld_lp.product import ProductState
+from mitld_lp.world_names import state_record
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
 #: this module, and an import, even for types only, would make a circle).
@@ -23,8 +24,10 @@ POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action",
 def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     """The policy as data: one row per product state that is still undecided.
 
-    Keys: ``game_state`` (the game's own state), ``automaton_state`` (the obligation
-    still to satisfy, as formula text), ``pending`` (the events that have not happened,
+    Keys: ``game_state`` (the game's own state; a PRISM world's as an object of its
+    variables by name, :func:`mitld_lp.world_names.state_record`), ``automaton_state``
+    (the obligation still to satisfy, as formula text), ``pending`` (the events that
+    have not happened,
     sorted), ``clock`` (steps counted for the pending events, capped where their hazards
     stop changing), ``action`` (the policy's action), ``value`` (the probability that
     the policy satisfies the task from there, truncation counted as failure: exact, from
@@ -38,12 +41,13 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     policy, values = low.policy, low.policy_values
     obligations = result.dta.states
     goal = result.acceptance.goal
+    game = result.model.game
     rows: list[dict[str, Any]] = []
     for i, state in enumerate(mdp.states):
         if not isinstance(state, ProductState) or policy[i] < 0:
             continue
         rows.append({
-            "game_state": state.game,
+            "game_state": state_record(game, state.game),
             "automaton_state": str(obligations[state.automaton]),
             "pending": sorted(state.pending),
             "clock": state.clock,

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import defaults
-from mitld_lp.controller import Controller, Observation, RunStatus
+from mitld_lp.controller import ControllerLike, Observation, RunStatus
 from mitld_lp.model import Model
 from mitld_lp.progress import bar as progress_bar
 
@@ -81,18 +81,19 @@ def _sample_successor(rng: np.random.Generator, succ) -> Any:
 
 def rollout(
     model: Model,
-    controller: Controller,
+    controller: ControllerLike,
     rng: np.random.Generator,
     *,
     max_steps: int = defaults.MAX_STEPS,
     record: bool = False,
 ) -> tuple[RunStatus, list[Step]]:
-    """One run of ``controller`` in ``model``'s world: returns the controller's final
-    status and (if ``record``) the steps.  Each event's time is drawn from its law once,
-    at the start (events in name order, so a seed gives the same run)."""
+    """One run of ``controller`` (deterministic or randomised) in ``model``'s world:
+    returns the controller's final status and (if ``record``) the steps.  Each event's
+    time is drawn from its law once, at the start (events in name order, so a seed gives
+    the same run).  The run ends when the controller stops acting, or when the task is
+    decided (a randomised controller may go on deciding its constraints)."""
     game = model.game
-    times = {a: float(law.sample(rng, 1)[0])
-             for a, law in sorted(model.distributions.items())}
+    times = {a: float(law.sample(rng, 1)[0]) for a, law in sorted(_laws(model, controller))}
     controller.reset()
     s = game.initial
     events: frozenset[str] = frozenset()
@@ -104,7 +105,7 @@ def rollout(
                 Step(t, s, events, controller.automaton_state or 0, controller.pending,
                      controller.clock, action)
             )
-        if action is None:
+        if action is None or controller.status is not RunStatus.RUNNING:
             return controller.status, steps
         events = frozenset(a for a, k in times.items() if k == t + 1)
         s = _sample_successor(rng, game.successors(s, action, events))
@@ -113,15 +114,17 @@ def rollout(
 
 def simulate(
     model: Model,
-    controller: Controller,
+    controller: ControllerLike,
     *,
     runs: int = defaults.RUNS,
     seed: int | None = 0,
     max_steps: int = defaults.MAX_STEPS,
     progress: bool | None = None,
 ) -> SimulationResult:
-    """Estimate the probability that ``controller`` satisfies ``model``'s task in the
-    model's untruncated world (module docs).
+    """Estimate the probability that ``controller`` (deterministic or randomised: any
+    :class:`~mitld_lp.controller.ControllerLike`) satisfies ``model``'s task in the
+    model's untruncated world (module docs).  A randomised controller draws from its own
+    generator, reseeded with ``seed`` first, so a seed gives the same estimate.
 
     Each run is watched for ``max_steps`` steps (the result's ``horizon``).  A task with
     a safety part (``G !h``) is never decided by a finite run: a run that reaches the
@@ -138,13 +141,21 @@ def simulate(
     if seed is not None:
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
+    if controller.randomised:
+        controller.reset(seed=int(rng.integers(2**63)))
     ok = beyond = undecided = kept = 0
-    persistent = _persistent_states(model)
+    # a randomised controller runs the joint automaton of the task and its constraints,
+    # where the task's safety part is kept by a *keep* choice (the status is then
+    # accepted); otherwise the run keeps the task in a persistent state of its automaton
+    persistent = frozenset() if controller.randomised else _persistent_states(model)
+    # objective "min": the controller runs the complement's automaton (same states): the
+    # task holds where the complement rejects, or in the task's persistent states
+    win = RunStatus.REJECTED if model.objective == "min" else RunStatus.ACCEPTED
     bar = progress_bar(progress, total=runs, leave=False, desc="simulate")
     for _ in range(runs):
         status, _ = rollout(model, controller, rng, max_steps=max_steps)
         keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent
-        ok += status is RunStatus.ACCEPTED or keeping
+        ok += status is win or keeping
         kept += keeping
         undecided += status is RunStatus.RUNNING and not keeping
         beyond += controller.beyond_model
@@ -153,6 +164,22 @@ def simulate(
     lo, hi = _wilson(ok, runs)
     return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed,
                             max_steps, kept)
+
+
+def _laws(model: Model, controller: ControllerLike) -> list[tuple[str, Any]]:
+    """The law of every event of the model and of the controller: a constraint's own
+    event (an inline law in the constraint) is the controller's, read from its STA."""
+    laws = dict(model.distributions)
+    missing = sorted(controller.events - set(laws))
+    if missing:
+        try:
+            clocks = controller.sta.clocks  # type: ignore[attr-defined]
+        except AttributeError:
+            raise ValueError(
+                f"the controller reads the event {missing[0]!r}, which the model has no law "
+                "for; simulate it with the controller of the synthesis") from None
+        laws.update((a, clocks[a].distribution) for a in missing)
+    return list(laws.items())
 
 
 def _check_count(name: str, value: object, low: int, high: int | None) -> None:

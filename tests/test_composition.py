@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mitld_lp import ExplicitGame, GridWorld, Model, load_model, synthesize
+from mitld_lp import ExplicitGame, GridWorld, Model, Observation, load_model, synthesize
 from mitld_lp.cli import main
 from mitld_lp.problem import ProblemError
 from mitld_lp.report import SUMMARY_KEYS
@@ -176,7 +176,7 @@ def _rollouts(result, p1: float, runs: int, seed: int) -> tuple[float, float]:  
         ctrl.reset()
         s, events = game.initial, frozenset()
         for t in range(200):
-            action = ctrl.act(s, events)
+            action = ctrl.act(Observation(state=s, events=events))
             if action is None or ctrl.settled:
                 break
             events = frozenset(a for a, k in times.items() if k == t + 1)
@@ -313,8 +313,7 @@ def test_a_sweep_over_a_constrained_model_file(tmp_path: Path,
 # --------------------------------------------------------------------------- other verbs
 
 
-@pytest.mark.parametrize("verb", [["export", "--drn", "x.drn"], ["info"],
-                                  ["simulate", "-n", "10"]])
+@pytest.mark.parametrize("verb", [["export", "--drn", "x.drn"], ["info"]])
 def test_verbs_that_take_no_constraints_refuse_a_constrained_model(
         verb: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """export wrote the unconstrained model of a file with constraints and exited 0."""
@@ -326,6 +325,18 @@ def test_verbs_that_take_no_constraints_refuse_a_constrained_model(
     assert main(argv) == 2
     assert f"{verb[0]}: the model has constraints" in capsys.readouterr().err
     assert not (tmp_path / "x.drn").exists()
+
+
+def test_simulate_runs_the_constrained_controller(capsys: pytest.CaptureFixture[str]) -> None:
+    """simulate took no --constraint; it now runs the randomised controller of the
+    constrained problem, and its estimate agrees with the certified value."""
+    code = main(["simulate", str(MODELS / "bus_risk.toml"), "--constraint",
+                 "P(F puddle) <= 0.05", "-n", "3000", "--seed", "3", "--json", "-q"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    lo, hi = out["certified_bracket"]
+    assert lo < 0.9  # the constrained problem's value, not the unconstrained 0.9244
+    assert out["ci95"][0] - 0.01 <= hi and out["ci95"][1] + 0.01 >= lo
 
 
 # --------------------------------------------------------------------------- one schema

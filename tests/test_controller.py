@@ -261,16 +261,21 @@ def test_damaged_truncated_or_foreign_files_are_one_clear_error(tmp_path: Path) 
         p.write_bytes(data[:cut])
         cases[f"truncated at {cut}"] = (p, "")
     flipped = bytearray(data)
-    flipped[len(data) // 3] ^= 0xFF
+    with zipfile.ZipFile(good) as z:  # a byte inside the compressed policy keys
+        info = z.getinfo("keys.npy")
+    local = info.header_offset
+    name_len = int.from_bytes(data[local + 26:local + 28], "little")
+    extra_len = int.from_bytes(data[local + 28:local + 30], "little")
+    flipped[local + 30 + name_len + extra_len + info.compress_size // 2] ^= 0xFF
     (tmp_path / "flipped.npz").write_bytes(bytes(flipped))
     cases["a flipped byte"] = (tmp_path / "flipped.npz", "")
     (tmp_path / "text.npz").write_text("name = 'bus_grid'\n")
     cases["a text file"] = (tmp_path / "text.npz", "")
     cases["a folder"] = (tmp_path, "")
     cases["no file"] = (tmp_path / "missing.npz", "No such file")
-    cases["version 2"] = (rewritten(good, tmp_path / "v2.npz",
-                                    lambda m: with_meta(m, version=2)),
-                          "format version 2; this mitld_lp reads version 1")
+    cases["version 3"] = (rewritten(good, tmp_path / "v3.npz",
+                                    lambda m: with_meta(m, version=3)),
+                          "format version 3; this mitld_lp reads versions 1, 2")
     cases["another format"] = (rewritten(good, tmp_path / "fmt.npz",
                                          lambda m: with_meta(m, format="other")),
                                "not a controller file")

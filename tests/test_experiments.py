@@ -243,3 +243,16 @@ def test_bench_sweeps(tmp_path):
     (case,) = [r for r in rows if not r["states"]]
     assert float(case["whole_cpu"]) > 0 and float(case["storm_prism_cpu"]) > 0
     assert (tmp_path / "bench_sweeps.md").read_text().startswith("| instance |")
+
+
+def test_bench_controllers(tmp_path):
+    """The controllers' benchmark: every start-up probe answers (the two loaders the
+    same action), and the tree's controller keeps lower by Storm on its chain."""
+    _run("bench_controllers", tmp_path)
+    starts = {r["what"]: r for r in _csv(tmp_path / "bench_controllers.csv")}
+    assert starts["runtime"]["answer"] == starts["Controller.load"]["answer"] != "None"
+    trees = _csv(tmp_path / "bench_trees.csv")
+    assert [r["model"] for r in trees] == ["corridor.toml", "bus_grid.toml"]
+    for r in trees:
+        assert float(r["abs_diff"]) <= 1e-9
+        assert int(r["tree_nodes"]) <= int(r["same_actions_nodes"]) <= int(r["table_rows"])

@@ -81,6 +81,8 @@ _VERBS: list[
      _verb("runs", "args_sweep"), _verb("runs", "cmd_sweep")),
     ("plot", "draw a grid world's policy, or a column of a sweep's results",
      _verb("runs", "args_plot"), _verb("runs", "cmd_plot")),
+    ("run", "answer JSON observations on stdin with a saved controller's actions",
+     _verb("run", "args_run"), _verb("run", "cmd_run")),
     ("pareto", "the certified curve of success probability against steps, cost or a risk",
      _verb("constrained", "args_pareto"), _verb("constrained", "cmd_pareto")),
 ]

@@ -1,6 +1,9 @@
 """The command line's ``export`` verb: the occupancy LP (MPS/LP), the product MDP (Storm's
-DRN) and, for a law known only within a band, the interval MDP (DRN with intervals).
-Wired into :mod:`mitld_lp.cli` (which owns exit codes and error lines)."""
+DRN) and, for a law known only within a band, the interval MDP (DRN with intervals);
+and, from a synthesis, its controller (``--controller``), the controlled chain
+(``--chain``, :mod:`mitld_lp.chain`) and the decision tree (``--tree``,
+:mod:`mitld_lp.tree`).  Wired into :mod:`mitld_lp.cli` (which owns exit codes and error
+lines)."""
 
 from __future__ import annotations
 
@@ -8,7 +11,17 @@ import argparse
 from pathlib import Path
 
 from mitld_lp import files
-from mitld_lp.cli.kernel import EXIT_OK, UsageError, _args_model, _build, _out, _output_path, _write
+from mitld_lp.cli.kernel import (
+    EXIT_OK,
+    EXIT_UNCERTIFIED,
+    UsageError,
+    _args_model,
+    _build,
+    _out,
+    _output_path,
+    _time_left,
+    _write,
+)
 
 __all__ = ["args_export", "cmd_export"]
 
@@ -18,6 +31,14 @@ def args_export(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lp", metavar="FILE",
                    help="the occupancy LP, whose optimum is the value, as .mps or .lp")
     p.add_argument("--drn", metavar="FILE", help="the product MDP in Storm's DRN format")
+    p.add_argument("--controller", metavar="FILE",
+                   help="the synthesised controller (.npz), for Controller.load and mitld-lp run")
+    p.add_argument("--chain", metavar="FILE", help="the Markov chain of the world under the "
+                   "controller (Storm's DRN; P=? [F \"accept\"] is the value)")
+    p.add_argument("--tree", metavar="FILE", help="the controller as an exact decision tree: "
+                   ".json, .dot or .py")
+    p.add_argument("--same-actions", action="store_true", help="the tree picks the "
+                   "controller's own action everywhere (else any action keeping its value)")
     p.add_argument("--upper", action="store_true",
                    help="count the truncation sink as winning (the upper model)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
@@ -26,13 +47,31 @@ def args_export(p: argparse.ArgumentParser) -> None:
 def cmd_export(args: argparse.Namespace) -> int:
     """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
     from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
+    from mitld_lp.tree import TREE_SUFFIXES
 
-    if args.lp is None and args.drn is None:
-        raise UsageError("export: nothing to do; give --lp FILE and/or --drn FILE")
+    wanted = (args.lp, args.drn, args.controller, args.chain, args.tree)
+    if all(w is None for w in wanted):
+        raise UsageError("export: nothing to do; give --lp, --drn, --controller, --chain "
+                         "or --tree FILE")
     lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
     drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
                                                      DRN_SUFFIXES)
-    files.distinct_outputs((what, p) for what, p in (("--lp", lp), ("--drn", drn)) if p)
+    controller = None if args.controller is None else _output_path(
+        args.controller, args.force, "--controller", (".npz",))
+    chain = None if args.chain is None else _output_path(args.chain, args.force, "--chain",
+                                                         (".drn",))
+    tree = None if args.tree is None else _output_path(args.tree, args.force, "--tree",
+                                                       TREE_SUFFIXES)
+    files.distinct_outputs((what, p) for what, p in (
+        ("--lp", lp), ("--drn", drn), ("--controller", controller), ("--chain", chain),
+        ("--tree", tree)) if p)
+    if args.same_actions and tree is None:
+        raise UsageError("export --same-actions: a choice for --tree; give --tree FILE")
+    code = EXIT_OK
+    if controller or chain or tree:
+        code = _controller_exports(args, controller, chain, tree)
+    if lp is None and drn is None:
+        return code
     from mitld_lp.acceptance import acceptance
 
     if _robust_export(args, lp, drn):
@@ -51,6 +90,56 @@ def cmd_export(args: argparse.Namespace) -> int:
     if drn:
         _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))
         _out(f"wrote {drn}")
+    return code
+
+
+def _controller_exports(args: argparse.Namespace, controller: Path | None,
+                        chain: Path | None, tree: Path | None) -> int:
+    """Synthesise (the model's own problem: constraints give a randomised controller)
+    and write its controller, chain and tree; exit 3 when the answer is not certified
+    (the files are written all the same, and say what they are)."""
+    from mitld_lp.chain import chain_drn, chain_of
+    from mitld_lp.model import load_model
+    from mitld_lp.synthesis import synthesize
+    from mitld_lp.tree import tree_of
+
+    if args.upper:
+        raise UsageError("export --upper: the upper model has no controller of its own; "
+                         "--controller, --chain and --tree export the synthesised one")
+    from mitld_lp.robust_synthesis import is_robust
+
+    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    if is_robust(model.distributions) and (chain or tree):
+        raise UsageError("export --chain/--tree: a law known only within a band has a "
+                         "worst case, not one Markov chain; --drn writes the interval MDP, "
+                         "--controller the robust controller")
+    r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
+                   max_states=args.max_states, max_memory=args.max_memory,
+                   max_automaton_states=args.max_automaton_states,
+                   time_limit=_time_left(args))
+    if r.controller is None:
+        raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
+    if controller:
+        from mitld_lp.problem import Settings
+
+        budget = Settings(max_states=args.max_states).resolved(model.budgets).max_states
+        _write(controller, lambda p: r.controller.save(p, overwrite=True,
+                                                       max_states=budget))
+        _out(f"wrote {controller}")
+    if chain:
+        text = chain_drn(chain_of(r))
+        _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
+        _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
+    if tree:
+        from mitld_lp.tree import write_tree
+
+        t = tree_of(r, same_actions=args.same_actions)
+        _write(tree, lambda p: write_tree(r, p, tree=t, overwrite=True))
+        _out(f"wrote {tree} ({t.size} nodes over {t.samples} reachable states; "
+             f"policy table: {len(r.policy_table())} rows)")
+    if not r.certified:
+        _out(f"not certified: {r.status}")
+        return EXIT_UNCERTIFIED
     return EXIT_OK
 
 

@@ -24,6 +24,7 @@ from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
 from mitld_lp.problem import CONSTRAINED, ProblemError
 from mitld_lp.product import ProductTooLarge
+from mitld_lp.saved_plan import ControllerFileError
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.text import printable
 
@@ -49,6 +50,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
     FileExistsError,
     SweepError,
     ProblemError,
+    ControllerFileError,
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
@@ -196,9 +198,8 @@ def unconstrained(posed: Posed, verb: str) -> Posed:
     them)."""
     if posed.route != CONSTRAINED:
         return posed
-    raise UsageError(f"{verb}: the model has constraints, which only solve, sweep and "
-                     "pareto take (the randomised controller runs from Python: "
-                     "mitld_lp.constrained_runs)")
+    raise UsageError(f"{verb}: the model has constraints, which only solve, simulate, "
+                     "sweep, pareto and export --controller/--chain/--tree take")
 
 
 def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:

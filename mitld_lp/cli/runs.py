@@ -30,7 +30,7 @@ from mitld_lp.cli.kernel import (
     _say,
     _time_left,
     _write,
-    posed_model,
+    model_options,
     solve_settings,
     unconstrained,
 )
@@ -228,16 +228,23 @@ def args_simulate(p: argparse.ArgumentParser) -> None:
                    help="steps each run is watched (a run keeping a safety part unviolated "
                         "that long counts as a success; undecided ones as failures)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    from mitld_lp.cli.constrained import args_constraints
+
+    args_constraints(p)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
     from mitld_lp.model import load_model
+    from mitld_lp.problem import pose, settings_from
     from mitld_lp.simulate import simulate
     from mitld_lp.synthesis import solve
 
     model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
-    r = solve(posed_model(args, model, "simulate"))
+    r = solve(pose(model, args.constraint, then=args.then,
+                   settings=settings_from(**model_options(args))))
+    if r.controller is None:
+        raise UsageError(f"simulate: no controller to run: the synthesis is {r.status}")
     sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
                    max_steps=args.max_steps)
     robust = r.summary().get("robust", False)

@@ -1,0 +1,300 @@
+"""The controlled chain: the Markov chain of the world under a controller, for anyone to
+re-check with Storm (``P=? [F "accept"]``) or PRISM.
+
+The chain's states are the states the controller can reach: the world state, the
+controller's memory (the automaton state, the events still pending, the clock) and,
+for a randomised controller, whether it has drawn *stay* (it then keeps to an end
+component for ever).  They are built from the product the controller was synthesised
+on, so a step moves the world, lets the events happen with their hazards and advances
+the clock exactly as there; the controller's choice is asked of the controller itself
+(its tables, the same ones ``act`` reads), not read from the synthesis's arrays.  Runs
+past a truncation point go to the one state labelled ``truncated``, counted as failure,
+as ``lower`` counts them.
+
+Labels: ``init``; ``accept`` on the states from which the controller's run is accepted
+for sure -- where the automaton has accepted, and, for a task with a safety part, on
+every bottom strongly connected component of the chain whose automaton states are all
+persistent (a run that enters it stays in it and keeps the safety part for ever); so
+``P=? [F "accept"]`` is the probability that the run is accepted, which equals the
+synthesis's ``lower``.  ``reject`` where the task is lost (the controller stops),
+``truncated`` as above, ``staying`` where a randomised controller keeps to an end
+component, and each world proposition that holds (a proposition named like one of these
+labels is written ``world_<name>``).  Each state line is followed by its valuation as a
+comment, as Storm's own exporter writes it:
+``//[x=1 & y=2 & q=3 & pending={b1} & clock=0]``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Hashable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from mitld_lp import files
+from mitld_lp.controller import ControllerLike
+from mitld_lp.game import Game
+from mitld_lp.mdp import MDP
+from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED
+from mitld_lp.world_names import state_fields, state_values, valuation_text
+
+__all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS"]
+
+CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Chain:
+    """A finite Markov chain: state 0 is the initial one.
+
+    ``matrix``: ``(n, n)`` CSR transition probabilities; ``labels[i]``: the labels of
+    state ``i`` (without ``init``); ``valuations[i]``: its valuation text;
+    ``origin[i]``: its product state (-1 for the chain's own absorbing states) and
+    ``staying[i]`` whether a randomised controller has drawn *stay* there."""
+
+    matrix: sp.csr_array
+    labels: tuple[frozenset[str], ...]
+    valuations: tuple[str, ...]
+    origin: np.ndarray
+    staying: np.ndarray
+
+    @property
+    def n_states(self) -> int:
+        return self.matrix.shape[0]
+
+    def accepting(self) -> np.ndarray:
+        return np.array(["accept" in x for x in self.labels], dtype=bool)
+
+
+def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
+    """The controlled chain of a synthesis result (:class:`~mitld_lp.SynthesisResult`
+    or a constrained result) under its controller (or ``controller``, one built on the
+    same product).  A robust result (a law within a band) is refused: its controller
+    runs on an interval model, whose controlled system is no Markov chain."""
+    if hasattr(result, "joint"):  # a constrained result: the joint automaton's product
+        if result.controller is None and controller is None:
+            raise ValueError(f"no controller to export: the synthesis is {result.status}")
+        persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
+        return controlled_chain(result.mdp, controller or result.controller,
+                                persistent, _game(result, controller))
+    if not hasattr(result, "lower_model") or not isinstance(result.mdp, MDP):
+        raise ValueError("a robust result (a law known only within a band): its "
+                         "controller acts on an interval model, whose controlled system is "
+                         "no Markov chain; export --drn writes the interval MDP")
+    return controlled_chain(result.mdp, controller or result.controller,
+                            result.dta.persistent, result.model.game)
+
+
+def _game(result: Any, controller: ControllerLike | None) -> Game[Any]:
+    """The world of a constrained result (its own controller knows it)."""
+    for c in (result.controller, controller):
+        try:
+            return c.game  # type: ignore[union-attr]
+        except AttributeError:
+            continue
+    raise ValueError("the constrained result has no controller that knows its world")
+
+
+def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[int],
+                     game: Game[Any]) -> Chain:
+    """The chain of ``controller`` on ``mdp``, the product of ``game`` with the
+    controller's automaton (module docstring); ``persistent``: the automaton states in
+    which staying for ever is acceptance."""
+    keep = frozenset(persistent)
+    fields = (*state_fields(game), "q", "pending", "clock")
+    index: dict[tuple[int, bool], int] = {}
+    order: list[tuple[int, bool]] = []
+    rows: list[dict[int, float]] = []
+    special: dict[str, int] = {}
+
+    def number(node: tuple[int, bool]) -> int:
+        at = index.get(node)
+        if at is None:
+            at = index[node] = len(order)
+            order.append(node)
+        return at
+
+    def sink(name: str) -> int:  # the chain's own absorbing state for a stopped run
+        if name not in special:
+            special[name] = number((-1 - len(special), False))
+        return special[name]
+
+    number((int(mdp.initial), False))
+    done = 0
+    while done < len(order):
+        node = order[done]
+        i, staying = node
+        row: dict[int, float] = {}
+        if i < 0:
+            row[done] = 1.0
+        else:
+            for j, stay_next, p in _moves(mdp, controller, i, staying, sink):
+                if p > 0:
+                    to = j if stay_next is None else number((j, stay_next))
+                    row[to] = row.get(to, 0.0) + p
+        rows.append(row)
+        done += 1
+    n = len(order)
+    names = {v: k for k, v in special.items()}
+    origin = np.array([i for i, _ in order], dtype=np.int64)
+    staying = np.array([s for _, s in order], dtype=bool)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum([len(r) for r in rows], out=indptr[1:])
+    cols = np.fromiter((c for r in rows for c in sorted(r)), dtype=np.int64,
+                       count=int(indptr[-1]))
+    vals = np.fromiter((r[c] for r in rows for c in sorted(r)), dtype=np.float64,
+                       count=int(indptr[-1]))
+    matrix = sp.csr_array((vals, cols, indptr), shape=(n, n))
+    props = _prop_labels(game)
+    labels: list[set[str]] = []
+    valuations: list[str] = []
+    plan_verdicts = controller._plan.verdicts  # type: ignore[attr-defined]
+    for k, (i, stay) in enumerate(order):
+        here: set[str] = set()
+        if i < 0:
+            here.add(names[k])
+            valuations.append(names[k])
+        else:
+            rec = mdp.states[i]
+            if isinstance(rec, ProductState):
+                here |= {props(p) for p in game.propositions(rec.game)}
+                v = plan_verdicts[rec.automaton][0]
+                if v == ACCEPTED:
+                    here.add("accept")
+                elif v == REJECTED:
+                    here.add("reject")
+                pend = ",".join(sorted(rec.pending))
+                valuations.append(valuation_text(
+                    fields, (*state_values(game, rec.game), rec.automaton, f"{{{pend}}}",
+                             rec.clock)) + (" & staying=true" if stay else ""))
+            else:
+                here.add({Absorbing.TARGET: "accept", Absorbing.SINK: "reject",
+                          Absorbing.TRUNCATED: "truncated"}[rec])
+                valuations.append(str(rec))
+            if stay:
+                here.add("staying")
+        labels.append(here)
+    for k in _kept_for_ever(matrix, order, mdp, keep):
+        labels[k].add("accept")
+    return Chain(matrix, tuple(frozenset(x) for x in labels), tuple(valuations), origin,
+                 staying)
+
+
+def _prop_labels(game: Game[Any]) -> Any:
+    reserved = set(CHAIN_LABELS) | {"target", "sink"}
+    return lambda p: f"world_{p}" if p in reserved else p
+
+
+def _moves(mdp: MDP, controller: ControllerLike, i: int, staying: bool,
+           sink: Any) -> Iterable[tuple[int, bool | None, float]]:
+    """The chain's steps from product state ``i``: ``(j, staying, p)`` to product
+    state ``j``, or ``(k, None, p)`` to the chain's own state ``k``."""
+    rec = mdp.states[i]
+    if not isinstance(rec, ProductState):  # target, sink, truncated: absorbing
+        yield i, False, 1.0
+        return
+    plan = controller._plan  # type: ignore[attr-defined]  # the tables act() reads
+    verdicts = plan.verdicts[rec.automaton]
+    if UNDECIDED not in verdicts:  # every component decided: the controller stops
+        yield sink("accept" if verdicts[0] == ACCEPTED else "reject"), None, 1.0
+        return
+    d = plan.decide(rec.game, rec.automaton, rec.pending, rec.clock)
+    if d.lost:
+        yield sink("reject"), None, 1.0
+        return
+    choice: list[tuple[str, float, bool]] = []  # action, probability, staying after
+    if d.weights is None or not d.actions:
+        choice.append((d.actions[0] if d.actions else plan.fallback(rec.game), 1.0, staying))
+    else:
+        go_on = 0.0 if staying else 1.0 - d.stay
+        now_stay = 1.0 - go_on
+        if now_stay > 0:
+            if d.inside:
+                choice += [(a, now_stay / len(d.inside), True) for a in d.inside]
+            else:
+                choice.append((plan.fallback(rec.game), now_stay, True))
+        total = float(np.sum(d.weights))
+        if go_on > 0 and total > 0:
+            choice += [(a, go_on * float(w) / total, False)
+                       for a, w in zip(d.actions, d.weights, strict=True) if w > 0]
+    matrix = mdp.matrix
+    for action, p, stay_after in choice:
+        c = _row(mdp, i, action)
+        lo, hi = int(matrix.indptr[c]), int(matrix.indptr[c + 1])
+        for j, q in zip(matrix.indices[lo:hi].tolist(), matrix.data[lo:hi].tolist(),
+                        strict=True):
+            yield j, stay_after, p * q
+
+
+def _row(mdp: MDP, i: int, action: str) -> int:
+    for c in range(int(mdp.row_groups[i]), int(mdp.row_groups[i + 1])):
+        if mdp.action_name(c) == action:
+            return c
+    raise ValueError(f"product state {i}: the controller chose {action!r}, which is not "
+                     "one of its actions (the controller is not of this product)")
+
+
+def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, bool]], mdp: MDP,
+                   persistent: frozenset[int]) -> list[int]:
+    """The states of the bottom strongly connected components whose every state is an
+    ordinary product state with a persistent automaton state (and not *staying*, whose
+    run decides nothing more)."""
+    if not persistent:
+        return []
+    n = matrix.shape[0]
+    count, comp = csgraph.connected_components(matrix, directed=True, connection="strong")
+    coo = matrix.tocoo()
+    leaves = np.zeros(count, dtype=bool)
+    cross = (comp[coo.row] != comp[coo.col]) & (coo.data > 0)
+    leaves[comp[coo.row[cross]]] = True
+    good = np.ones(count, dtype=bool)
+    for k in range(n):
+        i, stay = order[k]
+        rec = mdp.states[i] if i >= 0 else None
+        if stay or not isinstance(rec, ProductState) or rec.automaton not in persistent:
+            good[comp[k]] = False
+    return np.flatnonzero(good[comp] & ~leaves[comp]).tolist()
+
+
+def chain_drn(chain: Chain) -> str:
+    """The chain in Storm's explicit DRN format (``@type: DTMC``).  DRN declares a label
+    only by using it: when no reachable state accepts (the value is 0), one extra,
+    unreachable absorbing state carries ``accept`` so that the property still parses."""
+    extra = not any("accept" in x for x in chain.labels)
+    n = chain.n_states + extra
+    lines = ["// The controlled chain, exported by mitld_lp", "@type: DTMC", "@parameters",
+             "", "@reward_models", "", "@nr_states", str(n), "@nr_choices", str(n), "@model"]
+    m = chain.matrix
+    for s in range(chain.n_states):
+        labels = (["init"] if s == 0 else []) + sorted(chain.labels[s])
+        lines.append(" ".join([f"state {s}", *labels]))
+        lines.append(f"//[{chain.valuations[s]}]")
+        lines.append("\taction 0")
+        lo, hi = int(m.indptr[s]), int(m.indptr[s + 1])
+        lines.extend(f"\t\t{int(t)} : {float(p)!r}"
+                     for t, p in zip(m.indices[lo:hi], m.data[lo:hi], strict=True))
+    if extra:
+        s = chain.n_states
+        lines += [f"state {s} accept", "//[unreachable: declares the label]", "\taction 0",
+                  f"\t\t{s} : 1.0"]
+    return "\n".join(lines) + "\n"
+
+
+def write_chain(result: Any, path: str | os.PathLike[str], *,
+                controller: ControllerLike | None = None, overwrite: bool = False) -> Path:
+    """Write the controlled chain of ``result`` (:func:`chain_of`) to ``path`` (``.drn``)
+    under the package's rule for output files."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".drn",))
+    return files.write_text(out, chain_drn(chain_of(result, controller)), overwrite=True,
+                            suffixes=(".drn",))
+
+
+def reachable_states(chain: Chain) -> Iterable[Hashable]:
+    """The product states the chain visits (for tests and reports)."""
+    return sorted({int(i) for i in chain.origin if i >= 0})

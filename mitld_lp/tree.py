@@ -1,0 +1,572 @@
+"""A controller small enough to read: an exact decision tree over named features.
+
+The features of a state the controller acts in are the world's own (a grid cell's
+``x`` and ``y``, a PRISM world's variables, else the world ``state`` itself), the
+controller's memory -- the automaton state ``q``, one ``pending_<event>`` flag per event
+(true while the event has not happened), the ``clock`` -- and nothing else.  The tree
+is grown top-down (the split of highest information gain, as CART and dtControl do)
+until every leaf holds one decision, over exactly the states the controller can reach
+(the controlled chain, :mod:`mitld_lp.chain`), so it picks the controller's own
+decision in each of them: the action, or ``null`` where the task is lost and the
+controller stops.  A randomised controller's leaf holds its distribution (the actions
+with their probabilities, and the probability of *stay*).
+
+:func:`tree_controller` runs the tree in place of the controller's table and
+:func:`tree_value` evaluates it exactly on its Markov chain (a sparse solve): it equals
+the synthesis's ``lower``.
+
+Written as JSON (``.json``: ``{"format", "features", "nodes", ...}``, a node either
+``{"id", "feature", "op", "value", "yes", "no"}`` or a leaf ``{"id", "action"}``), as
+Graphviz DOT (``.dot``) or as a plain Python function (``.py``) by :func:`write_tree`.
+"""
+
+from __future__ import annotations
+
+import json
+import keyword
+import math
+import os
+from collections import Counter
+from collections.abc import Hashable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mitld_lp import files
+from mitld_lp.chain import chain_of
+from mitld_lp.controller import ControllerLike
+from mitld_lp.product import ProductState
+from mitld_lp.runtime import UNDECIDED, Decision, Stepper
+from mitld_lp.world_names import state_fields, state_values
+
+__all__ = ["Tree", "TREE_SUFFIXES", "tree_of", "tree_controller", "tree_value", "write_tree"]
+
+TREE_SUFFIXES = (".json", ".dot", ".py")
+FORMAT = "mitld_lp.tree"
+
+
+@dataclass(frozen=True, slots=True)
+class Node:
+    """An inner node tests ``feature op value`` (``<=`` or ``==``) and goes to ``yes``
+    or ``no``; a leaf (``feature`` None) holds ``decision``."""
+
+    feature: int | None = None
+    op: str = ""
+    value: Any = None
+    yes: int = -1
+    no: int = -1
+    decision: Any = None
+
+
+@dataclass(frozen=True, slots=True)
+class Tree:
+    """The tree: ``features`` named, ``nodes[0]`` the root; ``samples`` the reachable
+    states it was grown on (and is exact on)."""
+
+    features: tuple[str, ...]
+    events: tuple[str, ...]
+    nodes: tuple[Node, ...]
+    randomised: bool
+    samples: int
+    same_actions: bool = True
+    automaton: tuple[str, ...] = ()  # per automaton state q, what it stands for
+
+    @property
+    def size(self) -> int:
+        """Its number of nodes (inner nodes and leaves)."""
+        return len(self.nodes)
+
+    @property
+    def leaves(self) -> int:
+        return sum(n.feature is None for n in self.nodes)
+
+    def decide(self, values: Sequence[Any]) -> Any:
+        """The leaf's decision for the feature ``values``."""
+        node = self.nodes[0]
+        while node.feature is not None:
+            node = self.nodes[node.yes if _holds(node, values[node.feature]) else node.no]
+        return node.decision
+
+    # ------------------------------------------------------------------ formats
+
+    def to_json(self) -> str:
+        nodes = []
+        for i, n in enumerate(self.nodes):
+            if n.feature is None:
+                nodes.append({"id": i, **_leaf_json(n.decision, self.randomised)})
+            else:
+                nodes.append({"id": i, "feature": self.features[n.feature], "op": n.op,
+                              "value": _plain(n.value), "yes": n.yes, "no": n.no})
+        return json.dumps({"format": FORMAT, "version": 1, "features": list(self.features),
+                           "events": list(self.events), "randomised": self.randomised,
+                           "states": self.samples, "same_actions": self.same_actions,
+                           "automaton_states": {str(q): text for q, text in
+                                                enumerate(self.automaton)},
+                           "nodes": nodes}, indent=1) + "\n"
+
+    def to_dot(self) -> str:
+        lines = ["digraph tree {", '  node [fontname="Helvetica"];']
+        for i, n in enumerate(self.nodes):
+            if n.feature is None:
+                text = _leaf_text(n.decision, self.randomised)
+                lines.append(f'  n{i} [shape=box, label={json.dumps(text)}];')
+            else:
+                value = _plain(n.value)
+                shown = ("{" + ", ".join(map(str, value)) + "}" if n.op == "in" else
+                         str(value).lower() if isinstance(value, bool) else value)
+                test = f"{self.features[n.feature]} {n.op} {shown}"
+                lines.append(f"  n{i} [shape=ellipse, label={json.dumps(test)}];")
+                lines.append(f'  n{i} -> n{n.yes} [label="yes"];')
+                lines.append(f'  n{i} -> n{n.no} [label="no", style=dashed];')
+        lines.append("}")
+        return "\n".join(lines) + "\n"
+
+    def to_python(self) -> str:
+        args = ", ".join(_identifier(f) for f in self.features)
+        what = ("a dict {action: probability} (key None: stay in the end component)"
+                if self.randomised else "the action (None: the task is lost, stop)")
+        out = ['"""The controller as a decision tree, written by mitld_lp (exact on the',
+               f'{self.samples} states it can reach).  act(...) returns {what}."""', "", "",
+               f"def act({args}):"]
+
+        def emit(i: int, depth: int) -> None:
+            n, pad = self.nodes[i], "    " * depth
+            if n.feature is None:
+                out.append(f"{pad}return {_leaf_python(n.decision, self.randomised)}")
+                return
+            out.append(f"{pad}if {_python_test(_identifier(self.features[n.feature]), n)}:")
+            emit(n.yes, depth + 1)
+            out.append(f"{pad}else:")
+            emit(n.no, depth + 1)
+
+        emit(0, 1)
+        return "\n".join(out) + "\n"
+
+
+def _python_test(name: str, n: Node) -> str:
+    if n.op == "==" and n.value is True:
+        return name
+    if n.op == "in":
+        return f"{name} in {tuple(_plain(v) for v in n.value)!r}"
+    return f"{name} {n.op} {_plain(n.value)!r}"
+
+
+def _holds(node: Node, v: Any) -> bool:
+    if node.op == "<=":
+        return v <= node.value
+    return v in node.value if node.op == "in" else v == node.value
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+def _identifier(name: str) -> str:
+    text = "".join(c if c.isalnum() or c == "_" else "_" for c in name)
+    text = text if text and not text[0].isdigit() else f"f_{text}"
+    return f"{text}_" if keyword.iskeyword(text) else text
+
+
+def _leaf_json(decision: Any, randomised: bool) -> dict[str, Any]:
+    if not randomised:
+        return {"action": decision}
+    if decision is None:
+        return {"action": None}
+    actions, weights, stay, inside = decision
+    return {"actions": {a: w for a, w in zip(actions, weights, strict=True) if w > 0},
+            "stay": stay, "inside": list(inside)}
+
+
+def _leaf_text(decision: Any, randomised: bool) -> str:
+    if not randomised or decision is None:
+        return "stop (lost)" if decision is None else str(decision)
+    actions, weights, stay, _ = decision
+    parts = [f"{a}: {w:.3g}" for a, w in zip(actions, weights, strict=True) if w > 0]
+    return "\n".join(parts + ([f"stay: {stay:.3g}"] if stay else []))
+
+
+def _leaf_python(decision: Any, randomised: bool) -> str:
+    if not randomised or decision is None:
+        return repr(decision)
+    actions, weights, stay, _ = decision
+    mix = {a: w for a, w in zip(actions, weights, strict=True) if w > 0}
+    if stay:
+        mix[None] = stay  # type: ignore[index]
+    return repr(mix)
+
+
+# --------------------------------------------------------------------------- features
+
+
+def _features(result: Any, controller: ControllerLike) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    game = _game_of(result, controller)
+    events = tuple(sorted(controller.events))
+    return (*state_fields(game), "q", *(f"pending_{e}" for e in events), "clock"), events
+
+
+def _game_of(result: Any, controller: ControllerLike) -> Any:
+    model = getattr(result, "model", None)
+    if model is not None:
+        return model.game
+    for c in (result.controller, controller):
+        try:
+            return c.game  # type: ignore[union-attr]
+        except AttributeError:
+            continue
+    raise ValueError("the result has no controller that knows its world")
+
+
+def _values(game: Any, rec: ProductState, events: tuple[str, ...]) -> tuple[Any, ...]:
+    return (*state_values(game, rec.game), rec.automaton, *(e in rec.pending for e in events),
+            rec.clock)
+
+
+def _label(d: Decision, randomised: bool) -> Hashable:
+    if d.lost:
+        return None
+    if not randomised:
+        return d.actions[0] if d.actions else "fallback"
+    w = tuple(float(x) for x in (d.weights if d.weights is not None else ()))
+    return (d.actions, w, float(d.stay), d.inside)
+
+
+def _acting(result: Any, controller: ControllerLike) -> list[int]:
+    """The product states the controller reaches and acts in (undecided ones)."""
+    chain = chain_of(result, controller)
+    plan = controller._plan  # type: ignore[attr-defined]
+    out = []
+    for i in sorted({int(i) for i in chain.origin if i >= 0}):
+        rec = result.mdp.states[i]
+        if isinstance(rec, ProductState) and UNDECIDED in plan.verdicts[rec.automaton]:
+            out.append(i)
+    return out
+
+
+def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
+    """The controller's own decision at product state ``i``."""
+    plan = controller._plan  # type: ignore[attr-defined]
+    rec = result.mdp.states[i]
+    label = _label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
+                   controller.randomised)
+    return plan.fallback(rec.game) if label == "fallback" else label
+
+
+_TIE = 1e-12
+"""Two values closer than this are equal when the tree may pick among actions."""
+
+
+def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Hashable]] | None:
+    """Per product state, the actions that keep the controller's value exactly: with
+    ``V`` the controller's exact values (``lower_model.policy_values``) and ``Q(s, a)``
+    the value of ``a`` then ``V``, the actions with ``Q = V`` that, where ``V > 0``,
+    move with positive probability closer to the goal in the graph of such actions (so
+    no choice among them can loop away from it); in the goal (an accepting end
+    component) only the controller's own action.  A controller that picks one of them
+    in every state has the value ``V``: the Bellman equation holds, and no bottom
+    component avoids the goal where ``V > 0``.  None for a randomised controller, whose
+    decisions are kept."""
+    if controller.randomised or not hasattr(result, "lower_model"):
+        return None
+    mdp = result.mdp
+    v = np.asarray(result.lower_model.policy_values, dtype=np.float64)
+    q = mdp.matrix @ v
+    cs = mdp.choice_state()
+    tight = np.abs(q - v[cs]) <= _TIE
+    goal = np.asarray(result.acceptance.goal, dtype=bool)
+    # rank: steps to the goal along tight choices (a backward search over their edges)
+    coo = mdp.matrix.tocoo()
+    use = tight[coo.row] & (coo.data > 0) & ~goal[cs[coo.row]]
+    src, dst = cs[coo.row[use]], coo.col[use]
+    order = np.argsort(dst, kind="stable")
+    src, dst = src[order], dst[order]
+    starts = np.searchsorted(dst, np.arange(mdp.n_states + 1))
+    rank = np.full(mdp.n_states, np.iinfo(np.int64).max, dtype=np.int64)
+    frontier = np.flatnonzero(goal)
+    rank[frontier] = 0
+    step = 0
+    while frontier.size:
+        step += 1
+        nxt = np.unique(np.concatenate([src[starts[j]:starts[j + 1]] for j in frontier]))
+        nxt = nxt[rank[nxt] > step]
+        rank[nxt] = step
+        frontier = nxt
+    out: dict[int, frozenset[Hashable]] = {}
+    indptr, cols = mdp.matrix.indptr, mdp.matrix.indices
+    for i, rec in enumerate(mdp.states):
+        if not isinstance(rec, ProductState) or goal[i]:
+            continue
+        ok = set()
+        for c in range(int(mdp.row_groups[i]), int(mdp.row_groups[i + 1])):
+            if not tight[c]:
+                continue
+            succ = cols[indptr[c]:indptr[c + 1]]
+            if v[i] <= 0 or (succ.size and int(rank[succ].min()) < int(rank[i])):
+                ok.add(mdp.action_name(c))
+        out[i] = frozenset(ok)
+    return out
+
+
+def _dataset(result: Any, controller: ControllerLike, states: Sequence[int],
+             choices: dict[int, frozenset[Hashable]] | None
+             ) -> tuple[list[tuple[Any, ...]], list[frozenset[Hashable]]]:
+    """Per state, its features and the decisions the tree may take there."""
+    game = _game_of(result, controller)
+    _, events = _features(result, controller)
+    rows, allowed = [], []
+    for i in states:
+        rec = result.mdp.states[i]
+        own = _strict(result, controller, i)
+        extra = choices.get(i, frozenset()) if choices is not None else frozenset()
+        rows.append(_values(game, rec, events))
+        allowed.append(frozenset({own}) | extra)
+    return rows, allowed
+
+
+# --------------------------------------------------------------------------- growing
+
+
+def tree_of(result: Any, controller: ControllerLike | None = None, *,
+            same_actions: bool = False) -> Tree:
+    """A decision tree for ``result``'s controller (or ``controller``, one of the same
+    product), exact over the states it reaches (module docstring).
+
+    By default the tree may pick, in a state, any action that keeps the controller's
+    value exactly (:func:`_choices`), which makes it much smaller; it is grown until it
+    is exact on every state *its own* controller reaches.  ``same_actions`` asks for the
+    controller's own action in every state the controller reaches.  Either way
+    :func:`tree_value` is the controller's value, ``lower``."""
+    c = controller or result.controller
+    if c is None:
+        raise ValueError(f"no controller: the synthesis is {result.status}")
+    names, events = _features(result, c)
+    choices = None if same_actions else _choices(result, c)
+    states = _acting(result, c)
+    for _ in range(_ROUNDS):
+        rows, allowed = _dataset(result, c, states, choices)
+        nodes: list[Node] = []
+        _grow(rows, allowed, list(range(len(rows))), nodes,
+              frozenset({names.index("q")}))
+        tree = Tree(names, events, tuple(nodes), bool(c.randomised), len(rows),
+                    choices is None, _automaton_texts(result))
+        if choices is None:
+            return tree
+        more = set(_acting(result, tree_controller(result, tree, c))) - set(states)
+        if not more:
+            return tree
+        states = sorted(set(states) | more)
+    return tree_of(result, controller, same_actions=True)
+
+
+def _automaton_texts(result: Any) -> tuple[str, ...]:
+    """What each automaton state stands for: the obligation left (a task's automaton)
+    or the states of the task's and each constraint's automaton (a joint one)."""
+    joint = getattr(result, "joint", None)
+    if joint is not None:
+        return tuple(" | ".join(str(part.states[k]) for part, k in zip(
+            joint.parts, comp, strict=True)) for comp in joint.components)
+    return tuple(str(s) for s in result.dta.states)
+
+
+_ROUNDS = 20
+"""Rounds of growing the tree on the states its controller reaches, before falling
+back to the controller's own actions."""
+
+
+def _sort_key(v: Any) -> tuple[str, Any]:
+    if isinstance(v, bool | int | float):
+        return ("0", float(v))
+    return ("1", repr(v))
+
+
+def _entropy(counts: Counter[Any] | dict[Any, int], n: int) -> float:
+    return -sum(k / n * math.log2(k / n) for k in counts.values() if k)
+
+
+def _order(d: Hashable) -> tuple[bool, str]:
+    return (d is None, repr(d))
+
+
+def _grow(rows: list[tuple[Any, ...]], allowed: list[frozenset[Hashable]], idx: list[int],
+          nodes: list[Node], categorical: frozenset[int] = frozenset()) -> int:
+    """Append the subtree of the samples ``idx`` (each with its set of allowed
+    decisions) to ``nodes``; return its root.  A leaf holds a decision every sample
+    below it allows; a split is chosen on each sample's most common allowed decision
+    (dtControl's "max-freq" determinisation)."""
+    at = len(nodes)
+    nodes.append(Node())
+    common = frozenset.intersection(*(allowed[i] for i in idx)) if idx else frozenset()
+    if common:
+        nodes[at] = Node(decision=min(common, key=_order))
+        return at
+    freq = Counter(d for i in idx for d in allowed[i])
+    ranked = sorted(freq, key=lambda d: (-freq[d], _order(d)))
+    place = {d: k for k, d in enumerate(ranked)}
+    labels = {i: min(allowed[i], key=place.__getitem__) for i in idx}
+    best = _best_split(rows, labels, idx, Counter(labels.values()), categorical)
+    if best is None:  # equal features, no common decision: cannot happen on a product
+        raise ValueError("two reachable states with the same features take different "
+                         "decisions; the features do not describe the controller's state")
+    feature, op, value = best
+    probe = Node(feature, op, value)
+    yes = [i for i in idx if _holds(probe, rows[i][feature])]
+    no = [i for i in idx if not _holds(probe, rows[i][feature])]
+    y = _grow(rows, allowed, yes, nodes, categorical)
+    n = _grow(rows, allowed, no, nodes, categorical)
+    nodes[at] = Node(feature, op, value, y, n)
+    return at
+
+
+def _best_split(rows: list[tuple[Any, ...]], labels: dict[int, Hashable], idx: list[int],
+                counts: Counter[Any], categorical: frozenset[int] = frozenset()
+                ) -> tuple[int, str, Any] | None:
+    n = len(idx)
+    base = _entropy(counts, n)
+    best: tuple[float, int, int, str, Any] | None = None
+    for f in range(len(rows[idx[0]])):
+        values = [rows[i][f] for i in idx]
+        distinct = set(values)
+        if len(distinct) < 2:
+            continue
+        numeric = f not in categorical and all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in distinct)
+        ordered = sorted(distinct, key=_sort_key)
+        by_value: dict[Any, Counter[Any]] = {}
+        for i, v in zip(idx, values, strict=True):
+            by_value.setdefault(v, Counter())[labels[i]] += 1
+        candidates: list[tuple[str, Any, Counter[Any]]] = []
+        if numeric:
+            left: Counter[Any] = Counter()
+            for v in ordered[:-1]:
+                left = left + by_value[v]
+                candidates.append(("<=", v, left))
+        else:
+            candidates += [("==", v, by_value[v]) for v in ordered]
+            if len(ordered) == 2:
+                candidates = candidates[1:]  # one test splits a pair
+            else:  # the values grouped by their most common decision: "in {...}"
+                groups: dict[Hashable, list[Any]] = {}
+                for v in ordered:
+                    top = max(by_value[v], key=lambda d: (by_value[v][d], repr(d)))
+                    groups.setdefault(top, []).append(v)
+                for members in groups.values():
+                    if 1 < len(members) < len(ordered):
+                        inside = sum((by_value[v] for v in members), Counter())
+                        candidates.append(("in", tuple(members), inside))
+        for op, v, inside in candidates:
+            k = sum(inside.values())
+            rest = counts - inside
+            gain = base - (k / n) * _entropy(inside, k) - ((n - k) / n) * _entropy(rest, n - k)
+            key = (round(gain, 12), -f)
+            if best is None or key > best[:2]:
+                best = (key[0], key[1], f, op, v)
+    if best is None:
+        return None
+    _, _, f, op, v = best
+    return f, op, v
+
+
+# --------------------------------------------------------------------------- running it
+
+
+class _TreePlan:
+    """A controller's tables with the policy replaced by the tree."""
+
+    def __init__(self, plan: Any, tree: Tree, game: Any) -> None:
+        self._plan, self.tree, self.game = plan, tree, game
+        self.events, self.initial, self.verdicts = plan.events, plan.initial, plan.verdicts
+
+    def read(self, q: int, state: Hashable, events: frozenset[str]) -> int:
+        return self._plan.read(q, state, events)
+
+    def advance(self, pending: frozenset[str], clock: int) -> tuple[int, bool]:
+        return self._plan.advance(pending, clock)
+
+    def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
+        rec = ProductState(state, q, pending, clock)
+        d = self.tree.decide(_values(self.game, rec, self.tree.events))
+        if d is None:
+            return Decision((), lost=True)
+        if not self.tree.randomised:
+            return Decision((d,))
+        actions, weights, stay, inside = d
+        return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside)
+
+    def fallback(self, state: Hashable) -> str:
+        return self._plan.fallback(state)
+
+
+class TreeController(Stepper):
+    """The tree run as a controller (the automaton and clock of the original)."""
+
+    def __init__(self, plan: _TreePlan, randomised: bool, seed: int | None = 0) -> None:
+        self.randomised = randomised
+        self._begin(plan, np.random.default_rng(seed))
+
+    @property
+    def status(self) -> Any:
+        from mitld_lp.controller import RunStatus
+
+        return RunStatus(self.status_name)
+
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self._restart()
+
+    def act(self, observation: Any) -> str | None:
+        return self._step(observation.state, observation.events)
+
+
+def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None = None
+                    ) -> TreeController:
+    """A controller that decides by ``tree`` (and tracks its memory as ``result``'s
+    controller does)."""
+    c = controller or result.controller
+    return TreeController(_TreePlan(c._plan, tree, _game_of(result, c)),  # type: ignore[union-attr]
+                          bool(c.randomised))
+
+
+def tree_value(result: Any, tree: Tree) -> float:
+    """The exact probability that the tree's controller satisfies the task, in the
+    lower model (truncation counts as failure): one sparse solve on its chain, over
+    the states from which ``accept`` is reachable (the others have value 0)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+    from scipy.sparse import csgraph
+
+    chain = chain_of(result, tree_controller(result, tree))
+    accept = chain.accepting()
+    if accept[0]:
+        return 1.0
+    m = chain.matrix
+    graph = sp.csr_array(m.T)  # who reaches accept: search the reversed edges
+    reach = np.zeros(chain.n_states, dtype=bool)
+    for j in np.flatnonzero(accept):
+        if not reach[j]:
+            reach[csgraph.breadth_first_order(graph, int(j), directed=True,
+                                              return_predecessors=False)] = True
+    if not reach[0]:
+        return 0.0
+    u = np.flatnonzero(reach & ~accept)
+    a = sp.identity(u.size, format="csr") - m[u][:, u]
+    b = np.asarray(m[u][:, np.flatnonzero(accept)].sum(axis=1)).ravel()
+    x = spla.spsolve(sp.csc_array(a), b)
+    return float(np.atleast_1d(x)[int(np.searchsorted(u, 0))])
+
+
+def write_tree(result: Any, path: str | os.PathLike[str], *, tree: Tree | None = None,
+               overwrite: bool = False) -> Path:
+    """Write the tree of ``result``'s controller (or ``tree``) to ``path`` in the format
+    of its suffix: ``.json``, ``.dot`` or ``.py``."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=TREE_SUFFIXES)
+    t = tree or tree_of(result)
+    suffix = out.suffix.lower()
+    text = t.to_json() if suffix == ".json" else t.to_dot() if suffix == ".dot" else (
+        t.to_python())
+    return files.write_text(out, text, overwrite=True, suffixes=TREE_SUFFIXES)
