@@ -353,14 +353,19 @@ def test_cli_pareto_writes_certified_points_and_refuses_to_overwrite(tmp_path, c
     assert "exists" in capsys.readouterr().err
 
 
-def test_cli_simulate_refuses_a_model_with_constraints(tmp_path, capsys):
+def test_cli_simulate_runs_a_model_file_with_constraints(tmp_path, capsys):
+    """simulate refused a model file with constraints; it now runs the constrained
+    problem's randomised controller, and its bracket is the constrained one (below the
+    unconstrained 0.9244)."""
+    import json
+
     from mitld_lp.cli import main
 
     path = tmp_path / "m.toml"
     path.write_text(BUS_PUDDLE.replace('spec = ', 'constraints = ["P(F puddle) <= 0.05"]\nspec = '))
-    assert main(["simulate", str(path), "-n", "10", "-q"]) == 2
-    err = capsys.readouterr().err
-    assert "constraints" in err and len(err.strip().splitlines()) == 1
+    assert main(["simulate", str(path), "-n", "200", "-q", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["certified_bracket"][1] < 0.9
 
 
 def test_constraints_on_a_task_with_a_safety_part_are_kept_not_misread() -> None:
