@@ -49,14 +49,9 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.progress import Bar
 from mitld_lp.progress import bar as progress_bar
-from mitld_lp.solvers.quotient import (
-    Quotient,
-    backward_reachable,
-    greedy_choices,
-    lift_policy,
-    quotient_for,
-    segmented_argmax,
-)
+from mitld_lp.solvers.graph import backward_reachable, segmented_argmax
+from mitld_lp.solvers.quotient import lift_policy, quotient_for
+from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
@@ -65,6 +60,7 @@ from mitld_lp.solvers.topological import (
     single_scores,
     solve_chain,
     state_graph,
+    transient_solve,
 )
 
 __all__ = ["interval_iteration", "interval_iterations", "evaluate_policy"]
@@ -414,12 +410,13 @@ def _solve_transient(
     """Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``): by
     components in topological order (``"auto"``,
     :func:`mitld_lp.solvers.topological.solve_chain`), one sparse LU of ``I - Q``
-    (``"direct"``) or BiCGSTAB to a residual of 1e-12 (``"iterative"``)."""
+    (``"direct"``, :func:`mitld_lp.solvers.topological.transient_solve`) or BiCGSTAB
+    to a residual of 1e-12 (``"iterative"``)."""
     if method == "auto":
         return solve_chain(chain, b, layers)
-    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     if method == "direct":
-        return np.asarray(spla.spsolve(a, b), dtype=np.float64).ravel()
+        return transient_solve(chain, b)
+    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)
     x = np.asarray(x, dtype=np.float64).ravel()
     residual = float(np.max(np.abs(a @ x - b), initial=0.0))
