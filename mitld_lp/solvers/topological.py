@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -181,11 +180,16 @@ def chain_lu(a: sp.csc_array) -> spla.SuperLU:
 @dataclass(slots=True, eq=False)
 class Factors:
     """The last factorisation of a sequence of transient solves on one block (mutable:
-    :func:`transient_solve` reuses and replaces it).  Policy iteration changes a few
-    rows of the chain per round; the LU of an earlier chain (``base``) then still solves
-    the new one, corrected for the changed rows by the Sherman--Morrison--Woodbury
-    formula, at the cost of a solve per changed row instead of a new factorisation.
-    ``reused`` / ``factorised`` count both."""
+    :func:`transient_solve` reuses or replaces it): a chain equal to the factorised one
+    (``base``) is solved on its LU, refined exactly as a new one would be.  The policy
+    jump's three policy iterations end and start on the same policy, so two of their
+    evaluations need no factorisation.  ``reused`` / ``factorised`` count both.
+
+    (Reusing the LU of a chain that differs in a few rows, corrected by the
+    Sherman--Morrison--Woodbury formula, was measured on the bus blocks and dropped: a
+    changed row costs a pair of triangular solves, about 1/60 of a new LU at 32,768
+    states, and the rows changed in policy iteration's later rounds add up to about 60.)
+    """
 
     lu: spla.SuperLU | None = None
     base: sp.csr_array | None = None
@@ -193,20 +197,9 @@ class Factors:
     factorised: int = 0
 
 
-_WOODBURY_ROWS = 64
-"""At most this many changed rows are corrected on an old factorisation (a solve each:
-2 ms on a 32,768-state bus block, whose new LU takes 90 ms)."""
-_REUSE_STEPS = 8
-"""At most this many refinement steps on a corrected old factorisation; one whose
-corrections, shrinking at their last rate, would need more is dropped for a new LU."""
-_EXTENDED_EPS = float(np.finfo(np.longdouble).eps)
-_REUSE_FLOOR = 32.0
-"""Roundings (of extended precision, relative to a column's largest entry) a correction
-may still be when a refinement on a reused factorisation stops: the corrections of a new
-LU's refinement level off at 5-10 of them on the product's blocks."""
-_STALLED = 1e-16
-"""A relative correction this far below float64's rounding that no longer shrinks is
-the extended precision's floor for the chain (where a new LU's refinement stops too)."""
+def _same(a: sp.csr_array, b: sp.csr_array) -> bool:
+    return (a.shape == b.shape and a.nnz == b.nnz and np.array_equal(a.indptr, b.indptr)
+            and np.array_equal(a.indices, b.indices) and np.array_equal(a.data, b.data))
 
 
 def transient_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray, *,
@@ -215,27 +208,20 @@ def transient_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray, *,
     (``chain``, square; a chain's rows, or a flow's transposed ones) by one sparse LU
     of ``I - Q`` (:func:`chain_lu`).  ``rhs`` may have a column per right-hand side;
     ``refine`` rounds of iterative refinement in extended precision return the answer
-    as ``longdouble`` (without, ``float64``).
-
-    ``factors`` (with ``refine``): the factorisation of an earlier chain of the same
-    size that differs from this one in at most :data:`_WOODBURY_ROWS` rows is used,
-    corrected for them (:class:`Factors`), and the answer refined against this chain
-    until the correction is at the extended precision's rounding (:data:`_REUSE_FLOOR`
-    roundings of each column's scale, where a new LU's refinement lands); otherwise (or
-    if that refinement stalls) a new LU is made and kept in ``factors``."""
+    as ``longdouble`` (without, ``float64``).  ``factors``: the factorisation of the
+    previous chain, used if this chain is the same (:class:`Factors`), else replaced."""
     k = chain.shape[0]
     rhs = np.asarray(rhs, dtype=np.float64)
     chain = sp.csr_array(chain)
-    if refine and factors is not None and factors.lu is not None \
-            and factors.base is not None and factors.base.shape == chain.shape:
-        x = _reused(chain, rhs, factors)
-        if x is not None:
-            factors.reused += 1
-            return x
-    lu = chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
-    if factors is not None:
-        factors.lu, factors.base = lu, chain
-        factors.factorised += 1
+    if factors is not None and factors.lu is not None and factors.base is not None \
+            and _same(chain, factors.base):
+        lu = factors.lu
+        factors.reused += 1
+    else:
+        lu = chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+        if factors is not None:
+            factors.lu, factors.base = lu, chain
+            factors.factorised += 1
     x = lu.solve(rhs)
     if not refine:
         return np.asarray(x, dtype=np.float64)
@@ -248,64 +234,10 @@ def transient_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray, *,
     return x
 
 
-def _reused(chain: sp.csr_array, rhs: np.ndarray, factors: Factors) -> np.ndarray | None:
-    """``x = rhs + Q x`` on ``factors``' old LU corrected for the changed rows (see
-    :func:`transient_solve`), or None if too many changed or it does not converge."""
-    lu, base = factors.lu, factors.base
-    assert lu is not None and base is not None
-    diff = sp.csr_array(base - chain)  # (I - Q_new) - (I - Q_old), rows S only
-    diff.eliminate_zeros()
-    rows = np.flatnonzero(np.diff(diff.indptr))
-    if rows.size > _WOODBURY_ROWS:
-        return None
-    if rows.size:
-        d_s = sp.csr_array(diff[rows])
-        unit = np.zeros((chain.shape[0], rows.size))
-        unit[rows, np.arange(rows.size)] = 1.0
-        z = lu.solve(unit)  # (I - Q_old)^-1 P_S
-        cap = np.eye(rows.size) + d_s @ z
-        try:
-            cap_lu = sla.lu_factor(cap)
-        except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - singular
-            return None
-        if not np.all(np.isfinite(cap_lu[0])):
-            return None
-
-        def solve(r: np.ndarray) -> np.ndarray:
-            y = lu.solve(r)
-            return y - z @ sla.lu_solve(cap_lu, d_s @ y)
-    else:
-        solve = lu.solve
-    q_ld = chain.astype(np.longdouble)
-    b_ld = rhs.astype(np.longdouble)
-    x = solve(rhs).astype(np.longdouble)
-    last = np.inf
-    goal = _REUSE_FLOOR * _EXTENDED_EPS
-    for done in range(1, _REUSE_STEPS + 1):
-        step = solve(np.asarray(b_ld + q_ld @ x - x, dtype=np.float64))
-        x += step
-        size = np.max(np.abs(step), axis=0)
-        scale = np.maximum(np.max(np.abs(x), axis=0), np.finfo(np.float64).tiny)
-        worst = float(np.max(size / scale))
-        if not np.isfinite(worst):
-            return None
-        if worst <= goal:
-            return x
-        if done > 1:
-            rate = worst / last
-            if worst <= _STALLED and rate > 0.1:
-                return x  # at the extended precision's floor: no step improves it
-            if rate >= 1.0 or done + np.log(goal / worst) / np.log(rate) > _REUSE_STEPS:
-                return None
-        last = worst
-    return None
-
-
 def evaluate_chain(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
                    factors: Factors | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Value ``v = r + M v`` and exit time ``t = 1 + M t`` of the chain of ``chosen``
-    rows, in extended precision (one LU, refined twice, or a reused one refined to the
-    same precision: :func:`transient_solve`)."""
+    rows, in extended precision (one LU, refined twice: :func:`transient_solve`)."""
     k = chosen.shape[0]
     both = transient_solve(sp.csr_array(inner[chosen]),
                            np.column_stack([reward[chosen], np.ones(k)]), refine=2,
@@ -323,9 +255,8 @@ def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
     Scores are compared in extended precision, so that at the fixpoint no choice beats
     the policy by more than ~1e-17 of the values' scale (the verified bounds of interval
     iteration rely on that); a switch needs a gain above that, so rounding cannot make
-    it cycle.  Each round's chain differs from the last in the states whose choice
-    changed, so its evaluation starts from the last factorisation (``factors``, shared
-    by the caller across calls on the same block; else one for this call)."""
+    it cycle.  ``factors``: shared by the caller across calls on the same block, so
+    that a call starting where the last one ended reuses its factorisation."""
     groups = block.groups
     inner = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
