@@ -46,7 +46,9 @@ solved faster).  The routes:
 Every value is the optimum at the initial state (lower model); ``max_diff`` is the
 largest difference between the routes that returned one.  Printed per row: the ratios
 ``default / storm_prism`` (whole runs), ``default / storm_drn check`` and
-``ii / storm_drn check``.  Written: ``scaling.csv``, ``scaling_machine.txt`` (cpu,
+``ii / storm_drn check``, none for an instance whose optimum is below 1e-3 or above
+1 - 1e-3 (degenerate: the plain ``bus`` family's from n = 32 on; use ``bus_scaled``).
+Written: ``scaling.csv``, ``scaling_machine.txt`` (cpu,
 cores, RAM, versions, date, load) and ``scaling.png`` (log-log seconds against states).
 
 The committed first run (moderate budgets) was::
@@ -493,9 +495,22 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 RATIO_KEYS = ("default/storm_prism", "default/storm_check", "ii/storm_check")
 
 
+DEGENERATE = 1e-3
+"""An optimum below this (or above 1 - this) leaves a solver almost nothing to do: such
+an instance is reported, never in a ratio."""
+
+
+def degenerate(row: Row) -> bool:
+    """Whether the instance's optimum (the largest value any route found) is degenerate."""
+    values = row.values()
+    return bool(values) and not DEGENERATE <= max(values) <= 1.0 - DEGENERATE
+
+
 def ratios(row: Row) -> dict[str, float | None]:
     """The speed ratios printed per row (keys: ``RATIO_KEYS``); None where a side is
-    missing."""
+    missing or the optimum is degenerate (:func:`degenerate`)."""
+    if degenerate(row):
+        return dict.fromkeys(RATIO_KEYS)
     check = row.seconds("storm_drn", "check_s")
     return dict(zip(RATIO_KEYS, (
         _ratio(row.seconds("default"), row.seconds("storm_prism")),
@@ -656,11 +671,13 @@ def machine_text(load_note: str, details: Sequence[str] | None = None) -> str:
 
 
 def _commit() -> str:
-    """The checkout's commit (and ``+changes`` if its tracked files differ from it)."""
+    """The checkout's commit (and ``+changes`` if its tracked files other than the
+    results being written differ from it)."""
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
                               capture_output=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                ".", ":(exclude)experiments/results"],
                                cwd=ROOT, text=True, capture_output=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
