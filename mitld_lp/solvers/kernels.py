@@ -72,10 +72,10 @@ def _build() -> Any:
 
 
 class Prepared:
-    """A block's matrix split for the sweeps: the off-diagonal part and each choice's
-    ``1 - self-loop``."""
+    """A block's matrix prepared for the sweeps: each choice's ``1 - self-loop`` and,
+    for the NumPy sweeps, the matrix without its diagonal."""
 
-    __slots__ = ("inner", "off", "leave", "starts", "groups", "_typed")
+    __slots__ = ("inner", "leave", "starts", "groups", "_diag", "_off")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -87,18 +87,19 @@ class Prepared:
         diag = inner.indices == owner[row]
         self_loop = np.bincount(row[diag], weights=inner.data[diag], minlength=n_choices)
         self.leave = 1.0 - self_loop
-        data = inner.data.copy()
-        data[diag] = 0.0
-        self.off = sp.csr_array((data, inner.indices, inner.indptr), shape=inner.shape)
-        self._typed: tuple[np.ndarray, ...] | None = None
+        self._diag = np.flatnonzero(diag)
+        self._off: sp.csr_array | None = None
 
-    def typed(self) -> tuple[np.ndarray, ...]:
-        """The matrix's arrays in the kernel's types (one compiled signature)."""
-        if self._typed is None:
-            self._typed = (self.inner.indptr.astype(np.int64, copy=False),
-                           self.inner.indices.astype(np.int64, copy=False),
-                           np.ascontiguousarray(self.inner.data, dtype=np.float64))
-        return self._typed
+    @property
+    def off(self) -> sp.csr_array:
+        """The matrix without its diagonal entries (made for the NumPy sweeps only: the
+        compiled kernel skips them in place)."""
+        if self._off is None:
+            data = self.inner.data.copy()
+            data[self._diag] = 0.0
+            self._off = sp.csr_array((data, self.inner.indices, self.inner.indptr),
+                                     shape=self.inner.shape)
+        return self._off
 
 
 def numpy_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: float,
@@ -129,8 +130,8 @@ def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: f
     gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
     if gap < tol or max_sweeps <= 0:
         return 0, gap
-    indptr, indices, data = prep.typed()
-    done, gap = kernel(indptr, indices, data, prep.groups, prep.leave,
+    inner = prep.inner  # its own index type: no int64 copy of the block
+    done, gap = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
                        np.ascontiguousarray(exits, dtype=np.float64), local,
                        int(max_sweeps), float(tol))
     return int(done), float(gap)
