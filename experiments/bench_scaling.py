@@ -6,6 +6,11 @@ Two families of instances, on the same model per instance:
   geometric buses, the task
   ``(D[geometric(0.8)] b1 & F(b1 & F[0,d] A)) | (D[geometric(0.3)] b2 & F(b2 & F[0,d] B))``
   with the stations at the 4x4 layout scaled: ``A = (n//4, n//2)``, ``B = (3n//4, 0)``;
+* ``bus_scaled`` -- the same task with both hazards scaled by ``4/n`` (the buses come
+  later as the grid grows, so the robot still has time to get there) and ``B`` at
+  ``(n - 1, 0)``: its optimum stays near 0.25 from ``n = 16`` to ``128``, where the
+  ``bus`` family's collapses to 1e-9 and below (a degenerate benchmark); ``n = 4`` is the
+  case study itself;
 * ``events`` -- no event memoryless: three sites in the far corners of an ``n x n``
   grid, one event each (a pmf on steps 1-4, ``1 + Poisson(n)``, a discretised
   ``Weibull(2, n)``), task: reach the site of some event within ``d`` steps of it;
@@ -41,7 +46,9 @@ solved faster).  The routes:
 Every value is the optimum at the initial state (lower model); ``max_diff`` is the
 largest difference between the routes that returned one.  Printed per row: the ratios
 ``default / storm_prism`` (whole runs), ``default / storm_drn check`` and
-``ii / storm_drn check``.  Written: ``scaling.csv``, ``scaling_machine.txt`` (cpu,
+``ii / storm_drn check``, none for an instance whose optimum is below 1e-3 or above
+1 - 1e-3 (degenerate: the plain ``bus`` family's from n = 32 on; use ``bus_scaled``).
+Written: ``scaling.csv``, ``scaling_machine.txt`` (cpu,
 cores, RAM, versions, date, load) and ``scaling.png`` (log-log seconds against states).
 
 The committed first run (moderate budgets) was::
@@ -125,7 +132,7 @@ SETUP_SLACK = 600.0  # seconds a child may spend importing and loading before it
 class Instance:
     """One benchmark instance: a family, a grid size ``n`` and a deadline ``d``."""
 
-    family: str  # "bus" or "events"
+    family: str  # "bus", "bus_scaled" or "events"
     n: int
     d: int
 
@@ -143,11 +150,26 @@ class Instance:
         if self.family == "bus":
             # the 4x4 layout A = (1, 2), B = (3, 0), scaled
             return {"A": (n // 4, n // 2), "B": (3 * n // 4, 0)}
+        if self.family == "bus_scaled":
+            return {"A": (n // 4, n // 2), "B": (n - 1, 0)}
         return {"S1": (0, n - 1), "S2": (n - 1, n - 1), "S3": (n - 1, 0)}
 
+    @property
+    def is_bus(self) -> bool:
+        """A bus family (it has a PRISM encoding)."""
+        return self.family in ("bus", "bus_scaled")
+
+    @property
+    def hazards(self) -> tuple[float, float]:
+        """The two buses' per-step probabilities (``bus_scaled``: ``BUS_P * 4 / n``)."""
+        if self.family == "bus_scaled":
+            return tuple(round(p * 4.0 / self.n, 12) for p in BUS_P)  # type: ignore[return-value]
+        return BUS_P
+
     def spec(self) -> str:
-        if self.family == "bus":
-            return BUS_SPEC.format(p1=BUS_P[0], p2=BUS_P[1], d=self.d)
+        if self.is_bus:
+            p1, p2 = self.hazards
+            return BUS_SPEC.format(p1=repr(p1), p2=repr(p2), d=self.d)
         return EVENTS_SPEC.format(lam=float(self.n), scale=float(self.n), d=self.d)
 
     def world(self) -> Any:
@@ -158,11 +180,12 @@ class Instance:
 
     def prism(self) -> str:
         """The PRISM encoding of a bus instance: the template with its constants set."""
-        if self.family != "bus":
+        if not self.is_bus:
             raise ValueError(f"{self.name}: only the bus family has a PRISM encoding")
         (ax, ay), (bx, by) = self.stations["A"], self.stations["B"]
+        p1, p2 = self.hazards
         consts: dict[str, object] = dict(N=self.n, X0=0, Y0=0, AX=ax, AY=ay, BX=bx, BY=by,
-                                         D=self.d, P1=BUS_P[0], P2=BUS_P[1], SLIP=SLIP)
+                                         D=self.d, P1=repr(p1), P2=repr(p2), SLIP=SLIP)
         text = PRISM_TEMPLATE.read_text(encoding="utf-8")
         for key, value in consts.items():
             text, found = re.subn(rf"^const (int|double) {key};",
@@ -472,9 +495,22 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 RATIO_KEYS = ("default/storm_prism", "default/storm_check", "ii/storm_check")
 
 
+DEGENERATE = 1e-3
+"""An optimum below this (or above 1 - this) leaves a solver almost nothing to do: such
+an instance is reported, never in a ratio."""
+
+
+def degenerate(row: Row) -> bool:
+    """Whether the instance's optimum (the largest value any route found) is degenerate."""
+    values = row.values()
+    return bool(values) and not DEGENERATE <= max(values) <= 1.0 - DEGENERATE
+
+
 def ratios(row: Row) -> dict[str, float | None]:
     """The speed ratios printed per row (keys: ``RATIO_KEYS``); None where a side is
-    missing."""
+    missing or the optimum is degenerate (:func:`degenerate`)."""
+    if degenerate(row):
+        return dict.fromkeys(RATIO_KEYS)
     check = row.seconds("storm_drn", "check_s")
     return dict(zip(RATIO_KEYS, (
         _ratio(row.seconds("default"), row.seconds("storm_prism")),
@@ -510,7 +546,7 @@ def run_instance(inst: Instance, budget: float, mem_budget_mb: float | None,
     runs["build"] = build
     states = build.extra.get("states")
     for route in SOLVE_ROUTES:
-        if route == "storm_prism" and inst.family != "bus":
+        if route == "storm_prism" and not inst.is_bus:
             runs[route] = RouteRun("n/a", note="no PRISM encoding of this family")
             continue
         if states is None and route != "storm_prism":
@@ -583,7 +619,9 @@ def _num(x: Any, spec: str) -> object:
     return x
 
 
-def machine_text(load_note: str) -> str:
+def machine_text(load_note: str, details: Sequence[str] | None = None) -> str:
+    """The machine, the versions, the load and the code; ``details`` (how the figures
+    were taken) replaces this script's own lines."""
     import importlib.metadata as md
 
     def version(pkg: str) -> str:
@@ -615,9 +653,14 @@ def machine_text(load_note: str) -> str:
         f"os: {platform.platform()}",
         f"python: {platform.python_version()}",
         *[f"{p}: {version(p)}" for p in ("numpy", "scipy", "cvxpy", "clarabel", "highspy",
-                                         "stormpy", "mitld_lp")],
+                                         "numba", "stormpy", "mitld_lp")],
         f"load average at the end (1, 5, 15 min): {load}",
         f"note: {load_note}",
+        f"code: {_commit()}",
+    ]
+    if details is not None:
+        return "\n".join([*lines, *details]) + "\n"
+    lines += [
         "storm: sound value iteration, precision 1e-9 absolute, on our DRN and on "
         "experiments/prism/bus.prism",
         "times: seconds inside the child process after its imports and model loading; "
@@ -625,6 +668,20 @@ def machine_text(load_note: str) -> str:
         "*_mb: the child's peak resident memory (ru_maxrss, includes the interpreter)",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _commit() -> str:
+    """The checkout's commit (and ``+changes`` if its tracked files other than the
+    results being written differ from it)."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
+                              capture_output=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                ".", ":(exclude)experiments/results"],
+                               cwd=ROOT, text=True, capture_output=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + (" +changes" if dirty else "")
 
 
 def plot(rows: Sequence[Row], path: Path) -> Path:

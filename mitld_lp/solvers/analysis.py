@@ -17,7 +17,7 @@ analysis serves both:
   lies inside one component.  They are the lower model's end components too: an end
   component's states reach the same states, so it lies either wholly among the lower
   model's maybe states or wholly outside them;
-* one **quotient** (:class:`~mitld_lp.solvers.quotient.Quotient`): the upper model's
+* one **quotient** (:class:`~mitld_lp.solvers.reduced.Quotient`): the upper model's
   maybe states with those end components collapsed, and its matrix, shared by the two
   models, which differ only in the one-step probability of reaching their target.  A
   state of the lower model that can reach a truncated state but not the goal is kept
@@ -29,80 +29,31 @@ and never decompose the graph again.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
-from mitld_lp.arrays import unique
 from mitld_lp.mdp import MDP, as_state_mask
-from mitld_lp.solvers.quotient import EndComponents, Quotient, maximal_end_components
+from mitld_lp.solvers.graph import (
+    Blocks,
+    EndComponents,
+    blocks_from,
+    gather_ranges,
+    graph_view,
+    levels,
+    maximal_end_components,
+)
+from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.topological import Blocks, blocks_from, gather_ranges, graph_view
 
 __all__ = ["analyse"]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class _Levels:
-    """Components of the state graph, their levels and which targets they can reach."""
-
-    component: np.ndarray  # (n,) the component of each state
-    level: np.ndarray  # (n_components,)
-    reach: np.ndarray  # (n_components, k) bool: can reach target set j
-
-
-def _levels(graph: sp.csr_array, seeds: np.ndarray) -> _Levels:
-    """The strongly connected components of ``graph``, their levels (Kahn's algorithm
-    run backwards: sinks are level 0, a component's level is one more than its highest
-    successor's) and, propagated up the same walk, which components can reach a state
-    of each seed set (``seeds``: ``(n, k)`` bool)."""
-    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
-    # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
-    index = graph.indices.dtype
-    small = np.asarray(comp, dtype=index)
-    comp = np.asarray(comp, dtype=np.int64)
-    owner = np.repeat(np.arange(graph.shape[0], dtype=index), np.diff(graph.indptr))
-    up, down = small[owner], small[graph.indices]
-    del owner, small
-    cross = up != down
-    up, down = up[cross], down[cross]
-    del cross
-    out_degree = np.bincount(up, minlength=n_comp)
-    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
-    # the duplicates: its data are the multiplicities the out-degrees counted)
-    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
-                            shape=(n_comp, n_comp))
-    del up, down
-    pred_ptr, preds, times = preds_of.indptr, preds_of.indices, preds_of.data
-    k = seeds.shape[1]
-    reach = np.zeros((n_comp, k), dtype=bool)
-    for j in range(k):
-        reach[comp[seeds[:, j]], j] = True
-    level = np.full(n_comp, -1, dtype=np.int64)
-    frontier = np.flatnonzero(out_degree == 0)
-    depth = 0
-    while frontier.size:
-        level[frontier] = depth
-        lo, hi = pred_ptr[frontier], pred_ptr[frontier + 1]
-        at = gather_ranges(lo, hi)
-        above = np.asarray(preds[at], dtype=np.int64)
-        below = np.repeat(frontier, hi - lo)
-        for j in range(k):  # the frontier's reach is final: its successors are done
-            reach[above[reach[below, j]], j] = True
-        np.subtract.at(out_degree, above, times[at])
-        frontier = unique(above[out_degree[above] == 0])
-        depth += 1
-    if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
-        raise AssertionError("the component graph has a cycle")
-    return _Levels(comp, level, reach)
 
 
 def _end_components(mdp: MDP, comp: np.ndarray,
                     maybe: np.ndarray) -> EndComponents:
     """The maximal end components of the ``maybe`` states (module docs): searched by
-    :func:`~mitld_lp.solvers.quotient.maximal_end_components` on the sub-MDP of the
+    :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
     candidates, with one extra absorbing state standing for everything else."""
     n = mdp.n_states
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
@@ -168,10 +119,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
         mdp = replace(mdp, matrix=m)
     wide = goal | extra
     graph = graph_view(m, mdp.row_groups)
-    levels = _levels(graph, np.column_stack([goal, wide]))
-    reach = levels.reach[levels.component]
+    found = levels(graph, np.column_stack([goal, wide]))
+    reach = found.reach[found.component]
     maybe = reach[:, 1] & ~wide
-    mecs = _end_components(mdp, levels.component, maybe)
+    mecs = _end_components(mdp, found.component, maybe)
     del graph
 
     n = mdp.n_states
@@ -216,9 +167,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     matrix.eliminate_zeros()
 
     comp_of = np.zeros(n_red, dtype=np.int64)
-    comp_of[state_map[maybe]] = levels.component[maybe]
-    order = _order(matrix, row_groups, comp_of, levels.level)
-    layers = (read_only(levels.component), read_only(levels.level))
+    comp_of[state_map[maybe]] = found.component[maybe]
+    order = _order(matrix, row_groups, comp_of, found.level)
+    layers = (read_only(found.component), read_only(found.level))
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:

@@ -49,22 +49,20 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.progress import Bar
 from mitld_lp.progress import bar as progress_bar
-from mitld_lp.solvers.quotient import (
-    Quotient,
-    backward_reachable,
-    greedy_choices,
-    lift_policy,
-    quotient_for,
-    segmented_argmax,
-)
+from mitld_lp.solvers.graph import backward_reachable, segmented_argmax
+from mitld_lp.solvers.kernels import Prepared, compiled_sweeps, numpy_sweeps, use_compiled
+from mitld_lp.solvers.quotient import lift_policy, quotient_for
+from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
+    Factors,
     blocks,
     improve_policy,
     single_scores,
     solve_chain,
     state_graph,
+    transient_solve,
 )
 
 __all__ = ["interval_iteration", "interval_iterations", "evaluate_policy"]
@@ -76,6 +74,10 @@ _PROGRESS_MIN_STATES = 10_000
 
 _SWEEPS_BEFORE_POLICY = 100
 """Sweeps of a component before it is jumped by policy evaluation (module docs)."""
+_COMPILED_SWEEPS_BEFORE_POLICY = 1000
+"""The same for the compiled Gauss--Seidel sweeps: a sweep costs a few microseconds
+per thousand transitions there, so a thousand cost about what the jump's factorisations
+do on the bus blocks (where 200 close the gap)."""
 
 
 
@@ -87,6 +89,17 @@ class _Budget:
     deadline: float
     iterations: int = 0
     stopped: Status | None = field(default=None)
+
+    def take(self, wanted: int) -> int:
+        """Up to ``wanted`` sweeps granted at once (counted when :meth:`spent`); 0 (and
+        the reason in ``stopped``) once out of budget."""
+        if self.iterations >= self.max_iterations:
+            self.stopped = Status.MAX_ITERATIONS
+            return 0
+        if time.perf_counter() >= self.deadline:
+            self.stopped = Status.TIME_LIMIT
+            return 0
+        return min(wanted, self.max_iterations - self.iterations)
 
     def spend(self) -> bool:
         """Count one sweep; ``False`` (and the reason in ``stopped``) once out of budget."""
@@ -129,6 +142,36 @@ def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
         bounds[block.states] = local
 
 
+_CHUNK = 16
+"""Sweeps of a block between two looks at the budget and the clock."""
+
+
+def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.ndarray,
+                  tol: float, budget: _Budget, bar: Bar, compiled: bool,
+                  limit: int | None = None) -> bool:
+    """Sweep the block's bounds in place (``bounds[block.states]``, a lower and an upper
+    column per model; :mod:`mitld_lp.solvers.kernels`: each self-loop solved exactly,
+    Gauss--Seidel if ``compiled``, else Jacobi) until every model's gap on the block is
+    below ``tol``; ``False`` if the budget or ``limit`` sweeps ran out first."""
+    run = compiled_sweeps if compiled else numpy_sweeps
+    local = bounds[block.states]
+    done = 0
+    try:
+        while True:
+            wanted = _CHUNK if limit is None else min(_CHUNK, limit - done)
+            granted = budget.take(wanted) if wanted > 0 else 0
+            swept, gap = run(prep, exits, local, tol, granted)
+            budget.iterations += swept
+            done += swept
+            bar.update(swept)
+            if gap < tol:
+                return True
+            if granted == 0:
+                return False
+    finally:
+        bounds[block.states] = local
+
+
 def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     """Try the verified policy jump of the module docs on ``block``; update ``lo`` and
     ``hi`` where it proves better bounds.  ``True`` if both bounds were proven."""
@@ -136,17 +179,19 @@ def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     groups = np.append(block.starts, block.choices.shape[0])
     local = np.column_stack([lo[block.states], hi[block.states]])
     start = segmented_argmax(exit2[:, 0] + block.inner @ local[:, 0], groups)
-    chosen, v, t = improve_policy(block, exit2[:, 0], start)
+    factors = Factors()  # the three policy iterations below share their factorisations
+    chosen, v, t = improve_policy(block, exit2[:, 0], start, factors=factors)
     eps = (tol / 4.0) / float(np.max(t))
     lower = v - eps * t
     inner_ld = block.inner.astype(np.longdouble)
     lower_ok = bool(np.all(exit2[chosen, 0] + (inner_ld @ lower)[chosen] >= lower))
-    chosen_hi, w, _ = improve_policy(block, exit2[:, 1], chosen)
+    chosen_hi, w, _ = improve_policy(block, exit2[:, 1], chosen, factors=factors)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: t_hi = 1 + max over choices within tol/4 of optimal of P t_hi.
     owner_w = np.repeat(w, np.diff(groups))
     tied = (owner_w - (exit2[:, 1] + inner_ld @ w)) < tol / 4.0
-    _, t_hi, _ = improve_policy(block, np.ones(block.choices.shape[0]), chosen_hi, tied)
+    _, t_hi, _ = improve_policy(block, np.ones(block.choices.shape[0]), chosen_hi, tied,
+                                factors=factors)
     eps_hi = (tol / 4.0) / float(np.max(t_hi))
     upper = w + eps_hi * t_hi
     image = exit2[:, 1] + inner_ld @ upper
@@ -177,12 +222,12 @@ def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
-                 budget: _Budget, bar: Bar, *, from_initial: bool) -> None:
+                 budget: _Budget, bar: Bar, *, from_initial: bool, compiled: bool) -> None:
     """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
     one-step target probabilities) level by level (module docs); stops early out of
     budget.  ``from_initial``: only the states the initial state can reach (their
     successors are reachable too, so nothing they need is skipped); the others keep
-    ``[0, 1]``."""
+    ``[0, 1]``.  ``compiled``: the blocks are swept by the compiled kernel."""
     blk = blocks(q)
     skip = None
     if from_initial:
@@ -197,7 +242,9 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             continue
         block = Block.of(q, rest)
         exits = rewards[block.choices] + block.outer @ bounds
-        if _sweeps(block, exits, bounds, tol, budget, "max", -1, bar, _SWEEPS_BEFORE_POLICY):
+        prep = Prepared(block.inner, block.groups)
+        if _block_sweeps(block, prep, exits, bounds, tol, budget, bar, compiled,
+                         _COMPILED_SWEEPS_BEFORE_POLICY if compiled else _SWEEPS_BEFORE_POLICY):
             continue
         if budget.stopped is None:
             proven = True
@@ -208,7 +255,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             spread = bounds[rest][:, 1::2] - bounds[rest][:, 0::2]
             if proven and float(np.max(spread)) < tol:
                 continue
-        if not _sweeps(block, exits, bounds, tol, budget, "max", -1, bar):
+        if not _block_sweeps(block, prep, exits, bounds, tol, budget, bar, compiled):
             return
 
 
@@ -223,6 +270,7 @@ def interval_iteration(
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
+    compiled: bool | None = None,
 ) -> IterationResult:
     """Sound bounds ``lower <= Pmax(F target) <= upper`` on every state.
 
@@ -237,11 +285,14 @@ def interval_iteration(
     reaching ``time_limit`` seconds ``TIME_LIMIT``, both with the bracket so far
     (``[0, 1]`` where nothing was done).
     ``quotient``: ``reduce(mdp, target)`` if the caller already has it.
+    ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
+    (:mod:`mitld_lp.solvers.kernels`); None (default) uses it on a quotient of at least
+    ``kernels.COMPILED_MIN_ENTRIES`` transitions when numba is installed, ``False`` never.
     """
     q = quotient_for(mdp, target, quotient)
     (result,) = interval_iterations(mdp, [q], tol=tol, max_iterations=max_iterations,
                                     progress=progress, gap=gap, topological=topological,
-                                    time_limit=time_limit)
+                                    time_limit=time_limit, compiled=compiled)
     return result
 
 
@@ -255,6 +306,7 @@ def interval_iterations(
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
+    compiled: bool | None = None,
 ) -> list[IterationResult]:
     """:func:`interval_iteration` of several models in one pass: ``quotients`` share
     their matrix and block order (both truncation models of a product, from
@@ -282,7 +334,9 @@ def interval_iterations(
         if n and not decided:
             if topological:
                 _topological(q, rewards, bounds, tol, budget, bar,
-                             from_initial=gap == "initial")
+                             from_initial=gap == "initial",
+                             compiled=use_compiled(q.matrix.nnz) if compiled is None
+                             else compiled)
             else:
                 whole = Block.of(q, np.arange(n))
                 _sweeps(whole, rewards[whole.choices] + whole.outer @ bounds, bounds, tol,
@@ -414,12 +468,13 @@ def _solve_transient(
     """Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``): by
     components in topological order (``"auto"``,
     :func:`mitld_lp.solvers.topological.solve_chain`), one sparse LU of ``I - Q``
-    (``"direct"``) or BiCGSTAB to a residual of 1e-12 (``"iterative"``)."""
+    (``"direct"``, :func:`mitld_lp.solvers.topological.transient_solve`) or BiCGSTAB
+    to a residual of 1e-12 (``"iterative"``)."""
     if method == "auto":
         return solve_chain(chain, b, layers)
-    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     if method == "direct":
-        return np.asarray(spla.spsolve(a, b), dtype=np.float64).ravel()
+        return transient_solve(chain, b)
+    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)
     x = np.asarray(x, dtype=np.float64).ravel()
     residual = float(np.max(np.abs(a @ x - b), initial=0.0))

@@ -57,23 +57,17 @@ import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers.graph import Blocks, gather_ranges, segmented_argmax
 from mitld_lp.solvers.lp_backends import Matrices, Raw, Settings, solve_one, unusable_reason
-from mitld_lp.solvers.quotient import (
-    Quotient,
-    greedy_choices,
-    lift_policy,
-    quotient_for,
-    segmented_argmax,
-)
+from mitld_lp.solvers.quotient import lift_policy, quotient_for
+from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import LPResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
-    Blocks,
     blocks,
-    chain_lu,
-    gather_ranges,
     improve_policy,
     solve_single_states,
+    transient_solve,
 )
 
 __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
@@ -203,8 +197,7 @@ def _policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -
                                           np.arange(sub.shape[0]))),
                                shape=(block.size, sub.shape[0]))
             moves = sp.csc_array((mix @ sub[:, block]).T)
-            a = sp.csc_array(sp.eye_array(block.size, format="csc") - moves)
-            x[block] = chain_lu(a).solve(x[block])
+            x[block] = transient_solve(moves, x[block])
         # Push the flow out of this level (its own columns were solved above).
         y = w * x[states[owner_local]]
         coo = rows.tocoo()

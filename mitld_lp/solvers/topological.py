@@ -24,18 +24,22 @@ interval iteration, per level).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse import csgraph
 
-from mitld_lp.arrays import unique
-from mitld_lp.solvers.quotient import Quotient, segmented_argmax
-from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.graph import (
+    Blocks,
+    Level,
+    blocks_from,
+    gather_ranges,
+    graph_blocks,
+    graph_view,
+    segmented_argmax,
+)
+from mitld_lp.solvers.reduced import Quotient
 
 __all__ = [
     "Block",
@@ -44,10 +48,12 @@ __all__ = [
     "LevelUpdate",
     "blocks",
     "blocks_from",
+    "Factors",
     "evaluate_chain",
     "gather_ranges",
     "graph_blocks",
     "solve_chain",
+    "transient_solve",
     "improve_policy",
     "single_scores",
     "solve_single_states",
@@ -55,92 +61,6 @@ __all__ = [
 
 POLICY_ROUNDS = 50
 """At most this many policy improvements per :func:`improve_policy` call."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Blocks:
-    """The SCCs of a quotient's state graph, grouped by level (see the module docs).
-
-    Attributes:
-        component: ``(n_reduced_states,)`` the SCC of each reduced state.
-        level: ``(n_components,)`` the level of each SCC (0: no successor SCC).
-        size: ``(n_components,)`` the number of states of each SCC.
-        by_level: reduced states sorted by the level of their SCC (stable).
-        level_starts: ``(n_levels + 1,)`` the states of level ``k`` are
-            ``by_level[level_starts[k]:level_starts[k+1]]``.
-        self_loop: ``(n_reduced_choices,)`` ``P_hat(c, owner(c))``, the probability
-            that a choice stays where it is.
-    """
-
-    component: np.ndarray
-    level: np.ndarray
-    size: np.ndarray
-    by_level: np.ndarray
-    level_starts: np.ndarray
-    self_loop: np.ndarray
-
-    @property
-    def n_levels(self) -> int:
-        return int(self.level_starts.shape[0] - 1)
-
-    @property
-    def n_components(self) -> int:
-        return int(self.size.shape[0])
-
-    def states_at(self, level: int) -> np.ndarray:
-        return self.by_level[self.level_starts[level] : self.level_starts[level + 1]]
-
-    def single(self, states: np.ndarray) -> np.ndarray:
-        """Which of ``states`` form a component of their own."""
-        return self.size[self.component[states]] == 1
-
-    def walk(self, *, skip: np.ndarray | None = None,
-             upstream_first: bool = False) -> Iterator[Level]:
-        """The one level loop every solver runs: the levels downstream first (values
-        need what they lead to), or upstream first (flows need what leads to them), each
-        with its states (less the ``skip`` ones) split into single states and the states
-        of non-trivial components, which the solvers take as one block."""
-        order = range(self.n_levels - 1, -1, -1) if upstream_first else range(self.n_levels)
-        for level in order:
-            states = self.states_at(level)
-            if skip is not None:
-                states = states[~skip[states]]
-            one = self.single(states)
-            yield Level(level, states, states[one], states[~one])
-
-
-class Level(NamedTuple):
-    """One level of a :meth:`Blocks.walk`: its ``states``, of which ``single`` form a
-    component of their own and ``rest`` lie in non-trivial components."""
-
-    index: int
-    states: np.ndarray
-    single: np.ndarray
-    rest: np.ndarray
-
-
-def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised."""
-    starts = np.asarray(starts, dtype=np.int64)
-    counts = np.asarray(stops, dtype=np.int64) - starts
-    total = int(counts.sum())
-    offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
-    return offsets + np.arange(total, dtype=np.int64)
-
-
-def graph_view(matrix: sp.csr_array, row_groups: np.ndarray) -> sp.csr_array:
-    """``(n, n)`` bool: ``s -> s'`` iff a choice of ``s`` has an entry for ``s'`` (a
-    state's choices are consecutive rows, so its successors are a slice of the matrix's
-    column indices); an entry of probability 0 is an edge too, so it must not be stored.
-    The duplicates (several choices to one successor, often two thirds of the entries)
-    are merged: scipy's strongly connected components did not finish on a graph with
-    them (scipy 1.17, 1e4 states)."""
-    n = row_groups.shape[0] - 1
-    index = np.int32 if max(n, matrix.nnz) < 2**31 else np.int64
-    graph = sp.csr_array((np.ones(matrix.nnz, dtype=bool), matrix.indices.astype(index),
-                          np.asarray(matrix.indptr[row_groups], dtype=index)), shape=(n, n))
-    graph.sum_duplicates()
-    return graph
 
 
 def state_graph(q: Quotient) -> sp.csr_array:
@@ -153,74 +73,6 @@ def blocks(q: Quotient) -> Blocks:
     """The SCCs of ``q``'s state graph and their levels: the order the analysis that
     made ``q`` found (:mod:`mitld_lp.solvers.analysis`), not computed again."""
     return q.order
-
-
-def blocks_from(component: np.ndarray, level_of: np.ndarray, self_loop: np.ndarray,
-                ) -> Blocks:
-    """The :class:`Blocks` of states whose components (``component``, ids of a larger
-    graph's) and levels (``level_of[component]``) are known: ids and levels renumbered
-    densely, the order kept.  A layering of a graph is one of every subgraph (an edge
-    between components goes down there too), so a decomposition found once serves
-    every chain of every policy on it."""
-    ids = unique(component)
-    dense = np.searchsorted(ids, component)
-    raw = np.asarray(level_of)[ids]
-    used = unique(raw)
-    level = np.searchsorted(used, raw)
-    state_level = level[dense]
-    by_level = np.argsort(state_level, kind="stable")
-    level_starts = np.searchsorted(state_level[by_level], np.arange(used.size + 1))
-    return Blocks(
-        component=read_only(dense),
-        level=read_only(level),
-        size=read_only(np.bincount(dense, minlength=ids.size)),
-        by_level=read_only(by_level),
-        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
-        self_loop=read_only(np.asarray(self_loop, dtype=np.float64)),
-    )
-
-
-def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
-    """The SCCs of ``graph`` (``scipy.sparse.csgraph``, strong connection) and their
-    levels; ``self_loop`` is stored as given.
-
-    Levels by Kahn's algorithm on the graph of components, run backwards: the
-    components with no successor are level 0; removing a level frees the components
-    whose last successor it held.  Each round touches only the predecessors of the
-    current level, so the whole is linear in the number of edges.
-    """
-    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
-    comp = np.asarray(comp, dtype=np.int64)
-    coo = graph.tocoo()
-    src, dst = comp[coo.row], comp[coo.col]
-    cross = src != dst
-    pairs = unique(src[cross] * n_comp + dst[cross])
-    up, down = pairs // n_comp, pairs % n_comp  # edge up -> down between components
-    out_degree = np.bincount(up, minlength=n_comp)
-    order = np.argsort(down, kind="stable")
-    pred_ptr = np.concatenate([[0], np.cumsum(np.bincount(down, minlength=n_comp))])
-    preds = up[order]
-    level = np.full(n_comp, -1, dtype=np.int64)
-    frontier = np.flatnonzero(out_degree == 0)
-    k = 0
-    while frontier.size:
-        level[frontier] = k
-        above = preds[gather_ranges(pred_ptr[frontier], pred_ptr[frontier + 1])]
-        np.subtract.at(out_degree, above, 1)
-        frontier = unique(above[out_degree[above] == 0])
-        k += 1
-    if np.any(level < 0):  # pragma: no cover - the graph of SCCs is acyclic
-        raise AssertionError("the component graph has a cycle")
-    by_level = np.argsort(level[comp], kind="stable")
-    level_starts = np.searchsorted(level[comp][by_level], np.arange(k + 1))
-    return Blocks(
-        component=read_only(comp),
-        level=read_only(level),
-        size=read_only(np.bincount(comp, minlength=n_comp)),
-        by_level=read_only(by_level),
-        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
-        self_loop=read_only(self_loop),
-    )
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -325,27 +177,77 @@ def chain_lu(a: sp.csc_array) -> spla.SuperLU:
     return spla.splu(a, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
 
 
+@dataclass(slots=True, eq=False)
+class Factors:
+    """The last factorisation of a sequence of transient solves on one block (mutable:
+    :func:`transient_solve` reuses or replaces it): a chain equal to the factorised one
+    (``base``) is solved on its LU, refined exactly as a new one would be.  The policy
+    jump's three policy iterations end and start on the same policy, so two of their
+    evaluations need no factorisation.  ``reused`` / ``factorised`` count both.
+
+    (Reusing the LU of a chain that differs in a few rows, corrected by the
+    Sherman--Morrison--Woodbury formula, was measured on the bus blocks and dropped: a
+    changed row costs a pair of triangular solves, about 1/60 of a new LU at 32,768
+    states, and the rows changed in policy iteration's later rounds add up to about 60.)
+    """
+
+    lu: spla.SuperLU | None = None
+    base: sp.csr_array | None = None
+    reused: int = 0
+    factorised: int = 0
+
+
+def _same(a: sp.csr_array, b: sp.csr_array) -> bool:
+    return (a.shape == b.shape and a.nnz == b.nnz and np.array_equal(a.indptr, b.indptr)
+            and np.array_equal(a.indices, b.indices) and np.array_equal(a.data, b.data))
+
+
+def transient_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray, *,
+                    refine: int = 0, factors: Factors | None = None) -> np.ndarray:
+    """The one transient solve: ``x = rhs + Q x`` for a transient sub-stochastic ``Q``
+    (``chain``, square; a chain's rows, or a flow's transposed ones) by one sparse LU
+    of ``I - Q`` (:func:`chain_lu`).  ``rhs`` may have a column per right-hand side;
+    ``refine`` rounds of iterative refinement in extended precision return the answer
+    as ``longdouble`` (without, ``float64``).  ``factors``: the factorisation of the
+    previous chain, used if this chain is the same (:class:`Factors`), else replaced."""
+    k = chain.shape[0]
+    rhs = np.asarray(rhs, dtype=np.float64)
+    chain = sp.csr_array(chain)
+    if factors is not None and factors.lu is not None and factors.base is not None \
+            and _same(chain, factors.base):
+        lu = factors.lu
+        factors.reused += 1
+    else:
+        lu = chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+        if factors is not None:
+            factors.lu, factors.base = lu, chain
+            factors.factorised += 1
+    x = lu.solve(rhs)
+    if not refine:
+        return np.asarray(x, dtype=np.float64)
+    q_ld = chain.astype(np.longdouble)
+    x = x.astype(np.longdouble)
+    b_ld = rhs.astype(np.longdouble)
+    for _ in range(refine):
+        residual = b_ld + q_ld @ x - x
+        x += lu.solve(np.asarray(residual, dtype=np.float64))
+    return x
+
+
 def evaluate_chain(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
-              ) -> tuple[np.ndarray, np.ndarray]:
+                   factors: Factors | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Value ``v = r + M v`` and exit time ``t = 1 + M t`` of the chain of ``chosen``
-    rows, in extended precision (a float64 LU refined twice)."""
+    rows, in extended precision (one LU, refined twice: :func:`transient_solve`)."""
     k = chosen.shape[0]
-    m = sp.csr_array(inner[chosen])
-    a = sp.csc_array(sp.eye_array(k, format="csc") - m)
-    lu = chain_lu(a)
-    m_ld = m.astype(np.longdouble)
-    out = []
-    for rhs in (reward[chosen], np.ones(k)):
-        x = lu.solve(rhs).astype(np.longdouble)
-        for _ in range(2):
-            residual = rhs.astype(np.longdouble) + m_ld @ x - x
-            x += lu.solve(np.asarray(residual, dtype=np.float64))
-        out.append(x)
-    return out[0], out[1]
+    both = transient_solve(sp.csr_array(inner[chosen]),
+                           np.column_stack([reward[chosen], np.ones(k)]), refine=2,
+                           factors=factors)
+    return both[:, 0], both[:, 1]
 
 
 def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
-                   allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+                   allowed: np.ndarray | None = None, *,
+                   factors: Factors | None = None) -> tuple[np.ndarray, ...]:
     """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
     choice indices) to a fixpoint, over the ``allowed`` choices only if given.  Returns
     the policy, its values and its expected exit times (extended precision).
@@ -353,11 +255,13 @@ def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
     Scores are compared in extended precision, so that at the fixpoint no choice beats
     the policy by more than ~1e-17 of the values' scale (the verified bounds of interval
     iteration rely on that); a switch needs a gain above that, so rounding cannot make
-    it cycle."""
+    it cycle.  ``factors``: shared by the caller across calls on the same block, so
+    that a call starting where the last one ended reuses its factorisation."""
     groups = block.groups
     inner = block.inner.astype(np.longdouble)
+    factors = Factors() if factors is None else factors
     for _ in range(POLICY_ROUNDS):
-        v, t = evaluate_chain(block.inner, chosen, reward)
+        v, t = evaluate_chain(block.inner, chosen, reward, factors)
         score = reward + inner @ v
         if allowed is not None:
             score = np.where(allowed, score, -np.inf)
@@ -375,8 +279,9 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
     r"""Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``), level by
     level downstream first: a single state by :math:`x(s) = (b(s) + \sum_{s' \ne s}
     Q(s, s') x(s')) / (1 - Q(s, s))`, a non-trivial component by one sparse LU of its
-    own size.  No iterative method and no multi-threaded BLAS call, so a loaded machine
-    cannot make it crawl, and no fill-in across components.  ``layers``: the component
+    own size (:func:`transient_solve`).  No iterative method and no multi-threaded
+    BLAS call, so a loaded machine cannot make it crawl, and no fill-in across
+    components.  ``layers``: the component
     of each state and the level of each component in a graph that contains the chain's
     (the analysis of its MDP, :func:`blocks_from`); else the chain is decomposed here.
     A level's states in non-trivial components are solved together by one LU."""
@@ -391,8 +296,5 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
         x[one] = (b[one] + chain[one] @ x) / (1.0 - blk.self_loop[one])
         if inner.size:
             rows = sp.csr_array(chain[inner])
-            rhs = b[inner] + rows @ x
-            sub = sp.csc_array(rows[:, inner])
-            a = sp.csc_array(sp.eye_array(inner.size, format="csc") - sub)
-            x[inner] = chain_lu(a).solve(rhs)
+            x[inner] = transient_solve(sp.csr_array(rows[:, inner]), b[inner] + rows @ x)
     return x

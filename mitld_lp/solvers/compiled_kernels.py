@@ -1,0 +1,90 @@
+"""The numba kernels of :mod:`mitld_lp.solvers.kernels` (imported only from there, and
+only for a product large enough to pay numba's import; compiled once, cached on disk).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["gauss_seidel"]
+
+
+@numba.njit(cache=True, nogil=True)
+def update(indptr, indices, data, starts, leave, exits, local, s, best,
+           acc):  # pragma: no cover - compiled
+    k = local.shape[1]
+    for j in range(k):
+        best[j] = -np.inf
+    for c in range(starts[s], starts[s + 1]):
+        for j in range(k):
+            acc[j] = exits[c, j]
+        for e in range(indptr[c], indptr[c + 1]):
+            t = indices[e]
+            if t != s:
+                w = data[e]
+                for j in range(k):
+                    acc[j] += w * local[t, j]
+        lv = leave[c]
+        for j in range(k):
+            val = acc[j] / lv if lv > 0.0 else 0.0
+            if val > best[j]:
+                best[j] = val
+    for j in range(k):
+        val = min(max(best[j], 0.0), 1.0)
+        if j % 2 == 0:
+            if val > local[s, j]:
+                local[s, j] = val
+        elif val < local[s, j]:
+            local[s, j] = val
+
+@numba.njit(cache=True, nogil=True)
+def update2(indptr, indices, data, starts, leave, exits, local,
+            s):  # pragma: no cover - compiled
+    lo_best = -np.inf
+    hi_best = -np.inf
+    for c in range(starts[s], starts[s + 1]):
+        lo = exits[c, 0]
+        hi = exits[c, 1]
+        for e in range(indptr[c], indptr[c + 1]):
+            t = indices[e]
+            if t != s:
+                w = data[e]
+                lo += w * local[t, 0]
+                hi += w * local[t, 1]
+        lv = leave[c]
+        if lv > 0.0:
+            lo /= lv
+            hi /= lv
+        else:
+            lo = 0.0
+            hi = 0.0
+        lo_best = max(lo_best, lo)
+        hi_best = max(hi_best, hi)
+    local[s, 0] = max(local[s, 0], min(max(lo_best, 0.0), 1.0))
+    local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
+
+@numba.njit(cache=True, nogil=True)
+def gauss_seidel(indptr, indices, data, starts, leave, exits, local,
+                 max_sweeps, tol):  # pragma: no cover - compiled
+    n, k = local.shape
+    best = np.empty(k)
+    acc = np.empty(k)
+    done = 0
+    gap = np.inf
+    while done < max_sweeps:
+        for s in range(n):
+            if k == 2:
+                update2(indptr, indices, data, starts, leave, exits, local, s)
+            else:
+                update(indptr, indices, data, starts, leave, exits, local, s, best, acc)
+        done += 1
+        gap = 0.0
+        for s in range(n):
+            for j in range(0, k, 2):
+                d = local[s, j + 1] - local[s, j]
+                if d > gap:
+                    gap = d
+        if gap < tol:
+            break
+    return done, gap

@@ -1,0 +1,341 @@
+r"""The support-graph routines every solver shares, below all of them.
+
+Edges of an MDP, backward reachability, maximal end components, the one strongly
+connected decomposition with its levels (:func:`levels`) and the block order the
+solvers walk (:class:`Blocks`).  All of them look only at which transitions have
+positive probability, so they are exact.  This module imports no other solver module:
+:mod:`~mitld_lp.solvers.analysis`, :mod:`~mitld_lp.solvers.quotient` and
+:mod:`~mitld_lp.solvers.topological` all build on it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from mitld_lp.arrays import unique
+from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.result import read_only
+
+__all__ = [
+    "Blocks",
+    "Edges",
+    "EndComponents",
+    "Level",
+    "Levels",
+    "backward_reachable",
+    "blocks_from",
+    "edges",
+    "gather_ranges",
+    "graph_blocks",
+    "graph_view",
+    "levels",
+    "maximal_end_components",
+    "segmented_argmax",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Edges:
+    """The positive entries of ``mdp.matrix`` as parallel arrays (one per transition)."""
+
+    choice: np.ndarray  # the choice (row) of the transition
+    source: np.ndarray  # the state owning that choice
+    succ: np.ndarray  # the successor state (column)
+    prob: np.ndarray  # the probability, > 0
+
+
+def edges(mdp: MDP) -> Edges:
+    coo = sp.coo_array(mdp.matrix)
+    keep = coo.data > 0
+    choice = np.asarray(coo.row[keep], dtype=np.int64)
+    succ = np.asarray(coo.col[keep], dtype=np.int64)
+    return Edges(choice, mdp.choice_state()[choice], succ, np.asarray(coo.data[keep]))
+
+
+def backward_reachable(
+    n: int, source: np.ndarray, succ: np.ndarray, seeds: np.ndarray
+) -> np.ndarray:
+    """States with a path (along the edges ``source -> succ``) to a ``seeds`` state.
+
+    One breadth-first search on the reversed graph from a virtual node ``n`` that points
+    at every seed; the seeds themselves are included.
+    """
+    seed_idx = np.flatnonzero(seeds)
+    if seed_idx.size == 0:
+        return np.zeros(n, dtype=bool)
+    index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes an edge if it can
+    rows = np.concatenate([succ, np.full(seed_idx.size, n)], dtype=index)
+    cols = np.concatenate([source, seed_idx], dtype=index)
+    graph = sp.csr_array(
+        (np.ones(rows.size, dtype=np.float64), (rows, cols)), shape=(n + 1, n + 1)
+    )
+    del rows, cols
+    order = csgraph.breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    reached = np.zeros(n + 1, dtype=bool)
+    reached[np.asarray(order)] = True
+    return reached[:n]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EndComponents:
+    """The maximal end components (MECs) of a sub-MDP.
+
+    Attributes:
+        mec_of: ``(n_states,)`` int64, the MEC of each state, ``-1`` if in none.
+        internal: ``(n_choices,)`` bool, the choices that belong to a MEC: their state is
+            in the MEC and their whole support lies in the same MEC.
+        n_mecs: the number of MECs (ids ``0 .. n_mecs - 1``).
+    """
+
+    mec_of: np.ndarray
+    internal: np.ndarray
+    n_mecs: int
+
+    def states_of(self, mec: int) -> np.ndarray:
+        """The states of MEC ``mec``."""
+        return np.flatnonzero(self.mec_of == mec)
+
+    def choices_of(self, mec: int, mdp: MDP) -> np.ndarray:
+        """The internal choices of MEC ``mec`` (those that stay in it with probability 1)."""
+        return np.flatnonzero(self.internal & (self.mec_of[mdp.choice_state()] == mec))
+
+
+def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
+    """The MECs of the sub-MDP induced by ``states_mask``.
+
+    An end component is a set ``C`` of states with, for each, a non-empty set of choices
+    whose support lies in ``C``, such that the graph of those choices is strongly
+    connected.  Algorithm (de Alfaro 1997; Baier & Katoen, Alg. 47): keep the choices
+    whose support lies in the current state set, drop the states left with no choice,
+    split into strongly connected components (SCCs) and drop every choice that can leave
+    its SCC; repeat until nothing changes.  What is left, grouped by SCC, are the MECs.
+    Each round is vectorised (one ``csgraph.connected_components`` call).
+    """
+    states_mask = as_state_mask(mdp, states_mask, "states_mask")
+    n = mdp.n_states
+    cstate = mdp.choice_state()
+    e = edges(mdp)
+    alive = states_mask.copy()
+    allowed = alive[cstate]
+    while True:
+        allowed &= alive[cstate]
+        allowed[e.choice[~alive[e.succ]]] = False
+        still = alive & (np.bincount(cstate[allowed], minlength=n) > 0)
+        keep = allowed[e.choice]
+        graph = sp.csr_matrix(
+            (np.ones(int(keep.sum())), (e.source[keep], e.succ[keep])), shape=(n, n)
+        )
+        _, scc = csgraph.connected_components(graph, directed=True, connection="strong")
+        cross = keep & (scc[e.source] != scc[e.succ])
+        if not cross.any() and np.array_equal(still, alive):
+            break
+        allowed[e.choice[cross]] = False
+        alive = still
+    mec_of = np.full(n, -1, dtype=np.int64)
+    if alive.any():
+        _, ids = np.unique(scc[alive], return_inverse=True)
+        mec_of[alive] = ids
+    n_mecs = int(mec_of.max()) + 1 if alive.any() else 0
+    return EndComponents(read_only(mec_of), read_only(allowed), n_mecs)
+
+
+def segmented_argmax(
+    values: np.ndarray, row_groups: np.ndarray, *, tie: float = 0.0,
+    prefer: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per group ``row_groups[i]:row_groups[i+1]`` (all non-empty), the index of the max.
+
+    Entries within ``tie`` of the group's maximum count as tied; among them the one with
+    the largest ``prefer`` wins, then the lowest index.  Fully vectorised.
+    """
+    starts = np.asarray(row_groups[:-1], dtype=np.int64)
+    counts = np.diff(row_groups)
+    best = np.maximum.reduceat(values, starts)
+    tied = values >= np.repeat(best, counts) - tie
+    if prefer is not None:
+        key = np.where(tied, prefer, -np.inf)
+        top = np.maximum.reduceat(key, starts)
+        tied &= key >= np.repeat(top, counts)
+    idx = np.where(tied, np.arange(values.shape[0]), np.iinfo(np.int64).max)
+    return np.minimum.reduceat(idx, starts)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Blocks:
+    """The SCCs of a quotient's state graph, grouped by level (see the module docs).
+
+    Attributes:
+        component: ``(n_reduced_states,)`` the SCC of each reduced state.
+        level: ``(n_components,)`` the level of each SCC (0: no successor SCC).
+        size: ``(n_components,)`` the number of states of each SCC.
+        by_level: reduced states sorted by the level of their SCC (stable).
+        level_starts: ``(n_levels + 1,)`` the states of level ``k`` are
+            ``by_level[level_starts[k]:level_starts[k+1]]``.
+        self_loop: ``(n_reduced_choices,)`` ``P_hat(c, owner(c))``, the probability
+            that a choice stays where it is.
+    """
+
+    component: np.ndarray
+    level: np.ndarray
+    size: np.ndarray
+    by_level: np.ndarray
+    level_starts: np.ndarray
+    self_loop: np.ndarray
+
+    @property
+    def n_levels(self) -> int:
+        return int(self.level_starts.shape[0] - 1)
+
+    @property
+    def n_components(self) -> int:
+        return int(self.size.shape[0])
+
+    def states_at(self, level: int) -> np.ndarray:
+        return self.by_level[self.level_starts[level] : self.level_starts[level + 1]]
+
+    def single(self, states: np.ndarray) -> np.ndarray:
+        """Which of ``states`` form a component of their own."""
+        return self.size[self.component[states]] == 1
+
+    def walk(self, *, skip: np.ndarray | None = None,
+             upstream_first: bool = False) -> Iterator[Level]:
+        """The one level loop every solver runs: the levels downstream first (values
+        need what they lead to), or upstream first (flows need what leads to them), each
+        with its states (less the ``skip`` ones) split into single states and the states
+        of non-trivial components, which the solvers take as one block."""
+        order = range(self.n_levels - 1, -1, -1) if upstream_first else range(self.n_levels)
+        for level in order:
+            states = self.states_at(level)
+            if skip is not None:
+                states = states[~skip[states]]
+            one = self.single(states)
+            yield Level(level, states, states[one], states[~one])
+
+
+class Level(NamedTuple):
+    """One level of a :meth:`Blocks.walk`: its ``states``, of which ``single`` form a
+    component of their own and ``rest`` lie in non-trivial components."""
+
+    index: int
+    states: np.ndarray
+    single: np.ndarray
+    rest: np.ndarray
+
+
+def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised."""
+    starts = np.asarray(starts, dtype=np.int64)
+    counts = np.asarray(stops, dtype=np.int64) - starts
+    total = int(counts.sum())
+    offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
+    return offsets + np.arange(total, dtype=np.int64)
+
+
+def graph_view(matrix: sp.csr_array, row_groups: np.ndarray) -> sp.csr_array:
+    """``(n, n)`` bool: ``s -> s'`` iff a choice of ``s`` has an entry for ``s'`` (a
+    state's choices are consecutive rows, so its successors are a slice of the matrix's
+    column indices); an entry of probability 0 is an edge too, so it must not be stored.
+    The duplicates (several choices to one successor, often two thirds of the entries)
+    are merged: scipy's strongly connected components did not finish on a graph with
+    them (scipy 1.17, 1e4 states)."""
+    n = row_groups.shape[0] - 1
+    index = np.int32 if max(n, matrix.nnz) < 2**31 else np.int64
+    graph = sp.csr_array((np.ones(matrix.nnz, dtype=bool), matrix.indices.astype(index),
+                          np.asarray(matrix.indptr[row_groups], dtype=index)), shape=(n, n))
+    graph.sum_duplicates()
+    return graph
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Levels:
+    """Components of the state graph, their levels and which targets they can reach."""
+
+    component: np.ndarray  # (n,) the component of each state
+    level: np.ndarray  # (n_components,)
+    reach: np.ndarray  # (n_components, k) bool: can reach target set j
+
+
+def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
+    """The strongly connected components of ``graph``, their levels (Kahn's algorithm
+    run backwards: sinks are level 0, a component's level is one more than its highest
+    successor's) and, propagated up the same walk, which components can reach a state
+    of each seed set (``seeds``: ``(n, k)`` bool)."""
+    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
+    # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
+    index = graph.indices.dtype
+    small = np.asarray(comp, dtype=index)
+    comp = np.asarray(comp, dtype=np.int64)
+    owner = np.repeat(np.arange(graph.shape[0], dtype=index), np.diff(graph.indptr))
+    up, down = small[owner], small[graph.indices]
+    del owner, small
+    cross = up != down
+    up, down = up[cross], down[cross]
+    del cross
+    out_degree = np.bincount(up, minlength=n_comp)
+    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
+    # the duplicates: its data are the multiplicities the out-degrees counted)
+    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
+                            shape=(n_comp, n_comp))
+    del up, down
+    pred_ptr, preds, times = preds_of.indptr, preds_of.indices, preds_of.data
+    if seeds is None:
+        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
+    k = seeds.shape[1]
+    reach = np.zeros((n_comp, k), dtype=bool)
+    for j in range(k):
+        reach[comp[seeds[:, j]], j] = True
+    level = np.full(n_comp, -1, dtype=np.int64)
+    frontier = np.flatnonzero(out_degree == 0)
+    depth = 0
+    while frontier.size:
+        level[frontier] = depth
+        lo, hi = pred_ptr[frontier], pred_ptr[frontier + 1]
+        at = gather_ranges(lo, hi)
+        above = np.asarray(preds[at], dtype=np.int64)
+        below = np.repeat(frontier, hi - lo)
+        for j in range(k):  # the frontier's reach is final: its successors are done
+            reach[above[reach[below, j]], j] = True
+        np.subtract.at(out_degree, above, times[at])
+        frontier = unique(above[out_degree[above] == 0])
+        depth += 1
+    if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
+        raise AssertionError("the component graph has a cycle")
+    return Levels(comp, level, reach)
+
+
+def blocks_from(component: np.ndarray, level_of: np.ndarray, self_loop: np.ndarray,
+                ) -> Blocks:
+    """The :class:`Blocks` of states whose components (``component``, ids of a larger
+    graph's) and levels (``level_of[component]``) are known: ids and levels renumbered
+    densely, the order kept.  A layering of a graph is one of every subgraph (an edge
+    between components goes down there too), so a decomposition found once serves
+    every chain of every policy on it."""
+    ids = unique(component)
+    dense = np.searchsorted(ids, component)
+    raw = np.asarray(level_of)[ids]
+    used = unique(raw)
+    level = np.searchsorted(used, raw)
+    state_level = level[dense]
+    by_level = np.argsort(state_level, kind="stable")
+    level_starts = np.searchsorted(state_level[by_level], np.arange(used.size + 1))
+    return Blocks(
+        component=read_only(dense),
+        level=read_only(level),
+        size=read_only(np.bincount(dense, minlength=ids.size)),
+        by_level=read_only(by_level),
+        level_starts=read_only(np.asarray(level_starts, dtype=np.int64)),
+        self_loop=read_only(np.asarray(self_loop, dtype=np.float64)),
+    )
+
+
+def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
+    """The SCCs of ``graph`` and their levels (:func:`levels`) as :class:`Blocks`;
+    ``self_loop`` is stored as given."""
+    found = levels(graph)
+    return blocks_from(found.component, found.level, self_loop)

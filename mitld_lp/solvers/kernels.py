@@ -1,0 +1,137 @@
+r"""Sweeps of a block's interval bounds: compiled (numba) for large products, NumPy else.
+
+A sweep updates a block's lower and upper bounds (a column each per model) by the
+Bellman operator with every choice's *self-loop solved exactly*, as a single state's
+is (:mod:`mitld_lp.solvers.topological`):
+
+.. math:: x(s) \leftarrow \max_c \frac{e(c) + \sum_{s' \ne s} P(c, s')\, x(s')}{1 - p(c)}
+
+with :math:`e(c)` the choice's exit reward and :math:`p(c) = P(c, s)` its self-loop.
+If :math:`x \le v^*` the right-hand side is :math:`\le v^*` too (for each choice,
+:math:`v^*(s)(1 - p(c)) \ge e(c) + \sum_{s' \ne s} P(c, s') v^*(s')`), and if
+:math:`x \ge v^*` it is :math:`\ge v^*` (take an optimal choice), so every update keeps a
+lower bound below and an upper bound above the optimum; a lower bound is only raised
+and an upper one only lowered.  A state that waits for an event (a self-loop of
+probability 0.98) is settled in one update instead of hundreds.
+
+* **NumPy** (:func:`numpy_sweeps`): Jacobi, every state from the previous sweep's
+  bounds, one sparse product per sweep for all columns.
+* **compiled** (:func:`compiled_sweeps`, numba): Gauss--Seidel, each state from the
+  bounds already updated in this sweep, in the block's own order (an order breadth
+  first from the exits took 10% fewer sweeps on the bus blocks and, jumping through
+  memory, 5x the time).  numba is imported only for a product of at least
+  :data:`COMPILED_MIN_ENTRIES` entries (its import and the cached kernels cost about
+  0.2-0.4 s of CPU, the first compilation on a machine a few seconds, cached after);
+  without numba the NumPy path runs.
+
+Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["COMPILED_MIN_ENTRIES", "compiled_kernel", "compiled_sweeps", "numpy_sweeps",
+           "use_compiled"]
+
+logger = logging.getLogger(__name__)
+
+COMPILED_MIN_ENTRIES = 1_000_000
+"""Quotient entries (transitions) from which the compiled sweeps are used."""
+
+_KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
+
+
+def use_compiled(entries: int) -> bool:
+    """Whether a product of ``entries`` transitions sweeps with the compiled kernel
+    (large enough to pay numba's import, and numba importable)."""
+    return entries >= COMPILED_MIN_ENTRIES and compiled_kernel() is not None
+
+
+def compiled_kernel() -> Any:
+    """The numba kernel (compiled on the first call, cached on disk), or None if numba
+    cannot be imported."""
+    global _KERNEL
+    if _KERNEL is None:
+        try:
+            _KERNEL = _build()
+        except ImportError:
+            logger.info("numba is not installed: the NumPy sweeps run")
+            _KERNEL = False
+    return _KERNEL or None
+
+
+def _build() -> Any:
+    from mitld_lp.solvers import compiled_kernels
+
+    return compiled_kernels.gauss_seidel
+
+
+class Prepared:
+    """A block's matrix prepared for the sweeps: each choice's ``1 - self-loop`` and,
+    for the NumPy sweeps, the matrix without its diagonal."""
+
+    __slots__ = ("inner", "leave", "starts", "groups", "_diag", "_off")
+
+    def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
+        self.inner = inner
+        self.groups = np.asarray(groups, dtype=np.int64)
+        self.starts = self.groups[:-1]
+        n_choices = inner.shape[0]
+        owner = np.repeat(np.arange(self.groups.size - 1), np.diff(self.groups))
+        row = np.repeat(np.arange(n_choices), np.diff(inner.indptr))
+        diag = inner.indices == owner[row]
+        self_loop = np.bincount(row[diag], weights=inner.data[diag], minlength=n_choices)
+        self.leave = 1.0 - self_loop
+        self._diag = np.flatnonzero(diag)
+        self._off: sp.csr_array | None = None
+
+    @property
+    def off(self) -> sp.csr_array:
+        """The matrix without its diagonal entries (made for the NumPy sweeps only: the
+        compiled kernel skips them in place)."""
+        if self._off is None:
+            data = self.inner.data.copy()
+            data[self._diag] = 0.0
+            self._off = sp.csr_array((data, self.inner.indices, self.inner.indptr),
+                                     shape=self.inner.shape)
+        return self._off
+
+
+def numpy_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: float,
+                 max_sweeps: int) -> tuple[int, float]:
+    """At most ``max_sweeps`` Jacobi sweeps of ``local`` (in place; even columns lower,
+    odd upper bounds) until the largest gap is below ``tol``; the sweeps done and the
+    gap."""
+    leave = prep.leave[:, None]
+    done = 0
+    gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
+    while done < max_sweeps and gap >= tol:
+        num = exits + prep.off @ local
+        score = np.divide(num, leave, out=np.zeros_like(num), where=leave > 0)
+        new = np.clip(np.maximum.reduceat(score, prep.starts, axis=0), 0.0, 1.0)
+        np.maximum(local[:, 0::2], new[:, 0::2], out=local[:, 0::2])
+        np.minimum(local[:, 1::2], new[:, 1::2], out=local[:, 1::2])
+        done += 1
+        gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
+    return done, gap
+
+
+def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: float,
+                    max_sweeps: int) -> tuple[int, float]:
+    """As :func:`numpy_sweeps`, by the compiled Gauss--Seidel kernel (module docs)."""
+    kernel = compiled_kernel()
+    if kernel is None:  # pragma: no cover - the caller asked use_compiled first
+        return numpy_sweeps(prep, exits, local, tol, max_sweeps)
+    gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
+    if gap < tol or max_sweeps <= 0:
+        return 0, gap
+    inner = prep.inner  # its own index type: no int64 copy of the block
+    done, gap = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
+                       np.ascontiguousarray(exits, dtype=np.float64), local,
+                       int(max_sweeps), float(tol))
+    return int(done), float(gap)

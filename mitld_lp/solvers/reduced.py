@@ -1,0 +1,110 @@
+"""The record every solver works on: the MEC quotient of an MDP (:class:`Quotient`).
+
+Built by :func:`mitld_lp.solvers.analysis.analyse` (:func:`mitld_lp.solvers.quotient.
+reduce` for one model); kept here, below the analysis and the solvers, so that each can
+name it without importing the others.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.solvers.graph import Blocks, EndComponents, segmented_argmax
+
+__all__ = ["Quotient", "greedy_choices"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Quotient:
+    """The *maybe* part of an MDP with its maximal end components collapsed.
+
+    Built by :func:`reduce`.  Target states (value 1) and prob-0 states (value 0) are
+    removed; every MEC of the remaining *maybe* states becomes one state whose choices
+    are the choices of its members that are not internal to it (they leave the MEC with
+    positive probability).  The result has no end components, so every policy leaves
+    the maybe states with probability 1: the occupancy LP is bounded and the upper
+    sequence of interval iteration converges to the optimum.
+
+    Reduced states are numbered: first the maybe states outside any MEC (in the order of
+    the original states), then one state per MEC (``n_plain + mec id``).
+
+    Attributes:
+        target: ``(n_states,)`` bool, the original target mask (value 1).
+        prob0: ``(n_states,)`` bool, states with max-reach probability 0 (value 0).
+        state_map: ``(n_states,)`` int64, the reduced state of each original state,
+            ``-1`` for removed (target / prob-0) ones.
+        mecs: the MECs of the maybe states (ids as in ``mecs.mec_of``).
+        n_plain: number of maybe states outside any MEC.
+        matrix: ``(n_reduced_choices, n_reduced_states)`` CSR, probability of moving
+            between reduced states (mass to target / prob-0 states is not in it).
+        to_target: ``(n_reduced_choices,)`` probability of entering ``target`` in one
+            step; the rest of a row's mass (``1 - to_target - row sum``) enters prob-0.
+        row_groups: ``(n_reduced_states + 1,)`` the choices of each reduced state.
+        choice_origin: ``(n_reduced_choices,)`` the original choice of each reduced one.
+        initial: the reduced initial state, or ``-1`` if the initial state was removed.
+        initial_value: the value of the initial state if it was removed (1.0 if it is a
+            target state, 0.0 if it is prob-0), else ``nan``.
+        order: the strongly connected components of the reduced states in levels,
+            downstream first (:class:`~mitld_lp.solvers.topological.Blocks`), from the
+            one analysis that made the quotient; every solver walks it.
+        zero: ``(n_reduced_states,)`` bool, reduced states known to have value 0: a
+            quotient shared with a larger target (:func:`mitld_lp.solvers.analysis.
+            analyse`) keeps the states that reach only the larger one; empty for
+            :func:`reduce`'s own.
+        layers: the component of each *original* state in the product's support graph
+            and the level of each component: the order in which a policy's chain is
+            evaluated (:func:`mitld_lp.solvers.iteration.evaluate_policy`).
+    """
+
+    target: np.ndarray
+    prob0: np.ndarray
+    state_map: np.ndarray
+    mecs: EndComponents
+    n_plain: int
+    matrix: sp.csr_array
+    to_target: np.ndarray
+    row_groups: np.ndarray
+    choice_origin: np.ndarray
+    initial: int
+    initial_value: float
+    order: Blocks
+    zero: np.ndarray
+    layers: tuple[np.ndarray, np.ndarray]
+
+    @property
+    def n_states(self) -> int:
+        return int(self.row_groups.shape[0] - 1)
+
+    @property
+    def n_choices(self) -> int:
+        return int(self.choice_origin.shape[0])
+
+    def choice_state(self) -> np.ndarray:
+        """``(n_reduced_choices,)``: the reduced state each reduced choice belongs to."""
+        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
+
+    def lift(self, reduced: np.ndarray) -> np.ndarray:
+        """Map a per-reduced-state value vector back to the original states.
+
+        Members of a collapsed MEC all get the MEC's value; target states get 1 and
+        prob-0 states 0.
+        """
+        out = np.where(self.target, 1.0, 0.0)
+        keep = self.state_map >= 0
+        out[keep] = np.asarray(reduced, dtype=np.float64)[self.state_map[keep]]
+        return out
+
+
+def greedy_choices(q: Quotient, v: np.ndarray, *, tie: float = 1e-12) -> np.ndarray:
+    """Per reduced state, the reduced choice maximising ``P(c,target) + sum P(c,s') v(s')``.
+
+    Ties (within ``tie``) go to the choice with the larger one-step probability of
+    entering the target, a cheap measure of progress.  On the quotient every policy
+    leaves the maybe states almost surely (no end components remain), so a greedy
+    policy on exact values is optimal and never loops forever.
+    """
+    scores = q.to_target + q.matrix @ v
+    return segmented_argmax(scores, q.row_groups, tie=tie, prefer=q.to_target)

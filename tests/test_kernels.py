@@ -1,0 +1,78 @@
+"""The block sweeps (compiled Gauss--Seidel and NumPy Jacobi, each self-loop solved
+exactly) against the value LP solved by HiGHS (scipy.optimize.linprog)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.optimize import linprog
+
+from mitld_lp import load_model, synthesize
+from mitld_lp.solvers import Status, interval_iteration
+from mitld_lp.solvers import kernels as kernels_module
+from mitld_lp.testing import random_mdp
+
+
+def _pmax(mdp) -> np.ndarray:
+    """Pmax(F target) of every state by the value LP: the least ``v >= 0`` with
+    ``v(s) >= sum_s' P(c, s') v(s')`` for every choice and ``v = 1`` on the target
+    (minimising the sum of ``v`` picks the least one, end components or not)."""
+    n = mdp.n_states
+    p = sp.csr_array(mdp.matrix)
+    owner = mdp.choice_state()
+    # P v - v(owner) <= 0  ->  (P - E) v <= 0
+    a = sp.csr_array(p - sp.csr_array((np.ones(owner.size), (np.arange(owner.size), owner)),
+                                      shape=p.shape))
+    bounds = [(1.0, 1.0) if t else (0.0, 1.0) for t in mdp.target]
+    res = linprog(np.ones(n), A_ub=a, b_ub=np.zeros(owner.size), bounds=bounds,
+                  method="highs")
+    assert res.status == 0
+    return res.x
+
+
+def _paths() -> list[bool]:
+    return [False, True] if kernels_module.compiled_kernel() is not None else [False]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_both_sweeps_bracket_the_optimum(seed: int) -> None:
+    # locality: long chains, so the quotient has large cyclic blocks to sweep
+    mdp = random_mdp(300, seed=seed, locality=6, target_fraction=0.03, sink_fraction=0.03)
+    exact = _pmax(mdp)
+    for compiled in _paths():
+        r = interval_iteration(mdp, mdp.target, gap="max", progress=False, compiled=compiled)
+        assert r.status == Status.OPTIMAL, compiled
+        assert np.all(r.lower <= exact + 1e-9) and np.all(exact <= r.upper + 1e-9), compiled
+        assert float(np.max(r.upper - r.lower)) < 1e-9
+        np.testing.assert_allclose(r.lower, exact, atol=2e-9)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_sweep_budget_stops_with_a_sound_bracket(compiled: bool) -> None:
+    if compiled and kernels_module.compiled_kernel() is None:
+        pytest.skip("numba is not installed")
+    mdp = random_mdp(300, seed=5, locality=4, target_fraction=0.02, sink_fraction=0.02)
+    exact = _pmax(mdp)
+    r = interval_iteration(mdp, mdp.target, gap="max", progress=False, compiled=compiled,
+                           max_iterations=3)
+    assert r.status == Status.MAX_ITERATIONS and r.iterations == 3
+    assert np.all(r.lower <= exact + 1e-12) and np.all(exact <= r.upper + 1e-12)
+    assert float(np.max(r.upper - r.lower)) > 1e-6  # three sweeps do not close it
+
+
+def test_compiled_and_numpy_routes_give_the_same_certified_bracket(monkeypatch) -> None:
+    if kernels_module.compiled_kernel() is None:
+        pytest.skip("numba is not installed")
+    model = load_model("models/bus_puddle.toml")
+    answers = {}
+    for threshold in (10**12, 0):  # never / always compiled
+        monkeypatch.setattr(kernels_module, "COMPILED_MIN_ENTRIES", threshold)
+        r = synthesize(model)
+        assert r.certified
+        answers[threshold] = (r.lower, r.upper)
+    (lo_np, hi_np), (lo_c, hi_c) = answers[10**12], answers[0]
+    # the same bracket to the solver's tolerance (1e-9): the sweeps' bounds prune the
+    # block LPs' columns, and among choices tied within it either path may keep another
+    assert lo_np == pytest.approx(lo_c, abs=1e-9) and hi_np == pytest.approx(hi_c, abs=1e-9)
+    assert lo_np == pytest.approx(0.5902931, abs=5e-8)  # the bundled model's optimum
