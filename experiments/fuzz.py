@@ -268,6 +268,11 @@ def campaign(n_formulas: int, n_models: int, n_cli: int, seed: int, folder: Path
 
 # --------------------------------------------------------------------------- the surfaces
 
+ALLOWANCE = 128 << 20
+"""Bytes a run may spend above the base beyond 1.5 x its --max-memory: the stages the
+budget does not govern (the automaton, bounded by --max-automaton-states; the modules
+a fit imports, scipy.stats and scipy.optimize, which the base's tiny solve does not)."""
+
 SURFACE_OUTCOMES = ("ok (0)", "user error (2)", "budget stop (3)", "interrupted (130)",
                     "killed (by the campaign)", "internal error (1)", "crash", "timeout",
                     "over budget", "damaged file")
@@ -373,7 +378,10 @@ def surfaces(n: int, seed: int, folder: Path, memory: int, progress: bool = True
             key = None
             if outcome in ("internal error (1)", "crash", "timeout"):
                 key = f"{outcome}: {_normalise(_said(e))}"
-            elif case.max_memory is not None and (pk - base) * 2**20 > 1.5 * case.max_memory:
+            elif c == 3 and "out of memory" in e:
+                outcome, key = "over budget", "a MemoryError under the worker's limit"
+            elif case.max_memory is not None and (pk - base) * 2**20 > (
+                    1.5 * case.max_memory + ALLOWANCE):
                 outcome, key = "over budget", (f"{pk - base:.0f} MB above the base under "
                                                f"--max-memory {case.max_memory >> 20} MB")
             elif c == 2 and sum("error:" in line for line in e.splitlines()) != 1:
@@ -411,8 +419,11 @@ def surface_report(t: SurfaceTally) -> list[str]:
                      + " | ".join(str(c[o]) for o in SURFACE_OUTCOMES)
                      + f" | {t.peak.get(kind, 0.0):.0f} |")
     lines += ["", "Each case runs in a fresh process under the worker's memory limit. *over "
-              "budget*: a run whose peak RSS above the base (a tiny solve) exceeded 1.5 "
-              "times the `--max-memory` it was given. *damaged file*: after two sweeps "
+              "budget*: a run that ran out of memory, or whose peak RSS above the base (a "
+              "tiny solve) exceeded 1.5 times the `--max-memory` it was given plus "
+              f"{ALLOWANCE >> 20} MB for the stages that budget does not govern (the "
+              "automaton, bounded by `--max-automaton-states`; the modules a fit imports). "
+              "*peak MB above base*: the largest of the kind. *damaged file*: after two sweeps "
               "wrote one results file at once (the first perhaps killed) and a third ran to "
               "the end, a point twice, a cut line before the last, or more rows than "
               "points. A run killed by the campaign is not a crash. "
