@@ -50,7 +50,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from mitld_lp import defaults
+from mitld_lp import defaults, file_rules
 from mitld_lp.constants import substitute
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_table
 from mitld_lp.game import Game, GameError, world_members
@@ -565,8 +565,10 @@ def load_model(
     file cannot be read or is not UTF-8."""
     p = Path(path)
     source = os.fspath(path)
-    try:
-        text = p.read_bytes().decode("utf-8")
+    try:  # a regular file, no larger than the memory budget allows (file_rules)
+        text = file_rules.read_bytes(p, file_rules.read_limit(max_memory)).decode("utf-8")
+    except file_rules.InputFileError as exc:
+        raise ModelError(str(exc)) from exc
     except OSError as exc:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:

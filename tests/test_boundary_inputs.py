@@ -450,3 +450,15 @@ def test_keyboard_interrupt_in_a_world_off_the_command_line_is_an_error_of_the_w
     thread.join(60)
     assert len(caught) == 1 and isinstance(caught[0], WorldContractError), caught
     assert "W.successors(state 1, action 'a'): raised KeyboardInterrupt" in str(caught[0])
+
+
+@pytest.mark.parametrize("verb", [["solve"], ["info"], ["sweep"]])
+def test_model_and_sweep_files_must_be_regular_files(verb, tmp_path, capsys):
+    """A model or sweep file that is a device or a FIFO was read without bound (or
+    blocked for ever); it is refused by name, exit 2, before anything is read."""
+    fifo = tmp_path / "m.toml"
+    os.mkfifo(fifo)
+    for path in ("/dev/zero", str(fifo)):
+        assert main([*verb, path, "-q"]) == 2
+        err = capsys.readouterr().err
+        assert path in err and "not a regular file" in err

@@ -57,6 +57,7 @@ from datetime import date, datetime, time
 from pathlib import Path
 from typing import Any
 
+from mitld_lp import file_rules
 from mitld_lp.model import ModelError, loads_model
 from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.sweep.rows import RESERVED_COLUMNS
@@ -320,8 +321,10 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
     :class:`SweepError` (a :class:`ModelError` of the base model names its file)."""
     source = os.fspath(path)
     ctx = _Ctx(source)
-    try:
-        text = Path(path).read_bytes().decode("utf-8")
+    try:  # regular files, bounded (file_rules)
+        text = file_rules.read_bytes(path).decode("utf-8")
+    except file_rules.InputFileError as exc:
+        raise SweepError(str(exc)) from exc
     except OSError as exc:
         raise ctx.error("", f"cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
@@ -342,7 +345,7 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
     model_path = (Path(source).resolve().parent / doc["model"]).resolve()
     model_name = doc["model"]
     try:
-        model_text = model_path.read_bytes().decode("utf-8")
+        model_text = file_rules.read_bytes(model_path).decode("utf-8")
         base = tomllib.loads(model_text)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         message = getattr(exc, "strerror", None) or str(exc)
