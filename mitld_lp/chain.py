@@ -80,6 +80,7 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     if hasattr(result, "joint"):  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
+        refuse_kept(result, "the controlled chain")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
         return controlled_chain(result.mdp, controller or result.controller,
                                 persistent, _game(result, controller))
@@ -89,6 +90,19 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
                          "no Markov chain; export --drn writes the interval MDP")
     return controlled_chain(result.mdp, controller or result.controller,
                             result.dta.persistent, result.model.game)
+
+
+def refuse_kept(result: Any, what: str) -> None:
+    """A constrained result whose policy keeps a task's safety part (*keep* choices: from
+    then on the controller plays an end component's internal actions for ever, a memory
+    this chain and the saved tables do not carry yet): refused, naming it."""
+    if bool(result.merged.keep.any()) and result.prob is not None and bool(
+            (result.prob[result.merged.keep] > 0).any()):
+        from mitld_lp.problem import ProblemError
+
+        raise ProblemError(f"{what} of a constrained policy that keeps the task's safety "
+                           "part in an end component (a keep choice) is not exported yet; "
+                           "the policy runs in the process that synthesised it (simulate)")
 
 
 def _game(result: Any, controller: ControllerLike | None) -> Game[Any]:

@@ -85,9 +85,10 @@ class _LiveRandomPlan:
         if m.keep.any():
             from mitld_lp.problem import ProblemError
 
-            raise ProblemError("saving a randomised controller that keeps a task's safety "
-                               "part (its keep choices) is not supported yet; it runs in "
-                               "the process that synthesised it")
+            raise ProblemError("the saved tables of a constrained policy that keeps the "
+                               "task's safety part in an end component (a keep choice) are "
+                               "not written yet; the policy runs in the process that "
+                               "synthesised it (simulate)")
         return tabulate_randomised(
             self.game, self.sta, self.joint.verdicts, self.mdp, m.of_product, m.mdp,
             self.prob, self.stay, m.internal, m.undecided, m.absorbing,

@@ -344,6 +344,10 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
+    if hasattr(result, "joint"):
+        from mitld_lp.chain import refuse_kept
+
+        refuse_kept(result, "the decision tree")
     names, events = _features(result, c)
     choices = None if same_actions else _choices(result, c)
     states = _acting(result, c)
