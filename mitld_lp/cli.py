@@ -238,6 +238,9 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
     p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_STATES,
                    metavar="N", help="refuse products (and automata) larger than N states "
                                      "(exit 3)")
+    p.add_argument("--max-world-states", type=bounded_int(1), default=defaults.MAX_STATES,
+                   metavar="N", help="refuse a world (a PRISM program) whose exploration "
+                                     "passes N states (exit 3)")
     p.add_argument("--max-automaton-states", type=bounded_int(1),
                    default=defaults.MAX_AUTOMATON_STATES, metavar="N",
                    help="refuse automata larger than N states (exit 3)")
@@ -251,7 +254,8 @@ def _build(args: argparse.Namespace) -> tuple[Model, Built]:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import build_product
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     built = build_product(
         model.game, model.spec, model.distributions,
         epsilon=model.epsilon if args.epsilon is None else args.epsilon,
@@ -328,7 +332,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     if _constrained().wanted(args, model):
         return _constrained().solve(args, model, policy_file)
     r = _constrained().unconstrained(

@@ -57,7 +57,8 @@ def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) 
     from mitld_lp.robust_synthesis import interval_model, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     if not is_robust(model.distributions):
         return False
     if lp:
