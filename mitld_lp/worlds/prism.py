@@ -1,15 +1,17 @@
 """A PRISM MDP as a :class:`mitld_lp.game.Game`, built by Storm through stormpy.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
-gives its undefined constants their values, checks the program and bounds its states
-(within ``max_states`` and ``max_memory``, before Storm runs), builds the MDP's reachable
-states with Storm and copies it into numpy arrays without a loop over states
+gives its undefined constants their values, checks the program, builds the MDP's
+reachable states with Storm (within ``max_states`` and ``max_memory``, stopped when the
+exploration passes them; not past the states where the task is decided) and copies it
+into numpy arrays without a loop over states
 (:mod:`mitld_lp.worlds.prism_tables`; the game pickles and needs Storm no more):
 
 * **states** are tuples of the PRISM variables' values, in the order
   :attr:`PrismGame.variables` lists them (``game.valuation(s)`` gives them by name);
   the initial state is the program's (exactly one is required).
-* **propositions** are the program's ``label "name" = ...;`` definitions, all of them
+* **propositions** are the program's ``label "name" = ...;`` definitions (and its
+  Boolean ``formula``s, and the labels ``define=`` adds), all of them
   by default (Storm is always told to build every label: a label it was not asked to
   build would silently be false everywhere); ``labels=`` selects a subset, and naming a
   label the file does not define is an error.  Storm's own ``"init"`` and
@@ -47,6 +49,17 @@ variable's range or probabilities that do not sum to 1 in some state stop the bu
 (without them Storm stores values modulo the range); before it builds, every variable
 must have a non-empty range holding its initial value and every command with constant
 probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
+Sums are compared as PRISM compares them, within
+:data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
+in floating point, so where it alone fails the checks are redone in exact arithmetic
+(:func:`load_prism`).
+
+Budgets and exploration.  The product of the variables' ranges is a note, not a
+refusal: Storm explores the reachable part within ``max_states`` and ``max_memory``
+(in a memory-capped child process when the ranges do not already fit:
+:mod:`mitld_lp.worlds.prism_bounded`).  Given the task, states where it is decided
+whatever happens next are not expanded (:mod:`mitld_lp.worlds.prism_terminal`): they
+keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.
 
 Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
 wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
@@ -105,17 +118,17 @@ _Distribution = tuple[tuple[State, float], ...]
 _INSTALL = "pip install -e '.[prism]'"
 
 BYTES_PER_STATE = 1024
-"""Memory per state of a PRISM world while it is built, for the budget checked before
-Storm runs: Storm's explicit model with valuations, labels and choice origins (measured
-about 550 bytes per state with 4 choices and 7 transitions per state, stormpy 2.0) and
-the game's copy (arrays, one tuple and one index entry per state), rounded up."""
+"""Memory per state of a PRISM world while it is built, for the memory cap of Storm's
+exploration (``max_states`` states at most this much each): Storm's explicit model with
+valuations, labels and choice origins (measured about 550 bytes per state with 4 choices
+and 7 transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one
+index entry per state), rounded up."""
 
 
 class PrismTooLarge(WorldError, ProductTooLarge):
-    """The PRISM program may have more states than ``max_states``, or need more than
-    ``max_memory`` bytes, judged from its variables' ranges before Storm builds it: a
-    budget stop (exit 3 on the command line), whose message names the budget and how to
-    raise it."""
+    """Storm's exploration of the PRISM program passed ``max_states`` states or the
+    memory budget (it was stopped there, in a capped child process): a budget stop
+    (exit 3 on the command line), whose message names the budget and how to raise it."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -104,6 +104,9 @@ def run_capped(work: Callable[[], T], budget: int) -> T:
     try:
         while chunk := os.read(read, 1 << 20):
             chunks.append(chunk)
+    except BaseException:  # an interrupt or a time limit here: the child stops too
+        os.kill(pid, signal.SIGKILL)
+        raise
     finally:
         os.close(read)
         _, status = os.waitpid(pid, 0)
