@@ -297,3 +297,31 @@ def test_cli_budget_stop_is_one_line_exit_3(tmp_path: Path) -> None:
                     code=3)
     assert line.startswith(f"mitld-lp: stopped: {m}: prism: ")
     assert "max_states = 1,000" in line and "--max-world-states" in line
+
+
+def test_world_and_product_budgets_are_separate_settings(tmp_path: Path) -> None:
+    m = model_file(tmp_path, prism(tmp_path, WIDE))
+    line = one_line(cli("solve", str(m), "--max-world-states", "23"), code=3)
+    assert "Storm explored 24 states, more than max_states = 23" in line
+    # the product's budget no longer bounds the world (nor the other way round)
+    ok = cli("solve", str(m), "--max-world-states", "24", "--max-memory", "1048576T", "-q")
+    assert ok.returncode == 0, ok.stderr
+
+
+@pytest.mark.parametrize("text, value", [
+    ("1048576T", 1 << 60), ("1P", 1 << 50), ("2PiB", 2 << 50), ("1.5G", 3 << 29), ("7E", 7 << 60),
+])
+def test_memory_sizes_take_every_unit(text: str, value: int) -> None:
+    from mitld_lp.arguments import memory_size
+
+    assert memory_size(text) == value
+
+
+@pytest.mark.parametrize("text", ["8E", "0.5", "inf", "nan", "4X"])
+def test_memory_sizes_out_of_range_are_refused(text: str) -> None:
+    import argparse
+
+    from mitld_lp.arguments import memory_size
+
+    with pytest.raises(argparse.ArgumentTypeError):
+        memory_size(text)
