@@ -105,7 +105,7 @@ from mitld_lp.worlds.prism_terminal import render
 
 __all__ = [
     "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
-    "BYTES_PER_STATE",
+    "BYTES_PER_STATE", "CAP_BYTES_PER_STATE",
 ]
 
 log = logging.getLogger(__name__)
@@ -118,11 +118,18 @@ _Distribution = tuple[tuple[State, float], ...]
 _INSTALL = "pip install -e '.[prism]'"
 
 BYTES_PER_STATE = 1024
-"""Memory per state of a PRISM world while it is built, for the memory cap of Storm's
-exploration (``max_states`` states at most this much each): Storm's explicit model with
-valuations, labels and choice origins (measured about 550 bytes per state with 4 choices
-and 7 transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one
-index entry per state), rounded up."""
+"""Memory per state of a PRISM world while it is built, for the bound from the variables'
+ranges (a program whose range product fits ``max_states`` and, at this much a state,
+``max_memory``, is built in this process): Storm's explicit model with valuations,
+labels and choice origins (measured about 550 bytes per state with 4 choices and 7
+transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one index
+entry per state), rounded up."""
+
+CAP_BYTES_PER_STATE = 16 << 10
+"""The memory allowed per state of ``max_states`` when Storm explores under a cap: 16 KiB,
+enough for about 100 transitions a state (ij.20 of QVBS, 17.5 transitions a state, takes
+2.6 KB), so that the cap stops a program far larger than ``max_states`` early and does
+not stop a dense one within it; ``max_memory`` caps it as well."""
 
 
 class PrismTooLarge(WorldError, ProductTooLarge):
@@ -398,7 +405,7 @@ def load_prism(
         return _build(stormpy, program, plain, where, chosen, event_set, action_names,
                       terminal, max_states)
 
-    budget = min(memory, max_states * BYTES_PER_STATE)
+    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
     if bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory:
         tables = work()  # every valuation fits: no cap needed
     elif can_cap():
@@ -407,7 +414,7 @@ def load_prism(
         except OutOfBudget as exc:
             raise PrismTooLarge(
                 f"{where}: Storm's exploration passed the budget of {_bytes(budget)} "
-                f"({exc.detail}; max_states = {max_states:,} at {BYTES_PER_STATE} bytes a "
+                f"({exc.detail}; max_states = {max_states:,} at {_bytes(CAP_BYTES_PER_STATE)} a "
                 f"state, max_memory = {_bytes(memory)}; {bound}): raise max_states "
                 "(--max-world-states) or max_memory (--max-memory)"
             ) from None
