@@ -132,10 +132,21 @@ def read_bytes(path: PathLike, limit: int | None = None, what: str = "") -> byte
         size = os.fstat(handle.fileno()).st_size
         if size > limit:
             raise _too_large(label, size, limit)
-        data = handle.read(limit + 1)
-    if len(data) > limit:
-        raise _too_large(label, len(data), limit)
-    return data
+        # in pieces: asking read() for limit + 1 bytes at once allocates that much
+        chunks, total = [], 0
+        while total <= limit:
+            chunk = handle.read(min(max(size - total, 0) + 1, _CHUNK, limit + 1 - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+    if total > limit:
+        raise _too_large(label, total, limit)
+    return b"".join(chunks)
+
+
+_CHUNK = 1 << 24
+"""Bytes asked of one read of :func:`read_bytes` at most."""
 
 
 def read_text(path: PathLike, limit: int | None = None, what: str = "", *,

@@ -276,7 +276,10 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     """``[prism]``: ``file`` (relative to the model file; to the working directory for
     :func:`loads_model`), optional ``constants`` (name -> boolean or number), ``labels``
     (the labels that become propositions, default all) and ``events`` (PRISM actions
-    that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`."""
+    that are the effects of the spec's events); see :mod:`mitld_lp.worlds.prism`.  The
+    top-level ``[labels]`` table defines more labels, ``done = "l=9"``, evaluated by
+    Storm on the world's variables; the spec is given to the loader so that states
+    where the task is decided are not expanded."""
     from mitld_lp.worlds import WorldError
     from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
@@ -300,13 +303,23 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
 
     labels, events = names("labels"), names("events")
+    # [labels]: name -> a PRISM expression, a label Storm evaluates on the world's states
+    define = {name: ctx.string(text, _join("labels", name))
+              for name, text in ctx.table(doc.get("labels", {}), "labels").items()}
+    # the task, so that Storm does not expand states where it is decided
+    task, _ = _parse_spec(doc["spec"], ctx)
     try:
         return load_prism(path, constants=constants, labels=labels, events=events or (),
-                          max_states=ctx.max_states, max_memory=ctx.max_memory)
+                          max_states=ctx.max_states, max_memory=ctx.max_memory,
+                          define=define, task=task)
     except PrismTooLarge as exc:  # a budget stop, not a mistake in the file
         raise PrismTooLarge(f"{ctx.source}: prism: {exc}") from exc
     except WorldError as exc:
-        raise ctx.error("prism", str(exc)) from exc
+        message = str(exc)
+        m = re.match(r"label '(\w+)'(?: = '[^']*')?: (.*)$", message)
+        if m and m[1] in define:
+            raise ctx.error(_join("labels", m[1]), m[2]) from exc
+        raise ctx.error("prism", message) from exc
 
 
 def _check_prism_task(game: Game[Any], task: Task, ctx: _Context) -> None:
@@ -317,7 +330,9 @@ def _check_prism_task(game: Game[Any], task: Task, ctx: _Context) -> None:
 
     assert isinstance(game, PrismGame)
     robot_actions = {a for s in game.states for a in game.actions(s)}
-    for action in sorted(atoms(task.formula) & robot_actions):
+    # a label of the world named like an action is the label (the spec reads labels)
+    for action in sorted((atoms(task.formula) - set(game.proposition_names))
+                         & robot_actions):
         raise ctx.error(
             "prism.events",
             f"PRISM action {action!r} has the name of a proposition of spec; list it in "
@@ -330,7 +345,7 @@ _GAME_KINDS: tuple[_GameKind, ...] = (
         table="grid", extra_tables=("regions",), proposition_noun="region", build=_build_grid,
     ),
     _GameKind(
-        table="prism", extra_tables=(), proposition_noun="label", build=_build_prism,
+        table="prism", extra_tables=("labels",), proposition_noun="label", build=_build_prism,
         check_task=_check_prism_task,
     ),
     # worlds named by code (mitld_lp.worlds.loaders): a gymnasium environment, a factory
@@ -476,7 +491,7 @@ def _load(
     # the caller's budgets first, then the file's, then the defaults (a world built while
     # loading, a [prism] program, is bounded by them)
     ctx.max_states = int(max_states if max_states is not None else
-                         budgets.get("max_states", defaults.MAX_STATES))
+                         budgets.get("max_world_states", defaults.MAX_STATES))
     mem = max_memory if max_memory is not None else budgets.get("max_memory")
     ctx.max_memory = None if mem is None else int(mem)
 

@@ -125,7 +125,8 @@ class _Context:
 
 
 #: The ``[budgets]`` a model file may set, with the check of each value.
-_BUDGET_KEYS = ("max_states", "max_automaton_states", "max_memory", "time_limit")
+_BUDGET_KEYS = ("max_states", "max_world_states", "max_automaton_states", "max_memory",
+                "time_limit")
 
 
 def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:

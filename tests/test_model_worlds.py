@@ -47,7 +47,7 @@ def test_frozen_lake_from_a_model_file_matches_value_iteration(folder):
     gym = pytest.importorskip("gymnasium")
     (folder / "lake.toml").write_text(FROZEN)
     model = load_model(folder / "lake.toml")
-    assert model.game.actions(0) == ("LEFT", "DOWN", "RIGHT", "UP")
+    assert model.game.actions(model.game.initial) == ("LEFT", "DOWN", "RIGHT", "UP")
     assert model.game.proposition_names == {"goal", "hole"}
     env = gym.make("FrozenLake-v1", map_name="4x4", is_slippery=True)
     desc = [[c.decode() for c in row] for row in env.unwrapped.desc]

@@ -110,7 +110,7 @@ def test_variable_declarations_are_checked(tmp_path: Path, variables: str, messa
 @pytest.mark.parametrize("updates, total", [
     ("0.5:(x'=x+1) + 0.6:(x'=x)", "1.1"),
     ("0.5:(x'=x+1) + 0.4:(x'=x)", "0.9"),
-    ("0.5:(x'=x+1) + 0.5:(x'=x) + 1e-6:(x'=0)", "1.000001"),
+    ("0.5:(x'=x+1) + 0.5:(x'=x) + 1e-4:(x'=0)", "1.0001"),  # beyond PRISM's 1e-5
 ])
 def test_constant_probabilities_must_sum_to_one(tmp_path: Path, updates: str, total: str) -> None:
     text = module(f"  [stay] true -> true;\n  [go] x<3 -> {updates};")
@@ -211,7 +211,7 @@ def test_cli_refuses_with_one_line_and_exit_2(tmp_path: Path, body: str | bytes,
 
 
 # 2000 x 2000 = 4,000,000 states, all reachable: building it takes minutes and gigabytes,
-# so these tests finish only because the budget is checked before Storm runs.
+# so these tests finish only because Storm's exploration stops at the budget.
 HUGE = """mdp
 module m
   x : [0..1999] init 0;
@@ -224,15 +224,40 @@ label "goal" = x=1999 & y=1999;
 """
 
 
-def test_state_budget_is_checked_before_storm_builds(tmp_path: Path) -> None:
-    with pytest.raises(PrismTooLarge, match=r"m\.prism: at most 4,000,000 states from the "
-                       r"variables' ranges \(x: 2,000 x y: 2,000\), more than max_states = "
-                       r"1,000; Storm was not run: raise max_states \(--max-states\)"):
+def test_state_budget_stops_the_exploration(tmp_path: Path) -> None:
+    # the range product (4,000,000) is reported as a note, the refusal is the budget's
+    with pytest.raises(PrismTooLarge, match=r"m\.prism: Storm's exploration passed the budget "
+                       r".*max_states = 1,000 .*at most 4,000,000 states from the variables' "
+                       r"ranges \(x: 2,000 x y: 2,000\)\): raise max_states "
+                       r"\(--max-world-states\)"):
         load_prism(prism(tmp_path, HUGE), max_states=1000)
-    # the default budget (5,000,000 states) passes this bound; the memory budget does not
-    with pytest.raises(PrismTooLarge, match=r"would need about 4\.1 GB \(1024 bytes per "
-                       r"state\), more than max_memory = 1\.1 GB; .*--max-memory"):
-        load_prism(prism(tmp_path, HUGE), max_memory=1 << 30)
+    with pytest.raises(PrismTooLarge, match=r"max_memory = .*--max-memory"):
+        load_prism(prism(tmp_path, HUGE), max_memory=32 << 20)
+
+
+# The ranges allow 100,001^2 valuations; from (0, 0) the program reaches x in 0..3 and
+# y in 0..5 only (go raises x or y, back lowers x): 4 * 6 = 24 states.
+WIDE = """mdp
+module m
+  x : [0..100000] init 0;
+  y : [0..100000] init 0;
+  [go] x<3 -> 0.5:(x'=x+1) + 0.5:(y'=min(y+1,5));
+  [back] x>0 -> (x'=x-1);
+endmodule
+label "goal" = x=3;
+"""
+
+
+def test_wide_ranges_with_a_small_reachable_part_load_with_default_budgets(
+    tmp_path: Path,
+) -> None:
+    game = load_prism(prism(tmp_path, WIDE))
+    assert sorted(game.states) == [(x, y) for x in range(4) for y in range(6)]
+    # and within a budget just above the reachable part, not the ranges' product
+    assert game.n_states == len(load_prism(prism(tmp_path, WIDE), max_states=24).states)
+    with pytest.raises(PrismTooLarge, match=r"Storm explored 24 states, more than "
+                       r"max_states = 23"):
+        load_prism(prism(tmp_path, WIDE), max_states=23)
 
 
 def test_budget_stop_is_a_world_error_and_a_product_budget(tmp_path: Path) -> None:
@@ -254,18 +279,49 @@ def test_bound_is_the_product_of_every_variables_range(tmp_path: Path) -> None:
     bound = 3 * 4 * 2 * 4 * 2
     game = load_prism(src, max_states=bound)  # the bound itself is within the budget
     assert len(game.states) == bound  # every valuation is reachable: the bound is tight
-    with pytest.raises(PrismTooLarge, match=rf"at most {bound} states .*max_states = {bound - 1}"):
+    with pytest.raises(PrismTooLarge, match=rf"explored {bound} states, more than "
+                       rf"max_states = {bound - 1}"):
         load_prism(src, max_states=bound - 1)
 
 
 def test_model_file_passes_the_budget_to_the_prism_world(tmp_path: Path) -> None:
     m = model_file(tmp_path, prism(tmp_path, HUGE))
-    with pytest.raises(PrismTooLarge, match=rf"^{re.escape(str(m))}: prism: .*m\.prism: at most"):
+    with pytest.raises(PrismTooLarge, match=rf"^{re.escape(str(m))}: prism: .*m\.prism: Storm's "
+                       "exploration passed the budget"):
         load_model(m, max_states=1000)
 
 
 def test_cli_budget_stop_is_one_line_exit_3(tmp_path: Path) -> None:
     m = model_file(tmp_path, prism(tmp_path, HUGE))
-    line = one_line(cli("solve", str(m), "--max-states", "1000", "--max-memory", "1G"), code=3)
+    line = one_line(cli("solve", str(m), "--max-world-states", "1000", "--max-memory", "1G"),
+                    code=3)
     assert line.startswith(f"mitld-lp: stopped: {m}: prism: ")
-    assert "more than max_states = 1,000" in line and "--max-states" in line
+    assert "max_states = 1,000" in line and "--max-world-states" in line
+
+
+def test_world_and_product_budgets_are_separate_settings(tmp_path: Path) -> None:
+    m = model_file(tmp_path, prism(tmp_path, WIDE))
+    line = one_line(cli("solve", str(m), "--max-world-states", "23"), code=3)
+    assert "Storm explored 24 states, more than max_states = 23" in line
+    # the product's budget no longer bounds the world (nor the other way round)
+    ok = cli("solve", str(m), "--max-world-states", "24", "--max-memory", "1048576T", "-q")
+    assert ok.returncode == 0, ok.stderr
+
+
+@pytest.mark.parametrize("text, value", [
+    ("1048576T", 1 << 60), ("1P", 1 << 50), ("2PiB", 2 << 50), ("1.5G", 3 << 29), ("7E", 7 << 60),
+])
+def test_memory_sizes_take_every_unit(text: str, value: int) -> None:
+    from mitld_lp.arguments import memory_size
+
+    assert memory_size(text) == value
+
+
+@pytest.mark.parametrize("text", ["8E", "0.5", "inf", "nan", "4X"])
+def test_memory_sizes_out_of_range_are_refused(text: str) -> None:
+    import argparse
+
+    from mitld_lp.arguments import memory_size
+
+    with pytest.raises(argparse.ArgumentTypeError):
+        memory_size(text)

@@ -117,7 +117,8 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
     from mitld_lp.cli.kernel import model_options
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     try:
         points = pareto(model, args.against, args.points, **model_options(args))
     except ConstraintError as exc:

@@ -108,7 +108,8 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
                          "--controller, --chain and --tree export the synthesised one")
     from mitld_lp.robust_synthesis import is_robust
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     if is_robust(model.distributions) and (chain or tree):
         raise UsageError("export --chain/--tree: a law known only within a band has a "
                          "worst case, not one Markov chain; --drn writes the interval MDP, "
@@ -151,7 +152,8 @@ def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) 
     from mitld_lp.robust_synthesis import interval_model, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     if not is_robust(model.distributions):
         return False
     posed = posed_model(args, model, "export")

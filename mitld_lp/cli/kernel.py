@@ -141,6 +141,10 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
                    help="refuse products (and automata) larger than N states (exit 3; "
                         "default: the model file's [budgets], else "
                         f"{defaults.MAX_STATES:,})")
+    p.add_argument("--max-world-states", type=bounded_int(1), metavar="N",
+                   help="refuse a world (a PRISM program, a gymnasium table) whose "
+                        "exploration passes N states (exit 3; default: the model file's "
+                        f"[budgets], else {defaults.MAX_STATES:,})")
     p.add_argument("--max-automaton-states", type=bounded_int(1), metavar="N",
                    help="refuse automata larger than N states (exit 3; default: the model "
                         f"file's [budgets], else {defaults.MAX_AUTOMATON_STATES:,})")
@@ -157,7 +161,8 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     from mitld_lp.model import load_model
     from mitld_lp.synthesis import build_posed
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     posed = posed_model(args, model, verb)
     return posed, build_posed(posed)
 

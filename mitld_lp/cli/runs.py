@@ -82,7 +82,7 @@ def solve_batch(args: argparse.Namespace) -> int:
         for path in (m for m in matches if m not in seen):
             seen.add(path)
             outcome = run_model(
-                lambda path=path: load_model(path, max_states=args.max_states,
+                lambda path=path: load_model(path, max_states=args.max_world_states,
                                              max_memory=args.max_memory),
                 solve_settings(args), constraints=tuple(args.constraint), then=args.then)
             records.append({"file": path, **outcome.summary} if outcome.summary else {
@@ -240,7 +240,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.simulate import simulate
     from mitld_lp.synthesis import solve
 
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     r = solve(pose(model, args.constraint, then=args.then,
                    settings=settings_from(**model_options(args))))
     if r.controller is None:

@@ -91,7 +91,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model, max_states=args.max_states, max_memory=args.max_memory)
+    model = load_model(args.model, max_states=args.max_world_states,
+                       max_memory=args.max_memory)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args))
     if posed.route == CONSTRAINED:

@@ -73,6 +73,50 @@ __all__ = ["gym_world", "python_world", "GuardedWorld", "WorldContractError"]
 _TERMINAL = ("absorb", "keep")
 
 
+#: Bytes gymnasium's own table takes per (state, action, outcome) entry (a list of
+#: tuples in a dict of dicts: measured about 200 on FrozenLake).
+_GYM_BYTES_PER_ENTRY = 200
+
+
+def _before_make(env_id: str, kwargs: dict[str, Any], ctx: _Context) -> None:
+    """Refuse, before ``gymnasium.make`` builds its own table, a toy-text map whose size
+    the keywords already tell (FrozenLake's ``desc`` or ``map_name``) when its states
+    pass the world budget or its table the memory budget; any other environment is
+    checked by :func:`mitld_lp.worlds.gym.from_env` once made."""
+    from mitld_lp.worlds.gym import GymTooLarge
+
+    if not env_id.startswith("FrozenLake"):
+        return
+    desc = kwargs.get("desc")
+    if isinstance(desc, list) and desc and all(isinstance(r, str) for r in desc):
+        states = len(desc) * max(len(r) for r in desc)
+    elif kwargs.get("map_name", "4x4") in ("4x4", "8x8"):
+        states = 16 if kwargs.get("map_name", "4x4") == "4x4" else 64
+    else:
+        return
+    outcomes = 3 if kwargs.get("is_slippery", True) else 1
+    need = states * 4 * outcomes * _GYM_BYTES_PER_ENTRY
+    if states > ctx.max_states:
+        raise GymTooLarge(f"{ctx.source}: gym: {env_id} with this map has {states:,} states, "
+                          f"more than max_states = {ctx.max_states:,} (checked before "
+                          "gymnasium builds its table)")
+    if ctx.max_memory is not None and need > ctx.max_memory:
+        raise GymTooLarge(f"{ctx.source}: gym: {env_id} with this map has {states:,} states; "
+                          f"gymnasium's own table alone needs about {need / 2**20:.0f} MB, "
+                          f"more than max_memory = {ctx.max_memory / 2**20:.1f} MB (checked "
+                          "before it is built)")
+
+
+def _reward_labels(ctx: _Context, table: dict[str, Any]) -> dict[str, float]:
+    """``reward_labels``: proposition -> the reward whose transitions enter it."""
+    out: dict[str, float] = {}
+    for name, value in ctx.table(table.get("reward_labels", {}), "gym.reward_labels").items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ctx.error(f"gym.reward_labels.{name}", f"must be a number, got {value!r}")
+        out[name] = float(value)
+    return out
+
+
 def _names(ctx: _Context, value: Any, path: str) -> list[str]:
     return [ctx.string(v, f"{path}[{i}]") for i, v in enumerate(ctx.array(value, path))]
 
@@ -116,7 +160,8 @@ def gym_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     """The game of a ``[gym]`` table (module docstring)."""
     table = ctx.table(doc["gym"], "gym")
     ctx.keys(table, "gym", {"env"},
-             {"kwargs", "labels", "propositions", "actions", "initial", "terminal"})
+             {"kwargs", "labels", "propositions", "actions", "initial", "terminal",
+              "reward_labels", "done_label", "time_limit"})
     env_id = ctx.string(table["env"], "gym.env")
     kwargs = ctx.table(table.get("kwargs", {}), "gym.kwargs")
     actions = _names(ctx, table["actions"], "gym.actions") if "actions" in table else None
@@ -124,12 +169,18 @@ def gym_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     terminal = table.get("terminal", "absorb")
     if terminal not in _TERMINAL:
         raise ctx.error("gym.terminal", f'must be "absorb" or "keep", got {terminal!r}')
+    rewards = _reward_labels(ctx, table)
+    done = ctx.string(table["done_label"], "gym.done_label") if "done_label" in table else None
+    time_limit = table.get("time_limit", "honour")
+    if time_limit not in ("honour", "ignore"):
+        raise ctx.error("gym.time_limit", f'must be "honour" or "ignore", got {time_limit!r}')
     try:
         import gymnasium
     except ImportError:
         raise ctx.error("gym", "needs gymnasium (pip install 'mitld_lp[gym]')") from None
-    from mitld_lp.worlds.gym import FROZEN_LAKE_ACTIONS, from_env
+    from mitld_lp.worlds.gym import FROZEN_LAKE_ACTIONS, GymTooLarge, from_env
 
+    _before_make(env_id, kwargs, ctx)
     try:
         env = gymnasium.make(env_id, **kwargs)
     except gymnasium.error.Error as exc:
@@ -146,7 +197,11 @@ def gym_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         if actions is None and env_id.startswith("FrozenLake"):
             actions = list(FROZEN_LAKE_ACTIONS)
         return from_env(env, propositions=labels, proposition_names=names,
-                        action_names=actions, initial=initial, terminal=terminal)
+                        action_names=actions, initial=initial, terminal=terminal,
+                        reward_labels=rewards, done_label=done, time_limit=time_limit,
+                        max_states=ctx.max_states, max_memory=ctx.max_memory)
+    except GymTooLarge as exc:  # a budget stop (exit 3), not a mistake in the file
+        raise GymTooLarge(f"{ctx.source}: gym: {exc}") from None
     except WorldError as exc:
         raise ctx.error("gym", str(exc)) from None
     finally:

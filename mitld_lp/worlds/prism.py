@@ -1,15 +1,17 @@
 """A PRISM MDP as a :class:`mitld_lp.game.Game`, built by Storm through stormpy.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
-gives its undefined constants their values, checks the program and bounds its states
-(within ``max_states`` and ``max_memory``, before Storm runs), builds the MDP's reachable
-states with Storm and copies it into numpy arrays without a loop over states
+gives its undefined constants their values, checks the program, builds the MDP's
+reachable states with Storm (within ``max_states`` and ``max_memory``, stopped when the
+exploration passes them; not past the states where the task is decided) and copies it
+into numpy arrays without a loop over states
 (:mod:`mitld_lp.worlds.prism_tables`; the game pickles and needs Storm no more):
 
 * **states** are tuples of the PRISM variables' values, in the order
   :attr:`PrismGame.variables` lists them (``game.valuation(s)`` gives them by name);
   the initial state is the program's (exactly one is required).
-* **propositions** are the program's ``label "name" = ...;`` definitions, all of them
+* **propositions** are the program's ``label "name" = ...;`` definitions (and its
+  Boolean ``formula``s, and the labels ``define=`` adds), all of them
   by default (Storm is always told to build every label: a label it was not asked to
   build would silently be false everywhere); ``labels=`` selects a subset, and naming a
   label the file does not define is an error.  Storm's own ``"init"`` and
@@ -47,6 +49,17 @@ variable's range or probabilities that do not sum to 1 in some state stop the bu
 (without them Storm stores values modulo the range); before it builds, every variable
 must have a non-empty range holding its initial value and every command with constant
 probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
+Sums are compared as PRISM compares them, within
+:data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
+in floating point, so where it alone fails the checks are redone in exact arithmetic
+(:func:`load_prism`).
+
+Budgets and exploration.  The product of the variables' ranges is a note, not a
+refusal: Storm explores the reachable part within ``max_states`` and ``max_memory``
+(in a memory-capped child process when the ranges do not already fit:
+:mod:`mitld_lp.worlds.prism_bounded`).  Given the task, states where it is decided
+whatever happens next are not expanded (:mod:`mitld_lp.worlds.prism_terminal`): they
+keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.
 
 Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
 wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
@@ -62,6 +75,8 @@ from __future__ import annotations
 
 import logging
 import os
+import re
+import tempfile
 from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,13 +86,27 @@ import numpy as np
 
 from mitld_lp import defaults
 from mitld_lp.game import GameError
+from mitld_lp.logic.syntax import Formula
 from mitld_lp.product import ProductTooLarge, default_max_memory
 from mitld_lp.product.budget import _bytes  # the product's budget messages write sizes so
 from mitld_lp.worlds import WorldError
-from mitld_lp.worlds.prism_program import SizeBound, check_program, storm_error, storm_quiet
-from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, Tables, read_model
+from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_program import (
+    SUM_TOLERANCE,
+    check_program,
+    show_sum,
+    storm_error,
+    storm_quiet,
+    storm_sum,
+)
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
+from mitld_lp.worlds.prism_terminal import decided as decided_when
+from mitld_lp.worlds.prism_terminal import render
 
-__all__ = ["PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "BYTES_PER_STATE"]
+__all__ = [
+    "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
+    "BYTES_PER_STATE", "CAP_BYTES_PER_STATE",
+]
 
 log = logging.getLogger(__name__)
 
@@ -89,17 +118,24 @@ _Distribution = tuple[tuple[State, float], ...]
 _INSTALL = "pip install -e '.[prism]'"
 
 BYTES_PER_STATE = 1024
-"""Memory per state of a PRISM world while it is built, for the budget checked before
-Storm runs: Storm's explicit model with valuations, labels and choice origins (measured
-about 550 bytes per state with 4 choices and 7 transitions per state, stormpy 2.0) and
-the game's copy (arrays, one tuple and one index entry per state), rounded up."""
+"""Memory per state of a PRISM world while it is built, for the bound from the variables'
+ranges (a program whose range product fits ``max_states`` and, at this much a state,
+``max_memory``, is built in this process): Storm's explicit model with valuations,
+labels and choice origins (measured about 550 bytes per state with 4 choices and 7
+transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one index
+entry per state), rounded up."""
+
+CAP_BYTES_PER_STATE = 16 << 10
+"""The memory allowed per state of ``max_states`` when Storm explores under a cap: 16 KiB,
+enough for about 100 transitions a state (ij.20 of QVBS, 17.5 transitions a state, takes
+2.6 KB), so that the cap stops a program far larger than ``max_states`` early and does
+not stop a dense one within it; ``max_memory`` caps it as well."""
 
 
 class PrismTooLarge(WorldError, ProductTooLarge):
-    """The PRISM program may have more states than ``max_states``, or need more than
-    ``max_memory`` bytes, judged from its variables' ranges before Storm builds it: a
-    budget stop (exit 3 on the command line), whose message names the budget and how to
-    raise it."""
+    """Storm's exploration of the PRISM program passed ``max_states`` states or the
+    memory budget (it was stopped there, in a capped child process): a budget stop
+    (exit 3 on the command line), whose message names the budget and how to raise it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,6 +151,10 @@ class PrismGame:
         effects: ``event -> array over states``: where each event action's command is
             enabled, the index of its choice; -1 where it is not (the event leaves the
             state as it is).
+        terminal: the PRISM expression of the states where the task is decided, which
+            Storm did not expand ("" when there are none).
+        decided: how many of :attr:`states` were not expanded (their one action is
+            :data:`DECIDED_ACTION`, a self-loop).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
     a state's actions and a choice's distribution become tuples when first asked for.
@@ -128,6 +168,8 @@ class PrismGame:
     effects: Mapping[str, np.ndarray]
     _tables: Tables = field(repr=False)
     _index: Mapping[State, int] = field(repr=False)
+    terminal: str = ""
+    decided: int = 0
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -212,8 +254,12 @@ def _stormpy() -> Any:
 
 def _check_utf8(path: Path, where: str) -> None:
     """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
-    try:
-        data = path.read_bytes()
+    from mitld_lp import file_rules
+
+    try:  # a regular file, bounded, before Storm reads it
+        data = file_rules.read_bytes(path)
+    except file_rules.InputFileError as exc:
+        raise WorldError(f"{where}: {exc}") from None
     except OSError as exc:
         raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
     try:
@@ -274,18 +320,28 @@ def load_prism(
     events: Iterable[str] = (),
     max_states: int = defaults.MAX_STATES,
     max_memory: int | None = None,
+    define: Mapping[str, str] | None = None,
+    task: Formula | None = None,
 ) -> PrismGame:
     """Build the PRISM MDP at ``path`` with Storm and return it as a game.
 
     ``constants``: values of the file's undefined constants (every undefined constant
-    needs one).  ``labels``: the labels that become propositions (default: every label
-    of the file).  ``events``: PRISM actions that are external events' effects (module
-    docstring); their names must match the events of the specification.
+    needs one).  ``labels``: the propositions (default: every label of the file, every
+    Boolean ``formula`` that no label shadows, and every name of ``define``).
+    ``define``: more labels, ``name -> PRISM expression`` over the file's variables,
+    constants and formulas (``{"done": "l=9"}``), evaluated by Storm as if the file ended
+    with ``label "done" = l=9;`` (the file itself is not changed).  ``events``: PRISM
+    actions that are external events' effects (module docstring); their names must match
+    the events of the specification.  ``task``: the formula the world is for; states
+    where it is decided whatever happens next are not expanded
+    (:mod:`mitld_lp.worlds.prism_terminal`).
 
-    Budgets, checked before Storm runs: the program's states are at most the product of
-    its variables' ranges (:class:`mitld_lp.worlds.prism_program.SizeBound`); that bound
-    must be within ``max_states`` and, at :data:`BYTES_PER_STATE` bytes each, within
-    ``max_memory`` (default :func:`mitld_lp.product.default_max_memory`).
+    Budgets: Storm explores at most ``max_states`` states within ``max_memory`` bytes
+    (default :func:`mitld_lp.product.default_max_memory`), at :data:`BYTES_PER_STATE`
+    bytes a state.  When the product of the variables' ranges does not already fit, the
+    exploration runs in a child process capped at that memory
+    (:mod:`mitld_lp.worlds.prism_bounded`), so that a program larger than the budget
+    stops when the budget is spent; the range product is only reported.
 
     Raises :class:`mitld_lp.worlds.WorldError` (:class:`PrismTooLarge` for a budget).
     """
@@ -293,6 +349,7 @@ def load_prism(
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                   or value < 1):
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    memory = default_max_memory() if max_memory is None else max_memory
     where = os.fspath(path)
     p = Path(path)
     if not p.is_file():
@@ -301,16 +358,15 @@ def load_prism(
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     _check_utf8(p, where)
     stormpy = _stormpy()
-    try:
-        with storm_quiet():
-            program = stormpy.parse_prism_program(where)
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
+    program = _parse(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
         raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
+    extra = _extra_labels(program, dict(define or {}), where)
+    if extra:
+        program = _with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
     _check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
@@ -343,37 +399,36 @@ def load_prism(
             plain = program.substitute_constants()
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
         raise storm_error(exc, where) from None
-    _check_budget(check_program(plain, where), where, max_states,
-                  default_max_memory() if max_memory is None else max_memory)
+    bound = check_program(plain, where)
+    condition = decided_when(task, frozenset(defined)) if task is not None else False
+    terminal = "" if condition is False else render(
+        condition, {lab.name: str(lab.expression) for lab in plain.labels})
     program, action_names = _name_unlabelled_commands(program, where, stormpy)
-    options = stormpy.BuilderOptions()
-    # Refuse updates out of a variable's range and probabilities that do not sum to 1
-    # where they depend on the state (without the checks Storm wraps values around).
-    options.set_exploration_checks(True)
-    # Every label, always: a label left out of the build would be false in every state.
-    options.set_build_all_labels()
-    options.set_build_choice_labels()
-    options.set_build_choice_origins()
-    options.set_build_state_valuations()
-    try:
-        with storm_quiet():
-            model = stormpy.build_model(program, options=options)
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where, program, plain) from None
-    built = set(model.labeling.get_labels())
-    if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
-        raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    command_names = _command_names(program)
 
-    def origin(choice: int) -> str:
-        """The commands a choice comes from, ``robot_cmd2``."""
-        cmds = sorted(model.choice_origins.get_command_set(choice))
-        return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
+    def work() -> Tables:
+        return _build(stormpy, program, plain, where, chosen, event_set, action_names,
+                      terminal, max_states)
 
-    tables = read_model(model, where, chosen, event_set, action_names, origin)
+    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
+    if bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory:
+        tables = work()  # every valuation fits: no cap needed
+    elif can_cap():
+        try:
+            tables = run_capped(work, budget)
+        except OutOfBudget as exc:
+            raise PrismTooLarge(
+                f"{where}: Storm's exploration passed the budget of {_bytes(budget)} "
+                f"({exc.detail}; max_states = {max_states:,} at {_bytes(CAP_BYTES_PER_STATE)} a "
+                f"state, max_memory = {_bytes(memory)}; {bound}): raise max_states "
+                "(--max-world-states) or max_memory (--max-memory)"
+            ) from None
+    else:
+        log.info("%s: %s; no memory cap on this platform", where, bound)
+        tables = work()
     log.info(
-        "%s: %d states, %d choices, labels %s, events %s",
-        where, model.nr_states, model.nr_choices, sorted(chosen), sorted(event_set),
+        "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
+        where, len(tables.states), bound, tables.decided, terminal or "never",
+        sorted(chosen), sorted(event_set),
     )
     return PrismGame(
         source=where,
@@ -382,25 +437,137 @@ def load_prism(
         initial=tables.states[tables.initial],
         proposition_names=chosen,
         effects=tables.effects,
+        terminal=terminal,
+        decided=tables.decided,
         _tables=tables,
         _index=dict(zip(tables.states, range(len(tables.states)), strict=True)),
     )
 
 
-def _check_budget(bound: SizeBound, where: str, max_states: int, max_memory: int) -> None:
-    """Refuse before Storm runs when the bound on the states exceeds a budget."""
-    if bound.states > max_states:
+def _parse(stormpy: Any, file: str, where: str) -> Any:
+    try:
+        with storm_quiet():
+            return stormpy.parse_prism_program(file)
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None
+
+
+_FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
+
+
+def _extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, str]:
+    """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
+    that no label shadows (``name -> name``), then ``define``."""
+    labels = {lab.name for lab in program.labels}
+    manager = program.expression_manager
+    extra: dict[str, str] = {}
+    for name in _FORMULA.findall(str(program)):
+        if name not in labels and manager.get_variable(name).has_boolean_type():
+            extra[name] = name
+    for name, text in define.items():
+        if not re.fullmatch(r"[A-Za-z_]\w*", name):
+            raise WorldError(f"label {name!r}: not a PRISM identifier")
+        if name in labels or name in extra:
+            what = "label" if name in labels else "formula"
+            raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
+        if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
+            raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
+        extra[name] = text
+    return extra
+
+
+def _with_labels(stormpy: Any, path: Path, extra: dict[str, str], where: str) -> Any:
+    """The program of ``path`` with ``label "name" = expression;`` appended for each
+    entry of ``extra`` (a copy in a temporary folder; the file is not changed)."""
+    text = path.read_text(encoding="utf-8")
+    first = text.count("\n") + 2
+    lines = [f'label "{name}" = {expression};' for name, expression in extra.items()]
+    with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
+        copy = Path(folder) / path.name
+        copy.write_text(text + "\n" + "\n".join(lines) + "\n", encoding="utf-8")
+        try:
+            with storm_quiet():
+                return stormpy.parse_prism_program(str(copy))
+        except (RuntimeError, stormpy.exceptions.StormError) as exc:
+            error = str(storm_error(exc, where))
+    m = re.match(rf"{re.escape(where)}:(\d+):(?:\d+: )?(.*)$", error)
+    if m and int(m[1]) >= first:
+        name = list(extra)[min(int(m[1]) - first, len(extra) - 1)]
+        raise WorldError(f"label {name!r} = {extra[name]!r}: {m[2]}")
+    raise WorldError(error)
+
+
+def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
+           events: frozenset[str], action_names: dict[str, str], terminal: str,
+           max_states: int) -> Tables:
+    """Storm's build of ``program``, copied into :class:`Tables`.
+
+    Storm's exploration checks refuse updates out of a variable's range (without them
+    it stores values modulo the range) and probabilities that do not sum to 1, compared
+    *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
+    checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
+    PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
+    model is built without the checks (its sums are then checked by
+    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance)."""
+    formula = None
+    if terminal:
+        with storm_quiet():
+            formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
+        formula = formula.get_raw_formula()
+
+    def options(checks: bool) -> Any:
+        o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
+        o.set_exploration_checks(checks)
+        # Every label, always: a label left out of the build would be false in every state.
+        o.set_build_all_labels()
+        o.set_build_choice_labels()
+        o.set_build_choice_origins()
+        o.set_build_state_valuations()
+        return o
+
+    errors = (RuntimeError, stormpy.exceptions.StormError)
+    try:
+        with storm_quiet():
+            model = stormpy.build_model(program, options=options(True))
+    except errors as exc:
+        if storm_sum(str(exc)) is None:
+            raise storm_error(exc, where, program, plain) from None
+        model = None
+    if model is None:
+        try:
+            with storm_quiet():
+                stormpy.build_model[stormpy.Rational](program, options=options(True))
+        except errors as exc:
+            total = storm_sum(str(exc))
+            if total is None or abs(total - 1) > SUM_TOLERANCE:
+                raise storm_error(exc, where, program, plain) from None
+            log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
+                     "the rest of the checks are read_model's", where, show_sum(total),
+                     SUM_TOLERANCE)
+        try:
+            with storm_quiet():
+                model = stormpy.build_model(program, options=options(False))
+        except errors as exc:
+            raise storm_error(exc, where, program, plain) from None
+    if model.nr_states > max_states:
         raise PrismTooLarge(
-            f"{where}: {bound}, more than max_states = {max_states:,}; Storm was not run: "
-            f"raise max_states (--max-states) to {bound.states:,} or narrow the ranges"
+            f"{where}: Storm explored {model.nr_states:,} states, more than max_states = "
+            f"{max_states:,}: raise max_states (--max-world-states)"
         )
-    need = bound.states * BYTES_PER_STATE
-    if need > max_memory:
-        raise PrismTooLarge(
-            f"{where}: {bound}, which would need about {_bytes(need)} ({BYTES_PER_STATE} "
-            f"bytes per state), more than max_memory = {_bytes(max_memory)}; Storm was not "
-            "run: raise max_memory (--max-memory) or narrow the ranges"
-        )
+    built = set(model.labeling.get_labels())
+    if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
+        raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
+    known = {lab.name for lab in program.labels} | {"init", "deadlock"}
+    stopped = sorted(built - known) if terminal else []
+    command_names = _command_names(program)
+
+    def origin(choice: int) -> str:
+        """The commands a choice comes from, ``robot_cmd2``."""
+        cmds = sorted(model.choice_origins.get_command_set(choice))
+        return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
+
+    return read_model(model, where, chosen, events, action_names, origin,
+                      stopped[0] if len(stopped) == 1 else None)
 
 
 def _name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:

@@ -2,9 +2,10 @@
 
 * :func:`check_program`: every variable has a non-empty range that contains its initial
   value, and every command whose probabilities are constants has probabilities in
-  [0, 1] summing to 1 (within :data:`mitld_lp.game.PROBABILITY_TOLERANCE`); it returns
-  the :class:`SizeBound` of the program, ``prod over the variables of |range|``, an
-  upper bound on the states Storm can reach, known before anything is built.
+  [0, 1] summing to 1 (within PRISM's :data:`SUM_TOLERANCE`); it returns the
+  :class:`SizeBound` of the program, ``prod over the variables of |range|``, an upper
+  bound on the states Storm can reach, known before anything is built (a note, not a
+  refusal: the reachable part is often far smaller).
 * :func:`storm_error`: one of Storm's exceptions as one line naming the file, and the
   line, the module and the command where Storm's message allows it (a parse error
   quotes at most :data:`EXCERPT` characters of the file).
@@ -26,18 +27,48 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
-from mitld_lp.game import PROBABILITY_TOLERANCE
 from mitld_lp.quiet import native_quiet
 from mitld_lp.worlds import WorldError
 
-__all__ = ["SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT"]
+__all__ = [
+    "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
+    "SUM_TOLERANCE", "show_sum", "storm_sum",
+]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
 EXCERPT = 24
 """At most this many characters of a user's file are quoted in a message."""
 
+SUM_TOLERANCE = 1e-5
+"""How far from 1 the probabilities of a command may sum: PRISM's default
+(``-sumroundoff``, an absolute difference), so that a file PRISM reads is read here
+(``1/3`` written three times, ``0.8 + 0.1 + 0.1`` in floating point).  A larger excess or
+shortfall is refused with the sum."""
+
 _UNSET = "__storm::notinitialized__"  # Storm's text for an expression that is not given
+
+
+def show_sum(total: float | Fraction) -> str:
+    """A sum of probabilities with the digits that tell it from 1: the shortest decimal
+    that reads back as the same double (``0.9``, ``0.99999``, ``1.0000001``), and an
+    exact fraction as well when it is not a short decimal (``2/3`` is ``0.6666666666666666``)."""
+    text = repr(float(total))
+    if isinstance(total, Fraction) and Fraction(text) != total:
+        return f"{text} ({total.numerator}/{total.denominator})"
+    return text
+
+
+def storm_sum(text: str) -> Fraction | None:
+    """The sum in one of Storm's messages on probabilities that do not sum to 1
+    (``actually sum to 9/10``), or None."""
+    m = re.search(r"actually sum to (-?[0-9./e+-]+)\)", text)
+    if not m:
+        return None
+    try:
+        return Fraction(m[1])
+    except (ValueError, ZeroDivisionError):
+        return None
 
 
 def excerpt(text: str, limit: int = EXCERPT) -> str:
@@ -145,9 +176,9 @@ def _check_probabilities(program: Any, where: str) -> None:
             for p in values:
                 if not 0 <= p <= 1:
                     raise WorldError(f"{at}: probability {float(p):g} is not in [0, 1]")
-            total = float(sum(values, Fraction(0)))
-            if abs(total - 1.0) > PROBABILITY_TOLERANCE:
-                raise WorldError(f"{at}: probabilities sum to {total:.12g}, not 1")
+            total = sum(values, Fraction(0))
+            if abs(total - 1) > SUM_TOLERANCE:
+                raise WorldError(f"{at}: probabilities sum to {show_sum(total)}, not 1")
 
 
 def check_program(program: Any, where: str) -> SizeBound:
@@ -228,12 +259,16 @@ def storm_error(
         m = _SUM.match(first)
         if m:
             at = find(lambda c, text=m[1]: str(c) == text)
-            return WorldError(f"{where}: {at}probabilities sum to {m[2]} in a state, not 1")
+            total = storm_sum(first)
+            shown = m[2] if total is None else show_sum(total)
+            return WorldError(f"{where}: {at}probabilities sum to {shown} in a state, not 1")
         m = _SYNC_SUM.match(first)
         if m:
+            total = storm_sum(first)
+            shown = m[1] if total is None else show_sum(total)
             return WorldError(
                 f"{where}: the synchronised commands of an action have probabilities "
-                f"summing to {m[1]} in a state, not 1"
+                f"summing to {shown} in a state, not 1"
             )
         m = _NEGATIVE.search(first)
         if m:

@@ -21,14 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.game import PROBABILITY_TOLERANCE
 from mitld_lp.worlds import WorldError
-from mitld_lp.worlds.prism_program import storm_quiet
+from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 
-__all__ = ["Tables", "read_model", "DEADLOCK_ACTION"]
+__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION"]
 
 DEADLOCK_ACTION = "deadlock"
 """The name of the self-loop Storm adds where no PRISM command is enabled."""
+
+DECIDED_ACTION = "decided"
+"""The name of the self-loop of a state where the task is decided (not expanded:
+:mod:`mitld_lp.worlds.prism_terminal`)."""
 
 State = tuple[Hashable, ...]
 
@@ -48,6 +51,7 @@ class Tables:
         names: ``m`` action names (an object array), ``None`` for an event's choice.
         effects: ``event -> n`` choice indices: the event's choice at each state, -1
             where its command is not enabled.
+        decided: how many states were not expanded because the task is decided there.
     """
 
     variables: tuple[str, ...]
@@ -60,6 +64,7 @@ class Tables:
     probabilities: np.ndarray
     names: np.ndarray
     effects: Mapping[str, np.ndarray]
+    decided: int = 0
 
 
 def _indices(bits: Any) -> np.ndarray:
@@ -69,7 +74,8 @@ def _indices(bits: Any) -> np.ndarray:
 
 def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
     """``(choices, branches, targets, probabilities)`` from Storm's UMB export, checked
-    for consistency; branches of probability 0 dropped."""
+    for consistency; branches of probability 0 dropped (negative ones are kept, for
+    :func:`read_model` to refuse)."""
     try:
         choices, branches, targets, probabilities = _export(model, where)
     except OSError as exc:
@@ -84,7 +90,7 @@ def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
     )
     if not ok:
         raise WorldError(f"{where}: Storm's UMB export is inconsistent; not supported")
-    positive = probabilities > 0.0
+    positive = probabilities != 0.0
     if not positive.all():  # a branch of probability 0 is no successor
         kept = np.add.reduceat(positive.astype(np.int64), branches[:-1])
         branches = np.concatenate(([0], np.cumsum(kept)))
@@ -174,15 +180,19 @@ def read_model(
     events: frozenset[str],
     action_names: Mapping[str, str],
     origin: Callable[[int], str],
+    decided: str | None = None,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
     ``action_names`` maps Storm's choice labels to action names (a command without an
     action was given a fresh one before the build); a choice without a label is the
     deadlock self-loop.  ``origin(choice)`` names the commands a choice comes from, used
-    only where two choices of a state would have the same name.  Raises
-    :class:`WorldError` for a state where only events are enabled, an event with two
-    enabled commands in a state, or a distribution whose probabilities do not sum to 1.
+    only where two choices of a state would have the same name.  ``decided``: Storm's
+    label of the states it did not expand (terminal states); their self-loop is named
+    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for a state where only events
+    are enabled, an event with two enabled commands in a state, a negative probability,
+    or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
+    (:data:`mitld_lp.worlds.prism_program.SUM_TOLERANCE`).
     """
     variables, states = _valuations(model)
     choices, branches, targets, probabilities = _structure(model, where)
@@ -199,14 +209,30 @@ def read_model(
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     names = np.asarray(table, dtype=object)[label_of]  # label -1 picks the last entry
 
+    n_decided = 0
+    if decided is not None:
+        stopped = np.zeros(n, dtype=bool)
+        stopped[_indices(model.labeling.get_states(decided))] = True
+        alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
+        unlabelled = alone[state_of] & (label_of == -1)
+        names[unlabelled] = DECIDED_ACTION
+        n_decided = int(np.count_nonzero(unlabelled))
+
     choice_of = np.repeat(np.arange(m, dtype=np.int64), np.diff(branches))
+    negative = np.flatnonzero(probabilities < 0.0)
+    if negative.size:
+        c = int(choice_of[negative[0]])
+        raise WorldError(
+            f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}: a probability "
+            f"is negative ({float(probabilities[negative[0]])!r})"
+        )
     totals = np.bincount(choice_of, weights=probabilities, minlength=m)
-    bad = np.flatnonzero(np.abs(totals - 1.0) > PROBABILITY_TOLERANCE)
+    bad = np.flatnonzero(np.abs(totals - 1.0) > SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
         raise WorldError(
             f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}: probabilities "
-            f"sum to {totals[c]!r}, not 1"
+            f"sum to {show_sum(float(totals[c]))}, not 1"
         )
 
     effects: dict[str, np.ndarray] = {}
@@ -260,4 +286,5 @@ def read_model(
         probabilities=probabilities,
         names=names,
         effects=effects,
+        decided=n_decided,
     )

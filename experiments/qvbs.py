@@ -1,0 +1,438 @@
+"""The Quantitative Verification Benchmark Set's PRISM MDPs, solved through the front door.
+
+Every PRISM-language MDP instance of QVBS (the QComp set, ``ahartmanns/qcomp``,
+``benchmarks/mdp/*/index.json``; data CC-BY 4.0) with at most ``--max-states`` reachable
+states (2,000,000) and a probability as its reference value is posed as a model file
+(``[prism] file``, the instance's constants, ``[labels]`` for the property's state
+formulas, the property as an MITLD spec; ``objective = "min"`` for ``Pmin``) and solved
+with :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` in a child process; the
+PRISM text is never edited.  Storm solves the same file and property in this process,
+for its time and value.  The table lists per instance: QVBS's state count, the world
+states we explored, our certified bracket, QVBS's reference (exact where it gives one),
+whether the reference lies inside the bracket, our time (load + solve) and Storm's
+(parse + build + check), and their ratio.  Trivial references (0, 1, below 1e-3 or
+above 1 - 1e-3) are listed apart and never enter a ratio.  Every instance that is not run
+is listed with the reason.
+
+Properties are translated as written: ``P(min|max)=? [F phi]`` is ``F t``, ``[F<=k phi]``
+is ``F[0,k] t``, ``[psi U phi]`` is ``l U t`` (MITLD's until is PCTL's: ``psi`` at every
+step before the first ``phi``), with ``t``, ``l`` the file's label when the state formula
+is one label (or ``!`` one label), else a ``[labels]`` entry holding the state formula as
+a PRISM expression (labels inlined).  Reward-bounded (``F^{rew...}``), reward and
+steady-state properties are not probabilities of the kind a task expresses: listed as not
+run.  The deadline families (firewire_dl, zeroconf_dl, wlan_dl) keep their PRISM clock:
+their deadline is a state formula of the file (``t>=deadline``), posed as written.
+
+The QVBS files are not part of this repository: give a checkout's ``benchmarks/``
+folder::
+
+    git clone https://github.com/ahartmanns/qcomp && \\
+        python experiments/qvbs.py --qvbs qcomp/benchmarks
+    python experiments/qvbs.py --qvbs qcomp/benchmarks --quick   # up to 20,000 states
+
+A full run writes ``qvbs.csv`` and ``qvbs.md`` to ``experiments/out``; ``--quick`` to the
+scratch folder.  Exit status 1 when a reference lies outside a certified bracket.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+from _common import ROOT, markdown_table, out_dir, parser, text_table, write_csv, write_text
+
+from mitld_lp.logic.syntax import is_proposition_name
+
+QUICK_STATES = 20_000
+TRIVIAL = 1e-3
+INSIDE_TOL = 1e-8
+"""A reference counts as inside ``[lower, upper]`` within this much (the solvers' own
+tolerance is 1e-9)."""
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One property of one parameter setting of one QVBS family."""
+
+    family: str
+    prism: Path
+    props: Path
+    constants: Mapping[str, bool | int | float]
+    prop: str
+    reference: Fraction | float
+    qvbs_states: int
+
+    @property
+    def name(self) -> str:
+        values = "-".join(str(v).lower() for v in self.constants.values())
+        return f"{self.family}.{values}.{self.prop}" if values else f"{self.family}.{self.prop}"
+
+
+@dataclass(frozen=True)
+class Posed:
+    """A property as a model file's spec, labels and objective."""
+
+    spec: str
+    labels: dict[str, str] = field(default_factory=dict)
+    objective: str = "max"
+
+
+class NotPosed(Exception):
+    """The property is not one a task expresses (the reason is the message)."""
+
+
+# --------------------------------------------------------------------------- QVBS index
+
+
+def _reference(value: Any) -> Fraction | float | None:
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, dict):
+        if "num" in value and "den" in value:
+            return Fraction(int(value["num"]), int(value["den"]))
+        if isinstance(value.get("approx"), int | float):
+            return float(value["approx"])
+    return None
+
+
+def find_instances(
+    benchmarks: Path, max_states: int
+) -> tuple[list[Instance], list[tuple[str, str]]]:
+    """Every instance to run, and ``(what, why not)`` for every one left out."""
+    runs: list[Instance] = []
+    skipped: list[tuple[str, str]] = []
+    for index in sorted((benchmarks / "mdp").glob("*/index.json")):
+        family = index.parent
+        meta = json.loads(index.read_text(encoding="utf-8"))
+        kinds = {p["name"]: p.get("type", "") for p in meta.get("properties", [])}
+        for entry in meta.get("files", []):
+            originals = entry.get("original-file", [])
+            originals = [originals] if isinstance(originals, str) else originals
+            prism = [f for f in originals if f.endswith((".prism", ".nm"))]
+            props = [f for f in originals if f.endswith((".props", ".pctl", ".prctl"))]
+            if meta.get("original") != "PRISM" or not prism:
+                skipped.append((f"{family.name}/{entry.get('file')}",
+                                f"not PRISM ({meta.get('original')})"))
+                continue
+            fixed = {v["name"]: v["value"] for v in entry.get("file-parameter-values", [])}
+            for setting in entry.get("open-parameter-values", []):
+                constants = {**fixed, **{v["name"]: v["value"] for v in setting.get("values", [])}}
+                states = [s["number"] for s in setting.get("states", []) if "number" in s]
+                label = f"{family.name} {constants}"
+                if not states:
+                    skipped.append((label, "QVBS gives no state count"))
+                    continue
+                if states[0] > max_states:
+                    skipped.append((label, f"{states[0]:,} states > {max_states:,}"))
+                    continue
+                for result in setting.get("results", []):
+                    name = result.get("property", "?")
+                    kind = kinds.get(name, "")
+                    reference = _reference(result.get("value"))
+                    if not kind.startswith("prob"):
+                        skipped.append((f"{label} {name}", f"not a probability ({kind})"))
+                        continue
+                    if reference is None:
+                        skipped.append((f"{label} {name}", f"qualitative ({kind}, reference "
+                                        f"{result.get('value')!r}), not a probability"))
+                        continue
+                    if not props:
+                        skipped.append((f"{label} {name}", "no PRISM properties file"))
+                        continue
+                    runs.append(Instance(family.name, family / prism[0], family / props[0],
+                                         constants, name, reference, int(states[0])))
+    return runs, skipped
+
+
+def read_properties(path: Path) -> dict[str, str]:
+    """``name -> text`` of a PRISM properties file's named properties."""
+    text = "\n".join(line.split("//", 1)[0] for line in path.read_text().splitlines())
+    out: dict[str, str] = {}
+    for piece in text.split(";"):
+        m = re.match(r'^\s*"([^"]+)"\s*:\s*(.+?)\s*$', piece, re.DOTALL)
+        if m:
+            out[m[1]] = " ".join(m[2].split())
+    return out
+
+
+# --------------------------------------------------------------------------- posing
+
+
+def _top_level_until(body: str) -> int | None:
+    """The index of the ``U`` of ``body`` outside parentheses and quotes, or None."""
+    depth, quoted = 0, False
+    for i, c in enumerate(body):
+        if c == '"':
+            quoted = not quoted
+        elif quoted:
+            continue
+        elif c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth -= 1
+        elif (c == "U" and depth == 0 and (i == 0 or not body[i - 1].isalnum() and
+              body[i - 1] != "_") and (i + 1 == len(body) or body[i + 1] in " (<\"!")):
+            return i
+    return None
+
+
+def pose(text: str, labels: Mapping[str, str], constants: Mapping[str, Any]) -> Posed:
+    """The property ``text`` (``Pmax=? [F "goal"]``) as a spec over ``labels`` (the
+    file's ``name -> expression``); ``constants`` are substituted where the property
+    uses them (the properties file's own constants).  Raises :class:`NotPosed`."""
+    m = re.fullmatch(r"\s*P\s*(min|max)\s*=\s*\?\s*\[(.*)\]\s*", text, re.DOTALL)
+    if not m:
+        raise NotPosed("not a Pmin=?/Pmax=? query")
+    body = m[2].strip()
+    for name, value in constants.items():
+        shown = str(value).lower() if isinstance(value, bool) else str(value)
+        body = re.sub(rf"(?<![\w\"]){re.escape(name)}(?![\w\"])", shown, body)
+    if "^{" in body or "rew" in body:
+        raise NotPosed("reward-bounded path formula")
+    extra: dict[str, str] = {}
+
+    def prop(formula: str, role: str) -> str:
+        f = formula.strip()
+        while f.startswith("(") and f.endswith(")") and _balanced(f[1:-1]):
+            f = f[1:-1].strip()
+        one = re.fullmatch(r'(!?)\s*"(\w+)"', f)  # a label of the file, or its negation
+        if one and one[2] in labels and is_proposition_name(one[2]):
+            return one[1] + one[2]
+
+        def inline(match: re.Match[str]) -> str:
+            if match[1] not in labels:
+                raise NotPosed(f"label {match[1]!r} is not defined by the file")
+            return f"({labels[match[1]]})"
+
+        name = f"qvbs_{role}"
+        extra[name] = re.sub(r'"(\w+)"', inline, f)
+        return name
+
+    at = _top_level_until(body)
+    if at is not None:
+        right = body[at + 1 :].lstrip()
+        bound = re.match(r"<=\s*(\d+)\s*", right)
+        window = f"[0,{bound[1]}]" if bound else ""
+        right = right[bound.end():] if bound else right
+        spec = f"{prop(body[:at], 'left')} U{window} {prop(right, 'target')}"
+    else:
+        f = re.fullmatch(r"F\s*(?:<=\s*(\d+))?\s*(?=[\s(\"!A-Za-z])(.*)", body, re.DOTALL)
+        if not f:
+            raise NotPosed(f"path formula {body[:30]!r} is not F or U")
+        window = f"[0,{f[1]}]" if f[1] else ""
+        spec = f"F{window} {prop(f[2], 'target')}"
+    return Posed(spec=spec, labels=extra, objective=m[1])
+
+
+def _balanced(text: str) -> bool:
+    depth = 0
+    for c in text:
+        depth += (c == "(") - (c == ")")
+        if depth < 0:
+            return False
+    return depth == 0
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    return repr(value)
+
+
+def model_file(instance: Instance, posed: Posed, undefined: set[str]) -> str:
+    """The model file of one instance (the PRISM file by absolute path)."""
+    lines = [f"name = {json.dumps(instance.name)}", f"spec = {json.dumps(posed.spec)}"]
+    if posed.objective == "min":
+        lines.append('objective = "min"')
+    lines += ["", "[prism]", f"file = {json.dumps(str(instance.prism.resolve()))}"]
+    given = {k: v for k, v in instance.constants.items() if k in undefined}
+    if given:
+        body = ", ".join(f"{k} = {_toml_value(v)}" for k, v in given.items())
+        lines.append(f"constants = {{ {body} }}")
+    if posed.labels:
+        lines += ["", "[labels]"] + [f"{k} = {json.dumps(v)}" for k, v in posed.labels.items()]
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- running
+
+
+DRIVER = r"""
+import json, sys, time
+from mitld_lp import load_model, synthesize
+from mitld_lp.model import ModelError
+start = time.perf_counter()
+try:
+    model = load_model(sys.argv[1], max_states=int(sys.argv[2]))
+except ModelError as exc:
+    print(json.dumps({"error": str(exc)}))
+    raise SystemExit(0)
+loaded = time.perf_counter()
+r = synthesize(model)
+done = time.perf_counter()
+print(json.dumps({"lower": r.lower, "upper": r.upper, "certified": r.certified,
+                  "status": str(r.status), "world": model.game.n_states,
+                  "decided": getattr(model.game, "decided", 0),
+                  "load": loaded - start, "solve": done - loaded}))
+"""
+
+
+def ours(path: Path, max_states: int, timeout: float) -> dict[str, Any]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    try:
+        run = subprocess.run([sys.executable, "-c", DRIVER, str(path), str(max_states)],
+                             capture_output=True, text=True, timeout=timeout, env=env)
+    except subprocess.TimeoutExpired:
+        return {"error": f"over {timeout:g} s"}
+    lines = run.stdout.strip().splitlines()
+    if run.returncode != 0 or not lines:
+        tail = (run.stderr.strip().splitlines() or ["no output"])[-1]
+        return {"error": f"exit {run.returncode}: {tail[:200]}"}
+    return json.loads(lines[-1])
+
+
+def storm(instance: Instance, text: str) -> tuple[float, float]:
+    """Storm's value and seconds (parse, build with the property, check)."""
+    import stormpy
+
+    start = time.perf_counter()
+    program = stormpy.parse_prism_program(str(instance.prism))
+    undefined = {c.name for c in program.constants if not c.defined}
+    given = {k: v for k, v in instance.constants.items() if k in undefined}
+    if given:
+        program, _ = stormpy.instantiate_constants(program, given)
+    others = {k: v for k, v in instance.constants.items() if k not in undefined}
+    for name, value in others.items():  # the properties file's own constants
+        shown = str(value).lower() if isinstance(value, bool) else str(value)
+        text = re.sub(rf"(?<![\w\"]){re.escape(name)}(?![\w\"])", shown, text)
+    props = stormpy.parse_properties(text, program)
+    model = stormpy.build_model(program, props)
+    result = stormpy.model_checking(model, props[0])
+    value = float(result.get_value_vector()[model.initial_states[0]])
+    return value, time.perf_counter() - start
+
+
+def _labels_of(instance: Instance) -> tuple[dict[str, str], set[str]]:
+    import stormpy
+
+    program = stormpy.parse_prism_program(str(instance.prism))
+    labels = {lab.name: str(lab.expression) for lab in program.labels}
+    return labels, {c.name for c in program.constants if not c.defined}
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.9g}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = parser(__doc__.splitlines()[0])
+    ap.add_argument("--qvbs", type=Path, required=True,
+                    help="the benchmarks/ folder of a checkout of github.com/ahartmanns/qcomp")
+    ap.add_argument("--max-states", type=int, default=2_000_000,
+                    help="largest instance (QVBS's state count) to run (default 2,000,000)")
+    ap.add_argument("--timeout", type=float, default=None,
+                    help="seconds per instance for our solve (default 3600, --quick 120)")
+    ap.add_argument("--family", action="append", help="only these families (repeatable)")
+    args = ap.parse_args(argv)
+    if not (args.qvbs / "mdp").is_dir():
+        ap.error(f"--qvbs {args.qvbs}: no mdp/ folder (give qcomp's benchmarks/ folder)")
+    limit = min(args.max_states, QUICK_STATES) if args.quick else args.max_states
+    timeout = args.timeout or (120.0 if args.quick else 3600.0)
+    out = out_dir(args)
+    work = out / "qvbs-models"
+    work.mkdir(parents=True, exist_ok=True)
+
+    runs, skipped = find_instances(args.qvbs, limit)
+    if args.family:
+        runs = [r for r in runs if r.family in args.family]
+    header = ["instance", "states", "explored", "lower", "upper", "reference", "inside",
+              "ours s", "storm s", "ratio", "storm value"]
+    rows: list[list[Any]] = []
+    trivial: list[list[Any]] = []
+    outside: list[str] = []
+    widths: list[float] = []
+    for inst in runs:
+        missing = [f.name for f in (inst.prism, inst.props) if not f.is_file()]
+        if missing:
+            skipped.append((inst.name, f"missing from the checkout: {', '.join(missing)}"))
+            continue
+        texts = read_properties(inst.props)
+        if inst.prop not in texts:
+            skipped.append((inst.name, f"property not in {inst.props.name}"))
+            continue
+        labels, undefined = _labels_of(inst)
+        try:
+            posed = pose(texts[inst.prop], labels,
+                         {k: v for k, v in inst.constants.items() if k not in undefined})
+        except NotPosed as exc:
+            skipped.append((inst.name, str(exc)))
+            continue
+        path = work / f"{inst.name}.toml"
+        path.write_text(model_file(inst, posed, undefined), encoding="utf-8")
+        got = ours(path, max(limit, inst.qvbs_states), timeout)
+        if "error" in got:
+            reason = got["error"]
+            if posed.objective == "min" and "objective" in reason:
+                reason = ('Pmin: the model file\'s objective = "min" is not supported by this '
+                          "version")
+            skipped.append((inst.name, reason))
+            continue
+        value, storm_seconds = storm(inst, texts[inst.prop])
+        ref = float(inst.reference)
+        lower, upper = got["lower"], got["upper"]
+        inside = got["certified"] and lower - INSIDE_TOL <= ref <= upper + INSIDE_TOL
+        if not inside:
+            outside.append(inst.name)
+        widths.append(upper - lower)
+        seconds = got["load"] + got["solve"]
+        easy = ref <= TRIVIAL or ref >= 1 - TRIVIAL
+        row = [inst.name, f"{inst.qvbs_states:,}", f"{got['world']:,}", _fmt(lower),
+               _fmt(upper), _fmt(ref), "yes" if inside else "NO", f"{seconds:.2f}",
+               f"{storm_seconds:.2f}", "-" if easy else f"{seconds / storm_seconds:.1f}",
+               _fmt(value)]
+        (trivial if easy else rows).append(row)
+        print(f"{inst.name}: [{_fmt(lower)}, {_fmt(upper)}] ref {_fmt(ref)} "
+              f"{'inside' if inside else 'OUTSIDE'} ({seconds:.2f} s, Storm {storm_seconds:.2f} s)",
+              flush=True)
+
+    report = ["## QVBS PRISM MDPs through the front door", ""]
+    if rows:
+        report += [text_table(header, rows), ""]
+    if trivial:
+        report += ["Trivial references (0, 1, < 1e-3 or > 1 - 1e-3; no ratio):", "",
+                   text_table(header, trivial), ""]
+    ratios = [float(r[9]) for r in rows]
+    run = len(rows) + len(trivial)
+    report.append(f"{run} run, {run - len(outside)} references inside the certified bracket, "
+                  f"{len(outside)} outside{': ' + ', '.join(outside) if outside else ''}; "
+                  f"largest bracket width {max(widths, default=0.0):.3g}")
+    if ratios:
+        report.append("ours / Storm time (non-trivial): median "
+                      f"{sorted(ratios)[len(ratios) // 2]:.1f}, geometric mean "
+                      f"{math.exp(sum(math.log(max(r, 1e-3)) for r in ratios) / len(ratios)):.1f}")
+    report += ["", f"Not run ({len(skipped)}):"] + [f"  {what}: {why}" for what, why in skipped]
+    text = "\n".join(report)
+    print(text)
+    write_csv(out / "qvbs.csv", header, rows + trivial)
+    write_text(out / "qvbs.md", markdown_table(header, rows + trivial) + "\n" + "\n".join(
+        f"- not run: {what}: {why}" for what, why in skipped) + "\n")
+    return 1 if outside else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
