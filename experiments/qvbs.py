@@ -387,9 +387,6 @@ def main(argv: list[str] | None = None) -> int:
         got = ours(path, max(limit, inst.qvbs_states), timeout)
         if "error" in got:
             reason = got["error"]
-            if posed.objective == "min" and "objective" in reason:
-                reason = ('Pmin: the model file\'s objective = "min" is not supported by this '
-                          "version")
             skipped.append((inst.name, reason))
             continue
         value, storm_seconds = storm(inst, texts[inst.prop])
