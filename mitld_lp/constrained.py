@@ -42,6 +42,7 @@ from mitld_lp.problem import CONSTRAINED, Posed, ProblemError, check_constrained
 from mitld_lp.product import ProductState, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
+from mitld_lp.world_names import state_record
 
 __all__ = ["ConstrainedResult", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
@@ -128,7 +129,8 @@ class ConstrainedResult:
     def _row(self, s: int, action: str, p: float) -> dict[str, Any]:
         rec = self.mdp.states[int(self.merged.origin[s])]
         assert isinstance(rec, ProductState)
-        return {"game_state": rec.game,
+        game = None if self.model is None else self.model.game
+        return {"game_state": rec.game if game is None else state_record(game, rec.game),
                 "automaton_state": list(self.joint.components[rec.automaton]),
                 "pending": sorted(rec.pending), "clock": rec.clock, "action": action,
                 "probability": p}

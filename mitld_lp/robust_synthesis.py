@@ -57,6 +57,7 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
+from mitld_lp.world_names import state_record
 
 __all__ = ["is_robust", "synthesize_robust", "RobustResult", "RobustModelSolution",
            "robust_game"]
@@ -234,7 +235,7 @@ class RobustResult:
             c = int(low.policy[i])
             if not isinstance(state, ProductState) or c < 0:
                 continue
-            rows.append({"game_state": state.game,
+            rows.append({"game_state": state_record(self.model.game, state.game),
                          "automaton_state": str(self.dta.states[state.automaton]),
                          "pending": sorted(state.pending), "clock": state.clock,
                          "action": m.action_name(c), "value": float(low.policy_values[i]),

@@ -620,3 +620,25 @@ def test_a_kept_safety_part_with_constraints_is_not_exported_yet(
     err = capsys.readouterr().err
     assert "keeps the task's safety part" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_a_constrained_policy_table_names_prism_states_by_their_variables(
+        tmp_path: Path) -> None:
+    """The constrained route's policy table wrote a PRISM world's states as raw tuples;
+    it writes them by variable, as the plain table and mitld-lp run do."""
+    pytest.importorskip("stormpy")
+    from mitld_lp import load_model
+
+    (tmp_path / "w.prism").write_text(
+        "mdp\nmodule m\n  x : [0..3] init 0;\n"
+        "  [safe] x=0 -> (x'=1);\n  [go] x=0 -> 0.3:(x'=2) + 0.7:(x'=3);\n"
+        "  [wait] x>0 -> true;\nendmodule\nlabel \"h\" = x=2;\nlabel \"g\" = x=3;\n")
+    (tmp_path / "w.toml").write_text('name = "w"\nspec = "F g"\n'
+                                     'constraints = ["P(F h) <= 0.1"]\n'
+                                     '[prism]\nfile = "w.prism"\n')
+    r = synthesize(load_model(tmp_path / "w.toml"))
+    assert r.route == "constrained" and r.certified
+    assert r.lower == pytest.approx(0.7 * 0.1 / 0.3, abs=1e-7)  # go w.p. 1/3: P(h) = 0.1
+    rows = r.policy_table()
+    assert rows and all(isinstance(row["game_state"], dict) and set(row["game_state"]) == {"x"}
+                        for row in rows)
