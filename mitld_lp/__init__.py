@@ -8,13 +8,14 @@ loaded from their modules on first use, so that :mod:`mitld_lp.runtime` (a saved
 controller, NumPy alone) imports nothing else of the package.
 """
 
+from mitld_lp import startup  # noqa: F401 - first: Ctrl-C while the command line imports
+
+# isort: split
 import importlib
 import importlib.util
 import sys
 import types
 from typing import TYPE_CHECKING, Any
-
-from mitld_lp import startup  # noqa: F401 - first: Ctrl-C while the command line imports
 
 if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA
