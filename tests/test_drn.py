@@ -96,3 +96,26 @@ def test_product_valuations_match_the_reference(tmp_path: Path) -> None:
     mdp = build_product(model.game, model.spec, model.distributions, epsilon=0.01).mdp
     path = write_drn(mdp, mdp.target, tmp_path / "p.drn")
     assert path.read_text(encoding="utf-8") == reference_drn(mdp, mdp.target, True, True)
+
+
+def test_a_prism_worlds_states_are_named_by_their_variables_in_the_drn(tmp_path):
+    """export --drn wrote a PRISM world's state as game=(...); it writes its variables by
+    name, as Storm's own exporter does, and Storm still reads the file: Pmax of accept is
+    the answer (0.7 by hand: the one gamble that reaches g)."""
+    stormpy = pytest.importorskip("stormpy")
+    from mitld_lp.cli import main
+
+    (tmp_path / "w.prism").write_text(
+        "mdp\nmodule m\n  x : [0..3] init 0;\n  b : bool init false;\n"
+        "  [safe] x=0 -> (x'=1);\n  [go] x=0 -> 0.3:(x'=2)&(b'=true) + 0.7:(x'=3);\n"
+        "  [wait] x>0 -> true;\nendmodule\nlabel \"h\" = x=2;\nlabel \"g\" = x=3;\n")
+    (tmp_path / "w.toml").write_text('name = "w"\nspec = "F g"\n[prism]\nfile = "w.prism"\n')
+    drn = tmp_path / "w.drn"
+    assert main(["export", str(tmp_path / "w.toml"), "--drn", str(drn), "-q"]) == 0
+    lines = drn.read_text().splitlines()
+    assert "//[b=false & x=0 & q=0 & pending={} & clock=0]" in lines
+    assert not any("game=" in line for line in lines)
+    model = stormpy.build_model_from_drn(str(drn))
+    prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
+    value = stormpy.model_checking(model, prop).get_value(model.initial_states[0])
+    assert value == pytest.approx(0.7, abs=1e-9)

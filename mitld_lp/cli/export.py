@@ -8,7 +8,9 @@ lines)."""
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from mitld_lp import files
 from mitld_lp.cli.kernel import (
@@ -88,9 +90,23 @@ def cmd_export(args: argparse.Namespace) -> int:
         _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _out(f"wrote {lp}")
     if drn:
-        _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True))
+        world = _world_valuation(posed.model.game)
+        _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True, world=world))
         _out(f"wrote {drn}")
     return code
+
+
+def _world_valuation(game: Any) -> Callable[[object], str] | None:
+    """How the DRN names a world state: a PRISM world's by its variables (``x=2 &
+    open=true``, as Storm's own exporter names PRISM states); any other world's as
+    ``game=...`` (None: the default)."""
+    from mitld_lp.controller_file import world_variables
+    from mitld_lp.world_names import state_values, valuation_text
+
+    names = world_variables(game)
+    if names is None:
+        return None
+    return lambda g: valuation_text(names, state_values(game, g))  # type: ignore[arg-type]
 
 
 def _controller_exports(args: argparse.Namespace, controller: Path | None,

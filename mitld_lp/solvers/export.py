@@ -17,7 +17,7 @@ import importlib
 import logging
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -140,11 +140,13 @@ def _compact(value: object) -> str:
 
 class _Valuations:
     """:func:`_valuation` with the parts that many states share (a game state, a set of
-    pending events) formatted once."""
+    pending events) formatted once; ``world``: how a game state is written (default
+    ``game=(...)``; a PRISM world's caller gives its variables, ``x=1 & y=2``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, world: Callable[[object], str] | None = None) -> None:
         self.games: dict[object, str] = {}
         self.pending: dict[object, str] = {}
+        self.world = world or (lambda g: f"game={_compact(g)}")
 
     def __call__(self, record: object) -> str:
         game = getattr(record, "game", None)
@@ -152,12 +154,12 @@ class _Valuations:
             return _valuation(record)
         g = self.games.get(game)
         if g is None:
-            g = self.games[game] = _compact(game)
+            g = self.games[game] = self.world(game)
         pend = record.pending  # type: ignore[attr-defined]
         p = self.pending.get(pend)
         if p is None:
             p = self.pending[pend] = ",".join(sorted(pend))
-        return (f"game={g} & q={record.automaton} & "  # type: ignore[attr-defined]
+        return (f"{g} & q={record.automaton} & "  # type: ignore[attr-defined]
                 f"pending={{{p}}} & clock={record.clock}")  # type: ignore[attr-defined]
 
 
@@ -186,7 +188,8 @@ def _successors(cols: np.ndarray) -> np.ndarray:
 
 
 def drn_text(mdp: MDP, marks: list[tuple[str, np.ndarray]], *,
-             valuations: bool = True) -> Iterator[str]:
+             valuations: bool = True,
+             world: Callable[[object], str] | None = None) -> Iterator[str]:
     """The ``@model`` section of ``mdp``'s DRN text, a chunk of :data:`_DRN_CHUNK`
     states at a time (the text of a 1e6-state model never sits in memory whole).
 
@@ -206,7 +209,7 @@ def drn_text(mdp: MDP, marks: list[tuple[str, np.ndarray]], *,
     codes[int(mdp.initial)] = 1
     for bit, (_, mask) in enumerate(marks, start=1):
         codes |= np.asarray(mask, dtype=np.int64) << bit
-    valuation = _Valuations()
+    valuation = _Valuations(world)
     for lo in range(0, n, _DRN_CHUNK):
         hi = min(n, lo + _DRN_CHUNK)
         c_lo, c_hi = int(row_groups[lo]), int(row_groups[hi])
@@ -257,6 +260,7 @@ def write_drn(
     overwrite: bool = False,
     truncated_label: bool = True,
     valuations: bool = True,
+    world: Callable[[object], str] | None = None,
 ) -> Path:
     """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``).
 
@@ -272,7 +276,9 @@ def write_drn(
     each ``state`` line is followed by the state's valuation as Storm's own exporter
     writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
     state, the automaton state, the events still pending, the clock), or
-    ``//[target]`` / ``//[sink]`` / ``//[truncated]`` for the absorbing states.
+    ``//[target]`` / ``//[sink]`` / ``//[truncated]`` for the absorbing states;
+    ``world`` writes the game state in the world's own terms instead of ``game=...``
+    (the command line gives a PRISM world's variables, ``x=2 & open=true``).
     Probabilities are written with Python's shortest round-trip ``repr``.
 
     Raises:
@@ -301,7 +307,7 @@ def write_drn(
     ]
     with files.replacing(p) as f:
         f.write("\n".join(header) + "\n")
-        for text in drn_text(mdp, marks, valuations=valuations):
+        for text in drn_text(mdp, marks, valuations=valuations, world=world):
             f.write(text)
     logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
     return p
