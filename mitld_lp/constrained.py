@@ -42,6 +42,7 @@ from mitld_lp.problem import CONSTRAINED, Posed, ProblemError, check_constrained
 from mitld_lp.product import ProductState, product
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
+from mitld_lp.solvers.result import Status
 from mitld_lp.world_names import state_record
 
 __all__ = ["ConstrainedResult", "ConstraintValue",
@@ -65,14 +66,16 @@ class ConstraintValue:
 class ConstrainedResult:
     """The answer of :func:`synthesize_constrained`.
 
-    ``status``: ``"optimal"``, ``"infeasible"`` (no policy meets the constraints; each
-    :class:`ConstraintValue` then carries ``feasible_bound``) or ``"failed"``.
+    ``status``: a :class:`~mitld_lp.solvers.result.Status`, the vocabulary of every route
+    (``OPTIMAL``, ``INFEASIBLE``: no policy meets the constraints, each
+    :class:`ConstraintValue` then carries ``feasible_bound``; ``FAILED``, ``TIME_LIMIT``);
+    each is also its string (``"optimal"``).
     ``lower``: the task's exact probability under the returned policy (lower model);
     ``upper``: the upper model's LP optimum; ``value``: the lower model's LP optimum.
     ``then``/``secondary``: the lexicographic objective and its exact value on the policy.
     """
 
-    status: str
+    status: Status
     lower: float
     upper: float
     value: float

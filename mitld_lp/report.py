@@ -132,7 +132,7 @@ def _constrained_part(result: Any) -> dict[str, Any]:
     merged = result.merged.mdp
     infeasible = result.status == "infeasible"
     return {
-        "status": result.status, "states": merged.n_states, "choices": merged.n_choices,
+        "status": str(result.status), "states": merged.n_states, "choices": merged.n_choices,
         "transitions": merged.n_transitions, "dta_states": result.joint.dta.n_states,
         "checks": [{"name": n, "ok": ok, "detail": d} for n, ok, d in result.checks],
         "constraints": [

@@ -642,3 +642,19 @@ def test_a_constrained_policy_table_names_prism_states_by_their_variables(
     rows = r.policy_table()
     assert rows and all(isinstance(row["game_state"], dict) and set(row["game_state"]) == {"x"}
                         for row in rows)
+
+
+def test_one_status_vocabulary_on_every_route() -> None:
+    """The constrained route answered with bare strings where the others used Status;
+    every route's status is now a Status member (each also its string)."""
+    from mitld_lp.solvers.result import Status
+
+    risk = load_model(MODELS / "bus_risk.toml")
+    results = [synthesize(load_model(MODELS / "bus_grid.toml")),
+               synthesize(load_model(MODELS / "bus_fit.toml")),
+               synthesize(risk, constraints=["P(F puddle) <= 0.05"]),
+               synthesize(risk, constraints=["P(F puddle) <= 0.05", "P(F puddle) >= 0.5"])]
+    assert [r.route for r in results] == ["plain", "robust", "constrained", "constrained"]
+    assert all(isinstance(r.status, Status) for r in results)
+    assert [r.status for r in results] == [Status.OPTIMAL] * 3 + [Status.INFEASIBLE]
+    assert results[2].status == "optimal" and f"{results[3].status}" == "infeasible"

@@ -29,10 +29,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evaluate
+from mitld_lp.solvers.result import Status
 
 __all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED"]
 
-OPTIMAL, INFEASIBLE, FAILED, TIME_LIMIT = "optimal", "infeasible", "failed", "time_limit"
+OPTIMAL, INFEASIBLE, FAILED, TIME_LIMIT = (Status.OPTIMAL, Status.INFEASIBLE, Status.FAILED,
+                                          Status.TIME_LIMIT)
 
 _ZERO_SHARE = 1e-9  # a choice with less than this share of its state's visits is dropped
 

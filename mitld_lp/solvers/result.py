@@ -23,8 +23,9 @@ def read_only(a: np.ndarray) -> np.ndarray:
     return a
 
 
-class Status(enum.Enum):
-    """How a solver terminated."""
+class Status(enum.StrEnum):
+    """How a solver terminated: one vocabulary for every route (a ``StrEnum``: each
+    member is also its string, ``Status.OPTIMAL == "optimal"``)."""
 
     OPTIMAL = "optimal"
     """Solved to the requested tolerance."""
