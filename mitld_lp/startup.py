@@ -16,8 +16,10 @@ third of solving the bundled case study; the cost grows with the core count.
 
 from __future__ import annotations
 
+# _signal, not signal: the C module is built into the interpreter and imports at once,
+# while signal.py builds its enums first (a Ctrl-C landing there printed a traceback)
+import _signal
 import os
-import signal
 import sys
 
 __all__ = ["started_as_command"]
@@ -39,6 +41,6 @@ BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 if started_as_command():
-    signal.signal(signal.SIGINT, _interrupted)
+    _signal.signal(_signal.SIGINT, _interrupted)
     for _name, _value in BLAS_THREADS.items():
         os.environ.setdefault(_name, _value)
