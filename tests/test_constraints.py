@@ -19,20 +19,9 @@ from mitld_lp.constraints import ConstraintError, parse_constraint
 from mitld_lp.game import ExplicitGame
 from mitld_lp.model import Model, ModelError, loads_model
 from mitld_lp.synthesis import synthesize, synthesize_constrained
+from mitld_lp.testing import two_routes_world
 
-# s0: "safe" reaches the goal with 1/2; "risky" with 0.9, but 0.3 of it through a hazard.
-HAND = ExplicitGame(
-    initial="s0",
-    transitions={
-        "s0": {"safe": {"goal": 0.5, "trap": 0.5},
-               "risky": {"hg": 0.3, "goal": 0.6, "trap": 0.1}},
-        "goal": {"wait": {"goal": 1.0}},
-        "trap": {"wait": {"trap": 1.0}},
-        "hg": {"wait": {"hg": 1.0}},
-    },
-    labels={"goal": {"goal"}, "hg": {"goal", "hazard"}},
-    proposition_names=frozenset({"goal", "hazard"}),
-)
+HAND = two_routes_world()  # worked by hand: safe 1/2; risky 0.9, 0.3 via a hazard
 
 
 def _mix(result, state="s0"):

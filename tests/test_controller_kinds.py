@@ -24,26 +24,15 @@ from mitld_lp import Observation, RunStatus, synthesize
 from mitld_lp.constrained import ConstrainedController as Reexported
 from mitld_lp.controller import Controller, ControllerFileError
 from mitld_lp.controller_random import ConstrainedController, load_controller
-from mitld_lp.game import ExplicitGame
 from mitld_lp.model import Model, load_model
 from mitld_lp.simulate import rollout, simulate
 from mitld_lp.synthesis import synthesize_constrained
+from mitld_lp.testing import two_routes_world
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
 
-HAND = ExplicitGame(
-    initial="s0",
-    transitions={
-        "s0": {"safe": {"goal": 0.5, "trap": 0.5},
-               "risky": {"hg": 0.3, "goal": 0.6, "trap": 0.1}},
-        "goal": {"wait": {"goal": 1.0}},
-        "trap": {"wait": {"trap": 1.0}},
-        "hg": {"wait": {"hg": 1.0}},
-    },
-    labels={"goal": {"goal"}, "hg": {"goal", "hazard"}},
-    proposition_names=frozenset({"goal", "hazard"}),
-)
+HAND = two_routes_world()  # worked by hand: safe 1/2; risky 0.9, 0.3 via a hazard
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,29 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.game import ExplicitGame
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.testing.reference_product import reference_product
 
-__all__ = ["random_mdp", "reference_product"]
+__all__ = ["random_mdp", "reference_product", "two_routes_world"]
+
+
+def two_routes_world() -> ExplicitGame:
+    """A world worked by hand in the tests: from ``s0``, ``safe`` reaches the goal with
+    1/2; ``risky`` with 0.9, but 0.3 of it through a hazard (state ``hg``, labelled goal
+    and hazard)."""
+    return ExplicitGame(
+        initial="s0",
+        transitions={
+            "s0": {"safe": {"goal": 0.5, "trap": 0.5},
+                   "risky": {"hg": 0.3, "goal": 0.6, "trap": 0.1}},
+            "goal": {"wait": {"goal": 1.0}},
+            "trap": {"wait": {"trap": 1.0}},
+            "hg": {"wait": {"hg": 1.0}},
+        },
+        labels={"goal": {"goal"}, "hg": {"goal", "hazard"}},
+        proposition_names=frozenset({"goal", "hazard"}),
+    )
 
 
 def random_mdp(
