@@ -34,7 +34,8 @@ from mitld_lp import Model, load_model, synthesize
 from mitld_lp.distributions import geometric
 from mitld_lp.distributions.fit import fit_law
 from mitld_lp.product.imdp import IntervalMDP
-from mitld_lp.routes.robust import RobustResult, robust_game
+from mitld_lp.result import Result
+from mitld_lp.routes.robust import robust_game
 from mitld_lp.solvers.robust import robust_interval_iteration
 from mitld_lp.solvers.robust_export import write_interval_drn
 
@@ -52,7 +53,7 @@ def _since(start: tuple[float, float]) -> tuple[float, float]:
     return wall - start[0], cpu - start[1]
 
 
-def value_under(result: RobustResult, hazard: float) -> float:
+def value_under(result: Result, hazard: float) -> float:
     """The robust policy's exact value when bus 2's hazard is ``hazard`` at every step
     (the band narrowed to that point: nature has no choice left)."""
     m = result.imdp
@@ -144,7 +145,7 @@ def main(argv: list[str] | None = None):
             t = _clock()
             res = synthesize(model(fit.band))
             wall, cpu = _since(t)
-            assert isinstance(res, RobustResult) and res.certified, res.failed_checks
+            assert res.route == "robust" and res.certified, res.failed_checks
             true_value = value_under(res, P_TRUE)
             lo, hi = fit.band.hazard_band(1)
             runs.append([n, rep, fit.parameters[0].estimate, lo, hi, res.lower, res.upper,

@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.model import Model, ModelError, load_model, loads_model
     from mitld_lp.problem import Problem, ProblemError, Settings, pose
     from mitld_lp.product import ProductState, product
+    from mitld_lp.result import Result, SynthesisResult
     from mitld_lp.running.controller import (
         Controller,
         ControllerFileError,
@@ -55,7 +56,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.running.randomised import ConstrainedController, load_controller
     from mitld_lp.running.simulate import simulate
     from mitld_lp.sweep import load_sweep, run_sweep
-    from mitld_lp.synthesis import SynthesisResult, solve, synthesize, synthesize_constrained
+    from mitld_lp.synthesis import solve, synthesize, synthesize_constrained
     from mitld_lp.worlds.game import ExplicitGame, Game
     from mitld_lp.worlds.grid import GridWorld
 
@@ -98,7 +99,8 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "ProductState": "mitld_lp.product",
     "product": "mitld_lp.product",
     "simulate": "mitld_lp.running.simulate",
-    "SynthesisResult": "mitld_lp.synthesis",
+    "Result": "mitld_lp.result",
+    "SynthesisResult": "mitld_lp.result",
     "synthesize": "mitld_lp.synthesis",
     "ConstrainedController": "mitld_lp.running.randomised",
     "load_controller": "mitld_lp.running.randomised",
@@ -186,6 +188,7 @@ __all__ = [
     "ProductState",
     "product",
     "synthesize",
+    "Result",
     "SynthesisResult",
     "Controller",
     "ControllerFileError",

@@ -1,18 +1,21 @@
-"""What a :class:`~mitld_lp.synthesis.SynthesisResult` says, as data: the policy table
-(one row per undecided product state), the JSON summary (the command line's ``--json``)
-and the table a notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
+"""What a :class:`~mitld_lp.result.Result` says, as data: the policy table (one row per
+undecided product state, or per (state, action) of a randomised policy), the JSON
+summary (the command line's ``--json``, one schema for every route) and the table a
+notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
 
 from __future__ import annotations
 
 from html import escape
 from typing import Any
 
+import numpy as np
+
 from mitld_lp.product import ProductState
 from mitld_lp.worlds.names import state_record
 
-#: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
-#: this module, and an import, even for types only, would make a circle).
-SynthesisResult = Any
+#: A :class:`mitld_lp.result.Result` (not imported: it imports this module, and an
+#: import, even for types only, would make a circle).
+Result = Any
 
 __all__ = ["POLICY_COLUMNS", "SUMMARY_KEYS", "policy_table", "summary", "html"]
 
@@ -21,8 +24,11 @@ POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action",
 """The keys of a :func:`policy_table` row, in the order the CSV file writes them."""
 
 
-def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
+def policy_table(result: Result) -> list[dict[str, Any]]:
     """The policy as data: one row per product state that is still undecided.
+
+    A randomised (constrained) policy has one row per (state, action) it takes with
+    positive probability (:func:`randomised_table`).
 
     Keys: ``game_state`` (the game's own state; a PRISM world's as an object of its
     variables by name, :func:`mitld_lp.worlds.names.state_record`), ``automaton_state``
@@ -37,6 +43,8 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     kept by playing ``action`` forever, an action that never leaves the component;
     always false for a co-safe task).
     """
+    if result.route == "constrained":
+        return randomised_table(result)
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
     obligations = result.dta.states
@@ -53,8 +61,38 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
             "clock": state.clock,
             "action": mdp.action_name(int(policy[i])),
             "value": float(values[i]),
-            "accepting_component": bool(goal[i]),
+            "accepting_component": bool(goal[i]) and result.route == "plain",
         })
+    return rows
+
+
+def randomised_table(result: Result) -> list[dict[str, Any]]:
+    """A randomised policy as data: one row per (state, action) it takes with positive
+    probability: the world state, the joint automaton's component states, pending
+    events, clock, the action (``keep`` for an action that keeps a safety part,
+    ``stay`` for staying for ever) and its ``probability``."""
+    if result.prob is None or result.stay is None:
+        return []
+    m = result.merged
+    cs = m.mdp.choice_state()
+    game = None if result.model is None else result.model.game
+
+    def row(s: int, action: str, p: float) -> dict[str, Any]:
+        rec = result.mdp.states[int(m.origin[s])]
+        assert isinstance(rec, ProductState)
+        return {"game_state": rec.game if game is None else state_record(game, rec.game),
+                "automaton_state": list(result.joint.components[rec.automaton]),
+                "pending": sorted(rec.pending), "clock": rec.clock, "action": action,
+                "probability": p}
+
+    rows = []
+    for c in np.flatnonzero(result.prob > 0).tolist():
+        s = int(cs[c])
+        if not m.absorbing[s]:
+            rows.append(row(s, "keep" if m.keep[c] else m.mdp.action_name(c),
+                            float(result.prob[c])))
+    rows.extend(row(int(s), "stay", float(result.stay[s]))
+                for s in np.flatnonzero(result.stay > 0).tolist())
     return rows
 
 
@@ -87,28 +125,22 @@ def summary(result: Any) -> dict[str, Any]:
         objective=result.objective, route=result.route, certified=bool(result.certified),
         lower=result.lower, upper=result.upper, value=result.value,
         failed_checks=[f"{c.name}: {c.detail}" for c in result.failed_checks],
-        method=getattr(result, "method", "lp"), product_states=mdp.n_states,
+        method=result.method, product_states=mdp.n_states,
         epsilon=result.epsilon, epsilon_achieved=sta.epsilon_achieved,
         truncation_points=dict(sta.truncation_points), seconds=result.seconds,
-        timings=dict(result.timings), robust=False, bands={}, first_step_hazards={},
-        ambiguous_choices=0, constraints=[], randomized_states=0,
+        timings=dict(result.timings), robust=bool(result.bands), bands=dict(result.bands),
+        first_step_hazards={e: list(b) for e, b in result.first_step_hazards().items()},
+        ambiguous_choices=0, constraints=[], randomized_states=0, status=str(result.status),
+        checks=[{"name": c.name, "ok": c.passed, "detail": c.detail} for c in result.checks],
+        dta_states=result.automaton.n_states,
     )
     if result.route == "constrained":
         out.update(_constrained_part(result))
         return out
     low, high = result.lower_model, result.upper_model
-    models = (low,) if high is low else (low, high)
-    out.update(
-        status=result.status.value, states=mdp.n_states, choices=mdp.n_choices,
-        transitions=mdp.n_transitions, dta_states=result.dta.n_states,
-        checks=[{"name": c.name, "ok": c.passed, "detail": c.detail}
-                for m in models for c in m.checks],
-    )
+    out.update(states=mdp.n_states, choices=mdp.n_choices, transitions=mdp.n_transitions)
     if result.route == "robust":
-        out.update(robust=True, bands=result.bands(),
-                   first_step_hazards={e: list(b) for e, b in
-                                       result.first_step_hazards().items()},
-                   ambiguous_choices=mdp.ambiguous_choices)
+        out.update(ambiguous_choices=mdp.ambiguous_choices)
         out["lp"] = None if low.lp is None else {
             "status": low.lp.status.value, "variables": low.lp.variables,
             "constraints": low.lp.constraints, "message": low.lp.message}
@@ -132,9 +164,8 @@ def _constrained_part(result: Any) -> dict[str, Any]:
     merged = result.merged.mdp
     infeasible = result.status == "infeasible"
     return {
-        "status": str(result.status), "states": merged.n_states, "choices": merged.n_choices,
-        "transitions": merged.n_transitions, "dta_states": result.joint.dta.n_states,
-        "checks": [{"name": n, "ok": ok, "detail": d} for n, ok, d in result.checks],
+        "states": merged.n_states, "choices": merged.n_choices,
+        "transitions": merged.n_transitions,
         "constraints": [
             {"constraint": str(c.constraint), "value": c.value, "bound": c.constraint.bound,
              "holds": c.holds, **({"feasible_bound": c.feasible_bound} if infeasible else {})}
@@ -142,21 +173,20 @@ def _constrained_part(result: Any) -> dict[str, Any]:
         "then": result.then, "secondary": result.secondary,
         "expected_steps": result.steps, "message": result.message,
         "randomized_states": result.randomized_states,
-        "robust": bool(result.bands), "bands": dict(result.bands),
     }
 
 
-def html(result: SynthesisResult) -> str:
+def html(result: Result) -> str:
     """An HTML table of the answer (what a notebook shows for a result)."""
     rows = [
-        ("model", result.model.name),
-        ("spec", str(result.model.spec)),
+        ("model", "" if result.model is None else result.model.name),
+        ("spec", "" if result.model is None else str(result.model.spec)),
         ("optimum in", f"[{result.lower:.7f}, {result.upper:.7f}]"),
         ("certified", "yes" if result.certified else "NO: " + "; ".join(
             c.name for c in result.failed_checks)),
-        ("status", result.status.value),
+        ("status", str(result.status)),
         ("epsilon achieved", f"{result.sta.epsilon_achieved:.3g}"),
-        ("sizes", f"{result.dta.n_states} automaton states, {result.mdp.n_states} "
+        ("sizes", f"{result.automaton.n_states} automaton states, {result.mdp.n_states} "
                   f"states, {result.mdp.n_transitions} transitions"),
     ]
     body = "".join(

@@ -23,40 +23,31 @@ does better.  So the true optimum lies in ``[lower, upper]``, and
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Literal, NoReturn, TypeAlias
+from typing import TYPE_CHECKING, Any, Literal, NoReturn
 
 import numpy as np
 
-from mitld_lp import defaults, report
-from mitld_lp.automata.dta import DTA
-from mitld_lp.automata.sta import STA, make_sta
-from mitld_lp.automata.translate import to_dta
+from mitld_lp import defaults
 from mitld_lp.checks import Check, close
-from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, Posed, pose, settings_from
-from mitld_lp.product import product
+from mitld_lp.result import Result, from_models
+from mitld_lp.routes.stages import Built, build_posed, build_product
 from mitld_lp.running.controller import Controller
 from mitld_lp.util.heap import release_free_memory
-from mitld_lp.worlds.game import Game
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
-    from mitld_lp.routes.constrained import ConstrainedResult
-    from mitld_lp.routes.robust import RobustResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
-           "SynthesisResult", "ModelSolution", "Check"]
+           "Result", "ModelSolution", "Check"]
 
 log = logging.getLogger(__name__)
 
@@ -94,112 +85,6 @@ class ModelSolution:
         raise AttributeError("ModelSolution.quotient was removed: the reduction is freed "
                              "once the LPs are solved; use ModelSolution.prob0, or "
                              "mitld_lp.solvers.quotient.reduce(mdp, target) to rebuild it")
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class SynthesisResult:
-    """What :func:`synthesize` returns (see the module docstring for the bracket).
-
-    Each quantity has one name: the answer is ``lower``, ``upper``, ``certified`` and
-    ``status`` (read from the two models); the policy, the method's optimum, the LP's
-    and the iteration's records are those of ``lower_model`` (and ``upper_model``); the
-    truncation points and the epsilon achieved are the ``sta``'s; the sizes are the
-    ``dta``'s and the ``mdp``'s.
-
-    ``objective="min"``: the two models solve the complement (``dta`` is its automaton,
-    the policy maximises the probability of ``not task``); ``lower`` and ``upper`` are
-    read back in the task's terms, ``Pmin(task) = 1 - Pmax(not task)``: ``upper`` is
-    then what the returned policy guarantees (at most that probability of the task),
-    ``lower`` what no policy beats.
-    """
-
-    model: Model
-    method: Method
-    epsilon: float  # the truncation budget asked for (the model's unless overridden)
-    dta: DTA
-    sta: STA
-    mdp: MDP
-    lower_model: ModelSolution
-    upper_model: ModelSolution
-    controller: Controller
-    timings: Mapping[str, float]  # seconds per stage: automaton, product, solve
-    acceptance: Acceptance  # the target the bracket is about (its goal, its components)
-    solve_cpu: float = float("nan")  # CPU seconds of the solve stage (all threads)
-    objective: str = "max"
-    route: ClassVar[str] = PLAIN
-
-    @property
-    def lower(self) -> float:
-        """What the returned policy achieves in the real world: its exact value in the
-        lower model (runs past a truncation point count as failures).  For
-        ``objective="min"``: no policy makes the task less likely."""
-        if self.objective == "min":
-            return 1.0 - self.upper_model.bracket[1]
-        return float(self.lower_model.policy_values[self.mdp.initial])
-
-    @property
-    def upper(self) -> float:
-        """No policy does better: interval iteration's sound upper bound on the upper
-        model (runs past a truncation point count as successes).  For
-        ``objective="min"``: the returned policy keeps the task at most this likely."""
-        if self.objective == "min":
-            return 1.0 - float(self.lower_model.policy_values[self.mdp.initial])
-        return self.upper_model.bracket[1]
-
-    @property
-    def value(self) -> float:
-        """The method's optimum in the task's terms (the lower model's)."""
-        v = self.lower_model.value
-        return 1.0 - v if self.objective == "min" else v
-
-    @property
-    def status(self) -> Status:
-        """``OPTIMAL`` when both solves succeeded, else the first other status."""
-        from mitld_lp.solvers.result import Status
-
-        return next((m.status for m in (self.lower_model, self.upper_model)
-                     if m.status is not Status.OPTIMAL), Status.OPTIMAL)
-
-    @property
-    def certified(self) -> bool:
-        """Every check of both models passed."""
-        return self.lower_model.certified and self.upper_model.certified
-
-    @property
-    def failed_checks(self) -> tuple[Check, ...]:
-        """The checks that failed, each once (the two models are one when nothing is
-        truncated)."""
-        models = (self.lower_model,) if self.upper_model is self.lower_model else (
-            self.lower_model, self.upper_model)
-        return tuple(c for m in models for c in m.checks if not c.passed)
-
-    @property
-    def seconds(self) -> float:
-        return float(sum(self.timings.values()))
-
-    def __repr__(self) -> str:
-        return (
-            f"SynthesisResult(model={self.model.name!r}, lower={self.lower:.7g}, "
-            f"upper={self.upper:.7g}, certified={self.certified}, "
-            f"status={self.status.value!r}, states={self.mdp.n_states})"
-        )
-
-    def _repr_html_(self) -> str:
-        return report.html(self)
-
-    def policy_table(self) -> list[dict[str, Any]]:
-        """The policy as data (:func:`mitld_lp.report.policy_table`)."""
-        return report.policy_table(self)
-
-    def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write.write_policy`)."""
-        from mitld_lp.files.write import write_policy
-
-        return write_policy(self, path, overwrite=overwrite)
-
-    def summary(self) -> dict[str, Any]:
-        """A JSON-ready record, the CLI's ``--json`` (:func:`mitld_lp.report.summary`)."""
-        return report.summary(self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -334,65 +219,6 @@ def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolu
     return replace(solution, policy=policy, checks=(*solution.checks, check))
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class Built:
-    """What :func:`build_product` returns: the automaton, the STA and the product MDP,
-    with the seconds each construction took (``automaton``, ``product``)."""
-
-    dta: DTA
-    sta: STA
-    mdp: MDP
-    timings: Mapping[str, float]
-
-
-def build_product(
-    game: Game[Any],
-    formula: Formula,
-    laws: Mapping[str, FirstOccurrence],
-    *,
-    epsilon: float = defaults.EPSILON,
-    clock_reduction: bool = True,
-    truncation: Mapping[str, int] | None = None,
-    max_states: int = defaults.MAX_STATES,
-    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
-    max_memory: int | None = None,
-    progress: bool | None = None,
-    complement: bool = False,
-) -> Built:
-    """The stages up to the MDP: ``to_dta(formula)`` (its complement with
-    ``complement``, for a minimised task), ``make_sta`` with the events' ``laws`` and
-    the truncation budget ``epsilon`` (or the fixed ``truncation`` points), then the
-    reachable ``product`` with ``game``.  Budgets, each checked before the work that
-    would exceed it: no state space built here has more than ``max_states`` states; the
-    automaton, whose states cost thousands of times more than the product's, also no
-    more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`); the product needs at
-    most ``max_memory`` bytes (default: half the machine's memory)."""
-    t0 = time.perf_counter()
-    dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
-    if complement:
-        dta = dta.complement()
-    sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
-    t1 = time.perf_counter()
-    mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
-    t2 = time.perf_counter()
-    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
-
-
-def build_posed(posed: Posed, *, progress: bool | None = None) -> Built:
-    """:func:`build_product` of a posed problem's task with its settings."""
-    model, s = posed.model, posed.settings
-    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
-    return build_product(
-        model.game, model.spec, model.distributions,
-        epsilon=model.epsilon if s.epsilon is None else s.epsilon,
-        clock_reduction=s.clock_reduction, truncation=s.truncation_map,
-        max_states=s.max_states, max_automaton_states=s.max_automaton_states,
-        max_memory=s.max_memory, progress=progress, complement=posed.minimise)
-
-
-Result: TypeAlias = "SynthesisResult | ConstrainedResult | RobustResult"
-
-
 def synthesize(
     model: Model,
     *,
@@ -443,28 +269,36 @@ def synthesize(
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 
-def solve(posed: Posed) -> Result:
-    """Solve a posed problem on its route (:mod:`mitld_lp.problem`)."""
-    if posed.route == ROBUST:
-        from mitld_lp.routes.robust import synthesize_robust
+def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
+          seed: int | None = 0) -> Result:
+    """The one wiring of every posed problem (:mod:`mitld_lp.problem`):
 
-        return synthesize_robust(posed)
+        formula --> automaton --> STA --> product (build_posed, one for every route)
+                --> the route's solver and certificate --> Result
+
+    The route solves what the problem poses: ``plain`` the occupancy LP (or interval
+    iteration) on the product; ``robust`` the interval MDP's robust optimum; with
+    constraints the constrained occupancy LP on the joint product, and with a band its
+    sound robust bracket.  ``costs`` / ``seed``: a constrained problem's action costs
+    (default the model's) and its randomised controller's seed."""
     if posed.route == CONSTRAINED:
-        return _constrained(posed)
-    return _solve_plain(posed)
+        from mitld_lp.problem import check_constrained
 
+        check_constrained(posed)  # a refusal names the combination before any work
+    built = build_posed(posed, progress=posed.settings.progress or None)
+    if posed.route == ROBUST:
+        from mitld_lp.routes.robust import solve_robust
 
-def _constrained(posed: Posed, costs: Mapping[str, float] | None = None,
-                 seed: int | None = 0) -> ConstrainedResult:
-    """The constrained route: the occupancy LP with constraint rows, and for a law known
-    only within a band its sound robust bracket (:mod:`mitld_lp.routes.robust_constrained`)."""
-    if posed.robust:
-        from mitld_lp.routes.robust_constrained import solve_robust_constrained
+        return solve_robust(posed, built)
+    if posed.route == CONSTRAINED:
+        if posed.robust:
+            from mitld_lp.routes.robust_constrained import solve_robust_constrained
 
-        return solve_robust_constrained(posed, costs=costs, seed=seed)
-    from mitld_lp.routes.constrained import solve_constrained
+            return solve_robust_constrained(posed, built, costs=costs, seed=seed)
+        from mitld_lp.routes.constrained import solve_constrained
 
-    return solve_constrained(posed, costs=costs, seed=seed)
+        return solve_constrained(posed, built, costs=costs, seed=seed)
+    return _solve_plain(posed, built)
 
 
 def synthesize_constrained(
@@ -475,7 +309,7 @@ def synthesize_constrained(
     costs: Mapping[str, float] | None = None,
     seed: int | None = 0,
     **options: Any,
-) -> ConstrainedResult:
+) -> Result:
     """Maximise the task's probability subject to ``constraints`` (texts or records;
     the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
     or ``"min-cost"``), minimise the expected steps / cost among the policies within
@@ -486,14 +320,13 @@ def synthesize_constrained(
     budgets, truncation, ...), each honoured or refused by name (:func:`pose`)."""
     posed = pose(model, constraints, then=then, settings=settings_from(**options),
                  constrained=True)
-    return _constrained(posed, costs, seed)
+    return solve(posed, costs=costs, seed=seed)
 
 
-def _solve_plain(posed: Posed) -> SynthesisResult:
+def _solve_plain(posed: Posed, built: Built) -> Result:
     """The plain route: point laws, no constraints, any supported task class."""
     model, s = posed.model, posed.settings
     eps = model.epsilon if s.epsilon is None else s.epsilon
-    built = build_posed(posed, progress=s.progress or None)
     mdp = built.mdp
     timings: dict[str, float] = dict(built.timings)
 
@@ -526,21 +359,11 @@ def _solve_plain(posed: Posed) -> SynthesisResult:
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0
 
-    result = SynthesisResult(
-        model=model,
-        method=s.method,  # type: ignore[arg-type]
-        epsilon=eps,
-        dta=built.dta,
-        sta=built.sta,
-        mdp=mdp,
-        lower_model=low,
-        upper_model=high,
-        controller=Controller(model.game, built.sta, mdp, low.policy,
-                              hopeless=high.prob0),
-        timings=timings,
-        acceptance=accept,
-        solve_cpu=solve_cpu,
-        objective=posed.problem.objective,
-    )
+    result = Result(
+        route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
+        epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
+        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
+        timings=timings, acceptance=accept, solve_cpu=solve_cpu,
+        **from_models(low, high, mdp.initial, posed.problem.objective))
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

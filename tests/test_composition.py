@@ -355,7 +355,7 @@ def test_one_json_schema_on_every_route(capsys: pytest.CaptureFixture[str]) -> N
 # --------------------------------------------------------------------------- optimal everywhere
 
 
-def _optimal_values(r) -> np.ndarray:  # noqa: ANN001 - a SynthesisResult
+def _optimal_values(r) -> np.ndarray:  # noqa: ANN001 - a Result of the plain route
     """Value iteration written here: the least fixed point of V = max_c P(c) V with V = 1
     on the result's reachability target (its accepting end components), 20,000 sweeps
     from 0 on a product of 69 states."""
@@ -421,7 +421,7 @@ def test_a_safety_task_with_a_constraint_by_hand() -> None:
     assert abs(runs.accepted[1] / runs.runs - 0.5) < 4 * (0.25 / runs.runs) ** 0.5
 
 
-def _joint_drn(result, path: Path) -> None:  # noqa: ANN001 - a ConstrainedResult
+def _joint_drn(result, path: Path) -> None:  # noqa: ANN001 - a Result of the constrained route
     """The product of the world with the joint automaton (before any merging) as DRN,
     labelled ``rejected`` (the task's automaton rejected) and ``c1`` (the first
     constraint's formula accepted)."""
@@ -658,3 +658,45 @@ def test_one_status_vocabulary_on_every_route() -> None:
     assert all(isinstance(r.status, Status) for r in results)
     assert [r.status for r in results] == [Status.OPTIMAL] * 3 + [Status.INFEASIBLE]
     assert results[2].status == "optimal" and f"{results[3].status}" == "infeasible"
+
+
+def test_one_result_type_and_one_wiring_on_every_route() -> None:
+    """Three routes returned three classes (SynthesisResult, RobustResult,
+    ConstrainedResult) with checks as records on two and bare tuples on the third, and
+    each route wired its own stages (the constrained one timed them as "build").  Now:
+    one type, the checks as records whose conjunction is ``certified``, the same stage
+    timings, and the policy table of each route as the route's policy says: a
+    deterministic one row per state, a randomised one summing to 1 per state."""
+    from collections import defaultdict
+
+    from mitld_lp import Result
+    from mitld_lp.checks import Check
+
+    risk = load_model(MODELS / "bus_risk.toml")
+    fit = load_model(MODELS / "bus_fit.toml")
+    results = [synthesize(load_model(MODELS / "bus_grid.toml")), synthesize(fit),
+               synthesize(risk, constraints=["P(F puddle) <= 0.05"]),
+               synthesize(fit, constraints=["P(F[0,5] A) <= 0.5"])]
+    assert [r.route for r in results] == ["plain", "robust", "constrained", "constrained"]
+    for r in results:
+        assert type(r) is Result
+        assert r.checks and all(isinstance(c, Check) for c in r.checks)
+        assert r.certified == all(c.passed for c in r.checks)
+        assert r.failed_checks == tuple(c for c in r.checks if not c.passed)
+        assert {"automaton", "product", "solve"} <= set(r.timings)
+        assert 0.0 <= r.lower <= r.upper + 1e-9 <= 1.0 + 1e-9
+        assert tuple(r.summary()) == SUMMARY_KEYS
+    plain, robust, point, band = results
+    assert robust.bands and band.bands and not plain.bands and not point.bands
+    assert band.first_step_hazards() == robust.first_step_hazards()
+    for r in (plain, robust):  # deterministic: one row per undecided state
+        rows = r.policy_table()
+        assert len({(str(x["game_state"]), x["automaton_state"], tuple(x["pending"]),
+                     x["clock"]) for x in rows}) == len(rows)
+    for r in (point, band):  # randomised: each state's probabilities sum to 1
+        total: dict[tuple, float] = defaultdict(float)
+        for x in r.policy_table():
+            key = (str(x["game_state"]), str(x["automaton_state"]), tuple(x["pending"]),
+                   x["clock"])
+            total[key] += x["probability"]
+        assert total and all(v == pytest.approx(1.0, abs=1e-6) for v in total.values())

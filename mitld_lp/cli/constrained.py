@@ -57,9 +57,8 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             if r.then:
                 _out(f"then {r.then}: {r.secondary:.6g}")
             _out("certified:    " + ("yes" if r.certified else "NO"))
-            for name, ok, detail in r.checks:
-                if not ok:
-                    _out(f"  failed: {name}: {detail}")
+            for c in r.failed_checks:
+                _out(f"  failed: {c.name}: {c.detail}")
         for c in r.constraints:
             if r.status == "optimal":
                 _out(f"constraint:   {c.constraint}: {c.value:.7g}"

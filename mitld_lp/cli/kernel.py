@@ -31,7 +31,7 @@ from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
     from mitld_lp.problem import Posed, Settings
-    from mitld_lp.synthesis import Built
+    from mitld_lp.routes.stages import Built
 
 PROG = "mitld-lp"
 
@@ -160,7 +160,7 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     with constraints is refused naming ``verb`` (its product would be another
     problem's)."""
     from mitld_lp.model import load_model
-    from mitld_lp.synthesis import build_posed
+    from mitld_lp.routes.stages import build_posed
 
     model = load_model(args.model, max_states=args.max_world_states,
                        max_memory=args.max_memory)

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from mitld_lp.synthesis import SynthesisResult
+    from mitld_lp.result import Result as SynthesisResult
 
 __all__ = ["PlotError", "Situation", "CellView", "PolicyMap", "parse_situation", "policy_map",
            "policy_figure", "sweep_figure", "save", "FIGURE_SUFFIXES"]

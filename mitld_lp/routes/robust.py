@@ -30,23 +30,25 @@ import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA, SAFE
-from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check, close
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
-from mitld_lp.product import ProductState, robust_product
+from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
+from mitld_lp.routes.stages import Built, build_posed
 from mitld_lp.running.controller import Controller
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
@@ -57,9 +59,8 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
-from mitld_lp.worlds.names import state_record
 
-__all__ = ["is_robust", "synthesize_robust", "RobustResult", "RobustModelSolution",
+__all__ = ["is_robust", "synthesize_robust", "solve_robust", "RobustModelSolution",
            "robust_game"]
 
 log = logging.getLogger(__name__)
@@ -135,121 +136,6 @@ def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
                                (lo, hi), tuple(checks))
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class RobustResult:
-    """What :func:`synthesize_robust` returns: the same reading as
-    :class:`~mitld_lp.synthesis.SynthesisResult` (``lower``, ``upper``, ``certified``,
-    ``status``, ``controller``, ``summary()``, ``policy_table()``), for the robust
-    optimum; ``imdp`` is the interval MDP (also ``mdp`` for the sizes and records)."""
-
-    model: Model
-    method: str
-    epsilon: float
-    dta: DTA
-    sta: STA
-    imdp: IntervalMDP
-    lower_model: RobustModelSolution
-    upper_model: RobustModelSolution
-    controller: Controller
-    timings: Mapping[str, float]
-    objective: str = "max"
-    goal: np.ndarray | None = None  # the robust target (a safety part: the kept states)
-    route: ClassVar[str] = ROBUST
-
-    @property
-    def mdp(self) -> IntervalMDP:
-        return self.imdp
-
-    @property
-    def acceptance(self) -> Acceptance:
-        goal = self.imdp.target if self.goal is None else self.goal
-        return Acceptance(np.asarray(goal, dtype=bool), None)
-
-    @property
-    def lower(self) -> float:
-        """What the policy guarantees against every law of the bands, truncation lost
-        (``objective="min"``: no policy guarantees less, ``1 - upper`` of the
-        complement)."""
-        if self.objective == "min":
-            return 1.0 - self.upper_model.bracket[1]
-        return float(self.lower_model.policy_values[self.imdp.initial])
-
-    @property
-    def upper(self) -> float:
-        """No policy guarantees more (robust iteration's upper bound, truncation won);
-        ``objective="min"``: what the returned policy guarantees at most."""
-        if self.objective == "min":
-            return 1.0 - float(self.lower_model.policy_values[self.imdp.initial])
-        return self.upper_model.bracket[1]
-
-    @property
-    def value(self) -> float:
-        v = self.lower_model.value
-        return 1.0 - v if self.objective == "min" else v
-
-    @property
-    def status(self) -> Status:
-        return next((m.status for m in (self.lower_model, self.upper_model)
-                     if m.status is not Status.OPTIMAL), Status.OPTIMAL)
-
-    @property
-    def certified(self) -> bool:
-        return self.lower_model.certified and self.upper_model.certified
-
-    @property
-    def failed_checks(self) -> tuple[Check, ...]:
-        models = (self.lower_model,) if self.upper_model is self.lower_model else (
-            self.lower_model, self.upper_model)
-        return tuple(c for m in models for c in m.checks if not c.passed)
-
-    @property
-    def seconds(self) -> float:
-        return float(sum(self.timings.values()))
-
-    def bands(self) -> dict[str, str]:
-        """Each event with a band: its law's label."""
-        return {e: str(c.distribution) for e, c in sorted(self.sta.clocks.items())
-                if c.distribution.is_ambiguous}
-
-    def first_step_hazards(self) -> dict[str, tuple[float, float]]:
-        """Each event with a band: ``(h_lo(1), h_hi(1))``, how much its band leaves open
-        at the first step (wide for a fit from few observations)."""
-        out = {}
-        for e, c in sorted(self.sta.clocks.items()):
-            if c.distribution.is_ambiguous:
-                lo, hi = c.distribution.hazard_band(1)
-                out[e] = (float(lo), float(hi))
-        return out
-
-    def __repr__(self) -> str:
-        return (f"RobustResult(model={self.model.name!r}, lower={self.lower:.7g}, "
-                f"upper={self.upper:.7g}, certified={self.certified}, "
-                f"status={self.status.value!r}, states={self.imdp.n_states})")
-
-    def policy_table(self) -> list[dict[str, Any]]:
-        """One row per undecided state: as :func:`mitld_lp.report.policy_table`, the
-        value being the policy's robust value (truncation lost)."""
-        m, low = self.imdp, self.lower_model
-        rows = []
-        for i, state in enumerate(m.states):
-            c = int(low.policy[i])
-            if not isinstance(state, ProductState) or c < 0:
-                continue
-            rows.append({"game_state": state_record(self.model.game, state.game),
-                         "automaton_state": str(self.dta.states[state.automaton]),
-                         "pending": sorted(state.pending), "clock": state.clock,
-                         "action": m.action_name(c), "value": float(low.policy_values[i]),
-                         "accepting_component": False})
-        return rows
-
-    def summary(self) -> dict[str, Any]:
-        """A JSON-ready record (the command line's ``--json``,
-        :func:`mitld_lp.report.summary`)."""
-        from mitld_lp.report import summary
-
-        return summary(self)
-
-
 def _goal(game: RobustGame, imdp: IntervalMDP, dta: DTA,
           reached: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """The robust reachability target of the task and the choices that stay in it: for a
@@ -295,30 +181,28 @@ def _rows_kept(game: RobustGame, goal: np.ndarray, choices: np.ndarray) -> bool:
     return bool(goal[sub.indices].all())
 
 
-def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
+def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
     """The robust synthesis (module docstring) of a posed problem, or of ``model`` with
     :func:`mitld_lp.synthesis.synthesize`'s keyword ``options`` (posed here:
-    :class:`~mitld_lp.problem.ProblemError` for a combination it does not solve, e.g.
-    a safety part or constraints).  ``method="lp"``: the policy's value by the LP and by
-    iteration; ``"vi"``: by iteration only."""
-    if not isinstance(model, Posed):
-        model = pose(model, settings=settings_from(**options))
-    posed = model
+    :class:`~mitld_lp.problem.ProblemError` for a combination it does not solve), also
+    when every law is a point (the robust route's answer then equals the plain one).
+    ``method="lp"``: the policy's value by the LP and by iteration; ``"vi"``: by
+    iteration only.  :func:`mitld_lp.synthesize` takes this route by itself for a
+    problem with a band."""
+    posed = model if isinstance(model, Posed) else pose(model, settings=settings_from(**options))
     if posed.route == CONSTRAINED:
         raise ProblemError("synthesize_robust: a task with constraints is not solved "
                            "robustly")
+    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress or None,
+                                           robust=True))
+
+
+def solve_robust(posed: Posed, built: Built) -> Result:
+    """The robust route on its built interval MDP (:func:`mitld_lp.synthesis.solve`)."""
     model, s = posed.model, posed.settings
-    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     eps = model.epsilon if s.epsilon is None else s.epsilon
-    t0 = time.perf_counter()
-    dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
-    if posed.minimise:
-        dta = dta.complement()
-    sta = make_sta(dta, model.distributions, eps, clock_reduction=s.clock_reduction,
-                   truncation=s.truncation_map)
-    t1 = time.perf_counter()
-    imdp = robust_product(model.game, sta, max_states=s.max_states, max_memory=s.max_memory,
-                          progress=s.progress or None)
+    imdp, dta, sta = built.mdp, built.dta, built.sta
+    assert isinstance(imdp, IntervalMDP)
     t2 = time.perf_counter()
     game = robust_game(imdp)
     deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
@@ -331,11 +215,16 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> RobustResult:
                             s.certify_tol, deadline), game, upper_goal, upper_stay)
     else:
         high = low
-    timings = {"automaton": t1 - t0, "product": t2 - t1, "solve": time.perf_counter() - t2}
+    timings = {**built.timings, "solve": time.perf_counter() - t2}
     controller = Controller(model.game, sta, structure_mdp(imdp), low.policy,
                             hopeless=high.iteration.prob0)
-    result = RobustResult(model, s.method, eps, dta, sta, imdp, low, high, controller,
-                          timings, posed.problem.objective, read_only(target))
+    bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
+             if c.distribution.is_ambiguous}
+    result = Result(
+        route=ROBUST, model=model, objective=posed.problem.objective, method=s.method,
+        epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
+        acceptance=Acceptance(np.asarray(target, dtype=bool), None), goal=read_only(target),
+        bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective))
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result

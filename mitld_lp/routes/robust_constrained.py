@@ -40,17 +40,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.automata.joint import ACCEPTED
+from mitld_lp.checks import Check
 from mitld_lp.problem import Posed
-from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
+from mitld_lp.result import Result
 from mitld_lp.routes.constrained import (
-    ConstrainedResult,
     ConstraintValue,
-    joint_sta,
     quantity_of,
     solve_merged,
 )
 from mitld_lp.routes.constraints import CONSTRAINT_TOL
+from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.constrained import OPTIMAL
 from mitld_lp.solvers.constrained_model import Merged, Quantity
 from mitld_lp.solvers.robust import robust_interval_iteration
@@ -189,17 +189,18 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     return float(it.lower[s0]), float(it.upper[s0])
 
 
-def solve_robust_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
-                             seed: int | None = 0) -> ConstrainedResult:
+def solve_robust_constrained(posed: Posed, built: Built, *,
+                             costs: Mapping[str, float] | None = None,
+                             seed: int | None = 0) -> Result:
     """The sound bracket of the module docstring for a posed problem with constraints and
-    a band."""
+    a band, on its built joint interval MDP (:func:`mitld_lp.synthesis.solve`)."""
     s = posed.settings
     t0 = time.perf_counter()
-    joint, sta = joint_sta(posed)
-    imdp = robust_product(posed.model.game, sta, max_states=s.max_states,
-                          max_memory=s.max_memory)
+    imdp, joint, sta = built.mdp, built.joint, built.sta
+    assert isinstance(imdp, IntervalMDP) and joint is not None
     middle = point_mdp(imdp, middle_rows(imdp))
-    nominal = solve_merged(posed, middle, joint, sta, t0, costs=costs, seed=seed)
+    nominal = solve_merged(posed, middle, joint, sta, t0, costs=costs, seed=seed,
+                           build=built.timings)
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
     if nominal.status != OPTIMAL:  # infeasible at one law of the bands: at every law too
@@ -225,7 +226,8 @@ def solve_robust_constrained(posed: Posed, *, costs: Mapping[str, float] | None 
         tight = tuple(replace(c, bound=c.bound - margins[i] if c.sense == "<=" else
                               c.bound + margins[i]) for i, c in enumerate(cons))
         again = solve_merged(replace(posed, problem=replace(posed.problem, constraints=tight)),
-                             middle, joint, sta, t0, costs=costs, seed=seed)
+                             middle, joint, sta, t0, costs=costs, seed=seed,
+                             build=built.timings)
         if again.status != OPTIMAL:
             break
         chosen, values = again, _worst_constraints(again, vr, cons, s.tol)
@@ -236,11 +238,12 @@ def solve_robust_constrained(posed: Posed, *, costs: Mapping[str, float] | None 
     lower = task_lo if robust_ok else float("nan")
     width = raw_upper - lower
     checks = (*chosen.checks,
-              ("constraints hold against every law of the bands", robust_ok,
-               "; ".join(f"{v.constraint}: worst case {v.value!r}" for v in values)
-               or "no constraint"),
-              ("robust lower <= upper", bool(robust_ok and lower <= raw_upper + s.certify_tol),
-               f"{lower!r} <= {raw_upper!r}"))
+              Check("constraints hold against every law of the bands", robust_ok,
+                    "; ".join(f"{v.constraint}: worst case {v.value!r}" for v in values)
+                    or "no constraint"),
+              Check("robust lower <= upper",
+                    bool(robust_ok and lower <= raw_upper + s.certify_tol),
+                    f"{lower!r} <= {raw_upper!r}"))
     eps = nominal.sta.epsilon_achieved
     tightened = (f" (its bounds tightened in {rounds} rounds by "
                  + ", ".join(f"{m:.3g}" for m in margins) + ")") if rounds else ""
@@ -259,11 +262,11 @@ def solve_robust_constrained(posed: Posed, *, costs: Mapping[str, float] | None 
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
                    constraints=tuple(values),
-                   certified=all(ok for _, ok, _ in checks), checks=checks,
+                   certified=all(c.passed for c in checks), checks=checks,
                    message=message, bands=bands, timings=timings)
 
 
-def _worst_constraints(result: ConstrainedResult, vr: VertexRows, cons: tuple[Any, ...],
+def _worst_constraints(result: Result, vr: VertexRows, cons: tuple[Any, ...],
                        tol: float) -> list[ConstraintValue]:
     """Each constraint of ``cons`` (the user's bounds) against every law of the bands,
     under ``result``'s policy: its worst case and whether that is within the bound."""

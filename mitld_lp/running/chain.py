@@ -77,14 +77,14 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     or a constrained result) under its controller (or ``controller``, one built on the
     same product).  A robust result (a law within a band) is refused: its controller
     runs on an interval model, whose controlled system is no Markov chain."""
-    if hasattr(result, "joint"):  # a constrained result: the joint automaton's product
+    if result.route == "constrained":  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
         refuse_kept(result, "the controlled chain")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
         return controlled_chain(result.mdp, controller or result.controller,
                                 persistent, _game(result, controller))
-    if not hasattr(result, "lower_model") or not isinstance(result.mdp, MDP):
+    if result.lower_model is None or not isinstance(result.mdp, MDP):
         raise ValueError("a robust result (a law known only within a band): its "
                          "controller acts on an interval model, whose controlled system is "
                          "no Markov chain; export --drn writes the interval MDP")

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.routes.constrained import ConstrainedResult
+from mitld_lp.result import Result
 from mitld_lp.running.controller import Observation
 
 __all__ = ["RunStats", "run_constrained"]
@@ -28,7 +28,7 @@ class RunStats:
     unsettled: int
 
 
-def run_constrained(result: ConstrainedResult, *, runs: int = 10_000, seed: int = 0,
+def run_constrained(result: Result, *, runs: int = 10_000, seed: int = 0,
                     max_steps: int = 1000) -> RunStats:
     """Roll the result's controller out ``runs`` times (seeded: the events' times, the
     world's moves and the controller's draws all come from one generator)."""

@@ -271,7 +271,7 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
     in every state has the value ``V``: the Bellman equation holds, and no bottom
     component avoids the goal where ``V > 0``.  None for a randomised controller, whose
     decisions are kept."""
-    if controller.randomised or not hasattr(result, "lower_model"):
+    if controller.randomised or result.lower_model is None:
         return None
     mdp = result.mdp
     v = np.asarray(result.lower_model.policy_values, dtype=np.float64)
@@ -344,7 +344,7 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
-    if hasattr(result, "joint"):
+    if result.route == "constrained":
         from mitld_lp.running.chain import refuse_kept
 
         refuse_kept(result, "the decision tree")
