@@ -48,9 +48,7 @@ ACCEPTED, REJECTED, UNDECIDED = 1, 0, -1
 """A component's verdict in an automaton state (the task is component 0)."""
 
 KEEP = "keep"
-"""The name a randomised controller's decision gives its *keep* choice (the policy
-table's action ``keep``); the choice is told apart by :attr:`Decision.keep`, so a world
-action of the same name is not confused with it."""
+"""A *keep* choice's name in a decision (told apart by :attr:`Decision.keep`)."""
 
 Diagram = int | tuple[str, Any, Any]
 """An automaton state's transition function: a leaf (the next state) or ``(atom, low,
@@ -68,9 +66,7 @@ _RANDOMISED = {**_COMMON, "offsets": np.int64, "choices": np.int32, "weights": n
                "inside": np.bool_, "stay": np.float64, "charged": np.bool_,
                "keep": np.bool_, "kept": np.bool_}
 MEMBERS = {"deterministic": _DETERMINISTIC, "randomised": _RANDOMISED}
-_KEEPS = ("keep", "kept")
-"""The randomised members new in version 3 (a version 2 file has neither: no keep
-choice anywhere)."""
+_KEEPS = ("keep", "kept")  # randomised members new in version 3 (version 2: no keeps)
 
 
 def _members(kind: str, version: int) -> dict[str, Any]:
