@@ -22,11 +22,11 @@ import scipy.linalg
 from test_composition import _GRID_FILE
 
 from mitld_lp import Observation, runtime, synthesize
-from mitld_lp.chain import chain_of
 from mitld_lp.cli import main
-from mitld_lp.controller_random import ConstrainedController, load_controller
 from mitld_lp.model import load_model
-from mitld_lp.tree import tree_controller, tree_of
+from mitld_lp.running.chain import chain_of
+from mitld_lp.running.randomised import ConstrainedController, load_controller
+from mitld_lp.running.tree import tree_controller, tree_of
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from mitld_lp import Model, make_sta, parse, synthesize, to_dta
-from mitld_lp.game import GameError
 from mitld_lp.product import product
-from mitld_lp.successors import distribution_fault, distribution_faults
+from mitld_lp.worlds.game import GameError
+from mitld_lp.worlds.successors import distribution_fault, distribution_faults
 
 
 class _Line:
@@ -143,9 +143,9 @@ def test_a_fault_is_found_among_thousands_of_rows_wherever_it_is(bad):
 def test_one_tolerance_for_the_product_check_game_and_explicit_tables(total, ok):
     """The three readers of a successor distribution -- the product, ``check_game`` (the
     letter of the protocol) and ``ExplicitGame``'s tables -- are one validator
-    (:mod:`mitld_lp.successors`): a total 2e-9 off 1 is refused by each, 5e-10 off
+    (:mod:`mitld_lp.worlds.successors`): a total 2e-9 off 1 is refused by each, 5e-10 off
     accepted by each (the tolerance is 1e-9, by hand)."""
-    from mitld_lp.game import ExplicitGame, check_game
+    from mitld_lp.worlds.game import ExplicitGame, check_game
 
     dist = ((2, 0.5), (1, total - 0.5))
     game = _Line(dist)

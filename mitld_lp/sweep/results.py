@@ -8,14 +8,14 @@ parameter (named by its key path), then :data:`mitld_lp.sweep.rows.RESULT_COLUMN
   ``"text"``), an absent number is empty, booleans are ``True``/``False``.  A last line
   cut short by a kill is dropped when the file is read again.
 * **Parquet** (``.parquet``, needs pyarrow): rewritten whole (by the package's one
-  writer, :func:`mitld_lp.files.replacing_path`: a temporary file renamed over the old
+  writer, :func:`mitld_lp.files.write.replacing_path`: a temporary file renamed over the old
   one) at most once a second and at the end; numeric parameters
   are numeric columns, others JSON text.
 
 A results file is only ever extended by the sweep it belongs to: opening it for another
 sweep (another ``sweep_id``), or opening a file that is no results file, is refused.
 It is read only if it is a regular file (not a FIFO or a device), and only up to
-:func:`mitld_lp.files.read_limit`; a path the writing rule refuses (a folder, a folder
+:func:`mitld_lp.files.write.read_limit`; a path the writing rule refuses (a folder, a folder
 under ``/proc``) is refused before any point.
 
 **One writer at a time**: :class:`Results` holds an advisory lock (``flock``) on the
@@ -38,7 +38,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-from mitld_lp import files
+from mitld_lp.files import write as files
 from mitld_lp.sweep.rows import META_COLUMNS, RESULT_COLUMNS
 from mitld_lp.sweep.spec import SweepError
 

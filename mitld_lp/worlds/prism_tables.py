@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.successors import distribution_faults
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
+from mitld_lp.worlds.successors import distribution_faults
 
 __all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION"]
 

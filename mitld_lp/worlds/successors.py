@@ -1,13 +1,13 @@
-"""What an answer of :meth:`mitld_lp.game.Game.successors` must be: a distribution.
+"""What an answer of :meth:`mitld_lp.worlds.game.Game.successors` must be: a distribution.
 
 The one place a world's successor distribution is checked.  The rule the product
 applies to every row it reads from a world (:func:`distribution_faults`, a batch of rows
 at once; :func:`distribution_fault` says what is wrong with one): pairs ``(next_state,
 probability)`` with hashable next states, not empty, every probability a finite,
 non-negative number, the total within :data:`PROBABILITY_TOLERANCE` of 1.
-:func:`mitld_lp.game.check_game` (on a world it explores) holds a world to the stricter
+:func:`mitld_lp.worlds.game.check_game` (on a world it explores) holds a world to the stricter
 letter of the protocol with the same tolerance (:func:`strict_distribution_fault`:
-probabilities in (0, 1], distinct next states); :class:`mitld_lp.game.ExplicitGame`
+probabilities in (0, 1], distinct next states); :class:`mitld_lp.worlds.game.ExplicitGame`
 reads its tables with :func:`table_distribution` (repeated next states merged, zeros
 dropped); a PRISM world's tables are checked in a batch with PRISM's own tolerance
 (:mod:`mitld_lp.worlds.prism_tables`).
@@ -119,7 +119,7 @@ def distribution_fault(dist: Any, tolerance: float = PROBABILITY_TOLERANCE) -> s
 
 def strict_distribution_fault(dist: Any,
                               tolerance: float = PROBABILITY_TOLERANCE) -> str | None:
-    """The letter of the protocol (:func:`mitld_lp.game.check_game`): a non-empty tuple
+    """The letter of the protocol (:func:`mitld_lp.worlds.game.check_game`): a non-empty tuple
     of ``(next_state, probability)`` pairs, distinct hashable next states, every
     probability in (0, 1], the total within ``tolerance`` of 1; None when it holds."""
     if not isinstance(dist, tuple) or not dist:
@@ -145,7 +145,7 @@ def strict_distribution_fault(dist: Any,
 
 def table_distribution(value: Any, tolerance: float = PROBABILITY_TOLERANCE
                        ) -> tuple[tuple[tuple[Any, float], ...], str | None]:
-    """A distribution given in a table (:class:`mitld_lp.game.ExplicitGame`): a mapping
+    """A distribution given in a table (:class:`mitld_lp.worlds.game.ExplicitGame`): a mapping
     ``next -> probability`` or pairs, each probability in [0, 1]; repeated next states
     are merged and exact zeros dropped.  Returns the pairs and None, or ``()`` and what
     is wrong (the total of the merged pairs, summed exactly, within ``tolerance`` of 1)."""

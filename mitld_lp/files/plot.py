@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mitld_lp import files
-from mitld_lp.gridworld import MOVES, STAY, Cell, GridWorld
+from mitld_lp.files import write as files
+from mitld_lp.worlds.grid import MOVES, STAY, Cell, GridWorld
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -381,9 +381,9 @@ def sweep_figure(
 
 def save(fig: Figure, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write ``fig`` to ``path`` (``.png``, ``.svg`` or ``.pdf``) at its own size, under
-    the package's rule for output files (:mod:`mitld_lp.files`: an existing file is
+    the package's rule for output files (:mod:`mitld_lp.files.write`: an existing file is
     replaced only with ``overwrite``, and only once the new one is complete; a path the
-    rule refuses raises :class:`~mitld_lp.files.OutputPathError`)."""
+    rule refuses raises :class:`~mitld_lp.files.write.OutputPathError`)."""
     return files.write_figure(fig, path, overwrite=overwrite, suffixes=FIGURE_SUFFIXES,
                               dpi=_DPI)
 

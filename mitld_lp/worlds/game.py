@@ -33,7 +33,7 @@ from itertools import combinations
 from types import MappingProxyType
 from typing import Any, Generic, Protocol, TypeVar, cast, runtime_checkable
 
-from mitld_lp.successors import (
+from mitld_lp.worlds.successors import (
     PROBABILITY_TOLERANCE,
     place,
     strict_distribution_fault,
@@ -209,7 +209,7 @@ def _freeze_distribution(
     value: Mapping[Any, float] | Iterable[tuple[Any, float]], where: str
 ) -> Distribution:
     """Validate one successor distribution and return it as a tuple of pairs
-    (:func:`mitld_lp.successors.table_distribution`).  Raises :class:`GameError` naming
+    (:func:`mitld_lp.worlds.successors.table_distribution`).  Raises :class:`GameError` naming
     ``where``."""
     out, why = table_distribution(value)
     if why:
@@ -437,7 +437,7 @@ def _check_actions(game: Game[Any], state: Any) -> tuple[str, ...]:
 
 def _check_distribution(dist: Any, where: str, tolerance: float) -> tuple[Any, ...]:
     """One ``successors`` answer, held to the letter of the protocol
-    (:func:`mitld_lp.successors.strict_distribution_fault`).  Returns the next states
+    (:func:`mitld_lp.worlds.successors.strict_distribution_fault`).  Returns the next states
     in order."""
     why = strict_distribution_fault(dist, tolerance)
     if why:
