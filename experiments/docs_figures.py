@@ -38,12 +38,12 @@ def main(argv: list[str] | None = None) -> dict[str, Path]:
     situations = [Situation(), Situation(occurred=frozenset({"b1"})),
                   Situation(occurred=frozenset({"b2"}))]
     written = {"policy": save(policy_figure(result, situations, size=POLICY_SIZE),
-                              out / "bus_policy.png")}
+                              out / "bus_policy.png", overwrite=True)}
     with tempfile.TemporaryDirectory() as scratch:
         results = Path(scratch) / "bus_sweep.csv"
         run = run_sweep(C.MODELS / "sweeps" / "bus_sweep.toml", results)
         written["sweep"] = save(sweep_figure(results, "T", "lower", size=SWEEP_SIZE),
-                                out / "bus_sweep.png")
+                                out / "bus_sweep.png", overwrite=True)
     print(f"bus grid: optimum in [{result.lower:.7f}, {result.upper:.7f}]")
     print(f"bus sweep: {len(run.rows)} points, {len(run.failed)} without a certified answer")
     for path in written.values():

@@ -31,6 +31,7 @@ import numpy as np
 from mitld_lp.running.saved_plan import (
     ACCEPTED,
     FORMAT,
+    KEEP,
     REJECTED,
     UNDECIDED,
     VERSION,
@@ -48,6 +49,7 @@ __all__ = [
     "ControllerFileError",
     "Decision",
     "FORMAT",
+    "KEEP",
     "REJECTED",
     "RuntimeController",
     "SavedPlan",

@@ -603,25 +603,6 @@ def test_every_verb_on_every_kind_of_model_file(tmp_path: Path, law: str, extra:
             assert code == 0, (verb, err)
 
 
-@pytest.mark.parametrize("output", [["--chain", "k.drn"], ["--tree", "k.json"],
-                                    ["--controller", "k.npz"]])
-def test_a_kept_safety_part_with_constraints_is_not_exported_yet(
-        output: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A constrained policy that keeps a safety part runs (simulate), but its chain, tree
-    and saved tables do not carry the keep yet: refused by name, not an internal error,
-    and no file is left."""
-    path = tmp_path / "kept.toml"
-    path.write_text(_GRID_FILE.format(extra='constraints = ["P(F[0,8] goal) >= 0.5"]',
-                                      law="0.3").replace(
-        'spec = "G !puddle & D[mu] b & F(b & F[0,3] goal)"', 'spec = "G !puddle"').replace(
-        "[distributions]\nmu = { geometric = 0.3 }\n", ""))
-    out = tmp_path / output[1]
-    assert main(["export", str(path), output[0], str(out), "-q"]) == 2
-    err = capsys.readouterr().err
-    assert "keeps the task's safety part" in err and err.count("\n") == 1
-    assert not out.exists()
-
-
 def test_a_constrained_policy_table_names_prism_states_by_their_variables(
         tmp_path: Path) -> None:
     """The constrained route's policy table wrote a PRISM world's states as raw tuples;

@@ -273,9 +273,9 @@ def test_damaged_truncated_or_foreign_files_are_one_clear_error(tmp_path: Path) 
     cases["a text file"] = (tmp_path / "text.npz", "")
     cases["a folder"] = (tmp_path, "")
     cases["no file"] = (tmp_path / "missing.npz", "No such file")
-    cases["version 3"] = (rewritten(good, tmp_path / "v3.npz",
-                                    lambda m: with_meta(m, version=3)),
-                          "format version 3; this mitld_lp reads versions 1, 2")
+    cases["version 4"] = (rewritten(good, tmp_path / "v4.npz",
+                                    lambda m: with_meta(m, version=4)),
+                          "format version 4; this mitld_lp reads versions 1, 2, 3")
     cases["another format"] = (rewritten(good, tmp_path / "fmt.npz",
                                          lambda m: with_meta(m, format="other")),
                                "not a controller file")

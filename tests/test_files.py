@@ -129,6 +129,8 @@ def solved():
 
 def _writers(result):
     """Every file writer of the package: (name, suffix, write(path, overwrite))."""
+    from mitld_lp.files import plot
+    from mitld_lp.routes import pareto
     from mitld_lp.solvers.export import write_drn, write_lp
 
     mdp = result.mdp
@@ -140,6 +142,11 @@ def _writers(result):
         ("mps", ".mps", lambda p, o: write_lp(mdp, mdp.target, p, overwrite=o)),
         ("dot", ".dot", lambda p, o: files.write_text(p, result.dta.to_dot(), overwrite=o)),
         ("controller", ".ctl", lambda p, o: result.controller.save(p, overwrite=o)),
+        ("figure png", ".png", lambda p, o: plot.save(plot.policy_figure(result), p,
+                                                      overwrite=o)),
+        ("figure svg", ".svg", lambda p, o: plot.save(plot.policy_figure(result), p,
+                                                      overwrite=o)),
+        ("pareto", ".png", lambda p, o: pareto.plot([], p, "P(F A)", "t", overwrite=o)),
     ]
 
 
@@ -197,6 +204,35 @@ def test_a_writer_by_name_that_fails_leaves_the_old_file(tmp_path):
     with files.replacing_path(out) as scratch:
         scratch.write_text("a whole LP\n")
     assert _listing(tmp_path) == ["model.lp"] and out.read_text() == "a whole LP\n"
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_sweep_results_rewrite_that_fails_leaves_the_old_file(tmp_path, monkeypatch,
+                                                                  suffix):
+    """A sweep's results file is rewritten by the package's one writer: a rewrite that
+    fails half-way leaves the file as it was and no temporary file beside it."""
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    from mitld_lp.sweep.results import Results, read_results
+
+    out = tmp_path / f"r{suffix}"
+    first = Results(out, "s", "id1", ["p"])
+    first.close()
+    before = out.read_bytes()
+    columns, rows, _ = read_results(out)
+    assert rows == [] and "sweep_id" in columns
+
+    def broken(self, target, *args, **kwargs):
+        (target.write if hasattr(target, "write") else target.write_bytes)(
+            "half a row" if hasattr(target, "write") else b"half a table")
+        raise OSError("disk on fire")
+
+    monkeypatch.setattr(Results, "_write_csv" if suffix == ".csv" else "_write_parquet",
+                        broken)
+    with pytest.raises(OSError, match="disk on fire"):
+        Results(out, "s", "id1", ["p"], force=True)
+    assert out.read_bytes() == before
+    assert _listing(tmp_path) == [f"r{suffix}"]  # no temporary file, no lock file left
 
 
 def test_an_abandoned_thread_renames_nothing(tmp_path):

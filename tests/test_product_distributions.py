@@ -133,3 +133,38 @@ def test_a_fault_is_found_among_thousands_of_rows_wherever_it_is(bad):
     with pytest.raises(GameError, match=rf"^state {bad}, action 'go': probabilities sum to 0\.99"):
         product(_Tree(20000, bad), make_sta(to_dta(parse("F[0,40] A")), {}, 0.01))
     product(_Tree(20000, None), make_sta(to_dta(parse("F[0,40] A")), {}, 0.01))
+
+
+@pytest.mark.parametrize(
+    "total, ok",
+    [(1.0 + 2e-9, False), (1.0 - 2e-9, False), (1.0 + 5e-10, True), (1.0 - 5e-10, True),
+     (0.99, False)],
+)
+def test_one_tolerance_for_the_product_check_game_and_explicit_tables(total, ok):
+    """The three readers of a successor distribution -- the product, ``check_game`` (the
+    letter of the protocol) and ``ExplicitGame``'s tables -- are one validator
+    (:mod:`mitld_lp.worlds.successors`): a total 2e-9 off 1 is refused by each, 5e-10 off
+    accepted by each (the tolerance is 1e-9, by hand)."""
+    from mitld_lp.worlds.game import ExplicitGame, check_game
+
+    dist = ((2, 0.5), (1, total - 0.5))
+    game = _Line(dist)
+
+    class Strict(_Line):  # no next state listed twice (the letter check_game holds to)
+        def successors(self, state, action, events):
+            return ((2, 1.0),) if state == 2 else super().successors(state, action, events)
+
+    explicit = {"transitions": {0: {"go": {1: 1.0}}, 1: {"go": dict(dist)}, 2: {"go": {2: 1.0}}},
+                "labels": {2: {"A"}}}
+    checks = {
+        "product": lambda: synthesize(Model.from_game(game, SPEC)),
+        "check_game": lambda: check_game(Strict(dist), events={"e"}),
+        "tables": lambda: ExplicitGame(0, **explicit),
+    }
+    for name, run in checks.items():
+        if ok:
+            run()
+            continue
+        with pytest.raises(GameError, match=r"probabilities (must )?sum to") as err:
+            run()
+        assert repr(math.fsum(p for _, p in dist))[:6] in str(err.value), name

@@ -273,6 +273,12 @@ def test_the_csv_is_tidy(files):
          's.toml: solve.method: must be "lp" or "vi", got "simplex"'),
         ('name = "s"\nmodel = "tiny.toml"\n[set]\ngrid.slip = 0.9\n',
          "s.toml: model: tiny.toml with [set] does not load: "),
+        # one key-path context for sweep and model files (model_keys): the same wording
+        ('name = "s"\nmodel = "tiny.toml"\n[solve]\nmethd = "lp"\n',
+         "s.toml: solve.methd: unknown key (allowed: backend, certify_tol, clock_reduction, "),
+        ('name = "s"\nmodel = "tiny.toml"\nvary = 3\n',
+         "s.toml: vary: must be a table, got an integer 3"),
+        ('name = "s"\nmodel = "tiny.toml"\n"a b" = 1\n', 's.toml: "a b": unknown key'),
     ],
 )
 def test_sweep_file_errors_are_one_line_with_the_key_path(files, capsys, text, message):
@@ -282,6 +288,17 @@ def test_sweep_file_errors_are_one_line_with_the_key_path(files, capsys, text, m
     err = captured.err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("mitld-lp: error: " + message), err
     assert captured.out == "" and not (files / "s.csv").exists()
+
+
+def test_a_model_file_error_in_a_sweep_names_both_key_paths(files, capsys):
+    """A value under [set] that the model file refuses: the sweep's key path and the
+    model file's own (the same context words both)."""
+    (files / "s.toml").write_text('name = "s"\nmodel = "tiny.toml"\n[set]\ngrid.slip = "x"\n')
+    assert main(["sweep", "s.toml", "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mitld-lp: error: s.toml: model: tiny.toml with [set] does not load")
+    assert err.endswith('tiny.toml: grid.slip: must be a number, got a string "x"')
+    assert "\n" not in err
 
 
 def test_points_and_set_and_a_whole_law_varied(files):

@@ -213,7 +213,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
-    _write(out, lambda p: plot.save(fig, p))
+    _write(out, lambda p: plot.save(fig, p, overwrite=True))  # checked above, before work
     _out(f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
     return EXIT_OK
 

@@ -1,8 +1,8 @@
 """Key paths of a model file: the one place a TOML value is checked for its type and
 range, and every fault becomes a :class:`ModelError` naming ``SOURCE: KEY.PATH``.
 
-Used by the model loader (:mod:`mitld_lp.model`) and the world tables a model file names
-(:mod:`mitld_lp.worlds.loaders`).
+Used by the model loader (:mod:`mitld_lp.model`), the world tables a model file names
+(:mod:`mitld_lp.worlds.loaders`) and the sweep files (:mod:`mitld_lp.sweep.spec`).
 """
 
 from __future__ import annotations
@@ -64,17 +64,23 @@ def _type_name(value: Any) -> str:
 
 
 class _Context:
-    """Error reporting for one source, and the budgets a world built while loading gets."""
+    """Error reporting for one source, and the budgets a world built while loading gets.
+
+    The one key-path context of the package's TOML files: a model file's (errors are
+    :class:`ModelError`) and a sweep file's (``error=SweepError``,
+    :mod:`mitld_lp.sweep.spec`); every fault reads ``SOURCE: KEY.PATH: what is wrong``."""
 
     def __init__(
-        self, source: str, max_states: int = defaults.MAX_STATES, max_memory: int | None = None
+        self, source: str, max_states: int = defaults.MAX_STATES, max_memory: int | None = None,
+        *, error: type[ValueError] = ModelError,
     ) -> None:
         self.source = source
         self.max_states, self.max_memory = max_states, max_memory
+        self._error = error
 
-    def error(self, path: str, message: str) -> ModelError:
+    def error(self, path: str, message: str) -> ValueError:
         where = f"{path}: " if path else ""
-        return ModelError(f"{self.source}: {where}{message}")
+        return self._error(f"{self.source}: {where}{message}")
 
     def table(self, value: Any, path: str) -> dict[str, Any]:
         if not isinstance(value, dict):

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from mitld_lp.files import write as files
 from mitld_lp.worlds.grid import MOVES, STAY, Cell, GridWorld
 
 if TYPE_CHECKING:
@@ -378,11 +379,11 @@ def sweep_figure(
     return fig
 
 
-def save(fig: Figure, path: str | os.PathLike[str]) -> Path:
-    """Write ``fig`` to ``path`` (``.png``, ``.svg`` or ``.pdf``) at its own size."""
-    out = Path(path)
-    if out.suffix.lower() not in FIGURE_SUFFIXES:
-        raise PlotError(f"{out}: the suffix must be one of {', '.join(FIGURE_SUFFIXES)}")
-    fig.savefig(out, dpi=_DPI)
-    return out
+def save(fig: Figure, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Write ``fig`` to ``path`` (``.png``, ``.svg`` or ``.pdf``) at its own size, under
+    the package's rule for output files (:mod:`mitld_lp.files.write`: an existing file is
+    replaced only with ``overwrite``, and only once the new one is complete; a path the
+    rule refuses raises :class:`~mitld_lp.files.write.OutputPathError`)."""
+    return files.write_figure(fig, path, overwrite=overwrite, suffixes=FIGURE_SUFFIXES,
+                              dpi=_DPI)
 

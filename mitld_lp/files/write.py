@@ -8,15 +8,16 @@ overwriting (``overwrite=True``, the command line's ``--force``).  Two outputs o
 command must not name the same file (:func:`distinct_outputs`).
 
 The writing (:func:`replacing` for a stream, :func:`replacing_path` for a writer that
-takes a file name): the content goes to a temporary file beside the target, which is
-renamed over the target only once it is complete.  A write that fails or is interrupted
-(Ctrl-C) leaves the target exactly as it was and removes the temporary file; a command
-that stops a writing thread from outside (the command line on Ctrl-C or a time limit)
-calls :func:`abandon` with that thread.  With ``overwrite`` a symlink is written through
-(its target is replaced, the link kept), and a target that is not a regular file (a
-device such as ``/dev/null``) is written directly: there is nothing to rename over.
-A path under ``/proc`` or ``/sys`` (the kernel's own tables, which take no new file)
-is refused by the rule.
+takes a file name -- a figure, a Parquet table, HiGHS's LP file -- and the helpers
+:func:`write_text`, :func:`write_figure`, :func:`write_policy` over them): the content
+goes to a temporary file beside the target, which is renamed over the target only once
+it is complete. A write that fails or is interrupted (Ctrl-C) leaves the target exactly
+as it was and removes the temporary file; a command that stops a writing thread from
+outside (the command line on Ctrl-C or a time limit) calls :func:`abandon` with that
+thread. With ``overwrite`` a symlink is written through (its target is replaced, the
+link kept), and a target that is not a regular file (a device such as ``/dev/null``) is
+written directly: there is nothing to rename over. A path under ``/proc`` or ``/sys``
+(the kernel's own tables, which take no new file) is refused by the rule.
 
 The readers of the files a user names (:func:`read_bytes`, :func:`read_text`,
 :func:`open_archive`, :func:`check_zip`: regular files only, bounded, sizes checked
@@ -66,6 +67,7 @@ __all__ = [
     "replacing",
     "replacing_path",
     "write_text",
+    "write_figure",
     "write_policy",
     "POLICY_SUFFIXES",
     "abandon",
@@ -313,6 +315,22 @@ def write_text(
     out = writable_path(path, overwrite=overwrite, suffixes=suffixes)
     with replacing(out) as handle:
         handle.write(text)
+    return out
+
+
+def write_figure(
+    figure: Any,
+    path: PathLike,
+    *,
+    overwrite: bool = False,
+    suffixes: Iterable[str] = (),
+    dpi: int = 100,
+) -> Path:
+    """Write a Matplotlib ``figure`` (its format from the suffix of ``path``) under the
+    rule, replacing the file in one step (:func:`replacing_path`)."""
+    out = writable_path(path, overwrite=overwrite, suffixes=suffixes)
+    with replacing_path(out) as scratch:
+        figure.savefig(scratch, dpi=dpi)
     return out
 
 

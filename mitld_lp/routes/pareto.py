@@ -115,7 +115,7 @@ def plot(points: list[ParetoPoint], path: Path, against: str, title: str, *,
          overwrite: bool = False) -> int:
     """Draw the certified points (the bracket as a band) as a PNG, under the output-file
     rule; returns how many were left out."""
-    out = files.writable_path(path, overwrite=overwrite, suffixes=(".png",))
+    files.writable_path(path, overwrite=overwrite, suffixes=(".png",))  # before drawing
     import matplotlib
 
     matplotlib.use("Agg")
@@ -131,9 +131,11 @@ def plot(points: list[ParetoPoint], path: Path, against: str, title: str, *,
     ax.set_xlabel(f"bound on {'E(' + against + ')' if against in ('steps', 'cost') else against}")
     ax.set_ylabel("success probability")
     ax.set_title(title)
-    ax.legend(loc="lower right")
+    if good:  # no certified point: nothing to label
+        ax.legend(loc="lower right")
     fig.tight_layout()
-    with files.replacing_path(out) as scratch:
-        fig.savefig(scratch, dpi=120)
-    plt.close(fig)
+    try:
+        files.write_figure(fig, path, overwrite=overwrite, suffixes=(".png",), dpi=120)
+    finally:
+        plt.close(fig)
     return len(points) - len(good)

@@ -2,25 +2,27 @@
 re-check with Storm (``P=? [F "accept"]``) or PRISM.
 
 The chain's states are the states the controller can reach: the world state, the
-controller's memory (the automaton state, the events still pending, the clock) and,
-for a randomised controller, whether it has drawn *stay* (it then keeps to an end
-component for ever).  They are built from the product the controller was synthesised
-on, so a step moves the world, lets the events happen with their hazards and advances
-the clock exactly as there; the controller's choice is asked of the controller itself
-(its tables, the same ones ``act`` reads), not read from the synthesis's arrays.  Runs
-past a truncation point go to the one state labelled ``truncated``, counted as failure,
-as ``lower`` counts them.
+controller's memory (the automaton state, the events still pending, the clock) and, for
+a randomised controller, whether it has drawn *stay* (it then keeps to an end component
+for ever) or *keep* (it then plays an end component of persistent task states for ever,
+which keeps the task's safety part). They are built from the product the controller was
+synthesised on, so a step moves the world, lets the events happen with their hazards and
+advances the clock exactly as there; the controller's choice is asked of the controller
+itself (its tables, the same ones ``act`` reads), not read from the synthesis's arrays.
+Runs past a truncation point go to the one state labelled ``truncated``, counted as
+failure, as ``lower`` counts them.
 
 Labels: ``init``; ``accept`` on the states from which the controller's run is accepted
 for sure -- where the automaton has accepted, and, for a task with a safety part, on
 every bottom strongly connected component of the chain whose automaton states are all
-persistent (a run that enters it stays in it and keeps the safety part for ever); so
-``P=? [F "accept"]`` is the probability that the run is accepted, which equals the
-synthesis's ``lower``.  ``reject`` where the task is lost (the controller stops),
-``truncated`` as above, ``staying`` where a randomised controller keeps to an end
-component, and each world proposition that holds (a proposition named like one of these
-labels is written ``world_<name>``).  Each state line is followed by its valuation as a
-comment, as Storm's own exporter writes it:
+persistent (a run that enters it stays in it and keeps the safety part for ever), and,
+for a randomised controller of a task with a safety part, on every state reached after
+drawing *keep* (labelled ``keeping`` too); so ``P=? [F "accept"]`` is the probability
+that the run is accepted, which equals the synthesis's ``lower``. ``reject`` where the
+task is lost (the controller stops), ``truncated`` as above, ``staying`` where a
+randomised controller keeps to an end component, and each world proposition that holds
+(a proposition named like one of these labels is written ``world_<name>``). Each state
+line is followed by its valuation as a comment, as Storm's own exporter writes it:
 ``//[x=1 & y=2 & q=3 & pending={b1} & clock=0]``.
 """
 
@@ -46,7 +48,11 @@ from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
 __all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS"]
 
-CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying")
+CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping")
+
+_GO, _STAY, _KEEP = 0, 1, 2
+"""A randomised controller's mode, part of a chain state: acting by its distribution,
+staying in an end component for ever, keeping the task's safety part for ever."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -55,14 +61,16 @@ class Chain:
 
     ``matrix``: ``(n, n)`` CSR transition probabilities; ``labels[i]``: the labels of
     state ``i`` (without ``init``); ``valuations[i]``: its valuation text;
-    ``origin[i]``: its product state (-1 for the chain's own absorbing states) and
-    ``staying[i]`` whether a randomised controller has drawn *stay* there."""
+    ``origin[i]``: its product state (-1 for the chain's own absorbing states),
+    ``staying[i]`` whether a randomised controller has drawn *stay* there and
+    ``keeping[i]`` whether it has drawn *keep* (the task's safety part kept for ever)."""
 
     matrix: sp.csr_array
     labels: tuple[frozenset[str], ...]
     valuations: tuple[str, ...]
     origin: np.ndarray
     staying: np.ndarray
+    keeping: np.ndarray
 
     @property
     def n_states(self) -> int:
@@ -80,7 +88,6 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     if result.route == "constrained":  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
-        refuse_kept(result, "the controlled chain")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
         return controlled_chain(result.mdp, controller or result.controller,
                                 persistent, _game(result, controller))
@@ -90,19 +97,6 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
                          "no Markov chain; export --drn writes the interval MDP")
     return controlled_chain(result.mdp, controller or result.controller,
                             result.dta.persistent, result.model.game)
-
-
-def refuse_kept(result: Any, what: str) -> None:
-    """A constrained result whose policy keeps a task's safety part (*keep* choices: from
-    then on the controller plays an end component's internal actions for ever, a memory
-    this chain and the saved tables do not carry yet): refused, naming it."""
-    if bool(result.merged.keep.any()) and result.prob is not None and bool(
-            (result.prob[result.merged.keep] > 0).any()):
-        from mitld_lp.problem import ProblemError
-
-        raise ProblemError(f"{what} of a constrained policy that keeps the task's safety "
-                           "part in an end component (a keep choice) is not exported yet; "
-                           "the policy runs in the process that synthesised it (simulate)")
 
 
 def _game(result: Any, controller: ControllerLike | None) -> Game[Any]:
@@ -122,12 +116,12 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
     which staying for ever is acceptance."""
     keep = frozenset(persistent)
     fields = (*state_fields(game), "q", "pending", "clock")
-    index: dict[tuple[int, bool], int] = {}
-    order: list[tuple[int, bool]] = []
+    index: dict[tuple[int, int], int] = {}
+    order: list[tuple[int, int]] = []
     rows: list[dict[int, float]] = []
     special: dict[str, int] = {}
 
-    def number(node: tuple[int, bool]) -> int:
+    def number(node: tuple[int, int]) -> int:
         at = index.get(node)
         if at is None:
             at = index[node] = len(order)
@@ -136,28 +130,27 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
 
     def sink(name: str) -> int:  # the chain's own absorbing state for a stopped run
         if name not in special:
-            special[name] = number((-1 - len(special), False))
+            special[name] = number((-1 - len(special), _GO))
         return special[name]
 
-    number((int(mdp.initial), False))
+    number((int(mdp.initial), _GO))
     done = 0
     while done < len(order):
-        node = order[done]
-        i, staying = node
+        i, mode = order[done]
         row: dict[int, float] = {}
         if i < 0:
             row[done] = 1.0
         else:
-            for j, stay_next, p in _moves(mdp, controller, i, staying, sink):
+            for j, mode_next, p in _moves(mdp, controller, i, mode, sink):
                 if p > 0:
-                    to = j if stay_next is None else number((j, stay_next))
+                    to = j if mode_next is None else number((j, mode_next))
                     row[to] = row.get(to, 0.0) + p
         rows.append(row)
         done += 1
     n = len(order)
     names = {v: k for k, v in special.items()}
     origin = np.array([i for i, _ in order], dtype=np.int64)
-    staying = np.array([s for _, s in order], dtype=bool)
+    modes = np.array([s for _, s in order], dtype=np.int64)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum([len(r) for r in rows], out=indptr[1:])
     cols = np.fromiter((c for r in rows for c in sorted(r)), dtype=np.int64,
@@ -169,7 +162,7 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
     labels: list[set[str]] = []
     valuations: list[str] = []
     plan_verdicts = controller._plan.verdicts  # type: ignore[attr-defined]
-    for k, (i, stay) in enumerate(order):
+    for k, (i, mode) in enumerate(order):
         here: set[str] = set()
         if i < 0:
             here.add(names[k])
@@ -186,18 +179,23 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
                 pend = ",".join(sorted(rec.pending))
                 valuations.append(valuation_text(
                     fields, (*state_values(game, rec.game), rec.automaton, f"{{{pend}}}",
-                             rec.clock)) + (" & staying=true" if stay else ""))
+                             rec.clock)) + _MODE_TEXT[mode])
             else:
                 here.add({Absorbing.TARGET: "accept", Absorbing.SINK: "reject",
                           Absorbing.TRUNCATED: "truncated"}[rec])
                 valuations.append(str(rec))
-            if stay:
+            if mode == _STAY:
                 here.add("staying")
+            elif mode == _KEEP:  # the safety part kept for ever: the task accepted
+                here |= {"keeping", "accept"}
         labels.append(here)
     for k in _kept_for_ever(matrix, order, mdp, keep):
         labels[k].add("accept")
     return Chain(matrix, tuple(frozenset(x) for x in labels), tuple(valuations), origin,
-                 staying)
+                 modes == _STAY, modes == _KEEP)
+
+
+_MODE_TEXT = {_GO: "", _STAY: " & staying=true", _KEEP: " & keeping=true"}
 
 
 def _prop_labels(game: Game[Any]) -> Any:
@@ -205,13 +203,14 @@ def _prop_labels(game: Game[Any]) -> Any:
     return lambda p: f"world_{p}" if p in reserved else p
 
 
-def _moves(mdp: MDP, controller: ControllerLike, i: int, staying: bool,
-           sink: Any) -> Iterable[tuple[int, bool | None, float]]:
-    """The chain's steps from product state ``i``: ``(j, staying, p)`` to product
-    state ``j``, or ``(k, None, p)`` to the chain's own state ``k``."""
+def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
+           sink: Any) -> Iterable[tuple[int, int | None, float]]:
+    """The chain's steps from product state ``i`` in controller ``mode``: ``(j, mode,
+    p)`` to product state ``j``, or ``(k, None, p)`` to the chain's own state ``k``
+    (the draws of :meth:`mitld_lp.runtime.Stepper._step`, as probabilities)."""
     rec = mdp.states[i]
     if not isinstance(rec, ProductState):  # target, sink, truncated: absorbing
-        yield i, False, 1.0
+        yield i, _GO, 1.0
         return
     plan = controller._plan  # type: ignore[attr-defined]  # the tables act() reads
     verdicts = plan.verdicts[rec.automaton]
@@ -222,28 +221,40 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, staying: bool,
     if d.lost:
         yield sink("reject"), None, 1.0
         return
-    choice: list[tuple[str, float, bool]] = []  # action, probability, staying after
+    fallback = plan.fallback(rec.game)
+
+    def uniform(actions: tuple[str, ...], p: float, after: int) -> list[tuple[str, float, int]]:
+        if not actions:
+            return [(fallback, p, after)]
+        return [(a, p / len(actions), after) for a in actions]
+
+    choice: list[tuple[str, float, int]] = []  # action, probability, mode after
     if d.weights is None or not d.actions:
-        choice.append((d.actions[0] if d.actions else plan.fallback(rec.game), 1.0, staying))
+        choice.append((d.actions[0] if d.actions else fallback, 1.0, mode))
+    elif mode == _KEEP:
+        choice += uniform(d.kept, 1.0, _KEEP)
     else:
-        go_on = 0.0 if staying else 1.0 - d.stay
+        go_on = 0.0 if mode == _STAY else 1.0 - d.stay
         now_stay = 1.0 - go_on
         if now_stay > 0:
-            if d.inside:
-                choice += [(a, now_stay / len(d.inside), True) for a in d.inside]
-            else:
-                choice.append((plan.fallback(rec.game), now_stay, True))
+            choice += uniform(d.inside, now_stay, _STAY)
         total = float(np.sum(d.weights))
         if go_on > 0 and total > 0:
-            choice += [(a, go_on * float(w) / total, False)
-                       for a, w in zip(d.actions, d.weights, strict=True) if w > 0]
+            for k, (a, w) in enumerate(zip(d.actions, d.weights, strict=True)):
+                if w <= 0:
+                    continue
+                p = go_on * float(w) / total
+                if d.keep and d.keep[k]:
+                    choice += uniform(d.kept, p, _KEEP)
+                else:
+                    choice.append((a, p, _GO))
     matrix = mdp.matrix
-    for action, p, stay_after in choice:
+    for action, p, after in choice:
         c = _row(mdp, i, action)
         lo, hi = int(matrix.indptr[c]), int(matrix.indptr[c + 1])
         for j, q in zip(matrix.indices[lo:hi].tolist(), matrix.data[lo:hi].tolist(),
                         strict=True):
-            yield j, stay_after, p * q
+            yield j, after, p * q
 
 
 def _row(mdp: MDP, i: int, action: str) -> int:
@@ -254,7 +265,7 @@ def _row(mdp: MDP, i: int, action: str) -> int:
                      "one of its actions (the controller is not of this product)")
 
 
-def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, bool]], mdp: MDP,
+def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, int]], mdp: MDP,
                    persistent: frozenset[int]) -> list[int]:
     """The states of the bottom strongly connected components whose every state is an
     ordinary product state with a persistent automaton state (and not *staying*, whose
@@ -269,9 +280,9 @@ def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, bool]], mdp: MDP
     leaves[comp[coo.row[cross]]] = True
     good = np.ones(count, dtype=bool)
     for k in range(n):
-        i, stay = order[k]
+        i, mode = order[k]
         rec = mdp.states[i] if i >= 0 else None
-        if stay or not isinstance(rec, ProductState) or rec.automaton not in persistent:
+        if mode == _STAY or not isinstance(rec, ProductState) or rec.automaton not in persistent:
             good[comp[k]] = False
     return np.flatnonzero(good[comp] & ~leaves[comp]).tolist()
 

@@ -9,7 +9,7 @@ only be refused (:class:`ControllerFileError`).  It holds everything the control
 needs to run, and nothing of the world's Python objects, so a robot's process loads it
 without the world's class (and without any solver):
 
-* ``meta`` (JSON): the format tag and version (2; version 1 files are still read), the
+* ``meta`` (JSON): the format tag and version (3; versions 1 and 2 are still read), the
   ``kind`` (``"deterministic"`` or ``"randomised"``), the world's ``variables`` (their
   names when a world state is a tuple of them, as in a PRISM world; else null), the
   automaton's atoms, the task's events, the action names, the automaton (its initial
@@ -29,9 +29,13 @@ without the world's class (and without any solver):
 * randomised: ``offsets`` (int64, one more than the keys): the key ``i``'s choices are
   entries ``offsets[i]:offsets[i + 1]`` of ``choices`` (int32 action numbers),
   ``weights`` (float64, their probabilities) and ``inside`` (bool: the choice keeps
-  the run in its end component); ``stay`` (float64 per key: the probability of
-  drawing *stay*, keeping to the end component for ever) and ``charged`` (bool per
-  key: a step here counts towards E(steps)).
+  the run in its end component), ``keep`` (bool: the choice is the *keep* choice of a
+  task with a safety part, stored as action -1: from then on the run plays the end
+  component of persistent task states for ever) and ``kept`` (bool: the choice stays in
+  that component; what a run that has kept draws from, uniformly); ``stay`` (float64 per
+  key: the probability of drawing *stay*, keeping to the end component for ever) and
+  ``charged`` (bool per key: a step here counts towards E(steps)).  A version 2 file has
+  no ``keep`` and ``kept``: it has no keep choice.
 
 The world states listed are every state the world reaches from its initial one (under
 any action and any events): the product's game states and those reached past a
@@ -209,6 +213,8 @@ def tabulate_randomised(
     charged: np.ndarray,
     skip: np.ndarray,
     *,
+    keep: np.ndarray | None = None,
+    kept: np.ndarray | None = None,
     max_states: int,
 ) -> SavedPlan:
     """The tables of a randomised controller on the product ``mdp`` of ``game`` with
@@ -216,7 +222,10 @@ def tabulate_randomised(
     ``i`` is state ``merged_of[i]`` of ``merged`` (-1: none), whose choice ``c`` is
     drawn with probability ``prob[c]`` (``inside[c]``: it stays in its end component),
     *stay* with ``stay[s]``; ``charged[s]``: steps there count; ``skip[s]``: no
-    decision there (an absorbing state).  Budget and errors as :func:`tabulate`."""
+    decision there (an absorbing state); ``keep[c]``: choice ``c`` is the *keep* choice
+    (saved as action -1), ``kept[c]``: it stays in the end component of persistent task
+    states (what a run plays once it has kept; both all false when None).  Budget and
+    errors as :func:`tabulate`."""
     dta = sta.dta
     world = _World(game, dta.atoms, list(mdp.action_names), max_states)
     rows = [i for i, r in enumerate(mdp.states) if isinstance(r, ProductState)
@@ -224,14 +233,21 @@ def tabulate_randomised(
     keys = _product_keys(world, sta, dta.n_states, mdp, rows)
     order = np.argsort(np.asarray(keys, dtype=np.int64), kind="stable")
     offsets, choices, weights, inner, stays, charge = [0], [], [], [], [], []
+    keeps: list[bool] = []
+    plays: list[bool] = []
+    none = np.zeros(merged.n_choices, dtype=bool)
+    keep = none if keep is None else keep
+    kept = none if kept is None else kept
     groups = merged.row_groups
     for j in order.tolist():
         s = int(merged_of[rows[j]])
         lo, hi = int(groups[s]), int(groups[s + 1])
         for c in range(lo, hi):
-            choices.append(world.action(merged.action_name(c)))
+            choices.append(-1 if keep[c] else world.action(merged.action_name(c)))
             weights.append(float(prob[c]))
             inner.append(bool(inside[c]))
+            keeps.append(bool(keep[c]))
+            plays.append(bool(kept[c]))
         offsets.append(len(choices))
         stays.append(float(stay[s]))
         charge.append(bool(charged[s]))
@@ -243,7 +259,9 @@ def tabulate_randomised(
                      "weights": np.asarray(weights, dtype=np.float64),
                      "inside": np.asarray(inner, dtype=np.bool_),
                      "stay": np.asarray(stays, dtype=np.float64),
-                     "charged": np.asarray(charge, dtype=np.bool_)})
+                     "charged": np.asarray(charge, dtype=np.bool_),
+                     "keep": np.asarray(keeps, dtype=np.bool_),
+                     "kept": np.asarray(plays, dtype=np.bool_)})
 
 
 def _close(

@@ -29,7 +29,7 @@ from mitld_lp.running.controller_file import (
     read_plan,
     tabulate_randomised,
 )
-from mitld_lp.runtime import Decision, Stepper
+from mitld_lp.runtime import KEEP, Decision, Stepper
 
 __all__ = ["ConstrainedController", "load_controller"]
 
@@ -75,11 +75,12 @@ class _LiveRandomPlan:
         if s < 0 or m.absorbing[s]:
             return Decision((), np.zeros(0))
         lo, hi = int(m.mdp.row_groups[s]), int(m.mdp.row_groups[s + 1])
-        names = tuple("keep" if m.keep[c] else m.mdp.action_name(c) for c in range(lo, hi))
-        inside = tuple(n for n, keep in zip(names, m.internal[lo:hi], strict=True) if keep)
-        kept = tuple(n for n, keep in zip(names, m.keep_internal[lo:hi], strict=True) if keep)
+        names = tuple(KEEP if m.keep[c] else m.mdp.action_name(c) for c in range(lo, hi))
+        inside = tuple(n for n, flag in zip(names, m.internal[lo:hi], strict=True) if flag)
+        kept = tuple(n for n, flag in zip(names, m.keep_internal[lo:hi], strict=True) if flag)
+        keep = tuple(bool(k) for k in m.keep[lo:hi])
         return Decision(names, np.asarray(self.prob[lo:hi]), float(self.stay[s]), inside,
-                        charged=bool(m.undecided[s]), keep=tuple(bool(k) for k in m.keep[lo:hi]),
+                        charged=bool(m.undecided[s]), keep=keep if any(keep) else (),
                         kept=kept)
 
     def fallback(self, state: Hashable) -> str:
@@ -87,17 +88,10 @@ class _LiveRandomPlan:
 
     def tables(self, max_states: int) -> SavedPlan:
         m = self.merged
-        if m.keep.any():
-            from mitld_lp.problem import ProblemError
-
-            raise ProblemError("the saved tables of a constrained policy that keeps the "
-                               "task's safety part in an end component (a keep choice) are "
-                               "not written yet; the policy runs in the process that "
-                               "synthesised it (simulate)")
         return tabulate_randomised(
             self.game, self.sta, self.joint.verdicts, self.mdp, m.of_product, m.mdp,
             self.prob, self.stay, m.internal, m.undecided, m.absorbing,
-            max_states=max_states)
+            keep=m.keep, kept=m.keep_internal, max_states=max_states)
 
 
 class ConstrainedController(Stepper):

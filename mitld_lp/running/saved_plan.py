@@ -22,6 +22,7 @@ __all__ = [
     "ControllerFileError",
     "Decision",
     "FORMAT",
+    "KEEP",
     "MEMBERS",
     "READS",
     "REJECTED",
@@ -37,13 +38,17 @@ __all__ = [
 ]
 
 FORMAT = "mitld_lp.running.controller"
-VERSION = 2
+VERSION = 3
 """The file format's version.  Version 1 (deterministic controllers, no world variables)
-is still read; any other version is refused by name."""
-READS = (1, 2)
+and version 2 (randomised controllers without *keep* choices) are still read; any other
+version is refused by name."""
+READS = (1, 2, 3)
 
 ACCEPTED, REJECTED, UNDECIDED = 1, 0, -1
 """A component's verdict in an automaton state (the task is component 0)."""
+
+KEEP = "keep"
+"""A *keep* choice's name in a decision (told apart by :attr:`Decision.keep`)."""
 
 Diagram = int | tuple[str, Any, Any]
 """An automaton state's transition function: a leaf (the next state) or ``(atom, low,
@@ -58,8 +63,18 @@ _COMMON = {  # member -> dtype of its 1-D array, in every file
 }
 _DETERMINISTIC = {**_COMMON, "policy": np.int32, "hopeless": np.bool_}
 _RANDOMISED = {**_COMMON, "offsets": np.int64, "choices": np.int32, "weights": np.float64,
-               "inside": np.bool_, "stay": np.float64, "charged": np.bool_}
+               "inside": np.bool_, "stay": np.float64, "charged": np.bool_,
+               "keep": np.bool_, "kept": np.bool_}
 MEMBERS = {"deterministic": _DETERMINISTIC, "randomised": _RANDOMISED}
+_KEEPS = ("keep", "kept")  # randomised members new in version 3 (version 2: no keeps)
+
+
+def _members(kind: str, version: int) -> dict[str, Any]:
+    """The members of a file of ``kind`` written in format ``version``."""
+    members = MEMBERS[kind]
+    if kind == "randomised" and version < 3:
+        return {k: v for k, v in members.items() if k not in _KEEPS}
+    return members
 _QUOTE = 80  # characters of a foreign value quoted in an error
 
 
@@ -269,10 +284,13 @@ class SavedPlan:
         if at < 0:
             return Decision(())
         lo, hi = int(t["offsets"][at]), int(t["offsets"][at + 1])
-        names = tuple(self.actions[int(c)] for c in t["choices"][lo:hi])
-        inside = tuple(n for n, keep in zip(names, t["inside"][lo:hi], strict=True) if keep)
+        names = tuple(KEEP if c < 0 else self.actions[c] for c in t["choices"][lo:hi].tolist())
+        inside = tuple(n for n, flag in zip(names, t["inside"][lo:hi], strict=True) if flag)
+        keep = tuple(bool(k) for k in t["keep"][lo:hi])
+        kept = tuple(n for n, flag in zip(names, t["kept"][lo:hi], strict=True) if flag)
         return Decision(names, np.asarray(t["weights"][lo:hi]), float(t["stay"][at]), inside,
-                        charged=bool(t["charged"][at]))
+                        charged=bool(t["charged"][at]), keep=keep if any(keep) else (),
+                        kept=kept)
 
     def lookup(self, state: Hashable, q: int, pending: frozenset[str],
                clock: int) -> tuple[str | None, bool]:
@@ -397,7 +415,7 @@ def _read_arrays(source: Path) -> dict[str, np.ndarray]:
             loaded = np.load(handle, allow_pickle=False)
             with loaded:
                 names = set(loaded.files)
-                if not any(names == set(m) for m in MEMBERS.values()):
+                if not any(names == set(_members(k, v)) for k in MEMBERS for v in READS):
                     raise _Bad(f"not a controller archive (members {_short(loaded.files)}, "
                                f"expected {', '.join(_DETERMINISTIC)} or "
                                f"{', '.join(_RANDOMISED)})")
@@ -460,9 +478,9 @@ def _plan(raw: dict[str, np.ndarray]) -> SavedPlan:
     _need(set(meta) == keys, f"meta: unexpected keys {_short(sorted(meta))}")
     kind = meta.get("kind", "deterministic")
     _need(kind in MEMBERS, f"meta.kind: {_short(kind)} is not a controller kind")
-    members = MEMBERS[kind]
-    _need(set(raw) == set(members), f"not a {kind} controller archive (members "
-          f"{_short(sorted(raw))})")
+    members = _members(kind, version)
+    _need(set(raw) == set(members), f"not a {kind} controller archive of format version "
+          f"{version} (members {_short(sorted(raw))})")
     for name, dtype in members.items():
         a = raw[name]
         _need(a.dtype == dtype and a.ndim == 1,
@@ -502,6 +520,8 @@ def _plan(raw: dict[str, np.ndarray]) -> SavedPlan:
     _need(keys_.size == 0 or (int(keys_[0]) >= 0 and int(keys_[-1]) < bound),
           "keys: a product state out of range")
     tables = {k: raw[k] for k in members if k not in _COMMON}
+    if kind == "randomised" and "keep" not in tables:  # version 2: no keep choice
+        tables.update({k: np.zeros(raw["choices"].size, dtype=np.bool_) for k in _KEEPS})
     (_deterministic_tables if kind == "deterministic" else _randomised_tables)(
         tables, keys_.size, len(actions))
     return SavedPlan(
@@ -526,10 +546,13 @@ def _randomised_tables(t: dict[str, np.ndarray], n: int, n_actions: int) -> None
     _need(int(off[0]) == 0 and bool(np.all(np.diff(off) >= 0))
           and int(off[-1]) == t["choices"].size,
           "offsets: not a partition of the choices")
-    _need(t["weights"].size == t["choices"].size and t["inside"].size == t["choices"].size,
-          "choices, weights and inside: not of one length")
-    _need(bool(np.all((t["choices"] >= 0) & (t["choices"] < n_actions))),
-          "choices: an action number out of range")
+    _need(all(t[k].size == t["choices"].size for k in ("weights", "inside", *_KEEPS)),
+          "choices, weights, inside, keep and kept: not of one length")
+    _need(bool(np.all(np.where(t["keep"], t["choices"] == -1,
+                               (t["choices"] >= 0) & (t["choices"] < n_actions)))),
+          "choices: an action number out of range (-1 only for a keep choice)")
+    _need(not bool(np.any(t["keep"] & (t["kept"] | t["inside"]))),
+          "keep: a keep choice is not itself an action of an end component")
     for name in ("weights", "stay"):
         v = t[name]
         _need(bool(np.all(np.isfinite(v) & (v >= 0) & (v <= 1))),

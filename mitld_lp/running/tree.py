@@ -9,7 +9,8 @@ until every leaf holds one decision, over exactly the states the controller can 
 (the controlled chain, :mod:`mitld_lp.running.chain`), so it picks the controller's own
 decision in each of them: the action, or ``null`` where the task is lost and the
 controller stops.  A randomised controller's leaf holds its distribution (the actions
-with their probabilities, and the probability of *stay*).
+with their probabilities, the probability of *stay* and, for a task with a safety
+part, of *keep* with the actions a run that drew it plays for ever).
 
 :func:`tree_controller` runs the tree in place of the controller's table and
 :func:`tree_value` evaluates it exactly on its Markov chain (a sparse solve): it equals
@@ -125,8 +126,9 @@ class Tree:
 
     def to_python(self) -> str:
         args = ", ".join(_identifier(f) for f in self.features)
-        what = ("a dict {action: probability} (key None: stay in the end component)"
-                if self.randomised else "the action (None: the task is lost, stop)")
+        what = ("a dict {action: probability} (key None: stay in the end component; a key "
+                "('keep', *actions): keep the safety part, playing those actions uniformly "
+                "for ever)" if self.randomised else "the action (None: the task is lost, stop)")
         out = ['"""The controller as a decision tree, written by mitld_lp (exact on the',
                f'{self.samples} states it can reach).  act(...) returns {what}."""', "", "",
                f"def act({args}):"]
@@ -178,26 +180,42 @@ def _leaf_json(decision: Any, randomised: bool) -> dict[str, Any]:
         return {"action": decision}
     if decision is None:
         return {"action": None}
-    actions, weights, stay, inside = decision
-    return {"actions": {a: w for a, w in zip(actions, weights, strict=True) if w > 0},
-            "stay": stay, "inside": list(inside)}
+    actions, weights, stay, inside, keep, kept = decision
+    out = {"actions": {a: w for a, w, k in _mix(actions, weights, keep) if w > 0 and not k},
+           "stay": stay, "inside": list(inside)}
+    if any(keep):  # the keep choice, and what a run that drew it plays for ever
+        out |= {"keep": sum(w for _, w, k in _mix(actions, weights, keep) if k),
+                "kept": list(kept)}
+    return out
+
+
+def _mix(actions: Sequence[str], weights: Sequence[float],
+         keep: Sequence[bool]) -> list[tuple[str, float, bool]]:
+    """A randomised leaf's choices: action, probability, whether it is the keep choice."""
+    flags = keep or (False,) * len(actions)
+    return list(zip(actions, weights, flags, strict=True))
 
 
 def _leaf_text(decision: Any, randomised: bool) -> str:
     if not randomised or decision is None:
         return "stop (lost)" if decision is None else str(decision)
-    actions, weights, stay, _ = decision
-    parts = [f"{a}: {w:.3g}" for a, w in zip(actions, weights, strict=True) if w > 0]
+    actions, weights, stay, _, keep, kept = decision
+    parts = [f"{a}: {w:.3g}" for a, w, k in _mix(actions, weights, keep) if w > 0 and not k]
+    parts += [f"keep: {w:.3g} ({', '.join(kept) or 'any'} for ever)"
+              for _, w, k in _mix(actions, weights, keep) if w > 0 and k]
     return "\n".join(parts + ([f"stay: {stay:.3g}"] if stay else []))
 
 
 def _leaf_python(decision: Any, randomised: bool) -> str:
     if not randomised or decision is None:
         return repr(decision)
-    actions, weights, stay, _ = decision
-    mix = {a: w for a, w in zip(actions, weights, strict=True) if w > 0}
+    actions, weights, stay, _, keep, kept = decision
+    mix: dict[Any, float] = {a: w for a, w, k in _mix(actions, weights, keep) if w > 0 and not k}
+    for _, w, k in _mix(actions, weights, keep):
+        if k and w > 0:
+            mix[("keep", *kept)] = w
     if stay:
-        mix[None] = stay  # type: ignore[index]
+        mix[None] = stay
     return repr(mix)
 
 
@@ -233,7 +251,7 @@ def _label(d: Decision, randomised: bool) -> Hashable:
     if not randomised:
         return d.actions[0] if d.actions else "fallback"
     w = tuple(float(x) for x in (d.weights if d.weights is not None else ()))
-    return (d.actions, w, float(d.stay), d.inside)
+    return (d.actions, w, float(d.stay), d.inside, d.keep, d.kept)
 
 
 def _acting(result: Any, controller: ControllerLike) -> list[int]:
@@ -344,10 +362,6 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
-    if result.route == "constrained":
-        from mitld_lp.running.chain import refuse_kept
-
-        refuse_kept(result, "the decision tree")
     names, events = _features(result, c)
     choices = None if same_actions else _choices(result, c)
     states = _acting(result, c)
@@ -498,8 +512,9 @@ class _TreePlan:
             return Decision((), lost=True)
         if not self.tree.randomised:
             return Decision((d,))
-        actions, weights, stay, inside = d
-        return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside)
+        actions, weights, stay, inside, keep, kept = d
+        return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside,
+                        keep=keep, kept=kept)
 
     def fallback(self, state: Hashable) -> str:
         return self._plan.fallback(state)

@@ -7,8 +7,9 @@ parameter (named by its key path), then :data:`mitld_lp.sweep.rows.RESULT_COLUMN
   point finishes; a parameter's cell is its value as JSON (``0.1``, ``[2.0, 4.0]``,
   ``"text"``), an absent number is empty, booleans are ``True``/``False``.  A last line
   cut short by a kill is dropped when the file is read again.
-* **Parquet** (``.parquet``, needs pyarrow): rewritten whole (to a temporary file, then
-  renamed over the old one) at most once a second and at the end; numeric parameters
+* **Parquet** (``.parquet``, needs pyarrow): rewritten whole (by the package's one
+  writer, :func:`mitld_lp.files.write.replacing_path`: a temporary file renamed over the old
+  one) at most once a second and at the end; numeric parameters
   are numeric columns, others JSON text.
 
 A results file is only ever extended by the sweep it belongs to: opening it for another
@@ -33,9 +34,9 @@ import io
 import json
 import os
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from mitld_lp.files import write as files
 from mitld_lp.sweep.rows import META_COLUMNS, RESULT_COLUMNS
@@ -150,16 +151,6 @@ def read_results(path: str | os.PathLike[str]) -> tuple[list[str], list[dict[str
 # --------------------------------------------------------------------------- writing
 
 
-def _replace(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through a temporary file beside ``path``, then rename it over ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 class Results:
     """The results file of one sweep, open for appending rows.
 
@@ -219,22 +210,23 @@ class Results:
         """Replace the file's content by ``rows`` (atomically)."""
         self.rows = list(rows)
         if self.suffix == ".parquet":
-            _replace(self.path, self._write_parquet)
+            with files.replacing_path(self.path) as scratch:
+                self._write_parquet(scratch)
         else:
-            _replace(self.path, lambda tmp: self._write_csv(tmp, "w", self.rows, header=True))
+            with files.replacing(self.path, newline="") as handle:
+                self._write_csv(handle, self.rows, header=True)
         self._written = time.monotonic()
 
-    def _write_csv(self, path: Path, mode: str, rows: Iterable[dict[str, Any]],
+    def _write_csv(self, handle: IO[str], rows: Iterable[dict[str, Any]],
                    header: bool) -> None:
-        with path.open(mode, newline="", encoding="utf-8") as handle:
-            writer = csv.writer(handle, lineterminator="\n")
-            if header:
-                writer.writerow(self.columns)
-            for row in rows:
-                writer.writerow(
-                    [_result_cell(row[c]) if c in RESULT_COLUMNS or c in META_COLUMNS
-                     else json.dumps(row[c], ensure_ascii=False) for c in self.columns])
-            handle.flush()
+        writer = csv.writer(handle, lineterminator="\n")
+        if header:
+            writer.writerow(self.columns)
+        for row in rows:
+            writer.writerow(
+                [_result_cell(row[c]) if c in RESULT_COLUMNS or c in META_COLUMNS
+                 else json.dumps(row[c], ensure_ascii=False) for c in self.columns])
+        handle.flush()
 
     def _write_parquet(self, path: Path) -> None:
         import pyarrow as pa
@@ -258,8 +250,9 @@ class Results:
         """Record one row (the meta columns are filled in here)."""
         row = {**self.meta, **row}
         self.rows.append(row)
-        if self.suffix == ".csv":
-            self._write_csv(self.path, "a", [row], header=False)
+        if self.suffix == ".csv":  # appended and flushed: a row survives a kill
+            with self.path.open("a", newline="", encoding="utf-8") as handle:
+                self._write_csv(handle, [row], header=False)
         elif time.monotonic() - self._written >= _REWRITE_EVERY:
             self.rewrite(self.rows)
 

@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from mitld_lp.files import rules as file_rules
+from mitld_lp.files.keys import _Context
 from mitld_lp.model import ModelError, loads_model
 from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.sweep.rows import RESERVED_COLUMNS
@@ -206,7 +207,7 @@ def _lists(table: Mapping[str, Any], prefix: KeyPath) -> Iterator[tuple[KeyPath,
             yield (*prefix, k), v
 
 
-def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: _Ctx) -> None:
+def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: _Context) -> None:
     table = doc
     for i, part in enumerate(path[:-1]):
         nxt = table.setdefault(part, {})
@@ -217,20 +218,8 @@ def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: _Ctx
     table[path[-1]] = copy.deepcopy(value)
 
 
-class _Ctx:
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def error(self, path: str, message: str) -> SweepError:
-        return SweepError(f"{self.source}: {path + ': ' if path else ''}{message}")
-
-
-def _setting(table: dict[str, Any], ctx: _Ctx) -> Settings:
-    allowed = _SOLVE_KEYS  # epsilon is the model's
-    for k in table:
-        if k not in allowed:
-            raise ctx.error(f"solve.{_part(k)}", f"unknown key (allowed: "
-                            f"{', '.join(sorted(allowed))})")
+def _setting(table: dict[str, Any], ctx: _Context) -> Settings:
+    ctx.keys(table, "solve", set(), set(_SOLVE_KEYS))  # epsilon is the model's
     values: dict[str, Any] = {}
     for k, v in table.items():
         where = f"solve.{k}"
@@ -269,10 +258,8 @@ _SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "deco
                          "tol", "certify_tol"})
 
 
-def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Ctx) -> list[tuple[KeyPath, list]]:
-    table = doc.get(key, {})
-    if not isinstance(table, dict):
-        raise ctx.error(key, f"must be a table, got {_toml_value(table)}")
+def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Context) -> list[tuple[KeyPath, list]]:
+    table = ctx.table(doc.get(key, {}), key)
     out = []
     for path, values in _lists(table, ()):
         where = f"{key}.{key_path_text(path)}"
@@ -285,7 +272,7 @@ def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Ctx) -> list[tuple[Key
 
 
 def _check_path(base: Mapping[str, Any], path: KeyPath, first: Any, where: str, model: str,
-                model_path: Path, ctx: _Ctx) -> None:
+                model_path: Path, ctx: _Context) -> None:
     """Every table on ``path`` must exist in the base model; a key the base does not have
     (one with a default, such as ``epsilon``) must be one the model file knows."""
     table: Any = base
@@ -320,7 +307,7 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
     every point (an unknown key, a bad spec) is reported here.  Raises
     :class:`SweepError` (a :class:`ModelError` of the base model names its file)."""
     source = os.fspath(path)
-    ctx = _Ctx(source)
+    ctx = _Context(source, error=SweepError)
     try:  # regular files, bounded (file_rules)
         text = file_rules.read_bytes(path).decode("utf-8")
     except file_rules.InputFileError as exc:
@@ -333,13 +320,8 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ctx.error("", f"TOML syntax error: {exc}") from None
-    allowed = {"name", "model", "set", "vary", "points", "solve"}
-    for k in doc:
-        if k not in allowed:
-            raise ctx.error(_part(k), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+    ctx.keys(doc, "", {"name", "model"}, {"set", "vary", "points", "solve"})
     for k in ("name", "model"):
-        if k not in doc:
-            raise ctx.error(k, "missing (required)")
         if not isinstance(doc[k], str) or not doc[k].strip():
             raise ctx.error(k, f"must be a non-empty string, got {_toml_value(doc[k])}")
     model_path = (Path(source).resolve().parent / doc["model"]).resolve()
@@ -351,9 +333,7 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
         message = getattr(exc, "strerror", None) or str(exc)
         raise ctx.error("model", f"cannot read the model file {model_name}: {message}") from exc
 
-    fixed = doc.get("set", {})
-    if not isinstance(fixed, dict):
-        raise ctx.error("set", f"must be a table, got {_toml_value(fixed)}")
+    fixed = ctx.table(doc.get("set", {}), "set")
     for kp, value in _flatten(fixed, ()):
         _merge(base, kp, value, f"set.{key_path_text(kp)}", ctx)
 
@@ -386,10 +366,7 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
     combos = list(itertools.product(*(v for _, v in grid)))
     points = tuple(tuple(r) + tuple(c) for r in rows for c in combos)
 
-    solve = doc.get("solve", {})
-    if not isinstance(solve, dict):
-        raise ctx.error("solve", f"must be a table, got {_toml_value(solve)}")
-    settings = _setting(solve, ctx)
+    settings = _setting(ctx.table(doc.get("solve", {}), "solve"), ctx)
     try:  # every point shares this model: its mistakes are the sweep's
         loads_model(to_toml(base), os.fspath(model_path))
     except ModelError as exc:

@@ -26,7 +26,6 @@ a new implementation before trusting it.
 from __future__ import annotations
 
 import difflib
-import math
 from collections.abc import Hashable, Iterable, Mapping
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, fields
@@ -34,7 +33,12 @@ from itertools import combinations
 from types import MappingProxyType
 from typing import Any, Generic, Protocol, TypeVar, cast, runtime_checkable
 
-from mitld_lp.worlds.successors import PROBABILITY_TOLERANCE, is_real, place
+from mitld_lp.worlds.successors import (
+    PROBABILITY_TOLERANCE,
+    place,
+    strict_distribution_fault,
+    table_distribution,
+)
 
 __all__ = [
     "Game",
@@ -204,30 +208,12 @@ def world_members(world: object) -> WorldMembers:
 def _freeze_distribution(
     value: Mapping[Any, float] | Iterable[tuple[Any, float]], where: str
 ) -> Distribution:
-    """Validate one successor distribution and return it as a tuple of pairs.
-
-    Accepts a mapping ``next -> probability`` or pairs; repeated next states are merged
-    and exact zeros dropped.  Raises :class:`GameError` naming ``where``."""
-    pairs = value.items() if isinstance(value, Mapping) else value
-    merged: dict[Any, float] = {}
-    for item in pairs:
-        try:
-            nxt, p = item
-        except (TypeError, ValueError):
-            raise GameError(f"{where}: expected (next_state, probability), got {item!r}") from None
-        if not is_real(p) or not math.isfinite(float(p)):
-            raise GameError(f"{where}: probability of {nxt!r} must be a number, got {p!r}")
-        p = float(p)
-        if p < 0.0 or p > 1.0:
-            raise GameError(f"{where}: probability of {nxt!r} must be in [0, 1], got {p!r}")
-        try:
-            merged[nxt] = merged.get(nxt, 0.0) + p
-        except TypeError:
-            raise GameError(f"{where}: next state {nxt!r} is not hashable") from None
-    out = tuple((s, p) for s, p in merged.items() if p > 0.0)
-    total = math.fsum(p for _, p in out)
-    if not out or abs(total - 1.0) > PROBABILITY_TOLERANCE:
-        raise GameError(f"{where}: probabilities must sum to 1, got {total!r}")
+    """Validate one successor distribution and return it as a tuple of pairs
+    (:func:`mitld_lp.worlds.successors.table_distribution`).  Raises :class:`GameError` naming
+    ``where``."""
+    out, why = table_distribution(value)
+    if why:
+        raise GameError(f"{where}: {why}")
     return out
 
 
@@ -450,30 +436,13 @@ def _check_actions(game: Game[Any], state: Any) -> tuple[str, ...]:
 
 
 def _check_distribution(dist: Any, where: str, tolerance: float) -> tuple[Any, ...]:
-    """One ``successors`` answer: a non-empty tuple of ``(next, p)`` pairs with distinct
-    hashable next states and ``p`` in (0, 1] summing to 1 within ``tolerance``.
-    Returns the next states in order."""
-    if not isinstance(dist, tuple) or not dist:
-        raise GameError(f"{where}: successors must be a non-empty tuple, got {dist!r}")
-    nexts: dict[Any, None] = {}
-    total = 0.0
-    for item in dist:
-        if not isinstance(item, tuple) or len(item) != 2:
-            raise GameError(f"{where}: expected (next_state, probability), got {item!r}")
-        nxt, p = item
-        if not is_real(p) or not (0.0 < float(p) <= 1.0):
-            raise GameError(f"{where}: probability of {nxt!r} must be in (0, 1], got {p!r}")
-        try:
-            fresh = nxt not in nexts
-        except TypeError:
-            raise GameError(f"{where}: next state {nxt!r} is not hashable") from None
-        if not fresh:
-            raise GameError(f"{where}: next state {nxt!r} is listed twice")
-        nexts[nxt] = None
-        total += float(p)
-    if abs(total - 1.0) > tolerance:
-        raise GameError(f"{where}: probabilities sum to {total!r}, not 1")
-    return tuple(nexts)
+    """One ``successors`` answer, held to the letter of the protocol
+    (:func:`mitld_lp.worlds.successors.strict_distribution_fault`).  Returns the next states
+    in order."""
+    why = strict_distribution_fault(dist, tolerance)
+    if why:
+        raise GameError(f"{where}: {why}")
+    return tuple(nxt for nxt, _ in dist)
 
 
 def check_game(

@@ -23,6 +23,7 @@ import numpy as np
 
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
+from mitld_lp.worlds.successors import distribution_faults
 
 __all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION"]
 
@@ -218,22 +219,15 @@ def read_model(
         names[unlabelled] = DECIDED_ACTION
         n_decided = int(np.count_nonzero(unlabelled))
 
-    choice_of = np.repeat(np.arange(m, dtype=np.int64), np.diff(branches))
-    negative = np.flatnonzero(probabilities < 0.0)
-    if negative.size:
-        c = int(choice_of[negative[0]])
-        raise WorldError(
-            f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}: a probability "
-            f"is negative ({float(probabilities[negative[0]])!r})"
-        )
-    totals = np.bincount(choice_of, weights=probabilities, minlength=m)
-    bad = np.flatnonzero(np.abs(totals - 1.0) > SUM_TOLERANCE)
+    bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
-        raise WorldError(
-            f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}: probabilities "
-            f"sum to {show_sum(float(totals[c]))}, not 1"
-        )
+        row = probabilities[int(branches[c]):int(branches[c + 1])]
+        at = f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}"
+        negative = row[row < 0.0]
+        if negative.size:
+            raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
+        raise WorldError(f"{at}: probabilities sum to {show_sum(float(row.sum()))}, not 1")
 
     effects: dict[str, np.ndarray] = {}
     robot = np.ones(m, dtype=bool)

@@ -1,19 +1,22 @@
 """What an answer of :meth:`mitld_lp.worlds.game.Game.successors` must be: a distribution.
 
-The rule the product applies to every row it reads from a world
-(:func:`distribution_faults`, a batch of rows at once; :func:`distribution_fault` says
-what is wrong with one): pairs ``(next_state, probability)`` with hashable next
-states, not empty, every probability a finite, non-negative number, the total within
-:data:`PROBABILITY_TOLERANCE` of 1.  :class:`mitld_lp.worlds.game.ExplicitGame` (on its
-tables) and :func:`mitld_lp.worlds.game.check_game` (on a world it explores) hold a world to
-the stricter letter of the protocol with the same tolerance: probabilities in (0, 1],
-distinct next states.
+The one place a world's successor distribution is checked.  The rule the product
+applies to every row it reads from a world (:func:`distribution_faults`, a batch of rows
+at once; :func:`distribution_fault` says what is wrong with one): pairs ``(next_state,
+probability)`` with hashable next states, not empty, every probability a finite,
+non-negative number, the total within :data:`PROBABILITY_TOLERANCE` of 1.
+:func:`mitld_lp.worlds.game.check_game` (on a world it explores) holds a world to the stricter
+letter of the protocol with the same tolerance (:func:`strict_distribution_fault`:
+probabilities in (0, 1], distinct next states); :class:`mitld_lp.worlds.game.ExplicitGame`
+reads its tables with :func:`table_distribution` (repeated next states merged, zeros
+dropped); a PRISM world's tables are checked in a batch with PRISM's own tolerance
+(:mod:`mitld_lp.worlds.prism_tables`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from numbers import Real
 from typing import Any
 
@@ -26,6 +29,8 @@ __all__ = [
     "as_probabilities",
     "distribution_faults",
     "distribution_fault",
+    "strict_distribution_fault",
+    "table_distribution",
     "actions_fault",
     "propositions_fault",
 ]
@@ -84,6 +89,11 @@ def _short(value: Any) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
+def _total_fault(total: float, tolerance: float) -> str | None:
+    """The one test of a distribution's total (summed in order)."""
+    return None if abs(total - 1.0) <= tolerance else f"probabilities sum to {total!r}, not 1"
+
+
 def distribution_fault(dist: Any, tolerance: float = PROBABILITY_TOLERANCE) -> str | None:
     """What makes one answer of :meth:`Game.successors` not a distribution (the rule of
     :func:`distribution_faults`, and pairs ``(next_state, probability)`` with hashable
@@ -104,9 +114,62 @@ def distribution_fault(dist: Any, tolerance: float = PROBABILITY_TOLERANCE) -> s
         if not is_real(p) or not math.isfinite(float(p)) or float(p) < 0.0:
             return f"probability of {_short(nxt)} must be finite and non-negative, got {p!r}"
         total += float(p)
-    if abs(total - 1.0) > tolerance:
-        return f"probabilities sum to {total!r}, not 1"
-    return None
+    return _total_fault(total, tolerance)
+
+
+def strict_distribution_fault(dist: Any,
+                              tolerance: float = PROBABILITY_TOLERANCE) -> str | None:
+    """The letter of the protocol (:func:`mitld_lp.worlds.game.check_game`): a non-empty tuple
+    of ``(next_state, probability)`` pairs, distinct hashable next states, every
+    probability in (0, 1], the total within ``tolerance`` of 1; None when it holds."""
+    if not isinstance(dist, tuple) or not dist:
+        return f"successors must be a non-empty tuple, got {dist!r}"
+    nexts: set[Any] = set()
+    total = 0.0
+    for item in dist:
+        if not isinstance(item, tuple) or len(item) != 2:
+            return f"expected (next_state, probability), got {item!r}"
+        nxt, p = item
+        if not is_real(p) or not (0.0 < float(p) <= 1.0):
+            return f"probability of {nxt!r} must be in (0, 1], got {p!r}"
+        try:
+            fresh = nxt not in nexts
+        except TypeError:
+            return f"next state {nxt!r} is not hashable"
+        if not fresh:
+            return f"next state {nxt!r} is listed twice"
+        nexts.add(nxt)
+        total += float(p)
+    return _total_fault(total, tolerance)
+
+
+def table_distribution(value: Any, tolerance: float = PROBABILITY_TOLERANCE
+                       ) -> tuple[tuple[tuple[Any, float], ...], str | None]:
+    """A distribution given in a table (:class:`mitld_lp.worlds.game.ExplicitGame`): a mapping
+    ``next -> probability`` or pairs, each probability in [0, 1]; repeated next states
+    are merged and exact zeros dropped.  Returns the pairs and None, or ``()`` and what
+    is wrong (the total of the merged pairs, summed exactly, within ``tolerance`` of 1)."""
+    pairs = value.items() if isinstance(value, Mapping) else value
+    merged: dict[Any, float] = {}
+    for item in pairs:
+        try:
+            nxt, p = item
+        except (TypeError, ValueError):
+            return (), f"expected (next_state, probability), got {item!r}"
+        if not is_real(p) or not math.isfinite(float(p)):
+            return (), f"probability of {nxt!r} must be a number, got {p!r}"
+        p = float(p)
+        if p < 0.0 or p > 1.0:
+            return (), f"probability of {nxt!r} must be in [0, 1], got {p!r}"
+        try:
+            merged[nxt] = merged.get(nxt, 0.0) + p
+        except TypeError:
+            return (), f"next state {nxt!r} is not hashable"
+    out = tuple((s, p) for s, p in merged.items() if p > 0.0)
+    total = math.fsum(p for _, p in out)
+    if not out or _total_fault(total, tolerance):
+        return (), f"probabilities must sum to 1, got {total!r}"
+    return out, None
 
 
 def actions_fault(actions: Any) -> str | None:
