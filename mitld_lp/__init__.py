@@ -46,6 +46,8 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.problem import Problem, ProblemError, Settings, pose
     from mitld_lp.product import ProductState, product
     from mitld_lp.result import Result, SynthesisResult
+    from mitld_lp.routes.constraints import Constraint, ConstraintError, parse_constraint
+    from mitld_lp.routes.pareto import pareto
     from mitld_lp.running.controller import (
         Controller,
         ControllerFileError,
@@ -112,6 +114,10 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "Settings": "mitld_lp.problem",
     "ProblemError": "mitld_lp.problem",
     "fit_law": "mitld_lp.distributions.fit",
+    "Constraint": "mitld_lp.routes.constraints",
+    "ConstraintError": "mitld_lp.routes.constraints",
+    "parse_constraint": "mitld_lp.routes.constraints",
+    "pareto": "mitld_lp.routes.pareto",
     "run_sweep": "mitld_lp.sweep",
     "load_sweep": "mitld_lp.sweep",
 }
@@ -205,6 +211,10 @@ __all__ = [
     "ProblemError",
     "synthesize_constrained",
     "fit_law",
+    "Constraint",
+    "ConstraintError",
+    "parse_constraint",
+    "pareto",
     "run_sweep",
     "load_sweep",
 ]

@@ -105,3 +105,22 @@ def test_progress_bars_follow_tqdms_rule(monkeypatch):
     assert not isinstance(shown, progress._Off)
     shown.close()
     assert isinstance(progress.bar(False, total=1), progress._Off)
+
+
+def test_every_public_name_resolves_to_what_its_module_defines() -> None:
+    """Each name of ``mitld_lp.__all__`` loads on first use from its module, and is that
+    module's object (not a submodule that happens to share the name, as ``simulate`` and
+    ``pareto`` once were)."""
+    import importlib
+    import types
+
+    import mitld_lp
+
+    for name in mitld_lp.__all__:
+        value = getattr(mitld_lp, name)
+        assert not isinstance(value, types.ModuleType), name
+        where = mitld_lp._WHERE.get(name)
+        if where is not None:
+            assert getattr(importlib.import_module(where), name) is value, name
+    assert {"Result", "Constraint", "parse_constraint", "pareto", "fit_law", "run_sweep",
+            "load_sweep", "pose", "solve"} <= set(mitld_lp.__all__)
