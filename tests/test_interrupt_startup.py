@@ -44,6 +44,8 @@ def test_ctrl_c_during_startup_is_one_line_and_exit_130(command: list[str]) -> N
         out, err = proc.communicate(timeout=120)
         if "Traceback" in err and str(ROOT / "mitld_lp") not in err:
             continue  # the signal beat Python's own start (site, runpy): no code of ours ran
+        if proc.returncode == -signal.SIGINT and not err:
+            continue  # it beat even Python's own handler (a loaded machine): nothing ran
         assert "Traceback" not in err, (delay, err)
         assert proc.returncode in (0, 130), (delay, proc.returncode, err)
         if proc.returncode == 130:
