@@ -44,13 +44,23 @@ from mitld_lp.heap import release_free_memory
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, Posed, pose, settings_from
+from mitld_lp.problem import (
+    CONSTRAINED,
+    PLAIN,
+    ROBUST,
+    SENSED,
+    Posed,
+    ProblemError,
+    pose,
+    settings_from,
+)
 from mitld_lp.product import product
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.acceptance import Acceptance
     from mitld_lp.constrained import ConstrainedResult
     from mitld_lp.robust_synthesis import RobustResult
+    from mitld_lp.sensing.solve import SensedResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -381,6 +391,10 @@ def build_product(
 def build_posed(posed: Posed, *, progress: bool | None = None) -> Built:
     """:func:`build_product` of a posed problem's task with its settings."""
     model, s = posed.model, posed.settings
+    if posed.route == SENSED:  # the fully observed product would answer another problem
+        raise ProblemError("the model has sensors that miss events: its problem is solved "
+                           "on the information-state product (solve, simulate); this "
+                           "command would read the fully observed product")
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     return build_product(
         model.game, model.spec, model.distributions,
@@ -390,7 +404,7 @@ def build_posed(posed: Posed, *, progress: bool | None = None) -> Built:
         max_memory=s.max_memory, progress=progress, complement=posed.minimise)
 
 
-Result: TypeAlias = "SynthesisResult | ConstrainedResult | RobustResult"
+Result: TypeAlias = "SynthesisResult | ConstrainedResult | RobustResult | SensedResult"
 
 
 def synthesize(
@@ -451,6 +465,10 @@ def solve(posed: Posed) -> Result:
         return synthesize_robust(posed)
     if posed.route == CONSTRAINED:
         return _constrained(posed)
+    if posed.route == SENSED:  # sensors that miss events (mitld_lp.sensing)
+        from mitld_lp.sensing.solve import solve_sensed
+
+        return solve_sensed(posed)
     return _solve_plain(posed)
 
 
