@@ -66,7 +66,7 @@ SUMMARY_KEYS = (
     "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
-    "randomized_states", "message",
+    "randomized_states", "message", "sensors",
 )
 
 
@@ -92,6 +92,7 @@ def summary(result: Any) -> dict[str, Any]:
         truncation_points=dict(sta.truncation_points), seconds=result.seconds,
         timings=dict(result.timings), robust=False, bands={}, first_step_hazards={},
         ambiguous_choices=0, constraints=[], randomized_states=0,
+        sensors={a: s.detect for a, s in getattr(result, "sensors", {}).items()},
     )
     if result.route == "constrained":
         out.update(_constrained_part(result))

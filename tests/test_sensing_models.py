@@ -109,3 +109,34 @@ def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
     run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
+
+
+@pytest.mark.parametrize("verb", [
+    ["info"], ["export", "--drn", "OUT.drn"], ["export", "--chain", "OUT.drn"],
+    ["export", "--controller", "OUT.npz"], ["plot", "--out", "OUT.png"],
+])
+def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]) -> None:
+    model = tmp_path / "m.toml"
+    model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    args = [a.replace("OUT", str(tmp_path / "out")) for a in verb]
+    run = subprocess.run([sys.executable, "-m", "mitld_lp", args[0], *args[1:], str(model)],
+                         capture_output=True, text=True)
+    assert run.returncode == 2, run.stderr
+    assert "sensor" in run.stderr and "Traceback" not in run.stderr
+    assert not list(tmp_path.glob("out*"))
+
+
+def test_plain_simulate_refuses_a_sensed_model() -> None:
+    from mitld_lp.simulate import simulate
+
+    sensed = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    plain = synthesize(loads_model(GRID))
+    with pytest.raises(ValueError, match="simulate_sensed"):
+        simulate(sensed, plain.controller, runs=10)
+
+
+def test_law_that_may_never_happen_is_refused() -> None:
+    g = ExplicitGame(initial="x", transitions={"x": {"w": {"x": 1.0}}}, labels={"x": {"A"}})
+    m = Model.from_game(g, "D[pmf(0.5, 0.3)] b & F(b & A)", sensors={"b": {"detect": 0.5}})
+    with pytest.raises(ProblemError, match="never happens"):
+        synthesize(m)

@@ -29,6 +29,7 @@ import numpy as np
 from mitld_lp import defaults
 from mitld_lp.controller import RunStatus
 from mitld_lp.game import Game
+from mitld_lp.problem import ProblemError
 from mitld_lp.product import Absorbing
 from mitld_lp.sensing.belief import Belief
 from mitld_lp.simulate import SimulationResult, _check_count, _sample_successor, _wilson
@@ -36,8 +37,9 @@ from mitld_lp.simulate import SimulationResult, _check_count, _sample_successor,
 __all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError"]
 
 
-class SensedControllerError(ValueError):
-    """A use of the observation-based controller it does not support (saving it)."""
+class SensedControllerError(ProblemError):
+    """A use of the observation-based controller it does not support (saving it, its
+    tables): a problem error, so the command line exits 2 naming it."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -41,6 +41,12 @@ def sensed_refusal(model: Any, fragment: str, objective: str, constraints: Seque
     if fragment != CO_SAFE:
         return (f"a {fragment} task with {head}: only co-safe tasks are solved on what "
                 "the robot observes")
+    for a in sensors:
+        if model.distributions[a].never > 0:
+            return (f"sensors.{a}: the law of {a!r} leaves probability "
+                    f"{model.distributions[a].never:.3g} that it never happens, so the "
+                    "belief that it has not happened yet changes at every step without end; "
+                    "not solved (give a law that surely happens)")
     try:
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here
