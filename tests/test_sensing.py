@@ -1,8 +1,8 @@
 """The sensed route against an exhaustive expectimax over observation histories, written
-here from the semantics (docs/semantics.md, "Sensors"): hidden scenarios (event step,
-report step) enumerated with their probabilities, the task judged on the trace, the
-optimum over every observation-based policy by enumerating histories -- no hazards, no
-automaton, no information states."""
+here from the semantics (docs/semantics.md, "Sensors that miss events"): hidden
+scenarios (event step, report step) enumerated with their probabilities, the task
+judged on the trace, the optimum over every observation-based policy by enumerating
+histories -- no hazards, no automaton, no information states."""
 
 from __future__ import annotations
 
