@@ -6,6 +6,7 @@ histories -- no hazards, no automaton, no information states."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -29,34 +30,51 @@ SPEC = f"D[pmf({', '.join(map(str, PMF))})] b & F(b & F[0,{WINDOW}] A)"
 
 def expectimax(game: ExplicitGame, pmf: tuple[float, ...], detect: float, window: int,
                goal: str, horizon: int) -> float:
-    """The best probability, over policies that see the world state and the sensor's
-    report (never the event), that the robot is at ``goal`` at some step in
-    ``[k, k + window]``, ``k`` the event's step: by enumerating observation histories.
-    A scenario is ``(k, r, p)``: event at ``k``, first report at ``r`` (None: not within
-    the horizon), probability ``p``."""
-    scenarios = []
-    for k, mu in enumerate(pmf, start=1):
-        for r in range(k, horizon + 1):
-            scenarios.append((k, r, mu * detect * (1 - detect) ** (r - k)))
-        scenarios.append((k, None, mu * (1 - detect) ** (horizon - k + 1)))
-    scenarios = [s for s in scenarios if s[2] > 0]
+    """:func:`expectimax_many` of one event."""
+    return expectimax_many(game, [(pmf, detect, goal, window)], horizon)
 
-    def best(t: int, state: str, alive: list[tuple[int, int | None, float]]) -> float:
-        won = sum(p for k, _, p in alive if k <= t <= k + window and goal in
-                  game.propositions(state))
-        left = [(k, r, p) for k, r, p in alive
-                if not (k <= t <= k + window and goal in game.propositions(state))
-                and t < k + window]
+
+def expectimax_many(game: ExplicitGame, events: list[tuple[tuple[float, ...], float, str, int]],
+                    horizon: int) -> float:
+    """The best probability, over policies that see the world state and the sensors'
+    reports (never the events), that for some event ``i`` with step ``k_i`` the robot
+    is at ``goal_i`` at some step in ``[k_i, k_i + window_i]``, the events independent;
+    by enumerating observation histories.  ``events``: ``(pmf, detect, goal, window)``.
+    A scenario fixes every event's step ``k`` and first report ``r`` (None: not within
+    the horizon); its probability is the product over the events."""
+    per_event = []
+    for pmf, detect, _, _ in events:
+        options = []
+        for k, mu in enumerate(pmf, start=1):
+            for r in range(k, horizon + 1):
+                options.append((k, r, mu * detect * (1 - detect) ** (r - k)))
+            options.append((k, None, mu * (1 - detect) ** (horizon - k + 1)))
+        per_event.append([o for o in options if o[2] > 0])
+    scenarios = [(tuple((k, r) for k, r, _ in combo), math.prod(p for _, _, p in combo))
+                 for combo in itertools.product(*per_event)]
+
+    def caught(t: int, state: str, times: tuple[tuple[int, int | None], ...]) -> bool:
+        return any(k <= t <= k + w and goal in game.propositions(state)
+                   for (k, _), (_, _, goal, w) in zip(times, events, strict=True))
+
+    def open_(t: int, times: tuple[tuple[int, int | None], ...]) -> bool:
+        return any(t < k + w for (k, _), (_, _, _, w) in zip(times, events, strict=True))
+
+    def best(t: int, state: str, alive: list) -> float:
+        won = sum(p for times, p in alive if caught(t, state, times))
+        left = [(times, p) for times, p in alive
+                if not caught(t, state, times) and open_(t, times)]
         if t == horizon or not left:
             return won
         values = []
         for action in game.actions(state):
             v = 0.0
             for nxt, ps in game.successors(state, action, frozenset()):
-                for seen in (True, False):  # the observation: a report at step t + 1?
-                    group = [(k, r, p * ps) for k, r, p in left if (r == t + 1) == seen]
-                    if group:
-                        v += best(t + 1, nxt, group)
+                groups: dict[tuple[bool, ...], list] = {}
+                for times, p in left:  # the observation: which events are reported now
+                    seen = tuple(r == t + 1 for _, r in times)
+                    groups.setdefault(seen, []).append((times, p * ps))
+                v += sum(best(t + 1, nxt, group) for group in groups.values())
             values.append(v)
         return won + max(values)
 
@@ -121,3 +139,38 @@ def test_controller_reads_observations_only() -> None:
     c.reset()
     with pytest.raises(ValueError, match="step 0"):
         c.act(Observation("mid", reports={"b"}))
+
+
+TWO = ExplicitGame(
+    initial="mid",
+    transitions={
+        "mid": {"to_a": {"sa": 0.8, "ditch": 0.2}, "to_b": {"sb": 0.8, "ditch": 0.2},
+                "wait": {"mid": 1.0}},
+        "sa": {"back": {"mid": 0.8, "ditch": 0.2}},
+        "sb": {"back": {"mid": 0.8, "ditch": 0.2}},
+        "ditch": {"stay": {"ditch": 1.0}},
+    },
+    labels={"sa": {"A"}, "sb": {"B"}},
+)
+PMF1, PMF2 = (0.3, 0.3, 0.4), (0.4, 0.3, 0.3)
+SPEC2 = ("(D[pmf(0.3, 0.3, 0.4)] b1 & F(b1 & F[0,1] A)) | "
+         "(D[pmf(0.4, 0.3, 0.3)] b2 & F(b2 & F[0,1] B))")
+
+
+@pytest.mark.parametrize("d1, d2", [(0.6, 0.4), (0.5, 1.0), (1.0, 0.3), (0.0, 0.8), (0.0, 0.0)])
+def test_two_events_equal_expectimax(d1: float, d2: float) -> None:
+    """Two independent events, each with its own sensor (or none: ``detect = 1``); the
+    posterior is a product over the events and a seen event sits beside hidden ones."""
+    sensors = {e: {"detect": d} for e, d in (("b1", d1), ("b2", d2)) if d < 1}
+    r = synthesize(Model.from_game(TWO, SPEC2, sensors=sensors))
+    assert r.certified and r.route == ("sensed" if sensors else "plain")
+    exact = expectimax_many(TWO, [(PMF1, d1, "A", 1), (PMF2, d2, "B", 1)], horizon=5)
+    assert r.lower - 1e-7 <= exact <= r.upper + 1e-7
+    assert r.upper - r.lower < 1e-7
+
+
+def test_two_events_example_is_not_degenerate() -> None:
+    def value(d1: float, d2: float) -> float:
+        return expectimax_many(TWO, [(PMF1, d1, "A", 1), (PMF2, d2, "B", 1)], horizon=5)
+
+    assert value(0.0, 0.0) < value(0.6, 0.4) < value(1.0, 1.0)
