@@ -150,6 +150,9 @@ class _Builder:
         self.succ: dict[tuple[Hashable, str, frozenset[str]], tuple[Any, ...]] = {}
         self.step_cache: dict[tuple[int, frozenset[str]], int] = {}
         self.live_cache: dict[tuple[int, frozenset[str]], bool] = {}
+        self.label_cache: dict[Hashable, frozenset[str]] = {}
+        self.branch_cache: dict[tuple[tuple[int, ...], frozenset[str], int], list[Any]] = {}
+        self.hazard_cache: dict[tuple[str, int], float] = {}
         self.props = frozenset(dta.atoms) - frozenset(sta.events)
 
     # ---------------------------------------------------------------- states
@@ -240,7 +243,7 @@ class _Builder:
         for happened in itertools.product((False, True), repeat=len(events)):
             p = 1.0
             for a, yes in zip(events, happened, strict=True):
-                h = self.clocks[a].hazard(t)
+                h = self.hazard(a, t)
                 p *= h if yes else 1.0 - h
             if p <= 0.0:
                 continue
@@ -250,17 +253,38 @@ class _Builder:
             out.append((occurred, p, crossed))
         return out
 
+    def hazard(self, event: str, t: int) -> float:
+        key = (event, t)
+        h = self.hazard_cache.get(key)
+        if h is None:
+            h = self.hazard_cache[key] = self.clocks[event].hazard(t)
+        return h
+
+    def label(self, world: Hashable) -> frozenset[str]:
+        props = self.label_cache.get(world)
+        if props is None:
+            props = self.label_cache[world] = frozenset(self.game.propositions(world))
+        return props
+
     def sensed_branches(self, times: tuple[int, ...], reported: frozenset[str], t: int
                         ) -> list[tuple[tuple[int, ...], frozenset[str], float, bool]]:
         """``(times', newly reported, probability, truncated)`` of one hypothesis's
-        sensed events over the next step."""
+        sensed events over the next step, with the events that happen in it."""
+        key = (times, reported, t)
+        hit = self.branch_cache.get(key)
+        if hit is None:
+            hit = self.branch_cache[key] = self._sensed_branches(times, reported, t)
+        return hit
+
+    def _sensed_branches(self, times: tuple[int, ...], reported: frozenset[str], t: int
+                         ) -> list[Any]:
         per_event = []
         for i, a in enumerate(self.sensed):
             clock, d = self.clocks[a], self.sensors[a].detect
             k = times[i]
             options: list[tuple[int, bool, float, bool]] = []
             if k == NOT_YET:
-                h = clock.hazard(t)
+                h = self.hazard(a, t)
                 T = clock.truncation
                 assert T is not None and t < T
                 if h < 1.0:
@@ -275,9 +299,14 @@ class _Builder:
         out = []
         for combo in itertools.product(*per_event):
             p = math.prod(o[2] for o in combo)
-            out.append((tuple(o[0] for o in combo),
+            times2 = tuple(o[0] for o in combo)
+            out.append((times2,
                         frozenset(a for a, o in zip(self.sensed, combo, strict=True) if o[1]),
-                        p, any(o[3] for o in combo)))
+                        p, any(o[3] for o in combo),
+                        frozenset(a for a, k, k2 in zip(self.sensed, times, times2, strict=True)
+                                  if k2 != k),
+                        frozenset(a for a, k2 in zip(self.sensed, times2, strict=True)
+                                  if k2 == NOT_YET)))
         return out
 
     def expand(self, i: int, s: InfoState) -> list[tuple[str, dict[int, float]]]:
@@ -298,27 +327,24 @@ class _Builder:
                 if succ is None:
                     succ = self.succ[skey] = tuple(self.game.successors(s.world, act, occurred))
                 for (times, q), w in zip(s.hypotheses, s.weights, strict=True):
-                    for times2, new, pc, cut in self.sensed_branches(times, s.reported, t):
+                    for times2, new, pc, cut, now, waiting in self.sensed_branches(
+                            times, s.reported, t):
                         base = w * pu * pc
                         if cut:
                             j = self.intern(Absorbing.TRUNCATED)
                             row[j] = row.get(j, 0.0) + base
                             continue
-                        happened = occurred | {a for a, k, k2 in
-                                               zip(self.sensed, times, times2, strict=True)
-                                               if k2 != k}
+                        happened = occurred | now
+                        left = (s.pending - occurred) | waiting
                         for g2, pg in succ:
                             if pg <= 0.0:
                                 continue
-                            label = frozenset(self.game.propositions(g2)) | happened
+                            label = self.label(g2) | happened
                             q2 = self.automaton(q, label)
                             obs: Obs = (g2, occurred, new)
                             mass = base * pg
-                            left = (s.pending - occurred) | {
-                                a for a, k2 in zip(self.sensed, times2, strict=True)
-                                if k2 == NOT_YET}
                             if q2 == self.dta.rejecting or q2 == self.dta.accepting or (
-                                    not self.can_accept(q2, frozenset(left))):
+                                    not self.can_accept(q2, left)):
                                 end = (Absorbing.TARGET if q2 == self.dta.accepting
                                        else Absorbing.SINK)
                                 j = self.intern(end)
