@@ -140,3 +140,14 @@ def test_law_that_may_never_happen_is_refused() -> None:
     m = Model.from_game(g, "D[pmf(0.5, 0.3)] b & F(b & A)", sensors={"b": {"detect": 0.5}})
     with pytest.raises(ProblemError, match="never happens"):
         synthesize(m)
+
+
+def test_budgets_stop_the_information_states() -> None:
+    from mitld_lp.product import ProductTooLarge
+
+    m = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    states = synthesize(m).mdp.n_states
+    with pytest.raises(ProductTooLarge, match=f"more than {states - 1:,} states"):
+        synthesize(m, max_states=states - 1)
+    with pytest.raises(ProductTooLarge, match="more than 10,000 bytes"):
+        synthesize(m, max_memory=10_000)

@@ -54,7 +54,7 @@ from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.product import Absorbing, ProductTooLarge
+from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory
 from mitld_lp.sensing.sensors import Sensor
 
 __all__ = ["InfoState", "Belief", "belief_product", "sensed_sta", "WEIGHT_TOL"]
@@ -66,6 +66,14 @@ MAX_PRUNE_ATOMS = 14
 """The most atoms whose letters :meth:`_Builder.can_accept` enumerates."""
 
 WEIGHT_TOL = 1e-9
+
+BYTES_PER_INFO_STATE = 6_500
+"""Bytes an information state costs in the build (its record, index entry, rows, moves
+and caches): with :data:`BYTES_PER_HYPOTHESIS`, a fit of the build's peak (tracemalloc)
+on the bus case with one and with two sensed buses (2,693 states / 6,996 hypotheses:
+17.6 MB; 3,751 / 17,213: 25.6 MB)."""
+BYTES_PER_HYPOTHESIS = 200
+"""Bytes each hypothesis of a state costs (its key tuple, its weight, its row entries)."""
 """How far two visits of one information state may disagree on its posterior."""
 
 Obs = tuple[Hashable, frozenset[str], frozenset[str]]
@@ -123,21 +131,26 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
                    sensors: Mapping[str, Sensor], epsilon: float, *,
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
-                   max_states: int) -> Belief:
+                   max_states: int, max_memory: int | None = None) -> Belief:
     """The reachable information-state MDP (module docs) of a co-safe task's automaton
     ``dta`` in ``game``, the events of ``sensors`` (missed detections only) hidden.
-    Raises :class:`ProductTooLarge` before storing a state beyond ``max_states``."""
+    Raises :class:`ProductTooLarge` before storing a state beyond ``max_states``, or one
+    that would take the states past ``max_memory`` bytes (default: half the machine's
+    memory) at :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS`
+    per hypothesis it holds."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
                      truncation=truncation)
-    return _Builder(game, dta, sta, sensed, sensors, max_states).build()
+    memory = default_max_memory() if max_memory is None else max_memory
+    return _Builder(game, dta, sta, sensed, sensors, max_states, memory).build()
 
 
 class _Builder:
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
-                 sensors: Mapping[str, Sensor], max_states: int) -> None:
+                 sensors: Mapping[str, Sensor], max_states: int, max_memory: int) -> None:
         self.game, self.dta, self.sta = game, dta, sta
         self.sensed, self.sensors, self.max_states = sensed, sensors, max_states
+        self.max_memory, self.bytes = max_memory, 0
         self.unsensed = frozenset(sta.events) - frozenset(sensed)
         self.clocks = sta.clocks
         # the clock matters up to these bounds (a truncated event's point, an exact
@@ -176,6 +189,15 @@ class _Builder:
                 f"(sensed events: {', '.join(self.sensed)}; truncation points: "
                 f"{self.sta.truncation_points}); raise max_states, loosen epsilon, or shrink "
                 "the model")
+        cost = BYTES_PER_INFO_STATE + (
+            0 if isinstance(state, Absorbing) else BYTES_PER_HYPOTHESIS * len(state.hypotheses))
+        if self.bytes + cost > self.max_memory:
+            raise ProductTooLarge(
+                f"the information-state product would need more than {self.max_memory:,} "
+                f"bytes ({len(self.states):,} states so far, sensed events: "
+                f"{', '.join(self.sensed)}); raise max_memory, loosen epsilon, or shrink the "
+                "model")
+        self.bytes += cost
         self.index[key] = len(self.states)
         self.states.append(state)
         return len(self.states) - 1

@@ -170,7 +170,8 @@ def solve_sensed(posed: Posed) -> SensedResult:
     t1 = time.perf_counter()
     belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
                             eps, clock_reduction=s.clock_reduction,
-                            truncation=s.truncation_map, max_states=s.max_states)
+                            truncation=s.truncation_map, max_states=s.max_states,
+                            max_memory=s.max_memory)
     t2 = time.perf_counter()
     mdp = belief.mdp
     deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
