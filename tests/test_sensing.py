@@ -174,3 +174,11 @@ def test_two_events_example_is_not_degenerate() -> None:
         return expectimax_many(TWO, [(PMF1, d1, "A", 1), (PMF2, d2, "B", 1)], horizon=5)
 
     assert value(0.0, 0.0) < value(0.6, 0.4) < value(1.0, 1.0)
+
+
+def test_controller_refuses_an_unknown_report() -> None:
+    c = synthesize(Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})).controller
+    c.reset()
+    c.act(Observation("mid"))
+    with pytest.raises(ValueError, match="'bus' is not an event"):
+        c.act(Observation("mid", reports={"bus"}))

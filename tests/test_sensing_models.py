@@ -151,3 +151,12 @@ def test_budgets_stop_the_information_states() -> None:
         synthesize(m, max_states=states - 1)
     with pytest.raises(ProductTooLarge, match="more than 10,000 bytes"):
         synthesize(m, max_memory=10_000)
+
+
+def test_model_with_sensors_pickles() -> None:
+    import pickle
+
+    m = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    back = pickle.loads(pickle.dumps(m))
+    assert back.sensors == {"b": Sensor(0.5)}
+    assert synthesize(back).lower == synthesize(m).lower

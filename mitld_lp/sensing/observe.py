@@ -127,6 +127,10 @@ class SensedController:
         if not isinstance(observation, Observation):
             raise TypeError("SensedController.act: expected a mitld_lp.sensing.observe."
                             f"Observation (state, reports), got {type(observation).__name__}")
+        unknown = sorted(observation.reports - self.events)
+        if unknown:
+            raise ValueError(f"Observation.reports: {unknown[0]!r} is not an event of the "
+                             f"task (events: {', '.join(sorted(self.events))})")
         if self.finished:
             return None
         mdp = self.belief.mdp
@@ -171,9 +175,11 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     docs), with a Wilson 95% interval.  Each run draws every event's time from its law,
     then each sensed event's report ``j ~ Geometric(detect)`` steps after it (``j = 0``:
     the step it happens); the world moves on the true events; the task's automaton reads
-    the true events.  ``beyond_model`` counts the runs that left the model (an event past
-    its truncation point), ``undecided`` those still undecided after ``max_steps`` or
-    when the controller stopped."""
+    the true events.  ``beyond_model`` counts the runs in which the controller met an
+    observation the model gives probability 0 (an event past its truncation point);
+    ``undecided`` the runs whose automaton had no verdict when the controller stopped
+    (every hypothesis left was decided) or after ``max_steps``: failures, such as a bus
+    missed, which the automaton never rejects (it does not know a bus comes once)."""
     from mitld_lp.automata.translate import to_dta
 
     _check_count("runs", runs, 1, defaults.MAX_RUNS)
