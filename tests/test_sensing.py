@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import pytest
 
@@ -34,31 +35,32 @@ def expectimax(game: ExplicitGame, pmf: tuple[float, ...], detect: float, window
     return expectimax_many(game, [(pmf, detect, goal, window)], horizon)
 
 
-def expectimax_many(game: ExplicitGame, events: list[tuple[tuple[float, ...], float, str, int]],
+def expectimax_many(game: ExplicitGame, events: list[tuple[Any, ...]],
                     horizon: int) -> float:
     """The best probability, over policies that see the world state and the sensors'
     reports (never the events), that for some event ``i`` with step ``k_i`` the robot
     is at ``goal_i`` at some step in ``[k_i, k_i + window_i]``, the events independent;
-    by enumerating observation histories.  ``events``: ``(pmf, detect, goal, window)``.
-    A scenario fixes every event's step ``k`` and first report ``r`` (None: not within
-    the horizon); its probability is the product over the events."""
+    by enumerating observation histories.  ``events``: ``(pmf, detect, goal, window)``
+    and optionally the sensor's ``delay``.  A scenario fixes every event's step ``k`` and
+    first report ``r >= k + delay`` (None: not within the horizon); its probability is
+    the product over the events."""
     per_event = []
-    for pmf, detect, _, _ in events:
+    for pmf, detect, *_, delay in [(*e, 0) if len(e) == 4 else e for e in events]:
         options = []
         for k, mu in enumerate(pmf, start=1):
-            for r in range(k, horizon + 1):
-                options.append((k, r, mu * detect * (1 - detect) ** (r - k)))
-            options.append((k, None, mu * (1 - detect) ** (horizon - k + 1)))
+            for r in range(k + delay, horizon + 1):
+                options.append((k, r, mu * detect * (1 - detect) ** (r - k - delay)))
+            options.append((k, None, mu * (1 - detect) ** max(0, horizon - k - delay + 1)))
         per_event.append([o for o in options if o[2] > 0])
     scenarios = [(tuple((k, r) for k, r, _ in combo), math.prod(p for _, _, p in combo))
                  for combo in itertools.product(*per_event)]
 
     def caught(t: int, state: str, times: tuple[tuple[int, int | None], ...]) -> bool:
-        return any(k <= t <= k + w and goal in game.propositions(state)
-                   for (k, _), (_, _, goal, w) in zip(times, events, strict=True))
+        return any(k <= t <= k + e[3] and e[2] in game.propositions(state)
+                   for (k, _), e in zip(times, events, strict=True))
 
     def open_(t: int, times: tuple[tuple[int, int | None], ...]) -> bool:
-        return any(t < k + w for (k, _), (_, _, _, w) in zip(times, events, strict=True))
+        return any(t < k + e[3] for (k, _), e in zip(times, events, strict=True))
 
     def best(t: int, state: str, alive: list) -> float:
         won = sum(p for times, p in alive if caught(t, state, times))
@@ -182,3 +184,27 @@ def test_controller_refuses_an_unknown_report() -> None:
     c.act(Observation("mid"))
     with pytest.raises(ValueError, match="'bus' is not an event"):
         c.act(Observation("mid", reports={"bus"}))
+
+
+@pytest.mark.parametrize("detect, delay", [(0.7, 1), (1.0, 1), (0.5, 2)])
+def test_reporting_delay_equals_expectimax(detect: float, delay: int) -> None:
+    """A sensor whose report can come only ``delay`` steps after the event."""
+    sensors = {"b": {"detect": detect, "delay": delay}}
+    r = synthesize(Model.from_game(STATION, SPEC, sensors=sensors))
+    assert r.route == "sensed" and r.certified
+    exact = expectimax_many(STATION, [(PMF, detect, "A", WINDOW, delay)],
+                            horizon=len(PMF) + WINDOW)
+    assert r.lower - 1e-7 <= exact <= r.upper + 1e-7
+    assert r.upper - r.lower < 1e-7
+    sim = simulate_sensed(Model.from_game(STATION, SPEC, sensors=sensors), r.controller,
+                          runs=3000, seed=5)
+    assert abs(sim.estimate - r.lower) <= 4.5 * math.sqrt(r.lower * (1 - r.lower) / 3000)
+
+
+def test_delay_costs() -> None:
+    """Not degenerate: a later report is worth less (expectimax alone)."""
+    def value(delay: int) -> float:
+        return expectimax_many(STATION, [(PMF, 0.7, "A", WINDOW, delay)],
+                               horizon=len(PMF) + WINDOW)
+
+    assert value(0) > value(1) > value(2)

@@ -72,7 +72,6 @@ def test_from_game_names_the_key() -> None:
 
 @pytest.mark.parametrize("extra, words", [
     ("[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }", "sensors.b.false_alarm"),
-    ("[sensors]\nb = { detect = 0.5, delay = 2 }", "sensors.b.delay"),
     ('constraints = ["P(F A) >= 0.1"]\n[sensors]\nb = { detect = 0.5 }', "constraint"),
     ('objective = "min"\n[sensors]\nb = { detect = 0.5 }', "objective min"),
 ])

@@ -14,11 +14,12 @@ unsensed events, {hypothesis: automaton state})`` over the hypotheses still poss
 and still undecided, with the posterior weights of those hypotheses.  The posterior is
 a function of that key: with missed detections and no false alarms, the likelihood of
 a report history under "happened at ``k``" is ``(1 - d)^(misses)`` and the ratio of two
-such hypotheses of one event does not change with time (both miss every step), while
-"not happened yet" against "happened at ``k``" depends on the step count, which the key
-keeps while that hypothesis is alive.  The construction stores the weights the first
-time it meets a key and checks them on every later visit (an internal check of this
-argument).
+such hypotheses of one event does not change with time once both reports are due (both
+miss every step), while "not happened yet" against "happened at ``k``", or a hypothesis
+whose report is not due yet (a sensor with a ``delay``: reports from step ``k + delay``
+on), depends on the step count, which the key keeps while such a hypothesis is alive.
+The construction stores the weights the first time it meets a key and checks them on
+every later visit (an internal check of this argument).
 
 Every sensed event is truncated at its point ``T_a`` (``P(K_a > T_a) <= `` its share
 of epsilon), geometric laws included: the hypothesis "not happened by ``T_a``" goes to
@@ -202,12 +203,20 @@ class _Builder:
         self.states.append(state)
         return len(self.states) - 1
 
-    def clock_key(self, t: int, hyps: list[tuple[int, ...]], pending: frozenset[str]) -> int:
-        """``t`` capped where nothing left reads it any more (module docs)."""
+    def clock_key(self, t: int, hyps: list[tuple[int, ...]], pending: frozenset[str],
+                  reported: frozenset[str]) -> int:
+        """``t`` capped where nothing left reads it any more (module docs): an unsensed
+        pending event reads it up to its bound; a sensed one while it may not have
+        happened (up to its truncation point plus its delay) or, not reported, while some
+        hypothesis's report may not be due yet (``k + delay > t``)."""
         need = [self.bound[b] for b in pending]
         for i, a in enumerate(self.sensed):
-            if any(h[i] == NOT_YET for h in hyps):
-                need.append(self.bound[a])
+            values = [h[i] for h in hyps]
+            delay = self.sensors[a].delay
+            if NOT_YET in values:
+                need.append(self.bound[a] + delay)
+            elif a not in reported:
+                need.append(max(values) + delay)
         return min(t, max(need, default=0))
 
     def make(self, world: Hashable, t: int, reported: frozenset[str],
@@ -215,8 +224,8 @@ class _Builder:
              ) -> InfoState:
         total = math.fsum(mass.values())
         hyps = tuple(sorted(mass))
-        return InfoState(world, self.clock_key(t, [h for h, _ in hyps], pending), reported,
-                         pending, hyps, tuple(mass[h] / total for h in hyps))
+        return InfoState(world, self.clock_key(t, [h for h, _ in hyps], pending, reported),
+                         reported, pending, hyps, tuple(mass[h] / total for h in hyps))
 
     def automaton(self, q: int, label: frozenset[str]) -> int:
         key = (q, label)
@@ -303,6 +312,7 @@ class _Builder:
         per_event = []
         for i, a in enumerate(self.sensed):
             clock, d = self.clocks[a], self.sensors[a].detect
+            delay = self.sensors[a].delay
             k = times[i]
             options: list[tuple[int, bool, float, bool]] = []
             if k == NOT_YET:
@@ -311,9 +321,11 @@ class _Builder:
                 assert T is not None and t < T
                 if h < 1.0:
                     options.append((NOT_YET, False, 1.0 - h, t + 1 >= T))
-                if h > 0.0:
+                if h > 0.0 and delay == 0:
                     options += [(t + 1, True, h * d, False), (t + 1, False, h * (1 - d), False)]
-            elif a in reported:
+                elif h > 0.0:  # its report is not due before step t + 1 + delay
+                    options.append((t + 1, False, h, False))
+            elif a in reported or k + delay > t + 1:
                 options.append((k, False, 1.0, False))
             else:
                 options += [(k, True, d, False), (k, False, 1.0 - d, False)]

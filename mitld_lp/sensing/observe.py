@@ -173,10 +173,11 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
                     ) -> SimulationResult:
     """Estimate the probability that ``controller`` satisfies ``model``'s task (module
     docs), with a Wilson 95% interval.  Each run draws every event's time from its law,
-    then each sensed event's report ``j ~ Geometric(detect)`` steps after it (``j = 0``:
-    the step it happens); the world moves on the true events; the task's automaton reads
-    the true events.  ``beyond_model`` counts the runs in which the controller met an
-    observation the model gives probability 0 (an event past its truncation point);
+    then each sensed event's report ``delay + j`` steps after it, ``j ~
+    Geometric(detect)`` (``j = 0``: the step its report is first due); the world moves
+    on the true events; the task's automaton reads the true events.  ``beyond_model``
+    counts the runs in which the controller met an observation the model gives
+    probability 0 (an event past its truncation point);
     ``undecided`` the runs whose automaton had no verdict when the controller stopped
     (every hypothesis left was decided) or after ``max_steps``: failures, such as a bus
     missed, which the automaton never rejects (it does not know a bus comes once)."""
@@ -196,7 +197,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
         seen = dict(times)
         for a in sorted(sensors):
             d = sensors[a].detect
-            seen[a] = times[a] + (rng.geometric(d) - 1 if d > 0 else math.inf)
+            seen[a] = times[a] + sensors[a].delay + (rng.geometric(d) - 1 if d > 0
+                                                     else math.inf)
         controller.reset()
         s = game.initial
         q = dta.step(dta.initial, frozenset(game.propositions(s)))

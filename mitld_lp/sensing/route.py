@@ -25,9 +25,6 @@ def sensed_refusal(model: Any, fragment: str, objective: str, constraints: Seque
             return (f"sensors.{a}.false_alarm = {s.false_alarm:g}: with false alarms the "
                     "robot's belief depends on the time of every report, so the information "
                     "state is not finite; not solved (give false_alarm = 0)")
-        if s.delay:
-            return (f"sensors.{a}.delay = {s.delay}: a reporting delay is not solved yet "
-                    "(give delay = 0)")
     if constraints or then is not None:
         what = f"then = {then}" if then is not None else f"constraint {constraints[0]}"
         return (f"{what} with {head}: the constrained LP over observation-based policies "

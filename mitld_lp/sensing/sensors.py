@@ -1,15 +1,14 @@
 """Sensors: how the robot learns that an external event happened.
 
-An event ``a`` with a sensor ``Sensor(detect=d)`` happens at its hidden step ``K``
-(its law); from step ``K`` on, each step the sensor reports it with probability ``d``,
-independently of everything else, until it has reported it once.  ``d = 1`` is the
-fully observed semantics (the robot sees the event the step it happens); an event
-without a sensor is seen that way.
+An event ``a`` with a sensor ``Sensor(detect=d, delay=D)`` happens at its hidden step
+``K`` (its law); from step ``K + D`` on, each step the sensor reports it with
+probability ``d``, independently of everything else, until it has reported it once.
+``d = 1, D = 0`` is the fully observed semantics (the robot sees the event the step it
+happens); an event without a sensor is seen that way.
 
-``false_alarm`` (a report in a step before the event) and ``delay`` (a report a fixed
-number of steps late) are read and checked here, and refused by name when a problem is
-posed (:func:`mitld_lp.problem.pose`): the information state is then not finite within
-this construction.
+``false_alarm`` (a report in a step before the event) is read and checked here, and
+refused by name when a problem is posed (:func:`mitld_lp.problem.pose`): the
+information state is then not finite within this construction.
 
 A model file writes them under ``[sensors]``::
 
@@ -35,7 +34,7 @@ SENSOR_KEYS = ("detect", "false_alarm", "delay")
 class Sensor:
     """How one event is reported (module docs): ``detect`` the per-step probability of a
     report once the event has happened, ``false_alarm`` the per-step probability of a
-    report before it, ``delay`` the steps between a detection and its report."""
+    report before it, ``delay`` the steps after the event before its report can come."""
 
     detect: float
     false_alarm: float = 0.0
