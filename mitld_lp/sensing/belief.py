@@ -104,8 +104,8 @@ class Belief:
 
     ``moves[(state, action)][obs]`` is the successor state of an observation, or an
     :class:`Absorbing` member when nothing undecided is left with it (``TARGET``: every
-    hypothesis accepted; ``SINK``: every one rejected or ran past its truncation
-    point, or a mix).  ``sta``: the clocks (sensed events truncated)."""
+    hypothesis left accepted; ``SINK``: every one rejected; ``TRUNCATED``: some of each,
+    the robot cannot tell which).  ``sta``: the clocks (sensed events truncated)."""
 
     mdp: MDP
     sta: STA
@@ -395,9 +395,9 @@ class _Builder:
                 row[j] = row.get(j, 0.0) + math.fsum(mass.values())
                 moves[obs] = j
             for obs, kinds in ends.items():
-                if obs not in moves:
-                    moves[obs] = (Absorbing.TARGET if kinds == {Absorbing.TARGET}
-                                  else Absorbing.SINK)
+                if obs not in moves:  # nothing undecided left: the verdict, if one
+                    moves[obs] = (next(iter(kinds)) if len(kinds) == 1
+                                  else Absorbing.TRUNCATED)
             rows.append((act, row))
         return rows
 

@@ -18,23 +18,27 @@ task's automaton on the *true* events.
 
 from __future__ import annotations
 
+import json
 import math
 import os
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mitld_lp import defaults
+from mitld_lp import defaults, files
 from mitld_lp.controller import RunStatus
-from mitld_lp.game import Game
+from mitld_lp.game import Game, world_members
 from mitld_lp.problem import ProblemError
 from mitld_lp.product import Absorbing
-from mitld_lp.sensing.belief import Belief
+from mitld_lp.saved_plan import ControllerFileError, encode_state
+from mitld_lp.sensing.belief import Belief, Obs
 from mitld_lp.simulate import SimulationResult, _check_count, _sample_successor, _wilson
 
-__all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError"]
+__all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError",
+           "save_sensed", "FORMAT", "VERSION"]
 
 
 class SensedControllerError(ProblemError):
@@ -72,23 +76,52 @@ class Observation:
 
 
 class SensedController:
-    """The synthesised observation-based policy, run online (module docs).
+    """The synthesised observation-based policy, run online (module docs): tables only
+    (:meth:`from_belief` makes them from the synthesis; :func:`load_sensed` from a file),
+    so a loaded controller runs without the world's class.
 
     ``status``: ``ACCEPTED`` (resp. ``REJECTED``) once every hypothesis the
     observations leave has satisfied (resp. violated) the task; ``finished``: nothing
     the robot does can change the outcome any more (also when the hypotheses left are
     decided differently); ``beyond_model``: an observation the model gives probability
     0 (an event later than its truncation point): the controller then plays the
-    world's first action."""
+    world state's first action (``fallback``)."""
 
     randomised = False
     sensed = True
 
-    def __init__(self, game: Game[Any], belief: Belief, policy: np.ndarray) -> None:
-        self.game, self.belief = game, belief
-        self.policy = np.asarray(policy)
-        self.events = frozenset(belief.sta.events)
+    def __init__(self, *, initial: int | Absorbing, actions: Sequence[str | None],
+                 moves: Mapping[tuple[int, str], Mapping[Obs, int | Absorbing]],
+                 sensed: Sequence[str], events: Iterable[str],
+                 game: Game[Any] | None = None,
+                 first_actions: Mapping[Hashable, str] | None = None) -> None:
+        self.initial, self.actions, self.moves = initial, tuple(actions), moves
+        self.sensed_events = frozenset(sensed)
+        self.events = frozenset(events)
+        self.game, self.first_actions = game, dict(first_actions or {})
         self.reset()
+
+    def fallback(self, world: Hashable) -> str:
+        """The world state's first action (the world's, else the saved table's)."""
+        if self.game is not None:
+            return str(next(iter(self.game.actions(world))))
+        action = self.first_actions.get(world)
+        if action is None:
+            raise ValueError(f"Observation.state: {world!r} is not a world state of the "
+                             "saved controller")
+        return action
+
+    @classmethod
+    def from_belief(cls, game: Game[Any], belief: Belief, policy: np.ndarray
+                    ) -> SensedController:
+        """The controller of ``policy`` (a choice row per state) on ``belief``'s MDP."""
+        mdp = belief.mdp
+        initial = mdp.states[mdp.initial]
+        actions = [None if isinstance(s, Absorbing) or policy[i] < 0 else
+                   mdp.action_name(int(policy[i])) for i, s in enumerate(mdp.states)]
+        return cls(initial=initial if isinstance(initial, Absorbing) else mdp.initial,
+                   actions=actions, moves=belief.moves, sensed=belief.sensed,
+                   events=belief.sta.events, game=game)
 
     def reset(self, seed: int | None = None) -> None:
         self.info: int | None = None
@@ -98,22 +131,13 @@ class SensedController:
         self.beyond_model = False
         self.steps = 0
 
-    @property
-    def state(self) -> Any:
-        """The current information state (an :class:`~mitld_lp.sensing.belief.InfoState`),
-        None before the first observation, once finished, or beyond the model."""
-        return None if self.info is None else self.belief.mdp.states[self.info]
-
     def _choose(self, world: Hashable) -> str | None:
-        mdp = self.belief.mdp
         if self.info is None:
-            self.last = str(next(iter(self.game.actions(world))))
+            self.last = self.fallback(world)
             return self.last
-        state = mdp.states[self.info]
-        if isinstance(state, Absorbing):
-            self._finish(state)
-            return None
-        self.last = mdp.action_name(int(self.policy[self.info]))
+        self.last = self.actions[self.info]
+        if self.last is None:  # nothing can be won from here: any action will do
+            self.last = self.fallback(world)
         return self.last
 
     def _finish(self, end: Absorbing) -> None:
@@ -133,20 +157,22 @@ class SensedController:
                              f"task (events: {', '.join(sorted(self.events))})")
         if self.finished:
             return None
-        mdp = self.belief.mdp
-        first = self.steps == 0 and self.last is None
+        first = self.steps == 0
         self.steps += 1
         if first:
             if observation.reports:
                 raise ValueError(f"Observation.reports at step 0: no event happens at step "
                                  f"0, got {sorted(observation.reports)}")
-            self.info = mdp.initial
+            if isinstance(self.initial, Absorbing):
+                self._finish(self.initial)
+                return None
+            self.info = self.initial
             return self._choose(observation.state)
         if self.beyond_model or self.info is None:
             return self._choose(observation.state)
-        sensed = frozenset(self.belief.sensed)
+        sensed = self.sensed_events
         obs = (observation.state, observation.reports - sensed, observation.reports & sensed)
-        nxt = self.belief.moves.get((self.info, self.last or ""), {}).get(obs)
+        nxt = self.moves.get((self.info, self.last or ""), {}).get(obs)
         if nxt is None:
             self.beyond_model = True
             self.info = None
@@ -158,14 +184,88 @@ class SensedController:
         return self._choose(observation.state)
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False,
-             max_states: int = defaults.MAX_STATES) -> None:
-        raise SensedControllerError(
-            "saving a controller that acts on sensor reports is not supported yet: its "
-            "memory is the information state; run it from the synthesis result")
+             max_states: int = defaults.MAX_STATES) -> Path:
+        """Write the controller's tables to ``path`` (``.npz``, :func:`save_sensed`; read
+        back by :func:`mitld_lp.sensing.saved.load_sensed`)."""
+        return save_sensed(self, path, overwrite=overwrite, max_states=max_states)
 
     def tables(self, max_states: int = defaults.MAX_STATES) -> None:
         raise SensedControllerError(
-            "the tables of a controller that acts on sensor reports are not written yet")
+            "the tables of a controller that acts on sensor reports are its own file "
+            "format (save / mitld_lp.sensing.saved.load_sensed), not a SavedPlan")
+
+
+# --------------------------------------------------------------------- the file
+
+FORMAT, VERSION = "mitld-lp-sensed-controller", 1
+_END = {Absorbing.TARGET: -1, Absorbing.SINK: -2, Absorbing.TRUNCATED: -3}
+_NAMES = {Absorbing.TARGET: "accepted", Absorbing.SINK: "rejected",
+          Absorbing.TRUNCATED: "decided"}
+
+
+def _world_states(c: SensedController, max_states: int) -> list[Hashable]:
+    """Every world state reachable from the initial one under any action and any of the
+    events the world reacts to; a loaded controller's own table."""
+    if c.game is None:
+        return list(c.first_actions)
+    game = c.game
+    reacts = sorted(world_members(game).event_names)
+    subsets = [frozenset(e for i, e in enumerate(reacts) if mask >> i & 1)
+               for mask in range(1 << len(reacts))]
+    seen = {game.initial: None}
+    todo = [game.initial]
+    while todo:
+        s = todo.pop()
+        for action in game.actions(s):
+            for events in subsets:
+                for nxt, p in game.successors(s, action, events):
+                    if p > 0 and nxt not in seen:
+                        if len(seen) >= max_states:
+                            raise ControllerFileError(
+                                f"the world has more than {max_states:,} states reachable: "
+                                "raise max_states to save this controller")
+                        seen[nxt] = None
+                        todo.append(nxt)
+    return list(seen)
+
+
+def save_sensed(c: SensedController, path: str | os.PathLike[str], *,
+                overwrite: bool = False, max_states: int = defaults.MAX_STATES) -> Path:
+    """Write ``c``'s tables to ``path`` under the writable-path rule (the format:
+    :mod:`mitld_lp.sensing.saved`)."""
+    out = files.writable_path(path, overwrite=overwrite, suffixes=(".npz",))
+    worlds = _world_states(c, max_states)
+    index = {w: i for i, w in enumerate(worlds)}
+    events = sorted(c.events)
+    bit = {e: 1 << i for i, e in enumerate(events)}
+    actions = sorted({a for a in c.actions if a is not None}
+                     | {c.fallback(w) for w in worlds})
+    number = {a: i for i, a in enumerate(actions)}
+    rows = []
+    for (src, act), table in c.moves.items():
+        if act != c.actions[src]:  # a move the policy never makes
+            continue
+        for (world, seen, new), dst in table.items():
+            mask = sum(bit[e] for e in seen | new)
+            rows.append((src, number[act], index[world], mask,
+                         _END[dst] if isinstance(dst, Absorbing) else dst))
+    meta = {"format": FORMAT, "version": VERSION, "events": events,
+            "sensed": sorted(c.sensed_events), "actions": actions,
+            "initial": (_NAMES[c.initial] if isinstance(c.initial, Absorbing)
+                        else int(c.initial))}
+    arrays = {
+        "meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+        "states": np.frombuffer(json.dumps([encode_state(w) for w in worlds]).encode(),
+                                dtype=np.uint8),
+        "first": np.array([number[c.fallback(w)] for w in worlds], dtype=np.int32),
+        "policy": np.array([-1 if a is None else number[a] for a in c.actions],
+                           dtype=np.int32),
+        "moves": np.array(rows, dtype=np.int64).reshape(-1, 5),
+    }
+    with files.replacing(out, "wb") as handle:
+        np.savez(handle, **arrays)
+    return out
+
 
 
 def simulate_sensed(model: Any, controller: SensedController, *, runs: int = defaults.RUNS,
@@ -189,7 +289,7 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
         _check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
     game, dta = model.game, to_dta(model.spec)
-    sensors = controller.belief.sensors
+    sensors = {a: s for a, s in model.sensors.items() if a in controller.sensed_events}
     laws = sorted(model.distributions.items())
     ok = beyond = undecided = 0
     for _ in range(runs):

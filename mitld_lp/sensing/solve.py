@@ -201,7 +201,7 @@ def solve_sensed(posed: Posed) -> SensedResult:
     result = SensedResult(
         model=model, method=s.method, epsilon=eps, dta=dta, belief=belief,
         lower_model=low, upper_model=high,
-        controller=SensedController(model.game, belief, low.policy),
+        controller=SensedController.from_belief(model.game, belief, low.policy),
         timings={"automaton": t1 - t0, "product": t2 - t1, "solve": t3 - t2})
     log.info("sensed synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
