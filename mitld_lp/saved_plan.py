@@ -397,6 +397,9 @@ def _read_arrays(source: Path) -> dict[str, np.ndarray]:
             loaded = np.load(handle, allow_pickle=False)
             with loaded:
                 names = set(loaded.files)
+                if names == {"meta", "states", "first", "policy", "moves"}:
+                    raise _Bad("a controller that acts on sensor reports: load it with "
+                               "mitld_lp.sensing.saved.load_sensed")
                 if not any(names == set(m) for m in MEMBERS.values()):
                     raise _Bad(f"not a controller archive (members {_short(loaded.files)}, "
                                f"expected {', '.join(_DETERMINISTIC)} or "

@@ -68,3 +68,12 @@ def test_foreign_and_damaged_files_refused(tmp_path: Path) -> None:
     np.savez(bad, **arrays)
     with pytest.raises(ControllerFileError, match="next state out of range"):
         load_sensed(bad)
+
+
+def test_load_controller_names_the_loader(tmp_path: Path) -> None:
+    from mitld_lp import load_controller
+
+    r = synthesize(Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}}))
+    path = r.controller.save(tmp_path / "c.npz")
+    with pytest.raises(ControllerFileError, match="load_sensed"):
+        load_controller(path)
