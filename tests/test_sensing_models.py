@@ -13,7 +13,7 @@ from types import MappingProxyType
 import pytest
 
 from mitld_lp import ExplicitGame, Model, load_model, loads_model, synthesize
-from mitld_lp.model_keys import ModelError
+from mitld_lp.files.keys import ModelError
 from mitld_lp.problem import ProblemError, pose
 from mitld_lp.sensing import Sensor
 
@@ -126,7 +126,7 @@ def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]
 
 
 def test_plain_simulate_refuses_a_sensed_model() -> None:
-    from mitld_lp.simulate import simulate
+    from mitld_lp.running.simulate import simulate
 
     sensed = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
     plain = synthesize(loads_model(GRID))

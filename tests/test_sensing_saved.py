@@ -13,7 +13,7 @@ import pytest
 from test_sensing import SPEC, STATION
 
 from mitld_lp import Model, load_model, synthesize
-from mitld_lp.saved_plan import ControllerFileError
+from mitld_lp.running.saved_plan import ControllerFileError
 from mitld_lp.sensing.observe import simulate_sensed
 from mitld_lp.sensing.saved import load_sensed
 

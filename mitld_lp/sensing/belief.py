@@ -53,10 +53,10 @@ import scipy.sparse as sp
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory
 from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.worlds.game import Game
 
 __all__ = ["InfoState", "Belief", "belief_product", "sensed_sta", "WEIGHT_TOL"]
 

@@ -28,14 +28,15 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import defaults, files
-from mitld_lp.controller import RunStatus
-from mitld_lp.game import Game, world_members
+from mitld_lp import defaults
+from mitld_lp.files import write as files
 from mitld_lp.problem import ProblemError
 from mitld_lp.product import Absorbing
-from mitld_lp.saved_plan import ControllerFileError, encode_state
+from mitld_lp.running.controller import RunStatus
+from mitld_lp.running.saved_plan import ControllerFileError, encode_state
+from mitld_lp.running.simulate import SimulationResult, _check_count, _sample_successor, _wilson
 from mitld_lp.sensing.belief import Belief, Obs
-from mitld_lp.simulate import SimulationResult, _check_count, _sample_successor, _wilson
+from mitld_lp.worlds.game import Game, world_members
 
 __all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError",
            "save_sensed", "FORMAT", "VERSION"]

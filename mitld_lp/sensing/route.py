@@ -6,9 +6,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from mitld_lp.game import GameError, world_members
 from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.sensing.sensors import partial
+from mitld_lp.worlds.game import GameError, world_members
 
 __all__ = ["sensed_refusal"]
 

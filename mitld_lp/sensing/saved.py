@@ -3,7 +3,7 @@
 :meth:`SensedController.save <mitld_lp.sensing.observe.SensedController.save>`
 (:func:`mitld_lp.sensing.observe.save_sensed`) writes a NumPy ``.npz`` archive that
 :func:`load_sensed` reads with ``allow_pickle=False`` (no code from the file is run; a
-foreign or damaged file is refused with :class:`~mitld_lp.saved_plan.ControllerFileError`
+foreign or damaged file is refused with :class:`~mitld_lp.running.saved_plan.ControllerFileError`
 naming it), in a process that needs neither the world's class nor a solver:
 
 * ``meta`` (JSON): ``format`` ``"mitld-lp-sensed-controller"``, ``version`` 1, the
@@ -11,7 +11,7 @@ naming it), in a process that needs neither the world's class nor a solver:
   ``initial`` information state (a number, or ``"accepted"`` / ``"rejected"`` /
   ``"decided"`` when the task is decided at step 0);
 * ``states`` (JSON): the world states the robot can be in (every state the world reaches
-  from its initial one), encoded as :func:`mitld_lp.saved_plan.encode_state` does;
+  from its initial one), encoded as :func:`mitld_lp.running.saved_plan.encode_state` does;
 * ``first`` (int32 per world state): its first action (played beyond the model);
 * ``policy`` (int32 per information state): the action, -1 where nothing is left to do;
 * ``moves`` (int64, one row per move): ``(state, action, world state seen, events
@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import file_rules
+from mitld_lp.files import rules as file_rules
 from mitld_lp.product import Absorbing
-from mitld_lp.saved_plan import ControllerFileError, decode_state
+from mitld_lp.running.saved_plan import ControllerFileError, decode_state
 from mitld_lp.sensing.observe import _END, _NAMES, FORMAT, VERSION, SensedController
 
 __all__ = ["load_sensed", "FORMAT", "VERSION", "MEMBERS"]

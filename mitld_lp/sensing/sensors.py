@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
-from mitld_lp.model_keys import _Context, _join, _show, _type_name
+from mitld_lp.files.keys import _Context, _join, _show, _type_name
 
 __all__ = ["Sensor", "read_sensors", "sensors_from", "partial", "SENSOR_KEYS"]
 
@@ -85,7 +85,7 @@ def read_sensors(table: Any, events: Iterable[str], ctx: _Context,
                  path: str = "sensors") -> Mapping[str, Sensor]:
     """The ``[sensors]`` table of a model file (or :meth:`Model.from_game`'s
     ``sensors``): one :class:`Sensor` per event named, each event one of ``events``.
-    Raises :class:`~mitld_lp.model_keys.ModelError` naming the key path
+    Raises :class:`~mitld_lp.files.keys.ModelError` naming the key path
     (``sensors.b1.detect``)."""
     if not isinstance(table, Mapping):
         raise ctx.error(path, f"must be a table of events, got {_type_name(table)} "

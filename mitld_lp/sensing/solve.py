@@ -37,7 +37,7 @@ from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.iteration import evaluate_policy, interval_iterations
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.result import IterationResult, LPResult, Status, read_only
-from mitld_lp.world_names import state_record
+from mitld_lp.worlds.names import state_record
 
 __all__ = ["SensedResult", "SensedSolution", "solve_sensed"]
 
