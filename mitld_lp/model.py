@@ -66,6 +66,7 @@ from mitld_lp.files.keys import (
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
+from mitld_lp.sensing.sensors import Sensor, read_sensors, sensors_from
 from mitld_lp.worlds.game import Game, GameError, world_members
 from mitld_lp.worlds.grid import GridWorld
 from mitld_lp.worlds.task import BindError, Task, bind, resolve_laws
@@ -105,6 +106,8 @@ class Model:
         budgets: the file's ``[budgets]`` (``max_states``, ``max_automaton_states``,
             ``max_memory`` in bytes, ``time_limit`` in seconds): used where the caller
             sets none (:class:`mitld_lp.problem.Settings`).
+        sensors: the file's ``[sensors]``: how the robot learns of an event
+            (:mod:`mitld_lp.sensing`); an event not named is seen the step it happens.
     """
 
     name: str
@@ -118,6 +121,7 @@ class Model:
     costs: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     objective: str = "max"
     budgets: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    sensors: Mapping[str, Sensor] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def events(self) -> frozenset[str]:
@@ -129,7 +133,7 @@ class Model:
         return (_unpickle_model, (self.name, self.spec, self.spec_text, self.epsilon,
                                   self.game, dict(self.distributions), self.source,
                                   self.constraints, dict(self.costs), self.objective,
-                                  dict(self.budgets)))
+                                  dict(self.budgets), dict(self.sensors)))
 
     @classmethod
     def from_game(
@@ -142,6 +146,7 @@ class Model:
         epsilon: float = DEFAULT_EPSILON,
         name: str = "model",
         objective: str = "max",
+        sensors: Mapping[str, Any] | None = None,
     ) -> Model:
         """A model from a game object and a specification, validated as a file would be.
 
@@ -155,7 +160,9 @@ class Model:
         proposition of the game has an event's name, or the game reacts to events
         (``event_names``) the spec gives no distribution).  ``events`` gives events of
         the world their laws without the spec asking that they happen (a model file's
-        ``[events]``): the spec may use them as propositions, ``G (door -> F[0,3] stop)``."""
+        ``[events]``): the spec may use them as propositions, ``G (door -> F[0,3] stop)``.
+        ``sensors``: per event a :class:`~mitld_lp.sensing.Sensor` or its table
+        (``{"detect": 0.8}``), as a model file's ``[sensors]`` (:mod:`mitld_lp.sensing`)."""
         ctx = _Context("<spec>")
         try:
             world_members(game)
@@ -179,8 +186,9 @@ class Model:
         task = _bind(game, report, distributions, "proposition", None, ctx, events)
         if objective not in OBJECTIVES:
             raise ctx.error("objective", f"must be 'max' or 'min', got {objective!r}")
+        seen = sensors_from(sensors, task.laws, ctx)
         return cls(name=name, spec=formula, spec_text=text, epsilon=float(epsilon), game=game,
-                   distributions=task.laws, source=None, objective=objective)
+                   distributions=task.laws, source=None, objective=objective, sensors=seen)
 
 
 def _unpickle_model(
@@ -188,10 +196,11 @@ def _unpickle_model(
     distributions: dict[str, FirstOccurrence], source: Path | None,
     constraints: tuple[str, ...] = (), costs: dict[str, float] | None = None,
     objective: str = "max", budgets: dict[str, float] | None = None,
+    sensors: dict[str, Sensor] | None = None,
 ) -> Model:
     return Model(name, spec, spec_text, epsilon, game, MappingProxyType(distributions), source,
                  constraints, MappingProxyType(costs or {}), objective,
-                 MappingProxyType(budgets or {}))
+                 MappingProxyType(budgets or {}), MappingProxyType(sensors or {}))
 
 
 
@@ -364,7 +373,7 @@ def _loaders() -> Any:
 
 _COMMON_REQUIRED = {"name", "spec"}
 _COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs",
-                    "objective", "budgets"}
+                    "objective", "budgets", "sensors"}
 OBJECTIVES = ("max", "min")
 
 
@@ -536,6 +545,7 @@ def _load(
     kind.check_task(game, task, ctx)
 
     constraints, costs = constraints_and_costs(doc, ctx)
+    sensors = read_sensors(doc.get("sensors", {}), task.laws, ctx)
     objective = doc.get("objective", "max")
     if objective not in OBJECTIVES:
         raise ctx.error("objective", f"must be \"max\" or \"min\", got {_show(objective)}")
@@ -551,6 +561,7 @@ def _load(
         costs=MappingProxyType(costs),
         objective=objective,
         budgets=MappingProxyType(budgets),
+        sensors=sensors,
     )
 
 

@@ -15,7 +15,9 @@ The routes (which solver chain accepts the problem):
 * ``robust``: some law known only within a band (an interval parameter or a fit from
   data), no constraints; co-safe tasks -- :mod:`mitld_lp.routes.robust`;
 * ``constrained``: constraints or a ``then`` objective with point laws; co-safe task and
-  constraint formulas -- :mod:`mitld_lp.routes.constrained`.
+  constraint formulas -- :mod:`mitld_lp.routes.constrained`;
+* ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
+  co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.sensing.solve`.
 
 ``objective = "min"`` (PRISM's ``Pmin``) is solved as the maximum of the complement:
 ``Pmin(phi) = 1 - Pmax(not phi)``, with the complement taken on the automaton
@@ -34,9 +36,10 @@ from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY
 
 __all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "check_constrained",
            "OBJECTIVES",
-           "complement_class", "PLAIN", "ROBUST", "CONSTRAINED"]
+           "complement_class", "PLAIN", "ROBUST", "CONSTRAINED", "SENSED"]
 
 PLAIN, ROBUST, CONSTRAINED = "plain", "robust", "constrained"
+SENSED = "sensed"
 OBJECTIVES = ("max", "min")
 METHODS = ("lp", "vi")
 BACKENDS = ("auto", "cvxpy", "direct")
@@ -234,6 +237,15 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     constrained = constrained or bool(cons or then)
     problem = Problem(model, cons, then, goal)
     what = _task_words(fragment, goal)
+    # sensors that miss events: the observation-based route, or a refusal naming why
+    from mitld_lp.sensing.route import sensed_refusal
+    from mitld_lp.sensing.sensors import partial
+
+    if partial(model.sensors):
+        why = sensed_refusal(model, fragment, goal, cons, then, robust)
+        if why is not None:
+            raise ProblemError(why)
+        return Posed(problem, s, SENSED, fragment, robust)
     if constrained:
         posed = Posed(problem, s, CONSTRAINED, fragment, robust)
         check_constrained(posed)

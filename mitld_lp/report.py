@@ -45,6 +45,10 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     """
     if result.route == "constrained":
         return randomised_table(result)
+    if result.route == "sensed":  # the information states (mitld_lp.sensing)
+        from mitld_lp.sensing.table import sensed_table
+
+        return sensed_table(result)
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
     obligations = result.dta.states
@@ -104,7 +108,7 @@ SUMMARY_KEYS = (
     "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
-    "randomized_states", "message",
+    "randomized_states", "message", "sensors",
 )
 
 
@@ -133,6 +137,7 @@ def summary(result: Any) -> dict[str, Any]:
         ambiguous_choices=0, constraints=[], randomized_states=0, status=str(result.status),
         checks=[{"name": c.name, "ok": c.passed, "detail": c.detail} for c in result.checks],
         dta_states=result.automaton.n_states,
+        sensors={a: s.detect for a, s in result.sensors.items()},
     )
     if result.route == "constrained":
         out.update(_constrained_part(result))

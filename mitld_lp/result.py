@@ -9,7 +9,9 @@ and the parts only some routes have: the two solved models (``lower_model``,
 ``upper_model``) where the optimum comes from a deterministic policy, the bands
 (``bands``, ``first_step_hazards()``), the constraints' part (``constraints``, ``then``,
 ``secondary``, ``steps``, the randomised policy ``prob`` / ``stay`` on the ``merged``
-model of the ``joint`` automaton).  A part a route does not have is ``None`` or empty.
+model of the ``joint`` automaton), the sensors' part (``sensors``, the information-state
+product ``belief``; the ``mdp`` is then that product).  A part a route does not have
+is ``None`` or empty.
 ``summary()`` is the command line's ``--json``, one schema for every route
 (:data:`mitld_lp.report.SUMMARY_KEYS`).
 """
@@ -51,7 +53,7 @@ class Result:
     for a band; for constraints the product, ``merged`` the model the LP solved).
     """
 
-    route: str  # "plain", "robust" or "constrained" (mitld_lp.problem)
+    route: str  # "plain", "robust", "constrained" or "sensed" (mitld_lp.problem)
     model: Model | None
     objective: str  # "max" or "min"
     method: str  # "lp" or "vi"
@@ -85,6 +87,9 @@ class Result:
     joint: Any = None
     prob: np.ndarray | None = None  # per merged choice: the policy's probability
     stay: np.ndarray | None = None  # per merged state: the probability of staying
+    # sensors that miss events: each sensed event's sensor, the information-state product
+    sensors: Mapping[str, Any] = field(default_factory=dict)
+    belief: Any = None
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:

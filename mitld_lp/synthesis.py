@@ -34,7 +34,7 @@ from mitld_lp import defaults
 from mitld_lp.checks import Check, close
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, Posed, pose, settings_from
+from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, SENSED, Posed, pose, settings_from
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.stages import Built, build_posed, build_product
 from mitld_lp.running.controller import Controller
@@ -277,7 +277,8 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
                 --> the route's solver and certificate --> Result
 
     The route solves what the problem poses: ``plain`` the occupancy LP (or interval
-    iteration) on the product; ``robust`` the interval MDP's robust optimum; with
+    iteration) on the product; ``robust`` the interval MDP's robust optimum; ``sensed``
+    the optimum over observation-based policies on the information-state product; with
     constraints the constrained occupancy LP on the joint product, and with a band its
     sound robust bracket.  ``costs`` / ``seed``: a constrained problem's action costs
     (default the model's) and its randomised controller's seed."""
@@ -290,6 +291,10 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
         from mitld_lp.routes.robust import solve_robust
 
         return solve_robust(posed, built)
+    if posed.route == SENSED:  # sensors that miss events (mitld_lp.sensing)
+        from mitld_lp.sensing.solve import solve_sensed
+
+        return solve_sensed(posed, built)
     if posed.route == CONSTRAINED:
         if posed.robust:
             from mitld_lp.routes.robust_constrained import solve_robust_constrained

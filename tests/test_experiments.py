@@ -260,3 +260,21 @@ def test_bench_controllers(tmp_path):
     for r in trees:
         assert float(r["abs_diff"]) <= 1e-9
         assert int(r["tree_nodes"]) <= int(r["same_actions_nodes"]) <= int(r["table_rows"])
+
+
+def test_sensors(tmp_path):
+    """The bus case with a camera: detect 1 is the fully observed answer (Storm's value
+    on the exact product, above), a missing camera can only lose, and the bracket's
+    width is within the truncation's epsilon achieved."""
+    text = _run("sensors", tmp_path)
+    assert "camera on b1" in text and _is_png(tmp_path / "sensors.png")
+    rows = {float(r["detect"]): r for r in _csv(tmp_path / "sensors.csv")}
+    seen, camera = rows[1.0], rows[0.5]
+    assert seen["route"] == "plain" and camera["route"] == "sensed"
+    assert float(seen["lower"]) == pytest.approx(STORM["bus_grid"], abs=1e-6)
+    assert float(camera["upper"]) <= STORM["bus_grid"] + 1e-7
+    assert float(camera["upper"]) - float(camera["lower"]) <= float(
+        camera["eps_achieved"]) + 1e-9
+    if camera["storm_value"]:  # Storm on the same information-state MDP
+        assert float(camera["storm_value"]) == pytest.approx(float(camera["lower"]),
+                                                             abs=1e-6)

@@ -136,6 +136,10 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
                    time_limit=_time_left(args))
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
+    if r.route == "sensed" and (chain or tree):  # mitld_lp.sensing
+        raise UsageError("export --chain/--tree: the model has sensors that miss events; "
+                         "the controlled chain and the decision tree of an observation-based "
+                         "controller are not written yet")
     if controller:
         from mitld_lp.problem import Settings
 

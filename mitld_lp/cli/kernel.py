@@ -165,6 +165,11 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     model = load_model(args.model, max_states=args.max_world_states,
                        max_memory=args.max_memory)
     posed = posed_model(args, model, verb)
+    if posed.route == "sensed":  # the fully observed product would answer another problem
+        raise ProblemError(f"{verb}: the model has sensors that miss events: its problem is "
+                           "solved on the information-state product (solve, simulate, "
+                           "export --controller); this command would read the fully "
+                           "observed product")
     return posed, build_posed(posed)
 
 

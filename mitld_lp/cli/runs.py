@@ -210,6 +210,9 @@ def cmd_plot(args: argparse.Namespace) -> int:
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
             result = solve(posed)
+            if result.route == "sensed":  # mitld_lp.sensing
+                raise UsageError("plot: the model has sensors that miss events; the policy "
+                                 "map of an observation-based controller is not drawn yet")
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
@@ -246,8 +249,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                    settings=settings_from(**model_options(args))))
     if r.controller is None:
         raise UsageError(f"simulate: no controller to run: the synthesis is {r.status}")
-    sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
-                   max_steps=args.max_steps)
+    if r.route == "sensed":  # the hidden events and the sensors drawn (mitld_lp.sensing)
+        from mitld_lp.sensing.observe import simulate_sensed
+
+        sim = simulate_sensed(model, r.controller, runs=args.runs, seed=args.seed,
+                              max_steps=args.max_steps)
+    else:
+        sim = simulate(model, r.controller, runs=args.runs, seed=args.seed,
+                       max_steps=args.max_steps)
     robust = r.summary().get("robust", False)
     out = {
         "runs": sim.runs,

@@ -345,7 +345,8 @@ def write_policy(
     :data:`~mitld_lp.report.POLICY_COLUMNS`, pending events joined by spaces, values
     with every digit) or ``.json`` (a list of objects), under the rule."""
     out = writable_path(path, overwrite=overwrite, suffixes=POLICY_SUFFIXES)
-    rows = policy_table(result)
+    # the sensed route's rows are its information states (mitld_lp.sensing.solve)
+    rows = result.policy_table() if result.route == "sensed" else policy_table(result)
     if out.suffix.lower() == ".json":
         with replacing(out) as handle:
             handle.write(json.dumps(rows, default=str) + "\n")

@@ -28,7 +28,7 @@ from mitld_lp.logic import check
 from mitld_lp.logic.syntax import DistLiteral, Formula, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, Posed
+from mitld_lp.problem import CONSTRAINED, SENSED, Posed
 from mitld_lp.product import product, robust_product
 from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.routes.constraints import Constraint, ConstraintError
@@ -48,6 +48,7 @@ class Built:
     mdp: MDP | IntervalMDP  # an interval MDP when some law is known only within a band
     timings: Mapping[str, float]
     joint: Joint | None = None  # with constraints: the task's and each constraint's parts
+    belief: Any = None  # sensors that miss events: the information-state product's record
 
 
 def build_product(
@@ -94,6 +95,8 @@ def build_posed(posed: Posed, *, progress: bool | None = None,
     model, s = posed.model, posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     robust = posed.robust if robust is None else robust
+    if posed.route == SENSED:
+        return _sensed(posed, progress)
     if posed.route != CONSTRAINED and not robust:
         return build_product(
             model.game, model.spec, model.distributions,
@@ -119,6 +122,26 @@ def build_posed(posed: Posed, *, progress: bool | None = None,
                 progress=progress)
     return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                  joint)
+
+
+def _sensed(posed: Posed, progress: bool | None) -> Built:
+    """The stages of a problem with sensors that miss events: the task's automaton, then
+    the information-state product (:mod:`mitld_lp.sensing.belief`: what the robot knows
+    of the events, never the events themselves), under the problem's budgets."""
+    from mitld_lp.sensing.belief import belief_product
+    from mitld_lp.sensing.sensors import partial
+
+    model, s = posed.model, posed.settings
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+    t0 = time.perf_counter()
+    dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
+    t1 = time.perf_counter()
+    belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
+                            model.epsilon if s.epsilon is None else s.epsilon,
+                            clock_reduction=s.clock_reduction, truncation=s.truncation_map,
+                            max_states=s.max_states, max_memory=s.max_memory)
+    return Built(dta, belief.sta, belief.mdp,
+                 {"automaton": t1 - t0, "product": time.perf_counter() - t1}, belief=belief)
 
 
 def joint_sta(posed: Posed) -> tuple[Joint, STA]:

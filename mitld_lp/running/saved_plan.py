@@ -415,6 +415,9 @@ def _read_arrays(source: Path) -> dict[str, np.ndarray]:
             loaded = np.load(handle, allow_pickle=False)
             with loaded:
                 names = set(loaded.files)
+                if names == {"meta", "states", "first", "policy", "moves"}:
+                    raise _Bad("a controller that acts on sensor reports: load it with "
+                               "mitld_lp.sensing.saved.load_sensed")
                 if not any(names == set(_members(k, v)) for k in MEMBERS for v in READS):
                     raise _Bad(f"not a controller archive (members {_short(loaded.files)}, "
                                f"expected {', '.join(_DETERMINISTIC)} or "

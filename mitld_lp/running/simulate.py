@@ -140,6 +140,12 @@ def simulate(
     _check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
     if seed is not None:
         _check_count("seed", seed, 0, None)
+    # sensors that miss events: the robot never sees them, so these rollouts (which hand
+    # the controller the events) would answer another problem
+    if getattr(controller, "sensed", False) or any(
+            not s.perfect for s in model.sensors.values()):
+        raise ValueError("simulate: the model has sensors that miss events; simulate its "
+                         "sensed controller with mitld_lp.sensing.observe.simulate_sensed")
     rng = np.random.default_rng(seed)
     if controller.randomised:
         controller.reset(seed=int(rng.integers(2**63)))

@@ -1,0 +1,17 @@
+"""Events the robot learns of through sensors that miss (docs/semantics.md, "Sensors").
+
+* :mod:`~mitld_lp.sensing.sensors`: the :class:`Sensor` record and the ``[sensors]``
+  table of a model file;
+* :mod:`~mitld_lp.sensing.belief`: the information-state product (the MDP over what the
+  robot knows);
+* :mod:`~mitld_lp.sensing.solve`: the ``sensed`` route, its certified bracket (the one
+  :class:`~mitld_lp.result.Result`, with its ``sensors`` and ``belief`` parts);
+* :mod:`~mitld_lp.sensing.table`: its policy table;
+* :mod:`~mitld_lp.sensing.observe`: :class:`~mitld_lp.sensing.observe.Observation`, the
+  controller that acts on observations, and the simulation that draws the hidden events
+  and the sensors' reports.
+"""
+
+from mitld_lp.sensing.sensors import Sensor
+
+__all__ = ["Sensor"]

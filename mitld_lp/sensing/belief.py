@@ -1,0 +1,451 @@
+"""The information-state product: the MDP over what the robot knows when some events
+are reported by sensors that miss (:mod:`mitld_lp.sensing.sensors`).
+
+The robot observes the world's state, its own actions, the step count, the events that
+have no sensor (the step they happen) and its sensors' reports; it never observes a
+sensed event itself.  What it does not know is *when* (and whether) each sensed event
+happened.  A *hypothesis* is one value per sensed event: ``0`` (not happened yet) or
+the step ``k >= 1`` it happened at.  Given the observations, a hypothesis fixes the
+whole hidden run: the world ignores the sensed events (the problem refuses the other
+case), so the automaton's state under a hypothesis is a function of the observed path.
+
+An information state is therefore ``(world state, clock, reported events, pending
+unsensed events, {hypothesis: automaton state})`` over the hypotheses still possible
+and still undecided, with the posterior weights of those hypotheses.  The posterior is
+a function of that key: with missed detections and no false alarms, the likelihood of
+a report history under "happened at ``k``" is ``(1 - d)^(misses)`` and the ratio of two
+such hypotheses of one event does not change with time once both reports are due (both
+miss every step), while "not happened yet" against "happened at ``k``", or a hypothesis
+whose report is not due yet (a sensor with a ``delay``: reports from step ``k + delay``
+on), depends on the step count, which the key keeps while such a hypothesis is alive.
+The construction stores the weights the first time it meets a key and checks them on
+every later visit (an internal check of this argument).
+
+Every sensed event is truncated at its point ``T_a`` (``P(K_a > T_a) <= `` its share
+of epsilon), geometric laws included: the hypothesis "not happened by ``T_a``" goes to
+the truncation sink, so the clock and the hypotheses stay finite.  The lower model
+counts that mass as failure, the upper as success, as in the fully observed product.
+
+One step from an information state under action ``act``: the unsensed events happen by
+their hazards at the clock; each hypothesis's sensed events that had not happened
+happen by their hazards (or stay pending, or cross their truncation point); each
+sensed event that has happened and is not reported yet is reported with probability
+``detect``; the world moves by ``P(s' | s, act, E_unsensed)``; each hypothesis's
+automaton reads ``props(s') | E``.  Hypotheses whose automaton accepts go to the
+target, those that reject to the sink; the rest, grouped by what the robot observes
+(``s'``, the unsensed events, the new reports), make the successor information states,
+each entered with its group's probability.  A policy of this MDP acts on the
+information state, a function of the observation history: the optimum over it is the
+optimum over observation-based policies.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.distributions import FirstOccurrence
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory
+from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.worlds.game import Game
+
+__all__ = ["InfoState", "Belief", "belief_product", "sensed_sta", "WEIGHT_TOL"]
+
+NOT_YET = 0
+"""A hypothesis's value for a sensed event that has not happened (yet)."""
+
+MAX_PRUNE_ATOMS = 14
+"""The most atoms whose letters :meth:`_Builder.can_accept` enumerates."""
+
+WEIGHT_TOL = 1e-9
+
+BYTES_PER_INFO_STATE = 6_500
+"""Bytes an information state costs in the build (its record, index entry, rows, moves
+and caches): with :data:`BYTES_PER_HYPOTHESIS`, a fit of the build's peak (tracemalloc)
+on the bus case with one and with two sensed buses (2,693 states / 6,996 hypotheses:
+17.6 MB; 3,751 / 17,213: 25.6 MB)."""
+BYTES_PER_HYPOTHESIS = 200
+"""Bytes each hypothesis of a state costs (its key tuple, its weight, its row entries)."""
+"""How far two visits of one information state may disagree on its posterior."""
+
+Obs = tuple[Hashable, frozenset[str], frozenset[str]]
+"""What the robot observes after a step: world state, unsensed events, new reports."""
+
+
+@dataclass(frozen=True, slots=True)
+class InfoState:
+    """One information state (module docs).  ``hypotheses``: ``(times, automaton
+    state)`` pairs, ``times`` one value per sensed event (in ``Belief.sensed`` order,
+    ``0`` for not happened), sorted; ``weights``: their posterior, in that order."""
+
+    world: Hashable
+    clock: int
+    reported: frozenset[str]
+    pending: frozenset[str]
+    hypotheses: tuple[tuple[tuple[int, ...], int], ...]
+    weights: tuple[float, ...]
+
+    def key(self) -> Hashable:
+        return (self.world, self.clock, self.reported, self.pending, self.hypotheses)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Belief:
+    """The information-state MDP and what a controller needs to follow it.
+
+    ``moves[(state, action)][obs]`` is the successor state of an observation, or an
+    :class:`Absorbing` member when nothing undecided is left with it (``TARGET``: every
+    hypothesis left accepted; ``SINK``: every one rejected; ``TRUNCATED``: some of each,
+    the robot cannot tell which).  ``sta``: the clocks (sensed events truncated)."""
+
+    mdp: MDP
+    sta: STA
+    sensed: tuple[str, ...]
+    sensors: Mapping[str, Sensor]
+    moves: Mapping[tuple[int, str], Mapping[Obs, int | Absorbing]]
+
+
+def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str, ...],
+               epsilon: float, *, clock_reduction: bool = True,
+               truncation: Mapping[str, int] | None = None) -> STA:
+    """The STA with every sensed event truncated: the events truncated (the sensed ones,
+    and the unsensed ones whose hazard never becomes constant, or all without
+    ``clock_reduction``) share ``epsilon`` equally, as :func:`make_sta` shares it; a
+    point in ``truncation`` is kept as given."""
+    fixed = dict(truncation or {})
+    auto = [a for a in sorted(laws) if a not in fixed and (
+        a in sensed or not clock_reduction or laws[a].constant_hazard_from is None)]
+    points = {a: laws[a].truncation_point(epsilon / len(auto)) for a in auto}
+    return make_sta(dta, laws, epsilon, clock_reduction=clock_reduction,
+                    truncation={**fixed, **points})
+
+
+def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
+                   sensors: Mapping[str, Sensor], epsilon: float, *,
+                   clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
+                   max_states: int, max_memory: int | None = None) -> Belief:
+    """The reachable information-state MDP (module docs) of a co-safe task's automaton
+    ``dta`` in ``game``, the events of ``sensors`` (missed detections only) hidden.
+    Raises :class:`ProductTooLarge` before storing a state beyond ``max_states``, or one
+    that would take the states past ``max_memory`` bytes (default: half the machine's
+    memory) at :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS`
+    per hypothesis it holds."""
+    sensed = tuple(sorted(sensors))
+    sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
+                     truncation=truncation)
+    memory = default_max_memory() if max_memory is None else max_memory
+    return _Builder(game, dta, sta, sensed, sensors, max_states, memory).build()
+
+
+class _Builder:
+    def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
+                 sensors: Mapping[str, Sensor], max_states: int, max_memory: int) -> None:
+        self.game, self.dta, self.sta = game, dta, sta
+        self.sensed, self.sensors, self.max_states = sensed, sensors, max_states
+        self.max_memory, self.bytes = max_memory, 0
+        self.unsensed = frozenset(sta.events) - frozenset(sensed)
+        self.clocks = sta.clocks
+        # the clock matters up to these bounds (a truncated event's point, an exact
+        # event's cap); past all of them the key keeps none
+        self.bound = {a: (c.truncation if c.truncation is not None else c.cap)
+                      for a, c in sta.clocks.items()}
+        self.index: dict[Hashable, int] = {}
+        self.states: list[InfoState | Absorbing] = []
+        self.moves: dict[tuple[int, str], dict[Obs, int | Absorbing]] = {}
+        self.succ: dict[tuple[Hashable, str, frozenset[str]], tuple[Any, ...]] = {}
+        self.step_cache: dict[tuple[int, frozenset[str]], int] = {}
+        self.live_cache: dict[tuple[int, frozenset[str]], bool] = {}
+        self.label_cache: dict[Hashable, frozenset[str]] = {}
+        self.branch_cache: dict[tuple[tuple[int, ...], frozenset[str], int], list[Any]] = {}
+        self.hazard_cache: dict[tuple[str, int], float] = {}
+        self.props = frozenset(dta.atoms) - frozenset(sta.events)
+
+    # ---------------------------------------------------------------- states
+
+    def intern(self, state: InfoState | Absorbing) -> int:
+        key = state if isinstance(state, Absorbing) else state.key()
+        i = self.index.get(key)
+        if i is not None:
+            if isinstance(state, InfoState):
+                old = self.states[i]
+                assert isinstance(old, InfoState)
+                gap = max(abs(a - b) for a, b in zip(old.weights, state.weights, strict=True))
+                if gap > WEIGHT_TOL:  # the posterior is not a function of the key
+                    raise RuntimeError(
+                        f"internal error: information state {key!r} reached with two "
+                        f"posteriors (they differ by {gap:.3g})")
+            return i
+        if len(self.states) >= self.max_states:
+            raise ProductTooLarge(
+                f"the information-state product has more than {self.max_states:,} states "
+                f"(sensed events: {', '.join(self.sensed)}; truncation points: "
+                f"{self.sta.truncation_points}); raise max_states, loosen epsilon, or shrink "
+                "the model")
+        cost = BYTES_PER_INFO_STATE + (
+            0 if isinstance(state, Absorbing) else BYTES_PER_HYPOTHESIS * len(state.hypotheses))
+        if self.bytes + cost > self.max_memory:
+            raise ProductTooLarge(
+                f"the information-state product would need more than {self.max_memory:,} "
+                f"bytes ({len(self.states):,} states so far, sensed events: "
+                f"{', '.join(self.sensed)}); raise max_memory, loosen epsilon, or shrink the "
+                "model")
+        self.bytes += cost
+        self.index[key] = len(self.states)
+        self.states.append(state)
+        return len(self.states) - 1
+
+    def clock_key(self, t: int, hyps: list[tuple[int, ...]], pending: frozenset[str],
+                  reported: frozenset[str]) -> int:
+        """``t`` capped where nothing left reads it any more (module docs): an unsensed
+        pending event reads it up to its bound; a sensed one while it may not have
+        happened (up to its truncation point plus its delay) or, not reported, while some
+        hypothesis's report may not be due yet (``k + delay > t``)."""
+        need = [self.bound[b] for b in pending]
+        for i, a in enumerate(self.sensed):
+            values = [h[i] for h in hyps]
+            delay = self.sensors[a].delay
+            if NOT_YET in values:
+                need.append(self.bound[a] + delay)
+            elif a not in reported:
+                need.append(max(values) + delay)
+        return min(t, max(need, default=0))
+
+    def make(self, world: Hashable, t: int, reported: frozenset[str],
+             pending: frozenset[str], mass: Mapping[tuple[tuple[int, ...], int], float],
+             ) -> InfoState:
+        total = math.fsum(mass.values())
+        hyps = tuple(sorted(mass))
+        return InfoState(world, self.clock_key(t, [h for h, _ in hyps], pending, reported),
+                         reported, pending, hyps, tuple(mass[h] / total for h in hyps))
+
+    def automaton(self, q: int, label: frozenset[str]) -> int:
+        key = (q, label)
+        q2 = self.step_cache.get(key)
+        if q2 is None:
+            q2 = self.step_cache[key] = self.dta.step(q, label)
+        return q2
+
+    def can_accept(self, q: int, pending: frozenset[str]) -> bool:
+        """Whether some word reaches acceptance from ``q`` when only ``pending`` events
+        can still happen (an event happens once): a hypothesis that cannot is lost
+        whatever the robot does, and goes to the sink.  Beyond
+        :data:`MAX_PRUNE_ATOMS` letters' atoms every hypothesis is kept (sound, larger)."""
+        key = (q, pending)
+        hit = self.live_cache.get(key)
+        if hit is not None:
+            return hit
+        atoms = sorted(self.props | (pending & frozenset(self.dta.atoms)))
+        if len(atoms) > MAX_PRUNE_ATOMS:
+            self.live_cache[key] = True
+            return True
+        letters = [frozenset(x for x, bit in zip(atoms, bits, strict=True) if bit)
+                   for bits in itertools.product((0, 1), repeat=len(atoms))]
+        seen, todo = {q}, [q]
+        found = q == self.dta.accepting
+        while todo and not found:
+            u = todo.pop()
+            for letter in letters:
+                v = self.automaton(u, letter)
+                if v == self.dta.accepting:
+                    found = True
+                    break
+                if v not in seen:
+                    seen.add(v)
+                    todo.append(v)
+        self.live_cache[key] = found
+        return found
+
+    # ---------------------------------------------------------------- one step
+
+    def unsensed_outcomes(self, pending: frozenset[str], t: int
+                          ) -> list[tuple[frozenset[str], float, bool]]:
+        """``(events, probability, truncated)`` of the unsensed events of the next step."""
+        events = sorted(pending)
+        out = []
+        for happened in itertools.product((False, True), repeat=len(events)):
+            p = 1.0
+            for a, yes in zip(events, happened, strict=True):
+                h = self.hazard(a, t)
+                p *= h if yes else 1.0 - h
+            if p <= 0.0:
+                continue
+            occurred = frozenset(a for a, yes in zip(events, happened, strict=True) if yes)
+            crossed = any((T := self.clocks[a].truncation) is not None and t + 1 >= T
+                          for a in pending - occurred)
+            out.append((occurred, p, crossed))
+        return out
+
+    def hazard(self, event: str, t: int) -> float:
+        key = (event, t)
+        h = self.hazard_cache.get(key)
+        if h is None:
+            h = self.hazard_cache[key] = self.clocks[event].hazard(t)
+        return h
+
+    def label(self, world: Hashable) -> frozenset[str]:
+        props = self.label_cache.get(world)
+        if props is None:
+            props = self.label_cache[world] = frozenset(self.game.propositions(world))
+        return props
+
+    def sensed_branches(self, times: tuple[int, ...], reported: frozenset[str], t: int
+                        ) -> list[tuple[tuple[int, ...], frozenset[str], float, bool]]:
+        """``(times', newly reported, probability, truncated)`` of one hypothesis's
+        sensed events over the next step, with the events that happen in it."""
+        key = (times, reported, t)
+        hit = self.branch_cache.get(key)
+        if hit is None:
+            hit = self.branch_cache[key] = self._sensed_branches(times, reported, t)
+        return hit
+
+    def _sensed_branches(self, times: tuple[int, ...], reported: frozenset[str], t: int
+                         ) -> list[Any]:
+        per_event = []
+        for i, a in enumerate(self.sensed):
+            clock, d = self.clocks[a], self.sensors[a].detect
+            delay = self.sensors[a].delay
+            k = times[i]
+            options: list[tuple[int, bool, float, bool]] = []
+            if k == NOT_YET:
+                h = self.hazard(a, t)
+                T = clock.truncation
+                assert T is not None and t < T
+                if h < 1.0:
+                    options.append((NOT_YET, False, 1.0 - h, t + 1 >= T))
+                if h > 0.0 and delay == 0:
+                    options += [(t + 1, True, h * d, False), (t + 1, False, h * (1 - d), False)]
+                elif h > 0.0:  # its report is not due before step t + 1 + delay
+                    options.append((t + 1, False, h, False))
+            elif a in reported or k + delay > t + 1:
+                options.append((k, False, 1.0, False))
+            else:
+                options += [(k, True, d, False), (k, False, 1.0 - d, False)]
+            per_event.append([o for o in options if o[2] > 0.0])
+        out = []
+        for combo in itertools.product(*per_event):
+            p = math.prod(o[2] for o in combo)
+            times2 = tuple(o[0] for o in combo)
+            out.append((times2,
+                        frozenset(a for a, o in zip(self.sensed, combo, strict=True) if o[1]),
+                        p, any(o[3] for o in combo),
+                        frozenset(a for a, k, k2 in zip(self.sensed, times, times2, strict=True)
+                                  if k2 != k),
+                        frozenset(a for a, k2 in zip(self.sensed, times2, strict=True)
+                                  if k2 == NOT_YET)))
+        return out
+
+    def expand(self, i: int, s: InfoState) -> list[tuple[str, dict[int, float]]]:
+        rows = []
+        t = s.clock
+        for act in self.game.actions(s.world):
+            row: dict[int, float] = {}
+            groups: dict[tuple[Obs, frozenset[str]], dict[tuple[tuple[int, ...], int], float]]
+            groups = {}
+            ends: dict[Obs, set[Absorbing]] = {}
+            for occurred, pu, crossed in self.unsensed_outcomes(s.pending, t):
+                if crossed:
+                    j = self.intern(Absorbing.TRUNCATED)
+                    row[j] = row.get(j, 0.0) + pu
+                    continue
+                skey = (s.world, act, occurred)
+                succ = self.succ.get(skey)
+                if succ is None:
+                    succ = self.succ[skey] = tuple(self.game.successors(s.world, act, occurred))
+                for (times, q), w in zip(s.hypotheses, s.weights, strict=True):
+                    for times2, new, pc, cut, now, waiting in self.sensed_branches(
+                            times, s.reported, t):
+                        base = w * pu * pc
+                        if cut:
+                            j = self.intern(Absorbing.TRUNCATED)
+                            row[j] = row.get(j, 0.0) + base
+                            continue
+                        happened = occurred | now
+                        left = (s.pending - occurred) | waiting
+                        for g2, pg in succ:
+                            if pg <= 0.0:
+                                continue
+                            label = self.label(g2) | happened
+                            q2 = self.automaton(q, label)
+                            obs: Obs = (g2, occurred, new)
+                            mass = base * pg
+                            if q2 == self.dta.rejecting or q2 == self.dta.accepting or (
+                                    not self.can_accept(q2, left)):
+                                end = (Absorbing.TARGET if q2 == self.dta.accepting
+                                       else Absorbing.SINK)
+                                j = self.intern(end)
+                                row[j] = row.get(j, 0.0) + mass
+                                ends.setdefault(obs, set()).add(end)
+                                continue
+                            group = groups.setdefault((obs, s.pending - occurred), {})
+                            group[(times2, q2)] = group.get((times2, q2), 0.0) + mass
+            moves = self.moves.setdefault((i, act), {})
+            for (obs, pending2), mass in groups.items():
+                g2, _, new = obs
+                state = self.make(g2, t + 1, s.reported | new, pending2, mass)
+                j = self.intern(state)
+                row[j] = row.get(j, 0.0) + math.fsum(mass.values())
+                moves[obs] = j
+            for obs, kinds in ends.items():
+                if obs not in moves:  # nothing undecided left: the verdict, if one
+                    moves[obs] = (next(iter(kinds)) if len(kinds) == 1
+                                  else Absorbing.TRUNCATED)
+            rows.append((act, row))
+        return rows
+
+    # ---------------------------------------------------------------- the MDP
+
+    def build(self) -> Belief:
+        game, dta = self.game, self.dta
+        q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
+        if q0 == dta.accepting:
+            initial = self.intern(Absorbing.TARGET)
+        elif q0 == dta.rejecting:
+            initial = self.intern(Absorbing.SINK)
+        else:
+            times0 = (NOT_YET,) * len(self.sensed)
+            initial = self.intern(self.make(game.initial, 0, frozenset(), self.unsensed,
+                                            {(times0, q0): 1.0}))
+        indptr, cols, vals = [0], [], []
+        groups, actions = [0], []
+        names: dict[str, int] = {}
+        head = 0
+        while head < len(self.states):
+            s = self.states[head]
+            if isinstance(s, Absorbing):
+                cols.append(head)
+                vals.append(1.0)
+                actions.append(ABSORB)
+            else:
+                for act, row in self.expand(head, s):
+                    cols.extend(row)
+                    vals.extend(row.values())
+                    actions.append(names.setdefault(act, len(names)))
+                    indptr.append(len(cols))
+                groups.append(len(actions))
+                head += 1
+                continue
+            indptr.append(len(cols))
+            groups.append(len(actions))
+            head += 1
+        n = len(self.states)
+        kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
+                         .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
+                        dtype=np.int8)
+        matrix = sp.csr_array((np.asarray(vals, dtype=np.float64),
+                               np.asarray(cols, dtype=np.int32),
+                               np.asarray(indptr, dtype=np.int64)), shape=(len(actions), n))
+        mdp = MDP(matrix=matrix, row_groups=np.asarray(groups, dtype=np.int64),
+                  choice_actions=np.asarray(actions, dtype=np.int32),
+                  action_names=tuple(sorted(names, key=names.__getitem__)),
+                  initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
+                  states=tuple(self.states))
+        return Belief(mdp, self.sta, self.sensed, self.sensors, self.moves)

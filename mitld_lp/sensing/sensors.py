@@ -1,0 +1,115 @@
+"""Sensors: how the robot learns that an external event happened.
+
+An event ``a`` with a sensor ``Sensor(detect=d, delay=D)`` happens at its hidden step
+``K`` (its law); from step ``K + D`` on, each step the sensor reports it with
+probability ``d``, independently of everything else, until it has reported it once.
+``d = 1, D = 0`` is the fully observed semantics (the robot sees the event the step it
+happens); an event without a sensor is seen that way.
+
+``false_alarm`` (a report in a step before the event) is read and checked here, and
+refused by name when a problem is posed (:func:`mitld_lp.problem.pose`): the
+information state is then not finite within this construction.
+
+A model file writes them under ``[sensors]``::
+
+    [sensors]
+    b1 = { detect = 0.8 }
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+from mitld_lp.files.keys import _Context, _join, _show, _type_name
+
+__all__ = ["Sensor", "read_sensors", "sensors_from", "partial", "SENSOR_KEYS"]
+
+SENSOR_KEYS = ("detect", "false_alarm", "delay")
+
+
+@dataclass(frozen=True, slots=True)
+class Sensor:
+    """How one event is reported (module docs): ``detect`` the per-step probability of a
+    report once the event has happened, ``false_alarm`` the per-step probability of a
+    report before it, ``delay`` the steps after the event before its report can come."""
+
+    detect: float
+    false_alarm: float = 0.0
+    delay: int = 0
+
+    @property
+    def perfect(self) -> bool:
+        """The fully observed semantics: reported the step the event happens."""
+        return self.detect == 1.0 and self.false_alarm == 0.0 and self.delay == 0
+
+    def __str__(self) -> str:
+        extra = "".join(
+            f", {k} = {_show(getattr(self, k))}" for k in ("false_alarm", "delay")
+            if getattr(self, k))
+        return f"{{ detect = {_show(self.detect)}{extra} }}"
+
+
+def _probability(ctx: _Context, value: Any, path: str, *, one: bool) -> float:
+    v = ctx.number(value, path)
+    if not (0.0 <= v <= 1.0) or (not one and v == 1.0):
+        what = "[0, 1]" if one else "[0, 1)"
+        raise ctx.error(path, f"must be a probability in {what}, got {_show(value)}")
+    return v
+
+
+def _one(ctx: _Context, value: Any, path: str) -> Sensor:
+    if isinstance(value, Sensor):
+        value = {k: getattr(value, k) for k in SENSOR_KEYS}
+    if not isinstance(value, Mapping):
+        raise ctx.error(path, f"must be a table such as {{ detect = 0.8 }}, got "
+                              f"{_type_name(value)} {_show(value)}")
+    table = dict(value)
+    ctx.keys(table, path, {"detect"}, {"false_alarm", "delay"})
+    detect = _probability(ctx, table["detect"], _join(path, "detect"), one=True)
+    false_alarm = 0.0
+    if "false_alarm" in table:
+        false_alarm = _probability(ctx, table["false_alarm"], _join(path, "false_alarm"),
+                                   one=False)
+    delay = 0
+    if "delay" in table:
+        delay = ctx.integer(table["delay"], _join(path, "delay"))
+        if delay < 0:
+            raise ctx.error(_join(path, "delay"), f"must be an integer >= 0, got {delay}")
+    return Sensor(detect, false_alarm, delay)
+
+
+def read_sensors(table: Any, events: Iterable[str], ctx: _Context,
+                 path: str = "sensors") -> Mapping[str, Sensor]:
+    """The ``[sensors]`` table of a model file (or :meth:`Model.from_game`'s
+    ``sensors``): one :class:`Sensor` per event named, each event one of ``events``.
+    Raises :class:`~mitld_lp.files.keys.ModelError` naming the key path
+    (``sensors.b1.detect``)."""
+    if not isinstance(table, Mapping):
+        raise ctx.error(path, f"must be a table of events, got {_type_name(table)} "
+                              f"{_show(table)}")
+    known = sorted(events)
+    out: dict[str, Sensor] = {}
+    for name, value in table.items():
+        where = _join(path, str(name))
+        if name not in known:
+            raise ctx.error(where, "not an event of the model (events: "
+                                   f"{', '.join(known) or 'none'})")
+        out[name] = _one(ctx, value, where)
+    return MappingProxyType(dict(sorted(out.items())))
+
+
+def sensors_from(value: Mapping[str, Any] | None, events: Iterable[str],
+                 ctx: _Context) -> Mapping[str, Sensor]:
+    """:func:`read_sensors` of an optional argument (``None``: no sensor)."""
+    if value is None:
+        return MappingProxyType({})
+    return read_sensors(value, events, ctx)
+
+
+def partial(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
+    """The sensors that change the problem: every one but the perfect ones
+    (``detect = 1``, no false alarm, no delay), which are the fully observed semantics."""
+    return {a: s for a, s in sensors.items() if not s.perfect}

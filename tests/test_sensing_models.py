@@ -1,0 +1,161 @@
+"""Sensors in model files and the problems they pose: ``detect = 1`` is today's route and
+answer on every bundled model; key-path errors; the combinations refused by name."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import subprocess
+import sys
+from pathlib import Path
+from types import MappingProxyType
+
+import pytest
+
+from mitld_lp import ExplicitGame, Model, load_model, loads_model, synthesize
+from mitld_lp.files.keys import ModelError
+from mitld_lp.problem import ProblemError, pose
+from mitld_lp.sensing import Sensor
+
+MODELS = sorted(Path(__file__).resolve().parent.parent.joinpath("models").glob("*.toml"))
+
+GRID = """
+name = "g"
+spec = "D[mu] b & F(b & F[0,2] A)"
+[grid]
+size = [3, 1]
+start = [0, 0]
+[regions]
+A = [[2, 0]]
+[distributions]
+mu = { geometric = 0.4 }
+"""
+
+
+@pytest.mark.parametrize("path", MODELS, ids=lambda p: p.stem)
+def test_perfect_sensors_give_todays_answer(path: Path) -> None:
+    model = load_model(path)
+    perfect = dataclasses.replace(model, sensors=MappingProxyType(
+        {e: Sensor(1.0) for e in model.distributions}))
+    a, b = synthesize(model), synthesize(perfect)
+    assert b.route == a.route != "sensed"
+    assert (a.lower, a.upper) == (b.lower, b.upper)
+
+
+def test_sensors_table_is_read() -> None:
+    m = loads_model(GRID + "[sensors]\nb = { detect = 0.8 }\n")
+    assert m.sensors == {"b": Sensor(0.8)}
+    assert pose(m).route == "sensed"
+    assert pose(loads_model(GRID + "[sensors]\nb = { detect = 1 }\n")).route == "plain"
+
+
+@pytest.mark.parametrize("table, where", [
+    ("b = { detect = 1.5 }", "sensors.b.detect: must be a probability in [0, 1]"),
+    ("b = { detect = true }", "sensors.b.detect: must be a number"),
+    ("b = { }", "sensors.b.detect: missing"),
+    ("b = { detect = 0.5, colour = 1 }", "sensors.b.colour: unknown key"),
+    ("c = { detect = 0.5 }", "sensors.c: not an event of the model"),
+    ("b = 0.5", "sensors.b: must be a table"),
+    ("b = { detect = 0.5, false_alarm = 1.0 }", "sensors.b.false_alarm: must be a probability"),
+    ("b = { detect = 0.5, delay = -1 }", "sensors.b.delay: must be an integer >= 0"),
+])
+def test_key_path_errors(table: str, where: str) -> None:
+    with pytest.raises(ModelError, match=re.escape(f"<string>: {where}")):
+        loads_model(GRID + "[sensors]\n" + table + "\n")
+
+
+def test_from_game_names_the_key() -> None:
+    g = ExplicitGame(initial="x", transitions={"x": {"w": {"x": 1.0}}}, labels={"x": {"A"}})
+    with pytest.raises(ModelError, match="sensors.b.detect"):
+        Model.from_game(g, "D[geometric(0.5)] b & F(b & A)", sensors={"b": {"detect": -1}})
+
+
+@pytest.mark.parametrize("extra, words", [
+    ("[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }", "sensors.b.false_alarm"),
+    ('constraints = ["P(F A) >= 0.1"]\n[sensors]\nb = { detect = 0.5 }', "constraint"),
+    ('objective = "min"\n[sensors]\nb = { detect = 0.5 }', "objective min"),
+])
+def test_refused_by_name(extra: str, words: str) -> None:
+    head, rest = GRID.split("[grid]")
+    text = head + (extra.split("[sensors]")[0]) + "[grid]" + rest + "[sensors]" + \
+        extra.split("[sensors]")[1] + "\n"
+    with pytest.raises(ProblemError, match=words.replace("(", r"\(")):
+        synthesize(loads_model(text))
+
+
+def test_safety_task_refused() -> None:
+    g = ExplicitGame(initial="x", transitions={"x": {"w": {"x": 1.0}}}, labels={"x": {"A"}})
+    safety = Model.from_game(g, "G (b -> A)", events={"b": _geometric()},
+                             sensors={"b": {"detect": 0.5}})
+    with pytest.raises(ProblemError, match="safety task with sensors"):
+        synthesize(safety)
+
+
+def _geometric():  # type: ignore[no-untyped-def]
+    from mitld_lp.distributions import geometric
+
+    return geometric(0.5)
+
+
+def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
+    model = tmp_path / "m.toml"
+    model.write_text(GRID + "[sensors]\nb = { detect = 0.5, false_alarm = 0.2 }\n")
+    run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
+                         capture_output=True, text=True)
+    assert run.returncode == 2
+    assert "sensors.b.false_alarm" in run.stderr and "Traceback" not in run.stderr
+    model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+
+
+@pytest.mark.parametrize("verb", [
+    ["info"], ["export", "--drn", "OUT.drn"], ["export", "--chain", "OUT.drn"],
+    ["plot", "--out", "OUT.png"],
+])
+def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]) -> None:
+    model = tmp_path / "m.toml"
+    model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    args = [a.replace("OUT", str(tmp_path / "out")) for a in verb]
+    run = subprocess.run([sys.executable, "-m", "mitld_lp", args[0], *args[1:], str(model)],
+                         capture_output=True, text=True)
+    assert run.returncode == 2, run.stderr
+    assert "sensor" in run.stderr and "Traceback" not in run.stderr
+    assert not list(tmp_path.glob("out*"))
+
+
+def test_plain_simulate_refuses_a_sensed_model() -> None:
+    from mitld_lp.running.simulate import simulate
+
+    sensed = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    plain = synthesize(loads_model(GRID))
+    with pytest.raises(ValueError, match="simulate_sensed"):
+        simulate(sensed, plain.controller, runs=10)
+
+
+def test_law_that_may_never_happen_is_refused() -> None:
+    g = ExplicitGame(initial="x", transitions={"x": {"w": {"x": 1.0}}}, labels={"x": {"A"}})
+    m = Model.from_game(g, "D[pmf(0.5, 0.3)] b & F(b & A)", sensors={"b": {"detect": 0.5}})
+    with pytest.raises(ProblemError, match="never happens"):
+        synthesize(m)
+
+
+def test_budgets_stop_the_information_states() -> None:
+    from mitld_lp.product import ProductTooLarge
+
+    m = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    states = synthesize(m).mdp.n_states
+    with pytest.raises(ProductTooLarge, match=f"more than {states - 1:,} states"):
+        synthesize(m, max_states=states - 1)
+    with pytest.raises(ProductTooLarge, match="more than 10,000 bytes"):
+        synthesize(m, max_memory=10_000)
+
+
+def test_model_with_sensors_pickles() -> None:
+    import pickle
+
+    m = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
+    back = pickle.loads(pickle.dumps(m))
+    assert back.sensors == {"b": Sensor(0.5)}
+    assert synthesize(back).lower == synthesize(m).lower
