@@ -112,6 +112,11 @@ def cmd_solve(args: argparse.Namespace) -> int:
                 f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
                 for (e, law), h in zip(summary["bands"].items(),
                                        summary["first_step_hazards"].values(), strict=True)))
+        if r.sensors:
+            _out("sensed:       the policy acts on what the robot observes; " + ", ".join(
+                f"{e} reported w.p. {sensor.detect:g} per step"
+                + (f" from {sensor.delay} steps after it" if sensor.delay else "")
+                for e, sensor in sorted(r.sensors.items())))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
         _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
