@@ -1,222 +1,38 @@
-"""``synthesize``: the one place that wires the stages.
+"""``synthesize`` and ``solve``: the one place that wires the stages, for every problem.
 
-    spec --to_dta--> DTA --make_sta--> STA --product(game)--> MDP --solve--> policy
+    problem --pose--> Posed --build_posed--> automaton, STA, product (Built)
+            --the route's solver and certificate--> Result
 
-The product is built once; its truncation sink counted as losing gives the *lower*
-model, as winning the *upper* model.  Each model is solved (occupancy LP or interval
-iteration) and certified:
-
-* the extracted deterministic policy is evaluated exactly on its Markov chain (sparse
-  solve): a value the policy really achieves;
-* interval iteration gives sound lower and upper bounds on the optimum;
-* with the LP, its primal objective, its dual objective (the value function at the
-  initial state), the policy's value and the iteration bracket must agree within
-  ``certify_tol``.
-
-``lower`` is the exact value of the returned policy in the lower model (truncation
-counted as failure): the policy achieves at least that in the real, untruncated world.
-``upper`` is the sound upper bound of interval iteration on the upper model: no policy
-does better.  So the true optimum lies in ``[lower, upper]``, and
-``upper - lower <= epsilon_achieved`` up to the solver tolerance.
+The routes: plain (:mod:`mitld_lp.routes.plain`: both truncation models solved and
+certified), robust (:mod:`mitld_lp.routes.robust`), constrained
+(:mod:`mitld_lp.routes.constrained`, and :mod:`mitld_lp.routes.robust_constrained` with
+a band), sensed (:mod:`mitld_lp.sensing.solve`).  On every route ``lower`` is what the
+returned controller achieves in the real, untruncated world and ``upper`` what no policy
+beats (docs/results.md).
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Literal, NoReturn
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Literal
 
 from mitld_lp import defaults
-from mitld_lp.checks import Check, close
-from mitld_lp.mdp import MDP
+from mitld_lp.checks import Check
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, SENSED, Posed, pose, settings_from
-from mitld_lp.result import Result, from_models
+from mitld_lp.problem import CONSTRAINED, ROBUST, SENSED, Posed, pose, settings_from
+from mitld_lp.result import Result
 from mitld_lp.routes.stages import Built, build_posed, build_product
-from mitld_lp.running.controller import Controller
-from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
-    from mitld_lp.routes.acceptance import Acceptance
     from mitld_lp.solvers.lp import Backend
-    from mitld_lp.solvers.quotient import Quotient
-    from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
-           "Result", "ModelSolution", "Check"]
+           "Result", "Check"]
 
 log = logging.getLogger(__name__)
 
-#: The product size from which its builder's freed memory is handed back to the system
-#: (:mod:`mitld_lp.util.heap`).  Below it the process's heap is tens of megabytes: its holes
-#: do not matter, while the pages touched again cost a few percent of a short solve.
-TRIM_FROM_TRANSITIONS = 1_000_000
-
 Method = Literal["lp", "vi"]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class ModelSolution:
-    """The solution of one of the two models (lower: truncation loses; upper: it wins)."""
-
-    which: str
-    status: Status
-    value: float  # the method's optimum at the initial state
-    policy: np.ndarray  # deterministic: a choice row per state, -1 where absorbing
-    policy_values: np.ndarray  # exact value of ``policy`` in every state (read-only)
-    bracket: tuple[float, float]  # interval iteration's sound bounds at the initial state
-    lp: LPResult | None
-    iteration: IterationResult
-    prob0: np.ndarray  # (n_states,) bool: the states from which the target is unreachable
-    checks: tuple[Check, ...]
-
-    @property
-    def certified(self) -> bool:
-        return all(c.passed for c in self.checks)
-
-    @property
-    def quotient(self) -> NoReturn:
-        """Gone: the reduction is released before the exact evaluations (its matrix was
-        a second copy of most transitions); what the result needs of it is ``prob0``."""
-        raise AttributeError("ModelSolution.quotient was removed: the reduction is freed "
-                             "once the LPs are solved; use ModelSolution.prob0, or "
-                             "mitld_lp.solvers.quotient.reduce(mdp, target) to rebuild it")
-
-
-@dataclass(frozen=True, slots=True)
-class _Settings:
-    """How each of the two models is solved and certified (:func:`synthesize`'s
-    arguments, typed once)."""
-
-    method: Method
-    solver: str
-    backend: Backend
-    tol: float
-    certify_tol: float
-    progress: bool
-    decompose: bool
-    deadline: float  # time.perf_counter() past which the solvers stop; inf: none
-
-    def remaining(self) -> float | None:
-        """Seconds left before the deadline (None: no deadline)."""
-        if self.deadline == float("inf"):
-            return None
-        return max(0.0, self.deadline - time.perf_counter())
-
-
-def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
-              how: _Settings) -> LPResult | None:
-    """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
-    :class:`Quotient`, made by the one analysis of the product both models share
-    (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
-    iteration (both models are iterated in one pass, :func:`_iterate`)."""
-    if how.method != "lp":
-        return None
-    from mitld_lp.solvers.lp import solve_lp
-
-    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
-                    backend=how.backend, tol=how.tol, decompose=how.decompose,
-                    time_limit=how.remaining(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0)
-
-
-def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
-               layers: tuple[np.ndarray, np.ndarray], it: IterationResult,
-               lp: LPResult | None, which: str, how: _Settings) -> ModelSolution:
-    """One model's answer and its certificate (module docs), on the product alone: the
-    quotient's matrix is released by then.  An LP that did not come back optimal (after
-    its own retries) is replaced by the interval-iteration policy, certified the same way
-    (exact value inside the bracket) when it failed numerically (``INACCURATE``,
-    ``MAX_ITERATIONS``)."""
-    from mitld_lp.solvers.iteration import evaluate_policy
-    from mitld_lp.solvers.result import Status, read_only
-
-    certify_tol = how.certify_tol
-    checks = [
-        Check("iteration converged", it.status is Status.OPTIMAL, it.message),
-    ]
-    policy, value, status = it.policy, it.value_lower, it.status
-    if lp is not None:
-        if lp.status is Status.OPTIMAL and lp.policy is not None:
-            policy, value, status = lp.policy, lp.value, lp.status
-            checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
-            checks.append(close("LP primal = dual", lp.primal_objective, lp.dual_objective,
-                                 certify_tol))
-        elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
-                it.status is Status.OPTIMAL):
-            # A numerical failure after the LP's own retries: the answer is the converged
-            # iteration's, certified below like method "vi"; the LP's word is kept.
-            checks.append(Check("LP replaced by the iteration policy", True,
-                                f"{lp.status.value}: {lp.message}"))
-        else:  # a usage error (solver not installed), a time limit, or no fallback
-            status = lp.status
-            checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    values = read_only(evaluate_policy(mdp, target, policy, layers=layers))
-    exact = float(values[mdp.initial])
-    lo, hi = it.value_lower, it.value_upper
-    checks.append(Check(
-        "policy value within iteration bracket",
-        lo - certify_tol <= exact <= hi + certify_tol,
-        f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
-    ))
-    checks.append(close("policy value = optimum", exact, value, certify_tol))
-    checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
-    checks.append(_bellman(mdp, target, values, certify_tol))
-    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, prob0,
-                         tuple(checks))
-
-
-def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
-    """Interval iteration of the models in one pass over their shared quotient.  When the
-    graph analysis decides the initial state, every component is still brought below the
-    tolerance (``gap="max"``), as the LP then solves every state (``everywhere``): the
-    certified policy is optimal in every state the Bellman check reads, not only where
-    the initial state leads."""
-    from mitld_lp.solvers.iteration import interval_iterations
-
-    decided = quotients[0].initial < 0
-    return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
-                               time_limit=how.remaining(),
-                               gap="max" if decided else "initial")
-
-
-def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
-    """The policy is optimal from every state, not only where it goes: no choice of any
-    state does better against the policy's exact values ``V`` than ``V`` itself,
-    ``max_c P(c) . V <= V(s) + tol`` (one sweep).  Then ``V`` is a pre-fixed point of
-    the Bellman operator, so ``V >= V*`` (the least one), and ``V <= V*`` as a policy's
-    values: the policy is optimal in every state."""
-    v = np.where(target, 1.0, values)
-    best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
-    gap = np.where(target, 0.0, best - v)
-    worst = int(np.argmax(gap)) if gap.size else 0
-    over = float(gap[worst]) if gap.size else 0.0
-    return Check("policy optimal in every state (Bellman)", over <= tol,
-                 f"max_s (max_c P(c).V - V(s)) = {over:.2e} (tol {tol:g})"
-                 + (f" at state {mdp.states[worst]}" if over > tol else ""))
-
-
-def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
-    """For a task with a safety part: ``solution`` whose policy plays, in the accepting
-    end components, an internal choice (never one that can leave them), with the check
-    that no state of them escapes under the policy.  Unchanged for a co-safe task."""
-    if accept.components is None:
-        return solution
-    from mitld_lp.solvers.accepting import escapes, keep_inside
-
-    policy = keep_inside(accept.components, solution.policy)
-    leaving = np.flatnonzero(escapes(mdp, policy, accept.goal))
-    check = Check(
-        "policy stays in the accepting end components",
-        leaving.size == 0,
-        f"{int(accept.goal.sum())} states in {accept.components.mecs.n_mecs} components; "
-        + (f"states {leaving[:10].tolist()} can leave" if leaving.size else "none can leave"),
-    )
-    return replace(solution, policy=policy, checks=(*solution.checks, check))
 
 
 def synthesize(
@@ -303,7 +119,9 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
         from mitld_lp.routes.constrained import solve_constrained
 
         return solve_constrained(posed, built, costs=costs, seed=seed)
-    return _solve_plain(posed, built)
+    from mitld_lp.routes.plain import solve_plain
+
+    return solve_plain(posed, built)
 
 
 def synthesize_constrained(
@@ -326,49 +144,3 @@ def synthesize_constrained(
     posed = pose(model, constraints, then=then, settings=settings_from(**options),
                  constrained=True)
     return solve(posed, costs=costs, seed=seed)
-
-
-def _solve_plain(posed: Posed, built: Built) -> Result:
-    """The plain route: point laws, no constraints, any supported task class."""
-    model, s = posed.model, posed.settings
-    eps = model.epsilon if s.epsilon is None else s.epsilon
-    mdp = built.mdp
-    timings: dict[str, float] = dict(built.timings)
-
-    t0, c0 = time.perf_counter(), time.process_time()
-    how = _Settings(s.method, s.solver, s.backend, s.tol, s.certify_tol,  # type: ignore[arg-type]
-                    s.progress, s.decompose is not False,
-                    float("inf") if s.time_limit is None else t0 + s.time_limit)
-    from mitld_lp.routes.acceptance import acceptance
-    from mitld_lp.solvers.analysis import analyse
-
-    # The builder's freed temporaries go back to the system (mitld_lp.util.heap).
-    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
-        release_free_memory()
-    accept = acceptance(mdp, built.dta)
-    quotients = analyse(mdp, accept.goal, mdp.truncated)
-    quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
-    its = _iterate(mdp, quotients, how)
-    lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
-    # The certificates work on the product: the reduced matrix (a second copy of most
-    # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.prob0, q.layers) for q in quotients]
-    del quotients
-    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
-                 zip(kept, its, lps, ("lower", "upper"), strict=False)]
-    low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
-    kept_low = _keeping(mdp, accept, low)
-    if high is low:
-        high = kept_low
-    low = kept_low
-    timings["solve"] = time.perf_counter() - t0
-    solve_cpu = time.process_time() - c0
-
-    result = Result(
-        route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
-        epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
-        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
-        timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **from_models(low, high, mdp.initial, posed.problem.objective))
-    log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
-    return result

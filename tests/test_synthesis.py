@@ -235,7 +235,7 @@ def test_the_reduced_matrix_is_released_before_the_exact_evaluations(monkeypatch
 
 
 def test_the_builders_memory_is_trimmed_only_for_large_products(monkeypatch):
-    import mitld_lp.synthesis as synthesis_module
+    import mitld_lp.routes.plain as synthesis_module
 
     calls = []
     monkeypatch.setattr(synthesis_module, "release_free_memory", lambda: calls.append(1))
