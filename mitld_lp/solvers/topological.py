@@ -37,6 +37,7 @@ from mitld_lp.solvers.graph import (
     gather_ranges,
     graph_blocks,
     graph_view,
+    rows_dot,
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient
@@ -117,7 +118,7 @@ def single_scores(q: Quotient, b: Blocks, states: np.ndarray, rewards: np.ndarra
     lo, hi = q.row_groups[states], q.row_groups[states + 1]
     choices = gather_ranges(lo, hi)
     values[states] = 0.0
-    reward = rewards[choices] + q.matrix[choices] @ values
+    reward = rewards[choices] + rows_dot(q.matrix, choices, values)
     leave = 1.0 - b.self_loop[choices]
     if reward.ndim == 2:
         leave = leave[:, None]
@@ -293,7 +294,7 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
     for level in blk.walk():
         one, inner = level.single, level.rest
         # the level's own states are still 0 in x: the right-hand sides see only below
-        x[one] = (b[one] + chain[one] @ x) / (1.0 - blk.self_loop[one])
+        x[one] = (b[one] + rows_dot(chain, one, x)) / (1.0 - blk.self_loop[one])
         if inner.size:
             rows = sp.csr_array(chain[inner])
             x[inner] = transient_solve(sp.csr_array(rows[:, inner]), b[inner] + rows @ x)
