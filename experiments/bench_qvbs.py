@@ -9,7 +9,8 @@ as ``experiments/qvbs.py`` poses it (the PRISM file as published, its constants,
 property as an MITLD spec).  Per instance, each route in a child process of its own:
 
 * ``ours``: :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` with their
-  defaults; ``solve_cpu`` is everything after the product is built, ``whole_cpu`` the
+  defaults; ``solve_cpu`` is everything after the product is built (the solver modules
+  imported before, as in ``bench_sweeps.py``), ``whole_cpu`` the
   load (the PRISM exploration) and the synthesis, ``process_cpu`` the whole child
   (imports included); ``bytes_per_transition`` the peak resident size over the size
   before ``synthesize``, per product transition.  After the figures are taken, the
@@ -85,6 +86,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     c = bs._cpu()
     model = load_model(job["model"], max_states=job["max_states"])
     load_cpu = bs._cpu() - c
+    bs.preload()
     before = bs._rss_kb()
     c = bs._cpu()
     r = synthesize(model)
