@@ -321,8 +321,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
         todo, skipped = jobs(args.qvbs, low, high, families, Path(tmp))
         if args.only:
             todo = [(i, j) for i, j in todo if i.name in set(args.only)]
+        todo.sort(key=lambda t: t[0].qvbs_states)  # smallest first: a cut-short run has rows
         if args.quick:
-            todo = sorted(todo, key=lambda t: -t[0].qvbs_states)[:QUICK_COUNT]
+            todo = todo[-QUICK_COUNT:]
         for inst, job in todo:
             work = Path(tmp) / inst.name
             work.mkdir()
