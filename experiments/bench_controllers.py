@@ -23,8 +23,8 @@ from pathlib import Path
 import _common
 
 from mitld_lp import load_model, synthesize
-from mitld_lp.chain import write_chain
-from mitld_lp.tree import tree_controller, tree_of
+from mitld_lp.running.chain import write_chain
+from mitld_lp.running.tree import tree_controller, tree_of
 
 PROBES = {
     "interpreter": "print(None)",

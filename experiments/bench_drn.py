@@ -17,9 +17,9 @@ import stormpy
 
 from mitld_lp import Model, load_model
 from mitld_lp.distributions import geometric
-from mitld_lp.gridworld import GridWorld
 from mitld_lp.solvers.export import write_drn
 from mitld_lp.synthesis import build_product
+from mitld_lp.worlds.grid import GridWorld
 
 
 def _timed(fn, *args, **kwargs):

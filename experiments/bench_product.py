@@ -29,12 +29,12 @@ import numpy as np
 
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.parser import parse
 from mitld_lp.mdp import MDP
 from mitld_lp.model import bind_distributions
 from mitld_lp.product import product
 from mitld_lp.testing import reference_product
+from mitld_lp.worlds.grid import GridWorld
 
 SPEC = (
     "D[geometric(0.2)] a & D[pmf(0.1, 0.2, 0.3, 0.4)] b & D[poisson(3.0)] c"

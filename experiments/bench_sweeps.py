@@ -107,7 +107,7 @@ def preload() -> None:
     solvers, the acceptance), so that ``solve_cpu`` is the solve and not a one-time
     library load (0.1-0.3 s): Storm's check is timed after stormpy is loaded too.  The
     process figures include it; numba, loaded only for a large product, stays inside."""
-    import mitld_lp.acceptance
+    import mitld_lp.routes.acceptance
     import mitld_lp.solvers.analysis
     import mitld_lp.solvers.iteration
     import mitld_lp.solvers.lp  # noqa: F401

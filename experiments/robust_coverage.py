@@ -33,8 +33,8 @@ import numpy as np
 from mitld_lp import Model, load_model, synthesize
 from mitld_lp.distributions import geometric
 from mitld_lp.distributions.fit import fit_law
-from mitld_lp.imdp import IntervalMDP
-from mitld_lp.robust_synthesis import RobustResult, robust_game
+from mitld_lp.product.imdp import IntervalMDP
+from mitld_lp.routes.robust import RobustResult, robust_game
 from mitld_lp.solvers.robust import robust_interval_iteration
 from mitld_lp.solvers.robust_export import write_interval_drn
 

@@ -25,10 +25,10 @@ from matplotlib.colors import Normalize
 from matplotlib.patches import Rectangle
 
 import mitld_lp
-from mitld_lp.gridworld import MOVES
 from mitld_lp.product import ProductState
 from mitld_lp.solvers.export import write_drn
 from mitld_lp.solvers.iteration import evaluate_policy
+from mitld_lp.worlds.grid import MOVES
 
 PAIRS = (("bus_grid.toml", "bus_puddle.toml"), ("patrol.toml", "patrol_nogo.toml"))
 

@@ -21,17 +21,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA
     from mitld_lp.automata.sta import STA, make_sta
     from mitld_lp.automata.translate import to_dta
-    from mitld_lp.controller import (
-        Controller,
-        ControllerFileError,
-        ControllerLike,
-        Observation,
-        RunStatus,
-    )
-    from mitld_lp.controller_random import ConstrainedController, load_controller
     from mitld_lp.distributions.fit import fit_law
-    from mitld_lp.game import ExplicitGame, Game
-    from mitld_lp.gridworld import GridWorld
     from mitld_lp.logic.parser import ParseError, parse, parse_distribution
     from mitld_lp.logic.syntax import (
         FALSE,
@@ -55,22 +45,32 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.model import Model, ModelError, load_model, loads_model
     from mitld_lp.problem import Problem, ProblemError, Settings, pose
     from mitld_lp.product import ProductState, product
-    from mitld_lp.simulate import simulate
+    from mitld_lp.running.controller import (
+        Controller,
+        ControllerFileError,
+        ControllerLike,
+        Observation,
+        RunStatus,
+    )
+    from mitld_lp.running.randomised import ConstrainedController, load_controller
+    from mitld_lp.running.simulate import simulate
     from mitld_lp.sweep import load_sweep, run_sweep
     from mitld_lp.synthesis import SynthesisResult, solve, synthesize, synthesize_constrained
+    from mitld_lp.worlds.game import ExplicitGame, Game
+    from mitld_lp.worlds.grid import GridWorld
 
 _WHERE = {  # public name -> the module defining it, imported on first use
     "DTA": "mitld_lp.automata.dta",
     "STA": "mitld_lp.automata.sta",
     "make_sta": "mitld_lp.automata.sta",
     "to_dta": "mitld_lp.automata.translate",
-    "Controller": "mitld_lp.controller",
-    "ControllerFileError": "mitld_lp.controller",
-    "Observation": "mitld_lp.controller",
-    "RunStatus": "mitld_lp.controller",
-    "ExplicitGame": "mitld_lp.game",
-    "Game": "mitld_lp.game",
-    "GridWorld": "mitld_lp.gridworld",
+    "Controller": "mitld_lp.running.controller",
+    "ControllerFileError": "mitld_lp.running.controller",
+    "Observation": "mitld_lp.running.controller",
+    "RunStatus": "mitld_lp.running.controller",
+    "ExplicitGame": "mitld_lp.worlds.game",
+    "Game": "mitld_lp.worlds.game",
+    "GridWorld": "mitld_lp.worlds.grid",
     "ParseError": "mitld_lp.logic.parser",
     "parse": "mitld_lp.logic.parser",
     "parse_distribution": "mitld_lp.logic.parser",
@@ -97,12 +97,12 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "loads_model": "mitld_lp.model",
     "ProductState": "mitld_lp.product",
     "product": "mitld_lp.product",
-    "simulate": "mitld_lp.simulate",
+    "simulate": "mitld_lp.running.simulate",
     "SynthesisResult": "mitld_lp.synthesis",
     "synthesize": "mitld_lp.synthesis",
-    "ConstrainedController": "mitld_lp.controller_random",
-    "load_controller": "mitld_lp.controller_random",
-    "ControllerLike": "mitld_lp.controller",
+    "ConstrainedController": "mitld_lp.running.randomised",
+    "load_controller": "mitld_lp.running.randomised",
+    "ControllerLike": "mitld_lp.running.controller",
     "solve": "mitld_lp.synthesis",
     "synthesize_constrained": "mitld_lp.synthesis",
     "pose": "mitld_lp.problem",
@@ -133,7 +133,7 @@ def __dir__() -> list[str]:
 
 
 class _Package(types.ModuleType):
-    """The package's module type: importing the submodule ``mitld_lp.simulate`` (or
+    """The package's module type: importing the submodule ``mitld_lp.running.simulate`` (or
     ``mitld_lp.product``) does not rebind the public name ``simulate`` (``product``),
     the function, to the module, as an eager ``from ... import`` used to ensure."""
 

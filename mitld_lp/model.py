@@ -20,7 +20,7 @@ The schema (also in docs/model-files.md)::
     mu1 = { geometric = 0.8 }           # mitld_lp.distributions.from_table)
 
     [constants]                         # optional: name -> value, written {name} in
-    T = 3                               # the spec (mitld_lp.constants)
+    T = 3                               # the spec (mitld_lp.files.constants)
 
 Every key is validated: unknown keys, wrong types (``true`` is not a number) and
 out-of-range values are errors.  The specification is parsed and checked to be in the
@@ -50,15 +50,11 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from mitld_lp import defaults, file_rules
-from mitld_lp.constants import substitute
+from mitld_lp import defaults
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_table
-from mitld_lp.game import Game, GameError, world_members
-from mitld_lp.gridworld import GridWorld
-from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
-from mitld_lp.logic.parser import ParseError, parse_source
-from mitld_lp.logic.syntax import Formula, atoms
-from mitld_lp.model_keys import (
+from mitld_lp.files import rules as file_rules
+from mitld_lp.files.constants import substitute
+from mitld_lp.files.keys import (
     ModelError,
     _Context,
     _join,
@@ -67,7 +63,12 @@ from mitld_lp.model_keys import (
     budgets_table,
     constraints_and_costs,
 )
-from mitld_lp.task import BindError, Task, bind, resolve_laws
+from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
+from mitld_lp.logic.parser import ParseError, parse_source
+from mitld_lp.logic.syntax import Formula, atoms
+from mitld_lp.worlds.game import Game, GameError, world_members
+from mitld_lp.worlds.grid import GridWorld
+from mitld_lp.worlds.task import BindError, Task, bind, resolve_laws
 
 __all__ = [
     "Model",
@@ -92,12 +93,12 @@ class Model:
         spec: the parsed specification.
         spec_text: the specification as written in the file.
         epsilon: the truncation budget shared over the events.
-        game: the world (today a :class:`mitld_lp.gridworld.GridWorld`).
+        game: the world (today a :class:`mitld_lp.worlds.grid.GridWorld`).
         distributions: read-only mapping ``event -> FirstOccurrence`` with one entry per
             external event of the spec (the events are exactly its keys).
         source: the file the model was read from, or ``None`` for :func:`loads_model`.
         constraints: the file's ``constraints`` (texts, checked when loaded; see
-            :mod:`mitld_lp.constraints`).
+            :mod:`mitld_lp.routes.constraints`).
         costs: the file's ``[costs]``: cost per action (1 for an action not named).
         objective: ``"max"`` (the default) or ``"min"``: the probability of the task is
             maximised or minimised (PRISM's ``Pmax`` / ``Pmin``).
@@ -148,8 +149,8 @@ class Model:
         ``D[name]`` to laws (inline literals such as ``D[geometric(0.3)]`` need none).
         Raises :class:`ModelError` (source ``<spec>``) when the spec does not parse or is
         unsupported, the game's members are missing or wrong
-        (:func:`mitld_lp.game.world_members`), or the task does not fit the game
-        (:func:`mitld_lp.task.bind`: a name is unbound or bound but unused, a
+        (:func:`mitld_lp.worlds.game.world_members`), or the task does not fit the game
+        (:func:`mitld_lp.worlds.task.bind`: a name is unbound or bound but unused, a
         proposition of the spec is neither a proposition of the game nor an event, a
         proposition of the game has an event's name, or the game reacts to events
         (``event_names``) the spec gives no distribution).  ``events`` gives events of
@@ -198,7 +199,7 @@ def _unpickle_model(
 
 
 def _no_check(game: Game[Any], task: Task, ctx: _Context) -> None:
-    """A kind with nothing to check beyond :func:`mitld_lp.task.bind`."""
+    """A kind with nothing to check beyond :func:`mitld_lp.worlds.task.bind`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,7 +212,7 @@ class _GameKind:
         proposition_noun: what the kind calls a robot proposition, for messages.
         build: ``(document, context) -> game``; validates its own tables.
         check_task: ``(game, task, context)``: what this kind refuses of a task bound to
-            its game beyond :func:`mitld_lp.task.bind` (the spec is read once, after the
+            its game beyond :func:`mitld_lp.worlds.task.bind` (the spec is read once, after the
             game is built).
     """
 
@@ -225,7 +226,7 @@ class _GameKind:
 def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
     """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
     values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
-    from mitld_lp.gridworld import GridError
+    from mitld_lp.worlds.grid import GridError
 
     grid = ctx.table(doc["grid"], "grid")
     ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})
@@ -388,7 +389,7 @@ def bind_distributions(
     spec: Formula, named: Mapping[str, FirstOccurrence] | None = None, source: str = "<spec>"
 ) -> dict[str, FirstOccurrence]:
     """The distribution of each external event of ``spec``: ``D[name]`` looked up in
-    ``named``, an inline literal built (:func:`mitld_lp.task.resolve_laws`).  Raises
+    ``named``, an inline literal built (:func:`mitld_lp.worlds.task.resolve_laws`).  Raises
     :class:`ModelError` naming the problem (an unsupported formula, an unknown name, a
     bad literal, a name bound but not used)."""
     ctx = _Context(source)
@@ -444,7 +445,7 @@ def _bind(
     ctx: _Context,
     declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> Task:
-    """:func:`mitld_lp.task.bind`, its faults as :class:`ModelError` with key paths."""
+    """:func:`mitld_lp.worlds.task.bind`, its faults as :class:`ModelError` with key paths."""
     try:
         return bind(game, report, named, noun=noun, declared=declared)
     except BindError as exc:
@@ -519,7 +520,7 @@ def _load(
         except ValueError as err:
             raise ctx.error("epsilon", str(err)) from None
 
-    # {name} in the spec stands for a value under [constants] (mitld_lp.constants)
+    # {name} in the spec stands for a value under [constants] (mitld_lp.files.constants)
     spec_text = substitute(spec_text, ctx.table(doc.get("constants", {}), "constants"),
                            ctx.error)
     doc = {**doc, "spec": spec_text}

@@ -13,9 +13,9 @@ The routes (which solver chain accepts the problem):
 * ``plain``: point laws, no constraints; any supported task class (co-safe, safety,
   obligation) -- :mod:`mitld_lp.synthesis`;
 * ``robust``: some law known only within a band (an interval parameter or a fit from
-  data), no constraints; co-safe tasks -- :mod:`mitld_lp.robust_synthesis`;
+  data), no constraints; co-safe tasks -- :mod:`mitld_lp.routes.robust`;
 * ``constrained``: constraints or a ``then`` objective with point laws; co-safe task and
-  constraint formulas -- :mod:`mitld_lp.constrained`.
+  constraint formulas -- :mod:`mitld_lp.routes.constrained`.
 
 ``objective = "min"`` (PRISM's ``Pmin``) is solved as the maximum of the complement:
 ``Pmin(phi) = 1 - Pmax(not phi)``, with the complement taken on the automaton
@@ -167,7 +167,7 @@ class Problem:
     ``"min-cost"``) among the optimal policies."""
 
     model: Any  # mitld_lp.model.Model (not imported: the model imports the worlds)
-    constraints: tuple[Any, ...] = ()  # mitld_lp.constraints.Constraint records
+    constraints: tuple[Any, ...] = ()  # mitld_lp.routes.constraints.Constraint records
     then: str | None = None
     objective: str = "max"
 
@@ -198,14 +198,14 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
          settings: Settings | None = None, objective: str | None = None,
          constrained: bool = False) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
-    texts or :class:`~mitld_lp.constraints.Constraint` records, after the model's own;
+    texts or :class:`~mitld_lp.routes.constraints.Constraint` records, after the model's own;
     ``objective``: the model's unless given; ``constrained``: the constrained LP's
     route even with no constraint (the trade-off curve's end points).  Raises
     :class:`ProblemError` naming the combination no route solves, or the option the
     route cannot honour."""
-    from mitld_lp.constraints import THEN, ConstraintError, parse_constraints
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
+    from mitld_lp.routes.constraints import THEN, ConstraintError, parse_constraints
 
     if not isinstance(model, Model):
         raise TypeError(

@@ -1,6 +1,6 @@
 """What a :class:`~mitld_lp.synthesis.SynthesisResult` says, as data: the policy table
 (one row per undecided product state), the JSON summary (the command line's ``--json``)
-and the table a notebook shows.  Files are written by :mod:`mitld_lp.files`."""
+and the table a notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from html import escape
 from typing import Any
 
 from mitld_lp.product import ProductState
-from mitld_lp.world_names import state_record
+from mitld_lp.worlds.names import state_record
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
 #: this module, and an import, even for types only, would make a circle).
@@ -25,7 +25,7 @@ def policy_table(result: SynthesisResult) -> list[dict[str, Any]]:
     """The policy as data: one row per product state that is still undecided.
 
     Keys: ``game_state`` (the game's own state; a PRISM world's as an object of its
-    variables by name, :func:`mitld_lp.world_names.state_record`), ``automaton_state``
+    variables by name, :func:`mitld_lp.worlds.names.state_record`), ``automaton_state``
     (the obligation still to satisfy, as formula text), ``pending`` (the events that
     have not happened,
     sorted), ``clock`` (steps counted for the pending events, capped where their hazards

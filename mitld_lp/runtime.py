@@ -6,7 +6,7 @@
     action = controller.act((1, 0), {"b1"})
     ...                                   # None once the task is decided
 
-The file is read by :mod:`mitld_lp.saved_plan`; this module is the one place that steps
+The file is read by :mod:`mitld_lp.running.saved_plan`; this module is the one place that steps
 a controller: :class:`mitld_lp.Controller` and :class:`mitld_lp.ConstrainedController`
 act through :class:`Stepper` too, so the runtime and the library cannot disagree.  Both
 modules import only the standard library and NumPy (``import mitld_lp`` itself loads
@@ -28,7 +28,7 @@ from typing import IO, Any, Protocol
 
 import numpy as np
 
-from mitld_lp.saved_plan import (
+from mitld_lp.running.saved_plan import (
     ACCEPTED,
     FORMAT,
     REJECTED,

@@ -37,20 +37,20 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check, close
-from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.game import Game
-from mitld_lp.heap import release_free_memory
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, PLAIN, ROBUST, Posed, pose, settings_from
 from mitld_lp.product import product
+from mitld_lp.running.controller import Controller
+from mitld_lp.util.heap import release_free_memory
+from mitld_lp.worlds.game import Game
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
-    from mitld_lp.acceptance import Acceptance
-    from mitld_lp.constrained import ConstrainedResult
-    from mitld_lp.robust_synthesis import RobustResult
+    from mitld_lp.routes.acceptance import Acceptance
+    from mitld_lp.routes.constrained import ConstrainedResult
+    from mitld_lp.routes.robust import RobustResult
     from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
@@ -61,7 +61,7 @@ __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Bu
 log = logging.getLogger(__name__)
 
 #: The product size from which its builder's freed memory is handed back to the system
-#: (:mod:`mitld_lp.heap`).  Below it the process's heap is tens of megabytes: its holes
+#: (:mod:`mitld_lp.util.heap`).  Below it the process's heap is tens of megabytes: its holes
 #: do not matter, while the pages touched again cost a few percent of a short solve.
 TRIM_FROM_TRANSITIONS = 1_000_000
 
@@ -192,8 +192,8 @@ class SynthesisResult:
         return report.policy_table(self)
 
     def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write_policy`)."""
-        from mitld_lp.files import write_policy
+        """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write.write_policy`)."""
+        from mitld_lp.files.write import write_policy
 
         return write_policy(self, path, overwrite=overwrite)
 
@@ -428,8 +428,8 @@ def synthesize(
     block in topological order (``None``, the default, or ``True``) or as one LP
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
     ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
-    constrained synthesis (:mod:`mitld_lp.constrained`); a law known only within a band:
-    the robust synthesis (:mod:`mitld_lp.robust_synthesis`).
+    constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law known only within a band:
+    the robust synthesis (:mod:`mitld_lp.routes.robust`).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -446,7 +446,7 @@ def synthesize(
 def solve(posed: Posed) -> Result:
     """Solve a posed problem on its route (:mod:`mitld_lp.problem`)."""
     if posed.route == ROBUST:
-        from mitld_lp.robust_synthesis import synthesize_robust
+        from mitld_lp.routes.robust import synthesize_robust
 
         return synthesize_robust(posed)
     if posed.route == CONSTRAINED:
@@ -457,12 +457,12 @@ def solve(posed: Posed) -> Result:
 def _constrained(posed: Posed, costs: Mapping[str, float] | None = None,
                  seed: int | None = 0) -> ConstrainedResult:
     """The constrained route: the occupancy LP with constraint rows, and for a law known
-    only within a band its sound robust bracket (:mod:`mitld_lp.robust_constrained`)."""
+    only within a band its sound robust bracket (:mod:`mitld_lp.routes.robust_constrained`)."""
     if posed.robust:
-        from mitld_lp.robust_constrained import solve_robust_constrained
+        from mitld_lp.routes.robust_constrained import solve_robust_constrained
 
         return solve_robust_constrained(posed, costs=costs, seed=seed)
-    from mitld_lp.constrained import solve_constrained
+    from mitld_lp.routes.constrained import solve_constrained
 
     return solve_constrained(posed, costs=costs, seed=seed)
 
@@ -479,7 +479,7 @@ def synthesize_constrained(
     """Maximise the task's probability subject to ``constraints`` (texts or records;
     the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
     or ``"min-cost"``), minimise the expected steps / cost among the policies within
-    :data:`~mitld_lp.constraints.LEXICOGRAPHIC_TOL` of that probability; by the
+    :data:`~mitld_lp.routes.constraints.LEXICOGRAPHIC_TOL` of that probability; by the
     constrained LP even with no constraint (docs/constraints.md).  ``costs``: per action
     (default the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
     controller's generator.  ``options``: :func:`synthesize`'s settings (epsilon,
@@ -501,10 +501,10 @@ def _solve_plain(posed: Posed) -> SynthesisResult:
     how = _Settings(s.method, s.solver, s.backend, s.tol, s.certify_tol,  # type: ignore[arg-type]
                     s.progress, s.decompose is not False,
                     float("inf") if s.time_limit is None else t0 + s.time_limit)
-    from mitld_lp.acceptance import acceptance
+    from mitld_lp.routes.acceptance import acceptance
     from mitld_lp.solvers.analysis import analyse
 
-    # The builder's freed temporaries go back to the system (mitld_lp.heap).
+    # The builder's freed temporaries go back to the system (mitld_lp.util.heap).
     if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
         release_free_memory()
     accept = acceptance(mdp, built.dta)

@@ -1,12 +1,12 @@
-"""The array kernels (``mitld_lp.arrays``) against plain Python dictionaries and loops."""
+"""The array kernels (``mitld_lp.util.arrays``) against plain Python dictionaries and loops."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mitld_lp import arrays
-from mitld_lp.arrays import Grow, Index, Memo, concatenate, merge, ranks
+from mitld_lp.util import arrays
+from mitld_lp.util.arrays import Grow, Index, Memo, concatenate, merge, ranks
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -17,13 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mitld_lp import files, load_model
+from mitld_lp import load_model
 from mitld_lp.cli import main
 from mitld_lp.distributions.fit import fit_law, read_observations
-from mitld_lp.imdp import vertex_rows
+from mitld_lp.files import write as files
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.product import budget as budget_module
-from mitld_lp.robust_synthesis import interval_model
+from mitld_lp.product.imdp import vertex_rows
+from mitld_lp.routes.robust import interval_model
 from mitld_lp.sweep import SweepError, load_sweep
 from mitld_lp.sweep.results import Results
 
@@ -98,7 +99,7 @@ def test_a_fifo_is_refused_without_blocking(tmp_path, what):
 
 _LOAD = """\
 from mitld_lp import Controller
-from mitld_lp.controller_file import ControllerFileError
+from mitld_lp.running.controller_file import ControllerFileError
 try:
     Controller.load({path!r})
 except ControllerFileError as err:
@@ -301,7 +302,7 @@ def test_vertex_rows_are_the_weighted_sums_of_the_branches(tmp_path):
 
 
 def test_a_start_too_wide_for_max_memory_is_refused_before_the_build():
-    from mitld_lp.imdp import BYTES_PER_WEIGHT
+    from mitld_lp.product.imdp import BYTES_PER_WEIGHT
 
     b = budget_module.BuildBudget(10**9, 20_000_000, None)  # type: ignore[arg-type]
     # by hand: 10 events, 4^10 weights at BYTES_PER_WEIGHT = 48 bytes: 50.3 MB > 20 MB;

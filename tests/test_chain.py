@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from mitld_lp import synthesize
-from mitld_lp.chain import chain_of, write_chain
-from mitld_lp.controller_random import load_controller
 from mitld_lp.distributions import geometric, pmf, poisson
-from mitld_lp.game import ExplicitGame
 from mitld_lp.model import Model, load_model
+from mitld_lp.running.chain import chain_of, write_chain
+from mitld_lp.running.randomised import load_controller
 from mitld_lp.synthesis import synthesize_constrained
+from mitld_lp.worlds.game import ExplicitGame
 
 stormpy = pytest.importorskip("stormpy")
 

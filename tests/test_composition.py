@@ -222,7 +222,7 @@ def test_point_laws_through_the_robust_route_keep_a_safety_part_as_the_plain_rou
     against every nature) and the plain route's accepting end components are different
     algorithms; with a point law they must give one answer."""
     from mitld_lp.distributions.literal import from_table
-    from mitld_lp.robust_synthesis import synthesize_robust
+    from mitld_lp.routes.robust import synthesize_robust
 
     world = GridWorld.make(4, 3, start=(0, 0), slip=0.2, regions=_SLIPPERY)
     m = Model.from_game(world, spec, distributions={"mu": from_table({"geometric": 0.3},
@@ -408,7 +408,7 @@ def _gamble() -> ExplicitGame:
 def test_a_safety_task_with_a_constraint_by_hand() -> None:
     """max P(G !h) s.t. P(F g) >= 0.5: play go w.p. q >= 5/7, P(G !h) = 1 - 0.3 q, so
     1 - 0.3 * 5/7 (by hand); the controller's runs agree within their 4-sigma band."""
-    from mitld_lp.constrained_runs import run_constrained
+    from mitld_lp.running.constrained_runs import run_constrained
 
     r = synthesize(Model.from_game(_gamble(), "G !h"), constraints=["P(F g) >= 0.5"])
     assert r.route == "constrained" and r.certified, r.checks
@@ -544,7 +544,7 @@ def test_every_cell_of_the_composition_matrix(task: str, law: str, extra: str) -
         assert r.lower <= fixed.upper + 1e-9  # no bracket claims more than a law allows
         assert fixed.lower <= alone.upper + 1e-9  # extras only lower the optimum
     if law == "point" and extra == "none":
-        from mitld_lp.robust_synthesis import synthesize_robust
+        from mitld_lp.routes.robust import synthesize_robust
 
         other = synthesize_robust(model)
         assert other.lower == pytest.approx(r.lower, abs=1e-8)

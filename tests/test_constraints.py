@@ -14,12 +14,12 @@ import pytest
 from scipy.optimize import linprog
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.constrained_runs import run_constrained
-from mitld_lp.constraints import ConstraintError, parse_constraint
-from mitld_lp.game import ExplicitGame
 from mitld_lp.model import Model, ModelError, loads_model
+from mitld_lp.routes.constraints import ConstraintError, parse_constraint
+from mitld_lp.running.constrained_runs import run_constrained
 from mitld_lp.synthesis import synthesize, synthesize_constrained
 from mitld_lp.testing import two_routes_world
+from mitld_lp.worlds.game import ExplicitGame
 
 HAND = two_routes_world()  # worked by hand: safe 1/2; risky 0.9, 0.3 via a hazard
 

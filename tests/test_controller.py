@@ -19,13 +19,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mitld_lp import GridWorld, Model, Observation, RunStatus, synthesize
-from mitld_lp.controller import Controller, ControllerFileError
-from mitld_lp.controller_file import decode_state, encode_state
 from mitld_lp.distributions import weibull
-from mitld_lp.game import ExplicitGame, check_game
 from mitld_lp.model import load_model
 from mitld_lp.product import ProductState
-from mitld_lp.simulate import rollout, simulate
+from mitld_lp.running.controller import Controller, ControllerFileError
+from mitld_lp.running.controller_file import decode_state, encode_state
+from mitld_lp.running.simulate import rollout, simulate
+from mitld_lp.worlds.game import ExplicitGame, check_game
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"

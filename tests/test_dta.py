@@ -20,10 +20,10 @@ from hypothesis import HealthCheck, given, settings
 import mitld_lp.automata.translate as T
 from mitld_lp.automata.dta import DTA, KINDS, Location
 from mitld_lp.cli import main
-from mitld_lp.hypothesis import formulas
 from mitld_lp.logic import check, nnf, parse
 from mitld_lp.logic import syntax as S
 from mitld_lp.logic.normal import c_and, c_or, c_until, normal_form
+from mitld_lp.testing.hypothesis import formulas
 
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
 

@@ -1,4 +1,4 @@
-"""Files the package writes (``mitld_lp.files``): the one rule for an output path, and
+"""Files the package writes (``mitld_lp.files.write``): the one rule for an output path, and
 the write through a temporary file renamed into place, so that a failed or interrupted
 write (SIGINT, in a subprocess, in the middle of a large export) leaves the old file
 exactly as it was and no temporary file behind."""
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from mitld_lp import files
 from mitld_lp.cli import main
+from mitld_lp.files import write as files
 
 ROOT = Path(__file__).resolve().parent.parent
 BUS = ROOT / "models" / "bus_grid.toml"
@@ -232,7 +232,7 @@ def test_an_abandoned_thread_renames_nothing(tmp_path):
 
 SLOW_WRITER = textwrap.dedent("""
     import sys, time
-    from mitld_lp import files
+    from mitld_lp.files import write as files
 
     out = files.writable_path(sys.argv[1], overwrite=True, suffixes=(".csv",))
     with files.replacing(out) as handle:

@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic.fragment import (
     CO_SAFE,
     OBLIGATION,
@@ -44,6 +43,7 @@ from mitld_lp.logic.syntax import (
     Until,
     subformulas,
 )
+from mitld_lp.testing.hypothesis import formulas, traces
 
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
 p, q = Prop("p"), Prop("q")

@@ -53,13 +53,13 @@ from mitld_lp import (
     parse_distribution,
 )
 from mitld_lp.distributions import from_spec
-from mitld_lp.hypothesis import formulas
 from mitld_lp.logic.fragment import FragmentError, check
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.logic.syntax import DistLiteral
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.synthesis import synthesize
 from mitld_lp.testing import fuzz
+from mitld_lp.testing.hypothesis import formulas
 
 ROOT = Path(__file__).resolve().parent.parent
 GRID_MODELS = ("bus_grid", "bus_grid_case2", "patrol", "red_light")

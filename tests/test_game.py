@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from mitld_lp.game import ExplicitGame, Game, GameCheck, GameError, check_game
+from mitld_lp.worlds.game import ExplicitGame, Game, GameCheck, GameError, check_game
 
 
 def coin_game() -> ExplicitGame:

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mitld_lp.game import Game, check_game
-from mitld_lp.gridworld import ACTIONS, GridError, GridWorld
+from mitld_lp.worlds.game import Game, check_game
+from mitld_lp.worlds.grid import ACTIONS, GridError, GridWorld
 
 
 def dist(g: GridWorld, cell: tuple[int, int], action: str) -> dict[tuple[int, int], float]:

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PROBE = """
 import os
 import numpy as np
-from mitld_lp.heap import release_free_memory
+from mitld_lp.util.heap import release_free_memory
 
 def resident():
     with open("/proc/self/statm") as f:
@@ -50,7 +50,7 @@ def test_free_pages_inside_the_heap_go_back_to_the_system():
 
 
 def test_elsewhere_it_says_it_could_not(monkeypatch):
-    from mitld_lp import heap
+    from mitld_lp.util import heap
 
     monkeypatch.setattr(heap.sys, "platform", "darwin")
     heap._malloc_trim.cache_clear()

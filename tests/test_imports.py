@@ -48,7 +48,7 @@ def test_a_solve_nobody_watches_imports_no_progress_bar():
         "assert not heavy_seen, sorted(m for m in sys.modules if 'tqdm' in m)")
     assert "mitld_lp.solvers.lp" in solved
     shown = subprocess.run(
-        [sys.executable, "-c", "import sys\nfrom mitld_lp.progress import bar\n"
+        [sys.executable, "-c", "import sys\nfrom mitld_lp.util.progress import bar\n"
          "b = bar(True, total=2, disable=True)\nb.update(); b.close()\n"
          "print('tqdm' in sys.modules)"],
         capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
@@ -96,7 +96,7 @@ def test_the_command_line_starts_blas_with_one_thread_unless_told_otherwise():
 def test_progress_bars_follow_tqdms_rule(monkeypatch):
     # None: a bar where standard error is a terminal or in a notebook (tqdm's widget),
     # none in a pipe (here: pytest captures standard error)
-    from mitld_lp import progress
+    from mitld_lp.util import progress
 
     monkeypatch.delitem(sys.modules, "ipykernel", raising=False)
     assert isinstance(progress.bar(None, total=1), progress._Off)

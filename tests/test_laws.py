@@ -14,11 +14,11 @@ import pytest
 from mitld_lp import model as M
 from mitld_lp.cli import main
 from mitld_lp.distributions import FAMILIES, DistributionError, Family, from_spec, from_table
-from mitld_lp.hypothesis import KEYWORDS
 from mitld_lp.logic import check, parse
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError, parse_distribution
 from mitld_lp.logic.syntax import RESERVED, DistLiteral, Prop, dist
+from mitld_lp.testing.hypothesis import KEYWORDS
 
 # (formula, column of the law's family name, a word of the reason), from issue 12 item 4.
 BAD_LAWS = [

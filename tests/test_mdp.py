@@ -214,7 +214,7 @@ def test_quotient_has_no_end_components(seed: int) -> None:
 
 
 def test_unique_is_numpys_unique():
-    from mitld_lp.arrays import unique
+    from mitld_lp.util.arrays import unique
 
     rng = np.random.default_rng(3)
     for size in (0, 1, 7, 1000):

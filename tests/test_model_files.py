@@ -11,7 +11,6 @@ from typing import Any
 import pytest
 
 import mitld_lp.model as model_module
-from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic.syntax import (
     DistRef,
     Prop,
@@ -24,6 +23,7 @@ from mitld_lp.logic.syntax import (
     until,
 )
 from mitld_lp.model import DEFAULT_EPSILON, Model, ModelError, load_model, loads_model
+from mitld_lp.worlds.grid import GridWorld
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 BUS_GRID = MODELS / "bus_grid.toml"

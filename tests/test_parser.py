@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mitld_lp.hypothesis import dist_specs, formulas, identifiers
 from mitld_lp.logic.fragment import nnf
 from mitld_lp.logic.parser import MAX_DEPTH, ParseError, parse, parse_distribution
 from mitld_lp.logic.syntax import (
@@ -31,6 +30,7 @@ from mitld_lp.logic.syntax import (
     release,
     until,
 )
+from mitld_lp.testing.hypothesis import dist_specs, formulas, identifiers
 
 p, q, r, s = Prop("p"), Prop("q"), Prop("r"), Prop("s")
 

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 from lark import Lark
 from lark.exceptions import UnexpectedInput
 
-from mitld_lp.hypothesis import formulas
 from mitld_lp.logic import tables
+from mitld_lp.testing.hypothesis import formulas
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The file as stored, read as the package reads it, whatever its digest and lark version.

@@ -36,7 +36,6 @@ from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import progress as _progress
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.distributions import geometric, pmf
-from mitld_lp.gridworld import GridWorld
 from mitld_lp.logic import parse
 from mitld_lp.logic.syntax import FALSE, TRUE
 from mitld_lp.model import load_model
@@ -50,6 +49,7 @@ from mitld_lp.product import (
     product,
 )
 from mitld_lp.testing import reference_product
+from mitld_lp.worlds.grid import GridWorld
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 PAPER = "(D[mu1] b1 & F(b1 & F[0,3] A)) | (D[mu2] b2 & F(b2 & F[0,3] B))"
@@ -518,7 +518,7 @@ RANDOM_SPECS = (
 
 
 def _random_game(rng: np.random.Generator, events: list[str]):
-    from mitld_lp.game import ExplicitGame
+    from mitld_lp.worlds.game import ExplicitGame
 
     n = int(rng.integers(2, 9))
     names = ["a", "b", "c"]
@@ -655,7 +655,7 @@ def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, mo
     """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("mitld_lp.arrays"), "DENSE_LIMIT", 8)
+    monkeypatch.setattr(importlib.import_module("mitld_lp.util.arrays"), "DENSE_LIMIT", 8)
     rng = np.random.default_rng(seed)
     text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
     game = _random_game(rng, sorted(dists))

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from mitld_lp import Model, make_sta, parse, synthesize, to_dta
-from mitld_lp.game import GameError
 from mitld_lp.product import product
-from mitld_lp.successors import distribution_fault, distribution_faults
+from mitld_lp.worlds.game import GameError
+from mitld_lp.worlds.successors import distribution_fault, distribution_faults
 
 
 class _Line:

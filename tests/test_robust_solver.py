@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from mitld_lp.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.mdp import ABSORB
+from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.robust import (

@@ -18,7 +18,7 @@ from mitld_lp.cli import main
 from mitld_lp.distributions import from_table, geometric
 from mitld_lp.problem import ProblemError
 from mitld_lp.product import product, robust_product
-from mitld_lp.robust_synthesis import RobustResult, synthesize_robust
+from mitld_lp.routes.robust import RobustResult, synthesize_robust
 from mitld_lp.solvers.robust_export import write_interval_drn
 from mitld_lp.synthesis import SynthesisResult
 

@@ -2,7 +2,7 @@
 ``mitld-lp run`` answers JSON observations line by line.
 
 Independent routes: the observations come from a simulation of the grid world and of
-the bus arrivals written here (not :mod:`mitld_lp.simulate`), in lockstep with the
+the bus arrivals written here (not :mod:`mitld_lp.running.simulate`), in lockstep with the
 in-memory controller, whose actions the subprocess must reproduce; the import list of a
 fresh interpreter is read from ``sys.modules``; the clock rule is compared with the
 STA's own on random inputs."""
@@ -61,8 +61,8 @@ def test_runtime_imports_numpy_alone(tmp_path: Path) -> None:
     assert not roots & set(NOT_HERE), sorted(roots & set(NOT_HERE))
     ours = sorted(m for m in reply["modules"] if m.startswith("mitld_lp"))
     # file_rules: the bounded reader of files a user names (the standard library only)
-    assert ours == ["mitld_lp", "mitld_lp.file_rules", "mitld_lp.runtime",
-                    "mitld_lp.saved_plan", "mitld_lp.startup"]
+    assert ours == ["mitld_lp", "mitld_lp.files.rules", "mitld_lp.runtime",
+                    "mitld_lp.running.saved_plan", "mitld_lp.startup"]
 
 
 # --------------------------------------------------------------------------- a world here

@@ -184,7 +184,7 @@ def test_controller_never_leaves_the_accepting_components() -> None:
 
 
 def test_simulation_sees_violations_and_agrees() -> None:
-    from mitld_lp.simulate import simulate
+    from mitld_lp.running.simulate import simulate
 
     world = _cross(0.1)
     r = synthesize(Model.from_game(world, "G !hazard & F goal"))

@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic.fragment import horizon
 from mitld_lp.logic.parser import parse
 from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
@@ -26,6 +25,7 @@ from mitld_lp.logic.syntax import (
     Release,
     Until,
 )
+from mitld_lp.testing.hypothesis import formulas, traces
 
 T, F, U = Verdict.TRUE, Verdict.FALSE, Verdict.UNKNOWN
 

@@ -1,4 +1,4 @@
-"""Monte-Carlo rollouts (``mitld_lp.simulate``): the Wilson interval against its defining
+"""Monte-Carlo rollouts (``mitld_lp.running.simulate``): the Wilson interval against its defining
 equation, the ends of the interval at true values 0 and 1, and argument checks."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from mitld_lp import GridWorld, Model, synthesize
-from mitld_lp.simulate import _wilson, simulate
+from mitld_lp.running.simulate import _wilson, simulate
 
 Z = 1.959963984540054
 

@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mitld_lp.hypothesis import formulas, intervals, traces
 from mitld_lp.logic.syntax import (
     FALSE,
     TRUE,
@@ -38,6 +37,7 @@ from mitld_lp.logic.syntax import (
     subformulas,
     until,
 )
+from mitld_lp.testing.hypothesis import formulas, intervals, traces
 
 p, q, r = Prop("p"), Prop("q"), Prop("r")
 FS = formulas(max_depth=3, max_bound=4)

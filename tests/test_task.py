@@ -1,4 +1,4 @@
-"""One binding of a task to a world (``mitld_lp.task``): every route says the same thing.
+"""One binding of a task to a world (``mitld_lp.worlds.task``): every route says the same thing.
 
 The routes are the model file, ``Model.from_game`` and ``product`` on a hand-made STA;
 each fault below is written once and must be refused by all three with one message.
@@ -12,7 +12,7 @@ from mitld_lp import GridWorld, Model, ModelError, loads_model, make_sta, parse,
 from mitld_lp.distributions import geometric
 from mitld_lp.logic.fragment import check
 from mitld_lp.product import product
-from mitld_lp.task import BindError, bind, check_alphabet, resolve_laws
+from mitld_lp.worlds.task import BindError, bind, check_alphabet, resolve_laws
 
 WORLD = GridWorld.make(3, 1, start=(0, 0), regions={"A": [(2, 0)]})
 GRID_TOML = """

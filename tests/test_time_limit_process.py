@@ -46,7 +46,8 @@ def test_a_long_native_call_does_not_outlive_the_limit(tmp_path: Path) -> None:
 SCRIPT = """
 import re, sys
 from pathlib import Path
-from mitld_lp import files, watch
+from mitld_lp.files import write as files
+from mitld_lp.util import watch
 
 code = watch.watched(0.5, lambda: print("stop line from the parent", file=sys.stderr))
 if code is not None:

@@ -51,10 +51,10 @@ from hypothesis import strategies as st
 from mtl import sugar
 
 from mitld_lp.automata.translate import progress, to_dta
-from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic import parse
 from mitld_lp.logic import syntax as S
 from mitld_lp.logic.semantics import Verdict, holds
+from mitld_lp.testing.hypothesis import formulas, traces
 
 PROPS = ("p", "q", "r")
 

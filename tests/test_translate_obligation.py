@@ -28,7 +28,6 @@ from test_translate import ours, theirs  # the same trees in our syntax and in m
 
 from mitld_lp.automata.dta import ACCEPT, OPEN, REJECT, SAFE
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.hypothesis import formulas, traces
 from mitld_lp.logic import parse
 from mitld_lp.logic import syntax as S
 from mitld_lp.logic.fragment import (
@@ -39,6 +38,7 @@ from mitld_lp.logic.fragment import (
     classify,
 )
 from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
+from mitld_lp.testing.hypothesis import formulas, traces
 
 PROPS = ("p", "q", "r")
 LETTERS = [frozenset(c) for n in range(len(PROPS) + 1) for c in itertools.combinations(PROPS, n)]

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from mitld_lp import Observation, synthesize
-from mitld_lp.chain import chain_of, write_chain
 from mitld_lp.model import load_model
 from mitld_lp.product import ProductState
+from mitld_lp.running.chain import chain_of, write_chain
+from mitld_lp.running.tree import tree_controller, tree_of, tree_value, write_tree
 from mitld_lp.synthesis import synthesize_constrained
-from mitld_lp.tree import tree_controller, tree_of, tree_value, write_tree
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

@@ -1,4 +1,4 @@
-"""The members a world declares beyond the Game protocol (``mitld_lp.game.WorldMembers``).
+"""The members a world declares beyond the Game protocol (``mitld_lp.worlds.game.WorldMembers``).
 
 Every world kind says which events its moves react to, and an event it reacts to that
 the spec gives no law is refused for every kind with one message.  Before, a PRISM
@@ -17,11 +17,11 @@ from mitld_lp import ExplicitGame, GridWorld, Model, ModelError, load_model, syn
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.distributions import geometric
-from mitld_lp.game import GameError, WorldMembers, world_members
 from mitld_lp.logic import parse
 from mitld_lp.product import estimate_size, product
-from mitld_lp.task import BindError
+from mitld_lp.worlds.game import GameError, WorldMembers, world_members
 from mitld_lp.worlds.gym import from_transition_table
+from mitld_lp.worlds.task import BindError
 
 needs_storm = pytest.mark.skipif(
     importlib.util.find_spec("stormpy") is None, reason="stormpy is not installed"

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mitld_lp import Model, synthesize
-from mitld_lp.game import check_game
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.game import check_game
 from mitld_lp.worlds.gym import FROZEN_LAKE_ACTIONS, from_env, from_transition_table, map_labels
 
 # A three-state chain: from 0, "go" (1) reaches 1 with 0.6 (else stays, listed twice to

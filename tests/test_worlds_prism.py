@@ -13,9 +13,9 @@ import pytest
 from scipy import stats
 
 from mitld_lp import Model, load_model, synthesize
-from mitld_lp.game import check_game
 from mitld_lp.model import ModelError, loads_model
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.game import check_game
 from mitld_lp.worlds.prism import DEADLOCK_ACTION, load_prism
 
 # Tests that build a PRISM file need Storm; the others (install hint, import hygiene) run

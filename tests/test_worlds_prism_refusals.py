@@ -312,7 +312,7 @@ def test_world_and_product_budgets_are_separate_settings(tmp_path: Path) -> None
     ("1048576T", 1 << 60), ("1P", 1 << 50), ("2PiB", 2 << 50), ("1.5G", 3 << 29), ("7E", 7 << 60),
 ])
 def test_memory_sizes_take_every_unit(text: str, value: int) -> None:
-    from mitld_lp.arguments import memory_size
+    from mitld_lp.cli.arguments import memory_size
 
     assert memory_size(text) == value
 
@@ -321,7 +321,7 @@ def test_memory_sizes_take_every_unit(text: str, value: int) -> None:
 def test_memory_sizes_out_of_range_are_refused(text: str) -> None:
     import argparse
 
-    from mitld_lp.arguments import memory_size
+    from mitld_lp.cli.arguments import memory_size
 
     with pytest.raises(argparse.ArgumentTypeError):
         memory_size(text)

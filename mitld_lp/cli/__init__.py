@@ -29,8 +29,7 @@ import time
 from collections.abc import Callable
 from typing import Any, NoReturn
 
-from mitld_lp import files, watch
-from mitld_lp.arguments import seconds
+from mitld_lp.cli.arguments import seconds
 from mitld_lp.cli.kernel import (
     _BUDGET_STOPS,
     _USER_ERRORS,
@@ -45,7 +44,9 @@ from mitld_lp.cli.kernel import (
     _dumps,
     _say,
 )
-from mitld_lp.text import printable
+from mitld_lp.files import write as files
+from mitld_lp.util import watch
+from mitld_lp.util.text import printable
 
 __all__ = ["main", "run", "UsageError", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE",
            "EXIT_UNCERTIFIED", "EXIT_INTERRUPTED", "PROG"]

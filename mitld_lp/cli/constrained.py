@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from mitld_lp.constraints import THEN, ConstraintError
+from mitld_lp.routes.constraints import THEN, ConstraintError
 
 __all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto"]
 
@@ -76,8 +76,8 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
 
 
 def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
-    from mitld_lp import files
     from mitld_lp.cli.kernel import _write
+    from mitld_lp.files import write as files
 
     def write(p: Path) -> None:
         if p.suffix.lower() == ".json":
@@ -95,7 +95,7 @@ def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def args_pareto(p: argparse.ArgumentParser) -> None:
-    from mitld_lp.arguments import bounded_int
+    from mitld_lp.cli.arguments import bounded_int
     from mitld_lp.cli.kernel import _args_model
 
     _args_model(p)
@@ -111,7 +111,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     """Trace the certified trade-off curve."""
     from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _out, _output_path, _write
     from mitld_lp.model import load_model
-    from mitld_lp.pareto import pareto, plot, write_csv
+    from mitld_lp.routes.pareto import pareto, plot, write_csv
 
     out_csv = _output_path(args.csv, args.force, "--csv", (".csv",))
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))

@@ -1,8 +1,8 @@
 """The command line's ``export`` verb: the occupancy LP (MPS/LP), the product MDP (Storm's
 DRN) and, for a law known only within a band, the interval MDP (DRN with intervals);
 and, from a synthesis, its controller (``--controller``), the controlled chain
-(``--chain``, :mod:`mitld_lp.chain`) and the decision tree (``--tree``,
-:mod:`mitld_lp.tree`).  Wired into :mod:`mitld_lp.cli` (which owns exit codes and error
+(``--chain``, :mod:`mitld_lp.running.chain`) and the decision tree (``--tree``,
+:mod:`mitld_lp.running.tree`).  Wired into :mod:`mitld_lp.cli` (which owns exit codes and error
 lines)."""
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mitld_lp import files
 from mitld_lp.cli.kernel import (
     EXIT_OK,
     EXIT_UNCERTIFIED,
@@ -24,6 +23,7 @@ from mitld_lp.cli.kernel import (
     _time_left,
     _write,
 )
+from mitld_lp.files import write as files
 
 __all__ = ["args_export", "cmd_export"]
 
@@ -48,8 +48,8 @@ def args_export(p: argparse.ArgumentParser) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
+    from mitld_lp.running.tree import TREE_SUFFIXES
     from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
-    from mitld_lp.tree import TREE_SUFFIXES
 
     wanted = (args.lp, args.drn, args.controller, args.chain, args.tree)
     if all(w is None for w in wanted):
@@ -74,7 +74,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         code = _controller_exports(args, controller, chain, tree)
     if lp is None and drn is None:
         return code
-    from mitld_lp.acceptance import acceptance
+    from mitld_lp.routes.acceptance import acceptance
 
     if _robust_export(args, lp, drn):
         return EXIT_OK
@@ -100,8 +100,8 @@ def _world_valuation(game: Any) -> Callable[[object], str] | None:
     """How the DRN names a world state: a PRISM world's by its variables (``x=2 &
     open=true``, as Storm's own exporter names PRISM states); any other world's as
     ``game=...`` (None: the default)."""
-    from mitld_lp.controller_file import world_variables
-    from mitld_lp.world_names import state_values, valuation_text
+    from mitld_lp.running.controller_file import world_variables
+    from mitld_lp.worlds.names import state_values, valuation_text
 
     names = world_variables(game)
     if names is None:
@@ -114,15 +114,15 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
     """Synthesise (the model's own problem: constraints give a randomised controller)
     and write its controller, chain and tree; exit 3 when the answer is not certified
     (the files are written all the same, and say what they are)."""
-    from mitld_lp.chain import chain_drn, chain_of
     from mitld_lp.model import load_model
+    from mitld_lp.running.chain import chain_drn, chain_of
+    from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
-    from mitld_lp.tree import tree_of
 
     if args.upper:
         raise UsageError("export --upper: the upper model has no controller of its own; "
                          "--controller, --chain and --tree export the synthesised one")
-    from mitld_lp.robust_synthesis import is_robust
+    from mitld_lp.routes.robust import is_robust
 
     model = load_model(args.model, max_states=args.max_world_states,
                        max_memory=args.max_memory)
@@ -148,7 +148,7 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
         _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
     if tree:
-        from mitld_lp.tree import write_tree
+        from mitld_lp.running.tree import write_tree
 
         t = tree_of(r, same_actions=args.same_actions)
         _write(tree, lambda p: write_tree(r, p, tree=t, overwrite=True))
@@ -165,7 +165,7 @@ def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) 
     optimum is a max-min, no one LP: --lp is refused).  False for any other model."""
     from mitld_lp.cli.kernel import posed_model
     from mitld_lp.model import load_model
-    from mitld_lp.robust_synthesis import interval_model, is_robust
+    from mitld_lp.routes.robust import interval_model, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
 
     model = load_model(args.model, max_states=args.max_world_states,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from mitld_lp import defaults, files
-from mitld_lp.arguments import bounded_int
+from mitld_lp import defaults
+from mitld_lp.cli.arguments import bounded_int
 from mitld_lp.cli.kernel import (
     _DOT_SUFFIXES,
     _USER_ERRORS,
@@ -17,6 +17,7 @@ from mitld_lp.cli.kernel import (
     _output_path,
     _write,
 )
+from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 

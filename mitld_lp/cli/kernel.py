@@ -15,18 +15,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mitld_lp import defaults, files
-from mitld_lp.arguments import bounded_int, memory_size, probability_budget
+from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
+from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
 from mitld_lp.distributions import DistributionError
+from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
 from mitld_lp.problem import CONSTRAINED, ProblemError
 from mitld_lp.product import ProductTooLarge
-from mitld_lp.saved_plan import ControllerFileError
+from mitld_lp.running.saved_plan import ControllerFileError
 from mitld_lp.sweep.spec import SweepError
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
     from mitld_lp.problem import Posed, Settings
@@ -65,7 +66,7 @@ EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2
 
 def _output_path(given: str, force: bool, what: str, suffixes: tuple[str, ...] = ()) -> Path:
     """Check, before any work, that ``given`` can be written (the one rule,
-    :func:`mitld_lp.files.writable_path`)."""
+    :func:`mitld_lp.files.write.writable_path`)."""
     return files.writable_path(given, overwrite=force, suffixes=suffixes, what=what,
                                force="--force")
 
@@ -74,7 +75,7 @@ _DOT_SUFFIXES = (".dot", ".gv")
 
 
 def _write(path: Path, write: Callable[[Path], object]) -> None:
-    """Run ``write(path)`` (a writer of :mod:`mitld_lp.files`, which replaces the file
+    """Run ``write(path)`` (a writer of :mod:`mitld_lp.files.write`, which replaces the file
     only once it is complete); an OS error (disk full, no permission) is a one-line
     error."""
     try:

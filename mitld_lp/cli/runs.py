@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from mitld_lp import defaults
-from mitld_lp.arguments import bounded_int, probability_budget
+from mitld_lp.cli.arguments import bounded_int, probability_budget
 from mitld_lp.cli.kernel import (
     EXIT_INTERNAL,
     EXIT_OK,
@@ -34,7 +34,7 @@ from mitld_lp.cli.kernel import (
     solve_settings,
     unconstrained,
 )
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
 
 
 def is_pattern(name: str) -> bool:
@@ -185,7 +185,7 @@ def args_plot(p: argparse.ArgumentParser) -> None:
 
 def cmd_plot(args: argparse.Namespace) -> int:
     """Draw a grid world's policy, or a column of a sweep's results."""
-    from mitld_lp import plot
+    from mitld_lp.files import plot
 
     out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
     table = Path(args.input).suffix.lower() in (".csv", ".parquet")
@@ -237,7 +237,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
     from mitld_lp.model import load_model
     from mitld_lp.problem import pose, settings_from
-    from mitld_lp.simulate import simulate
+    from mitld_lp.running.simulate import simulate
     from mitld_lp.synthesis import solve
 
     model = load_model(args.model, max_states=args.max_world_states,

@@ -7,9 +7,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mitld_lp import defaults, files
-from mitld_lp.arguments import solver_name
+from mitld_lp import defaults
 from mitld_lp.cli import constrained, runs
+from mitld_lp.cli.arguments import solver_name
 from mitld_lp.cli.kernel import (
     EXIT_OK,
     EXIT_UNCERTIFIED,
@@ -24,6 +24,7 @@ from mitld_lp.cli.kernel import (
     print_head,
     solve_settings,
 )
+from mitld_lp.files import write as files
 
 __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 

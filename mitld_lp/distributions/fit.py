@@ -53,7 +53,6 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
-from mitld_lp import file_rules
 from mitld_lp.distributions import scipy_laws
 from mitld_lp.distributions.band import ConstantBand, TableBand, band_of_laws
 from mitld_lp.distributions.families import (
@@ -68,6 +67,7 @@ from mitld_lp.distributions.families import (
 )
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
 from mitld_lp.distributions.printing import literal_text
+from mitld_lp.files import rules as file_rules
 
 __all__ = [
     "MIN_OBSERVATIONS", "DIRECTIONS", "FIT_FAMILIES", "Observations", "Parameter", "Fit",

@@ -36,7 +36,7 @@ from typing import Any, overload
 import numpy as np
 import numpy.typing as npt
 
-from mitld_lp.text import excerpt
+from mitld_lp.util.text import excerpt
 
 __all__ = [
     "DistributionError",

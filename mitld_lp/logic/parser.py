@@ -76,7 +76,7 @@ from mitld_lp.logic.syntax import (
     until,
     weak,
 )
-from mitld_lp.text import excerpt
+from mitld_lp.util.text import excerpt
 
 __all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
 

@@ -25,7 +25,7 @@ from types import MappingProxyType
 from lark import Tree
 
 from mitld_lp.logic.syntax import Dist, Formula
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
 
 __all__ = ["LawSite", "Source", "source_of"]
 

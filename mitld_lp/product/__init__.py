@@ -28,7 +28,7 @@ The modules, one concern each: :mod:`~mitld_lp.product.build` (the breadth-first
 construction and the MDP's assembly), :mod:`~mitld_lp.product.layers` (the factors,
 each asked once), :mod:`~mitld_lp.product.states` (the key codec and the state
 records), :mod:`~mitld_lp.product.budget` (the size estimate and the budgets); the array
-kernels they use are in :mod:`mitld_lp.arrays`.
+kernels they use are in :mod:`mitld_lp.util.arrays`.
 """
 
 from mitld_lp.product.budget import (

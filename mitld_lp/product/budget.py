@@ -6,11 +6,11 @@ before a batch's new states are stored, a product over ``max_states`` states or 
 ``max_memory`` bytes (:data:`BYTES_PER_STATE`, :data:`BYTES_PER_TRANSITION`).
 
 A robust product (some law a band) is solved on nature's vertex distributions
-(:func:`mitld_lp.imdp.vertex_rows`): a choice with ``k`` ambiguous events has ``2^k``
+(:func:`mitld_lp.product.imdp.vertex_rows`): a choice with ``k`` ambiguous events has ``2^k``
 vertex rows, each over the union of its ``2^k`` branches' successors, computed from
 ``2^k x 2^k`` weights.  The budget counts them too, as the build finds the choices
 (:data:`BYTES_PER_VERTEX_ENTRY`, :data:`BYTES_PER_VERTEX_ROW`, and the widest block of
-weights at :data:`mitld_lp.imdp.BYTES_PER_WEIGHT`), and before anything is built
+weights at :data:`mitld_lp.product.imdp.BYTES_PER_WEIGHT`), and before anything is built
 refuses a task whose start alone, with every event pending, would not fit
 (:meth:`BuildBudget.check_start`).
 """
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from mitld_lp.automata.sta import STA
-from mitld_lp.game import Game, world_members
-from mitld_lp.imdp import BYTES_PER_WEIGHT, WEIGHT_BLOCK
+from mitld_lp.product.imdp import BYTES_PER_WEIGHT, WEIGHT_BLOCK
+from mitld_lp.worlds.game import Game, world_members
 
 __all__ = [
     "ProductTooLarge",
@@ -79,7 +79,7 @@ class SizeEstimate:
     state is a game state, a non-absorbing automaton state and a situation (the pending
     events and a clock value at most ``cap(pending)``), plus the three absorbing states.
     ``game_states`` is None (and so is ``states``) for a game that does not say how many
-    states it has (:attr:`mitld_lp.game.WorldMembers.n_states`).
+    states it has (:attr:`mitld_lp.worlds.game.WorldMembers.n_states`).
     """
 
     game_states: int | None
@@ -139,7 +139,7 @@ class BuildBudget:
         self.widest = max(self.widest, widest)
 
     def _weight_block(self) -> float:
-        """Bytes of the largest block of weights :func:`~mitld_lp.imdp.vertex_rows`
+        """Bytes of the largest block of weights :func:`~mitld_lp.product.imdp.vertex_rows`
         holds at once: a block, or one choice wider than a block, or all the weights
         when they are fewer."""
         return min(max(WEIGHT_BLOCK, 4**self.widest), self.weights) * BYTES_PER_WEIGHT

@@ -10,16 +10,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.arrays import Grow, Index, concatenate, merge, ranks
 from mitld_lp.automata.sta import STA
-from mitld_lp.game import Game
-from mitld_lp.imdp import IntervalMDP
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
+from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
-from mitld_lp.progress import bar as progress_bar
-from mitld_lp.task import check_alphabet
+from mitld_lp.util.arrays import Grow, Index, concatenate, merge, ranks
+from mitld_lp.util.progress import bar as progress_bar
+from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.task import check_alphabet
 
 __all__ = ["product", "robust_product"]
 
@@ -56,8 +56,8 @@ def product(
     :class:`ProductTooLarge` naming the numbers.
     ``progress``: show a progress bar (None: only on a terminal, for large builds).
 
-    Raises :class:`mitld_lp.task.BindError` (a ``ValueError``) when the task does not fit
-    the game (:func:`mitld_lp.task.check_alphabet`: a proposition the automaton reads
+    Raises :class:`mitld_lp.worlds.task.BindError` (a ``ValueError``) when the task does not fit
+    the game (:func:`mitld_lp.worlds.task.check_alphabet`: a proposition the automaton reads
     that is neither a proposition of the game nor an event of the STA, an event with a
     proposition's name, an event the game reacts to without a law).
     """
@@ -74,7 +74,7 @@ def robust_product(
     max_memory: int | None = None,
     progress: bool | None = None,
 ) -> IntervalMDP:
-    """The product as an interval MDP (:mod:`mitld_lp.imdp`) when some event's law is a
+    """The product as an interval MDP (:mod:`mitld_lp.product.imdp`) when some event's law is a
     band: built like :func:`product`, but a choice's rows are kept apart by which
     ambiguous events happened (its branches), each weighted by the events known exactly
     only, and each choice carries the hazard intervals of its ambiguous events.  With no
@@ -135,7 +135,7 @@ def _build(
 
 def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:
     """Nature's vertex distributions of a robust batch's choices
-    (:func:`mitld_lp.imdp.vertex_rows`): ``(entries, rows, weights, widest)``.  A choice
+    (:func:`mitld_lp.product.imdp.vertex_rows`): ``(entries, rows, weights, widest)``.  A choice
     with ``k`` ambiguous events has ``2^k`` vertex rows, each over the union of the
     successors of its ``2^k`` branches, and ``4^k`` weights."""
     cols, row_len, n_branch, n_bands = chunk[0], chunk[2], chunk[5], chunk[6]

@@ -13,12 +13,17 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.arrays import Grow, Memo, unique
 from mitld_lp.automata.sta import STA, TRUNCATED
-from mitld_lp.game import Game, GameError, WorldMembers
 from mitld_lp.product.budget import ProductTooLarge
 from mitld_lp.product.states import CODE, Absorbing, KeyCodec
-from mitld_lp.successors import as_probabilities, distribution_fault, distribution_faults, place
+from mitld_lp.util.arrays import Grow, Memo, unique
+from mitld_lp.worlds.game import Game, GameError, WorldMembers
+from mitld_lp.worlds.successors import (
+    as_probabilities,
+    distribution_fault,
+    distribution_faults,
+    place,
+)
 
 __all__ = ["Layers"]
 
@@ -159,7 +164,7 @@ class Layers:
         """Store successor rows (pairs ``(game state, probability)``) as rows of ``g``;
         ``asked``: the memo key of each.  Answers that are not pairs of a hashable state
         and a number are refused here; the probabilities are checked in
-        :meth:`check_rows`.  Raises :class:`mitld_lp.game.GameError`."""
+        :meth:`check_rows`.  Raises :class:`mitld_lp.worlds.game.GameError`."""
         gid = self.gid
         try:
             lengths = np.array([len(r) for r in rows], dtype=np.int64)
@@ -182,8 +187,8 @@ class Layers:
 
     def check_rows(self) -> None:
         """Check that the rows stored since the last call are distributions, all at once
-        (:func:`mitld_lp.game.distribution_faults`); the build calls it once more at
-        its end.  Raises :class:`mitld_lp.game.GameError` naming the state, action and
+        (:func:`mitld_lp.worlds.game.distribution_faults`); the build calls it once more at
+        its end.  Raises :class:`mitld_lp.worlds.game.GameError` naming the state, action and
         events of the first row that is not."""
         first = self.rows_checked
         if first == self.row_len.size:

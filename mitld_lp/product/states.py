@@ -17,8 +17,8 @@ from typing import Any, overload
 
 import numpy as np
 
-from mitld_lp.arrays import unique
 from mitld_lp.mdp import MDP
+from mitld_lp.util.arrays import unique
 
 __all__ = [
     "Absorbing",

@@ -1,7 +1,7 @@
 """Export the occupancy LP (MPS / CPLEX-LP, via HiGHS), whose optimum is the value, and
 the MDP (Storm's DRN format).
 
-Both writers follow the package's one rule for output files (:mod:`mitld_lp.files`):
+Both writers follow the package's one rule for output files (:mod:`mitld_lp.files.write`):
 they refuse to overwrite an existing file unless ``overwrite=True``, and write to a
 temporary file renamed over the target once complete, so an interrupted or failed write
 leaves the target as it was.
@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp import files
+from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP, as_state_mask
-from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.lp import occupancy_lp
+from mitld_lp.util.quiet import native_quiet
 
 __all__ = ["drn_text", "write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
 
@@ -62,7 +62,7 @@ def write_lp(
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
-        ValueError: a path :func:`mitld_lp.files.writable_path` refuses (a suffix other
+        ValueError: a path :func:`mitld_lp.files.write.writable_path` refuses (a suffix other
             than ``.mps``/``.lp``).
         OSError: HiGHS failed to write the file.
     """
@@ -271,7 +271,7 @@ def write_drn(
     action).  Labels: ``init``; ``target`` and ``accept`` on the states of ``target``
     (so ``Pmax=? [F "accept"]`` in Storm is the quantity :func:`solve_lp` computes; for
     a task with a safety part the caller passes the union of its accepting end
-    components, :func:`mitld_lp.acceptance.acceptance`);
+    components, :func:`mitld_lp.routes.acceptance.acceptance`);
     ``sink``; ``truncated`` (unless ``truncated_label=False``).  With ``valuations``,
     each ``state`` line is followed by the state's valuation as Storm's own exporter
     writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
@@ -283,7 +283,7 @@ def write_drn(
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
-        ValueError: a path :func:`mitld_lp.files.writable_path` refuses.
+        ValueError: a path :func:`mitld_lp.files.write.writable_path` refuses.
     """
     target = as_state_mask(mdp, target, "target")
     p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)

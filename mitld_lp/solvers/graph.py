@@ -18,9 +18,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from mitld_lp.arrays import unique
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.result import read_only
+from mitld_lp.util.arrays import unique
 
 __all__ = [
     "Blocks",

@@ -47,8 +47,6 @@ from scipy.sparse import csgraph
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
-from mitld_lp.progress import Bar
-from mitld_lp.progress import bar as progress_bar
 from mitld_lp.solvers.graph import backward_reachable, segmented_argmax
 from mitld_lp.solvers.kernels import Prepared, compiled_sweeps, numpy_sweeps, use_compiled
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
@@ -64,6 +62,8 @@ from mitld_lp.solvers.topological import (
     state_graph,
     transient_solve,
 )
+from mitld_lp.util.progress import Bar
+from mitld_lp.util.progress import bar as progress_bar
 
 __all__ = ["interval_iteration", "interval_iterations", "evaluate_policy"]
 

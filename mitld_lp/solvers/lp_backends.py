@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.quiet import native_quiet
 from mitld_lp.solvers.result import Status
+from mitld_lp.util.quiet import native_quiet
 
 __all__ = ["CLARABEL_STATUS", "Matrices", "Raw", "Settings", "solve_one", "unusable_reason"]
 

@@ -8,7 +8,7 @@ The robust Bellman operator of a :class:`~.robust_graph.RobustGame` is
     (B V)(s) = \max_{c \in Act(s)} \; \min_{v \in Rows(c)} \; P_v \cdot V,
 
 nature's rows being the vertex distributions of the hazard box
-(:func:`mitld_lp.imdp.vertex_rows`: the inner minimum over the box of a multilinear
+(:func:`mitld_lp.product.imdp.vertex_rows`: the inner minimum over the box of a multilinear
 function is attained at a vertex).  The robust value ``V*`` is its least fixed point with
 ``V = 1`` on the target.
 

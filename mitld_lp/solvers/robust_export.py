@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mitld_lp import files
-from mitld_lp.imdp import IntervalMDP, vertex_weights
+from mitld_lp.files import write as files
 from mitld_lp.mdp import ABSORB
+from mitld_lp.product.imdp import IntervalMDP, vertex_weights
 from mitld_lp.solvers.export import DRN_SUFFIXES, _drn_action
 
 __all__ = ["branch_intervals", "write_interval_drn"]
@@ -67,7 +67,7 @@ def write_interval_drn(
     """Write ``imdp`` as an interval DRN (module docstring).  States ``0 .. n-1`` are the
     product's, the outcome states follow.  Labels: ``init``; ``target`` and ``accept`` on
     ``target``; ``sink``; ``truncated``.  Raises ``FileExistsError`` (``path`` exists,
-    no ``overwrite``) or ``ValueError`` (a path :func:`mitld_lp.files.writable_path`
+    no ``overwrite``) or ``ValueError`` (a path :func:`mitld_lp.files.write.writable_path`
     refuses)."""
     target = np.asarray(target, dtype=bool)
     p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)

@@ -1,5 +1,5 @@
 """Graph analyses of a robust game: the robot picks a choice, nature one of the choice's
-vertex distributions (:mod:`mitld_lp.imdp`).  An outcome whose probability is 0 at some
+vertex distributions (:mod:`mitld_lp.product.imdp`).  An outcome whose probability is 0 at some
 end of a hazard band is missing from that vertex row, so every analysis here sees the
 graphs nature can make, not the nominal one.
 

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mitld_lp.progress import bar as progress_bar
 from mitld_lp.sweep.results import Results, point_key
 from mitld_lp.sweep.rows import RESULT_COLUMNS, TIME_COLUMNS, PointTask, Settings
 from mitld_lp.sweep.spec import Sweep, SweepError, load_sweep
+from mitld_lp.util.progress import bar as progress_bar
 
 __all__ = ["sweep", "run_sweep", "SweepRun", "Sweep", "SweepError", "Settings", "load_sweep",
            "TIME_COLUMNS"]

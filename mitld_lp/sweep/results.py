@@ -14,7 +14,7 @@ parameter (named by its key path), then :data:`mitld_lp.sweep.rows.RESULT_COLUMN
 A results file is only ever extended by the sweep it belongs to: opening it for another
 sweep (another ``sweep_id``), or opening a file that is no results file, is refused.
 It is read only if it is a regular file (not a FIFO or a device), and only up to
-:func:`mitld_lp.files.read_limit`; a path the writing rule refuses (a folder, a folder
+:func:`mitld_lp.files.write.read_limit`; a path the writing rule refuses (a folder, a folder
 under ``/proc``) is refused before any point.
 
 **One writer at a time**: :class:`Results` holds an advisory lock (``flock``) on the
@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from mitld_lp import files
+from mitld_lp.files import write as files
 from mitld_lp.sweep.rows import META_COLUMNS, RESULT_COLUMNS
 from mitld_lp.sweep.spec import SweepError
 

@@ -57,11 +57,11 @@ from datetime import date, datetime, time
 from pathlib import Path
 from typing import Any
 
-from mitld_lp import file_rules
+from mitld_lp.files import rules as file_rules
 from mitld_lp.model import ModelError, loads_model
 from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.sweep.rows import RESERVED_COLUMNS
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
 
 __all__ = [
     "Sweep",

@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.game import ExplicitGame
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.testing.reference_product import reference_product
+from mitld_lp.worlds.game import ExplicitGame
 
 __all__ = ["random_mdp", "reference_product", "two_routes_world"]
 

@@ -16,9 +16,9 @@ import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.automata.sta import STA, TRUNCATED
-from mitld_lp.game import Game
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing, ProductState, ProductTooLarge
+from mitld_lp.worlds.game import Game
 
 
 def reference_product(

@@ -1,4 +1,4 @@
-"""Worlds from other tools, as :class:`mitld_lp.game.Game` values.
+"""Worlds from other tools, as :class:`mitld_lp.worlds.game.Game` values.
 
 * :mod:`mitld_lp.worlds.prism`: a PRISM MDP, built by Storm (``pip install -e '.[prism]'``);
 * :mod:`mitld_lp.worlds.gym`: a gymnasium toy-text transition table ``env.unwrapped.P``

@@ -1,9 +1,9 @@
-"""A gymnasium toy-text transition table as a :class:`mitld_lp.game.Game`.
+"""A gymnasium toy-text transition table as a :class:`mitld_lp.worlds.game.Game`.
 
 Toy-text environments (FrozenLake, CliffWalking, Taxi) publish their dynamics as
 ``env.unwrapped.P``: ``P[s][a]`` is a list of ``(probability, next_state, reward,
 terminated)``.  :func:`from_transition_table` turns such a table into an
-:class:`~mitld_lp.game.ExplicitGame`; :func:`from_env` reads it from an environment.
+:class:`~mitld_lp.worlds.game.ExplicitGame`; :func:`from_env` reads it from an environment.
 gymnasium itself is never imported: any object with a ``P`` table works.
 
 * **states** are the table's keys; **actions** are the keys of ``P[s]``, named by
@@ -53,10 +53,10 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from mitld_lp import defaults
-from mitld_lp.game import ExplicitGame, GameError
 from mitld_lp.product import ProductTooLarge, default_max_memory
 from mitld_lp.product.budget import _bytes
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.game import ExplicitGame, GameError
 
 __all__ = [
     "from_transition_table", "from_env", "map_labels", "FROZEN_LAKE_ACTIONS", "GymGame",
@@ -83,7 +83,7 @@ class GymGame(ExplicitGame[Any]):
     """The game of a toy-text table, with what is needed to run its controller in the
     environment (:class:`GymAgent`).
 
-    Attributes (beyond :class:`~mitld_lp.game.ExplicitGame`'s):
+    Attributes (beyond :class:`~mitld_lp.worlds.game.ExplicitGame`'s):
         env_actions: action name -> the environment's action (an integer for
             toy-text environments).
         horizon: the time limit honoured (``None``: none).
@@ -465,7 +465,7 @@ class GymAgent:
         self.controller, self.game, self.t = controller, game, 0
 
     def _act(self, state: Any) -> Any:
-        from mitld_lp.controller import Observation
+        from mitld_lp.running.controller import Observation
 
         name = self.controller.act(Observation(state))
         return None if name is None else self.game.env_actions.get(name, name)

@@ -26,9 +26,9 @@ names them.
 The module is imported (the model file's folder is searched first, as Python searches a
 script's folder) and ``factory(**kwargs)`` is called: **loading such a model file runs
 that code**, so a model file from someone else deserves the care a script from them
-does.  The result must implement the :class:`mitld_lp.game.Game` protocol.
+does.  The result must implement the :class:`mitld_lp.worlds.game.Game` protocol.
 
-The game is then held to the :class:`~mitld_lp.game.Game` contract on every call
+The game is then held to the :class:`~mitld_lp.worlds.game.Game` contract on every call
 (:class:`GuardedWorld`): a method that raises, answers ``None``, an empty or repeated
 action list, propositions that are not a set of its ``proposition_names``, or successor
 probabilities that are not a distribution (negative, NaN, summing to 0.99) is a
@@ -58,15 +58,15 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from mitld_lp import files
-from mitld_lp.game import Game, GameError, world_members
+from mitld_lp.files import write as files
+from mitld_lp.files.keys import ModelError
 from mitld_lp.logic.syntax import is_proposition_name
-from mitld_lp.model_keys import ModelError
-from mitld_lp.successors import actions_fault, distribution_fault, place, propositions_fault
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.game import Game, GameError, world_members
+from mitld_lp.worlds.successors import actions_fault, distribution_fault, place, propositions_fault
 
 if TYPE_CHECKING:
-    from mitld_lp.model_keys import _Context
+    from mitld_lp.files.keys import _Context
 
 __all__ = ["gym_world", "python_world", "GuardedWorld", "WorldContractError"]
 
@@ -279,7 +279,7 @@ def _is_game(world: object) -> bool:
 
 
 class WorldContractError(ModelError):
-    """A ``[python]`` world broke the :class:`~mitld_lp.game.Game` contract: the message
+    """A ``[python]`` world broke the :class:`~mitld_lp.worlds.game.Game` contract: the message
     names the model file, the world, the method and the state."""
 
 
@@ -312,7 +312,7 @@ def _interrupt(error: Callable[[], BaseException]) -> NoReturn:
 
 
 class GuardedWorld:
-    """A user's world held to the :class:`~mitld_lp.game.Game` contract on every call
+    """A user's world held to the :class:`~mitld_lp.worlds.game.Game` contract on every call
     (module docstring); every other attribute is the world's own."""
 
     __slots__ = ("_world", "_label", "_names")

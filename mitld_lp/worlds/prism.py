@@ -1,4 +1,4 @@
-"""A PRISM MDP as a :class:`mitld_lp.game.Game`, built by Storm through stormpy.
+"""A PRISM MDP as a :class:`mitld_lp.worlds.game.Game`, built by Storm through stormpy.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
 gives its undefined constants their values, checks the program, builds the MDP's
@@ -85,11 +85,11 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import defaults
-from mitld_lp.game import GameError
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.product import ProductTooLarge, default_max_memory
 from mitld_lp.product.budget import _bytes  # the product's budget messages write sizes so
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
@@ -254,7 +254,7 @@ def _stormpy() -> Any:
 
 def _check_utf8(path: Path, where: str) -> None:
     """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
-    from mitld_lp import file_rules
+    from mitld_lp.files import rules as file_rules
 
     try:  # a regular file, bounded, before Storm reads it
         data = file_rules.read_bytes(path)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
-from mitld_lp.quiet import native_quiet
+from mitld_lp.util.quiet import native_quiet
 from mitld_lp.worlds import WorldError
 
 __all__ = [
@@ -284,5 +284,5 @@ def storm_error(
 
 def storm_quiet() -> contextlib.AbstractContextManager[None]:
     """Storm's output (its logger prints errors and warnings on stdout, which must carry
-    nothing but the answer) sent to the debug log: :func:`mitld_lp.quiet.native_quiet`."""
+    nothing but the answer) sent to the debug log: :func:`mitld_lp.util.quiet.native_quiet`."""
     return native_quiet("storm")

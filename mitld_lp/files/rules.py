@@ -8,7 +8,7 @@ ever, ``/dev/zero`` never ends, and both are refused without waiting), and read 
 to a ceiling (:func:`read_limit`, derived from the memory budget), the size checked
 before the first byte is read.  :func:`check_zip` checks a zip archive's declared sizes
 (and a NumPy member's declared shape) before anything is inflated.  The writing rule and
-the writers are in :mod:`mitld_lp.files`, which re-exports these names.
+the writers are in :mod:`mitld_lp.files.write`, which re-exports these names.
 """
 
 from __future__ import annotations

@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from mitld_lp import files
 from mitld_lp.automata.joint import ACCEPTED
+from mitld_lp.files import write as files
 from mitld_lp.solvers.constrained_model import Merged
 
 __all__ = ["write_merged_drn"]

@@ -1,5 +1,5 @@
 """A saved controller's tables and their file, with NumPy alone: the reader of the
-format :mod:`mitld_lp.controller_file` writes (described there), the tables' answers
+format :mod:`mitld_lp.running.controller_file` writes (described there), the tables' answers
 (:class:`SavedPlan`) and the one clock rule.  Imported by :mod:`mitld_lp.runtime` (and
 through it by the full package), so it imports only the standard library and NumPy."""
 
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import file_rules
+from mitld_lp.files import rules as file_rules
 
 __all__ = [
     "ACCEPTED",
@@ -36,7 +36,7 @@ __all__ = [
     "read_plan",
 ]
 
-FORMAT = "mitld_lp.controller"
+FORMAT = "mitld_lp.running.controller"
 VERSION = 2
 """The file format's version.  Version 1 (deterministic controllers, no world variables)
 is still read; any other version is refused by name."""
@@ -171,7 +171,7 @@ class Decision:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class SavedPlan:
-    """What a controller needs to run, as tables (:mod:`mitld_lp.controller_file`).
+    """What a controller needs to run, as tables (:mod:`mitld_lp.running.controller_file`).
 
     ``verdicts[q]``: per automaton state, the verdict of each component (the task
     first); a deterministic controller's automaton has one component, decided in its

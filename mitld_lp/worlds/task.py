@@ -27,10 +27,10 @@ from types import MappingProxyType
 from typing import Any
 
 from mitld_lp.distributions import DistributionError, FirstOccurrence, from_spec
-from mitld_lp.game import Game, WorldMembers, world_members
 from mitld_lp.logic.fragment import FragmentReport
 from mitld_lp.logic.syntax import DistLiteral, DistRef, Formula, atoms, is_proposition_name
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
+from mitld_lp.worlds.game import Game, WorldMembers, world_members
 
 __all__ = ["BindError", "Task", "bind", "resolve_laws", "check_alphabet"]
 
@@ -125,8 +125,8 @@ def check_alphabet(
     ``events`` fits ``world`` (see the module docstring), and return the world's
     declared members.  ``noun`` is what the world calls its propositions in messages (a
     grid's are regions, a PRISM file's labels).  Raises :class:`BindError`, or
-    :class:`mitld_lp.game.GameError` when the world's members are missing or wrong
-    (:func:`mitld_lp.game.world_members`)."""
+    :class:`mitld_lp.worlds.game.GameError` when the world's members are missing or wrong
+    (:func:`mitld_lp.worlds.game.world_members`)."""
     members = world_members(world)
     events = frozenset(events)
     props = frozenset(world.proposition_names)

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import defaults
-from mitld_lp.controller import ControllerLike, Observation, RunStatus
 from mitld_lp.model import Model
-from mitld_lp.progress import bar as progress_bar
+from mitld_lp.running.controller import ControllerLike, Observation, RunStatus
+from mitld_lp.util.progress import bar as progress_bar
 
 __all__ = ["SimulationResult", "simulate", "rollout", "Step"]
 
@@ -122,7 +122,7 @@ def simulate(
     progress: bool | None = None,
 ) -> SimulationResult:
     """Estimate the probability that ``controller`` (deterministic or randomised: any
-    :class:`~mitld_lp.controller.ControllerLike`) satisfies ``model``'s task in the
+    :class:`~mitld_lp.running.controller.ControllerLike`) satisfies ``model``'s task in the
     model's untruncated world (module docs).  A randomised controller draws from its own
     generator, reseeded with ``seed`` first, so a seed gives the same estimate.
 

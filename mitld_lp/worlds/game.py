@@ -34,7 +34,7 @@ from itertools import combinations
 from types import MappingProxyType
 from typing import Any, Generic, Protocol, TypeVar, cast, runtime_checkable
 
-from mitld_lp.successors import PROBABILITY_TOLERANCE, is_real, place
+from mitld_lp.worlds.successors import PROBABILITY_TOLERANCE, is_real, place
 
 __all__ = [
     "Game",

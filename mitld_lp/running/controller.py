@@ -9,7 +9,7 @@ with an action, tracking the automaton state, the pending events and the clock i
 ``act`` returns ``None`` once the task is decided (``status`` says how).
 
 A controller is saved as a file of plain tables (:meth:`Controller.save`, format in
-:mod:`mitld_lp.controller_file`) that :meth:`Controller.load` parses without running
+:mod:`mitld_lp.running.controller_file`) that :meth:`Controller.load` parses without running
 anything from it, in a process that needs neither the world's class nor a solver.
 """
 
@@ -24,13 +24,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from mitld_lp import defaults, files
+from mitld_lp import defaults
 from mitld_lp.automata.sta import STA
-from mitld_lp.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate
-from mitld_lp.game import Game
+from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
+from mitld_lp.running.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate
 from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED, Decision, Stepper
+from mitld_lp.worlds.game import Game
 
 __all__ = ["Observation", "Controller", "ControllerFileError", "ControllerLike", "RunStatus",
            "save_tables"]
@@ -85,7 +86,7 @@ class Observation:
 class ControllerLike(Protocol):
     """What every controller offers (:class:`Controller`, deterministic, and
     :class:`mitld_lp.ConstrainedController`, randomised), and what :func:`simulate
-    <mitld_lp.simulate.simulate>`, ``mitld-lp simulate``, the exports and the runtime
+    <mitld_lp.running.simulate.simulate>`, ``mitld-lp simulate``, the exports and the runtime
     take: ``act`` on an observation (None once the task is decided), ``reset`` to start
     a new run, the memory (``automaton_state``, ``pending``, ``clock``), the task's
     ``status``, and ``save``.  A randomised controller draws from ``rng``, a seeded
@@ -232,9 +233,9 @@ class Controller(Stepper):
         """Write the controller to ``path`` (by convention ``*.npz``) as plain tables:
         the policy over product states, the automaton's transition diagrams, the clock
         rule, and every world state it may observe with its propositions (see
-        :mod:`mitld_lp.controller_file`).  :meth:`load` reads it back in any process,
+        :mod:`mitld_lp.running.controller_file`).  :meth:`load` reads it back in any process,
         without the world's class.  The file holds data only, never pickled objects.
-        The path follows the package's one rule for output files (:mod:`mitld_lp.files`):
+        The path follows the package's one rule for output files (:mod:`mitld_lp.files.write`):
         checked before any work, written to a temporary file renamed into place.
 
         Raises ``FileExistsError`` if ``path`` exists and not ``overwrite``;

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from mitld_lp import defaults
-from mitld_lp.text import printable
+from mitld_lp.util.text import printable
 
 
 class ModelError(ValueError):
@@ -134,7 +134,7 @@ def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
     or a text such as ``"4G"``) of memory, a positive number of seconds."""
     from argparse import ArgumentTypeError
 
-    from mitld_lp.arguments import memory_size
+    from mitld_lp.cli.arguments import memory_size
 
     if "budgets" not in doc:
         return {}
@@ -164,9 +164,9 @@ def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
 
 def constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
                                                                           dict[str, float]]:
-    """The ``constraints`` list (each read by :func:`mitld_lp.constraints.parse_constraint`)
+    """The ``constraints`` list (each read by :func:`mitld_lp.routes.constraints.parse_constraint`)
     and the ``[costs]`` table (numbers > 0 per action)."""
-    from mitld_lp.constraints import ConstraintError, check_costs, parse_constraint
+    from mitld_lp.routes.constraints import ConstraintError, check_costs, parse_constraint
 
     texts = doc.get("constraints", [])
     if not isinstance(texts, list):

@@ -36,18 +36,18 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.acceptance import Acceptance
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check, close
-from mitld_lp.controller import Controller
 from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
 from mitld_lp.product import ProductState, robust_product
+from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.routes.acceptance import Acceptance
+from mitld_lp.running.controller import Controller
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
     RobustIteration,
@@ -57,7 +57,7 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
-from mitld_lp.world_names import state_record
+from mitld_lp.worlds.names import state_record
 
 __all__ = ["is_robust", "synthesize_robust", "RobustResult", "RobustModelSolution",
            "robust_game"]
@@ -260,7 +260,7 @@ def _goal(game: RobustGame, imdp: IntervalMDP, dta: DTA,
     satisfies the task, with the choice that keeps it there."""
     if SAFE not in dta.kinds:
         return reached, None
-    from mitld_lp.acceptance import persistent_states
+    from mitld_lp.routes.acceptance import persistent_states
     from mitld_lp.solvers.robust_graph import keeping
 
     inside, stay = keeping(game, persistent_states(imdp, dta) | reached)  # type: ignore[arg-type]

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.constrained import ConstrainedResult
-from mitld_lp.controller import Observation
+from mitld_lp.routes.constrained import ConstrainedResult
+from mitld_lp.running.controller import Observation
 
 __all__ = ["RunStats", "run_constrained"]
 

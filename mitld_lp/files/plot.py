@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mitld_lp.gridworld import MOVES, STAY, Cell, GridWorld
+from mitld_lp.worlds.grid import MOVES, STAY, Cell, GridWorld
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -1,8 +1,8 @@
-"""The randomised controller of a constrained synthesis (:mod:`mitld_lp.constrained`),
+"""The randomised controller of a constrained synthesis (:mod:`mitld_lp.routes.constrained`),
 behind the same interface as the deterministic :class:`mitld_lp.Controller`
-(:class:`mitld_lp.controller.ControllerLike`): ``act`` on an
+(:class:`mitld_lp.running.controller.ControllerLike`): ``act`` on an
 :class:`~mitld_lp.Observation`, ``reset``, ``save`` / ``load`` (the same file format,
-kind ``"randomised"``), run by :func:`mitld_lp.simulate.simulate` and the exports.
+kind ``"randomised"``), run by :func:`mitld_lp.running.simulate.simulate` and the exports.
 
 :func:`load_controller` loads a saved controller of either kind.
 """
@@ -20,10 +20,15 @@ import numpy as np
 from mitld_lp import defaults
 from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
-from mitld_lp.controller import Controller, Observation, RunStatus, save_tables
-from mitld_lp.controller_file import ControllerFileError, SavedPlan, read_plan, tabulate_randomised
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
+from mitld_lp.running.controller import Controller, Observation, RunStatus, save_tables
+from mitld_lp.running.controller_file import (
+    ControllerFileError,
+    SavedPlan,
+    read_plan,
+    tabulate_randomised,
+)
 from mitld_lp.runtime import Decision, Stepper
 
 __all__ = ["ConstrainedController", "load_controller"]
@@ -160,7 +165,7 @@ class ConstrainedController(Stepper):
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False,
              max_states: int = defaults.MAX_STATES) -> Path:
         """Write the controller to ``path`` as plain tables (kind ``"randomised"`` of
-        the format in :mod:`mitld_lp.controller_file`); as :meth:`Controller.save`."""
+        the format in :mod:`mitld_lp.running.controller_file`); as :meth:`Controller.save`."""
         return save_tables(self, path, overwrite=overwrite, max_states=max_states)
 
     @classmethod

@@ -36,13 +36,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from mitld_lp import files
-from mitld_lp.controller import ControllerLike
-from mitld_lp.game import Game
+from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.running.controller import ControllerLike
 from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED
-from mitld_lp.world_names import state_fields, state_values, valuation_text
+from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
 __all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS"]
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 from collections.abc import Hashable
 from typing import Any
 
-from mitld_lp.controller_file import world_variables
-from mitld_lp.game import Game
-from mitld_lp.gridworld import GridWorld
+from mitld_lp.running.controller_file import world_variables
+from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.grid import GridWorld
 
 __all__ = ["state_fields", "state_record", "state_values", "valuation_text"]
 

@@ -40,17 +40,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.constrained import (
+from mitld_lp.problem import Posed
+from mitld_lp.product import robust_product
+from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
+from mitld_lp.routes.constrained import (
     ConstrainedResult,
     ConstraintValue,
     joint_sta,
     quantity_of,
     solve_merged,
 )
-from mitld_lp.constraints import CONSTRAINT_TOL
-from mitld_lp.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
-from mitld_lp.problem import Posed
-from mitld_lp.product import robust_product
+from mitld_lp.routes.constraints import CONSTRAINT_TOL
 from mitld_lp.solvers.constrained import OPTIMAL
 from mitld_lp.solvers.constrained_model import Merged, Quantity
 from mitld_lp.solvers.robust import robust_interval_iteration

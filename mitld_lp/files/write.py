@@ -20,7 +20,7 @@ is refused by the rule.
 
 The readers of the files a user names (:func:`read_bytes`, :func:`read_text`,
 :func:`open_archive`, :func:`check_zip`: regular files only, bounded, sizes checked
-before reading or inflating) live in :mod:`mitld_lp.file_rules`, which imports nothing
+before reading or inflating) live in :mod:`mitld_lp.files.rules`, which imports nothing
 of the package so that every reader may use it, and are re-exported here.
 """
 
@@ -40,8 +40,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any, Literal
 
-from mitld_lp import watch
-from mitld_lp.file_rules import (
+from mitld_lp.files.rules import (
     InputFileError,
     OutputPathError,
     _kernel_folder,
@@ -53,6 +52,7 @@ from mitld_lp.file_rules import (
     read_text,
 )
 from mitld_lp.report import POLICY_COLUMNS, policy_table
+from mitld_lp.util import watch
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
 #: this module, and an import, even for types only, would make a circle).

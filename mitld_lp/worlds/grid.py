@@ -1,4 +1,4 @@
-"""The grid world of the case study, as a :class:`mitld_lp.game.Game`.
+"""The grid world of the case study, as a :class:`mitld_lp.worlds.game.Game`.
 
 States are the free cells ``(x, y)`` of a ``width x height`` grid (E is +x, N is +y).
 The robot's actions are the compass moves ``N, S, E, W``.  A move reaches the intended
@@ -126,7 +126,8 @@ class GridWorld:
     )
 
     ignores_events: ClassVar[bool] = True
-    """The moves do not depend on the external events (:class:`mitld_lp.game.WorldMembers`)."""
+    """The moves do not depend on the external events
+    (:class:`mitld_lp.worlds.game.WorldMembers`)."""
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):

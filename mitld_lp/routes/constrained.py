@@ -26,12 +26,6 @@ from mitld_lp.automata.joint import Joint, joint_automaton
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check
-from mitld_lp.constraints import (
-    LEXICOGRAPHIC_TOL,
-    Constraint,
-    ConstraintError,
-)
-from mitld_lp.controller_random import ConstrainedController
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.literal import from_spec
 from mitld_lp.logic import check
@@ -40,10 +34,16 @@ from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import CONSTRAINED, Posed, ProblemError, check_constrained
 from mitld_lp.product import ProductState, product
+from mitld_lp.routes.constraints import (
+    LEXICOGRAPHIC_TOL,
+    Constraint,
+    ConstraintError,
+)
+from mitld_lp.running.randomised import ConstrainedController
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 from mitld_lp.solvers.result import Status
-from mitld_lp.world_names import state_record
+from mitld_lp.worlds.names import state_record
 
 __all__ = ["ConstrainedResult", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
@@ -229,7 +229,7 @@ def solve_constrained(posed: Posed, *, costs: Mapping[str, float] | None = None,
     if posed.robust:
         raise ProblemError("solve_constrained: a law known only within a band; "
                            "mitld_lp.synthesize (or synthesize_constrained) solves it "
-                           "(mitld_lp.robust_constrained)")
+                           "(mitld_lp.routes.robust_constrained)")
     s = posed.settings
     t0 = time.perf_counter()
     joint, sta = joint_sta(posed)

@@ -6,7 +6,7 @@ controller's memory -- the automaton state ``q``, one ``pending_<event>`` flag p
 (true while the event has not happened), the ``clock`` -- and nothing else.  The tree
 is grown top-down (the split of highest information gain, as CART and dtControl do)
 until every leaf holds one decision, over exactly the states the controller can reach
-(the controlled chain, :mod:`mitld_lp.chain`), so it picks the controller's own
+(the controlled chain, :mod:`mitld_lp.running.chain`), so it picks the controller's own
 decision in each of them: the action, or ``null`` where the task is lost and the
 controller stops.  A randomised controller's leaf holds its distribution (the actions
 with their probabilities, and the probability of *stay*).
@@ -34,17 +34,17 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import files
-from mitld_lp.chain import chain_of
-from mitld_lp.controller import ControllerLike
+from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
+from mitld_lp.running.chain import chain_of
+from mitld_lp.running.controller import ControllerLike
 from mitld_lp.runtime import UNDECIDED, Decision, Stepper
-from mitld_lp.world_names import state_fields, state_values
+from mitld_lp.worlds.names import state_fields, state_values
 
 __all__ = ["Tree", "TREE_SUFFIXES", "tree_of", "tree_controller", "tree_value", "write_tree"]
 
 TREE_SUFFIXES = (".json", ".dot", ".py")
-FORMAT = "mitld_lp.tree"
+FORMAT = "mitld_lp.running.tree"
 
 
 @dataclass(frozen=True, slots=True)
@@ -345,7 +345,7 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
     if hasattr(result, "joint"):
-        from mitld_lp.chain import refuse_kept
+        from mitld_lp.running.chain import refuse_kept
 
         refuse_kept(result, "the decision tree")
     names, events = _features(result, c)
@@ -514,7 +514,7 @@ class TreeController(Stepper):
 
     @property
     def status(self) -> Any:
-        from mitld_lp.controller import RunStatus
+        from mitld_lp.running.controller import RunStatus
 
         return RunStatus(self.status_name)
 

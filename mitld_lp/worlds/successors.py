@@ -1,11 +1,11 @@
-"""What an answer of :meth:`mitld_lp.game.Game.successors` must be: a distribution.
+"""What an answer of :meth:`mitld_lp.worlds.game.Game.successors` must be: a distribution.
 
 The rule the product applies to every row it reads from a world
 (:func:`distribution_faults`, a batch of rows at once; :func:`distribution_fault` says
 what is wrong with one): pairs ``(next_state, probability)`` with hashable next
 states, not empty, every probability a finite, non-negative number, the total within
-:data:`PROBABILITY_TOLERANCE` of 1.  :class:`mitld_lp.game.ExplicitGame` (on its
-tables) and :func:`mitld_lp.game.check_game` (on a world it explores) hold a world to
+:data:`PROBABILITY_TOLERANCE` of 1.  :class:`mitld_lp.worlds.game.ExplicitGame` (on its
+tables) and :func:`mitld_lp.worlds.game.check_game` (on a world it explores) hold a world to
 the stricter letter of the protocol with the same tolerance: probabilities in (0, 1],
 distinct next states.
 """

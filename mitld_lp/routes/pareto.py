@@ -1,7 +1,7 @@
 """The trade-off curve: the best (constrained) success probability against a bound on a
 second quantity (expected steps, expected cost, or the probability of a formula).
 
-Each point is a constrained synthesis (:func:`mitld_lp.constrained.synthesize_constrained`)
+Each point is a constrained synthesis (:func:`mitld_lp.routes.constrained.synthesize_constrained`)
 with the bound as one more constraint, so each comes with its certificate; the curve is
 drawn from the certified points only.
 """
@@ -16,10 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import files
-from mitld_lp.constrained import rows_for
-from mitld_lp.constraints import Constraint, ConstraintError, parse_constraint, parse_constraints
+from mitld_lp.files import write as files
 from mitld_lp.model import Model
+from mitld_lp.routes.constrained import rows_for
+from mitld_lp.routes.constraints import (
+    Constraint,
+    ConstraintError,
+    parse_constraint,
+    parse_constraints,
+)
 from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
 from mitld_lp.synthesis import synthesize_constrained
@@ -71,7 +76,7 @@ def _range(model: Model, against: str, options: dict[str, Any]) -> tuple[float, 
         least = optimise(probe.merged, Quantity("prob", own + 1, 1.0), False, rows)
         top = probe.constraints[-1].value
         return float(least.objective), float(top)
-    from mitld_lp.constrained import cost_vector
+    from mitld_lp.routes.constrained import cost_vector
     costs = cost_vector(base.mdp, dict(model.costs))
     own = rows_for(parse_constraints(model.constraints), "lower")
     least = optimise(base.merged, Quantity(lo_c.kind), False, own, costs=costs)

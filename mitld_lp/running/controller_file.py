@@ -1,5 +1,5 @@
 """A controller as plain tables: what :meth:`mitld_lp.Controller.save` and
-:meth:`mitld_lp.ConstrainedController.save` write; :mod:`mitld_lp.saved_plan` reads it
+:meth:`mitld_lp.ConstrainedController.save` write; :mod:`mitld_lp.running.saved_plan` reads it
 (with NumPy alone) for :meth:`~mitld_lp.Controller.load` and ``mitld-lp run``.
 
 The file is a NumPy ``.npz`` archive of plain arrays (integers, floats, booleans, and
@@ -50,10 +50,9 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.automata.sta import STA
-from mitld_lp.game import Game
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState
-from mitld_lp.saved_plan import (
+from mitld_lp.running.saved_plan import (
     FORMAT,
     UNDECIDED,
     VERSION,
@@ -64,6 +63,7 @@ from mitld_lp.saved_plan import (
     key,
     read_plan,
 )
+from mitld_lp.worlds.game import Game
 
 __all__ = [
     "ControllerFileError",

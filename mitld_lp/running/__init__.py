@@ -1,0 +1,2 @@
+"""Running a policy: controllers (deterministic and randomised), their saved
+tables, the controlled chain, the decision tree and Monte-Carlo rollouts."""
