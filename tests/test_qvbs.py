@@ -154,3 +154,29 @@ def test_properties_a_task_does_not_express_are_refused(prop: str) -> None:
     qvbs = _pose()
     with pytest.raises(qvbs.NotPosed):
         qvbs.pose(prop, {"goal": "g=1", "safe": "s"}, {})
+
+
+def test_bench_qvbs_measures_ours_and_storm_on_the_same_instances(tmp_path: Path) -> None:
+    """experiments/bench_qvbs.py --quick: every row's bracket holds Storm's exact value,
+    Storm's sound checks on our DRN agree with our product's optimum, and Storm's run on
+    the PRISM file as published finds the exact value too."""
+    references = qvbs_folder(tmp_path / "benchmarks")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    out = tmp_path / "out"
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "bench_qvbs.py"), "--qvbs",
+         str(tmp_path / "benchmarks"), "--quick", "--out", str(out)],
+        capture_output=True, text=True, timeout=600, env=env, cwd=ROOT)
+    assert run.returncode == 0, run.stdout + run.stderr
+    with (out / "bench_qvbs.csv").open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 2
+    for row in rows:
+        reference = references[row["instance"]]
+        assert float(row["value"]) - 1e-8 <= reference <= float(row["upper"]) + 1e-8
+        assert row["certified"] == "True" and row["storm_agrees"] == "True"
+        assert abs(float(row["storm_prism_value"]) - reference) < 1e-6
+        assert float(row["solve_cpu"]) > 0 and float(row["storm_check_cpu"]) >= 0
+    text = (out / "bench_qvbs.md").read_text()
+    assert "no such instance was run" in text  # the quick instances are all small

@@ -37,6 +37,7 @@ from mitld_lp.solvers.graph import (
     gather_ranges,
     graph_blocks,
     graph_view,
+    rows_dot,
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient
@@ -117,7 +118,7 @@ def single_scores(q: Quotient, b: Blocks, states: np.ndarray, rewards: np.ndarra
     lo, hi = q.row_groups[states], q.row_groups[states + 1]
     choices = gather_ranges(lo, hi)
     values[states] = 0.0
-    reward = rewards[choices] + q.matrix[choices] @ values
+    reward = rewards[choices] + rows_dot(q.matrix, choices, values)
     leave = 1.0 - b.self_loop[choices]
     if reward.ndim == 2:
         leave = leave[:, None]
@@ -185,10 +186,23 @@ class Factors:
     jump's three policy iterations end and start on the same policy, so two of their
     evaluations need no factorisation.  ``reused`` / ``factorised`` count both.
 
-    (Reusing the LU of a chain that differs in a few rows, corrected by the
-    Sherman--Morrison--Woodbury formula, was measured on the bus blocks and dropped: a
-    changed row costs a pair of triangular solves, about 1/60 of a new LU at 32,768
-    states, and the rows changed in policy iteration's later rounds add up to about 60.)
+    What else was measured on the polish's chains of ``bus_scaled`` n128 d3 (21
+    evaluations over blocks of 32,768 and 16,384 states) and dropped:
+
+    * the LU of a chain that differs in a few rows, corrected by the
+      Sherman--Morrison--Woodbury formula: a changed row costs a pair of triangular
+      solves, about 1/60 of a new LU at 32,768 states, and the rows policy iteration
+      changes add up to 450 and 1,600 on the two blocks (215, 107, 68, 29, 19, 8, 2 per
+      round on the first);
+    * the last policy's LU as the preconditioner of the extended-precision refinement,
+      started from the last policy's values: the refinement contracted by 0.3-0.5 a
+      round on one block and diverged on the other (its error grew 1e-10 -> 3e-9);
+    * the first factorisation's symmetric order kept for the later ones (SuperLU told
+      ``NATURAL`` on the permuted matrix): the same fill, and 1.22-1.25 s against
+      1.17-1.18 s for the 21 refined evaluations;
+    * a look-ahead of 10-40 Bellman sweeps (float64) before each improvement: not one
+      round fewer, as the later rounds' gains (1e-17 to 1e-12) are below float64's
+      resolution of the values.
     """
 
     lu: spla.SuperLU | None = None
@@ -293,7 +307,7 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
     for level in blk.walk():
         one, inner = level.single, level.rest
         # the level's own states are still 0 in x: the right-hand sides see only below
-        x[one] = (b[one] + chain[one] @ x) / (1.0 - blk.self_loop[one])
+        x[one] = (b[one] + rows_dot(chain, one, x)) / (1.0 - blk.self_loop[one])
         if inner.size:
             rows = sp.csr_array(chain[inner])
             x[inner] = transient_solve(sp.csr_array(rows[:, inner]), b[inner] + rows @ x)

@@ -1,0 +1,385 @@
+"""Benchmark: QVBS's public PRISM MDPs of at least 1e5 states, ours beside Storm, one run.
+
+The successor of ``bench_sweeps.py`` for the public models: the same figures, in CPU
+seconds, on the QVBS instances (``ahartmanns/qcomp``, ``benchmarks/mdp``; data CC-BY
+4.0) of the families the issue names -- consensus, csma, wlan, wlan_dl, zeroconf,
+zeroconf_dl, firewire_dl, resource-gathering -- with between ``--min-states``
+(100,000) and ``--max-states`` (2,000,000) states by QVBS's count.  Each property is posed
+as ``experiments/qvbs.py`` poses it (the PRISM file as published, its constants, the
+property as an MITLD spec).  Per instance, each route in a child process of its own:
+
+* ``ours``: :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` with their
+  defaults; ``solve_cpu`` is everything after the product is built (the solver modules
+  imported before, as in ``bench_sweeps.py``), ``whole_cpu`` the load (the PRISM
+  exploration) and the synthesis, ``process_cpu`` the whole child (imports included);
+  ``bytes_per_transition`` the peak resident size during ``synthesize`` (the peak is
+  reset after the load, where Linux allows it) over the size before it, per product
+  transition (the product is built inside ``synthesize``).  After the figures are
+  taken, the product is written as DRN (target: the lower model's goal) and one sweep
+  of it is timed (a sparse product and a maximum per state; the median of seven
+  batches of at least 0.05 s each, as the CPU clock ticks in milliseconds);
+* ``storm_check``: stormpy reads that DRN and checks ``Pmax=? [F "target"]`` with each
+  of Storm's sound methods (``force_soundness``, precision 1e-9 absolute); the fastest
+  is Storm's best check, and every method must agree with our product's optimum within
+  1e-6 (for a ``Pmin`` property the product is the complement's, as ours solves it);
+* ``storm_prism``: Storm's whole run on the PRISM file and the QVBS property as
+  published, as a process: import stormpy, parse, build, check with the best method
+  found on the DRN (``storm_process_cpu``; ``storm_prism_cpu`` the parse, build and
+  check alone).
+
+An instance whose optimum (QVBS's reference) is below 1e-3 or above 1 - 1e-3 is
+degenerate: reported apart, never in a ratio.  The targets checked on the others (all
+have at least 1e5 states): solve <= 2x Storm's best check, whole process <= 1x Storm's
+whole process, <= 50 bytes per transition.  Instances not run are listed with the
+reason (not in the checkout, not a probability, over the CPU budget).
+
+The QVBS files are not part of this repository; give a checkout's ``benchmarks/``::
+
+    python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --out experiments/results
+    python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --quick  # two small instances
+
+Written: ``bench_qvbs.csv``, ``bench_qvbs.md`` and ``bench_qvbs_machine.txt``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import _common  # noqa: E402
+import bench_sweeps as bs  # noqa: E402  (the same routes and targets)
+import qvbs  # noqa: E402  (the same instances, posed the same way)
+
+FAMILIES = ("consensus", "csma", "wlan", "wlan_dl", "zeroconf", "zeroconf_dl", "firewire_dl",
+            "resource-gathering")
+MIN_STATES = 100_000
+MAX_STATES = 2_000_000
+QUICK_MAX_STATES = 20_000
+QUICK_COUNT = 2
+BUDGET = 1800.0  # CPU seconds per child
+_NOT_A_TASK = ("not a probability", "qualitative")
+COLUMNS = ("instance", "value", "reference", "states", "transitions", "sweep_ms",
+           "solve_cpu", "solve_sweeps", "storm_check_cpu", "storm_check_sweeps", "storm_best",
+           "solve_over_storm_check", "whole_cpu", "process_cpu", "storm_prism_cpu",
+           "storm_process_cpu", "process_over_storm_process", "bytes_per_transition",
+           "storm_bytes_per_transition", "storm_agrees", "certified")
+
+
+# ----------------------------------------------------------------------------- workers
+
+
+def _reset_peak() -> bool:
+    """Reset the process's peak resident size (Linux: ``5`` to ``/proc/self/clear_refs``);
+    ``False`` where that is not possible (the peak then counts from the start)."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
+def _hwm_kb() -> int:
+    """The peak resident size since the last reset (``VmHWM``), in KiB."""
+    with open("/proc/self/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1])
+    return bs._peak_kb()
+
+
+def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    import numpy as np
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.solvers import write_drn
+
+    c = bs._cpu()
+    model = load_model(job["model"], max_states=job["max_states"])
+    load_cpu = bs._cpu() - c
+    bs.preload()
+    fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
+    before = bs._rss_kb()
+    c = bs._cpu()
+    r = synthesize(model)
+    synth_cpu = bs._cpu() - c
+    peak = _hwm_kb() if fresh else bs._peak_kb()
+    mdp = r.mdp
+    out = dict(states=mdp.n_states, transitions=mdp.n_transitions, lower=r.lower,
+               upper=r.upper, product_value=float(r.lower_model.value),
+               certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
+               whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
+               bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
+    # untimed from here: the DRN for Storm and the unit sweep
+    v = np.random.default_rng(0).random(mdp.n_states)
+    starts = np.asarray(mdp.row_groups[:-1])
+    times = []
+    for _ in range(7):  # batches of at least 0.05 s: the CPU clock ticks in 4 ms here
+        c, k = bs._cpu(), 0
+        while k == 0 or bs._cpu() - c < 0.05:
+            np.maximum.reduceat(mdp.matrix @ v, starts)
+            k += 1
+        times.append((bs._cpu() - c) / k)
+    write_drn(mdp, r.acceptance.goal, work / "model.drn", overwrite=True)
+    return dict(out, sweep_cpu=float(np.median(times)))
+
+
+def work_storm_check(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    import stormpy
+
+    prop = stormpy.parse_properties('Pmax=? [F "target"]')[0]
+    before = bs._rss_kb()
+    c = bs._cpu()
+    model = stormpy.build_model_from_drn(str(work / "model.drn"))
+    parse_cpu = bs._cpu() - c
+    checks = bs._checks(model, prop, bs.METHODS)
+    peak = bs._peak_kb()
+    return dict(parse_cpu=parse_cpu, states=model.nr_states, transitions=model.nr_transitions,
+                bytes_per_transition=max(peak - before, 0) * 1024 / max(model.nr_transitions, 1),
+                **checks)
+
+
+def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    """Storm on the PRISM file and the property as published (``qvbs.storm``'s steps),
+    checked with the best method found on the DRN."""
+    import stormpy
+
+    c = bs._cpu()
+    program = stormpy.parse_prism_program(job["prism"])
+    undefined = {k.name for k in program.constants if not k.defined}
+    constants = job["constants"]
+    given = {k: v for k, v in constants.items() if k in undefined}
+    if given:
+        program, _ = stormpy.instantiate_constants(program, given)
+    text = job["property"]
+    for name, value in constants.items():  # the properties file's own constants
+        if name not in undefined:
+            shown = str(value).lower() if isinstance(value, bool) else str(value)
+            text = re.sub(rf"(?<![\w\"]){re.escape(name)}(?![\w\"])", shown, text)
+    prop = stormpy.parse_properties(text, program)[0]
+    model = stormpy.build_model(program, [prop])
+    build_cpu = bs._cpu() - c
+    method = job["best"]
+    checks = bs._checks(model, prop, (method,))
+    return dict(build_cpu=build_cpu, whole_cpu=build_cpu + checks["best_cpu"],
+                states=model.nr_states, value=checks["methods"][method]["value"], **checks)
+
+
+WORKERS = {"ours": work_ours, "storm_check": work_storm_check, "storm_prism": work_storm_prism}
+
+
+def _child(route: str, job: dict[str, Any], work: Path, budget: float) -> dict[str, Any]:
+    """The route in a child process under a CPU budget; its result with
+    ``process_cpu`` (``os.wait4``), or ``{"error": ...}``."""
+    (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
+    out = work / f"{route}.json"
+    out.unlink(missing_ok=True)
+    limit = int(budget)
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = os.pathsep.join([str(bs.ROOT), *filter(None, [env.get("PYTHONPATH")])])
+    with tempfile.TemporaryFile() as errors:
+        proc = subprocess.Popen([sys.executable, __file__, "--worker", route, str(work)],
+                                cwd=bs.ROOT, stdout=subprocess.DEVNULL, stderr=errors,
+                                env=env, preexec_fn=cap)
+        _, status, usage = os.wait4(proc.pid, 0)
+        code = os.waitstatus_to_exitcode(status)
+        errors.seek(0)
+        err = errors.read().decode(errors="replace")
+    cpu = usage.ru_utime + usage.ru_stime
+    if code != 0 or not out.is_file():
+        why = (f"over the CPU budget of {limit} s" if cpu >= limit - 1
+               else f"exit {code}: {(err.strip().splitlines() or ['no output'])[-1][:200]}")
+        return {"error": f"{route}: {why}"}
+    return dict(json.loads(out.read_text(encoding="utf-8")), process_cpu=cpu)
+
+
+# ----------------------------------------------------------------------------- the runs
+
+
+def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work: Path,
+         ) -> tuple[list[tuple[qvbs.Instance, dict[str, Any]]], list[tuple[str, str]]]:
+    """The instances to run as jobs (their model files written to ``work``), and the
+    ones left out with the reason."""
+    found, skipped = qvbs.find_instances(benchmarks, high)
+    skipped = [s for s in skipped if s[0].split("/")[0].split(" ")[0] in families]
+    out = []
+    for inst in found:
+        if inst.family not in families or inst.qvbs_states < low:
+            continue
+        missing = [f.name for f in (inst.prism, inst.props) if not f.is_file()]
+        if missing:
+            skipped.append((inst.name, f"missing from the checkout: {', '.join(missing)}"))
+            continue
+        texts = qvbs.read_properties(inst.props)
+        if inst.prop not in texts:
+            skipped.append((inst.name, f"property not in {inst.props.name}"))
+            continue
+        labels, undefined = qvbs._labels_of(inst)
+        try:
+            posed = qvbs.pose(texts[inst.prop], labels, {
+                k: v for k, v in inst.constants.items() if k not in undefined})
+        except qvbs.NotPosed as exc:
+            skipped.append((inst.name, str(exc)))
+            continue
+        path = work / f"{inst.name}.toml"
+        path.write_text(qvbs.model_file(inst, posed, undefined), encoding="utf-8")
+        out.append((inst, dict(model=str(path), max_states=max(high, inst.qvbs_states),
+                               prism=str(inst.prism.resolve()), constants=inst.constants,
+                               property=texts[inst.prop])))
+    return out, skipped
+
+
+def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
+            budget: float) -> dict[str, Any]:
+    """Every route on one instance and its row; ratios only if not degenerate."""
+    ours = _child("ours", job, work, budget)
+    if "error" in ours:
+        return dict(instance=inst.name, error=ours["error"])
+    storm = _child("storm_check", job, work, budget)
+    (work / "model.drn").unlink(missing_ok=True)
+    if "error" in storm:
+        return dict(instance=inst.name, error=storm["error"])
+    prism = _child("storm_prism", dict(job, best=storm["best"]), work, budget)
+    if "error" in prism:
+        prism = None
+    reference = float(inst.reference)
+    flat = bs.degenerate(reference)
+    sweep = ours["sweep_cpu"]
+
+    def ratio(a: float, b: float | None) -> float | None:
+        return None if flat or b is None or b <= 0 else a / b
+
+    def sweeps(a: float) -> float | None:  # a tiny product's sweep can time as 0
+        return a / sweep if sweep > 0 else None
+
+    values = [m["value"] for m in storm["methods"].values()]
+    return dict(
+        instance=inst.name, value=ours["lower"], upper=ours["upper"], reference=reference,
+        degenerate=flat, states=ours["states"], transitions=ours["transitions"],
+        storm_states=storm["states"], storm_transitions=storm["transitions"],
+        sweep_ms=1e3 * sweep, certified=ours["certified"],
+        storm_agrees=all(abs(v - ours["product_value"]) <= 1e-6 for v in values),
+        storm_prism_value=prism["value"] if prism else None,
+        solve_cpu=ours["solve_cpu"], solve_sweeps=sweeps(ours["solve_cpu"]),
+        whole_cpu=ours["whole_cpu"], process_cpu=ours["process_cpu"],
+        storm_best=storm["best"].lower(), storm_check_cpu=storm["best_cpu"],
+        storm_check_sweeps=sweeps(storm["best_cpu"]),
+        solve_over_storm_check=ratio(ours["solve_cpu"], storm["best_cpu"]),
+        storm_prism_cpu=prism["whole_cpu"] if prism else None,
+        storm_process_cpu=prism["process_cpu"] if prism else None,
+        process_over_storm_process=ratio(ours["process_cpu"],
+                                         prism["process_cpu"] if prism else None),
+        bytes_per_transition=ours["bytes_per_transition"],
+        storm_bytes_per_transition=storm["bytes_per_transition"],
+        **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
+    )
+
+
+def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
+    def table(part: list[dict]) -> str:
+        return _common.markdown_table(COLUMNS, [[bs._fmt(r.get(k)) for k in COLUMNS]
+                                                for r in part])
+
+    done = [r for r in rows if "error" not in r]
+    good = [r for r in done if not r["degenerate"]]
+    flat = [r for r in done if r["degenerate"]]
+    text = "## QVBS PRISM MDPs of at least 1e5 states, ours and Storm in one run\n\n"
+    text += table(good) if good else "No non-degenerate instance was run.\n"
+    if flat:
+        text += ("\nDegenerate instances (QVBS's reference below 1e-3 or above 1 - 1e-3; no "
+                 "ratio is taken from them):\n\n" + table(flat))
+    missed = bs.misses(good)
+    big = [r for r in good if r["states"] >= bs.BIG]
+    text += (f"\nTargets on the non-degenerate instances of at least {bs.BIG:,} states "
+             "(solve <= 2x Storm's best check, whole process <= 1x Storm's, <= 50 bytes "
+             "per transition): " + ("no such instance was run.\n" if not big else
+                                     "all met.\n" if not missed else
+                                     "missed:\n\n" + "".join(f"- {m}\n" for m in missed)))
+    left = [(r["instance"], r["error"]) for r in rows if "error" in r] + [
+        s for s in skipped if not s[1].startswith(_NOT_A_TASK)]
+    if left:
+        text += "\nNot run:\n\n" + "".join(f"- {what}: {why}\n" for what, why in left)
+    quiet = len(skipped) - len(left) + len([r for r in rows if "error" in r])
+    if quiet:
+        text += (f"\n{quiet} QVBS properties of these families are not probabilities a "
+                 "task expresses (expected rewards, qualitative ones): not run.\n")
+    return text
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    from bench_scaling import machine_text
+
+    ap = _common.parser(__doc__.splitlines()[0])
+    ap.add_argument("--qvbs", type=Path, required=True,
+                    help="the benchmarks/ folder of a checkout of github.com/ahartmanns/qcomp")
+    ap.add_argument("--min-states", type=int, default=MIN_STATES)
+    ap.add_argument("--max-states", type=int, default=MAX_STATES)
+    ap.add_argument("--family", action="append", choices=FAMILIES,
+                    help="only these families (repeatable)")
+    ap.add_argument("--only", nargs="*", default=None, metavar="NAME",
+                    help="only these instances (e.g. firewire_dl.3-600.deadline)")
+    ap.add_argument("--budget", type=float, default=BUDGET,
+                    help=f"CPU seconds per child process (default {BUDGET:g})")
+    args = ap.parse_args(argv)
+    if not (args.qvbs / "mdp").is_dir():
+        ap.error(f"--qvbs {args.qvbs}: no mdp/ folder (give qcomp's benchmarks/ folder)")
+    out = _common.out_dir(args)
+    low, high = ((0, QUICK_MAX_STATES) if args.quick else (args.min_states, args.max_states))
+    families = tuple(args.family or FAMILIES)
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory(prefix="bench_qvbs_") as tmp:
+        todo, skipped = jobs(args.qvbs, low, high, families, Path(tmp))
+        if args.only:
+            todo = [(i, j) for i, j in todo if i.name in set(args.only)]
+        todo.sort(key=lambda t: t[0].qvbs_states)  # smallest first: a cut-short run has rows
+        if args.quick:
+            todo = todo[-QUICK_COUNT:]
+        for inst, job in todo:
+            work = Path(tmp) / inst.name
+            work.mkdir()
+            rows.append(measure(inst, job, work, args.budget))
+            print(bs._line(rows[-1]) if "error" not in rows[-1]
+                  else f"{inst.name}: not run ({rows[-1]['error']})", flush=True)
+    header = sorted({k for r in rows for k in r}, key=lambda k: (
+        COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
+    _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
+                      [["" if r.get(k) is None else r[k] for k in header] for r in rows])
+    text = report(rows, skipped)
+    _common.write_text(out / "bench_qvbs.md", text)
+    _common.write_text(out / "bench_qvbs_machine.txt", machine_text(
+        "shared 2-core machine, other processes running; one run, CPU seconds",
+        [f"command: python experiments/bench_qvbs.py {' '.join(argv or sys.argv[1:])}",
+         "storm: each sound method (force_soundness, 1e-9 absolute) on our DRN; the best "
+         "one again on the PRISM file and property as published, in a process of its own"]))
+    print(text)
+    print(f"written: {_common.shown(out / 'bench_qvbs.csv')}, "
+          f"{_common.shown(out / 'bench_qvbs.md')}")
+    return rows
+
+
+def worker(route: str, work: str) -> None:
+    job = json.loads((Path(work) / "job.json").read_text(encoding="utf-8"))
+    result = WORKERS[route](job, Path(work))
+    (Path(work) / f"{route}.json").write_text(json.dumps(result), encoding="utf-8")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        worker(*sys.argv[2:4])
+    else:
+        main()
