@@ -70,10 +70,18 @@ def test_foreign_and_damaged_files_refused(tmp_path: Path) -> None:
         load_sensed(bad)
 
 
-def test_load_controller_names_the_loader(tmp_path: Path) -> None:
+def test_load_controller_loads_every_kind_of_controller_file(tmp_path: Path) -> None:
+    """One loader for every controller file: it named load_sensed and refused a sensed
+    controller; now it loads it and the loaded one plays as the synthesised one; the
+    deterministic controllers' reader still refuses it by name."""
     from mitld_lp import load_controller
+    from mitld_lp.running.saved_plan import SensedControllerFile, read_plan
 
-    r = synthesize(Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}}))
+    model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
+    r = synthesize(model)
     path = r.controller.save(tmp_path / "c.npz")
-    with pytest.raises(ControllerFileError, match="load_sensed"):
-        load_controller(path)
+    loaded = load_controller(path)
+    assert simulate_sensed(model, loaded, runs=300, seed=5) == simulate_sensed(
+        model, r.controller, runs=300, seed=5)
+    with pytest.raises(SensedControllerFile, match="sensor reports"):
+        read_plan(path)

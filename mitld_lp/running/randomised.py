@@ -29,6 +29,7 @@ from mitld_lp.running.controller_file import (
     read_plan,
     tabulate_randomised,
 )
+from mitld_lp.running.saved_plan import SensedControllerFile
 from mitld_lp.runtime import KEEP, Decision, Stepper
 
 __all__ = ["ConstrainedController", "load_controller"]
@@ -179,9 +180,15 @@ class ConstrainedController(Stepper):
 
 def load_controller(path: str | os.PathLike[str], *,
                     seed: int | None = 0) -> Controller | ConstrainedController:
-    """The controller saved at ``path``, of whichever kind the file holds (a randomised
-    one draws from a generator seeded with ``seed``)."""
-    plan = read_plan(Path(path))
+    """The controller saved at ``path``, of whichever kind the file holds: deterministic,
+    randomised (drawing from a generator seeded with ``seed``) or acting on sensor
+    reports (:class:`~mitld_lp.sensing.observe.SensedController`)."""
+    try:
+        plan = read_plan(Path(path))
+    except SensedControllerFile:
+        from mitld_lp.sensing.saved import load_sensed
+
+        return load_sensed(path)  # type: ignore[return-value]
     controller: Controller | ConstrainedController
     controller = (ConstrainedController if plan.randomised else Controller).__new__(
         ConstrainedController if plan.randomised else Controller)

@@ -84,8 +84,18 @@ class ControllerFileError(ValueError):
     what is wrong."""
 
 
+class SensedControllerFile(ControllerFileError):
+    """The file holds a controller that acts on sensor reports
+    (:mod:`mitld_lp.sensing.saved`), which :func:`read_plan` does not read;
+    :func:`mitld_lp.load_controller` loads it."""
+
+
 class _Bad(Exception):
     """Internal: what is wrong with the file being read (becomes ControllerFileError)."""
+
+
+class _Sensed(_Bad):
+    """Internal: a sensed controller's archive (becomes SensedControllerFile)."""
 
 
 def _printable(text: str) -> str:
@@ -386,6 +396,8 @@ def read_plan(path: str | Path) -> SavedPlan:
     source = Path(path)
     try:
         return _plan(_read_arrays(source))
+    except _Sensed as bad:
+        raise SensedControllerFile(f"{source}: cannot load the controller: {bad}") from None
     except _Bad as bad:
         raise ControllerFileError(f"{source}: cannot load the controller: {bad}") from None
 
@@ -416,8 +428,9 @@ def _read_arrays(source: Path) -> dict[str, np.ndarray]:
             with loaded:
                 names = set(loaded.files)
                 if names == {"meta", "states", "first", "policy", "moves"}:
-                    raise _Bad("a controller that acts on sensor reports: load it with "
-                               "mitld_lp.sensing.saved.load_sensed")
+                    raise _Sensed("a controller that acts on sensor reports (mitld_lp."
+                                  "load_controller loads it; mitld-lp run and "
+                                  "mitld_lp.runtime do not serve it yet)")
                 if not any(names == set(_members(k, v)) for k in MEMBERS for v in READS):
                     raise _Bad(f"not a controller archive (members {_short(loaded.files)}, "
                                f"expected {', '.join(_DETERMINISTIC)} or "
