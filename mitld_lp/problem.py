@@ -106,6 +106,13 @@ class Settings:
         if self.backend == "direct" and solver != "CLARABEL":
             raise ProblemError(f"backend 'direct' runs only Clarabel, not {self.solver}; "
                                "use backend 'cvxpy' (or 'auto') for other solvers")
+        if solver != defaults.SOLVER.upper():  # another LP solver: one cvxpy has
+            import cvxpy
+
+            installed = cvxpy.installed_solvers()
+            if solver not in installed:
+                raise ProblemError(f"solver: unknown or not installed LP solver "
+                                   f"{self.solver!r} (installed: {', '.join(installed)})")
         if self.time_limit is not None and not (
                 isinstance(self.time_limit, int | float) and not isinstance(self.time_limit, bool)
                 and 0 <= self.time_limit < float("inf")):

@@ -41,7 +41,10 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     ``result.lower_model.policy_values``), ``accepting_component`` (whether the state
     lies in an accepting end component of a task with a safety part: the task is then
     kept by playing ``action`` forever, an action that never leaves the component;
-    always false for a co-safe task).
+    always false for a co-safe task).  For ``objective = "min"`` the policy is the
+    complement's and ``value`` is read back in the task's terms: ``1 -`` the
+    complement's exact value, the most the task can happen under the policy from there
+    (truncation counted as the task happening).
     """
     if result.route == "constrained":
         return randomised_table(result)
@@ -51,6 +54,8 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
         return sensed_table(result)
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
+    if result.objective == "min":  # Pmin(task) = 1 - Pmax(not task), state by state
+        values = 1.0 - np.asarray(values, dtype=np.float64)
     obligations = result.dta.states
     goal = result.acceptance.goal
     game = result.model.game
@@ -149,8 +154,9 @@ def summary(result: Any) -> dict[str, Any]:
         out["lp"] = None if low.lp is None else {
             "status": low.lp.status.value, "variables": low.lp.variables,
             "constraints": low.lp.constraints, "message": low.lp.message}
-        out["iteration"] = {"status": low.iteration.status.value, "lower": low.bracket[0],
-                            "upper": high.bracket[1], "iterations": low.iteration.sweeps}
+        out["iteration"] = {"status": low.iteration.status.value,
+                            **_task_terms(result, low.bracket[0], high.bracket[1]),
+                            "iterations": low.iteration.sweeps}
         return out
     lp = low.lp
     out["lp"] = None if lp is None else {
@@ -158,10 +164,18 @@ def summary(result: Any) -> dict[str, Any]:
         "primal_objective": lp.primal_objective, "dual_objective": lp.dual_objective,
         "iterations": lp.iterations, "seconds": lp.seconds, "message": lp.message}
     out["iteration"] = {"status": low.iteration.status.value,
-                        "lower": low.iteration.value_lower,
-                        "upper": high.iteration.value_upper,
+                        **_task_terms(result, low.iteration.value_lower,
+                                      high.iteration.value_upper),
                         "iterations": low.iteration.iterations}
     return out
+
+
+def _task_terms(result: Result, lower: float, upper: float) -> dict[str, float]:
+    """A bracket of the solved automaton in the task's terms: the complement's
+    ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task."""
+    if result.objective == "min":
+        return {"lower": 1.0 - upper, "upper": 1.0 - lower}
+    return {"lower": lower, "upper": upper}
 
 
 def _constrained_part(result: Any) -> dict[str, Any]:

@@ -169,7 +169,9 @@ def from_models(lower_model: Any, upper_model: Any, initial: int,
     from mitld_lp.solvers.result import Status
 
     policy = float(lower_model.policy_values[initial])
-    bound = float(upper_model.bracket[1])
+    # the optimum is at least the policy's exact value: a bound a rounding left below it
+    # is raised to it, so the bracket never inverts (also read back for "min")
+    bound = max(float(upper_model.bracket[1]), policy)
     models = (lower_model,) if upper_model is lower_model else (lower_model, upper_model)
     if objective == "min":
         lower, upper, value = 1.0 - bound, 1.0 - policy, 1.0 - lower_model.value

@@ -52,7 +52,7 @@ def test_a_failing_model_is_its_line_and_the_exit_status_says_so(folder, capsys)
     assert code == 2
     captured = capsys.readouterr()
     assert captured.err.strip().splitlines() == [
-        "mitld-lp: error: 2 of 3 models could not be read (see their lines)"]
+        "mitld-lp: error: 2 of 3 models could not be read or posed (see their lines)"]
     lines = [json.loads(line) for line in captured.out.splitlines()]
     assert [(x["file"], x["status"]) for x in lines] == [
         ("bad.toml", "model_error"), ("bus_grid.toml", "optimal"),

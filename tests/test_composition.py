@@ -15,7 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mitld_lp import ExplicitGame, GridWorld, Model, Observation, load_model, synthesize
+from mitld_lp import (
+    ExplicitGame,
+    GridWorld,
+    Model,
+    Observation,
+    load_model,
+    loads_model,
+    synthesize,
+)
 from mitld_lp.cli import main
 from mitld_lp.problem import ProblemError
 from mitld_lp.report import SUMMARY_KEYS
@@ -52,6 +60,34 @@ def test_objective_min_and_max_by_hand(spec: str, objective: str, expected: floa
     best = "b" if (objective == "min") == (spec == "F A") else "a"
     first = int(r.lower_model.policy[r.mdp.initial])
     assert r.mdp.action_name(first) == best
+
+
+@pytest.mark.parametrize(("objective", "expected"), [("max", 0.6), ("min", 0.2)])
+def test_objective_min_outputs_speak_of_the_task(objective: str, expected: float,
+                                                tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """For a minimised task the policy table, the JSON's iteration record and the chain
+    export showed the complement's numbers as the task's (a table value of 0.8 where
+    the optimum is 0.2).  By hand on the fork: P(F A) is 0.6 at most, 0.2 at least."""
+    model = Model.from_game(_fork(), "F A", objective=objective)
+    r = synthesize(model)
+    first = next(row for row in r.policy_table() if row["game_state"] == "s")
+    assert first["value"] == pytest.approx(expected, abs=1e-9)
+    it = r.summary()["iteration"]
+    assert it["lower"] - 1e-9 <= expected <= it["upper"] + 1e-9
+    assert r.lower <= r.upper
+    # the chain export on the bundled grid made minimised: what it prints about
+    # P=? [F "accept"] is what Storm computes on the file it writes
+    pytest.importorskip("stormpy")
+    from test_chain import storm_accept
+
+    text = tmp_path / "grid.toml"
+    text.write_text((MODELS / "bus_risk.toml").read_text().replace(
+        'name = "', f'objective = "{objective}"\nname = "', 1))
+    assert main(["export", str(text), "--chain", str(tmp_path / "c.drn"), "-q"]) == 0
+    said = capsys.readouterr().out
+    printed = float(said.split(" = ")[-1].split()[0].rstrip(":)"))
+    assert storm_accept(tmp_path / "c.drn") == pytest.approx(printed, abs=1e-9)
 
 
 def test_objective_min_with_a_constraint_by_hand() -> None:
@@ -681,3 +717,20 @@ def test_one_result_type_and_one_wiring_on_every_route() -> None:
                    x["clock"])
             total[key] += x["probability"]
         assert total and all(v == pytest.approx(1.0, abs=1e-6) for v in total.values())
+
+
+def test_library_refusals_name_what_the_caller_gave() -> None:
+    """An unknown solver returned status 'failed' on the plain route (the command line
+    refused it); pareto with then= leaked a TypeError, and on a model with sensors its
+    refusal named a constraint the caller never gave."""
+    from mitld_lp import pareto
+
+    grid = load_model(MODELS / "bus_grid.toml")
+    with pytest.raises(ProblemError, match="solver: unknown or not installed LP solver 'NOPE'"):
+        synthesize(grid, solver="NOPE")
+    with pytest.raises(ProblemError, match="pareto: the curve poses its own constraint"):
+        pareto(grid, against="steps", then="min-cost")
+    sensed = loads_model((MODELS / "bus_grid.toml").read_text()
+                         + "\n[sensors]\nb1 = { detect = 0.5 }\n")
+    with pytest.raises(ProblemError, match="pareto: .*sensors that miss events"):
+        pareto(sensed, against="steps")

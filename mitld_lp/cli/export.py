@@ -150,7 +150,11 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
-        _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
+        if r.objective == "min":  # the complement's automaton: "accept" marks failing runs
+            _out(f"wrote {chain} (P=? [F \"accept\"] = 1 - upper = {1.0 - r.upper!r}: for "
+                 "a minimised task \"accept\" marks the runs that fail it)")
+        else:
+            _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
     if tree:
         from mitld_lp.running.tree import write_tree
 

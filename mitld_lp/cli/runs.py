@@ -55,7 +55,7 @@ def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
         return EXIT_INTERNAL
     if "model_error" in statuses:
         _say(f"error: {statuses.count('model_error')} of {_count(len(records), noun)} "
-             "could not be read (see their lines)")
+             "could not be read or posed (see their lines)")
         return EXIT_USAGE
     if failed:
         _say(f"stopped: {of} without a certified answer (see their lines)")

@@ -168,6 +168,9 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     controller = ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
                                        chosen.stay, seed=seed)
     value = low.objective
+    # the LP's optimum is inexact to its tolerance; when the policy's exact value lies
+    # above it (within the check's tolerance), the bracket keeps its order
+    upper = max(upper, lower) if upper == upper else upper
     if posed.minimise:  # Pmin(task) = 1 - Pmax(not task): the bracket read back
         lower, upper, value = 1.0 - upper, 1.0 - lower, 1.0 - value
     return Result(

@@ -18,6 +18,7 @@ import numpy as np
 
 from mitld_lp.files import write as files
 from mitld_lp.model import Model
+from mitld_lp.problem import ProblemError
 from mitld_lp.routes.constrained import rows_for
 from mitld_lp.routes.constraints import (
     Constraint,
@@ -87,6 +88,16 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
     """``points`` certified points, bounds evenly spaced over the range worth tracing.
     ``options``: :func:`mitld_lp.synthesis.synthesize`'s settings, used for every point
     (each honoured or refused by name: :func:`mitld_lp.problem.pose`)."""
+    if "then" in options or "constraints" in options:
+        raise ProblemError("pareto: the curve poses its own constraint on each point (and "
+                           "its own then for --against steps/cost); give the model's "
+                           "constraints in its file, not as options")
+    from mitld_lp.sensing.sensors import partial
+
+    if partial(model.sensors):
+        raise ProblemError(f"pareto: {model.name}: the model has sensors that miss events; "
+                           "the trade-off curve over observation-based policies is not "
+                           "solved (the constrained LP is over fully observed policies)")
     lo, hi = _range(model, against, options)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")
