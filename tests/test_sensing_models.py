@@ -125,13 +125,24 @@ def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]
     assert not list(tmp_path.glob("out*"))
 
 
-def test_plain_simulate_refuses_a_sensed_model() -> None:
-    from mitld_lp.running.simulate import simulate
+def test_simulate_runs_a_sensed_model_by_its_sensed_controller_only() -> None:
+    """``mitld_lp.simulate`` refused a sensed model and pointed at another function;
+    it now runs the sensed controller (the same runs as simulate_sensed, seed for seed),
+    and still refuses a fully observed controller on a sensed model (it would hand the
+    controller the hidden events) and a sensed controller on a fully observed model."""
+    from mitld_lp import simulate
+    from mitld_lp.sensing.observe import simulate_sensed
 
     sensed = loads_model(GRID + "[sensors]\nb = { detect = 0.5 }\n")
-    plain = synthesize(loads_model(GRID))
-    with pytest.raises(ValueError, match="simulate_sensed"):
+    plain_model = loads_model(GRID)
+    r = synthesize(sensed)
+    assert simulate(sensed, r.controller, runs=200, seed=4) == simulate_sensed(
+        sensed, r.controller, runs=200, seed=4)
+    plain = synthesize(plain_model)
+    with pytest.raises(ValueError, match="sensed controller"):
         simulate(sensed, plain.controller, runs=10)
+    with pytest.raises(ValueError, match="sensed controller"):
+        simulate(plain_model, r.controller, runs=10)
 
 
 def test_law_that_may_never_happen_is_refused() -> None:

@@ -9,7 +9,6 @@ The estimate comes with a Wilson 95% confidence interval.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +17,12 @@ import numpy as np
 from mitld_lp import defaults
 from mitld_lp.model import Model
 from mitld_lp.running.controller import ControllerLike, Observation, RunStatus
+from mitld_lp.running.rollouts import (
+    SimulationResult,
+    check_count,
+    sample_successor,
+    wilson,
+)
 from mitld_lp.util.progress import bar as progress_bar
 
 __all__ = ["SimulationResult", "simulate", "rollout", "Step"]
@@ -35,48 +40,6 @@ class Step:
     pending: frozenset[str]
     clock: int
     action: str | None
-
-
-@dataclass(frozen=True, slots=True)
-class SimulationResult:
-    runs: int
-    successes: int
-    estimate: float
-    ci_low: float
-    ci_high: float
-    beyond_model: int  # runs in which an event came later than its truncation point
-    undecided: int  # runs stopped at max_steps without a verdict (counted as failures)
-    seed: int | None
-    horizon: int = 0  # max_steps: the steps each run was watched for a violation
-    kept: int = 0  # successes that were keeping a safety part, unviolated, at the horizon
-
-
-def _wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """The Wilson score interval of ``k`` successes in ``n`` runs (95% by default).
-
-    In exact arithmetic its lower end is 0 when ``k = 0`` and its upper end 1 when
-    ``k = n``; the floating-point formula misses them by an ulp either way, which would
-    exclude a true value of exactly 0 or 1, so the ends are set there exactly.
-    """
-    if n == 0:
-        return 0.0, 1.0
-    p = k / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    low = 0.0 if k == 0 else max(0.0, centre - half)
-    high = 1.0 if k == n else min(1.0, centre + half)
-    return low, high
-
-
-def _sample_successor(rng: np.random.Generator, succ) -> Any:
-    u = rng.random()
-    acc = 0.0
-    for s, p in succ:
-        acc += p
-        if u < acc:
-            return s
-    return succ[-1][0]
 
 
 def rollout(
@@ -108,7 +71,7 @@ def rollout(
         if action is None or controller.status is not RunStatus.RUNNING:
             return controller.status, steps
         events = frozenset(a for a, k in times.items() if k == t + 1)
-        s = _sample_successor(rng, game.successors(s, action, events))
+        s = sample_successor(rng, game.successors(s, action, events))
     return RunStatus.RUNNING, steps
 
 
@@ -132,20 +95,30 @@ def simulate(
     counts as a success (``kept``); a violation after the horizon is not seen, so choose
     the horizon well beyond the steps the task needs.
 
+    A model with sensors that miss events is run by its sensed controller: each run then
+    draws the hidden event times and the sensors' reports
+    (:func:`mitld_lp.sensing.observe.simulate_sensed`).
+
     Raises ``ValueError`` naming the argument when ``runs`` is not an integer in
     ``1..defaults.MAX_RUNS``, ``max_steps`` not an integer in
     ``0..defaults.MAX_STEPS_LIMIT``, or ``seed`` negative.
     """
-    _check_count("runs", runs, 1, defaults.MAX_RUNS)
-    _check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
+    check_count("runs", runs, 1, defaults.MAX_RUNS)
+    check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
     if seed is not None:
-        _check_count("seed", seed, 0, None)
-    # sensors that miss events: the robot never sees them, so these rollouts (which hand
-    # the controller the events) would answer another problem
-    if getattr(controller, "sensed", False) or any(
-            not s.perfect for s in model.sensors.values()):
-        raise ValueError("simulate: the model has sensors that miss events; simulate its "
-                         "sensed controller with mitld_lp.sensing.observe.simulate_sensed")
+        check_count("seed", seed, 0, None)
+    # sensors that miss events: the robot never sees them; its controller acts on the
+    # reports, which these rollouts draw (mitld_lp.sensing.observe.simulate_sensed)
+    sensed = any(not s.perfect for s in model.sensors.values())
+    if sensed or getattr(controller, "sensed", False):
+        if not (sensed and getattr(controller, "sensed", False)):
+            raise ValueError("simulate: a model with sensors that miss events is run by "
+                             "its sensed controller (the one its synthesis returns), and "
+                             "a sensed controller by a model with those sensors")
+        from mitld_lp.sensing.observe import simulate_sensed
+
+        return simulate_sensed(model, controller,  # type: ignore[arg-type]
+                               runs=runs, seed=seed, max_steps=max_steps)
     rng = np.random.default_rng(seed)
     if controller.randomised:
         controller.reset(seed=int(rng.integers(2**63)))
@@ -167,7 +140,7 @@ def simulate(
         beyond += controller.beyond_model
         bar.update()
     bar.close()
-    lo, hi = _wilson(ok, runs)
+    lo, hi = wilson(ok, runs)
     return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed,
                             max_steps, kept)
 
@@ -186,14 +159,6 @@ def _laws(model: Model, controller: ControllerLike) -> list[tuple[str, Any]]:
                 "for; simulate it with the controller of the synthesis") from None
         laws.update((a, clocks[a].distribution) for a in missing)
     return list(laws.items())
-
-
-def _check_count(name: str, value: object, low: int, high: int | None) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise ValueError(f"{name}: must be an integer, got {value!r}")
-    if value < low or (high is not None and value > high):
-        bound = f"in {low}..{high:,}" if high is not None else f">= {low}"
-        raise ValueError(f"{name}: must be {bound}, got {value!r}")
 
 
 def _persistent_states(model: Model) -> frozenset[int]:

@@ -33,8 +33,8 @@ from mitld_lp.files import write as files
 from mitld_lp.problem import ProblemError
 from mitld_lp.product import Absorbing
 from mitld_lp.running.controller import RunStatus
+from mitld_lp.running.rollouts import SimulationResult, check_count, sample_successor, wilson
 from mitld_lp.running.saved_plan import ControllerFileError, encode_state
-from mitld_lp.running.simulate import SimulationResult, _check_count, _sample_successor, _wilson
 from mitld_lp.sensing.belief import Belief, Obs
 from mitld_lp.worlds.game import Game, world_members
 
@@ -284,10 +284,10 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     missed, which the automaton never rejects (it does not know a bus comes once)."""
     from mitld_lp.automata.translate import to_dta
 
-    _check_count("runs", runs, 1, defaults.MAX_RUNS)
-    _check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
+    check_count("runs", runs, 1, defaults.MAX_RUNS)
+    check_count("max_steps", max_steps, 0, defaults.MAX_STEPS_LIMIT)
     if seed is not None:
-        _check_count("seed", seed, 0, None)
+        check_count("seed", seed, 0, None)
     rng = np.random.default_rng(seed)
     game, dta = model.game, to_dta(model.spec)
     sensors = {a: s for a, s in model.sensors.items() if a in controller.sensed_events}
@@ -314,12 +314,12 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
                 break
             events = frozenset(a for a, k in times.items() if k == t + 1)
             reports = frozenset(a for a, k in seen.items() if k == t + 1)
-            s = _sample_successor(rng, game.successors(s, action, events))
+            s = sample_successor(rng, game.successors(s, action, events))
             q = dta.step(q, frozenset(game.propositions(s)) | events)
         if verdict is None and (q == dta.accepting or q == dta.rejecting):
             verdict = q == dta.accepting
         ok += bool(verdict)
         undecided += verdict is None
         beyond += controller.beyond_model
-    lo, hi = _wilson(ok, runs)
+    lo, hi = wilson(ok, runs)
     return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed, max_steps)
