@@ -171,6 +171,11 @@ def test_plot_a_sweep_from_the_command_line(tmp_path, monkeypatch, capsys):
         (["--x", "slip"], "a results file needs --x and --y"),
         (["--x", "slip", "--y", "lower", "--situation", "occurred=b"],
          "--situation applies to a model file"),
+        # model options on a results file were accepted and ignored
+        (["--x", "slip", "--y", "lower", "--epsilon", "0.1"],
+         "--epsilon applies to a model file"),
+        (["--x", "slip", "--y", "lower", "--max-states", "3"],
+         "--max-states applies to a model file"),
     ]:
         assert main(["plot", "s.csv", *argv, "-o", "c.png", "-q"]) == 2
         err = capsys.readouterr().err.strip().splitlines()

@@ -191,7 +191,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     table = Path(args.input).suffix.lower() in (".csv", ".parquet")
     if table and (args.x is None or args.y is None):
         raise UsageError(f"plot {args.input}: a results file needs --x and --y")
-    wrong = ("--situation" if args.situation else None) if table else (
+    wrong = ("--situation" if args.situation else "--epsilon" if args.epsilon is not None
+             else "--max-states" if args.max_states is not None else None) if table else (
         "--x" if args.x else "--y" if args.y else "--by" if args.by else None)
     if wrong:
         raise UsageError(f"plot {args.input}: {wrong} applies to "
@@ -209,10 +210,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
             posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
-            result = solve(posed)
-            if result.route == "sensed":  # mitld_lp.sensing
+            if posed.route == "sensed":  # mitld_lp.sensing: refused before any work
                 raise UsageError("plot: the model has sensors that miss events; the policy "
                                  "map of an observation-based controller is not drawn yet")
+            result = solve(posed)
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
