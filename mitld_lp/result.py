@@ -165,7 +165,8 @@ def from_models(lower_model: Any, upper_model: Any, initial: int,
     """The answer's fields read from two solved models (plain and robust routes): the
     lower model's policy value and the upper model's sound upper bound, in the task's
     terms; the status is ``OPTIMAL`` when both solves succeeded, else the first other;
-    every check once (the two models are one when nothing is truncated)."""
+    every check once (the two models are one when nothing is truncated; otherwise each
+    check's name says which model it checked)."""
     from mitld_lp.solvers.result import Status
 
     policy = float(lower_model.policy_values[initial])
@@ -182,6 +183,9 @@ def from_models(lower_model: Any, upper_model: Any, initial: int,
         "status": next((m.status for m in models if m.status is not Status.OPTIMAL),
                        Status.OPTIMAL),
         "certified": all(m.certified for m in models),
-        "checks": tuple(c for m in models for c in m.checks),
+        # each check once; with two models, named by the model it checked
+        "checks": tuple(c if len(models) == 1 else Check(f"{m.which} model: {c.name}",
+                                                          c.passed, c.detail)
+                        for m in models for c in m.checks),
         "lower_model": lower_model, "upper_model": upper_model,
     }
