@@ -170,3 +170,13 @@ def test_model_with_sensors_pickles() -> None:
     back = pickle.loads(pickle.dumps(m))
     assert back.sensors == {"b": Sensor(0.5)}
     assert synthesize(back).lower == synthesize(m).lower
+
+
+def test_a_fully_observed_controller_names_the_observation_it_takes() -> None:
+    """A sensed Observation (reports, no events) given to a fully observed controller
+    raised AttributeError; now a TypeError names what it takes and what it got."""
+    from mitld_lp.sensing.observe import Observation as Sensed
+
+    c = synthesize(loads_model(GRID)).controller
+    with pytest.raises(TypeError, match="expected a mitld_lp.Observation.*sensing.observe"):
+        c.act(Sensed((0, 0), frozenset()))

@@ -267,7 +267,18 @@ class Controller(Stepper):
 
     def act(self, observation: Observation) -> str | None:
         """The action to take in ``observation.state``; ``None`` once the task is decided."""
-        return self._step(observation.state, observation.events)
+        return self._step(observation.state, _events(observation))
+
+
+def _events(observation: Any) -> frozenset[str]:
+    """The events of a fully observed :class:`Observation`; a ``TypeError`` naming the
+    class for anything else (a sensed ``Observation`` carries reports, not events: its
+    controller is the one the synthesis of a model with sensors returns)."""
+    events = getattr(observation, "events", None)
+    if events is None or not hasattr(observation, "state"):
+        raise TypeError(f"act: expected a mitld_lp.Observation(state, events), got "
+                        f"{type(observation).__module__}.{type(observation).__qualname__}")
+    return events
 
 
 def save_tables(controller: ControllerLike, path: str | os.PathLike[str], *,

@@ -22,7 +22,7 @@ from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState, ProductStates
-from mitld_lp.running.controller import Controller, Observation, RunStatus, save_tables
+from mitld_lp.running.controller import Controller, Observation, RunStatus, _events, save_tables
 from mitld_lp.running.controller_file import (
     ControllerFileError,
     SavedPlan,
@@ -150,7 +150,7 @@ class ConstrainedController(Stepper):
     def act(self, observation: Observation) -> str | None:
         """The action in ``observation.state`` after its events; None once nothing is
         left to decide."""
-        return self._step(observation.state, observation.events)
+        return self._step(observation.state, _events(observation))
 
     def tables(self, max_states: int = defaults.MAX_STATES) -> SavedPlan:
         """The controller as plain tables (what :meth:`save` writes)."""
