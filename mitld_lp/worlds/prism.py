@@ -102,6 +102,7 @@ from mitld_lp.worlds.prism_program import (
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
+from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
     "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
@@ -157,7 +158,9 @@ class PrismGame:
             :data:`DECIDED_ACTION`, a self-loop).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
-    a state's actions and a choice's distribution become tuples when first asked for.
+    a state's actions and a choice's distribution become tuples when first asked for
+    (and the index of the states, a dictionary, when a state is first looked up).  The
+    product reads the layout whole (:meth:`as_table`) when no event changes the world.
     """
 
     source: str
@@ -167,7 +170,6 @@ class PrismGame:
     proposition_names: frozenset[str]
     effects: Mapping[str, np.ndarray]
     _tables: Tables = field(repr=False)
-    _index: Mapping[State, int] = field(repr=False)
     terminal: str = ""
     decided: int = 0
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -188,23 +190,52 @@ class PrismGame:
         return dict(zip(self.variables, state, strict=True))
 
     def _at(self, state: State) -> int:
+        index = self._cache.get("index")
+        if index is None:  # built on first use: the product reads the table instead
+            index = self._cache["index"] = dict(
+                zip(self.states, range(len(self.states)), strict=True))
         try:
-            return self._index[state]
+            return index[state]
         except (KeyError, TypeError):
             raise GameError(f"{state!r} is not a state of {self.source}") from None
+
+    def _names(self, s: int) -> list[str | None]:
+        """The names of state ``s``'s choices, None for an event's."""
+        t = self._tables
+        return [t.action_names[k] if k >= 0 else None
+                for k in t.action_index[t.choices[s] : t.choices[s + 1]].tolist()]
 
     def actions(self, state: State) -> tuple[str, ...]:
         s = self._at(state)
         key = ("actions", s)
         found = self._cache.get(key)
         if found is None:
-            t = self._tables
-            row = t.names[t.choices[s] : t.choices[s + 1]]
-            found = self._cache[key] = tuple(a for a in row.tolist() if a is not None)
+            found = self._cache[key] = tuple(a for a in self._names(s) if a is not None)
         return found
 
     def propositions(self, state: State) -> frozenset[str]:
-        return self._tables.labels[self._at(state)]
+        t = self._tables
+        return t.label_sets[int(t.label_index[self._at(state)])]
+
+    def robot_actions(self) -> frozenset[str]:
+        """Every name of a robot action at some state."""
+        t = self._tables
+        used = np.unique(t.action_index)
+        return frozenset(t.action_names[k] for k in used[used >= 0].tolist())
+
+    def as_table(self) -> WorldTable | None:
+        """The world as a :class:`~mitld_lp.worlds.table.WorldTable` for the product (no
+        copy of the transitions when no choice is an event's); None when an event
+        changes the world (its moves then depend on the step's events)."""
+        if self.effects:
+            return None
+        t = self._tables
+        return WorldTable(
+            states=self.states, initial=t.initial, label_sets=t.label_sets,
+            label_of=t.label_index, choices=t.choices, action_names=t.action_names,
+            action_of=t.action_index, branches=t.branches, targets=t.targets,
+            probabilities=t.probabilities,
+        )
 
     def _distribution(self, choice: int) -> dict[int, float]:
         t = self._tables
@@ -222,7 +253,7 @@ class PrismGame:
         if found is not None:
             return found
         t = self._tables
-        row = t.names[t.choices[s] : t.choices[s + 1]].tolist()
+        row = self._names(s)
         if action not in row:
             raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
         dist = self._distribution(int(t.choices[s]) + row.index(action))
@@ -440,7 +471,6 @@ def load_prism(
         terminal=terminal,
         decided=tables.decided,
         _tables=tables,
-        _index=dict(zip(tables.states, range(len(tables.states)), strict=True)),
     )
 
 

@@ -45,11 +45,13 @@ class Tables:
         variables: the PRISM variables, in the order of a state's values.
         states: ``n`` tuples of values (Storm's state order).
         initial: the index of the initial state.
-        labels: ``n`` frozensets (an object array): the chosen labels true in each state.
+        label_sets: the distinct sets of chosen labels true in a state.
+        label_index: ``n`` indices into ``label_sets``: the labels of each state.
         choices: ``n + 1`` offsets: state ``s`` has choices ``choices[s]:choices[s+1]``.
         branches: ``m + 1`` offsets: choice ``c`` has branches ``branches[c]:branches[c+1]``.
         targets, probabilities: the ``b`` branches (state index, probability > 0).
-        names: ``m`` action names (an object array), ``None`` for an event's choice.
+        action_names: the distinct action names.
+        action_index: ``m`` indices into ``action_names`` (int32), -1 for an event's choice.
         effects: ``event -> n`` choice indices: the event's choice at each state, -1
             where its command is not enabled.
         decided: how many states were not expanded because the task is decided there.
@@ -58,12 +60,14 @@ class Tables:
     variables: tuple[str, ...]
     states: tuple[State, ...]
     initial: int
-    labels: np.ndarray
+    label_sets: tuple[frozenset[str], ...]
+    label_index: np.ndarray
     choices: np.ndarray
     branches: np.ndarray
     targets: np.ndarray
     probabilities: np.ndarray
-    names: np.ndarray
+    action_names: tuple[str, ...]
+    action_index: np.ndarray
     effects: Mapping[str, np.ndarray]
     decided: int = 0
 
@@ -156,22 +160,21 @@ def _valuations(model: Any) -> tuple[tuple[str, ...], tuple[State, ...]]:
     return order, tuple(zip(*columns, strict=True))
 
 
-def _state_labels(model: Any, chosen: frozenset[str]) -> np.ndarray:
-    """Per state, the frozenset of the ``chosen`` labels it satisfies (object array)."""
+def _state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[str], ...],
+                                                                np.ndarray]:
+    """The distinct sets of the ``chosen`` labels a state satisfies, and per state the
+    index of its set."""
     n = model.nr_states
     names = sorted(chosen)
+    if not names:
+        return (frozenset(),), np.zeros(n, dtype=np.int32)
     packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
     for k, label in enumerate(names):
         packed[_indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
-    if not names:
-        out = np.empty(n, dtype=object)
-        out[:] = [frozenset()] * n
-        return out
     rows, inverse = np.unique(packed, axis=0, return_inverse=True)
     bits = np.unpackbits(rows, axis=1)[:, : len(names)]
-    sets = np.empty(len(rows), dtype=object)
-    sets[:] = [frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits]
-    return sets[np.asarray(inverse).reshape(-1)]
+    sets = tuple(frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits)
+    return sets, np.asarray(inverse).reshape(-1).astype(np.int32)
 
 
 def read_model(
@@ -207,8 +210,9 @@ def read_model(
     label_of = np.full(m, -1, dtype=np.int64)  # -1: no label, the deadlock self-loop
     for k, label in enumerate(label_names):
         label_of[_indices(model.choice_labeling.get_choices(label))] = k
+    # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
-    names = np.asarray(table, dtype=object)[label_of]  # label -1 picks the last entry
+    code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
 
     n_decided = 0
     if decided is not None:
@@ -216,14 +220,15 @@ def read_model(
         stopped[_indices(model.labeling.get_states(decided))] = True
         alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
-        names[unlabelled] = DECIDED_ACTION
+        table.append(DECIDED_ACTION)
+        code[unlabelled] = len(table) - 1
         n_decided = int(np.count_nonzero(unlabelled))
 
     bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
         row = probabilities[int(branches[c]):int(branches[c + 1])]
-        at = f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}"
+        at = f"{where}: at state {show(int(state_of[c]))}, action {table[int(code[c])]!r}"
         negative = row[row < 0.0]
         if negative.size:
             raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
@@ -232,7 +237,7 @@ def read_model(
     effects: dict[str, np.ndarray] = {}
     robot = np.ones(m, dtype=bool)
     for event in sorted(events):
-        mine = np.flatnonzero(names == event) if event in table else np.zeros(0, np.int64)
+        mine = np.flatnonzero(np.isin(code, [k for k, a in enumerate(table) if a == event]))
         robot[mine] = False
         at = state_of[mine]
         twice = np.flatnonzero(np.bincount(at, minlength=n) > 1)
@@ -252,33 +257,41 @@ def read_model(
         )
 
     # Two robot choices of one state with one name: told apart by their commands.
-    key = state_of * (len(table) + 1) + label_of + 1
+    key = state_of * (len(label_names) + 1) + label_of + 1
     keys, counts = np.unique(key[robot], return_counts=True)
     clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
     for c in clash.tolist():
-        names[c] = f"{names[c]}@{origin(c)}"
+        table.append(f"{table[int(code[c])]}@{origin(c)}")
+        code[c] = len(table) - 1
     for s in np.unique(state_of[clash]).tolist():
         mine = slice(choices[s], choices[s + 1])
-        row = [str(x) for x in names[mine][robot[mine]]]
+        row = [table[k] for k in code[mine][robot[mine]].tolist()]
         for name in sorted({x for x in row if row.count(x) > 1}):
             raise WorldError(f"{where}: two choices named {name!r} at state {show(s)}")
-    names[~robot] = None
+    # one index per distinct name; -1 for an event's choice
+    distinct: dict[str, int] = {}
+    remap = np.array([distinct.setdefault(a, len(distinct)) for a in table], dtype=np.int32)
+    action_index = remap[code]
+    action_index[~robot] = -1
 
     initial = list(model.initial_states)
     if len(initial) != 1:
         raise WorldError(
             f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
         )
+    label_sets, label_index = _state_labels(model, chosen)
     return Tables(
         variables=variables,
         states=states,
         initial=int(initial[0]),
-        labels=_state_labels(model, chosen),
+        label_sets=label_sets,
+        label_index=label_index,
         choices=choices,
         branches=branches,
         targets=targets,
         probabilities=probabilities,
-        names=names,
+        action_names=tuple(distinct),
+        action_index=action_index,
         effects=effects,
         decided=n_decided,
     )
