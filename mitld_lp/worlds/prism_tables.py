@@ -171,7 +171,13 @@ def _state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[s
     packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
     for k, label in enumerate(names):
         packed[_indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
-    rows, inverse = np.unique(packed, axis=0, return_inverse=True)
+    if packed.shape[1] <= 8:  # a state's labels as one big-endian integer: a 1-d unique
+        wide = np.zeros((n, 8), dtype=np.uint8)
+        wide[:, : packed.shape[1]] = packed
+        codes, inverse = np.unique(wide.view(">u8").reshape(-1), return_inverse=True)
+        rows = codes.astype(">u8").view(np.uint8).reshape(-1, 8)[:, : packed.shape[1]]
+    else:
+        rows, inverse = np.unique(packed, axis=0, return_inverse=True)
     bits = np.unpackbits(rows, axis=1)[:, : len(names)]
     sets = tuple(frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits)
     return sets, np.asarray(inverse).reshape(-1).astype(np.int32)
