@@ -172,3 +172,28 @@ def test_a_world_changed_by_its_events_is_asked_state_by_state(tmp_path: Path) -
     assert table_of(game) is None  # its moves depend on the step's events
     sta = sta_of(game, "F (goal & D[geometric(0.3)] ring)")
     same_mdp(product(game, sta), reference_product(game, sta))
+
+
+def test_the_states_are_storms_valuations_made_on_demand(tmp_path: Path) -> None:
+    import json
+    import pickle
+
+    import stormpy
+
+    source = write(tmp_path, ROBOT)
+    game = load_prism(source)
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(stormpy.parse_prism_program(str(source)), options=options)
+    storm = [json.loads(str(model.state_valuations.to_json(i))) for i in range(model.nr_states)]
+    expected = tuple(tuple(v[name] for name in game.variables) for v in storm)
+    assert len(game.states) == len(expected) == model.nr_states
+    assert game.states == expected and list(game.states) == list(expected)
+    assert [game.states[i] for i in range(-2, 3)] == [expected[i] for i in range(-2, 3)]
+    assert game.states[1:4] == expected[1:4]
+    parked = game.variables.index("parked")  # a Boolean variable's value is a bool
+    assert all(type(s[parked]) is bool and type(s[0 if parked else 1]) is int
+               for s in game.states)
+    assert pickle.loads(pickle.dumps(game.states)) == expected
+    with pytest.raises(IndexError):
+        game.states[len(expected)]

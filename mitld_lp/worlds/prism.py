@@ -77,7 +77,7 @@ import logging
 import os
 import re
 import tempfile
-from collections.abc import Hashable, Iterable, Mapping
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -146,7 +146,8 @@ class PrismGame:
     Attributes:
         source: the PRISM file.
         variables: the PRISM variables, in the order of a state's values.
-        states: every state Storm built, in Storm's order.
+        states: every state Storm built, in Storm's order (each made a tuple when
+            asked for: :class:`mitld_lp.worlds.prism_tables.Valuations`).
         initial: the initial state.
         proposition_names: the labels that are propositions.
         effects: ``event -> array over states``: where each event action's command is
@@ -165,7 +166,7 @@ class PrismGame:
 
     source: str
     variables: tuple[str, ...]
-    states: tuple[State, ...]
+    states: Sequence[State]
     initial: State
     proposition_names: frozenset[str]
     effects: Mapping[str, np.ndarray]

@@ -15,9 +15,9 @@ import json
 import os
 import tarfile
 import tempfile
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -43,7 +43,8 @@ class Tables:
 
     Attributes:
         variables: the PRISM variables, in the order of a state's values.
-        states: ``n`` tuples of values (Storm's state order).
+        states: ``n`` tuples of values (Storm's state order), made when asked for
+            (:class:`Valuations`).
         initial: the index of the initial state.
         label_sets: the distinct sets of chosen labels true in a state.
         label_index: ``n`` indices into ``label_sets``: the labels of each state.
@@ -58,7 +59,7 @@ class Tables:
     """
 
     variables: tuple[str, ...]
-    states: tuple[State, ...]
+    states: Valuations
     initial: int
     label_sets: tuple[frozenset[str], ...]
     label_index: np.ndarray
@@ -140,24 +141,80 @@ def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
             )
 
 
-def _valuations(model: Any) -> tuple[tuple[str, ...], tuple[State, ...]]:
+class Valuations(Sequence[State]):
+    """The states as the rows of one integer array (a column per variable, in
+    :attr:`Tables.variables` order); state ``i`` becomes the tuple of its values (a
+    ``bool`` for a Boolean variable, else an ``int``) when asked for.  A million tuples
+    would cost a hundred megabytes and seconds to make, copy back from the exploring
+    child and index, and the product reads none of them."""
+
+    def __init__(self, values: np.ndarray, booleans: tuple[int, ...]) -> None:
+        self.values = values  # (n, k): the smallest integer type that holds them all
+        self.booleans = booleans  # the columns of Boolean variables
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+    def _tuples(self, block: np.ndarray) -> list[State]:
+        rows = block.tolist()
+        for row in rows if self.booleans else ():
+            for j in self.booleans:
+                row[j] = bool(row[j])
+        return [tuple(row) for row in rows]
+
+    @overload
+    def __getitem__(self, i: int) -> State: ...
+    @overload
+    def __getitem__(self, i: slice) -> tuple[State, ...]: ...
+    def __getitem__(self, i: int | slice) -> State | tuple[State, ...]:
+        if isinstance(i, slice):
+            return tuple(self._tuples(self.values[i]))
+        return self._tuples(self.values[i][None, :])[0]
+
+    def __iter__(self) -> Iterator[State]:
+        for lo in range(0, len(self), 1 << 16):
+            yield from self._tuples(self.values[lo : lo + (1 << 16)])
+
+    def __eq__(self, other: object) -> bool:  # as the tuple of the states would compare
+        if isinstance(other, Valuations | tuple | list):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other,
+                                                                         strict=True))
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"Valuations(<{len(self)} states>)"
+
+
+def _narrow(values: np.ndarray) -> np.ndarray:
+    """``values`` in the smallest signed integer type that holds them."""
+    if values.size == 0:
+        return values.astype(np.int8)
+    lo, hi = int(values.min()), int(values.max())
+    for kind in (np.int8, np.int16, np.int32):
+        info = np.iinfo(kind)
+        if info.min <= lo and hi <= info.max:
+            return values.astype(kind)
+    return values
+
+
+def _valuations(model: Any) -> tuple[tuple[str, ...], Valuations]:
     """The variables (in Storm's order) and each state's values, one call per variable."""
     n = model.nr_states
     valuations = model.state_valuations
     order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
     by_name = {v.name: v for v in valuations.get_all_variables()}
-    columns: list[list[Any]] = []
-    for name in order:
+    values = np.zeros((n, len(order)), dtype=np.int64)
+    booleans = []
+    for j, name in enumerate(order):
         var = by_name[name]
         if var.has_boolean_type():  # a bit vector: the states where it is true
-            column = np.zeros(n, dtype=bool)
-            column[_indices(valuations.get_boolean_values(var))] = True
-            columns.append(column.tolist())
+            values[_indices(valuations.get_boolean_values(var)), j] = 1
+            booleans.append(j)
         else:  # PRISM state variables are booleans and bounded integers
-            columns.append(list(valuations.get_int64_values(var)))
-    if not columns:  # no variables (Storm made them constants): one empty valuation
-        return order, ((),) * n
-    return order, tuple(zip(*columns, strict=True))
+            values[:, j] = np.asarray(valuations.get_int64_values(var), dtype=np.int64)
+    return order, Valuations(_narrow(values), tuple(booleans))
 
 
 def _state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[str], ...],
