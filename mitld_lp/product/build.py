@@ -130,7 +130,9 @@ def _build(
     f.check_rows()  # the rows not checked yet: every distribution read is checked
     keys = states.keys.view.copy()
     del states  # the index is not needed any more: free it before the matrix is assembled
-    return _assemble(f, chunks, state_choices.view, keys, initial)
+    built = _assemble(f, chunks, state_choices.view, keys, initial)
+    f.release()  # its arrays go now, not at the next cyclic collection
+    return built
 
 
 def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:

@@ -128,14 +128,21 @@ class Layers:
         self.act_start = Grow.of(t.choices[:-1].astype(np.int64, copy=False))
         self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
         self.action_id = {a: i for i, a in enumerate(t.action_names)}
-        self.slot_aid = Grow.of(t.action_of.astype(np.int64, copy=False))
+        self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
         lengths = np.diff(t.branches).astype(np.int64, copy=False)
-        self.row_start = Grow.of(np.concatenate(([0], t.branches[:-1] + 1)).astype(np.int64))
-        self.row_len = Grow.of(np.concatenate(([1], lengths)).astype(np.int64))
-        self.row_succ = Grow.of(np.concatenate(([-1], t.targets)).astype(np.int64))
-        self.row_prob = Grow.of(np.concatenate(([1.0], t.probabilities)).astype(np.float64))
+        self.row_start = Grow.of(np.concatenate(([0], t.branches[:-1] + 1), dtype=np.int64))
+        self.row_len = Grow.of(np.concatenate(([1], lengths), dtype=np.int64))
+        self.row_succ = Grow.of(np.concatenate(([-1], t.targets), dtype=np.int64))
+        self.row_prob = Grow.of(np.concatenate(([1.0], t.probabilities), dtype=np.float64))
         self._faulty = distribution_faults(lengths, t.probabilities.astype(np.float64))
         self.rows_checked = self.row_len.size
+
+    def release(self) -> None:
+        """Drop the memos, whose bound methods refer back to this object: without them
+        the layers are freed as soon as the build lets go of them, not at the next
+        cyclic garbage collection (on a product of a million transitions they hold tens
+        of megabytes that the solver could use)."""
+        self._rows = self._delta = None  # type: ignore[assignment]
 
     def occ_set(self, mask: int) -> frozenset[str]:
         """The events of an outcome's bit mask (over the sorted events)."""
