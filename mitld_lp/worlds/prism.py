@@ -546,13 +546,23 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
         formula = formula.get_raw_formula()
 
+    # Two choices of one state named by one action are told apart by the commands they
+    # come from (Storm's choice origins, a tenth of the build): that takes a module with
+    # two commands of one action (every command has an action here, and a choice of an
+    # action joins one enabled command of it from each module that has it).
+    origins = any(
+        len(names) != len(set(names))
+        for names in ([c.action_name for c in module.commands] for module in program.modules)
+    )
+
     def options(checks: bool) -> Any:
         o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
         o.set_exploration_checks(checks)
         # Every label, always: a label left out of the build would be false in every state.
         o.set_build_all_labels()
         o.set_build_choice_labels()
-        o.set_build_choice_origins()
+        if origins:
+            o.set_build_choice_origins()
         o.set_build_state_valuations()
         return o
 
@@ -594,6 +604,8 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
 
     def origin(choice: int) -> str:
         """The commands a choice comes from, ``robot_cmd2``."""
+        if not origins:  # no module has two commands of one action: see above
+            raise AssertionError("two choices of one action without two such commands")
         cmds = sorted(model.choice_origins.get_command_set(choice))
         return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
 
