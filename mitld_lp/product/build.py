@@ -199,16 +199,18 @@ def _expand(
     p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
     p_occ = f.out_occ.view[p_out]
     p_next = f.out_next.view[p_out]
-    p_row = np.zeros(p_choice.size, dtype=np.int64)  # row 0: crossed a truncation point
+    p_row = np.full(p_choice.size, f.cut_row, dtype=np.int64)  # crossed a truncation point
     alive = p_next >= 0
     p_row[alive] = f.rows(c_slot[p_choice[alive]], p_occ[alive])
-    # entries: one per (pair, game successor)
+    # entries: one per (pair, game successor); the truncation row's one entry has
+    # probability 1 and no successor (neither is read)
     n_succ = f.row_len.view[p_row]
     e_pair = np.repeat(np.arange(p_choice.size), n_succ)
     e_at = f.row_start.view[p_row][e_pair] + ranks(n_succ)
-    vals = f.out_prob.view[p_out][e_pair] * f.row_prob.view[e_at]
-    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
     moving = alive[e_pair]
+    vals = f.out_prob.view[p_out][e_pair]
+    vals[moving] *= f.row_prob.view[e_at[moving]]
+    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
     g2 = f.row_succ.view[e_at[moving]]
     e_pm = e_pair[moving]
     f.flush()

@@ -41,8 +41,9 @@ class Layers:
       ``.. + act_count[g]`` index ``slot_action``) and its propositions as a bit mask
       over the automaton's atoms; per (slot, event outcome) one successor row
       (``row_start``/``row_len`` into ``row_succ``/``row_prob``; ``row_asked``: the
-      memo key it was first asked for), row 0 standing for "the outcome crossed a
-      truncation point"; every row is checked to be a distribution (:meth:`check_rows`);
+      memo key it was first asked for), row ``cut_row`` (0; after the rows of a
+      table) standing for "the outcome crossed a truncation point"; every row is checked
+      to be a distribution (:meth:`check_rows`);
     * the events: situations ``(pending, clock)`` interned as ``sid``; per ``sid`` its
       outcomes (``out_*``: the events that happened as a bit mask over the STA's events,
       the probability, the next situation or -1 when truncated);
@@ -88,6 +89,7 @@ class Layers:
         self.row_prob.extend([1.0])
         self.row_asked.extend([-1])
         self.rows_checked = 1
+        self.cut_row = 0  # the row of an outcome that crossed a truncation point
         # events
         self.sid: dict[tuple[frozenset[str], int], int] = {}
         self.situations: list[tuple[frozenset[str], int]] = []
@@ -115,8 +117,9 @@ class Layers:
 
     def _read_table(self, t: WorldTable) -> None:
         """Every game state's entries from the table at once: game state ``g`` is the
-        table's state ``g``, action slot ``c`` its robot choice ``c``, row ``1 + c`` that
-        choice's successors (row 0 stays the truncation row).  The rows that are not
+        table's state ``g``, action slot ``c`` its robot choice ``c``, row ``c`` that
+        choice's successors, in the table's own arrays (the truncation row after them:
+        its length alone is stored, its entry is never read).  The rows that are not
         distributions are found here, and refused when the product first reads one."""
         self.table = t
         self.game_states = t.states  # type: ignore[assignment]  # a sequence, not copied
@@ -129,12 +132,15 @@ class Layers:
         self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
         self.action_id = {a: i for i, a in enumerate(t.action_names)}
         self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
+        # row c: robot choice c, the table's own arrays (not copied); the truncation row
+        # after them, its entry never read
         lengths = np.diff(t.branches).astype(np.int64, copy=False)
-        self.row_start = Grow.of(np.concatenate(([0], t.branches[:-1] + 1), dtype=np.int64))
-        self.row_len = Grow.of(np.concatenate(([1], lengths), dtype=np.int64))
-        self.row_succ = Grow.of(np.concatenate(([-1], t.targets), dtype=np.int64))
-        self.row_prob = Grow.of(np.concatenate(([1.0], t.probabilities), dtype=np.float64))
-        self._faulty = distribution_faults(lengths, t.probabilities.astype(np.float64))
+        self.cut_row = lengths.size
+        self.row_start = Grow.of(t.branches.astype(np.int64, copy=False))
+        self.row_len = Grow.of(np.concatenate((lengths, [1]), dtype=np.int64))
+        self.row_succ = Grow.of(t.targets.astype(np.int64, copy=False))
+        self.row_prob = Grow.of(t.probabilities.astype(np.float64, copy=False))
+        self._faulty = distribution_faults(lengths, self.row_prob.view)
         self.rows_checked = self.row_len.size
 
     def release(self) -> None:
@@ -269,7 +275,7 @@ class Layers:
         if self.table is not None:  # one row per robot choice, whatever the events
             if self._faulty.size:
                 self._refuse(slots)
-            return slots + 1
+            return slots
         if self.ignores_events:  # one row per slot, asked with no events
             return self._rows(slots)
         return self._rows(slots * self.n_occ + occ)
