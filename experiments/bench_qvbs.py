@@ -11,9 +11,9 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 * ``ours``: :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` with their
   defaults; ``solve_cpu`` is everything after the product is built (the solver modules
   imported before, as in ``bench_sweeps.py``), ``whole_cpu`` the load (the PRISM
-  exploration) and the synthesis, ``process_cpu`` the child's CPU up to the end of
-  the synthesis (imports and Storm's exploration in its own child included; the
-  bench's extras below are not: ``child_cpu`` is the whole child with them);
+  exploration, with the child process Storm explores in when it is capped) and the
+  synthesis, ``process_cpu`` the child's CPU up to the end of the synthesis (imports
+  included; the bench's extras below are not: ``child_cpu`` is the whole child);
   ``bytes_per_transition`` the peak resident size during ``synthesize`` (the peak is
   reset after the load, where Linux allows it) over the size before it, per product
   transition (the product is built inside ``synthesize``).  After the figures are
@@ -122,9 +122,9 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     from mitld_lp import load_model, synthesize
     from mitld_lp.solvers import write_drn
 
-    c = bs._cpu()
+    c = _process_cpu()  # with the child in which Storm explores the PRISM program
     model = load_model(job["model"], max_states=job["max_states"])
-    load_cpu = bs._cpu() - c
+    load_cpu = _process_cpu() - c
     bs.preload()
     fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
     before = bs._rss_kb()
