@@ -148,7 +148,7 @@ class Layers:
         the layers are freed as soon as the build lets go of them, not at the next
         cyclic garbage collection (on a product of a million transitions they hold tens
         of megabytes that the solver could use)."""
-        self._rows = self._delta = None  # type: ignore[assignment]
+        del self._rows, self._delta
 
     def occ_set(self, mask: int) -> frozenset[str]:
         """The events of an outcome's bit mask (over the sorted events)."""

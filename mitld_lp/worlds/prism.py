@@ -93,7 +93,10 @@ from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
+    check_constants,
     check_program,
+    command_names,
+    name_unlabelled_commands,
     show_sum,
     storm_error,
     storm_quiet,
@@ -305,45 +308,6 @@ def _check_utf8(path: Path, where: str) -> None:
         ) from None
 
 
-def _check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
-    declared = {c.name: c for c in program.constants}
-    for name, value in constants.items():
-        if name not in declared:
-            known = ", ".join(sorted(declared)) or "none"
-            raise WorldError(f"{where}: constant {name!r} is not declared (constants: {known})")
-        c = declared[name]
-        if c.defined:
-            raise WorldError(
-                f"{where}: constant {name!r} already has a value in the file "
-                f"({c.definition}); only undefined constants can be given"
-            )
-        kind = c.type
-        if kind.is_boolean:
-            ok, want = isinstance(value, bool), "a boolean"
-        elif kind.is_integer:
-            ok, want = isinstance(value, int) and not isinstance(value, bool), "an integer"
-        else:
-            ok = isinstance(value, int | float) and not isinstance(value, bool)
-            want = "a number"
-        if not ok:
-            raise WorldError(f"{where}: constant {name!r} must be {want}, got {value!r}")
-    missing = sorted(c.name for c in program.constants if not c.defined and c.name not in constants)
-    if missing:
-        raise WorldError(
-            f"{where}: constants {', '.join(missing)} have no value in the file; "
-            "give them with constants={...}"
-        )
-
-
-def _command_names(program: Any) -> dict[int, str]:
-    """Global command index -> ``<module>_cmd<k>`` (k from 1 within the module)."""
-    return {
-        cmd.global_index: f"{module.name}_cmd{k}"
-        for module in program.modules
-        for k, cmd in enumerate(module.commands, start=1)
-    }
-
-
 def load_prism(
     path: str | os.PathLike[str],
     *,
@@ -400,7 +364,7 @@ def load_prism(
     if extra:
         program = _with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
-    _check_constants(program, given, where)
+    check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
     if labels is None:
         chosen = frozenset(defined)
@@ -435,7 +399,7 @@ def load_prism(
     condition = decided_when(task, frozenset(defined)) if task is not None else False
     terminal = "" if condition is False else render(
         condition, {lab.name: str(lab.expression) for lab in plain.labels})
-    program, action_names = _name_unlabelled_commands(program, where, stormpy)
+    program, action_names = name_unlabelled_commands(program, where, stormpy)
 
     def work() -> Tables:
         return _build(stormpy, program, plain, where, chosen, event_set, action_names,
@@ -600,40 +564,14 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
     known = {lab.name for lab in program.labels} | {"init", "deadlock"}
     stopped = sorted(built - known) if terminal else []
-    command_names = _command_names(program)
+    commands = command_names(program)
 
     def origin(choice: int) -> str:
         """The commands a choice comes from, ``robot_cmd2``."""
         if not origins:  # no module has two commands of one action: see above
             raise AssertionError("two choices of one action without two such commands")
         cmds = sorted(model.choice_origins.get_command_set(choice))
-        return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
+        return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
 
     return read_model(model, where, chosen, events, action_names, origin,
                       stopped[0] if len(stopped) == 1 else None)
-
-
-def _name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:
-    """Give every command without an action a fresh action of its own (it synchronises
-    with nothing, as before), so that Storm's choice labels name every choice; returns
-    the program and ``fresh action -> <module>_cmd<k>``."""
-    taken = {c.action_name for m in program.modules for c in m.commands}
-    taken |= {m.name for m in program.modules} | {c.name for c in program.constants}
-    taken |= {v.name for v in program.variables} | {lab.name for lab in program.labels}
-    fresh: dict[int, str] = {}
-    names: dict[str, str] = {}
-    for module in program.modules:
-        for k, cmd in enumerate(module.commands, start=1):
-            if not cmd.is_labeled:
-                action = f"_mitld_cmd{cmd.global_index}"
-                while action in taken:
-                    action = "_" + action
-                fresh[cmd.global_index] = action
-                names[action] = f"{module.name}_cmd{k}"
-    if not fresh:
-        return program, names
-    try:
-        with storm_quiet():
-            return program.label_unlabelled_commands(fresh), names
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
