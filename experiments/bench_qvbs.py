@@ -11,7 +11,9 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 * ``ours``: :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` with their
   defaults; ``solve_cpu`` is everything after the product is built (the solver modules
   imported before, as in ``bench_sweeps.py``), ``whole_cpu`` the load (the PRISM
-  exploration) and the synthesis, ``process_cpu`` the whole child (imports included);
+  exploration, with the child process Storm explores in when it is capped) and the
+  synthesis, ``process_cpu`` the child's CPU up to the end of the synthesis (imports
+  included; the bench's extras below are not: ``child_cpu`` is the whole child);
   ``bytes_per_transition`` the peak resident size during ``synthesize`` (the peak is
   reset after the load, where Linux allows it) over the size before it, per product
   transition (the product is built inside ``synthesize``).  After the figures are
@@ -24,8 +26,13 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
   1e-6 (for a ``Pmin`` property the product is the complement's, as ours solves it);
 * ``storm_prism``: Storm's whole run on the PRISM file and the QVBS property as
   published, as a process: import stormpy, parse, build, check with the best method
-  found on the DRN (``storm_process_cpu``; ``storm_prism_cpu`` the parse, build and
-  check alone).
+  found on the DRN (``storm_process_cpu``, up to the end of the check;
+  ``storm_prism_cpu`` the parse, build and check alone).
+
+``--compare DIR`` runs ``ours`` a second time on each instance, in the same run, with
+the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git worktree add`` or
+``git archive``), and adds its figures as ``base_*`` columns and a before/after table:
+the same bracket, the same product, CPU and bytes per transition side by side.
 
 An instance whose optimum (QVBS's reference) is below 1e-3 or above 1 - 1e-3 is
 degenerate: reported apart, never in a ratio.  The targets checked on the others (all
@@ -37,6 +44,8 @@ The QVBS files are not part of this repository; give a checkout's ``benchmarks/`
 
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --out experiments/results
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --quick  # two small instances
+    python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --only csma.4-2.some_before \
+        --compare ../old-checkout --out /tmp/qvbs  # before and after, one run
 
 Written: ``bench_qvbs.csv``, ``bench_qvbs.md`` and ``bench_qvbs_machine.txt``.
 """
@@ -99,26 +108,36 @@ def _hwm_kb() -> int:
     return bs._peak_kb()
 
 
+def _process_cpu() -> float:
+    """This process's CPU seconds so far, with its children that have ended (the capped
+    child in which Storm explores a PRISM program)."""
+    own, ended = (resource.getrusage(w) for w in (resource.RUSAGE_SELF,
+                                                   resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
+
+
 def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     import numpy as np
 
     from mitld_lp import load_model, synthesize
     from mitld_lp.solvers import write_drn
 
-    c = bs._cpu()
+    c = _process_cpu()  # with the child in which Storm explores the PRISM program
     model = load_model(job["model"], max_states=job["max_states"])
-    load_cpu = bs._cpu() - c
+    load_cpu = _process_cpu() - c
     bs.preload()
     fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
     before = bs._rss_kb()
     c = bs._cpu()
     r = synthesize(model)
     synth_cpu = bs._cpu() - c
+    process_cpu = _process_cpu()  # the process so far; the bench's extras below are not ours
     peak = _hwm_kb() if fresh else bs._peak_kb()
     mdp = r.mdp
     out = dict(states=mdp.n_states, transitions=mdp.n_transitions, lower=r.lower,
                upper=r.upper, product_value=float(r.lower_model.value),
                certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
+               process_cpu=process_cpu,
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
                bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
     # untimed from here: the DRN for Storm and the unit sweep
@@ -173,15 +192,19 @@ def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
     method = job["best"]
     checks = bs._checks(model, prop, (method,))
     return dict(build_cpu=build_cpu, whole_cpu=build_cpu + checks["best_cpu"],
-                states=model.nr_states, value=checks["methods"][method]["value"], **checks)
+                states=model.nr_states, value=checks["methods"][method]["value"],
+                process_cpu=_process_cpu(), **checks)
 
 
 WORKERS = {"ours": work_ours, "storm_check": work_storm_check, "storm_prism": work_storm_prism}
 
 
-def _child(route: str, job: dict[str, Any], work: Path, budget: float) -> dict[str, Any]:
+def _child(route: str, job: dict[str, Any], work: Path, budget: float,
+           code: Path | None = None) -> dict[str, Any]:
     """The route in a child process under a CPU budget; its result with
-    ``process_cpu`` (``os.wait4``), or ``{"error": ...}``."""
+    ``child_cpu`` (the whole child, ``os.wait4``; ``process_cpu`` too unless the route
+    measured it before the bench's own extras), or ``{"error": ...}``.  ``code``: the
+    repository whose ``mitld_lp`` the child imports (default this one)."""
     (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
     out = work / f"{route}.json"
     out.unlink(missing_ok=True)
@@ -191,10 +214,11 @@ def _child(route: str, job: dict[str, Any], work: Path, budget: float) -> dict[s
         resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
 
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = os.pathsep.join([str(bs.ROOT), *filter(None, [env.get("PYTHONPATH")])])
+    root = bs.ROOT if code is None else code
+    env["PYTHONPATH"] = os.pathsep.join([str(root), *filter(None, [env.get("PYTHONPATH")])])
     with tempfile.TemporaryFile() as errors:
         proc = subprocess.Popen([sys.executable, __file__, "--worker", route, str(work)],
-                                cwd=bs.ROOT, stdout=subprocess.DEVNULL, stderr=errors,
+                                cwd=root, stdout=subprocess.DEVNULL, stderr=errors,
                                 env=env, preexec_fn=cap)
         _, status, usage = os.wait4(proc.pid, 0)
         code = os.waitstatus_to_exitcode(status)
@@ -205,7 +229,9 @@ def _child(route: str, job: dict[str, Any], work: Path, budget: float) -> dict[s
         why = (f"over the CPU budget of {limit} s" if cpu >= limit - 1
                else f"exit {code}: {(err.strip().splitlines() or ['no output'])[-1][:200]}")
         return {"error": f"{route}: {why}"}
-    return dict(json.loads(out.read_text(encoding="utf-8")), process_cpu=cpu)
+    result = json.loads(out.read_text(encoding="utf-8"))
+    result.setdefault("process_cpu", cpu)
+    return dict(result, child_cpu=cpu)
 
 
 # ----------------------------------------------------------------------------- the runs
@@ -245,8 +271,13 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
 
 
 def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
-            budget: float) -> dict[str, Any]:
-    """Every route on one instance and its row; ratios only if not degenerate."""
+            budget: float, compare: Path | None = None) -> dict[str, Any]:
+    """Every route on one instance and its row; ratios only if not degenerate.
+    ``compare``: also ours from that checkout (``base_*`` columns)."""
+    base: dict[str, Any] = {}
+    if compare is not None:
+        base = _child("ours", job, work, budget, compare)
+        (work / "model.drn").unlink(missing_ok=True)
     ours = _child("ours", job, work, budget)
     if "error" in ours:
         return dict(instance=inst.name, error=ours["error"])
@@ -286,8 +317,37 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
                                          prism["process_cpu"] if prism else None),
         bytes_per_transition=ours["bytes_per_transition"],
         storm_bytes_per_transition=storm["bytes_per_transition"],
+        child_cpu=ours["child_cpu"], storm_child_cpu=prism["child_cpu"] if prism else None,
+        **_compared(base, ours, prism, flat),
         **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
     )
+
+
+def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] | None,
+              flat: bool) -> dict[str, Any]:
+    """The ``base_*`` columns of a ``--compare`` run (empty without one)."""
+    if not base:
+        return {}
+    if "error" in base:
+        return dict(base_error=base["error"])
+    storm = prism["process_cpu"] if prism else None
+    return dict(
+        base_value=base["lower"], base_upper=base["upper"], base_certified=base["certified"],
+        base_whole_cpu=base["whole_cpu"], base_process_cpu=base["process_cpu"],
+        base_bytes_per_transition=base["bytes_per_transition"],
+        base_process_over_storm_process=None if flat or not storm
+        else base["process_cpu"] / storm,
+        same_bracket=(base["lower"], base["upper"]) == (ours["lower"], ours["upper"]),
+        same_product=(base["states"], base["transitions"]) == (ours["states"],
+                                                                 ours["transitions"]),
+    )
+
+
+COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "states",
+            "transitions", "base_whole_cpu", "whole_cpu", "base_process_cpu", "process_cpu",
+            "storm_process_cpu", "base_process_over_storm_process",
+            "process_over_storm_process", "base_bytes_per_transition",
+            "bytes_per_transition", "storm_bytes_per_transition")
 
 
 def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
@@ -300,6 +360,12 @@ def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
     flat = [r for r in done if r["degenerate"]]
     text = "## QVBS PRISM MDPs of at least 1e5 states, ours and Storm in one run\n\n"
     text += table(good) if good else "No non-degenerate instance was run.\n"
+    compared = [r for r in done if "base_value" in r]
+    if compared:
+        text += ("\nBefore (`base_*`: the package of the `--compare` checkout) and after "
+                 "(this checkout), in the same run; ratios only for the non-degenerate "
+                 "instances:\n\n" + _common.markdown_table(
+                     COMPARED, [[bs._fmt(r.get(k)) for k in COMPARED] for r in compared]))
     if flat:
         text += ("\nDegenerate instances (QVBS's reference below 1e-3 or above 1 - 1e-3; no "
                  "ratio is taken from them):\n\n" + table(flat))
@@ -333,6 +399,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     help="only these families (repeatable)")
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME",
                     help="only these instances (e.g. firewire_dl.3-600.deadline)")
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                    help="also run ours from the checkout DIR (its mitld_lp) on each "
+                    "instance, before this checkout's, and report both")
     ap.add_argument("--budget", type=float, default=BUDGET,
                     help=f"CPU seconds per child process (default {BUDGET:g})")
     args = ap.parse_args(argv)
@@ -352,7 +421,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for inst, job in todo:
             work = Path(tmp) / inst.name
             work.mkdir()
-            rows.append(measure(inst, job, work, args.budget))
+            rows.append(measure(inst, job, work, args.budget, args.compare))
             print(bs._line(rows[-1]) if "error" not in rows[-1]
                   else f"{inst.name}: not run ({rows[-1]['error']})", flush=True)
     header = sorted({k for r in rows for k in r}, key=lambda k: (

@@ -339,7 +339,7 @@ def _check_prism_task(game: Game[Any], task: Task, ctx: _Context) -> None:
     from mitld_lp.worlds.prism import PrismGame
 
     assert isinstance(game, PrismGame)
-    robot_actions = {a for s in game.states for a in game.actions(s)}
+    robot_actions = game.robot_actions()  # from the tables, not state by state
     # a label of the world named like an action is the label (the spec reads labels)
     for action in sorted((atoms(task.formula) - set(game.proposition_names))
                          & robot_actions):

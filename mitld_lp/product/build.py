@@ -130,7 +130,9 @@ def _build(
     f.check_rows()  # the rows not checked yet: every distribution read is checked
     keys = states.keys.view.copy()
     del states  # the index is not needed any more: free it before the matrix is assembled
-    return _assemble(f, chunks, state_choices.view, keys, initial)
+    built = _assemble(f, chunks, state_choices.view, keys, initial)
+    f.release()  # its arrays go now, not at the next cyclic collection
+    return built
 
 
 def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:
@@ -197,16 +199,18 @@ def _expand(
     p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
     p_occ = f.out_occ.view[p_out]
     p_next = f.out_next.view[p_out]
-    p_row = np.zeros(p_choice.size, dtype=np.int64)  # row 0: crossed a truncation point
+    p_row = np.full(p_choice.size, f.cut_row, dtype=np.int64)  # crossed a truncation point
     alive = p_next >= 0
     p_row[alive] = f.rows(c_slot[p_choice[alive]], p_occ[alive])
-    # entries: one per (pair, game successor)
+    # entries: one per (pair, game successor); the truncation row's one entry has
+    # probability 1 and no successor (neither is read)
     n_succ = f.row_len.view[p_row]
     e_pair = np.repeat(np.arange(p_choice.size), n_succ)
     e_at = f.row_start.view[p_row][e_pair] + ranks(n_succ)
-    vals = f.out_prob.view[p_out][e_pair] * f.row_prob.view[e_at]
-    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
     moving = alive[e_pair]
+    vals = f.out_prob.view[p_out][e_pair]
+    vals[moving] *= f.row_prob.view[e_at[moving]]
+    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
     g2 = f.row_succ.view[e_at[moving]]
     e_pm = e_pair[moving]
     f.flush()

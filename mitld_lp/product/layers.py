@@ -3,7 +3,10 @@
 The game is asked once per (state, action, events of the step), the STA once per
 situation (pending events, clock), the automaton once per (state, letter); the answers
 are numbered and stored in arrays that :mod:`mitld_lp.product.build` joins for a whole
-batch of product states at a time.
+batch of product states at a time.  A world that is already a table
+(:mod:`mitld_lp.worlds.table`: a PRISM program) is read whole instead, by array
+operations: its states are the game states in its own numbering, its choices the action
+slots, its rows the successor rows; nothing is asked of it state by state.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from mitld_lp.worlds.successors import (
     distribution_faults,
     place,
 )
+from mitld_lp.worlds.table import WorldTable, table_of
 
 __all__ = ["Layers"]
 
@@ -37,8 +41,9 @@ class Layers:
       ``.. + act_count[g]`` index ``slot_action``) and its propositions as a bit mask
       over the automaton's atoms; per (slot, event outcome) one successor row
       (``row_start``/``row_len`` into ``row_succ``/``row_prob``; ``row_asked``: the
-      memo key it was first asked for), row 0 standing for "the outcome crossed a
-      truncation point"; every row is checked to be a distribution (:meth:`check_rows`);
+      memo key it was first asked for), row ``cut_row`` (0; after the rows of a
+      table) standing for "the outcome crossed a truncation point"; every row is checked
+      to be a distribution (:meth:`check_rows`);
     * the events: situations ``(pending, clock)`` interned as ``sid``; per ``sid`` its
       outcomes (``out_*``: the events that happened as a bit mask over the STA's events,
       the probability, the next situation or -1 when truncated);
@@ -84,6 +89,7 @@ class Layers:
         self.row_prob.extend([1.0])
         self.row_asked.extend([-1])
         self.rows_checked = 1
+        self.cut_row = 0  # the row of an outcome that crossed a truncation point
         # events
         self.sid: dict[tuple[frozenset[str], int], int] = {}
         self.situations: list[tuple[frozenset[str], int]] = []
@@ -102,6 +108,47 @@ class Layers:
         self.codec = KeyCodec(self.dta.n_states, n_occ * (caps + 1))
         # automaton
         self._delta = Memo(self._new_steps, self.dta.n_states << len(self.atoms))
+        # a world that is a table: read whole (its rows are then one per robot choice)
+        self.table: WorldTable | None = None
+        self._faulty = np.zeros(0, dtype=np.int64)
+        table = table_of(game)
+        if table is not None and self.codec.fits(table.n_states):
+            self._read_table(table)
+
+    def _read_table(self, t: WorldTable) -> None:
+        """Every game state's entries from the table at once: game state ``g`` is the
+        table's state ``g``, action slot ``c`` its robot choice ``c``, row ``c`` that
+        choice's successors, in the table's own arrays (the truncation row after them:
+        its length alone is stored, its entry is never read).  The rows that are not
+        distributions are found here, and refused when the product first reads one."""
+        self.table = t
+        self.game_states = t.states  # type: ignore[assignment]  # a sequence, not copied
+        masks = np.array(
+            [sum(1 << i for a, i in self.atoms.items() if a in labels) for labels in t.label_sets],
+            dtype=np.int64,
+        )
+        self.props = Grow.of(masks[t.label_of])
+        self.act_start = Grow.of(t.choices[:-1].astype(np.int64, copy=False))
+        self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
+        self.action_id = {a: i for i, a in enumerate(t.action_names)}
+        self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
+        # row c: robot choice c, the table's own arrays (not copied); the truncation row
+        # after them, its entry never read
+        lengths = np.diff(t.branches).astype(np.int64, copy=False)
+        self.cut_row = lengths.size
+        self.row_start = Grow.of(t.branches.astype(np.int64, copy=False))
+        self.row_len = Grow.of(np.concatenate((lengths, [1]), dtype=np.int64))
+        self.row_succ = Grow.of(t.targets.astype(np.int64, copy=False))
+        self.row_prob = Grow.of(t.probabilities.astype(np.float64, copy=False))
+        self._faulty = distribution_faults(lengths, self.row_prob.view)
+        self.rows_checked = self.row_len.size
+
+    def release(self) -> None:
+        """Drop the memos, whose bound methods refer back to this object: without them
+        the layers are freed as soon as the build lets go of them, not at the next
+        cyclic garbage collection (on a product of a million transitions they hold tens
+        of megabytes that the solver could use)."""
+        del self._rows, self._delta
 
     def occ_set(self, mask: int) -> frozenset[str]:
         """The events of an outcome's bit mask (over the sorted events)."""
@@ -122,6 +169,12 @@ class Layers:
 
     # ---------------------------------------------------------------- game
     def game_state(self, s: Hashable) -> int:
+        if self.table is not None:  # the table's own numbering
+            if s == self.table.states[self.table.initial]:
+                return self.table.initial
+            if not self.gid:
+                self.gid = {x: i for i, x in enumerate(self.table.states)}
+            return self.gid[s]
         g = self.gid.get(s)
         if g is None:
             g = len(self.game_states)
@@ -148,6 +201,8 @@ class Layers:
     def ensure_actions(self, gs: np.ndarray) -> None:
         """Ask the game for the actions of the game states ``gs`` not yet asked."""
         self.flush()
+        if self.table is not None:  # every state's actions are in the table
+            return
         missing = unique(gs[self.act_count.view[gs] < 0])
         aids = []
         for g in missing.tolist():
@@ -208,15 +263,35 @@ class Layers:
 
     def _place(self, key: int) -> str:
         """The state, action and events of a row's memo key, for messages."""
+        t = self.table
+        if t is not None:  # the key is the robot choice; its row ignores the events
+            return place(t.states[t.owner(key)], t.action_names[int(t.action_of[key])])
         slot, o = (key, 0) if self.ignores_events else divmod(key, self.n_occ)
         events = () if self.ignores_events else self.occ_set(o)
         return place(self.game_states[self.slot_owner[slot]], self.slot_action[slot], events)
 
     def rows(self, slots: np.ndarray, occ: np.ndarray) -> np.ndarray:
         """The successor row of each (action slot, event outcome)."""
+        if self.table is not None:  # one row per robot choice, whatever the events
+            if self._faulty.size:
+                self._refuse(slots)
+            return slots
         if self.ignores_events:  # one row per slot, asked with no events
             return self._rows(slots)
         return self._rows(slots * self.n_occ + occ)
+
+    def _refuse(self, slots: np.ndarray) -> None:
+        """Raise :class:`GameError` for the first of the table's rows in ``slots`` that
+        is not a distribution (if any)."""
+        hit = np.intersect1d(slots, self._faulty)
+        if hit.size:
+            c = int(hit[0])
+            assert self.table is not None
+            lo, hi = int(self.table.branches[c]), int(self.table.branches[c + 1])
+            nexts = [self.table.states[g] for g in self.table.targets[lo:hi].tolist()]
+            row = tuple(zip(nexts, self.table.probabilities[lo:hi].tolist(), strict=True))
+            why = distribution_fault(row) or "not a distribution"
+            raise GameError(f"{self._place(c)}: {why}")
 
     def _new_rows(self, keys: np.ndarray) -> np.ndarray:
         """Ask the game once per (action slot, event outcome) ``keys``; a game that

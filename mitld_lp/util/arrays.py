@@ -47,6 +47,14 @@ class Grow:
         self.data = np.empty(64, dtype=dtype)
         self.size = 0
 
+    @classmethod
+    def of(cls, values: np.ndarray) -> Grow:
+        """A :class:`Grow` holding ``values`` (not copied when contiguous)."""
+        out = cls(values.dtype)
+        out.data = np.ascontiguousarray(values)
+        out.size = out.data.size
+        return out
+
     def extend(self, values: Any) -> None:
         values = np.asarray(values, dtype=self.data.dtype)
         need = self.size + values.size

@@ -77,7 +77,7 @@ import logging
 import os
 import re
 import tempfile
-from collections.abc import Hashable, Iterable, Mapping
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -93,7 +93,10 @@ from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
+    check_constants,
     check_program,
+    command_names,
+    name_unlabelled_commands,
     show_sum,
     storm_error,
     storm_quiet,
@@ -102,6 +105,7 @@ from mitld_lp.worlds.prism_program import (
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
+from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
     "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
@@ -145,7 +149,8 @@ class PrismGame:
     Attributes:
         source: the PRISM file.
         variables: the PRISM variables, in the order of a state's values.
-        states: every state Storm built, in Storm's order.
+        states: every state Storm built, in Storm's order (each made a tuple when
+            asked for: :class:`mitld_lp.worlds.prism_tables.Valuations`).
         initial: the initial state.
         proposition_names: the labels that are propositions.
         effects: ``event -> array over states``: where each event action's command is
@@ -157,17 +162,18 @@ class PrismGame:
             :data:`DECIDED_ACTION`, a self-loop).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
-    a state's actions and a choice's distribution become tuples when first asked for.
+    a state's actions and a choice's distribution become tuples when first asked for
+    (and the index of the states, a dictionary, when a state is first looked up).  The
+    product reads the layout whole (:meth:`as_table`) when no event changes the world.
     """
 
     source: str
     variables: tuple[str, ...]
-    states: tuple[State, ...]
+    states: Sequence[State]
     initial: State
     proposition_names: frozenset[str]
     effects: Mapping[str, np.ndarray]
     _tables: Tables = field(repr=False)
-    _index: Mapping[State, int] = field(repr=False)
     terminal: str = ""
     decided: int = 0
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -188,23 +194,52 @@ class PrismGame:
         return dict(zip(self.variables, state, strict=True))
 
     def _at(self, state: State) -> int:
+        index = self._cache.get("index")
+        if index is None:  # built on first use: the product reads the table instead
+            index = self._cache["index"] = dict(
+                zip(self.states, range(len(self.states)), strict=True))
         try:
-            return self._index[state]
+            return index[state]
         except (KeyError, TypeError):
             raise GameError(f"{state!r} is not a state of {self.source}") from None
+
+    def _names(self, s: int) -> list[str | None]:
+        """The names of state ``s``'s choices, None for an event's."""
+        t = self._tables
+        return [t.action_names[k] if k >= 0 else None
+                for k in t.action_index[t.choices[s] : t.choices[s + 1]].tolist()]
 
     def actions(self, state: State) -> tuple[str, ...]:
         s = self._at(state)
         key = ("actions", s)
         found = self._cache.get(key)
         if found is None:
-            t = self._tables
-            row = t.names[t.choices[s] : t.choices[s + 1]]
-            found = self._cache[key] = tuple(a for a in row.tolist() if a is not None)
+            found = self._cache[key] = tuple(a for a in self._names(s) if a is not None)
         return found
 
     def propositions(self, state: State) -> frozenset[str]:
-        return self._tables.labels[self._at(state)]
+        t = self._tables
+        return t.label_sets[int(t.label_index[self._at(state)])]
+
+    def robot_actions(self) -> frozenset[str]:
+        """Every name of a robot action at some state."""
+        t = self._tables
+        used = np.unique(t.action_index)
+        return frozenset(t.action_names[k] for k in used[used >= 0].tolist())
+
+    def as_table(self) -> WorldTable | None:
+        """The world as a :class:`~mitld_lp.worlds.table.WorldTable` for the product (no
+        copy of the transitions when no choice is an event's); None when an event
+        changes the world (its moves then depend on the step's events)."""
+        if self.effects:
+            return None
+        t = self._tables
+        return WorldTable(
+            states=self.states, initial=t.initial, label_sets=t.label_sets,
+            label_of=t.label_index, choices=t.choices, action_names=t.action_names,
+            action_of=t.action_index, branches=t.branches, targets=t.targets,
+            probabilities=t.probabilities,
+        )
 
     def _distribution(self, choice: int) -> dict[int, float]:
         t = self._tables
@@ -222,7 +257,7 @@ class PrismGame:
         if found is not None:
             return found
         t = self._tables
-        row = t.names[t.choices[s] : t.choices[s + 1]].tolist()
+        row = self._names(s)
         if action not in row:
             raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
         dist = self._distribution(int(t.choices[s]) + row.index(action))
@@ -271,45 +306,6 @@ def _check_utf8(path: Path, where: str) -> None:
             f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
             "a PRISM file is UTF-8"
         ) from None
-
-
-def _check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
-    declared = {c.name: c for c in program.constants}
-    for name, value in constants.items():
-        if name not in declared:
-            known = ", ".join(sorted(declared)) or "none"
-            raise WorldError(f"{where}: constant {name!r} is not declared (constants: {known})")
-        c = declared[name]
-        if c.defined:
-            raise WorldError(
-                f"{where}: constant {name!r} already has a value in the file "
-                f"({c.definition}); only undefined constants can be given"
-            )
-        kind = c.type
-        if kind.is_boolean:
-            ok, want = isinstance(value, bool), "a boolean"
-        elif kind.is_integer:
-            ok, want = isinstance(value, int) and not isinstance(value, bool), "an integer"
-        else:
-            ok = isinstance(value, int | float) and not isinstance(value, bool)
-            want = "a number"
-        if not ok:
-            raise WorldError(f"{where}: constant {name!r} must be {want}, got {value!r}")
-    missing = sorted(c.name for c in program.constants if not c.defined and c.name not in constants)
-    if missing:
-        raise WorldError(
-            f"{where}: constants {', '.join(missing)} have no value in the file; "
-            "give them with constants={...}"
-        )
-
-
-def _command_names(program: Any) -> dict[int, str]:
-    """Global command index -> ``<module>_cmd<k>`` (k from 1 within the module)."""
-    return {
-        cmd.global_index: f"{module.name}_cmd{k}"
-        for module in program.modules
-        for k, cmd in enumerate(module.commands, start=1)
-    }
 
 
 def load_prism(
@@ -368,7 +364,7 @@ def load_prism(
     if extra:
         program = _with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
-    _check_constants(program, given, where)
+    check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
     if labels is None:
         chosen = frozenset(defined)
@@ -403,7 +399,7 @@ def load_prism(
     condition = decided_when(task, frozenset(defined)) if task is not None else False
     terminal = "" if condition is False else render(
         condition, {lab.name: str(lab.expression) for lab in plain.labels})
-    program, action_names = _name_unlabelled_commands(program, where, stormpy)
+    program, action_names = name_unlabelled_commands(program, where, stormpy)
 
     def work() -> Tables:
         return _build(stormpy, program, plain, where, chosen, event_set, action_names,
@@ -440,7 +436,6 @@ def load_prism(
         terminal=terminal,
         decided=tables.decided,
         _tables=tables,
-        _index=dict(zip(tables.states, range(len(tables.states)), strict=True)),
     )
 
 
@@ -515,13 +510,23 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
         formula = formula.get_raw_formula()
 
+    # Two choices of one state named by one action are told apart by the commands they
+    # come from (Storm's choice origins, a tenth of the build): that takes a module with
+    # two commands of one action (every command has an action here, and a choice of an
+    # action joins one enabled command of it from each module that has it).
+    origins = any(
+        len(names) != len(set(names))
+        for names in ([c.action_name for c in module.commands] for module in program.modules)
+    )
+
     def options(checks: bool) -> Any:
         o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
         o.set_exploration_checks(checks)
         # Every label, always: a label left out of the build would be false in every state.
         o.set_build_all_labels()
         o.set_build_choice_labels()
-        o.set_build_choice_origins()
+        if origins:
+            o.set_build_choice_origins()
         o.set_build_state_valuations()
         return o
 
@@ -559,38 +564,14 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
     known = {lab.name for lab in program.labels} | {"init", "deadlock"}
     stopped = sorted(built - known) if terminal else []
-    command_names = _command_names(program)
+    commands = command_names(program)
 
     def origin(choice: int) -> str:
         """The commands a choice comes from, ``robot_cmd2``."""
+        if not origins:  # no module has two commands of one action: see above
+            raise AssertionError("two choices of one action without two such commands")
         cmds = sorted(model.choice_origins.get_command_set(choice))
-        return "+".join(command_names[c] for c in cmds) if cmds else DEADLOCK_ACTION
+        return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
 
     return read_model(model, where, chosen, events, action_names, origin,
                       stopped[0] if len(stopped) == 1 else None)
-
-
-def _name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:
-    """Give every command without an action a fresh action of its own (it synchronises
-    with nothing, as before), so that Storm's choice labels name every choice; returns
-    the program and ``fresh action -> <module>_cmd<k>``."""
-    taken = {c.action_name for m in program.modules for c in m.commands}
-    taken |= {m.name for m in program.modules} | {c.name for c in program.constants}
-    taken |= {v.name for v in program.variables} | {lab.name for lab in program.labels}
-    fresh: dict[int, str] = {}
-    names: dict[str, str] = {}
-    for module in program.modules:
-        for k, cmd in enumerate(module.commands, start=1):
-            if not cmd.is_labeled:
-                action = f"_mitld_cmd{cmd.global_index}"
-                while action in taken:
-                    action = "_" + action
-                fresh[cmd.global_index] = action
-                names[action] = f"{module.name}_cmd{k}"
-    if not fresh:
-        return program, names
-    try:
-        with storm_quiet():
-            return program.label_unlabelled_commands(fresh), names
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None

@@ -22,7 +22,7 @@ import contextlib
 import logging
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
@@ -32,7 +32,8 @@ from mitld_lp.worlds import WorldError
 
 __all__ = [
     "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
-    "SUM_TOLERANCE", "show_sum", "storm_sum",
+    "SUM_TOLERANCE", "show_sum", "storm_sum", "check_constants", "command_names",
+    "name_unlabelled_commands",
 ]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
@@ -286,3 +287,68 @@ def storm_quiet() -> contextlib.AbstractContextManager[None]:
     """Storm's output (its logger prints errors and warnings on stdout, which must carry
     nothing but the answer) sent to the debug log: :func:`mitld_lp.util.quiet.native_quiet`."""
     return native_quiet("storm")
+
+
+def check_constants(program: Any, constants: Mapping[str, Any], where: str) -> None:
+    declared = {c.name: c for c in program.constants}
+    for name, value in constants.items():
+        if name not in declared:
+            known = ", ".join(sorted(declared)) or "none"
+            raise WorldError(f"{where}: constant {name!r} is not declared (constants: {known})")
+        c = declared[name]
+        if c.defined:
+            raise WorldError(
+                f"{where}: constant {name!r} already has a value in the file "
+                f"({c.definition}); only undefined constants can be given"
+            )
+        kind = c.type
+        if kind.is_boolean:
+            ok, want = isinstance(value, bool), "a boolean"
+        elif kind.is_integer:
+            ok, want = isinstance(value, int) and not isinstance(value, bool), "an integer"
+        else:
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            want = "a number"
+        if not ok:
+            raise WorldError(f"{where}: constant {name!r} must be {want}, got {value!r}")
+    missing = sorted(c.name for c in program.constants if not c.defined and c.name not in constants)
+    if missing:
+        raise WorldError(
+            f"{where}: constants {', '.join(missing)} have no value in the file; "
+            "give them with constants={...}"
+        )
+
+
+def command_names(program: Any) -> dict[int, str]:
+    """Global command index -> ``<module>_cmd<k>`` (k from 1 within the module)."""
+    return {
+        cmd.global_index: f"{module.name}_cmd{k}"
+        for module in program.modules
+        for k, cmd in enumerate(module.commands, start=1)
+    }
+
+
+def name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:
+    """Give every command without an action a fresh action of its own (it synchronises
+    with nothing, as before), so that Storm's choice labels name every choice; returns
+    the program and ``fresh action -> <module>_cmd<k>``."""
+    taken = {c.action_name for m in program.modules for c in m.commands}
+    taken |= {m.name for m in program.modules} | {c.name for c in program.constants}
+    taken |= {v.name for v in program.variables} | {lab.name for lab in program.labels}
+    fresh: dict[int, str] = {}
+    names: dict[str, str] = {}
+    for module in program.modules:
+        for k, cmd in enumerate(module.commands, start=1):
+            if not cmd.is_labeled:
+                action = f"_mitld_cmd{cmd.global_index}"
+                while action in taken:
+                    action = "_" + action
+                fresh[cmd.global_index] = action
+                names[action] = f"{module.name}_cmd{k}"
+    if not fresh:
+        return program, names
+    try:
+        with storm_quiet():
+            return program.label_unlabelled_commands(fresh), names
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None

@@ -15,9 +15,9 @@ import json
 import os
 import tarfile
 import tempfile
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -43,27 +43,32 @@ class Tables:
 
     Attributes:
         variables: the PRISM variables, in the order of a state's values.
-        states: ``n`` tuples of values (Storm's state order).
+        states: ``n`` tuples of values (Storm's state order), made when asked for
+            (:class:`Valuations`).
         initial: the index of the initial state.
-        labels: ``n`` frozensets (an object array): the chosen labels true in each state.
+        label_sets: the distinct sets of chosen labels true in a state.
+        label_index: ``n`` indices into ``label_sets``: the labels of each state.
         choices: ``n + 1`` offsets: state ``s`` has choices ``choices[s]:choices[s+1]``.
         branches: ``m + 1`` offsets: choice ``c`` has branches ``branches[c]:branches[c+1]``.
         targets, probabilities: the ``b`` branches (state index, probability > 0).
-        names: ``m`` action names (an object array), ``None`` for an event's choice.
+        action_names: the distinct action names.
+        action_index: ``m`` indices into ``action_names`` (int32), -1 for an event's choice.
         effects: ``event -> n`` choice indices: the event's choice at each state, -1
             where its command is not enabled.
         decided: how many states were not expanded because the task is decided there.
     """
 
     variables: tuple[str, ...]
-    states: tuple[State, ...]
+    states: Valuations
     initial: int
-    labels: np.ndarray
+    label_sets: tuple[frozenset[str], ...]
+    label_index: np.ndarray
     choices: np.ndarray
     branches: np.ndarray
     targets: np.ndarray
     probabilities: np.ndarray
-    names: np.ndarray
+    action_names: tuple[str, ...]
+    action_index: np.ndarray
     effects: Mapping[str, np.ndarray]
     decided: int = 0
 
@@ -136,42 +141,103 @@ def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
             )
 
 
-def _valuations(model: Any) -> tuple[tuple[str, ...], tuple[State, ...]]:
+class Valuations(Sequence[State]):
+    """The states as the rows of one integer array (a column per variable, in
+    :attr:`Tables.variables` order); state ``i`` becomes the tuple of its values (a
+    ``bool`` for a Boolean variable, else an ``int``) when asked for.  A million tuples
+    would cost a hundred megabytes and seconds to make, copy back from the exploring
+    child and index, and the product reads none of them."""
+
+    def __init__(self, values: np.ndarray, booleans: tuple[int, ...]) -> None:
+        self.values = values  # (n, k): the smallest integer type that holds them all
+        self.booleans = booleans  # the columns of Boolean variables
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+    def _tuples(self, block: np.ndarray) -> list[State]:
+        rows = block.tolist()
+        for row in rows if self.booleans else ():
+            for j in self.booleans:
+                row[j] = bool(row[j])
+        return [tuple(row) for row in rows]
+
+    @overload
+    def __getitem__(self, i: int) -> State: ...
+    @overload
+    def __getitem__(self, i: slice) -> tuple[State, ...]: ...
+    def __getitem__(self, i: int | slice) -> State | tuple[State, ...]:
+        if isinstance(i, slice):
+            return tuple(self._tuples(self.values[i]))
+        return self._tuples(self.values[i][None, :])[0]
+
+    def __iter__(self) -> Iterator[State]:
+        for lo in range(0, len(self), 1 << 16):
+            yield from self._tuples(self.values[lo : lo + (1 << 16)])
+
+    def __eq__(self, other: object) -> bool:  # as the tuple of the states would compare
+        if isinstance(other, Valuations | tuple | list):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other,
+                                                                         strict=True))
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"Valuations(<{len(self)} states>)"
+
+
+def _narrow(values: np.ndarray) -> np.ndarray:
+    """``values`` in the smallest signed integer type that holds them."""
+    if values.size == 0:
+        return values.astype(np.int8)
+    lo, hi = int(values.min()), int(values.max())
+    for kind in (np.int8, np.int16, np.int32):
+        info = np.iinfo(kind)
+        if info.min <= lo and hi <= info.max:
+            return values.astype(kind)
+    return values
+
+
+def _valuations(model: Any) -> tuple[tuple[str, ...], Valuations]:
     """The variables (in Storm's order) and each state's values, one call per variable."""
     n = model.nr_states
     valuations = model.state_valuations
     order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
     by_name = {v.name: v for v in valuations.get_all_variables()}
-    columns: list[list[Any]] = []
-    for name in order:
+    values = np.zeros((n, len(order)), dtype=np.int64)
+    booleans = []
+    for j, name in enumerate(order):
         var = by_name[name]
         if var.has_boolean_type():  # a bit vector: the states where it is true
-            column = np.zeros(n, dtype=bool)
-            column[_indices(valuations.get_boolean_values(var))] = True
-            columns.append(column.tolist())
+            values[_indices(valuations.get_boolean_values(var)), j] = 1
+            booleans.append(j)
         else:  # PRISM state variables are booleans and bounded integers
-            columns.append(list(valuations.get_int64_values(var)))
-    if not columns:  # no variables (Storm made them constants): one empty valuation
-        return order, ((),) * n
-    return order, tuple(zip(*columns, strict=True))
+            values[:, j] = np.asarray(valuations.get_int64_values(var), dtype=np.int64)
+    return order, Valuations(_narrow(values), tuple(booleans))
 
 
-def _state_labels(model: Any, chosen: frozenset[str]) -> np.ndarray:
-    """Per state, the frozenset of the ``chosen`` labels it satisfies (object array)."""
+def _state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[str], ...],
+                                                                np.ndarray]:
+    """The distinct sets of the ``chosen`` labels a state satisfies, and per state the
+    index of its set."""
     n = model.nr_states
     names = sorted(chosen)
+    if not names:
+        return (frozenset(),), np.zeros(n, dtype=np.int32)
     packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
     for k, label in enumerate(names):
         packed[_indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
-    if not names:
-        out = np.empty(n, dtype=object)
-        out[:] = [frozenset()] * n
-        return out
-    rows, inverse = np.unique(packed, axis=0, return_inverse=True)
+    if packed.shape[1] <= 8:  # a state's labels as one big-endian integer: a 1-d unique
+        wide = np.zeros((n, 8), dtype=np.uint8)
+        wide[:, : packed.shape[1]] = packed
+        codes, inverse = np.unique(wide.view(">u8").reshape(-1), return_inverse=True)
+        rows = codes.astype(">u8").view(np.uint8).reshape(-1, 8)[:, : packed.shape[1]]
+    else:
+        rows, inverse = np.unique(packed, axis=0, return_inverse=True)
     bits = np.unpackbits(rows, axis=1)[:, : len(names)]
-    sets = np.empty(len(rows), dtype=object)
-    sets[:] = [frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits]
-    return sets[np.asarray(inverse).reshape(-1)]
+    sets = tuple(frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits)
+    return sets, np.asarray(inverse).reshape(-1).astype(np.int32)
 
 
 def read_model(
@@ -207,8 +273,9 @@ def read_model(
     label_of = np.full(m, -1, dtype=np.int64)  # -1: no label, the deadlock self-loop
     for k, label in enumerate(label_names):
         label_of[_indices(model.choice_labeling.get_choices(label))] = k
+    # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
-    names = np.asarray(table, dtype=object)[label_of]  # label -1 picks the last entry
+    code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
 
     n_decided = 0
     if decided is not None:
@@ -216,14 +283,15 @@ def read_model(
         stopped[_indices(model.labeling.get_states(decided))] = True
         alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
-        names[unlabelled] = DECIDED_ACTION
+        table.append(DECIDED_ACTION)
+        code[unlabelled] = len(table) - 1
         n_decided = int(np.count_nonzero(unlabelled))
 
     bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
         row = probabilities[int(branches[c]):int(branches[c + 1])]
-        at = f"{where}: at state {show(int(state_of[c]))}, action {names[c]!r}"
+        at = f"{where}: at state {show(int(state_of[c]))}, action {table[int(code[c])]!r}"
         negative = row[row < 0.0]
         if negative.size:
             raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
@@ -232,7 +300,7 @@ def read_model(
     effects: dict[str, np.ndarray] = {}
     robot = np.ones(m, dtype=bool)
     for event in sorted(events):
-        mine = np.flatnonzero(names == event) if event in table else np.zeros(0, np.int64)
+        mine = np.flatnonzero(np.isin(code, [k for k, a in enumerate(table) if a == event]))
         robot[mine] = False
         at = state_of[mine]
         twice = np.flatnonzero(np.bincount(at, minlength=n) > 1)
@@ -252,33 +320,41 @@ def read_model(
         )
 
     # Two robot choices of one state with one name: told apart by their commands.
-    key = state_of * (len(table) + 1) + label_of + 1
+    key = state_of * (len(label_names) + 1) + label_of + 1
     keys, counts = np.unique(key[robot], return_counts=True)
     clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
     for c in clash.tolist():
-        names[c] = f"{names[c]}@{origin(c)}"
+        table.append(f"{table[int(code[c])]}@{origin(c)}")
+        code[c] = len(table) - 1
     for s in np.unique(state_of[clash]).tolist():
         mine = slice(choices[s], choices[s + 1])
-        row = [str(x) for x in names[mine][robot[mine]]]
+        row = [table[k] for k in code[mine][robot[mine]].tolist()]
         for name in sorted({x for x in row if row.count(x) > 1}):
             raise WorldError(f"{where}: two choices named {name!r} at state {show(s)}")
-    names[~robot] = None
+    # one index per distinct name; -1 for an event's choice
+    distinct: dict[str, int] = {}
+    remap = np.array([distinct.setdefault(a, len(distinct)) for a in table], dtype=np.int32)
+    action_index = remap[code]
+    action_index[~robot] = -1
 
     initial = list(model.initial_states)
     if len(initial) != 1:
         raise WorldError(
             f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
         )
+    label_sets, label_index = _state_labels(model, chosen)
     return Tables(
         variables=variables,
         states=states,
         initial=int(initial[0]),
-        labels=_state_labels(model, chosen),
+        label_sets=label_sets,
+        label_index=label_index,
         choices=choices,
         branches=branches,
         targets=targets,
         probabilities=probabilities,
-        names=names,
+        action_names=tuple(distinct),
+        action_index=action_index,
         effects=effects,
         decided=n_decided,
     )
