@@ -23,12 +23,10 @@ The schema (also in docs/model-files.md)::
     T = 3                               # the spec (mitld_lp.files.constants)
 
 Every key is validated: unknown keys, wrong types (``true`` is not a number) and
-out-of-range values are errors.  The specification is parsed and checked to be in the
-co-safe fragment; each of its events gets exactly one distribution, either a name bound
-under ``[distributions]`` or an inline literal; every other proposition of the spec must
-be a region; region names must not be events; a distribution that the spec does not
-use is an error (nothing in a model file is silently ignored).  Regions the spec does
-not mention are allowed: they describe the world, which several tasks may share.
+out-of-range values are errors.  Each event of the spec gets exactly one distribution
+(a name under ``[distributions]`` or an inline literal); every other proposition must be
+a region, not an event; a distribution the spec does not use is an error (nothing is
+silently ignored).  Regions the spec does not mention describe the world: allowed.
 
 Every error is a :class:`ModelError` whose message starts with the source (the file
 path) and names the key path and the offending value, e.g.
@@ -104,10 +102,9 @@ class Model:
         objective: ``"max"`` (the default) or ``"min"``: the probability of the task is
             maximised or minimised (PRISM's ``Pmax`` / ``Pmin``).
         budgets: the file's ``[budgets]`` (``max_states``, ``max_automaton_states``,
-            ``max_memory`` in bytes, ``time_limit`` in seconds): used where the caller
-            sets none (:class:`mitld_lp.problem.Settings`).
-        sensors: the file's ``[sensors]``: how the robot learns of an event
-            (:mod:`mitld_lp.sensing`); an event not named is seen the step it happens.
+            ``max_memory`` bytes, ``time_limit`` seconds), where the caller sets none.
+        sensors: the file's ``[sensors]`` (:mod:`mitld_lp.sensing`); an event not
+            named is seen the step it happens.
     """
 
     name: str

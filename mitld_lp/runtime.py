@@ -28,6 +28,7 @@ from typing import IO, Any, Protocol
 
 import numpy as np
 
+from mitld_lp.running.plan_reader import read_plan
 from mitld_lp.running.saved_plan import (
     ACCEPTED,
     FORMAT,
@@ -41,7 +42,6 @@ from mitld_lp.running.saved_plan import (
     advance,
     decode_state,
     encode_state,
-    read_plan,
 )
 
 __all__ = [

@@ -63,7 +63,8 @@ def test_runtime_imports_numpy_alone(tmp_path: Path) -> None:
     # files.rules: the bounded reader of files a user names (the standard library only);
     # files and running: their packages, a docstring each
     assert ours == ["mitld_lp", "mitld_lp.files", "mitld_lp.files.rules", "mitld_lp.running",
-                    "mitld_lp.running.saved_plan", "mitld_lp.runtime", "mitld_lp.startup"]
+                    "mitld_lp.running.plan_reader", "mitld_lp.running.saved_plan",
+                    "mitld_lp.runtime", "mitld_lp.startup"]
 
 
 # --------------------------------------------------------------------------- a world here

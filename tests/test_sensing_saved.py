@@ -75,7 +75,8 @@ def test_load_controller_loads_every_kind_of_controller_file(tmp_path: Path) -> 
     controller; now it loads it and the loaded one plays as the synthesised one; the
     deterministic controllers' reader still refuses it by name."""
     from mitld_lp import load_controller
-    from mitld_lp.running.saved_plan import SensedControllerFile, read_plan
+    from mitld_lp.running.plan_reader import read_plan
+    from mitld_lp.running.saved_plan import SensedControllerFile
 
     model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
     r = synthesize(model)

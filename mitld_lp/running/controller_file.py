@@ -56,6 +56,7 @@ import numpy as np
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import MDP
 from mitld_lp.product import ProductState
+from mitld_lp.running.plan_reader import read_plan
 from mitld_lp.running.saved_plan import (
     FORMAT,
     UNDECIDED,
@@ -65,7 +66,6 @@ from mitld_lp.running.saved_plan import (
     decode_state,
     encode_state,
     key,
-    read_plan,
 )
 from mitld_lp.worlds.game import Game
 
