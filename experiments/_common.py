@@ -12,8 +12,11 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import tempfile
+import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -85,3 +88,24 @@ def shown(path: Path) -> str:
         return os.path.relpath(path)
     except ValueError:  # another drive
         return str(path)
+
+
+def storm_pmax(mdp: Any, goal: Any) -> tuple[float | None, float | None]:
+    """Storm's ``Pmax=? [F "accept"]`` at the initial state of ``mdp`` exported as DRN
+    with ``goal`` labelled accept, and Storm's seconds (parse and check); ``(None,
+    None)`` without stormpy."""
+    try:
+        import stormpy
+    except ImportError:
+        return None, None
+    from mitld_lp.solvers.export import write_drn
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "m.drn"
+        write_drn(mdp, goal, path)
+        t0 = time.perf_counter()
+        model = stormpy.build_model_from_drn(str(path))
+        prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
+        checked = stormpy.model_checking(model, prop, only_initial_states=True)
+        value = float(checked.get_value_vector()[model.initial_states[0]])
+        return value, time.perf_counter() - t0

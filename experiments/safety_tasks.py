@@ -13,7 +13,6 @@ out the patrol models.  Writes ``safety_tasks.md`` and ``safety_policy.png``.
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Hashable
 from dataclasses import dataclass
@@ -26,7 +25,6 @@ from matplotlib.patches import Rectangle
 
 import mitld_lp
 from mitld_lp.product import ProductState
-from mitld_lp.solvers.export import write_drn
 from mitld_lp.solvers.iteration import evaluate_policy
 from mitld_lp.worlds.grid import MOVES
 
@@ -48,19 +46,7 @@ class Row:
 
 def storm_value(result: mitld_lp.SynthesisResult) -> tuple[float | None, float | None]:
     """Storm's Pmax=? [F "accept"] on the lower model's DRN export, and its seconds."""
-    try:
-        import stormpy
-    except ImportError:
-        return None, None
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "m.drn"
-        write_drn(result.mdp, result.acceptance.goal, path)
-        t0 = time.perf_counter()
-        model = stormpy.build_model_from_drn(str(path))
-        prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
-        checked = stormpy.model_checking(model, prop, only_initial_states=True)
-        value = float(checked.get_value_vector()[model.initial_states[0]])
-        return value, time.perf_counter() - t0
+    return C.storm_pmax(result.mdp, result.acceptance.goal)
 
 
 def solve(name: str) -> tuple[Row, mitld_lp.SynthesisResult]:

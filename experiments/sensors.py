@@ -21,9 +21,6 @@ on bus 1 only, ``d`` in {0.5, 1}.  Writes ``sensors.csv``, ``sensors.md`` and
 from __future__ import annotations
 
 import dataclasses
-import tempfile
-import time
-from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -32,7 +29,6 @@ import matplotlib.pyplot as plt
 
 from mitld_lp import load_model, synthesize
 from mitld_lp.sensing import Sensor
-from mitld_lp.solvers.export import write_drn
 
 FULL = (0.0, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.0)
 QUICK = (0.5, 1.0)
@@ -42,19 +38,7 @@ EPSILON = 1e-3
 def storm(result: Any) -> tuple[float | None, float | None]:
     """Storm's ``Pmax=? [F "accept"]`` on the lower model's DRN and its seconds (None
     without stormpy)."""
-    try:
-        import stormpy
-    except ImportError:
-        return None, None
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "m.drn"
-        write_drn(result.mdp, result.mdp.target, path)
-        t0 = time.perf_counter()
-        model = stormpy.build_model_from_drn(str(path))
-        prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
-        checked = stormpy.model_checking(model, prop, only_initial_states=True)
-        value = float(checked.get_value_vector()[model.initial_states[0]])
-        return value, time.perf_counter() - t0
+    return C.storm_pmax(result.mdp, result.mdp.target)
 
 
 def main(argv: list[str] | None = None) -> int:
