@@ -90,7 +90,7 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
         return controlled_chain(result.mdp, controller or result.controller,
-                                persistent, _game(result, controller))
+                                persistent, world_of(result, controller))
     if result.lower_model is None or not isinstance(result.mdp, MDP):
         raise ValueError("a robust result (a law known only within a band): its "
                          "controller acts on an interval model, whose controlled system is "
@@ -99,14 +99,18 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
                             result.dta.persistent, result.model.game)
 
 
-def _game(result: Any, controller: ControllerLike | None) -> Game[Any]:
-    """The world of a constrained result (its own controller knows it)."""
+def world_of(result: Any, controller: ControllerLike | None = None) -> Game[Any]:
+    """The world of a result: its model's, else the one its controller (or
+    ``controller``) knows."""
+    model = getattr(result, "model", None)
+    if model is not None:
+        return model.game
     for c in (result.controller, controller):
         try:
             return c.game  # type: ignore[union-attr]
         except AttributeError:
             continue
-    raise ValueError("the constrained result has no controller that knows its world")
+    raise ValueError("the result has no controller that knows its world")
 
 
 def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[int],

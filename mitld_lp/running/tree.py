@@ -37,7 +37,7 @@ import numpy as np
 
 from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
-from mitld_lp.running.chain import chain_of
+from mitld_lp.running.chain import chain_of, world_of
 from mitld_lp.running.controller import ControllerLike
 from mitld_lp.runtime import UNDECIDED, Decision, Stepper
 from mitld_lp.worlds.names import state_fields, state_values
@@ -223,21 +223,9 @@ def _leaf_python(decision: Any, randomised: bool) -> str:
 
 
 def _features(result: Any, controller: ControllerLike) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    game = _game_of(result, controller)
+    game = world_of(result, controller)
     events = tuple(sorted(controller.events))
     return (*state_fields(game), "q", *(f"pending_{e}" for e in events), "clock"), events
-
-
-def _game_of(result: Any, controller: ControllerLike) -> Any:
-    model = getattr(result, "model", None)
-    if model is not None:
-        return model.game
-    for c in (result.controller, controller):
-        try:
-            return c.game  # type: ignore[union-attr]
-        except AttributeError:
-            continue
-    raise ValueError("the result has no controller that knows its world")
 
 
 def _values(game: Any, rec: ProductState, events: tuple[str, ...]) -> tuple[Any, ...]:
@@ -334,7 +322,7 @@ def _dataset(result: Any, controller: ControllerLike, states: Sequence[int],
              choices: dict[int, frozenset[Hashable]] | None
              ) -> tuple[list[tuple[Any, ...]], list[frozenset[Hashable]]]:
     """Per state, its features and the decisions the tree may take there."""
-    game = _game_of(result, controller)
+    game = world_of(result, controller)
     _, events = _features(result, controller)
     rows, allowed = [], []
     for i in states:
@@ -547,7 +535,7 @@ def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None =
     """A controller that decides by ``tree`` (and tracks its memory as ``result``'s
     controller does)."""
     c = controller or result.controller
-    return TreeController(_TreePlan(c._plan, tree, _game_of(result, c)),  # type: ignore[union-attr]
+    return TreeController(_TreePlan(c._plan, tree, world_of(result, c)),  # type: ignore[union-attr]
                           bool(c.randomised))
 
 
