@@ -120,7 +120,7 @@ def find_instances(
         for entry in meta.get("files", []):
             originals = entry.get("original-file", [])
             originals = [originals] if isinstance(originals, str) else originals
-            prism = [f for f in originals if f.endswith((".prism", ".nm"))]
+            prism = [f for f in originals if f.endswith((".prism", ".nm", ".pm"))]
             props = [f for f in originals if f.endswith((".props", ".pctl", ".prctl"))]
             if meta.get("original") != "PRISM" or not prism:
                 skipped.append((f"{family.name}/{entry.get('file')}",

@@ -41,6 +41,9 @@ CASES = {
         "seven_by_four": "Pmax=? [ F<=14 (s1=7 & s2=7 & d1+d2=7) ]",
     }),
 }
+# Saved under another name in the folder: QVBS's resource-gathering ships its PRISM
+# program as ``.pm`` (the other families as ``.prism`` or ``.nm``).
+SAVED_AS = {"firewire": "firewire.pm"}
 
 
 def storm_exact(path: Path, prop: str) -> tuple[int, int, int]:
@@ -64,13 +67,14 @@ def qvbs_folder(root: Path) -> dict[str, float]:
     for family, (name, props) in CASES.items():
         folder = root / "mdp" / family
         folder.mkdir(parents=True)
-        shutil.copy(source / name, folder / name)
+        name_in_folder = SAVED_AS.get(family, name)
+        shutil.copy(source / name, folder / name_in_folder)
         (folder / f"{family}.props").write_text(
             "".join(f'"{p}": {text};\n' for p, text in props.items()))
         results = []
         states = 0
         for p, text in props.items():
-            num, den, states = storm_exact(folder / name, text)
+            num, den, states = storm_exact(folder / name_in_folder, text)
             results.append({"property": p, "value": {"approx": num / den, "num": num,
                                                      "den": den}})
             references[f"{family}.{p}"] = num / den
@@ -78,7 +82,8 @@ def qvbs_folder(root: Path) -> dict[str, float]:
             "short": family, "type": "mdp", "original": "PRISM",
             "properties": [{"name": p, "type": "prob-reach"} for p in props],
             "files": [{
-                "file": f"{family}.jani", "original-file": [name, f"{family}.props"],
+                "file": f"{family}.jani",
+                "original-file": [name_in_folder, f"{family}.props"],
                 "file-parameter-values": [],
                 "open-parameter-values": [{"values": [], "states": [{"number": states}],
                                            "results": results}],
