@@ -257,8 +257,7 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
             continue
         labels, undefined = qvbs._labels_of(inst)
         try:
-            posed = qvbs.pose(texts[inst.prop], labels, {
-                k: v for k, v in inst.constants.items() if k not in undefined})
+            posed = qvbs.pose(texts[inst.prop], labels, inst.constants)
         except qvbs.NotPosed as exc:
             skipped.append((inst.name, str(exc)))
             continue

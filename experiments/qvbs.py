@@ -191,7 +191,8 @@ def _top_level_until(body: str) -> int | None:
 def pose(text: str, labels: Mapping[str, str], constants: Mapping[str, Any]) -> Posed:
     """The property ``text`` (``Pmax=? [F "goal"]``) as a spec over ``labels`` (the
     file's ``name -> expression``); ``constants`` are substituted where the property
-    uses them (the properties file's own constants).  Raises :class:`NotPosed`."""
+    uses them: the properties file's own, and the program's open ones (a step bound
+    ``F<=B`` with ``B`` left open in the program).  Raises :class:`NotPosed`."""
     m = re.fullmatch(r"\s*P\s*(min|max)\s*=\s*\?\s*\[(.*)\]\s*", text, re.DOTALL)
     if not m:
         raise NotPosed("not a Pmin=?/Pmax=? query")
@@ -377,8 +378,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         labels, undefined = _labels_of(inst)
         try:
-            posed = pose(texts[inst.prop], labels,
-                         {k: v for k, v in inst.constants.items() if k not in undefined})
+            posed = pose(texts[inst.prop], labels, inst.constants)
         except NotPosed as exc:
             skipped.append((inst.name, str(exc)))
             continue

@@ -185,3 +185,36 @@ def test_bench_qvbs_measures_ours_and_storm_on_the_same_instances(tmp_path: Path
         assert float(row["solve_cpu"]) > 0 and float(row["storm_check_cpu"]) >= 0
     text = (out / "bench_qvbs.md").read_text()
     assert "no such instance was run" in text  # the quick instances are all small
+
+
+def test_a_step_bound_left_open_in_the_program_is_posed_with_its_value(tmp_path: Path,
+                                                                       ) -> None:
+    """QVBS's resource-gathering asks ``Pmax=? [F<=B "success"]`` with ``B`` an open
+    constant of the PRISM program: the bound is the instance's value of ``B``, and the
+    model file gives ``B`` to the program too."""
+    folder = tmp_path / "benchmarks" / "mdp" / "walk"
+    folder.mkdir(parents=True)
+    (folder / "walk.pm").write_text(
+        "mdp\nconst int B;\nmodule m\n  x : [0..3] init 0;\n"
+        "  [] x<3 -> 0.5:(x'=x+1) + 0.5:(x'=x);\nendmodule\nlabel \"done\" = x=3;\n")
+    (folder / "walk.prctl").write_text('"reach": Pmax=? [F<=B "done"];\n')
+    (folder / "index.json").write_text(json.dumps({
+        "short": "walk", "type": "mdp", "original": "PRISM",
+        "properties": [{"name": "reach", "type": "prob-reach-step-bounded"}],
+        "files": [{"file": "walk.jani", "original-file": ["walk.pm", "walk.prctl"],
+                   "file-parameter-values": [],
+                   "open-parameter-values": [{
+                       "values": [{"name": "B", "value": 5}], "states": [{"number": 4}],
+                       "results": [{"property": "reach", "value": 0.5}]}]}]}))
+    sys.path.insert(0, str(ROOT / "experiments"))
+    try:
+        import bench_qvbs
+    finally:
+        sys.path.remove(str(ROOT / "experiments"))
+    work = tmp_path / "work"
+    work.mkdir()
+    found, skipped = bench_qvbs.jobs(tmp_path / "benchmarks", 0, 100, ("walk",), work)
+    assert skipped == [] and len(found) == 1
+    text = Path(found[0][1]["model"]).read_text()
+    assert 'spec = "F[0,5] done"' in text
+    assert "B = 5" in text
