@@ -318,6 +318,7 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     for j in range(k):
         reach[comp[seeds[:, j]], j] = True
     level = np.full(n_comp, -1, dtype=np.int64)
+    stamp = np.empty(n_comp, dtype=np.int64)  # scratch of _distinct
     frontier = np.flatnonzero(out_degree == 0)
     depth = 0
     while frontier.size:
@@ -328,12 +329,23 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
         below = np.repeat(frontier, hi - lo)
         for j in range(k):  # the frontier's reach is final: its successors are done
             reach[above[reach[below, j]], j] = True
-        np.subtract.at(out_degree, above, times[at])
-        frontier = unique(above[out_degree[above] == 0])
+        # the counts in the degrees' own type: ufunc.at on mixed types takes numpy's
+        # generic loop, 50-80x slower (2 of 3 s of the analysis on a 2e6-state product)
+        np.subtract.at(out_degree, above, times[at].astype(out_degree.dtype))
+        frontier = _distinct(above[out_degree[above] == 0], stamp)
         depth += 1
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
     return Levels(comp, level, reach)
+
+
+def _distinct(values: np.ndarray, stamp: np.ndarray) -> np.ndarray:
+    """The distinct entries of ``values`` (ids below ``stamp.size``), in no set order,
+    without sorting: each entry writes its position into ``stamp`` and an entry is kept
+    iff its position is the one that stayed (one per id, whichever write won)."""
+    at = np.arange(values.size)
+    stamp[values] = at
+    return values[stamp[values] == at]
 
 
 def blocks_from(component: np.ndarray, level_of: np.ndarray, self_loop: np.ndarray,
