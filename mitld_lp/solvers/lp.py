@@ -392,7 +392,13 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
     ``bus_scaled`` n128 d3 (faer); bounds tightened further by the exact-self-loop
     sweeps of :mod:`mitld_lp.solvers.kernels` (compiled or not) kept 9,335 columns where
     the plain sweeps keep 9,339 of 32,768 on n64 d3: the columns left are near-ties
-    whose gains, 1e-17 to 1e-10, no bracket of width 1e-9 separates."""
+    whose gains, 1e-17 to 1e-10, no bracket of width 1e-9 separates.  The kept columns'
+    own graph split further (n64 d3: the 8,192-state block into 89 components, the
+    largest 3,772, over 35 levels) and solved as one LP per level of it: 0.145 s of
+    Clarabel in 33 calls against 0.179 s in one, 20% for a second layering inside the
+    block.  On QVBS consensus (4-4) the columns left are ties, not near-ties: with the
+    exact optimal values, 37,368 of the 38,496 kept columns of its largest block are
+    within 1e-15 of optimal (the symmetric processes), so no bound prunes them."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)

@@ -193,7 +193,18 @@ class Factors:
       Sherman--Morrison--Woodbury formula: a changed row costs a pair of triangular
       solves, about 1/60 of a new LU at 32,768 states, and the rows policy iteration
       changes add up to 450 and 1,600 on the two blocks (215, 107, 68, 29, 19, 8, 2 per
-      round on the first);
+      round on the first).  Measured again as a hybrid (Woodbury only while at most 64
+      rows differ from the factorised policy, the unit columns' solves kept for later
+      rounds, the refined answer taken only at a new LU's residual, 2e-19): on n64 d3
+      the evaluations took 0.74 s against 0.37 s, as SuperLU solves a block of unit
+      columns at 0.4 ms a column (8,192 states, an LU 12 ms) and 3-4 ms a column
+      (32,768 states, an LU 76-87 ms, a solve 2-3.6 ms): 64 columns cost 2-3 LUs;
+    * the policy's own chain solved level by level (its 32,768 states split into 257
+      components, the largest 9,600, over 97 levels): 115 ms against the one LU's
+      118 ms, and slower on the smaller blocks (43 against 20 ms at 8,192 states);
+    * SuperLU's other orderings and options on the 32,768-state chain: no pivoting
+      threshold, no equilibration, larger supernodes: 85-86 ms against 87 ms;
+      ``COLAMD`` / ``MMD_ATA``: 90-94 ms and 2.3-2.5x the fill (slower solves);
     * the last policy's LU as the preconditioner of the extended-precision refinement,
       started from the last policy's values: the refinement contracted by 0.3-0.5 a
       round on one block and diverged on the other (its error grew 1e-10 -> 3e-9);
