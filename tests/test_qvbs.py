@@ -120,13 +120,17 @@ def test_every_reference_is_inside_the_certified_bracket(tmp_path: Path) -> None
     assert str(tmp_path / "benchmarks" / "mdp" / "dice" / "two_dice.nm") in toml
 
 
-def _pose():
+def _experiment(name: str):
+    """The script ``experiments/<name>.py`` as a module (imported from that folder)."""
     sys.path.insert(0, str(ROOT / "experiments"))
     try:
-        import qvbs
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(ROOT / "experiments"))
-    return qvbs
+
+
+def _pose():
+    return _experiment("qvbs")
 
 
 @pytest.mark.parametrize("prop, spec, labels, objective", [
@@ -206,11 +210,7 @@ def test_a_step_bound_left_open_in_the_program_is_posed_with_its_value(tmp_path:
                    "open-parameter-values": [{
                        "values": [{"name": "B", "value": 5}], "states": [{"number": 4}],
                        "results": [{"property": "reach", "value": 0.5}]}]}]}))
-    sys.path.insert(0, str(ROOT / "experiments"))
-    try:
-        import bench_qvbs
-    finally:
-        sys.path.remove(str(ROOT / "experiments"))
+    bench_qvbs = _experiment("bench_qvbs")
     work = tmp_path / "work"
     work.mkdir()
     found, skipped = bench_qvbs.jobs(tmp_path / "benchmarks", 0, 100, ("walk",), work)
