@@ -68,6 +68,7 @@ def test_compiled_and_numpy_routes_give_the_same_certified_bracket(monkeypatch) 
     answers = {}
     for threshold in (10**12, 0):  # never / always compiled
         monkeypatch.setattr(kernels_module, "COMPILED_MIN_ENTRIES", threshold)
+        monkeypatch.setattr(kernels_module, "COMPILED_MIN_BLOCK_ENTRIES", threshold)
         r = synthesize(model)
         assert r.certified
         answers[threshold] = (r.lower, r.upper)
@@ -76,3 +77,28 @@ def test_compiled_and_numpy_routes_give_the_same_certified_bracket(monkeypatch) 
     # block LPs' columns, and among choices tied within it either path may keep another
     assert lo_np == pytest.approx(lo_c, abs=1e-9) and hi_np == pytest.approx(hi_c, abs=1e-9)
     assert lo_np == pytest.approx(0.5902931, abs=5e-8)  # the bundled model's optimum
+
+
+@pytest.mark.parametrize(("product", "block", "loads"), [
+    (0, 0, True),  # every block compiled
+    (0, 10**12, False),  # a large product whose blocks are all small
+    (10**12, 0, False),  # a small product
+])
+def test_numba_is_loaded_only_for_a_block_worth_it(monkeypatch, product: int, block: int,
+                                                   loads: bool) -> None:
+    asked: list[int] = []
+    real = kernels_module.compiled_kernel
+
+    def counting():  # stands for the import of numba and the kernel's load
+        asked.append(1)
+        return real()
+
+    monkeypatch.setattr(kernels_module, "compiled_kernel", counting)
+    monkeypatch.setattr(kernels_module, "COMPILED_MIN_ENTRIES", product)
+    monkeypatch.setattr(kernels_module, "COMPILED_MIN_BLOCK_ENTRIES", block)
+    mdp = random_mdp(300, seed=1, locality=6, target_fraction=0.03, sink_fraction=0.03)
+    exact = _pmax(mdp)
+    r = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    assert bool(asked) is loads
+    assert r.status == Status.OPTIMAL
+    assert np.all(r.lower <= exact + 1e-9) and np.all(exact <= r.upper + 1e-9)

@@ -222,12 +222,15 @@ def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
-                 budget: _Budget, bar: Bar, *, from_initial: bool, compiled: bool) -> None:
+                 budget: _Budget, bar: Bar, *, from_initial: bool,
+                 compiled: bool | None) -> None:
     """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
     one-step target probabilities) level by level (module docs); stops early out of
     budget.  ``from_initial``: only the states the initial state can reach (their
     successors are reachable too, so nothing they need is skipped); the others keep
-    ``[0, 1]``.  ``compiled``: the blocks are swept by the compiled kernel."""
+    ``[0, 1]``.  ``compiled``: the blocks are swept by the compiled kernel (``None``:
+    the blocks :func:`~mitld_lp.solvers.kernels.use_compiled` picks, numba loaded at the
+    first of them)."""
     blk = blocks(q)
     skip = None
     if from_initial:
@@ -243,8 +246,10 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         block = Block.of(q, rest)
         exits = rewards[block.choices] + block.outer @ bounds
         prep = Prepared(block.inner, block.groups)
-        if _block_sweeps(block, prep, exits, bounds, tol, budget, bar, compiled,
-                         _COMPILED_SWEEPS_BEFORE_POLICY if compiled else _SWEEPS_BEFORE_POLICY):
+        fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
+                else compiled)
+        if _block_sweeps(block, prep, exits, bounds, tol, budget, bar, fast,
+                         _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY):
             continue
         if budget.stopped is None:
             proven = True
@@ -255,7 +260,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             spread = bounds[rest][:, 1::2] - bounds[rest][:, 0::2]
             if proven and float(np.max(spread)) < tol:
                 continue
-        if not _block_sweeps(block, prep, exits, bounds, tol, budget, bar, compiled):
+        if not _block_sweeps(block, prep, exits, bounds, tol, budget, bar, fast):
             return
 
 
@@ -286,8 +291,10 @@ def interval_iteration(
     (``[0, 1]`` where nothing was done).
     ``quotient``: ``reduce(mdp, target)`` if the caller already has it.
     ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
-    (:mod:`mitld_lp.solvers.kernels`); None (default) uses it on a quotient of at least
-    ``kernels.COMPILED_MIN_ENTRIES`` transitions when numba is installed, ``False`` never.
+    (:mod:`mitld_lp.solvers.kernels`); None (default) uses it, when numba is installed,
+    on the blocks of at least ``kernels.COMPILED_MIN_BLOCK_ENTRIES`` entries of a
+    quotient of at least ``kernels.COMPILED_MIN_ENTRIES``; ``True`` on every block,
+    ``False`` never.
     """
     q = quotient_for(mdp, target, quotient)
     (result,) = interval_iterations(mdp, [q], tol=tol, max_iterations=max_iterations,
@@ -334,9 +341,7 @@ def interval_iterations(
         if n and not decided:
             if topological:
                 _topological(q, rewards, bounds, tol, budget, bar,
-                             from_initial=gap == "initial",
-                             compiled=use_compiled(q.matrix.nnz) if compiled is None
-                             else compiled)
+                             from_initial=gap == "initial", compiled=compiled)
             else:
                 whole = Block.of(q, np.arange(n))
                 _sweeps(whole, rewards[whole.choices] + whole.outer @ bounds, bounds, tol,

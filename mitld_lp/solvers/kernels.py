@@ -19,10 +19,12 @@ probability 0.98) is settled in one update instead of hundreds.
 * **compiled** (:func:`compiled_sweeps`, numba): Gauss--Seidel, each state from the
   bounds already updated in this sweep, in the block's own order (an order breadth
   first from the exits took 10% fewer sweeps on the bus blocks and, jumping through
-  memory, 5x the time).  numba is imported only for a product of at least
-  :data:`COMPILED_MIN_ENTRIES` entries (its import and the cached kernels cost about
-  0.2-0.4 s of CPU, the first compilation on a machine a few seconds, cached after);
-  without numba the NumPy path runs.
+  memory, 5x the time).  A block is swept by it only in a product of at least
+  :data:`COMPILED_MIN_ENTRIES` entries and when the block itself has at least
+  :data:`COMPILED_MIN_BLOCK_ENTRIES`; numba is imported at the first such block, so a
+  product whose blocks are all small never loads it (its import and the cached kernels
+  cost about 0.2-0.4 s of CPU and 74 MB, the first compilation on a machine a few
+  seconds, cached after); without numba the NumPy path runs.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
 """
@@ -35,21 +37,32 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["COMPILED_MIN_ENTRIES", "compiled_kernel", "compiled_sweeps", "numpy_sweeps",
-           "use_compiled"]
+__all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "compiled_kernel",
+           "compiled_sweeps", "numpy_sweeps", "use_compiled"]
 
 logger = logging.getLogger(__name__)
 
 COMPILED_MIN_ENTRIES = 1_000_000
 """Quotient entries (transitions) from which the compiled sweeps are used."""
 
+COMPILED_MIN_BLOCK_ENTRIES = 150_000
+"""A block's own entries from which it is swept by the compiled kernel.  What the kernel
+saves on a block is the policy jump's factorisations, which grow faster than the block.
+CPU seconds of the solve stage on ``bus_scaled``, numba's load included, two runs each:
+n64 d10 (blocks of 98,288 and 49,144 entries) 2.07 / 1.93 s compiled against 2.08 /
+1.97 s with NumPy, with 11 more bytes a transition at the peak (65 against 54); blocks
+of 393,200 and 196,600 entries 6.0 / 6.5 s against 10.7 / 13.9 s (n128 d3) and 9.2 /
+12.0 s against 14.3 / 15.9 s (n128 d10)."""
+
 _KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
 
 
-def use_compiled(entries: int) -> bool:
-    """Whether a product of ``entries`` transitions sweeps with the compiled kernel
-    (large enough to pay numba's import, and numba importable)."""
-    return entries >= COMPILED_MIN_ENTRIES and compiled_kernel() is not None
+def use_compiled(entries: int, block_entries: int) -> bool:
+    """Whether a block of ``block_entries`` entries in a product of ``entries``
+    transitions is swept with the compiled kernel (both large enough to pay numba's
+    import and memory, and numba importable: imported here the first time)."""
+    return (entries >= COMPILED_MIN_ENTRIES and block_entries >= COMPILED_MIN_BLOCK_ENTRIES
+            and compiled_kernel() is not None)
 
 
 def compiled_kernel() -> Any:
