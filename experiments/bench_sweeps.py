@@ -106,7 +106,12 @@ def preload() -> None:
     """Import the modules the solve stage imports on first use (the analysis, the
     solvers, the acceptance), so that ``solve_cpu`` is the solve and not a one-time
     library load (0.1-0.3 s): Storm's check is timed after stormpy is loaded too.  The
-    process figures include it; numba, loaded only for a large product, stays inside."""
+    process figures include it; numba, loaded only for a large product, stays inside.
+    SciPy's csgraph and sparse linear algebra are loaded by the solve of a product past
+    the small-graph walks (``mitld_lp.util.traversal``), as every instance here is."""
+    import scipy.sparse.csgraph
+    import scipy.sparse.linalg  # noqa: F401
+
     import mitld_lp.routes.acceptance
     import mitld_lp.solvers.analysis
     import mitld_lp.solvers.iteration

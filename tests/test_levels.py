@@ -12,6 +12,7 @@ import pytest
 import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import levels
+from mitld_lp.util import traversal
 
 
 def _reachable(adj: list[set[int]], start: int) -> set[int]:
@@ -26,7 +27,10 @@ def _reachable(adj: list[set[int]], start: int) -> set[int]:
 
 @pytest.mark.parametrize("seed", range(12))
 @pytest.mark.parametrize("index", [np.int32, np.int64])
-def test_levels_and_reach_match_a_plain_construction(seed: int, index: type) -> None:
+@pytest.mark.parametrize("small", [-1, 10**9], ids=["csgraph", "python"])
+def test_levels_and_reach_match_a_plain_construction(seed: int, index: type, small: int,
+                                                     monkeypatch) -> None:
+    monkeypatch.setattr(traversal, "SMALL", small)  # the components by either walk
     rng = np.random.default_rng(seed)
     n = int(rng.integers(20, 120))
     # mostly forward edges (a deep component graph), some back edges (cycles), repeats

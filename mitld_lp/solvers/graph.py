@@ -16,11 +16,11 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.result import read_only
 from mitld_lp.util.arrays import unique
+from mitld_lp.util.traversal import breadth_first_order, strong_components
 
 __all__ = [
     "Blocks",
@@ -78,7 +78,7 @@ def backward_reachable(
         (np.ones(rows.size, dtype=np.float64), (rows, cols)), shape=(n + 1, n + 1)
     )
     del rows, cols
-    order = csgraph.breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    order = breadth_first_order(graph, n)
     reached = np.zeros(n + 1, dtype=bool)
     reached[np.asarray(order)] = True
     return reached[:n]
@@ -117,7 +117,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
     whose support lies in the current state set, drop the states left with no choice,
     split into strongly connected components (SCCs) and drop every choice that can leave
     its SCC; repeat until nothing changes.  What is left, grouped by SCC, are the MECs.
-    Each round is vectorised (one ``csgraph.connected_components`` call).
+    Each round is vectorised (one :func:`~mitld_lp.util.traversal.strong_components`).
     """
     states_mask = as_state_mask(mdp, states_mask, "states_mask")
     n = mdp.n_states
@@ -133,7 +133,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
         graph = sp.csr_matrix(
             (np.ones(int(keep.sum())), (e.source[keep], e.succ[keep])), shape=(n, n)
         )
-        _, scc = csgraph.connected_components(graph, directed=True, connection="strong")
+        _, scc = strong_components(graph)
         cross = keep & (scc[e.source] != scc[e.succ])
         if not cross.any() and np.array_equal(still, alive):
             break
@@ -293,7 +293,7 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     run backwards: sinks are level 0, a component's level is one more than its highest
     successor's) and, propagated up the same walk, which components can reach a state
     of each seed set (``seeds``: ``(n, k)`` bool)."""
-    n_comp, comp = csgraph.connected_components(graph, directed=True, connection="strong")
+    n_comp, comp = strong_components(graph)
     # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
     index = graph.indices.dtype
     small = np.asarray(comp, dtype=index)

@@ -42,8 +42,6 @@ from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.sparse import csgraph
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
@@ -64,6 +62,7 @@ from mitld_lp.solvers.topological import (
 )
 from mitld_lp.util.progress import Bar
 from mitld_lp.util.progress import bar as progress_bar
+from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = ["interval_iteration", "interval_iterations", "evaluate_policy"]
 
@@ -234,8 +233,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     blk = blocks(q)
     skip = None
     if from_initial:
-        order = csgraph.breadth_first_order(state_graph(q), q.initial, directed=True,
-                                            return_predecessors=False)
+        order = breadth_first_order(state_graph(q), q.initial)
         skip = np.ones(q.n_states, dtype=bool)
         skip[np.asarray(order)] = False
     for level in blk.walk(skip=skip):
@@ -479,6 +477,8 @@ def _solve_transient(
         return solve_chain(chain, b, layers)
     if method == "direct":
         return transient_solve(chain, b)
+    import scipy.sparse.linalg as spla
+
     a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
     x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)
     x = np.asarray(x, dtype=np.float64).ravel()

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.solvers.analysis import analyse
@@ -28,6 +27,7 @@ from mitld_lp.solvers.graph import (
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
+from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
     "EndComponents",
@@ -143,7 +143,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])
     cols = np.concatenate([src, owners])
     graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
-    _, pred = csgraph.breadth_first_order(graph, n, directed=True, return_predecessors=True)
+    _, pred = breadth_first_order(graph, n, return_predecessors=True)
     members = np.flatnonzero(mecs.mec_of >= 0)
     others = np.setdiff1d(members, owners)
     if np.any(pred[others] < 0):  # pragma: no cover - MECs are strongly connected

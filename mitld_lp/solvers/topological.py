@@ -25,10 +25,10 @@ interval iteration, per level).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from mitld_lp.solvers.graph import (
     Blocks,
@@ -41,6 +41,9 @@ from mitld_lp.solvers.graph import (
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient
+
+if TYPE_CHECKING:
+    from scipy.sparse.linalg import SuperLU
 
 __all__ = [
     "Block",
@@ -170,11 +173,36 @@ class Block:
                                 self.to_target + self.outer @ hi])
 
 
-def chain_lu(a: sp.csc_array) -> spla.SuperLU:
-    """Sparse LU of ``I - Q`` for a sub-stochastic ``Q`` (a chain's, or its transpose):
-    the diagonal is pivoted on (``I - Q`` is diagonally dominant) in a minimum-degree
-    order of ``A + A'``, which on the product's blocks fills a third less than SuperLU's
-    default column order and factorises in 0.7-0.8x its time."""
+DENSE_LU_STATES = 256
+"""Chains of at most this many states are factorised dense (:class:`DenseLU`)."""
+
+
+class DenseLU:
+    """``I - Q`` of a small chain kept dense and solved by LAPACK's partial-pivoting LU
+    (``numpy.linalg.solve``, a few milliseconds at 256 states): SuperLU would need
+    ``scipy.sparse.linalg``, whose import (with ``scipy.linalg``) is 0.18 s of CPU, a
+    third of a whole ``mitld-lp solve`` of the bundled case, whose chains are all
+    smaller.  It answers ``solve`` as SciPy's ``SuperLU`` does."""
+
+    __slots__ = ("a",)
+
+    def __init__(self, a: sp.csc_array) -> None:
+        self.a = a.toarray()
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(self.a, rhs)
+
+
+def chain_lu(a: sp.csc_array) -> SuperLU | DenseLU:
+    """LU of ``I - Q`` for a sub-stochastic ``Q`` (a chain's, or its transpose): dense
+    up to :data:`DENSE_LU_STATES` states, else SuperLU's, the diagonal pivoted on
+    (``I - Q`` is diagonally dominant) in a minimum-degree order of ``A + A'``, which on
+    the product's blocks fills a third less than SuperLU's default column order and
+    factorises in 0.7-0.8x its time."""
+    if a.shape[0] <= DENSE_LU_STATES:
+        return DenseLU(a)
+    import scipy.sparse.linalg as spla
+
     return spla.splu(a, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
 
 
@@ -216,7 +244,7 @@ class Factors:
       resolution of the values.
     """
 
-    lu: spla.SuperLU | None = None
+    lu: SuperLU | DenseLU | None = None
     base: sp.csr_array | None = None
     reused: int = 0
     factorised: int = 0
