@@ -36,13 +36,13 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.running.controller import ControllerLike
 from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED
+from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
@@ -277,7 +277,7 @@ def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, int]], mdp: MDP,
     if not persistent:
         return []
     n = matrix.shape[0]
-    count, comp = csgraph.connected_components(matrix, directed=True, connection="strong")
+    count, comp = strong_components(matrix)
     coo = matrix.tocoo()
     leaves = np.zeros(count, dtype=bool)
     cross = (comp[coo.row] != comp[coo.col]) & (coo.data > 0)

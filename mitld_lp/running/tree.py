@@ -40,6 +40,7 @@ from mitld_lp.product import ProductState
 from mitld_lp.running.chain import chain_of, world_of
 from mitld_lp.running.controller import ControllerLike
 from mitld_lp.runtime import UNDECIDED, Decision, Stepper
+from mitld_lp.util.traversal import breadth_first_order
 from mitld_lp.worlds.names import state_fields, state_values
 
 __all__ = ["Tree", "TREE_SUFFIXES", "tree_of", "tree_controller", "tree_value", "write_tree"]
@@ -545,7 +546,6 @@ def tree_value(result: Any, tree: Tree) -> float:
     the states from which ``accept`` is reachable (the others have value 0)."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
-    from scipy.sparse import csgraph
 
     chain = chain_of(result, tree_controller(result, tree))
     accept = chain.accepting()
@@ -556,8 +556,7 @@ def tree_value(result: Any, tree: Tree) -> float:
     reach = np.zeros(chain.n_states, dtype=bool)
     for j in np.flatnonzero(accept):
         if not reach[j]:
-            reach[csgraph.breadth_first_order(graph, int(j), directed=True,
-                                              return_predecessors=False)] = True
+            reach[breadth_first_order(graph, int(j))] = True
     if not reach[0]:
         return 0.0
     u = np.flatnonzero(reach & ~accept)

@@ -42,13 +42,12 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.sparse import csgraph
 
 from mitld_lp.automata.joint import ACCEPTED, UNDECIDED, Joint
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.solvers.quotient import backward_reachable, maximal_end_components
+from mitld_lp.util.traversal import breadth_first_order, strong_components
 
 __all__ = ["Merged", "merge", "Quantity", "columns", "evaluate", "Evaluation"]
 
@@ -130,7 +129,7 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
     owner = to_new[cstate[rows]]
     coo = sub.tocoo()
     graph = sp.csr_array((np.ones(coo.nnz), (owner[coo.row], coo.col)), shape=(n_new, n_new))
-    order = csgraph.breadth_first_order(graph, start, directed=True, return_predecessors=False)
+    order = breadth_first_order(graph, start)
     reach = np.zeros(n_new, dtype=bool)
     reach[np.asarray(order)] = True
     # renumber the reachable merged states
@@ -351,7 +350,7 @@ def evaluate(
     if trapped.any():
         idx = np.flatnonzero(trapped)
         inner = chain[idx][:, idx]
-        n_c, lab = csgraph.connected_components(inner, directed=True, connection="strong")
+        n_c, lab = strong_components(inner)
         ic = inner.tocoo()
         leaves = np.zeros(n_c, dtype=bool)
         cross = (lab[ic.row] != lab[ic.col]) & (ic.data > 0)
@@ -365,6 +364,8 @@ def evaluate(
         qtt = chain[t_idx][:, t_idx]
         rhs = np.zeros(t_idx.size)
         rhs[np.searchsorted(t_idx, mdp.initial)] = 1.0
+        import scipy.sparse.linalg as spla
+
         y = spla.spsolve((sp.eye_array(t_idx.size, format="csc") - qtt.T).tocsc(), rhs)
         visits[t_idx] = np.atleast_1d(np.asarray(y, dtype=np.float64))
         b_idx = np.flatnonzero(bottom)

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+
+from mitld_lp.util.traversal import strong_components
 
 __all__ = ["RobustGame", "positive_attractor", "almost_sure", "end_components", "levels",
            "gather", "take_rows", "keeping"]
@@ -207,7 +208,7 @@ def end_components(
         r_of = np.repeat(rows, np.diff(game.matrix.indptr)[rows])
         cols = game.matrix.indices[gather(game.matrix.indptr[rows], game.matrix.indptr[rows + 1])]
         graph = sp.csr_array((np.ones(cols.size), (row_state[r_of], cols)), shape=(n, n))
-        _, comp = connected_components(graph, directed=True, connection="strong")
+        _, comp = strong_components(graph)
         new = np.where(alive, comp, -1)
         if _same_partition(new, label):
             return new, staying & (new[game.choice_state()] >= 0)
@@ -244,7 +245,7 @@ def levels(game: RobustGame, states: np.ndarray) -> list[np.ndarray]:
     src, dst = row_state[entry_row], game.matrix.indices
     keep = states[src] & states[dst]
     graph = sp.csr_array((np.ones(int(keep.sum())), (src[keep], dst[keep])), shape=(n, n))
-    n_comp, comp = connected_components(graph, directed=True, connection="strong")
+    n_comp, comp = strong_components(graph)
     cs, cd = comp[src[keep]], comp[dst[keep]]
     pairs = np.unique(cs[cs != cd] * n_comp + cd[cs != cd])
     cs, cd = pairs // n_comp, pairs % n_comp
