@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from mitld_lp import load_model, synthesize
+from mitld_lp.mdp import MDP
 from mitld_lp.solvers import Status, interval_iteration
 from mitld_lp.solvers import kernels as kernels_module
 from mitld_lp.testing import random_mdp
@@ -102,3 +103,50 @@ def test_numba_is_loaded_only_for_a_block_worth_it(monkeypatch, product: int, bl
     assert bool(asked) is loads
     assert r.status == Status.OPTIMAL
     assert np.all(r.lower <= exact + 1e-9) and np.all(exact <= r.upper + 1e-9)
+
+
+def _ping_pong() -> MDP:
+    """Two states passing the run back and forth with probability 0.999, each leaving
+    to the target or to a sink a little: Gauss--Seidel closes the gap by about 0.998 a
+    sweep, so sweeping to 1e-9 would take some 10,000 sweeps."""
+    rows = [0, 0, 0, 1, 1, 1, 2, 3]
+    cols = [1, 2, 3, 0, 2, 3, 2, 3]
+    vals = [0.999, 0.0005, 0.0005, 0.999, 0.0004, 0.0006, 1.0, 1.0]
+    no = np.zeros(4, dtype=bool)
+    return MDP(matrix=sp.csr_array((vals, (rows, cols)), shape=(4, 4)),
+               row_groups=np.arange(5), choice_actions=np.array([0, 0, -1, -1], dtype=np.int32),
+               action_names=("go",), initial=0, target=np.array([False, False, True, False]),
+               sink=np.array([False, False, False, True]), truncated=no, states=(0, 1, 2, 3))
+
+
+def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit() -> None:
+    if kernels_module.compiled_kernel() is None:
+        pytest.skip("numba is not installed")
+    from mitld_lp.solvers import iteration
+
+    mdp = _ping_pong()
+    # by hand: a = 0.0005 + 0.999 b, b = 0.0004 + 0.999 a
+    a = (0.0005 + 0.999 * 0.0004) / (1 - 0.999 ** 2)
+    r = interval_iteration(mdp, mdp.target, gap="max", progress=False, compiled=True)
+    assert r.status == Status.OPTIMAL
+    assert r.lower[0] <= a + 1e-15 and a <= r.upper[0] + 1e-15
+    assert float(np.max(r.upper - r.lower)) < 1e-9
+    # the forecast gave up on the sweeps, well before their limit of 1000
+    assert iteration._FORECAST_FROM <= r.iterations < iteration._COMPILED_SWEEPS_BEFORE_POLICY
+
+
+@pytest.mark.parametrize(("rate", "at", "hopeless"), [
+    # by hand: the sweeps still needed are log(1e-9 / 1e-2) / log(rate), the sweeps left
+    # to the limit of 1000 are 1000 - at
+    (0.9, 192, False),  # 153 needed, 2 x 808 left
+    (0.999, 192, True),  # 16,110 needed
+    (0.999, 176, False),  # too early to judge
+    (1.0, 960, True),  # the gap does not shrink
+    (0.99, 960, True),  # 1,604 needed, 2 x 40 left
+    (0.5, 960, False),  # 23 needed, 2 x 40 left
+])
+def test_the_sweep_forecast(rate: float, at: int, hopeless: bool) -> None:
+    from mitld_lp.solvers.iteration import _hopeless
+
+    seen = [(k, 1e-2 * rate ** (k - at)) for k in range(16, at + 1, 16)]
+    assert _hopeless(seen, 1e-9, 1000) is hopeless
