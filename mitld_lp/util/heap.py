@@ -10,8 +10,15 @@ the analysis, for products of at least a million transitions. On the events fami
 1.56M states (39M transitions) the peak went from 60.5 to 53.8 bytes a transition, for
 the trim's 38 ms and the pages the analysis then touches afresh. Trimming again between
 the later stages freed no more at peak there and cost 5-10% of the solve stage at 1e5
-states in pages touched again (``experiments/bench_sweeps.py``). Dask's workers trim the
-same way. With another C library (macOS, musl) it does nothing.
+states in pages touched again (``experiments/bench_sweeps.py``); on bus n64 d10 (8.3M
+transitions) a trim before the certificate took the peak from 54.6-55.1 to 49.1-50.5
+bytes a transition for 10-14% more solve time, and on events n32 d4 nothing, so it is
+not done.  A fixed ``M_MMAP_THRESHOLD`` of 128 KiB (every larger array its own mapping,
+handed back when freed) took bus n64 d10 from 66 to 54.5 bytes a transition (numba
+loaded then, as it no longer is there) but the
+product build to 2.1-2.5x its CPU, every array faulted in afresh; 1-16 MiB saved
+nothing.  Dask's workers trim the same way. With another C library (macOS, musl) it
+does nothing.
 """
 
 from __future__ import annotations
