@@ -67,11 +67,16 @@ def test_breadth_first_search_is_csgraphs(seed: int) -> None:
 
 
 def test_a_large_graph_goes_to_csgraph(monkeypatch) -> None:
-    graph = _graph(3)
     monkeypatch.setattr(traversal, "_tarjan", None)  # would fail if called
-    monkeypatch.setattr(traversal, "SMALL", graph.nnz - 1)
+    graph = _graph(3)
+    monkeypatch.setattr(traversal, "SMALL", graph.shape[0] + graph.nnz - 1)
     n_comp, labels = traversal.strong_components(graph)
     assert labels.shape == (graph.shape[0],) and n_comp == len(np.unique(labels))
+    # many nodes and few edges (an end-component round of a large product) count too
+    sparse_nodes = sp.csr_array(([1.0], ([0], [1])), shape=(50_000, 50_000))
+    monkeypatch.setattr(traversal, "SMALL", 20_000)
+    n_comp, labels = traversal.strong_components(sparse_nodes)
+    assert n_comp == 50_000
 
 
 def test_a_root_outside_the_graph_is_refused() -> None:
