@@ -11,9 +11,17 @@ import pytest
 from test_analysis import _dense_values
 
 from mitld_lp.solvers.iteration import interval_iteration
-from mitld_lp.solvers.lp import _may_be_optimal, _tightened, solve_lp
+from mitld_lp.solvers.lp import (
+    _block_lp,
+    _crossover_start,
+    _may_be_optimal,
+    _polish,
+    _tightened,
+    solve_lp,
+)
+from mitld_lp.solvers.lp_backends import Settings, solve_one
 from mitld_lp.solvers.quotient import reduce
-from mitld_lp.solvers.topological import Block
+from mitld_lp.solvers.topological import Block, improve_policy
 from mitld_lp.testing import random_mdp
 
 
@@ -91,3 +99,48 @@ def test_tightened_bounds_stay_sound_and_prune_more(seed: int) -> None:
     q_star = reward + block.inner @ v
     owner = np.repeat(np.arange(v.size), np.diff(block.groups))
     assert np.all(after[q_star >= v[owner] - 1e-12])  # no optimal choice left out
+
+
+
+def _block_answer(seed: int):
+    """A random block, its LP, Clarabel's answer and the block's values, computed apart
+    from the LP (policy iteration in extended precision from the first choices)."""
+    block, _, v = _whole_block(seed)
+    lp = _block_lp(block, np.zeros(block.states.size))
+    raw = solve_one(lp, Settings("CLARABEL", "direct", 1e-9, {}, np.inf), retry=False)
+    assert raw.y is not None and raw.v is not None
+    _, exact, _ = improve_policy(block, lp.objective, np.asarray(block.groups[:-1]))
+    exact = np.asarray(exact, dtype=np.float64)
+    assert np.allclose(exact, v, atol=1e-9)  # the dense value iteration agrees
+    return block, lp, np.maximum(raw.y, 0.0), raw.v, exact
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_crossover_starts_in_the_lp_support_ranked_by_the_lower_bound(seed: int) -> None:
+    """Given the values as its lower bound, the crossover starts, whatever the LP's duals
+    say (here 0), at a choice the LP's flow uses and that is optimal up to rounding in
+    every state; a useless bound (0) costs rounds, never the answer: every choice is
+    still checked against the exact values."""
+    block, lp, y, duals, exact = _block_answer(seed)
+    everything = np.arange(block.choices.size)
+    start = _crossover_start(block, lp, y, np.zeros_like(duals), everything, exact)
+    q = lp.objective + block.inner @ exact
+    assert np.all(q[start] >= exact - 1e-12)
+    most = np.maximum.reduceat(y, block.groups[:-1])
+    assert np.all(y[start] >= 0.01 * most)
+    for lower in (exact, np.zeros_like(exact), None):
+        got = _polish(block, lp, y, duals, everything, 1e-9, lower=lower)
+        assert got.optimal and np.allclose(got.values, exact, atol=1e-12)
+
+
+def test_without_the_bound_the_start_follows_the_duals() -> None:
+    """The check above can fail: from duals of 0 and no bound, the start is greedy on
+    the one-step target probability alone, and loses in some state of some block."""
+    losses = []
+    for seed in range(6):
+        block, lp, y, duals, exact = _block_answer(seed)
+        start = _crossover_start(block, lp, y, np.zeros_like(duals),
+                                 np.arange(block.choices.size), None)
+        q = lp.objective + block.inner @ exact
+        losses.append(float(np.max(exact - q[start])))
+    assert max(losses) > 1e-3

@@ -341,21 +341,17 @@ class _Polished:
 
 
 def _polish(block: Block, lp: Matrices, y: np.ndarray, duals: np.ndarray,
-            columns: np.ndarray, tol: float) -> _Polished:
-    """Crossover by policy iteration: the policy greedy on the LP's duals (its value
-    function) over the LP's ``columns`` is evaluated exactly on the block's chain and
-    improved, over every choice of the block, until no choice gains; an interior-point
-    answer is accurate to its tolerance times the block's expected exit time (a block
-    left once in a million steps loses six digits), the policy's exact value is not.
-    (Started so, policy iteration took 1-2 rounds on the bus blocks where it took 14
-    from the choices of largest occupancy.)  The randomised policy keeps the LP's
+            columns: np.ndarray, tol: float, lower: np.ndarray | None = None) -> _Polished:
+    """Crossover by policy iteration from the LP's answer (:func:`_crossover_start`),
+    evaluated exactly on the block's chain and improved, over every choice of the
+    block, until no choice gains; an interior-point answer is accurate to its tolerance
+    times the block's expected exit time (a block left once in a million steps loses six
+    digits), the policy's exact value is not.  The randomised policy keeps the LP's
     occupancies on the choices that are tight at the exact values (to ``tol`` over the
     block's expected exit time)."""
     groups = block.groups
     counts = np.diff(groups)
-    score = np.full(y.size, -np.inf)
-    score[columns] = (lp.objective + block.inner @ duals)[columns]
-    start = segmented_argmax(score, groups)  # among the LP's columns: its duals fit them
+    start = _crossover_start(block, lp, y, duals, columns, lower)
     chosen, v_ld, exit_time = improve_policy(block, lp.objective, start)
     v = np.asarray(v_ld, dtype=np.float64)
     slack = np.asarray(np.repeat(v_ld, counts)
@@ -373,6 +369,40 @@ def _polish(block: Block, lp: Matrices, y: np.ndarray, duals: np.ndarray,
     weights[chosen[lone]] = 1.0
     return _Polished(chosen, np.clip(v, 0.0, 1.0), weights,
                      bool(np.min(slack, initial=0.0) >= -tie))
+
+
+def _crossover_start(block: Block, lp: Matrices, y: np.ndarray, duals: np.ndarray,
+                     columns: np.ndarray, lower: np.ndarray | None) -> np.ndarray:
+    """The policy the crossover starts from (a local choice per state of ``block``).
+
+    With sound ``lower`` bounds on the block's values: in each state, among the choices
+    the LP's solution uses (an occupancy of at least :data:`_SUPPORT` of the state's
+    largest), the one of largest lower Q-bound ``r(c) + P(c) . lower``.  The
+    interior-point answer spreads its flow over the optimal face, so its support holds
+    the optimal choices; its duals, accurate to the solver's tolerance, cannot rank the
+    near-ties inside it (gains of 1e-10 to 1e-17 on the bus blocks), while a bound that
+    sweeps left below every choice's Q-value can (the policy greedy on such a bound is
+    worth at least the bound).  Policy iteration rounds from the duals' greedy policy
+    against this start, on ``bus_scaled`` (``experiments/bench_sweeps.py``): 6+3 -> 1+0
+    (n64 d3), 7+12 -> 7+1 (n128 d3), 6+2 -> 2+0 (n64 d10), each round a sparse LU of
+    the block's chain.  Without bounds: greedy on the duals among the LP's ``columns``
+    (the duals fit them)."""
+    groups = block.groups
+    if lower is None:
+        score = np.full(y.size, -np.inf)
+        score[columns] = (lp.objective + block.inner @ duals)[columns]
+        return segmented_argmax(score, groups)
+    most = np.repeat(np.maximum.reduceat(y, groups[:-1]), np.diff(groups))
+    used = y >= _SUPPORT * most  # every state keeps its largest occupancy
+    return segmented_argmax(np.where(used, lp.objective + block.inner @ lower, -np.inf),
+                            groups)
+
+
+_SUPPORT = 0.01
+"""A choice's share of its state's largest occupancy from which the crossover counts it
+as used by the LP's answer (:func:`_crossover_start`); an interior point leaves a
+suboptimal choice many orders of magnitude below (1e-3 to 0.1 gave the same starts on
+the bus blocks)."""
 
 
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
@@ -416,10 +446,10 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
             continue
         block = Block.of(q, rest)
         lp = _block_lp(block, values)
-        columns = (np.arange(block.choices.size) if bounds is None else np.flatnonzero(
-            _may_be_optimal(block, lp.objective,
-                            *_tightened(block, lp.objective, bounds[0][rest],
-                                        bounds[1][rest]))))
+        tight = (None if bounds is None else
+                 _tightened(block, lp.objective, bounds[0][rest], bounds[1][rest]))
+        columns = (np.arange(block.choices.size) if tight is None else
+                   np.flatnonzero(_may_be_optimal(block, lp.objective, *tight)))
         raw = solve_one(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
                                  lp.objective[columns]), settings, retry=False)
         iterations += raw.iterations
@@ -431,7 +461,8 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
                         f"{rest.size} states)", iterations=iterations)
         y = np.zeros(block.choices.size)
         y[columns] = np.maximum(raw.y, 0.0)
-        polished = _polish(block, lp, y, raw.v, columns, settings.tol)
+        polished = _polish(block, lp, y, raw.v, columns, settings.tol,
+                           None if tight is None else tight[0])
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
