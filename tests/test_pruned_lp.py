@@ -12,6 +12,7 @@ from test_analysis import _dense_values
 
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import (
+    _better_of,
     _block_lp,
     _crossover_start,
     _may_be_optimal,
@@ -21,7 +22,7 @@ from mitld_lp.solvers.lp import (
 )
 from mitld_lp.solvers.lp_backends import Settings, solve_one
 from mitld_lp.solvers.quotient import reduce
-from mitld_lp.solvers.topological import Block, improve_policy
+from mitld_lp.solvers.topological import Block, Factors, evaluate_chain, improve_policy
 from mitld_lp.testing import random_mdp
 
 
@@ -115,32 +116,51 @@ def _block_answer(seed: int):
     return block, lp, np.maximum(raw.y, 0.0), raw.v, exact
 
 
+def _start(block, lp, y, duals, lower):
+    return _crossover_start(block, lp, y, duals, np.arange(block.choices.size), lower,
+                            Factors())
+
+
+def _exact(block, lp, chosen) -> np.ndarray:
+    return np.asarray(evaluate_chain(block.inner, chosen, lp.objective)[0], dtype=np.float64)
+
+
 @pytest.mark.parametrize("seed", range(6))
-def test_the_crossover_starts_in_the_lp_support_ranked_by_the_lower_bound(seed: int) -> None:
-    """Given the values as its lower bound, the crossover starts, whatever the LP's duals
-    say (here 0), at a choice the LP's flow uses and that is optimal up to rounding in
-    every state; a useless bound (0) costs rounds, never the answer: every choice is
-    still checked against the exact values."""
+def test_the_crossover_start_is_worth_both_candidates(seed: int) -> None:
+    """The crossover starts from a policy worth, in every state, at least the better of
+    its two candidates (here random policies, each better in some states), and the
+    crossover's answer is exact whatever bound it is given."""
     block, lp, y, duals, exact = _block_answer(seed)
-    everything = np.arange(block.choices.size)
-    start = _crossover_start(block, lp, y, np.zeros_like(duals), everything, exact)
-    q = lp.objective + block.inner @ exact
-    assert np.all(q[start] >= exact - 1e-12)
-    most = np.maximum.reduceat(y, block.groups[:-1])
-    assert np.all(y[start] >= 0.01 * most)
+    groups, everything = block.groups, np.arange(block.choices.size)
+    rng = np.random.default_rng(seed)
+    counts = np.diff(groups)
+    for _ in range(50):  # a pair where neither policy is the better everywhere
+        first, second = (groups[:-1] + rng.integers(0, counts) for _ in range(2))
+        v_first, v_second = _exact(block, lp, first), _exact(block, lp, second)
+        if np.any(v_first > v_second + 1e-9) and np.any(v_second > v_first + 1e-9):
+            break
+    else:
+        pytest.fail("no pair of random policies where each is better somewhere")
+    merged = _better_of(block, lp.objective, first, second, Factors())
+    worth = _exact(block, lp, merged)
+    assert np.all(worth >= np.maximum(v_first, v_second) - 1e-12)
+    assert np.all(worth <= exact + 1e-12)
     for lower in (exact, np.zeros_like(exact), None):
         got = _polish(block, lp, y, duals, everything, 1e-9, lower=lower)
         assert got.optimal and np.allclose(got.values, exact, atol=1e-12)
 
 
-def test_without_the_bound_the_start_follows_the_duals() -> None:
-    """The check above can fail: from duals of 0 and no bound, the start is greedy on
-    the one-step target probability alone, and loses in some state of some block."""
+def test_the_two_candidates_differ_and_neither_is_always_better() -> None:
+    """The check above is not empty: on these blocks the duals' greedy policy (from
+    duals of 0: the best one-step reward) and the bound's (the values themselves) differ,
+    and the start is optimal where one of them is not."""
     losses = []
     for seed in range(6):
         block, lp, y, duals, exact = _block_answer(seed)
-        start = _crossover_start(block, lp, y, np.zeros_like(duals),
-                                 np.arange(block.choices.size), None)
+        zero = np.zeros_like(duals)
+        start = _start(block, lp, y, zero, exact)
         q = lp.objective + block.inner @ exact
-        losses.append(float(np.max(exact - q[start])))
+        assert np.all(q[start] >= exact - 1e-12)  # optimal up to rounding
+        alone = _start(block, lp, y, zero, None)  # the duals' greedy policy alone
+        losses.append(float(np.max(exact - q[alone])))
     assert max(losses) > 1e-3
