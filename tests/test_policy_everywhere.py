@@ -54,7 +54,7 @@ def test_the_policy_is_optimal_in_every_state(route) -> None:
 def test_a_policy_optimal_only_where_it_goes_is_not_certified(monkeypatch) -> None:
     """Without the crossover, the one LP's policy is wrong off its path; the Bellman
     check over all states must catch it."""
-    monkeypatch.setattr(lp_module, "_crossover", lambda q, start: start)
+    monkeypatch.setattr(lp_module, "crossover", lambda q, start: start)
     r = synthesize(loads_model(GRID), decompose=False)
     assert not r.certified
     assert {c.name for c in r.failed_checks} == {"policy optimal in every state (Bellman)"}

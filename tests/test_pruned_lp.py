@@ -10,16 +10,9 @@ import numpy as np
 import pytest
 from test_analysis import _dense_values
 
+from mitld_lp.solvers.crossover import better_of, crossover_start, polish
 from mitld_lp.solvers.iteration import interval_iteration
-from mitld_lp.solvers.lp import (
-    _better_of,
-    _block_lp,
-    _crossover_start,
-    _may_be_optimal,
-    _polish,
-    _tightened,
-    solve_lp,
-)
+from mitld_lp.solvers.lp import _block_lp, _may_be_optimal, _tightened, solve_lp
 from mitld_lp.solvers.lp_backends import Settings, solve_one
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block, Factors, evaluate_chain, improve_policy
@@ -117,7 +110,7 @@ def _block_answer(seed: int):
 
 
 def _start(block, lp, y, duals, lower):
-    return _crossover_start(block, lp, y, duals, np.arange(block.choices.size), lower,
+    return crossover_start(block, lp, y, duals, np.arange(block.choices.size), lower,
                             Factors())
 
 
@@ -126,7 +119,7 @@ def _exact(block, lp, chosen) -> np.ndarray:
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_the_crossover_start_is_worth_both_candidates(seed: int) -> None:
+def test_thecrossover_start_is_worth_both_candidates(seed: int) -> None:
     """The crossover starts from a policy worth, in every state, at least the better of
     its two candidates (here random policies, each better in some states), and the
     crossover's answer is exact whatever bound it is given."""
@@ -141,12 +134,12 @@ def test_the_crossover_start_is_worth_both_candidates(seed: int) -> None:
             break
     else:
         pytest.fail("no pair of random policies where each is better somewhere")
-    merged = _better_of(block, lp.objective, first, second, Factors())
+    merged = better_of(block, lp.objective, first, second, Factors())
     worth = _exact(block, lp, merged)
     assert np.all(worth >= np.maximum(v_first, v_second) - 1e-12)
     assert np.all(worth <= exact + 1e-12)
     for lower in (exact, np.zeros_like(exact), None):
-        got = _polish(block, lp, y, duals, everything, 1e-9, lower=lower)
+        got = polish(block, lp, y, duals, everything, 1e-9, lower=lower)
         assert got.optimal and np.allclose(got.values, exact, atol=1e-12)
 
 
