@@ -65,6 +65,7 @@ from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
 from mitld_lp.sensing.sensors import Sensor, read_sensors, sensors_from
+from mitld_lp.util.decimals import Written
 from mitld_lp.worlds.game import Game, GameError, world_members
 from mitld_lp.worlds.grid import GridWorld
 from mitld_lp.worlds.task import BindError, Task, bind, resolve_laws
@@ -489,7 +490,8 @@ def _load(
 ) -> Model:
     ctx = _Context(source)
     try:
-        doc = tomllib.loads(text)
+        # every decimal keeps its text: an exact answer is about the model as written
+        doc = tomllib.loads(text, parse_float=Written)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
