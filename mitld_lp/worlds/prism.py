@@ -75,10 +75,9 @@ from __future__ import annotations
 
 import logging
 import os
-import re
-import tempfile
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -91,16 +90,23 @@ from mitld_lp.product.budget import _bytes  # the product's budget messages writ
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
+    builder_options,
     check_constants,
     check_program,
     command_names,
+    extra_labels,
     name_unlabelled_commands,
+    needs_origins,
+    parse_program,
     show_sum,
     storm_error,
     storm_quiet,
     storm_sum,
+    with_constants,
+    with_labels,
 )
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
 from mitld_lp.worlds.prism_terminal import decided as decided_when
@@ -177,6 +183,7 @@ class PrismGame:
     terminal: str = ""
     decided: int = 0
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
+    recipe: PrismRecipe | None = field(default=None, repr=False)  # to build it again
 
     @property
     def event_names(self) -> frozenset[str]:
@@ -241,18 +248,37 @@ class PrismGame:
             probabilities=t.probabilities,
         )
 
-    def _distribution(self, choice: int) -> dict[int, float]:
+    def _distribution(self, choice: int, exact: bool = False) -> dict[int, Any]:
         t = self._tables
         lo, hi = t.branches[choice], t.branches[choice + 1]
+        if exact:  # Storm's exact build, made when first asked (mitld_lp.worlds.prism_exact)
+            probabilities = self._cache.get("exact")
+            if probabilities is None:
+                if self.recipe is None:
+                    raise WorldError(f"{self.source}: this world was not built by "
+                                     "load_prism: its exact probabilities are unknown")
+                probabilities = self._cache["exact"] = exact_probabilities(self.recipe, t)
+            return dict(zip(t.targets[lo:hi].tolist(), probabilities[lo:hi], strict=True))
         return dict(zip(t.targets[lo:hi].tolist(), t.probabilities[lo:hi].tolist(), strict=True))
 
     def successors(
         self, state: State, action: str, events: frozenset[str]
     ) -> tuple[tuple[State, float], ...]:
         """The robot's move, then each event's effect in name order (module docstring)."""
+        return self._moves(state, action, events, exact=False)
+
+    def exact_successors(
+        self, state: State, action: str, events: frozenset[str]
+    ) -> tuple[tuple[State, Fraction], ...]:
+        """:meth:`successors` in rational arithmetic, the probabilities as the PRISM file
+        writes them (Storm's exact build, :mod:`mitld_lp.worlds.prism_exact`)."""
+        return self._moves(state, action, events, exact=True)
+
+    def _moves(self, state: State, action: str, events: frozenset[str], exact: bool,
+               ) -> tuple[tuple[State, Any], ...]:
         s = self._at(state)
         acting = frozenset(events & self.effects.keys())
-        key = (s, action, acting)
+        key = (s, action, acting, exact)
         found = self._cache.get(key)
         if found is not None:
             return found
@@ -260,14 +286,14 @@ class PrismGame:
         row = self._names(s)
         if action not in row:
             raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
-        dist = self._distribution(int(t.choices[s]) + row.index(action))
+        dist = self._distribution(int(t.choices[s]) + row.index(action), exact)
         for event in sorted(acting):
             effect = self.effects[event]
-            moved: dict[int, float] = {}
+            moved: dict[int, Any] = {}
             for u, p in dist.items():
                 c = int(effect[u])
-                for v, q in (self._distribution(c) if c >= 0 else {u: 1.0}).items():
-                    moved[v] = moved.get(v, 0.0) + p * q
+                for v, q in (self._distribution(c, exact) if c >= 0 else {u: 1}).items():
+                    moved[v] = moved.get(v, 0) + p * q
             dist = moved
         out = tuple((self.states[u], p) for u, p in dist.items())
         self._cache[key] = out
@@ -354,15 +380,15 @@ def load_prism(
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     _check_utf8(p, where)
     stormpy = _stormpy()
-    program = _parse(stormpy, where, where)
+    program = parse_program(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
         raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
-    extra = _extra_labels(program, dict(define or {}), where)
+    extra = extra_labels(program, dict(define or {}), where)
     if extra:
-        program = _with_labels(stormpy, p, extra, where)
+        program = with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
     check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
@@ -384,12 +410,7 @@ def load_prism(
             f"(actions: {', '.join(sorted(actions)) or 'none'})"
         )
 
-    if given:
-        try:
-            with storm_quiet():
-                program, _ = stormpy.instantiate_constants(program, given)
-        except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            raise storm_error(exc, where) from None
+    program = with_constants(stormpy, program, given, where)
     try:
         with storm_quiet():
             plain = program.substitute_constants()
@@ -436,60 +457,8 @@ def load_prism(
         terminal=terminal,
         decided=tables.decided,
         _tables=tables,
+        recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
     )
-
-
-def _parse(stormpy: Any, file: str, where: str) -> Any:
-    try:
-        with storm_quiet():
-            return stormpy.parse_prism_program(file)
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
-
-
-_FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
-
-
-def _extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, str]:
-    """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
-    that no label shadows (``name -> name``), then ``define``."""
-    labels = {lab.name for lab in program.labels}
-    manager = program.expression_manager
-    extra: dict[str, str] = {}
-    for name in _FORMULA.findall(str(program)):
-        if name not in labels and manager.get_variable(name).has_boolean_type():
-            extra[name] = name
-    for name, text in define.items():
-        if not re.fullmatch(r"[A-Za-z_]\w*", name):
-            raise WorldError(f"label {name!r}: not a PRISM identifier")
-        if name in labels or name in extra:
-            what = "label" if name in labels else "formula"
-            raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
-        if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
-            raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
-        extra[name] = text
-    return extra
-
-
-def _with_labels(stormpy: Any, path: Path, extra: dict[str, str], where: str) -> Any:
-    """The program of ``path`` with ``label "name" = expression;`` appended for each
-    entry of ``extra`` (a copy in a temporary folder; the file is not changed)."""
-    text = path.read_text(encoding="utf-8")
-    first = text.count("\n") + 2
-    lines = [f'label "{name}" = {expression};' for name, expression in extra.items()]
-    with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
-        copy = Path(folder) / path.name
-        copy.write_text(text + "\n" + "\n".join(lines) + "\n", encoding="utf-8")
-        try:
-            with storm_quiet():
-                return stormpy.parse_prism_program(str(copy))
-        except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            error = str(storm_error(exc, where))
-    m = re.match(rf"{re.escape(where)}:(\d+):(?:\d+: )?(.*)$", error)
-    if m and int(m[1]) >= first:
-        name = list(extra)[min(int(m[1]) - first, len(extra) - 1)]
-        raise WorldError(f"label {name!r} = {extra[name]!r}: {m[2]}")
-    raise WorldError(error)
 
 
 def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
@@ -504,31 +473,12 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
     model is built without the checks (its sums are then checked by
     :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance)."""
-    formula = None
-    if terminal:
-        with storm_quiet():
-            formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
-        formula = formula.get_raw_formula()
-
     # Two choices of one state named by one action are told apart by the commands they
-    # come from (Storm's choice origins, a tenth of the build): that takes a module with
-    # two commands of one action (every command has an action here, and a choice of an
-    # action joins one enabled command of it from each module that has it).
-    origins = any(
-        len(names) != len(set(names))
-        for names in ([c.action_name for c in module.commands] for module in program.modules)
-    )
+    # come from (Storm's choice origins, a tenth of the build): only where needed.
+    origins = needs_origins(program)
 
     def options(checks: bool) -> Any:
-        o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
-        o.set_exploration_checks(checks)
-        # Every label, always: a label left out of the build would be false in every state.
-        o.set_build_all_labels()
-        o.set_build_choice_labels()
-        if origins:
-            o.set_build_choice_origins()
-        o.set_build_state_valuations()
-        return o
+        return builder_options(stormpy, program, terminal, checks=checks, origins=origins)
 
     errors = (RuntimeError, stormpy.exceptions.StormError)
     try:
