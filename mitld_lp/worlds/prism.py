@@ -295,7 +295,13 @@ class PrismGame:
                 for v, q in (self._distribution(c, exact) if c >= 0 else {u: 1}).items():
                     moved[v] = moved.get(v, 0) + p * q
             dist = moved
-        out = tuple((self.states[u], p) for u, p in dist.items())
+        if exact:  # every state asked for in turn: made tuples once, not one by one
+            listed = self._cache.get("listed")
+            if listed is None:
+                listed = self._cache["listed"] = list(self.states)
+            out = tuple((listed[u], p) for u, p in dist.items())
+        else:
+            out = tuple((self.states[u], p) for u, p in dist.items())
         self._cache[key] = out
         return out
 
