@@ -17,6 +17,8 @@ __all__ = [
     "MAX_RUNS",
     "MAX_STEPS",
     "MAX_STEPS_LIMIT",
+    "EXACT_MAX_TRANSITIONS",
+    "EXACT_MAX_BLOCK",
     "check_epsilon",
 ]
 
@@ -54,6 +56,17 @@ MAX_STEPS = 1000
 
 MAX_STEPS_LIMIT = 1_000_000
 """The largest ``max_steps`` accepted for a rollout."""
+
+EXACT_MAX_TRANSITIONS = 1_000_000
+"""The largest product an exact answer (``--exact``) takes, in transitions: each is
+recomputed and multiplied in rational arithmetic in Python, some microseconds each and
+more as the numbers grow (checked before the exact work)."""
+
+EXACT_MAX_BLOCK = 1_000
+"""The largest strongly connected block of a policy's chain an exact answer factorises:
+one dense rational solve of that size (python-flint), about 3 s and 6,000-digit
+numbers at 1,000 states, growing with the cube (checked before each solve, and on the
+floating-point policy's chain before the exact work)."""
 
 
 def check_epsilon(value: object) -> float:

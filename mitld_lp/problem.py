@@ -81,6 +81,7 @@ class Settings:
     tol: float = defaults.TOL
     certify_tol: float = defaults.CERTIFY_TOL
     progress: bool = False
+    exact: bool = False  # the optimum as a fraction too (mitld_lp.exact)
 
     def identity(self) -> dict[str, Any]:
         """The settings that change an answer (part of a sweep's identity)."""
@@ -127,6 +128,8 @@ class Settings:
             if v is not None and not (isinstance(v, int) and not isinstance(v, bool)
                                       and v >= 1):
                 raise ProblemError(f"{name}: must be a whole number >= 1, got {v!r}")
+        if not isinstance(self.exact, bool):
+            raise ProblemError(f"exact: must be True or False, got {self.exact!r}")
         if self.max_memory is not None and not (
                 isinstance(self.max_memory, int) and self.max_memory >= 1):
             raise ProblemError(f"max_memory: must be a number of bytes >= 1, "
@@ -252,17 +255,29 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
         why = sensed_refusal(model, fragment, goal, cons, then, robust)
         if why is not None:
             raise ProblemError(why)
-        return Posed(problem, s, SENSED, fragment, robust)
+        return _exact_checked(Posed(problem, s, SENSED, fragment, robust))
     if constrained:
         posed = Posed(problem, s, CONSTRAINED, fragment, robust)
         check_constrained(posed)
-        return posed
+        return _exact_checked(posed)
     if robust:
         _robust_route(s)
-        return Posed(problem, s, ROBUST, fragment, robust)
+        return _exact_checked(Posed(problem, s, ROBUST, fragment, robust))
     if fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses the others
         raise ProblemError(f"{what}: not a supported class")
-    return Posed(problem, s, PLAIN, fragment, robust)
+    return _exact_checked(Posed(problem, s, PLAIN, fragment, robust))
+
+
+def _exact_checked(posed: Posed) -> Posed:
+    """``posed``, or a :class:`ProblemError` naming why its exact answer (``exact=True``)
+    cannot be given (:func:`mitld_lp.exact.exact_refusal`), before any work."""
+    if posed.settings.exact:
+        from mitld_lp.exact.stage import exact_refusal
+
+        why = exact_refusal(posed)
+        if why is not None:
+            raise ProblemError(why)
+    return posed
 
 
 def _task_words(fragment: str, goal: str) -> str:

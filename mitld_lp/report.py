@@ -113,7 +113,7 @@ SUMMARY_KEYS = (
     "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
-    "randomized_states", "message", "sensors",
+    "randomized_states", "message", "sensors", "exact", "exact_bracket",
 )
 
 
@@ -143,6 +143,7 @@ def summary(result: Any) -> dict[str, Any]:
         checks=[{"name": c.name, "ok": c.passed, "detail": c.detail} for c in result.checks],
         dta_states=result.automaton.n_states,
         sensors={a: s.detect for a, s in result.sensors.items()},
+        **_exact_part(result.exact),
     )
     if result.route == "constrained":
         out.update(_constrained_part(result))
@@ -213,3 +214,18 @@ def html(result: Result) -> str:
         for k, v in rows
     )
     return f"<table>{body}</table>"
+
+
+def _exact_part(exact: Any) -> dict[str, Any]:
+    """``exact``: the exact optimum as ``"p/q"`` (None unless asked for, and when a
+    truncation leaves two models); ``exact_bracket``: both models' optima, ``["p/q",
+    "r/s"]`` (None unless asked for)."""
+    if exact is None:
+        return {}
+    point = exact.value
+    return {"exact": None if point is None else _fraction(point),
+            "exact_bracket": [_fraction(exact.lower), _fraction(exact.upper)]}
+
+
+def _fraction(x: Any) -> str:
+    return f"{x.numerator}/{x.denominator}"

@@ -90,6 +90,9 @@ class Result:
     # sensors that miss events: each sensed event's sensor, the information-state product
     sensors: Mapping[str, Any] = field(default_factory=dict)
     belief: Any = None
+    # exact=True: the optimum as fractions (mitld_lp.exact.ExactAnswer); lower and upper
+    # are then its two fractions rounded outward
+    exact: Any = None
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:

@@ -55,6 +55,7 @@ def synthesize(
     constraints: Iterable[Any] = (),
     then: str | None = None,
     objective: str | None = None,
+    exact: bool = False,
 ) -> Result:
     """Maximise (or, with ``objective="min"`` or the model's own objective, minimise)
     the probability that the model's world satisfies its MITLD spec.
@@ -71,7 +72,9 @@ def synthesize(
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
     ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
     constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law known only within a band:
-    the robust synthesis (:mod:`mitld_lp.routes.robust`).
+    the robust synthesis (:mod:`mitld_lp.routes.robust`).  ``exact``: also the exact
+    optimum as a fraction, ``Result.exact`` (:mod:`mitld_lp.exact`; the plain route,
+    models of modest size, laws and worlds with rational probabilities).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -81,7 +84,8 @@ def synthesize(
         method=method, solver=solver, backend=backend, clock_reduction=clock_reduction,
         decompose=decompose, time_limit=time_limit, max_states=max_states,
         max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
-        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress)
+        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
+        exact=exact)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 

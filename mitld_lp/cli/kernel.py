@@ -19,6 +19,7 @@ from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
 from mitld_lp.distributions import DistributionError
+from mitld_lp.exact.errors import ExactError
 from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
@@ -41,6 +42,7 @@ class UsageError(ValueError):
 
 #: Exceptions that mean "the input is wrong" (exit 2), not "the program is wrong".
 _USER_ERRORS: tuple[type[Exception], ...] = (
+    ExactError,
     ParseError,
     FragmentError,
     ModelError,
@@ -199,7 +201,7 @@ def solve_settings(args: argparse.Namespace) -> Settings:
     from mitld_lp.problem import settings_from
 
     return settings_from(method=args.method, solver=args.solver, backend=args.backend,
-                         decompose=False if args.no_decompose else None,
+                         decompose=False if args.no_decompose else None, exact=args.exact,
                          **model_options(args))
 
 

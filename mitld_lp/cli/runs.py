@@ -98,9 +98,12 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
     elif "error" in record:
         _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
     else:
+        exact = record.get("exact_bracket")  # --exact: the fraction (or both models')
+        shown = "" if not exact else f" exact {exact[0]}" if exact[0] == exact[1] else (
+            f" exact in [{exact[0]}, {exact[1]}]")
         _out(f"{printable(record['file'])}: [{_prob(record['lower'])}, {_prob(record['upper'])}] "
              f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
-             f"{record['states']} states, {record['seconds']:.3f} s)")
+             f"{record['states']} states, {record['seconds']:.3f} s){shown}")
 
 
 def args_sweep(p: argparse.ArgumentParser) -> None:

@@ -71,6 +71,10 @@ def args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-decompose", action="store_true",
                    help="solve one monolithic LP instead of one LP per strongly connected "
                         "block in topological order")
+    p.add_argument("--exact", action="store_true",
+                   help="also the exact optimum as a fraction, in rational arithmetic on the "
+                        "model as written (models of modest size; grid and PRISM worlds; "
+                        "geometric, pmf and uniform laws)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
@@ -119,6 +123,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                 for e, sensor in sorted(r.sensors.items())))
         _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
+        if r.exact is not None:
+            _out(exact_line(r.exact))
         _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
@@ -132,3 +138,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
             _out(f"policy:       {policy_file}")
     return EXIT_OK if r.certified else EXIT_UNCERTIFIED
 
+
+def exact_line(exact: Any) -> str:
+    """The exact optimum: the fraction, and a float to read it by; with a truncation,
+    both models' fractions."""
+    if exact.value is not None:
+        return f"exact:        {exact.value}  (~ {float(exact.value)!r})"
+    return (f"exact:        in [{exact.lower}, {exact.upper}]  (~ [{float(exact.lower)!r}, "
+            f"{float(exact.upper)!r}]: the optima of the two truncation models; the "
+            "truncation leaves no one value)")

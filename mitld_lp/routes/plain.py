@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -238,6 +238,29 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings,
     return kept_low, (kept_low if high is low else high)
 
 
+def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
+           high: ModelSolution, t0: float,
+           ) -> tuple[dict[str, Any], ModelSolution, ModelSolution]:
+    """The exact answer (:func:`mitld_lp.exact.exact_answer`) as the result's fields: the
+    bracket the two fractions, rounded outward to floats, and the exact record; the
+    models with the lower one's exact policy.  The models are the complement's maximum
+    for a minimised task (:func:`mitld_lp.routes.stages.build_posed`)."""
+    from mitld_lp.exact.stage import exact_answer, float_above, float_below
+    from mitld_lp.solvers.result import Status
+
+    s = posed.settings
+    deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
+    answer, exact_low, check = exact_answer(
+        built.mdp, posed.model.game, built.sta, (low, high), accept.goal, sense="max",
+        complemented=posed.minimise, deadline=deadline)
+    low_checked = replace(exact_low, checks=(*exact_low.checks, check))
+    models = (low_checked, low_checked if high is low else high)
+    if answer is None:
+        return {"status": Status.TIME_LIMIT}, *models
+    return ({"lower": float_below(answer.lower), "upper": float_above(answer.upper),
+             "exact": answer}, *models)
+
+
 def solve_plain(posed: Posed, built: Built) -> Result:
     """The plain route: point laws, no constraints, any supported task class."""
     from mitld_lp.routes.acceptance import acceptance
@@ -253,12 +276,16 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     accept = acceptance(mdp, built.dta)
     low, high = solve_models(mdp, accept, s, t0)
     timings["solve"] = time.perf_counter() - t0
+    fields: dict[str, Any] = {}
+    if s.exact:  # the optimum as a fraction (mitld_lp.exact), its policy the controller's
+        fields, low, high = _exact(posed, built, accept, low, high, t0)
+        timings["exact"] = time.perf_counter() - t0 - timings["solve"]
     solve_cpu = time.process_time() - c0
     result = Result(
         route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **from_models(low, high, mdp.initial, posed.problem.objective))
+        **{**from_models(low, high, mdp.initial, posed.problem.objective), **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

@@ -22,6 +22,7 @@ from typing import Any
 
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
+from mitld_lp.exact.errors import ExactError
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import Model, ModelError
@@ -54,7 +55,7 @@ MODEL_ERROR, BUDGET, ERROR, LOST = "model_error", "budget", "error", "lost"
 #: Exceptions meaning "this input is wrong".
 INPUT_ERRORS: tuple[type[Exception], ...] = (
     ModelError, ParseError, FragmentError, DistributionError, TranslationError, WorldError,
-    GameError, GridError, ProblemError, ConstraintError,
+    GameError, GridError, ProblemError, ConstraintError, ExactError,
 )
 #: Exceptions meaning "a budget stopped the work" (checked first: some subclass the above).
 BUDGET_STOPS: tuple[type[BaseException], ...] = (ProductTooLarge, AutomatonTooLarge, MemoryError)
