@@ -373,3 +373,10 @@ def test_a_batch_line_shows_the_fraction(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].endswith(" exact 1/1000000000000000000000000000000")
     assert lines[1].endswith(f" exact {Fraction('0.0011') ** 10}")
+
+
+def test_past_the_time_limit_there_is_no_exact_answer_and_no_certificate(tmp_path):
+    path = _prism_model(tmp_path, RARE, "F hit")
+    result = synthesize(load_model(path), exact=True, time_limit=0)
+    assert result.exact is None and str(result.status) == "time_limit"
+    assert not result.certified and "exact optimum" in result.failed_checks[-1].name
