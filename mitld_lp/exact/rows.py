@@ -35,7 +35,7 @@ import numpy as np
 from mitld_lp.automata.sta import STA
 from mitld_lp.exact.errors import ExactError, TimeUp
 from mitld_lp.mdp import MDP
-from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.product import Absorbing, ProductState, ProductStates
 from mitld_lp.worlds.exact import exact_successors_of
 from mitld_lp.worlds.game import world_members
 
@@ -76,6 +76,8 @@ class _Factors:
         self.moves, self.game, self.sta, self.dta = moves, game, sta, sta.dta
         self.ignores = world_members(game).ignores_events
         self.atoms = frozenset(self.dta.atoms)
+        if not isinstance(mdp.states, ProductStates):
+            raise ExactError("an exact answer reads a product built by mitld_lp.product")
         self.states = mdp.states
         self._outcomes: dict[tuple[frozenset[str], int], list[tuple[Any, ...]]] = {}
         self._rows: dict[tuple[Hashable, str, frozenset[str]], list[tuple[Any, Any]]] = {}
@@ -183,6 +185,7 @@ def exact_rows(mdp: MDP, game: Any, sta: STA, states: np.ndarray,
             if isinstance(record, Absorbing):  # its self-loop
                 values[lo] = one
                 continue
+            assert isinstance(record, ProductState)
             action = mdp.action_name(c)
             row = _row(f, record, action)
             cols = indices[lo:hi].tolist()

@@ -103,8 +103,8 @@ class _Solver:
         self.fmpq, self.fmpq_mat = fmpq, fmpq_mat
         self.mdp, self.p, self.target, self.zero = mdp, values, target, zero
         self.maybe = ~target & ~zero
-        self.indptr = mdp.matrix.indptr.tolist()
-        self.indices = mdp.matrix.indices.tolist()
+        self.indptr = [int(x) for x in mdp.matrix.indptr]
+        self.indices = [int(x) for x in mdp.matrix.indices]
         self.max_block, self.deadline = max_block, deadline
 
     def _clock(self) -> None:
