@@ -80,7 +80,7 @@ class Settings:
     truncation: tuple[tuple[str, int], ...] | None = None
     tol: float = defaults.TOL
     certify_tol: float = defaults.CERTIFY_TOL
-    progress: bool = False
+    progress: bool | None = None  # bars: None on a terminal only (mitld_lp.util.progress)
 
     def identity(self) -> dict[str, Any]:
         """The settings that change an answer (part of a sweep's identity)."""

@@ -49,7 +49,7 @@ def synthesize(
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool = False,
+    progress: bool | None = None,
     decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
@@ -69,9 +69,11 @@ def synthesize(
     the model file's ``[budgets]``, else the defaults).  ``decompose``: the LP block by
     block in topological order (``None``, the default, or ``True``) or as one LP
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
-    ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
-    constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law known only within a band:
-    the robust synthesis (:mod:`mitld_lp.routes.robust`).
+    ``TIME_LIMIT``.  ``progress``: a bar for each long stage where standard error is a
+    terminal (``None``), never (``False``) or wherever it goes (``True``;
+    :mod:`mitld_lp.util.progress`).  ``constraints`` / ``then`` (and the model's
+    constraints): the constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law
+    known only within a band: the robust synthesis (:mod:`mitld_lp.routes.robust`).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -102,7 +104,7 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
         from mitld_lp.problem import check_constrained
 
         check_constrained(posed)  # a refusal names the combination before any work
-    built = build_posed(posed, progress=posed.settings.progress or None)
+    built = build_posed(posed, progress=posed.settings.progress)
     if posed.route == ROBUST:
         from mitld_lp.routes.robust import solve_robust
 

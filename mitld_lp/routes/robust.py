@@ -193,7 +193,7 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
     if posed.route == CONSTRAINED:
         raise ProblemError("synthesize_robust: a task with constraints is not solved "
                            "robustly")
-    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress or None,
+    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress,
                                            robust=True))
 
 
