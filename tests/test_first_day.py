@@ -1,0 +1,68 @@
+"""What a first day meets (issue 41): every reason a problem is refused at once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mitld_lp import load_model, loads_model, synthesize
+from mitld_lp.problem import ProblemError, pose, settings_from
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models"
+BUS = MODELS / "bus_grid.toml"
+
+#: Four features, each refused with sensors that miss events, in one model file: a false
+#: alarm, a constraint, a law known within a band (b1) and the objective min.
+FOUR = {
+    "false alarm": ("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }",
+                    "sensors.b2.false_alarm = 0.1"),
+    "constraint": ('epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["E(steps) <= 10"]',
+                   "constraint E(steps) <= 10"),
+    "band": ("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }",
+             "b1 ~ geometric([0.7, 0.9])"),
+    "objective": ('epsilon = 0.01', 'epsilon = 0.01\nobjective = "min"', "objective min"),
+}
+
+
+def _sensed(features: list[str]) -> str:
+    text = BUS.read_text() + "\n[sensors]\nb2 = { detect = 0.8 }\n"
+    for name in features:
+        old, new, _ = FOUR[name]
+        text = text.replace(old, new, 1)
+    return text
+
+
+def test_four_features_that_do_not_combine_are_refused_together():
+    model = loads_model(_sensed(list(FOUR)))
+    with pytest.raises(ProblemError) as info:
+        pose(model)
+    reasons = info.value.reasons
+    assert len(reasons) == len(FOUR)
+    for name, (_, _, named) in FOUR.items():  # each reason names its own feature
+        assert sum(named in r for r in reasons) == 1, (name, reasons)
+    assert str(info.value).startswith("not solved, for 4 reasons: (1) ")
+    # each feature alone: its one reason, as its own message
+    for name, (_, _, named) in FOUR.items():
+        with pytest.raises(ProblemError) as alone:
+            pose(loads_model(_sensed([name])))
+        assert len(alone.value.reasons) == 1 and named in str(alone.value), name
+
+
+def test_the_constrained_and_robust_routes_say_every_reason():
+    risk = load_model(MODELS / "bus_risk.toml")
+    settings = settings_from(method="vi", solver="HIGHS", decompose=True)
+    with pytest.raises(ProblemError) as info:
+        pose(risk, ["P(F puddle) <= 0.1", "P(G !puddle) >= 0.5"], settings=settings)
+    named = ("method 'vi'", "solver HIGHS", "decompose", "'P(G !puddle) >= 0.5': a safety")
+    assert len(info.value.reasons) == len(named)
+    assert all(sum(n in r for r in info.value.reasons) == 1 for n in named)
+    with pytest.raises(ProblemError) as info:
+        synthesize(load_model(MODELS / "bus_fit.toml"), solver="HIGHS", decompose=True)
+    assert len(info.value.reasons) == 2
+    # bad constraint texts are each a reason, beside the route's
+    with pytest.raises(ProblemError) as info:
+        pose(risk, ["P(F puddle) <=", "E(steps) < 3"], settings=settings_from(method="vi"))
+    assert len(info.value.reasons) == 3
+
