@@ -1,4 +1,5 @@
-"""What a first day meets (issue 41): every reason a problem is refused at once."""
+"""What a first day meets (issue 41): every reason a problem is refused at once, a model
+file without a name."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from mitld_lp import load_model, loads_model, synthesize
+from mitld_lp.cli import main
 from mitld_lp.problem import ProblemError, pose, settings_from
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,4 +67,14 @@ def test_the_constrained_and_robust_routes_say_every_reason():
     with pytest.raises(ProblemError) as info:
         pose(risk, ["P(F puddle) <=", "E(steps) < 3"], settings=settings_from(method="vi"))
     assert len(info.value.reasons) == 3
+
+def test_a_model_file_without_a_name_is_named_after_the_file(tmp_path, capsys):
+    text = "\n".join(ln for ln in BUS.read_text().splitlines() if not ln.startswith("name"))
+    path = tmp_path / "my_first_model.toml"
+    path.write_text(text)
+    assert load_model(path).name == "my_first_model"
+    assert loads_model(text, "somewhere/other.toml").name == "other"
+    assert loads_model(text).name == "model"
+    assert main(["solve", str(path), "-q"]) == 0
+    assert capsys.readouterr().out.startswith("model:        my_first_model  (")
 
