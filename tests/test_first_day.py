@@ -1,8 +1,10 @@
 """What a first day meets (issue 41): every reason a problem is refused at once, a model
-file without a name."""
+file without a name, a file given to the wrong verb, the expected steps of a
+constrained answer, ``pareto`` without a file."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -52,6 +54,16 @@ def test_four_features_that_do_not_combine_are_refused_together():
         assert len(alone.value.reasons) == 1 and named in str(alone.value), name
 
 
+def test_one_command_line_says_every_reason(tmp_path, capsys):
+    path = tmp_path / "four.toml"
+    path.write_text(_sensed(list(FOUR)))
+    assert main(["solve", str(path), "--json"]) == 2
+    out, err = capsys.readouterr()
+    record = json.loads(out)
+    assert len(record["reasons"]) == 4 and err.count("\n") == 1
+    assert all(f"({i})" in err for i in range(1, 5))
+
+
 def test_the_constrained_and_robust_routes_say_every_reason():
     risk = load_model(MODELS / "bus_risk.toml")
     settings = settings_from(method="vi", solver="HIGHS", decompose=True)
@@ -68,6 +80,7 @@ def test_the_constrained_and_robust_routes_say_every_reason():
         pose(risk, ["P(F puddle) <=", "E(steps) < 3"], settings=settings_from(method="vi"))
     assert len(info.value.reasons) == 3
 
+
 def test_a_model_file_without_a_name_is_named_after_the_file(tmp_path, capsys):
     text = "\n".join(ln for ln in BUS.read_text().splitlines() if not ln.startswith("name"))
     path = tmp_path / "my_first_model.toml"
@@ -78,3 +91,49 @@ def test_a_model_file_without_a_name_is_named_after_the_file(tmp_path, capsys):
     assert main(["solve", str(path), "-q"]) == 0
     assert capsys.readouterr().out.startswith("model:        my_first_model  (")
 
+
+@pytest.mark.parametrize("argv, says", [
+    (["solve", str(MODELS / "sweeps" / "bus_sweep.toml")], "it is a sweep file: run it "
+     "with mitld-lp sweep"),
+    (["sweep", str(BUS)], "it is a model file: solve it with mitld-lp solve"),
+    (["info", str(MODELS / "corridor.prism")], "it is a PRISM program: a model file names "
+     "it as its world, [prism] file ="),
+])
+def test_a_file_given_to_the_wrong_verb_is_named_for_what_it_is(argv, says, capsys):
+    assert main([*argv, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+
+
+def test_a_bad_model_file_gets_no_guess(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(BUS.read_text().replace("[regions]", "[region]"))
+    assert main(["solve", str(bad), "-q"]) == 2
+    assert "it is a" not in capsys.readouterr().err
+
+
+def test_a_constrained_answer_says_how_to_minimise_its_steps(capsys):
+    risk = str(MODELS / "bus_risk.toml")
+    assert main(["solve", risk, "--constraint", "P(F puddle) <= 0.05", "-q"]) == 0
+    plain = capsys.readouterr().out
+    notes = [ln for ln in plain.splitlines() if ln.startswith("note:")]
+    assert len(notes) == 1 and "--then min-steps" in notes[0]
+    steps = float(next(ln for ln in plain.splitlines() if ln.startswith("E(steps):"))
+                  .split()[1])
+    # the suggestion runs, and gives no more steps; with it there is no note
+    assert main(["solve", risk, "--constraint", "P(F puddle) <= 0.05", "--then",
+                 "min-steps", "-q"]) == 0
+    fewest = capsys.readouterr().out
+    assert "note:" not in fewest
+    least = float(next(ln for ln in fewest.splitlines() if ln.startswith("then min-steps:"))
+                  .split()[-1])
+    assert least <= steps + 1e-6
+
+
+def test_pareto_prints_its_points_without_a_file(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["pareto", str(MODELS / "bus_risk.toml"), "--against", "steps",
+                 "--points", "2", "-q"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and all("[" in ln for ln in lines)
+    assert list(tmp_path.iterdir()) == []
