@@ -91,6 +91,7 @@ from mitld_lp.product.budget import _bytes  # the product's budget messages writ
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_depth import ExpressionDepth
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     check_constants,
@@ -287,8 +288,10 @@ def _stormpy() -> Any:
     return stormpy
 
 
-def _check_utf8(path: Path, where: str) -> None:
-    """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
+def _check_text(path: Path, where: str, depth: ExpressionDepth) -> None:
+    """Refuse a file that is not UTF-8 text (naming the first bad byte's place) or that
+    holds an expression deeper than Storm's parser can take (its place and the limit:
+    :mod:`mitld_lp.worlds.prism_depth`; ``depth`` keeps its formulas' depths)."""
     from mitld_lp.files import rules as file_rules
 
     try:  # a regular file, bounded, before Storm reads it
@@ -298,7 +301,7 @@ def _check_utf8(path: Path, where: str) -> None:
     except OSError as exc:
         raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
     try:
-        data.decode("utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
@@ -306,6 +309,9 @@ def _check_utf8(path: Path, where: str) -> None:
             f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
             "a PRISM file is UTF-8"
         ) from None
+    deep = depth.deepest(text)
+    if deep is not None:
+        raise WorldError(f"{where}:{deep.line}:{deep.column}: {deep.message()}")
 
 
 def load_prism(
@@ -352,7 +358,8 @@ def load_prism(
         raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
-    _check_utf8(p, where)
+    depth = ExpressionDepth()
+    _check_text(p, where, depth)  # before Storm's parser, which can crash on it
     stormpy = _stormpy()
     program = _parse(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
@@ -360,7 +367,7 @@ def load_prism(
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
         raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
-    extra = _extra_labels(program, dict(define or {}), where)
+    extra = _extra_labels(program, dict(define or {}), where, depth)
     if extra:
         program = _with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
@@ -399,6 +406,10 @@ def load_prism(
     condition = decided_when(task, frozenset(defined)) if task is not None else False
     terminal = "" if condition is False else render(
         condition, {lab.name: str(lab.expression) for lab in plain.labels})
+    if terminal and depth.deepest(terminal) is not None:  # every state expanded instead
+        log.info("%s: the states where the task is decided are too deep an expression for "
+                 "Storm; all states are expanded", where)
+        terminal = ""
     program, action_names = name_unlabelled_commands(program, where, stormpy)
 
     def work() -> Tables:
@@ -450,9 +461,11 @@ def _parse(stormpy: Any, file: str, where: str) -> Any:
 _FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
 
 
-def _extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, str]:
+def _extra_labels(program: Any, define: dict[str, str], where: str,
+                  depth: ExpressionDepth) -> dict[str, str]:
     """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
-    that no label shadows (``name -> name``), then ``define``."""
+    that no label shadows (``name -> name``), then ``define`` (each no deeper than
+    Storm's parser takes, counted with the file's formulas: ``depth``)."""
     labels = {lab.name for lab in program.labels}
     manager = program.expression_manager
     extra: dict[str, str] = {}
@@ -467,6 +480,9 @@ def _extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str,
             raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
         if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
             raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
+        deep = depth.deepest(text)
+        if deep is not None:
+            raise WorldError(f"label {name!r}: {deep.message()}")
         extra[name] = text
     return extra
 
