@@ -104,3 +104,83 @@ def test_an_expression_within_the_limit_is_built_by_storm(tmp_path: Path) -> Non
     text = CORRIDOR.replace("[west] x > 0", f"[west] {nested(900)} > 0")
     run = cli("info", "-q", str(corridor_model(tmp_path, text)), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
+
+
+# --------------------------------------------------------------------------- sums
+
+
+THIRDS = """mdp
+module m
+  x : [0..3] init 0;
+  [go] x=0 -> {p} : (x'=1) + {p} : (x'=2) + {p} : (x'=3);
+  [stay] x>0 -> true;
+{extra}endmodule
+label "goal" = x=3;
+"""
+
+
+def thirds(folder: Path, p: str = "0.333333", extra: str = "") -> Path:
+    (folder / "t.prism").write_text(THIRDS.format(p=p, extra=extra))
+    model = folder / "t.toml"
+    model.write_text('name = "t"\nspec = "F[0,3] goal"\n[prism]\nfile = "t.prism"\n')
+    return model
+
+
+def test_rows_are_normalised_only_beyond_the_games_tolerance() -> None:
+    import numpy as np
+
+    from mitld_lp.worlds.successors import normalise_rows
+
+    lengths = np.array([2, 3, 3])
+    probs = np.array([0.5, 0.5, 0.333333, 0.333333, 0.333333, 0.1, 0.2, 0.7])
+    out, rows, largest = normalise_rows(lengths, probs)
+    assert rows == 1
+    assert largest == pytest.approx(1e-6, rel=1e-9)  # 1 - 3 x 0.333333
+    assert out[2:5].tolist() == pytest.approx([1 / 3] * 3, abs=1e-15)  # 333333/999999
+    assert out[[0, 1, 5, 6, 7]].tolist() == probs[[0, 1, 5, 6, 7]].tolist()  # untouched
+
+
+@needs_storm
+def test_a_sum_prism_accepts_is_normalised_and_the_answer_says_so(tmp_path: Path) -> None:
+    from mitld_lp.model import load_model
+    from mitld_lp.synthesis import synthesize
+
+    model = load_model(thirds(tmp_path))
+    game = model.game
+    assert game.normalised is not None and game.normalised.rows == 1
+    assert game.normalised.largest == pytest.approx(1e-6, rel=1e-9)
+    succ = dict(game.successors((0,), "go", frozenset()))
+    assert succ == pytest.approx({(1,): 1 / 3, (2,): 1 / 3, (3,): 1 / 3}, abs=1e-15)
+    r = synthesize(model)
+    # by hand: the goal x=3 is reached in one step with probability 1/3, never after
+    assert r.certified and r.lower == pytest.approx(1 / 3, abs=1e-12)
+    said = [c for c in r.checks if c.name == "world's probabilities normalised"]
+    assert len(said) == 1 and said[0].passed
+    assert "1 row of" in said[0].detail and "1e-06" in said[0].detail
+
+
+@needs_storm
+@pytest.mark.parametrize("verb", ["solve", "info"])
+def test_a_sum_prism_accepts_is_solved_on_the_command_line(tmp_path: Path, verb: str) -> None:
+    run = cli(verb, "-q", str(thirds(tmp_path)), cwd=tmp_path)
+    assert run.returncode == 0, run.stderr  # was 1: "internal error: GameError ..."
+    assert "internal error" not in run.stderr
+
+
+@needs_storm
+def test_a_sum_beyond_prisms_tolerance_is_refused(tmp_path: Path) -> None:
+    run = cli("solve", "-q", str(thirds(tmp_path, "0.3333")), cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    assert "t.prism: module m, command 1 ([go] (x = 0) ->" in run.stderr
+    assert "probabilities sum to 0.9999, not 1" in run.stderr
+
+
+@needs_storm
+def test_an_update_out_of_range_is_refused_when_storms_checks_are_off(tmp_path: Path) -> None:
+    # the sum within PRISM's tolerance makes Storm build without its checks; x'=x+2 at
+    # x=2 leaves [0..3] and was stored modulo the range, silently
+    model = thirds(tmp_path, extra="  [up] x=2 -> (x'=x+2);\n")
+    run = cli("solve", "-q", str(model), cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    assert ("t.prism: at state [x=2], action 'up': an update gives a variable a value "
+            "outside its range") in run.stderr

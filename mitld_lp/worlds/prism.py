@@ -106,6 +106,7 @@ from mitld_lp.worlds.prism_program import (
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
+from mitld_lp.worlds.successors import Normalisation
 from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
@@ -161,6 +162,9 @@ class PrismGame:
             Storm did not expand ("" when there are none).
         decided: how many of :attr:`states` were not expanded (their one action is
             :data:`DECIDED_ACTION`, a self-loop).
+        normalised: the choices whose probabilities summed to 1 only within PRISM's
+            tolerance, each divided by its sum when the file was read (None: none
+            were); an answer's checks say it (:func:`mitld_lp.synthesis.solve`).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
     a state's actions and a choice's distribution become tuples when first asked for
@@ -177,6 +181,7 @@ class PrismGame:
     _tables: Tables = field(repr=False)
     terminal: str = ""
     decided: int = 0
+    normalised: Normalisation | None = None
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -446,6 +451,7 @@ def load_prism(
         effects=tables.effects,
         terminal=terminal,
         decided=tables.decided,
+        normalised=tables.normalised,
         _tables=tables,
     )
 
@@ -518,8 +524,11 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
     checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
     PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
-    model is built without the checks (its sums are then checked by
-    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance)."""
+    model is built without the checks: its sums are then checked (and normalised) by
+    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance, and an update
+    out of a variable's range goes to Storm's out-of-bounds state, refused here (the
+    exact build stopped at the first sum it did not take, before it had checked every
+    update)."""
     formula = None
     if terminal:
         with storm_quiet():
@@ -538,6 +547,7 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     def options(checks: bool) -> Any:
         o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
         o.set_exploration_checks(checks)
+        o.set_add_out_of_bounds_state(not checks)  # range errors kept visible
         # Every label, always: a label left out of the build would be false in every state.
         o.set_build_all_labels()
         o.set_build_choice_labels()
@@ -563,8 +573,8 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             if total is None or abs(total - 1) > SUM_TOLERANCE:
                 raise storm_error(exc, where, program, plain) from None
             log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
-                     "the rest of the checks are read_model's", where, show_sum(total),
-                     SUM_TOLERANCE)
+                     "built without Storm's checks, the sums checked on the model",
+                     where, show_sum(total), SUM_TOLERANCE)
         try:
             with storm_quiet():
                 model = stormpy.build_model(program, options=options(False))
@@ -576,9 +586,11 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             f"{max_states:,}: raise max_states (--max-world-states)"
         )
     built = set(model.labeling.get_labels())
+    if _OUT_OF_BOUNDS in built:
+        raise _out_of_range(model, where, action_names)
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    known = {lab.name for lab in program.labels} | {"init", "deadlock"}
+    known = {lab.name for lab in program.labels} | {"init", "deadlock", _OUT_OF_BOUNDS}
     stopped = sorted(built - known) if terminal else []
     commands = command_names(program)
 
@@ -591,3 +603,25 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
 
     return read_model(model, where, chosen, events, action_names, origin,
                       stopped[0] if len(stopped) == 1 else None)
+
+
+_OUT_OF_BOUNDS = "out_of_bounds"  # Storm's label of its out-of-bounds state
+
+
+def _out_of_range(model: Any, where: str, action_names: dict[str, str]) -> WorldError:
+    """The first choice of ``model`` (built with an out-of-bounds state) that reaches
+    that state: an update out of a variable's range, named by its state and action."""
+    outside = set(model.labeling.get_states(_OUT_OF_BOUNDS))
+    for state in model.states:
+        if state.id in outside:
+            continue
+        for action in state.actions:
+            if any(t.column in outside for t in action.transitions):
+                choice = model.get_choice_index(state.id, action.id)
+                labels = sorted(model.choice_labeling.get_labels_of_choice(choice))
+                name = action_names.get(labels[0], labels[0]) if labels else DEADLOCK_ACTION
+                shown = str(model.state_valuations.to_string(state.id))
+                shown = re.sub(r"!?_OutOfBoundsBit\s*&?\s*", "", shown)
+                return WorldError(f"{where}: at state {shown}, action {name!r}: an update "
+                                  "gives a variable a value outside its range")
+    return WorldError(f"{where}: an update gives a variable a value outside its range")
