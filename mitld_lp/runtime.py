@@ -16,13 +16,15 @@ time.
 :func:`serve` is the line loop behind ``mitld-lp run CONTROLLER``: one JSON object per
 line on its input, ``{"state": ..., "events": [...]}`` (the world state as the policy
 table writes it; the events seen in the step that led there), one ``{"action": ...}``
-per line on its output (``null`` once the task is decided; ``"status"`` says how).
+per line on its output (``null`` once the task is decided; ``"status"`` says how).  A
+line longer than :data:`LINE_BUDGET` characters is not kept: it is answered with an
+error, its rest read and dropped in pieces, and the loop goes on.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Hashable, Iterable, Sequence
+from collections.abc import Hashable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, Protocol
 
@@ -59,12 +61,18 @@ __all__ = [
     "advance",
     "decode_state",
     "encode_state",
+    "LINE_BUDGET",
     "load",
     "read_plan",
     "serve",
 ]
 
 _QUOTE = 80  # characters of a foreign value quoted in an error
+
+LINE_BUDGET = 1 << 20
+"""The longest observation line :func:`serve` reads, in characters (1 MiB; an
+observation of a PRISM state with a hundred variables by name takes a few KB): a longer
+line is answered with an error and never held whole in memory."""
 
 
 def _printable(text: str) -> str:
@@ -266,16 +274,22 @@ def load(path: str | Path, *, seed: int | None = 0) -> RuntimeController:
 # --------------------------------------------------------------------------- the line loop
 
 
-def serve(controller: RuntimeController, lines: Iterable[str], out: IO[str]) -> int:
+def serve(controller: RuntimeController, lines: Iterable[str] | IO[str], out: IO[str],
+          *, budget: int = LINE_BUDGET) -> int:
     """Answer each JSON observation of ``lines`` with one JSON line on ``out`` (module
     docstring).  An observation with ``"reset": true`` starts a new run first.  A bad
     line is answered with ``{"error": ...}`` naming its line number, and the loop goes
-    on; returns how many lines were bad."""
+    on; so is a line longer than ``budget`` characters (from a stream, such as standard
+    input, it is read ``budget`` characters at a time and dropped, never held whole).
+    Returns how many lines were bad."""
     bad = 0
-    for number, line in enumerate(lines, 1):
-        if not line.strip():
+    for number, line in enumerate(_bounded(lines, budget), 1):
+        if line is not None and not line.strip():
             continue
         try:
+            if line is None:
+                raise ValueError(f"longer than {budget:,} characters, the most an "
+                                 "observation line may have; the line was skipped")
             reply = _answer(controller, line)
         except (ValueError, TypeError, RecursionError) as exc:
             bad += 1
@@ -283,6 +297,24 @@ def serve(controller: RuntimeController, lines: Iterable[str], out: IO[str]) -> 
         out.write(json.dumps(reply) + "\n")
         out.flush()
     return bad
+
+
+def _bounded(lines: Iterable[str] | IO[str], budget: int) -> Iterator[str | None]:
+    """The lines of ``lines`` (each at most ``budget`` characters before its newline),
+    None for a longer one; from a stream, with at most ``budget + 1`` characters in
+    memory (the rest of a longer line is read and dropped)."""
+    readline = getattr(lines, "readline", None)
+    if readline is None:  # an iterable of lines, already in memory: held to the budget
+        for line in lines:
+            yield line if len(line) - line.endswith("\n") <= budget else None
+        return
+    while line := readline(budget + 1):
+        if len(line) <= budget or line.endswith("\n"):
+            yield line
+            continue
+        while (rest := readline(budget)) and not rest.endswith("\n"):
+            pass
+        yield None
 
 
 def _answer(controller: RuntimeController, line: str) -> dict[str, Any]:

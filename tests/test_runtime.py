@@ -205,3 +205,62 @@ def test_a_policy_table_state_is_what_run_reads(tmp_path: Path) -> None:
     done = run_cli(path, [{"state": first["game_state"], "events": []}])
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["action"] == first["action"]
+
+
+# --------------------------------------------------------------------------- issue 41
+
+
+@pytest.fixture(scope="module")
+def bus_file(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("bus")
+    return synthesize(load_model(MODELS / "bus_grid.toml")).controller.save(folder / "c.npz")
+
+
+def test_a_line_beyond_the_budget_is_an_error_and_the_loop_goes_on(bus_file: Path) -> None:
+    import io
+
+    from mitld_lp.runtime import load, serve
+
+    first = '{"state": [0, 0]}'
+    exact = first[:-1] + " " * (200 - len(first)) + "}"  # 200 characters: within
+    lines = [first, '{"state": "' + "x" * 500 + '"}', exact, first + " " * 190]
+    out = io.StringIO()
+    bad = serve(load(bus_file), io.StringIO("\n".join(lines) + "\n"), out, budget=200)
+    replies = [json.loads(x) for x in out.getvalue().splitlines()]
+    assert bad == 2 and len(replies) == 4
+    assert replies[1]["error"] == ("line 2: longer than 200 characters, the most an "
+                                   "observation line may have; the line was skipped")
+    assert replies[3]["error"].startswith("line 4: longer than 200 characters")
+    # the loop went on: line 3 is a new observation at step 1 (no reset), as a
+    # controller that never saw line 2 answers it
+    c = load(bus_file)
+    assert replies[0]["action"] == c.act((0, 0)) and replies[2]["action"] == c.act((0, 0))
+    # a list of lines is held to the same budget
+    out = io.StringIO()
+    assert serve(load(bus_file), lines, out, budget=200) == 2
+
+
+MEASURED = r"""
+import sys
+from mitld_lp.cli import main
+try:
+    code = main(["run", sys.argv[1]])
+finally:  # this process's peak resident memory (ru_maxrss keeps the forking parent's)
+    with open("/proc/self/status") as f:
+        peak = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
+    print(int(peak) // 1024, file=sys.stderr)
+sys.exit(code)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc (Linux)")
+def test_a_huge_line_is_never_held_in_memory(bus_file: Path) -> None:
+    size = 128 << 20  # characters: read whole, it would take at least 128 MiB
+    text = b'{"state": [0, 0]}\n{"state": "' + b"x" * size + b'"}\n{"state": [0, 0]}\n'
+    done = subprocess.run([sys.executable, "-c", MEASURED, str(bus_file)], input=text,
+                          env=ENV, capture_output=True, timeout=120, check=False)
+    assert done.returncode == 2, done.stderr  # one bad line, said on stderr
+    replies = [json.loads(x) for x in done.stdout.splitlines()]
+    assert [("error" in x) for x in replies] == [False, True, False]
+    peak_mib = int(done.stderr.decode().strip().splitlines()[-1])
+    assert peak_mib < 100, peak_mib  # was 2.4 GB for a 200 MB line
