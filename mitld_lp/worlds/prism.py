@@ -52,7 +52,10 @@ probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
 in floating point, so where it alone fails the checks are redone in exact arithmetic
-(:func:`load_prism`).
+(:func:`load_prism`), and a choice that sums to 1 only within that tolerance is divided
+by its sum (:attr:`PrismGame.normalised` counts them).  An expression deeper than
+Storm's parser takes is refused before it reads the file
+(:mod:`mitld_lp.worlds.prism_depth`).
 
 Budgets and exploration.  The product of the variables' ranges is a note, not a
 refusal: Storm explores the reachable part within ``max_states`` and ``max_memory``
@@ -91,7 +94,7 @@ from mitld_lp.product.budget import _bytes  # the product's budget messages writ
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
-from mitld_lp.worlds.prism_depth import ExpressionDepth
+from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     check_constants,
@@ -103,7 +106,13 @@ from mitld_lp.worlds.prism_program import (
     storm_quiet,
     storm_sum,
 )
-from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
+from mitld_lp.worlds.prism_tables import (
+    DEADLOCK_ACTION,
+    DECIDED_ACTION,
+    OUT_OF_BOUNDS,
+    Tables,
+    read_model,
+)
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 from mitld_lp.worlds.successors import Normalisation
@@ -293,32 +302,6 @@ def _stormpy() -> Any:
     return stormpy
 
 
-def _check_text(path: Path, where: str, depth: ExpressionDepth) -> None:
-    """Refuse a file that is not UTF-8 text (naming the first bad byte's place) or that
-    holds an expression deeper than Storm's parser can take (its place and the limit:
-    :mod:`mitld_lp.worlds.prism_depth`; ``depth`` keeps its formulas' depths)."""
-    from mitld_lp.files import rules as file_rules
-
-    try:  # a regular file, bounded, before Storm reads it
-        data = file_rules.read_bytes(path)
-    except file_rules.InputFileError as exc:
-        raise WorldError(f"{where}: {exc}") from None
-    except OSError as exc:
-        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        raise WorldError(
-            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
-            "a PRISM file is UTF-8"
-        ) from None
-    deep = depth.deepest(text)
-    if deep is not None:
-        raise WorldError(f"{where}:{deep.line}:{deep.column}: {deep.message()}")
-
-
 def load_prism(
     path: str | os.PathLike[str],
     *,
@@ -364,7 +347,7 @@ def load_prism(
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     depth = ExpressionDepth()
-    _check_text(p, where, depth)  # before Storm's parser, which can crash on it
+    check_text(p, where, depth)  # before Storm's parser, which can crash on it
     stormpy = _stormpy()
     program = _parse(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
@@ -524,11 +507,10 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
     checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
     PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
-    model is built without the checks: its sums are then checked (and normalised) by
-    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance, and an update
-    out of a variable's range goes to Storm's out-of-bounds state, refused here (the
-    exact build stopped at the first sum it did not take, before it had checked every
-    update)."""
+    model is built without the checks, with Storm's out-of-bounds state (the exact build
+    stopped at the first sum it did not take, before it had checked every update):
+    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) the
+    sums, with the tolerance, and refuses an update that reached that state."""
     formula = None
     if terminal:
         with storm_quiet():
@@ -586,11 +568,9 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             f"{max_states:,}: raise max_states (--max-world-states)"
         )
     built = set(model.labeling.get_labels())
-    if _OUT_OF_BOUNDS in built:
-        raise _out_of_range(model, where, action_names)
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    known = {lab.name for lab in program.labels} | {"init", "deadlock", _OUT_OF_BOUNDS}
+    known = {lab.name for lab in program.labels} | {"init", "deadlock", OUT_OF_BOUNDS}
     stopped = sorted(built - known) if terminal else []
     commands = command_names(program)
 
@@ -603,25 +583,3 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
 
     return read_model(model, where, chosen, events, action_names, origin,
                       stopped[0] if len(stopped) == 1 else None)
-
-
-_OUT_OF_BOUNDS = "out_of_bounds"  # Storm's label of its out-of-bounds state
-
-
-def _out_of_range(model: Any, where: str, action_names: dict[str, str]) -> WorldError:
-    """The first choice of ``model`` (built with an out-of-bounds state) that reaches
-    that state: an update out of a variable's range, named by its state and action."""
-    outside = set(model.labeling.get_states(_OUT_OF_BOUNDS))
-    for state in model.states:
-        if state.id in outside:
-            continue
-        for action in state.actions:
-            if any(t.column in outside for t in action.transitions):
-                choice = model.get_choice_index(state.id, action.id)
-                labels = sorted(model.choice_labeling.get_labels_of_choice(choice))
-                name = action_names.get(labels[0], labels[0]) if labels else DEADLOCK_ACTION
-                shown = str(model.state_valuations.to_string(state.id))
-                shown = re.sub(r"!?_OutOfBoundsBit\s*&?\s*", "", shown)
-                return WorldError(f"{where}: at state {shown}, action {name!r}: an update "
-                                  "gives a variable a value outside its range")
-    return WorldError(f"{where}: an update gives a variable a value outside its range")

@@ -9,15 +9,20 @@ unreadable message).  So the text is scanned first, and a statement deeper than
 :data:`MAX_DEPTH` is refused with its line and column.
 
 The scan bounds the depth of the tree Storm builds, without parsing: within one
-statement (up to ``;``), a parenthesised group's depth is ``1 + its operators + the
-deepest group or named expression inside it``, and the statement's is its operators
-plus the deepest group or named expression in it.  Every node on a path of the tree is
+statement (up to a ``;``, a bracket or a keyword such as ``endmodule``), a
+parenthesised group's depth is ``1 + its operators + the deepest group or named
+expression inside it``, and the statement's is its operators plus the deepest group or
+named expression in it.  Every node on a path of the tree is
 an operator of one of the groups the path crosses, so the tree is no deeper.  A
 ``formula`` or ``const`` is substituted where it is used, so its name counts as deep as
 its definition.  Operators are counted generously (every ``&``, ``|``, ``!``, ``+``,
 ``-``, ``*``, ``/``, comparison, ``?``, ``:``, ``,`` and ``->``, also between a
 command's updates), which only makes the bound larger.  The PRISM files of the QVBS
 benchmarks reach at most 394 (wlan.6); the limit is well below where Storm fails.
+
+:func:`check_text` reads a PRISM file as :func:`mitld_lp.worlds.prism.load_prism` hands
+it to Storm only then: a regular file within the size ceiling, UTF-8, no expression
+deeper than the limit.
 """
 
 from __future__ import annotations
@@ -25,8 +30,11 @@ from __future__ import annotations
 import itertools
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
-__all__ = ["MAX_DEPTH", "Deep", "ExpressionDepth"]
+from mitld_lp.worlds import WorldError
+
+__all__ = ["MAX_DEPTH", "Deep", "ExpressionDepth", "check_text"]
 
 MAX_DEPTH = 1000
 """The deepest PRISM expression read (see the module docstring for how it is counted)."""
@@ -77,7 +85,7 @@ class ExpressionDepth:
             first = token[0]
             if first == "/" and token.startswith("//") or first == '"':
                 continue
-            if token in _KEYWORDS or token in "[]":  # a renaming's "[a=b, ...]" too
+            if token in _KEYWORDS or token in ("[", "]"):  # a renaming's "[a=b, ...]" too
                 depth = self._end(tokens, start, stack)
                 if depth > MAX_DEPTH:
                     return _at(text, start, depth)
@@ -135,3 +143,29 @@ def _at(text: str, token: int, depth: int) -> Deep:
     offset = 0 if m is None else m.start()
     line = text.count("\n", 0, offset) + 1
     return Deep(depth, line, offset - (text.rfind("\n", 0, offset) + 1) + 1)
+
+
+def check_text(path: Path, where: str, depth: ExpressionDepth) -> None:
+    """Refuse a file that is not UTF-8 text (naming the first bad byte's place) or that
+    holds an expression deeper than Storm's parser can take (its place and the limit;
+    ``depth`` keeps its formulas' depths)."""
+    from mitld_lp.files import rules as file_rules
+
+    try:  # a regular file, bounded, before Storm reads it
+        data = file_rules.read_bytes(path)
+    except file_rules.InputFileError as exc:
+        raise WorldError(f"{where}: {exc}") from None
+    except OSError as exc:
+        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise WorldError(
+            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+            "a PRISM file is UTF-8"
+        ) from None
+    deep = depth.deepest(text)
+    if deep is not None:
+        raise WorldError(f"{where}:{deep.line}:{deep.column}: {deep.message()}")

@@ -26,15 +26,20 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 
-__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION", "OUT_OF_BOUNDS_BIT"]
+__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION", "OUT_OF_BOUNDS",
+           "OUT_OF_BOUNDS_BIT"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
 DEADLOCK_ACTION = "deadlock"
 """The name of the self-loop Storm adds where no PRISM command is enabled."""
 
+OUT_OF_BOUNDS = "out_of_bounds"
+"""Storm's label of its out-of-bounds state (asked for when its checks are off), where an
+update that leaves a variable's range goes."""
+
 OUT_OF_BOUNDS_BIT = "_OutOfBoundsBit"
-"""The variable Storm adds when asked for an out-of-bounds state: not the program's."""
+"""The variable Storm adds with that state: not the program's."""
 
 DECIDED_ACTION = "decided"
 """The name of the self-loop of a state where the task is decided (not expanded:
@@ -266,8 +271,9 @@ def read_model(
     deadlock self-loop.  ``origin(choice)`` names the commands a choice comes from, used
     only where two choices of a state would have the same name.  ``decided``: Storm's
     label of the states it did not expand (terminal states); their self-loop is named
-    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for a state where only events
-    are enabled, an event with two enabled commands in a state, a negative probability,
+    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for an update that reached
+    Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
+    events are enabled, an event with two enabled commands in a state, a negative probability,
     or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
     (:data:`mitld_lp.worlds.prism_program.SUM_TOLERANCE`).  A distribution within that
     tolerance but not within the game's own
@@ -299,6 +305,15 @@ def read_model(
         table.append(DECIDED_ACTION)
         code[unlabelled] = len(table) - 1
         n_decided = int(np.count_nonzero(unlabelled))
+
+    if OUT_OF_BOUNDS in model.labeling.get_labels():  # Storm built without its checks
+        outside = np.zeros(n, dtype=bool)
+        outside[_indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
+        choice_of = np.repeat(np.arange(m), np.diff(branches))  # per branch
+        c = int(choice_of[np.flatnonzero(outside[targets] & ~outside[state_of[choice_of]])[0]])
+        raise WorldError(f"{where}: at state {show(int(state_of[c]))}, action "
+                         f"{table[int(code[c])]!r}: an update gives a variable a value "
+                         "outside its range")
 
     bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
     if bad.size:
