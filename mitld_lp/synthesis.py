@@ -100,6 +100,10 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     constraints the constrained occupancy LP on the joint product, and with a band its
     sound robust bracket.  ``costs`` / ``seed``: a constrained problem's action costs
     (default the model's) and its randomised controller's seed."""
+    return _with_world_checks(_solve_route(posed, costs, seed), posed.model.game)
+
+
+def _solve_route(posed: Posed, costs: Mapping[str, float] | None, seed: int | None) -> Result:
     if posed.route == CONSTRAINED:
         from mitld_lp.problem import check_constrained
 
@@ -124,6 +128,21 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     from mitld_lp.routes.plain import solve_plain
 
     return solve_plain(posed, built)
+
+
+def _with_world_checks(result: Result, game: Any) -> Result:
+    """``result`` with a check saying how the world was read, when it was changed: a
+    PRISM world's choices whose probabilities summed to 1 only within PRISM's tolerance
+    were divided by their sums (:class:`mitld_lp.worlds.successors.Normalisation`), so
+    the bracket is the normalised world's."""
+    from mitld_lp.worlds.prism import PrismGame
+
+    if not isinstance(game, PrismGame) or game.normalised is None:
+        return result
+    from dataclasses import replace
+
+    check = Check("world's probabilities normalised", True, str(game.normalised))
+    return replace(result, checks=(*result.checks, check))
 
 
 def synthesize_constrained(

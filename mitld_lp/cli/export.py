@@ -199,7 +199,7 @@ def _robust_export(args: argparse.Namespace, said: dict[str, Any], lp: Path | No
     """A model with a law known only within a band: its interval MDP as DRN (the robust
     optimum is a max-min, no one LP: --lp is refused).  False for any other model."""
     from mitld_lp.cli.kernel import posed_model
-    from mitld_lp.routes.robust import interval_model, is_robust
+    from mitld_lp.routes.robust import interval_export, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
 
     model = read_model(args)
@@ -215,10 +215,10 @@ def _robust_export(args: argparse.Namespace, said: dict[str, Any], lp: Path | No
                          "interval MDP")
     s = posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
-    imdp = interval_model(model, epsilon=s.epsilon, clock_reduction=s.clock_reduction,
-                          max_states=s.max_states, max_memory=s.max_memory,
-                          max_automaton_states=s.max_automaton_states)
-    target = imdp.target | imdp.truncated if args.upper else imdp.target
+    imdp, target = interval_export(  # a safety part: the states where it is kept robustly
+        model, upper=args.upper, epsilon=s.epsilon, clock_reduction=s.clock_reduction,
+        max_states=s.max_states, max_memory=s.max_memory,
+        max_automaton_states=s.max_automaton_states)
     assert drn is not None  # export checked that one of the two is given
     _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
     _wrote(args, said, "drn", drn, f"wrote {drn} (interval MDP)", interval_mdp=True)
