@@ -2,7 +2,7 @@
 
 The schema (also in docs/model-files.md)::
 
-    name = "bus_grid"                   # required, non-empty string
+    name = "bus_grid"                   # optional, non-empty; default the file's stem
     spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
     epsilon = 0.01                      # optional, in (0, 1), default 0.01
 
@@ -369,9 +369,9 @@ def _loaders() -> Any:
 
     return loaders
 
-_COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs",
-                    "objective", "budgets", "sensors"}
+_COMMON_REQUIRED = {"spec"}
+_COMMON_OPTIONAL = {"name", "epsilon", "distributions", "events", "constants", "constraints",
+                    "costs", "objective", "budgets", "sensors"}
 OBJECTIVES = ("max", "min")
 
 
@@ -518,7 +518,7 @@ def _load(
     kind = present[0]
     ctx.keys(doc, "", _COMMON_REQUIRED | {kind.table}, _COMMON_OPTIONAL | set(kind.extra_tables))
 
-    name = ctx.string(doc["name"], "name")
+    name = ctx.string(doc["name"], "name") if "name" in doc else _default_name(source, path)
     spec_text = ctx.string(doc["spec"], "spec")
     epsilon = DEFAULT_EPSILON
     if "epsilon" in doc:
@@ -562,6 +562,13 @@ def _load(
         budgets=MappingProxyType(budgets),
         sensors=sensors,
     )
+
+
+def _default_name(source: str, path: Path | None) -> str:
+    """A model's name when its file gives none: the file's stem (its source's for text
+    whose source names a file), else ``"model"``."""
+    stem = (path or Path(source)).stem if path is not None or not source.startswith("<") else ""
+    return stem or "model"
 
 
 def loads_model(

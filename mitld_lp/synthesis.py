@@ -49,7 +49,7 @@ def synthesize(
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool = False,
+    progress: bool | None = None,
     decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
@@ -70,11 +70,14 @@ def synthesize(
     the model file's ``[budgets]``, else the defaults).  ``decompose``: the LP block by
     block in topological order (``None``, the default, or ``True``) or as one LP
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
-    ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
-    constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law known only within a band:
-    the robust synthesis (:mod:`mitld_lp.routes.robust`).  ``exact``: also the exact
-    optimum as a fraction, ``Result.exact`` (:mod:`mitld_lp.exact`; the plain route,
-    models of modest size, laws and worlds with rational probabilities).
+    ``TIME_LIMIT``.  ``progress``: a bar for each long stage where standard error is a
+    terminal (``None``), never (``False``) or wherever it goes (``True``;
+    :mod:`mitld_lp.util.progress`).  ``constraints`` / ``then`` (and the model's
+    constraints): the constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law
+    known only within a band: the robust synthesis (:mod:`mitld_lp.routes.robust`).
+    ``exact``: also the exact optimum as a fraction, ``Result.exact``
+    (:mod:`mitld_lp.exact`; the plain route, models of modest size, laws and worlds with
+    rational probabilities).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -102,11 +105,15 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     constraints the constrained occupancy LP on the joint product, and with a band its
     sound robust bracket.  ``costs`` / ``seed``: a constrained problem's action costs
     (default the model's) and its randomised controller's seed."""
+    return _with_world_checks(_solve_route(posed, costs, seed), posed.model.game)
+
+
+def _solve_route(posed: Posed, costs: Mapping[str, float] | None, seed: int | None) -> Result:
     if posed.route == CONSTRAINED:
         from mitld_lp.problem import check_constrained
 
         check_constrained(posed)  # a refusal names the combination before any work
-    built = build_posed(posed, progress=posed.settings.progress or None)
+    built = build_posed(posed, progress=posed.settings.progress)
     if posed.route == ROBUST:
         from mitld_lp.routes.robust import solve_robust
 
@@ -126,6 +133,21 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     from mitld_lp.routes.plain import solve_plain
 
     return solve_plain(posed, built)
+
+
+def _with_world_checks(result: Result, game: Any) -> Result:
+    """``result`` with a check saying how the world was read, when it was changed: a
+    PRISM world's choices whose probabilities summed to 1 only within PRISM's tolerance
+    were divided by their sums (:class:`mitld_lp.worlds.successors.Normalisation`), so
+    the bracket is the normalised world's."""
+    from mitld_lp.worlds.prism import PrismGame
+
+    if not isinstance(game, PrismGame) or game.normalised is None:
+        return result
+    from dataclasses import replace
+
+    check = Check("world's probabilities normalised", True, str(game.normalised))
+    return replace(result, checks=(*result.checks, check))
 
 
 def synthesize_constrained(

@@ -56,7 +56,8 @@ def test_solve_human_output(capsys):
 def test_an_unknown_solver_is_refused_before_any_work(capsys):
     assert main(["solve", BUS, "--solver", "NO_SUCH_SOLVER", "--json"]) == 2
     captured = capsys.readouterr()
-    assert captured.out == ""  # no JSON with NaN in it, no work done
+    # no answer (no JSON with NaN in it, no work done): the error object alone
+    assert json.loads(captured.out)["status"] == "usage_error"
     err = captured.err.strip().splitlines()
     assert len(err) == 1 and "unknown or not installed LP solver 'NO_SUCH_SOLVER'" in err[0]
     assert "CLARABEL" in err[0]  # the installed ones are named

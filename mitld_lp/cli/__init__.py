@@ -43,9 +43,12 @@ from mitld_lp.cli.kernel import (
     _command,
     _dumps,
     _say,
+    error_record,
+    error_status,
+    say_error,
 )
 from mitld_lp.files import write as files
-from mitld_lp.util import watch
+from mitld_lp.util import progress, watch
 from mitld_lp.util.text import printable
 
 __all__ = ["main", "run", "UsageError", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE",
@@ -126,7 +129,8 @@ def _version() -> str:
 
 
 class _StageLines(logging.Handler):
-    """Log records as printable lines on stderr; the last one says where a stop was."""
+    """Log records as printable lines on stderr (a progress bar drawn there is cleared
+    first); the last one says where a stop was."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -135,33 +139,33 @@ class _StageLines(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         try:
             self.last = printable(record.getMessage())
-            print(f"{PROG}: {self.last}", file=sys.stderr, flush=True)
+            progress.write(f"{PROG}: {self.last}", sys.stderr)
+            sys.stderr.flush()
         except Exception:  # noqa: BLE001 - logging must never break the command
             self.handleError(record)
 
 
 def _run(args: argparse.Namespace) -> int:
-    """Run the verb; map every exception to an exit code and one line on stderr."""
+    """Run the verb; map every exception to an exit code, one line on stderr and, with
+    ``--json``, the error object on stdout (:func:`mitld_lp.cli.kernel.say_error`)."""
     try:
         return args.run(args)
     except files.WriteAbandoned:  # interrupted from outside, which has said so
         return EXIT_INTERRUPTED
     except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
-        _say(f"stopped: {err}")
-        return EXIT_UNCERTIFIED
+        return say_error(args, "budget", str(err), err)
     except _USER_ERRORS as err:
-        _say(f"error: {err}")
-        return EXIT_USAGE
+        return say_error(args, error_status(err), str(err), err)
     except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
         sys.stderr.close()
         return EXIT_OK
-    except MemoryError:
-        _say("stopped: out of memory (lower --max-states, or give the machine more memory)")
-        return EXIT_UNCERTIFIED
+    except MemoryError as err:
+        return say_error(args, "budget", "out of memory (lower --max-states, or give the "
+                         "machine more memory)", err)
     except Exception as err:  # noqa: BLE001 - the CLI never shows a traceback
         first = str(err).splitlines()[0] if str(err) else ""
-        _say(f"internal error: {type(err).__name__}: {first} (please report this)")
-        return EXIT_INTERNAL
+        return say_error(args, "error", f"{type(err).__name__}: {first} (please report this)",
+                         err)
 
 
 _WATCHDOG_GRACE = 1.0
@@ -181,9 +185,9 @@ def main(argv: list[str] | None = None) -> int:
     global _worker
     try:
         args = _build_parser().parse_args(argv)
-    except UsageError as err:
-        _say(f"error: {err}")
-        return EXIT_USAGE
+    except UsageError as err:  # no arguments yet: --json is looked for in the words
+        return say_error(_json_asked(sys.argv[1:] if argv is None else argv), "usage_error",
+                         str(err))
     except SystemExit as stop:  # --help and --version have printed and exit 0
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
     args.started = time.monotonic()
@@ -192,7 +196,9 @@ def main(argv: list[str] | None = None) -> int:
 
     def work() -> None:
         _command.cancelled = cancelled
-        outcome.append(_run(args))
+        # bars on a terminal only, none under -q or --json (mitld_lp.util.progress)
+        with progress.silenced(args.quiet or getattr(args, "json", False)):
+            outcome.append(_run(args))
 
     worker = threading.Thread(target=work, name=PROG, daemon=True)
     handler = _StageLines()  # this command's lines only, not an abandoned one's
@@ -212,6 +218,7 @@ def main(argv: list[str] | None = None) -> int:
             if deadline is not None and time.monotonic() >= deadline and worker.is_alive():
                 cancelled.set()
                 files.abandon(worker)
+                progress.abandon()
                 _time_stop(args, f" (last stage: {handler.last})" if handler.last else "")
                 watch.report(watch.SAID)
                 _worker = worker
@@ -219,7 +226,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         cancelled.set()
         files.abandon(worker)  # a file half written is removed; the old one stays
-        _say("interrupted")
+        progress.abandon()
+        say_error(args, "interrupted", "interrupted")
         watch.report(watch.SAID)
         _worker = worker
         return EXIT_INTERRUPTED
@@ -242,10 +250,21 @@ def _limited(argv: list[str]) -> argparse.Namespace | None:
 
 
 def _time_stop(args: argparse.Namespace, where: str) -> None:
-    """The time-limit stop: the JSON status with ``--json``, and the stop line."""
+    """The time-limit stop: the stop line, and the error object with ``--json``."""
+    message = f"time limit of {args.time_limit:g} s reached{where}"
+    _say(f"stopped: {message}")
     if getattr(args, "json", False):
-        print(_dumps({"status": "time_limit", "time_limit": args.time_limit}), flush=True)
-    _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
+        print(_dumps(error_record("time_limit", message, time_limit=args.time_limit)),
+              flush=True)
+
+
+def _json_asked(words: list[str]) -> argparse.Namespace | None:
+    """Arguments that ask for JSON (the verb and ``json``) when ``words``, which did not
+    parse, hold ``--json`` before any ``--``; else None."""
+    before = words[:words.index("--")] if "--" in words else words
+    if "--json" not in before:
+        return None
+    return argparse.Namespace(json=True, verb=words[0] if words else None)
 
 
 def run() -> None:

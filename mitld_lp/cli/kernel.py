@@ -28,9 +28,11 @@ from mitld_lp.problem import CONSTRAINED, ProblemError
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.running.saved_plan import ControllerFileError
 from mitld_lp.sweep.spec import SweepError
+from mitld_lp.util import progress
 from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
+    from mitld_lp.model import Model
     from mitld_lp.problem import Posed, Settings
     from mitld_lp.routes.stages import Built
 
@@ -61,6 +63,63 @@ _BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge
 
 #: 3: no certified answer (a solver status or a budget stop; the status is printed).
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+# --------------------------------------------------------------------------- errors as JSON
+
+#: The statuses of the error object and the exit code of each: the input (a model file,
+#: a formula, a sweep file, the problem they pose) is wrong; an argument or output path
+#: is wrong; a budget stopped the work; the time limit did; Ctrl-C did; a bug.  A batch's
+#: line and a sweep's row use the same statuses for the same causes.
+ERROR_EXITS: dict[str, int] = {"model_error": EXIT_USAGE, "usage_error": EXIT_USAGE,
+                               "budget": EXIT_UNCERTIFIED, "time_limit": EXIT_UNCERTIFIED,
+                               "interrupted": EXIT_INTERRUPTED, "error": EXIT_INTERNAL}
+
+#: The user errors that are about the command line itself (the rest: the input).
+_USAGE_ERRORS: tuple[type[Exception], ...] = (UsageError, files.OutputPathError,
+                                              FileExistsError)
+
+
+def error_record(status: str, message: str, **more: Any) -> dict[str, Any]:
+    """The one JSON error object of every verb that takes ``--json`` (docs/results.md,
+    "Errors as JSON"): ``{"status", "error", "exit"}``, the reason as the error line on
+    stderr says it, and ``more`` (a formula's ``line`` and ``column``; a batch line's
+    ``file``)."""
+    return {"status": status, "error": printable(message), "exit": ERROR_EXITS[status],
+            **more}
+
+
+def error_status(err: BaseException) -> str:
+    """The error object's status of an exception the command line maps to an exit code."""
+    if isinstance(err, _BUDGET_STOPS + (MemoryError,)):
+        return "budget"
+    if isinstance(err, _USAGE_ERRORS):
+        return "usage_error"
+    return "model_error" if isinstance(err, _USER_ERRORS) else "error"
+
+
+def say_error(args: argparse.Namespace | None, status: str, message: str,
+              err: BaseException | None = None) -> int:
+    """The one line on stderr (``error:``, ``stopped:`` or ``internal error:``) and, with
+    ``--json``, the error object on stdout; the exit code of ``status``.  The command
+    has ended: a bar its error left drawn is erased first."""
+    progress.abandon()
+    word = {"model_error": "error", "usage_error": "error", "error": "internal error"}.get(
+        status, "stopped")
+    _say(message if status == "interrupted" else f"{word}: {message}")
+    if args is not None and getattr(args, "json", False):
+        formula = err  # a formula's error, also as the cause of a model's or a sweep's
+        while formula is not None and not isinstance(formula, ParseError):
+            formula = formula.__cause__
+        where: dict[str, Any] = (  # a formula's place (in a model file: in its spec)
+            {"line": formula.line, "column": formula.column}
+            if isinstance(formula, ParseError) else
+            {"reasons": list(err.reasons)} if isinstance(err, ProblemError) else {})
+        if getattr(args, "verb", None) == "check":  # check's own answer field
+            where["supported"] = False
+        _out(_dumps(error_record(status, message, **where)))
+        sys.stdout.flush()
+    return ERROR_EXITS[status]
 
 
 # --------------------------------------------------------------------------- output files
@@ -113,15 +172,23 @@ def _prob(x: float) -> str:
 
 
 def _out(text: str = "") -> None:
-    """Print one line of the command's answer on stdout (nothing once cancelled)."""
+    """Print one line of the command's answer on stdout (nothing once cancelled; a
+    progress bar drawn on the terminal is cleared first, :func:`progress.write`)."""
     cancelled = getattr(_command, "cancelled", None)
     if cancelled is None or not cancelled.is_set():
-        print(text)
+        progress.write(text, sys.stdout)
 
 
 def _count(n: int, noun: str) -> str:
     """``n`` with ``noun`` in the singular or plural: "1 clock", "2 clocks"."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def args_json(p: argparse.ArgumentParser) -> None:
+    """``--json``, the same for every verb that takes it."""
+    p.add_argument("--json", action="store_true",
+                   help='print one JSON object on stdout, also for an error ({"status", '
+                        '"error", "exit"}); no progress bars')
 
 
 # --------------------------------------------------------------------------- model verbs
@@ -157,16 +224,60 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
                         "memory)")
 
 
+def read_model(args: argparse.Namespace, path: str | None = None,
+               max_states: int | None = None) -> Model:
+    """The model file ``path`` (default ``args.model``) under the verb's world budgets;
+    a file that is plainly something else (a sweep file, a PRISM program) is refused
+    saying what it is and which command or table takes it."""
+    from mitld_lp.model import load_model
+
+    path = args.model if path is None else path
+    memory = getattr(args, "max_memory", None)
+    try:
+        return load_model(path, max_memory=memory, max_states=max_states if max_states
+                          is not None else getattr(args, "max_world_states", None))
+    except ModelError as err:
+        what = other_file(path, memory, "model")
+        if what:
+            raise ModelError(f"{err}; {what}") from None
+        raise
+
+
+#: What a file is, by its suffix or its top-level keys, and where it goes.
+_OTHER_FILES = {
+    "prism": "it is a PRISM program: a model file names it as its world, [prism] file = "
+             "\"...\" (docs/worlds.md; models/corridor.toml)",
+    "sweep": "it is a sweep file: run it with mitld-lp sweep (docs/sweeps.md)",
+    "model": "it is a model file: solve it with mitld-lp solve; a sweep file names its "
+             "model, model = \"...\" (docs/sweeps.md)",
+}
+
+
+def other_file(path: str, max_memory: int | None, expected: str) -> str:
+    """Why the file at ``path``, which did not read as a ``expected`` file ("model" or
+    "sweep"), is another kind of file ("" when it is not plainly one)."""
+    import tomllib
+
+    from mitld_lp.files import rules
+
+    if Path(path).suffix.lower() in (".prism", ".pm", ".nm"):
+        return _OTHER_FILES["prism"]
+    try:
+        doc = tomllib.loads(rules.read_bytes(path, rules.read_limit(max_memory)).decode())
+    except (OSError, ValueError, RecursionError, rules.InputFileError):
+        return ""  # the reader's own error says it
+    kind = ("sweep" if "model" in doc and "spec" not in doc else
+            "model" if "spec" in doc and "model" not in doc else "")
+    return _OTHER_FILES[kind] if kind and kind != expected else ""
+
+
 def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     """Model file -> (the problem it poses, its automaton, STA and product MDP); a model
     with constraints is refused naming ``verb`` (its product would be another
     problem's)."""
-    from mitld_lp.model import load_model
     from mitld_lp.routes.stages import build_posed
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
-    posed = posed_model(args, model, verb)
+    posed = posed_model(args, read_model(args), verb)
     if posed.route == "sensed":  # the fully observed product would answer another problem
         raise ProblemError(f"{verb}: the model has sensors that miss events: its problem is "
                            "solved on the information-state product (solve, simulate, "
@@ -184,7 +295,8 @@ def _time_left(args: argparse.Namespace) -> float | None:
 
 
 def _say(message: str) -> None:
-    print(f"{PROG}: {printable(message)}", file=sys.stderr, flush=True)
+    progress.write(f"{PROG}: {printable(message)}", sys.stderr)
+    sys.stderr.flush()
 
 
 

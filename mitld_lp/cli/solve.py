@@ -21,7 +21,9 @@ from mitld_lp.cli.kernel import (
     _output_path,
     _prob,
     _write,
+    args_json,
     print_head,
+    read_model,
     solve_settings,
 )
 from mitld_lp.files import write as files
@@ -31,7 +33,7 @@ __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 
 def args_info(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args_json(p)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -75,7 +77,7 @@ def args_solve(p: argparse.ArgumentParser) -> None:
                    help="also the exact optimum as a fraction, in rational arithmetic on the "
                         "model as written (models of modest size; grid and PRISM worlds; "
                         "geometric, pmf and uniform laws)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args_json(p)
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
@@ -84,7 +86,6 @@ def args_solve(p: argparse.ArgumentParser) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
-    from mitld_lp.model import load_model
     from mitld_lp.problem import CONSTRAINED, pose
     from mitld_lp.synthesis import solve
 
@@ -96,8 +97,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args))
     if posed.route == CONSTRAINED:

@@ -90,7 +90,7 @@ class _Settings:
     backend: Backend
     tol: float
     certify_tol: float
-    progress: bool
+    progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
     decompose: bool
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
@@ -114,7 +114,7 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
     return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
                     backend=how.backend, tol=how.tol, decompose=how.decompose,
                     time_limit=how.remaining(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0)
+                    everywhere=quotient.initial < 0, progress=how.progress)
 
 
 def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,

@@ -139,7 +139,8 @@ def _sensed(posed: Posed, progress: bool | None) -> Built:
     belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
                             model.epsilon if s.epsilon is None else s.epsilon,
                             clock_reduction=s.clock_reduction, truncation=s.truncation_map,
-                            max_states=s.max_states, max_memory=s.max_memory)
+                            max_states=s.max_states, max_memory=s.max_memory,
+                            progress=progress)
     return Built(dta, belief.sta, belief.mdp,
                  {"automaton": t1 - t0, "product": time.perf_counter() - t1}, belief=belief)
 

@@ -118,7 +118,7 @@ def simulate(
         from mitld_lp.sensing.observe import simulate_sensed
 
         return simulate_sensed(model, controller,  # type: ignore[arg-type]
-                               runs=runs, seed=seed, max_steps=max_steps)
+                               runs=runs, seed=seed, max_steps=max_steps, progress=progress)
     rng = np.random.default_rng(seed)
     if controller.randomised:
         controller.reset(seed=int(rng.integers(2**63)))
@@ -130,7 +130,7 @@ def simulate(
     # objective "min": the controller runs the complement's automaton (same states): the
     # task holds where the complement rejects, or in the task's persistent states
     win = RunStatus.REJECTED if model.objective == "min" else RunStatus.ACCEPTED
-    bar = progress_bar(progress, total=runs, leave=False, desc="simulate")
+    bar = progress_bar(progress, total=runs, leave=False, desc="simulate", unit=" runs")
     for _ in range(runs):
         status, _ = rollout(model, controller, rng, max_steps=max_steps)
         keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent

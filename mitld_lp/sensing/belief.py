@@ -42,6 +42,7 @@ optimum over observation-based policies.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
@@ -54,9 +55,12 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory
+from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory, estimate_size
 from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
+
+log = logging.getLogger(__name__)
 
 __all__ = ["InfoState", "Belief", "belief_product", "sensed_sta", "WEIGHT_TOL"]
 
@@ -132,18 +136,39 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
                    sensors: Mapping[str, Sensor], epsilon: float, *,
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
-                   max_states: int, max_memory: int | None = None) -> Belief:
+                   max_states: int, max_memory: int | None = None,
+                   progress: bool | None = None) -> Belief:
     """The reachable information-state MDP (module docs) of a co-safe task's automaton
     ``dta`` in ``game``, the events of ``sensors`` (missed detections only) hidden.
     Raises :class:`ProductTooLarge` before storing a state beyond ``max_states``, or one
     that would take the states past ``max_memory`` bytes (default: half the machine's
     memory) at :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS`
-    per hypothesis it holds."""
+    per hypothesis it holds.  ``progress``: a bar of the states built
+    (:mod:`mitld_lp.util.progress`: ``None`` on a terminal only), after a line saying
+    how large the product may grow."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
                      truncation=truncation)
     memory = default_max_memory() if max_memory is None else max_memory
-    return _Builder(game, dta, sta, sensed, sensors, max_states, memory).build()
+    _announce(game, sta, sensed, max_states, memory)
+    return _Builder(game, dta, sta, sensed, sensors, max_states, memory).build(progress)
+
+
+def _announce(game: Game[Any], sta: STA, sensed: tuple[str, ...], max_states: int,
+              max_memory: int) -> None:
+    """Say, before the build, how large the information-state product may grow: the
+    fully observed product's bound at these truncation points, the hypotheses each
+    state may hold, and the budgets that stop it."""
+    points = sta.truncation_points
+    hypotheses = math.prod(points[a] + 1 for a in sensed)  # not yet, or at step 1..T
+    cap = min(max_states, max_memory // BYTES_PER_INFO_STATE)
+    log.info("information-state product: the fully observed one has %s; each state here "
+             "also holds up to %s hypotheses of when %s happened (%s), so it may be far "
+             "larger: it stops past %s states (max_states %s; max_memory %.1f GiB at %s "
+             "bytes a state)",
+             estimate_size(game, sta), f"{hypotheses:,}", ", ".join(sensed),
+             ", ".join(f"{a} truncated at step {points[a]}" for a in sensed), f"{cap:,}",
+             f"{max_states:,}", max_memory / 2**30, f"{BYTES_PER_INFO_STATE:,}")
 
 
 class _Builder:
@@ -403,7 +428,7 @@ class _Builder:
 
     # ---------------------------------------------------------------- the MDP
 
-    def build(self) -> Belief:
+    def build(self, progress: bool | None = None) -> Belief:
         game, dta = self.game, self.dta
         q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
         if q0 == dta.accepting:
@@ -418,7 +443,10 @@ class _Builder:
         groups, actions = [0], []
         names: dict[str, int] = {}
         head = 0
+        shown = progress_bar(progress, total=None, unit=" states", desc="information states",
+                             leave=False, mininterval=0.5)
         while head < len(self.states):
+            shown.update()
             s = self.states[head]
             if isinstance(s, Absorbing):
                 cols.append(head)
@@ -436,6 +464,9 @@ class _Builder:
             indptr.append(len(cols))
             groups.append(len(actions))
             head += 1
+        shown.close()
+        log.info("information-state product: %s states, %s choices, %s transitions",
+                 f"{len(self.states):,}", f"{len(actions):,}", f"{len(cols):,}")
         n = len(self.states)
         kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
                          .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],

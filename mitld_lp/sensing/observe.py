@@ -36,6 +36,7 @@ from mitld_lp.running.controller import RunStatus
 from mitld_lp.running.rollouts import SimulationResult, check_count, sample_successor, wilson
 from mitld_lp.running.saved_plan import ControllerFileError, encode_state
 from mitld_lp.sensing.belief import Belief, Obs
+from mitld_lp.util.progress import tracked
 from mitld_lp.worlds.game import Game, world_members
 
 __all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError",
@@ -270,8 +271,8 @@ def save_sensed(c: SensedController, path: str | os.PathLike[str], *,
 
 
 def simulate_sensed(model: Any, controller: SensedController, *, runs: int = defaults.RUNS,
-                    seed: int | None = 0, max_steps: int = defaults.MAX_STEPS
-                    ) -> SimulationResult:
+                    seed: int | None = 0, max_steps: int = defaults.MAX_STEPS,
+                    progress: bool | None = None) -> SimulationResult:
     """Estimate the probability that ``controller`` satisfies ``model``'s task (module
     docs), with a Wilson 95% interval.  Each run draws every event's time from its law,
     then each sensed event's report ``delay + j`` steps after it, ``j ~
@@ -281,7 +282,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     probability 0 (an event past its truncation point);
     ``undecided`` the runs whose automaton had no verdict when the controller stopped
     (every hypothesis left was decided) or after ``max_steps``: failures, such as a bus
-    missed, which the automaton never rejects (it does not know a bus comes once)."""
+    missed, which the automaton never rejects (it does not know a bus comes once).
+    ``progress``: a bar over the runs (:mod:`mitld_lp.util.progress`)."""
     from mitld_lp.automata.translate import to_dta
 
     check_count("runs", runs, 1, defaults.MAX_RUNS)
@@ -293,7 +295,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     sensors = {a: s for a, s in model.sensors.items() if a in controller.sensed_events}
     laws = sorted(model.distributions.items())
     ok = beyond = undecided = 0
-    for _ in range(runs):
+    for _ in tracked(range(runs), progress, total=runs, desc="simulate", unit=" runs",
+                     leave=False):
         times = {a: float(law.sample(rng, 1)[0]) for a, law in laws}
         seen = dict(times)
         for a in sorted(sensors):

@@ -311,7 +311,7 @@ def interval_iteration(
     quotient: Quotient | None = None,
     tol: float = defaults.TOL,
     max_iterations: int = 1_000_000,
-    progress: bool = True,
+    progress: bool | None = None,
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
@@ -349,7 +349,7 @@ def interval_iterations(
     *,
     tol: float = defaults.TOL,
     max_iterations: int = 1_000_000,
-    progress: bool = True,
+    progress: bool | None = None,
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
@@ -374,7 +374,7 @@ def interval_iterations(
         bounds[:, 2 * j + 1] = np.where(o.zero, 0.0, 1.0)
     budget = _Budget(max_iterations,
                      start + time_limit if time_limit is not None else np.inf)
-    bar = progress_bar(bool(progress) and n >= _PROGRESS_MIN_STATES, total=None,
+    bar = progress_bar(progress if n >= _PROGRESS_MIN_STATES else False, total=None,
                        desc="interval iteration", unit="it", leave=False)
     decided = gap == "initial" and q.initial < 0
     try:

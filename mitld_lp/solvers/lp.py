@@ -64,6 +64,7 @@ from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import LPResult, Status, read_only
 from mitld_lp.solvers.topological import Block, blocks, solve_single_states, transient_solve
+from mitld_lp.util.progress import tracked
 
 __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 
@@ -301,7 +302,8 @@ _TIGHTEN_MAX = 500
 
 
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
-                      bounds: tuple[np.ndarray, np.ndarray] | None) -> _Answer | Raw:
+                      bounds: tuple[np.ndarray, np.ndarray] | None,
+                      progress: bool | None = None) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
     :func:`~mitld_lp.solvers.crossover.polish`; the occupancy of the resulting
@@ -343,7 +345,9 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = 0
-    for level in blk.walk(skip=q.zero):
+    todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
+    for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
+                         total=todo, desc="block LPs", unit=" states", leave=False):
         upd = solve_single_states(q, blk, level.single, values)
         reduced_choice[upd.states] = upd.choices
         weights[upd.choices] = 1.0
@@ -404,6 +408,7 @@ def solve_lp(
     time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    progress: bool | None = None,
 ) -> LPResult:
     """Maximal probability of reaching ``target`` from ``mdp.initial``, by the occupancy LP.
 
@@ -433,6 +438,8 @@ def solve_lp(
             ``decompose``, a block's LP leaves out the choices they prove suboptimal
             (every choice is still checked against the exact values afterwards, so a
             wrong bound costs time, never the answer).
+        progress: a bar over the blocks' states (:mod:`mitld_lp.util.progress`:
+            ``None`` on a terminal only).
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -472,7 +479,7 @@ def solve_lp(
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
             greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
     elif decompose:
-        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds))
+        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)

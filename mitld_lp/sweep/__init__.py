@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +68,7 @@ def run_sweep(
     retries: int = 2,
     force: bool = False,
     retry_failed: bool = False,
-    progress: bool = False,
+    progress: bool | None = False,
     on_row: Callable[[dict[str, Any]], None] | None = None,
 ) -> SweepRun:
     """Solve every point of a sweep that ``results`` does not hold yet.
@@ -79,8 +79,9 @@ def run_sweep(
     number of local processes (1: in this process); ``dask``: the address of a Dask
     scheduler (``tcp://host:8786``) instead; ``retries``: how often Dask runs a failed
     task again.  ``retry_failed``: also solve again the points whose row has a failure
-    status (``model_error``, ``budget``, ``error``, ``lost``).  ``progress``: a tqdm bar
-    on stderr.  ``on_row(row)`` is called after each new row is recorded.
+    status (``model_error``, ``budget``, ``error``, ``lost``).  ``progress``: a bar over
+    the points (:func:`mitld_lp.util.progress.bar`: ``None`` on a terminal only).
+    ``on_row(row)`` is called after each new row is recorded.
     Raises :class:`SweepError` for a bad sweep or results file (before any point)."""
     sw = spec if isinstance(spec, Sweep) else load_sweep(spec)
     if workers < 1:
@@ -105,10 +106,11 @@ def run_sweep(
     todo_keys = set(keys) - set(done)
     source = os.fspath(sw.model_path)
     tasks, queued = [], set()
+    quiet = replace(sw.settings, progress=False)  # one bar, the sweep's: none per point
     for i, (point, key) in enumerate(zip(sw.points, keys, strict=True)):
         if key in todo_keys and key not in queued:  # a point listed twice is solved once
             queued.add(key)
-            tasks.append(PointTask(i, sw.model_text(point), source, sw.settings))
+            tasks.append(PointTask(i, sw.model_text(point), source, quiet))
     reused = sum(1 for k in set(keys) if k in done)
 
     from mitld_lp.sweep import engines
@@ -119,7 +121,7 @@ def run_sweep(
         finished = engines.process_pool(tasks, workers)
     else:
         finished = engines.serial(tasks)
-    bar = progress_bar(bool(progress), total=len(tasks), desc=sw.name, unit="point",
+    bar = progress_bar(progress, total=len(tasks), desc=sw.name, unit="point",
                        leave=False)
     computed = 0
     try:

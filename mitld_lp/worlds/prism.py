@@ -52,7 +52,10 @@ probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
 in floating point, so where it alone fails the checks are redone in exact arithmetic
-(:func:`load_prism`).
+(:func:`load_prism`), and a choice that sums to 1 only within that tolerance is divided
+by its sum (:attr:`PrismGame.normalised` counts them).  An expression deeper than
+Storm's parser takes is refused before it reads the file
+(:mod:`mitld_lp.worlds.prism_depth`).
 
 Budgets and exploration.  The product of the variables' ranges is a note, not a
 refusal: Storm explores the reachable part within ``max_states`` and ``max_memory``
@@ -90,6 +93,7 @@ from mitld_lp.product.budget import _bytes  # the product's budget messages writ
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
@@ -108,9 +112,16 @@ from mitld_lp.worlds.prism_program import (
     with_constants,
     with_labels,
 )
-from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
+from mitld_lp.worlds.prism_tables import (
+    DEADLOCK_ACTION,
+    DECIDED_ACTION,
+    OUT_OF_BOUNDS,
+    Tables,
+    read_model,
+)
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
+from mitld_lp.worlds.successors import Normalisation
 from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
@@ -166,6 +177,9 @@ class PrismGame:
             Storm did not expand ("" when there are none).
         decided: how many of :attr:`states` were not expanded (their one action is
             :data:`DECIDED_ACTION`, a self-loop).
+        normalised: the choices whose probabilities summed to 1 only within PRISM's
+            tolerance, each divided by its sum when the file was read (None: none
+            were); an answer's checks say it (:func:`mitld_lp.synthesis.solve`).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
     a state's actions and a choice's distribution become tuples when first asked for
@@ -182,6 +196,7 @@ class PrismGame:
     _tables: Tables = field(repr=False)
     terminal: str = ""
     decided: int = 0
+    normalised: Normalisation | None = None
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
     recipe: PrismRecipe | None = field(default=None, repr=False)  # to build it again
 
@@ -319,27 +334,6 @@ def _stormpy() -> Any:
     return stormpy
 
 
-def _check_utf8(path: Path, where: str) -> None:
-    """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
-    from mitld_lp.files import rules as file_rules
-
-    try:  # a regular file, bounded, before Storm reads it
-        data = file_rules.read_bytes(path)
-    except file_rules.InputFileError as exc:
-        raise WorldError(f"{where}: {exc}") from None
-    except OSError as exc:
-        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
-    try:
-        data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        raise WorldError(
-            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
-            "a PRISM file is UTF-8"
-        ) from None
-
-
 def load_prism(
     path: str | os.PathLike[str],
     *,
@@ -384,7 +378,8 @@ def load_prism(
         raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
-    _check_utf8(p, where)
+    depth = ExpressionDepth()
+    check_text(p, where, depth)  # before Storm's parser, which can crash on it
     stormpy = _stormpy()
     program = parse_program(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
@@ -392,7 +387,7 @@ def load_prism(
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
         raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
-    extra = extra_labels(program, dict(define or {}), where)
+    extra = extra_labels(program, dict(define or {}), where, depth)
     if extra:
         program = with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
@@ -426,6 +421,10 @@ def load_prism(
     condition = decided_when(task, frozenset(defined)) if task is not None else False
     terminal = "" if condition is False else render(
         condition, {lab.name: str(lab.expression) for lab in plain.labels})
+    if terminal and depth.deepest(terminal) is not None:  # every state expanded instead
+        log.info("%s: the states where the task is decided are too deep an expression for "
+                 "Storm; all states are expanded", where)
+        terminal = ""
     program, action_names = name_unlabelled_commands(program, where, stormpy)
 
     def work() -> Tables:
@@ -462,6 +461,7 @@ def load_prism(
         effects=tables.effects,
         terminal=terminal,
         decided=tables.decided,
+        normalised=tables.normalised,
         _tables=tables,
         recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
     )
@@ -477,8 +477,10 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
     checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
     PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
-    model is built without the checks (its sums are then checked by
-    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance)."""
+    model is built without the checks, with Storm's out-of-bounds state (the exact build
+    stopped at the first sum it did not take, before it had checked every update):
+    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) the
+    sums, with the tolerance, and refuses an update that reached that state."""
     # Two choices of one state named by one action are told apart by the commands they
     # come from (Storm's choice origins, a tenth of the build): only where needed.
     origins = needs_origins(program)
@@ -503,8 +505,8 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             if total is None or abs(total - 1) > SUM_TOLERANCE:
                 raise storm_error(exc, where, program, plain) from None
             log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
-                     "the rest of the checks are read_model's", where, show_sum(total),
-                     SUM_TOLERANCE)
+                     "built without Storm's checks, the sums checked on the model",
+                     where, show_sum(total), SUM_TOLERANCE)
         try:
             with storm_quiet():
                 model = stormpy.build_model(program, options=options(False))
@@ -518,7 +520,7 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     built = set(model.labeling.get_labels())
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    known = {lab.name for lab in program.labels} | {"init", "deadlock"}
+    known = {lab.name for lab in program.labels} | {"init", "deadlock", OUT_OF_BOUNDS}
     stopped = sorted(built - known) if terminal else []
     commands = command_names(program)
 

@@ -31,6 +31,7 @@ from typing import Any
 
 from mitld_lp.util.quiet import native_quiet
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_depth import ExpressionDepth
 
 __all__ = [
     "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
@@ -372,9 +373,11 @@ def parse_program(stormpy: Any, file: str, where: str) -> Any:
 _FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
 
 
-def extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, str]:
+def extra_labels(program: Any, define: dict[str, str], where: str,
+                 depth: ExpressionDepth | None = None) -> dict[str, str]:
     """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
-    that no label shadows (``name -> name``), then ``define``."""
+    that no label shadows (``name -> name``), then ``define`` (each no deeper than
+    Storm's parser takes, counted with the file's formulas: ``depth``, when given)."""
     labels = {lab.name for lab in program.labels}
     manager = program.expression_manager
     extra: dict[str, str] = {}
@@ -389,6 +392,9 @@ def extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, 
             raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
         if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
             raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
+        deep = None if depth is None else depth.deepest(text)
+        if deep is not None:
+            raise WorldError(f"label {name!r}: {deep.message()}")
         extra[name] = text
     return extra
 
@@ -442,8 +448,10 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
                     origins: bool) -> Any:
     """Storm's builder options for a world: every label (a label left out of the build
     would be false in every state), choice labels, state valuations, the choice origins
-    when ``origins``, exploration checks when ``checks``, and no expansion past the
-    states where ``terminal`` holds (a PRISM expression; "" for none)."""
+    when ``origins``, exploration checks when ``checks`` (without them Storm's
+    out-of-bounds state, so that an update out of a variable's range stays visible), and
+    no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
+    none)."""
     formula = None
     if terminal:
         with storm_quiet():
@@ -451,6 +459,7 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
         formula = formula.get_raw_formula()
     o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
     o.set_exploration_checks(checks)
+    o.set_add_out_of_bounds_state(not checks)  # range errors kept visible
     o.set_build_all_labels()
     o.set_build_choice_labels()
     if origins:
