@@ -208,6 +208,47 @@ def test_a_second_writer_of_a_results_file_is_refused(tmp_path):
     second.close()
 
 
+def test_every_name_of_a_results_file_takes_its_one_lock(tmp_path):
+    # issue 41: `-o r.csv` and `-o link.csv` (a symlink to it) both ran and left 240 rows
+    # for 144 points; the lock is now the file's own, whatever name reaches it
+    sw = load_sweep(BUS_SWEEP)
+    (tmp_path / "sub").mkdir()
+    out = tmp_path / "r.csv"
+    (tmp_path / "link.csv").symlink_to("r.csv")
+    (tmp_path / "sub" / "far.csv").symlink_to(out)  # a link from another folder
+    first = Results(out, sw.name, sw.sweep_id, sw.columns)
+    try:
+        for other in (tmp_path / "link.csv", tmp_path / "sub" / "far.csv",
+                      tmp_path / "sub" / ".." / "r.csv"):
+            with pytest.raises(SweepError, match=r"another sweep is writing it .*holds "
+                                                 r"\.r\.csv\.lock\)"):
+                Results(other, sw.name, sw.sweep_id, sw.columns)
+        assert sorted(p.name for p in tmp_path.iterdir()) == [
+            ".r.csv.lock", "link.csv", "r.csv", "sub"]  # no lock beside the links
+    finally:
+        first.close()
+    second = Results(tmp_path / "link.csv", sw.name, sw.sweep_id, sw.columns)  # free again
+    second.close()
+    assert (tmp_path / "link.csv").is_symlink()
+
+
+def test_a_hard_linked_results_file_is_not_extended(tmp_path):
+    # a hard link is a second name no lock file can follow: refused while two names
+    # share the rows (the issue's symlink report, by the other kind of link)
+    sw = load_sweep(BUS_SWEEP)
+    out = tmp_path / "r.csv"
+    Results(out, sw.name, sw.sweep_id, sw.columns).close()
+    os.link(out, tmp_path / "h.csv")
+    before = out.read_bytes()
+    for name in ("r.csv", "h.csv"):
+        with pytest.raises(SweepError, match=rf"{name}: has 2 names \(hard links\)"):
+            Results(tmp_path / name, sw.name, sw.sweep_id, sw.columns)
+    assert out.read_bytes() == before
+    # --force starts the file anew under its own name: the other name keeps the old rows
+    Results(tmp_path / "h.csv", sw.name, sw.sweep_id, sw.columns, force=True).close()
+    assert os.stat(out).st_nlink == 1 and not os.path.samefile(out, tmp_path / "h.csv")
+
+
 def test_two_sweeps_at_once_never_duplicate_rows(tmp_path):
     env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": os.environ["PATH"]}
     argv = [PYTHON, "-m", "mitld_lp", "sweep", str(BUS_SWEEP), "-o", "r.csv", "-q"]
