@@ -25,7 +25,7 @@ from mitld_lp.product import ProductTooLarge
 from mitld_lp.product import budget as budget_module
 from mitld_lp.product.imdp import vertex_rows
 from mitld_lp.routes.robust import interval_model
-from mitld_lp.sweep import SweepError, load_sweep
+from mitld_lp.sweep import SweepError, load_sweep, run_sweep
 from mitld_lp.sweep.results import Results
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -283,6 +283,58 @@ def test_a_dask_address_that_is_none_is_one_line(tmp_path, capsys):
                  "--dask", "not an address"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "not the address of a Dask scheduler" in err[0]
+
+
+@pytest.mark.parametrize(("address", "why"), [
+    ("localhost", "no port"),
+    ("tcp://10.0.0.5", "no port"),
+    ("tls://[::1]", "no port"),
+    ("tcp://host:", "no port"),
+    ("host:0", "the port 0 is outside 1..65535"),
+    ("host:65536", "the port 65536 is outside 1..65535"),
+    ("host:87x6", "the port '87x6' is not a number"),
+    ("udp://host:8786", "the protocol 'udp' is none of"),
+    ("tcp://:8786", "no host"),
+    ("::1:8786", "must be written in brackets"),
+    ("[::1:8786", "without its closing"),
+    ("[::g]:8786", "'::g' is no IPv6 address"),
+    ("300.1.1.1:8786", "'300.1.1.1' is no IPv4 address"),
+    ("bad..host:8786", "'bad..host' is no host name"),
+    ("-host:8786", "'-host' is no host name"),
+])
+def test_a_malformed_dask_address_is_refused_at_once_writing_nothing(
+        tmp_path, capsys, address, why):
+    # issue 41: `--dask HOST` took 20 s, printed a traceback and left a results file
+    # holding its header alone; docs/sweeps.md promises HOST:PORT or a refusal at once
+    code = main(["sweep", str(BUS_SWEEP), "-o", str(tmp_path / "r.csv"), "-q",
+                 f"--dask={address}"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "not the address of a Dask scheduler" in err[0] and why in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:8786", "127.0.0.1:8786",
+                                     "tls://[::1]:8786", "ws://node-3.lab_a.example:1/",
+                                     "UCX://10.0.0.5:65535"])
+def test_the_addresses_docs_sweeps_gives_are_accepted(address):
+    from mitld_lp.sweep.engines import check_address
+
+    assert check_address(address) == address
+
+
+def test_an_unreachable_dask_scheduler_leaves_no_results_file(tmp_path, monkeypatch):
+    # a well-formed address no scheduler answers: refused before the file is touched
+    # (the connection is made to fail at once, as Dask's does after its 10 s timeout)
+    distributed = pytest.importorskip("dask.distributed")
+
+    def refuse(*args, **kwargs):
+        raise OSError("Timed out trying to connect")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    with pytest.raises(SweepError, match="cannot reach the Dask scheduler"):
+        run_sweep(BUS_SWEEP, tmp_path / "r.csv", dask="tcp://127.0.0.1:8786")
+    assert list(tmp_path.iterdir()) == []
 
 
 # --------------------------------------------------------------------------- bands
