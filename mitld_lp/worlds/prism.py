@@ -293,8 +293,10 @@ def _check_utf8(path: Path, where: str) -> None:
 
     try:  # a regular file, bounded, before Storm reads it
         data = file_rules.read_bytes(path)
-    except file_rules.InputFileError as exc:
-        raise WorldError(f"{where}: {exc}") from None
+    except file_rules.InputFileError as exc:  # says what it is: a FIFO, a folder, too large
+        raise WorldError(f"{where}: {exc.strerror}") from None
+    except FileNotFoundError:
+        raise WorldError(f"{where}: no such PRISM file") from None
     except OSError as exc:
         raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
     try:
@@ -348,8 +350,6 @@ def load_prism(
     memory = default_max_memory() if max_memory is None else max_memory
     where = os.fspath(path)
     p = Path(path)
-    if not p.is_file():
-        raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     _check_utf8(p, where)
