@@ -30,16 +30,13 @@ from mitld_lp.cli.kernel import (
     _say,
     _time_left,
     _write,
+    file_time_limit,
+    is_pattern,
     model_options,
     solve_settings,
     unconstrained,
 )
 from mitld_lp.util.text import printable
-
-
-def is_pattern(name: str) -> bool:
-    """A glob pattern the shell did not expand (and no file of that name)."""
-    return glob.has_magic(name) and not Path(name).exists()
 
 
 def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
@@ -81,10 +78,20 @@ def solve_batch(args: argparse.Namespace) -> int:
             _batch_line(records[-1], args.json)
         for path in (m for m in matches if m not in seen):
             seen.add(path)
-            outcome = run_model(
-                lambda path=path: load_model(path, max_states=args.max_world_states,
-                                             max_memory=args.max_memory),
-                solve_settings(args), constraints=tuple(args.constraint), then=args.then)
+            # a model file's own time limit binds its run, the load included; one that
+            # cannot stop by itself (a world's factory looping) stops the batch, as the
+            # flag would (the watchdog of mitld_lp.cli.main)
+            own = None if args.time_limit is not None else file_time_limit(path,
+                                                                             args.max_memory)
+            command, args.limit = args.limit, own or args.limit
+            try:
+                outcome = run_model(
+                    lambda path=path: load_model(path, max_states=args.max_world_states,
+                                                 max_memory=args.max_memory),
+                    solve_settings(args), constraints=tuple(args.constraint),
+                    then=args.then, whole=True)
+            finally:
+                args.limit = command
             records.append({"file": path, **outcome.summary} if outcome.summary else {
                 "file": path, "status": outcome.status, "certified": False,
                 "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
