@@ -45,11 +45,13 @@ from dataclasses import dataclass
 from mitld_lp.automata.dta import DTA, Diagram
 from mitld_lp.sensing.sensors import Sensor
 
-__all__ = ["forgetting_horizon", "Collapse", "collapse", "MAX_PAIRS"]
+__all__ = ["forgetting_horizon", "Collapse", "collapse", "MAX_WORK"]
 
-MAX_PAIRS = 200_000
-"""The most pairs of automaton states :func:`forgetting_horizon` explores before it gives
-up (no bound, nothing collapsed)."""
+MAX_WORK = 1_200_000
+"""The most decision-diagram nodes :func:`forgetting_horizon` walks before it gives up
+(no bound, nothing collapsed): a few seconds at most; the 720-state automaton of
+``models/patrol.toml`` with one sensed event takes about a million.  It runs only when
+some sensor's delay could be past the bound (``delay >= T - 1``)."""
 
 _Pair = tuple[int, int, frozenset[str], frozenset[str]]
 """Two hypotheses' automaton states and the sensed events each has seen happen."""
@@ -90,36 +92,50 @@ def _leaves(d: Diagram, absent: frozenset[str]) -> set[int]:
 
 
 def _pair_steps(d1: Diagram, d2: Diagram, sensed: frozenset[str], new1: frozenset[str],
-                new2: frozenset[str], limit: int) -> set[tuple[int, int]] | None:
+                new2: frozenset[str], budget: list[int]) -> set[tuple[int, int]] | None:
     """The successor pairs of two diagrams read with one observed letter (any letter
     over the propositions that are not sensed events, shared) and the sensed events
-    ``new1``, ``new2`` of each copy; None past ``limit`` branches."""
+    ``new1``, ``new2`` of each copy; None once ``budget[0]`` nodes are walked."""
     out: set[tuple[int, int]] = set()
-    budget = [limit]
+    fixed: dict[str, bool] = {}  # the observed propositions decided on this path
 
-    def go(a: Diagram, b: Diagram, fixed: dict[str, bool]) -> bool:
+    def go(a: Diagram, b: Diagram) -> bool:
         while True:
             budget[0] -= 1
             if budget[0] < 0:
                 return False
-            for which, node, new in ((0, a, new1), (1, b, new2)):
-                if isinstance(node, int):
+            if not isinstance(a, int):
+                p, low, high = a
+                if p in sensed:
+                    a = high if p in new1 else low
                     continue
-                p, low, high = node
-                if p in sensed or p in fixed:
-                    nxt = high if (p in new if p in sensed else fixed[p]) else low
-                    a, b = (nxt, b) if which == 0 else (a, nxt)
-                    break
-                return (go(high if which == 0 else a, high if which == 1 else b,
-                           {**fixed, p: True})
-                        and go(low if which == 0 else a, low if which == 1 else b,
-                               {**fixed, p: False}))
+            elif not isinstance(b, int):
+                p, low, high = b
+                if p in sensed:
+                    b = high if p in new2 else low
+                    continue
             else:
-                assert isinstance(a, int) and isinstance(b, int)
                 out.add((a, b))
                 return True
+            if p in fixed:  # the shared letter already says
+                a, b = _follow(a, p, fixed[p]), _follow(b, p, fixed[p])
+                continue
+            for value in (False, True):
+                fixed[p] = value
+                ok = go(_follow(a, p, value), _follow(b, p, value))
+                del fixed[p]
+                if not ok:
+                    return False
+            return True
 
-    return out if go(d1, d2, {}) else None
+    return out if go(d1, d2) else None
+
+
+def _follow(d: Diagram, p: str, value: bool) -> Diagram:
+    """``d`` past its node when that node tests ``p`` (else ``d`` itself)."""
+    if isinstance(d, int) or d[0] != p:
+        return d
+    return d[2] if value else d[1]
 
 
 def _subsets(events: Iterable[str]) -> list[frozenset[str]]:
@@ -129,10 +145,10 @@ def _subsets(events: Iterable[str]) -> list[frozenset[str]]:
 
 
 def forgetting_horizon(dta: DTA, sensed: Iterable[str], *,
-                       max_pairs: int = MAX_PAIRS) -> int | None:
+                       max_work: int = MAX_WORK) -> int | None:
     """``L`` of the module docs: the most steps, after the later of two hypotheses' last
     sensed events, before their automaton states are equal or one is decided; None when
-    some pair stays apart for ever, or past ``max_pairs`` pairs explored.
+    some pair stays apart for ever, or past ``max_work`` diagram nodes walked.
 
     Explored on pairs ``(q1, q2, S1, S2)`` (``S_i`` the sensed events copy ``i`` has
     seen) from ``(q, q, {}, {})`` for every state ``q``, each step reading one shared
@@ -156,6 +172,8 @@ def forgetting_horizon(dta: DTA, sensed: Iterable[str], *,
     start = [(q, q, none, none) for q in range(dta.n_states) if not decided(q, none)]
     seen: set[_Pair] = set(start)
     todo = list(start)
+    budget = [max_work]
+    walked: dict[tuple[int, int, frozenset[str], frozenset[str]], set[tuple[int, int]]] = {}
     region: dict[tuple[int, int], set[tuple[int, int]]] = {}
     while todo:
         q1, q2, s1, s2 = todo.pop()
@@ -163,10 +181,14 @@ def forgetting_horizon(dta: DTA, sensed: Iterable[str], *,
         succ: set[_Pair] = set()
         for n1 in news[s1]:
             for n2 in news[s2]:
-                steps = _pair_steps(dta.delta[q1], dta.delta[q2], events, n1, n2,
-                                    max_pairs)
+                key = (q1, q2, n1, n2)  # the walk does not depend on S1, S2
+                steps = walked.get(key)
                 if steps is None:
-                    return None
+                    steps = _pair_steps(dta.delta[q1], dta.delta[q2], events, n1, n2,
+                                        budget)
+                    if steps is None:
+                        return None
+                    walked[key] = steps
                 succ.update((a, b, s1 | n1, s2 | n2) for a, b in steps)
         for pair in succ:
             a, b, t1, t2 = pair
@@ -176,8 +198,6 @@ def forgetting_horizon(dta: DTA, sensed: Iterable[str], *,
             if full:
                 region.setdefault((q1, q2), set()).add((a, b))
             if pair not in seen:
-                if len(seen) >= max_pairs:
-                    return None
                 seen.add(pair)
                 todo.append(pair)
         if full:
@@ -236,6 +256,8 @@ def collapse(dta: DTA, sensors: Mapping[str, Sensor], truncation: Mapping[str, i
     blind ones: ``delay >= T + L - 1`` with ``T`` the largest of ``truncation`` (the
     sensed events' truncation points) and ``L`` :func:`forgetting_horizon`."""
     last = max((truncation[a] for a in sensors), default=0)
+    if not any(s.detect > 0 and s.delay >= last - 1 for s in sensors.values()):
+        return Collapse(last, None, frozenset(), sensors)  # none could be late (L >= 0)
     horizon = forgetting_horizon(dta, sensors)
     if horizon is None:
         return Collapse(last, None, frozenset(), sensors)
