@@ -271,13 +271,13 @@ def run() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
-    limited = _limited(sys.argv[1:])
-    if limited is not None:  # the limit is kept from a parent process (watch.py)
-        code = watch.watched(limited.time_limit, lambda: _time_stop(
-            limited, " (inside a long native call)"))
-        if code is not None:
-            sys.exit(code)
     try:
+        limited = _limited(sys.argv[1:])  # reads the arguments (and the model's budgets)
+        if limited is not None:  # the limit is kept from a parent process (watch.py)
+            code = watch.watched(limited.time_limit, lambda: _time_stop(
+                limited, " (inside a long native call)"))
+            if code is not None:
+                sys.exit(code)
         code = main()
     except KeyboardInterrupt:  # before the command started (reading the arguments)
         _say("interrupted")
