@@ -83,7 +83,7 @@ def _address_fault(address: str) -> str | None:
     scheme, sep, rest = address.partition("://")
     if not sep:
         scheme, rest = "tcp", address
-    elif scheme.lower() not in _SCHEMES:
+    elif scheme not in _SCHEMES:  # Dask knows them in lower case only
         return f"the protocol {scheme!r} is none of {', '.join(_SCHEMES)}"
     rest = rest.removesuffix("/")
     if rest.startswith("["):
