@@ -75,6 +75,7 @@ __all__ = [
     "ModelError",
     "load_model",
     "loads_model",
+    "model_budgets",
     "bind_distributions",
     "DEFAULT_EPSILON",
 ]
@@ -596,14 +597,27 @@ def load_model(
 
     Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
     file cannot be read or is not UTF-8."""
-    p = Path(path)
+    return _load(_read(path, max_memory), os.fspath(path), Path(path), max_states, max_memory)
+
+
+def _read(path: str | os.PathLike[str], max_memory: int | None) -> str:
     source = os.fspath(path)
     try:  # a regular file, no larger than the memory budget allows (file_rules)
-        text = file_rules.read_bytes(p, file_rules.read_limit(max_memory)).decode("utf-8")
+        return file_rules.read_bytes(path, file_rules.read_limit(max_memory)).decode("utf-8")
     except file_rules.InputFileError as exc:
         raise ModelError(str(exc)) from exc
     except OSError as exc:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
-    return _load(text, source, p, max_states, max_memory)
+
+
+def model_budgets(path: str | os.PathLike[str], *,
+                  max_memory: int | None = None) -> dict[str, float]:
+    """The ``[budgets]`` of the model file at ``path`` alone, read before the model is so
+    that a command holds every stage to them, the world's loading included (the command
+    line's time limit); ``{}`` when they cannot be read: :func:`load_model` says why."""
+    try:
+        return budgets_table(tomllib.loads(_read(path, max_memory)), _Context(os.fspath(path)))
+    except (ModelError, tomllib.TOMLDecodeError, RecursionError):
+        return {}

@@ -39,10 +39,12 @@ from mitld_lp.cli.kernel import (
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     PROG,
+    TimeLimit,
     UsageError,
     _command,
     _dumps,
     _say,
+    apply_file_time_limit,
     error_record,
     error_status,
     say_error,
@@ -92,6 +94,10 @@ _VERBS: list[
 ]
 
 
+#: The verbs that read one model file, whose ``[budgets] time_limit`` may set theirs.
+_MODEL_VERBS = ("info", "solve", "export", "simulate", "plot", "pareto")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
 
@@ -117,7 +123,8 @@ def _build_parser() -> argparse.ArgumentParser:
         p.add_argument("-v", "--verbose", action="store_true",
                        help="also the details of every stage (solver messages)")
         p.add_argument("--time-limit", type=seconds, metavar="SECONDS",
-                       help="stop after SECONDS with status time_limit (exit 3)")
+                       help="stop after SECONDS with status time_limit (exit 3; default: "
+                            "the model file's [budgets] time_limit)")
         p.set_defaults(run=run)
     return parser
 
@@ -191,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as stop:  # --help and --version have printed and exit 0
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
     args.started = time.monotonic()
+    apply_file_time_limit(args)  # a model file's [budgets] time_limit binds as the flag
     cancelled = threading.Event()
     outcome: list[int] = []
 
@@ -208,18 +216,19 @@ def main(argv: list[str] | None = None) -> int:
         package_log.addHandler(handler)
         package_log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
     # The solvers get the limit itself and answer with a status; the watchdog stops a
-    # stage that cannot (the product, a native call) shortly after it.
-    deadline = None if args.time_limit is None else (
-        args.started + args.time_limit + _WATCHDOG_GRACE)
+    # stage that cannot (the product, a native call, a world's factory) shortly after it.
+    # (args.limit: a batch replaces it while a model file's own limit runs.)
     try:
         worker.start()
         while worker.is_alive():
             worker.join(0.1)
-            if deadline is not None and time.monotonic() >= deadline and worker.is_alive():
+            limit = args.limit
+            if limit.passed(_WATCHDOG_GRACE) and worker.is_alive():
                 cancelled.set()
                 files.abandon(worker)
                 progress.abandon()
-                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "")
+                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "",
+                           limit)
                 watch.report(watch.SAID)
                 _worker = worker
                 return EXIT_UNCERTIFIED
@@ -237,24 +246,32 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _limited(argv: list[str]) -> argparse.Namespace | None:
-    """The arguments of a command with ``--time-limit`` (None without one, when the
-    arguments are wrong, :func:`main` says so, and for ``sweep``, whose worker processes
-    a killed parent would leave running: its points have their own limits)."""
-    if "--time-limit" not in " ".join(argv):
-        return None
+    """The arguments of a command with a time limit, ``--time-limit`` or its one model
+    file's ``[budgets] time_limit`` (None without one, when the arguments are wrong,
+    :func:`main` says so, and for ``sweep``, whose worker processes a killed parent would
+    leave running: its points have their own limits)."""
+    if "--time-limit" not in " ".join(argv) and (argv or [""])[0] not in _MODEL_VERBS:
+        return None  # neither the flag nor a model file that could set it
     try:
         args = _build_parser().parse_args(argv)
     except (UsageError, SystemExit):
         return None
-    return args if args.time_limit is not None and args.verb != "sweep" else None
+    if args.verb == "sweep":
+        return None
+    args.started = time.monotonic()
+    apply_file_time_limit(args)
+    return args if args.time_limit is not None else None
 
 
-def _time_stop(args: argparse.Namespace, where: str) -> None:
-    """The time-limit stop: the stop line, and the error object with ``--json``."""
-    message = f"time limit of {args.time_limit:g} s reached{where}"
+def _time_stop(args: argparse.Namespace, where: str, limit: TimeLimit | None = None) -> None:
+    """The time-limit stop: the stop line naming whose limit it was (``limit``, default
+    the command's), and the error object with ``--json``."""
+    limit = args.limit if limit is None else limit
+    assert isinstance(limit, TimeLimit)
+    message = f"time limit of {limit.seconds:g} s{limit.source} reached{where}"
     _say(f"stopped: {message}")
     if getattr(args, "json", False):
-        print(_dumps(error_record("time_limit", message, time_limit=args.time_limit)),
+        print(_dumps(error_record("time_limit", message, time_limit=limit.seconds)),
               flush=True)
 
 
@@ -273,13 +290,13 @@ def run() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
-    limited = _limited(sys.argv[1:])
-    if limited is not None:  # the limit is kept from a parent process (watch.py)
-        code = watch.watched(limited.time_limit, lambda: _time_stop(
-            limited, " (inside a long native call)"))
-        if code is not None:
-            sys.exit(code)
     try:
+        limited = _limited(sys.argv[1:])  # reads the arguments (and the model's budgets)
+        if limited is not None:  # the limit is kept from a parent process (watch.py)
+            code = watch.watched(limited.time_limit, lambda: _time_stop(
+                limited, " (inside a long native call)"))
+            if code is not None:
+                sys.exit(code)
         code = main()
     except KeyboardInterrupt:  # before the command started (reading the arguments)
         _say("interrupted")

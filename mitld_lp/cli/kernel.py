@@ -6,6 +6,7 @@ the problem those options pose (:func:`mitld_lp.problem.pose`)."""
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import math
 import sys
@@ -284,6 +285,60 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
                            "export --controller); this command would read the fully "
                            "observed product")
     return posed, build_posed(posed)
+
+
+class TimeLimit:
+    """The time limit the command's watchdog holds the work to (:func:`mitld_lp.cli.main`):
+    ``seconds`` from ``started`` (monotonic), ``source`` saying whose limit it is for the
+    stop line (empty for ``--time-limit``).  A batch replaces it while it runs a model
+    whose file sets its own (:func:`file_time_limit`)."""
+
+    __slots__ = ("seconds", "started", "source")
+
+    def __init__(self, seconds: float | None, started: float, source: str = "") -> None:
+        self.seconds, self.started, self.source = seconds, started, source
+
+    def passed(self, grace: float) -> bool:
+        return self.seconds is not None and time.monotonic() >= (
+            self.started + self.seconds + grace)
+
+
+def is_pattern(name: str) -> bool:
+    """A glob pattern the shell did not expand (and no file of that name)."""
+    return glob.has_magic(name) and not Path(name).exists()
+
+
+def one_model_file(args: argparse.Namespace) -> str | None:
+    """The one model file a command reads (None for a formula, a batch, a sweep, a
+    results file, a controller)."""
+    given = getattr(args, "model", None) if args.verb != "plot" else (
+        None if Path(args.input).suffix.lower() in (".csv", ".parquet") else args.input)
+    if isinstance(given, list):  # solve's: one file, or a batch
+        given = given[0] if len(given) == 1 and not is_pattern(given[0]) else None
+    return given if isinstance(given, str) else None
+
+
+def file_time_limit(path: str, max_memory: int | None = None) -> TimeLimit | None:
+    """The ``[budgets] time_limit`` of the model file ``path`` as the watchdog's limit,
+    from now; None when it sets none.  A model file's budget binds as the flag does: every
+    stage, the world's loading (a ``[python]`` factory) included."""
+    from mitld_lp.model import model_budgets
+
+    seconds = model_budgets(path, max_memory=max_memory).get("time_limit")
+    if seconds is None:
+        return None
+    return TimeLimit(seconds, time.monotonic(), f" (the [budgets] time_limit of {path})")
+
+
+def apply_file_time_limit(args: argparse.Namespace) -> None:
+    """``--time-limit`` from the one model file's ``[budgets]`` when not given
+    (:func:`file_time_limit`); ``args.limit`` the limit the watchdog holds."""
+    args.limit = TimeLimit(args.time_limit, args.started)
+    path = one_model_file(args) if args.time_limit is None else None
+    limit = None if path is None else file_time_limit(path, getattr(args, "max_memory", None))
+    if limit is not None:
+        args.time_limit, args.limit = limit.seconds, TimeLimit(limit.seconds, args.started,
+                                                               limit.source)
 
 
 def _time_left(args: argparse.Namespace) -> float | None:

@@ -32,6 +32,8 @@ from mitld_lp.cli.kernel import (
     _write,
     args_json,
     error_record,
+    file_time_limit,
+    is_pattern,
     model_options,
     other_file,
     read_model,
@@ -40,11 +42,6 @@ from mitld_lp.cli.kernel import (
 )
 from mitld_lp.util import progress
 from mitld_lp.util.text import printable
-
-
-def is_pattern(name: str) -> bool:
-    """A glob pattern the shell did not expand (and no file of that name)."""
-    return glob.has_magic(name) and not Path(name).exists()
 
 
 def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
@@ -93,9 +90,19 @@ def solve_batch(args: argparse.Namespace) -> int:
                 records.append({"file": path, **error_record(
                     MODEL_ERROR, "no file matches this pattern"), "certified": False})
             else:
-                outcome = run_model(
-                    lambda path=path: read_model(args, path),
-                    solve_settings(args), constraints=tuple(args.constraint), then=args.then)
+                # a model file's own time limit binds its run, the load included; one
+                # that cannot stop by itself (a world's factory looping) stops the batch,
+                # as the flag would (the watchdog of mitld_lp.cli.main)
+                own = None if args.time_limit is not None else file_time_limit(
+                    path, args.max_memory)
+                command, args.limit = args.limit, own or args.limit
+                try:
+                    outcome = run_model(
+                        lambda path=path: read_model(args, path),
+                        solve_settings(args), constraints=tuple(args.constraint),
+                        then=args.then, whole=True)
+                finally:
+                    args.limit = command
                 records.append({"file": path, **outcome.summary} if outcome.summary else {
                     "file": path, **error_record(outcome.status, outcome.error.removeprefix(
                         f"{path}: ") if outcome.error else ""), "certified": False})

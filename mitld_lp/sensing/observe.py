@@ -96,10 +96,13 @@ class SensedController:
                  moves: Mapping[tuple[int, str], Mapping[Obs, int | Absorbing]],
                  sensed: Sequence[str], events: Iterable[str],
                  game: Game[Any] | None = None,
-                 first_actions: Mapping[Hashable, str] | None = None) -> None:
+                 first_actions: Mapping[Hashable, str] | None = None,
+                 ignored: Iterable[str] = ()) -> None:
         self.initial, self.actions, self.moves = initial, tuple(actions), moves
         self.sensed_events = frozenset(sensed)
         self.events = frozenset(events)
+        # sensed events whose reports come too late to matter (mitld_lp.sensing.horizon)
+        self.ignored = frozenset(ignored)
         self.game, self.first_actions = game, dict(first_actions or {})
         self.reset()
 
@@ -123,7 +126,7 @@ class SensedController:
                    mdp.action_name(int(policy[i])) for i, s in enumerate(mdp.states)]
         return cls(initial=initial if isinstance(initial, Absorbing) else mdp.initial,
                    actions=actions, moves=belief.moves, sensed=belief.sensed,
-                   events=belief.sta.events, game=game)
+                   events=belief.sta.events, game=game, ignored=belief.ignored)
 
     def reset(self, seed: int | None = None) -> None:
         self.info: int | None = None
@@ -172,8 +175,8 @@ class SensedController:
             return self._choose(observation.state)
         if self.beyond_model or self.info is None:
             return self._choose(observation.state)
-        sensed = self.sensed_events
-        obs = (observation.state, observation.reports - sensed, observation.reports & sensed)
+        sensed, reports = self.sensed_events, observation.reports - self.ignored
+        obs = (observation.state, reports - sensed, reports & sensed)
         nxt = self.moves.get((self.info, self.last or ""), {}).get(obs)
         if nxt is None:
             self.beyond_model = True
@@ -199,7 +202,7 @@ class SensedController:
 
 # --------------------------------------------------------------------- the file
 
-FORMAT, VERSION = "mitld-lp-sensed-controller", 1
+FORMAT, VERSION = "mitld-lp-sensed-controller", 2
 _END = {Absorbing.TARGET: -1, Absorbing.SINK: -2, Absorbing.TRUNCATED: -3}
 _NAMES = {Absorbing.TARGET: "accepted", Absorbing.SINK: "rejected",
           Absorbing.TRUNCATED: "decided"}
@@ -252,7 +255,8 @@ def save_sensed(c: SensedController, path: str | os.PathLike[str], *,
             rows.append((src, number[act], index[world], mask,
                          _END[dst] if isinstance(dst, Absorbing) else dst))
     meta = {"format": FORMAT, "version": VERSION, "events": events,
-            "sensed": sorted(c.sensed_events), "actions": actions,
+            "sensed": sorted(c.sensed_events), "ignored": sorted(c.ignored),
+            "actions": actions,
             "initial": (_NAMES[c.initial] if isinstance(c.initial, Absorbing)
                         else int(c.initial))}
     arrays = {

@@ -90,6 +90,26 @@ def run_sweep(
         raise SweepError(f"retries: must be at least 0, got {retries}")
     if dask is not None and workers != 1:
         raise SweepError("give either workers or a Dask address, not both")
+    from mitld_lp.sweep import engines
+
+    # the scheduler answers before the results file is touched: a refused address
+    # leaves no file behind (nor a header alone)
+    client = None if dask is None else engines.connect(dask)
+    try:
+        return _run(sw, results, client, workers=workers, retries=retries, force=force,
+                    retry_failed=retry_failed, progress=progress, on_row=on_row)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run(sw: Sweep, results: str | os.PathLike[str] | None, client: Any, *, workers: int,
+         retries: int, force: bool, retry_failed: bool, progress: bool,
+         on_row: Callable[[dict[str, Any]], None] | None) -> SweepRun:
+    """:func:`run_sweep` once its arguments are checked (``client``: a Dask client, or
+    None for local processes)."""
+    from mitld_lp.sweep import engines
+
     store = None if results is None else Results(results, sw.name, sw.sweep_id, sw.columns,
                                                  force=force)
     keys = [point_key(p) for p in sw.points]
@@ -112,11 +132,8 @@ def run_sweep(
             queued.add(key)
             tasks.append(PointTask(i, sw.model_text(point), source, quiet))
     reused = sum(1 for k in set(keys) if k in done)
-
-    from mitld_lp.sweep import engines
-
-    if dask is not None:
-        finished = engines.dask_cluster(tasks, dask, retries)
+    if client is not None:
+        finished = engines.dask_cluster(tasks, client, retries)
     elif workers > 1 and len(tasks) > 1:
         finished = engines.process_pool(tasks, workers)
     else:
@@ -137,6 +154,7 @@ def run_sweep(
             if on_row is not None:
                 on_row(row)
     finally:
+        finished.close()  # the engine's own ending (pending tasks cancelled) comes first
         bar.close()
         if store is not None:
             store.close()

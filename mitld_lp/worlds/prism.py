@@ -374,8 +374,6 @@ def load_prism(
     memory = default_max_memory() if max_memory is None else max_memory
     where = os.fspath(path)
     p = Path(path)
-    if not p.is_file():
-        raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     depth = ExpressionDepth()

@@ -153,8 +153,10 @@ def check_text(path: Path, where: str, depth: ExpressionDepth) -> None:
 
     try:  # a regular file, bounded, before Storm reads it
         data = file_rules.read_bytes(path)
-    except file_rules.InputFileError as exc:
-        raise WorldError(f"{where}: {exc}") from None
+    except file_rules.InputFileError as exc:  # says what it is: a FIFO, a folder, too large
+        raise WorldError(f"{where}: {exc.strerror}") from None
+    except FileNotFoundError:
+        raise WorldError(f"{where}: no such PRISM file") from None
     except OSError as exc:
         raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
     try:
