@@ -125,7 +125,7 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
     its own retries) is replaced by the interval-iteration policy, certified the same way
     (exact value inside the bracket) when it failed numerically (``INACCURATE``,
     ``MAX_ITERATIONS``)."""
-    from mitld_lp.solvers.iteration import evaluate_policy
+    from mitld_lp.solvers.evaluation import evaluate_policy
     from mitld_lp.solvers.result import Status, read_only
 
     certify_tol = how.certify_tol
