@@ -3,23 +3,31 @@
 The references are independent of the solvers: every deterministic policy of a small
 MDP evaluated in exact rational arithmetic (``fractions.Fraction``; memoryless
 deterministic policies attain both optima of reachability), the graph's 0/1 sets read
-off those exact optima, and closed forms worked by hand.
+off those exact optima, and Storm's exact engine (``stormpy.build_model[Rational]``) on
+PRISM files written here.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from mitld_lp import load_model, synthesize
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.solvers import Status, evaluate_policy, interval_iteration, solve_lp
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.quotient import prob0_min, prob1_max, prob1_min
+
+needs_storm = pytest.mark.skipif(importlib.util.find_spec("stormpy") is None,
+                                 reason="needs stormpy: pip install -e '.[prism]'")
+
 
 # --------------------------------------------------------------------------- references
 
@@ -291,3 +299,160 @@ def test_a_quotient_answers_only_the_sense_it_was_reduced_for() -> None:
     q = analyse(mdp, mdp.target, sense=Sense.MIN)[0]
     with pytest.raises(ValueError, match="reduced for a minimum, not the maximum"):
         solve_lp(mdp, mdp.target, quotient=q)
+
+
+# --------------------------------------------------------------------------- rare events
+
+RARE = """mdp
+module m
+  k : [0..11] init 0;
+  [a] k<10 -> 0.001 : (k'=k+1) + 0.999 : (k'=11);
+  [b] k<10 -> 0.0011 : (k'=k+1) + 0.9989 : (k'=11);
+  [end] k>=10 -> true;
+endmodule
+label "hit" = k=10;
+"""
+
+# Six stages, each failing by a slow fault (1e-7 a try, retried half the time) or a
+# fast one (3e-6), or (from stage 2 on) sent back a stage (1e-6 of failing on the way):
+# stages 1-5 form one cycle, so
+# the minimum and the maximum are solved on a block of five states; at stage 0 the
+# system may also be shut down for ever (the minimum is 0 from there: Prob0E).
+CASCADE = """mdp
+module cascade
+  s : [0..7] init 0;
+  off : bool init false;
+  [slow] s<6 & !off -> 0.0000001 : (s'=s+1) + 0.5 : (s'=s) + 0.4999999 : (s'=7);
+  [fast] s<6 & !off -> 0.000003 : (s'=s+1) + 0.999997 : (s'=7);
+  [back] s>1 & s<6 & !off -> 0.3 : (s'=s-1) + 0.000001 : (s'=s+1) + 0.699999 : (s'=7);
+  [stop] s=0 & !off -> (off'=true);
+  [idle] off -> true;
+  [done] s>=6 -> true;
+endmodule
+label "hit" = s=6;
+"""
+
+
+def _storm_exact(prism: Path, prop: str) -> Fraction:
+    import stormpy
+
+    program = stormpy.parse_prism_program(str(prism))
+    props = stormpy.parse_properties(prop, program)
+    model = stormpy.build_model[stormpy.Rational](program, props)
+    value = stormpy.model_checking(model, props[0]).get_value_vector()[model.initial_states[0]]
+    return Fraction(int(str(value.numerator)), int(str(value.denominator)))
+
+
+def _model(tmp_path: Path, text: str, spec: str, objective: str) -> Path:
+    prism = tmp_path / "m.prism"
+    prism.write_text(text)
+    path = tmp_path / f"m_{objective}.toml"
+    path.write_text(f'name = "rare"\nspec = "{spec}"\nobjective = "{objective}"\n\n'
+                    f'[prism]\nfile = "{prism.name}"\n')
+    return path
+
+
+@needs_storm
+@pytest.mark.parametrize(("objective", "float_exact"), [
+    ("min", Fraction(0.001) ** 10), ("max", Fraction(0.0011) ** 10)])
+def test_the_issues_rare_example(tmp_path: Path, objective: str,
+                                 float_exact: Fraction) -> None:
+    """The issue's 12-state MDP: ``F hit`` is 1e-30 at least and 0.0011**10 at most
+    (Storm, exact); in the float model's own arithmetic (0.001 and 0.0011 as stored)
+    the bracket holds the optimum to relative 1e-12, not [0, 0] (the minimum read back
+    from 1 - the complement's maximum) nor a policy a thousand times worse."""
+    path = _model(tmp_path, RARE, "F hit", objective)
+    storm = _storm_exact(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
+    assert storm == (Fraction(1, 10**30) if objective == "min"
+                     else Fraction(25937424601, 10**40))
+    for method in ("lp", "vi"):
+        r = synthesize(load_model(path), method=method)
+        assert r.certified, r.failed_checks
+        assert r.sense == objective and not r.complemented
+        for end in (r.lower, r.upper):
+            assert _within(end, float_exact, 1e-12), (method, end, float(float_exact))
+            assert _within(end, storm, 1e-12)
+        # the controller plays the same choice every step: a for the least, b for the most
+        first = int(r.lower_model.policy[r.mdp.initial])
+        assert r.mdp.action_name(first) == ("a" if objective == "min" else "b")
+
+
+@needs_storm
+@pytest.mark.parametrize("objective", ["min", "max"])
+@pytest.mark.parametrize("start", [0, 4])
+def test_a_fault_cascade_to_six_digits(tmp_path: Path, objective: str, start: int) -> None:
+    """A cascade of six rare faults with a cycle through the stages (a block of five
+    states): the bracket contains Storm's exact value and is at most 1e-6 of it wide.
+    From stage 0 the minimum is 0 (shut down): the graph says so, exactly."""
+    text = CASCADE.replace("s : [0..7] init 0", f"s : [0..7] init {start}")
+    path = _model(tmp_path, text, "F hit", objective)
+    r = synthesize(load_model(path))
+    assert r.certified, r.failed_checks
+    exact = _storm_exact(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
+    if exact == 0:
+        assert objective == "min" and start == 0
+        assert r.lower == r.upper == 0.0
+        return
+    assert exact < Fraction(1, 10**8)  # rare: below any absolute tolerance
+    # the float model differs from the decimal one by a few roundings a step
+    assert Fraction(r.lower) <= exact * (1 + Fraction(1, 10**12))
+    assert Fraction(r.upper) >= exact * (1 - Fraction(1, 10**12))
+    assert Fraction(r.upper - r.lower) <= Fraction(1, 10**6) * exact
+
+
+def test_a_co_safe_minimum_runs_its_own_automaton_a_safety_one_the_complement() -> None:
+    """By hand on a fork: ``a`` reaches A w.p. 0.6, ``b`` w.p. 0.2.  Minimising ``F A``
+    is solved on its own automaton (the controller's runs accept when A is reached);
+    ``G !A``, a task with a safety part, on its complement.  The simulation of each
+    controller estimates the task's own probability, whichever automaton it runs."""
+    from mitld_lp import Model, simulate
+    from mitld_lp.worlds.game import ExplicitGame
+
+    fork = ExplicitGame(
+        initial="s",
+        transitions={"s": {"a": {"A": 0.6, "B": 0.4}, "b": {"A": 0.2, "C": 0.8}},
+                     "A": {"wait": {"A": 1.0}}, "B": {"wait": {"B": 1.0}},
+                     "C": {"wait": {"C": 1.0}}},
+        labels={"A": {"A"}, "B": {"B"}, "C": {"C"}})
+    for spec, direct, task in (("F A", True, 0.2), ("G !A", False, 0.4)):
+        r = synthesize(Model.from_game(fork, spec, objective="min"))
+        assert r.certified and r.complemented is not direct
+        assert r.sense == ("min" if direct else "max")
+        assert r.lower == pytest.approx(task, abs=1e-12)
+        assert r.upper == pytest.approx(task, abs=1e-12)
+        sim = simulate(Model.from_game(fork, spec, objective="min"), r.controller,
+                       runs=2000, seed=1, max_steps=5)
+        assert sim.ci_low <= task <= sim.ci_high, (spec, sim)
+
+
+@needs_storm
+def test_a_bundled_minimum_is_storms_on_its_own_product(tmp_path: Path) -> None:
+    """models/red_light.toml minimised (a co-safe task with truncated events): the
+    upper end is the controller's exact value with truncation counted as the task
+    happening, the lower end the least with truncation counted against it; Storm's
+    sound value iteration (relative 1e-13) on the product written as DRN, for each
+    target, gives the same minima (read back from the complement's maximum the upper end
+    was 7.794158388474415e-06, off by 4e-11 of itself)."""
+    import stormpy
+    import stormpy.environments as envs
+
+    from mitld_lp.solvers import write_drn
+
+    root = Path(__file__).resolve().parent.parent
+    r = synthesize(load_model(root / "models" / "red_light.toml"), objective="min")
+    assert r.certified and r.sense == "min" and r.sta.truncation_points
+    env = stormpy.Environment()
+    env.solver().force_soundness = True
+    minmax = env.solver().min_max()
+    minmax.method = envs.MinMaxMethod.SOUND_VALUE_ITERATION
+    minmax.precision = stormpy.Rational("1/10000000000000")
+    minmax.relative_termination_criterion = True
+    prop = stormpy.parse_properties('Pmin=? [F "target"]')[0]
+    goal = np.asarray(r.acceptance.goal)
+    for target, ours in ((goal | np.asarray(r.mdp.truncated), r.upper), (goal, r.lower)):
+        path = write_drn(r.mdp, target, tmp_path / "p.drn", overwrite=True)
+        model = stormpy.build_model_from_drn(str(path))
+        value = stormpy.model_checking(model, prop, environment=env).get_value(
+            model.initial_states[0])
+        assert ours == pytest.approx(value, rel=1e-12, abs=1e-300)
+    assert r.upper > 7e-6

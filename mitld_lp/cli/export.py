@@ -80,8 +80,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         return EXIT_OK
     posed, built = _build(args, "export")
     if posed.minimise:
-        raise UsageError("export: the model's objective is min; its LP and DRN would be "
-                         "those of the complement's maximum (not exported, to keep the "
+        raise UsageError("export: the model's objective is min; the LP and the DRN's "
+                         "target are written for a maximum (not exported, to keep the "
                          "files' optimum the task's)")
     mdp = built.mdp
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
@@ -150,9 +150,13 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
-        if r.objective == "min":  # the complement's automaton: "accept" marks failing runs
+        if r.complemented:  # the complement's automaton: "accept" marks failing runs
             _out(f"wrote {chain} (P=? [F \"accept\"] = 1 - upper = {1.0 - r.upper!r}: for "
                  "a minimised task \"accept\" marks the runs that fail it)")
+        elif r.objective == "min":  # the controller's guarantee counts truncation in
+            _out(f"wrote {chain} (P=? [F (\"accept\" | \"truncated\")] = upper = "
+                 f"{r.upper!r}: for a minimised task the runs past a truncation point "
+                 "count as the task's)")
         else:
             _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
     if tree:
