@@ -294,6 +294,26 @@ def test_a_slow_rare_block_is_jumped_to_relative_precision(sense: Sense) -> None
     assert mdp.action_name(int(r.policy[0])) == ("a" if sense is Sense.MIN else "b")
 
 
+@pytest.mark.parametrize("sense", [Sense.MIN, Sense.MAX])
+def test_policy_iteration_tells_rare_choices_apart(sense: Sense) -> None:
+    """Policy iteration on the cycle's block, started from the wrong gamble in both
+    states, switches to the right one: the gain (about 1e-20 a step) is judged relative
+    to the values compared (1e-17), not to 1; the values are the closed form's."""
+    from mitld_lp.solvers.quotient import reduce
+    from mitld_lp.solvers.topological import Block, improve_policy
+
+    mdp = _cycle(0.999, (1e-20, 2e-20))
+    q = reduce(mdp, mdp.target, sense=sense)
+    block = Block.of(q, np.arange(q.n_states))
+    wrong = 1 if sense is Sense.MIN else 0  # b for the least, a for the most
+    start = np.asarray(block.groups[:-1]) + wrong
+    chosen, v, _ = improve_policy(block, block.to_target, start, sense=sense)
+    assert np.array_equal(chosen, np.asarray(block.groups[:-1]) + (1 - wrong))
+    exact = Fraction(1e-20 if sense is Sense.MIN else 2e-20) / (1 - Fraction(0.999))
+    for value in v:
+        assert _within(float(value), exact, 1e-12), float(value)
+
+
 def test_a_quotient_answers_only_the_sense_it_was_reduced_for() -> None:
     mdp = small_mdp(3)
     q = analyse(mdp, mdp.target, sense=Sense.MIN)[0]
