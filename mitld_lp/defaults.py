@@ -11,6 +11,7 @@ __all__ = [
     "MAX_STATES",
     "MAX_AUTOMATON_STATES",
     "TOL",
+    "PRECISION",
     "CERTIFY_TOL",
     "SOLVER",
     "RUNS",
@@ -37,6 +38,11 @@ some 25 GB and hours before the budget acted; 200,000 is about 1 GB and minutes.
 
 TOL = 1e-9
 """Accuracy asked of the solvers (LP gap and feasibility, interval-iteration gap)."""
+
+PRECISION = 1e-6
+"""Relative precision asked of interval iteration beside :data:`TOL`: a bracket is
+closed when its gap is below both ``TOL`` and ``PRECISION`` times its lower bound, so a
+rare value (1e-30) is known to six digits, as Storm's sound methods report by default."""
 
 CERTIFY_TOL = 1e-6
 """How far two routes to one value may differ for the answer to count as certified."""

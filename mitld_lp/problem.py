@@ -19,10 +19,12 @@ The routes (which solver chain accepts the problem):
 * ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
   co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.sensing.solve`.
 
-``objective = "min"`` (PRISM's ``Pmin``) is solved as the maximum of the complement:
+``objective = "min"`` (PRISM's ``Pmin``) is posed as the maximum of the complement:
 ``Pmin(phi) = 1 - Pmax(not phi)``, with the complement taken on the automaton
 (:meth:`mitld_lp.automata.dta.DTA.complement`), so the classes swap (co-safe <-> safety,
-obligation stays) and the route is chosen for the complement.
+obligation stays) and the route is chosen for the complement; the plain route then
+solves a co-safe task's minimum as a minimum, on the task's own automaton
+(:mod:`mitld_lp.routes.stages`), which keeps a rare probability's digits.
 """
 
 from __future__ import annotations

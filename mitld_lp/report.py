@@ -41,10 +41,10 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     ``result.lower_model.policy_values``), ``accepting_component`` (whether the state
     lies in an accepting end component of a task with a safety part: the task is then
     kept by playing ``action`` forever, an action that never leaves the component;
-    always false for a co-safe task).  For ``objective = "min"`` the policy is the
-    complement's and ``value`` is read back in the task's terms: ``1 -`` the
-    complement's exact value, the most the task can happen under the policy from there
-    (truncation counted as the task happening).
+    always false for a co-safe task).  For ``objective = "min"`` ``value`` is the most
+    the task can happen under the policy from there (truncation counted as the task
+    happening): the policy's exact value, or, where the minimum is the complement's
+    maximum read back (``result.complemented``), ``1 -`` the complement's.
     """
     if result.route == "constrained":
         return randomised_table(result)
@@ -54,7 +54,7 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
         return sensed_table(result)
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
-    if result.objective == "min":  # Pmin(task) = 1 - Pmax(not task), state by state
+    if result.complemented:  # Pmin(task) = 1 - Pmax(not task), state by state
         values = 1.0 - np.asarray(values, dtype=np.float64)
     obligations = result.dta.states
     goal = result.acceptance.goal
@@ -164,17 +164,21 @@ def summary(result: Any) -> dict[str, Any]:
         "status": lp.status.value, "solver": lp.solver, "backend": lp.backend,
         "primal_objective": lp.primal_objective, "dual_objective": lp.dual_objective,
         "iterations": lp.iterations, "seconds": lp.seconds, "message": lp.message}
+    # a minimum solved as one: the controller's model (upper) bounds it from above
+    below, above = ((high.iteration.value_lower, low.iteration.value_upper)
+                    if result.sense == "min" else
+                    (low.iteration.value_lower, high.iteration.value_upper))
     out["iteration"] = {"status": low.iteration.status.value,
-                        **_task_terms(result, low.iteration.value_lower,
-                                      high.iteration.value_upper),
+                        **_task_terms(result, below, above),
                         "iterations": low.iteration.iterations}
     return out
 
 
 def _task_terms(result: Result, lower: float, upper: float) -> dict[str, float]:
     """A bracket of the solved automaton in the task's terms: the complement's
-    ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task."""
-    if result.objective == "min":
+    ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task read back from
+    its complement (``result.complemented``)."""
+    if result.complemented:
         return {"lower": 1.0 - upper, "upper": 1.0 - lower}
     return {"lower": lower, "upper": upper}
 

@@ -45,9 +45,11 @@ class Result:
     ``lower``: what the returned controller achieves in the real, untruncated world
     (for a band, whatever law of the band the events follow; with constraints, each
     constraint holding); ``upper``: what no policy beats; the optimum lies in between.
-    For ``objective="min"`` both are read back in the task's terms
-    (``Pmin(task) = 1 - Pmax(not task)``): ``upper`` is then what the controller
-    guarantees at most, ``lower`` what no policy goes below.  ``value``: the method's
+    For ``objective="min"`` ``upper`` is what the controller guarantees at most,
+    ``lower`` what no policy goes below: solved as a minimum on the task's own
+    automaton (``sense == "min"``: a co-safe task on the plain route), or read back
+    from the complement's maximum (``Pmin(task) = 1 - Pmax(not task)``,
+    :attr:`complemented`).  ``value``: the method's
     optimum (the lower model's).  ``checks``: every certification check, each once;
     ``certified``: all passed.  ``mdp``: the model the solver worked on (an interval MDP
     for a band; for constraints the product, ``merged`` the model the LP solved).
@@ -69,8 +71,9 @@ class Result:
     mdp: Any
     timings: Mapping[str, float]  # seconds per stage
     solve_cpu: float = float("nan")  # CPU seconds of the solve stage (all threads)
-    dta: DTA | None = None  # the task's automaton (its complement for "min")
-    # the two solved models (plain and robust routes)
+    dta: DTA | None = None  # the task's automaton (its complement if ``complemented``)
+    # the two solved models (plain and robust routes): the controller's (``lower_model``:
+    # the lower model, for a minimum solved as one the upper) and the bound's
     lower_model: Any = None
     upper_model: Any = None
     acceptance: Any = None  # the target the bracket is about (its goal, its components)
@@ -93,6 +96,15 @@ class Result:
     # exact=True: the optimum as fractions (mitld_lp.exact.ExactAnswer); lower and upper
     # are then its two fractions rounded outward
     exact: Any = None
+    # how the solver optimised the solved automaton's target: "min" for a minimum solved
+    # as one (the automaton is the task's own); "max" otherwise
+    sense: str = "max"
+
+    @property
+    def complemented(self) -> bool:
+        """Whether the solved automaton (``dta``, the controller's) is the task's
+        complement, its values read back as ``1 -`` them: a minimum not solved as one."""
+        return self.objective == "min" and self.sense == "max"
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -164,23 +176,32 @@ SynthesisResult = Result
 
 
 def from_models(lower_model: Any, upper_model: Any, initial: int,
-                objective: str) -> dict[str, Any]:
+                objective: str, sense: str = "max") -> dict[str, Any]:
     """The answer's fields read from two solved models (plain and robust routes): the
     lower model's policy value and the upper model's sound upper bound, in the task's
     terms; the status is ``OPTIMAL`` when both solves succeeded, else the first other;
     every check once (the two models are one when nothing is truncated; otherwise each
-    check's name says which model it checked)."""
+    check's name says which model it checked).  ``sense="min"``: the models were
+    minimised on the task's own automaton, the first (the controller's) being the upper
+    model, whose policy value is the bracket's upper end, the second the lower model,
+    whose iteration lower bound is its lower end."""
     from mitld_lp.solvers.result import Status
 
     policy = float(lower_model.policy_values[initial])
-    # the optimum is at least the policy's exact value: a bound a rounding left below it
-    # is raised to it, so the bracket never inverts (also read back for "min")
-    bound = max(float(upper_model.bracket[1]), policy)
     models = (lower_model,) if upper_model is lower_model else (lower_model, upper_model)
-    if objective == "min":
-        lower, upper, value = 1.0 - bound, 1.0 - policy, 1.0 - lower_model.value
+    if sense == "min":
+        # the optimum is at most the policy's exact value (the bracket never inverts)
+        lower, upper = min(float(upper_model.bracket[0]), policy), policy
+        value = lower_model.value
     else:
-        lower, upper, value = policy, bound, lower_model.value
+        # the optimum is at least the policy's exact value: a bound a rounding left
+        # below it is raised to it, so the bracket never inverts (also read back for
+        # "min")
+        bound = max(float(upper_model.bracket[1]), policy)
+        if objective == "min":
+            lower, upper, value = 1.0 - bound, 1.0 - policy, 1.0 - lower_model.value
+        else:
+            lower, upper, value = policy, bound, lower_model.value
     return {
         "lower": lower, "upper": upper, "value": float(value),
         "status": next((m.status for m in models if m.status is not Status.OPTIMAL),
@@ -190,5 +211,5 @@ def from_models(lower_model: Any, upper_model: Any, initial: int,
         "checks": tuple(c if len(models) == 1 else Check(f"{m.which} model: {c.name}",
                                                           c.passed, c.detail)
                         for m in models for c in m.checks),
-        "lower_model": lower_model, "upper_model": upper_model,
+        "lower_model": lower_model, "upper_model": upper_model, "sense": sense,
     }

@@ -166,6 +166,12 @@ class Stepper:
         v = tuple(self._plan.verdicts[self._memory[0]])
         return (ACCEPTED, *v[1:]) if self.keeping else v
 
+    def task_verdict(self, state: int) -> int:
+        """The task's verdict in automaton state ``state`` of the controller's own
+        automaton (accepted 1, rejected 0, undecided -1): which automaton it runs, the
+        task's or its complement's, is told by the task's accepting state."""
+        return int(self._plan.verdicts[state][0])
+
     @property
     def status_name(self) -> str:
         v = REJECTED if self._lost else self.verdicts[0]

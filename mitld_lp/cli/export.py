@@ -103,8 +103,8 @@ def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
         return code
     posed, built = _build(args, "export")
     if posed.minimise:
-        raise UsageError("export: the model's objective is min; its LP and DRN would be "
-                         "those of the complement's maximum (not exported, to keep the "
+        raise UsageError("export: the model's objective is min; the LP and the DRN's "
+                         "target are written for a maximum (not exported, to keep the "
                          "files' optimum the task's)")
     mdp = built.mdp
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
@@ -173,11 +173,18 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
-        accept = 1.0 - r.upper if r.objective == "min" else r.lower
-        _wrote(args, said, "chain", chain, f"wrote {chain} (P=? [F \"accept\"] = " + (
-            f"1 - upper = {accept!r}: for a minimised task \"accept\" marks the runs that "
-            "fail it)" if r.objective == "min" else f"lower = {accept!r})"),
-            chain_accept=accept)
+        if r.complemented:  # the complement's automaton: "accept" marks failing runs
+            accept = 1.0 - r.upper
+            said_chain = (f"P=? [F \"accept\"] = 1 - upper = {accept!r}: for a minimised task "
+                          "\"accept\" marks the runs that fail it")
+        elif r.objective == "min":  # the controller's guarantee counts truncation in
+            accept = r.upper
+            said_chain = (f"P=? [F (\"accept\" | \"truncated\")] = upper = {accept!r}: for a "
+                          "minimised task the runs past a truncation point count as the task's")
+        else:
+            accept = r.lower
+            said_chain = f"P=? [F \"accept\"] = lower = {accept!r}"
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     if tree:
         from mitld_lp.running.tree import write_tree
 

@@ -121,18 +121,20 @@ def _check_budget(mdp: Any, policies: list[np.ndarray], targets: list[np.ndarray
 
 def exact_answer(mdp: Any, game: Any, sta: Any, models: tuple[Any, Any],
                  goal: np.ndarray, *, sense: str, complemented: bool,
-                 deadline: float = math.inf) -> tuple[ExactAnswer | None, Any, Check]:
+                 deadline: float = math.inf
+                 ) -> tuple[ExactAnswer | None, tuple[Any, Any], Check]:
     """Both truncation models of ``mdp`` (target ``goal``; the upper model's also the
     truncated states) made exact from their float solutions ``models`` (the lower and
     upper :class:`~mitld_lp.routes.plain.ModelSolution`, one object when nothing is
     truncated), optimised in ``sense``; ``complemented``: the models are the
     complement's maximum, read back as ``1 -`` (a minimised task on main's route).
 
-    Returns the :class:`ExactAnswer` (None past ``deadline``), the lower model with the
-    exact policy (its float values evaluated again when a choice was switched), and the
-    check that says what was done.  Raises :class:`ExactTooLarge` (a budget) and
-    :class:`ExactError` (a model whose exact probabilities cannot be had)."""
-    from mitld_lp.solvers.iteration import evaluate_policy
+    Returns the :class:`ExactAnswer` (None past ``deadline``), the two models with their
+    exact policies (their float values evaluated again where a choice was switched; one
+    object twice when nothing is truncated), and the check that says what was done.
+    Raises :class:`ExactTooLarge` (a budget) and :class:`ExactError` (a model whose exact
+    probabilities cannot be had)."""
+    from mitld_lp.solvers.evaluation import evaluate_policy
     from mitld_lp.solvers.result import read_only
     from mitld_lp.worlds import WorldError
 
@@ -161,18 +163,21 @@ def exact_answer(mdp: Any, game: Any, sta: Any, models: tuple[Any, Any],
             switched += solved.switched
             policies.append(solved.policy)
     except TimeUp:
-        return None, low, Check("exact optimum", False,
+        return None, (low, high), Check("exact optimum", False,
                                 f"time limit after {time.perf_counter() - t0:.1f} s")
     lo, hi = optima[0], optima[-1]
     if complemented:
         lo, hi = 1 - hi, 1 - lo
     answer = ExactAnswer(lo, hi, rounds, switched, time.perf_counter() - t0)
-    exact_low = low
-    if not np.array_equal(policies[0], low.policy):
-        exact_low = replace(low, policy=read_only(policies[0]), policy_values=read_only(
-            evaluate_policy(mdp, targets[0], policies[0])))
+    exact_models = tuple(
+        model if np.array_equal(policy, model.policy) else replace(
+            model, policy=read_only(policy),
+            policy_values=read_only(evaluate_policy(mdp, target, policy)))
+        for model, policy, target in zip((low, high)[:len(policies)], policies, targets,
+                                         strict=True))
+    pair = (exact_models[0], exact_models[-1])
     shown = str(lo) if lo == hi else f"[{lo}, {hi}]"
     detail = (f"{shown if len(shown) <= 80 else 'found'}: {rounds} exact policy "
               f"evaluation{'s' if rounds != 1 else ''}, {switched} float choice"
               f"{'s' if switched != 1 else ''} switched, {answer.seconds:.2f} s")
-    return answer, exact_low, Check("exact optimum", True, detail)
+    return answer, pair, Check("exact optimum", True, detail)

@@ -16,6 +16,12 @@ as losing gives the *lower* model, as winning the *upper* model.  Each model is 
   ``certify_tol``; one Bellman sweep over every state checks that the policy is optimal
   everywhere, not only where it goes.
 
+A minimum (``sense="min"``: a co-safe task minimised on its own product,
+:mod:`mitld_lp.routes.stages`) is solved as one, on quotients without end components
+(:func:`mitld_lp.solvers.analysis.analyse`): the controller's policy is the upper
+model's (truncation counted as the task happening: what the policy guarantees at most),
+the bound no policy goes below the lower model's.
+
 :func:`solve_models` is that solve on any MDP with a target (the sensed route's
 information-state product uses it too); :func:`solve_plain` is the plain route.
 """
@@ -40,7 +46,7 @@ from mitld_lp.util.heap import release_free_memory
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
     from mitld_lp.solvers.lp import Backend
-    from mitld_lp.solvers.quotient import Quotient
+    from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
@@ -54,7 +60,8 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ModelSolution:
-    """The solution of one of the two models (lower: truncation loses; upper: it wins)."""
+    """The solution of one of the two models (lower: truncation loses; upper: it wins),
+    optimised in ``sense`` (``"max"``, or ``"min"`` for a minimum solved as one)."""
 
     which: str
     status: Status
@@ -66,6 +73,10 @@ class ModelSolution:
     iteration: IterationResult
     prob0: np.ndarray  # (n_states,) bool: the states from which the target is unreachable
     checks: tuple[Check, ...]
+    sense: str = "max"
+    # the values the graph decides, 0 or 1 (Storm's prob01, in ``sense``): every other
+    # state's optimum is strictly between 0 and 1
+    qualitative: Qualitative | None = None
 
     @property
     def certified(self) -> bool:
@@ -89,6 +100,7 @@ class _Settings:
     solver: str
     backend: Backend
     tol: float
+    precision: float | None  # relative precision of the iteration's bracket
     certify_tol: float
     progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
     decompose: bool
@@ -111,13 +123,14 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
         return None
     from mitld_lp.solvers.lp import solve_lp
 
-    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
-                    backend=how.backend, tol=how.tol, decompose=how.decompose,
+    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient,
+                    sense=quotient.sense, solver=how.solver, backend=how.backend,
+                    tol=how.tol, precision=how.precision, decompose=how.decompose,
                     time_limit=how.remaining(), bounds=(it.lower, it.upper),
                     everywhere=quotient.initial < 0, progress=how.progress)
 
 
-def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
+def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], it: IterationResult,
                lp: LPResult | None, which: str, how: _Settings) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
@@ -125,7 +138,7 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
     its own retries) is replaced by the interval-iteration policy, certified the same way
     (exact value inside the bracket) when it failed numerically (``INACCURATE``,
     ``MAX_ITERATIONS``)."""
-    from mitld_lp.solvers.iteration import evaluate_policy
+    from mitld_lp.solvers.evaluation import evaluate_policy
     from mitld_lp.solvers.result import Status, read_only
 
     certify_tol = how.certify_tol
@@ -157,10 +170,14 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
     ))
     checks.append(close("policy value = optimum", exact, value, certify_tol))
-    checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
-    checks.append(_bellman(mdp, target, values, certify_tol))
-    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, prob0,
-                         tuple(checks))
+    minimum = str(decided.sense) == "min"
+    if minimum:  # the iteration's bound beyond what any policy achieves
+        checks.append(close("optimum = iteration lower bound", value, lo, certify_tol))
+    else:
+        checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
+    checks.append(_bellman(mdp, target, values, certify_tol, decided))
+    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it,
+                         decided.unreachable, tuple(checks), str(decided.sense), decided)
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
@@ -172,25 +189,44 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     from mitld_lp.solvers.iteration import interval_iterations
 
     decided = quotients[0].initial < 0
-    return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
-                               time_limit=how.remaining(),
+    # the relative precision where the bracket is the answer's (the initial state);
+    # when the graph decides that, the LP solves every state and the bounds only prune
+    return interval_iterations(mdp, quotients, tol=how.tol,
+                               precision=None if decided else how.precision,
+                               progress=how.progress, time_limit=how.remaining(),
                                gap="max" if decided else "initial")
 
 
-def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
+def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float,
+             decided: Qualitative) -> Check:
     """The policy is optimal from every state, not only where it goes: no choice of any
     state does better against the policy's exact values ``V`` than ``V`` itself,
     ``max_c P(c) . V <= V(s) + tol`` (one sweep).  Then ``V`` is a pre-fixed point of
     the Bellman operator, so ``V >= V*`` (the least one), and ``V <= V*`` as a policy's
-    values: the policy is optimal in every state."""
+    values: the policy is optimal in every state.  For a minimum, ``min_c P(c) . V >=
+    V(s) - tol`` and ``V = 0`` where the graph says some policy avoids the target for
+    ever (``Prob0E``): the other states have no end component, where the Bellman
+    operator has one fixed point, so ``V`` is it."""
     v = np.where(target, 1.0, values)
-    best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
-    gap = np.where(target, 0.0, best - v)
+    minimum = str(decided.sense) == "min"
+    if minimum:
+        best = np.minimum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
+        gap = np.where(target, 0.0, v - best)
+    else:
+        best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
+        gap = np.where(target, 0.0, best - v)
     worst = int(np.argmax(gap)) if gap.size else 0
     over = float(gap[worst]) if gap.size else 0.0
-    return Check("policy optimal in every state (Bellman)", over <= tol,
-                 f"max_s (max_c P(c).V - V(s)) = {over:.2e} (tol {tol:g})"
-                 + (f" at state {mdp.states[worst]}" if over > tol else ""))
+    word = "V(s) - min_c P(c).V" if minimum else "max_c P(c).V - V(s)"
+    detail = (f"max_s ({word}) = {over:.2e} "
+              f"(tol {tol:g})" + (f" at state {mdp.states[worst]}" if over > tol else ""))
+    passed = over <= tol
+    if minimum:
+        kept = np.flatnonzero(np.asarray(decided.zero) & (v != 0.0))
+        passed = passed and kept.size == 0
+        detail += ("; V = 0 where some policy avoids the target for ever" if kept.size == 0
+                   else f"; V > 0 at state {mdp.states[int(kept[0])]} of Prob0E")
+    return Check("policy optimal in every state (Bellman)", passed, detail)
 
 
 def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
@@ -212,28 +248,35 @@ def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolu
     return replace(solution, policy=policy, checks=(*solution.checks, check))
 
 
-def solve_models(mdp: MDP, accept: Acceptance, s: Settings,
-                 t0: float) -> tuple[ModelSolution, ModelSolution]:
+def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
+                 sense: str = "max") -> tuple[ModelSolution, ModelSolution]:
     """Both truncation models of ``mdp`` solved and certified (module docs) for the
     target ``accept`` (its goal; a task's accepting end components kept by their
     choices), with the settings ``s`` of a posed problem, the time limit counted from
-    ``t0``.  The two are one object when nothing is truncated."""
+    ``t0``, maximised (``sense="min"``: minimised).  Returned as (the controller's
+    model, the bound's model): for a maximum the lower model then the upper one, for a
+    minimum the upper then the lower (module docs).  The two are one object when
+    nothing is truncated."""
+    from mitld_lp import defaults
     from mitld_lp.solvers.analysis import analyse
+    from mitld_lp.solvers.graph import Sense
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, s.certify_tol, s.progress,
-                    s.decompose is not False,
+    how = _Settings(s.method, s.solver, s.backend, s.tol, defaults.PRECISION,
+                    s.certify_tol, s.progress, s.decompose is not False,
                     float("inf") if s.time_limit is None else t0 + s.time_limit)
-    quotients = analyse(mdp, accept.goal, mdp.truncated)
+    quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
     its = _iterate(mdp, quotients, how)
     lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.prob0, q.layers) for q in quotients]
+    kept = [(np.asarray(q.target), q.qualitative, q.layers) for q in quotients]
     del quotients
     solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
                  zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
+    if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
+        low, high = high, low
     kept_low = _keeping(mdp, accept, low)
     return kept_low, (kept_low if high is low else high)
 
@@ -243,18 +286,24 @@ def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
            ) -> tuple[dict[str, Any], ModelSolution, ModelSolution]:
     """The exact answer (:func:`mitld_lp.exact.exact_answer`) as the result's fields: the
     bracket the two fractions, rounded outward to floats, and the exact record; the
-    models with the lower one's exact policy.  The models are the complement's maximum
-    for a minimised task (:func:`mitld_lp.routes.stages.build_posed`)."""
+    models (the controller's, the bound's: :func:`solve_models`) with their exact
+    policies.  A minimum is the task's own (``built.sense == "min"``) or the complement's
+    maximum read back (a task with a safety part: :func:`mitld_lp.routes.stages.build_posed`)."""
     from mitld_lp.exact.stage import exact_answer, float_above, float_below
     from mitld_lp.solvers.result import Status
 
     s = posed.settings
     deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
-    answer, exact_low, check = exact_answer(
-        built.mdp, posed.model.game, built.sta, (low, high), accept.goal, sense="max",
-        complemented=posed.minimise, deadline=deadline)
-    low_checked = replace(exact_low, checks=(*exact_low.checks, check))
-    models = (low_checked, low_checked if high is low else high)
+    minimum = built.sense == "min"
+    # exact_answer takes the truncation models in their order (lower, upper); for a
+    # minimum solve_models hands the upper one (the controller's) first
+    lower_trunc, upper_trunc = (high, low) if minimum else (low, high)
+    answer, (exact_lower, exact_upper), check = exact_answer(
+        built.mdp, posed.model.game, built.sta, (lower_trunc, upper_trunc), accept.goal,
+        sense=built.sense, complemented=posed.minimise and not minimum, deadline=deadline)
+    first, second = (exact_upper, exact_lower) if minimum else (exact_lower, exact_upper)
+    first = replace(first, checks=(*first.checks, check))
+    models = (first, first if high is low else second)
     if answer is None:
         return {"status": Status.TIME_LIMIT}, *models
     return ({"lower": float_below(answer.lower), "upper": float_above(answer.upper),
@@ -274,18 +323,22 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
         release_free_memory()
     accept = acceptance(mdp, built.dta)
-    low, high = solve_models(mdp, accept, s, t0)
+    low, high = solve_models(mdp, accept, s, t0, built.sense)
     timings["solve"] = time.perf_counter() - t0
     fields: dict[str, Any] = {}
     if s.exact:  # the optimum as a fraction (mitld_lp.exact), its policy the controller's
         fields, low, high = _exact(posed, built, accept, low, high, t0)
         timings["exact"] = time.perf_counter() - t0 - timings["solve"]
     solve_cpu = time.process_time() - c0
+    # the controller stops where the task cannot happen even if every truncated event
+    # came in time: the upper model's unreachable states
+    upper = low if built.sense == "min" else high
     result = Result(
         route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
-        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
+        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **{**from_models(low, high, mdp.initial, posed.problem.objective), **fields})
+        **{**from_models(low, high, mdp.initial, posed.problem.objective, built.sense),
+           **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

@@ -297,12 +297,15 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
     no choice among them can loop away from it); in the goal (an accepting end
     component) only the controller's own action.  A controller that picks one of them
     in every state has the value ``V``: the Bellman equation holds, and no bottom
-    component avoids the goal where ``V > 0``.  None for a randomised controller, whose
-    decisions are kept."""
+    component avoids the goal where ``V > 0``.  For a minimum solved as one
+    (``result.sense == "min"``) every action with ``Q = V`` keeps it: a policy of them
+    is worth at most ``V`` (its least fixed point), and at least the optimum ``V``.
+    None for a randomised controller, whose decisions are kept."""
     if controller.randomised or result.lower_model is None:
         return None
     mdp = result.mdp
     v = np.asarray(result.lower_model.policy_values, dtype=np.float64)
+    minimum = result.sense == "min"
     q = mdp.matrix @ v
     cs = mdp.choice_state()
     tight = np.abs(q - v[cs]) <= _TIE
@@ -334,7 +337,7 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
             if not tight[c]:
                 continue
             succ = cols[indptr[c]:indptr[c + 1]]
-            if v[i] <= 0 or (succ.size and int(rank[succ].min()) < int(rank[i])):
+            if v[i] <= 0 or minimum or (succ.size and int(rank[succ].min()) < int(rank[i])):
                 ok.add(mdp.action_name(c))
         out[i] = frozenset(ok)
     return out
