@@ -68,6 +68,7 @@ from mitld_lp.running.saved_plan import (
     key,
 )
 from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.names import world_variables
 
 __all__ = [
     "ControllerFileError",
@@ -79,19 +80,7 @@ __all__ = [
     "read_plan",
     "tabulate",
     "tabulate_randomised",
-    "world_variables",
 ]
-
-
-def world_variables(game: Game[Any]) -> tuple[str, ...] | None:
-    """The names of the world's variables when its states are tuples of their values
-    (a PRISM world's ``variables``), else None."""
-    names = getattr(game, "variables", None)
-    if isinstance(names, tuple) and names and all(isinstance(v, str) for v in names):
-        initial = game.initial
-        if isinstance(initial, tuple) and len(initial) == len(names):
-            return names
-    return None
 
 
 class _World:
