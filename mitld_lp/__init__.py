@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
         ConstrainedController,
         Controller,
         ControllerLike,
+        SensedController,
         load_controller,
     )
     from mitld_lp.controllers.observation import Observation, RunStatus
@@ -107,6 +108,7 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "ConstrainedController": "mitld_lp.controllers.kinds",
     "load_controller": "mitld_lp.controllers.kinds",
     "ControllerLike": "mitld_lp.controllers.kinds",
+    "SensedController": "mitld_lp.controllers.kinds",
     "solve": "mitld_lp.synthesis",
     "synthesize_constrained": "mitld_lp.synthesis",
     "pose": "mitld_lp.problem",
@@ -203,6 +205,7 @@ __all__ = [
     "simulate",
     "ConstrainedController",
     "ControllerLike",
+    "SensedController",
     "load_controller",
     "pose",
     "solve",

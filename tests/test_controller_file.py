@@ -29,11 +29,11 @@ from mitld_lp import (
     Model,
     Observation,
     RunStatus,
+    SensedController,
     load_controller,
     runtime,
     synthesize,
 )
-from mitld_lp.controllers.kinds import SensedController
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

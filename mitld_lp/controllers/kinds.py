@@ -50,7 +50,7 @@ __all__ = ["ConstrainedController", "Controller", "ControllerLike", "PlanControl
 
 _LOADERS = {"deterministic": "mitld_lp.Controller.load",
             "randomised": "mitld_lp.ConstrainedController.load",
-            "sensed": "mitld_lp.sensing.observe.SensedController.load"}
+            "sensed": "mitld_lp.SensedController.load"}
 
 
 class ControllerLike(Protocol):
