@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Set as AbstractSet
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
@@ -98,11 +99,12 @@ def _observed(observation: Any) -> tuple[Hashable, frozenset[str], frozenset[str
     if isinstance(observation, Observation):
         return observation.state, observation.events, observation.reports
     events = getattr(observation, "events", None)  # a record with the same fields
-    if not isinstance(events, frozenset) or not hasattr(observation, "state"):
+    reports = getattr(observation, "reports", frozenset())
+    if not (isinstance(events, AbstractSet) and isinstance(reports, AbstractSet)
+            and hasattr(observation, "state")):
         raise TypeError(f"act: expected a mitld_lp.Observation(state, events, reports), got "
                         f"{type(observation).__module__}.{type(observation).__qualname__}")
-    reports = getattr(observation, "reports", frozenset())
-    return observation.state, events, frozenset(reports)
+    return observation.state, frozenset(events), frozenset(reports)
 
 
 class PlanController(Stepper):
