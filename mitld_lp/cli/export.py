@@ -123,8 +123,7 @@ def _world_valuation(game: Any) -> Callable[[object], str] | None:
     """How the DRN names a world state: a PRISM world's by its variables (``x=2 &
     open=true``, as Storm's own exporter names PRISM states); any other world's as
     ``game=...`` (None: the default)."""
-    from mitld_lp.running.controller_file import world_variables
-    from mitld_lp.worlds.names import state_values, valuation_text
+    from mitld_lp.worlds.names import state_values, valuation_text, world_variables
 
     names = world_variables(game)
     if names is None:

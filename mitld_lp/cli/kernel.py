@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
+from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.exact.errors import ExactError
 from mitld_lp.files import write as files
@@ -27,7 +28,6 @@ from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
 from mitld_lp.problem import CONSTRAINED, ProblemError
 from mitld_lp.product import ProductTooLarge
-from mitld_lp.running.saved_plan import ControllerFileError
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.util import progress
 from mitld_lp.util.text import printable

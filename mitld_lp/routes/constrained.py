@@ -25,6 +25,7 @@ import numpy as np
 from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
+from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import CONSTRAINED, Posed, ProblemError
 from mitld_lp.result import Result
@@ -34,7 +35,6 @@ from mitld_lp.routes.constraints import (
     ConstraintError,
 )
 from mitld_lp.routes.stages import Built
-from mitld_lp.running.randomised import ConstrainedController
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Quantity, merge
 from mitld_lp.solvers.result import Status

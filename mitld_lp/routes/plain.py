@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING, Any, NoReturn
 import numpy as np
 
 from mitld_lp.checks import Check, close
+from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import PLAIN, Posed, Settings
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.stages import Built
-from mitld_lp.running.controller import Controller
 from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)

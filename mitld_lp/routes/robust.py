@@ -40,6 +40,7 @@ from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.checks import Check, close
+from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
@@ -49,7 +50,6 @@ from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.stages import Built, build_posed
-from mitld_lp.running.controller import Controller
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
     RobustIteration,

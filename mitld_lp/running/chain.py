@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.controllers.format import ACCEPTED, REJECTED, UNDECIDED
+from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.product import Absorbing, ProductState
-from mitld_lp.running.controller import ControllerLike
-from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED
 from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
@@ -167,7 +167,7 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
     props = _prop_labels(game)
     labels: list[set[str]] = []
     valuations: list[str] = []
-    plan_verdicts = controller._plan.verdicts  # type: ignore[attr-defined]
+    plan_verdicts = controller.plan.verdicts  # type: ignore[attr-defined]
     for k, (i, mode) in enumerate(order):
         here: set[str] = set()
         if i < 0:
@@ -213,12 +213,12 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
            sink: Any) -> Iterable[tuple[int, int | None, float]]:
     """The chain's steps from product state ``i`` in controller ``mode``: ``(j, mode,
     p)`` to product state ``j``, or ``(k, None, p)`` to the chain's own state ``k``
-    (the draws of :meth:`mitld_lp.runtime.Stepper._step`, as probabilities)."""
+    (the draws of :meth:`mitld_lp.controllers.stepper.Stepper._act`, as probabilities)."""
     rec = mdp.states[i]
     if not isinstance(rec, ProductState):  # target, sink, truncated: absorbing
         yield i, _GO, 1.0
         return
-    plan = controller._plan  # type: ignore[attr-defined]  # the tables act() reads
+    plan: Any = controller.plan  # the tables act() reads
     verdicts = plan.verdicts[rec.automaton]
     if UNDECIDED not in verdicts:  # every component decided: the controller stops
         yield sink("accept" if verdicts[0] == ACCEPTED else "reject"), None, 1.0

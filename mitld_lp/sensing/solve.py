@@ -24,7 +24,7 @@ from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import solve_models
 from mitld_lp.routes.stages import Built
-from mitld_lp.sensing.observe import SensedController
+from mitld_lp.sensing.observe import controller_of
 
 __all__ = ["solve_sensed"]
 
@@ -48,7 +48,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
         route=SENSED, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta, belief=belief,
         sensors=dict(belief.sensors),
-        controller=SensedController.from_belief(model.game, belief, low.policy),
+        controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
         **from_models(low, high, mdp.initial, posed.problem.objective))
     log.info("sensed synthesis: [%g, %g], certified=%s", result.lower, result.upper,
