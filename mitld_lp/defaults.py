@@ -12,6 +12,7 @@ __all__ = [
     "MAX_AUTOMATON_STATES",
     "TOL",
     "CERTIFY_TOL",
+    "PRECISION",
     "SOLVER",
     "RUNS",
     "MAX_RUNS",
@@ -38,6 +39,11 @@ TOL = 1e-9
 
 CERTIFY_TOL = 1e-6
 """How far two routes to one value may differ for the answer to count as certified."""
+
+PRECISION = 1e-6
+"""The relative width a certified bracket may have where no truncation is involved
+(Storm's sound mode's default): ``upper - lower <= PRECISION * lower``; with
+truncation, the solver's part of the width (docs/results.md)."""
 
 SOLVER = "CLARABEL"
 """The LP solver, called directly on the sparse matrices (no cvxpy needed)."""

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from mitld_lp.model import Model
     from mitld_lp.solvers.result import Status
 
-__all__ = ["Result", "SynthesisResult", "from_models"]
+__all__ = ["Result", "SynthesisResult", "from_models", "precision_check"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -45,9 +45,11 @@ class Result:
     ``lower``: what the returned controller achieves in the real, untruncated world
     (for a band, whatever law of the band the events follow; with constraints, each
     constraint holding); ``upper``: what no policy beats; the optimum lies in between.
-    For ``objective="min"`` both are read back in the task's terms
-    (``Pmin(task) = 1 - Pmax(not task)``): ``upper`` is then what the controller
-    guarantees at most, ``lower`` what no policy goes below.  ``value``: the method's
+    Both hold in exact arithmetic for the model as written, its decimal probabilities
+    (:mod:`mitld_lp.solvers.certify`).  For ``objective="min"`` both are in the task's
+    terms: ``upper`` is then what the controller guarantees at most, ``lower`` what no
+    policy goes below; read back from the complement (``Pmin(task) = 1 - Pmax(not
+    task)``), ``complement`` is the complement's bracket.  ``value``: the method's
     optimum (the lower model's).  ``checks``: every certification check, each once;
     ``certified``: all passed.  ``mdp``: the model the solver worked on (an interval MDP
     for a band; for constraints the product, ``merged`` the model the LP solved).
@@ -90,6 +92,14 @@ class Result:
     # sensors that miss events: each sensed event's sensor, the information-state product
     sensors: Mapping[str, Any] = field(default_factory=dict)
     belief: Any = None
+    # the certificate's parts: for a minimum read back from the complement's maximum,
+    # the complement's own bracket (1 - the task's probability lies in it, kept with its
+    # digits where the task's bracket rounds to 1); the relative precision asked; the
+    # bracket's width split into the truncation's part (the two models' optima apart)
+    # and the solver's (the certificates' slack)
+    complement: tuple[float, float] | None = None
+    precision: float = float("nan")
+    width: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def failed_checks(self) -> tuple[Check, ...]:
@@ -134,8 +144,9 @@ class Result:
 
     def __repr__(self) -> str:
         name = None if self.model is None else self.model.name
-        return (f"Result(route={self.route!r}, model={name!r}, lower={self.lower:.7g}, "
-                f"upper={self.upper:.7g}, certified={self.certified}, "
+        lower, upper = report.bracket_text(self.lower, self.upper)[1:-1].split(", ")
+        return (f"Result(route={self.route!r}, model={name!r}, lower={lower}, "
+                f"upper={upper}, certified={self.certified}, "
                 f"status={str(self.status)!r}, states={self.mdp.n_states})")
 
     def _repr_html_(self) -> str:
@@ -160,32 +171,55 @@ class Result:
 SynthesisResult = Result
 
 
-def from_models(lower_model: Any, upper_model: Any, initial: int,
-                objective: str) -> dict[str, Any]:
+def from_models(lower_model: Any, upper_model: Any, initial: int, objective: str,
+                precision: float = float("nan"), *, truncated: bool = False,
+                ) -> dict[str, Any]:
     """The answer's fields read from two solved models (plain and robust routes): the
-    lower model's policy value and the upper model's sound upper bound, in the task's
-    terms; the status is ``OPTIMAL`` when both solves succeeded, else the first other;
-    every check once (the two models are one when nothing is truncated; otherwise each
-    check's name says which model it checked)."""
+    lower model's certified lower bound and the upper model's certified upper bound
+    (``bounds``), in the task's terms (a minimum solved as the complement's maximum is
+    read back, rounded outward, with the complement's bracket kept); the status is
+    ``OPTIMAL`` when both solves succeeded, else the first other; every check once (the
+    two models are one when nothing is truncated; otherwise each check's name says
+    which model it checked), and the check that the solver's part of the width is
+    within ``precision`` of the value (``truncated``: the two models differ by the
+    truncation, whose part of the width is reported apart)."""
+    from mitld_lp.solvers.certify import one_minus
     from mitld_lp.solvers.result import Status
 
-    policy = float(lower_model.policy_values[initial])
-    # the optimum is at least the policy's exact value: a bound a rounding left below it
-    # is raised to it, so the bracket never inverts (also read back for "min")
-    bound = max(float(upper_model.bracket[1]), policy)
+    low, high = float(lower_model.bounds[0]), float(upper_model.bounds[1])
     models = (lower_model,) if upper_model is lower_model else (lower_model, upper_model)
-    if objective == "min":
-        lower, upper, value = 1.0 - bound, 1.0 - policy, 1.0 - lower_model.value
+    complement = None
+    if objective == "min" and getattr(lower_model, "sense", "max") == "max":
+        complement = (low, high)
+        (lower, upper), value = one_minus(low, high), 1.0 - lower_model.value
     else:
-        lower, upper, value = policy, bound, lower_model.value
+        lower, upper, value = low, high, lower_model.value
+    # the estimates of the two models' optima: how far apart the truncation sets them
+    apart = abs(float(upper_model.policy_values[initial])
+                - float(lower_model.policy_values[initial])) if truncated else 0.0
+    total = upper - lower
+    solver = max(total - apart, 0.0)
+    checks = [c if len(models) == 1 else Check(f"{m.which} model: {c.name}", c.passed, c.detail)
+              for m in models for c in m.checks]
+    checks.append(precision_check(lower, upper, solver, apart, precision))
     return {
         "lower": lower, "upper": upper, "value": float(value),
         "status": next((m.status for m in models if m.status is not Status.OPTIMAL),
                        Status.OPTIMAL),
-        "certified": all(m.certified for m in models),
-        # each check once; with two models, named by the model it checked
-        "checks": tuple(c if len(models) == 1 else Check(f"{m.which} model: {c.name}",
-                                                          c.passed, c.detail)
-                        for m in models for c in m.checks),
+        "certified": all(c.passed for c in checks),
+        "checks": tuple(checks),
         "lower_model": lower_model, "upper_model": upper_model,
+        "complement": complement, "precision": precision,
+        "width": {"total": total, "truncation": apart, "solver": solver},
     }
+
+
+def precision_check(lower: float, upper: float, solver: float, truncation: float,
+                    precision: float) -> Check:
+    """The check that the solver's part ``solver`` of the bracket's width is at most
+    ``precision`` times the value (``lower``); the truncation's part is reported."""
+    ok = solver <= precision * lower or upper == lower or precision != precision
+    split = (f" = truncation {truncation:.3g} + solver {solver:.3g}" if truncation else "")
+    return Check("precision", bool(ok), (
+        f"width {upper - lower:.3g}{split}; solver's part "
+        f"{'<=' if ok else '>'} {precision:g} x {lower:.7g}"))

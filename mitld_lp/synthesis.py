@@ -50,6 +50,7 @@ def synthesize(
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool = False,
+    precision: float = defaults.PRECISION,
     decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
@@ -69,9 +70,12 @@ def synthesize(
     the model file's ``[budgets]``, else the defaults).  ``decompose``: the LP block by
     block in topological order (``None``, the default, or ``True``) or as one LP
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
-    ``TIME_LIMIT``.  ``constraints`` / ``then`` (and the model's constraints): the
-    constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law known only within a band:
-    the robust synthesis (:mod:`mitld_lp.routes.robust`).
+    ``TIME_LIMIT``.  ``precision``: the relative width the certified bracket may have
+    (``upper - lower <= precision * lower``; with truncation, the solver's part of the
+    width), else the answer is not certified (docs/results.md).  ``constraints`` /
+    ``then`` (and the model's constraints): the constrained synthesis
+    (:mod:`mitld_lp.routes.constrained`); a law known only within a band: the robust
+    synthesis (:mod:`mitld_lp.routes.robust`).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -81,7 +85,8 @@ def synthesize(
         method=method, solver=solver, backend=backend, clock_reduction=clock_reduction,
         decompose=decompose, time_limit=time_limit, max_states=max_states,
         max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
-        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress)
+        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
+        precision=precision)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 

@@ -150,11 +150,12 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
-        if r.objective == "min":  # the complement's automaton: "accept" marks failing runs
-            _out(f"wrote {chain} (P=? [F \"accept\"] = 1 - upper = {1.0 - r.upper!r}: for "
-                 "a minimised task \"accept\" marks the runs that fail it)")
+        if r.complement is not None:  # the complement's automaton: failing runs accepted
+            _out(f"wrote {chain} (P=? [F \"accept\"] >= {r.complement[0]!r}, the "
+                 "complement's lower bound: for a minimised task \"accept\" marks the runs "
+                 "that fail it)")
         else:
-            _out(f"wrote {chain} (P=? [F \"accept\"] = lower = {r.lower!r})")
+            _out(f"wrote {chain} (P=? [F \"accept\"] >= lower = {r.lower!r})")
     if tree:
         from mitld_lp.running.tree import write_tree
 

@@ -6,15 +6,14 @@ truncation models solved and certified.
 
 The product is built once (:mod:`mitld_lp.routes.stages`); its truncation sink counted
 as losing gives the *lower* model, as winning the *upper* model.  Each model is solved
-(occupancy LP or interval iteration) and certified:
-
-* the extracted deterministic policy is evaluated exactly on its Markov chain (sparse
-  solve): a value the policy really achieves;
-* interval iteration gives sound lower and upper bounds on the optimum;
-* with the LP, its primal objective, its dual objective (the value function at the
-  initial state), the policy's value and the iteration bracket must agree within
-  ``certify_tol``; one Bellman sweep over every state checks that the policy is optimal
-  everywhere, not only where it goes.
+(occupancy LP or interval iteration) and certified (:mod:`mitld_lp.solvers.certify`):
+the extracted deterministic policy is evaluated on its Markov chain, and the bounds the
+answer reports are checked inequalities that hold in exact arithmetic on the model as
+written: a lower bound on the policy's value (a sub-fixed point of its chain) and an
+upper bound on the optimum (a pre-fixed point of the Bellman operator over every state
+and choice), or for a minimum a lower bound on the optimum and an upper bound on the
+policy's value.  The lower model's certificate gives ``lower``, the upper model's
+``upper``; when nothing is truncated one model gives both.
 
 :func:`solve_models` is that solve on any MDP with a target (the sensed route's
 information-state product uses it too); :func:`solve_plain` is the plain route.
@@ -29,7 +28,7 @@ from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
-from mitld_lp.checks import Check, close
+from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import PLAIN, Posed, Settings
 from mitld_lp.result import Result, from_models
@@ -66,6 +65,12 @@ class ModelSolution:
     iteration: IterationResult
     prob0: np.ndarray  # (n_states,) bool: the states from which the target is unreachable
     checks: tuple[Check, ...]
+    sense: str = "max"  # "max": the policy maximises; "min": it minimises
+    # the certificate's bounds at the initial state (mitld_lp.solvers.certify): for
+    # "max" a lower bound on the policy's value and an upper bound on the maximum, for
+    # "min" a lower bound on the minimum and an upper bound on the policy's value; nan
+    # for a side this model was not asked for
+    bounds: tuple[float, float] = (float("nan"), float("nan"))
 
     @property
     def certified(self) -> bool:
@@ -89,7 +94,9 @@ class _Settings:
     solver: str
     backend: Backend
     tol: float
-    certify_tol: float
+    eta: float  # the probabilities' allowance (mitld_lp.solvers.certify.model_eta)
+    precision: float  # the relative width asked of the bracket
+    complement: bool  # the answer is 1 - the values (a minimum read back)
     progress: bool
     decompose: bool
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
@@ -118,17 +125,19 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
 
 
 def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
-               layers: tuple[np.ndarray, np.ndarray], it: IterationResult,
-               lp: LPResult | None, which: str, how: _Settings) -> ModelSolution:
+               layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
+               it: IterationResult, lp: LPResult | None, which: str, how: _Settings,
+               sense: str = "max") -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
-    quotient's matrix is released by then.  An LP that did not come back optimal (after
-    its own retries) is replaced by the interval-iteration policy, certified the same way
-    (exact value inside the bracket) when it failed numerically (``INACCURATE``,
-    ``MAX_ITERATIONS``)."""
-    from mitld_lp.solvers.iteration import evaluate_policy
+    quotient's matrix is released by then.  Both bounds are checked on each model (the
+    answer reads the lower model's lower one and the upper model's upper one), and that
+    the policy is within the precision of the optimum in every state.  An LP that did
+    not come back optimal (after its own retries) is replaced by the interval-iteration
+    policy when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``); the
+    certificate is the same whatever policy it reads."""
+    from mitld_lp.solvers.certify import certify
     from mitld_lp.solvers.result import Status, read_only
 
-    certify_tol = how.certify_tol
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
@@ -137,8 +146,6 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
-            checks.append(close("LP primal = dual", lp.primal_objective, lp.dual_objective,
-                                 certify_tol))
         elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
                 it.status is Status.OPTIMAL):
             # A numerical failure after the LP's own retries: the answer is the converged
@@ -148,19 +155,14 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    values = read_only(evaluate_policy(mdp, target, policy, layers=layers))
-    exact = float(values[mdp.initial])
-    lo, hi = it.value_lower, it.value_upper
-    checks.append(Check(
-        "policy value within iteration bracket",
-        lo - certify_tol <= exact <= hi + certify_tol,
-        f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
-    ))
-    checks.append(close("policy value = optimum", exact, value, certify_tol))
-    checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
-    checks.append(_bellman(mdp, target, values, certify_tol))
-    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it, prob0,
-                         tuple(checks))
+    cert = certify(mdp, target, policy, sense=sense, zero=prob0, mec_of=mec_of,
+                   layers=layers, fallback_lower=it.lower, fallback_upper=it.upper,
+                   eta=how.eta, precision=how.precision,
+                   complement=how.complement and sense == "max")
+    checks.extend(cert.checks)
+    return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
+                         (it.value_lower, it.value_upper), lp, it, prob0, tuple(checks),
+                         sense, (cert.lower, cert.upper))
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
@@ -175,22 +177,6 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
                                time_limit=how.remaining(),
                                gap="max" if decided else "initial")
-
-
-def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float) -> Check:
-    """The policy is optimal from every state, not only where it goes: no choice of any
-    state does better against the policy's exact values ``V`` than ``V`` itself,
-    ``max_c P(c) . V <= V(s) + tol`` (one sweep).  Then ``V`` is a pre-fixed point of
-    the Bellman operator, so ``V >= V*`` (the least one), and ``V <= V*`` as a policy's
-    values: the policy is optimal in every state."""
-    v = np.where(target, 1.0, values)
-    best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
-    gap = np.where(target, 0.0, best - v)
-    worst = int(np.argmax(gap)) if gap.size else 0
-    over = float(gap[worst]) if gap.size else 0.0
-    return Check("policy optimal in every state (Bellman)", over <= tol,
-                 f"max_s (max_c P(c).V - V(s)) = {over:.2e} (tol {tol:g})"
-                 + (f" at state {mdp.states[worst]}" if over > tol else ""))
 
 
 def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
@@ -213,15 +199,20 @@ def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolu
 
 
 def solve_models(mdp: MDP, accept: Acceptance, s: Settings,
-                 t0: float) -> tuple[ModelSolution, ModelSolution]:
+                 t0: float, eta: float | None = None, *, complement: bool = False,
+                 ) -> tuple[ModelSolution, ModelSolution]:
     """Both truncation models of ``mdp`` solved and certified (module docs) for the
     target ``accept`` (its goal; a task's accepting end components kept by their
     choices), with the settings ``s`` of a posed problem, the time limit counted from
-    ``t0``.  The two are one object when nothing is truncated."""
+    ``t0``; ``eta``: the probabilities' allowance (default
+    :data:`mitld_lp.solvers.certify.ETA`); ``complement``: the answer is read back as
+    ``1 -`` the values (the precision is relative to that).  The two are one object when nothing is
+    truncated."""
     from mitld_lp.solvers.analysis import analyse
+    from mitld_lp.solvers.certify import ETA
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, s.certify_tol, s.progress,
-                    s.decompose is not False,
+    how = _Settings(s.method, s.solver, s.backend, s.tol, ETA if eta is None else eta,
+                    s.precision, complement, s.progress, s.decompose is not False,
                     float("inf") if s.time_limit is None else t0 + s.time_limit)
     quotients = analyse(mdp, accept.goal, mdp.truncated)
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
@@ -229,10 +220,10 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings,
     lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.prob0, q.layers) for q in quotients]
+    kept = [(np.asarray(q.target), q.prob0, q.layers, q.mecs.mec_of) for q in quotients]
     del quotients
-    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
-                 zip(kept, its, lps, ("lower", "upper"), strict=False)]
+    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which
+                 in zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     kept_low = _keeping(mdp, accept, low)
     return kept_low, (kept_low if high is low else high)
@@ -250,8 +241,11 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     # The builder's freed temporaries go back to the system (mitld_lp.util.heap).
     if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
         release_free_memory()
+    from mitld_lp.solvers.certify import model_eta
+
     accept = acceptance(mdp, built.dta)
-    low, high = solve_models(mdp, accept, s, t0)
+    low, high = solve_models(mdp, accept, s, t0, model_eta(built.sta),
+                             complement=posed.minimise)
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0
     result = Result(
@@ -259,6 +253,7 @@ def solve_plain(posed: Posed, built: Built) -> Result:
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **from_models(low, high, mdp.initial, posed.problem.objective))
+        **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
+                      truncated=bool(mdp.truncated.any())))
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
