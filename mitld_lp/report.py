@@ -221,7 +221,8 @@ def _constrained_part(result: Any) -> dict[str, Any]:
         "transitions": merged.n_transitions,
         "constraints": [
             {"constraint": str(c.constraint), "value": c.value, "bound": c.constraint.bound,
-             "holds": c.holds, **({"feasible_bound": c.feasible_bound} if infeasible else {})}
+             "holds": c.holds, "certified": list(c.bounds), "miss": c.miss,
+             **({"feasible_bound": c.feasible_bound} if infeasible else {})}
             for c in result.constraints],
         "then": result.then, "secondary": result.secondary,
         "expected_steps": result.steps, "message": result.message,

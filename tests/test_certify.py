@@ -382,3 +382,57 @@ def test_precision_is_an_option_everywhere(tmp_path, capsys) -> None:
     assert r.precision == 1e-3 and r.certified
     with pytest.raises(ValueError, match="precision"):
         synthesize(load_model(path), precision=0.0)
+
+
+# ------------------------------------------------------------------ constraints
+
+SLOW = """mdp
+module m
+  x : [0..1] init 0;
+  [go] x=0 -> 0.7 : (x'=1) + 0.3 : (x'=0);
+  [done] x=1 -> true;
+endmodule
+label "goal" = x=1;
+"""
+
+
+def test_a_constraint_holds_only_when_its_certified_bound_meets_it(tmp_path) -> None:
+    from mitld_lp.synthesis import synthesize_constrained
+
+    model = load_model(model_file(tmp_path, "slow", SLOW, "F goal"))
+    # the least expected steps is exactly 10/7; the float just below cannot be met
+    below_min = float(Fraction(10, 7))
+    while Fraction(below_min) >= Fraction(10, 7):
+        below_min = float(np.nextafter(below_min, 0.0))
+    r = synthesize_constrained(model, [f"E(steps) <= {below_min!r}"])
+    assert not r.certified
+    if r.status == "optimal":
+        (c,) = r.constraints
+        assert not c.holds and c.miss > 0 and Fraction(c.certified) >= Fraction(10, 7)
+    ok = synthesize_constrained(model, ["E(steps) <= 1.43"])
+    (c,) = ok.constraints
+    assert ok.certified and c.holds
+    assert Fraction(c.bounds[0]) <= Fraction(10, 7) <= Fraction(c.bounds[1]) <= Fraction("1.43")
+
+
+def test_a_binding_constraint_holds_for_the_policys_exact_value(tmp_path) -> None:
+    # main printed "P(F puddle) <= 0.05: 0.05000006 (holds)"; now the policy meets the
+    # bound, which Storm's exact engine confirms on the controlled chain (its DRN holds
+    # the stored floats, an exact model within eta of the decimals)
+    from mitld_lp.running.chain import write_chain
+    from mitld_lp.synthesis import synthesize_constrained
+
+    models = Path(__file__).resolve().parents[1] / "models"
+    r = synthesize_constrained(load_model(models / "bus_risk.toml"),
+                               ["P(F puddle) <= 0.05"], then="min-steps")
+    (c,) = r.constraints
+    assert r.certified and c.holds and c.bounds[1] <= 0.05
+    chain = stormpy.build_model_from_drn[stormpy.Rational](
+        str(write_chain(r, tmp_path / "chain.drn")))
+
+    def exact(prop: str) -> Fraction:
+        result = stormpy.model_checking(chain, stormpy.parse_properties(prop)[0])
+        return Fraction(str(result.get_value(chain.initial_states[0])))
+
+    assert inside(c.bounds[0], exact('P=? [F "puddle"]'), c.bounds[1])
+    assert Fraction(r.lower) <= exact('P=? [F "accept"]') <= Fraction(r.upper)

@@ -105,8 +105,16 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
     for b in np.linspace(lo, max(hi, lo), points):
         c = against_constraint(against, float(b) + 1e-9)
         r = synthesize_constrained(model, [c], **options)
+        miss = r.constraints[-1].miss if r.constraints else 0.0
+        if r.status == OPTIMAL and miss > 0 and math.isfinite(miss):
+            # the range's ends are LP optima, exact only to the LP's tolerance: no policy
+            # may meet such a bound in exact arithmetic (a constraint holds only when its
+            # certified bound meets it, docs/constraints.md); loosened by what it missed
+            c = against_constraint(against, float(b) + 1e-9 + 2.0 * miss)
+            r = synthesize_constrained(model, [c], **options)
         achieved = r.constraints[-1].value if r.constraints else float("nan")
-        out.append(ParetoPoint(float(b), r.lower, r.upper, achieved, r.status, r.certified))
+        out.append(ParetoPoint(float(c.bound), r.lower, r.upper, achieved, r.status,
+                               r.certified))
     return out
 
 

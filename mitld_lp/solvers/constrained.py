@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evaluate
 from mitld_lp.solvers.result import Status
 
-__all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED"]
+__all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED", "certified_value"]
 
 OPTIMAL, INFEASIBLE, FAILED, TIME_LIMIT = (Status.OPTIMAL, Status.INFEASIBLE, Status.FAILED,
                                           Status.TIME_LIMIT)
@@ -208,3 +208,29 @@ def _exact(merged: Merged, prob: np.ndarray, stay: np.ndarray, quantities: list[
            cols: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, ...]:
     asked = [(pc, ps, _counts_steps(q)) for q, (pc, ps) in zip(quantities, cols, strict=True)]
     return evaluate(merged, prob, stay, asked).values
+
+
+def certified_value(merged: Merged, prob: np.ndarray, stay: np.ndarray, q: Quantity,
+                    name: str, *, costs: np.ndarray | None = None,
+                    eta: float | None = None) -> Any:
+    """Bounds in exact arithmetic on ``q`` under the randomised policy ``prob`` /
+    ``stay`` (:func:`mitld_lp.solvers.certify_mixture.mixture_bounds`): a probability
+    is the verdict of the absorbing state reached (truncation worth ``q.truncated``) or
+    of staying for ever; steps and costs a reward per choice."""
+    from mitld_lp.automata.joint import ACCEPTED
+    from mitld_lp.solvers.certify_mixture import mixture_bounds
+    from mitld_lp.solvers.rounding import ETA
+
+    mdp = merged.mdp
+    per_choice, per_stay = columns(merged, q, costs)
+    if q.kind == "prob":
+        sat = (merged.verdicts[:, q.component] == ACCEPTED).astype(np.float64)
+        fixed = np.where(merged.absorbing, sat, 0.0)
+        fixed[merged.truncated] = q.truncated
+        reward = np.zeros(mdp.n_choices)
+    else:
+        fixed = np.zeros(mdp.n_states)
+        reward = per_choice
+    return mixture_bounds(mdp, prob, stay, merged.absorbing, fixed, reward, per_stay, name,
+                          counts_steps=_counts_steps(q), undecided=merged.undecided,
+                          eta=ETA if eta is None else eta)
