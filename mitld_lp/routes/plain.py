@@ -248,10 +248,14 @@ def solve_plain(posed: Posed, built: Built) -> Result:
                              complement=posed.minimise)
     timings["solve"] = time.perf_counter() - t0
     solve_cpu = time.process_time() - c0
+    # the controller plays the policy whose value the answer bounds: the lower model's
+    # for a maximum (its value is ``lower``), the upper model's for a minimum (``upper``)
+    played = high if low.sense == "min" else low
     result = Result(
         route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
-        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=high.prob0),
+        controller=Controller(model.game, built.sta, mdp, played.policy,
+                              hopeless=high.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
         **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
                       truncated=bool(mdp.truncated.any())))

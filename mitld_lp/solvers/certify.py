@@ -57,6 +57,7 @@ from mitld_lp.solvers.graph import (
     graph_view,
     levels,
     maximal_end_components,
+    row_entries,
     rows_dot,
 )
 from mitld_lp.solvers.result import read_only
@@ -139,11 +140,13 @@ def support_layers(mdp: MDP | RowModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
-          layers: tuple[np.ndarray, np.ndarray] | None = None) -> Chain:
+          layers: tuple[np.ndarray, np.ndarray] | None = None,
+          guess: np.ndarray | None = None) -> Chain:
     """The values of ``policy`` (a choice row per state, ``-1`` on the target and the
     absorbing states) and the slack ``W`` of its certificates (module docs), solved
     level by level with one LU per non-trivial component serving both.  ``layers``:
-    the components and levels of ``mdp``'s support graph (:func:`support_layers`)."""
+    the components and levels of ``mdp``'s support graph (:func:`support_layers`);
+    ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
     m = sp.csr_array(mdp.matrix)
     n = mdp.n_states
     target = np.asarray(target, dtype=bool)
@@ -174,7 +177,8 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         sub = sp.csr_array((p[into], (s_loc[into], at[d[into]])), shape=(idx.size,) * 2)
         kappa = 1.0 - rnd.low[policy[idx]]
         v, w = _solve(sub, b, kappa, None if layers is None else
-                      (np.asarray(layers[0])[idx], np.asarray(layers[1])))
+                      (np.asarray(layers[0])[idx], np.asarray(layers[1])),
+                      None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
         values[idx] = np.clip(v, 0.0, 1.0)
         slack[idx] = np.maximum(w, 0.0)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
@@ -182,10 +186,14 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
 
 
 def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
-           layers: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+           layers: tuple[np.ndarray, np.ndarray] | None,
+           guess: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``v = b + Q v`` and ``W = delta v + Q W`` on a transient chain ``Q`` (``sub``),
     level by level downstream first; ``delta`` per state is twice its relative residual
-    plus its rounding bound ``kappa`` (module docs)."""
+    plus its rounding bound ``kappa`` (module docs).  ``guess``: an estimate of ``v``
+    (the iteration's lower bound) positive on a block: its ``W`` is solved with ``v``
+    as a second right-hand side, ``2 kappa guess``, scaled after by what the residuals
+    ask (one factorisation, one solve)."""
     from mitld_lp.solvers.graph import graph_blocks
 
     diag = sub.diagonal()
@@ -196,24 +204,35 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
     for level in blk.walk():
         one, inner = level.single, level.rest
         if one.size:
-            v[one] = (b[one] + rows_dot(sub, one, v)) / (1.0 - diag[one])
-        block = rows = None
-        factors = Factors()
-        if inner.size:
-            rows = sp.csr_array(sub[inner])
-            block = sp.csr_array(rows[:, inner])
-            v[inner] = transient_solve(block, b[inner] + rows @ v, factors=factors)
-        st = level.states
-        residual = np.abs(v[st] - (b[st] + rows_dot(sub, st, v)))
+            # a single state's own entry is still 0 in v and w: the sums see only below;
+            # its formula's residual is a rounding, within kappa
+            local, cols, vals = row_entries(sub, one)
+            down_v = np.bincount(local, weights=vals * v[cols], minlength=one.size)
+            down_w = np.bincount(local, weights=vals * w[cols], minlength=one.size)
+            v[one] = (b[one] + down_v) / (1.0 - diag[one])
+            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
+        if inner.size == 0:
+            continue
+        rows = sp.csr_array(sub[inner])
+        block = sp.csr_array(rows[:, inner])
+        known = b[inner] + rows @ v
+        g = None if guess is None else guess[inner]
+        joint = None
+        if g is not None and bool(np.all(g > 0)):
+            pair = transient_solve(block, np.column_stack([known, 2.0 * kappa[inner] * g
+                                                           + rows @ w]))
+            v[inner], joint = pair[:, 0], pair[:, 1]
+        else:
+            factors = Factors()
+            v[inner] = transient_solve(block, known, factors=factors)
+        residual = np.abs(v[inner] - (b[inner] + rows @ v))
         with np.errstate(divide="ignore", invalid="ignore"):
-            delta = np.where(v[st] > 0, 2.0 * (residual / v[st] + kappa[st]), 0.0)
-        rhs = np.zeros(k)
-        rhs[st] = delta * v[st]
-        if one.size:
-            w[one] = (rhs[one] + rows_dot(sub, one, w)) / (1.0 - diag[one])
-        if inner.size:
-            assert rows is not None and block is not None
-            w[inner] = transient_solve(block, rhs[inner] + rows @ w, factors=factors)
+            need = np.where(v[inner] > 0, 2.0 * (residual + kappa[inner] * v[inner]), 0.0)
+            if joint is not None:
+                ratio = need / (2.0 * kappa[inner] * g)  # type: ignore[operator]
+                w[inner] = joint * max(1.0, float(np.max(ratio, initial=1.0)))
+            else:
+                w[inner] = transient_solve(block, need + rows @ w, factors=factors)
     return v, w
 
 
@@ -569,7 +588,7 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
     if layers is None:
         layers = support_layers(mdp)
-    ch = chain(mdp, target, policy, rnd, layers)
+    ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
     low = high = None
     if "lower" in sides:
         low = (policy_lower(mdp, ch, rnd) if sense == "max" else
