@@ -41,7 +41,6 @@ the answer is then sound but not precise, and its check says so.
 
 from __future__ import annotations
 
-import heapq
 import logging
 from dataclasses import dataclass
 
@@ -174,7 +173,10 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         s_loc, d, p = at[src[keep]], dst[keep], val[keep]
         into = solved[d]
         b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
-        sub = sp.csr_array((p[into], (s_loc[into], at[d[into]])), shape=(idx.size,) * 2)
+        # the entries come row by row in the states' order: the CSR arrays directly
+        rows_of = s_loc[into]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
+        sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
         kappa = 1.0 - rnd.low[policy[idx]]
         v, w = _solve(sub, b, kappa, None if layers is None else
                       (np.asarray(layers[0])[idx], np.asarray(layers[1])),
@@ -363,7 +365,9 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
 @dataclass(slots=True, eq=False)
 class _Repair:
     """The repair of a candidate (module docs): a failing state's bound moved to what its
-    choices need, levels downstream first, an end component's states together."""
+    choices need, levels downstream first (one pass over the levels above the lowest
+    failing one, a level's states taken again while they move, at most :data:`ROUNDS`
+    times), an end component's states together."""
 
     st: Rows
     rnd: Rounding
@@ -371,19 +375,8 @@ class _Repair:
     level_of: np.ndarray
     mec_of: np.ndarray | None
     upper: bool
-    preds: sp.csr_array | None = None
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
-
-    def predecessors(self, states: np.ndarray) -> np.ndarray:
-        if self.preds is None:
-            m, n = self.st.matrix, self.st.n_states
-            owner = np.repeat(self.st.row_state(), np.diff(m.indptr))
-            self.preds = sp.csr_array((np.ones(owner.size, dtype=bool), (m.indices, owner)),
-                                      shape=(n, n))
-        p = self.preds
-        found = np.unique(p.indices[gather_ranges(p.indptr[states], p.indptr[states + 1])])
-        return found[~self.free[found]]
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -409,38 +402,52 @@ class _Repair:
         x[inside] = new
         return np.union1d(states, changed)
 
+    def _reading(self, states: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Which of ``states`` have a choice whose support holds a ``moved`` state."""
+        rows, _, state_starts = self.st.rows_of(states)
+        local, cols, _ = row_entries(self.st.matrix, rows)
+        per_row = np.bincount(local, weights=moved[cols], minlength=rows.size)
+        return np.add.reduceat(per_row, state_starts) > 0
+
     def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
         """Move the bounds of the ``failing`` states and of whatever they move upstream;
         False when a level does not settle within :data:`ROUNDS` rounds."""
-        pending: dict[int, list[np.ndarray]] = {}
-        heap: list[int] = []
-
-        def mark(states: np.ndarray) -> None:
-            lv = self.level_of[states]
-            for level in np.unique(lv).tolist():
-                if level not in pending:
-                    pending[level] = []
-                    heapq.heappush(heap, level)
-                pending[level].append(states[lv == level])
-
-        mark(np.flatnonzero(failing))
-        while heap:
-            level = heapq.heappop(heap)
+        live = np.flatnonzero(~self.free)
+        lv = self.level_of[live]
+        order = np.argsort(lv, kind="stable")
+        live, lv = live[order], lv[order]
+        first = int(self.level_of[failing].min())
+        bounds = np.flatnonzero(np.diff(lv)) + 1
+        starts = np.concatenate([[0], bounds])
+        stops = np.concatenate([bounds, [lv.size]])
+        moved = np.zeros(x.shape[0], dtype=bool)
+        now = np.zeros(x.shape[0], dtype=bool)  # scratch: the states one round moved
+        any_moved = False
+        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+            if lv[a] < first:
+                continue
+            states = live[a:b]
+            todo = states[failing[states] | (self._reading(states, moved) if any_moved
+                                             else False)]
             for _ in range(ROUNDS):
-                if level not in pending:
+                if todo.size == 0:
                     break
-                states = np.unique(np.concatenate(pending.pop(level)))
-                need = _needed(self.st, self.rnd, x, states, self.upper)
-                move = (need > x[states]) if self.upper else (need < x[states])
-                moved = states[move]
-                if moved.size:
-                    x[moved] = (np.minimum(need[move], 1.0) if self.upper else
-                                np.maximum(need[move], 0.0))
-                    self.moved += int(moved.size)
-                    mark(self.predecessors(self.together(x, moved)))
+                need = _needed(self.st, self.rnd, x, todo, self.upper)
+                move = (need > x[todo]) if self.upper else (need < x[todo])
+                changed = todo[move]
+                if changed.size == 0:
+                    break
+                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
+                              np.maximum(need[move], 0.0))
+                self.moved += int(changed.size)
+                changed = self.together(x, changed)
+                moved[changed] = True
+                any_moved = True
+                now[changed] = True
+                todo = states[self._reading(states, now)]  # within the level: its cycles
+                now[changed] = False
             else:
-                if level in pending:
-                    return False
+                return False
         return True
 
 
