@@ -38,7 +38,10 @@ TOL = 1e-9
 """Accuracy asked of the solvers (LP gap and feasibility, interval-iteration gap)."""
 
 CERTIFY_TOL = 1e-6
-"""How far two routes to one value may differ for the answer to count as certified."""
+"""How far a value computed in floating point to a solver's tolerance (the constrained
+LP's optimum) may lie below a certified bound and still count as consistent with it (the
+robust constrained route's check); every other bound is checked in exact arithmetic
+(:mod:`mitld_lp.solvers.certify`), with no tolerance."""
 
 PRECISION = 1e-6
 """The relative width a certified bracket may have where no truncation is involved

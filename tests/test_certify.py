@@ -436,3 +436,19 @@ def test_a_binding_constraint_holds_for_the_policys_exact_value(tmp_path) -> Non
 
     assert inside(c.bounds[0], exact('P=? [F "puddle"]'), c.bounds[1])
     assert Fraction(r.lower) <= exact('P=? [F "accept"]') <= Fraction(r.upper)
+
+
+def test_an_upper_bound_does_not_take_a_wrong_zero_set_on_trust() -> None:
+    # told that no state reaches the target, the maximum's bound still holds: its 0s
+    # are candidates, checked (and raised) like every other value
+    rng = random.Random(1)
+    mdp, exact = random_mdp(rng, 7, 2)
+    target = np.asarray(mdp.target)
+    choices = [list(mdp.choices(s)) for s in range(mdp.n_states)]
+    pmax = max(exact_value(mdp, exact, target, pol)[mdp.initial]
+               for pol in itertools.product(*choices))
+    assert pmax > 0
+    policy = np.array([-1 if target[s] or mdp.sink[s] else c[0]
+                       for s, c in enumerate(choices)])
+    cert = C.certify(mdp, target, policy, sense="max", zero=~target, sides=("upper",))
+    assert Fraction(cert.upper) >= pmax

@@ -456,7 +456,9 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
                   layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None,
                   name: str) -> Side:
     target = ch.target
-    free = target | zero
+    # a lower bound may be 0 anywhere; an upper bound's 0 on ``zero`` is a candidate,
+    # checked like every other value (the graph's word is not taken on trust)
+    free = target | zero if not upper else target.copy()
     level_of = np.asarray(layers[1])[np.asarray(layers[0])]
     base = np.where(target, 1.0, 0.0)
     if one is not None:
@@ -470,6 +472,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             x[ch.sure & ~free] = 1.0
             rest = ch.never & ~free
             x[rest] = 1.0 if fallback is None else np.minimum(fallback[rest] * 1.0000001, 1.0)
+            x[zero & ~free] = 0.0
         else:
             x[idx] = np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0)
             x[ch.sure & ~free] = 1.0
@@ -520,8 +523,9 @@ def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
                   ) -> Side:
     """An upper bound on the maximal probability of reaching the target (module docs).
     ``zero``: the states from which no policy reaches it (the candidate's 0 there is
-    checked like every other value); ``mec_of``: the maximal end components (their
-    states' bounds are moved together by the repair); ``fallback``: an upper vector to
+    checked like every other value: a choice whose support stays in them passes);
+    ``mec_of``: the maximal end components (their states' bounds are moved together by
+    the repair); ``fallback``: an upper vector to
     try when the policy's does not pass (the iteration's).  ``nature``: for a robust
     game, each choice's rows (``mdp.matrix``'s rows are then nature's vertex rows and
     ``mdp.row_groups`` group the choices): the bound is on ``max_c min_rows``, the
