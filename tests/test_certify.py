@@ -452,3 +452,24 @@ def test_an_upper_bound_does_not_take_a_wrong_zero_set_on_trust() -> None:
                        for s, c in enumerate(choices)])
     cert = C.certify(mdp, target, policy, sense="max", zero=~target, sides=("upper",))
     assert Fraction(cert.upper) >= pmax
+
+
+def test_a_constrained_bracket_holds_the_exact_optimum() -> None:
+    # max P(F A) s.t. P(F B) <= 0.2 on a fork (a: A 0.6, B 0.4; b: A 0.2, C 0.8): play a
+    # w.p. q, 0.4 q <= 0.2, P(F A) = 0.2 + 0.4 q is at most 2/5 (by hand); the upper
+    # bound is weak duality checked in exact arithmetic, the lower the policy's value
+    from mitld_lp.synthesis import synthesize_constrained
+
+    fork = ExplicitGame(
+        initial="s",
+        transitions={"s": {"a": {"A": 0.6, "B": 0.4}, "b": {"A": 0.2, "C": 0.8}},
+                     "A": {"wait": {"A": 1.0}}, "B": {"wait": {"B": 1.0}},
+                     "C": {"wait": {"C": 1.0}}},
+        labels={"A": {"A"}, "B": {"B"}, "C": {"C"}})
+    r = synthesize_constrained(Model.from_game(fork, "F A"), ["P(F B) <= 0.2"])
+    assert r.certified and inside(r.lower, Fraction(2, 5), r.upper)
+    assert Fraction(r.upper) - Fraction(r.lower) <= Fraction(1, 10**6)
+    (c,) = r.constraints
+    assert c.holds and Fraction(c.bounds[1]) <= Fraction(1, 5)
+    assert any(ch.name.startswith("upper bound: the constrained optimum") and ch.passed
+               for ch in r.checks)

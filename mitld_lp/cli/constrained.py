@@ -54,6 +54,10 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
                  + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
         if r.status == "optimal":
             _out(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")
+            parts = {k: v for k, v in r.width.items() if k != "total" and v}
+            if set(parts) - {"solver"}:
+                _out(f"width:        {r.width['total']:.3g} = " + " + ".join(
+                    f"{k} {v:.3g}" for k, v in parts.items()))
             _out(f"E(steps):     {r.steps:.6g}")
             if r.then:
                 _out(f"then {r.then}: {r.secondary:.6g}")

@@ -151,8 +151,8 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
         if r.complement is not None:  # the complement's automaton: failing runs accepted
-            _out(f"wrote {chain} (P=? [F \"accept\"] >= {r.complement[0]!r}, the "
-                 "complement's lower bound: for a minimised task \"accept\" marks the runs "
+            _out(f"wrote {chain} (P=? [F \"accept\"] >= the complement's lower = "
+                 f"{r.complement[0]!r}: for a minimised task \"accept\" marks the runs "
                  "that fail it)")
         else:
             _out(f"wrote {chain} (P=? [F \"accept\"] >= lower = {r.lower!r})")

@@ -153,6 +153,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                                   model=model, epsilon=eps, then=then)
     margins = [0.0] * len(cons)
     found = None
+    first = float("nan")  # the untightened LP's optimum
+    untightened: Solved | None = None
     for attempt in range(TIGHTEN_ROUNDS + 1):
         lp_rows = [Row(r.quantity, r.sense, r.bound - m if r.sense == "<=" else r.bound + m)
                    for r, m in zip(rows("lower"), margins, strict=True)]
@@ -162,6 +164,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                 return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
             break  # a tightened LP failed: the last policy stands, its misses reported
         chosen, secondary = low, None
+        if attempt == 0:
+            first, untightened = low.objective, low
         if then is not None:
             q2 = Quantity("steps" if then == "min-steps" else "cost")
             keep = Row(task_lo, ">=", low.objective - LEXICOGRAPHIC_TOL)
@@ -180,18 +184,19 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                    for m, d, c in zip(margins, misses, cons, strict=True)]
     assert found is not None
     low, chosen, secondary, (task, values, steps), attempts = found
-    high = low
+    # the upper bound from the LP with the problem's own bounds (a tightened one's duals
+    # would be extrapolated back to them, overshooting where the optimum bends)
+    high, which = (untightened or low), "lower"
     if merged.truncated.any():
-        high = lp(task_hi, True, rows("upper"))
+        high, which = lp(task_hi, True, rows("upper")), "upper"
     assert chosen.prob is not None and chosen.stay is not None
     lower = task.lower
-    upper = high.objective if high.status == OPTIMAL else float("nan")
-    # the LP's optimum is inexact to its tolerance; when the policy's certified value
-    # lies above it, the bracket keeps its order
-    upper = max(upper, lower) if upper == upper else upper
+    upper, proved = _upper_bound(merged, high, rows(which), task_hi if which == "upper"
+                                 else task_lo, cost_vec, eta)
     checks = [
         Check("lower LP", low.status == OPTIMAL, low.message),
         Check("upper LP", high.status == OPTIMAL, high.message),
+        proved,
         task.check,
         *(Check(f"constraint {v.constraint}", v.holds, _said(v)) for v in values),
     ]
@@ -201,6 +206,9 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
             + ", ".join(f"{m:.3g}" for m in margins) + " so that the policy meets them")))
     value = low.objective
     allowed = LEXICOGRAPHIC_TOL if then else 0.0
+    # what tightening the bounds cost the optimum (the LP's estimate): deliberate, as
+    # the lexicographic tolerance is, and reported apart from the solver's part
+    tightening = max(first - low.objective, 0.0) if attempts else 0.0
     complement = None
     if posed.minimise:  # Pmin(task) = 1 - Pmax(not task): the bracket read back
         from mitld_lp.solvers.rounding import one_minus
@@ -209,9 +217,9 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         (lower, upper), value = one_minus(lower, upper), 1.0 - value
     apart = 0.0
     if merged.truncated.any() and high.status == OPTIMAL:
-        apart = max(high.objective - low.objective, 0.0)
+        apart = max(high.objective - first, 0.0)
     total = upper - lower
-    solver = max(total - apart - allowed, 0.0)
+    solver = max(total - apart - allowed - tightening, 0.0)
     checks.append(precision_check(lower, upper, solver, apart, s.precision))
     controller = ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
                                        chosen.stay, seed=seed)
@@ -223,7 +231,30 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         timings={**(build or {}), "solve": time.perf_counter() - t0},
         complement=complement, precision=s.precision,
         width={"total": total, "truncation": apart, "solver": solver,
-               **({"lexicographic": allowed} if then else {})}, **common)
+               **({"lexicographic": allowed} if then else {}),
+               **({"tightening": tightening} if attempts else {})}, **common)
+
+
+def _upper_bound(merged: Any, high: Solved, rows: list[Row], objective: Quantity,
+                 cost_vec: np.ndarray, eta: float) -> tuple[float, Check]:
+    """The constrained optimum bounded from above in exact arithmetic by weak duality
+    from the LP's dual solution, against the problem's own bounds (those of a tightened
+    LP's rows are not this answer's: the dual solution is feasible whatever they are),
+    :mod:`mitld_lp.solvers.certify_dual`; the LP's float optimum when no dual solution
+    settles, with a failed check."""
+    from mitld_lp.solvers.certify_dual import dual_bound
+
+    name = "upper bound: the constrained optimum (weak duality)"
+    if high.status != OPTIMAL or high.duals is None:
+        return float("nan"), Check(name, False, f"the upper LP is {high.status}")
+    timed = any(r.quantity.kind in ("steps", "cost") for r in rows)
+    stays = merged.stay_ok & ~(merged.undecided & timed)
+    upper, check = dual_bound(merged, [objective, *(r.quantity for r in rows)],
+                              [r.sense for r in rows], [r.bound for r in rows],
+                              high.duals, stays, cost_vec, eta)
+    if upper == float("inf"):
+        return high.objective, check
+    return upper, check
 
 
 #: Rounds of tightening the bounds a policy missed (module docs).

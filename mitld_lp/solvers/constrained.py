@@ -59,6 +59,8 @@ class Solved:
         stay: per merged state, the probability the policy stays there for ever.
         values: the exact value on the policy's chain of the objective, then of each row.
         message: the solver's word.
+        duals: the LP's dual solution, ``(y, lam)``: ``y`` per merged state (0 where
+            absorbing), ``lam >= 0`` per row (``None`` without a solution).
     """
 
     status: str
@@ -67,6 +69,7 @@ class Solved:
     stay: np.ndarray | None
     values: tuple[float, ...]
     message: str
+    duals: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _counts_steps(q: Quantity) -> bool:
@@ -75,10 +78,11 @@ def _counts_steps(q: Quantity) -> bool:
 
 def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_array,
               b_ub: np.ndarray, tol: float, time_limit: float | None = None,
-              ) -> tuple[str, np.ndarray | None, str]:
+              ) -> tuple[str, np.ndarray | None, np.ndarray | None, str]:
     """``min c'v  s.t.  a_eq v = b_eq, a_ub v <= b_ub, v >= 0`` by Clarabel (form
-    ``Av + s = b, s in {0}^n x R_+^m``); ``time_limit`` seconds (status
-    ``time_limit`` past it)."""
+    ``Av + s = b, s in {0}^n x R_+^m``): the status, the primal and dual solutions
+    (``A'z + c = 0``, the equality rows' duals first), the solver's word;
+    ``time_limit`` seconds (status ``time_limit`` past it)."""
     clarabel: Any = importlib.import_module("clarabel")
     n = c.size
     a = sp.vstack([a_eq, a_ub, -sp.eye_array(n, format="csc")], format="csc")
@@ -97,15 +101,16 @@ def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_
             settings,
         ).solve()
     except Exception as exc:  # pyo3 panics included
-        return FAILED, None, f"clarabel: {type(exc).__name__}: {exc}"
+        return FAILED, None, None, f"clarabel: {type(exc).__name__}: {exc}"
     word = str(solution.status)
     if word in ("Solved", "AlmostSolved"):
-        return OPTIMAL, np.asarray(solution.x, dtype=np.float64), f"clarabel: {word}"
+        return (OPTIMAL, np.asarray(solution.x, dtype=np.float64),
+                np.asarray(solution.z, dtype=np.float64), f"clarabel: {word}")
     if word in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
-        return INFEASIBLE, None, f"clarabel: {word}"
+        return INFEASIBLE, None, None, f"clarabel: {word}"
     if word == "MaxTime":
-        return TIME_LIMIT, None, f"clarabel: {word} (time limit {time_limit} s)"
-    return FAILED, None, f"clarabel: {word}"
+        return TIME_LIMIT, None, None, f"clarabel: {word} (time limit {time_limit} s)"
+    return FAILED, None, None, f"clarabel: {word}"
 
 
 def optimise(
@@ -168,14 +173,20 @@ def optimise(
     n_var = live_choices.size + stays.size
     a_ub = sp.csc_array(np.array(ub_rows).reshape(len(rows), n_var))
     c = vec(0) * (-1.0 if maximise else 1.0)
-    status, v, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol,
-                                   time_limit)
-    if v is None:
+    status, v, z, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64),
+                                      tol, time_limit)
+    if v is None or z is None:
         return Solved(status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)
     prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v)
     values = _exact(merged, prob, stay, quantities, cols)
-    return Solved(OPTIMAL, lp_value, prob, stay, values, message)
+    # Clarabel's duals satisfy A'z + c = 0 with c = -objective for a maximum: the flow
+    # rows' duals y and the rows' lam >= 0 (a cone's duals) give A_eq'y + A_ub'lam >=
+    # objective, weak duality's certificate (mitld_lp.solvers.certify_dual)
+    y = np.zeros(mdp.n_states)
+    y[states] = z[:states.size] if maximise else -z[:states.size]
+    lam = np.maximum(z[states.size:states.size + len(rows)], 0.0)
+    return Solved(OPTIMAL, lp_value, prob, stay, values, message, (y, lam))
 
 
 def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
