@@ -247,11 +247,14 @@ def _upper_bound(merged: Any, high: Solved, rows: list[Row], objective: Quantity
     name = "upper bound: the constrained optimum (weak duality)"
     if high.status != OPTIMAL or high.duals is None:
         return float("nan"), Check(name, False, f"the upper LP is {high.status}")
+    from mitld_lp.solvers.constrained import never_reaching
+
     timed = any(r.quantity.kind in ("steps", "cost") for r in rows)
-    stays = merged.stay_ok & ~(merged.undecided & timed)
+    allowed, stay_allowed = never_reaching(merged, rows)
+    stays = merged.stay_ok & ~(merged.undecided & timed) & stay_allowed
     upper, check = dual_bound(merged, [objective, *(r.quantity for r in rows)],
                               [r.sense for r in rows], [r.bound for r in rows],
-                              high.duals, stays, cost_vec, eta)
+                              high.duals, stays, cost_vec, eta, allowed)
     if upper == float("inf"):
         return high.objective, check
     return upper, check

@@ -42,10 +42,14 @@ ROUNDS = 64
 
 def dual_bound(merged: Any, quantities: list[Any], senses: list[str], bounds: list[float],
                duals: tuple[np.ndarray, np.ndarray], stay_ok: np.ndarray,
-               costs: np.ndarray | None, eta: float) -> tuple[float, Check]:
+               costs: np.ndarray | None, eta: float,
+               allowed: np.ndarray | None = None) -> tuple[float, Check]:
     """An upper bound on the maximum of ``quantities[0]`` subject to the rows
     ``quantities[i] senses[i-1] bounds[i-1]`` over ``merged``'s randomised policies with
-    stays (allowed where ``stay_ok``), from the LP's ``duals`` (module docs)."""
+    stays (allowed where ``stay_ok``), from the LP's ``duals`` (module docs).
+    ``allowed``: the choices a feasible policy may take at all (a choice that may reach
+    ``phi`` under ``P(phi) <= 0``: every policy using it is infeasible, so its column
+    is not in the LP and needs no dual inequality)."""
     from mitld_lp.automata.joint import ACCEPTED
     from mitld_lp.solvers.certify import support_layers
     from mitld_lp.solvers.constrained_model import columns
@@ -100,6 +104,8 @@ def dual_bound(merged: Any, quantities: list[Any], senses: list[str], bounds: li
     layers = support_layers(mdp)
     level_of = np.asarray(layers[1])[np.asarray(layers[0])]
     mecs = maximal_end_components(mdp, live).mec_of
+    if allowed is not None:  # a closed choice: no inequality to meet
+        reward = np.where(allowed, reward, -np.inf)
     settled = _settle(m, np.asarray(mdp.row_groups, dtype=np.int64), cs, rnd, x, reward,
                       floors, live, level_of, mecs)
     if not settled:
@@ -150,7 +156,9 @@ def _needed(m: sp.csr_array, groups: np.ndarray, rnd: Any, x: np.ndarray,
     local, cols, vals = row_entries(m, rows)
     sums = np.bincount(local, weights=vals * x[cols], minlength=rows.size)
     each = np.nextafter(reward[rows] + above(rnd, rows, sums), np.inf)
-    # R <= 0: a choice's value is at most the largest value of its support
-    each = np.minimum(each, support_extreme(m, rows, x, largest=True))
+    # R <= 0: a choice's value is at most the largest value of its support (a closed
+    # choice, R = -inf, asks nothing)
+    each = np.minimum(each, np.where(np.isfinite(reward[rows]),
+                                     support_extreme(m, rows, x, largest=True), -np.inf))
     starts = np.concatenate([[0], np.cumsum(groups[states + 1] - groups[states])[:-1]])
     return np.maximum(np.maximum.reduceat(each, starts), floors[states])

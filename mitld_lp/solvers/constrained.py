@@ -61,6 +61,8 @@ class Solved:
         message: the solver's word.
         duals: the LP's dual solution, ``(y, lam)``: ``y`` per merged state (0 where
             absorbing), ``lam >= 0`` per row (``None`` without a solution).
+        allowed: per merged choice, whether the LP could take it (a ``P(phi) <= 0`` row
+            closes the choices that may reach ``phi``: :func:`never_reaching`).
     """
 
     status: str
@@ -70,6 +72,7 @@ class Solved:
     values: tuple[float, ...]
     message: str
     duals: tuple[np.ndarray, np.ndarray] | None = None
+    allowed: np.ndarray | None = None
 
 
 def _counts_steps(q: Quantity) -> bool:
@@ -134,8 +137,9 @@ def optimise(
     cols = [columns(merged, q, costs) for q in quantities]
     cs = mdp.choice_state()
     live = ~merged.absorbing
-    live_choices = np.flatnonzero(live[cs])
-    stays = np.flatnonzero(allow_stay)
+    allowed, stay_allowed = never_reaching(merged, rows)
+    live_choices = np.flatnonzero(live[cs] & allowed)
+    stays = np.flatnonzero(allow_stay & stay_allowed)
     if not live[mdp.initial]:  # decided before any step
         prob = np.zeros(mdp.n_choices)
         stay = np.zeros(mdp.n_states)
@@ -178,7 +182,7 @@ def optimise(
     if v is None or z is None:
         return Solved(status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)
-    prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v)
+    prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v, allowed)
     values = _exact(merged, prob, stay, quantities, cols)
     # Clarabel's duals satisfy A'z + c = 0 with c = -objective for a maximum: the flow
     # rows' duals y and the rows' lam >= 0 (a cone's duals) give A_eq'y + A_ub'lam >=
@@ -186,7 +190,44 @@ def optimise(
     y = np.zeros(mdp.n_states)
     y[states] = z[:states.size] if maximise else -z[:states.size]
     lam = np.maximum(z[states.size:states.size + len(rows)], 0.0)
-    return Solved(OPTIMAL, lp_value, prob, stay, values, message, (y, lam))
+    return Solved(OPTIMAL, lp_value, prob, stay, values, message, (y, lam), allowed)
+
+
+def never_reaching(merged: Merged, rows: list[Row]) -> tuple[np.ndarray, np.ndarray]:
+    """The choices and stays a policy may use under the rows ``P(phi) <= 0``: from the
+    states where some policy keeps ``phi`` from holding for ever (a greatest fixed point
+    on the graph), the choices whose support stays there and the stays where it has not
+    held.  An interior-point LP spreads a little flow over every optimal column, so a
+    zero bound met to its tolerance (3.8e-8 on bus_risk) would not hold exactly: the
+    graph decides it instead.  Every choice and stay where no row is such a bound."""
+    from mitld_lp.automata.joint import ACCEPTED
+
+    mdp = merged.mdp
+    cs = mdp.choice_state()
+    allowed = np.ones(mdp.n_choices, dtype=bool)
+    stays = np.ones(mdp.n_states, dtype=bool)
+    m = sp.csr_array(mdp.matrix)
+    owner = np.repeat(np.arange(mdp.n_choices), np.diff(m.indptr))
+    for r in rows:
+        q = r.quantity
+        if q.kind != "prob" or r.sense != "<=" or r.bound > 0:
+            continue
+        sat = merged.verdicts[:, q.component] == ACCEPTED
+        bad = sat.copy()
+        bad[merged.truncated] = q.truncated > 0
+        keep = ~bad
+        while True:
+            inside = np.ones(mdp.n_choices, dtype=bool)
+            np.logical_and.at(inside, owner, keep[m.indices])
+            ok = np.zeros(mdp.n_states, dtype=bool)
+            np.logical_or.at(ok, cs, inside)
+            nxt = keep & (ok | merged.absorbing)
+            if np.array_equal(nxt, keep):
+                break
+            keep = nxt
+        allowed &= ~keep[cs] | inside
+        stays &= ~sat
+    return allowed, stays
 
 
 def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
@@ -194,10 +235,12 @@ def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
 
 
 def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.ndarray,
-            cs: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            cs: np.ndarray, v: np.ndarray, allowed: np.ndarray,
+            ) -> tuple[np.ndarray, np.ndarray]:
     """``pi(c | s)`` and ``pi(stay | s)`` from the occupancy ``v``; shares below
     :data:`_ZERO_SHARE` of a state's visits are dropped (interior-point noise), and a
-    state the solution never visits takes its first choice."""
+    state the solution never visits takes its first ``allowed`` choice (its first
+    choice when none is)."""
     x = np.zeros(n_choices)
     x[live_choices] = np.maximum(v[: live_choices.size], 0.0)
     z = np.zeros(n_states)
@@ -209,7 +252,9 @@ def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.n
     empty = total <= 0
     first = np.zeros(n_choices, dtype=bool)
     starts = np.flatnonzero(np.diff(np.concatenate([[-1], cs])))  # first choice per state
-    first[starts] = True
+    rank = np.where(allowed, np.arange(n_choices), n_choices)
+    best = np.minimum.reduceat(rank, starts)
+    first[np.where(best < n_choices, best, starts)] = True
     x[first & empty[cs]] = 1.0
     total[empty] = 1.0
     return x / total[cs], z / total
