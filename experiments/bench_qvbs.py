@@ -23,7 +23,9 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 * ``storm_check``: stormpy reads that DRN and checks ``Pmax=? [F "target"]`` with each
   of Storm's sound methods (``force_soundness``, precision 1e-9 absolute); the fastest
   is Storm's best check, and every method must agree with our product's optimum within
-  1e-6 (for a ``Pmin`` property the product is the complement's, as ours solves it);
+  1e-6 (``Pmin=?`` where ours minimises the product, ``Result.sense``: a ``Pmin``
+  property of a co-safe task; a task with a safety part is minimised as its
+  complement's maximum, whose product is written);
 * ``storm_prism``: Storm's whole run on the PRISM file and the QVBS property as
   published, as a process: import stormpy, parse, build, check with the best method
   found on the DRN (``storm_process_cpu``, up to the end of the check;
@@ -151,13 +153,16 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
             k += 1
         times.append((bs._cpu() - c) / k)
     write_drn(mdp, r.acceptance.goal, work / "model.drn", overwrite=True)
+    # Storm optimises the DRN's target as we do (a checkout before Result.sense: "max")
+    (work / "sense.txt").write_text(getattr(r, "sense", "max"))
     return dict(out, sweep_cpu=float(np.median(times)))
 
 
 def work_storm_check(job: dict[str, Any], work: Path) -> dict[str, Any]:
     import stormpy
 
-    prop = stormpy.parse_properties('Pmax=? [F "target"]')[0]
+    sense = (work / "sense.txt").read_text().strip()
+    prop = stormpy.parse_properties(f'P{sense}=? [F "target"]')[0]
     before = bs._rss_kb()
     c = bs._cpu()
     model = stormpy.build_model_from_drn(str(work / "model.drn"))

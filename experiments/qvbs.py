@@ -14,6 +14,14 @@ whether the reference lies inside the bracket, our time (load + solve) and Storm
 above 1 - 1e-3) are listed apart and never enter a ratio.  Every instance that is not run
 is listed with the reason.
 
+Inside means inside exactly: the bracket's two floats as the solver printed them, read as
+the rationals they are (``Fraction(lower)``), against QVBS's exact reference ``num/den``,
+with no tolerance (a bracket that misses by one rounding misses); the table prints the
+floats in full and, for a miss, how far it is relative to the reference.  A reference
+QVBS gives only approximately is compared as given and counted apart (``approx``), never
+in the exact tally or the exit status.  ``--exact`` also asks each instance for its exact
+optimum (``solve --exact``, within its budget) and says whether that fraction is QVBS's.
+
 Properties are translated as written: ``P(min|max)=? [F phi]`` is ``F t``, ``[F<=k phi]``
 is ``F[0,k] t``, ``[psi U phi]`` is ``l U t`` (MITLD's until is PCTL's: ``psi`` at every
 step before the first ``phi``), with ``t``, ``l`` the file's label when the state formula
@@ -30,8 +38,13 @@ folder::
         python experiments/qvbs.py --qvbs qcomp/benchmarks
     python experiments/qvbs.py --qvbs qcomp/benchmarks --quick   # up to 20,000 states
 
+The exactness check of issue 40 runs every instance of at most 200,000 states::
+
+    python experiments/qvbs.py --qvbs ../shared/qvbs --max-states 200000 --exact
+
 A full run writes ``qvbs.csv`` and ``qvbs.md`` to ``experiments/out``; ``--quick`` to the
-scratch folder.  Exit status 1 when a reference lies outside a certified bracket.
+scratch folder.  Exit status 1 when an exact reference lies outside a certified bracket,
+or an exact answer is not QVBS's fraction.
 """
 
 from __future__ import annotations
@@ -55,9 +68,6 @@ from mitld_lp.logic.syntax import is_proposition_name
 
 QUICK_STATES = 20_000
 TRIVIAL = 1e-3
-INSIDE_TOL = 1e-8
-"""A reference counts as inside ``[lower, upper]`` within this much (the solvers' own
-tolerance is 1e-9)."""
 
 
 @dataclass(frozen=True)
@@ -285,18 +295,28 @@ except ModelError as exc:
 loaded = time.perf_counter()
 r = synthesize(model)
 done = time.perf_counter()
+exact = None
+if sys.argv[3] == "exact":  # the exact answer, or why there is none
+    from mitld_lp.exact.errors import ExactError, ExactTooLarge
+    from mitld_lp.problem import ProblemError
+    try:
+        e = synthesize(model, exact=True).exact
+        exact = "time limit" if e is None else [str(e.lower), str(e.upper)]
+    except (ExactError, ExactTooLarge, ProblemError) as exc:
+        exact = str(exc).splitlines()[0]
 print(json.dumps({"lower": r.lower, "upper": r.upper, "certified": r.certified,
                   "status": str(r.status), "world": model.game.n_states,
                   "decided": getattr(model.game, "decided", 0),
-                  "load": loaded - start, "solve": done - loaded}))
+                  "load": loaded - start, "solve": done - loaded, "exact": exact}))
 """
 
 
-def ours(path: Path, max_states: int, timeout: float) -> dict[str, Any]:
+def ours(path: Path, max_states: int, timeout: float, exact: bool = False) -> dict[str, Any]:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
     try:
-        run = subprocess.run([sys.executable, "-c", DRIVER, str(path), str(max_states)],
+        run = subprocess.run([sys.executable, "-c", DRIVER, str(path), str(max_states),
+                              "exact" if exact else "float"],
                              capture_output=True, text=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
         return {"error": f"over {timeout:g} s"}
@@ -340,6 +360,37 @@ def _fmt(x: float) -> str:
     return f"{x:.9g}"
 
 
+def inside_exactly(lower: float, upper: float, reference: Fraction) -> bool:
+    """Whether ``reference`` lies in ``[lower, upper]``, the two floats read as the
+    rationals they are: no tolerance."""
+    if not (math.isfinite(lower) and math.isfinite(upper)):
+        return False
+    return Fraction(lower) <= reference <= Fraction(upper)
+
+
+def miss(lower: float, upper: float, reference: Fraction) -> str:
+    """How far outside ``[lower, upper]`` the reference is, relative to it ("" inside)."""
+    if inside_exactly(lower, upper, reference) or not (math.isfinite(lower)
+                                                       and math.isfinite(upper)):
+        return ""
+    gap = Fraction(lower) - reference if Fraction(lower) > reference else reference - Fraction(
+        upper)
+    return f"{float(gap / reference):.1e}" if reference else f"{float(gap):.1e} (abs)"
+
+
+def exact_verdict(exact: Any, reference: Fraction | float) -> str:
+    """``--exact``: "yes" when the exact answer is QVBS's fraction (both truncation
+    models' optima equal to it), "NO" when it is another, else why there is none."""
+    if exact is None:
+        return "-"
+    if isinstance(exact, str):
+        return f"none: {exact[:60]}"
+    low, high = (Fraction(x) for x in exact)
+    if not isinstance(reference, Fraction):
+        return f"{float(low)!r}" + ("" if low == high else f"..{float(high)!r}") + " (approx ref)"
+    return "yes" if low == high == reference else "NO"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, required=True,
@@ -349,6 +400,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=None,
                     help="seconds per instance for our solve (default 3600, --quick 120)")
     ap.add_argument("--family", action="append", help="only these families (repeatable)")
+    ap.add_argument("--exact", action="store_true",
+                    help="also each instance's exact optimum (solve --exact), compared with "
+                         "QVBS's fraction")
     args = ap.parse_args(argv)
     if not (args.qvbs / "mdp").is_dir():
         ap.error(f"--qvbs {args.qvbs}: no mdp/ folder (give qcomp's benchmarks/ folder)")
@@ -362,10 +416,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.family:
         runs = [r for r in runs if r.family in args.family]
     header = ["instance", "states", "explored", "lower", "upper", "reference", "inside",
-              "ours s", "storm s", "ratio", "storm value"]
+              "miss", "ours s", "storm s", "ratio", "storm value"]
+    if args.exact:
+        header.append("exact = ref")
     rows: list[list[Any]] = []
     trivial: list[list[Any]] = []
     outside: list[str] = []
+    approximate: list[str] = []
+    wrong: list[str] = []
     widths: list[float] = []
     for inst in runs:
         missing = [f.name for f in (inst.prism, inst.props) if not f.is_file()]
@@ -384,27 +442,39 @@ def main(argv: list[str] | None = None) -> int:
             continue
         path = work / f"{inst.name}.toml"
         path.write_text(model_file(inst, posed, undefined), encoding="utf-8")
-        got = ours(path, max(limit, inst.qvbs_states), timeout)
+        got = ours(path, max(limit, inst.qvbs_states), timeout, args.exact)
         if "error" in got:
             reason = got["error"]
             skipped.append((inst.name, reason))
             continue
         value, storm_seconds = storm(inst, texts[inst.prop])
         ref = float(inst.reference)
+        exact_ref = isinstance(inst.reference, Fraction)
+        reference = inst.reference if exact_ref else Fraction(ref)
         lower, upper = got["lower"], got["upper"]
-        inside = got["certified"] and lower - INSIDE_TOL <= ref <= upper + INSIDE_TOL
-        if not inside:
+        inside = got["certified"] and inside_exactly(lower, upper, reference)
+        if not exact_ref:
+            approximate.append(inst.name)
+        elif not inside:
             outside.append(inst.name)
         widths.append(upper - lower)
         seconds = got["load"] + got["solve"]
         easy = ref <= TRIVIAL or ref >= 1 - TRIVIAL
-        row = [inst.name, f"{inst.qvbs_states:,}", f"{got['world']:,}", _fmt(lower),
-               _fmt(upper), _fmt(ref), "yes" if inside else "NO", f"{seconds:.2f}",
-               f"{storm_seconds:.2f}", "-" if easy else f"{seconds / storm_seconds:.1f}",
-               _fmt(value)]
+        said = ("yes" if inside else "NO") if exact_ref else (
+            "approx yes" if inside else "approx no")
+        row = [inst.name, f"{inst.qvbs_states:,}", f"{got['world']:,}", repr(lower),
+               repr(upper), repr(ref), said, miss(lower, upper, reference) if got["certified"]
+               else "uncertified", f"{seconds:.2f}", f"{storm_seconds:.2f}",
+               "-" if easy else f"{seconds / storm_seconds:.1f}", _fmt(value)]
+        if args.exact:
+            verdict = exact_verdict(got.get("exact"), inst.reference)
+            if verdict == "NO":
+                wrong.append(inst.name)
+            row.append(verdict)
         (trivial if easy else rows).append(row)
-        print(f"{inst.name}: [{_fmt(lower)}, {_fmt(upper)}] ref {_fmt(ref)} "
-              f"{'inside' if inside else 'OUTSIDE'} ({seconds:.2f} s, Storm {storm_seconds:.2f} s)",
+        print(f"{inst.name}: [{lower!r}, {upper!r}] ref {ref!r} "
+              f"{said if exact_ref else said.upper()} ({seconds:.2f} s, Storm "
+              f"{storm_seconds:.2f} s)" + (f" exact {row[-1]}" if args.exact else ""),
               flush=True)
 
     report = ["## QVBS PRISM MDPs through the front door", ""]
@@ -413,11 +483,19 @@ def main(argv: list[str] | None = None) -> int:
     if trivial:
         report += ["Trivial references (0, 1, < 1e-3 or > 1 - 1e-3; no ratio):", "",
                    text_table(header, trivial), ""]
-    ratios = [float(r[9]) for r in rows]
+    ratios = [float(r[10]) for r in rows]
     run = len(rows) + len(trivial)
-    report.append(f"{run} run, {run - len(outside)} references inside the certified bracket, "
+    exact_run = run - len(approximate)
+    report.append(f"{run} run, {exact_run} with an exact reference: "
+                  f"{exact_run - len(outside)} inside the certified bracket exactly, "
                   f"{len(outside)} outside{': ' + ', '.join(outside) if outside else ''}; "
+                  f"{len(approximate)} with an approximate reference (not counted); "
                   f"largest bracket width {max(widths, default=0.0):.3g}")
+    if args.exact:
+        agree = sum(1 for r in rows + trivial if r[-1] == "yes")
+        report.append(f"exact answers: {agree} equal to QVBS's fraction, {len(wrong)} not"
+                      f"{': ' + ', '.join(wrong) if wrong else ''}; the others have none "
+                      "(refused, past the budget) or an approximate reference")
     if ratios:
         report.append("ours / Storm time (non-trivial): median "
                       f"{sorted(ratios)[len(ratios) // 2]:.1f}, geometric mean "
@@ -428,7 +506,7 @@ def main(argv: list[str] | None = None) -> int:
     write_csv(out / "qvbs.csv", header, rows + trivial)
     write_text(out / "qvbs.md", markdown_table(header, rows + trivial) + "\n" + "\n".join(
         f"- not run: {what}: {why}" for what, why in skipped) + "\n")
-    return 1 if outside else 0
+    return 1 if outside or wrong else 0
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """``python -m mitld_lp``: the ``mitld-lp`` command."""
 
-from mitld_lp.cli import run
+from mitld_lp.startup import command
 
-run()
+command()

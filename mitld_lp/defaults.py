@@ -11,13 +11,15 @@ __all__ = [
     "MAX_STATES",
     "MAX_AUTOMATON_STATES",
     "TOL",
-    "CERTIFY_TOL",
     "PRECISION",
+    "CERTIFY_TOL",
     "SOLVER",
     "RUNS",
     "MAX_RUNS",
     "MAX_STEPS",
     "MAX_STEPS_LIMIT",
+    "EXACT_MAX_TRANSITIONS",
+    "EXACT_MAX_BLOCK",
     "check_epsilon",
 ]
 
@@ -44,9 +46,12 @@ robust constrained route's check); every other bound is checked in exact arithme
 (:mod:`mitld_lp.solvers.certify`), with no tolerance."""
 
 PRECISION = 1e-6
-"""The relative width a certified bracket may have where no truncation is involved
-(Storm's sound mode's default): ``upper - lower <= PRECISION * lower``; with
-truncation, the solver's part of the width (docs/results.md)."""
+"""The relative precision asked (Storm's sound mode's default; ``--precision``,
+``[solve] precision``): a certified bracket is at most ``PRECISION * lower`` wide where
+no truncation is involved (with truncation, the solver's part of its width,
+docs/results.md), and interval iteration closes a bracket when its gap is below both
+:data:`TOL` and ``PRECISION`` times its lower bound, so a rare value (1e-30) is known to
+six digits."""
 
 SOLVER = "CLARABEL"
 """The LP solver, called directly on the sparse matrices (no cvxpy needed)."""
@@ -63,6 +68,17 @@ MAX_STEPS = 1000
 
 MAX_STEPS_LIMIT = 1_000_000
 """The largest ``max_steps`` accepted for a rollout."""
+
+EXACT_MAX_TRANSITIONS = 1_000_000
+"""The largest product an exact answer (``--exact``) takes, in transitions: each is
+recomputed and multiplied in rational arithmetic in Python, some microseconds each and
+more as the numbers grow (checked before the exact work)."""
+
+EXACT_MAX_BLOCK = 1_000
+"""The largest strongly connected block of a policy's chain an exact answer factorises:
+one dense rational solve of that size (python-flint), about 3 s and 6,000-digit
+numbers at 1,000 states, growing with the cube (checked before each solve, and on the
+floating-point policy's chain before the exact work)."""
 
 
 def check_epsilon(value: object) -> float:

@@ -2,7 +2,7 @@
 
 The schema (also in docs/model-files.md)::
 
-    name = "bus_grid"                   # required, non-empty string
+    name = "bus_grid"                   # optional, non-empty; default the file's stem
     spec = "D[mu1] b1 & F(b1 & F[0,3] A)"   # required, an MITLD formula (co-safe)
     epsilon = 0.01                      # optional, in (0, 1), default 0.01
 
@@ -65,6 +65,7 @@ from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
 from mitld_lp.sensing.sensors import Sensor, read_sensors, sensors_from
+from mitld_lp.util.decimals import Written
 from mitld_lp.worlds.game import Game, GameError, world_members
 from mitld_lp.worlds.grid import GridWorld
 from mitld_lp.worlds.task import BindError, Task, bind, resolve_laws
@@ -74,6 +75,7 @@ __all__ = [
     "ModelError",
     "load_model",
     "loads_model",
+    "model_budgets",
     "bind_distributions",
     "DEFAULT_EPSILON",
 ]
@@ -368,9 +370,9 @@ def _loaders() -> Any:
 
     return loaders
 
-_COMMON_REQUIRED = {"name", "spec"}
-_COMMON_OPTIONAL = {"epsilon", "distributions", "events", "constants", "constraints", "costs",
-                    "objective", "budgets", "sensors"}
+_COMMON_REQUIRED = {"spec"}
+_COMMON_OPTIONAL = {"name", "epsilon", "distributions", "events", "constants", "constraints",
+                    "costs", "objective", "budgets", "sensors"}
 OBJECTIVES = ("max", "min")
 
 
@@ -489,7 +491,8 @@ def _load(
 ) -> Model:
     ctx = _Context(source)
     try:
-        doc = tomllib.loads(text)
+        # every decimal keeps its text: an exact answer is about the model as written
+        doc = tomllib.loads(text, parse_float=Written)
     except tomllib.TOMLDecodeError as exc:
         raise _toml_error(exc, text, ctx) from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
@@ -516,7 +519,7 @@ def _load(
     kind = present[0]
     ctx.keys(doc, "", _COMMON_REQUIRED | {kind.table}, _COMMON_OPTIONAL | set(kind.extra_tables))
 
-    name = ctx.string(doc["name"], "name")
+    name = ctx.string(doc["name"], "name") if "name" in doc else _default_name(source, path)
     spec_text = ctx.string(doc["spec"], "spec")
     epsilon = DEFAULT_EPSILON
     if "epsilon" in doc:
@@ -562,6 +565,13 @@ def _load(
     )
 
 
+def _default_name(source: str, path: Path | None) -> str:
+    """A model's name when its file gives none: the file's stem (its source's for text
+    whose source names a file), else ``"model"``."""
+    stem = (path or Path(source)).stem if path is not None or not source.startswith("<") else ""
+    return stem or "model"
+
+
 def loads_model(
     text: str,
     source: str = "<string>",
@@ -587,14 +597,27 @@ def load_model(
 
     Raises :class:`ModelError` (message ``PATH: KEY.PATH: problem``), also when the
     file cannot be read or is not UTF-8."""
-    p = Path(path)
+    return _load(_read(path, max_memory), os.fspath(path), Path(path), max_states, max_memory)
+
+
+def _read(path: str | os.PathLike[str], max_memory: int | None) -> str:
     source = os.fspath(path)
     try:  # a regular file, no larger than the memory budget allows (file_rules)
-        text = file_rules.read_bytes(p, file_rules.read_limit(max_memory)).decode("utf-8")
+        return file_rules.read_bytes(path, file_rules.read_limit(max_memory)).decode("utf-8")
     except file_rules.InputFileError as exc:
         raise ModelError(str(exc)) from exc
     except OSError as exc:
         raise ModelError(f"{source}: cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{source}: not UTF-8 text: {exc}") from exc
-    return _load(text, source, p, max_states, max_memory)
+
+
+def model_budgets(path: str | os.PathLike[str], *,
+                  max_memory: int | None = None) -> dict[str, float]:
+    """The ``[budgets]`` of the model file at ``path`` alone, read before the model is so
+    that a command holds every stage to them, the world's loading included (the command
+    line's time limit); ``{}`` when they cannot be read: :func:`load_model` says why."""
+    try:
+        return budgets_table(tomllib.loads(_read(path, max_memory)), _Context(os.fspath(path)))
+    except (ModelError, tomllib.TOMLDecodeError, RecursionError):
+        return {}

@@ -19,10 +19,12 @@ The routes (which solver chain accepts the problem):
 * ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
   co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.sensing.solve`.
 
-``objective = "min"`` (PRISM's ``Pmin``) is solved as the maximum of the complement:
+``objective = "min"`` (PRISM's ``Pmin``) is posed as the maximum of the complement:
 ``Pmin(phi) = 1 - Pmax(not phi)``, with the complement taken on the automaton
 (:meth:`mitld_lp.automata.dta.DTA.complement`), so the classes swap (co-safe <-> safety,
-obligation stays) and the route is chosen for the complement.
+obligation stays) and the route is chosen for the complement; the plain route then
+solves a co-safe task's minimum as a minimum, on the task's own automaton
+(:mod:`mitld_lp.routes.stages`), which keeps a rare probability's digits.
 """
 
 from __future__ import annotations
@@ -47,7 +49,14 @@ BACKENDS = ("auto", "cvxpy", "direct")
 
 class ProblemError(ValueError):
     """A problem no route solves as posed, or an option its route cannot honour: the
-    message names the combination (the command line exits 2)."""
+    message names the combination (the command line exits 2).  ``reasons``: every
+    reason found, each naming its feature, all in the message (one run tells them all)."""
+
+    def __init__(self, *reasons: str) -> None:
+        self.reasons = reasons
+        super().__init__(reasons[0] if len(reasons) == 1 else
+                         f"not solved, for {len(reasons)} reasons: "
+                         + "; ".join(f"({i}) {r}" for i, r in enumerate(reasons, 1)))
 
 
 def complement_class(fragment: str) -> str:
@@ -82,8 +91,9 @@ class Settings:
     truncation: tuple[tuple[str, int], ...] | None = None
     tol: float = defaults.TOL
     certify_tol: float = defaults.CERTIFY_TOL
-    progress: bool = False
-    precision: float = defaults.PRECISION
+    progress: bool | None = None  # bars: None on a terminal only (mitld_lp.util.progress)
+    exact: bool = False  # the optimum as a fraction too (mitld_lp.exact)
+    precision: float = defaults.PRECISION  # the relative precision asked (defaults)
 
     def identity(self) -> dict[str, Any]:
         """The settings that change an answer (part of a sweep's identity; the precision
@@ -134,6 +144,8 @@ class Settings:
             if v is not None and not (isinstance(v, int) and not isinstance(v, bool)
                                       and v >= 1):
                 raise ProblemError(f"{name}: must be a whole number >= 1, got {v!r}")
+        if not isinstance(self.exact, bool):
+            raise ProblemError(f"exact: must be True or False, got {self.exact!r}")
         if self.max_memory is not None and not (
                 isinstance(self.max_memory, int) and self.max_memory >= 1):
             raise ProblemError(f"max_memory: must be a number of bytes >= 1, "
@@ -219,7 +231,7 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     ``objective``: the model's unless given; ``constrained``: the constrained LP's
     route even with no constraint (the trade-off curve's end points).  Raises
     :class:`ProblemError` naming the combination no route solves, or the option the
-    route cannot honour."""
+    route cannot honour: every reason at once, not the first alone."""
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
     from mitld_lp.routes.constraints import THEN, ConstraintError, parse_constraints
@@ -229,47 +241,59 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
             f"expected a Model (load_model(path) or Model.from_game(game, spec)), "
             f"got {type(model).__name__}")
     s = (settings or Settings()).checked().resolved(model.budgets)
+    refused: list[str] = []  # every reason, each naming its feature
     goal = model.objective if objective is None else objective
     if goal not in OBJECTIVES:
-        raise ProblemError(f"objective: must be 'max' or 'min', got {goal!r}")
+        refused.append(f"objective: must be 'max' or 'min', got {goal!r}")
     if then is not None and then not in THEN:
-        raise ProblemError(f"then: must be one of {', '.join(THEN)}, got {then!r}")
-    try:
-        cons = parse_constraints(model.constraints) + parse_constraints(list(constraints))
-    except ConstraintError as exc:
-        raise ProblemError(str(exc)) from None
+        refused.append(f"then: must be one of {', '.join(THEN)}, got {then!r}")
+    cons: tuple[Any, ...] = ()
+    given = (*model.constraints, *constraints)
+    for item in given:
+        try:
+            cons += parse_constraints([item])
+        except ConstraintError as exc:
+            refused.append(str(exc))
     fragment = check(model.spec).fragment
     if goal == "min":
         fragment = complement_class(fragment)
     if s.truncation is not None:
         unknown = sorted(set(dict(s.truncation)) - set(model.distributions))
         if unknown:
-            raise ProblemError(
+            refused.append(
                 f"truncation: {unknown[0]!r} is not an event of the model (events: "
                 f"{', '.join(sorted(model.distributions)) or 'none'})")
     robust = any(d.is_ambiguous for d in model.distributions.values())
-    constrained = constrained or bool(cons or then)
+    constrained = constrained or bool(given or then)
     problem = Problem(model, cons, then, goal)
     what = _task_words(fragment, goal)
     # sensors that miss events: the observation-based route, or a refusal naming why
-    from mitld_lp.sensing.route import sensed_refusal
+    from mitld_lp.sensing.route import sensed_refusals
     from mitld_lp.sensing.sensors import partial
 
     if partial(model.sensors):
-        why = sensed_refusal(model, fragment, goal, cons, then, robust)
+        route = SENSED
+        refused += sensed_refusals(model, fragment, goal, cons, then, robust)
+    elif constrained:
+        route = CONSTRAINED
+        refused += _constrained_refusals(Posed(problem, s, CONSTRAINED, fragment, robust))
+    elif robust:
+        route = ROBUST
+        refused += _robust_refusals(s)
+    else:
+        route = PLAIN
+        if fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses the others
+            refused.append(f"{what}: not a supported class")
+    posed = Posed(problem, s, route, fragment, robust)
+    if s.exact:  # an exact answer (mitld_lp.exact): what it cannot take, before any work
+        from mitld_lp.exact.stage import exact_refusal
+
+        why = exact_refusal(posed)
         if why is not None:
-            raise ProblemError(why)
-        return Posed(problem, s, SENSED, fragment, robust)
-    if constrained:
-        posed = Posed(problem, s, CONSTRAINED, fragment, robust)
-        check_constrained(posed)
-        return posed
-    if robust:
-        _robust_route(s)
-        return Posed(problem, s, ROBUST, fragment, robust)
-    if fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses the others
-        raise ProblemError(f"{what}: not a supported class")
-    return Posed(problem, s, PLAIN, fragment, robust)
+            refused.append(why)
+    if refused:
+        raise ProblemError(*refused)
+    return posed
 
 
 def _task_words(fragment: str, goal: str) -> str:
@@ -285,43 +309,55 @@ def _band(model: Any) -> str:
 
 
 def check_constrained(posed: Posed) -> None:
-    """Raise :class:`ProblemError` unless the constrained LP (one Clarabel LP over the
-    joint product's occupancy measures) solves ``posed`` as posed."""
+    """Raise :class:`ProblemError` (with every reason) unless the constrained LP (one
+    Clarabel LP over the joint product's occupancy measures) solves ``posed`` as posed."""
+    refused = _constrained_refusals(posed)
+    if refused:
+        raise ProblemError(*refused)
+
+
+def _constrained_refusals(posed: Posed) -> list[str]:
+    """Why the constrained LP does not solve ``posed`` as posed (empty: it does)."""
     from mitld_lp.logic.fragment import check
 
     s, cons, fragment = posed.settings, posed.problem.constraints, posed.fragment
     what = _task_words(fragment, posed.problem.objective)
+    refused = []
     if posed.robust and (posed.problem.then is not None
                          or any(c.kind != "prob" for c in cons)):
         what_else = (f"then = {posed.problem.then}" if posed.problem.then is not None else
                      next(str(c) for c in cons if c.kind != "prob"))
-        raise ProblemError(
+        refused.append(
             f"{what_else} with a law known only within a band ({_band(posed.model)}): the "
             "worst case of expected steps or costs is not solved; give the event a point "
             "law, or bound probabilities only")
     if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
-        raise ProblemError(f"{what} with constraints: not a supported class")
+        refused.append(f"{what} with constraints: not a supported class")
     for c in cons:
         if c.formula is not None and check(c.formula).fragment != CO_SAFE:
-            raise ProblemError(f"constraint {c}: class {check(c.formula).fragment}; "
-                               "constraint formulas must be co-safe")
+            refused.append(f"constraint {c}: class {check(c.formula).fragment}; "
+                           "constraint formulas must be co-safe")
     if s.method != "lp":
-        raise ProblemError(f"method {s.method!r} with constraints: the constrained "
-                           "optimum is one occupancy LP (method 'lp')")
+        refused.append(f"method {s.method!r} with constraints: the constrained "
+                       "optimum is one occupancy LP (method 'lp')")
     if s.solver != "CLARABEL" or s.backend == "cvxpy":
-        raise ProblemError(f"solver {s.solver} / backend {s.backend} with constraints: the "
-                           "constrained LP is solved by Clarabel directly")
+        refused.append(f"solver {s.solver} / backend {s.backend} with constraints: the "
+                       "constrained LP is solved by Clarabel directly")
     if s.decompose is True:
-        raise ProblemError("decompose with constraints: the constrained LP is one LP over "
-                           "the whole product (its rows couple every block)")
+        refused.append("decompose with constraints: the constrained LP is one LP over "
+                       "the whole product (its rows couple every block)")
+    return refused
 
 
-def _robust_route(s: Settings) -> None:
-    """Robust interval iteration, with the policy's robust LP (Clarabel) for method lp."""
+def _robust_refusals(s: Settings) -> list[str]:
+    """Why robust interval iteration, with the policy's robust LP (Clarabel) for method
+    lp, does not take settings ``s`` (empty: it does)."""
+    refused = []
     if s.solver != "CLARABEL" or s.backend == "cvxpy":
-        raise ProblemError(f"solver {s.solver} / backend {s.backend} with a law known only "
-                           "within a band: the robust policy LP is solved by Clarabel "
-                           "directly")
+        refused.append(f"solver {s.solver} / backend {s.backend} with a law known only "
+                       "within a band: the robust policy LP is solved by Clarabel "
+                       "directly")
     if s.decompose is True:
-        raise ProblemError("decompose with a law known only within a band: robust "
-                           "synthesis has no block LPs")
+        refused.append("decompose with a law known only within a band: robust "
+                       "synthesis has no block LPs")
+    return refused

@@ -60,18 +60,18 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     Keys: ``game_state`` (the game's own state; a PRISM world's as an object of its
     variables by name, :func:`mitld_lp.worlds.names.state_record`), ``automaton_state``
     (the obligation still to satisfy, as formula text), ``pending`` (the events that
-    have not happened,
-    sorted), ``clock`` (steps counted for the pending events, capped where their hazards
-    stop changing), ``action`` (the policy's action), ``value`` (the probability that
-    the policy satisfies the task from there, truncation counted as failure: exact, from
-    the linear solve on the policy's Markov chain that certified it,
-    ``result.lower_model.policy_values``), ``accepting_component`` (whether the state
-    lies in an accepting end component of a task with a safety part: the task is then
-    kept by playing ``action`` forever, an action that never leaves the component;
-    always false for a co-safe task).  For ``objective = "min"`` the policy is the
-    complement's and ``value`` is read back in the task's terms: ``1 -`` the
-    complement's exact value, the most the task can happen under the policy from there
-    (truncation counted as the task happening).
+    have not happened, sorted), ``clock`` (steps counted for the pending events, capped
+    where their hazards stop changing), ``action`` (the policy's action), ``value`` (the
+    probability that the policy satisfies the task from there, truncation counted as
+    failure: from the linear solve on the policy's Markov chain that the certificate
+    starts from, in floating point, ``result.lower_model.policy_values``),
+    ``accepting_component`` (whether the state lies in an accepting end component of a
+    task with a safety part: the task is then kept by playing ``action`` forever, an
+    action that never leaves the component; always false for a co-safe task). For
+    ``objective = "min"`` ``value`` is the most the task can happen under the policy
+    from there (truncation counted as the task happening): the policy's value, or, where
+    the minimum is the complement's maximum read back (``result.complemented``), ``1 -``
+    the complement's.
     """
     if result.route == "constrained":
         return randomised_table(result)
@@ -81,7 +81,7 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
         return sensed_table(result)
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
-    if result.objective == "min":  # Pmin(task) = 1 - Pmax(not task), state by state
+    if result.complemented:  # Pmin(task) = 1 - Pmax(not task), state by state
         values = 1.0 - np.asarray(values, dtype=np.float64)
     obligations = result.dta.states
     goal = result.acceptance.goal
@@ -140,7 +140,8 @@ SUMMARY_KEYS = (
     "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
-    "randomized_states", "message", "sensors", "complement", "precision", "width",
+    "randomized_states", "message", "sensors", "complement", "precision", "width", "exact",
+    "exact_bracket",
 )
 
 
@@ -177,6 +178,7 @@ def summary(result: Any) -> dict[str, Any]:
         sensors={a: s.detect for a, s in result.sensors.items()},
         complement=None if result.complement is None else list(result.complement),
         precision=result.precision, width=dict(result.width),
+        **_exact_part(result.exact),
     )
     if result.route == "constrained":
         out.update(_constrained_part(result))
@@ -197,17 +199,21 @@ def summary(result: Any) -> dict[str, Any]:
         "status": lp.status.value, "solver": lp.solver, "backend": lp.backend,
         "primal_objective": lp.primal_objective, "dual_objective": lp.dual_objective,
         "iterations": lp.iterations, "seconds": lp.seconds, "message": lp.message}
+    # a minimum solved as one: the controller's model (upper) bounds it from above
+    below, above = ((high.iteration.value_lower, low.iteration.value_upper)
+                    if result.sense == "min" else
+                    (low.iteration.value_lower, high.iteration.value_upper))
     out["iteration"] = {"status": low.iteration.status.value,
-                        **_task_terms(result, low.iteration.value_lower,
-                                      high.iteration.value_upper),
+                        **_task_terms(result, below, above),
                         "iterations": low.iteration.iterations}
     return out
 
 
 def _task_terms(result: Result, lower: float, upper: float) -> dict[str, float]:
     """A bracket of the solved automaton in the task's terms: the complement's
-    ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task."""
-    if result.objective == "min":
+    ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task read back from
+    its complement (``result.complemented``)."""
+    if result.complemented:
         return {"lower": 1.0 - upper, "upper": 1.0 - lower}
     return {"lower": lower, "upper": upper}
 
@@ -248,3 +254,18 @@ def html(result: Result) -> str:
         for k, v in rows
     )
     return f"<table>{body}</table>"
+
+
+def _exact_part(exact: Any) -> dict[str, Any]:
+    """``exact``: the exact optimum as ``"p/q"`` (None unless asked for, and when a
+    truncation leaves two models); ``exact_bracket``: both models' optima, ``["p/q",
+    "r/s"]`` (None unless asked for)."""
+    if exact is None:
+        return {}
+    point = exact.value
+    return {"exact": None if point is None else _fraction(point),
+            "exact_bracket": [_fraction(exact.lower), _fraction(exact.upper)]}
+
+
+def _fraction(x: Any) -> str:
+    return f"{x.numerator}/{x.denominator}"

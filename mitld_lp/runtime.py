@@ -16,13 +16,23 @@ time.
 :func:`serve` is the line loop behind ``mitld-lp run CONTROLLER``: one JSON object per
 line on its input, ``{"state": ..., "events": [...]}`` (the world state as the policy
 table writes it; the events seen in the step that led there), one ``{"action": ...}``
-per line on its output (``null`` once the task is decided; ``"status"`` says how).
+per line on its output (``null`` once the task is decided; ``"status"`` says how).  A
+line longer than :data:`LINE_BUDGET` characters is not kept: it is answered with an
+error, its rest read and dropped in pieces, and the loop goes on.
+
+:func:`main` is that command itself, ``mitld-lp run CONTROLLER [--seed S]`` (the
+console script hands ``run`` to it before it imports anything of the command line,
+:func:`mitld_lp.startup.command`) and ``python -m mitld_lp.runtime CONTROLLER``: the one
+command line outside :mod:`mitld_lp.cli`, so that it too runs with NumPy alone.
 """
 
 from __future__ import annotations
 
+import argparse
+import io
 import json
-from collections.abc import Hashable, Iterable, Sequence
+import sys
+from collections.abc import Hashable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, Protocol
 
@@ -59,12 +69,22 @@ __all__ = [
     "advance",
     "decode_state",
     "encode_state",
+    "LINE_BUDGET",
     "load",
+    "main",
     "read_plan",
+    "run_file",
     "serve",
 ]
 
 _QUOTE = 80  # characters of a foreign value quoted in an error
+
+LINE_BUDGET = 1 << 20
+"""The longest observation line :func:`serve` reads, in characters (1 MiB; an
+observation of a PRISM state with a hundred variables by name takes a few KB): a longer
+line is answered with an error and never held whole in memory."""
+
+PROG = "mitld-lp"
 
 
 def _printable(text: str) -> str:
@@ -145,6 +165,12 @@ class Stepper:
             return tuple(UNDECIDED for _ in self._plan.verdicts[self._plan.initial])
         v = tuple(self._plan.verdicts[self._memory[0]])
         return (ACCEPTED, *v[1:]) if self.keeping else v
+
+    def task_verdict(self, state: int) -> int:
+        """The task's verdict in automaton state ``state`` of the controller's own
+        automaton (accepted 1, rejected 0, undecided -1): which automaton it runs, the
+        task's or its complement's, is told by the task's accepting state."""
+        return int(self._plan.verdicts[state][0])
 
     @property
     def status_name(self) -> str:
@@ -266,16 +292,22 @@ def load(path: str | Path, *, seed: int | None = 0) -> RuntimeController:
 # --------------------------------------------------------------------------- the line loop
 
 
-def serve(controller: RuntimeController, lines: Iterable[str], out: IO[str]) -> int:
+def serve(controller: RuntimeController, lines: Iterable[str] | IO[str], out: IO[str],
+          *, budget: int = LINE_BUDGET) -> int:
     """Answer each JSON observation of ``lines`` with one JSON line on ``out`` (module
     docstring).  An observation with ``"reset": true`` starts a new run first.  A bad
     line is answered with ``{"error": ...}`` naming its line number, and the loop goes
-    on; returns how many lines were bad."""
+    on; so is a line longer than ``budget`` characters (from a stream, such as standard
+    input, it is read ``budget`` characters at a time and dropped, never held whole).
+    Returns how many lines were bad."""
     bad = 0
-    for number, line in enumerate(lines, 1):
-        if not line.strip():
+    for number, line in enumerate(_bounded(lines, budget), 1):
+        if line is not None and not line.strip():
             continue
         try:
+            if line is None:
+                raise ValueError(f"longer than {budget:,} characters, the most an "
+                                 "observation line may have; the line was skipped")
             reply = _answer(controller, line)
         except (ValueError, TypeError, RecursionError) as exc:
             bad += 1
@@ -283,6 +315,24 @@ def serve(controller: RuntimeController, lines: Iterable[str], out: IO[str]) -> 
         out.write(json.dumps(reply) + "\n")
         out.flush()
     return bad
+
+
+def _bounded(lines: Iterable[str] | IO[str], budget: int) -> Iterator[str | None]:
+    """The lines of ``lines`` (each at most ``budget`` characters before its newline),
+    None for a longer one; from a stream, with at most ``budget + 1`` characters in
+    memory (the rest of a longer line is read and dropped)."""
+    readline = getattr(lines, "readline", None)
+    if readline is None:  # an iterable of lines, already in memory: held to the budget
+        for line in lines:
+            yield line if len(line) - line.endswith("\n") <= budget else None
+        return
+    while line := readline(budget + 1):
+        if len(line) <= budget or line.endswith("\n"):
+            yield line
+            continue
+        while (rest := readline(budget)) and not rest.endswith("\n"):
+            pass
+        yield None
 
 
 def _answer(controller: RuntimeController, line: str) -> dict[str, Any]:
@@ -305,3 +355,76 @@ def _answer(controller: RuntimeController, line: str) -> dict[str, Any]:
     state = controller.world_state(o["state"])
     action = controller.act(state, events)
     return {"action": action, "status": controller.status}
+
+
+# --------------------------------------------------------------------------- the command
+
+
+class _Usage(Exception):
+    """A bad argument (argparse's message)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> Any:  # one line, as the command line says it
+        raise _Usage(message)
+
+
+def _parser(prog: str) -> argparse.ArgumentParser:
+    p = _Parser(
+        prog=prog, description="Answer JSON observations on stdin, one per line "
+        '({"state": ..., "events": [...]}), with a saved controller\'s actions on stdout.')
+    p.add_argument("controller", metavar="CONTROLLER",
+                   help="a controller file saved by Controller.save / export --controller")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of a randomised controller's generator (default 0)")
+    p.add_argument("-q", "--quiet", action="store_true", help="(nothing is said but errors)")
+    p.add_argument("-v", "--verbose", action="store_true", help="(nothing more to say)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None, prog: str = f"{PROG} run") -> int:
+    """The command ``mitld-lp run CONTROLLER [--seed S]`` (:func:`run_file`); a bad
+    argument is refused with the usage and exit 2, ``--help`` prints it."""
+    try:
+        args = _parser(prog).parse_args(argv)
+    except _Usage as bad:
+        return _error(sys.stderr, f"{bad} (see {prog} --help)")
+    except SystemExit as stop:  # --help has printed the usage
+        return int(stop.code or 0)
+    return run_file(args.controller, seed=args.seed)
+
+
+def run_file(path: str | Path, *, seed: int = 0, stdin: IO[str] | None = None,
+             stdout: IO[str] | None = None, stderr: IO[str] | None = None) -> int:
+    """Serve the controller saved at ``path`` on ``stdin`` / ``stdout`` (default the
+    process's; its input read as UTF-8, a bad byte replaced); exit 0, or 2 when the file
+    is not a controller or some line was bad (one line on ``stderr`` says so)."""
+    err = sys.stderr if stderr is None else stderr
+    if seed < 0:
+        return _error(err, f"--seed: must be >= 0, got {seed}")
+    try:
+        controller = load(path, seed=seed)
+    except ControllerFileError as exc:
+        return _error(err, str(exc))
+    raw = getattr(sys.stdin, "buffer", None) if stdin is None else None
+    text = io.TextIOWrapper(raw, encoding="utf-8", errors="replace") if raw else None
+    try:
+        bad = serve(controller, stdin or text or sys.stdin,
+                    sys.stdout if stdout is None else stdout)
+    finally:
+        if text is not None:
+            text.detach()  # standard input stays open for whoever reads it next
+    if bad:
+        return _error(err, f"run: {bad} observation line{'s' if bad > 1 else ''} could not "
+                      "be answered (each got an error line)")
+    return 0
+
+
+def _error(err: IO[str], message: str) -> int:
+    err.write(f"{PROG}: error: {_printable(message)}\n")
+    err.flush()
+    return 2
+
+
+if __name__ == "__main__":  # python -m mitld_lp.runtime CONTROLLER
+    sys.exit(main(prog="python -m mitld_lp.runtime"))

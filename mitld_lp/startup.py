@@ -1,4 +1,8 @@
-"""What must happen before anything heavy is imported.
+"""What must happen before anything heavy is imported, and the console script.
+
+``mitld-lp`` is :func:`command`: the verb ``run`` goes to :func:`mitld_lp.runtime.main`,
+which imports NumPy alone (a robot's process runs it without the solver stack), and
+every other verb to :func:`mitld_lp.cli.run`.
 
 Started as the command line (``mitld-lp``, or ``python -m mitld_lp`` while Python locates
 the module and ``sys.argv[0]`` is ``"-m"``), a Ctrl-C during the package's import prints
@@ -22,7 +26,7 @@ import _signal
 import os
 import sys
 
-__all__ = ["started_as_command"]
+__all__ = ["started_as_command", "command"]
 
 
 def started_as_command() -> bool:
@@ -44,3 +48,19 @@ if started_as_command():
     _signal.signal(_signal.SIGINT, _interrupted)
     for _name, _value in BLAS_THREADS.items():
         os.environ.setdefault(_name, _value)
+
+
+def command() -> None:
+    """The ``mitld-lp`` console script (and ``python -m mitld_lp``): ``run`` is answered
+    by :func:`mitld_lp.runtime.main` with NumPy alone, before anything of the command
+    line is imported (its verbs' modules load the parser, the solvers' records and
+    SciPy); every other verb, and ``run`` with ``--time-limit`` (whose watcher is the
+    command line's), by :func:`mitld_lp.cli.run`."""
+    argv = sys.argv[1:]
+    if argv[:1] == ["run"] and not any(a.startswith("--ti") for a in argv[1:]):
+        from mitld_lp.runtime import main
+
+        sys.exit(main(argv[1:]))
+    from mitld_lp.cli import run
+
+    run()

@@ -49,13 +49,14 @@ def synthesize(
     max_memory: int | None = None,
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool = False,
+    progress: bool | None = None,
     precision: float = defaults.PRECISION,
     decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
     then: str | None = None,
     objective: str | None = None,
+    exact: bool = False,
 ) -> Result:
     """Maximise (or, with ``objective="min"`` or the model's own objective, minimise)
     the probability that the model's world satisfies its MITLD spec.
@@ -70,12 +71,16 @@ def synthesize(
     the model file's ``[budgets]``, else the defaults).  ``decompose``: the LP block by
     block in topological order (``None``, the default, or ``True``) or as one LP
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
-    ``TIME_LIMIT``.  ``precision``: the relative width the certified bracket may have
-    (``upper - lower <= precision * lower``; with truncation, the solver's part of the
-    width), else the answer is not certified (docs/results.md).  ``constraints`` /
-    ``then`` (and the model's constraints): the constrained synthesis
+    ``TIME_LIMIT``.  ``progress``: a bar for each long stage where standard error is a
+    terminal (``None``), never (``False``) or wherever it goes (``True``;
+    :mod:`mitld_lp.util.progress`).  ``precision``: the relative width the certified
+    bracket may have (``upper - lower <= precision * lower``; with truncation, the
+    solver's part of the width), else the answer is not certified (docs/results.md).
+    ``constraints`` / ``then`` (and the model's constraints): the constrained synthesis
     (:mod:`mitld_lp.routes.constrained`); a law known only within a band: the robust
-    synthesis (:mod:`mitld_lp.routes.robust`).
+    synthesis (:mod:`mitld_lp.routes.robust`).  ``exact``: also the exact optimum as a
+    fraction, ``Result.exact``, the bracket then its point (:mod:`mitld_lp.exact`; the
+    plain route, models of modest size, laws and worlds with rational probabilities).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -86,7 +91,7 @@ def synthesize(
         decompose=decompose, time_limit=time_limit, max_states=max_states,
         max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
         truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
-        precision=precision)
+        precision=precision, exact=exact)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 
@@ -103,11 +108,15 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     constraints the constrained occupancy LP on the joint product, and with a band its
     sound robust bracket.  ``costs`` / ``seed``: a constrained problem's action costs
     (default the model's) and its randomised controller's seed."""
+    return _with_world_checks(_solve_route(posed, costs, seed), posed.model.game)
+
+
+def _solve_route(posed: Posed, costs: Mapping[str, float] | None, seed: int | None) -> Result:
     if posed.route == CONSTRAINED:
         from mitld_lp.problem import check_constrained
 
         check_constrained(posed)  # a refusal names the combination before any work
-    built = build_posed(posed, progress=posed.settings.progress or None)
+    built = build_posed(posed, progress=posed.settings.progress)
     if posed.route == ROBUST:
         from mitld_lp.routes.robust import solve_robust
 
@@ -127,6 +136,21 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
     from mitld_lp.routes.plain import solve_plain
 
     return solve_plain(posed, built)
+
+
+def _with_world_checks(result: Result, game: Any) -> Result:
+    """``result`` with a check saying how the world was read, when it was changed: a
+    PRISM world's choices whose probabilities summed to 1 only within PRISM's tolerance
+    were divided by their sums (:class:`mitld_lp.worlds.successors.Normalisation`), so
+    the bracket is the normalised world's."""
+    from mitld_lp.worlds.prism import PrismGame
+
+    if not isinstance(game, PrismGame) or game.normalised is None:
+        return result
+    from dataclasses import replace
+
+    check = Check("world's probabilities normalised", True, str(game.normalised))
+    return replace(result, checks=(*result.checks, check))
 
 
 def synthesize_constrained(

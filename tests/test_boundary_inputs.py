@@ -25,7 +25,7 @@ from mitld_lp.product import ProductTooLarge
 from mitld_lp.product import budget as budget_module
 from mitld_lp.product.imdp import vertex_rows
 from mitld_lp.routes.robust import interval_model
-from mitld_lp.sweep import SweepError, load_sweep
+from mitld_lp.sweep import SweepError, load_sweep, run_sweep
 from mitld_lp.sweep.results import Results
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -208,6 +208,47 @@ def test_a_second_writer_of_a_results_file_is_refused(tmp_path):
     second.close()
 
 
+def test_every_name_of_a_results_file_takes_its_one_lock(tmp_path):
+    # issue 41: `-o r.csv` and `-o link.csv` (a symlink to it) both ran and left 240 rows
+    # for 144 points; the lock is now the file's own, whatever name reaches it
+    sw = load_sweep(BUS_SWEEP)
+    (tmp_path / "sub").mkdir()
+    out = tmp_path / "r.csv"
+    (tmp_path / "link.csv").symlink_to("r.csv")
+    (tmp_path / "sub" / "far.csv").symlink_to(out)  # a link from another folder
+    first = Results(out, sw.name, sw.sweep_id, sw.columns)
+    try:
+        for other in (tmp_path / "link.csv", tmp_path / "sub" / "far.csv",
+                      tmp_path / "sub" / ".." / "r.csv"):
+            with pytest.raises(SweepError, match=r"another sweep is writing it .*holds "
+                                                 r"\.r\.csv\.lock\)"):
+                Results(other, sw.name, sw.sweep_id, sw.columns)
+        assert sorted(p.name for p in tmp_path.iterdir()) == [
+            ".r.csv.lock", "link.csv", "r.csv", "sub"]  # no lock beside the links
+    finally:
+        first.close()
+    second = Results(tmp_path / "link.csv", sw.name, sw.sweep_id, sw.columns)  # free again
+    second.close()
+    assert (tmp_path / "link.csv").is_symlink()
+
+
+def test_a_hard_linked_results_file_is_not_extended(tmp_path):
+    # a hard link is a second name no lock file can follow: refused while two names
+    # share the rows (the issue's symlink report, by the other kind of link)
+    sw = load_sweep(BUS_SWEEP)
+    out = tmp_path / "r.csv"
+    Results(out, sw.name, sw.sweep_id, sw.columns).close()
+    os.link(out, tmp_path / "h.csv")
+    before = out.read_bytes()
+    for name in ("r.csv", "h.csv"):
+        with pytest.raises(SweepError, match=rf"{name}: has 2 names \(hard links\)"):
+            Results(tmp_path / name, sw.name, sw.sweep_id, sw.columns)
+    assert out.read_bytes() == before
+    # --force starts the file anew under its own name: the other name keeps the old rows
+    Results(tmp_path / "h.csv", sw.name, sw.sweep_id, sw.columns, force=True).close()
+    assert os.stat(out).st_nlink == 1 and not os.path.samefile(out, tmp_path / "h.csv")
+
+
 def test_two_sweeps_at_once_never_duplicate_rows(tmp_path):
     env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": os.environ["PATH"]}
     argv = [PYTHON, "-m", "mitld_lp", "sweep", str(BUS_SWEEP), "-o", "r.csv", "-q"]
@@ -242,6 +283,60 @@ def test_a_dask_address_that_is_none_is_one_line(tmp_path, capsys):
                  "--dask", "not an address"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "not the address of a Dask scheduler" in err[0]
+
+
+@pytest.mark.parametrize(("address", "why"), [
+    ("localhost", "no port"),
+    ("tcp://10.0.0.5", "no port"),
+    ("tls://[::1]", "no port"),
+    ("tcp://host:", "no port"),
+    ("host:0", "the port 0 is outside 1..65535"),
+    ("host:65536", "the port 65536 is outside 1..65535"),
+    ("host:87x6", "the port '87x6' is not a number"),
+    ("udp://host:8786", "the protocol 'udp' is none of"),
+    ("TCP://host:8786", "the protocol 'TCP' is none of"),  # Dask reads it in lower case
+    ("tcp://:8786", "no host"),
+    ("::1:8786", "must be written in brackets"),
+    ("[::1:8786", "without its closing"),
+    ("[::g]:8786", "'::g' is no IPv6 address"),
+    ("300.1.1.1:8786", "'300.1.1.1' is no IPv4 address"),
+    ("bad..host:8786", "'bad..host' is no host name"),
+    ("-host:8786", "'-host' is no host name"),
+])
+def test_a_malformed_dask_address_is_refused_at_once_writing_nothing(
+        tmp_path, capsys, address, why):
+    # issue 41: `--dask HOST` took 20 s, printed a traceback and left a results file
+    # holding its header alone; docs/sweeps.md promises HOST:PORT or a refusal at once
+    code = main(["sweep", str(BUS_SWEEP), "-o", str(tmp_path / "r.csv"), "-q",
+                 f"--dask={address}"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "not the address of a Dask scheduler" in err[0] and why in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:8786", "127.0.0.1:8786",
+                                     "tls://[::1]:8786", "ws://node-3.lab_a.example:1/",
+                                     "ucx://10.0.0.5:65535"])
+def test_the_addresses_docs_sweeps_gives_are_accepted(address):
+    from mitld_lp.sweep.engines import check_address
+
+    assert check_address(address) == address
+
+
+def test_an_unreachable_dask_scheduler_leaves_no_results_file(tmp_path, monkeypatch):
+    # a well-formed address no scheduler answers: refused before the file is touched
+    # (the connection made to fail at once, as Dask's does after its 10 s timeout; not
+    # by importing dask here, whose import makes every exception pickle its traceback)
+    from mitld_lp.sweep import engines
+
+    def refuse(address: str) -> None:
+        raise SweepError(f"cannot reach the Dask scheduler at {address}: timed out")
+
+    monkeypatch.setattr(engines, "connect", refuse)
+    with pytest.raises(SweepError, match="cannot reach the Dask scheduler"):
+        run_sweep(BUS_SWEEP, tmp_path / "r.csv", dask="tcp://127.0.0.1:8786")
+    assert list(tmp_path.iterdir()) == []
 
 
 # --------------------------------------------------------------------------- bands

@@ -343,6 +343,19 @@ def test_the_allowance_grows_with_a_cancelling_hazard() -> None:
     assert C.model_eta(near_one) >= C.ETA + (1 - 1e-9) / 1e-9 * C.HAZARD_ACCURACY * 0.99
 
 
+def test_an_allowance_past_its_limit_fails_the_checks_soundly(tmp_path) -> None:
+    r = rare_product(tmp_path)
+    mdp, goal, zero = r.mdp, r.acceptance.goal, r.lower_model.prob0
+    pmax = Fraction(11, 10000) ** 10
+    wide = C.certify(mdp, goal, always(mdp, "b"), sense="max", zero=zero, eta=2.0**-4)
+    assert inside(wide.lower, pmax, wide.upper)  # loose, still sound
+    # past the limit a row's sum is bounded by 0 and infinity: the trivial bracket,
+    # proved, and the policy not shown optimal to any precision
+    past = C.certify(mdp, goal, always(mdp, "b"), sense="max", zero=zero, eta=0.2,
+                     precision=1e-6)
+    assert (past.lower, past.upper) == (0.0, 1.0) and not past.certified
+
+
 # ------------------------------------------------------------------ robust and printing
 
 

@@ -57,7 +57,8 @@ def test_solve_human_output(capsys):
 def test_an_unknown_solver_is_refused_before_any_work(capsys):
     assert main(["solve", BUS, "--solver", "NO_SUCH_SOLVER", "--json"]) == 2
     captured = capsys.readouterr()
-    assert captured.out == ""  # no JSON with NaN in it, no work done
+    # no answer (no JSON with NaN in it, no work done): the error object alone
+    assert json.loads(captured.out)["status"] == "usage_error"
     err = captured.err.strip().splitlines()
     assert len(err) == 1 and "unknown or not installed LP solver 'NO_SUCH_SOLVER'" in err[0]
     assert "CLARABEL" in err[0]  # the installed ones are named
@@ -261,3 +262,32 @@ def test_a_commands_stage_lines_are_its_own(capsys) -> None:
         other.join()
     err = capsys.readouterr().err
     assert "stray line" not in err and "mitld-lp: product:" in err
+
+
+# --------------------------------------------------------------------------- budgets
+
+
+@pytest.mark.parametrize(("model", "key", "value", "flag"), [
+    ("bus_grid", "max_states", "10", "10"),
+    ("bus_grid", "max_automaton_states", "2", "2"),
+    ("bus_grid", "max_memory", '"100K"', "100K"),
+    ("corridor", "max_world_states", "3", "3"),
+])
+@pytest.mark.parametrize("verb", [["info"], ["solve"], ["simulate", "-n", "5"]])
+def test_each_budget_of_a_model_file_binds_as_its_flag(tmp_path, capsys, model, key, value,
+                                                       flag, verb):
+    # issue 41: every budget in a model file is as binding as the same flag (the time
+    # limit's own tests are in test_time_limit_process.py)
+    if model == "corridor":
+        pytest.importorskip("stormpy")
+    text = (MODELS / f"{model}.toml").read_text().replace('"corridor.prism"',
+                                                          f'"{MODELS / "corridor.prism"}"')
+    (tmp_path / "file.toml").write_text(f"{text}\n[budgets]\n{key} = {value}\n")
+    (tmp_path / "flag.toml").write_text(text)
+    outcomes = []
+    for name, extra in (("file", []), ("flag", [f"--{key.replace('_', '-')}", flag])):
+        code = main([verb[0], str(tmp_path / f"{name}.toml"), *verb[1:], *extra, "-q"])
+        err = capsys.readouterr().err.replace(str(tmp_path / f"{name}.toml"), "M")
+        outcomes.append((code, err))
+    assert outcomes[0] == outcomes[1]
+    assert outcomes[0][0] == 3 and "stopped: " in outcomes[0][1]  # the budget did stop it

@@ -103,6 +103,29 @@ def test_docs_exist_and_stay_inside_the_repository() -> None:
             assert (page.parent / target).exists(), f"{page.name}: broken link {target}"
 
 
+def test_the_readme_lists_every_bundled_file_with_what_it_needs() -> None:
+    """The README's table of bundled models names every file under ``models/`` and no
+    other; a row says the ``[prism]`` extra where the file is or reads a PRISM program,
+    and names every other file of ``models/`` the file reads."""
+    models = ROOT / "models"
+    section = (ROOT / "README.md").read_text(encoding="utf-8").split("\n## Model files")[1]
+    section = section.split("\n## ")[0]
+    rows = {m.group(1): [c.strip() for c in m.group(2).split(" | ")]
+            for m in re.finditer(r"^\| `([^`]+)` \| (.+) \|$", section, re.M)}
+    files = {p.relative_to(models).as_posix(): p for p in models.rglob("*")
+             if p.is_file() and not any(part.startswith(".") for part in p.parts)}
+    assert set(rows) == set(files)
+    for name, path in files.items():
+        scenario, needs = rows[name]
+        text = path.read_text(encoding="utf-8") if path.suffix == ".toml" else ""
+        prism = path.suffix == ".prism" or re.search(r"^\[prism\]", text, re.M) is not None
+        assert ("`[prism]` extra" in needs) is prism, name
+        for other in files:  # a file it reads, relative to its own folder
+            if other != name and f'"{other}"' in text:
+                assert f"`{other}`" in needs, (name, other)
+        assert scenario, name
+
+
 def _run_bash(block: Block) -> None:
     from mitld_lp.cli import main
 

@@ -91,6 +91,24 @@ def test_two_outputs_naming_one_file_are_refused(tmp_path):
     files.distinct_outputs([("--lp", a), ("--drn", tmp_path / "b.drn")])
 
 
+def test_two_outputs_naming_one_file_by_any_name_are_refused(tmp_path):
+    # issue 41: the rule compared resolved paths, so a hard link or another path to
+    # the same folder could name one file twice
+    (tmp_path / "sub").mkdir()
+    a = tmp_path / "a.lp"
+    a.write_text("x")
+    os.link(a, tmp_path / "hard.drn")
+    for alias in (tmp_path / "hard.drn", tmp_path / "sub" / ".." / "a.lp"):
+        with pytest.raises(files.OutputPathError, match="--lp and --drn name the same file"):
+            files.distinct_outputs([("--lp", a), ("--drn", alias)])
+    new = tmp_path / "new.lp"  # a file not yet written, reached through a folder link
+    (tmp_path / "same").symlink_to(tmp_path / "sub")
+    with pytest.raises(files.OutputPathError, match="--lp and --drn name the same file"):
+        files.distinct_outputs([("--lp", tmp_path / "sub" / "n.lp"),
+                                ("--drn", tmp_path / "same" / "n.lp")])
+    files.distinct_outputs([("--lp", new), ("--drn", tmp_path / "sub" / "new.lp")])
+
+
 def test_cli_refuses_two_outputs_naming_one_file(tmp_path, capsys):
     a = tmp_path / "a.lp"
     (tmp_path / "alias.drn").symlink_to(a)

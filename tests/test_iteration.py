@@ -52,10 +52,13 @@ def test_iteration_limit_is_a_status_with_a_valid_bracket() -> None:
 
 
 def test_initial_decided_without_iterating() -> None:
-    mdp = build_mdp([[("a", {1: 1.0})], []], initial=1, target=[1])
+    mdp = build_mdp([[("a", {1: 1.0}), ("b", {0: 0.5, 2: 0.5})], [], [("c", {0: 1.0})]],
+                    initial=1, target=[1])
     r = interval_iteration(mdp, mdp.target, progress=False)
     assert r.iterations == 0 and r.value_lower == r.value_upper == 1.0
-    assert r.lower[0] == 0.0 and r.upper[0] == 1.0  # not refined, still sound
+    # state 0 is not iterated: its value (1, by "a") is decided by the graph (Prob1E);
+    # state 2 (value 1 too, by going back to 0) as well
+    assert r.lower[0] == r.upper[0] == 1.0 and r.lower[2] == r.upper[2] == 1.0
 
 
 @pytest.mark.parametrize("seed", range(6))

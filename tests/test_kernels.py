@@ -148,5 +148,6 @@ def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit() -> N
 def test_the_sweep_forecast(rate: float, at: int, hopeless: bool) -> None:
     from mitld_lp.solvers.iteration import _hopeless
 
-    seen = [(k, 1e-2 * rate ** (k - at)) for k in range(16, at + 1, 16)]
-    assert _hopeless(seen, 1e-9, 1000) is hopeless
+    # what the sweeps report: the gap over its threshold (here tol = 1e-9 alone)
+    seen = [(k, 1e-2 * rate ** (k - at) / 1e-9) for k in range(16, at + 1, 16)]
+    assert _hopeless(seen, 1000) is hopeless

@@ -354,7 +354,7 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
         "\n".join(x for x in GOOD.split("\n") if not x.startswith("spec")),
         ("spec: missing",),
     ),
-    ("missing name", edit('name = "bad"\n', ""), ("name: missing",)),
+    ("empty name", edit('name = "bad"', 'name = ""'), ("name: must not be empty",)),
     ("name not a string", edit('name = "bad"', "name = 3"), ("name: must be a string", "3")),
     (
         "spec not a string",

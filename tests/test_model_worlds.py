@@ -3,6 +3,8 @@ take any world the library takes; mistakes are one line naming the key path."""
 
 from __future__ import annotations
 
+import os
+import re
 import sys
 
 import pytest
@@ -136,3 +138,17 @@ def test_world_errors_name_the_key_path(folder, capsys, table, expected):
     assert main(["solve", "m.toml"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == f"mitld-lp: error: {info.value}"
+
+
+@pytest.mark.parametrize("kind, make", [("a FIFO (named pipe)", os.mkfifo),
+                                        ("a directory", os.mkdir)])
+def test_a_python_world_module_that_is_no_regular_file_is_named(folder, kind, make):
+    # issue 41, defect 11's other places: Python passes over a module file that is no
+    # regular file in silence ("No module named"); the error says what is there
+    make(folder / "fifoworld.py")
+    (folder / "m.toml").write_text('name = "m"\nspec = "F[0,2] goal"\n[python]\n'
+                                   'world = "fifoworld:corridor"\n')
+    with pytest.raises(ModelError, match=re.escape(
+            f"m.toml: python.world: cannot import fifoworld: No module named 'fifoworld' "
+            f"(fifoworld.py is {kind}, not a regular file)")):
+        load_model("m.toml")

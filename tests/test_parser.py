@@ -230,14 +230,21 @@ def test_distribution_literals(text: str, expected: DistSpec) -> None:
     got = parse_distribution(text)
     assert got == expected
     if isinstance(got, DistLiteral) and isinstance(expected, DistLiteral):
-        assert [type(a) for a in got.args] == [type(a) for a in expected.args]
+        assert [_kind(a) for a in got.args] == [_kind(a) for a in expected.args]
     assert parse(f"D[{text}] a") == dist(expected, Prop("a"))
+
+
+def _kind(a: object) -> type:
+    """int, float (a decimal read from text is a float that keeps its text), str."""
+    return float if isinstance(a, float) else type(a)
 
 
 def test_ints_and_floats_keep_their_type() -> None:
     mu = parse_distribution("pmf(0, 0.0, 1e0)")
     assert isinstance(mu, DistLiteral)
-    assert [type(a) for a in mu.args] == [int, float, float]
+    assert [_kind(a) for a in mu.args] == [int, float, float]
+    # a decimal keeps the text it was written as (an exact answer reads it)
+    assert [getattr(a, "text", None) for a in mu.args] == [None, "0.0", "1e0"]
     assert str(mu) == "pmf(0, 0.0, 1.0)"
 
 

@@ -139,7 +139,7 @@ def test_thecrossover_start_is_worth_both_candidates(seed: int) -> None:
     assert np.all(worth >= np.maximum(v_first, v_second) - 1e-12)
     assert np.all(worth <= exact + 1e-12)
     for lower in (exact, np.zeros_like(exact), None):
-        got = polish(block, lp, y, duals, everything, 1e-9, lower=lower)
+        got = polish(block, lp, y, duals, everything, 1e-9, bound=lower)
         assert got.optimal and np.allclose(got.values, exact, atol=1e-12)
 
 

@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 import pytest
@@ -58,12 +59,12 @@ def storm_exact(path: Path, prop: str) -> tuple[int, int, int]:
     return int(str(value.numerator)), int(str(value.denominator)), int(full.nr_states)
 
 
-def qvbs_folder(root: Path) -> dict[str, float]:
+def qvbs_folder(root: Path) -> dict[str, Fraction]:
     """A ``benchmarks/`` folder with one family per case; returns the references."""
     from stormpy.examples import files
 
     source = Path(files.prism_mdp_coin_2_2).parent
-    references: dict[str, float] = {}
+    references: dict[str, Fraction] = {}
     for family, (name, props) in CASES.items():
         folder = root / "mdp" / family
         folder.mkdir(parents=True)
@@ -77,7 +78,7 @@ def qvbs_folder(root: Path) -> dict[str, float]:
             num, den, states = storm_exact(folder / name_in_folder, text)
             results.append({"property": p, "value": {"approx": num / den, "num": num,
                                                      "den": den}})
-            references[f"{family}.{p}"] = num / den
+            references[f"{family}.{p}"] = Fraction(num, den)
         index = {
             "short": family, "type": "mdp", "original": "PRISM",
             "properties": [{"name": p, "type": "prob-reach"} for p in props],
@@ -109,11 +110,13 @@ def test_every_reference_is_inside_the_certified_bracket(tmp_path: Path) -> None
     assert "Pmin" not in (out / "qvbs.md").read_text()  # none left unrun for its objective
     for name, reference in references.items():
         row = rows[name]  # Pmin (consensus.c2) included: objective = "min"
-        assert row["inside"] == "yes"
-        lower, upper = float(row["lower"]), float(row["upper"])
-        assert lower - 1e-8 <= reference <= upper + 1e-8
-        assert abs(float(row["reference"]) - reference) < 1e-9 * max(1.0, reference)
-    assert "references inside the certified bracket, 0 outside" in run.stdout
+        assert row["inside"] == "yes" and row["miss"] == ""
+        # the floats in full: inside exactly, as rationals, no tolerance
+        assert Fraction(float(row["lower"])) <= reference <= Fraction(float(row["upper"]))
+        assert float(row["reference"]) == float(reference)
+    n = len(references)
+    assert (f"{n} run, {n} with an exact reference: {n} inside the certified bracket "
+            "exactly, 0 outside") in run.stdout
     # the model files it wrote name the PRISM file and never a copy of it
     toml = (out / "qvbs-models" / "dice.seven_soon.toml").read_text()
     assert 'spec = "!two U[0,12] seven"' in toml
@@ -131,6 +134,20 @@ def _experiment(name: str):
 
 def _pose():
     return _experiment("qvbs")
+
+
+def test_inside_means_inside_exactly() -> None:
+    qvbs = _pose()
+    # the float 0.1 is 0.1000000000000000055...: a point bracket [0.1, 0.1] misses 1/10
+    assert not qvbs.inside_exactly(0.1, 0.1, Fraction(1, 10))
+    assert qvbs.miss(0.1, 0.1, Fraction(1, 10)) == "5.6e-17"
+    assert qvbs.inside_exactly(0.09999999999999999, 0.1, Fraction(1, 10))
+    assert qvbs.miss(0.09999999999999999, 0.1, Fraction(1, 10)) == ""
+    assert qvbs.inside_exactly(0.5, 0.5, Fraction(1, 2))  # a float that is the reference
+    assert not qvbs.inside_exactly(float("nan"), 1.0, Fraction(1, 2))
+    assert qvbs.exact_verdict(["1/2", "1/2"], Fraction(1, 2)) == "yes"
+    assert qvbs.exact_verdict(["1/2", "3/5"], Fraction(1, 2)) == "NO"
+    assert qvbs.exact_verdict("exact with b ~ poisson(2)", Fraction(1, 2)).startswith("none")
 
 
 @pytest.mark.parametrize("prop, spec, labels, objective", [

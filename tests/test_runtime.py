@@ -205,3 +205,126 @@ def test_a_policy_table_state_is_what_run_reads(tmp_path: Path) -> None:
     done = run_cli(path, [{"state": first["game_state"], "events": []}])
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["action"] == first["action"]
+
+
+# --------------------------------------------------------------------------- issue 41
+
+
+@pytest.fixture(scope="module")
+def bus_file(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("bus")
+    return synthesize(load_model(MODELS / "bus_grid.toml")).controller.save(folder / "c.npz")
+
+
+def test_a_line_beyond_the_budget_is_an_error_and_the_loop_goes_on(bus_file: Path) -> None:
+    import io
+
+    from mitld_lp.runtime import load, serve
+
+    first = '{"state": [0, 0]}'
+    exact = first[:-1] + " " * (200 - len(first)) + "}"  # 200 characters: within
+    lines = [first, '{"state": "' + "x" * 500 + '"}', exact, first + " " * 190]
+    out = io.StringIO()
+    bad = serve(load(bus_file), io.StringIO("\n".join(lines) + "\n"), out, budget=200)
+    replies = [json.loads(x) for x in out.getvalue().splitlines()]
+    assert bad == 2 and len(replies) == 4
+    assert replies[1]["error"] == ("line 2: longer than 200 characters, the most an "
+                                   "observation line may have; the line was skipped")
+    assert replies[3]["error"].startswith("line 4: longer than 200 characters")
+    # the loop went on: line 3 is a new observation at step 1 (no reset), as a
+    # controller that never saw line 2 answers it
+    c = load(bus_file)
+    assert replies[0]["action"] == c.act((0, 0)) and replies[2]["action"] == c.act((0, 0))
+    # a list of lines is held to the same budget
+    out = io.StringIO()
+    assert serve(load(bus_file), lines, out, budget=200) == 2
+
+
+MEASURED = r"""
+import sys
+from mitld_lp.cli import main
+try:
+    code = main(["run", sys.argv[1]])
+finally:  # this process's peak resident memory (ru_maxrss keeps the forking parent's)
+    with open("/proc/self/status") as f:
+        peak = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
+    print(int(peak) // 1024, file=sys.stderr)
+sys.exit(code)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc (Linux)")
+def test_a_huge_line_is_never_held_in_memory(bus_file: Path) -> None:
+    size = 128 << 20  # characters: read whole, it would take at least 128 MiB
+    text = b'{"state": [0, 0]}\n{"state": "' + b"x" * size + b'"}\n{"state": [0, 0]}\n'
+    done = subprocess.run([sys.executable, "-c", MEASURED, str(bus_file)], input=text,
+                          env=ENV, capture_output=True, timeout=120, check=False)
+    assert done.returncode == 2, done.stderr  # one bad line, said on stderr
+    replies = [json.loads(x) for x in done.stdout.splitlines()]
+    assert [("error" in x) for x in replies] == [False, True, False]
+    peak_mib = int(done.stderr.decode().strip().splitlines()[-1])
+    assert peak_mib < 100, peak_mib  # was 2.4 GB for a 200 MB line
+
+
+def test_python_m_runtime_serves_or_refuses(bus_file: Path) -> None:
+    line = '{"state": [0, 0]}\n'
+    done = subprocess.run([sys.executable, "-m", "mitld_lp.runtime", str(bus_file)],
+                          input=line, env=ENV, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr  # was: exit 0 with no answer
+    assert json.loads(done.stdout)["action"] in {"N", "E", "S", "W"}
+    bare = subprocess.run([sys.executable, "-m", "mitld_lp.runtime"], input=line, env=ENV,
+                          capture_output=True, text=True, timeout=120)
+    assert bare.returncode == 2 and bare.stdout == ""
+    assert bare.stderr == ("mitld-lp: error: the following arguments are required: "
+                           "CONTROLLER (see python -m mitld_lp.runtime --help)\n")
+
+
+def _numpy_only_python(folder: Path) -> Path:
+    """A fresh virtual environment that can import NumPy (this environment's, linked
+    in: no network) and this repository, and nothing else of this environment."""
+    import venv
+
+    import numpy
+
+    venv.EnvBuilder(with_pip=False, symlinks=True).create(folder / "env")
+    python = folder / "env" / "bin" / "python"
+    if not python.exists():
+        pytest.skip("no POSIX virtual environment layout on this platform")
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path"
+                           "('purelib'))"], capture_output=True, text=True, check=True)
+    only = folder / "numpy_only"
+    only.mkdir()
+    installed = Path(numpy.__file__).parent.parent
+    for name in ("numpy", "numpy.libs"):  # the package and its bundled libraries
+        if (installed / name).exists():
+            (only / name).symlink_to(installed / name)
+    Path(site.stdout.strip(), "mitld.pth").write_text(f"{only}\n{ROOT}\n")
+    return python
+
+
+def test_mitld_lp_run_runs_with_numpy_alone_in_a_fresh_environment(tmp_path: Path) -> None:
+    import tomllib
+
+    python = _numpy_only_python(tmp_path)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    probe = ("import importlib.util as u, numpy; print([m for m in ('lark', 'scipy', "
+             "'cvxpy', 'clarabel', 'stormpy', 'tqdm') if u.find_spec(m)])")
+    absent = subprocess.run([str(python), "-s", "-c", probe], env=env, capture_output=True,
+                            text=True, check=True)
+    assert absent.stdout.strip() == "[]"  # NumPy alone (and the standard library)
+    # the console script as pip writes it from pyproject.toml's [project.scripts]
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    module, function = scripts["mitld-lp"].split(":")
+    shim = (f"import sys; sys.argv[0] = 'mitld-lp'; from {module} import {function}; "
+            f"sys.exit({function}())")
+    r = synthesize(load_model(MODELS / "bus_grid.toml"))
+    path = r.controller.save(tmp_path / "bus.npz")
+    runs = bus_runs(r.controller, runs=5, seed=3)
+    text = "".join(json.dumps(x) + "\n" for obs, _ in runs for x in obs)
+    for command in ([str(python), "-s", "-c", shim, "run", str(path)],
+                    [str(python), "-s", "-m", "mitld_lp.runtime", str(path)]):
+        done = subprocess.run(command, input=text, env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr  # was: No module named 'lark'
+        assert [json.loads(x)["action"] for x in done.stdout.splitlines()] == [
+            a for _, acts in runs for a in acts]

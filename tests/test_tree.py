@@ -141,3 +141,41 @@ def test_a_randomised_controllers_tree_keeps_its_distributions(tmp_path) -> None
         b.reset(seed=seed)
         assert a.act(Observation((0, 0))) == b.act(Observation((0, 0)))
     assert np.isfinite(tree_value(r, tree))
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("stormpy") is None,
+                    reason="needs stormpy: pip install -e '.[prism]'")
+def test_memory_features_do_not_clash_with_world_variables(tmp_path) -> None:
+    # the world's variables take the names of the controller's memory (q, clock,
+    # pending_b) and two names that are one Python name (lambda is a keyword)
+    (tmp_path / "w.prism").write_text(
+        "mdp\nmodule m\n  clock : [0..3] init 0;\n  q : [0..2] init 0;\n"
+        "  pending_b : bool init false;\n  lambda : [0..1] init 0;\n  lambda_ : [0..1] init 1;\n"
+        "  [go] q<2 -> 0.7 : (q'=q+1) + 0.3 : (lambda'=1-lambda);\n"
+        "  [tick] clock<3 -> (clock'=clock+1) & (pending_b'=!pending_b) & (lambda_'=lambda);\n"
+        'endmodule\nlabel "goal" = q=2;\n')
+    (tmp_path / "w.toml").write_text(
+        'name = "w"\nspec = "D[geometric(0.5)] b & F(b & F[0,3] goal)"\n'
+        '[prism]\nfile = "w.prism"\n')
+    r = synthesize(load_model(tmp_path / "w.toml"))
+    world = r.model.game.variables
+    assert sorted(world) == ["clock", "lambda", "lambda_", "pending_b", "q"]
+    tree = tree_of(r, same_actions=True)
+    data = json.loads(write_tree(r, tmp_path / "t.json", tree=tree).read_text())
+    assert data["features"] == [*world, "q_", "pending_b_", "clock_"]
+    code = write_tree(r, tmp_path / "t.py", tree=tree).read_text()
+    space: dict = {}
+    exec(compile(code, "t.py", "exec"), space)  # was: def act(clock, q, ..., q, ..., clock)
+    act = space["act"]
+    assert act.__code__.co_argcount == len(world) + 3
+    # the function plays the controller's own action wherever the controller goes
+    plan, checked = r.controller._plan, 0
+    for i in {int(i) for i in chain_of(r).origin if i >= 0}:
+        rec = r.mdp.states[i]
+        if not isinstance(rec, ProductState) or -1 not in plan.verdicts[rec.automaton]:
+            continue
+        d = plan.decide(rec.game, rec.automaton, rec.pending, rec.clock)
+        own = None if d.lost else d.actions[0] if d.actions else plan.fallback(rec.game)
+        assert act(*rec.game, rec.automaton, "b" in rec.pending, rec.clock) == own
+        checked += 1
+    assert checked >= 10

@@ -325,3 +325,25 @@ def test_memory_sizes_out_of_range_are_refused(text: str) -> None:
 
     with pytest.raises(argparse.ArgumentTypeError):
         memory_size(text)
+
+
+@pytest.mark.parametrize("kind, make", [
+    ("a FIFO (named pipe)", lambda p: os.mkfifo(p)),
+    ("a directory", lambda p: p.mkdir()),
+    ("a character device", lambda p: p.symlink_to("/dev/null")),
+])
+def test_a_prism_file_that_is_no_regular_file_is_named_for_what_it_is(tmp_path, kind, make):
+    # issue 41: a FIFO, device or directory given as [prism] file was "no such PRISM file"
+    source = tmp_path / "m.prism"
+    make(source)
+    with pytest.raises(WorldError, match=rf"m\.prism: is {re.escape(kind)}, not a regular "
+                                         "file$"):
+        load_prism(source)
+    line = one_line(cli("solve", str(model_file(tmp_path, source)), "-q"))
+    assert line == (f"mitld-lp: error: {tmp_path / 'm.toml'}: prism: {source}: is {kind}, "
+                    "not a regular file")
+
+
+def test_a_missing_prism_file_is_still_said_missing(tmp_path):
+    with pytest.raises(ModelError, match=r"m\.toml: prism: .*m\.prism: no such PRISM file$"):
+        load_model(model_file(tmp_path, tmp_path / "m.prism"))

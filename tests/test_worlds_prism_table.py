@@ -19,7 +19,6 @@ from mitld_lp.distributions.literal import from_table
 from mitld_lp.model import Model
 from mitld_lp.product import product, robust_product
 from mitld_lp.testing import reference_product
-from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism import load_prism
 from mitld_lp.worlds.table import table_of
 
@@ -146,23 +145,21 @@ def sta_of(game: Any, spec: str) -> Any:
     return make_sta(to_dta(m.spec), m.distributions, m.epsilon)
 
 
-def test_a_row_beyond_the_products_tolerance_is_refused_when_read(tmp_path: Path) -> None:
-    # 1.000001: PRISM's tolerance (1e-5) accepts it, the product's (1e-9) does not; the
-    # row is at one state past the goal, so a task decided at the goal never reads it
+def test_a_row_beyond_the_products_tolerance_is_normalised_when_read(tmp_path: Path) -> None:
+    # 1.000001: PRISM's tolerance (1e-5) accepts it, the product's (1e-9) does not: the
+    # row is divided by its sum when the file is read (issue 41), wherever it is
     text = ROBOT.replace("endmodule\nmodule door", "  [dance] x=4 & d=2 -> 0.5 : (x'=3) + "
                          "0.500001 : true;\nendmodule\nmodule door")
     text += 'label "home" = x=0;\n'
     game = load_prism(write(tmp_path, text))
-    sta = sta_of(game, "F goal")
-    same_mdp(product(game, sta), product(StateByState(game), sta))
-    sta = sta_of(game, "F (goal & F home)")
-    messages = []
-    for world in (game, StateByState(game)):
-        with pytest.raises(GameError, match=r"action 'dance': probabilities sum to 1\.0000"
-                           ) as e:
-            product(world, sta)
-        messages.append(str(e.value))
-    assert messages[0] == messages[1]
+    assert game.normalised is not None and game.normalised.rows == 1
+    assert game.normalised.largest == pytest.approx(1e-6, rel=1e-9)
+    dance = next(s for s in game.states if "dance" in game.actions(s))
+    row = sorted(p for _, p in game.successors(dance, "dance", frozenset()))
+    assert row == pytest.approx([0.5 / 1.000001, 0.500001 / 1.000001], abs=1e-15)
+    for spec in ("F goal", "F (goal & F home)"):
+        sta = sta_of(game, spec)
+        same_mdp(product(game, sta), product(StateByState(game), sta))
 
 
 def test_a_world_changed_by_its_events_is_asked_state_by_state(tmp_path: Path) -> None:

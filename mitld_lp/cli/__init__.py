@@ -39,13 +39,18 @@ from mitld_lp.cli.kernel import (
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     PROG,
+    TimeLimit,
     UsageError,
     _command,
     _dumps,
     _say,
+    apply_file_time_limit,
+    error_record,
+    error_status,
+    say_error,
 )
 from mitld_lp.files import write as files
-from mitld_lp.util import watch
+from mitld_lp.util import progress, watch
 from mitld_lp.util.text import printable
 
 __all__ = ["main", "run", "UsageError", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE",
@@ -89,6 +94,10 @@ _VERBS: list[
 ]
 
 
+#: The verbs that read one model file, whose ``[budgets] time_limit`` may set theirs.
+_MODEL_VERBS = ("info", "solve", "export", "simulate", "plot", "pareto")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
 
@@ -114,7 +123,8 @@ def _build_parser() -> argparse.ArgumentParser:
         p.add_argument("-v", "--verbose", action="store_true",
                        help="also the details of every stage (solver messages)")
         p.add_argument("--time-limit", type=seconds, metavar="SECONDS",
-                       help="stop after SECONDS with status time_limit (exit 3)")
+                       help="stop after SECONDS with status time_limit (exit 3; default: "
+                            "the model file's [budgets] time_limit)")
         p.set_defaults(run=run)
     return parser
 
@@ -126,7 +136,8 @@ def _version() -> str:
 
 
 class _StageLines(logging.Handler):
-    """Log records as printable lines on stderr; the last one says where a stop was."""
+    """Log records as printable lines on stderr (a progress bar drawn there is cleared
+    first); the last one says where a stop was."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -135,33 +146,33 @@ class _StageLines(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         try:
             self.last = printable(record.getMessage())
-            print(f"{PROG}: {self.last}", file=sys.stderr, flush=True)
+            progress.write(f"{PROG}: {self.last}", sys.stderr)
+            sys.stderr.flush()
         except Exception:  # noqa: BLE001 - logging must never break the command
             self.handleError(record)
 
 
 def _run(args: argparse.Namespace) -> int:
-    """Run the verb; map every exception to an exit code and one line on stderr."""
+    """Run the verb; map every exception to an exit code, one line on stderr and, with
+    ``--json``, the error object on stdout (:func:`mitld_lp.cli.kernel.say_error`)."""
     try:
         return args.run(args)
     except files.WriteAbandoned:  # interrupted from outside, which has said so
         return EXIT_INTERRUPTED
     except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
-        _say(f"stopped: {err}")
-        return EXIT_UNCERTIFIED
+        return say_error(args, "budget", str(err), err)
     except _USER_ERRORS as err:
-        _say(f"error: {err}")
-        return EXIT_USAGE
+        return say_error(args, error_status(err), str(err), err)
     except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
         sys.stderr.close()
         return EXIT_OK
-    except MemoryError:
-        _say("stopped: out of memory (lower --max-states, or give the machine more memory)")
-        return EXIT_UNCERTIFIED
+    except MemoryError as err:
+        return say_error(args, "budget", "out of memory (lower --max-states, or give the "
+                         "machine more memory)", err)
     except Exception as err:  # noqa: BLE001 - the CLI never shows a traceback
         first = str(err).splitlines()[0] if str(err) else ""
-        _say(f"internal error: {type(err).__name__}: {first} (please report this)")
-        return EXIT_INTERNAL
+        return say_error(args, "error", f"{type(err).__name__}: {first} (please report this)",
+                         err)
 
 
 _WATCHDOG_GRACE = 1.0
@@ -181,18 +192,21 @@ def main(argv: list[str] | None = None) -> int:
     global _worker
     try:
         args = _build_parser().parse_args(argv)
-    except UsageError as err:
-        _say(f"error: {err}")
-        return EXIT_USAGE
+    except UsageError as err:  # no arguments yet: --json is looked for in the words
+        return say_error(_json_asked(sys.argv[1:] if argv is None else argv), "usage_error",
+                         str(err))
     except SystemExit as stop:  # --help and --version have printed and exit 0
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
     args.started = time.monotonic()
+    apply_file_time_limit(args)  # a model file's [budgets] time_limit binds as the flag
     cancelled = threading.Event()
     outcome: list[int] = []
 
     def work() -> None:
         _command.cancelled = cancelled
-        outcome.append(_run(args))
+        # bars on a terminal only, none under -q or --json (mitld_lp.util.progress)
+        with progress.silenced(args.quiet or getattr(args, "json", False)):
+            outcome.append(_run(args))
 
     worker = threading.Thread(target=work, name=PROG, daemon=True)
     handler = _StageLines()  # this command's lines only, not an abandoned one's
@@ -202,24 +216,27 @@ def main(argv: list[str] | None = None) -> int:
         package_log.addHandler(handler)
         package_log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
     # The solvers get the limit itself and answer with a status; the watchdog stops a
-    # stage that cannot (the product, a native call) shortly after it.
-    deadline = None if args.time_limit is None else (
-        args.started + args.time_limit + _WATCHDOG_GRACE)
+    # stage that cannot (the product, a native call, a world's factory) shortly after it.
+    # (args.limit: a batch replaces it while a model file's own limit runs.)
     try:
         worker.start()
         while worker.is_alive():
             worker.join(0.1)
-            if deadline is not None and time.monotonic() >= deadline and worker.is_alive():
+            limit = args.limit
+            if limit.passed(_WATCHDOG_GRACE) and worker.is_alive():
                 cancelled.set()
                 files.abandon(worker)
-                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "")
+                progress.abandon()
+                _time_stop(args, f" (last stage: {handler.last})" if handler.last else "",
+                           limit)
                 watch.report(watch.SAID)
                 _worker = worker
                 return EXIT_UNCERTIFIED
     except KeyboardInterrupt:
         cancelled.set()
         files.abandon(worker)  # a file half written is removed; the old one stays
-        _say("interrupted")
+        progress.abandon()
+        say_error(args, "interrupted", "interrupted")
         watch.report(watch.SAID)
         _worker = worker
         return EXIT_INTERRUPTED
@@ -229,23 +246,42 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _limited(argv: list[str]) -> argparse.Namespace | None:
-    """The arguments of a command with ``--time-limit`` (None without one, when the
-    arguments are wrong, :func:`main` says so, and for ``sweep``, whose worker processes
-    a killed parent would leave running: its points have their own limits)."""
-    if "--time-limit" not in " ".join(argv):
-        return None
+    """The arguments of a command with a time limit, ``--time-limit`` or its one model
+    file's ``[budgets] time_limit`` (None without one, when the arguments are wrong,
+    :func:`main` says so, and for ``sweep``, whose worker processes a killed parent would
+    leave running: its points have their own limits)."""
+    if "--time-limit" not in " ".join(argv) and (argv or [""])[0] not in _MODEL_VERBS:
+        return None  # neither the flag nor a model file that could set it
     try:
         args = _build_parser().parse_args(argv)
     except (UsageError, SystemExit):
         return None
-    return args if args.time_limit is not None and args.verb != "sweep" else None
+    if args.verb == "sweep":
+        return None
+    args.started = time.monotonic()
+    apply_file_time_limit(args)
+    return args if args.time_limit is not None else None
 
 
-def _time_stop(args: argparse.Namespace, where: str) -> None:
-    """The time-limit stop: the JSON status with ``--json``, and the stop line."""
+def _time_stop(args: argparse.Namespace, where: str, limit: TimeLimit | None = None) -> None:
+    """The time-limit stop: the stop line naming whose limit it was (``limit``, default
+    the command's), and the error object with ``--json``."""
+    limit = args.limit if limit is None else limit
+    assert isinstance(limit, TimeLimit)
+    message = f"time limit of {limit.seconds:g} s{limit.source} reached{where}"
+    _say(f"stopped: {message}")
     if getattr(args, "json", False):
-        print(_dumps({"status": "time_limit", "time_limit": args.time_limit}), flush=True)
-    _say(f"stopped: time limit of {args.time_limit:g} s reached{where}")
+        print(_dumps(error_record("time_limit", message, time_limit=limit.seconds)),
+              flush=True)
+
+
+def _json_asked(words: list[str]) -> argparse.Namespace | None:
+    """Arguments that ask for JSON (the verb and ``json``) when ``words``, which did not
+    parse, hold ``--json`` before any ``--``; else None."""
+    before = words[:words.index("--")] if "--" in words else words
+    if "--json" not in before:
+        return None
+    return argparse.Namespace(json=True, verb=words[0] if words else None)
 
 
 def run() -> None:
@@ -254,13 +290,13 @@ def run() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
-    limited = _limited(sys.argv[1:])
-    if limited is not None:  # the limit is kept from a parent process (watch.py)
-        code = watch.watched(limited.time_limit, lambda: _time_stop(
-            limited, " (inside a long native call)"))
-        if code is not None:
-            sys.exit(code)
     try:
+        limited = _limited(sys.argv[1:])  # reads the arguments (and the model's budgets)
+        if limited is not None:  # the limit is kept from a parent process (watch.py)
+            code = watch.watched(limited.time_limit, lambda: _time_stop(
+                limited, " (inside a long native call)"))
+            if code is not None:
+                sys.exit(code)
         code = main()
     except KeyboardInterrupt:  # before the command started (reading the arguments)
         _say("interrupted")

@@ -61,6 +61,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             _out(f"E(steps):     {r.steps:.6g}")
             if r.then:
                 _out(f"then {r.then}: {r.secondary:.6g}")
+            elif not r.bands:  # the steps of one optimal policy, not the fewest
+                _out("note:         E(steps) is that of one optimal policy; --then min-steps "
+                     "gives the fewest among them")
             _out("certified:    " + ("yes" if r.certified else "NO"))
             for c in r.failed_checks:
                 _out(f"  failed: {c.name}: {c.detail}")
@@ -103,40 +106,61 @@ def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
 
 def args_pareto(p: argparse.ArgumentParser) -> None:
     from mitld_lp.cli.arguments import bounded_int
-    from mitld_lp.cli.kernel import _args_model
+    from mitld_lp.cli.kernel import _args_model, args_json
 
     _args_model(p)
     p.add_argument("--against", required=True, metavar="Q",
                    help="steps, cost, or 'P(FORMULA)' (a risk bounded from above)")
     p.add_argument("--points", type=bounded_int(2, 1000), default=11)
-    p.add_argument("--csv", metavar="FILE", required=True, help="the points (.csv)")
+    p.add_argument("--csv", metavar="FILE", help="also write the points (.csv)")
     p.add_argument("--plot", metavar="FILE", help="the curve (.png), certified points only")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
+    args_json(p)
 
 
 def cmd_pareto(args: argparse.Namespace) -> int:
-    """Trace the certified trade-off curve."""
-    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _out, _output_path, _write
-    from mitld_lp.model import load_model
+    """Trace the certified trade-off curve: its points on stdout (with ``--json`` one
+    object), in ``--csv`` and drawn in ``--plot``."""
+    from mitld_lp.cli.kernel import (
+        EXIT_OK,
+        EXIT_UNCERTIFIED,
+        _dumps,
+        _out,
+        _output_path,
+        _write,
+    )
     from mitld_lp.routes.pareto import pareto, plot, write_csv
 
-    out_csv = _output_path(args.csv, args.force, "--csv", (".csv",))
+    out_csv = args.csv and _output_path(args.csv, args.force, "--csv", (".csv",))
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
-    from mitld_lp.cli.kernel import model_options
+    from mitld_lp.cli.kernel import model_options, read_model
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     try:
         points = pareto(model, args.against, args.points, **model_options(args))
     except ConstraintError as exc:
         raise _usage(exc) from None
-    _write(out_csv, lambda p: write_csv(points, p, overwrite=True))
-    _out(f"wrote {out_csv}")
+    said: dict[str, Any] = {"against": args.against, "files": {}}
+    if out_csv:
+        _write(out_csv, lambda p: write_csv(points, p, overwrite=True))
+        said["files"]["csv"] = str(out_csv)
     if out_png:
         left = plot(points, out_png, args.against, model.name, overwrite=True)
+        said["files"]["plot"] = str(out_png)
+        said["left_out"] = left
+    code = EXIT_OK if all(p.certified or p.status == "infeasible" for p in points) else (
+        EXIT_UNCERTIFIED)
+    if args.json:
+        said["points"] = [{"bound": p.bound, "lower": p.lower, "upper": p.upper,
+                           "achieved": p.achieved, "status": p.status,
+                           "certified": p.certified} for p in points]
+        _out(_dumps(said))
+        return code
+    if out_csv:
+        _out(f"wrote {out_csv}")
+    if out_png:
         _out(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
     for p in points:
         _out(f"{p.bound:12.6g}  {bracket_text(p.lower, p.upper)}  {p.status}"
              f"{'' if p.certified else ' (not certified)'}")
-    return EXIT_OK if all(p.certified or p.status == "infeasible" for p in points) else (
-        EXIT_UNCERTIFIED)
+    return code

@@ -18,10 +18,13 @@ from mitld_lp.cli.kernel import (
     UsageError,
     _args_model,
     _build,
+    _dumps,
     _out,
     _output_path,
     _time_left,
     _write,
+    args_json,
+    read_model,
 )
 from mitld_lp.files import write as files
 
@@ -44,10 +47,30 @@ def args_export(p: argparse.ArgumentParser) -> None:
     p.add_argument("--upper", action="store_true",
                    help="count the truncation sink as winning (the upper model)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
+    args_json(p)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools."""
+    """Write the LP (through HiGHS) and/or the MDP (DRN) for external tools; with
+    ``--json`` one object: the files written, and the synthesis's status for the
+    controller's exports."""
+    said: dict[str, Any] = {"files": {}}
+    code = _export(args, said)
+    if args.json:
+        _out(_dumps(said))
+    return code
+
+
+def _wrote(args: argparse.Namespace, said: dict[str, Any], key: str, path: Path, line: str,
+           **more: Any) -> None:
+    """A file written: its line, or (``--json``) its entry under ``files`` and ``more``."""
+    said["files"][key] = str(path)
+    said.update(more)
+    if not args.json:
+        _out(line)
+
+
+def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
     from mitld_lp.running.tree import TREE_SUFFIXES
     from mitld_lp.solvers.export import DRN_SUFFIXES, LP_SUFFIXES, write_drn, write_lp
 
@@ -71,28 +94,28 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise UsageError("export --same-actions: a choice for --tree; give --tree FILE")
     code = EXIT_OK
     if controller or chain or tree:
-        code = _controller_exports(args, controller, chain, tree)
+        code = _controller_exports(args, said, controller, chain, tree)
     if lp is None and drn is None:
         return code
     from mitld_lp.routes.acceptance import acceptance
 
-    if _robust_export(args, lp, drn):
-        return EXIT_OK
+    if _robust_export(args, said, lp, drn):
+        return code
     posed, built = _build(args, "export")
     if posed.minimise:
-        raise UsageError("export: the model's objective is min; its LP and DRN would be "
-                         "those of the complement's maximum (not exported, to keep the "
+        raise UsageError("export: the model's objective is min; the LP and the DRN's "
+                         "target are written for a maximum (not exported, to keep the "
                          "files' optimum the task's)")
     mdp = built.mdp
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
     target = goal | mdp.truncated if args.upper else goal
     if lp:
         _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
-        _out(f"wrote {lp}")
+        _wrote(args, said, "lp", lp, f"wrote {lp}")
     if drn:
         world = _world_valuation(posed.model.game)
         _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True, world=world))
-        _out(f"wrote {drn}")
+        _wrote(args, said, "drn", drn, f"wrote {drn}")
     return code
 
 
@@ -109,12 +132,12 @@ def _world_valuation(game: Any) -> Callable[[object], str] | None:
     return lambda g: valuation_text(names, state_values(game, g))  # type: ignore[arg-type]
 
 
-def _controller_exports(args: argparse.Namespace, controller: Path | None,
-                        chain: Path | None, tree: Path | None) -> int:
+def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
+                        controller: Path | None, chain: Path | None,
+                        tree: Path | None) -> int:
     """Synthesise (the model's own problem: constraints give a randomised controller)
     and write its controller, chain and tree; exit 3 when the answer is not certified
     (the files are written all the same, and say what they are)."""
-    from mitld_lp.model import load_model
     from mitld_lp.running.chain import chain_drn, chain_of
     from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
@@ -124,8 +147,7 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
                          "--controller, --chain and --tree export the synthesised one")
     from mitld_lp.routes.robust import is_robust
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     if is_robust(model.distributions) and (chain or tree):
         raise UsageError("export --chain/--tree: a law known only within a band has a "
                          "worst case, not one Markov chain; --drn writes the interval MDP, "
@@ -136,6 +158,7 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
                    time_limit=_time_left(args))
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
+    said.update(status=str(r.status), certified=r.certified, lower=r.lower, upper=r.upper)
     if r.route == "sensed" and (chain or tree):  # mitld_lp.sensing
         raise UsageError("export --chain/--tree: the model has sensors that miss events; "
                          "the controlled chain and the decision tree of an observation-based "
@@ -146,39 +169,50 @@ def _controller_exports(args: argparse.Namespace, controller: Path | None,
         budget = Settings(max_states=args.max_states).resolved(model.budgets).max_states
         _write(controller, lambda p: r.controller.save(p, overwrite=True,
                                                        max_states=budget))
-        _out(f"wrote {controller}")
+        _wrote(args, said, "controller", controller, f"wrote {controller}")
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
-        if r.complement is not None:  # the complement's automaton: failing runs accepted
-            _out(f"wrote {chain} (P=? [F \"accept\"] >= the complement's lower = "
-                 f"{r.complement[0]!r}: for a minimised task \"accept\" marks the runs "
-                 "that fail it)")
+        # the chain's probability is the controller's exact value: inside the bracket of
+        # the automaton it was solved on, at its near end within the precision
+        if r.complemented:  # the complement's automaton: "accept" marks failing runs
+            accept = r.complement[0] if r.complement is not None else 1.0 - r.upper
+            said_chain = (f"P=? [F \"accept\"] >= the complement's lower = {accept!r}: for a "
+                          "minimised task \"accept\" marks the runs that fail it")
+        elif r.objective == "min":  # the controller's guarantee counts truncation in
+            accept = r.upper
+            said_chain = (f"P=? [F (\"accept\" | \"truncated\")] <= upper = {accept!r}: for "
+                          "a minimised task the runs past a truncation point count as the "
+                          "task's")
         else:
-            _out(f"wrote {chain} (P=? [F \"accept\"] >= lower = {r.lower!r})")
+            accept = r.lower
+            said_chain = f"P=? [F \"accept\"] >= lower = {accept!r}"
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     if tree:
         from mitld_lp.running.tree import write_tree
 
         t = tree_of(r, same_actions=args.same_actions)
         _write(tree, lambda p: write_tree(r, p, tree=t, overwrite=True))
-        _out(f"wrote {tree} ({t.size} nodes over {t.samples} reachable states; "
-             f"policy table: {len(r.policy_table())} rows)")
+        rows = len(r.policy_table())
+        _wrote(args, said, "tree", tree, f"wrote {tree} ({t.size} nodes over {t.samples} "
+               f"reachable states; policy table: {rows} rows)", tree_nodes=t.size,
+               tree_states=t.samples)
     if not r.certified:
-        _out(f"not certified: {r.status}")
+        if not args.json:
+            _out(f"not certified: {r.status}")
         return EXIT_UNCERTIFIED
     return EXIT_OK
 
 
-def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) -> bool:
+def _robust_export(args: argparse.Namespace, said: dict[str, Any], lp: Path | None,
+                   drn: Path | None) -> bool:
     """A model with a law known only within a band: its interval MDP as DRN (the robust
     optimum is a max-min, no one LP: --lp is refused).  False for any other model."""
     from mitld_lp.cli.kernel import posed_model
-    from mitld_lp.model import load_model
-    from mitld_lp.routes.robust import interval_model, is_robust
+    from mitld_lp.routes.robust import interval_export, is_robust
     from mitld_lp.solvers.robust_export import write_interval_drn
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     if not is_robust(model.distributions):
         return False
     posed = posed_model(args, model, "export")
@@ -191,11 +225,11 @@ def _robust_export(args: argparse.Namespace, lp: Path | None, drn: Path | None) 
                          "interval MDP")
     s = posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
-    imdp = interval_model(model, epsilon=s.epsilon, clock_reduction=s.clock_reduction,
-                          max_states=s.max_states, max_memory=s.max_memory,
-                          max_automaton_states=s.max_automaton_states)
-    target = imdp.target | imdp.truncated if args.upper else imdp.target
+    imdp, target = interval_export(  # a safety part: the states where it is kept robustly
+        model, upper=args.upper, epsilon=s.epsilon, clock_reduction=s.clock_reduction,
+        max_states=s.max_states, max_memory=s.max_memory,
+        max_automaton_states=s.max_automaton_states)
     assert drn is not None  # export checked that one of the two is given
     _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
-    _out(f"wrote {drn} (interval MDP)")
+    _wrote(args, said, "drn", drn, f"wrote {drn} (interval MDP)", interval_mdp=True)
     return True

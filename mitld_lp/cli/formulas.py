@@ -4,22 +4,26 @@ automaton)."""
 from __future__ import annotations
 
 import argparse
-import json
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp import defaults
 from mitld_lp.cli.arguments import bounded_int
 from mitld_lp.cli.kernel import (
     _DOT_SUFFIXES,
-    _USER_ERRORS,
     EXIT_OK,
     _count,
+    _dumps,
     _out,
     _output_path,
     _write,
+    args_json,
 )
 from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentReport, check
-from mitld_lp.logic.parser import ParseError, parse_source
+from mitld_lp.logic.parser import parse_source
+
+if TYPE_CHECKING:
+    from mitld_lp.automata.dta import DTA
 
 __all__ = ["args_check", "cmd_check", "args_dta", "cmd_dta"]
 
@@ -28,7 +32,7 @@ __all__ = ["args_check", "cmd_check", "args_dta", "cmd_dta"]
 
 def args_check(p: argparse.ArgumentParser) -> None:
     p.add_argument("formula", help='an MITLD formula, e.g. "F[0,3] A & D[mu] b"')
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args_json(p)
 
 
 def _report_json(report: FragmentReport) -> dict[str, object]:
@@ -44,27 +48,21 @@ def _report_json(report: FragmentReport) -> dict[str, object]:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Parse and classify a formula: normalised form, NNF, events, horizon."""
-    try:
-        report = check(parse_source(args.formula))
-    except _USER_ERRORS as err:
-        if args.json:
-            out: dict[str, object] = {"supported": False, "error": str(err)}
-            if isinstance(err, ParseError):
-                out.update(line=err.line, column=err.column)
-            print(json.dumps(out))
-        raise
+    """Parse and classify a formula: normalised form, NNF, events, horizon.  A formula
+    that is wrong or not supported is an error (with ``--json`` the error object, with
+    ``"supported": false``, :func:`mitld_lp.cli.kernel.say_error`)."""
+    report = check(parse_source(args.formula))
     if args.json:
-        print(json.dumps(_report_json(report)))
+        _out(_dumps(_report_json(report)))
         return EXIT_OK
     events = ", ".join(f"{event} ~ {mu}" for event, mu in report.events) or "none"
     horizon = "unbounded" if report.horizon is None else str(report.horizon)
-    print(f"formula:   {report.formula}")
-    print(f"nnf:       {report.nnf}")
-    print(f"events:    {events}")
-    print(f"horizon:   {horizon}")
-    print(f"class:     {report.fragment}")
-    print("supported: yes")
+    _out(f"formula:   {report.formula}")
+    _out(f"nnf:       {report.nnf}")
+    _out(f"events:    {events}")
+    _out(f"horizon:   {horizon}")
+    _out(f"class:     {report.fragment}")
+    _out("supported: yes")
     return EXIT_OK
 
 
@@ -78,6 +76,7 @@ def args_dta(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-states", type=bounded_int(1), default=defaults.MAX_AUTOMATON_STATES,
                    metavar="N", help="refuse automata with more states (checked while it "
                                      "is built; exit 3)")
+    args_json(p)
 
 
 def cmd_dta(args: argparse.Namespace) -> int:
@@ -91,22 +90,43 @@ def cmd_dta(args: argparse.Namespace) -> int:
     dta = to_dta(report, max_states=args.max_states)
     if path:
         _write(path, lambda p: files.write_text(p, dta.to_dot(), overwrite=True))
-        _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
+        if args.json:
+            _out(_dumps({"formula": str(formula), "states": dta.n_states,
+                         "files": {"dot": str(path)}}))
+        else:
+            _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
         return EXIT_OK
     shown = [dta.location(i) for i in range(dta.n_states)]
     locations = {loc.obligation for loc in shown}
     clocks = {name for loc in shown for name, _ in loc.clocks}
-    print(f"formula:   {formula}")
-    print(f"states:    {dta.n_states} ({_count(len(locations), 'location')}, "
-          f"{_count(len(clocks), 'clock')})")
-    print(f"atoms:     {', '.join(dta.atoms)}")
+    if args.json:
+        _out(_dumps(_dta_json(dta, str(formula), shown, len(locations), clocks)))
+        return EXIT_OK
+    _out(f"formula:   {formula}")
+    _out(f"states:    {dta.n_states} ({_count(len(locations), 'location')}, "
+         f"{_count(len(clocks), 'clock')})")
+    _out(f"atoms:     {', '.join(dta.atoms)}")
     for i, loc in enumerate(shown):
-        tag = " (initial)" if i == dta.initial else ""
-        tag += " (accepting)" if dta.is_accepting(i) else ""
-        tag += " (rejecting)" if dta.is_rejecting(i) else ""
-        tag += " (safe)" if dta.is_safe(i) else ""
-        print(f"  {i}{tag}: {loc}")
+        _out(f"  {i}{''.join(f' ({tag})' for tag in _tags(dta, i))}: {loc}")
         for target, guard in sorted(dta.guards(i).items()):
-            print(f"      --[{guard}]--> {target}")
+            _out(f"      --[{guard}]--> {target}")
     return EXIT_OK
 
+
+def _tags(dta: DTA, i: int) -> list[str]:
+    """What a state of the automaton is: initial, accepting, rejecting, safe."""
+    return [tag for tag, yes in (("initial", i == dta.initial),
+                                 ("accepting", dta.is_accepting(i)),
+                                 ("rejecting", dta.is_rejecting(i)), ("safe", dta.is_safe(i)))
+            if yes]
+
+
+def _dta_json(dta: DTA, formula: str, shown: list[Any], locations: int,
+              clocks: set[str]) -> dict[str, Any]:
+    """``dta --json``: what the text says, one record per state."""
+    return {"formula": formula, "states": dta.n_states, "locations": locations,
+            "clocks": sorted(clocks), "atoms": list(dta.atoms), "initial": dta.initial,
+            "automaton": [{"state": i, "location": str(loc), "tags": _tags(dta, i),
+                           "transitions": [{"guard": str(guard), "to": target} for
+                                           target, guard in sorted(dta.guards(i).items())]}
+                          for i, loc in enumerate(shown)]}

@@ -6,6 +6,7 @@ the problem those options pose (:func:`mitld_lp.problem.pose`)."""
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import math
 import sys
@@ -19,6 +20,7 @@ from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
 from mitld_lp.distributions import DistributionError
+from mitld_lp.exact.errors import ExactError
 from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
@@ -28,9 +30,11 @@ from mitld_lp.product import ProductTooLarge
 from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.running.saved_plan import ControllerFileError
 from mitld_lp.sweep.spec import SweepError
+from mitld_lp.util import progress
 from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
+    from mitld_lp.model import Model
     from mitld_lp.problem import Posed, Settings
     from mitld_lp.routes.stages import Built
 
@@ -42,6 +46,7 @@ class UsageError(ValueError):
 
 #: Exceptions that mean "the input is wrong" (exit 2), not "the program is wrong".
 _USER_ERRORS: tuple[type[Exception], ...] = (
+    ExactError,
     ParseError,
     FragmentError,
     ModelError,
@@ -60,6 +65,63 @@ _BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge
 
 #: 3: no certified answer (a solver status or a budget stop; the status is printed).
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+# --------------------------------------------------------------------------- errors as JSON
+
+#: The statuses of the error object and the exit code of each: the input (a model file,
+#: a formula, a sweep file, the problem they pose) is wrong; an argument or output path
+#: is wrong; a budget stopped the work; the time limit did; Ctrl-C did; a bug.  A batch's
+#: line and a sweep's row use the same statuses for the same causes.
+ERROR_EXITS: dict[str, int] = {"model_error": EXIT_USAGE, "usage_error": EXIT_USAGE,
+                               "budget": EXIT_UNCERTIFIED, "time_limit": EXIT_UNCERTIFIED,
+                               "interrupted": EXIT_INTERRUPTED, "error": EXIT_INTERNAL}
+
+#: The user errors that are about the command line itself (the rest: the input).
+_USAGE_ERRORS: tuple[type[Exception], ...] = (UsageError, files.OutputPathError,
+                                              FileExistsError)
+
+
+def error_record(status: str, message: str, **more: Any) -> dict[str, Any]:
+    """The one JSON error object of every verb that takes ``--json`` (docs/results.md,
+    "Errors as JSON"): ``{"status", "error", "exit"}``, the reason as the error line on
+    stderr says it, and ``more`` (a formula's ``line`` and ``column``; a batch line's
+    ``file``)."""
+    return {"status": status, "error": printable(message), "exit": ERROR_EXITS[status],
+            **more}
+
+
+def error_status(err: BaseException) -> str:
+    """The error object's status of an exception the command line maps to an exit code."""
+    if isinstance(err, _BUDGET_STOPS + (MemoryError,)):
+        return "budget"
+    if isinstance(err, _USAGE_ERRORS):
+        return "usage_error"
+    return "model_error" if isinstance(err, _USER_ERRORS) else "error"
+
+
+def say_error(args: argparse.Namespace | None, status: str, message: str,
+              err: BaseException | None = None) -> int:
+    """The one line on stderr (``error:``, ``stopped:`` or ``internal error:``) and, with
+    ``--json``, the error object on stdout; the exit code of ``status``.  The command
+    has ended: a bar its error left drawn is erased first."""
+    progress.abandon()
+    word = {"model_error": "error", "usage_error": "error", "error": "internal error"}.get(
+        status, "stopped")
+    _say(message if status == "interrupted" else f"{word}: {message}")
+    if args is not None and getattr(args, "json", False):
+        formula = err  # a formula's error, also as the cause of a model's or a sweep's
+        while formula is not None and not isinstance(formula, ParseError):
+            formula = formula.__cause__
+        where: dict[str, Any] = (  # a formula's place (in a model file: in its spec)
+            {"line": formula.line, "column": formula.column}
+            if isinstance(formula, ParseError) else
+            {"reasons": list(err.reasons)} if isinstance(err, ProblemError) else {})
+        if getattr(args, "verb", None) == "check":  # check's own answer field
+            where["supported"] = False
+        _out(_dumps(error_record(status, message, **where)))
+        sys.stdout.flush()
+    return ERROR_EXITS[status]
 
 
 # --------------------------------------------------------------------------- output files
@@ -117,15 +179,23 @@ def _bracket(lower: float, upper: float) -> str:
 
 
 def _out(text: str = "") -> None:
-    """Print one line of the command's answer on stdout (nothing once cancelled)."""
+    """Print one line of the command's answer on stdout (nothing once cancelled; a
+    progress bar drawn on the terminal is cleared first, :func:`progress.write`)."""
     cancelled = getattr(_command, "cancelled", None)
     if cancelled is None or not cancelled.is_set():
-        print(text)
+        progress.write(text, sys.stdout)
 
 
 def _count(n: int, noun: str) -> str:
     """``n`` with ``noun`` in the singular or plural: "1 clock", "2 clocks"."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def args_json(p: argparse.ArgumentParser) -> None:
+    """``--json``, the same for every verb that takes it."""
+    p.add_argument("--json", action="store_true",
+                   help='print one JSON object on stdout, also for an error ({"status", '
+                        '"error", "exit"}); no progress bars')
 
 
 # --------------------------------------------------------------------------- model verbs
@@ -165,22 +235,120 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
                         f"of the width; default {defaults.PRECISION:g})")
 
 
+def read_model(args: argparse.Namespace, path: str | None = None,
+               max_states: int | None = None) -> Model:
+    """The model file ``path`` (default ``args.model``) under the verb's world budgets;
+    a file that is plainly something else (a sweep file, a PRISM program) is refused
+    saying what it is and which command or table takes it."""
+    from mitld_lp.model import load_model
+
+    path = args.model if path is None else path
+    memory = getattr(args, "max_memory", None)
+    try:
+        return load_model(path, max_memory=memory, max_states=max_states if max_states
+                          is not None else getattr(args, "max_world_states", None))
+    except ModelError as err:
+        what = other_file(path, memory, "model")
+        if what:
+            raise ModelError(f"{err}; {what}") from None
+        raise
+
+
+#: What a file is, by its suffix or its top-level keys, and where it goes.
+_OTHER_FILES = {
+    "prism": "it is a PRISM program: a model file names it as its world, [prism] file = "
+             "\"...\" (docs/worlds.md; models/corridor.toml)",
+    "sweep": "it is a sweep file: run it with mitld-lp sweep (docs/sweeps.md)",
+    "model": "it is a model file: solve it with mitld-lp solve; a sweep file names its "
+             "model, model = \"...\" (docs/sweeps.md)",
+}
+
+
+def other_file(path: str, max_memory: int | None, expected: str) -> str:
+    """Why the file at ``path``, which did not read as a ``expected`` file ("model" or
+    "sweep"), is another kind of file ("" when it is not plainly one)."""
+    import tomllib
+
+    from mitld_lp.files import rules
+
+    if Path(path).suffix.lower() in (".prism", ".pm", ".nm"):
+        return _OTHER_FILES["prism"]
+    try:
+        doc = tomllib.loads(rules.read_bytes(path, rules.read_limit(max_memory)).decode())
+    except (OSError, ValueError, RecursionError, rules.InputFileError):
+        return ""  # the reader's own error says it
+    kind = ("sweep" if "model" in doc and "spec" not in doc else
+            "model" if "spec" in doc and "model" not in doc else "")
+    return _OTHER_FILES[kind] if kind and kind != expected else ""
+
+
 def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     """Model file -> (the problem it poses, its automaton, STA and product MDP); a model
     with constraints is refused naming ``verb`` (its product would be another
     problem's)."""
-    from mitld_lp.model import load_model
     from mitld_lp.routes.stages import build_posed
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
-    posed = posed_model(args, model, verb)
+    posed = posed_model(args, read_model(args), verb)
     if posed.route == "sensed":  # the fully observed product would answer another problem
         raise ProblemError(f"{verb}: the model has sensors that miss events: its problem is "
                            "solved on the information-state product (solve, simulate, "
                            "export --controller); this command would read the fully "
                            "observed product")
     return posed, build_posed(posed)
+
+
+class TimeLimit:
+    """The time limit the command's watchdog holds the work to (:func:`mitld_lp.cli.main`):
+    ``seconds`` from ``started`` (monotonic), ``source`` saying whose limit it is for the
+    stop line (empty for ``--time-limit``).  A batch replaces it while it runs a model
+    whose file sets its own (:func:`file_time_limit`)."""
+
+    __slots__ = ("seconds", "started", "source")
+
+    def __init__(self, seconds: float | None, started: float, source: str = "") -> None:
+        self.seconds, self.started, self.source = seconds, started, source
+
+    def passed(self, grace: float) -> bool:
+        return self.seconds is not None and time.monotonic() >= (
+            self.started + self.seconds + grace)
+
+
+def is_pattern(name: str) -> bool:
+    """A glob pattern the shell did not expand (and no file of that name)."""
+    return glob.has_magic(name) and not Path(name).exists()
+
+
+def one_model_file(args: argparse.Namespace) -> str | None:
+    """The one model file a command reads (None for a formula, a batch, a sweep, a
+    results file, a controller)."""
+    given = getattr(args, "model", None) if args.verb != "plot" else (
+        None if Path(args.input).suffix.lower() in (".csv", ".parquet") else args.input)
+    if isinstance(given, list):  # solve's: one file, or a batch
+        given = given[0] if len(given) == 1 and not is_pattern(given[0]) else None
+    return given if isinstance(given, str) else None
+
+
+def file_time_limit(path: str, max_memory: int | None = None) -> TimeLimit | None:
+    """The ``[budgets] time_limit`` of the model file ``path`` as the watchdog's limit,
+    from now; None when it sets none.  A model file's budget binds as the flag does: every
+    stage, the world's loading (a ``[python]`` factory) included."""
+    from mitld_lp.model import model_budgets
+
+    seconds = model_budgets(path, max_memory=max_memory).get("time_limit")
+    if seconds is None:
+        return None
+    return TimeLimit(seconds, time.monotonic(), f" (the [budgets] time_limit of {path})")
+
+
+def apply_file_time_limit(args: argparse.Namespace) -> None:
+    """``--time-limit`` from the one model file's ``[budgets]`` when not given
+    (:func:`file_time_limit`); ``args.limit`` the limit the watchdog holds."""
+    args.limit = TimeLimit(args.time_limit, args.started)
+    path = one_model_file(args) if args.time_limit is None else None
+    limit = None if path is None else file_time_limit(path, getattr(args, "max_memory", None))
+    if limit is not None:
+        args.time_limit, args.limit = limit.seconds, TimeLimit(limit.seconds, args.started,
+                                                               limit.source)
 
 
 def _time_left(args: argparse.Namespace) -> float | None:
@@ -192,7 +360,8 @@ def _time_left(args: argparse.Namespace) -> float | None:
 
 
 def _say(message: str) -> None:
-    print(f"{PROG}: {printable(message)}", file=sys.stderr, flush=True)
+    progress.write(f"{PROG}: {printable(message)}", sys.stderr)
+    sys.stderr.flush()
 
 
 
@@ -210,7 +379,7 @@ def solve_settings(args: argparse.Namespace) -> Settings:
     from mitld_lp.problem import settings_from
 
     return settings_from(method=args.method, solver=args.solver, backend=args.backend,
-                         decompose=False if args.no_decompose else None,
+                         decompose=False if args.no_decompose else None, exact=args.exact,
                          **model_options(args))
 
 

@@ -1,17 +1,15 @@
 """The command line's ``run`` verb: a saved controller answering observations, one JSON
-line in, one JSON line out (:func:`mitld_lp.runtime.serve`), for any robot stack to
-drive.  It imports :mod:`mitld_lp.runtime` only (NumPy; no solver, parser or world).
-Registered in :data:`mitld_lp.cli._VERBS`; it imports nothing of the command line
-(no import circle), so it says its own one error line."""
+line in, one JSON line out.  The command is :func:`mitld_lp.runtime.main` (NumPy alone),
+which the console script reaches before it imports this package
+(:func:`mitld_lp.startup.command`); this module registers the verb in
+:data:`mitld_lp.cli._VERBS` (its help, and the path through the whole command line when
+``--time-limit`` is given) and runs the same :func:`mitld_lp.runtime.run_file`."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 
 __all__ = ["args_run", "cmd_run"]
-
-EXIT_OK, EXIT_USAGE = 0, 2
 
 
 def args_run(p: argparse.ArgumentParser) -> None:
@@ -26,29 +24,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     ``{"action": ..., "status": ...}`` on stdout (``{"error": ...}`` for a bad line,
     and the loop goes on).  Exit 0; 2 when the file is not a controller or some line
     was bad (the count is said on stderr)."""
-    from mitld_lp.runtime import ControllerFileError, load
+    from mitld_lp.runtime import run_file
 
-    if args.seed < 0:
-        return _error(f"--seed: must be >= 0, got {args.seed}")
-    try:
-        controller = load(args.controller, seed=args.seed)
-    except ControllerFileError as err:
-        return _error(str(err))
-    bad = controller_loop(controller)
-    if bad:
-        return _error(f"run: {bad} observation line{'s' if bad > 1 else ''} could not be "
-                      "answered (each got an error line)")
-    return EXIT_OK
-
-
-def controller_loop(controller: object) -> int:
-    from mitld_lp.runtime import RuntimeController, serve
-
-    assert isinstance(controller, RuntimeController)
-    return serve(controller, sys.stdin, sys.stdout)
-
-
-def _error(message: str) -> int:
-    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
-    print(f"mitld-lp: error: {text}", file=sys.stderr, flush=True)
-    return EXIT_USAGE
+    return run_file(args.controller, seed=args.seed)

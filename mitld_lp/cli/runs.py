@@ -29,17 +29,19 @@ from mitld_lp.cli.kernel import (
     _say,
     _time_left,
     _write,
+    args_json,
+    error_record,
+    file_time_limit,
+    is_pattern,
     model_options,
+    other_file,
+    read_model,
     solve_settings,
     unconstrained,
 )
 from mitld_lp.report import bracket_text
+from mitld_lp.util import progress
 from mitld_lp.util.text import printable
-
-
-def is_pattern(name: str) -> bool:
-    """A glob pattern the shell did not expand (and no file of that name)."""
-    return glob.has_magic(name) and not Path(name).exists()
 
 
 def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
@@ -66,29 +68,48 @@ def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
 def solve_batch(args: argparse.Namespace) -> int:
     """``solve a.toml b.toml 'models/*.toml'``: each model file in turn, one line each
     (a JSON object with ``--json``); a model that fails is its line, not the end."""
-    from mitld_lp.model import load_model
     from mitld_lp.sweep.rows import MODEL_ERROR, run_model
 
     if args.policy:
         raise UsageError("--policy writes the policy of one model; give one model file")
     records: list[dict[str, Any]] = []
     seen: set[str] = set()
+    todo: list[tuple[str, bool]] = []  # (a file, True) or (a pattern matching none, False)
     for name in args.model:
         matches = sorted(glob.glob(name, recursive=True)) if is_pattern(name) else [name]
         if not matches:
-            records.append({"file": name, "status": MODEL_ERROR, "certified": False,
-                            "error": "no file matches this pattern"})
+            todo.append((name, False))
+        for path in matches:
+            if path not in seen:  # a file named twice is solved once
+                seen.add(path)
+                todo.append((path, True))
+    bar = progress.bar(None, total=len(todo), desc="batch", unit="model", leave=False)
+    try:
+        for path, found in todo:
+            if not found:
+                records.append({"file": path, **error_record(
+                    MODEL_ERROR, "no file matches this pattern"), "certified": False})
+            else:
+                # a model file's own time limit binds its run, the load included; one
+                # that cannot stop by itself (a world's factory looping) stops the batch,
+                # as the flag would (the watchdog of mitld_lp.cli.main)
+                own = None if args.time_limit is not None else file_time_limit(
+                    path, args.max_memory)
+                command, args.limit = args.limit, own or args.limit
+                try:
+                    outcome = run_model(
+                        lambda path=path: read_model(args, path),
+                        solve_settings(args), constraints=tuple(args.constraint),
+                        then=args.then, whole=True)
+                finally:
+                    args.limit = command
+                records.append({"file": path, **outcome.summary} if outcome.summary else {
+                    "file": path, **error_record(outcome.status, outcome.error.removeprefix(
+                        f"{path}: ") if outcome.error else ""), "certified": False})
             _batch_line(records[-1], args.json)
-        for path in (m for m in matches if m not in seen):
-            seen.add(path)
-            outcome = run_model(
-                lambda path=path: load_model(path, max_states=args.max_world_states,
-                                             max_memory=args.max_memory),
-                solve_settings(args), constraints=tuple(args.constraint), then=args.then)
-            records.append({"file": path, **outcome.summary} if outcome.summary else {
-                "file": path, "status": outcome.status, "certified": False,
-                "error": outcome.error.removeprefix(f"{path}: ") if outcome.error else ""})
-            _batch_line(records[-1], args.json)
+            bar.update()
+    finally:
+        bar.close()
     return _batch_exit(records, "model")
 
 
@@ -98,9 +119,12 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
     elif "error" in record:
         _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
     else:
+        exact = record.get("exact_bracket")  # --exact: the fraction (or both models')
+        shown = "" if not exact else f" exact {exact[0]}" if exact[0] == exact[1] else (
+            f" exact in [{exact[0]}, {exact[1]}]")
         _out(f"{printable(record['file'])}: {bracket_text(record['lower'], record['upper'])} "
              f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
-             f"{record['states']} states, {record['seconds']:.3f} s)")
+             f"{record['states']} states, {record['seconds']:.3f} s){shown}")
 
 
 def args_sweep(p: argparse.ArgumentParser) -> None:
@@ -120,32 +144,48 @@ def args_sweep(p: argparse.ArgumentParser) -> None:
                    help="solve again the points whose row has a failure status")
     p.add_argument("--force", action="store_true",
                    help="start RESULTS anew, even when it holds another sweep's rows")
+    args_json(p)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Solve every point of a sweep not yet in its results file; print a summary."""
     from collections import Counter
 
-    from mitld_lp.sweep import load_sweep, run_sweep
+    from mitld_lp.sweep import SweepError, load_sweep, run_sweep
 
-    sw = load_sweep(args.sweep)
+    try:
+        sw = load_sweep(args.sweep)
+    except SweepError as err:
+        what = other_file(args.sweep, None, "sweep")
+        if what:
+            raise SweepError(f"{err}; {what}") from None
+        raise
     out = Path(args.out or re.sub(r"[^\w.-]", "_", sw.name) + ".csv")
     if not args.verbose:  # the bar says how far it is; each point's stages would drown it
         logging.getLogger("mitld_lp").setLevel(logging.WARNING)
     run = run_sweep(sw, out, workers=args.workers, dask=args.dask, retries=args.retries,
                     force=args.force, retry_failed=args.retry_failed,
-                    progress=not args.quiet)
+                    progress=None)  # a bar on a terminal, none under -q or --json
     statuses = Counter(r["status"] for r in run.rows)
+    shown: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in run.failed:  # the first five failures of different kinds
+        if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
+            shown[r["status"], r["error"]] = {c: r[c] for c in sw.columns}
+    if args.json:
+        _out(_dumps({"sweep": sw.name, "points": len(run.rows), "solved": run.computed,
+                     "reused": run.reused, "statuses": dict(statuses.most_common()),
+                     "certified": len(run.rows) - len(run.failed),
+                     "failures": [{"status": s, "error": e, "at": at}
+                                  for (s, e), at in shown.items()],
+                     "files": {"results": str(out)}}))
+        return _batch_exit(list(run.rows), "point")
     _out(f"sweep:      {sw.name} ({_count(len(run.rows), 'point')}: {run.computed} solved "
          f"now, {run.reused} already in {out})")
     _out("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
     _out(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
-    shown: set[tuple[str, str]] = set()
-    for r in run.failed:
-        if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
-            shown.add((r["status"], r["error"]))
-            at = ", ".join(f"{c} = {json.dumps(r[c])}" for c in sw.columns)
-            _out(f"  {r['status']} at {at or 'the base model'}: {r['error']}")
+    for (status, error), at in shown.items():
+        where = ", ".join(f"{c} = {json.dumps(v)}" for c, v in at.items())
+        _out(f"  {status} at {where or 'the base model'}: {error}")
     _out(f"results:    {out}")
     return _batch_exit(list(run.rows), "point")
 
@@ -175,6 +215,7 @@ def args_plot(p: argparse.ArgumentParser) -> None:
                         "every other parameter that varies)")
     p.add_argument("--size", type=_size, default=(800, 600), metavar="WxH",
                    help="the picture's size in pixels (default 800x600)")
+    args_json(p)
     p.add_argument("--epsilon", type=probability_budget,
                    help="model: truncation budget in (0, 1) (default: the model's)")
     p.add_argument("--max-states", type=bounded_int(1), metavar="N",
@@ -201,12 +242,11 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if table:
             fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
         else:
-            from mitld_lp.model import load_model
             from mitld_lp.problem import pose, settings_from
             from mitld_lp.synthesis import solve
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
-            model = load_model(args.input, max_states=args.max_states)
+            model = read_model(args, args.input, max_states=args.max_states)
             posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
@@ -218,7 +258,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
     _write(out, lambda p: plot.save(fig, p, overwrite=True))  # checked above, before work
-    _out(f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
+    _out(_dumps({"files": {"out": str(out)}, "size": list(args.size)}) if args.json else
+         f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
     return EXIT_OK
 
 
@@ -231,7 +272,7 @@ def args_simulate(p: argparse.ArgumentParser) -> None:
                    default=defaults.MAX_STEPS,
                    help="steps each run is watched (a run keeping a safety part unviolated "
                         "that long counts as a success; undecided ones as failures)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args_json(p)
     from mitld_lp.cli.constrained import args_constraints
 
     args_constraints(p)
@@ -239,13 +280,11 @@ def args_simulate(p: argparse.ArgumentParser) -> None:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
-    from mitld_lp.model import load_model
     from mitld_lp.problem import pose, settings_from
     from mitld_lp.running.simulate import simulate
     from mitld_lp.synthesis import solve
 
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     r = solve(pose(model, args.constraint, then=args.then,
                    settings=settings_from(**model_options(args))))
     if r.controller is None:

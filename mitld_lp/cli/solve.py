@@ -21,7 +21,9 @@ from mitld_lp.cli.kernel import (
     _output_path,
     _prob,
     _write,
+    args_json,
     print_head,
+    read_model,
     solve_settings,
 )
 from mitld_lp.files import write as files
@@ -32,7 +34,7 @@ __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 
 def args_info(p: argparse.ArgumentParser) -> None:
     _args_model(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args_json(p)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -72,7 +74,11 @@ def args_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-decompose", action="store_true",
                    help="solve one monolithic LP instead of one LP per strongly connected "
                         "block in topological order")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--exact", action="store_true",
+                   help="also the exact optimum as a fraction, in rational arithmetic on the "
+                        "model as written (models of modest size; grid and PRISM worlds; "
+                        "geometric, pmf and uniform laws)")
+    args_json(p)
     p.add_argument("--policy", metavar="FILE",
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
@@ -81,7 +87,6 @@ def args_solve(p: argparse.ArgumentParser) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
-    from mitld_lp.model import load_model
     from mitld_lp.problem import CONSTRAINED, pose
     from mitld_lp.synthesis import solve
 
@@ -93,8 +98,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = load_model(args.model, max_states=args.max_world_states,
-                       max_memory=args.max_memory)
+    model = read_model(args)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args))
     if posed.route == CONSTRAINED:
@@ -126,7 +130,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
         if width.get("truncation"):
             _out(f"width:        {width['total']:.3g} = truncation {width['truncation']:.3g}"
                  f" (at most epsilon achieved) + solver {width['solver']:.3g}")
-        _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
+        if r.exact is not None:
+            _out(exact_line(r.exact))
+        # a minimum read back from its complement: the complement's estimate, whose
+        # digits 1 - it would round away
+        shown = (f"1 - {_prob(r.lower_model.value)}" if r.complemented and
+                 r.lower_model is not None else _prob(r.value))
+        _out(f"value:        {shown}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")
@@ -139,3 +149,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
             _out(f"policy:       {policy_file}")
     return EXIT_OK if r.certified else EXIT_UNCERTIFIED
 
+
+def exact_line(exact: Any) -> str:
+    """The exact optimum: the fraction, and a float to read it by; with a truncation,
+    both models' fractions."""
+    if exact.value is not None:
+        return f"exact:        {exact.value}  (~ {float(exact.value)!r})"
+    return (f"exact:        in [{exact.lower}, {exact.upper}]  (~ [{float(exact.lower)!r}, "
+            f"{float(exact.upper)!r}]: the optima of the two truncation models; the "
+            "truncation leaves no one value)")

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
 
 import numpy as np
 
@@ -20,6 +22,7 @@ from mitld_lp.distributions.law import (
     IntArray,
     constant_from,
 )
+from mitld_lp.util.decimals import exact_value
 
 __all__ = ["Geometric", "Finite", "Uniform"]
 
@@ -35,6 +38,7 @@ class Geometric(FirstOccurrence):
     _q: float = field(init=False, repr=False)
     _log_q: float = field(init=False, repr=False)
     _q_exact: bool = field(init=False, repr=False)
+    written: Any = field(default=None, repr=False)  # p as given: its exact value (None: p)
 
     def __post_init__(self) -> None:
         q = 1.0 - self.p
@@ -72,6 +76,17 @@ class Geometric(FirstOccurrence):
     def _constant_hazard_from(self) -> int | None:
         return 1
 
+    @property
+    def exact_hazards(self) -> bool:
+        return True
+
+    def exact_hazard(self, k: int) -> Fraction:
+        """``p`` as written (:func:`mitld_lp.util.decimals.exact_value`), at every step."""
+        return exact_value(self.p if self.written is None else self.written)
+
+    def exact_constant_from(self) -> int:
+        return 1
+
     def _sample_from(self, v: FloatArray) -> FloatArray:
         # S(k) = q^k < v  <=>  k > log(v)/log(q)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -90,6 +105,11 @@ class Finite(FirstOccurrence):
     _cum: FloatArray = field(init=False, repr=False)  # _cum[k] = P(K <= k), k = 0..n
     _surv: FloatArray = field(init=False, repr=False)  # _surv[k] = P(K > k), k = 0..n
     _never_mass: float = field(init=False, repr=False)
+    # the masses as written: ("masses", values as given) or ("uniform", (a, b)); None:
+    # the float masses themselves.  Read only by the exact hazards, made when first asked
+    written: tuple[str, Any] | None = field(default=None, repr=False)
+    _exact: tuple[tuple[Fraction, ...], tuple[Fraction, ...]] | None = field(
+        default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         m = np.array(self.masses, dtype=np.float64)
@@ -146,6 +166,46 @@ class Finite(FirstOccurrence):
         h = self._hazard_pos(np.arange(1, self._n + 2, dtype=np.int64))
         return constant_from(h == h[-1])
 
+    @property
+    def exact_hazards(self) -> bool:
+        return True
+
+    def _exact_table(self) -> tuple[tuple[Fraction, ...], tuple[Fraction, ...]]:
+        """``(masses, survival)`` in rational arithmetic, ``survival[k] = P(K > k)`` for
+        ``k = 0..n``: the masses as written, rescaled to total 1 exactly where the float
+        table was (a total within ``MASS_TOLERANCE`` of 1), else the rest is never."""
+        if self._exact is None:
+            kind, given = self.written or ("masses", self.masses.tolist())
+            if kind == "uniform":
+                a, b = given
+                m = [Fraction(0)] * (a - 1) + [Fraction(1, b - a + 1)] * (b - a + 1)
+            else:
+                m = [exact_value(x) for x in given]
+            total = sum(m, Fraction(0))
+            never = Fraction(0)
+            if self._never_mass == 0.0 and total != 1:  # the float table was rescaled
+                m = [x / total for x in m]
+            elif self._never_mass != 0.0:
+                never = 1 - total
+            surv = [never] * (len(m) + 1)
+            for k in range(len(m) - 1, -1, -1):
+                surv[k] = surv[k + 1] + m[k]
+            object.__setattr__(self, "_exact", (tuple(m), tuple(surv)))
+        assert self._exact is not None
+        return self._exact
+
+    def exact_hazard(self, k: int) -> Fraction:
+        """``m_k / S(k-1)`` in rationals (1 where ``S(k-1) = 0``; 0 or 1 after the table)."""
+        m, surv = self._exact_table()
+        before = surv[min(k - 1, len(m))]
+        if before == 0:
+            return Fraction(1)
+        return (m[k - 1] if k <= len(m) else Fraction(0)) / before
+
+    def exact_constant_from(self) -> int:
+        h = [self.exact_hazard(k) for k in range(1, self._n + 2)]
+        return constant_from(np.array([x == h[-1] for x in h], dtype=bool))
+
     def _first_step_survival_at_most(self, eps: float, cap: int) -> int | None:
         ok = np.flatnonzero(self._surv <= eps)
         if ok.size == 0:
@@ -196,4 +256,16 @@ class Uniform(FirstOccurrence):
 
     def _constant_hazard_from(self) -> int | None:
         # h(b) = 1 and h = 1 after b; h(b-1) = 1/2 (or 0 before a when a = b)
+        return self.b
+
+    @property
+    def exact_hazards(self) -> bool:
+        return True
+
+    def exact_hazard(self, k: int) -> Fraction:
+        if k < self.a:
+            return Fraction(0)
+        return Fraction(1, self.b - k + 1) if k <= self.b else Fraction(1)
+
+    def exact_constant_from(self) -> int:
         return self.b

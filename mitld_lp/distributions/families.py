@@ -116,7 +116,7 @@ def geometric(p: float) -> FirstOccurrence:
     pf = _real(label, "p", p)
     if not 0 < pf <= 1:
         raise DistributionError(label, "p must be in (0, 1]")
-    return Geometric(label, pf)
+    return Geometric(label, pf, written=p)
 
 
 def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
@@ -153,7 +153,7 @@ def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
         raise DistributionError(label, "masses sum to more than the largest float > 1") from None
     if total > 1 + MASS_TOLERANCE:
         raise DistributionError(label, f"masses sum to {total:.12g} > 1")
-    return Finite(label, m)
+    return Finite(label, m, written=("masses", tuple(values)))
 
 
 def uniform(a: int, b: int) -> FirstOccurrence:
@@ -179,7 +179,7 @@ def uniform(a: int, b: int) -> FirstOccurrence:
         return Uniform(label, lo, hi)
     m = np.zeros(hi)
     m[lo - 1 :] = 1.0 / (hi - lo + 1)
-    return Finite(label, m)
+    return Finite(label, m, written=("uniform", (lo, hi)))
 
 
 def poisson(lam: float) -> FirstOccurrence:

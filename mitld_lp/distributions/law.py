@@ -31,6 +31,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Any, overload
 
 import numpy as np
@@ -327,6 +328,29 @@ class FirstOccurrence(ABC):
                 self.label, f"survival is still above eps = {e:.6g} at step 2**62"
             )
         return t
+
+    # ------------------------------------------------------------------ exact hazards
+    # A law whose hazards are rational for rational parameters (:mod:`.closed`: the
+    # geometric, a table of masses, the uniform) overrides these two with the hazards of
+    # its parameters as written (:func:`mitld_lp.util.decimals.exact_value`); every
+    # other law has none, and an exact answer refuses it by name (:mod:`mitld_lp.exact`).
+
+    @property
+    def exact_hazards(self) -> bool:
+        """Whether :meth:`exact_hazard` gives this law's hazards as rational numbers."""
+        return False
+
+    def exact_hazard(self, k: int) -> Fraction:
+        """``h(k)`` as a rational number, from the parameters as written (``k >= 1``).
+        Raises :class:`DistributionError` for a law without rational hazards."""
+        raise DistributionError(self.label, "its hazards are not rational numbers (an exact "
+                                "answer takes geometric, pmf and uniform laws)")
+
+    def exact_constant_from(self) -> int:
+        """The smallest ``k0 >= 1`` with :meth:`exact_hazard` the same at every ``k >=
+        k0``, in rational arithmetic: where :attr:`constant_hazard_from`, found in floats,
+        may have taken two hazards that differ beyond double precision for equal."""
+        raise DistributionError(self.label, "its hazards are not rational numbers")
 
     # ------------------------------------------------------------------ ambiguity
     # A law known exactly is its own band; :mod:`.band` overrides these three.

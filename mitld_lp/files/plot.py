@@ -165,7 +165,7 @@ def policy_map(result: SynthesisResult, situation: Situation = Situation()) -> P
         raise PlotError(f"situation: automaton: no state {q0} (the automaton has "
                         f"{dta.n_states}: 0..{dta.n_states - 1})")
     policy, values = result.lower_model.policy, result.lower_model.policy_values
-    if result.objective == "min":  # the complement's values, read in the task's terms
+    if result.complemented:  # the complement's values, read in the task's terms
         values = 1.0 - values
     index: dict[tuple[Hashable, int, frozenset[str]], tuple[int, int]] = {}
     for i, s in enumerate(mdp.states):

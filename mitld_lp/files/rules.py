@@ -25,6 +25,7 @@ __all__ = [
     "OutputPathError",
     "InputFileError",
     "read_limit",
+    "irregular_kind",
     "open_regular",
     "read_bytes",
     "read_text",
@@ -87,6 +88,18 @@ def _kind_of(mode: int) -> str:
         if test(mode):
             return name
     return "not a regular file"
+
+
+def irregular_kind(path: PathLike) -> str | None:
+    """What ``path`` is when it exists and is no regular file (``"a FIFO (named pipe)"``,
+    ``"a directory"``, ...; a symlink is followed); None for a regular file or no file.
+    For a reader that finds files by name (Python's import) and would only say "not
+    found"."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return None if stat.S_ISREG(mode) else _kind_of(mode)
 
 
 def open_regular(path: PathLike, what: str = "") -> IO[bytes]:

@@ -46,6 +46,7 @@ from mitld_lp.files.rules import (
     OutputPathError,
     _kernel_folder,
     check_zip,
+    irregular_kind,
     open_archive,
     open_regular,
     read_bytes,
@@ -74,6 +75,7 @@ __all__ = [
     "abandoned",
     "InputFileError",
     "read_limit",
+    "irregular_kind",
     "open_regular",
     "read_bytes",
     "read_text",
@@ -137,13 +139,30 @@ def writable_path(
 
 def distinct_outputs(named: Iterable[tuple[str, Path]]) -> None:
     """Refuse two outputs that are one file: ``named`` pairs a name (``--lp``) with a
-    path already checked by :func:`writable_path`.  Raises :class:`OutputPathError`."""
-    seen: dict[str, str] = {}
+    path already checked by :func:`writable_path`.  Raises :class:`OutputPathError`.
+
+    One file whatever names reach it: an existing file is known by its device and inode
+    (a symlink, ``..``, a hard link, a second mount of its folder), a new one by its
+    folder's device and inode and its name."""
+    seen: dict[tuple[int, int, str], str] = {}
     for what, path in named:
-        key = os.path.realpath(path)
+        key = _identity(path)
         if key in seen:
             raise OutputPathError(f"{seen[key]} and {what} name the same file {path}")
         seen[key] = what
+
+
+def _identity(path: Path) -> tuple[int, int, str]:
+    """The file ``path`` names (:func:`distinct_outputs`)."""
+    real = Path(os.path.realpath(path))
+    with contextlib.suppress(OSError):
+        own = os.stat(real)
+        return own.st_dev, own.st_ino, ""
+    try:
+        folder = os.stat(real.parent)
+    except OSError:
+        return 0, 0, str(real)
+    return folder.st_dev, folder.st_ino, real.name
 
 
 # --------------------------------------------------------------------------- the writing

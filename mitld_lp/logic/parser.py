@@ -76,6 +76,7 @@ from mitld_lp.logic.syntax import (
     until,
     weak,
 )
+from mitld_lp.util.decimals import Written
 from mitld_lp.util.text import excerpt
 
 __all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
@@ -218,8 +219,8 @@ class _Build:
         except ValueError:  # more digits than int() converts (sys.get_int_max_str_digits)
             raise self._error(f"integer too long ({len(tok)} digits)", tok) from None
 
-    def _float(self, tok: Token) -> float:
-        value = float(tok)
+    def _float(self, tok: Token) -> Written:
+        value = Written(str(tok))  # the decimal as written, for an exact answer
         if not math.isfinite(value):
             raise self._error(f"number out of range: {tok}", tok)
         return value
@@ -300,7 +301,7 @@ class _Build:
 
     def arg_float(self, c: list) -> tuple[DistArg, Token]:
         value = self._float(c[-1])
-        return (-value if len(c) == 2 else value, c[0])
+        return (Written(f"-{value.text}") if len(c) == 2 else value, c[0])
 
 
 # --------------------------------------------------------------------------- errors

@@ -29,6 +29,7 @@ from mitld_lp.routes.constraints import (
 from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
 from mitld_lp.synthesis import synthesize_constrained
+from mitld_lp.util.progress import tracked
 
 __all__ = ["ParetoPoint", "pareto", "write_csv", "plot"]
 
@@ -106,7 +107,8 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")
     out = []
-    for b in np.linspace(lo, max(hi, lo), points):
+    for b in tracked(np.linspace(lo, max(hi, lo), points), options.get("progress"),
+                     total=points, desc="pareto", unit=" points", leave=False):
         c = against_constraint(against, float(b) + 1e-9)
         r = synthesize_constrained(model, [c], **options)
         loosen = 0.0

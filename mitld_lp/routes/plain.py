@@ -15,6 +15,12 @@ and choice), or for a minimum a lower bound on the optimum and an upper bound on
 policy's value.  The lower model's certificate gives ``lower``, the upper model's
 ``upper``; when nothing is truncated one model gives both.
 
+A minimum (``sense="min"``: a co-safe task minimised on its own product,
+:mod:`mitld_lp.routes.stages`) is solved as one, on quotients without end components
+(:func:`mitld_lp.solvers.analysis.analyse`): the controller's policy is the upper
+model's (truncation counted as the task happening: what the policy guarantees at most),
+the bound no policy goes below the lower model's.
+
 :func:`solve_models` is that solve on any MDP with a target (the sensed route's
 information-state product uses it too); :func:`solve_plain` is the plain route.
 """
@@ -24,7 +30,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -39,7 +45,7 @@ from mitld_lp.util.heap import release_free_memory
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
     from mitld_lp.solvers.lp import Backend
-    from mitld_lp.solvers.quotient import Quotient
+    from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
@@ -53,7 +59,8 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ModelSolution:
-    """The solution of one of the two models (lower: truncation loses; upper: it wins)."""
+    """The solution of one of the two models (lower: truncation loses; upper: it wins),
+    optimised in ``sense`` (``"max"``, or ``"min"`` for a minimum solved as one)."""
 
     which: str
     status: Status
@@ -71,6 +78,9 @@ class ModelSolution:
     # "min" a lower bound on the minimum and an upper bound on the policy's value; nan
     # for a side this model was not asked for
     bounds: tuple[float, float] = (float("nan"), float("nan"))
+    # the values the graph decides, 0 or 1 (Storm's prob01, in ``sense``): every other
+    # state's optimum is strictly between 0 and 1
+    qualitative: Qualitative | None = None
 
     @property
     def certified(self) -> bool:
@@ -94,10 +104,10 @@ class _Settings:
     solver: str
     backend: Backend
     tol: float
+    precision: float  # the relative precision asked (the iteration's and the bracket's)
     eta: float  # the probabilities' allowance (mitld_lp.solvers.certify.model_eta)
-    precision: float  # the relative width asked of the bracket
     complement: bool  # the answer is 1 - the values (a minimum read back)
-    progress: bool
+    progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
     decompose: bool
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
 
@@ -118,21 +128,25 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
         return None
     from mitld_lp.solvers.lp import solve_lp
 
-    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient, solver=how.solver,
-                    backend=how.backend, tol=how.tol, decompose=how.decompose,
+    return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient,
+                    sense=quotient.sense, solver=how.solver, backend=how.backend,
+                    tol=how.tol, precision=how.precision, decompose=how.decompose,
                     time_limit=how.remaining(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0)
+                    everywhere=quotient.initial < 0, progress=how.progress)
 
 
-def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
+def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
-               it: IterationResult, lp: LPResult | None, which: str, how: _Settings,
-               sense: str = "max") -> ModelSolution:
+               it: IterationResult, lp: LPResult | None, which: str,
+               how: _Settings) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
     quotient's matrix is released by then.  Both bounds are checked on each model (the
     answer reads the lower model's lower one and the upper model's upper one), and that
-    the policy is within the precision of the optimum in every state.  An LP that did
-    not come back optimal (after its own retries) is replaced by the interval-iteration
+    the policy is within the precision of the optimum in every state.  ``decided``: the
+    graph's 0/1 sets in the model's sense (for a maximum ``zero`` is ``Prob0A``, the
+    candidate upper bound's zeros; for a minimum ``Prob0E``, where the lower bound is 0,
+    the end-component check guarding it, and ``one`` ``Prob1A``).  An LP that did not
+    come back optimal (after its own retries) is replaced by the interval-iteration
     policy when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``); the
     certificate is the same whatever policy it reads."""
     from mitld_lp.solvers.certify import certify
@@ -155,14 +169,17 @@ def _certified(mdp: MDP, target: np.ndarray, prob0: np.ndarray,
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    cert = certify(mdp, target, policy, sense=sense, zero=prob0, mec_of=mec_of,
+    sense = str(decided.sense)
+    minimum = sense == "min"
+    cert = certify(mdp, target, policy, sense=sense, zero=decided.zero,
+                   one=decided.one if minimum else None, mec_of=None if minimum else mec_of,
                    layers=layers, fallback_lower=it.lower, fallback_upper=it.upper,
                    eta=how.eta, precision=how.precision,
-                   complement=how.complement and sense == "max")
+                   complement=how.complement and not minimum)
     checks.extend(cert.checks)
     return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
-                         (it.value_lower, it.value_upper), lp, it, prob0, tuple(checks),
-                         sense, (cert.lower, cert.upper))
+                         (it.value_lower, it.value_upper), lp, it, decided.unreachable,
+                         tuple(checks), sense, (cert.lower, cert.upper), decided)
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
@@ -174,8 +191,11 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     from mitld_lp.solvers.iteration import interval_iterations
 
     decided = quotients[0].initial < 0
-    return interval_iterations(mdp, quotients, tol=how.tol, progress=how.progress,
-                               time_limit=how.remaining(),
+    # the relative precision where the bracket is the answer's (the initial state);
+    # when the graph decides that, the LP solves every state and the bounds only prune
+    return interval_iterations(mdp, quotients, tol=how.tol,
+                               precision=None if decided else how.precision,
+                               progress=how.progress, time_limit=how.remaining(),
                                gap="max" if decided else "initial")
 
 
@@ -198,35 +218,83 @@ def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolu
     return replace(solution, policy=policy, checks=(*solution.checks, check))
 
 
-def solve_models(mdp: MDP, accept: Acceptance, s: Settings,
-                 t0: float, eta: float | None = None, *, complement: bool = False,
-                 ) -> tuple[ModelSolution, ModelSolution]:
+def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
+                 sense: str = "max", eta: float | None = None, *,
+                 complement: bool = False) -> tuple[ModelSolution, ModelSolution]:
     """Both truncation models of ``mdp`` solved and certified (module docs) for the
     target ``accept`` (its goal; a task's accepting end components kept by their
     choices), with the settings ``s`` of a posed problem, the time limit counted from
-    ``t0``; ``eta``: the probabilities' allowance (default
-    :data:`mitld_lp.solvers.certify.ETA`); ``complement``: the answer is read back as
-    ``1 -`` the values (the precision is relative to that).  The two are one object when nothing is
-    truncated."""
+    ``t0``, maximised (``sense="min"``: minimised).  ``eta``: the probabilities'
+    allowance (default :data:`mitld_lp.solvers.certify.ETA`); ``complement``: the answer
+    is read back as ``1 -`` the values (the precision is relative to that).  Returned as
+    (the controller's model, the bound's model): for a maximum the lower model then the
+    upper one, for a minimum the upper then the lower (module docs).  The two are one
+    object when nothing is truncated."""
     from mitld_lp.solvers.analysis import analyse
     from mitld_lp.solvers.certify import ETA
+    from mitld_lp.solvers.graph import Sense
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, ETA if eta is None else eta,
-                    s.precision, complement, s.progress, s.decompose is not False,
+    how = _Settings(s.method, s.solver, s.backend, s.tol, s.precision,
+                    ETA if eta is None else eta, complement, s.progress,
+                    s.decompose is not False,
                     float("inf") if s.time_limit is None else t0 + s.time_limit)
-    quotients = analyse(mdp, accept.goal, mdp.truncated)
+    quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
     its = _iterate(mdp, quotients, how)
     lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.prob0, q.layers, q.mecs.mec_of) for q in quotients]
+    kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
+            for q in quotients]
     del quotients
     solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which
                  in zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
+    if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
+        low, high = high, low
     kept_low = _keeping(mdp, accept, low)
     return kept_low, (kept_low if high is low else high)
+
+
+def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
+           high: ModelSolution, t0: float,
+           ) -> tuple[dict[str, Any], ModelSolution, ModelSolution]:
+    """The exact answer (:func:`mitld_lp.exact.exact_answer`) as the result's fields (the
+    exact record; past the time limit the status) and the models (the controller's, the
+    bound's: :func:`solve_models`) with their exact-optimal policies, each model's
+    ``bounds`` its exact optimum rounded outward.  The exact check proves the bracket:
+    it takes the place of the float certificate's checks (the float bounds and the
+    policy's optimality in every state, now shown exactly).  A minimum is the task's own
+    (``built.sense == "min"``) or the complement's maximum read back (a task with a safety
+    part: :func:`mitld_lp.routes.stages.build_posed`)."""
+    from mitld_lp.exact.stage import exact_answer
+    from mitld_lp.solvers.certify import float_down, float_up, is_certificate_check
+    from mitld_lp.solvers.result import Status
+
+    s = posed.settings
+    deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
+    minimum = built.sense == "min"
+    complemented = posed.minimise and not minimum
+    # exact_answer takes the truncation models in their order (lower, upper); for a
+    # minimum solve_models hands the upper one (the controller's) first
+    lower_trunc, upper_trunc = (high, low) if minimum else (low, high)
+    answer, (exact_lower, exact_upper), check = exact_answer(
+        built.mdp, posed.model.game, built.sta, (lower_trunc, upper_trunc), accept.goal,
+        sense=built.sense, complemented=complemented, deadline=deadline)
+    if answer is None:  # the float certificate stands, the exact check failed
+        first = replace(low, checks=(*low.checks, check))
+        return {"status": Status.TIME_LIMIT}, first, (first if high is low else high)
+    # each truncation model's optimum in its own terms (the complement's for a minimum
+    # read back), the lower model's the answer's lower end
+    optima = (1 - answer.upper, 1 - answer.lower) if complemented else (answer.lower,
+                                                                        answer.upper)
+    exact_lower, exact_upper = (
+        replace(m, bounds=(float_down(q), float_up(q)),
+                checks=tuple(c for c in m.checks if not is_certificate_check(c)))
+        for m, q in zip((exact_lower, exact_upper), optima, strict=True))
+    first, second = (exact_upper, exact_lower) if minimum else (exact_lower, exact_upper)
+    first = replace(first, checks=(*first.checks, check))
+    return {"exact": answer}, first, (first if high is low else second)
 
 
 def solve_plain(posed: Posed, built: Built) -> Result:
@@ -244,20 +312,26 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     from mitld_lp.solvers.certify import model_eta
 
     accept = acceptance(mdp, built.dta)
-    low, high = solve_models(mdp, accept, s, t0, model_eta(built.sta),
-                             complement=posed.minimise)
+    low, high = solve_models(mdp, accept, s, t0, built.sense, model_eta(built.sta),
+                             complement=posed.minimise and built.sense == "max")
     timings["solve"] = time.perf_counter() - t0
+    fields: dict[str, Any] = {}
+    if s.exact:  # the optimum as a fraction (mitld_lp.exact), its policy the controller's
+        fields, low, high = _exact(posed, built, accept, low, high, t0)
+        timings["exact"] = time.perf_counter() - t0 - timings["solve"]
     solve_cpu = time.process_time() - c0
-    # the controller plays the policy whose value the answer bounds: the lower model's
-    # for a maximum (its value is ``lower``), the upper model's for a minimum (``upper``)
-    played = high if low.sense == "min" else low
+    # the controller plays the first model's policy (solve_models): the one whose value
+    # the answer's near end bounds; it stops where the task cannot happen even if every
+    # truncated event came in time: the upper model's unreachable states
+    upper = low if built.sense == "min" else high
     result = Result(
         route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
-        controller=Controller(model.game, built.sta, mdp, played.policy,
-                              hopeless=high.prob0),
+        controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
-                      truncated=bool(mdp.truncated.any())))
+        **{**from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
+                         truncated=bool(mdp.truncated.any()), sense=built.sense,
+                         exact=fields.get("exact")),
+           **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

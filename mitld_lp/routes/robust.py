@@ -61,7 +61,7 @@ from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
 
 __all__ = ["is_robust", "synthesize_robust", "solve_robust", "RobustModelSolution",
-           "robust_game"]
+           "robust_game", "interval_model", "interval_export"]
 
 log = logging.getLogger(__name__)
 
@@ -238,7 +238,7 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
     if posed.route == CONSTRAINED:
         raise ProblemError("synthesize_robust: a task with constraints is not solved "
                            "robustly")
-    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress or None,
+    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress,
                                            robust=True))
 
 
@@ -293,11 +293,42 @@ def interval_model(
     max_memory: int | None = None,
 ) -> IntervalMDP:
     """The interval MDP that :func:`synthesize_robust` solves for ``model`` (for export:
-    :func:`mitld_lp.solvers.robust_export.write_interval_drn`)."""
+    :func:`interval_export`)."""
+    return _interval(model, epsilon, clock_reduction, max_states, max_automaton_states,
+                     max_memory)[0]
+
+
+def interval_export(
+    model: Model,
+    *,
+    upper: bool = False,
+    epsilon: float | None = None,
+    clock_reduction: bool = True,
+    max_states: int = defaults.MAX_STATES,
+    max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
+    max_memory: int | None = None,
+) -> tuple[IntervalMDP, np.ndarray]:
+    """The interval MDP of :func:`interval_model` and the states its DRN marks
+    ``target`` (:func:`mitld_lp.solvers.robust_export.write_interval_drn`): the set whose
+    robust reachability probability is the bracket's end, as :func:`solve_robust` solves
+    it -- the task's accepting states (and, with ``upper``, the truncated ones), or for
+    a task with a safety part the states from which the robot keeps it whatever law of
+    the bands nature plays (:func:`_goal`).  Storm's ``Pmax=? [F "target"]`` on the file
+    is then ``lower`` (``upper`` with ``upper=True``), or at most it with several
+    ambiguous events at once (docs/robust.md)."""
+    imdp, dta = _interval(model, epsilon, clock_reduction, max_states, max_automaton_states,
+                          max_memory)
+    reached = imdp.target | imdp.truncated if upper else imdp.target
+    goal, _ = _goal(robust_game(imdp), imdp, dta, np.asarray(reached, dtype=bool))
+    return imdp, np.asarray(goal, dtype=bool)
+
+
+def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_states: int,
+              max_automaton_states: int, max_memory: int | None) -> tuple[IntervalMDP, DTA]:
     eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
     dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
-    return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory)
+    return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory), dta
 
 
 def structure_mdp(imdp: IntervalMDP) -> MDP:

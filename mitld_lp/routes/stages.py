@@ -1,8 +1,16 @@
 """The stages every route shares, up to the model a solver works on.
 
-    task (its complement for "min"; with constraints, the joint automaton of the task and
-    each constraint's formula) --to_dta--> DTA --make_sta--> STA --product(game)--> MDP
+    task (its complement for "min", unless the plain route minimises a co-safe task on
+    its own automaton; with constraints, the joint automaton of the task and each
+    constraint's formula) --to_dta--> DTA --make_sta--> STA --product(game)--> MDP
     (an interval MDP when some law is known only within a band)
+
+Which automaton a minimum builds: a task whose acceptance is reaching the accepting
+state (co-safe: no :data:`~mitld_lp.automata.dta.SAFE` state) is minimised on the plain
+route as a minimum, on its own automaton (``Built.sense == "min"``), so a rare
+probability keeps its digits; a task with a safety part (accepting end components), and
+every minimum on the robust and constrained routes, is the complement's maximum read
+back (``Pmin(phi) = 1 - Pmax(not phi)``, ``Built.sense == "max"``).
 
 :func:`build_posed` builds them for a posed problem (:mod:`mitld_lp.problem`), whatever
 its route; :func:`mitld_lp.synthesis.solve` then hands the :class:`Built` record to
@@ -18,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mitld_lp import defaults
-from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.joint import Joint, joint_automaton
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.automata.translate import to_dta
@@ -28,20 +36,22 @@ from mitld_lp.logic import check
 from mitld_lp.logic.syntax import DistLiteral, Formula, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, SENSED, Posed
+from mitld_lp.problem import CONSTRAINED, PLAIN, SENSED, Posed
 from mitld_lp.product import product, robust_product
 from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.routes.constraints import Constraint, ConstraintError
 from mitld_lp.worlds.game import Game
 
-__all__ = ["Built", "build_product", "build_posed", "joint_sta"]
+__all__ = ["Built", "build_product", "build_posed", "joint_sta", "reaching"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Built:
     """What :func:`build_product` and :func:`build_posed` return: the automaton, the STA
     and the product, with the seconds each construction took (``automaton``,
-    ``product``)."""
+    ``product``), and the sense in which the product's target is optimised (``"min"``
+    only for a minimum solved on the task's own automaton; a minimum read back from
+    its complement's maximum is ``"max"`` here)."""
 
     dta: DTA  # the automaton the product is built from (the joint one with constraints)
     sta: STA
@@ -49,6 +59,14 @@ class Built:
     timings: Mapping[str, float]
     joint: Joint | None = None  # with constraints: the task's and each constraint's parts
     belief: Any = None  # sensors that miss events: the information-state product's record
+    sense: str = "max"  # "max" or "min": how the solver optimises the product's target
+
+
+def reaching(dta: DTA) -> bool:
+    """Whether ``dta``'s acceptance is reaching its accepting state (no
+    :data:`~mitld_lp.automata.dta.SAFE` state: a co-safe task), so that a minimum of
+    it is a minimal reachability probability on its own product."""
+    return SAFE not in dta.kinds
 
 
 def build_product(
@@ -64,30 +82,38 @@ def build_product(
     max_memory: int | None = None,
     progress: bool | None = None,
     complement: bool = False,
+    objective: str = "max",
 ) -> Built:
     """The stages up to the MDP: ``to_dta(formula)`` (its complement with
-    ``complement``, for a minimised task), ``make_sta`` with the events' ``laws`` and
+    ``complement``; with ``objective="min"`` the automaton the minimum is solved on:
+    the task's own if it is co-safe, :func:`reaching`, else its complement, module
+    docs), ``make_sta`` with the events' ``laws`` and
     the truncation budget ``epsilon`` (or the fixed ``truncation`` points), then the
     reachable ``product`` with ``game``.  Budgets, each checked before the work that
     would exceed it: no state space built here has more than ``max_states`` states; the
     automaton, whose states cost thousands of times more than the product's, also no
     more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`); the product needs at
     most ``max_memory`` bytes (default: half the machine's memory)."""
+    if objective not in ("max", "min"):
+        raise ValueError(f"objective: must be 'max' or 'min', got {objective!r}")
     t0 = time.perf_counter()
     dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
-    if complement:
+    direct = objective == "min" and not complement and reaching(dta)
+    if complement or (objective == "min" and not direct):
         dta = dta.complement()
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
     mdp = product(game, sta, max_states=max_states, max_memory=max_memory, progress=progress)
     t2 = time.perf_counter()
-    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1})
+    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": t2 - t1},
+                 sense="min" if direct else "max")
 
 
 def build_posed(posed: Posed, *, progress: bool | None = None,
                 robust: bool | None = None) -> Built:
-    """The stages of a posed problem, whatever its route: the task's automaton (its
-    complement for ``objective="min"``; with constraints, the joint automaton,
+    """The stages of a posed problem, whatever its route: the task's automaton (for
+    ``objective="min"`` its own on the plain route when it is co-safe, else its
+    complement, module docs; with constraints, the joint automaton,
     :func:`joint_sta`), the STA with the problem's truncation settings, and the product
     with the world (an interval MDP when some law is a band), under the problem's
     budgets.  ``robust=True`` builds the interval MDP also when every law is a point
@@ -103,7 +129,9 @@ def build_posed(posed: Posed, *, progress: bool | None = None,
             epsilon=model.epsilon if s.epsilon is None else s.epsilon,
             clock_reduction=s.clock_reduction, truncation=s.truncation_map,
             max_states=s.max_states, max_automaton_states=s.max_automaton_states,
-            max_memory=s.max_memory, progress=progress, complement=posed.minimise)
+            max_memory=s.max_memory, progress=progress,
+            objective="min" if posed.minimise and posed.route == PLAIN else "max",
+            complement=posed.minimise and posed.route != PLAIN)
     t0 = time.perf_counter()
     joint = None
     if posed.route == CONSTRAINED:
@@ -139,7 +167,8 @@ def _sensed(posed: Posed, progress: bool | None) -> Built:
     belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
                             model.epsilon if s.epsilon is None else s.epsilon,
                             clock_reduction=s.clock_reduction, truncation=s.truncation_map,
-                            max_states=s.max_states, max_memory=s.max_memory)
+                            max_states=s.max_states, max_memory=s.max_memory,
+                            progress=progress)
     return Built(dta, belief.sta, belief.mdp,
                  {"automaton": t1 - t0, "product": time.perf_counter() - t1}, belief=belief)
 

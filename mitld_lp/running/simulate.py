@@ -118,7 +118,7 @@ def simulate(
         from mitld_lp.sensing.observe import simulate_sensed
 
         return simulate_sensed(model, controller,  # type: ignore[arg-type]
-                               runs=runs, seed=seed, max_steps=max_steps)
+                               runs=runs, seed=seed, max_steps=max_steps, progress=progress)
     rng = np.random.default_rng(seed)
     if controller.randomised:
         controller.reset(seed=int(rng.integers(2**63)))
@@ -127,10 +127,11 @@ def simulate(
     # where the task's safety part is kept by a *keep* choice (the status is then
     # accepted); otherwise the run keeps the task in a persistent state of its automaton
     persistent = frozenset() if controller.randomised else _persistent_states(model)
-    # objective "min": the controller runs the complement's automaton (same states): the
-    # task holds where the complement rejects, or in the task's persistent states
-    win = RunStatus.REJECTED if model.objective == "min" else RunStatus.ACCEPTED
-    bar = progress_bar(progress, total=runs, leave=False, desc="simulate")
+    # a minimum read back from the complement's maximum: the controller runs the
+    # complement's automaton (same states): the task holds where the complement rejects,
+    # or in the task's persistent states
+    win = RunStatus.REJECTED if _runs_complement(model, controller) else RunStatus.ACCEPTED
+    bar = progress_bar(progress, total=runs, leave=False, desc="simulate", unit=" runs")
     for _ in range(runs):
         status, _ = rollout(model, controller, rng, max_steps=max_steps)
         keeping = status is RunStatus.RUNNING and controller.automaton_state in persistent
@@ -159,6 +160,27 @@ def _laws(model: Model, controller: ControllerLike) -> list[tuple[str, Any]]:
                 "for; simulate it with the controller of the synthesis") from None
         laws.update((a, clocks[a].distribution) for a in missing)
     return list(laws.items())
+
+
+def _runs_complement(model: Model, controller: ControllerLike) -> bool:
+    """Whether ``controller`` runs the complement of ``model``'s minimised task: a
+    randomised (constrained) controller does; a deterministic one does when its
+    automaton's verdict in one of the task's decided states is the opposite of the
+    task's (the translation is deterministic, so a fresh one numbers the states as the
+    controller's; a co-safe task minimised on the plain route runs its own automaton)."""
+    if model.objective != "min":
+        return False
+    if controller.randomised:
+        return True
+    from mitld_lp.automata.translate import to_dta
+    from mitld_lp.logic.fragment import check
+
+    task = to_dta(check(model.spec))
+    if task.accepting is not None:
+        return controller.task_verdict(task.accepting) == 0
+    if task.rejecting is not None:
+        return controller.task_verdict(task.rejecting) == 1
+    return True  # nothing is ever decided: the verdict is read from the persistent states
 
 
 def _persistent_states(model: Model) -> frozenset[int]:

@@ -3,7 +3,10 @@
 The features of a state the controller acts in are the world's own (a grid cell's
 ``x`` and ``y``, a PRISM world's variables, else the world ``state`` itself), the
 controller's memory -- the automaton state ``q``, one ``pending_<event>`` flag per event
-(true while the event has not happened), the ``clock`` -- and nothing else.  The tree
+(true while the event has not happened), the ``clock`` -- and nothing else.  A memory
+feature whose name a world variable already has gets ``_`` appended until it is new
+(a PRISM world with variables ``q`` and ``clock``: ``q_`` and ``clock_``), and the
+``.py`` function's arguments are distinct Python names.  The tree
 is grown top-down (the split of highest information gain, as CART and dtControl do)
 until every leaf holds one decision, over exactly the states the controller can reach
 (the controlled chain, :mod:`mitld_lp.running.chain`), so it picks the controller's own
@@ -126,20 +129,24 @@ class Tree:
         return "\n".join(lines) + "\n"
 
     def to_python(self) -> str:
-        args = ", ".join(_identifier(f) for f in self.features)
+        taken: set[str] = set()  # distinct Python names, whatever the features' names
+        names = [_identifier(_fresh(f, taken)) for f in self.features]
         what = ("a dict {action: probability} (key None: stay in the end component; a key "
                 "('keep', *actions): keep the safety part, playing those actions uniformly "
                 "for ever)" if self.randomised else "the action (None: the task is lost, stop)")
+        world = len(self.features) - len(self.events) - 2
         out = ['"""The controller as a decision tree, written by mitld_lp (exact on the',
-               f'{self.samples} states it can reach).  act(...) returns {what}."""', "", "",
-               f"def act({args}):"]
+               f"{self.samples} states it can reach).  act(...) returns {what}.",
+               f"Arguments: the world's {', '.join(names[:world])}; the controller's "
+               f"{', '.join(names[world:])} (automaton state, pending events, clock).\"\"\"",
+               "", "", f"def act({', '.join(names)}):"]
 
         def emit(i: int, depth: int) -> None:
             n, pad = self.nodes[i], "    " * depth
             if n.feature is None:
                 out.append(f"{pad}return {_leaf_python(n.decision, self.randomised)}")
                 return
-            out.append(f"{pad}if {_python_test(_identifier(self.features[n.feature]), n)}:")
+            out.append(f"{pad}if {_python_test(names[n.feature], n)}:")
             emit(n.yes, depth + 1)
             out.append(f"{pad}else:")
             emit(n.no, depth + 1)
@@ -174,6 +181,15 @@ def _identifier(name: str) -> str:
     text = "".join(c if c.isalnum() or c == "_" else "_" for c in name)
     text = text if text and not text[0].isdigit() else f"f_{text}"
     return f"{text}_" if keyword.iskeyword(text) else text
+
+
+def _fresh(name: str, taken: set[str]) -> str:
+    """``name`` with ``_`` appended until neither it nor its Python name is ``taken``
+    (world variables ``lambda`` and ``lambda_`` are both ``lambda_`` in Python)."""
+    while name in taken or _identifier(name) in taken:
+        name += "_"
+    taken |= {name, _identifier(name)}
+    return name
 
 
 def _leaf_json(decision: Any, randomised: bool) -> dict[str, Any]:
@@ -224,9 +240,14 @@ def _leaf_python(decision: Any, randomised: bool) -> str:
 
 
 def _features(result: Any, controller: ControllerLike) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The world's features, then the memory's (``q``, ``pending_<event>``, ``clock``,
+    each with ``_`` appended while a world feature has its name, or its Python name)."""
     game = world_of(result, controller)
     events = tuple(sorted(controller.events))
-    return (*state_fields(game), "q", *(f"pending_{e}" for e in events), "clock"), events
+    world = state_fields(game)
+    taken = set(world) | {_identifier(f) for f in world}
+    memory = ("q", *(f"pending_{e}" for e in events), "clock")
+    return (*world, *(_fresh(name, taken) for name in memory)), events
 
 
 def _values(game: Any, rec: ProductState, events: tuple[str, ...]) -> tuple[Any, ...]:
@@ -265,7 +286,8 @@ def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
 
 
 _TIE = 1e-12
-"""Two values closer than this are equal when the tree may pick among actions."""
+"""Two values closer than this, relative to the larger, are equal when the tree may pick
+among actions (relative: two choices worth 1e-30 and 2.6e-30 are not tied)."""
 
 
 def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Hashable]] | None:
@@ -276,15 +298,18 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
     no choice among them can loop away from it); in the goal (an accepting end
     component) only the controller's own action.  A controller that picks one of them
     in every state has the value ``V``: the Bellman equation holds, and no bottom
-    component avoids the goal where ``V > 0``.  None for a randomised controller, whose
-    decisions are kept."""
+    component avoids the goal where ``V > 0``.  For a minimum solved as one
+    (``result.sense == "min"``) every action with ``Q = V`` keeps it: a policy of them
+    is worth at most ``V`` (its least fixed point), and at least the optimum ``V``.
+    None for a randomised controller, whose decisions are kept."""
     if controller.randomised or result.lower_model is None:
         return None
     mdp = result.mdp
     v = np.asarray(result.lower_model.policy_values, dtype=np.float64)
+    minimum = result.sense == "min"
     q = mdp.matrix @ v
     cs = mdp.choice_state()
-    tight = np.abs(q - v[cs]) <= _TIE
+    tight = np.abs(q - v[cs]) <= _TIE * np.maximum(np.abs(q), np.abs(v[cs]))
     goal = np.asarray(result.acceptance.goal, dtype=bool)
     # rank: steps to the goal along tight choices (a backward search over their edges)
     coo = mdp.matrix.tocoo()
@@ -313,7 +338,7 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
             if not tight[c]:
                 continue
             succ = cols[indptr[c]:indptr[c + 1]]
-            if v[i] <= 0 or (succ.size and int(rank[succ].min()) < int(rank[i])):
+            if v[i] <= 0 or minimum or (succ.size and int(rank[succ].min()) < int(rank[i])):
                 ok.add(mdp.action_name(c))
         out[i] = frozenset(ok)
     return out
@@ -358,7 +383,7 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
         rows, allowed = _dataset(result, c, states, choices)
         nodes: list[Node] = []
         _grow(rows, allowed, list(range(len(rows))), nodes,
-              frozenset({names.index("q")}))
+              frozenset({len(names) - len(events) - 2}))  # q: its states are categories
         tree = Tree(names, events, tuple(nodes), bool(c.randomised), len(rows),
                     choices is None, _automaton_texts(result))
         if choices is None:

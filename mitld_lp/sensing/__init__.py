@@ -4,6 +4,8 @@
   table of a model file;
 * :mod:`~mitld_lp.sensing.belief`: the information-state product (the MDP over what the
   robot knows);
+* :mod:`~mitld_lp.sensing.horizon`: the sensors whose reports come too late for the
+  task, built as blind ones (the same optimum);
 * :mod:`~mitld_lp.sensing.solve`: the ``sensed`` route, its certified bracket (the one
   :class:`~mitld_lp.result.Result`, with its ``sensors`` and ``belief`` parts);
 * :mod:`~mitld_lp.sensing.table`: its policy table;

@@ -42,6 +42,7 @@ optimum over observation-based policies.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
@@ -54,11 +55,16 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory
+from mitld_lp.product import Absorbing, ProductTooLarge, default_max_memory, estimate_size
+from mitld_lp.sensing.horizon import collapse
 from mitld_lp.sensing.sensors import Sensor
-from mitld_lp.worlds.game import Game
+from mitld_lp.util.progress import bar as progress_bar
+from mitld_lp.worlds.game import Game, world_members
 
-__all__ = ["InfoState", "Belief", "belief_product", "sensed_sta", "WEIGHT_TOL"]
+log = logging.getLogger(__name__)
+
+__all__ = ["InfoState", "Belief", "InfoSize", "info_size", "belief_product", "sensed_sta",
+           "WEIGHT_TOL"]
 
 NOT_YET = 0
 """A hypothesis's value for a sensed event that has not happened (yet)."""
@@ -105,13 +111,51 @@ class Belief:
     ``moves[(state, action)][obs]`` is the successor state of an observation, or an
     :class:`Absorbing` member when nothing undecided is left with it (``TARGET``: every
     hypothesis left accepted; ``SINK``: every one rejected; ``TRUNCATED``: some of each,
-    the robot cannot tell which).  ``sta``: the clocks (sensed events truncated)."""
+    the robot cannot tell which).  ``sta``: the clocks (sensed events truncated).
+    ``sensors``: the sensors as given; ``ignored``: the sensed events whose reports
+    come too late to matter (:mod:`mitld_lp.sensing.horizon`), built as blind ones: an
+    observation's reports of them are dropped before it is looked up in ``moves``."""
 
     mdp: MDP
     sta: STA
     sensed: tuple[str, ...]
     sensors: Mapping[str, Sensor]
     moves: Mapping[tuple[int, str], Mapping[Obs, int | Absorbing]]
+    ignored: frozenset[str] = frozenset()
+
+
+@dataclass(frozen=True, slots=True)
+class InfoSize:
+    """What one information state can hold, from the factors, before any is built:
+    ``clock`` the largest clock value a state keeps (an unsensed event's bound; a sensed
+    event's truncation point plus its sensor's delay: :meth:`_Builder.clock_key`),
+    ``hypotheses`` the most hypotheses a state holds (a step up to the truncation point,
+    or not yet, per sensed event; one automaton state each, the observations fixing the
+    run), ``world_states`` (None if the game does not say).  The states themselves are
+    counted as they are built."""
+
+    world_states: int | None
+    clock: int
+    hypotheses: int
+
+    def __str__(self) -> str:
+        world = "an unknown number of" if self.world_states is None else (
+            f"{self.world_states:,}")
+        return (f"{world} world states, the clock kept up to step {self.clock:,}, at most "
+                f"{self.hypotheses:,} hypotheses per state")
+
+
+def info_size(game: Game[Any], sta: STA, sensors: Mapping[str, Sensor]) -> InfoSize:
+    """:class:`InfoSize` of the information states of ``sta``'s events with ``sensors``
+    (the sensors the construction uses)."""
+    bounds = [c.truncation if c.truncation is not None else c.cap
+              for a, c in sta.clocks.items() if a not in sensors]
+    last = {a: sta.clocks[a].truncation for a in sensors}
+    points = {a: t for a, t in last.items() if t is not None}
+    assert len(points) == len(sensors)  # every sensed event is truncated (sensed_sta)
+    bounds += [points[a] + sensor.delay for a, sensor in sensors.items()]
+    return InfoSize(world_members(game).n_states, max(bounds, default=0),
+                    math.prod(t + 1 for t in points.values()))
 
 
 def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str, ...],
@@ -132,24 +176,65 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
                    sensors: Mapping[str, Sensor], epsilon: float, *,
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
-                   max_states: int, max_memory: int | None = None) -> Belief:
+                   max_states: int, max_memory: int | None = None,
+                   progress: bool | None = None, late_reports: bool = True) -> Belief:
     """The reachable information-state MDP (module docs) of a co-safe task's automaton
     ``dta`` in ``game``, the events of ``sensors`` (missed detections only) hidden.
-    Raises :class:`ProductTooLarge` before storing a state beyond ``max_states``, or one
-    that would take the states past ``max_memory`` bytes (default: half the machine's
-    memory) at :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS`
-    per hypothesis it holds."""
+
+    A sensor whose reports all come after the task stops depending on when the sensed
+    events happened is built as a blind one, its reports ignored (the same optimum:
+    :mod:`mitld_lp.sensing.horizon`), before any state is built; ``late_reports=False``
+    builds every sensor as given (to compare the two).  Raises :class:`ProductTooLarge`
+    before storing a state beyond ``max_states``, or one that would take the states past
+    ``max_memory`` bytes (default: half the machine's memory) at
+    :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS` per
+    hypothesis it holds.  ``progress``: a bar of the states built
+    (:mod:`mitld_lp.util.progress`: ``None`` on a terminal only), after a line saying
+    how large the product may grow."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
                      truncation=truncation)
     memory = default_max_memory() if max_memory is None else max_memory
-    return _Builder(game, dta, sta, sensed, sensors, max_states, memory).build()
+    used: dict[str, Sensor] = dict(sensors)
+    ignored: frozenset[str] = frozenset()
+    if late_reports:
+        found = collapse(dta, sensors, sta.truncation_points)
+        used, ignored = dict(found.sensors), found.blind
+        for a in sorted(ignored):
+            log.info("sensors.%s: its reports come %d steps after the event at the "
+                     "earliest, and from step %s on the task no longer depends on when the "
+                     "sensed events happened (the last can happen at step %d): solved as "
+                     "a blind sensor, the same optimum", a, sensors[a].delay,
+                     found.decided_from, found.last)
+    size = info_size(game, sta, used)
+    _announce(game, sta, sensed, max_states, memory, size)
+    belief = _Builder(game, dta, sta, sensed, used, max_states, memory, size).build(progress)
+    return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
+
+
+def _announce(game: Game[Any], sta: STA, sensed: tuple[str, ...], max_states: int,
+              max_memory: int, size: InfoSize) -> None:
+    """Say, before the build, how large the information-state product may grow: the
+    fully observed product's bound at these truncation points, the hypotheses each
+    state may hold, and the budgets that stop it."""
+    points = sta.truncation_points
+    hypotheses = math.prod(points[a] + 1 for a in sensed)  # not yet, or at step 1..T
+    cap = min(max_states, max_memory // BYTES_PER_INFO_STATE)
+    log.info("information-state product: the fully observed one has %s; each state here "
+             "also holds up to %s hypotheses of when %s happened (%s), so it may be far "
+             "larger: it stops past %s states (max_states %s; max_memory %.1f GiB at %s "
+             "bytes a state)",
+             estimate_size(game, sta), f"{hypotheses:,}", ", ".join(sensed),
+             ", ".join(f"{a} truncated at step {points[a]}" for a in sensed), f"{cap:,}",
+             f"{max_states:,}", max_memory / 2**30, f"{BYTES_PER_INFO_STATE:,}")
+    log.info("information states: %s", size)
 
 
 class _Builder:
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
-                 sensors: Mapping[str, Sensor], max_states: int, max_memory: int) -> None:
-        self.game, self.dta, self.sta = game, dta, sta
+                 sensors: Mapping[str, Sensor], max_states: int, max_memory: int,
+                 size: InfoSize) -> None:
+        self.game, self.dta, self.sta, self.size = game, dta, sta, size
         self.sensed, self.sensors, self.max_states = sensed, sensors, max_states
         self.max_memory, self.bytes = max_memory, 0
         self.unsensed = frozenset(sta.events) - frozenset(sensed)
@@ -188,16 +273,16 @@ class _Builder:
             raise ProductTooLarge(
                 f"the information-state product has more than {self.max_states:,} states "
                 f"(sensed events: {', '.join(self.sensed)}; truncation points: "
-                f"{self.sta.truncation_points}); raise max_states, loosen epsilon, or shrink "
-                "the model")
+                f"{self.sta.truncation_points}; {self.size}); raise max_states, loosen "
+                "epsilon, or shrink the model")
         cost = BYTES_PER_INFO_STATE + (
             0 if isinstance(state, Absorbing) else BYTES_PER_HYPOTHESIS * len(state.hypotheses))
         if self.bytes + cost > self.max_memory:
             raise ProductTooLarge(
                 f"the information-state product would need more than {self.max_memory:,} "
                 f"bytes ({len(self.states):,} states so far, sensed events: "
-                f"{', '.join(self.sensed)}); raise max_memory, loosen epsilon, or shrink the "
-                "model")
+                f"{', '.join(self.sensed)}; {self.size}); raise max_memory, loosen "
+                "epsilon, or shrink the model")
         self.bytes += cost
         self.index[key] = len(self.states)
         self.states.append(state)
@@ -403,7 +488,7 @@ class _Builder:
 
     # ---------------------------------------------------------------- the MDP
 
-    def build(self) -> Belief:
+    def build(self, progress: bool | None = None) -> Belief:
         game, dta = self.game, self.dta
         q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
         if q0 == dta.accepting:
@@ -418,7 +503,10 @@ class _Builder:
         groups, actions = [0], []
         names: dict[str, int] = {}
         head = 0
+        shown = progress_bar(progress, total=None, unit=" states", desc="information states",
+                             leave=False, mininterval=0.5)
         while head < len(self.states):
+            shown.update()
             s = self.states[head]
             if isinstance(s, Absorbing):
                 cols.append(head)
@@ -436,6 +524,9 @@ class _Builder:
             indptr.append(len(cols))
             groups.append(len(actions))
             head += 1
+        shown.close()
+        log.info("information-state product: %s states, %s choices, %s transitions",
+                 f"{len(self.states):,}", f"{len(actions):,}", f"{len(cols):,}")
         n = len(self.states)
         kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
                          .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],

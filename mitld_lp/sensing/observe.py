@@ -36,6 +36,7 @@ from mitld_lp.running.controller import RunStatus
 from mitld_lp.running.rollouts import SimulationResult, check_count, sample_successor, wilson
 from mitld_lp.running.saved_plan import ControllerFileError, encode_state
 from mitld_lp.sensing.belief import Belief, Obs
+from mitld_lp.util.progress import tracked
 from mitld_lp.worlds.game import Game, world_members
 
 __all__ = ["Observation", "SensedController", "simulate_sensed", "SensedControllerError",
@@ -95,10 +96,13 @@ class SensedController:
                  moves: Mapping[tuple[int, str], Mapping[Obs, int | Absorbing]],
                  sensed: Sequence[str], events: Iterable[str],
                  game: Game[Any] | None = None,
-                 first_actions: Mapping[Hashable, str] | None = None) -> None:
+                 first_actions: Mapping[Hashable, str] | None = None,
+                 ignored: Iterable[str] = ()) -> None:
         self.initial, self.actions, self.moves = initial, tuple(actions), moves
         self.sensed_events = frozenset(sensed)
         self.events = frozenset(events)
+        # sensed events whose reports come too late to matter (mitld_lp.sensing.horizon)
+        self.ignored = frozenset(ignored)
         self.game, self.first_actions = game, dict(first_actions or {})
         self.reset()
 
@@ -122,7 +126,7 @@ class SensedController:
                    mdp.action_name(int(policy[i])) for i, s in enumerate(mdp.states)]
         return cls(initial=initial if isinstance(initial, Absorbing) else mdp.initial,
                    actions=actions, moves=belief.moves, sensed=belief.sensed,
-                   events=belief.sta.events, game=game)
+                   events=belief.sta.events, game=game, ignored=belief.ignored)
 
     def reset(self, seed: int | None = None) -> None:
         self.info: int | None = None
@@ -171,8 +175,8 @@ class SensedController:
             return self._choose(observation.state)
         if self.beyond_model or self.info is None:
             return self._choose(observation.state)
-        sensed = self.sensed_events
-        obs = (observation.state, observation.reports - sensed, observation.reports & sensed)
+        sensed, reports = self.sensed_events, observation.reports - self.ignored
+        obs = (observation.state, reports - sensed, reports & sensed)
         nxt = self.moves.get((self.info, self.last or ""), {}).get(obs)
         if nxt is None:
             self.beyond_model = True
@@ -198,7 +202,7 @@ class SensedController:
 
 # --------------------------------------------------------------------- the file
 
-FORMAT, VERSION = "mitld-lp-sensed-controller", 1
+FORMAT, VERSION = "mitld-lp-sensed-controller", 2
 _END = {Absorbing.TARGET: -1, Absorbing.SINK: -2, Absorbing.TRUNCATED: -3}
 _NAMES = {Absorbing.TARGET: "accepted", Absorbing.SINK: "rejected",
           Absorbing.TRUNCATED: "decided"}
@@ -251,7 +255,8 @@ def save_sensed(c: SensedController, path: str | os.PathLike[str], *,
             rows.append((src, number[act], index[world], mask,
                          _END[dst] if isinstance(dst, Absorbing) else dst))
     meta = {"format": FORMAT, "version": VERSION, "events": events,
-            "sensed": sorted(c.sensed_events), "actions": actions,
+            "sensed": sorted(c.sensed_events), "ignored": sorted(c.ignored),
+            "actions": actions,
             "initial": (_NAMES[c.initial] if isinstance(c.initial, Absorbing)
                         else int(c.initial))}
     arrays = {
@@ -270,8 +275,8 @@ def save_sensed(c: SensedController, path: str | os.PathLike[str], *,
 
 
 def simulate_sensed(model: Any, controller: SensedController, *, runs: int = defaults.RUNS,
-                    seed: int | None = 0, max_steps: int = defaults.MAX_STEPS
-                    ) -> SimulationResult:
+                    seed: int | None = 0, max_steps: int = defaults.MAX_STEPS,
+                    progress: bool | None = None) -> SimulationResult:
     """Estimate the probability that ``controller`` satisfies ``model``'s task (module
     docs), with a Wilson 95% interval.  Each run draws every event's time from its law,
     then each sensed event's report ``delay + j`` steps after it, ``j ~
@@ -281,7 +286,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     probability 0 (an event past its truncation point);
     ``undecided`` the runs whose automaton had no verdict when the controller stopped
     (every hypothesis left was decided) or after ``max_steps``: failures, such as a bus
-    missed, which the automaton never rejects (it does not know a bus comes once)."""
+    missed, which the automaton never rejects (it does not know a bus comes once).
+    ``progress``: a bar over the runs (:mod:`mitld_lp.util.progress`)."""
     from mitld_lp.automata.translate import to_dta
 
     check_count("runs", runs, 1, defaults.MAX_RUNS)
@@ -293,7 +299,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     sensors = {a: s for a, s in model.sensors.items() if a in controller.sensed_events}
     laws = sorted(model.distributions.items())
     ok = beyond = undecided = 0
-    for _ in range(runs):
+    for _ in tracked(range(runs), progress, total=runs, desc="simulate", unit=" runs",
+                     leave=False):
         times = {a: float(law.sample(rng, 1)[0]) for a, law in laws}
         seen = dict(times)
         for a in sorted(sensors):

@@ -6,10 +6,12 @@
 foreign or damaged file is refused with :class:`~mitld_lp.running.saved_plan.ControllerFileError`
 naming it), in a process that needs neither the world's class nor a solver:
 
-* ``meta`` (JSON): ``format`` ``"mitld-lp-sensed-controller"``, ``version`` 1, the
-  task's ``events`` (sorted), the ``sensed`` ones, the ``actions`` (names), the
-  ``initial`` information state (a number, or ``"accepted"`` / ``"rejected"`` /
-  ``"decided"`` when the task is decided at step 0);
+* ``meta`` (JSON): ``format`` ``"mitld-lp-sensed-controller"``, ``version`` 2, the
+  task's ``events`` (sorted), the ``sensed`` ones, the ``ignored`` ones (sensed events
+  whose reports come too late to matter, :mod:`mitld_lp.sensing.horizon`: the
+  controller drops them; version 1 files, which have none, are read too), the
+  ``actions`` (names), the ``initial`` information state (a number, or ``"accepted"`` /
+  ``"rejected"`` / ``"decided"`` when the task is decided at step 0);
 * ``states`` (JSON): the world states the robot can be in (every state the world reaches
   from its initial one), encoded as :func:`mitld_lp.running.saved_plan.encode_state` does;
 * ``first`` (int32 per world state): its first action (played beyond the model);
@@ -95,11 +97,13 @@ def _controller(t: dict[str, np.ndarray]) -> SensedController:
     meta = _json(t["meta"], "meta")
     _need(isinstance(meta, dict) and meta.get("format") == FORMAT,
           "not a sensed controller (meta.format)")
-    _need(meta.get("version") == VERSION, f"version {meta.get('version')!r} is not read "
-                                          f"(this module reads {VERSION})")
+    _need(meta.get("version") in (1, VERSION), f"version {meta.get('version')!r} is not "
+                                               f"read (this module reads 1 and {VERSION})")
     events = _names(meta.get("events"), "meta.events")
     sensed = _names(meta.get("sensed"), "meta.sensed")
     _need(set(sensed) <= set(events), "meta.sensed: not among the events")
+    ignored = _names(meta.get("ignored", []) if meta["version"] > 1 else [], "meta.ignored")
+    _need(set(ignored) <= set(sensed), "meta.ignored: not among the sensed events")
     actions = _names(meta.get("actions"), "meta.actions")
     raw_states = _json(t["states"], "states")
     _need(isinstance(raw_states, list), "states: expected a list")
@@ -145,5 +149,5 @@ def _controller(t: dict[str, np.ndarray]) -> SensedController:
         table.setdefault((s, actions[a]), {})[obs] = back[d] if d < 0 else d
     return SensedController(
         initial=start, actions=[None if a < 0 else actions[a] for a in policy.tolist()],
-        moves=table, sensed=sensed, events=events,
+        moves=table, sensed=sensed, events=events, ignored=ignored,
         first_actions={w: actions[a] for w, a in zip(worlds, first.tolist(), strict=True)})

@@ -45,7 +45,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     from mitld_lp.solvers.certify import model_eta
 
     low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2,
-                             model_eta(belief.sta, history=True),
+                             eta=model_eta(belief.sta, history=True),
                              complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(

@@ -1,4 +1,5 @@
-"""Solvers for maximal reachability on a :class:`mitld_lp.mdp.MDP`.
+"""Solvers for maximal (or minimal: ``sense=Sense.MIN``) reachability on a
+:class:`mitld_lp.mdp.MDP`.
 
 * :func:`solve_lp` -- the occupancy-measure LP (cvxpy with any installed LP solver, or
   Clarabel called directly), block by block in topological order by default
@@ -13,8 +14,10 @@ All of them start from :func:`mitld_lp.solvers.quotient.reduce`; pass its
 :class:`~mitld_lp.solvers.quotient.Quotient` as ``quotient=`` to reduce a model once.
 """
 
+from mitld_lp.solvers.evaluation import evaluate_policy
 from mitld_lp.solvers.export import write_drn, write_lp
-from mitld_lp.solvers.iteration import evaluate_policy, interval_iteration
+from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import OccupancyLP, occupancy_lp, solve_lp
 from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
@@ -22,6 +25,7 @@ __all__ = [
     "IterationResult",
     "LPResult",
     "OccupancyLP",
+    "Sense",
     "Status",
     "evaluate_policy",
     "interval_iteration",

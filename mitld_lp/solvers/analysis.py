@@ -21,7 +21,20 @@ analysis serves both:
   maybe states with those end components collapsed, and its matrix, shared by the two
   models, which differ only in the one-step probability of reaching their target.  A
   state of the lower model that can reach a truncated state but not the goal is kept
-  in it with its value known to be 0 (``Quotient.zero``): the solvers skip it.
+  in it with its value known to be 0 (``Quotient.zero``): the solvers skip it;
+* the **qualitative sets** of each model (:class:`~mitld_lp.solvers.reduced.
+  Qualitative`, Storm's *prob01*), from the graph alone: the prob-0 states above, and
+  the states of value 1 (``Prob1E``: on the quotient, which has no end component, the
+  states with a choice that cannot lose and stays among such states; the complement is
+  an :func:`~mitld_lp.solvers.graph.attractor` of the choices that can lose).
+
+For a **minimum** (``sense=Sense.MIN``) the prob-0 states are ``Prob0E``: the states
+from which some policy avoids the target for ever, the complement of the
+:func:`~mitld_lp.solvers.graph.attractor` of the target.  The states left have no end
+component among them (its states could avoid the target for ever), so nothing is
+collapsed; a state of the lower model that some policy keeps from the goal, but not
+from a truncated state, is kept with value 0 as above.  The states of value 1
+(``Prob1A``) are those that cannot reach a prob-0 state before the target.
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
 and never decompose the graph again.
@@ -38,13 +51,16 @@ from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.graph import (
     Blocks,
     EndComponents,
+    Sense,
+    attractor,
+    backward_reachable,
     blocks_from,
     gather_ranges,
     graph_view,
     levels,
     maximal_end_components,
 )
-from mitld_lp.solvers.reduced import Quotient
+from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 
 __all__ = ["analyse"]
@@ -104,14 +120,39 @@ def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
     return blocks_from(comp_of, level_of, self_loop)
 
 
-def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
-            ) -> tuple[Quotient, Quotient]:
+def _no_end_components(n: int, n_choices: int) -> EndComponents:
+    return EndComponents(read_only(np.full(n, -1, dtype=np.int64)),
+                         read_only(np.zeros(n_choices, dtype=bool)), 0)
+
+
+def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.ndarray,
+         leaks: np.ndarray) -> np.ndarray:
+    """``(n_reduced,)`` bool: the reduced states of value exactly 1 in ``sense``, on the
+    quotient (no end component), from its pattern, its states known to be 0 (``zero``)
+    and the choices that may move to a removed state of value 0 (``leaks``).  A maximum
+    is 1 where some choice keeps among such states (the complement: every choice can
+    lose, an :func:`~mitld_lp.solvers.graph.attractor`); a minimum where no path leads
+    to a state or a choice that can lose (a backward search)."""
+    if sense is Sense.MAX:
+        return ~attractor(matrix, row_groups, zero, leaks)
+    n = row_groups.shape[0] - 1
+    owner = np.repeat(np.arange(n), np.diff(row_groups))
+    seeds = zero.copy()
+    seeds[owner[leaks]] = True
+    entry_owner = np.repeat(owner, np.diff(matrix.indptr))
+    return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
+
+
+def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
+            sense: Sense = Sense.MAX) -> tuple[Quotient, Quotient]:
     """The quotients for reaching ``goal`` and for reaching ``goal | extra`` (module
-    docs), from one analysis, sharing their matrix, end components and block order.
-    With ``extra`` None or empty both are the same object."""
+    docs), from one analysis, sharing their matrix, end components and block order,
+    for the optimum in ``sense``.  With ``extra`` None or empty both are the same
+    object."""
     goal = as_state_mask(mdp, goal, "goal")
     extra = np.zeros_like(goal) if extra is None else as_state_mask(mdp, extra, "extra")
     extra = extra & ~goal
+    sense = Sense(sense)
     m = sp.csr_array(mdp.matrix)
     if m.nnz and not bool(np.all(m.data > 0)):  # a zero entry is not an edge
         m = m.copy()
@@ -121,11 +162,20 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     graph = graph_view(m, mdp.row_groups)
     found = levels(graph, np.column_stack([goal, wide]))
     reach = found.reach[found.component]
-    maybe = reach[:, 1] & ~wide
-    mecs = _end_components(mdp, found.component, maybe)
     del graph
-
     n = mdp.n_states
+    if sense is Sense.MAX:
+        prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
+        maybe = reach[:, 1] & ~wide
+        mecs = _end_components(mdp, found.component, maybe)
+    else:
+        positive = attractor(m, mdp.row_groups, wide)
+        prob0 = [~attractor(m, mdp.row_groups, goal) if extra.any() else ~positive & ~goal,
+                 ~positive]
+        maybe = positive & ~wide
+        mecs = _no_end_components(n, mdp.n_choices)
+        del positive
+
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     state_map = np.full(n, -1, dtype=np.int64)
@@ -150,11 +200,15 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     del column
     rows = sp.csr_array(mapped[kept]) if kept.size != mdp.n_choices else mapped.copy()
     del mapped
-    # one pass over the product for both targets' one-step probabilities
-    one_step = m @ np.column_stack([goal, extra]).astype(np.float64)
+    # One pass over the product for both targets' one-step probabilities and each
+    # model's removed states of value 0 (a choice that may move there can lose).
+    removed = state_map < 0
+    lost = [p & removed for p in prob0]
+    one_step = m @ np.column_stack([goal, extra, *lost]).astype(np.float64)
     to_goal = np.ascontiguousarray(one_step[kept, 0])
     to_extra = np.ascontiguousarray(one_step[kept, 1]) if extra.any() else None
-    del one_step
+    leaks = [one_step[kept, 2 + j] > 0 for j in range(2)]
+    del one_step, lost, removed
     data, cols = rows.data, rows.indices
     gone = cols == n_red
     data[gone] = 0.0
@@ -173,20 +227,24 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None,
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
-        prob0 = ~reach[:, j] & ~target
         zero = np.zeros(n_red, dtype=bool)
-        zero[state_map[maybe & prob0]] = True
-        initial_value = 1.0 if target[init] else (0.0 if prob0[init] else float("nan"))
+        zero[state_map[maybe & prob0[j]]] = True
+        one = target.copy()
+        one[maybe] = _one(sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
+        unreachable = ~reach[:, j] & ~target
+        decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
+                              read_only(prob0[j] if sense is Sense.MAX else unreachable))
+        initial_value = 1.0 if target[init] else (0.0 if prob0[j][init] else float("nan"))
         return Quotient(
-            target=read_only(target.copy()), prob0=read_only(prob0),
+            target=read_only(target.copy()), prob0=read_only(prob0[j]),
             state_map=read_only(state_map), mecs=mecs, n_plain=n_plain, matrix=matrix,
             to_target=read_only(to_target), row_groups=read_only(row_groups),
             choice_origin=read_only(kept), initial=int(state_map[init]),
             initial_value=initial_value if state_map[init] < 0 else float("nan"),
-            order=order, zero=read_only(zero), layers=layers)
+            order=order, zero=read_only(zero), layers=layers, sense=sense,
+            qualitative=decided)
 
     if to_extra is None:
         one = quotient(goal, to_goal, 1)
         return one, one
     return quotient(goal, to_goal, 0), quotient(wide, to_goal + to_extra, 1)
-

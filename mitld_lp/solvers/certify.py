@@ -75,7 +75,8 @@ from mitld_lp.solvers.rounding import (
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
-           "model_eta", "float_down", "float_up", "one_minus"]
+           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
+           "is_certificate_check"]
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +88,16 @@ RETRIES = 2
 
 ROUNDS = 64
 """Repair rounds on one level of non-trivial components before giving up."""
+
+EVERYWHERE = "policy optimal in every state"
+"""The name of :func:`everywhere`'s check."""
+
+
+def is_certificate_check(check: Check) -> bool:
+    """Whether ``check`` is one of a model's certificate checks (a bound or
+    :func:`everywhere`): what an exact answer proves in their place."""
+    return check.name.startswith(("lower bound: ", "upper bound: ")) or \
+        check.name == EVERYWHERE
 
 
 # ------------------------------------------------------------------ one side's bound
@@ -482,7 +493,7 @@ def everywhere(lower: np.ndarray, upper: np.ndarray, initial: int, precision: fl
     scale = np.maximum(value, value[initial])
     bad = np.flatnonzero(gap > precision * scale)
     worst = int(bad[np.argmax(gap[bad] / np.maximum(scale[bad], 1e-300))]) if bad.size else -1
-    return Check("policy optimal in every state", bad.size == 0, (
+    return Check(EVERYWHERE, bad.size == 0, (
         f"certified bounds of the policy's value and of the optimum within {precision:g} "
         f"(relative) in all {lower.size} states" if bad.size == 0 else
         f"{bad.size} states apart by more than {precision:g} (relative), e.g. state "

@@ -11,11 +11,11 @@ __all__ = ["gauss_seidel"]
 
 
 @numba.njit(cache=True, nogil=True)
-def update(indptr, indices, data, starts, leave, exits, local, s, best,
-           acc):  # pragma: no cover - compiled
+def update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
+           minimise):  # pragma: no cover - compiled
     k = local.shape[1]
     for j in range(k):
-        best[j] = -np.inf
+        best[j] = np.inf if minimise else -np.inf
     for c in range(starts[s], starts[s + 1]):
         for j in range(k):
             acc[j] = exits[c, j]
@@ -28,7 +28,7 @@ def update(indptr, indices, data, starts, leave, exits, local, s, best,
         lv = leave[c]
         for j in range(k):
             val = acc[j] / lv if lv > 0.0 else 0.0
-            if val > best[j]:
+            if (val < best[j]) if minimise else (val > best[j]):
                 best[j] = val
     for j in range(k):
         val = min(max(best[j], 0.0), 1.0)
@@ -39,10 +39,10 @@ def update(indptr, indices, data, starts, leave, exits, local, s, best,
             local[s, j] = val
 
 @numba.njit(cache=True, nogil=True)
-def update2(indptr, indices, data, starts, leave, exits, local,
-            s):  # pragma: no cover - compiled
-    lo_best = -np.inf
-    hi_best = -np.inf
+def update2(indptr, indices, data, starts, leave, exits, local, s,
+            minimise):  # pragma: no cover - compiled
+    lo_best = np.inf if minimise else -np.inf
+    hi_best = lo_best
     for c in range(starts[s], starts[s + 1]):
         lo = exits[c, 0]
         hi = exits[c, 1]
@@ -59,32 +59,44 @@ def update2(indptr, indices, data, starts, leave, exits, local,
         else:
             lo = 0.0
             hi = 0.0
-        lo_best = max(lo_best, lo)
-        hi_best = max(hi_best, hi)
+        if minimise:
+            lo_best = min(lo_best, lo)
+            hi_best = min(hi_best, hi)
+        else:
+            lo_best = max(lo_best, lo)
+            hi_best = max(hi_best, hi)
     local[s, 0] = max(local[s, 0], min(max(lo_best, 0.0), 1.0))
     local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
 
 @numba.njit(cache=True, nogil=True)
-def gauss_seidel(indptr, indices, data, starts, leave, exits, local,
-                 max_sweeps, tol):  # pragma: no cover - compiled
+def gauss_seidel(indptr, indices, data, starts, leave, exits, local, max_sweeps, tol,
+                 minimise, precision, floor):  # pragma: no cover - compiled
+    """Sweeps until every gap is below ``tol`` and, when ``precision >= 0``, below
+    ``precision`` times its lower bound (never below ``floor``); returns the sweeps and
+    the largest gap over its threshold."""
     n, k = local.shape
     best = np.empty(k)
     acc = np.empty(k)
     done = 0
-    gap = np.inf
+    over = np.inf
     while done < max_sweeps:
         for s in range(n):
             if k == 2:
-                update2(indptr, indices, data, starts, leave, exits, local, s)
+                update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
             else:
-                update(indptr, indices, data, starts, leave, exits, local, s, best, acc)
+                update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
+                       minimise)
         done += 1
-        gap = 0.0
+        over = 0.0
         for s in range(n):
             for j in range(0, k, 2):
                 d = local[s, j + 1] - local[s, j]
-                if d > gap:
-                    gap = d
-        if gap < tol:
+                if precision < 0.0:
+                    r = d / tol
+                else:
+                    r = d / min(tol, max(precision * local[s, j], floor))
+                if r > over:
+                    over = r
+        if over < 1.0:
             break
-    return done, gap
+    return done, over

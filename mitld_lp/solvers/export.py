@@ -272,7 +272,9 @@ def write_drn(
     (so ``Pmax=? [F "accept"]`` in Storm is the quantity :func:`solve_lp` computes; for
     a task with a safety part the caller passes the union of its accepting end
     components, :func:`mitld_lp.routes.acceptance.acceptance`);
-    ``sink``; ``truncated`` (unless ``truncated_label=False``).  With ``valuations``,
+    ``sink``; ``truncated`` (unless ``truncated_label=False``); when ``target`` is
+    empty, one more state that no state reaches carries ``target`` and ``accept``, so
+    that Storm knows them and answers 0.  With ``valuations``,
     each ``state`` line is followed by the state's valuation as Storm's own exporter
     writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
     state, the automaton state, the events still pending, the clock), or
@@ -292,6 +294,9 @@ def write_drn(
              ("sink", np.asarray(mdp.sink, dtype=bool))]
     if truncated_label:
         marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
+    # target and accept on no state (the value is 0) go on one more state that no state
+    # reaches, so that Storm knows them (DRN declares labels only on states)
+    unused = [] if target.any() else ["target", "accept"]
     header = [
         "// Exported by mitld_lp",
         "@type: MDP",
@@ -300,14 +305,16 @@ def write_drn(
         "@reward_models",
         "",
         "@nr_states",
-        str(n),
+        str(n + bool(unused)),
         "@nr_choices",
-        str(mdp.n_choices),
+        str(mdp.n_choices + bool(unused)),
         "@model",
     ]
     with files.replacing(p) as f:
         f.write("\n".join(header) + "\n")
         for text in drn_text(mdp, marks, valuations=valuations, world=world):
             f.write(text)
+        if unused:
+            f.write(f"state {n} {' '.join(unused)}\n\taction absorb\n\t\t{n} : 1.0\n")
     logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
     return p

@@ -10,6 +10,7 @@ positive probability, so they are exact.  This module imports no other solver mo
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -23,6 +24,8 @@ from mitld_lp.util.arrays import unique
 from mitld_lp.util.traversal import breadth_first_order, strong_components
 
 __all__ = [
+    "Sense",
+    "attractor",
     "Blocks",
     "Edges",
     "EndComponents",
@@ -40,6 +43,28 @@ __all__ = [
     "maximal_end_components",
     "segmented_argmax",
 ]
+
+
+class Sense(enum.StrEnum):
+    """Whether a value is maximised or minimised over the policies: the one word every
+    solver of a quotient takes (a ``StrEnum``: ``Sense.MIN == "min"``).  Each member
+    knows its reductions, so a solver is written once for both."""
+
+    MAX = "max"
+    MIN = "min"
+
+    def best(self, a: np.ndarray, b: np.ndarray | float) -> np.ndarray:
+        """The elementwise better of ``a`` and ``b``."""
+        return np.maximum(a, b) if self is Sense.MAX else np.minimum(a, b)
+
+    def reduce(self, values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """The best of each segment of ``values`` (rows) starting at ``starts``."""
+        op = np.maximum if self is Sense.MAX else np.minimum
+        return op.reduceat(values, starts, axis=0)
+
+    def gain(self, candidate: np.ndarray, current: np.ndarray) -> np.ndarray:
+        """How much ``candidate`` improves on ``current`` (positive: better)."""
+        return candidate - current if self is Sense.MAX else current - candidate
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,23 +174,67 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
 
 def segmented_argmax(
     values: np.ndarray, row_groups: np.ndarray, *, tie: float = 0.0,
-    prefer: np.ndarray | None = None,
+    prefer: np.ndarray | None = None, sense: Sense = Sense.MAX,
 ) -> np.ndarray:
-    """Per group ``row_groups[i]:row_groups[i+1]`` (all non-empty), the index of the max.
+    """Per group ``row_groups[i]:row_groups[i+1]`` (all non-empty), the index of the max
+    (the min with ``sense=Sense.MIN``).
 
-    Entries within ``tie`` of the group's maximum count as tied; among them the one with
-    the largest ``prefer`` wins, then the lowest index.  Fully vectorised.
+    Entries within ``tie`` of the group's best *relative to it* (``|best - value| <=
+    tie * |best|``: a value of 1e-30 is told apart from one of 1.1e-30 whatever
+    ``tie`` below 0.1) count as tied; among them the one with the largest ``prefer``
+    wins, then the lowest index.  Fully vectorised.
     """
     starts = np.asarray(row_groups[:-1], dtype=np.int64)
     counts = np.diff(row_groups)
-    best = np.maximum.reduceat(values, starts)
-    tied = values >= np.repeat(best, counts) - tie
+    best = np.repeat(sense.reduce(values, starts), counts)
+    tied = sense.gain(values, best) >= -tie * np.abs(best)
     if prefer is not None:
         key = np.where(tied, prefer, -np.inf)
         top = np.maximum.reduceat(key, starts)
         tied &= key >= np.repeat(top, counts)
     idx = np.where(tied, np.arange(values.shape[0]), np.iinfo(np.int64).max)
     return np.minimum.reduceat(idx, starts)
+
+
+def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
+              hit: np.ndarray | None = None) -> np.ndarray:
+    r"""The states from which *every* policy reaches ``seeds`` with positive
+    probability, on the support graph of ``matrix`` (rows: choices grouped per state by
+    ``row_groups``; columns: states; no zero stored): the least set
+
+    .. math:: X = \mathit{seeds} \cup \{ s \mid \text{every choice } c \text{ of } s
+              \text{ is hit: } \mathit{post}(c) \cap X \ne \emptyset
+              \text{ or } \mathit{hit}(c) \}
+
+    (``hit``: choices that count as hit from the start, e.g. those that may leave to a
+    losing state outside the matrix).  Its complement is where some policy avoids the
+    seeds for ever: ``Prob0E`` of a minimum when the seeds are the target.  Solved
+    backwards from the seeds a frontier at a time (a choice is hit once, a state joins
+    when its last choice is), vectorised per round; the predecessors are the matrix's
+    pattern in column order (one counting sort)."""
+    n = row_groups.shape[0] - 1
+    counts = np.diff(row_groups)
+    owner = np.repeat(np.arange(n, dtype=np.int64), counts)
+    pattern = sp.csc_array(sp.csr_array(
+        (np.ones(matrix.nnz, dtype=bool), matrix.indices, matrix.indptr), shape=matrix.shape))
+    col_ptr, col_rows = pattern.indptr, pattern.indices
+    n_choices = int(matrix.indptr.size - 1)
+    hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
+    remaining = counts - np.bincount(owner[hit], minlength=n)
+    inside = np.array(seeds, dtype=bool)
+    inside |= (remaining == 0) & (counts > 0)
+    stamp = np.empty(max(n, n_choices), dtype=np.int64)  # scratch of _distinct
+    frontier = np.flatnonzero(inside)
+    while frontier.size:
+        rows = col_rows[gather_ranges(col_ptr[frontier], col_ptr[frontier + 1])]
+        rows = _distinct(np.asarray(rows[~hit[rows]], dtype=np.int64), stamp)
+        hit[rows] = True
+        owners = owner[rows]
+        np.subtract.at(remaining, owners, 1)
+        joined = owners[(remaining[owners] == 0) & ~inside[owners]]
+        frontier = _distinct(joined, stamp)
+        inside[frontier] = True
+    return inside
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -1,4 +1,5 @@
-r"""Interval iteration for maximal reachability, and exact evaluation of a policy.
+r"""Interval iteration for maximal (or minimal) reachability (the exact evaluation of a
+policy, :func:`evaluate_policy`, lives in :mod:`mitld_lp.solvers.evaluation`).
 
 Interval iteration (Haddad & Monmege, TCS 2018; Baier et al., CAV 2017) runs the
 Bellman operator
@@ -8,11 +9,21 @@ Bellman operator
     (T x)(s) = \max_{c \in \mathit{Act}(s)} \hat P(c, \mathit{target})
                + \sum_{s'} \hat P(c, s')\, x(s')
 
-on the MEC quotient (:func:`mitld_lp.solvers.quotient.reduce`) from two starting
+(:math:`\min_c` for a minimum: the quotient's ``sense``) on the quotient
+(:func:`mitld_lp.solvers.quotient.reduce`: no end component is left) from two starting
 points: ``x = 0`` (increases to the optimum from below) and ``x = 1`` on the maybe
 states (decreases to it from above; this needs the quotient: on an MDP with end
 components the upper sequence can get stuck above the optimum).  Both vectors are
-updated together with one sparse product and a segmented maximum.
+updated together with one sparse product and a segmented maximum (minimum).
+
+**Stopping.**  A bracket is closed when its gap is below the absolute ``tol`` and, with
+a relative ``precision`` (default :data:`mitld_lp.defaults.PRECISION`, 1e-6), below
+``precision`` times its lower bound: an optimum of 1e-30 is bracketed to six digits,
+not to 1e-9.  The iteration first closes every gap to ``tol`` alone, as it always did;
+only where the bracket it stops at is then wider than the relative precision are the
+components walked again with both thresholds per state (a state's relative gap bounds
+its predecessors': each weighs its successors' gaps by probabilities summing to at
+most 1), so an answer of ordinary size costs nothing more.
 
 **Topological order** (``topological=True``, the default; this is how Storm's sound
 check works): the quotient's strongly connected components are solved level by level,
@@ -25,28 +36,42 @@ A component that drains slowly (an event of hazard 1e-6 leaves it once in a mill
 steps) would need millions of sweeps.  After ``_SWEEPS_BEFORE_POLICY`` sweeps such a
 component is *jumped*: a policy is improved to a fixpoint with exact solves of its
 chain, and the candidate bounds it gives are kept only if they prove themselves.  With
-``t`` the expected number of steps the policy needs to leave the component and ``e > 0``,
-``L = v - e t`` satisfies ``L <= T(L)`` and ``U = w + e t'`` (``w`` from the upper exits)
-is kept if ``T(U) <= U``.  On a quotient (no end components) ``x <= T(x)`` implies
-``x <= Pmax`` and ``T(x) <= x`` implies ``x >= Pmax``, so the checks (done in extended
-precision, then rounded outwards) make the jump as sound as a sweep.
+``W = u + P W`` the policy's expected total of a positive ``u`` before it leaves the
+component (``u = 1``: its expected number of steps ``t``) and ``e > 0``, ``L = v - e W``
+satisfies ``L <= T(L)`` (``T_pi(L) = L + e u``) and ``U = w + e W'`` (``w`` from the
+upper exits, ``W'`` the largest over the nearly optimal choices) is kept if
+``T(U) <= U``.  On a quotient (no end components) ``x <= T(x)`` implies ``x <= Pmax``
+and ``T(x) <= x`` implies ``x >= Pmax``, so the checks (done in extended precision,
+then rounded outwards) make the jump as sound as a sweep.  ``u`` is each state's gap
+threshold, so ``e W`` is a quarter of it: ``tol`` alone gives ``u = 1``, ``W = t``; with
+the relative precision ``u`` follows the values, and a component of values near 1e-30
+gets bounds within ``precision`` of them.  For a minimum the roles swap: the policy's
+own values bound the optimum from above (checked on the policy's choices), the lower
+bound is checked over every choice.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
-import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
-from mitld_lp.solvers.graph import backward_reachable, segmented_argmax
-from mitld_lp.solvers.kernels import Prepared, compiled_sweeps, numpy_sweeps, use_compiled
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.evaluation import evaluate_policy
+from mitld_lp.solvers.graph import Sense, segmented_argmax
+from mitld_lp.solvers.kernels import (
+    Prepared,
+    compiled_sweeps,
+    excess,
+    numpy_sweeps,
+    thresholds,
+    use_compiled,
+)
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
@@ -54,11 +79,10 @@ from mitld_lp.solvers.topological import (
     Block,
     Factors,
     blocks,
+    evaluate_chain,
     improve_policy,
     single_scores,
-    solve_chain,
     state_graph,
-    transient_solve,
 )
 from mitld_lp.util.progress import Bar
 from mitld_lp.util.progress import bar as progress_bar
@@ -117,26 +141,27 @@ class _Budget:
 
 
 def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
-            budget: _Budget, width: Literal["initial", "max"], initial: int, bar: Bar,
+            precision: float | None, sense: Sense, budget: _Budget,
+            width: Literal["initial", "max"], initial: int, bar: Bar,
             limit: int | None = None) -> bool:
     """Iterate the block's bounds in place (``bounds[block.states]``: a lower and an
     upper column per model, ``exits`` their exit rewards per choice) until every
-    model's gap is below ``tol`` (at ``initial`` or over the block); ``False`` if the
-    budget or ``limit`` sweeps ran out first.  One sparse product serves every column."""
+    model's gap is below its threshold (``tol``, and ``precision`` times the lower
+    bound; at ``initial`` or over the block); ``False`` if the budget or ``limit``
+    sweeps ran out first.  One sparse product serves every column."""
     local = bounds[block.states]
 
-    def gap() -> float:
-        spread = local[:, 1::2] - local[:, 0::2]
+    def over() -> float:
         if width == "initial" and initial >= 0:
-            return float(np.max(spread[initial]))
-        return float(np.max(spread, initial=0.0))
+            return excess(local[initial:initial + 1], tol, precision)
+        return excess(local, tol, precision)
 
     done = 0
     try:
-        while gap() >= tol:
+        while over() >= 1.0:
             if (limit is not None and done >= limit) or not budget.spend():
                 return False
-            local = np.maximum.reduceat(block.inner @ local + exits, block.starts, axis=0)
+            local = sense.reduce(block.inner @ local + exits, block.starts)
             done += 1
             if done % 100 == 0:
                 bar.update(100)
@@ -157,54 +182,56 @@ _FORECAST_WINDOW = 64
 
 
 def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.ndarray,
-                  tol: float, budget: _Budget, bar: Bar, compiled: bool,
-                  limit: int | None = None) -> bool:
+                  tol: float, precision: float | None, sense: Sense, budget: _Budget,
+                  bar: Bar, compiled: bool, limit: int | None = None) -> bool:
     """Sweep the block's bounds in place (``bounds[block.states]``, a lower and an upper
     column per model; :mod:`mitld_lp.solvers.kernels`: each self-loop solved exactly,
     Gauss--Seidel if ``compiled``, else Jacobi) until every model's gap on the block is
-    below ``tol``; ``False`` if the budget or ``limit`` sweeps ran out first."""
+    below its threshold; ``False`` if the budget or ``limit`` sweeps ran out first."""
     run = compiled_sweeps if compiled else numpy_sweeps
     local = bounds[block.states]
     done = 0
-    seen: list[tuple[int, float]] = []  # (sweeps done, gap) after each chunk
+    seen: list[tuple[int, float]] = []  # (sweeps done, gap over threshold) per chunk
     try:
         while True:
             wanted = _CHUNK if limit is None else min(_CHUNK, limit - done)
             granted = budget.take(wanted) if wanted > 0 else 0
-            swept, gap = run(prep, exits, local, tol, granted)
+            swept, over = run(prep, exits, local, tol, granted, sense, precision)
             budget.iterations += swept
             done += swept
             bar.update(swept)
-            if gap < tol:
+            if over < 1.0:
                 return True
             if granted == 0:
                 return False
             if limit is not None:
-                seen.append((done, gap))
-                if _hopeless(seen, tol, limit):
+                seen.append((done, over))
+                if _hopeless(seen, limit):
                     return False
     finally:
         bounds[block.states] = local
 
 
-def _hopeless(seen: list[tuple[int, float]], tol: float, limit: int) -> bool:
-    """Whether a block's gap, read after each chunk of sweeps (``seen``), would still be
-    above ``tol`` at twice the sweeps left to ``limit`` if it kept shrinking at the rate
-    of the last :data:`_FORECAST_WINDOW` sweeps (never before :data:`_FORECAST_FROM`)."""
-    done, gap = seen[-1]
+def _hopeless(seen: list[tuple[int, float]], limit: int) -> bool:
+    """Whether a block's gap (over its threshold, read after each chunk of sweeps:
+    ``seen``) would still be open at twice the sweeps left to ``limit`` if it kept
+    shrinking at the rate of the last :data:`_FORECAST_WINDOW` sweeps (never before
+    :data:`_FORECAST_FROM`)."""
+    done, over = seen[-1]
     if done < _FORECAST_FROM:
         return False
     then = next(((d, g) for d, g in reversed(seen) if d <= done - _FORECAST_WINDOW), None)
     if then is None or then[1] <= 0.0:
         return False
-    rate = (gap / then[1]) ** (1.0 / (done - then[0]))  # per sweep
+    rate = (over / then[1]) ** (1.0 / (done - then[0]))  # per sweep
     if rate >= 1.0:
         return True
-    needed = np.log(tol / gap) / np.log(rate)
+    needed = np.log(1.0 / over) / np.log(rate)
     return bool(needed > 2 * (limit - done))
 
 
-def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
+def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
+          precision: float | None, sense: Sense) -> bool:
     """Try the verified policy jump of the module docs on ``block``; update ``lo`` and
     ``hi`` where it proves better bounds.  ``True`` if both bounds were proven.
 
@@ -218,66 +245,100 @@ def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     policy's own, which the upper bound's margin must cover."""
     exit2 = block.exits(lo, hi)
     groups = np.append(block.starts, block.choices.shape[0])
+    counts = np.diff(groups)
     local = np.column_stack([lo[block.states], hi[block.states]])
-    start = segmented_argmax(exit2[:, 0] + block.inner @ local[:, 0], groups)
-    factors = Factors()  # the three policy iterations below share their factorisations
-    chosen, v, t = improve_policy(block, exit2[:, 0], start, factors=factors)
-    eps = (tol / 4.0) / float(np.max(t))
-    lower = v - eps * t
+    # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
+    # the one checked over every choice; -1 lowers a bound, +1 raises it
+    own, every = (0, 1) if sense is Sense.MAX else (1, 0)
+    start = segmented_argmax(exit2[:, own] + block.inner @ local[:, own], groups,
+                             sense=sense)
+    factors = Factors()  # the policy iterations below share their factorisations
+    chosen, v, t = improve_policy(block, exit2[:, own], start, factors=factors,
+                                  sense=sense)
+    own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
+                         lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
+                                                  factors)[0])
     inner_ld = block.inner.astype(np.longdouble)
-    lower_ok = bool(np.all(exit2[chosen, 0] + (inner_ld @ lower)[chosen] >= lower))
-    chosen_hi, w, _ = improve_policy(block, exit2[:, 1], chosen, factors=factors)
+    own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
+    own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
+    chosen_best, w, _ = improve_policy(block, exit2[:, every], chosen, factors=factors,
+                                       sense=sense)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
-    # policy's: t_hi = 1 + max over choices within tol/4 of optimal of P t_hi.
-    owner_w = np.repeat(w, np.diff(groups))
-    tied = (owner_w - (exit2[:, 1] + inner_ld @ w)) < tol / 4.0
-    _, t_hi, _ = improve_policy(block, np.ones(block.choices.shape[0]), chosen_hi, tied,
-                                factors=factors)
-    eps_hi = (tol / 4.0) / float(np.max(t_hi))
-    upper = w + eps_hi * t_hi
-    image = exit2[:, 1] + inner_ld @ upper
-    excess = float(np.max(image - np.repeat(upper, np.diff(groups))))
-    upper_ok = excess <= 0.0
-    if lower_ok:
-        low64 = np.nextafter(lower.astype(np.float64), -np.inf)
-        local[:, 0] = np.maximum(local[:, 0], np.clip(low64, 0.0, 1.0))
-    if upper_ok:
-        up64 = np.nextafter(upper.astype(np.float64), np.inf)
-        local[:, 1] = np.minimum(local[:, 1], np.clip(up64, 0.0, 1.0))
+    # policy's: W = u + max over the choices within a quarter of the threshold of P W.
+    owner_w = np.repeat(w, counts)
+    loses = -sense.gain(exit2[:, every] + inner_ld @ w, owner_w)
+    tied = loses < np.repeat(thresholds(np.asarray(w, dtype=np.float64), tol, precision),
+                             counts) / 4.0
+
+    def slowest(u: np.ndarray) -> np.ndarray:
+        return improve_policy(block, np.repeat(u, counts), chosen_best, tied,
+                              factors=factors)[1]
+
+    every_bound = _shifted(w, None, 1 if every else -1, tol, precision, slowest)
+    image = exit2[:, every] + inner_ld @ every_bound
+    sign = 1.0 if every else -1.0
+    worst = float(np.max(sign * (image - np.repeat(every_bound, counts))))
+    every_ok = worst <= 0.0
+    for ok, side, bound in ((own_ok, own, own_bound), (every_ok, every, every_bound)):
+        if not ok:
+            continue
+        if side == 0:
+            low64 = np.nextafter(bound.astype(np.float64), -np.inf)
+            local[:, 0] = np.maximum(local[:, 0], np.clip(low64, 0.0, 1.0))
+        else:
+            up64 = np.nextafter(bound.astype(np.float64), np.inf)
+            local[:, 1] = np.minimum(local[:, 1], np.clip(up64, 0.0, 1.0))
     lo[block.states], hi[block.states] = local[:, 0], local[:, 1]
-    logger.debug("policy jump on %d states: lower %s, upper %s (T(U) - U <= %.1e)",
-                 block.states.size, lower_ok, upper_ok, excess)
-    return lower_ok and upper_ok
+    logger.debug("policy jump on %d states: policy's bound %s, every choice's %s "
+                 "(excess %.1e)", block.states.size, own_ok, every_ok, worst)
+    return own_ok and every_ok
+
+
+def _shifted(x: np.ndarray, steps: np.ndarray | None, sign: int, tol: float,
+             precision: float | None, total: Callable[[np.ndarray], np.ndarray]
+             ) -> np.ndarray:
+    """``x + sign * e * W`` (module docs): ``W = total(u)``, the chain's expected total
+    of ``u`` (the states' gap thresholds scaled to at most 1) before it leaves, and
+    ``e`` so that ``e W`` is at most a quarter of each threshold (over the states of
+    positive value; a state of value 0 keeps its bound there).  With thresholds all
+    ``tol``, ``u = 1`` and ``W`` is the expected exit time (``steps`` if given)."""
+    target = thresholds(np.asarray(x, dtype=np.float64), tol, precision)
+    scale = float(np.max(target))
+    u = target / scale
+    flat = bool(np.all(u == 1.0))
+    w = steps if flat and steps is not None else total(u)
+    positive = np.asarray(x > 0) if not flat else np.ones(x.shape, dtype=bool)
+    ratio = (w / u)[positive] if positive.any() else w / u
+    eps = (scale / 4.0) / float(np.max(ratio))
+    return x + sign * eps * w
 
 
 def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
                    bounds: np.ndarray) -> None:
     r"""The single-state components ``states`` solved exactly from the bounds
-    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` scored by
+    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` (the min for
+    a minimum) scored by
     :func:`mitld_lp.solvers.topological.single_scores` as the LP's single states are
     (``rewards``: the one-step probability of the target per choice and column)."""
     if states.size == 0:
         return
     _, score, groups = single_scores(q, q.order, states, rewards, bounds)
-    bounds[states] = np.maximum.reduceat(score, groups[:-1], axis=0)
+    bounds[states] = q.sense.reduce(score, groups[:-1])
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
-                 budget: _Budget, bar: Bar, *, from_initial: bool,
-                 compiled: bool | None) -> None:
+                 precision: float | None, budget: _Budget, bar: Bar, *,
+                 skip: np.ndarray | None, compiled: bool | None) -> None:
     """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
-    one-step target probabilities) level by level (module docs); stops early out of
-    budget.  ``from_initial``: only the states the initial state can reach (their
-    successors are reachable too, so nothing they need is skipped); the others keep
-    ``[0, 1]``.  ``compiled``: the blocks are swept by the compiled kernel (``None``:
-    the blocks :func:`~mitld_lp.solvers.kernels.use_compiled` picks, numba loaded at the
-    first of them)."""
+    one-step target probabilities) level by level (module docs) until every gap is
+    below its threshold (``tol``, and ``precision`` times the lower bound); stops early
+    out of budget.  ``skip``: states left out (those the initial state cannot reach:
+    their successors are unreachable too, so nothing the others need is skipped); they
+    keep what they had.  ``compiled``: the blocks are swept by the compiled kernel
+    (``None``: the blocks :func:`~mitld_lp.solvers.kernels.use_compiled` picks, numba
+    loaded at the first of them)."""
     blk = blocks(q)
-    skip = None
-    if from_initial:
-        order = breadth_first_order(state_graph(q), q.initial)
-        skip = np.ones(q.n_states, dtype=bool)
-        skip[np.asarray(order)] = False
+    sense = q.sense
     for level in blk.walk(skip=skip):
         _single_states(q, level.single, rewards, bounds)
         rest = level.rest
@@ -288,7 +349,8 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         prep = Prepared(block.inner, block.groups)
         fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
                 else compiled)
-        if _block_sweeps(block, prep, exits, bounds, tol, budget, bar, fast,
+        if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
+                         fast,
                          _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY):
             continue
         if budget.stopped is None:
@@ -296,11 +358,11 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             for j in range(bounds.shape[1] // 2):
                 model = replace(block, to_target=rewards[block.choices, 2 * j])
                 lo, hi = bounds[:, 2 * j], bounds[:, 2 * j + 1]  # views: written through
-                proven &= _jump(model, lo, hi, tol)
-            spread = bounds[rest][:, 1::2] - bounds[rest][:, 0::2]
-            if proven and float(np.max(spread)) < tol:
+                proven &= _jump(model, lo, hi, tol, precision, sense)
+            if proven and excess(bounds[rest], tol, precision) < 1.0:
                 continue
-        if not _block_sweeps(block, prep, exits, bounds, tol, budget, bar, fast):
+        if not _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
+                             bar, fast):
             return
 
 
@@ -309,36 +371,42 @@ def interval_iteration(
     target: np.ndarray,
     *,
     quotient: Quotient | None = None,
+    sense: Sense = Sense.MAX,
     tol: float = defaults.TOL,
+    precision: float | None = defaults.PRECISION,
     max_iterations: int = 1_000_000,
-    progress: bool = True,
+    progress: bool | None = None,
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
     compiled: bool | None = None,
 ) -> IterationResult:
-    """Sound bounds ``lower <= Pmax(F target) <= upper`` on every state.
+    """Sound bounds ``lower <= Pmax(F target) <= upper`` on every state (``Pmin`` with
+    ``sense=Sense.MIN``).
 
     ``topological=False`` sweeps the whole quotient at once and stops when the gap
-    ``upper - lower`` is below ``tol`` at the initial state (``gap="initial"``, the
-    default) or at every state (``gap="max"``).  ``topological=True`` (module docs)
-    brings every component below ``tol`` in turn: with ``gap="initial"`` every one the
-    initial state can reach, with ``gap="max"`` all of them.  Either way the bounds are
-    valid everywhere, and if the initial state is decided by the graph analysis (target
-    or prob-0) no iteration is needed with ``gap="initial"``.  ``max_iterations``
-    counts sweeps (over all components); reaching it gives status ``MAX_ITERATIONS``,
-    reaching ``time_limit`` seconds ``TIME_LIMIT``, both with the bracket so far
-    (``[0, 1]`` where nothing was done).
-    ``quotient``: ``reduce(mdp, target)`` if the caller already has it.
+    ``upper - lower`` is below its threshold at the initial state (``gap="initial"``,
+    the default) or at every state (``gap="max"``): below ``tol``, and below
+    ``precision`` times the lower bound (relative; ``None``: ``tol`` alone).
+    ``topological=True`` (module docs) brings every component below its thresholds in
+    turn: with ``gap="initial"`` every one the initial state can reach, with
+    ``gap="max"`` all of them.  Either way the bounds are valid everywhere, and if the
+    initial state is decided by the graph analysis (target or prob-0) no iteration is
+    needed with ``gap="initial"``.  ``max_iterations`` counts sweeps (over all
+    components); reaching it gives status ``MAX_ITERATIONS``, reaching ``time_limit``
+    seconds ``TIME_LIMIT``, both with the bracket so far (``[0, 1]`` where nothing was
+    done).
+    ``quotient``: ``reduce(mdp, target, sense=sense)`` if the caller already has it.
     ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
     (:mod:`mitld_lp.solvers.kernels`); None (default) uses it, when numba is installed,
     on the blocks of at least ``kernels.COMPILED_MIN_BLOCK_ENTRIES`` entries of a
     quotient of at least ``kernels.COMPILED_MIN_ENTRIES``; ``True`` on every block,
     ``False`` never.
     """
-    q = quotient_for(mdp, target, quotient)
-    (result,) = interval_iterations(mdp, [q], tol=tol, max_iterations=max_iterations,
-                                    progress=progress, gap=gap, topological=topological,
+    q = quotient_for(mdp, target, quotient, sense)
+    (result,) = interval_iterations(mdp, [q], tol=tol, precision=precision,
+                                    max_iterations=max_iterations, progress=progress,
+                                    gap=gap, topological=topological,
                                     time_limit=time_limit, compiled=compiled)
     return result
 
@@ -348,15 +416,16 @@ def interval_iterations(
     quotients: Sequence[Quotient],
     *,
     tol: float = defaults.TOL,
+    precision: float | None = defaults.PRECISION,
     max_iterations: int = 1_000_000,
-    progress: bool = True,
+    progress: bool | None = None,
     gap: Literal["initial", "max"] = "initial",
     topological: bool = True,
     time_limit: float | None = None,
     compiled: bool | None = None,
 ) -> list[IterationResult]:
     """:func:`interval_iteration` of several models in one pass: ``quotients`` share
-    their matrix and block order (both truncation models of a product, from
+    their matrix, block order and sense (both truncation models of a product, from
     :func:`mitld_lp.solvers.analysis.analyse`) and differ in their one-step target
     probabilities; each sweep updates the lower and upper bounds of every model with one
     sparse product.  One result per quotient; the sweep count and the seconds are the
@@ -364,9 +433,11 @@ def interval_iterations(
     start = time.perf_counter()
     q = quotients[0]
     if any(other.matrix is not q.matrix or other.order is not q.order
-           for other in quotients[1:]):
-        raise ValueError("quotients: iterated together only when they share their matrix "
-                         "and block order (one analysis)")
+           or other.sense is not q.sense for other in quotients[1:]):
+        raise ValueError("quotients: iterated together only when they share their matrix, "
+                         "block order and sense (one analysis)")
+    if precision is not None and not (0.0 < precision < 1.0):
+        raise ValueError(f"precision: a relative precision in (0, 1), got {precision!r}")
     n, k = q.n_states, len(quotients)
     rewards = np.repeat(np.column_stack([o.to_target for o in quotients]), 2, axis=1)
     bounds = np.zeros((n, 2 * k))
@@ -374,40 +445,69 @@ def interval_iterations(
         bounds[:, 2 * j + 1] = np.where(o.zero, 0.0, 1.0)
     budget = _Budget(max_iterations,
                      start + time_limit if time_limit is not None else np.inf)
-    bar = progress_bar(bool(progress) and n >= _PROGRESS_MIN_STATES, total=None,
+    bar = progress_bar(progress if n >= _PROGRESS_MIN_STATES else False, total=None,
                        desc="interval iteration", unit="it", leave=False)
     decided = gap == "initial" and q.initial < 0
     try:
         if n and not decided:
             if topological:
-                _topological(q, rewards, bounds, tol, budget, bar,
-                             from_initial=gap == "initial", compiled=compiled)
+                skip = None
+                if gap == "initial":
+                    skip = np.ones(q.n_states, dtype=bool)
+                    skip[np.asarray(breadth_first_order(state_graph(q), q.initial))] = False
+                # first to ``tol`` alone (what an answer of ordinary size needs), then,
+                # where the bracket is still wider than the relative precision, again
+                # with both thresholds per state (module docs)
+                _topological(q, rewards, bounds, tol, None, budget, bar, skip=skip,
+                             compiled=compiled)
+                if (precision is not None and budget.stopped is None
+                        and _over(bounds, q, gap, tol, precision) >= 1.0):
+                    _topological(q, rewards, bounds, tol, precision, budget, bar,
+                                 skip=skip, compiled=compiled)
             else:
                 whole = Block.of(q, np.arange(n))
                 _sweeps(whole, rewards[whole.choices] + whole.outer @ bounds, bounds, tol,
-                        budget, gap, q.initial, bar)
+                        precision, q.sense, budget, gap, q.initial, bar)
     finally:
         bar.close()
     np.clip(bounds, 0.0, 1.0, out=bounds)  # rounding can push the upper bound past 1
     seconds = time.perf_counter() - start
-    return [_result(mdp, o, bounds[:, 2 * j:2 * j + 2], tol, gap, decided, budget, seconds,
-                    time_limit) for j, o in enumerate(quotients)]
+    return [_result(mdp, o, bounds[:, 2 * j:2 * j + 2], tol, precision, gap, decided,
+                    budget, seconds, time_limit) for j, o in enumerate(quotients)]
+
+
+def _over(bounds: np.ndarray, q: Quotient, gap: Literal["initial", "max"], tol: float,
+          precision: float | None) -> float:
+    """The largest gap over its threshold where the stopping rule looks (the initial
+    state, or every state)."""
+    if gap == "initial":
+        return excess(bounds[q.initial:q.initial + 1], tol, precision) if q.initial >= 0 \
+            else 0.0
+    return excess(bounds, tol, precision)
 
 
 def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
-            gap: Literal["initial", "max"], decided: bool, budget: _Budget, seconds: float,
-            time_limit: float | None) -> IterationResult:
-    """One model's bounds of the pass as its :class:`IterationResult`."""
+            precision: float | None, gap: Literal["initial", "max"], decided: bool,
+            budget: _Budget, seconds: float, time_limit: float | None) -> IterationResult:
+    """One model's bounds of the pass as its :class:`IterationResult`; the states whose
+    value the graph decides as 1 (``q.qualitative.one``) get the bracket ``[1, 1]``."""
     n = q.n_states
     width = 0.0 if n == 0 or decided else (
         float(bounds[q.initial, 1] - bounds[q.initial, 0]) if gap == "initial"
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
-    status = budget.stopped or (Status.OPTIMAL if width < tol else Status.MAX_ITERATIONS)
-    lower = q.lift(bounds[:, 0])
-    upper = q.lift(bounds[:, 1])
-    policy = lift_policy(mdp, q, greedy_choices(q, bounds[:, 0]) if n else np.zeros(0, int))
+    over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
+    status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
+    one = np.asarray(q.qualitative.one)
+    lower = np.where(one, 1.0, q.lift(bounds[:, 0]))
+    upper = np.where(one, 1.0, q.lift(bounds[:, 1]))
+    # greedy on the bound that a greedy policy's value lies beyond (a maximum's lower, a
+    # minimum's upper: the policy's operator maps it to the optimum's side)
+    known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
+    policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+    threshold = f"tol {tol:.1e}" + ("" if precision is None else
+                                    f" and {precision:.0e} of the lower bound")
     message = (
-        f"gap ({gap}) {width:.3e} {'<' if status == Status.OPTIMAL else '>='} tol {tol:.1e} "
+        f"gap ({gap}) {width:.3e} {'<' if status == Status.OPTIMAL else '>='} {threshold} "
         f"after {budget.iterations} iterations"
         + ("" if budget.stopped is not Status.TIME_LIMIT else f" (time limit {time_limit} s)")
     )
@@ -423,108 +523,3 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         policy=read_only(policy),
         message=message,
     )
-
-
-def evaluate_policy(
-    mdp: MDP,
-    target: np.ndarray,
-    policy: np.ndarray,
-    *,
-    method: Literal["auto", "direct", "iterative"] = "auto",
-    layers: tuple[np.ndarray, np.ndarray] | None = None,
-) -> np.ndarray:
-    r"""The exact probability of reaching ``target`` from every state under ``policy``.
-
-    ``policy[s]`` is the choice row taken in ``s`` (one of ``mdp.choices(s)``), or ``-1``
-    in a target state or an absorbing state (a single ``ABSORB`` self-loop), where the
-    run stops.  On the induced Markov chain ``P_pi``: target states get 1; states that
-    cannot reach the target in the chain's graph get 0 (this makes the rest transient);
-    the rest solve the sparse linear system
-
-    .. math:: (I - P_{\pi}[U, U])\, x = P_{\pi}[U, \mathit{target}]\, \mathbf 1.
-
-    ``method="auto"`` solves the chain component by component in topological order
-    (exact, single-threaded: an iterative solve slowed 88x on a loaded machine when BLAS
-    threads fought); ``"direct"`` factorises the whole system (sparse LU);
-    ``"iterative"`` uses BiCGSTAB to a residual of 1e-12.  ``layers``: the components and
-    levels of the MDP's support graph (``Quotient.layers``, from the analysis), so that
-    ``"auto"`` walks them instead of decomposing the chain again.
-    """
-    target = as_state_mask(mdp, target, "target")
-    policy = np.asarray(policy, dtype=np.int64)
-    n = mdp.n_states
-    if policy.shape != (n,):
-        raise ValueError(f"policy: expected shape ({n},), got {policy.shape}")
-    stop = policy < 0
-    absorbing = absorbing_states(mdp)
-    bad_stop = np.flatnonzero(stop & ~target & ~absorbing)
-    if bad_stop.size:
-        raise ValueError(
-            f"policy: -1 (stop) in non-target, non-absorbing states {bad_stop[:10].tolist()}"
-        )
-    acting = ~stop & ~target
-    lo, hi = mdp.row_groups[:-1], mdp.row_groups[1:]
-    bad = np.flatnonzero(acting & ((policy < lo) | (policy >= hi)))
-    if bad.size:
-        raise ValueError(
-            f"policy: choice not owned by its state in states {bad[:10].tolist()}"
-        )
-    states = np.flatnonzero(acting)
-    chain = sp.csr_array(mdp.matrix)[policy[states]]  # rows: acting states
-    counts = np.diff(chain.indptr)
-    positive = chain.data > 0
-    can = backward_reachable(n, np.repeat(states.astype(chain.indices.dtype), counts)[positive],
-                             chain.indices[positive], target)
-    del positive
-    solve = acting & can
-    values = np.where(target, 1.0, 0.0)
-    if not solve.any():
-        return values
-    idx = np.flatnonzero(solve)
-    rows = np.flatnonzero(solve[states])  # positions in `chain` of the states to solve
-    b = (chain @ target.astype(np.float64))[rows]
-    sub = _restricted(chain, rows, solve[states], idx, n)
-    del chain  # the policy's rows are not needed while the system is solved
-    x = _solve_transient(sub, b, method,
-                         None if layers is None else (np.asarray(layers[0])[idx], layers[1]))
-    values[idx] = np.clip(x, 0.0, 1.0)
-    return values
-
-
-def _restricted(chain: sp.csr_array, rows: np.ndarray, row_kept: np.ndarray,
-                idx: np.ndarray, n: int) -> sp.csr_array:
-    """``chain[rows][:, idx]`` as a square CSR matrix, made in one pass over ``chain``'s
-    entries (SciPy's row and column indexing would copy the chain twice more)."""
-    pos = np.full(n, -1, dtype=np.int64)
-    pos[idx] = np.arange(idx.size)
-    col = pos[chain.indices]
-    del pos
-    keep = (col >= 0) & np.repeat(row_kept, np.diff(chain.indptr))
-    ends = np.concatenate([[0], np.cumsum(keep)])
-    per_row = (ends[chain.indptr[1:]] - ends[chain.indptr[:-1]])[rows]
-    indptr = np.concatenate([[0], np.cumsum(per_row)])
-    return sp.csr_array((chain.data[keep], col[keep], indptr), shape=(idx.size, idx.size))
-
-
-def _solve_transient(
-    chain: sp.csr_array, b: np.ndarray, method: Literal["auto", "direct", "iterative"],
-    layers: tuple[np.ndarray, np.ndarray] | None = None,
-) -> np.ndarray:
-    """Solve ``x = b + Q x`` for a transient sub-stochastic ``Q`` (``chain``): by
-    components in topological order (``"auto"``,
-    :func:`mitld_lp.solvers.topological.solve_chain`), one sparse LU of ``I - Q``
-    (``"direct"``, :func:`mitld_lp.solvers.topological.transient_solve`) or BiCGSTAB
-    to a residual of 1e-12 (``"iterative"``)."""
-    if method == "auto":
-        return solve_chain(chain, b, layers)
-    if method == "direct":
-        return transient_solve(chain, b)
-    import scipy.sparse.linalg as spla
-
-    a = sp.csc_array(sp.eye_array(b.shape[0], format="csc") - chain)
-    x, info = spla.bicgstab(sp.csr_array(a), b, rtol=1e-14, atol=1e-15, maxiter=5_000)
-    x = np.asarray(x, dtype=np.float64).ravel()
-    residual = float(np.max(np.abs(a @ x - b), initial=0.0))
-    if info != 0 or residual > 1e-12:
-        logger.info("BiCGSTAB did not converge (info %d, residual %.1e)", info, residual)
-    return x

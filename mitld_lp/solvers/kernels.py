@@ -6,7 +6,8 @@ is (:mod:`mitld_lp.solvers.topological`):
 
 .. math:: x(s) \leftarrow \max_c \frac{e(c) + \sum_{s' \ne s} P(c, s')\, x(s')}{1 - p(c)}
 
-with :math:`e(c)` the choice's exit reward and :math:`p(c) = P(c, s)` its self-loop.
+(:math:`\min_c` for a minimum) with :math:`e(c)` the choice's exit reward and
+:math:`p(c) = P(c, s)` its self-loop.
 If :math:`x \le v^*` the right-hand side is :math:`\le v^*` too (for each choice,
 :math:`v^*(s)(1 - p(c)) \ge e(c) + \sum_{s' \ne s} P(c, s') v^*(s')`), and if
 :math:`x \ge v^*` it is :math:`\ge v^*` (take an optimal choice), so every update keeps a
@@ -27,6 +28,10 @@ probability 0.98) is settled in one update instead of hundreds.
   seconds, cached after); without numba the NumPy path runs.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
+They stop when every state's gap is below its threshold: the absolute ``tol``, and with
+a relative ``precision`` also ``precision`` times the state's lower bound (a value of
+1e-30 is known to six digits only once its gap is below 1e-36; :func:`thresholds`).
+What they return is the largest ratio of a gap to its threshold (below 1: converged).
 """
 
 from __future__ import annotations
@@ -37,8 +42,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "compiled_kernel",
-           "compiled_sweeps", "numpy_sweeps", "use_compiled"]
+from mitld_lp.solvers.graph import Sense
+
+__all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
+           "compiled_sweeps", "excess", "numpy_sweeps", "thresholds", "use_compiled"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +62,29 @@ of 393,200 and 196,600 entries 6.0 / 6.5 s against 10.7 / 13.9 s (n128 d3) and 9
 12.0 s against 14.3 / 15.9 s (n128 d10)."""
 
 _KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
+
+FLOOR = 2.0**-1000
+"""The least gap threshold (about 9e-302): a value below it (or a lower bound not yet
+above 0) is not asked for relative precision, so an optimum that underflows float64
+cannot keep the sweeps going."""
+
+
+def thresholds(lower: np.ndarray, tol: float, precision: float | None) -> np.ndarray:
+    """Per entry of ``lower`` (the lower bounds), the gap below which it is known:
+    ``tol``, and with ``precision`` also ``precision * lower`` (never below
+    :data:`FLOOR`)."""
+    if precision is None:
+        return np.full(lower.shape, float(tol))
+    return np.minimum(float(tol), np.maximum(precision * lower, FLOOR))
+
+
+def excess(local: np.ndarray, tol: float, precision: float | None) -> float:
+    """The largest ratio of a gap of ``local`` (even columns lower, odd upper bounds) to
+    its threshold (:func:`thresholds`): below 1 when every gap is closed."""
+    gaps = local[:, 1::2] - local[:, 0::2]
+    if precision is None:
+        return float(np.max(gaps, initial=0.0)) / tol
+    return float(np.max(gaps / thresholds(local[:, 0::2], tol, precision), initial=0.0))
 
 
 def use_compiled(entries: int, block_entries: int) -> bool:
@@ -116,35 +146,38 @@ class Prepared:
 
 
 def numpy_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: float,
-                 max_sweeps: int) -> tuple[int, float]:
+                 max_sweeps: int, sense: Sense = Sense.MAX,
+                 precision: float | None = None) -> tuple[int, float]:
     """At most ``max_sweeps`` Jacobi sweeps of ``local`` (in place; even columns lower,
-    odd upper bounds) until the largest gap is below ``tol``; the sweeps done and the
-    gap."""
+    odd upper bounds) for the optimum in ``sense`` until every gap is below its
+    threshold (module docs); the sweeps done and the largest gap over its threshold."""
     leave = prep.leave[:, None]
     done = 0
-    gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
-    while done < max_sweeps and gap >= tol:
+    over = excess(local, tol, precision)
+    while done < max_sweeps and over >= 1.0:
         num = exits + prep.off @ local
         score = np.divide(num, leave, out=np.zeros_like(num), where=leave > 0)
-        new = np.clip(np.maximum.reduceat(score, prep.starts, axis=0), 0.0, 1.0)
+        new = np.clip(sense.reduce(score, prep.starts), 0.0, 1.0)
         np.maximum(local[:, 0::2], new[:, 0::2], out=local[:, 0::2])
         np.minimum(local[:, 1::2], new[:, 1::2], out=local[:, 1::2])
         done += 1
-        gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
-    return done, gap
+        over = excess(local, tol, precision)
+    return done, over
 
 
 def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: float,
-                    max_sweeps: int) -> tuple[int, float]:
+                    max_sweeps: int, sense: Sense = Sense.MAX,
+                    precision: float | None = None) -> tuple[int, float]:
     """As :func:`numpy_sweeps`, by the compiled Gauss--Seidel kernel (module docs)."""
     kernel = compiled_kernel()
     if kernel is None:  # pragma: no cover - the caller asked use_compiled first
-        return numpy_sweeps(prep, exits, local, tol, max_sweeps)
-    gap = float(np.max(local[:, 1::2] - local[:, 0::2], initial=0.0))
-    if gap < tol or max_sweeps <= 0:
-        return 0, gap
+        return numpy_sweeps(prep, exits, local, tol, max_sweeps, sense, precision)
+    over = excess(local, tol, precision)
+    if over < 1.0 or max_sweeps <= 0:
+        return 0, over
     inner = prep.inner  # its own index type: no int64 copy of the block
-    done, gap = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
-                       np.ascontiguousarray(exits, dtype=np.float64), local,
-                       int(max_sweeps), float(tol))
-    return int(done), float(gap)
+    done, over = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
+                        np.ascontiguousarray(exits, dtype=np.float64), local,
+                        int(max_sweeps), float(tol), sense is Sense.MIN,
+                        -1.0 if precision is None else float(precision), FLOOR)
+    return int(done), float(over)

@@ -1,4 +1,5 @@
-r"""The occupancy-measure linear program for maximal reachability, and its duals.
+r"""The occupancy-measure linear program for maximal (or minimal) reachability, and its
+duals.
 
 On the MEC quotient :math:`\hat M` of the MDP (see
 :func:`mitld_lp.solvers.quotient.reduce`: target and prob-0 states removed, maximal end
@@ -32,6 +33,13 @@ so the equality multipliers are the value function: every dual-feasible :math:`v
 upper bound on the optimal reach probability, and at an optimum :math:`v(s)` is exact on
 every state with :math:`b(s) > 0` or positive occupancy.
 
+**A minimum** (a quotient of ``sense`` :attr:`~mitld_lp.solvers.graph.Sense.MIN`, whose
+prob-0 states are ``Prob0E`` and which has no end component either) is the same LP with
+:math:`\min` for :math:`\max`; its dual is :math:`\max_v \sum_s b(s) v(s)` subject to
+:math:`v(s) \le \hat P(c, \mathit{target}) + \sum_{s'} \hat P(c, s') v(s')`.  It is
+handed to the solver as the maximum of the negated rewards, whose duals are the negated
+values.
+
 **Block by block** (``decompose=True``, the default): the quotient's strongly connected
 components are solved level by level, downstream first
 (:mod:`mitld_lp.solvers.topological`).  A single-state component is solved exactly; the
@@ -58,12 +66,13 @@ import scipy.sparse as sp
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.crossover import crossover, polish
-from mitld_lp.solvers.graph import Blocks, gather_ranges, row_entries, segmented_argmax
+from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
 from mitld_lp.solvers.lp_backends import Matrices, Raw, Settings, solve_one, unusable_reason
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
-from mitld_lp.solvers.reduced import Quotient, greedy_choices
+from mitld_lp.solvers.reduced import Quotient, greedy_choices, keeping_zero
 from mitld_lp.solvers.result import LPResult, Status, read_only
 from mitld_lp.solvers.topological import Block, blocks, solve_single_states, transient_solve
+from mitld_lp.util.progress import tracked
 
 __all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
 
@@ -74,7 +83,8 @@ Backend = Literal["auto", "cvxpy", "direct"]
 
 @dataclass(frozen=True, slots=True, eq=False)
 class OccupancyLP:
-    """The occupancy LP in matrix form: ``max c'y  s.t.  A y = b, y >= 0``.
+    """The occupancy LP in matrix form: ``max c'y  s.t.  A y = b, y >= 0`` (``min`` when
+    the quotient's sense is a minimum).
 
     Attributes:
         a_eq: ``(n_reduced_states, n_reduced_choices)`` CSC, ``A = E - P_hat^T`` where
@@ -110,9 +120,9 @@ def occupancy_lp(
     ``everywhere=True``: ``b = 1`` on every reduced state, so the duals are the exact
     value function of every state and the occupancy policy is optimal from every state
     (the objective is then the sum of the values).  ``quotient``: the reduction of
-    ``mdp`` for ``target`` if the caller has it (else it is computed).
+    ``mdp`` for ``target`` if the caller has it (else it is computed, for a maximum).
     """
-    q = quotient_for(mdp, target, quotient)
+    q = quotient_for(mdp, target, quotient, quotient.sense if quotient else Sense.MAX)
     a_eq = _flow_matrix(q.choice_state(), q.n_states, q.matrix)
     return OccupancyLP(a_eq, _start_weights(q, everywhere),
                        np.asarray(q.to_target, dtype=np.float64), q)
@@ -219,17 +229,31 @@ class _Answer:
     n_solver_calls: int
 
 
+def _sensed(matrices: Matrices, sense: Sense, settings: Settings, *,
+            retry: bool = True) -> Raw:
+    """:func:`~mitld_lp.solvers.lp_backends.solve_one` of an LP in ``sense``: a minimum as
+    the maximum of the negated objective, its duals negated back."""
+    if sense is Sense.MAX:
+        return solve_one(matrices, settings, retry=retry)
+    raw = solve_one(Matrices(matrices.a_eq, matrices.b_eq, -matrices.objective), settings,
+                    retry=retry)
+    return raw if raw.v is None else Raw(raw.status, raw.message, raw.y, -raw.v,
+                                         raw.iterations)
+
+
 def _solve_monolithic(lp: OccupancyLP, settings: Settings) -> _Answer | Raw:
-    raw = solve_one(Matrices(lp.a_eq, lp.b_eq, lp.objective), settings)
+    q = lp.quotient
+    raw = _sensed(Matrices(lp.a_eq, lp.b_eq, lp.objective), q.sense, settings)
     if raw.y is None or raw.v is None:
         return raw
-    q = lp.quotient
     y = np.maximum(raw.y, 0.0)
     v = np.clip(raw.v, 0.0, 1.0)
     # Off the visited states (and everywhere if nothing was solved) the greedy fallback
-    # needs numbers; an unsolved state gets the trivially dual-feasible value 1.
+    # needs numbers; an unsolved state gets the trivially dual-feasible value (1 for a
+    # maximum, 0 for a minimum).
+    unsolved = 1.0 if q.sense is Sense.MAX else 0.0
     reduced_choice = crossover(
-        q, _occupancy_policy(q, y, np.nan_to_num(v, nan=1.0), settings.tol))
+        q, _occupancy_policy(q, y, np.nan_to_num(v, nan=unsolved), settings.tol))
     return _Answer(raw, y, v, reduced_choice, float(lp.objective @ y),
                    float(lp.b_eq @ np.nan_to_num(raw.v, nan=0.0)), 1)
 
@@ -244,15 +268,22 @@ def _block_lp(block: Block, values: np.ndarray) -> Matrices:
 
 
 def _may_be_optimal(block: Block, reward: np.ndarray, lo: np.ndarray,
-                    hi: np.ndarray) -> np.ndarray:
+                    hi: np.ndarray, sense: Sense = Sense.MAX) -> np.ndarray:
     r"""The block's choices that can be optimal, given sound bounds ``lo <= v* <= hi``
-    on its states: a choice whose upper Q-bound :math:`r(c) + \sum_{s'} P(c, s')
-    hi(s')` is below its state's lower bound is not (it loses to the optimum).  Each
-    state keeps its choice of largest upper Q-bound, so rounding never empties a state."""
+    on its states: for a maximum, a choice whose upper Q-bound :math:`r(c) +
+    \sum_{s'} P(c, s') hi(s')` is below its state's lower bound is not (it loses to the
+    optimum); for a minimum, one whose lower Q-bound is above its state's upper bound.
+    Each state keeps its choice of best such Q-bound, so rounding never empties a
+    state."""
     groups = block.groups
-    q_hi = reward + block.inner @ hi
-    keep = q_hi >= np.repeat(lo * (1.0 - _PRUNE_MARGIN), np.diff(groups))
-    keep[segmented_argmax(q_hi, groups)] = True
+    if sense is Sense.MAX:
+        q_hi = reward + block.inner @ hi
+        keep = q_hi >= np.repeat(lo * (1.0 - _PRUNE_MARGIN), np.diff(groups))
+        keep[segmented_argmax(q_hi, groups)] = True
+        return keep
+    q_lo = reward + block.inner @ lo
+    keep = q_lo <= np.repeat(hi * (1.0 + _PRUNE_MARGIN), np.diff(groups))
+    keep[segmented_argmax(q_lo, groups, sense=sense)] = True
     return keep
 
 
@@ -265,20 +296,22 @@ improves over every choice of the block)."""
 
 
 def _tightened(block: Block, reward: np.ndarray, lo: np.ndarray,
-               hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+               hi: np.ndarray, sense: Sense = Sense.MAX) -> tuple[np.ndarray, np.ndarray]:
     """Sound bounds on the block's values made tight enough to prune: both swept (the
-    Bellman operator with the exact exit rewards ``reward``, each bound kept if the
-    sweep does not improve it) in rounds of :data:`_TIGHTEN_ROUND` sweeps until a round
-    leaves out no further choice, at most :data:`_TIGHTEN_MAX` sweeps.  The iteration
-    stops at an absolute gap, which says nothing on a block whose values are far below
-    it (1e-19 to 1e-9 on the bus blocks of ``experiments/bench_sweeps.py``): there only
-    relative precision tells the choices apart, and a sweep costs a small fraction of
-    the LP it shrinks.  The sweeps run over the choices not yet left out (action
-    elimination): an optimal choice is never left out, so the maximum over the rest
-    still bounds the values from above, and any maximum bounds them from below."""
+    Bellman operator in ``sense`` with the exact exit rewards ``reward``, each bound
+    kept if the sweep does not improve it) in rounds of :data:`_TIGHTEN_ROUND` sweeps
+    until a round leaves out no further choice, at most :data:`_TIGHTEN_MAX` sweeps.
+    The iteration stops at an absolute gap, which says nothing on a block whose values
+    are far below it (1e-19 to 1e-9 on the bus blocks of
+    ``experiments/bench_sweeps.py``): there only relative precision tells the choices
+    apart, and a sweep costs a small fraction of the LP it shrinks.  The sweeps run
+    over the choices not yet left out (action elimination): an optimal choice is never
+    left out, so the best over the rest is still beyond the optimum on the side a
+    policy's value is not (a maximum's upper, a minimum's lower bound), and any choice's
+    value is beyond it on the other."""
     lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
     owner = np.repeat(np.arange(lo.size), np.diff(block.groups))
-    keep = _may_be_optimal(block, reward, lo, hi)
+    keep = _may_be_optimal(block, reward, lo, hi, sense)
     kept = int(np.count_nonzero(keep))
     for _ in range(_TIGHTEN_MAX // _TIGHTEN_ROUND):
         alive = np.flatnonzero(keep)
@@ -286,9 +319,9 @@ def _tightened(block: Block, reward: np.ndarray, lo: np.ndarray,
         # each state keeps a choice, so its first one left starts its group
         starts = np.flatnonzero(np.diff(owner[alive], prepend=-1))
         for _ in range(_TIGHTEN_ROUND):
-            np.maximum(lo, np.maximum.reduceat(r + inner @ lo, starts), out=lo)
-            np.minimum(hi, np.maximum.reduceat(r + inner @ hi, starts), out=hi)
-        keep = _may_be_optimal(block, reward, lo, hi)
+            np.maximum(lo, sense.reduce(r + inner @ lo, starts), out=lo)
+            np.minimum(hi, sense.reduce(r + inner @ hi, starts), out=hi)
+        keep = _may_be_optimal(block, reward, lo, hi, sense)
         now = int(np.count_nonzero(keep))
         if now >= kept:
             break
@@ -301,7 +334,9 @@ _TIGHTEN_MAX = 500
 
 
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
-                      bounds: tuple[np.ndarray, np.ndarray] | None) -> _Answer | Raw:
+                      bounds: tuple[np.ndarray, np.ndarray] | None,
+                      precision: float | None, progress: bool | None = None
+                      ) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
     :func:`~mitld_lp.solvers.crossover.polish`; the occupancy of the resulting
@@ -338,12 +373,15 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
-    # a state known to have value 0 takes its first choice and is not solved
-    reduced_choice = np.asarray(q.row_groups[:-1], dtype=np.int64).copy()
+    # a state known to have value 0 takes a choice that keeps it 0 and is not solved
+    reduced_choice = (keeping_zero(q) if q.zero.any()
+                      else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = 0
-    for level in blk.walk(skip=q.zero):
+    todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
+    for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
+                         total=todo, desc="block LPs", unit=" states", leave=False):
         upd = solve_single_states(q, blk, level.single, values)
         reduced_choice[upd.states] = upd.choices
         weights[upd.choices] = 1.0
@@ -353,11 +391,12 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         block = Block.of(q, rest)
         lp = _block_lp(block, values)
         tight = (None if bounds is None else
-                 _tightened(block, lp.objective, bounds[0][rest], bounds[1][rest]))
+                 _tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
+                            q.sense))
         columns = (np.arange(block.choices.size) if tight is None else
-                   np.flatnonzero(_may_be_optimal(block, lp.objective, *tight)))
-        raw = solve_one(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
-                                 lp.objective[columns]), settings, retry=False)
+                   np.flatnonzero(_may_be_optimal(block, lp.objective, *tight, q.sense)))
+        raw = _sensed(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
+                               lp.objective[columns]), q.sense, settings, retry=False)
         iterations += raw.iterations
         calls += 1
         n_columns += block.choices.size
@@ -368,7 +407,8 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         y = np.zeros(block.choices.size)
         y[columns] = np.maximum(raw.y, 0.0)
         polished = polish(block, lp, y, raw.v, columns, settings.tol,
-                           None if tight is None else tight[0])
+                          None if tight is None else tight[0 if q.sense is Sense.MAX else 1],
+                          sense=q.sense, precision=precision)
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
@@ -396,23 +436,29 @@ def solve_lp(
     target: np.ndarray,
     *,
     quotient: Quotient | None = None,
+    sense: Sense = Sense.MAX,
     solver: str = defaults.SOLVER,
     backend: Backend = "auto",
     tol: float = defaults.TOL,
+    precision: float | None = defaults.PRECISION,
     everywhere: bool = False,
     decompose: bool = True,
     time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    progress: bool | None = None,
 ) -> LPResult:
-    """Maximal probability of reaching ``target`` from ``mdp.initial``, by the occupancy LP.
+    """Maximal (``sense=Sense.MIN``: minimal) probability of reaching ``target`` from
+    ``mdp.initial``, by the occupancy LP.
 
     Args:
         mdp: the MDP.
         target: ``(n_states,)`` bool mask of the states that count as reached
             (``mdp.target`` for the lower model, ``mdp.target | mdp.truncated`` for the
             upper one).
-        quotient: ``reduce(mdp, target)`` if the caller already has it.
+        quotient: ``reduce(mdp, target, sense=sense)`` if the caller already has it.
+        sense: maximise or minimise (a given ``quotient`` must have been reduced for
+            it).
         solver: with ``backend="cvxpy"`` any LP solver cvxpy has installed, by name
             (``"CLARABEL"``, ``"HIGHS"``, ``"SCS"``, ...); with ``"direct"`` only
             ``"CLARABEL"``.
@@ -421,6 +467,8 @@ def solve_lp(
             cvxpy's canonicalisation and its ~1 s import); ``"auto"`` (default) is
             ``"direct"`` for Clarabel and ``"cvxpy"`` for any other solver.
         tol: accuracy passed to the solver (gap and feasibility tolerances).
+        precision: relative precision beside ``tol`` with which the exact values of the
+            crossover tell tight choices apart (the randomised policy's support).
         everywhere: start weight 1 on every reduced state instead of only the initial
             one, so ``values`` and the policy are exact / optimal in every state.
         decompose: solve block by block in topological order (module docs); ``False``
@@ -433,6 +481,8 @@ def solve_lp(
             ``decompose``, a block's LP leaves out the choices they prove suboptimal
             (every choice is still checked against the exact values afterwards, so a
             wrong bound costs time, never the answer).
+        progress: a bar over the blocks' states (:mod:`mitld_lp.util.progress`:
+            ``None`` on a terminal only).
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -441,7 +491,7 @@ def solve_lp(
     start = time.perf_counter()
     if backend == "auto":
         backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
-    q = quotient_for(mdp, target, quotient)
+    q = quotient_for(mdp, target, quotient, sense)
     b_eq = _start_weights(q, everywhere)
     shape = (q.n_states, q.n_choices)
     logger.info(
@@ -470,9 +520,11 @@ def solve_lp(
             Raw(Status.OPTIMAL, f"initial state is {reason}: decided by graph analysis, "
                  "no LP solved (values of the other maybe states are nan)"),
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
-            greedy_choices(q, np.ones(q.n_states)), 0.0, 0.0, 0)
+            greedy_choices(q, np.full(q.n_states, 1.0 if q.sense is Sense.MAX else 0.0)),
+            0.0, 0.0, 0)
     elif decompose:
-        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds))
+        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds),
+                                   precision, progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)

@@ -2,7 +2,9 @@
 
 Every solver of this package (the occupancy LP, interval iteration, the topological
 order of both) and the controller's *hopeless* set start from the same preprocessing:
-remove the target and prob-0 states, collapse the maximal end components of the rest.
+remove the target and prob-0 states, collapse the maximal end components of the rest
+(for a maximum; for a minimum the prob-0 states are ``Prob0E`` and no end component is
+left to collapse).
 :func:`reduce` does it once and returns a :class:`Quotient` that maps answers back;
 ``synthesize`` builds one per model and hands it to every solver.
 
@@ -21,23 +23,29 @@ from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import (
     EndComponents,
+    Sense,
+    attractor,
     backward_reachable,
     edges,
     maximal_end_components,
     segmented_argmax,
 )
-from mitld_lp.solvers.reduced import Quotient, greedy_choices
+from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
     "EndComponents",
+    "Qualitative",
     "Quotient",
+    "Sense",
     "backward_reachable",
     "greedy_choices",
     "lift_policy",
     "maximal_end_components",
     "prob0_max",
+    "prob0_min",
     "prob1_max",
+    "prob1_min",
     "quotient_for",
     "reduce",
     "segmented_argmax",
@@ -81,27 +89,54 @@ def prob1_max(mdp: MDP, target: np.ndarray) -> np.ndarray:
         inside = nxt
 
 
+def prob0_min(mdp: MDP, target: np.ndarray) -> np.ndarray:
+    """States from which *some* policy reaches ``target`` with probability 0
+    (``Prob0E``): the complement of the states from which every choice, step after
+    step, keeps a positive probability of reaching it
+    (:func:`~mitld_lp.solvers.graph.attractor`)."""
+    target = as_state_mask(mdp, target, "target")
+    return ~attractor(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups), target)
 
-def reduce(mdp: MDP, target: np.ndarray) -> Quotient:
+
+def prob1_min(mdp: MDP, target: np.ndarray) -> np.ndarray:
+    """States from which *every* policy reaches ``target`` with probability 1
+    (``Prob1A``): those with no path, before the target, to a state of
+    :func:`prob0_min` (from there some policy avoids the target for ever; conversely a
+    policy that avoids it with positive probability ends, almost surely, in states
+    that avoid it for ever)."""
+    target = as_state_mask(mdp, target, "target")
+    e = edges(mdp)
+    keep = ~target[e.source]
+    return ~backward_reachable(mdp.n_states, e.source[keep], e.succ[keep],
+                               prob0_min(mdp, target))
+
+
+def reduce(mdp: MDP, target: np.ndarray, *, sense: Sense = Sense.MAX) -> Quotient:
     """Remove target and prob-0 states, then collapse the MECs of the rest.
 
     See :class:`Quotient`.  A choice internal to a MEC is dropped (it only moves inside
     the MEC); every other choice of a maybe state is kept, with its transitions into a
     MEC redirected to the MEC's reduced state (so a choice may keep a self-loop of
-    probability < 1 on its collapsed MEC).  One model's
+    probability < 1 on its collapsed MEC).  For ``sense=Sense.MIN`` the prob-0 states
+    are :func:`prob0_min`'s and no end component remains to collapse.  One model's
     :func:`mitld_lp.solvers.analysis.analyse`.
     """
-    return analyse(mdp, as_state_mask(mdp, target, "target"))[0]
+    return analyse(mdp, as_state_mask(mdp, target, "target"), sense=sense)[0]
 
 
-def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None) -> Quotient:
-    """``quotient`` if given (checked to be the reduction for ``target``), else
-    ``reduce(mdp, target)``: how every solver takes the caller's reduction."""
+def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None,
+                 sense: Sense = Sense.MAX) -> Quotient:
+    """``quotient`` if given (checked to be the reduction for ``target`` in ``sense``),
+    else ``reduce(mdp, target, sense=sense)``: how every solver takes the caller's
+    reduction."""
     if quotient is None:
-        return reduce(mdp, target)
+        return reduce(mdp, target, sense=sense)
     target = as_state_mask(mdp, target, "target")
     if not np.array_equal(quotient.target, target):
         raise ValueError("quotient: it was reduced for another target than the one given")
+    if quotient.sense is not Sense(sense):
+        raise ValueError(f"quotient: it was reduced for a {quotient.sense}imum, not the "
+                         f"{Sense(sense)}imum asked for")
     return quotient
 
 
@@ -119,10 +154,17 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       positive probability, so the policy leaves the MEC almost surely and its value is
       the quotient policy's value;
     * target states and absorbing states (a single ``ABSORB`` self-loop) get ``-1``;
-      the other prob-0 states get their first choice (every choice has value 0 there).
+      the other prob-0 states get their first choice (every choice has value 0 there);
+      for a minimum, their first choice that stays among them (``Prob0E``: one does,
+      and staying avoids the target for ever).
     """
     n = mdp.n_states
     policy = np.asarray(mdp.row_groups[:-1], dtype=np.int64).copy()
+    if quotient.sense is Sense.MIN and quotient.prob0.any():
+        m = sp.csr_array(mdp.matrix)
+        leaves = (m @ (~quotient.prob0).astype(np.float64)) > 0
+        stays = segmented_argmax((~leaves).astype(np.float64), mdp.row_groups)
+        policy[quotient.prob0] = stays[quotient.prob0]
     policy[quotient.target | absorbing_states(mdp)] = -1
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]

@@ -12,28 +12,62 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import Blocks, EndComponents, segmented_argmax
+from mitld_lp.solvers.graph import Blocks, EndComponents, Sense, segmented_argmax
 
-__all__ = ["Quotient", "greedy_choices"]
+__all__ = ["Qualitative", "Quotient", "greedy_choices", "keeping_zero"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Qualitative:
+    """The states whose optimal probability of reaching the target (in ``sense``) the
+    support graph decides, before any number is computed (Storm's *prob01*): exactly
+    0 on ``zero``, exactly 1 on ``one``, and strictly between 0 and 1 everywhere else.
+
+    Attributes:
+        sense: the optimum they are about.
+        zero: ``(n_states,)`` bool: ``Prob0A`` for a maximum (no path to the target),
+            ``Prob0E`` for a minimum (some policy avoids the target for ever).
+        one: ``(n_states,)`` bool, the target included: ``Prob1E`` for a maximum (some
+            policy reaches it almost surely), ``Prob1A`` for a minimum (every policy
+            does).
+        unreachable: ``(n_states,)`` bool, ``Prob0A`` (no path to the target, so no
+            policy's value is above 0 there); ``zero`` itself for a maximum.
+    """
+
+    sense: Sense
+    zero: np.ndarray
+    one: np.ndarray
+    unreachable: np.ndarray
+
+    @property
+    def inside(self) -> np.ndarray:
+        """``(n_states,)`` bool: the states whose value is strictly between 0 and 1."""
+        return ~(self.zero | self.one)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Quotient:
-    """The *maybe* part of an MDP with its maximal end components collapsed.
+    """The *maybe* part of an MDP with its maximal end components collapsed: a total
+    reward (the one-step probability of entering the target) to optimise in a
+    ``sense`` on a model with no end component.
 
     Built by :func:`reduce`.  Target states (value 1) and prob-0 states (value 0) are
-    removed; every MEC of the remaining *maybe* states becomes one state whose choices
-    are the choices of its members that are not internal to it (they leave the MEC with
-    positive probability).  The result has no end components, so every policy leaves
-    the maybe states with probability 1: the occupancy LP is bounded and the upper
-    sequence of interval iteration converges to the optimum.
+    removed; for a maximum every MEC of the remaining *maybe* states becomes one state
+    whose choices are the choices of its members that are not internal to it (they
+    leave the MEC with positive probability).  For a minimum the prob-0 states are
+    ``Prob0E`` (some policy avoids the target for ever), and no end component is left
+    among the others (its states could avoid the target for ever): nothing is
+    collapsed.  Either way the result has no end components, so every policy leaves
+    the maybe states with probability 1: the occupancy LP is bounded and both
+    sequences of interval iteration converge to the optimum.
 
     Reduced states are numbered: first the maybe states outside any MEC (in the order of
     the original states), then one state per MEC (``n_plain + mec id``).
 
     Attributes:
         target: ``(n_states,)`` bool, the original target mask (value 1).
-        prob0: ``(n_states,)`` bool, states with max-reach probability 0 (value 0).
+        prob0: ``(n_states,)`` bool, the states removed with value 0: ``Prob0A`` (no
+            path to the target) for a maximum, ``Prob0E`` for a minimum.
         state_map: ``(n_states,)`` int64, the reduced state of each original state,
             ``-1`` for removed (target / prob-0) ones.
         mecs: the MECs of the maybe states (ids as in ``mecs.mec_of``).
@@ -57,6 +91,9 @@ class Quotient:
         layers: the component of each *original* state in the product's support graph
             and the level of each component: the order in which a policy's chain is
             evaluated (:func:`mitld_lp.solvers.iteration.evaluate_policy`).
+        sense: whether the solvers maximise or minimise on it.
+        qualitative: the values the graph decides (:class:`Qualitative`, per original
+            state).
     """
 
     target: np.ndarray
@@ -73,6 +110,8 @@ class Quotient:
     order: Blocks
     zero: np.ndarray
     layers: tuple[np.ndarray, np.ndarray]
+    sense: Sense
+    qualitative: Qualitative
 
     @property
     def n_states(self) -> int:
@@ -99,12 +138,28 @@ class Quotient:
 
 
 def greedy_choices(q: Quotient, v: np.ndarray, *, tie: float = 1e-12) -> np.ndarray:
-    """Per reduced state, the reduced choice maximising ``P(c,target) + sum P(c,s') v(s')``.
+    """Per reduced state, the reduced choice best for ``q.sense`` (maximising, or
+    minimising) ``P(c,target) + sum P(c,s') v(s')``.
 
-    Ties (within ``tie``) go to the choice with the larger one-step probability of
-    entering the target, a cheap measure of progress.  On the quotient every policy
-    leaves the maybe states almost surely (no end components remain), so a greedy
-    policy on exact values is optimal and never loops forever.
+    Ties (within ``tie`` relative to the best score, so that values of 1e-30 are told
+    apart) go to the choice with the larger one-step probability of entering the target
+    for a maximum (a cheap measure of progress), the smaller for a minimum.  On the
+    quotient every policy leaves the maybe states almost surely (no end components
+    remain), so a greedy policy on exact values is optimal and never loops forever.
     """
     scores = q.to_target + q.matrix @ v
-    return segmented_argmax(scores, q.row_groups, tie=tie, prefer=q.to_target)
+    prefer = q.to_target if q.sense is Sense.MAX else -q.to_target
+    return segmented_argmax(scores, q.row_groups, tie=tie, prefer=prefer, sense=q.sense)
+
+
+def keeping_zero(q: Quotient) -> np.ndarray:
+    """Per reduced state, its first choice that keeps a value of 0: no probability of
+    entering the target and every successor known to be 0 (``q.zero``).  Every choice
+    of a maximum's zero state does (it has no path to the target); a minimum's zero
+    state (some policy avoids the target for ever) has one.  The first choice where
+    none does."""
+    n_choices = q.n_choices
+    entry_row = np.repeat(np.arange(n_choices), np.diff(q.matrix.indptr))
+    moves = np.bincount(entry_row[~q.zero[q.matrix.indices]], minlength=n_choices) > 0
+    keeps = ~moves & (q.to_target == 0.0)
+    return segmented_argmax(keeps.astype(np.float64), q.row_groups)

@@ -12,6 +12,12 @@ so the file's robust value is ours.  With several, Storm's interval model lets t
 outcome probabilities vary independently inside their intervals, a superset of the
 products of per-event hazards: its robust value is then at most ours (a relaxation).
 
+The labels a user checks are always in it: when no state satisfies the task robustly
+(the value is 0), ``target`` and ``accept`` are carried by one more state after the
+others, which no state reaches and which loops on itself, so that Storm knows them (its
+DRN format declares labels only on states) and ``Pmax=? [F "target"]`` is 0, not an
+error.
+
 Storm 2.0 computes until probabilities on interval models only when they are *graph
 preserving*: every interval written has a positive lower end.  A band reaching 0 or 1
 (a Kaplan-Meier band, a fit with no event in some step) writes intervals ``[0, x]``; the
@@ -65,10 +71,13 @@ def write_interval_drn(
     overwrite: bool = False,
 ) -> Path:
     """Write ``imdp`` as an interval DRN (module docstring).  States ``0 .. n-1`` are the
-    product's, the outcome states follow.  Labels: ``init``; ``target`` and ``accept`` on
-    ``target``; ``sink``; ``truncated``.  Raises ``FileExistsError`` (``path`` exists,
-    no ``overwrite``) or ``ValueError`` (a path :func:`mitld_lp.files.write.writable_path`
-    refuses)."""
+    product's, the outcome states follow (then, when ``target`` is empty, the state
+    that carries ``target`` and ``accept``).  Labels: ``init``; ``target`` and
+    ``accept`` on ``target`` (for a task with a safety part, the states from which it
+    is kept robustly: :func:`mitld_lp.routes.robust.interval_export`, a result's
+    ``goal``); ``sink``; ``truncated``.  Raises ``FileExistsError`` (``path`` exists,
+    no ``overwrite``) or ``ValueError`` (a path
+    :func:`mitld_lp.files.write.writable_path` refuses)."""
     target = np.asarray(target, dtype=bool)
     p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)
     n = imdp.n_states
@@ -93,9 +102,11 @@ def write_interval_drn(
         return [f"\t\t{cols[j]} : {_interval(vals[j], vals[j])}"
                 for j in range(indptr[b], indptr[b + 1]) if vals[j] > 0]
 
+    unused = [] if target.any() else ["target", "accept"]
+    extra = 1 if unused else 0  # the state that carries them (module docstring)
     lines = ["// Exported by mitld_lp: an interval MDP (robust synthesis)", "@type: MDP",
-             "@parameters", "", "@reward_models", "", "@nr_states", str(n + n_out),
-             "@nr_choices", str(imdp.n_choices + n_out), "@model"]
+             "@parameters", "", "@reward_models", "", "@nr_states", str(n + n_out + extra),
+             "@nr_choices", str(imdp.n_choices + n_out + extra), "@model"]
     for s in range(n):
         labels = (["init"] if s == imdp.initial else []) + [
             name for name, mask in marks if mask[s]]
@@ -115,6 +126,9 @@ def write_interval_drn(
             lines.append(f"state {int(outcome_first[c]) + j}")
             lines.append("\taction world")
             lines += row(b)
+    if unused:  # reached by no state: only so that Storm knows these labels
+        lines += [f"state {n + n_out} {' '.join(unused)}", "\taction absorb",
+                  f"\t\t{n + n_out} : {_interval(1.0, 1.0)}"]
     with files.replacing(p) as f:
         f.write("\n".join(lines) + "\n")
     logger.info("wrote interval DRN (%d states, %d outcome states) to %s", n, n_out, p)

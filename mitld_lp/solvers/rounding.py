@@ -29,7 +29,7 @@ from mitld_lp.solvers.result import read_only
 if TYPE_CHECKING:
     from mitld_lp.automata.sta import STA
 
-__all__ = ["UNIT", "ETA", "TINY", "HAZARD_ACCURACY", "Rounding", "rounding", "below",
+__all__ = ["UNIT", "ETA", "ETA_LIMIT", "TINY", "HAZARD_ACCURACY", "Rounding", "rounding", "below",
            "above", "support_extreme", "model_eta", "float_down", "float_up", "one_minus"]
 
 UNIT = 2.0**-53
@@ -73,17 +73,27 @@ class Rounding:
     eta: float
 
 
+ETA_LIMIT = 2.0**-3
+"""The largest allowance the one-step factors serve (``1 / ((1 - g)(1 - eta)) <= 1 +
+2 (g + eta)`` needs ``g + eta <= 1/2``): past it a row's sum is bounded by 0 below and
+infinity above, sound and useless, so every check that needs arithmetic fails."""
+
+
 def rounding(matrix: sp.csr_array, eta: float = ETA) -> Rounding:
-    """The :class:`Rounding` of ``matrix``'s rows for the allowance ``eta``."""
-    if not (0.0 <= eta <= 2.0**-10):
-        raise ValueError(f"eta: must be in [0, 2^-10], got {eta!r}")
+    """The :class:`Rounding` of ``matrix``'s rows for the allowance ``eta`` (past
+    :data:`ETA_LIMIT`: the trivial factors 0 and infinity)."""
+    if not eta >= 0.0:
+        raise ValueError(f"eta: must be a number >= 0, got {eta!r}")
     n = np.diff(np.asarray(matrix.indptr)).astype(np.float64)
+    slack = read_only((n + 4.0) * TINY)
+    if eta > ETA_LIMIT:
+        return Rounding(read_only(np.zeros_like(n)), read_only(np.full_like(n, np.inf)),
+                        slack, float(eta))
     gamma = n * UNIT / (1.0 - n * UNIT)
     margin = 1.0 + 2.0**-20  # the constants' own rounding
     low = (gamma + eta + gamma * eta + 4.0 * UNIT) * margin
     high = (2.0 * (gamma + eta) + 4.0 * UNIT) * margin
-    return Rounding(read_only(1.0 - low), read_only(1.0 + high),
-                    read_only((n + 4.0) * TINY), float(eta))
+    return Rounding(read_only(1.0 - low), read_only(1.0 + high), slack, float(eta))
 
 
 def below(r: Rounding, rows: np.ndarray, sums: np.ndarray) -> np.ndarray:
@@ -113,8 +123,9 @@ def model_eta(sta: STA | None, *, history: bool = False) -> float:
     """The probabilities' allowance of a product built with ``sta``'s laws: :data:`ETA`
     plus, per event, the largest cancellation of ``1 - h`` over the hazards its clock
     reads (``h * HAZARD_ACCURACY / (1 - h)``, the relative error of ``1 - h`` when ``h``
-    is accurate to :data:`HAZARD_ACCURACY`), capped at ``2^-10`` (the certificates'
-    limit; a model that needs more gets brackets that fail their checks).  ``history``:
+    is accurate to :data:`HAZARD_ACCURACY`); past :data:`ETA_LIMIT` (a hazard within
+    about ``2^-45`` of 1) the rows' sums are bounded by 0 and infinity, and the
+    certificates' checks fail (:func:`rounding`).  ``history``:
     the probabilities are also products along an event's history (the sensed route's
     posterior weights: a few roundings a step up to its truncation point or cap), each
     step adding ``4u``."""
@@ -132,7 +143,7 @@ def model_eta(sta: STA | None, *, history: bool = False) -> float:
         eta += worst * HAZARD_ACCURACY
         if history:
             eta += 4.0 * UNIT * max(clock.cap, clock.truncation or 0)
-    return min(eta, 2.0**-10)
+    return eta
 
 
 # ------------------------------------------------------------------ directed rounding

@@ -16,7 +16,8 @@ solution
 
 .. math:: v(s) = \max_c \frac{r(c)}{1 - p(c)},
 
-because :math:`r + p v \le v` iff :math:`v \ge r / (1 - p)`.  All single-state
+because :math:`r + p v \le v` iff :math:`v \ge r / (1 - p)` (for a minimum
+:math:`\min_c`, the one solution of :math:`v = \min_c r(c) + p(c) v`).  All single-state
 components of one level are updated at once (one sparse product and a segmented max).
 The non-trivial components of a level are left to the caller (one occupancy LP, or
 interval iteration, per level).
@@ -33,6 +34,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
+    Sense,
     blocks_from,
     gather_ranges,
     graph_blocks,
@@ -59,6 +61,7 @@ __all__ = [
     "solve_chain",
     "transient_solve",
     "improve_policy",
+    "GAIN",
     "single_scores",
     "solve_single_states",
 ]
@@ -93,17 +96,19 @@ def solve_single_states(
 ) -> LevelUpdate:
     r"""Solve the single-state components ``states`` given ``values`` downstream.
 
-    ``v(s) = max_c r(c) / (1 - p(c))`` (module docs), written into ``values[states]``
-    (what was there is ignored).  Ties (within ``tie``) go to the larger one-step
-    probability of entering the target, as in
-    :func:`mitld_lp.solvers.quotient.greedy_choices`.
+    ``v(s) = max_c r(c) / (1 - p(c))`` (module docs; the min for a minimum), written
+    into ``values[states]`` (what was there is ignored).  Ties (within ``tie``
+    relative to the best score) go as in :func:`mitld_lp.solvers.quotient.
+    greedy_choices`.
     """
     states = np.asarray(states, dtype=np.int64)
     if states.size == 0:
         empty = np.zeros(0, dtype=np.int64)
         return LevelUpdate(empty, np.zeros(0), empty)
     choices, score, groups = single_scores(q, b, states, q.to_target, values)
-    best = segmented_argmax(score, groups, tie=tie, prefer=q.to_target[choices])
+    prefer = q.to_target[choices]
+    best = segmented_argmax(score, groups, tie=tie, sense=q.sense,
+                            prefer=prefer if q.sense is Sense.MAX else -prefer)
     values[states] = score[best]
     return LevelUpdate(states, score[best], choices[best])
 
@@ -300,31 +305,41 @@ def evaluate_chain(inner: sp.csr_array, chosen: np.ndarray, reward: np.ndarray,
 
 def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
                    allowed: np.ndarray | None = None, *,
-                   factors: Factors | None = None) -> tuple[np.ndarray, ...]:
+                   factors: Factors | None = None,
+                   sense: Sense = Sense.MAX) -> tuple[np.ndarray, ...]:
     """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
-    choice indices) to a fixpoint, over the ``allowed`` choices only if given.  Returns
-    the policy, its values and its expected exit times (extended precision).
+    choice indices) to a fixpoint, maximising (or minimising, ``sense``), over the
+    ``allowed`` choices only if given.  Returns the policy, its values and its expected
+    exit times (extended precision).
 
     Scores are compared in extended precision, so that at the fixpoint no choice beats
-    the policy by more than ~1e-17 of the values' scale (the verified bounds of interval
-    iteration rely on that); a switch needs a gain above that, so rounding cannot make
-    it cycle.  ``factors``: shared by the caller across calls on the same block, so
-    that a call starting where the last one ended reuses its factorisation."""
+    the policy by more than :data:`GAIN` of the values compared, *relative* to them (a
+    state of value 1e-30 is improved as one of value 0.5 is; the verified bounds of
+    interval iteration rely on that); a switch needs a gain above that, so rounding
+    cannot make it cycle.  ``factors``: shared by the caller across calls on the same
+    block, so that a call starting where the last one ended reuses its factorisation."""
     groups = block.groups
     inner = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
+    worst = -np.inf if sense is Sense.MAX else np.inf
     for _ in range(POLICY_ROUNDS):
         v, t = evaluate_chain(block.inner, chosen, reward, factors)
         score = reward + inner @ v
         if allowed is not None:
-            score = np.where(allowed, score, -np.inf)
-        better = segmented_argmax(score, groups)
-        gain = score[better] - score[chosen]
-        nxt = np.where(gain > 1e-17 * max(1.0, float(np.max(np.abs(v)))), better, chosen)
+            score = np.where(allowed, score, worst)
+        better = segmented_argmax(score, groups, sense=sense)
+        gain = sense.gain(score[better], score[chosen])
+        scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
+        nxt = np.where(gain > GAIN * scale, better, chosen)
         if np.array_equal(nxt, chosen):
             return chosen, v, t
         chosen = nxt
     return chosen, v, t
+
+
+GAIN = 1e-17
+"""The least gain, relative to the scores compared, for which policy iteration switches
+a choice (extended precision resolves about 1e-19 of a value)."""
 
 
 def solve_chain(chain: sp.csr_array, b: np.ndarray,

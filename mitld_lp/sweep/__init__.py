@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +68,7 @@ def run_sweep(
     retries: int = 2,
     force: bool = False,
     retry_failed: bool = False,
-    progress: bool = False,
+    progress: bool | None = False,
     on_row: Callable[[dict[str, Any]], None] | None = None,
 ) -> SweepRun:
     """Solve every point of a sweep that ``results`` does not hold yet.
@@ -79,8 +79,9 @@ def run_sweep(
     number of local processes (1: in this process); ``dask``: the address of a Dask
     scheduler (``tcp://host:8786``) instead; ``retries``: how often Dask runs a failed
     task again.  ``retry_failed``: also solve again the points whose row has a failure
-    status (``model_error``, ``budget``, ``error``, ``lost``).  ``progress``: a tqdm bar
-    on stderr.  ``on_row(row)`` is called after each new row is recorded.
+    status (``model_error``, ``budget``, ``error``, ``lost``).  ``progress``: a bar over
+    the points (:func:`mitld_lp.util.progress.bar`: ``None`` on a terminal only).
+    ``on_row(row)`` is called after each new row is recorded.
     Raises :class:`SweepError` for a bad sweep or results file (before any point)."""
     sw = spec if isinstance(spec, Sweep) else load_sweep(spec)
     if workers < 1:
@@ -89,6 +90,26 @@ def run_sweep(
         raise SweepError(f"retries: must be at least 0, got {retries}")
     if dask is not None and workers != 1:
         raise SweepError("give either workers or a Dask address, not both")
+    from mitld_lp.sweep import engines
+
+    # the scheduler answers before the results file is touched: a refused address
+    # leaves no file behind (nor a header alone)
+    client = None if dask is None else engines.connect(dask)
+    try:
+        return _run(sw, results, client, workers=workers, retries=retries, force=force,
+                    retry_failed=retry_failed, progress=progress, on_row=on_row)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run(sw: Sweep, results: str | os.PathLike[str] | None, client: Any, *, workers: int,
+         retries: int, force: bool, retry_failed: bool, progress: bool,
+         on_row: Callable[[dict[str, Any]], None] | None) -> SweepRun:
+    """:func:`run_sweep` once its arguments are checked (``client``: a Dask client, or
+    None for local processes)."""
+    from mitld_lp.sweep import engines
+
     store = None if results is None else Results(results, sw.name, sw.sweep_id, sw.columns,
                                                  force=force)
     keys = [point_key(p) for p in sw.points]
@@ -105,21 +126,19 @@ def run_sweep(
     todo_keys = set(keys) - set(done)
     source = os.fspath(sw.model_path)
     tasks, queued = [], set()
+    quiet = replace(sw.settings, progress=False)  # one bar, the sweep's: none per point
     for i, (point, key) in enumerate(zip(sw.points, keys, strict=True)):
         if key in todo_keys and key not in queued:  # a point listed twice is solved once
             queued.add(key)
-            tasks.append(PointTask(i, sw.model_text(point), source, sw.settings))
+            tasks.append(PointTask(i, sw.model_text(point), source, quiet))
     reused = sum(1 for k in set(keys) if k in done)
-
-    from mitld_lp.sweep import engines
-
-    if dask is not None:
-        finished = engines.dask_cluster(tasks, dask, retries)
+    if client is not None:
+        finished = engines.dask_cluster(tasks, client, retries)
     elif workers > 1 and len(tasks) > 1:
         finished = engines.process_pool(tasks, workers)
     else:
         finished = engines.serial(tasks)
-    bar = progress_bar(bool(progress), total=len(tasks), desc=sw.name, unit="point",
+    bar = progress_bar(progress, total=len(tasks), desc=sw.name, unit="point",
                        leave=False)
     computed = 0
     try:
@@ -135,6 +154,7 @@ def run_sweep(
             if on_row is not None:
                 on_row(row)
     finally:
+        finished.close()  # the engine's own ending (pending tasks cancelled) comes first
         bar.close()
         if store is not None:
             store.close()

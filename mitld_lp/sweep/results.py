@@ -20,10 +20,14 @@ under ``/proc``) is refused before any point.
 
 **One writer at a time**: :class:`Results` holds an advisory lock (``flock``) on the
 file ``.NAME.lock`` beside the results file ``NAME`` from before it reads the file until
-:meth:`Results.close`.  A second sweep that opens the same results file meanwhile (in
-this process or another) is refused at once with one line naming the process that
-holds it, and writes nothing: two writers never duplicate or interleave rows.  The lock
-file is removed when the lock is released; one left by a killed sweep holds no lock.
+:meth:`Results.close`.  ``NAME`` and its folder are the file's own, symlinks resolved, so
+that every name reaching the file (a symlink, ``../x.csv``, an absolute path) takes the
+same lock; a file with another name of its own (a hard link) is not extended, since a
+sweep through that name would take another lock.  A second sweep that opens the same
+results file meanwhile (in this process or another) is refused at once with one line
+naming the process that holds it, and writes nothing: two writers never duplicate or
+interleave rows.  The lock file is removed when the lock is released; one left by a
+killed sweep holds no lock.
 """
 
 from __future__ import annotations
@@ -185,6 +189,7 @@ class Results:
             raise
 
     def _adopt(self, name: str, sweep_id: str) -> None:
+        _one_name(self.path)
         columns, rows, dropped = read_results(self.path)
         if not columns and not rows:  # an empty file
             self.rewrite([])
@@ -284,15 +289,29 @@ def _regular(path: Path) -> None:
                          else f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
+def _one_name(path: Path) -> None:
+    """Refuse to extend a results file that has another name of its own (a hard link):
+    a sweep given that name would lock ``.OTHER.lock`` and append to the same rows."""
+    try:
+        links = os.stat(path).st_nlink
+    except OSError:
+        return  # read_results says why it cannot be read
+    if links > 1:
+        raise SweepError(f"{path}: has {links} names (hard links), so another sweep could "
+                         "write it under another name; give a file of its own (a copy), "
+                         "or pass --force to start it anew")
+
+
 class _Lock:
-    """An exclusive advisory lock on ``.NAME.lock`` beside the results file ``NAME``
-    (module docstring), taken without waiting: :class:`SweepError` if another writer
-    holds it."""
+    """An exclusive advisory lock on ``.NAME.lock`` beside the results file ``NAME``,
+    symlinks resolved (module docstring), taken without waiting: :class:`SweepError` if
+    another writer holds it."""
 
     def __init__(self, results: Path) -> None:
         import fcntl
 
-        self.path = results.with_name(f".{results.name}.lock")
+        real = Path(os.path.realpath(results))  # the file itself, whatever name reached it
+        self.path = real.with_name(f".{real.name}.lock")
         for _ in range(100):  # the holder may remove the file between open and flock
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)

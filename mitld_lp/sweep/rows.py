@@ -22,6 +22,7 @@ from typing import Any
 
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
+from mitld_lp.exact.errors import ExactError
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import Model, ModelError
@@ -54,7 +55,7 @@ MODEL_ERROR, BUDGET, ERROR, LOST = "model_error", "budget", "error", "lost"
 #: Exceptions meaning "this input is wrong".
 INPUT_ERRORS: tuple[type[Exception], ...] = (
     ModelError, ParseError, FragmentError, DistributionError, TranslationError, WorldError,
-    GameError, GridError, ProblemError, ConstraintError,
+    GameError, GridError, ProblemError, ConstraintError, ExactError,
 )
 #: Exceptions meaning "a budget stopped the work" (checked first: some subclass the above).
 BUDGET_STOPS: tuple[type[BaseException], ...] = (ProductTooLarge, AutomatonTooLarge, MemoryError)
@@ -110,17 +111,27 @@ class Outcome:
 
 
 def run_model(load: Callable[[], Model], settings: Settings,
-              constraints: tuple[str, ...] = (), then: str | None = None) -> Outcome:
+              constraints: tuple[str, ...] = (), then: str | None = None, *,
+              whole: bool = False) -> Outcome:
     """Load a model with ``load()`` and solve the problem it poses with ``settings``,
     ``constraints`` (after the model's own) and ``then`` (:func:`mitld_lp.problem.pose`:
     every route, the constrained one included); every failure but an interrupt becomes
-    an :class:`Outcome` with its status."""
+    an :class:`Outcome` with its status.  ``whole``: the model file's ``[budgets]
+    time_limit`` counts from the start of the load, as ``--time-limit`` does (a batch's
+    model), not from the solve's (a sweep's point)."""
+    from dataclasses import replace
+
     from mitld_lp.problem import pose
     from mitld_lp.synthesis import solve
 
     start = time.perf_counter()
     try:
-        summary = solve(pose(load(), constraints, then=then, settings=settings)).summary()
+        model = load()
+        limit = model.budgets.get("time_limit")
+        if whole and settings.time_limit is None and limit is not None:
+            settings = replace(settings, time_limit=max(
+                limit - (time.perf_counter() - start), 0.0))
+        summary = solve(pose(model, constraints, then=then, settings=settings)).summary()
     except Exception as exc:  # noqa: BLE001 - a point's failure is its record
         status, message = classify(exc)
         return Outcome(None, status, message, time.perf_counter() - start)

@@ -1,4 +1,5 @@
-"""``--time-limit`` as a promise about the process.
+"""``--time-limit`` (or the ``[budgets] time_limit`` of the command's model file, which
+binds as the flag does) as a promise about the process.
 
 The command's own watchdog (:func:`mitld_lp.cli.main`) stops a stage that returns to the
 interpreter, but a native call that holds Python's lock for seconds (a ``scipy.stats``

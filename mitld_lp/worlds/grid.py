@@ -20,11 +20,13 @@ import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from numbers import Real
 from types import MappingProxyType
 from typing import Any, ClassVar, cast
 
 from mitld_lp.logic.syntax import RESERVED, is_proposition_name
+from mitld_lp.util.decimals import Written, exact_value
 
 __all__ = ["Cell", "GridWorld", "GridError", "ACTIONS", "STAY", "MOVES", "PERPENDICULAR"]
 
@@ -124,6 +126,7 @@ class GridWorld:
     _labels: dict[Cell, frozenset[str]] = field(
         init=False, repr=False, compare=False, hash=False
     )
+    _exact_slip: Fraction = field(init=False, repr=False, compare=False, hash=False)
 
     ignores_events: ClassVar[bool] = True
     """The moves do not depend on the external events
@@ -147,7 +150,10 @@ class GridWorld:
             raise GridError(["start"], f"cell {self.start!r} is an obstacle")
         regions = self._regions(obstacles)
         object.__setattr__(self, "start", start)
-        object.__setattr__(self, "slip", float(slip))
+        # slip as written (mitld_lp.util.decimals), for the exact successors; a decimal
+        # read from text stays a Written float, so that a copy (replace) keeps its text
+        object.__setattr__(self, "_exact_slip", exact_value(slip))
+        object.__setattr__(self, "slip", slip if isinstance(slip, Written) else float(slip))
         object.__setattr__(self, "obstacles", frozenset(obstacles))
         object.__setattr__(self, "regions", tuple(sorted(regions.items())))
         object.__setattr__(self, "_succ", {})
@@ -228,13 +234,16 @@ class GridWorld:
             and (x, y) not in self.obstacles
         )
 
-    def _distribution(self, cell: Cell, action: str) -> tuple[tuple[Cell, float], ...]:
+    def _distribution(self, cell: Cell, action: str, exact: bool = False,
+                      ) -> tuple[tuple[Cell, Any], ...]:
         """``P(c, a)``: intended neighbour ``1 - 2*slip``, each perpendicular ``slip``,
-        blocked outcomes stay at ``c``, merged by landing cell, zero outcomes dropped."""
+        blocked outcomes stay at ``c``, merged by landing cell, zero outcomes dropped
+        (``exact``: in rationals, from ``slip`` as written)."""
         x, y = cell
-        intended, side = 1.0 - 2.0 * self.slip, self.slip
+        slip = self._exact_slip if exact else self.slip
+        intended, side = 1 - 2 * slip, slip
         left, right = PERPENDICULAR[action]
-        dist: dict[Cell, float] = {}
+        dist: dict[Cell, Any] = {}
         for direction, p in ((action, intended), (left, side), (right, side)):
             if p <= 0.0:
                 continue
@@ -243,7 +252,7 @@ class GridWorld:
             if not (0 <= nx < self.width and 0 <= ny < self.height) or (
                 nx, ny) in self.obstacles:
                 nx, ny = x, y
-            dist[nx, ny] = dist.get((nx, ny), 0.0) + p
+            dist[nx, ny] = dist.get((nx, ny), 0) + p
         return tuple(dist.items())
 
     # ------------------------------------------------------------------ Game protocol
@@ -280,6 +289,16 @@ class GridWorld:
                 ((state, 1.0),) if action == STAY else self._distribution(state, action)
             )
         return hit
+
+    def exact_successors(
+        self, state: Cell, action: str, events: frozenset[str] = frozenset()
+    ) -> tuple[tuple[Cell, Fraction], ...]:
+        """:meth:`successors` in rational arithmetic, from ``slip`` as written
+        (:mod:`mitld_lp.worlds.exact`): the same next cells in the same order."""
+        self.successors(state, action, events)  # the same checks of the state and action
+        if action == STAY:
+            return ((state, Fraction(1)),)
+        return self._distribution(state, action, exact=True)
 
     def propositions(self, state: Cell) -> frozenset[str]:
         """The names of the regions containing ``state``."""

@@ -233,7 +233,8 @@ def python_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         try:
             module = importlib.import_module(module_name)
         except ImportError as exc:
-            raise ctx.error("python.world", f"cannot import {module_name}: {exc}") from None
+            raise ctx.error("python.world", f"cannot import {module_name}: {exc}"
+                            f"{_unreadable_module(exc, folder)}") from None
         except Exception as exc:  # noqa: BLE001 - the module's own code failed
             raise ctx.error("python.world", f"importing {module_name} raised "
                             f"{type(exc).__name__}: {exc}") from None
@@ -264,6 +265,18 @@ def python_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     except GameError as exc:
         raise ctx.error("python.world", f"{target}: {exc}") from None
     return guarded
+
+
+def _unreadable_module(exc: ImportError, folder: Path) -> str:
+    """Why Python found no module ``exc.name`` in the model file's folder when a file of
+    its name is there but is no regular file (a FIFO, a folder named ``m.py``), which
+    Python passes over in silence; else nothing."""
+    if not isinstance(exc, ModuleNotFoundError) or not exc.name:
+        return ""
+    parts = exc.name.split(".")
+    candidate = folder.joinpath(*parts[:-1], f"{parts[-1]}.py")
+    kind = files.irregular_kind(candidate)
+    return "" if kind is None else f" ({candidate} is {kind}, not a regular file)"
 
 
 # --------------------------------------------------------------------------- the guard

@@ -52,7 +52,10 @@ probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
 in floating point, so where it alone fails the checks are redone in exact arithmetic
-(:func:`load_prism`).
+(:func:`load_prism`), and a choice that sums to 1 only within that tolerance is divided
+by its sum (:attr:`PrismGame.normalised` counts them).  An expression deeper than
+Storm's parser takes is refused before it reads the file
+(:mod:`mitld_lp.worlds.prism_depth`).
 
 Budgets and exploration.  The product of the variables' ranges is a note, not a
 refusal: Storm explores the reachable part within ``max_states`` and ``max_memory``
@@ -75,10 +78,9 @@ from __future__ import annotations
 
 import logging
 import os
-import re
-import tempfile
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -91,20 +93,35 @@ from mitld_lp.product.budget import _bytes  # the product's budget messages writ
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
+from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
+    builder_options,
     check_constants,
     check_program,
     command_names,
+    extra_labels,
     name_unlabelled_commands,
+    needs_origins,
+    parse_program,
     show_sum,
     storm_error,
     storm_quiet,
     storm_sum,
+    with_constants,
+    with_labels,
 )
-from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, read_model
+from mitld_lp.worlds.prism_tables import (
+    DEADLOCK_ACTION,
+    DECIDED_ACTION,
+    OUT_OF_BOUNDS,
+    Tables,
+    read_model,
+)
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
+from mitld_lp.worlds.successors import Normalisation
 from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
@@ -160,6 +177,9 @@ class PrismGame:
             Storm did not expand ("" when there are none).
         decided: how many of :attr:`states` were not expanded (their one action is
             :data:`DECIDED_ACTION`, a self-loop).
+        normalised: the choices whose probabilities summed to 1 only within PRISM's
+            tolerance, each divided by its sum when the file was read (None: none
+            were); an answer's checks say it (:func:`mitld_lp.synthesis.solve`).
 
     Transitions stay in Storm's sparse layout (:class:`mitld_lp.worlds.prism_tables.Tables`);
     a state's actions and a choice's distribution become tuples when first asked for
@@ -176,7 +196,9 @@ class PrismGame:
     _tables: Tables = field(repr=False)
     terminal: str = ""
     decided: int = 0
+    normalised: Normalisation | None = None
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
+    recipe: PrismRecipe | None = field(default=None, repr=False)  # to build it again
 
     @property
     def event_names(self) -> frozenset[str]:
@@ -241,18 +263,37 @@ class PrismGame:
             probabilities=t.probabilities,
         )
 
-    def _distribution(self, choice: int) -> dict[int, float]:
+    def _distribution(self, choice: int, exact: bool = False) -> dict[int, Any]:
         t = self._tables
         lo, hi = t.branches[choice], t.branches[choice + 1]
+        if exact:  # Storm's exact build, made when first asked (mitld_lp.worlds.prism_exact)
+            probabilities = self._cache.get("exact")
+            if probabilities is None:
+                if self.recipe is None:
+                    raise WorldError(f"{self.source}: this world was not built by "
+                                     "load_prism: its exact probabilities are unknown")
+                probabilities = self._cache["exact"] = exact_probabilities(self.recipe, t)
+            return dict(zip(t.targets[lo:hi].tolist(), probabilities[lo:hi], strict=True))
         return dict(zip(t.targets[lo:hi].tolist(), t.probabilities[lo:hi].tolist(), strict=True))
 
     def successors(
         self, state: State, action: str, events: frozenset[str]
     ) -> tuple[tuple[State, float], ...]:
         """The robot's move, then each event's effect in name order (module docstring)."""
+        return self._moves(state, action, events, exact=False)
+
+    def exact_successors(
+        self, state: State, action: str, events: frozenset[str]
+    ) -> tuple[tuple[State, Fraction], ...]:
+        """:meth:`successors` in rational arithmetic, the probabilities as the PRISM file
+        writes them (Storm's exact build, :mod:`mitld_lp.worlds.prism_exact`)."""
+        return self._moves(state, action, events, exact=True)
+
+    def _moves(self, state: State, action: str, events: frozenset[str], exact: bool,
+               ) -> tuple[tuple[State, Any], ...]:
         s = self._at(state)
         acting = frozenset(events & self.effects.keys())
-        key = (s, action, acting)
+        key = (s, action, acting, exact)
         found = self._cache.get(key)
         if found is not None:
             return found
@@ -260,16 +301,22 @@ class PrismGame:
         row = self._names(s)
         if action not in row:
             raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
-        dist = self._distribution(int(t.choices[s]) + row.index(action))
+        dist = self._distribution(int(t.choices[s]) + row.index(action), exact)
         for event in sorted(acting):
             effect = self.effects[event]
-            moved: dict[int, float] = {}
+            moved: dict[int, Any] = {}
             for u, p in dist.items():
                 c = int(effect[u])
-                for v, q in (self._distribution(c) if c >= 0 else {u: 1.0}).items():
-                    moved[v] = moved.get(v, 0.0) + p * q
+                for v, q in (self._distribution(c, exact) if c >= 0 else {u: 1}).items():
+                    moved[v] = moved.get(v, 0) + p * q
             dist = moved
-        out = tuple((self.states[u], p) for u, p in dist.items())
+        if exact:  # every state asked for in turn: made tuples once, not one by one
+            listed = self._cache.get("listed")
+            if listed is None:
+                listed = self._cache["listed"] = list(self.states)
+            out = tuple((listed[u], p) for u, p in dist.items())
+        else:
+            out = tuple((self.states[u], p) for u, p in dist.items())
         self._cache[key] = out
         return out
 
@@ -285,27 +332,6 @@ def _stormpy() -> Any:
             f"reading a PRISM file needs stormpy, which is not installed: {_INSTALL}"
         ) from exc
     return stormpy
-
-
-def _check_utf8(path: Path, where: str) -> None:
-    """Refuse a file that is not UTF-8 text, naming the first bad byte's place."""
-    from mitld_lp.files import rules as file_rules
-
-    try:  # a regular file, bounded, before Storm reads it
-        data = file_rules.read_bytes(path)
-    except file_rules.InputFileError as exc:
-        raise WorldError(f"{where}: {exc}") from None
-    except OSError as exc:
-        raise WorldError(f"{where}: cannot read: {exc.strerror or exc}") from None
-    try:
-        data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        raise WorldError(
-            f"{where}:{line}:{column}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
-            "a PRISM file is UTF-8"
-        ) from None
 
 
 def load_prism(
@@ -348,21 +374,20 @@ def load_prism(
     memory = default_max_memory() if max_memory is None else max_memory
     where = os.fspath(path)
     p = Path(path)
-    if not p.is_file():
-        raise WorldError(f"{where}: no such PRISM file")
     if p.suffix.lower() == ".jani":
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
-    _check_utf8(p, where)
+    depth = ExpressionDepth()
+    check_text(p, where, depth)  # before Storm's parser, which can crash on it
     stormpy = _stormpy()
-    program = _parse(stormpy, where, where)
+    program = parse_program(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
         hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
         raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
-    extra = _extra_labels(program, dict(define or {}), where)
+    extra = extra_labels(program, dict(define or {}), where, depth)
     if extra:
-        program = _with_labels(stormpy, p, extra, where)
+        program = with_labels(stormpy, p, extra, where)
     given = dict(constants or {})
     check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
@@ -384,12 +409,7 @@ def load_prism(
             f"(actions: {', '.join(sorted(actions)) or 'none'})"
         )
 
-    if given:
-        try:
-            with storm_quiet():
-                program, _ = stormpy.instantiate_constants(program, given)
-        except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            raise storm_error(exc, where) from None
+    program = with_constants(stormpy, program, given, where)
     try:
         with storm_quiet():
             plain = program.substitute_constants()
@@ -399,6 +419,10 @@ def load_prism(
     condition = decided_when(task, frozenset(defined)) if task is not None else False
     terminal = "" if condition is False else render(
         condition, {lab.name: str(lab.expression) for lab in plain.labels})
+    if terminal and depth.deepest(terminal) is not None:  # every state expanded instead
+        log.info("%s: the states where the task is decided are too deep an expression for "
+                 "Storm; all states are expanded", where)
+        terminal = ""
     program, action_names = name_unlabelled_commands(program, where, stormpy)
 
     def work() -> Tables:
@@ -435,61 +459,10 @@ def load_prism(
         effects=tables.effects,
         terminal=terminal,
         decided=tables.decided,
+        normalised=tables.normalised,
         _tables=tables,
+        recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
     )
-
-
-def _parse(stormpy: Any, file: str, where: str) -> Any:
-    try:
-        with storm_quiet():
-            return stormpy.parse_prism_program(file)
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
-
-
-_FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
-
-
-def _extra_labels(program: Any, define: dict[str, str], where: str) -> dict[str, str]:
-    """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
-    that no label shadows (``name -> name``), then ``define``."""
-    labels = {lab.name for lab in program.labels}
-    manager = program.expression_manager
-    extra: dict[str, str] = {}
-    for name in _FORMULA.findall(str(program)):
-        if name not in labels and manager.get_variable(name).has_boolean_type():
-            extra[name] = name
-    for name, text in define.items():
-        if not re.fullmatch(r"[A-Za-z_]\w*", name):
-            raise WorldError(f"label {name!r}: not a PRISM identifier")
-        if name in labels or name in extra:
-            what = "label" if name in labels else "formula"
-            raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
-        if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
-            raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
-        extra[name] = text
-    return extra
-
-
-def _with_labels(stormpy: Any, path: Path, extra: dict[str, str], where: str) -> Any:
-    """The program of ``path`` with ``label "name" = expression;`` appended for each
-    entry of ``extra`` (a copy in a temporary folder; the file is not changed)."""
-    text = path.read_text(encoding="utf-8")
-    first = text.count("\n") + 2
-    lines = [f'label "{name}" = {expression};' for name, expression in extra.items()]
-    with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
-        copy = Path(folder) / path.name
-        copy.write_text(text + "\n" + "\n".join(lines) + "\n", encoding="utf-8")
-        try:
-            with storm_quiet():
-                return stormpy.parse_prism_program(str(copy))
-        except (RuntimeError, stormpy.exceptions.StormError) as exc:
-            error = str(storm_error(exc, where))
-    m = re.match(rf"{re.escape(where)}:(\d+):(?:\d+: )?(.*)$", error)
-    if m and int(m[1]) >= first:
-        name = list(extra)[min(int(m[1]) - first, len(extra) - 1)]
-        raise WorldError(f"label {name!r} = {extra[name]!r}: {m[2]}")
-    raise WorldError(error)
 
 
 def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
@@ -502,33 +475,16 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
     checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
     PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
-    model is built without the checks (its sums are then checked by
-    :func:`~mitld_lp.worlds.prism_tables.read_model`, with the tolerance)."""
-    formula = None
-    if terminal:
-        with storm_quiet():
-            formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
-        formula = formula.get_raw_formula()
-
+    model is built without the checks, with Storm's out-of-bounds state (the exact build
+    stopped at the first sum it did not take, before it had checked every update):
+    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) the
+    sums, with the tolerance, and refuses an update that reached that state."""
     # Two choices of one state named by one action are told apart by the commands they
-    # come from (Storm's choice origins, a tenth of the build): that takes a module with
-    # two commands of one action (every command has an action here, and a choice of an
-    # action joins one enabled command of it from each module that has it).
-    origins = any(
-        len(names) != len(set(names))
-        for names in ([c.action_name for c in module.commands] for module in program.modules)
-    )
+    # come from (Storm's choice origins, a tenth of the build): only where needed.
+    origins = needs_origins(program)
 
     def options(checks: bool) -> Any:
-        o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
-        o.set_exploration_checks(checks)
-        # Every label, always: a label left out of the build would be false in every state.
-        o.set_build_all_labels()
-        o.set_build_choice_labels()
-        if origins:
-            o.set_build_choice_origins()
-        o.set_build_state_valuations()
-        return o
+        return builder_options(stormpy, program, terminal, checks=checks, origins=origins)
 
     errors = (RuntimeError, stormpy.exceptions.StormError)
     try:
@@ -547,8 +503,8 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
             if total is None or abs(total - 1) > SUM_TOLERANCE:
                 raise storm_error(exc, where, program, plain) from None
             log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
-                     "the rest of the checks are read_model's", where, show_sum(total),
-                     SUM_TOLERANCE)
+                     "built without Storm's checks, the sums checked on the model",
+                     where, show_sum(total), SUM_TOLERANCE)
         try:
             with storm_quiet():
                 model = stormpy.build_model(program, options=options(False))
@@ -562,7 +518,7 @@ def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset
     built = set(model.labeling.get_labels())
     if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
         raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    known = {lab.name for lab in program.labels} | {"init", "deadlock"}
+    known = {lab.name for lab in program.labels} | {"init", "deadlock", OUT_OF_BOUNDS}
     stopped = sorted(built - known) if terminal else []
     commands = command_names(program)
 

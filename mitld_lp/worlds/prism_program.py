@@ -22,18 +22,22 @@ import contextlib
 import logging
 import math
 import re
+import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from fractions import Fraction
+from pathlib import Path
 from typing import Any
 
 from mitld_lp.util.quiet import native_quiet
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_depth import ExpressionDepth
 
 __all__ = [
     "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
     "SUM_TOLERANCE", "show_sum", "storm_sum", "check_constants", "command_names",
-    "name_unlabelled_commands",
+    "name_unlabelled_commands", "parse_program", "extra_labels", "with_labels",
+    "needs_origins", "builder_options", "with_constants",
 ]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
@@ -352,3 +356,113 @@ def name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[An
             return program.label_unlabelled_commands(fresh), names
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
         raise storm_error(exc, where) from None
+
+
+# --------------------------------------------------------------------------- the build
+
+
+def parse_program(stormpy: Any, file: str, where: str) -> Any:
+    """Storm's parse of the PRISM file ``file`` (errors name ``where``)."""
+    try:
+        with storm_quiet():
+            return stormpy.parse_prism_program(file)
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None
+
+
+_FORMULA = re.compile(r"^formula (\w+) = ", re.MULTILINE)
+
+
+def extra_labels(program: Any, define: dict[str, str], where: str,
+                 depth: ExpressionDepth | None = None) -> dict[str, str]:
+    """``name -> expression`` of the labels to add: every Boolean ``formula`` of the file
+    that no label shadows (``name -> name``), then ``define`` (each no deeper than
+    Storm's parser takes, counted with the file's formulas: ``depth``, when given)."""
+    labels = {lab.name for lab in program.labels}
+    manager = program.expression_manager
+    extra: dict[str, str] = {}
+    for name in _FORMULA.findall(str(program)):
+        if name not in labels and manager.get_variable(name).has_boolean_type():
+            extra[name] = name
+    for name, text in define.items():
+        if not re.fullmatch(r"[A-Za-z_]\w*", name):
+            raise WorldError(f"label {name!r}: not a PRISM identifier")
+        if name in labels or name in extra:
+            what = "label" if name in labels else "formula"
+            raise WorldError(f"label {name!r}: {where} already has a {what} {name!r}")
+        if not isinstance(text, str) or not text.strip() or ";" in text or '"' in text:
+            raise WorldError(f"label {name!r}: must be one PRISM expression, got {text!r}")
+        deep = None if depth is None else depth.deepest(text)
+        if deep is not None:
+            raise WorldError(f"label {name!r}: {deep.message()}")
+        extra[name] = text
+    return extra
+
+
+def with_labels(stormpy: Any, path: Path, extra: dict[str, str], where: str) -> Any:
+    """The program of ``path`` with ``label "name" = expression;`` appended for each
+    entry of ``extra`` (a copy in a temporary folder; the file is not changed)."""
+    text = path.read_text(encoding="utf-8")
+    first = text.count("\n") + 2
+    lines = [f'label "{name}" = {expression};' for name, expression in extra.items()]
+    with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
+        copy = Path(folder) / path.name
+        copy.write_text(text + "\n" + "\n".join(lines) + "\n", encoding="utf-8")
+        try:
+            with storm_quiet():
+                return stormpy.parse_prism_program(str(copy))
+        except (RuntimeError, stormpy.exceptions.StormError) as exc:
+            error = str(storm_error(exc, where))
+    m = re.match(rf"{re.escape(where)}:(\d+):(?:\d+: )?(.*)$", error)
+    if m and int(m[1]) >= first:
+        name = list(extra)[min(int(m[1]) - first, len(extra) - 1)]
+        raise WorldError(f"label {name!r} = {extra[name]!r}: {m[2]}")
+    raise WorldError(error)
+
+
+def with_constants(stormpy: Any, program: Any, given: Mapping[str, Any], where: str) -> Any:
+    """The program with its open constants given their values (Storm's errors name
+    ``where``); the program itself when none is given."""
+    if not given:
+        return program
+    try:
+        with storm_quiet():
+            return stormpy.instantiate_constants(program, dict(given))[0]
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where) from None
+
+
+def needs_origins(program: Any) -> bool:
+    """Whether two choices of one state may carry one action's name, to be told apart by
+    the commands they come from (Storm's choice origins, a tenth of the build): that
+    takes a module with two commands of one action (every command has an action here,
+    and a choice of an action joins one enabled command of it from each module that has
+    it)."""
+    return any(
+        len(names) != len(set(names))
+        for names in ([c.action_name for c in module.commands] for module in program.modules)
+    )
+
+
+def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
+                    origins: bool) -> Any:
+    """Storm's builder options for a world: every label (a label left out of the build
+    would be false in every state), choice labels, state valuations, the choice origins
+    when ``origins``, exploration checks when ``checks`` (without them Storm's
+    out-of-bounds state, so that an update out of a variable's range stays visible), and
+    no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
+    none)."""
+    formula = None
+    if terminal:
+        with storm_quiet():
+            formula = stormpy.parse_properties(f"Pmax=? [F {terminal}]", program)[0]
+        formula = formula.get_raw_formula()
+    o = stormpy.BuilderOptions([formula]) if formula is not None else stormpy.BuilderOptions()
+    o.set_exploration_checks(checks)
+    o.set_add_out_of_bounds_state(not checks)  # range errors kept visible
+    o.set_build_all_labels()
+    o.set_build_choice_labels()
+    if origins:
+        o.set_build_choice_origins()
+    o.set_build_state_valuations()
+    return o

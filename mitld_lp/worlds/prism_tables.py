@@ -12,6 +12,7 @@ action in a state) are looked at one by one.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import tarfile
 import tempfile
@@ -23,12 +24,22 @@ import numpy as np
 
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
-from mitld_lp.worlds.successors import distribution_faults
+from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 
-__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION"]
+__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION", "OUT_OF_BOUNDS",
+           "OUT_OF_BOUNDS_BIT"]
+
+log = logging.getLogger("mitld_lp.worlds.prism")
 
 DEADLOCK_ACTION = "deadlock"
 """The name of the self-loop Storm adds where no PRISM command is enabled."""
+
+OUT_OF_BOUNDS = "out_of_bounds"
+"""Storm's label of its out-of-bounds state (asked for when its checks are off), where an
+update that leaves a variable's range goes."""
+
+OUT_OF_BOUNDS_BIT = "_OutOfBoundsBit"
+"""The variable Storm adds with that state: not the program's."""
 
 DECIDED_ACTION = "decided"
 """The name of the self-loop of a state where the task is decided (not expanded:
@@ -56,6 +67,8 @@ class Tables:
         effects: ``event -> n`` choice indices: the event's choice at each state, -1
             where its command is not enabled.
         decided: how many states were not expanded because the task is decided there.
+        normalised: the choices whose probabilities summed to 1 only within PRISM's
+            tolerance, divided by their sums (None when there were none).
     """
 
     variables: tuple[str, ...]
@@ -71,6 +84,7 @@ class Tables:
     action_index: np.ndarray
     effects: Mapping[str, np.ndarray]
     decided: int = 0
+    normalised: Normalisation | None = None
 
 
 def _indices(bits: Any) -> np.ndarray:
@@ -204,6 +218,7 @@ def _valuations(model: Any) -> tuple[tuple[str, ...], Valuations]:
     n = model.nr_states
     valuations = model.state_valuations
     order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
+    order = tuple(name for name in order if name != OUT_OF_BOUNDS_BIT)  # (see _build)
     by_name = {v.name: v for v in valuations.get_all_variables()}
     values = np.zeros((n, len(order)), dtype=np.int64)
     booleans = []
@@ -256,10 +271,14 @@ def read_model(
     deadlock self-loop.  ``origin(choice)`` names the commands a choice comes from, used
     only where two choices of a state would have the same name.  ``decided``: Storm's
     label of the states it did not expand (terminal states); their self-loop is named
-    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for a state where only events
-    are enabled, an event with two enabled commands in a state, a negative probability,
+    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for an update that reached
+    Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
+    events are enabled, an event with two enabled commands in a state, a negative probability,
     or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
-    (:data:`mitld_lp.worlds.prism_program.SUM_TOLERANCE`).
+    (:data:`mitld_lp.worlds.prism_program.SUM_TOLERANCE`).  A distribution within that
+    tolerance but not within the game's own
+    (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
+    and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
     variables, states = _valuations(model)
     choices, branches, targets, probabilities = _structure(model, where)
@@ -287,6 +306,15 @@ def read_model(
         code[unlabelled] = len(table) - 1
         n_decided = int(np.count_nonzero(unlabelled))
 
+    if OUT_OF_BOUNDS in model.labeling.get_labels():  # Storm built without its checks
+        outside = np.zeros(n, dtype=bool)
+        outside[_indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
+        choice_of = np.repeat(np.arange(m), np.diff(branches))  # per branch
+        c = int(choice_of[np.flatnonzero(outside[targets] & ~outside[state_of[choice_of]])[0]])
+        raise WorldError(f"{where}: at state {show(int(state_of[c]))}, action "
+                         f"{table[int(code[c])]!r}: an update gives a variable a value "
+                         "outside its range")
+
     bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
@@ -296,6 +324,10 @@ def read_model(
         if negative.size:
             raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
         raise WorldError(f"{at}: probabilities sum to {show_sum(float(row.sum()))}, not 1")
+    probabilities, rows, largest = normalise_rows(np.diff(branches), probabilities)
+    normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
+    if normalised is not None:
+        log.info("%s", normalised)
 
     effects: dict[str, np.ndarray] = {}
     robot = np.ones(m, dtype=bool)
@@ -357,4 +389,5 @@ def read_model(
         action_index=action_index,
         effects=effects,
         decided=n_decided,
+        normalised=normalised,
     )

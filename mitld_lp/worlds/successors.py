@@ -10,13 +10,16 @@ letter of the protocol with the same tolerance (:func:`strict_distribution_fault
 probabilities in (0, 1], distinct next states); :class:`mitld_lp.worlds.game.ExplicitGame`
 reads its tables with :func:`table_distribution` (repeated next states merged, zeros
 dropped); a PRISM world's tables are checked in a batch with PRISM's own tolerance
-(:mod:`mitld_lp.worlds.prism_tables`).
+(:mod:`mitld_lp.worlds.prism_tables`), and a row that PRISM's tolerance accepts but this
+one does not is divided by its sum there (:func:`normalise_rows`), which the world
+declares as its :class:`Normalisation`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from numbers import Real
 from typing import Any
 
@@ -24,6 +27,8 @@ import numpy as np
 
 __all__ = [
     "PROBABILITY_TOLERANCE",
+    "Normalisation",
+    "normalise_rows",
     "is_real",
     "place",
     "as_probabilities",
@@ -82,6 +87,51 @@ def distribution_faults(
     total = np.bincount(row, weights=np.where(wrong, 0.0, probs), minlength=n)
     bad |= np.abs(total - 1.0) > tolerance
     return np.flatnonzero(bad)
+
+
+@dataclass(frozen=True, slots=True)
+class Normalisation:
+    """The rows of a world's table whose probabilities summed to 1 only within a wider
+    tolerance than :data:`PROBABILITY_TOLERANCE` (PRISM's ``1e-5``), each divided by its
+    sum when the world was read (:func:`normalise_rows`): every answer is then for the
+    normalised world.
+
+    Attributes:
+        source: the file the rows come from.
+        rows: how many rows were divided by their sums.
+        largest: the largest ``|sum - 1|`` among them, the relative deviation of a sum
+            from 1; each probability of such a row changed by the factor ``1 / sum``,
+            within ``1 / (1 - largest)`` of 1.
+        tolerance: the rule the rows were read with (``|sum - 1| <= tolerance``).
+    """
+
+    source: str
+    rows: int
+    largest: float
+    tolerance: float
+
+    def __str__(self) -> str:
+        rows = "1 row" if self.rows == 1 else f"{self.rows:,} rows"
+        return (f"{rows} of {self.source} summed to 1 only within {self.tolerance:g} "
+                f"(largest |sum - 1| = {self.largest:.3g}), each divided by its sum: "
+                "the answer is for the normalised world")
+
+
+def normalise_rows(lengths: np.ndarray, probs: np.ndarray
+                   ) -> tuple[np.ndarray, int, float]:
+    """Rows (as for :func:`distribution_faults`, already checked with a wider tolerance)
+    whose total is more than :data:`PROBABILITY_TOLERANCE` from 1, each divided by its
+    total: returns the probabilities, how many rows changed and their largest
+    ``|total - 1|`` (``probs`` itself, 0 and 0.0 when none did)."""
+    n = lengths.size
+    row = np.repeat(np.arange(n), lengths)
+    total = np.bincount(row, weights=probs, minlength=n)
+    deviation = np.abs(total - 1.0)
+    off = deviation > PROBABILITY_TOLERANCE
+    if not off.any():
+        return probs, 0, 0.0
+    return (probs / np.where(off, total, 1.0)[row], int(np.count_nonzero(off)),
+            float(deviation[off].max()))
 
 
 def _short(value: Any) -> str:
