@@ -18,9 +18,11 @@ every bottom strongly connected component of the chain whose automaton states ar
 persistent (a run that enters it stays in it and keeps the safety part for ever), and,
 for a randomised controller of a task with a safety part, on every state reached after
 drawing *keep* (labelled ``keeping`` too); so ``P=? [F "accept"]`` is the probability
-that the run is accepted, which equals the synthesis's ``lower`` (for a minimum solved
-as one, on the task's own automaton, ``P=? [F ("accept" | "truncated")]`` equals its
-``upper``). ``reject`` where the
+that the run is accepted: the controller's value, inside the synthesis's certified
+bracket, ``lower`` its bound from below (for a minimum solved as one, on the task's own
+automaton, ``P=? [F ("accept" | "truncated")]`` is bounded from above by ``upper``; for a
+minimised task read back from its complement, ``P=? [F "accept"]`` from below by the
+complement's lower bound, ``result.complement[0]``). ``reject`` where the
 task is lost (the controller stops), ``truncated`` as above, ``staying`` where a
 randomised controller keeps to an end component, and each world proposition that holds
 (a proposition named like one of these labels is written ``world_<name>``). Each state

@@ -287,7 +287,8 @@ def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
 
 
 _TIE = 1e-12
-"""Two values closer than this are equal when the tree may pick among actions."""
+"""Two values closer than this, relative to the larger, are equal when the tree may pick
+among actions (relative: two choices worth 1e-30 and 2.6e-30 are not tied)."""
 
 
 def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Hashable]] | None:
@@ -309,7 +310,7 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
     minimum = result.sense == "min"
     q = mdp.matrix @ v
     cs = mdp.choice_state()
-    tight = np.abs(q - v[cs]) <= _TIE
+    tight = np.abs(q - v[cs]) <= _TIE * np.maximum(np.abs(q), np.abs(v[cs]))
     goal = np.asarray(result.acceptance.goal, dtype=bool)
     # rank: steps to the goal along tight choices (a backward search over their edges)
     coo = mdp.matrix.tocoo()

@@ -41,8 +41,12 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     t2 = time.perf_counter()
     mdp = belief.mdp
     # an ordinary MDP with a reachability target: solved and certified as the plain
-    # route's product is (both truncation models, the Bellman check over every state)
-    low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2)
+    # route's product is (both truncation models, bounds checked in exact arithmetic)
+    from mitld_lp.solvers.certify import model_eta
+
+    low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2,
+                             eta=model_eta(belief.sta, history=True),
+                             complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(
         route=SENSED, model=model, objective=posed.problem.objective, method=s.method,
@@ -50,7 +54,8 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
         sensors=dict(belief.sensors),
         controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
-        **from_models(low, high, mdp.initial, posed.problem.objective))
+        **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
+                      truncated=bool(mdp.truncated.any())))
     log.info("sensed synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result
