@@ -35,9 +35,12 @@ def test_a_long_native_call_does_not_outlive_the_limit(tmp_path: Path) -> None:
                           timeout=600, cwd=ROOT, check=False)
     took = time.monotonic() - start
     assert done.returncode == 3, done.stderr
-    assert json.loads(done.stdout) == {  # the one error object (docs/results.md)
-        "status": "time_limit", "error": "time limit of 2 s reached (inside a long native "
-        "call)", "exit": 3, "time_limit": 2.0}
+    reply = json.loads(done.stdout)  # the one error object (docs/results.md)
+    # on a loaded machine the limit can fall before the native call starts (the law's
+    # import, the automaton); either way the run stops at the limit with the one object
+    assert reply.pop("error") in {"time limit of 2 s reached (inside a long native call)",
+                                  "time limit of 2 s reached"}, reply
+    assert reply == {"status": "time_limit", "exit": 3, "time_limit": 2.0}
     assert "stopped: time limit of 2 s reached" in done.stderr
     assert "Traceback" not in done.stderr
     # one survival evaluation of this law alone holds the lock for about half a minute
