@@ -21,6 +21,15 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA
     from mitld_lp.automata.sta import STA, make_sta
     from mitld_lp.automata.translate import to_dta
+    from mitld_lp.controllers.format import ControllerFileError
+    from mitld_lp.controllers.kinds import (
+        ConstrainedController,
+        Controller,
+        ControllerLike,
+        SensedController,
+        load_controller,
+    )
+    from mitld_lp.controllers.observation import Observation, RunStatus
     from mitld_lp.distributions.fit import fit_law
     from mitld_lp.logic.parser import ParseError, parse, parse_distribution
     from mitld_lp.logic.syntax import (
@@ -48,14 +57,6 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.result import Result, SynthesisResult
     from mitld_lp.routes.constraints import Constraint, ConstraintError, parse_constraint
     from mitld_lp.routes.pareto import pareto
-    from mitld_lp.running.controller import (
-        Controller,
-        ControllerFileError,
-        ControllerLike,
-        Observation,
-        RunStatus,
-    )
-    from mitld_lp.running.randomised import ConstrainedController, load_controller
     from mitld_lp.running.simulate import simulate
     from mitld_lp.sweep import load_sweep, run_sweep
     from mitld_lp.synthesis import solve, synthesize, synthesize_constrained
@@ -67,10 +68,10 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "STA": "mitld_lp.automata.sta",
     "make_sta": "mitld_lp.automata.sta",
     "to_dta": "mitld_lp.automata.translate",
-    "Controller": "mitld_lp.running.controller",
-    "ControllerFileError": "mitld_lp.running.controller",
-    "Observation": "mitld_lp.running.controller",
-    "RunStatus": "mitld_lp.running.controller",
+    "Controller": "mitld_lp.controllers.kinds",
+    "ControllerFileError": "mitld_lp.controllers.format",
+    "Observation": "mitld_lp.controllers.observation",
+    "RunStatus": "mitld_lp.controllers.observation",
     "ExplicitGame": "mitld_lp.worlds.game",
     "Game": "mitld_lp.worlds.game",
     "GridWorld": "mitld_lp.worlds.grid",
@@ -104,9 +105,10 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "Result": "mitld_lp.result",
     "SynthesisResult": "mitld_lp.result",
     "synthesize": "mitld_lp.synthesis",
-    "ConstrainedController": "mitld_lp.running.randomised",
-    "load_controller": "mitld_lp.running.randomised",
-    "ControllerLike": "mitld_lp.running.controller",
+    "ConstrainedController": "mitld_lp.controllers.kinds",
+    "load_controller": "mitld_lp.controllers.kinds",
+    "ControllerLike": "mitld_lp.controllers.kinds",
+    "SensedController": "mitld_lp.controllers.kinds",
     "solve": "mitld_lp.synthesis",
     "synthesize_constrained": "mitld_lp.synthesis",
     "pose": "mitld_lp.problem",
@@ -203,6 +205,7 @@ __all__ = [
     "simulate",
     "ConstrainedController",
     "ControllerLike",
+    "SensedController",
     "load_controller",
     "pose",
     "solve",

@@ -39,13 +39,19 @@ some 25 GB and hours before the budget acted; 200,000 is about 1 GB and minutes.
 TOL = 1e-9
 """Accuracy asked of the solvers (LP gap and feasibility, interval-iteration gap)."""
 
-PRECISION = 1e-6
-"""Relative precision asked of interval iteration beside :data:`TOL`: a bracket is
-closed when its gap is below both ``TOL`` and ``PRECISION`` times its lower bound, so a
-rare value (1e-30) is known to six digits, as Storm's sound methods report by default."""
-
 CERTIFY_TOL = 1e-6
-"""How far two routes to one value may differ for the answer to count as certified."""
+"""How far a value computed in floating point to a solver's tolerance (the constrained
+LP's optimum) may lie below a certified bound and still count as consistent with it (the
+robust constrained route's check); every other bound is checked in exact arithmetic
+(:mod:`mitld_lp.solvers.certify`), with no tolerance."""
+
+PRECISION = 1e-6
+"""The relative precision asked (Storm's sound mode's default; ``--precision``,
+``[solve] precision``): a certified bracket is at most ``PRECISION * lower`` wide where
+no truncation is involved (with truncation, the solver's part of its width,
+docs/results.md), and interval iteration closes a bracket when its gap is below both
+:data:`TOL` and ``PRECISION`` times its lower bound, so a rare value (1e-30) is known to
+six digits."""
 
 SOLVER = "CLARABEL"
 """The LP solver, called directly on the sparse matrices (no cvxpy needed)."""

@@ -71,9 +71,11 @@ class Settings:
     ``decompose``: ``None`` lets the route choose (block LPs in topological order for
     the plain route); ``True`` asks for the block decomposition, ``False`` for one LP.
     ``truncation``: fixed truncation points ``((event, steps), ...)`` instead of the
-    epsilon budget.  A budget left ``None`` (``max_states``, ``max_automaton_states``,
-    ``max_memory``, ``time_limit``) is the model file's ``[budgets]`` one, else the
-    default (:meth:`resolved`).  The others are :func:`mitld_lp.synthesis.synthesize`'s.
+    epsilon budget.  ``precision``: the relative width a certified bracket may have
+    (``upper - lower <= precision * lower``; with truncation, the solver's part).  A
+    budget left ``None`` (``max_states``, ``max_automaton_states``, ``max_memory``,
+    ``time_limit``) is the model file's ``[budgets]`` one, else the default
+    (:meth:`resolved`).  The others are :func:`mitld_lp.synthesis.synthesize`'s.
     """
 
     method: str = "lp"
@@ -91,12 +93,17 @@ class Settings:
     certify_tol: float = defaults.CERTIFY_TOL
     progress: bool | None = None  # bars: None on a terminal only (mitld_lp.util.progress)
     exact: bool = False  # the optimum as a fraction too (mitld_lp.exact)
+    precision: float = defaults.PRECISION  # the relative precision asked (defaults)
 
     def identity(self) -> dict[str, Any]:
-        """The settings that change an answer (part of a sweep's identity)."""
+        """The settings that change an answer (part of a sweep's identity; the precision
+        only when it is not the default, so that results files written before it keep
+        their identity)."""
         return {"method": self.method, "solver": self.solver, "backend": self.backend,
                 "clock_reduction": self.clock_reduction,
-                "decompose": self.decompose is not False}
+                "decompose": self.decompose is not False,
+                **({} if self.precision == defaults.PRECISION else
+                   {"precision": self.precision})}
 
     @property
     def truncation_map(self) -> dict[str, int] | None:
@@ -128,9 +135,9 @@ class Settings:
                 and 0 <= self.time_limit < float("inf")):
             raise ProblemError(f"time_limit: must be a finite number of seconds >= 0 or "
                                f"None, got {self.time_limit!r}")
-        for name in ("tol", "certify_tol"):
+        for name in ("tol", "certify_tol", "precision"):
             v = getattr(self, name)
-            if not (isinstance(v, int | float) and 0 < v < 1):
+            if isinstance(v, bool) or not (isinstance(v, int | float) and 0 < v < 1):
                 raise ProblemError(f"{name}: must be a number in (0, 1), got {v!r}")
         for name in ("max_states", "max_automaton_states"):
             v = getattr(self, name)

@@ -5,6 +5,7 @@ notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
 
 from __future__ import annotations
 
+from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from html import escape
 from typing import Any
 
@@ -17,7 +18,33 @@ from mitld_lp.worlds.names import state_record
 #: import, even for types only, would make a circle).
 Result = Any
 
-__all__ = ["POLICY_COLUMNS", "SUMMARY_KEYS", "policy_table", "summary", "html"]
+__all__ = ["POLICY_COLUMNS", "SUMMARY_KEYS", "policy_table", "summary", "html",
+           "probability_text", "bracket_text"]
+
+
+def probability_text(x: float, direction: str = "nearest") -> str:
+    """A probability as text: 7 decimals, or 7 significant digits below 1e-3 (and for
+    0 < x, when 7 decimals would print 0).  ``direction``: ``"down"`` / ``"up"``
+    rounds the printed digits toward minus / plus infinity (a bound printed so that it
+    stays a bound), ``"nearest"`` as Python's formatting does."""
+    if x != x or x in (float("inf"), float("-inf")):
+        return str(x)
+    fixed = x == 0 or abs(x) >= 1e-3
+    if direction == "nearest":
+        return f"{x:.7f}" if fixed else f"{x:.7g}"
+    d = Decimal(x)  # exact
+    rounding = ROUND_FLOOR if direction == "down" else ROUND_CEILING
+    if fixed:
+        return f"{d.quantize(Decimal('1e-7'), rounding=rounding):.7f}"
+    q = d.quantize(Decimal(1).scaleb(d.adjusted() - 6), rounding=rounding)
+    # q has 7 significant digits: the nearest double prints them back as Python does
+    return f"{float(q):.7g}" if abs(q) < Decimal("1e-3") else f"{q:.7f}"
+
+
+def bracket_text(lower: float, upper: float) -> str:
+    """``[lower, upper]`` printed outward: the lower end's digits rounded down, the
+    upper end's up, so that the printed bracket contains the certified one."""
+    return f"[{probability_text(lower, 'down')}, {probability_text(upper, 'up')}]"
 
 POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
                   "accepting_component")
@@ -33,18 +60,18 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     Keys: ``game_state`` (the game's own state; a PRISM world's as an object of its
     variables by name, :func:`mitld_lp.worlds.names.state_record`), ``automaton_state``
     (the obligation still to satisfy, as formula text), ``pending`` (the events that
-    have not happened,
-    sorted), ``clock`` (steps counted for the pending events, capped where their hazards
-    stop changing), ``action`` (the policy's action), ``value`` (the probability that
-    the policy satisfies the task from there, truncation counted as failure: exact, from
-    the linear solve on the policy's Markov chain that certified it,
-    ``result.lower_model.policy_values``), ``accepting_component`` (whether the state
-    lies in an accepting end component of a task with a safety part: the task is then
-    kept by playing ``action`` forever, an action that never leaves the component;
-    always false for a co-safe task).  For ``objective = "min"`` ``value`` is the most
-    the task can happen under the policy from there (truncation counted as the task
-    happening): the policy's exact value, or, where the minimum is the complement's
-    maximum read back (``result.complemented``), ``1 -`` the complement's.
+    have not happened, sorted), ``clock`` (steps counted for the pending events, capped
+    where their hazards stop changing), ``action`` (the policy's action), ``value`` (the
+    probability that the policy satisfies the task from there, truncation counted as
+    failure: from the linear solve on the policy's Markov chain that the certificate
+    starts from, in floating point, ``result.lower_model.policy_values``),
+    ``accepting_component`` (whether the state lies in an accepting end component of a
+    task with a safety part: the task is then kept by playing ``action`` forever, an
+    action that never leaves the component; always false for a co-safe task). For
+    ``objective = "min"`` ``value`` is the most the task can happen under the policy
+    from there (truncation counted as the task happening): the policy's value, or, where
+    the minimum is the complement's maximum read back (``result.complemented``), ``1 -``
+    the complement's.
     """
     if result.route == "constrained":
         return randomised_table(result)
@@ -113,7 +140,8 @@ SUMMARY_KEYS = (
     "product_states", "dta_states", "epsilon", "epsilon_achieved", "truncation_points",
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
-    "randomized_states", "message", "sensors", "exact", "exact_bracket",
+    "randomized_states", "message", "sensors", "complement", "precision", "width", "exact",
+    "exact_bracket",
 )
 
 
@@ -121,8 +149,13 @@ def summary(result: Any) -> dict[str, Any]:
     """A JSON-ready record of any synthesis result (the command line's ``--json``), with
     the keys :data:`SUMMARY_KEYS` on every route (docs/results.md).
 
-    ``lower``, ``upper``: the certified bracket (in the task's terms also for
-    ``objective = "min"``); ``value``: the method's optimum (the lower model's);
+    ``lower``, ``upper``: the certified bracket, full-precision floats that hold for the
+    model's exact value (in the task's terms also for ``objective = "min"``);
+    ``complement``: for a minimum read back from the complement's maximum, the
+    complement's bracket ``[a, b]`` (``1 - value`` lies in it), else ``None``;
+    ``precision``: the relative width asked; ``width``: ``total``, ``truncation`` and
+    ``solver`` parts of ``upper - lower``; ``value``: the method's optimum (the lower
+    model's);
     ``states`` / ``choices`` / ``transitions``: the model the solver worked on (for the
     constrained route the merged product, ``product_states`` the product's);
     ``lp`` and ``iteration``: the lower model's solver records where the route has them.
@@ -143,6 +176,8 @@ def summary(result: Any) -> dict[str, Any]:
         checks=[{"name": c.name, "ok": c.passed, "detail": c.detail} for c in result.checks],
         dta_states=result.automaton.n_states,
         sensors={a: s.detect for a, s in result.sensors.items()},
+        complement=None if result.complement is None else list(result.complement),
+        precision=result.precision, width=dict(result.width),
         **_exact_part(result.exact),
     )
     if result.route == "constrained":
@@ -192,7 +227,8 @@ def _constrained_part(result: Any) -> dict[str, Any]:
         "transitions": merged.n_transitions,
         "constraints": [
             {"constraint": str(c.constraint), "value": c.value, "bound": c.constraint.bound,
-             "holds": c.holds, **({"feasible_bound": c.feasible_bound} if infeasible else {})}
+             "holds": c.holds, "certified": list(c.bounds), "miss": c.miss,
+             **({"feasible_bound": c.feasible_bound} if infeasible else {})}
             for c in result.constraints],
         "then": result.then, "secondary": result.secondary,
         "expected_steps": result.steps, "message": result.message,
@@ -205,7 +241,7 @@ def html(result: Result) -> str:
     rows = [
         ("model", "" if result.model is None else result.model.name),
         ("spec", "" if result.model is None else str(result.model.spec)),
-        ("optimum in", f"[{result.lower:.7f}, {result.upper:.7f}]"),
+        ("optimum in", bracket_text(result.lower, result.upper)),
         ("certified", "yes" if result.certified else "NO: " + "; ".join(
             c.name for c in result.failed_checks)),
         ("status", str(result.status)),

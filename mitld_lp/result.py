@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from mitld_lp.model import Model
     from mitld_lp.solvers.result import Status
 
-__all__ = ["Result", "SynthesisResult", "from_models"]
+__all__ = ["Result", "SynthesisResult", "from_models", "precision_check"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -45,11 +45,14 @@ class Result:
     ``lower``: what the returned controller achieves in the real, untruncated world
     (for a band, whatever law of the band the events follow; with constraints, each
     constraint holding); ``upper``: what no policy beats; the optimum lies in between.
-    For ``objective="min"`` ``upper`` is what the controller guarantees at most,
-    ``lower`` what no policy goes below: solved as a minimum on the task's own
-    automaton (``sense == "min"``: a co-safe task on the plain route), or read back
-    from the complement's maximum (``Pmin(task) = 1 - Pmax(not task)``,
-    :attr:`complemented`).  ``value``: the method's
+    Both hold in exact arithmetic for the model as written, its decimal probabilities
+    (:mod:`mitld_lp.solvers.certify`).  For ``objective="min"`` ``upper`` is what the
+    controller guarantees at most, ``lower`` what no policy goes below: solved as a
+    minimum on the task's own automaton (``sense == "min"``: a co-safe task on the plain
+    route), or read back from the complement's maximum (``Pmin(task) = 1 - Pmax(not
+    task)``, :attr:`complemented`), ``complement`` then the complement's bracket.
+    ``exact``: with ``exact=True`` the optimum as fractions, the bracket then their
+    floats rounded outward.  ``value``: the method's
     optimum (the lower model's).  ``checks``: every certification check, each once;
     ``certified``: all passed.  ``mdp``: the model the solver worked on (an interval MDP
     for a band; for constraints the product, ``merged`` the model the LP solved).
@@ -93,6 +96,14 @@ class Result:
     # sensors that miss events: each sensed event's sensor, the information-state product
     sensors: Mapping[str, Any] = field(default_factory=dict)
     belief: Any = None
+    # the certificate's parts: for a minimum read back from the complement's maximum,
+    # the complement's own bracket (1 - the task's probability lies in it, kept with its
+    # digits where the task's bracket rounds to 1); the relative precision asked; the
+    # bracket's width split into the truncation's part (the two models' optima apart)
+    # and the solver's (the certificates' slack)
+    complement: tuple[float, float] | None = None
+    precision: float = float("nan")
+    width: Mapping[str, float] = field(default_factory=dict)
     # exact=True: the optimum as fractions (mitld_lp.exact.ExactAnswer); lower and upper
     # are then its two fractions rounded outward
     exact: Any = None
@@ -149,8 +160,9 @@ class Result:
 
     def __repr__(self) -> str:
         name = None if self.model is None else self.model.name
-        return (f"Result(route={self.route!r}, model={name!r}, lower={self.lower:.7g}, "
-                f"upper={self.upper:.7g}, certified={self.certified}, "
+        lower, upper = report.bracket_text(self.lower, self.upper)[1:-1].split(", ")
+        return (f"Result(route={self.route!r}, model={name!r}, lower={lower}, "
+                f"upper={upper}, certified={self.certified}, "
                 f"status={str(self.status)!r}, states={self.mdp.n_states})")
 
     def _repr_html_(self) -> str:
@@ -175,41 +187,79 @@ class Result:
 SynthesisResult = Result
 
 
-def from_models(lower_model: Any, upper_model: Any, initial: int,
-                objective: str, sense: str = "max") -> dict[str, Any]:
-    """The answer's fields read from two solved models (plain and robust routes): the
-    lower model's policy value and the upper model's sound upper bound, in the task's
-    terms; the status is ``OPTIMAL`` when both solves succeeded, else the first other;
-    every check once (the two models are one when nothing is truncated; otherwise each
-    check's name says which model it checked).  ``sense="min"``: the models were
-    minimised on the task's own automaton, the first (the controller's) being the upper
-    model, whose policy value is the bracket's upper end, the second the lower model,
-    whose iteration lower bound is its lower end."""
+def from_models(first: Any, second: Any, initial: int, objective: str,
+                precision: float = float("nan"), *, truncated: bool = False,
+                sense: str = "max", exact: Any = None) -> dict[str, Any]:
+    """The answer's fields read from two solved models (plain and robust routes):
+    ``first`` the controller's, ``second`` the bound's (for a maximum the lower and the
+    upper truncation model, for a minimum solved as one, ``sense="min"``, the upper then
+    the lower: :func:`mitld_lp.routes.plain.solve_models`; one object when nothing is
+    truncated).  The bracket is the lower truncation model's certified lower bound and
+    the upper one's certified upper bound (``bounds``: for a maximum the policy's value
+    and the optimum, for a minimum the optimum and the policy's value), in the task's
+    terms (a minimum solved as the complement's maximum is read back, rounded outward,
+    with the complement's bracket kept); with an ``exact`` answer
+    (:class:`mitld_lp.exact.ExactAnswer`) its fractions rounded outward.  The status is
+    ``OPTIMAL`` when both solves succeeded, else the first other; every check once
+    (otherwise each check's name says which model it checked), and the check that the
+    solver's part of the width is within ``precision`` of the value (``truncated``: the
+    two models differ by the truncation, whose part of the width is reported apart)."""
+    from mitld_lp.solvers.certify import float_down, float_up, one_minus
     from mitld_lp.solvers.result import Status
 
-    policy = float(lower_model.policy_values[initial])
-    models = (lower_model,) if upper_model is lower_model else (lower_model, upper_model)
-    if sense == "min":
-        # the optimum is at most the policy's exact value (the bracket never inverts)
-        lower, upper = min(float(upper_model.bracket[0]), policy), policy
-        value = lower_model.value
+    minimum = sense == "min"
+    low_model, high_model = (second, first) if minimum else (first, second)
+    low, high = float(low_model.bounds[0]), float(high_model.bounds[1])
+    models = (first,) if second is first else (first, second)
+    complement = None
+    if objective == "min" and not minimum:
+        complement = (low, high)
+        (lower, upper), value = one_minus(low, high), 1.0 - first.value
     else:
-        # the optimum is at least the policy's exact value: a bound a rounding left
-        # below it is raised to it, so the bracket never inverts (also read back for
-        # "min")
-        bound = max(float(upper_model.bracket[1]), policy)
-        if objective == "min":
-            lower, upper, value = 1.0 - bound, 1.0 - policy, 1.0 - lower_model.value
-        else:
-            lower, upper, value = policy, bound, lower_model.value
+        lower, upper, value = low, high, first.value
+    if exact is not None:  # the fractions themselves, not their floats' differences
+        lower, upper = float_down(exact.lower), float_up(exact.upper)
+        if complement is not None:
+            complement = (float_down(1 - exact.upper), float_up(1 - exact.lower))
+    # the solver's part of the width: each model's own bracket (its certificate's two
+    # bounds), held to the precision relative to that model's value in the task's terms;
+    # the rest is the truncation's (the two models' optima apart)
+    own = [(float(m.bounds[1]) - float(m.bounds[0]),
+            1.0 - float(m.bounds[1]) if complement is not None else float(m.bounds[0]))
+           for m in models]
+    if exact is not None:  # both ends are the fractions: what is left is their rounding
+        own = [(upper - lower - float(exact.upper - exact.lower), lower)]
+    total = upper - lower
+    solver = min(sum(w for w, _ in own), total)
+    apart = max(total - solver, 0.0) if truncated else 0.0
+    checks = [c if len(models) == 1 else Check(f"{m.which} model: {c.name}", c.passed, c.detail)
+              for m in models for c in m.checks]
+    checks.append(precision_check(lower, upper, solver, apart, precision, own=own))
     return {
         "lower": lower, "upper": upper, "value": float(value),
         "status": next((m.status for m in models if m.status is not Status.OPTIMAL),
                        Status.OPTIMAL),
-        "certified": all(m.certified for m in models),
-        # each check once; with two models, named by the model it checked
-        "checks": tuple(c if len(models) == 1 else Check(f"{m.which} model: {c.name}",
-                                                          c.passed, c.detail)
-                        for m in models for c in m.checks),
-        "lower_model": lower_model, "upper_model": upper_model, "sense": sense,
+        "certified": all(c.passed for c in checks),
+        "checks": tuple(checks),
+        "lower_model": first, "upper_model": second, "sense": sense,
+        "complement": complement, "precision": precision,
+        "width": {"total": total, "truncation": apart, "solver": solver},
     }
+
+
+def precision_check(lower: float, upper: float, solver: float, truncation: float,
+                    precision: float, *,
+                    own: list[tuple[float, float]] | None = None) -> Check:
+    """The check that the solver's part ``solver`` of the bracket's width is at most
+    ``precision`` times the value (``lower``); the truncation's part is reported.
+    ``own``: the solver's part as (width, value) per model, each held to ``precision``
+    times its own value (a truncated minimum's lower model may be worth 0 where the
+    upper one is not)."""
+    parts = [(solver, lower)] if own is None else own
+    ok = precision != precision or upper == lower or all(
+        w <= precision * v or w <= 0.0 for w, v in parts)
+    split = (f" = truncation {truncation:.3g} + solver {solver:.3g}" if truncation else "")
+    said = " and ".join(f"{w:.3g} {'<=' if w <= precision * v or w <= 0.0 else '>'} "
+                        f"{precision:g} x {v:.7g}" for w, v in parts)
+    return Check("precision", bool(ok), f"width {upper - lower:.3g}{split}; solver's part "
+                 + said)

@@ -50,6 +50,7 @@ def synthesize(
     tol: float = defaults.TOL,
     certify_tol: float = defaults.CERTIFY_TOL,
     progress: bool | None = None,
+    precision: float = defaults.PRECISION,
     decompose: bool | None = None,
     time_limit: float | None = None,
     constraints: Iterable[Any] = (),
@@ -72,12 +73,14 @@ def synthesize(
     (``False``).  ``time_limit``: seconds for the solve stage; past it the status is
     ``TIME_LIMIT``.  ``progress``: a bar for each long stage where standard error is a
     terminal (``None``), never (``False``) or wherever it goes (``True``;
-    :mod:`mitld_lp.util.progress`).  ``constraints`` / ``then`` (and the model's
-    constraints): the constrained synthesis (:mod:`mitld_lp.routes.constrained`); a law
-    known only within a band: the robust synthesis (:mod:`mitld_lp.routes.robust`).
-    ``exact``: also the exact optimum as a fraction, ``Result.exact``
-    (:mod:`mitld_lp.exact`; the plain route, models of modest size, laws and worlds with
-    rational probabilities).
+    :mod:`mitld_lp.util.progress`).  ``precision``: the relative width the certified
+    bracket may have (``upper - lower <= precision * lower``; with truncation, the
+    solver's part of the width), else the answer is not certified (docs/results.md).
+    ``constraints`` / ``then`` (and the model's constraints): the constrained synthesis
+    (:mod:`mitld_lp.routes.constrained`); a law known only within a band: the robust
+    synthesis (:mod:`mitld_lp.routes.robust`).  ``exact``: also the exact optimum as a
+    fraction, ``Result.exact``, the bracket then its point (:mod:`mitld_lp.exact`; the
+    plain route, models of modest size, laws and worlds with rational probabilities).
 
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
@@ -88,7 +91,7 @@ def synthesize(
         decompose=decompose, time_limit=time_limit, max_states=max_states,
         max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
         truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
-        exact=exact)
+        precision=precision, exact=exact)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 

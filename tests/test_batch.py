@@ -41,7 +41,8 @@ def test_a_pattern_the_shell_did_not_expand(folder, capsys):
     assert main(["solve", "*.toml", "bus_grid.toml", "-q"]) == 0  # bus_grid once
     out = capsys.readouterr().out.splitlines()
     assert len(out) == 2
-    assert out[0].startswith("bus_grid.toml: [0.9244053, 0.9244053] certified yes")
+    # Storm's 0.9244053 (README), the bracket printed outward to 7 decimals around it
+    assert out[0].startswith("bus_grid.toml: [0.9244052, 0.9244053] certified yes")
     assert out[1].startswith("red_light.toml: [")
 
 

@@ -99,7 +99,7 @@ def test_a_fifo_is_refused_without_blocking(tmp_path, what):
 
 _LOAD = """\
 from mitld_lp import Controller
-from mitld_lp.running.controller_file import ControllerFileError
+from mitld_lp.controllers.format import ControllerFileError
 try:
     Controller.load({path!r})
 except ControllerFileError as err:

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from mitld_lp import synthesize
+from mitld_lp.controllers.kinds import load_controller
 from mitld_lp.distributions import geometric, pmf, poisson
 from mitld_lp.model import Model, load_model
 from mitld_lp.running.chain import chain_of, write_chain
-from mitld_lp.running.randomised import load_controller
 from mitld_lp.synthesis import synthesize_constrained
 from mitld_lp.worlds.game import ExplicitGame
 

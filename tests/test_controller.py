@@ -19,11 +19,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mitld_lp import GridWorld, Model, Observation, RunStatus, synthesize
+from mitld_lp.controllers.format import ControllerFileError, decode_state, encode_state
+from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import weibull
 from mitld_lp.model import load_model
 from mitld_lp.product import ProductState
-from mitld_lp.running.controller import Controller, ControllerFileError
-from mitld_lp.running.controller_file import decode_state, encode_state
 from mitld_lp.running.simulate import rollout, simulate
 from mitld_lp.worlds.game import ExplicitGame, check_game
 
@@ -273,9 +273,9 @@ def test_damaged_truncated_or_foreign_files_are_one_clear_error(tmp_path: Path) 
     cases["a text file"] = (tmp_path / "text.npz", "")
     cases["a folder"] = (tmp_path, "")
     cases["no file"] = (tmp_path / "missing.npz", "No such file")
-    cases["version 4"] = (rewritten(good, tmp_path / "v4.npz",
-                                    lambda m: with_meta(m, version=4)),
-                          "format version 4; this mitld_lp reads versions 1, 2, 3")
+    cases["version 5"] = (rewritten(good, tmp_path / "v5.npz",
+                                    lambda m: with_meta(m, version=5)),
+                          "format version 5; this mitld_lp reads versions 1, 2, 3, 4")
     cases["another format"] = (rewritten(good, tmp_path / "fmt.npz",
                                          lambda m: with_meta(m, format="other")),
                                "not a controller file")

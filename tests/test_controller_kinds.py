@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 from mitld_lp import Observation, RunStatus, synthesize
+from mitld_lp.controllers.format import ControllerFileError
+from mitld_lp.controllers.kinds import ConstrainedController, Controller, load_controller
 from mitld_lp.model import Model, load_model
 from mitld_lp.routes.constrained import ConstrainedController as Reexported
-from mitld_lp.running.controller import Controller, ControllerFileError
-from mitld_lp.running.randomised import ConstrainedController, load_controller
 from mitld_lp.running.simulate import rollout, simulate
 from mitld_lp.synthesis import synthesize_constrained
 from mitld_lp.testing import two_routes_world
@@ -110,7 +110,7 @@ def test_randomised_controller_saves_and_loads_and_acts_the_same(bus_risk, tmp_p
 RUN_SAVED = r"""
 import json, sys
 from mitld_lp import Observation
-from mitld_lp.running.randomised import load_controller
+from mitld_lp.controllers.kinds import load_controller
 
 def state(v):
     return tuple(state(x) for x in v) if isinstance(v, list) else v

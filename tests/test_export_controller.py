@@ -11,8 +11,8 @@ import pytest
 
 from mitld_lp import synthesize
 from mitld_lp.cli import main
+from mitld_lp.controllers.kinds import load_controller
 from mitld_lp.model import load_model
-from mitld_lp.running.randomised import load_controller
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

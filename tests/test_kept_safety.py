@@ -23,9 +23,9 @@ from test_composition import _GRID_FILE
 
 from mitld_lp import Observation, runtime, synthesize
 from mitld_lp.cli import main
+from mitld_lp.controllers.kinds import ConstrainedController, load_controller
 from mitld_lp.model import load_model
 from mitld_lp.running.chain import chain_of
-from mitld_lp.running.randomised import ConstrainedController, load_controller
 from mitld_lp.running.tree import tree_controller, tree_of
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
@@ -104,7 +104,7 @@ def test_the_saved_controller_acts_as_the_one_in_process(kept, tmp_path) -> None
     _, model, r = kept
     path = r.controller.save(tmp_path / "kept.npz")
     meta = json.loads(np.load(path)["meta"].tobytes())
-    assert meta["version"] == 3
+    assert meta["version"] == 4  # 3 added the keep choices; 4 the sensed kind
     loaded = load_controller(path)
     assert isinstance(loaded, ConstrainedController)
     robot = runtime.load(path)

@@ -57,4 +57,4 @@ def test_a_policy_optimal_only_where_it_goes_is_not_certified(monkeypatch) -> No
     monkeypatch.setattr(lp_module, "crossover", lambda q, start: start)
     r = synthesize(loads_model(GRID), decompose=False)
     assert not r.certified
-    assert {c.name for c in r.failed_checks} == {"policy optimal in every state (Bellman)"}
+    assert {c.name for c in r.failed_checks} == {"policy optimal in every state"}

@@ -61,9 +61,10 @@ def test_runtime_imports_numpy_alone(tmp_path: Path) -> None:
     assert not roots & set(NOT_HERE), sorted(roots & set(NOT_HERE))
     ours = sorted(m for m in reply["modules"] if m.startswith("mitld_lp"))
     # files.rules: the bounded reader of files a user names (the standard library only);
-    # files and running: their packages, a docstring each
-    assert ours == ["mitld_lp", "mitld_lp.files", "mitld_lp.files.rules", "mitld_lp.running",
-                    "mitld_lp.running.plan_reader", "mitld_lp.running.saved_plan",
+    # files and controllers: their packages, a docstring each
+    assert ours == ["mitld_lp", "mitld_lp.controllers", "mitld_lp.controllers.format",
+                    "mitld_lp.controllers.reader", "mitld_lp.controllers.stepper",
+                    "mitld_lp.controllers.tables", "mitld_lp.files", "mitld_lp.files.rules",
                     "mitld_lp.runtime", "mitld_lp.startup"]
 
 

@@ -174,9 +174,14 @@ def test_model_with_sensors_pickles() -> None:
 
 def test_a_fully_observed_controller_names_the_observation_it_takes() -> None:
     """A sensed Observation (reports, no events) given to a fully observed controller
-    raised AttributeError; now a TypeError names what it takes and what it got."""
-    from mitld_lp.sensing.observe import Observation as Sensed
+    raised AttributeError, then a TypeError naming the other class.  One Observation
+    (issue 42): the fully observed controller refuses reports by name (it sees the events
+    themselves), and anything but an observation with a TypeError naming its class."""
+    from mitld_lp import Observation
 
     c = synthesize(loads_model(GRID)).controller
-    with pytest.raises(TypeError, match="expected a mitld_lp.Observation.*sensing.observe"):
-        c.act(Sensed((0, 0), frozenset()))
+    with pytest.raises(ValueError, match=r"Observation.reports: \['b'\]: this controller "
+                                         "sees the events themselves"):
+        c.act(Observation((0, 0), reports={"b"}))
+    with pytest.raises(TypeError, match="expected a mitld_lp.Observation.*got builtins.tuple"):
+        c.act((0, 0))  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ import pytest
 from test_sensing import SPEC, STATION
 
 from mitld_lp import Model, load_model, synthesize
-from mitld_lp.running.saved_plan import ControllerFileError
+from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.sensing.observe import simulate_sensed
 from mitld_lp.sensing.saved import load_sensed
 
@@ -57,7 +57,7 @@ def test_foreign_and_damaged_files_refused(tmp_path: Path) -> None:
     with pytest.raises(ControllerFileError, match="x.npz: cannot load the controller"):
         load_sensed(bad)
     np.savez(bad, meta=np.zeros(3, dtype=np.uint8))
-    with pytest.raises(ControllerFileError, match="not a sensed controller"):
+    with pytest.raises(ControllerFileError, match="not a controller archive"):
         load_sensed(bad)
     r = synthesize(Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}}))
     good = r.controller.save(tmp_path / "c.npz")
@@ -72,11 +72,12 @@ def test_foreign_and_damaged_files_refused(tmp_path: Path) -> None:
 
 def test_load_controller_loads_every_kind_of_controller_file(tmp_path: Path) -> None:
     """One loader for every controller file: it named load_sensed and refused a sensed
-    controller; now it loads it and the loaded one plays as the synthesised one; the
-    deterministic controllers' reader still refuses it by name."""
-    from mitld_lp import load_controller
-    from mitld_lp.running.plan_reader import read_plan
-    from mitld_lp.running.saved_plan import SensedControllerFile
+    controller; now it loads it and the loaded one plays as the synthesised one.  One
+    reader (issue 42): the deterministic controllers' reader refused it ("sensor
+    reports"); the reader reads every kind, and a class's own loader names the kind."""
+    from mitld_lp import Controller, load_controller
+    from mitld_lp.controllers.reader import read
+    from mitld_lp.controllers.tables import SensedPlan
 
     model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
     r = synthesize(model)
@@ -84,5 +85,6 @@ def test_load_controller_loads_every_kind_of_controller_file(tmp_path: Path) -> 
     loaded = load_controller(path)
     assert simulate_sensed(model, loaded, runs=300, seed=5) == simulate_sensed(
         model, r.controller, runs=300, seed=5)
-    with pytest.raises(SensedControllerFile, match="sensor reports"):
-        read_plan(path)
+    assert isinstance(read(path), SensedPlan)
+    with pytest.raises(ControllerFileError, match="a sensed controller; load it with"):
+        Controller.load(path)

@@ -397,3 +397,16 @@ def test_a_lost_dask_worker_s_point_runs_again_elsewhere(files):
     assert marker.exists()  # a worker did die
     assert [r["status"] for r in run.rows] == ["optimal"] * 3
     assert [r["lower"] for r in run.rows] == pytest.approx([1.0, 1.0, 1.0])
+
+
+def test_a_sweep_asks_its_precision_and_keeps_its_identity_at_the_default(files):
+    plain = load_sweep(files / "tiny_sweep.toml")
+    (files / "fine.toml").write_text(SWEEP + "[solve]\nprecision = 1e-3\n")
+    (files / "same.toml").write_text(SWEEP + "[solve]\nprecision = 1e-6\n")
+    fine, same = load_sweep(files / "fine.toml"), load_sweep(files / "same.toml")
+    assert fine.settings.precision == 1e-3 and plain.settings.precision == 1e-6
+    # the default's identity is the one results files were written under before
+    assert same.sweep_id == plain.sweep_id != fine.sweep_id
+    (files / "bad.toml").write_text(SWEEP + "[solve]\nprecision = 2\n")
+    with pytest.raises(SweepError, match="solve.precision: must be a number in"):
+        load_sweep(files / "bad.toml")

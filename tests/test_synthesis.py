@@ -213,7 +213,7 @@ def test_the_reduced_matrix_is_released_before_the_exact_evaluations(monkeypatch
     # each evaluation.
     import gc
 
-    from mitld_lp.solvers import evaluation, lp
+    from mitld_lp.solvers import certify, lp
     from mitld_lp.solvers.quotient import Quotient
 
     def alive() -> int:
@@ -228,8 +228,7 @@ def test_the_reduced_matrix_is_released_before_the_exact_evaluations(monkeypatch
         return wrapped
 
     monkeypatch.setattr(lp, "solve_lp", counting("lp", lp.solve_lp))
-    monkeypatch.setattr(evaluation, "evaluate_policy",
-                        counting("evaluate", evaluation.evaluate_policy))
+    monkeypatch.setattr(certify, "chain", counting("evaluate", certify.chain))
     r = synthesize(load_model(RED_LIGHT))  # truncated: two models, two quotients
     assert r.sta.truncation_points and r.certified
     assert len(seen["lp"]) == 2 and min(seen["lp"]) == 2

@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from mitld_lp.report import bracket_text
 from mitld_lp.routes.constraints import THEN, ConstraintError
 
 __all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto"]
@@ -52,7 +53,11 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             _out("robust:       worst case over the bands "
                  + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
         if r.status == "optimal":
-            _out(f"optimum in:   [{r.lower:.7f}, {r.upper:.7f}]  (LP {r.value:.7f})")
+            _out(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")
+            parts = {k: v for k, v in r.width.items() if k != "total" and v}
+            if set(parts) - {"solver"}:
+                _out(f"width:        {r.width['total']:.3g} = " + " + ".join(
+                    f"{k} {v:.3g}" for k, v in parts.items()))
             _out(f"E(steps):     {r.steps:.6g}")
             if r.then:
                 _out(f"then {r.then}: {r.secondary:.6g}")
@@ -64,8 +69,11 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
                 _out(f"  failed: {c.name}: {c.detail}")
         for c in r.constraints:
             if r.status == "optimal":
-                _out(f"constraint:   {c.constraint}: {c.value:.7g}"
-                     f" ({'holds' if c.holds else 'VIOLATED'})")
+                word = "<=" if c.constraint.sense == "<=" else ">="
+                _out(f"constraint:   {c.constraint}: {c.value:.7g} ("
+                     + (f"holds: certified {word} {c.certified!r}" if c.holds else
+                        f"MISSES by up to {c.miss:.3g}: certified {word} {c.certified!r}")
+                     + ")")
             else:
                 tight = "none (the others are infeasible)" if c.feasible_bound is None else (
                     f"{c.feasible_bound:.7g}")
@@ -153,6 +161,6 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     if out_png:
         _out(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
     for p in points:
-        _out(f"{p.bound:12.6g}  [{p.lower:.6f}, {p.upper:.6f}]  {p.status}"
+        _out(f"{p.bound:12.6g}  {bracket_text(p.lower, p.upper)}  {p.status}"
              f"{'' if p.certified else ' (not certified)'}")
     return code

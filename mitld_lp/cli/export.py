@@ -123,8 +123,7 @@ def _world_valuation(game: Any) -> Callable[[object], str] | None:
     """How the DRN names a world state: a PRISM world's by its variables (``x=2 &
     open=true``, as Storm's own exporter names PRISM states); any other world's as
     ``game=...`` (None: the default)."""
-    from mitld_lp.running.controller_file import world_variables
-    from mitld_lp.worlds.names import state_values, valuation_text
+    from mitld_lp.worlds.names import state_values, valuation_text, world_variables
 
     names = world_variables(game)
     if names is None:
@@ -173,17 +172,20 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     if chain:
         text = chain_drn(chain_of(r))
         _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
+        # the chain's probability is the controller's exact value: inside the bracket of
+        # the automaton it was solved on, at its near end within the precision
         if r.complemented:  # the complement's automaton: "accept" marks failing runs
-            accept = 1.0 - r.upper
-            said_chain = (f"P=? [F \"accept\"] = 1 - upper = {accept!r}: for a minimised task "
-                          "\"accept\" marks the runs that fail it")
+            accept = r.complement[0] if r.complement is not None else 1.0 - r.upper
+            said_chain = (f"P=? [F \"accept\"] >= the complement's lower = {accept!r}: for a "
+                          "minimised task \"accept\" marks the runs that fail it")
         elif r.objective == "min":  # the controller's guarantee counts truncation in
             accept = r.upper
-            said_chain = (f"P=? [F (\"accept\" | \"truncated\")] = upper = {accept!r}: for a "
-                          "minimised task the runs past a truncation point count as the task's")
+            said_chain = (f"P=? [F (\"accept\" | \"truncated\")] <= upper = {accept!r}: for "
+                          "a minimised task the runs past a truncation point count as the "
+                          "task's")
         else:
             accept = r.lower
-            said_chain = f"P=? [F \"accept\"] = lower = {accept!r}"
+            said_chain = f"P=? [F \"accept\"] >= lower = {accept!r}"
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     if tree:
         from mitld_lp.running.tree import write_tree

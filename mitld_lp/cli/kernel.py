@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
+from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.exact.errors import ExactError
 from mitld_lp.files import write as files
@@ -27,7 +28,7 @@ from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
 from mitld_lp.problem import CONSTRAINED, ProblemError
 from mitld_lp.product import ProductTooLarge
-from mitld_lp.running.saved_plan import ControllerFileError
+from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.util import progress
 from mitld_lp.util.text import printable
@@ -169,7 +170,12 @@ an answer after the stop was reported."""
 
 def _prob(x: float) -> str:
     """A probability for text output: 7 decimals, or 7 significant digits below 1e-3."""
-    return f"{x:.7f}" if x == 0 or abs(x) >= 1e-3 else f"{x:.7g}"
+    return probability_text(x)
+
+
+def _bracket(lower: float, upper: float) -> str:
+    """A certified bracket for text output, its digits rounded outward."""
+    return bracket_text(lower, upper)
 
 
 def _out(text: str = "") -> None:
@@ -223,6 +229,10 @@ def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
                    help="refuse products needing more memory, e.g. 4G or 500M (exit 3; "
                         "default: the model file's [budgets], else half the machine's "
                         "memory)")
+    p.add_argument("--precision", type=probability_budget, metavar="P",
+                   help="the relative width a certified bracket may have, in (0, 1): "
+                        "upper - lower <= P x lower (with truncation, the solver's part "
+                        f"of the width; default {defaults.PRECISION:g})")
 
 
 def read_model(args: argparse.Namespace, path: str | None = None,
@@ -360,7 +370,8 @@ def model_options(args: argparse.Namespace) -> dict[str, Any]:
     :func:`mitld_lp.synthesis.synthesize`'s keywords (time left now)."""
     return {"epsilon": args.epsilon, "clock_reduction": not args.no_clock_reduction,
             "max_states": args.max_states, "max_automaton_states": args.max_automaton_states,
-            "max_memory": args.max_memory, "time_limit": _time_left(args)}
+            "max_memory": args.max_memory, "time_limit": _time_left(args),
+            "precision": defaults.PRECISION if args.precision is None else args.precision}
 
 
 def solve_settings(args: argparse.Namespace) -> Settings:

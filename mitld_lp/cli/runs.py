@@ -26,7 +26,6 @@ from mitld_lp.cli.kernel import (
     _dumps,
     _out,
     _output_path,
-    _prob,
     _say,
     _time_left,
     _write,
@@ -40,6 +39,7 @@ from mitld_lp.cli.kernel import (
     solve_settings,
     unconstrained,
 )
+from mitld_lp.report import bracket_text
 from mitld_lp.util import progress
 from mitld_lp.util.text import printable
 
@@ -122,7 +122,7 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
         exact = record.get("exact_bracket")  # --exact: the fraction (or both models')
         shown = "" if not exact else f" exact {exact[0]}" if exact[0] == exact[1] else (
             f" exact in [{exact[0]}, {exact[1]}]")
-        _out(f"{printable(record['file'])}: [{_prob(record['lower'])}, {_prob(record['upper'])}] "
+        _out(f"{printable(record['file'])}: {bracket_text(record['lower'], record['upper'])} "
              f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
              f"{record['states']} states, {record['seconds']:.3f} s){shown}")
 
@@ -320,7 +320,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if sim.kept:
             _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
                  "(counted as successes)")
-        _out(f"certified:    [{_prob(r.lower)}, {_prob(r.upper)}]  "
+        _out(f"certified:    {bracket_text(r.lower, r.upper)}  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:
             _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "

@@ -27,6 +27,7 @@ from mitld_lp.cli.kernel import (
     solve_settings,
 )
 from mitld_lp.files import write as files
+from mitld_lp.report import bracket_text
 
 __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 
@@ -121,11 +122,21 @@ def cmd_solve(args: argparse.Namespace) -> int:
                 f"{e} reported w.p. {sensor.detect:g} per step"
                 + (f" from {sensor.delay} steps after it" if sensor.delay else "")
                 for e, sensor in sorted(r.sensors.items())))
-        _out(f"optimum in:   [{_prob(r.lower)}, {_prob(r.upper)}]"
+        _out(f"optimum in:   {bracket_text(r.lower, r.upper)}"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
+        if r.complement is not None:
+            _out(f"complement:   1 - optimum in {bracket_text(*r.complement)}")
+        width = r.width
+        if width.get("truncation"):
+            _out(f"width:        {width['total']:.3g} = truncation {width['truncation']:.3g}"
+                 f" (at most epsilon achieved) + solver {width['solver']:.3g}")
         if r.exact is not None:
             _out(exact_line(r.exact))
-        _out(f"value:        {_prob(r.value)}  ({r.method}, status {r.status.value})")
+        # a minimum read back from its complement: the complement's estimate, whose
+        # digits 1 - it would round away
+        shown = (f"1 - {_prob(r.lower_model.value)}" if r.complemented and
+                 r.lower_model is not None else _prob(r.value))
+        _out(f"value:        {shown}  ({r.method}, status {r.status.value})")
         _out("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
             _out(f"  failed: {c.name}: {c.detail}")

@@ -5,12 +5,16 @@ then the fastest (cheapest) of the optimal policies.  See docs/constraints.md.
     task, constraints --to_dta--> DTAs --joint_automaton--> joint DTA --make_sta--> STA
         --product(game)--> MDP --merge--> Merged --optimise (one LP, Clarabel)--> policy
 
-Certification: the returned randomised policy is evaluated exactly on its Markov chain
-(sparse solve) in the *lower* model, where the truncated state counts as failure for
-the task and as violation for each constraint: its task value is ``lower`` and each
-constraint's value is reported with its bound.  The *upper* model counts truncation the
-other way (success, satisfaction); its LP optimum ``upper`` bounds the constrained
-optimum from above.  So the constrained optimum lies in ``[lower, upper]``.
+Certification: the returned randomised policy is evaluated on its Markov chain in the
+*lower* model, where the truncated state counts as failure for the task and as
+violation for each constraint, and each value is bounded in exact arithmetic
+(:mod:`mitld_lp.solvers.certify_mixture`): the task's lower bound is ``lower``, and a
+constraint holds when its bound's side that matters meets it exactly.  The LP's answer
+meets a binding constraint only to its tolerance, so a constraint the policy misses is
+tightened by what it missed (and a little more) and the LPs solved again, a few times;
+what still misses is reported with by how much, and the answer is not certified.  The
+*upper* model counts truncation the other way (success, satisfaction); its LP optimum
+``upper`` bounds the constrained optimum from above.
 """
 
 from __future__ import annotations
@@ -25,16 +29,16 @@ import numpy as np
 from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
+from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import CONSTRAINED, Posed, ProblemError
-from mitld_lp.result import Result
+from mitld_lp.result import Result, precision_check
 from mitld_lp.routes.constraints import (
     LEXICOGRAPHIC_TOL,
     Constraint,
     ConstraintError,
 )
 from mitld_lp.routes.stages import Built
-from mitld_lp.running.randomised import ConstrainedController
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Quantity, merge
 from mitld_lp.solvers.result import Status
@@ -45,15 +49,31 @@ __all__ = ["ConstraintValue",
 
 @dataclass(frozen=True, slots=True)
 class ConstraintValue:
-    """A constraint and its exact value on the returned policy (lower-model accounting:
-    truncation counts as violation); ``holds`` to :data:`CONSTRAINT_TOL`.
-    ``feasible_bound``: when the constraints are infeasible, the tightest bound of this
-    constraint that the others allow (None when they are infeasible on their own)."""
+    """A constraint and its value on the returned policy (lower-model accounting:
+    truncation counts as violation): ``value`` the float estimate, ``bounds`` the value
+    bounded in exact arithmetic; ``holds`` when the bound's side that matters meets it
+    (``<=``: the upper bound at most ``bound``; ``>=``: the lower at least), else
+    ``miss`` says by how much it does not.  ``feasible_bound``: when the constraints are
+    infeasible, the tightest bound of this constraint that the others allow (None when
+    they are infeasible on their own)."""
 
     constraint: Constraint
     value: float
     holds: bool
     feasible_bound: float | None = None
+    bounds: tuple[float, float] = (float("nan"), float("nan"))
+
+    @property
+    def certified(self) -> float:
+        """The bound that decides the constraint (upper for ``<=``, lower for ``>=``)."""
+        return self.bounds[1] if self.constraint.sense == "<=" else self.bounds[0]
+
+    @property
+    def miss(self) -> float:
+        """How far the certified bound lies beyond the constraint's (0 when it holds)."""
+        c = self.constraint
+        gap = self.certified - c.bound if c.sense == "<=" else c.bound - self.certified
+        return max(gap, 0.0) if gap == gap else float("nan")
 
 
 def quantity_of(c: Constraint, component: int, model: str) -> Quantity:
@@ -105,8 +125,10 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                  costs: Mapping[str, float] | None = None, seed: int | None = 0,
                  build: Mapping[str, float] | None = None) -> Result:
     """The constrained LPs on the product ``mdp`` of the world with ``joint`` (module
-    docs), the chosen policy's exact values and the certificate; the time limit counts
-    from ``t0``, ``build`` the seconds of the stages before it."""
+    docs), the chosen policy's values bounded in exact arithmetic and the certificate;
+    the time limit counts from ``t0``, ``build`` the seconds of the stages before it."""
+    from mitld_lp.solvers.rounding import model_eta
+
     model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
         posed.problem.then
     cost_map = dict(model.costs if costs is None else costs)
@@ -114,6 +136,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     eps = model.epsilon if s.epsilon is None else s.epsilon
     merged = merge(mdp, joint)
     cost_vec = cost_vector(mdp, cost_map)
+    eta = model_eta(sta)
 
     def rows(which: str) -> list[Row]:
         return rows_for(cons, which)
@@ -125,60 +148,151 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    low = lp(task_lo, True, rows("lower"))
     common: dict[str, Any] = dict(route=CONSTRAINED, method="lp", merged=merged, joint=joint,
                                   sta=sta, mdp=mdp, objective=posed.problem.objective,
                                   model=model, epsilon=eps, then=then)
-    if low.status != OPTIMAL:
-        return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
-    chosen = low
-    secondary = None
-    if then is not None:
-        q2 = Quantity("steps" if then == "min-steps" else "cost")
-        keep = Row(task_lo, ">=", low.objective - LEXICOGRAPHIC_TOL)
-        second = lp(q2, False, [*rows("lower"), keep])
-        if second.status != OPTIMAL:
-            return _unsolved(second, cons, rows("lower"), cost_vec, build, **common)
-        chosen = second
-        secondary = second.values[0]
-    high = low
+    margins = [0.0] * len(cons)
+    found = None
+    first = float("nan")  # the untightened LP's optimum
+    untightened: Solved | None = None
+    for attempt in range(TIGHTEN_ROUNDS + 1):
+        lp_rows = [Row(r.quantity, r.sense, r.bound - m if r.sense == "<=" else r.bound + m)
+                   for r, m in zip(rows("lower"), margins, strict=True)]
+        low = lp(task_lo, True, lp_rows)
+        if low.status != OPTIMAL:
+            if found is None:
+                return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
+            break  # a tightened LP failed: the last policy stands, its misses reported
+        chosen, secondary = low, None
+        if attempt == 0:
+            first, untightened = low.objective, low
+        if then is not None:
+            q2 = Quantity("steps" if then == "min-steps" else "cost")
+            keep = Row(task_lo, ">=", low.objective - LEXICOGRAPHIC_TOL)
+            second = lp(q2, False, [*lp_rows, keep])
+            if second.status != OPTIMAL:
+                if found is None:
+                    return _unsolved(second, cons, rows("lower"), cost_vec, build, **common)
+                break
+            chosen, secondary = second, second.values[0]
+        found = (low, chosen, secondary, _values(merged, chosen, cons, cost_vec, eta),
+                 attempt)
+        misses = [v.miss for v in found[3][1]]
+        if not any(m > 0 or m != m for m in misses):
+            break
+        margins = [m + (2.0 * d + 1e-12 * max(1.0, abs(c.bound)) if d > 0 else 0.0)
+                   for m, d, c in zip(margins, misses, cons, strict=True)]
+    assert found is not None
+    low, chosen, secondary, (task, values, steps), attempts = found
+    # the upper bound from the LP with the problem's own bounds (a tightened one's duals
+    # would be extrapolated back to them, overshooting where the optimum bends)
+    high, which = (untightened or low), "lower"
     if merged.truncated.any():
-        high = lp(task_hi, True, rows("upper"))
-    # exact values of the chosen policy: the task, each constraint, the steps
+        high, which = lp(task_hi, True, rows("upper")), "upper"
     assert chosen.prob is not None and chosen.stay is not None
-    from mitld_lp.solvers.constrained_model import columns, evaluate
-    asked = [task_lo, *(r.quantity for r in rows("lower")), Quantity("steps")]
-    vals = evaluate(merged, chosen.prob, chosen.stay,
-                    [(*columns(merged, q, cost_vec), q.kind != "prob") for q in asked]).values
-    lower, con_vals, steps = vals[0], vals[1:-1], vals[-1]
-    values = tuple(ConstraintValue(c, v, c.holds(v)) for c, v in zip(cons, con_vals, strict=True))
-    upper = high.objective if high.status == OPTIMAL else float("nan")
-    want = low.objective - (LEXICOGRAPHIC_TOL if then else 0.0)
-    certify_tol = s.certify_tol
-    checks = (
+    lower = task.lower
+    upper, proved = _upper_bound(merged, high, rows(which), task_hi if which == "upper"
+                                 else task_lo, cost_vec, eta)
+    checks = [
         Check("lower LP", low.status == OPTIMAL, low.message),
         Check("upper LP", high.status == OPTIMAL, high.message),
-        Check("policy value = LP optimum", lower >= want - certify_tol and
-              (then is not None or abs(lower - low.objective) <= certify_tol),
-              f"{lower!r} vs {low.objective!r}"),
-        Check("constraints hold on the policy", all(v.holds for v in values),
-              "; ".join(f"{v.constraint}: {v.value!r}" for v in values)),
-        Check("lower <= upper", lower <= upper + certify_tol, f"{lower!r} <= {upper!r}"),
-    )
+        proved,
+        task.check,
+        *(Check(f"constraint {v.constraint}", v.holds, _said(v)) for v in values),
+    ]
+    if attempts:
+        checks.append(Check("constraints tightened", True, (
+            f"the LPs solved again {attempts} times with bounds tightened by "
+            + ", ".join(f"{m:.3g}" for m in margins) + " so that the policy meets them")))
+    value = low.objective
+    allowed = LEXICOGRAPHIC_TOL if then else 0.0
+    # what tightening the bounds cost the optimum (the LP's estimate): deliberate, as
+    # the lexicographic tolerance is, and reported apart from the solver's part
+    tightening = max(first - low.objective, 0.0) if attempts else 0.0
+    complement = None
+    if posed.minimise:  # Pmin(task) = 1 - Pmax(not task): the bracket read back
+        from mitld_lp.solvers.rounding import one_minus
+
+        complement = (lower, upper)
+        (lower, upper), value = one_minus(lower, upper), 1.0 - value
+    apart = 0.0
+    if merged.truncated.any() and high.status == OPTIMAL:
+        apart = max(high.objective - first, 0.0)
+    total = upper - lower
+    solver = max(total - apart - allowed - tightening, 0.0)
+    checks.append(precision_check(lower, upper, solver, apart, s.precision))
     controller = ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
                                        chosen.stay, seed=seed)
-    value = low.objective
-    # the LP's optimum is inexact to its tolerance; when the policy's exact value lies
-    # above it (within the check's tolerance), the bracket keeps its order
-    upper = max(upper, lower) if upper == upper else upper
-    if posed.minimise:  # Pmin(task) = 1 - Pmax(not task): the bracket read back
-        lower, upper, value = 1.0 - upper, 1.0 - lower, 1.0 - value
     return Result(
         status=Status.OPTIMAL, lower=lower, upper=upper, value=value,
         certified=all(c.passed for c in checks), constraints=values,
-        secondary=secondary, steps=steps, checks=checks, message=chosen.message,
+        secondary=secondary, steps=steps, checks=tuple(checks), message=chosen.message,
         controller=controller, prob=chosen.prob, stay=chosen.stay,
-        timings={**(build or {}), "solve": time.perf_counter() - t0}, **common)
+        timings={**(build or {}), "solve": time.perf_counter() - t0},
+        complement=complement, precision=s.precision,
+        width={"total": total, "truncation": apart, "solver": solver,
+               **({"lexicographic": allowed} if then else {}),
+               **({"tightening": tightening} if attempts else {})}, **common)
+
+
+def _upper_bound(merged: Any, high: Solved, rows: list[Row], objective: Quantity,
+                 cost_vec: np.ndarray, eta: float) -> tuple[float, Check]:
+    """The constrained optimum bounded from above in exact arithmetic by weak duality
+    from the LP's dual solution, against the problem's own bounds (those of a tightened
+    LP's rows are not this answer's: the dual solution is feasible whatever they are),
+    :mod:`mitld_lp.solvers.certify_dual`; the LP's float optimum when no dual solution
+    settles, with a failed check."""
+    from mitld_lp.solvers.certify_dual import dual_bound
+
+    name = "upper bound: the constrained optimum (weak duality)"
+    if high.status != OPTIMAL or high.duals is None:
+        return float("nan"), Check(name, False, f"the upper LP is {high.status}")
+    from mitld_lp.solvers.constrained import never_reaching
+
+    timed = any(r.quantity.kind in ("steps", "cost") for r in rows)
+    allowed, stay_allowed = never_reaching(merged, rows)
+    stays = merged.stay_ok & ~(merged.undecided & timed) & stay_allowed
+    upper, check = dual_bound(merged, [objective, *(r.quantity for r in rows)],
+                              [r.sense for r in rows], [r.bound for r in rows],
+                              high.duals, stays, cost_vec, eta, allowed)
+    if upper == float("inf"):
+        return high.objective, check
+    return upper, check
+
+
+#: Rounds of tightening the bounds a policy missed (module docs).
+TIGHTEN_ROUNDS = 3
+
+
+def _values(merged: Any, chosen: Solved, cons: tuple[Constraint, ...], cost_vec: np.ndarray,
+            eta: float) -> tuple[Any, tuple[ConstraintValue, ...], float]:
+    """The chosen policy's task probability, each constraint's value and its expected
+    steps, bounded in exact arithmetic (lower-model accounting)."""
+    from mitld_lp.solvers.constrained import certified_value
+
+    assert chosen.prob is not None and chosen.stay is not None
+    task = certified_value(merged, chosen.prob, chosen.stay, Quantity("prob", 0, 0.0),
+                           "lower bound: the policy's task probability", eta=eta)
+    values = []
+    for c, r, v in zip(cons, rows_for(cons, "lower"), chosen.values[1:], strict=False):
+        b = certified_value(merged, chosen.prob, chosen.stay, r.quantity, f"{c}",
+                            costs=cost_vec, eta=eta)
+        side = b.upper if c.sense == "<=" else b.lower
+        holds = b.check.passed and (side <= c.bound if c.sense == "<=" else side >= c.bound)
+        values.append(ConstraintValue(c, float(v), bool(holds), bounds=(b.lower, b.upper)))
+    steps = certified_value(merged, chosen.prob, chosen.stay, Quantity("steps"),
+                            "expected steps").value
+    return task, tuple(values), steps
+
+
+def _said(v: ConstraintValue) -> str:
+    c = v.constraint
+    word = "at most" if c.sense == "<=" else "at least"
+    if v.holds:
+        return (f"the policy's value is {word} {v.certified!r} in exact arithmetic, "
+                f"within the bound {c.bound!r} (estimate {v.value!r})")
+    return (f"the policy's value is only known {word} {v.certified!r}: it misses the bound "
+            f"{c.bound!r} by up to {v.miss:.3g} (estimate {v.value!r})")
 
 
 def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cost_vec: np.ndarray,

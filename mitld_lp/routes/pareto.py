@@ -85,6 +85,10 @@ def _range(model: Model, against: str, options: dict[str, Any]) -> tuple[float, 
     return float(least.objective), float(base.secondary or 0.0)
 
 
+#: Times a point's bound is loosened when the policy misses it (or the model's bounds).
+LOOSEN_ROUNDS = 4
+
+
 def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list[ParetoPoint]:
     """``points`` certified points, bounds evenly spaced over the range worth tracing.
     ``options``: :func:`mitld_lp.synthesis.synthesize`'s settings, used for every point
@@ -107,8 +111,21 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
                      total=points, desc="pareto", unit=" points", leave=False):
         c = against_constraint(against, float(b) + 1e-9)
         r = synthesize_constrained(model, [c], **options)
+        loosen = 0.0
+        for _ in range(LOOSEN_ROUNDS):
+            misses = [v.miss for v in r.constraints if math.isfinite(v.miss)]
+            if r.status != OPTIMAL or not any(m > 0 for m in misses):
+                break
+            # the range's ends are LP optima, exact only to the LP's tolerance: no policy
+            # may meet such a bound in exact arithmetic (a constraint holds only when its
+            # certified bound meets it, docs/constraints.md), nor, at the corner, the
+            # model's own bounds with it; this point's bound is loosened until one does
+            loosen = max(2.0 * max(misses), 10.0 * loosen)
+            c = against_constraint(against, float(b) + 1e-9 + loosen)
+            r = synthesize_constrained(model, [c], **options)
         achieved = r.constraints[-1].value if r.constraints else float("nan")
-        out.append(ParetoPoint(float(b), r.lower, r.upper, achieved, r.status, r.certified))
+        out.append(ParetoPoint(float(c.bound), r.lower, r.upper, achieved, r.status,
+                               r.certified))
     return out
 
 

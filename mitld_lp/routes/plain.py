@@ -6,15 +6,14 @@ truncation models solved and certified.
 
 The product is built once (:mod:`mitld_lp.routes.stages`); its truncation sink counted
 as losing gives the *lower* model, as winning the *upper* model.  Each model is solved
-(occupancy LP or interval iteration) and certified:
-
-* the extracted deterministic policy is evaluated exactly on its Markov chain (sparse
-  solve): a value the policy really achieves;
-* interval iteration gives sound lower and upper bounds on the optimum;
-* with the LP, its primal objective, its dual objective (the value function at the
-  initial state), the policy's value and the iteration bracket must agree within
-  ``certify_tol``; one Bellman sweep over every state checks that the policy is optimal
-  everywhere, not only where it goes.
+(occupancy LP or interval iteration) and certified (:mod:`mitld_lp.solvers.certify`):
+the extracted deterministic policy is evaluated on its Markov chain, and the bounds the
+answer reports are checked inequalities that hold in exact arithmetic on the model as
+written: a lower bound on the policy's value (a sub-fixed point of its chain) and an
+upper bound on the optimum (a pre-fixed point of the Bellman operator over every state
+and choice), or for a minimum a lower bound on the optimum and an upper bound on the
+policy's value.  The lower model's certificate gives ``lower``, the upper model's
+``upper``; when nothing is truncated one model gives both.
 
 A minimum (``sense="min"``: a co-safe task minimised on its own product,
 :mod:`mitld_lp.routes.stages`) is solved as one, on quotients without end components
@@ -35,12 +34,12 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
-from mitld_lp.checks import Check, close
+from mitld_lp.checks import Check
+from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import PLAIN, Posed, Settings
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.stages import Built
-from mitld_lp.running.controller import Controller
 from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
@@ -73,7 +72,12 @@ class ModelSolution:
     iteration: IterationResult
     prob0: np.ndarray  # (n_states,) bool: the states from which the target is unreachable
     checks: tuple[Check, ...]
-    sense: str = "max"
+    sense: str = "max"  # "max": the policy maximises; "min": it minimises
+    # the certificate's bounds at the initial state (mitld_lp.solvers.certify): for
+    # "max" a lower bound on the policy's value and an upper bound on the maximum, for
+    # "min" a lower bound on the minimum and an upper bound on the policy's value; nan
+    # for a side this model was not asked for
+    bounds: tuple[float, float] = (float("nan"), float("nan"))
     # the values the graph decides, 0 or 1 (Storm's prob01, in ``sense``): every other
     # state's optimum is strictly between 0 and 1
     qualitative: Qualitative | None = None
@@ -100,8 +104,9 @@ class _Settings:
     solver: str
     backend: Backend
     tol: float
-    precision: float | None  # relative precision of the iteration's bracket
-    certify_tol: float
+    precision: float  # the relative precision asked (the iteration's and the bracket's)
+    eta: float  # the probabilities' allowance (mitld_lp.solvers.certify.model_eta)
+    complement: bool  # the answer is 1 - the values (a minimum read back)
     progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
     decompose: bool
     deadline: float  # time.perf_counter() past which the solvers stop; inf: none
@@ -131,17 +136,22 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
-               layers: tuple[np.ndarray, np.ndarray], it: IterationResult,
-               lp: LPResult | None, which: str, how: _Settings) -> ModelSolution:
+               layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
+               it: IterationResult, lp: LPResult | None, which: str,
+               how: _Settings) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
-    quotient's matrix is released by then.  An LP that did not come back optimal (after
-    its own retries) is replaced by the interval-iteration policy, certified the same way
-    (exact value inside the bracket) when it failed numerically (``INACCURATE``,
-    ``MAX_ITERATIONS``)."""
-    from mitld_lp.solvers.evaluation import evaluate_policy
+    quotient's matrix is released by then.  Both bounds are checked on each model (the
+    answer reads the lower model's lower one and the upper model's upper one), and that
+    the policy is within the precision of the optimum in every state.  ``decided``: the
+    graph's 0/1 sets in the model's sense (for a maximum ``zero`` is ``Prob0A``, the
+    candidate upper bound's zeros; for a minimum ``Prob0E``, where the lower bound is 0,
+    the end-component check guarding it, and ``one`` ``Prob1A``).  An LP that did not
+    come back optimal (after its own retries) is replaced by the interval-iteration
+    policy when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``); the
+    certificate is the same whatever policy it reads."""
+    from mitld_lp.solvers.certify import certify
     from mitld_lp.solvers.result import Status, read_only
 
-    certify_tol = how.certify_tol
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
@@ -150,8 +160,6 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
         if lp.status is Status.OPTIMAL and lp.policy is not None:
             policy, value, status = lp.policy, lp.value, lp.status
             checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
-            checks.append(close("LP primal = dual", lp.primal_objective, lp.dual_objective,
-                                 certify_tol))
         elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
                 it.status is Status.OPTIMAL):
             # A numerical failure after the LP's own retries: the answer is the converged
@@ -161,23 +169,17 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
         else:  # a usage error (solver not installed), a time limit, or no fallback
             status = lp.status
             checks.append(Check("LP solved", False, f"{lp.status.value}: {lp.message}"))
-    values = read_only(evaluate_policy(mdp, target, policy, layers=layers))
-    exact = float(values[mdp.initial])
-    lo, hi = it.value_lower, it.value_upper
-    checks.append(Check(
-        "policy value within iteration bracket",
-        lo - certify_tol <= exact <= hi + certify_tol,
-        f"policy {exact:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}",
-    ))
-    checks.append(close("policy value = optimum", exact, value, certify_tol))
-    minimum = str(decided.sense) == "min"
-    if minimum:  # the iteration's bound beyond what any policy achieves
-        checks.append(close("optimum = iteration lower bound", value, lo, certify_tol))
-    else:
-        checks.append(close("optimum = iteration upper bound", value, hi, certify_tol))
-    checks.append(_bellman(mdp, target, values, certify_tol, decided))
-    return ModelSolution(which, status, value, policy, values, (lo, hi), lp, it,
-                         decided.unreachable, tuple(checks), str(decided.sense), decided)
+    sense = str(decided.sense)
+    minimum = sense == "min"
+    cert = certify(mdp, target, policy, sense=sense, zero=decided.zero,
+                   one=decided.one if minimum else None, mec_of=None if minimum else mec_of,
+                   layers=layers, fallback_lower=it.lower, fallback_upper=it.upper,
+                   eta=how.eta, precision=how.precision,
+                   complement=how.complement and not minimum)
+    checks.extend(cert.checks)
+    return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
+                         (it.value_lower, it.value_upper), lp, it, decided.unreachable,
+                         tuple(checks), sense, (cert.lower, cert.upper), decided)
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
@@ -195,38 +197,6 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
                                precision=None if decided else how.precision,
                                progress=how.progress, time_limit=how.remaining(),
                                gap="max" if decided else "initial")
-
-
-def _bellman(mdp: MDP, target: np.ndarray, values: np.ndarray, tol: float,
-             decided: Qualitative) -> Check:
-    """The policy is optimal from every state, not only where it goes: no choice of any
-    state does better against the policy's exact values ``V`` than ``V`` itself,
-    ``max_c P(c) . V <= V(s) + tol`` (one sweep).  Then ``V`` is a pre-fixed point of
-    the Bellman operator, so ``V >= V*`` (the least one), and ``V <= V*`` as a policy's
-    values: the policy is optimal in every state.  For a minimum, ``min_c P(c) . V >=
-    V(s) - tol`` and ``V = 0`` where the graph says some policy avoids the target for
-    ever (``Prob0E``): the other states have no end component, where the Bellman
-    operator has one fixed point, so ``V`` is it."""
-    v = np.where(target, 1.0, values)
-    minimum = str(decided.sense) == "min"
-    if minimum:
-        best = np.minimum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
-        gap = np.where(target, 0.0, v - best)
-    else:
-        best = np.maximum.reduceat(mdp.matrix @ v, mdp.row_groups[:-1])
-        gap = np.where(target, 0.0, best - v)
-    worst = int(np.argmax(gap)) if gap.size else 0
-    over = float(gap[worst]) if gap.size else 0.0
-    word = "V(s) - min_c P(c).V" if minimum else "max_c P(c).V - V(s)"
-    detail = (f"max_s ({word}) = {over:.2e} "
-              f"(tol {tol:g})" + (f" at state {mdp.states[worst]}" if over > tol else ""))
-    passed = over <= tol
-    if minimum:
-        kept = np.flatnonzero(np.asarray(decided.zero) & (v != 0.0))
-        passed = passed and kept.size == 0
-        detail += ("; V = 0 where some policy avoids the target for ever" if kept.size == 0
-                   else f"; V > 0 at state {mdp.states[int(kept[0])]} of Prob0E")
-    return Check("policy optimal in every state (Bellman)", passed, detail)
 
 
 def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
@@ -249,20 +219,24 @@ def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolu
 
 
 def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
-                 sense: str = "max") -> tuple[ModelSolution, ModelSolution]:
+                 sense: str = "max", eta: float | None = None, *,
+                 complement: bool = False) -> tuple[ModelSolution, ModelSolution]:
     """Both truncation models of ``mdp`` solved and certified (module docs) for the
     target ``accept`` (its goal; a task's accepting end components kept by their
     choices), with the settings ``s`` of a posed problem, the time limit counted from
-    ``t0``, maximised (``sense="min"``: minimised).  Returned as (the controller's
-    model, the bound's model): for a maximum the lower model then the upper one, for a
-    minimum the upper then the lower (module docs).  The two are one object when
-    nothing is truncated."""
-    from mitld_lp import defaults
+    ``t0``, maximised (``sense="min"``: minimised).  ``eta``: the probabilities'
+    allowance (default :data:`mitld_lp.solvers.certify.ETA`); ``complement``: the answer
+    is read back as ``1 -`` the values (the precision is relative to that).  Returned as
+    (the controller's model, the bound's model): for a maximum the lower model then the
+    upper one, for a minimum the upper then the lower (module docs).  The two are one
+    object when nothing is truncated."""
     from mitld_lp.solvers.analysis import analyse
+    from mitld_lp.solvers.certify import ETA
     from mitld_lp.solvers.graph import Sense
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, defaults.PRECISION,
-                    s.certify_tol, s.progress, s.decompose is not False,
+    how = _Settings(s.method, s.solver, s.backend, s.tol, s.precision,
+                    ETA if eta is None else eta, complement, s.progress,
+                    s.decompose is not False,
                     float("inf") if s.time_limit is None else t0 + s.time_limit)
     quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
@@ -270,10 +244,11 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.qualitative, q.layers) for q in quotients]
+    kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
+            for q in quotients]
     del quotients
-    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which in
-                 zip(kept, its, lps, ("lower", "upper"), strict=False)]
+    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which
+                 in zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
         low, high = high, low
@@ -284,30 +259,42 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
 def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
            high: ModelSolution, t0: float,
            ) -> tuple[dict[str, Any], ModelSolution, ModelSolution]:
-    """The exact answer (:func:`mitld_lp.exact.exact_answer`) as the result's fields: the
-    bracket the two fractions, rounded outward to floats, and the exact record; the
-    models (the controller's, the bound's: :func:`solve_models`) with their exact
-    policies.  A minimum is the task's own (``built.sense == "min"``) or the complement's
-    maximum read back (a task with a safety part: :func:`mitld_lp.routes.stages.build_posed`)."""
-    from mitld_lp.exact.stage import exact_answer, float_above, float_below
+    """The exact answer (:func:`mitld_lp.exact.exact_answer`) as the result's fields (the
+    exact record; past the time limit the status) and the models (the controller's, the
+    bound's: :func:`solve_models`) with their exact-optimal policies, each model's
+    ``bounds`` its exact optimum rounded outward.  The exact check proves the bracket:
+    it takes the place of the float certificate's checks (the float bounds and the
+    policy's optimality in every state, now shown exactly).  A minimum is the task's own
+    (``built.sense == "min"``) or the complement's maximum read back (a task with a safety
+    part: :func:`mitld_lp.routes.stages.build_posed`)."""
+    from mitld_lp.exact.stage import exact_answer
+    from mitld_lp.solvers.certify import float_down, float_up, is_certificate_check
     from mitld_lp.solvers.result import Status
 
     s = posed.settings
     deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
     minimum = built.sense == "min"
+    complemented = posed.minimise and not minimum
     # exact_answer takes the truncation models in their order (lower, upper); for a
     # minimum solve_models hands the upper one (the controller's) first
     lower_trunc, upper_trunc = (high, low) if minimum else (low, high)
     answer, (exact_lower, exact_upper), check = exact_answer(
         built.mdp, posed.model.game, built.sta, (lower_trunc, upper_trunc), accept.goal,
-        sense=built.sense, complemented=posed.minimise and not minimum, deadline=deadline)
+        sense=built.sense, complemented=complemented, deadline=deadline)
+    if answer is None:  # the float certificate stands, the exact check failed
+        first = replace(low, checks=(*low.checks, check))
+        return {"status": Status.TIME_LIMIT}, first, (first if high is low else high)
+    # each truncation model's optimum in its own terms (the complement's for a minimum
+    # read back), the lower model's the answer's lower end
+    optima = (1 - answer.upper, 1 - answer.lower) if complemented else (answer.lower,
+                                                                        answer.upper)
+    exact_lower, exact_upper = (
+        replace(m, bounds=(float_down(q), float_up(q)),
+                checks=tuple(c for c in m.checks if not is_certificate_check(c)))
+        for m, q in zip((exact_lower, exact_upper), optima, strict=True))
     first, second = (exact_upper, exact_lower) if minimum else (exact_lower, exact_upper)
     first = replace(first, checks=(*first.checks, check))
-    models = (first, first if high is low else second)
-    if answer is None:
-        return {"status": Status.TIME_LIMIT}, *models
-    return ({"lower": float_below(answer.lower), "upper": float_above(answer.upper),
-             "exact": answer}, *models)
+    return {"exact": answer}, first, (first if high is low else second)
 
 
 def solve_plain(posed: Posed, built: Built) -> Result:
@@ -322,23 +309,29 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     # The builder's freed temporaries go back to the system (mitld_lp.util.heap).
     if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
         release_free_memory()
+    from mitld_lp.solvers.certify import model_eta
+
     accept = acceptance(mdp, built.dta)
-    low, high = solve_models(mdp, accept, s, t0, built.sense)
+    low, high = solve_models(mdp, accept, s, t0, built.sense, model_eta(built.sta),
+                             complement=posed.minimise and built.sense == "max")
     timings["solve"] = time.perf_counter() - t0
     fields: dict[str, Any] = {}
     if s.exact:  # the optimum as a fraction (mitld_lp.exact), its policy the controller's
         fields, low, high = _exact(posed, built, accept, low, high, t0)
         timings["exact"] = time.perf_counter() - t0 - timings["solve"]
     solve_cpu = time.process_time() - c0
-    # the controller stops where the task cannot happen even if every truncated event
-    # came in time: the upper model's unreachable states
+    # the controller plays the first model's policy (solve_models): the one whose value
+    # the answer's near end bounds; it stops where the task cannot happen even if every
+    # truncated event came in time: the upper model's unreachable states
     upper = low if built.sense == "min" else high
     result = Result(
         route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
-        **{**from_models(low, high, mdp.initial, posed.problem.objective, built.sense),
+        **{**from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
+                         truncated=bool(mdp.truncated.any()), sense=built.sense,
+                         exact=fields.get("exact")),
            **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result

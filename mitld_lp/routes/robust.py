@@ -8,18 +8,19 @@ Each of the two models (truncation losing / winning) is solved and certified:
 
 * robust interval iteration brackets the robust optimum ``V* = max_robot min_nature``
   on every state (:func:`mitld_lp.solvers.robust.robust_interval_iteration`);
-* a robot policy is read off its lower bound, and the policy's own robust value (what it
-  guarantees against every adversary) is bracketed by the same iteration on the game
-  the policy leaves (its lower bound is the ``lower`` reported: sound, as every value of
-  the iteration from below) and computed again by the LP of
-  :mod:`mitld_lp.solvers.robust_lp` (Clarabel); the two must agree;
-* the policy's value must lie in the bracket and reach its upper bound, and be a fixed
-  point of the robust Bellman operator (one sweep: then it is the least fixed point,
-  the robust value).
+* a robot policy is read off its lower bound, and its own robust value (what it
+  guarantees against every adversary) is computed by the same iteration on the game
+  the policy leaves, and by the LP of :mod:`mitld_lp.solvers.robust_lp` (Clarabel) for
+  method ``lp``;
+* the certificate (:mod:`mitld_lp.solvers.certify`), in exact arithmetic: against the
+  policy, nature is an MDP's minimiser over the vertex rows, so the policy's robust
+  value is bounded from below by a checked sub-fixed point of nature's minimum; the
+  robust optimum from above by a checked pre-fixed point of ``max_c min_rows``; and the
+  policy is within the precision of the optimum in every state.
 
-``lower`` is the policy's exact robust value in the lower model: whatever law of the band
+``lower`` is the lower model's bound on the policy's value: whatever law of the band
 the events follow, even one chosen step by step against the robot, the policy achieves
-at least that.  ``upper`` is the iteration's upper bound in the upper model: no policy
+at least that.  ``upper`` is the upper model's bound on the robust optimum: no policy
 guarantees more.  With bands that are points every step is today's
 :func:`mitld_lp.synthesis.synthesize` (and the model takes that route).
 """
@@ -39,7 +40,8 @@ from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.checks import Check, close
+from mitld_lp.checks import Check
+from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
@@ -49,11 +51,9 @@ from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.stages import Built, build_posed
-from mitld_lp.running.controller import Controller
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
     RobustIteration,
-    bellman_residual,
     robust_interval_iteration,
     robust_policy,
 )
@@ -91,6 +91,10 @@ class RobustModelSolution:
     lp: PolicyLP | None  # the policy's robust value by the LP (method "lp")
     bracket: tuple[float, float]  # the robust optimum's bracket at the initial state
     checks: tuple[Check, ...]
+    # the certificate's bounds at the initial state: the policy's value against every law
+    # of the bands from below, the robust optimum from above (mitld_lp.solvers.certify)
+    bounds: tuple[float, float] = (float("nan"), float("nan"))
+    sense: str = "max"
 
     @property
     def certified(self) -> bool:
@@ -98,8 +102,12 @@ class RobustModelSolution:
 
 
 def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
-           method: str, tol: float, certify_tol: float,
-           deadline: float) -> RobustModelSolution:
+           method: str, tol: float, deadline: float, layers: tuple[np.ndarray, np.ndarray],
+           eta: float, precision: float, complement: bool) -> RobustModelSolution:
+    """One model's robust optimum, the policy read off its lower bound, the policy's own
+    robust value, and the certificate: the policy's value against every law of the
+    bands bounded from below, the robust optimum from above, both in exact arithmetic
+    (:func:`_certificate`)."""
     def remaining() -> float | None:
         return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
 
@@ -117,23 +125,60 @@ def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
         lp = policy_lp(game, target, choice, tol=tol, time_limit=remaining())
         checks.append(Check("policy LP solved", lp.status is Status.OPTIMAL,
                             f"{lp.status.value}: {lp.message}"))
-        if lp.values is not None:
-            checks.append(close("policy LP = policy iteration", float(lp.values[s0]),
-                                 float(ev.lower[s0]), certify_tol))
-    lo, hi = float(it.lower[s0]), float(it.upper[s0])
-    v0 = float(values[s0])
-    checks.append(Check("policy value within robust bracket",
-                        lo - certify_tol <= v0 <= hi + certify_tol,
-                        f"policy {v0:.10g} in [{lo:.10g}, {hi:.10g}] +- {certify_tol:g}"))
-    checks.append(close("policy value = robust optimum (upper bound)", v0, hi, certify_tol))
-    residual = bellman_residual(game, target, values)
-    checks.append(Check("policy values are a robust Bellman fixed point",
-                        residual <= certify_tol,
-                        f"max |B V - V| = {residual:.2e} (tol {certify_tol:g})"))
+    lower, upper, proved = _certificate(game, s0, target, choice, it, ev, layers, eta,
+                                        precision, complement)
+    checks.extend(proved)
     absorbing = np.asarray(imdp.choice_actions)[choice] == ABSORB
-    return RobustModelSolution(which, status, v0, it, read_only(np.where(absorbing, -1, choice)),
+    return RobustModelSolution(which, status, float(values[s0]), it,
+                               read_only(np.where(absorbing, -1, choice)),
                                read_only(np.asarray(values, dtype=np.float64)), ev, lp,
-                               (lo, hi), tuple(checks))
+                               (float(it.lower[s0]), float(it.upper[s0])), tuple(checks),
+                               bounds=(lower, upper))
+
+
+def _certificate(game: RobustGame, s0: int, target: np.ndarray, choice: np.ndarray,
+                 it: RobustIteration, ev: RobustIteration,
+                 layers: tuple[np.ndarray, np.ndarray], eta: float, precision: float,
+                 complement: bool) -> tuple[float, float, list[Check]]:
+    """The robust bounds in exact arithmetic (:mod:`mitld_lp.solvers.certify`): the
+    policy's value against every law of the bands is the minimum over nature's vertex
+    rows of the game the policy leaves (nature an MDP's minimiser, memoryless optimal),
+    bounded from below; the robust optimum is the least fixed point of ``max_c min_rows``,
+    bounded from above by a checked pre-fixed point; and the policy within the
+    precision of the optimum in every state."""
+    from mitld_lp.solvers.certify import (
+        RowModel,
+        chain,
+        everywhere,
+        optimum_lower,
+        optimum_upper,
+        rounding,
+    )
+
+    played = game.restrict(choice)
+    nature = RowModel(played.matrix, played.vertex_groups, s0)
+    # nature's strategy: in each state the vertex row worst for the policy's values
+    scores = played.matrix @ np.asarray(ev.lower, dtype=np.float64)
+    groups = played.vertex_groups
+    worst = np.minimum.reduceat(scores, groups[:-1])
+    rows = np.arange(scores.shape[0])
+    first = np.where(scores <= np.repeat(worst, np.diff(groups)), rows, rows.shape[0])
+    strategy = np.minimum.reduceat(first, groups[:-1])
+    strategy = np.where(target, -1, strategy)
+    rnd = rounding(played.matrix, eta)
+    ch = chain(nature, target, strategy, rnd, layers)
+    low = optimum_lower(nature, ch, rnd, zero=np.asarray(ev.prob0, dtype=bool),
+                        one=np.asarray(ev.prob1, dtype=bool), layers=layers,
+                        fallback=ev.lower)
+    whole = RowModel(game.matrix, game.row_groups, s0)
+    high = optimum_upper(whole, ch, rounding(game.matrix, eta),
+                         zero=np.asarray(it.prob0, dtype=bool), layers=layers,
+                         fallback=it.upper, nature=game.vertex_groups)
+    named = [Check(f"{c.name.replace('the optimum', 'the robust optimum')}" if c is
+                   high.check else "lower bound: the policy's value against every law of "
+                   "the bands", c.passed, c.detail) for c in (low.check, high.check)]
+    named.append(everywhere(low.vector, high.vector, s0, precision, complement=complement))
+    return low.value, high.value, named
 
 
 def _goal(game: RobustGame, imdp: IntervalMDP, dta: DTA,
@@ -206,13 +251,20 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     t2 = time.perf_counter()
     game = robust_game(imdp)
     deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
+    from mitld_lp.solvers.certify import RowModel, model_eta, support_layers
+
     target, stay = _goal(game, imdp, dta, np.asarray(imdp.target, dtype=bool))
-    low = _kept(_solve(game, imdp, target, "lower", s.method, s.tol, s.certify_tol,
-                       deadline), game, target, stay)
+    # the components and levels of the game's support graph (every vertex row)
+    layers = support_layers(RowModel(game.matrix, game.vertex_groups[game.row_groups],
+                                     imdp.initial))
+    eta = model_eta(sta)
+    low = _kept(_solve(game, imdp, target, "lower", s.method, s.tol, deadline, layers, eta,
+                       s.precision, posed.minimise), game, target, stay)
     if imdp.truncated.any():
         upper_goal, upper_stay = _goal(game, imdp, dta, imdp.target | imdp.truncated)
-        high = _kept(_solve(game, imdp, upper_goal, "upper", s.method, s.tol,
-                            s.certify_tol, deadline), game, upper_goal, upper_stay)
+        high = _kept(_solve(game, imdp, upper_goal, "upper", s.method, s.tol, deadline,
+                            layers, eta, s.precision, posed.minimise), game, upper_goal,
+                     upper_stay)
     else:
         high = low
     timings = {**built.timings, "solve": time.perf_counter() - t2}
@@ -224,7 +276,8 @@ def solve_robust(posed: Posed, built: Built) -> Result:
         route=ROBUST, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
         acceptance=Acceptance(np.asarray(target, dtype=bool), None), goal=read_only(target),
-        bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective))
+        bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
+                                   s.precision, truncated=bool(imdp.truncated.any())))
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result

@@ -49,7 +49,6 @@ from mitld_lp.routes.constrained import (
     quantity_of,
     solve_merged,
 )
-from mitld_lp.routes.constraints import CONSTRAINT_TOL
 from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.constrained import OPTIMAL
 from mitld_lp.solvers.constrained_model import Merged, Quantity
@@ -89,13 +88,17 @@ def middle_rows(imdp: IntervalMDP) -> sp.csr_array:
 
 
 def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarray,
-               q: Quantity, *, nature_maximises: bool, tol: float) -> tuple[float, float]:
-    """Sound bounds ``(lo, hi)`` at the initial state on the probability of ``q`` under
+               q: Quantity, *, nature_maximises: bool, tol: float,
+               eta: float | None = None) -> tuple[float, float]:
+    """Bounds ``(lo, hi)`` at the initial state on the probability of ``q`` under
     the randomised policy ``(prob, stay)`` of ``merged`` when nature picks, for each of the
     policy's choices and each step, a corner of the choice's hazard box (vertex rows
     ``vr`` of the product, mapped to the merged states) to minimise it (or to maximise
     it, ``nature_maximises``).  Nature choosing per choice has at least the power of one
-    hazard per step, so the bounds hold for every law of the bands.
+    hazard per step, so the bounds hold for every law of the bands.  The side nature
+    pushes (``hi`` when it maximises, else ``lo``) holds in exact arithmetic for the
+    model's probabilities within ``eta`` of the stored ones (:func:`_checked`); the
+    other is robust interval iteration's, to its tolerance.
 
     The robust game: each live merged state has one choice, to a node per policy choice
     (weight ``prob[c]``) and to WIN or LOSE for its stay (worth the stay's verdict); a
@@ -113,6 +116,10 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     n = lose + 1
     if q.kind != "prob":
         raise ValueError("worst_case: probabilities only")
+    if eta is None:
+        from mitld_lp.solvers.rounding import ETA
+
+        eta = ETA
     sat = merged.verdicts[:, q.component] == ACCEPTED
     target = np.zeros(n, dtype=bool)
     target[:m] = merged.absorbing & sat
@@ -183,10 +190,41 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     np.cumsum(rows_per_choice, out=vertex_groups[1:])
     row_groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(choices_per_state, out=row_groups[1:])
-    it = robust_interval_iteration(RobustGame(matrix, vertex_groups, row_groups), target,
-                                   tol=tol)
-    s0 = mdp.initial
-    return float(it.lower[s0]), float(it.upper[s0])
+    game = RobustGame(matrix, vertex_groups, row_groups)
+    it = robust_interval_iteration(game, target, tol=tol)
+    return _checked(game, target, it, nature_maximises, eta, int(mdp.initial),
+                    int(np.max(np.diff(rg), initial=1)) + 1)
+
+
+def _checked(game: RobustGame, target: np.ndarray, it: Any, nature_maximises: bool,
+             eta: float, s0: int, width: int) -> tuple[float, float]:
+    """The side of the worst case that matters bounded in exact arithmetic
+    (:mod:`mitld_lp.solvers.certify`): nature, one player, is an MDP's maximiser (an
+    upper bound on its maximum) or minimiser (a lower bound on its minimum); the other
+    side is the iteration's.  A policy's row is its floats normalised by their exact
+    sum, within ``gamma_width`` of the floats: added to ``eta``."""
+    from mitld_lp.solvers.certify import RowModel, certify
+    from mitld_lp.solvers.rounding import UNIT
+
+    model = RowModel(game.matrix, game.vertex_groups[game.row_groups], s0)
+    values = np.asarray(it.lower if not nature_maximises else it.upper, dtype=np.float64)
+    scores = game.matrix @ values
+    groups = model.row_groups
+    best = (np.maximum if nature_maximises else np.minimum).reduceat(scores, groups[:-1])
+    rows = np.arange(scores.shape[0])
+    hit = scores == np.repeat(best, np.diff(groups))
+    strategy = np.minimum.reduceat(np.where(hit, rows, rows.shape[0]), groups[:-1])
+    strategy = np.where(target, -1, strategy)
+    eta = eta + 2.0 * width * UNIT / (1.0 - width * UNIT)
+    if nature_maximises:
+        cert = certify(model, target, strategy, sense="max", sides=("upper",),
+                       zero=np.asarray(it.prob0, dtype=bool), fallback_upper=it.upper,
+                       eta=eta)
+        return float(it.lower[s0]), cert.upper
+    cert = certify(model, target, strategy, sense="min", sides=("lower",),
+                   zero=np.asarray(it.prob0, dtype=bool),
+                   one=np.asarray(it.prob1, dtype=bool), fallback_lower=it.lower, eta=eta)
+    return cert.lower, float(it.upper[s0])
 
 
 def solve_robust_constrained(posed: Posed, built: Built, *,
@@ -214,7 +252,10 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     raw_upper = 1.0 - nominal.lower if minimise else nominal.upper
     vr = vertex_rows(imdp)
     cons = posed.problem.constraints
-    chosen, values = nominal, _worst_constraints(nominal, vr, cons, s.tol)
+    from mitld_lp.solvers.rounding import model_eta, one_minus
+
+    eta = model_eta(sta)
+    chosen, values = nominal, _worst_constraints(nominal, vr, cons, s.tol, eta)
     margins = [0.0] * len(cons)
     rounds = 0
     while not all(v.holds for v in values) and rounds < ROUNDS:
@@ -230,14 +271,18 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
                              build=built.timings)
         if again.status != OPTIMAL:
             break
-        chosen, values = again, _worst_constraints(again, vr, cons, s.tol)
+        chosen, values = again, _worst_constraints(again, vr, cons, s.tol, eta)
     assert chosen.prob is not None and chosen.stay is not None
     task_lo, _ = worst_case(chosen.merged, vr, chosen.prob, chosen.stay,
-                            Quantity("prob", 0, 0.0), nature_maximises=False, tol=s.tol)
+                            Quantity("prob", 0, 0.0), nature_maximises=False, tol=s.tol,
+                            eta=eta)
     robust_ok = all(v.holds for v in values)
     lower = task_lo if robust_ok else float("nan")
     width = raw_upper - lower
-    checks = (*chosen.checks,
+    # the middle law's own precision and constraint checks are not this answer's
+    kept = [c for c in chosen.checks
+            if c.name != "precision" and not c.name.startswith("constraint ")]
+    checks = (*kept,
               Check("constraints hold against every law of the bands", robust_ok,
                     "; ".join(f"{v.constraint}: worst case {v.value!r}" for v in values)
                     or "no constraint"),
@@ -255,29 +300,33 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
                if robust_ok else
                "the policy optimal at the middle law of the bands breaks a constraint under "
                "some law of the bands: no certified lower bound")
+    complement = None
     if minimise:
-        lower, upper = 1.0 - raw_upper, 1.0 - lower
+        complement = (lower, raw_upper)
+        lower, upper = (one_minus(lower, raw_upper) if robust_ok else
+                        (one_minus(0.0, raw_upper)[0], float("nan")))
     else:
         upper = raw_upper
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
                    constraints=tuple(values),
                    certified=all(c.passed for c in checks), checks=checks,
-                   message=message, bands=bands, timings=timings)
+                   message=message, bands=bands, timings=timings, complement=complement,
+                   width={"total": width, "bands": width})
 
 
 def _worst_constraints(result: Result, vr: VertexRows, cons: tuple[Any, ...],
-                       tol: float) -> list[ConstraintValue]:
+                       tol: float, eta: float) -> list[ConstraintValue]:
     """Each constraint of ``cons`` (the user's bounds) against every law of the bands,
-    under ``result``'s policy: its worst case and whether that is within the bound."""
+    under ``result``'s policy: its worst case, bounded in exact arithmetic on the side
+    that matters, and whether that meets the bound exactly."""
     assert result.prob is not None and result.stay is not None
     out = []
     for k, c in enumerate(cons, start=1):
         lo, hi = worst_case(result.merged, vr, result.prob, result.stay,
                             quantity_of(c, k, "lower"), nature_maximises=c.sense == "<=",
-                            tol=tol)
+                            tol=tol, eta=eta)
         worst = hi if c.sense == "<=" else lo
-        holds = worst <= c.bound + CONSTRAINT_TOL if c.sense == "<=" else (
-            worst >= c.bound - CONSTRAINT_TOL)
-        out.append(ConstraintValue(c, worst, holds))
+        holds = worst <= c.bound if c.sense == "<=" else worst >= c.bound
+        out.append(ConstraintValue(c, worst, holds, bounds=(lo, hi)))
     return out

@@ -18,9 +18,11 @@ every bottom strongly connected component of the chain whose automaton states ar
 persistent (a run that enters it stays in it and keeps the safety part for ever), and,
 for a randomised controller of a task with a safety part, on every state reached after
 drawing *keep* (labelled ``keeping`` too); so ``P=? [F "accept"]`` is the probability
-that the run is accepted, which equals the synthesis's ``lower`` (for a minimum solved
-as one, on the task's own automaton, ``P=? [F ("accept" | "truncated")]`` equals its
-``upper``). ``reject`` where the
+that the run is accepted: the controller's value, inside the synthesis's certified
+bracket, ``lower`` its bound from below (for a minimum solved as one, on the task's own
+automaton, ``P=? [F ("accept" | "truncated")]`` is bounded from above by ``upper``; for a
+minimised task read back from its complement, ``P=? [F "accept"]`` from below by the
+complement's lower bound, ``result.complement[0]``). ``reject`` where the
 task is lost (the controller stops), ``truncated`` as above, ``staying`` where a
 randomised controller keeps to an end component, and each world proposition that holds
 (a proposition named like one of these labels is written ``world_<name>``). Each state
@@ -39,11 +41,11 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.controllers.format import ACCEPTED, REJECTED, UNDECIDED
+from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.product import Absorbing, ProductState
-from mitld_lp.running.controller import ControllerLike
-from mitld_lp.runtime import ACCEPTED, REJECTED, UNDECIDED
 from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
@@ -167,7 +169,7 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
     props = _prop_labels(game)
     labels: list[set[str]] = []
     valuations: list[str] = []
-    plan_verdicts = controller._plan.verdicts  # type: ignore[attr-defined]
+    plan_verdicts = controller.plan.verdicts  # type: ignore[attr-defined]
     for k, (i, mode) in enumerate(order):
         here: set[str] = set()
         if i < 0:
@@ -213,12 +215,12 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
            sink: Any) -> Iterable[tuple[int, int | None, float]]:
     """The chain's steps from product state ``i`` in controller ``mode``: ``(j, mode,
     p)`` to product state ``j``, or ``(k, None, p)`` to the chain's own state ``k``
-    (the draws of :meth:`mitld_lp.runtime.Stepper._step`, as probabilities)."""
+    (the draws of :meth:`mitld_lp.controllers.stepper.Stepper._act`, as probabilities)."""
     rec = mdp.states[i]
     if not isinstance(rec, ProductState):  # target, sink, truncated: absorbing
         yield i, _GO, 1.0
         return
-    plan = controller._plan  # type: ignore[attr-defined]  # the tables act() reads
+    plan: Any = controller.plan  # the tables act() reads
     verdicts = plan.verdicts[rec.automaton]
     if UNDECIDED not in verdicts:  # every component decided: the controller stops
         yield sink("accept" if verdicts[0] == ACCEPTED else "reject"), None, 1.0

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitld_lp.automata.joint import ACCEPTED
+from mitld_lp.controllers.observation import Observation
 from mitld_lp.result import Result
-from mitld_lp.running.controller import Observation
 
 __all__ = ["RunStats", "run_constrained"]
 

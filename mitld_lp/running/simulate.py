@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import defaults
+from mitld_lp.controllers.kinds import ControllerLike
+from mitld_lp.controllers.observation import Observation, RunStatus
 from mitld_lp.model import Model
-from mitld_lp.running.controller import ControllerLike, Observation, RunStatus
 from mitld_lp.running.rollouts import (
     SimulationResult,
     check_count,
@@ -85,7 +86,7 @@ def simulate(
     progress: bool | None = None,
 ) -> SimulationResult:
     """Estimate the probability that ``controller`` (deterministic or randomised: any
-    :class:`~mitld_lp.running.controller.ControllerLike`) satisfies ``model``'s task in the
+    :class:`~mitld_lp.controllers.kinds.ControllerLike`) satisfies ``model``'s task in the
     model's untruncated world (module docs).  A randomised controller draws from its own
     generator, reseeded with ``seed`` first, so a seed gives the same estimate.
 

@@ -38,11 +38,12 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.controllers.format import UNDECIDED
+from mitld_lp.controllers.kinds import ControllerLike, PlanController
+from mitld_lp.controllers.stepper import AutomatonMemory, Decision
 from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
 from mitld_lp.running.chain import chain_of, world_of
-from mitld_lp.running.controller import ControllerLike
-from mitld_lp.runtime import UNDECIDED, Decision, Stepper
 from mitld_lp.util.traversal import breadth_first_order
 from mitld_lp.worlds.names import state_fields, state_values
 
@@ -267,7 +268,7 @@ def _label(d: Decision, randomised: bool) -> Hashable:
 def _acting(result: Any, controller: ControllerLike) -> list[int]:
     """The product states the controller reaches and acts in (undecided ones)."""
     chain = chain_of(result, controller)
-    plan = controller._plan  # type: ignore[attr-defined]
+    plan: Any = controller.plan
     out = []
     for i in sorted({int(i) for i in chain.origin if i >= 0}):
         rec = result.mdp.states[i]
@@ -278,7 +279,7 @@ def _acting(result: Any, controller: ControllerLike) -> list[int]:
 
 def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
     """The controller's own decision at product state ``i``."""
-    plan = controller._plan  # type: ignore[attr-defined]
+    plan: Any = controller.plan
     rec = result.mdp.states[i]
     label = _label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
                    controller.randomised)
@@ -286,7 +287,8 @@ def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
 
 
 _TIE = 1e-12
-"""Two values closer than this are equal when the tree may pick among actions."""
+"""Two values closer than this, relative to the larger, are equal when the tree may pick
+among actions (relative: two choices worth 1e-30 and 2.6e-30 are not tied)."""
 
 
 def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Hashable]] | None:
@@ -308,7 +310,7 @@ def _choices(result: Any, controller: ControllerLike) -> dict[int, frozenset[Has
     minimum = result.sense == "min"
     q = mdp.matrix @ v
     cs = mdp.choice_state()
-    tight = np.abs(q - v[cs]) <= _TIE
+    tight = np.abs(q - v[cs]) <= _TIE * np.maximum(np.abs(q), np.abs(v[cs]))
     goal = np.asarray(result.acceptance.goal, dtype=bool)
     # rank: steps to the goal along tight choices (a backward search over their edges)
     coo = mdp.matrix.tocoo()
@@ -505,12 +507,16 @@ def _best_split(rows: list[tuple[Any, ...]], labels: dict[int, Hashable], idx: l
 # --------------------------------------------------------------------------- running it
 
 
-class _TreePlan:
+class _TreePlan(AutomatonMemory):
     """A controller's tables with the policy replaced by the tree."""
 
     def __init__(self, plan: Any, tree: Tree, game: Any) -> None:
         self._plan, self.tree, self.game = plan, tree, game
         self.events, self.initial, self.verdicts = plan.events, plan.initial, plan.verdicts
+
+    @property
+    def randomised(self) -> bool:
+        return self.tree.randomised
 
     def read(self, q: int, state: Hashable, events: frozenset[str]) -> int:
         return self._plan.read(q, state, events)
@@ -533,26 +539,14 @@ class _TreePlan:
         return self._plan.fallback(state)
 
 
-class TreeController(Stepper):
-    """The tree run as a controller (the automaton and clock of the original)."""
+class TreeController(PlanController):
+    """The tree run as a controller (the automaton and clock of the original); it is
+    not saved (the tree is written by :func:`write_tree`)."""
 
-    def __init__(self, plan: _TreePlan, randomised: bool, seed: int | None = 0) -> None:
-        self.randomised = randomised
+    kind = "tree"
+
+    def __init__(self, plan: _TreePlan, seed: int | None = 0) -> None:
         self._begin(plan, np.random.default_rng(seed))
-
-    @property
-    def status(self) -> Any:
-        from mitld_lp.running.controller import RunStatus
-
-        return RunStatus(self.status_name)
-
-    def reset(self, seed: int | None = None) -> None:
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-        self._restart()
-
-    def act(self, observation: Any) -> str | None:
-        return self._step(observation.state, observation.events)
 
 
 def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None = None
@@ -560,8 +554,7 @@ def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None =
     """A controller that decides by ``tree`` (and tracks its memory as ``result``'s
     controller does)."""
     c = controller or result.controller
-    return TreeController(_TreePlan(c._plan, tree, world_of(result, c)),  # type: ignore[union-attr]
-                          bool(c.randomised))
+    return TreeController(_TreePlan(c.plan, tree, world_of(result, c)))
 
 
 def tree_value(result: Any, tree: Tree) -> float:

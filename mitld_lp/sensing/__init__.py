@@ -9,9 +9,12 @@
 * :mod:`~mitld_lp.sensing.solve`: the ``sensed`` route, its certified bracket (the one
   :class:`~mitld_lp.result.Result`, with its ``sensors`` and ``belief`` parts);
 * :mod:`~mitld_lp.sensing.table`: its policy table;
-* :mod:`~mitld_lp.sensing.observe`: :class:`~mitld_lp.sensing.observe.Observation`, the
-  controller that acts on observations, and the simulation that draws the hidden events
-  and the sensors' reports.
+* :mod:`~mitld_lp.sensing.observe`: the controller that acts on observations made from
+  the information states (the controller itself, its file and its step rule are
+  :mod:`mitld_lp.controllers`, with every other kind), and the simulation that draws the
+  hidden events and the sensors' reports;
+* :mod:`~mitld_lp.sensing.saved`: ``load_sensed``, where it was (the one reader loads
+  every controller file).
 """
 
 from mitld_lp.sensing.sensors import Sensor

@@ -24,7 +24,7 @@ from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import solve_models
 from mitld_lp.routes.stages import Built
-from mitld_lp.sensing.observe import SensedController
+from mitld_lp.sensing.observe import controller_of
 
 __all__ = ["solve_sensed"]
 
@@ -41,16 +41,21 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     t2 = time.perf_counter()
     mdp = belief.mdp
     # an ordinary MDP with a reachability target: solved and certified as the plain
-    # route's product is (both truncation models, the Bellman check over every state)
-    low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2)
+    # route's product is (both truncation models, bounds checked in exact arithmetic)
+    from mitld_lp.solvers.certify import model_eta
+
+    low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2,
+                             eta=model_eta(belief.sta, history=True),
+                             complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(
         route=SENSED, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta, belief=belief,
         sensors=dict(belief.sensors),
-        controller=SensedController.from_belief(model.game, belief, low.policy),
+        controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
-        **from_models(low, high, mdp.initial, posed.problem.objective))
+        **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
+                      truncated=bool(mdp.truncated.any())))
     log.info("sensed synthesis: [%g, %g], certified=%s", result.lower, result.upper,
              result.certified)
     return result

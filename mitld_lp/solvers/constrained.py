@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evaluate
 from mitld_lp.solvers.result import Status
 
-__all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED"]
+__all__ = ["Row", "Solved", "optimise", "OPTIMAL", "INFEASIBLE", "FAILED", "certified_value"]
 
 OPTIMAL, INFEASIBLE, FAILED, TIME_LIMIT = (Status.OPTIMAL, Status.INFEASIBLE, Status.FAILED,
                                           Status.TIME_LIMIT)
@@ -59,6 +59,10 @@ class Solved:
         stay: per merged state, the probability the policy stays there for ever.
         values: the exact value on the policy's chain of the objective, then of each row.
         message: the solver's word.
+        duals: the LP's dual solution, ``(y, lam)``: ``y`` per merged state (0 where
+            absorbing), ``lam >= 0`` per row (``None`` without a solution).
+        allowed: per merged choice, whether the LP could take it (a ``P(phi) <= 0`` row
+            closes the choices that may reach ``phi``: :func:`never_reaching`).
     """
 
     status: str
@@ -67,6 +71,8 @@ class Solved:
     stay: np.ndarray | None
     values: tuple[float, ...]
     message: str
+    duals: tuple[np.ndarray, np.ndarray] | None = None
+    allowed: np.ndarray | None = None
 
 
 def _counts_steps(q: Quantity) -> bool:
@@ -75,10 +81,11 @@ def _counts_steps(q: Quantity) -> bool:
 
 def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_array,
               b_ub: np.ndarray, tol: float, time_limit: float | None = None,
-              ) -> tuple[str, np.ndarray | None, str]:
+              ) -> tuple[str, np.ndarray | None, np.ndarray | None, str]:
     """``min c'v  s.t.  a_eq v = b_eq, a_ub v <= b_ub, v >= 0`` by Clarabel (form
-    ``Av + s = b, s in {0}^n x R_+^m``); ``time_limit`` seconds (status
-    ``time_limit`` past it)."""
+    ``Av + s = b, s in {0}^n x R_+^m``): the status, the primal and dual solutions
+    (``A'z + c = 0``, the equality rows' duals first), the solver's word;
+    ``time_limit`` seconds (status ``time_limit`` past it)."""
     clarabel: Any = importlib.import_module("clarabel")
     n = c.size
     a = sp.vstack([a_eq, a_ub, -sp.eye_array(n, format="csc")], format="csc")
@@ -97,15 +104,16 @@ def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_
             settings,
         ).solve()
     except Exception as exc:  # pyo3 panics included
-        return FAILED, None, f"clarabel: {type(exc).__name__}: {exc}"
+        return FAILED, None, None, f"clarabel: {type(exc).__name__}: {exc}"
     word = str(solution.status)
     if word in ("Solved", "AlmostSolved"):
-        return OPTIMAL, np.asarray(solution.x, dtype=np.float64), f"clarabel: {word}"
+        return (OPTIMAL, np.asarray(solution.x, dtype=np.float64),
+                np.asarray(solution.z, dtype=np.float64), f"clarabel: {word}")
     if word in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
-        return INFEASIBLE, None, f"clarabel: {word}"
+        return INFEASIBLE, None, None, f"clarabel: {word}"
     if word == "MaxTime":
-        return TIME_LIMIT, None, f"clarabel: {word} (time limit {time_limit} s)"
-    return FAILED, None, f"clarabel: {word}"
+        return TIME_LIMIT, None, None, f"clarabel: {word} (time limit {time_limit} s)"
+    return FAILED, None, None, f"clarabel: {word}"
 
 
 def optimise(
@@ -129,8 +137,9 @@ def optimise(
     cols = [columns(merged, q, costs) for q in quantities]
     cs = mdp.choice_state()
     live = ~merged.absorbing
-    live_choices = np.flatnonzero(live[cs])
-    stays = np.flatnonzero(allow_stay)
+    allowed, stay_allowed = never_reaching(merged, rows)
+    live_choices = np.flatnonzero(live[cs] & allowed)
+    stays = np.flatnonzero(allow_stay & stay_allowed)
     if not live[mdp.initial]:  # decided before any step
         prob = np.zeros(mdp.n_choices)
         stay = np.zeros(mdp.n_states)
@@ -168,14 +177,57 @@ def optimise(
     n_var = live_choices.size + stays.size
     a_ub = sp.csc_array(np.array(ub_rows).reshape(len(rows), n_var))
     c = vec(0) * (-1.0 if maximise else 1.0)
-    status, v, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol,
-                                   time_limit)
-    if v is None:
+    status, v, z, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64),
+                                      tol, time_limit)
+    if v is None or z is None:
         return Solved(status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)
-    prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v)
+    prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v, allowed)
     values = _exact(merged, prob, stay, quantities, cols)
-    return Solved(OPTIMAL, lp_value, prob, stay, values, message)
+    # Clarabel's duals satisfy A'z + c = 0 with c = -objective for a maximum: the flow
+    # rows' duals y and the rows' lam >= 0 (a cone's duals) give A_eq'y + A_ub'lam >=
+    # objective, weak duality's certificate (mitld_lp.solvers.certify_dual)
+    y = np.zeros(mdp.n_states)
+    y[states] = z[:states.size] if maximise else -z[:states.size]
+    lam = np.maximum(z[states.size:states.size + len(rows)], 0.0)
+    return Solved(OPTIMAL, lp_value, prob, stay, values, message, (y, lam), allowed)
+
+
+def never_reaching(merged: Merged, rows: list[Row]) -> tuple[np.ndarray, np.ndarray]:
+    """The choices and stays a policy may use under the rows ``P(phi) <= 0``: from the
+    states where some policy keeps ``phi`` from holding for ever (a greatest fixed point
+    on the graph), the choices whose support stays there and the stays where it has not
+    held.  An interior-point LP spreads a little flow over every optimal column, so a
+    zero bound met to its tolerance (3.8e-8 on bus_risk) would not hold exactly: the
+    graph decides it instead.  Every choice and stay where no row is such a bound."""
+    from mitld_lp.automata.joint import ACCEPTED
+
+    mdp = merged.mdp
+    cs = mdp.choice_state()
+    allowed = np.ones(mdp.n_choices, dtype=bool)
+    stays = np.ones(mdp.n_states, dtype=bool)
+    m = sp.csr_array(mdp.matrix)
+    owner = np.repeat(np.arange(mdp.n_choices), np.diff(m.indptr))
+    for r in rows:
+        q = r.quantity
+        if q.kind != "prob" or r.sense != "<=" or r.bound > 0:
+            continue
+        sat = merged.verdicts[:, q.component] == ACCEPTED
+        bad = sat.copy()
+        bad[merged.truncated] = q.truncated > 0
+        keep = ~bad
+        while True:
+            inside = np.ones(mdp.n_choices, dtype=bool)
+            np.logical_and.at(inside, owner, keep[m.indices])
+            ok = np.zeros(mdp.n_states, dtype=bool)
+            np.logical_or.at(ok, cs, inside)
+            nxt = keep & (ok | merged.absorbing)
+            if np.array_equal(nxt, keep):
+                break
+            keep = nxt
+        allowed &= ~keep[cs] | inside
+        stays &= ~sat
+    return allowed, stays
 
 
 def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
@@ -183,10 +235,12 @@ def _meets(row: Row, value: float, tol: float = 1e-9) -> bool:
 
 
 def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.ndarray,
-            cs: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            cs: np.ndarray, v: np.ndarray, allowed: np.ndarray,
+            ) -> tuple[np.ndarray, np.ndarray]:
     """``pi(c | s)`` and ``pi(stay | s)`` from the occupancy ``v``; shares below
     :data:`_ZERO_SHARE` of a state's visits are dropped (interior-point noise), and a
-    state the solution never visits takes its first choice."""
+    state the solution never visits takes its first ``allowed`` choice (its first
+    choice when none is)."""
     x = np.zeros(n_choices)
     x[live_choices] = np.maximum(v[: live_choices.size], 0.0)
     z = np.zeros(n_states)
@@ -198,7 +252,9 @@ def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.n
     empty = total <= 0
     first = np.zeros(n_choices, dtype=bool)
     starts = np.flatnonzero(np.diff(np.concatenate([[-1], cs])))  # first choice per state
-    first[starts] = True
+    rank = np.where(allowed, np.arange(n_choices), n_choices)
+    best = np.minimum.reduceat(rank, starts)
+    first[np.where(best < n_choices, best, starts)] = True
     x[first & empty[cs]] = 1.0
     total[empty] = 1.0
     return x / total[cs], z / total
@@ -208,3 +264,29 @@ def _exact(merged: Merged, prob: np.ndarray, stay: np.ndarray, quantities: list[
            cols: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, ...]:
     asked = [(pc, ps, _counts_steps(q)) for q, (pc, ps) in zip(quantities, cols, strict=True)]
     return evaluate(merged, prob, stay, asked).values
+
+
+def certified_value(merged: Merged, prob: np.ndarray, stay: np.ndarray, q: Quantity,
+                    name: str, *, costs: np.ndarray | None = None,
+                    eta: float | None = None) -> Any:
+    """Bounds in exact arithmetic on ``q`` under the randomised policy ``prob`` /
+    ``stay`` (:func:`mitld_lp.solvers.certify_mixture.mixture_bounds`): a probability
+    is the verdict of the absorbing state reached (truncation worth ``q.truncated``) or
+    of staying for ever; steps and costs a reward per choice."""
+    from mitld_lp.automata.joint import ACCEPTED
+    from mitld_lp.solvers.certify_mixture import mixture_bounds
+    from mitld_lp.solvers.rounding import ETA
+
+    mdp = merged.mdp
+    per_choice, per_stay = columns(merged, q, costs)
+    if q.kind == "prob":
+        sat = (merged.verdicts[:, q.component] == ACCEPTED).astype(np.float64)
+        fixed = np.where(merged.absorbing, sat, 0.0)
+        fixed[merged.truncated] = q.truncated
+        reward = np.zeros(mdp.n_choices)
+    else:
+        fixed = np.zeros(mdp.n_states)
+        reward = per_choice
+    return mixture_bounds(mdp, prob, stay, merged.absorbing, fixed, reward, per_stay, name,
+                          counts_steps=_counts_steps(q), undecided=merged.undecided,
+                          eta=ETA if eta is None else eta)

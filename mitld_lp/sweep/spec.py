@@ -25,6 +25,7 @@ The schema (also in docs/sweeps.md)::
     time_limit = 60                     # seconds of each point's solve stage
     max_states = 5000000                # each point's product budget (states)
     max_memory = 4000000000             # and memory (bytes; default half the machine's)
+    precision = 1e-6                    # the certified bracket's relative width
 
 A parameter is any key path of the model file: TOML's dotted keys are the key path.
 Under ``[vary]`` and ``[points]`` the values of a parameter are a list (so varying a
@@ -231,7 +232,7 @@ def _setting(table: dict[str, Any], ctx: _Context) -> Settings:
                 raise ctx.error(where, f"must be a positive number of seconds, got "
                                 f"{_toml_value(v)}")
             v = float(v)
-        elif k in ("tol", "certify_tol"):
+        elif k in ("tol", "certify_tol", "precision"):
             if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < 1:
                 raise ctx.error(where, f"must be a number in (0, 1), got {_toml_value(v)}")
             v = float(v)
@@ -255,7 +256,7 @@ def _setting(table: dict[str, Any], ctx: _Context) -> Settings:
 #: The keys of a sweep's ``[solve]`` table: the settings a point is solved with.
 _SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "decompose",
                          "time_limit", "max_states", "max_automaton_states", "max_memory",
-                         "tol", "certify_tol"})
+                         "tol", "certify_tol", "precision"})
 
 
 def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Context) -> list[tuple[KeyPath, list]]:

@@ -206,7 +206,7 @@ _MEMORY = (("20M", 20 << 20), ("200M", 200 << 20), ("1G", 1 << 30))
 _LOAD = """\
 import sys
 from mitld_lp import Controller
-from mitld_lp.running.controller_file import ControllerFileError
+from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.files.write import InputFileError
 try:
     Controller.load({path!r})

@@ -465,7 +465,7 @@ class GymAgent:
         self.controller, self.game, self.t = controller, game, 0
 
     def _act(self, state: Any) -> Any:
-        from mitld_lp.running.controller import Observation
+        from mitld_lp.controllers.observation import Observation
 
         name = self.controller.act(Observation(state))
         return None if name is None else self.game.env_actions.get(name, name)

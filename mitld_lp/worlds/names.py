@@ -8,11 +8,21 @@ from __future__ import annotations
 from collections.abc import Hashable
 from typing import Any
 
-from mitld_lp.running.controller_file import world_variables
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.grid import GridWorld
 
-__all__ = ["state_fields", "state_record", "state_values", "valuation_text"]
+__all__ = ["state_fields", "state_record", "state_values", "valuation_text", "world_variables"]
+
+
+def world_variables(game: Game[Any]) -> tuple[str, ...] | None:
+    """The names of the world's variables when its states are tuples of their values
+    (a PRISM world's ``variables``), else None."""
+    names = getattr(game, "variables", None)
+    if isinstance(names, tuple) and names and all(isinstance(v, str) for v in names):
+        initial = game.initial
+        if isinstance(initial, tuple) and len(initial) == len(names):
+            return names
+    return None
 
 
 def state_fields(game: Game[Any]) -> tuple[str, ...]:

@@ -1,97 +1,176 @@
-"""A controller as plain tables: what :meth:`mitld_lp.Controller.save` and
-:meth:`mitld_lp.ConstrainedController.save` write; :mod:`mitld_lp.running.saved_plan` reads it
-(with NumPy alone) for :meth:`~mitld_lp.Controller.load` and ``mitld-lp run``.
+"""A synthesis's model as a controller's plan, and its tables for saving.
 
-The file is a NumPy ``.npz`` archive of plain arrays (integers, floats, booleans, and
-UTF-8 JSON text stored as bytes), read with ``allow_pickle=False``: loading parses
-numbers and JSON and never runs code from the file, so a foreign or damaged file can
-only be refused (:class:`ControllerFileError`).  It holds everything the controller
-needs to run, and nothing of the world's Python objects, so a robot's process loads it
-without the world's class (and without any solver):
-
-* ``meta`` (JSON): the format tag and version (3; versions 1 and 2 are still read), the
-  ``kind`` (``"deterministic"`` or ``"randomised"``), the world's ``variables`` (their
-  names when a world state is a tuple of them, as in a PRISM world; else null), the
-  automaton's atoms, the task's events, the action names, the automaton (its initial
-  state, per state its transition function as a decision diagram over the atoms, see
-  :mod:`mitld_lp.automata.dta`, and its accepting and rejecting states -- for a
-  randomised controller instead per state the ``verdicts`` of the task and of each
-  constraint's formula: 1 accepted, 0 rejected, -1 undecided), and the clock rule (per
-  event its cap and truncation point, :func:`mitld_lp.automata.sta.advance_clock`);
-* ``states`` (JSON): the world states the controller may observe, in the encoding of
-  :func:`encode_state`; position ``g`` in this list is the state's number ``g``;
-* ``props`` (int64, per state ``g``): its robot propositions, as a bit mask over the atoms;
-* ``fallback`` (int32, per ``g``): its first action (taken where the policy has none);
-* ``keys`` (int64, sorted), one entry per ordinary product state ``(g, q, pending,
-  clock)`` with key ``((g * n_q + q) * 2**n_events + pending_mask) * n_clock + clock``;
-* deterministic: ``policy`` (int32) and ``hopeless`` (bool) per key: the policy's
-  action (-1: none, the value there is 0) and whether the task is lost there;
-* randomised: ``offsets`` (int64, one more than the keys): the key ``i``'s choices are
-  entries ``offsets[i]:offsets[i + 1]`` of ``choices`` (int32 action numbers),
-  ``weights`` (float64, their probabilities) and ``inside`` (bool: the choice keeps
-  the run in its end component), ``keep`` (bool: the choice is the *keep* choice of a
-  task with a safety part, stored as action -1: from then on the run plays the end
-  component of persistent task states for ever) and ``kept`` (bool: the choice stays in
-  that component; what a run that has kept draws from, uniformly); ``stay`` (float64 per
-  key: the probability of drawing *stay*, keeping to the end component for ever) and
-  ``charged`` (bool per key: a step here counts towards E(steps)).  A version 2 file has
-  no ``keep`` and ``kept``: it has no keep choice.
+:class:`LivePlan` (a deterministic policy on the product) and :class:`LiveRandomPlan`
+(a constrained synthesis's randomised policy on its merged model) answer the one step
+rule (:class:`~mitld_lp.controllers.stepper.Stepper`) from the world, the STA and the
+product themselves; :func:`tabulate` and :func:`tabulate_randomised` turn them into a
+:class:`~mitld_lp.controllers.tables.SavedPlan`, :func:`tabulate_sensed` a sensed
+plan made by the synthesis into one that lists its world states: what the file holds
+(:mod:`mitld_lp.controllers.format`).
 
 The world states listed are every state the world reaches from its initial one (under
 any action and any events): the product's game states and those reached past a
-truncation point, where the controller goes on (:func:`tabulate` explores them).
-
-Pickling a controller in memory (to hand it to another process of the same program)
-still works; pickle is never a file format here.
+truncation point, where the controller goes on.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
+from mitld_lp.controllers.format import ACCEPTED, KEEP, REJECTED, UNDECIDED
+from mitld_lp.controllers.stepper import AutomatonMemory, Decision
+from mitld_lp.controllers.tables import SavedPlan, SensedPlan, key
 from mitld_lp.mdp import MDP
-from mitld_lp.product import ProductState
-from mitld_lp.running.plan_reader import read_plan
-from mitld_lp.running.saved_plan import (
-    FORMAT,
-    UNDECIDED,
-    VERSION,
-    ControllerFileError,
-    SavedPlan,
-    decode_state,
-    encode_state,
-    key,
-)
-from mitld_lp.worlds.game import Game
+from mitld_lp.product import ProductState, ProductStates
+from mitld_lp.worlds.game import Game, world_members
+from mitld_lp.worlds.names import world_variables
 
-__all__ = [
-    "ControllerFileError",
-    "FORMAT",
-    "VERSION",
-    "SavedPlan",
-    "decode_state",
-    "encode_state",
-    "read_plan",
-    "tabulate",
-    "tabulate_randomised",
-    "world_variables",
-]
+__all__ = ["LivePlan", "LiveRandomPlan", "tabulate", "tabulate_randomised", "tabulate_sensed"]
 
 
-def world_variables(game: Game[Any]) -> tuple[str, ...] | None:
-    """The names of the world's variables when its states are tuples of their values
-    (a PRISM world's ``variables``), else None."""
-    names = getattr(game, "variables", None)
-    if isinstance(names, tuple) and names and all(isinstance(v, str) for v in names):
-        initial = game.initial
-        if isinstance(initial, tuple) and len(initial) == len(names):
-            return names
-    return None
+def _position(mdp: MDP, record: ProductState, index: dict[Hashable, int]) -> int | None:
+    states = mdp.states
+    return states.position(record) if isinstance(states, ProductStates) else index.get(record)
+
+
+class _OnTheModel(AutomatonMemory):
+    """What the synthesis's plans share: the automaton ``dta`` read on the world
+    ``game``'s labels, the clock of the ``sta``, the world's first action."""
+
+    __slots__ = ()
+
+    game: Any
+    sta: STA
+
+    @property
+    def dta(self) -> Any:
+        raise NotImplementedError
+
+    @property
+    def events(self) -> frozenset[str]:
+        return self.sta.events
+
+    @property
+    def initial(self) -> int:
+        return self.dta.initial
+
+    def read(self, q: int, state: Hashable, events: frozenset[str]) -> int:
+        return self.dta.step(q, self.game.propositions(state) | events)
+
+    def advance(self, pending: frozenset[str], clock: int) -> tuple[int, bool]:
+        step = self.sta.advance(pending, clock)
+        return step.clock, step.truncated
+
+    def fallback(self, state: Hashable) -> str:
+        return self.game.actions(state)[0]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LivePlan(_OnTheModel):
+    """The synthesised model itself: the world, the STA, the product MDP, the policy
+    (a choice per state, -1 where there is none) and the optional hopeless mask."""
+
+    game: Game[Any]
+    sta: STA
+    mdp: MDP
+    policy: np.ndarray
+    hopeless: np.ndarray | None
+    _index: dict[Hashable, int] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.mdp.states, ProductStates):  # a hand-made MDP: index it
+            self._index.update((s, i) for i, s in enumerate(self.mdp.states))
+
+    @property
+    def randomised(self) -> bool:
+        return False
+
+    @property
+    def dta(self) -> Any:
+        return self.sta.dta
+
+    @property
+    def verdicts(self) -> tuple[tuple[int, ...], ...]:
+        dta = self.sta.dta
+        return tuple((ACCEPTED,) if q == dta.accepting else (REJECTED,)
+                     if q == dta.rejecting else (UNDECIDED,) for q in range(dta.n_states))
+
+    def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
+        i = _position(self.mdp, ProductState(state, q, pending, clock), self._index)
+        if i is None:
+            return Decision(())
+        lost = self.hopeless is not None and bool(self.hopeless[i])
+        c = int(self.policy[i])
+        return Decision(() if c < 0 else (self.mdp.action_name(c),), lost=lost)
+
+    def lookup(
+        self, state: Hashable, q: int, pending: frozenset[str], clock: int
+    ) -> tuple[str | None, bool]:
+        d = self.decide(state, q, pending, clock)
+        return (d.actions[0] if d.actions else None), d.lost
+
+    def tables(self, max_states: int) -> SavedPlan:
+        return tabulate(self.game, self.sta, self.mdp, self.policy, self.hopeless,
+                        max_states=max_states)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LiveRandomPlan(_OnTheModel):
+    """The constrained synthesis's model: the world, the STA of the joint automaton,
+    the product, the merged model and the randomised policy on it."""
+
+    game: Any
+    sta: STA
+    joint: Joint
+    merged: Any  # mitld_lp.solvers.constrained_model.Merged
+    mdp: MDP
+    prob: np.ndarray
+    stay: np.ndarray
+
+    @property
+    def randomised(self) -> bool:
+        return True
+
+    @property
+    def dta(self) -> Any:
+        return self.joint.dta
+
+    @property
+    def verdicts(self) -> tuple[tuple[int, ...], ...]:
+        return tuple(tuple(v) for v in self.joint.verdicts)
+
+    def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
+        i = _position(self.mdp, ProductState(state, q, pending, clock), {})
+        m = self.merged
+        s = -1 if i is None else int(m.of_product[i])
+        if s < 0 or m.absorbing[s]:
+            return Decision((), np.zeros(0))
+        lo, hi = int(m.mdp.row_groups[s]), int(m.mdp.row_groups[s + 1])
+        names = tuple(KEEP if m.keep[c] else m.mdp.action_name(c) for c in range(lo, hi))
+        inside = tuple(n for n, flag in zip(names, m.internal[lo:hi], strict=True) if flag)
+        kept = tuple(n for n, flag in zip(names, m.keep_internal[lo:hi], strict=True) if flag)
+        keep = tuple(bool(k) for k in m.keep[lo:hi])
+        return Decision(names, np.asarray(self.prob[lo:hi]), float(self.stay[s]), inside,
+                        charged=bool(m.undecided[s]), keep=keep if any(keep) else (),
+                        kept=kept)
+
+    def tables(self, max_states: int) -> SavedPlan:
+        m = self.merged
+        return tabulate_randomised(
+            self.game, self.sta, self.joint.verdicts, self.mdp, m.of_product, m.mdp,
+            self.prob, self.stay, m.internal, m.undecided, m.absorbing,
+            keep=m.keep, kept=m.keep_internal, max_states=max_states)
+
+
+# --------------------------------------------------------------------------- tabulating
 
 
 class _World:
@@ -181,7 +260,7 @@ def tabulate(
     world reaches past a truncation point, where the product stopped and the controller
     goes on.  Raises ``ValueError`` (naming the numbers) when there are more than
     ``max_states`` of them, or when a world state cannot be encoded
-    (:func:`encode_state`).
+    (:func:`~mitld_lp.controllers.format.encode_state`).
     """
     dta = sta.dta
     world = _World(game, dta.atoms, list(mdp.action_names), max_states)
@@ -262,6 +341,31 @@ def tabulate_randomised(
                      "charged": np.asarray(charge, dtype=np.bool_),
                      "keep": np.asarray(keeps, dtype=np.bool_),
                      "kept": np.asarray(plays, dtype=np.bool_)})
+
+
+def tabulate_sensed(plan: SensedPlan, max_states: int) -> SensedPlan:
+    """``plan`` (a sensed controller's, made by the synthesis with its world) as a plan
+    that lists its world states and their first actions instead, as a file holds it:
+    every state reachable under every action and every set of the events the world
+    reacts to.  Budget and errors as :func:`tabulate`."""
+    game = plan.game
+    if game is None:
+        return plan
+    index: dict[Hashable, int] = {}
+    states: list[Hashable] = []
+
+    def number(s: Hashable) -> int:
+        g = index.get(s)
+        if g is None:
+            _check_budget(len(states) + 1, max_states)
+            g = index[s] = len(states)
+            states.append(s)
+        return g
+
+    number(game.initial)
+    _close(game, states, number, sorted(world_members(game).event_names))
+    return dataclasses.replace(plan, game=None, first={s: plan.fallback(s) for s in states},
+                               variables=world_variables(game))
 
 
 def _close(

@@ -1,0 +1,500 @@
+r"""Brackets that hold in exact arithmetic: the certificate of a solved model.
+
+The solvers compute in floating point on the product's stored probabilities ``p^``;
+the model as written has exact (rational) probabilities ``p`` with
+``|p^ - p| <= eta * p`` entry by entry (:data:`ETA`, :func:`model_eta`) and the same
+support.  Whatever the solvers did, a bound reported here is the conclusion of
+inequalities checked on the float vectors with every rounding accounted for, so it
+holds for the exact model:
+
+* **a lower bound on a policy's value** (``policy_lower``): a vector ``L`` with
+  ``L = 1`` where the policy's chain reaches the target almost surely, ``L = 0`` where
+  it cannot reach it (both from the chain's graph), and ``L(s) <= E_sigma(s)(L)``
+  elsewhere, checked with the float sum rounded down.  On those states the chain is
+  transient, so ``(I - P) (L - v) <= 0`` gives ``L <= v``;
+* **an upper bound on a policy's value** (``policy_upper``): ``U >= E_sigma(s)(U)``
+  rounded up; the policy's value is the chain's least fixed point, so ``U >= v``;
+* **an upper bound on the maximum** (``optimum_upper``): ``U = 1`` on the target and
+  ``E_c(U) <= U(s)`` for every state and choice, rounded up; the maximum is the least
+  fixed point of the Bellman operator, so ``U >= Pmax`` (a choice whose support has
+  ``max_j U(j) <= U(s)`` passes without arithmetic: a convex combination);
+* **a lower bound on the minimum** (``optimum_lower``): ``L = 0`` on the states from
+  which some policy avoids the target for ever (given, and checked to leave no end
+  component outside them), ``L(s) <= E_c(L)`` for every choice, rounded down; with no
+  end component left the minimum is the operator's only fixed point there, so
+  ``L <= Pmin``.
+
+The float sums are bounded by :mod:`mitld_lp.solvers.rounding`.
+
+The candidates are built with slack so that the checks pass at relative precision:
+from the policy's float values ``v`` (one more solve with each block's LU:
+``W = (I - P)^{-1} (delta * v)``, ``delta`` twice each state's measured relative
+residual plus its rounding bound), ``L = v - W`` and ``U = v + W``: then
+``(I - P) L = b + r - delta v``, below the target's mass by ``delta v - r > 0`` in
+every state, and ``W(s) / v(s)`` is ``delta`` times the expected steps to the target
+(conditioned on reaching it): the bracket's relative width.  A check that still fails
+is retried with a larger slack, then repaired (a failing state's bound moved to what
+its choices need, downstream first, the states of an end component together), then
+the iteration's bound is tried, and last a trivial bound (0 or 1) that always holds:
+the answer is then sound but not precise, and its check says so.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.checks import Check
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
+from mitld_lp.solvers.graph import (
+    gather_ranges,
+    maximal_end_components,
+    row_entries,
+    rows_dot,
+)
+from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rounding import (
+    ETA,
+    HAZARD_ACCURACY,
+    UNIT,
+    Rounding,
+    above,
+    below,
+    float_down,
+    float_up,
+    model_eta,
+    one_minus,
+    rounding,
+    support_extreme,
+)
+
+__all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
+           "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
+           "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
+           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
+           "is_certificate_check"]
+
+log = logging.getLogger(__name__)
+
+GROWTH = 16.0
+"""How much the candidates' slack grows on each retry."""
+
+RETRIES = 2
+"""Retries with a larger slack before the repair and the fallbacks."""
+
+ROUNDS = 64
+"""Repair rounds on one level of non-trivial components before giving up."""
+
+EVERYWHERE = "policy optimal in every state"
+"""The name of :func:`everywhere`'s check."""
+
+
+def is_certificate_check(check: Check) -> bool:
+    """Whether ``check`` is one of a model's certificate checks (a bound or
+    :func:`everywhere`): what an exact answer proves in their place."""
+    return check.name.startswith(("lower bound: ", "upper bound: ")) or \
+        check.name == EVERYWHERE
+
+
+# ------------------------------------------------------------------ one side's bound
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Side:
+    """One checked bound: its ``vector`` on every state and its ``value`` at the
+    initial state (sound whatever ``check`` says: a failed check falls back to a
+    trivial bound) and the ``check`` that says what was proved."""
+
+    value: float
+    check: Check
+    vector: np.ndarray
+
+
+def _scales() -> list[float]:
+    return [GROWTH**k for k in range(RETRIES + 1)]
+
+
+def policy_lower(mdp: MDP, ch: Chain, rnd: Rounding) -> Side:
+    """A lower bound on the policy's exact value at the initial state (module docs)."""
+    return _policy_side(mdp, ch, rnd, upper=False)
+
+
+def policy_upper(mdp: MDP, ch: Chain, rnd: Rounding) -> Side:
+    """An upper bound on the policy's exact value at the initial state."""
+    return _policy_side(mdp, ch, rnd, upper=True)
+
+
+def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
+    m = sp.csr_array(mdp.matrix)
+    idx = np.flatnonzero(ch.solved)
+    rows = ch.policy[idx]
+    x = np.where(ch.sure, 1.0, 0.0)
+    name = "upper bound: the policy's value" if upper else "lower bound: the policy's value"
+    s0 = int(mdp.initial)
+    if idx.size == 0:
+        return Side(float(x[s0]), Check(name, True, "decided by the chain's graph: "
+                                        f"{x[s0]:g} (no state left to solve)"), read_only(x))
+    for scale in _scales():
+        x[idx] = (np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0) if upper else
+                  np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0))
+        sums = rows_dot(m, rows, x)
+        ok = (x[idx] >= above(rnd, rows, sums)) if upper else (x[idx] <= below(rnd, rows, sums))
+        if ok.all():
+            return Side(float(x[s0]), Check(name, True, (
+                f"{'pre' if upper else 'sub'}-fixed point of the policy's chain checked "
+                f"in exact arithmetic on {idx.size} states (slack x{scale:g}, eta "
+                f"{rnd.eta:.2g}): {float(x[s0])!r}")), read_only(x))
+    worst = idx[~ok][:5].tolist()
+    x[idx] = 1.0 if upper else 0.0
+    return Side(float(x[s0]), Check(name, False, (
+        f"the {'pre' if upper else 'sub'}-fixed point check failed in {int((~ok).sum())} "
+        f"states (first {worst}) at every slack; the bound is the trivial "
+        f"{x[s0]:g}")), read_only(x))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Rows:
+    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
+    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
+    picks one, as in a robust game; ``None``: one row per choice) and the choices into
+    states by ``groups``."""
+
+    matrix: sp.csr_array
+    groups: np.ndarray
+    nature: np.ndarray | None = None
+
+    @property
+    def n_states(self) -> int:
+        return int(self.groups.shape[0] - 1)
+
+    def row_state(self) -> np.ndarray:
+        cs = np.repeat(np.arange(self.n_states), np.diff(self.groups))
+        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
+
+    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
+                                                    np.ndarray]:
+        """The rows of ``states``' choices, where each choice's rows start (``None``
+        without nature) and where each state's choices start, both within the rows."""
+        choices = gather_ranges(self.groups[states], self.groups[states + 1])
+        per_state = self.groups[states + 1] - self.groups[states]
+        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
+        if self.nature is None:
+            return choices, None, state_starts
+        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
+        per_choice = self.nature[choices + 1] - self.nature[choices]
+        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
+
+
+def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+           upper: bool) -> np.ndarray:
+    """The states (not ``free``) where some choice breaks the pre- (``upper``) or
+    sub-fixed point inequality, rounding and the convex rule accounted for (a robust
+    choice passes when one of nature's rows does)."""
+    m = st.matrix
+    row_state = st.row_state()
+    sums = m @ x
+    every = np.arange(sums.shape[0])
+    own = x[row_state]
+    ok = (above(rnd, every, sums) <= own) if upper else (below(rnd, every, sums) >= own)
+    ok |= free[row_state]
+    suspect = np.flatnonzero(~ok)
+    if suspect.size:
+        ext = support_extreme(m, suspect, x, largest=upper)
+        ok[suspect] = (ext <= own[suspect]) if upper else (ext >= own[suspect])
+    if st.nature is not None:
+        ok = np.logical_or.reduceat(ok, st.nature[:-1])
+    return ~np.logical_and.reduceat(ok, st.groups[:-1])
+
+
+def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
+            upper: bool) -> np.ndarray:
+    """Per state of ``states``: the least (``upper``) / largest value its choices allow,
+    ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
+    rows, choice_starts, state_starts = st.rows_of(states)
+    sums = rows_dot(st.matrix, rows, x)
+    ext = support_extreme(st.matrix, rows, x, largest=upper)
+    each = np.minimum(above(rnd, rows, sums), ext) if upper else \
+        np.maximum(below(rnd, rows, sums), ext)
+    if choice_starts is not None:
+        each = np.minimum.reduceat(each, choice_starts)
+    return (np.maximum if upper else np.minimum).reduceat(each, state_starts)
+
+
+@dataclass(slots=True, eq=False)
+class _Repair:
+    """The repair of a candidate (module docs): a failing state's bound moved to what its
+    choices need, levels downstream first (one pass over the levels above the lowest
+    failing one, a level's states taken again while they move, at most :data:`ROUNDS`
+    times), an end component's states together."""
+
+    st: Rows
+    rnd: Rounding
+    free: np.ndarray
+    level_of: np.ndarray
+    mec_of: np.ndarray | None
+    upper: bool
+    members: tuple[np.ndarray, np.ndarray] | None = None
+    moved: int = 0
+
+    def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """Bring each end component touched by ``states`` to its members' extreme value;
+        the states whose value moved."""
+        if self.mec_of is None:
+            return states
+        mecs = np.unique(self.mec_of[states])
+        mecs = mecs[mecs >= 0]
+        if mecs.size == 0:
+            return states
+        if self.members is None:
+            order = np.argsort(self.mec_of, kind="stable")
+            self.members = (order, self.mec_of[order])
+        order, sorted_ids = self.members
+        lo = np.searchsorted(sorted_ids, mecs, side="left")
+        hi = np.searchsorted(sorted_ids, mecs, side="right")
+        inside = order[gather_ranges(lo, hi)]
+        group = np.repeat(np.arange(mecs.size), hi - lo)
+        best = np.full(mecs.size, -np.inf if self.upper else np.inf)
+        (np.maximum if self.upper else np.minimum).at(best, group, x[inside])
+        new = best[group]
+        changed = inside[new != x[inside]]
+        x[inside] = new
+        return np.union1d(states, changed)
+
+    def _reading(self, states: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Which of ``states`` have a choice whose support holds a ``moved`` state."""
+        rows, _, state_starts = self.st.rows_of(states)
+        local, cols, _ = row_entries(self.st.matrix, rows)
+        per_row = np.bincount(local, weights=moved[cols], minlength=rows.size)
+        return np.add.reduceat(per_row, state_starts) > 0
+
+    def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
+        """Move the bounds of the ``failing`` states and of whatever they move upstream;
+        False when a level does not settle within :data:`ROUNDS` rounds."""
+        live = np.flatnonzero(~self.free)
+        lv = self.level_of[live]
+        order = np.argsort(lv, kind="stable")
+        live, lv = live[order], lv[order]
+        first = int(self.level_of[failing].min())
+        bounds = np.flatnonzero(np.diff(lv)) + 1
+        starts = np.concatenate([[0], bounds])
+        stops = np.concatenate([bounds, [lv.size]])
+        moved = np.zeros(x.shape[0], dtype=bool)
+        now = np.zeros(x.shape[0], dtype=bool)  # scratch: the states one round moved
+        any_moved = False
+        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+            if lv[a] < first:
+                continue
+            states = live[a:b]
+            todo = states[failing[states] | (self._reading(states, moved) if any_moved
+                                             else False)]
+            for _ in range(ROUNDS):
+                if todo.size == 0:
+                    break
+                need = _needed(self.st, self.rnd, x, todo, self.upper)
+                move = (need > x[todo]) if self.upper else (need < x[todo])
+                changed = todo[move]
+                if changed.size == 0:
+                    break
+                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
+                              np.maximum(need[move], 0.0))
+                self.moved += int(changed.size)
+                changed = self.together(x, changed)
+                moved[changed] = True
+                any_moved = True
+                now[changed] = True
+                todo = states[self._reading(states, now)]  # within the level: its cycles
+                now[changed] = False
+            else:
+                return False
+        return True
+
+
+def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bool,
+                  zero: np.ndarray, one: np.ndarray | None, fallback: np.ndarray | None,
+                  layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None,
+                  name: str) -> Side:
+    target = ch.target
+    # a lower bound may be 0 anywhere; an upper bound's 0 on ``zero`` is a candidate,
+    # checked like every other value (the graph's word is not taken on trust)
+    free = target | zero if not upper else target.copy()
+    level_of = np.asarray(layers[1])[np.asarray(layers[0])]
+    base = np.where(target, 1.0, 0.0)
+    if one is not None:
+        base[one] = 1.0
+
+    def candidate(scale: float) -> np.ndarray:
+        x = base.copy()
+        idx = ch.solved & ~free
+        if upper:
+            x[idx] = np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0)
+            x[ch.sure & ~free] = 1.0
+            rest = ch.never & ~free
+            x[rest] = 1.0 if fallback is None else np.minimum(fallback[rest] * 1.0000001, 1.0)
+            x[zero & ~free] = 0.0
+        else:
+            x[idx] = np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0)
+            x[ch.sure & ~free] = 1.0
+            x[ch.never & ~free] = 0.0
+        return x
+
+    tried = []
+    candidates = [(f"slack x{s:g}", lambda s=s: candidate(s)) for s in _scales()]
+    if fallback is not None:
+        def from_iteration() -> np.ndarray:
+            x = candidate(_scales()[-1])
+            f = np.asarray(fallback, dtype=np.float64)
+            live = ~free
+            if upper:
+                x[live] = np.minimum(np.maximum(x[live], f[live] * (1.0 + 2.0**-30)), 1.0)
+            else:
+                x[live] = np.maximum(np.minimum(x[live], f[live] * (1.0 - 2.0**-30)), 0.0)
+            return x
+        candidates.append(("the iteration's bound", from_iteration))
+    for label, make in candidates:
+        x = make()
+        failing = _fails(st, rnd, x, free, upper)
+        repair = _Repair(st, rnd, free, level_of, mec_of if upper else None, upper)
+        if failing.any():
+            if not repair.run(x, failing):
+                tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
+                continue
+            failing = _fails(st, rnd, x, free, upper)
+            if failing.any():
+                tried.append(f"{label}: {int(failing.sum())} states after the repair")
+                continue
+        return Side(float(x[initial]), Check(name, True, (
+            f"{'pre' if upper else 'sub'}-fixed point of the Bellman operator checked in "
+            f"exact arithmetic on {int((~free).sum())} states and every choice "
+            f"({label}, eta {rnd.eta:.2g}" + (f", {repair.moved} states repaired" if
+                                               repair.moved else "")
+            + f"): {float(x[initial])!r}")), read_only(x))
+    x = base.copy()
+    x[~free] = 1.0 if upper else 0.0
+    return Side(float(x[initial]), Check(name, False, (
+        "no candidate passed (" + "; ".join(tried) + f"); the bound is the trivial "
+        f"{x[initial]:g}")), read_only(x))
+
+
+def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
+                  layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None = None,
+                  fallback: np.ndarray | None = None, nature: np.ndarray | None = None,
+                  ) -> Side:
+    """An upper bound on the maximal probability of reaching the target (module docs).
+    ``zero``: the states from which no policy reaches it (the candidate's 0 there is
+    checked like every other value: a choice whose support stays in them passes);
+    ``mec_of``: the maximal end components (their states' bounds are moved together by
+    the repair); ``fallback``: an upper vector to
+    try when the policy's does not pass (the iteration's).  ``nature``: for a robust
+    game, each choice's rows (``mdp.matrix``'s rows are then nature's vertex rows and
+    ``mdp.row_groups`` group the choices): the bound is on ``max_c min_rows``, the
+    robust optimum, and ``ch`` is the chain of the policy against nature's strategy."""
+    st = Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64), nature)
+    return _optimum_side(st, int(mdp.initial), ch, rnd, upper=True,
+                         zero=np.asarray(zero, dtype=bool), one=None, fallback=fallback,
+                         layers=layers, mec_of=mec_of, name="upper bound: the optimum")
+
+
+def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
+                  layers: tuple[np.ndarray, np.ndarray], one: np.ndarray | None = None,
+                  fallback: np.ndarray | None = None) -> Side:
+    """A lower bound on the minimal probability of reaching the target (module docs).
+    ``zero``: the states from which some policy avoids the target for ever (checked:
+    no end component may remain outside it and the target, else the bound is 0);
+    ``one``: the states from which every policy reaches it (a candidate value of 1,
+    checked); ``fallback``: a lower vector to try (the iteration's)."""
+    zero = np.asarray(zero, dtype=bool)
+    name = "lower bound: the optimum"
+    left = ~zero & ~ch.target
+    ecs = maximal_end_components(mdp, left)
+    if ecs.n_mecs:
+        s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
+        return Side(0.0, Check(name, False, (
+            f"{ecs.n_mecs} end components outside the zero set (state {s}): the minimum "
+            "is not the operator's only fixed point there; the bound is the trivial 0")),
+            read_only(np.where(ch.target, 1.0, 0.0)))
+    st = Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
+    return _optimum_side(st, int(mdp.initial), ch, rnd, upper=False, zero=zero, one=one,
+                         fallback=fallback, layers=layers, mec_of=None, name=name)
+
+
+# ------------------------------------------------------------------ one model
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Certificate:
+    """One model's checked bounds at the initial state: ``lower`` and ``upper`` (``nan``
+    for a side not asked), the policy's float ``values`` (every state), the ``checks``."""
+
+    lower: float
+    upper: float
+    values: np.ndarray
+    checks: tuple[Check, ...]
+
+    @property
+    def certified(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "max",
+            sides: tuple[str, ...] = ("lower", "upper"), zero: np.ndarray,
+            one: np.ndarray | None = None, mec_of: np.ndarray | None = None,
+            layers: tuple[np.ndarray, np.ndarray] | None = None,
+            fallback_lower: np.ndarray | None = None,
+            fallback_upper: np.ndarray | None = None, eta: float = ETA,
+            precision: float | None = None, complement: bool = False) -> Certificate:
+    """The certificate of one solved model (module docs).  ``sense="max"``: ``lower``
+    bounds the policy's value, ``upper`` the maximum (``zero``: the states from which
+    no policy reaches the target); ``sense="min"``: ``lower`` bounds the minimum
+    (``zero``: the states from which some policy avoids the target for ever; ``one``:
+    those from which every policy reaches it), ``upper`` the policy's value.
+    ``sides``: which bounds to check; ``fallback_*``: the iteration's vectors.  With
+    both sides and a ``precision``, one more check: the policy is within that
+    precision of the optimum in every state (:func:`everywhere`; ``complement``: the
+    answer is ``1 -`` these values, the precision relative to that)."""
+    if sense not in ("max", "min"):
+        raise ValueError(f"sense: must be 'max' or 'min', got {sense!r}")
+    target = np.asarray(target, dtype=bool)
+    rnd = rounding(sp.csr_array(mdp.matrix), eta)
+    if layers is None:
+        layers = support_layers(mdp)
+    ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
+    low = high = None
+    if "lower" in sides:
+        low = (policy_lower(mdp, ch, rnd) if sense == "max" else
+               optimum_lower(mdp, ch, rnd, zero=zero, one=one, layers=layers,
+                             fallback=fallback_lower))
+    if "upper" in sides:
+        high = (optimum_upper(mdp, ch, rnd, zero=zero, layers=layers, mec_of=mec_of,
+                              fallback=fallback_upper) if sense == "max" else
+                policy_upper(mdp, ch, rnd))
+    checks = [s.check for s in (low, high) if s is not None]
+    if low is not None and high is not None and precision is not None:
+        checks.append(everywhere(low.vector, high.vector, int(mdp.initial), precision,
+                                 complement=complement))
+    return Certificate(float("nan") if low is None else low.value,
+                       float("nan") if high is None else high.value, ch.values,
+                       tuple(checks))
+
+
+def everywhere(lower: np.ndarray, upper: np.ndarray, initial: int, precision: float, *,
+               complement: bool = False) -> Check:
+    """The check that the policy is optimal in every state, not only where it goes: the
+    certified bounds of its value and of the optimum (one of them the policy's) are
+    within ``precision`` of each other in every state, relative to the larger of the
+    state's value and the initial state's (a state far rarer than the answer is held
+    to the answer's scale).  ``complement``: the answer is ``1 -`` the values (a
+    minimum read back from its complement's maximum), the scale too."""
+    gap = upper - lower
+    value = 1.0 - upper if complement else lower
+    scale = np.maximum(value, value[initial])
+    bad = np.flatnonzero(gap > precision * scale)
+    worst = int(bad[np.argmax(gap[bad] / np.maximum(scale[bad], 1e-300))]) if bad.size else -1
+    return Check(EVERYWHERE, bad.size == 0, (
+        f"certified bounds of the policy's value and of the optimum within {precision:g} "
+        f"(relative) in all {lower.size} states" if bad.size == 0 else
+        f"{bad.size} states apart by more than {precision:g} (relative), e.g. state "
+        f"{worst}: [{float(lower[worst])!r}, {float(upper[worst])!r}]"))

@@ -1,0 +1,167 @@
+"""A deterministic policy's chain solved for the certificates (:mod:`mitld_lp.solvers.
+certify`): its values, the slack ``W`` of the candidates, and the three sets its graph
+decides (reached almost surely, unreachable, transient)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.graph import (
+    backward_reachable,
+    blocks_from,
+    gather_ranges,
+    graph_view,
+    levels,
+    row_entries,
+)
+from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rounding import Rounding
+from mitld_lp.solvers.topological import Factors, transient_solve
+
+__all__ = ["Chain", "RowModel", "support_layers", "chain"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Chain:
+    """A policy's chain solved for the certificates: ``values`` (float, every state; 1
+    on ``sure``, 0 on ``never``), ``slack`` (``W``, 0 outside ``solved``), and the three
+    sets of its graph: ``sure`` (the target reached almost surely, the target
+    included), ``never`` (the target unreachable) and ``solved`` (the rest: transient)."""
+
+    values: np.ndarray
+    slack: np.ndarray
+    solved: np.ndarray
+    sure: np.ndarray
+    never: np.ndarray
+    policy: np.ndarray
+    target: np.ndarray
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RowModel:
+    """A model the certificates read that is not an :class:`~mitld_lp.mdp.MDP`: the
+    ``matrix``'s rows grouped into states' choices by ``row_groups``, an ``initial``
+    state (for a robust game: nature's rows under a fixed robot policy, or the vertex
+    rows with the robot's choices as ``row_groups``)."""
+
+    matrix: sp.csr_array
+    row_groups: np.ndarray
+    initial: int
+
+    @property
+    def n_states(self) -> int:
+        return int(self.row_groups.shape[0] - 1)
+
+    def choice_state(self) -> np.ndarray:
+        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
+
+
+def support_layers(mdp: MDP | RowModel) -> tuple[np.ndarray, np.ndarray]:
+    """The components of ``mdp``'s support graph and their levels (the analysis's
+    ``Quotient.layers``, for a caller without one)."""
+    found = levels(graph_view(sp.csr_array(mdp.matrix), mdp.row_groups))
+    return found.component, found.level
+
+
+def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
+          layers: tuple[np.ndarray, np.ndarray] | None = None,
+          guess: np.ndarray | None = None) -> Chain:
+    """The values of ``policy`` (a choice row per state, ``-1`` on the target and the
+    absorbing states) and the slack ``W`` of its certificates (module docs), solved
+    level by level with one LU per non-trivial component serving both.  ``layers``:
+    the components and levels of ``mdp``'s support graph (:func:`support_layers`);
+    ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
+    m = sp.csr_array(mdp.matrix)
+    n = mdp.n_states
+    target = np.asarray(target, dtype=bool)
+    policy = np.asarray(policy, dtype=np.int64)
+    acting = (policy >= 0) & ~target
+    states = np.flatnonzero(acting)
+    rows = policy[states]
+    lo, hi = m.indptr[rows], m.indptr[rows + 1]
+    entries = gather_ranges(lo, hi)
+    src = np.repeat(states, hi - lo)
+    dst = np.asarray(m.indices[entries], dtype=np.int64)
+    val = m.data[entries]
+    del entries
+    pos = val > 0
+    never = ~backward_reachable(n, src[pos], dst[pos], target)
+    sure = ~backward_reachable(n, src[pos], dst[pos], never)
+    solved = acting & ~never & ~sure
+    values = np.where(sure, 1.0, 0.0)
+    slack = np.zeros(n)
+    idx = np.flatnonzero(solved)
+    if idx.size:
+        at = np.full(n, -1, dtype=np.int64)
+        at[idx] = np.arange(idx.size)
+        keep = solved[src] & pos
+        s_loc, d, p = at[src[keep]], dst[keep], val[keep]
+        into = solved[d]
+        b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
+        # the entries come row by row in the states' order: the CSR arrays directly
+        rows_of = s_loc[into]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
+        sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
+        kappa = 1.0 - rnd.low[policy[idx]]
+        v, w = _solve(sub, b, kappa, None if layers is None else
+                      (np.asarray(layers[0])[idx], np.asarray(layers[1])),
+                      None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
+        values[idx] = np.clip(v, 0.0, 1.0)
+        slack[idx] = np.maximum(w, 0.0)
+    return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
+                 read_only(never), read_only(policy), read_only(target.copy()))
+
+
+def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
+           layers: tuple[np.ndarray, np.ndarray] | None,
+           guess: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``v = b + Q v`` and ``W = delta v + Q W`` on a transient chain ``Q`` (``sub``),
+    level by level downstream first; ``delta`` per state is twice its relative residual
+    plus its rounding bound ``kappa`` (module docs).  ``guess``: an estimate of ``v``
+    (the iteration's lower bound) positive on a block: its ``W`` is solved with ``v``
+    as a second right-hand side, ``2 kappa guess``, scaled after by what the residuals
+    ask (one factorisation, one solve)."""
+    from mitld_lp.solvers.graph import graph_blocks
+
+    diag = sub.diagonal()
+    blk = (graph_blocks(sp.csr_array(sub != 0, dtype=np.float64), diag) if layers is None
+           else blocks_from(layers[0], layers[1], diag))
+    k = b.shape[0]
+    v, w = np.zeros(k), np.zeros(k)
+    for level in blk.walk():
+        one, inner = level.single, level.rest
+        if one.size:
+            # a single state's own entry is still 0 in v and w: the sums see only below;
+            # its formula's residual is a rounding, within kappa
+            local, cols, vals = row_entries(sub, one)
+            down_v = np.bincount(local, weights=vals * v[cols], minlength=one.size)
+            down_w = np.bincount(local, weights=vals * w[cols], minlength=one.size)
+            v[one] = (b[one] + down_v) / (1.0 - diag[one])
+            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
+        if inner.size == 0:
+            continue
+        rows = sp.csr_array(sub[inner])
+        block = sp.csr_array(rows[:, inner])
+        known = b[inner] + rows @ v
+        g = None if guess is None else guess[inner]
+        joint = None
+        if g is not None and bool(np.all(g > 0)):
+            pair = transient_solve(block, np.column_stack([known, 2.0 * kappa[inner] * g
+                                                           + rows @ w]))
+            v[inner], joint = pair[:, 0], pair[:, 1]
+        else:
+            factors = Factors()
+            v[inner] = transient_solve(block, known, factors=factors)
+        residual = np.abs(v[inner] - (b[inner] + rows @ v))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            need = np.where(v[inner] > 0, 2.0 * (residual + kappa[inner] * v[inner]), 0.0)
+            if joint is not None:
+                ratio = need / (2.0 * kappa[inner] * g)  # type: ignore[operator]
+                w[inner] = joint * max(1.0, float(np.max(ratio, initial=1.0)))
+            else:
+                w[inner] = transient_solve(block, need + rows @ w, factors=factors)
+    return v, w
