@@ -38,7 +38,8 @@ class MDPShape:
     """The shape every MDP-shaped record shares, defined once: the product's :class:`MDP`,
     the interval MDP (:class:`mitld_lp.product.imdp.IntervalMDP`), the robust game
     (:class:`mitld_lp.solvers.robust_graph.RobustGame`), the MEC quotient
-    (:class:`mitld_lp.solvers.reduced.Quotient`), a DRN file's model
+    (:class:`mitld_lp.solvers.reduced.Quotient`), the certificates' row model
+    (:class:`mitld_lp.solvers.certify_chain.RowModel`), a DRN file's model
     (:class:`mitld_lp.files.drn.DrnModel`); a constrained synthesis's merged model holds
     an :class:`MDP`.
 
