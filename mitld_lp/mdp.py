@@ -5,9 +5,10 @@ of ``matrix`` is the successor distribution of choice ``c`` and sums to 1.  Ever
 has at least one choice; the absorbing states (``target``, ``sink``, ``truncated``) have
 exactly one, a self-loop, whose action label is ``ABSORB`` (-1).
 
-This module holds the record only: the product builds it, the controller runs on it, the
-exports write it.  The analyses of its support graph (prob-0/1 states, end components)
-and the reduction every solver works on are in :mod:`mitld_lp.solvers.quotient`.
+This module holds the record only, and the shape it shares with every MDP-shaped record
+(:class:`MDPShape`): the product builds it, the controller runs on it, the exports write
+it.  The analyses of its support graph (prob-0/1 states, end components) and the
+reduction every solver works on are in :mod:`mitld_lp.solvers.quotient`.
 
 Three disjoint absorbing classes are kept apart:
 
@@ -20,43 +21,45 @@ Three disjoint absorbing classes are kept apart:
 from __future__ import annotations
 
 from collections.abc import Hashable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ABSORB", "MDP", "absorbing_states", "as_state_mask"]
+__all__ = ["ABSORB", "MDP", "MDPShape", "ActionChoices", "absorbing_states",
+           "as_state_mask"]
 
 ABSORB = -1
 """Action label of the self-loop choice of an absorbing state."""
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class MDP:
-    """A finite MDP with a reachability objective.
+class MDPShape:
+    """The shape every MDP-shaped record shares, defined once: the product's :class:`MDP`,
+    the interval MDP (:class:`mitld_lp.product.imdp.IntervalMDP`), the robust game
+    (:class:`mitld_lp.solvers.robust_graph.RobustGame`), the MEC quotient
+    (:class:`mitld_lp.solvers.reduced.Quotient`), the certificates' row model
+    (:class:`mitld_lp.solvers.certify_chain.RowModel`), a DRN file's model
+    (:class:`mitld_lp.files.drn.DrnModel`); a constrained synthesis's merged model holds
+    an :class:`MDP`.
 
-    Attributes:
-        matrix: ``(n_choices, n_states)`` CSR array of transition probabilities.
-        row_groups: ``(n_states + 1,)`` int64; choices of state ``s`` are the rows
-            ``row_groups[s]:row_groups[s+1]``.
-        choice_actions: ``(n_choices,)`` int32 index into ``action_names`` (``ABSORB`` for
-            the self-loop of an absorbing state).
-        action_names: the robot's action names.
-        initial: index of the initial state.
-        target, sink, truncated: ``(n_states,)`` bool masks, pairwise disjoint.
-        states: per state, the record it stands for (for the product: a
-            :class:`mitld_lp.product.ProductState`), so that answers map back.
+    States are ``0 .. n_states-1``; the choices of state ``s`` are the consecutive rows
+    ``row_groups[s]:row_groups[s+1]`` (Storm's *row groups*, every state has at least one
+    choice); each choice has one successor distribution, row ``c`` of ``matrix``, unless
+    the record says otherwise in :meth:`distributions` (the interval MDP's branches and
+    the robust game's vertex rows: several per choice).
+
+    A base class rather than a :class:`typing.Protocol`: a protocol would name these
+    members, but each record would still derive them from its arrays, which is the
+    repetition this class removes; the records inherit them (``__slots__ = ()``, so the
+    frozen, slotted dataclasses stay slotted), and code that takes any of them names
+    this class.
     """
 
-    matrix: sp.csr_array
+    __slots__ = ()
+
     row_groups: np.ndarray
-    choice_actions: np.ndarray
-    action_names: tuple[str, ...]
-    initial: int
-    target: np.ndarray
-    sink: np.ndarray
-    truncated: np.ndarray
-    states: Sequence[Hashable]
+    matrix: sp.csr_array
 
     @property
     def n_states(self) -> int:
@@ -68,8 +71,8 @@ class MDP:
 
     @property
     def n_transitions(self) -> int:
-        """Number of nonzero (choice, successor) entries."""
-        return int(self.matrix.nnz)
+        """Number of stored (distribution, successor) entries."""
+        return int(self.distributions()[0].nnz)
 
     def choices(self, state: int) -> range:
         """The row indices of ``state``'s choices."""
@@ -79,9 +82,68 @@ class MDP:
         """``(n_choices,)``: the state each choice belongs to."""
         return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
 
+    def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
+        """``(rows, groups)``: the successor distributions, one CSR row each, and the
+        rows of choice ``c``, ``groups[c]:groups[c+1]`` (``None``: row ``c`` alone)."""
+        return self.matrix, None
+
+    def successors(self, choice: int) -> np.ndarray:
+        """The states ``choice`` reaches with positive probability in some of its
+        distributions, increasing."""
+        rows, groups = self.distributions()
+        first, last = (choice, choice + 1) if groups is None else (
+            int(groups[choice]), int(groups[choice + 1]))
+        lo, hi = int(rows.indptr[first]), int(rows.indptr[last])
+        return np.unique(rows.indices[lo:hi][rows.data[lo:hi] > 0])
+
+
+@dataclass(frozen=True, slots=True, eq=False, kw_only=True)
+class ActionChoices(MDPShape):
+    """What the product's two records share beside their rows (:class:`MDP`, and the
+    interval MDP, :class:`mitld_lp.product.imdp.IntervalMDP`): the states' choices, the
+    robot's action of each, the initial state, the absorbing states and what each state
+    stands for.  Made by keyword only (the fields of a record built on it follow these).
+
+    Attributes:
+        row_groups: ``(n_states + 1,)`` int64; choices of state ``s`` are the rows
+            ``row_groups[s]:row_groups[s+1]``.
+        choice_actions: ``(n_choices,)`` int32 index into ``action_names`` (``ABSORB`` for
+            the self-loop of an absorbing state).
+        action_names: the robot's action names.
+        initial: index of the initial state.
+        target, sink, truncated: ``(n_states,)`` bool masks, pairwise disjoint.
+        states: per state, the record it stands for (for the product: a
+            :class:`mitld_lp.product.ProductState`), so that answers map back.
+    """
+
+    row_groups: np.ndarray
+    choice_actions: np.ndarray
+    action_names: tuple[str, ...]
+    initial: int
+    target: np.ndarray
+    sink: np.ndarray
+    truncated: np.ndarray
+    states: Sequence[Hashable]
+
     def action_name(self, choice: int) -> str:
         a = int(self.choice_actions[choice])
         return "absorb" if a == ABSORB else self.action_names[a]
+
+    def choice_fields(self) -> dict[str, Any]:
+        """These fields by name, to make another record over the same choices."""
+        return {f.name: getattr(self, f.name) for f in fields(ActionChoices)}
+
+
+@dataclass(frozen=True, slots=True, eq=False, kw_only=True)
+class MDP(ActionChoices):
+    """A finite MDP with a reachability objective: its choices (:class:`ActionChoices`)
+    and their rows.
+
+    Attributes:
+        matrix: ``(n_choices, n_states)`` CSR array of transition probabilities.
+    """
+
+    matrix: sp.csr_array
 
 
 def absorbing_states(mdp: MDP) -> np.ndarray:

@@ -189,9 +189,11 @@ def random_mdp(rng: random.Random, n: int, actions: int):
     target[n - 2] = True
     sink = np.zeros(n, dtype=bool)
     sink[n - 1] = True
-    mdp = MDP(matrix, np.array(groups, dtype=np.int64), np.array(acts, dtype=np.int32),
-              tuple(f"a{i}" for i in range(actions)), 0, target, sink,
-              np.zeros(n, dtype=bool), list(range(n)))
+    mdp = MDP(matrix=matrix, row_groups=np.array(groups, dtype=np.int64),
+              choice_actions=np.array(acts, dtype=np.int32),
+              action_names=tuple(f"a{i}" for i in range(actions)), initial=0,
+              target=target, sink=sink, truncated=np.zeros(n, dtype=bool),
+              states=list(range(n)))
     return mdp, exact
 
 

@@ -74,18 +74,16 @@ def shuffled_rows(mdp: MDP, seed: int) -> MDP:
 
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("valuations", [True, False])
-def test_random_mdps_match_the_reference(tmp_path: Path, seed: int, valuations: bool) -> None:
-    import mitld_lp.solvers.export as export
+def test_random_mdps_match_the_reference(tmp_path: Path, seed: int, valuations: bool,
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    from mitld_lp.files import drn
 
     mdp = shuffled_rows(random_mdp(90, seed=seed, locality=5 if seed else None), seed)
     mdp = replace(mdp, initial=3, truncated=np.arange(mdp.n_states) % 17 == 5)
-    for chunk in (export._DRN_CHUNK, 7):
-        export._DRN_CHUNK, saved = chunk, export._DRN_CHUNK
-        try:
-            path = write_drn(mdp, mdp.target, tmp_path / f"{chunk}.drn",
-                             valuations=valuations, truncated_label=seed != 1)
-        finally:
-            export._DRN_CHUNK = saved
+    for chunk in (drn.CHUNK_STATES, 7):
+        monkeypatch.setattr(drn, "CHUNK_STATES", chunk)
+        path = write_drn(mdp, mdp.target, tmp_path / f"{chunk}.drn",
+                         valuations=valuations, truncated_label=seed != 1)
         assert path.read_text(encoding="utf-8") == reference_drn(
             mdp, mdp.target, valuations, truncated_label=seed != 1)
 

@@ -131,11 +131,11 @@ def test_lp_export_refusals(tmp_path: Path) -> None:
 
 def test_drn_is_the_same_whatever_the_chunk(tmp_path: Path,
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    import mitld_lp.solvers.export as export
+    from mitld_lp.files import drn
 
     mdp = random_mdp(60, seed=9, locality=4)
     whole = write_drn(mdp, mdp.target, tmp_path / "whole.drn")
-    monkeypatch.setattr(export, "_DRN_CHUNK", 7)  # 60 states: 9 chunks, the last short
+    monkeypatch.setattr(drn, "CHUNK_STATES", 7)  # 60 states: 9 chunks, the last short
     chunked = write_drn(mdp, mdp.target, tmp_path / "chunked.drn")
     assert chunked.read_bytes() == whole.read_bytes()
     values, _ = storm_pmax(chunked)

@@ -5,7 +5,7 @@ against fixed laws in the band, and against today's solver when the band is a po
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -215,10 +215,7 @@ def test_robust_value_is_at_most_every_fixed_law(seed: int) -> None:
     robust = robust_interval_iteration(game_of(m), m.target, tol=1e-10)
     for _ in range(5):
         h = m.band_lo + rng.random(m.band_lo.size) * (m.band_hi - m.band_lo)
-        fixed = IntervalMDP(
-            m.branches, m.branch_groups, m.band_groups, h, h, m.band_events, m.row_groups,
-            m.choice_actions, m.action_names, m.initial, m.target, m.sink, m.truncated,
-            m.states)
+        fixed = replace(m, band_lo=h, band_hi=h)
         v = vertex_rows(fixed)
         mdp = point_mdp(m, sp.csr_array(v.matrix[v.groups[:-1]]))
         opt = interval_iteration(mdp, m.target, tol=1e-10)

@@ -137,6 +137,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     """Synthesise (the model's own problem: constraints give a randomised controller)
     and write its controller, chain and tree; exit 3 when the answer is not certified
     (the files are written all the same, and say what they are)."""
+    from mitld_lp.files import drn
     from mitld_lp.running.chain import chain_drn, chain_of
     from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
@@ -170,8 +171,8 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
                                                        max_states=budget))
         _wrote(args, said, "controller", controller, f"wrote {controller}")
     if chain:
-        text = chain_drn(chain_of(r))
-        _write(chain, lambda p: files.write_text(p, text, overwrite=True, suffixes=(".drn",)))
+        model = chain_drn(chain_of(r))
+        _write(chain, lambda p: drn.write(model, p, overwrite=True))
         # the chain's probability is the controller's exact value: inside the bracket of
         # the automaton it was solved on, at its near end within the precision
         if r.complemented:  # the complement's automaton: "accept" marks failing runs

@@ -20,20 +20,19 @@ the box of hazards is attained at a vertex: nature's choices can be taken among 
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.mdp import MDP
+from mitld_lp.mdp import MDP, ActionChoices
 
 __all__ = ["IntervalMDP", "VertexRows", "vertex_rows", "vertex_weights", "point_mdp",
            "WEIGHT_BLOCK", "BYTES_PER_WEIGHT"]
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class IntervalMDP:
+@dataclass(frozen=True, slots=True, eq=False, kw_only=True)
+class IntervalMDP(ActionChoices):
     """The interval MDP (module docstring), laid out like :class:`~mitld_lp.mdp.MDP`.
 
     Attributes:
@@ -45,8 +44,8 @@ class IntervalMDP:
             intervals are ``band_lo[j], band_hi[j]`` for ``j`` in
             ``band_groups[c]:band_groups[c+1]`` (event ``i`` of the choice is bit ``i``).
         band_events: per entry of ``band_lo``, the event's name (for the DRN labels).
-        row_groups, choice_actions, action_names, initial, target, sink, truncated,
-        states: as in :class:`~mitld_lp.mdp.MDP`.
+
+    Its states, choices and actions are those of :class:`~mitld_lp.mdp.ActionChoices`.
     """
 
     branches: sp.csr_array
@@ -55,45 +54,19 @@ class IntervalMDP:
     band_lo: np.ndarray
     band_hi: np.ndarray
     band_events: tuple[str, ...]
-    row_groups: np.ndarray
-    choice_actions: np.ndarray
-    action_names: tuple[str, ...]
-    initial: int
-    target: np.ndarray
-    sink: np.ndarray
-    truncated: np.ndarray
-    states: Sequence[Hashable]
-
-    @property
-    def n_states(self) -> int:
-        return int(self.row_groups.shape[0] - 1)
-
-    @property
-    def n_choices(self) -> int:
-        return int(self.row_groups[-1])
 
     @property
     def n_branches(self) -> int:
         return int(self.branch_groups[-1])
 
     @property
-    def n_transitions(self) -> int:
-        return int(self.branches.nnz)
-
-    @property
     def ambiguous_choices(self) -> int:
         """Choices with at least one ambiguous event."""
         return int(np.count_nonzero(np.diff(self.band_groups)))
 
-    def choices(self, state: int) -> range:
-        return range(int(self.row_groups[state]), int(self.row_groups[state + 1]))
-
-    def choice_state(self) -> np.ndarray:
-        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
-
-    def action_name(self, choice: int) -> str:
-        a = int(self.choice_actions[choice])
-        return "absorb" if a < 0 else self.action_names[a]
+    def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
+        """The branches, ``2^k`` rows per choice (its :class:`~mitld_lp.mdp.MDPShape`)."""
+        return self.branches, self.branch_groups
 
 
 def vertex_weights(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -218,14 +191,4 @@ class _Block:
 def point_mdp(imdp: IntervalMDP, rows: sp.csr_array) -> MDP:
     """The MDP with the same states and choices whose row ``c`` is ``rows[c]`` (one
     distribution per choice: the interval MDP under one fixed choice of nature)."""
-    return MDP(
-        matrix=rows,
-        row_groups=imdp.row_groups,
-        choice_actions=imdp.choice_actions,
-        action_names=imdp.action_names,
-        initial=imdp.initial,
-        target=imdp.target,
-        sink=imdp.sink,
-        truncated=imdp.truncated,
-        states=imdp.states,
-    )
+    return MDP(matrix=rows, **imdp.choice_fields())

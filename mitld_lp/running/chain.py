@@ -43,7 +43,9 @@ import scipy.sparse as sp
 
 from mitld_lp.controllers.format import ACCEPTED, REJECTED, UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
+from mitld_lp.files import drn
 from mitld_lp.files import write as files
+from mitld_lp.files.drn import DrnModel
 from mitld_lp.mdp import MDP
 from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.util.traversal import strong_components
@@ -295,37 +297,25 @@ def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, int]], mdp: MDP,
     return np.flatnonzero(good[comp] & ~leaves[comp]).tolist()
 
 
-def chain_drn(chain: Chain) -> str:
-    """The chain in Storm's explicit DRN format (``@type: DTMC``).  DRN declares a label
-    only by using it: when no reachable state accepts (the value is 0), one extra,
-    unreachable absorbing state carries ``accept`` so that the property still parses."""
-    extra = not any("accept" in x for x in chain.labels)
-    n = chain.n_states + extra
-    lines = ["// The controlled chain, exported by mitld_lp", "@type: DTMC", "@parameters",
-             "", "@reward_models", "", "@nr_states", str(n), "@nr_choices", str(n), "@model"]
-    m = chain.matrix
-    for s in range(chain.n_states):
-        labels = (["init"] if s == 0 else []) + sorted(chain.labels[s])
-        lines.append(" ".join([f"state {s}", *labels]))
-        lines.append(f"//[{chain.valuations[s]}]")
-        lines.append("\taction 0")
-        lo, hi = int(m.indptr[s]), int(m.indptr[s + 1])
-        lines.extend(f"\t\t{int(t)} : {float(p)!r}"
-                     for t, p in zip(m.indices[lo:hi], m.data[lo:hi], strict=True))
-    if extra:
-        s = chain.n_states
-        lines += [f"state {s} accept", "//[unreachable: declares the label]", "\taction 0",
-                  f"\t\t{s} : 1.0"]
-    return "\n".join(lines) + "\n"
+def chain_drn(chain: Chain) -> DrnModel:
+    """The chain as Storm's explicit DRN (``@type: DTMC``), for the one DRN writer
+    (:mod:`mitld_lp.files.drn`): each state's labels, in name order, and its valuation;
+    ``accept`` declared even when no reachable state accepts (the value is 0)."""
+    names = sorted(set().union(*chain.labels))
+    labels = tuple((name, np.fromiter((name in x for x in chain.labels), dtype=bool,
+                                      count=chain.n_states)) for name in names)
+    return DrnModel(matrix=chain.matrix, row_groups=np.arange(chain.n_states + 1),
+                    initial=0, kind="DTMC", labels=labels, declared=("accept",),
+                    valuations=chain.valuations,
+                    comment="The controlled chain, exported by mitld_lp")
 
 
 def write_chain(result: Any, path: str | os.PathLike[str], *,
                 controller: ControllerLike | None = None, overwrite: bool = False) -> Path:
     """Write the controlled chain of ``result`` (:func:`chain_of`) to ``path`` (``.drn``)
     under the package's rule for output files."""
-    out = files.writable_path(path, overwrite=overwrite, suffixes=(".drn",))
-    return files.write_text(out, chain_drn(chain_of(result, controller)), overwrite=True,
-                            suffixes=(".drn",))
+    out = files.writable_path(path, overwrite=overwrite, suffixes=drn.SUFFIXES)
+    return drn.write(chain_drn(chain_of(result, controller)), out, overwrite=overwrite)
 
 
 def reachable_states(chain: Chain) -> Iterable[Hashable]:

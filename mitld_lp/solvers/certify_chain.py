@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.mdp import MDP
+from mitld_lp.mdp import MDP, MDPShape
 from mitld_lp.solvers.graph import (
     backward_reachable,
     blocks_from,
@@ -42,22 +42,16 @@ class Chain:
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class RowModel:
+class RowModel(MDPShape):
     """A model the certificates read that is not an :class:`~mitld_lp.mdp.MDP`: the
     ``matrix``'s rows grouped into states' choices by ``row_groups``, an ``initial``
     state (for a robust game: nature's rows under a fixed robot policy, or the vertex
-    rows with the robot's choices as ``row_groups``)."""
+    rows with the robot's choices as ``row_groups``); its sizes and choice-to-state are
+    :class:`~mitld_lp.mdp.MDPShape`'s."""
 
     matrix: sp.csr_array
     row_groups: np.ndarray
     initial: int
-
-    @property
-    def n_states(self) -> int:
-        return int(self.row_groups.shape[0] - 1)
-
-    def choice_state(self) -> np.ndarray:
-        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
 
 
 def support_layers(mdp: MDP | RowModel) -> tuple[np.ndarray, np.ndarray]:

@@ -16,25 +16,27 @@ from __future__ import annotations
 import importlib
 import logging
 import os
-import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.files import drn
 from mitld_lp.files import write as files
+from mitld_lp.files.drn import DrnModel
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.lp import occupancy_lp
 from mitld_lp.util.quiet import native_quiet
 
-__all__ = ["drn_text", "write_lp", "write_drn", "LP_SUFFIXES", "DRN_SUFFIXES"]
+__all__ = ["write_lp", "write_drn", "product_drn", "ProductValuations", "LP_SUFFIXES",
+           "DRN_SUFFIXES"]
 
 logger = logging.getLogger(__name__)
 
 LP_SUFFIXES = (".mps", ".lp")
-DRN_SUFFIXES = (".drn",)
+DRN_SUFFIXES = drn.SUFFIXES
 
 
 def write_lp(
@@ -113,45 +115,45 @@ def write_lp(
     return p
 
 
-_TOKEN = re.compile(r"\s+")
-
-_DRN_CHUNK = 50_000
-"""States whose lines :func:`drn_text` formats at a time."""
-
-
-def _drn_action(name: str) -> str:
-    return _TOKEN.sub("_", name.strip()) or "_"
-
-
-def _valuation(record: object) -> str:
-    """A state's valuation for the DRN comment line: ``var=value`` joined by `` & ``."""
-    game = getattr(record, "game", None)
-    if game is None or not hasattr(record, "pending"):
-        return str(record) if isinstance(record, str) else f"state={_compact(record)}"
-    pending = ",".join(sorted(record.pending))  # type: ignore[attr-defined]
-    return (f"game={_compact(game)} & q={record.automaton} & "  # type: ignore[attr-defined]
-            f"pending={{{pending}}} & clock={record.clock}")  # type: ignore[attr-defined]
-
-
 def _compact(value: object) -> str:
     """``value`` on one line without spaces (a DRN line is split on whitespace)."""
     return "".join(str(value).split())
 
 
-class _Valuations:
-    """:func:`_valuation` with the parts that many states share (a game state, a set of
-    pending events) formatted once; ``world``: how a game state is written (default
-    ``game=(...)``; a PRISM world's caller gives its variables, ``x=1 & y=2``)."""
+class ProductValuations(Sequence[str]):
+    """The valuation of each state of a product MDP, formatted when asked (the file is
+    written a chunk at a time): ``game=(1,2) & q=3 & pending={b1,b2} & clock=0`` (the
+    game state, the automaton state, the events still pending, the clock), the record's
+    text for an absorbing state (``target`` / ``sink`` / ``truncated``), else
+    ``state=...``.  The parts that many states share (a game state, a set of pending
+    events) are formatted once; ``world`` writes a game state in the world's own terms
+    (a PRISM world's caller gives its variables, ``x=1 & y=2``)."""
 
-    def __init__(self, world: Callable[[object], str] | None = None) -> None:
+    def __init__(self, states: Sequence[object],
+                 world: Callable[[object], str] | None = None) -> None:
+        self.states = states
         self.games: dict[object, str] = {}
         self.pending: dict[object, str] = {}
         self.world = world or (lambda g: f"game={_compact(g)}")
 
-    def __call__(self, record: object) -> str:
+    def __len__(self) -> int:
+        return len(self.states)
+
+    @overload
+    def __getitem__(self, index: int) -> str: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[str]: ...
+
+    def __getitem__(self, index: int | slice) -> str | list[str]:
+        if isinstance(index, slice):
+            return [self.text(record) for record in self.states[index]]
+        return self.text(self.states[index])
+
+    def text(self, record: object) -> str:
         game = getattr(record, "game", None)
         if game is None or not hasattr(record, "pending"):
-            return _valuation(record)
+            return str(record) if isinstance(record, str) else f"state={_compact(record)}"
         g = self.games.get(game)
         if g is None:
             g = self.games[game] = self.world(game)
@@ -163,93 +165,19 @@ class _Valuations:
                 f"pending={{{p}}} & clock={record.clock}")  # type: ignore[attr-defined]
 
 
-def _strings(values: np.ndarray, fmt: Any) -> tuple[np.ndarray, np.ndarray]:
-    """``(table, index)``: ``fmt`` of each distinct entry of ``values`` once, as an object
-    array, and where each entry's string is in it."""
-    distinct, index = np.unique(values, return_inverse=True)
-    table = np.empty(distinct.shape[0], dtype=object)
-    table[:] = [fmt(v) for v in distinct.tolist()]
-    return table, index
-
-
-def _successors(cols: np.ndarray) -> np.ndarray:
-    """``"\\t\\t{c} : "`` for each entry of ``cols`` (object array): the successors of a
-    chunk lie in a narrow range of states, so a table over that range is made without
-    sorting (a sort of the distinct ones if the range is wide)."""
-    if cols.size == 0:
-        return np.empty(0, dtype=object)
-    low, high = int(cols.min()), int(cols.max())
-    if high - low > cols.size:
-        table, index = _strings(cols, lambda c: f"\t\t{c} : ")
-        return table[index]
-    table = np.empty(high - low + 1, dtype=object)
-    table[:] = [f"\t\t{c} : " for c in range(low, high + 1)]
-    return table[cols - low]
-
-
-def drn_text(mdp: MDP, marks: list[tuple[str, np.ndarray]], *,
-             valuations: bool = True,
-             world: Callable[[object], str] | None = None) -> Iterator[str]:
-    """The ``@model`` section of ``mdp``'s DRN text, a chunk of :data:`_DRN_CHUNK`
-    states at a time (the text of a 1e6-state model never sits in memory whole).
-
-    ``marks``: ``(label, state mask)`` in the order the labels are written after
-    ``init``.  Vectorised: every distinct successor, probability, action and label set
-    of a chunk is formatted once, and the chunk's lines are one ``join`` of those
-    pieces put in place by array indexing; only the valuations are formatted state by
-    state.  Successors are listed in increasing order, zero entries left out.
-    """
-    n = mdp.n_states
-    matrix = mdp.matrix
-    row_groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    actions = np.asarray(mdp.choice_actions, dtype=np.int64)
-    action_lines = np.array([f"\taction {_drn_action(a)}\n" for a in mdp.action_names]
-                            + ["\taction absorb\n"], dtype=object)
-    codes = np.zeros(n, dtype=np.int64)
-    codes[int(mdp.initial)] = 1
-    for bit, (_, mask) in enumerate(marks, start=1):
-        codes |= np.asarray(mask, dtype=np.int64) << bit
-    valuation = _Valuations(world)
-    for lo in range(0, n, _DRN_CHUNK):
-        hi = min(n, lo + _DRN_CHUNK)
-        c_lo, c_hi = int(row_groups[lo]), int(row_groups[hi])
-        p_lo, p_hi = int(matrix.indptr[c_lo]), int(matrix.indptr[c_hi])
-        rows = sp.csr_array((np.array(matrix.data[p_lo:p_hi]),
-                             np.array(matrix.indices[p_lo:p_hi]),
-                             np.asarray(matrix.indptr[c_lo:c_hi + 1], dtype=np.int64) - p_lo),
-                            shape=(c_hi - c_lo, n))
-        rows.sort_indices()
-        keep = rows.data > 0
-        cols, vals = rows.indices[keep], rows.data[keep]
-        entry_row = np.repeat(np.arange(c_hi - c_lo), np.diff(rows.indptr))[keep]
-        row_len = np.bincount(entry_row, minlength=c_hi - c_lo)
-        # Places: per state its header, then per choice its action line and two pieces
-        # (successor, probability) per entry.
-        size = 1 + 2 * row_len
-        before = np.concatenate([[0], np.cumsum(size)])  # pieces of earlier choices
-        owner = np.repeat(np.arange(hi - lo), np.diff(row_groups[lo:hi + 1]))
-        choice_at = owner + 1 + before[:-1]
-        state_at = np.arange(hi - lo) + before[row_groups[lo:hi] - c_lo]
-        first = np.concatenate([[0], np.cumsum(row_len)])
-        entry_at = choice_at[entry_row] + 1 + 2 * (np.arange(cols.size) - first[entry_row])
-        pieces = np.empty(hi - lo + c_hi - c_lo + 2 * cols.size, dtype=object)
-        pieces[choice_at] = action_lines[actions[c_lo:c_hi]]
-        pieces[entry_at] = _successors(cols)
-        table, index = _strings(vals, lambda v: f"{v!r}\n")
-        pieces[entry_at + 1] = table[index]
-        labels = {code: "".join(" " + name for bit, name in enumerate(
-            ["init", *(m for m, _ in marks)]) if code >> bit & 1)
-                  for code in np.unique(codes[lo:hi]).tolist()}
-        chunk_codes = codes[lo:hi].tolist()
-        if valuations:
-            records = mdp.states[lo:hi]
-            heads = [f"state {s}{labels[code]}\n//[{valuation(rec)}]\n" for s, code, rec
-                     in zip(range(lo, hi), chunk_codes, records, strict=True)]
-        else:
-            heads = [f"state {s}{labels[code]}\n" for s, code in
-                     zip(range(lo, hi), chunk_codes, strict=True)]
-        pieces[state_at] = heads
-        yield "".join(pieces.tolist())
+def product_drn(mdp: MDP, target: np.ndarray, *, truncated_label: bool = True,
+                valuations: bool = True,
+                world: Callable[[object], str] | None = None) -> DrnModel:
+    """What :func:`write_drn` writes: ``mdp`` with its labels, actions and valuations."""
+    target = as_state_mask(mdp, target, "target")
+    labels = [("target", target), ("accept", target), ("sink", np.asarray(mdp.sink, bool))]
+    if truncated_label:
+        labels.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
+    return DrnModel(matrix=mdp.matrix, row_groups=mdp.row_groups, initial=int(mdp.initial),
+                    labels=tuple(labels), declared=("target", "accept"),
+                    action_names=mdp.action_names, choice_actions=mdp.choice_actions,
+                    valuations=ProductValuations(mdp.states, world) if valuations else None,
+                    comment="Exported by mitld_lp")
 
 
 def write_drn(
@@ -262,7 +190,8 @@ def write_drn(
     valuations: bool = True,
     world: Callable[[object], str] | None = None,
 ) -> Path:
-    """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``).
+    """Write ``mdp`` in Storm's explicit DRN format (``@type: MDP``), through the one DRN
+    writer (:mod:`mitld_lp.files.drn`).
 
     State ``i`` of the file is state ``i`` of ``mdp``; its choices appear in row order
     with the action names of ``mdp.action_names`` (whitespace replaced by ``_``) or
@@ -276,45 +205,18 @@ def write_drn(
     empty, one more state that no state reaches carries ``target`` and ``accept``, so
     that Storm knows them and answers 0.  With ``valuations``,
     each ``state`` line is followed by the state's valuation as Storm's own exporter
-    writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]`` (the game
-    state, the automaton state, the events still pending, the clock), or
-    ``//[target]`` / ``//[sink]`` / ``//[truncated]`` for the absorbing states;
-    ``world`` writes the game state in the world's own terms instead of ``game=...``
-    (the command line gives a PRISM world's variables, ``x=2 & open=true``).
-    Probabilities are written with Python's shortest round-trip ``repr``.
+    writes it, a comment ``//[game=(1,2) & q=3 & pending={b1,b2} & clock=0]``
+    (:class:`ProductValuations`), or ``//[target]`` / ``//[sink]`` / ``//[truncated]``
+    for the absorbing states; ``world`` writes the game state in the world's own terms
+    instead of ``game=...`` (the command line gives a PRISM world's variables,
+    ``x=2 & open=true``).  Probabilities are written with Python's shortest round-trip
+    ``repr``.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
         ValueError: a path :func:`mitld_lp.files.write.writable_path` refuses.
     """
     target = as_state_mask(mdp, target, "target")
-    p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)
-    n = mdp.n_states
-    marks = [("target", target), ("accept", target),
-             ("sink", np.asarray(mdp.sink, dtype=bool))]
-    if truncated_label:
-        marks.append(("truncated", np.asarray(mdp.truncated, dtype=bool)))
-    # target and accept on no state (the value is 0) go on one more state that no state
-    # reaches, so that Storm knows them (DRN declares labels only on states)
-    unused = [] if target.any() else ["target", "accept"]
-    header = [
-        "// Exported by mitld_lp",
-        "@type: MDP",
-        "@parameters",
-        "",
-        "@reward_models",
-        "",
-        "@nr_states",
-        str(n + bool(unused)),
-        "@nr_choices",
-        str(mdp.n_choices + bool(unused)),
-        "@model",
-    ]
-    with files.replacing(p) as f:
-        f.write("\n".join(header) + "\n")
-        for text in drn_text(mdp, marks, valuations=valuations, world=world):
-            f.write(text)
-        if unused:
-            f.write(f"state {n} {' '.join(unused)}\n\taction absorb\n\t\t{n} : 1.0\n")
-    logger.info("wrote DRN (%d states, %d choices) to %s", n, mdp.n_choices, p)
-    return p
+    p = files.writable_path(path, overwrite=overwrite, suffixes=drn.SUFFIXES)
+    return drn.write(product_drn(mdp, target, truncated_label=truncated_label,
+                                 valuations=valuations, world=world), p, overwrite=overwrite)

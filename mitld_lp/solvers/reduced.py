@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.mdp import MDPShape
 from mitld_lp.solvers.graph import Blocks, EndComponents, Sense, segmented_argmax
 
 __all__ = ["Qualitative", "Quotient", "greedy_choices", "keeping_zero"]
@@ -46,7 +47,7 @@ class Qualitative:
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class Quotient:
+class Quotient(MDPShape):
     """The *maybe* part of an MDP with its maximal end components collapsed: a total
     reward (the one-step probability of entering the target) to optimise in a
     ``sense`` on a model with no end component.
@@ -63,6 +64,8 @@ class Quotient:
 
     Reduced states are numbered: first the maybe states outside any MEC (in the order of
     the original states), then one state per MEC (``n_plain + mec id``).
+    MDP-shaped (:class:`~mitld_lp.mdp.MDPShape`), with rows short of 1 by what enters the
+    target or prob-0 in one step.
 
     Attributes:
         target: ``(n_states,)`` bool, the original target mask (value 1).
@@ -112,18 +115,6 @@ class Quotient:
     layers: tuple[np.ndarray, np.ndarray]
     sense: Sense
     qualitative: Qualitative
-
-    @property
-    def n_states(self) -> int:
-        return int(self.row_groups.shape[0] - 1)
-
-    @property
-    def n_choices(self) -> int:
-        return int(self.choice_origin.shape[0])
-
-    def choice_state(self) -> np.ndarray:
-        """``(n_reduced_choices,)``: the reduced state each reduced choice belongs to."""
-        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
 
     def lift(self, reduced: np.ndarray) -> np.ndarray:
         """Map a per-reduced-state value vector back to the original states.

@@ -26,20 +26,18 @@ file is still the model, but Storm refuses to check it.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
+from mitld_lp.files import drn
 from mitld_lp.files import write as files
-from mitld_lp.mdp import ABSORB
+from mitld_lp.files.drn import DrnModel
 from mitld_lp.product.imdp import IntervalMDP, vertex_weights
-from mitld_lp.solvers.export import DRN_SUFFIXES, _drn_action
 
-__all__ = ["branch_intervals", "write_interval_drn"]
-
-logger = logging.getLogger(__name__)
+__all__ = ["branch_intervals", "interval_drn", "write_interval_drn"]
 
 
 def branch_intervals(imdp: IntervalMDP) -> tuple[np.ndarray, np.ndarray]:
@@ -59,8 +57,48 @@ def branch_intervals(imdp: IntervalMDP) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _interval(lo: float, hi: float) -> str:
-    return f"[{lo!r}, {hi!r}]"
+def interval_drn(imdp: IntervalMDP, target: np.ndarray) -> DrnModel:
+    """What :func:`write_interval_drn` writes (module docstring): the product's states
+    ``0 .. n-1``, then one outcome state per branch of each ambiguous choice, in choice
+    order; the product's choices, then the outcome states' ``world``."""
+    target = np.asarray(target, dtype=bool)
+    n, n_c = imdp.n_states, imdp.n_choices
+    bg = np.asarray(imdp.branch_groups, dtype=np.int64)
+    n_branch = np.diff(bg)
+    ambiguous = np.diff(imdp.band_groups) > 0
+    outcome = np.flatnonzero(np.repeat(ambiguous, n_branch))  # branches: outcome states
+    n_out = outcome.size
+    b_lo, b_hi = branch_intervals(imdp)
+    # the rows of the file's choices: a plain choice's one branch, an ambiguous one's
+    # outcome states with the branches' intervals, each outcome state's branch
+    m = imdp.branches
+    plain = bg[:-1][~ambiguous]
+    rows_of = np.concatenate([plain, outcome])  # branch rows copied, by file choice
+    choice_of = np.concatenate([np.flatnonzero(~ambiguous), n_c + np.arange(n_out)])
+    lengths = np.diff(m.indptr)[rows_of]
+    at = np.repeat(m.indptr[rows_of] - (np.cumsum(lengths) - lengths),
+                   lengths) + np.arange(int(lengths.sum()))
+    owner = np.repeat(np.arange(n_c), n_branch)[outcome]  # the ambiguous choice of each
+    row = np.concatenate([np.repeat(choice_of, lengths), owner])
+    col = np.concatenate([m.indices[at], n + np.arange(n_out)])
+    lo = np.concatenate([m.data[at], b_lo[outcome]])
+    hi = np.concatenate([m.data[at], b_hi[outcome]])
+    order = np.argsort(row, kind="stable")
+    indptr = np.zeros(n_c + n_out + 1, dtype=np.int64)
+    np.cumsum(np.bincount(row, minlength=n_c + n_out), out=indptr[1:])
+    matrix = sp.csr_array((lo[order], col[order], indptr), shape=(n_c + n_out, n + n_out))
+    row_groups = np.concatenate([imdp.row_groups, n_c + 1 + np.arange(n_out)])
+    world = len(imdp.action_names)  # the outcome states' one action
+    actions = np.concatenate([imdp.choice_actions, np.full(n_out, world)])
+    pad = np.zeros(n_out, dtype=bool)
+    labels = tuple((name, np.concatenate([np.asarray(mask, dtype=bool), pad])) for name, mask
+                   in (("target", target), ("accept", target), ("sink", imdp.sink),
+                       ("truncated", imdp.truncated)))
+    return DrnModel(matrix=matrix, row_groups=row_groups, initial=int(imdp.initial),
+                    labels=labels, declared=("target", "accept"),
+                    action_names=(*imdp.action_names, "world"), choice_actions=actions,
+                    upper=hi[order],
+                    comment="Exported by mitld_lp: an interval MDP (robust synthesis)")
 
 
 def write_interval_drn(
@@ -70,7 +108,8 @@ def write_interval_drn(
     *,
     overwrite: bool = False,
 ) -> Path:
-    """Write ``imdp`` as an interval DRN (module docstring).  States ``0 .. n-1`` are the
+    """Write ``imdp`` as an interval DRN (module docstring) through the one DRN writer
+    (:mod:`mitld_lp.files.drn`).  States ``0 .. n-1`` are the
     product's, the outcome states follow (then, when ``target`` is empty, the state
     that carries ``target`` and ``accept``).  Labels: ``init``; ``target`` and
     ``accept`` on ``target`` (for a task with a safety part, the states from which it
@@ -78,58 +117,5 @@ def write_interval_drn(
     ``goal``); ``sink``; ``truncated``.  Raises ``FileExistsError`` (``path`` exists,
     no ``overwrite``) or ``ValueError`` (a path
     :func:`mitld_lp.files.write.writable_path` refuses)."""
-    target = np.asarray(target, dtype=bool)
-    p = files.writable_path(path, overwrite=overwrite, suffixes=DRN_SUFFIXES)
-    n = imdp.n_states
-    k = np.diff(imdp.band_groups)
-    n_branch = np.diff(imdp.branch_groups)
-    outcome_first = np.full(imdp.n_choices, -1, dtype=np.int64)  # first outcome state
-    ambiguous = np.flatnonzero(k > 0)
-    outcome_first[ambiguous] = n + np.concatenate([[0], np.cumsum(n_branch[ambiguous])[:-1]])
-    n_out = int(n_branch[ambiguous].sum())
-    b_lo, b_hi = branch_intervals(imdp)
-    names = [_drn_action(a) for a in imdp.action_names]
-    marks = [("target", target), ("accept", target), ("sink", np.asarray(imdp.sink, bool)),
-             ("truncated", np.asarray(imdp.truncated, bool))]
-    m = imdp.branches
-    indptr = [int(x) for x in m.indptr]
-    cols: list[int] = m.indices.tolist()
-    vals: list[float] = m.data.tolist()
-    bg, rg = imdp.branch_groups.tolist(), imdp.row_groups.tolist()
-    acts = np.asarray(imdp.choice_actions, dtype=np.int64).tolist()
-
-    def row(b: int) -> list[str]:
-        return [f"\t\t{cols[j]} : {_interval(vals[j], vals[j])}"
-                for j in range(indptr[b], indptr[b + 1]) if vals[j] > 0]
-
-    unused = [] if target.any() else ["target", "accept"]
-    extra = 1 if unused else 0  # the state that carries them (module docstring)
-    lines = ["// Exported by mitld_lp: an interval MDP (robust synthesis)", "@type: MDP",
-             "@parameters", "", "@reward_models", "", "@nr_states", str(n + n_out + extra),
-             "@nr_choices", str(imdp.n_choices + n_out + extra), "@model"]
-    for s in range(n):
-        labels = (["init"] if s == imdp.initial else []) + [
-            name for name, mask in marks if mask[s]]
-        lines.append(f"state {s} {' '.join(labels)}".rstrip())
-        for c in range(rg[s], rg[s + 1]):
-            a = acts[c]
-            lines.append(f"\taction {names[a] if a != ABSORB else 'absorb'}")
-            if outcome_first[c] < 0:
-                lines += row(bg[c])
-                continue
-            for j, b in enumerate(range(bg[c], bg[c + 1])):
-                if b_hi[b] > 0:
-                    lines.append(f"\t\t{int(outcome_first[c]) + j} : "
-                                 f"{_interval(float(b_lo[b]), float(b_hi[b]))}")
-    for c in ambiguous.tolist():
-        for j, b in enumerate(range(bg[c], bg[c + 1])):
-            lines.append(f"state {int(outcome_first[c]) + j}")
-            lines.append("\taction world")
-            lines += row(b)
-    if unused:  # reached by no state: only so that Storm knows these labels
-        lines += [f"state {n + n_out} {' '.join(unused)}", "\taction absorb",
-                  f"\t\t{n + n_out} : {_interval(1.0, 1.0)}"]
-    with files.replacing(p) as f:
-        f.write("\n".join(lines) + "\n")
-    logger.info("wrote interval DRN (%d states, %d outcome states) to %s", n, n_out, p)
-    return p
+    p = files.writable_path(path, overwrite=overwrite, suffixes=drn.SUFFIXES)
+    return drn.write(interval_drn(imdp, target), p, overwrite=overwrite)

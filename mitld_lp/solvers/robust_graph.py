@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.mdp import MDPShape
 from mitld_lp.util.traversal import strong_components
 
 __all__ = ["RobustGame", "positive_attractor", "almost_sure", "end_components", "levels",
@@ -30,7 +31,7 @@ __all__ = ["RobustGame", "positive_attractor", "almost_sure", "end_components", 
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class RobustGame:
+class RobustGame(MDPShape):
     """The arrays a robust solver reads: state ``s``'s choices are
     ``row_groups[s]:row_groups[s+1]``, choice ``c``'s vertex rows
     ``vertex_groups[c]:vertex_groups[c+1]`` of ``matrix`` (``(n_rows, n_states)`` CSR,
@@ -41,19 +42,12 @@ class RobustGame:
     row_groups: np.ndarray
 
     @property
-    def n_states(self) -> int:
-        return int(self.row_groups.shape[0] - 1)
-
-    @property
-    def n_choices(self) -> int:
-        return int(self.row_groups[-1])
-
-    @property
     def n_rows(self) -> int:
         return int(self.vertex_groups[-1])
 
-    def choice_state(self) -> np.ndarray:
-        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
+    def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
+        """Nature's vertex rows, several per choice (its :class:`~mitld_lp.mdp.MDPShape`)."""
+        return self.matrix, self.vertex_groups
 
     def row_choice(self) -> np.ndarray:
         return np.repeat(np.arange(self.n_choices), np.diff(self.vertex_groups))
