@@ -7,12 +7,14 @@ Used by the model loader (:mod:`mitld_lp.model`), the world tables a model file 
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 from collections.abc import Mapping
 from typing import Any
 
 from mitld_lp import defaults
+from mitld_lp.util.memory import memory_size
 from mitld_lp.util.text import printable
 
 
@@ -138,10 +140,6 @@ _BUDGET_KEYS = ("max_states", "max_world_states", "max_automaton_states", "max_m
 def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
     """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
     or a text such as ``"4G"``) of memory, a positive number of seconds."""
-    from argparse import ArgumentTypeError
-
-    from mitld_lp.cli.arguments import memory_size
-
     if "budgets" not in doc:
         return {}
     table = ctx.table(doc["budgets"], "budgets")
@@ -152,7 +150,7 @@ def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
         if key == "max_memory" and isinstance(value, str):
             try:
                 out[key] = memory_size(value)
-            except ArgumentTypeError as exc:
+            except argparse.ArgumentTypeError as exc:
                 raise ctx.error(where, str(exc)) from None
             continue
         if key == "time_limit":

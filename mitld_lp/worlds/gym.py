@@ -53,8 +53,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from mitld_lp import defaults
-from mitld_lp.product import ProductTooLarge, default_max_memory
-from mitld_lp.product.budget import _bytes
+from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import ExplicitGame, GameError
 
@@ -312,8 +311,8 @@ def _check_budget(table: Any, extended: bool, horizon: int | None, max_states: i
     if need > max_memory:
         raise GymTooLarge(
             f"the environment's table ({n:,} states, {actions} actions, up to {branches} "
-            f"outcomes) would need about {_bytes(need)} as a game, more than max_memory = "
-            f"{_bytes(max_memory)}; nothing was built: raise max_memory (--max-memory)"
+            f"outcomes) would need about {byte_text(need)} as a game, more than max_memory = "
+            f"{byte_text(max_memory)}; nothing was built: raise max_memory (--max-memory)"
         )
 
 
