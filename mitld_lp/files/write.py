@@ -44,9 +44,9 @@ from typing import IO, Any, Literal
 from mitld_lp.files.rules import (
     InputFileError,
     OutputPathError,
-    _kernel_folder,
     check_zip,
     irregular_kind,
+    kernel_folder,
     open_archive,
     open_regular,
     read_bytes,
@@ -125,7 +125,7 @@ def writable_path(
     folder = out.parent
     if not folder.is_dir():
         raise OutputPathError(f"{label}: the folder {folder} does not exist")
-    kernel = _kernel_folder(folder)
+    kernel = kernel_folder(folder)
     if kernel is not None:
         raise OutputPathError(f"{label}: is under {kernel}, the kernel's own tables, where "
                               "no file can be written")
