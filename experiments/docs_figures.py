@@ -19,7 +19,7 @@ from pathlib import Path
 import _common as C
 
 import mitld_lp
-from mitld_lp.files.plot import Situation, policy_figure, save, sweep_figure
+from mitld_lp.plot import Situation, policy_figure, save, sweep_figure
 from mitld_lp.sweep import run_sweep
 
 DOCS_IMG = C.ROOT / "docs" / "img"

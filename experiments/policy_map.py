@@ -5,7 +5,7 @@ One panel per main situation of the automaton and the events: waiting for both b
 state the DTA reaches from its initial state on a letter with b1, pending {b2}); bus 2
 just arrived (likewise with b2, pending {b1}).  In each, an arrow per cell shows the
 deterministic policy's action and the cell's colour the probability of success from
-there.  The panels are the library's (``mitld_lp.files.plot.policy_map``: product states
+there.  The panels are the library's (``mitld_lp.plot.policy_map``: product states
 found by decoding ``mdp.states`` and stepping the DTA, never by index; ``mitld-lp plot``
 draws the same for any grid world).  Then one sampled run (fixed seed) is printed in
 the paper's notation.
@@ -27,7 +27,7 @@ import numpy as np
 from matplotlib.colors import Normalize
 
 import mitld_lp
-from mitld_lp.files.plot import PolicyMap, Situation, draw_panel, policy_map
+from mitld_lp.plot import PolicyMap, Situation, draw_panel, policy_map
 from mitld_lp.running.simulate import rollout
 
 MODELS = (("case 1", "bus_grid.toml"), ("case 2", "bus_grid_case2.toml"))

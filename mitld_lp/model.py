@@ -53,13 +53,13 @@ from mitld_lp.distributions import DistributionError, FirstOccurrence, from_tabl
 from mitld_lp.files import rules as file_rules
 from mitld_lp.files.constants import substitute
 from mitld_lp.files.keys import (
+    KeyContext,
     ModelError,
-    _Context,
-    _join,
-    _show,
-    _type_name,
     budgets_table,
     constraints_and_costs,
+    key_path,
+    toml_text,
+    type_name,
 )
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
@@ -162,7 +162,7 @@ class Model:
         ``[events]``): the spec may use them as propositions, ``G (door -> F[0,3] stop)``.
         ``sensors``: per event a :class:`~mitld_lp.sensing.Sensor` or its table
         (``{"detect": 0.8}``), as a model file's ``[sensors]`` (:mod:`mitld_lp.sensing`)."""
-        ctx = _Context("<spec>")
+        ctx = KeyContext("<spec>")
         try:
             world_members(game)
         except GameError as exc:
@@ -206,7 +206,7 @@ def _unpickle_model(
 # --------------------------------------------------------------------------- game kinds
 
 
-def _no_check(game: Game[Any], task: Task, ctx: _Context) -> None:
+def _no_check(game: Game[Any], task: Task, ctx: KeyContext) -> None:
     """A kind with nothing to check beyond :func:`mitld_lp.worlds.task.bind`."""
 
 
@@ -227,11 +227,11 @@ class _GameKind:
     table: str
     extra_tables: tuple[str, ...]
     proposition_noun: str
-    build: Callable[[dict[str, Any], _Context], Game[Any]]
-    check_task: Callable[[Game[Any], Task, _Context], None] = _no_check
+    build: Callable[[dict[str, Any], KeyContext], Game[Any]]
+    check_task: Callable[[Game[Any], Task, KeyContext], None] = _no_check
 
 
-def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
+def _build_grid(doc: dict[str, Any], ctx: KeyContext) -> GridWorld:
     """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
     values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
     from mitld_lp.worlds.grid import GridError
@@ -240,7 +240,7 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
     ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})
     size = grid["size"]
     if not isinstance(size, list) or len(size) != 2:
-        raise ctx.error("grid.size", f"must be [width, height], got {_show(size)}")
+        raise ctx.error("grid.size", f"must be [width, height], got {toml_text(size)}")
     width = ctx.integer(size[0], "grid.size[0]")
     height = ctx.integer(size[1], "grid.size[1]")
 
@@ -253,11 +253,11 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
         ctx.number(grid["slip"], "grid.slip")
     stay = grid.get("stay", False)
     if not isinstance(stay, bool):
-        raise ctx.error("grid.stay", f"must be a boolean, got {_type_name(stay)} {_show(stay)}")
+        raise ctx.error("grid.stay", f"must be a boolean, got {type_name(stay)} {toml_text(stay)}")
     obstacles = cells(grid.get("obstacles", []), "grid.obstacles")
     ctx.pair(grid["start"], "grid.start")
     table = ctx.table(doc.get("regions", {}), "regions")
-    regions: Any = {name: cells(value, _join("regions", name)) for name, value in table.items()}
+    regions: Any = {name: cells(value, key_path("regions", name)) for name, value in table.items()}
     try:
         return GridWorld(
             width=width,
@@ -277,11 +277,11 @@ def _build_grid(doc: dict[str, Any], ctx: _Context) -> GridWorld:
         else:
             path = "regions" if head == "regions" else f"grid.{head}"
         for part in rest:
-            path = f"{path}[{part}]" if isinstance(part, int) else _join(path, part)
+            path = f"{path}[{part}]" if isinstance(part, int) else key_path(path, part)
         raise ctx.error(path, exc.message) from None
 
 
-def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+def _build_prism(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
     """``[prism]``: ``file`` (relative to the model file; to the working directory for
     :func:`loads_model`), optional ``constants`` (name -> boolean or number), ``labels``
     (the labels that become propositions, default all) and ``events`` (PRISM actions
@@ -301,8 +301,8 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
     for cname, value in constants.items():
         if not isinstance(value, bool | int | float):
             raise ctx.error(
-                _join("prism.constants", cname),
-                f"must be a boolean or a number, got {_type_name(value)} {_show(value)}",
+                key_path("prism.constants", cname),
+                f"must be a boolean or a number, got {type_name(value)} {toml_text(value)}",
             )
 
     def names(key: str) -> list[str] | None:
@@ -313,7 +313,7 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
 
     labels, events = names("labels"), names("events")
     # [labels]: name -> a PRISM expression, a label Storm evaluates on the world's states
-    define = {name: ctx.string(text, _join("labels", name))
+    define = {name: ctx.string(text, key_path("labels", name))
               for name, text in ctx.table(doc.get("labels", {}), "labels").items()}
     # the task, so that Storm does not expand states where it is decided
     task, _ = _parse_spec(doc["spec"], ctx)
@@ -327,11 +327,11 @@ def _build_prism(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
         message = str(exc)
         m = re.match(r"label '(\w+)'(?: = '[^']*')?: (.*)$", message)
         if m and m[1] in define:
-            raise ctx.error(_join("labels", m[1]), m[2]) from exc
+            raise ctx.error(key_path("labels", m[1]), m[2]) from exc
         raise ctx.error("prism", message) from exc
 
 
-def _check_prism_task(game: Game[Any], task: Task, ctx: _Context) -> None:
+def _check_prism_task(game: Game[Any], task: Task, ctx: KeyContext) -> None:
     """A PRISM action named like a proposition of the spec but not listed under
     ``prism.events`` would be offered to the robot as a move of its own: refuse it
     rather than let the robot cause the event."""
@@ -379,7 +379,7 @@ OBJECTIVES = ("max", "min")
 # --------------------------------------------------------------------------- the spec
 
 
-def _parse_spec(text: str, ctx: _Context) -> tuple[Formula, FragmentReport]:
+def _parse_spec(text: str, ctx: KeyContext) -> tuple[Formula, FragmentReport]:
     """Parse the spec (errors carry ``line:column`` within the spec string) and check it
     is in the supported co-safe fragment."""
     try:
@@ -400,7 +400,7 @@ def bind_distributions(
     ``named``, an inline literal built (:func:`mitld_lp.worlds.task.resolve_laws`).  Raises
     :class:`ModelError` naming the problem (an unsupported formula, an unknown name, a
     bad literal, a name bound but not used)."""
-    ctx = _Context(source)
+    ctx = KeyContext(source)
     try:
         report = check(spec)
     except FragmentError as exc:
@@ -414,7 +414,7 @@ def bind_distributions(
 # --------------------------------------------------------------------------- loading
 
 
-def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: _Context) -> ModelError:
+def _toml_error(exc: tomllib.TOMLDecodeError, text: str, ctx: KeyContext) -> ModelError:
     """``SOURCE:LINE:COLUMN: TOML syntax error at line L, column C: what``."""
     message = str(exc)
     m = re.search(r"\s*\(at line (\d+), column (\d+)\)", message)
@@ -438,9 +438,9 @@ def _bind_path(exc: BindError, table: str | None) -> str:
     ``table`` (where the world's propositions are declared) when there is one."""
     match exc.key:
         case ("distributions" | "events" as key, name):
-            return _join(key, name)
+            return key_path(key, name)
         case ("proposition", name) if table:
-            return _join(table, name)
+            return key_path(table, name)
     return "spec"
 
 
@@ -450,7 +450,7 @@ def _bind(
     named: Mapping[str, FirstOccurrence] | None,
     noun: str,
     table: str | None,
-    ctx: _Context,
+    ctx: KeyContext,
     declared: Mapping[str, FirstOccurrence] | None = None,
 ) -> Task:
     """:func:`mitld_lp.worlds.task.bind`, its faults as :class:`ModelError` with key paths."""
@@ -460,19 +460,19 @@ def _bind(
         raise ctx.error(_bind_path(exc, table), exc.reason) from exc
 
 
-def _law_tables(doc: Mapping[str, Any], key: str, ctx: _Context) -> dict[str, FirstOccurrence]:
+def _law_tables(doc: Mapping[str, Any], key: str, ctx: KeyContext) -> dict[str, FirstOccurrence]:
     """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
     an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
     laws: dict[str, FirstOccurrence] = {}
     source = Path(ctx.source)  # a fit's data file is read beside the model file
     base = source.parent if source.is_file() else None
     for name, value in ctx.table(doc.get(key, {}), key).items():
-        path = _join(key, name)
+        path = key_path(key, name)
         if not isinstance(value, dict):
             raise ctx.error(
                 path,
                 f"must be an inline table such as {{ geometric = 0.5 }}, got "
-                f"{_type_name(value)} {_show(value)}",
+                f"{type_name(value)} {toml_text(value)}",
             )
         try:
             laws[name] = from_table(value, path, base)
@@ -489,7 +489,7 @@ def _load(
     text: str, source: str, path: Path | None, max_states: int | None,
     max_memory: int | None
 ) -> Model:
-    ctx = _Context(source)
+    ctx = KeyContext(source)
     try:
         # every decimal keeps its text: an exact answer is about the model as written
         doc = tomllib.loads(text, parse_float=Written)
@@ -548,7 +548,7 @@ def _load(
     sensors = read_sensors(doc.get("sensors", {}), task.laws, ctx)
     objective = doc.get("objective", "max")
     if objective not in OBJECTIVES:
-        raise ctx.error("objective", f"must be \"max\" or \"min\", got {_show(objective)}")
+        raise ctx.error("objective", f"must be \"max\" or \"min\", got {toml_text(objective)}")
     return Model(
         name=name,
         spec=spec,
@@ -618,6 +618,6 @@ def model_budgets(path: str | os.PathLike[str], *,
     that a command holds every stage to them, the world's loading included (the command
     line's time limit); ``{}`` when they cannot be read: :func:`load_model` says why."""
     try:
-        return budgets_table(tomllib.loads(_read(path, max_memory)), _Context(os.fspath(path)))
+        return budgets_table(tomllib.loads(_read(path, max_memory)), KeyContext(os.fspath(path)))
     except (ModelError, tomllib.TOMLDecodeError, RecursionError):
         return {}

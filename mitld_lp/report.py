@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.files.write import POLICY_COLUMNS  # the keys of a policy_table row
 from mitld_lp.product import ProductState
 from mitld_lp.worlds.names import state_record
 
@@ -46,9 +47,6 @@ def bracket_text(lower: float, upper: float) -> str:
     upper end's up, so that the printed bracket contains the certified one."""
     return f"[{probability_text(lower, 'down')}, {probability_text(upper, 'up')}]"
 
-POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
-                  "accepting_component")
-"""The keys of a :func:`policy_table` row, in the order the CSV file writes them."""
 
 
 def policy_table(result: Result) -> list[dict[str, Any]]:

@@ -147,7 +147,7 @@ def solved():
 
 def _writers(result):
     """Every file writer of the package: (name, suffix, write(path, overwrite))."""
-    from mitld_lp.files import plot
+    from mitld_lp import plot
     from mitld_lp.routes import pareto
     from mitld_lp.solvers.export import write_drn, write_lp
 

@@ -13,7 +13,7 @@ import pytest
 
 from mitld_lp import GridWorld, Model, load_model, synthesize
 from mitld_lp.cli import main
-from mitld_lp.files.plot import (
+from mitld_lp.plot import (
     PlotError,
     Situation,
     parse_situation,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from mitld_lp import GridWorld, Model, synthesize
-from mitld_lp.running.rollouts import wilson as _wilson
 from mitld_lp.running.simulate import simulate
+from mitld_lp.util.rollouts import wilson as _wilson
 
 Z = 1.959963984540054
 

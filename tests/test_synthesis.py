@@ -140,7 +140,7 @@ def test_simulation_of_canonical_model():
 
 
 def test_wilson_interval_by_hand():
-    from mitld_lp.running.rollouts import wilson as _wilson
+    from mitld_lp.util.rollouts import wilson as _wilson
 
     lo, hi = _wilson(50, 100)
     # Wilson score interval for 50/100 at 95%: 0.5 +- 1.96*sqrt(0.25/100 + 1.96^2/40000)

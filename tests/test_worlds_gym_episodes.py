@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 from mitld_lp import Model, synthesize
+from mitld_lp.running.gym import GymAgent
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.gym import (
     FROZEN_LAKE_ACTIONS,
-    GymAgent,
     GymTooLarge,
     from_env,
     from_transition_table,

@@ -226,7 +226,7 @@ def args_plot(p: argparse.ArgumentParser) -> None:
 
 def cmd_plot(args: argparse.Namespace) -> int:
     """Draw a grid world's policy, or a column of a sweep's results."""
-    from mitld_lp.files import plot
+    from mitld_lp import plot
 
     out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
     table = Path(args.input).suffix.lower() in (".csv", ".parquet")

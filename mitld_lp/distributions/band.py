@@ -46,8 +46,8 @@ from mitld_lp.distributions.law import (
     FloatArray,
     IntArray,
     Steps,
-    _out,
-    _steps,
+    scalar_or_array,
+    step_array,
 )
 from mitld_lp.distributions.printing import literal_text
 
@@ -125,22 +125,22 @@ class Band(FirstOccurrence):
 
     def hazard_band(self, k: Steps) -> tuple[Any, Any]:
         """``(h_lo(k), h_hi(k))``, both 0 for ``k <= 0`` (no event at step 0)."""
-        ks, scalar = _steps(k)
+        ks, scalar = step_array(k)
         lo = np.zeros(ks.shape)
         hi = np.zeros(ks.shape)
         pos = ks >= 1
         if pos.any():
             lo[pos], hi[pos] = self._band_pos(ks[pos])
-        return _out(lo, scalar), _out(hi, scalar)
+        return scalar_or_array(lo, scalar), scalar_or_array(hi, scalar)
 
     def survival_upper(self, k: Steps) -> Any:
         """``S_hi(k)``, 1 for ``k <= 0``."""
-        ks, scalar = _steps(k)
+        ks, scalar = step_array(k)
         out = np.ones(ks.shape)
         pos = ks >= 1
         if pos.any():
             out[pos] = self._sf_hi_pos(ks[pos])
-        return _out(out, scalar)
+        return scalar_or_array(out, scalar)
 
     def truncation_point(self, eps: float) -> int:
         """The smallest ``T >= 0`` with ``S_hi(T) <= eps`` (every law of the band has

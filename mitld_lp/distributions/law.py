@@ -48,6 +48,8 @@ __all__ = [
     "NEGLIGIBLE_TAIL",
     "MAX_HAZARD_SCAN",
     "MAX_TABLE_STEPS",
+    "step_array",
+    "scalar_or_array",
     "MAX_STEP",
 ]
 
@@ -91,7 +93,7 @@ class DistributionError(ValueError):
 # --------------------------------------------------------------------------- helpers
 
 
-def _steps(k: Steps) -> tuple[IntArray, bool]:
+def step_array(k: Steps) -> tuple[IntArray, bool]:
     """``k`` as an int64 array, and whether it was a scalar."""
     arr = np.asarray(k)
     scalar = arr.ndim == 0
@@ -104,7 +106,8 @@ def _steps(k: Steps) -> tuple[IntArray, bool]:
     raise TypeError(f"steps must be integers, got {k!r}")
 
 
-def _out(values: FloatArray, scalar: bool) -> Any:
+def scalar_or_array(values: FloatArray, scalar: bool) -> Any:
+    """``values`` as a float when the steps were a scalar (:func:`step_array`), else as is."""
     return float(values) if scalar else values
 
 
@@ -190,7 +193,7 @@ class FirstOccurrence(ABC):
         (a float for a scalar).  A value that is not a number (scipy cannot evaluate some
         laws at extreme parameters or far out in the tail) is a :class:`DistributionError`
         naming the step, never a nan passed on to the automaton."""
-        ks, scalar = _steps(k)
+        ks, scalar = step_array(k)
         out = np.full(ks.shape, before)
         pos = ks >= 1
         if pos.any():
@@ -202,7 +205,7 @@ class FirstOccurrence(ABC):
                     f"the {what} at step {int(ks[nan].flat[0])} is not a number (the law "
                     "cannot be evaluated there)",
                 )
-        return _out(out, scalar)
+        return scalar_or_array(out, scalar)
 
     def _sample_from(self, v: FloatArray) -> FloatArray:
         """Inverse cdf in survival form: for ``v`` uniform on ``(0, 1]``,

@@ -7,13 +7,18 @@ Used by the model loader (:mod:`mitld_lp.model`), the world tables a model file 
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 from collections.abc import Mapping
 from typing import Any
 
 from mitld_lp import defaults
+from mitld_lp.util.memory import memory_size
 from mitld_lp.util.text import printable
+
+__all__ = ["ModelError", "KeyContext", "key_path", "toml_text", "type_name", "budgets_table",
+           "constraints_and_costs"]
 
 
 class ModelError(ValueError):
@@ -26,27 +31,29 @@ class ModelError(ValueError):
 
 def _key(part: str) -> str:
     """A key of a key path as TOML writes it: bare, or quoted with escapes."""
-    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else _show(part)
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else toml_text(part)
 
 
-def _join(path: str, key: str) -> str:
+def key_path(path: str, key: str) -> str:
+    """``key`` under ``path`` as a key path (``regions.goal``, ``labels."a b"``)."""
     return f"{path}.{_key(key)}" if path else _key(key)
 
 
-def _show(value: Any) -> str:
+def toml_text(value: Any) -> str:
     """A value the way TOML writes it (``true``, ``"text"``, ``[1, 2]``)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, list):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
+        return "[" + ", ".join(toml_text(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_show(v)}" for k, v in value.items()) + " }"
+        return "{ " + ", ".join(f"{_key(k)} = {toml_text(v)}" for k, v in value.items()) + " }"
     return repr(value)
 
 
-def _type_name(value: Any) -> str:
+def type_name(value: Any) -> str:
+    """What a TOML value is, for a message: ``"an integer"``, ``"a table"``."""
     match value:
         case bool():
             return "a boolean"
@@ -63,7 +70,7 @@ def _type_name(value: Any) -> str:
     return type(value).__name__
 
 
-class _Context:
+class KeyContext:
     """Error reporting for one source, and the budgets a world built while loading gets.
 
     The one key-path context of the package's TOML files: a model file's (errors are
@@ -84,7 +91,7 @@ class _Context:
 
     def table(self, value: Any, path: str) -> dict[str, Any]:
         if not isinstance(value, dict):
-            raise self.error(path, f"must be a table, got {_type_name(value)} {_show(value)}")
+            raise self.error(path, f"must be a table, got {type_name(value)} {toml_text(value)}")
         return value
 
     def keys(
@@ -94,39 +101,39 @@ class _Context:
         for k in table:
             if k not in allowed:
                 raise self.error(
-                    _join(path, k), f"unknown key (allowed: {', '.join(sorted(allowed))})"
+                    key_path(path, k), f"unknown key (allowed: {', '.join(sorted(allowed))})"
                 )
         for k in sorted(required):
             if k not in table:
-                raise self.error(_join(path, k), "missing (required)")
+                raise self.error(key_path(path, k), "missing (required)")
 
     def string(self, value: Any, path: str) -> str:
         if not isinstance(value, str):
-            raise self.error(path, f"must be a string, got {_type_name(value)} {_show(value)}")
+            raise self.error(path, f"must be a string, got {type_name(value)} {toml_text(value)}")
         if not value.strip():
             raise self.error(path, "must not be empty")
         return value
 
     def number(self, value: Any, path: str) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(path, f"must be a number, got {_type_name(value)} {_show(value)}")
+            raise self.error(path, f"must be a number, got {type_name(value)} {toml_text(value)}")
         if not math.isfinite(value):
-            raise self.error(path, f"must be finite, got {_show(value)}")
+            raise self.error(path, f"must be finite, got {toml_text(value)}")
         return float(value)
 
     def integer(self, value: Any, path: str) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(path, f"must be an integer, got {_type_name(value)} {_show(value)}")
+            raise self.error(path, f"must be an integer, got {type_name(value)} {toml_text(value)}")
         return value
 
     def array(self, value: Any, path: str) -> list[Any]:
         if not isinstance(value, list):
-            raise self.error(path, f"must be an array, got {_type_name(value)} {_show(value)}")
+            raise self.error(path, f"must be an array, got {type_name(value)} {toml_text(value)}")
         return value
 
     def pair(self, value: Any, path: str) -> tuple[int, int]:
         if not isinstance(value, list) or len(value) != 2:
-            raise self.error(path, f"must be a pair [x, y] of integers, got {_show(value)}")
+            raise self.error(path, f"must be a pair [x, y] of integers, got {toml_text(value)}")
         return (self.integer(value[0], f"{path}[0]"), self.integer(value[1], f"{path}[1]"))
 
 
@@ -135,13 +142,9 @@ _BUDGET_KEYS = ("max_states", "max_world_states", "max_automaton_states", "max_m
                 "time_limit")
 
 
-def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
+def budgets_table(doc: Mapping[str, Any], ctx: KeyContext) -> dict[str, float]:
     """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
     or a text such as ``"4G"``) of memory, a positive number of seconds."""
-    from argparse import ArgumentTypeError
-
-    from mitld_lp.cli.arguments import memory_size
-
     if "budgets" not in doc:
         return {}
     table = ctx.table(doc["budgets"], "budgets")
@@ -152,23 +155,23 @@ def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
         if key == "max_memory" and isinstance(value, str):
             try:
                 out[key] = memory_size(value)
-            except ArgumentTypeError as exc:
+            except argparse.ArgumentTypeError as exc:
                 raise ctx.error(where, str(exc)) from None
             continue
         if key == "time_limit":
             if isinstance(value, bool) or not isinstance(value, int | float) or not (
                     0 < value < float("inf")):
                 raise ctx.error(where, f"must be a positive number of seconds, got "
-                                       f"{_show(value)}")
+                                       f"{toml_text(value)}")
             out[key] = float(value)
             continue
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ctx.error(where, f"must be a whole number >= 1, got {_show(value)}")
+            raise ctx.error(where, f"must be a whole number >= 1, got {toml_text(value)}")
         out[key] = value
     return out
 
 
-def constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[str, ...],
+def constraints_and_costs(doc: Mapping[str, Any], ctx: KeyContext) -> tuple[tuple[str, ...],
                                                                           dict[str, float]]:
     """The ``constraints`` list (each read by :func:`mitld_lp.routes.constraints.parse_constraint`)
     and the ``[costs]`` table (numbers > 0 per action)."""
@@ -176,7 +179,7 @@ def constraints_and_costs(doc: Mapping[str, Any], ctx: _Context) -> tuple[tuple[
 
     texts = doc.get("constraints", [])
     if not isinstance(texts, list):
-        raise ctx.error("constraints", f"must be a list of strings, got {_type_name(texts)}")
+        raise ctx.error("constraints", f"must be a list of strings, got {type_name(texts)}")
     for i, text in enumerate(texts):
         try:
             parse_constraint(text, f"constraints[{i}]")

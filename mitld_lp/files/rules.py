@@ -23,6 +23,7 @@ from typing import IO
 
 __all__ = [
     "OutputPathError",
+    "kernel_folder",
     "InputFileError",
     "read_limit",
     "irregular_kind",
@@ -40,7 +41,7 @@ class OutputPathError(ValueError):
     """An output path that cannot be written: names the path and why."""
 
 
-def _kernel_folder(folder: Path) -> str | None:
+def kernel_folder(folder: Path) -> str | None:
     """``/proc`` or ``/sys`` when ``folder`` (resolved) is in one of them."""
     real = Path(os.path.realpath(folder))
     for kernel in ("/proc", "/sys"):

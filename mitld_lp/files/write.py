@@ -44,20 +44,19 @@ from typing import IO, Any, Literal
 from mitld_lp.files.rules import (
     InputFileError,
     OutputPathError,
-    _kernel_folder,
     check_zip,
     irregular_kind,
+    kernel_folder,
     open_archive,
     open_regular,
     read_bytes,
     read_limit,
     read_text,
 )
-from mitld_lp.report import POLICY_COLUMNS, policy_table
 from mitld_lp.util import watch
 
-#: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
-#: this module, and an import, even for types only, would make a circle).
+#: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: this module is below
+#: every stage; :func:`write_policy` asks the result for its table).
 SynthesisResult = Any
 
 __all__ = [
@@ -71,6 +70,7 @@ __all__ = [
     "write_figure",
     "write_policy",
     "POLICY_SUFFIXES",
+    "POLICY_COLUMNS",
     "abandon",
     "abandoned",
     "InputFileError",
@@ -125,7 +125,7 @@ def writable_path(
     folder = out.parent
     if not folder.is_dir():
         raise OutputPathError(f"{label}: the folder {folder} does not exist")
-    kernel = _kernel_folder(folder)
+    kernel = kernel_folder(folder)
     if kernel is not None:
         raise OutputPathError(f"{label}: is under {kernel}, the kernel's own tables, where "
                               "no file can be written")
@@ -355,17 +355,21 @@ def write_figure(
 
 POLICY_SUFFIXES = (".csv", ".json")
 
+POLICY_COLUMNS = ("game_state", "automaton_state", "pending", "clock", "action", "value",
+                  "accepting_component")
+"""The keys of a policy table's row (:func:`mitld_lp.report.policy_table`), in the order
+the CSV file writes them."""
+
 
 def write_policy(
     result: SynthesisResult, path: PathLike, *, overwrite: bool = False
 ) -> Path:
     """Write ``result``'s policy table (:func:`mitld_lp.report.policy_table`) to
     ``path``: ``.csv`` (one row per state, the columns of
-    :data:`~mitld_lp.report.POLICY_COLUMNS`, pending events joined by spaces, values
+    :data:`POLICY_COLUMNS`, pending events joined by spaces, values
     with every digit) or ``.json`` (a list of objects), under the rule."""
     out = writable_path(path, overwrite=overwrite, suffixes=POLICY_SUFFIXES)
-    # the sensed route's rows are its information states (mitld_lp.sensing.solve)
-    rows = result.policy_table() if result.route == "sensed" else policy_table(result)
+    rows = result.policy_table()  # mitld_lp.report.policy_table, every route's
     if out.suffix.lower() == ".json":
         with replacing(out) as handle:
             handle.write(json.dumps(rows, default=str) + "\n")

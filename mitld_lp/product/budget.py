@@ -17,12 +17,12 @@ refuses a task whose start alone, with every event pending, would not fit
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Any
 
 from mitld_lp.automata.sta import STA
 from mitld_lp.product.imdp import BYTES_PER_WEIGHT, WEIGHT_BLOCK
+from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds.game import Game, world_members
 
 __all__ = [
@@ -42,11 +42,6 @@ MAX_INDEX = 2**31 - 1
 """The most states an MDP can hold: the matrix's column indices are int32."""
 
 
-class ProductTooLarge(RuntimeError):
-    """The product would exceed a budget (``max_states`` or ``max_memory``); a user
-    error: the message names the numbers and what to change."""
-
-
 # Peak bytes of the construction, measured with experiments/bench_product.py on builds
 # of 0.3-3.5M states (tracemalloc, numpy's buffers included): about 30 bytes per
 # transition (the matrix, the batches' rows, the merge) and 80 per state (the index at
@@ -61,14 +56,6 @@ BYTES_PER_STATE = 96
 # rounded up.
 BYTES_PER_VERTEX_ENTRY = 80
 BYTES_PER_VERTEX_ROW = 64
-
-
-def default_max_memory() -> int:
-    """Half the machine's physical memory, in bytes (8 GiB if the system cannot say)."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
-    except (AttributeError, ValueError, OSError):
-        return 8 << 30
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,7 +146,7 @@ class BuildBudget:
             f"{ambiguous} events whose law is a band are pending together at the start: "
             f"nature's vertex distributions of one choice there alone need 2^{ambiguous} "
             f"vertex rows from 4^{ambiguous} = {4**ambiguous:,} weights, about "
-            f"{_bytes(need(ambiguous))}, more than max_memory = {_bytes(self.max_memory)} "
+            f"{byte_text(need(ambiguous))}, more than max_memory = {byte_text(self.max_memory)} "
             f"(at most {fits} such events fit); raise max_memory, or give fewer events "
             "a band (an exact law)")
 
@@ -185,26 +172,19 @@ class BuildBudget:
                      + self.vertex_rows * BYTES_PER_VERTEX_ROW + self._weight_block())
             if need > self.max_memory:
                 raise ProductTooLarge(
-                    f"the robust product would need about {_bytes(need, 2)}, more than "
-                    f"max_memory = {_bytes(self.max_memory, 2)} ({states:,} states found, "
+                    f"the robust product would need about {byte_text(need, 2)}, more than "
+                    f"max_memory = {byte_text(self.max_memory, 2)} ({states:,} states found, "
                     f"{per_state:.1f} branch transitions each; nature's vertex "
                     f"distributions of the {self.expanded:,} states expanded: "
                     f"{self.vertex_rows:,} rows, up to 2^{self.widest} per choice, "
                     f"{self.vertex_entries:,} entries at {BYTES_PER_VERTEX_ENTRY} bytes); "
-                    f"raise max_memory above {_bytes(need, 2)}, give fewer events a band, "
+                    f"raise max_memory above {byte_text(need, 2)}, give fewer events a band, "
                     "loosen epsilon, or shrink the model")
         if need > self.max_memory:
             raise ProductTooLarge(
-                f"the product would need about {_bytes(need)}, more than max_memory = "
-                f"{_bytes(self.max_memory)} ({states:,} states found, {per_state:.1f} "
+                f"the product would need about {byte_text(need)}, more than max_memory = "
+                f"{byte_text(self.max_memory)} ({states:,} states found, {per_state:.1f} "
                 f"transitions each, {BYTES_PER_STATE} bytes per state and "
                 f"{BYTES_PER_TRANSITION} per transition); raise max_memory, loosen "
                 "epsilon, or shrink the model"
             )
-
-
-def _bytes(n: float, digits: int = 1) -> str:
-    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n >= size:
-            return f"{n / size:.{digits}f} {unit}"
-    return f"{n:.0f} bytes"

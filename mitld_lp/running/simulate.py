@@ -18,13 +18,13 @@ from mitld_lp import defaults
 from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.controllers.observation import Observation, RunStatus
 from mitld_lp.model import Model
-from mitld_lp.running.rollouts import (
+from mitld_lp.util.progress import bar as progress_bar
+from mitld_lp.util.rollouts import (
     SimulationResult,
     check_count,
     sample_successor,
     wilson,
 )
-from mitld_lp.util.progress import bar as progress_bar
 
 __all__ = ["SimulationResult", "simulate", "rollout", "Step"]
 

@@ -30,9 +30,9 @@ from mitld_lp import defaults
 from mitld_lp.controllers.kinds import SensedController
 from mitld_lp.controllers.observation import Observation
 from mitld_lp.product import Absorbing
-from mitld_lp.running.rollouts import SimulationResult, check_count, sample_successor, wilson
 from mitld_lp.sensing.belief import Belief
 from mitld_lp.util.progress import tracked
+from mitld_lp.util.rollouts import SimulationResult, check_count, sample_successor, wilson
 from mitld_lp.worlds.game import Game
 
 __all__ = ["Observation", "SensedController", "controller_of", "simulate_sensed"]

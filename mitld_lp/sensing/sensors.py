@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
-from mitld_lp.files.keys import _Context, _join, _show, _type_name
+from mitld_lp.files.keys import KeyContext, key_path, toml_text, type_name
 
 __all__ = ["Sensor", "read_sensors", "sensors_from", "partial", "SENSOR_KEYS"]
 
@@ -47,53 +47,53 @@ class Sensor:
 
     def __str__(self) -> str:
         extra = "".join(
-            f", {k} = {_show(getattr(self, k))}" for k in ("false_alarm", "delay")
+            f", {k} = {toml_text(getattr(self, k))}" for k in ("false_alarm", "delay")
             if getattr(self, k))
-        return f"{{ detect = {_show(self.detect)}{extra} }}"
+        return f"{{ detect = {toml_text(self.detect)}{extra} }}"
 
 
-def _probability(ctx: _Context, value: Any, path: str, *, one: bool) -> float:
+def _probability(ctx: KeyContext, value: Any, path: str, *, one: bool) -> float:
     v = ctx.number(value, path)
     if not (0.0 <= v <= 1.0) or (not one and v == 1.0):
         what = "[0, 1]" if one else "[0, 1)"
-        raise ctx.error(path, f"must be a probability in {what}, got {_show(value)}")
+        raise ctx.error(path, f"must be a probability in {what}, got {toml_text(value)}")
     return v
 
 
-def _one(ctx: _Context, value: Any, path: str) -> Sensor:
+def _one(ctx: KeyContext, value: Any, path: str) -> Sensor:
     if isinstance(value, Sensor):
         value = {k: getattr(value, k) for k in SENSOR_KEYS}
     if not isinstance(value, Mapping):
         raise ctx.error(path, f"must be a table such as {{ detect = 0.8 }}, got "
-                              f"{_type_name(value)} {_show(value)}")
+                              f"{type_name(value)} {toml_text(value)}")
     table = dict(value)
     ctx.keys(table, path, {"detect"}, {"false_alarm", "delay"})
-    detect = _probability(ctx, table["detect"], _join(path, "detect"), one=True)
+    detect = _probability(ctx, table["detect"], key_path(path, "detect"), one=True)
     false_alarm = 0.0
     if "false_alarm" in table:
-        false_alarm = _probability(ctx, table["false_alarm"], _join(path, "false_alarm"),
+        false_alarm = _probability(ctx, table["false_alarm"], key_path(path, "false_alarm"),
                                    one=False)
     delay = 0
     if "delay" in table:
-        delay = ctx.integer(table["delay"], _join(path, "delay"))
+        delay = ctx.integer(table["delay"], key_path(path, "delay"))
         if delay < 0:
-            raise ctx.error(_join(path, "delay"), f"must be an integer >= 0, got {delay}")
+            raise ctx.error(key_path(path, "delay"), f"must be an integer >= 0, got {delay}")
     return Sensor(detect, false_alarm, delay)
 
 
-def read_sensors(table: Any, events: Iterable[str], ctx: _Context,
+def read_sensors(table: Any, events: Iterable[str], ctx: KeyContext,
                  path: str = "sensors") -> Mapping[str, Sensor]:
     """The ``[sensors]`` table of a model file (or :meth:`Model.from_game`'s
     ``sensors``): one :class:`Sensor` per event named, each event one of ``events``.
     Raises :class:`~mitld_lp.files.keys.ModelError` naming the key path
     (``sensors.b1.detect``)."""
     if not isinstance(table, Mapping):
-        raise ctx.error(path, f"must be a table of events, got {_type_name(table)} "
-                              f"{_show(table)}")
+        raise ctx.error(path, f"must be a table of events, got {type_name(table)} "
+                              f"{toml_text(table)}")
     known = sorted(events)
     out: dict[str, Sensor] = {}
     for name, value in table.items():
-        where = _join(path, str(name))
+        where = key_path(path, str(name))
         if name not in known:
             raise ctx.error(where, "not an event of the model (events: "
                                    f"{', '.join(known) or 'none'})")
@@ -102,7 +102,7 @@ def read_sensors(table: Any, events: Iterable[str], ctx: _Context,
 
 
 def sensors_from(value: Mapping[str, Any] | None, events: Iterable[str],
-                 ctx: _Context) -> Mapping[str, Sensor]:
+                 ctx: KeyContext) -> Mapping[str, Sensor]:
     """:func:`read_sensors` of an optional argument (``None``: no sensor)."""
     if value is None:
         return MappingProxyType({})

@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from mitld_lp.files import rules as file_rules
-from mitld_lp.files.keys import _Context
+from mitld_lp.files.keys import KeyContext
 from mitld_lp.model import ModelError, loads_model
 from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.sweep.rows import RESERVED_COLUMNS
@@ -208,7 +208,7 @@ def _lists(table: Mapping[str, Any], prefix: KeyPath) -> Iterator[tuple[KeyPath,
             yield (*prefix, k), v
 
 
-def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: _Context) -> None:
+def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: KeyContext) -> None:
     table = doc
     for i, part in enumerate(path[:-1]):
         nxt = table.setdefault(part, {})
@@ -219,7 +219,7 @@ def _merge(doc: dict[str, Any], path: KeyPath, value: Any, where: str, ctx: _Con
     table[path[-1]] = copy.deepcopy(value)
 
 
-def _setting(table: dict[str, Any], ctx: _Context) -> Settings:
+def _setting(table: dict[str, Any], ctx: KeyContext) -> Settings:
     ctx.keys(table, "solve", set(), set(_SOLVE_KEYS))  # epsilon is the model's
     values: dict[str, Any] = {}
     for k, v in table.items():
@@ -259,7 +259,7 @@ _SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "deco
                          "tol", "certify_tol", "precision"})
 
 
-def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Context) -> list[tuple[KeyPath, list]]:
+def _parameter_lists(doc: dict[str, Any], key: str, ctx: KeyContext) -> list[tuple[KeyPath, list]]:
     table = ctx.table(doc.get(key, {}), key)
     out = []
     for path, values in _lists(table, ()):
@@ -273,7 +273,7 @@ def _parameter_lists(doc: dict[str, Any], key: str, ctx: _Context) -> list[tuple
 
 
 def _check_path(base: Mapping[str, Any], path: KeyPath, first: Any, where: str, model: str,
-                model_path: Path, ctx: _Context) -> None:
+                model_path: Path, ctx: KeyContext) -> None:
     """Every table on ``path`` must exist in the base model; a key the base does not have
     (one with a default, such as ``epsilon``) must be one the model file knows."""
     table: Any = base
@@ -308,7 +308,7 @@ def load_sweep(path: str | os.PathLike[str]) -> Sweep:
     every point (an unknown key, a bad spec) is reported here.  Raises
     :class:`SweepError` (a :class:`ModelError` of the base model names its file)."""
     source = os.fspath(path)
-    ctx = _Context(source, error=SweepError)
+    ctx = KeyContext(source, error=SweepError)
     try:  # regular files, bounded (file_rules)
         text = file_rules.read_bytes(path).decode("utf-8")
     except file_rules.InputFileError as exc:

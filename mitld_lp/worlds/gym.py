@@ -53,14 +53,13 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from mitld_lp import defaults
-from mitld_lp.product import ProductTooLarge, default_max_memory
-from mitld_lp.product.budget import _bytes
+from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import ExplicitGame, GameError
 
 __all__ = [
     "from_transition_table", "from_env", "map_labels", "FROZEN_LAKE_ACTIONS", "GymGame",
-    "GymAgent", "GymTooLarge", "time_limit_of", "BYTES_PER_STATE", "BYTES_PER_BRANCH",
+    "GymTooLarge", "time_limit_of", "BYTES_PER_STATE", "BYTES_PER_BRANCH",
 ]
 
 BYTES_PER_STATE = 600
@@ -312,8 +311,8 @@ def _check_budget(table: Any, extended: bool, horizon: int | None, max_states: i
     if need > max_memory:
         raise GymTooLarge(
             f"the environment's table ({n:,} states, {actions} actions, up to {branches} "
-            f"outcomes) would need about {_bytes(need)} as a game, more than max_memory = "
-            f"{_bytes(max_memory)}; nothing was built: raise max_memory (--max-memory)"
+            f"outcomes) would need about {byte_text(need)} as a game, more than max_memory = "
+            f"{byte_text(max_memory)}; nothing was built: raise max_memory (--max-memory)"
         )
 
 
@@ -440,50 +439,6 @@ def from_env(
     )
 
 
-class GymAgent:
-    """A controller of a :class:`GymGame` acting in the environment itself::
-
-        agent = GymAgent(result.controller, game)
-        obs, _ = env.reset(seed=1)
-        action = agent.reset(obs)
-        while action is not None:
-            obs, reward, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                break
-            action = agent.step(obs, reward, terminated)
-
-    It keeps the step count and the propositions of the last transition, gives the
-    controller the game's state and returns the environment's action (an integer for
-    toy-text environments); ``None`` once the task is decided.  ``agent.controller``
-    tells the run's status.
-    """
-
-    def __init__(self, controller: Any, game: GymGame) -> None:
-        if not isinstance(game, GymGame):
-            raise TypeError(f"GymAgent: game must be a GymGame (from_env), got "
-                            f"{type(game).__name__}")
-        self.controller, self.game, self.t = controller, game, 0
-
-    def _act(self, state: Any) -> Any:
-        from mitld_lp.controllers.observation import Observation
-
-        name = self.controller.act(Observation(state))
-        return None if name is None else self.game.env_actions.get(name, name)
-
-    def reset(self, observation: Any) -> Any:
-        """The first action, in the environment's ``observation`` after ``env.reset``."""
-        self.controller.reset()
-        self.t = 0
-        return self._act(self.game.state_of(observation))
-
-    def step(self, observation: Any, reward: float = 0.0, terminated: bool = False) -> Any:
-        """The next action, after ``env.step`` returned ``observation``, ``reward`` and
-        ``terminated``."""
-        self.t += 1
-        entered = self.game.entered(reward, terminated)
-        return self._act(self.game.state_of(observation, self.t, entered, terminated))
-
-
 def map_labels(
     desc: Iterable[Any], names: Mapping[str, str] | None = None
 ) -> dict[int, frozenset[str]]:
@@ -509,3 +464,14 @@ def _letter(cell: Any) -> str:
     if hasattr(cell, "tobytes"):  # a numpy bytes scalar
         return bytes(cell).decode()
     return str(cell)
+
+
+def __getattr__(name: str) -> Any:
+    """``GymAgent``, which runs a controller and so stands with the runners
+    (:mod:`mitld_lp.running.gym`), under its old name here (loaded on first use:
+    the worlds import no controller)."""
+    if name == "GymAgent":
+        import importlib
+
+        return importlib.import_module("mitld_lp.running.gym").GymAgent
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

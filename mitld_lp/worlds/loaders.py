@@ -66,7 +66,7 @@ from mitld_lp.worlds.game import Game, GameError, world_members
 from mitld_lp.worlds.successors import actions_fault, distribution_fault, place, propositions_fault
 
 if TYPE_CHECKING:
-    from mitld_lp.files.keys import _Context
+    from mitld_lp.files.keys import KeyContext
 
 __all__ = ["gym_world", "python_world", "GuardedWorld", "WorldContractError"]
 
@@ -78,7 +78,7 @@ _TERMINAL = ("absorb", "keep")
 _GYM_BYTES_PER_ENTRY = 200
 
 
-def _before_make(env_id: str, kwargs: dict[str, Any], ctx: _Context) -> None:
+def _before_make(env_id: str, kwargs: dict[str, Any], ctx: KeyContext) -> None:
     """Refuse, before ``gymnasium.make`` builds its own table, a toy-text map whose size
     the keywords already tell (FrozenLake's ``desc`` or ``map_name``) when its states
     pass the world budget or its table the memory budget; any other environment is
@@ -107,7 +107,7 @@ def _before_make(env_id: str, kwargs: dict[str, Any], ctx: _Context) -> None:
                           "before it is built)")
 
 
-def _reward_labels(ctx: _Context, table: dict[str, Any]) -> dict[str, float]:
+def _reward_labels(ctx: KeyContext, table: dict[str, Any]) -> dict[str, float]:
     """``reward_labels``: proposition -> the reward whose transitions enter it."""
     out: dict[str, float] = {}
     for name, value in ctx.table(table.get("reward_labels", {}), "gym.reward_labels").items():
@@ -117,18 +117,18 @@ def _reward_labels(ctx: _Context, table: dict[str, Any]) -> dict[str, float]:
     return out
 
 
-def _names(ctx: _Context, value: Any, path: str) -> list[str]:
+def _names(ctx: KeyContext, value: Any, path: str) -> list[str]:
     return [ctx.string(v, f"{path}[{i}]") for i, v in enumerate(ctx.array(value, path))]
 
 
-def _proposition(ctx: _Context, name: str, path: str) -> str:
+def _proposition(ctx: KeyContext, name: str, path: str) -> str:
     if not is_proposition_name(name):
         raise ctx.error(path, f"{name!r} is not a name a formula can write (letters, digits "
                         "and _, not a reserved word such as F)")
     return name
 
 
-def _labels(ctx: _Context, table: dict[str, Any], env: Any, n_states: int, env_id: str,
+def _labels(ctx: KeyContext, table: dict[str, Any], env: Any, n_states: int, env_id: str,
             ) -> tuple[dict[Any, frozenset[str]], frozenset[str]]:
     """``(state -> propositions, every proposition name)`` of a ``[gym]`` table."""
     from mitld_lp.worlds.gym import map_labels
@@ -156,7 +156,7 @@ def _labels(ctx: _Context, table: dict[str, Any], env: Any, n_states: int, env_i
     return map_labels(desc, letters), frozenset(letters.values())
 
 
-def gym_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+def gym_world(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
     """The game of a ``[gym]`` table (module docstring)."""
     table = ctx.table(doc["gym"], "gym")
     ctx.keys(table, "gym", {"env"},
@@ -218,7 +218,7 @@ def _searched_first(folder: Path) -> Iterator[None]:
             sys.path.remove(str(folder))
 
 
-def python_world(doc: dict[str, Any], ctx: _Context) -> Game[Any]:
+def python_world(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
     """The game a ``[python]`` table's factory returns (module docstring)."""
     table = ctx.table(doc["python"], "python")
     ctx.keys(table, "python", {"world"}, {"kwargs"})

@@ -88,8 +88,7 @@ import numpy as np
 
 from mitld_lp import defaults
 from mitld_lp.logic.syntax import Formula
-from mitld_lp.product import ProductTooLarge, default_max_memory
-from mitld_lp.product.budget import _bytes  # the product's budget messages write sizes so
+from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
@@ -437,9 +436,9 @@ def load_prism(
             tables = run_capped(work, budget)
         except OutOfBudget as exc:
             raise PrismTooLarge(
-                f"{where}: Storm's exploration passed the budget of {_bytes(budget)} "
-                f"({exc.detail}; max_states = {max_states:,} at {_bytes(CAP_BYTES_PER_STATE)} a "
-                f"state, max_memory = {_bytes(memory)}; {bound}): raise max_states "
+                f"{where}: Storm's exploration passed the budget of {byte_text(budget)} "
+                f"({exc.detail}; max_states = {max_states:,} at {byte_text(CAP_BYTES_PER_STATE)} a "
+                f"state, max_memory = {byte_text(memory)}; {bound}): raise max_states "
                 "(--max-world-states) or max_memory (--max-memory)"
             ) from None
     else:

@@ -1,7 +1,8 @@
 """What every Monte-Carlo rollout shares (:mod:`mitld_lp.running.simulate` for a fully
 observed controller, :mod:`mitld_lp.sensing.observe` for one that acts on sensor
 reports): the result record, the Wilson interval, a successor drawn from a world's
-distribution, the checks of the counts."""
+distribution, the checks of the counts.  Below both (NumPy alone), so that neither
+package imports the other to share them."""
 
 from __future__ import annotations
 
