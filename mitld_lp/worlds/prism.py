@@ -324,7 +324,8 @@ class PrismGame:
 # --------------------------------------------------------------------------- loading
 
 
-def _stormpy() -> Any:
+def stormpy_module() -> Any:
+    """stormpy, or a :class:`WorldError` saying how to install it."""
     try:
         import stormpy  # pyright: ignore[reportMissingImports]
     except ImportError as exc:
@@ -378,7 +379,7 @@ def load_prism(
         raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
     depth = ExpressionDepth()
     check_text(p, where, depth)  # before Storm's parser, which can crash on it
-    stormpy = _stormpy()
+    stormpy = stormpy_module()
     program = parse_program(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
