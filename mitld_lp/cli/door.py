@@ -80,13 +80,13 @@ def check_args(args: argparse.Namespace) -> bool:
                 raise UsageError(f"solve: {flag} goes with a PRISM file; a model file "
                                  "holds its own task and constants")
         return False
-    if Path(worlds[0]).suffix.lower() == ".jani":
-        raise ModelError(f"{worlds[0]}: JANI files are not read yet; give the PRISM source")
-    if (args.prop is None) == (args.spec is None):
+    jani = Path(worlds[0]).suffix.lower() == ".jani"
+    if args.prop is not None and args.spec is not None or (
+            args.prop is None and args.spec is None and not jani):
         raise UsageError(f"solve: {worlds[0]}: give a property with --prop (or an MITLD "
                          "task with --spec), one of the two")
-    if args.prop is not None:
-        if len(args.prop) > 2:
+    if args.spec is None:
+        if args.prop is not None and len(args.prop) > 2:
             raise UsageError("--prop takes a property, or a properties file and the name "
                              "or number of one of its properties")
         for flag, given in (("--constraint", args.constraint), ("--then", args.then),
@@ -103,14 +103,16 @@ def _world(args: argparse.Namespace, constants: dict[str, Any], define: dict[str
     """The PRISM world for one task, under the command's world budgets; its faults as
     the model's (exit 2; a budget stop stays one)."""
     from mitld_lp.worlds import WorldError
+    from mitld_lp.worlds.jani import load_jani
     from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states
+    load = load_jani if Path(args.model).suffix.lower() == ".jani" else load_prism
     try:
-        return load_prism(args.model, constants=constants, define=define, task=task,
-                          max_memory=args.max_memory, **kwargs)
+        return load(args.model, constants=constants, define=define, task=task,
+                    max_memory=args.max_memory, **kwargs)
     except PrismTooLarge:
         raise
     except WorldError as exc:  # the loader's keyword is --const here
@@ -142,11 +144,26 @@ def world_model(args: argparse.Namespace) -> Any:
 
 def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[list[Any],
                                                                               Any]:
-    """``(name, property)`` of each property posed, and the PRISM file as Storm read it."""
+    """``(name, property)`` of each property posed, and the PRISM or JANI file as Storm
+    read it (a JANI file's own properties: every one without ``--prop``, or the one
+    ``--prop NAME`` or ``--prop NUMBER`` names)."""
     from mitld_lp.files import rules
     from mitld_lp.worlds import WorldError
-    from mitld_lp.worlds.properties import pick, read_program, read_properties
+    from mitld_lp.worlds.properties import instantiate, pick, read_program, read_properties
 
+    try:
+        program = read_program(args.model)
+        own = list(program.properties)
+        if own and (args.prop is None or len(args.prop) == 1 and (
+                args.prop[0].isdigit() or any(p.get_name() == args.prop[0] for p in own))):
+            which = None if args.prop is None else args.prop[0]
+            props = instantiate(program.program, own, args.model, constants)
+            return pick(props, which, args.model), program
+    except WorldError as exc:
+        raise ModelError(str(exc)) from exc
+    if args.prop is None:
+        raise UsageError(f"solve: {args.model}: the file has no property: give one with "
+                         "--prop (or an MITLD task with --spec)")
     given, *which = args.prop
     path = Path(given)
     if path.suffix.lower() in PROPERTY_SUFFIXES or path.is_file():
@@ -162,7 +179,6 @@ def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[li
     else:
         text, where = given, "--prop"
     try:
-        program = read_program(args.model)
         props = read_properties(program.program, text, where, constants)
         return pick(props, which[0] if which else None, where), program
     except WorldError as exc:
@@ -189,7 +205,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     for name, prop in props:
         started = time.perf_counter()
         try:
-            query = pose_property(name, prop, program.labels)
+            query = pose_property(name, prop, program.labels, program.reserved)
             game = _world(args, ours, query.define, parse(query.spec))
             model = Model.from_game(game, query.spec, name=Path(args.model).stem,
                                     objective=query.objective)

@@ -100,7 +100,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    if world and args.prop is not None:
+    if world and args.spec is None:  # --prop, or a JANI file's own properties
         return door.solve_properties(args, policy_file)
     model = door.world_model(args) if world else read_model(args)
     posed = pose(model, args.constraint, then=args.then,

@@ -43,7 +43,7 @@ from mitld_lp.util.decimals import Written
 from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
-           "pose_property", "read_properties", "verdict", "pick"]
+           "pose_property", "read_properties", "instantiate", "verdict", "pick"]
 
 
 class PropertyError(WorldError):
@@ -111,20 +111,32 @@ def parse_constants(text: str, where: str = "--const") -> dict[str, bool | int |
 
 @dataclass(frozen=True)
 class Program:
-    """A PRISM file as Storm parsed it, for its properties: the program, its labels
-    (``name -> expression``) and the constants it declares."""
+    """A PRISM or JANI file as Storm parsed it, for its properties: the program (or JANI
+    model), its labels (``name -> expression``; a JANI model's transient Boolean
+    variables, ``name -> name``), the constants it declares, the properties a JANI file
+    carries, and the names a new proposition must not take (a JANI model's variables)."""
 
     program: Any
     labels: dict[str, str]
     constants: frozenset[str]
+    properties: tuple[Any, ...] = ()
+    reserved: frozenset[str] = frozenset()
 
 
 def read_program(path: str) -> Program:
     """The PRISM file at ``path`` parsed by Storm (after the depth check that keeps
-    Storm's parser from crashing: :mod:`mitld_lp.worlds.prism_depth`)."""
+    Storm's parser from crashing: :mod:`mitld_lp.worlds.prism_depth`), or the JANI file
+    (``.jani``) with its properties."""
     from pathlib import Path
 
     from mitld_lp.worlds.prism import stormpy_module
+
+    if Path(path).suffix.lower() == ".jani":
+        from mitld_lp.worlds.jani import read_jani
+
+        jani = read_jani(path)
+        return Program(jani.model, jani.labels, jani.constants, tuple(jani.properties),
+                       jani.variables)
     from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
     from mitld_lp.worlds.prism_program import parse_program
 
@@ -162,7 +174,7 @@ def read_properties(program: Any, text: str, where: str,
                     constants: Mapping[str, Any] | None = None) -> list[Any]:
     """Storm's properties of ``text`` (one property, or a properties file's text, with
     its ``const`` lines and ``"name":`` prefixes) for ``program``, the ``constants``
-    the properties leave open put in (``program`` a Storm PRISM program)."""
+    the properties leave open put in (``program`` a Storm PRISM program or JANI model)."""
     from mitld_lp.worlds.prism import stormpy_module
     from mitld_lp.worlds.prism_program import storm_quiet
 
@@ -176,6 +188,18 @@ def read_properties(program: Any, text: str, where: str,
         raise _parse_error(str(exc), text, where) from None
     if not props:
         raise PropertyError(f"{where}: no property in it")
+    return instantiate(program, props, where, constants)
+
+
+def instantiate(program: Any, props: list[Any], where: str,
+                constants: Mapping[str, Any] | None = None) -> list[Any]:
+    """Storm's ``props`` with the ``constants`` they leave open put in (every open one
+    needs a value)."""
+    from mitld_lp.worlds.prism import stormpy_module
+    from mitld_lp.worlds.prism_program import storm_quiet
+
+    stormpy = stormpy_module()
+    errors = (RuntimeError, stormpy.exceptions.StormError)
     open_names = sorted({v.name for p in props for v in p.get_undefined_constants()})
     given = {k: v for k, v in (constants or {}).items() if k in open_names}
     missing = [name for name in open_names if name not in given]
@@ -220,8 +244,9 @@ def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
 class _Poser:
     """The state formulas of one property made propositions (see the module)."""
 
-    def __init__(self, name: str, text: str, labels: Mapping[str, str]) -> None:
-        self.name, self.text, self.labels = name, text, labels
+    def __init__(self, name: str, text: str, labels: Mapping[str, str],
+                 reserved: frozenset[str] = frozenset()) -> None:
+        self.name, self.text, self.labels, self.reserved = name, text, labels, reserved
         self.define: dict[str, str] = {}
 
     def refuse(self, form: str, why: str) -> PropertyError:
@@ -255,7 +280,7 @@ class _Poser:
         if shown in ("true", "false"):
             return shown
         expression = _LABEL.sub(lambda m: f"({self.labels[m[1]]})", shown)
-        taken = set(self.labels) | set(self.define)
+        taken = set(self.labels) | set(self.define) | self.reserved
         k = len(self.define) + 1
         while f"phi{k}" in taken or not is_proposition_name(f"phi{k}"):
             k += 1
@@ -266,8 +291,9 @@ class _Poser:
         """The steps ``[a, b]`` of a bounded until, from Storm's printing of it
         (``left U<=5 right``; stormpy gives neither the kind of bound nor its lower end)."""
         rest = str(formula)[len(str(left)):].lstrip()
-        found = re.match(r"U(?:rew\{[^}]*\})?(?:\[[^\]]*\]|\S*)", rest)
+        found = re.match(r"U(?:steps|rew\{[^}]*\})?(?:\[[^\]]*\]|\S*)", rest)
         op = found[0] if found else rest.split(" ")[0]
+        op = re.sub(r"^Usteps", "U", op)  # a JANI file's step bound (``Usteps<=3``)
         numbers = r"([^,\]]+)"
         m = (re.fullmatch(r"U\s*(<=?)\s*(\S+)", op) or
              re.fullmatch(rf"U\s*\[\s*{numbers}\s*,\s*{numbers}\s*\]", op))
@@ -325,9 +351,11 @@ class _Poser:
                           "only one of F, G, X, U over state formulas is taken (PCTL)")
 
 
-def pose_property(name: str, prop: Any, labels: Mapping[str, str]) -> Query:
+def pose_property(name: str, prop: Any, labels: Mapping[str, str],
+                  reserved: frozenset[str] = frozenset()) -> Query:
     """The task of Storm's property ``prop`` (``labels``: the file's ``name ->
-    expression``), or :class:`PropertyError` naming the form refused and why."""
+    expression``; ``reserved``: names a new proposition must not take), or
+    :class:`PropertyError` naming the form refused and why."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     formula = prop.get_raw_formula()
@@ -362,7 +390,7 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str]) -> Query:
         raise _refuse(name, text, "P=? without min or max",
                       "on an MDP the probability depends on the scheduler: write Pmax=? "
                       "or Pmin=?")
-    poser = _Poser(name, text, labels)
+    poser = _Poser(name, text, labels, reserved)
     spec = poser.path(formula.subformula)
     return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
                  comparison=comparison, threshold=threshold)
