@@ -76,7 +76,9 @@ class Query:
 
 
 _COMPARISONS = {"GEQ": ">=", "GREATER": ">", "LEQ": "<=", "LESS": "<"}
-_INIT_FILTER = "Obtain the values of the '\"init\"'-states"
+# the values, or their maximum or minimum (QVBS's JANI files), over the initial states:
+# one initial state (a world has exactly one), so its value
+_INIT_FILTER = re.compile(r"Obtain the (values|maximum|minimum) of the '\"init\"'-states")
 _LABEL = re.compile(r'"([^"]*)"')
 _NESTED = re.compile(r"(?<![\w.])(P|R|S|T|LRA)\s*(\{[^}]*\})?\s*(min|max)?\s*(=\s*\?|[<>]=?)")
 _TEMPORAL = re.compile(r"(?<![\w.])[XFGUWR](?![\w])")
@@ -360,7 +362,7 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
 
     formula = prop.get_raw_formula()
     text = str(formula)
-    if _INIT_FILTER not in str(prop):
+    if not _INIT_FILTER.search(str(prop)):
         raise _refuse(name, text, "a filter", "only the value at the initial state is "
                       "answered")
     kinds = ((logic.RewardOperatorFormula, "an expected reward (R)",
