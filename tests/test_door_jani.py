@@ -78,10 +78,11 @@ def test_the_files_own_properties_all_by_name_by_number(capsys) -> None:
 
 def test_a_maximum_over_the_initial_states_is_the_initial_value(capsys) -> None:
     # QVBS's JANI properties are filter(max, ..., initial); a world has one initial state
-    prop = 'filter(max, Pmin=? [F<=4 "goal"], "init")'
-    code, [answer] = ours(capsys, "--prop", prop, "--const", "N=3", "--exact")
-    assert code == 0 and Fraction(answer["exact"]) == storm_exact('Pmin=? [F<=4 "goal"]',
-                                                                  {"N": 3})
+    for fun in ("max", "min"):
+        prop = f'filter({fun}, Pmin=? [F<=4 "goal"], "init")'
+        code, [answer] = ours(capsys, "--prop", prop, "--const", "N=3", "--exact")
+        assert code == 0 and Fraction(answer["exact"]) == storm_exact(
+            'Pmin=? [F<=4 "goal"]', {"N": 3})
 
 
 def test_missing_constant_says_const(capsys) -> None:

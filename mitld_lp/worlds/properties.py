@@ -77,8 +77,8 @@ class Query:
 
 _COMPARISONS = {"GEQ": ">=", "GREATER": ">", "LEQ": "<=", "LESS": "<"}
 # the values, or their maximum or minimum (QVBS's JANI files), over the initial states:
-# one initial state (a world has exactly one), so its value
-_INIT_FILTER = re.compile(r"Obtain the (values|maximum|minimum) of the '\"init\"'-states")
+# one initial state (a world has exactly one), so its value (Storm spells it "minumum")
+_INIT_FILTER = re.compile(r"Obtain the (values|maximum|minimum|minumum) of the '\"init\"'-states")
 _LABEL = re.compile(r'"([^"]*)"')
 _NESTED = re.compile(r"(?<![\w.])(P|R|S|T|LRA)\s*(\{[^}]*\})?\s*(min|max)?\s*(=\s*\?|[<>]=?)")
 _TEMPORAL = re.compile(r"(?<![\w.])[XFGUWR](?![\w])")
