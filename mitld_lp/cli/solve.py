@@ -8,7 +8,7 @@ import argparse
 from typing import Any
 
 from mitld_lp import defaults
-from mitld_lp.cli import constrained, runs
+from mitld_lp.cli import constrained, door, runs
 from mitld_lp.cli.arguments import solver_name
 from mitld_lp.cli.kernel import (
     EXIT_OK,
@@ -83,6 +83,7 @@ def args_solve(p: argparse.ArgumentParser) -> None:
                    help="write the policy table (.csv or .json): one row per state")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     constrained.args_constraints(p)
+    door.args_door(p)
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
@@ -93,14 +94,17 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "
                          "use --backend cvxpy (or auto) for other solvers")
-    if len(args.model) > 1 or runs.is_pattern(args.model[0]):
+    world = door.check_args(args)  # a PRISM file with --prop or --spec
+    if not world and (len(args.model) > 1 or runs.is_pattern(args.model[0])):
         return runs.solve_batch(args)
     args.model = args.model[0]
     policy_file = None if args.policy is None else _output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
-    model = read_model(args)
+    if world and args.spec is None:  # --prop, or a JANI file's own properties
+        return door.solve_properties(args, policy_file)
+    model = door.world_model(args) if world else read_model(args)
     posed = pose(model, args.constraint, then=args.then,
-                 settings=solve_settings(args))
+                 settings=solve_settings(args), objective=args.objective)
     if posed.route == CONSTRAINED:
         return constrained.solve(args, posed, policy_file)
     r = solve(posed)

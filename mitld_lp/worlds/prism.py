@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -125,7 +125,7 @@ from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
     "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
-    "BYTES_PER_STATE", "CAP_BYTES_PER_STATE",
+    "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "build_within", "check_budgets",
 ]
 
 log = logging.getLogger(__name__)
@@ -197,7 +197,7 @@ class PrismGame:
     decided: int = 0
     normalised: Normalisation | None = None
     _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
-    recipe: PrismRecipe | None = field(default=None, repr=False)  # to build it again
+    recipe: Any = field(default=None, repr=False)  # to build it again: a PrismRecipe, a JaniRecipe
 
     @property
     def event_names(self) -> frozenset[str]:
@@ -323,7 +323,8 @@ class PrismGame:
 # --------------------------------------------------------------------------- loading
 
 
-def _stormpy() -> Any:
+def stormpy_module() -> Any:
+    """stormpy, or a :class:`WorldError` saying how to install it."""
     try:
         import stormpy  # pyright: ignore[reportMissingImports]
     except ImportError as exc:
@@ -366,18 +367,14 @@ def load_prism(
 
     Raises :class:`mitld_lp.worlds.WorldError` (:class:`PrismTooLarge` for a budget).
     """
-    for name, value in (("max_states", max_states), ("max_memory", max_memory)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                                  or value < 1):
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    memory = default_max_memory() if max_memory is None else max_memory
+    memory = check_budgets(max_states, max_memory)
     where = os.fspath(path)
     p = Path(path)
     if p.suffix.lower() == ".jani":
-        raise WorldError(f"{where}: JANI files are not supported; give the PRISM source")
+        raise WorldError(f"{where}: JANI files are not supported here: load_jani reads them")
     depth = ExpressionDepth()
     check_text(p, where, depth)  # before Storm's parser, which can crash on it
-    stormpy = _stormpy()
+    stormpy = stormpy_module()
     program = parse_program(stormpy, where, where)
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind != "MDP":
@@ -428,22 +425,8 @@ def load_prism(
         return _build(stormpy, program, plain, where, chosen, event_set, action_names,
                       terminal, max_states)
 
-    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
-    if bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory:
-        tables = work()  # every valuation fits: no cap needed
-    elif can_cap():
-        try:
-            tables = run_capped(work, budget)
-        except OutOfBudget as exc:
-            raise PrismTooLarge(
-                f"{where}: Storm's exploration passed the budget of {byte_text(budget)} "
-                f"({exc.detail}; max_states = {max_states:,} at {byte_text(CAP_BYTES_PER_STATE)} a "
-                f"state, max_memory = {byte_text(memory)}; {bound}): raise max_states "
-                "(--max-world-states) or max_memory (--max-memory)"
-            ) from None
-    else:
-        log.info("%s: %s; no memory cap on this platform", where, bound)
-        tables = work()
+    fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
+    tables = build_within(work, where, fits, str(bound), max_states, memory)
     log.info(
         "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
         where, len(tables.states), bound, tables.decided, terminal or "never",
@@ -462,6 +445,39 @@ def load_prism(
         _tables=tables,
         recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
     )
+
+
+def check_budgets(max_states: int, max_memory: int | None) -> int:
+    """The memory budget in bytes (``max_memory``, or the default); ``ValueError`` for a
+    budget that is not a positive integer."""
+    for name, value in (("max_states", max_states), ("max_memory", max_memory)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 1):
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return default_max_memory() if max_memory is None else max_memory
+
+
+def build_within(work: Callable[[], Tables], where: str, fits: bool, note: str,
+                 max_states: int, memory: int) -> Tables:
+    """``work()`` (Storm's build of a world, copied into tables) here when ``fits`` (every
+    valuation fits the budgets), else in a child process capped at the memory budget
+    (:mod:`mitld_lp.worlds.prism_bounded`): :class:`PrismTooLarge` when it passes it.
+    ``note`` says what bounds the states, for the message."""
+    if fits:
+        return work()  # every valuation fits: no cap needed
+    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
+    if not can_cap():
+        log.info("%s: %s; no memory cap on this platform", where, note)
+        return work()
+    try:
+        return run_capped(work, budget)
+    except OutOfBudget as exc:
+        raise PrismTooLarge(
+            f"{where}: Storm's exploration passed the budget of {byte_text(budget)} "
+            f"({exc.detail}; max_states = {max_states:,} at {byte_text(CAP_BYTES_PER_STATE)} a "
+            f"state, max_memory = {byte_text(memory)}; {note}): raise max_states "
+            "(--max-world-states) or max_memory (--max-memory)"
+        ) from None
 
 
 def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],

@@ -42,7 +42,7 @@ from mitld_lp.worlds.prism_program import (
 )
 from mitld_lp.worlds.prism_tables import Tables
 
-__all__ = ["PrismRecipe", "exact_probabilities"]
+__all__ = ["PrismRecipe", "exact_probabilities", "exact_build", "exact_constants"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +59,19 @@ class PrismRecipe:
     terminal: str = ""
 
 
+def exact_constants(stormpy: Any, constants: Mapping[str, Any]) -> dict[str, Any]:
+    """``constants`` for Storm's exact build: a float as the number it stands for
+    (:func:`mitld_lp.util.decimals.exact_value`: its text when read from a file), a
+    Storm rational."""
+    given: dict[str, Any] = {}
+    for name, value in constants.items():
+        if isinstance(value, float):  # the number as written, not its binary rounding
+            exact = exact_value(value)
+            value = stormpy.Rational(f"{exact.numerator}/{exact.denominator}")
+        given[name] = value
+    return given
+
+
 def _program(stormpy: Any, recipe: PrismRecipe) -> Any:
     """The program as the world's build prepared it, its constants exact."""
     where = recipe.where
@@ -66,34 +79,35 @@ def _program(stormpy: Any, recipe: PrismRecipe) -> Any:
     extra = extra_labels(program, dict(recipe.define), where)
     if extra:
         program = with_labels(stormpy, Path(recipe.path), extra, where)
-    given: dict[str, Any] = {}
-    for name, value in recipe.constants.items():
-        if isinstance(value, float):  # the number as written, not its binary rounding
-            exact = exact_value(value)
-            value = stormpy.Rational(f"{exact.numerator}/{exact.denominator}")
-        given[name] = value
-    program = with_constants(stormpy, program, given, where)
+    program = with_constants(stormpy, program, exact_constants(stormpy, recipe.constants),
+                             where)
     program, _ = name_unlabelled_commands(program, where, stormpy)
     return program
 
 
-def exact_probabilities(recipe: PrismRecipe, tables: Tables) -> tuple[Fraction, ...]:
-    """The rational probability of each branch of ``tables`` (the world's floating-point
-    build), in its order, from Storm's exact build of ``recipe`` (module docs).  Raises
-    :class:`mitld_lp.worlds.WorldError` when Storm refuses the exact build or when the
-    two builds differ."""
+def exact_build(recipe: PrismRecipe) -> Any:
+    """Storm's exact build of ``recipe`` (the world's program, the same builder options)."""
     import stormpy  # the world was built by it: installed
 
-    where = recipe.where
     program = _program(stormpy, recipe)
     options = builder_options(stormpy, program, recipe.terminal, checks=True,
                               origins=needs_origins(program))
     try:
         with storm_quiet():
-            model = stormpy.build_model[stormpy.Rational](program, options=options)
+            return stormpy.build_model[stormpy.Rational](program, options=options)
     except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise WorldError(f"{str(storm_error(exc, where))} (in Storm's exact build: the "
-                         "exact answer takes the probabilities as written)") from None
+        raise WorldError(f"{str(storm_error(exc, recipe.where))} (in Storm's exact build: "
+                         "the exact answer takes the probabilities as written)") from None
+
+
+def exact_probabilities(recipe: Any, tables: Tables) -> tuple[Fraction, ...]:
+    """The rational probability of each branch of ``tables`` (the world's floating-point
+    build), in its order, from Storm's exact build of ``recipe`` (module docs; a recipe
+    with a ``build_exact()`` of its own, a JANI world's, builds it so).  Raises
+    :class:`mitld_lp.worlds.WorldError` when Storm refuses the exact build or when the
+    two builds differ."""
+    where = recipe.where
+    model = recipe.build_exact() if hasattr(recipe, "build_exact") else exact_build(recipe)
     n, m = len(tables.states), int(tables.choices[-1])
     if (model.nr_states, model.nr_choices) != (n, m) or int(model.initial_states[0]) != \
             tables.initial:

@@ -213,12 +213,15 @@ def _narrow(values: np.ndarray) -> np.ndarray:
     return values
 
 
-def _valuations(model: Any) -> tuple[tuple[str, ...], Valuations]:
-    """The variables (in Storm's order) and each state's values, one call per variable."""
+def _valuations(model: Any, hidden: frozenset[str] = frozenset()) -> tuple[tuple[str, ...],
+                                                                          Valuations]:
+    """The variables (in Storm's order, but ``hidden``) and each state's values, one call
+    per variable."""
     n = model.nr_states
     valuations = model.state_valuations
     order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
-    order = tuple(name for name in order if name != OUT_OF_BOUNDS_BIT)  # (see _build)
+    order = tuple(name for name in order  # Storm's own bit (see _build), and ``hidden``
+                  if name != OUT_OF_BOUNDS_BIT and name not in hidden)
     by_name = {v.name: v for v in valuations.get_all_variables()}
     values = np.zeros((n, len(order)), dtype=np.int64)
     booleans = []
@@ -263,6 +266,9 @@ def read_model(
     action_names: Mapping[str, str],
     origin: Callable[[int], str],
     decided: str | None = None,
+    *,
+    silent: str | None = None,
+    hidden: frozenset[str] = frozenset(),
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -271,7 +277,11 @@ def read_model(
     deadlock self-loop.  ``origin(choice)`` names the commands a choice comes from, used
     only where two choices of a state would have the same name.  ``decided``: Storm's
     label of the states it did not expand (terminal states); their self-loop is named
-    :data:`DECIDED_ACTION`.  Raises :class:`WorldError` for an update that reached
+    :data:`DECIDED_ACTION`.  ``silent``: the name of a choice without a label at a state
+    Storm did not label ``"deadlock"`` (a JANI edge without an action; None: every choice
+    without a label is the deadlock self-loop, as in a PRISM build where every command
+    has an action).  ``hidden``: variables of Storm's valuations that are not the state's
+    (JANI's transient variables).  Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
     or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
@@ -280,7 +290,7 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
-    variables, states = _valuations(model)
+    variables, states = _valuations(model, hidden)
     choices, branches, targets, probabilities = _structure(model, where)
     n, m = len(states), len(branches) - 1
 
@@ -295,6 +305,12 @@ def read_model(
     # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
+    if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
+        stuck = np.zeros(n, dtype=bool)
+        if "deadlock" in model.labeling.get_labels():
+            stuck[_indices(model.labeling.get_states("deadlock"))] = True
+        table.append(silent)
+        code[(label_of < 0) & ~stuck[state_of]] = len(table) - 1
 
     n_decided = 0
     if decided is not None:
