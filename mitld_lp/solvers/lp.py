@@ -67,7 +67,8 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.crossover import crossover, polish
 from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
-from mitld_lp.solvers.lp_backends import Matrices, Raw, Settings, solve_one, unusable_reason
+from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one, unusable_reason
+from mitld_lp.solvers.options import Deadline, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices, keeping_zero
 from mitld_lp.solvers.result import LPResult, Status, read_only
@@ -229,7 +230,7 @@ class _Answer:
     n_solver_calls: int
 
 
-def _sensed(matrices: Matrices, sense: Sense, settings: Settings, *,
+def _sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
             retry: bool = True) -> Raw:
     """:func:`~mitld_lp.solvers.lp_backends.solve_one` of an LP in ``sense``: a minimum as
     the maximum of the negated objective, its duals negated back."""
@@ -241,7 +242,7 @@ def _sensed(matrices: Matrices, sense: Sense, settings: Settings, *,
                                          raw.iterations)
 
 
-def _solve_monolithic(lp: OccupancyLP, settings: Settings) -> _Answer | Raw:
+def _solve_monolithic(lp: OccupancyLP, settings: SolveOptions) -> _Answer | Raw:
     q = lp.quotient
     raw = _sensed(Matrices(lp.a_eq, lp.b_eq, lp.objective), q.sense, settings)
     if raw.y is None or raw.v is None:
@@ -333,9 +334,9 @@ _TIGHTEN_ROUND = 25
 _TIGHTEN_MAX = 500
 
 
-def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
+def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
-                      precision: float | None, progress: bool | None = None
+                      progress: bool | None = None
                       ) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
@@ -408,7 +409,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         y[columns] = np.maximum(raw.y, 0.0)
         polished = polish(block, lp, y, raw.v, columns, settings.tol,
                           None if tight is None else tight[0 if q.sense is Sense.MAX else 1],
-                          sense=q.sense, precision=precision)
+                          sense=q.sense, precision=settings.precision)
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
@@ -498,8 +499,8 @@ def solve_lp(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
         mdp.n_states, q.n_states, q.mecs.n_mecs, q.n_choices,
     )
-    settings = Settings(solver, backend, tol, dict(solver_options or {}),
-                         start + time_limit if time_limit is not None else np.inf)
+    settings = SolveOptions(solver, backend, tol, precision, Deadline.after(time_limit, start),
+                            dict(solver_options or {}))
 
     def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)
@@ -523,8 +524,7 @@ def solve_lp(
             greedy_choices(q, np.full(q.n_states, 1.0 if q.sense is Sense.MAX else 0.0)),
             0.0, 0.0, 0)
     elif decompose:
-        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds),
-                                   precision, progress)
+        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -548,7 +548,7 @@ def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
     return lo[rep], hi[rep]
 
 
-def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: Settings, start: float,
+def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: SolveOptions, start: float,
             shape: tuple[int, int]) -> LPResult:
     """The answer of a route mapped back to ``mdp`` (values, policies, occupancy)."""
     values = q.lift(answer.v)
