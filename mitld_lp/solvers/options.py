@@ -5,13 +5,14 @@ business of the module that calls it (:mod:`mitld_lp.solvers.lp_backends`)."""
 
 from __future__ import annotations
 
+import enum
 import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Deadline", "SolveOptions"]
+__all__ = ["Deadline", "Layout", "SolveOptions"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +44,17 @@ class Deadline:
     def passed(self) -> bool:
         """Whether the deadline has been reached."""
         return time.perf_counter() >= self.at
+
+
+class Layout(enum.StrEnum):
+    """How the occupancy LP of :func:`mitld_lp.solvers.solve_lp` is laid out for the
+    solver."""
+
+    BLOCKS = "blocks"
+    """Block by block, the strongly connected components in topological order, each
+    block's answer polished exactly (:mod:`mitld_lp.solvers.lp`)."""
+    WHOLE = "whole"
+    """One monolithic LP (the one :func:`mitld_lp.solvers.write_lp` exports)."""
 
 
 @dataclass(frozen=True, slots=True)
