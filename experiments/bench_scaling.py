@@ -30,8 +30,9 @@ solved faster).  The routes:
 * ``default``: ``synthesize`` end to end with its defaults, on
   ``Model.from_game(world, spec)`` (or ``synthesize(world, spec)`` before that API); the
   process's wall time including imports is ``default_proc_s``;
-* ``topo_lp`` / ``mono_lp``: ``solve_lp(mdp, target, decompose=True / False)`` with
-  Clarabel through cvxpy; without the ``decompose`` parameter ``topo_lp`` is
+* ``topo_lp`` / ``mono_lp``: ``solve_lp(mdp, target, layout="blocks" / "whole")`` (in
+  older versions ``decompose=True / False``) with
+  Clarabel through cvxpy; without either parameter ``topo_lp`` is
   ``unavailable`` and ``mono_lp`` is plain ``solve_lp`` (monolithic then);
 * ``highs_lp``: the monolithic LP with HiGHS through cvxpy;
 * ``ii``: ``interval_iteration`` (tolerance 1e-9 on the initial state's gap);
@@ -213,10 +214,14 @@ def _load_mdp(work: Path) -> Any:
 
 
 def _decompose_kw(fn: Any, value: bool) -> dict[str, Any] | None:
-    """``{"decompose": value}`` if ``fn`` takes it, else None."""
+    """``{"layout": "blocks" / "whole"}`` if ``fn`` takes it, else ``{"decompose": value}``
+    (older versions) if it takes that, else None."""
     import inspect
 
-    return {"decompose": value} if "decompose" in inspect.signature(fn).parameters else None
+    parameters = inspect.signature(fn).parameters
+    if "layout" in parameters:
+        return {"layout": "blocks" if value else "whole"}
+    return {"decompose": value} if "decompose" in parameters else None
 
 
 def _storm_env() -> Any:
@@ -290,7 +295,7 @@ def _work_lp(work: Path, arm: Any, solver: str, decompose: bool) -> dict[str, An
 
     kw = _decompose_kw(solve_lp, decompose)
     if kw is None and decompose:
-        return dict(status="unavailable", note="solve_lp has no 'decompose' parameter")
+        return dict(status="unavailable", note="solve_lp has no 'layout' parameter")
     mdp = _load_mdp(work)
     arm()
     t = time.perf_counter()

@@ -70,8 +70,8 @@ def run_model(name: str, mdp: MDP, mono_max: int) -> list[object]:
     calls: dict[str, Callable[[], Any]] = {
         "topo": lambda: solve_lp(mdp, t, quotient=q, backend="direct"),
         "topo-cvx": lambda: solve_lp(mdp, t, quotient=q),
-        "mono": lambda: solve_lp(mdp, t, quotient=q, backend="direct", decompose=False),
-        "highs": lambda: solve_lp(mdp, t, quotient=q, solver="HIGHS", decompose=False),
+        "mono": lambda: solve_lp(mdp, t, quotient=q, backend="direct", layout="whole"),
+        "highs": lambda: solve_lp(mdp, t, quotient=q, solver="HIGHS", layout="whole"),
         "ii": lambda: interval_iteration(mdp, t, quotient=q, progress=False),
         "ii-flat": lambda: interval_iteration(mdp, t, quotient=q, progress=False,
                                               topological=False),

@@ -163,9 +163,9 @@ def test_geometric_one_in_a_million_event_converges() -> None:
     mdp = result.mdp
     r = interval_iteration(mdp, mdp.target, max_iterations=100_000, progress=False)
     assert r.status == Status.OPTIMAL, r.message
-    from mitld_lp.solvers import solve_lp
+    from mitld_lp.solvers import Layout, solve_lp
 
-    highs = solve_lp(mdp, mdp.target, solver="HIGHS", decompose=False)
+    highs = solve_lp(mdp, mdp.target, solver="HIGHS", layout=Layout.WHOLE)
     assert r.value_lower - 1e-8 <= highs.value <= r.value_upper + 1e-8
     # The default LP route: its block (the waiting layer, left once in a million steps)
     # comes back from Clarabel off by 0.15 and is made exact by policy iteration.

@@ -20,6 +20,7 @@ from conftest import HAND, HAND_VALUES, build_mdp, reference_values
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.solvers import (
+    Layout,
     LPResult,
     Status,
     evaluate_policy,
@@ -290,7 +291,7 @@ def test_topological_lp_matches_monolithic_and_value_lp(seed: int) -> None:
     maybe = ~target & ~prob0_max(mdp, target)
     mdp = replace(mdp, initial=int(np.argmin(np.where(maybe, np.abs(ref - 0.5), np.inf))))
     blocks = solve_lp(mdp, target, backend="direct")
-    whole = solve_lp(mdp, target, backend="direct", decompose=False)
+    whole = solve_lp(mdp, target, backend="direct", layout=Layout.WHOLE)
     assert blocks.status == whole.status == Status.OPTIMAL, blocks.message
     assert blocks.values is not None and blocks.policy is not None
     # Every block is solved with b = 1: the values are exact everywhere, not only
@@ -351,8 +352,8 @@ def test_acyclic_model_needs_no_solver() -> None:
 
 def test_time_limit_is_a_status() -> None:
     mdp = random_mdp(200, seed=4, locality=None)
-    for decompose in (True, False):
-        r = solve_lp(mdp, mdp.target, time_limit=0.0, decompose=decompose)
+    for layout in Layout:
+        r = solve_lp(mdp, mdp.target, time_limit=0.0, layout=layout)
         assert r.status == Status.TIME_LIMIT and r.values is None
 
 
@@ -376,10 +377,10 @@ def test_inaccurate_clarabel_solve_is_retried() -> None:
 
     model = _inaccurate_case()
     mdp = synthesize(model, method="vi").mdp
-    highs = solve_lp(mdp, mdp.target, solver="HIGHS", decompose=False)
+    highs = solve_lp(mdp, mdp.target, solver="HIGHS", layout=Layout.WHOLE)
     assert highs.status == Status.OPTIMAL and highs.value == pytest.approx(1.0, abs=1e-9)
     for backend in ("cvxpy", "direct"):
-        r = solve_lp(mdp, mdp.target, backend=backend, decompose=False)  # type: ignore[arg-type]
+        r = solve_lp(mdp, mdp.target, backend=backend, layout=Layout.WHOLE)  # type: ignore[arg-type]
         assert r.status == Status.OPTIMAL, r.message
         assert "retried" in r.message
         assert r.value == pytest.approx(1.0, abs=1e-8)

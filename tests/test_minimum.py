@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from mitld_lp import load_model, synthesize
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.solvers import Status, evaluate_policy, interval_iteration, solve_lp
+from mitld_lp.solvers import Layout, Status, evaluate_policy, interval_iteration, solve_lp
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.quotient import prob0_min, prob1_max, prob1_min
@@ -229,13 +229,13 @@ def test_minimum_against_every_policy(seed: int, rare: float) -> None:
         assert _within(float(best[s]), pmax[s], 1e-12), s
 
 
-@pytest.mark.parametrize("decompose", [True, False])
-def test_minimum_lp_routes_agree_on_random_models(decompose: bool) -> None:
+@pytest.mark.parametrize("layout", list(Layout))
+def test_minimum_lp_routes_agree_on_random_models(layout: Layout) -> None:
     """The block LPs and the one monolithic LP give the brute-force minimum."""
     for seed in range(4):
         mdp = small_mdp(seed + 40)
         pmin, _ = brute_force(mdp, mdp.target)
-        lp = solve_lp(mdp, mdp.target, sense=Sense.MIN, decompose=decompose,
+        lp = solve_lp(mdp, mdp.target, sense=Sense.MIN, layout=layout,
                       everywhere=True)
         assert lp.status is Status.OPTIMAL
         worth = evaluate_policy(mdp, mdp.target, lp.policy)

@@ -13,7 +13,8 @@ from test_analysis import _dense_values
 from mitld_lp.solvers.crossover import better_of, crossover_start, polish
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import _block_lp, _may_be_optimal, _tightened, solve_lp
-from mitld_lp.solvers.lp_backends import Settings, solve_one
+from mitld_lp.solvers.lp_backends import solve_one
+from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block, Factors, evaluate_chain, improve_policy
 from mitld_lp.testing import random_mdp
@@ -101,7 +102,7 @@ def _block_answer(seed: int):
     from the LP (policy iteration in extended precision from the first choices)."""
     block, _, v = _whole_block(seed)
     lp = _block_lp(block, np.zeros(block.states.size))
-    raw = solve_one(lp, Settings("CLARABEL", "direct", 1e-9, {}, np.inf), retry=False)
+    raw = solve_one(lp, SolveOptions("CLARABEL", "direct", 1e-9), retry=False)
     assert raw.y is not None and raw.v is not None
     _, exact, _ = improve_policy(block, lp.objective, np.asarray(block.groups[:-1]))
     exact = np.asarray(exact, dtype=np.float64)

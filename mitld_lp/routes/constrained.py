@@ -39,7 +39,7 @@ from mitld_lp.routes.constraints import (
     ConstraintError,
 )
 from mitld_lp.routes.stages import Built
-from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
+from mitld_lp.solvers.constrained import INFEASIBLE, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Quantity, merge
 from mitld_lp.solvers.result import Status
 
@@ -159,7 +159,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         lp_rows = [Row(r.quantity, r.sense, r.bound - m if r.sense == "<=" else r.bound + m)
                    for r, m in zip(rows("lower"), margins, strict=True)]
         low = lp(task_lo, True, lp_rows)
-        if low.status != OPTIMAL:
+        if not low.status.has_solution:
             if found is None:
                 return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
             break  # a tightened LP failed: the last policy stands, its misses reported
@@ -170,7 +170,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
             q2 = Quantity("steps" if then == "min-steps" else "cost")
             keep = Row(task_lo, ">=", low.objective - LEXICOGRAPHIC_TOL)
             second = lp(q2, False, [*lp_rows, keep])
-            if second.status != OPTIMAL:
+            if not second.status.has_solution:
                 if found is None:
                     return _unsolved(second, cons, rows("lower"), cost_vec, build, **common)
                 break
@@ -194,8 +194,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     upper, proved = _upper_bound(merged, high, rows(which), task_hi if which == "upper"
                                  else task_lo, cost_vec, eta)
     checks = [
-        Check("lower LP", low.status == OPTIMAL, low.message),
-        Check("upper LP", high.status == OPTIMAL, high.message),
+        Check("lower LP", low.status.has_solution, low.message),
+        Check("upper LP", high.status.has_solution, high.message),
         proved,
         task.check,
         *(Check(f"constraint {v.constraint}", v.holds, _said(v)) for v in values),
@@ -216,7 +216,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         complement = (lower, upper)
         (lower, upper), value = one_minus(lower, upper), 1.0 - value
     apart = 0.0
-    if merged.truncated.any() and high.status == OPTIMAL:
+    if merged.truncated.any() and high.status.has_solution:
         apart = max(high.objective - first, 0.0)
     total = upper - lower
     solver = max(total - apart - allowed - tightening, 0.0)
@@ -245,7 +245,7 @@ def _upper_bound(merged: Any, high: Solved, rows: list[Row], objective: Quantity
     from mitld_lp.solvers.certify_dual import dual_bound
 
     name = "upper bound: the constrained optimum (weak duality)"
-    if high.status != OPTIMAL or high.duals is None:
+    if not high.status.has_solution or high.duals is None:
         return float("nan"), Check(name, False, f"the upper LP is {high.status}")
     from mitld_lp.solvers.constrained import never_reaching
 
@@ -306,7 +306,7 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
         if failed.status == INFEASIBLE:
             others = rows[:i] + rows[i + 1:]
             best = optimise(merged, rows[i].quantity, c.sense == ">=", others, costs=cost_vec)
-            bound = best.objective if best.status == OPTIMAL else None
+            bound = best.objective if best.status.has_solution else None
         values.append(ConstraintValue(c, float("nan"), False, bound))
     nan = float("nan")
     return Result(

@@ -130,7 +130,8 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
 
     return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient,
                     sense=quotient.sense, solver=how.solver, backend=how.backend,
-                    tol=how.tol, precision=how.precision, decompose=how.decompose,
+                    tol=how.tol, precision=how.precision,
+                    layout="blocks" if how.decompose else "whole",
                     time_limit=how.remaining(), bounds=(it.lower, it.upper),
                     everywhere=quotient.initial < 0, progress=how.progress)
 

@@ -3,7 +3,7 @@
 
 * :func:`solve_lp` -- the occupancy-measure LP (cvxpy with any installed LP solver, or
   Clarabel called directly), block by block in topological order by default
-  (``decompose=False``: one monolithic LP), its duals as the value function, and the
+  (``layout=Layout.WHOLE``: one monolithic LP), its duals as the value function, and the
   policies;
 * :func:`interval_iteration` -- sound lower / upper bounds by value iteration, also in
   topological order by default;
@@ -18,12 +18,13 @@ from mitld_lp.solvers.evaluation import evaluate_policy
 from mitld_lp.solvers.export import write_drn, write_lp
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.iteration import interval_iteration
-from mitld_lp.solvers.lp import OccupancyLP, occupancy_lp, solve_lp
+from mitld_lp.solvers.lp import Layout, OccupancyLP, occupancy_lp, solve_lp
 from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = [
     "IterationResult",
     "LPResult",
+    "Layout",
     "OccupancyLP",
     "Sense",
     "Status",

@@ -21,13 +21,13 @@ Its values are then computed exactly on its Markov chain
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.clarabel_lp import ClarabelAnswer, solve_clarabel
 from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, evaluate
 from mitld_lp.solvers.result import Status
 
@@ -53,7 +53,9 @@ class Solved:
     """One LP and the policy read off it.
 
     Attributes:
-        status: :data:`OPTIMAL`, :data:`INFEASIBLE` or :data:`FAILED`.
+        status: how the LP's solve ended (:data:`~mitld_lp.solvers.clarabel_lp.CLARABEL_STATUS`);
+            a solution comes with ``OPTIMAL`` and ``INACCURATE``
+            (``status.has_solution``), whose policy the caller's certificate judges.
         objective: the LP's optimum (nan without a solution).
         prob: per merged choice, the probability the policy takes it.
         stay: per merged state, the probability the policy stays there for ever.
@@ -65,7 +67,7 @@ class Solved:
             closes the choices that may reach ``phi``: :func:`never_reaching`).
     """
 
-    status: str
+    status: Status
     objective: float
     prob: np.ndarray | None
     stay: np.ndarray | None
@@ -81,39 +83,19 @@ def _counts_steps(q: Quantity) -> bool:
 
 def _clarabel(c: np.ndarray, a_eq: sp.csc_array, b_eq: np.ndarray, a_ub: sp.csc_array,
               b_ub: np.ndarray, tol: float, time_limit: float | None = None,
-              ) -> tuple[str, np.ndarray | None, np.ndarray | None, str]:
+              ) -> ClarabelAnswer:
     """``min c'v  s.t.  a_eq v = b_eq, a_ub v <= b_ub, v >= 0`` by Clarabel (form
-    ``Av + s = b, s in {0}^n x R_+^m``): the status, the primal and dual solutions
-    (``A'z + c = 0``, the equality rows' duals first), the solver's word;
-    ``time_limit`` seconds (status ``time_limit`` past it)."""
-    clarabel: Any = importlib.import_module("clarabel")
+    ``Av + s = b, s in {0}^n x R_+^m``): its answer, whose dual solution satisfies
+    ``A'z + c = 0`` (the equality rows' duals first); ``time_limit`` seconds (status
+    ``time_limit`` past it, the limit then said in the message)."""
     n = c.size
     a = sp.vstack([a_eq, a_ub, -sp.eye_array(n, format="csc")], format="csc")
     b = np.concatenate([b_eq, b_ub, np.zeros(n)])
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
-        setattr(settings, key, tol)
-    settings.max_iter = 500
+    settings: dict[str, Any] = {key: tol for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas")}
+    settings["max_iter"] = 500
     if time_limit is not None:
-        settings.time_limit = max(float(time_limit), 1e-3)
-    try:
-        solution = clarabel.DefaultSolver(
-            sp.csc_matrix((n, n)), c, sp.csc_matrix(a), b,
-            [clarabel.ZeroConeT(b_eq.size), clarabel.NonnegativeConeT(b_ub.size + n)],
-            settings,
-        ).solve()
-    except Exception as exc:  # pyo3 panics included
-        return FAILED, None, None, f"clarabel: {type(exc).__name__}: {exc}"
-    word = str(solution.status)
-    if word in ("Solved", "AlmostSolved"):
-        return (OPTIMAL, np.asarray(solution.x, dtype=np.float64),
-                np.asarray(solution.z, dtype=np.float64), f"clarabel: {word}")
-    if word in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
-        return INFEASIBLE, None, None, f"clarabel: {word}"
-    if word == "MaxTime":
-        return TIME_LIMIT, None, None, f"clarabel: {word} (time limit {time_limit} s)"
-    return FAILED, None, None, f"clarabel: {word}"
+        settings["time_limit"] = max(float(time_limit), 1e-3)
+    return solve_clarabel(c, a, b, zero=b_eq.size, nonneg=b_ub.size + n, settings=settings)
 
 
 def optimise(
@@ -177,10 +159,12 @@ def optimise(
     n_var = live_choices.size + stays.size
     a_ub = sp.csc_array(np.array(ub_rows).reshape(len(rows), n_var))
     c = vec(0) * (-1.0 if maximise else 1.0)
-    status, v, z, message = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64),
-                                      tol, time_limit)
+    answer = _clarabel(c, a_eq, b_eq, a_ub, np.array(ub_b, dtype=np.float64), tol, time_limit)
+    v, z, message = answer.x, answer.z, answer.message
+    if answer.status is Status.TIME_LIMIT:
+        message = f"{message} (time limit {time_limit} s)"
     if v is None or z is None:
-        return Solved(status, float("nan"), None, None, (), message)
+        return Solved(answer.status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)
     prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v, allowed)
     values = _exact(merged, prob, stay, quantities, cols)
@@ -190,7 +174,7 @@ def optimise(
     y = np.zeros(mdp.n_states)
     y[states] = z[:states.size] if maximise else -z[:states.size]
     lam = np.maximum(z[states.size:states.size + len(rows)], 0.0)
-    return Solved(OPTIMAL, lp_value, prob, stay, values, message, (y, lam), allowed)
+    return Solved(answer.status, lp_value, prob, stay, values, message, (y, lam), allowed)
 
 
 def never_reaching(merged: Merged, rows: list[Row]) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,7 @@ prob-0 states are ``Prob0E`` and which has no end component either) is the same 
 handed to the solver as the maximum of the negated rewards, whose duals are the negated
 values.
 
-**Block by block** (``decompose=True``, the default): the quotient's strongly connected
+**Block by block** (``layout=Layout.BLOCKS``, the default): the quotient's strongly connected
 components are solved level by level, downstream first
 (:mod:`mitld_lp.solvers.topological`).  A single-state component is solved exactly; the
 non-trivial components of one level form one LP of the same form restricted to their
@@ -67,14 +67,15 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.crossover import crossover, polish
 from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
-from mitld_lp.solvers.lp_backends import Matrices, Raw, Settings, solve_one, unusable_reason
+from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one, unusable_reason
+from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices, keeping_zero
 from mitld_lp.solvers.result import LPResult, Status, read_only
 from mitld_lp.solvers.topological import Block, blocks, solve_single_states, transient_solve
 from mitld_lp.util.progress import tracked
 
-__all__ = ["OccupancyLP", "occupancy_lp", "solve_lp"]
+__all__ = ["Layout", "OccupancyLP", "occupancy_lp", "solve_lp"]
 
 logger = logging.getLogger(__name__)
 
@@ -229,7 +230,7 @@ class _Answer:
     n_solver_calls: int
 
 
-def _sensed(matrices: Matrices, sense: Sense, settings: Settings, *,
+def _sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
             retry: bool = True) -> Raw:
     """:func:`~mitld_lp.solvers.lp_backends.solve_one` of an LP in ``sense``: a minimum as
     the maximum of the negated objective, its duals negated back."""
@@ -241,7 +242,7 @@ def _sensed(matrices: Matrices, sense: Sense, settings: Settings, *,
                                          raw.iterations)
 
 
-def _solve_monolithic(lp: OccupancyLP, settings: Settings) -> _Answer | Raw:
+def _solve_monolithic(lp: OccupancyLP, settings: SolveOptions) -> _Answer | Raw:
     q = lp.quotient
     raw = _sensed(Matrices(lp.a_eq, lp.b_eq, lp.objective), q.sense, settings)
     if raw.y is None or raw.v is None:
@@ -333,9 +334,9 @@ _TIGHTEN_ROUND = 25
 _TIGHTEN_MAX = 500
 
 
-def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
+def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
-                      precision: float | None, progress: bool | None = None
+                      progress: bool | None = None
                       ) -> _Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
@@ -408,7 +409,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: Settings,
         y[columns] = np.maximum(raw.y, 0.0)
         polished = polish(block, lp, y, raw.v, columns, settings.tol,
                           None if tight is None else tight[0 if q.sense is Sense.MAX else 1],
-                          sense=q.sense, precision=precision)
+                          sense=q.sense, precision=settings.precision)
         if not polished.optimal and worst.status is Status.OPTIMAL:
             worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
                          "iteration did not settle")
@@ -442,7 +443,7 @@ def solve_lp(
     tol: float = defaults.TOL,
     precision: float | None = defaults.PRECISION,
     everywhere: bool = False,
-    decompose: bool = True,
+    layout: Layout | str = Layout.BLOCKS,
     time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
@@ -471,14 +472,16 @@ def solve_lp(
             crossover tell tight choices apart (the randomised policy's support).
         everywhere: start weight 1 on every reduced state instead of only the initial
             one, so ``values`` and the policy are exact / optimal in every state.
-        decompose: solve block by block in topological order (module docs); ``False``
-            solves the one monolithic LP (the one :func:`write_lp` exports).
+        layout: :attr:`Layout.BLOCKS` solves block by block in topological order
+            (module docs); :attr:`Layout.WHOLE` the one monolithic LP (the one
+            :func:`write_lp` exports).  Its value's name (``"blocks"``, ``"whole"``)
+            will do.
         time_limit: seconds; past it the result has status ``TIME_LIMIT``.
         solver_options: extra keywords for the solver (override the tolerance ones),
             e.g. ``{"max_iter": 50}`` for Clarabel.
         bounds: sound lower and upper bounds on the optimal value of every state
             (``(n_states,)`` each, interval iteration's ``lower`` and ``upper``): with
-            ``decompose``, a block's LP leaves out the choices they prove suboptimal
+            ``Layout.BLOCKS``, a block's LP leaves out the choices they prove suboptimal
             (every choice is still checked against the exact values afterwards, so a
             wrong bound costs time, never the answer).
         progress: a bar over the blocks' states (:mod:`mitld_lp.util.progress`:
@@ -498,8 +501,9 @@ def solve_lp(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
         mdp.n_states, q.n_states, q.mecs.n_mecs, q.n_choices,
     )
-    settings = Settings(solver, backend, tol, dict(solver_options or {}),
-                         start + time_limit if time_limit is not None else np.inf)
+    layout = Layout(layout)
+    settings = SolveOptions(solver, backend, tol, precision, Deadline.after(time_limit, start),
+                            dict(solver_options or {}))
 
     def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)
@@ -522,9 +526,8 @@ def solve_lp(
             np.zeros(q.n_choices), np.full(q.n_states, np.nan),
             greedy_choices(q, np.full(q.n_states, 1.0 if q.sense is Sense.MAX else 0.0)),
             0.0, 0.0, 0)
-    elif decompose:
-        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds),
-                                   precision, progress)
+    elif layout is Layout.BLOCKS:
+        answer = _solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -548,7 +551,7 @@ def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
     return lo[rep], hi[rep]
 
 
-def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: Settings, start: float,
+def _result(mdp: MDP, q: Quotient, answer: _Answer, settings: SolveOptions, start: float,
             shape: tuple[int, int]) -> LPResult:
     """The answer of a route mapped back to ``mdp`` (values, policies, occupancy)."""
     values = q.lift(answer.v)

@@ -5,22 +5,22 @@ settings.  What the LP means is :mod:`mitld_lp.solvers.lp`'s business."""
 
 from __future__ import annotations
 
-import functools
 import importlib
 import logging
-import time
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.clarabel_lp import clarabel_has_faer, is_fatal, solve_clarabel
+from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.result import Status
 from mitld_lp.util.quiet import native_quiet
 
-__all__ = ["CLARABEL_STATUS", "Matrices", "Raw", "Settings", "solve_one", "unusable_reason"]
+__all__ = ["Matrices", "Raw", "solve_one", "solver_keywords", "unusable_reason"]
 
 logger = logging.getLogger("mitld_lp.solvers.lp")
 
@@ -49,23 +49,6 @@ class Raw:
     y: np.ndarray | None = None
     v: np.ndarray | None = None
     iterations: int = 0
-
-
-@functools.cache
-def clarabel_has_faer() -> bool:
-    """Whether the installed Clarabel factorises with faer (a build without it refuses
-    the setting when a solver is made, so a one-variable solver is made once to ask)."""
-    clarabel: Any = importlib.import_module("clarabel")
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    try:
-        settings.direct_solve_method = "faer"
-        clarabel.DefaultSolver(sp.csc_matrix((1, 1)), np.zeros(1),
-                               sp.csc_matrix(-np.eye(1)), np.zeros(1),
-                               [clarabel.NonnegativeConeT(1)], settings)
-    except Exception:  # noqa: BLE001 - any refusal means: not this build
-        return False
-    return True
 
 
 def _tolerance_options(solver: str, tol: float) -> dict[str, Any]:
@@ -100,10 +83,6 @@ _CVXPY_STATUS = {
 }
 
 
-def _is_fatal(exc: BaseException) -> bool:
-    return isinstance(exc, KeyboardInterrupt | SystemExit | GeneratorExit | MemoryError)
-
-
 def _solve_cvxpy(lp: Matrices, solver: str, options: dict[str, Any]) -> Raw:
     cp: Any = importlib.import_module("cvxpy")
     m = lp.objective.shape[0]
@@ -116,7 +95,7 @@ def _solve_cvxpy(lp: Matrices, solver: str, options: dict[str, Any]) -> Raw:
             with native_quiet(solver.lower()):  # HiGHS's banner is no answer
                 problem.solve(solver=solver, **options)
     except BaseException as exc:  # a solver error must become a status, not a crash
-        if _is_fatal(exc):
+        if is_fatal(exc):
             raise
         return Raw(Status.FAILED, f"cvxpy/{solver}: {type(exc).__name__}: {exc}")
     status = _CVXPY_STATUS.get(str(problem.status), Status.FAILED)
@@ -130,18 +109,6 @@ def _solve_cvxpy(lp: Matrices, solver: str, options: dict[str, Any]) -> Raw:
     return Raw(status, message, np.asarray(y.value, dtype=np.float64), v, iterations)
 
 
-CLARABEL_STATUS = {  # Clarabel's status words as ours (every Clarabel caller)
-    "Solved": Status.OPTIMAL,
-    "AlmostSolved": Status.INACCURATE,
-    "PrimalInfeasible": Status.INFEASIBLE,
-    "AlmostPrimalInfeasible": Status.INFEASIBLE,
-    "DualInfeasible": Status.UNBOUNDED,
-    "AlmostDualInfeasible": Status.UNBOUNDED,
-    "MaxIterations": Status.MAX_ITERATIONS,
-    "MaxTime": Status.TIME_LIMIT,
-}
-
-
 def _solve_clarabel(lp: Matrices, options: dict[str, Any]) -> Raw:
     r"""Call Clarabel on the matrices directly (no cvxpy canonicalisation).
 
@@ -150,39 +117,12 @@ def _solve_clarabel(lp: Matrices, options: dict[str, Any]) -> Raw:
     ``A = [A_eq; -I]``, ``b = [b_eq; 0]``, ``K = {0}^n x R_+^m``.  The dual equation reads
     ``A_eq' z_eq = objective + z_nn >= objective``: ``z_eq`` is the value function ``v``.
     """
-    clarabel: Any = importlib.import_module("clarabel")
     n, m = lp.b_eq.shape[0], lp.objective.shape[0]
     a = sp.vstack([lp.a_eq, -sp.eye_array(m, format="csc")], format="csc")
     b = np.concatenate([lp.b_eq, np.zeros(m)])
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    for key, val in options.items():
-        if not hasattr(settings, key):
-            return Raw(Status.FAILED, f"clarabel: unknown setting {key!r}")
-        setattr(settings, key, val)
-    try:
-        solver = clarabel.DefaultSolver(
-            sp.csc_matrix((m, m)),
-            -lp.objective,
-            sp.csc_matrix(a),
-            b,
-            [clarabel.ZeroConeT(n), clarabel.NonnegativeConeT(m)],
-            settings,
-        )
-        solution = solver.solve()
-    except BaseException as exc:  # includes pyo3's PanicException
-        if _is_fatal(exc):
-            raise
-        return Raw(Status.FAILED, f"clarabel: {type(exc).__name__}: {exc}")
-    word = str(solution.status)
-    status = CLARABEL_STATUS.get(word, Status.FAILED)
-    message = f"clarabel: {word}"
-    iterations = int(solution.iterations)
-    if not status.has_solution:
-        return Raw(status, message, None, None, iterations)
-    x = np.asarray(solution.x, dtype=np.float64)
-    z = np.asarray(solution.z, dtype=np.float64)
-    return Raw(status, message, x, z[:n], iterations)
+    answer = solve_clarabel(-lp.objective, a, b, zero=n, nonneg=m, settings=options)
+    v = None if answer.z is None else answer.z[:n]
+    return Raw(answer.status, answer.message, answer.x, v, answer.iterations)
 
 
 def unusable_reason(solver: str, backend: str) -> str | None:
@@ -208,43 +148,34 @@ def _run_backend(lp: Matrices, solver: str, backend: str, options: dict[str, Any
     return _solve_clarabel(lp, options)
 
 
-@dataclass(frozen=True, slots=True)
-class Settings:
-    """How every LP of one :func:`solve_lp` call is solved."""
-
-    solver: str
-    backend: str
-    tol: float
-    extra: Mapping[str, Any]
-    deadline: float  # time.perf_counter() value, inf without a time limit
-
-    def options(self, *, polished: bool = False) -> dict[str, Any]:
-        """The solver's keywords; ``polished``: the answer will be made exact by policy
-        iteration, so Clarabel's iterative refinement of each KKT solve (1.2-1.9x of its
-        time) buys nothing (the values returned are the same to the last digit), and its
-        KKT systems are factorised by faer's supernodal LDL on one thread (0.7-0.8x of
-        QDLDL's time on the bus blocks; ``experiments/bench_sweeps.py``)."""
-        opts = _tolerance_options(self.solver, self.tol)
-        if polished and self.solver.upper() == "CLARABEL":
-            opts["iterative_refinement_enable"] = False
-            if clarabel_has_faer():
-                opts.update(direct_solve_method="faer", max_threads=1)
-        if np.isfinite(self.deadline):
-            opts.update(_time_options(self.solver, self.deadline - time.perf_counter()))
-        return {**opts, **dict(self.extra)}
+def solver_keywords(options: SolveOptions, *, polished: bool = False) -> dict[str, Any]:
+    """The solver's keywords for ``options``; ``polished``: the answer will be made exact
+    by policy iteration, so Clarabel's iterative refinement of each KKT solve (1.2-1.9x
+    of its time) buys nothing (the values returned are the same to the last digit), and
+    its KKT systems are factorised by faer's supernodal LDL on one thread (0.7-0.8x of
+    QDLDL's time on the bus blocks; ``experiments/bench_sweeps.py``)."""
+    opts = _tolerance_options(options.solver, options.tol)
+    if polished and options.solver.upper() == "CLARABEL":
+        opts["iterative_refinement_enable"] = False
+        if clarabel_has_faer():
+            opts.update(direct_solve_method="faer", max_threads=1)
+    left = options.deadline.remaining()
+    if left is not None:
+        opts.update(_time_options(options.solver, left))
+    return {**opts, **dict(options.extra)}
 
 
-def _retries(settings: Settings) -> Iterator[tuple[str, dict[str, Any]]]:
+def _retries(options: SolveOptions) -> Iterator[tuple[str, dict[str, Any]]]:
     """Other ways to solve an LP that came back inaccurate (Clarabel only; the user's
     own ``solver_options`` are kept in every one)."""
-    if settings.solver.upper() != "CLARABEL":
+    if options.solver.upper() != "CLARABEL":
         return
-    base = settings.options()
-    yield settings.backend, {**base, "static_regularization_constant": 1e-7,
-                             "iterative_refinement_max_iter": 50,
-                             "max_iter": 400, **dict(settings.extra)}
-    other = "direct" if settings.backend == "cvxpy" else "cvxpy"
-    yield other, {**base, "equilibrate_max_iter": 50, "max_iter": 400, **dict(settings.extra)}
+    base = solver_keywords(options)
+    yield options.backend, {**base, "static_regularization_constant": 1e-7,
+                            "iterative_refinement_max_iter": 50,
+                            "max_iter": 400, **dict(options.extra)}
+    other = "direct" if options.backend == "cvxpy" else "cvxpy"
+    yield other, {**base, "equilibrate_max_iter": 50, "max_iter": 400, **dict(options.extra)}
 
 
 _DUAL_SLACK = 1e-7
@@ -264,25 +195,25 @@ def _checked(lp: Matrices, raw: Raw) -> Raw:
                 f"inequality by {violation:.1e}", raw.y, raw.v, raw.iterations)
 
 
-def solve_one(lp: Matrices, settings: Settings, *, retry: bool = True) -> Raw:
+def solve_one(lp: Matrices, options: SolveOptions, *, retry: bool = True) -> Raw:
     """Solve ``lp``; with ``retry``, an inaccurate answer (by the solver's word or by
     :func:`_checked`) is retried with other settings (see :func:`_retries`) and the
     first accurate one is kept, else the first answer.  (A block of the topological
     route is not retried: its answer is polished exactly instead.)"""
-    if time.perf_counter() >= settings.deadline:
+    if options.deadline.passed():
         return Raw(Status.TIME_LIMIT, "time limit reached before the solve")
-    raw = _run_backend(lp, settings.solver, settings.backend,
-                       settings.options(polished=not retry))
+    raw = _run_backend(lp, options.solver, options.backend,
+                       solver_keywords(options, polished=not retry))
     if not retry:
         return raw
     raw = _checked(lp, raw)
     if raw.status is not Status.INACCURATE:
         return raw
-    for backend, options in _retries(settings):
-        if time.perf_counter() >= settings.deadline:
+    for backend, keywords in _retries(options):
+        if options.deadline.passed():
             break
-        again = _checked(lp, _run_backend(lp, settings.solver, backend, options))
-        logger.info("inaccurate LP retried (%s, %s): %s", backend, sorted(options),
+        again = _checked(lp, _run_backend(lp, options.solver, backend, keywords))
+        logger.info("inaccurate LP retried (%s, %s): %s", backend, sorted(keywords),
                     again.message)
         if again.status is Status.OPTIMAL:
             return Raw(again.status, f"{again.message} (retried after: {raw.message})",

@@ -25,7 +25,6 @@ bound comes from the iteration (:mod:`.robust`).
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.solvers.lp_backends import CLARABEL_STATUS
+from mitld_lp.solvers.clarabel_lp import solve_clarabel
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust_graph import RobustGame, positive_attractor
 
@@ -89,26 +88,13 @@ def policy_lp(
     eye = sp.eye_array(n_var, format="csc")
     a_all = sp.vstack([a, eye, -eye], format="csc")
     b_all = np.concatenate([to_target, np.ones(n_var), np.zeros(n_var)])
-    clarabel: Any = importlib.import_module("clarabel")
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tol
+    settings: dict[str, Any] = {key: tol for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas")}
     if time_limit is not None:
-        settings.time_limit = max(float(time_limit), 1e-3)
-    try:
-        solution = clarabel.DefaultSolver(
-            sp.csc_matrix((n_var, n_var)), -np.ones(n_var), sp.csc_matrix(a_all), b_all,
-            [clarabel.NonnegativeConeT(rows.size + 2 * n_var)], settings,
-        ).solve()
-    except BaseException as exc:  # includes pyo3's PanicException
-        if isinstance(exc, KeyboardInterrupt | SystemExit | MemoryError):
-            raise
-        return PolicyLP(Status.FAILED, None, n_var, rows.size,
-                        f"clarabel: {type(exc).__name__}: {exc}")
-    word = str(solution.status)
-    status = CLARABEL_STATUS.get(word, Status.FAILED)
-    if not status.has_solution:
-        return PolicyLP(status, None, n_var, rows.size, f"clarabel: {word}")
-    values[unknown] = np.clip(np.asarray(solution.x, dtype=np.float64), 0.0, 1.0)
-    return PolicyLP(status, read_only(values), n_var, rows.size,
-                    f"clarabel: {word} ({n_var} variables, {rows.size} vertex rows)")
+        settings["time_limit"] = max(float(time_limit), 1e-3)
+    answer = solve_clarabel(-np.ones(n_var), a_all, b_all, zero=0,
+                            nonneg=rows.size + 2 * n_var, settings=settings)
+    if answer.x is None:
+        return PolicyLP(answer.status, None, n_var, rows.size, answer.message)
+    values[unknown] = np.clip(answer.x, 0.0, 1.0)
+    return PolicyLP(answer.status, read_only(values), n_var, rows.size,
+                    f"{answer.message} ({n_var} variables, {rows.size} vertex rows)")
