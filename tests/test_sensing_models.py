@@ -111,7 +111,7 @@ def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("verb", [
-    ["info"], ["export", "--drn", "OUT.drn"], ["export", "--chain", "OUT.drn"],
+    ["info"], ["export", "--drn", "OUT.drn"], ["export", "--tree", "OUT.json"],
     ["plot", "--out", "OUT.png"],
 ])
 def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]) -> None:

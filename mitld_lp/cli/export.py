@@ -152,6 +152,12 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         raise UsageError("export --chain/--tree: a law known only within a band has a "
                          "worst case, not one Markov chain; --drn writes the interval MDP, "
                          "--controller the robust controller")
+    if tree:  # before the work: a sensed controller's memory is no feature vector
+        from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
+        from mitld_lp.sensing.sensors import partial
+
+        if partial(model.sensors):
+            raise UsageError(SENSED_TREE_REFUSAL)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
@@ -159,10 +165,6 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
     said.update(status=str(r.status), certified=r.certified, lower=r.lower, upper=r.upper)
-    if r.route == "sensed" and (chain or tree):  # mitld_lp.sensing
-        raise UsageError("export --chain/--tree: the model has sensors that miss events; "
-                         "the controlled chain and the decision tree of an observation-based "
-                         "controller are not written yet")
     if controller:
         from mitld_lp.problem import Settings
 

@@ -33,7 +33,7 @@ line is followed by its valuation as a comment, as Storm's own exporter writes i
 from __future__ import annotations
 
 import os
-from collections.abc import Hashable, Iterable
+from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,9 +52,12 @@ from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS"]
+__all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS",
+           "prop_labels", "rows_matrix"]
 
-CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping")
+CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping", "beyond")
+"""The chains' own labels (``beyond``: a sensed controller's memory past its model,
+:mod:`mitld_lp.running.sensed_chain`)."""
 
 _GO, _STAY, _KEEP = 0, 1, 2
 """A randomised controller's mode, part of a chain state: acting by its distribution,
@@ -90,7 +93,13 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     """The controlled chain of a synthesis result (:class:`~mitld_lp.SynthesisResult`
     or a constrained result) under its controller (or ``controller``, one built on the
     same product).  A robust result (a law within a band) is refused: its controller
-    runs on an interval model, whose controlled system is no Markov chain."""
+    runs on an interval model, whose controlled system is no Markov chain.  A result
+    with sensors that miss events has the chain of :mod:`mitld_lp.running.sensed_chain`
+    (the truth and what the robot has observed)."""
+    from mitld_lp.running.sensed_chain import is_sensed, sensed_chain_of
+
+    if is_sensed(result):
+        return sensed_chain_of(result, controller)
     if result.route == "constrained":  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
@@ -157,18 +166,11 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
                     row[to] = row.get(to, 0.0) + p
         rows.append(row)
         done += 1
-    n = len(order)
     names = {v: k for k, v in special.items()}
     origin = np.array([i for i, _ in order], dtype=np.int64)
     modes = np.array([s for _, s in order], dtype=np.int64)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum([len(r) for r in rows], out=indptr[1:])
-    cols = np.fromiter((c for r in rows for c in sorted(r)), dtype=np.int64,
-                       count=int(indptr[-1]))
-    vals = np.fromiter((r[c] for r in rows for c in sorted(r)), dtype=np.float64,
-                       count=int(indptr[-1]))
-    matrix = sp.csr_array((vals, cols, indptr), shape=(n, n))
-    props = _prop_labels(game)
+    matrix = rows_matrix(rows)
+    props = prop_labels()
     labels: list[set[str]] = []
     valuations: list[str] = []
     plan_verdicts = controller.plan.verdicts  # type: ignore[attr-defined]
@@ -205,10 +207,25 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
                  modes == _STAY, modes == _KEEP)
 
 
+def rows_matrix(rows: list[dict[int, float]]) -> sp.csr_array:
+    """A chain's ``(n, n)`` CSR matrix from its rows (``rows[i]``: successor to
+    probability), each row's successors in increasing order."""
+    n = len(rows)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum([len(r) for r in rows], out=indptr[1:])
+    cols = np.fromiter((c for r in rows for c in sorted(r)), dtype=np.int64,
+                       count=int(indptr[-1]))
+    vals = np.fromiter((r[c] for r in rows for c in sorted(r)), dtype=np.float64,
+                       count=int(indptr[-1]))
+    return sp.csr_array((vals, cols, indptr), shape=(n, n))
+
+
 _MODE_TEXT = {_GO: "", _STAY: " & staying=true", _KEEP: " & keeping=true"}
 
 
-def _prop_labels(game: Game[Any]) -> Any:
+def prop_labels() -> Callable[[str], str]:
+    """A world proposition's label in a chain: its name, or ``world_<name>`` for one named
+    like a chain's own label."""
     reserved = set(CHAIN_LABELS) | {"target", "sink"}
     return lambda p: f"world_{p}" if p in reserved else p
 

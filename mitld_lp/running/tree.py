@@ -44,6 +44,7 @@ from mitld_lp.controllers.stepper import AutomatonMemory, Decision
 from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
 from mitld_lp.running.chain import chain_of, world_of
+from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL, is_sensed
 from mitld_lp.util.traversal import breadth_first_order
 from mitld_lp.worlds.names import state_fields, state_values
 
@@ -373,7 +374,11 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     value exactly (:func:`_choices`), which makes it much smaller; it is grown until it
     is exact on every state *its own* controller reaches.  ``same_actions`` asks for the
     controller's own action in every state the controller reaches.  Either way
-    :func:`tree_value` is the controller's value, ``lower``."""
+    :func:`tree_value` is the controller's value, ``lower``.  A controller that acts on
+    sensor reports is refused (:data:`~mitld_lp.running.sensed_chain.SENSED_TREE_REFUSAL`
+    says why)."""
+    if is_sensed(result):
+        raise ValueError(SENSED_TREE_REFUSAL)
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")

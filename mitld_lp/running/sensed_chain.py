@@ -1,0 +1,244 @@
+"""The controlled chain of a controller that acts on sensor reports (the ``sensed``
+route, :mod:`mitld_lp.sensing`), for anyone to re-check with Storm
+(``P=? [F "accept"]``).
+
+A state of the chain is what the world is and what the robot knows of it:
+
+* the *truth*: the world state, the task's automaton state on the true events (the
+  sensed ones included, when they really happen), the events still pending, the clock,
+  and for each sensed event that has happened and is not reported yet the steps until
+  its report can come (``unreported={b1:0}``: it can come next step; a sensor reports an
+  event once);
+* the controller's *memory*: what the robot has observed, its information state (the
+  controller's own value: a state number of its tables, or ``target`` / ``sink`` /
+  ``truncated`` once every hypothesis it keeps is decided).
+
+It is built from the dynamics, not from the information-state product: one step lets
+every pending event happen by its hazard at the true clock, each sensed event's sensor
+report it (with probability ``detect`` once its ``delay`` has passed), the world move by
+the controller's action, and the automaton read the new state's propositions and the
+true events; the controller's memory then follows the *observation* (the world state,
+the events without a sensor, the sensors' reports) through the controller's own plan
+(``follow``), and its next action is the plan's ``decision`` there -- the tables the
+robot runs (a synthesis's controller or one loaded from its file), never the synthesis's
+policy vector.  So the chain re-checks the controller and the information-state
+construction it was made from.
+
+Labels: ``init``; ``accept`` where the true automaton has accepted; ``reject`` where it
+has rejected, or where the controller stops with the task undecided (every hypothesis
+it keeps is decided: the true run's task can no longer be won); ``truncated`` where an
+event came later than its truncation point (counted as failure, as ``lower`` counts
+it); ``beyond`` on a state whose memory met an observation the controller's model gives
+probability 0 (none is expected: its presence says the controller and the world
+disagree); and each world proposition that holds (``world_<name>`` for a proposition
+named like a label).  ``P=? [F "accept"]`` is the controller's probability of
+satisfying the task: inside the synthesis's certified bracket, at least ``lower``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.sta import STA
+from mitld_lp.controllers.format import UNDECIDED
+from mitld_lp.controllers.kinds import ControllerLike
+from mitld_lp.controllers.tables import BEYOND
+from mitld_lp.running.chain import Chain, prop_labels, rows_matrix
+from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.names import state_fields, state_values, valuation_text
+
+__all__ = ["SENSED_ROUTE", "SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain",
+           "sensed_chain_of"]
+
+SENSED_ROUTE = "sensed"
+
+SENSED_TREE_REFUSAL = (
+    "export --tree: the model has sensors that miss events; its controller's memory is its "
+    "information state (what the robot has observed: the hypotheses of when the sensed "
+    "events happened), moved by the controller's own tables at every observation, so a "
+    "decision tree over the world's variables and that memory would still need those "
+    "tables to run and would read no better than them; not written (--controller writes "
+    "the controller, --chain its controlled chain for Storm)")
+"""Why a controller that acts on sensor reports has no decision tree (the command line
+refuses ``--tree`` before any work, :func:`mitld_lp.running.tree.tree_of` too)."""
+
+_REPORTED = -1
+"""A sensed event's report status once it is reported (or before it happens)."""
+
+_ENDS = ("accept", "reject", "truncated")
+
+
+def is_sensed(result: Any) -> bool:
+    """Whether ``result`` answers a problem with sensors that miss events (the one place
+    this package's running and export code reads a result's route for it)."""
+    return getattr(result, "route", None) == SENSED_ROUTE
+
+
+def sensed_chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
+    """The controlled chain (module docs) of a ``sensed`` result under its controller,
+    or under ``controller`` (one of the same model, such as the result's controller
+    saved and loaded again)."""
+    c = controller if controller is not None else result.controller
+    if c is None:
+        raise ValueError(f"no controller to export: the synthesis is {result.status}")
+    return sensed_chain(result.model.game, result.dta, result.sta, result.sensors, c)
+
+
+def sensed_chain(game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sensor],
+                 controller: ControllerLike) -> Chain:
+    """The chain of ``controller`` (a controller that acts on sensor reports) in
+    ``game``, the task's automaton ``dta``, the events' clocks ``sta`` (the sensed events
+    truncated, as the synthesis did) and the ``sensors`` that miss events."""
+    plan: Any = controller.plan
+    sensed = tuple(sorted(sensors))
+    if frozenset(sensed) != getattr(plan, "sensed", None):
+        raise ValueError(f"the controller does not act on the reports of {', '.join(sensed)} "
+                         "(it is not a controller of this model's sensors)")
+    return _Unfolding(game, dta, sta, sensors, sensed, plan).chain()
+
+
+class _Unfolding:
+    """The reachable states of the chain, one step at a time (module docs).  A node is
+    ``(world, q, pending, clock, unreported, memory)``; ``unreported`` one value per
+    sensed event: :data:`_REPORTED`, or the steps until its report can come (0: it can
+    come in the next step)."""
+
+    def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sensor],
+                 sensed: tuple[str, ...], plan: Any) -> None:
+        self.game, self.dta, self.sta, self.plan = game, dta, sta, plan
+        self.sensors, self.sensed = sensors, sensed
+        self.index: dict[Hashable, int] = {}
+        self.order: list[Hashable] = []
+        self.props: dict[Hashable, frozenset[str]] = {}
+
+    def number(self, node: Hashable) -> int:
+        at = self.index.get(node)
+        if at is None:
+            at = self.index[node] = len(self.order)
+            self.order.append(node)
+        return at
+
+    def label(self, world: Hashable) -> frozenset[str]:
+        props = self.props.get(world)
+        if props is None:
+            props = self.props[world] = frozenset(self.game.propositions(world))
+        return props
+
+    def enter(self, q: int, node: tuple[Any, ...]) -> int:
+        """The chain state of ``node``, or the end its automaton state ``q`` decides."""
+        if q == self.dta.accepting:
+            return self.number("accept")
+        if q == self.dta.rejecting:
+            return self.number("reject")
+        return self.number(node)
+
+    def chain(self) -> Chain:
+        g0 = self.game.initial
+        q0 = self.dta.step(self.dta.initial, self.label(g0))
+        unreported = (_REPORTED,) * len(self.sensed)
+        self.enter(q0, (g0, q0, frozenset(self.sta.events), 0, unreported,
+                        self.plan.start(g0)))
+        rows: list[dict[int, float]] = []
+        while len(rows) < len(self.order):
+            node = self.order[len(rows)]
+            if isinstance(node, str):
+                rows.append({len(rows): 1.0})
+            else:
+                rows.append(self.step(node))
+        return self.record(rows)
+
+    def step(self, node: tuple[Any, ...]) -> dict[int, float]:
+        g, q, pending, clock, unreported, memory = node
+        plan = self.plan
+        row: dict[int, float] = {}
+        if UNDECIDED not in plan.verdicts_at(memory):  # the controller stops
+            return {self.number("reject"): 1.0}
+        d = plan.decision(g, memory)
+        if d.weights is not None:
+            raise ValueError("a controller that acts on sensor reports decides one action")
+        if d.lost:
+            return {self.number("reject"): 1.0}
+        action = d.actions[0] if d.actions else plan.fallback(g)
+        for occurred, p_events in self.events(pending, clock):
+            left = pending - occurred
+            after = self.sta.advance(left, clock)
+            if after.truncated:
+                k = self.number("truncated")
+                row[k] = row.get(k, 0.0) + p_events
+                continue
+            for reports, unreported2, p_reports in self.reports(occurred, unreported):
+                seen = (occurred - frozenset(self.sensed)) | reports
+                for g2, p_world in self.game.successors(g, action, occurred):
+                    p = p_events * p_reports * p_world
+                    if p <= 0.0:
+                        continue
+                    q2 = self.dta.step(q, self.label(g2) | occurred)
+                    memory2, _ = plan.follow(memory, g2, seen, action)
+                    k = self.enter(q2, (g2, q2, left, after.clock, unreported2, memory2))
+                    row[k] = row.get(k, 0.0) + p
+        return row
+
+    def events(self, pending: frozenset[str], clock: int
+               ) -> list[tuple[frozenset[str], float]]:
+        """The events of the next step, each with its probability (their hazards at the
+        true clock, independent)."""
+        out: list[tuple[frozenset[str], float]] = [(frozenset(), 1.0)]
+        for a in sorted(pending):
+            h = self.sta.clocks[a].hazard(clock)
+            out = [(e | {a}, p * h) for e, p in out] + [(e, p * (1.0 - h)) for e, p in out]
+        return [(e, p) for e, p in out if p > 0.0]
+
+    def reports(self, occurred: frozenset[str], unreported: tuple[int, ...]
+                ) -> list[tuple[frozenset[str], tuple[int, ...], float]]:
+        """The sensors' reports of the next step: ``(reported, unreported after,
+        probability)``."""
+        out: list[tuple[frozenset[str], tuple[int, ...], float]] = [(frozenset(), (), 1.0)]
+        for a, wait in zip(self.sensed, unreported, strict=True):
+            sensor = self.sensors[a]
+            if a in occurred:
+                due = sensor.delay  # the event happens now: its report from step + delay
+            elif wait == _REPORTED:  # not happened yet, or reported already
+                out = [(r, (*u, _REPORTED), p) for r, u, p in out]
+                continue
+            else:
+                due = wait - 1
+            if due > 0:
+                out = [(r, (*u, due), p) for r, u, p in out]
+                continue
+            d = sensor.detect
+            out = ([(r | {a}, (*u, _REPORTED), p * d) for r, u, p in out] +
+                   [(r, (*u, 0), p * (1.0 - d)) for r, u, p in out])
+        return [(r, u, p) for r, u, p in out if p > 0.0]
+
+    def record(self, rows: list[dict[int, float]]) -> Chain:
+        n = len(rows)
+        matrix = rows_matrix(rows)
+        props = prop_labels()
+        fields = (*state_fields(self.game), "q", "pending", "clock", "unreported", "memory")
+        labels: list[frozenset[str]] = []
+        valuations: list[str] = []
+        origin = np.full(n, -1, dtype=np.int64)
+        for k, node in enumerate(self.order):
+            if isinstance(node, str):
+                labels.append(frozenset({node}))
+                valuations.append(node)
+                continue
+            g, q, pending, clock, unreported, memory = node
+            here = {props(p) for p in self.label(g)}
+            if memory == BEYOND:
+                here.add("beyond")
+            if isinstance(memory, (int, np.integer)) and memory >= 0:
+                origin[k] = memory
+            labels.append(frozenset(here))
+            waiting = ",".join(f"{a}:{w}" for a, w in zip(self.sensed, unreported, strict=True)
+                               if w != _REPORTED)
+            valuations.append(valuation_text(fields, (
+                *state_values(self.game, g), q, "{" + ",".join(sorted(pending)) + "}", clock,
+                "{" + waiting + "}", "beyond" if memory == BEYOND else str(memory))))
+        none = np.zeros(n, dtype=bool)
+        return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy())
