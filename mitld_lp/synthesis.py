@@ -3,10 +3,8 @@
     problem --pose--> Posed --build_posed--> automaton, STA, product (Built)
             --the route's solver and certificate--> Result
 
-The routes: plain (:mod:`mitld_lp.routes.plain`: both truncation models solved and
-certified), robust (:mod:`mitld_lp.routes.robust`), constrained
-(:mod:`mitld_lp.routes.constrained`, and :mod:`mitld_lp.routes.robust_constrained` with
-a band), sensed (:mod:`mitld_lp.sensing.solve`).  On every route ``lower`` is what the
+The route is the posed problem's (:mod:`mitld_lp.routes.precedence`): this module
+names none; it asks the route to build and to solve.  On every route ``lower`` is what the
 returned controller achieves in the real, untruncated world and ``upper`` what no policy
 beats (docs/results.md).
 """
@@ -20,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from mitld_lp import defaults
 from mitld_lp.checks import Check
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, ROBUST, SENSED, Posed, pose, settings_from
+from mitld_lp.problem import Posed, pose, settings_from
 from mitld_lp.result import Result
 from mitld_lp.routes.stages import Built, build_posed, build_product
 
@@ -112,30 +110,8 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
 
 
 def _solve_route(posed: Posed, costs: Mapping[str, float] | None, seed: int | None) -> Result:
-    if posed.route == CONSTRAINED:
-        from mitld_lp.problem import check_constrained
-
-        check_constrained(posed)  # a refusal names the combination before any work
     built = build_posed(posed, progress=posed.settings.progress)
-    if posed.route == ROBUST:
-        from mitld_lp.routes.robust import solve_robust
-
-        return solve_robust(posed, built)
-    if posed.route == SENSED:  # sensors that miss events (mitld_lp.sensing)
-        from mitld_lp.sensing.solve import solve_sensed
-
-        return solve_sensed(posed, built)
-    if posed.route == CONSTRAINED:
-        if posed.robust:
-            from mitld_lp.routes.robust_constrained import solve_robust_constrained
-
-            return solve_robust_constrained(posed, built, costs=costs, seed=seed)
-        from mitld_lp.routes.constrained import solve_constrained
-
-        return solve_constrained(posed, built, costs=costs, seed=seed)
-    from mitld_lp.routes.plain import solve_plain
-
-    return solve_plain(posed, built)
+    return posed.route.solve(posed, built, costs=costs, seed=seed)
 
 
 def _with_world_checks(result: Result, game: Any) -> Result:
@@ -170,6 +146,7 @@ def synthesize_constrained(
     (default the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
     controller's generator.  ``options``: :func:`synthesize`'s settings (epsilon,
     budgets, truncation, ...), each honoured or refused by name (:func:`pose`)."""
-    posed = pose(model, constraints, then=then, settings=settings_from(**options),
-                 constrained=True)
+    from mitld_lp.routes.precedence import LP
+
+    posed = pose(model, constraints, then=then, settings=settings_from(**options), routes=LP)
     return solve(posed, costs=costs, seed=seed)

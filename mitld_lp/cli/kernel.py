@@ -26,7 +26,7 @@ from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
-from mitld_lp.problem import CONSTRAINED, ProblemError
+from mitld_lp.problem import ProblemError
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.sweep.spec import SweepError
@@ -289,7 +289,7 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     from mitld_lp.routes.stages import build_posed
 
     posed = posed_model(args, read_model(args), verb)
-    if posed.route == "sensed":  # the fully observed product would answer another problem
+    if posed.route.observation_based:  # the fully observed product: another problem
         raise ProblemError(f"{verb}: the model has sensors that miss events: its problem is "
                            "solved on the information-state product (solve, simulate, "
                            "export --controller); this command would read the fully "
@@ -387,7 +387,7 @@ def unconstrained(posed: Posed, verb: str) -> Posed:
     """``posed`` if it is not a constrained problem; a usage error naming the verb for a
     model whose file carries constraints (only ``solve``, ``sweep`` and ``pareto`` take
     them)."""
-    if posed.route != CONSTRAINED:
+    if not posed.route.takes_constraints:
         return posed
     raise UsageError(f"{verb}: the model has constraints, which only solve, simulate, "
                      "sweep, pareto and export --controller/--chain/--tree take")

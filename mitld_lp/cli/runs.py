@@ -250,7 +250,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
-            if posed.route == "sensed":  # mitld_lp.sensing: refused before any work
+            if posed.route.observation_based:  # mitld_lp.sensing: refused before work
                 raise UsageError("plot: the model has sensors that miss events; the policy "
                                  "map of an observation-based controller is not drawn yet")
             result = solve(posed)

@@ -87,7 +87,7 @@ def args_solve(p: argparse.ArgumentParser) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
-    from mitld_lp.problem import CONSTRAINED, pose
+    from mitld_lp.problem import pose
     from mitld_lp.synthesis import solve
 
     if args.backend == "direct" and args.solver != "CLARABEL":
@@ -101,7 +101,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     model = read_model(args)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args))
-    if posed.route == CONSTRAINED:
+    if posed.route.takes_constraints:
         return constrained.solve(args, posed, policy_file)
     r = solve(posed)
     summary = r.summary()

@@ -31,19 +31,20 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.mdp import MDP
-from mitld_lp.problem import CONSTRAINED, Posed, ProblemError
+from mitld_lp.problem import Posed, ProblemError, task_words
 from mitld_lp.result import Result, precision_check
 from mitld_lp.routes.constraints import (
     LEXICOGRAPHIC_TOL,
     Constraint,
     ConstraintError,
 )
-from mitld_lp.routes.stages import Built
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Quantity, merge
 from mitld_lp.solvers.result import Status
 
-__all__ = ["ConstraintValue",
+__all__ = ["ConstrainedRoute", "lp_refusals", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
 
 
@@ -111,8 +112,8 @@ def solve_constrained(posed: Posed, built: Built, *,
                       seed: int | None = 0) -> Result:
     """The constrained LP of a posed problem with point laws on its built joint product
     (one with no constraint is solved too: the trade-off curve's end points).  The
-    entry point is :func:`mitld_lp.synthesis.solve` (it refuses, naming it, a problem
-    this LP does not solve, :func:`mitld_lp.problem.check_constrained`)."""
+    entry point is :func:`mitld_lp.synthesis.solve` (:func:`mitld_lp.problem.pose`
+    refuses, naming it, a problem this LP does not solve: :class:`ConstrainedRoute`)."""
     if posed.robust or built.joint is None:
         raise ProblemError("solve_constrained: a law known only within a band, or a "
                            "product built without the constraints; mitld_lp.synthesize "
@@ -148,8 +149,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    common: dict[str, Any] = dict(route=CONSTRAINED, method="lp", merged=merged, joint=joint,
-                                  sta=sta, mdp=mdp, objective=posed.problem.objective,
+    common: dict[str, Any] = dict(route=ConstrainedRoute.name, method="lp", merged=merged,
+                                  joint=joint, sta=sta, mdp=mdp, objective=posed.problem.objective,
                                   model=model, epsilon=eps, then=then)
     margins = [0.0] * len(cons)
     found = None
@@ -314,3 +315,55 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
         constraints=tuple(values), secondary=None, steps=nan, checks=(),
         message=failed.message, controller=None, prob=None, stay=None,
         timings=dict(build or {}), **common)
+
+
+class ConstrainedRoute(Route):
+    """Constraints or a ``then`` objective with point laws: one Clarabel LP over the
+    joint product's occupancy measures, a randomised controller.  ``every``: it claims
+    problems without constraints too (the trade-off curve's end points,
+    :func:`mitld_lp.synthesis.synthesize_constrained`)."""
+
+    name = "constrained"
+    takes_constraints = True
+
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
+    def claims(self, posed: Posed) -> bool:
+        return (posed.problem.constrained or self.every) and not posed.robust
+
+    def refusal(self, posed: Posed) -> list[str]:
+        return lp_refusals(posed)
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_joint(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        return solve_constrained(posed, built, costs=costs, seed=seed)
+
+
+def lp_refusals(posed: Posed) -> list[str]:
+    """Why the constrained LP (one Clarabel LP over the joint product's occupancy
+    measures) does not solve ``posed`` as posed (empty: it does)."""
+    from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY, check
+
+    s, cons, fragment = posed.settings, posed.problem.constraints, posed.fragment
+    what = task_words(fragment, posed.problem.objective)
+    refused = []
+    if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
+        refused.append(f"{what} with constraints: not a supported class")
+    for c in cons:
+        if c.formula is not None and check(c.formula).fragment != CO_SAFE:
+            refused.append(f"constraint {c}: class {check(c.formula).fragment}; "
+                           "constraint formulas must be co-safe")
+    if s.method != "lp":
+        refused.append(f"method {s.method!r} with constraints: the constrained "
+                       "optimum is one occupancy LP (method 'lp')")
+    if s.solver != "CLARABEL" or s.backend == "cvxpy":
+        refused.append(f"solver {s.solver} / backend {s.backend} with constraints: the "
+                       "constrained LP is solved by Clarabel directly")
+    if s.decompose is True:
+        refused.append("decompose with constraints: the constrained LP is one LP over "
+                       "the whole product (its rows couple every block)")
+    return refused

@@ -37,9 +37,10 @@ import numpy as np
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
-from mitld_lp.problem import PLAIN, Posed, Settings
+from mitld_lp.problem import Posed, Settings, task_words
 from mitld_lp.result import Result, from_models
-from mitld_lp.routes.stages import Built
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_task
 from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
@@ -48,7 +49,7 @@ if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package
     from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
+__all__ = ["PlainRoute", "ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -325,7 +326,7 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     # truncated event came in time: the upper model's unreachable states
     upper = low if built.sense == "min" else high
     result = Result(
-        route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
+        route=PlainRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
         timings=timings, acceptance=accept, solve_cpu=solve_cpu,
@@ -335,3 +336,31 @@ def solve_plain(posed: Posed, built: Built) -> Result:
            **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
+
+
+class PlainRoute(Route):
+    """Point laws, no constraints, every sensor perfect: any supported task class
+    (co-safe, safety, obligation), both truncation models solved and certified; the one
+    route with an exact answer (:mod:`mitld_lp.exact`)."""
+
+    name = "plain"
+    exact = True
+
+    def claims(self, posed: Posed) -> bool:
+        return not (posed.robust or posed.problem.constrained or posed.sensed)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY
+
+        refused = [f"plain route: {why}" for why in posed.beyond_points().values()]
+        if posed.fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses others
+            refused.append(f"{task_words(posed.fragment, posed.problem.objective)}: "
+                           "not a supported class")
+        return refused
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_task(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Any = None,
+              seed: int | None = 0) -> Result:
+        return solve_plain(posed, built)

@@ -45,12 +45,13 @@ from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
+from mitld_lp.problem import Posed, ProblemError, pose, settings_from
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
-from mitld_lp.routes.stages import Built, build_posed
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_interval
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
     RobustIteration,
@@ -60,8 +61,8 @@ from mitld_lp.solvers.robust import (
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
 
-__all__ = ["is_robust", "synthesize_robust", "solve_robust", "RobustModelSolution",
-           "robust_game", "interval_model", "interval_export"]
+__all__ = ["RobustRoute", "POINTS_TOO", "is_robust", "synthesize_robust", "solve_robust",
+           "RobustModelSolution", "robust_game", "interval_model", "interval_export"]
 
 log = logging.getLogger(__name__)
 
@@ -234,12 +235,14 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
     ``method="lp"``: the policy's value by the LP and by iteration; ``"vi"``: by
     iteration only.  :func:`mitld_lp.synthesize` takes this route by itself for a
     problem with a band."""
-    posed = model if isinstance(model, Posed) else pose(model, settings=settings_from(**options))
-    if posed.route == CONSTRAINED:
-        raise ProblemError("synthesize_robust: a task with constraints is not solved "
-                           "robustly")
-    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress,
-                                           robust=True))
+    if isinstance(model, Posed):
+        if model.problem.constrained:
+            raise ProblemError("synthesize_robust: a task with constraints is not solved "
+                               "robustly")
+        posed = model
+    else:
+        posed = pose(model, settings=settings_from(**options), routes=(POINTS_TOO,))
+    return solve_robust(posed, build_interval(posed, posed.settings.progress))
 
 
 def solve_robust(posed: Posed, built: Built) -> Result:
@@ -273,7 +276,7 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
     result = Result(
-        route=ROBUST, model=model, objective=posed.problem.objective, method=s.method,
+        route=RobustRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
         acceptance=Acceptance(np.asarray(target, dtype=bool), None), goal=read_only(target),
         bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
@@ -329,6 +332,45 @@ def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_st
     dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
     return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory), dta
+
+
+class RobustRoute(Route):
+    """Some law known only within a band, no constraints: robust interval iteration on
+    the interval MDP, the policy's robust LP (Clarabel) for method lp.  ``points``: it
+    claims problems with point laws too (:func:`synthesize_robust`)."""
+
+    name = "robust"
+
+    def __init__(self, *, points: bool = False) -> None:
+        self.points = points
+
+    def claims(self, posed: Posed) -> bool:
+        return ((posed.robust or self.points) and not posed.problem.constrained
+                and not posed.sensed)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        s = posed.settings
+        refused = [f"robust route: {why}" for what, why in posed.beyond_points().items()
+                   if what != "band"]
+        if s.solver != "CLARABEL" or s.backend == "cvxpy":
+            refused.append(f"solver {s.solver} / backend {s.backend} with a law known only "
+                           "within a band: the robust policy LP is solved by Clarabel "
+                           "directly")
+        if s.decompose is True:
+            refused.append("decompose with a law known only within a band: robust "
+                           "synthesis has no block LPs")
+        return refused
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_interval(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Any = None,
+              seed: int | None = 0) -> Result:
+        return solve_robust(posed, built)
+
+
+#: The robust route claiming point laws too (:func:`synthesize_robust`).
+POINTS_TOO = RobustRoute(points=True)
 
 
 def structure_mdp(imdp: IntervalMDP) -> MDP:

@@ -19,12 +19,13 @@ import time
 
 import numpy as np
 
-from mitld_lp.problem import SENSED, Posed
+from mitld_lp.problem import Posed
 from mitld_lp.result import Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import solve_models
 from mitld_lp.routes.stages import Built
 from mitld_lp.sensing.observe import controller_of
+from mitld_lp.sensing.route import SensedRoute
 
 __all__ = ["solve_sensed"]
 
@@ -35,7 +36,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     """Solve a problem posed on the ``sensed`` route (module docs) on its built
     information-state product (:func:`mitld_lp.synthesis.solve`)."""
     model, s = posed.model, posed.settings
-    assert posed.route == SENSED and built.belief is not None
+    assert built.belief is not None  # built by SensedRoute.build
     eps = model.epsilon if s.epsilon is None else s.epsilon
     belief, dta = built.belief, built.dta
     t2 = time.perf_counter()
@@ -49,7 +50,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
                              complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(
-        route=SENSED, model=model, objective=posed.problem.objective, method=s.method,
+        route=SensedRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta, belief=belief,
         sensors=dict(belief.sensors),
         controller=controller_of(model.game, belief, low.policy),
