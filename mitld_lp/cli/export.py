@@ -158,7 +158,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
     said.update(status=str(r.status), certified=r.certified, lower=r.lower, upper=r.upper)
-    if r.route == "sensed" and (chain or tree):  # mitld_lp.sensing
+    if r.part.observation_based and (chain or tree):  # mitld_lp.sensing
         raise UsageError("export --chain/--tree: the model has sensors that miss events; "
                          "the controlled chain and the decision tree of an observation-based "
                          "controller are not written yet")

@@ -289,7 +289,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                    settings=settings_from(**model_options(args))))
     if r.controller is None:
         raise UsageError(f"simulate: no controller to run: the synthesis is {r.status}")
-    if r.route == "sensed":  # the hidden events and the sensors drawn (mitld_lp.sensing)
+    if r.part.observation_based:  # the hidden events and sensors drawn (mitld_lp.sensing)
         from mitld_lp.sensing.observe import simulate_sensed
 
         sim = simulate_sensed(model, r.controller, runs=args.runs, seed=args.seed,

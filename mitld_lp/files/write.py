@@ -53,7 +53,7 @@ from mitld_lp.files.rules import (
     read_limit,
     read_text,
 )
-from mitld_lp.report import POLICY_COLUMNS, policy_table
+from mitld_lp.report import POLICY_COLUMNS
 from mitld_lp.util import watch
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: the results import
@@ -364,8 +364,7 @@ def write_policy(
     :data:`~mitld_lp.report.POLICY_COLUMNS`, pending events joined by spaces, values
     with every digit) or ``.json`` (a list of objects), under the rule."""
     out = writable_path(path, overwrite=overwrite, suffixes=POLICY_SUFFIXES)
-    # the sensed route's rows are its information states (mitld_lp.sensing.solve)
-    rows = result.policy_table() if result.route == "sensed" else policy_table(result)
+    rows = result.policy_table()  # the route's table (the sensed one: information states)
     if out.suffix.lower() == ".json":
         with replacing(out) as handle:
             handle.write(json.dumps(rows, default=str) + "\n")

@@ -21,18 +21,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from mitld_lp import report
 from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import Posed, ProblemError, task_words
-from mitld_lp.result import Result, precision_check
+from mitld_lp.result import Part, Result, precision_check
 from mitld_lp.routes.constraints import (
     LEXICOGRAPHIC_TOL,
     Constraint,
@@ -41,10 +42,10 @@ from mitld_lp.routes.constraints import (
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
-from mitld_lp.solvers.constrained_model import Quantity, merge
+from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 from mitld_lp.solvers.result import Status
 
-__all__ = ["ConstrainedRoute", "lp_refusals", "ConstraintValue",
+__all__ = ["ConstrainedRoute", "ConstrainedPart", "lp_refusals", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
 
 
@@ -149,9 +150,10 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    common: dict[str, Any] = dict(route=ConstrainedRoute.name, method="lp", merged=merged,
-                                  joint=joint, sta=sta, mdp=mdp, objective=posed.problem.objective,
-                                  model=model, epsilon=eps, then=then)
+    common: dict[str, Any] = dict(route=ConstrainedRoute.name, method="lp", sta=sta,
+                                  mdp=mdp, objective=posed.problem.objective, model=model,
+                                  epsilon=eps)
+    whole = ConstrainedPart(then=then, merged=merged, joint=joint)
     margins = [0.0] * len(cons)
     found = None
     first = float("nan")  # the untightened LP's optimum
@@ -162,7 +164,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         low = lp(task_lo, True, lp_rows)
         if low.status != OPTIMAL:
             if found is None:
-                return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
+                return _unsolved(low, cons, rows("lower"), cost_vec, build, whole, **common)
             break  # a tightened LP failed: the last policy stands, its misses reported
         chosen, secondary = low, None
         if attempt == 0:
@@ -173,7 +175,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
             second = lp(q2, False, [*lp_rows, keep])
             if second.status != OPTIMAL:
                 if found is None:
-                    return _unsolved(second, cons, rows("lower"), cost_vec, build, **common)
+                    return _unsolved(second, cons, rows("lower"), cost_vec, build, whole,
+                                     **common)
                 break
             chosen, secondary = second, second.values[0]
         found = (low, chosen, secondary, _values(merged, chosen, cons, cost_vec, eta),
@@ -226,9 +229,10 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                                        chosen.stay, seed=seed)
     return Result(
         status=Status.OPTIMAL, lower=lower, upper=upper, value=value,
-        certified=all(c.passed for c in checks), constraints=values,
-        secondary=secondary, steps=steps, checks=tuple(checks), message=chosen.message,
-        controller=controller, prob=chosen.prob, stay=chosen.stay,
+        certified=all(c.passed for c in checks), checks=tuple(checks),
+        part=replace(whole, constraints=values, secondary=secondary, steps=steps,
+                     message=chosen.message, prob=chosen.prob, stay=chosen.stay),
+        controller=controller,
         timings={**(build or {}), "solve": time.perf_counter() - t0},
         complement=complement, precision=s.precision,
         width={"total": total, "truncation": apart, "solver": solver,
@@ -297,10 +301,11 @@ def _said(v: ConstraintValue) -> str:
 
 
 def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cost_vec: np.ndarray,
-              build: Mapping[str, float] | None, **common: Any) -> Result:
+              build: Mapping[str, float] | None, whole: ConstrainedPart,
+              **common: Any) -> Result:
     """An infeasible (or failed) answer; when infeasible, each constraint's tightest bound
     the others allow (a second LP: optimise that constraint's quantity subject to them)."""
-    merged = common["merged"]
+    merged = whole.merged
     values = []
     for i, c in enumerate(cons):
         bound = None
@@ -312,9 +317,34 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
     nan = float("nan")
     return Result(
         status=Status(failed.status), lower=nan, upper=nan, value=nan, certified=False,
-        constraints=tuple(values), secondary=None, steps=nan, checks=(),
-        message=failed.message, controller=None, prob=None, stay=None,
+        checks=(), controller=None,
+        part=replace(whole, constraints=tuple(values), message=failed.message),
         timings=dict(build or {}), **common)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ConstrainedPart(Part):
+    """The constrained routes' part of the answer: each constraint's value, the
+    lexicographic objective and its value, the expected steps, the solver's message, and
+    the randomised policy (``prob`` per choice, ``stay`` per state) on the ``merged``
+    model of the ``joint`` automaton."""
+
+    then: str | None = None
+    merged: Merged | None = None
+    joint: Joint | None = None
+    constraints: tuple[ConstraintValue, ...] = ()
+    secondary: float | None = None
+    steps: float = float("nan")
+    message: str = ""
+    prob: np.ndarray | None = None
+    stay: np.ndarray | None = None
+    randomised = True
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        return report.randomised_table(result)
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        return report.constrained_summary(result)
 
 
 class ConstrainedRoute(Route):

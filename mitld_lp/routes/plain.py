@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
@@ -38,7 +38,7 @@ from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import Posed, Settings, task_words
-from mitld_lp.result import Result, from_models
+from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_task
 from mitld_lp.util.heap import release_free_memory
@@ -49,7 +49,8 @@ if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package
     from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["PlainRoute", "ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
+__all__ = ["PlainRoute", "PlainPart", "ModelSolution", "solve_models", "solve_plain",
+           "TRIM_FROM_TRANSITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -329,13 +330,25 @@ def solve_plain(posed: Posed, built: Built) -> Result:
         route=PlainRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
-        timings=timings, acceptance=accept, solve_cpu=solve_cpu,
+        timings=timings, part=PlainPart(low, high, accept), solve_cpu=solve_cpu,
         **{**from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
                          truncated=bool(mdp.truncated.any()), sense=built.sense,
                          exact=fields.get("exact")),
            **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlainPart(Part):
+    """The plain route's part of the answer: the two solved models (the controller's,
+    the bound's: :func:`solve_models`) and the target the bracket is about; the policy
+    keeps a task's safety part in its accepting end components."""
+
+    lower_model: ModelSolution = field()  # required (Part's default is for the other routes)
+    upper_model: ModelSolution = field()
+    acceptance: Acceptance = field()
+    kept_components = True
 
 
 class PlainRoute(Route):

@@ -30,13 +30,13 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp import defaults
+from mitld_lp import defaults, report
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
@@ -48,7 +48,7 @@ from mitld_lp.model import Model
 from mitld_lp.problem import Posed, ProblemError, pose, settings_from
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
-from mitld_lp.result import Result, from_models
+from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_interval
@@ -61,8 +61,9 @@ from mitld_lp.solvers.robust import (
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
 
-__all__ = ["RobustRoute", "POINTS_TOO", "is_robust", "synthesize_robust", "solve_robust",
-           "RobustModelSolution", "robust_game", "interval_model", "interval_export"]
+__all__ = ["RobustRoute", "RobustPart", "POINTS_TOO", "is_robust", "synthesize_robust",
+           "solve_robust", "RobustModelSolution", "robust_game", "interval_model",
+           "interval_export"]
 
 log = logging.getLogger(__name__)
 
@@ -278,7 +279,8 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     result = Result(
         route=RobustRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
-        acceptance=Acceptance(np.asarray(target, dtype=bool), None), goal=read_only(target),
+        part=RobustPart(low, high, Acceptance(np.asarray(target, dtype=bool), None),
+                        read_only(target)),
         bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
                                    s.precision, truncated=bool(imdp.truncated.any())))
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
@@ -332,6 +334,22 @@ def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_st
     dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
     return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory), dta
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RobustPart(Part):
+    """The robust route's part of the answer: the two solved models (robust iteration,
+    the policy's robust LP), the target and the states that satisfy the task whatever
+    law of the bands nature plays; the model solved is an interval MDP."""
+
+    lower_model: RobustModelSolution = field()  # required (Part's default is for the other routes)
+    upper_model: RobustModelSolution = field()
+    acceptance: Acceptance = field()
+    goal: np.ndarray = field()
+    interval = True
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        return report.robust_summary(result)
 
 
 class RobustRoute(Route):

@@ -246,9 +246,9 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
     if nominal.status != OPTIMAL:  # infeasible at one law of the bands: at every law too
-        return replace(nominal, bands=bands, message=(
+        return replace(nominal, bands=bands, part=replace(nominal.part, message=(
             f"{nominal.message}; at the middle law of the bands (a law within them: no "
-            "policy meets the constraints under every law either)"))
+            "policy meets the constraints under every law either)")))
     t1 = time.perf_counter()
     minimise = posed.minimise
     # the nominal answer is read in the task's terms; the robust evaluation works on the
@@ -313,9 +313,9 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
         upper = raw_upper
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
-                   constraints=tuple(values),
-                   certified=all(c.passed for c in checks), checks=checks,
-                   message=message, bands=bands, timings=timings, complement=complement,
+                   part=replace(chosen.part, constraints=tuple(values), message=message),
+                   certified=all(c.passed for c in checks), checks=checks, bands=bands,
+                   timings=timings, complement=complement,
                    width={"total": width, "bands": width})
 
 

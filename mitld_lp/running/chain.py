@@ -89,7 +89,7 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     or a constrained result) under its controller (or ``controller``, one built on the
     same product).  A robust result (a law within a band) is refused: its controller
     runs on an interval model, whose controlled system is no Markov chain."""
-    if result.route == "constrained":  # a constrained result: the joint automaton's product
+    if result.part.randomised:  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching
