@@ -41,9 +41,7 @@ from mitld_lp.logic.fragment import CO_SAFE, SAFETY
 __all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "OBJECTIVES",
            "complement_class", "task_words", "band_text"]
 
-OBJECTIVES = ("max", "min")
-METHODS = ("lp", "vi")
-BACKENDS = ("auto", "cvxpy", "direct")
+OBJECTIVES = defaults.OBJECTIVES
 
 
 class ProblemError(ValueError):
@@ -111,10 +109,10 @@ class Settings:
     def checked(self) -> Settings:
         """These settings, each value checked (a :class:`ProblemError` names the first
         that is wrong); the solver's name upper-cased."""
-        if self.method not in METHODS:
+        if self.method not in defaults.METHODS:
             raise ProblemError(f"method: must be 'lp' or 'vi', got {self.method!r}")
-        if self.backend not in BACKENDS:
-            raise ProblemError(f"backend: must be one of {', '.join(BACKENDS)}, "
+        if self.backend not in defaults.BACKENDS:
+            raise ProblemError(f"backend: must be one of {', '.join(defaults.BACKENDS)}, "
                                f"got {self.backend!r}")
         if not isinstance(self.solver, str) or not self.solver:
             raise ProblemError(f"solver: must be a solver's name, got {self.solver!r}")
@@ -129,26 +127,20 @@ class Settings:
             if solver not in installed:
                 raise ProblemError(f"solver: unknown or not installed LP solver "
                                    f"{self.solver!r} (installed: {', '.join(installed)})")
-        if self.time_limit is not None and not (
-                isinstance(self.time_limit, int | float) and not isinstance(self.time_limit, bool)
-                and 0 <= self.time_limit < float("inf")):
-            raise ProblemError(f"time_limit: must be a finite number of seconds >= 0 or "
-                               f"None, got {self.time_limit!r}")
-        for name in ("tol", "certify_tol", "precision"):
+        for name, rule in _RULES.items():  # the rule every surface applies (defaults)
             v = getattr(self, name)
-            if isinstance(v, bool) or not (isinstance(v, int | float) and 0 < v < 1):
-                raise ProblemError(f"{name}: must be a number in (0, 1), got {v!r}")
-        for name in ("max_states", "max_automaton_states"):
-            v = getattr(self, name)
-            if v is not None and not (isinstance(v, int) and not isinstance(v, bool)
-                                      and v >= 1):
-                raise ProblemError(f"{name}: must be a whole number >= 1, got {v!r}")
-        if not isinstance(self.exact, bool):
-            raise ProblemError(f"exact: must be True or False, got {self.exact!r}")
-        if self.max_memory is not None and not (
-                isinstance(self.max_memory, int) and self.max_memory >= 1):
-            raise ProblemError(f"max_memory: must be a number of bytes >= 1, "
-                               f"got {self.max_memory!r}")
+            if v is not None:
+                try:
+                    rule(v)
+                except ValueError as exc:
+                    raise ProblemError(f"{name}: {exc}") from None
+        if self.decompose is not None and not isinstance(self.decompose, bool):
+            raise ProblemError(f"decompose: must be True, False or None, got "
+                               f"{self.decompose!r}")
+        for name in ("clock_reduction", "exact"):
+            if not isinstance(getattr(self, name), bool):
+                raise ProblemError(f"{name}: must be True or False, got "
+                                   f"{getattr(self, name)!r}")
         try:
             eps = None if self.epsilon is None else defaults.check_epsilon(self.epsilon)
         except ValueError as exc:
@@ -168,6 +160,15 @@ class Settings:
                                                       defaults.MAX_AUTOMATON_STATES)),
                         max_memory=pick("max_memory", None),
                         time_limit=pick("time_limit", None))
+
+
+#: The numbers of :class:`Settings`, each with its one rule (:mod:`mitld_lp.defaults`:
+#: the command line, a model file's ``[budgets]`` and a sweep's ``[solve]`` apply the
+#: same).
+_RULES = {"time_limit": defaults.check_seconds, "max_states": defaults.check_count,
+          "max_automaton_states": defaults.check_count, "max_memory": defaults.check_bytes,
+          "tol": defaults.check_unit, "certify_tol": defaults.check_unit,
+          "precision": defaults.check_unit}
 
 
 def _replace(s: Settings, **changes: Any) -> Settings:

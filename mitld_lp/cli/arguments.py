@@ -38,44 +38,25 @@ def bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
     return parse_int
 
 
-_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40, "P": 1 << 50,
-          "E": 1 << 60}
-
-MAX_MEMORY_SIZE = (1 << 63) - 1
-"""The largest size accepted (8E less a byte): a byte count is a signed 64-bit integer
-to the operating system, and no machine comes near it."""
-
-
 def memory_size(text: str) -> int:
-    """A byte count with an optional binary unit: ``500M``, ``4G``, ``1.5G``, ``2P``
-    (``K M G T P E``, each 1024 times the last; a trailing ``B`` or ``iB`` is allowed)."""
-    body = text.strip().upper().removesuffix("B").removesuffix("I")
-    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
+    """A byte count with an optional binary unit (:func:`mitld_lp.defaults.parse_size`)."""
     try:
-        number = float(body[: len(body) - len(unit)])
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a size such as 4G or 500M, got {text!r}") from None
-    if not number == number or number in (float("inf"), float("-inf")):  # nan, inf
-        raise argparse.ArgumentTypeError(f"must be a finite size, got {text!r}")
-    value = number * _UNITS[unit]
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive size (at least 1 byte), got "
-                                         f"{text!r}")
-    if value > MAX_MEMORY_SIZE:
-        raise argparse.ArgumentTypeError(f"must be below 8E (2^63 bytes), got {text!r}")
-    return int(value)
+        return defaults.parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def seconds(text: str) -> float:
-    """A positive, finite number of seconds (``--time-limit``)."""
+    """A positive, finite number of seconds (``--time-limit``,
+    :func:`mitld_lp.defaults.check_seconds`)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not value > 0.0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
-    return value
+    try:
+        return defaults.check_seconds(value, repr(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def solver_name(text: str) -> str:

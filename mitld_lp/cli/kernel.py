@@ -31,6 +31,7 @@ from mitld_lp.product import ProductTooLarge
 from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.util import progress
+from mitld_lp.util.clock import Deadline
 from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
@@ -354,9 +355,7 @@ def apply_file_time_limit(args: argparse.Namespace) -> None:
 def _time_left(args: argparse.Namespace) -> float | None:
     """Seconds left of ``--time-limit`` (None without one): the solvers stop with status
     ``time_limit`` and their bracket so far; the command's own watchdog is the backstop."""
-    if args.time_limit is None:
-        return None
-    return max(args.time_limit - (time.monotonic() - args.started), 0.0)
+    return Deadline.after(args.time_limit, args.started, time.monotonic).left()
 
 
 def _say(message: str) -> None:

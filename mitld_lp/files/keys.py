@@ -138,10 +138,6 @@ _BUDGET_KEYS = ("max_states", "max_world_states", "max_automaton_states", "max_m
 def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
     """The ``[budgets]`` table: whole numbers >= 1 of states, a size (a number of bytes
     or a text such as ``"4G"``) of memory, a positive number of seconds."""
-    from argparse import ArgumentTypeError
-
-    from mitld_lp.cli.arguments import memory_size
-
     if "budgets" not in doc:
         return {}
     table = ctx.table(doc["budgets"], "budgets")
@@ -149,22 +145,15 @@ def budgets_table(doc: Mapping[str, Any], ctx: _Context) -> dict[str, float]:
     out: dict[str, float] = {}
     for key, value in table.items():
         where = f"budgets.{key}"
-        if key == "max_memory" and isinstance(value, str):
-            try:
-                out[key] = memory_size(value)
-            except ArgumentTypeError as exc:
-                raise ctx.error(where, str(exc)) from None
-            continue
-        if key == "time_limit":
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (
-                    0 < value < float("inf")):
-                raise ctx.error(where, f"must be a positive number of seconds, got "
-                                       f"{_show(value)}")
-            out[key] = float(value)
-            continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ctx.error(where, f"must be a whole number >= 1, got {_show(value)}")
-        out[key] = value
+        try:  # the rules every surface applies (mitld_lp.defaults)
+            if key == "max_memory":
+                out[key] = defaults.check_memory(value, _show(value))
+            elif key == "time_limit":
+                out[key] = defaults.check_seconds(value, _show(value))
+            else:
+                out[key] = defaults.check_count(value, _show(value))
+        except ValueError as exc:
+            raise ctx.error(where, str(exc)) from None
     return out
 
 

@@ -44,6 +44,7 @@ from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import INFEASIBLE, OPTIMAL, Row, Solved, optimise
 from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 from mitld_lp.solvers.result import Status
+from mitld_lp.util.clock import Deadline
 
 __all__ = ["ConstrainedRoute", "ConstrainedPart", "lp_refusals", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
@@ -134,7 +135,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
         posed.problem.then
     cost_map = dict(model.costs if costs is None else costs)
-    deadline = None if s.time_limit is None else t0 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t0)
     eps = model.epsilon if s.epsilon is None else s.epsilon
     merged = merge(mdp, joint)
     cost_vec = cost_vector(mdp, cost_map)
@@ -144,9 +145,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         return rows_for(cons, which)
 
     def lp(objective: Quantity, maximise: bool, lp_rows: list[Row]) -> Solved:
-        left = None if deadline is None else max(deadline - time.perf_counter(), 0.0)
         return optimise(merged, objective, maximise, lp_rows, costs=cost_vec,
-                        tol=s.tol * 0.1, time_limit=left)
+                        tol=s.tol * 0.1, time_limit=deadline.left())
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)

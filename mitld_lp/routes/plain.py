@@ -41,11 +41,11 @@ from mitld_lp.problem import Posed, Settings, task_words
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_task
+from mitld_lp.util.clock import Deadline
 from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
-    from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
@@ -97,50 +97,27 @@ class ModelSolution:
                              "mitld_lp.solvers.quotient.reduce(mdp, target) to rebuild it")
 
 
-@dataclass(frozen=True, slots=True)
-class _Settings:
-    """How each of the two models is solved and certified (:func:`synthesize`'s
-    arguments, typed once)."""
-
-    method: str
-    solver: str
-    backend: Backend
-    tol: float
-    precision: float  # the relative precision asked (the iteration's and the bracket's)
-    eta: float  # the probabilities' allowance (mitld_lp.solvers.certify.model_eta)
-    complement: bool  # the answer is 1 - the values (a minimum read back)
-    progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
-    decompose: bool
-    deadline: float  # time.perf_counter() past which the solvers stop; inf: none
-
-    def remaining(self) -> float | None:
-        """Seconds left before the deadline (None: no deadline)."""
-        if self.deadline == float("inf"):
-            return None
-        return max(0.0, self.deadline - time.perf_counter())
-
-
-def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
-              how: _Settings) -> LPResult | None:
+def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
+              deadline: Deadline) -> LPResult | None:
     """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
     :class:`Quotient`, made by the one analysis of the product both models share
     (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
     iteration (both models are iterated in one pass, :func:`_iterate`)."""
-    if how.method != "lp":
+    if s.method != "lp":
         return None
     from mitld_lp.solvers.lp import solve_lp
 
     return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient,
-                    sense=quotient.sense, solver=how.solver, backend=how.backend,
-                    tol=how.tol, precision=how.precision, decompose=how.decompose,
-                    time_limit=how.remaining(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0, progress=how.progress)
+                    sense=quotient.sense, solver=s.solver, backend=s.backend,
+                    tol=s.tol, precision=s.precision, decompose=s.decompose is not False,
+                    time_limit=deadline.left(), bounds=(it.lower, it.upper),
+                    everywhere=quotient.initial < 0, progress=s.progress)
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
                it: IterationResult, lp: LPResult | None, which: str,
-               how: _Settings) -> ModelSolution:
+               s: Settings, eta: float, complement: bool) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
     quotient's matrix is released by then.  Both bounds are checked on each model (the
     answer reads the lower model's lower one and the upper model's upper one), and that
@@ -176,15 +153,15 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     cert = certify(mdp, target, policy, sense=sense, zero=decided.zero,
                    one=decided.one if minimum else None, mec_of=None if minimum else mec_of,
                    layers=layers, fallback_lower=it.lower, fallback_upper=it.upper,
-                   eta=how.eta, precision=how.precision,
-                   complement=how.complement and not minimum)
+                   eta=eta, precision=s.precision, complement=complement and not minimum)
     checks.extend(cert.checks)
     return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
                          (it.value_lower, it.value_upper), lp, it, decided.unreachable,
                          tuple(checks), sense, (cert.lower, cert.upper), decided)
 
 
-def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
+def _iterate(mdp: MDP, quotients: list[Quotient], s: Settings,
+             deadline: Deadline) -> list[IterationResult]:
     """Interval iteration of the models in one pass over their shared quotient.  When the
     graph analysis decides the initial state, every component is still brought below the
     tolerance (``gap="max"``), as the LP then solves every state (``everywhere``): the
@@ -195,9 +172,9 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     decided = quotients[0].initial < 0
     # the relative precision where the bracket is the answer's (the initial state);
     # when the graph decides that, the LP solves every state and the bounds only prune
-    return interval_iterations(mdp, quotients, tol=how.tol,
-                               precision=None if decided else how.precision,
-                               progress=how.progress, time_limit=how.remaining(),
+    return interval_iterations(mdp, quotients, tol=s.tol,
+                               precision=None if decided else s.precision,
+                               progress=s.progress, time_limit=deadline.left(),
                                gap="max" if decided else "initial")
 
 
@@ -236,20 +213,19 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     from mitld_lp.solvers.certify import ETA
     from mitld_lp.solvers.graph import Sense
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, s.precision,
-                    ETA if eta is None else eta, complement, s.progress,
-                    s.decompose is not False,
-                    float("inf") if s.time_limit is None else t0 + s.time_limit)
+    deadline = Deadline.after(s.time_limit, t0)
     quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
-    its = _iterate(mdp, quotients, how)
-    lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
+    its = _iterate(mdp, quotients, s, deadline)
+    lps = [_solve_lp(mdp, q, it, s, deadline) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
     kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
             for q in quotients]
     del quotients
-    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which
+    eta = ETA if eta is None else eta
+    solutions = [_certified(mdp, *k, it, lp, which, s, eta, complement)
+                 for k, it, lp, which
                  in zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
@@ -274,7 +250,7 @@ def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
     from mitld_lp.solvers.result import Status
 
     s = posed.settings
-    deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t0)
     minimum = built.sense == "min"
     complemented = posed.minimise and not minimum
     # exact_answer takes the truncation models in their order (lower, upper); for a
@@ -282,7 +258,7 @@ def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
     lower_trunc, upper_trunc = (high, low) if minimum else (low, high)
     answer, (exact_lower, exact_upper), check = exact_answer(
         built.mdp, posed.model.game, built.sta, (lower_trunc, upper_trunc), accept.goal,
-        sense=built.sense, complemented=complemented, deadline=deadline)
+        sense=built.sense, complemented=complemented, deadline=deadline.at)
     if answer is None:  # the float certificate stands, the exact check failed
         first = replace(low, checks=(*low.checks, check))
         return {"status": Status.TIME_LIMIT}, first, (first if high is low else high)

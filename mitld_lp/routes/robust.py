@@ -60,6 +60,7 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
+from mitld_lp.util.clock import Deadline
 
 __all__ = ["RobustRoute", "RobustPart", "POINTS_TOO", "is_robust", "synthesize_robust",
            "solve_robust", "RobustModelSolution", "robust_game", "interval_model",
@@ -104,27 +105,24 @@ class RobustModelSolution:
 
 
 def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
-           method: str, tol: float, deadline: float, layers: tuple[np.ndarray, np.ndarray],
+           method: str, tol: float, deadline: Deadline, layers: tuple[np.ndarray, np.ndarray],
            eta: float, precision: float, complement: bool) -> RobustModelSolution:
     """One model's robust optimum, the policy read off its lower bound, the policy's own
     robust value, and the certificate: the policy's value against every law of the
     bands bounded from below, the robust optimum from above, both in exact arithmetic
     (:func:`_certificate`)."""
-    def remaining() -> float | None:
-        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
-
     s0 = imdp.initial
-    it = robust_interval_iteration(game, target, tol=tol, time_limit=remaining())
+    it = robust_interval_iteration(game, target, tol=tol, time_limit=deadline.left())
     choice = robust_policy(game, target, it.lower, tie=max(tol, 1e-12))
     ev = robust_interval_iteration(game.restrict(choice), target, tol=tol,
-                                   time_limit=remaining())
+                                   time_limit=deadline.left())
     checks = [Check("robust iteration converged", it.status is Status.OPTIMAL, it.message),
               Check("policy evaluation converged", ev.status is Status.OPTIMAL, ev.message)]
     values = ev.lower
     status = it.status if it.status is not Status.OPTIMAL else ev.status
     lp = None
     if method == "lp":
-        lp = policy_lp(game, target, choice, tol=tol, time_limit=remaining())
+        lp = policy_lp(game, target, choice, tol=tol, time_limit=deadline.left())
         checks.append(Check("policy LP solved", lp.status is Status.OPTIMAL,
                             f"{lp.status.value}: {lp.message}"))
     lower, upper, proved = _certificate(game, s0, target, choice, it, ev, layers, eta,
@@ -254,7 +252,7 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     assert isinstance(imdp, IntervalMDP)
     t2 = time.perf_counter()
     game = robust_game(imdp)
-    deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t2)
     from mitld_lp.solvers.certify import RowModel, model_eta, support_layers
 
     target, stay = _goal(game, imdp, dta, np.asarray(imdp.target, dtype=bool))
