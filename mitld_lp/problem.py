@@ -185,6 +185,10 @@ def settings_from(**kwargs: Any) -> Settings:
         if not isinstance(trunc, Mapping):
             raise ProblemError(f"truncation: must map event names to steps, got {trunc!r}")
         kwargs["truncation"] = tuple(sorted((str(k), v) for k, v in trunc.items()))
+    unknown = sorted(set(kwargs) - set(Settings.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"unknown setting {unknown[0]!r} (settings: "
+                        f"{', '.join(Settings.__dataclass_fields__)})")
     return Settings(**kwargs).checked()
 
 

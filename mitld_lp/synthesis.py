@@ -13,48 +13,27 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any
 
-from mitld_lp import defaults
 from mitld_lp.checks import Check
 from mitld_lp.model import Model
-from mitld_lp.problem import Posed, pose, settings_from
+from mitld_lp.problem import Posed, Settings, pose, settings_from
 from mitld_lp.result import Result
 from mitld_lp.routes.stages import Built, build_posed, build_product
-
-if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
-    from mitld_lp.solvers.lp import Backend
 
 __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
            "Result", "Check"]
 
 log = logging.getLogger(__name__)
 
-Method = Literal["lp", "vi"]
-
-
 def synthesize(
     model: Model,
     *,
-    epsilon: float | None = None,
-    method: Method = "lp",
-    solver: str = defaults.SOLVER,
-    backend: Backend = "auto",
-    clock_reduction: bool = True,
-    truncation: Mapping[str, int] | None = None,
-    max_states: int | None = None,
-    max_automaton_states: int | None = None,
-    max_memory: int | None = None,
-    tol: float = defaults.TOL,
-    certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool | None = None,
-    precision: float = defaults.PRECISION,
-    decompose: bool | None = None,
-    time_limit: float | None = None,
     constraints: Iterable[Any] = (),
     then: str | None = None,
     objective: str | None = None,
-    exact: bool = False,
+    settings: Settings | None = None,
+    **options: Any,
 ) -> Result:
     """Maximise (or, with ``objective="min"`` or the model's own objective, minimise)
     the probability that the model's world satisfies its MITLD spec.
@@ -80,16 +59,19 @@ def synthesize(
     fraction, ``Result.exact``, the bracket then its point (:mod:`mitld_lp.exact`; the
     plain route, models of modest size, laws and worlds with rational probabilities).
 
+    ``options`` are the fields of :class:`~mitld_lp.problem.Settings` (those above and
+    ``clock_reduction``, ``max_states``, ``max_automaton_states``, ``max_memory``,
+    ``tol``, ``certify_tol``), each checked by the rule every surface applies; or give
+    one ``settings=`` record instead.
+
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
     :class:`~mitld_lp.problem.ProblemError` naming it.
     """
-    settings = settings_from(
-        method=method, solver=solver, backend=backend, clock_reduction=clock_reduction,
-        decompose=decompose, time_limit=time_limit, max_states=max_states,
-        max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
-        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
-        precision=precision, exact=exact)
+    if settings is not None and options:
+        raise TypeError(f"synthesize: give settings= or its keywords, not both (got "
+                        f"settings and {', '.join(sorted(options))})")
+    settings = settings if settings is not None else settings_from(**options)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 

@@ -114,3 +114,15 @@ def test_the_time_left_is_counted_from_the_start_on_the_clock_given() -> None:
     now[0] = 104.0
     assert deadline.left() == 0.0
     assert Deadline.after(None).left() is None
+
+
+def test_synthesize_takes_the_settings_as_keywords_or_as_one_record() -> None:
+    from mitld_lp import synthesize
+
+    model = loads_model(MODEL)
+    with pytest.raises(TypeError, match="unknown setting 'epsilom'"):
+        synthesize(model, epsilom=0.1)
+    with pytest.raises(TypeError, match="not both"):
+        synthesize(model, settings=Settings(), epsilon=0.1)
+    with pytest.raises(ProblemError, match="time_limit: must be a positive number"):
+        synthesize(model, settings=Settings(time_limit=0))

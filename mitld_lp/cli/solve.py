@@ -65,10 +65,10 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def args_solve(p: argparse.ArgumentParser) -> None:
     _args_model(p, many=True)
-    p.add_argument("--method", choices=("lp", "vi"), default="lp")
+    p.add_argument("--method", choices=defaults.METHODS, default="lp")
     p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
-    p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
+    p.add_argument("--backend", choices=defaults.BACKENDS, default="auto",
                    help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
                         "(any solver); auto (default): direct for Clarabel, else cvxpy")
     p.add_argument("--no-decompose", action="store_true",

@@ -94,7 +94,7 @@ def build_product(
     automaton, whose states cost thousands of times more than the product's, also no
     more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`); the product needs at
     most ``max_memory`` bytes (default: half the machine's memory)."""
-    if objective not in ("max", "min"):
+    if objective not in defaults.OBJECTIVES:
         raise ValueError(f"objective: must be 'max' or 'min', got {objective!r}")
     t0 = time.perf_counter()
     dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
