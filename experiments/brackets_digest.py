@@ -12,8 +12,9 @@ outputs::
     PYTHONPATH=B python experiments/brackets_digest.py --quick > b.txt
     diff a.txt b.txt
 
-``--quick`` leaves out the slower models' minima.  Nothing is timed: this is not a
-speed claim, so there is no peer beside it.
+``--quick`` leaves out the slower models' minima; the digest is also written to
+``--out`` (default ``experiments/out``, with ``--quick`` the scratch folder).  Nothing is
+timed: this is not a speed claim, so there is no peer beside it.
 """
 
 from __future__ import annotations
@@ -107,21 +108,22 @@ def _composition() -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
+    import _common as C
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="leave out the slow minima")
-    args = ap.parse_args(argv)
+    from mitld_lp import load_model, synthesize
+
+    args = C.parser(__doc__.splitlines()[0]).parse_args(argv)
+    lines = []
     for path in sorted(MODELS.glob("*.toml")):
-        print(f"solve {path.name}: {_cli('solve', path.name)}")
+        lines.append(f"solve {path.name}: {_cli('solve', path.name)}")
         if not args.quick or path.name in ("red_light.toml", "corridor.toml"):
-            from mitld_lp import load_model, synthesize
-
             least = synthesize(load_model(path), objective="min")
-            print(f"objective min {path.name}: {_bracket(least)}")
-    print(f"solve --exact red_light.toml: {_cli('solve', 'red_light.toml', '--exact')}")
-    for line in _composition():
-        print(line)
+            lines.append(f"objective min {path.name}: {_bracket(least)}")
+    lines.append(f"solve --exact red_light.toml: "
+                 f"{_cli('solve', 'red_light.toml', '--exact')}")
+    lines += _composition()
+    print("\n".join(lines))
+    C.write_text(C.out_dir(args) / "brackets_digest.txt", "\n".join(lines) + "\n")
     return 0
 
 
