@@ -152,7 +152,7 @@ def check_bytes(value: object, shown: str | None = None) -> int:
     """``value`` as a memory budget: a whole number of bytes from 1 to
     :data:`MAX_MEMORY_SIZE`."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not (
-            1 <= value <= MAX_MEMORY_SIZE):
+            1 <= int(value) <= MAX_MEMORY_SIZE):
         raise ValueError(f"must be a number of bytes from 1 to 2^63 - 1, got "
                          f"{shown or repr(value)}")
     return int(value)

@@ -33,10 +33,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp import defaults
 from mitld_lp.logic.fragment import CO_SAFE, SAFETY
+
+if TYPE_CHECKING:  # the routes import this module
+    from mitld_lp.routes.route import Route
 
 __all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "OBJECTIVES",
            "complement_class", "task_words", "band_text"]
@@ -215,13 +218,13 @@ class Problem:
 class Posed:
     """A problem accepted by one route, with its checked settings.
 
-    ``route``: the :class:`~mitld_lp.routes.route.Route` that owns it (``None`` while
-    the routes are asked); ``fragment``: the class of the task as it is solved (the
+    ``route``: the :class:`~mitld_lp.routes.route.Route` that owns it (the bare base
+    class while the routes are asked); ``fragment``: the class of the task as it is solved (the
     complement's for ``objective="min"``); ``robust``: some law is a band."""
 
     problem: Problem
     settings: Settings
-    route: Any  # mitld_lp.routes.route.Route (the routes import this module)
+    route: Route  # a bare Route only while pose asks the routes
     fragment: str
     robust: bool
 
@@ -256,7 +259,7 @@ class Posed:
 
 def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None,
          settings: Settings | None = None, objective: str | None = None,
-         routes: Sequence[Any] | None = None) -> Posed:
+         routes: Sequence[Route] | None = None) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
     texts or :class:`~mitld_lp.routes.constraints.Constraint` records, after the model's own;
     ``objective``: the model's unless given; ``routes``: the routes to ask, in
@@ -268,6 +271,7 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     from mitld_lp.model import Model
     from mitld_lp.routes import precedence
     from mitld_lp.routes.constraints import THEN, ConstraintError, parse_constraints
+    from mitld_lp.routes.route import Route
 
     if not isinstance(model, Model):
         raise TypeError(
@@ -298,7 +302,7 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
                 f"truncation: {unknown[0]!r} is not an event of the model (events: "
                 f"{', '.join(sorted(model.distributions)) or 'none'})")
     robust = any(d.is_ambiguous for d in model.distributions.values())
-    asked = Posed(Problem(model, cons, then, goal, unread), s, None, fragment, robust)
+    asked = Posed(Problem(model, cons, then, goal, unread), s, Route(), fragment, robust)
     candidates = precedence.ROUTES if routes is None else routes
     owner = next((r for r in candidates if r.claims(asked)), None)
     if owner is None:  # no route's kind: every route's reasons

@@ -306,6 +306,7 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
     """An infeasible (or failed) answer; when infeasible, each constraint's tightest bound
     the others allow (a second LP: optimise that constraint's quantity subject to them)."""
     merged = whole.merged
+    assert merged is not None  # solve_merged's part has its model
     values = []
     for i, c in enumerate(cons):
         bound = None

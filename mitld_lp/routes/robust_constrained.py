@@ -46,6 +46,7 @@ from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
 from mitld_lp.result import Result
 from mitld_lp.routes.constrained import (
+    ConstrainedPart,
     ConstraintValue,
     lp_refusals,
     quantity_of,
@@ -245,6 +246,7 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
                            build=built.timings)
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
+    assert isinstance(nominal.part, ConstrainedPart)  # solve_merged's answer
     if nominal.status != OPTIMAL:  # infeasible at one law of the bands: at every law too
         return replace(nominal, bands=bands, part=replace(nominal.part, message=(
             f"{nominal.message}; at the middle law of the bands (a law within them: no "
@@ -312,6 +314,7 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     else:
         upper = raw_upper
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
+    assert isinstance(chosen.part, ConstrainedPart)
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
                    part=replace(chosen.part, constraints=tuple(values), message=message),
                    certified=all(c.passed for c in checks), checks=checks, bands=bands,
