@@ -1,5 +1,8 @@
 """The library's defaults, each defined once; every stage and the CLI read them here,
-with the one range check of the truncation budget."""
+with the one range check of each setting a user gives (the truncation budget, seconds,
+counts, bytes, tolerances: the library, the command line, a model file's ``[budgets]``
+and a sweep's ``[solve]`` apply the same rule, each naming the place) and the names a
+method, a backend and an objective may have."""
 
 from __future__ import annotations
 
@@ -20,7 +23,17 @@ __all__ = [
     "MAX_STEPS_LIMIT",
     "EXACT_MAX_TRANSITIONS",
     "EXACT_MAX_BLOCK",
+    "METHODS",
+    "BACKENDS",
+    "OBJECTIVES",
+    "MAX_MEMORY_SIZE",
     "check_epsilon",
+    "check_unit",
+    "check_seconds",
+    "check_count",
+    "check_bytes",
+    "check_memory",
+    "parse_size",
 ]
 
 EPSILON = 0.01
@@ -81,15 +94,91 @@ numbers at 1,000 states, growing with the cube (checked before each solve, and o
 floating-point policy's chain before the exact work)."""
 
 
-def check_epsilon(value: object) -> float:
-    """``value`` as a truncation budget: a real number strictly between 0 and 1.
+#: The solve methods: the occupancy LP (with interval iteration as its cross-check) or
+#: interval iteration alone.
+METHODS = ("lp", "vi")
+#: How an LP reaches its solver: cvxpy for any solver but Clarabel, Clarabel directly.
+BACKENDS = ("auto", "cvxpy", "direct")
+#: What is optimised: the probability's maximum or minimum.
+OBJECTIVES = ("max", "min")
 
-    Raises ``ValueError("must be a number in (0, 1), got ...")``; the caller names the
-    place (a key path, an option, an argument).
-    """
+MAX_MEMORY_SIZE = (1 << 63) - 1
+"""The largest memory budget accepted (8E less a byte): a byte count is a signed 64-bit
+integer to the operating system, and no machine comes near it."""
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40, "P": 1 << 50,
+          "E": 1 << 60}
+
+
+def _real(value: object) -> float | None:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"must be a number in (0, 1), got {value!r}")
-    number = float(value)
-    if not (math.isfinite(number) and 0.0 < number < 1.0):  # also refuses nan
-        raise ValueError(f"must be a number in (0, 1), got {value!r}")
+        return None
+    return float(value)
+
+
+def check_unit(value: object, shown: str | None = None) -> float:
+    """``value`` as a real number strictly between 0 and 1 (a truncation budget, a
+    tolerance, a precision).  Raises ``ValueError("must be a number in (0, 1), got
+    ...")`` (``shown``: how the caller writes the value); the caller names the place (a
+    key path, an option, an argument)."""
+    number = _real(value)
+    if number is None or not (math.isfinite(number) and 0.0 < number < 1.0):  # nan too
+        raise ValueError(f"must be a number in (0, 1), got {shown or repr(value)}")
     return number
+
+
+def check_epsilon(value: object) -> float:
+    """``value`` as a truncation budget (:func:`check_unit`)."""
+    return check_unit(value)
+
+
+def check_seconds(value: object, shown: str | None = None) -> float:
+    """``value`` as a time limit: a positive, finite number of seconds (zero is refused
+    on every surface: no work fits in it)."""
+    number = _real(value)
+    if number is None or not 0.0 < number < math.inf:
+        raise ValueError(f"must be a positive number of seconds, got {shown or repr(value)}")
+    return number
+
+
+def check_count(value: object, shown: str | None = None) -> int:
+    """``value`` as a state budget: a whole number >= 1."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ValueError(f"must be a whole number >= 1, got {shown or repr(value)}")
+    return int(value)
+
+
+def check_bytes(value: object, shown: str | None = None) -> int:
+    """``value`` as a memory budget: a whole number of bytes from 1 to
+    :data:`MAX_MEMORY_SIZE`."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not (
+            1 <= int(value) <= MAX_MEMORY_SIZE):
+        raise ValueError(f"must be a number of bytes from 1 to 2^63 - 1, got "
+                         f"{shown or repr(value)}")
+    return int(value)
+
+
+def check_memory(value: object, shown: str | None = None) -> int:
+    """A file's memory budget: a number of bytes (:func:`check_bytes`) or a size
+    written as text (:func:`parse_size`)."""
+    return parse_size(value) if isinstance(value, str) else check_bytes(value, shown)
+
+
+def parse_size(text: str) -> int:
+    """A memory budget written as a size: ``500M``, ``4G``, ``1.5G``, ``2P`` (``K M G T
+    P E``, each 1024 times the last; a trailing ``B`` or ``iB`` is allowed), held to
+    :func:`check_bytes`'s range."""
+    body = text.strip().upper().removesuffix("B").removesuffix("I")
+    unit = body[-1:] if body[-1:] in _UNITS and body[-1:] else ""
+    try:
+        number = float(body[: len(body) - len(unit)])
+    except ValueError:
+        raise ValueError(f"must be a size such as 4G or 500M, got {text!r}") from None
+    if not number == number or number in (math.inf, -math.inf):  # nan, inf
+        raise ValueError(f"must be a finite size, got {text!r}")
+    value = number * _UNITS[unit]
+    if value < 1:
+        raise ValueError(f"must be a positive size (at least 1 byte), got {text!r}")
+    if value > MAX_MEMORY_SIZE:
+        raise ValueError(f"must be below 8E (2^63 bytes), got {text!r}")
+    return int(value)

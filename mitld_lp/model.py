@@ -373,7 +373,7 @@ def _loaders() -> Any:
 _COMMON_REQUIRED = {"spec"}
 _COMMON_OPTIONAL = {"name", "epsilon", "distributions", "events", "constants", "constraints",
                     "costs", "objective", "budgets", "sensors"}
-OBJECTIVES = ("max", "min")
+OBJECTIVES = defaults.OBJECTIVES
 
 
 # --------------------------------------------------------------------------- the spec

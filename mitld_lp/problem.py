@@ -8,14 +8,16 @@ its problem here and nowhere else, so each combination is either sent to the one
 that solves exactly that problem or refused with one line naming the combination; an
 option a route cannot honour is refused, never dropped.
 
-The routes (which solver chain accepts the problem):
+The routes (which solver chain accepts the problem: :data:`mitld_lp.routes.precedence.ROUTES`,
+asked in that order, the first that claims the problem owns it):
 
 * ``plain``: point laws, no constraints; any supported task class (co-safe, safety,
   obligation) -- :mod:`mitld_lp.synthesis`;
 * ``robust``: some law known only within a band (an interval parameter or a fit from
   data), no constraints; co-safe tasks -- :mod:`mitld_lp.routes.robust`;
 * ``constrained``: constraints or a ``then`` objective with point laws; co-safe task and
-  constraint formulas -- :mod:`mitld_lp.routes.constrained`;
+  constraint formulas -- :mod:`mitld_lp.routes.constrained`; with a band,
+  :mod:`mitld_lp.routes.robust_constrained` (probability constraints only);
 * ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
   co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.sensing.solve`.
 
@@ -29,22 +31,20 @@ solves a co-safe task's minimum as a minimum, on the task's own automaton
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp import defaults
-from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY
+from mitld_lp.logic.fragment import CO_SAFE, SAFETY
 
-__all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "check_constrained",
-           "OBJECTIVES",
-           "complement_class", "PLAIN", "ROBUST", "CONSTRAINED", "SENSED"]
+if TYPE_CHECKING:  # the routes import this module
+    from mitld_lp.routes.route import Route
 
-PLAIN, ROBUST, CONSTRAINED = "plain", "robust", "constrained"
-SENSED = "sensed"
-OBJECTIVES = ("max", "min")
-METHODS = ("lp", "vi")
-BACKENDS = ("auto", "cvxpy", "direct")
+__all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "OBJECTIVES",
+           "complement_class", "task_words", "band_text"]
+
+OBJECTIVES = defaults.OBJECTIVES
 
 
 class ProblemError(ValueError):
@@ -112,10 +112,10 @@ class Settings:
     def checked(self) -> Settings:
         """These settings, each value checked (a :class:`ProblemError` names the first
         that is wrong); the solver's name upper-cased."""
-        if self.method not in METHODS:
+        if self.method not in defaults.METHODS:
             raise ProblemError(f"method: must be 'lp' or 'vi', got {self.method!r}")
-        if self.backend not in BACKENDS:
-            raise ProblemError(f"backend: must be one of {', '.join(BACKENDS)}, "
+        if self.backend not in defaults.BACKENDS:
+            raise ProblemError(f"backend: must be one of {', '.join(defaults.BACKENDS)}, "
                                f"got {self.backend!r}")
         if not isinstance(self.solver, str) or not self.solver:
             raise ProblemError(f"solver: must be a solver's name, got {self.solver!r}")
@@ -130,26 +130,20 @@ class Settings:
             if solver not in installed:
                 raise ProblemError(f"solver: unknown or not installed LP solver "
                                    f"{self.solver!r} (installed: {', '.join(installed)})")
-        if self.time_limit is not None and not (
-                isinstance(self.time_limit, int | float) and not isinstance(self.time_limit, bool)
-                and 0 <= self.time_limit < float("inf")):
-            raise ProblemError(f"time_limit: must be a finite number of seconds >= 0 or "
-                               f"None, got {self.time_limit!r}")
-        for name in ("tol", "certify_tol", "precision"):
+        for name, rule in _RULES.items():  # the rule every surface applies (defaults)
             v = getattr(self, name)
-            if isinstance(v, bool) or not (isinstance(v, int | float) and 0 < v < 1):
-                raise ProblemError(f"{name}: must be a number in (0, 1), got {v!r}")
-        for name in ("max_states", "max_automaton_states"):
-            v = getattr(self, name)
-            if v is not None and not (isinstance(v, int) and not isinstance(v, bool)
-                                      and v >= 1):
-                raise ProblemError(f"{name}: must be a whole number >= 1, got {v!r}")
-        if not isinstance(self.exact, bool):
-            raise ProblemError(f"exact: must be True or False, got {self.exact!r}")
-        if self.max_memory is not None and not (
-                isinstance(self.max_memory, int) and self.max_memory >= 1):
-            raise ProblemError(f"max_memory: must be a number of bytes >= 1, "
-                               f"got {self.max_memory!r}")
+            if v is not None:
+                try:
+                    rule(v)
+                except ValueError as exc:
+                    raise ProblemError(f"{name}: {exc}") from None
+        if self.decompose is not None and not isinstance(self.decompose, bool):
+            raise ProblemError(f"decompose: must be True, False or None, got "
+                               f"{self.decompose!r}")
+        for name in ("clock_reduction", "exact"):
+            if not isinstance(getattr(self, name), bool):
+                raise ProblemError(f"{name}: must be True or False, got "
+                                   f"{getattr(self, name)!r}")
         try:
             eps = None if self.epsilon is None else defaults.check_epsilon(self.epsilon)
         except ValueError as exc:
@@ -171,6 +165,15 @@ class Settings:
                         time_limit=pick("time_limit", None))
 
 
+#: The numbers of :class:`Settings`, each with its one rule (:mod:`mitld_lp.defaults`:
+#: the command line, a model file's ``[budgets]`` and a sweep's ``[solve]`` apply the
+#: same).
+_RULES = {"time_limit": defaults.check_seconds, "max_states": defaults.check_count,
+          "max_automaton_states": defaults.check_count, "max_memory": defaults.check_bytes,
+          "tol": defaults.check_unit, "certify_tol": defaults.check_unit,
+          "precision": defaults.check_unit}
+
+
 def _replace(s: Settings, **changes: Any) -> Settings:
     from dataclasses import replace
 
@@ -185,6 +188,10 @@ def settings_from(**kwargs: Any) -> Settings:
         if not isinstance(trunc, Mapping):
             raise ProblemError(f"truncation: must map event names to steps, got {trunc!r}")
         kwargs["truncation"] = tuple(sorted((str(k), v) for k, v in trunc.items()))
+    unknown = sorted(set(kwargs) - set(Settings.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"unknown setting {unknown[0]!r} (settings: "
+                        f"{', '.join(Settings.__dataclass_fields__)})")
     return Settings(**kwargs).checked()
 
 
@@ -199,18 +206,25 @@ class Problem:
     constraints: tuple[Any, ...] = ()  # mitld_lp.routes.constraints.Constraint records
     then: str | None = None
     objective: str = "max"
+    unread: tuple[Any, ...] = ()  # constraints given that did not parse (each refused)
+
+    @property
+    def constrained(self) -> bool:
+        """Whether constraints or a ``then`` objective are asked."""
+        return bool(self.constraints or self.unread) or self.then is not None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Posed:
     """A problem accepted by one route, with its checked settings.
 
-    ``fragment``: the class of the task as it is solved (the complement's for
-    ``objective="min"``); ``robust``: some law is a band."""
+    ``route``: the :class:`~mitld_lp.routes.route.Route` that owns it (the bare base
+    class while the routes are asked); ``fragment``: the class of the task as it is solved (the
+    complement's for ``objective="min"``); ``robust``: some law is a band."""
 
     problem: Problem
     settings: Settings
-    route: str
+    route: Route  # a bare Route only while pose asks the routes
     fragment: str
     robust: bool
 
@@ -222,19 +236,42 @@ class Posed:
     def minimise(self) -> bool:
         return self.problem.objective == "min"
 
+    @property
+    def sensed(self) -> bool:
+        """Whether some event's sensor misses it (:mod:`mitld_lp.sensing`)."""
+        from mitld_lp.sensing.sensors import partial
+
+        return bool(partial(self.problem.model.sensors))
+
+    def beyond_points(self) -> dict[str, str]:
+        """What this problem asks beyond point laws, no constraints and perfect sensors,
+        by feature (``constraints``, ``band``, ``sensors``): the plain and robust
+        routes' refusal of a problem not of their kind."""
+        p = self.problem
+        said = {"constraints": ("constraints or a then objective are solved by the "
+                                "constrained LP", p.constrained),
+                "band": (f"a law known only within a band ({band_text(p.model)})",
+                         self.robust),
+                "sensors": ("sensors that miss events are solved on the information-state "
+                            "product", self.sensed)}
+        return {k: why for k, (why, asked) in said.items() if asked}
+
 
 def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None,
          settings: Settings | None = None, objective: str | None = None,
-         constrained: bool = False) -> Posed:
+         routes: Sequence[Route] | None = None) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
     texts or :class:`~mitld_lp.routes.constraints.Constraint` records, after the model's own;
-    ``objective``: the model's unless given; ``constrained``: the constrained LP's
-    route even with no constraint (the trade-off curve's end points).  Raises
-    :class:`ProblemError` naming the combination no route solves, or the option the
-    route cannot honour: every reason at once, not the first alone."""
+    ``objective``: the model's unless given; ``routes``: the routes to ask, in
+    precedence (default :data:`mitld_lp.routes.precedence.ROUTES`; the trade-off
+    curve's end points ask the constrained LP's, :data:`~mitld_lp.routes.precedence.LP`).
+    Raises :class:`ProblemError` naming the combination no route solves, or the option
+    the route cannot honour: every reason at once, not the first alone."""
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
+    from mitld_lp.routes import precedence
     from mitld_lp.routes.constraints import THEN, ConstraintError, parse_constraints
+    from mitld_lp.routes.route import Route
 
     if not isinstance(model, Model):
         raise TypeError(
@@ -248,12 +285,13 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     if then is not None and then not in THEN:
         refused.append(f"then: must be one of {', '.join(THEN)}, got {then!r}")
     cons: tuple[Any, ...] = ()
-    given = (*model.constraints, *constraints)
-    for item in given:
+    unread: tuple[Any, ...] = ()
+    for item in (*model.constraints, *constraints):
         try:
             cons += parse_constraints([item])
         except ConstraintError as exc:
             refused.append(str(exc))
+            unread += (item,)
     fragment = check(model.spec).fragment
     if goal == "min":
         fragment = complement_class(fragment)
@@ -264,27 +302,15 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
                 f"truncation: {unknown[0]!r} is not an event of the model (events: "
                 f"{', '.join(sorted(model.distributions)) or 'none'})")
     robust = any(d.is_ambiguous for d in model.distributions.values())
-    constrained = constrained or bool(given or then)
-    problem = Problem(model, cons, then, goal)
-    what = _task_words(fragment, goal)
-    # sensors that miss events: the observation-based route, or a refusal naming why
-    from mitld_lp.sensing.route import sensed_refusals
-    from mitld_lp.sensing.sensors import partial
-
-    if partial(model.sensors):
-        route = SENSED
-        refused += sensed_refusals(model, fragment, goal, cons, then, robust)
-    elif constrained:
-        route = CONSTRAINED
-        refused += _constrained_refusals(Posed(problem, s, CONSTRAINED, fragment, robust))
-    elif robust:
-        route = ROBUST
-        refused += _robust_refusals(s)
-    else:
-        route = PLAIN
-        if fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses the others
-            refused.append(f"{what}: not a supported class")
-    posed = Posed(problem, s, route, fragment, robust)
+    asked = Posed(Problem(model, cons, then, goal, unread), s, Route(), fragment, robust)
+    candidates = precedence.ROUTES if routes is None else routes
+    owner = next((r for r in candidates if r.claims(asked)), None)
+    if owner is None:  # no route's kind: every route's reasons
+        refused += [why for r in candidates for why in r.refusal(asked)] or [
+            f"no route solves {task_words(fragment, goal)} as posed"]
+        raise ProblemError(*refused)
+    refused += owner.refusal(asked)
+    posed = Posed(asked.problem, s, owner, fragment, robust)
     if s.exact:  # an exact answer (mitld_lp.exact): what it cannot take, before any work
         from mitld_lp.exact.stage import exact_refusal
 
@@ -296,68 +322,15 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
     return posed
 
 
-def _task_words(fragment: str, goal: str) -> str:
+def task_words(fragment: str, goal: str) -> str:
+    """How a refusal names the task: its class, and for a minimum the complement's."""
     article = "an" if fragment[0] in "aeiou" else "a"
     return (f"{article} {fragment} task" if goal == "max" else
             f"objective min (solved as the maximum of the complement, {article} {fragment} "
             "task)")
 
 
-def _band(model: Any) -> str:
+def band_text(model: Any) -> str:
+    """The model's laws known only within a band, as ``event ~ law, ...``."""
     return ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
                      if d.is_ambiguous)
-
-
-def check_constrained(posed: Posed) -> None:
-    """Raise :class:`ProblemError` (with every reason) unless the constrained LP (one
-    Clarabel LP over the joint product's occupancy measures) solves ``posed`` as posed."""
-    refused = _constrained_refusals(posed)
-    if refused:
-        raise ProblemError(*refused)
-
-
-def _constrained_refusals(posed: Posed) -> list[str]:
-    """Why the constrained LP does not solve ``posed`` as posed (empty: it does)."""
-    from mitld_lp.logic.fragment import check
-
-    s, cons, fragment = posed.settings, posed.problem.constraints, posed.fragment
-    what = _task_words(fragment, posed.problem.objective)
-    refused = []
-    if posed.robust and (posed.problem.then is not None
-                         or any(c.kind != "prob" for c in cons)):
-        what_else = (f"then = {posed.problem.then}" if posed.problem.then is not None else
-                     next(str(c) for c in cons if c.kind != "prob"))
-        refused.append(
-            f"{what_else} with a law known only within a band ({_band(posed.model)}): the "
-            "worst case of expected steps or costs is not solved; give the event a point "
-            "law, or bound probabilities only")
-    if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
-        refused.append(f"{what} with constraints: not a supported class")
-    for c in cons:
-        if c.formula is not None and check(c.formula).fragment != CO_SAFE:
-            refused.append(f"constraint {c}: class {check(c.formula).fragment}; "
-                           "constraint formulas must be co-safe")
-    if s.method != "lp":
-        refused.append(f"method {s.method!r} with constraints: the constrained "
-                       "optimum is one occupancy LP (method 'lp')")
-    if s.solver != "CLARABEL" or s.backend == "cvxpy":
-        refused.append(f"solver {s.solver} / backend {s.backend} with constraints: the "
-                       "constrained LP is solved by Clarabel directly")
-    if s.decompose is True:
-        refused.append("decompose with constraints: the constrained LP is one LP over "
-                       "the whole product (its rows couple every block)")
-    return refused
-
-
-def _robust_refusals(s: Settings) -> list[str]:
-    """Why robust interval iteration, with the policy's robust LP (Clarabel) for method
-    lp, does not take settings ``s`` (empty: it does)."""
-    refused = []
-    if s.solver != "CLARABEL" or s.backend == "cvxpy":
-        refused.append(f"solver {s.solver} / backend {s.backend} with a law known only "
-                       "within a band: the robust policy LP is solved by Clarabel "
-                       "directly")
-    if s.decompose is True:
-        refused.append("decompose with a law known only within a band: robust "
-                       "synthesis has no block LPs")
-    return refused

@@ -71,12 +71,12 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
     the minimum is the complement's maximum read back (``result.complemented``), ``1 -``
     the complement's.
     """
-    if result.route == "constrained":
-        return randomised_table(result)
-    if result.route == "sensed":  # the information states (mitld_lp.sensing)
-        from mitld_lp.sensing.table import sensed_table
+    return result.part.policy_table(result)
 
-        return sensed_table(result)
+
+def model_table(result: Result) -> list[dict[str, Any]]:
+    """:func:`policy_table` of an answer whose policy is a deterministic one on the
+    product (the plain and robust routes)."""
     mdp, low = result.mdp, result.lower_model
     policy, values = low.policy, low.policy_values
     if result.complemented:  # Pmin(task) = 1 - Pmax(not task), state by state
@@ -95,7 +95,7 @@ def policy_table(result: Result) -> list[dict[str, Any]]:
             "clock": state.clock,
             "action": mdp.action_name(int(policy[i])),
             "value": float(values[i]),
-            "accepting_component": bool(goal[i]) and result.route == "plain",
+            "accepting_component": bool(goal[i]) and result.part.kept_components,
         })
     return rows
 
@@ -178,20 +178,16 @@ def summary(result: Any) -> dict[str, Any]:
         precision=result.precision, width=dict(result.width),
         **_exact_part(result.exact),
     )
-    if result.route == "constrained":
-        out.update(_constrained_part(result))
-        return out
-    low, high = result.lower_model, result.upper_model
-    out.update(states=mdp.n_states, choices=mdp.n_choices, transitions=mdp.n_transitions)
-    if result.route == "robust":
-        out.update(ambiguous_choices=mdp.ambiguous_choices)
-        out["lp"] = None if low.lp is None else {
-            "status": low.lp.status.value, "variables": low.lp.variables,
-            "constraints": low.lp.constraints, "message": low.lp.message}
-        out["iteration"] = {"status": low.iteration.status.value,
-                            **_task_terms(result, low.bracket[0], high.bracket[1]),
-                            "iterations": low.iteration.sweeps}
-        return out
+    out.update(result.part.summary(result))
+    return out
+
+
+def models_summary(result: Result) -> dict[str, Any]:
+    """The keys an answer from two solved models fills (plain and sensed routes): the
+    sizes of the model solved, the lower model's LP and the iteration's bracket."""
+    mdp, low, high = result.mdp, result.lower_model, result.upper_model
+    out: dict[str, Any] = dict(states=mdp.n_states, choices=mdp.n_choices,
+                               transitions=mdp.n_transitions)
     lp = low.lp
     out["lp"] = None if lp is None else {
         "status": lp.status.value, "solver": lp.solver, "backend": lp.backend,
@@ -207,6 +203,22 @@ def summary(result: Any) -> dict[str, Any]:
     return out
 
 
+def robust_summary(result: Result) -> dict[str, Any]:
+    """The keys a robust answer fills: the interval MDP's sizes, its ambiguous choices,
+    the policy's robust LP and the robust iteration's bracket."""
+    mdp, low, high = result.mdp, result.lower_model, result.upper_model
+    out: dict[str, Any] = dict(states=mdp.n_states, choices=mdp.n_choices,
+                               transitions=mdp.n_transitions,
+                               ambiguous_choices=mdp.ambiguous_choices)
+    out["lp"] = None if low.lp is None else {
+        "status": low.lp.status.value, "variables": low.lp.variables,
+        "constraints": low.lp.constraints, "message": low.lp.message}
+    out["iteration"] = {"status": low.iteration.status.value,
+                        **_task_terms(result, low.bracket[0], high.bracket[1]),
+                        "iterations": low.iteration.sweeps}
+    return out
+
+
 def _task_terms(result: Result, lower: float, upper: float) -> dict[str, float]:
     """A bracket of the solved automaton in the task's terms: the complement's
     ``[lower, upper]`` is ``[1 - upper, 1 - lower]`` of a minimised task read back from
@@ -216,7 +228,7 @@ def _task_terms(result: Result, lower: float, upper: float) -> dict[str, float]:
     return {"lower": lower, "upper": upper}
 
 
-def _constrained_part(result: Any) -> dict[str, Any]:
+def constrained_summary(result: Any) -> dict[str, Any]:
     """The keys a constrained result fills (its model is the merged product)."""
     merged = result.merged.mdp
     infeasible = result.status == "infeasible"

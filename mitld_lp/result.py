@@ -22,6 +22,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
     from mitld_lp.model import Model
     from mitld_lp.solvers.result import Status
 
-__all__ = ["Result", "SynthesisResult", "from_models", "precision_check"]
+__all__ = ["Result", "Part", "SynthesisResult", "from_models", "precision_check"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -73,29 +74,11 @@ class Result:
     sta: STA
     mdp: Any
     timings: Mapping[str, float]  # seconds per stage
+    part: Part  # the route's own part of the answer (its record, :class:`Part`)
     solve_cpu: float = float("nan")  # CPU seconds of the solve stage (all threads)
     dta: DTA | None = None  # the task's automaton (its complement if ``complemented``)
-    # the two solved models (plain and robust routes): the controller's (``lower_model``:
-    # the lower model, for a minimum solved as one the upper) and the bound's
-    lower_model: Any = None
-    upper_model: Any = None
-    acceptance: Any = None  # the target the bracket is about (its goal, its components)
-    goal: np.ndarray | None = None  # robust: the states that satisfy the task robustly
     # laws known within a band: each such event and its law's label
     bands: Mapping[str, str] = field(default_factory=dict)
-    # the constraints' part
-    constraints: tuple[Any, ...] = ()  # ConstraintValue records
-    then: str | None = None
-    secondary: float | None = None
-    steps: float = float("nan")  # expected steps of the returned policy
-    message: str = ""
-    merged: Any = None
-    joint: Any = None
-    prob: np.ndarray | None = None  # per merged choice: the policy's probability
-    stay: np.ndarray | None = None  # per merged state: the probability of staying
-    # sensors that miss events: each sensed event's sensor, the information-state product
-    sensors: Mapping[str, Any] = field(default_factory=dict)
-    belief: Any = None
     # the certificate's parts: for a minimum read back from the complement's maximum,
     # the complement's own bracket (1 - the task's probability lies in it, kept with its
     # digits where the task's bracket rounds to 1); the relative precision asked; the
@@ -129,7 +112,81 @@ class Result:
     @property
     def imdp(self) -> Any:
         """The interval MDP of a robust answer (``mdp``); ``None`` on other routes."""
-        return self.mdp if self.route == "robust" else None
+        return self.mdp if self.part.interval else None
+
+    # the route's part, read through its record (one name per quantity, as before)
+    @property
+    def lower_model(self) -> Any:
+        """The controller's solved model (the lower one; for a minimum solved as one the
+        upper one): plain, robust and sensed routes."""
+        return self.part.lower_model
+
+    @property
+    def upper_model(self) -> Any:
+        """The bound's solved model: plain, robust and sensed routes."""
+        return self.part.upper_model
+
+    @property
+    def acceptance(self) -> Any:
+        """The target the bracket is about (its goal, its components)."""
+        return self.part.acceptance
+
+    @property
+    def goal(self) -> np.ndarray | None:
+        """Robust: the states that satisfy the task robustly."""
+        return self.part.goal
+
+    @property
+    def constraints(self) -> tuple[Any, ...]:
+        """With constraints: each one's ``ConstraintValue``."""
+        return self.part.constraints
+
+    @property
+    def then(self) -> str | None:
+        return self.part.then
+
+    @property
+    def secondary(self) -> float | None:
+        return self.part.secondary
+
+    @property
+    def steps(self) -> float:
+        """With constraints: the expected steps of the returned policy."""
+        return self.part.steps
+
+    @property
+    def message(self) -> str:
+        return self.part.message
+
+    @property
+    def merged(self) -> Any:
+        """With constraints: the model the LP solved."""
+        return self.part.merged
+
+    @property
+    def joint(self) -> Any:
+        """With constraints: the joint automaton of the task and the constraints."""
+        return self.part.joint
+
+    @property
+    def prob(self) -> np.ndarray | None:
+        """With constraints: per merged choice, the policy's probability."""
+        return self.part.prob
+
+    @property
+    def stay(self) -> np.ndarray | None:
+        """With constraints: per merged state, the probability of staying."""
+        return self.part.stay
+
+    @property
+    def sensors(self) -> Mapping[str, Any]:
+        """Sensors that miss events: each sensed event's sensor."""
+        return self.part.sensors
+
+    @property
+    def belief(self) -> Any:
+        """Sensors that miss events: the information-state product's record."""
+        return self.part.belief
 
     @property
     def automaton(self) -> DTA:
@@ -169,8 +226,8 @@ class Result:
         return report.html(self)
 
     def policy_table(self) -> list[dict[str, Any]]:
-        """The policy as data (:func:`mitld_lp.report.policy_table`)."""
-        return report.policy_table(self)
+        """The policy as data (the route's table: :meth:`Part.policy_table`)."""
+        return self.part.policy_table(self)
 
     def write_policy(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """Write :meth:`policy_table` to ``path`` (:func:`mitld_lp.files.write.write_policy`)."""
@@ -181,6 +238,47 @@ class Result:
     def summary(self) -> dict[str, Any]:
         """A JSON-ready record, the CLI's ``--json`` (:func:`mitld_lp.report.summary`)."""
         return report.summary(self)
+
+
+class Part:
+    """A route's own part of an answer, reached from :class:`Result` by ``part``: each
+    route has its record, a subclass with its fields (the two solved models, the
+    constraints' values and the randomised policy, the sensors and the information
+    states).  A quantity a route does not have reads as the defaults here.  What a
+    reader asks of an answer instead of its route's name: ``interval`` (the model is an
+    interval MDP), ``randomised`` (the policy is ``prob`` / ``stay`` on the ``merged``
+    model of the ``joint`` automaton), ``observation_based`` (the controller acts on
+    what sensors report), ``kept_components`` (the policy keeps a safety part in the
+    product's accepting end components); and its policy table and JSON keys."""
+
+    __slots__ = ()
+    lower_model: Any = None
+    upper_model: Any = None
+    acceptance: Any = None
+    goal: np.ndarray | None = None
+    constraints: tuple[Any, ...] = ()
+    then: str | None = None
+    secondary: float | None = None
+    steps: float = float("nan")
+    message: str = ""
+    merged: Any = None
+    joint: Any = None
+    prob: np.ndarray | None = None
+    stay: np.ndarray | None = None
+    sensors: Mapping[str, Any] = MappingProxyType({})
+    belief: Any = None
+    interval: bool = False
+    randomised: bool = False
+    observation_based: bool = False
+    kept_components: bool = False
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        """The policy as data, one row per state (:func:`mitld_lp.report.policy_table`)."""
+        return report.model_table(result)
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        """The JSON keys this route fills (:func:`mitld_lp.report.summary`)."""
+        return report.models_summary(result)
 
 
 #: The name of earlier releases, for code that imports it: the same class.
@@ -241,7 +339,7 @@ def from_models(first: Any, second: Any, initial: int, objective: str,
                        Status.OPTIMAL),
         "certified": all(c.passed for c in checks),
         "checks": tuple(checks),
-        "lower_model": first, "upper_model": second, "sense": sense,
+        "sense": sense,
         "complement": complement, "precision": precision,
         "width": {"total": total, "truncation": apart, "solver": solver},
     }

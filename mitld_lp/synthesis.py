@@ -3,10 +3,8 @@
     problem --pose--> Posed --build_posed--> automaton, STA, product (Built)
             --the route's solver and certificate--> Result
 
-The routes: plain (:mod:`mitld_lp.routes.plain`: both truncation models solved and
-certified), robust (:mod:`mitld_lp.routes.robust`), constrained
-(:mod:`mitld_lp.routes.constrained`, and :mod:`mitld_lp.routes.robust_constrained` with
-a band), sensed (:mod:`mitld_lp.sensing.solve`).  On every route ``lower`` is what the
+The route is the posed problem's (:mod:`mitld_lp.routes.precedence`): this module
+names none; it asks the route to build and to solve.  On every route ``lower`` is what the
 returned controller achieves in the real, untruncated world and ``upper`` what no policy
 beats (docs/results.md).
 """
@@ -15,48 +13,27 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any
 
-from mitld_lp import defaults
 from mitld_lp.checks import Check
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, ROBUST, SENSED, Posed, pose, settings_from
+from mitld_lp.problem import Posed, Settings, pose, settings_from
 from mitld_lp.result import Result
 from mitld_lp.routes.stages import Built, build_posed, build_product
-
-if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
-    from mitld_lp.solvers.lp import Backend
 
 __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
            "Result", "Check"]
 
 log = logging.getLogger(__name__)
 
-Method = Literal["lp", "vi"]
-
-
 def synthesize(
     model: Model,
     *,
-    epsilon: float | None = None,
-    method: Method = "lp",
-    solver: str = defaults.SOLVER,
-    backend: Backend = "auto",
-    clock_reduction: bool = True,
-    truncation: Mapping[str, int] | None = None,
-    max_states: int | None = None,
-    max_automaton_states: int | None = None,
-    max_memory: int | None = None,
-    tol: float = defaults.TOL,
-    certify_tol: float = defaults.CERTIFY_TOL,
-    progress: bool | None = None,
-    precision: float = defaults.PRECISION,
-    decompose: bool | None = None,
-    time_limit: float | None = None,
     constraints: Iterable[Any] = (),
     then: str | None = None,
     objective: str | None = None,
-    exact: bool = False,
+    settings: Settings | None = None,
+    **options: Any,
 ) -> Result:
     """Maximise (or, with ``objective="min"`` or the model's own objective, minimise)
     the probability that the model's world satisfies its MITLD spec.
@@ -82,16 +59,19 @@ def synthesize(
     fraction, ``Result.exact``, the bracket then its point (:mod:`mitld_lp.exact`; the
     plain route, models of modest size, laws and worlds with rational probabilities).
 
+    ``options`` are the fields of :class:`~mitld_lp.problem.Settings` (those above and
+    ``clock_reduction``, ``max_states``, ``max_automaton_states``, ``max_memory``,
+    ``tol``, ``certify_tol``), each checked by the rule every surface applies; or give
+    one ``settings=`` record instead.
+
     The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
     solves, or an option its route cannot honour, raises
     :class:`~mitld_lp.problem.ProblemError` naming it.
     """
-    settings = settings_from(
-        method=method, solver=solver, backend=backend, clock_reduction=clock_reduction,
-        decompose=decompose, time_limit=time_limit, max_states=max_states,
-        max_automaton_states=max_automaton_states, max_memory=max_memory, epsilon=epsilon,
-        truncation=truncation, tol=tol, certify_tol=certify_tol, progress=progress,
-        precision=precision, exact=exact)
+    if settings is not None and options:
+        raise TypeError(f"synthesize: give settings= or its keywords, not both (got "
+                        f"settings and {', '.join(sorted(options))})")
+    settings = settings if settings is not None else settings_from(**options)
     return solve(pose(model, constraints, then=then, settings=settings, objective=objective))
 
 
@@ -112,30 +92,8 @@ def solve(posed: Posed, *, costs: Mapping[str, float] | None = None,
 
 
 def _solve_route(posed: Posed, costs: Mapping[str, float] | None, seed: int | None) -> Result:
-    if posed.route == CONSTRAINED:
-        from mitld_lp.problem import check_constrained
-
-        check_constrained(posed)  # a refusal names the combination before any work
     built = build_posed(posed, progress=posed.settings.progress)
-    if posed.route == ROBUST:
-        from mitld_lp.routes.robust import solve_robust
-
-        return solve_robust(posed, built)
-    if posed.route == SENSED:  # sensors that miss events (mitld_lp.sensing)
-        from mitld_lp.sensing.solve import solve_sensed
-
-        return solve_sensed(posed, built)
-    if posed.route == CONSTRAINED:
-        if posed.robust:
-            from mitld_lp.routes.robust_constrained import solve_robust_constrained
-
-            return solve_robust_constrained(posed, built, costs=costs, seed=seed)
-        from mitld_lp.routes.constrained import solve_constrained
-
-        return solve_constrained(posed, built, costs=costs, seed=seed)
-    from mitld_lp.routes.plain import solve_plain
-
-    return solve_plain(posed, built)
+    return posed.route.solve(posed, built, costs=costs, seed=seed)
 
 
 def _with_world_checks(result: Result, game: Any) -> Result:
@@ -170,6 +128,7 @@ def synthesize_constrained(
     (default the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
     controller's generator.  ``options``: :func:`synthesize`'s settings (epsilon,
     budgets, truncation, ...), each honoured or refused by name (:func:`pose`)."""
-    posed = pose(model, constraints, then=then, settings=settings_from(**options),
-                 constrained=True)
+    from mitld_lp.routes.precedence import LP
+
+    posed = pose(model, constraints, then=then, settings=settings_from(**options), routes=LP)
     return solve(posed, costs=costs, seed=seed)

@@ -66,12 +66,12 @@ def test_failures_are_statuses_in_the_one_vocabulary() -> None:
 
 
 def test_the_deadline_is_the_one_clock() -> None:
-    assert Deadline().remaining() is None and not Deadline().passed()
-    assert Deadline.after(None).remaining() is None
+    assert Deadline().left() is None and not Deadline().passed()
+    assert Deadline.after(None).left() is None
     gone = Deadline.after(0.0)
-    assert gone.passed() and gone.remaining() == 0.0
+    assert gone.passed() and gone.left() == 0.0
     later = Deadline.after(100.0, start=time.perf_counter())
-    left = later.remaining()
+    left = later.left()
     assert left is not None and 99.0 < left <= 100.0 and not later.passed()
 
 

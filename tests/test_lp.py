@@ -408,7 +408,7 @@ def test_synthesize_time_limit_is_a_status_not_a_hang() -> None:
     from mitld_lp import load_model, synthesize
 
     model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
-    result = synthesize(model, time_limit=0.0)
+    result = synthesize(model, time_limit=1e-9)
     assert result.status == Status.TIME_LIMIT and not result.certified
     assert result.lower_model.iteration.status == Status.TIME_LIMIT
     assert result.lower_model.lp is not None

@@ -45,8 +45,8 @@ def test_perfect_sensors_give_todays_answer(path: Path) -> None:
 def test_sensors_table_is_read() -> None:
     m = loads_model(GRID + "[sensors]\nb = { detect = 0.8 }\n")
     assert m.sensors == {"b": Sensor(0.8)}
-    assert pose(m).route == "sensed"
-    assert pose(loads_model(GRID + "[sensors]\nb = { detect = 1 }\n")).route == "plain"
+    assert pose(m).route.name == "sensed"
+    assert pose(loads_model(GRID + "[sensors]\nb = { detect = 1 }\n")).route.name == "plain"
 
 
 @pytest.mark.parametrize("table, where", [

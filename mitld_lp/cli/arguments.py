@@ -8,7 +8,6 @@ import argparse
 from collections.abc import Callable
 
 from mitld_lp import defaults
-from mitld_lp.util.memory import memory_size
 
 __all__ = ["probability_budget", "bounded_int", "memory_size", "seconds", "solver_name"]
 
@@ -39,15 +38,25 @@ def bounded_int(low: int, high: int | None = None) -> Callable[[str], int]:
     return parse_int
 
 
+def memory_size(text: str) -> int:
+    """A byte count with an optional binary unit (:func:`mitld_lp.defaults.parse_size`)."""
+    try:
+        return defaults.parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def seconds(text: str) -> float:
-    """A positive, finite number of seconds (``--time-limit``)."""
+    """A positive, finite number of seconds (``--time-limit``,
+    :func:`mitld_lp.defaults.check_seconds`)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not value > 0.0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
-    return value
+    try:
+        return defaults.check_seconds(value, repr(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def solver_name(text: str) -> str:

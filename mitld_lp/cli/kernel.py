@@ -26,11 +26,12 @@ from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import ModelError
-from mitld_lp.problem import CONSTRAINED, ProblemError
+from mitld_lp.problem import ProblemError
 from mitld_lp.product import ProductTooLarge
 from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.sweep.spec import SweepError
 from mitld_lp.util import progress
+from mitld_lp.util.clock import Deadline
 from mitld_lp.util.text import printable
 
 if TYPE_CHECKING:
@@ -289,7 +290,7 @@ def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     from mitld_lp.routes.stages import build_posed
 
     posed = posed_model(args, read_model(args), verb)
-    if posed.route == "sensed":  # the fully observed product would answer another problem
+    if posed.route.observation_based:  # the fully observed product: another problem
         raise ProblemError(f"{verb}: the model has sensors that miss events: its problem is "
                            "solved on the information-state product (solve, simulate, "
                            "export --controller); this command would read the fully "
@@ -354,9 +355,7 @@ def apply_file_time_limit(args: argparse.Namespace) -> None:
 def _time_left(args: argparse.Namespace) -> float | None:
     """Seconds left of ``--time-limit`` (None without one): the solvers stop with status
     ``time_limit`` and their bracket so far; the command's own watchdog is the backstop."""
-    if args.time_limit is None:
-        return None
-    return max(args.time_limit - (time.monotonic() - args.started), 0.0)
+    return Deadline.after(args.time_limit, args.started, time.monotonic).left()
 
 
 def _say(message: str) -> None:
@@ -387,7 +386,7 @@ def unconstrained(posed: Posed, verb: str) -> Posed:
     """``posed`` if it is not a constrained problem; a usage error naming the verb for a
     model whose file carries constraints (only ``solve``, ``sweep`` and ``pareto`` take
     them)."""
-    if posed.route != CONSTRAINED:
+    if not posed.route.takes_constraints:
         return posed
     raise UsageError(f"{verb}: the model has constraints, which only solve, simulate, "
                      "sweep, pareto and export --controller/--chain/--tree take")

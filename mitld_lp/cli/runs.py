@@ -250,7 +250,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
                 time_limit=_time_left(args))), "plot")
-            if posed.route == "sensed":  # mitld_lp.sensing: refused before any work
+            if posed.route.observation_based:  # mitld_lp.sensing: refused before work
                 raise UsageError("plot: the model has sensors that miss events; the policy "
                                  "map of an observation-based controller is not drawn yet")
             result = solve(posed)
@@ -289,7 +289,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                    settings=settings_from(**model_options(args))))
     if r.controller is None:
         raise UsageError(f"simulate: no controller to run: the synthesis is {r.status}")
-    if r.route == "sensed":  # the hidden events and the sensors drawn (mitld_lp.sensing)
+    if r.part.observation_based:  # the hidden events and sensors drawn (mitld_lp.sensing)
         from mitld_lp.sensing.observe import simulate_sensed
 
         sim = simulate_sensed(model, r.controller, runs=args.runs, seed=args.seed,

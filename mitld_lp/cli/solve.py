@@ -65,10 +65,10 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def args_solve(p: argparse.ArgumentParser) -> None:
     _args_model(p, many=True)
-    p.add_argument("--method", choices=("lp", "vi"), default="lp")
+    p.add_argument("--method", choices=defaults.METHODS, default="lp")
     p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
-    p.add_argument("--backend", choices=("auto", "cvxpy", "direct"), default="auto",
+    p.add_argument("--backend", choices=defaults.BACKENDS, default="auto",
                    help="direct: Clarabel on the sparse matrices; cvxpy: through cvxpy "
                         "(any solver); auto (default): direct for Clarabel, else cvxpy")
     p.add_argument("--no-decompose", action="store_true",
@@ -88,7 +88,7 @@ def args_solve(p: argparse.ArgumentParser) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
-    from mitld_lp.problem import CONSTRAINED, pose
+    from mitld_lp.problem import pose
     from mitld_lp.synthesis import solve
 
     if args.backend == "direct" and args.solver != "CLARABEL":
@@ -105,7 +105,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     model = door.world_model(args) if world else read_model(args)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args), objective=args.objective)
-    if posed.route == CONSTRAINED:
+    if posed.route.takes_constraints:
         return constrained.solve(args, posed, policy_file)
     r = solve(posed)
     summary = r.summary()

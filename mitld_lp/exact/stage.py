@@ -73,8 +73,8 @@ def exact_refusal(posed: Any) -> str | None:
     floats) must have them constant from there exactly, or the reduced model would not
     be the model as written."""
     model, route, s = posed.model, posed.route, posed.settings
-    if route != "plain":
-        return (f"exact with the {route} route: an exact answer is given for a task without "
+    if not route.exact:
+        return (f"exact with the {route.name} route: an exact answer is given for a task without "
                 "constraints, bands or sensors")
     try:
         import flint  # noqa: F401

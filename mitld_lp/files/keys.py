@@ -7,14 +7,12 @@ Used by the model loader (:mod:`mitld_lp.model`), the world tables a model file 
 
 from __future__ import annotations
 
-import argparse
 import math
 import re
 from collections.abc import Mapping
 from typing import Any
 
 from mitld_lp import defaults
-from mitld_lp.util.memory import memory_size
 from mitld_lp.util.text import printable
 
 __all__ = ["ModelError", "KeyContext", "key_path", "toml_text", "type_name", "budgets_table",
@@ -152,22 +150,15 @@ def budgets_table(doc: Mapping[str, Any], ctx: KeyContext) -> dict[str, float]:
     out: dict[str, float] = {}
     for key, value in table.items():
         where = f"budgets.{key}"
-        if key == "max_memory" and isinstance(value, str):
-            try:
-                out[key] = memory_size(value)
-            except argparse.ArgumentTypeError as exc:
-                raise ctx.error(where, str(exc)) from None
-            continue
-        if key == "time_limit":
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (
-                    0 < value < float("inf")):
-                raise ctx.error(where, f"must be a positive number of seconds, got "
-                                       f"{toml_text(value)}")
-            out[key] = float(value)
-            continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ctx.error(where, f"must be a whole number >= 1, got {toml_text(value)}")
-        out[key] = value
+        try:  # the rules every surface applies (mitld_lp.defaults)
+            if key == "max_memory":
+                out[key] = defaults.check_memory(value, toml_text(value))
+            elif key == "time_limit":
+                out[key] = defaults.check_seconds(value, toml_text(value))
+            else:
+                out[key] = defaults.check_count(value, toml_text(value))
+        except ValueError as exc:
+            raise ctx.error(where, str(exc)) from None
     return out
 
 

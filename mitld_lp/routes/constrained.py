@@ -21,29 +21,32 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from mitld_lp import report
 from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.mdp import MDP
-from mitld_lp.problem import CONSTRAINED, Posed, ProblemError
-from mitld_lp.result import Result, precision_check
+from mitld_lp.problem import Posed, ProblemError, task_words
+from mitld_lp.result import Part, Result, precision_check
 from mitld_lp.routes.constraints import (
     LEXICOGRAPHIC_TOL,
     Constraint,
     ConstraintError,
 )
-from mitld_lp.routes.stages import Built
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import INFEASIBLE, Row, Solved, optimise
-from mitld_lp.solvers.constrained_model import Quantity, merge
+from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 from mitld_lp.solvers.result import Status
+from mitld_lp.util.clock import Deadline
 
-__all__ = ["ConstraintValue",
+__all__ = ["ConstrainedRoute", "ConstrainedPart", "lp_refusals", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
 
 
@@ -111,8 +114,8 @@ def solve_constrained(posed: Posed, built: Built, *,
                       seed: int | None = 0) -> Result:
     """The constrained LP of a posed problem with point laws on its built joint product
     (one with no constraint is solved too: the trade-off curve's end points).  The
-    entry point is :func:`mitld_lp.synthesis.solve` (it refuses, naming it, a problem
-    this LP does not solve, :func:`mitld_lp.problem.check_constrained`)."""
+    entry point is :func:`mitld_lp.synthesis.solve` (:func:`mitld_lp.problem.pose`
+    refuses, naming it, a problem this LP does not solve: :class:`ConstrainedRoute`)."""
     if posed.robust or built.joint is None:
         raise ProblemError("solve_constrained: a law known only within a band, or a "
                            "product built without the constraints; mitld_lp.synthesize "
@@ -132,7 +135,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
         posed.problem.then
     cost_map = dict(model.costs if costs is None else costs)
-    deadline = None if s.time_limit is None else t0 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t0)
     eps = model.epsilon if s.epsilon is None else s.epsilon
     merged = merge(mdp, joint)
     cost_vec = cost_vector(mdp, cost_map)
@@ -142,15 +145,15 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         return rows_for(cons, which)
 
     def lp(objective: Quantity, maximise: bool, lp_rows: list[Row]) -> Solved:
-        left = None if deadline is None else max(deadline - time.perf_counter(), 0.0)
         return optimise(merged, objective, maximise, lp_rows, costs=cost_vec,
-                        tol=s.tol * 0.1, time_limit=left)
+                        tol=s.tol * 0.1, time_limit=deadline.left())
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    common: dict[str, Any] = dict(route=CONSTRAINED, method="lp", merged=merged, joint=joint,
-                                  sta=sta, mdp=mdp, objective=posed.problem.objective,
-                                  model=model, epsilon=eps, then=then)
+    common: dict[str, Any] = dict(route=ConstrainedRoute.name, method="lp", sta=sta,
+                                  mdp=mdp, objective=posed.problem.objective, model=model,
+                                  epsilon=eps)
+    whole = ConstrainedPart(then=then, merged=merged, joint=joint)
     margins = [0.0] * len(cons)
     found = None
     first = float("nan")  # the untightened LP's optimum
@@ -161,7 +164,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
         low = lp(task_lo, True, lp_rows)
         if not low.status.has_solution:
             if found is None:
-                return _unsolved(low, cons, rows("lower"), cost_vec, build, **common)
+                return _unsolved(low, cons, rows("lower"), cost_vec, build, whole, **common)
             break  # a tightened LP failed: the last policy stands, its misses reported
         chosen, secondary = low, None
         if attempt == 0:
@@ -172,7 +175,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
             second = lp(q2, False, [*lp_rows, keep])
             if not second.status.has_solution:
                 if found is None:
-                    return _unsolved(second, cons, rows("lower"), cost_vec, build, **common)
+                    return _unsolved(second, cons, rows("lower"), cost_vec, build, whole,
+                                     **common)
                 break
             chosen, secondary = second, second.values[0]
         found = (low, chosen, secondary, _values(merged, chosen, cons, cost_vec, eta),
@@ -225,9 +229,10 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                                        chosen.stay, seed=seed)
     return Result(
         status=Status.OPTIMAL, lower=lower, upper=upper, value=value,
-        certified=all(c.passed for c in checks), constraints=values,
-        secondary=secondary, steps=steps, checks=tuple(checks), message=chosen.message,
-        controller=controller, prob=chosen.prob, stay=chosen.stay,
+        certified=all(c.passed for c in checks), checks=tuple(checks),
+        part=replace(whole, constraints=values, secondary=secondary, steps=steps,
+                     message=chosen.message, prob=chosen.prob, stay=chosen.stay),
+        controller=controller,
         timings={**(build or {}), "solve": time.perf_counter() - t0},
         complement=complement, precision=s.precision,
         width={"total": total, "truncation": apart, "solver": solver,
@@ -296,10 +301,12 @@ def _said(v: ConstraintValue) -> str:
 
 
 def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cost_vec: np.ndarray,
-              build: Mapping[str, float] | None, **common: Any) -> Result:
+              build: Mapping[str, float] | None, whole: ConstrainedPart,
+              **common: Any) -> Result:
     """An infeasible (or failed) answer; when infeasible, each constraint's tightest bound
     the others allow (a second LP: optimise that constraint's quantity subject to them)."""
-    merged = common["merged"]
+    merged = whole.merged
+    assert merged is not None  # solve_merged's part has its model
     values = []
     for i, c in enumerate(cons):
         bound = None
@@ -311,6 +318,83 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
     nan = float("nan")
     return Result(
         status=Status(failed.status), lower=nan, upper=nan, value=nan, certified=False,
-        constraints=tuple(values), secondary=None, steps=nan, checks=(),
-        message=failed.message, controller=None, prob=None, stay=None,
+        checks=(), controller=None,
+        part=replace(whole, constraints=tuple(values), message=failed.message),
         timings=dict(build or {}), **common)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ConstrainedPart(Part):
+    """The constrained routes' part of the answer: each constraint's value, the
+    lexicographic objective and its value, the expected steps, the solver's message, and
+    the randomised policy (``prob`` per choice, ``stay`` per state) on the ``merged``
+    model of the ``joint`` automaton."""
+
+    then: str | None = None
+    merged: Merged | None = None
+    joint: Joint | None = None
+    constraints: tuple[ConstraintValue, ...] = ()
+    secondary: float | None = None
+    steps: float = float("nan")
+    message: str = ""
+    prob: np.ndarray | None = None
+    stay: np.ndarray | None = None
+    randomised = True
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        return report.randomised_table(result)
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        return report.constrained_summary(result)
+
+
+class ConstrainedRoute(Route):
+    """Constraints or a ``then`` objective with point laws: one Clarabel LP over the
+    joint product's occupancy measures, a randomised controller.  ``every``: it claims
+    problems without constraints too (the trade-off curve's end points,
+    :func:`mitld_lp.synthesis.synthesize_constrained`)."""
+
+    name = "constrained"
+    takes_constraints = True
+
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
+    def claims(self, posed: Posed) -> bool:
+        return (posed.problem.constrained or self.every) and not posed.robust
+
+    def refusal(self, posed: Posed) -> list[str]:
+        return lp_refusals(posed)
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_joint(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        return solve_constrained(posed, built, costs=costs, seed=seed)
+
+
+def lp_refusals(posed: Posed) -> list[str]:
+    """Why the constrained LP (one Clarabel LP over the joint product's occupancy
+    measures) does not solve ``posed`` as posed (empty: it does)."""
+    from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY, check
+
+    s, cons, fragment = posed.settings, posed.problem.constraints, posed.fragment
+    what = task_words(fragment, posed.problem.objective)
+    refused = []
+    if fragment not in (CO_SAFE, SAFETY, OBLIGATION):
+        refused.append(f"{what} with constraints: not a supported class")
+    for c in cons:
+        if c.formula is not None and check(c.formula).fragment != CO_SAFE:
+            refused.append(f"constraint {c}: class {check(c.formula).fragment}; "
+                           "constraint formulas must be co-safe")
+    if s.method != "lp":
+        refused.append(f"method {s.method!r} with constraints: the constrained "
+                       "optimum is one occupancy LP (method 'lp')")
+    if s.solver != "CLARABEL" or s.backend == "cvxpy":
+        refused.append(f"solver {s.solver} / backend {s.backend} with constraints: the "
+                       "constrained LP is solved by Clarabel directly")
+    if s.decompose is True:
+        refused.append("decompose with constraints: the constrained LP is one LP over "
+                       "the whole product (its rows couple every block)")
+    return refused

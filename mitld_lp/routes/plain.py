@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
@@ -37,18 +37,20 @@ import numpy as np
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
-from mitld_lp.problem import PLAIN, Posed, Settings
-from mitld_lp.result import Result, from_models
-from mitld_lp.routes.stages import Built
+from mitld_lp.problem import Posed, Settings, task_words
+from mitld_lp.result import Part, Result, from_models
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_task
+from mitld_lp.util.clock import Deadline
 from mitld_lp.util.heap import release_free_memory
 
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
-    from mitld_lp.solvers.lp import Backend
     from mitld_lp.solvers.quotient import Qualitative, Quotient
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
-__all__ = ["ModelSolution", "solve_models", "solve_plain", "TRIM_FROM_TRANSITIONS"]
+__all__ = ["PlainRoute", "PlainPart", "ModelSolution", "solve_models", "solve_plain",
+           "TRIM_FROM_TRANSITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -95,51 +97,28 @@ class ModelSolution:
                              "mitld_lp.solvers.quotient.reduce(mdp, target) to rebuild it")
 
 
-@dataclass(frozen=True, slots=True)
-class _Settings:
-    """How each of the two models is solved and certified (:func:`synthesize`'s
-    arguments, typed once)."""
-
-    method: str
-    solver: str
-    backend: Backend
-    tol: float
-    precision: float  # the relative precision asked (the iteration's and the bracket's)
-    eta: float  # the probabilities' allowance (mitld_lp.solvers.certify.model_eta)
-    complement: bool  # the answer is 1 - the values (a minimum read back)
-    progress: bool | None  # bars (mitld_lp.util.progress): None on a terminal only
-    decompose: bool
-    deadline: float  # time.perf_counter() past which the solvers stop; inf: none
-
-    def remaining(self) -> float | None:
-        """Seconds left before the deadline (None: no deadline)."""
-        if self.deadline == float("inf"):
-            return None
-        return max(0.0, self.deadline - time.perf_counter())
-
-
-def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult,
-              how: _Settings) -> LPResult | None:
+def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
+              deadline: Deadline) -> LPResult | None:
     """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
     :class:`Quotient`, made by the one analysis of the product both models share
     (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
     iteration (both models are iterated in one pass, :func:`_iterate`)."""
-    if how.method != "lp":
+    if s.method != "lp":
         return None
     from mitld_lp.solvers.lp import solve_lp
 
     return solve_lp(mdp, np.asarray(quotient.target), quotient=quotient,
-                    sense=quotient.sense, solver=how.solver, backend=how.backend,
-                    tol=how.tol, precision=how.precision,
-                    layout="blocks" if how.decompose else "whole",
-                    time_limit=how.remaining(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0, progress=how.progress)
+                    sense=quotient.sense, solver=s.solver, backend=s.backend,
+                    tol=s.tol, precision=s.precision,
+                    layout="blocks" if s.decompose is not False else "whole",
+                    time_limit=deadline.left(), bounds=(it.lower, it.upper),
+                    everywhere=quotient.initial < 0, progress=s.progress)
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
                it: IterationResult, lp: LPResult | None, which: str,
-               how: _Settings) -> ModelSolution:
+               s: Settings, eta: float, complement: bool) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
     quotient's matrix is released by then.  Both bounds are checked on each model (the
     answer reads the lower model's lower one and the upper model's upper one), and that
@@ -175,15 +154,15 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     cert = certify(mdp, target, policy, sense=sense, zero=decided.zero,
                    one=decided.one if minimum else None, mec_of=None if minimum else mec_of,
                    layers=layers, fallback_lower=it.lower, fallback_upper=it.upper,
-                   eta=how.eta, precision=how.precision,
-                   complement=how.complement and not minimum)
+                   eta=eta, precision=s.precision, complement=complement and not minimum)
     checks.extend(cert.checks)
     return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
                          (it.value_lower, it.value_upper), lp, it, decided.unreachable,
                          tuple(checks), sense, (cert.lower, cert.upper), decided)
 
 
-def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[IterationResult]:
+def _iterate(mdp: MDP, quotients: list[Quotient], s: Settings,
+             deadline: Deadline) -> list[IterationResult]:
     """Interval iteration of the models in one pass over their shared quotient.  When the
     graph analysis decides the initial state, every component is still brought below the
     tolerance (``gap="max"``), as the LP then solves every state (``everywhere``): the
@@ -194,9 +173,9 @@ def _iterate(mdp: MDP, quotients: list[Quotient], how: _Settings) -> list[Iterat
     decided = quotients[0].initial < 0
     # the relative precision where the bracket is the answer's (the initial state);
     # when the graph decides that, the LP solves every state and the bounds only prune
-    return interval_iterations(mdp, quotients, tol=how.tol,
-                               precision=None if decided else how.precision,
-                               progress=how.progress, time_limit=how.remaining(),
+    return interval_iterations(mdp, quotients, tol=s.tol,
+                               precision=None if decided else s.precision,
+                               progress=s.progress, time_limit=deadline.left(),
                                gap="max" if decided else "initial")
 
 
@@ -235,20 +214,19 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     from mitld_lp.solvers.certify import ETA
     from mitld_lp.solvers.graph import Sense
 
-    how = _Settings(s.method, s.solver, s.backend, s.tol, s.precision,
-                    ETA if eta is None else eta, complement, s.progress,
-                    s.decompose is not False,
-                    float("inf") if s.time_limit is None else t0 + s.time_limit)
+    deadline = Deadline.after(s.time_limit, t0)
     quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
-    its = _iterate(mdp, quotients, how)
-    lps = [_solve_lp(mdp, q, it, how) for q, it in zip(quotients, its, strict=True)]
+    its = _iterate(mdp, quotients, s, deadline)
+    lps = [_solve_lp(mdp, q, it, s, deadline) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
     kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
             for q in quotients]
     del quotients
-    solutions = [_certified(mdp, *k, it, lp, which, how) for k, it, lp, which
+    eta = ETA if eta is None else eta
+    solutions = [_certified(mdp, *k, it, lp, which, s, eta, complement)
+                 for k, it, lp, which
                  in zip(kept, its, lps, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
@@ -273,7 +251,7 @@ def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
     from mitld_lp.solvers.result import Status
 
     s = posed.settings
-    deadline = float("inf") if s.time_limit is None else t0 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t0)
     minimum = built.sense == "min"
     complemented = posed.minimise and not minimum
     # exact_answer takes the truncation models in their order (lower, upper); for a
@@ -281,7 +259,7 @@ def _exact(posed: Posed, built: Built, accept: Acceptance, low: ModelSolution,
     lower_trunc, upper_trunc = (high, low) if minimum else (low, high)
     answer, (exact_lower, exact_upper), check = exact_answer(
         built.mdp, posed.model.game, built.sta, (lower_trunc, upper_trunc), accept.goal,
-        sense=built.sense, complemented=complemented, deadline=deadline)
+        sense=built.sense, complemented=complemented, deadline=deadline.at)
     if answer is None:  # the float certificate stands, the exact check failed
         first = replace(low, checks=(*low.checks, check))
         return {"status": Status.TIME_LIMIT}, first, (first if high is low else high)
@@ -326,13 +304,53 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     # truncated event came in time: the upper model's unreachable states
     upper = low if built.sense == "min" else high
     result = Result(
-        route=PLAIN, model=model, objective=posed.problem.objective, method=s.method,
+        route=PlainRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=built.sta, mdp=mdp, dta=built.dta,
         controller=Controller(model.game, built.sta, mdp, low.policy, hopeless=upper.prob0),
-        timings=timings, acceptance=accept, solve_cpu=solve_cpu,
+        timings=timings, part=PlainPart(low, high, accept), solve_cpu=solve_cpu,
         **{**from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
                          truncated=bool(mdp.truncated.any()), sense=built.sense,
                          exact=fields.get("exact")),
            **fields})
     log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
     return result
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlainPart(Part):
+    """The plain route's part of the answer: the two solved models (the controller's,
+    the bound's: :func:`solve_models`) and the target the bracket is about; the policy
+    keeps a task's safety part in its accepting end components."""
+
+    lower_model: ModelSolution = field()  # required (Part's default is for the other routes)
+    upper_model: ModelSolution = field()
+    acceptance: Acceptance = field()
+    kept_components = True
+
+
+class PlainRoute(Route):
+    """Point laws, no constraints, every sensor perfect: any supported task class
+    (co-safe, safety, obligation), both truncation models solved and certified; the one
+    route with an exact answer (:mod:`mitld_lp.exact`)."""
+
+    name = "plain"
+    exact = True
+
+    def claims(self, posed: Posed) -> bool:
+        return not (posed.robust or posed.problem.constrained or posed.sensed)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        from mitld_lp.logic.fragment import CO_SAFE, OBLIGATION, SAFETY
+
+        refused = [f"plain route: {why}" for why in posed.beyond_points().values()]
+        if posed.fragment not in (CO_SAFE, SAFETY, OBLIGATION):  # check() refuses others
+            refused.append(f"{task_words(posed.fragment, posed.problem.objective)}: "
+                           "not a supported class")
+        return refused
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_task(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Any = None,
+              seed: int | None = 0) -> Result:
+        return solve_plain(posed, built)

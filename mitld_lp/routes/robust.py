@@ -30,13 +30,13 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp import defaults
+from mitld_lp import defaults, report
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
@@ -45,12 +45,13 @@ from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, ROBUST, Posed, ProblemError, pose, settings_from
+from mitld_lp.problem import Posed, ProblemError, pose, settings_from
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
-from mitld_lp.result import Result, from_models
+from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
-from mitld_lp.routes.stages import Built, build_posed
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_interval
 from mitld_lp.solvers.result import Status, read_only
 from mitld_lp.solvers.robust import (
     RobustIteration,
@@ -59,9 +60,11 @@ from mitld_lp.solvers.robust import (
 )
 from mitld_lp.solvers.robust_graph import RobustGame
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
+from mitld_lp.util.clock import Deadline
 
-__all__ = ["is_robust", "synthesize_robust", "solve_robust", "RobustModelSolution",
-           "robust_game", "interval_model", "interval_export"]
+__all__ = ["RobustRoute", "RobustPart", "POINTS_TOO", "is_robust", "synthesize_robust",
+           "solve_robust", "RobustModelSolution", "robust_game", "interval_model",
+           "interval_export"]
 
 log = logging.getLogger(__name__)
 
@@ -102,27 +105,24 @@ class RobustModelSolution:
 
 
 def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
-           method: str, tol: float, deadline: float, layers: tuple[np.ndarray, np.ndarray],
+           method: str, tol: float, deadline: Deadline, layers: tuple[np.ndarray, np.ndarray],
            eta: float, precision: float, complement: bool) -> RobustModelSolution:
     """One model's robust optimum, the policy read off its lower bound, the policy's own
     robust value, and the certificate: the policy's value against every law of the
     bands bounded from below, the robust optimum from above, both in exact arithmetic
     (:func:`_certificate`)."""
-    def remaining() -> float | None:
-        return None if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
-
     s0 = imdp.initial
-    it = robust_interval_iteration(game, target, tol=tol, time_limit=remaining())
+    it = robust_interval_iteration(game, target, tol=tol, time_limit=deadline.left())
     choice = robust_policy(game, target, it.lower, tie=max(tol, 1e-12))
     ev = robust_interval_iteration(game.restrict(choice), target, tol=tol,
-                                   time_limit=remaining())
+                                   time_limit=deadline.left())
     checks = [Check("robust iteration converged", it.status is Status.OPTIMAL, it.message),
               Check("policy evaluation converged", ev.status is Status.OPTIMAL, ev.message)]
     values = ev.lower
     status = it.status if it.status is not Status.OPTIMAL else ev.status
     lp = None
     if method == "lp":
-        lp = policy_lp(game, target, choice, tol=tol, time_limit=remaining())
+        lp = policy_lp(game, target, choice, tol=tol, time_limit=deadline.left())
         checks.append(Check("policy LP solved", lp.status is Status.OPTIMAL,
                             f"{lp.status.value}: {lp.message}"))
     lower, upper, proved = _certificate(game, s0, target, choice, it, ev, layers, eta,
@@ -234,12 +234,14 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
     ``method="lp"``: the policy's value by the LP and by iteration; ``"vi"``: by
     iteration only.  :func:`mitld_lp.synthesize` takes this route by itself for a
     problem with a band."""
-    posed = model if isinstance(model, Posed) else pose(model, settings=settings_from(**options))
-    if posed.route == CONSTRAINED:
-        raise ProblemError("synthesize_robust: a task with constraints is not solved "
-                           "robustly")
-    return solve_robust(posed, build_posed(posed, progress=posed.settings.progress,
-                                           robust=True))
+    if isinstance(model, Posed):
+        if model.problem.constrained:
+            raise ProblemError("synthesize_robust: a task with constraints is not solved "
+                               "robustly")
+        posed = model
+    else:
+        posed = pose(model, settings=settings_from(**options), routes=(POINTS_TOO,))
+    return solve_robust(posed, build_interval(posed, posed.settings.progress))
 
 
 def solve_robust(posed: Posed, built: Built) -> Result:
@@ -250,7 +252,7 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     assert isinstance(imdp, IntervalMDP)
     t2 = time.perf_counter()
     game = robust_game(imdp)
-    deadline = float("inf") if s.time_limit is None else t2 + s.time_limit
+    deadline = Deadline.after(s.time_limit, t2)
     from mitld_lp.solvers.certify import RowModel, model_eta, support_layers
 
     target, stay = _goal(game, imdp, dta, np.asarray(imdp.target, dtype=bool))
@@ -273,9 +275,10 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
     result = Result(
-        route=ROBUST, model=model, objective=posed.problem.objective, method=s.method,
+        route=RobustRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
-        acceptance=Acceptance(np.asarray(target, dtype=bool), None), goal=read_only(target),
+        part=RobustPart(low, high, Acceptance(np.asarray(target, dtype=bool), None),
+                        read_only(target)),
         bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
                                    s.precision, truncated=bool(imdp.truncated.any())))
     log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
@@ -329,6 +332,61 @@ def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_st
     dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
     sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
     return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory), dta
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RobustPart(Part):
+    """The robust route's part of the answer: the two solved models (robust iteration,
+    the policy's robust LP), the target and the states that satisfy the task whatever
+    law of the bands nature plays; the model solved is an interval MDP."""
+
+    lower_model: RobustModelSolution = field()  # required (Part's default is for the other routes)
+    upper_model: RobustModelSolution = field()
+    acceptance: Acceptance = field()
+    goal: np.ndarray = field()
+    interval = True
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        return report.robust_summary(result)
+
+
+class RobustRoute(Route):
+    """Some law known only within a band, no constraints: robust interval iteration on
+    the interval MDP, the policy's robust LP (Clarabel) for method lp.  ``points``: it
+    claims problems with point laws too (:func:`synthesize_robust`)."""
+
+    name = "robust"
+
+    def __init__(self, *, points: bool = False) -> None:
+        self.points = points
+
+    def claims(self, posed: Posed) -> bool:
+        return ((posed.robust or self.points) and not posed.problem.constrained
+                and not posed.sensed)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        s = posed.settings
+        refused = [f"robust route: {why}" for what, why in posed.beyond_points().items()
+                   if what != "band"]
+        if s.solver != "CLARABEL" or s.backend == "cvxpy":
+            refused.append(f"solver {s.solver} / backend {s.backend} with a law known only "
+                           "within a band: the robust policy LP is solved by Clarabel "
+                           "directly")
+        if s.decompose is True:
+            refused.append("decompose with a law known only within a band: robust "
+                           "synthesis has no block LPs")
+        return refused
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_interval(posed, progress)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Any = None,
+              seed: int | None = 0) -> Result:
+        return solve_robust(posed, built)
+
+
+#: The robust route claiming point laws too (:func:`synthesize_robust`).
+POINTS_TOO = RobustRoute(points=True)
 
 
 def structure_mdp(imdp: IntervalMDP) -> MDP:

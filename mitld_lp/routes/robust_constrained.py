@@ -41,21 +41,26 @@ import scipy.sparse as sp
 
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.checks import Check
-from mitld_lp.problem import Posed
+from mitld_lp.problem import Posed, band_text
+from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
 from mitld_lp.result import Result
 from mitld_lp.routes.constrained import (
+    ConstrainedPart,
     ConstraintValue,
+    lp_refusals,
     quantity_of,
     solve_merged,
 )
-from mitld_lp.routes.stages import Built
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import OPTIMAL
 from mitld_lp.solvers.constrained_model import Merged, Quantity
 from mitld_lp.solvers.robust import robust_interval_iteration
 from mitld_lp.solvers.robust_graph import RobustGame
 
-__all__ = ["solve_robust_constrained", "middle_rows", "worst_case", "ROUNDS"]
+__all__ = ["RobustConstrainedRoute", "solve_robust_constrained", "middle_rows", "worst_case",
+           "ROUNDS"]
 
 ROUNDS = 8
 """How many times the middle-law LP is solved again with tightened bounds."""
@@ -241,10 +246,11 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
                            build=built.timings)
     bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
              if c.distribution.is_ambiguous}
+    assert isinstance(nominal.part, ConstrainedPart)  # solve_merged's answer
     if nominal.status != OPTIMAL:  # infeasible at one law of the bands: at every law too
-        return replace(nominal, bands=bands, message=(
+        return replace(nominal, bands=bands, part=replace(nominal.part, message=(
             f"{nominal.message}; at the middle law of the bands (a law within them: no "
-            "policy meets the constraints under every law either)"))
+            "policy meets the constraints under every law either)")))
     t1 = time.perf_counter()
     minimise = posed.minimise
     # the nominal answer is read in the task's terms; the robust evaluation works on the
@@ -308,10 +314,11 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     else:
         upper = raw_upper
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
+    assert isinstance(chosen.part, ConstrainedPart)
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
-                   constraints=tuple(values),
-                   certified=all(c.passed for c in checks), checks=checks,
-                   message=message, bands=bands, timings=timings, complement=complement,
+                   part=replace(chosen.part, constraints=tuple(values), message=message),
+                   certified=all(c.passed for c in checks), checks=checks, bands=bands,
+                   timings=timings, complement=complement,
                    width={"total": width, "bands": width})
 
 
@@ -330,3 +337,38 @@ def _worst_constraints(result: Result, vr: VertexRows, cons: tuple[Any, ...],
         holds = worst <= c.bound if c.sense == "<=" else worst >= c.bound
         out.append(ConstraintValue(c, worst, holds, bounds=(lo, hi)))
     return out
+
+
+class RobustConstrainedRoute(Route):
+    """Probability constraints with a law known only within a band: the sound bracket
+    of the module docs on the joint interval MDP.  ``every``: it claims problems
+    without constraints too (:func:`mitld_lp.synthesis.synthesize_constrained`).  Its
+    answer is a constrained one (``name``)."""
+
+    name = "constrained"
+    takes_constraints = True
+
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
+    def claims(self, posed: Posed) -> bool:
+        return (posed.problem.constrained or self.every) and posed.robust
+
+    def refusal(self, posed: Posed) -> list[str]:
+        p = posed.problem
+        refused = []
+        if p.then is not None or any(c.kind != "prob" for c in p.constraints):
+            what_else = (f"then = {p.then}" if p.then is not None else
+                         next(str(c) for c in p.constraints if c.kind != "prob"))
+            refused.append(
+                f"{what_else} with a law known only within a band ({band_text(p.model)}): "
+                "the worst case of expected steps or costs is not solved; give the event "
+                "a point law, or bound probabilities only")
+        return refused + lp_refusals(posed)
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        return build_joint(posed, progress, make=robust_product)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        return solve_robust_constrained(posed, built, costs=costs, seed=seed)

@@ -21,7 +21,7 @@ exceed it (:func:`build_product`).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,13 +36,14 @@ from mitld_lp.logic import check
 from mitld_lp.logic.syntax import DistLiteral, Formula, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import CONSTRAINED, PLAIN, SENSED, Posed
+from mitld_lp.problem import Posed
 from mitld_lp.product import product, robust_product
 from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.routes.constraints import Constraint, ConstraintError
 from mitld_lp.worlds.game import Game
 
-__all__ = ["Built", "build_product", "build_posed", "joint_sta", "reaching"]
+__all__ = ["Built", "build_product", "build_posed", "build_task", "build_interval",
+           "build_joint", "joint_sta", "reaching"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -81,11 +82,10 @@ def build_product(
     max_automaton_states: int = defaults.MAX_AUTOMATON_STATES,
     max_memory: int | None = None,
     progress: bool | None = None,
-    complement: bool = False,
     objective: str = "max",
 ) -> Built:
-    """The stages up to the MDP: ``to_dta(formula)`` (its complement with
-    ``complement``; with ``objective="min"`` the automaton the minimum is solved on:
+    """The stages up to the MDP: ``to_dta(formula)`` (with ``objective="min"`` the
+    automaton the minimum is solved on:
     the task's own if it is co-safe, :func:`reaching`, else its complement, module
     docs), ``make_sta`` with the events' ``laws`` and
     the truncation budget ``epsilon`` (or the fixed ``truncation`` points), then the
@@ -94,12 +94,12 @@ def build_product(
     automaton, whose states cost thousands of times more than the product's, also no
     more than ``max_automaton_states`` (:mod:`mitld_lp.defaults`); the product needs at
     most ``max_memory`` bytes (default: half the machine's memory)."""
-    if objective not in ("max", "min"):
+    if objective not in defaults.OBJECTIVES:
         raise ValueError(f"objective: must be 'max' or 'min', got {objective!r}")
     t0 = time.perf_counter()
     dta = to_dta(formula, max_states=min(max_states, max_automaton_states))
-    direct = objective == "min" and not complement and reaching(dta)
-    if complement or (objective == "min" and not direct):
+    direct = objective == "min" and reaching(dta)
+    if objective == "min" and not direct:
         dta = dta.complement()
     sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction, truncation=truncation)
     t1 = time.perf_counter()
@@ -109,68 +109,63 @@ def build_product(
                  sense="min" if direct else "max")
 
 
-def build_posed(posed: Posed, *, progress: bool | None = None,
-                robust: bool | None = None) -> Built:
-    """The stages of a posed problem, whatever its route: the task's automaton (for
-    ``objective="min"`` its own on the plain route when it is co-safe, else its
-    complement, module docs; with constraints, the joint automaton,
-    :func:`joint_sta`), the STA with the problem's truncation settings, and the product
-    with the world (an interval MDP when some law is a band), under the problem's
-    budgets.  ``robust=True`` builds the interval MDP also when every law is a point
-    (the robust route's own check)."""
+def build_posed(posed: Posed, *, progress: bool | None = None) -> Built:
+    """The stages of a posed problem, as its route builds them (:meth:`Route.build
+    <mitld_lp.routes.route.Route.build>`)."""
+    return posed.route.build(posed, progress)
+
+
+def build_task(posed: Posed, progress: bool | None = None) -> Built:
+    """The plain route's stages: the task's automaton (for ``objective="min"`` its own
+    when it is co-safe, else its complement, module docs), the STA with the problem's
+    truncation settings, and the product with the world, under the problem's budgets."""
     model, s = posed.model, posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
-    robust = posed.robust if robust is None else robust
-    if posed.route == SENSED:
-        return _sensed(posed, progress)
-    if posed.route != CONSTRAINED and not robust:
-        return build_product(
-            model.game, model.spec, model.distributions,
-            epsilon=model.epsilon if s.epsilon is None else s.epsilon,
-            clock_reduction=s.clock_reduction, truncation=s.truncation_map,
-            max_states=s.max_states, max_automaton_states=s.max_automaton_states,
-            max_memory=s.max_memory, progress=progress,
-            objective="min" if posed.minimise and posed.route == PLAIN else "max",
-            complement=posed.minimise and posed.route != PLAIN)
-    t0 = time.perf_counter()
-    joint = None
-    if posed.route == CONSTRAINED:
-        joint, sta = joint_sta(posed)
-        dta = joint.dta
-    else:
-        dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
-        if posed.minimise:
-            dta = dta.complement()
-        sta = make_sta(dta, model.distributions,
-                       model.epsilon if s.epsilon is None else s.epsilon,
-                       clock_reduction=s.clock_reduction, truncation=s.truncation_map)
-    t1 = time.perf_counter()
-    build = robust_product if robust else product
-    mdp = build(model.game, sta, max_states=s.max_states, max_memory=s.max_memory,
-                progress=progress)
-    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": time.perf_counter() - t1},
-                 joint)
+    return build_product(
+        model.game, model.spec, model.distributions, epsilon=_epsilon(posed),
+        clock_reduction=s.clock_reduction, truncation=s.truncation_map,
+        max_states=s.max_states, max_automaton_states=s.max_automaton_states,
+        max_memory=s.max_memory, progress=progress,
+        objective="min" if posed.minimise else "max")
 
 
-def _sensed(posed: Posed, progress: bool | None) -> Built:
-    """The stages of a problem with sensors that miss events: the task's automaton, then
-    the information-state product (:mod:`mitld_lp.sensing.belief`: what the robot knows
-    of the events, never the events themselves), under the problem's budgets."""
-    from mitld_lp.sensing.belief import belief_product
-    from mitld_lp.sensing.sensors import partial
-
+def build_interval(posed: Posed, progress: bool | None = None) -> Built:
+    """The robust route's stages: the task's automaton (its complement for
+    ``objective="min"``: a minimum is the complement's maximum read back), the STA, and
+    the interval MDP with the world (also when every law is a point)."""
     model, s = posed.model, posed.settings
     assert s.max_states is not None and s.max_automaton_states is not None  # resolved
     t0 = time.perf_counter()
     dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
+    if posed.minimise:
+        dta = dta.complement()
+    sta = make_sta(dta, model.distributions, _epsilon(posed),
+                   clock_reduction=s.clock_reduction, truncation=s.truncation_map)
     t1 = time.perf_counter()
-    belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
-                            model.epsilon if s.epsilon is None else s.epsilon,
-                            clock_reduction=s.clock_reduction, truncation=s.truncation_map,
-                            max_states=s.max_states, max_memory=s.max_memory,
-                            progress=progress)
-    return Built(dta, belief.sta, belief.mdp,
-                 {"automaton": t1 - t0, "product": time.perf_counter() - t1}, belief=belief)
+    mdp = robust_product(model.game, sta, max_states=s.max_states, max_memory=s.max_memory,
+                         progress=progress)
+    return Built(dta, sta, mdp, {"automaton": t1 - t0, "product": time.perf_counter() - t1})
+
+
+def build_joint(posed: Posed, progress: bool | None = None, *,
+                make: Callable[..., MDP | IntervalMDP] = product) -> Built:
+    """The constrained routes' stages: the joint automaton of the task and the
+    constraints' formulas (:func:`joint_sta`), its STA, and ``make``'s product with the
+    world (:func:`~mitld_lp.product.product`, or :func:`~mitld_lp.product.robust_product`
+    for a band), under the problem's budgets."""
+    s = posed.settings
+    t0 = time.perf_counter()
+    joint, sta = joint_sta(posed)
+    t1 = time.perf_counter()
+    mdp = make(posed.model.game, sta, max_states=s.max_states, max_memory=s.max_memory,
+               progress=progress)
+    return Built(joint.dta, sta, mdp,
+                 {"automaton": t1 - t0, "product": time.perf_counter() - t1}, joint)
+
+
+def _epsilon(posed: Posed) -> float:
+    s = posed.settings
+    return posed.model.epsilon if s.epsilon is None else s.epsilon
 
 
 def joint_sta(posed: Posed) -> tuple[Joint, STA]:

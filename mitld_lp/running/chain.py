@@ -100,7 +100,7 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
 
     if is_sensed(result):
         return sensed_chain_of(result, controller)
-    if result.route == "constrained":  # a constrained result: the joint automaton's product
+    if result.part.randomised:  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:
             raise ValueError(f"no controller to export: the synthesis is {result.status}")
         persistent: frozenset[int] = frozenset()  # joint acceptance is by reaching

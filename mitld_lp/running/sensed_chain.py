@@ -52,10 +52,9 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["SENSED_ROUTE", "SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain",
+__all__ = ["SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain",
            "sensed_chain_of"]
 
-SENSED_ROUTE = "sensed"
 
 SENSED_TREE_REFUSAL = (
     "export --tree: the model has sensors that miss events; its controller's memory is its "
@@ -75,8 +74,10 @@ _ENDS = ("accept", "reject", "truncated")
 
 def is_sensed(result: Any) -> bool:
     """Whether ``result`` answers a problem with sensors that miss events (the one place
-    this package's running and export code reads a result's route for it)."""
-    return getattr(result, "route", None) == SENSED_ROUTE
+    this package's running and export code asks a result for it: its route's part says
+    its controller acts on observations)."""
+    part = getattr(result, "part", None)
+    return bool(getattr(part, "observation_based", False))
 
 
 def sensed_chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:

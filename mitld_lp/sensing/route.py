@@ -1,16 +1,71 @@
-"""Which problems with sensors that miss the ``sensed`` route solves, and the refusal
-naming each combination it does not (:func:`mitld_lp.problem.pose` raises it)."""
+"""The ``sensed`` route (:class:`SensedRoute`): a problem with a sensor that misses its
+event, solved on the information-state product; which such problems it solves, and the
+refusal naming each combination it does not (:func:`mitld_lp.problem.pose` raises it)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+import time
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp.logic.fragment import CO_SAFE
+from mitld_lp.routes.route import Route
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.worlds.game import GameError, world_members
 
-__all__ = ["sensed_refusals"]
+if TYPE_CHECKING:
+    from mitld_lp.problem import Posed
+    from mitld_lp.result import Result
+    from mitld_lp.routes.stages import Built
+
+__all__ = ["SensedRoute", "sensed_refusals"]
+
+
+class SensedRoute(Route):
+    """Some event is reported by a sensor that misses it (``detect < 1``): co-safe
+    tasks, point laws, no constraints (:mod:`mitld_lp.sensing.solve`).  It claims every
+    problem with such a sensor: the fully observed product would answer another one."""
+
+    name = "sensed"
+    observation_based = True
+
+    def claims(self, posed: Posed) -> bool:
+        return bool(partial(posed.model.sensors))
+
+    def refusal(self, posed: Posed) -> list[str]:
+        p = posed.problem
+        if not partial(p.model.sensors):
+            return ["sensed route: no event has a sensor that misses it"]
+        return sensed_refusals(p.model, posed.fragment, p.objective, p.constraints, p.then,
+                               posed.robust)
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        """The task's automaton, then the information-state product
+        (:mod:`mitld_lp.sensing.belief`: what the robot knows of the events, never the
+        events themselves), under the problem's budgets."""
+        from mitld_lp.automata.translate import to_dta
+        from mitld_lp.routes.stages import Built
+        from mitld_lp.sensing.belief import belief_product
+
+        model, s = posed.model, posed.settings
+        assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+        t0 = time.perf_counter()
+        dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
+        t1 = time.perf_counter()
+        belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
+                                model.epsilon if s.epsilon is None else s.epsilon,
+                                clock_reduction=s.clock_reduction,
+                                truncation=s.truncation_map, max_states=s.max_states,
+                                max_memory=s.max_memory, progress=progress)
+        return Built(dta, belief.sta, belief.mdp,
+                     {"automaton": t1 - t0, "product": time.perf_counter() - t1},
+                     belief=belief)
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        from mitld_lp.sensing.solve import solve_sensed
+
+        return solve_sensed(posed, built)
 
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],

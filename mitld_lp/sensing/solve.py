@@ -16,26 +16,48 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from mitld_lp.problem import SENSED, Posed
-from mitld_lp.result import Result, from_models
+from mitld_lp.problem import Posed
+from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
-from mitld_lp.routes.plain import solve_models
+from mitld_lp.routes.plain import ModelSolution, solve_models
 from mitld_lp.routes.stages import Built
 from mitld_lp.sensing.observe import controller_of
+from mitld_lp.sensing.route import SensedRoute
 
-__all__ = ["solve_sensed"]
+__all__ = ["SensedPart", "solve_sensed"]
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SensedPart(Part):
+    """The sensed route's part of the answer: the two solved models of the
+    information-state product, each sensed event's sensor, and that product's record;
+    the controller acts on what the sensors report."""
+
+    lower_model: ModelSolution = field()  # required (Part's default is for the other routes)
+    upper_model: ModelSolution = field()
+    sensors: Mapping[str, Any] = field()
+    belief: Any = field()
+    observation_based = True
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        from mitld_lp.sensing.table import sensed_table
+
+        return sensed_table(result)
 
 
 def solve_sensed(posed: Posed, built: Built) -> Result:
     """Solve a problem posed on the ``sensed`` route (module docs) on its built
     information-state product (:func:`mitld_lp.synthesis.solve`)."""
     model, s = posed.model, posed.settings
-    assert posed.route == SENSED and built.belief is not None
+    assert built.belief is not None  # built by SensedRoute.build
     eps = model.epsilon if s.epsilon is None else s.epsilon
     belief, dta = built.belief, built.dta
     t2 = time.perf_counter()
@@ -49,9 +71,9 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
                              complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(
-        route=SENSED, model=model, objective=posed.problem.objective, method=s.method,
-        epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta, belief=belief,
-        sensors=dict(belief.sensors),
+        route=SensedRoute.name, model=model, objective=posed.problem.objective, method=s.method,
+        epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta,
+        part=SensedPart(low, high, dict(belief.sensors), belief),
         controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
         **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,

@@ -159,7 +159,7 @@ def solver_keywords(options: SolveOptions, *, polished: bool = False) -> dict[st
         opts["iterative_refinement_enable"] = False
         if clarabel_has_faer():
             opts.update(direct_solve_method="faer", max_threads=1)
-    left = options.deadline.remaining()
+    left = options.deadline.left()
     if left is not None:
         opts.update(_time_options(options.solver, left))
     return {**opts, **dict(options.extra)}

@@ -1,49 +1,18 @@
 """How a solve is run: the solver, its backend, its accuracy and its deadline, as one
-record (:class:`SolveOptions`), and the time left computed in one place
-(:class:`Deadline`).  What the options mean to a given solver (its keywords) is the
-business of the module that calls it (:mod:`mitld_lp.solvers.lp_backends`)."""
+record (:class:`SolveOptions`); its deadline is the package's one
+:class:`~mitld_lp.util.clock.Deadline` (the time left computed in one place).
+What the options mean to a given solver (its keywords) is the business of the module that calls it (:mod:`mitld_lp.solvers.lp_backends`)."""
 
 from __future__ import annotations
 
 import enum
-import math
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from mitld_lp.util.clock import Deadline
+
 __all__ = ["Deadline", "Layout", "SolveOptions"]
-
-
-@dataclass(frozen=True, slots=True)
-class Deadline:
-    """A point in time (a :func:`time.perf_counter` value; ``inf``: no time limit) and
-    the time left until it, the one way every solver reads a time limit."""
-
-    at: float = math.inf
-
-    @classmethod
-    def after(cls, seconds: float | None, start: float | None = None) -> Deadline:
-        """``seconds`` after ``start`` (now if ``None``); no deadline if ``seconds`` is
-        ``None``."""
-        if seconds is None:
-            return cls()
-        return cls((time.perf_counter() if start is None else start) + seconds)
-
-    @property
-    def limited(self) -> bool:
-        """Whether there is a time limit at all."""
-        return math.isfinite(self.at)
-
-    def remaining(self) -> float | None:
-        """Seconds left (0 once past), ``None`` without a time limit."""
-        if not self.limited:
-            return None
-        return max(self.at - time.perf_counter(), 0.0)
-
-    def passed(self) -> bool:
-        """Whether the deadline has been reached."""
-        return time.perf_counter() >= self.at
 
 
 class Layout(enum.StrEnum):

@@ -58,6 +58,7 @@ from datetime import date, datetime, time
 from pathlib import Path
 from typing import Any
 
+from mitld_lp import defaults
 from mitld_lp.files import rules as file_rules
 from mitld_lp.files.keys import KeyContext
 from mitld_lp.model import ModelError, loads_model
@@ -77,8 +78,6 @@ __all__ = [
 MAX_POINTS = 100_000
 """Largest number of points a sweep may have (checked before any point is made)."""
 
-METHODS = ("lp", "vi")
-BACKENDS = ("auto", "direct", "cvxpy")
 
 
 class SweepError(ValueError):
@@ -227,20 +226,13 @@ def _setting(table: dict[str, Any], ctx: KeyContext) -> Settings:
         if k in ("clock_reduction", "decompose"):
             if not isinstance(v, bool):
                 raise ctx.error(where, f"must be true or false, got {_toml_value(v)}")
-        elif k == "time_limit":
-            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < math.inf:
-                raise ctx.error(where, f"must be a positive number of seconds, got "
-                                f"{_toml_value(v)}")
-            v = float(v)
-        elif k in ("tol", "certify_tol", "precision"):
-            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < 1:
-                raise ctx.error(where, f"must be a number in (0, 1), got {_toml_value(v)}")
-            v = float(v)
-        elif k in ("max_states", "max_automaton_states", "max_memory"):
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ctx.error(where, f"must be a positive integer, got {_toml_value(v)}")
+        elif k in _RULES:  # the rule every surface applies (mitld_lp.defaults)
+            try:
+                v = _RULES[k](v, _toml_value(v))
+            except ValueError as exc:
+                raise ctx.error(where, str(exc)) from None
         else:
-            choices = {"method": METHODS, "backend": BACKENDS}.get(k)
+            choices = {"method": defaults.METHODS, "backend": defaults.BACKENDS}.get(k)
             if not isinstance(v, str) or (choices and v not in choices):
                 allowed_text = " or ".join(f'"{c}"' for c in choices) if choices else "a string"
                 raise ctx.error(where, f"must be {allowed_text}, got {_toml_value(v)}")
@@ -252,6 +244,12 @@ def _setting(table: dict[str, Any], ctx: KeyContext) -> Settings:
     except ProblemError as exc:
         raise ctx.error("solve", str(exc)) from None
 
+
+#: The checks of a sweep's ``[solve]`` numbers (the library's and the model file's).
+_RULES = {"time_limit": defaults.check_seconds, "tol": defaults.check_unit,
+          "certify_tol": defaults.check_unit, "precision": defaults.check_unit,
+          "max_states": defaults.check_count, "max_automaton_states": defaults.check_count,
+          "max_memory": defaults.check_memory}
 
 #: The keys of a sweep's ``[solve]`` table: the settings a point is solved with.
 _SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "decompose",

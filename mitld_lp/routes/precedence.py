@@ -1,0 +1,31 @@
+"""The routes, in the order :func:`mitld_lp.problem.pose` asks them: the first that
+claims a problem owns it (:class:`mitld_lp.routes.route.Route`).
+
+A new route is one module with one :class:`~mitld_lp.routes.route.Route` subclass and
+one line here, before the routes whose problems it takes over.
+"""
+
+from __future__ import annotations
+
+from mitld_lp.routes.constrained import ConstrainedRoute
+from mitld_lp.routes.plain import PlainRoute
+from mitld_lp.routes.robust import RobustRoute
+from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
+from mitld_lp.routes.route import Route
+from mitld_lp.sensing.route import SensedRoute
+
+__all__ = ["ROUTES", "LP"]
+
+#: Every route, in precedence.
+ROUTES: list[Route] = [
+    SensedRoute(),  # a sensor that misses its event: what the robot observes
+    RobustConstrainedRoute(),  # constraints and a band
+    ConstrainedRoute(),  # constraints or then, point laws
+    RobustRoute(),  # a band
+    PlainRoute(),  # point laws, no constraints, perfect sensors
+]
+
+#: The constrained LP's routes, claiming a problem without constraints too (the
+#: trade-off curve's end points, :func:`mitld_lp.synthesis.synthesize_constrained`).
+LP: tuple[Route, ...] = (SensedRoute(), RobustConstrainedRoute(every=True),
+                         ConstrainedRoute(every=True))
