@@ -20,9 +20,9 @@ from pathlib import Path
 import _common
 
 from mitld_lp.model import loads_model
+from mitld_lp.tradeoff import pareto, plot
+from mitld_lp.tradeoff import write_csv as write_pareto_csv
 from mitld_lp.routes.constrained_export import write_merged_drn
-from mitld_lp.routes.pareto import pareto, plot
-from mitld_lp.routes.pareto import write_csv as write_pareto_csv
 from mitld_lp.synthesis import synthesize_constrained
 
 RISK = 0.05

@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     )
     from mitld_lp.controllers.observation import Observation, RunStatus
     from mitld_lp.distributions.fit import fit_law
+    from mitld_lp.logic.constraints import Constraint, ConstraintError, parse_constraint
     from mitld_lp.logic.parser import ParseError, parse, parse_distribution
     from mitld_lp.logic.syntax import (
         FALSE,
@@ -52,11 +53,10 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     )
     from mitld_lp.mdp import MDP
     from mitld_lp.model import Model, ModelError, load_model, loads_model
+    from mitld_lp.tradeoff import pareto
     from mitld_lp.problem import Problem, ProblemError, Settings, pose
     from mitld_lp.product import ProductState, product
     from mitld_lp.result import Result, SynthesisResult
-    from mitld_lp.routes.constraints import Constraint, ConstraintError, parse_constraint
-    from mitld_lp.routes.pareto import pareto
     from mitld_lp.running.simulate import simulate
     from mitld_lp.sweep import load_sweep, run_sweep
     from mitld_lp.synthesis import solve, synthesize, synthesize_constrained
@@ -116,10 +116,10 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "Settings": "mitld_lp.problem",
     "ProblemError": "mitld_lp.problem",
     "fit_law": "mitld_lp.distributions.fit",
-    "Constraint": "mitld_lp.routes.constraints",
-    "ConstraintError": "mitld_lp.routes.constraints",
-    "parse_constraint": "mitld_lp.routes.constraints",
-    "pareto": "mitld_lp.routes.pareto",
+    "Constraint": "mitld_lp.logic.constraints",
+    "ConstraintError": "mitld_lp.logic.constraints",
+    "parse_constraint": "mitld_lp.logic.constraints",
+    "pareto": "mitld_lp.tradeoff",
     "run_sweep": "mitld_lp.sweep",
     "load_sweep": "mitld_lp.sweep",
 }

@@ -56,7 +56,6 @@ from mitld_lp.files.keys import (
     KeyContext,
     ModelError,
     budgets_table,
-    constraints_and_costs,
     key_path,
     toml_text,
     type_name,
@@ -99,7 +98,7 @@ class Model:
             external event of the spec (the events are exactly its keys).
         source: the file the model was read from, or ``None`` for :func:`loads_model`.
         constraints: the file's ``constraints`` (texts, checked when loaded; see
-            :mod:`mitld_lp.routes.constraints`).
+            :mod:`mitld_lp.logic.constraints`).
         costs: the file's ``[costs]``: cost per action (1 for an action not named).
         objective: ``"max"`` (the default) or ``"min"``: the probability of the task is
             maximised or minimised (PRISM's ``Pmax`` / ``Pmin``).
@@ -621,3 +620,24 @@ def model_budgets(path: str | os.PathLike[str], *,
         return budgets_table(tomllib.loads(_read(path, max_memory)), KeyContext(os.fspath(path)))
     except (ModelError, tomllib.TOMLDecodeError, RecursionError):
         return {}
+
+
+def constraints_and_costs(doc: Mapping[str, Any], ctx: KeyContext) -> tuple[tuple[str, ...],
+                                                                          dict[str, float]]:
+    """The ``constraints`` list (each read by :func:`mitld_lp.logic.constraints.parse_constraint`)
+    and the ``[costs]`` table (numbers > 0 per action)."""
+    from mitld_lp.logic.constraints import ConstraintError, check_costs, parse_constraint
+
+    texts = doc.get("constraints", [])
+    if not isinstance(texts, list):
+        raise ctx.error("constraints", f"must be a list of strings, got {type_name(texts)}")
+    for i, text in enumerate(texts):
+        try:
+            parse_constraint(text, f"constraints[{i}]")
+        except ConstraintError as exc:
+            raise ModelError(f"{ctx.source}: {exc}") from None
+    try:
+        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
+    except ConstraintError as exc:
+        raise ModelError(f"{ctx.source}: {exc}") from None
+    return tuple(texts), costs

@@ -19,7 +19,7 @@ asked in that order, the first that claims the problem owns it):
   constraint formulas -- :mod:`mitld_lp.routes.constrained`; with a band,
   :mod:`mitld_lp.routes.robust_constrained` (probability constraints only);
 * ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
-  co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.sensing.solve`.
+  co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.routes.sensed_solve`.
 
 ``objective = "min"`` (PRISM's ``Pmin``) is posed as the maximum of the complement:
 ``Pmin(phi) = 1 - Pmax(not phi)``, with the complement taken on the automaton
@@ -203,7 +203,7 @@ class Problem:
     ``"min-cost"``) among the optimal policies."""
 
     model: Any  # mitld_lp.model.Model (not imported: the model imports the worlds)
-    constraints: tuple[Any, ...] = ()  # mitld_lp.routes.constraints.Constraint records
+    constraints: tuple[Any, ...] = ()  # mitld_lp.logic.constraints.Constraint records
     then: str | None = None
     objective: str = "max"
     unread: tuple[Any, ...] = ()  # constraints given that did not parse (each refused)
@@ -261,16 +261,16 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
          settings: Settings | None = None, objective: str | None = None,
          routes: Sequence[Route] | None = None) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
-    texts or :class:`~mitld_lp.routes.constraints.Constraint` records, after the model's own;
+    texts or :class:`~mitld_lp.logic.constraints.Constraint` records, after the model's own;
     ``objective``: the model's unless given; ``routes``: the routes to ask, in
     precedence (default :data:`mitld_lp.routes.precedence.ROUTES`; the trade-off
     curve's end points ask the constrained LP's, :data:`~mitld_lp.routes.precedence.LP`).
     Raises :class:`ProblemError` naming the combination no route solves, or the option
     the route cannot honour: every reason at once, not the first alone."""
+    from mitld_lp.logic.constraints import THEN, ConstraintError, parse_constraints
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
     from mitld_lp.routes import precedence
-    from mitld_lp.routes.constraints import THEN, ConstraintError, parse_constraints
     from mitld_lp.routes.route import Route
 
     if not isinstance(model, Model):

@@ -123,7 +123,7 @@ def synthesize_constrained(
     """Maximise the task's probability subject to ``constraints`` (texts or records;
     the model's own ``constraints`` come first), then, with ``then`` (``"min-steps"``
     or ``"min-cost"``), minimise the expected steps / cost among the policies within
-    :data:`~mitld_lp.routes.constraints.LEXICOGRAPHIC_TOL` of that probability; by the
+    :data:`~mitld_lp.logic.constraints.LEXICOGRAPHIC_TOL` of that probability; by the
     constrained LP even with no constraint (docs/constraints.md).  ``costs``: per action
     (default the model's ``[costs]``, 1 for any action not named).  ``seed`` seeds the
     controller's generator.  ``options``: :func:`synthesize`'s settings (epsilon,

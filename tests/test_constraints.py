@@ -14,8 +14,8 @@ import pytest
 from scipy.optimize import linprog
 
 from mitld_lp.automata.joint import ACCEPTED
+from mitld_lp.logic.constraints import ConstraintError, parse_constraint
 from mitld_lp.model import Model, ModelError, loads_model
-from mitld_lp.routes.constraints import ConstraintError, parse_constraint
 from mitld_lp.running.constrained_runs import run_constrained
 from mitld_lp.synthesis import synthesize, synthesize_constrained
 from mitld_lp.testing import two_routes_world

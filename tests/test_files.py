@@ -147,8 +147,7 @@ def solved():
 
 def _writers(result):
     """Every file writer of the package: (name, suffix, write(path, overwrite))."""
-    from mitld_lp import plot
-    from mitld_lp.routes import pareto
+    from mitld_lp import plot, tradeoff
     from mitld_lp.solvers.export import write_drn, write_lp
 
     mdp = result.mdp
@@ -164,7 +163,7 @@ def _writers(result):
                                                       overwrite=o)),
         ("figure svg", ".svg", lambda p, o: plot.save(plot.policy_figure(result), p,
                                                       overwrite=o)),
-        ("pareto", ".png", lambda p, o: pareto.plot([], p, "P(F A)", "t", overwrite=o)),
+        ("pareto", ".png", lambda p, o: tradeoff.plot([], p, "P(F A)", "t", overwrite=o)),
     ]
 
 

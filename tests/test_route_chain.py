@@ -107,7 +107,7 @@ def test_without_the_line_the_route_is_not_asked() -> None:
 def test_no_route_claims_a_problem_gives_every_routes_reasons() -> None:
     """Asked only routes of another kind, pose names why each refuses."""
     from mitld_lp.routes.constrained import ConstrainedRoute
-    from mitld_lp.sensing.route import SensedRoute
+    from mitld_lp.routes.sensed import SensedRoute
 
     with pytest.raises(ProblemError) as info:
         pose(_model("x"), routes=(SensedRoute(), ConstrainedRoute()))

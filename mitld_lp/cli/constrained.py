@@ -9,8 +9,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from mitld_lp.logic.constraints import THEN, ConstraintError
 from mitld_lp.report import bracket_text
-from mitld_lp.routes.constraints import THEN, ConstraintError
 
 __all__ = ["args_constraints", "solve", "args_pareto", "cmd_pareto"]
 
@@ -129,7 +129,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         _output_path,
         _write,
     )
-    from mitld_lp.routes.pareto import pareto, plot, write_csv
+    from mitld_lp.tradeoff import pareto, plot, write_csv
 
     out_csv = args.csv and _output_path(args.csv, args.force, "--csv", (".csv",))
     out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))

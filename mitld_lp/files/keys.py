@@ -15,8 +15,7 @@ from typing import Any
 from mitld_lp import defaults
 from mitld_lp.util.text import printable
 
-__all__ = ["ModelError", "KeyContext", "key_path", "toml_text", "type_name", "budgets_table",
-           "constraints_and_costs"]
+__all__ = ["ModelError", "KeyContext", "key_path", "toml_text", "type_name", "budgets_table"]
 
 
 class ModelError(ValueError):
@@ -160,24 +159,3 @@ def budgets_table(doc: Mapping[str, Any], ctx: KeyContext) -> dict[str, float]:
         except ValueError as exc:
             raise ctx.error(where, str(exc)) from None
     return out
-
-
-def constraints_and_costs(doc: Mapping[str, Any], ctx: KeyContext) -> tuple[tuple[str, ...],
-                                                                          dict[str, float]]:
-    """The ``constraints`` list (each read by :func:`mitld_lp.routes.constraints.parse_constraint`)
-    and the ``[costs]`` table (numbers > 0 per action)."""
-    from mitld_lp.routes.constraints import ConstraintError, check_costs, parse_constraint
-
-    texts = doc.get("constraints", [])
-    if not isinstance(texts, list):
-        raise ctx.error("constraints", f"must be a list of strings, got {type_name(texts)}")
-    for i, text in enumerate(texts):
-        try:
-            parse_constraint(text, f"constraints[{i}]")
-        except ConstraintError as exc:
-            raise ModelError(f"{ctx.source}: {exc}") from None
-    try:
-        costs = check_costs(ctx.table(doc.get("costs", {}), "costs"))
-    except ConstraintError as exc:
-        raise ModelError(f"{ctx.source}: {exc}") from None
-    return tuple(texts), costs

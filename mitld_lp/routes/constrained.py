@@ -31,14 +31,14 @@ from mitld_lp.automata.joint import Joint
 from mitld_lp.automata.sta import STA
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
-from mitld_lp.mdp import MDP
-from mitld_lp.problem import Posed, ProblemError, task_words
-from mitld_lp.result import Part, Result, precision_check
-from mitld_lp.routes.constraints import (
+from mitld_lp.logic.constraints import (
     LEXICOGRAPHIC_TOL,
     Constraint,
     ConstraintError,
 )
+from mitld_lp.mdp import MDP
+from mitld_lp.problem import Posed, ProblemError, task_words
+from mitld_lp.result import Part, Result, precision_check
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import INFEASIBLE, Row, Solved, optimise

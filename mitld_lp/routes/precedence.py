@@ -12,7 +12,7 @@ from mitld_lp.routes.plain import PlainRoute
 from mitld_lp.routes.robust import RobustRoute
 from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
 from mitld_lp.routes.route import Route
-from mitld_lp.sensing.route import SensedRoute
+from mitld_lp.routes.sensed import SensedRoute
 
 __all__ = ["ROUTES", "LP"]
 

@@ -33,13 +33,13 @@ from mitld_lp.automata.translate import to_dta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.literal import from_spec
 from mitld_lp.logic import check
+from mitld_lp.logic.constraints import Constraint, ConstraintError
 from mitld_lp.logic.syntax import DistLiteral, Formula, atoms
 from mitld_lp.mdp import MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import Posed
 from mitld_lp.product import product, robust_product
 from mitld_lp.product.imdp import IntervalMDP
-from mitld_lp.routes.constraints import Constraint, ConstraintError
 from mitld_lp.worlds.game import Game
 
 __all__ = ["Built", "build_product", "build_posed", "build_task", "build_interval",

@@ -6,7 +6,7 @@
   robot knows);
 * :mod:`~mitld_lp.sensing.horizon`: the sensors whose reports come too late for the
   task, built as blind ones (the same optimum);
-* :mod:`~mitld_lp.sensing.solve`: the ``sensed`` route, its certified bracket (the one
+* :mod:`~mitld_lp.routes.sensed_solve`: the ``sensed`` route, its certified bracket (the one
   :class:`~mitld_lp.result.Result`, with its ``sensors`` and ``belief`` parts);
 * :mod:`~mitld_lp.sensing.table`: its policy table;
 * :mod:`~mitld_lp.sensing.observe`: the controller that acts on observations made from

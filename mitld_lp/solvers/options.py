@@ -1,7 +1,8 @@
 """How a solve is run: the solver, its backend, its accuracy and its deadline, as one
 record (:class:`SolveOptions`); its deadline is the package's one
 :class:`~mitld_lp.util.clock.Deadline` (the time left computed in one place).
-What the options mean to a given solver (its keywords) is the business of the module that calls it (:mod:`mitld_lp.solvers.lp_backends`)."""
+What the options mean to a given solver (its keywords) is the business of the module
+that calls it (:mod:`mitld_lp.solvers.lp_backends`)."""
 
 from __future__ import annotations
 

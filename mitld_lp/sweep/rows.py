@@ -23,12 +23,12 @@ from typing import Any
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.exact.errors import ExactError
+from mitld_lp.logic.constraints import ConstraintError
 from mitld_lp.logic.fragment import FragmentError
 from mitld_lp.logic.parser import ParseError
 from mitld_lp.model import Model, ModelError
 from mitld_lp.problem import ProblemError, Settings
 from mitld_lp.product import ProductTooLarge
-from mitld_lp.routes.constraints import ConstraintError
 from mitld_lp.util.text import printable
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError

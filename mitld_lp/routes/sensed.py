@@ -23,7 +23,7 @@ __all__ = ["SensedRoute", "sensed_refusals"]
 
 class SensedRoute(Route):
     """Some event is reported by a sensor that misses it (``detect < 1``): co-safe
-    tasks, point laws, no constraints (:mod:`mitld_lp.sensing.solve`).  It claims every
+    tasks, point laws, no constraints (:mod:`mitld_lp.routes.sensed_solve`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
@@ -63,7 +63,7 @@ class SensedRoute(Route):
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
-        from mitld_lp.sensing.solve import solve_sensed
+        from mitld_lp.routes.sensed_solve import solve_sensed
 
         return solve_sensed(posed, built)
 

@@ -17,15 +17,15 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.files import write as files
-from mitld_lp.model import Model
-from mitld_lp.problem import ProblemError
-from mitld_lp.routes.constrained import rows_for
-from mitld_lp.routes.constraints import (
+from mitld_lp.logic.constraints import (
     Constraint,
     ConstraintError,
     parse_constraint,
     parse_constraints,
 )
+from mitld_lp.model import Model
+from mitld_lp.problem import ProblemError
+from mitld_lp.routes.constrained import rows_for
 from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
 from mitld_lp.synthesis import synthesize_constrained

@@ -26,9 +26,9 @@ from mitld_lp.problem import Posed
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import ModelSolution, solve_models
+from mitld_lp.routes.sensed import SensedRoute
 from mitld_lp.routes.stages import Built
 from mitld_lp.sensing.observe import controller_of
-from mitld_lp.sensing.route import SensedRoute
 
 __all__ = ["SensedPart", "solve_sensed"]
 
