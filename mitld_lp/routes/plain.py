@@ -38,6 +38,7 @@ from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import Controller
 from mitld_lp.mdp import MDP
 from mitld_lp.problem import Posed, Settings, task_words
+from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_task
@@ -312,7 +313,8 @@ def solve_plain(posed: Posed, built: Built) -> Result:
                          truncated=bool(mdp.truncated.any()), sense=built.sense,
                          exact=fields.get("exact")),
            **fields})
-    log.info("synthesis: [%g, %g], certified=%s", result.lower, result.upper, result.certified)
+    log.info("synthesis: %s, certified=%s",  # outward, as every surface prints it
+             bracket_text(result.lower, result.upper), result.certified)
     return result
 
 

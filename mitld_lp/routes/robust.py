@@ -48,6 +48,7 @@ from mitld_lp.model import Model
 from mitld_lp.problem import Posed, ProblemError, pose, settings_from
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.route import Route
@@ -281,8 +282,8 @@ def solve_robust(posed: Posed, built: Built) -> Result:
                         read_only(target)),
         bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
                                    s.precision, truncated=bool(imdp.truncated.any())))
-    log.info("robust synthesis: [%g, %g], certified=%s", result.lower, result.upper,
-             result.certified)
+    log.info("robust synthesis: %s, certified=%s",  # outward, as every surface prints it
+             bracket_text(result.lower, result.upper), result.certified)
     return result
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.problem import Posed
+from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import ModelSolution, solve_models
@@ -78,6 +79,6 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
         timings={**built.timings, "solve": t3 - t2},
         **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
                       truncated=bool(mdp.truncated.any())))
-    log.info("sensed synthesis: [%g, %g], certified=%s", result.lower, result.upper,
-             result.certified)
+    log.info("sensed synthesis: %s, certified=%s",  # outward, as every surface prints it
+             bracket_text(result.lower, result.upper), result.certified)
     return result
