@@ -20,10 +20,10 @@ from pathlib import Path
 import _common
 
 from mitld_lp.model import loads_model
-from mitld_lp.tradeoff import pareto, plot
-from mitld_lp.tradeoff import write_csv as write_pareto_csv
 from mitld_lp.routes.constrained_export import write_merged_drn
 from mitld_lp.synthesis import synthesize_constrained
+from mitld_lp.tradeoff import pareto, plot
+from mitld_lp.tradeoff import write_csv as write_pareto_csv
 
 RISK = 0.05
 

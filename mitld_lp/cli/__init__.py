@@ -31,22 +31,22 @@ from typing import Any, NoReturn
 
 from mitld_lp.cli.arguments import seconds
 from mitld_lp.cli.kernel import (
-    _BUDGET_STOPS,
-    _USER_ERRORS,
+    BUDGET_STOPS,
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     PROG,
+    USER_ERRORS,
     TimeLimit,
     UsageError,
-    _command,
-    _dumps,
-    _say,
     apply_file_time_limit,
+    command_state,
     error_record,
     error_status,
+    json_text,
+    say,
     say_error,
 )
 from mitld_lp.files import write as files
@@ -159,9 +159,9 @@ def _run(args: argparse.Namespace) -> int:
         return args.run(args)
     except files.WriteAbandoned:  # interrupted from outside, which has said so
         return EXIT_INTERRUPTED
-    except _BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
+    except BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
         return say_error(args, "budget", str(err), err)
-    except _USER_ERRORS as err:
+    except USER_ERRORS as err:
         return say_error(args, error_status(err), str(err), err)
     except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
         sys.stderr.close()
@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     outcome: list[int] = []
 
     def work() -> None:
-        _command.cancelled = cancelled
+        command_state.cancelled = cancelled
         # bars on a terminal only, none under -q or --json (mitld_lp.util.progress)
         with progress.silenced(args.quiet or getattr(args, "json", False)):
             outcome.append(_run(args))
@@ -269,9 +269,9 @@ def _time_stop(args: argparse.Namespace, where: str, limit: TimeLimit | None = N
     limit = args.limit if limit is None else limit
     assert isinstance(limit, TimeLimit)
     message = f"time limit of {limit.seconds:g} s{limit.source} reached{where}"
-    _say(f"stopped: {message}")
+    say(f"stopped: {message}")
     if getattr(args, "json", False):
-        print(_dumps(error_record("time_limit", message, time_limit=limit.seconds)),
+        print(json_text(error_record("time_limit", message, time_limit=limit.seconds)),
               flush=True)
 
 
@@ -299,7 +299,7 @@ def run() -> None:
                 sys.exit(code)
         code = main()
     except KeyboardInterrupt:  # before the command started (reading the arguments)
-        _say("interrupted")
+        say("interrupted")
         code = EXIT_INTERRUPTED
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # done: a late Ctrl-C changes nothing
     if _worker is not None:  # interrupted or out of time: no finalisation under a thread

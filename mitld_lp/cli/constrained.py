@@ -32,7 +32,7 @@ def _usage(exc: ConstraintError) -> Exception:
 def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int:
     """Run the constrained synthesis of a posed problem and print it; exit 0 when
     certified, 3 when infeasible, failed or not certified."""
-    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, _dumps, _out, print_head
+    from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, json_text, print_head, say_answer
     from mitld_lp.synthesis import solve
 
     model = posed.model
@@ -45,48 +45,48 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
         _write_policy(r.policy_table(), policy_file)
         summary["policy_file"] = str(policy_file)
     if args.json:
-        _out(_dumps(summary))
+        say_answer(json_text(summary))
     else:
         print_head(model, r.objective)
-        _out(f"status:       {r.status}")
+        say_answer(f"status:       {r.status}")
         if r.bands:
-            _out("robust:       worst case over the bands "
-                 + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
+            say_answer("robust:       worst case over the bands "
+                       + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
         if r.status == "optimal":
-            _out(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")
+            say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")
             parts = {k: v for k, v in r.width.items() if k != "total" and v}
             if set(parts) - {"solver"}:
-                _out(f"width:        {r.width['total']:.3g} = " + " + ".join(
+                say_answer(f"width:        {r.width['total']:.3g} = " + " + ".join(
                     f"{k} {v:.3g}" for k, v in parts.items()))
-            _out(f"E(steps):     {r.steps:.6g}")
+            say_answer(f"E(steps):     {r.steps:.6g}")
             if r.then:
-                _out(f"then {r.then}: {r.secondary:.6g}")
+                say_answer(f"then {r.then}: {r.secondary:.6g}")
             elif not r.bands:  # the steps of one optimal policy, not the fewest
-                _out("note:         E(steps) is that of one optimal policy; --then min-steps "
-                     "gives the fewest among them")
-            _out("certified:    " + ("yes" if r.certified else "NO"))
+                say_answer("note:         E(steps) is that of one optimal policy; --then min-steps "
+                           "gives the fewest among them")
+            say_answer("certified:    " + ("yes" if r.certified else "NO"))
             for c in r.failed_checks:
-                _out(f"  failed: {c.name}: {c.detail}")
+                say_answer(f"  failed: {c.name}: {c.detail}")
         for c in r.constraints:
             if r.status == "optimal":
                 word = "<=" if c.constraint.sense == "<=" else ">="
-                _out(f"constraint:   {c.constraint}: {c.value:.7g} ("
-                     + (f"holds: certified {word} {c.certified!r}" if c.holds else
+                say_answer(f"constraint:   {c.constraint}: {c.value:.7g} ("
+                           + (f"holds: certified {word} {c.certified!r}" if c.holds else
                         f"MISSES by up to {c.miss:.3g}: certified {word} {c.certified!r}")
                      + ")")
             else:
                 tight = "none (the others are infeasible)" if c.feasible_bound is None else (
                     f"{c.feasible_bound:.7g}")
-                _out(f"constraint:   {c.constraint}: tightest feasible bound {tight}")
-        _out(f"sizes:        {r.merged.mdp.n_states} states ({r.mdp.n_states} in the product), "
-             f"{summary['randomized_states']} randomised")
+                say_answer(f"constraint:   {c.constraint}: tightest feasible bound {tight}")
+        say_answer(f"sizes:        {r.merged.mdp.n_states} states ({r.mdp.n_states} in the "
+                   f"product), {summary['randomized_states']} randomised")
         if policy_file is not None and r.prob is not None:
-            _out(f"policy:       {policy_file}")
+            say_answer(f"policy:       {policy_file}")
     return EXIT_OK if r.status == "optimal" and r.certified else EXIT_UNCERTIFIED
 
 
 def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
-    from mitld_lp.cli.kernel import _write
+    from mitld_lp.cli.kernel import write_file
     from mitld_lp.files import write as files
 
     def write(p: Path) -> None:
@@ -101,14 +101,14 @@ def _write_policy(rows: list[dict[str, Any]], path: Path) -> None:
                 w.writerow({k: json.dumps(v, default=repr) if isinstance(v, list | tuple)
                             else v for k, v in row.items()})
 
-    _write(path, write)
+    write_file(path, write)
 
 
 def args_pareto(p: argparse.ArgumentParser) -> None:
     from mitld_lp.cli.arguments import bounded_int
-    from mitld_lp.cli.kernel import _args_model, args_json
+    from mitld_lp.cli.kernel import add_model_argument, args_json
 
-    _args_model(p)
+    add_model_argument(p)
     p.add_argument("--against", required=True, metavar="Q",
                    help="steps, cost, or 'P(FORMULA)' (a risk bounded from above)")
     p.add_argument("--points", type=bounded_int(2, 1000), default=11)
@@ -124,15 +124,15 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     from mitld_lp.cli.kernel import (
         EXIT_OK,
         EXIT_UNCERTIFIED,
-        _dumps,
-        _out,
-        _output_path,
-        _write,
+        json_text,
+        output_path,
+        say_answer,
+        write_file,
     )
     from mitld_lp.tradeoff import pareto, plot, write_csv
 
-    out_csv = args.csv and _output_path(args.csv, args.force, "--csv", (".csv",))
-    out_png = args.plot and _output_path(args.plot, args.force, "--plot", (".png",))
+    out_csv = args.csv and output_path(args.csv, args.force, "--csv", (".csv",))
+    out_png = args.plot and output_path(args.plot, args.force, "--plot", (".png",))
     from mitld_lp.cli.kernel import model_options, read_model
 
     model = read_model(args)
@@ -142,7 +142,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         raise _usage(exc) from None
     said: dict[str, Any] = {"against": args.against, "files": {}}
     if out_csv:
-        _write(out_csv, lambda p: write_csv(points, p, overwrite=True))
+        write_file(out_csv, lambda p: write_csv(points, p, overwrite=True))
         said["files"]["csv"] = str(out_csv)
     if out_png:
         left = plot(points, out_png, args.against, model.name, overwrite=True)
@@ -154,13 +154,13 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         said["points"] = [{"bound": p.bound, "lower": p.lower, "upper": p.upper,
                            "achieved": p.achieved, "status": p.status,
                            "certified": p.certified} for p in points]
-        _out(_dumps(said))
+        say_answer(json_text(said))
         return code
     if out_csv:
-        _out(f"wrote {out_csv}")
+        say_answer(f"wrote {out_csv}")
     if out_png:
-        _out(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
+        say_answer(f"wrote {out_png}" + (f" ({left} uncertified points left out)" if left else ""))
     for p in points:
-        _out(f"{p.bound:12.6g}  {bracket_text(p.lower, p.upper)}  {p.status}"
-             f"{'' if p.certified else ' (not certified)'}")
+        say_answer(f"{p.bound:12.6g}  {bracket_text(p.lower, p.upper)}  {p.status}"
+                   f"{'' if p.certified else ' (not certified)'}")
     return code

@@ -24,12 +24,12 @@ from mitld_lp.cli.kernel import (
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     UsageError,
-    _dumps,
-    _out,
-    _write,
     error_record,
     is_pattern,
+    json_text,
     model_options,
+    say_answer,
+    write_file,
 )
 from mitld_lp.files import write as files
 from mitld_lp.model import ModelError
@@ -214,7 +214,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
                 raise ModelError(str(exc)) from exc
             codes.append(EXIT_USAGE)
             record = error_record("model_error", str(exc), property=name)
-            _out(_dumps(record) if args.json else f"{name}: refused: {exc}")
+            say_answer(json_text(record) if args.json else f"{name}: refused: {exc}")
             continue
         settings = settings_from(method=args.method, solver=args.solver,
                                  backend=args.backend, exact=args.exact,
@@ -222,7 +222,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
                                  **model_options(args))
         r = solve(pose(model, settings=settings))
         if policy_file is not None:
-            _write(policy_file, lambda p, r=r: files.write_policy(r, p, overwrite=True))
+            write_file(policy_file, lambda p, r=r: files.write_policy(r, p, overwrite=True))
         codes.append(_answer(args, query, model, r, time.perf_counter() - started))
     return max(codes, default=EXIT_OK)
 
@@ -244,7 +244,7 @@ def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: f
         if query.comparison is not None:
             record.update(comparison=query.comparison, threshold=str(query.threshold),
                           verdict=decided)
-        _out(_dumps(record))
+        say_answer(json_text(record))
         return code
     bracket = bracket_text(r.lower, r.upper)
     word = "Pmin" if query.objective == "min" else "Pmax"
@@ -259,5 +259,5 @@ def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: f
             f"{seconds:.2f} s"]
     if exact is not None:
         tail.insert(1, f"exact {exact}")
-    _out(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
+    say_answer(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
     return code

@@ -16,15 +16,15 @@ from mitld_lp.cli.kernel import (
     EXIT_OK,
     EXIT_UNCERTIFIED,
     UsageError,
-    _args_model,
-    _build,
-    _dumps,
-    _out,
-    _output_path,
-    _time_left,
-    _write,
+    add_model_argument,
     args_json,
+    build_for,
+    json_text,
+    output_path,
     read_model,
+    say_answer,
+    time_left,
+    write_file,
 )
 from mitld_lp.files import write as files
 
@@ -32,7 +32,7 @@ __all__ = ["args_export", "cmd_export"]
 
 
 def args_export(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
+    add_model_argument(p)
     p.add_argument("--lp", metavar="FILE",
                    help="the occupancy LP, whose optimum is the value, as .mps or .lp")
     p.add_argument("--drn", metavar="FILE", help="the product MDP in Storm's DRN format")
@@ -57,7 +57,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     said: dict[str, Any] = {"files": {}}
     code = _export(args, said)
     if args.json:
-        _out(_dumps(said))
+        say_answer(json_text(said))
     return code
 
 
@@ -67,7 +67,7 @@ def _wrote(args: argparse.Namespace, said: dict[str, Any], key: str, path: Path,
     said["files"][key] = str(path)
     said.update(more)
     if not args.json:
-        _out(line)
+        say_answer(line)
 
 
 def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
@@ -78,15 +78,15 @@ def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
     if all(w is None for w in wanted):
         raise UsageError("export: nothing to do; give --lp, --drn, --controller, --chain "
                          "or --tree FILE")
-    lp = None if args.lp is None else _output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
-    drn = None if args.drn is None else _output_path(args.drn, args.force, "--drn",
-                                                     DRN_SUFFIXES)
-    controller = None if args.controller is None else _output_path(
+    lp = None if args.lp is None else output_path(args.lp, args.force, "--lp", LP_SUFFIXES)
+    drn = None if args.drn is None else output_path(args.drn, args.force, "--drn",
+                                                    DRN_SUFFIXES)
+    controller = None if args.controller is None else output_path(
         args.controller, args.force, "--controller", (".npz",))
-    chain = None if args.chain is None else _output_path(args.chain, args.force, "--chain",
-                                                         (".drn",))
-    tree = None if args.tree is None else _output_path(args.tree, args.force, "--tree",
-                                                       TREE_SUFFIXES)
+    chain = None if args.chain is None else output_path(args.chain, args.force, "--chain",
+                                                        (".drn",))
+    tree = None if args.tree is None else output_path(args.tree, args.force, "--tree",
+                                                      TREE_SUFFIXES)
     files.distinct_outputs((what, p) for what, p in (
         ("--lp", lp), ("--drn", drn), ("--controller", controller), ("--chain", chain),
         ("--tree", tree)) if p)
@@ -101,7 +101,7 @@ def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
 
     if _robust_export(args, said, lp, drn):
         return code
-    posed, built = _build(args, "export")
+    posed, built = build_for(args, "export")
     if posed.minimise:
         raise UsageError("export: the model's objective is min; the LP and the DRN's "
                          "target are written for a maximum (not exported, to keep the "
@@ -110,11 +110,11 @@ def _export(args: argparse.Namespace, said: dict[str, Any]) -> int:
     goal = acceptance(mdp, built.dta).goal  # a safety task: its accepting end components
     target = goal | mdp.truncated if args.upper else goal
     if lp:
-        _write(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
+        write_file(lp, lambda p: write_lp(mdp, target, p, overwrite=True))
         _wrote(args, said, "lp", lp, f"wrote {lp}")
     if drn:
         world = _world_valuation(posed.model.game)
-        _write(drn, lambda p: write_drn(mdp, target, p, overwrite=True, world=world))
+        write_file(drn, lambda p: write_drn(mdp, target, p, overwrite=True, world=world))
         _wrote(args, said, "drn", drn, f"wrote {drn}")
     return code
 
@@ -161,7 +161,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
-                   time_limit=_time_left(args))
+                   time_limit=time_left(args))
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
     said.update(status=str(r.status), certified=r.certified, lower=r.lower, upper=r.upper)
@@ -169,12 +169,12 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         from mitld_lp.problem import Settings
 
         budget = Settings(max_states=args.max_states).resolved(model.budgets).max_states
-        _write(controller, lambda p: r.controller.save(p, overwrite=True,
+        write_file(controller, lambda p: r.controller.save(p, overwrite=True,
                                                        max_states=budget))
         _wrote(args, said, "controller", controller, f"wrote {controller}")
     if chain:
         model = chain_drn(chain_of(r))
-        _write(chain, lambda p: drn.write(model, p, overwrite=True))
+        write_file(chain, lambda p: drn.write(model, p, overwrite=True))
         # the chain's probability is the controller's exact value: inside the bracket of
         # the automaton it was solved on, at its near end within the precision
         if r.complemented:  # the complement's automaton: "accept" marks failing runs
@@ -194,14 +194,14 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         from mitld_lp.running.tree import write_tree
 
         t = tree_of(r, same_actions=args.same_actions)
-        _write(tree, lambda p: write_tree(r, p, tree=t, overwrite=True))
+        write_file(tree, lambda p: write_tree(r, p, tree=t, overwrite=True))
         rows = len(r.policy_table())
         _wrote(args, said, "tree", tree, f"wrote {tree} ({t.size} nodes over {t.samples} "
                f"reachable states; policy table: {rows} rows)", tree_nodes=t.size,
                tree_states=t.samples)
     if not r.certified:
         if not args.json:
-            _out(f"not certified: {r.status}")
+            say_answer(f"not certified: {r.status}")
         return EXIT_UNCERTIFIED
     return EXIT_OK
 
@@ -232,6 +232,6 @@ def _robust_export(args: argparse.Namespace, said: dict[str, Any], lp: Path | No
         max_states=s.max_states, max_memory=s.max_memory,
         max_automaton_states=s.max_automaton_states)
     assert drn is not None  # export checked that one of the two is given
-    _write(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
+    write_file(drn, lambda p: write_interval_drn(imdp, target, p, overwrite=True))
     _wrote(args, said, "drn", drn, f"wrote {drn} (interval MDP)", interval_mdp=True)
     return True

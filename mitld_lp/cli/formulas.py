@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING, Any
 from mitld_lp import defaults
 from mitld_lp.cli.arguments import bounded_int
 from mitld_lp.cli.kernel import (
-    _DOT_SUFFIXES,
+    DOT_SUFFIXES,
     EXIT_OK,
-    _count,
-    _dumps,
-    _out,
-    _output_path,
-    _write,
     args_json,
+    count_text,
+    json_text,
+    output_path,
+    say_answer,
+    write_file,
 )
 from mitld_lp.files import write as files
 from mitld_lp.logic.fragment import FragmentReport, check
@@ -53,16 +53,16 @@ def cmd_check(args: argparse.Namespace) -> int:
     ``"supported": false``, :func:`mitld_lp.cli.kernel.say_error`)."""
     report = check(parse_source(args.formula))
     if args.json:
-        _out(_dumps(_report_json(report)))
+        say_answer(json_text(_report_json(report)))
         return EXIT_OK
     events = ", ".join(f"{event} ~ {mu}" for event, mu in report.events) or "none"
     horizon = "unbounded" if report.horizon is None else str(report.horizon)
-    _out(f"formula:   {report.formula}")
-    _out(f"nnf:       {report.nnf}")
-    _out(f"events:    {events}")
-    _out(f"horizon:   {horizon}")
-    _out(f"class:     {report.fragment}")
-    _out("supported: yes")
+    say_answer(f"formula:   {report.formula}")
+    say_answer(f"nnf:       {report.nnf}")
+    say_answer(f"events:    {events}")
+    say_answer(f"horizon:   {horizon}")
+    say_answer(f"class:     {report.fragment}")
+    say_answer("supported: yes")
     return EXIT_OK
 
 
@@ -83,33 +83,33 @@ def cmd_dta(args: argparse.Namespace) -> int:
     """Print the minimal DTA: each state's location and clocks, and its transitions."""
     from mitld_lp.automata.translate import to_dta
 
-    path = None if args.dot is None else _output_path(args.dot, args.force, "--dot",
-                                                       _DOT_SUFFIXES)
+    path = None if args.dot is None else output_path(args.dot, args.force, "--dot",
+                                                       DOT_SUFFIXES)
     report = check(parse_source(args.formula))
     formula = report.formula
     dta = to_dta(report, max_states=args.max_states)
     if path:
-        _write(path, lambda p: files.write_text(p, dta.to_dot(), overwrite=True))
+        write_file(path, lambda p: files.write_text(p, dta.to_dot(), overwrite=True))
         if args.json:
-            _out(_dumps({"formula": str(formula), "states": dta.n_states,
+            say_answer(json_text({"formula": str(formula), "states": dta.n_states,
                          "files": {"dot": str(path)}}))
         else:
-            _out(f"wrote {path} ({_count(dta.n_states, 'state')})")
+            say_answer(f"wrote {path} ({count_text(dta.n_states, 'state')})")
         return EXIT_OK
     shown = [dta.location(i) for i in range(dta.n_states)]
     locations = {loc.obligation for loc in shown}
     clocks = {name for loc in shown for name, _ in loc.clocks}
     if args.json:
-        _out(_dumps(_dta_json(dta, str(formula), shown, len(locations), clocks)))
+        say_answer(json_text(_dta_json(dta, str(formula), shown, len(locations), clocks)))
         return EXIT_OK
-    _out(f"formula:   {formula}")
-    _out(f"states:    {dta.n_states} ({_count(len(locations), 'location')}, "
-         f"{_count(len(clocks), 'clock')})")
-    _out(f"atoms:     {', '.join(dta.atoms)}")
+    say_answer(f"formula:   {formula}")
+    say_answer(f"states:    {dta.n_states} ({count_text(len(locations), 'location')}, "
+               f"{count_text(len(clocks), 'clock')})")
+    say_answer(f"atoms:     {', '.join(dta.atoms)}")
     for i, loc in enumerate(shown):
-        _out(f"  {i}{''.join(f' ({tag})' for tag in _tags(dta, i))}: {loc}")
+        say_answer(f"  {i}{''.join(f' ({tag})' for tag in _tags(dta, i))}: {loc}")
         for target, guard in sorted(dta.guards(i).items()):
-            _out(f"      --[{guard}]--> {target}")
+            say_answer(f"      --[{guard}]--> {target}")
     return EXIT_OK
 
 

@@ -46,7 +46,7 @@ class UsageError(ValueError):
 
 
 #: Exceptions that mean "the input is wrong" (exit 2), not "the program is wrong".
-_USER_ERRORS: tuple[type[Exception], ...] = (
+USER_ERRORS: tuple[type[Exception], ...] = (
     ExactError,
     ParseError,
     FragmentError,
@@ -62,7 +62,7 @@ _USER_ERRORS: tuple[type[Exception], ...] = (
 )
 
 #: Exceptions that mean "a budget stopped the work" (exit 3).
-_BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge)
+BUDGET_STOPS: tuple[type[Exception], ...] = (ProductTooLarge, AutomatonTooLarge)
 
 #: 3: no certified answer (a solver status or a budget stop; the status is printed).
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNCERTIFIED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -94,11 +94,11 @@ def error_record(status: str, message: str, **more: Any) -> dict[str, Any]:
 
 def error_status(err: BaseException) -> str:
     """The error object's status of an exception the command line maps to an exit code."""
-    if isinstance(err, _BUDGET_STOPS + (MemoryError,)):
+    if isinstance(err, BUDGET_STOPS + (MemoryError,)):
         return "budget"
     if isinstance(err, _USAGE_ERRORS):
         return "usage_error"
-    return "model_error" if isinstance(err, _USER_ERRORS) else "error"
+    return "model_error" if isinstance(err, USER_ERRORS) else "error"
 
 
 def say_error(args: argparse.Namespace | None, status: str, message: str,
@@ -109,7 +109,7 @@ def say_error(args: argparse.Namespace | None, status: str, message: str,
     progress.abandon()
     word = {"model_error": "error", "usage_error": "error", "error": "internal error"}.get(
         status, "stopped")
-    _say(message if status == "interrupted" else f"{word}: {message}")
+    say(message if status == "interrupted" else f"{word}: {message}")
     if args is not None and getattr(args, "json", False):
         formula = err  # a formula's error, also as the cause of a model's or a sweep's
         while formula is not None and not isinstance(formula, ParseError):
@@ -120,7 +120,7 @@ def say_error(args: argparse.Namespace | None, status: str, message: str,
             {"reasons": list(err.reasons)} if isinstance(err, ProblemError) else {})
         if getattr(args, "verb", None) == "check":  # check's own answer field
             where["supported"] = False
-        _out(_dumps(error_record(status, message, **where)))
+        say_answer(json_text(error_record(status, message, **where)))
         sys.stdout.flush()
     return ERROR_EXITS[status]
 
@@ -128,17 +128,17 @@ def say_error(args: argparse.Namespace | None, status: str, message: str,
 # --------------------------------------------------------------------------- output files
 
 
-def _output_path(given: str, force: bool, what: str, suffixes: tuple[str, ...] = ()) -> Path:
+def output_path(given: str, force: bool, what: str, suffixes: tuple[str, ...] = ()) -> Path:
     """Check, before any work, that ``given`` can be written (the one rule,
     :func:`mitld_lp.files.write.writable_path`)."""
     return files.writable_path(given, overwrite=force, suffixes=suffixes, what=what,
                                force="--force")
 
 
-_DOT_SUFFIXES = (".dot", ".gv")
+DOT_SUFFIXES = (".dot", ".gv")
 
 
-def _write(path: Path, write: Callable[[Path], object]) -> None:
+def write_file(path: Path, write: Callable[[Path], object]) -> None:
     """Run ``write(path)`` (a writer of :mod:`mitld_lp.files.write`, which replaces the file
     only once it is complete); an OS error (disk full, no permission) is a one-line
     error."""
@@ -148,7 +148,7 @@ def _write(path: Path, write: Callable[[Path], object]) -> None:
         raise UsageError(f"{path}: cannot write: {exc.strerror or exc}") from exc
 
 
-def _dumps(record: object) -> str:
+def json_text(record: object) -> str:
     """JSON with non-finite numbers as ``null`` (``NaN`` is not JSON)."""
 
     def clean(x: object) -> object:
@@ -163,13 +163,13 @@ def _dumps(record: object) -> str:
     return json.dumps(clean(record), allow_nan=False)
 
 
-_command = threading.local()
+command_state = threading.local()
 """Per command thread: ``cancelled``, an Event set when the command was interrupted or
 ran out of time.  Its thread may still be finishing a native call, and must not print
 an answer after the stop was reported."""
 
 
-def _prob(x: float) -> str:
+def prob_text(x: float) -> str:
     """A probability for text output: 7 decimals, or 7 significant digits below 1e-3."""
     return probability_text(x)
 
@@ -179,15 +179,15 @@ def _bracket(lower: float, upper: float) -> str:
     return bracket_text(lower, upper)
 
 
-def _out(text: str = "") -> None:
+def say_answer(text: str = "") -> None:
     """Print one line of the command's answer on stdout (nothing once cancelled; a
     progress bar drawn on the terminal is cleared first, :func:`progress.write`)."""
-    cancelled = getattr(_command, "cancelled", None)
+    cancelled = getattr(command_state, "cancelled", None)
     if cancelled is None or not cancelled.is_set():
         progress.write(text, sys.stdout)
 
 
-def _count(n: int, noun: str) -> str:
+def count_text(n: int, noun: str) -> str:
     """``n`` with ``noun`` in the singular or plural: "1 clock", "2 clocks"."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
@@ -202,7 +202,7 @@ def args_json(p: argparse.ArgumentParser) -> None:
 # --------------------------------------------------------------------------- model verbs
 
 
-def _args_model(p: argparse.ArgumentParser, many: bool = False) -> None:
+def add_model_argument(p: argparse.ArgumentParser, many: bool = False) -> None:
     if many:
         p.add_argument("model", nargs="+", help="model files or glob patterns (a batch: "
                        "one line per model)")
@@ -283,7 +283,7 @@ def other_file(path: str, max_memory: int | None, expected: str) -> str:
     return _OTHER_FILES[kind] if kind and kind != expected else ""
 
 
-def _build(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
+def build_for(args: argparse.Namespace, verb: str) -> tuple[Posed, Built]:
     """Model file -> (the problem it poses, its automaton, STA and product MDP); a model
     with constraints is refused naming ``verb`` (its product would be another
     problem's)."""
@@ -352,24 +352,24 @@ def apply_file_time_limit(args: argparse.Namespace) -> None:
                                                                limit.source)
 
 
-def _time_left(args: argparse.Namespace) -> float | None:
+def time_left(args: argparse.Namespace) -> float | None:
     """Seconds left of ``--time-limit`` (None without one): the solvers stop with status
     ``time_limit`` and their bracket so far; the command's own watchdog is the backstop."""
     return Deadline.after(args.time_limit, args.started, time.monotonic).left()
 
 
-def _say(message: str) -> None:
+def say(message: str) -> None:
     progress.write(f"{PROG}: {printable(message)}", sys.stderr)
     sys.stderr.flush()
 
 
 
 def model_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The settings every model verb's options set (:func:`_args_model`), as
+    """The settings every model verb's options set (:func:`add_model_argument`), as
     :func:`mitld_lp.synthesis.synthesize`'s keywords (time left now)."""
     return {"epsilon": args.epsilon, "clock_reduction": not args.no_clock_reduction,
             "max_states": args.max_states, "max_automaton_states": args.max_automaton_states,
-            "max_memory": args.max_memory, "time_limit": _time_left(args),
+            "max_memory": args.max_memory, "time_limit": time_left(args),
             "precision": defaults.PRECISION if args.precision is None else args.precision}
 
 
@@ -404,7 +404,7 @@ def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:
 def print_head(model: Any, objective: str) -> None:
     """The first lines of a ``solve`` answer: the model, its task and a minimised
     objective."""
-    _out(f"model:        {model.name}  ({model.spec})")
+    say_answer(f"model:        {model.name}  ({model.spec})")
     if objective == "min":
-        _out("objective:    min (the least probability of the task; the policy's "
-             "guarantee is the upper end)")
+        say_answer("objective:    min (the least probability of the task; the policy's "
+                   "guarantee is the upper end)")

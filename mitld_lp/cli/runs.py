@@ -21,23 +21,23 @@ from mitld_lp.cli.kernel import (
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     UsageError,
-    _args_model,
-    _count,
-    _dumps,
-    _out,
-    _output_path,
-    _say,
-    _time_left,
-    _write,
+    add_model_argument,
     args_json,
+    count_text,
     error_record,
     file_time_limit,
     is_pattern,
+    json_text,
     model_options,
     other_file,
+    output_path,
     read_model,
+    say,
+    say_answer,
     solve_settings,
+    time_left,
     unconstrained,
+    write_file,
 )
 from mitld_lp.report import bracket_text
 from mitld_lp.util import progress
@@ -50,17 +50,17 @@ def _batch_exit(records: list[dict[str, Any]], noun: str) -> int:
     own lines name each failure)."""
     statuses = [r["status"] for r in records]
     failed = sum(1 for r in records if not r.get("certified"))
-    of = f"{failed} of {_count(len(records), noun)}"
+    of = f"{failed} of {count_text(len(records), noun)}"
     if "error" in statuses:
-        _say(f"internal error: {statuses.count('error')} of {_count(len(records), noun)} "
-             "failed unexpectedly (see their lines; please report this)")
+        say(f"internal error: {statuses.count('error')} of {count_text(len(records), noun)} "
+            "failed unexpectedly (see their lines; please report this)")
         return EXIT_INTERNAL
     if "model_error" in statuses:
-        _say(f"error: {statuses.count('model_error')} of {_count(len(records), noun)} "
-             "could not be read or posed (see their lines)")
+        say(f"error: {statuses.count('model_error')} of {count_text(len(records), noun)} "
+            "could not be read or posed (see their lines)")
         return EXIT_USAGE
     if failed:
-        _say(f"stopped: {of} without a certified answer (see their lines)")
+        say(f"stopped: {of} without a certified answer (see their lines)")
         return EXIT_UNCERTIFIED
     return EXIT_OK
 
@@ -115,16 +115,16 @@ def solve_batch(args: argparse.Namespace) -> int:
 
 def _batch_line(record: dict[str, Any], as_json: bool) -> None:
     if as_json:
-        _out(_dumps(record))
+        say_answer(json_text(record))
     elif "error" in record:
-        _out(f"{printable(record['file'])}: {record['status']}: {record['error']}")
+        say_answer(f"{printable(record['file'])}: {record['status']}: {record['error']}")
     else:
         exact = record.get("exact_bracket")  # --exact: the fraction (or both models')
         shown = "" if not exact else f" exact {exact[0]}" if exact[0] == exact[1] else (
             f" exact in [{exact[0]}, {exact[1]}]")
-        _out(f"{printable(record['file'])}: {bracket_text(record['lower'], record['upper'])} "
-             f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
-             f"{record['states']} states, {record['seconds']:.3f} s){shown}")
+        say_answer(f"{printable(record['file'])}: {bracket_text(record['lower'], record['upper'])} "
+                   f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
+                   f"{record['states']} states, {record['seconds']:.3f} s){shown}")
 
 
 def args_sweep(p: argparse.ArgumentParser) -> None:
@@ -172,21 +172,21 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if r["error"] and (r["status"], r["error"]) not in shown and len(shown) < 5:
             shown[r["status"], r["error"]] = {c: r[c] for c in sw.columns}
     if args.json:
-        _out(_dumps({"sweep": sw.name, "points": len(run.rows), "solved": run.computed,
+        say_answer(json_text({"sweep": sw.name, "points": len(run.rows), "solved": run.computed,
                      "reused": run.reused, "statuses": dict(statuses.most_common()),
                      "certified": len(run.rows) - len(run.failed),
                      "failures": [{"status": s, "error": e, "at": at}
                                   for (s, e), at in shown.items()],
                      "files": {"results": str(out)}}))
         return _batch_exit(list(run.rows), "point")
-    _out(f"sweep:      {sw.name} ({_count(len(run.rows), 'point')}: {run.computed} solved "
-         f"now, {run.reused} already in {out})")
-    _out("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
-    _out(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
+    say_answer(f"sweep:      {sw.name} ({count_text(len(run.rows), 'point')}: {run.computed} "
+               f"solved now, {run.reused} already in {out})")
+    say_answer("status:     " + ", ".join(f"{n} {s}" for s, n in statuses.most_common()))
+    say_answer(f"certified:  {len(run.rows) - len(run.failed)} of {len(run.rows)}")
     for (status, error), at in shown.items():
         where = ", ".join(f"{c} = {json.dumps(v)}" for c, v in at.items())
-        _out(f"  {status} at {where or 'the base model'}: {error}")
-    _out(f"results:    {out}")
+        say_answer(f"  {status} at {where or 'the base model'}: {error}")
+    say_answer(f"results:    {out}")
     return _batch_exit(list(run.rows), "point")
 
 
@@ -228,7 +228,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     """Draw a grid world's policy, or a column of a sweep's results."""
     from mitld_lp import plot
 
-    out = _output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
+    out = output_path(args.out, args.force, "--out", plot.FIGURE_SUFFIXES)
     table = Path(args.input).suffix.lower() in (".csv", ".parquet")
     if table and (args.x is None or args.y is None):
         raise UsageError(f"plot {args.input}: a results file needs --x and --y")
@@ -249,7 +249,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             model = read_model(args, args.input, max_states=args.max_states)
             posed = unconstrained(pose(model, settings=settings_from(
                 epsilon=args.epsilon, max_states=args.max_states,
-                time_limit=_time_left(args))), "plot")
+                time_limit=time_left(args))), "plot")
             if posed.route.observation_based:  # mitld_lp.sensing: refused before work
                 raise UsageError("plot: the model has sensors that miss events; the policy "
                                  "map of an observation-based controller is not drawn yet")
@@ -257,14 +257,14 @@ def cmd_plot(args: argparse.Namespace) -> int:
             fig = plot.policy_figure(result, situations, size=args.size)
     except plot.PlotError as err:
         raise UsageError(str(err)) from None
-    _write(out, lambda p: plot.save(fig, p, overwrite=True))  # checked above, before work
-    _out(_dumps({"files": {"out": str(out)}, "size": list(args.size)}) if args.json else
-         f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
+    write_file(out, lambda p: plot.save(fig, p, overwrite=True))  # checked above, before work
+    say_answer(json_text({"files": {"out": str(out)}, "size": list(args.size)}) if args.json else
+               f"wrote {out} ({args.size[0]}x{args.size[1]} pixels)")
     return EXIT_OK
 
 
 def args_simulate(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
+    add_model_argument(p)
     p.add_argument("-n", "--runs", type=bounded_int(1, defaults.MAX_RUNS),
                    default=defaults.RUNS, help=f"number of rollouts (1..{defaults.MAX_RUNS:,})")
     p.add_argument("--seed", type=bounded_int(0), default=0, help="a non-negative seed")
@@ -313,19 +313,19 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "seed": sim.seed,
     }
     if args.json:
-        _out(_dumps(out))
+        say_answer(json_text(out))
     else:
-        _out(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
+        say_answer(f"success rate: {sim.estimate:.4f}  95% CI [{sim.ci_low:.4f}, {sim.ci_high:.4f}]"
               f"  ({sim.successes}/{sim.runs}, seed {sim.seed}, horizon {sim.horizon} steps)")
         if sim.kept:
-            _out(f"kept:         {_count(sim.kept, 'run')} kept the safety part to the horizon "
-                 "(counted as successes)")
-        _out(f"certified:    {bracket_text(r.lower, r.upper)}  "
+            say_answer(f"kept:         {count_text(sim.kept, 'run')} kept the safety part to the "
+                       "horizon (counted as successes)")
+        say_answer(f"certified:    {bracket_text(r.lower, r.upper)}  "
               + ("consistent" if out["consistent"] else "INCONSISTENT"))
         if sim.beyond_model:
-            _out(f"note:         {_count(sim.beyond_model, 'run')} had an event after its "
-                 "truncation point")
+            say_answer(f"note:         {count_text(sim.beyond_model, 'run')} had an event after "
+                       "its truncation point")
         if robust:
-            _out("note:         runs follow each band's nominal law; the bracket is the "
-                 "worst case over the bands")
+            say_answer("note:         runs follow each band's nominal law; the bracket is the "
+                       "worst case over the bands")
     return EXIT_OK

@@ -14,17 +14,17 @@ from mitld_lp.cli.kernel import (
     EXIT_OK,
     EXIT_UNCERTIFIED,
     UsageError,
-    _args_model,
-    _build,
-    _dumps,
-    _out,
-    _output_path,
-    _prob,
-    _write,
+    add_model_argument,
     args_json,
+    build_for,
+    json_text,
+    output_path,
     print_head,
+    prob_text,
     read_model,
+    say_answer,
     solve_settings,
+    write_file,
 )
 from mitld_lp.files import write as files
 from mitld_lp.report import bracket_text
@@ -33,7 +33,7 @@ __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 
 
 def args_info(p: argparse.ArgumentParser) -> None:
-    _args_model(p)
+    add_model_argument(p)
     args_json(p)
 
 
@@ -41,7 +41,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     """The product's sizes, truncation points and the epsilon achieved."""
     from mitld_lp.product import component_counts
 
-    posed, built = _build(args, "info")
+    posed, built = build_for(args, "info")
     model = posed.model
     sta, mdp = built.sta, built.mdp
     out: dict[str, Any] = {
@@ -55,16 +55,16 @@ def cmd_info(args: argparse.Namespace) -> int:
         "epsilon_achieved": sta.epsilon_achieved,
     }
     if args.json:
-        _out(_dumps(out))
+        say_answer(json_text(out))
     else:
         width = max(map(len, out))
         for k, v in out.items():
-            _out(f"{k + ':':<{width + 1}} {v}")
+            say_answer(f"{k + ':':<{width + 1}} {v}")
     return EXIT_OK
 
 
 def args_solve(p: argparse.ArgumentParser) -> None:
-    _args_model(p, many=True)
+    add_model_argument(p, many=True)
     p.add_argument("--method", choices=defaults.METHODS, default="lp")
     p.add_argument("--solver", type=solver_name, default=defaults.SOLVER,
                    help="an LP solver cvxpy has installed, any case (CLARABEL, HIGHS, ...)")
@@ -98,7 +98,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if not world and (len(args.model) > 1 or runs.is_pattern(args.model[0])):
         return runs.solve_batch(args)
     args.model = args.model[0]
-    policy_file = None if args.policy is None else _output_path(
+    policy_file = None if args.policy is None else output_path(
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     if world and args.spec is None:  # --prop, or a JANI file's own properties
         return door.solve_properties(args, policy_file)
@@ -110,47 +110,47 @@ def cmd_solve(args: argparse.Namespace) -> int:
     r = solve(posed)
     summary = r.summary()
     if policy_file:
-        _write(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
+        write_file(policy_file, lambda p: files.write_policy(r, p, overwrite=True))
         summary["policy_file"] = str(policy_file)
     if args.json:
-        _out(_dumps(summary))
+        say_answer(json_text(summary))
     else:
         print_head(model, r.objective)
         if summary["robust"]:
-            _out("robust:       worst case over the bands " + ", ".join(
-                f"{e} ~ {law} (hazard at step 1 in [{_prob(h[0])}, {_prob(h[1])}])"
+            say_answer("robust:       worst case over the bands " + ", ".join(
+                f"{e} ~ {law} (hazard at step 1 in [{prob_text(h[0])}, {prob_text(h[1])}])"
                 for (e, law), h in zip(summary["bands"].items(),
                                        summary["first_step_hazards"].values(), strict=True)))
         if r.sensors:
-            _out("sensed:       the policy acts on what the robot observes; " + ", ".join(
+            say_answer("sensed:       the policy acts on what the robot observes; " + ", ".join(
                 f"{e} reported w.p. {sensor.detect:g} per step"
                 + (f" from {sensor.delay} steps after it" if sensor.delay else "")
                 for e, sensor in sorted(r.sensors.items())))
-        _out(f"optimum in:   {bracket_text(r.lower, r.upper)}"
+        say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")
         if r.complement is not None:
-            _out(f"complement:   1 - optimum in {bracket_text(*r.complement)}")
+            say_answer(f"complement:   1 - optimum in {bracket_text(*r.complement)}")
         width = r.width
         if width.get("truncation"):
-            _out(f"width:        {width['total']:.3g} = truncation {width['truncation']:.3g}"
-                 f" (at most epsilon achieved) + solver {width['solver']:.3g}")
+            say_answer(f"width:        {width['total']:.3g} = truncation {width['truncation']:.3g}"
+                       f" (at most epsilon achieved) + solver {width['solver']:.3g}")
         if r.exact is not None:
-            _out(exact_line(r.exact))
+            say_answer(exact_line(r.exact))
         # a minimum read back from its complement: the complement's estimate, whose
         # digits 1 - it would round away
-        shown = (f"1 - {_prob(r.lower_model.value)}" if r.complemented and
-                 r.lower_model is not None else _prob(r.value))
-        _out(f"value:        {shown}  ({r.method}, status {r.status.value})")
-        _out("certified:    " + ("yes" if r.certified else "NO"))
+        shown = (f"1 - {prob_text(r.lower_model.value)}" if r.complemented and
+                 r.lower_model is not None else prob_text(r.value))
+        say_answer(f"value:        {shown}  ({r.method}, status {r.status.value})")
+        say_answer("certified:    " + ("yes" if r.certified else "NO"))
         for c in r.failed_checks:
-            _out(f"  failed: {c.name}: {c.detail}")
-        _out(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"
-             f" {r.mdp.n_choices} choices, {r.mdp.n_transitions} transitions")
+            say_answer(f"  failed: {c.name}: {c.detail}")
+        say_answer(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"
+                   f" {r.mdp.n_choices} choices, {r.mdp.n_transitions} transitions")
         if r.sta.truncation_points:
-            _out(f"truncation:   {r.sta.truncation_points}")
-        _out("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
+            say_answer(f"truncation:   {r.sta.truncation_points}")
+        say_answer("seconds:      " + ", ".join(f"{k} {v:.3f}" for k, v in r.timings.items()))
         if policy_file:
-            _out(f"policy:       {policy_file}")
+            say_answer(f"policy:       {policy_file}")
     return EXIT_OK if r.certified else EXIT_UNCERTIFIED
 
 
