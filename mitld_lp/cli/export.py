@@ -138,6 +138,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     and write its controller, chain and tree; exit 3 when the answer is not certified
     (the files are written all the same, and say what they are)."""
     from mitld_lp.files import drn
+    from mitld_lp.running.band_chain import band_chain_drn, band_chain_of, band_claim, is_band
     from mitld_lp.running.chain import chain_drn, chain_of
     from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
@@ -148,10 +149,11 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     from mitld_lp.routes.robust import is_robust
 
     model = read_model(args)
-    if is_robust(model.distributions) and (chain or tree):
-        raise UsageError("export --chain/--tree: a law known only within a band has a "
-                         "worst case, not one Markov chain; --drn writes the interval MDP, "
-                         "--controller the robust controller")
+    if is_robust(model.distributions) and model.constraints and (chain or tree):
+        raise UsageError("export --chain/--tree: a law known only within a band with "
+                         "constraints gives a randomised controller chosen at the bands' "
+                         "middle law, whose interval chain is not written; --controller "
+                         "writes the controller")
     if tree:  # before the work: a sensed controller's memory is no feature vector
         from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
         from mitld_lp.sensing.sensors import partial
@@ -172,7 +174,12 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         write_file(controller, lambda p: r.controller.save(p, overwrite=True,
                                                        max_states=budget))
         _wrote(args, said, "controller", controller, f"wrote {controller}")
-    if chain:
+    if chain and is_band(r):  # the interval chain, for Storm's robust check
+        band = band_chain_drn(band_chain_of(r))
+        _write(chain, lambda p: drn.write(band, p, overwrite=True))
+        accept, said_chain = band_claim(r)
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
+    elif chain:
         model = chain_drn(chain_of(r))
         write_file(chain, lambda p: drn.write(model, p, overwrite=True))
         # the chain's probability is the controller's exact value: inside the bracket of

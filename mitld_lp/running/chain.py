@@ -46,14 +46,14 @@ from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.files import drn
 from mitld_lp.files import write as files
 from mitld_lp.files.drn import DrnModel
-from mitld_lp.mdp import MDP
+from mitld_lp.mdp import MDP, ActionChoices
 from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
 __all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS",
-           "prop_labels", "rows_matrix"]
+           "prop_labels", "rows_matrix", "choice_of", "stops", "state_marks"]
 
 CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping", "beyond")
 """The chains' own labels (``beyond``: a sensed controller's memory past its model,
@@ -93,7 +93,8 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     """The controlled chain of a synthesis result (:class:`~mitld_lp.SynthesisResult`
     or a constrained result) under its controller (or ``controller``, one built on the
     same product).  A robust result (a law within a band) is refused: its controller
-    runs on an interval model, whose controlled system is no Markov chain.  A result
+    runs on an interval model, whose controlled system is no Markov chain (its interval
+    chain: :func:`mitld_lp.running.band_chain.band_chain_of`).  A result
     with sensors that miss events has the chain of :mod:`mitld_lp.running.sensed_chain`
     (the truth and what the robot has observed)."""
     from mitld_lp.running.sensed_chain import is_sensed, sensed_chain_of
@@ -109,7 +110,8 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     if result.lower_model is None or not isinstance(result.mdp, MDP):
         raise ValueError("a robust result (a law known only within a band): its "
                          "controller acts on an interval model, whose controlled system is "
-                         "no Markov chain; export --drn writes the interval MDP")
+                         "no Markov chain; mitld_lp.running.band_chain.band_chain_of gives "
+                         "its interval chain (export --chain writes it)")
     return controlled_chain(result.mdp, controller or result.controller,
                             result.dta.persistent, result.model.game)
 
@@ -180,22 +182,9 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
             here.add(names[k])
             valuations.append(names[k])
         else:
-            rec = mdp.states[i]
-            if isinstance(rec, ProductState):
-                here |= {props(p) for p in game.propositions(rec.game)}
-                v = plan_verdicts[rec.automaton][0]
-                if v == ACCEPTED:
-                    here.add("accept")
-                elif v == REJECTED:
-                    here.add("reject")
-                pend = ",".join(sorted(rec.pending))
-                valuations.append(valuation_text(
-                    fields, (*state_values(game, rec.game), rec.automaton, f"{{{pend}}}",
-                             rec.clock)) + _MODE_TEXT[mode])
-            else:
-                here.add({Absorbing.TARGET: "accept", Absorbing.SINK: "reject",
-                          Absorbing.TRUNCATED: "truncated"}[rec])
-                valuations.append(str(rec))
+            marks, text = state_marks(game, plan_verdicts, mdp.states[i], props, fields)
+            here |= marks
+            valuations.append(text + _MODE_TEXT[mode])
             if mode == _STAY:
                 here.add("staying")
             elif mode == _KEEP:  # the safety part kept for ever: the task accepted
@@ -205,6 +194,27 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
         labels[k].add("accept")
     return Chain(matrix, tuple(frozenset(x) for x in labels), tuple(valuations), origin,
                  modes == _STAY, modes == _KEEP)
+
+
+def state_marks(game: Game[Any], verdicts: Any, rec: Any, props: Callable[[str], str],
+                fields: tuple[str, ...]) -> tuple[set[str], str]:
+    """The labels and the valuation text of product state ``rec`` in a chain: its world
+    propositions (``props``) and ``accept`` / ``reject`` by the controller's automaton
+    ``verdicts``; an absorbing record's own label (``accept``, ``reject``,
+    ``truncated``)."""
+    if not isinstance(rec, ProductState):
+        end = {Absorbing.TARGET: "accept", Absorbing.SINK: "reject",
+               Absorbing.TRUNCATED: "truncated"}[rec]
+        return {end}, str(rec)
+    here = {props(p) for p in game.propositions(rec.game)}
+    v = verdicts[rec.automaton][0]
+    if v == ACCEPTED:
+        here.add("accept")
+    elif v == REJECTED:
+        here.add("reject")
+    pend = ",".join(sorted(rec.pending))
+    return here, valuation_text(fields, (*state_values(game, rec.game), rec.automaton,
+                                         f"{{{pend}}}", rec.clock))
 
 
 def rows_matrix(rows: list[dict[int, float]]) -> sp.csr_array:
@@ -240,9 +250,9 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
         yield i, _GO, 1.0
         return
     plan: Any = controller.plan  # the tables act() reads
-    verdicts = plan.verdicts[rec.automaton]
-    if UNDECIDED not in verdicts:  # every component decided: the controller stops
-        yield sink("accept" if verdicts[0] == ACCEPTED else "reject"), None, 1.0
+    stop = stops(plan, rec)
+    if stop is not None:  # every component decided: the controller stops
+        yield sink(stop), None, 1.0
         return
     d = plan.decide(rec.game, rec.automaton, rec.pending, rec.clock)
     if d.lost:
@@ -277,14 +287,24 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
                     choice.append((a, p, _GO))
     matrix = mdp.matrix
     for action, p, after in choice:
-        c = _row(mdp, i, action)
+        c = choice_of(mdp, i, action)
         lo, hi = int(matrix.indptr[c]), int(matrix.indptr[c + 1])
         for j, q in zip(matrix.indices[lo:hi].tolist(), matrix.data[lo:hi].tolist(),
                         strict=True):
             yield j, after, p * q
 
 
-def _row(mdp: MDP, i: int, action: str) -> int:
+def stops(plan: Any, rec: ProductState) -> str | None:
+    """Where a controller's ``plan`` stops at product state ``rec``: ``"accept"`` or
+    ``"reject"`` once every component of its automaton state is decided, else None."""
+    verdicts = plan.verdicts[rec.automaton]
+    if UNDECIDED in verdicts:
+        return None
+    return "accept" if verdicts[0] == ACCEPTED else "reject"
+
+
+def choice_of(mdp: ActionChoices, i: int, action: str) -> int:
+    """The choice of product state ``i`` whose action is ``action`` (the controller's)."""
     for c in range(int(mdp.row_groups[i]), int(mdp.row_groups[i + 1])):
         if mdp.action_name(c) == action:
             return c

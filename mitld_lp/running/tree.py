@@ -43,6 +43,7 @@ from mitld_lp.controllers.kinds import ControllerLike, PlanController
 from mitld_lp.controllers.stepper import AutomatonMemory, Decision
 from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
+from mitld_lp.running.band_chain import band_chain_of, is_band
 from mitld_lp.running.chain import chain_of, world_of
 from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL, is_sensed
 from mitld_lp.util.traversal import breadth_first_order
@@ -268,7 +269,8 @@ def _label(d: Decision, randomised: bool) -> Hashable:
 
 def _acting(result: Any, controller: ControllerLike) -> list[int]:
     """The product states the controller reaches and acts in (undecided ones)."""
-    chain = chain_of(result, controller)
+    chain = (band_chain_of(result, controller) if is_band(result) else
+             chain_of(result, controller))  # a band: the states reached under any law
     plan: Any = controller.plan
     out = []
     for i in sorted({int(i) for i in chain.origin if i >= 0}):
@@ -373,7 +375,8 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     By default the tree may pick, in a state, any action that keeps the controller's
     value exactly (:func:`_choices`), which makes it much smaller; it is grown until it
     is exact on every state *its own* controller reaches.  ``same_actions`` asks for the
-    controller's own action in every state the controller reaches.  Either way
+    controller's own action in every state the controller reaches (always for a law
+    within a band: every state it reaches under some law).  Either way
     :func:`tree_value` is the controller's value, ``lower``.  A controller that acts on
     sensor reports is refused (:data:`~mitld_lp.running.sensed_chain.SENSED_TREE_REFUSAL`
     says why)."""
@@ -383,7 +386,8 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
     names, events = _features(result, c)
-    choices = None if same_actions else _choices(result, c)
+    # a band: the controller's own actions (another may not keep a worst case)
+    choices = None if same_actions or is_band(result) else _choices(result, c)
     states = _acting(result, c)
     for _ in range(_ROUNDS):
         rows, allowed = _dataset(result, c, states, choices)
@@ -569,6 +573,8 @@ def tree_value(result: Any, tree: Tree) -> float:
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
+    if is_band(result):
+        raise ValueError("a band: the value is a worst case; Storm checks band_chain_of")
     chain = chain_of(result, tree_controller(result, tree))
     accept = chain.accepting()
     if accept[0]:
