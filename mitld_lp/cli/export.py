@@ -176,7 +176,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         _wrote(args, said, "controller", controller, f"wrote {controller}")
     if chain and is_band(r):  # the interval chain, for Storm's robust check
         band = band_chain_drn(band_chain_of(r))
-        _write(chain, lambda p: drn.write(band, p, overwrite=True))
+        write_file(chain, lambda p: drn.write(band, p, overwrite=True))
         accept, said_chain = band_claim(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     elif chain:

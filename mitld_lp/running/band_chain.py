@@ -81,9 +81,10 @@ class BandChain:
 
 
 def is_band(result: Any) -> bool:
-    """Whether ``result`` is a robust answer (the one place this module reads a result's
-    route)."""
-    return getattr(result, "route", None) == "robust"
+    """Whether ``result`` is a robust answer (the one place this module asks it: its
+    route's part says its model is an interval MDP)."""
+    part = getattr(result, "part", None)
+    return bool(getattr(part, "interval", False))
 
 
 def _answer(result: Any) -> tuple[IntervalMDP, Any, frozenset[int], Any]:
