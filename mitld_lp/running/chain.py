@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Hashable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +47,7 @@ from mitld_lp.files import write as files
 from mitld_lp.files.drn import DrnModel
 from mitld_lp.mdp import MDP, ActionChoices
 from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.running.chain_model import CHAIN_LABELS, Chain, prop_labels, rows_matrix
 from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
@@ -55,38 +55,9 @@ from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 __all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS",
            "prop_labels", "rows_matrix", "choice_of", "stops", "state_marks"]
 
-CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping", "beyond")
-"""The chains' own labels (``beyond``: a sensed controller's memory past its model,
-:mod:`mitld_lp.running.sensed_chain`)."""
-
 _GO, _STAY, _KEEP = 0, 1, 2
 """A randomised controller's mode, part of a chain state: acting by its distribution,
 staying in an end component for ever, keeping the task's safety part for ever."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Chain:
-    """A finite Markov chain: state 0 is the initial one.
-
-    ``matrix``: ``(n, n)`` CSR transition probabilities; ``labels[i]``: the labels of
-    state ``i`` (without ``init``); ``valuations[i]``: its valuation text;
-    ``origin[i]``: its product state (-1 for the chain's own absorbing states),
-    ``staying[i]`` whether a randomised controller has drawn *stay* there and
-    ``keeping[i]`` whether it has drawn *keep* (the task's safety part kept for ever)."""
-
-    matrix: sp.csr_array
-    labels: tuple[frozenset[str], ...]
-    valuations: tuple[str, ...]
-    origin: np.ndarray
-    staying: np.ndarray
-    keeping: np.ndarray
-
-    @property
-    def n_states(self) -> int:
-        return self.matrix.shape[0]
-
-    def accepting(self) -> np.ndarray:
-        return np.array(["accept" in x for x in self.labels], dtype=bool)
 
 
 def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
@@ -217,27 +188,7 @@ def state_marks(game: Game[Any], verdicts: Any, rec: Any, props: Callable[[str],
                                          f"{{{pend}}}", rec.clock))
 
 
-def rows_matrix(rows: list[dict[int, float]]) -> sp.csr_array:
-    """A chain's ``(n, n)`` CSR matrix from its rows (``rows[i]``: successor to
-    probability), each row's successors in increasing order."""
-    n = len(rows)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum([len(r) for r in rows], out=indptr[1:])
-    cols = np.fromiter((c for r in rows for c in sorted(r)), dtype=np.int64,
-                       count=int(indptr[-1]))
-    vals = np.fromiter((r[c] for r in rows for c in sorted(r)), dtype=np.float64,
-                       count=int(indptr[-1]))
-    return sp.csr_array((vals, cols, indptr), shape=(n, n))
-
-
 _MODE_TEXT = {_GO: "", _STAY: " & staying=true", _KEEP: " & keeping=true"}
-
-
-def prop_labels() -> Callable[[str], str]:
-    """A world proposition's label in a chain: its name, or ``world_<name>`` for one named
-    like a chain's own label."""
-    reserved = set(CHAIN_LABELS) | {"target", "sink"}
-    return lambda p: f"world_{p}" if p in reserved else p
 
 
 def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,

@@ -47,7 +47,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.controllers.tables import BEYOND
-from mitld_lp.running.chain import Chain, prop_labels, rows_matrix
+from mitld_lp.running.chain_model import Chain, prop_labels, rows_matrix
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text

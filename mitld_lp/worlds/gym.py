@@ -464,14 +464,3 @@ def _letter(cell: Any) -> str:
     if hasattr(cell, "tobytes"):  # a numpy bytes scalar
         return bytes(cell).decode()
     return str(cell)
-
-
-def __getattr__(name: str) -> Any:
-    """``GymAgent``, which runs a controller and so stands with the runners
-    (:mod:`mitld_lp.running.gym`), under its old name here (loaded on first use:
-    the worlds import no controller)."""
-    if name == "GymAgent":
-        import importlib
-
-        return importlib.import_module("mitld_lp.running.gym").GymAgent
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
