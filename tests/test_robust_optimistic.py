@@ -161,7 +161,10 @@ def test_every_surface_applies_the_one_rule(tmp_path: Path, value, accepted) -> 
     sweep.write_text('name = "s"\nmodel = "wait.toml"\n[vary]\nepsilon = [0.01]\n'
                      f"[solve]\nbands = {toml}\n")
     try:
-        load_sweep(sweep)
+        loaded = load_sweep(sweep)
+        assert loaded.settings.bands == value
+        # a sweep read optimistically is another sweep: its results are not reused
+        assert ("bands" in loaded.settings.identity()) is (value == "best")
         swept = True
     except SweepError as exc:
         assert "solve.bands" in str(exc) and said in str(exc)
