@@ -195,6 +195,10 @@ def test_the_command_line_reads_the_bands_and_says_which_reading(tmp_path: Path,
     assert main(["solve", str(path), "--bands", "best"]) == 0
     out = capsys.readouterr().out
     assert "best case over the bands (Pmaxmax)" in out and "guarantees nothing" in out
+    (tmp_path / "again.toml").write_text(MODEL)  # a batch says it on each line
+    assert main(["solve", str(path), str(tmp_path / "again.toml"), "--bands", "best"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and all("best law of the bands: Pmaxmax" in x for x in lines)
     assert main(["solve", str(path), "--bands", "most"]) == 2
     assert "--bands" in capsys.readouterr().err
     assert main(["simulate", str(path), "--bands", "best", "--runs", "200", "--json"]) == 0

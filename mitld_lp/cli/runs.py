@@ -122,6 +122,8 @@ def _batch_line(record: dict[str, Any], as_json: bool) -> None:
         exact = record.get("exact_bracket")  # --exact: the fraction (or both models')
         shown = "" if not exact else f" exact {exact[0]}" if exact[0] == exact[1] else (
             f" exact in [{exact[0]}, {exact[1]}]")
+        if record.get("bands_reading") == "best":  # no guarantee: said on every line
+            shown += " (the best law of the bands: Pmaxmax)"
         say_answer(f"{printable(record['file'])}: {bracket_text(record['lower'], record['upper'])} "
                    f"certified {'yes' if record['certified'] else 'NO'} ({record['status']}, "
                    f"{record['states']} states, {record['seconds']:.3f} s){shown}")
