@@ -316,8 +316,9 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
         raise ProblemError(*refused)
     refused += owner.refusal(asked)
     if robust and s.bands != "worst" and not owner.optimistic:
-        extra = [k for k in asked.beyond_points() if k != "band"] or [owner.name]
-        refused.append(f"bands {s.bands!r} with {' and '.join(extra)}: a band is read for "
+        extra = [k for k in asked.beyond_points() if k != "band"]
+        said = f"with {' and '.join(extra)}" if extra else f"on the {owner.name} route"
+        refused.append(f"bands {s.bands!r} {said}: a band is read for "
                        "its best law only without constraints, then or a sensor that "
                        f"misses (the robust route); the {owner.name} route reads it for the "
                        "worst law (bands 'worst')")
