@@ -26,6 +26,7 @@ __all__ = [
     "METHODS",
     "BACKENDS",
     "OBJECTIVES",
+    "BANDS",
     "MAX_MEMORY_SIZE",
     "check_epsilon",
     "check_unit",
@@ -33,6 +34,7 @@ __all__ = [
     "check_count",
     "check_bytes",
     "check_memory",
+    "check_bands",
     "parse_size",
 ]
 
@@ -101,6 +103,11 @@ METHODS = ("lp", "vi")
 BACKENDS = ("auto", "cvxpy", "direct")
 #: What is optimised: the probability's maximum or minimum.
 OBJECTIVES = ("max", "min")
+#: How a law known only within a band is read: ``worst``, the law of the band worst for
+#: the robot at every step (nature against it: PRISM's ``Pmaxmin``, Storm's robust
+#: resolution), or ``best``, the law best for it (nature with it: ``Pmaxmax``, Storm's
+#: cooperative resolution); the spread between the two is what the band leaves open.
+BANDS = ("worst", "best")
 
 MAX_MEMORY_SIZE = (1 << 63) - 1
 """The largest memory budget accepted (8E less a byte): a byte count is a signed 64-bit
@@ -162,6 +169,13 @@ def check_memory(value: object, shown: str | None = None) -> int:
     """A file's memory budget: a number of bytes (:func:`check_bytes`) or a size
     written as text (:func:`parse_size`)."""
     return parse_size(value) if isinstance(value, str) else check_bytes(value, shown)
+
+
+def check_bands(value: object, shown: str | None = None) -> str:
+    """``value`` as a reading of the bands: one of :data:`BANDS`."""
+    if not isinstance(value, str) or value not in BANDS:
+        raise ValueError(f"must be 'worst' or 'best', got {shown or repr(value)}")
+    return str(value)
 
 
 def parse_size(text: str) -> int:

@@ -75,7 +75,10 @@ class Settings:
     (``upper - lower <= precision * lower``; with truncation, the solver's part).  A
     budget left ``None`` (``max_states``, ``max_automaton_states``, ``max_memory``,
     ``time_limit``) is the model file's ``[budgets]`` one, else the default
-    (:meth:`resolved`).  The others are :func:`mitld_lp.synthesis.synthesize`'s.
+    (:meth:`resolved`).  ``bands``: how a law known only within a band is read,
+    ``"worst"`` (nature against the robot, the default) or ``"best"`` (nature with it,
+    PRISM's ``Pmaxmax``; :data:`mitld_lp.defaults.BANDS`).  The others are
+    :func:`mitld_lp.synthesis.synthesize`'s.
     """
 
     method: str = "lp"
@@ -94,16 +97,18 @@ class Settings:
     progress: bool | None = None  # bars: None on a terminal only (mitld_lp.util.progress)
     exact: bool = False  # the optimum as a fraction too (mitld_lp.exact)
     precision: float = defaults.PRECISION  # the relative precision asked (defaults)
+    bands: str = "worst"  # a band read for the worst law or the best (defaults.BANDS)
 
     def identity(self) -> dict[str, Any]:
         """The settings that change an answer (part of a sweep's identity; the precision
-        only when it is not the default, so that results files written before it keep
-        their identity)."""
+        and the bands' reading only when they are not the default, so that results files
+        written before them keep their identity)."""
         return {"method": self.method, "solver": self.solver, "backend": self.backend,
                 "clock_reduction": self.clock_reduction,
                 "decompose": self.decompose is not False,
                 **({} if self.precision == defaults.PRECISION else
-                   {"precision": self.precision})}
+                   {"precision": self.precision}),
+                **({} if self.bands == "worst" else {"bands": self.bands})}
 
     @property
     def truncation_map(self) -> dict[str, int] | None:
@@ -171,7 +176,7 @@ class Settings:
 _RULES = {"time_limit": defaults.check_seconds, "max_states": defaults.check_count,
           "max_automaton_states": defaults.check_count, "max_memory": defaults.check_bytes,
           "tol": defaults.check_unit, "certify_tol": defaults.check_unit,
-          "precision": defaults.check_unit}
+          "precision": defaults.check_unit, "bands": defaults.check_bands}
 
 
 def _replace(s: Settings, **changes: Any) -> Settings:
@@ -310,6 +315,13 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
             f"no route solves {task_words(fragment, goal)} as posed"]
         raise ProblemError(*refused)
     refused += owner.refusal(asked)
+    if robust and s.bands != "worst" and not owner.optimistic:
+        extra = [k for k in asked.beyond_points() if k != "band"]
+        said = f"with {' and '.join(extra)}" if extra else f"on the {owner.name} route"
+        refused.append(f"bands {s.bands!r} {said}: a band is read for "
+                       "its best law only without constraints, then or a sensor that "
+                       f"misses (the robust route); the {owner.name} route reads it for the "
+                       "worst law (bands 'worst')")
     posed = Posed(asked.problem, s, owner, fragment, robust)
     if s.exact:  # an exact answer (mitld_lp.exact): what it cannot take, before any work
         from mitld_lp.exact.stage import exact_refusal

@@ -139,7 +139,7 @@ SUMMARY_KEYS = (
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
     "randomized_states", "message", "sensors", "complement", "precision", "width", "exact",
-    "exact_bracket",
+    "exact_bracket", "bands_reading",
 )
 
 
@@ -156,7 +156,10 @@ def summary(result: Any) -> dict[str, Any]:
     model's);
     ``states`` / ``choices`` / ``transitions``: the model the solver worked on (for the
     constrained route the merged product, ``product_states`` the product's);
-    ``lp`` and ``iteration``: the lower model's solver records where the route has them.
+    ``lp`` and ``iteration``: the lower model's solver records where the route has them;
+    ``bands_reading``: with a band, ``"worst"`` (the bracket is the worst case over the
+    bands, guaranteed by the policy) or ``"best"`` (the best case, PRISM's ``Pmaxmax``:
+    the policy reaches it only under the law its answer names), else ``None``.
     """
     out = dict.fromkeys(SUMMARY_KEYS)
     mdp, sta = result.mdp, result.sta
@@ -176,6 +179,7 @@ def summary(result: Any) -> dict[str, Any]:
         sensors={a: s.detect for a, s in result.sensors.items()},
         complement=None if result.complement is None else list(result.complement),
         precision=result.precision, width=dict(result.width),
+        bands_reading=result.part.reading if result.bands else None,
         **_exact_part(result.exact),
     )
     out.update(result.part.summary(result))
@@ -216,6 +220,8 @@ def robust_summary(result: Result) -> dict[str, Any]:
     out["iteration"] = {"status": low.iteration.status.value,
                         **_task_terms(result, low.bracket[0], high.bracket[1]),
                         "iterations": low.iteration.sweeps}
+    if result.part.message:  # the bands read for their best law: what the policy is worth
+        out["message"] = result.part.message
     return out
 
 

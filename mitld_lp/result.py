@@ -249,7 +249,9 @@ class Part:
     interval MDP), ``randomised`` (the policy is ``prob`` / ``stay`` on the ``merged``
     model of the ``joint`` automaton), ``observation_based`` (the controller acts on
     what sensors report), ``kept_components`` (the policy keeps a safety part in the
-    product's accepting end components); and its policy table and JSON keys."""
+    product's accepting end components), ``reading`` (a band read for the robot's
+    ``"worst"`` law or its ``"best"``, ``Settings.bands``); and its policy table and
+    JSON keys."""
 
     __slots__ = ()
     lower_model: Any = None
@@ -271,6 +273,7 @@ class Part:
     randomised: bool = False
     observation_based: bool = False
     kept_components: bool = False
+    reading: str = "worst"
 
     def policy_table(self, result: Result) -> list[dict[str, Any]]:
         """The policy as data, one row per state (:func:`mitld_lp.report.policy_table`)."""

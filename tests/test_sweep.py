@@ -275,7 +275,8 @@ def test_the_csv_is_tidy(files):
          "s.toml: model: tiny.toml with [set] does not load: "),
         # one key-path context for sweep and model files (model_keys): the same wording
         ('name = "s"\nmodel = "tiny.toml"\n[solve]\nmethd = "lp"\n',
-         "s.toml: solve.methd: unknown key (allowed: backend, certify_tol, clock_reduction, "),
+         "s.toml: solve.methd: unknown key (allowed: backend, bands, certify_tol, "
+         "clock_reduction, "),
         ('name = "s"\nmodel = "tiny.toml"\nvary = 3\n',
          "s.toml: vary: must be a table, got an integer 3"),
         ('name = "s"\nmodel = "tiny.toml"\n"a b" = 1\n', 's.toml: "a b": unknown key'),

@@ -9,7 +9,8 @@ from collections.abc import Callable
 
 from mitld_lp import defaults
 
-__all__ = ["probability_budget", "bounded_int", "memory_size", "seconds", "solver_name"]
+__all__ = ["probability_budget", "bounded_int", "memory_size", "seconds", "solver_name",
+           "bands_reading"]
 
 
 def probability_budget(text: str) -> float:
@@ -72,3 +73,12 @@ def solver_name(text: str) -> str:
             f"unknown or not installed LP solver {text!r} (installed: {', '.join(installed)})"
         )
     return name
+
+
+def bands_reading(text: str) -> str:
+    """How a band is read, ``worst`` or ``best`` (``--bands``,
+    :func:`mitld_lp.defaults.check_bands`)."""
+    try:
+        return defaults.check_bands(text, repr(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

@@ -154,6 +154,10 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
                          "constraints gives a randomised controller chosen at the bands' "
                          "middle law, whose interval chain is not written; --controller "
                          "writes the controller")
+    if chain and args.bands != "worst" and is_robust(model.distributions):
+        raise UsageError("export --chain with --bands best: the interval chain's claim is "
+                         "the controller's worst case over the bands, which an optimistic "
+                         "controller does not bound; --controller and --tree write it")
     if tree:  # before the work: a sensed controller's memory is no feature vector
         from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
         from mitld_lp.sensing.sensors import partial
@@ -163,7 +167,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
-                   time_limit=time_left(args))
+                   time_limit=time_left(args), bands=args.bands)
     if r.controller is None:
         raise UsageError(f"export: no controller to write: the synthesis is {r.status}")
     said.update(status=str(r.status), certified=r.certified, lower=r.lower, upper=r.upper)

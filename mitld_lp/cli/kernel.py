@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from mitld_lp import defaults
 from mitld_lp.automata.translate import AutomatonTooLarge, TranslationError
-from mitld_lp.cli.arguments import bounded_int, memory_size, probability_budget
+from mitld_lp.cli.arguments import bands_reading, bounded_int, memory_size, probability_budget
 from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.distributions import DistributionError
 from mitld_lp.exact.errors import ExactError
@@ -234,6 +234,10 @@ def add_model_argument(p: argparse.ArgumentParser, many: bool = False) -> None:
                    help="the relative width a certified bracket may have, in (0, 1): "
                         "upper - lower <= P x lower (with truncation, the solver's part "
                         f"of the width; default {defaults.PRECISION:g})")
+    p.add_argument("--bands", type=bands_reading, default="worst", metavar="READING",
+                   help="how a law known only within a band is read: worst (the worst law "
+                        "for the robot, guaranteed: Pmaxmin, the default) or best (the best "
+                        "law for it, Pmaxmax: no guarantee under a law nature chooses)")
 
 
 def read_model(args: argparse.Namespace, path: str | None = None,
@@ -370,7 +374,8 @@ def model_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"epsilon": args.epsilon, "clock_reduction": not args.no_clock_reduction,
             "max_states": args.max_states, "max_automaton_states": args.max_automaton_states,
             "max_memory": args.max_memory, "time_limit": time_left(args),
-            "precision": defaults.PRECISION if args.precision is None else args.precision}
+            "precision": defaults.PRECISION if args.precision is None else args.precision,
+            "bands": args.bands}
 
 
 def solve_settings(args: argparse.Namespace) -> Settings:

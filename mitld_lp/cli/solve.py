@@ -117,7 +117,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     else:
         print_head(model, r.objective)
         if summary["robust"]:
-            say_answer("robust:       worst case over the bands " + ", ".join(
+            said = ("worst case over the bands " if summary["bands_reading"] == "worst"
+                    else "best case over the bands (Pmaxmax) ")
+            say_answer("robust:       " + said + ", ".join(
                 f"{e} ~ {law} (hazard at step 1 in [{prob_text(h[0])}, {prob_text(h[1])}])"
                 for (e, law), h in zip(summary["bands"].items(),
                                        summary["first_step_hazards"].values(), strict=True)))
@@ -142,6 +144,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
                  r.lower_model is not None else prob_text(r.value))
         say_answer(f"value:        {shown}  ({r.method}, status {r.status.value})")
         say_answer("certified:    " + ("yes" if r.certified else "NO"))
+        if summary["bands_reading"] == "best":
+            say_answer("note:         the controller reaches this only when the events "
+                       "follow the law of the bands that helps it; it guarantees nothing "
+                       "under a law nature chooses (--bands worst gives the guarantee)")
         for c in r.failed_checks:
             say_answer(f"  failed: {c.name}: {c.detail}")
         say_answer(f"sizes:        {r.dta.n_states} automaton states, {r.mdp.n_states} states,"

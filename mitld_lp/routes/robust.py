@@ -23,6 +23,16 @@ the events follow, even one chosen step by step against the robot, the policy ac
 at least that.  ``upper`` is the upper model's bound on the robust optimum: no policy
 guarantees more.  With bands that are points every step is today's
 :func:`mitld_lp.synthesis.synthesize` (and the model takes that route).
+
+``Settings.bands = "best"`` reads the bands optimistically (PRISM's ``Pmaxmax``, Storm's
+cooperative resolution): nature picks the law of the bands best for the robot, so it
+plays on the robot's side and the game is one MDP whose choices are the pairs (robot
+choice, vertex row) (:func:`cooperative`).  The same iteration, policy and certificate
+solve it (nature has one row a choice there), the bracket is on ``max_robot
+max_nature``, and the controller is the robot's half of the pair: it reaches ``lower``
+only when the events follow the law its other half names, and guarantees nothing under
+a law of nature's choosing.  For ``objective = "min"`` the complement is maximised, so
+nature helps the robot minimise the task's probability.
 """
 
 from __future__ import annotations
@@ -70,6 +80,13 @@ __all__ = ["RobustRoute", "RobustPart", "POINTS_TOO", "is_robust", "synthesize_r
 log = logging.getLogger(__name__)
 
 
+#: What an answer with the bands read for their best law says of its controller.
+OPTIMISTIC = ("the bands read for the robot's best law (Pmaxmax): the bracket is the best "
+              "case over the bands; the controller reaches it only when the events follow "
+              "the law that helps it, and guarantees nothing under a law of nature's "
+              "choosing (Settings.bands = 'worst' gives the guarantee)")
+
+
 def is_robust(laws: Mapping[str, FirstOccurrence]) -> bool:
     """Whether some law is a band (the task is then solved robustly)."""
     return any(law.is_ambiguous for law in laws.values())
@@ -79,6 +96,17 @@ def robust_game(imdp: IntervalMDP) -> RobustGame:
     """The robust game of ``imdp``: nature's rows are the vertex distributions."""
     v = vertex_rows(imdp)
     return RobustGame(v.matrix, v.groups, imdp.row_groups)
+
+
+def cooperative(game: RobustGame) -> RobustGame:
+    """``game`` with nature on the robot's side (the bands read for their best law):
+    every vertex row is a choice of its own, so ``max_c min_rows`` of the result is
+    ``max_c max_v`` of ``game`` (the best law of a box of hazards is at a vertex too:
+    the value of a step is multilinear in the hazards).  Choice ``k`` of the result is
+    row ``k`` of ``game``: ``game.row_choice()`` maps it back to the robot's choice."""
+    n_rows = game.n_rows
+    return RobustGame(game.matrix, np.arange(n_rows + 1, dtype=np.int64),
+                      np.asarray(game.vertex_groups[game.row_groups], dtype=np.int64))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -107,11 +135,13 @@ class RobustModelSolution:
 
 def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
            method: str, tol: float, deadline: Deadline, layers: tuple[np.ndarray, np.ndarray],
-           eta: float, precision: float, complement: bool) -> RobustModelSolution:
+           eta: float, precision: float, complement: bool,
+           choice_of: np.ndarray | None = None) -> RobustModelSolution:
     """One model's robust optimum, the policy read off its lower bound, the policy's own
     robust value, and the certificate: the policy's value against every law of the
     bands bounded from below, the robust optimum from above, both in exact arithmetic
-    (:func:`_certificate`)."""
+    (:func:`_certificate`).  ``choice_of``: the interval MDP's choice of each of
+    ``game``'s (the cooperative game's, :func:`cooperative`; None: the same)."""
     s0 = imdp.initial
     it = robust_interval_iteration(game, target, tol=tol, time_limit=deadline.left())
     choice = robust_policy(game, target, it.lower, tie=max(tol, 1e-12))
@@ -129,9 +159,10 @@ def _solve(game: RobustGame, imdp: IntervalMDP, target: np.ndarray, which: str,
     lower, upper, proved = _certificate(game, s0, target, choice, it, ev, layers, eta,
                                         precision, complement)
     checks.extend(proved)
-    absorbing = np.asarray(imdp.choice_actions)[choice] == ABSORB
+    robot = choice if choice_of is None else choice_of[choice]
+    absorbing = np.asarray(imdp.choice_actions)[robot] == ABSORB
     return RobustModelSolution(which, status, float(values[s0]), it,
-                               read_only(np.where(absorbing, -1, choice)),
+                               read_only(np.where(absorbing, -1, robot)),
                                read_only(np.asarray(values, dtype=np.float64)), ev, lp,
                                (float(it.lower[s0]), float(it.upper[s0])), tuple(checks),
                                bounds=(lower, upper))
@@ -200,19 +231,22 @@ def _goal(game: RobustGame, imdp: IntervalMDP, dta: DTA,
 
 
 def _kept(solution: RobustModelSolution, game: RobustGame, goal: np.ndarray,
-          stay: np.ndarray | None) -> RobustModelSolution:
+          stay: np.ndarray | None, choice_of: np.ndarray | None = None
+          ) -> RobustModelSolution:
     """A task with a safety part: ``solution`` whose policy plays, on the goal, a choice
-    that keeps the run there whatever nature plays, with the check that it does."""
+    that keeps the run there whatever nature plays (on the cooperative game: the law
+    its row names), with the check that it does.  ``choice_of`` as for :func:`_solve`."""
     if stay is None:
         return solution
     from dataclasses import replace
 
     policy = np.array(solution.policy)
     keep = goal & (policy >= 0)
-    policy[keep] = stay[keep]
-    rows_ok = _rows_kept(game, goal, policy[keep])
-    check = Check("policy keeps the task's safety part whatever the bands",
-                  bool(rows_ok), f"{int(keep.sum())} states kept")
+    rows_ok = _rows_kept(game, goal, stay[keep])
+    policy[keep] = stay[keep] if choice_of is None else choice_of[stay[keep]]
+    check = Check("policy keeps the task's safety part whatever the bands" if choice_of
+                  is None else "policy keeps the task's safety part under the best law "
+                  "of the bands", bool(rows_ok), f"{int(keep.sum())} states kept")
     return replace(solution, policy=read_only(policy), checks=(*solution.checks, check))
 
 
@@ -253,6 +287,9 @@ def solve_robust(posed: Posed, built: Built) -> Result:
     assert isinstance(imdp, IntervalMDP)
     t2 = time.perf_counter()
     game = robust_game(imdp)
+    choice_of = None
+    if s.bands == "best":  # nature on the robot's side: max over both (module docs)
+        choice_of, game = game.row_choice(), cooperative(game)
     deadline = Deadline.after(s.time_limit, t2)
     from mitld_lp.solvers.certify import RowModel, model_eta, support_layers
 
@@ -262,12 +299,13 @@ def solve_robust(posed: Posed, built: Built) -> Result:
                                      imdp.initial))
     eta = model_eta(sta)
     low = _kept(_solve(game, imdp, target, "lower", s.method, s.tol, deadline, layers, eta,
-                       s.precision, posed.minimise), game, target, stay)
+                       s.precision, posed.minimise, choice_of), game, target, stay,
+                choice_of)
     if imdp.truncated.any():
         upper_goal, upper_stay = _goal(game, imdp, dta, imdp.target | imdp.truncated)
         high = _kept(_solve(game, imdp, upper_goal, "upper", s.method, s.tol, deadline,
-                            layers, eta, s.precision, posed.minimise), game, upper_goal,
-                     upper_stay)
+                            layers, eta, s.precision, posed.minimise, choice_of), game,
+                     upper_goal, upper_stay, choice_of)
     else:
         high = low
     timings = {**built.timings, "solve": time.perf_counter() - t2}
@@ -279,11 +317,12 @@ def solve_robust(posed: Posed, built: Built) -> Result:
         route=RobustRoute.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=sta, mdp=imdp, dta=dta, controller=controller, timings=timings,
         part=RobustPart(low, high, Acceptance(np.asarray(target, dtype=bool), None),
-                        read_only(target)),
+                        read_only(target), reading=s.bands,
+                        message="" if s.bands == "worst" else OPTIMISTIC),
         bands=bands, **from_models(low, high, imdp.initial, posed.problem.objective,
                                    s.precision, truncated=bool(imdp.truncated.any())))
-    log.info("robust synthesis: %s, certified=%s",  # outward, as every surface prints it
-             bracket_text(result.lower, result.upper), result.certified)
+    log.info("robust synthesis (the %s law of the bands): %s, certified=%s",  # outward,
+             s.bands, bracket_text(result.lower, result.upper), result.certified)
     return result
 
 
@@ -339,12 +378,16 @@ def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_st
 class RobustPart(Part):
     """The robust route's part of the answer: the two solved models (robust iteration,
     the policy's robust LP), the target and the states that satisfy the task whatever
-    law of the bands nature plays; the model solved is an interval MDP."""
+    law of the bands nature plays; the model solved is an interval MDP.  ``reading``:
+    the bands read for the robot's ``"worst"`` law or its ``"best"``
+    (:data:`mitld_lp.defaults.BANDS`)."""
 
     lower_model: RobustModelSolution = field()  # required (Part's default is for the other routes)
     upper_model: RobustModelSolution = field()
     acceptance: Acceptance = field()
     goal: np.ndarray = field()
+    reading: str = "worst"
+    message: str = ""
     interval = True
 
     def summary(self, result: Result) -> dict[str, Any]:
@@ -357,6 +400,7 @@ class RobustRoute(Route):
     claims problems with point laws too (:func:`synthesize_robust`)."""
 
     name = "robust"
+    optimistic = True
 
     def __init__(self, *, points: bool = False) -> None:
         self.points = points

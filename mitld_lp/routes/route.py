@@ -31,12 +31,14 @@ class Route:
     ``takes_constraints`` (the answer carries the constraints' values and a randomised
     policy), ``observation_based`` (the controller acts on what sensors report, not on
     the product's states: the fully observed product, its chain, tree and policy map
-    answer another problem)."""
+    answer another problem), ``optimistic`` (a band is read for its best law when the
+    settings ask, ``Settings.bands = "best"``)."""
 
     name: str = "route"
     exact: bool = False
     takes_constraints: bool = False
     observation_based: bool = False
+    optimistic: bool = False
 
     def claims(self, posed: Posed) -> bool:
         """Whether ``posed`` (its route not yet chosen) is of this route's kind: the

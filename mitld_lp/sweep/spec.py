@@ -26,6 +26,7 @@ The schema (also in docs/sweeps.md)::
     max_states = 5000000                # each point's product budget (states)
     max_memory = 4000000000             # and memory (bytes; default half the machine's)
     precision = 1e-6                    # the certified bracket's relative width
+    bands = "worst"                     # a band's law worst for the robot, or "best"
 
 A parameter is any key path of the model file: TOML's dotted keys are the key path.
 Under ``[vary]`` and ``[points]`` the values of a parameter are a list (so varying a
@@ -248,13 +249,13 @@ def _setting(table: dict[str, Any], ctx: KeyContext) -> Settings:
 #: The checks of a sweep's ``[solve]`` numbers (the library's and the model file's).
 _RULES = {"time_limit": defaults.check_seconds, "tol": defaults.check_unit,
           "certify_tol": defaults.check_unit, "precision": defaults.check_unit,
-          "max_states": defaults.check_count, "max_automaton_states": defaults.check_count,
-          "max_memory": defaults.check_memory}
+          "bands": defaults.check_bands, "max_states": defaults.check_count,
+          "max_automaton_states": defaults.check_count, "max_memory": defaults.check_memory}
 
 #: The keys of a sweep's ``[solve]`` table: the settings a point is solved with.
 _SOLVE_KEYS = frozenset({"method", "solver", "backend", "clock_reduction", "decompose",
                          "time_limit", "max_states", "max_automaton_states", "max_memory",
-                         "tol", "certify_tol", "precision"})
+                         "tol", "certify_tol", "precision", "bands"})
 
 
 def _parameter_lists(doc: dict[str, Any], key: str, ctx: KeyContext) -> list[tuple[KeyPath, list]]:
