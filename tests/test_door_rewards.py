@@ -162,3 +162,38 @@ def test_random_models_against_storm(capsys, tmp_path, seed: int) -> None:
             assert answer["value"] == "inf", (seed, prop)
         else:
             assert Fraction(answer["value"]) == value, (seed, prop)
+
+
+def test_cyclic_block_past_the_budget_stops_by_name(capsys) -> None:
+    """A chain with a cycle of two states: solved (the value by hand), and past
+    ``max_block = 1`` stopped naming the budget."""
+    import numpy as np
+
+    from mitld_lp.exact.errors import ExactTooLarge
+    from mitld_lp.exact.reward import RewardMDP, solve_reward
+
+    # 0 -> 1 (1), 1 -> 0 (1/2) or the target 2 (1/2); reward 1 per step: E = 4 from 0
+    model = RewardMDP(groups=np.array([0, 1, 2, 3]), indptr=np.array([0, 1, 3, 4]),
+                      indices=np.array([1, 0, 2, 2]),
+                      probabilities=(Fraction(1), Fraction(1, 2), Fraction(1, 2),
+                                     Fraction(1)),
+                      rewards=(Fraction(1), Fraction(1), Fraction(0)),
+                      target=np.array([False, False, True]), initial=0)
+    assert solve_reward(model, "min").value == 4  # E0 = 1 + E1, E1 = 1 + E0 / 2
+    with pytest.raises(ExactTooLarge, match="cyclic block of 2 states"):
+        solve_reward(model, "max", max_block=1)
+
+
+def test_dtmc_and_policy_refusal(capsys, tmp_path) -> None:
+    path = tmp_path / "chain.prism"
+    path.write_text("dtmc\nmodule m\n  s : [0..2] init 0;\n"
+                    "  [] s=0 -> 1/3 : (s'=1) + 2/3 : (s'=0);\n  [] s=1 -> (s'=2);\n"
+                    "  [] s=2 -> true;\nendmodule\n"
+                    'rewards\n  s<2 : 1;\nendrewards\nlabel "end" = s=2;\n')
+    _, [answer] = ours(capsys, "--prop", 'Rmin=? [F "end"]', path=str(path))
+    assert Fraction(answer["value"]) == 4  # 3 expected steps to leave 0, then one
+    assert storm_exact('R=? [F "end"]', {}, str(path)) == 4
+    policy = tmp_path / "p.json"
+    assert main(["solve", str(path), "--prop", 'Rmin=? [F "end"]', "--policy",
+                 str(policy)]) == 2
+    assert "writes no policy file" in capsys.readouterr().err and not policy.exists()
