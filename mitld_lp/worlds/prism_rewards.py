@@ -8,7 +8,8 @@ it naming the form (:class:`mitld_lp.worlds.properties.PropertyError`): cumulati
 filter, a file without that reward structure.  :func:`reward_mdp` builds the program
 with Storm in rational arithmetic (``build_model[stormpy.Rational]``: the probabilities
 and rewards as the file writes them; its exploration checks on), within the world
-budgets (``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`),
+budgets (``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`,
+and :data:`mitld_lp.defaults.EXACT_MAX_TRANSITIONS` before the rational work),
 and gives the :class:`mitld_lp.exact.reward.RewardMDP` (each choice's reward: its
 state's state reward plus its action reward; the target: the state formula as Storm
 evaluates it on the built model).  Transition rewards (``[a] g : r`` depending on the
@@ -223,6 +224,11 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
         if model.nr_states > max_states:
             raise PrismTooLarge(f"{where}: Storm built {model.nr_states:,} states, more than "
                                 f"max_states = {max_states:,} (--max-world-states)")
+        if model.nr_transitions > defaults.EXACT_MAX_TRANSITIONS:
+            raise PrismTooLarge(
+                f"{where}: {model.nr_transitions:,} transitions, more than the "
+                f"{defaults.EXACT_MAX_TRANSITIONS:,} an expected reward is solved with in "
+                "rational arithmetic (mitld_lp.defaults.EXACT_MAX_TRANSITIONS)")
         return _tables(model, query, where)
 
     fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
