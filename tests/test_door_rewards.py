@@ -170,7 +170,8 @@ def test_cyclic_block_past_the_budget_stops_by_name(capsys) -> None:
     import numpy as np
 
     from mitld_lp.exact.errors import ExactTooLarge
-    from mitld_lp.exact.reward import RewardMDP, solve_reward
+    from mitld_lp.exact.reward import solve_reward
+    from mitld_lp.worlds.prism_rewards import RewardMDP
 
     # 0 -> 1 (1), 1 -> 0 (1/2) or the target 2 (1/2); reward 1 per step: E = 4 from 0
     model = RewardMDP(groups=np.array([0, 1, 2, 3]), indptr=np.array([0, 1, 3, 4]),

@@ -49,41 +49,9 @@ import scipy.sparse as sp
 from mitld_lp import defaults
 from mitld_lp.exact.errors import ExactTooLarge, TimeUp
 from mitld_lp.solvers.graph import graph_blocks
+from mitld_lp.worlds.prism_rewards import RewardMDP
 
-__all__ = ["RewardMDP", "RewardAnswer", "almost_sure", "solve_reward", "to_fraction"]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class RewardMDP:
-    """An MDP with rewards, exactly.
-
-    Attributes:
-        groups: ``(n_states + 1,)`` the choices of state ``s`` are
-            ``groups[s]:groups[s+1]``.
-        indptr, indices: the choices' successors (CSR layout over choices).
-        probabilities: per entry, its probability (a rational: python-flint ``fmpq`` or
-            :class:`fractions.Fraction`).
-        rewards: per choice, the reward collected when it is taken (the state reward of
-            its state plus the action reward), a non-negative rational.
-        target: ``(n_states,)`` bool.
-        initial: the initial state.
-    """
-
-    groups: np.ndarray
-    indptr: np.ndarray
-    indices: np.ndarray
-    probabilities: tuple[Any, ...]
-    rewards: tuple[Any, ...]
-    target: np.ndarray
-    initial: int
-
-    @property
-    def n_states(self) -> int:
-        return int(self.groups.size - 1)
-
-    @property
-    def owner(self) -> np.ndarray:
-        return np.repeat(np.arange(self.n_states), np.diff(self.groups))
+__all__ = ["RewardAnswer", "almost_sure", "solve_reward", "to_fraction"]
 
 
 @dataclass(frozen=True, slots=True)

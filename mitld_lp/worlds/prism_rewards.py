@@ -10,7 +10,7 @@ with Storm in rational arithmetic (``build_model[stormpy.Rational]``: the probab
 and rewards as the file writes them; its exploration checks on), within the world
 budgets (``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`,
 and :data:`mitld_lp.defaults.EXACT_MAX_TRANSITIONS` before the rational work),
-and gives the :class:`mitld_lp.exact.reward.RewardMDP` (each choice's reward: its
+and gives the :class:`RewardMDP` (each choice's reward: its
 state's state reward plus its action reward; the target: the state formula as Storm
 evaluates it on the built model).  Transition rewards (``[a] g : r`` depending on the
 successor) are Storm's ``transition_rewards``; PRISM files write action rewards, which
@@ -32,7 +32,40 @@ from mitld_lp import defaults
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.properties import PropertyError
 
-__all__ = ["RewardQuery", "is_reward", "pose_reward", "reward_mdp"]
+__all__ = ["RewardMDP", "RewardQuery", "is_reward", "pose_reward", "reward_mdp"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RewardMDP:
+    """An MDP with rewards, exactly.
+
+    Attributes:
+        groups: ``(n_states + 1,)`` the choices of state ``s`` are
+            ``groups[s]:groups[s+1]``.
+        indptr, indices: the choices' successors (CSR layout over choices).
+        probabilities: per entry, its probability (a rational: python-flint ``fmpq`` or
+            :class:`fractions.Fraction`).
+        rewards: per choice, the reward collected when it is taken (the state reward of
+            its state plus the action reward), a non-negative rational.
+        target: ``(n_states,)`` bool.
+        initial: the initial state.
+    """
+
+    groups: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+    probabilities: tuple[Any, ...]
+    rewards: tuple[Any, ...]
+    target: np.ndarray
+    initial: int
+
+    @property
+    def n_states(self) -> int:
+        return int(self.groups.size - 1)
+
+    @property
+    def owner(self) -> np.ndarray:
+        return np.repeat(np.arange(self.n_states), np.diff(self.groups))
 
 
 @dataclass(frozen=True)
@@ -124,7 +157,6 @@ def _fraction(x: Any) -> Fraction:
 
 def _tables(model: Any, query: RewardQuery, where: str) -> Any:
     """The built model's :class:`RewardMDP` (picklable: it may come from a capped child)."""
-    from mitld_lp.exact.reward import RewardMDP
     from mitld_lp.worlds.prism import stormpy_module
     from mitld_lp.worlds.prism_program import storm_quiet
 
@@ -173,7 +205,7 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
                constants: Mapping[str, Any] | None = None,
                max_states: int = defaults.MAX_STATES,
                max_memory: int | None = None) -> Any:
-    """The :class:`mitld_lp.exact.reward.RewardMDP` of ``query`` on the PRISM ``program``
+    """The :class:`RewardMDP` of ``query`` on the PRISM ``program``
     (Storm's parse of ``path``), its open ``constants`` given, built by Storm in rational
     arithmetic within the budgets (:class:`mitld_lp.worlds.prism.PrismTooLarge` past
     them); :class:`WorldError` for a model Storm refuses or that is not an MDP or DTMC."""
