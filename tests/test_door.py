@@ -103,7 +103,7 @@ def test_properties_file_constant_given_on_the_command_line(capsys, tmp_path) ->
 
 
 @pytest.mark.parametrize("prop, says", [
-    ('R{"r"}max=? [F "goal"]', "an expected reward (R) is refused"),
+    ('R{"r"}max=? [F "goal"]', 'the file has no reward structure "r"'),
     ('S=? ["goal"]', "long-run average"),
     ('Pmax=? [F<=2.5 "goal"]', "must be a non-negative integer"),
     ('Pmax=? [F>=2 "goal"]', "only a lower end"),

@@ -189,10 +189,12 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     """Every property posed answered, one line (one JSON object) each; the exit code
     the worst of theirs (2 when one was refused, 3 when one is not certified or
     undecided)."""
+    from mitld_lp.cli.rewards import answer_reward
     from mitld_lp.logic.parser import parse
     from mitld_lp.model import Model
     from mitld_lp.problem import pose, settings_from
     from mitld_lp.synthesis import solve
+    from mitld_lp.worlds.prism_rewards import is_reward
     from mitld_lp.worlds.properties import PropertyError, pose_property
 
     constants = _constants(args)
@@ -205,6 +207,12 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     for name, prop in props:
         started = time.perf_counter()
         try:
+            if is_reward(prop):  # an expected reward: its own exact solve
+                if policy_file is not None:
+                    raise UsageError("--policy: an expected reward (R) writes no policy "
+                                     "file")
+                codes.append(answer_reward(args, name, prop, program, ours))
+                continue
             query = pose_property(name, prop, program.labels, program.reserved)
             game = _world(args, ours, query.define, parse(query.spec))
             model = Model.from_game(game, query.spec, name=Path(args.model).stem,

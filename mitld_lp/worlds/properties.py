@@ -22,6 +22,10 @@ answered in its place):
   its own, the state formula as a PRISM expression with the file's labels written out,
   which Storm evaluates (:func:`mitld_lp.worlds.prism.load_prism`'s ``define``).
 
+Expected rewards (``R``) are not tasks: :func:`pose_property` refuses them, and the
+command line's door answers ``R{"r"}min=? [F target]`` and ``R{"r"}max=? [F target]``
+with :mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward`.
+
 Refused, by name: expected rewards (``R``), long-run averages (``S``), expected time
 (``T``), multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
 without ``min`` or ``max`` (an MDP needs one, as in Storm), a ``P`` nested in a path
@@ -43,7 +47,8 @@ from mitld_lp.util.decimals import Written
 from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
-           "pose_property", "read_properties", "instantiate", "verdict", "pick"]
+           "pose_property", "read_properties", "instantiate", "verdict", "pick",
+           "INIT_FILTER"]
 
 
 class PropertyError(WorldError):
@@ -78,7 +83,7 @@ class Query:
 _COMPARISONS = {"GEQ": ">=", "GREATER": ">", "LEQ": "<=", "LESS": "<"}
 # the values, or their maximum or minimum (QVBS's JANI files), over the initial states:
 # one initial state (a world has exactly one), so its value (Storm spells it "minumum")
-_INIT_FILTER = re.compile(r"Obtain the (values|maximum|minimum|minumum) of the '\"init\"'-states")
+INIT_FILTER = re.compile(r"Obtain the (values|maximum|minimum|minumum) of the '\"init\"'-states")
 _LABEL = re.compile(r'"([^"]*)"')
 _NESTED = re.compile(r"(?<![\w.])(P|R|S|T|LRA)\s*(\{[^}]*\})?\s*(min|max)?\s*(=\s*\?|[<>]=?)")
 _TEMPORAL = re.compile(r"(?<![\w.])[XFGUWR](?![\w])")
@@ -362,11 +367,12 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
 
     formula = prop.get_raw_formula()
     text = str(formula)
-    if not _INIT_FILTER.search(str(prop)):
+    if not INIT_FILTER.search(str(prop)):
         raise _refuse(name, text, "a filter", "only the value at the initial state is "
                       "answered")
     kinds = ((logic.RewardOperatorFormula, "an expected reward (R)",
-              "expected rewards are not answered yet"),
+              "an expected reward is not the probability of a task (the door "
+              "answers it: mitld_lp.worlds.prism_rewards)"),
              (logic.LongRunAverageOperatorFormula, "a long-run average (S)",
               "a long-run average is not a probability of a task"),
              (logic.TimeOperatorFormula, "an expected time (T)",
