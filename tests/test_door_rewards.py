@@ -106,6 +106,18 @@ def test_line_says_inf_and_why(capsys) -> None:
     assert "= inf" in out and "not reached with probability 1 under some scheduler" in out
 
 
+def test_without_python_flint_an_expected_reward_is_refused_by_name(capsys, monkeypatch) -> None:
+    """The rational solve needs the exact extra: without python-flint the property is
+    refused with the install line (exit 2), not a traceback."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "flint", None)  # import flint raises ImportError
+    assert main(["solve", WALK, "--prop", 'R{"cost"}min=? [F "stop"]', "--const",
+                 "N=3,IDLE=true", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "python-flint" in err and "mitld_lp[exact]" in err and "Traceback" not in err
+
+
 @pytest.mark.parametrize("prop, says", [
     ('R{"cost"}min=? [C<=3]', "a cumulative reward C<=k is refused"),
     ('R{"cost"}max=? [I=3]', "an instantaneous reward I=k is refused"),

@@ -47,7 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.exact.errors import ExactTooLarge, TimeUp
+from mitld_lp.exact.errors import ExactError, ExactTooLarge, TimeUp
 from mitld_lp.solvers.graph import graph_blocks
 from mitld_lp.worlds.prism_rewards import RewardMDP
 
@@ -273,6 +273,11 @@ def solve_reward(model: RewardMDP, sense: str, *, time_limit: float | None = Non
     past ``max_block``, :class:`TimeUp` past ``time_limit`` seconds."""
     if sense not in ("min", "max"):
         raise ValueError(f"sense must be 'min' or 'max', got {sense!r}")
+    try:
+        import flint  # noqa: F401
+    except ImportError:
+        raise ExactError("an expected reward is computed in rational arithmetic with "
+                         "python-flint: pip install 'mitld_lp[exact]'") from None
     if any(to_fraction(r) < 0 for r in model.rewards):
         raise ValueError("expected reward: a negative reward (the rewards must be >= 0)")
     deadline = time.perf_counter() + (float("inf") if time_limit is None else time_limit)
