@@ -53,12 +53,12 @@ if TYPE_CHECKING:  # what the names are, for type checkers and readers
     )
     from mitld_lp.mdp import MDP
     from mitld_lp.model import Model, ModelError, load_model, loads_model
-    from mitld_lp.problem import Problem, ProblemError, Settings, pose
+    from mitld_lp.problem import Problem, ProblemError, Settings
     from mitld_lp.product import ProductState, product
     from mitld_lp.result import Result, SynthesisResult
     from mitld_lp.running.simulate import simulate
     from mitld_lp.sweep import load_sweep, run_sweep
-    from mitld_lp.synthesis import solve, synthesize, synthesize_constrained
+    from mitld_lp.synthesis import pose, solve, synthesize, synthesize_constrained
     from mitld_lp.tradeoff import pareto
     from mitld_lp.worlds.game import ExplicitGame, Game
     from mitld_lp.worlds.grid import GridWorld
@@ -111,7 +111,7 @@ _WHERE = {  # public name -> the module defining it, imported on first use
     "SensedController": "mitld_lp.controllers.kinds",
     "solve": "mitld_lp.synthesis",
     "synthesize_constrained": "mitld_lp.synthesis",
-    "pose": "mitld_lp.problem",
+    "pose": "mitld_lp.synthesis",
     "Problem": "mitld_lp.problem",
     "Settings": "mitld_lp.problem",
     "ProblemError": "mitld_lp.problem",

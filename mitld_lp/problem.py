@@ -33,15 +33,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mitld_lp import defaults
 from mitld_lp.logic.fragment import CO_SAFE, SAFETY
 
-if TYPE_CHECKING:  # the routes import this module
-    from mitld_lp.routes.route import Route
-
-__all__ = ["Settings", "Problem", "Posed", "ProblemError", "pose", "OBJECTIVES",
+__all__ = ["Settings", "Problem", "Posed", "ProblemError", "Route", "pose_on", "OBJECTIVES",
            "complement_class", "task_words", "band_text"]
 
 OBJECTIVES = defaults.OBJECTIVES
@@ -262,21 +259,62 @@ class Posed:
         return {k: why for k, (why, asked) in said.items() if asked}
 
 
-def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None,
-         settings: Settings | None = None, objective: str | None = None,
-         routes: Sequence[Route] | None = None) -> Posed:
+class Route:
+    """A route (module docs).  ``name``: the answer's ``route`` (the JSON's key, the
+    word a refusal uses).  Capabilities, for the readers that would otherwise compare
+    names: ``exact`` (an exact answer is given on it, :mod:`mitld_lp.exact`),
+    ``takes_constraints`` (the answer carries the constraints' values and a randomised
+    policy), ``observation_based`` (the controller acts on what sensors report, not on
+    the product's states: the fully observed product, its chain, tree and policy map
+    answer another problem), ``optimistic`` (a band is read for its best law when the
+    settings ask, ``Settings.bands = "best"``)."""
+
+    name: str = "route"
+    exact: bool = False
+    takes_constraints: bool = False
+    observation_based: bool = False
+    optimistic: bool = False
+
+    def claims(self, posed: Posed) -> bool:
+        """Whether ``posed`` (its route not yet chosen) is of this route's kind: the
+        first of the precedence list to claim a problem owns it."""
+        raise NotImplementedError
+
+    def refusal(self, posed: Posed) -> list[str]:
+        """Every reason this route does not solve ``posed`` as posed, each naming its
+        feature (empty: it does).  Never raises."""
+        raise NotImplementedError
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Any:
+        """The automaton, STA and product this route's solver works on, under the
+        problem's budgets (a :class:`mitld_lp.routes.stages.Built`)."""
+        raise NotImplementedError
+
+    def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Any:
+        """The answer on ``built`` (``costs`` / ``seed``: a randomised policy's action
+        costs and generator, for the routes that have one): a
+        :class:`mitld_lp.result.Result`."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<route {self.name}>"
+
+
+def pose_on(routes: Sequence[Route], model: Any, constraints: Iterable[Any] = (), *,
+            then: str | None = None, settings: Settings | None = None,
+            objective: str | None = None) -> Posed:
     """Validate the problem once and choose its route (module docs).  ``constraints``:
     texts or :class:`~mitld_lp.logic.constraints.Constraint` records, after the model's own;
     ``objective``: the model's unless given; ``routes``: the routes to ask, in
-    precedence (default :data:`mitld_lp.routes.precedence.ROUTES`; the trade-off
-    curve's end points ask the constrained LP's, :data:`~mitld_lp.routes.precedence.LP`).
+    precedence (:func:`mitld_lp.synthesis.pose` asks
+    :data:`mitld_lp.routes.precedence.ROUTES`; the trade-off curve's end points ask the
+    constrained LP's, :data:`~mitld_lp.routes.precedence.LP`).
     Raises :class:`ProblemError` naming the combination no route solves, or the option
     the route cannot honour: every reason at once, not the first alone."""
     from mitld_lp.logic.constraints import THEN, ConstraintError, parse_constraints
     from mitld_lp.logic.fragment import check
     from mitld_lp.model import Model
-    from mitld_lp.routes import precedence
-    from mitld_lp.routes.route import Route
 
     if not isinstance(model, Model):
         raise TypeError(
@@ -308,7 +346,7 @@ def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None
                 f"{', '.join(sorted(model.distributions)) or 'none'})")
     robust = any(d.is_ambiguous for d in model.distributions.values())
     asked = Posed(Problem(model, cons, then, goal, unread), s, Route(), fragment, robust)
-    candidates = precedence.ROUTES if routes is None else routes
+    candidates = routes
     owner = next((r for r in candidates if r.claims(asked)), None)
     if owner is None:  # no route's kind: every route's reasons
         refused += [why for r in candidates for why in r.refusal(asked)] or [

@@ -12,19 +12,30 @@ beats (docs/results.md).
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from mitld_lp.checks import Check
 from mitld_lp.model import Model
-from mitld_lp.problem import Posed, Settings, pose, settings_from
+from mitld_lp.problem import Posed, Route, Settings, pose_on, settings_from
 from mitld_lp.result import Result
+from mitld_lp.routes import precedence
 from mitld_lp.routes.stages import Built, build_posed, build_product
 
 __all__ = ["synthesize", "synthesize_constrained", "solve", "build_product", "Built",
            "Result", "Check"]
 
 log = logging.getLogger(__name__)
+
+def pose(model: Any, constraints: Iterable[Any] = (), *, then: str | None = None,
+         settings: Settings | None = None, objective: str | None = None,
+         routes: Sequence[Route] | None = None) -> Posed:
+    """Validate the problem once and choose its route: the first of ``routes`` (default
+    :data:`mitld_lp.routes.precedence.ROUTES`) that claims it owns it
+    (:func:`mitld_lp.problem.pose_on`, which says every reason a route refuses it)."""
+    return pose_on(precedence.ROUTES if routes is None else routes, model, constraints, then=then,
+                   settings=settings, objective=objective)
+
 
 def synthesize(
     model: Model,
@@ -64,7 +75,7 @@ def synthesize(
     ``tol``, ``certify_tol``), each checked by the rule every surface applies; or give
     one ``settings=`` record instead.
 
-    The problem is posed once (:func:`mitld_lp.problem.pose`): a combination no route
+    The problem is posed once (:func:`mitld_lp.synthesis.pose`): a combination no route
     solves, or an option its route cannot honour, raises
     :class:`~mitld_lp.problem.ProblemError` naming it.
     """
@@ -130,5 +141,5 @@ def synthesize_constrained(
     budgets, truncation, ...), each honoured or refused by name (:func:`pose`)."""
     from mitld_lp.routes.precedence import LP
 
-    posed = pose(model, constraints, then=then, settings=settings_from(**options), routes=LP)
+    posed = pose_on(LP, model, constraints, then=then, settings=settings_from(**options))
     return solve(posed, costs=costs, seed=seed)

@@ -92,7 +92,7 @@ LOOSEN_ROUNDS = 4
 def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list[ParetoPoint]:
     """``points`` certified points, bounds evenly spaced over the range worth tracing.
     ``options``: :func:`mitld_lp.synthesis.synthesize`'s settings, used for every point
-    (each honoured or refused by name: :func:`mitld_lp.problem.pose`)."""
+    (each honoured or refused by name: :func:`mitld_lp.synthesis.pose`)."""
     if "then" in options or "constraints" in options:
         raise ProblemError("pareto: the curve poses its own constraint on each point (and "
                            "its own then for --against steps/cost); give the model's "

@@ -11,7 +11,8 @@ import pytest
 
 from mitld_lp import load_model, loads_model, synthesize
 from mitld_lp.cli import main
-from mitld_lp.problem import ProblemError, pose, settings_from
+from mitld_lp.problem import ProblemError, settings_from
+from mitld_lp.synthesis import pose
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"

@@ -11,11 +11,12 @@ import pytest
 
 from mitld_lp import Model, synthesize
 from mitld_lp.distributions.literal import from_table
-from mitld_lp.problem import ProblemError, pose
+from mitld_lp.problem import ProblemError
 from mitld_lp.result import Part, Result
 from mitld_lp.routes import precedence
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import build_task
+from mitld_lp.synthesis import pose
 from mitld_lp.worlds.grid import GridWorld
 
 MARKER = "sweep me"

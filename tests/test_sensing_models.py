@@ -14,8 +14,9 @@ import pytest
 
 from mitld_lp import ExplicitGame, Model, load_model, loads_model, synthesize
 from mitld_lp.files.keys import ModelError
-from mitld_lp.problem import ProblemError, pose
+from mitld_lp.problem import ProblemError
 from mitld_lp.sensing import Sensor
+from mitld_lp.synthesis import pose
 
 MODELS = sorted(Path(__file__).resolve().parent.parent.joinpath("models").glob("*.toml"))
 

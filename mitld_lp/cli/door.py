@@ -8,7 +8,7 @@ refuses are refused by name, exit 2) and answered with the certified bracket; ``
 is answered true or false by the bracket, or undecided when the bracket straddles
 ``p`` (exit 3).  ``--spec`` poses an MITLD task over the same file instead, answered as
 a model file's (:func:`world_model`).  ``--objective`` sets a model file's objective
-too (:mod:`mitld_lp.cli.solve` passes it to :func:`mitld_lp.problem.pose`).
+too (:mod:`mitld_lp.cli.solve` passes it to :func:`mitld_lp.synthesis.pose`).
 """
 
 from __future__ import annotations
@@ -192,8 +192,8 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     from mitld_lp.cli.rewards import answer_reward
     from mitld_lp.logic.parser import parse
     from mitld_lp.model import Model
-    from mitld_lp.problem import pose, settings_from
-    from mitld_lp.synthesis import solve
+    from mitld_lp.problem import settings_from
+    from mitld_lp.synthesis import pose, solve
     from mitld_lp.worlds.prism_rewards import is_reward
     from mitld_lp.worlds.properties import PropertyError, pose_property
 

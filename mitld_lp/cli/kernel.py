@@ -1,7 +1,7 @@
 """The command line's kernel: what every verb shares, below all of them (the verbs import
 it, it imports no verb).  Exit codes (:mod:`mitld_lp.cli`), the user errors and budget
 stops they map, output files, the answer's lines, the options every model verb takes and
-the problem those options pose (:func:`mitld_lp.problem.pose`)."""
+the problem those options pose (:func:`mitld_lp.synthesis.pose`)."""
 
 from __future__ import annotations
 
@@ -401,7 +401,8 @@ def posed_model(args: argparse.Namespace, model: Any, verb: str) -> Posed:
     """The problem a verb that takes no constraints (``simulate``, ``plot``, ``info``,
     ``export``) poses for ``model``: refused, naming the verb, when the model file
     carries constraints."""
-    from mitld_lp.problem import pose, settings_from
+    from mitld_lp.problem import settings_from
+    from mitld_lp.synthesis import pose
 
     return unconstrained(pose(model, settings=settings_from(**model_options(args))), verb)
 

@@ -244,8 +244,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if table:
             fig = plot.sweep_figure(args.input, args.x, args.y, by=args.by, size=args.size)
         else:
-            from mitld_lp.problem import pose, settings_from
-            from mitld_lp.synthesis import solve
+            from mitld_lp.problem import settings_from
+            from mitld_lp.synthesis import pose, solve
 
             situations = [plot.parse_situation(s) for s in args.situation or [""]]
             model = read_model(args, args.input, max_states=args.max_states)
@@ -282,9 +282,9 @@ def args_simulate(p: argparse.ArgumentParser) -> None:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Monte-Carlo rollouts of the synthesised controller in the untruncated world."""
-    from mitld_lp.problem import pose, settings_from
+    from mitld_lp.problem import settings_from
     from mitld_lp.running.simulate import simulate
-    from mitld_lp.synthesis import solve
+    from mitld_lp.synthesis import pose, solve
 
     model = read_model(args)
     r = solve(pose(model, args.constraint, then=args.then,

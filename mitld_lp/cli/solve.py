@@ -88,8 +88,7 @@ def args_solve(p: argparse.ArgumentParser) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Synthesise the policy: the certified bracket, the value, the sizes."""
-    from mitld_lp.problem import pose
-    from mitld_lp.synthesis import solve
+    from mitld_lp.synthesis import pose, solve
 
     if args.backend == "direct" and args.solver != "CLARABEL":
         raise UsageError(f"--backend direct runs only Clarabel, not {args.solver}; "

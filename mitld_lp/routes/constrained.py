@@ -114,7 +114,7 @@ def solve_constrained(posed: Posed, built: Built, *,
                       seed: int | None = 0) -> Result:
     """The constrained LP of a posed problem with point laws on its built joint product
     (one with no constraint is solved too: the trade-off curve's end points).  The
-    entry point is :func:`mitld_lp.synthesis.solve` (:func:`mitld_lp.problem.pose`
+    entry point is :func:`mitld_lp.synthesis.solve` (:func:`mitld_lp.synthesis.pose`
     refuses, naming it, a problem this LP does not solve: :class:`ConstrainedRoute`)."""
     if posed.robust or built.joint is None:
         raise ProblemError("solve_constrained: a law known only within a band, or a "

@@ -1,4 +1,4 @@
-"""The routes, in the order :func:`mitld_lp.problem.pose` asks them: the first that
+"""The routes, in the order :func:`mitld_lp.synthesis.pose` asks them: the first that
 claims a problem owns it (:class:`mitld_lp.routes.route.Route`).
 
 A new route is one module with one :class:`~mitld_lp.routes.route.Route` subclass and

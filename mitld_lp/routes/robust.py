@@ -55,7 +55,7 @@ from mitld_lp.controllers.kinds import Controller
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
-from mitld_lp.problem import Posed, ProblemError, pose, settings_from
+from mitld_lp.problem import Posed, ProblemError, pose_on, settings_from
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
 from mitld_lp.report import bracket_text
@@ -275,7 +275,7 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
                                "robustly")
         posed = model
     else:
-        posed = pose(model, settings=settings_from(**options), routes=(POINTS_TOO,))
+        posed = pose_on((POINTS_TOO,), model, settings=settings_from(**options))
     return solve_robust(posed, build_interval(posed, posed.settings.progress))
 
 

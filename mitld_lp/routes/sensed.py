@@ -1,6 +1,6 @@
 """The ``sensed`` route (:class:`SensedRoute`): a problem with a sensor that misses its
 event, solved on the information-state product; which such problems it solves, and the
-refusal naming each combination it does not (:func:`mitld_lp.problem.pose` raises it)."""
+refusal naming each combination it does not (:func:`mitld_lp.synthesis.pose` raises it)."""
 
 from __future__ import annotations
 

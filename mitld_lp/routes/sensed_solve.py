@@ -27,7 +27,6 @@ from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import ModelSolution, solve_models
-from mitld_lp.routes.sensed import SensedRoute
 from mitld_lp.routes.stages import Built
 from mitld_lp.sensing.observe import controller_of
 
@@ -58,7 +57,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     """Solve a problem posed on the ``sensed`` route (module docs) on its built
     information-state product (:func:`mitld_lp.synthesis.solve`)."""
     model, s = posed.model, posed.settings
-    assert built.belief is not None  # built by SensedRoute.build
+    assert built.belief is not None  # built by the sensed route's build
     eps = model.epsilon if s.epsilon is None else s.epsilon
     belief, dta = built.belief, built.dta
     t2 = time.perf_counter()
@@ -72,7 +71,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
                              complement=posed.minimise)
     t3 = time.perf_counter()
     result = Result(
-        route=SensedRoute.name, model=model, objective=posed.problem.objective, method=s.method,
+        route=posed.route.name, model=model, objective=posed.problem.objective, method=s.method,
         epsilon=eps, sta=belief.sta, mdp=mdp, dta=dta,
         part=SensedPart(low, high, dict(belief.sensors), belief),
         controller=controller_of(model.game, belief, low.policy),

@@ -7,7 +7,7 @@ probability ``d``, independently of everything else, until it has reported it on
 happens); an event without a sensor is seen that way.
 
 ``false_alarm`` (a report in a step before the event) is read and checked here, and
-refused by name when a problem is posed (:func:`mitld_lp.problem.pose`): the
+refused by name when a problem is posed (:func:`mitld_lp.synthesis.pose`): the
 information state is then not finite within this construction.
 
 A model file writes them under ``[sensors]``::

@@ -114,15 +114,14 @@ def run_model(load: Callable[[], Model], settings: Settings,
               constraints: tuple[str, ...] = (), then: str | None = None, *,
               whole: bool = False) -> Outcome:
     """Load a model with ``load()`` and solve the problem it poses with ``settings``,
-    ``constraints`` (after the model's own) and ``then`` (:func:`mitld_lp.problem.pose`:
+    ``constraints`` (after the model's own) and ``then`` (:func:`mitld_lp.synthesis.pose`:
     every route, the constrained one included); every failure but an interrupt becomes
     an :class:`Outcome` with its status.  ``whole``: the model file's ``[budgets]
     time_limit`` counts from the start of the load, as ``--time-limit`` does (a batch's
     model), not from the solve's (a sweep's point)."""
     from dataclasses import replace
 
-    from mitld_lp.problem import pose
-    from mitld_lp.synthesis import solve
+    from mitld_lp.synthesis import pose, solve
 
     start = time.perf_counter()
     try:
