@@ -151,3 +151,53 @@ def test_the_sweep_forecast(rate: float, at: int, hopeless: bool) -> None:
     # what the sweeps report: the gap over its threshold (here tol = 1e-9 alone)
     seen = [(k, 1e-2 * rate ** (k - at) / 1e-9) for k in range(16, at + 1, 16)]
     assert _hopeless(seen, 1000) is hopeless
+
+
+def _chain(n: int) -> MDP:
+    """States 0 .. n-1 explored forward from 0, each moving to the next; the last reaches
+    the target with 1/2, a sink with 1/4 and state 0 with 1/4 (so the chain is one
+    strongly connected block).  By hand every state's value is v = 1/2 + v/4 = 2/3."""
+    rows = [*range(n - 1), n - 1, n - 1, n - 1, n, n + 1]
+    cols = [*range(1, n), n, n + 1, 0, n, n + 1]
+    vals = [1.0] * (n - 1) + [0.5, 0.25, 0.25, 1.0, 1.0]
+    target = np.zeros(n + 2, dtype=bool)
+    target[n] = True
+    sink = np.zeros(n + 2, dtype=bool)
+    sink[n + 1] = True
+    return MDP(matrix=sp.csr_array((vals, (rows, cols)), shape=(n + 2, n + 2)),
+               row_groups=np.arange(n + 3),
+               choice_actions=np.array([0] * n + [-1, -1], dtype=np.int32),
+               action_names=("go",), initial=0, target=target, sink=sink,
+               truncated=np.zeros(n + 2, dtype=bool), states=tuple(range(n + 2)))
+
+
+def test_the_sweeps_run_backward_over_a_block_explored_forward() -> None:
+    """A value entering the chain at its end reaches its start in one backward sweep,
+    so both bounds' gap is 4^-k everywhere after k sweeps (the last state's update
+    ``1/2 + v(0)/4`` from bounds 0 and 1): 15 sweeps bring it below 1e-9 (4^-15 =
+    9.3e-10, 4^-14 = 3.7e-9).  The forward order moves it one state a sweep: state 0
+    keeps its gap of 1 for n - 1 sweeps."""
+    if kernels_module.compiled_kernel() is None:
+        pytest.skip("numba is not installed")
+    n = 200
+    inner = sp.csr_array(([1.0] * (n - 1) + [0.25], ([*range(n - 1), n - 1], [*range(1, n), 0])),
+                         shape=(n, n))
+    exits = np.zeros((n, 2))
+    exits[n - 1] = 0.5
+    counts = {}
+    for name, order in (("chosen", None), ("forward", np.arange(n, dtype=np.int64))):
+        prep = kernels_module.Prepared(inner, np.arange(n + 1))
+        if order is not None:
+            prep.order = order
+        local = np.column_stack([np.zeros(n), np.ones(n)])
+        counts[name], over = kernels_module.compiled_sweeps(prep, exits, local, 1e-9, 10**6)
+        assert over < 1.0
+        assert np.all(local[:, 0] <= 2 / 3) and np.all(2 / 3 <= local[:, 1])
+    assert counts["chosen"] == 15
+    assert counts["forward"] >= n
+
+    mdp = _chain(n)  # the same through interval iteration: the product's order is kept
+    r = interval_iteration(mdp, mdp.target, gap="max", precision=None, progress=False,
+                           compiled=True)
+    assert r.status == Status.OPTIMAL and r.iterations == 15
+    assert r.lower[0] <= 2 / 3 <= r.upper[0]

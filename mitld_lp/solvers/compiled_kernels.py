@@ -69,18 +69,19 @@ def update2(indptr, indices, data, starts, leave, exits, local, s,
     local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
 
 @numba.njit(cache=True, nogil=True)
-def gauss_seidel(indptr, indices, data, starts, leave, exits, local, max_sweeps, tol,
-                 minimise, precision, floor):  # pragma: no cover - compiled
-    """Sweeps until every gap is below ``tol`` and, when ``precision >= 0``, below
-    ``precision`` times its lower bound (never below ``floor``); returns the sweeps and
-    the largest gap over its threshold."""
+def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_sweeps,
+                 tol, minimise, precision, floor):  # pragma: no cover - compiled
+    """Sweeps through the states in ``order`` until every gap is below ``tol`` and,
+    when ``precision >= 0``, below ``precision`` times its lower bound (never below
+    ``floor``); returns the sweeps and the largest gap over its threshold."""
     n, k = local.shape
     best = np.empty(k)
     acc = np.empty(k)
     done = 0
     over = np.inf
     while done < max_sweeps:
-        for s in range(n):
+        for i in range(n):
+            s = order[i]
             if k == 2:
                 update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
             else:
