@@ -40,7 +40,7 @@ folder::
 
 The exactness check of issue 40 runs every instance of at most 200,000 states::
 
-    python experiments/qvbs.py --qvbs ../shared/qvbs --max-states 200000 --exact
+    python experiments/qvbs.py --qvbs qcomp/benchmarks --max-states 200000 --exact
 
 A full run writes ``qvbs.csv`` and ``qvbs.md`` to ``experiments/out``; ``--quick`` to the
 scratch folder.  Exit status 1 when an exact reference lies outside a certified bracket,
