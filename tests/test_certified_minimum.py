@@ -15,6 +15,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import pytest
+from storm_exact import RARE, storm_rational
 
 from mitld_lp import load_model, synthesize
 from mitld_lp.cli import main
@@ -50,18 +51,6 @@ endmodule
 label "hit" = s=6;
 """
 
-# the issue's 12-state MDP: ten steps, each passed with 0.001 or 0.0011
-RARE = """mdp
-module m
-  k : [0..11] init 0;
-  [a] k<10 -> 0.001 : (k'=k+1) + 0.999 : (k'=11);
-  [b] k<10 -> 0.0011 : (k'=k+1) + 0.9989 : (k'=11);
-  [end] k>=10 -> true;
-endmodule
-label "hit" = k=10;
-"""
-
-
 def model_file(tmp_path: Path, prism: str, spec: str, objective: str) -> Path:
     (tmp_path / "m.prism").write_text(prism)
     path = tmp_path / f"m_{objective}.toml"
@@ -73,11 +62,7 @@ def model_file(tmp_path: Path, prism: str, spec: str, objective: str) -> Path:
 def storm_exact(tmp_path: Path, prism: str, prop: str) -> Fraction:
     path = tmp_path / "storm.prism"
     path.write_text(prism)
-    program = stormpy.parse_prism_program(str(path))
-    props = stormpy.parse_properties(prop, program)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    value = stormpy.model_checking(model, props[0]).get_value(model.initial_states[0])
-    return Fraction(str(value))
+    return storm_rational(path, prop)
 
 
 def inside(lower: float, exact: Fraction, upper: float) -> bool:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from storm_exact import RARE, storm_rational
 
 from mitld_lp import ExplicitGame, Model, load_model, synthesize
 from mitld_lp.cli import main
@@ -26,16 +27,6 @@ from mitld_lp.report import bracket_text, probability_text
 from mitld_lp.solvers import certify as C
 
 stormpy = pytest.importorskip("stormpy")
-
-RARE = """mdp
-module m
-  k : [0..11] init 0;
-  [a] k<10 -> 0.001 : (k'=k+1) + 0.999 : (k'=11);
-  [b] k<10 -> 0.0011 : (k'=k+1) + 0.9989 : (k'=11);
-  [end] k>=10 -> true;
-endmodule
-label "hit" = k=10;
-"""
 
 WALK = """mdp
 module walk
@@ -61,11 +52,7 @@ def storm_exact(prism: str, prop: str, tmp_path: Path) -> Fraction:
     """Storm's exact engine on the program: the property's value at the initial state."""
     path = tmp_path / "exact.prism"
     path.write_text(prism)
-    program = stormpy.parse_prism_program(str(path))
-    props = stormpy.parse_properties(prop, program)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    result = stormpy.model_checking(model, props[0])
-    return Fraction(str(result.get_value(model.initial_states[0])))
+    return storm_rational(path, prop)
 
 
 def inside(lower: float, exact: Fraction, upper: float) -> bool:

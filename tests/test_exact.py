@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import build_mdp
+from storm_exact import RARE, storm_rational
 
 from mitld_lp import defaults
 from mitld_lp.cli import main
@@ -23,16 +24,6 @@ from mitld_lp.problem import ProblemError
 from mitld_lp.synthesis import synthesize
 
 flint = pytest.importorskip("flint")
-
-RARE = """mdp
-module m
-  k : [0..11] init 0;
-  [a] k<10 -> 0.001 : (k'=k+1) + 0.999 : (k'=11);
-  [b] k<10 -> 0.0011 : (k'=k+1) + 0.9989 : (k'=11);
-  [end] k>=10 -> true;
-endmodule
-label "hit" = k=10;
-"""
 
 # end components (s=1 may stay forever: Pmin(F goal) = 0 there; s=0 may loop), cycles
 # through 0, 1, 2 and decimal probabilities
@@ -86,14 +77,8 @@ def _prism_model(tmp_path: Path, program: str, spec: str, objective: str = "max"
 
 
 def _storm_exact(tmp_path: Path, prop: str) -> Fraction:
-    stormpy = pytest.importorskip("stormpy")
-    program = stormpy.parse_prism_program(str(tmp_path / "w.prism"))
-    props = stormpy.parse_properties(prop, program)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    env = stormpy.Environment()
-    env.solver().force_exact = True
-    result = stormpy.model_checking(model, props[0], environment=env)
-    return Fraction(str(result.get_value_vector()[model.initial_states[0]]))
+    pytest.importorskip("stormpy")
+    return storm_rational(tmp_path / "w.prism", prop)
 
 
 @pytest.mark.parametrize(("spec", "objective", "prop", "closed"), [

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from storm_exact import RARE, storm_rational
 
 from mitld_lp import load_model, synthesize
 from mitld_lp.mdp import ABSORB, MDP
@@ -323,16 +324,6 @@ def test_a_quotient_answers_only_the_sense_it_was_reduced_for() -> None:
 
 # --------------------------------------------------------------------------- rare events
 
-RARE = """mdp
-module m
-  k : [0..11] init 0;
-  [a] k<10 -> 0.001 : (k'=k+1) + 0.999 : (k'=11);
-  [b] k<10 -> 0.0011 : (k'=k+1) + 0.9989 : (k'=11);
-  [end] k>=10 -> true;
-endmodule
-label "hit" = k=10;
-"""
-
 # Six stages, each failing by a slow fault (1e-7 a try, retried half the time) or a
 # fast one (3e-6), or (from stage 2 on) sent back a stage (1e-6 of failing on the way):
 # stages 1-5 form one cycle, so
@@ -351,16 +342,6 @@ module cascade
 endmodule
 label "hit" = s=6;
 """
-
-
-def _storm_exact(prism: Path, prop: str) -> Fraction:
-    import stormpy
-
-    program = stormpy.parse_prism_program(str(prism))
-    props = stormpy.parse_properties(prop, program)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    value = stormpy.model_checking(model, props[0]).get_value_vector()[model.initial_states[0]]
-    return Fraction(int(str(value.numerator)), int(str(value.denominator)))
 
 
 def _model(tmp_path: Path, text: str, spec: str, objective: str) -> Path:
@@ -383,7 +364,7 @@ def test_the_issues_rare_example(tmp_path: Path, objective: str,
     2^-44 a probability over ten steps), not [0, 0] (the minimum read back from 1 - the
     complement's maximum) nor a policy a thousand times worse."""
     path = _model(tmp_path, RARE, "F hit", objective)
-    storm = _storm_exact(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
+    storm = storm_rational(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
     assert storm == (Fraction(1, 10**30) if objective == "min"
                      else Fraction(25937424601, 10**40))
     for method in ("lp", "vi"):
@@ -410,7 +391,7 @@ def test_a_fault_cascade_to_six_digits(tmp_path: Path, objective: str, start: in
     path = _model(tmp_path, text, "F hit", objective)
     r = synthesize(load_model(path))
     assert r.certified, r.failed_checks
-    exact = _storm_exact(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
+    exact = storm_rational(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
     if exact == 0:
         assert objective == "min" and start == 0
         assert r.lower == r.upper == 0.0
