@@ -53,6 +53,13 @@ class EventClock:
     distribution: FirstOccurrence
     cap: int
     truncation: int | None
+    # a sensed event whose law may never happen (:mod:`mitld_lp.sensing.belief`): at
+    # ``T`` "never" is kept as a hypothesis of its own, not cut; ``report_limit`` ``R``:
+    # a hypothesis "happened, missed by its sensor ``R`` times" is cut, ``report_tail``
+    # the most mass that cut takes
+    keeps_never: bool = False
+    report_limit: int | None = None
+    report_tail: float = 0.0
 
     def hazard(self, clock: int) -> float:
         """Probability that the event happens in the step after ``clock`` steps."""
@@ -67,10 +74,14 @@ class EventClock:
     @property
     def tail(self) -> float:
         """P(K > truncation): the probability mass the truncation cuts off (for a band,
-        the most any law of the band leaves)."""
-        return 0.0 if self.truncation is None else float(
-            self.distribution.survival_upper(self.truncation)
-        )
+        the most any law of the band leaves); for a sensed event that keeps "never",
+        ``P(truncation < K < inf)`` and the sensor's cut (``report_tail``)."""
+        if self.truncation is None:
+            return 0.0
+        tail = float(self.distribution.survival_upper(self.truncation))
+        if self.keeps_never:  # the never-mass is a hypothesis, not cut
+            tail = max(tail - float(self.distribution.never), 0.0)
+        return tail + self.report_tail
 
 
 @dataclass(frozen=True, slots=True)

@@ -14,7 +14,8 @@ import scipy.sparse as sp
 
 __all__ = ["Chain", "CHAIN_LABELS", "prop_labels", "rows_matrix"]
 
-CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping", "beyond")
+CHAIN_LABELS = ("init", "accept", "reject", "truncated", "staying", "keeping", "beyond",
+                "persistent")
 """The chains' own labels (``beyond``: a sensed controller's memory past its model,
 :mod:`mitld_lp.running.sensed_chain`)."""
 

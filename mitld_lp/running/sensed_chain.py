@@ -15,7 +15,9 @@ A state of the chain is what the world is and what the robot knows of it:
 
 It is built from the dynamics, not from the information-state product: one step lets
 every pending event happen by its hazard at the true clock, each sensed event's sensor
-report it (with probability ``detect`` once its ``delay`` has passed), the world move by
+report it (with probability ``detect`` once its ``delay`` has passed; a sensed event
+that may never happen, still pending at its truncation point, never happens with its
+conditional probability, else it is truncated), the world move by
 the controller's action, and the automaton read the new state's propositions and the
 true events; the controller's memory then follows the *observation* (the world state,
 the events without a sensor, the sensors' reports) through the controller's own plan
@@ -26,7 +28,10 @@ construction it was made from.
 
 Labels: ``init``; ``accept`` where the true automaton has accepted; ``reject`` where it
 has rejected, or where the controller stops with the task undecided (every hypothesis
-it keeps is decided: the true run's task can no longer be won); ``truncated`` where an
+it keeps is decided: the true run's task can no longer be won); ``persistent`` where the
+true automaton's state is safe (a task with a safety part is satisfied by the runs that
+stay in such states from some step on: ``P=? [G !("reject" | "truncated")]`` for a
+safety task, ``P=? [F G ("persistent" | "accept")]`` for any); ``truncated`` where an
 event came later than its truncation point (counted as failure, as ``lower`` counts
 it); ``beyond`` on a state whose memory met an observation the controller's model gives
 probability 0 (none is expected: its presence says the controller and the world
@@ -165,8 +170,7 @@ class _Unfolding:
         if d.lost:
             return {self.number("reject"): 1.0}
         action = d.actions[0] if d.actions else plan.fallback(g)
-        for occurred, p_events in self.events(pending, clock):
-            left = pending - occurred
+        for occurred, left, p_events in self.outcomes(pending, clock):
             after = self.sta.advance(left, clock)
             if after.truncated:
                 k = self.number("truncated")
@@ -193,6 +197,26 @@ class _Unfolding:
             h = self.sta.clocks[a].hazard(clock)
             out = [(e | {a}, p * h) for e, p in out] + [(e, p * (1.0 - h)) for e, p in out]
         return [(e, p) for e, p in out if p > 0.0]
+
+    def outcomes(self, pending: frozenset[str], clock: int
+                 ) -> list[tuple[frozenset[str], frozenset[str], float]]:
+        """``(events, still pending, probability)`` of the next step: a sensed event that
+        may never happen and reaches its truncation point still pending never happens
+        with probability ``never / P(K > T)`` (it leaves ``pending``), else it comes
+        later, past the point (the truncation)."""
+        out = []
+        for occurred, p in self.events(pending, clock):
+            branches = [(pending - occurred, p)]
+            for a in sorted(pending - occurred):
+                c = self.sta.clocks[a]
+                if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+                    continue
+                never = min(float(c.distribution.never)
+                            / float(c.distribution.survival(c.truncation)), 1.0)
+                branches = [(b - {a}, q * never) for b, q in branches] + [
+                    (b, q * (1.0 - never)) for b, q in branches]
+            out += [(occurred, b, q) for b, q in branches if q > 0.0]
+        return out
 
     def reports(self, occurred: frozenset[str], unreported: tuple[int, ...]
                 ) -> list[tuple[frozenset[str], tuple[int, ...], float]]:
@@ -231,6 +255,8 @@ class _Unfolding:
                 continue
             g, q, pending, clock, unreported, memory = node
             here = {props(p) for p in self.label(g)}
+            if q in self.dta.persistent:
+                here.add("persistent")
             if memory == BEYOND:
                 here.add("beyond")
             if isinstance(memory, (int, np.integer)) and memory >= 0:

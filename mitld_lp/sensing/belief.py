@@ -45,13 +45,13 @@ import itertools
 import logging
 import math
 from collections.abc import Hashable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.mdp import ABSORB, MDP
@@ -68,6 +68,9 @@ __all__ = ["InfoState", "Belief", "InfoSize", "info_size", "belief_product", "se
 
 NOT_YET = 0
 """A hypothesis's value for a sensed event that has not happened (yet)."""
+NEVER = -1
+"""A hypothesis's value for a sensed event that will never happen (a law with
+``never > 0``, past its truncation point: module docs)."""
 
 MAX_PRUNE_ATOMS = 14
 """The most atoms whose letters :meth:`_Builder.can_accept` enumerates."""
@@ -153,24 +156,60 @@ def info_size(game: Game[Any], sta: STA, sensors: Mapping[str, Sensor]) -> InfoS
     last = {a: sta.clocks[a].truncation for a in sensors}
     points = {a: t for a, t in last.items() if t is not None}
     assert len(points) == len(sensors)  # every sensed event is truncated (sensed_sta)
-    bounds += [points[a] + sensor.delay for a, sensor in sensors.items()]
+    bounds += [points[a] + sensor.delay + (sta.clocks[a].report_limit or 0)
+               for a, sensor in sensors.items()]
     return InfoSize(world_members(game).n_states, max(bounds, default=0),
-                    math.prod(t + 1 for t in points.values()))
+                    math.prod(t + 1 + sta.clocks[a].keeps_never for a, t in points.items()))
 
 
 def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str, ...],
                epsilon: float, *, clock_reduction: bool = True,
-               truncation: Mapping[str, int] | None = None) -> STA:
+               truncation: Mapping[str, int] | None = None,
+               sensors: Mapping[str, Sensor] | None = None) -> STA:
     """The STA with every sensed event truncated: the events truncated (the sensed ones,
     and the unsensed ones whose hazard never becomes constant, or all without
     ``clock_reduction``) share ``epsilon`` equally, as :func:`make_sta` shares it; a
-    point in ``truncation`` is kept as given."""
+    point in ``truncation`` is kept as given.
+
+    A sensed event whose law may never happen (``never > 0``) keeps "never" as a
+    hypothesis of its own (:data:`NEVER`, module docs): its point ``T`` cuts only
+    ``P(T < K < inf)``; with a sensor that detects (``0 < detect < 1``) the belief in
+    "never" against "happened at ``k``, missed since" grows at every miss, so a
+    hypothesis missed ``R`` times (``report_limit``) is cut too, ``R`` the first with
+    ``(1 - detect)^R <= `` half the event's share (the other half is ``T``'s), and the
+    event's tail is both cuts' mass (``report_tail``)."""
     fixed = dict(truncation or {})
     auto = [a for a in sorted(laws) if a not in fixed and (
         a in sensed or not clock_reduction or laws[a].constant_hazard_from is None)]
-    points = {a: laws[a].truncation_point(epsilon / len(auto)) for a in auto}
-    return make_sta(dta, laws, epsilon, clock_reduction=clock_reduction,
-                    truncation={**fixed, **points})
+    share = epsilon / len(auto) if auto else epsilon
+    points, cuts = {}, {}
+    for a in auto:
+        nu = float(laws[a].never) if a in sensed else 0.0
+        d = sensors[a].detect if sensors is not None and a in sensors else 0.0
+        if nu > 0.0:
+            half = share / 2 if 0.0 < d < 1.0 else share
+            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0)), 1)
+            if 0.0 < d < 1.0:
+                cuts[a] = max(2, math.ceil(math.log(half) / math.log1p(-d)))
+        else:
+            points[a] = laws[a].truncation_point(share)
+    for a in fixed:  # a fixed point of a sensed event that may never happen
+        if a in sensed and float(laws[a].never) > 0.0:
+            d = sensors[a].detect if sensors is not None and a in sensors else 0.0
+            if 0.0 < d < 1.0:
+                cuts[a] = max(2, math.ceil(math.log(share / 2) / math.log1p(-d)))
+    sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction,
+                   truncation={**fixed, **points})
+    clocks = dict(sta.clocks)
+    for a in sensed:
+        c = clocks[a]
+        if float(c.distribution.never) > 0.0 and c.truncation is not None:
+            R = cuts.get(a)
+            d = sensors[a].detect if sensors is not None and a in sensors else 0.0
+            reach = 1.0 - float(c.distribution.survival(c.truncation))  # P(K <= T)
+            clocks[a] = replace(c, keeps_never=True, report_limit=R,
+                                report_tail=0.0 if R is None else reach * (1.0 - d) ** R)
+    return STA(dta, clocks)
 
 
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
@@ -193,11 +232,15 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
     how large the product may grow."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
-                     truncation=truncation)
+                     truncation=truncation, sensors=sensors)
     memory = default_max_memory() if max_memory is None else max_memory
     used: dict[str, Sensor] = dict(sensors)
     ignored: frozenset[str] = frozenset()
-    if late_reports:
+    # the collapse's argument (every sensed event has happened by T, the task's
+    # acceptance is reaching its accepting state) holds for co-safe tasks and laws that
+    # surely happen only
+    if late_reports and SAFE not in dta.kinds and not any(
+            sta.clocks[a].keeps_never for a in sensed):
         found = collapse(dta, sensors, sta.truncation_points)
         used, ignored = dict(found.sensors), found.blind
         for a in sorted(ignored):
@@ -253,6 +296,10 @@ class _Builder:
         self.branch_cache: dict[tuple[tuple[int, ...], frozenset[str], int], list[Any]] = {}
         self.hazard_cache: dict[tuple[str, int], float] = {}
         self.props = frozenset(dta.atoms) - frozenset(sta.events)
+        # where acceptance can still come from: the accepting state, or a safe one a run
+        # may stay in (a task with a safety part); a hypothesis reaching none is lost
+        self.persistent = dta.persistent | (
+            frozenset() if dta.accepting is None else frozenset({dta.accepting}))
 
     # ---------------------------------------------------------------- states
 
@@ -298,10 +345,12 @@ class _Builder:
         for i, a in enumerate(self.sensed):
             values = [h[i] for h in hyps]
             delay = self.sensors[a].delay
+            cut = self.clocks[a].report_limit or 0  # the misses counted up to R
+            happened = [k for k in values if k > 0]
             if NOT_YET in values:
-                need.append(self.bound[a] + delay)
-            elif a not in reported:
-                need.append(max(values) + delay)
+                need.append(self.bound[a] + delay + cut)
+            elif a not in reported and happened:
+                need.append(max(happened) + delay + cut)
         return min(t, max(need, default=0))
 
     def make(self, world: Hashable, t: int, reported: frozenset[str],
@@ -320,8 +369,9 @@ class _Builder:
         return q2
 
     def can_accept(self, q: int, pending: frozenset[str]) -> bool:
-        """Whether some word reaches acceptance from ``q`` when only ``pending`` events
-        can still happen (an event happens once): a hypothesis that cannot is lost
+        """Whether some word reaches acceptance (the accepting state, or a safe state of
+        a task with a safety part) from ``q`` when only ``pending`` events can still
+        happen (an event happens once): a hypothesis that cannot is lost
         whatever the robot does, and goes to the sink.  Beyond
         :data:`MAX_PRUNE_ATOMS` letters' atoms every hypothesis is kept (sound, larger)."""
         key = (q, pending)
@@ -335,12 +385,12 @@ class _Builder:
         letters = [frozenset(x for x, bit in zip(atoms, bits, strict=True) if bit)
                    for bits in itertools.product((0, 1), repeat=len(atoms))]
         seen, todo = {q}, [q]
-        found = q == self.dta.accepting
+        found = q in self.persistent
         while todo and not found:
             u = todo.pop()
             for letter in letters:
                 v = self.automaton(u, letter)
-                if v == self.dta.accepting:
+                if v in self.persistent:
                     found = True
                     break
                 if v not in seen:
@@ -404,16 +454,24 @@ class _Builder:
                 h = self.hazard(a, t)
                 T = clock.truncation
                 assert T is not None and t < T
-                if h < 1.0:
+                if h < 1.0 and clock.keeps_never and t + 1 >= T:
+                    # past T: "never" kept, "later than T" cut (module docs)
+                    never = min(float(clock.distribution.never)
+                                / float(clock.distribution.survival(T)), 1.0)
+                    options += [(NEVER, False, (1.0 - h) * never, False),
+                                (NOT_YET, False, (1.0 - h) * (1.0 - never), True)]
+                elif h < 1.0:
                     options.append((NOT_YET, False, 1.0 - h, t + 1 >= T))
                 if h > 0.0 and delay == 0:
                     options += [(t + 1, True, h * d, False), (t + 1, False, h * (1 - d), False)]
                 elif h > 0.0:  # its report is not due before step t + 1 + delay
                     options.append((t + 1, False, h, False))
-            elif a in reported or k + delay > t + 1:
+            elif k == NEVER or a in reported or k + delay > t + 1:
                 options.append((k, False, 1.0, False))
-            else:
-                options += [(k, True, d, False), (k, False, 1.0 - d, False)]
+            else:  # due: reported, or missed (cut at the R-th miss, module docs)
+                R = clock.report_limit
+                options += [(k, True, d, False),
+                            (k, False, 1.0 - d, R is not None and t + 2 - k - delay >= R)]
             per_event.append([o for o in options if o[2] > 0.0])
         out = []
         for combo in itertools.product(*per_event):
@@ -423,7 +481,7 @@ class _Builder:
                         frozenset(a for a, o in zip(self.sensed, combo, strict=True) if o[1]),
                         p, any(o[3] for o in combo),
                         frozenset(a for a, k, k2 in zip(self.sensed, times, times2, strict=True)
-                                  if k2 != k),
+                                  if k2 != k and k2 > 0),
                         frozenset(a for a, k2 in zip(self.sensed, times2, strict=True)
                                   if k2 == NOT_YET)))
         return out
