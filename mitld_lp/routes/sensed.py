@@ -8,7 +8,6 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.routes.route import Route
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.worlds.game import GameError, world_members
@@ -22,8 +21,9 @@ __all__ = ["SensedRoute", "sensed_refusals"]
 
 
 class SensedRoute(Route):
-    """Some event is reported by a sensor that misses it (``detect < 1``): co-safe
-    tasks, point laws, no constraints (:mod:`mitld_lp.routes.sensed_solve`).  It claims every
+    """Some event is reported by a sensor that misses it (``detect < 1``): every task
+    class, either objective, laws that may never happen; point laws, no constraints
+    (:mod:`mitld_lp.routes.sensed_solve`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
@@ -44,13 +44,18 @@ class SensedRoute(Route):
         (:mod:`mitld_lp.sensing.belief`: what the robot knows of the events, never the
         events themselves), under the problem's budgets."""
         from mitld_lp.automata.translate import to_dta
-        from mitld_lp.routes.stages import Built
+        from mitld_lp.routes.stages import Built, reaching
         from mitld_lp.sensing.belief import belief_product
 
         model, s = posed.model, posed.settings
         assert s.max_states is not None and s.max_automaton_states is not None  # resolved
         t0 = time.perf_counter()
         dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
+        # a minimum as the plain route poses it: a co-safe task minimised on its own
+        # automaton, any other as its complement's maximum read back
+        direct = posed.minimise and reaching(dta)
+        if posed.minimise and not direct:
+            dta = dta.complement()
         t1 = time.perf_counter()
         belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
                                 model.epsilon if s.epsilon is None else s.epsilon,
@@ -59,7 +64,7 @@ class SensedRoute(Route):
                                 max_memory=s.max_memory, progress=progress)
         return Built(dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
-                     belief=belief)
+                     belief=belief, sense="min" if direct else "max")
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
@@ -93,18 +98,6 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         refused.append(f"{head} with a law known only within a band ({bands}): the worst "
                        "case over observation-based policies is not solved; give the event "
                        "a point law")
-    if objective == "min":
-        refused.append(f"objective min with {head}: the complement is a safety task, which "
-                       "the observation-based route does not solve")
-    elif fragment != CO_SAFE:
-        refused.append(f"a {fragment} task with {head}: only co-safe tasks are solved on "
-                       "what the robot observes")
-    for a in sensors:
-        if model.distributions[a].never > 0:
-            refused.append(f"sensors.{a}: the law of {a!r} leaves probability "
-                           f"{model.distributions[a].never:.3g} that it never happens, so "
-                           "the belief that it has not happened yet changes at every step "
-                           "without end; not solved (give a law that surely happens)")
     try:
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here

@@ -17,20 +17,25 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from mitld_lp.automata.dta import DTA, SAFE
+from mitld_lp.checks import Check
+from mitld_lp.mdp import MDP
 from mitld_lp.problem import Posed
 from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import ModelSolution, solve_models
 from mitld_lp.routes.stages import Built
+from mitld_lp.sensing.belief import InfoState
 from mitld_lp.sensing.observe import controller_of
+from mitld_lp.solvers.accepting import accepting_end_components
 
-__all__ = ["SensedPart", "solve_sensed"]
+__all__ = ["SensedPart", "sensed_acceptance", "solve_sensed"]
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +58,44 @@ class SensedPart(Part):
         return sensed_table(result)
 
 
+def sensed_acceptance(mdp: MDP, dta: DTA) -> tuple[Acceptance, Acceptance | None, Check]:
+    """The target of ``dta``'s task on its information-state product ``mdp`` (module
+    docs): for a co-safe task the product's target; for a task with a safety part the
+    accepting end components of the states whose every hypothesis is persistent, and,
+    when they differ, those of the states with some persistent hypothesis (the upper
+    end's target, else None); with the check that says which."""
+    if SAFE not in dta.kinds:
+        return (Acceptance(np.asarray(mdp.target, dtype=bool), None), None,
+                Check("observation-based acceptance", True, "reaching the accepting state"))
+    keep = dta.persistent
+    every = np.asarray(mdp.target, dtype=bool).copy()
+    some = every.copy()
+    for i, state in enumerate(mdp.states):
+        if isinstance(state, InfoState):
+            held = [q in keep for _, q in state.hypotheses]
+            every[i], some[i] = all(held), any(held)
+    inner = accepting_end_components(mdp, every)
+    if not (some & ~every).any():
+        return (Acceptance(inner.union, inner), None,
+                Check("observation-based acceptance", True,
+                      "exact: every information state holds persistent hypotheses only "
+                      "or none"))
+    outer = accepting_end_components(mdp, some)
+    mixed = int((outer.union & ~inner.union).sum())
+    if mixed == 0:
+        return (Acceptance(inner.union, inner), None,
+                Check("observation-based acceptance", True,
+                      "exact: no end component mixes persistent hypotheses with others"))
+    log.info("sensed acceptance: %d information states lie in end components that keep "
+             "some hypotheses persistent and not others; the bracket counts them lost "
+             "(lower) and won (upper)", mixed)
+    return (Acceptance(inner.union, inner), Acceptance(outer.union, outer),
+            Check("observation-based acceptance", True,
+                  f"bracketed: {mixed} information states in end components that keep "
+                  "some hypotheses persistent and not others, lost in the lower end and "
+                  "won in the upper"))
+
+
 def solve_sensed(posed: Posed, built: Built) -> Result:
     """Solve a problem posed on the ``sensed`` route (module docs) on its built
     information-state product (:func:`mitld_lp.synthesis.solve`)."""
@@ -66,9 +109,13 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     # route's product is (both truncation models, bounds checked in exact arithmetic)
     from mitld_lp.solvers.certify import model_eta
 
-    low, high = solve_models(mdp, Acceptance(np.asarray(mdp.target, dtype=bool), None), s, t2,
-                             eta=model_eta(belief.sta, history=True),
-                             complement=posed.minimise)
+    eta = model_eta(belief.sta, history=True)
+    complement = posed.minimise and built.sense == "max"
+    inner, outer, check = sensed_acceptance(mdp, dta)
+    low, high = solve_models(mdp, inner, s, t2, built.sense, eta, complement=complement)
+    if outer is not None:  # the upper end from the wider target (module docs)
+        high = solve_models(mdp, outer, s, t2, built.sense, eta, complement=complement)[1]
+    low = replace(low, checks=(*low.checks, check))
     t3 = time.perf_counter()
     result = Result(
         route=posed.route.name, model=model, objective=posed.problem.objective, method=s.method,
@@ -77,7 +124,8 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
         controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
         **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
-                      truncated=bool(mdp.truncated.any())))
+                      truncated=bool(mdp.truncated.any()) or outer is not None,
+                      sense=built.sense))
     log.info("sensed synthesis: %s, certified=%s",  # outward, as every surface prints it
              bracket_text(result.lower, result.upper), result.certified)
     return result
