@@ -63,14 +63,18 @@ def scenarios(events: Sequence[tuple[Sequence[Fraction], Fraction]], horizon: in
 
 
 def expectimax(game: ExplicitGame, events: Sequence[tuple[Sequence[Fraction], Fraction]],
-               judge: Judge, horizon: int, sense: Callable[..., Fraction] = max) -> Fraction:
+               judge: Judge, horizon: int, sense: Callable[..., Fraction] = max,
+               terminal: Callable[..., Fraction] | None = None) -> Fraction:
     """The best (``sense=min``: the worst) probability over policies that see the world
     state and the reports of each step (never the events) that ``judge(trace, times)``
     holds, ``trace`` the world states of steps ``0..horizon`` (a judge may return the
-    probability that the task holds, the best continuation from the horizon on)."""
+    probability that the task holds, the best continuation from the horizon on; or
+    ``terminal(trace, alive)`` the best continuation given the scenarios left)."""
 
     def best(trace: list[str], alive: list[tuple[Times, Fraction]]) -> Fraction:
         t = len(trace) - 1
+        if t == horizon and terminal is not None:
+            return terminal(trace, alive)
         if t == horizon:
             return sum((p * judge(trace, times) for times, p in alive), Fraction(0))
         values = []
@@ -253,3 +257,101 @@ def test_two_sensed_events_safety_equals_expectimax() -> None:
 
     judge = both(reach, avoided(TWO, ["A", "B"]))
     _within(r, expectimax(TWO, events, judge, horizon=4))
+
+
+MIXED = ExplicitGame(
+    initial="mid",
+    transitions={
+        "mid": {"go": {"st": 1.0}, "wait": {"mid": 1.0}, "try": {"cz": 0.4, "ditch": 0.6}},
+        "st": {"back": {"mid": 1.0}},
+        "cz": {"stay": {"cz": 1.0}},
+        "ditch": {"stay": {"ditch": 1.0}},
+    },
+    labels={"st": {"A"}, "cz": {"c"}, "ditch": {"h"}},
+)
+
+
+@pytest.mark.parametrize("detect", [0.0, 0.5])
+def test_mixed_end_components_are_bracketed(detect: float) -> None:
+    """``(F(b & A) & G !h) | F c``: a robot that was at ``A`` when the bus came is done
+    by waiting for ever, one that was not needs ``c`` (reached by a risky try). A robot
+    unsure which waits for ever with both hypotheses alive: one persistent, one not.
+    The lower end counts such an end component lost, the upper credits it with the
+    persistent weight, and the bracket holds the exact value (for the blind robot it is
+    the upper end: waiting, 1/2, beats trying, 0.4)."""
+    model = Model.from_game(MIXED, "(F(b & A) & G !h) | F c", events={"b": pmf([0.5, 0.5])},
+                            sensors={"b": {"detect": detect}})
+    r = synthesize(model)
+
+    def terminal(trace: Sequence[str], alive: list[tuple[Times, Fraction]]) -> Fraction:
+        """After the bus (step 1 or 2): the best of waiting for ever (the caught
+        scenarios win) and trying once for ``c`` (0.4 of every scenario)."""
+        if "ditch" in trace:
+            return Fraction(0)
+        total = sum((p for _, p in alive), Fraction(0))
+        if trace[-1] == "cz":
+            return total
+        won = sum((p for times, p in alive if trace[times[0][0]] == "st"), Fraction(0))
+        return max(won, Fraction(2, 5) * total)
+
+    exact = expectimax(MIXED, [(_frac((0.5, 0.5)), Fraction(str(detect)))],
+                       lambda *_: True, horizon=2, terminal=terminal)
+    assert r.certified
+    assert Fraction(r.lower) <= exact <= Fraction(r.upper)
+    said = next(c.detail for c in r.checks if "observation-based acceptance" in c.name)
+    assert said.startswith("bracketed")
+    if detect == 0.0:
+        assert exact == Fraction(1, 2) and abs(r.upper - 0.5) < 1e-9
+
+
+def _storm(path: Any, formula: str) -> Fraction:
+    stormpy = pytest.importorskip("stormpy")
+    model = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+    result = stormpy.model_checking(model, stormpy.parse_properties(formula)[0])
+    return Fraction(str(result.get_value(model.initial_states[0])))
+
+
+@pytest.mark.parametrize("law", ["pmf(0.25, 0.25, 0.25, 0.25)", "pmf(0.3, 0.3)"])
+def test_safety_chain_checked_by_storm_and_run(law: str, tmp_path: Any) -> None:
+    """The controlled chain of a safety task's sensed controller (the worst case of
+    ``G !(b & A)``, solved as the complement's maximum; and its best, where the
+    chain's ``accept`` marks the bottom components kept safe for ever): Storm's
+    ``P=? [F "accept"]`` is at least the controller's bound, and for the safety task
+    equals Storm's own ``P=? [G !("reject" | "truncated")]`` on the same file (the
+    runs never rejected; to the rounding of the file's decimals, whose rows need not
+    sum to 1 exactly); a law that may never happen included.  ``mitld-lp run``
+    serves the saved controller."""
+    import json
+    import subprocess
+    import sys
+
+    from mitld_lp.running.chain import write_chain
+
+    model = Model.from_game(PUSHED, "G !(b & A) & G[0,3] !h",
+                            events={"b": pmf([float(x) for x in law[4:-1].split(",")])},
+                            sensors={"b": {"detect": 0.5}}, epsilon=1e-4)
+    best = synthesize(model)
+    path = write_chain(best, tmp_path / "best.drn")
+    value = _storm(path, 'P=? [F "accept"]')
+    assert Fraction(best.lower) <= value <= Fraction(best.upper)
+    ends = [f'"{x}"' for x in ("reject", "truncated") if f" {x}" in path.read_text()]
+    never_bad = _storm(path, f"P=? [G !({' | '.join(ends)})]")
+    assert ends and abs(value - never_bad) < 1e-12  # the DRN's decimals round the rows
+    assert 0 < value < 1
+    worst = synthesize(model, objective="min")
+    failing = _storm(write_chain(worst, tmp_path / "worst.drn"), 'P=? [F "accept"]')
+    assert Fraction(worst.complement[0]) <= failing  # "accept" marks the failing runs
+    saved = best.controller.save(tmp_path / "c.npz")
+    lines = [{"state": "mid"}, {"state": "st", "reports": ["b"]}, {"state": "mid"}]
+    done = subprocess.run([sys.executable, "-m", "mitld_lp", "run", str(saved)],
+                          input="".join(json.dumps(x) + "\n" for x in lines),
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    replies = [json.loads(x) for x in done.stdout.splitlines()]
+    best.controller.reset()
+    from mitld_lp.controllers.observation import Observation
+
+    expected = [best.controller.act(Observation("mid")),
+                best.controller.act(Observation("st", reports={"b"})),
+                best.controller.act(Observation("mid"))]
+    assert [x["action"] for x in replies] == expected

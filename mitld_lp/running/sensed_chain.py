@@ -26,12 +26,14 @@ robot runs (a synthesis's controller or one loaded from its file), never the syn
 policy vector.  So the chain re-checks the controller and the information-state
 construction it was made from.
 
-Labels: ``init``; ``accept`` where the true automaton has accepted; ``reject`` where it
+Labels: ``init``; ``accept`` where the true automaton has accepted, and for a task with a
+safety part also on the bottom strongly connected components of the chain whose every
+state's true automaton state is persistent (a run reaching one stays in safe states for
+ever: the task holds); ``reject`` where it
 has rejected, or where the controller stops with the task undecided (every hypothesis
 it keeps is decided: the true run's task can no longer be won); ``persistent`` where the
-true automaton's state is safe (a task with a safety part is satisfied by the runs that
-stay in such states from some step on: ``P=? [G !("reject" | "truncated")]`` for a
-safety task, ``P=? [F G ("persistent" | "accept")]`` for any); ``truncated`` where an
+true automaton's state is safe or accepting (a task with a safety part is satisfied by
+the runs that stay in such states from some step on); ``truncated`` where an
 event came later than its truncation point (counted as failure, as ``lower`` counts
 it); ``beyond`` on a state whose memory met an observation the controller's model gives
 probability 0 (none is expected: its presence says the controller and the world
@@ -46,8 +48,9 @@ from collections.abc import Hashable, Mapping
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
-from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
@@ -267,5 +270,29 @@ class _Unfolding:
             valuations.append(valuation_text(fields, (
                 *state_values(self.game, g), q, "{" + ",".join(sorted(pending)) + "}", clock,
                 "{" + waiting + "}", "beyond" if memory == BEYOND else str(memory))))
+        if SAFE in self.dta.kinds:
+            for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
+                labels[k] = labels[k] | {"accept"}
         none = np.zeros(n, dtype=bool)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy())
+
+
+def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int]
+                   ) -> list[int]:
+    """The chain states of the bottom strongly connected components whose every state's
+    true automaton state is persistent: a run that reaches one stays in it, and in
+    persistent states, for ever (with probability 1), so its task holds."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(order)
+    _, comp = connected_components(matrix, directed=True, connection="strong")
+    rows = sp.csr_array(matrix)
+    src = np.repeat(np.arange(n), np.diff(rows.indptr))
+    leaves = comp[src] != comp[rows.indices]
+    bottom = np.ones(comp.max() + 1 if n else 0, dtype=bool)
+    bottom[comp[src[leaves]]] = False
+    good = bottom.copy()
+    for k, node in enumerate(order):
+        if isinstance(node, str) or node[1] not in persistent:
+            good[comp[k]] = False
+    return [k for k in range(n) if good[comp[k]]]

@@ -25,6 +25,16 @@ Every sensed event is truncated at its point ``T_a`` (``P(K_a > T_a) <= `` its s
 of epsilon), geometric laws included: the hypothesis "not happened by ``T_a``" goes to
 the truncation sink, so the clock and the hypotheses stay finite.  The lower model
 counts that mass as failure, the upper as success, as in the fully observed product.
+A law that may never happen (``never > 0``) cuts only ``P(T_a < K_a < inf)`` at ``T_a``
+(half the share when its sensor detects): "not happened by ``T_a``" becomes
+:data:`NEVER` with probability ``never / P(K_a > T_a)``, a hypothesis of its own in which
+the event never comes.  Against it a hypothesis "happened at ``k``, not reported" loses
+weight by ``1 - detect`` at every missed report for ever, so such a hypothesis is cut at
+its ``R``-th miss (``(1 - detect)^R <= `` the other half; :func:`sensed_sta`): past
+that the posterior stops changing, and the clock with it.  Both cuts are the event's
+tail (:attr:`mitld_lp.automata.sta.EventClock.tail`), inside the epsilon achieved.
+A hypothesis is lost (the sink) when its automaton can reach no persistent state (the
+accepting one, or a safe one of a task with a safety part) with the events left.
 
 One step from an information state under action ``act``: the unsensed events happen by
 their hazards at the clock; each hypothesis's sensed events that had not happened
@@ -217,8 +227,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
                    max_states: int, max_memory: int | None = None,
                    progress: bool | None = None, late_reports: bool = True) -> Belief:
-    """The reachable information-state MDP (module docs) of a co-safe task's automaton
-    ``dta`` in ``game``, the events of ``sensors`` (missed detections only) hidden.
+    """The reachable information-state MDP (module docs) of a task's automaton ``dta``
+    in ``game``, the events of ``sensors`` (missed detections only) hidden.
 
     A sensor whose reports all come after the task stops depending on when the sensed
     events happened is built as a blind one, its reports ignored (the same optimum:
