@@ -62,7 +62,9 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     probability 0 (an event past its truncation point);
     ``undecided`` the runs whose automaton had no verdict when the controller stopped
     (every hypothesis left was decided) or after ``max_steps``: failures, such as a bus
-    missed, which the automaton never rejects (it does not know a bus comes once).
+    missed, which the automaton never rejects (it does not know a bus comes once); a run
+    that reaches ``max_steps`` in a safe automaton state (a task's safety part kept)
+    counts as a success, ``kept``, as :func:`mitld_lp.simulate` counts it.
     ``progress``: a bar over the runs (:mod:`mitld_lp.util.progress`)."""
     from mitld_lp.automata.translate import to_dta
 
@@ -75,7 +77,8 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     hidden = controller.sensed_events
     sensors = {a: s for a, s in model.sensors.items() if a in hidden}
     laws = sorted(model.distributions.items())
-    ok = beyond = undecided = 0
+    ok = beyond = undecided = kept = 0
+    persistent = dta.persistent - {dta.accepting}  # safe states (a task's safety part)
     for _ in tracked(range(runs), progress, total=runs, desc="simulate", unit=" runs",
                      leave=False):
         times = {a: float(law.sample(rng, 1)[0]) for a, law in laws}
@@ -103,8 +106,12 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
             q = dta.step(q, frozenset(game.propositions(s)) | events)
         if verdict is None and (q == dta.accepting or q == dta.rejecting):
             verdict = q == dta.accepting
+        if verdict is None and q in persistent:  # a safety part kept to the horizon
+            verdict = True
+            kept += 1
         ok += bool(verdict)
         undecided += verdict is None
         beyond += controller.beyond_model
     lo, hi = wilson(ok, runs)
-    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed, max_steps)
+    return SimulationResult(runs, ok, ok / runs, lo, hi, beyond, undecided, seed, max_steps,
+                            kept)
