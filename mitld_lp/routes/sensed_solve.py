@@ -22,29 +22,29 @@ hypotheses only, and the target is the accepting end components of those states
 (:func:`sensed_acceptance`), exact unless some end component keeps some hypotheses
 persistent and others not.  Such *mixed* components (``(F(b & A) & G !h) | F c``: a
 robot unsure whether it caught the bus waits for ever, one hypothesis kept safe, one
-waiting for ``c``) are counted lost in the lower end and credited, in the upper, with
-the weight of their persistent hypotheses by a stop choice (:func:`_credited`): the
-bracket says so in its check.  Where the task's open obligations are bounded
-(``F[0,10] b1 & G !puddle``) no end component is mixed and the answer is exact.
+waiting for ``c``) are credited through a stop choice
+(:mod:`mitld_lp.routes.sensed_mixed`): in the upper end each state with
+the weight of its persistent hypotheses, in the lower each maximal one with those
+persistent throughout it, the controller's value then found on its own chain; the check
+``observation-based acceptance`` says ``bracketed``.  Where the task's open obligations
+are bounded (``F[0,10] b1 & G !puddle``) no end component is mixed and the target is
+exact.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.checks import Check
-from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.mdp import MDP
 from mitld_lp.problem import Posed
-from mitld_lp.product import Absorbing
 from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
@@ -54,7 +54,7 @@ from mitld_lp.sensing.belief import InfoState
 from mitld_lp.sensing.observe import controller_of
 from mitld_lp.solvers.accepting import accepting_end_components
 
-__all__ = ["SensedPart", "sensed_acceptance", "solve_sensed"]
+__all__ = ["SensedPart", "Mixed", "sensed_acceptance", "solve_sensed"]
 
 log = logging.getLogger(__name__)
 
@@ -77,13 +77,26 @@ class SensedPart(Part):
         return sensed_table(result)
 
 
-def sensed_acceptance(mdp: MDP, dta: DTA
-                      ) -> tuple[Acceptance, tuple[MDP, Acceptance] | None, Check]:
+@dataclass(frozen=True, slots=True, eq=False)
+class Mixed:
+    """End components that keep some hypotheses persistent and not others
+    (:mod:`mitld_lp.routes.sensed_mixed`): ``outer`` the accepting end components of the
+    states with some persistent hypothesis, ``mixed`` their states outside the exact
+    target, ``every`` the states whose every hypothesis is persistent, ``keep`` the
+    persistent automaton states."""
+
+    outer: Any
+    mixed: np.ndarray
+    every: np.ndarray
+    keep: frozenset[int]
+
+
+def sensed_acceptance(mdp: MDP, dta: DTA) -> tuple[Acceptance, Mixed | None, Check]:
     """The target of ``dta``'s task on its information-state product ``mdp`` (module
     docs): for a co-safe task the product's target; for a task with a safety part the
-    accepting end components of the states whose every hypothesis is persistent, and,
-    when end components mix persistent hypotheses with others, the upper end's model
-    and target (:func:`_credited`; else None); with the check that says which."""
+    accepting end components of the states whose every hypothesis is persistent, and
+    the end components that mix persistent hypotheses with others (else None); with
+    the check that says which."""
     if SAFE not in dta.kinds:
         return (Acceptance(np.asarray(mdp.target, dtype=bool), None), None,
                 Check("observation-based acceptance", True, "reaching the accepting state"))
@@ -95,70 +108,56 @@ def sensed_acceptance(mdp: MDP, dta: DTA
             held = [q in keep for _, q in state.hypotheses]
             every[i], some[i] = all(held), any(held)
     inner = accepting_end_components(mdp, every)
-    if not (some & ~every).any():
-        return (Acceptance(inner.union, inner), None,
-                Check("observation-based acceptance", True,
-                      "exact: every information state holds persistent hypotheses only "
-                      "or none"))
-    outer = accepting_end_components(mdp, some)
+    outer = accepting_end_components(mdp, some) if (some & ~every).any() else inner
     mixed = outer.union & ~inner.union
     if not mixed.any():
         return (Acceptance(inner.union, inner), None,
                 Check("observation-based acceptance", True,
                       "exact: no end component mixes persistent hypotheses with others"))
     log.info("sensed acceptance: %d information states lie in end components that keep "
-             "some hypotheses persistent and not others; the lower end counts them lost, "
-             "the upper credits each its persistent hypotheses' weight", int(mixed.sum()))
-    return (Acceptance(inner.union, inner), _credited(mdp, mixed, inner.union, keep),
+             "some hypotheses persistent and not others (module docs)", int(mixed.sum()))
+    return (Acceptance(inner.union, inner), Mixed(outer, mixed, every, keep),
             Check("observation-based acceptance", True,
                   f"bracketed: {int(mixed.sum())} information states in end components "
-                  "that keep some hypotheses persistent and not others, lost in the lower "
-                  "end, credited with their persistent hypotheses' weight in the upper"))
+                  "that keep some hypotheses persistent and not others; lower: the "
+                  "controller's value with each end component credited with its "
+                  "hypotheses persistent throughout, upper: each state credited with its "
+                  "persistent hypotheses"))
 
 
-def _credited(mdp: MDP, mixed: np.ndarray, won: np.ndarray, keep: frozenset[int]
-              ) -> tuple[MDP, Acceptance]:
-    """The upper end's model when end components mix persistent hypotheses with others
-    (module docs): ``mdp`` with two new absorbing states (won, lost) and, at each
-    ``mixed`` state ``y``, one more choice (``stop``) to won with the weight of its
-    persistent hypotheses and to lost with the rest; the target its own, the ``won``
-    end components and the new won state.  A run that settles in an end component ``B``
-    is accepted with at most the weight of the hypotheses persistent in all of ``B``,
-    at most the credit of any state of ``B``: the best stopping problem with these
-    credits bounds every policy's value (the Snell envelope dominates the limit)."""
-    n = mdp.n_states
-    groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    matrix = sp.csr_array(mdp.matrix)
-    stop = len(mdp.action_names)
-    rows: list[sp.csr_array] = []
-    sizes = np.diff(groups)
-    actions: list[np.ndarray] = []
-    for y in range(n):
-        rows.append(matrix[groups[y]:groups[y + 1]])
-        actions.append(np.asarray(mdp.choice_actions[groups[y]:groups[y + 1]]))
-        if mixed[y]:
-            state = mdp.states[y]
-            c = math.fsum(w for (_, q), w in zip(state.hypotheses, state.weights,
-                                                  strict=True) if q in keep)
-            rows.append(sp.csr_array(([c, 1.0 - c], ([0, 0], [n, n + 1])), shape=(1, n + 2)))
-            actions.append(np.array([stop], dtype=np.int32))
-            sizes[y] += 1
-    for k in (n, n + 1):  # won, lost: absorbing
-        rows.append(sp.csr_array(([1.0], ([0], [k])), shape=(1, n + 2)))
-        actions.append(np.array([ABSORB], dtype=np.int32))
-    rows = [r if r.shape[1] == n + 2 else sp.csr_array(r, shape=(r.shape[0], n + 2))
-            for r in rows]
-    pad = np.zeros(2, dtype=bool)
-    target = np.concatenate([np.asarray(mdp.target, dtype=bool), [True, False]])
-    credited = MDP(
-        matrix=sp.csr_array(sp.vstack(rows, format="csr")),
-        row_groups=np.concatenate([[0], np.cumsum(np.concatenate([sizes, [1, 1]]))]),
-        choice_actions=np.concatenate(actions).astype(np.int32),
-        action_names=(*mdp.action_names, "stop"), initial=mdp.initial, target=target,
-        sink=np.concatenate([np.asarray(mdp.sink, dtype=bool), [False, True]]),
-        truncated=np.concatenate([np.asarray(mdp.truncated, dtype=bool), pad]),
-        states=(*mdp.states, Absorbing.TARGET, Absorbing.SINK))
-    return credited, Acceptance(target | np.concatenate([won, pad]), None)
+def _mixed_models(mdp: MDP, mixed: Mixed, low: ModelSolution, s: Any, t0: float,
+                  eta: float, complement: bool) -> tuple[ModelSolution, ModelSolution]:
+    """The two ends where end components are mixed (:mod:`mitld_lp.routes.sensed_mixed`):
+    the controller's model (its value on its chain, if above ``low``'s, which counts
+    those components lost) and the upper end's."""
+    from mitld_lp.routes.sensed_mixed import (
+        chain_value,
+        component_credit,
+        persistent_weight,
+        real_policy,
+        with_stops,
+    )
+
+    n, pad = mdp.n_states, np.zeros(2, dtype=bool)
+    won = np.concatenate([np.asarray(mixed.outer.union & ~mixed.mixed), pad])
+    upper = with_stops(mdp, {int(y): persistent_weight(mdp.states[y], mixed.keep)
+                             for y in np.flatnonzero(mixed.mixed)})
+    high = solve_models(upper, Acceptance(upper.target | won, None), s, t0, "max", eta,
+                        complement=complement)[1]
+    stopped = with_stops(mdp, component_credit(mdp, mixed.outer.mecs.mec_of, mixed.mixed,
+                                               mixed.keep))
+    kept = accepting_end_components(stopped, np.concatenate([mixed.every, [True, False]]))
+    first = solve_models(stopped, Acceptance(kept.union, kept), s, t0, "max", eta,
+                         complement=complement)[0]
+    policy = real_policy(mdp, stopped, first.policy, mixed.outer.keep)
+    chain = chain_value(mdp, policy, mixed.keep)
+    value = solve_models(chain, Acceptance(np.asarray(chain.target, dtype=bool), None), s,
+                         t0, "max", eta, complement=complement)[0]
+    said = Check("controller's value on its chain", value.certified,
+                 "its bottom components credited with the hypotheses persistent in each")
+    candidate = replace(value, policy=policy, policy_values=value.policy_values[:n],
+                        prob0=value.prob0[:n], checks=(*value.checks, said))
+    return (candidate if candidate.bounds[0] >= low.bounds[0] else low), high
 
 
 def solve_sensed(posed: Posed, built: Built) -> Result:
@@ -176,10 +175,10 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
 
     eta = model_eta(belief.sta, history=True)
     complement = posed.minimise and built.sense == "max"
-    inner, outer, check = sensed_acceptance(mdp, dta)
+    inner, mixed, check = sensed_acceptance(mdp, dta)
     low, high = solve_models(mdp, inner, s, t2, built.sense, eta, complement=complement)
-    if outer is not None:  # the upper end on the credited model (module docs)
-        high = solve_models(*outer, s, t2, built.sense, eta, complement=complement)[1]
+    if mixed is not None:  # both ends on their credited models (module docs)
+        low, high = _mixed_models(mdp, mixed, low, s, t2, eta, complement)
     low = replace(low, checks=(*low.checks, check))
     t3 = time.perf_counter()
     result = Result(
@@ -189,7 +188,7 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
         controller=controller_of(model.game, belief, low.policy),
         timings={**built.timings, "solve": t3 - t2},
         **from_models(low, high, mdp.initial, posed.problem.objective, s.precision,
-                      truncated=bool(mdp.truncated.any()) or outer is not None,
+                      truncated=bool(mdp.truncated.any()) or mixed is not None,
                       sense=built.sense))
     log.info("sensed synthesis: %s, certified=%s",  # outward, as every surface prints it
              bracket_text(result.lower, result.upper), result.certified)

@@ -271,7 +271,8 @@ def _announce(game: Game[Any], sta: STA, sensed: tuple[str, ...], max_states: in
     fully observed product's bound at these truncation points, the hypotheses each
     state may hold, and the budgets that stop it."""
     points = sta.truncation_points
-    hypotheses = math.prod(points[a] + 1 for a in sensed)  # not yet, or at step 1..T
+    # not yet, or at step 1..T, or never
+    hypotheses = math.prod(points[a] + 1 + sta.clocks[a].keeps_never for a in sensed)
     cap = min(max_states, max_memory // BYTES_PER_INFO_STATE)
     log.info("information-state product: the fully observed one has %s; each state here "
              "also holds up to %s hypotheses of when %s happened (%s), so it may be far "
