@@ -48,6 +48,7 @@ from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
            "pose_property", "read_properties", "instantiate", "verdict", "pick",
+           "probability_objective",
            "INIT_FILTER"]
 
 
@@ -385,6 +386,18 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     if not isinstance(formula, logic.ProbabilityOperatorFormula):
         raise _refuse(name, text, "a state formula that is not one P operator",
                       "one P[...] per property is answered")
+    objective, comparison, threshold = probability_objective(name, formula)
+    poser = _Poser(name, text, labels, reserved)
+    spec = poser.path(formula.subformula)
+    return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
+                 comparison=comparison, threshold=threshold)
+
+
+def probability_objective(name: str, formula: Any) -> tuple[str, str | None,
+                                                          Fraction | None]:
+    """``(objective, comparison, threshold)`` of Storm's ``P`` operator ``formula``:
+    ``Pmax=?`` is ``("max", None, None)``; ``P>=p`` asks for every scheduler, so the
+    least probability decides it, ``("min", ">=", p)`` (``Pmax>=p``: the greatest)."""
     comparison = threshold = None
     if formula.has_bound:
         comparison = _COMPARISONS[str(formula.comparison_type).rsplit(".", 1)[-1]]
@@ -395,13 +408,10 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     elif comparison is not None:  # for every scheduler: the worst one decides
         objective = "min" if comparison in (">=", ">") else "max"
     else:
-        raise _refuse(name, text, "P=? without min or max",
+        raise _refuse(name, str(formula), "P=? without min or max",
                       "on an MDP the probability depends on the scheduler: write Pmax=? "
                       "or Pmin=?")
-    poser = _Poser(name, text, labels, reserved)
-    spec = poser.path(formula.subformula)
-    return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
-                 comparison=comparison, threshold=threshold)
+    return objective, comparison, threshold
 
 
 def verdict(query: Query, lower: Fraction, upper: Fraction) -> bool | None:
