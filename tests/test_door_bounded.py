@@ -195,3 +195,34 @@ def test_budgets_stop_naming_the_size(capsys, tmp_path) -> None:
     assert main(["solve", str(path), "--prop", 'R{"act"}max=? [C<=200000]', "-q"]) == 3
     err = capsys.readouterr().err
     assert "200,000 steps" in err and "rational updates" in err
+
+
+def test_unfolding_by_hand_with_a_left_side() -> None:
+    """0 -> 1 (reward 0) or 0 -> target 2 w.p. 1/2, back to 0 w.p. 1/2 (reward 1); 1 ->
+    2 (reward 0).  With bound 1: through 1 the target is sure (Pmax = 1); where the left
+    side excludes state 1 only the retry is left, once within the bound: Pmax = 1/2;
+    Pmin = 0 in both (0 -> 1 then stuck there when 1 is excluded; with 1 allowed, the
+    retry twice costs 2 > 1, so 1/2)."""
+    import numpy as np
+
+    from mitld_lp.exact.reward_bounded import solve_reward_bounded
+    from mitld_lp.worlds.prism_rewards import RewardMDP
+    from mitld_lp.worlds.properties import Query
+    from mitld_lp.worlds.reward_bounded import RewardBounded
+
+    def model(left):
+        return RewardMDP(groups=np.array([0, 2, 3, 4]), indptr=np.array([0, 1, 3, 4, 5]),
+                         indices=np.array([1, 2, 0, 2, 2]),
+                         probabilities=(Fraction(1), Fraction(1, 2), Fraction(1, 2),
+                                        Fraction(1), Fraction(1)),
+                         rewards=(Fraction(0), Fraction(1), Fraction(0), Fraction(0)),
+                         target=np.array([False, False, True]), initial=0, left=left)
+
+    def value(left, sense: str) -> Fraction:
+        posed = RewardBounded(query=Query(name="1", text="", spec="", objective=sense),
+                              reward="r", bound=1, reward_query=None)
+        return solve_reward_bounded(model(left), posed).value
+
+    assert value(None, "max") == 1 and value(None, "min") == Fraction(1, 2)
+    excluded = np.array([True, False, False])
+    assert value(excluded, "max") == Fraction(1, 2) and value(excluded, "min") == 0
