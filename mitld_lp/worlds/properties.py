@@ -22,9 +22,12 @@ answered in its place):
   its own, the state formula as a PRISM expression with the file's labels written out,
   which Storm evaluates (:func:`mitld_lp.worlds.prism.load_prism`'s ``define``).
 
-Expected rewards (``R``) are not tasks: :func:`pose_property` refuses them, and the
-command line's door answers ``R{"r"}min=? [F target]`` and ``R{"r"}max=? [F target]``
-with :mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward`.
+Expected rewards (``R``) and reward-bounded probabilities are not tasks:
+:func:`pose_property` refuses them, and the command line's door answers
+``R{"r"}min=? [F target]``, ``[C<=k]``, ``[I=k]`` with
+:mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward` (and
+:mod:`~mitld_lp.exact.horizon`), ``P=? [F{"r"}<=b target]`` with
+:mod:`mitld_lp.worlds.reward_bounded`.
 
 Refused, by name: expected rewards (``R``), long-run averages (``S``), expected time
 (``T``), multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
