@@ -185,16 +185,17 @@ def test_refused_by_name_exit_2(capsys, path: str, prop: str, says: str) -> None
 
 def test_budgets_stop_naming_the_size(capsys, tmp_path) -> None:
     """A reward bound whose unfolding may pass max_states, and a step bound whose work
-    passes the exact budget, stop before the work with the size (exit 3)."""
+    passes the floating-point bracket's budget (past the exact one), stop before the
+    work with the size (exit 3)."""
     path = tmp_path / "integer.prism"
     path.write_text(INTEGER)
     assert main(["solve", str(path), "--prop", 'Pmax=? [F{"act"}<=100 "goal"]',
                  "--max-world-states", "50", "-q"]) == 3
     err = capsys.readouterr().err
     assert "may take 405 states" in err and "max_states = 50" in err
-    assert main(["solve", str(path), "--prop", 'R{"act"}max=? [C<=200000]', "-q"]) == 3
+    assert main(["solve", str(path), "--prop", 'R{"act"}max=? [C<=100000000]', "-q"]) == 3
     err = capsys.readouterr().err
-    assert "200,000 steps" in err and "rational updates" in err
+    assert "100,000,000 steps" in err and "HORIZON_MAX_WORK" in err
 
 
 def test_unfolding_by_hand_with_a_left_side() -> None:
@@ -226,3 +227,39 @@ def test_unfolding_by_hand_with_a_left_side() -> None:
     assert value(None, "max") == 1 and value(None, "min") == Fraction(1, 2)
     excluded = np.array([True, False, False])
     assert value(excluded, "max") == Fraction(1, 2) and value(excluded, "min") == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_float_bracket_past_the_exact_budget_holds_storms_value(capsys, tmp_path, monkeypatch,
+                                                                seed: int) -> None:
+    """Past the exact budget (here every step-bounded reward is past it) C<=k and I=k
+    are answered by the floating-point bracket: Storm's exact value inside it, the
+    bracket narrow."""
+    from mitld_lp.exact import horizon
+    from mitld_lp.exact.errors import ExactTooLarge
+
+    def past(model, steps):
+        raise ExactTooLarge("past the budget")
+
+    monkeypatch.setattr(horizon, "check_horizon", past)
+    rng = random.Random(100 + seed)
+    path = tmp_path / "random.prism"
+    path.write_text(random_prism(rng, rng.randint(4, 7)))
+    for prop in ('R{"r"}max=? [C<=30]', 'R{"r"}min=? [C<=30]', 'R{"r"}max=? [I=7]'):
+        code, [answer] = ours(capsys, str(path), "--prop", prop)
+        assert code == 0 and answer["certified"] and answer["value"] is None
+        try:
+            value = storm_value(str(path), prop, {})
+        except RuntimeError:  # I=k without state rewards: 0
+            value = Fraction(0)
+        lower, upper = Fraction(answer["lower"]), Fraction(answer["upper"])
+        assert lower <= value <= upper and upper - lower <= Fraction(1, 10**9) * (1 + value)
+
+
+def test_constants_of_the_file_in_a_step_bound(capsys, tmp_path) -> None:
+    """``C<=K`` over the file's open constant K, given with --const, is a number."""
+    path = tmp_path / "k.prism"
+    path.write_text(INTEGER.replace("mdp\n", "mdp\nconst int K;\n"))
+    _, [answer] = ours(capsys, str(path), "--prop", 'R{"act"}max=? [C<=K]', "--const", "K=3")
+    assert answer["steps"] == 3
+    assert Fraction(answer["value"]) == storm_value(str(path), 'R{"act"}max=? [C<=3]', {"K": 3})

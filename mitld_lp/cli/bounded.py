@@ -29,19 +29,28 @@ def _bracket(value: Fraction) -> tuple[float, float]:
 def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: float) -> int:
     """``C<=k`` or ``I=k`` of ``query`` (a :class:`~mitld_lp.worlds.prism_rewards.
     RewardQuery`) on its built ``model``, said; its exit code."""
-    from mitld_lp.exact.horizon import solve_horizon
+    from mitld_lp.exact import horizon
+    from mitld_lp.exact.errors import ExactTooLarge
 
-    answer = solve_horizon(model, query.kind, query.steps, query.objective)
+    try:
+        horizon.check_horizon(model, query.steps)
+    except ExactTooLarge:  # past the exact budget: the floating-point bracket
+        from mitld_lp.solvers.step_bounded import horizon_bracket
+
+        value = None
+        lower, upper = horizon_bracket(model, query.kind, query.steps, query.objective)
+    else:
+        value = horizon.solve_horizon(model, query.kind, query.steps, query.objective).value
+        lower, upper = _bracket(value)
     seconds = time.perf_counter() - started
-    value = answer.value
-    lower, upper = _bracket(value)
     form = (f"cumulative reward within {query.steps} steps" if query.kind == "cumulative"
             else f"state reward at step {query.steps}")
     no_state = query.kind == "instantaneous" and not model.state_rewards
     if args.json:
         record = {"property": query.name, "formula": query.text, "reward": query.reward,
                   "objective": query.objective, "kind": query.kind, "steps": query.steps,
-                  "status": "optimal", "certified": True, "value": str(value),
+                  "status": "optimal", "certified": True,
+                  "value": None if value is None else str(value),
                   "lower": lower, "upper": upper, "states": model.n_states,
                   "choices": int(model.groups[-1]), "seconds": seconds,
                   "model": Path(args.model).stem}
@@ -49,8 +58,12 @@ def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: fl
             record["why"] = "the reward structure has no state rewards"
         say_answer(json_text(record))
         return EXIT_OK
-    tail = [f"reward \"{query.reward}\", {form}", f"exact {value}", "certified",
-            f"{model.n_states} states, {int(model.groups[-1])} choices, a policy per step",
+    how = (f"exact {value}" if value is not None else
+           f"floating-point bracket: {query.steps:,} steps x {int(model.indices.size):,} "
+           "transitions past the exact budget")
+    tail = [f"reward \"{query.reward}\", {form}", how, "certified",
+            f"{model.n_states} states, {int(model.groups[-1])} choices"
+            + (", a policy per step" if value is not None else ""),
             f"{seconds:.2f} s"]
     if no_state:
         tail.insert(1, "the structure has no state rewards")
@@ -95,7 +108,8 @@ def answer_reward_bounded(args: argparse.Namespace, name: str, prop: Any, progra
     if args.json:
         record = {"property": name, "formula": query.text, "reward": posed.reward,
                   "objective": query.objective, "bound": posed.bound,
-                  "status": "optimal", "certified": True, "value": str(value),
+                  "status": "optimal", "certified": True,
+                  "value": None if value is None else str(value),
                   "lower": lower, "upper": upper, "states": model.n_states,
                   "unfolded_states": answer.states, "seconds": seconds,
                   "model": Path(args.model).stem}

@@ -49,16 +49,18 @@ class HorizonAnswer:
 
 
 def check_horizon(model: RewardMDP, steps: int,
-                  budget: int = defaults.EXACT_MAX_TRANSITIONS) -> None:
+                  budget: int = defaults.EXACT_MAX_TRANSITIONS,
+                  setting: str = "EXACT_MAX_TRANSITIONS", what: str = "answered exactly"
+                  ) -> None:
     """:class:`ExactTooLarge` when ``steps`` times the model's transitions and choices
-    passes ``budget`` (the rational work of the backward induction, before it starts)."""
+    passes ``budget`` (the work of the backward induction, before it starts; ``setting``
+    names the budget in :mod:`mitld_lp.defaults`, ``what`` what it allows)."""
     work = steps * (int(model.indices.size) + int(model.groups[-1]))
     if work > budget:
         raise ExactTooLarge(
             f"step-bounded reward: {steps:,} steps x {int(model.indices.size):,} "
-            f"transitions and {int(model.groups[-1]):,} choices = {work:,} rational "
-            f"updates, more than the {budget:,} answered exactly "
-            "(mitld_lp.defaults.EXACT_MAX_TRANSITIONS)")
+            f"transitions and {int(model.groups[-1]):,} choices = {work:,} updates, more "
+            f"than the {budget:,} {what} (mitld_lp.defaults.{setting})")
 
 
 def solve_horizon(model: RewardMDP, kind: str, steps: int, sense: str, *,

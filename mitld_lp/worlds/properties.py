@@ -205,14 +205,16 @@ def read_properties(program: Any, text: str, where: str,
 def instantiate(program: Any, props: list[Any], where: str,
                 constants: Mapping[str, Any] | None = None) -> list[Any]:
     """Storm's ``props`` with the ``constants`` they leave open put in (every open one
-    needs a value)."""
+    needs a value), and the file's open constants given among ``constants`` too (a
+    bound ``F<=B`` or ``C<=B`` over the file's ``B`` is then a number)."""
     from mitld_lp.worlds.prism import stormpy_module
     from mitld_lp.worlds.prism_program import storm_quiet
 
     stormpy = stormpy_module()
     errors = (RuntimeError, stormpy.exceptions.StormError)
     open_names = sorted({v.name for p in props for v in p.get_undefined_constants()})
-    given = {k: v for k, v in (constants or {}).items() if k in open_names}
+    declared = {c.name for c in program.constants if not c.defined}
+    given = {k: v for k, v in (constants or {}).items() if k in open_names or k in declared}
     missing = [name for name in open_names if name not in given]
     if missing:
         raise PropertyError(f"{where}: constants {', '.join(missing)} have no value: give "
