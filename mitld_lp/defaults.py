@@ -23,6 +23,7 @@ __all__ = [
     "MAX_STEPS_LIMIT",
     "EXACT_MAX_TRANSITIONS",
     "EXACT_MAX_BLOCK",
+    "HORIZON_MAX_WORK",
     "METHODS",
     "BACKENDS",
     "OBJECTIVES",
@@ -88,6 +89,11 @@ EXACT_MAX_TRANSITIONS = 1_000_000
 """The largest product an exact answer (``--exact``) takes, in transitions: each is
 recomputed and multiplied in rational arithmetic in Python, some microseconds each and
 more as the numbers grow (checked before the exact work)."""
+
+HORIZON_MAX_WORK = 1_000_000_000
+"""The most work of a step-bounded reward (``C<=k``, ``I=k``) past the exact budget,
+``k`` times the transitions and choices: each step one sparse product per bound in
+floating point, about a second per 100 million (checked before the work)."""
 
 EXACT_MAX_BLOCK = 1_000
 """The largest strongly connected block of a policy's chain an exact answer factorises:

@@ -1,9 +1,11 @@
-"""What several tests share: the issue's rare 12-state PRISM MDP and Storm's exact value
-of a property on a PRISM file (``build_model[stormpy.Rational]``, an exact solver
-environment), the independent value certified brackets are compared with."""
+"""What several tests share: the issue's rare 12-state PRISM MDP, Storm's exact value
+of a property on a PRISM (or JANI) file (``build_model[stormpy.Rational]``, an exact
+solver environment), the independent value certified brackets are compared with, and
+random PRISM MDPs with a reward structure."""
 
 from __future__ import annotations
 
+import random
 from fractions import Fraction
 from pathlib import Path
 
@@ -30,3 +32,54 @@ def storm_rational(prism: Path, prop: str) -> Fraction:
     env.solver().force_exact = True
     result = stormpy.model_checking(model, props[0], environment=env)
     return Fraction(str(result.get_value(model.initial_states[0])))
+
+
+def storm_value(path: str, prop: str, constants: dict) -> Fraction:
+    """Storm's exact value of ``prop`` at the initial state of the PRISM or JANI file
+    ``path``, its open ``constants`` given (only the initial state asked: Storm's
+    reward-bounded until needs that)."""
+    import stormpy
+
+    if path.endswith(".jani"):
+        program, _ = stormpy.parse_jani_model(path)
+    else:
+        program = stormpy.parse_prism_program(path)
+    props = stormpy.parse_properties(prop, program)
+    if constants:
+        program, props = stormpy.instantiate_constants(program, constants, props)
+    model = stormpy.build_model[stormpy.Rational](program, props)
+    env = stormpy.Environment()
+    env.solver().force_exact = True
+    result = stormpy.model_checking(model, props[0], environment=env,
+                                    only_initial_states=True)
+    return Fraction(str(result.get_value(model.initial_states[0])))
+
+
+def random_prism(rng: random.Random, n: int, integer: bool = False) -> str:
+    """A random MDP over ``s`` in ``[0..n-1]``: each state one to three commands with
+    random rational branches and random action rewards (rationals, or integers 0..2 when
+    ``integer``), a state reward on some states; the label "goal" is ``s = n-1``."""
+    lines = ["mdp", "module m", f"  s : [0..{n - 1}] init 0;"]
+    actions = []
+    for s in range(n - 1):
+        for k in range(rng.choice([1, 2, 3])):
+            succ = rng.sample(range(n), rng.choice([1, 2, 3]))
+            weights = [rng.randint(1, 5) for _ in succ]
+            total = sum(weights)
+            branches = " + ".join(f"{w}/{total} : (s'={t})"
+                                  for w, t in zip(weights, succ, strict=True))
+            lines.append(f"  [a{s}_{k}] s={s} -> {branches};")
+            actions.append(f"a{s}_{k}")
+    lines.append(f"  [end] s={n - 1} -> true;")
+    lines.append("endmodule")
+    lines.append('rewards "r"')
+    for s in range(n - 1):
+        if rng.random() < 0.5:
+            lines.append(f"  s={s} : {rng.randint(0, 1 if integer else 3)};")
+    for a in actions:
+        if rng.random() < 0.6:
+            reward = rng.randint(0, 2) if integer else f"{rng.randint(0, 4)}/{rng.randint(1, 3)}"
+            lines.append(f"  [{a}] true : {reward};")
+    lines.append("endrewards")
+    lines.append(f'label "goal" = s={n - 1};')
+    return "\n".join(lines) + "\n"

@@ -95,7 +95,7 @@ def test_missing_constant_says_const(capsys) -> None:
 
 @pytest.mark.parametrize("prop, says", [
     ('Pmax=? [F "nowhere"]', "label 'nowhere' is not defined (labels: goal)"),
-    ('R{"r"}max=? [F "goal"]', "expected reward (R) is refused"),
+    ('R{"r"}max=? [F "goal"]', 'no reward structure "r" (reward structures: none)'),
     ('Pmax=? [X X "goal"]', "nested in another"),
 ])
 def test_refused_by_name(capsys, prop: str, says: str) -> None:

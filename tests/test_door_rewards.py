@@ -16,6 +16,8 @@ import pytest
 stormpy = pytest.importorskip("stormpy")
 pytest.importorskip("flint")
 
+from storm_exact import random_prism  # noqa: E402
+
 from mitld_lp.cli import main  # noqa: E402
 
 DATA = Path(__file__).parent / "data"
@@ -119,8 +121,12 @@ def test_without_python_flint_an_expected_reward_is_refused_by_name(capsys, monk
 
 
 @pytest.mark.parametrize("prop, says", [
-    ('R{"cost"}min=? [C<=3]', "a cumulative reward C<=k is refused"),
-    ('R{"cost"}max=? [I=3]', "an instantaneous reward I=k is refused"),
+    ('R{"cost"}max=? [C]', "a total reward C is refused"),
+    ('R{"cost"}max=? [C<=5/2]', "the steps must be a non-negative integer"),
+    ('R{"cost"}min=? [F<=3 "goal"]', "a reward-bounded or time-bounded F is refused"),
+    ('R=? [C<=3]', "R=? without min or max is refused"),
+    ('S=? ["goal"]', "a long-run average (S) is refused"),
+    ('multi(Pmax=? [F "goal"], R{"cost"}min=? [F "stop"])', "a multi-objective query"),
     ('R{"cost"}max=? [LRA]', "long-run average reward LRA is refused"),
     ('R{"cost"}<=3 [F "goal"]', "a reward bound R~b is refused"),
     ('R=? [F "goal"]', "R=? without min or max is refused"),
@@ -133,39 +139,11 @@ def test_refused_by_name_exit_2(capsys, prop: str, says: str) -> None:
     assert says in err and "error:" in err
 
 
-def _random_prism(rng: random.Random, n: int) -> str:
-    """A random MDP over ``s`` in ``[0..n-1]``: each state two or three commands with
-    random rational branches and random action rewards, a state reward on some states."""
-    lines = ["mdp", "module m", f"  s : [0..{n - 1}] init 0;"]
-    actions = []
-    for s in range(n - 1):
-        for k in range(rng.choice([1, 2, 3])):
-            succ = rng.sample(range(n), rng.choice([1, 2, 3]))
-            weights = [rng.randint(1, 5) for _ in succ]
-            total = sum(weights)
-            branches = " + ".join(f"{w}/{total} : (s'={t})"
-                                  for w, t in zip(weights, succ, strict=True))
-            lines.append(f"  [a{s}_{k}] s={s} -> {branches};")
-            actions.append(f"a{s}_{k}")
-    lines.append(f"  [end] s={n - 1} -> true;")
-    lines.append("endmodule")
-    lines.append('rewards "r"')
-    for s in range(n - 1):
-        if rng.random() < 0.5:
-            lines.append(f"  s={s} : {rng.randint(0, 3)};")
-    for a in actions:
-        if rng.random() < 0.6:
-            lines.append(f"  [{a}] true : {rng.randint(0, 4)}/{rng.randint(1, 3)};")
-    lines.append("endrewards")
-    lines.append(f'label "goal" = s={n - 1};')
-    return "\n".join(lines) + "\n"
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_random_models_against_storm(capsys, tmp_path, seed: int) -> None:
     rng = random.Random(seed)
     path = tmp_path / f"random{seed}.prism"
-    path.write_text(_random_prism(rng, rng.randint(4, 9)))
+    path.write_text(random_prism(rng, rng.randint(4, 9)))
     for prop in ('R{"r"}min=? [F "goal"]', 'R{"r"}max=? [F "goal"]'):
         code, [answer] = ours(capsys, "--prop", prop, path=str(path))
         assert code == 0

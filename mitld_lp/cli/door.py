@@ -36,7 +36,7 @@ from mitld_lp.model import ModelError
 from mitld_lp.report import bracket_text
 
 __all__ = ["WORLD_SUFFIXES", "args_door", "is_world_file", "check_args", "world_model",
-           "solve_properties"]
+           "solve_properties", "probability_head"]
 
 #: The files ``solve`` reads as a world with a property, not as a model file.
 WORLD_SUFFIXES = (".prism", ".pm", ".nm", ".jani")
@@ -189,6 +189,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     """Every property posed answered, one line (one JSON object) each; the exit code
     the worst of theirs (2 when one was refused, 3 when one is not certified or
     undecided)."""
+    from mitld_lp.cli.bounded import answer_reward_bounded
     from mitld_lp.cli.rewards import answer_reward
     from mitld_lp.logic.parser import parse
     from mitld_lp.model import Model
@@ -196,6 +197,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     from mitld_lp.synthesis import pose, solve
     from mitld_lp.worlds.prism_rewards import is_reward
     from mitld_lp.worlds.properties import PropertyError, pose_property
+    from mitld_lp.worlds.reward_bounded import is_reward_bounded
 
     constants = _constants(args)
     props, program = _properties(args, constants)
@@ -212,6 +214,12 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
                     raise UsageError("--policy: an expected reward (R) writes no policy "
                                      "file")
                 codes.append(answer_reward(args, name, prop, program, ours))
+                continue
+            if is_reward_bounded(prop):  # P over F{"r"}<=b: the reward unfolded
+                if policy_file is not None:
+                    raise UsageError("--policy: a reward-bounded probability writes no "
+                                     "policy file")
+                codes.append(answer_reward_bounded(args, name, prop, program, ours))
                 continue
             query = pose_property(name, prop, program.labels, program.reserved)
             game = _world(args, ours, query.define, parse(query.spec))
@@ -235,6 +243,16 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     return max(codes, default=EXIT_OK)
 
 
+def probability_head(query: Any, bracket: str, decided: bool | None) -> str:
+    """A ``P`` property's answer, ``in [l, u]``, or for ``P~p`` its verdict with the
+    bracket that decides it."""
+    if query.comparison is None:
+        return f"in {bracket}"
+    word = "Pmin" if query.objective == "min" else "Pmax"
+    said = {True: "true", False: "false", None: "undecided"}[decided]
+    return f"{said}: {word} in {bracket}, threshold {query.comparison} {query.threshold}"
+
+
 def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: float) -> int:
     """One property's line (or JSON object); its exit code."""
     from mitld_lp.worlds.properties import verdict
@@ -254,13 +272,7 @@ def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: f
                           verdict=decided)
         say_answer(json_text(record))
         return code
-    bracket = bracket_text(r.lower, r.upper)
-    word = "Pmin" if query.objective == "min" else "Pmax"
-    if query.comparison is None:
-        head = f"in {bracket}"
-    else:
-        said = {True: "true", False: "false", None: "undecided"}[decided]
-        head = f"{said}: {word} in {bracket}, threshold {query.comparison} {query.threshold}"
+    head = probability_head(query, bracket_text(r.lower, r.upper), decided)
     tail = [f"task {query.spec}" + "".join(f", {k} = {v}" for k, v in query.define.items()),
             "certified" if r.certified else f"NOT certified ({r.status.value})",
             f"{model.game.n_states} world states, {r.mdp.n_states} product states",

@@ -33,16 +33,12 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
     from mitld_lp.solvers.rounding import float_down, float_up
     from mitld_lp.worlds import WorldError
     from mitld_lp.worlds.prism import PrismTooLarge
-    from mitld_lp.worlds.prism_rewards import pose_reward, reward_mdp
+    from mitld_lp.worlds.prism_rewards import pose_reward, reward_mdp, reward_names
     from mitld_lp.worlds.properties import PropertyError
 
     started = time.perf_counter()
-    if Path(args.model).suffix.lower() == ".jani":
-        raise PropertyError(f"property {name} ({prop.get_raw_formula()}): an expected "
-                            "reward (R) is refused on a JANI file: rewards are read from "
-                            "PRISM files")
-    names = [r.name for r in program.program.reward_models]
-    query = pose_reward(name, prop, names)
+    query = pose_reward(name, prop, reward_names(program.program),
+                        first=Path(args.model).suffix.lower() != ".jani")
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states
@@ -53,6 +49,10 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
         raise  # a budget stop stays one; a refusal is the door's
     except WorldError as exc:
         raise ModelError(str(exc)) from exc
+    if query.kind != "reach":  # C<=k, I=k: backward induction
+        from mitld_lp.cli.bounded import answer_horizon
+
+        return answer_horizon(args, query, model, started)
     answer = solve_reward(model, query.objective)
     seconds = time.perf_counter() - started
     value = answer.value

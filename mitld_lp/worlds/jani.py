@@ -62,7 +62,7 @@ from mitld_lp.worlds.prism_tables import Tables, read_model
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 
-__all__ = ["JaniFile", "JaniRecipe", "load_jani", "read_jani", "SILENT_ACTION"]
+__all__ = ["JaniFile", "JaniRecipe", "load_jani", "read_jani", "state_bound", "SILENT_ACTION"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -317,7 +317,7 @@ def _check_constants(file: JaniFile, given: Mapping[str, Any], where: str) -> No
                          "file; give them with constants={...}")
 
 
-def _bound(model: Any) -> int | None:
+def state_bound(model: Any) -> int | None:
     """The product of the variables' ranges and the automata's locations, when every
     variable is bounded or Boolean (None otherwise): an upper bound on the states."""
     total = 1
@@ -367,7 +367,7 @@ def load_jani(
     terminal = "" if condition is False else render(
         condition, {**file.labels, **define})
     build = _Build(stormpy, file, where, given, define, terminal)
-    bound = _bound(build.model)
+    bound = state_bound(build.model)
 
     def work() -> Tables:
         return build.tables(labels, max_states)

@@ -1,11 +1,16 @@
-"""Expected-reward properties of a PRISM file, as Storm reads them: ``R{"name"}min=? [F
-target]``, ``R{"name"}max=? [F target]``, and ``Rmin=?`` / ``Rmax=?`` with the file's
-first reward structure (as PRISM takes it).
+"""Expected-reward properties of a PRISM or JANI file, as Storm reads them: ``R{"name"}min=?
+[F target]``, ``R{"name"}max=? [F target]``, the cumulative reward within ``k`` steps
+``R{"name"}max=? [C<=k]`` (``C<k``: ``k-1`` steps), the state reward at step ``k``
+``R{"name"}max=? [I=k]``, each with ``min`` too, and ``Rmin=?`` / ``Rmax=?`` with the
+file's first reward structure (as PRISM takes it).
 
 :func:`pose_reward` reads Storm's parsed property into a :class:`RewardQuery` or refuses
-it naming the form (:class:`mitld_lp.worlds.properties.PropertyError`): cumulative
-``C<=k``, instantaneous ``I=k``, long-run ``LRA``, total ``C``, reward bounds ``R~b``, a
-filter, a file without that reward structure.  :func:`reward_mdp` builds the program
+it naming the form (:class:`mitld_lp.worlds.properties.PropertyError`): long-run
+``LRA``, total ``C``, discounted rewards, a time-bounded ``F<=k``, reward bounds ``R~b``,
+a step bound that is not a non-negative integer, a filter, a file without that reward
+structure.  A JANI file's reward structures are its transient variables that are not
+Boolean (Storm's reward models of a JANI model, ``R{"cost"}`` or a property's ``Emin``
+over ``cost``).  :func:`reward_mdp` builds the program
 with Storm in rational arithmetic (``build_model[stormpy.Rational]``: the probabilities
 and rewards as the file writes them; its exploration checks on), within the world
 budgets (``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`,
@@ -20,6 +25,7 @@ Storm gives as ``state_action_rewards``; a model with transition rewards is refu
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
@@ -32,7 +38,8 @@ from mitld_lp import defaults
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.properties import PropertyError
 
-__all__ = ["RewardMDP", "RewardQuery", "is_reward", "pose_reward", "reward_mdp"]
+__all__ = ["RewardMDP", "RewardQuery", "is_reward", "pose_reward", "reward_mdp", "reward_names",
+           "states_of"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -49,6 +56,10 @@ class RewardMDP:
             its state plus the action reward), a non-negative rational.
         target: ``(n_states,)`` bool.
         initial: the initial state.
+        state_rewards: per state, its state reward alone (for ``I=k``); empty when the
+            structure has none.
+        left: ``(n_states,)`` bool, where the left side of a reward-bounded until holds
+            (None: everywhere).
     """
 
     groups: np.ndarray
@@ -58,6 +69,8 @@ class RewardMDP:
     rewards: tuple[Any, ...]
     target: np.ndarray
     initial: int
+    state_rewards: tuple[Any, ...] = ()
+    left: np.ndarray | None = None
 
     @property
     def n_states(self) -> int:
@@ -77,7 +90,13 @@ class RewardQuery:
         text: the property as Storm prints it.
         reward: the reward structure's name (``""`` for an unnamed one).
         objective: ``"min"`` or ``"max"``.
-        target: Storm's state formula of ``F target``.
+        target: Storm's state formula of ``F target`` (None for ``C<=k`` and ``I=k``).
+        kind: ``"reach"`` (``F target``), ``"cumulative"`` (``C<=k``),
+            ``"instantaneous"`` (``I=k``) or ``"bounded"`` (a reward-bounded until,
+            :mod:`mitld_lp.worlds.reward_bounded`).
+        steps: ``k`` of ``C<=k`` and ``I=k``.
+        formula: Storm's formula (what Storm is asked to build the model for).
+        left: the left state formula of a reward-bounded until (None: ``true``).
     """
 
     name: str
@@ -85,6 +104,10 @@ class RewardQuery:
     reward: str
     objective: str
     target: Any
+    kind: str = "reach"
+    steps: int = 0
+    formula: Any = None
+    left: Any = None
 
     @property
     def word(self) -> str:
@@ -98,14 +121,26 @@ def is_reward(prop: Any) -> bool:
     return isinstance(prop.get_raw_formula(), logic.RewardOperatorFormula)
 
 
+def reward_names(program: Any) -> list[str]:
+    """The reward structures of Storm's PRISM program in the file's order, or of a JANI
+    model: its transient variables that are not Boolean (its order)."""
+    if hasattr(program, "reward_models"):
+        return [r.name for r in program.reward_models]
+    return [v.name for v in program.global_variables
+            if v.is_transient and not v.expression_variable.has_boolean_type()]
+
+
 def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
     return PropertyError(f"property {name} ({text}): {form} is refused: {why}")
 
 
-def pose_reward(name: str, prop: Any, reward_names: list[str]) -> RewardQuery:
+def pose_reward(name: str, prop: Any, reward_names: list[str], *,
+                first: bool = True) -> RewardQuery:
     """The :class:`RewardQuery` of Storm's ``R`` property ``prop`` over a file whose
     reward structures are ``reward_names`` (in the file's order), or a
-    :class:`PropertyError` naming the form refused."""
+    :class:`PropertyError` naming the form refused.  ``R`` without a name is the first
+    structure (PRISM's rule) when ``first``, else only the one structure of the file
+    (Storm's rule for a JANI file)."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     from mitld_lp.worlds.properties import INIT_FILTER
@@ -124,31 +159,67 @@ def pose_reward(name: str, prop: Any, reward_names: list[str]) -> RewardQuery:
                       "or Rmin=?")
     objective = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
     sub = formula.subformula
-    if not isinstance(sub, logic.EventuallyFormula) or not isinstance(
+    kind, steps, target = "reach", 0, None
+    if isinstance(sub, (logic.CumulativeRewardFormula, logic.InstantaneousRewardFormula)):
+        kind = "cumulative" if isinstance(sub, logic.CumulativeRewardFormula) else \
+            "instantaneous"
+        steps = _steps(name, text, str(sub))
+    elif not isinstance(sub, logic.EventuallyFormula) or not isinstance(
             sub.subformula, logic.StateFormula) or "rew" in str(sub) or "<" in \
             str(sub).split(" ")[0]:
-        forms = (("CumulativeRewardFormula", "a cumulative reward C<=k"),
-                 ("InstantaneousRewardFormula", "an instantaneous reward I=k"),
-                 ("LongRunAverageRewardFormula", "a long-run average reward LRA"),
+        forms = (("LongRunAverageRewardFormula", "a long-run average reward LRA"),
+                 ("DiscountedCumulativeRewardFormula", "a discounted cumulative reward"),
+                 ("DiscountedTotalRewardFormula", "a discounted total reward"),
                  ("TotalRewardFormula", "a total reward C"),
+                 ("BoundedUntilFormula", "a reward-bounded or time-bounded F"),
                  ("EventuallyFormula", "a reward-bounded or time-bounded F"))
-        form = next((f for kind, f in forms
-                     if isinstance(sub, getattr(logic, kind, ()))),
+        form = next((f for cls, f in forms
+                     if isinstance(sub, getattr(logic, cls, ()))),
+                    "a total reward C" if str(sub).strip() == "C" else
                     f"the reward formula {str(sub)!r}")
-        raise _refuse(name, text, form, "only the expected reward until a target, "
-                      "R{...}min=? [F target] and R{...}max=? [F target], is answered")
+        raise _refuse(name, text, form, "answered are the expected reward until a "
+                      "target (F target), the cumulative reward within k steps (C<=k) and "
+                      "the state reward at step k (I=k), each with min or max")
+    else:
+        target = sub.subformula
     if formula.has_reward_model_name():
         reward = formula.reward_name
         if reward not in reward_names:
             known = ", ".join(f'"{r}"' for r in reward_names) or "none"
             raise PropertyError(f"property {name} ({text}): the file has no reward "
                                 f"structure \"{reward}\" (reward structures: {known})")
+    elif len(reward_names) > 1 and not first:
+        known = ", ".join(f'"{r}"' for r in reward_names)
+        raise PropertyError(f"property {name} ({text}): which reward structure is meant? "
+                            f"the file has several ({known}): name one, R{{\"name\"}} (as "
+                            "Storm asks for a JANI file)")
     elif reward_names:
         reward = reward_names[0]  # PRISM's default: the first structure
     else:
         raise PropertyError(f"property {name} ({text}): the file has no reward structure")
     return RewardQuery(name=name, text=text, reward=reward, objective=objective,
-                       target=sub.subformula)
+                       target=target, kind=kind, steps=steps, formula=formula)
+
+
+def _steps(name: str, text: str, shown: str) -> int:
+    """``k`` of Storm's printing ``C<=k``, ``C<k`` (``k-1``) or ``I=k``: a non-negative
+    integer, else the property is refused."""
+    m = re.fullmatch(r"\s*[CI]\s*(<=|<|=)\s*(.+?)\s*", shown)
+    form = f"the step bound of {shown.strip()!r}"
+    if m is None:
+        raise _refuse(name, text, form, "expected C<=k, C<k or I=k")
+    try:
+        value = Fraction(re.sub(r"[()\s]", "", m[2]))  # Storm prints 5/2 as (5 / 2)
+    except ValueError:
+        raise _refuse(name, text, form, f"{m[2]!r} is not a number (a constant without "
+                      "a value? give it with --const)") from None
+    if value.denominator != 1 or value < 0:
+        raise _refuse(name, text, form, "the steps must be a non-negative integer "
+                      "(discrete time counts steps)")
+    k = int(value) - (m[1] == "<")
+    if k < 0:
+        raise _refuse(name, text, form, "no step is below 0")
+    return k
 
 
 def _fraction(x: Any) -> Fraction:
@@ -157,10 +228,6 @@ def _fraction(x: Any) -> Fraction:
 
 def _tables(model: Any, query: RewardQuery, where: str) -> Any:
     """The built model's :class:`RewardMDP` (picklable: it may come from a capped child)."""
-    from mitld_lp.worlds.prism import stormpy_module
-    from mitld_lp.worlds.prism_program import storm_quiet
-
-    stormpy = stormpy_module()
     matrix = model.transition_matrix
     n = model.nr_states
     if matrix.has_trivial_row_grouping:
@@ -182,30 +249,44 @@ def _tables(model: Any, query: RewardQuery, where: str) -> Any:
     rewards = [Fraction(0)] * matrix.nr_rows
     if rm.has_state_action_rewards:
         rewards = [_fraction(x) for x in rm.state_action_rewards]
+    state: list[Fraction] = []
     if rm.has_state_rewards:
         state = [_fraction(x) for x in rm.state_rewards]
         for s in range(n):
             for c in range(int(groups[s]), int(groups[s + 1])):
                 rewards[c] += state[s]
-    negative = [r for r in rewards if r < 0]
+    negative = [r for r in rewards + state if r < 0]
     if negative:
         raise WorldError(f"{where}: reward structure \"{query.reward}\": a negative reward "
-                         f"({negative[0]}); expected rewards until a target need rewards >= 0")
-    with storm_quiet():
-        truth = stormpy.model_checking(model, query.target)
-    target = np.zeros(n, dtype=bool)
-    target[np.asarray(list(truth.get_truth_values_vector()), dtype=np.int64)] = True
+                         f"({negative[0]}); expected rewards need rewards >= 0")
     return RewardMDP(groups=groups, indptr=np.asarray(indptr, dtype=np.int64),
                      indices=np.asarray(indices, dtype=np.int64),
                      probabilities=tuple(probabilities), rewards=tuple(rewards),
-                     target=target, initial=int(model.initial_states[0]))
+                     target=states_of(model, query.target),
+                     initial=int(model.initial_states[0]), state_rewards=tuple(state),
+                     left=None if query.left is None else states_of(model, query.left))
+
+
+def states_of(model: Any, formula: Any) -> np.ndarray:
+    """``(n_states,)`` bool: where Storm's state ``formula`` holds on the built ``model``
+    (nowhere for None)."""
+    from mitld_lp.worlds.prism import stormpy_module
+    from mitld_lp.worlds.prism_program import storm_quiet
+
+    where = np.zeros(model.nr_states, dtype=bool)
+    if formula is None:
+        return where
+    with storm_quiet():
+        truth = stormpy_module().model_checking(model, formula)
+    where[np.asarray(list(truth.get_truth_values_vector()), dtype=np.int64)] = True
+    return where
 
 
 def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *,
                constants: Mapping[str, Any] | None = None,
                max_states: int = defaults.MAX_STATES,
                max_memory: int | None = None) -> Any:
-    """The :class:`RewardMDP` of ``query`` on the PRISM ``program``
+    """The :class:`RewardMDP` of ``query`` on the PRISM ``program`` or JANI model
     (Storm's parse of ``path``), its open ``constants`` given, built by Storm in rational
     arithmetic within the budgets (:class:`mitld_lp.worlds.prism.PrismTooLarge` past
     them); :class:`WorldError` for a model Storm refuses or that is not an MDP or DTMC."""
@@ -226,24 +307,39 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
 
     memory = check_budgets(max_states, max_memory)
     where = os.fspath(path)
-    if Path(where).suffix.lower() == ".jani":
-        raise WorldError(f"{where}: expected rewards are read from PRISM files; a JANI "
-                         "file's are refused")
     stormpy = stormpy_module()
     kind = str(program.model_type).rsplit(".", 1)[-1]
     if kind not in ("MDP", "DTMC"):
         raise WorldError(f"{where}: the model is a {kind}; expected rewards are answered "
                          "on an mdp (or a dtmc)")
-    program = with_constants(stormpy, program, exact_constants(stormpy, dict(constants or {})),
-                             where)
+    given = exact_constants(stormpy, dict(constants or {}))
     errors = (RuntimeError, stormpy.exceptions.StormError)
-    try:
-        with storm_quiet():
-            plain = program.substitute_constants()
-    except errors as exc:
-        raise storm_error(exc, where) from None
-    bound = check_program(plain, where)
-    options = stormpy.BuilderOptions([query.target])
+    if Path(where).suffix.lower() == ".jani":
+        from mitld_lp.worlds.jani import state_bound
+
+        try:
+            with storm_quiet():
+                plain = stormpy.instantiate_constants(program, given)[0] if given else \
+                    program
+        except errors as exc:
+            raise storm_error(exc, where) from None
+        states = state_bound(plain)
+        fits = states is not None and states <= max_states and \
+            states * BYTES_PER_STATE <= memory
+        note = ("the variables' ranges unbounded" if states is None else
+                f"{states:,} valuations of the variables' ranges and the locations")
+    else:
+        program = with_constants(stormpy, program, given, where)
+        try:
+            with storm_quiet():
+                plain = program.substitute_constants()
+        except errors as exc:
+            raise storm_error(exc, where) from None
+        bound = check_program(plain, where)
+        fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
+        note = str(bound)
+    formulas = [query.target] if query.kind == "reach" else [query.formula]
+    options = stormpy.BuilderOptions(formulas)
     options.set_build_all_reward_models()
     options.set_exploration_checks(True)
 
@@ -263,5 +359,4 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
                 "rational arithmetic (mitld_lp.defaults.EXACT_MAX_TRANSITIONS)")
         return _tables(model, query, where)
 
-    fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
-    return build_within(work, where, fits, str(bound), max_states, memory)
+    return build_within(work, where, fits, note, max_states, memory)

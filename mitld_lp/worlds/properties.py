@@ -22,9 +22,12 @@ answered in its place):
   its own, the state formula as a PRISM expression with the file's labels written out,
   which Storm evaluates (:func:`mitld_lp.worlds.prism.load_prism`'s ``define``).
 
-Expected rewards (``R``) are not tasks: :func:`pose_property` refuses them, and the
-command line's door answers ``R{"r"}min=? [F target]`` and ``R{"r"}max=? [F target]``
-with :mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward`.
+Expected rewards (``R``) and reward-bounded probabilities are not tasks:
+:func:`pose_property` refuses them, and the command line's door answers
+``R{"r"}min=? [F target]``, ``[C<=k]``, ``[I=k]`` with
+:mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward` (and
+:mod:`~mitld_lp.exact.horizon`), ``P=? [F{"r"}<=b target]`` with
+:mod:`mitld_lp.worlds.reward_bounded`.
 
 Refused, by name: expected rewards (``R``), long-run averages (``S``), expected time
 (``T``), multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
@@ -48,6 +51,7 @@ from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
            "pose_property", "read_properties", "instantiate", "verdict", "pick",
+           "probability_objective",
            "INIT_FILTER"]
 
 
@@ -201,14 +205,16 @@ def read_properties(program: Any, text: str, where: str,
 def instantiate(program: Any, props: list[Any], where: str,
                 constants: Mapping[str, Any] | None = None) -> list[Any]:
     """Storm's ``props`` with the ``constants`` they leave open put in (every open one
-    needs a value)."""
+    needs a value), and the file's open constants given among ``constants`` too (a
+    bound ``F<=B`` or ``C<=B`` over the file's ``B`` is then a number)."""
     from mitld_lp.worlds.prism import stormpy_module
     from mitld_lp.worlds.prism_program import storm_quiet
 
     stormpy = stormpy_module()
     errors = (RuntimeError, stormpy.exceptions.StormError)
     open_names = sorted({v.name for p in props for v in p.get_undefined_constants()})
-    given = {k: v for k, v in (constants or {}).items() if k in open_names}
+    declared = {c.name for c in program.constants if not c.defined}
+    given = {k: v for k, v in (constants or {}).items() if k in open_names or k in declared}
     missing = [name for name in open_names if name not in given]
     if missing:
         raise PropertyError(f"{where}: constants {', '.join(missing)} have no value: give "
@@ -385,6 +391,18 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     if not isinstance(formula, logic.ProbabilityOperatorFormula):
         raise _refuse(name, text, "a state formula that is not one P operator",
                       "one P[...] per property is answered")
+    objective, comparison, threshold = probability_objective(name, formula)
+    poser = _Poser(name, text, labels, reserved)
+    spec = poser.path(formula.subformula)
+    return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
+                 comparison=comparison, threshold=threshold)
+
+
+def probability_objective(name: str, formula: Any) -> tuple[str, str | None,
+                                                          Fraction | None]:
+    """``(objective, comparison, threshold)`` of Storm's ``P`` operator ``formula``:
+    ``Pmax=?`` is ``("max", None, None)``; ``P>=p`` asks for every scheduler, so the
+    least probability decides it, ``("min", ">=", p)`` (``Pmax>=p``: the greatest)."""
     comparison = threshold = None
     if formula.has_bound:
         comparison = _COMPARISONS[str(formula.comparison_type).rsplit(".", 1)[-1]]
@@ -395,13 +413,10 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     elif comparison is not None:  # for every scheduler: the worst one decides
         objective = "min" if comparison in (">=", ">") else "max"
     else:
-        raise _refuse(name, text, "P=? without min or max",
+        raise _refuse(name, str(formula), "P=? without min or max",
                       "on an MDP the probability depends on the scheduler: write Pmax=? "
                       "or Pmin=?")
-    poser = _Poser(name, text, labels, reserved)
-    spec = poser.path(formula.subformula)
-    return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
-                 comparison=comparison, threshold=threshold)
+    return objective, comparison, threshold
 
 
 def verdict(query: Query, lower: Fraction, upper: Fraction) -> bool | None:
