@@ -404,8 +404,12 @@ def judge(reference: Any, record: Mapping[str, Any]) -> str:
 
 def reason_key(text: str) -> str:
     """A refusal's text with what names the instance taken out (its property and
-    formula, file paths, numbers), so that refusals of one kind group together."""
-    t = re.sub(r"^property \S+ \((?:[^()]|\([^()]*\))*\):\s*", "", text)
+    formula, the details in parentheses, file paths, quoted names, numbers), so that
+    refusals of one kind group together."""
+    t = text
+    while re.search(r"\([^()]*\)", t):  # the details in parentheses (innermost first)
+        t = re.sub(r"\([^()]*\)", "", t)
+    t = re.sub(r"^property \S+\s*:\s*", "", t)
     t = re.sub(r"(?:/[^\s:'\"]+)+", "FILE", t)
     t = re.sub(r"'[^']*'", "'…'", t)
     return re.sub(r"\d[\d,.]*(?:e[+-]?\d+)?", "N", t)
@@ -489,6 +493,14 @@ def report(rows: Sequence[Sequence[Any]], head: str) -> str:
     grouped = reasons(rows)
     return "\n".join([
         head, "", "### Per class", "", markdown_table(header, table),
+        "Answered: the tool gave a bracket (and, for `P~p`, its verdict); inside: "
+        "certified and holding QVBS's exact reference (a fraction or an integer, compared "
+        "as `Fraction`s with the bracket's floats read exactly; a `P>=1` by its verdict); "
+        "approx ref: QVBS gives only a float or an interval, compared as given; budget "
+        "stop: the tool stopped at `--max-world-states`/`--max-memory` (exit 3); over "
+        "budget: QVBS's state count passes `--max-states`, not run; not readable: the "
+        "folder holds no PRISM or JANI file of the family; no reference: QVBS gives no "
+        "result for the instance (every property of the family is posed).", "",
         "### Reasons (grouped; the text is the tool's own, of the first row of the group)",
         "", markdown_table(["rows", "outcome", "classes", "reason"],
                            [[g[0], g[1], g[2], g[3].replace("|", "\\|")] for g in grouped]),

@@ -91,6 +91,16 @@ def test_refusals_of_one_kind_group_together() -> None:
               "1,000: raise max_states (--max-world-states)")
     budget2 = budget.replace("ij.30", "ij.40").replace("1,024", "2,048")
     assert door.reason_key(one) == door.reason_key(two)
+    # formulas nested deeper than one parenthesis, other property names, other bounds
+    nested = ('property deadline (Pmin=? [true Urew{"time"}<=deadline (((s1 = 8) & '
+              "(s2 = 7)) | ((s1 = 7) & (s2 = 8)))]): the bound 'Urew{\"time\"}<=deadline' "
+              "is refused: a reward bound is not a step bound")
+    flat = ('property ProbUtil (Pmax=? [true Urew{"u"}>=5 (b = 0)]): the bound '
+            "'Urew{\"u\"}>=5' is refused: a reward bound is not a step bound")
+    assert door.reason_key(nested) == door.reason_key(flat) != door.reason_key(one)
+    unread = "not readable: no model file in the folder (original PPDDL: {}; {} not kept)"
+    assert door.reason_key(unread.format("d.pddl, p01.pddl", "a.2.jani")) == \
+        door.reason_key(unread.format("p02.pddl", "b.jani"))
     assert door.reason_key(budget) == door.reason_key(budget2) != door.reason_key(one)
     rows = [["a", "R cumulative (C<=k)"] + [""] * 3 + ["refused"] + [""] * 7 + [one],
             ["b", "R cumulative (C<=k)"] + [""] * 3 + ["refused"] + [""] * 7 + [two],
