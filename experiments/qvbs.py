@@ -42,6 +42,13 @@ The exactness check of issue 40 runs every instance of at most 200,000 states::
 
     python experiments/qvbs.py --qvbs qcomp/benchmarks --max-states 200000 --exact
 
+``--all`` poses every property of every family instead, PRISM and JANI, probabilities,
+rewards and qualitative, through the door (``mitld-lp solve FILE --prop ... --json``) and
+reports per class how many are answered, refused (the tool's reason, grouped) and inside
+the reference: ``qvbs_all.md`` and ``qvbs_all.csv`` (see :mod:`qvbs_door`)::
+
+    python experiments/qvbs.py --qvbs qcomp/benchmarks --all --max-states 100000 --timeout 120
+
 A full run writes ``qvbs.csv`` and ``qvbs.md`` to ``experiments/out``; ``--quick`` to the
 scratch folder.  Exit status 1 when an exact reference lies outside a certified bracket,
 or an exact answer is not QVBS's fraction.
@@ -63,10 +70,12 @@ from pathlib import Path
 from typing import Any
 
 from _common import ROOT, markdown_table, out_dir, parser, text_table, write_csv, write_text
+from qvbs_door import entries, main_all, read_properties
 
 from mitld_lp.logic.syntax import is_proposition_name
 
 QUICK_STATES = 20_000
+ALL_QUICK_STATES = 1_000  # --all --quick: the instances of at most 1,000 states
 TRIVIAL = 1e-3
 
 
@@ -123,58 +132,41 @@ def find_instances(
     """Every instance to run, and ``(what, why not)`` for every one left out."""
     runs: list[Instance] = []
     skipped: list[tuple[str, str]] = []
-    for index in sorted((benchmarks / "mdp").glob("*/index.json")):
-        family = index.parent
-        meta = json.loads(index.read_text(encoding="utf-8"))
-        kinds = {p["name"]: p.get("type", "") for p in meta.get("properties", [])}
-        for entry in meta.get("files", []):
-            originals = entry.get("original-file", [])
-            originals = [originals] if isinstance(originals, str) else originals
-            prism = [f for f in originals if f.endswith((".prism", ".nm", ".pm"))]
-            props = [f for f in originals if f.endswith((".props", ".pctl", ".prctl"))]
-            if meta.get("original") != "PRISM" or not prism:
-                skipped.append((f"{family.name}/{entry.get('file')}",
-                                f"not PRISM ({meta.get('original')})"))
+    for e in entries(benchmarks):
+        family, meta, kinds, entry = e.folder, e.meta, e.kinds, e.entry
+        prism, props = e.prism, e.props
+        if meta.get("original") != "PRISM" or not prism:
+            skipped.append((f"{family.name}/{entry.get('file')}",
+                            f"not PRISM ({meta.get('original')})"))
+            continue
+        fixed = {v["name"]: v["value"] for v in entry.get("file-parameter-values", [])}
+        for setting in entry.get("open-parameter-values", []):
+            constants = {**fixed, **{v["name"]: v["value"] for v in setting.get("values", [])}}
+            states = [s["number"] for s in setting.get("states", []) if "number" in s]
+            label = f"{family.name} {constants}"
+            if not states:
+                skipped.append((label, "QVBS gives no state count"))
                 continue
-            fixed = {v["name"]: v["value"] for v in entry.get("file-parameter-values", [])}
-            for setting in entry.get("open-parameter-values", []):
-                constants = {**fixed, **{v["name"]: v["value"] for v in setting.get("values", [])}}
-                states = [s["number"] for s in setting.get("states", []) if "number" in s]
-                label = f"{family.name} {constants}"
-                if not states:
-                    skipped.append((label, "QVBS gives no state count"))
+            if states[0] > max_states:
+                skipped.append((label, f"{states[0]:,} states > {max_states:,}"))
+                continue
+            for result in setting.get("results", []):
+                name = result.get("property", "?")
+                kind = kinds.get(name, "")
+                reference = _reference(result.get("value"))
+                if not kind.startswith("prob"):
+                    skipped.append((f"{label} {name}", f"not a probability ({kind})"))
                     continue
-                if states[0] > max_states:
-                    skipped.append((label, f"{states[0]:,} states > {max_states:,}"))
+                if reference is None:
+                    skipped.append((f"{label} {name}", f"qualitative ({kind}, reference "
+                                    f"{result.get('value')!r}), not a probability"))
                     continue
-                for result in setting.get("results", []):
-                    name = result.get("property", "?")
-                    kind = kinds.get(name, "")
-                    reference = _reference(result.get("value"))
-                    if not kind.startswith("prob"):
-                        skipped.append((f"{label} {name}", f"not a probability ({kind})"))
-                        continue
-                    if reference is None:
-                        skipped.append((f"{label} {name}", f"qualitative ({kind}, reference "
-                                        f"{result.get('value')!r}), not a probability"))
-                        continue
-                    if not props:
-                        skipped.append((f"{label} {name}", "no PRISM properties file"))
-                        continue
-                    runs.append(Instance(family.name, family / prism[0], family / props[0],
-                                         constants, name, reference, int(states[0])))
+                if not props:
+                    skipped.append((f"{label} {name}", "no PRISM properties file"))
+                    continue
+                runs.append(Instance(family.name, family / prism[0], family / props[0],
+                                     constants, name, reference, int(states[0])))
     return runs, skipped
-
-
-def read_properties(path: Path) -> dict[str, str]:
-    """``name -> text`` of a PRISM properties file's named properties."""
-    text = "\n".join(line.split("//", 1)[0] for line in path.read_text().splitlines())
-    out: dict[str, str] = {}
-    for piece in text.split(";"):
-        m = re.match(r'^\s*"([^"]+)"\s*:\s*(.+?)\s*$', piece, re.DOTALL)
-        if m:
-            out[m[1]] = " ".join(m[2].split())
-    return out
 
 
 # --------------------------------------------------------------------------- posing
@@ -400,6 +392,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=None,
                     help="seconds per instance for our solve (default 3600, --quick 120)")
     ap.add_argument("--family", action="append", help="only these families (repeatable)")
+    ap.add_argument("--all", action="store_true",
+                    help="every property of every family (PRISM and JANI; probabilities, "
+                         "rewards, qualitative) through the door, per class: answered, "
+                         "refused with the reason, inside the reference (qvbs_all.md/.csv)")
+    ap.add_argument("--max-memory", default="4G",
+                    help="--all: the door's --max-memory per property (default 4G)")
     ap.add_argument("--exact", action="store_true",
                     help="also each instance's exact optimum (solve --exact), compared with "
                          "QVBS's fraction")
@@ -409,6 +407,17 @@ def main(argv: list[str] | None = None) -> int:
     limit = min(args.max_states, QUICK_STATES) if args.quick else args.max_states
     timeout = args.timeout or (120.0 if args.quick else 3600.0)
     out = out_dir(args)
+    if args.all:
+        limit = min(args.max_states, ALL_QUICK_STATES) if args.quick else args.max_states
+        shown = " ".join(["python experiments/qvbs.py --qvbs QVBS --all",
+                          *(["--quick"] if args.quick else []), f"--max-states {limit}",
+                          f"--timeout {timeout:g}", f"--max-memory {args.max_memory}",
+                          *[f"--family {f}" for f in args.family or []]])
+        head = ("## Every QVBS MDP property through the door\n\n"
+                f"`{shown}` (QVBS: the benchmarks/ folder of a qcomp checkout; "
+                f"{time.strftime('%Y-%m-%d')}). Each row is `mitld-lp solve FILE --prop "
+                "... --const ... --json` in a child process; see experiments/qvbs_door.py.")
+        return main_all(args.qvbs, out, limit, timeout, args.max_memory, args.family, head)
     work = out / "qvbs-models"
     work.mkdir(parents=True, exist_ok=True)
 
