@@ -74,6 +74,10 @@ class Merged:
             terminal one; -1: not reachable in the merged model).
         choice_origin: per merged choice, the product choice it is (-1: an absorbing
             state's self-loop or a *keep* choice).
+        share: per merged state, the share of a step taken there that expected steps
+            and costs count (None: 1 in the ``undecided`` states, 0 elsewhere); an
+            information state's is the posterior weight of its hypotheses whose task
+            is undecided (:mod:`mitld_lp.routes.sensed_constrained`).
     """
 
     mdp: MDP
@@ -90,6 +94,7 @@ class Merged:
     keep_internal: np.ndarray
     state_map: np.ndarray
     choice_origin: np.ndarray
+    share: np.ndarray | None = None
 
 
 def merge(mdp: MDP, joint: Joint) -> Merged:
@@ -303,6 +308,8 @@ def columns(
         return per_choice, np.where(merged.absorbing, 0.0, sat)
     cs = mdp.choice_state()
     charged = (merged.undecided[cs] & ~merged.keep).astype(np.float64)
+    if merged.share is not None:
+        charged *= merged.share[cs]
     if q.kind == "cost":
         assert costs is not None
         acts = mdp.choice_actions
