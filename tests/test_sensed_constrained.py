@@ -184,3 +184,33 @@ def test_refused_by_name_what_is_not_solved() -> None:
     bad = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5, "false_alarm": 0.1}})
     with pytest.raises(ProblemError, match="false_alarm"):  # not finite
         synthesize(bad, constraints=["P(F wet) <= 0.2"])
+
+
+
+def test_a_policy_that_stays_at_mid_is_worth_its_hypotheses() -> None:
+    """A run that a policy keeps for ever among information states is worth what its
+    hypotheses accepted: go to the stop, come back, wait at "mid" for ever.  By hand:
+    the task holds when the robot stands at the stop at step 1 (0.8) and the bus came at
+    step 1 (0.25): 0.2; it gets wet going (0.2) or coming back (0.8 * 0.2): 0.36."""
+    from mitld_lp.solvers.constrained import certified_value
+    from mitld_lp.solvers.constrained_model import Quantity
+
+    model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
+    m = synthesize(model, constraints=["P(F wet) <= 0.3"]).merged
+    mdp = m.mdp
+    plan = np.zeros(mdp.n_choices)
+    for s in range(mdp.n_states):
+        first, last = int(mdp.row_groups[s]), int(mdp.row_groups[s + 1])
+        if m.absorbing[s]:
+            plan[first] = 1.0
+            continue
+        want = {"mid": "go" if s == mdp.initial else "wait", "st": "back",
+                "ditch": "stay"}[mdp.states[s].world]
+        (pick,) = [c for c in range(first, last)
+                   if not m.keep[c] and mdp.action_name(c) == want]
+        plan[pick] = 1.0
+    stay = np.zeros(mdp.n_states)
+    task = certified_value(m, plan, stay, Quantity("prob", 0, 0.0), "task")
+    wet = certified_value(m, plan, stay, Quantity("prob", 1, 1.0), "wet")
+    assert task.lower <= 0.2 <= task.upper and task.upper - task.lower < 1e-9
+    assert wet.lower <= 0.36 <= wet.upper and wet.upper - wet.lower < 1e-9

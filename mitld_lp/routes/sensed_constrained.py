@@ -23,7 +23,10 @@ it once every quantity is a linear function of its occupancy:
   hypotheses whose task is still undecided (:attr:`Merged.share`): the expected number
   of steps taken while the true run's task is undecided, as on the fully observed
   product.  A stay where that weight is positive would take infinitely many steps: it
-  is not offered when steps or costs are bounded or minimised.
+  is not offered when steps or costs are bounded or minimised.  A run the chosen
+  policy traps in information states (an interior-point solution's negligible flow on a
+  loop) is worth what staying there is worth (:attr:`Merged.stay_values`), so the
+  policy's certified values are its own.
 
 Solved and certified as :mod:`mitld_lp.routes.constrained` solves the product: the
 lower model (truncation fails the task and violates each constraint), a constraint the
@@ -145,11 +148,13 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
     n, k = len(records), len(ends.joint.parts)
     info = np.array([isinstance(r, InfoState) for r in records], dtype=bool)
     share = np.zeros(n)
+    worth = np.zeros((n, k))  # staying for ever: the weight of each component accepted
     targets: list[dict[Verdict, float]] = [{} for _ in range(n)]
     for i in np.flatnonzero(info).tolist():
         s = records[i]
         for w, v in zip(s.weights, _verdicts_of(belief, ends, s), strict=True):
             share[i] += w if v[0] == UNDECIDED else 0.0
+            worth[i] += w * (np.asarray(v) == ACCEPTED)
             end = Verdict(tuple(REJECTED if x == UNDECIDED else x for x in v))
             targets[i][end] = targets[i].get(end, 0.0) + w
     index = {r: i for i, r in enumerate(records) if isinstance(r, Verdict)}
@@ -206,7 +211,8 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
     return Merged(merged_mdp, origin, np.arange(n), np.full(m, -1, dtype=np.int64), verdicts,
                   absorbing, truncated, share > 0, np.zeros(m, dtype=bool),
                   np.zeros(n_choices, dtype=bool), keep, np.zeros(n_choices, dtype=bool),
-                  np.arange(n), choice_origin, share)
+                  np.arange(n), choice_origin, share,
+                  np.concatenate([worth, np.zeros((m - n, k))]))
 
 
 @dataclass(frozen=True, slots=True, eq=False)

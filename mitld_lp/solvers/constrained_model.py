@@ -78,6 +78,9 @@ class Merged:
             and costs count (None: 1 in the ``undecided`` states, 0 elsewhere); an
             information state's is the posterior weight of its hypotheses whose task
             is undecided (:mod:`mitld_lp.routes.sensed_constrained`).
+        stay_values: per merged state and component, what staying there for ever is
+            worth (None: its verdict, 1 accepted, else 0); an information state's is the
+            posterior weight of its hypotheses that accepted the component.
     """
 
     mdp: MDP
@@ -95,6 +98,7 @@ class Merged:
     state_map: np.ndarray
     choice_origin: np.ndarray
     share: np.ndarray | None = None
+    stay_values: np.ndarray | None = None
 
 
 def merge(mdp: MDP, joint: Joint) -> Merged:
@@ -305,6 +309,8 @@ def columns(
         absorbed[merged.truncated] = q.truncated
         per_choice = mdp.matrix @ absorbed
         per_choice[np.repeat(merged.absorbing, np.diff(mdp.row_groups))] = 0.0
+        if merged.stay_values is not None:
+            sat = merged.stay_values[:, q.component]
         return per_choice, np.where(merged.absorbing, 0.0, sat)
     cs = mdp.choice_state()
     charged = (merged.undecided[cs] & ~merged.keep).astype(np.float64)
