@@ -214,3 +214,19 @@ def test_a_policy_that_stays_at_mid_is_worth_its_hypotheses() -> None:
     wet = certified_value(m, plan, stay, Quantity("prob", 1, 1.0), "wet")
     assert task.lower <= 0.2 <= task.upper and task.upper - task.lower < 1e-9
     assert wet.lower <= 0.36 <= wet.upper and wet.upper - wet.lower < 1e-9
+
+
+def test_trade_off_curve_with_a_sensor_equals_the_knowledge_lp() -> None:
+    from mitld_lp.tradeoff import pareto
+
+    model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
+    lp = knowledge_lp(0.5)
+    points = pareto(model, "P(F wet)", points=3)
+    assert len(points) == 3 and points[0].bound < points[-1].bound
+    for p in points:
+        exact = best(lp, "task", True, [("wet", "<=", p.bound)])
+        assert p.lower - 1e-7 <= exact <= p.upper + 1e-7
+        # the first point's bound is about 1e-9: a relative precision of 1e-6 is not
+        # met there, on the fully observed route alike
+        assert p.certified or p.bound < 1e-6
+        assert p.achieved <= p.bound + 1e-12
