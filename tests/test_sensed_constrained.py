@@ -230,3 +230,16 @@ def test_trade_off_curve_with_a_sensor_equals_the_knowledge_lp() -> None:
         # met there, on the fully observed route alike
         assert p.certified or p.bound < 1e-6
         assert p.achieved <= p.bound + 1e-12
+
+
+def test_the_randomised_controller_runs_on_observations() -> None:
+    """The controller draws from the policy on what it observes (stays included);
+    simulated on the true events, its success rate is the policy's exact value."""
+    from mitld_lp.sensing.observe import simulate_sensed
+
+    model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
+    r = synthesize(model, constraints=["P(F wet) <= 0.1"])
+    assert r.controller is not None and r.controller.randomised
+    sim = simulate_sensed(model, r.controller, runs=2000, seed=5, max_steps=20)
+    sigma = (r.lower * (1 - r.lower) / sim.runs) ** 0.5
+    assert abs(sim.estimate - r.lower) <= 4.5 * sigma and sim.beyond_model == 0

@@ -287,10 +287,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from mitld_lp.synthesis import pose, solve
 
     model = read_model(args)
-    from mitld_lp.routes.sensed_constrained import controller_refusal
-
-    if (no_controller := controller_refusal(model, args.constraint, args.then)) is not None:
-        raise UsageError(f"simulate: {no_controller}")
     r = solve(pose(model, args.constraint, then=args.then,
                    settings=settings_from(**model_options(args))))
     if r.controller is None:

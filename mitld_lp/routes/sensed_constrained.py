@@ -70,16 +70,16 @@ STAY = "(stay)"
 """The name of a stay choice in the policy's table."""
 
 NO_CONTROLLER = (
-    "constraints or then with sensors that miss events: the answer's policy is randomised "
-    "over the information states, with stays, and no controller runs it yet (no "
-    "controller file, chain or simulation); solve gives the certified bracket, the "
-    "constraints' values and the policy's table (--policy)")
-"""Why an answer of the ``sensed-constrained`` route has no controller (the command line
-refuses to run or export one before any work)."""
+    "constraints or then with sensors that miss events: the answer's controller is "
+    "randomised over the information states, with stays, and runs live only "
+    "(mitld_lp.synthesize(...).controller, mitld-lp simulate); its controller file and "
+    "its chain are not written")
+"""Why an answer of the ``sensed-constrained`` route has no controller file or chain
+(the command line refuses to export them before any work)."""
 
 
 def controller_refusal(model: Any, constraints: Any = (), then: str | None = None
-                       ) -> str | None:
+                       ) -> str | None:  # export --controller/--chain
     """:data:`NO_CONTROLLER` when ``model`` (with these extra constraints, ``then``) is a
     problem of the ``sensed-constrained`` route, else None."""
     asked = bool(model.constraints or constraints) or then is not None
@@ -302,6 +302,7 @@ class SensedConstrainedRoute(Route):
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        from mitld_lp.sensing.mixed import mixed_controller
         from mitld_lp.solvers.rounding import model_eta
 
         assert built.joint is not None and built.belief is not None  # built above
@@ -317,4 +318,6 @@ class SensedConstrainedRoute(Route):
         return solve_merged(posed, belief.mdp, built.joint, belief.sta, t0, costs=costs,
                             seed=seed, build=built.timings, merged=merged,
                             eta=model_eta(belief.sta, history=True), route=self.name,
-                            part=part, controller=lambda merged, chosen: None)
+                            part=part, controller=lambda merged, chosen: mixed_controller(
+                                posed.model.game, belief, merged, chosen.prob, Verdict,
+                                seed=seed))
