@@ -97,12 +97,6 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
         raise ProblemError("pareto: the curve poses its own constraint on each point (and "
                            "its own then for --against steps/cost); give the model's "
                            "constraints in its file, not as options")
-    from mitld_lp.sensing.sensors import partial
-
-    if partial(model.sensors):
-        raise ProblemError(f"pareto: {model.name}: the model has sensors that miss events; "
-                           "the trade-off curve over observation-based policies is not "
-                           "solved (the constrained LP is over fully observed policies)")
     lo, hi = _range(model, against, options)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")

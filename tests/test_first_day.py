@@ -18,14 +18,13 @@ ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
 BUS = MODELS / "bus_grid.toml"
 
-#: Features, each refused with sensors that miss events, in one model file: a false
-#: alarm, a constraint, a law known within a band (b1) (the objective min with sensors,
-#: once a fourth, is solved).
+#: Features each refused with sensors that miss events, in one model file: a false
+#: alarm and a law known within a band (b1) (a constraint and the objective min with
+#: sensors, once refused too, are solved: tests/test_sensed_constrained.py,
+#: tests/test_sensing_tasks.py).
 FOUR = {
     "false alarm": ("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }",
                     "sensors.b2.false_alarm = 0.1"),
-    "constraint": ('epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["E(steps) <= 10"]',
-                   "constraint E(steps) <= 10"),
     "band": ("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }",
              "b1 ~ geometric([0.7, 0.9])"),
 }

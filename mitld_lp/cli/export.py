@@ -164,6 +164,10 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
 
         if partial(model.sensors):
             raise UsageError(SENSED_TREE_REFUSAL)
+    from mitld_lp.routes.sensed_constrained import controller_refusal
+
+    if (no_controller := controller_refusal(model)) is not None:
+        raise UsageError(f"export: {no_controller}")
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,

@@ -20,7 +20,7 @@ what still misses is reported with by how much, and the answer is not certified.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -126,10 +126,16 @@ def solve_constrained(posed: Posed, built: Built, *,
 
 def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
                  costs: Mapping[str, float] | None = None, seed: int | None = 0,
-                 build: Mapping[str, float] | None = None) -> Result:
+                 build: Mapping[str, float] | None = None, merged: Merged | None = None,
+                 eta: float | None = None, route: str | None = None,
+                 part: Callable[..., ConstrainedPart] | None = None,
+                 controller: Callable[[Merged, Solved], Any] | None = None) -> Result:
     """The constrained LPs on the product ``mdp`` of the world with ``joint`` (module
     docs), the chosen policy's values bounded in exact arithmetic and the certificate;
-    the time limit counts from ``t0``, ``build`` the seconds of the stages before it."""
+    the time limit counts from ``t0``, ``build`` the seconds of the stages before it.
+    Another route's model (:mod:`mitld_lp.routes.sensed_constrained`) comes as its own
+    ``merged`` model with its ``eta``, ``route`` name, ``part`` record and
+    ``controller`` (made from the model and the chosen LP)."""
     from mitld_lp.solvers.rounding import model_eta
 
     model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
@@ -137,9 +143,9 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     cost_map = dict(model.costs if costs is None else costs)
     deadline = Deadline.after(s.time_limit, t0)
     eps = model.epsilon if s.epsilon is None else s.epsilon
-    merged = merge(mdp, joint)
+    merged = merge(mdp, joint) if merged is None else merged
     cost_vec = cost_vector(mdp, cost_map)
-    eta = model_eta(sta)
+    eta = model_eta(sta) if eta is None else eta
 
     def rows(which: str) -> list[Row]:
         return rows_for(cons, which)
@@ -150,10 +156,10 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
 
     task_lo = Quantity("prob", 0, 0.0)
     task_hi = Quantity("prob", 0, 1.0)
-    common: dict[str, Any] = dict(route=ConstrainedRoute.name, method="lp", sta=sta,
-                                  mdp=mdp, objective=posed.problem.objective, model=model,
-                                  epsilon=eps)
-    whole = ConstrainedPart(then=then, merged=merged, joint=joint)
+    common: dict[str, Any] = dict(route=route or ConstrainedRoute.name, method="lp",
+                                  sta=sta, mdp=mdp, objective=posed.problem.objective,
+                                  model=model, epsilon=eps)
+    whole = (part or ConstrainedPart)(then=then, merged=merged, joint=joint)
     margins = [0.0] * len(cons)
     found = None
     first = float("nan")  # the untightened LP's optimum
@@ -225,8 +231,9 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     total = upper - lower
     solver = max(total - apart - allowed - tightening, 0.0)
     checks.append(precision_check(lower, upper, solver, apart, s.precision))
-    controller = ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
-                                       chosen.stay, seed=seed)
+    controller = (ConstrainedController(model.game, sta, joint, merged, mdp, chosen.prob,
+                                        chosen.stay, seed=seed) if controller is None
+                  else controller(merged, chosen))
     return Result(
         status=Status.OPTIMAL, lower=lower, upper=upper, value=value,
         certified=all(c.passed for c in checks), checks=tuple(checks),

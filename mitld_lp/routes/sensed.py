@@ -29,8 +29,8 @@ class SensedRoute(Route):
     name = "sensed"
     observation_based = True
 
-    def claims(self, posed: Posed) -> bool:
-        return bool(partial(posed.model.sensors))
+    def claims(self, posed: Posed) -> bool:  # constraints: the sensed-constrained route
+        return bool(partial(posed.model.sensors)) and not posed.problem.constrained
 
     def refusal(self, posed: Posed) -> list[str]:
         p = posed.problem
@@ -88,10 +88,6 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
                            "the robot's belief depends on the time of every report, so the "
                            "information state is not finite; not solved (give "
                            "false_alarm = 0)")
-    if constraints or then is not None:
-        what = f"then = {then}" if then is not None else f"constraint {constraints[0]}"
-        refused.append(f"{what} with {head}: the constrained LP over observation-based "
-                       "policies is not solved; drop the constraints or the sensors")
     if robust:
         bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
                           if d.is_ambiguous)

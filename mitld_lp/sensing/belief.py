@@ -54,7 +54,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-from collections.abc import Hashable, Mapping
+from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -74,7 +74,7 @@ from mitld_lp.worlds.game import Game, world_members
 log = logging.getLogger(__name__)
 
 __all__ = ["InfoState", "Belief", "InfoSize", "info_size", "belief_product", "sensed_sta",
-           "WEIGHT_TOL"]
+           "WEIGHT_TOL", "Ends", "Reaches"]
 
 NOT_YET = 0
 """A hypothesis's value for a sensed event that has not happened (yet)."""
@@ -98,6 +98,17 @@ BYTES_PER_HYPOTHESIS = 200
 
 Obs = tuple[Hashable, frozenset[str], frozenset[str]]
 """What the robot observes after a step: world state, unsensed events, new reports."""
+
+Reaches = Callable[[DTA, int, frozenset[str]], bool]
+"""Whether some word reaches acceptance of a DTA from a state when only the given
+events can still happen (:meth:`_Builder.can_accept`)."""
+
+Ends = Callable[[int, frozenset[str], Reaches], Hashable | None]
+"""Where a hypothesis ends: given its automaton state and the events that can still
+happen, the absorbing record it goes to (hashable, not an :class:`InfoState`), or None
+while it is undecided.  The default: :class:`Absorbing` ``TARGET`` / ``SINK`` by the
+task's acceptance; :mod:`mitld_lp.routes.sensed_constrained` ends hypotheses of a joint
+automaton in one record per verdict tuple."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,7 +237,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                    sensors: Mapping[str, Sensor], epsilon: float, *,
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
                    max_states: int, max_memory: int | None = None,
-                   progress: bool | None = None, late_reports: bool = True) -> Belief:
+                   progress: bool | None = None, late_reports: bool = True,
+                   ends: Ends | None = None) -> Belief:
     """The reachable information-state MDP (module docs) of a task's automaton ``dta``
     in ``game``, the events of ``sensors`` (missed detections only) hidden.
 
@@ -239,7 +251,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
     :data:`BYTES_PER_INFO_STATE` per state and :data:`BYTES_PER_HYPOTHESIS` per
     hypothesis it holds.  ``progress``: a bar of the states built
     (:mod:`mitld_lp.util.progress`: ``None`` on a terminal only), after a line saying
-    how large the product may grow."""
+    how large the product may grow.  ``ends``: where a hypothesis ends (:data:`Ends`;
+    every record it returns is an absorbing state of the MDP)."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
                      truncation=truncation, sensors=sensors)
@@ -261,7 +274,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                      found.decided_from, found.last)
     size = info_size(game, sta, used)
     _announce(game, sta, sensed, max_states, memory, size)
-    belief = _Builder(game, dta, sta, sensed, used, max_states, memory, size).build(progress)
+    belief = _Builder(game, dta, sta, sensed, used, max_states, memory, size,
+                      ends).build(progress)
     return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
 
 
@@ -287,8 +301,9 @@ def _announce(game: Game[Any], sta: STA, sensed: tuple[str, ...], max_states: in
 class _Builder:
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
                  sensors: Mapping[str, Sensor], max_states: int, max_memory: int,
-                 size: InfoSize) -> None:
+                 size: InfoSize, ends: Ends | None = None) -> None:
         self.game, self.dta, self.sta, self.size = game, dta, sta, size
+        self.ends = ends
         self.sensed, self.sensors, self.max_states = sensed, sensors, max_states
         self.max_memory, self.bytes = max_memory, 0
         self.unsensed = frozenset(sta.events) - frozenset(sensed)
@@ -298,11 +313,11 @@ class _Builder:
         self.bound = {a: (c.truncation if c.truncation is not None else c.cap)
                       for a, c in sta.clocks.items()}
         self.index: dict[Hashable, int] = {}
-        self.states: list[InfoState | Absorbing] = []
+        self.states: list[InfoState | Hashable] = []
         self.moves: dict[tuple[int, str], dict[Obs, int | Absorbing]] = {}
         self.succ: dict[tuple[Hashable, str, frozenset[str]], tuple[Any, ...]] = {}
         self.step_cache: dict[tuple[int, frozenset[str]], int] = {}
-        self.live_cache: dict[tuple[int, frozenset[str]], bool] = {}
+        self.live_cache: dict[tuple[int, frozenset[str], int], bool] = {}
         self.label_cache: dict[Hashable, frozenset[str]] = {}
         self.branch_cache: dict[tuple[tuple[int, ...], frozenset[str], int], list[Any]] = {}
         self.hazard_cache: dict[tuple[str, int], float] = {}
@@ -314,8 +329,8 @@ class _Builder:
 
     # ---------------------------------------------------------------- states
 
-    def intern(self, state: InfoState | Absorbing) -> int:
-        key = state if isinstance(state, Absorbing) else state.key()
+    def intern(self, state: InfoState | Hashable) -> int:
+        key = state.key() if isinstance(state, InfoState) else state
         i = self.index.get(key)
         if i is not None:
             if isinstance(state, InfoState):
@@ -334,7 +349,7 @@ class _Builder:
                 f"{self.sta.truncation_points}; {self.size}); raise max_states, loosen "
                 "epsilon, or shrink the model")
         cost = BYTES_PER_INFO_STATE + (
-            0 if isinstance(state, Absorbing) else BYTES_PER_HYPOTHESIS * len(state.hypotheses))
+            BYTES_PER_HYPOTHESIS * len(state.hypotheses) if isinstance(state, InfoState) else 0)
         if self.bytes + cost > self.max_memory:
             raise ProductTooLarge(
                 f"the information-state product would need more than {self.max_memory:,} "
@@ -379,29 +394,50 @@ class _Builder:
             q2 = self.step_cache[key] = self.dta.step(q, label)
         return q2
 
-    def can_accept(self, q: int, pending: frozenset[str]) -> bool:
+    def end(self, q: int, left: frozenset[str]) -> Hashable | None:
+        """Where a hypothesis in automaton state ``q`` ends, ``left`` the events that can
+        still happen (:data:`Ends`; by default the task's verdict, a task it can no
+        longer accept counting as rejected)."""
+        if self.ends is not None:
+            return self.ends(q, left, self.reaches)
+        if q == self.dta.accepting:
+            return Absorbing.TARGET
+        if q == self.dta.rejecting or not self.can_accept(q, left):
+            return Absorbing.SINK
+        return None
+
+    def reaches(self, dta: DTA, q: int, pending: frozenset[str]) -> bool:
+        """:meth:`can_accept` for another automaton ``dta`` (a part of a joint one)."""
+        return self.can_accept(q, pending, dta)
+
+    def can_accept(self, q: int, pending: frozenset[str], dta: DTA | None = None) -> bool:
         """Whether some word reaches acceptance (the accepting state, or a safe state of
         a task with a safety part) from ``q`` when only ``pending`` events can still
         happen (an event happens once): a hypothesis that cannot is lost
         whatever the robot does, and goes to the sink.  Beyond
-        :data:`MAX_PRUNE_ATOMS` letters' atoms every hypothesis is kept (sound, larger)."""
-        key = (q, pending)
+        :data:`MAX_PRUNE_ATOMS` letters' atoms every hypothesis is kept (sound, larger).
+        ``dta``: the automaton (the task's by default)."""
+        d = self.dta if dta is None else dta
+        key = (q, pending, id(d))
         hit = self.live_cache.get(key)
         if hit is not None:
             return hit
-        atoms = sorted(self.props | (pending & frozenset(self.dta.atoms)))
+        props = frozenset(d.atoms) - frozenset(self.sta.events)
+        atoms = sorted(props | (pending & frozenset(d.atoms)))
         if len(atoms) > MAX_PRUNE_ATOMS:
             self.live_cache[key] = True
             return True
         letters = [frozenset(x for x, bit in zip(atoms, bits, strict=True) if bit)
                    for bits in itertools.product((0, 1), repeat=len(atoms))]
         seen, todo = {q}, [q]
-        found = q in self.persistent
+        persistent = self.persistent if d is self.dta else d.persistent | (
+            frozenset() if d.accepting is None else frozenset({d.accepting}))
+        found = q in persistent
         while todo and not found:
             u = todo.pop()
             for letter in letters:
-                v = self.automaton(u, letter)
-                if v in self.persistent:
+                v = self.automaton(u, letter) if d is self.dta else d.step(u, letter)
+                if v in persistent:
                     found = True
                     break
                 if v not in seen:
@@ -504,7 +540,7 @@ class _Builder:
             row: dict[int, float] = {}
             groups: dict[tuple[Obs, frozenset[str]], dict[tuple[tuple[int, ...], int], float]]
             groups = {}
-            ends: dict[Obs, set[Absorbing]] = {}
+            ends: dict[Obs, set[Hashable]] = {}
             for occurred, pu, crossed in self.unsensed_outcomes(s.pending, t):
                 if crossed:
                     j = self.intern(Absorbing.TRUNCATED)
@@ -531,10 +567,8 @@ class _Builder:
                             q2 = self.automaton(q, label)
                             obs: Obs = (g2, occurred, new)
                             mass = base * pg
-                            if q2 == self.dta.rejecting or q2 == self.dta.accepting or (
-                                    not self.can_accept(q2, left)):
-                                end = (Absorbing.TARGET if q2 == self.dta.accepting
-                                       else Absorbing.SINK)
+                            end = self.end(q2, left)
+                            if end is not None:
                                 j = self.intern(end)
                                 row[j] = row.get(j, 0.0) + mass
                                 ends.setdefault(obs, set()).add(end)
@@ -560,10 +594,10 @@ class _Builder:
     def build(self, progress: bool | None = None) -> Belief:
         game, dta = self.game, self.dta
         q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
-        if q0 == dta.accepting:
-            initial = self.intern(Absorbing.TARGET)
-        elif q0 == dta.rejecting:
-            initial = self.intern(Absorbing.SINK)
+        first = self.end(q0, frozenset(self.sta.events)) if (
+            self.ends is not None or q0 in (dta.accepting, dta.rejecting)) else None
+        if first is not None:
+            initial = self.intern(first)
         else:
             times0 = (NOT_YET,) * len(self.sensed)
             initial = self.intern(self.make(game.initial, 0, frozenset(), self.unsensed,
@@ -577,7 +611,7 @@ class _Builder:
         while head < len(self.states):
             shown.update()
             s = self.states[head]
-            if isinstance(s, Absorbing):
+            if not isinstance(s, InfoState):
                 cols.append(head)
                 vals.append(1.0)
                 actions.append(ABSORB)

@@ -74,6 +74,13 @@ class Merged:
             terminal one; -1: not reachable in the merged model).
         choice_origin: per merged choice, the product choice it is (-1: an absorbing
             state's self-loop or a *keep* choice).
+        share: per merged state, the share of a step taken there that expected steps
+            and costs count (None: 1 in the ``undecided`` states, 0 elsewhere); an
+            information state's is the posterior weight of its hypotheses whose task
+            is undecided (:mod:`mitld_lp.routes.sensed_constrained`).
+        stay_values: per merged state and component, what staying there for ever is
+            worth (None: its verdict, 1 accepted, else 0); an information state's is the
+            posterior weight of its hypotheses that accepted the component.
     """
 
     mdp: MDP
@@ -90,6 +97,8 @@ class Merged:
     keep_internal: np.ndarray
     state_map: np.ndarray
     choice_origin: np.ndarray
+    share: np.ndarray | None = None
+    stay_values: np.ndarray | None = None
 
 
 def merge(mdp: MDP, joint: Joint) -> Merged:
@@ -300,9 +309,13 @@ def columns(
         absorbed[merged.truncated] = q.truncated
         per_choice = mdp.matrix @ absorbed
         per_choice[np.repeat(merged.absorbing, np.diff(mdp.row_groups))] = 0.0
+        if merged.stay_values is not None:
+            sat = merged.stay_values[:, q.component]
         return per_choice, np.where(merged.absorbing, 0.0, sat)
     cs = mdp.choice_state()
     charged = (merged.undecided[cs] & ~merged.keep).astype(np.float64)
+    if merged.share is not None:
+        charged *= merged.share[cs]
     if q.kind == "cost":
         assert costs is not None
         acts = mdp.choice_actions

@@ -1,0 +1,323 @@
+"""The ``sensed-constrained`` route: constraints (and ``then``) with sensors that miss
+their events, solved by the constrained occupancy LP on the information-state product.
+
+The information-state MDP (:mod:`mitld_lp.sensing.belief`) is an ordinary MDP over what
+the robot knows, so the constrained LP of :mod:`mitld_lp.solvers.constrained` applies to
+it once every quantity is a linear function of its occupancy:
+
+* **The joint automaton per hypothesis.**  The product is built on the joint automaton
+  of the task and the constraints' formulas (:mod:`mitld_lp.automata.joint`): each
+  hypothesis (when the sensed events happened) runs it.  A hypothesis ends when every
+  component is decided, a component that can no longer accept (given the events still
+  to come) counting as rejected; it then goes to one absorbing state per verdict tuple
+  (:class:`Verdict`).  A probability is the mass entering the verdict states that
+  accept its component, as on the fully observed product.
+* **Staying for ever.**  A run may stay for ever in an end component of the
+  information states; the hypotheses left there keep their verdicts (a co-safe
+  component accepted stays accepted; one undecided never accepts inside an end
+  component), the undecided ones counting as not satisfied.  Each information state of
+  an end component gets a *stay* choice into the verdict states, by the posterior
+  weights of its hypotheses' verdicts: the fully observed LP's stay with fractional
+  values.  The controller that takes it plays the end component's choices for ever.
+* **Steps and costs** count, at an information state, the posterior weight of its
+  hypotheses whose task is still undecided (:attr:`Merged.share`): the expected number
+  of steps taken while the true run's task is undecided, as on the fully observed
+  product.  A stay where that weight is positive would take infinitely many steps: it
+  is not offered when steps or costs are bounded or minimised.  A run the chosen
+  policy traps in information states (an interior-point solution's negligible flow on a
+  loop) is worth what staying there is worth (:attr:`Merged.stay_values`), so the
+  policy's certified values are its own.
+
+Solved and certified as :mod:`mitld_lp.routes.constrained` solves the product: the
+lower model (truncation fails the task and violates each constraint), a constraint the
+certified bound misses tightened and solved again, the upper bound by weak duality.
+The policy is randomised over information states, so a constraint holds in expectation
+over observation histories (the fully observed route's semantics).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint
+from mitld_lp.logic.fragment import CO_SAFE
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.product import Absorbing
+from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merged
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.sensed import sensed_refusals
+from mitld_lp.sensing.belief import NOT_YET, Belief, InfoState, Reaches
+from mitld_lp.sensing.sensors import partial
+from mitld_lp.solvers.constrained_model import Merged
+from mitld_lp.solvers.quotient import maximal_end_components
+
+if TYPE_CHECKING:
+    from mitld_lp.problem import Posed
+    from mitld_lp.result import Result
+    from mitld_lp.routes.stages import Built
+
+__all__ = ["SensedConstrainedRoute", "SensedConstrainedPart", "Verdict", "JointEnds",
+           "info_merged", "STAY", "NO_CONTROLLER", "controller_refusal"]
+
+STAY = "(stay)"
+"""The name of a stay choice in the policy's table."""
+
+NO_CONTROLLER = (
+    "constraints or then with sensors that miss events: the answer's controller is "
+    "randomised over the information states, with stays, and runs live only "
+    "(mitld_lp.synthesize(...).controller, mitld-lp simulate); its controller file and "
+    "its chain are not written")
+"""Why an answer of the ``sensed-constrained`` route has no controller file or chain
+(the command line refuses to export them before any work)."""
+
+
+def controller_refusal(model: Any, constraints: Any = (), then: str | None = None
+                       ) -> str | None:  # export --controller/--chain
+    """:data:`NO_CONTROLLER` when ``model`` (with these extra constraints, ``then``) is a
+    problem of the ``sensed-constrained`` route, else None."""
+    asked = bool(model.constraints or constraints) or then is not None
+    return NO_CONTROLLER if asked and partial(model.sensors) else None
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """An absorbing state of the information-state product on a joint automaton: the
+    hypotheses that end with these verdicts, one per component (the task first),
+    :data:`~mitld_lp.automata.joint.ACCEPTED` or ``REJECTED``."""
+
+    verdicts: tuple[int, ...]
+
+    def __str__(self) -> str:
+        return "verdict(" + ", ".join("accepted" if v == ACCEPTED else "rejected"
+                                      for v in self.verdicts) + ")"
+
+
+class JointEnds:
+    """Where a hypothesis of the joint automaton ends
+    (:data:`mitld_lp.sensing.belief.Ends`): a :class:`Verdict` once every component is
+    decided, a component that can no longer accept counting as rejected.  ``seen``
+    keeps each undecided hypothesis's verdicts (automaton state, events left) for the
+    stays and the steps' shares."""
+
+    def __init__(self, joint: Joint) -> None:
+        self.joint = joint
+        self.seen: dict[tuple[int, frozenset[str]], tuple[int, ...]] = {}
+
+    def __call__(self, q: int, left: frozenset[str], reaches: Reaches) -> Hashable | None:
+        key = (q, left)
+        v = self.seen.get(key)
+        if v is None:
+            v = self.seen[key] = tuple(
+                _effective(part, c, verdict, left, reaches) for part, c, verdict in zip(
+                    self.joint.parts, self.joint.components[q], self.joint.verdicts[q],
+                    strict=True))
+        return None if UNDECIDED in v else Verdict(v)
+
+
+def _effective(part: DTA, q: int, verdict: int, left: frozenset[str],
+               reaches: Reaches) -> int:
+    if verdict == UNDECIDED and not reaches(part, q, left):
+        return REJECTED
+    return verdict
+
+
+def _verdicts_of(belief: Belief, ends: JointEnds, s: InfoState) -> list[tuple[int, ...]]:
+    """The verdicts of each hypothesis of ``s``, in its order."""
+    out = []
+    for times, q in s.hypotheses:
+        waiting = frozenset(a for a, k in zip(belief.sensed, times, strict=True)
+                            if k == NOT_YET)
+        out.append(ends.seen[(q, s.pending | waiting)])
+    return out
+
+
+def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
+    """The information-state product on a joint automaton as the constrained LP's
+    model (module docs): its verdict states, a stay choice (action ``ABSORB``, marked
+    ``keep``) at each information state of an end component (where no hypothesis's
+    task is undecided when ``timed``), and the steps' shares."""
+    mdp = belief.mdp
+    records: list[Any] = list(mdp.states)
+    n, k = len(records), len(ends.joint.parts)
+    info = np.array([isinstance(r, InfoState) for r in records], dtype=bool)
+    share = np.zeros(n)
+    worth = np.zeros((n, k))  # staying for ever: the weight of each component accepted
+    targets: list[dict[Verdict, float]] = [{} for _ in range(n)]
+    for i in np.flatnonzero(info).tolist():
+        s = records[i]
+        for w, v in zip(s.weights, _verdicts_of(belief, ends, s), strict=True):
+            share[i] += w if v[0] == UNDECIDED else 0.0
+            worth[i] += w * (np.asarray(v) == ACCEPTED)
+            end = Verdict(tuple(REJECTED if x == UNDECIDED else x for x in v))
+            targets[i][end] = targets[i].get(end, 0.0) + w
+    index = {r: i for i, r in enumerate(records) if isinstance(r, Verdict)}
+    for t in targets:
+        for end in t:
+            if end not in index:
+                index[end] = len(records)
+                records.append(end)
+    m = len(records)
+    mecs = maximal_end_components(mdp, info)
+    stays = (np.asarray(mecs.mec_of) >= 0) & info & ~(timed & (share > 0))
+    # the rows: each state's own, then its stay; a new verdict state's self-loop
+    rg = np.asarray(mdp.row_groups, dtype=np.int64)
+    counts = np.concatenate([np.diff(rg) + stays, np.ones(m - n, dtype=np.int64)])
+    groups = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(counts, out=groups[1:])
+    owner = mdp.choice_state()
+    old_pos = groups[owner] + (np.arange(owner.size) - rg[owner])
+    stay_pos = groups[np.flatnonzero(stays)] + np.diff(rg)[stays]
+    coo = mdp.matrix.tocoo()
+    rows, cols, vals = [old_pos[coo.row]], [coo.col], [coo.data]
+    for s, pos in zip(np.flatnonzero(stays).tolist(), stay_pos.tolist(), strict=True):
+        for end, w in targets[s].items():
+            rows.append(np.array([pos]))
+            cols.append(np.array([index[end]]))
+            vals.append(np.array([w]))
+    new = np.arange(n, m)
+    rows.append(groups[new])
+    cols.append(new)
+    vals.append(np.ones(m - n))
+    n_choices = int(groups[-1])
+    matrix = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(n_choices, m))
+    actions = np.full(n_choices, ABSORB, dtype=np.int32)
+    actions[old_pos] = mdp.choice_actions
+    keep = np.zeros(n_choices, dtype=bool)
+    keep[stay_pos] = True
+    verdicts = np.full((m, k), UNDECIDED, dtype=np.int64)
+    for r, i in index.items():
+        verdicts[i] = r.verdicts
+    absorbing = np.ones(m, dtype=bool)
+    absorbing[:n] = ~info
+    truncated = np.array([r is Absorbing.TRUNCATED for r in records], dtype=bool)
+    accepted = verdicts[:, 0] == ACCEPTED
+    merged_mdp = MDP(matrix=matrix, row_groups=groups, choice_actions=actions,
+                     action_names=mdp.action_names, initial=mdp.initial,
+                     target=absorbing & accepted, sink=absorbing & ~accepted & ~truncated,
+                     truncated=truncated, states=tuple(records))
+    share = np.concatenate([share, np.zeros(m - n)])
+    origin = np.where(np.arange(m) < n, np.arange(m), -1)
+    origin[absorbing] = -1
+    choice_origin = np.full(n_choices, -1, dtype=np.int64)
+    choice_origin[old_pos] = np.arange(owner.size)
+    return Merged(merged_mdp, origin, np.arange(n), np.full(m, -1, dtype=np.int64), verdicts,
+                  absorbing, truncated, share > 0, np.zeros(m, dtype=bool),
+                  np.zeros(n_choices, dtype=bool), keep, np.zeros(n_choices, dtype=bool),
+                  np.arange(n), choice_origin, share,
+                  np.concatenate([worth, np.zeros((m - n, k))]))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SensedConstrainedPart(ConstrainedPart):
+    """The ``sensed-constrained`` route's part of the answer: the constrained route's
+    (its ``merged`` model the information states, :func:`info_merged`), each sensed
+    event's sensor, and the information-state product's record."""
+
+    sensors: Mapping[str, Any] = field(default_factory=dict)
+    belief: Any = None
+    observation_based = True
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        """One row per (information state, choice) the policy takes with positive
+        probability: the world state, the clock, the reports, the hypotheses' number,
+        the action (:data:`STAY` for staying for ever) and its probability."""
+        m = self.merged
+        if self.prob is None or m is None:
+            return []
+        cs = m.mdp.choice_state()
+        rows = []
+        for c in np.flatnonzero(self.prob > 0).tolist():
+            s = m.mdp.states[int(cs[c])]
+            if not isinstance(s, InfoState):
+                continue
+            rows.append({"game_state": s.world, "clock": s.clock,
+                         "reported": sorted(s.reported), "hypotheses": len(s.hypotheses),
+                         "action": STAY if m.keep[c] else m.mdp.action_name(c),
+                         "probability": float(self.prob[c])})
+        return rows
+
+
+class SensedConstrainedRoute(Route):
+    """Constraints or a ``then`` objective with a sensor that misses its event (module
+    docs).  ``every``: it claims sensed problems without constraints too (the trade-off
+    curve's end points)."""
+
+    name = "sensed-constrained"
+    takes_constraints = True
+    observation_based = True
+
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
+    def claims(self, posed: Posed) -> bool:
+        return bool(partial(posed.model.sensors)) and (posed.problem.constrained or self.every)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        p = posed.problem
+        sensors = partial(p.model.sensors)
+        head = "sensors (" + ", ".join(f"{a} = {s}" for a, s in sensors.items()) + ")"
+        refused = lp_refusals(posed)
+        if p.objective == "min":
+            refused.append(f"objective min with constraints and {head}: the complement "
+                           "is a safety task, which the constrained observation-based "
+                           "route does not solve")
+        elif posed.fragment != CO_SAFE:
+            refused.append(f"a {posed.fragment} task with constraints and {head}: only "
+                           "co-safe tasks are solved with constraints on what the robot "
+                           "observes")
+        # the sensors' own conditions (false alarms, bands, laws that may never happen,
+        # worlds that react to a sensed event); the task's are said above
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", (), None, posed.robust)
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Built:
+        """The joint automaton of the task and the constraints' formulas, then the
+        information-state product on it (module docs), under the problem's budgets."""
+        from mitld_lp.routes.stages import Built, joint_sta
+        from mitld_lp.sensing.belief import belief_product
+
+        model, s = posed.model, posed.settings
+        assert s.max_states is not None  # resolved
+        t0 = time.perf_counter()
+        joint, sta = joint_sta(posed)
+        laws = {a: c.distribution for a, c in sta.clocks.items()}
+        t1 = time.perf_counter()
+        ends = JointEnds(joint)
+        belief = belief_product(model.game, joint.dta, laws, partial(model.sensors),
+                                model.epsilon if s.epsilon is None else s.epsilon,
+                                clock_reduction=s.clock_reduction,
+                                truncation=s.truncation_map, max_states=s.max_states,
+                                max_memory=s.max_memory, progress=progress,
+                                late_reports=False, ends=ends)
+        return Built(joint.dta, belief.sta, belief.mdp,
+                     {"automaton": t1 - t0, "product": time.perf_counter() - t1},
+                     joint, belief=(belief, ends))
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        from mitld_lp.sensing.mixed import mixed_controller
+        from mitld_lp.solvers.rounding import model_eta
+
+        assert built.joint is not None and built.belief is not None  # built above
+        belief, ends = built.belief
+        t0 = time.perf_counter()
+        p = posed.problem
+        timed = p.then is not None or any(c.kind != "prob" for c in p.constraints)
+        merged = info_merged(belief, ends, timed=timed)
+
+        def part(**kw: Any) -> SensedConstrainedPart:
+            return SensedConstrainedPart(**kw, sensors=dict(belief.sensors), belief=belief)
+
+        return solve_merged(posed, belief.mdp, built.joint, belief.sta, t0, costs=costs,
+                            seed=seed, build=built.timings, merged=merged,
+                            eta=model_eta(belief.sta, history=True), route=self.name,
+                            part=part, controller=lambda merged, chosen: mixed_controller(
+                                posed.model.game, belief, merged, chosen.prob, Verdict,
+                                seed=seed))
