@@ -73,10 +73,7 @@ def test_from_game_names_the_key() -> None:
 
 @pytest.mark.parametrize("extra, words", [
     ("[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }", "sensors.b.false_alarm"),
-    ('objective = "min"
-constraints = ["P(F A) >= 0.1"]
-[sensors]
-b = { detect = 0.5 }',
+    ('objective = "min"\nconstraints = ["P(F A) >= 0.1"]\n[sensors]\nb = { detect = 0.5 }',
      "objective min with constraints and sensors"),
 ])
 def test_refused_by_name(extra: str, words: str) -> None:
