@@ -94,8 +94,8 @@ def test_a_cycle_of_single_choice_states_is_eliminated() -> None:
 
 def _forced(monkeypatch: pytest.MonkeyPatch) -> None:
     """Eliminate in every block, however small the product and the block."""
-    monkeypatch.setattr(elim, "MIN_ENTRIES", 0)
-    monkeypatch.setattr(elim, "COMPILED_MIN_ENTRIES", 0)
+    for name in ("MIN_ENTRIES", "MIN_PRODUCT_ENTRIES", "MIN_BLOCK_ENTRIES"):
+        monkeypatch.setattr(elim, name, 0)
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -32,10 +32,12 @@ def _grow(idx, val, used, more):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def boundary_rows(comp_ptr, comp_states, needed, s_ptr, s_idx, s_val, s_rew, n_m,
+def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_rew, n_m,
                   max_fill):  # pragma: no cover - compiled
     """``a = (I - P_SS)^-1 r_S`` and the rows of ``B = (I - P_SS)^-1 P_SM`` (sparse over
-    ``M``) of the ``needed`` components, downstream first.  Returns ``a``, each row's
+    ``M``) of the ``port`` states of the ``needed`` components, downstream first (a
+    cyclic component's port rows as ``E_P' (I - P_CC)^-1`` times its right-hand sides:
+    its other states' rows are never formed).  Returns ``a`` (on the ports), each row's
     start and length in the buffers, the buffers, and ``ok`` (False once the rows hold
     more than ``max_fill`` entries: the caller solves the whole LP instead)."""
     n_s = s_rew.shape[0]
@@ -91,22 +93,36 @@ def boundary_rows(comp_ptr, comp_states, needed, s_ptr, s_idx, s_val, s_rew, n_m
                     rhs[i, nt] += w * a[t]
                     for f in range(row_ptr[t], row_ptr[t] + row_len[t]):
                         rhs[i, col_pos[b_idx[f]]] += w * b_val[f]
-        if k == 1:
+        n_p = 0
+        for i in range(k):
+            if port[comp_states[lo + i]]:
+                n_p += 1
+        if k == 1:  # a needed single state is a port
             sol = rhs / mat[0, 0]
-        else:
-            sol = np.linalg.solve(mat, rhs)
-        b_idx, b_val = _grow(b_idx, b_val, used, k * nt)
+        else:  # the port rows of the inverse, then their products with rhs
+            unit = np.zeros((k, n_p))
+            r = 0
+            for i in range(k):
+                if port[comp_states[lo + i]]:
+                    unit[i, r] = 1.0
+                    r += 1
+            sol = np.linalg.solve(np.ascontiguousarray(mat.T), unit).T @ rhs
+        b_idx, b_val = _grow(b_idx, b_val, used, n_p * nt)
+        r = 0
         for i in range(k):
             s = comp_states[lo + i]
-            a[s] = sol[i, nt]
+            pos[s] = -1
+            if not port[s]:
+                continue
+            a[s] = sol[r, nt]
             row_ptr[s] = used
             for q in range(nt):
-                if sol[i, q] != 0.0:
+                if sol[r, q] != 0.0:
                     b_idx[used] = touched[q]
-                    b_val[used] = sol[i, q]
+                    b_val[used] = sol[r, q]
                     used += 1
             row_len[s] = used - row_ptr[s]
-            pos[s] = -1
+            r += 1
         for q in range(nt):
             col_pos[touched[q]] = -1
         if used > max_fill:
@@ -239,13 +255,15 @@ def upstream(comp_ptr, comp_states, s_ptr, s_idx, s_val, base):  # pragma: no co
 @numba.njit(cache=True, nogil=True)
 def reach(comp_ptr, comp_states, comp_of, s_ptr, s_idx, seed):  # pragma: no cover
     """Per component (downstream first in ``comp_ptr``), whether it holds a ``seed``
-    state or lies downstream of one: walked upstream first, each reached component
-    marks the components its rows enter."""
+    state or lies downstream of one, and per state whether it is a *port*: a seed, or
+    entered from another reached component (only a port's row of ``B`` is ever read).
+    Walked upstream first, each reached component marks the states its rows enter."""
     n_c = comp_ptr.shape[0] - 1
     hit = np.zeros(n_c, np.bool_)
+    port = seed.copy()
     for c in range(n_c - 1, -1, -1):
         for i in range(comp_ptr[c], comp_ptr[c + 1]):
-            if seed[comp_states[i]]:
+            if port[comp_states[i]]:
                 hit[c] = True
         if not hit[c]:
             continue
@@ -253,6 +271,6 @@ def reach(comp_ptr, comp_states, comp_of, s_ptr, s_idx, seed):  # pragma: no cov
             s = comp_states[i]
             for e in range(s_ptr[s], s_ptr[s + 1]):
                 t = s_idx[e]
-                if t >= 0:
-                    hit[comp_of[t]] = True
-    return hit
+                if t >= 0 and comp_of[t] != c:
+                    port[t] = True
+    return hit, port

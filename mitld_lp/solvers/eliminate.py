@@ -41,18 +41,23 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import levels
-from mitld_lp.solvers.kernels import COMPILED_MIN_ENTRIES
+from mitld_lp.solvers.kernels import COMPILED_MIN_BLOCK_ENTRIES, COMPILED_MIN_ENTRIES
 
-__all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_ENTRIES", "Elimination", "eliminate",
-           "worth_eliminating"]
+__all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_BLOCK_ENTRIES", "MIN_ENTRIES",
+           "MIN_PRODUCT_ENTRIES", "Elimination", "eliminate", "worth_eliminating"]
 
 logger = logging.getLogger(__name__)
 
+MIN_PRODUCT_ENTRIES = COMPILED_MIN_ENTRIES
+MIN_BLOCK_ENTRIES = COMPILED_MIN_BLOCK_ENTRIES
+"""A block is reduced in a quotient of at least :data:`MIN_PRODUCT_ENTRIES` entries when
+it has at least :data:`MIN_BLOCK_ENTRIES` (the compiled sweeps' thresholds,
+:mod:`mitld_lp.solvers.kernels`: numba is loaded and warm by then).  Loading numba and
+its first call cost 0.6-1.1 s of CPU, more than the whole Clarabel solve of a smaller
+block (0.23 s for both blocks of ``bus_scaled`` n64 d3, 98,288 and 49,144 entries)."""
+
 MIN_ENTRIES = 5_000
-"""A block's kept entries from which its single-choice states are eliminated, in a
-product of at least :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES` transitions
-(whose sweeps load numba anyway: below, the interior-point solve of the whole block
-costs less than numba's import)."""
+"""A block's kept entries (after pruning) from which it is reduced."""
 
 DENSE_LIMIT = 400
 """States of a cyclic component of ``S`` solved dense (about 20 MFlop at this size);
@@ -77,12 +82,12 @@ def _kernels() -> Any:
     return _KERNELS or None
 
 
-def worth_eliminating(product_entries: int, kept_entries: int) -> bool:
-    """Whether a block whose kept columns hold ``kept_entries`` entries, in a quotient
-    of ``product_entries``, is reduced (both large enough, and numba importable:
-    imported here the first time)."""
-    return (product_entries >= COMPILED_MIN_ENTRIES and kept_entries >= MIN_ENTRIES
-            and _kernels() is not None)
+def worth_eliminating(product_entries: int, block_entries: int, kept_entries: int) -> bool:
+    """Whether a block of ``block_entries`` entries, ``kept_entries`` of them in the
+    columns left after pruning, in a quotient of ``product_entries``, is reduced (all
+    large enough, and numba importable: imported here the first time)."""
+    return (product_entries >= MIN_PRODUCT_ENTRIES and block_entries >= MIN_BLOCK_ENTRIES
+            and kept_entries >= MIN_ENTRIES and _kernels() is not None)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -207,10 +212,11 @@ def _reduce(k: Any, inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray,
     c_ptr, c_idx = rows_m.indptr.astype(np.int64), code[rows_m.indices]
     seed = np.zeros(s_states.size, bool)
     seed[c_idx[c_idx >= 0]] = True
-    needed = k.reach(comp_ptr, order, comp_of, s_ptr, s_idx, seed)
+    needed, port = k.reach(comp_ptr, order, comp_of, s_ptr, s_idx, seed)
     budget = int(FILL_FACTOR * (s_entries + rows_m.nnz))
     a, row_ptr, row_len, b_idx, b_val, ok = k.boundary_rows(
-        comp_ptr, order, needed, s_ptr, s_idx, rows_s.data, s_rew, m_states.size, budget)
+        comp_ptr, order, needed, port, s_ptr, s_idx, rows_s.data, s_rew, m_states.size,
+        budget)
     if not ok:
         logger.info("elimination of %d states stopped: its rows passed %d entries",
                     s_states.size, budget)

@@ -344,7 +344,8 @@ def _solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
     Returns the solver's answer, the occupancy per block column and the value per block
     state (``None`` if it failed), and the states the LP had."""
     reduced = None
-    if worth_eliminating(entries, int(np.diff(block.inner.indptr)[columns].sum())):
+    if worth_eliminating(entries, block.inner.nnz,
+                         int(np.diff(block.inner.indptr)[columns].sum())):
         keep = np.zeros(block.choices.size, dtype=bool)
         keep[columns] = True
         reduced = eliminate(block.inner, lp.objective, block.groups, keep)
