@@ -33,13 +33,15 @@ def _grow(idx, val, used, more):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_rew, n_m,
-                  max_fill):  # pragma: no cover - compiled
+                  max_fill, max_work):  # pragma: no cover - compiled
     """``a = (I - P_SS)^-1 r_S`` and the rows of ``B = (I - P_SS)^-1 P_SM`` (sparse over
     ``M``) of the ``port`` states of the ``needed`` components, downstream first (a
     cyclic component's port rows as ``E_P' (I - P_CC)^-1`` times its right-hand sides:
     its other states' rows are never formed).  Returns ``a`` (on the ports), each row's
-    start and length in the buffers, the buffers, and ``ok`` (False once the rows hold
-    more than ``max_fill`` entries: the caller solves the whole LP instead)."""
+    start and length in the buffers, the buffers, the work done (the entries read and
+    the dense solves' floating-point operations) and whether it is complete: it stops
+    once the rows hold more than ``max_fill`` entries, or before the work would
+    pass ``max_work`` (the caller solves the whole LP instead)."""
     n_s = s_rew.shape[0]
     a = np.zeros(n_s)
     row_ptr = np.zeros(n_s, np.int64)
@@ -50,6 +52,7 @@ def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_re
     col_pos = np.full(n_m, -1, np.int64)
     touched = np.empty(n_m, np.int64)
     pos = np.full(n_s, -1, np.int64)
+    work = 0.0
     for c in range(comp_ptr.shape[0] - 1):
         if not needed[c]:
             continue
@@ -70,12 +73,21 @@ def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_re
                         touched[nt] = j
                         nt += 1
                 elif pos[t] < 0:
+                    work += 2.0 * row_len[t]  # read here and in the right-hand side
                     for f in range(row_ptr[t], row_ptr[t] + row_len[t]):
                         j = b_idx[f]
                         if col_pos[j] < 0:
                             col_pos[j] = nt
                             touched[nt] = j
                             nt += 1
+        n_p = 0
+        for i in range(k):
+            if port[comp_states[lo + i]]:
+                n_p += 1
+        if k > 1:  # LU, the port rows of the inverse, their products with rhs
+            work += k * k * (k / 3.0 + n_p) + 2.0 * n_p * k * (nt + 1)
+        if work > max_work:
+            return a, row_ptr, row_len, b_idx[:used], b_val[:used], work, False
         mat = np.zeros((k, k))
         rhs = np.zeros((k, nt + 1))  # the last column: the reward
         for i in range(k):
@@ -93,10 +105,6 @@ def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_re
                     rhs[i, nt] += w * a[t]
                     for f in range(row_ptr[t], row_ptr[t] + row_len[t]):
                         rhs[i, col_pos[b_idx[f]]] += w * b_val[f]
-        n_p = 0
-        for i in range(k):
-            if port[comp_states[lo + i]]:
-                n_p += 1
         if k == 1:  # a needed single state is a port
             sol = rhs / mat[0, 0]
         else:  # the port rows of the inverse, then their products with rhs
@@ -126,8 +134,8 @@ def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_re
         for q in range(nt):
             col_pos[touched[q]] = -1
         if used > max_fill:
-            return a, row_ptr, row_len, b_idx[:used], b_val[:used], False
-    return a, row_ptr, row_len, b_idx[:used], b_val[:used], True
+            return a, row_ptr, row_len, b_idx[:used], b_val[:used], work, False
+    return a, row_ptr, row_len, b_idx[:used], b_val[:used], work, True
 
 
 @numba.njit(cache=True, nogil=True)

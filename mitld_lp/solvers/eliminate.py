@@ -23,7 +23,9 @@ self-loop, a cyclic component (the grid's back-and-forth moves make most of them
 over the columns of ``M`` it reaches.  A cyclic component of more than
 :data:`DENSE_LIMIT` states is not eliminated: its states stay in the LP as ``M``
 states with their one column.  If ``B`` would hold more than :data:`FILL_FACTOR` times
-the block's kept entries, the block's whole LP is solved instead.
+the block's kept entries, or its dense solves more than :data:`WORK_PER_ENTRY`
+operations per kept entry (checked before each solve), the block's whole LP is solved
+instead.
 
 The exported LP (``export --lp``, :func:`mitld_lp.solvers.export.write_lp`) and the
 constrained LP are the whole LP; this is a presolve of one block's solve, whose
@@ -44,7 +46,8 @@ from mitld_lp.solvers.graph import levels
 from mitld_lp.solvers.kernels import COMPILED_MIN_BLOCK_ENTRIES, COMPILED_MIN_ENTRIES
 
 __all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_BLOCK_ENTRIES", "MIN_ENTRIES",
-           "MIN_PRODUCT_ENTRIES", "Elimination", "eliminate", "worth_eliminating"]
+           "MIN_PRODUCT_ENTRIES", "WORK_PER_ENTRY", "Elimination", "eliminate",
+           "worth_eliminating"]
 
 logger = logging.getLogger(__name__)
 
@@ -63,8 +66,15 @@ DENSE_LIMIT = 400
 """States of a cyclic component of ``S`` solved dense (about 20 MFlop at this size);
 a larger component stays in the LP."""
 
-FILL_FACTOR = 4.0
+FILL_FACTOR = 32.0
 """``B``'s entries allowed, in multiples of the block's kept entries."""
+
+WORK_PER_ENTRY = 2_500.0
+"""The dense solves' floating-point operations allowed per kept entry of the block,
+checked before each component's solve (about a third of Clarabel's time on the whole
+block's LP: 0.67 s for the 53,000 kept entries of ``bus_scaled`` n128 d3's smaller
+block, whose elimination would cost 1-2 s with its components of 1,300-2,000 states
+kept in the LP)."""
 
 _KERNELS: Any = None  # the compiled module once imported, False without numba
 
@@ -214,12 +224,14 @@ def _reduce(k: Any, inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray,
     seed[c_idx[c_idx >= 0]] = True
     needed, port = k.reach(comp_ptr, order, comp_of, s_ptr, s_idx, seed)
     budget = int(FILL_FACTOR * (s_entries + rows_m.nnz))
-    a, row_ptr, row_len, b_idx, b_val, ok = k.boundary_rows(
+    a, row_ptr, row_len, b_idx, b_val, work, ok = k.boundary_rows(
         comp_ptr, order, needed, port, s_ptr, s_idx, rows_s.data, s_rew, m_states.size,
-        budget)
+        budget, WORK_PER_ENTRY * (s_entries + rows_m.nnz))
+    logger.debug("elimination of %d states: work %.3g", s_states.size, work)
     if not ok:
-        logger.info("elimination of %d states stopped: its rows passed %d entries",
-                    s_states.size, budget)
+        logger.info("elimination of %d states stopped: past its budget of %d entries or "
+                    "%.3g operations", s_states.size, budget,
+                    WORK_PER_ENTRY * (s_entries + rows_m.nnz))
         return None
     out_ptr, o_idx, o_val, rew = k.reduced_rows(c_ptr, c_idx, rows_m.data, reward[m_cols],
                                                 a, row_ptr, row_len, b_idx, b_val,
