@@ -50,6 +50,7 @@ def _case(seed: int):
 def test_reduced_lp_has_the_whole_lps_optimum_and_lifts_to_it(
         seed: int, dense_limit: int, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(elim, "DENSE_LIMIT", dense_limit)  # 2: big cycles stay in the LP
+    monkeypatch.setattr(elim, "MAX_KEPT_SHARE", 1.0)
     _, _, block, keep = _case(seed)
     n, groups = block.states.size, block.groups
     owner = np.repeat(np.arange(n), np.diff(groups))
@@ -146,3 +147,18 @@ def test_bundled_case_answer_unchanged_within_its_bracket(
     assert before.lower <= after.lower <= before.upper
     assert after.lower <= before.lower <= after.upper
     assert after.lower == pytest.approx(0.9244053, abs=1e-6)  # Storm's value (README)
+
+
+def test_a_block_whose_cycles_would_mostly_stay_is_not_reduced(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three one-choice states in a cycle, one state of two choices: with cyclic
+    components limited to 2 states, all three would stay in the LP (more than
+    MAX_KEPT_SHARE of them): no reduction, the caller solves the whole LP."""
+    inner = sp.csr_array(np.array([[0, .8, 0, .1], [0, 0, .8, .1], [.8, 0, 0, .1],
+                                   [0, 0, 0, 0], [.6, 0, 0, 0]]))
+    args = (inner, np.array([.1, .1, .1, .5, .3]), np.array([0, 1, 2, 3, 5]),
+            np.ones(5, bool))
+    monkeypatch.setattr(elim, "DENSE_LIMIT", 2)
+    assert elim.eliminate(*args) is None
+    monkeypatch.setattr(elim, "MAX_KEPT_SHARE", 1.0)
+    assert elim.eliminate(*args) is None  # every state would stay: nothing to reduce

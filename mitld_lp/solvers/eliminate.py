@@ -22,7 +22,8 @@ self-loop, a cyclic component (the grid's back-and-forth moves make most of them
 339 components on the 8,192-state block above, up to 314 states) by one dense solve
 over the columns of ``M`` it reaches.  A cyclic component of more than
 :data:`DENSE_LIMIT` states is not eliminated: its states stay in the LP as ``M``
-states with their one column.  If ``B`` would hold more than :data:`FILL_FACTOR` times
+states with their one column (and if more than :data:`MAX_KEPT_SHARE` of ``S`` would
+stay, the block is not reduced).  If ``B`` would hold more than :data:`FILL_FACTOR` times
 the block's kept entries, or its dense solves more than :data:`WORK_PER_ENTRY`
 operations per kept entry (checked before each solve), the block's whole LP is solved
 instead.
@@ -46,7 +47,7 @@ from mitld_lp.solvers.graph import levels
 from mitld_lp.solvers.kernels import COMPILED_MIN_BLOCK_ENTRIES, COMPILED_MIN_ENTRIES
 
 __all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_BLOCK_ENTRIES", "MIN_ENTRIES",
-           "MIN_PRODUCT_ENTRIES", "WORK_PER_ENTRY", "Elimination", "eliminate",
+           "MIN_PRODUCT_ENTRIES", "MAX_KEPT_SHARE", "WORK_PER_ENTRY", "Elimination", "eliminate",
            "worth_eliminating"]
 
 logger = logging.getLogger(__name__)
@@ -65,6 +66,13 @@ MIN_ENTRIES = 5_000
 DENSE_LIMIT = 400
 """States of a cyclic component of ``S`` solved dense (about 20 MFlop at this size);
 a larger component stays in the LP."""
+
+MAX_KEPT_SHARE = 0.2
+"""The largest share of the single-choice states that may stay in the LP (in components
+past :data:`DENSE_LIMIT`) for the block to be reduced at all: every state kept widens
+the rows of ``B`` of the states upstream (``bus_scaled`` n128 d3's smaller block: 5,995
+of its 15,063 would stay, the reduced LP has 7,316 rows and its elimination costs 2-3x
+Clarabel's solve of the whole block; its larger block keeps 1,142 of 22,296)."""
 
 FILL_FACTOR = 32.0
 """``B``'s entries allowed, in multiples of the block's kept entries."""
@@ -187,10 +195,14 @@ def eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray,
                                 shape=(s_states.size, s_states.size)))
     size = np.bincount(found.component)
     big = size[found.component] > DENSE_LIMIT
+    if np.count_nonzero(big) > MAX_KEPT_SHARE * s_states.size:
+        logger.info("no elimination: %d of the %d single-choice states lie in components "
+                    "of more than %d", np.count_nonzero(big), s_states.size, DENSE_LIMIT)
+        return None
+    if big.all():
+        return None
     if big.any():
         single[s_states[big]] = False
-        if not single.any():
-            return None
     return _reduce(k, inner, reward, groups, cols, single, owner_all,
                    found.component[~big], found.level[found.component[~big]],
                    int(rows.nnz))
