@@ -349,26 +349,23 @@ def _solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
         keep = np.zeros(block.choices.size, dtype=bool)
         keep[columns] = True
         reduced = eliminate(block.inner, lp.objective, block.groups, keep)
-    if reduced is None:
+    rows = block.states.size if reduced is None else reduced.n_m
+    if rows == 0:  # every state eliminated: the block's one policy, solved exactly
+        raw = Raw(Status.OPTIMAL, "every state eliminated", np.zeros(0), np.zeros(0))
+    else:
         raw = _sensed(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
-                               lp.objective[columns]), sense, settings, retry=False)
-        if raw.y is None or raw.v is None:
-            return raw, None, None, block.states.size
-        y = np.zeros(block.choices.size)
-        y[columns] = np.maximum(raw.y, 0.0)
-        return raw, y, raw.v, block.states.size
-    if reduced.n_m:
-        raw = _sensed(Matrices(_flow_matrix(reduced.owner, reduced.n_m, reduced.moves),
+                               lp.objective[columns]) if reduced is None else
+                      Matrices(_flow_matrix(reduced.owner, rows, reduced.moves),
                                reduced.b_eq, reduced.objective), sense, settings,
                       retry=False)
-        if raw.y is None or raw.v is None:
-            return raw, None, None, reduced.n_m
-        y_m, v_m = np.maximum(raw.y, 0.0), raw.v
-    else:  # every state eliminated: the block's one policy, solved exactly
-        raw = Raw(Status.OPTIMAL, "every state eliminated")
-        y_m, v_m = np.zeros(0), np.zeros(0)
-    y, v = reduced.lift(y_m, v_m)
-    return raw, y, v, reduced.n_m
+    if raw.y is None or raw.v is None:
+        return raw, None, None, rows
+    if reduced is None:
+        y = np.zeros(block.choices.size)
+        y[columns] = np.maximum(raw.y, 0.0)
+        return raw, y, raw.v, rows
+    y, v = reduced.lift(np.maximum(raw.y, 0.0), raw.v)
+    return raw, y, v, rows
 
 
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
