@@ -43,10 +43,17 @@ The targets checked on every non-degenerate instance of at least 1e5 states: sol
 transition; the case as a process <= 2x the stormpy script.  Each miss is listed with
 its factor.
 
+``--compare DIR`` runs ``ours`` a second time on each instance, in the same run, with
+the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git archive``), and
+adds its figures as ``base_*`` columns and a before/after table: both answers, whether
+the bracket is the same, both solve stages and their ratios to Storm's best check.
+
 Written: ``bench_sweeps.csv``, ``bench_sweeps.md`` (the tables and the misses) and
 ``bench_sweeps_machine.txt``.  The full run::
 
     python experiments/bench_sweeps.py --out experiments/results
+    python experiments/bench_sweeps.py --only bus_scaled_n64_d3 --compare ../before \
+        --out /tmp/sweeps  # before and after, one run
 
 ``--quick`` runs tiny instances into ``experiments/out/quick`` (or ``--out``).
 """
@@ -217,13 +224,15 @@ WORKERS = {"ours": work_ours, "export": work_export, "storm_check": work_storm_c
            "storm_prism": work_storm_prism}
 
 
-def _child(route: str, inst: Instance, work: Path) -> dict[str, Any]:
+def _child(route: str, inst: Instance, work: Path, code: Path | None = None,
+           ) -> dict[str, Any]:
     """The route in a child process; its result with ``process_cpu``, the child's whole
-    CPU (user + system, imports included) from ``os.wait4``."""
+    CPU (user + system, imports included) from ``os.wait4``.  ``code``: the checkout
+    whose ``mitld_lp`` the child imports (default this one)."""
     out = work / f"{route}.json"
     argv = [sys.executable, __file__, "--worker", route, inst.family, str(inst.n),
             str(inst.d), str(work)]
-    cpu, err = _cpu_of(argv)
+    cpu, err = _cpu_of(argv, code)
     if cpu is None:
         raise RuntimeError(f"{route} on {inst.name} failed:\n{err[-2000:]}")
     return dict(json.loads(out.read_text(encoding="utf-8")), process_cpu=cpu)
@@ -258,15 +267,19 @@ def whole_processes(work: Path, repeats: int) -> dict[str, float]:
     return dict(ours=min(ours), storm=min(storm))
 
 
-def _cpu_of(argv: list[str]) -> tuple[float | None, str]:
-    """The CPU seconds of the process ``argv`` (None if it failed) and its stderr."""
+def _cpu_of(argv: list[str], code: Path | None = None) -> tuple[float | None, str]:
+    """The CPU seconds of the process ``argv`` (None if it failed) and its stderr;
+    ``code``: a checkout put first on its ``PYTHONPATH`` (and its working directory)."""
     # bytecode is cached as on an installed package: with PYTHONDONTWRITEBYTECODE set
     # (some CI images set it), an editable checkout would recompile every module on every
     # run, while the installed stormpy's bytecode was written at installation
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    if code is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(code),
+                                             *filter(None, [env.get("PYTHONPATH")])])
     with tempfile.TemporaryFile() as errors:
-        proc = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=errors,
-                                env=env)
+        proc = subprocess.Popen(argv, cwd=code or ROOT, stdout=subprocess.DEVNULL,
+                                stderr=errors, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
         proc.returncode = os.waitstatus_to_exitcode(status)
         errors.seek(0)
@@ -281,8 +294,10 @@ def degenerate(value: float) -> bool:
     return not DEGENERATE <= value <= 1.0 - DEGENERATE
 
 
-def measure(inst: Instance, work: Path) -> dict[str, Any]:
-    """Every route on ``inst`` and the row of figures; ratios only if not degenerate."""
+def measure(inst: Instance, work: Path, compare: Path | None = None) -> dict[str, Any]:
+    """Every route on ``inst`` and the row of figures; ratios only if not degenerate.
+    ``compare``: also ours from that checkout (``base_*`` columns)."""
+    base = _child("ours", inst, work, compare) if compare is not None else None
     ours = _child("ours", inst, work)
     export = _child("export", inst, work)
     storm = _child("storm_check", inst, work)
@@ -316,18 +331,34 @@ def measure(inst: Instance, work: Path) -> dict[str, Any]:
         bytes_per_transition=ours["bytes_per_transition"],
         storm_bytes_per_transition=storm["bytes_per_transition"],
         **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
+        **({} if base is None else dict(
+            base_value=base["value"], base_upper=base["upper"],
+            base_certified=base["certified"], base_solve_cpu=base["solve_cpu"],
+            base_solve_over_storm_check=ratio(base["solve_cpu"], storm["best_cpu"]),
+            same_bracket=(base["value"], base["upper"]) == (ours["value"], ours["upper"]),
+            same_product=(base["states"], base["transitions"]) == (ours["states"],
+                                                                     ours["transitions"]))),
     )
 
 
-def run(instances: list[tuple[str, int, int]], repeats: int) -> list[dict]:
+COMPARED = ("instance", "base_value", "value", "base_upper", "upper", "same_bracket",
+            "same_product", "states", "base_solve_cpu", "solve_cpu", "storm_check_cpu",
+            "storm_best", "base_solve_over_storm_check", "solve_over_storm_check",
+            "base_certified", "certified")
+
+
+def run(instances: list[tuple[str, int, int]], repeats: int,
+        compare: Path | None = None, skip_case: bool = False) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_sweeps_") as tmp:
         for family, n, d in instances:
             inst = Instance(family, n, d)
             work = Path(tmp) / inst.name
             work.mkdir()
-            rows.append(measure(inst, work))
+            rows.append(measure(inst, work, compare))
             print(_line(rows[-1]), flush=True)
+        if skip_case:
+            return rows
         case = whole_processes(Path(tmp), repeats)
     rows.append(dict(instance="bus_grid.toml as a process", value=0.9244053,
                      degenerate=False, process_cpu=case["ours"],
@@ -350,6 +381,12 @@ def _fmt(x: Any) -> str:
     if isinstance(x, float):
         return f"{x:.4g}"
     return str(x)
+
+
+def _full(key: str, x: Any) -> str:
+    """A bound in full (a bracket's digits), anything else as :func:`_fmt`."""
+    return f"{x:.12g}" if key.endswith(("value", "upper")) and isinstance(x, float) \
+        else _fmt(x)
 
 
 def _line(row: dict) -> str:
@@ -393,6 +430,12 @@ def report(rows: list[dict]) -> str:
     if flat:
         text += ("\nDegenerate instances (optimum below 1e-3 or above 1 - 1e-3; no ratio "
                  "is taken from them):\n\n" + table(flat))
+    compared = [r for r in rows if "base_value" in r]
+    if compared:
+        text += ("\nBefore (`base_*`: the package of the `--compare` checkout) and after "
+                 "(this checkout), in the same run, CPU seconds; ratios only for the "
+                 "non-degenerate instances:\n\n" + _common.markdown_table(
+                     COMPARED, [[_full(k, r.get(k)) for k in COMPARED] for r in compared]))
     missed = misses(rows)
     text += (f"\nTargets on the non-degenerate instances of at least {BIG:,} states "
              "(solve <= 2x Storm's best check, whole process <= 1x Storm's, <= 50 bytes "
@@ -412,12 +455,19 @@ def main(argv: list[str] | None = None) -> list[dict]:
                          "with --quick)")
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME",
                     help="run only these instances (e.g. bus_scaled_n64_d3)")
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                    help="also run ours with the mitld_lp of this checkout (before/after)")
+    ap.add_argument("--skip-case", action="store_true",
+                    help="leave out the case study as whole processes")
     args = ap.parse_args(argv)
+    if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
+        ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
     out = _common.out_dir(args)
     instances = QUICK if args.quick else FULL
     if args.only:
         instances = [i for i in instances if Instance(*i).name in set(args.only)]
-    rows = run(instances, args.repeats or (2 if args.quick else 5))
+    rows = run(instances, args.repeats or (2 if args.quick else 5),
+               args.compare.resolve() if args.compare else None, args.skip_case)
     header = sorted({k for r in rows for k in r}, key=lambda k: (
         COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
     _common.write_csv(out / "bench_sweeps.csv", header,

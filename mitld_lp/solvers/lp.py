@@ -66,6 +66,7 @@ import scipy.sparse as sp
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.crossover import crossover, polish
+from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
 from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
 from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one, unusable_reason
 from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
@@ -334,6 +335,39 @@ _TIGHTEN_ROUND = 25
 _TIGHTEN_MAX = 500
 
 
+def _solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
+                 settings: SolveOptions, entries: int,
+                 ) -> tuple[Raw, np.ndarray | None, np.ndarray | None, int]:
+    """One block's LP over its ``columns``: its single-choice states eliminated first
+    when the block (in a quotient of ``entries``) is large enough
+    (:mod:`mitld_lp.solvers.eliminate`), else whole.
+    Returns the solver's answer, the occupancy per block column and the value per block
+    state (``None`` if it failed), and the states the LP had."""
+    reduced = None
+    if worth_eliminating(entries, block.inner.nnz,
+                         int(np.diff(block.inner.indptr)[columns].sum())):
+        keep = np.zeros(block.choices.size, dtype=bool)
+        keep[columns] = True
+        reduced = eliminate(block.inner, lp.objective, block.groups, keep)
+    rows = block.states.size if reduced is None else reduced.n_m
+    if rows == 0:  # every state eliminated: the block's one policy, solved exactly
+        raw = Raw(Status.OPTIMAL, "every state eliminated", np.zeros(0), np.zeros(0))
+    else:
+        raw = _sensed(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
+                               lp.objective[columns]) if reduced is None else
+                      Matrices(_flow_matrix(reduced.owner, rows, reduced.moves),
+                               reduced.b_eq, reduced.objective), sense, settings,
+                      retry=False)
+    if raw.y is None or raw.v is None:
+        return raw, None, None, rows
+    if reduced is None:
+        y = np.zeros(block.choices.size)
+        y[columns] = np.maximum(raw.y, 0.0)
+        return raw, y, raw.v, rows
+    y, v = reduced.lift(np.maximum(raw.y, 0.0), raw.v)
+    return raw, y, v, rows
+
+
 def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
                       progress: bool | None = None
@@ -362,15 +396,10 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     exact optimal values, 37,368 of the 38,496 kept columns of its largest block are
     within 1e-15 of optimal (the symmetric processes), so no bound prunes them.
 
-    Measured and not done, a presolve: the states left with one column (22,296 of the
-    32,768 states of ``bus_scaled`` n128 d3's large block, 15,063 of 16,384 of its
-    other) eliminated by their Schur complement.  The smaller block's LP becomes 1,321
-    rows by 2,642 columns (35,803 entries), which Clarabel solves in 0.07 s against
-    0.80 s, to the same objective (1e-10 relative); but forming the complement with
-    SuperLU's dense right-hand sides, one solve of the eliminated states' system per
-    boundary column (2,642), took 5.0 s (by rows it would be 309 solves there, 1,284
-    on the large block).  A sparse right-hand-side elimination (compiled) would make it
-    pay."""
+    The states left with one column are eliminated before the solver when the block
+    is large (:mod:`mitld_lp.solvers.eliminate`, :func:`_solve_block`): the LP is
+    over the states that keep a choice, and its answer is lifted back to the whole
+    block before the polish."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
@@ -379,7 +408,7 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
-    iterations = calls = n_columns = n_kept = 0
+    iterations = calls = n_columns = n_kept = n_eliminated = 0
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
                          total=todo, desc="block LPs", unit=" states", leave=False):
@@ -396,18 +425,17 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                             q.sense))
         columns = (np.arange(block.choices.size) if tight is None else
                    np.flatnonzero(_may_be_optimal(block, lp.objective, *tight, q.sense)))
-        raw = _sensed(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
-                               lp.objective[columns]), q.sense, settings, retry=False)
+        raw, y, duals, left = _solve_block(block, lp, columns, q.sense, settings,
+                                               q.matrix.nnz)
         iterations += raw.iterations
         calls += 1
         n_columns += block.choices.size
         n_kept += columns.size
-        if raw.y is None or raw.v is None:
+        n_eliminated += rest.size - left
+        if y is None or duals is None:
             return Raw(raw.status, f"{raw.message} (block LP of level {level.index}, "
                         f"{rest.size} states)", iterations=iterations)
-        y = np.zeros(block.choices.size)
-        y[columns] = np.maximum(raw.y, 0.0)
-        polished = polish(block, lp, y, raw.v, columns, settings.tol,
+        polished = polish(block, lp, y, duals, columns, settings.tol,
                           None if tight is None else tight[0 if q.sense is Sense.MAX else 1],
                           sense=q.sense, precision=settings.precision)
         if not polished.optimal and worst.status is Status.OPTIMAL:
@@ -424,6 +452,8 @@ def _solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                f"single states over {blk.n_levels} levels"
                + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"
                   if bounds is not None and calls else "")
+               + (f"; {n_eliminated} single-choice block states eliminated"
+                  if n_eliminated else "")
                + (f"; {worst.message}" if worst.message else ""))
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
