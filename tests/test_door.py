@@ -140,6 +140,17 @@ def test_missing_constant_says_const(capsys) -> None:
     assert "N" in err and "--const NAME=VALUE" in err
 
 
+@pytest.mark.parametrize("prop", ['Pmax=? [F "goal"]', "PROPS"])
+def test_an_undeclared_constant_is_named_not_dropped(capsys, prop: str) -> None:
+    """``--const`` with a name the file does not declare (a typo of ``N``) was dropped
+    and the property answered at the file's other values: exit 2 naming it, for a
+    property on the line and for a properties file."""
+    prop = PROPS if prop == "PROPS" else prop
+    assert main(["solve", WALK, "--prop", prop, "--const", "N=4,M=3", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "constant 'M' is not declared" in err and "constants: N" in err
+
+
 def test_file_with_a_refused_property_answers_the_rest(capsys, tmp_path) -> None:
     props = tmp_path / "mixed.props"
     props.write_text('"r": R{"x"}min=? [F "goal"];\n"p": Pmax=? [F "goal"];\n')

@@ -14,6 +14,7 @@ too (:mod:`mitld_lp.cli.solve` passes it to :func:`mitld_lp.synthesis.pose`).
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from fractions import Fraction
 from pathlib import Path
@@ -142,6 +143,16 @@ def world_model(args: argparse.Namespace) -> Any:
                            objective=args.objective or "max")
 
 
+def _declared(args: argparse.Namespace, constants: dict[str, Any], program: Any,
+              theirs: set[str]) -> None:
+    """Refuse a ``--const`` name that neither the file nor its properties (``theirs``)
+    declare: a typo is named, never dropped."""
+    stray = sorted(k for k in constants if k not in program.constants and k not in theirs)
+    if stray:
+        raise ModelError(f"{args.model}: constant {stray[0]!r} is not declared (constants: "
+                         f"{', '.join(sorted(program.constants))})")
+
+
 def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[list[Any],
                                                                               Any]:
     """``(name, property)`` of each property posed, and the PRISM or JANI file as Storm
@@ -157,6 +168,8 @@ def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[li
         if own and (args.prop is None or len(args.prop) == 1 and (
                 args.prop[0].isdigit() or any(p.get_name() == args.prop[0] for p in own))):
             which = None if args.prop is None else args.prop[0]
+            _declared(args, constants, program, {
+                c.name for p in own for c in p.get_undefined_constants()})
             props = instantiate(program.program, own, args.model, constants)
             return pick(props, which, args.model), program
     except WorldError as exc:
@@ -178,6 +191,8 @@ def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[li
                          "property to pick from it")
     else:
         text, where = given, "--prop"
+    _declared(args, constants, program, {k for k in constants
+                                         if re.search(rf"\b{re.escape(k)}\b", text)})
     try:
         props = read_properties(program.program, text, where, constants)
         return pick(props, which[0] if which else None, where), program
