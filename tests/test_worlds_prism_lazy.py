@@ -114,3 +114,16 @@ def test_lazy_bracket_holds_storms_step_bounded_value(tmp_path):
     exact = storm_rational(path, 'Pmax=? [F<=9 "goal"]')  # Storm's exact engine
     assert lower <= exact <= upper and upper - lower < 1e-6  # a Fraction against floats
     assert lazy.explored < 1600
+
+
+def test_auto_explores_the_horizon_before_the_product(tmp_path):
+    # F[0,6]: the states within 6 moves of (0,0) are the 28 with x + y <= 6 (counted by
+    # hand); auto explores them all before the product, which then needs nothing more
+    path = _grid(tmp_path, 30)
+    game = load_prism(path, task=parse("F[0,6] goal"), first_states=4)
+    assert isinstance(game, LazyPrismGame)
+    assert 28 <= game.explored < 900
+    before = game.limit
+    full = load_prism(path, task=parse("F[0,6] goal"), explore="full")
+    assert _answer(game, "F[0,6] goal") == _answer(full, "F[0,6] goal")
+    assert game.limit == before  # no exploration during the product

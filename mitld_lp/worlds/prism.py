@@ -99,6 +99,7 @@ from mitld_lp.worlds.prism_build import (
     build_tables,
     build_within,
     check_budgets,
+    expanded_within,
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
@@ -394,8 +395,19 @@ class LazyPrismGame(PrismGame):
             raise WorldError(
                 f"{self.source}: the exact answer needs the whole world, and this one is "
                 "explored as the task reaches it: load it with explore='full'")
-        self._at(state)
-        return super()._moves(state, action, events, exact)
+        s = self._at(state)
+        key = (s, action)  # no event changes this world: the row is the action's alone
+        found = self._cache.get(key)
+        if found is None:
+            t = self._tables
+            row = self._names(s)
+            if action not in row:
+                raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
+            c = int(t.choices[s]) + row.index(action)
+            lo, hi = int(t.branches[c]), int(t.branches[c + 1])
+            found = self._cache[key] = tuple(zip(
+                t.states.rows(t.targets[lo:hi]), t.probabilities[lo:hi].tolist(), strict=True))
+        return found
 
 
 # --------------------------------------------------------------------------- loading
@@ -448,9 +460,11 @@ def load_prism(
     ``explore``: ``"full"`` builds every reachable state before the product is built;
     ``"lazy"`` explores the states breadth first as the product reaches them, starting
     with ``first_states`` (:class:`LazyPrismGame`; refused with event effects); ``"auto"``
-    (default) is ``"lazy"`` for a task of bounded horizon (``F[0,10] goal``, not
-    ``F goal`` or ``D[mu] a``) without event effects, else ``"full"``.  Either way a world
-    Storm explores whole within ``first_states`` is the plain :class:`PrismGame`.
+    (default) is ``"lazy"`` for a task of bounded horizon ``H`` (``F[0,10] goal``, not
+    ``F goal`` or ``D[mu] a``) without event effects, else ``"full"``, and explores at
+    once (:data:`LAZY_GROWTH` times more each time) until every state within ``H`` moves
+    is expanded.  Either way a world Storm explores whole within the states it was
+    allowed is the plain :class:`PrismGame`, which the product reads whole.
 
     Raises :class:`mitld_lp.worlds.WorldError` (:class:`PrismTooLarge` for a budget).
     """
@@ -522,8 +536,12 @@ def load_prism(
                          f"named {UNEXPLORED!r}: use explore='full'")
     first = min(first_states, max_states)
     if lazy:  # the first states Storm finds; all of them when the world is that small
-        tables = build_within(lambda: work(first), where,
-                              first * BYTES_PER_STATE <= memory, str(bound), max_states, memory)
+        grower = _Grower(work, where, memory, str(bound), max_states)
+        tables = grower(first)
+        steps = horizon(task) if task is not None and explore == "auto" else None
+        while steps is not None and not expanded_within(tables, steps) and first < max_states:
+            first = min(first * LAZY_GROWTH, max_states)  # the task's horizon reaches
+            tables = grower(first)  # further: explored before the product, at once
     else:
         fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
         tables = build_within(work, where, fits, str(bound), max_states, memory)
@@ -547,7 +565,6 @@ def load_prism(
     )
     if tables.unexplored is None:
         return PrismGame(**common)  # type: ignore[arg-type]
-    grower = _Grower(work, where, memory, str(bound), max_states)
     return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
                          max_states=max_states,
                          program_actions=frozenset(action_names.get(a, a) for a in

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
@@ -37,7 +38,7 @@ from mitld_lp.worlds.prism_program import (
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
-           "check_budgets", "build_within", "build_tables"]
+           "check_budgets", "build_within", "build_tables", "expanded_within"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -192,3 +193,29 @@ def _storm_build(stormpy: Any, program: Any, options: Any, value_type: Any,
     return developer.make_explicit_model_builder[float](
         description, options, exploration_options=explore).build()
 
+
+
+def expanded_within(tables: Tables, steps: int) -> bool:
+    """Whether every state within ``steps`` moves of the initial state is expanded in
+    ``tables`` (a build with a state limit; always true for a whole one): a task of that
+    horizon then reads nothing of the world that Storm has not explored."""
+    found = tables.unexplored
+    if found is None:
+        return True
+    n = len(tables.states)
+    per_choice = np.diff(tables.branches)
+    owner = np.repeat(np.repeat(np.arange(n), np.diff(tables.choices)), per_choice)
+    graph = sp.csr_matrix((np.ones(owner.size, dtype=np.int8), (owner, tables.targets)),
+                          shape=(n, n))
+    seen = np.zeros(n, dtype=bool)
+    frontier = np.array([tables.initial])
+    seen[frontier] = True
+    for _ in range(steps + 1):
+        if found[frontier].any():
+            return False
+        nxt = np.unique(graph[frontier].indices)
+        frontier = nxt[~seen[nxt]]
+        if frontier.size == 0:
+            return True
+        seen[frontier] = True
+    return True

@@ -180,6 +180,10 @@ class Valuations(Sequence[State]):
                 row[j] = bool(row[j])
         return [tuple(row) for row in rows]
 
+    def rows(self, indices: np.ndarray) -> list[State]:
+        """The states at ``indices``, in one call."""
+        return self._tuples(self.values[indices])
+
     @overload
     def __getitem__(self, i: int) -> State: ...
     @overload
