@@ -13,6 +13,7 @@ from storm_exact import storm_rational  # noqa: E402
 import mitld_lp  # noqa: E402
 from mitld_lp.logic.parser import parse  # noqa: E402
 from mitld_lp.worlds import WorldError  # noqa: E402
+from mitld_lp.worlds.exact import exact_successors_of  # noqa: E402
 from mitld_lp.worlds.prism import LazyPrismGame, PrismGame, PrismTooLarge, load_prism  # noqa: E402
 
 
@@ -101,8 +102,11 @@ def test_budget_stops_a_lazy_world_before_storm_explores_past_it(tmp_path):
 def test_exact_answer_and_event_effects_refused_by_name_on_a_lazy_world(tmp_path):
     path = _grid(tmp_path, 12)
     game = load_prism(path, task=parse("F[0,4] goal"), explore="lazy", first_states=4)
-    with pytest.raises(WorldError, match="exact answer needs the whole world"):
-        game.exact_successors((0, 0), "east", frozenset())
+    assert exact_successors_of(game) is None  # refused before any work (the CLI test)
+    with pytest.raises(WorldError, match="explored as the task reaches it"):
+        game._moves((0, 0), "east", frozenset(), exact=True)
+    with pytest.raises(WorldError, match="explore='lazy' takes no event effects"):
+        load_prism(path, events=["east"], explore="lazy")
     with pytest.raises(ValueError, match="explore must be"):
         load_prism(path, explore="some")
 
@@ -127,3 +131,41 @@ def test_auto_explores_the_horizon_before_the_product(tmp_path):
     full = load_prism(path, task=parse("F[0,6] goal"), explore="full")
     assert _answer(game, "F[0,6] goal") == _answer(full, "F[0,6] goal")
     assert game.limit == before  # no exploration during the product
+
+
+def _model(tmp_path, explore: str | None, spec: str = "F[0,5] goal") -> str:
+    prism = _grid(tmp_path, 80)  # 6,400 states: more than load_prism's first 4,096
+    key = "" if explore is None else f'explore = "{explore}"\n'
+    path = tmp_path / "m.toml"
+    path.write_text(f'name = "g"\nspec = "{spec}"\n[prism]\nfile = "{prism.name}"\n{key}')
+    return str(path)
+
+
+def test_model_file_explore_key_and_the_exact_refusal(tmp_path, capsys):
+    from mitld_lp.cli import main
+
+    model = _model(tmp_path, None)
+    assert isinstance(mitld_lp.load_model(model).game, LazyPrismGame)
+    # --exact is refused before any work, naming the world and the key that fixes it
+    assert main(["solve", model, "--exact"]) == 2
+    err = capsys.readouterr().err
+    assert "explored as the task reaches it" in err and 'explore = \\"full\\"' not in err
+    assert '[prism] explore = "full"' in err and "LP optimal" not in err
+    full = _model(tmp_path, "full")
+    assert type(mitld_lp.load_model(full).game) is PrismGame
+    assert main(["solve", full, "--exact", "--json"]) == 0
+    capsys.readouterr()
+    assert main(["solve", _model(tmp_path, "eager")]) == 2
+    assert 'prism.explore: must be "auto", "full" or "lazy"' in capsys.readouterr().err
+
+
+def test_door_answers_a_bounded_property_on_a_lazy_world(tmp_path, capsys):
+    from mitld_lp.cli import main
+
+    prism = str(_grid(tmp_path, 80))
+    assert main(["solve", prism, "--prop", 'Pmax=? [F<=5 "goal"]']) == 0
+    said = capsys.readouterr().out
+    # (0,0) -> (3,2) in 5 moves: all five succeed, 0.9^3 (east) * 0.9^2 (north) = 0.59049
+    assert "[0.5904899, 0.5904901]" in said or "[0.59049, 0.59049]" in said
+    explored = int(said.split(" world states")[0].rsplit(" ", 1)[-1])
+    assert 21 <= explored < 6400  # every state within 5 moves (21), not the whole grid

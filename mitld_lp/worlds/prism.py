@@ -328,6 +328,12 @@ class LazyPrismGame(PrismGame):
     program's actions, :meth:`as_table` is None (the product asks state by state), and
     the exact successors (``--exact``) are refused: they need the whole world."""
 
+    exact_successors = None  # Storm's exact build is of the whole world (prism_exact)
+    inexact_reason = ("a PRISM world explored as the task reaches it: its exact "
+                      "probabilities come from Storm's exact build of the whole world; "
+                      "explore it whole ([prism] explore = \"full\" in a model file, "
+                      "load_prism(explore=\"full\"))")
+
     grow: Any = field(default=None, repr=False)  # limit -> Tables (a _Grower)
     limit: int = 0
     max_states: int = defaults.MAX_STATES
@@ -392,9 +398,7 @@ class LazyPrismGame(PrismGame):
     def _moves(self, state: State, action: str, events: frozenset[str], exact: bool,
                ) -> tuple[tuple[State, Any], ...]:
         if exact:
-            raise WorldError(
-                f"{self.source}: the exact answer needs the whole world, and this one is "
-                "explored as the task reaches it: load it with explore='full'")
+            raise WorldError(f"{self.source}: no exact successors on {self.inexact_reason}")
         s = self._at(state)
         key = (s, action)  # no event changes this world: the row is the action's alone
         found = self._cache.get(key)
