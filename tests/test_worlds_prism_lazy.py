@@ -4,6 +4,8 @@ Storm explores past max_states; the exact answer is refused by name."""
 
 from __future__ import annotations
 
+import pickle
+
 import pytest
 
 pytest.importorskip("stormpy")
@@ -107,6 +109,8 @@ def test_exact_answer_and_event_effects_refused_by_name_on_a_lazy_world(tmp_path
         game._moves((0, 0), "east", frozenset(), exact=True)
     with pytest.raises(WorldError, match="explore='lazy' takes no event effects"):
         load_prism(path, events=["east"], explore="lazy")
+    with pytest.raises(TypeError, match="does not pickle"):
+        pickle.dumps(game)
     with pytest.raises(ValueError, match="explore must be"):
         load_prism(path, explore="some")
 

@@ -590,6 +590,10 @@ class _Grower:
         self.work, self.where, self.memory = work, where, memory
         self.note, self.max_states = note, max_states
 
+    def __reduce__(self) -> Any:
+        raise TypeError(f"{self.where}: a world explored as the task reaches it does not "
+                        "pickle (Storm explores it on demand): load it with explore='full'")
+
     def __call__(self, limit: int) -> Tables:
         fits = limit * BYTES_PER_STATE <= self.memory
         return build_within(lambda: self.work(limit), self.where, fits, self.note, self.max_states,
