@@ -62,7 +62,10 @@ refusal: Storm explores the reachable part within ``max_states`` and ``max_memor
 (in a memory-capped child process when the ranges do not already fit:
 :mod:`mitld_lp.worlds.prism_bounded`).  Given the task, states where it is decided
 whatever happens next are not expanded (:mod:`mitld_lp.worlds.prism_terminal`): they
-keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.
+keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.  Given a task
+of bounded horizon, Storm explores only the states within that horizon, breadth first,
+and more only if the product asks for them (:class:`LazyPrismGame`; Storm's build itself
+is :mod:`mitld_lp.worlds.prism_build`).
 
 Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
 wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
