@@ -316,14 +316,12 @@ LAZY_GROWTH = 8
 class LazyPrismGame(PrismGame):
     """A PRISM MDP explored as the product reaches it (``load_prism(explore=...)``).
 
-    Storm explores the program breadth first from the initial state and stops expanding
-    once it has found :attr:`limit` states (:func:`~mitld_lp.worlds.prism_build.build_tables`);
-    a state's actions, moves and index are the whole build's, because Storm numbers
-    states in the order its search finds them.  When the product first asks for the
-    actions or moves of a state found but not expanded, Storm explores again from the
-    start with :data:`LAZY_GROWTH` times the limit (never past ``max_states``: beyond,
-    :class:`PrismTooLarge` before Storm explores further).  A bounded task on a large
-    world thus costs Storm the states within its horizon, not the whole world.
+    Storm explores breadth first and stops expanding once it has found :attr:`limit`
+    states (:func:`~mitld_lp.worlds.prism_build.build_tables`): a state's index, actions
+    and moves are the whole build's, as Storm numbers states in the order it finds them.
+    A state found but not expanded, when the product asks for it, makes Storm explore
+    again with :data:`LAZY_GROWTH` times the limit (never past ``max_states``: beyond,
+    :class:`PrismTooLarge` before Storm explores further).
 
     Differences from :class:`PrismGame`, each by name: :attr:`states` are the states
     found so far, :attr:`n_states` is None until Storm has expanded every state (the
