@@ -292,7 +292,7 @@ def _build_prism(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
     from mitld_lp.worlds.prism import PrismTooLarge, load_prism
 
     table = ctx.table(doc["prism"], "prism")
-    ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events"})
+    ctx.keys(table, "prism", {"file"}, {"constants", "labels", "events", "explore"})
     source = Path(ctx.source)
     base = source.parent if source.is_file() else Path.cwd()
     path = base / ctx.string(table["file"], "prism.file")
@@ -311,6 +311,9 @@ def _build_prism(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
         return [ctx.string(v, f"prism.{key}[{i}]") for i, v in enumerate(items)]
 
     labels, events = names("labels"), names("events")
+    explore = ctx.string(table.get("explore", "auto"), "prism.explore")
+    if explore not in ("auto", "full", "lazy"):
+        raise ctx.error("prism.explore", f'must be "auto", "full" or "lazy", got {explore!r}')
     # [labels]: name -> a PRISM expression, a label Storm evaluates on the world's states
     define = {name: ctx.string(text, key_path("labels", name))
               for name, text in ctx.table(doc.get("labels", {}), "labels").items()}
@@ -319,7 +322,7 @@ def _build_prism(doc: dict[str, Any], ctx: KeyContext) -> Game[Any]:
     try:
         return load_prism(path, constants=constants, labels=labels, events=events or (),
                           max_states=ctx.max_states, max_memory=ctx.max_memory,
-                          define=define, task=task)
+                          define=define, task=task, explore=explore)
     except PrismTooLarge as exc:  # a budget stop, not a mistake in the file
         raise PrismTooLarge(f"{ctx.source}: prism: {exc}") from exc
     except WorldError as exc:

@@ -278,3 +278,18 @@ def test_sensors(tmp_path):
     if camera["storm_value"]:  # Storm on the same information-state MDP
         assert float(camera["storm_value"]) == pytest.approx(float(camera["lower"]),
                                                              abs=1e-6)
+
+
+def test_bench_explore(tmp_path):
+    """The explored-world benchmark: the big grid's bounded task explored to its horizon,
+    the same bracket as the whole build and the small grid, Storm's value inside."""
+    text = _run("bench_explore", tmp_path, "--n", "101")
+    rows = {r["route"]: r for r in _csv(tmp_path / "bench_explore.csv")}
+    assert set(rows) == {"ours auto (12x12)", "ours auto", "ours full", "storm"}
+    answers = {rows[k]["answer"] for k in ("ours auto (12x12)", "ours auto", "ours full")}
+    assert len(answers) == 1  # the same bracket, bit for bit
+    lower, upper = (float(x) for x in answers.pop().strip("[]").split(", "))
+    assert lower <= float(rows["storm"]["answer"]) <= upper
+    assert int(rows["ours full"]["explored"]) == 101 * 101 == int(rows["storm"]["explored"])
+    assert int(rows["ours auto"]["explored"]) < 101 * 101
+    assert "auto / small-grid CPU" in text

@@ -111,6 +111,8 @@ def _world(args: argparse.Namespace, constants: dict[str, Any], define: dict[str
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states
     load = load_jani if Path(args.model).suffix.lower() == ".jani" else load_prism
+    if load is load_prism and getattr(args, "exact", False):
+        kwargs["explore"] = "full"  # the exact answer reads the whole world
     try:
         return load(args.model, constants=constants, define=define, task=task,
                     max_memory=args.max_memory, **kwargs)
@@ -290,7 +292,7 @@ def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: f
     head = probability_head(query, bracket_text(r.lower, r.upper), decided)
     tail = [f"task {query.spec}" + "".join(f", {k} = {v}" for k, v in query.define.items()),
             "certified" if r.certified else f"NOT certified ({r.status.value})",
-            f"{model.game.n_states} world states, {r.mdp.n_states} product states",
+            f"{model.game.explored} world states, {r.mdp.n_states} product states",
             f"{seconds:.2f} s"]
     if exact is not None:
         tail.insert(1, f"exact {exact}")

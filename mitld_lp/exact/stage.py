@@ -92,6 +92,9 @@ def exact_refusal(posed: Any) -> str | None:
                     f"in floating point but are so only from step {law.exact_constant_from()}"
                     "; the clock reduction would change the model (solve with "
                     "--no-clock-reduction, or fix the event's truncation point)")
+    reason = getattr(model.game, "inexact_reason", None)  # a world that says why not
+    if exact_successors_of(model.game) is None and isinstance(reason, str):
+        return f"exact with {reason}"
     if exact_successors_of(model.game) is None:
         return (f"exact with a {type(model.game).__name__} world: its probabilities are "
                 "floats with no exact value; an exact answer takes a grid or PRISM world "

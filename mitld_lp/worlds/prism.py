@@ -62,7 +62,10 @@ refusal: Storm explores the reachable part within ``max_states`` and ``max_memor
 (in a memory-capped child process when the ranges do not already fit:
 :mod:`mitld_lp.worlds.prism_bounded`).  Given the task, states where it is decided
 whatever happens next are not expanded (:mod:`mitld_lp.worlds.prism_terminal`): they
-keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.
+keep their labels and have one action, :data:`DECIDED_ACTION`, a self-loop.  Given a task
+of bounded horizon, Storm explores only the states within that horizon, breadth first,
+and more only if the product asks for them (:class:`LazyPrismGame`; Storm's build itself
+is :mod:`mitld_lp.worlds.prism_build`).
 
 Errors are :class:`mitld_lp.worlds.WorldError`, one line naming the file and what is
 wrong: a missing file or one that is not UTF-8 (the first bad byte's line and column),
@@ -87,45 +90,43 @@ from typing import Any
 import numpy as np
 
 from mitld_lp import defaults
+from mitld_lp.logic.fragment import horizon
 from mitld_lp.logic.syntax import Formula
-from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.game import GameError
-from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_build import (
+    BYTES_PER_STATE,
+    CAP_BYTES_PER_STATE,
+    UNEXPLORED,
+    PrismTooLarge,
+    build_tables,
+    build_within,
+    check_budgets,
+    expanded_within,
+)
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
 from mitld_lp.worlds.prism_program import (
-    SUM_TOLERANCE,
-    builder_options,
     check_constants,
     check_program,
-    command_names,
     extra_labels,
     name_unlabelled_commands,
-    needs_origins,
     parse_program,
-    show_sum,
     storm_error,
     storm_quiet,
-    storm_sum,
     with_constants,
     with_labels,
 )
-from mitld_lp.worlds.prism_tables import (
-    DEADLOCK_ACTION,
-    DECIDED_ACTION,
-    OUT_OF_BOUNDS,
-    Tables,
-    read_model,
-)
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 from mitld_lp.worlds.successors import Normalisation
 from mitld_lp.worlds.table import WorldTable
 
 __all__ = [
-    "PrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION", "DECIDED_ACTION",
-    "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "build_within", "check_budgets",
+    "PrismGame", "LazyPrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION",
+    "DECIDED_ACTION", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "build_within",
+    "check_budgets", "LAZY_FIRST_STATES", "LAZY_GROWTH",
 ]
 
 log = logging.getLogger(__name__)
@@ -136,27 +137,6 @@ State = tuple[Hashable, ...]
 _Distribution = tuple[tuple[State, float], ...]
 
 _INSTALL = "pip install -e '.[prism]'"
-
-BYTES_PER_STATE = 1024
-"""Memory per state of a PRISM world while it is built, for the bound from the variables'
-ranges (a program whose range product fits ``max_states`` and, at this much a state,
-``max_memory``, is built in this process): Storm's explicit model with valuations,
-labels and choice origins (measured about 550 bytes per state with 4 choices and 7
-transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one index
-entry per state), rounded up."""
-
-CAP_BYTES_PER_STATE = 16 << 10
-"""The memory allowed per state of ``max_states`` when Storm explores under a cap: 16 KiB,
-enough for about 100 transitions a state (ij.20 of QVBS, 17.5 transitions a state, takes
-2.6 KB), so that the cap stops a program far larger than ``max_states`` early and does
-not stop a dense one within it; ``max_memory`` caps it as well."""
-
-
-class PrismTooLarge(WorldError, ProductTooLarge):
-    """Storm's exploration of the PRISM program passed ``max_states`` states or the
-    memory budget (it was stopped there, in a capped child process): a budget stop
-    (exit 3 on the command line), whose message names the budget and how to raise it."""
-
 
 @dataclass(frozen=True, eq=False)
 class PrismGame:
@@ -205,10 +185,15 @@ class PrismGame:
         return frozenset(self.effects)
 
     @property
-    def n_states(self) -> int:
+    def n_states(self) -> int | None:
         """How many states Storm built (bounds the product before it is built)."""
         return len(self.states)
 
+    @property
+    def explored(self) -> int:
+        """How many states Storm expanded (all of :attr:`states` unless the world is
+        explored as the task reaches it: :class:`LazyPrismGame`)."""
+        return len(self.states)
 
     def valuation(self, state: State) -> dict[str, Hashable]:
         """The state's variables by name, e.g. ``{"x": 2, "open": False}``."""
@@ -320,6 +305,116 @@ class PrismGame:
         return out
 
 
+LAZY_FIRST_STATES = 4096
+"""The states Storm first explores of a world explored as the task reaches it."""
+
+LAZY_GROWTH = 8
+"""How much more a lazily explored world's next exploration finds than its last."""
+
+
+@dataclass(frozen=True, eq=False)
+class LazyPrismGame(PrismGame):
+    """A PRISM MDP explored as the product reaches it (``load_prism(explore=...)``).
+
+    Storm explores breadth first and stops expanding once it has found :attr:`limit`
+    states (:func:`~mitld_lp.worlds.prism_build.build_tables`): a state's index, actions
+    and moves are the whole build's, as Storm numbers states in the order it finds them.
+    A state found but not expanded, when the product asks for it, makes Storm explore
+    again with :data:`LAZY_GROWTH` times the limit (never past ``max_states``: beyond,
+    :class:`PrismTooLarge` before Storm explores further).
+
+    Differences from :class:`PrismGame`, each by name: :attr:`states` are the states
+    found so far, :attr:`n_states` is None until Storm has expanded every state (the
+    product then counts its states as it builds), :meth:`robot_actions` names the
+    program's actions, :meth:`as_table` is None (the product asks state by state), and
+    the exact successors (``--exact``) are refused: they need the whole world."""
+
+    exact_successors = None  # Storm's exact build is of the whole world (prism_exact)
+    inexact_reason = ("a PRISM world explored as the task reaches it: its exact "
+                      "probabilities come from Storm's exact build of the whole world; "
+                      "explore it whole ([prism] explore = \"full\" in a model file, "
+                      "load_prism(explore=\"full\"))")
+
+    grow: Any = field(default=None, repr=False)  # limit -> Tables (a _Grower)
+    limit: int = 0
+    max_states: int = defaults.MAX_STATES
+    program_actions: frozenset[str] = frozenset()
+
+    @property
+    def ignores_events(self) -> bool:
+        return True  # no event changes a lazily explored world (load_prism)
+
+    @property
+    def n_states(self) -> int | None:
+        return None if self._open() is not None else len(self.states)
+
+    @property
+    def explored(self) -> int:
+        found = self._open()
+        return len(self.states) - (0 if found is None else int(np.count_nonzero(found)))
+
+    def _open(self) -> np.ndarray | None:
+        return self._tables.unexplored
+
+    def _at(self, state: State, expanded: bool = True) -> int:
+        """The index of ``state``, exploring further until it is found (and, when
+        ``expanded``, expanded)."""
+        while True:
+            try:
+                s = super()._at(state)
+            except GameError:
+                if self._open() is None:
+                    raise
+            else:
+                found = self._open()
+                if not expanded or found is None or not found[s]:
+                    return s
+            self._explore_further()
+
+    def _explore_further(self) -> None:
+        if self.limit >= self.max_states:
+            raise PrismTooLarge(
+                f"{self.source}: the task reaches more than max_states = {self.max_states:,} "
+                "world states (explored breadth first from the initial state): raise "
+                "max_states (--max-world-states)")
+        limit = min(self.limit * LAZY_GROWTH, self.max_states)
+        tables: Tables = self.grow(limit)
+        log.info("%s: explored further, %d states found (limit %d)", self.source,
+                 len(tables.states), limit)
+        for name, value in (("_tables", tables), ("states", tables.states),
+                            ("limit", limit), ("decided", tables.decided)):
+            object.__setattr__(self, name, value)  # the same states, more of them
+        self._cache.pop("index", None)  # the other entries are by index: still true
+
+    def propositions(self, state: State) -> frozenset[str]:
+        t = self._tables  # a state found is labelled, expanded or not
+        return t.label_sets[int(t.label_index[self._at(state, expanded=False)])]
+
+    def robot_actions(self) -> frozenset[str]:
+        return self.program_actions
+
+    def as_table(self) -> WorldTable | None:
+        return None
+
+    def _moves(self, state: State, action: str, events: frozenset[str], exact: bool,
+               ) -> tuple[tuple[State, Any], ...]:
+        if exact:
+            raise WorldError(f"{self.source}: no exact successors on {self.inexact_reason}")
+        s = self._at(state)
+        key = (s, action)  # no event changes this world: the row is the action's alone
+        found = self._cache.get(key)
+        if found is None:
+            t = self._tables
+            row = self._names(s)
+            if action not in row:
+                raise GameError(f"state {state!r}: {action!r} is not one of its actions {row!r}")
+            c = int(t.choices[s]) + row.index(action)
+            lo, hi = int(t.branches[c]), int(t.branches[c + 1])
+            found = self._cache[key] = tuple(zip(
+                t.states.rows(t.targets[lo:hi]), t.probabilities[lo:hi].tolist(), strict=True))
+        return found
+
+
 # --------------------------------------------------------------------------- loading
 
 
@@ -344,6 +439,8 @@ def load_prism(
     max_memory: int | None = None,
     define: Mapping[str, str] | None = None,
     task: Formula | None = None,
+    explore: str = "auto",
+    first_states: int = LAZY_FIRST_STATES,
 ) -> PrismGame:
     """Build the PRISM MDP at ``path`` with Storm and return it as a game.
 
@@ -365,8 +462,21 @@ def load_prism(
     (:mod:`mitld_lp.worlds.prism_bounded`), so that a program larger than the budget
     stops when the budget is spent; the range product is only reported.
 
+    ``explore``: ``"full"`` builds every reachable state before the product is built;
+    ``"lazy"`` explores the states breadth first as the product reaches them, starting
+    with ``first_states`` (:class:`LazyPrismGame`; refused with event effects); ``"auto"``
+    (default) is ``"lazy"`` for a task of bounded horizon ``H`` (``F[0,10] goal``, not
+    ``F goal`` or ``D[mu] a``) without event effects, else ``"full"``, and explores at
+    once (:data:`LAZY_GROWTH` times more each time) until every state within ``H`` moves
+    is expanded.  Either way a world Storm explores whole within the states it was
+    allowed is the plain :class:`PrismGame`, which the product reads whole.
+
     Raises :class:`mitld_lp.worlds.WorldError` (:class:`PrismTooLarge` for a budget).
     """
+    if explore not in ("auto", "full", "lazy"):
+        raise ValueError(f"explore must be 'auto', 'full' or 'lazy', got {explore!r}")
+    if isinstance(first_states, bool) or not isinstance(first_states, int) or first_states < 1:
+        raise ValueError(f"first_states must be a positive integer, got {first_states!r}")
     memory = check_budgets(max_states, max_memory)
     where = os.fspath(path)
     p = Path(path)
@@ -395,9 +505,7 @@ def load_prism(
             raise WorldError(
                 f"{where}: label {name!r} is not defined (labels: {', '.join(defined) or 'none'})"
             )
-    actions = {
-        cmd.action_name for module in program.modules for cmd in module.commands if cmd.is_labeled
-    }
+    actions = _labelled(program)
     event_set = frozenset([events] if isinstance(events, str) else events)
     for name in sorted(event_set - actions):
         raise WorldError(
@@ -421,18 +529,33 @@ def load_prism(
         terminal = ""
     program, action_names = name_unlabelled_commands(program, where, stormpy)
 
-    def work() -> Tables:
-        return _build(stormpy, program, plain, where, chosen, event_set, action_names,
-                      terminal, max_states)
+    def work(limit: int | None = None) -> Tables:
+        return build_tables(stormpy, program, plain, where, chosen, event_set, action_names,
+                            terminal, max_states, limit)
 
-    fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
-    tables = build_within(work, where, fits, str(bound), max_states, memory)
+    lazy = explore == "lazy" or (explore == "auto" and task is not None
+                                 and horizon(task) is not None and not event_set
+                                 and UNEXPLORED not in defined)
+    if lazy and (event_set or UNEXPLORED in defined):
+        raise WorldError(f"{where}: explore='lazy' takes no event effects and no label "
+                         f"named {UNEXPLORED!r}: use explore='full'")
+    first = min(first_states, max_states)
+    if lazy:  # the first states Storm finds; all of them when the world is that small
+        grower = _Grower(work, where, memory, str(bound), max_states)
+        tables = grower(first)
+        steps = horizon(task) if task is not None and explore == "auto" else None
+        while steps is not None and not expanded_within(tables, steps) and first < max_states:
+            first = min(first * LAZY_GROWTH, max_states)  # the task's horizon reaches
+            tables = grower(first)  # further: explored before the product, at once
+    else:
+        fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
+        tables = build_within(work, where, fits, str(bound), max_states, memory)
     log.info(
         "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
         where, len(tables.states), bound, tables.decided, terminal or "never",
         sorted(chosen), sorted(event_set),
     )
-    return PrismGame(
+    common = dict(
         source=where,
         variables=tables.variables,
         states=tables.states,
@@ -445,104 +568,34 @@ def load_prism(
         _tables=tables,
         recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
     )
+    if tables.unexplored is None:
+        return PrismGame(**common)  # type: ignore[arg-type]
+    return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
+                         max_states=max_states,
+                         program_actions=frozenset(action_names.get(a, a) for a in
+                                                   _labelled(program)) - event_set)
 
 
-def check_budgets(max_states: int, max_memory: int | None) -> int:
-    """The memory budget in bytes (``max_memory``, or the default); ``ValueError`` for a
-    budget that is not a positive integer."""
-    for name, value in (("max_states", max_states), ("max_memory", max_memory)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                                  or value < 1):
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return default_max_memory() if max_memory is None else max_memory
+def _labelled(program: Any) -> set[str]:
+    """The actions of the program's commands."""
+    return {cmd.action_name for module in program.modules for cmd in module.commands
+            if cmd.is_labeled}
 
 
-def build_within(work: Callable[[], Tables], where: str, fits: bool, note: str,
-                 max_states: int, memory: int) -> Tables:
-    """``work()`` (Storm's build of a world, copied into tables) here when ``fits`` (every
-    valuation fits the budgets), else in a child process capped at the memory budget
-    (:mod:`mitld_lp.worlds.prism_bounded`): :class:`PrismTooLarge` when it passes it.
-    ``note`` says what bounds the states, for the message."""
-    if fits:
-        return work()  # every valuation fits: no cap needed
-    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
-    if not can_cap():
-        log.info("%s: %s; no memory cap on this platform", where, note)
-        return work()
-    try:
-        return run_capped(work, budget)
-    except OutOfBudget as exc:
-        raise PrismTooLarge(
-            f"{where}: Storm's exploration passed the budget of {byte_text(budget)} "
-            f"({exc.detail}; max_states = {max_states:,} at {byte_text(CAP_BYTES_PER_STATE)} a "
-            f"state, max_memory = {byte_text(memory)}; {note}): raise max_states "
-            "(--max-world-states) or max_memory (--max-memory)"
-        ) from None
+class _Grower:
+    """A lazily explored world's next exploration: ``grower(limit)``, Storm's build of
+    the states it expands before it has found ``limit``, within the budgets."""
 
+    def __init__(self, work: Callable[[int], Tables], where: str, memory: int, note: str,
+                 max_states: int) -> None:
+        self.work, self.where, self.memory = work, where, memory
+        self.note, self.max_states = note, max_states
 
-def _build(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
-           events: frozenset[str], action_names: dict[str, str], terminal: str,
-           max_states: int) -> Tables:
-    """Storm's build of ``program``, copied into :class:`Tables`.
+    def __reduce__(self) -> Any:
+        raise TypeError(f"{self.where}: a world explored as the task reaches it does not "
+                        "pickle (Storm explores it on demand): load it with explore='full'")
 
-    Storm's exploration checks refuse updates out of a variable's range (without them
-    it stores values modulo the range) and probabilities that do not sum to 1, compared
-    *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
-    checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
-    PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
-    model is built without the checks, with Storm's out-of-bounds state (the exact build
-    stopped at the first sum it did not take, before it had checked every update):
-    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) the
-    sums, with the tolerance, and refuses an update that reached that state."""
-    # Two choices of one state named by one action are told apart by the commands they
-    # come from (Storm's choice origins, a tenth of the build): only where needed.
-    origins = needs_origins(program)
-
-    def options(checks: bool) -> Any:
-        return builder_options(stormpy, program, terminal, checks=checks, origins=origins)
-
-    errors = (RuntimeError, stormpy.exceptions.StormError)
-    try:
-        with storm_quiet():
-            model = stormpy.build_model(program, options=options(True))
-    except errors as exc:
-        if storm_sum(str(exc)) is None:
-            raise storm_error(exc, where, program, plain) from None
-        model = None
-    if model is None:
-        try:
-            with storm_quiet():
-                stormpy.build_model[stormpy.Rational](program, options=options(True))
-        except errors as exc:
-            total = storm_sum(str(exc))
-            if total is None or abs(total - 1) > SUM_TOLERANCE:
-                raise storm_error(exc, where, program, plain) from None
-            log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
-                     "built without Storm's checks, the sums checked on the model",
-                     where, show_sum(total), SUM_TOLERANCE)
-        try:
-            with storm_quiet():
-                model = stormpy.build_model(program, options=options(False))
-        except errors as exc:
-            raise storm_error(exc, where, program, plain) from None
-    if model.nr_states > max_states:
-        raise PrismTooLarge(
-            f"{where}: Storm explored {model.nr_states:,} states, more than max_states = "
-            f"{max_states:,}: raise max_states (--max-world-states)"
-        )
-    built = set(model.labeling.get_labels())
-    if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
-        raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
-    known = {lab.name for lab in program.labels} | {"init", "deadlock", OUT_OF_BOUNDS}
-    stopped = sorted(built - known) if terminal else []
-    commands = command_names(program)
-
-    def origin(choice: int) -> str:
-        """The commands a choice comes from, ``robot_cmd2``."""
-        if not origins:  # no module has two commands of one action: see above
-            raise AssertionError("two choices of one action without two such commands")
-        cmds = sorted(model.choice_origins.get_command_set(choice))
-        return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
-
-    return read_model(model, where, chosen, events, action_names, origin,
-                      stopped[0] if len(stopped) == 1 else None)
+    def __call__(self, limit: int) -> Tables:
+        fits = limit * BYTES_PER_STATE <= self.memory
+        return build_within(lambda: self.work(limit), self.where, fits, self.note, self.max_states,
+                            self.memory)

@@ -69,6 +69,9 @@ class Tables:
         decided: how many states were not expanded because the task is decided there.
         normalised: the choices whose probabilities summed to 1 only within PRISM's
             tolerance, divided by their sums (None when there were none).
+        unexplored: ``n`` flags, the states found but not expanded by a build with a
+            state limit (:func:`mitld_lp.worlds.prism_build.build_tables`); their rows
+            are Storm's self-loops, not the program's (None: every state expanded).
     """
 
     variables: tuple[str, ...]
@@ -85,6 +88,7 @@ class Tables:
     effects: Mapping[str, np.ndarray]
     decided: int = 0
     normalised: Normalisation | None = None
+    unexplored: np.ndarray | None = None
 
 
 def _indices(bits: Any) -> np.ndarray:
@@ -175,6 +179,10 @@ class Valuations(Sequence[State]):
             for j in self.booleans:
                 row[j] = bool(row[j])
         return [tuple(row) for row in rows]
+
+    def rows(self, indices: np.ndarray) -> list[State]:
+        """The states at ``indices``, in one call."""
+        return self._tuples(self.values[indices])
 
     @overload
     def __getitem__(self, i: int) -> State: ...

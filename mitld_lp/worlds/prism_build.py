@@ -1,0 +1,221 @@
+"""Storm's build of a PRISM program into :class:`~mitld_lp.worlds.prism_tables.Tables`,
+within the world's budgets, whole or the first states of its breadth-first exploration.
+
+:func:`build_tables` runs Storm's explicit builder (its exploration checks on, the sums
+redone in exact arithmetic where only they fail) and copies the model; given ``limit``
+it stops expanding once Storm has found that many states (Storm's
+``exploration_state_limit``): the states found but not expanded carry Storm's label
+``"unexplored"`` (:attr:`Tables.unexplored`), and every expanded state has the number,
+the choices and the rows it has in the whole build, because Storm numbers states in the
+order its breadth-first search finds them (:class:`mitld_lp.worlds.prism.LazyPrismGame`
+builds on that).  :func:`build_within` runs a build in a memory-capped child process
+when it may not fit (:mod:`mitld_lp.worlds.prism_bounded`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
+from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_program import (
+    SUM_TOLERANCE,
+    builder_options,
+    command_names,
+    needs_origins,
+    show_sum,
+    storm_error,
+    storm_quiet,
+    storm_sum,
+)
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
+
+__all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
+           "check_budgets", "build_within", "build_tables", "expanded_within"]
+
+log = logging.getLogger("mitld_lp.worlds.prism")
+
+UNEXPLORED = "unexplored"
+"""Storm's label of the states it found but did not expand (a build with a state limit)."""
+
+BYTES_PER_STATE = 1024
+"""Memory per state of a PRISM world while it is built, for the bound from the variables'
+ranges (a program whose range product fits ``max_states`` and, at this much a state,
+``max_memory``, is built in this process): Storm's explicit model with valuations,
+labels and choice origins (measured about 550 bytes per state with 4 choices and 7
+transitions per state, stormpy 2.0) and the game's copy (arrays, one tuple and one index
+entry per state), rounded up."""
+
+CAP_BYTES_PER_STATE = 16 << 10
+"""The memory allowed per state of ``max_states`` when Storm explores under a cap: 16 KiB,
+enough for about 100 transitions a state (ij.20 of QVBS, 17.5 transitions a state, takes
+2.6 KB), so that the cap stops a program far larger than ``max_states`` early and does
+not stop a dense one within it; ``max_memory`` caps it as well."""
+
+
+class PrismTooLarge(WorldError, ProductTooLarge):
+    """Storm's exploration of the PRISM program passed ``max_states`` states or the
+    memory budget (it was stopped there, in a capped child process): a budget stop
+    (exit 3 on the command line), whose message names the budget and how to raise it."""
+
+
+
+def check_budgets(max_states: int, max_memory: int | None) -> int:
+    """The memory budget in bytes (``max_memory``, or the default); ``ValueError`` for a
+    budget that is not a positive integer."""
+    for name, value in (("max_states", max_states), ("max_memory", max_memory)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 1):
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return default_max_memory() if max_memory is None else max_memory
+
+
+def build_within(work: Callable[[], Tables], where: str, fits: bool, note: str,
+                 max_states: int, memory: int) -> Tables:
+    """``work()`` (Storm's build of a world, copied into tables) here when ``fits`` (every
+    valuation fits the budgets), else in a child process capped at the memory budget
+    (:mod:`mitld_lp.worlds.prism_bounded`): :class:`PrismTooLarge` when it passes it.
+    ``note`` says what bounds the states, for the message."""
+    if fits:
+        return work()  # every valuation fits: no cap needed
+    budget = min(memory, max_states * CAP_BYTES_PER_STATE)
+    if not can_cap():
+        log.info("%s: %s; no memory cap on this platform", where, note)
+        return work()
+    try:
+        return run_capped(work, budget)
+    except OutOfBudget as exc:
+        raise PrismTooLarge(
+            f"{where}: Storm's exploration passed the budget of {byte_text(budget)} "
+            f"({exc.detail}; max_states = {max_states:,} at {byte_text(CAP_BYTES_PER_STATE)} a "
+            f"state, max_memory = {byte_text(memory)}; {note}): raise max_states "
+            "(--max-world-states) or max_memory (--max-memory)"
+        ) from None
+
+
+def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
+                 events: frozenset[str], action_names: dict[str, str], terminal: str,
+                 max_states: int, limit: int | None = None) -> Tables:
+    """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
+    the states Storm expands before it has found ``limit`` states (the module docstring).
+
+    Storm's exploration checks refuse updates out of a variable's range (without them
+    it stores values modulo the range) and probabilities that do not sum to 1, compared
+    *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only the sum fails, the
+    checks are run again in exact arithmetic (``1/10`` is exact there), a sum within
+    PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` is accepted, and the
+    model is built without the checks, with Storm's out-of-bounds state (the exact build
+    stopped at the first sum it did not take, before it had checked every update):
+    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) the
+    sums, with the tolerance, and refuses an update that reached that state."""
+    # Two choices of one state named by one action are told apart by the commands they
+    # come from (Storm's choice origins, a tenth of the build): only where needed.
+    origins = needs_origins(program)
+
+    def options(checks: bool) -> Any:
+        return builder_options(stormpy, program, terminal, checks=checks, origins=origins)
+
+    errors = (RuntimeError, stormpy.exceptions.StormError)
+    try:
+        with storm_quiet():
+            model = _storm_build(stormpy, program, options(True), float, limit)
+    except errors as exc:
+        if storm_sum(str(exc)) is None:
+            raise storm_error(exc, where, program, plain) from None
+        model = None
+    if model is None:
+        try:  # (stormpy's exact builder takes no state limit: a limited build's sums
+            # are all checked by read_model instead)
+            with storm_quiet():
+                if limit is None:
+                    _storm_build(stormpy, program, options(True), stormpy.Rational, None)
+        except errors as exc:
+            total = storm_sum(str(exc))
+            if total is None or abs(total - 1) > SUM_TOLERANCE:
+                raise storm_error(exc, where, program, plain) from None
+            log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
+                     "built without Storm's checks, the sums checked on the model",
+                     where, show_sum(total), SUM_TOLERANCE)
+        try:
+            with storm_quiet():
+                model = _storm_build(stormpy, program, options(False), float, limit)
+        except errors as exc:
+            raise storm_error(exc, where, program, plain) from None
+    built = set(model.labeling.get_labels())
+    unexplored = np.zeros(model.nr_states, dtype=bool)
+    if UNEXPLORED in built and limit is not None:
+        unexplored[np.fromiter(model.labeling.get_states(UNEXPLORED), dtype=np.int64)] = True
+    if model.nr_states - int(np.count_nonzero(unexplored)) > max_states:
+        raise PrismTooLarge(
+            f"{where}: Storm explored {model.nr_states:,} states, more than max_states = "
+            f"{max_states:,}: raise max_states (--max-world-states)"
+        )
+    if not chosen <= built:  # cannot happen with build_all_labels; never trust it silently
+        raise WorldError(f"{where}: Storm did not build labels {sorted(chosen - built)}")
+    known = {lab.name for lab in program.labels} | {"init", "deadlock", OUT_OF_BOUNDS}
+    if limit is not None:
+        known.add(UNEXPLORED)
+    stopped = sorted(built - known) if terminal else []
+    commands = command_names(program)
+
+    def origin(choice: int) -> str:
+        """The commands a choice comes from, ``robot_cmd2``."""
+        if not origins:  # no module has two commands of one action: see above
+            raise AssertionError("two choices of one action without two such commands")
+        cmds = sorted(model.choice_origins.get_command_set(choice))
+        return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
+
+    tables = read_model(model, where, chosen, events, action_names, origin,
+                        stopped[0] if len(stopped) == 1 else None)
+    return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
+
+
+def _storm_build(stormpy: Any, program: Any, options: Any, value_type: Any,
+                 limit: int | None) -> Any:
+    """Storm's sparse build of ``program`` (``value_type``: float or ``stormpy.Rational``,
+    the latter without a limit), breadth first; with ``limit``, no state expanded once
+    that many are found."""
+    if limit is None:
+        return stormpy.build_model[value_type](program, options=options)
+    from stormpy import developer  # pyright: ignore[reportMissingImports]
+
+    explore = developer.ExplicitModelBuilderOptions[float]()
+    explore.exploration_order = developer.ExplorationOrder.BFS  # Storm's default order
+    explore.exploration_state_limit = limit
+    description = developer.SymbolicModelDescription(program)
+    return developer.make_explicit_model_builder[float](
+        description, options, exploration_options=explore).build()
+
+
+
+def expanded_within(tables: Tables, steps: int) -> bool:
+    """Whether every state within ``steps`` moves of the initial state is expanded in
+    ``tables`` (a build with a state limit; always true for a whole one): a task of that
+    horizon then reads nothing of the world that Storm has not explored."""
+    found = tables.unexplored
+    if found is None:
+        return True
+    n = len(tables.states)
+    per_choice = np.diff(tables.branches)
+    owner = np.repeat(np.repeat(np.arange(n), np.diff(tables.choices)), per_choice)
+    graph = sp.csr_matrix((np.ones(owner.size, dtype=np.int8), (owner, tables.targets)),
+                          shape=(n, n))
+    seen = np.zeros(n, dtype=bool)
+    frontier = np.array([tables.initial])
+    seen[frontier] = True
+    for _ in range(steps + 1):
+        if found[frontier].any():
+            return False
+        nxt = np.unique(graph[frontier].indices)
+        frontier = nxt[~seen[nxt]]
+        if frontier.size == 0:
+            return True
+        seen[frontier] = True
+    return True
