@@ -134,6 +134,24 @@ def test_a_time_limit_is_a_status_not_a_hang(capsys, tmp_path):
     assert json.loads(captured.out)["status"] == "time_limit"
 
 
+def test_a_time_limit_spent_before_the_solve_is_a_status_not_a_user_error():
+    # On a loaded machine the model's loading ate a 0.01 s limit: the time left, zero,
+    # went to the settings, which refuse a zero limit as a user error (exit 2, "got
+    # 0.0").  Spent is a positive sliver now; the settings take it and the solve stops.
+    import argparse
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.cli import kernel
+
+    spent = argparse.Namespace(time_limit=0.01, started=time.monotonic() - 60.0)
+    left = kernel.time_left(spent)
+    assert left is not None and 0 < left <= kernel.SPENT
+    assert kernel.time_left(argparse.Namespace(time_limit=None, started=0.0)) is None
+    big = load_model(BUS)
+    r = synthesize(big, time_limit=left)
+    assert r.status in {"time_limit", "optimal"}  # the tiny case may finish in 1 ms
+
+
 def test_a_memory_budget_stops_before_the_work(capsys):
     # 10 KiB cannot hold the bus grid's 371-state product: a budget stop, exit 3.
     line = _one_error_line(capsys, 3, ["info", BUS, "--max-memory", "10K", "-q"])

@@ -358,8 +358,16 @@ def apply_file_time_limit(args: argparse.Namespace) -> None:
 
 def time_left(args: argparse.Namespace) -> float | None:
     """Seconds left of ``--time-limit`` (None without one): the solvers stop with status
-    ``time_limit`` and their bracket so far; the command's own watchdog is the backstop."""
-    return Deadline.after(args.time_limit, args.started, time.monotonic).left()
+    ``time_limit`` and their bracket so far; the command's own watchdog is the backstop.
+    A limit already spent is :data:`SPENT` seconds, not zero: the settings refuse a zero
+    limit as a user error (exit 2, on a loaded machine where the model's loading ate the
+    limit), while a spent one is the time-limit status (exit 3)."""
+    left = Deadline.after(args.time_limit, args.started, time.monotonic).left()
+    return left if left is None else max(left, SPENT)
+
+
+#: The seconds :func:`time_left` gives for a time limit already spent.
+SPENT = 1e-3
 
 
 def say(message: str) -> None:
