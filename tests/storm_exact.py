@@ -1,9 +1,11 @@
-"""What several tests share: the issue's rare 12-state PRISM MDP and Storm's exact value
+"""What several tests share: the issue's rare 12-state PRISM MDP, the expected-reward
+properties of tests/data/rewards.prism and random reward MDPs, and Storm's exact value
 of a property on a PRISM file (``build_model[stormpy.Rational]``, an exact solver
 environment), the independent value certified brackets are compared with."""
 
 from __future__ import annotations
 
+import random
 from fractions import Fraction
 from pathlib import Path
 
@@ -19,6 +21,41 @@ label "hit" = k=10;
 """
 
 
+PROPS = ['R{"cost"}min=? [F "goal"]', 'R{"cost"}max=? [F "goal"]',
+         'R{"cost"}min=? [F "stop"]', 'R{"cost"}max=? [F "stop"]',
+         'R{"time"}min=? [F "stop"]', 'R{"time"}max=? [F "stop"]',
+         'R{"time"}min=? [F x>=2 & !lost]', 'R{"time"}max=? [F (x>=2 | lost)]',
+         'R{"cost"}min=? [F lost]', 'R{"cost"}max=? [F !lost]']
+
+
+def random_prism(rng: random.Random, n: int) -> str:
+    """A random MDP over ``s`` in ``[0..n-1]``: each state two or three commands with
+    random rational branches and random action rewards, a state reward on some states."""
+    lines = ["mdp", "module m", f"  s : [0..{n - 1}] init 0;"]
+    actions = []
+    for s in range(n - 1):
+        for k in range(rng.choice([1, 2, 3])):
+            succ = rng.sample(range(n), rng.choice([1, 2, 3]))
+            weights = [rng.randint(1, 5) for _ in succ]
+            total = sum(weights)
+            branches = " + ".join(f"{w}/{total} : (s'={t})"
+                                  for w, t in zip(weights, succ, strict=True))
+            lines.append(f"  [a{s}_{k}] s={s} -> {branches};")
+            actions.append(f"a{s}_{k}")
+    lines.append(f"  [end] s={n - 1} -> true;")
+    lines.append("endmodule")
+    lines.append('rewards "r"')
+    for s in range(n - 1):
+        if rng.random() < 0.5:
+            lines.append(f"  s={s} : {rng.randint(0, 3)};")
+    for a in actions:
+        if rng.random() < 0.6:
+            lines.append(f"  [{a}] true : {rng.randint(0, 4)}/{rng.randint(1, 3)};")
+    lines.append("endrewards")
+    lines.append(f'label "goal" = s={n - 1};')
+    return "\n".join(lines) + "\n"
+
+
 def storm_rational(prism: Path, prop: str) -> Fraction:
     """Storm's exact value of ``prop`` at the initial state of the PRISM file ``prism``."""
     import stormpy
@@ -30,3 +67,18 @@ def storm_rational(prism: Path, prop: str) -> Fraction:
     env.solver().force_exact = True
     result = stormpy.model_checking(model, props[0], environment=env)
     return Fraction(str(result.get_value(model.initial_states[0])))
+
+
+def storm_value(prop: str, constants: dict, path: str) -> Fraction | None:
+    """Storm's exact value of ``prop`` at the initial state of the PRISM file ``path``
+    with its open ``constants`` given (None for Storm's infinity)."""
+    import stormpy
+
+    program = stormpy.parse_prism_program(path)
+    props = stormpy.parse_properties(prop, program)
+    if constants:
+        program, props = stormpy.instantiate_constants(program, constants, props)
+    model = stormpy.build_model[stormpy.Rational](program, props)
+    result = stormpy.model_checking(model, props[0], only_initial_states=True)
+    text = str(result.get_value(model.initial_states[0]))
+    return None if text == "inf" else Fraction(text)

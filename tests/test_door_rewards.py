@@ -1,5 +1,6 @@
-"""``mitld-lp solve FILE.prism --prop 'R{"r"}min=? [F target]'`` against Storm's exact
-engine on the same file and property: the answer is the exact optimum (compared as a
+"""``mitld-lp solve FILE.prism --prop 'R{"r"}min=? [F target]' --exact`` against Storm's
+exact engine on the same file and property (the float route, the default, is
+tests/test_rewards_float.py): the answer is the exact optimum (compared as a
 fraction, no tolerance) inside its certified bracket, ``inf`` exactly where Storm says
 infinity (a target not reached with probability 1), and the reward forms not answered
 are refused by name (exit 2)."""
@@ -16,6 +17,8 @@ import pytest
 stormpy = pytest.importorskip("stormpy")
 pytest.importorskip("flint")
 
+from storm_exact import PROPS, random_prism, storm_value  # noqa: E402
+
 from mitld_lp.cli import main  # noqa: E402
 
 DATA = Path(__file__).parent / "data"
@@ -24,28 +27,14 @@ WALK = str(DATA / "rewards.prism")
 
 def storm_exact(prop: str, constants: dict, path: str = WALK) -> Fraction | None:
     """Storm's exact value of ``prop`` at the initial state (None for infinity)."""
-    program = stormpy.parse_prism_program(path)
-    props = stormpy.parse_properties(prop, program)
-    if constants:
-        program, props = stormpy.instantiate_constants(program, constants, props)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    result = stormpy.model_checking(model, props[0], only_initial_states=True)
-    text = str(result.get_value(model.initial_states[0]))
-    return None if text == "inf" else Fraction(text)
+    return storm_value(prop, constants, path)
 
 
 def ours(capsys: pytest.CaptureFixture[str], *argv: str, path: str = WALK
          ) -> tuple[int, list[dict]]:
-    code = main(["solve", path, "--json", "-q", *argv])
+    code = main(["solve", path, "--json", "-q", "--exact", *argv])
     lines = capsys.readouterr().out.strip().splitlines()
     return code, [json.loads(line) for line in lines]
-
-
-PROPS = ['R{"cost"}min=? [F "goal"]', 'R{"cost"}max=? [F "goal"]',
-         'R{"cost"}min=? [F "stop"]', 'R{"cost"}max=? [F "stop"]',
-         'R{"time"}min=? [F "stop"]', 'R{"time"}max=? [F "stop"]',
-         'R{"time"}min=? [F x>=2 & !lost]', 'R{"time"}max=? [F (x>=2 | lost)]',
-         'R{"cost"}min=? [F lost]', 'R{"cost"}max=? [F !lost]']
 
 
 @pytest.mark.parametrize("idle", ["true", "false"])
@@ -113,7 +102,7 @@ def test_without_python_flint_an_expected_reward_is_refused_by_name(capsys, monk
 
     monkeypatch.setitem(sys.modules, "flint", None)  # import flint raises ImportError
     assert main(["solve", WALK, "--prop", 'R{"cost"}min=? [F "stop"]', "--const",
-                 "N=3,IDLE=true", "-q"]) == 2
+                 "N=3,IDLE=true", "-q", "--exact"]) == 2
     err = capsys.readouterr().err
     assert "python-flint" in err and "mitld_lp[exact]" in err and "Traceback" not in err
 
@@ -133,39 +122,11 @@ def test_refused_by_name_exit_2(capsys, prop: str, says: str) -> None:
     assert says in err and "error:" in err
 
 
-def _random_prism(rng: random.Random, n: int) -> str:
-    """A random MDP over ``s`` in ``[0..n-1]``: each state two or three commands with
-    random rational branches and random action rewards, a state reward on some states."""
-    lines = ["mdp", "module m", f"  s : [0..{n - 1}] init 0;"]
-    actions = []
-    for s in range(n - 1):
-        for k in range(rng.choice([1, 2, 3])):
-            succ = rng.sample(range(n), rng.choice([1, 2, 3]))
-            weights = [rng.randint(1, 5) for _ in succ]
-            total = sum(weights)
-            branches = " + ".join(f"{w}/{total} : (s'={t})"
-                                  for w, t in zip(weights, succ, strict=True))
-            lines.append(f"  [a{s}_{k}] s={s} -> {branches};")
-            actions.append(f"a{s}_{k}")
-    lines.append(f"  [end] s={n - 1} -> true;")
-    lines.append("endmodule")
-    lines.append('rewards "r"')
-    for s in range(n - 1):
-        if rng.random() < 0.5:
-            lines.append(f"  s={s} : {rng.randint(0, 3)};")
-    for a in actions:
-        if rng.random() < 0.6:
-            lines.append(f"  [{a}] true : {rng.randint(0, 4)}/{rng.randint(1, 3)};")
-    lines.append("endrewards")
-    lines.append(f'label "goal" = s={n - 1};')
-    return "\n".join(lines) + "\n"
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_random_models_against_storm(capsys, tmp_path, seed: int) -> None:
     rng = random.Random(seed)
     path = tmp_path / f"random{seed}.prism"
-    path.write_text(_random_prism(rng, rng.randint(4, 9)))
+    path.write_text(random_prism(rng, rng.randint(4, 9)))
     for prop in ('R{"r"}min=? [F "goal"]', 'R{"r"}max=? [F "goal"]'):
         code, [answer] = ours(capsys, "--prop", prop, path=str(path))
         assert code == 0
@@ -209,4 +170,7 @@ def test_dtmc_and_policy_refusal(capsys, tmp_path) -> None:
     policy = tmp_path / "p.json"
     assert main(["solve", str(path), "--prop", 'Rmin=? [F "end"]', "--policy",
                  str(policy)]) == 2
+    assert "writes no policy file" in capsys.readouterr().err and not policy.exists()
+    assert main(["solve", str(path), "--prop", 'Rmin=? [F "end"]', "--policy",
+                 str(policy), "--exact"]) == 2
     assert "writes no policy file" in capsys.readouterr().err and not policy.exists()
