@@ -104,7 +104,7 @@ class _Rows:
     """The useful choices as a CSR matrix over all states, with their float rewards and
     the rounding of their sums."""
 
-    def __init__(self, model: RewardMDP, useful: np.ndarray) -> None:
+    def __init__(self, model: RewardMDP, useful: np.ndarray, eta: float) -> None:
         self.n = model.n_states
         self.rows = np.flatnonzero(useful)
         self.position = np.full(useful.size, -1, dtype=np.int64)
@@ -119,7 +119,7 @@ class _Rows:
         self.reward = reward
         self.r_low = reward * (1.0 - 2.0 * ETA)
         self.r_high = reward * (1.0 + 2.0 * ETA)
-        self.rnd = rounding(self.matrix)
+        self.rnd = rounding(self.matrix, eta)
         self.zero = reward == 0.0
         self.every = np.arange(self.rows.size)
         self.nonempty = np.diff(self.matrix.indptr) > 0
@@ -297,10 +297,11 @@ def _check(rows: _Rows, x: np.ndarray, solved: np.ndarray, sense: str, policy_ro
 
 
 def solve_reward_float(model: RewardMDP, sense: str, *, time_limit: float | None = None,
-                       use_lp: bool = True) -> RewardBracket:
+                       use_lp: bool = True, eta: float = ETA) -> RewardBracket:
     """``Rmin`` (``sense`` "min") or ``Rmax`` ("max") of the expected total reward until
     the target, bracketed (module docs).  ``model``'s probabilities and rewards are
-    floats (or anything :func:`numpy.asarray` reads as them)."""
+    floats (or anything :func:`numpy.asarray` reads as them); ``eta``: the probabilities'
+    allowance (:func:`mitld_lp.solvers.rounding.model_eta` for a product)."""
     if sense not in ("min", "max"):
         raise ValueError(f"sense must be 'min' or 'max', got {sense!r}")
     rewards = np.asarray(model.rewards, dtype=np.float64)
@@ -317,7 +318,7 @@ def solve_reward_float(model: RewardMDP, sense: str, *, time_limit: float | None
     solved = np.flatnonzero(finite & ~model.target)
     if not solved.size:  # the initial state is a target
         return RewardBracket(0.0, 0.0, False, True, none, 0, None, "not run", 0)
-    rows = _Rows(model, useful)
+    rows = _Rows(model, useful, eta)
     start = (attractor_policy(model, finite, useful) if sense == "min" else none.copy())
     if sense == "max":
         start[rows.states] = rows.rows[rows.starts]
