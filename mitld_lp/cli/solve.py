@@ -26,10 +26,8 @@ from mitld_lp.cli.kernel import (
     solve_settings,
     write_file,
 )
-from mitld_lp.cli.steps import solve_steps
 from mitld_lp.files import write as files
 from mitld_lp.report import bracket_text
-from mitld_lp.routes.steps import STEP_OBJECTIVES
 
 __all__ = ["args_info", "cmd_info", "args_solve", "cmd_solve"]
 
@@ -103,7 +101,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     if world and args.spec is None:  # --prop, or a JANI file's own properties
         return door.solve_properties(args, policy_file)
-    if args.objective in STEP_OBJECTIVES:  # the expected steps (cost), its own solve
+    if args.objective in ("min-steps", "min-cost"):  # the expected steps (cost)
+        from mitld_lp.cli.steps import solve_steps  # its solver loads only when asked
+
         return solve_steps(args, world, policy_file)
     model = door.world_model(args) if world else read_model(args)
     posed = pose(model, args.constraint, then=args.then,
