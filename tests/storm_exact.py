@@ -1,7 +1,8 @@
-"""What several tests share: the issue's rare 12-state PRISM MDP, Storm's exact value
-of a property on a PRISM (or JANI) file (``build_model[stormpy.Rational]``, an exact
-solver environment), the independent value certified brackets are compared with, and
-random PRISM MDPs with a reward structure."""
+"""What several tests share: the issue's rare 12-state PRISM MDP, the expected-reward
+properties of tests/data/rewards.prism, random PRISM MDPs with a reward structure, and
+Storm's exact value of a property on a PRISM (or JANI) file
+(``build_model[stormpy.Rational]``, an exact solver environment), the independent value
+certified brackets are compared with."""
 
 from __future__ import annotations
 
@@ -21,6 +22,13 @@ label "hit" = k=10;
 """
 
 
+PROPS = ['R{"cost"}min=? [F "goal"]', 'R{"cost"}max=? [F "goal"]',
+         'R{"cost"}min=? [F "stop"]', 'R{"cost"}max=? [F "stop"]',
+         'R{"time"}min=? [F "stop"]', 'R{"time"}max=? [F "stop"]',
+         'R{"time"}min=? [F x>=2 & !lost]', 'R{"time"}max=? [F (x>=2 | lost)]',
+         'R{"cost"}min=? [F lost]', 'R{"cost"}max=? [F !lost]']
+
+
 def storm_rational(prism: Path, prop: str) -> Fraction:
     """Storm's exact value of ``prop`` at the initial state of the PRISM file ``prism``."""
     import stormpy
@@ -34,10 +42,10 @@ def storm_rational(prism: Path, prop: str) -> Fraction:
     return Fraction(str(result.get_value(model.initial_states[0])))
 
 
-def storm_value(path: str, prop: str, constants: dict) -> Fraction:
+def storm_value(path: str, prop: str, constants: dict) -> Fraction | None:
     """Storm's exact value of ``prop`` at the initial state of the PRISM or JANI file
     ``path``, its open ``constants`` given (only the initial state asked: Storm's
-    reward-bounded until needs that)."""
+    reward-bounded until needs that); None for Storm's infinity."""
     import stormpy
 
     if path.endswith(".jani"):
@@ -52,7 +60,8 @@ def storm_value(path: str, prop: str, constants: dict) -> Fraction:
     env.solver().force_exact = True
     result = stormpy.model_checking(model, props[0], environment=env,
                                     only_initial_states=True)
-    return Fraction(str(result.get_value(model.initial_states[0])))
+    text = str(result.get_value(model.initial_states[0]))
+    return None if text == "inf" else Fraction(text)
 
 
 def random_prism(rng: random.Random, n: int, integer: bool = False) -> str:

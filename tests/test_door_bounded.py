@@ -145,7 +145,7 @@ def test_random_models_against_storm(capsys, tmp_path, seed: int) -> None:
 def test_jani_rewards_are_storms(capsys) -> None:
     """The JANI file's own properties (Emin over cost until goal, Emax over time until
     stop: infinity with the idle loop, Emin of time at step 2) and R properties on it."""
-    code, answers = ours(capsys, JANI, "--const", "N=3")
+    code, answers = ours(capsys, JANI, "--const", "N=3", "--exact")
     assert code == 0 and [a["property"] for a in answers] == ["cost_min", "time_max",
                                                              "time_at"]
     model, props = stormpy.parse_jani_model(JANI)
@@ -162,8 +162,14 @@ def test_jani_rewards_are_storms(capsys) -> None:
             check(answer, Fraction(value))
     for prop in ('R{"cost"}max=? [C<=3]', 'R{"time"}min=? [C<=3]', 'R{"time"}max=? [I=1]',
                  'R{"cost"}min=? [F "stop"]'):
-        _, [answer] = ours(capsys, JANI, "--prop", prop, "--const", "N=3")
+        _, [answer] = ours(capsys, JANI, "--prop", prop, "--const", "N=3", "--exact")
         check(answer, storm_value(JANI, prop, {"N": 3}))
+    # without --exact an expected reward until a target is the float route's bracket
+    for prop in ('R{"cost"}min=? [F "stop"]', 'R{"cost"}min=? [F "goal"]'):
+        code, [answer] = ours(capsys, JANI, "--prop", prop, "--const", "N=3")
+        value = storm_value(JANI, prop, {"N": 3})
+        assert code == 0 and answer["certified"]
+        assert Fraction(answer["lower"]) <= value <= Fraction(answer["upper"])
 
 
 @pytest.mark.parametrize("path, prop, says", [

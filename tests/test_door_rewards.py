@@ -1,5 +1,6 @@
-"""``mitld-lp solve FILE.prism --prop 'R{"r"}min=? [F target]'`` against Storm's exact
-engine on the same file and property: the answer is the exact optimum (compared as a
+"""``mitld-lp solve FILE.prism --prop 'R{"r"}min=? [F target]' --exact`` against Storm's
+exact engine on the same file and property (the float route, the default, is
+tests/test_rewards_float.py): the answer is the exact optimum (compared as a
 fraction, no tolerance) inside its certified bracket, ``inf`` exactly where Storm says
 infinity (a target not reached with probability 1), and the reward forms not answered
 are refused by name (exit 2)."""
@@ -16,7 +17,7 @@ import pytest
 stormpy = pytest.importorskip("stormpy")
 pytest.importorskip("flint")
 
-from storm_exact import random_prism  # noqa: E402
+from storm_exact import PROPS, random_prism, storm_value  # noqa: E402
 
 from mitld_lp.cli import main  # noqa: E402
 
@@ -26,28 +27,14 @@ WALK = str(DATA / "rewards.prism")
 
 def storm_exact(prop: str, constants: dict, path: str = WALK) -> Fraction | None:
     """Storm's exact value of ``prop`` at the initial state (None for infinity)."""
-    program = stormpy.parse_prism_program(path)
-    props = stormpy.parse_properties(prop, program)
-    if constants:
-        program, props = stormpy.instantiate_constants(program, constants, props)
-    model = stormpy.build_model[stormpy.Rational](program, props)
-    result = stormpy.model_checking(model, props[0], only_initial_states=True)
-    text = str(result.get_value(model.initial_states[0]))
-    return None if text == "inf" else Fraction(text)
+    return storm_value(path, prop, constants)
 
 
 def ours(capsys: pytest.CaptureFixture[str], *argv: str, path: str = WALK
          ) -> tuple[int, list[dict]]:
-    code = main(["solve", path, "--json", "-q", *argv])
+    code = main(["solve", path, "--json", "-q", "--exact", *argv])
     lines = capsys.readouterr().out.strip().splitlines()
     return code, [json.loads(line) for line in lines]
-
-
-PROPS = ['R{"cost"}min=? [F "goal"]', 'R{"cost"}max=? [F "goal"]',
-         'R{"cost"}min=? [F "stop"]', 'R{"cost"}max=? [F "stop"]',
-         'R{"time"}min=? [F "stop"]', 'R{"time"}max=? [F "stop"]',
-         'R{"time"}min=? [F x>=2 & !lost]', 'R{"time"}max=? [F (x>=2 | lost)]',
-         'R{"cost"}min=? [F lost]', 'R{"cost"}max=? [F !lost]']
 
 
 @pytest.mark.parametrize("idle", ["true", "false"])
@@ -115,7 +102,7 @@ def test_without_python_flint_an_expected_reward_is_refused_by_name(capsys, monk
 
     monkeypatch.setitem(sys.modules, "flint", None)  # import flint raises ImportError
     assert main(["solve", WALK, "--prop", 'R{"cost"}min=? [F "stop"]', "--const",
-                 "N=3,IDLE=true", "-q"]) == 2
+                 "N=3,IDLE=true", "-q", "--exact"]) == 2
     err = capsys.readouterr().err
     assert "python-flint" in err and "mitld_lp[exact]" in err and "Traceback" not in err
 
@@ -187,4 +174,7 @@ def test_dtmc_and_policy_refusal(capsys, tmp_path) -> None:
     policy = tmp_path / "p.json"
     assert main(["solve", str(path), "--prop", 'Rmin=? [F "end"]', "--policy",
                  str(policy)]) == 2
+    assert "writes no policy file" in capsys.readouterr().err and not policy.exists()
+    assert main(["solve", str(path), "--prop", 'Rmin=? [F "end"]', "--policy",
+                 str(policy), "--exact"]) == 2
     assert "writes no policy file" in capsys.readouterr().err and not policy.exists()

@@ -54,9 +54,10 @@ def args_door(p: argparse.ArgumentParser) -> None:
                         "properties'), N=20,K=2,p=0.1,b=true")
     p.add_argument("--spec", metavar="FORMULA",
                    help="with a PRISM file: an MITLD task over its labels instead of --prop")
-    p.add_argument("--objective", choices=("max", "min"),
+    p.add_argument("--objective", choices=("max", "min", "min-steps", "min-cost"),
                    help="maximise or minimise the probability of the task (default: the "
-                        "model file's, max; with --prop the property says)")
+                        "model file's, max; with --prop the property says), or minimise "
+                        "the expected steps (cost) of satisfying it")
 
 
 def is_world_file(path: str) -> bool:

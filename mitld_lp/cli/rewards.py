@@ -1,11 +1,15 @@
 """``solve FILE.prism --prop 'R{"r"}min=? [F "goal"]'``: an expected reward until a
-target, answered by :mod:`mitld_lp.exact.reward` on Storm's exact build of the file
-(:mod:`mitld_lp.worlds.prism_rewards`), one line (one JSON object) per property.
+target, one line (one JSON object) per property.
 
-The answer is the optimum in rationals, the bracket that value rounded outward (both
-ends certified: the optimum is a policy's exact value and an exact sub- or pre-fixed
-point of the Bellman operator, see :mod:`mitld_lp.exact.reward`), or ``inf`` where the
-graph decides that the target is not reached with probability 1 (for ``Rmin`` by any
+By default the model is built in doubles and answered by
+:mod:`mitld_lp.solvers.reward`: a certified bracket (a checked sub- and super-solution)
+and the occupancy LP's objective as a cross-check.  Under ``--exact`` it is answered by
+:mod:`mitld_lp.exact.reward` on Storm's exact build of the file
+(:mod:`mitld_lp.worlds.prism_rewards`): the optimum in rationals, the bracket that
+value rounded outward (both ends certified: the optimum is a policy's exact value and
+an exact sub- or pre-fixed point of the Bellman operator, see
+:mod:`mitld_lp.exact.reward`).  Either way the answer is ``inf`` where the graph
+decides that the target is not reached with probability 1 (for ``Rmin`` by any
 scheduler, for ``Rmax`` by some scheduler), as Storm answers it.
 """
 
@@ -17,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from mitld_lp.cli.kernel import EXIT_OK, json_text, say_answer
+from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, json_text, say_answer, time_left
 from mitld_lp.report import bracket_text
 
 __all__ = ["answer_reward"]
@@ -42,9 +46,11 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states
+    # C<=k and I=k: backward induction on the exact build (floats past its budget)
+    exact = bool(getattr(args, "exact", False)) or query.kind != "reach"
     try:
         model = reward_mdp(args.model, program.program, query, constants=constants,
-                           max_memory=args.max_memory, **kwargs)
+                           max_memory=args.max_memory, exact=exact, **kwargs)
     except (PrismTooLarge, PropertyError):
         raise  # a budget stop stays one; a refusal is the door's
     except WorldError as exc:
@@ -53,14 +59,14 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
         from mitld_lp.cli.bounded import answer_horizon
 
         return answer_horizon(args, query, model, started)
+    if not exact:
+        return _say_float(args, query, model, started)
     answer = solve_reward(model, query.objective)
     seconds = time.perf_counter() - started
     value = answer.value
     lower = math.inf if value is None else float_down(value)
     upper = math.inf if value is None else float_up(value)
-    scheduler = "every" if query.objective == "min" else "some"
-    why = (f"the target is not reached with probability 1 under {scheduler} scheduler: "
-           "Storm's infinity, decided by the graph")
+    why = _why(query.objective)
     if args.json:
         record = {"property": query.name, "formula": query.text, "reward": query.reward,
                   "objective": query.objective, "target": str(query.target),
@@ -83,3 +89,47 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
             f"{answer.rounds} exact policy evaluations", f"{seconds:.2f} s"]
     say_answer(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
     return EXIT_OK
+
+
+def _why(objective: str) -> str:
+    scheduler = "every" if objective == "min" else "some"
+    return (f"the target is not reached with probability 1 under {scheduler} scheduler: "
+            "Storm's infinity, decided by the graph")
+
+
+def _say_float(args: argparse.Namespace, query: Any, model: Any, started: float) -> int:
+    """The float route's answer said (module docs); its exit code (3 when the upper
+    bound's check failed: not certified)."""
+    from mitld_lp.solvers.reward import solve_reward_float
+
+    answer = solve_reward_float(model, query.objective, time_limit=time_left(args))
+    seconds = time.perf_counter() - started
+    code = EXIT_OK if answer.certified else EXIT_UNCERTIFIED
+    choices = int(model.groups[-1])
+    if args.json:
+        record = {"property": query.name, "formula": query.text, "reward": query.reward,
+                  "objective": query.objective, "target": str(query.target),
+                  "status": "optimal" if answer.certified else "not_certified",
+                  "certified": answer.certified,
+                  "value": "inf" if answer.infinite else answer.value,
+                  "lower": answer.lower, "upper": answer.upper,
+                  "infinite": answer.infinite, "states": model.n_states,
+                  "choices": choices, "policy_iterations": answer.rounds,
+                  "lp_value": answer.lp_value, "lp_status": answer.lp_status,
+                  "seconds": seconds, "model": Path(args.model).stem}
+        if answer.infinite:
+            record["why"] = _why(query.objective)
+        say_answer(json_text(record))
+        return code
+    head = "= inf" if answer.infinite else f"in {bracket_text(answer.lower, answer.upper)}"
+    tail = [f"reward \"{query.reward}\", target {query.target}"]
+    if answer.infinite:
+        tail.append(_why(query.objective))
+    tail.append("certified" if answer.certified else
+                "NOT certified (the upper bound's check failed)")
+    if answer.lp_value is not None:
+        tail.append(f"occupancy LP {answer.lp_value:.10g}")
+    tail += [f"{model.n_states} states, {choices} choices, {answer.rounds} policy "
+             "evaluations", f"{seconds:.2f} s"]
+    say_answer(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
+    return code

@@ -101,6 +101,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
         args.policy, args.force, "--policy", files.POLICY_SUFFIXES)
     if world and args.spec is None:  # --prop, or a JANI file's own properties
         return door.solve_properties(args, policy_file)
+    if args.objective in ("min-steps", "min-cost"):  # the expected steps (cost)
+        from mitld_lp.cli.steps import solve_steps  # its solver loads only when asked
+
+        return solve_steps(args, world, policy_file)
     model = door.world_model(args) if world else read_model(args)
     posed = pose(model, args.constraint, then=args.then,
                  settings=solve_settings(args), objective=args.objective)

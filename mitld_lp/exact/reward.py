@@ -51,7 +51,8 @@ from mitld_lp.exact.errors import ExactError, ExactTooLarge, TimeUp
 from mitld_lp.solvers.graph import graph_blocks
 from mitld_lp.worlds.prism_rewards import RewardMDP
 
-__all__ = ["RewardAnswer", "almost_sure", "solve_reward", "to_fraction"]
+__all__ = ["RewardAnswer", "almost_sure", "attractor_policy", "keeps_inside", "solve_reward",
+           "to_fraction"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,7 +80,7 @@ def to_fraction(q: Any) -> Fraction:
     return Fraction(q)
 
 
-def _keep(model: RewardMDP, inside: np.ndarray) -> np.ndarray:
+def keeps_inside(model: RewardMDP, inside: np.ndarray) -> np.ndarray:
     """Per choice: every successor is in ``inside``."""
     bad = ~inside[model.indices]
     per_choice = np.add.reduceat(bad.astype(np.int64), model.indptr[:-1]) if bad.size else \
@@ -118,7 +119,7 @@ def almost_sure(model: RewardMDP, sense: str) -> np.ndarray:
     if sense == "min":
         keep = np.ones(n, dtype=bool)
         while True:  # the greatest set from which the target stays reachable
-            usable = _keep(model, keep) & ~target[model.owner]
+            usable = keeps_inside(model, keep) & ~target[model.owner]
             reach = _reach(model, target, usable) & keep
             if (reach == keep).all():
                 return keep
@@ -128,7 +129,7 @@ def almost_sure(model: RewardMDP, sense: str) -> np.ndarray:
     # staying in it)
     avoid = ~target
     while True:
-        stay = _keep(model, avoid)
+        stay = keeps_inside(model, avoid)
         has = np.zeros(n, dtype=bool)
         has[model.owner[stay]] = True
         new = avoid & has
@@ -139,7 +140,7 @@ def almost_sure(model: RewardMDP, sense: str) -> np.ndarray:
     return ~bad
 
 
-def _attractor_policy(model: RewardMDP, finite: np.ndarray, useful: np.ndarray) -> np.ndarray:
+def attractor_policy(model: RewardMDP, finite: np.ndarray, useful: np.ndarray) -> np.ndarray:
     """A choice per finite non-target state that keeps ``finite`` and has a successor one
     layer closer to the target (the layers of the backward search)."""
     policy = np.full(model.n_states, -1, dtype=np.int64)
@@ -283,9 +284,9 @@ def solve_reward(model: RewardMDP, sense: str, *, time_limit: float | None = Non
     deadline = time.perf_counter() + (float("inf") if time_limit is None else time_limit)
     finite = almost_sure(model, sense)
     owner = model.owner
-    useful = _keep(model, finite) & finite[owner] & ~model.target[owner]
+    useful = keeps_inside(model, finite) & finite[owner] & ~model.target[owner]
     if sense == "min":
-        policy = _attractor_policy(model, finite, useful)
+        policy = attractor_policy(model, finite, useful)
     else:
         policy = np.full(model.n_states, -1, dtype=np.int64)
         first = np.unique(owner[useful], return_index=True)[1]

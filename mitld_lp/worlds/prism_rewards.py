@@ -51,9 +51,10 @@ class RewardMDP:
             ``groups[s]:groups[s+1]``.
         indptr, indices: the choices' successors (CSR layout over choices).
         probabilities: per entry, its probability (a rational: python-flint ``fmpq`` or
-            :class:`fractions.Fraction`).
+            :class:`fractions.Fraction`; a float64 array from a double build).
         rewards: per choice, the reward collected when it is taken (the state reward of
-            its state plus the action reward), a non-negative rational.
+            its state plus the action reward), a non-negative rational (or a float64
+            array).
         target: ``(n_states,)`` bool.
         initial: the initial state.
         state_rewards: per state, its state reward alone (for ``I=k``); empty when the
@@ -65,8 +66,8 @@ class RewardMDP:
     groups: np.ndarray
     indptr: np.ndarray
     indices: np.ndarray
-    probabilities: tuple[Any, ...]
-    rewards: tuple[Any, ...]
+    probabilities: Any
+    rewards: Any
     target: np.ndarray
     initial: int
     state_rewards: tuple[Any, ...] = ()
@@ -226,6 +227,41 @@ def _fraction(x: Any) -> Fraction:
     return Fraction(str(x))
 
 
+def _float_tables(model: Any, query: RewardQuery, where: str) -> RewardMDP:
+    """The built (double) model's :class:`RewardMDP` with float arrays: the transitions
+    from Storm's binary export (no loop over states), the rewards per choice."""
+    from mitld_lp.worlds.prism import stormpy_module
+    from mitld_lp.worlds.prism_program import storm_quiet
+    from mitld_lp.worlds.prism_tables import transition_arrays
+
+    stormpy = stormpy_module()
+    groups, indptr, indices, probabilities = transition_arrays(model, where)
+    n, m = model.nr_states, int(groups[-1])
+    rm = model.reward_models[query.reward]
+    if rm.has_transition_rewards:
+        raise WorldError(f"{where}: reward structure \"{query.reward}\": rewards on "
+                         "transitions (depending on the successor) are refused; state and "
+                         "action rewards are read")
+    rewards = np.zeros(m)
+    if rm.has_state_action_rewards:
+        rewards += np.asarray(list(rm.state_action_rewards), dtype=np.float64)
+    if rm.has_state_rewards:
+        rewards += np.repeat(np.asarray(list(rm.state_rewards), dtype=np.float64),
+                             np.diff(groups))
+    bad = ~(rewards >= 0) | ~np.isfinite(rewards)
+    if bad.any():
+        raise WorldError(f"{where}: reward structure \"{query.reward}\": a negative reward "
+                         f"({rewards[bad][0]}); expected rewards until a target need "
+                         "rewards >= 0")
+    with storm_quiet():
+        truth = stormpy.model_checking(model, query.target)
+    target = np.zeros(n, dtype=bool)
+    target[np.asarray(list(truth.get_truth_values_vector()), dtype=np.int64)] = True
+    return RewardMDP(groups=groups, indptr=indptr, indices=indices,
+                     probabilities=probabilities, rewards=rewards, target=target,
+                     initial=int(model.initial_states[0]))
+
+
 def _tables(model: Any, query: RewardQuery, where: str) -> Any:
     """The built model's :class:`RewardMDP` (picklable: it may come from a capped child)."""
     matrix = model.transition_matrix
@@ -282,14 +318,32 @@ def states_of(model: Any, formula: Any) -> np.ndarray:
     return where
 
 
+def _float_build(stormpy: Any, plain: Any, options: Any) -> Any:
+    """Storm's double build with its exploration checks; where only a sum fails there
+    (compared exactly in doubles: ``2/3 + 1/6 + 1/6``), the checks are run in rational
+    arithmetic (every update in range, every sum exactly 1, or Storm's error) and the
+    double model is built without them."""
+    from mitld_lp.worlds.prism_program import storm_sum
+
+    try:
+        return stormpy.build_model(plain, options=options)
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        if storm_sum(str(exc)) is None:
+            raise
+    stormpy.build_model[stormpy.Rational](plain, options=options)
+    options.set_exploration_checks(False)
+    return stormpy.build_model(plain, options=options)
+
+
 def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *,
                constants: Mapping[str, Any] | None = None,
                max_states: int = defaults.MAX_STATES,
-               max_memory: int | None = None) -> Any:
+               max_memory: int | None = None, exact: bool = True) -> Any:
     """The :class:`RewardMDP` of ``query`` on the PRISM ``program`` or JANI model
     (Storm's parse of ``path``), its open ``constants`` given, built by Storm in rational
-    arithmetic within the budgets (:class:`mitld_lp.worlds.prism.PrismTooLarge` past
-    them); :class:`WorldError` for a model Storm refuses or that is not an MDP or DTMC."""
+    arithmetic (``exact``; else in doubles, with float arrays) within the budgets
+    (:class:`mitld_lp.worlds.prism.PrismTooLarge` past them); :class:`WorldError` for a
+    model Storm refuses or that is not an MDP or DTMC."""
     from mitld_lp.worlds.prism import (
         BYTES_PER_STATE,
         PrismTooLarge,
@@ -346,12 +400,15 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
     def work() -> Any:
         try:
             with storm_quiet():
-                model = stormpy.build_model[stormpy.Rational](plain, options=options)
+                model = (stormpy.build_model[stormpy.Rational](plain, options=options)
+                         if exact else _float_build(stormpy, plain, options))
         except errors as exc:
             raise storm_error(exc, where) from None
         if model.nr_states > max_states:
             raise PrismTooLarge(f"{where}: Storm built {model.nr_states:,} states, more than "
                                 f"max_states = {max_states:,} (--max-world-states)")
+        if not exact:
+            return _float_tables(model, query, where)
         if model.nr_transitions > defaults.EXACT_MAX_TRANSITIONS:
             raise PrismTooLarge(
                 f"{where}: {model.nr_transitions:,} transitions, more than the "

@@ -26,8 +26,8 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 
-__all__ = ["Tables", "read_model", "DEADLOCK_ACTION", "DECIDED_ACTION", "OUT_OF_BOUNDS",
-           "OUT_OF_BOUNDS_BIT"]
+__all__ = ["Tables", "read_model", "transition_arrays", "DEADLOCK_ACTION", "DECIDED_ACTION",
+           "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -94,6 +94,12 @@ class Tables:
 def _indices(bits: Any) -> np.ndarray:
     """The set positions of one of Storm's bit vectors."""
     return np.fromiter(bits, dtype=np.int64)
+
+
+def transition_arrays(model: Any, where: str) -> tuple[np.ndarray, ...]:
+    """``(choices, branches, targets, probabilities)`` of a model Storm built in doubles
+    (its UMB export, checked; branches of probability 0 dropped)."""
+    return _structure(model, where)
 
 
 def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
