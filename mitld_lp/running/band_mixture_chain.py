@@ -16,10 +16,11 @@ it stays for ever:
 
 Labels: ``accept`` where the task is accepted (a verdict state, or a stay sink whose
 state has accepted it), ``c1``, ``c2``, ... the same for each probability constraint's
-formula, ``truncated``, ``decided`` (module docs below).  The reward model ``steps`` earns, in each merged state, the
-controller's expected steps there (1 in a state where the task is undecided; ``cost``
-the action's cost).  Storm's ``Pmin=? [F "accept"]`` with the uncertainty resolved to the
-minimum is the controller's worst case over the bands, at least ``lower``;
+formula, ``truncated``, and ``decided`` where the task is decided or the run stopped.
+The reward model ``steps`` earns, in each merged state, the controller's expected steps
+there (1 where the task is undecided).  Storm's ``Pmin=? [F "accept"]`` with the
+uncertainty resolved to the minimum is the controller's worst case over the bands, at
+least ``lower``;
 ``Pmax=? [F ("c1" | "truncated")]`` (uncertainty MAXIMIZE) a ``P(.) <= x``
 constraint's worst case (truncation counted against it), at most its bound;
 ``R{"steps"}max=? [F "decided"]`` (``decided``: the task decided, or the run
