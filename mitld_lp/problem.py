@@ -17,7 +17,7 @@ asked in that order, the first that claims the problem owns it):
   data), no constraints; co-safe tasks -- :mod:`mitld_lp.routes.robust`;
 * ``constrained``: constraints or a ``then`` objective with point laws; co-safe task and
   constraint formulas -- :mod:`mitld_lp.routes.constrained`; with a band,
-  :mod:`mitld_lp.routes.robust_constrained` (probability constraints only);
+  :mod:`mitld_lp.routes.robust_constrained`;
 * ``sensed``: some event is reported by a sensor that misses it (``detect < 1``);
   co-safe tasks, point laws, no constraints -- :mod:`mitld_lp.routes.sensed_solve`.
 

@@ -121,14 +121,22 @@ def test_bus_fit_chain_and_tree_from_the_command_line(tmp_path: Path,
     assert storm_worst(by_tree) == pytest.approx(value, abs=1e-12)
 
 
-def test_a_band_with_constraints_is_refused_by_name(tmp_path: Path,
-                                                    capsys: pytest.CaptureFixture[str]
-                                                    ) -> None:
+def test_a_band_with_constraints_writes_its_chain_and_refuses_a_tree(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """bus_fit with a constraint: a randomised controller.  ``--chain`` writes its
+    controlled model (nature's corners as choices; refused until issue 43), which Storm's
+    robust check evaluates to at least the answer's ``lower`` (and within 1e-7 of it:
+    the same worst case); ``--tree`` is refused by name, writing nothing."""
     text = (MODELS / "bus_fit.toml").read_text().replace(
         'epsilon = 0.01', 'epsilon = 0.01\nconstraints = ["P(F A) <= 0.9"]')
     path = tmp_path / "m.toml"
     path.write_text(text)
     (tmp_path / "data").symlink_to(MODELS / "data")
-    assert main(["export", str(path), "--chain", str(tmp_path / "c.drn")]) == 2
+    assert main(["export", str(path), "--chain", str(tmp_path / "c.drn"), "--json",
+                 "-q"]) == 0
+    said = json.loads(capsys.readouterr().out)
+    value = storm_worst(tmp_path / "c.drn")
+    assert said["lower"] - 1e-9 <= value <= said["lower"] + 1e-7
+    assert main(["export", str(path), "--tree", str(tmp_path / "t.json")]) == 2
     assert "with constraints" in capsys.readouterr().err
-    assert not (tmp_path / "c.drn").exists()
+    assert not (tmp_path / "t.json").exists()

@@ -68,7 +68,7 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             for c in r.failed_checks:
                 say_answer(f"  failed: {c.name}: {c.detail}")
         for c in r.constraints:
-            if r.status == "optimal":
+            if r.status != "infeasible":  # a failed band answer: its policy's worst cases
                 word = "<=" if c.constraint.sense == "<=" else ">="
                 say_answer(f"constraint:   {c.constraint}: {c.value:.7g} ("
                            + (f"holds: certified {word} {c.certified!r}" if c.holds else

@@ -139,6 +139,11 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     (the files are written all the same, and say what they are)."""
     from mitld_lp.files import drn
     from mitld_lp.running.band_chain import band_chain_drn, band_chain_of, band_claim, is_band
+    from mitld_lp.running.band_mixture_chain import (
+        is_band_mixture,
+        mixture_chain_drn,
+        mixture_claim,
+    )
     from mitld_lp.running.chain import chain_drn, chain_of
     from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
@@ -149,11 +154,10 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     from mitld_lp.routes.robust import is_robust
 
     model = read_model(args)
-    if is_robust(model.distributions) and model.constraints and (chain or tree):
-        raise UsageError("export --chain/--tree: a law known only within a band with "
-                         "constraints gives a randomised controller chosen at the bands' "
-                         "middle law, whose interval chain is not written; --controller "
-                         "writes the controller")
+    if is_robust(model.distributions) and model.constraints and tree:
+        raise UsageError("export --tree: a law known only within a band with constraints "
+                         "gives a randomised controller, which no decision tree writes; "
+                         "--chain and --controller write it")
     if chain and args.bands != "worst" and is_robust(model.distributions):
         raise UsageError("export --chain with --bands best: the interval chain's claim is "
                          "the controller's worst case over the bands, which an optimistic "
@@ -186,6 +190,11 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         band = band_chain_drn(band_chain_of(r))
         write_file(chain, lambda p: drn.write(band, p, overwrite=True))
         accept, said_chain = band_claim(r)
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
+    elif chain and is_band_mixture(r):  # randomised, with a band: nature's corners
+        mixed = mixture_chain_drn(r)
+        write_file(chain, lambda p: drn.write(mixed, p, overwrite=True))
+        accept, said_chain = mixture_claim(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     elif chain:
         model = chain_drn(chain_of(r))

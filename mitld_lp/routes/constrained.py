@@ -346,6 +346,7 @@ class ConstrainedPart(Part):
     message: str = ""
     prob: np.ndarray | None = None
     stay: np.ndarray | None = None
+    options: Any = None  # with a band: nature's options on merged (solvers/robust_merged)
     randomised = True
 
     def policy_table(self, result: Result) -> list[dict[str, Any]]:

@@ -7,26 +7,39 @@ constraint holds whatever law of the bands they follow::
 
     V* = max { min_nu P_nu^pi(task) : pi such that for all nu, every constraint holds }
 
-It is bracketed by two computations on the interval MDP of the joint product:
+It is bracketed on the interval MDP of the joint product:
 
-* ``upper``: the constrained optimum (upper model, truncation won) at one law of the
-  bands, the *middle law* (every hazard at the middle of its interval, at every step).
-  A policy that meets the constraints under every law meets them under that one, and
-  its worst case is at most its value there, so ``V* <= upper``.
-* ``lower``: a policy optimal at the middle law, evaluated against every law of the
-  bands: the task's worst case from below, and each constraint's worst case (from above
-  for ``P(.) <= x``, from below for ``P(.) >= x``) by robust interval iteration, nature
-  choosing the corner of the hazard box for each of the policy's choices.  When every
-  constraint's worst case is within its bound, the policy is one of those ``V*`` ranges
-  over, so ``lower <= V*``.  A constraint that binds at the middle law is usually broken
-  by a worse law, so the middle-law LP is solved again with each broken bound tightened
-  by what the bands added to it (a few rounds, :data:`ROUNDS`), until the policy meets
-  every bound against every law; if none does, no lower bound is certified (``lower`` is
-  NaN) and the answer says which constraint the bands can break.
+* ``upper``: the smaller of the constrained optimum (upper model, truncation won) at one
+  law of the bands, the *middle law* (every hazard at the middle of its interval, at
+  every step) -- a policy that meets the constraints under every law meets them under
+  that one, and its worst case is at most its value there -- and the robust optimum of
+  the task without constraints and ``then`` (:mod:`mitld_lp.routes.robust`, certified),
+  which no constrained policy beats.
+* ``lower``: a policy's task value against every law of the bands, from below, for a
+  policy whose every constraint's worst case is within its bound (from above for
+  ``P(.) <= x`` and ``E(.) <= x``, from below for ``P(.) >= x``): a probability's by
+  robust interval iteration (:func:`worst_case`), an expected total's by nature's
+  maximum (:func:`mitld_lp.solvers.robust_merged.worst_total`), nature choosing the
+  corner of the hazard box for each of the policy's choices at every step.  Such a
+  policy is one of those ``V*`` ranges over, so ``lower <= V*``.  The policy is found
+  in this order: the policy optimal at the middle law; that LP solved again with each
+  bound the bands break tightened by what they added (:data:`ROUNDS` rounds, a bound
+  missed again tightened by at least twice its last step, an infeasible LP's margins
+  halved back); the robot's robust policy of each probability constraint alone
+  (:func:`mitld_lp.solvers.robust_merged.robust_for`).  If none meets every bound
+  against every law, the status is ``failed``, ``lower`` is NaN, no constraint is said
+  to hold, and the answer says the feasibility is unknown.  A problem infeasible at the
+  middle law is infeasible at every law.
+
+``then`` (``min-steps``/``min-cost``) with a band: what is optimised is the middle law's
+lexicographic LP (the fastest or cheapest of the policies optimal there, within the
+constraints tightened as above); what is evaluated is that policy's worst case over the
+bands: its task value (``lower``), and its expected steps (and cost) with nature
+maximising them, a certified interval (``steps``, ``secondary``, the checks).  The
+fastest policy at the worst law is not searched for.
 
 The width ``upper - lower`` is what the bands leave open beyond the truncation; the
-answer says it.  Expected-steps and cost constraints and ``then`` need the worst case of
-an expected total, not solved with bands: refused by name (:mod:`mitld_lp.problem`).
+answer says it.
 """
 
 from __future__ import annotations
@@ -41,7 +54,8 @@ import scipy.sparse as sp
 
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.checks import Check
-from mitld_lp.problem import Posed, band_text
+from mitld_lp.controllers.kinds import ConstrainedController
+from mitld_lp.problem import Posed
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
 from mitld_lp.result import Result
@@ -56,6 +70,7 @@ from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_joint
 from mitld_lp.solvers.constrained import OPTIMAL
 from mitld_lp.solvers.constrained_model import Merged, Quantity
+from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.robust import robust_interval_iteration
 from mitld_lp.solvers.robust_graph import RobustGame
 
@@ -235,8 +250,12 @@ def _checked(game: RobustGame, target: np.ndarray, it: Any, nature_maximises: bo
 def solve_robust_constrained(posed: Posed, built: Built, *,
                              costs: Mapping[str, float] | None = None,
                              seed: int | None = 0) -> Result:
-    """The sound bracket of the module docstring for a posed problem with constraints and
-    a band, on its built joint interval MDP (:func:`mitld_lp.synthesis.solve`)."""
+    """The sound bracket of the module docstring for a posed problem with constraints (or
+    ``then``) and a band, on its built joint interval MDP
+    (:func:`mitld_lp.synthesis.solve`)."""
+    from mitld_lp.routes.constrained import cost_vector
+    from mitld_lp.solvers.rounding import model_eta, one_minus
+
     s = posed.settings
     t0 = time.perf_counter()
     imdp, joint, sta = built.mdp, built.joint, built.sta
@@ -252,60 +271,51 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
             f"{nominal.message}; at the middle law of the bands (a law within them: no "
             "policy meets the constraints under every law either)")))
     t1 = time.perf_counter()
-    minimise = posed.minimise
+    minimise, cons, then = posed.minimise, posed.problem.constraints, posed.problem.then
     # the nominal answer is read in the task's terms; the robust evaluation works on the
     # maximised automaton (the complement's for a minimised task)
     raw_upper = 1.0 - nominal.lower if minimise else nominal.upper
-    vr = vertex_rows(imdp)
-    cons = posed.problem.constraints
-    from mitld_lp.solvers.rounding import model_eta, one_minus
-
-    eta = model_eta(sta)
-    chosen, values = nominal, _worst_constraints(nominal, vr, cons, s.tol, eta)
-    margins = [0.0] * len(cons)
-    rounds = 0
-    while not all(v.holds for v in values) and rounds < ROUNDS:
-        rounds += 1
-        for i, v in enumerate(values):  # what the bands added, and a little more
-            if not v.holds:
-                excess = abs(v.value - v.constraint.bound)
-                margins[i] += 1.5 * excess + 1e-9
-        tight = tuple(replace(c, bound=c.bound - margins[i] if c.sense == "<=" else
-                              c.bound + margins[i]) for i, c in enumerate(cons))
-        again = solve_merged(replace(posed, problem=replace(posed.problem, constraints=tight)),
-                             middle, joint, sta, t0, costs=costs, seed=seed,
-                             build=built.timings)
-        if again.status != OPTIMAL:
-            break
-        chosen, values = again, _worst_constraints(again, vr, cons, s.tol, eta)
-    assert chosen.prob is not None and chosen.stay is not None
-    task_lo, _ = worst_case(chosen.merged, vr, chosen.prob, chosen.stay,
-                            Quantity("prob", 0, 0.0), nature_maximises=False, tol=s.tol,
-                            eta=eta)
-    robust_ok = all(v.holds for v in values)
-    lower = task_lo if robust_ok else float("nan")
+    robust_upper = _robust_upper(posed)
+    upper_by = "the optimum at the middle law"
+    if robust_upper < raw_upper:
+        raw_upper, upper_by = robust_upper, "the robust optimum without constraints"
+    assert nominal.part.merged is not None
+    judge = _Judge(nominal.part.merged, vertex_rows(imdp), cons, s.tol, model_eta(sta),
+                   cost_vector(middle, dict(posed.model.costs if costs is None else costs)))
+    best, rounds, margins = _tighten(posed, middle, joint, sta, t0, costs, seed, built,
+                                     nominal, judge)
+    fallback = ""
+    if best is None:  # the robot's robust policy for each probability constraint alone
+        best, fallback = _fallback(nominal, judge, seed)
+    robust_ok = best is not None
+    chosen, values, lower = best if best is not None else (nominal, judge.values(nominal),
+                                                           float("nan"))
+    extra = _then_checks(chosen, judge, then)
     width = raw_upper - lower
     # the middle law's own precision and constraint checks are not this answer's
     kept = [c for c in chosen.checks
             if c.name != "precision" and not c.name.startswith("constraint ")]
-    checks = (*kept,
+    checks = (*kept, *extra[0],
               Check("constraints hold against every law of the bands", robust_ok,
-                    "; ".join(f"{v.constraint}: worst case {v.value!r}" for v in values)
+                    "; ".join(f"{v.constraint}: worst case {v.certified!r}" for v in values)
                     or "no constraint"),
               Check("robust lower <= upper",
                     bool(robust_ok and lower <= raw_upper + s.certify_tol),
                     f"{lower!r} <= {raw_upper!r}"))
     eps = nominal.sta.epsilon_achieved
-    tightened = (f" (its bounds tightened in {rounds} rounds by "
-                 + ", ".join(f"{m:.3g}" for m in margins) + ")") if rounds else ""
-    message = (f"robust bracket: a policy optimal at the middle law of the bands{tightened} "
-               f"against their worst law (lower) and the optimum at the middle law (upper); "
-               f"width "
-               f"{width:.3g}" + (f", wider than the truncation's {eps:.3g}: the bands leave "
-                                 "it open" if width > eps + s.certify_tol else "")
+    how = fallback or "a policy optimal at the middle law of the bands" + (
+        f" (its bounds tightened in {rounds} rounds by "
+        + ", ".join(f"{m:.3g}" for m in margins) + ")" if rounds else "")
+    message = (f"robust bracket: {how} against their worst law (lower) and {upper_by} "
+               f"(upper); width {width:.3g}"
+               + (f", wider than the truncation's {eps:.3g}: the bands leave it open"
+                  if width > eps + s.certify_tol else "") + extra[1]
                if robust_ok else
-               "the policy optimal at the middle law of the bands breaks a constraint under "
-               "some law of the bands: no certified lower bound")
+               "no policy found that meets every constraint under every law of the bands "
+               "(the middle law's optimum, tightened" + (
+                   ", and the robust policy of each probability constraint alone"
+                   if any(c.kind == "prob" for c in cons) else "")
+               + ", break one): feasibility unknown, no certified lower bound")
     complement = None
     if minimise:
         complement = (lower, raw_upper)
@@ -316,27 +326,174 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     timings = {**nominal.timings, "robust": time.perf_counter() - t1}
     assert isinstance(chosen.part, ConstrainedPart)
     return replace(chosen, lower=lower, upper=upper, value=nominal.value,
-                   part=replace(chosen.part, constraints=tuple(values), message=message),
+                   status=OPTIMAL if robust_ok else Status.FAILED,
+                   part=replace(chosen.part, constraints=tuple(values), message=message,
+                                options=judge.opts, **extra[2]),
                    certified=all(c.passed for c in checks), checks=checks, bands=bands,
                    timings=timings, complement=complement,
                    width={"total": width, "bands": width})
 
 
-def _worst_constraints(result: Result, vr: VertexRows, cons: tuple[Any, ...],
-                       tol: float, eta: float) -> list[ConstraintValue]:
-    """Each constraint of ``cons`` (the user's bounds) against every law of the bands,
-    under ``result``'s policy: its worst case, bounded in exact arithmetic on the side
-    that matters, and whether that meets the bound exactly."""
-    assert result.prob is not None and result.stay is not None
-    out = []
-    for k, c in enumerate(cons, start=1):
-        lo, hi = worst_case(result.merged, vr, result.prob, result.stay,
-                            quantity_of(c, k, "lower"), nature_maximises=c.sense == "<=",
-                            tol=tol, eta=eta)
-        worst = hi if c.sense == "<=" else lo
-        holds = worst <= c.bound if c.sense == "<=" else worst >= c.bound
-        out.append(ConstraintValue(c, worst, holds, bounds=(lo, hi)))
-    return out
+def _robust_upper(posed: Posed) -> float:
+    """The robust optimum of the task without constraints and ``then``, from above, in
+    the maximised automaton's terms (the complement's for a minimised task): no policy
+    meeting the constraints guarantees more (``inf`` when it is not certified)."""
+    from mitld_lp.routes.robust import solve_robust
+    from mitld_lp.routes.stages import build_interval
+
+    alone = replace(posed, problem=replace(posed.problem, constraints=(), then=None))
+    r = solve_robust(alone, build_interval(alone, False))
+    if not r.certified:
+        return float("inf")
+    if posed.minimise:
+        return float(r.complement[1]) if r.complement else 1.0 - float(r.lower)
+    return float(r.upper)
+
+
+class _Judge:
+    """A policy of the merged model judged against every law of the bands: each
+    constraint's worst case (:func:`worst_case` for a probability, nature's maximum of the
+    expected total for steps and cost, :func:`mitld_lp.solvers.robust_merged.worst_total`)
+    and the task's worst case from below."""
+
+    def __init__(self, merged: Merged, vr: VertexRows, cons: tuple[Any, ...], tol: float,
+                 eta: float, costs: np.ndarray) -> None:
+        from mitld_lp.solvers.robust_merged import options
+
+        self.merged, self.vr, self.cons, self.tol, self.eta, self.costs = \
+            merged, vr, cons, tol, eta, costs
+        self.opts = options(merged, vr)
+
+    def values(self, result: Result) -> list[ConstraintValue]:
+        """Each constraint's worst case under ``result``'s policy, bounded in exact
+        arithmetic on the side that matters, and whether that meets the bound exactly."""
+        from mitld_lp.solvers.robust_merged import worst_total
+
+        assert result.prob is not None and result.stay is not None
+        out, k = [], 0
+        for c in self.cons:
+            k += c.kind == "prob"
+            if c.kind == "prob":
+                lo, hi = worst_case(self.merged, self.vr, result.prob, result.stay,
+                                    quantity_of(c, k, "lower"),
+                                    nature_maximises=c.sense == "<=", tol=self.tol,
+                                    eta=self.eta)
+                worst, ok = (hi if c.sense == "<=" else lo), True
+            else:
+                w = worst_total(self.merged, self.opts, result.prob, result.stay,
+                                Quantity(c.kind), costs=self.costs, eta=self.eta)
+                lo, hi, worst, ok = w.lower, w.upper, w.upper, w.check.passed
+            holds = ok and (worst <= c.bound if c.sense == "<=" else worst >= c.bound)
+            out.append(ConstraintValue(c, worst, bool(holds), bounds=(lo, hi)))
+        return out
+
+    def task(self, prob: np.ndarray, stay: np.ndarray) -> float:
+        """The task's worst case under the policy, from below."""
+        return worst_case(self.merged, self.vr, prob, stay, Quantity("prob", 0, 0.0),
+                          nature_maximises=False, tol=self.tol, eta=self.eta)[0]
+
+
+Candidate = tuple[Result, list[ConstraintValue], float]
+
+
+def _tighten(posed: Posed, middle: Any, joint: Any, sta: Any, t0: float,
+             costs: Mapping[str, float] | None, seed: int | None, built: Built,
+             nominal: Result, judge: _Judge) -> tuple[Candidate | None, int, list[float]]:
+    """The middle law's LP solved again with each bound the bands break tightened by
+    what they added, and a little more (:data:`ROUNDS` rounds); a tightened LP that is
+    infeasible is solved again with the margins halved back towards the last feasible
+    ones; a bound missed again is tightened by at least twice its last step.  The
+    policy found that meets every bound against every law, the rounds and the
+    margins."""
+    cons = posed.problem.constraints
+    chosen, values = nominal, judge.values(nominal)
+    margins = [0.0] * len(cons)
+    steps = [0.0] * len(cons)
+    rounds = 0
+    while not all(v.holds for v in values):
+        if rounds >= ROUNDS:
+            return None, rounds, margins
+        rounds += 1
+        good = list(margins)  # the last margins whose LP was feasible
+        for i, v in enumerate(values):  # what the bands added, and a little more
+            if not v.holds:  # at least twice the last step: a bound missed again
+                excess = abs(v.value - v.constraint.bound) if v.value == v.value else 0.0
+                steps[i] = max(1.5 * excess + 1e-9 * (1.0 + abs(v.constraint.bound)),
+                               2.0 * steps[i])
+                margins[i] += steps[i]
+        again = None
+        for _ in range(4):
+            tight = tuple(replace(c, bound=c.bound - margins[i] if c.sense == "<=" else
+                                  c.bound + margins[i]) for i, c in enumerate(cons))
+            again = solve_merged(replace(posed, problem=replace(posed.problem,
+                                                                constraints=tight)),
+                                 middle, joint, sta, t0, costs=costs, seed=seed,
+                                 build=built.timings)
+            if again.status == OPTIMAL:
+                break
+            margins = [0.5 * (a + b) for a, b in zip(good, margins, strict=True)]
+            again = None
+        if again is None:
+            return None, rounds, margins
+        chosen, values = again, judge.values(again)
+    assert chosen.prob is not None and chosen.stay is not None
+    return (chosen, values, judge.task(chosen.prob, chosen.stay)), rounds, margins
+
+
+def _fallback(nominal: Result, judge: _Judge, seed: int | None
+              ) -> tuple[Candidate | None, str]:
+    """The robot's robust policy for each probability constraint alone (maximising the
+    worst case of a ``>=`` one, minimising that of a ``<=`` one), judged against every
+    constraint: the first that meets them all, with its task's worst case."""
+    from mitld_lp.solvers.robust_merged import robust_for
+
+    k = 0
+    for c in judge.cons:
+        k += c.kind == "prob"
+        if c.kind != "prob":
+            continue
+        prob, stay = robust_for(judge.merged, judge.opts, quantity_of(c, k, "lower"),
+                                maximise=c.sense == ">=", tol=judge.tol)
+        assert isinstance(nominal.part, ConstrainedPart)
+        old = nominal.controller  # the middle law's: the candidate gets its own
+        controller = ConstrainedController(old.game, old.sta, nominal.part.joint,
+                                           judge.merged, nominal.mdp, prob, stay,
+                                           seed=seed)
+        candidate = replace(nominal, controller=controller,
+                            part=replace(nominal.part, prob=prob, stay=stay))
+        values = judge.values(candidate)
+        if all(v.holds for v in values):
+            return (candidate, values, judge.task(prob, stay)), (
+                f"the robust policy of {c} alone (the middle law's optimum, tightened, "
+                "breaks a bound under some law)")
+    return None, ""
+
+
+def _then_checks(chosen: Result, judge: _Judge, then: str | None
+                 ) -> tuple[list[Check], str, dict[str, Any]]:
+    """The chosen policy's expected steps (and, for ``then = "min-cost"``, cost) at the
+    worst law of the bands, bracketed (nature maximising it): the answer's steps and
+    secondary; with ``then`` the bracket's proof is a check of the answer."""
+    from mitld_lp.solvers.robust_merged import worst_total
+
+    assert chosen.prob is not None and chosen.stay is not None
+    steps = worst_total(judge.merged, judge.opts, chosen.prob, chosen.stay,
+                        Quantity("steps"), eta=judge.eta)
+    fields: dict[str, Any] = {"steps": steps.upper}
+    checks = [steps.check]
+    text = (f"; E(steps) {steps.upper:.6g} at the worst law of the bands (in "
+            f"[{steps.lower:.6g}, {steps.upper:.6g}])")
+    if then == "min-cost":
+        cost = worst_total(judge.merged, judge.opts, chosen.prob, chosen.stay,
+                           Quantity("cost"), costs=judge.costs, eta=judge.eta)
+        checks.append(cost.check)
+        fields["secondary"] = cost.upper
+        text += (f"; then min-cost: the middle law's cheapest, E(cost) {cost.upper:.6g} at "
+                 f"the worst law (in [{cost.lower:.6g}, {cost.upper:.6g}])")
+    elif then == "min-steps":
+        fields["secondary"] = steps.upper
+        text += "; then min-steps: the middle law's fastest"
+    return (checks if then else []), text, fields
 
 
 class RobustConstrainedRoute(Route):
@@ -355,16 +512,7 @@ class RobustConstrainedRoute(Route):
         return (posed.problem.constrained or self.every) and posed.robust
 
     def refusal(self, posed: Posed) -> list[str]:
-        p = posed.problem
-        refused = []
-        if p.then is not None or any(c.kind != "prob" for c in p.constraints):
-            what_else = (f"then = {p.then}" if p.then is not None else
-                         next(str(c) for c in p.constraints if c.kind != "prob"))
-            refused.append(
-                f"{what_else} with a law known only within a band ({band_text(p.model)}): "
-                "the worst case of expected steps or costs is not solved; give the event "
-                "a point law, or bound probabilities only")
-        return refused + lp_refusals(posed)
+        return lp_refusals(posed)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         return build_joint(posed, progress, make=robust_product)
