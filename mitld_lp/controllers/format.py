@@ -13,8 +13,9 @@ Every file has these members:
 
 * ``meta`` (JSON): the format tag (:data:`FORMAT`) and version (:data:`VERSION`; the
   versions in :data:`READS` are read), the ``kind`` (``"deterministic"``,
-  ``"randomised"`` or ``"sensed"``), the world's ``variables`` (their names when a world
-  state is a tuple of them, as in a PRISM world; else null), the task's ``events``
+  ``"randomised"``, ``"sensed"`` or ``"sensed-randomised"``), the world's ``variables``
+  (their names when a world state is a tuple of them, as in a PRISM world; else null),
+  the task's ``events``
   (sorted) and the ``actions`` (names; an action is stored as its number in this list),
   and what its kind adds below;
 * ``states`` (JSON): the world states the controller may observe, in the encoding of
@@ -57,9 +58,19 @@ state (:mod:`mitld_lp.sensing.belief`):
   seen as a bit mask over events, next)``, ``next`` an information state, or -1 (every
   hypothesis left accepted), -2 (every one rejected), -3 (decided, unknown which).
 
+A randomised sensed controller (kind ``"sensed-randomised"``, version 5: the
+``sensed-constrained`` route's) has the sensed kind's ``meta`` and ``moves`` (the moves
+of every action it may take) and, instead of ``policy``, per information state ``i``
+the entries ``offsets[i]:offsets[i + 1]`` of ``choices`` (int32 action numbers),
+``weights`` (float64) and ``inside`` (bool): first its actions with their weights, then
+(flagged ``inside``, weight 0) the actions of its end component, drawn uniformly once
+the run stays; ``stay`` (float64 per state): the probability of drawing *stay*.  An
+empty entry with ``stay`` 0: nothing to do there.
+
 Older files still read (:data:`READS`, :data:`SENSED_READS`): version 1 (deterministic
 controllers; no ``kind`` nor ``variables``), version 2 (randomised controllers without
-``keep`` and ``kept``: no keep choice), version 3 (no sensed kind), and the sensed
+``keep`` and ``kept``: no keep choice), version 3 (no sensed kind), version 4 (no
+randomised sensed kind), and the sensed
 controller's own format of old, tag :data:`SENSED_FORMAT` (version 1 without
 ``ignored``, version 2; no ``kind`` nor ``variables``; its ``fallback`` named ``first``).
 
