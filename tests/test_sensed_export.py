@@ -65,6 +65,23 @@ def test_storm_on_the_exported_chain_meets_lower_and_each_bound(constraints, the
         assert float(storm(path, STEPS)) == pytest.approx(r.secondary, abs=1e-6)
 
 
+def test_two_sensed_events_and_a_constraint_each_way(tmp_path) -> None:
+    """Two buses, each seen by its own camera, a ``<=`` and a ``>=`` constraint: the
+    chain's ``c1`` at most its certified bound, ``c2`` at least its (the truncated runs
+    count against each: with ``c1``, without ``c2``)."""
+    from test_sensing import SPEC2, TWO
+
+    model = Model.from_game(TWO, SPEC2, sensors={"b1": {"detect": 0.5},
+                                                  "b2": {"detect": 0.7}})
+    r = synthesize(model, constraints=["P(F A) <= 0.2", "P(F B) >= 0.7"])
+    assert r.route == "sensed-constrained" and r.certified
+    path = write_chain(r, tmp_path / "two.drn")
+    assert Fraction(r.lower) <= storm(path, 'P=? [F "accept"]') <= Fraction(r.upper)
+    low, high = r.constraints
+    assert storm(path, 'P=? [F "c1"]') <= Fraction(low.certified) <= Fraction("0.2")
+    assert storm(path, 'P=? [F "c2"]') >= Fraction(high.certified) >= Fraction("0.7")
+
+
 def test_the_chain_binds_where_the_constraint_binds(tmp_path) -> None:
     """The risk the chain carries is the constraint's bound, not less (the labels are
     those of the run that gets wet, not an under-count): a binding constraint."""
