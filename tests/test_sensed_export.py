@@ -134,6 +134,10 @@ def test_the_saved_controller_draws_what_the_live_one_draws(tmp_path) -> None:
     assert len({tuple(a) for a, _ in pairs}) > 3
     again, _ = simulate_pairs(loaded, runtime.load(path), runs=100, seed=5)
     assert all(a == b for a, b in again)
+    # the chain of the controller read from the file is the live one's, to the bit
+    live = storm(write_chain(r, tmp_path / "live.drn"), 'P=? [F "c1"]')
+    assert storm(write_chain(r, tmp_path / "file.drn", controller=loaded),
+                 'P=? [F "c1"]') == live
 
 
 def test_mitld_lp_run_serves_the_saved_controller(tmp_path) -> None:

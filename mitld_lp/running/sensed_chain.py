@@ -40,6 +40,13 @@ probability 0 (none is expected: its presence says the controller and the world
 disagree); and each world proposition that holds (``world_<name>`` for a proposition
 named like a label).  ``P=? [F "accept"]`` is the controller's probability of
 satisfying the task: inside the synthesis's certified bracket, at least ``lower``.
+
+A randomised controller over information states (constraints or ``then``, the
+``sensed-constrained`` route) has its choice mixed into the rows: *stay* with its
+probability, else each action by its weight.  Its true run follows the joint automaton
+of the task and the constraints' formulas, whose ends (a decided run, a stop, a stay)
+and labels (``c<i>``, ``done``, the reward ``steps``) are
+:mod:`mitld_lp.running.sensed_joint`'s.
 """
 
 from __future__ import annotations
