@@ -65,6 +65,31 @@ def test_storm_on_the_exported_chain_meets_lower_and_each_bound(constraints, the
         assert float(storm(path, STEPS)) == pytest.approx(r.secondary, abs=1e-6)
 
 
+@pytest.mark.parametrize(("constraints", "then"), [(["E(cost) <= 5.5"], None),
+                                                   ([], "min-cost")])
+def test_storm_on_the_chains_cost(constraints, then, tmp_path) -> None:
+    """Costs (go and back 2, wait 0.5, the rest 1): the chain's reward ``cost`` is the
+    controller's action's expected cost while the true task is undecided; Storm's
+    expected total at most the ``E(cost)`` bound, or the ``then min-cost`` value."""
+    import dataclasses
+    from types import MappingProxyType
+
+    costs = MappingProxyType({"go": 2.0, "back": 2.0, "wait": 0.5})
+    model = dataclasses.replace(
+        Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}}), costs=costs)
+    r = synthesize(model, constraints=constraints, then=then)
+    assert r.certified
+    path = write_chain(r, tmp_path / "cost.drn")
+    assert Fraction(r.lower) <= storm(path, 'P=? [F "accept"]') <= Fraction(r.upper)
+    cost = storm(path, 'R{"cost"}=? [F "done"]')
+    if then is None:
+        (c,) = r.constraints
+        assert cost <= Fraction(c.certified) <= Fraction("5.5")
+        assert cost != storm(path, STEPS)  # the costs are not the steps
+    else:
+        assert float(cost) == pytest.approx(r.secondary, abs=1e-6)
+
+
 def test_two_sensed_events_and_a_constraint_each_way(tmp_path) -> None:
     """Two buses, each seen by its own camera, a ``<=`` and a ``>=`` constraint: the
     chain's ``c1`` at most its certified bound, ``c2`` at least its (the truncated runs

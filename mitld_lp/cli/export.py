@@ -221,8 +221,8 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
 def _sensed_claims(r: Any) -> str:
     """What the chain of a sensed answer with constraints or ``then`` claims beside the
     task (:mod:`mitld_lp.running.sensed_joint`'s labels and reward): each ``P(...)``
-    constraint's probability and each ``E(steps)`` bound or ``then min-steps`` value
-    (``E(cost)`` is not in the chain); empty for any other answer."""
+    constraint's probability, each ``E(steps)`` or ``E(cost)`` bound and the ``then``
+    value (rewards ``steps`` and ``cost``); empty for any other answer."""
     from mitld_lp.running.sensed_chain import is_sensed
 
     if not (is_sensed(r) and getattr(r.part, "randomised", False)):
@@ -232,10 +232,11 @@ def _sensed_claims(r: Any) -> str:
         c = v.constraint
         if c.kind == "prob":
             out.append(f"P=? [F \"c{i}\"] {c.sense} {v.certified!r} ({c})")
-        elif c.kind == "steps":
-            out.append(f"R{{\"steps\"}}=? [F \"done\"] <= {v.certified!r} ({c})")
-    if r.then == "min-steps" and r.secondary is not None:
-        out.append(f"R{{\"steps\"}}=? [F \"done\"] ~= {r.secondary!r} (then min-steps, "
+        else:
+            out.append(f"R{{\"{c.kind}\"}}=? [F \"done\"] <= {v.certified!r} ({c})")
+    if r.then is not None and r.secondary is not None:
+        kind = r.then.removeprefix("min-")
+        out.append(f"R{{\"{kind}\"}}=? [F \"done\"] ~= {r.secondary!r} (then {r.then}, "
                    "the LP's value)")
     return "".join("; " + x for x in out)
 

@@ -29,7 +29,7 @@ class Chain:
     ``origin[i]``: its product state (-1 for the chain's own absorbing states),
     ``staying[i]`` whether a randomised controller has drawn *stay* there and
     ``keeping[i]`` whether it has drawn *keep* (the task's safety part kept for ever);
-    ``steps[i]``: the reward ``steps`` earned in state ``i`` (None: no reward model)."""
+    ``rewards``: reward models, each ``(name, per state the reward earned there)``."""
 
     matrix: sp.csr_array
     labels: tuple[frozenset[str], ...]
@@ -37,7 +37,7 @@ class Chain:
     origin: np.ndarray
     staying: np.ndarray
     keeping: np.ndarray
-    steps: np.ndarray | None = None
+    rewards: tuple[tuple[str, np.ndarray], ...] = ()
 
     @property
     def n_states(self) -> int:

@@ -95,10 +95,12 @@ def is_sensed(result: Any) -> bool:
     return bool(getattr(part, "observation_based", False))
 
 
-def sensed_chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
+def sensed_chain_of(result: Any, controller: ControllerLike | None = None, *,
+                    costs: Mapping[str, float] | None = None) -> Chain:
     """The controlled chain (module docs) of a ``sensed`` result under its controller,
     or under ``controller`` (one of the same model, such as the result's controller
-    saved and loaded again)."""
+    saved and loaded again); ``costs``: the actions' costs the synthesis was given
+    (the reward ``cost`` of a ``sensed-constrained`` chain; default the model's)."""
     c = controller if controller is not None else result.controller
     if c is None:
         raise ValueError(f"no controller to export: the synthesis is {result.status}")
@@ -106,7 +108,7 @@ def sensed_chain_of(result: Any, controller: ControllerLike | None = None) -> Ch
         from mitld_lp.running.sensed_joint import joint_ends
 
         ends = joint_ends(result.joint, [v.constraint for v in result.constraints],
-                          result.belief)
+                          result.belief, result.model.costs if costs is None else costs)
         return sensed_chain(result.model.game, result.joint.dta, result.sta, result.sensors,
                             c, ends=ends)
     return sensed_chain(result.model.game, result.dta, result.sta, result.sensors, c)
@@ -151,10 +153,13 @@ class _TaskEnds:
     def end_labels(self, name: str) -> frozenset[str]:
         return frozenset({name})
 
-    def steps(self, states: list[tuple[int, frozenset[str]] | None]) -> np.ndarray | None:
-        """The reward ``steps`` per chain state (``(automaton state, events pending)``,
-        None for an end); None: the chain has no reward model."""
-        return None
+    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+                mixes: Mapping[int, list[tuple[str, float]]]
+                ) -> tuple[tuple[str, np.ndarray], ...]:
+        """The chain's reward models from its states (``(automaton state, events
+        pending)``, None for an end) and the controller's actions in each (``mixes``:
+        ``(action, probability)``); the task's own chain has none."""
+        return ()
 
 
 class _Unfolding:
@@ -168,6 +173,7 @@ class _Unfolding:
         self.game, self.dta, self.sta, self.plan, self.ends = game, dta, sta, plan, ends
         self.sensors, self.sensed = sensors, sensed
         self.index: dict[Hashable, int] = {}
+        self.mixes: dict[int, list[tuple[str, float]]] = {}  # the actions taken per state
         self.order: list[Hashable] = []
         self.props: dict[Hashable, frozenset[str]] = {}
 
@@ -221,6 +227,7 @@ class _Unfolding:
             w = np.asarray(d.weights, dtype=float)
             branches = [(a, (1.0 - d.stay) * float(x)) for a, x in
                         zip(d.actions, w / w.sum(), strict=True) if x > 0.0]
+        self.mixes[self.index[node]] = branches
         for action, p_action in branches:
             self.moves(node, action, p_action, row)
         return row
@@ -331,10 +338,10 @@ class _Unfolding:
             for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
                 labels[k] = labels[k] | {"accept"}
         none = np.zeros(n, dtype=bool)
-        steps = self.ends.steps([None if isinstance(x, str) else (x[1], x[2])
-                                 for x in self.order])
+        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2])
+                                     for x in self.order], self.mixes)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
-                     steps)
+                     rewards)
 
 
 def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int]

@@ -14,6 +14,9 @@ is labelled.
   ``done`` on the absorbing states.  ``truncated`` (an event later than its truncation
   point) counts as the lower model counts it: the task failed, each ``<=`` constraint's
   formula satisfied (violated), each ``>=`` one's not.
+* Rewards: ``steps`` (1 where the true task is undecided and can still be won) and
+  ``cost`` (there, the expected cost of the controller's action), what ``E(steps)``
+  and ``E(cost)`` count.
 
 So ``P=? [F "accept"]`` is at least the answer's ``lower`` and ``P=? [F "c<i>"]`` at most
 (``<=``) or at least (``>=``) the constraint's certified bound.
@@ -22,7 +25,7 @@ So ``P=? [F "accept"]`` is at least the answer's ``lower`` and ``P=? [F "c<i>"]`
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,8 +43,9 @@ class JointEnds:
     the labels a truncated run carries."""
 
     def __init__(self, joint: Joint, names: Sequence[str], against: frozenset[str],
-                 events: frozenset[str]) -> None:
+                 events: frozenset[str], costs: Mapping[str, float]) -> None:
         self.joint, self.names, self.events = joint, tuple(names), events
+        self.costs = costs
         self._live: dict[tuple[int, frozenset[str]], bool] = {}
         self._ends: dict[str, frozenset[str]] = {
             "truncated": frozenset({"truncated", "done"}) | against}
@@ -70,13 +74,20 @@ class JointEnds:
     def end_labels(self, name: str) -> frozenset[str]:
         return self._ends[name]
 
-    def steps(self, states: list[tuple[int, frozenset[str]] | None]) -> np.ndarray:
-        """1 on a state whose true task is undecided and can still accept with the
-        events pending (the synthesis's E(steps) counts its steps), else 0."""
+    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+                mixes: Mapping[int, list[tuple[str, float]]]
+                ) -> tuple[tuple[str, np.ndarray], ...]:
+        """``steps``: 1 on a state whose true task is undecided and can still accept
+        with the events pending (the synthesis's E(steps) counts its steps), else 0;
+        ``cost``: there, the expected cost of the controller's action (each action's
+        ``costs`` entry, 1 if it has none; *stay* costs nothing)."""
         j = self.joint
-        return np.array([0.0 if x is None or j.verdicts[x[0]][0] != UNDECIDED
-                         or not self.live(j.components[x[0]][0], x[1]) else 1.0
-                         for x in states])
+        steps = np.array([0.0 if x is None or j.verdicts[x[0]][0] != UNDECIDED
+                          or not self.live(j.components[x[0]][0], x[1]) else 1.0
+                          for x in states])
+        cost = np.array([sum(p * self.costs.get(a, 1.0) for a, p in mixes.get(k, ()))
+                         for k in range(len(states))]) * steps
+        return (("steps", steps), ("cost", cost))
 
     def live(self, q: int, pending: frozenset[str]) -> bool:
         """Whether the task's automaton reaches acceptance from ``q`` on some word of
@@ -112,11 +123,12 @@ def _reaches(dta: DTA, q: int, atoms: Sequence[str]) -> bool:
     return False
 
 
-def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any) -> JointEnds:
+def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any,
+               costs: Mapping[str, float]) -> JointEnds:
     """The ends of ``joint`` (the task first, then one component per ``P(...)``
     constraint of ``constraints``, in order): component labels ``c<i>`` by the
     constraint's position among all of them; ``belief``: the information-state product
-    (whether a component can still accept, for the steps)."""
+    (its events, for the steps); ``costs``: the actions' costs (the reward ``cost``)."""
     names = ["accept"]
     against: set[str] = set()
     for i, c in enumerate(constraints, start=1):
@@ -127,4 +139,5 @@ def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any) -> JointEn
     if len(names) != len(joint.parts):
         raise ValueError(f"the joint automaton has {len(joint.parts)} components, the task "
                          f"and {len(names) - 1} constraint formulas were given")
-    return JointEnds(joint, names, frozenset(against), frozenset(belief.sta.events))
+    return JointEnds(joint, names, frozenset(against), frozenset(belief.sta.events),
+                     costs)
