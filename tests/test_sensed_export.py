@@ -229,3 +229,38 @@ def test_export_controller_and_chain_from_the_command_line(tmp_path, capsys) -> 
     assert main(["export", str(model), "--chain", str(tmp_path / "d.drn")]) == 0
     line = capsys.readouterr().out
     assert 'P=? [F "c1"] <= ' in line and 'R{"steps"}=? [F "done"] <= ' in line
+
+
+def test_a_damaged_randomised_sensed_file_is_one_clear_error(tmp_path) -> None:
+    from test_controller import rewritten, with_meta
+
+    from mitld_lp import ControllerFileError
+
+    model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
+    r = synthesize(model, constraints=["P(F wet) <= 0.1"])
+    good = r.controller.save(tmp_path / "good.npz")
+
+    def inside_weighted(m: dict) -> dict:
+        w = m["weights"].copy()
+        w[np.flatnonzero(m["inside"])[0]] = 0.5
+        return {**m, "weights": w}
+
+    cases = {
+        "weights": (lambda m: {**m, "weights": m["weights"] * 3}, "weights: not probabilities"),
+        "stay": (lambda m: {**m, "stay": -m["stay"] - 1}, "stay: not probabilities"),
+        "offsets": (lambda m: {**m, "offsets": m["offsets"][::-1].copy()},
+                    "offsets: not a partition"),
+        "choices": (lambda m: {**m, "choices": m["choices"] + 50},
+                    "choices: an action number out of range"),
+        "inside": (inside_weighted, "an end component's action with a weight"),
+        "policy": (lambda m: {**m, "policy": np.zeros(3, dtype=np.int32)},
+                   "not a controller archive"),
+        "version": (lambda m: with_meta(m, version=4), "is not a controller kind of format "
+                    "version 4"),
+    }
+    for name, (change, message) in cases.items():
+        bad = rewritten(good, tmp_path / f"{name}.npz", change)
+        with pytest.raises(ControllerFileError, match=message):
+            load_controller(bad)
+        with pytest.raises(ControllerFileError, match=message):
+            runtime.load(bad)
