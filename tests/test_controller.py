@@ -273,9 +273,9 @@ def test_damaged_truncated_or_foreign_files_are_one_clear_error(tmp_path: Path) 
     cases["a text file"] = (tmp_path / "text.npz", "")
     cases["a folder"] = (tmp_path, "")
     cases["no file"] = (tmp_path / "missing.npz", "No such file")
-    cases["version 5"] = (rewritten(good, tmp_path / "v5.npz",
-                                    lambda m: with_meta(m, version=5)),
-                          "format version 5; this mitld_lp reads versions 1, 2, 3, 4")
+    cases["version 6"] = (rewritten(good, tmp_path / "v6.npz",
+                                    lambda m: with_meta(m, version=6)),
+                          "format version 6; this mitld_lp reads versions 1, 2, 3, 4, 5")
     cases["another format"] = (rewritten(good, tmp_path / "fmt.npz",
                                          lambda m: with_meta(m, format="other")),
                                "not a controller file")

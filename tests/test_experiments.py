@@ -293,3 +293,15 @@ def test_bench_explore(tmp_path):
     assert int(rows["ours full"]["explored"]) == 101 * 101 == int(rows["storm"]["explored"])
     assert int(rows["ours auto"]["explored"]) < 101 * 101
     assert "auto / small-grid CPU" in text
+
+
+def test_sensed_export(tmp_path):
+    """The bus case with a camera and a risk budget: Storm's exact values on the exported
+    chain meet ``lower`` and the constraint's certified bound (the script compares them
+    in exact arithmetic)."""
+    pytest.importorskip("stormpy")
+    _run("sensed_export", tmp_path)
+    (row,) = _csv(tmp_path / "sensed_export.csv")
+    assert row["route"] == "sensed-constrained"
+    assert row["accept>=lower"] == "True" and row["risk<=certified"] == "True"
+    assert float(row["storm_risk"]) <= float(row["bound"])

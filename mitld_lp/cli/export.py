@@ -168,10 +168,6 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
 
         if partial(model.sensors):
             raise UsageError(SENSED_TREE_REFUSAL)
-    from mitld_lp.routes.sensed_constrained import controller_refusal
-
-    if (no_controller := controller_refusal(model)) is not None:
-        raise UsageError(f"export: {no_controller}")
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
@@ -213,6 +209,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         else:
             accept = r.lower
             said_chain = f"P=? [F \"accept\"] >= lower = {accept!r}"
+            said_chain += _sensed_claims(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     if tree:
         from mitld_lp.running.tree import write_tree
@@ -228,6 +225,29 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
             say_answer(f"not certified: {r.status}")
         return EXIT_UNCERTIFIED
     return EXIT_OK
+
+
+def _sensed_claims(r: Any) -> str:
+    """What the chain of a sensed answer with constraints or ``then`` claims beside the
+    task (:mod:`mitld_lp.running.sensed_joint`'s labels and reward): each ``P(...)``
+    constraint's probability, each ``E(steps)`` or ``E(cost)`` bound and the ``then``
+    value (rewards ``steps`` and ``cost``); empty for any other answer."""
+    from mitld_lp.running.sensed_chain import is_sensed
+
+    if not (is_sensed(r) and getattr(r.part, "randomised", False)):
+        return ""
+    out = []
+    for i, v in enumerate(r.constraints, start=1):
+        c = v.constraint
+        if c.kind == "prob":
+            out.append(f"P=? [F \"c{i}\"] {c.sense} {v.certified!r} ({c})")
+        else:
+            out.append(f"R{{\"{c.kind}\"}}=? [F \"done\"] <= {v.certified!r} ({c})")
+    if r.then is not None and r.secondary is not None:
+        kind = r.then.removeprefix("min-")
+        out.append(f"R{{\"{kind}\"}}=? [F \"done\"] ~= {r.secondary!r} (then {r.then}, "
+                   "the LP's value)")
+    return "".join("; " + x for x in out)
 
 
 def _robust_export(args: argparse.Namespace, said: dict[str, Any], lp: Path | None,

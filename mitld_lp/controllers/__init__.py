@@ -11,13 +11,15 @@ and runs a saved controller with NumPy alone:
   :mod:`~mitld_lp.controllers.stepper` (the one step rule, :class:`Stepper`, and the
   memory rule of an automaton with a clock), :mod:`~mitld_lp.controllers.tables` (the
   saved tables and their answers: :class:`SavedPlan` for a deterministic or randomised
-  controller, :class:`SensedPlan` for one that acts on sensor reports) and
+  controller, :class:`SensedPlan` for one that acts on sensor reports,
+  :class:`MixedSensedPlan` for a randomised one over information states) and
   :mod:`~mitld_lp.controllers.reader` (the one reader, one set of checks for every kind
   and every version);
 * above them, with the synthesis's records: :mod:`~mitld_lp.controllers.live` (a
   synthesis's model as a plan, and its tables for saving) and
   :mod:`~mitld_lp.controllers.kinds` (the controller classes: deterministic, randomised,
-  sensed, which differ only in their plan, and :func:`load_controller`).
+  sensed, randomised sensed, which differ only in their plan, and
+  :func:`load_controller`).
 
 This file imports nothing, so that importing a module of the lower floor loads nothing
 of the upper one.

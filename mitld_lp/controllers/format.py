@@ -13,8 +13,9 @@ Every file has these members:
 
 * ``meta`` (JSON): the format tag (:data:`FORMAT`) and version (:data:`VERSION`; the
   versions in :data:`READS` are read), the ``kind`` (``"deterministic"``,
-  ``"randomised"`` or ``"sensed"``), the world's ``variables`` (their names when a world
-  state is a tuple of them, as in a PRISM world; else null), the task's ``events``
+  ``"randomised"``, ``"sensed"`` or ``"sensed-randomised"``), the world's ``variables``
+  (their names when a world state is a tuple of them, as in a PRISM world; else null),
+  the task's ``events``
   (sorted) and the ``actions`` (names; an action is stored as its number in this list),
   and what its kind adds below;
 * ``states`` (JSON): the world states the controller may observe, in the encoding of
@@ -57,9 +58,19 @@ state (:mod:`mitld_lp.sensing.belief`):
   seen as a bit mask over events, next)``, ``next`` an information state, or -1 (every
   hypothesis left accepted), -2 (every one rejected), -3 (decided, unknown which).
 
+A randomised sensed controller (kind ``"sensed-randomised"``, version 5: the
+``sensed-constrained`` route's) has the sensed kind's ``meta`` and ``moves`` (the moves
+of every action it may take) and, instead of ``policy``, per information state ``i``
+the entries ``offsets[i]:offsets[i + 1]`` of ``choices`` (int32 action numbers),
+``weights`` (float64) and ``inside`` (bool): first its actions with their weights, then
+(flagged ``inside``, weight 0) the actions of its end component, drawn uniformly once
+the run stays; ``stay`` (float64 per state): the probability of drawing *stay*.  An
+empty entry with ``stay`` 0: nothing to do there.
+
 Older files still read (:data:`READS`, :data:`SENSED_READS`): version 1 (deterministic
 controllers; no ``kind`` nor ``variables``), version 2 (randomised controllers without
-``keep`` and ``kept``: no keep choice), version 3 (no sensed kind), and the sensed
+``keep`` and ``kept``: no keep choice), version 3 (no sensed kind), version 4 (no
+randomised sensed kind), and the sensed
 controller's own format of old, tag :data:`SENSED_FORMAT` (version 1 without
 ``ignored``, version 2; no ``kind`` nor ``variables``; its ``fallback`` named ``first``).
 
@@ -105,14 +116,14 @@ __all__ = [
 ]
 
 FORMAT = "mitld_lp.running.controller"
-VERSION = 4
+VERSION = 5
 """The version every file is written in (module docs for what older ones lack)."""
-READS = (1, 2, 3, 4)
+READS = (1, 2, 3, 4, 5)
 SENSED_FORMAT = "mitld-lp-sensed-controller"
 """The tag of the sensed controller's own format of old (versions 1 and 2), still read."""
 SENSED_READS = (1, 2)
 
-KINDS = ("deterministic", "randomised", "sensed")
+KINDS = ("deterministic", "randomised", "sensed", "sensed-randomised")
 
 ACCEPTED, REJECTED, UNDECIDED = 1, 0, -1
 """A component's verdict in an automaton state (the task is component 0)."""
@@ -152,9 +163,13 @@ _LAYOUTS: dict[str, dict[str, Member]] = {
                    "stay": (np.float64, 1), "charged": (np.bool_, 1),
                    "keep": (np.bool_, 1), "kept": (np.bool_, 1)},
     "sensed": {**_COMMON, "policy": (np.int32, 1), "moves": (np.int64, 2)},
+    "sensed-randomised": {**_COMMON, "moves": (np.int64, 2), "offsets": (np.int64, 1),
+                          "choices": (np.int32, 1), "weights": (np.float64, 1),
+                          "inside": (np.bool_, 1), "stay": (np.float64, 1)},
 }
 _KEEPS = ("keep", "kept")  # randomised members new in version 3
-_FIRST = {"deterministic": 1, "randomised": 2, "sensed": 4}  # the version that added the kind
+# the version that added the kind
+_FIRST = {"deterministic": 1, "randomised": 2, "sensed": 4, "sensed-randomised": 5}
 
 
 def layout(tag: str, kind: str, version: int) -> dict[str, Member] | None:
@@ -188,7 +203,7 @@ def layouts() -> list[tuple[str, str, int, dict[str, Member]]]:
 def meta_keys(tag: str, kind: str, version: int) -> frozenset[str]:
     """The keys of ``meta`` in such a file."""
     common = {"format", "version", "events", "actions"}
-    if kind == "sensed":
+    if kind.startswith("sensed"):
         keys = common | {"sensed", "initial"}
         if tag == SENSED_FORMAT:
             return frozenset(keys | ({"ignored"} if version > 1 else set()))
@@ -281,7 +296,7 @@ def to_bytes(plan: Any) -> bytes:
         "format": FORMAT, "version": VERSION, "kind": plan.kind,
         "variables": None if plan.variables is None else list(plan.variables),
         "events": sorted(plan.events)}
-    if plan.kind == "sensed":
+    if plan.kind.startswith("sensed"):
         meta["actions"], arrays = _sensed(plan, meta)
     else:
         meta["actions"], arrays = list(plan.actions), _automaton(plan, meta)
@@ -321,11 +336,12 @@ def _sensed(plan: Any, meta: dict[str, Any]) -> tuple[list[str], dict[str, Any]]
     index = {w: i for i, w in enumerate(worlds)}
     bit = {e: 1 << i for i, e in enumerate(sorted(plan.events))}
     first = [plan.fallback(w) for w in worlds]
-    actions = sorted({a for a in plan.actions if a is not None} | set(first))
+    n_info = len(plan.decisions) if plan.randomised else len(plan.actions)
+    actions = sorted(set().union(*(plan.played(s) for s in range(n_info))) | set(first))
     number = {a: i for i, a in enumerate(actions)}
     rows = []
     for (src, act), table in plan.moves.items():
-        if act != plan.actions[src]:  # a move the policy never makes
+        if act not in plan.played(src):  # a move the policy never makes
             continue
         for (world, seen, new), dst in table.items():
             mask = sum(bit[e] for e in seen | new)
@@ -334,10 +350,24 @@ def _sensed(plan: Any, meta: dict[str, Any]) -> tuple[list[str], dict[str, Any]]
     initial = plan.initial
     meta.update({"sensed": sorted(plan.sensed), "ignored": sorted(plan.ignored),
                  "initial": END_NAMES[initial] if isinstance(initial, str) else int(initial)})
-    return actions, {
-        "fallback": [number[a] for a in first],
-        "policy": [-1 if a is None else number[a] for a in plan.actions],
-        "moves": np.array(rows, dtype=np.int64).reshape(-1, 5)}
+    arrays: dict[str, Any] = {"fallback": [number[a] for a in first],
+                              "moves": np.array(rows, dtype=np.int64).reshape(-1, 5)}
+    if not plan.randomised:
+        arrays["policy"] = [-1 if a is None else number[a] for a in plan.actions]
+        return actions, arrays
+    # per information state: its weighted choices, then the actions inside its end
+    # component (weight 0, flagged), in the live decision's orders (the same draws)
+    offsets, choices, weights, inside, stay = [0], [], [], [], []
+    for d in plan.decisions:
+        if d is not None:
+            w = [] if d.weights is None else d.weights.tolist()
+            choices += [number[a] for a in (*d.actions, *d.inside)]
+            weights += w + [0.0] * len(d.inside)
+            inside += [False] * len(d.actions) + [True] * len(d.inside)
+        offsets.append(len(choices))
+        stay.append(0.0 if d is None else d.stay)
+    arrays.update(offsets=offsets, choices=choices, weights=weights, inside=inside, stay=stay)
+    return actions, arrays
 
 
 def _flatten(d: Diagram, atoms: tuple[str, ...], nodes: list[list[Any]],

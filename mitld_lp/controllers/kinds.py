@@ -41,17 +41,18 @@ from mitld_lp.controllers.live import LivePlan, LiveRandomPlan, tabulate_sensed
 from mitld_lp.controllers.observation import Observation, RunStatus
 from mitld_lp.controllers.reader import read
 from mitld_lp.controllers.stepper import Plan, Stepper
-from mitld_lp.controllers.tables import Obs, SavedPlan, SensedPlan
+from mitld_lp.controllers.tables import MixedSensedPlan, Obs, SavedPlan, SensedPlan
 from mitld_lp.files import write as files
 from mitld_lp.mdp import MDP
 from mitld_lp.worlds.game import Game
 
-__all__ = ["ConstrainedController", "Controller", "ControllerLike", "PlanController",
-           "SensedController", "load_controller", "save_tables"]
+__all__ = ["ConstrainedController", "Controller", "ControllerLike", "MixedSensedController",
+           "PlanController", "SensedController", "load_controller", "save_tables"]
 
 _LOADERS = {"deterministic": "mitld_lp.Controller.load",
             "randomised": "mitld_lp.ConstrainedController.load",
-            "sensed": "mitld_lp.SensedController.load"}
+            "sensed": "mitld_lp.SensedController.load",
+            "sensed-randomised": "mitld_lp.load_controller"}
 
 
 class ControllerLike(Protocol):
@@ -295,8 +296,21 @@ class SensedController(PlanController):
         return tabulate_sensed(self._sensed_plan(), max_states)
 
 
+class MixedSensedController(SensedController):
+    """A randomised policy over information states (the ``sensed-constrained`` route,
+    :mod:`mitld_lp.sensing.mixed`), drawing from a generator seeded with ``seed``: in
+    each information state *stay* with its probability, else an action by its weights
+    (:class:`~mitld_lp.controllers.tables.MixedSensedPlan`)."""
+
+    kind = "sensed-randomised"
+
+    def __init__(self, plan: MixedSensedPlan, *, seed: int | None = 0) -> None:
+        self._begin(plan, np.random.default_rng(seed))
+
+
 _CLASSES: dict[str, type[PlanController]] = {
-    c.kind: c for c in (Controller, ConstrainedController, SensedController)}
+    c.kind: c for c in (Controller, ConstrainedController, SensedController,
+                        MixedSensedController)}
 
 
 def load_controller(path: str | os.PathLike[str], *, seed: int | None = 0) -> Any:

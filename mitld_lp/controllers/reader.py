@@ -36,7 +36,8 @@ from mitld_lp.controllers.format import (
     meta_keys,
     quoted,
 )
-from mitld_lp.controllers.tables import Obs, SavedPlan, SensedPlan
+from mitld_lp.controllers.stepper import Decision
+from mitld_lp.controllers.tables import MixedSensedPlan, Obs, SavedPlan, SensedPlan
 from mitld_lp.files import rules as file_rules
 
 __all__ = ["read"]
@@ -174,7 +175,7 @@ def _plan(raw: dict[str, np.ndarray]) -> SavedPlan | SensedPlan:
     _need(fallback.size == len(states),
           f"fallback: expected {len(states)} entries (one per world state)")
     _need(_in_range(fallback, 0, len(actions)), "fallback: an action number out of range")
-    if kind == "sensed":
+    if kind.startswith("sensed"):
         return _sensed(raw, meta, events, actions, states, variables)
     return _automaton(raw, meta, kind, events, actions, states, variables)
 
@@ -264,9 +265,15 @@ def _sensed(raw: dict[str, np.ndarray], meta: dict[str, Any], events: tuple[str,
     _need(set(sensed) <= set(events), "meta.sensed: not among the events")
     ignored = _names(meta.get("ignored", []), "meta.ignored", ordered=False)
     _need(set(ignored) <= set(sensed), "meta.ignored: not among the sensed events")
-    policy, moves = raw["policy"], raw["moves"]
-    n_info, n_act = policy.size, len(actions)
-    _need(_in_range(policy, -1, n_act), "policy: an action number out of range")
+    moves, n_act = raw["moves"], len(actions)
+    randomised = "stay" in raw
+    if randomised:
+        decisions = _decisions(raw, actions)
+        n_info = len(decisions)
+    else:
+        policy = raw["policy"]
+        n_info = policy.size
+        _need(_in_range(policy, -1, n_act), "policy: an action number out of range")
     _need(moves.shape[1] == 5, f"moves: expected rows of 5, got {moves.shape}")
     src, act, world, mask, dst = moves.T
     _need(_in_range(src, 0, n_info), "moves: a state out of range")
@@ -287,11 +294,48 @@ def _sensed(raw: dict[str, np.ndarray], meta: dict[str, Any], events: tuple[str,
         seen = frozenset(e for i, e in enumerate(events) if m >> i & 1)
         obs = (states[w], seen - hidden, seen & hidden)
         table.setdefault((s, actions[a]), {})[obs] = _ENDS[d] if d < 0 else d
+    first = {w: actions[a] for w, a in zip(states, raw["fallback"].tolist(), strict=True)}
+    if randomised:
+        return MixedSensedPlan(
+            initial=start, actions=(None,) * n_info, moves=table, sensed=hidden,
+            events=frozenset(events), ignored=frozenset(ignored), first=first,
+            variables=variables, decisions=decisions)
     return SensedPlan(
         initial=start, actions=tuple(None if a < 0 else actions[a] for a in policy.tolist()),
         moves=table, sensed=hidden, events=frozenset(events), ignored=frozenset(ignored),
-        first={w: actions[a] for w, a in zip(states, raw["fallback"].tolist(), strict=True)},
-        variables=variables)
+        first=first, variables=variables)
+
+
+def _decisions(raw: dict[str, np.ndarray], actions: tuple[str, ...]
+               ) -> tuple[Decision | None, ...]:
+    """A randomised sensed controller's decision per information state: its weighted
+    choices, and the actions inside its end component (flagged, weight 0)."""
+    off, choices, weights, inside, stay = (raw[k] for k in (
+        "offsets", "choices", "weights", "inside", "stay"))
+    n = stay.size
+    _need(off.size == n + 1, "offsets and stay: not of matching lengths")
+    _need(int(off[0]) == 0 and bool(np.all(np.diff(off) >= 0))
+          and int(off[-1]) == choices.size, "offsets: not a partition of the choices")
+    _need(weights.size == choices.size and inside.size == choices.size,
+          "choices, weights and inside: not of one length")
+    _need(_in_range(choices, 0, len(actions)), "choices: an action number out of range")
+    for name, v in (("weights", weights), ("stay", stay)):
+        _need(bool(np.all(np.isfinite(v) & (v >= 0) & (v <= 1))), f"{name}: not probabilities")
+    _need(not bool(np.any(inside & (weights > 0))), "inside: an end component's action "
+          "with a weight")
+    out: list[Decision | None] = []
+    for s in range(n):
+        lo, hi = int(off[s]), int(off[s + 1])
+        flag = inside[lo:hi]
+        names = tuple(actions[c] for c in choices[lo:hi][~flag].tolist())
+        w = weights[lo:hi][~flag]
+        _need(not names or float(w.sum()) > 0, f"weights: state {s}'s choices weigh 0")
+        if lo == hi and float(stay[s]) == 0.0:
+            out.append(None)
+            continue
+        out.append(Decision(names, np.array(w), float(stay[s]),
+                            tuple(actions[c] for c in choices[lo:hi][flag].tolist())))
+    return tuple(out)
 
 
 def _diagrams(

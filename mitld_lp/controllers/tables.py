@@ -24,7 +24,8 @@ from mitld_lp.controllers.format import (
 )
 from mitld_lp.controllers.stepper import DECIDED, AutomatonMemory, Decision
 
-__all__ = ["BEYOND", "SavedPlan", "SensedPlan", "Obs", "advance", "key", "unknown_state"]
+__all__ = ["BEYOND", "MixedSensedPlan", "SavedPlan", "SensedPlan", "Obs", "advance", "key",
+           "unknown_state"]
 
 
 def unknown_state(state: Hashable) -> ValueError:
@@ -273,8 +274,40 @@ class SensedPlan:
         a = None if isinstance(memory, str) or memory == BEYOND else self.actions[memory]
         return Decision(() if a is None else (a,))
 
+    def played(self, memory: int) -> frozenset[str]:
+        """The actions the controller may take in information state ``memory`` (whose
+        moves a file keeps)."""
+        a = self.actions[memory]
+        return frozenset() if a is None else frozenset({a})
+
     def to_bytes(self) -> bytes:
         """The ``.npz`` archive of these tables (a saved plan's: it lists its world
         states)."""
         assert self.game is None, "a synthesis's plan is tabulated first"
         return to_bytes(self)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MixedSensedPlan(SensedPlan):
+    """A :class:`SensedPlan` whose decision per information state is randomised
+    (``decisions``, None where nothing is left to do): *stay* with its probability (then
+    the actions ``inside`` the end component, uniformly, for ever), else an action by
+    its weights (the ``sensed-constrained`` route's controller; ``actions`` unused)."""
+
+    kind: ClassVar[str] = "sensed-randomised"
+
+    decisions: tuple[Decision | None, ...] = ()
+
+    @property
+    def randomised(self) -> bool:
+        return True
+
+    def decision(self, state: Hashable, memory: int | str) -> Decision:
+        if isinstance(memory, str) or memory < 0:
+            return Decision(())
+        d = self.decisions[memory]
+        return Decision(()) if d is None else d
+
+    def played(self, memory: int) -> frozenset[str]:
+        d = self.decisions[memory]
+        return frozenset() if d is None else frozenset(d.actions) | frozenset(d.inside)

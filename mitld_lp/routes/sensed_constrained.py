@@ -32,7 +32,10 @@ Solved and certified as :mod:`mitld_lp.routes.constrained` solves the product: t
 lower model (truncation fails the task and violates each constraint), a constraint the
 certified bound misses tightened and solved again, the upper bound by weak duality.
 The policy is randomised over information states, so a constraint holds in expectation
-over observation histories (the fully observed route's semantics).
+over observation histories (the fully observed route's semantics).  Its controller
+(:mod:`mitld_lp.sensing.mixed`) is saved as the controller file's ``sensed-randomised``
+kind; its controlled chain is :mod:`mitld_lp.running.sensed_chain`'s over the joint
+automaton (:mod:`mitld_lp.running.sensed_joint`).
 """
 
 from __future__ import annotations
@@ -64,26 +67,10 @@ if TYPE_CHECKING:
     from mitld_lp.routes.stages import Built
 
 __all__ = ["SensedConstrainedRoute", "SensedConstrainedPart", "Verdict", "JointEnds",
-           "info_merged", "STAY", "NO_CONTROLLER", "controller_refusal"]
+           "info_merged", "STAY"]
 
 STAY = "(stay)"
 """The name of a stay choice in the policy's table."""
-
-NO_CONTROLLER = (
-    "constraints or then with sensors that miss events: the answer's controller is "
-    "randomised over the information states, with stays, and runs live only "
-    "(mitld_lp.synthesize(...).controller, mitld-lp simulate); its controller file and "
-    "its chain are not written")
-"""Why an answer of the ``sensed-constrained`` route has no controller file or chain
-(the command line refuses to export them before any work)."""
-
-
-def controller_refusal(model: Any, constraints: Any = (), then: str | None = None
-                       ) -> str | None:  # export --controller/--chain
-    """:data:`NO_CONTROLLER` when ``model`` (with these extra constraints, ``then``) is a
-    problem of the ``sensed-constrained`` route, else None."""
-    asked = bool(model.constraints or constraints) or then is not None
-    return NO_CONTROLLER if asked and partial(model.sensors) else None
 
 
 @dataclass(frozen=True, slots=True)

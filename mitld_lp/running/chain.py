@@ -295,6 +295,7 @@ def chain_drn(chain: Chain) -> DrnModel:
     return DrnModel(matrix=chain.matrix, row_groups=np.arange(chain.n_states + 1),
                     initial=0, kind="DTMC", labels=labels, declared=("accept",),
                     valuations=chain.valuations,
+                    rewards=tuple(drn.Reward(name, r) for name, r in chain.rewards),
                     comment="The controlled chain, exported by mitld_lp")
 
 

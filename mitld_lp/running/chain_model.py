@@ -28,7 +28,8 @@ class Chain:
     state ``i`` (without ``init``); ``valuations[i]``: its valuation text;
     ``origin[i]``: its product state (-1 for the chain's own absorbing states),
     ``staying[i]`` whether a randomised controller has drawn *stay* there and
-    ``keeping[i]`` whether it has drawn *keep* (the task's safety part kept for ever)."""
+    ``keeping[i]`` whether it has drawn *keep* (the task's safety part kept for ever);
+    ``rewards``: reward models, each ``(name, per state the reward earned there)``."""
 
     matrix: sp.csr_array
     labels: tuple[frozenset[str], ...]
@@ -36,6 +37,7 @@ class Chain:
     origin: np.ndarray
     staying: np.ndarray
     keeping: np.ndarray
+    rewards: tuple[tuple[str, np.ndarray], ...] = ()
 
     @property
     def n_states(self) -> int:

@@ -40,6 +40,13 @@ probability 0 (none is expected: its presence says the controller and the world
 disagree); and each world proposition that holds (``world_<name>`` for a proposition
 named like a label).  ``P=? [F "accept"]`` is the controller's probability of
 satisfying the task: inside the synthesis's certified bracket, at least ``lower``.
+
+A randomised controller over information states (constraints or ``then``, the
+``sensed-constrained`` route) has its choice mixed into the rows: *stay* with its
+probability, else each action by its weight.  Its true run follows the joint automaton
+of the task and the constraints' formulas, whose ends (a decided run, a stop, a stay)
+and labels (``c<i>``, ``done``, the reward ``steps``) are
+:mod:`mitld_lp.running.sensed_joint`'s.
 """
 
 from __future__ import annotations
@@ -88,27 +95,71 @@ def is_sensed(result: Any) -> bool:
     return bool(getattr(part, "observation_based", False))
 
 
-def sensed_chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
+def sensed_chain_of(result: Any, controller: ControllerLike | None = None, *,
+                    costs: Mapping[str, float] | None = None) -> Chain:
     """The controlled chain (module docs) of a ``sensed`` result under its controller,
     or under ``controller`` (one of the same model, such as the result's controller
-    saved and loaded again)."""
+    saved and loaded again); ``costs``: the actions' costs the synthesis was given
+    (the reward ``cost`` of a ``sensed-constrained`` chain; default the model's)."""
     c = controller if controller is not None else result.controller
     if c is None:
         raise ValueError(f"no controller to export: the synthesis is {result.status}")
+    if getattr(result.part, "randomised", False):  # sensed-constrained: the joint automaton
+        from mitld_lp.running.sensed_joint import joint_ends
+
+        ends = joint_ends(result.joint, [v.constraint for v in result.constraints],
+                          result.belief, result.model.costs if costs is None else costs)
+        return sensed_chain(result.model.game, result.joint.dta, result.sta, result.sensors,
+                            c, ends=ends)
     return sensed_chain(result.model.game, result.dta, result.sta, result.sensors, c)
 
 
 def sensed_chain(game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sensor],
-                 controller: ControllerLike) -> Chain:
+                 controller: ControllerLike, *, ends: Any = None) -> Chain:
     """The chain of ``controller`` (a controller that acts on sensor reports) in
     ``game``, the task's automaton ``dta``, the events' clocks ``sta`` (the sensed events
-    truncated, as the synthesis did) and the ``sensors`` that miss events."""
+    truncated, as the synthesis did) and the ``sensors`` that miss events.  ``ends``:
+    for a joint automaton (:mod:`mitld_lp.running.sensed_joint`), its states' ends and
+    labels; None: the task's accepting and rejecting states."""
     plan: Any = controller.plan
     sensed = tuple(sorted(sensors))
     if frozenset(sensed) != getattr(plan, "sensed", None):
         raise ValueError(f"the controller does not act on the reports of {', '.join(sensed)} "
                          "(it is not a controller of this model's sensors)")
-    return _Unfolding(game, dta, sta, sensors, sensed, plan).chain()
+    return _Unfolding(game, dta, sta, sensors, sensed, plan, ends or _TaskEnds(dta)).chain()
+
+
+class _TaskEnds:
+    """The ends of a task's own automaton: ``accept`` and ``reject`` (no label on the
+    states before).  :class:`mitld_lp.running.sensed_joint.JointEnds` is its joint
+    automaton's twin."""
+
+    def __init__(self, dta: DTA) -> None:
+        self.dta = dta
+
+    def end(self, q: int) -> str | None:
+        """The absorbing state the run enters in automaton state ``q`` (None: none)."""
+        return ("accept" if q == self.dta.accepting else
+                "reject" if q == self.dta.rejecting else None)
+
+    def stopped(self, q: int) -> str:
+        """The absorbing state of a run whose controller stops (or stays for ever) in
+        ``q``: its verdicts, the undecided counting as not satisfied."""
+        return "accept" if q == self.dta.accepting else "reject"
+
+    def labels(self, q: int) -> frozenset[str]:
+        return frozenset()
+
+    def end_labels(self, name: str) -> frozenset[str]:
+        return frozenset({name})
+
+    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+                mixes: Mapping[int, list[tuple[str, float]]]
+                ) -> tuple[tuple[str, np.ndarray], ...]:
+        """The chain's reward models from its states (``(automaton state, events
+        pending)``, None for an end) and the controller's actions in each (``mixes``:
+        ``(action, probability)``); the task's own chain has none."""
+        return ()
 
 
 class _Unfolding:
@@ -118,10 +169,11 @@ class _Unfolding:
     come in the next step)."""
 
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sensor],
-                 sensed: tuple[str, ...], plan: Any) -> None:
-        self.game, self.dta, self.sta, self.plan = game, dta, sta, plan
+                 sensed: tuple[str, ...], plan: Any, ends: Any) -> None:
+        self.game, self.dta, self.sta, self.plan, self.ends = game, dta, sta, plan, ends
         self.sensors, self.sensed = sensors, sensed
         self.index: dict[Hashable, int] = {}
+        self.mixes: dict[int, list[tuple[str, float]]] = {}  # the actions taken per state
         self.order: list[Hashable] = []
         self.props: dict[Hashable, frozenset[str]] = {}
 
@@ -140,11 +192,8 @@ class _Unfolding:
 
     def enter(self, q: int, node: tuple[Any, ...]) -> int:
         """The chain state of ``node``, or the end its automaton state ``q`` decides."""
-        if q == self.dta.accepting:
-            return self.number("accept")
-        if q == self.dta.rejecting:
-            return self.number("reject")
-        return self.number(node)
+        end = self.ends.end(q)
+        return self.number(node if end is None else end)
 
     def chain(self) -> Chain:
         g0 = self.game.initial
@@ -166,30 +215,45 @@ class _Unfolding:
         plan = self.plan
         row: dict[int, float] = {}
         if UNDECIDED not in plan.verdicts_at(memory):  # the controller stops
-            return {self.number("reject"): 1.0}
+            return {self.number(self.ends.stopped(q)): 1.0}
         d = plan.decision(g, memory)
-        if d.weights is not None:
-            raise ValueError("a controller that acts on sensor reports decides one action")
         if d.lost:
-            return {self.number("reject"): 1.0}
-        action = d.actions[0] if d.actions else plan.fallback(g)
+            return {self.number(self.ends.stopped(q)): 1.0}
+        if d.weights is None or not d.actions:
+            branches = [(d.actions[0] if d.actions else plan.fallback(g), 1.0)]
+        else:  # randomised: stay for ever (an end by the true run's verdicts), or an action
+            if d.stay > 0.0:
+                row[self.number(self.ends.stopped(q))] = d.stay
+            w = np.asarray(d.weights, dtype=float)
+            branches = [(a, (1.0 - d.stay) * float(x)) for a, x in
+                        zip(d.actions, w / w.sum(), strict=True) if x > 0.0]
+        self.mixes[self.index[node]] = branches
+        for action, p_action in branches:
+            self.moves(node, action, p_action, row)
+        return row
+
+    def moves(self, node: tuple[Any, ...], action: str, p_action: float,
+              row: dict[int, float]) -> None:
+        """Add to ``row`` the successors of ``node`` when the controller takes
+        ``action`` (with probability ``p_action``)."""
+        g, q, pending, clock, unreported, memory = node
+        plan = self.plan
         for occurred, left, p_events in self.outcomes(pending, clock):
             after = self.sta.advance(left, clock)
             if after.truncated:
                 k = self.number("truncated")
-                row[k] = row.get(k, 0.0) + p_events
+                row[k] = row.get(k, 0.0) + p_action * p_events
                 continue
             for reports, unreported2, p_reports in self.reports(occurred, unreported):
                 seen = (occurred - frozenset(self.sensed)) | reports
                 for g2, p_world in self.game.successors(g, action, occurred):
-                    p = p_events * p_reports * p_world
+                    p = p_action * p_events * p_reports * p_world
                     if p <= 0.0:
                         continue
                     q2 = self.dta.step(q, self.label(g2) | occurred)
                     memory2, _ = plan.follow(memory, g2, seen, action)
                     k = self.enter(q2, (g2, q2, left, after.clock, unreported2, memory2))
                     row[k] = row.get(k, 0.0) + p
-        return row
 
     def events(self, pending: frozenset[str], clock: int
                ) -> list[tuple[frozenset[str], float]]:
@@ -253,11 +317,11 @@ class _Unfolding:
         origin = np.full(n, -1, dtype=np.int64)
         for k, node in enumerate(self.order):
             if isinstance(node, str):
-                labels.append(frozenset({node}))
+                labels.append(self.ends.end_labels(node))
                 valuations.append(node)
                 continue
             g, q, pending, clock, unreported, memory = node
-            here = {props(p) for p in self.label(g)}
+            here = {props(p) for p in self.label(g)} | self.ends.labels(q)
             if q in self.dta.persistent:
                 here.add("persistent")
             if memory == BEYOND:
@@ -274,7 +338,10 @@ class _Unfolding:
             for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
                 labels[k] = labels[k] | {"accept"}
         none = np.zeros(n, dtype=bool)
-        return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy())
+        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2])
+                                     for x in self.order], self.mixes)
+        return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
+                     rewards)
 
 
 def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int]

@@ -7,55 +7,26 @@ controller does (:class:`~mitld_lp.controllers.kinds.SensedController`, the same
 (then plays, uniformly, the actions that keep the run in that state's end component,
 for ever) or else an action with the policy's weights.  A hypothesis's end is read
 by the task's verdict: ``"target"`` when the task accepted, ``"sink"`` otherwise (the
-controller stops once nothing undecided is left).  It runs live only: no controller
-file, chain or tree is written for it (the command line refuses those before any work).
+controller stops once nothing undecided is left).  Its ``save`` writes the
+``sensed-randomised`` controller file (:mod:`mitld_lp.controllers.format`), which
+``mitld-lp run`` and :mod:`mitld_lp.runtime` run with the same draws for the same seed;
+:mod:`mitld_lp.running.sensed_chain` writes its controlled chain.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from mitld_lp.automata.joint import ACCEPTED
-from mitld_lp.controllers.kinds import SensedController
+from mitld_lp.controllers.kinds import MixedSensedController
 from mitld_lp.controllers.stepper import Decision
-from mitld_lp.controllers.tables import SensedPlan
+from mitld_lp.controllers.tables import MixedSensedPlan
 from mitld_lp.solvers.quotient import maximal_end_components
 from mitld_lp.worlds.game import Game
 
 __all__ = ["MixedSensedPlan", "MixedSensedController", "mixed_controller"]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class MixedSensedPlan(SensedPlan):
-    """A :class:`SensedPlan` whose decision per information state is randomised
-    (``decisions``, None where nothing is left to do)."""
-
-    decisions: tuple[Decision | None, ...] = ()
-
-    @property
-    def randomised(self) -> bool:
-        return True
-
-    def decision(self, state: Any, memory: int | str) -> Decision:
-        if isinstance(memory, str) or memory < 0:
-            return Decision(())
-        d = self.decisions[memory]
-        return Decision(()) if d is None else d
-
-
-class MixedSensedController(SensedController):
-    """The randomised controller over information states (module docs), drawing from a
-    generator seeded with ``seed``."""
-
-    def __init__(self, plan: MixedSensedPlan, *, seed: int | None = 0) -> None:
-        self._begin(plan, np.random.default_rng(seed))
-
-    def tables(self, max_states: int = 0) -> Any:
-        raise ValueError("a randomised controller over information states is not written "
-                         "to a file (it runs live only)")
 
 
 def mixed_controller(game: Game[Any], belief: Any, merged: Any, prob: np.ndarray,

@@ -1,0 +1,143 @@
+"""The ends and labels of the controlled chain of a sensed answer with constraints or
+``then`` (the ``sensed-constrained`` route): the true run follows the joint automaton of
+the task and the constraints' formulas (:mod:`mitld_lp.automata.joint`), and
+:mod:`mitld_lp.running.sensed_chain` asks this module where a run ends and how a state
+is labelled.
+
+* A run whose true joint state has every component decided enters the absorbing state of
+  its verdicts (``verdict(accepted,rejected)``); so does a run whose controller stops or
+  draws *stay* (keeps to an end component of its information states for ever), with the
+  true run's verdicts there, an undecided component counting as not satisfied -- the
+  synthesis's accounting of a stay (:mod:`mitld_lp.routes.sensed_constrained`).
+* Labels: ``accept`` where the task has accepted, ``c<i>`` where the formula of the
+  ``i``-th constraint (``P(...)``, counted from 1 in the problem's order) has accepted,
+  ``done`` on the absorbing states.  ``truncated`` (an event later than its truncation
+  point) counts as the lower model counts it: the task failed, each ``<=`` constraint's
+  formula satisfied (violated), each ``>=`` one's not.
+* Rewards: ``steps`` (1 where the true task is undecided and can still be won) and
+  ``cost`` (there, the expected cost of the controller's action), what ``E(steps)``
+  and ``E(cost)`` count.
+
+So ``P=? [F "accept"]`` is at least the answer's ``lower`` and ``P=? [F "c<i>"]`` at most
+(``<=``) or at least (``>=``) the constraint's certified bound.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.joint import ACCEPTED, UNDECIDED, Joint
+from mitld_lp.sensing.belief import MAX_PRUNE_ATOMS
+
+__all__ = ["JointEnds", "joint_ends"]
+
+
+class JointEnds:
+    """Where a run of the joint automaton ends and its labels (module docs);
+    ``names[i]``: the label of component ``i`` (the task's ``accept``), ``against``:
+    the labels a truncated run carries."""
+
+    def __init__(self, joint: Joint, names: Sequence[str], against: frozenset[str],
+                 events: frozenset[str], costs: Mapping[str, float]) -> None:
+        self.joint, self.names, self.events = joint, tuple(names), events
+        self.costs = costs
+        self._live: dict[tuple[int, frozenset[str]], bool] = {}
+        self._ends: dict[str, frozenset[str]] = {
+            "truncated": frozenset({"truncated", "done"}) | against}
+
+    def _named(self, verdicts: tuple[int, ...]) -> str:
+        name = "verdict(" + ",".join("accepted" if v == ACCEPTED else "rejected"
+                                     for v in verdicts) + ")"
+        if name not in self._ends:
+            self._ends[name] = frozenset(
+                {"done", "accept" if verdicts[0] == ACCEPTED else "reject"}
+                | {n for n, v in zip(self.names[1:], verdicts[1:], strict=True)
+                   if v == ACCEPTED})
+        return name
+
+    def end(self, q: int) -> str | None:
+        v = self.joint.verdicts[q]
+        return None if UNDECIDED in v else self._named(v)
+
+    def stopped(self, q: int) -> str:
+        return self._named(tuple(v if v != UNDECIDED else 0 for v in self.joint.verdicts[q]))
+
+    def labels(self, q: int) -> frozenset[str]:
+        return frozenset(n for n, v in zip(self.names, self.joint.verdicts[q], strict=True)
+                         if v == ACCEPTED)
+
+    def end_labels(self, name: str) -> frozenset[str]:
+        return self._ends[name]
+
+    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+                mixes: Mapping[int, list[tuple[str, float]]]
+                ) -> tuple[tuple[str, np.ndarray], ...]:
+        """``steps``: 1 on a state whose true task is undecided and can still accept
+        with the events pending (the synthesis's E(steps) counts its steps), else 0;
+        ``cost``: there, the expected cost of the controller's action (each action's
+        ``costs`` entry, 1 if it has none; *stay* costs nothing)."""
+        j = self.joint
+        steps = np.array([0.0 if x is None or j.verdicts[x[0]][0] != UNDECIDED
+                          or not self.live(j.components[x[0]][0], x[1]) else 1.0
+                          for x in states])
+        cost = np.array([sum(p * self.costs.get(a, 1.0) for a, p in mixes.get(k, ()))
+                         for k in range(len(states))]) * steps
+        return (("steps", steps), ("cost", cost))
+
+    def live(self, q: int, pending: frozenset[str]) -> bool:
+        """Whether the task's automaton reaches acceptance from ``q`` on some word of
+        the world's propositions and the ``pending`` events (each event may still come);
+        beyond :data:`~mitld_lp.sensing.belief.MAX_PRUNE_ATOMS` atoms, True (as the
+        synthesis counts it)."""
+        key = (q, pending)
+        hit = self._live.get(key)
+        if hit is None:
+            task = self.joint.parts[0]
+            atoms = sorted(a for a in task.atoms if a not in self.events or a in pending)
+            hit = len(atoms) > MAX_PRUNE_ATOMS or _reaches(task, q, atoms)
+            self._live[key] = hit
+        return hit
+
+
+def _reaches(dta: DTA, q: int, atoms: Sequence[str]) -> bool:
+    """Whether some word over ``atoms`` leads ``dta`` from ``q`` to a persistent or
+    accepting state."""
+    goal = dta.persistent | ({dta.accepting} if dta.accepting is not None else set())
+    letters = [frozenset(a for a, bit in zip(atoms, bits, strict=True) if bit)
+               for bits in itertools.product((False, True), repeat=len(atoms))]
+    seen, todo = {q}, [q]
+    while todo:
+        u = todo.pop()
+        if u in goal:
+            return True
+        for letter in letters:
+            v = dta.step(u, letter)
+            if v not in seen:
+                seen.add(v)
+                todo.append(v)
+    return False
+
+
+def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any,
+               costs: Mapping[str, float]) -> JointEnds:
+    """The ends of ``joint`` (the task first, then one component per ``P(...)``
+    constraint of ``constraints``, in order): component labels ``c<i>`` by the
+    constraint's position among all of them; ``belief``: the information-state product
+    (its events, for the steps); ``costs``: the actions' costs (the reward ``cost``)."""
+    names = ["accept"]
+    against: set[str] = set()
+    for i, c in enumerate(constraints, start=1):
+        if c.kind == "prob":
+            names.append(f"c{i}")
+            if c.sense == "<=":
+                against.add(f"c{i}")
+    if len(names) != len(joint.parts):
+        raise ValueError(f"the joint automaton has {len(joint.parts)} components, the task "
+                         f"and {len(names) - 1} constraint formulas were given")
+    return JointEnds(joint, names, frozenset(against), frozenset(belief.sta.events),
+                     costs)
