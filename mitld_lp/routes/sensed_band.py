@@ -1,0 +1,115 @@
+"""Sensed events whose law is known only within a band (the ``sensed`` route with a band):
+the worst case over the band for a policy that acts on observations, certified where the
+bracket closes, honest about the gap where it does not.
+
+The policy: the sensed optimum (:mod:`mitld_lp.routes.sensed_solve`) at the band's
+nominal law (a band's point law: the centre of an interval parameter, the fitted law of
+a fit; the law the robust constrained route chooses at too), a law of the band.
+
+``lower``: that controller's worst case over the band, with the band's semantics of the
+robust route (docs/robust.md: at every step nature, who has seen everything, picks each
+pending band event's hazard inside its band at the true clock): its controlled chain
+over the truth and the controller's memory with nature's corners as choices
+(:mod:`mitld_lp.running.sensed_band_chain`), evaluated by value iteration from below
+(sound at every iterate).  ``export --chain`` writes that chain; Storm's robust check of
+it gives ``lower``.
+
+``upper``: the least of two sound upper bounds on the optimum over observation-based
+policies of the worst case: the sensed optimum's ``upper`` at the nominal law (nature may
+play that law at every step) and the fully observed robust optimum's ``upper``
+(:mod:`mitld_lp.routes.robust`; an observation-based policy is a full-information one).
+The answer is certified when ``upper - lower`` is within the precision (relative to
+``lower``, as every route's) and both solves certified; otherwise the check
+``worst case over the band`` says the gap, both ends still sound.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Any
+
+from mitld_lp.checks import Check
+from mitld_lp.problem import Posed
+from mitld_lp.report import bracket_text
+from mitld_lp.result import Result
+from mitld_lp.routes.sensed_solve import SensedPart, solve_sensed
+from mitld_lp.routes.stages import Built
+from mitld_lp.solvers.certify import float_up
+
+__all__ = ["SensedBandPart", "solve_sensed_band"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SensedBandPart(SensedPart):
+    """The sensed route's part with a band: the point answer's models (at the nominal
+    law), and the band's bounds: ``worst`` the controller's worst case on its chain
+    (:class:`~mitld_lp.running.sensed_band_chain.SensedBandValue`), ``nominal_upper``
+    the sensed optimum's upper bound at the nominal law, ``full_upper`` the fully
+    observed robust optimum's, ``message`` what the bracket is."""
+
+    worst: Any = field(default=None)
+    nominal_upper: float = float("nan")
+    full_upper: float = float("nan")
+    message: str = ""
+    band_worst = True
+
+
+def _full_information(posed: Posed) -> Result:
+    """The fully observed robust optimum of the same problem (its sensors read as
+    perfect): a sound upper bound for every observation-based policy."""
+    from mitld_lp.synthesis import pose, solve
+
+    model = dataclasses.replace(posed.model, sensors=MappingProxyType({}))
+    settings = replace(posed.settings, progress=False)
+    return solve(pose(model, settings=settings, objective=posed.problem.objective))
+
+
+def solve_sensed_band(posed: Posed, built: Built) -> Result:
+    """Solve a problem with sensed events and a band (module docs) on its built
+    information-state product (the nominal law's beliefs)."""
+    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+
+    t0 = time.perf_counter()
+    point = solve_sensed(posed, built)
+    sta = point.sta
+    bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
+             if c.distribution.is_ambiguous}
+    if point.controller is None:  # no controller: the point answer's status says why
+        return replace(point, bands=bands)
+    worst = worst_case(sensed_band_chain_of(point))
+    full = _full_information(posed)
+    bounds = [point.upper, full.upper]
+    upper = min(u for u in bounds if u == u)  # NaN: a bound its solve did not give
+    lower = float(min(worst.lower, upper))
+    width = upper - lower
+    s = posed.settings
+    closed = width <= s.precision * max(lower, 0.0)
+    detail = (f"lower {lower!r}: the controller's worst case over the band on its chain "
+              f"({worst.n_states} states, {worst.iterations} iterations, last change "
+              f"{worst.last_change:.1e}); upper {upper!r}: the least of the sensed optimum "
+              f"at the nominal law ({point.upper!r}) and the fully observed robust optimum "
+              f"({full.upper!r}); gap {width:.3g} "
+              + ("within" if closed else "beyond") + f" the precision {s.precision:g}")
+    check = Check("worst case over the band", closed, detail)
+    checks = (*point.checks, *(c for c in full.checks if not c.passed), check)
+    message = ("" if closed else
+               f"not certified: the worst case over the band of an observation-based "
+               f"controller is in [{lower!r}, {upper!r}] (gap {width:.3g}); both ends "
+               "sound: lower is what the returned controller guarantees under every law "
+               "of the band")
+    part = SensedBandPart(point.part.lower_model, point.part.upper_model,
+                          point.part.sensors, point.part.belief, worst=worst,
+                          nominal_upper=point.upper, full_upper=full.upper, message=message)
+    result = replace(point, lower=lower, upper=float_up(upper), value=lower,
+                     certified=all(c.passed for c in checks), checks=checks, bands=bands,
+                     part=part, width={**point.width, "band": width},
+                     timings={**point.timings, "band": time.perf_counter() - t0})
+    log.info("sensed synthesis over the band: %s, certified=%s",
+             bracket_text(result.lower, result.upper), result.certified)
+    return result
