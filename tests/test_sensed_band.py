@@ -24,6 +24,8 @@ from mitld_lp.problem import ProblemError
 from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
 from mitld_lp.sensing import Sensor
 
+MODELS = Path(__file__).resolve().parent.parent / "models"
+
 # a robot waits in "mid"; "go" reaches the goal "sa" (A) with 3/4, from where it must
 # pass "trap" before it is back: a round of 3 steps, so it cannot be at A in every window
 # of two steps, and seeing the event's report tells it when to go
@@ -133,3 +135,26 @@ def test_what_is_not_solved_is_refused_by_name(extra, words) -> None:
     with pytest.raises(ProblemError, match="known only within a band") as err:
         synthesize(model([0.3, 0.6], 0.6), **extra)
     assert words in str(err.value)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("stormpy") is None, reason="needs stormpy")
+def test_export_chain_of_the_bus_case_with_a_camera_and_a_band(tmp_path: Path, capsys) -> None:
+    """The bus case, bus 1's law a band, its camera missing: the command line writes the
+    interval model, Storm's robust check of it gives lower; the point chain is refused."""
+    from test_band_chain import storm_worst
+
+    from mitld_lp.cli import main
+    from mitld_lp.model import load_model
+    from mitld_lp.running.chain import chain_of
+
+    text = (MODELS / "bus_grid.toml").read_text().replace(
+        "mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }", 1)
+    path = tmp_path / "camera.toml"
+    path.write_text(text + "\n[sensors]\nb1 = { detect = 0.5 }\n")
+    out = tmp_path / "camera.drn"
+    assert main(["export", str(path), "--chain", str(out), "-q"]) in (0, 3)
+    assert "uncertainty MINIMIZE >= lower" in capsys.readouterr().out
+    r = synthesize(load_model(path))
+    assert r.lower < r.upper and abs(storm_worst(out) - r.lower) <= 1e-9
+    with pytest.raises(ValueError, match="no Markov chain"):
+        chain_of(r)

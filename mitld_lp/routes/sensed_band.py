@@ -96,6 +96,8 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
               f"at the nominal law ({point.upper!r}) and the fully observed robust optimum "
               f"({full.upper!r}); gap {width:.3g} "
               + ("within" if closed else "beyond") + f" the precision {s.precision:g}")
+    solver = float(point.width.get("solver", 0.0))
+    widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
     check = Check("worst case over the band", closed, detail)
     checks = (*point.checks, *(c for c in full.checks if not c.passed), check)
     message = ("" if closed else
@@ -108,7 +110,7 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
                           nominal_upper=point.upper, full_upper=full.upper, message=message)
     result = replace(point, lower=lower, upper=float_up(upper), value=lower,
                      certified=all(c.passed for c in checks), checks=checks, bands=bands,
-                     part=part, width={**point.width, "band": width},
+                     part=part, width=widths,
                      timings={**point.timings, "band": time.perf_counter() - t0})
     log.info("sensed synthesis over the band: %s, certified=%s",
              bracket_text(result.lower, result.upper), result.certified)

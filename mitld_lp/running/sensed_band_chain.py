@@ -36,8 +36,8 @@ from mitld_lp.files import write as files
 from mitld_lp.running.band_chain import BAND_PROPERTY, BandChain, band_chain_drn
 from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
-__all__ = ["SensedBandValue", "sensed_band_chain", "sensed_band_chain_of", "worst_case",
-           "write_sensed_band_chain", "BAND_PROPERTY"]
+__all__ = ["SensedBandValue", "is_sensed_band", "sensed_band_chain", "sensed_band_chain_of",
+           "sensed_band_claim", "worst_case", "write_sensed_band_chain", "BAND_PROPERTY"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,19 @@ class SensedBandValue:
     last_change: float
     iterations: int
     n_states: int
+
+
+def is_sensed_band(result: Any) -> bool:
+    """Whether ``result`` answers a problem with sensors that miss events and a band (its
+    route's part says its lower end is a worst case over the band)."""
+    return bool(getattr(getattr(result, "part", None), "band_worst", False))
+
+
+def sensed_band_claim(result: Any) -> tuple[float, str]:
+    """What Storm's check of the file gives against ``result``'s bracket: the bound and
+    the sentence the command line prints."""
+    return result.lower, (f"{BAND_PROPERTY} with uncertainty MINIMIZE >= lower = "
+                          f"{result.lower!r}, the controller's worst case over the bands")
 
 
 def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any
