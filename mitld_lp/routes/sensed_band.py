@@ -59,15 +59,38 @@ class SensedBandPart(SensedPart):
     message: str = ""
     band_worst = True
 
+    def summary(self, result: Result) -> dict[str, Any]:
+        """The sensed route's keys, the band's bounds (``band_worst``) and, when the
+        bracket does not close, the message that says its gap."""
+        from mitld_lp.report import models_summary
 
-def _full_information(posed: Posed) -> Result:
-    """The fully observed robust optimum of the same problem (its sensors read as
-    perfect): a sound upper bound for every observation-based policy."""
+        out = models_summary(result)
+        w = self.worst
+        out["band_worst"] = {"lower": result.lower, "nominal_upper": self.nominal_upper,
+                             "full_information_upper": self.full_upper,
+                             "chain_states": w.n_states if w is not None else None}
+        if self.message:
+            out["message"] = self.message
+        return out
+
+
+def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
+    """The fully observed robust optimum's ``upper`` for the same problem (its sensors
+    read as perfect): a sound upper bound for every observation-based policy; NaN, with
+    the reason, where the robust route does not give it (its budget, a refusal)."""
+    from mitld_lp.problem import ProblemError
     from mitld_lp.synthesis import pose, solve
+    from mitld_lp.util.memory import ProductTooLarge
 
     model = dataclasses.replace(posed.model, sensors=MappingProxyType({}))
     settings = replace(posed.settings, progress=False)
-    return solve(pose(model, settings=settings, objective=posed.problem.objective))
+    try:
+        full = solve(pose(model, settings=settings, objective=posed.problem.objective))
+    except (ProblemError, ProductTooLarge) as exc:  # a budget or a refusal: the other bound
+        log.info("fully observed robust bound not used: %s", exc)
+        return float("nan"), ()
+    failed = tuple(c for c in full.checks if not c.passed)
+    return (full.upper if full.controller is not None else float("nan")), failed
 
 
 def solve_sensed_band(posed: Posed, built: Built) -> Result:
@@ -83,9 +106,8 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
     if point.controller is None:  # no controller: the point answer's status says why
         return replace(point, bands=bands)
     worst = worst_case(sensed_band_chain_of(point))
-    full = _full_information(posed)
-    bounds = [point.upper, full.upper]
-    upper = min(u for u in bounds if u == u)  # NaN: a bound its solve did not give
+    full_upper, full_failed = _full_information(posed)
+    upper = min(u for u in (point.upper, full_upper, 1.0) if u == u)  # NaN: not given
     lower = float(min(worst.lower, upper))
     width = upper - lower
     s = posed.settings
@@ -94,12 +116,12 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
               f"({worst.n_states} states, {worst.iterations} iterations, last change "
               f"{worst.last_change:.1e}); upper {upper!r}: the least of the sensed optimum "
               f"at the nominal law ({point.upper!r}) and the fully observed robust optimum "
-              f"({full.upper!r}); gap {width:.3g} "
+              f"({full_upper!r}); gap {width:.3g} "
               + ("within" if closed else "beyond") + f" the precision {s.precision:g}")
     solver = float(point.width.get("solver", 0.0))
     widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
     check = Check("worst case over the band", closed, detail)
-    checks = (*point.checks, *(c for c in full.checks if not c.passed), check)
+    checks = (*point.checks, *full_failed, check)
     message = ("" if closed else
                f"not certified: the worst case over the band of an observation-based "
                f"controller is in [{lower!r}, {upper!r}] (gap {width:.3g}); both ends "
@@ -107,7 +129,7 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
                "of the band")
     part = SensedBandPart(point.part.lower_model, point.part.upper_model,
                           point.part.sensors, point.part.belief, worst=worst,
-                          nominal_upper=point.upper, full_upper=full.upper, message=message)
+                          nominal_upper=point.upper, full_upper=full_upper, message=message)
     result = replace(point, lower=lower, upper=float_up(upper), value=lower,
                      certified=all(c.passed for c in checks), checks=checks, bands=bands,
                      part=part, width=widths,
