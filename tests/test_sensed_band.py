@@ -158,3 +158,18 @@ def test_export_chain_of_the_bus_case_with_a_camera_and_a_band(tmp_path: Path, c
     assert r.lower < r.upper and abs(storm_worst(out) - r.lower) <= 1e-9
     with pytest.raises(ValueError, match="no Markov chain"):
         chain_of(r)
+
+
+def test_a_certified_answer_is_the_optimum_at_the_band_s_worst_constant_law() -> None:
+    """Band [0.3, 0.6], camera 0.6: the bracket closes.  Its value must then be the best
+    an observation-based policy does against nature's constant low hazard (an upper
+    bound on the worst-case optimum, nature being free to play it), found here by an
+    expectimax over observation histories (tests/test_sensed_chain.py) with the law
+    0.3, 0.7 * 0.3, 0.7^2 * 0.3 on steps 1..3 (a later bus is too late)."""
+    from test_sensed_chain import histories
+
+    r = synthesize(model([0.3, 0.6], 0.6))
+    assert r.certified
+    best = histories(GAME, [(("0.3", "0.21", "0.147"), "0.6", 0, "A", 1)], 4)
+    assert abs(best - Fraction(r.lower)) <= Fraction(1, 10**9)
+    assert worst_over_nature(r.controller, "0.3", "0.6", "0.6") >= Fraction(r.lower)

@@ -2,21 +2,23 @@
 the worst case over the band for a policy that acts on observations, certified where the
 bracket closes, honest about the gap where it does not.
 
-The policy: the sensed optimum (:mod:`mitld_lp.routes.sensed_solve`) at the band's
-nominal law (a band's point law: the centre of an interval parameter, the fitted law of
-a fit; the law the robust constrained route chooses at too), a law of the band.
+The policy: the sensed optimum (:mod:`mitld_lp.routes.sensed_solve`) at a law of the
+band, the best by its worst case of three: the band's nominal law (the centre of an
+interval parameter, the fitted law of a fit; the law the robust constrained route
+chooses at too), every band at its low end, every band at its high end (an interval
+parameter's ends, :func:`end_laws`).
 
-``lower``: that controller's worst case over the band, with the band's semantics of the
-robust route (docs/robust.md: at every step nature, who has seen everything, picks each
-pending band event's hazard inside its band at the true clock): its controlled chain
+``lower``: the chosen controller's worst case over the band, with the band's semantics
+of the robust route (docs/robust.md: at every step nature, who has seen everything,
+picks each pending band event's hazard inside its band at the true clock): its chain
 over the truth and the controller's memory with nature's corners as choices
 (:mod:`mitld_lp.running.sensed_band_chain`), evaluated by value iteration from below
 (sound at every iterate).  ``export --chain`` writes that chain; Storm's robust check of
 it gives ``lower``.
 
-``upper``: the least of two sound upper bounds on the optimum over observation-based
-policies of the worst case: the sensed optimum's ``upper`` at the nominal law (nature may
-play that law at every step) and the fully observed robust optimum's ``upper``
+``upper``: the least of sound upper bounds on the optimum over observation-based
+policies of the worst case: the sensed optimum's ``upper`` at each of those laws (nature
+may play that law at every step) and the fully observed robust optimum's ``upper``
 (:mod:`mitld_lp.routes.robust`; an observation-based policy is a full-information one).
 The answer is certified when ``upper - lower`` is within the precision (relative to
 ``lower``, as every route's) and both solves certified; otherwise the check
@@ -28,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
@@ -40,7 +43,7 @@ from mitld_lp.routes.sensed_solve import SensedPart, solve_sensed
 from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.certify import float_up
 
-__all__ = ["SensedBandPart", "solve_sensed_band"]
+__all__ = ["SensedBandPart", "end_laws", "solve_sensed_band"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +58,8 @@ class SensedBandPart(SensedPart):
 
     worst: Any = field(default=None)
     nominal_upper: float = float("nan")
+    point_uppers: Mapping[str, float] = field(default_factory=dict)
+    chosen_at: str = "middle law"
     full_upper: float = float("nan")
     message: str = ""
     band_worst = True
@@ -66,7 +71,8 @@ class SensedBandPart(SensedPart):
 
         out = models_summary(result)
         w = self.worst
-        out["band_worst"] = {"lower": result.lower, "nominal_upper": self.nominal_upper,
+        out["band_worst"] = {"lower": result.lower, "chosen_at": self.chosen_at,
+                             "sensed_uppers": dict(self.point_uppers),
                              "full_information_upper": self.full_upper,
                              "chain_states": w.n_states if w is not None else None}
         if self.message:
@@ -93,30 +99,79 @@ def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
     return (full.upper if full.controller is not None else float("nan")), failed
 
 
-def solve_sensed_band(posed: Posed, built: Built) -> Result:
-    """Solve a problem with sensed events and a band (module docs) on its built
-    information-state product (the nominal law's beliefs)."""
+def end_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The laws of the band to try the sensed optimum at besides its middle law: every
+    band at its low end, and every band at its high end (an interval parameter's ends;
+    a band with no end laws keeps its middle law), each as the band with that point law
+    (its hazard intervals unchanged)."""
+    from mitld_lp.distributions import from_table
+    from mitld_lp.distributions.band import ConstantBand, EnvelopeBand
+
+    out = []
+    for end, name in ((0, "low ends"), (-1, "high ends")):
+        laws, moved = dict(distributions), False
+        for e, d in distributions.items():
+            try:
+                if isinstance(d, ConstantBand) and 0.0 < (d.lo, d.hi)[end] <= 1.0:
+                    law = from_table({"geometric": (d.lo, d.hi)[end]}, d.label)
+                elif isinstance(d, EnvelopeBand) and len(d.laws) > 1:
+                    law = d.laws[1:][end]
+                else:
+                    continue
+            except ValueError:  # an end no point law of its own can take
+                continue
+            laws[e], moved = dataclasses.replace(d, nominal=law), True
+        if moved:
+            out.append((name, laws))
+    return out
+
+
+def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
+               ) -> tuple[Result, Any]:
+    """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
+    ``built``) and its controller's worst case over the band."""
     from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
 
-    t0 = time.perf_counter()
+    if laws is not None:
+        model = dataclasses.replace(posed.model, distributions=MappingProxyType(laws))
+        posed = replace(posed, problem=replace(posed.problem, model=model))
+        built = posed.route.build(posed, progress=posed.settings.progress)
+    assert built is not None
     point = solve_sensed(posed, built)
-    sta = point.sta
-    bands = {e: str(c.distribution) for e, c in sorted(sta.clocks.items())
+    if point.controller is None:
+        return point, None
+    return point, worst_case(sensed_band_chain_of(point))
+
+
+def solve_sensed_band(posed: Posed, built: Built) -> Result:
+    """Solve a problem with sensed events and a band (module docs) on its built
+    information-state product (the middle law's beliefs), and at the bands' ends."""
+    t0 = time.perf_counter()
+    point, worst = _candidate(posed, built, None)
+    bands = {e: str(c.distribution) for e, c in sorted(point.sta.clocks.items())
              if c.distribution.is_ambiguous}
-    if point.controller is None:  # no controller: the point answer's status says why
+    if worst is None:  # no controller: the point answer's status says why
         return replace(point, bands=bands)
-    worst = worst_case(sensed_band_chain_of(point))
+    uppers = {"middle law": point.upper}
+    chosen, name = (point, worst), "middle law"
+    for label, laws in end_laws(posed.model.distributions):
+        other, w = _candidate(posed, None, laws)
+        uppers[label] = other.upper
+        if w is not None and w.lower > chosen[1].lower:
+            chosen, name = (other, w), label
+    point, worst = chosen
     full_upper, full_failed = _full_information(posed)
-    upper = min(u for u in (point.upper, full_upper, 1.0) if u == u)  # NaN: not given
+    upper = min(u for u in (*uppers.values(), full_upper, 1.0) if u == u)  # NaN: not given
     lower = float(min(worst.lower, upper))
     width = upper - lower
     s = posed.settings
     closed = width <= s.precision * max(lower, 0.0)
-    detail = (f"lower {lower!r}: the controller's worst case over the band on its chain "
-              f"({worst.n_states} states, {worst.iterations} iterations, last change "
-              f"{worst.last_change:.1e}); upper {upper!r}: the least of the sensed optimum "
-              f"at the nominal law ({point.upper!r}) and the fully observed robust optimum "
-              f"({full_upper!r}); gap {width:.3g} "
+    said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
+    detail = (f"lower {lower!r}: the worst case over the band of the sensed optimum at the "
+              f"{name} on its chain ({worst.n_states} states, {worst.iterations} "
+              f"iterations, last change {worst.last_change:.1e}); upper {upper!r}: the "
+              f"least of the sensed optima's upper bounds ({said}) and the fully observed "
+              f"robust optimum's ({full_upper!r}); gap {width:.3g} "
               + ("within" if closed else "beyond") + f" the precision {s.precision:g}")
     solver = float(point.width.get("solver", 0.0))
     widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
@@ -129,10 +184,11 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
                "of the band")
     part = SensedBandPart(point.part.lower_model, point.part.upper_model,
                           point.part.sensors, point.part.belief, worst=worst,
-                          nominal_upper=point.upper, full_upper=full_upper, message=message)
-    result = replace(point, lower=lower, upper=float_up(upper), value=lower,
-                     certified=all(c.passed for c in checks), checks=checks, bands=bands,
-                     part=part, width=widths,
+                          nominal_upper=uppers["middle law"], point_uppers=uppers,
+                          chosen_at=name, full_upper=full_upper, message=message)
+    result = replace(point, model=posed.model, lower=lower, upper=float_up(upper),
+                     value=lower, certified=all(c.passed for c in checks), checks=checks,
+                     bands=bands, part=part, width=widths,
                      timings={**point.timings, "band": time.perf_counter() - t0})
     log.info("sensed synthesis over the band: %s, certified=%s",
              bracket_text(result.lower, result.upper), result.certified)
