@@ -182,3 +182,20 @@ def test_a_safety_task_with_a_camera_and_a_band_exported_and_rechecked_by_storm(
     assert code == (0 if certified else 3) and 0.0 < lower <= upper
     assert abs(storm_worst(out) - lower) <= 1e-9
     assert said["chain_accept"] == lower
+
+
+def test_the_chain_s_budget_and_the_time_limit() -> None:
+    """A budget one state short of the interval chain (larger than the information-state
+    product here) stops it by name; with no time left for the bands' ends the middle
+    law's answer comes back uncertified, its gap said."""
+    from mitld_lp.util.memory import ProductTooLarge
+
+    full = synthesize(model([0.3, 0.6], 0.6))
+    n = full.part.worst.n_states
+    assert n > full.mdp.n_states
+    assert synthesize(model([0.3, 0.6], 0.6), max_states=n).lower == full.lower
+    with pytest.raises(ProductTooLarge, match=f"interval chain has more than {n - 1} states"):
+        synthesize(model([0.3, 0.6], 0.6), max_states=n - 1)
+    r = synthesize(model([0.3, 0.6], 0.6), time_limit=1e-3)
+    assert list(r.part.point_uppers) == ["middle law"] and not r.certified
+    assert r.lower <= r.upper and "not certified" in r.part.message

@@ -140,7 +140,20 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
     point = solve_sensed(posed, built)
     if point.controller is None:
         return point, None
-    return point, worst_case(sensed_band_chain_of(point))
+    chain = sensed_band_chain_of(point, max_states=posed.settings.max_states)
+    return point, worst_case(chain)
+
+
+def _within(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
+    """``posed`` with the time left of ``limit`` seconds from ``t0`` (None: none left,
+    ``what`` is not solved and its bound not used)."""
+    if limit is None:
+        return posed
+    left = t0 + limit - time.perf_counter()
+    if left <= 0.001:
+        log.info("time limit: %s not tried", what)
+        return None
+    return replace(posed, settings=replace(posed.settings, time_limit=left))
 
 
 def solve_sensed_band(posed: Posed, built: Built) -> Result:
@@ -154,13 +167,20 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
         return replace(point, bands=bands)
     uppers = {"middle law": point.upper}
     chosen, name = (point, worst), "middle law"
+    limit = posed.settings.time_limit
     for label, laws in end_laws(posed.model.distributions):
-        other, w = _candidate(posed, None, laws)
+        timed = _within(posed, t0, limit, label)
+        if timed is None:
+            continue
+        other, w = _candidate(timed, None, laws)
+        if w is None:  # no controller there (a time limit): its bound is not used
+            continue
         uppers[label] = other.upper
-        if w is not None and w.lower > chosen[1].lower:
+        if w.lower > chosen[1].lower:
             chosen, name = (other, w), label
     point, worst = chosen
-    full_upper, full_failed = _full_information(posed)
+    timed = _within(posed, t0, limit, "the fully observed robust optimum")
+    full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
     upper = min(u for u in (*uppers.values(), full_upper, 1.0) if u == u)  # NaN: not given
     lower = float(min(worst.lower, upper))
     width = upper - lower

@@ -67,11 +67,13 @@ def sensed_band_claim(result: Any) -> tuple[float, str]:
                           f"{result.lower!r}, the controller's worst case over the bands")
 
 
-def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any
-                      ) -> BandChain:
+def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
+                      max_states: int | None = None) -> BandChain:
     """The interval chain (module docs) of ``controller`` in ``game`` with the task's
-    automaton ``dta``, the events' clocks ``sta`` (bands included) and the ``sensors``."""
-    chain, choices = sensed_corner_unfolding(game, dta, sta, sensors, controller)
+    automaton ``dta``, the events' clocks ``sta`` (bands included) and the ``sensors``
+    (at most ``max_states`` states, else :class:`~mitld_lp.util.memory.ProductTooLarge`)."""
+    chain, choices = sensed_corner_unfolding(game, dta, sta, sensors, controller,
+                                             max_states)
     rows = [row for here in choices for _, row in here]
     names = tuple(name for here in choices for name, _ in here)
     n = len(choices)
@@ -88,13 +90,15 @@ def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: A
                      chain.origin)
 
 
-def sensed_band_chain_of(result: Any, controller: Any = None) -> BandChain:
+def sensed_band_chain_of(result: Any, controller: Any = None,
+                         max_states: int | None = None) -> BandChain:
     """The interval chain of a sensed answer whose laws include a band, under its
-    controller or ``controller`` (one of the same model)."""
+    controller or ``controller`` (one of the same model), at most ``max_states``."""
     c = controller if controller is not None else result.controller
     if c is None:
         raise ValueError(f"no controller to export: the synthesis is {result.status}")
-    return sensed_band_chain(result.model.game, result.dta, result.sta, result.sensors, c)
+    return sensed_band_chain(result.model.game, result.dta, result.sta, result.sensors, c,
+                             max_states)
 
 
 def worst_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_000_000

@@ -312,7 +312,8 @@ def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int
 
 
 def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
-                            sensors: Mapping[str, Sensor], controller: ControllerLike
+                            sensors: Mapping[str, Sensor], controller: ControllerLike,
+                            max_states: int | None = None
                             ) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
     """The chain of ``controller`` (a controller that acts on sensor reports) where some
     event's law is a band (``sta``'s clocks then give each step's hazard interval,
@@ -320,9 +321,12 @@ def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
     corner of the box of the hazards of its pending events whose band is open at its
     clock, nature's (:mod:`mitld_lp.running.sensed_band_chain`).  Returns the chain of
     the union of those choices' supports (its labels, valuations and states) and each
-    state's choices ``(name, row)``."""
+    state's choices ``(name, row)``; past ``max_states`` states it stops
+    (:class:`~mitld_lp.util.memory.ProductTooLarge`)."""
     plan, sensed = _plan_of(controller, sensors)
-    return _CornerUnfolding(game, dta, sta, sensors, sensed, plan).corners()
+    unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan)
+    unfolding.max_states = max_states
+    return unfolding.corners()
 
 
 class _CornerUnfolding(_Unfolding):
@@ -330,11 +334,18 @@ class _CornerUnfolding(_Unfolding):
     time (``corner``: the hazard each open band event has in the step unfolded now)."""
 
     corner: dict[str, float]
+    max_states: int | None = None
 
     def corners(self) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
         self.start()
         choices: list[list[tuple[str, dict[int, float]]]] = []
         while len(choices) < len(self.order):
+            if self.max_states is not None and len(self.order) > self.max_states:
+                from mitld_lp.util.memory import ProductTooLarge
+
+                raise ProductTooLarge(
+                    f"the sensed controller's interval chain has more than "
+                    f"{self.max_states:,} states (max_states); raise max_states")
             node = self.order[len(choices)]
             if isinstance(node, str):
                 choices.append([("stay", {len(choices): 1.0})])
