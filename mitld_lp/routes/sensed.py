@@ -23,7 +23,8 @@ __all__ = ["SensedRoute", "sensed_refusals"]
 class SensedRoute(Route):
     """Some event is reported by a sensor that misses it (``detect < 1``): every task
     class, either objective, laws that may never happen; point laws, no constraints
-    (:mod:`mitld_lp.routes.sensed_solve`).  It claims every
+    (:mod:`mitld_lp.routes.sensed_solve`), and for a maximum a law known within a band
+    (the worst case over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
