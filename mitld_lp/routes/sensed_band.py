@@ -185,14 +185,18 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
     lower = float(min(worst.lower, upper))
     width = upper - lower
     s = posed.settings
-    closed = width <= s.precision * max(lower, 0.0)
+    # the chain's worst case above a sound upper bound would mean the chain and the
+    # bounds disagree (none is expected): the answer is then not certified
+    agree = worst.lower <= upper + s.precision * max(upper, 0.0)
+    closed = agree and width <= s.precision * max(lower, 0.0)
     said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
     detail = (f"lower {lower!r}: the worst case over the band of the sensed optimum at the "
               f"{name} on its chain ({worst.n_states} states, {worst.iterations} "
               f"iterations, last change {worst.last_change:.1e}); upper {upper!r}: the "
               f"least of the sensed optima's upper bounds ({said}) and the fully observed "
               f"robust optimum's ({full_upper!r}); gap {width:.3g} "
-              + ("within" if closed else "beyond") + f" the precision {s.precision:g}")
+              + ("within" if closed else "beyond") + f" the precision {s.precision:g}"
+              + ("" if agree else f"; the chain's worst case {worst.lower!r} is above upper"))
     solver = float(point.width.get("solver", 0.0))
     widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
     check = Check("worst case over the band", closed, detail)
