@@ -199,3 +199,14 @@ def test_the_chain_s_budget_and_the_time_limit() -> None:
     r = synthesize(model([0.3, 0.6], 0.6), time_limit=1e-3)
     assert list(r.part.point_uppers) == ["middle law"] and not r.certified
     assert r.lower <= r.upper and "not certified" in r.part.message
+
+
+def test_the_controller_saved_and_loaded_has_the_same_worst_case(tmp_path: Path) -> None:
+    from mitld_lp.controllers.kinds import load_controller
+    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+
+    r = synthesize(model([0.1, 0.9], 0.5))
+    loaded = load_controller(r.controller.save(tmp_path / "c.npz"))
+    again = worst_case(sensed_band_chain_of(r, loaded))
+    assert again.n_states == r.part.worst.n_states and again.lower == r.lower
+    assert worst_over_nature(loaded, "0.1", "0.9", "0.5") >= Fraction(r.lower)
