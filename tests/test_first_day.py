@@ -18,23 +18,24 @@ ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
 BUS = MODELS / "bus_grid.toml"
 
-#: Features each refused with sensors that miss events, in one model file: a false
-#: alarm and a law known within a band (b1) (a constraint and the objective min with
-#: sensors, once refused too, are solved: tests/test_sensed_constrained.py,
-#: tests/test_sensing_tasks.py).
+#: Features each refused with sensors that miss events, in one model file (each its
+#: replacements and the words its reason names): a false alarm, and a law known within a
+#: band (b1) with the objective min (a band alone with sensors, a constraint and the
+#: objective min with sensors, once refused too, are solved: tests/test_sensed_band.py,
+#: tests/test_sensed_constrained.py, tests/test_sensing_tasks.py).
 FOUR = {
-    "false alarm": ("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }",
+    "false alarm": ((("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }"),),
                     "sensors.b2.false_alarm = 0.1"),
-    "band": ("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }",
-             "b1 ~ geometric([0.7, 0.9])"),
+    "band, min": ((("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }"),
+                   ("spec = ", 'objective = "min"\nspec = ')), "b1 ~ geometric([0.7, 0.9])"),
 }
 
 
 def _sensed(features: list[str]) -> str:
     text = BUS.read_text() + "\n[sensors]\nb2 = { detect = 0.8 }\n"
     for name in features:
-        old, new, _ = FOUR[name]
-        text = text.replace(old, new, 1)
+        for old, new in FOUR[name][0]:
+            text = text.replace(old, new, 1)
     return text
 
 
@@ -44,11 +45,11 @@ def test_four_features_that_do_not_combine_are_refused_together():
         pose(model)
     reasons = info.value.reasons
     assert len(reasons) == len(FOUR)
-    for name, (_, _, named) in FOUR.items():  # each reason names its own feature
+    for name, (_, named) in FOUR.items():  # each reason names its own feature
         assert sum(named in r for r in reasons) == 1, (name, reasons)
     assert str(info.value).startswith(f"not solved, for {len(FOUR)} reasons: (1) ")
     # each feature alone: its one reason, as its own message
-    for name, (_, _, named) in FOUR.items():
+    for name, (_, named) in FOUR.items():
         with pytest.raises(ProblemError) as alone:
             pose(loads_model(_sensed([name])))
         assert len(alone.value.reasons) == 1 and named in str(alone.value), name

@@ -182,7 +182,18 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         write_file(controller, lambda p: r.controller.save(p, overwrite=True,
                                                        max_states=budget))
         _wrote(args, said, "controller", controller, f"wrote {controller}")
-    if chain and is_band(r):  # the interval chain, for Storm's robust check
+    from mitld_lp.running.sensed_band_chain import (
+        is_sensed_band,
+        sensed_band_chain_of,
+        sensed_band_claim,
+    )
+
+    if chain and is_sensed_band(r):  # sensors and a band: an interval chain too
+        band = band_chain_drn(sensed_band_chain_of(r))
+        write_file(chain, lambda p: drn.write(band, p, overwrite=True))
+        accept, said_chain = sensed_band_claim(r)
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
+    elif chain and is_band(r):  # the interval chain, for Storm's robust check
         band = band_chain_drn(band_chain_of(r))
         write_file(chain, lambda p: drn.write(band, p, overwrite=True))
         accept, said_chain = band_claim(r)

@@ -23,7 +23,8 @@ __all__ = ["SensedRoute", "sensed_refusals"]
 class SensedRoute(Route):
     """Some event is reported by a sensor that misses it (``detect < 1``): every task
     class, either objective, laws that may never happen; point laws, no constraints
-    (:mod:`mitld_lp.routes.sensed_solve`).  It claims every
+    (:mod:`mitld_lp.routes.sensed_solve`), and for a maximum a law known within a band
+    (the worst case over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
@@ -70,6 +71,10 @@ class SensedRoute(Route):
               seed: int | None = 0) -> Result:
         from mitld_lp.routes.sensed_solve import solve_sensed
 
+        if posed.robust:  # the worst case over the band (mitld_lp.routes.sensed_band)
+            from mitld_lp.routes.sensed_band import solve_sensed_band
+
+            return solve_sensed_band(posed, built)
         return solve_sensed(posed, built)
 
 
@@ -89,11 +94,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
                            "information state is not finite; not solved (give "
                            "false_alarm = 0)")
     if robust:
-        bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
-                          if d.is_ambiguous)
-        refused.append(f"{head} with a law known only within a band ({bands}): the worst "
-                       "case over observation-based policies is not solved; give the event "
-                       "a point law")
+        refused += band_refusals(model, head, objective, constraints)
     try:
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here
@@ -102,3 +103,22 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
                        "(event_names), so the world's state reveals it; not solved")
     return refused
+
+
+def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[Any]
+                  ) -> list[str]:
+    """Why sensors with a law known only within a band cannot be solved as posed: the
+    worst case over the band is solved for a maximum without constraints
+    (:mod:`mitld_lp.routes.sensed_band`)."""
+    bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
+                      if d.is_ambiguous)
+    with_ = f"{head} with a law known only within a band ({bands})"
+    if constraints:
+        return [f"{with_} and constraints: a controller that acts on observations and "
+                "meets the constraints under every law of the band is not solved; give "
+                "the event a point law"]
+    if objective == "min":
+        return [f"{with_} and objective = \"min\": the worst case of a minimum over the "
+                "band for an observation-based controller is not solved; give the event a "
+                "point law"]
+    return []

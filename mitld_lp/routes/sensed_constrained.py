@@ -262,7 +262,9 @@ class SensedConstrainedRoute(Route):
                            "observes")
         # the sensors' own conditions (false alarms, bands, laws that may never happen,
         # worlds that react to a sensed event); the task's are said above
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", (), None, posed.robust)
+        # (constraints or then: a band is refused with them, by name)
+        asked = (*p.constraints, *([p.then] if p.then else []))
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", asked, None, posed.robust)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the

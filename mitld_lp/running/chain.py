@@ -71,6 +71,12 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     from mitld_lp.running.sensed_chain import is_sensed, sensed_chain_of
 
     if is_sensed(result):
+        if getattr(result.part, "band_worst", False):
+            raise ValueError("sensors with a law known only within a band: the controller's "
+                             "controlled system is no Markov chain (nature picks each step's "
+                             "hazard in the band); mitld_lp.running.sensed_band_chain."
+                             "sensed_band_chain_of gives its interval chain (export --chain "
+                             "writes it)")
         return sensed_chain_of(result, controller)
     if result.part.randomised:  # a constrained result: the joint automaton's product
         if result.controller is None and controller is None:

@@ -51,6 +51,7 @@ and labels (``c<i>``, ``done``, the reward ``steps``) are
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Hashable, Mapping
 from typing import Any
 
@@ -67,7 +68,7 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain",
+__all__ = ["SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain", "sensed_corner_unfolding",
            "sensed_chain_of"]
 
 
@@ -121,12 +122,20 @@ def sensed_chain(game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sens
     truncated, as the synthesis did) and the ``sensors`` that miss events.  ``ends``:
     for a joint automaton (:mod:`mitld_lp.running.sensed_joint`), its states' ends and
     labels; None: the task's accepting and rejecting states."""
+    plan, sensed = _plan_of(controller, sensors)
+    return _Unfolding(game, dta, sta, sensors, sensed, plan, ends or _TaskEnds(dta)).chain()
+
+
+def _plan_of(controller: ControllerLike, sensors: Mapping[str, Sensor]
+             ) -> tuple[Any, tuple[str, ...]]:
+    """The controller's plan and the sensed events, refused unless it acts on the
+    reports of exactly these sensors."""
     plan: Any = controller.plan
     sensed = tuple(sorted(sensors))
     if frozenset(sensed) != getattr(plan, "sensed", None):
         raise ValueError(f"the controller does not act on the reports of {', '.join(sensed)} "
                          "(it is not a controller of this model's sensors)")
-    return _Unfolding(game, dta, sta, sensors, sensed, plan, ends or _TaskEnds(dta)).chain()
+    return plan, sensed
 
 
 class _TaskEnds:
@@ -195,12 +204,16 @@ class _Unfolding:
         end = self.ends.end(q)
         return self.number(node if end is None else end)
 
-    def chain(self) -> Chain:
+    def start(self) -> None:
+        """Number the initial state."""
         g0 = self.game.initial
         q0 = self.dta.step(self.dta.initial, self.label(g0))
         unreported = (_REPORTED,) * len(self.sensed)
         self.enter(q0, (g0, q0, frozenset(self.sta.events), 0, unreported,
                         self.plan.start(g0)))
+
+    def chain(self) -> Chain:
+        self.start()
         rows: list[dict[int, float]] = []
         while len(rows) < len(self.order):
             node = self.order[len(rows)]
@@ -363,3 +376,70 @@ def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int
         if isinstance(node, str) or node[1] not in persistent:
             good[comp[k]] = False
     return [k for k in range(n) if good[comp[k]]]
+
+
+def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
+                            sensors: Mapping[str, Sensor], controller: ControllerLike,
+                            max_states: int | None = None
+                            ) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
+    """The chain of ``controller`` (a controller that acts on sensor reports) where some
+    event's law is a band (``sta``'s clocks then give each step's hazard interval,
+    :meth:`~mitld_lp.automata.sta.EventClock.band`): every state has one choice per
+    corner of the box of the hazards of its pending events whose band is open at its
+    clock, nature's (:mod:`mitld_lp.running.sensed_band_chain`).  Returns the chain of
+    the union of those choices' supports (its labels, valuations and states) and each
+    state's choices ``(name, row)``; past ``max_states`` states it stops
+    (:class:`~mitld_lp.util.memory.ProductTooLarge`)."""
+    plan, sensed = _plan_of(controller, sensors)
+    unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan, _TaskEnds(dta))
+    unfolding.max_states = max_states
+    return unfolding.corners()
+
+
+class _CornerUnfolding(_Unfolding):
+    """:class:`_Unfolding` with each step's hazards at one corner of the bands at a
+    time (``corner``: the hazard each open band event has in the step unfolded now)."""
+
+    corner: dict[str, float]
+    max_states: int | None = None
+
+    def corners(self) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
+        self.start()
+        choices: list[list[tuple[str, dict[int, float]]]] = []
+        while len(choices) < len(self.order):
+            if self.max_states is not None and len(self.order) > self.max_states:
+                from mitld_lp.util.memory import ProductTooLarge
+
+                raise ProductTooLarge(
+                    f"the sensed controller's interval chain has more than "
+                    f"{self.max_states:,} states (max_states); raise max_states")
+            node = self.order[len(choices)]
+            if isinstance(node, str):
+                choices.append([("stay", {len(choices): 1.0})])
+                continue
+            _, _, pending, clock, _, _ = node
+            bands = {a: self.sta.clocks[a].band(clock) for a in sorted(pending)}
+            open_ = [a for a, (lo, hi) in bands.items() if lo < hi]
+            here = []
+            for ends in itertools.product((0, 1), repeat=len(open_)):
+                self.corner = {a: bands[a][e] for a, e in zip(open_, ends, strict=True)}
+                name = "/".join(["act", *(f"{a}={('lo', 'hi')[e]}"
+                                          for a, e in zip(open_, ends, strict=True))])
+                here.append((name, self.step(node)))
+            choices.append(here)
+        union: list[dict[int, float]] = []
+        for here in choices:
+            row: dict[int, float] = {}
+            for _, r in here:
+                for k, p in r.items():
+                    row[k] = max(row.get(k, 0.0), p)
+            union.append(row)
+        return self.record(union), choices
+
+    def events(self, pending: frozenset[str], clock: int
+               ) -> list[tuple[frozenset[str], float]]:
+        out: list[tuple[frozenset[str], float]] = [(frozenset(), 1.0)]
+        for a in sorted(pending):
+            h = self.corner.get(a, self.sta.clocks[a].band(clock)[0])
+            out = [(e | {a}, p * h) for e, p in out] + [(e, p * (1.0 - h)) for e, p in out]
+        return [(e, p) for e, p in out if p > 0.0]

@@ -1,0 +1,219 @@
+"""Sensed events whose law is known only within a band (the ``sensed`` route with a band):
+the worst case over the band for a policy that acts on observations, certified where the
+bracket closes, honest about the gap where it does not.
+
+The policy: the sensed optimum (:mod:`mitld_lp.routes.sensed_solve`) at a law of the
+band, the best by its worst case of three: the band's nominal law (the centre of an
+interval parameter, the fitted law of a fit; the law the robust constrained route
+chooses at too), every band at its low end, every band at its high end (an interval
+parameter's ends, :func:`end_laws`).
+
+``lower``: the chosen controller's worst case over the band, with the band's semantics
+of the robust route (docs/robust.md: at every step nature, who has seen everything,
+picks each pending band event's hazard inside its band at the true clock): its chain
+over the truth and the controller's memory with nature's corners as choices
+(:mod:`mitld_lp.running.sensed_band_chain`), evaluated by value iteration from below
+(sound at every iterate).  ``export --chain`` writes that chain; Storm's robust check of
+it gives ``lower``.
+
+``upper``: the least of sound upper bounds on the optimum over observation-based
+policies of the worst case: the sensed optimum's ``upper`` at each of those laws (nature
+may play that law at every step) and the fully observed robust optimum's ``upper``
+(:mod:`mitld_lp.routes.robust`; an observation-based policy is a full-information one).
+The answer is certified when ``upper - lower`` is within the precision (relative to
+``lower``, as every route's) and both solves certified; otherwise the check
+``worst case over the band`` says the gap, both ends still sound.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Any
+
+from mitld_lp.checks import Check
+from mitld_lp.problem import Posed
+from mitld_lp.report import bracket_text
+from mitld_lp.result import Result
+from mitld_lp.routes.sensed_solve import SensedPart, solve_sensed
+from mitld_lp.routes.stages import Built
+from mitld_lp.solvers.certify import float_up
+
+__all__ = ["SensedBandPart", "end_laws", "solve_sensed_band"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SensedBandPart(SensedPart):
+    """The sensed route's part with a band: the point answer's models (at the nominal
+    law), and the band's bounds: ``worst`` the controller's worst case on its chain
+    (:class:`~mitld_lp.running.sensed_band_chain.SensedBandValue`), ``nominal_upper``
+    the sensed optimum's upper bound at the nominal law, ``full_upper`` the fully
+    observed robust optimum's, ``message`` what the bracket is."""
+
+    worst: Any = field(default=None)
+    nominal_upper: float = float("nan")
+    point_uppers: Mapping[str, float] = field(default_factory=dict)
+    chosen_at: str = "middle law"
+    full_upper: float = float("nan")
+    message: str = ""
+    band_worst = True
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        """The sensed route's keys, the band's bounds (``band_worst``) and, when the
+        bracket does not close, the message that says its gap."""
+        from mitld_lp.report import models_summary
+
+        out = models_summary(result)
+        w = self.worst
+        out["band_worst"] = {"lower": result.lower, "chosen_at": self.chosen_at,
+                             "sensed_uppers": dict(self.point_uppers),
+                             "full_information_upper": self.full_upper,
+                             "chain_states": w.n_states if w is not None else None}
+        if self.message:
+            out["message"] = self.message
+        return out
+
+
+def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
+    """The fully observed robust optimum's ``upper`` for the same problem (its sensors
+    read as perfect): a sound upper bound for every observation-based policy; NaN, with
+    the reason, where the robust route does not give it (its budget, a refusal)."""
+    from mitld_lp.problem import ProblemError
+    from mitld_lp.synthesis import pose, solve
+    from mitld_lp.util.memory import ProductTooLarge
+
+    model = dataclasses.replace(posed.model, sensors=MappingProxyType({}))
+    settings = replace(posed.settings, progress=False)
+    try:
+        full = solve(pose(model, settings=settings, objective=posed.problem.objective))
+    except (ProblemError, ProductTooLarge) as exc:  # a budget or a refusal: the other bound
+        log.info("fully observed robust bound not used: %s", exc)
+        return float("nan"), ()
+    failed = tuple(c for c in full.checks if not c.passed)
+    return (full.upper if full.controller is not None else float("nan")), failed
+
+
+def end_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The laws of the band to try the sensed optimum at besides its middle law: every
+    band at its low end, and every band at its high end (an interval parameter's ends;
+    a band with no end laws keeps its middle law), each as the band with that point law
+    (its hazard intervals unchanged)."""
+    from mitld_lp.distributions import from_table
+    from mitld_lp.distributions.band import ConstantBand, EnvelopeBand
+
+    out = []
+    for end, name in ((0, "low ends"), (-1, "high ends")):
+        laws, moved = dict(distributions), False
+        for e, d in distributions.items():
+            try:
+                if isinstance(d, ConstantBand) and 0.0 < (d.lo, d.hi)[end] <= 1.0:
+                    law = from_table({"geometric": (d.lo, d.hi)[end]}, d.label)
+                elif isinstance(d, EnvelopeBand) and len(d.laws) > 1:
+                    law = d.laws[1:][end]
+                else:
+                    continue
+            except ValueError:  # an end no point law of its own can take
+                continue
+            laws[e], moved = dataclasses.replace(d, nominal=law), True
+        if moved:
+            out.append((name, laws))
+    return out
+
+
+def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
+               ) -> tuple[Result, Any]:
+    """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
+    ``built``) and its controller's worst case over the band."""
+    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+
+    if laws is not None:
+        model = dataclasses.replace(posed.model, distributions=MappingProxyType(laws))
+        posed = replace(posed, problem=replace(posed.problem, model=model))
+        built = posed.route.build(posed, progress=posed.settings.progress)
+    assert built is not None
+    point = solve_sensed(posed, built)
+    if point.controller is None:
+        return point, None
+    chain = sensed_band_chain_of(point, max_states=posed.settings.max_states)
+    return point, worst_case(chain)
+
+
+def _within(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
+    """``posed`` with the time left of ``limit`` seconds from ``t0`` (None: none left,
+    ``what`` is not solved and its bound not used)."""
+    if limit is None:
+        return posed
+    left = t0 + limit - time.perf_counter()
+    if left <= 0.001:
+        log.info("time limit: %s not tried", what)
+        return None
+    return replace(posed, settings=replace(posed.settings, time_limit=left))
+
+
+def solve_sensed_band(posed: Posed, built: Built) -> Result:
+    """Solve a problem with sensed events and a band (module docs) on its built
+    information-state product (the middle law's beliefs), and at the bands' ends."""
+    t0 = time.perf_counter()
+    point, worst = _candidate(posed, built, None)
+    bands = {e: str(c.distribution) for e, c in sorted(point.sta.clocks.items())
+             if c.distribution.is_ambiguous}
+    if worst is None:  # no controller: the point answer's status says why
+        return replace(point, bands=bands)
+    uppers = {"middle law": point.upper}
+    chosen, name = (point, worst), "middle law"
+    limit = posed.settings.time_limit
+    for label, laws in end_laws(posed.model.distributions):
+        timed = _within(posed, t0, limit, label)
+        if timed is None:
+            continue
+        other, w = _candidate(timed, None, laws)
+        if w is None:  # no controller there (a time limit): its bound is not used
+            continue
+        uppers[label] = other.upper
+        if w.lower > chosen[1].lower:
+            chosen, name = (other, w), label
+    point, worst = chosen
+    timed = _within(posed, t0, limit, "the fully observed robust optimum")
+    full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
+    upper = min(u for u in (*uppers.values(), full_upper, 1.0) if u == u)  # NaN: not given
+    lower = float(min(worst.lower, upper))
+    width = upper - lower
+    s = posed.settings
+    # the chain's worst case above a sound upper bound would mean the chain and the
+    # bounds disagree (none is expected): the answer is then not certified
+    agree = worst.lower <= upper + s.precision * max(upper, 0.0)
+    closed = agree and width <= s.precision * max(lower, 0.0)
+    said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
+    detail = (f"lower {lower!r}: the worst case over the band of the sensed optimum at the "
+              f"{name} on its chain ({worst.n_states} states, {worst.iterations} "
+              f"iterations, last change {worst.last_change:.1e}); upper {upper!r}: the "
+              f"least of the sensed optima's upper bounds ({said}) and the fully observed "
+              f"robust optimum's ({full_upper!r}); gap {width:.3g} "
+              + ("within" if closed else "beyond") + f" the precision {s.precision:g}"
+              + ("" if agree else f"; the chain's worst case {worst.lower!r} is above upper"))
+    solver = float(point.width.get("solver", 0.0))
+    widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
+    check = Check("worst case over the band", closed, detail)
+    checks = (*point.checks, *full_failed, check)
+    message = ("" if closed else
+               f"not certified: the worst case over the band of an observation-based "
+               f"controller is in [{lower!r}, {upper!r}] (gap {width:.3g}); both ends "
+               "sound: lower is what the returned controller guarantees under every law "
+               "of the band")
+    part = SensedBandPart(point.part.lower_model, point.part.upper_model,
+                          point.part.sensors, point.part.belief, worst=worst,
+                          nominal_upper=uppers["middle law"], point_uppers=uppers,
+                          chosen_at=name, full_upper=full_upper, message=message)
+    result = replace(point, model=posed.model, lower=lower, upper=float_up(upper),
+                     value=lower, certified=all(c.passed for c in checks), checks=checks,
+                     bands=bands, part=part, width=widths,
+                     timings={**point.timings, "band": time.perf_counter() - t0})
+    log.info("sensed synthesis over the band: %s, certified=%s",
+             bracket_text(result.lower, result.upper), result.certified)
+    return result
