@@ -305,3 +305,15 @@ def test_sensed_export(tmp_path):
     assert row["route"] == "sensed-constrained"
     assert row["accept>=lower"] == "True" and row["risk<=certified"] == "True"
     assert float(row["storm_risk"]) <= float(row["bound"])
+
+
+def test_bus_camera_band(tmp_path):
+    """The bus case with a camera on bus 1, bus 2's law a band and the puddles to avoid
+    always: Storm's robust check of the exported interval chain is the answer's lower
+    end, within the bracket."""
+    pytest.importorskip("stormpy")
+    _run("bus_camera_band", tmp_path)
+    (row,) = _csv(tmp_path / "bus_camera_band.csv")
+    lower, upper, storm = float(row["lower"]), float(row["upper"]), float(row["storm_worst"])
+    assert 0.0 < lower <= upper <= 1.0
+    assert abs(storm - lower) <= 1e-9
