@@ -104,7 +104,8 @@ def test_the_saved_controller_acts_as_the_one_in_process(kept, tmp_path) -> None
     _, model, r = kept
     path = r.controller.save(tmp_path / "kept.npz")
     meta = json.loads(np.load(path)["meta"].tobytes())
-    assert meta["version"] == 4  # 3 added the keep choices; 4 the sensed kind
+    assert meta["version"] == 5  # 3 added the keep choices; 4 the sensed kind; 5 the
+    # randomised sensed kind (sensed-randomised)
     loaded = load_controller(path)
     assert isinstance(loaded, ConstrainedController)
     robot = runtime.load(path)
