@@ -77,7 +77,7 @@ def answer_reward_bounded(args: argparse.Namespace, name: str, prop: Any, progra
     """One reward-bounded ``P`` property posed, unfolded, solved and said; its exit
     code (3 when ``P~p`` is undecided).  Raises
     :class:`mitld_lp.worlds.properties.PropertyError` for a form refused."""
-    from mitld_lp.cli.door import probability_head
+    from mitld_lp.cli.kernel import probability_head
     from mitld_lp.exact.reward_bounded import solve_reward_bounded
     from mitld_lp.model import ModelError
     from mitld_lp.worlds import WorldError

@@ -29,6 +29,7 @@ from mitld_lp.cli.kernel import (
     is_pattern,
     json_text,
     model_options,
+    probability_head,
     say_answer,
     write_file,
 )
@@ -37,7 +38,7 @@ from mitld_lp.model import ModelError
 from mitld_lp.report import bracket_text
 
 __all__ = ["WORLD_SUFFIXES", "args_door", "is_world_file", "check_args", "world_model",
-           "solve_properties", "probability_head"]
+           "solve_properties"]
 
 #: The files ``solve`` reads as a world with a property, not as a model file.
 WORLD_SUFFIXES = (".prism", ".pm", ".nm", ".jani")
@@ -259,16 +260,6 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
             write_file(policy_file, lambda p, r=r: files.write_policy(r, p, overwrite=True))
         codes.append(_answer(args, query, model, r, time.perf_counter() - started))
     return max(codes, default=EXIT_OK)
-
-
-def probability_head(query: Any, bracket: str, decided: bool | None) -> str:
-    """A ``P`` property's answer, ``in [l, u]``, or for ``P~p`` its verdict with the
-    bracket that decides it."""
-    if query.comparison is None:
-        return f"in {bracket}"
-    word = "Pmin" if query.objective == "min" else "Pmax"
-    said = {True: "true", False: "false", None: "undecided"}[decided]
-    return f"{said}: {word} in {bracket}, threshold {query.comparison} {query.threshold}"
 
 
 def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: float) -> int:

@@ -422,3 +422,13 @@ def print_head(model: Any, objective: str) -> None:
     if objective == "min":
         say_answer("objective:    min (the least probability of the task; the policy's "
                    "guarantee is the upper end)")
+
+
+def probability_head(query: Any, bracket: str, decided: bool | None) -> str:
+    """A ``P`` property's answer, ``in [l, u]``, or for ``P~p`` its verdict with the
+    bracket that decides it."""
+    if query.comparison is None:
+        return f"in {bracket}"
+    word = "Pmin" if query.objective == "min" else "Pmax"
+    said = {True: "true", False: "false", None: "undecided"}[decided]
+    return f"{said}: {word} in {bracket}, threshold {query.comparison} {query.threshold}"

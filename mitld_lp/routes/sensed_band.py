@@ -84,14 +84,17 @@ def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
     """The fully observed robust optimum's ``upper`` for the same problem (its sensors
     read as perfect): a sound upper bound for every observation-based policy; NaN, with
     the reason, where the robust route does not give it (its budget, a refusal)."""
-    from mitld_lp.problem import ProblemError
-    from mitld_lp.synthesis import pose, solve
+    from mitld_lp.problem import ProblemError, pose_on
+    from mitld_lp.routes.robust import RobustRoute
+    from mitld_lp.routes.stages import build_posed
     from mitld_lp.util.memory import ProductTooLarge
 
     model = dataclasses.replace(posed.model, sensors=MappingProxyType({}))
     settings = replace(posed.settings, progress=False)
-    try:
-        full = solve(pose(model, settings=settings, objective=posed.problem.objective))
+    try:  # the robust route itself (the package's route list would lead back here)
+        seen = pose_on([RobustRoute()], model, settings=settings,
+                       objective=posed.problem.objective)
+        full = seen.route.solve(seen, build_posed(seen, progress=False))
     except (ProblemError, ProductTooLarge) as exc:  # a budget or a refusal: the other bound
         log.info("fully observed robust bound not used: %s", exc)
         return float("nan"), ()
