@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp import defaults
-from mitld_lp.exact.errors import ExactError, ExactTooLarge, TimeUp
+from mitld_lp.exact.errors import ExactError, TimeUp
 from mitld_lp.exact.reward import to_fraction
+from mitld_lp.solvers.step_bounded import check_horizon
 from mitld_lp.worlds.prism_rewards import RewardMDP
 
 __all__ = ["HorizonAnswer", "check_horizon", "solve_horizon"]
@@ -46,21 +46,6 @@ class HorizonAnswer:
 
     value: Fraction
     policy: np.ndarray
-
-
-def check_horizon(model: RewardMDP, steps: int,
-                  budget: int = defaults.EXACT_MAX_TRANSITIONS,
-                  setting: str = "EXACT_MAX_TRANSITIONS", what: str = "answered exactly"
-                  ) -> None:
-    """:class:`ExactTooLarge` when ``steps`` times the model's transitions and choices
-    passes ``budget`` (the work of the backward induction, before it starts; ``setting``
-    names the budget in :mod:`mitld_lp.defaults`, ``what`` what it allows)."""
-    work = steps * (int(model.indices.size) + int(model.groups[-1]))
-    if work > budget:
-        raise ExactTooLarge(
-            f"step-bounded reward: {steps:,} steps x {int(model.indices.size):,} "
-            f"transitions and {int(model.groups[-1]):,} choices = {work:,} updates, more "
-            f"than the {budget:,} {what} (mitld_lp.defaults.{setting})")
 
 
 def solve_horizon(model: RewardMDP, kind: str, steps: int, sense: str, *,

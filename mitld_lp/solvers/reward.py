@@ -55,10 +55,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.exact.reward import almost_sure, attractor_policy, keeps_inside
 from mitld_lp.solvers.certify_chain import RowModel
 from mitld_lp.solvers.clarabel_lp import clarabel_has_faer, solve_clarabel
 from mitld_lp.solvers.graph import maximal_end_components
+from mitld_lp.solvers.reward_graph import almost_sure, attractor_policy, keeps_inside
 from mitld_lp.solvers.rounding import ETA, UNIT, above, below, rounding
 from mitld_lp.worlds.prism_rewards import RewardMDP
 

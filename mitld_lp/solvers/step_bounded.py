@@ -24,14 +24,28 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp import defaults
-from mitld_lp.exact.errors import TimeUp
-from mitld_lp.exact.horizon import check_horizon
 from mitld_lp.solvers.rounding import UNIT, above, below, float_down, float_up, rounding
+from mitld_lp.util.stops import ExactTooLarge, TimeUp
 
 if TYPE_CHECKING:
     from mitld_lp.worlds.prism_rewards import RewardMDP
 
-__all__ = ["horizon_bracket"]
+__all__ = ["check_horizon", "horizon_bracket"]
+
+
+def check_horizon(model: RewardMDP, steps: int,
+                  budget: int = defaults.EXACT_MAX_TRANSITIONS,
+                  setting: str = "EXACT_MAX_TRANSITIONS", what: str = "answered exactly"
+                  ) -> None:
+    """:class:`ExactTooLarge` when ``steps`` times the model's transitions and choices
+    passes ``budget`` (the work of the backward induction, before it starts; ``setting``
+    names the budget in :mod:`mitld_lp.defaults`, ``what`` what it allows)."""
+    work = steps * (int(model.indices.size) + int(model.groups[-1]))
+    if work > budget:
+        raise ExactTooLarge(
+            f"step-bounded reward: {steps:,} steps x {int(model.indices.size):,} "
+            f"transitions and {int(model.groups[-1]):,} choices = {work:,} updates, more "
+            f"than the {budget:,} {what} (mitld_lp.defaults.{setting})")
 
 
 def horizon_bracket(model: RewardMDP, kind: str, steps: int, sense: str, *,
