@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 import mitld_lp.model as model_module
+from mitld_lp.game_tables import GameKind
 from mitld_lp.logic.syntax import (
     DistRef,
     Prop,
@@ -464,10 +465,8 @@ def _never_built(doc: dict[str, Any], ctx: Any) -> GridWorld:
 def with_maze_kind(monkeypatch: pytest.MonkeyPatch) -> None:
     """A game kind registered for the test (beside [grid] and [prism]), to check the
     dispatch."""
-    maze = model_module._GameKind(
-        table="maze", extra_tables=(), proposition_noun="room", build=_never_built
-    )
-    monkeypatch.setattr(model_module, "_GAME_KINDS", (*model_module._GAME_KINDS, maze))
+    maze = GameKind(table="maze", extra_tables=(), proposition_noun="room", build=_never_built)
+    monkeypatch.setattr(model_module, "GAME_KINDS", (*model_module.GAME_KINDS, maze))
 
 
 @pytest.mark.usefixtures("with_maze_kind")
