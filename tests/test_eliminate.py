@@ -136,7 +136,7 @@ def test_bundled_case_answer_unchanged_within_its_bracket(
     model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
     before = synthesize(model)
     _forced(monkeypatch)
-    import mitld_lp.solvers.lp as lp
+    import mitld_lp.solvers.lp_blocks as lp
 
     reduced = []
     monkeypatch.setattr(lp, "eliminate", lambda *a: reduced.append(elim.eliminate(*a))

@@ -12,8 +12,9 @@ from test_analysis import _dense_values
 
 from mitld_lp.solvers.crossover import better_of, crossover_start, polish
 from mitld_lp.solvers.iteration import interval_iteration
-from mitld_lp.solvers.lp import _block_lp, _may_be_optimal, _tightened, solve_lp
+from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.lp_backends import solve_one
+from mitld_lp.solvers.lp_blocks import block_lp, may_be_optimal, tightened
 from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block, Factors, evaluate_chain, improve_policy
@@ -60,7 +61,7 @@ def test_pruned_block_lps_give_the_whole_lps_values(seed: int) -> None:
 @pytest.mark.parametrize("seed", range(6))
 def test_left_out_are_exactly_the_suboptimal_choices(seed: int) -> None:
     block, reward, v_red = _whole_block(seed)  # no states downstream: the whole quotient
-    keep = _may_be_optimal(block, reward, v_red, v_red)  # exact bounds
+    keep = may_be_optimal(block, reward, v_red, v_red)  # exact bounds
     q_star = reward + block.inner @ v_red
     owner = np.repeat(np.arange(v_red.size), np.diff(block.groups))
     best = q_star >= v_red[owner] - 1e-9
@@ -75,8 +76,8 @@ def test_pruning_is_scale_free(seed: int) -> None:
     like the bus blocks' 1e-19..1e-9), the same choices are left out, none of them
     optimal (an absolute margin would keep every choice there)."""
     block, reward, v = _whole_block(seed)
-    keep = _may_be_optimal(block, reward, v, v)
-    tiny = _may_be_optimal(block, reward * 1e-15, v * 1e-15, v * 1e-15)
+    keep = may_be_optimal(block, reward, v, v)
+    tiny = may_be_optimal(block, reward * 1e-15, v * 1e-15, v * 1e-15)
     assert not keep.all()
     assert np.array_equal(keep, tiny)
 
@@ -85,11 +86,11 @@ def test_pruning_is_scale_free(seed: int) -> None:
 def test_tightened_bounds_stay_sound_and_prune_more(seed: int) -> None:
     block, reward, v = _whole_block(seed)
     lo, hi = np.zeros_like(v), np.ones_like(v)  # sound, and useless for pruning
-    t_lo, t_hi = _tightened(block, reward, lo, hi)
+    t_lo, t_hi = tightened(block, reward, lo, hi)
     assert np.all(t_lo <= v + 1e-12) and np.all(t_hi >= v - 1e-12)
     assert np.all(t_lo >= lo) and np.all(t_hi <= hi)
-    before = int(np.count_nonzero(_may_be_optimal(block, reward, lo, hi)))
-    after = _may_be_optimal(block, reward, t_lo, t_hi)
+    before = int(np.count_nonzero(may_be_optimal(block, reward, lo, hi)))
+    after = may_be_optimal(block, reward, t_lo, t_hi)
     assert int(np.count_nonzero(after)) < before
     q_star = reward + block.inner @ v
     owner = np.repeat(np.arange(v.size), np.diff(block.groups))
@@ -101,7 +102,7 @@ def _block_answer(seed: int):
     """A random block, its LP, Clarabel's answer and the block's values, computed apart
     from the LP (policy iteration in extended precision from the first choices)."""
     block, _, v = _whole_block(seed)
-    lp = _block_lp(block, np.zeros(block.states.size))
+    lp = block_lp(block, np.zeros(block.states.size))
     raw = solve_one(lp, SolveOptions("CLARABEL", "direct", 1e-9), retry=False)
     assert raw.y is not None and raw.v is not None
     _, exact, _ = improve_policy(block, lp.objective, np.asarray(block.groups[:-1]))

@@ -1,6 +1,6 @@
 r"""A block LP's single-choice states eliminated before the solver (issue 45).
 
-After pruning (:func:`mitld_lp.solvers.lp._may_be_optimal`) most states of a block keep
+After pruning (:func:`mitld_lp.solvers.lp_blocks.may_be_optimal`) most states of a block keep
 one column: on ``bus_scaled`` n64 d3, 4,005 of the 4,096 states of one block and 7,047
 of the 8,192 of the other.  Their flow is not a decision.  With ``S`` those states and
 ``M`` the others, the value of ``S`` is :math:`v_S = a + B v_M`, with

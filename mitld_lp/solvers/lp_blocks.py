@@ -1,0 +1,307 @@
+"""The occupancy LP block by block (the default layout of :mod:`mitld_lp.solvers.lp`):
+the quotient's strongly connected components level by level, downstream first, each
+level's non-trivial components one LP whose choices are pruned by sound bounds
+(:func:`may_be_optimal`, :func:`tightened`) and whose single-choice states are
+eliminated when it is large (:func:`solve_block`), each answer polished to exact values;
+and what both layouts share: the flow matrix ``E - P^T`` (:func:`flow_matrix`), an LP
+in either sense (:func:`sensed`), a route's answer (:class:`Answer`) and a randomised
+policy's occupancy (:func:`policy_flow`)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.solvers.crossover import polish
+from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
+from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
+from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one
+from mitld_lp.solvers.options import SolveOptions
+from mitld_lp.solvers.reduced import Quotient, keeping_zero
+from mitld_lp.solvers.result import Status
+from mitld_lp.solvers.topological import Block, blocks, solve_single_states, transient_solve
+from mitld_lp.util.progress import tracked
+
+__all__ = ["Answer", "block_lp", "flow_matrix", "may_be_optimal", "policy_flow", "sensed",
+           "solve_block", "solve_decomposed", "tightened"]
+
+logger = logging.getLogger(__name__)
+
+
+def flow_matrix(owner: np.ndarray, n_states: int, moves: sp.csr_array) -> sp.csc_array:
+    """``E - P^T`` for choices owned by ``owner`` moving by ``moves`` (rows: choices)."""
+    m = owner.shape[0]
+    exits = sp.csc_array((np.ones(m), (owner, np.arange(m))), shape=(n_states, m))
+    a_eq = sp.csc_array(exits - moves.T)
+    a_eq.sum_duplicates()
+    a_eq.eliminate_zeros()
+    return a_eq
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """What a route found, in reduced coordinates, before it is mapped back."""
+
+    raw: Raw  # status, message, iterations (y, v unused)
+    y: np.ndarray  # occupancy per reduced choice, from b
+    v: np.ndarray  # value per reduced state (nan where unknown)
+    reduced_choice: np.ndarray  # the deterministic policy on the quotient
+    primal: float
+    dual: float
+    n_solver_calls: int
+
+
+def sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
+            retry: bool = True) -> Raw:
+    """:func:`~mitld_lp.solvers.lp_backends.solve_one` of an LP in ``sense``: a minimum as
+    the maximum of the negated objective, its duals negated back."""
+    if sense is Sense.MAX:
+        return solve_one(matrices, settings, retry=retry)
+    raw = solve_one(Matrices(matrices.a_eq, matrices.b_eq, -matrices.objective), settings,
+                    retry=retry)
+    return raw if raw.v is None else Raw(raw.status, raw.message, raw.y, -raw.v,
+                                         raw.iterations)
+
+
+def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -> np.ndarray:
+    r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
+    per state) from the start weights ``b``: ``x = b + P_w^T x`` with
+    ``P_w = sum_c w(c) P_hat(c, .)``, then ``y(c) = w(c) x(owner(c))``.
+
+    Solved in topological order, upstream first: the flow into a level comes only from
+    higher levels, so a single state gets ``x(s) = (b(s) + inflow(s)) / (1 - w'p)`` and a
+    non-trivial component one sparse solve of its own size.  The policy's chain leaves
+    the quotient almost surely, so every one of these systems is invertible.
+    """
+    x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
+    for level in blk.walk(upstream_first=True):
+        states = np.concatenate([level.single, level.rest])
+        n_single = level.single.size
+        lo, hi = q.row_groups[states], q.row_groups[states + 1]
+        choices = gather_ranges(lo, hi)
+        owner_local = np.repeat(np.arange(states.size), hi - lo)
+        w = weights[choices]
+        stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
+                           minlength=states.size)
+        x[level.single] /= 1.0 - stay[:n_single]
+        if level.rest.size:
+            block = level.rest  # the tail of ``states``: local index = owner - n_single
+            pick = owner_local >= n_single
+            sub = sp.csr_array(q.matrix[choices[pick]])
+            mix = sp.csr_array((w[pick], (owner_local[pick] - n_single,
+                                          np.arange(sub.shape[0]))),
+                               shape=(block.size, sub.shape[0]))
+            moves = sp.csc_array((mix @ sub[:, block]).T)
+            x[block] = transient_solve(moves, x[block])
+        # Push the flow out of this level (its own columns were solved above).
+        y = w * x[states[owner_local]]
+        row, col, val = row_entries(q.matrix, choices)
+        out = blk.level[blk.component[col]] != level.index
+        np.add.at(x, col[out], val[out] * y[row[out]])
+    owner = q.choice_state()
+    return np.maximum(weights * x[owner], 0.0)
+
+
+def block_lp(block: Block, values: np.ndarray) -> Matrices:
+    """The occupancy LP of ``block`` with the values downstream as exit rewards and
+    ``b = 1`` on all of it."""
+    exit_reward = block.to_target + block.outer @ values
+    n = block.states.size
+    owner = np.repeat(np.arange(n), np.diff(block.groups))
+    return Matrices(flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
+
+
+def may_be_optimal(block: Block, reward: np.ndarray, lo: np.ndarray,
+                    hi: np.ndarray, sense: Sense = Sense.MAX) -> np.ndarray:
+    r"""The block's choices that can be optimal, given sound bounds ``lo <= v* <= hi``
+    on its states: for a maximum, a choice whose upper Q-bound :math:`r(c) +
+    \sum_{s'} P(c, s') hi(s')` is below its state's lower bound is not (it loses to the
+    optimum); for a minimum, one whose lower Q-bound is above its state's upper bound.
+    Each state keeps its choice of best such Q-bound, so rounding never empties a
+    state."""
+    groups = block.groups
+    if sense is Sense.MAX:
+        q_hi = reward + block.inner @ hi
+        keep = q_hi >= np.repeat(lo * (1.0 - _PRUNE_MARGIN), np.diff(groups))
+        keep[segmented_argmax(q_hi, groups)] = True
+        return keep
+    q_lo = reward + block.inner @ lo
+    keep = q_lo <= np.repeat(hi * (1.0 + _PRUNE_MARGIN), np.diff(groups))
+    keep[segmented_argmax(q_lo, groups, sense=sense)] = True
+    return keep
+
+
+_PRUNE_MARGIN = 1e-9
+"""A choice is left out only if its upper Q-bound is below the state's lower bound by
+more than this fraction of it (rounding in the bounds is ~1e-16 of a value; values on
+a block can be 1e-19, so an absolute margin would keep every choice there); what is
+left out is checked afterwards anyway (:func:`~mitld_lp.solvers.crossover.polish`
+improves over every choice of the block)."""
+
+
+def tightened(block: Block, reward: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray, sense: Sense = Sense.MAX) -> tuple[np.ndarray, np.ndarray]:
+    """Sound bounds on the block's values made tight enough to prune: both swept (the
+    Bellman operator in ``sense`` with the exact exit rewards ``reward``, each bound
+    kept if the sweep does not improve it) in rounds of :data:`_TIGHTEN_ROUND` sweeps
+    until a round leaves out no further choice, at most :data:`_TIGHTEN_MAX` sweeps.
+    The iteration stops at an absolute gap, which says nothing on a block whose values
+    are far below it (1e-19 to 1e-9 on the bus blocks of
+    ``experiments/bench_sweeps.py``): there only relative precision tells the choices
+    apart, and a sweep costs a small fraction of the LP it shrinks.  The sweeps run
+    over the choices not yet left out (action elimination): an optimal choice is never
+    left out, so the best over the rest is still beyond the optimum on the side a
+    policy's value is not (a maximum's upper, a minimum's lower bound), and any choice's
+    value is beyond it on the other."""
+    lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+    owner = np.repeat(np.arange(lo.size), np.diff(block.groups))
+    keep = may_be_optimal(block, reward, lo, hi, sense)
+    kept = int(np.count_nonzero(keep))
+    for _ in range(_TIGHTEN_MAX // _TIGHTEN_ROUND):
+        alive = np.flatnonzero(keep)
+        inner, r = sp.csr_array(block.inner[alive]), reward[alive]
+        # each state keeps a choice, so its first one left starts its group
+        starts = np.flatnonzero(np.diff(owner[alive], prepend=-1))
+        for _ in range(_TIGHTEN_ROUND):
+            np.maximum(lo, sense.reduce(r + inner @ lo, starts), out=lo)
+            np.minimum(hi, sense.reduce(r + inner @ hi, starts), out=hi)
+        keep = may_be_optimal(block, reward, lo, hi, sense)
+        now = int(np.count_nonzero(keep))
+        if now >= kept:
+            break
+        kept = now
+    return lo, hi
+
+
+_TIGHTEN_ROUND = 25
+_TIGHTEN_MAX = 500
+
+
+def solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
+                 settings: SolveOptions, entries: int,
+                 ) -> tuple[Raw, np.ndarray | None, np.ndarray | None, int]:
+    """One block's LP over its ``columns``: its single-choice states eliminated first
+    when the block (in a quotient of ``entries``) is large enough
+    (:mod:`mitld_lp.solvers.eliminate`), else whole.
+    Returns the solver's answer, the occupancy per block column and the value per block
+    state (``None`` if it failed), and the states the LP had."""
+    reduced = None
+    if worth_eliminating(entries, block.inner.nnz,
+                         int(np.diff(block.inner.indptr)[columns].sum())):
+        keep = np.zeros(block.choices.size, dtype=bool)
+        keep[columns] = True
+        reduced = eliminate(block.inner, lp.objective, block.groups, keep)
+    rows = block.states.size if reduced is None else reduced.n_m
+    if rows == 0:  # every state eliminated: the block's one policy, solved exactly
+        raw = Raw(Status.OPTIMAL, "every state eliminated", np.zeros(0), np.zeros(0))
+    else:
+        raw = sensed(Matrices(sp.csc_array(lp.a_eq[:, columns]), lp.b_eq,
+                               lp.objective[columns]) if reduced is None else
+                      Matrices(flow_matrix(reduced.owner, rows, reduced.moves),
+                               reduced.b_eq, reduced.objective), sense, settings,
+                      retry=False)
+    if raw.y is None or raw.v is None:
+        return raw, None, None, rows
+    if reduced is None:
+        y = np.zeros(block.choices.size)
+        y[columns] = np.maximum(raw.y, 0.0)
+        return raw, y, raw.v, rows
+    y, v = reduced.lift(np.maximum(raw.y, 0.0), raw.v)
+    return raw, y, v, rows
+
+
+def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
+                      bounds: tuple[np.ndarray, np.ndarray] | None,
+                      progress: bool | None = None
+                      ) -> Answer | Raw:
+    """Level by level (module docs): exact single-state updates, one LP per level of
+    non-trivial components, each answer polished by
+    :func:`~mitld_lp.solvers.crossover.polish`; the occupancy of the resulting
+    randomised policy from ``b_eq`` is the primal point, the values the dual one.  With
+    sound ``bounds`` on the reduced states' values, a block's LP has
+    only the columns of the choices that may be optimal (:func:`may_be_optimal`); the
+    polish then checks every choice of the block against the exact values, so the
+    values are those of the whole LP (its duals satisfy every constraint).
+
+    Measured and not done: Clarabel takes no starting point (it computes its own
+    initial iterate), so the iteration's bounds cannot warm-start it; handing it the
+    dual (value) LP, whose KKT system is a third smaller, took 6-7 interior-point
+    iterations instead of 5 and 1.1-1.2x the time on the two block LPs of
+    ``bus_scaled`` n128 d3 (faer); bounds tightened further by the exact-self-loop
+    sweeps of :mod:`mitld_lp.solvers.kernels` (compiled or not) kept 9,335 columns where
+    the plain sweeps keep 9,339 of 32,768 on n64 d3: the columns left are near-ties
+    whose gains, 1e-17 to 1e-10, no bracket of width 1e-9 separates.  The kept columns'
+    own graph split further (n64 d3: the 8,192-state block into 89 components, the
+    largest 3,772, over 35 levels) and solved as one LP per level of it: 0.145 s of
+    Clarabel in 33 calls against 0.179 s in one, 20% for a second layering inside the
+    block.  On QVBS consensus (4-4) the columns left are ties, not near-ties: with the
+    exact optimal values, 37,368 of the 38,496 kept columns of its largest block are
+    within 1e-15 of optimal (the symmetric processes), so no bound prunes them.
+
+    The states left with one column are eliminated before the solver when the block
+    is large (:mod:`mitld_lp.solvers.eliminate`, :func:`solve_block`): the LP is
+    over the states that keep a choice, and its answer is lifted back to the whole
+    block before the polish."""
+    blk: Blocks = blocks(q)
+    values = np.zeros(q.n_states)
+    weights = np.zeros(q.n_choices)
+    # a state known to have value 0 takes a choice that keeps it 0 and is not solved
+    reduced_choice = (keeping_zero(q) if q.zero.any()
+                      else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
+    weights[reduced_choice[q.zero]] = 1.0
+    worst = Raw(Status.OPTIMAL, "")
+    iterations = calls = n_columns = n_kept = n_eliminated = 0
+    todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
+    for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
+                         total=todo, desc="block LPs", unit=" states", leave=False):
+        upd = solve_single_states(q, blk, level.single, values)
+        reduced_choice[upd.states] = upd.choices
+        weights[upd.choices] = 1.0
+        rest = level.rest
+        if rest.size == 0:
+            continue
+        block = Block.of(q, rest)
+        lp = block_lp(block, values)
+        tight = (None if bounds is None else
+                 tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
+                            q.sense))
+        columns = (np.arange(block.choices.size) if tight is None else
+                   np.flatnonzero(may_be_optimal(block, lp.objective, *tight, q.sense)))
+        raw, y, duals, left = solve_block(block, lp, columns, q.sense, settings,
+                                               q.matrix.nnz)
+        iterations += raw.iterations
+        calls += 1
+        n_columns += block.choices.size
+        n_kept += columns.size
+        n_eliminated += rest.size - left
+        if y is None or duals is None:
+            return Raw(raw.status, f"{raw.message} (block LP of level {level.index}, "
+                        f"{rest.size} states)", iterations=iterations)
+        polished = polish(block, lp, y, duals, columns, settings.tol,
+                          None if tight is None else tight[0 if q.sense is Sense.MAX else 1],
+                          sense=q.sense, precision=settings.precision)
+        if not polished.optimal and worst.status is Status.OPTIMAL:
+            worst = Raw(Status.INACCURATE, f"level {level.index}: {raw.message}, policy "
+                         "iteration did not settle")
+        elif raw.status is not Status.OPTIMAL:
+            logger.info("block LP of level %d: %s; exact after policy iteration",
+                        level.index, raw.message)
+        values[rest] = polished.values
+        reduced_choice[rest] = block.choices[polished.chosen]
+        weights[block.choices] = polished.weights
+    y = policy_flow(q, blk, weights, b_eq)
+    message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
+               f"single states over {blk.n_levels} levels"
+               + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"
+                  if bounds is not None and calls else "")
+               + (f"; {n_eliminated} single-choice block states eliminated"
+                  if n_eliminated else "")
+               + (f"; {worst.message}" if worst.message else ""))
+    if calls:
+        solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
+        message = f"{solver_word}: {message}"
+    return Answer(Raw(worst.status, message, iterations=iterations), y, values,
+                   reduced_choice, float(q.to_target @ y), float(b_eq @ values), calls)
