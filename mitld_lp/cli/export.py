@@ -158,10 +158,12 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         raise UsageError("export --tree: a law known only within a band with constraints "
                          "gives a randomised controller, which no decision tree writes; "
                          "--chain and --controller write it")
-    if chain and args.bands != "worst" and is_robust(model.distributions):
+    if (chain and args.bands != "worst" and is_robust(model.distributions)
+            and not model.constraints):
         raise UsageError("export --chain with --bands best: the interval chain's claim is "
                          "the controller's worst case over the bands, which an optimistic "
-                         "controller does not bound; --controller and --tree write it")
+                         "controller does not bound; --controller and --tree write it "
+                         "(with constraints the chain at nature's chosen law is written)")
     if tree:  # before the work: a sensed controller's memory is no feature vector
         from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
         from mitld_lp.sensing.sensors import partial
