@@ -154,10 +154,6 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
     from mitld_lp.routes.robust import is_robust
 
     model = read_model(args)
-    if is_robust(model.distributions) and model.constraints and tree:
-        raise UsageError("export --tree: a law known only within a band with constraints "
-                         "gives a randomised controller, which no decision tree writes; "
-                         "--chain and --controller write it")
     if (chain and args.bands != "worst" and is_robust(model.distributions)
             and not model.constraints):
         raise UsageError("export --chain with --bands best: the interval chain's claim is "

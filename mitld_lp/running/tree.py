@@ -188,7 +188,9 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     value exactly (:func:`_choices`), which makes it much smaller; it is grown until it
     is exact on every state *its own* controller reaches.  ``same_actions`` asks for the
     controller's own action in every state the controller reaches (always for a law
-    within a band: every state it reaches under some law).  Either way
+    within a band: every state it reaches under some law; with constraints and a band
+    the states it reaches at the middle law of the bands, which are those it reaches
+    under some law, as every hazard there is inside its band).  Either way
     :func:`tree_value` is the controller's value, ``lower``.  A controller that acts on
     sensor reports is refused (:data:`~mitld_lp.running.sensed_chain.SENSED_TREE_REFUSAL`
     says why)."""
@@ -292,8 +294,11 @@ def tree_value(result: Any, tree: Tree) -> float:
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    if is_band(result):
-        raise ValueError("a band: the value is a worst case; Storm checks band_chain_of")
+    from mitld_lp.running.band_mixture_chain import is_band_mixture
+
+    if is_band(result) or is_band_mixture(result):
+        raise ValueError("a band: the value is a worst case; Storm checks band_chain_of "
+                         "(with constraints, band_mixture_chain.mixture_chain_drn)")
     chain = chain_of(result, tree_controller(result, tree))
     accept = chain.accepting()
     if accept[0]:
