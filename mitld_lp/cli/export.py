@@ -160,12 +160,6 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
                          "the controller's worst case over the bands, which an optimistic "
                          "controller does not bound; --controller and --tree write it "
                          "(with constraints the chain at nature's chosen law is written)")
-    if tree:  # before the work: a sensed controller's memory is no feature vector
-        from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
-        from mitld_lp.sensing.sensors import partial
-
-        if partial(model.sensors):
-            raise UsageError(SENSED_TREE_REFUSAL)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,

@@ -40,8 +40,15 @@ from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
 from mitld_lp.running.band_chain import band_chain_of, is_band
 from mitld_lp.running.chain import chain_of, world_of
-from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL, is_sensed
-from mitld_lp.running.tree_format import Node, Tree, fresh_name, identifier
+from mitld_lp.running.sensed_chain import is_sensed
+from mitld_lp.running.tree_format import (
+    Node,
+    Tree,
+    decision_label,
+    fresh_name,
+    identifier,
+    label_decision,
+)
 from mitld_lp.running.tree_grow import grow
 from mitld_lp.util.traversal import breadth_first_order
 from mitld_lp.worlds.names import state_fields, state_values
@@ -70,15 +77,6 @@ def _values(game: Any, rec: ProductState, events: tuple[str, ...]) -> tuple[Any,
             rec.clock)
 
 
-def _label(d: Decision, randomised: bool) -> Hashable:
-    if d.lost:
-        return None
-    if not randomised:
-        return d.actions[0] if d.actions else "fallback"
-    w = tuple(float(x) for x in (d.weights if d.weights is not None else ()))
-    return (d.actions, w, float(d.stay), d.inside, d.keep, d.kept)
-
-
 def _acting(result: Any, controller: ControllerLike) -> list[int]:
     """The product states the controller reaches and acts in (undecided ones)."""
     chain = (band_chain_of(result, controller) if is_band(result) else
@@ -96,7 +94,7 @@ def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
     """The controller's own decision at product state ``i``."""
     plan: Any = controller.plan
     rec = result.mdp.states[i]
-    label = _label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
+    label = decision_label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
                    controller.randomised)
     return plan.fallback(rec.game) if label == "fallback" else label
 
@@ -192,10 +190,12 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     the states it reaches at the middle law of the bands, which are those it reaches
     under some law, as every hazard there is inside its band).  Either way
     :func:`tree_value` is the controller's value, ``lower``.  A controller that acts on
-    sensor reports is refused (:data:`~mitld_lp.running.sensed_chain.SENSED_TREE_REFUSAL`
-    says why)."""
-    if is_sensed(result):
-        raise ValueError(SENSED_TREE_REFUSAL)
+    sensor reports gives a finite-memory controller's tree, over the world's variables
+    and its memory (:func:`mitld_lp.running.sensed_tree.sensed_tree_of`)."""
+    if is_sensed(result):  # a finite-memory controller: its memory is what it observed
+        from mitld_lp.running.sensed_tree import sensed_tree_of
+
+        return sensed_tree_of(result, controller)
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
@@ -256,14 +256,8 @@ class _TreePlan(AutomatonMemory):
 
     def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
         rec = ProductState(state, q, pending, clock)
-        d = self.tree.decide(_values(self.game, rec, self.tree.events))
-        if d is None:
-            return Decision((), lost=True)
-        if not self.tree.randomised:
-            return Decision((d,))
-        actions, weights, stay, inside, keep, kept = d
-        return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside,
-                        keep=keep, kept=kept)
+        label = self.tree.decide(_values(self.game, rec, self.tree.events))
+        return label_decision(label, self.tree.randomised)
 
     def fallback(self, state: Hashable) -> str:
         return self._plan.fallback(state)
@@ -284,6 +278,10 @@ def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None =
     """A controller that decides by ``tree`` (and tracks its memory as ``result``'s
     controller does)."""
     c = controller or result.controller
+    if tree.memory is not None:  # a sensed controller's tree (running.sensed_tree)
+        from mitld_lp.running.sensed_tree import sensed_tree_controller
+
+        return sensed_tree_controller(result, tree, c)  # type: ignore[return-value]
     return TreeController(_TreePlan(c.plan, tree, world_of(result, c)))
 
 

@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import json
 import keyword
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Node", "Tree", "FORMAT", "holds", "plain", "identifier", "fresh_name"]
+from mitld_lp.controllers.stepper import Decision
+
+__all__ = ["Node", "Tree", "Memory", "FORMAT", "holds", "plain", "identifier", "fresh_name",
+           "decision_label", "label_decision"]
 
 FORMAT = "mitld_lp.running.tree"
 
@@ -36,6 +39,22 @@ class Node:
 
 
 @dataclass(frozen=True, slots=True)
+class Memory:
+    """The memory of a finite-memory controller whose tree reads it (a controller that
+    acts on sensor reports: the memory is its information state, what the robot has
+    observed): its ``initial`` value and its update, ``moves`` rows ``(memory, action,
+    world values, events seen, reports, next memory)`` -- after the robot took ``action``
+    in ``memory`` and observed the world in the state of those values, the events
+    without a sensor that happened and the sensors' reports, the memory is ``next``
+    (a number, or an end: ``"target"`` every hypothesis left accepted the task,
+    ``"sink"`` every one rejected it, ``"truncated"`` decided, the robot cannot tell
+    which); an observation no row lists has probability 0 in the model."""
+
+    initial: int | str
+    moves: tuple[tuple[Any, str, tuple[Any, ...], tuple[str, ...], tuple[str, ...], Any], ...]
+
+
+@dataclass(frozen=True, slots=True)
 class Tree:
     """The tree: ``features`` named, ``nodes[0]`` the root; ``samples`` the reachable
     states it was grown on (and is exact on)."""
@@ -47,6 +66,7 @@ class Tree:
     samples: int
     same_actions: bool = True
     automaton: tuple[str, ...] = ()  # per automaton state q, what it stands for
+    memory: Memory | None = None  # a finite-memory controller's memory (its last feature)
 
     @property
     def size(self) -> int:
@@ -74,15 +94,24 @@ class Tree:
             else:
                 nodes.append({"id": i, "feature": self.features[n.feature], "op": n.op,
                               "value": plain(n.value), "yes": n.yes, "no": n.no})
-        return json.dumps({"format": FORMAT, "version": 1, "features": list(self.features),
-                           "events": list(self.events), "randomised": self.randomised,
-                           "states": self.samples, "same_actions": self.same_actions,
-                           "automaton_states": {str(q): text for q, text in
-                                                enumerate(self.automaton)},
-                           "nodes": nodes}, indent=1) + "\n"
+        out: dict[str, Any] = {
+            "format": FORMAT, "version": 1, "features": list(self.features),
+            "events": list(self.events), "randomised": self.randomised,
+            "states": self.samples, "same_actions": self.same_actions,
+            "automaton_states": {str(q): text for q, text in enumerate(self.automaton)},
+            "nodes": nodes}
+        if self.memory is not None:
+            out["memory"] = {"initial": self.memory.initial, "moves": [
+                {"memory": m, "action": a, "world": [plain(v) for v in w],
+                 "events": list(e), "reports": list(r), "next": nxt}
+                for m, a, w, e, r, nxt in self.memory.moves]}
+        return json.dumps(out, indent=1) + "\n"
 
     def to_dot(self) -> str:
         lines = ["digraph tree {", '  node [fontname="Helvetica"];']
+        if self.memory is not None:  # the picture is the decisions; the memory's table
+            lines.insert(1, "  // a finite-memory controller: the memory's update "
+                         "(INITIAL, MOVES) is in the .json and .py forms")
         for i, n in enumerate(self.nodes):
             if n.feature is None:
                 text = _leaf_text(n.decision, self.randomised)
@@ -104,12 +133,51 @@ class Tree:
         what = ("a dict {action: probability} (key None: stay in the end component; a key "
                 "('keep', *actions): keep the safety part, playing those actions uniformly "
                 "for ever)" if self.randomised else "the action (None: the task is lost, stop)")
+        if self.memory is not None:
+            return self._memory_python(names, what)
         world = len(self.features) - len(self.events) - 2
         out = ['"""The controller as a decision tree, written by mitld_lp (exact on the',
                f"{self.samples} states it can reach).  act(...) returns {what}.",
                f"Arguments: the world's {', '.join(names[:world])}; the controller's "
                f"{', '.join(names[world:])} (automaton state, pending events, clock).\"\"\"",
                "", "", f"def act({', '.join(names)}):"]
+        self._emit(out, names)
+        return "\n".join(out) + "\n"
+
+    def _memory_python(self, names: list[str], what: str) -> str:
+        """A finite-memory controller: ``act`` (the tree, on the world's variables and
+        the memory), ``INITIAL`` and ``update`` (the memory's table)."""
+        assert self.memory is not None
+        world, mem = names[:-1], names[-1]
+        taken = set(names)
+        act, seen, told = (identifier(fresh_name(x, taken))
+                           for x in ("action", "events", "reports"))
+        moves = {(m, a, tuple(plain(v) for v in w), tuple(e), tuple(r)): nxt
+                 for m, a, w, e, r, nxt in self.memory.moves}
+        out = ['"""The controller as a finite-memory controller, written by mitld_lp: its',
+               "memory is what the robot has observed (an information state), act(...) is a",
+               f"decision tree exact on the {self.samples} (world state, memory) pairs it can",
+               f"reach and returns {what}.",
+               "Start with memory = INITIAL; after each step, memory = update(memory, the",
+               "action taken, the new world state's "
+               f"{', '.join(world)}, the events without a sensor that",
+               "happened, the sensors' reports) (event names, sorted); an end (a string)",
+               "or BEYOND (an observation the model gives probability 0) stays.\"\"\"",
+               "", f"INITIAL = {self.memory.initial!r}", 'BEYOND = "beyond"',
+               f"MOVES = {moves!r}", "", "",
+               f"def update({mem}, {act}, {', '.join(world)}, {seen}, {told}):",
+               f"    if isinstance({mem}, str):",
+               f"        return {mem}",
+               f"    key = ({mem}, {act}, ({', '.join(world)},), "
+               f"tuple(sorted({seen})), tuple(sorted({told})))",
+               "    return MOVES.get(key, BEYOND)", "", "",
+               f"def act({', '.join(names)}):",
+               f"    if isinstance({mem}, str):",
+               "        return None"]
+        self._emit(out, names)
+        return "\n".join(out) + "\n"
+
+    def _emit(self, out: list[str], names: list[str]) -> None:
 
         def emit(i: int, depth: int) -> None:
             n, pad = self.nodes[i], "    " * depth
@@ -122,7 +190,6 @@ class Tree:
             emit(n.no, depth + 1)
 
         emit(0, 1)
-        return "\n".join(out) + "\n"
 
 
 def _python_test(name: str, n: Node) -> str:
@@ -204,3 +271,27 @@ def _leaf_python(decision: Any, randomised: bool) -> str:
     if stay:
         mix[None] = stay
     return repr(mix)
+
+
+def decision_label(d: Decision, randomised: bool) -> Hashable:
+    """What a leaf holds for the decision ``d``: None where the task is lost; the
+    action (``"fallback"``: the world state's first) or, randomised, the distribution
+    ``(actions, weights, stay, inside, keep, kept)``."""
+    if d.lost:
+        return None
+    if not randomised:
+        return d.actions[0] if d.actions else "fallback"
+    w = tuple(float(x) for x in (d.weights if d.weights is not None else ()))
+    return (d.actions, w, float(d.stay), d.inside, d.keep, d.kept)
+
+
+def label_decision(label: Any, randomised: bool) -> Decision:
+    """The controller's decision a leaf's ``label`` stands for (the inverse of
+    :func:`decision_label`)."""
+    if label is None:
+        return Decision((), lost=True)
+    if not randomised:
+        return Decision((label,))
+    actions, weights, stay, inside, keep, kept = label
+    return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside,
+                    keep=keep, kept=kept)
