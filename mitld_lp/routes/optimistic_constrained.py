@@ -142,7 +142,8 @@ def solve_optimistic_constrained(posed: Posed, built: Built, *,
     law_merged = merge(law, joint)
     prob, stay, unmapped = _mapped(merged, law_merged, imdp, vr, part.prob, part.stay)
     r = replace(r, mdp=law, part=replace(part, merged=law_merged, prob=prob, stay=stay))
-    return _judged(posed, r, prob, moved, bands, seed, unmapped)
+    return _judged(posed, r, prob, moved, bands, seed, unmapped,
+                   dict(posed.model.costs if costs is None else costs))
 
 
 def at_law(imdp: IntervalMDP, vr: VertexRows, weight: np.ndarray) -> MDP:
@@ -213,7 +214,7 @@ def _mapped(coop: Merged, law: Merged, imdp: IntervalMDP, vr: VertexRows,
 
 
 def _judged(posed: Posed, r: Result, prob: np.ndarray, moved: float, bands: dict[str, str],
-            seed: int | None, unmapped: list[str]) -> Result:
+            seed: int | None, unmapped: list[str], cost_map: dict[str, float]) -> Result:
     """``r`` (the LP's answer on the cooperative MDP) with its policy ``prob`` (a law of
     the bands, :func:`independent_weights`) evaluated in exact arithmetic: the task from
     below and each constraint on the side that matters.  The LP's upper bound stands
@@ -229,7 +230,7 @@ def _judged(posed: Posed, r: Result, prob: np.ndarray, moved: float, bands: dict
     assert isinstance(part, ConstrainedPart) and part.stay is not None
     merged, stay, cons = part.merged, part.stay, posed.problem.constraints
     eta = model_eta(r.sta)
-    costs = cost_vector(r.mdp, dict(posed.model.costs))
+    costs = cost_vector(r.mdp, cost_map)
     task = certified_value(merged, prob, stay, Quantity("prob", 0, 0.0),
                            "lower bound: the policy's task probability", eta=eta)
     values = []
@@ -280,5 +281,6 @@ def _judged(posed: Posed, r: Result, prob: np.ndarray, moved: float, bands: dict
                    part=replace(part, prob=prob, constraints=tuple(values),
                                 steps=steps.value, secondary=secondary,
                                 message=f"{part.message}; {OPTIMISTIC_CONSTRAINED}"
-                                + ("" if ok else "; the policy as a law of the bands "
-                                   "breaks a constraint: no lower bound claimed")))
+                                + ("" if ok else "; the policy at nature's chosen law "
+                                   "breaks a constraint or cannot be played there: no "
+                                   "lower bound claimed")))
