@@ -40,6 +40,9 @@ fastest policy at the worst law is not searched for.
 
 The width ``upper - lower`` is what the bands leave open beyond the truncation; the
 answer says it.
+
+With the bands read for their best law (``Settings.bands = "best"``) the route solves
+the optimistic constrained optimum instead (:mod:`mitld_lp.routes.optimistic_constrained`).
 """
 
 from __future__ import annotations
