@@ -113,3 +113,30 @@ def test_export_tree_of_a_sensed_model_file(tmp_path: Path, capsys) -> None:
     assert said["files"]["tree"] == str(out)
     assert written["features"][-1] == "memory" and written["memory"]["moves"]
     assert written["states"] == said["tree_states"] > 0
+
+
+def test_a_band_seen_through_a_camera_keeps_its_worst_case_in_the_tree() -> None:
+    """A sensed answer with a band: the tree controller's interval chain (nature picking
+    each step's hazard in the band) has the original controller's worst case, ``lower``."""
+    from mitld_lp import ExplicitGame
+    from mitld_lp.distributions import from_table
+    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+    from mitld_lp.sensing import Sensor
+
+    game = ExplicitGame(initial="mid", labels={"sa": {"A"}}, transitions={
+        "mid": {"go": {"sa": 0.75, "mid": 0.25}, "wait": {"mid": 1.0}},
+        "sa": {"back": {"trap": 1.0}}, "trap": {"back": {"mid": 1.0}}})
+    r = synthesize(Model.from_game(
+        game, "D[mu] b & F[0,3] (b & F[0,1] A)",
+        distributions={"mu": from_table({"geometric": [0.1, 0.9]}, "mu")},
+        sensors={"b": Sensor(0.5)}))
+    assert r.route == "sensed" and r.bands
+    tree = tree_of(r)
+    plan, by_tree = r.controller.plan, tree_controller(r, tree).plan
+    for g, m in _listed(plan, game.initial):
+        own = plan.decision(g, m)
+        if not own.actions:
+            own = type(own)((plan.fallback(g),))
+        assert _same(own, by_tree.decision(g, m)), (g, m)
+    worst = worst_case(sensed_band_chain_of(r, tree_controller(r, tree)))
+    assert worst.lower == worst_case(sensed_band_chain_of(r)).lower == r.lower
