@@ -357,8 +357,8 @@ def pose_on(routes: Sequence[Route], model: Any, constraints: Iterable[Any] = ()
         extra = [k for k in asked.beyond_points() if k != "band"]
         said = f"with {' and '.join(extra)}" if extra else f"on the {owner.name} route"
         refused.append(f"bands {s.bands!r} {said}: a band is read for "
-                       "its best law only without constraints, then or a sensor that "
-                       f"misses (the robust route); the {owner.name} route reads it for the "
+                       "its best law only without a sensor that misses (the robust and "
+                       f"constrained routes); the {owner.name} route reads it for the "
                        "worst law (bands 'worst')")
     posed = Posed(asked.problem, s, owner, fragment, robust)
     if s.exact:  # an exact answer (mitld_lp.exact): what it cannot take, before any work

@@ -584,6 +584,26 @@ def test_every_cell_of_the_composition_matrix(task: str, law: str, extra: str) -
         assert r.lower >= synthesize(model).lower - 1e-5
 
 
+@pytest.mark.parametrize("task", sorted(_TASKS))
+@pytest.mark.parametrize("extra", ["constraints", "then"])
+def test_the_best_law_with_constraints_or_then_bounds_every_law_of_the_band(
+        task: str, extra: str) -> None:
+    """``bands = "best"`` with an extra: each point law of the band is a law nature may
+    pick, so its optimum (another route) is at most the optimistic ``upper``; the
+    pessimistic answer's ``lower`` too; the constraints hold at the law chosen."""
+    the_law, points = _laws()["band"]
+    kwargs = _EXTRAS[extra]
+    best = synthesize(_model(task, the_law), bands="best", **kwargs)
+    assert best.certified, best.summary()["failed_checks"]
+    assert best.summary()["bands_reading"] == "best"
+    for p in points:
+        assert synthesize(_model(task, p), **kwargs).lower <= best.upper + 1e-9
+    assert synthesize(_model(task, the_law), **kwargs).lower <= best.upper + 1e-9
+    assert best.lower <= synthesize(_model(task, the_law), bands="best").upper + 1e-9
+    if extra == "constraints":
+        assert all(c.holds for c in best.constraints)
+
+
 _GRID_FILE = """name = "walk"
 spec = "G !puddle & D[mu] b & F(b & F[0,3] goal)"
 {extra}

@@ -125,9 +125,16 @@ def test_storms_cooperative_value_is_inside_the_optimistic_bracket(tmp_path: Pat
     assert storm("ROBUST") < cooperative - 0.1
 
 
-def test_a_constraint_with_the_best_law_is_refused_by_name() -> None:
-    with pytest.raises(ProblemError, match="bands 'best' with constraints: "):
-        synthesize(two_bands(), constraints=["P(F atL) <= 0.5"], bands="best")
+def test_a_sensor_with_the_best_law_is_refused_by_name() -> None:
+    # constraints with the best law are solved (tests/test_optimistic_constrained.py)
+    from mitld_lp.sensing import Sensor
+
+    sensed = Model.from_game(sides(), SPEC, distributions={
+        "mu": from_table({"geometric": [float(x) for x in MU]}, "mu"),
+        "nu": from_table({"geometric": [float(x) for x in NU]}, "nu")},
+        sensors={"a": Sensor(0.5)})
+    with pytest.raises(ProblemError, match="bands 'best' with sensors: "):
+        synthesize(sensed, bands="best")
     # point laws: the one law of each is both its best and its worst
     m = Model.from_game(sides(), SPEC, distributions={"mu": geometric(0.3),
                                                       "nu": geometric(0.4)})
@@ -204,8 +211,61 @@ def test_the_command_line_reads_the_bands_and_says_which_reading(tmp_path: Path,
     assert main(["simulate", str(path), "--bands", "best", "--runs", "200", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["certified_bracket"][0] == pytest.approx(
         answers["best"]["lower"])
-    # the interval chain's claim is a worst case: refused for an optimistic controller
+    # an optimistic controller's chain is a plain one, at nature's chosen law (an interval
+    # chain would claim a worst case): Storm gives the best law's value, 1 - 0.4^2
     assert main(["export", str(path), "--bands", "best", "--chain",
-                 str(tmp_path / "c.drn")]) == 2
-    assert "--chain with --bands best" in capsys.readouterr().err
-    assert not (tmp_path / "c.drn").exists()
+                 str(tmp_path / "c.drn"), "--json"]) == 0
+    said = json.loads(capsys.readouterr().out)
+    assert said["chain_accept"] == pytest.approx(1 - 0.4**2, abs=1e-9)
+    assert storm_exact(tmp_path / "c.drn") == Fraction(1) - Fraction(2, 5) ** 2
+
+
+def storm_exact(path: Path) -> Fraction:
+    """Storm's exact ``P=? [F "accept"]`` on the plain chain at ``path``."""
+    stormpy = pytest.importorskip("stormpy")
+    model = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+    assert "DTMC" in str(model.model_type)
+    result = stormpy.model_checking(model, stormpy.parse_properties('P=? [F "accept"]')[0])
+    return Fraction(str(result.get_value(model.initial_states[0])))
+
+
+SAFE_GRID = """name = "walk"
+spec = "{spec}"
+objective = "{objective}"
+[grid]
+size = [4, 3]
+start = [0, 0]
+slip = 0.2
+obstacles = []
+[regions]
+goal = [[3, 2]]
+puddle = [[2, 1], [2, 0]]
+[distributions]
+mu = {{ geometric = [0.2, 0.4] }}
+"""
+
+
+@pytest.mark.parametrize("spec", ["D[mu] b & F(b & F[0,3] goal)",
+                                  "G !puddle & D[mu] b & F(b & F[0,3] goal)"])
+@pytest.mark.parametrize("objective", ["max", "min"])
+def test_the_optimistic_chain_at_natures_law_is_inside_the_bracket(
+        tmp_path: Path, spec: str, objective: str) -> None:
+    """The plain chain of an optimistic answer (nature's chosen law found again from the
+    policy's values) is worth, exactly by Storm, at least the answer's claim and at most
+    the optimistic optimum: co-safe and obligation tasks, maximised and minimised."""
+    from mitld_lp.files import drn
+    from mitld_lp.running.chain import chain_drn
+    from mitld_lp.running.optimistic_chain import optimistic_chain_of, optimistic_claim
+
+    path = tmp_path / "walk.toml"
+    path.write_text(SAFE_GRID.format(spec=spec, objective=objective))
+    r = synthesize(load_model(path), bands="best")
+    assert r.certified
+    out = drn.write(chain_drn(optimistic_chain_of(r)), tmp_path / "c.drn")
+    value = storm_exact(out)
+    claim, _ = optimistic_claim(r)
+    assert Fraction(claim) <= value
+    if r.complemented:  # "accept" marks the runs that fail the task
+        assert value <= Fraction(r.complement[1])
+    else:
+        assert value <= Fraction(r.upper)

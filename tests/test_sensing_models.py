@@ -114,9 +114,8 @@ def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("verb", [
-    ["info"], ["export", "--drn", "OUT.drn"], ["export", "--tree", "OUT.json"],
-    ["plot", "--out", "OUT.png"],
-])
+    ["info"], ["export", "--drn", "OUT.drn"], ["plot", "--out", "OUT.png"],
+])  # export --tree writes a finite-memory controller (tests/test_sensed_tree.py)
 def test_verbs_that_would_drop_the_sensor_refuse(tmp_path: Path, verb: list[str]) -> None:
     model = tmp_path / "m.toml"
     model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")

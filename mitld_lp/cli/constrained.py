@@ -50,7 +50,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
         print_head(model, r.objective)
         say_answer(f"status:       {r.status}")
         if r.bands:
-            say_answer("robust:       worst case over the bands "
+            said = ("worst case over the bands " if r.part.reading == "worst"
+                    else "best case over the bands (Pmaxmax) ")
+            say_answer("robust:       " + said
                        + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
         if r.status == "optimal":
             say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")

@@ -145,29 +145,18 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         mixture_claim,
     )
     from mitld_lp.running.chain import chain_drn, chain_of
+    from mitld_lp.running.optimistic_chain import (
+        is_optimistic,
+        optimistic_chain_of,
+        optimistic_claim,
+    )
     from mitld_lp.running.tree import tree_of
     from mitld_lp.synthesis import synthesize
 
     if args.upper:
         raise UsageError("export --upper: the upper model has no controller of its own; "
                          "--controller, --chain and --tree export the synthesised one")
-    from mitld_lp.routes.robust import is_robust
-
     model = read_model(args)
-    if is_robust(model.distributions) and model.constraints and tree:
-        raise UsageError("export --tree: a law known only within a band with constraints "
-                         "gives a randomised controller, which no decision tree writes; "
-                         "--chain and --controller write it")
-    if chain and args.bands != "worst" and is_robust(model.distributions):
-        raise UsageError("export --chain with --bands best: the interval chain's claim is "
-                         "the controller's worst case over the bands, which an optimistic "
-                         "controller does not bound; --controller and --tree write it")
-    if tree:  # before the work: a sensed controller's memory is no feature vector
-        from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL
-        from mitld_lp.sensing.sensors import partial
-
-        if partial(model.sensors):
-            raise UsageError(SENSED_TREE_REFUSAL)
     r = synthesize(model, epsilon=args.epsilon, clock_reduction=not args.no_clock_reduction,
                    max_states=args.max_states, max_memory=args.max_memory,
                    max_automaton_states=args.max_automaton_states,
@@ -188,7 +177,12 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         sensed_band_claim,
     )
 
-    if chain and is_sensed_band(r):  # sensors and a band: an interval chain too
+    if chain and is_optimistic(r):  # the best law: a plain chain at nature's chosen law
+        plain = chain_drn(optimistic_chain_of(r))
+        write_file(chain, lambda p: drn.write(plain, p, overwrite=True))
+        accept, said_chain = optimistic_claim(r)
+        _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
+    elif chain and is_sensed_band(r):  # sensors and a band: an interval chain too
         band = band_chain_drn(sensed_band_chain_of(r))
         write_file(chain, lambda p: drn.write(band, p, overwrite=True))
         accept, said_chain = sensed_band_claim(r)

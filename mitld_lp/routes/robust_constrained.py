@@ -40,6 +40,9 @@ fastest policy at the worst law is not searched for.
 
 The width ``upper - lower`` is what the bands leave open beyond the truncation; the
 answer says it.
+
+With the bands read for their best law (``Settings.bands = "best"``) the route solves
+the optimistic constrained optimum instead (:mod:`mitld_lp.routes.optimistic_constrained`).
 """
 
 from __future__ import annotations
@@ -498,12 +501,14 @@ def _then_checks(chosen: Result, judge: _Judge, then: str | None
 
 class RobustConstrainedRoute(Route):
     """Probability constraints with a law known only within a band: the sound bracket
-    of the module docs on the joint interval MDP.  ``every``: it claims problems
+    of the module docs on the joint interval MDP (with the bands read for their best
+    law, :mod:`mitld_lp.routes.optimistic_constrained`).  ``every``: it claims problems
     without constraints too (:func:`mitld_lp.synthesis.synthesize_constrained`).  Its
     answer is a constrained one (``name``)."""
 
     name = "constrained"
     takes_constraints = True
+    optimistic = True  # bands "best": mitld_lp.routes.optimistic_constrained
 
     def __init__(self, *, every: bool = False) -> None:
         self.every = every
@@ -519,4 +524,8 @@ class RobustConstrainedRoute(Route):
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        if posed.settings.bands == "best":
+            from mitld_lp.routes.optimistic_constrained import solve_optimistic_constrained
+
+            return solve_optimistic_constrained(posed, built, costs=costs, seed=seed)
         return solve_robust_constrained(posed, built, costs=costs, seed=seed)

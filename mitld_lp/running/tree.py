@@ -26,13 +26,8 @@ Graphviz DOT (``.dot``) or as a plain Python function (``.py``) by :func:`write_
 
 from __future__ import annotations
 
-import json
-import keyword
-import math
 import os
-from collections import Counter
 from collections.abc import Hashable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,198 +40,22 @@ from mitld_lp.files import write as files
 from mitld_lp.product import ProductState
 from mitld_lp.running.band_chain import band_chain_of, is_band
 from mitld_lp.running.chain import chain_of, world_of
-from mitld_lp.running.sensed_chain import SENSED_TREE_REFUSAL, is_sensed
+from mitld_lp.running.sensed_chain import is_sensed
+from mitld_lp.running.tree_format import (
+    Node,
+    Tree,
+    decision_label,
+    fresh_name,
+    identifier,
+    label_decision,
+)
+from mitld_lp.running.tree_grow import grow
 from mitld_lp.util.traversal import breadth_first_order
 from mitld_lp.worlds.names import state_fields, state_values
 
 __all__ = ["Tree", "TREE_SUFFIXES", "tree_of", "tree_controller", "tree_value", "write_tree"]
 
 TREE_SUFFIXES = (".json", ".dot", ".py")
-FORMAT = "mitld_lp.running.tree"
-
-
-@dataclass(frozen=True, slots=True)
-class Node:
-    """An inner node tests ``feature op value`` (``<=`` or ``==``) and goes to ``yes``
-    or ``no``; a leaf (``feature`` None) holds ``decision``."""
-
-    feature: int | None = None
-    op: str = ""
-    value: Any = None
-    yes: int = -1
-    no: int = -1
-    decision: Any = None
-
-
-@dataclass(frozen=True, slots=True)
-class Tree:
-    """The tree: ``features`` named, ``nodes[0]`` the root; ``samples`` the reachable
-    states it was grown on (and is exact on)."""
-
-    features: tuple[str, ...]
-    events: tuple[str, ...]
-    nodes: tuple[Node, ...]
-    randomised: bool
-    samples: int
-    same_actions: bool = True
-    automaton: tuple[str, ...] = ()  # per automaton state q, what it stands for
-
-    @property
-    def size(self) -> int:
-        """Its number of nodes (inner nodes and leaves)."""
-        return len(self.nodes)
-
-    @property
-    def leaves(self) -> int:
-        return sum(n.feature is None for n in self.nodes)
-
-    def decide(self, values: Sequence[Any]) -> Any:
-        """The leaf's decision for the feature ``values``."""
-        node = self.nodes[0]
-        while node.feature is not None:
-            node = self.nodes[node.yes if _holds(node, values[node.feature]) else node.no]
-        return node.decision
-
-    # ------------------------------------------------------------------ formats
-
-    def to_json(self) -> str:
-        nodes = []
-        for i, n in enumerate(self.nodes):
-            if n.feature is None:
-                nodes.append({"id": i, **_leaf_json(n.decision, self.randomised)})
-            else:
-                nodes.append({"id": i, "feature": self.features[n.feature], "op": n.op,
-                              "value": _plain(n.value), "yes": n.yes, "no": n.no})
-        return json.dumps({"format": FORMAT, "version": 1, "features": list(self.features),
-                           "events": list(self.events), "randomised": self.randomised,
-                           "states": self.samples, "same_actions": self.same_actions,
-                           "automaton_states": {str(q): text for q, text in
-                                                enumerate(self.automaton)},
-                           "nodes": nodes}, indent=1) + "\n"
-
-    def to_dot(self) -> str:
-        lines = ["digraph tree {", '  node [fontname="Helvetica"];']
-        for i, n in enumerate(self.nodes):
-            if n.feature is None:
-                text = _leaf_text(n.decision, self.randomised)
-                lines.append(f'  n{i} [shape=box, label={json.dumps(text)}];')
-            else:
-                value = _plain(n.value)
-                shown = ("{" + ", ".join(map(str, value)) + "}" if n.op == "in" else
-                         str(value).lower() if isinstance(value, bool) else value)
-                test = f"{self.features[n.feature]} {n.op} {shown}"
-                lines.append(f"  n{i} [shape=ellipse, label={json.dumps(test)}];")
-                lines.append(f'  n{i} -> n{n.yes} [label="yes"];')
-                lines.append(f'  n{i} -> n{n.no} [label="no", style=dashed];')
-        lines.append("}")
-        return "\n".join(lines) + "\n"
-
-    def to_python(self) -> str:
-        taken: set[str] = set()  # distinct Python names, whatever the features' names
-        names = [_identifier(_fresh(f, taken)) for f in self.features]
-        what = ("a dict {action: probability} (key None: stay in the end component; a key "
-                "('keep', *actions): keep the safety part, playing those actions uniformly "
-                "for ever)" if self.randomised else "the action (None: the task is lost, stop)")
-        world = len(self.features) - len(self.events) - 2
-        out = ['"""The controller as a decision tree, written by mitld_lp (exact on the',
-               f"{self.samples} states it can reach).  act(...) returns {what}.",
-               f"Arguments: the world's {', '.join(names[:world])}; the controller's "
-               f"{', '.join(names[world:])} (automaton state, pending events, clock).\"\"\"",
-               "", "", f"def act({', '.join(names)}):"]
-
-        def emit(i: int, depth: int) -> None:
-            n, pad = self.nodes[i], "    " * depth
-            if n.feature is None:
-                out.append(f"{pad}return {_leaf_python(n.decision, self.randomised)}")
-                return
-            out.append(f"{pad}if {_python_test(names[n.feature], n)}:")
-            emit(n.yes, depth + 1)
-            out.append(f"{pad}else:")
-            emit(n.no, depth + 1)
-
-        emit(0, 1)
-        return "\n".join(out) + "\n"
-
-
-def _python_test(name: str, n: Node) -> str:
-    if n.op == "==" and n.value is True:
-        return name
-    if n.op == "in":
-        return f"{name} in {tuple(_plain(v) for v in n.value)!r}"
-    return f"{name} {n.op} {_plain(n.value)!r}"
-
-
-def _holds(node: Node, v: Any) -> bool:
-    if node.op == "<=":
-        return v <= node.value
-    return v in node.value if node.op == "in" else v == node.value
-
-
-def _plain(v: Any) -> Any:
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, tuple):
-        return [_plain(x) for x in v]
-    return v
-
-
-def _identifier(name: str) -> str:
-    text = "".join(c if c.isalnum() or c == "_" else "_" for c in name)
-    text = text if text and not text[0].isdigit() else f"f_{text}"
-    return f"{text}_" if keyword.iskeyword(text) else text
-
-
-def _fresh(name: str, taken: set[str]) -> str:
-    """``name`` with ``_`` appended until neither it nor its Python name is ``taken``
-    (world variables ``lambda`` and ``lambda_`` are both ``lambda_`` in Python)."""
-    while name in taken or _identifier(name) in taken:
-        name += "_"
-    taken |= {name, _identifier(name)}
-    return name
-
-
-def _leaf_json(decision: Any, randomised: bool) -> dict[str, Any]:
-    if not randomised:
-        return {"action": decision}
-    if decision is None:
-        return {"action": None}
-    actions, weights, stay, inside, keep, kept = decision
-    out = {"actions": {a: w for a, w, k in _mix(actions, weights, keep) if w > 0 and not k},
-           "stay": stay, "inside": list(inside)}
-    if any(keep):  # the keep choice, and what a run that drew it plays for ever
-        out |= {"keep": sum(w for _, w, k in _mix(actions, weights, keep) if k),
-                "kept": list(kept)}
-    return out
-
-
-def _mix(actions: Sequence[str], weights: Sequence[float],
-         keep: Sequence[bool]) -> list[tuple[str, float, bool]]:
-    """A randomised leaf's choices: action, probability, whether it is the keep choice."""
-    flags = keep or (False,) * len(actions)
-    return list(zip(actions, weights, flags, strict=True))
-
-
-def _leaf_text(decision: Any, randomised: bool) -> str:
-    if not randomised or decision is None:
-        return "stop (lost)" if decision is None else str(decision)
-    actions, weights, stay, _, keep, kept = decision
-    parts = [f"{a}: {w:.3g}" for a, w, k in _mix(actions, weights, keep) if w > 0 and not k]
-    parts += [f"keep: {w:.3g} ({', '.join(kept) or 'any'} for ever)"
-              for _, w, k in _mix(actions, weights, keep) if w > 0 and k]
-    return "\n".join(parts + ([f"stay: {stay:.3g}"] if stay else []))
-
-
-def _leaf_python(decision: Any, randomised: bool) -> str:
-    if not randomised or decision is None:
-        return repr(decision)
-    actions, weights, stay, _, keep, kept = decision
-    mix: dict[Any, float] = {a: w for a, w, k in _mix(actions, weights, keep) if w > 0 and not k}
-    for _, w, k in _mix(actions, weights, keep):
-        if k and w > 0:
-            mix[("keep", *kept)] = w
-    if stay:
-        mix[None] = stay
-    return repr(mix)
 
 
 # --------------------------------------------------------------------------- features
@@ -248,23 +67,14 @@ def _features(result: Any, controller: ControllerLike) -> tuple[tuple[str, ...],
     game = world_of(result, controller)
     events = tuple(sorted(controller.events))
     world = state_fields(game)
-    taken = set(world) | {_identifier(f) for f in world}
+    taken = set(world) | {identifier(f) for f in world}
     memory = ("q", *(f"pending_{e}" for e in events), "clock")
-    return (*world, *(_fresh(name, taken) for name in memory)), events
+    return (*world, *(fresh_name(name, taken) for name in memory)), events
 
 
 def _values(game: Any, rec: ProductState, events: tuple[str, ...]) -> tuple[Any, ...]:
     return (*state_values(game, rec.game), rec.automaton, *(e in rec.pending for e in events),
             rec.clock)
-
-
-def _label(d: Decision, randomised: bool) -> Hashable:
-    if d.lost:
-        return None
-    if not randomised:
-        return d.actions[0] if d.actions else "fallback"
-    w = tuple(float(x) for x in (d.weights if d.weights is not None else ()))
-    return (d.actions, w, float(d.stay), d.inside, d.keep, d.kept)
 
 
 def _acting(result: Any, controller: ControllerLike) -> list[int]:
@@ -284,7 +94,7 @@ def _strict(result: Any, controller: ControllerLike, i: int) -> Hashable:
     """The controller's own decision at product state ``i``."""
     plan: Any = controller.plan
     rec = result.mdp.states[i]
-    label = _label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
+    label = decision_label(plan.decide(rec.game, rec.automaton, rec.pending, rec.clock),
                    controller.randomised)
     return plan.fallback(rec.game) if label == "fallback" else label
 
@@ -376,12 +186,16 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     value exactly (:func:`_choices`), which makes it much smaller; it is grown until it
     is exact on every state *its own* controller reaches.  ``same_actions`` asks for the
     controller's own action in every state the controller reaches (always for a law
-    within a band: every state it reaches under some law).  Either way
+    within a band: every state it reaches under some law; with constraints and a band
+    the states it reaches at the middle law of the bands, which are those it reaches
+    under some law, as every hazard there is inside its band).  Either way
     :func:`tree_value` is the controller's value, ``lower``.  A controller that acts on
-    sensor reports is refused (:data:`~mitld_lp.running.sensed_chain.SENSED_TREE_REFUSAL`
-    says why)."""
-    if is_sensed(result):
-        raise ValueError(SENSED_TREE_REFUSAL)
+    sensor reports gives a finite-memory controller's tree, over the world's variables
+    and its memory (:func:`mitld_lp.running.sensed_tree.sensed_tree_of`)."""
+    if is_sensed(result):  # a finite-memory controller: its memory is what it observed
+        from mitld_lp.running.sensed_tree import sensed_tree_of
+
+        return sensed_tree_of(result, controller)
     c = controller or result.controller
     if c is None:
         raise ValueError(f"no controller: the synthesis is {result.status}")
@@ -392,7 +206,7 @@ def tree_of(result: Any, controller: ControllerLike | None = None, *,
     for _ in range(_ROUNDS):
         rows, allowed = _dataset(result, c, states, choices)
         nodes: list[Node] = []
-        _grow(rows, allowed, list(range(len(rows))), nodes,
+        grow(rows, allowed, list(range(len(rows))), nodes,
               frozenset({len(names) - len(events) - 2}))  # q: its states are categories
         tree = Tree(names, events, tuple(nodes), bool(c.randomised), len(rows),
                     choices is None, _automaton_texts(result))
@@ -420,99 +234,6 @@ _ROUNDS = 20
 back to the controller's own actions."""
 
 
-def _sort_key(v: Any) -> tuple[str, Any]:
-    if isinstance(v, bool | int | float):
-        return ("0", float(v))
-    return ("1", repr(v))
-
-
-def _entropy(counts: Counter[Any] | dict[Any, int], n: int) -> float:
-    return -sum(k / n * math.log2(k / n) for k in counts.values() if k)
-
-
-def _order(d: Hashable) -> tuple[bool, str]:
-    return (d is None, repr(d))
-
-
-def _grow(rows: list[tuple[Any, ...]], allowed: list[frozenset[Hashable]], idx: list[int],
-          nodes: list[Node], categorical: frozenset[int] = frozenset()) -> int:
-    """Append the subtree of the samples ``idx`` (each with its set of allowed
-    decisions) to ``nodes``; return its root.  A leaf holds a decision every sample
-    below it allows; a split is chosen on each sample's most common allowed decision
-    (dtControl's "max-freq" determinisation)."""
-    at = len(nodes)
-    nodes.append(Node())
-    common = frozenset.intersection(*(allowed[i] for i in idx)) if idx else frozenset()
-    if common:
-        nodes[at] = Node(decision=min(common, key=_order))
-        return at
-    freq = Counter(d for i in idx for d in allowed[i])
-    ranked = sorted(freq, key=lambda d: (-freq[d], _order(d)))
-    place = {d: k for k, d in enumerate(ranked)}
-    labels = {i: min(allowed[i], key=place.__getitem__) for i in idx}
-    best = _best_split(rows, labels, idx, Counter(labels.values()), categorical)
-    if best is None:  # equal features, no common decision: cannot happen on a product
-        raise ValueError("two reachable states with the same features take different "
-                         "decisions; the features do not describe the controller's state")
-    feature, op, value = best
-    probe = Node(feature, op, value)
-    yes = [i for i in idx if _holds(probe, rows[i][feature])]
-    no = [i for i in idx if not _holds(probe, rows[i][feature])]
-    y = _grow(rows, allowed, yes, nodes, categorical)
-    n = _grow(rows, allowed, no, nodes, categorical)
-    nodes[at] = Node(feature, op, value, y, n)
-    return at
-
-
-def _best_split(rows: list[tuple[Any, ...]], labels: dict[int, Hashable], idx: list[int],
-                counts: Counter[Any], categorical: frozenset[int] = frozenset()
-                ) -> tuple[int, str, Any] | None:
-    n = len(idx)
-    base = _entropy(counts, n)
-    best: tuple[float, int, int, str, Any] | None = None
-    for f in range(len(rows[idx[0]])):
-        values = [rows[i][f] for i in idx]
-        distinct = set(values)
-        if len(distinct) < 2:
-            continue
-        numeric = f not in categorical and all(
-            isinstance(v, int | float) and not isinstance(v, bool) for v in distinct)
-        ordered = sorted(distinct, key=_sort_key)
-        by_value: dict[Any, Counter[Any]] = {}
-        for i, v in zip(idx, values, strict=True):
-            by_value.setdefault(v, Counter())[labels[i]] += 1
-        candidates: list[tuple[str, Any, Counter[Any]]] = []
-        if numeric:
-            left: Counter[Any] = Counter()
-            for v in ordered[:-1]:
-                left = left + by_value[v]
-                candidates.append(("<=", v, left))
-        else:
-            candidates += [("==", v, by_value[v]) for v in ordered]
-            if len(ordered) == 2:
-                candidates = candidates[1:]  # one test splits a pair
-            else:  # the values grouped by their most common decision: "in {...}"
-                groups: dict[Hashable, list[Any]] = {}
-                for v in ordered:
-                    top = max(by_value[v], key=lambda d: (by_value[v][d], repr(d)))
-                    groups.setdefault(top, []).append(v)
-                for members in groups.values():
-                    if 1 < len(members) < len(ordered):
-                        inside = sum((by_value[v] for v in members), Counter())
-                        candidates.append(("in", tuple(members), inside))
-        for op, v, inside in candidates:
-            k = sum(inside.values())
-            rest = counts - inside
-            gain = base - (k / n) * _entropy(inside, k) - ((n - k) / n) * _entropy(rest, n - k)
-            key = (round(gain, 12), -f)
-            if best is None or key > best[:2]:
-                best = (key[0], key[1], f, op, v)
-    if best is None:
-        return None
-    _, _, f, op, v = best
-    return f, op, v
-
-
 # --------------------------------------------------------------------------- running it
 
 
@@ -535,14 +256,8 @@ class _TreePlan(AutomatonMemory):
 
     def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
         rec = ProductState(state, q, pending, clock)
-        d = self.tree.decide(_values(self.game, rec, self.tree.events))
-        if d is None:
-            return Decision((), lost=True)
-        if not self.tree.randomised:
-            return Decision((d,))
-        actions, weights, stay, inside, keep, kept = d
-        return Decision(actions, np.asarray(weights, dtype=np.float64), stay, inside,
-                        keep=keep, kept=kept)
+        label = self.tree.decide(_values(self.game, rec, self.tree.events))
+        return label_decision(label, self.tree.randomised)
 
     def fallback(self, state: Hashable) -> str:
         return self._plan.fallback(state)
@@ -563,6 +278,10 @@ def tree_controller(result: Any, tree: Tree, controller: ControllerLike | None =
     """A controller that decides by ``tree`` (and tracks its memory as ``result``'s
     controller does)."""
     c = controller or result.controller
+    if tree.memory is not None:  # a sensed controller's tree (running.sensed_tree)
+        from mitld_lp.running.sensed_tree import sensed_tree_controller
+
+        return sensed_tree_controller(result, tree, c)  # type: ignore[return-value]
     return TreeController(_TreePlan(c.plan, tree, world_of(result, c)))
 
 
@@ -573,8 +292,11 @@ def tree_value(result: Any, tree: Tree) -> float:
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    if is_band(result):
-        raise ValueError("a band: the value is a worst case; Storm checks band_chain_of")
+    from mitld_lp.running.band_mixture_chain import is_band_mixture
+
+    if is_band(result) or is_band_mixture(result):
+        raise ValueError("a band: the value is a worst case; Storm checks band_chain_of "
+                         "(with constraints, band_mixture_chain.mixture_chain_drn)")
     chain = chain_of(result, tree_controller(result, tree))
     accept = chain.accepting()
     if accept[0]:
