@@ -27,8 +27,8 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, ActionChoices
 
-__all__ = ["IntervalMDP", "VertexRows", "vertex_rows", "vertex_weights", "point_mdp",
-           "WEIGHT_BLOCK", "BYTES_PER_WEIGHT"]
+__all__ = ["BYTES_PER_WEIGHT", "IntervalMDP", "VertexRows", "WEIGHT_BLOCK", "middle_rows",
+           "point_mdp", "vertex_rows", "vertex_weights"]
 
 
 @dataclass(frozen=True, slots=True, eq=False, kw_only=True)
@@ -192,3 +192,29 @@ def point_mdp(imdp: IntervalMDP, rows: sp.csr_array) -> MDP:
     """The MDP with the same states and choices whose row ``c`` is ``rows[c]`` (one
     distribution per choice: the interval MDP under one fixed choice of nature)."""
     return MDP(matrix=rows, **imdp.choice_fields())
+
+
+def middle_rows(imdp: IntervalMDP) -> sp.csr_array:
+    """Per choice, its distribution at the middle law: every ambiguous event's hazard at
+    the middle of its interval, ``sum_b prod_i h_i^{b_i} (1 - h_i)^{1 - b_i} B(c, b)``."""
+    k = np.diff(imdp.band_groups).astype(np.int64)
+    rows, cols, vals = [], [], []
+    for kk in np.unique(k).tolist():
+        cs = np.flatnonzero(k == kk)
+        n = 1 << kk
+        w = np.ones((cs.size, n))
+        if kk:
+            at = imdp.band_groups[cs][:, None] + np.arange(kk)[None, :]
+            mid = 0.5 * (imdp.band_lo[at] + imdp.band_hi[at])  # (m, k)
+            bits = (np.arange(n)[:, None] >> np.arange(kk)[None, :]) & 1  # (n, k)
+            for i in range(kk):
+                w *= np.where(bits[None, :, i] == 1, mid[:, i:i + 1], 1.0 - mid[:, i:i + 1])
+        rows.append(np.repeat(cs, n))
+        cols.append((imdp.branch_groups[cs][:, None] + np.arange(n)[None, :]).ravel())
+        vals.append(w.ravel())
+    weights = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(imdp.n_choices, imdp.n_branches))
+    out = sp.csr_array(weights @ imdp.branches)
+    out.eliminate_zeros()
+    out.sort_indices()
+    return out

@@ -151,7 +151,7 @@ def at_law(imdp: IntervalMDP, vr: VertexRows, weight: np.ndarray) -> MDP:
     choice ``c`` is the mixture of its vertex rows by ``weight`` (per cooperative choice,
     :func:`cooperative_mdp`), or, for a choice ``weight`` gives nothing, its row at the
     middle law of the bands (a law within them)."""
-    from mitld_lp.routes.robust_constrained import middle_rows
+    from mitld_lp.product.imdp import middle_rows
 
     per = np.diff(vr.groups)
     robot = np.repeat(np.arange(imdp.n_choices), per)

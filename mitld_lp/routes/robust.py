@@ -57,7 +57,7 @@ from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.model import Model
 from mitld_lp.problem import Posed, ProblemError, pose_on, settings_from
 from mitld_lp.product import robust_product
-from mitld_lp.product.imdp import IntervalMDP, point_mdp, vertex_rows
+from mitld_lp.product.imdp import IntervalMDP, point_mdp
 from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
@@ -69,7 +69,7 @@ from mitld_lp.solvers.robust import (
     robust_interval_iteration,
     robust_policy,
 )
-from mitld_lp.solvers.robust_graph import RobustGame
+from mitld_lp.solvers.robust_graph import RobustGame, cooperative, robust_game
 from mitld_lp.solvers.robust_lp import PolicyLP, policy_lp
 from mitld_lp.util.clock import Deadline
 
@@ -90,23 +90,6 @@ OPTIMISTIC = ("the bands read for the robot's best law (Pmaxmax): the bracket is
 def is_robust(laws: Mapping[str, FirstOccurrence]) -> bool:
     """Whether some law is a band (the task is then solved robustly)."""
     return any(law.is_ambiguous for law in laws.values())
-
-
-def robust_game(imdp: IntervalMDP) -> RobustGame:
-    """The robust game of ``imdp``: nature's rows are the vertex distributions."""
-    v = vertex_rows(imdp)
-    return RobustGame(v.matrix, v.groups, imdp.row_groups)
-
-
-def cooperative(game: RobustGame) -> RobustGame:
-    """``game`` with nature on the robot's side (the bands read for their best law):
-    every vertex row is a choice of its own, so ``max_c min_rows`` of the result is
-    ``max_c max_v`` of ``game`` (the best law of a box of hazards is at a vertex too:
-    the value of a step is multilinear in the hazards).  Choice ``k`` of the result is
-    row ``k`` of ``game``: ``game.row_choice()`` maps it back to the robot's choice."""
-    n_rows = game.n_rows
-    return RobustGame(game.matrix, np.arange(n_rows + 1, dtype=np.int64),
-                      np.asarray(game.vertex_groups[game.row_groups], dtype=np.int64))
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -60,7 +60,7 @@ from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
 from mitld_lp.problem import Posed
 from mitld_lp.product import robust_product
-from mitld_lp.product.imdp import IntervalMDP, VertexRows, point_mdp, vertex_rows
+from mitld_lp.product.imdp import IntervalMDP, VertexRows, middle_rows, point_mdp, vertex_rows
 from mitld_lp.result import Result
 from mitld_lp.routes.constrained import (
     ConstrainedPart,
@@ -77,37 +77,11 @@ from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.robust import robust_interval_iteration
 from mitld_lp.solvers.robust_graph import RobustGame
 
-__all__ = ["RobustConstrainedRoute", "solve_robust_constrained", "middle_rows", "worst_case",
+__all__ = ["RobustConstrainedRoute", "solve_robust_constrained", "worst_case",
            "ROUNDS"]
 
 ROUNDS = 8
 """How many times the middle-law LP is solved again with tightened bounds."""
-
-
-def middle_rows(imdp: IntervalMDP) -> sp.csr_array:
-    """Per choice, its distribution at the middle law: every ambiguous event's hazard at
-    the middle of its interval, ``sum_b prod_i h_i^{b_i} (1 - h_i)^{1 - b_i} B(c, b)``."""
-    k = np.diff(imdp.band_groups).astype(np.int64)
-    rows, cols, vals = [], [], []
-    for kk in np.unique(k).tolist():
-        cs = np.flatnonzero(k == kk)
-        n = 1 << kk
-        w = np.ones((cs.size, n))
-        if kk:
-            at = imdp.band_groups[cs][:, None] + np.arange(kk)[None, :]
-            mid = 0.5 * (imdp.band_lo[at] + imdp.band_hi[at])  # (m, k)
-            bits = (np.arange(n)[:, None] >> np.arange(kk)[None, :]) & 1  # (n, k)
-            for i in range(kk):
-                w *= np.where(bits[None, :, i] == 1, mid[:, i:i + 1], 1.0 - mid[:, i:i + 1])
-        rows.append(np.repeat(cs, n))
-        cols.append((imdp.branch_groups[cs][:, None] + np.arange(n)[None, :]).ravel())
-        vals.append(w.ravel())
-    weights = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                           shape=(imdp.n_choices, imdp.n_branches))
-    out = sp.csr_array(weights @ imdp.branches)
-    out.eliminate_zeros()
-    out.sort_indices()
-    return out
 
 
 def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarray,

@@ -41,9 +41,9 @@ def nature_rows(result: Any) -> sp.csr_array:
     """Per choice of the answer's interval MDP, its row at nature's chosen law (module
     docstring): the chosen vertex row for the robot's choice of each state, the middle
     law for any other."""
-    from mitld_lp.routes.robust import cooperative, robust_game
-    from mitld_lp.routes.robust_constrained import middle_rows
+    from mitld_lp.product.imdp import middle_rows
     from mitld_lp.solvers.robust import robust_policy
+    from mitld_lp.solvers.robust_graph import cooperative, robust_game
 
     imdp = result.mdp
     assert isinstance(imdp, IntervalMDP)

@@ -68,19 +68,8 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["SENSED_TREE_REFUSAL", "is_sensed", "sensed_chain", "sensed_corner_unfolding",
-           "sensed_chain_of"]
+__all__ = ["is_sensed", "sensed_chain", "sensed_corner_unfolding", "sensed_chain_of"]
 
-
-SENSED_TREE_REFUSAL = (
-    "export --tree: the model has sensors that miss events; its controller's memory is its "
-    "information state (what the robot has observed: the hypotheses of when the sensed "
-    "events happened), moved by the controller's own tables at every observation, so a "
-    "decision tree over the world's variables and that memory would still need those "
-    "tables to run and would read no better than them; not written (--controller writes "
-    "the controller, --chain its controlled chain for Storm)")
-"""Why a controller that acts on sensor reports has no decision tree (the command line
-refuses ``--tree`` before any work, :func:`mitld_lp.running.tree.tree_of` too)."""
 
 _REPORTED = -1
 """A sensed event's report status once it is reported (or before it happens)."""

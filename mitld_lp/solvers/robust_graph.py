@@ -24,10 +24,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDPShape
+from mitld_lp.product.imdp import IntervalMDP, vertex_rows
 from mitld_lp.util.traversal import strong_components
 
-__all__ = ["RobustGame", "positive_attractor", "almost_sure", "end_components", "levels",
-           "gather", "take_rows", "keeping"]
+__all__ = ["RobustGame", "almost_sure", "cooperative", "end_components", "gather", "keeping",
+           "levels", "positive_attractor", "robust_game", "take_rows"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -261,3 +262,20 @@ def levels(game: RobustGame, states: np.ndarray) -> list[np.ndarray]:
         preds = np.unique(preds)
         ready = preds[(out_degree[preds] == 0) & used[preds]]
     return result
+
+
+def robust_game(imdp: IntervalMDP) -> RobustGame:
+    """The robust game of ``imdp``: nature's rows are the vertex distributions."""
+    v = vertex_rows(imdp)
+    return RobustGame(v.matrix, v.groups, imdp.row_groups)
+
+
+def cooperative(game: RobustGame) -> RobustGame:
+    """``game`` with nature on the robot's side (the bands read for their best law):
+    every vertex row is a choice of its own, so ``max_c min_rows`` of the result is
+    ``max_c max_v`` of ``game`` (the best law of a box of hazards is at a vertex too:
+    the value of a step is multilinear in the hazards).  Choice ``k`` of the result is
+    row ``k`` of ``game``: ``game.row_choice()`` maps it back to the robot's choice."""
+    n_rows = game.n_rows
+    return RobustGame(game.matrix, np.arange(n_rows + 1, dtype=np.int64),
+                      np.asarray(game.vertex_groups[game.row_groups], dtype=np.int64))
