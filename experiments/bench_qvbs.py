@@ -392,7 +392,8 @@ COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "
             "bytes_per_transition", "storm_bytes_per_transition")
 
 
-def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
+def report(rows: list[dict], skipped: list[tuple[str, str]],
+           only: list[str] | None = None) -> str:
     def table(part: list[dict]) -> str:
         return _common.markdown_table(COLUMNS, [[bs._fmt(r.get(k)) for k in COLUMNS]
                                                 for r in part])
@@ -401,6 +402,9 @@ def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
     good = [r for r in done if not r["degenerate"]]
     flat = [r for r in done if r["degenerate"]]
     text = "## QVBS PRISM MDPs of at least 1e5 states, ours and Storm in one run\n\n"
+    if only:
+        text += (f"A subset (`--only`): the {len(rows)} instances below; the families' "
+                 "other instances were not run here.\n\n")
     text += table(good) if good else "No non-trivial instance was run.\n"
     compared = [r for r in done if "base_value" in r]
     if compared:
@@ -474,7 +478,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
     _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
                       [["" if r.get(k) is None else r[k] for k in header] for r in rows])
-    text = report(rows, skipped)
+    text = report(rows, skipped, args.only)
     _common.write_text(out / "bench_qvbs.md", text)
     _common.write_text(out / "bench_qvbs_machine.txt", machine_text(
         "shared 2-core machine, other processes running; one run, CPU seconds",

@@ -107,3 +107,41 @@ def test_rare_event_in_every_stage_is_bracketed() -> None:
         lo, hi = Fraction(it.lower[i]), Fraction(it.upper[i])
         assert _near_below(lo, exact) and exact <= hi, i
         assert hi - lo <= Fraction(defaults.PRECISION) * exact, i
+
+
+def _bench_qvbs():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "bench_qvbs.py"
+    spec = importlib.util.spec_from_file_location("bench_qvbs_rule", path)
+    module = importlib.util.module_from_spec(spec)
+    import sys
+
+    sys.path.insert(0, str(path.parent))
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(path.parent))
+    return module
+
+
+def test_bench_leaves_apart_only_what_the_graph_decides() -> None:
+    """experiments/bench_qvbs.py's rule: a small probability counts in the ratios; only
+    an answer the graph decides (0: the goal walled off; 1: reached surely) is apart."""
+    from mitld_lp import GridWorld, Model, synthesize
+
+    rule = _bench_qvbs().trivial
+
+    def why(spec: str, **kw):
+        world = GridWorld.make(8, 8, start=(0, 0), **kw)
+        r = synthesize(Model.from_game(world, spec))
+        solved = [m for m in (r.lower_model, r.upper_model) if m is not None]
+        return r.lower, r.upper, rule(solved, r.mdp.initial)
+
+    lo, hi, said = why("F[0,14] A", slip=0.5, regions={"A": [(7, 7)]})
+    assert 0 < lo <= hi < 1e-3 and said is None  # rare, not trivial
+    lo, hi, said = why("F A", regions={"A": [(7, 7)]}, obstacles=[(6, 7), (7, 6), (6, 6)])
+    assert lo == hi == 0.0 and said is not None and said.startswith("0 by the graph")
+    lo, hi, said = why("F A", slip=0.3, regions={"A": [(7, 7)]})
+    assert lo == hi == 1.0 and said is not None and said.startswith("1 by the graph")
