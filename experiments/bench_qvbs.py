@@ -36,11 +36,17 @@ the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git worktree ad
 ``git archive``), and adds its figures as ``base_*`` columns and a before/after table:
 the same bracket, the same product, CPU and bytes per transition side by side.
 
-An instance whose optimum (QVBS's reference) is below 1e-3 or above 1 - 1e-3 is
-degenerate: reported apart, never in a ratio.  The targets checked on the others (all
-have at least 1e5 states): solve <= 2x Storm's best check, whole process <= 1x Storm's
-whole process, <= 50 bytes per transition.  Instances not run are listed with the
-reason (not in the checkout, not a probability, over the CPU budget).
+An instance is *trivial* only if its answer is decided by the graph alone, before any
+number: both truncation models' qualitative sets (Storm's prob01) put the initial state
+at exactly 0 or exactly 1 (``ModelSolution.qualitative``).  It is reported apart, with
+the reason, and never in a ratio; a small probability (a rare event, 3.7e-5 on
+``zeroconf`` 1000-4) is not trivial and counts in every ratio.  ``iteration_sweeps``
+are the interval iteration's own sweeps (``solve_sweeps`` is the whole solve stage in
+sweeps' worth: the LP, the iteration and the certificate); ``iteration_s`` and
+``lp_s`` are their wall seconds as the solvers report them.  The targets checked on
+the others (all have at least 1e5 states): solve <= 2x Storm's best check, whole
+process <= 1x Storm's whole process, <= 50 bytes per transition.  Instances not run are
+listed with the reason (not in the checkout, not a probability, over the CPU budget).
 
 The QVBS files are not part of this repository; give a checkout's ``benchmarks/``::
 
@@ -81,7 +87,8 @@ QUICK_COUNT = 2
 BUDGET = 1800.0  # CPU seconds per child
 _NOT_A_TASK = ("not a probability", "qualitative")
 COLUMNS = ("instance", "value", "reference", "states", "transitions", "sweep_ms",
-           "solve_cpu", "solve_sweeps", "storm_check_cpu", "storm_check_sweeps", "storm_best",
+           "solve_cpu", "solve_sweeps", "iteration_sweeps", "iteration_s", "lp_s",
+           "storm_check_cpu", "storm_check_sweeps", "storm_best",
            "solve_over_storm_check", "whole_cpu", "process_cpu", "storm_prism_cpu",
            "storm_process_cpu", "process_over_storm_process", "bytes_per_transition",
            "storm_bytes_per_transition", "storm_agrees", "certified")
@@ -136,7 +143,13 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     process_cpu = _process_cpu()  # the process so far; the bench's extras below are not ours
     peak = _hwm_kb() if fresh else bs._peak_kb()
     mdp = r.mdp
+    solved = [m for m in (r.lower_model, r.upper_model) if m is not None]
+    lp = [m.lp for m in solved if m.lp is not None]
     out = dict(states=mdp.n_states, transitions=mdp.n_transitions, lower=r.lower,
+               trivial=trivial(solved, mdp.initial),
+               iteration_sweeps=max(m.iteration.iterations for m in solved),
+               iteration_s=max(m.iteration.seconds for m in solved),
+               lp_s=sum(m.seconds for m in lp) if lp else None,
                upper=r.upper, product_value=float(r.lower_model.value),
                certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
                process_cpu=process_cpu,
@@ -156,6 +169,27 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     # Storm optimises the DRN's target as we do (a checkout before Result.sense: "max")
     (work / "sense.txt").write_text(getattr(r, "sense", "max"))
     return dict(out, sweep_cpu=float(np.median(times)))
+
+
+def trivial(solved: list[Any], initial: int) -> str | None:
+    """Why the answer is decided by the graph alone (both models' qualitative sets put
+    the initial state at the same 0 or 1, before any number), or ``None`` if it is not
+    (then the instance counts in every ratio, however small its value)."""
+    said = set()
+    for m in solved:
+        q = m.qualitative
+        if q is None:
+            return None
+        if bool(q.zero[initial]):
+            said.add(f"0 by the graph (the initial state is in {m.which} model's "
+                     f"Prob0{'A' if str(q.sense) == 'max' else 'E'})")
+        elif bool(q.one[initial]):
+            said.add(f"1 by the graph (the initial state is in {m.which} model's "
+                     f"Prob1{'E' if str(q.sense) == 'max' else 'A'})")
+        else:
+            return None
+    values = {w.split(" ")[0] for w in said}
+    return "; ".join(sorted(said)) if len(values) == 1 else None
 
 
 def work_storm_check(job: dict[str, Any], work: Path) -> dict[str, Any]:
@@ -276,7 +310,8 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
 
 def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
             budget: float, compare: Path | None = None) -> dict[str, Any]:
-    """Every route on one instance and its row; ratios only if not degenerate.
+    """Every route on one instance and its row; ratios only if not trivial (decided
+    by the graph alone, :func:`trivial`).
     ``compare``: also ours from that checkout (``base_*`` columns)."""
     base: dict[str, Any] = {}
     if compare is not None:
@@ -293,7 +328,8 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
     if "error" in prism:
         prism = None
     reference = float(inst.reference)
-    flat = bs.degenerate(reference)
+    why = ours["trivial"]
+    flat = why is not None
     sweep = ours["sweep_cpu"]
 
     def ratio(a: float, b: float | None) -> float | None:
@@ -305,7 +341,9 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
     values = [m["value"] for m in storm["methods"].values()]
     return dict(
         instance=inst.name, value=ours["lower"], upper=ours["upper"], reference=reference,
-        degenerate=flat, states=ours["states"], transitions=ours["transitions"],
+        degenerate=flat, trivial=why, states=ours["states"],
+        transitions=ours["transitions"], iteration_sweeps=ours["iteration_sweeps"],
+        iteration_s=ours["iteration_s"], lp_s=ours["lp_s"],
         storm_states=storm["states"], storm_transitions=storm["transitions"],
         sweep_ms=1e3 * sweep, certified=ours["certified"],
         storm_agrees=all(abs(v - ours["product_value"]) <= 1e-6 for v in values),
@@ -354,7 +392,8 @@ COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "
             "bytes_per_transition", "storm_bytes_per_transition")
 
 
-def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
+def report(rows: list[dict], skipped: list[tuple[str, str]],
+           only: list[str] | None = None) -> str:
     def table(part: list[dict]) -> str:
         return _common.markdown_table(COLUMNS, [[bs._fmt(r.get(k)) for k in COLUMNS]
                                                 for r in part])
@@ -363,19 +402,23 @@ def report(rows: list[dict], skipped: list[tuple[str, str]]) -> str:
     good = [r for r in done if not r["degenerate"]]
     flat = [r for r in done if r["degenerate"]]
     text = "## QVBS PRISM MDPs of at least 1e5 states, ours and Storm in one run\n\n"
-    text += table(good) if good else "No non-degenerate instance was run.\n"
+    if only:
+        text += (f"A subset (`--only`): the {len(rows)} instances below; the families' "
+                 "other instances were not run here.\n\n")
+    text += table(good) if good else "No non-trivial instance was run.\n"
     compared = [r for r in done if "base_value" in r]
     if compared:
         text += ("\nBefore (`base_*`: the package of the `--compare` checkout) and after "
-                 "(this checkout), in the same run; ratios only for the non-degenerate "
+                 "(this checkout), in the same run; ratios only for the non-trivial "
                  "instances:\n\n" + _common.markdown_table(
                      COMPARED, [[bs._fmt(r.get(k)) for k in COMPARED] for r in compared]))
     if flat:
-        text += ("\nDegenerate instances (QVBS's reference below 1e-3 or above 1 - 1e-3; no "
-                 "ratio is taken from them):\n\n" + table(flat))
+        text += ("\nTrivial instances (the answer decided by the graph alone, exactly 0 or "
+                 "1 before any number; no ratio is taken from them):\n\n" + table(flat)
+                 + "\n" + "".join(f"- {r['instance']}: {r['trivial']}\n" for r in flat))
     missed = bs.misses(good)
     big = [r for r in good if r["states"] >= bs.BIG]
-    text += (f"\nTargets on the non-degenerate instances of at least {bs.BIG:,} states "
+    text += (f"\nTargets on the non-trivial instances of at least {bs.BIG:,} states "
              "(solve <= 2x Storm's best check, whole process <= 1x Storm's, <= 50 bytes "
              "per transition): " + ("no such instance was run.\n" if not big else
                                      "all met.\n" if not missed else
@@ -426,13 +469,16 @@ def main(argv: list[str] | None = None) -> list[dict]:
             work = Path(tmp) / inst.name
             work.mkdir()
             rows.append(measure(inst, job, work, args.budget, args.compare))
-            print(bs._line(rows[-1]) if "error" not in rows[-1]
-                  else f"{inst.name}: not run ({rows[-1]['error']})", flush=True)
+            row = rows[-1]
+            print(f"{inst.name}: not run ({row['error']})" if "error" in row else
+                  bs._line(row) + (f"  apart: {row['trivial']}" if row["trivial"] else
+                                   f"  iteration_sweeps={row['iteration_sweeps']}"),
+                  flush=True)
     header = sorted({k for r in rows for k in r}, key=lambda k: (
         COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
     _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
                       [["" if r.get(k) is None else r[k] for k in header] for r in rows])
-    text = report(rows, skipped)
+    text = report(rows, skipped, args.only)
     _common.write_text(out / "bench_qvbs.md", text)
     _common.write_text(out / "bench_qvbs_machine.txt", machine_text(
         "shared 2-core machine, other processes running; one run, CPU seconds",

@@ -78,10 +78,10 @@ from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
     Factors,
+    SingleLevels,
     blocks,
     evaluate_chain,
     improve_policy,
-    single_scores,
     state_graph,
 )
 from mitld_lp.util.progress import Bar
@@ -313,19 +313,6 @@ def _shifted(x: np.ndarray, steps: np.ndarray | None, sign: int, tol: float,
     return x + sign * eps * w
 
 
-def _single_states(q: Quotient, states: np.ndarray, rewards: np.ndarray,
-                   bounds: np.ndarray) -> None:
-    r"""The single-state components ``states`` solved exactly from the bounds
-    downstream, every column at once: ``v(s) = max_c r(c) / (1 - p(c))`` (the min for
-    a minimum) scored by
-    :func:`mitld_lp.solvers.topological.single_scores` as the LP's single states are
-    (``rewards``: the one-step probability of the target per choice and column)."""
-    if states.size == 0:
-        return
-    _, score, groups = single_scores(q, q.order, states, rewards, bounds)
-    bounds[states] = q.sense.reduce(score, groups[:-1])
-
-
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
                  precision: float | None, budget: _Budget, bar: Bar, *,
                  skip: np.ndarray | None, compiled: bool | None) -> None:
@@ -339,9 +326,15 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     loaded at the first of them)."""
     blk = blocks(q)
     sense = q.sense
-    for level in blk.walk(skip=skip):
-        _single_states(q, level.single, rewards, bounds)
-        rest = level.rest
+    singles = SingleLevels(q, blk, skip)
+    done = 0  # the levels whose single states are solved
+    for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
+        singles.solve(done, index + 1, rewards, bounds)
+        done = index + 1
+        rest = blk.states_at(index)
+        rest = rest[blk.size[blk.component[rest]] > 1]
+        if skip is not None:
+            rest = rest[~skip[rest]]
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
@@ -364,6 +357,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         if not _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
                              bar, fast):
             return
+    singles.solve(done, blk.n_levels, rewards, bounds)
 
 
 def interval_iteration(
