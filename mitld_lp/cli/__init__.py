@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable
 from typing import Any, NoReturn
 
+from mitld_lp import startup
 from mitld_lp.cli.arguments import seconds
 from mitld_lp.cli.kernel import (
     BUDGET_STOPS,
@@ -208,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
         with progress.silenced(args.quiet or getattr(args, "json", False)):
             outcome.append(_run(args))
 
+    startup.collect_from_here()  # the collector, off while the command line imported
     worker = threading.Thread(target=work, name=PROG, daemon=True)
     handler = _StageLines()  # this command's lines only, not an abandoned one's
     handler.addFilter(lambda record: record.thread == worker.ident)
