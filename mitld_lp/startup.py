@@ -84,9 +84,14 @@ def command() -> None:
     """The ``mitld-lp`` console script (and ``python -m mitld_lp``): ``run`` is answered
     by :func:`mitld_lp.runtime.main` with NumPy alone, before anything of the command
     line is imported (its verbs' modules load the parser, the solvers' records and
-    SciPy); every other verb, and ``run`` with ``--time-limit`` (whose watcher is the
-    command line's), by :func:`mitld_lp.cli.run`."""
+    SciPy); ``--version`` here too; every other verb, and ``run`` with ``--time-limit``
+    (whose watcher is the command line's), by :func:`mitld_lp.cli.run`."""
     argv = sys.argv[1:]
+    if argv == ["--version"]:  # the answer argparse gives, without the command line
+        from mitld_lp import __version__
+
+        sys.stdout.write(f"mitld-lp {__version__}\n")
+        sys.exit(0)
     if argv[:1] == ["run"] and not any(a.startswith("--ti") for a in argv[1:]):
         from mitld_lp.runtime import main
 

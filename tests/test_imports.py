@@ -186,3 +186,14 @@ def test_the_command_solves_a_grid_model_without_what_it_does_not_need(tmp_path)
     assert exported["code"] == 0 and drn.read_text().startswith("// Exported by mitld_lp")
     assert {"mitld_lp.solvers.export", "mitld_lp.files.drn"} <= set(exported["loaded"])
 
+
+def test_the_version_is_answered_before_the_command_line_is_imported():
+    from mitld_lp import __version__
+
+    answered = _command_modules(["--version"])
+    assert answered["code"] == 0 and answered["out"] == f"mitld-lp {__version__}\n"
+    assert not answered["cli"] and not answered["numpy"]
+    shown = subprocess.run(  # the same line as the command line's own --version
+        [sys.executable, "-c", "from mitld_lp.cli import main\nmain(['--version'])"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    assert shown.stdout == answered["out"]
