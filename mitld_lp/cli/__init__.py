@@ -109,7 +109,11 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{where}{message} (see {self.prog} --help)")
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def _build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; given the words ``argv``, only the verb they name (the
+    first word not an option) gets its arguments: the others' stay unread (their modules
+    unimported), as a parse reads one verb's."""
+    asked = None if argv is None else next((w for w in argv if not w.startswith("-")), None)
     parser = _Parser(
         prog=PROG,
         description="Policy synthesis for MITLD specifications by occupancy-measure LP.",
@@ -118,6 +122,8 @@ def _build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb, help_text, add_args, run in _VERBS:
         p = sub.add_parser(verb, help=help_text, description=help_text)
+        if asked not in (None, verb):
+            continue
         add_args(p)
         p.add_argument("-q", "--quiet", action="store_true",
                        help="no progress lines on stderr, only the answer and errors")
@@ -192,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     (the numerical kernels release the interpreter lock)."""
     global _worker
     try:
-        args = _build_parser().parse_args(argv)
+        args = _build_parser(sys.argv[1:] if argv is None else argv).parse_args(argv)
     except UsageError as err:  # no arguments yet: --json is looked for in the words
         return say_error(_json_asked(sys.argv[1:] if argv is None else argv), "usage_error",
                          str(err))
@@ -255,7 +261,7 @@ def _limited(argv: list[str]) -> argparse.Namespace | None:
     if "--time-limit" not in " ".join(argv) and (argv or [""])[0] not in _MODEL_VERBS:
         return None  # neither the flag nor a model file that could set it
     try:
-        args = _build_parser().parse_args(argv)
+        args = _build_parser(argv).parse_args(argv)
     except (UsageError, SystemExit):
         return None
     if args.verb == "sweep":
