@@ -141,12 +141,16 @@ def test_every_public_name_resolves_to_what_its_module_defines() -> None:
 
 #: What the command line's solve of a grid model never needs: the other LP solvers, SciPy's
 #: factorisations, graphs, optimisers and laws, the compiler, the sweep, plot, Storm and
-#: exact-arithmetic extras, the progress bar, and the PRISM world and the exports' writers.
+#: exact-arithmetic extras, the progress bar, the PRISM world, the exports' writers, the
+#: other verbs' modules, and the laws' fits, bands and SciPy families (the case's laws
+#: are geometric).
 NOT_FOR_A_GRID_SOLVE = (
     "cvxpy", "highspy", "scipy.sparse.linalg", "scipy.linalg", "scipy.sparse.csgraph",
     "scipy.optimize", "scipy.stats", "numba", "pandas", "pyarrow", "matplotlib", "stormpy",
     "dask", "flint", "gymnasium", "tqdm", "asyncio", "mitld_lp.worlds.prism",
-    "mitld_lp.solvers.export", "mitld_lp.files.drn")
+    "mitld_lp.solvers.export", "mitld_lp.files.drn", "mitld_lp.cli.export",
+    "mitld_lp.cli.formulas", "mitld_lp.distributions.fit", "mitld_lp.distributions.band",
+    "mitld_lp.distributions.scipy_laws")
 
 
 def _command_modules(argv: list[str]) -> dict:
