@@ -37,7 +37,8 @@ Written: ``bench_startup.csv``, ``bench_startup.md`` and ``bench_startup_machine
     python experiments/bench_startup.py --out experiments/results
     python experiments/bench_startup.py --compare /tmp/before --out /tmp/startup
 
-``--quick`` runs two rounds into ``experiments/out/quick`` (or ``--out``).
+``--quick`` runs two rounds into ``experiments/out/quick`` (or ``--out``).  Storm's
+answers must lie within 1e-6 (its precision) of our bracket, or the run stops.
 """
 
 from __future__ import annotations
@@ -195,6 +196,11 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     repeats = args.repeats or (2 if args.quick else 15)
     with tempfile.TemporaryDirectory() as tmp:
         measured = measure(Path(tmp), repeats, args.compare)
+    lower, upper = json.loads(measured["ours"]["answer"])
+    for storm in ("storm_prism", "storm_drn"):  # Storm's sound check, precision 1e-6
+        value = float(measured[storm]["answer"])
+        if not lower - 1e-6 <= value <= upper + 1e-6:
+            raise RuntimeError(f"{storm}: {value} outside ours [{lower}, {upper}] +- 1e-6")
     rows = table(measured)
     text = report(rows, args.compare)
     print(text)
