@@ -258,11 +258,16 @@ def test_bench_startup(tmp_path):
     _run("bench_startup", tmp_path, "--repeats", "1")
     rows = {r["command"]: r for r in _csv(tmp_path / "bench_startup.csv")}
     assert set(rows) >= {"ours", "version", "check", "storm_prism", "storm_drn", "python",
-                         "numpy_scipy_sparse", "stormpy_import"}
+                         "numpy_scipy_sparse", "stormpy_import", "ours_corridor",
+                         "storm_corridor"}
     lower, upper = (float(x) for x in rows["ours"]["answer"].strip("[]").split(","))
     assert abs(lower - STORM["bus_grid"]) < 1e-6 and abs(upper - STORM["bus_grid"]) < 1e-6
     for storm in ("storm_prism", "storm_drn"):
         assert abs(float(rows[storm]["answer"]) - STORM["bus_grid"]) < 1e-6
+    # the corridor's Pmax=? [F<=6 "goal"] with the door open: 2816/3125 (README)
+    lower, upper = (float(x) for x in rows["ours_corridor"]["answer"].strip("[]").split(","))
+    assert lower - 1e-9 <= 2816 / 3125 <= upper + 1e-9
+    assert abs(float(rows["storm_corridor"]["answer"]) - 2816 / 3125) < 1e-6
     assert rows["version"]["answer"] == f"mitld-lp {__version__}"
     assert all(float(r["cpu_min"]) > 0 and float(r["over_storm_prism"]) > 0
                for r in rows.values())
