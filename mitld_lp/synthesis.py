@@ -112,9 +112,11 @@ def _with_world_checks(result: Result, game: Any) -> Result:
     PRISM world's choices whose probabilities summed to 1 only within PRISM's tolerance
     were divided by their sums (:class:`mitld_lp.worlds.successors.Normalisation`), so
     the bracket is the normalised world's."""
-    from mitld_lp.worlds.prism import PrismGame
+    import sys
 
-    if not isinstance(game, PrismGame) or game.normalised is None:
+    # a PrismGame's module is loaded once one exists: a grid world does not load it
+    prism = sys.modules.get("mitld_lp.worlds.prism")
+    if prism is None or not isinstance(game, prism.PrismGame) or game.normalised is None:
         return result
     from dataclasses import replace
 

@@ -249,6 +249,31 @@ def test_bench_sweeps(tmp_path):
     assert (tmp_path / "bench_sweeps.md").read_text().startswith("| instance |")
 
 
+def test_bench_startup(tmp_path):
+    """The start-up benchmark: the case's certified bracket and both stormpy scripts'
+    values beside Storm's reference for the case, the trivial command's line, a CPU
+    figure and a ratio for every process."""
+    from mitld_lp import __version__
+
+    _run("bench_startup", tmp_path, "--repeats", "1")
+    rows = {r["command"]: r for r in _csv(tmp_path / "bench_startup.csv")}
+    assert set(rows) >= {"ours", "version", "check", "storm_prism", "storm_drn", "python",
+                         "numpy_scipy_sparse", "stormpy_import", "ours_corridor",
+                         "storm_corridor"}
+    lower, upper = (float(x) for x in rows["ours"]["answer"].strip("[]").split(","))
+    assert abs(lower - STORM["bus_grid"]) < 1e-6 and abs(upper - STORM["bus_grid"]) < 1e-6
+    for storm in ("storm_prism", "storm_drn"):
+        assert abs(float(rows[storm]["answer"]) - STORM["bus_grid"]) < 1e-6
+    # the corridor's Pmax=? [F<=6 "goal"] with the door open: 2816/3125 (README)
+    lower, upper = (float(x) for x in rows["ours_corridor"]["answer"].strip("[]").split(","))
+    assert lower - 1e-9 <= 2816 / 3125 <= upper + 1e-9
+    assert abs(float(rows["storm_corridor"]["answer"]) - 2816 / 3125) < 1e-6
+    assert rows["version"]["answer"] == f"mitld-lp {__version__}"
+    assert all(float(r["cpu_min"]) > 0 and float(r["over_storm_prism"]) > 0
+               for r in rows.values())
+    assert "the case as a process is" in (tmp_path / "bench_startup.md").read_text()
+
+
 def test_bench_controllers(tmp_path):
     """The controllers' benchmark: every start-up probe answers (the two loaders the
     same action), and the tree's controller keeps lower by Storm on its chain."""

@@ -137,3 +137,67 @@ def test_every_public_name_resolves_to_what_its_module_defines() -> None:
             assert getattr(importlib.import_module(where), name) is value, name
     assert {"Result", "Constraint", "parse_constraint", "pareto", "fit_law", "run_sweep",
             "load_sweep", "pose", "solve"} <= set(mitld_lp.__all__)
+
+
+#: What the command line's solve of a grid model never needs: the other LP solvers, SciPy's
+#: factorisations, graphs, optimisers and laws, the compiler, the sweep, plot, Storm and
+#: exact-arithmetic extras, the progress bar, the PRISM world, the exports' writers, the
+#: other verbs' modules, and the laws' fits, bands and SciPy families (the case's laws
+#: are geometric).
+NOT_FOR_A_GRID_SOLVE = (
+    "cvxpy", "highspy", "scipy.sparse.linalg", "scipy.linalg", "scipy.sparse.csgraph",
+    "scipy.optimize", "scipy.stats", "numba", "pandas", "pyarrow", "matplotlib", "stormpy",
+    "dask", "flint", "gymnasium", "tqdm", "asyncio", "mitld_lp.worlds.prism",
+    "mitld_lp.solvers.export", "mitld_lp.files.drn", "mitld_lp.cli.export",
+    "mitld_lp.cli.formulas", "mitld_lp.distributions.fit", "mitld_lp.distributions.band",
+    "mitld_lp.distributions.scipy_laws")
+
+
+def _command_modules(argv: list[str]) -> dict:
+    """Run the console script's ``command`` with ``argv`` in a fresh interpreter started
+    as the command (``sys.argv[0]`` is ``mitld-lp``); its exit code, the modules then
+    loaded among :data:`NOT_FOR_A_GRID_SOLVE`, and the garbage collector's state."""
+    probe = ("import sys, json, gc, io, contextlib\n"
+             f"sys.argv = ['mitld-lp', *{argv!r}]\n"
+             "from mitld_lp.startup import command\n"
+             "out = io.StringIO()\n"
+             "try:\n"
+             "    with contextlib.redirect_stdout(out):\n"
+             "        command()\n"
+             "except SystemExit as stop:\n"
+             "    code = stop.code\n"
+             f"heavy = {NOT_FOR_A_GRID_SOLVE!r}\n"
+             "print(json.dumps(dict(code=code, out=out.getvalue(),\n"
+             "    loaded=sorted(m for m in sys.modules\n"
+             "                  if any(m == h or m.startswith(h + '.') for h in heavy)),\n"
+             "    collector=gc.isenabled(), frozen=gc.get_freeze_count(),\n"
+             "    cli='mitld_lp.cli' in sys.modules, numpy='numpy' in sys.modules)))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120, check=True)
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_the_command_solves_a_grid_model_without_what_it_does_not_need(tmp_path):
+    solved = _command_modules(["solve", "models/bus_grid.toml", "--json", "-q"])
+    assert solved["code"] == 0 and json.loads(solved["out"])["certified"]
+    assert solved["loaded"] == []
+    # the collector, off while the command line imported, is on again for the work,
+    # the imported modules' objects out of its passes
+    assert solved["collector"] and solved["frozen"] > 0
+    # the probe sees a module once a command needs it: the DRN export's writer
+    drn = tmp_path / "case.drn"
+    exported = _command_modules(["export", "models/bus_grid.toml", "--drn", str(drn), "-q"])
+    assert exported["code"] == 0 and drn.read_text().startswith("// Exported by mitld_lp")
+    assert {"mitld_lp.solvers.export", "mitld_lp.files.drn"} <= set(exported["loaded"])
+
+
+def test_the_version_is_answered_before_the_command_line_is_imported():
+    from mitld_lp import __version__
+
+    answered = _command_modules(["--version"])
+    assert answered["code"] == 0 and answered["out"] == f"mitld-lp {__version__}\n"
+    assert not answered["cli"] and not answered["numpy"]
+    shown = subprocess.run(  # the same line as the command line's own --version
+        [sys.executable, "-c", "from mitld_lp.cli import main\nmain(['--version'])"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    assert shown.stdout == answered["out"]

@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable
 from typing import Any, NoReturn
 
+from mitld_lp import startup
 from mitld_lp.cli.arguments import seconds
 from mitld_lp.cli.kernel import (
     BUDGET_STOPS,
@@ -108,7 +109,11 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{where}{message} (see {self.prog} --help)")
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def _build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; given the words ``argv``, only the verb they name (the
+    first word not an option) gets its arguments: the others' stay unread (their modules
+    unimported), as a parse reads one verb's."""
+    asked = None if argv is None else next((w for w in argv if not w.startswith("-")), None)
     parser = _Parser(
         prog=PROG,
         description="Policy synthesis for MITLD specifications by occupancy-measure LP.",
@@ -117,6 +122,8 @@ def _build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb, help_text, add_args, run in _VERBS:
         p = sub.add_parser(verb, help=help_text, description=help_text)
+        if asked not in (None, verb):
+            continue
         add_args(p)
         p.add_argument("-q", "--quiet", action="store_true",
                        help="no progress lines on stderr, only the answer and errors")
@@ -191,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     (the numerical kernels release the interpreter lock)."""
     global _worker
     try:
-        args = _build_parser().parse_args(argv)
+        args = _build_parser(sys.argv[1:] if argv is None else argv).parse_args(argv)
     except UsageError as err:  # no arguments yet: --json is looked for in the words
         return say_error(_json_asked(sys.argv[1:] if argv is None else argv), "usage_error",
                          str(err))
@@ -208,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         with progress.silenced(args.quiet or getattr(args, "json", False)):
             outcome.append(_run(args))
 
+    startup.collect_from_here()  # the collector, off while the command line imported
     worker = threading.Thread(target=work, name=PROG, daemon=True)
     handler = _StageLines()  # this command's lines only, not an abandoned one's
     handler.addFilter(lambda record: record.thread == worker.ident)
@@ -253,7 +261,7 @@ def _limited(argv: list[str]) -> argparse.Namespace | None:
     if "--time-limit" not in " ".join(argv) and (argv or [""])[0] not in _MODEL_VERBS:
         return None  # neither the flag nor a model file that could set it
     try:
-        args = _build_parser().parse_args(argv)
+        args = _build_parser(argv).parse_args(argv)
     except (UsageError, SystemExit):
         return None
     if args.verb == "sweep":

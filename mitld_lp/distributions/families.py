@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from mitld_lp.distributions import scipy_laws
 from mitld_lp.distributions.closed import Finite, Geometric, Uniform
 from mitld_lp.distributions.law import (
     MASS_TOLERANCE,
@@ -187,6 +186,8 @@ def poisson(lam: float) -> FirstOccurrence:
     ``P(K = k) = exp(-lam) lam^(k-1) / (k-1)!``."""
     label = _label("poisson", lam)
     lf = _positive(label, "lam", lam)
+    from mitld_lp.distributions import scipy_laws  # SciPy's laws: imported when used
+
     return scipy_laws.shifted(label, "poisson", scipy_laws.stats().poisson, [lf])
 
 
@@ -195,6 +196,8 @@ def scipy_discrete(name: str, *args: float) -> FirstOccurrence:
     ``K = 1 + X`` if its support starts at 0, ``K = X`` if it starts at 1 or later
     (e.g. ``geom``).  A support reaching below 0 is an error."""
     label = _label("scipy", name, *args)
+    from mitld_lp.distributions import scipy_laws
+
     gen = scipy_laws.generator(label, name)
     if not isinstance(gen, scipy_laws.stats().rv_discrete):
         raise DistributionError(label, f"scipy.stats.{name} is continuous, not discrete")
@@ -206,6 +209,8 @@ def discretised(name: str, *args: float) -> FirstOccurrence:
     arguments, then ``loc``, ``scale``) read at whole steps: ``K = ceil(X)``,
     ``P(K = k) = F(k) - F(k-1)``."""
     label = _label("scipy", name, *args)
+    from mitld_lp.distributions import scipy_laws
+
     gen = scipy_laws.generator(label, name)
     if not isinstance(gen, scipy_laws.stats().rv_continuous):
         raise DistributionError(label, f"scipy.stats.{name} is discrete, not continuous")
@@ -217,6 +222,8 @@ def exponential(rate: float) -> FirstOccurrence:
     ``geometric(1 - exp(-rate))``."""
     label = _label("exponential", rate)
     r = _positive(label, "rate", rate)
+    from mitld_lp.distributions import scipy_laws
+
     return scipy_laws.discretised(label, "expon", scipy_laws.stats().expon, [], {"scale": 1.0 / r})
 
 
@@ -225,6 +232,8 @@ def weibull(shape: float, scale: float) -> FirstOccurrence:
     label = _label("weibull", shape, scale)
     c = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
+    from mitld_lp.distributions import scipy_laws
+
     return scipy_laws.discretised(
         label, "weibull_min", scipy_laws.stats().weibull_min, [c], {"scale": s}
     )
@@ -236,6 +245,8 @@ def gamma(shape: float, scale: float) -> FirstOccurrence:
     label = _label("gamma", shape, scale)
     a = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
+    from mitld_lp.distributions import scipy_laws
+
     return scipy_laws.discretised(label, "gamma", scipy_laws.stats().gamma, [a], {"scale": s})
 
 
@@ -305,6 +316,8 @@ class Family:
 
 
 def _build_scipy(name: object, *args: Any) -> FirstOccurrence:
+    from mitld_lp.distributions import scipy_laws
+
     gen = scipy_laws.generator(_label("scipy", name, *args), name)
     assert isinstance(name, str)  # generator() checked it
     if isinstance(gen, scipy_laws.stats().rv_discrete):

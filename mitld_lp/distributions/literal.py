@@ -15,9 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mitld_lp.distributions.band import interval
 from mitld_lp.distributions.families import FAMILIES, build
-from mitld_lp.distributions.fit import fit_table
 from mitld_lp.distributions.law import DistributionError, FirstOccurrence
 from mitld_lp.distributions.printing import DistArg, literal_text
 
@@ -86,7 +84,9 @@ def from_table(value: object, path: str, base: Path | None = None) -> FirstOccur
             path,
             f"must be an inline table with one distribution key such as {example}, got {value!r}",
         )
-    if "fit" in value:
+    if "fit" in value:  # the fit's module (and SciPy's) only for a fitted law
+        from mitld_lp.distributions.fit import fit_table
+
         return fit_table(value, path, base)
     if len(value) != 1:
         keys = ", ".join(str(k) for k in value) or "none"
@@ -105,6 +105,8 @@ def from_table(value: object, path: str, base: Path | None = None) -> FirstOccur
         args = list(arg)
     else:
         if isinstance(arg, list | tuple) and len(arg) == 2:
+            from mitld_lp.distributions.band import interval  # a band: its module then
+
             return interval(str(family), arg[0], arg[1], where)
         if isinstance(arg, list | tuple | Mapping | str):
             raise DistributionError(where, f"must be a number, got {arg!r} (an interval "
