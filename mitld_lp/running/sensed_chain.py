@@ -156,6 +156,11 @@ class _TaskEnds:
         ``q``: its verdicts, the undecided counting as not satisfied."""
         return "accept" if q == self.dta.accepting else "reject"
 
+    def stayed(self, q: int, memory: Any) -> str:
+        """The absorbing state of a run whose controller draws *stay* (only the
+        randomised controller of :mod:`mitld_lp.running.sensed_joint` does)."""
+        return self.stopped(q)
+
     def labels(self, q: int) -> frozenset[str]:
         return frozenset()
 
@@ -236,7 +241,7 @@ class _Unfolding:
             branches = [(d.actions[0] if d.actions else plan.fallback(g), 1.0)]
         else:  # randomised: stay for ever (an end by the true run's verdicts), or an action
             if d.stay > 0.0:
-                row[self.number(self.ends.stopped(q))] = d.stay
+                row[self.number(self.ends.stayed(q, memory))] = d.stay
             w = np.asarray(d.weights, dtype=float)
             branches = [(a, (1.0 - d.stay) * float(x)) for a, x in
                         zip(d.actions, w / w.sum(), strict=True) if x > 0.0]

@@ -8,7 +8,12 @@ is labelled.
   its verdicts (``verdict(accepted,rejected)``); so does a run whose controller stops or
   draws *stay* (keeps to an end component of its information states for ever), with the
   true run's verdicts there, an undecided component counting as not satisfied -- the
-  synthesis's accounting of a stay (:mod:`mitld_lp.routes.sensed_constrained`).
+  synthesis's accounting of a stay (:mod:`mitld_lp.routes.sensed_constrained`).  For a
+  task with a safety part a stay in an information state whose every hypothesis is
+  persistent (its task accepted or its automaton state safe) is a *keep*: the
+  controller plays the end component of such states for ever, which keeps the true
+  run's task whichever hypothesis is true; the task accepted, the constraints as they
+  are.
 * Labels: ``accept`` where the task has accepted, ``c<i>`` where the formula of the
   ``i``-th constraint (``P(...)``, counted from 1 in the problem's order) has accepted,
   ``done`` on the absorbing states.  ``truncated`` (an event later than its truncation
@@ -31,10 +36,10 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.automata.dta import DTA
-from mitld_lp.automata.joint import ACCEPTED, UNDECIDED, Joint
+from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint
 from mitld_lp.sensing.belief import MAX_PRUNE_ATOMS
 
-__all__ = ["JointEnds", "joint_ends"]
+__all__ = ["JointEnds", "joint_ends", "held"]
 
 
 class JointEnds:
@@ -43,8 +48,10 @@ class JointEnds:
     the labels a truncated run carries."""
 
     def __init__(self, joint: Joint, names: Sequence[str], against: frozenset[str],
-                 events: frozenset[str], costs: Mapping[str, float]) -> None:
+                 events: frozenset[str], costs: Mapping[str, float],
+                 belief: Any = None) -> None:
         self.joint, self.names, self.events = joint, tuple(names), events
+        self.belief = belief
         self.costs = costs
         self._live: dict[tuple[int, frozenset[str]], bool] = {}
         self._ends: dict[str, frozenset[str]] = {
@@ -65,7 +72,23 @@ class JointEnds:
         return None if UNDECIDED in v else self._named(v)
 
     def stopped(self, q: int) -> str:
-        return self._named(tuple(v if v != UNDECIDED else 0 for v in self.joint.verdicts[q]))
+        return self._named(tuple(v if v != UNDECIDED else REJECTED
+                                 for v in self.joint.verdicts[q]))
+
+    def stayed(self, q: int, memory: Any) -> str:
+        """The end of a run whose controller draws *stay* in information state
+        ``memory``: a *keep* (the task accepted) where every hypothesis of ``memory`` is
+        persistent (module docs) and so is the true run (it is not when its hypothesis
+        was lost to the synthesis: it can reach no persistent state), else
+        :meth:`stopped`."""
+        states = self.belief.mdp.states if self.belief is not None else ()
+        j = self.joint
+        true_held = j.verdicts[q][0] == ACCEPTED or j.parts[0].is_safe(j.components[q][0])
+        if (true_held and isinstance(memory, (int, np.integer)) and 0 <= memory < len(states)
+                and all(held(j, states[memory]))):
+            return self._named((ACCEPTED, *(v if v != UNDECIDED else REJECTED
+                                            for v in self.joint.verdicts[q][1:])))
+        return self.stopped(q)
 
     def labels(self, q: int) -> frozenset[str]:
         return frozenset(n for n, v in zip(self.names, self.joint.verdicts[q], strict=True)
@@ -140,4 +163,13 @@ def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any,
         raise ValueError(f"the joint automaton has {len(joint.parts)} components, the task "
                          f"and {len(names) - 1} constraint formulas were given")
     return JointEnds(joint, names, frozenset(against), frozenset(belief.sta.events),
-                     costs)
+                     costs, belief)
+
+
+def held(joint: Joint, state: Any) -> list[bool]:
+    """Per hypothesis ``(times, q)`` of the information state ``state`` of a product on
+    ``joint``: whether it is *persistent* -- its task accepted, or its task automaton's
+    state safe (staying there for ever keeps a task's safety part)."""
+    task, comps = joint.parts[0], joint.components
+    return [joint.verdicts[q][0] == ACCEPTED or task.is_safe(comps[q][0])
+            for _, q in state.hypotheses]
