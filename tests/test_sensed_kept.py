@@ -207,3 +207,24 @@ def test_mixed_end_components_are_bracketed_soundly(tmp_path: Path) -> None:
     assert r.lower <= r.upper and r.width["observation"] >= 0
     assert all(c.holds for c in r.constraints)
     _checked_by_storm(r, tmp_path)
+
+
+def test_the_keeping_controller_runs_and_reloads(tmp_path: Path) -> None:
+    """The obligation's controller, simulated on the true events (a run kept for ever
+    counts as won, as the simulator counts a safe state at its last step): its success
+    rate is the policy's exact value; saved and loaded, its chain is the live one's."""
+    from mitld_lp import load_controller
+    from mitld_lp.sensing.observe import simulate_sensed
+
+    model = Model.from_game(STATION, LAW + "F(b & F[0,2] A) & G !h",
+                            sensors={"b": {"detect": 0.5}})
+    r = synthesize(model, constraints=["P(F[0,1] A) >= 0.5"])
+    assert r.certified and any(d is not None and d.stay > 0
+                               for d in r.controller.plan.decisions)  # it keeps
+    sim = simulate_sensed(model, r.controller, runs=2000, seed=3, max_steps=30)
+    sigma = (r.lower * (1 - r.lower) / sim.runs) ** 0.5
+    assert abs(sim.estimate - r.lower) <= 4.5 * sigma and sim.beyond_model == 0
+    loaded = load_controller(r.controller.save(tmp_path / "kept.npz"))
+    live = storm(write_chain(r, tmp_path / "live.drn"), 'P=? [F "accept"]')
+    assert storm(write_chain(r, tmp_path / "file.drn", controller=loaded),
+                 'P=? [F "accept"]') == live
