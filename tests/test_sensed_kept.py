@@ -27,10 +27,10 @@ from test_sensed_constrained import (  # the bus at step 1, 2, 3 or 4; the horiz
     flow_equations,
     scenarios,
 )
-from test_sensing_tasks import PUSHED, STATION
+from test_sensing_tasks import MIXED, PUSHED, STATION
 
 from mitld_lp import Model, synthesize
-from mitld_lp.distributions import geometric, pmf
+from mitld_lp.distributions import pmf
 from mitld_lp.running.chain import chain_of, write_chain
 
 LAW = f"D[pmf({', '.join(map(str, PMF))})] b & "
@@ -185,26 +185,75 @@ def test_minimum_with_a_constraint_equals_the_knowledge_lp(detect: float, bound:
     _checked_by_storm(r, tmp_path, complement=True)
 
 
-def test_mixed_end_components_are_bracketed_soundly(tmp_path: Path) -> None:
-    """``G(b -> F[0,2] A)`` with a geometric bus the camera may miss: waiting for ever
-    at mid keeps some hypotheses (no bus yet) and not others (a bus missed), so the
-    bracket is the policy's value (keeping only where every hypothesis is safe) and the
-    relaxed bound; both within the blind and the seeing robot's answers, the chain of
-    the policy gives ``lower``, the constraint holds."""
-    def model(detect: float | None) -> Model:
-        sensors = None if detect is None else {"b": {"detect": detect}}
-        return Model.from_game(STATION, "G (b -> F[0,2] A)",
-                               events={"b": geometric(0.3)}, sensors=sensors,
-                               epsilon=0.01)
-    cons = ["P(F h) <= 0.3"]
-    r = synthesize(model(0.6), constraints=cons)
+def mixed_lp(detect: float) -> dict:
+    """The occupancy LP over what the robot knows in MIXED (``(F(b & A) & G !h) | F c``,
+    the bus at step 1 or 2): the world trace and the report step to step 2, then one of
+    two ways to go on for ever: wait (won where the robot stood at ``A`` the step the
+    bus came) or try for ``c`` (0.4; else the ditch), or nothing left to choose in
+    ``cz`` (won) or the ditch (lost).  Per variable: the task's and the ditch's
+    probability."""
+    scen = [(k, r, 0.5 * detect * (1 - detect) ** (r - k)) for k in (1, 2)
+            for r in range(k, 3)] + [(k, None, 0.5 * (1 - detect) ** (3 - k)) for k in (1, 2)]
+    scen = [x for x in scen if x[2] > 0]
+    intern = Knowledge((0, ("mid",), None))
+    owners, win, fell, flows = [], [], [], []
+    head = 0
+    while head < len(intern.order):
+        here = intern.order[head]
+        t, trace, r = here
+        head += 1
+        post = consistent(scen, t, r)
+        norm = sum(p for _, p in post)
+        w = trace[-1]
+        if t == 2:  # the ways to go on for ever
+            lost = "ditch" in trace
+            caught = sum(p for k, p in post if trace[k] == "st") / norm
+            ends = ([(0.0, 1.0)] if lost else [(1.0, 0.0)] if w == "cz" else
+                    [(caught, 0.0), (0.4, 0.6)])
+            for v_task, v_fell in ends:
+                owners.append(intern(here))
+                win.append(v_task)
+                fell.append(v_fell)
+                flows.append([])
+            continue
+        for a in MIXED.actions(w):
+            owners.append(intern(here))
+            flow = []
+            for w2, pw in MIXED.successors(w, a, frozenset()):
+                for r2 in ([r] if r is not None else [t + 1, None]):
+                    pr = pw * sum(p for _, p in consistent(scen, t + 1, r2)) / norm
+                    if pr > 0:
+                        flow.append((intern((t + 1, (*trace, w2), r2)), pr))
+            win.append(0.0)
+            fell.append(0.0)
+            flows.append(flow)
+    n, m = len(intern.order), len(owners)
+    a_eq = np.zeros((n, m))
+    for j, (s, flow) in enumerate(zip(owners, flows, strict=True)):
+        a_eq[s, j] += 1.0
+        for s2, p in flow:
+            a_eq[s2, j] -= p
+    b_eq = np.zeros(n)
+    b_eq[0] = 1.0
+    return {"a_eq": a_eq, "b_eq": b_eq, "task": np.array(win), "con": np.array(fell)}
+
+
+@pytest.mark.parametrize("detect", [0.5, 0.0])
+def test_mixed_end_components_are_bracketed_soundly(detect: float, tmp_path: Path) -> None:
+    """MIXED with at most 0.3 of falling into the ditch: a robot unsure whether it
+    caught the bus waits for ever with one hypothesis kept safe and one waiting for
+    ``c``.  The policy keeps only where every open hypothesis is safe, so the answer is
+    a bracket: the policy's value (Storm's on its chain) and the bound crediting the
+    persistent hypotheses, holding the knowledge LP's optimum."""
+    model = Model.from_game(MIXED, "(F(b & A) & G !h) | F c", events={"b": pmf([0.5, 0.5])},
+                            sensors={"b": {"detect": detect}})
+    r = synthesize(model, constraints=["P(F h) <= 0.3"])
     assert r.route == "sensed-constrained" and r.certified, r.summary()["failed_checks"]
     said = next(c.detail for c in r.checks if c.name == "observation-based acceptance")
     assert said.startswith("bracketed")
-    seen, blind = synthesize(model(None), constraints=cons), synthesize(model(0.0),
-                                                                        constraints=cons)
-    assert blind.lower - 1e-7 <= r.upper and r.lower <= seen.upper + 1e-7
-    assert r.lower <= r.upper and r.width["observation"] >= 0
+    exact = optimum(mixed_lp(detect), True, "<=", 0.3)
+    assert r.lower - 1e-7 <= exact <= r.upper + 1e-7
+    assert r.upper - r.lower > 1e-3  # a real gap: the lower end does not wait mixed
     assert all(c.holds for c in r.constraints)
     _checked_by_storm(r, tmp_path)
 

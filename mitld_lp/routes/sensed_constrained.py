@@ -21,11 +21,13 @@ it once every quantity is a linear function of its occupancy:
   values.  The controller that takes it plays the end component's choices for ever.
 * **Keeping a safety part.**  For a task with a safety part (safety, obligation; a
   minimum's complement) a hypothesis is *persistent* when its task accepted or its task
-  automaton's state is safe.  Each information state of an end component of states
-  whose every hypothesis is persistent gets a *keep* choice instead: the task accepted
-  for every hypothesis, the constraints as they are (playing that end component for
-  ever keeps the true run's task, whichever hypothesis is true; the steps stop
-  counting); a stay is offered only where not every hypothesis is persistent
+  automaton's state is safe, *lost* when its task rejected or can no longer be won with
+  the events left, else *open* (:func:`mitld_lp.running.sensed_joint.held`).  Each
+  information state of an end component of states with no open hypothesis gets a
+  *keep* choice instead: the task accepted for the persistent hypotheses, the
+  constraints as they are (playing that end component for ever keeps the true run's
+  task whenever its hypothesis is persistent; the steps stop counting); a stay is
+  offered only where some hypothesis is open
   (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells the two apart on the
   chain).  Where end components mix persistent hypotheses with others
   (:func:`mixed_states`), the answer is a bracket (:mod:`mitld_lp.routes.sensed_kept`).
@@ -67,7 +69,7 @@ from mitld_lp.product import Absorbing
 from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merged
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import sensed_refusals
-from mitld_lp.running.sensed_joint import held
+from mitld_lp.running.sensed_joint import TaskLive, held
 from mitld_lp.sensing.belief import NOT_YET, Belief, InfoState, Reaches
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.solvers.constrained_model import Merged
@@ -145,8 +147,9 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
     model (module docs): its verdict states, a stay choice (action ``ABSORB``, marked
     ``keep``) at each information state of an end component (where no hypothesis's
     task is undecided when ``timed``), and the steps' shares.  For a task with a safety
-    part: a *keep* choice (the task accepted) at each state of an end component of
-    states whose every hypothesis is persistent, a stay only where not every one is
+    part: a *keep* choice (the task accepted for the persistent hypotheses) at each
+    state of an end component of states with no open hypothesis, a stay only where
+    some is open
     (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells them apart), and with
     ``relaxed`` (the upper end) a credited keep at every other state of an end
     component with some persistent hypothesis (:func:`mixed_states`)."""
@@ -175,10 +178,10 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
         for i in np.flatnonzero(in_mec & ~kinds.every & ~(timed & (share > 0))).tolist():
             extra[i] = plain[i]
         for i in np.flatnonzero(keepable).tolist():
-            extra[i] = kinds.credited(records[i], everyone=True)
+            extra[i] = kinds.credited(records[i])
         if relaxed:
             for i in np.flatnonzero(mixed_states(belief, ends, info)).tolist():
-                extra[i] = kinds.credited(records[i], everyone=False)
+                extra[i] = kinds.credited(records[i])
     else:
         for i in np.flatnonzero(in_mec & ~(timed & (share > 0))).tolist():
             extra[i] = plain[i]
@@ -253,50 +256,55 @@ def _add(targets: dict[Verdict, float], v: tuple[int, ...], task: int | None,
 
 
 class _StateKinds:
-    """Per information state, whether every (``every``) or some (``some``) hypothesis
-    is *persistent*: its task accepted, or its task automaton's state safe (a task with
-    a safety part, ``safety``)."""
+    """For a task with a safety part (``safety``), per information state: whether every
+    hypothesis is persistent or lost (``every``: none is open) and whether some is
+    persistent (``some``) (:func:`mitld_lp.running.sensed_joint.held`)."""
 
     def __init__(self, belief: Belief, ends: JointEnds, info: np.ndarray) -> None:
         self.belief, self.ends = belief, ends
         task = ends.joint.parts[0]
         self.safety = SAFE in task.kinds
+        self.live = TaskLive(task, frozenset(belief.sta.events))
         self.every = np.zeros(info.size, dtype=bool)
         self.some = np.zeros(info.size, dtype=bool)
         if not self.safety:
             return
         for i in np.flatnonzero(info).tolist():
-            held = self.held(belief.mdp.states[i])
-            self.every[i], self.some[i] = all(held), any(held)
+            kinds = self.held(belief.mdp.states[i])
+            self.every[i], self.some[i] = None not in kinds, True in kinds
 
-    def held(self, s: InfoState) -> list[bool]:
-        return held(self.ends.joint, s)
+    def held(self, s: InfoState) -> list[bool | None]:
+        """Per hypothesis: persistent (True), lost (False) or open (None)
+        (:func:`mitld_lp.running.sensed_joint.held`)."""
+        return held(self.ends.joint, s, self.belief.sensed, self.live)
 
-    def credited(self, s: InfoState, *, everyone: bool) -> dict[Verdict, float]:
-        """A keep's ends at ``s``: the task accepted for every hypothesis (``everyone``)
-        or for the persistent ones, the constraints as they are."""
+    def credited(self, s: InfoState) -> dict[Verdict, float]:
+        """A keep's ends at ``s``: the task accepted for the persistent hypotheses,
+        the constraints as they are."""
         out: dict[Verdict, float] = {}
         for w, v, kept in zip(s.weights, _verdicts_of(self.belief, self.ends, s),
                               self.held(s), strict=True):
-            _add(out, v, ACCEPTED if everyone or kept else REJECTED, w)
+            _add(out, v, ACCEPTED if kept else REJECTED, w)
         return out
 
 
 def mixed_states(belief: Belief, ends: JointEnds, info: np.ndarray | None = None
                  ) -> np.ndarray:
     """The information states of a task with a safety part that lie in an end
-    component and hold some persistent hypothesis but are not in an end component of
-    states whose every hypothesis is (module docs): where the lower end keeps nothing
-    and the upper end credits the persistent hypotheses."""
+    component of states with some persistent hypothesis but not in one of states with
+    no open hypothesis (module docs): where the lower end keeps nothing and the upper
+    end credits the persistent hypotheses."""
     mdp = belief.mdp
     if info is None:
         info = np.array([isinstance(r, InfoState) for r in mdp.states], dtype=bool)
     kinds = _StateKinds(belief, ends, info)
     if not kinds.safety:
         return np.zeros(mdp.n_states, dtype=bool)
-    in_mec = (np.asarray(maximal_end_components(mdp, info).mec_of) >= 0) & info
+    # a run that stays in an end component through a state with no persistent
+    # hypothesis loses the task: only end components of such states can be credited
+    some = np.asarray(maximal_end_components(mdp, info & kinds.some).mec_of) >= 0
     keepable = np.asarray(maximal_end_components(mdp, info & kinds.every).mec_of) >= 0
-    return in_mec & kinds.some & ~keepable
+    return some & ~keepable
 
 
 @dataclass(frozen=True, slots=True, eq=False)

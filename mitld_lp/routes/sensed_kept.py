@@ -3,9 +3,10 @@
 others (:mod:`mitld_lp.routes.sensed_constrained`).
 
 Two constrained LPs are solved on the information-state product.  The *exact end*
-keeps the task only in end components of states whose every hypothesis is persistent
-(sound: playing such a component for ever keeps the true run's task, whichever
-hypothesis is true) and offers no stay at a state with some persistent hypothesis: its
+keeps the task only in end components of states with no open hypothesis, every one
+persistent or lost (sound: playing such a component for ever keeps the true run's task
+whenever its hypothesis is persistent), and a stay, which wins no open hypothesis, only
+where some is open: its
 policy is the answer's, its certified value ``lower`` (for a minimum, ``upper`` read
 back), each constraint met by it in exact arithmetic.  The *relaxed end* also credits
 every other state of an end component with some persistent hypothesis with a keep
@@ -36,12 +37,12 @@ def bracketed(exact: Result, relaxed: Result, mixed: int, minimise: bool,
     (module docs); ``mixed``: the number of states the relaxed end credits."""
     said = (f"bracketed: {mixed} information states in end components that keep some "
             "hypotheses persistent and not others; the policy keeps the task only where "
-            "every hypothesis is persistent, the other bound credits each such state with "
+            "no hypothesis is open, the other bound credits each such state with "
             "its persistent hypotheses")
     if not exact.status.has_solution:
         if relaxed.status == Status.INFEASIBLE or exact.status != Status.INFEASIBLE:
             return exact
-        message = ("no policy keeping the task only where every hypothesis is persistent "
+        message = ("no policy keeping the task only where no hypothesis is open "
                    "meets the constraints; infeasibility is not proved (the model crediting "
                    f"the other persistent hypotheses is feasible): {said}")
         return replace(exact, status=Status.FAILED,

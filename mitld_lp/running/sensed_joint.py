@@ -10,10 +10,10 @@ is labelled.
   true run's verdicts there, an undecided component counting as not satisfied -- the
   synthesis's accounting of a stay (:mod:`mitld_lp.routes.sensed_constrained`).  For a
   task with a safety part a stay in an information state whose every hypothesis is
-  persistent (its task accepted or its automaton state safe) is a *keep*: the
-  controller plays the end component of such states for ever, which keeps the true
-  run's task whichever hypothesis is true; the task accepted, the constraints as they
-  are.
+  persistent (its task accepted or its automaton state safe) or lost (:func:`held`) is
+  a *keep*: the controller plays the end component of such states for ever, which
+  keeps the true run's task whichever persistent hypothesis is true; the task accepted
+  when the true run is persistent, the constraints as they are.
 * Labels: ``accept`` where the task has accepted, ``c<i>`` where the formula of the
   ``i``-th constraint (``P(...)``, counted from 1 in the problem's order) has accepted,
   ``done`` on the absorbing states.  ``truncated`` (an event later than its truncation
@@ -37,9 +37,9 @@ import numpy as np
 
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint
-from mitld_lp.sensing.belief import MAX_PRUNE_ATOMS
+from mitld_lp.sensing.belief import MAX_PRUNE_ATOMS, NOT_YET
 
-__all__ = ["JointEnds", "joint_ends", "held"]
+__all__ = ["JointEnds", "joint_ends", "held", "TaskLive"]
 
 
 class JointEnds:
@@ -53,7 +53,7 @@ class JointEnds:
         self.joint, self.names, self.events = joint, tuple(names), events
         self.belief = belief
         self.costs = costs
-        self._live: dict[tuple[int, frozenset[str]], bool] = {}
+        self._task_live = TaskLive(joint.parts[0], events)
         self._ends: dict[str, frozenset[str]] = {
             "truncated": frozenset({"truncated", "done"}) | against}
 
@@ -77,15 +77,15 @@ class JointEnds:
 
     def stayed(self, q: int, memory: Any) -> str:
         """The end of a run whose controller draws *stay* in information state
-        ``memory``: a *keep* (the task accepted) where every hypothesis of ``memory`` is
-        persistent (module docs) and so is the true run (it is not when its hypothesis
-        was lost to the synthesis: it can reach no persistent state), else
-        :meth:`stopped`."""
+        ``memory``: a *keep* where no hypothesis of ``memory`` is open (module docs): the
+        task accepted if the true run is persistent (it is not when its hypothesis is
+        lost), else :meth:`stopped`."""
         states = self.belief.mdp.states if self.belief is not None else ()
         j = self.joint
         true_held = j.verdicts[q][0] == ACCEPTED or j.parts[0].is_safe(j.components[q][0])
         if (true_held and isinstance(memory, (int, np.integer)) and 0 <= memory < len(states)
-                and all(held(j, states[memory]))):
+                and None not in held(j, states[memory], self.belief.sensed,
+                                     self._task_live)):
             return self._named((ACCEPTED, *(v if v != UNDECIDED else REJECTED
                                             for v in self.joint.verdicts[q][1:])))
         return self.stopped(q)
@@ -113,14 +113,26 @@ class JointEnds:
         return (("steps", steps), ("cost", cost))
 
     def live(self, q: int, pending: frozenset[str]) -> bool:
-        """Whether the task's automaton reaches acceptance from ``q`` on some word of
-        the world's propositions and the ``pending`` events (each event may still come);
-        beyond :data:`~mitld_lp.sensing.belief.MAX_PRUNE_ATOMS` atoms, True (as the
-        synthesis counts it)."""
+        """Whether the task's automaton reaches acceptance from ``q`` (:class:`TaskLive`)."""
+        return self._task_live(q, pending)
+
+
+class TaskLive:
+    """Whether ``task``'s automaton reaches acceptance (a persistent or the accepting
+    state) from a state on some word of the world's propositions and the events still
+    ``pending`` (each may still come; ``events``: every event); beyond
+    :data:`~mitld_lp.sensing.belief.MAX_PRUNE_ATOMS` atoms, True (as the synthesis
+    counts it)."""
+
+    def __init__(self, task: DTA, events: frozenset[str]) -> None:
+        self.task, self.events = task, events
+        self._live: dict[tuple[int, frozenset[str]], bool] = {}
+
+    def __call__(self, q: int, pending: frozenset[str]) -> bool:
         key = (q, pending)
         hit = self._live.get(key)
         if hit is None:
-            task = self.joint.parts[0]
+            task = self.task
             atoms = sorted(a for a in task.atoms if a not in self.events or a in pending)
             hit = len(atoms) > MAX_PRUNE_ATOMS or _reaches(task, q, atoms)
             self._live[key] = hit
@@ -166,10 +178,24 @@ def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any,
                      costs, belief)
 
 
-def held(joint: Joint, state: Any) -> list[bool]:
+def held(joint: Joint, state: Any, sensed: Sequence[str], live: TaskLive
+         ) -> list[bool | None]:
     """Per hypothesis ``(times, q)`` of the information state ``state`` of a product on
-    ``joint``: whether it is *persistent* -- its task accepted, or its task automaton's
-    state safe (staying there for ever keeps a task's safety part)."""
+    ``joint`` (``sensed``: its sensed events, in its hypotheses' order): True where it is
+    *persistent* -- its task accepted, or its task automaton's state safe (staying there
+    for ever keeps a task's safety part) --, False where its task is lost (rejected, or
+    no longer reaching acceptance with the events left, ``live``), None where it is
+    open."""
     task, comps = joint.parts[0], joint.components
-    return [joint.verdicts[q][0] == ACCEPTED or task.is_safe(comps[q][0])
-            for _, q in state.hypotheses]
+    out: list[bool | None] = []
+    for times, q in state.hypotheses:
+        v, c = joint.verdicts[q][0], comps[q][0]
+        if v == ACCEPTED or task.is_safe(c):
+            out.append(True)
+        elif v == REJECTED:
+            out.append(False)
+        else:
+            left = state.pending | frozenset(
+                a for a, k in zip(sensed, times, strict=True) if k == NOT_YET)
+            out.append(None if live(c, left) else False)
+    return out
