@@ -82,7 +82,7 @@ def knowledge_lp(detect: float) -> dict:
     the stop)``: variables per (knowledge, action) for ``t < HORIZON``; per variable the
     probability of the task, of getting wet (entering the ditch, or later from the
     world state at the horizon at the least) and the probability that the task is
-    undecided (the step counts)."""
+    undecided and can still be won (the step counts)."""
     scen = scenarios(detect)
 
     def caught(k: int, at_stop: frozenset[int], t: int) -> bool:
@@ -100,7 +100,9 @@ def knowledge_lp(detect: float) -> dict:
             continue
         mass = consistent(scen, t, r)
         total = sum(p for _, p in mass)
-        share = sum(p for k, p in mass if not caught(k, stop, t) and t < k + WINDOW) / total
+        # the ditch never reaches the stop: there the task can no longer be won
+        share = 0.0 if w == "ditch" else sum(
+            p for k, p in mass if not caught(k, stop, t) and t < k + WINDOW) / total
         for a in STATION.actions(w):
             cols.append((index[(t, w, r, stop)], a))
             flow, win, wetness = [], 0.0, 0.0

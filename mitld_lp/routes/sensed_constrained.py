@@ -22,20 +22,27 @@ it once every quantity is a linear function of its occupancy:
 * **Keeping a safety part.**  For a task with a safety part (safety, obligation; a
   minimum's complement) a hypothesis is *persistent* when its task accepted or its task
   automaton's state is safe, *lost* when its task rejected or can no longer be won with
-  the events left, else *open* (:func:`mitld_lp.running.sensed_joint.held`).  Each
-  information state of an end component of states with no open hypothesis gets a
-  *keep* choice instead: the task accepted for the persistent hypotheses, the
-  constraints as they are (playing that end component for ever keeps the true run's
-  task whenever its hypothesis is persistent; the steps stop counting); a stay is
-  offered only where some hypothesis is open
+  the events left, else *open* (:func:`mitld_lp.running.sensed_joint.held`).  A *keep
+  state* lies in an end component of states with no open hypothesis, or in one of
+  states with some persistent hypothesis where each hypothesis is persistent in every
+  state that holds it or in none (:class:`~mitld_lp.running.sensed_joint.Keeps`):
+  playing that end component for ever keeps the true run's task exactly when its
+  hypothesis is persistent there.  A keep state gets a *keep* choice instead of a
+  stay: the task accepted for the persistent hypotheses, the constraints as they are,
+  no step counted after it (with ``then`` or a bound on steps or costs only where no
+  hypothesis is open: an open one would take steps for ever); a stay is offered only
+  at other states with an open hypothesis
   (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells the two apart on the
-  chain).  Where end components mix persistent hypotheses with others
+  chain).  Where an end component holds persistent hypotheses but no keep state
   (:func:`mixed_states`), the answer is a bracket (:mod:`mitld_lp.routes.sensed_kept`).
-* **Steps and costs** count, at an information state, the posterior weight of its
+* **Steps and costs** count, at an information state from which the task can still be
+  won (:func:`~mitld_lp.running.sensed_joint.winnable`), the posterior weight of its
   hypotheses whose task is still undecided (:attr:`Merged.share`): the expected number
-  of steps taken while the true run's task is undecided, as on the fully observed
-  product.  A stay where that weight is positive would take infinitely many steps: it
-  is not offered when steps or costs are bounded or minimised.  A run the chosen
+  of steps taken while the true run's task is undecided and can be won, as on the
+  fully observed product (a trap that keeps the task's automaton open for ever, a
+  ditch that never reaches ``c`` of ``F c``, takes no steps and may be stayed in).
+  A stay where that weight is positive would take infinitely many steps: it is not
+  offered when steps or costs are bounded or minimised.  A run the chosen
   policy traps in information states (an interior-point solution's negligible flow on a
   loop) is worth what staying there is worth (:attr:`Merged.stay_values`), so the
   policy's certified values are its own.
@@ -61,7 +68,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.automata.dta import DTA, SAFE
+from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint
 from mitld_lp.logic.fragment import CO_SAFE
 from mitld_lp.mdp import ABSORB, MDP
@@ -69,7 +76,7 @@ from mitld_lp.product import Absorbing
 from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merged
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import sensed_refusals
-from mitld_lp.running.sensed_joint import TaskLive, held
+from mitld_lp.running.sensed_joint import Keeps, keeps_for, winnable
 from mitld_lp.sensing.belief import NOT_YET, Belief, InfoState, Reaches
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.solvers.constrained_model import Merged
@@ -142,14 +149,15 @@ def _verdicts_of(belief: Belief, ends: JointEnds, s: InfoState) -> list[tuple[in
 
 
 def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
-                relaxed: bool = False) -> Merged:
+                keeps: Keeps | None = None, relaxed: bool = False) -> Merged:
     """The information-state product on a joint automaton as the constrained LP's
     model (module docs): its verdict states, a stay choice (action ``ABSORB``, marked
     ``keep``) at each information state of an end component (where no hypothesis's
     task is undecided when ``timed``), and the steps' shares.  For a task with a safety
-    part: a *keep* choice (the task accepted for the persistent hypotheses) at each
-    state of an end component of states with no open hypothesis, a stay only where
-    some is open
+    part (``keeps``, :func:`~mitld_lp.running.sensed_joint.keeps_for`): a *keep*
+    choice (the task accepted for the persistent hypotheses) at each keep state (where
+    ``timed``, only those with no open hypothesis), a stay only at the other states
+    with an open hypothesis
     (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells them apart), and with
     ``relaxed`` (the upper end) a credited keep at every other state of an end
     component with some persistent hypothesis (:func:`mixed_states`)."""
@@ -159,7 +167,6 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
     info = np.array([isinstance(r, InfoState) for r in records], dtype=bool)
     share = np.zeros(n)
     worth = np.zeros((n, k))  # staying for ever: the weight of each component accepted
-    kinds = _StateKinds(belief, ends, info)
     plain: list[dict[Verdict, float]] = [{} for _ in range(n)]
     for i in np.flatnonzero(info).tolist():
         s = records[i]
@@ -167,21 +174,20 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
             share[i] += w if v[0] == UNDECIDED else 0.0
             worth[i] += w * (np.asarray(v) == ACCEPTED)
             _add(plain[i], v, None, w)
+    share *= winnable(belief, keeps)  # no step counts where the task is lost
     mecs = maximal_end_components(mdp, info)
     in_mec = (np.asarray(mecs.mec_of) >= 0) & info
     extra: dict[int, dict[Verdict, float]] = {}
     keep_internal = np.zeros(mdp.n_choices, dtype=bool)
-    if kinds.safety:
-        kept = maximal_end_components(mdp, info & kinds.every)
-        keepable = np.asarray(kept.mec_of) >= 0
-        keep_internal = np.asarray(kept.internal, dtype=bool)
-        for i in np.flatnonzero(in_mec & ~kinds.every & ~(timed & (share > 0))).tolist():
+    if keeps is not None:
+        usable = keeps.states & ~(timed & keeps.open_keeps)
+        keep_internal = keeps.inside & usable[mdp.choice_state()]
+        for i in np.flatnonzero(in_mec & ~keeps.every & ~keeps.states
+                                & ~(timed & (share > 0))).tolist():
             extra[i] = plain[i]
-        for i in np.flatnonzero(keepable).tolist():
-            extra[i] = kinds.credited(records[i])
-        if relaxed:
-            for i in np.flatnonzero(mixed_states(belief, ends, info)).tolist():
-                extra[i] = kinds.credited(records[i])
+        credited = usable | (mixed_states(keeps, timed) if relaxed else False)
+        for i in np.flatnonzero(credited).tolist():
+            extra[i] = _credited(belief, ends, records[i], keeps.status[i])
     else:
         for i in np.flatnonzero(in_mec & ~(timed & (share > 0))).tolist():
             extra[i] = plain[i]
@@ -255,56 +261,24 @@ def _add(targets: dict[Verdict, float], v: tuple[int, ...], task: int | None,
     targets[end] = targets.get(end, 0.0) + w
 
 
-class _StateKinds:
-    """For a task with a safety part (``safety``), per information state: whether every
-    hypothesis is persistent or lost (``every``: none is open) and whether some is
-    persistent (``some``) (:func:`mitld_lp.running.sensed_joint.held`)."""
-
-    def __init__(self, belief: Belief, ends: JointEnds, info: np.ndarray) -> None:
-        self.belief, self.ends = belief, ends
-        task = ends.joint.parts[0]
-        self.safety = SAFE in task.kinds
-        self.live = TaskLive(task, frozenset(belief.sta.events))
-        self.every = np.zeros(info.size, dtype=bool)
-        self.some = np.zeros(info.size, dtype=bool)
-        if not self.safety:
-            return
-        for i in np.flatnonzero(info).tolist():
-            kinds = self.held(belief.mdp.states[i])
-            self.every[i], self.some[i] = None not in kinds, True in kinds
-
-    def held(self, s: InfoState) -> list[bool | None]:
-        """Per hypothesis: persistent (True), lost (False) or open (None)
-        (:func:`mitld_lp.running.sensed_joint.held`)."""
-        return held(self.ends.joint, s, self.belief.sensed, self.live)
-
-    def credited(self, s: InfoState) -> dict[Verdict, float]:
-        """A keep's ends at ``s``: the task accepted for the persistent hypotheses,
-        the constraints as they are."""
-        out: dict[Verdict, float] = {}
-        for w, v, kept in zip(s.weights, _verdicts_of(self.belief, self.ends, s),
-                              self.held(s), strict=True):
-            _add(out, v, ACCEPTED if kept else REJECTED, w)
-        return out
+def _credited(belief: Belief, ends: JointEnds, s: InfoState, status: list[bool | None]
+              ) -> dict[Verdict, float]:
+    """A keep's ends at ``s``: the task accepted for the persistent hypotheses
+    (``status`` True), the constraints as they are."""
+    out: dict[Verdict, float] = {}
+    for w, v, kept in zip(s.weights, _verdicts_of(belief, ends, s), status, strict=True):
+        _add(out, v, ACCEPTED if kept else REJECTED, w)
+    return out
 
 
-def mixed_states(belief: Belief, ends: JointEnds, info: np.ndarray | None = None
-                 ) -> np.ndarray:
-    """The information states of a task with a safety part that lie in an end
-    component of states with some persistent hypothesis but not in one of states with
-    no open hypothesis (module docs): where the lower end keeps nothing and the upper
-    end credits the persistent hypotheses."""
-    mdp = belief.mdp
-    if info is None:
-        info = np.array([isinstance(r, InfoState) for r in mdp.states], dtype=bool)
-    kinds = _StateKinds(belief, ends, info)
-    if not kinds.safety:
-        return np.zeros(mdp.n_states, dtype=bool)
-    # a run that stays in an end component through a state with no persistent
-    # hypothesis loses the task: only end components of such states can be credited
-    some = np.asarray(maximal_end_components(mdp, info & kinds.some).mec_of) >= 0
-    keepable = np.asarray(maximal_end_components(mdp, info & kinds.every).mec_of) >= 0
-    return some & ~keepable
+def mixed_states(keeps: Keeps | None, timed: bool) -> np.ndarray | bool:
+    """The information states in an end component of states with some persistent
+    hypothesis where the lower end keeps nothing (no keep state, or one with an open
+    hypothesis where ``timed``: staying there takes steps for ever) and the upper end
+    credits the persistent hypotheses (module docs); False without ``keeps``."""
+    if keeps is None:
+        return False
+    return keeps.in_some & ~(keeps.states & ~(timed & keeps.open_keeps))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -395,7 +369,8 @@ class SensedConstrainedRoute(Route):
         t0 = time.perf_counter()
         p = posed.problem
         timed = p.then is not None or any(c.kind != "prob" for c in p.constraints)
-        merged = info_merged(belief, ends, timed=timed)
+        keeps = keeps_for(belief, ends.joint)
+        merged = info_merged(belief, ends, timed=timed, keeps=keeps)
         eta = model_eta(belief.sta, history=True)
 
         def part(**kw: Any) -> SensedConstrainedPart:
@@ -409,13 +384,13 @@ class SensedConstrainedRoute(Route):
 
         exact = solve(merged, lambda merged, chosen: mixed_controller(
             posed.model.game, belief, merged, chosen.prob, Verdict, seed=seed))
-        mixed = mixed_states(belief, ends)
+        mixed = np.asarray(mixed_states(keeps, timed))
         if not mixed.any():
             return exact
         log.info("sensed constraints: %d information states lie in end components that "
                  "keep some hypotheses persistent and not others: the upper end credits "
                  "them (module docs)", int(mixed.sum()))
-        relaxed = solve(info_merged(belief, ends, timed=timed, relaxed=True),
+        relaxed = solve(info_merged(belief, ends, timed=timed, keeps=keeps, relaxed=True),
                         lambda merged, chosen: None)
         return bracketed(exact, relaxed, int(mixed.sum()), posed.minimise,
                          posed.settings.precision)

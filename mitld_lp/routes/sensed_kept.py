@@ -1,17 +1,19 @@
 """The bracket of a task with a safety part seen through sensors, with constraints or
-``then``, where end components of information states mix persistent hypotheses with
-others (:mod:`mitld_lp.routes.sensed_constrained`).
+``then``, where end components of information states hold persistent hypotheses but
+no keep state (:mod:`mitld_lp.routes.sensed_constrained`): some hypothesis is safe in
+one state and open in another, or (with ``then`` or a bound on steps or costs) open
+hypotheses would take steps for ever.
 
 Two constrained LPs are solved on the information-state product.  The *exact end*
-keeps the task only in end components of states with no open hypothesis, every one
-persistent or lost (sound: playing such a component for ever keeps the true run's task
-whenever its hypothesis is persistent), and a stay, which wins no open hypothesis, only
-where some is open: its
-policy is the answer's, its certified value ``lower`` (for a minimum, ``upper`` read
+keeps the task only at keep states (:class:`mitld_lp.running.sensed_joint.Keeps`:
+playing their end component for ever keeps the true run's task exactly when its
+hypothesis is persistent there), and a stay, which wins no open hypothesis, elsewhere:
+its policy is the answer's, its certified value ``lower`` (for a minimum, ``upper`` read
 back), each constraint met by it in exact arithmetic.  The *relaxed end* also credits
-every other state of an end component with some persistent hypothesis with a keep
-worth the weight of its persistent hypotheses (at least what the hypotheses persistent
-throughout any end component through it are worth) and its constraints as they are: a
+every other state of an end component of states with some persistent hypothesis with
+a keep worth the weight of its persistent hypotheses (at least what the hypotheses
+persistent throughout any end component through it are worth; a run staying in an end
+component through a state with none loses the task) and its constraints as they are: a
 relaxation of every observation-based policy, whose weak-duality bound is the answer's
 ``upper`` (for a minimum, ``lower``).  Their distance is reported as the width's
 ``observation`` part (beside the truncation's), the check ``observation-based

@@ -167,11 +167,11 @@ class _TaskEnds:
     def end_labels(self, name: str) -> frozenset[str]:
         return frozenset({name})
 
-    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+    def rewards(self, states: list[tuple[int, frozenset[str], Any] | None],
                 mixes: Mapping[int, list[tuple[str, float]]]
                 ) -> tuple[tuple[str, np.ndarray], ...]:
         """The chain's reward models from its states (``(automaton state, events
-        pending)``, None for an end) and the controller's actions in each (``mixes``:
+        pending, memory)``, None for an end) and the controller's actions in each (``mixes``:
         ``(action, probability)``); the task's own chain has none."""
         return ()
 
@@ -356,7 +356,7 @@ class _Unfolding:
             for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
                 labels[k] = labels[k] | {"accept"}
         none = np.zeros(n, dtype=bool)
-        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2])
+        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2], x[5])
                                      for x in self.order], self.mixes)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
                      rewards)

@@ -5,7 +5,7 @@ It follows the information state from the observations as the deterministic sens
 controller does (:class:`~mitld_lp.controllers.kinds.SensedController`, the same
 ``moves``); in each information state it draws *stay* with the policy's probability
 (then plays, uniformly, the actions that keep the run in that state's end component,
-for ever; for a *keep*, in its end component of states with no open hypothesis) or
+for ever; for a *keep*, in its keep states' end component) or
 else an action with the policy's weights.  A hypothesis's end is read by the task's
 verdict: ``"target"`` when the task accepted, ``"sink"`` otherwise (the controller stops
 once nothing undecided is left).  Its ``save`` writes the
