@@ -23,9 +23,9 @@ it once every quantity is a linear function of its occupancy:
   minimum's complement) a hypothesis is *persistent* when its task accepted or its task
   automaton's state is safe, *lost* when its task rejected or can no longer be won with
   the events left, else *open* (:func:`mitld_lp.running.sensed_joint.held`).  A *keep
-  state* lies in an end component of states with no open hypothesis, or in one of
-  states with some persistent hypothesis where each hypothesis is persistent in every
-  state that holds it or in none (:class:`~mitld_lp.running.sensed_joint.Keeps`):
+  state* lies in a maximal end component of states with no open hypothesis, or else of
+  states with some persistent hypothesis, in which each hypothesis is persistent in
+  every state that holds it or in none (:class:`~mitld_lp.running.sensed_joint.Keeps`):
   playing that end component for ever keeps the true run's task exactly when its
   hypothesis is persistent there.  A keep state gets a *keep* choice instead of a
   stay: the task accepted for the persistent hypotheses, the constraints as they are,

@@ -224,10 +224,11 @@ class Keeps:
     """Where a task with a safety part is *kept* on the information-state product
     ``belief`` of ``joint`` (:mod:`mitld_lp.routes.sensed_constrained`): ``every`` and
     ``some`` mark the information states with no open hypothesis and with some
-    persistent one (:func:`held`); ``states`` the keep states: those of an end
-    component of ``every`` states, and those of an end component of ``some`` states in
-    which each hypothesis is persistent in every state that holds it or in none (a run
-    playing it for ever keeps the task exactly when the true hypothesis is persistent);
+    persistent one (:func:`held`); ``states`` the keep states: those of a maximal end
+    component of ``every`` states, or else of ``some`` states, in which each hypothesis
+    is persistent in every state that holds it or in none (a run playing it for ever
+    keeps the task exactly when the true hypothesis is persistent: given the true
+    hypothesis, the run stays among the states that hold it);
     ``inside`` per choice, whether a kept run plays it (its end component's internal
     choices); ``open_keeps`` the keep states with an open hypothesis."""
 
@@ -247,17 +248,17 @@ class Keeps:
             self.every[i], self.some[i] = None not in kinds, True in kinds
         whole = maximal_end_components(mdp, info & self.every)
         wider = maximal_end_components(mdp, info & self.some)
-        self.states = np.asarray(whole.mec_of) >= 0
-        self.inside = np.asarray(whole.internal, dtype=bool).copy()
+        self.states = np.zeros(n, dtype=bool)
+        self.inside = np.zeros(mdp.n_choices, dtype=bool)
         self.in_some = np.asarray(wider.mec_of) >= 0
         cs = mdp.choice_state()
-        for m in range(wider.n_mecs):
-            members = wider.states_of(m)
-            if self._uniform(mdp, members):
-                fresh = members[~self.states[members]]
-                self.states[fresh] = True
-                extra = np.asarray(wider.internal, dtype=bool) & np.isin(cs, fresh)
-                self.inside |= extra
+        for ecs in (whole, wider):  # the first found keeps its own end component
+            for m in range(ecs.n_mecs):
+                members = ecs.states_of(m)
+                if self._uniform(mdp, members):
+                    fresh = members[~self.states[members]]
+                    self.states[fresh] = True
+                    self.inside |= np.asarray(ecs.internal, dtype=bool) & np.isin(cs, fresh)
         self.open_keeps = self.states & ~self.every
 
     def _uniform(self, mdp: Any, members: np.ndarray) -> bool:
