@@ -39,14 +39,6 @@ _EXTRAS = {"none": {}, "min": {}, "constraint": {"constraints": ["P(F puddle) <=
 #: The cells not solved yet, each with the words of its refusal: the rows of the
 #: composition table (docs/results.md) that say "refused".
 NOT_SOLVED = {
-    ("safety", "constraint"): "only co-safe tasks are solved with constraints on what "
-                              "the robot observes",
-    ("safety", "then"): "only co-safe tasks are solved with constraints on what the robot "
-                        "observes",
-    ("obligation", "constraint"): "only co-safe tasks are solved with constraints on "
-                                  "what the robot observes",
-    ("obligation", "then"): "only co-safe tasks are solved with constraints on what the "
-                            "robot observes",
     ("band", "min"): "with a law known only within a band",
     ("band", "constraint"): "with a law known only within a band",
     ("band", "then"): "with a law known only within a band",

@@ -37,31 +37,59 @@ def scenarios(detect: float) -> list[tuple[int, int | None, float]]:
     return [s for s in out if s[2] > 0]
 
 
+def consistent(scen: list[tuple[int, int | None, float]], t: int, r: int | None
+               ) -> list[tuple[int, float]]:
+    """The scenarios' ``(bus step, probability)`` that agree with what the robot has
+    seen by step ``t``: the report at step ``r``, or (None) no report yet."""
+    return [(k, p) for k, rr, p in scen if (rr == r if r is not None else
+                                               rr is None or rr > t)]
+
+
+class Knowledge:
+    """The knowledge states met so far, numbered in order (``self(o)``: ``o``'s)."""
+
+    def __init__(self, first: tuple) -> None:
+        self.index: dict[tuple, int] = {}
+        self.order: list[tuple] = []
+        self(first)
+
+    def __call__(self, o: tuple) -> int:
+        if o not in self.index:
+            self.index[o] = len(self.order)
+            self.order.append(o)
+        return self.index[o]
+
+
+def flow_equations(order: list[tuple], owners: list[int],
+                   flows: list[list[tuple[int, float]]]) -> tuple[np.ndarray, np.ndarray]:
+    """The occupancy LP's equalities over the knowledge states before the horizon (the
+    first is the initial one): each variable (of knowledge ``owners[j]``) leaves its
+    state and enters ``flows[j]``'s with their probabilities."""
+    n, m = len(order), len(owners)
+    a_eq = np.zeros((n, m))
+    for j, (s, flow) in enumerate(zip(owners, flows, strict=True)):
+        a_eq[s, j] += 1.0
+        for s2, p in flow:
+            a_eq[s2, j] -= p
+    live = [i for i, o in enumerate(order) if o[0] < HORIZON]
+    b_eq = np.zeros(n)
+    b_eq[0] = 1.0
+    return a_eq[live], b_eq[live]
+
+
 def knowledge_lp(detect: float) -> dict:
     """The occupancy LP over the robot's knowledge ``(t, world, report step, steps at
     the stop)``: variables per (knowledge, action) for ``t < HORIZON``; per variable the
     probability of the task, of getting wet (entering the ditch, or later from the
     world state at the horizon at the least) and the probability that the task is
-    undecided (the step counts)."""
+    undecided and can still be won (the step counts)."""
     scen = scenarios(detect)
-
-    def consistent(t: int, r: int | None) -> list[tuple[int, float]]:
-        return [(k, p) for k, rr, p in scen if (rr == r if r is not None else
-                                                   rr is None or rr > t)]
 
     def caught(k: int, at_stop: frozenset[int], t: int) -> bool:
         return any(k <= j <= min(k + WINDOW, t) for j in at_stop)
 
-    index: dict[tuple, int] = {}
-    order: list[tuple] = []
-
-    def intern(o: tuple) -> int:
-        if o not in index:
-            index[o] = len(order)
-            order.append(o)
-        return index[o]
-
-    intern((0, "mid", None, frozenset()))
+    intern = Knowledge((0, "mid", None, frozenset()))
+    order, index = intern.order, intern.index
     cols: list[tuple[int, str]] = []
     task, wet, undecided, flows = [], [], [], []
     head = 0
@@ -70,9 +98,11 @@ def knowledge_lp(detect: float) -> dict:
         head += 1
         if t == HORIZON:
             continue
-        mass = consistent(t, r)
+        mass = consistent(scen, t, r)
         total = sum(p for _, p in mass)
-        share = sum(p for k, p in mass if not caught(k, stop, t) and t < k + WINDOW) / total
+        # the ditch never reaches the stop: there the task can no longer be won
+        share = 0.0 if w == "ditch" else sum(
+            p for k, p in mass if not caught(k, stop, t) and t < k + WINDOW) / total
         for a in STATION.actions(w):
             cols.append((index[(t, w, r, stop)], a))
             flow, win, wetness = [], 0.0, 0.0
@@ -80,7 +110,7 @@ def knowledge_lp(detect: float) -> dict:
                 stop2 = stop | {t + 1} if w2 == "st" else stop
                 reports = [r] if r is not None else [t + 1, None]
                 for r2 in reports:
-                    p_obs = sum(p for _, p in consistent(t + 1, r2)) / total
+                    p_obs = sum(p for _, p in consistent(scen, t + 1, r2)) / total
                     pr = pw * p_obs
                     if pr <= 0:
                         continue
@@ -89,7 +119,7 @@ def knowledge_lp(detect: float) -> dict:
                     if w2 == "ditch" and w != "ditch":
                         wetness += pr
                     if t + 1 == HORIZON:
-                        post = consistent(t + 1, r2)
+                        post = consistent(scen, t + 1, r2)
                         norm = sum(p for _, p in post)
                         win += pw * p_obs * sum(p for k, p in post
                                                 if caught(k, frozenset(stop2), HORIZON)) / norm
@@ -98,16 +128,8 @@ def knowledge_lp(detect: float) -> dict:
             wet.append(wetness)
             undecided.append(share)
             flows.append(flow)
-    n, m = len(order), len(cols)
-    a_eq = np.zeros((n, m))
-    for j, ((s, _), flow) in enumerate(zip(cols, flows, strict=True)):
-        a_eq[s, j] += 1.0
-        for s2, p in flow:
-            a_eq[s2, j] -= p
-    live = [i for i, o in enumerate(order) if o[0] < HORIZON]
-    b_eq = np.zeros(n)
-    b_eq[0] = 1.0
-    return {"a_eq": a_eq[live], "b_eq": b_eq[live], "task": np.array(task),
+    a_eq, b_eq = flow_equations(order, [s for s, _ in cols], flows)
+    return {"a_eq": a_eq, "b_eq": b_eq, "task": np.array(task),
             "wet": np.array(wet), "steps": np.array(undecided)}
 
 
@@ -177,8 +199,6 @@ def test_two_constraints_and_both_sensors_extremes() -> None:
 
 def test_refused_by_name_what_is_not_solved() -> None:
     model = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5}})
-    with pytest.raises(ProblemError, match="objective min with constraints and sensors"):
-        synthesize(model, objective="min", constraints=["P(F wet) <= 0.2"])
     with pytest.raises(ProblemError, match="method 'vi' with constraints"):
         synthesize(model, method="vi", constraints=["P(F wet) <= 0.2"])
     bad = Model.from_game(STATION, SPEC, sensors={"b": {"detect": 0.5, "false_alarm": 0.1}})

@@ -19,11 +19,30 @@ it once every quantity is a linear function of its occupancy:
   an end component gets a *stay* choice into the verdict states, by the posterior
   weights of its hypotheses' verdicts: the fully observed LP's stay with fractional
   values.  The controller that takes it plays the end component's choices for ever.
-* **Steps and costs** count, at an information state, the posterior weight of its
+* **Keeping a safety part.**  For a task with a safety part (safety, obligation; a
+  minimum's complement) a hypothesis is *persistent* when its task accepted or its task
+  automaton's state is safe, *lost* when its task rejected or can no longer be won with
+  the events left, else *open* (:func:`mitld_lp.running.sensed_joint.held`).  A *keep
+  state* lies in a maximal end component of states with no open hypothesis, or else of
+  states with some persistent hypothesis, in which each hypothesis is persistent in
+  every state that holds it or in none (:class:`~mitld_lp.running.sensed_joint.Keeps`):
+  playing that end component for ever keeps the true run's task exactly when its
+  hypothesis is persistent there.  A keep state gets a *keep* choice instead of a
+  stay: the task accepted for the persistent hypotheses, the constraints as they are,
+  no step counted after it (with ``then`` or a bound on steps or costs only where no
+  hypothesis is open: an open one would take steps for ever); a stay is offered only
+  at other states with an open hypothesis
+  (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells the two apart on the
+  chain).  Where an end component holds persistent hypotheses but no keep state
+  (:func:`mixed_states`), the answer is a bracket (:mod:`mitld_lp.routes.sensed_kept`).
+* **Steps and costs** count, at an information state from which the task can still be
+  won (:func:`~mitld_lp.running.sensed_joint.winnable`), the posterior weight of its
   hypotheses whose task is still undecided (:attr:`Merged.share`): the expected number
-  of steps taken while the true run's task is undecided, as on the fully observed
-  product.  A stay where that weight is positive would take infinitely many steps: it
-  is not offered when steps or costs are bounded or minimised.  A run the chosen
+  of steps taken while the true run's task is undecided and can be won, as on the
+  fully observed product (a trap that keeps the task's automaton open for ever, a
+  ditch that never reaches ``c`` of ``F c``, takes no steps and may be stayed in).
+  A stay where that weight is positive would take infinitely many steps: it is not
+  offered when steps or costs are bounded or minimised.  A run the chosen
   policy traps in information states (an interior-point solution's negligible flow on a
   loop) is worth what staying there is worth (:attr:`Merged.stay_values`), so the
   policy's certified values are its own.
@@ -40,6 +59,7 @@ automaton (:mod:`mitld_lp.running.sensed_joint`).
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, field
@@ -56,6 +76,7 @@ from mitld_lp.product import Absorbing
 from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merged
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import sensed_refusals
+from mitld_lp.running.sensed_joint import Keeps, keeps_for, winnable
 from mitld_lp.sensing.belief import NOT_YET, Belief, InfoState, Reaches
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.solvers.constrained_model import Merged
@@ -67,7 +88,9 @@ if TYPE_CHECKING:
     from mitld_lp.routes.stages import Built
 
 __all__ = ["SensedConstrainedRoute", "SensedConstrainedPart", "Verdict", "JointEnds",
-           "info_merged", "STAY"]
+           "info_merged", "mixed_states", "STAY"]
+
+log = logging.getLogger(__name__)
 
 STAY = "(stay)"
 """The name of a stay choice in the policy's table."""
@@ -125,34 +148,58 @@ def _verdicts_of(belief: Belief, ends: JointEnds, s: InfoState) -> list[tuple[in
     return out
 
 
-def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
+def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
+                keeps: Keeps | None = None, relaxed: bool = False) -> Merged:
     """The information-state product on a joint automaton as the constrained LP's
     model (module docs): its verdict states, a stay choice (action ``ABSORB``, marked
     ``keep``) at each information state of an end component (where no hypothesis's
-    task is undecided when ``timed``), and the steps' shares."""
+    task is undecided when ``timed``), and the steps' shares.  For a task with a safety
+    part (``keeps``, :func:`~mitld_lp.running.sensed_joint.keeps_for`): a *keep*
+    choice (the task accepted for the persistent hypotheses) at each keep state (where
+    ``timed``, only those with no open hypothesis), a stay only at the other states
+    with an open hypothesis
+    (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells them apart), and with
+    ``relaxed`` (the upper end) a credited keep at every other state of an end
+    component with some persistent hypothesis (:func:`mixed_states`)."""
     mdp = belief.mdp
     records: list[Any] = list(mdp.states)
     n, k = len(records), len(ends.joint.parts)
     info = np.array([isinstance(r, InfoState) for r in records], dtype=bool)
     share = np.zeros(n)
     worth = np.zeros((n, k))  # staying for ever: the weight of each component accepted
-    targets: list[dict[Verdict, float]] = [{} for _ in range(n)]
+    plain: list[dict[Verdict, float]] = [{} for _ in range(n)]
     for i in np.flatnonzero(info).tolist():
         s = records[i]
         for w, v in zip(s.weights, _verdicts_of(belief, ends, s), strict=True):
             share[i] += w if v[0] == UNDECIDED else 0.0
             worth[i] += w * (np.asarray(v) == ACCEPTED)
-            end = Verdict(tuple(REJECTED if x == UNDECIDED else x for x in v))
-            targets[i][end] = targets[i].get(end, 0.0) + w
+            _add(plain[i], v, None, w)
+    share *= winnable(belief, keeps)  # no step counts where the task is lost
+    mecs = maximal_end_components(mdp, info)
+    in_mec = (np.asarray(mecs.mec_of) >= 0) & info
+    extra: dict[int, dict[Verdict, float]] = {}
+    keep_internal = np.zeros(mdp.n_choices, dtype=bool)
+    if keeps is not None:
+        usable = keeps.states & ~(timed & keeps.open_keeps)
+        keep_internal = keeps.inside & usable[mdp.choice_state()]
+        for i in np.flatnonzero(in_mec & ~keeps.every & ~keeps.states
+                                & ~(timed & (share > 0))).tolist():
+            extra[i] = plain[i]
+        credited = usable | (mixed_states(keeps, timed) if relaxed else False)
+        for i in np.flatnonzero(credited).tolist():
+            extra[i] = _credited(belief, ends, records[i], keeps.status[i])
+    else:
+        for i in np.flatnonzero(in_mec & ~(timed & (share > 0))).tolist():
+            extra[i] = plain[i]
     index = {r: i for i, r in enumerate(records) if isinstance(r, Verdict)}
-    for t in targets:
+    for t in extra.values():
         for end in t:
             if end not in index:
                 index[end] = len(records)
                 records.append(end)
     m = len(records)
-    mecs = maximal_end_components(mdp, info)
-    stays = (np.asarray(mecs.mec_of) >= 0) & info & ~(timed & (share > 0))
+    stays = np.zeros(n, dtype=bool)
+    stays[list(extra)] = True
     # the rows: each state's own, then its stay; a new verdict state's self-loop
     rg = np.asarray(mdp.row_groups, dtype=np.int64)
     counts = np.concatenate([np.diff(rg) + stays, np.ones(m - n, dtype=np.int64)])
@@ -164,7 +211,7 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
     coo = mdp.matrix.tocoo()
     rows, cols, vals = [old_pos[coo.row]], [coo.col], [coo.data]
     for s, pos in zip(np.flatnonzero(stays).tolist(), stay_pos.tolist(), strict=True):
-        for end, w in targets[s].items():
+        for end, w in extra[s].items():
             rows.append(np.array([pos]))
             cols.append(np.array([index[end]]))
             vals.append(np.array([w]))
@@ -175,10 +222,13 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
     n_choices = int(groups[-1])
     matrix = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(n_choices, m))
+    matrix.sum_duplicates()
     actions = np.full(n_choices, ABSORB, dtype=np.int32)
     actions[old_pos] = mdp.choice_actions
     keep = np.zeros(n_choices, dtype=bool)
     keep[stay_pos] = True
+    kept_choice = np.zeros(n_choices, dtype=bool)
+    kept_choice[old_pos] = keep_internal
     verdicts = np.full((m, k), UNDECIDED, dtype=np.int64)
     for r, i in index.items():
         verdicts[i] = r.verdicts
@@ -197,9 +247,38 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool) -> Merged:
     choice_origin[old_pos] = np.arange(owner.size)
     return Merged(merged_mdp, origin, np.arange(n), np.full(m, -1, dtype=np.int64), verdicts,
                   absorbing, truncated, share > 0, np.zeros(m, dtype=bool),
-                  np.zeros(n_choices, dtype=bool), keep, np.zeros(n_choices, dtype=bool),
+                  np.zeros(n_choices, dtype=bool), keep, kept_choice,
                   np.arange(n), choice_origin, share,
                   np.concatenate([worth, np.zeros((m - n, k))]))
+
+
+def _add(targets: dict[Verdict, float], v: tuple[int, ...], task: int | None,
+         w: float) -> None:
+    """Add weight ``w`` to the verdict state of ``v`` (the task's verdict ``task`` if
+    given), an undecided component counting as rejected."""
+    end = Verdict(tuple(REJECTED if x == UNDECIDED else x for x in
+                        (v if task is None else (task, *v[1:]))))
+    targets[end] = targets.get(end, 0.0) + w
+
+
+def _credited(belief: Belief, ends: JointEnds, s: InfoState, status: list[bool | None]
+              ) -> dict[Verdict, float]:
+    """A keep's ends at ``s``: the task accepted for the persistent hypotheses
+    (``status`` True), the constraints as they are."""
+    out: dict[Verdict, float] = {}
+    for w, v, kept in zip(s.weights, _verdicts_of(belief, ends, s), status, strict=True):
+        _add(out, v, ACCEPTED if kept else REJECTED, w)
+    return out
+
+
+def mixed_states(keeps: Keeps | None, timed: bool) -> np.ndarray | bool:
+    """The information states in an end component of states with some persistent
+    hypothesis where the lower end keeps nothing (no keep state, or one with an open
+    hypothesis where ``timed``: staying there takes steps for ever) and the upper end
+    credits the persistent hypotheses (module docs); False without ``keeps``."""
+    if keeps is None:
+        return False
+    return keeps.in_some & ~(keeps.states & ~(timed & keeps.open_keeps))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -249,17 +328,7 @@ class SensedConstrainedRoute(Route):
 
     def refusal(self, posed: Posed) -> list[str]:
         p = posed.problem
-        sensors = partial(p.model.sensors)
-        head = "sensors (" + ", ".join(f"{a} = {s}" for a, s in sensors.items()) + ")"
-        refused = lp_refusals(posed)
-        if p.objective == "min":
-            refused.append(f"objective min with constraints and {head}: the complement "
-                           "is a safety task, which the constrained observation-based "
-                           "route does not solve")
-        elif posed.fragment != CO_SAFE:
-            refused.append(f"a {posed.fragment} task with constraints and {head}: only "
-                           "co-safe tasks are solved with constraints on what the robot "
-                           "observes")
+        refused = lp_refusals(posed)  # the task's class, the constraints' formulas
         # the sensors' own conditions (false alarms, bands, laws that may never happen,
         # worlds that react to a sensed event); the task's are said above
         # (constraints or then: a band is refused with them, by name)
@@ -291,6 +360,7 @@ class SensedConstrainedRoute(Route):
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        from mitld_lp.routes.sensed_kept import bracketed
         from mitld_lp.sensing.mixed import mixed_controller
         from mitld_lp.solvers.rounding import model_eta
 
@@ -299,14 +369,28 @@ class SensedConstrainedRoute(Route):
         t0 = time.perf_counter()
         p = posed.problem
         timed = p.then is not None or any(c.kind != "prob" for c in p.constraints)
-        merged = info_merged(belief, ends, timed=timed)
+        keeps = keeps_for(belief, ends.joint)
+        merged = info_merged(belief, ends, timed=timed, keeps=keeps)
+        eta = model_eta(belief.sta, history=True)
 
         def part(**kw: Any) -> SensedConstrainedPart:
             return SensedConstrainedPart(**kw, sensors=dict(belief.sensors), belief=belief)
 
-        return solve_merged(posed, belief.mdp, built.joint, belief.sta, t0, costs=costs,
-                            seed=seed, build=built.timings, merged=merged,
-                            eta=model_eta(belief.sta, history=True), route=self.name,
-                            part=part, controller=lambda merged, chosen: mixed_controller(
-                                posed.model.game, belief, merged, chosen.prob, Verdict,
-                                seed=seed))
+        def solve(merged: Merged, controller: Any) -> Result:
+            assert built.joint is not None
+            return solve_merged(posed, belief.mdp, built.joint, belief.sta, t0, costs=costs,
+                                seed=seed, build=built.timings, merged=merged, eta=eta,
+                                route=self.name, part=part, controller=controller)
+
+        exact = solve(merged, lambda merged, chosen: mixed_controller(
+            posed.model.game, belief, merged, chosen.prob, Verdict, seed=seed))
+        mixed = np.asarray(mixed_states(keeps, timed))
+        if not mixed.any():
+            return exact
+        log.info("sensed constraints: %d information states lie in end components that "
+                 "keep some hypotheses persistent and not others: the upper end credits "
+                 "them (module docs)", int(mixed.sum()))
+        relaxed = solve(info_merged(belief, ends, timed=timed, keeps=keeps, relaxed=True),
+                        lambda merged, chosen: None)
+        return bracketed(exact, relaxed, int(mixed.sum()), posed.minimise,
+                         posed.settings.precision)

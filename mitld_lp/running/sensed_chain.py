@@ -145,17 +145,22 @@ class _TaskEnds:
         ``q``: its verdicts, the undecided counting as not satisfied."""
         return "accept" if q == self.dta.accepting else "reject"
 
+    def stayed(self, q: int, memory: Any) -> str:
+        """The absorbing state of a run whose controller draws *stay* (only the
+        randomised controller of :mod:`mitld_lp.running.sensed_joint` does)."""
+        return self.stopped(q)
+
     def labels(self, q: int) -> frozenset[str]:
         return frozenset()
 
     def end_labels(self, name: str) -> frozenset[str]:
         return frozenset({name})
 
-    def rewards(self, states: list[tuple[int, frozenset[str]] | None],
+    def rewards(self, states: list[tuple[int, frozenset[str], Any] | None],
                 mixes: Mapping[int, list[tuple[str, float]]]
                 ) -> tuple[tuple[str, np.ndarray], ...]:
         """The chain's reward models from its states (``(automaton state, events
-        pending)``, None for an end) and the controller's actions in each (``mixes``:
+        pending, memory)``, None for an end) and the controller's actions in each (``mixes``:
         ``(action, probability)``); the task's own chain has none."""
         return ()
 
@@ -225,7 +230,7 @@ class _Unfolding:
             branches = [(d.actions[0] if d.actions else plan.fallback(g), 1.0)]
         else:  # randomised: stay for ever (an end by the true run's verdicts), or an action
             if d.stay > 0.0:
-                row[self.number(self.ends.stopped(q))] = d.stay
+                row[self.number(self.ends.stayed(q, memory))] = d.stay
             w = np.asarray(d.weights, dtype=float)
             branches = [(a, (1.0 - d.stay) * float(x)) for a, x in
                         zip(d.actions, w / w.sum(), strict=True) if x > 0.0]
@@ -340,7 +345,7 @@ class _Unfolding:
             for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
                 labels[k] = labels[k] | {"accept"}
         none = np.zeros(n, dtype=bool)
-        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2])
+        rewards = self.ends.rewards([None if isinstance(x, str) else (x[1], x[2], x[5])
                                      for x in self.order], self.mixes)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
                      rewards)

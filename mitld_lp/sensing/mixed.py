@@ -5,9 +5,10 @@ It follows the information state from the observations as the deterministic sens
 controller does (:class:`~mitld_lp.controllers.kinds.SensedController`, the same
 ``moves``); in each information state it draws *stay* with the policy's probability
 (then plays, uniformly, the actions that keep the run in that state's end component,
-for ever) or else an action with the policy's weights.  A hypothesis's end is read
-by the task's verdict: ``"target"`` when the task accepted, ``"sink"`` otherwise (the
-controller stops once nothing undecided is left).  Its ``save`` writes the
+for ever; for a *keep*, in its keep states' end component) or
+else an action with the policy's weights.  A hypothesis's end is read by the task's
+verdict: ``"target"`` when the task accepted, ``"sink"`` otherwise (the controller stops
+once nothing undecided is left).  Its ``save`` writes the
 ``sensed-randomised`` controller file (:mod:`mitld_lp.controllers.format`), which
 ``mitld-lp run`` and :mod:`mitld_lp.runtime` run with the same draws for the same seed;
 :mod:`mitld_lp.running.sensed_chain` writes its controlled chain.
@@ -38,11 +39,13 @@ def mixed_controller(game: Game[Any], belief: Any, merged: Any, prob: np.ndarray
     n = mdp.n_states
     live = np.array([not merged.absorbing[i] for i in range(n)], dtype=bool)
     internal = np.asarray(maximal_end_components(mdp, live).internal, dtype=bool)
-    cs = mdp.choice_state()
+    cs, mcs = mdp.choice_state(), merged.mdp.choice_state()
     inside: list[list[str]] = [[] for _ in range(n)]
+    kept: list[list[str]] = [[] for _ in range(n)]
     for c in np.flatnonzero(internal).tolist():
         inside[int(cs[c])].append(mdp.action_name(c))
-    mcs = merged.mdp.choice_state()
+    for c in np.flatnonzero(merged.keep_internal).tolist():  # a task's safety part kept
+        kept[int(mcs[c])].append(merged.mdp.action_name(c))
     decisions: list[Decision | None] = [None] * n
     for s in np.flatnonzero(live).tolist():
         first, last = int(merged.mdp.row_groups[s]), int(merged.mdp.row_groups[s + 1])
@@ -60,7 +63,7 @@ def mixed_controller(game: Game[Any], belief: Any, merged: Any, prob: np.ndarray
         if not names:  # it stays for sure: any weights will do after the draw
             names, weights = list(inside[s][:1]) or [merged.mdp.action_name(first)], [1.0]
         decisions[s] = Decision(tuple(names), np.asarray(weights), stay=min(stay, 1.0),
-                                inside=tuple(inside[s]))
+                                inside=tuple(kept[s] or inside[s]))
 
     def end(v: Any) -> Any:
         if isinstance(v, verdict_type):
