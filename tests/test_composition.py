@@ -430,6 +430,41 @@ def test_a_failed_check_is_reported_once_when_nothing_is_truncated() -> None:
 # --------------------------------------------------------------------------- safety + constraints
 
 
+def test_a_minimum_of_zero_with_a_constraint_is_certified_as_zero() -> None:
+    """min P(G (b -> F[0,2] goal)) s.t. P(F puddle) <= 0.2 on a slippery 3x2 grid: the
+    unconstrained minimum is 0 (the plain route, on the task's own automaton), so the
+    constrained one is at least 0, and the returned policy's value is 0 (the
+    constrained route's exact evaluation of its chain).  The constrained route reads the minimum back from
+    the complement's maximum, whose LP upper bound is 1 + 2.4e-11: the bracket was
+    [-2.35e-11, 0], outside [0, 1] and failing the precision check (no relative width
+    holds a value of 0)."""
+    world = GridWorld.make(3, 2, start=(0, 0), slip=0.2,
+                           regions={"goal": [(2, 1)], "puddle": [(1, 0)]})
+    from mitld_lp.distributions import from_table
+
+    model = Model.from_game(world, "G (b -> F[0,2] goal)", objective="min", epsilon=0.05,
+                            events={"b": from_table({"geometric": 0.4}, "mu")})
+    plain = synthesize(model)
+    assert plain.route != "constrained" and plain.upper == 0.0
+    r = synthesize(model, constraints=["P(F puddle) <= 0.2"])
+    assert r.route == "constrained" and r.certified, r.checks
+    assert (r.lower, r.upper) == (0.0, 0.0)
+    assert r.constraints[0].value <= 0.2 + 1e-9
+
+
+def test_one_minus_keeps_a_probability_bracket_in_the_unit_interval() -> None:
+    """``one_minus`` by hand: [1 - upper, 1 - lower] outward, clipped to [0, 1]."""
+    from fractions import Fraction
+
+    from mitld_lp.solvers.rounding import one_minus
+
+    assert one_minus(1.0, 1.0 + 2.4e-11) == (0.0, 0.0)
+    assert one_minus(-1e-12, 0.0) == (1.0, 1.0)
+    lo, hi = one_minus(0.3, 0.7)
+    assert Fraction(lo) <= 1 - Fraction(0.7) <= 1 - Fraction(0.3) <= Fraction(hi)
+    assert hi - lo < 1e-15 + 0.4
+
+
 def _gamble() -> ExplicitGame:
     """``safe`` stays clear of h for ever; ``go`` reaches g w.p. 0.7, else h."""
     return ExplicitGame(

@@ -164,6 +164,10 @@ def float_up(q: Fraction | float) -> float:
 
 
 def one_minus(lower: float, upper: float) -> tuple[float, float]:
-    """``[1 - upper, 1 - lower]`` rounded outward: the bracket of the complement's
-    probability from a bracket of a probability."""
-    return float_down(1 - Fraction(upper)), float_up(1 - Fraction(lower))
+    """``[1 - upper, 1 - lower]`` rounded outward and kept in ``[0, 1]``: the bracket of
+    the complement's probability from a bracket of a probability.  A bound past 0 or 1
+    (an LP's upper bound of 1 + 2e-11) says less than the interval a probability lies in
+    anyway, and would leave a minimum of exactly 0 a bracket ``[-2e-11, 0]`` whose
+    relative width no precision meets."""
+    return (max(0.0, float_down(1 - Fraction(upper))),
+            min(1.0, float_up(1 - Fraction(lower))))
