@@ -46,12 +46,16 @@ log = logging.getLogger(__name__)
 class SensedBandValue:
     """The controller's worst case over the band on its chain: ``lower`` a sound lower
     bound (the iterate less the rounding allowance), ``last_change`` the iteration's
-    last change (how far from converged it stopped), ``iterations``, ``n_states``."""
+    last change (how far from converged it stopped), ``iterations``, ``n_states``;
+    ``truncated_won`` the same worst case with the runs past a truncation point counted
+    as reaching ``accept`` (the upper truncation model's reading: how much of the gap to
+    an upper bound is the truncation's, not the band's)."""
 
     lower: float
     last_change: float
     iterations: int
     n_states: int
+    truncated_won: float = float("nan")
 
 
 def is_sensed_band(result: Any) -> bool:
@@ -63,8 +67,14 @@ def is_sensed_band(result: Any) -> bool:
 def sensed_band_claim(result: Any) -> tuple[float, str]:
     """What Storm's check of the file gives against ``result``'s bracket: the bound and
     the sentence the command line prints."""
-    return result.lower, (f"{BAND_PROPERTY} with uncertainty MINIMIZE >= lower = "
-                          f"{result.lower!r}, the controller's worst case over the bands")
+    how = f"{BAND_PROPERTY} with uncertainty MINIMIZE"
+    if result.complemented:  # the complement's automaton: "accept" marks failing runs
+        bound = result.complement[0] if result.complement is not None else 1 - result.upper
+        return bound, (f"{how} >= the complement's lower = {bound!r}: for a minimised "
+                       "task \"accept\" marks the runs that fail it (1 - it is upper, the "
+                       "controller's worst case over the bands)")
+    return result.lower, (f"{how} >= lower = {result.lower!r}, the controller's worst "
+                          "case over the bands")
 
 
 def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
@@ -105,19 +115,29 @@ def worst_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_
                ) -> SensedBandValue:
     """``Pmin(F accept)`` of ``chain`` from its state 0, nature minimising over each
     state's choices: value iteration from below until no value changes by more than
-    ``tol`` (module docs)."""
+    ``tol`` (module docs); and ``Pmin(F (accept | truncated))`` the same way."""
     accept = chain.accepting()
+    truncated = np.array(["truncated" in x for x in chain.labels], dtype=bool)
+    low, change, k = _from_below(chain, accept, tol, max_iterations)
+    high = _from_below(chain, accept | truncated, tol, max_iterations)[0]
+    return SensedBandValue(low, change, k, chain.n_states, high)
+
+
+def _from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations: int
+                ) -> tuple[float, float, int]:
+    """Nature's least probability of reaching ``target`` from state 0, from below, less
+    the floats' rounding allowance; the last change; the iterations."""
     m = chain.matrix
     starts = chain.row_groups[:-1]
-    v = accept.astype(np.float64)
+    v = target.astype(np.float64)
     change, k = 1.0, 0
     while change > tol and k < max_iterations:
         nxt = np.minimum.reduceat(m @ v, starts) if m.shape[0] else v
-        nxt[accept] = 1.0
+        nxt[target] = 1.0
         change = float(np.max(nxt - v)) if v.size else 0.0
         v, k = nxt, k + 1
     allowance = 4.0 * np.finfo(np.float64).eps * (k + 1)
-    return SensedBandValue(max(float(v[0]) - allowance, 0.0), change, k, chain.n_states)
+    return max(float(v[0]) - allowance, 0.0), change, k
 
 
 def write_sensed_band_chain(result: Any, path: str | os.PathLike[str], *,
