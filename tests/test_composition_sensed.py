@@ -47,8 +47,6 @@ NOT_SOLVED = {
                                   "what the robot observes",
     ("obligation", "then"): "only co-safe tasks are solved with constraints on what the "
                             "robot observes",
-    ("band", "constraint"): "with a law known only within a band",
-    ("band", "then"): "with a law known only within a band",
 }
 
 TOL = 1e-7
