@@ -84,3 +84,124 @@ def test_a_minimum_s_exported_chain_gives_its_complement_to_storm(tmp_path: Path
     assert bound == r.complement[0] and "complement" in said
     # the file's automaton is the complement's: "accept" marks the runs that fail
     assert abs(storm_worst(path) - (1 - r.upper)) <= 1e-9
+
+
+CONSTRAINT = "P(F[0,2] A) <= 0.5"  # decided by step 2: no run is left undecided
+
+
+def randomised_by_nature(controller: Any, band: tuple[str, str], detect: str,
+                         won: Callable[[int, str, int | None], bool | None],
+                         pick: Callable[[list[Fraction]], Fraction]) -> Fraction:
+    """The probability that ``won(t, state, k)`` says True (None: not decided yet)
+    under a randomised observation-based controller (its plan's mixed decision after
+    each observation history), nature picking the hazard of each step among the band's
+    ends by ``pick`` after seeing the robot's draw, in exact arithmetic."""
+    plan = controller.plan
+    d, ends = Fraction(detect), (Fraction(band[0]), Fraction(band[1]))
+
+    def value(t: int, state: str, k: int | None, reported: bool, memory: Any) -> Fraction:
+        verdict = won(t, state, k)
+        if verdict is not None:
+            return Fraction(int(verdict))
+        decision = plan.decision(state, memory)
+        assert not decision.lost and decision.stay == 0, "a stop or a stay: not expected"
+        weights = [Fraction(1)] if decision.weights is None else [
+            Fraction(float(w)) for w in decision.weights]
+        total = sum(weights)
+        out = Fraction(0)
+        for action, w in zip(decision.actions, weights, strict=True):
+            if w == 0:
+                continue
+            options = []
+            for h in (ends if k is None else (None,)):
+                v = Fraction(0)
+                for k2, pe in ([(t + 1, h), (None, 1 - h)] if k is None else [(k, 1)]):
+                    if pe == 0:
+                        continue
+                    told = ([(True, d), (False, 1 - d)] if k2 is not None and not reported
+                            else [(reported, Fraction(1))])
+                    for now, pr in told:
+                        seen = frozenset({"b"}) if now and not reported else frozenset()
+                        for nxt, pw in GAME.successors(state, action, frozenset()):
+                            after, _ = plan.follow(memory, nxt, seen, action)
+                            v += pe * pr * Fraction(str(pw)) * value(t + 1, nxt, k2, now,
+                                                                    after)
+                options.append(v)
+            out += w / total * pick(options)
+        return out
+
+    return value(0, GAME.initial, None, False, plan.start(GAME.initial))
+
+
+def _task(t: int, state: str, k: int | None) -> bool | None:
+    if k is not None and k <= t <= k + 1 and "A" in GAME.propositions(state):
+        return True
+    return False if (k is None and t >= 3) or (k is not None and t >= k + 1) else None
+
+
+def _early_a(t: int, state: str, k: int | None) -> bool | None:
+    if t <= 2 and "A" in GAME.propositions(state):
+        return True
+    return False if t >= 2 else None
+
+
+@pytest.fixture(scope="module")
+def constrained() -> Any:
+    return synthesize(model(("0.3", "0.6"), "0.6"), constraints=[CONSTRAINT])
+
+
+def test_a_constraint_holds_under_every_law_and_lower_is_the_worst_case(constrained) -> None:
+    """The returned controller's constraint value with nature making ``A`` by step 2
+    as likely as it can is within its bound, and the task's with nature against it is
+    ``lower``; both by the exact enumeration."""
+    r = constrained
+    assert r.route == "sensed-constrained" and r.bands and r.controller is not None
+    (v,) = r.constraints
+    assert v.holds
+    worst_a = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", _early_a, max)
+    assert worst_a <= Fraction(1, 2) and worst_a <= Fraction(v.bounds[1])
+    assert abs(worst_a - Fraction(v.bounds[1])) <= Fraction(1, 10**8)
+    task = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", _task, min)
+    assert abs(task - Fraction(r.lower)) <= Fraction(1, 10**9) and r.lower <= r.upper
+    # the robot that sees the event, under the same band and constraint: no better
+    seen = synthesize(Model.from_game(GAME, SPEC, distributions={"mu": from_table(
+        {"geometric": [0.3, 0.6]}, "mu")}), constraints=[CONSTRAINT])
+    assert r.lower <= seen.upper + 1e-9
+
+
+@needs_storm
+def test_storm_on_the_constrained_interval_chain(constrained, tmp_path: Path) -> None:
+    """Storm's robust check of the exported file: ``Pmin [F "accept"]`` (uncertainty
+    MINIMIZE) is ``lower``, ``Pmax [F "c1"]`` (MAXIMIZE) the constraint's worst case."""
+    import stormpy
+    from test_band_chain import storm_worst
+
+    from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
+
+    r = constrained
+    path = write_sensed_band_chain(r, tmp_path / "c.drn")
+    assert abs(storm_worst(path) - r.lower) <= 1e-9
+    chain = stormpy.build_model_from_drn[stormpy.Interval](str(path))
+    env = stormpy.Environment()
+    env.solver().min_max().precision = stormpy.Rational("1/1000000000000")
+    got = stormpy.model_checking(
+        chain, stormpy.parse_properties('Pmax=? [F "c1"]')[0], environment=env,
+        uncertainty_resolution_mode=stormpy.UncertaintyResolutionMode.MAXIMIZE)
+    worst = float(got.get_value(chain.initial_states[0]))
+    (v,) = r.constraints
+    assert worst <= v.bounds[1] + 1e-12 and abs(worst - v.bounds[1]) <= 1e-8
+
+
+def test_no_controller_meeting_the_constraint_under_every_law_is_failed() -> None:
+    """``P(task) >= 0.44``: met at each of the band's constant laws (the sensed optimum
+    at the low end is 0.4448, by the expectimax of tests/test_sensed_band.py's last
+    tests and the route alike), but the candidates' worst case over the band is below
+    it: status failed, no controller, no constraint said to hold, and the answer says
+    so rather than return a controller meeting it at some laws only."""
+    r = synthesize(model(("0.3", "0.6"), "0.6"),
+                   constraints=["P(F[0,3] (b & F[0,1] A)) >= 0.44"])
+    assert str(r.status) == "failed" and r.controller is None and r.lower != r.lower
+    assert not any(v.holds for v in r.constraints)
+    assert "under every law of the band" in r.part.message
+    low = synthesize(model(("0.3", "0.3"), "0.6"))  # the band's low end as a point law
+    assert low.lower >= 0.44
