@@ -205,3 +205,24 @@ def test_no_controller_meeting_the_constraint_under_every_law_is_failed() -> Non
     assert "under every law of the band" in r.part.message
     low = synthesize(model(("0.3", "0.3"), "0.6"))  # the band's low end as a point law
     assert low.lower >= 0.44
+
+
+def test_the_interval_chain_too_large_is_stopped_before_its_unfolding() -> None:
+    """A budget that the information-state product fits but the controller's interval
+    chain cannot: stopped from the product's count (a lower bound on the chain's
+    states), before the chain is unfolded, naming that count; the count is at most the
+    states of the chain unfolded under a budget it fits."""
+    import re
+
+    from test_composition_sensed import _model
+
+    from mitld_lp.util.memory import ProductTooLarge
+
+    full = synthesize(_model("safety", "band", 0.6, "none"))
+    chain, product = full.part.worst.n_states, full.mdp.n_states
+    assert product < chain
+    budget = (product + chain) // 2
+    with pytest.raises(ProductTooLarge, match="at least") as err:
+        synthesize(_model("safety", "band", 0.6, "none"), max_states=budget)
+    floor = int(re.search(r"at least ([\d,]+) states", str(err.value))[1].replace(",", ""))
+    assert budget < floor <= chain

@@ -143,7 +143,8 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
                ) -> tuple[Result, Any]:
     """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
     ``built``) and its controller's worst case over the band."""
-    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+    from mitld_lp.running.sensed_band_chain import chain_floor, sensed_band_chain_of, worst_case
+    from mitld_lp.util.memory import ProductTooLarge
 
     if laws is not None:
         model = dataclasses.replace(posed.model, distributions=MappingProxyType(laws))
@@ -153,7 +154,15 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
     point = solve_sensed(posed, built)
     if point.controller is None:
         return point, None
-    chain = sensed_band_chain_of(point, max_states=posed.settings.max_states)
+    budget = posed.settings.max_states
+    floor, reached = chain_floor(point.mdp, point.part.lower_model.policy, point.dta)
+    if budget is not None and floor > budget:  # before the unfolding, from the product
+        raise ProductTooLarge(
+            f"the sensed controller's interval chain has at least {floor:,} states (the "
+            f"hypotheses of the {reached:,} information states it reaches, each a truth "
+            f"the chain holds), more than {budget:,} (max_states); raise max_states, "
+            "loosen epsilon, or shrink the model")
+    chain = sensed_band_chain_of(point, max_states=budget)
     return point, worst_case(chain)
 
 

@@ -38,7 +38,8 @@ from mitld_lp.files import write as files
 from mitld_lp.running.band_chain import BAND_PROPERTY, BandChain, band_chain_drn
 from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
-__all__ = ["SensedBandValue", "NatureMax", "is_sensed_band", "nature_max", "sensed_band_chain",
+__all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
+           "sensed_band_chain",
            "sensed_band_chain_of", "sensed_band_unfolding", "sensed_band_unfolding_of",
            "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
            "BAND_PROPERTY"]
@@ -112,6 +113,34 @@ def sensed_band_unfolding(game: Any, dta: Any, sta: Any, sensors: Any, controlle
     np.cumsum([len(h) for h in choices], out=groups[1:])
     return (BandChain(matrix, vals.copy(), groups, names, chain.labels, chain.valuations,
                       chain.origin), chain.rewards)
+
+
+def chain_floor(mdp: Any, policy: np.ndarray, dta: Any) -> tuple[int, int]:
+    """A lower bound on the states of the interval chain of the controller of ``policy``
+    (a choice row per state, -1 where none) on the information-state product ``mdp`` of
+    the automaton ``dta``, from the product alone (before the chain is unfolded): every
+    information state the policy reaches holds hypotheses of positive weight, each a
+    truth the chain reaches at some law of the band; those with the same automaton state
+    (not an end) and the same events still pending are one.  Returns the bound and the
+    information states reached."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from mitld_lp.sensing.belief import NOT_YET
+
+    n = mdp.n_states
+    chosen = np.asarray(policy, dtype=np.int64)
+    at = np.flatnonzero(chosen >= 0)
+    rows = sp.csr_array(mdp.matrix[chosen[at]])
+    coo = rows.tocoo()
+    graph = sp.csr_array((np.ones(coo.nnz), (at[coo.row], coo.col)), shape=(n, n))
+    reached = breadth_first_order(graph, int(mdp.initial), return_predecessors=False)
+    ends = {dta.accepting, dta.rejecting}
+    truths = 0
+    for i in reached.tolist():
+        hypotheses = getattr(mdp.states[i], "hypotheses", ())
+        truths += len({(q, tuple(k == NOT_YET for k in times)) for times, q in hypotheses
+                       if q not in ends})
+    return truths, int(reached.size)
 
 
 def sensed_band_chain_of(result: Any, controller: Any = None,
