@@ -145,13 +145,21 @@ class SensedBandConstrainedRoute(Route):
             and posed.robust
 
     def refusal(self, posed: Posed) -> list[str]:
-        # the sensed-constrained route's own conditions at a point law (the task's class,
-        # the objective, the sensors'); the band is this route's
-        refused = SensedConstrainedRoute().refusal(replace(posed, robust=False))
+        from mitld_lp.problem import band_text, complement_class
+
+        # the sensed-constrained route's own conditions at a point law for the task
+        # maximised (its class, the sensors'); the band, and a minimum with it, are this
+        # route's
+        asked = replace(posed, robust=False)
         if posed.minimise:
-            refused.append("objective min with constraints, sensors that miss events and a "
-                           "law known only within a band: not solved (the worst case is "
-                           "judged for a maximised task)")
+            asked = replace(asked, fragment=complement_class(posed.fragment),
+                            problem=replace(posed.problem, objective="max"))
+        refused = SensedConstrainedRoute().refusal(asked)
+        if posed.minimise:
+            refused.append(f"objective min with constraints, sensors that miss events and "
+                           f"a law known only within a band ({band_text(posed.model)}): not "
+                           "solved (the worst case over the band is judged for a maximised "
+                           "task); give the event a point law or maximise")
         return refused
 
     def build(self, posed: Posed, progress: bool | None = None) -> Any:
