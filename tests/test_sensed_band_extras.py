@@ -226,3 +226,30 @@ def test_the_interval_chain_too_large_is_stopped_before_its_unfolding() -> None:
         synthesize(_model("safety", "band", 0.6, "none"), max_states=budget)
     floor = int(re.search(r"at least ([\d,]+) states", str(err.value))[1].replace(",", ""))
     assert budget < floor <= chain
+
+
+@needs_storm
+def test_a_mixed_first_step_gives_nature_a_corner_per_action(tmp_path: Path) -> None:
+    """``P(F[0,1] A) >= 0.5``: the robot must draw between going and holding at the
+    first step, with the bus's band open; the chain gives nature a corner for each
+    action drawn (choices named ``act/go:b=lo/hold:b=hi``), and its worst cases are the
+    enumeration's (nature choosing after the draw) and Storm's."""
+    from test_band_chain import storm_worst
+
+    from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
+
+    def early(t: int, state: str, k: int | None) -> bool | None:
+        if t <= 1 and "A" in GAME.propositions(state):
+            return True
+        return False if t >= 1 else None
+
+    r = synthesize(model(("0.3", "0.6"), "0.6"), constraints=["P(F[0,1] A) >= 0.5"])
+    (v,) = r.constraints
+    assert v.holds and r.controller is not None
+    path = write_sensed_band_chain(r, tmp_path / "c.drn")
+    assert "go:b=lo/hold:b=hi" in path.read_text() or "hold:b=hi/go:b=lo" in path.read_text()
+    task = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", _task, min)
+    assert abs(task - Fraction(r.lower)) <= Fraction(1, 10**9)
+    assert abs(storm_worst(path) - r.lower) <= 1e-9
+    reach = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", early, min)
+    assert reach >= Fraction(1, 2) and abs(reach - Fraction(v.bounds[0])) <= Fraction(1, 10**9)
