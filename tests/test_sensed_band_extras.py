@@ -253,3 +253,19 @@ def test_a_mixed_first_step_gives_nature_a_corner_per_action(tmp_path: Path) -> 
     assert abs(storm_worst(path) - r.lower) <= 1e-9
     reach = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", early, min)
     assert reach >= Fraction(1, 2) and abs(reach - Fraction(v.bounds[0])) <= Fraction(1, 10**9)
+
+
+def test_the_trade_off_curve_s_end_point_is_the_worst_case_not_the_middle_law() -> None:
+    """``synthesize_constrained`` without constraints (the trade-off curve's end point):
+    the band's worst case of its controller (the enumeration's), within the sensed band
+    route's bracket, not the optimum at the band's middle law (0.589 here)."""
+    from mitld_lp.synthesis import synthesize_constrained
+
+    r = synthesize_constrained(model(("0.3", "0.6"), "0.6"), [])
+    assert r.bands and r.controller is not None
+    worst = randomised_by_nature(r.controller, ("0.3", "0.6"), "0.6", _task, min)
+    assert abs(worst - Fraction(r.lower)) <= Fraction(1, 10**9)
+    alone = synthesize(model(("0.3", "0.6"), "0.6"))
+    assert r.lower <= alone.upper + 1e-12 and alone.lower <= r.upper + 1e-12
+    middle = synthesize(model(("0.45", "0.45"), "0.6"))
+    assert r.upper < middle.lower

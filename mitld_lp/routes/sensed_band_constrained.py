@@ -134,15 +134,20 @@ def judge(result: Result, constraints: tuple[Any, ...],
 
 class SensedBandConstrainedRoute(Route):
     """Constraints or ``then`` with a sensor that misses its event and a band (module
-    docs): the ``sensed-constrained`` route's controllers judged over the band."""
+    docs): the ``sensed-constrained`` route's controllers judged over the band.
+    ``every``: it claims such problems without constraints too (the trade-off curve's
+    end points, which the sensed constrained route would answer at the middle law)."""
 
     name = "sensed-constrained"
     takes_constraints = True
     observation_based = True
 
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
     def claims(self, posed: Posed) -> bool:
-        return bool(partial(posed.model.sensors)) and posed.problem.constrained \
-            and posed.robust
+        return bool(partial(posed.model.sensors)) and posed.robust \
+            and (posed.problem.constrained or self.every)
 
     def refusal(self, posed: Posed) -> list[str]:
         from mitld_lp.problem import band_text, complement_class
