@@ -218,7 +218,10 @@ def test_the_interval_chain_too_large_is_stopped_before_its_unfolding() -> None:
 
     from mitld_lp.util.memory import ProductTooLarge
 
-    full = synthesize(_model("safety", "band", 0.6, "none"))
+    # the middle law's controller alone (no time left for the bands' ends): the one the
+    # budget stops
+    full = synthesize(_model("safety", "band", 0.6, "none"), time_limit=1e-3)
+    assert list(full.part.point_uppers) == ["middle law"]
     chain, product = full.part.worst.n_states, full.mdp.n_states
     assert product < chain
     budget = (product + chain) // 2

@@ -222,8 +222,10 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
     timed = _within(posed, t0, limit, "the fully observed robust optimum")
     full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
     for label, laws in end_laws(posed.model.distributions):
-        if _gap(chosen[1], (*uppers.values(), full_upper), s.precision)[-1]:
-            break  # closed already: no other law's controller or bound can do better
+        _, lower_now, width_now = _gap(chosen[1], (*uppers.values(), full_upper),
+                                               s.precision)[:3]
+        if width_now <= s.precision * max(lower_now, 0.0):
+            break  # closed already, truncation too: no other law's controller does better
         timed = _within(posed, t0, limit, label)
         if timed is None:
             continue
