@@ -200,7 +200,7 @@ def _gap(worst: Any, uppers: tuple[float, ...], precision: float
     width = upper - lower
     agree = worst.lower <= upper + precision * max(upper, 0.0)
     won = worst.truncated_won
-    cut = min(max(won - lower, 0.0), width) if won == won else 0.0
+    cut = float(min(max(won - lower, 0.0), width)) if won == won else 0.0
     return upper, lower, width, cut, agree, agree and width - cut <= precision * max(lower, 0.0)
 
 

@@ -269,7 +269,7 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
     name, r, j = max(good, key=lambda t: t[2].lower)
     lower = float(min(j.lower, upper))
     width = upper - lower
-    cut = min(max(j.truncated_won - lower, 0.0), width)
+    cut = float(min(max(j.truncated_won - lower, 0.0), width))
     closed = width - cut <= s.precision * max(lower, 0.0)
     said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
     detail = (f"lower {lower!r}: the worst case over the band of the sensed-constrained "
