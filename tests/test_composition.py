@@ -434,8 +434,8 @@ def test_a_minimum_of_zero_with_a_constraint_is_certified_as_zero() -> None:
     """min P(G (b -> F[0,2] goal)) s.t. P(F puddle) <= 0.2 on a slippery 3x2 grid: the
     unconstrained minimum is 0 (the plain route, on the task's own automaton), so the
     constrained one is at least 0, and the returned policy's value is 0 (the
-    constrained route's exact evaluation of its chain).  The constrained route reads the minimum back from
-    the complement's maximum, whose LP upper bound is 1 + 2.4e-11: the bracket was
+    constrained route's exact evaluation of its chain).  The constrained route reads the
+    minimum back from the complement's maximum, whose LP upper bound is 1 + 2.4e-11: the bracket was
     [-2.35e-11, 0], outside [0, 1] and failing the precision check (no relative width
     holds a value of 0)."""
     world = GridWorld.make(3, 2, start=(0, 0), slip=0.2,

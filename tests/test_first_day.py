@@ -20,14 +20,17 @@ BUS = MODELS / "bus_grid.toml"
 
 #: Features each refused with sensors that miss events, in one model file (each its
 #: replacements and the words its reason names): a false alarm, and a law known within a
-#: band (b1) with the objective min (a band alone with sensors, a constraint and the
-#: objective min with sensors, once refused too, are solved: tests/test_sensed_band.py,
+#: band (b1) with the objective min and a constraint (a band alone with sensors, with the
+#: objective min or a constraint, a constraint and the objective min with sensors, once
+#: refused too, are solved: tests/test_sensed_band.py, tests/test_sensed_band_extras.py,
 #: tests/test_sensed_constrained.py, tests/test_sensing_tasks.py).
 FOUR = {
     "false alarm": ((("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }"),),
                     "sensors.b2.false_alarm = 0.1"),
-    "band, min": ((("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }"),
-                   ("spec = ", 'objective = "min"\nspec = ')), "b1 ~ geometric([0.7, 0.9])"),
+    "band, min, constraint": (
+        (("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }"),
+         ("spec = ", 'objective = "min"\nconstraints = ["P(F A) <= 0.9"]\nspec = ')),
+        "b1 ~ geometric([0.7, 0.9])"),
 }
 
 

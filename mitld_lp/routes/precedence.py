@@ -13,12 +13,14 @@ from mitld_lp.routes.robust import RobustRoute
 from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import SensedRoute
+from mitld_lp.routes.sensed_band_constrained import SensedBandConstrainedRoute
 from mitld_lp.routes.sensed_constrained import SensedConstrainedRoute
 
 __all__ = ["ROUTES", "LP"]
 
 #: Every route, in precedence.
 ROUTES: list[Route] = [
+    SensedBandConstrainedRoute(),  # constraints or then with such a sensor and a band
     SensedConstrainedRoute(),  # constraints or then with such a sensor
     SensedRoute(),  # a sensor that misses its event: what the robot observes
     RobustConstrainedRoute(),  # constraints and a band
@@ -29,6 +31,7 @@ ROUTES: list[Route] = [
 
 #: The constrained LP's routes, claiming a problem without constraints too (the
 #: trade-off curve's end points, :func:`mitld_lp.synthesis.synthesize_constrained`).
-LP: tuple[Route, ...] = (SensedConstrainedRoute(every=True),
+LP: tuple[Route, ...] = (SensedBandConstrainedRoute(every=True),
+                         SensedConstrainedRoute(every=True),
                          RobustConstrainedRoute(every=True),
                          ConstrainedRoute(every=True))

@@ -23,8 +23,8 @@ __all__ = ["SensedRoute", "sensed_refusals"]
 class SensedRoute(Route):
     """Some event is reported by a sensor that misses it (``detect < 1``): every task
     class, either objective, laws that may never happen; point laws, no constraints
-    (:mod:`mitld_lp.routes.sensed_solve`), and for a maximum a law known within a band
-    (the worst case over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
+    (:mod:`mitld_lp.routes.sensed_solve`), and a law known within a band (the worst case
+    over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
@@ -53,8 +53,10 @@ class SensedRoute(Route):
         t0 = time.perf_counter()
         dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
         # a minimum as the plain route poses it: a co-safe task minimised on its own
-        # automaton, any other as its complement's maximum read back
-        direct = posed.minimise and reaching(dta)
+        # automaton, any other as its complement's maximum read back; with a band every
+        # one as its complement's maximum (the robust route's reading, nature minimising
+        # it: mitld_lp.routes.sensed_band)
+        direct = posed.minimise and reaching(dta) and not posed.robust
         if posed.minimise and not direct:
             dta = dta.complement()
         t1 = time.perf_counter()
@@ -108,7 +110,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
 def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[Any]
                   ) -> list[str]:
     """Why sensors with a law known only within a band cannot be solved as posed: the
-    worst case over the band is solved for a maximum without constraints
+    worst case over the band is solved for either objective without constraints
     (:mod:`mitld_lp.routes.sensed_band`)."""
     bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
                       if d.is_ambiguous)
@@ -117,8 +119,4 @@ def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[A
         return [f"{with_} and constraints: a controller that acts on observations and "
                 "meets the constraints under every law of the band is not solved; give "
                 "the event a point law"]
-    if objective == "min":
-        return [f"{with_} and objective = \"min\": the worst case of a minimum over the "
-                "band for an observation-based controller is not solved; give the event a "
-                "point law"]
     return []

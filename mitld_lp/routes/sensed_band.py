@@ -20,9 +20,18 @@ it gives ``lower``.
 policies of the worst case: the sensed optimum's ``upper`` at each of those laws (nature
 may play that law at every step) and the fully observed robust optimum's ``upper``
 (:mod:`mitld_lp.routes.robust`; an observation-based policy is a full-information one).
-The answer is certified when ``upper - lower`` is within the precision (relative to
-``lower``, as every route's) and both solves certified; otherwise the check
-``worst case over the band`` says the gap, both ends still sound.
+The answer is certified when ``upper - lower``, less the truncation's part of it, is
+within the precision (relative to ``lower``, as every route's) and both solves
+certified; otherwise the check ``worst case over the band`` says the gap, both ends
+still sound.  The truncation's part (reported apart in ``width``, as every route reports
+it): the controller's worst case with the runs past a truncation point counted won (the
+upper bounds' reading) above ``lower``.
+
+``objective = "min"``: as on the robust route, the complement is maximised (the sensed
+route builds the complement's automaton under a band; nature then makes the task as
+likely as it can) and each bound read back: ``upper`` is the returned controller's worst
+case, ``lower`` the sound bound, ``complement`` the complement's bracket; the exported
+chain is the complement's, Storm's robust check of it gives ``1 - upper``.
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ from mitld_lp.result import Result
 from mitld_lp.routes.sensed_solve import SensedPart, solve_sensed
 from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.certify import float_up
+from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["SensedBandPart", "end_laws", "solve_sensed_band"]
 
@@ -99,7 +109,7 @@ def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
         log.info("fully observed robust bound not used: %s", exc)
         return float("nan"), ()
     failed = tuple(c for c in full.checks if not c.passed)
-    return (full.upper if full.controller is not None else float("nan")), failed
+    return (_solved(full)[1] if full.controller is not None else float("nan")), failed
 
 
 def end_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]]]:
@@ -133,7 +143,8 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
                ) -> tuple[Result, Any]:
     """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
     ``built``) and its controller's worst case over the band."""
-    from mitld_lp.running.sensed_band_chain import sensed_band_chain_of, worst_case
+    from mitld_lp.running.sensed_band_chain import chain_floor, sensed_band_chain_of, worst_case
+    from mitld_lp.util.memory import ProductTooLarge
 
     if laws is not None:
         model = dataclasses.replace(posed.model, distributions=MappingProxyType(laws))
@@ -143,7 +154,15 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
     point = solve_sensed(posed, built)
     if point.controller is None:
         return point, None
-    chain = sensed_band_chain_of(point, max_states=posed.settings.max_states)
+    budget = posed.settings.max_states
+    floor, reached = chain_floor(point.mdp, point.part.lower_model.policy, point.dta)
+    if budget is not None and floor > budget:  # before the unfolding, from the product
+        raise ProductTooLarge(
+            f"the sensed controller's interval chain has at least {floor:,} states (the "
+            f"hypotheses of the {reached:,} information states it reaches, each a truth "
+            f"the chain holds), more than {budget:,} (max_states); raise max_states, "
+            "loosen epsilon, or shrink the model")
+    chain = sensed_band_chain_of(point, max_states=budget)
     return point, worst_case(chain)
 
 
@@ -159,63 +178,101 @@ def _within(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | 
     return replace(posed, settings=replace(posed.settings, time_limit=left))
 
 
+def _solved(r: Result) -> tuple[float, float]:
+    """``r``'s bracket in the solved automaton's terms: the complement's for a minimum
+    read back from it (every minimum with a band, as on the robust route)."""
+    if r.complemented:
+        return r.complement if r.complement is not None else (1.0 - r.upper, 1.0 - r.lower)
+    return r.lower, r.upper
+
+
+def _gap(worst: Any, uppers: tuple[float, ...], precision: float
+         ) -> tuple[float, float, float, float, bool, bool]:
+    """The bracket of the controller's worst case ``worst`` under the least of the sound
+    upper bounds ``uppers`` (NaN: not given): ``upper``, ``lower``, the width, the
+    truncation's part of it (the controller's worst case with the runs past a truncation
+    point counted won, the upper bounds' reading, above its lower: reported apart, as
+    every route reports it), whether the chain agrees with the bounds (its worst case
+    above a sound upper bound would mean they disagree; none is expected) and whether
+    the rest of the gap, the band's, is within ``precision`` relative to ``lower``."""
+    upper = min(u for u in (*uppers, 1.0) if u == u)
+    lower = float(min(worst.lower, upper))
+    width = upper - lower
+    agree = worst.lower <= upper + precision * max(upper, 0.0)
+    won = worst.truncated_won
+    cut = float(min(max(won - lower, 0.0), width)) if won == won else 0.0
+    return upper, lower, width, cut, agree, agree and width - cut <= precision * max(lower, 0.0)
+
+
 def solve_sensed_band(posed: Posed, built: Built) -> Result:
     """Solve a problem with sensed events and a band (module docs) on its built
-    information-state product (the middle law's beliefs), and at the bands' ends."""
+    information-state product (the middle law's beliefs), and at the bands' ends.  A
+    minimum is its complement's maximum (the sensed route builds the complement's
+    automaton under a band), each bound read back: ``upper`` the controller's worst case
+    (the most probable the task is under some law), ``lower`` the sound bound."""
     t0 = time.perf_counter()
     point, worst = _candidate(posed, built, None)
     bands = {e: str(c.distribution) for e, c in sorted(point.sta.clocks.items())
              if c.distribution.is_ambiguous}
     if worst is None:  # no controller: the point answer's status says why
         return replace(point, bands=bands)
-    uppers = {"middle law": point.upper}
+    uppers = {"middle law": _solved(point)[1]}
     chosen, name = (point, worst), "middle law"
-    limit = posed.settings.time_limit
+    limit, s = posed.settings.time_limit, posed.settings
+    timed = _within(posed, t0, limit, "the fully observed robust optimum")
+    full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
     for label, laws in end_laws(posed.model.distributions):
+        _, lower_now, width_now = _gap(chosen[1], (*uppers.values(), full_upper),
+                                               s.precision)[:3]
+        if width_now <= s.precision * max(lower_now, 0.0):
+            break  # closed already, truncation too: no other law's controller does better
         timed = _within(posed, t0, limit, label)
         if timed is None:
             continue
         other, w = _candidate(timed, None, laws)
         if w is None:  # no controller there (a time limit): its bound is not used
             continue
-        uppers[label] = other.upper
+        uppers[label] = _solved(other)[1]
         if w.lower > chosen[1].lower:
             chosen, name = (other, w), label
     point, worst = chosen
-    timed = _within(posed, t0, limit, "the fully observed robust optimum")
-    full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
-    upper = min(u for u in (*uppers.values(), full_upper, 1.0) if u == u)  # NaN: not given
-    lower = float(min(worst.lower, upper))
-    width = upper - lower
-    s = posed.settings
-    # the chain's worst case above a sound upper bound would mean the chain and the
-    # bounds disagree (none is expected): the answer is then not certified
-    agree = worst.lower <= upper + s.precision * max(upper, 0.0)
-    closed = agree and width <= s.precision * max(lower, 0.0)
+    upper, lower, width, cut, agree, closed = _gap(worst, (*uppers.values(), full_upper),
+                                                   s.precision)
     said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
-    detail = (f"lower {lower!r}: the worst case over the band of the sensed optimum at the "
-              f"{name} on its chain ({worst.n_states} states, {worst.iterations} "
-              f"iterations, last change {worst.last_change:.1e}); upper {upper!r}: the "
-              f"least of the sensed optima's upper bounds ({said}) and the fully observed "
-              f"robust optimum's ({full_upper!r}); gap {width:.3g} "
+    terms = "the complement's " if point.complemented else ""
+    detail = (f"{terms}lower {lower!r}: the worst case over the band of the sensed optimum "
+              f"at the {name} on its chain ({worst.n_states} states, {worst.iterations} "
+              f"iterations, last change {worst.last_change:.1e}); {terms}upper {upper!r}: "
+              f"the least of the sensed optima's upper bounds ({said}) and the fully "
+              f"observed robust optimum's ({full_upper!r}); gap {width:.3g}, of which "
+              f"{cut:.3g} the truncation's (runs past a truncation point counted won, the "
+              f"worst case is {worst.truncated_won!r}); the rest "
               + ("within" if closed else "beyond") + f" the precision {s.precision:g}"
               + ("" if agree else f"; the chain's worst case {worst.lower!r} is above upper"))
     solver = float(point.width.get("solver", 0.0))
-    widths = {"total": width, "solver": solver, "band": max(width - solver, 0.0)}
+    widths = {"total": width, "solver": solver, "truncation": cut,
+              "band": max(width - cut - solver, 0.0)}
     check = Check("worst case over the band", closed, detail)
     checks = (*point.checks, *full_failed, check)
+    bracket: tuple[float, float] = (lower, float_up(upper))
+    complement = None
+    if point.complemented:  # read back: Pmin(task) = 1 - Pmax(not task)
+        complement, bracket = bracket, one_minus(*bracket)
+    what = ("the most probable the task is under some law of the band"
+            if point.complemented else "what the returned controller guarantees under "
+            "every law of the band")
     message = ("" if closed else
                f"not certified: the worst case over the band of an observation-based "
-               f"controller is in [{lower!r}, {upper!r}] (gap {width:.3g}); both ends "
-               "sound: lower is what the returned controller guarantees under every law "
-               "of the band")
+               f"controller is in [{bracket[0]!r}, {bracket[1]!r}] (gap {width:.3g}); both "
+               f"ends sound: {'upper' if point.complemented else 'lower'} is {what}")
     part = SensedBandPart(point.part.lower_model, point.part.upper_model,
                           point.part.sensors, point.part.belief, worst=worst,
                           nominal_upper=uppers["middle law"], point_uppers=uppers,
                           chosen_at=name, full_upper=full_upper, message=message)
-    result = replace(point, model=posed.model, lower=lower, upper=float_up(upper),
-                     value=lower, certified=all(c.passed for c in checks), checks=checks,
-                     bands=bands, part=part, width=widths,
+    result = replace(point, model=posed.model, lower=bracket[0], upper=bracket[1],
+                     value=bracket[1] if point.complemented else bracket[0],
+                     complement=complement, certified=all(c.passed for c in checks),
+                     checks=checks, bands=bands, part=part, width=widths,
                      timings={**point.timings, "band": time.perf_counter() - t0})
     log.info("sensed synthesis over the band: %s, certified=%s",
              bracket_text(result.lower, result.upper), result.certified)

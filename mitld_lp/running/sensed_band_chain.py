@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import logging
 import os
+import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,8 +38,11 @@ from mitld_lp.files import write as files
 from mitld_lp.running.band_chain import BAND_PROPERTY, BandChain, band_chain_drn
 from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
-__all__ = ["SensedBandValue", "is_sensed_band", "sensed_band_chain", "sensed_band_chain_of",
-           "sensed_band_claim", "worst_case", "write_sensed_band_chain", "BAND_PROPERTY"]
+__all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
+           "sensed_band_chain",
+           "sensed_band_chain_of", "sensed_band_unfolding", "sensed_band_unfolding_of",
+           "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
+           "BAND_PROPERTY"]
 
 log = logging.getLogger(__name__)
 
@@ -46,12 +51,16 @@ log = logging.getLogger(__name__)
 class SensedBandValue:
     """The controller's worst case over the band on its chain: ``lower`` a sound lower
     bound (the iterate less the rounding allowance), ``last_change`` the iteration's
-    last change (how far from converged it stopped), ``iterations``, ``n_states``."""
+    last change (how far from converged it stopped), ``iterations``, ``n_states``;
+    ``truncated_won`` the same worst case with the runs past a truncation point counted
+    as reaching ``accept`` (the upper truncation model's reading: how much of the gap to
+    an upper bound is the truncation's, not the band's)."""
 
     lower: float
     last_change: float
     iterations: int
     n_states: int
+    truncated_won: float = float("nan")
 
 
 def is_sensed_band(result: Any) -> bool:
@@ -63,17 +72,33 @@ def is_sensed_band(result: Any) -> bool:
 def sensed_band_claim(result: Any) -> tuple[float, str]:
     """What Storm's check of the file gives against ``result``'s bracket: the bound and
     the sentence the command line prints."""
-    return result.lower, (f"{BAND_PROPERTY} with uncertainty MINIMIZE >= lower = "
-                          f"{result.lower!r}, the controller's worst case over the bands")
+    how = f"{BAND_PROPERTY} with uncertainty MINIMIZE"
+    if result.complemented:  # the complement's automaton: "accept" marks failing runs
+        bound = result.complement[0] if result.complement is not None else 1 - result.upper
+        return bound, (f"{how} >= the complement's lower = {bound!r}: for a minimised "
+                       "task \"accept\" marks the runs that fail it (1 - it is upper, the "
+                       "controller's worst case over the bands)")
+    return result.lower, (f"{how} >= lower = {result.lower!r}, the controller's worst "
+                          "case over the bands")
 
 
 def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
-                      max_states: int | None = None) -> BandChain:
+                      max_states: int | None = None, *, ends: Any = None) -> BandChain:
     """The interval chain (module docs) of ``controller`` in ``game`` with the task's
     automaton ``dta``, the events' clocks ``sta`` (bands included) and the ``sensors``
-    (at most ``max_states`` states, else :class:`~mitld_lp.util.memory.ProductTooLarge`)."""
+    (at most ``max_states`` states, else :class:`~mitld_lp.util.memory.ProductTooLarge`);
+    ``ends``: a joint automaton's (:mod:`mitld_lp.running.sensed_joint`)."""
+    return sensed_band_unfolding(game, dta, sta, sensors, controller, max_states,
+                                 ends=ends)[0]
+
+
+def sensed_band_unfolding(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
+                          max_states: int | None = None, *, ends: Any = None
+                          ) -> tuple[BandChain, tuple[tuple[str, np.ndarray], ...]]:
+    """:func:`sensed_band_chain` and its reward models (a joint automaton's ``steps``
+    and ``cost``, the same for every corner: each state's)."""
     chain, choices = sensed_corner_unfolding(game, dta, sta, sensors, controller,
-                                             max_states)
+                                             max_states, ends=ends)
     rows = [row for here in choices for _, row in here]
     names = tuple(name for here in choices for name, _ in here)
     n = len(choices)
@@ -86,38 +111,208 @@ def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: A
     matrix = sp.csr_array((vals, cols, indptr), shape=(len(rows), n))
     groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum([len(h) for h in choices], out=groups[1:])
-    return BandChain(matrix, vals.copy(), groups, names, chain.labels, chain.valuations,
-                     chain.origin)
+    return (BandChain(matrix, vals.copy(), groups, names, chain.labels, chain.valuations,
+                      chain.origin), chain.rewards)
+
+
+def chain_floor(mdp: Any, policy: np.ndarray, dta: Any) -> tuple[int, int]:
+    """A lower bound on the states of the interval chain of the controller of ``policy``
+    (a choice row per state, -1 where none) on the information-state product ``mdp`` of
+    the automaton ``dta``, from the product alone (before the chain is unfolded): every
+    information state the policy reaches holds hypotheses of positive weight, each a
+    truth the chain reaches at some law of the band; those with the same automaton state
+    (not an end) and the same events still pending are one.  Returns the bound and the
+    information states reached."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from mitld_lp.sensing.belief import NOT_YET
+
+    n = mdp.n_states
+    chosen = np.asarray(policy, dtype=np.int64)
+    at = np.flatnonzero(chosen >= 0)
+    rows = sp.csr_array(mdp.matrix[chosen[at]])
+    coo = rows.tocoo()
+    graph = sp.csr_array((np.ones(coo.nnz), (at[coo.row], coo.col)), shape=(n, n))
+    reached = breadth_first_order(graph, int(mdp.initial), return_predecessors=False)
+    ends = {dta.accepting, dta.rejecting}
+    truths = 0
+    for i in reached.tolist():
+        hypotheses = getattr(mdp.states[i], "hypotheses", ())
+        truths += len({(q, tuple(k == NOT_YET for k in times)) for times, q in hypotheses
+                       if q not in ends})
+    return truths, int(reached.size)
 
 
 def sensed_band_chain_of(result: Any, controller: Any = None,
-                         max_states: int | None = None) -> BandChain:
+                         max_states: int | None = None, *,
+                         costs: Mapping[str, float] | None = None) -> BandChain:
     """The interval chain of a sensed answer whose laws include a band, under its
-    controller or ``controller`` (one of the same model), at most ``max_states``."""
+    controller or ``controller`` (one of the same model), at most ``max_states``; a
+    randomised controller's (constraints, ``then``) over the joint automaton, whose
+    labels ``c<i>`` mark each constraint's formula accepted (``costs``: the actions'
+    costs, default the model's)."""
+    return sensed_band_unfolding_of(result, controller, max_states, costs=costs)[0]
+
+
+def sensed_band_unfolding_of(result: Any, controller: Any = None,
+                             max_states: int | None = None, *,
+                             costs: Mapping[str, float] | None = None
+                             ) -> tuple[BandChain, tuple[tuple[str, np.ndarray], ...]]:
+    """:func:`sensed_band_chain_of` and its reward models."""
     c = controller if controller is not None else result.controller
     if c is None:
         raise ValueError(f"no controller to export: the synthesis is {result.status}")
-    return sensed_band_chain(result.model.game, result.dta, result.sta, result.sensors, c,
-                             max_states)
+    if getattr(result.part, "randomised", False):  # the joint automaton's ends
+        from mitld_lp.running.sensed_joint import joint_ends
+
+        ends = joint_ends(result.joint, [v.constraint for v in result.constraints],
+                          result.belief, result.model.costs if costs is None else costs)
+        return sensed_band_unfolding(result.model.game, result.joint.dta, result.sta,
+                                     result.sensors, c, max_states, ends=ends)
+    return sensed_band_unfolding(result.model.game, result.dta, result.sta, result.sensors,
+                                 c, max_states)
 
 
 def worst_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_000_000
                ) -> SensedBandValue:
     """``Pmin(F accept)`` of ``chain`` from its state 0, nature minimising over each
     state's choices: value iteration from below until no value changes by more than
-    ``tol`` (module docs)."""
+    ``tol`` (module docs); and ``Pmin(F (accept | truncated))`` the same way."""
     accept = chain.accepting()
+    truncated = np.array(["truncated" in x for x in chain.labels], dtype=bool)
+    low, change, k = _from_below(chain, accept, tol, max_iterations)
+    high = _from_below(chain, accept | truncated, tol, max_iterations)[0]
+    return SensedBandValue(low, change, k, chain.n_states, high)
+
+
+def reach_min(chain: BandChain, target: np.ndarray, *, tol: float = 1e-13,
+              max_iterations: int = 1_000_000) -> float:
+    """Nature's least probability of reaching ``target`` from state 0, a sound lower
+    bound (value iteration from below, less the floats' rounding allowance)."""
+    return _from_below(chain, target, tol, max_iterations)[0]
+
+
+@dataclass(frozen=True, slots=True)
+class NatureMax:
+    """Nature's greatest probability of reaching a target (or expected total reward)
+    from state 0: ``value`` its best strategy's (strategy improvement, each strategy's
+    chain solved exactly in floats), ``upper`` a sound upper bound (``value`` raised by a
+    margin and proven a super-solution of every corner's step: no strategy of nature
+    does better; 1 for a probability, infinity for a total where the proof fails),
+    ``proven`` whether it held, ``rounds`` the strategies tried."""
+
+    value: float
+    upper: float
+    proven: bool
+    rounds: int
+
+
+def nature_max(chain: BandChain, *, target: np.ndarray | None = None,
+               reward: np.ndarray | None = None, margin: float = 1e-12,
+               max_rounds: int = 200) -> NatureMax:
+    """Nature maximising, over each state's choices, the probability of reaching
+    ``target`` or (``reward`` given instead) the expected total reward from state 0
+    (:class:`NatureMax`).  Any vector at least every corner's one-step image (a
+    super-solution) bounds the least fixed point, the value, from above; the proof's
+    vector is the value raised by ``margin`` times nature's greatest expected number of
+    steps before the run is decided (each state then has a slack of ``margin`` over every
+    corner's step, which the floats' rounding does not eat)."""
+    n = chain.n_states
+    prob = target is not None
+    goal = np.asarray(target, dtype=bool) if prob else np.zeros(n, dtype=bool)
+    gain = np.zeros(n) if prob else np.asarray(reward, dtype=np.float64)
+    v, rounds = _strategy_value(chain, goal, gain, prob, max_rounds)
+    if not np.isfinite(v[0]):
+        return NatureMax(float("inf"), float("inf"), False, rounds)
+    m, groups = chain.matrix, chain.row_groups
+    owner = np.repeat(np.arange(n), np.diff(groups))
+    union = sp.csr_array((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape).tocoo()
+    reach = sp.csr_array((np.ones(union.nnz), (owner[union.row], union.col)), shape=(n, n))
+    live = _live(reach, goal if prob else gain > 0) & ~goal
+    # nature's greatest expected steps among the live states (each worth 1)
+    steps, _ = _strategy_value(chain, np.zeros(n, dtype=bool), live.astype(np.float64),
+                               False, max_rounds)
+    if not np.all(np.isfinite(steps[live])):
+        return NatureMax(float(v[0]), 1.0 if prob else float("inf"), False, rounds)
+    w = np.where(live, v + margin * (1.0 + steps), 0.0)
+    if prob:
+        w = np.minimum(w, 1.0)
+        w[goal] = 1.0
+    step = np.maximum.reduceat(m @ w + gain[owner], groups[:-1]) if m.shape[0] else w
+    free = live & (w < 1.0) if prob else live  # 1 bounds a probability by itself
+    proven = bool(np.all(w[free] >= step[free]))
+    upper = float(w[0]) if proven else (1.0 if prob else float("inf"))
+    return NatureMax(float(v[0]), upper, proven, rounds)
+
+
+def _live(rows: sp.csr_array, seeds: np.ndarray) -> np.ndarray:
+    """The states from which some state of ``seeds`` is reachable on ``rows``'s graph
+    (``seeds`` included)."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    back = sp.csr_array(rows.T)
+    live = np.zeros(rows.shape[0], dtype=bool)
+    for s0 in np.flatnonzero(seeds).tolist():
+        if not live[s0]:
+            live[breadth_first_order(back, s0, return_predecessors=False)] = True
+    return live
+
+
+def _strategy_value(chain: BandChain, goal: np.ndarray, gain: np.ndarray, prob: bool,
+                    max_rounds: int) -> tuple[np.ndarray, int]:
+    """Nature's best strategy's values by strategy improvement: each strategy's chain
+    solved exactly (in floats), improved where some corner does better by more than
+    1e-12; reaching ``goal`` (``prob``) or the total ``gain``; infinite where a
+    strategy keeps a reward for ever."""
+    from scipy.sparse.linalg import spsolve
+
+    m, groups, n = chain.matrix, chain.row_groups, chain.n_states
+    owner = np.repeat(np.arange(n), np.diff(groups))
+
+    def solve(rows: sp.csr_array) -> np.ndarray:
+        v = goal.astype(np.float64)
+        live = np.flatnonzero(_live(rows, goal if prob else gain > 0) & ~goal)
+        if live.size:
+            sub = sp.csc_array(sp.eye(live.size) - rows[live][:, live])
+            b = (rows[live][:, np.flatnonzero(goal)].sum(axis=1) if prob else gain[live])
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a singular system: a reward for ever
+                x = np.atleast_1d(spsolve(sub, np.asarray(b, dtype=np.float64).ravel()))
+            v[live] = np.where(np.isfinite(x) & (x >= -1e-12), np.maximum(x, 0.0), np.inf)
+        return v
+
+    strategy = groups[:-1].copy()
+    v, rounds = solve(sp.csr_array(m[strategy])), 1
+    while rounds < max_rounds and np.all(np.isfinite(v)):
+        q = m @ v + gain[owner]
+        better = strategy.copy()
+        for s in np.flatnonzero(np.diff(groups) > 1).tolist():
+            lo, hi = int(groups[s]), int(groups[s + 1])
+            k = lo + int(np.argmax(q[lo:hi]))
+            if q[k] > q[strategy[s]] + 1e-12 * (1.0 + abs(q[strategy[s]])):
+                better[s] = k
+        if np.array_equal(better, strategy):
+            break
+        strategy = better
+        v, rounds = solve(sp.csr_array(m[strategy])), rounds + 1
+    return v, rounds
+
+
+def _from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations: int
+                ) -> tuple[float, float, int]:
+    """Nature's least probability of reaching ``target`` from state 0, from below, less
+    the floats' rounding allowance; the last change; the iterations."""
     m = chain.matrix
     starts = chain.row_groups[:-1]
-    v = accept.astype(np.float64)
+    v = target.astype(np.float64)
     change, k = 1.0, 0
     while change > tol and k < max_iterations:
         nxt = np.minimum.reduceat(m @ v, starts) if m.shape[0] else v
-        nxt[accept] = 1.0
+        nxt[target] = 1.0
         change = float(np.max(nxt - v)) if v.size else 0.0
         v, k = nxt, k + 1
     allowance = 4.0 * np.finfo(np.float64).eps * (k + 1)
-    return SensedBandValue(max(float(v[0]) - allowance, 0.0), change, k, chain.n_states)
+    return max(float(v[0]) - allowance, 0.0), change, k
 
 
 def write_sensed_band_chain(result: Any, path: str | os.PathLike[str], *,

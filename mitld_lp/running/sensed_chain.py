@@ -374,18 +374,22 @@ def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int
 
 def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
                             sensors: Mapping[str, Sensor], controller: ControllerLike,
-                            max_states: int | None = None
+                            max_states: int | None = None, *, ends: Any = None
                             ) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
     """The chain of ``controller`` (a controller that acts on sensor reports) where some
     event's law is a band (``sta``'s clocks then give each step's hazard interval,
     :meth:`~mitld_lp.automata.sta.EventClock.band`): every state has one choice per
     corner of the box of the hazards of its pending events whose band is open at its
-    clock, nature's (:mod:`mitld_lp.running.sensed_band_chain`).  Returns the chain of
-    the union of those choices' supports (its labels, valuations and states) and each
+    clock, nature's (:mod:`mitld_lp.running.sensed_band_chain`); where a randomised
+    controller draws among several actions, one per corner for each action drawn
+    (nature sees the robot's action, docs/robust.md).  Returns the chain of the union of
+    those choices' supports (its labels, valuations, states and rewards) and each
     state's choices ``(name, row)``; past ``max_states`` states it stops
-    (:class:`~mitld_lp.util.memory.ProductTooLarge`)."""
+    (:class:`~mitld_lp.util.memory.ProductTooLarge`).  ``ends``: as for
+    :func:`sensed_chain` (a joint automaton's)."""
     plan, sensed = _plan_of(controller, sensors)
-    unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan, _TaskEnds(dta))
+    unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan,
+                                 ends or _TaskEnds(dta))
     unfolding.max_states = max_states
     return unfolding.corners()
 
@@ -395,6 +399,7 @@ class _CornerUnfolding(_Unfolding):
     time (``corner``: the hazard each open band event has in the step unfolded now)."""
 
     corner: dict[str, float]
+    per_action: dict[str | None, dict[str, float]]
     max_states: int | None = None
 
     def corners(self) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
@@ -415,10 +420,16 @@ class _CornerUnfolding(_Unfolding):
             bands = {a: self.sta.clocks[a].band(clock) for a in sorted(pending)}
             open_ = [a for a, (lo, hi) in bands.items() if lo < hi]
             here = []
-            for ends in itertools.product((0, 1), repeat=len(open_)):
-                self.corner = {a: bands[a][e] for a, e in zip(open_, ends, strict=True)}
-                name = "/".join(["act", *(f"{a}={('lo', 'hi')[e]}"
-                                          for a, e in zip(open_, ends, strict=True))])
+            boxes = list(itertools.product((0, 1), repeat=len(open_)))
+            drawn = self.drawn(node) if open_ else [None]
+            for pick in itertools.product(boxes, repeat=len(drawn)):
+                self.per_action = {act: {a: bands[a][e] for a, e in zip(open_, ends,
+                                                                         strict=True)}
+                                   for act, ends in zip(drawn, pick, strict=True)}
+                name = "/".join(["act", *(
+                    ("" if act is None else f"{act}:") + f"{a}={('lo', 'hi')[e]}"
+                    for act, ends in zip(drawn, pick, strict=True)
+                    for a, e in zip(open_, ends, strict=True))])
                 here.append((name, self.step(node)))
             choices.append(here)
         union: list[dict[int, float]] = []
@@ -429,6 +440,24 @@ class _CornerUnfolding(_Unfolding):
                     row[k] = max(row.get(k, 0.0), p)
             union.append(row)
         return self.record(union), choices
+
+    def drawn(self, node: tuple[Any, ...]) -> list[str | None]:
+        """The actions a randomised controller draws among at ``node`` when it draws
+        among several (nature's corner is then chosen for each); else ``[None]``: one
+        corner for the step, whatever the controller does."""
+        g, _, _, _, _, memory = node
+        if UNDECIDED not in self.plan.verdicts_at(memory):
+            return [None]
+        d = self.plan.decision(g, memory)
+        if d.lost or d.weights is None or not d.actions:
+            return [None]
+        acts = [a for a, x in zip(d.actions, d.weights, strict=True) if x > 0.0]
+        return acts if len(acts) > 1 else [None]
+
+    def moves(self, node: tuple[Any, ...], action: str, p_action: float,
+              row: dict[int, float]) -> None:
+        self.corner = self.per_action.get(action, self.per_action.get(None, {}))
+        super().moves(node, action, p_action, row)
 
     def events(self, pending: frozenset[str], clock: int
                ) -> list[tuple[frozenset[str], float]]:

@@ -1,0 +1,348 @@
+"""Constraints or ``then`` with sensors that miss their events and a law known only
+within a band: a randomised observation-based controller whose every constraint holds
+under every law of the band, with a sound bracket on its task value's worst case.
+
+Candidates: the ``sensed-constrained`` route's controller (:mod:`mitld_lp.routes.
+sensed_constrained`, its information-state LP) at the band's laws that
+:func:`mitld_lp.routes.sensed_band.end_laws` names (the middle law, every band at its
+low end, at its high end); where a candidate's constraint fails under some law, that law's
+LP once more with the constraint's bound tightened by what the band added
+(:data:`ROUNDS` times).
+
+Each candidate is judged on its interval chain (:mod:`mitld_lp.running.
+sensed_band_chain`: the truth and the controller's memory, the joint automaton of the
+task and the constraints' formulas, nature's corners as choices, nature seeing the
+robot's draw): the task's worst case from below (``lower``), each ``P(.) <= x`` and
+``E(.) <= x`` constraint's worst case from above (nature maximising, its strategy's
+value proven an upper bound by a super-solution, :func:`~mitld_lp.running.
+sensed_band_chain.nature_max`), each ``P(.) >= x`` one's from below.  A candidate whose
+constraint's worst case misses its bound is discarded; the best survivor by its task's
+worst case is returned.  If none survives, the status is ``failed``, no controller is
+returned and no constraint is said to hold (a policy meeting a constraint at some laws
+only is never returned as meeting it).
+
+``upper``: the least of the candidates' upper bounds at their laws, each from the LP with
+the problem's own bounds (a policy meeting the constraints under every law meets them at
+that one, and its worst case is at most its value there); a problem infeasible at one of
+those laws is infeasible under the band, and said so.  The answer is certified when
+``upper`` less the candidate's worst case with truncated runs counted won is within the
+precision (the rest is the truncation's, reported apart) and every check passed;
+otherwise the check ``worst case over the band`` says the gap, both ends sound.
+
+``then`` (``min-steps``/``min-cost``): each candidate is that law's lexicographic LP's
+policy; the returned one's expected steps (and cost) at the worst law of the band
+(nature maximising them), proven from above, are its ``steps`` (and ``secondary``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.checks import Check
+from mitld_lp.problem import Posed
+from mitld_lp.result import Result
+from mitld_lp.routes.constrained import ConstraintValue
+from mitld_lp.routes.route import Route
+from mitld_lp.routes.sensed_constrained import SensedConstrainedPart, SensedConstrainedRoute
+from mitld_lp.sensing.sensors import partial
+from mitld_lp.solvers.result import Status
+
+__all__ = ["SensedBandConstrainedRoute", "SensedBandConstrainedPart", "Judged", "judge",
+           "ROUNDS"]
+
+log = logging.getLogger(__name__)
+
+ROUNDS = 3
+"""How many times a law's LP is solved again with the bounds the band breaks tightened."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SensedBandConstrainedPart(SensedConstrainedPart):
+    """The ``sensed-constrained`` part of an answer with a band: the chosen law's, and
+    the band's bounds (``worst``: the chosen controller's :class:`Judged`)."""
+
+    worst: Any = None
+    chosen_at: str = "middle law"
+    point_uppers: Mapping[str, float] = field(default_factory=dict)
+    band_worst = True
+
+
+@dataclass(frozen=True, slots=True)
+class Judged:
+    """A candidate's worst case over the band on its interval chain: the task's
+    ``lower`` (and ``truncated_won``, its runs past a truncation point counted won),
+    each constraint's value with the bounds nature drives it to, whether all hold,
+    the expected steps and cost nature maximises (``(value, upper)``, NaN where not
+    asked), the chain's states."""
+
+    lower: float
+    truncated_won: float
+    values: tuple[ConstraintValue, ...]
+    steps: tuple[float, float]
+    cost: tuple[float, float]
+    n_states: int
+
+    @property
+    def holds(self) -> bool:
+        return all(v.holds for v in self.values)
+
+
+def judge(result: Result, constraints: tuple[Any, ...],
+          max_states: int | None = None) -> Judged:
+    """The worst case over the band of ``result``'s controller (module docs), against
+    the problem's ``constraints`` (``result``'s may be tightened ones, in their order)."""
+    from mitld_lp.running.sensed_band_chain import nature_max, reach_min, sensed_band_unfolding_of
+
+    chain, rewards = sensed_band_unfolding_of(result, max_states=max_states)
+    reward = dict(rewards)
+    labels = chain.labels
+
+    def marked(name: str) -> np.ndarray:
+        return np.array([name in x for x in labels], dtype=bool)
+
+    accept, truncated = marked("accept"), marked("truncated")
+    values = []
+    for i, c in enumerate(constraints, start=1):
+        if c.kind == "prob" and c.sense == ">=":
+            lo = reach_min(chain, marked(f"c{i}"))
+            values.append(ConstraintValue(c, lo, lo >= c.bound, bounds=(lo, 1.0)))
+            continue
+        nm = (nature_max(chain, target=marked(f"c{i}")) if c.kind == "prob" else
+              nature_max(chain, reward=reward[c.kind]))
+        values.append(ConstraintValue(c, nm.value, nm.proven and nm.upper <= c.bound,
+                                      bounds=(nm.value, nm.upper)))
+    nan = (float("nan"), float("nan"))
+    then = result.part.then
+    steps = cost = nan
+    if then is not None or any(c.kind == "steps" for c in constraints):
+        nm = nature_max(chain, reward=reward["steps"])
+        steps = (nm.value, nm.upper)
+    if then == "min-cost":
+        nm = nature_max(chain, reward=reward["cost"])
+        cost = (nm.value, nm.upper)
+    return Judged(reach_min(chain, accept), reach_min(chain, accept | truncated),
+                  tuple(values), steps, cost, chain.n_states)
+
+
+class SensedBandConstrainedRoute(Route):
+    """Constraints or ``then`` with a sensor that misses its event and a band (module
+    docs): the ``sensed-constrained`` route's controllers judged over the band.
+    ``every``: it claims such problems without constraints too (the trade-off curve's
+    end points, which the sensed constrained route would answer at the middle law)."""
+
+    name = "sensed-constrained"
+    takes_constraints = True
+    observation_based = True
+
+    def __init__(self, *, every: bool = False) -> None:
+        self.every = every
+
+    def claims(self, posed: Posed) -> bool:
+        return bool(partial(posed.model.sensors)) and posed.robust \
+            and (posed.problem.constrained or self.every)
+
+    def refusal(self, posed: Posed) -> list[str]:
+        from mitld_lp.logic.fragment import CO_SAFE
+        from mitld_lp.problem import band_text, complement_class
+
+        # the sensed-constrained route's own conditions at a point law for the task
+        # maximised (its class, the sensors'); the band, and a minimum with it, are this
+        # route's
+        asked = replace(posed, robust=False)
+        if posed.minimise:
+            asked = replace(asked, fragment=complement_class(posed.fragment),
+                            problem=replace(posed.problem, objective="max"))
+        refused = SensedConstrainedRoute().refusal(asked)
+        if asked.fragment != CO_SAFE:
+            article = "an" if asked.fragment[0] in "aeiou" else "a"
+            refused.append(f"{article} {asked.fragment} task with constraints or then, "
+                           "sensors that miss events and a law known only within a band "
+                           f"({band_text(posed.model)}): not solved (the controller's "
+                           "interval chain judges reaching the task's goal, not keeping "
+                           "in an end component); give the event a point law")
+        if posed.minimise:
+            refused.append(f"objective min with constraints, sensors that miss events and "
+                           f"a law known only within a band ({band_text(posed.model)}): not "
+                           "solved (the worst case over the band is judged for a maximised "
+                           "task); give the event a point law or maximise")
+        return refused
+
+    def build(self, posed: Posed, progress: bool | None = None) -> Any:
+        """The joint automaton and its information-state product at the band's middle
+        law (:meth:`SensedConstrainedRoute.build`)."""
+        return SensedConstrainedRoute().build(posed, progress=progress)
+
+    def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        return _solve(posed, built, costs=costs, seed=seed)
+
+
+def _at(posed: Posed, laws: Mapping[str, Any] | None, cons: tuple[Any, ...] | None) -> Posed:
+    """``posed`` with the band's point law ``laws`` (None: as posed) and the constraints
+    ``cons`` (None: as posed)."""
+    problem = posed.problem
+    if laws is not None:
+        model = dataclasses.replace(posed.model, distributions=MappingProxyType(dict(laws)))
+        problem = replace(problem, model=model)
+    if cons is not None:
+        problem = replace(problem, constraints=cons)
+    return replace(posed, problem=problem)
+
+
+def _tightened(cons: tuple[Any, ...], values: tuple[ConstraintValue, ...],
+               margins: list[float]) -> tuple[Any, ...]:
+    """The constraints with each bound a candidate missed moved in by its miss (doubled,
+    and added to what it was moved before)."""
+    out = []
+    for i, (c, v) in enumerate(zip(cons, values, strict=True)):
+        miss = v.miss if v.miss == v.miss else 0.0
+        if miss > 0.0:
+            margins[i] += 2.0 * miss + 1e-9
+        step = margins[i]
+        bound = c.bound - step if c.sense == "<=" else c.bound + step
+        out.append(replace(c, bound=min(max(bound, 0.0), 1.0) if c.kind == "prob"
+                           else max(bound, 0.0)))
+    return tuple(out)
+
+
+def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
+           seed: int | None) -> Result:
+    from mitld_lp.routes.sensed_band import end_laws
+
+    t0 = time.perf_counter()
+    inner = SensedConstrainedRoute()
+    s = posed.settings
+    cons = posed.problem.constraints
+    uppers: dict[str, float] = {}
+    tried: list[tuple[str, Result, Judged]] = []
+    first: Result | None = None
+    laws_to_try: list[tuple[str, Mapping[str, Any] | None]] = [
+        ("middle law", None), *end_laws(posed.model.distributions)]
+    at: dict[str, tuple[Posed, Any]] = {}
+    for label, laws in laws_to_try:  # each law's own LP, judged
+        here = _at(posed, laws, None)
+        b = built if laws is None else inner.build(here, progress=s.progress)
+        r = inner.solve(here, b, costs=costs, seed=seed)
+        first = first or r
+        if r.status is Status.INFEASIBLE:  # infeasible at a law of the band
+            return replace(r, model=posed.model, bands=_bands(r), part=replace(
+                r.part, message=f"infeasible at the band's {label}, so under the band: "
+                f"{r.part.message}"))
+        if r.controller is None:
+            continue
+        if r.status is Status.OPTIMAL:
+            uppers[label] = r.upper
+        tried.append((label, r, judge(r, cons, s.max_states)))
+        at[label] = (here, b)
+    if tried and not any(j.holds for _, _, j in tried):
+        # none holds under every law: the best one's law again, the bounds the band
+        # breaks tightened by what it added
+        label, _, j = max(tried, key=lambda t: t[2].lower)
+        here, b = at[label]
+        margins = [0.0] * len(cons)
+        for attempt in range(1, ROUNDS + 1):
+            r = inner.solve(_at(here, None, _tightened(cons, j.values, margins)), b,
+                            costs=costs, seed=seed)
+            if r.controller is None:
+                break
+            j = judge(r, cons, s.max_states)
+            tried.append((f"{label}, tightened {attempt}", r, j))
+            if j.holds:
+                break
+    assert first is not None
+    good = [t for t in tried if t[2].holds]
+    uppers["without constraints"] = _unconstrained_upper(posed)
+    upper = min(u for u in (*uppers.values(), 1.0) if u == u)  # NaN: not given
+    if not good:
+        said = "; ".join(f"{name}: " + ", ".join(
+            f"{v.constraint.text} worst case {v.certified:.6g}" for v in j.values
+            if not v.holds) for name, _, j in tried) or "no controller at any law"
+        message = ("failed: no candidate controller meets every constraint under every law "
+                   f"of the band ({said}); whether one exists is not known")
+        values = tuple(replace(v, holds=False) for v in first.constraints)
+        check = Check("constraints under every law of the band", False, message)
+        return replace(first, model=posed.model, lower=float("nan"), upper=upper,
+                       value=float("nan"), status=Status.FAILED, controller=None,
+                       certified=False, checks=(*first.checks, check), bands=_bands(first),
+                       part=replace(first.part, constraints=values, message=message),
+                       timings={**first.timings, "band": time.perf_counter() - t0})
+    name, r, j = max(good, key=lambda t: t[2].lower)
+    lower = float(min(j.lower, upper))
+    width = upper - lower
+    cut = float(min(max(j.truncated_won - lower, 0.0), width))
+    closed = width - cut <= s.precision * max(lower, 0.0)
+    said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
+    detail = (f"lower {lower!r}: the worst case over the band of the sensed-constrained "
+              f"controller at the {name} on its chain ({j.n_states} states); upper "
+              f"{upper!r}: the least of the constrained optima's upper bounds at the "
+              f"band's laws ({said}); gap {width:.3g}, of which {cut:.3g} the truncation's; "
+              f"the rest " + ("within" if closed else "beyond") +
+              f" the precision {s.precision:g}")
+    held = "; ".join(f"{v.constraint.text}: worst case {v.certified!r}" for v in j.values)
+    checks = (*r.checks, Check("worst case over the band", closed, detail),
+              Check("constraints under every law of the band", True, held or "none"))
+    extra: dict[str, Any] = {}
+    if not np.isnan(j.steps[1]):
+        extra["steps"] = j.steps[1]
+        if r.part.then is not None:
+            ok = bool(np.isfinite(j.steps[1]))
+            checks += (Check("worst expected steps over the band", ok,
+                             f"E(steps) in [{j.steps[0]!r}, {j.steps[1]!r}] at the worst "
+                             "law (nature maximising, proven from above)"),)
+    if r.part.then == "min-steps":
+        extra["secondary"] = j.steps[1]
+    elif r.part.then == "min-cost":
+        extra["secondary"] = j.cost[1]
+        checks += (Check("worst expected cost over the band", bool(np.isfinite(j.cost[1])),
+                         f"E(cost) in [{j.cost[0]!r}, {j.cost[1]!r}] at the worst law"),)
+    message = ("" if closed else
+               f"not certified: the worst case over the band of an observation-based "
+               f"controller meeting the constraints under every law is in [{lower!r}, "
+               f"{upper!r}] (gap {width:.3g}); both ends sound")
+    part = SensedBandConstrainedPart(
+        **{f.name: getattr(r.part, f.name) for f in dataclasses.fields(r.part)},
+        worst=j, chosen_at=name, point_uppers=uppers)
+    part = replace(part, constraints=j.values, message=message or r.part.message, **extra)
+    result = replace(r, model=posed.model, lower=lower, upper=upper, value=lower,
+                     certified=all(c.passed for c in checks), checks=checks, part=part,
+                     bands=_bands(r), width={"total": width, "truncation": cut,
+                                             "band": max(width - cut, 0.0)},
+                     timings={**r.timings, "band": time.perf_counter() - t0})
+    log.info("sensed constrained synthesis over the band: [%r, %r], certified=%s",
+             result.lower, result.upper, result.certified)
+    return result
+
+
+def _unconstrained_upper(posed: Posed) -> float:
+    """The sensed optimum's upper bound over the band without the constraints and
+    ``then`` (:mod:`mitld_lp.routes.sensed_band`): no controller meeting them does
+    better; NaN, said in the log, where that route does not give it (a budget, a
+    refusal, a time limit)."""
+    from mitld_lp.problem import ProblemError, pose_on
+    from mitld_lp.routes.sensed import SensedRoute
+    from mitld_lp.routes.stages import build_posed
+    from mitld_lp.util.memory import ProductTooLarge
+
+    settings = replace(posed.settings, progress=False)
+    try:
+        model = dataclasses.replace(posed.model, constraints=())
+        alone = pose_on([SensedRoute()], model, settings=settings,
+                        objective=posed.problem.objective)
+        r = alone.route.solve(alone, build_posed(alone, progress=False))
+    except (ProblemError, ProductTooLarge) as exc:
+        log.info("the sensed optimum over the band without constraints not used: %s", exc)
+        return float("nan")
+    return r.upper if r.controller is not None else float("nan")
+
+
+def _bands(r: Result) -> dict[str, str]:
+    return {e: str(c.distribution) for e, c in sorted(r.sta.clocks.items())
+            if c.distribution.is_ambiguous}
