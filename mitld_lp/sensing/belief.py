@@ -61,7 +61,7 @@ from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.product import default_max_memory, estimate_size
-from mitld_lp.sensing.build import Builder
+from mitld_lp.sensing.frontier import FrontierBuilder
 from mitld_lp.sensing.horizon import collapse
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
@@ -180,7 +180,7 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                      found.decided_from, found.last)
     size = info_size(game, sta, used)
     _announce(game, sta, sensed, max_states, memory, size)
-    belief = Builder(game, dta, sta, sensed, used, max_states, memory, size,
+    belief = FrontierBuilder(game, dta, sta, sensed, used, max_states, memory, size,
                       ends).build(progress)
     return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
 

@@ -2,8 +2,8 @@
 (:mod:`mitld_lp.sensing.belief`'s module docs): the events' hazards, the outcomes of the
 unsensed events, the branches of one hypothesis's sensed events and their reports, the
 automaton's step, where a hypothesis ends, and the clock an information state keeps;
-the construction (:mod:`mitld_lp.sensing.build`) asks each again and again with the
-same arguments, so each is cached."""
+the construction (:mod:`mitld_lp.sensing.frontier`) asks each once per new key, and
+each is cached."""
 
 from __future__ import annotations
 
