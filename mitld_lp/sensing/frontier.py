@@ -23,7 +23,6 @@ and memory budgets are checked before each batch of new states is stored."""
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Hashable, Mapping
 from typing import Any
 
@@ -45,6 +44,7 @@ from mitld_lp.sensing.info import (
     InfoState,
 )
 from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.rows import INT, Table, fsum_by, groups, mix64, spread
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
@@ -54,137 +54,12 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-_I = np.int64
+_I = INT
 CHUNK = 8_192
 """The most states expanded together: the rows of one expansion (a state's choices x
 its unsensed outcomes x its hypotheses x their branches x the world's successors, a
 few dozen per state, some fifteen numbers each) stay some tens of megabytes."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
-
-
-def _words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
-    """The columns packed into as few int64 words as keep their lexicographic order
-    (each column shifted to start at 0, in mixed radix while the product fits), and the
-    last word's span (0 for a hash, kept as it is in a word of its own)."""
-    words: list[np.ndarray] = []
-    word, span = None, 1
-    for c in cols:
-        lo, hi = int(c.min()), int(c.max())
-        size = hi - lo + 1
-        if size >= 1 << 62:
-            if word is not None:
-                words.append(word)
-            words.append(c.astype(_I, copy=False))
-            word, span = None, 0
-            continue
-        v = c.astype(_I) - lo
-        if word is not None and span * size < 1 << 62:
-            word, span = word * size + v, span * size
-        else:
-            if word is not None:
-                words.append(word)
-            word, span = v, size
-    if word is not None:
-        words.append(word)
-    return words, span
-
-
-def _groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows grouped by equal values in every column: each row's group (numbered in the
-    columns' lexicographic order) and one row of each group (every caller reads only
-    the grouped columns from it, equal across the group)."""
-    n = len(cols[0])
-    if n == 0:
-        return np.zeros(0, _I), np.zeros(0, _I)
-    words, span = _words(cols)
-    if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):  # a dense count, no sort
-        word = words[0]
-        first = np.full(span, -1, _I)
-        first[word] = np.arange(n, dtype=_I)  # a row of each group (any one will do)
-        present = first >= 0
-        rank = np.cumsum(present) - 1
-        return rank[word], first[present]
-    order = (np.argsort(words[0], kind="stable") if len(words) == 1
-             else np.lexsort(words[::-1]))
-    change = np.zeros(n, dtype=bool)
-    change[0] = True
-    for c in words:
-        s = c[order]
-        change[1:] |= s[1:] != s[:-1]
-    inverse = np.empty(n, _I)
-    inverse[order] = np.cumsum(change) - 1
-    return inverse, order[change]
-
-
-def _fsum(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """The sum of ``values`` per id (``ids`` sorted), correctly rounded as
-    :func:`math.fsum` (one addition is; three or more terms are summed by it)."""
-    count = np.bincount(ids, minlength=n)
-    out = np.bincount(ids, weights=values, minlength=n)
-    many = np.flatnonzero(count > 2)
-    if len(many):
-        starts = np.cumsum(count) - count
-        vals = values.tolist()
-        out[many] = [math.fsum(vals[a:a + k]) for a, k in zip(
-            starts[many].tolist(), count[many].tolist(), strict=True)]
-    return out
-
-
-def _spread(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For parents with ``counts`` children each: every child's parent and its rank."""
-    parent = np.repeat(np.arange(len(counts), dtype=_I), counts)
-    starts = np.cumsum(counts) - counts
-    return parent, np.arange(len(parent), dtype=_I) - starts[parent]
-
-
-def _mix(x: np.ndarray) -> np.ndarray:
-    """A 64-bit mix of each value (splitmix64's finaliser), summed into a set's hash."""
-    z = x.astype(np.uint64) + np.uint64(0x9E3779B97F4A7C15)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
-class _Table:
-    """Entries of variable number per key, each key's entries computed once (a Python
-    call) and kept as flat numpy columns: :meth:`rows` gives, for an array of keys'
-    indices, each entry's parent and the entry columns."""
-
-    def __init__(self, width: int, dtypes: tuple[Any, ...]) -> None:
-        self.index: dict[Hashable, int] = {}
-        self.entries: list[tuple[np.ndarray, ...]] = []
-        self.dtypes = dtypes
-        self.width = width
-
-    def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:
-        """The table index of each row's key (the row's values in ``cols``), ``make``
-        called once for each key not met before."""
-        ids, first = _groups(*cols)
-        out = np.empty(len(first), _I)
-        for n, key in enumerate(zip(*(c[first].tolist() for c in cols), strict=True)):
-            i = self.index.get(key)
-            if i is None:
-                rows = make(key)
-                i = self.index[key] = len(self.entries)
-                self.entries.append(tuple(np.asarray([r[c] for r in rows], dtype=d)
-                                          for c, d in enumerate(self.dtypes)))
-            out[n] = i
-        return out[ids]
-
-    def rows(self, which: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-        """``which``: a table index per parent row; the children's parents and columns."""
-        ids, first = _groups(which)
-        used = which[first]
-        counts = np.array([len(self.entries[i][0]) for i in used], dtype=_I)
-        if len(used):
-            cols = [np.concatenate([self.entries[i][c] for i in used])
-                    for c in range(self.width)]
-        else:
-            cols = [np.zeros(0, d) for d in self.dtypes]
-        starts = np.cumsum(counts) - counts
-        parent, rank = _spread(counts[ids])
-        at = starts[ids][parent] + rank
-        return parent, [c[at] for c in cols]
 
 
 class FrontierBuilder(StepRules):
@@ -221,14 +96,14 @@ class FrontierBuilder(StepRules):
         self.act_id: dict[str, int] = {}
         self.times: list[tuple[int, ...]] = []
         self.times_id: dict[tuple[int, ...], int] = {}
-        self.outcomes = _Table(3, (_I, np.float64, bool))
-        self.branches = _Table(6, (_I, _I, np.float64, bool, _I, _I))
-        self.successors = _Table(2, (_I, np.float64))
+        self.outcomes = Table(3, (_I, np.float64, bool))
+        self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
+        self.successors = Table(2, (_I, np.float64))
         self.step_table: dict[tuple[int, int], int] = {}
         self.end_table: dict[tuple[int, int], int] = {}  # -1 undecided, else a record
         self.need_table: dict[tuple[int, int], int] = {}
         self.pending_need: dict[tuple[int, int], int] = {}
-        self.actions = _Table(1, (_I,))
+        self.actions = Table(1, (_I,))
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
         self.move_rows: list[tuple[np.ndarray, ...]] = []
@@ -300,7 +175,7 @@ class FrontierBuilder(StepRules):
     def lookup(self, table: dict[tuple[int, int], int], a: np.ndarray, b: np.ndarray,
                make: Any) -> np.ndarray:
         """``table[(a, b)]`` per row, ``make(a, b)`` filling the keys not met before."""
-        ids, first = _groups(a, b)
+        ids, first = groups(a, b)
         values = np.empty(len(first), _I)
         for n, (x, y) in enumerate(zip(a[first].tolist(), b[first].tolist(), strict=True)):
             v = table.get((x, y))
@@ -422,7 +297,7 @@ class FrontierBuilder(StepRules):
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
         # each state's hypotheses
         st = c_state[c]
-        parent, rank = _spread(hcount[st])
+        parent, rank = spread(hcount[st])
         c, occ, pu, st, o_seq = (x[parent] for x in (c, occ, pu, st, o_seq))
         h = hstart[st] + rank
         code, w = self.hyp_code[h], self.hyp_weight[h]
@@ -459,11 +334,11 @@ class FrontierBuilder(StepRules):
             x[u] for x in (c, occ, st, w2, new, tid2, q2, mass, s_seq))
         # the undecided hypotheses grouped by what the robot observes, each group's in
         # InfoState order
-        obs, first = _groups(c, w2, occ, new)
-        hid, hfirst = _groups(obs, self.order_key(tid2, q2))
+        obs, first = groups(c, w2, occ, new)
+        hid, hfirst = groups(obs, self.order_key(tid2, q2))
         hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
         hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
-        total = _fsum(hobs, hmass, len(first))
+        total = fsum_by(hobs, hmass, len(first))
         weight = hmass / total[hobs]
         gst = c_state[c[first]]
         g_rep = reported[gst] | new[first]
@@ -475,7 +350,7 @@ class FrontierBuilder(StepRules):
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         g_count = np.bincount(hobs, minlength=len(first))
         g_hash = np.zeros(len(first), np.uint64)
-        np.add.at(g_hash, hobs, _mix(hcode))
+        np.add.at(g_hash, hobs, mix64(hcode))
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
         np.minimum.at(g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
@@ -500,7 +375,7 @@ class FrontierBuilder(StepRules):
                                                     zip(*ends, strict=True))
         order = np.lexsort((s_end, b_end, o_end, c_end))
         c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
-        ids, _ = _groups(c_end, r_end)
+        ids, _ = groups(c_end, r_end)
         mass = np.bincount(ids, weights=m_end)
         place = np.full(len(mass), np.iinfo(_I).max, _I)
         np.minimum.at(place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
@@ -517,7 +392,7 @@ class FrontierBuilder(StepRules):
                                                    np.ndarray]:
         """Each group's state by its key (``-1 - k`` for the ``k``-th new key), the new
         keys, and a group of each."""
-        ids, first = _groups(*group)
+        ids, first = groups(*group)
         keys = list(zip(*(x[first].tolist() for x in group), strict=True))
         found = np.array([self.keys.get(k, -1) for k in keys], _I)
         fresh = np.flatnonzero(found < 0)
@@ -556,7 +431,7 @@ class FrontierBuilder(StepRules):
             if not batch:
                 return
             g = reps[batch]
-            parent, rank = _spread(counts[g])
+            parent, rank = spread(counts[g])
             rows = g_start[g][parent] + rank
             index[batch] = len(self.states) + np.arange(len(batch), dtype=_I)
             self.add_states(*(x[g] for x in group[:5]), hcode[rows], weight[rows])
@@ -578,7 +453,7 @@ class FrontierBuilder(StepRules):
         """Check every group against its state, hypothesis by hypothesis: the same
         hypotheses (else two sets share a hash) and the same posterior."""
         starts = np.asarray(self.cols[4], _I)[target]
-        _, rank = _spread(count)
+        _, rank = spread(count)
         at = starts[hobs] + rank
         if not np.array_equal(self.hyp_code[at], hcode):
             raise RuntimeError("internal error: two information states with one key "
@@ -590,24 +465,24 @@ class FrontierBuilder(StepRules):
                 f"internal error: information state {self.states[int(target[bad])]!r} "
                 f"reached with two posteriors (they differ by {gap.max():.3g})")
 
-    def record_moves(self, base: int, groups: tuple[np.ndarray, ...], target: np.ndarray,
+    def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
                      ended: tuple[np.ndarray, ...]) -> None:
         """The controller's moves of the level's choices (``base``: its first choice's
         row): each observation's successor state, or, when nothing undecided is left
         with it, the verdict: the one record its hypotheses ended in, or
         :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        _, once = _groups(*ended)  # each (observation, record) once
+        _, once = groups(*ended)  # each (observation, record) once
         c, w2, occ, new, end = (x[once] for x in ended)
-        obs, first = _groups(c, w2, occ, new)
+        obs, first = groups(c, w2, occ, new)
         kinds = np.bincount(obs)
-        n = len(groups[0])
-        both, _ = _groups(*(np.concatenate([g, e[first]]) for g, e in
-                            zip(groups, (c, w2, occ, new), strict=True)))
+        n = len(grouped[0])
+        both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
+                            zip(grouped, (c, w2, occ, new), strict=True)))
         alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
         pick = first[alone]
         trunc = self.record(Absorbing.TRUNCATED)
         code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
-        gc, gw, go, gn = groups
+        gc, gw, go, gn = grouped
         self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
                                np.concatenate([gw, w2[pick]]),
                                np.concatenate([go, occ[pick]]),
@@ -636,7 +511,7 @@ class FrontierBuilder(StepRules):
                             np.array([self.mask(self.unsensed, self.unsensed_order)], _I),
                             one, q0code, np.ones(1))
             self.keys[(w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)), 1,
-                       int(_mix(q0code).view(_I)[0]))] = initial
+                       int(mix64(q0code).view(_I)[0]))] = initial
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
@@ -663,17 +538,24 @@ class FrontierBuilder(StepRules):
         np.cumsum(np.bincount(row, minlength=n_choices), out=indptr[1:])
         matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
                                indptr), shape=(n_choices, n))
-        groups = np.zeros(n + 1, np.int64)
-        np.add.at(groups, owner + 1, 1)
-        act = np.concatenate(acts).astype(np.int32)
-        act[act < 0] = ABSORB
+        per_state = np.zeros(n + 1, np.int64)
+        np.add.at(per_state, owner + 1, 1)
+        act = np.concatenate(acts)
+        # the actions numbered as the choices first show them
+        used = np.flatnonzero(act >= 0)
+        seen, at = np.unique(act[used], return_index=True)
+        shown_first = seen[np.argsort(at)]
+        number = np.full(len(self.act_names), -1, _I)
+        number[shown_first] = np.arange(len(shown_first))
+        names = tuple(self.act_names[k] for k in shown_first.tolist())
+        act = np.where(act < 0, ABSORB, number[np.maximum(act, 0)]).astype(np.int32)
         log.info("information-state product: %s states, %s choices, %s transitions",
                  f"{n:,}", f"{n_choices:,}", f"{matrix.nnz:,}")
         kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
                          .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
                         dtype=np.int8)
-        mdp = MDP(matrix=matrix, row_groups=np.cumsum(groups),
-                  choice_actions=act, action_names=tuple(self.act_names),
+        mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
+                  choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=tuple(self.states))
         cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
