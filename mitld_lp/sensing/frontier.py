@@ -55,6 +55,8 @@ __all__ = ["FrontierBuilder"]
 log = logging.getLogger("mitld_lp.sensing.belief")
 
 _I = INT
+DENSE = 1 << 22
+"""The most keys a lookup keeps as a dense array (32 MiB)."""
 CHUNK = 8_192
 """The most states expanded together: the rows of one expansion (a state's choices x
 its unsensed outcomes x its hypotheses x their branches x the world's successors, a
@@ -103,6 +105,7 @@ class FrontierBuilder(StepRules):
         self.end_table: dict[tuple[int, int], int] = {}  # -1 undecided, else a record
         self.need_table: dict[tuple[int, int], int] = {}
         self.pending_need: dict[tuple[int, int], int] = {}
+        self.dense: dict[int, np.ndarray] = {}  # the lookups' dense copies
         self.actions = Table(1, (_I,))
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
@@ -174,7 +177,31 @@ class FrontierBuilder(StepRules):
 
     def lookup(self, table: dict[tuple[int, int], int], a: np.ndarray, b: np.ndarray,
                make: Any) -> np.ndarray:
-        """``table[(a, b)]`` per row, ``make(a, b)`` filling the keys not met before."""
+        """``table[(a, b)]`` per row, ``make(a, b)`` filling the keys not met before
+        (values >= -1); kept also as a dense array while the keys' box is small."""
+        if len(a) == 0:
+            return np.zeros(0, _I)
+        shape = (int(a.max()) + 1, int(b.max()) + 1)
+        dense = self.dense.get(id(table))
+        if dense is None or dense.shape[0] < shape[0] or dense.shape[1] < shape[1]:
+            size = (max(shape[0], 0 if dense is None else dense.shape[0]),
+                    max(shape[1], 0 if dense is None else dense.shape[1]))
+            if size[0] * size[1] > DENSE:
+                return self.lookup_sparse(table, a, b, make)
+            grown = np.full(size, -2, _I)  # -2: not asked yet
+            if dense is not None:
+                grown[:dense.shape[0], :dense.shape[1]] = dense
+            dense = self.dense[id(table)] = grown
+        values = dense[a, b]
+        miss = np.flatnonzero(values == -2)
+        if len(miss):
+            found = self.lookup_sparse(table, a[miss], b[miss], make)
+            dense[a[miss], b[miss]] = found
+            values[miss] = found
+        return values
+
+    def lookup_sparse(self, table: dict[tuple[int, int], int], a: np.ndarray,
+                      b: np.ndarray, make: Any) -> np.ndarray:
         ids, first = groups(a, b)
         values = np.empty(len(first), _I)
         for n, (x, y) in enumerate(zip(a[first].tolist(), b[first].tolist(), strict=True)):
@@ -315,23 +342,25 @@ class FrontierBuilder(StepRules):
         ok = ~cut
         c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
             x[ok] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
-        # the world's successors
+        # the world's successors (what the hypothesis saw happen and what may still
+        # come, before they are spread)
+        happened = self.u_atoms[occ] | self.s_atoms[now]
+        left = (pending[st] & ~occ) | (wait << self.nu)
         which = self.successors.find((world[st], c_act[c], occ), self.make_successors)
         parent, (w2, pg) = self.successors.rows(which)
-        c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
-            x[parent] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
+        c, occ, q, base, tid2, new, happened, left, o_seq, b_seq = (
+            x[parent] for x in (c, occ, q, base, tid2, new, happened, left, o_seq, b_seq))
         s_seq = np.arange(len(c), dtype=_I)
         mass = base * pg
-        label = np.asarray(self.world_label, _I)[w2] | self.u_atoms[occ] | self.s_atoms[now]
+        label = np.asarray(self.world_label, _I)[w2] | happened
         q2 = self.lookup(self.step_table, q, label, self.make_step)
-        left = (pending[st] & ~occ) | (wait << self.nu)
         end = self.lookup(self.end_table, q2, left, self.make_end)
         done = end >= 0
         ends.append((c[done], o_seq[done], b_seq[done], s_seq[done], end[done], mass[done]))
         ended = (c[done], w2[done], occ[done], new[done], end[done])
         u = ~done
-        c, occ, st, w2, new, tid2, q2, mass, s_seq = (
-            x[u] for x in (c, occ, st, w2, new, tid2, q2, mass, s_seq))
+        c, occ, w2, new, tid2, q2, mass, s_seq = (
+            x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
         # the undecided hypotheses grouped by what the robot observes, each group's in
         # InfoState order
         obs, first = groups(c, w2, occ, new)
