@@ -236,3 +236,25 @@ def test_state_budget_stops_the_build() -> None:
     with pytest.raises(ProductTooLarge, match="more than 100 states"):
         belief_product(model.game, to_dta(model.spec), model.distributions,
                        dict(model.sensors), model.epsilon, max_states=100)
+
+
+def test_sums_per_group_are_math_fsum() -> None:
+    """The groups' totals are correctly rounded (as math.fsum) on sums where the plain
+    left-to-right sum is not: terms of many magnitudes, halves, thirds."""
+    import numpy as np
+
+    from mitld_lp.sensing.rows import fsum_by
+
+    rng = np.random.default_rng(7)
+    plain_differs = 0
+    for trial in range(60):
+        counts = rng.integers(1, 12, 300)
+        ids = np.repeat(np.arange(300), counts)
+        v = rng.random(len(ids)) * 10.0 ** rng.integers(-20, 1, len(ids))
+        if trial % 2:
+            v = 0.5 ** rng.integers(0, 60, len(ids)) * rng.choice([0.3, 0.7, 1 / 3], len(ids))
+        starts = np.cumsum(counts) - counts
+        want = [math.fsum(v[a:a + k].tolist()) for a, k in zip(starts, counts, strict=True)]
+        assert fsum_by(ids, v, 300).tolist() == want
+        plain_differs += int((np.bincount(ids, weights=v) != np.array(want)).sum())
+    assert plain_differs > 100  # the case is not trivial
