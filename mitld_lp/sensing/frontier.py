@@ -22,6 +22,7 @@ and memory budgets are checked before each batch of new states is stored."""
 
 from __future__ import annotations
 
+import gc
 import logging
 from collections.abc import Hashable, Mapping
 from typing import Any
@@ -545,11 +546,19 @@ class FrontierBuilder(StepRules):
         head = 0
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
                              leave=False, mininterval=0.5)
-        while head < len(self.states):
-            end = min(len(self.states), head + CHUNK)
-            parts.append(self.expand(head, end))
-            shown.update(end - head)
-            head = end
+        # the build makes many small objects and no reference cycles: the cyclic
+        # collector's passes over the whole heap are paused while it runs
+        collecting = gc.isenabled()
+        gc.disable()
+        try:
+            while head < len(self.states):
+                end = min(len(self.states), head + CHUNK)
+                parts.append(self.expand(head, end))
+                shown.update(end - head)
+                head = end
+        finally:
+            if collecting:
+                gc.enable()
         shown.close()
         offset = 0
         rows, cols, vals, owners, acts = [], [], [], [], []
