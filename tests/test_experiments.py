@@ -342,3 +342,20 @@ def test_bus_camera_band(tmp_path):
     lower, upper, storm = float(row["lower"]), float(row["upper"]), float(row["storm_worst"])
     assert 0.0 < lower <= upper <= 1.0
     assert abs(storm - lower) <= 1e-9
+
+
+def test_bench_sensed(tmp_path):
+    """The sensed build's benchmark: each case answered on the sensed route, its
+    bracket beside Storm's Pmax of the same product (Storm's value is our lower: the
+    truncated runs lose in both), the build's CPU seconds apart from the whole."""
+    _run("bench_sensed", tmp_path)
+    rows = _csv(tmp_path / "bench_sensed.csv")
+    assert [r["case"] for r in rows] == ["bus_grid b1@0.5 eps=0.01",
+                                         "bus_grid b1@0.7+b2@0.7 eps=0.05"]
+    for r in rows:
+        lower, upper = float(r["lower"]), float(r["upper"])
+        assert 0 < lower <= upper < 1
+        if r["storm_value"]:
+            assert float(r["storm_value"]) == pytest.approx(lower, abs=1e-6)
+        assert 0 < float(r["build_cpu"]) < float(r["process_cpu"])
+        assert int(r["states"].replace(",", "")) > 100

@@ -3,7 +3,10 @@
 * :mod:`~mitld_lp.sensing.sensors`: the :class:`Sensor` record and the ``[sensors]``
   table of a model file;
 * :mod:`~mitld_lp.sensing.belief`: the information-state product (the MDP over what the
-  robot knows);
+  robot knows), built a frontier at a time by :mod:`~mitld_lp.sensing.frontier` (its
+  array operations in :mod:`~mitld_lp.sensing.rows`) from the step rules of
+  :mod:`~mitld_lp.sensing.rules`, its records in :mod:`~mitld_lp.sensing.info`, the
+  controller's moves in :mod:`~mitld_lp.sensing.moves`;
 * :mod:`~mitld_lp.sensing.horizon`: the sensors whose reports come too late for the
   task, built as blind ones (the same optimum);
 * :mod:`~mitld_lp.routes.sensed_solve`: the ``sensed`` route, its certified bracket (the one

@@ -1,0 +1,193 @@
+"""Benchmark: the sensed build (the information-state product) before and after, one run.
+
+Each case is the bus case (``models/bus_grid.toml`` or ``models/bus_puddle.toml``) with
+cameras that miss buses (``[sensors] b = { detect = d }``) at an ``epsilon``, solved by
+``synthesize`` on the ``sensed`` route in a child process of its own.  Per case:
+
+* ``build_cpu``: the CPU seconds of :func:`mitld_lp.sensing.belief.belief_product` (the
+  information states, their transitions and the controller's moves), timed inside the
+  child; ``process_cpu`` the child's CPU up to the answer (imports, build, solve,
+  certificate; Storm's check after it is not counted);
+* the product's states, choices and transitions, and the certified bracket
+  ``[lower, upper]``, printed beside each time;
+* Storm (stormpy), where installed: ``Pmax=? [F "accept"]`` on the same product exported
+  as DRN (truncation losing: our ``lower``), its value beside ours and its seconds; not
+  for a task with a safety part (``bus_puddle``: its acceptance is staying in end
+  components of the information states, not reaching a target, so Storm's reachability
+  on the DRN is not the same question).
+
+``--compare DIR`` runs each case a second time, in the same run, with the ``mitld_lp`` of
+that checkout (``base_*`` columns: the build before), and checks that both builds give
+the same product (states, choices, transitions) and the same bracket (to 1e-9).
+
+Run: ``python experiments/bench_sensed.py [--quick] [--out DIR] [--compare DIR]
+[--repeats N]`` (``N`` runs of each child, the least CPU reported).
+``--quick``: two small cases.  Writes ``bench_sensed.csv``, ``bench_sensed.md`` and
+``bench_sensed_machine.txt``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import _common as C
+
+FULL = (
+    ("bus_grid.toml", (("b2", 0.5),), 0.01),  # issue 45's case: 81,814 states
+    ("bus_grid.toml", (("b1", 0.5),), 1e-3),
+    ("bus_grid.toml", (("b1", 0.5), ("b2", 0.5)), 1e-3),
+    ("bus_puddle.toml", (("b1", 0.5),), 1e-3),
+)
+QUICK = (
+    ("bus_grid.toml", (("b1", 0.5),), 0.01),
+    ("bus_grid.toml", (("b1", 0.7), ("b2", 0.7)), 0.05),
+)
+HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "build_cpu",
+          "process_cpu", "base_build_cpu", "base_process_cpu", "speedup", "same",
+          "storm_value", "storm_s"]
+
+
+def name_of(case: tuple[Any, ...]) -> str:
+    model, sensors, eps = case
+    cams = "+".join(f"{e}@{d:g}" for e, d in sensors)
+    return f"{model.removesuffix('.toml')} {cams} eps={eps:g}"
+
+
+def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
+    """One case in this process: the build timed, the answer, Storm on the product."""
+    import dataclasses
+    from types import MappingProxyType
+
+    import mitld_lp.sensing.belief as belief
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.sensing import Sensor
+
+    model_name, sensors, eps = (QUICK if quick else FULL)[index]
+    storm = storm and model_name != "bus_puddle.toml"  # a safety part: not reachability
+    built: dict[str, float] = {}
+    build = belief.belief_product
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.process_time()
+        b = build(*args, **kwargs)
+        built["cpu"] = built.get("cpu", 0.0) + time.process_time() - t0
+        return b
+
+    belief.belief_product = timed  # the sensed route imports it when it builds
+    base = load_model(C.model_path(model_name))
+    model = dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
+        {e: Sensor(d) for e, d in sensors}))
+    r = synthesize(model)
+    process = time.process_time()  # this process so far: imports, build, solve
+    assert r.route == "sensed", r.route
+    row: dict[str, Any] = {
+        "states": r.mdp.n_states, "choices": r.mdp.n_choices,
+        "transitions": int(r.mdp.matrix.nnz), "lower": r.lower, "upper": r.upper,
+        "build_cpu": built["cpu"], "process_cpu": process,
+        "package": str(Path(belief.__file__).parents[1])}
+    if storm:
+        row["storm_value"], row["storm_s"] = C.storm_pmax(r.mdp, r.mdp.target)
+    out.write_text(json.dumps(row), encoding="utf-8")
+
+
+def child(index: int, quick: bool, code: Path | None, storm: bool) -> dict[str, Any]:
+    """:func:`worker` in a child process (``code``: the checkout it imports, default this
+    one)."""
+    env = dict(os.environ)
+    if code is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(code), str(C.HERE)])
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "row.json"
+        argv = [sys.executable, __file__, "--worker", str(index), str(out)]
+        argv += ["--quick"] if quick else []
+        argv += [] if storm else ["--no-storm"]
+        with tempfile.TemporaryFile() as errors:
+            proc = subprocess.Popen(argv, cwd=code or C.ROOT, stdout=subprocess.DEVNULL,
+                                    stderr=errors, env=env)
+            _, status, _ = os.wait4(proc.pid, 0)
+            errors.seek(0)
+            err = errors.read().decode(errors="replace")
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise RuntimeError(f"case {index} failed:\n{err[-2000:]}")
+        return json.loads(out.read_text(encoding="utf-8"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = C.parser(__doc__.splitlines()[0])
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                    help="also build with the mitld_lp of this checkout (before/after)")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="runs of each child; the least CPU of them is reported (default 1)")
+    ap.add_argument("--worker", nargs=2, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--no-storm", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker is not None:
+        worker(int(args.worker[0]), args.quick, Path(args.worker[1]), not args.no_storm)
+        return 0
+    if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
+        ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
+    out = C.out_dir(args)
+    rows = []
+    for i, case in enumerate(QUICK if args.quick else FULL):
+        ours = least([child(i, args.quick, None, storm=k == 0)
+                      for k in range(args.repeats)])
+        row: dict[str, Any] = {"case": name_of(case), **ours}
+        if args.compare is not None:
+            base = least([child(i, args.quick, args.compare.resolve(), storm=False)
+                          for _ in range(args.repeats)])
+            row["base_build_cpu"], row["base_process_cpu"] = (base["build_cpu"],
+                                                              base["process_cpu"])
+            row["speedup"] = base["build_cpu"] / ours["build_cpu"]
+            row["same"] = (all(base[k] == ours[k] for k in ("states", "choices",
+                                                            "transitions"))
+                           and abs(base["lower"] - ours["lower"]) <= 1e-9
+                           and abs(base["upper"] - ours["upper"]) <= 1e-9)
+        rows.append(row)
+        print(C.text_table(HEADER, [[fmt(k, row.get(k)) for k in HEADER]]), flush=True)
+    table = [[fmt(k, r.get(k)) for k in HEADER] for r in rows]
+    print()
+    print(C.text_table(HEADER, table))
+    C.write_csv(out / "bench_sensed.csv", HEADER, table)
+    C.write_text(out / "bench_sensed.md", C.markdown_table(HEADER, table) + (
+        "\nCPU seconds; `build_cpu` is belief_product alone, `base_*` the same case with "
+        f"the package of `--compare` ({args.compare}), `same`: equal product sizes and "
+        "brackets (1e-9); Storm: Pmax on the same product as DRN (parse and check).\n"))
+    from bench_scaling import machine_text
+
+    C.write_text(out / "bench_sensed_machine.txt", machine_text(
+        "the machine is shared: the before/after ratio is taken in one run",
+        ["each case a child process; CPU seconds (process_time inside the child)"]))
+    return 0 if all(r.get("same", True) for r in rows) else 1
+
+
+def least(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first run's answer with the least CPU seconds of all runs (the machine is
+    shared: the least is the one least disturbed)."""
+    out = dict(runs[0])
+    for key in ("build_cpu", "process_cpu"):
+        out[key] = min(r[key] for r in runs)
+    return out
+
+
+def fmt(key: str, v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool) or isinstance(v, str):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    if key in ("lower", "upper", "storm_value"):
+        return f"{v:.10f}"
+    return f"{v:.1f}x" if key == "speedup" else f"{v:.3f}"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

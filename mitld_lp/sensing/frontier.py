@@ -1,0 +1,602 @@
+"""The construction of the information-state product, a frontier at a time
+(:mod:`mitld_lp.sensing.belief`'s module docs; tests/test_sensing_build.py builds the
+same product one state at a time and compares every state, row, posterior and move).
+
+The states found and not expanded yet (up to :data:`CHUNK` of them, breadth first) are
+expanded together, as numpy rows:
+each state's choices, the outcomes of its unsensed events, its hypotheses, each
+hypothesis's sensed branches and the world's successors, one row per combination; the
+automaton's step and where a hypothesis ends are looked up in tables indexed by small
+integers (world states, event sets as bit masks, hypotheses' event times), which the
+step rules (:mod:`mitld_lp.sensing.rules`) fill for the keys not met before, one Python
+call per new key.  The rows are then grouped by what the robot observes into successor
+information states, and an information state is found by an integer key: its world
+state, clock, reports, pending events, number of hypotheses and a 64-bit hash of its
+hypothesis set.  A key met before is compared with the stored state hypothesis by
+hypothesis (a hash collision is an internal error, never a merge) and weight by
+weight (:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a function of
+the key).  Python objects are made only once per world state, event set and new
+information state; the controller's moves are kept as arrays
+(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for.  The state
+and memory budgets are checked before each batch of new states is stored."""
+
+from __future__ import annotations
+
+import gc
+import logging
+from collections.abc import Hashable, Mapping
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.automata.dta import DTA
+from mitld_lp.automata.sta import STA
+from mitld_lp.mdp import ABSORB, MDP
+from mitld_lp.product import Absorbing, ProductTooLarge
+from mitld_lp.sensing.info import (
+    BYTES_PER_HYPOTHESIS,
+    BYTES_PER_INFO_STATE,
+    NOT_YET,
+    WEIGHT_TOL,
+    Belief,
+    Ends,
+    InfoSize,
+    InfoState,
+)
+from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.rows import INT, Table, fsum_by, groups, mix64, spread
+from mitld_lp.sensing.rules import StepRules
+from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.util.progress import bar as progress_bar
+from mitld_lp.worlds.game import Game
+
+__all__ = ["FrontierBuilder"]
+
+log = logging.getLogger("mitld_lp.sensing.belief")
+
+_I = INT
+DENSE = 1 << 22
+"""The most keys a lookup keeps as a dense array (32 MiB)."""
+CHUNK = 8_192
+"""The most states expanded together: the rows of one expansion (a state's choices x
+its unsensed outcomes x its hypotheses x their branches x the world's successors, a
+few dozen per state, some fifteen numbers each) stay some tens of megabytes."""
+_FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
+
+
+class FrontierBuilder(StepRules):
+    """The information states reachable from the initial one (module docs), under
+    ``max_states`` and ``max_memory`` (``size``: what a state can hold, for the
+    messages)."""
+
+    def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
+                 sensors: Mapping[str, Sensor], max_states: int, max_memory: int,
+                 size: InfoSize, ends: Ends | None = None) -> None:
+        super().__init__(game, dta, sta, sensed, sensors, ends)
+        self.size, self.max_states = size, max_states
+        self.max_memory, self.bytes = max_memory, 0
+        self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
+        self.states: list[InfoState | Hashable] = []
+        self.nq = dta.n_states
+        self.unsensed_order = tuple(sorted(self.unsensed))
+        nu, ns = len(self.unsensed_order), len(sensed)
+        self.nu = nu
+        self.u_sets = [frozenset(a for b, a in enumerate(self.unsensed_order) if m >> b & 1)
+                       for m in range(1 << nu)]
+        self.s_sets = [frozenset(a for b, a in enumerate(sensed) if m >> b & 1)
+                       for m in range(1 << ns)]
+        self.atoms = tuple(sorted(dta.atoms))
+        bit = {a: 1 << i for i, a in enumerate(self.atoms)}
+        self.u_atoms = np.array([sum(bit.get(a, 0) for a in s) for s in self.u_sets], _I)
+        self.s_atoms = np.array([sum(bit.get(a, 0) for a in s) for s in self.s_sets], _I)
+        self.atom_bit = bit
+        self.worlds: list[Hashable] = []
+        self.world_id: dict[Hashable, int] = {}
+        self.world_label: list[int] = []
+        self.world_acts: dict[int, tuple[str, ...]] = {}
+        self.act_names: list[str] = []
+        self.act_id: dict[str, int] = {}
+        self.times: list[tuple[int, ...]] = []
+        self.times_id: dict[tuple[int, ...], int] = {}
+        self.outcomes = Table(3, (_I, np.float64, bool))
+        self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
+        self.successors = Table(2, (_I, np.float64))
+        self.step_table: dict[tuple[int, int], int] = {}
+        self.end_table: dict[tuple[int, int], int] = {}  # -1 undecided, else a record
+        self.need_table: dict[tuple[int, int], int] = {}
+        self.pending_need: dict[tuple[int, int], int] = {}
+        self.dense: dict[int, np.ndarray] = {}  # the lookups' dense copies
+        self.actions = Table(1, (_I,))
+        # the moves (Moves): (choice, world, occurred, new, target) per level
+        self.n_choices = 0
+        self.move_rows: list[tuple[np.ndarray, ...]] = []
+        # the absorbing records (ends, the truncation): each one's id and its state
+        # (-1 until stored)
+        self.records: list[Hashable] = []
+        self.record_id: dict[Hashable, int] = {}
+        self.record_state: list[int] = []
+        self.tid_rank = np.zeros(0, _I)  # each hypothesis times' rank in sorted order
+        # per state: world, clock, reported, pending, first hypothesis, hypotheses;
+        # -1 clock for an absorbing state
+        self.cols: list[list[int]] = [[], [], [], [], [], []]
+        self.hyp_code = np.zeros(1024, _I)  # every state's hypotheses, in state order
+        self.hyp_weight = np.zeros(1024, np.float64)
+        self.n_hyps = 0
+
+    # ---------------------------------------------------------------- small tables
+
+    def world(self, g: Hashable) -> int:
+        i = self.world_id.get(g)
+        if i is None:
+            i = self.world_id[g] = len(self.worlds)
+            self.worlds.append(g)
+            self.world_label.append(sum(self.atom_bit.get(a, 0) for a in self.label(g)))
+        return i
+
+    def time_id(self, times: tuple[int, ...]) -> int:
+        i = self.times_id.get(times)
+        if i is None:
+            i = self.times_id[times] = len(self.times)
+            self.times.append(times)
+        return i
+
+    def make_acts(self, key: tuple[int]) -> list[tuple[int]]:
+        """A world state's actions (ids), or the loop (-1) of an absorbing state."""
+        (w,) = key
+        if w < 0:
+            return [(-1,)]
+        names = self.world_acts[w] = tuple(self.game.actions(self.worlds[w]))
+        for name in names:
+            if name not in self.act_id:
+                self.act_id[name] = len(self.act_names)
+                self.act_names.append(name)
+        return [(self.act_id[name],) for name in names]
+
+    def make_pending_need(self, pending: int, _: int) -> int:
+        return self.clock_key(_FAR, [], self.u_sets[pending], frozenset())
+
+    def mask(self, events: frozenset[str], order: tuple[str, ...]) -> int:
+        return sum(1 << i for i, a in enumerate(order) if a in events)
+
+    def make_outcomes(self, key: tuple[int, int]) -> list[tuple[int, float, bool]]:
+        pending, t = key
+        return [(self.mask(o, self.unsensed_order), p, crossed)
+                for o, p, crossed in self.unsensed_outcomes(self.u_sets[pending], t)]
+
+    def make_branches(self, key: tuple[int, int, int]) -> list[tuple[Any, ...]]:
+        tid, reported, t = key
+        return [(self.time_id(times2), self.mask(new, self.sensed), p, cut,
+                 self.mask(now, self.sensed), self.mask(waiting, self.sensed))
+                for times2, new, p, cut, now, waiting in self._sensed_branches(
+                    self.times[tid], self.s_sets[reported], t)]
+
+    def make_successors(self, key: tuple[int, int, int]) -> list[tuple[int, float]]:
+        w, act, occurred = key
+        return [(self.world(g2), p) for g2, p in self.game.successors(
+            self.worlds[w], self.act_names[act], self.u_sets[occurred]) if p > 0.0]
+
+    def lookup(self, table: dict[tuple[int, int], int], a: np.ndarray, b: np.ndarray,
+               make: Any) -> np.ndarray:
+        """``table[(a, b)]`` per row, ``make(a, b)`` filling the keys not met before
+        (values >= -1); kept also as a dense array while the keys' box is small."""
+        if len(a) == 0:
+            return np.zeros(0, _I)
+        shape = (int(a.max()) + 1, int(b.max()) + 1)
+        dense = self.dense.get(id(table))
+        if dense is None or dense.shape[0] < shape[0] or dense.shape[1] < shape[1]:
+            size = (max(shape[0], 0 if dense is None else dense.shape[0]),
+                    max(shape[1], 0 if dense is None else dense.shape[1]))
+            if size[0] * size[1] > DENSE:
+                return self.lookup_sparse(table, a, b, make)
+            grown = np.full(size, -2, _I)  # -2: not asked yet
+            if dense is not None:
+                grown[:dense.shape[0], :dense.shape[1]] = dense
+            dense = self.dense[id(table)] = grown
+        values = dense[a, b]
+        miss = np.flatnonzero(values == -2)
+        if len(miss):
+            found = self.lookup_sparse(table, a[miss], b[miss], make)
+            dense[a[miss], b[miss]] = found
+            values[miss] = found
+        return values
+
+    def lookup_sparse(self, table: dict[tuple[int, int], int], a: np.ndarray,
+                      b: np.ndarray, make: Any) -> np.ndarray:
+        ids, first = groups(a, b)
+        values = np.empty(len(first), _I)
+        for n, (x, y) in enumerate(zip(a[first].tolist(), b[first].tolist(), strict=True)):
+            v = table.get((x, y))
+            if v is None:
+                v = table[(x, y)] = make(x, y)
+            values[n] = v
+        return values[ids]
+
+    def make_step(self, q: int, label: int) -> int:
+        return self.automaton(q, frozenset(a for i, a in enumerate(self.atoms)
+                                           if label >> i & 1))
+
+    def make_end(self, q: int, left: int) -> int:
+        events = self.u_sets[left & ((1 << self.nu) - 1)] | self.s_sets[left >> self.nu]
+        end = self.end(q, events)
+        return -1 if end is None else self.record(end)
+
+    def make_need(self, tid: int, reported: int) -> int:
+        return self.clock_key(_FAR, [self.times[tid]], frozenset(), self.s_sets[reported])
+
+    # ---------------------------------------------------------------- states
+
+    def record(self, record: Hashable) -> int:
+        """The id of an absorbing record."""
+        r = self.record_id.get(record)
+        if r is None:
+            r = self.record_id[record] = len(self.records)
+            self.records.append(record)
+            self.record_state.append(-1)
+        return r
+
+    def store_record(self, r: int) -> None:
+        self.record_state[r] = len(self.states)
+        self.states.append(self.records[r])
+        for c, v in zip(self.cols, (-1, -1, 0, 0, self.n_hyps, 0), strict=True):
+            c.append(v)
+        self.bytes += BYTES_PER_INFO_STATE
+
+    def order_key(self, tid: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Hypotheses in :class:`InfoState` order: by their times, then automaton state."""
+        if len(self.tid_rank) < len(self.times):
+            rank = np.empty(len(self.times), _I)
+            rank[sorted(range(len(self.times)), key=self.times.__getitem__)] = np.arange(
+                len(self.times))
+            self.tid_rank = rank
+        return self.tid_rank[tid] * self.nq + q
+
+    def check(self, new: int, hyps: int) -> None:
+        """Raise :class:`ProductTooLarge` before ``new`` states of ``hyps`` hypotheses in
+        all are stored past a budget."""
+        if len(self.states) + new > self.max_states:
+            raise ProductTooLarge(
+                f"the information-state product has more than {self.max_states:,} states "
+                f"(sensed events: {', '.join(self.sensed)}; truncation points: "
+                f"{self.sta.truncation_points}; {self.size}); raise max_states, loosen "
+                "epsilon, or shrink the model")
+        if self.bytes + BYTES_PER_INFO_STATE * new + BYTES_PER_HYPOTHESIS * hyps > (
+                self.max_memory):
+            raise ProductTooLarge(
+                f"the information-state product would need more than {self.max_memory:,} "
+                f"bytes ({len(self.states):,} states so far, sensed events: "
+                f"{', '.join(self.sensed)}; {self.size}); raise max_memory, loosen "
+                "epsilon, or shrink the model")
+
+    def add_states(self, world: np.ndarray, clock: np.ndarray, reported: np.ndarray,
+                   pending: np.ndarray, counts: np.ndarray, codes: np.ndarray,
+                   weights: np.ndarray) -> None:
+        """Store new information states (columns), their hypotheses' codes and weights
+        concatenated in state order, each state's in :class:`InfoState` order."""
+        starts = self.n_hyps + np.cumsum(counts) - counts
+        for c, v in zip(self.cols, (world, clock, reported, pending, starts, counts),
+                        strict=True):
+            c.extend(v.tolist())
+        end = self.n_hyps + len(codes)
+        if end > len(self.hyp_code):
+            size = max(end, 2 * len(self.hyp_code))
+            self.hyp_code = np.resize(self.hyp_code, size)
+            self.hyp_weight = np.resize(self.hyp_weight, size)
+        self.hyp_code[self.n_hyps:end] = codes
+        self.hyp_weight[self.n_hyps:end] = weights
+        self.n_hyps = end
+        self.bytes += BYTES_PER_INFO_STATE * len(world) + BYTES_PER_HYPOTHESIS * len(codes)
+        times = self.times
+        pairs = [(times[c // self.nq], c % self.nq) for c in codes.tolist()]
+        mass = weights.tolist()
+        at = 0
+        for w, t, r, p, n in zip(world.tolist(), clock.tolist(), reported.tolist(),
+                                 pending.tolist(), counts.tolist(), strict=True):
+            self.states.append(InfoState(self.worlds[w], t, self.s_sets[r], self.u_sets[p],
+                                         tuple(pairs[at:at + n]), tuple(mass[at:at + n])))
+            at += n
+
+    # ---------------------------------------------------------------- one level
+
+    def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
+        """Expand the states ``a .. b - 1``: their choices (state, action) in order, and
+        the transitions (choice, column, probability), new states stored."""
+        cols = [np.asarray(c[a:b], _I) for c in self.cols]
+        world, clock, reported, pending, hstart, hcount = cols
+        # the choices: each state's actions, an absorbing state its loop
+        c_state, (c_act,) = self.actions.rows(self.actions.find((world,), self.make_acts))
+        row0 = self.n_choices
+        self.n_choices += len(c_state)
+        loops = np.flatnonzero(c_act < 0)
+        loop = (loops, a + c_state[loops], np.ones(len(loops)))
+        live = np.flatnonzero(c_act >= 0)  # the information states' choices
+        st = c_state[live]
+        t = clock[st]
+        # the unsensed events' outcomes
+        which = self.outcomes.find((pending[st], t), self.make_outcomes)
+        parent, (occ, pu, crossed) = self.outcomes.rows(which)
+        c = live[parent]
+        o_seq = np.arange(len(c), dtype=_I)  # each row's place in the loops of one state
+        trunc = self.record(Absorbing.TRUNCATED)
+        none = np.full(int(crossed.sum()), -1, _I)
+        ends = [(c[crossed], o_seq[crossed], none, none, np.full(len(none), trunc),
+                 pu[crossed])]
+        keep = ~crossed
+        c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
+        # each state's hypotheses
+        st = c_state[c]
+        parent, rank = spread(hcount[st])
+        c, occ, pu, st, o_seq = (x[parent] for x in (c, occ, pu, st, o_seq))
+        h = hstart[st] + rank
+        code, w = self.hyp_code[h], self.hyp_weight[h]
+        tid, q = code // self.nq, code % self.nq
+        # each hypothesis's sensed branches
+        t = clock[st]
+        which = self.branches.find((tid, reported[st], t), self.make_branches)
+        parent, (tid2, new, pc, cut, now, wait) = self.branches.rows(which)
+        c, occ, pu, st, q, w, o_seq = (x[parent] for x in (c, occ, pu, st, q, w, o_seq))
+        b_seq = np.arange(len(c), dtype=_I)
+        base = w * pu * pc
+        none = np.full(int(cut.sum()), -1, _I)
+        ends.append((c[cut], o_seq[cut], b_seq[cut], none, np.full(len(none), trunc),
+                     base[cut]))
+        ok = ~cut
+        c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
+            x[ok] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
+        # the world's successors (what the hypothesis saw happen and what may still
+        # come, before they are spread)
+        happened = self.u_atoms[occ] | self.s_atoms[now]
+        left = (pending[st] & ~occ) | (wait << self.nu)
+        which = self.successors.find((world[st], c_act[c], occ), self.make_successors)
+        parent, (w2, pg) = self.successors.rows(which)
+        c, occ, q, base, tid2, new, happened, left, o_seq, b_seq = (
+            x[parent] for x in (c, occ, q, base, tid2, new, happened, left, o_seq, b_seq))
+        s_seq = np.arange(len(c), dtype=_I)
+        mass = base * pg
+        label = np.asarray(self.world_label, _I)[w2] | happened
+        q2 = self.lookup(self.step_table, q, label, self.make_step)
+        end = self.lookup(self.end_table, q2, left, self.make_end)
+        done = end >= 0
+        ends.append((c[done], o_seq[done], b_seq[done], s_seq[done], end[done], mass[done]))
+        ended = (c[done], w2[done], occ[done], new[done], end[done])
+        u = ~done
+        c, occ, w2, new, tid2, q2, mass, s_seq = (
+            x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
+        # the undecided hypotheses grouped by what the robot observes, each group's in
+        # InfoState order
+        obs, first = groups(c, w2, occ, new)
+        hid, hfirst = groups(obs, self.order_key(tid2, q2))
+        hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
+        hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
+        total = fsum_by(hobs, hmass, len(first))
+        weight = hmass / total[hobs]
+        gst = c_state[c[first]]
+        g_rep = reported[gst] | new[first]
+        g_pend = pending[gst] & ~occ[first]
+        need = self.lookup(self.need_table, tid2[hfirst], g_rep[hobs], self.make_need)
+        most = np.full(len(first), -1, _I)
+        np.maximum.at(most, hobs, need)
+        pend_need = self.lookup(self.pending_need, g_pend, g_pend, self.make_pending_need)
+        g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
+        g_count = np.bincount(hobs, minlength=len(first))
+        g_hash = np.zeros(len(first), np.uint64)
+        np.add.at(g_hash, hobs, mix64(hcode))
+        g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
+        np.minimum.at(g_first, obs, s_seq)
+        group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
+        target, keys, reps = self.match(*group)
+        g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
+        self.store(c[first], g_first, target, keys, reps, group, g_start, hcode, weight,
+                   [np.concatenate(x) for x in zip(*ends, strict=True)])
+        self.verify(target, g_count, hobs, hcode, weight)
+        self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
+                          ended)
+        return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
+                                                      target, total))
+
+    def transitions(self, loop: tuple[np.ndarray, ...], ends: list[tuple[np.ndarray, ...]],
+                    c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
+                    total: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The expansion's transitions (choice, column, probability) in each choice's
+        order one state at a time would make them, with the same sums: the absorbing
+        records as the loops meet them (their mass summed in the loops' order), then
+        the information states as their observations come."""
+        c_end, o_end, b_end, s_end, r_end, m_end = (np.concatenate(x) for x in
+                                                    zip(*ends, strict=True))
+        order = np.lexsort((s_end, b_end, o_end, c_end))
+        c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
+        ids, _ = groups(c_end, r_end)
+        mass = np.bincount(ids, weights=m_end)
+        place = np.full(len(mass), np.iinfo(_I).max, _I)
+        np.minimum.at(place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
+        col = np.asarray(self.record_state, _I)[r_end[place]]
+        cc = np.concatenate([loop[0], c_end[place], c])
+        phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
+                                np.ones(len(c), _I)])
+        pos = np.concatenate([np.zeros(len(loop[0]), _I), place, g_first])
+        order = np.lexsort((pos, phase, cc))
+        return (cc[order], np.concatenate([loop[1], col, target])[order],
+                np.concatenate([loop[2], mass, total])[order])
+
+    def match(self, *group: np.ndarray) -> tuple[np.ndarray, list[tuple[int, ...]],
+                                                   np.ndarray]:
+        """Each group's state by its key (``-1 - k`` for the ``k``-th new key), the new
+        keys, and a group of each."""
+        ids, first = groups(*group)
+        keys = list(zip(*(x[first].tolist() for x in group), strict=True))
+        found = np.array([self.keys.get(k, -1) for k in keys], _I)
+        fresh = np.flatnonzero(found < 0)
+        found[fresh] = -1 - np.arange(len(fresh), dtype=_I)
+        return found[ids], [keys[k] for k in fresh.tolist()], first[fresh]
+
+    def store(self, c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
+              keys: list[tuple[int, ...]], reps: np.ndarray, group: tuple[np.ndarray, ...],
+              g_start: np.ndarray, hcode: np.ndarray, weight: np.ndarray,
+              ends: list[np.ndarray]) -> None:
+        """Store the new states (records and information states, ``target`` updated) in
+        the order one state at a time would: state by state and choice by choice, the
+        records as the loops meet them, then the new information states as their
+        observations' first rows come."""
+        c_end, o_end, b_end, s_end, r_end, _ = ends
+        fresh_record = np.asarray(self.record_state, _I)[r_end] < 0
+        new_group = target < 0
+        n_rec = len(self.records)
+        item = np.concatenate([r_end[fresh_record], n_rec - 1 - target[new_group]])
+        phase = np.concatenate([np.zeros(int(fresh_record.sum()), _I),
+                                np.ones(int(new_group.sum()), _I)])
+        order = np.lexsort((
+            np.concatenate([s_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
+            np.concatenate([b_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
+            np.concatenate([o_end[fresh_record], g_first[new_group]]),
+            phase,
+            np.concatenate([c_end[fresh_record], c[new_group]])))
+        _, at = np.unique(item[order], return_index=True)
+        sequence = item[order][np.sort(at)].tolist()
+        counts = group[4]
+        self.check(len(sequence), int(counts[reps].sum()))
+        index = np.empty(len(keys), _I)
+        batch: list[int] = []
+
+        def flush() -> None:
+            if not batch:
+                return
+            g = reps[batch]
+            parent, rank = spread(counts[g])
+            rows = g_start[g][parent] + rank
+            index[batch] = len(self.states) + np.arange(len(batch), dtype=_I)
+            self.add_states(*(x[g] for x in group[:5]), hcode[rows], weight[rows])
+            batch.clear()
+
+        for x in sequence:
+            if x < n_rec:
+                flush()
+                self.store_record(x)
+            else:
+                batch.append(x - n_rec)
+        flush()
+        for k, key in enumerate(keys):
+            self.keys[key] = int(index[k])
+        target[new_group] = index[-1 - target[new_group]]
+
+    def verify(self, target: np.ndarray, count: np.ndarray, hobs: np.ndarray,
+               hcode: np.ndarray, weight: np.ndarray) -> None:
+        """Check every group against its state, hypothesis by hypothesis: the same
+        hypotheses (else two sets share a hash) and the same posterior."""
+        starts = np.asarray(self.cols[4], _I)[target]
+        _, rank = spread(count)
+        at = starts[hobs] + rank
+        if not np.array_equal(self.hyp_code[at], hcode):
+            raise RuntimeError("internal error: two information states with one key "
+                               "(a hash collision of their hypothesis sets)")
+        gap = np.abs(self.hyp_weight[at] - weight)
+        if len(gap) and gap.max() > WEIGHT_TOL:
+            bad = int(hobs[int(np.argmax(gap))])
+            raise RuntimeError(
+                f"internal error: information state {self.states[int(target[bad])]!r} "
+                f"reached with two posteriors (they differ by {gap.max():.3g})")
+
+    def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
+                     ended: tuple[np.ndarray, ...]) -> None:
+        """The controller's moves of the level's choices (``base``: its first choice's
+        row): each observation's successor state, or, when nothing undecided is left
+        with it, the verdict: the one record its hypotheses ended in, or
+        :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
+        _, once = groups(*ended)  # each (observation, record) once
+        c, w2, occ, new, end = (x[once] for x in ended)
+        obs, first = groups(c, w2, occ, new)
+        kinds = np.bincount(obs)
+        n = len(grouped[0])
+        both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
+                            zip(grouped, (c, w2, occ, new), strict=True)))
+        alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
+        pick = first[alone]
+        trunc = self.record(Absorbing.TRUNCATED)
+        code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
+        gc, gw, go, gn = grouped
+        self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
+                               np.concatenate([gw, w2[pick]]),
+                               np.concatenate([go, occ[pick]]),
+                               np.concatenate([gn, new[pick]]),
+                               np.concatenate([target, code])))
+
+    # ---------------------------------------------------------------- the MDP
+
+    def build(self, progress: bool | None = None) -> Belief:
+        game, dta = self.game, self.dta
+        q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
+        first = self.end(q0, frozenset(self.sta.events)) if (
+            self.ends is not None or q0 in (dta.accepting, dta.rejecting)) else None
+        if first is not None:
+            self.check(1, 0)
+            self.store_record(self.record(first))
+            initial = 0
+        else:
+            initial = len(self.states)
+            times0 = self.time_id((NOT_YET,) * len(self.sensed))
+            q0code = np.array([times0 * self.nq + q0], _I)
+            one = np.array([1], _I)
+            w0 = self.world(game.initial)
+            clock0 = self.clock_key(0, [self.times[times0]], self.unsensed, frozenset())
+            self.add_states(np.array([w0], _I), np.array([clock0], _I), np.zeros(1, _I),
+                            np.array([self.mask(self.unsensed, self.unsensed_order)], _I),
+                            one, q0code, np.ones(1))
+            self.keys[(w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)), 1,
+                       int(mix64(q0code).view(_I)[0]))] = initial
+        parts: list[tuple[np.ndarray, ...]] = []
+        head = 0
+        shown = progress_bar(progress, total=None, unit=" states", desc="information states",
+                             leave=False, mininterval=0.5)
+        # the build makes many small objects and no reference cycles: the cyclic
+        # collector's passes over the whole heap are paused while it runs
+        collecting = gc.isenabled()
+        gc.disable()
+        try:
+            while head < len(self.states):
+                end = min(len(self.states), head + CHUNK)
+                parts.append(self.expand(head, end))
+                shown.update(end - head)
+                head = end
+        finally:
+            if collecting:
+                gc.enable()
+        shown.close()
+        offset = 0
+        rows, cols, vals, owners, acts = [], [], [], [], []
+        for owner, act, c, col, val in parts:
+            rows.append(c + offset)
+            cols.append(col)
+            vals.append(val)
+            owners.append(owner)
+            acts.append(act)
+            offset += len(owner)
+        n, n_choices = len(self.states), offset
+        owner = np.concatenate(owners)
+        row = np.concatenate(rows)  # choice by choice, each in its own order
+        indptr = np.zeros(n_choices + 1, np.int64)
+        np.cumsum(np.bincount(row, minlength=n_choices), out=indptr[1:])
+        matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
+                               indptr), shape=(n_choices, n))
+        per_state = np.zeros(n + 1, np.int64)
+        np.add.at(per_state, owner + 1, 1)
+        act = np.concatenate(acts)
+        # the actions numbered as the choices first show them
+        used = np.flatnonzero(act >= 0)
+        seen, at = np.unique(act[used], return_index=True)
+        shown_first = seen[np.argsort(at)]
+        number = np.full(len(self.act_names), -1, _I)
+        number[shown_first] = np.arange(len(shown_first))
+        names = tuple(self.act_names[k] for k in shown_first.tolist())
+        act = np.where(act < 0, ABSORB, number[np.maximum(act, 0)]).astype(np.int32)
+        log.info("information-state product: %s states, %s choices, %s transitions",
+                 f"{n:,}", f"{n_choices:,}", f"{matrix.nnz:,}")
+        kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
+                         .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
+                        dtype=np.int8)
+        mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
+                  choice_actions=act, action_names=names,
+                  initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
+                  states=tuple(self.states))
+        cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
+        moves = Moves(mdp.row_groups, np.asarray(self.cols[0], _I), self.world_acts,
+                      self.worlds, self.u_sets, self.s_sets, self.records, *cols)
+        return Belief(mdp, self.sta, self.sensed, self.sensors, moves)

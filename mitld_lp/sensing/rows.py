@@ -1,0 +1,165 @@
+"""Rows of integers grouped, spread and summed without a Python loop per row: the
+array operations of the frontier-at-a-time construction
+(:mod:`mitld_lp.sensing.frontier`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable
+from typing import Any
+
+import numpy as np
+
+__all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "INT"]
+
+INT = np.int64
+_I = INT
+
+
+def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
+    """The columns packed into as few int64 words as keep their lexicographic order
+    (each column shifted to start at 0, in mixed radix while the product fits), and the
+    last word's span (0 for a hash, kept as it is in a word of its own)."""
+    words: list[np.ndarray] = []
+    word, span = None, 1
+    for c in cols:
+        lo, hi = int(c.min()), int(c.max())
+        size = hi - lo + 1
+        if size >= 1 << 62:
+            if word is not None:
+                words.append(word)
+            words.append(c.astype(_I, copy=False))
+            word, span = None, 0
+            continue
+        v = c.astype(_I) - lo
+        if word is not None and span * size < 1 << 62:
+            word, span = word * size + v, span * size
+        else:
+            if word is not None:
+                words.append(word)
+            word, span = v, size
+    if word is not None:
+        words.append(word)
+    return words, span
+
+
+def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows grouped by equal values in every column: each row's group (numbered in the
+    columns' lexicographic order) and one row of each group (every caller reads only
+    the grouped columns from it, equal across the group)."""
+    n = len(cols[0])
+    if n == 0:
+        return np.zeros(0, _I), np.zeros(0, _I)
+    words, span = pack_words(cols)
+    if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):  # a dense count, no sort
+        word = words[0]
+        first = np.full(span, -1, _I)
+        first[word] = np.arange(n, dtype=_I)  # a row of each group (any one will do)
+        present = first >= 0
+        rank = np.cumsum(present) - 1
+        return rank[word], first[present]
+    order = (np.argsort(words[0], kind="stable") if len(words) == 1
+             else np.lexsort(words[::-1]))
+    change = np.zeros(n, dtype=bool)
+    change[0] = True
+    for c in words:
+        s = c[order]
+        change[1:] |= s[1:] != s[:-1]
+    inverse = np.empty(n, _I)
+    inverse[order] = np.cumsum(change) - 1
+    return inverse, order[change]
+
+
+def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """The sum of ``values`` per id (``ids`` sorted, every id in ``0 .. n - 1`` present),
+    correctly rounded as :func:`math.fsum`.  Summed term by term in double-double
+    (each addition's rounding error found by Knuth's two-sum and carried), then
+    rounded once: that is the correctly rounded sum unless the exact sum may lie within
+    the carried errors' own rounding of a point halfway between two floats, and those
+    few sums are redone by :func:`math.fsum`."""
+    count = np.bincount(ids, minlength=n)
+    starts = np.cumsum(count) - count
+    high = values[starts].copy()
+    low = np.zeros(n)
+    size = np.zeros(n)  # the errors' magnitudes, for the bound on low's own rounding
+    live = np.arange(n, dtype=_I)
+    for k in range(1, int(count.max(initial=0))):
+        live = live[count[live] > k]
+        a, x = high[live], values[starts[live] + k]
+        t = a + x
+        back = t - a
+        error = (a - (t - back)) + (x - back)
+        high[live] = t
+        low[live] += error
+        size[live] += np.abs(error)
+    out = high + low
+    back = out - high
+    rest = (high - (out - back)) + (low - back)  # high + low - out, exactly
+    # half the gap to the next float on the rest's side (below a power of two, the gap
+    # is half the one above)
+    half = np.spacing(out) / 2
+    half[(rest < 0) & (np.frexp(out)[0] == 0.5)] /= 2
+    unsure = np.abs(rest) + 4.0 * count * 2.0**-52 * size >= half
+    redo = np.flatnonzero(unsure & (count > 2))
+    if len(redo):
+        vals = values.tolist()
+        out[redo] = [math.fsum(vals[a:a + k]) for a, k in zip(
+            starts[redo].tolist(), count[redo].tolist(), strict=True)]
+    return out
+
+
+def spread(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For parents with ``counts`` children each: every child's parent and its rank."""
+    parent = np.repeat(np.arange(len(counts), dtype=_I), counts)
+    starts = np.cumsum(counts) - counts
+    return parent, np.arange(len(parent), dtype=_I) - starts[parent]
+
+
+def mix64(x: np.ndarray) -> np.ndarray:
+    """A 64-bit mix of each value (splitmix64's finaliser), summed into a set's hash."""
+    z = x.astype(np.uint64) + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+class Table:
+    """Entries of variable number per key, each key's entries computed once (a Python
+    call) and kept as flat numpy columns: :meth:`rows` gives, for an array of keys'
+    indices, each entry's parent and the entry columns."""
+
+    def __init__(self, width: int, dtypes: tuple[Any, ...]) -> None:
+        self.index: dict[Hashable, int] = {}
+        self.entries: list[tuple[np.ndarray, ...]] = []
+        self.dtypes = dtypes
+        self.width = width
+
+    def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:
+        """The table index of each row's key (the row's values in ``cols``), ``make``
+        called once for each key not met before."""
+        ids, first = groups(*cols)
+        out = np.empty(len(first), _I)
+        for n, key in enumerate(zip(*(c[first].tolist() for c in cols), strict=True)):
+            i = self.index.get(key)
+            if i is None:
+                rows = make(key)
+                i = self.index[key] = len(self.entries)
+                self.entries.append(tuple(np.asarray([r[c] for r in rows], dtype=d)
+                                          for c, d in enumerate(self.dtypes)))
+            out[n] = i
+        return out[ids]
+
+    def rows(self, which: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """``which``: a table index per parent row; the children's parents and columns."""
+        ids, first = groups(which)
+        used = which[first]
+        counts = np.array([len(self.entries[i][0]) for i in used], dtype=_I)
+        if len(used):
+            cols = [np.concatenate([self.entries[i][c] for i in used])
+                    for c in range(self.width)]
+        else:
+            cols = [np.zeros(0, d) for d in self.dtypes]
+        starts = np.cumsum(counts) - counts
+        parent, rank = spread(counts[ids])
+        at = starts[ids][parent] + rank
+        return parent, [c[at] for c in cols]
