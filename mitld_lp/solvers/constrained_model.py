@@ -49,7 +49,7 @@ from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.solvers.quotient import backward_reachable, maximal_end_components
 from mitld_lp.util.traversal import breadth_first_order, strong_components
 
-__all__ = ["Merged", "merge", "Quantity", "columns", "evaluate", "Evaluation"]
+__all__ = ["Merged", "merge", "Quantity", "columns", "evaluate", "Evaluation", "trapped_bottoms"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -332,6 +332,27 @@ class Evaluation:
     visits: np.ndarray
 
 
+def trapped_bottoms(chain: sp.csr_array, live: np.ndarray, exits: np.ndarray) -> np.ndarray:
+    """The bottom strongly connected sets of the ``live`` states of a Markov chain
+    (``chain``, state by state) that cannot reach ``exits``: where a run that can no
+    longer leave stays for ever."""
+    m = chain.shape[0]
+    coo = chain.tocoo()
+    pos = coo.data > 0
+    trapped = live & ~backward_reachable(m, coo.row[pos], coo.col[pos], exits)
+    bottom = np.zeros(m, dtype=bool)
+    if trapped.any():
+        idx = np.flatnonzero(trapped)
+        inner = chain[idx][:, idx]
+        n_c, lab = strong_components(inner)
+        ic = inner.tocoo()
+        leaves = np.zeros(n_c, dtype=bool)
+        cross = (lab[ic.row] != lab[ic.col]) & (ic.data > 0)
+        leaves[lab[ic.row[cross]]] = True
+        bottom[idx[~leaves[lab]]] = True
+    return bottom
+
+
 def evaluate(
     merged: Merged,
     prob: np.ndarray,
@@ -352,23 +373,8 @@ def evaluate(
     weighted = sp.diags_array(prob) @ mdp.matrix
     owner = sp.csr_array((np.ones(cs.size), (cs, np.arange(cs.size))), shape=(m, cs.size))
     chain = sp.csr_array(owner @ weighted)
-    # states that can leave (reach an absorbing state or a positive stay) under the policy
-    exits = (stay > 0) | merged.absorbing
-    coo = chain.tocoo()
-    pos = coo.data > 0
-    can_leave = backward_reachable(m, coo.row[pos], coo.col[pos], exits)
-    trapped = live & ~can_leave
     # the bottom sets of the trapped part act as stays; the rest of it is transient
-    bottom = np.zeros(m, dtype=bool)
-    if trapped.any():
-        idx = np.flatnonzero(trapped)
-        inner = chain[idx][:, idx]
-        n_c, lab = strong_components(inner)
-        ic = inner.tocoo()
-        leaves = np.zeros(n_c, dtype=bool)
-        cross = (lab[ic.row] != lab[ic.col]) & (ic.data > 0)
-        leaves[lab[ic.row[cross]]] = True
-        bottom[idx[~leaves[lab]]] = True
+    bottom = trapped_bottoms(chain, live, (stay > 0) | merged.absorbing)
     transient = live & ~bottom
     t_idx = np.flatnonzero(transient)
     visits = np.zeros(m)

@@ -35,9 +35,8 @@ import scipy.sparse as sp
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.checks import Check
 from mitld_lp.product.imdp import VertexRows
-from mitld_lp.solvers.constrained_model import Merged, Quantity, columns
+from mitld_lp.solvers.constrained_model import Merged, Quantity, columns, trapped_bottoms
 from mitld_lp.solvers.robust_graph import RobustGame, gather
-from mitld_lp.util.traversal import strong_components
 
 __all__ = ["Options", "options", "WorstTotal", "worst_total", "robust_for", "MAX_ROUNDS"]
 
@@ -116,19 +115,7 @@ def _values(merged: Merged, chain: sp.csr_array, reward: np.ndarray, stays: np.n
     live = ~merged.absorbing
     coo = chain.tocoo()
     pos = coo.data > 0
-    exits = merged.absorbing | stays
-    can_leave = backward_reachable(m, coo.row[pos], coo.col[pos], exits)
-    trapped = live & ~can_leave
-    bottom = np.zeros(m, dtype=bool)
-    if trapped.any():
-        idx = np.flatnonzero(trapped)
-        inner = chain[idx][:, idx]
-        n_c, lab = strong_components(inner)
-        ic = inner.tocoo()
-        leaves = np.zeros(n_c, dtype=bool)
-        cross = (lab[ic.row] != lab[ic.col]) & (ic.data > 0)
-        leaves[lab[ic.row[cross]]] = True
-        bottom[idx[~leaves[lab]]] = True
+    bottom = trapped_bottoms(chain, live, merged.absorbing | stays)
     bad = stuck | (bottom & merged.undecided)
     infinite = backward_reachable(m, coo.row[pos], coo.col[pos], bad)
     v = np.zeros(m)
