@@ -3,21 +3,20 @@
 same product one state at a time and compares every state, row, posterior and move).
 
 The states found and not expanded yet (up to :data:`CHUNK` of them, breadth first) are
-expanded together, as numpy rows:
-each state's choices, the outcomes of its unsensed events, its hypotheses, each
-hypothesis's sensed branches and the world's successors, one row per combination; the
-automaton's step and where a hypothesis ends are looked up in tables indexed by small
-integers (world states, event sets as bit masks, hypotheses' event times), which the
-step rules (:mod:`mitld_lp.sensing.rules`) fill for the keys not met before, one Python
-call per new key.  The rows are then grouped by what the robot observes into successor
-information states, and an information state is found by an integer key: its world
-state, clock, reports, pending events, number of hypotheses and a 64-bit hash of its
-hypothesis set.  A key met before is compared with the stored state hypothesis by
-hypothesis (a hash collision is an internal error, never a merge) and weight by
-weight (:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a function of
-the key).  Python objects are made only once per world state, event set and new
-information state; the controller's moves are kept as arrays
-(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for.  The state
+expanded together, as numpy rows: each state's choices, the outcomes of its unsensed
+events, its hypotheses, each hypothesis's sensed branches and the world's successors,
+one row per combination; the automaton's step and where a hypothesis ends are looked up
+in tables indexed by small integers (world states, event sets as bit masks, hypotheses'
+event times), which the step rules (:mod:`mitld_lp.sensing.rules`) fill for the keys not
+met before, one Python call per new key. The rows are then grouped by what the robot
+observes into successor information states, and an information state is found by an
+integer key: its world state, clock, reports, pending events, number of hypotheses and a
+64-bit hash of its hypothesis set. A key met before is compared with the stored state
+hypothesis by hypothesis (a hash collision is an internal error, never a merge) and
+weight by weight (:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a
+function of the key). Python objects are made only once per world state, event set and
+new information state; the controller's moves are kept as arrays
+(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for. The state
 and memory budgets are checked before each batch of new states is stored."""
 
 from __future__ import annotations
@@ -45,7 +44,8 @@ from mitld_lp.sensing.info import (
     InfoState,
 )
 from mitld_lp.sensing.moves import Moves
-from mitld_lp.sensing.rows import INT, Table, fsum_by, groups, mix64, spread
+from mitld_lp.sensing.rows import INT as _I
+from mitld_lp.sensing.rows import Table, fsum_by, groups, mix64, spread
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
@@ -55,7 +55,6 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-_I = INT
 DENSE = 1 << 22
 """The most keys a lookup keeps as a dense array (32 MiB)."""
 CHUNK = 8_192
@@ -135,11 +134,10 @@ class FrontierBuilder(StepRules):
         return i
 
     def time_id(self, times: tuple[int, ...]) -> int:
-        i = self.times_id.get(times)
-        if i is None:
-            i = self.times_id[times] = len(self.times)
+        if times not in self.times_id:
+            self.times_id[times] = len(self.times)
             self.times.append(times)
-        return i
+        return self.times_id[times]
 
     def make_acts(self, key: tuple[int]) -> list[tuple[int]]:
         """A world state's actions (ids), or the loop (-1) of an absorbing state."""
