@@ -10,12 +10,11 @@ into numpy arrays without a loop over states
 * **states** are tuples of the PRISM variables' values, in the order
   :attr:`PrismGame.variables` lists them (``game.valuation(s)`` gives them by name);
   the initial state is the program's (exactly one is required).
-* **propositions** are the program's ``label "name" = ...;`` definitions (and its
-  Boolean ``formula``s, and the labels ``define=`` adds), all of them
-  by default (Storm is always told to build every label: a label it was not asked to
-  build would silently be false everywhere); ``labels=`` selects a subset, and naming a
-  label the file does not define is an error.  Storm's own ``"init"`` and
-  ``"deadlock"`` are not propositions.
+* **propositions** are the program's ``label "name" = ...;`` definitions (and its Boolean
+  ``formula``s, and the labels ``define=`` adds), all of them by default (Storm is always
+  told to build every label: a label it was not asked to build would silently be false
+  everywhere); ``labels=`` selects a subset, and naming a label the file does not define is
+  an error.  Storm's own ``"init"`` and ``"deadlock"`` are not propositions.
 * **robot actions** are the choices of each state, named by their PRISM action: ``[go]``
   gives ``"go"``.  A command without an action (``[] ...``) is named
   ``"<module>_cmd<k>"``, the ``k``-th command (from 1) of its module, and the self-loop
