@@ -66,6 +66,14 @@ def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]
     return path
 
 
+def write_tables(out: Path, stem: str, header: Sequence[str],
+                 rows: Sequence[Sequence[object]]) -> None:
+    """The results as ``stem.csv`` and ``stem.md`` in ``out``, said on the terminal."""
+    write_csv(out / f"{stem}.csv", header, rows)
+    write_text(out / f"{stem}.md", markdown_table(header, rows))
+    print(f"wrote {out / f'{stem}.csv'}, {out / f'{stem}.md'}")
+
+
 def text_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     """A plain fixed-width table (right-aligned columns) for the terminal."""
     cells = [[str(h) for h in header]] + [[str(c) for c in r] for r in rows]

@@ -85,9 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     print("bus_puddle, camera on b1, bus 2's law a band: the interval chain re-checked by "
           "Storm's robust engine")
     print(C.text_table(header, rows))
-    C.write_csv(out / "bus_camera_band.csv", header, rows)
-    C.write_text(out / "bus_camera_band.md", C.markdown_table(header, rows))
-    print(f"wrote {out / 'bus_camera_band.csv'}, {out / 'bus_camera_band.md'}")
+    C.write_tables(out, "bus_camera_band", header, rows)
     return 0
 
 

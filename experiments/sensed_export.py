@@ -85,9 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     print("bus_risk, camera on b1, P(F puddle) <= bound: the controlled chain re-checked "
           "by Storm in exact arithmetic")
     print(C.text_table(header, rows))
-    C.write_csv(out / "sensed_export.csv", header, rows)
-    C.write_text(out / "sensed_export.md", C.markdown_table(header, rows))
-    print(f"wrote {out / 'sensed_export.csv'}, {out / 'sensed_export.md'}")
+    C.write_tables(out, "sensed_export", header, rows)
     return 0
 
 
