@@ -34,7 +34,8 @@ import _signal
 import os
 import sys
 
-__all__ = ["started_as_command", "command", "collect_from_here"]
+__all__ = ["started_as_command", "command", "collect_from_here", "lean_scipy",
+           "lark_without_regex"]
 
 
 def started_as_command() -> bool:
@@ -97,6 +98,83 @@ def command() -> None:
 
         collect_from_here()
         sys.exit(main(argv[1:]))
+    lean_scipy()
+    lark_without_regex()
     from mitld_lp.cli import run
 
     run()
+
+
+#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
+#: import all at once and which no array-API function needs (:func:`lean_scipy`).
+NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
+                "char", "strings", "core")
+
+#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
+SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
+
+
+def lean_scipy() -> None:
+    """Import SciPy's array-API layer (which every ``scipy.sparse`` import loads) without
+    the NumPy submodules in :data:`NUMPY_EXTRAS`.
+
+    The layer copies NumPy's namespace name by name (``from numpy import *`` and a
+    ``getattr`` of every name ``dir(numpy)`` lists), and so imports every submodule NumPy
+    keeps for first use -- ``numpy.f2py`` (which compiles a hundred regular
+    expressions), ``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``...: 0.085 s of
+    CPU, a fifth of solving the bundled case, for modules no command uses.  Here the
+    copy is made with those names out of NumPy's ``__all__`` and ``dir``, which are put
+    back at once, and the copy hands them over from NumPy when asked (a module
+    ``__getattr__``, importing them then): the layer sees the same objects, later.
+
+    The command line only (a program importing the package is left alone); nothing when
+    the layer is already imported or this SciPy has no such module."""
+    if SCIPY_NUMPY_COPY in sys.modules:
+        return
+    import importlib
+
+    import numpy
+
+    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
+    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
+    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
+    numpy.__all__ = [name for name in kept_all if name not in extras]
+    if kept_dir is not None:
+        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+    try:
+        copy = importlib.import_module(SCIPY_NUMPY_COPY)
+    except ImportError:  # another SciPy: its own import, later, is left as it is
+        return
+    finally:
+        numpy.__all__ = kept_all
+        if kept_dir is not None:
+            numpy.__dir__ = kept_dir
+    left_out = extras - vars(copy).keys()
+
+    def handed_over(name: str) -> object:
+        if name in left_out:
+            return getattr(numpy, name)
+        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
+
+    copy.__getattr__ = handed_over  # type: ignore[attr-defined]
+    copy.__all__ = sorted({*copy.__all__, *left_out})
+
+
+def lark_without_regex() -> None:
+    """Import lark as where the ``regex`` package is not installed (it is not one of
+    lark's requirements): lark imports ``regex`` at once when it can, for grammars
+    that ask for it (``Lark(regex=True)``, Unicode categories), which the formula
+    grammar does not; its import is 0.012 s of CPU.  Another package that imports
+    ``regex`` later gets it as usual.
+
+    The command line only (a program importing the package may build its own lark
+    grammars with ``regex=True``); nothing when lark or ``regex`` is already imported."""
+    if "lark" in sys.modules or "regex" in sys.modules:
+        return
+    sys.modules["regex"] = None  # type: ignore[assignment]  # ``import regex`` fails
+    try:
+        import lark  # noqa: F401
+    except ImportError:  # no lark: the command line says so where it needs it
+        pass
+    finally:
+        del sys.modules["regex"]

@@ -150,7 +150,12 @@ NOT_FOR_A_GRID_SOLVE = (
     "dask", "flint", "gymnasium", "tqdm", "asyncio", "mitld_lp.worlds.prism",
     "mitld_lp.solvers.export", "mitld_lp.files.drn", "mitld_lp.cli.export",
     "mitld_lp.cli.formulas", "mitld_lp.distributions.fit", "mitld_lp.distributions.band",
-    "mitld_lp.distributions.scipy_laws")
+    "mitld_lp.distributions.scipy_laws",
+    # NumPy's submodules SciPy's array-API layer would copy (mitld_lp.startup.lean_scipy;
+    # numpy.ma is imported by np.unique) and the regex package lark would take
+    # (mitld_lp.startup.lark_without_regex)
+    "numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ctypeslib", "numpy.rec",
+    "numpy.char", "numpy.strings", "regex")
 
 
 def _command_modules(argv: list[str]) -> dict:
@@ -201,3 +206,59 @@ def test_the_version_is_answered_before_the_command_line_is_imported():
         [sys.executable, "-c", "from mitld_lp.cli import main\nmain(['--version'])"],
         capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
     assert shown.stdout == answered["out"]
+
+
+def _array_api_copy(lean: bool) -> dict:
+    """In a fresh interpreter, SciPy's copy of NumPy's namespace (the array-API layer),
+    made by the command line's :func:`mitld_lp.startup.lean_scipy` or by SciPy itself:
+    the names it lists, whether each of NumPy's later submodules it hands over is
+    NumPy's own, NumPy's ``__all__`` and ``dir`` after, and what was imported."""
+    from mitld_lp.startup import NUMPY_EXTRAS, SCIPY_NUMPY_COPY
+
+    probe = ("import sys, json, importlib\n"
+             "sys.argv[0] = 'mitld-lp'\n"
+             "import numpy\n"
+             "from mitld_lp import startup\n"
+             f"{'startup.lean_scipy()' if lean else ''}\n"
+             f"copy = importlib.import_module({SCIPY_NUMPY_COPY!r})\n"
+             "import scipy.sparse as sp\n"
+             "m = sp.csr_array(numpy.array([[0.0, 2.0], [1.0, 0.0]]))\n"
+             "loaded = sorted(m for m in sys.modules if m.startswith('numpy.'))\n"
+             f"extras = {NUMPY_EXTRAS!r}\n"
+             "print(json.dumps(dict(names=sorted(copy.__all__), dir=sorted(dir(copy)),\n"
+             "    same=[getattr(copy, n) is getattr(numpy, n) for n in extras],\n"
+             "    numpy_all=sorted(numpy.__all__), numpy_dir=sorted(dir(numpy)),\n"
+             "    product=(m @ m).toarray().tolist(), loaded=loaded)))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120, check=True)
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_the_command_lines_scipy_copies_numpy_without_importing_what_it_never_uses():
+    lean, full = _array_api_copy(True), _array_api_copy(False)
+    # the same namespace as SciPy's own copy: every name, each NumPy's object
+    assert lean["names"] == full["names"] and set(lean["dir"]) == set(full["dir"])
+    assert all(lean["same"]) and all(full["same"])
+    # NumPy itself as it was: its __all__ and dir put back
+    assert lean["numpy_all"] == full["numpy_all"] and lean["numpy_dir"] == full["numpy_dir"]
+    assert lean["product"] == full["product"] == [[2.0, 0.0], [0.0, 2.0]]
+    # the copy and a sparse product imported none of them; SciPy's own copy does
+    for extra in ("numpy.f2py", "numpy.testing", "numpy.ma", "numpy.polynomial"):
+        assert extra not in lean["loaded"] and extra in full["loaded"]
+
+
+def test_the_command_lines_lark_is_lark_without_regex():
+    probe = ("import sys\nsys.argv[0] = 'mitld-lp'\nfrom mitld_lp import startup\n"
+             "startup.lark_without_regex()\nimport lark.utils\n"
+             "from mitld_lp.logic import parse\n"
+             "f = parse('F[0,3] a & G b')\n"
+             "had = 'regex' in sys.modules\nimport regex\n"
+             "print(lark.utils._has_regex, had, regex.__name__, repr(f))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120, check=True)
+    # lark as without the package; the package importable for anyone after it
+    assert run.stdout.split(maxsplit=3)[:3] == ["False", "False", "regex"]
+    # the same formula as lark with regex parses here (this process imported it as usual)
+    from mitld_lp.logic import parse
+
+    assert run.stdout.split(maxsplit=3)[3].strip() == repr(parse("F[0,3] a & G b"))
