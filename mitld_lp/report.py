@@ -6,7 +6,6 @@ notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
 from __future__ import annotations
 
 from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
-from html import escape
 from typing import Any
 
 import numpy as np
@@ -254,6 +253,8 @@ def constrained_summary(result: Any) -> dict[str, Any]:
 
 def html(result: Result) -> str:
     """An HTML table of the answer (what a notebook shows for a result)."""
+    from html import escape  # a notebook's: the command line never needs it
+
     rows = [
         ("model", "" if result.model is None else result.model.name),
         ("spec", "" if result.model is None else str(result.model.spec)),

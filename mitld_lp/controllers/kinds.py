@@ -39,7 +39,6 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import ControllerFileError
 from mitld_lp.controllers.live import LivePlan, LiveRandomPlan, tabulate_sensed
 from mitld_lp.controllers.observation import Observation, RunStatus
-from mitld_lp.controllers.reader import read
 from mitld_lp.controllers.stepper import Plan, Stepper
 from mitld_lp.controllers.tables import MixedSensedPlan, Obs, SavedPlan, SensedPlan
 from mitld_lp.files import write as files
@@ -168,6 +167,8 @@ class PlanController(Stepper):
         ``ValueError``) naming the file and the fault; :func:`load_controller` loads
         every kind.
         """
+        from mitld_lp.controllers.reader import read  # a solve never reads one
+
         plan = read(Path(path))
         if plan.kind != cls.kind:
             raise ControllerFileError(
@@ -318,6 +319,8 @@ def load_controller(path: str | os.PathLike[str], *, seed: int | None = 0) -> An
     :class:`Controller`, a :class:`ConstrainedController` (drawing from a generator
     seeded with ``seed``) or a :class:`SensedController`; :class:`ControllerFileError`
     as :meth:`PlanController.load`."""
+    from mitld_lp.controllers.reader import read
+
     plan = read(Path(path))
     return _made(_CLASSES[plan.kind], plan, seed)
 

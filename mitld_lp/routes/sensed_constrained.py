@@ -76,8 +76,6 @@ from mitld_lp.product import Absorbing
 from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merged
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import sensed_refusals
-from mitld_lp.running.sensed_joint import Keeps, keeps_for, winnable
-from mitld_lp.sensing.belief import NOT_YET, Belief, InfoState, Reaches
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.solvers.constrained_model import Merged
 from mitld_lp.solvers.quotient import maximal_end_components
@@ -86,6 +84,8 @@ if TYPE_CHECKING:
     from mitld_lp.problem import Posed
     from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
+    from mitld_lp.running.sensed_joint import Keeps
+    from mitld_lp.sensing.belief import Belief, InfoState, Reaches
 
 __all__ = ["SensedConstrainedRoute", "SensedConstrainedPart", "Verdict", "JointEnds",
            "info_merged", "mixed_states", "STAY"]
@@ -140,6 +140,7 @@ def _effective(part: DTA, q: int, verdict: int, left: frozenset[str],
 
 def _verdicts_of(belief: Belief, ends: JointEnds, s: InfoState) -> list[tuple[int, ...]]:
     """The verdicts of each hypothesis of ``s``, in its order."""
+    from mitld_lp.sensing.belief import NOT_YET  # the sensed modules load when solving
     out = []
     for times, q in s.hypotheses:
         waiting = frozenset(a for a, k in zip(belief.sensed, times, strict=True)
@@ -161,6 +162,9 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
     (:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed` tells them apart), and with
     ``relaxed`` (the upper end) a credited keep at every other state of an end
     component with some persistent hypothesis (:func:`mixed_states`)."""
+    from mitld_lp.running.sensed_joint import winnable
+    from mitld_lp.sensing.belief import InfoState
+
     mdp = belief.mdp
     records: list[Any] = list(mdp.states)
     n, k = len(records), len(ends.joint.parts)
@@ -295,6 +299,8 @@ class SensedConstrainedPart(ConstrainedPart):
         """One row per (information state, choice) the policy takes with positive
         probability: the world state, the clock, the reports, the hypotheses' number,
         the action (:data:`STAY` for staying for ever) and its probability."""
+        from mitld_lp.sensing.belief import InfoState
+
         m = self.merged
         if self.prob is None or m is None:
             return []
@@ -369,6 +375,8 @@ class SensedConstrainedRoute(Route):
         t0 = time.perf_counter()
         p = posed.problem
         timed = p.then is not None or any(c.kind != "prob" for c in p.constraints)
+        from mitld_lp.running.sensed_joint import keeps_for
+
         keeps = keeps_for(belief, ends.joint)
         merged = info_merged(belief, ends, timed=timed, keeps=keeps)
         eta = model_eta(belief.sta, history=True)
