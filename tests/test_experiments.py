@@ -274,6 +274,21 @@ def test_bench_startup(tmp_path):
     assert "the case as a process is" in (tmp_path / "bench_startup.md").read_text()
 
 
+def test_startup_answers(tmp_path):
+    """The command line's start-up (its own SciPy and lark imports) and the library in a
+    plain interpreter give the same status and bracket; the case's holds Storm's value."""
+    _run("startup_answers", tmp_path)
+    rows = _csv(tmp_path / "startup_answers.csv")
+    assert {(r["model"], r["way"]) for r in rows} == {
+        (m, w) for m in ("bus_grid.toml", "bus_fit.toml") for w in ("command", "library")}
+    for model in ("bus_grid.toml", "bus_fit.toml"):
+        command, library = ([r[k] for k in ("status", "lower", "upper")] for r in rows
+                            if r["model"] == model)
+        assert command == library and command[0] == "optimal"
+    case = next(r for r in rows if r["model"] == "bus_grid.toml")
+    assert float(case["lower"]) - 1e-6 <= STORM["bus_grid"] <= float(case["upper"]) + 1e-6
+
+
 def test_bench_controllers(tmp_path):
     """The controllers' benchmark: every start-up probe answers (the two loaders the
     same action), and the tree's controller keeps lower by Storm on its chain."""
