@@ -31,15 +31,16 @@ each stormpy script is the median of the rounds' ratios (each round's pair ran s
 side, which keeps it meaningful on a machine whose speed drifts).  The target (issue 45):
 the case as a process <= 2x the stormpy script on the PRISM encoding.
 
-``--compare DIR`` also runs ``ours``, ``ours_corridor``, ``version`` and ``check`` with the
-``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git archive``), in the same
-rounds, as ``*_base`` rows: before and after in one run.  Bytecode is cached for both (the
+``--compare BASE`` also runs ``ours``, ``ours_corridor``, ``version`` and ``check`` with
+another ``mitld_lp``, in the same rounds, as ``*_base`` rows: before and after in one run.
+``BASE`` is a checkout's folder or a commit of this repository (its ``mitld_lp`` taken
+with ``git archive`` into a scratch folder).  Bytecode is cached for both (the
 variable ``PYTHONDONTWRITEBYTECODE`` is cleared, as ``bench_sweeps.py`` does: an
 installed package's bytecode is written at installation).
 
 Written: ``bench_startup.csv``, ``bench_startup.md`` and ``bench_startup_machine.txt``::
 
-    python experiments/bench_startup.py --out experiments/results
+    python experiments/bench_startup.py --compare e1d68a4 --out experiments/results
     python experiments/bench_startup.py --compare /tmp/before --out /tmp/startup
 
 ``--quick`` runs two rounds into ``experiments/out/quick`` (or ``--out``).  Storm's
@@ -54,6 +55,7 @@ import platform
 import statistics
 import subprocess
 import sys
+import tarfile
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -161,6 +163,22 @@ def commands(work: Path, compare: Path | None) -> dict[str, tuple[list[str], Pat
     return rows
 
 
+def base_checkout(base: str, work: Path) -> Path:
+    """The folder whose ``mitld_lp`` the ``*_base`` rows import: ``base`` itself when it
+    is a folder, else this repository's ``mitld_lp`` at the commit ``base``."""
+    if Path(base).is_dir():
+        return Path(base)
+    archive = subprocess.run(["git", "archive", "--format=tar", base, "mitld_lp"], cwd=ROOT,
+                             capture_output=True, check=True).stdout
+    folder = work / "base"
+    folder.mkdir()
+    archive_file = work / "base.tar"
+    archive_file.write_bytes(archive)
+    with tarfile.open(archive_file) as tar:
+        tar.extractall(folder, filter="data")
+    return folder
+
+
 def measure(work: Path, repeats: int, compare: Path | None) -> dict[str, dict[str, Any]]:
     """Every command ``repeats`` times, taking turns; the CPU seconds of each run and
     the answer of the first (every run's answer must equal it)."""
@@ -194,7 +212,7 @@ def table(measured: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def report(rows: list[dict[str, Any]], compare: Path | None) -> str:
+def report(rows: list[dict[str, Any]], compare: str | None) -> str:
     header = ["command", "answer", "runs", "CPU min (s)", "CPU median (s)",
               "/ storm_prism", "/ storm_drn", "/ storm_corridor"]
     cells = [[r["command"], r["answer"], r["runs"], f"{r['cpu_min']:.3f}",
@@ -218,13 +236,15 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=None,
                     help="rounds of every command (default 15, 2 with --quick)")
-    ap.add_argument("--compare", type=Path, default=None,
-                    help="also run ours from this checkout's mitld_lp (the base rows)")
+    ap.add_argument("--compare", default=None, metavar="BASE",
+                    help="also run ours with this checkout's (a folder) or this commit's "
+                         "mitld_lp (the base rows)")
     args = ap.parse_args(argv)
     out = _common.out_dir(args)
     repeats = args.repeats or (2 if args.quick else 15)
     with tempfile.TemporaryDirectory() as tmp:
-        measured = measure(Path(tmp), repeats, args.compare)
+        base = None if args.compare is None else base_checkout(args.compare, Path(tmp))
+        measured = measure(Path(tmp), repeats, base)
     lower, upper = json.loads(measured["ours"]["answer"])
     corridor = json.loads(measured["ours_corridor"]["answer"])
     for storm, (lo, hi) in (("storm_prism", (lower, upper)), ("storm_drn", (lower, upper)),

@@ -8,21 +8,23 @@ each status and certified ``[lower, upper]`` beside its CPU seconds:
 * ``command``: ``python -m mitld_lp solve MODEL --json -q`` (the console script's route);
 * ``library``: ``synthesize(load_model(MODEL))`` in a plain interpreter, which imports
   SciPy and lark as any program does;
-* ``base`` (with ``--compare DIR``): the command line of another checkout's
-  ``mitld_lp`` (an older commit, ``git archive``), e.g. the one before the start-up work.
+* ``base`` (with ``--compare BASE``): the command line with another ``mitld_lp``, a
+  checkout's folder or a commit of this repository (``git archive``), e.g. the one
+  before the start-up work.
 
 Every row's status and both ends must be equal (as floats, no tolerance), or the run
 stops with the rows that differ.  ``--quick`` solves two models (the bundled case and
 one with a fitted law, whose fit imports ``scipy.optimize`` and ``scipy.stats`` through
 the layer) into ``experiments/out/quick``::
 
-    python experiments/startup_answers.py --compare /tmp/before --out experiments/results
+    python experiments/startup_answers.py --compare e1d68a4 --out experiments/results
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +33,7 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
 import _common  # noqa: E402
-from bench_startup import run_cpu  # noqa: E402
+from bench_startup import base_checkout, run_cpu  # noqa: E402
 
 QUICK = ("bus_grid.toml", "bus_fit.toml")
 
@@ -60,9 +62,17 @@ def ways(model: Path, compare: Path | None) -> dict[str, tuple[list[str], Path |
 
 def main(argv: list[str] | None = None) -> list[list[Any]]:
     ap = _common.parser(__doc__.splitlines()[0])
-    ap.add_argument("--compare", type=Path, default=None,
-                    help="also solve with this checkout's mitld_lp (the base column)")
+    ap.add_argument("--compare", default=None, metavar="BASE",
+                    help="also solve with this checkout's (a folder) or this commit's "
+                         "mitld_lp (the base rows)")
     args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        base = None if args.compare is None else base_checkout(args.compare, Path(tmp))
+        return solve_all(args, base)
+
+
+def solve_all(args: Any, base: Path | None) -> list[list[Any]]:
+    """Every model (two with ``--quick``) in every way; the table written and said."""
     out = _common.out_dir(args)
     models = ([_common.MODELS / m for m in QUICK] if args.quick
               else sorted(_common.MODELS.glob("*.toml")))
@@ -71,7 +81,7 @@ def main(argv: list[str] | None = None) -> list[list[Any]]:
     differ: list[str] = []
     for model in models:
         seen: dict[str, tuple[str, float, float]] = {}
-        for way, (cmd, code) in ways(model, args.compare).items():
+        for way, (cmd, code) in ways(model, base).items():
             cpu, text = run_cpu(cmd, code)
             seen[way] = answer(text)
             status, lower, upper = seen[way]
