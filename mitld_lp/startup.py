@@ -24,6 +24,13 @@ command's work starts.  Imports make no garbage cycles worth collecting, yet the
 collector, triggered by their allocations, walked every object already imported over
 and over (a full pass over NumPy, SciPy and the package): about 0.03 s of the bundled
 case's CPU, and each later pass of the solve walked them again.
+
+Before the command line is imported, :func:`command` also imports SciPy's array-API
+layer without the NumPy submodules no command uses (:func:`lean_scipy`) and lark
+without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundled
+case's CPU.  Both leave every name where it was (the layer hands NumPy's submodules
+over when asked; ``regex`` imports for whoever asks later); a program that imports the
+package gets SciPy and lark as they import themselves.
 """
 
 from __future__ import annotations
