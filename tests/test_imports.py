@@ -155,7 +155,9 @@ NOT_FOR_A_GRID_SOLVE = (
     # numpy.ma is imported by np.unique) and the regex package lark would take
     # (mitld_lp.startup.lark_without_regex)
     "numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ctypeslib", "numpy.rec",
-    "numpy.char", "numpy.strings", "regex")
+    "numpy.char", "numpy.strings", "regex",
+    # the sensed routes' information states, the controller file reader, a notebook's html
+    "mitld_lp.sensing.belief", "mitld_lp.running", "mitld_lp.controllers.reader", "html")
 
 
 def _command_modules(argv: list[str]) -> dict:
