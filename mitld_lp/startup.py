@@ -128,8 +128,9 @@ def lean_scipy() -> None:
     The layer copies NumPy's namespace name by name (``from numpy import *`` and a
     ``getattr`` of every name ``dir(numpy)`` lists), and so imports every submodule NumPy
     keeps for first use -- ``numpy.f2py`` (which compiles a hundred regular
-    expressions), ``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``...: 0.085 s of
-    CPU, a fifth of solving the bundled case, for modules no command uses.  Here the
+    expressions), ``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``...: about 0.08 s
+    of CPU, a fifth of solving the bundled case, for modules no command needs at its
+    start (``numpy.ma`` is imported later by ``numpy.unique``, when it runs).  Here the
     copy is made with those names out of NumPy's ``__all__`` and ``dir``, which are put
     back at once, and the copy hands them over from NumPy when asked (a module
     ``__getattr__``, importing them then): the layer sees the same objects, later.
@@ -157,10 +158,13 @@ def lean_scipy() -> None:
         if kept_dir is not None:
             numpy.__dir__ = kept_dir
     left_out = extras - vars(copy).keys()
+    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
 
     def handed_over(name: str) -> object:
         if name in left_out:
             return getattr(numpy, name)
+        if own is not None:
+            return own(name)
         raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
 
     copy.__getattr__ = handed_over  # type: ignore[attr-defined]
