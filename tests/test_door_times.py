@@ -175,3 +175,36 @@ def test_undecided_says_so_exit_3(capsys) -> None:
                  "--exact"]) == 0
     out = capsys.readouterr().out
     assert "true: Tmin in [" in out and "exact 54/25" in out
+
+
+CHAIN = """dtmc
+module m
+  s : [0..2] init 0;
+  [] s=0 -> 1/3 : (s'=1) + 2/3 : (s'=0);
+  [] s=1 -> (s'=2);
+  [] s=2 -> true;
+endmodule
+rewards "time"
+  s<2 : 1;
+endrewards
+label "end" = s=2;
+"""
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_a_dtmc_needs_no_min_or_max(capsys, tmp_path, exact: bool) -> None:
+    """On a DTMC Storm reads ``R=?``, ``T=?`` and ``P=?`` as the chain's one value; by
+    hand, leaving 0 (1/3 a step) then one step: 4 expected steps, and with at most 2
+    collected only the direct path, 1/3.  The float route reads Storm's export of a
+    chain (which has no choices table)."""
+    path = tmp_path / "chain.prism"
+    path.write_text(CHAIN)
+    flag = ["--exact"] if exact else []
+    for prop, value in (('T=? [F "end"]', Fraction(4)), ('R=? [F "end"]', Fraction(4)),
+                        ('P=? [F{"time"}<=2 "end"]', Fraction(1, 3))):
+        assert storm_value(str(path), prop, {}) == value
+        code, [answer] = ours(capsys, "--prop", prop, *flag, path=str(path))
+        assert code == 0 and answer["certified"], prop
+        assert Fraction(answer["lower"]) <= value <= Fraction(answer["upper"]), prop
+    code, [bound] = ours(capsys, "--prop", 'T<=5 [F "end"]', *flag, path=str(path))
+    assert code == 0 and bound["verdict"] is storm_holds(str(path), 'T<=5 [F "end"]', {})

@@ -115,7 +115,8 @@ def answer_reward_bounded(args: argparse.Namespace, name: str, prop: Any, progra
     from mitld_lp.worlds.reward_bounded import pose_reward_bounded
 
     started = time.perf_counter()
-    posed = pose_reward_bounded(name, prop, reward_names(program.program))
+    posed = pose_reward_bounded(name, prop, reward_names(program.program),
+                                chain=program.chain)
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states

@@ -44,7 +44,8 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
 
     started = time.perf_counter()
     query = pose_reward(name, prop, reward_names(program.program),
-                        first=Path(args.model).suffix.lower() != ".jani")
+                        first=Path(args.model).suffix.lower() != ".jani",
+                        chain=program.chain)
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states

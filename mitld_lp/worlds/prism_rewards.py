@@ -125,8 +125,9 @@ class RewardQuery:
     @property
     def word(self) -> str:
         """``R{"cost"}min``, or ``Tmin`` for an expected time."""
-        return f"T{self.objective}" if self.per_step else \
-            f"R{{\"{self.reward}\"}}{self.objective}"
+        if self.per_step:
+            return f"T{self.objective}"
+        return (f"R{{\"{self.reward}\"}}" if self.reward else "R") + self.objective
 
     @property
     def structure(self) -> str | None:
@@ -162,12 +163,13 @@ def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
 
 
 def pose_reward(name: str, prop: Any, reward_names: list[str], *,
-                first: bool = True) -> RewardQuery:
+                first: bool = True, chain: bool = False) -> RewardQuery:
     """The :class:`RewardQuery` of Storm's ``R`` or ``T`` property ``prop`` over a file
     whose reward structures are ``reward_names`` (in the file's order), or a
     :class:`PropertyError` naming the form refused.  ``R`` without a name is the first
     structure (PRISM's rule) when ``first``, else only the one structure of the file
-    (Storm's rule for a JANI file); ``T`` reads no structure (1 per step)."""
+    (Storm's rule for a JANI file); ``T`` reads no structure (1 per step).  ``chain``:
+    the file is a DTMC (``R=?`` needs no ``min`` or ``max``)."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     from mitld_lp.worlds.properties import INIT_FILTER, probability_objective
@@ -179,7 +181,8 @@ def pose_reward(name: str, prop: Any, reward_names: list[str], *,
                       "answered")
     per_step = isinstance(formula, logic.TimeOperatorFormula)
     letter, what = ("T", "the expected time") if per_step else ("R", "the expected reward")
-    objective, comparison, threshold = probability_objective(name, formula, letter, what)
+    objective, comparison, threshold = probability_objective(name, formula, letter, what,
+                                                             chain=chain)
     sub = formula.subformula
     kind, steps, target = "reach", 0, None
     if isinstance(sub, (logic.CumulativeRewardFormula, logic.InstantaneousRewardFormula)):

@@ -133,6 +133,12 @@ class Program:
     properties: tuple[Any, ...] = ()
     reserved: frozenset[str] = frozenset()
 
+    @property
+    def chain(self) -> bool:
+        """Whether the file is a DTMC (one scheduler: ``P=?``, ``R=?`` and ``T=?`` need
+        no ``min`` or ``max``, as Storm reads them)."""
+        return str(getattr(self.program, "model_type", "")).rsplit(".", 1)[-1] == "DTMC"
+
 
 def read_program(path: str) -> Program:
     """The PRISM file at ``path`` parsed by Storm (after the depth check that keeps
@@ -365,10 +371,11 @@ class _Poser:
 
 
 def pose_property(name: str, prop: Any, labels: Mapping[str, str],
-                  reserved: frozenset[str] = frozenset()) -> Query:
+                  reserved: frozenset[str] = frozenset(), *, chain: bool = False) -> Query:
     """The task of Storm's property ``prop`` (``labels``: the file's ``name ->
-    expression``; ``reserved``: names a new proposition must not take), or
-    :class:`PropertyError` naming the form refused and why."""
+    expression``; ``reserved``: names a new proposition must not take; ``chain``: the
+    file is a DTMC, :attr:`Program.chain`), or :class:`PropertyError` naming the form
+    refused and why."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     formula = prop.get_raw_formula()
@@ -392,7 +399,7 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     if not isinstance(formula, logic.ProbabilityOperatorFormula):
         raise _refuse(name, text, "a state formula that is not one P operator",
                       "one P[...] per property is answered")
-    objective, comparison, threshold = probability_objective(name, formula)
+    objective, comparison, threshold = probability_objective(name, formula, chain=chain)
     poser = _Poser(name, text, labels, reserved)
     spec = poser.path(formula.subformula)
     return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
@@ -400,13 +407,14 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
 
 
 def probability_objective(name: str, formula: Any, letter: str = "P",
-                          what: str = "the probability") -> tuple[str, str | None,
-                                                                  Fraction | None]:
+                          what: str = "the probability", *, chain: bool = False,
+                          ) -> tuple[str, str | None, Fraction | None]:
     """``(objective, comparison, threshold)`` of Storm's ``P`` operator ``formula``:
     ``Pmax=?`` is ``("max", None, None)``; ``P>=p`` asks for every scheduler, so the
     least probability decides it, ``("min", ">=", p)`` (``Pmax>=p``: the greatest).
     The same for an ``R`` or ``T`` operator (``letter``; ``what`` its quantity in the
-    refusal), as Storm reads ``R<=b``: the greatest expected reward decides it."""
+    refusal), as Storm reads ``R<=b``: the greatest expected reward decides it.  On a
+    DTMC (``chain``) ``P=?`` is its one value (``"max"``, which is also the least)."""
     comparison = threshold = None
     if formula.has_bound:
         comparison = _COMPARISONS[str(formula.comparison_type).rsplit(".", 1)[-1]]
@@ -416,6 +424,8 @@ def probability_objective(name: str, formula: Any, letter: str = "P",
         objective = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
     elif comparison is not None:  # for every scheduler: the worst one decides
         objective = "min" if comparison in (">=", ">") else "max"
+    elif chain:  # one scheduler: its value is the greatest and the least
+        objective = "max"
     else:
         raise _refuse(name, str(formula), f"{letter}=? without min or max",
                       f"on an MDP {what} depends on the scheduler: write {letter}max=? "
