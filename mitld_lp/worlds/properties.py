@@ -31,7 +31,7 @@ bounds ``R~b``, ``T~b`` with :mod:`mitld_lp.worlds.prism_rewards` and
 
 Refused, by name: expected rewards (``R``) and times (``T``), long-run averages (``S``),
 multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
-without ``min`` or ``max`` (an MDP needs one, as in Storm), a ``P`` nested in a path
+without ``min`` or ``max`` on an MDP (it needs one, as in Storm), a ``P`` nested in a path
 formula, Boolean combinations of path formulas and nested temporal operators (LTL),
 reward- and time-bounded operators, a bound with only a lower end, a bound that is not
 an integer, Storm's labels ``"init"`` and ``"deadlock"``, a label the file does not
