@@ -430,7 +430,8 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
         note = str(bound)
     formulas = [query.target] if query.kind == "reach" else [query.formula]
     options = stormpy.BuilderOptions(formulas)
-    options.set_build_all_reward_models()
+    if not query.per_step:  # T reads no structure of the file
+        options.set_build_all_reward_models()
     options.set_exploration_checks(True)
 
     def work() -> Any:
