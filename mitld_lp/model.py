@@ -362,7 +362,11 @@ def _load(
     sensors = read_sensors(doc.get("sensors", {}), task.laws, ctx)
     objective = doc.get("objective", "max")
     if objective not in OBJECTIVES:
-        raise ctx.error("objective", f"must be \"max\" or \"min\", got {toml_text(objective)}")
+        asked = (f" (ask for the task's expected {objective[4:]} on the command line: "
+                 f"--objective {objective}; a model file's objective is the "
+                 "probability's)" if objective in ("min-steps", "min-cost") else "")
+        raise ctx.error("objective", f"must be \"max\" or \"min\", got "
+                        f"{toml_text(objective)}{asked}")
     return Model(
         name=name,
         spec=spec,

@@ -1,6 +1,6 @@
 """What several tests share: the issue's rare 12-state PRISM MDP, the expected-reward
 properties of tests/data/rewards.prism, random PRISM MDPs with a reward structure, and
-Storm's exact value of a property on a PRISM (or JANI) file
+Storm's exact value (or verdict) of a property on a PRISM (or JANI) file
 (``build_model[stormpy.Rational]``, an exact solver environment), the independent value
 certified brackets are compared with."""
 
@@ -42,10 +42,9 @@ def storm_rational(prism: Path, prop: str) -> Fraction:
     return Fraction(str(result.get_value(model.initial_states[0])))
 
 
-def storm_value(path: str, prop: str, constants: dict) -> Fraction | None:
-    """Storm's exact value of ``prop`` at the initial state of the PRISM or JANI file
-    ``path``, its open ``constants`` given (only the initial state asked: Storm's
-    reward-bounded until needs that); None for Storm's infinity."""
+def storm_result(path: str, prop: str, constants: dict, **options: bool) -> tuple:
+    """Storm's built model (rational) and its result (an exact solver environment) for
+    ``prop`` on the PRISM or JANI file ``path``, its open ``constants`` given."""
     import stormpy
 
     if path.endswith(".jani"):
@@ -58,10 +57,23 @@ def storm_value(path: str, prop: str, constants: dict) -> Fraction | None:
     model = stormpy.build_model[stormpy.Rational](program, props)
     env = stormpy.Environment()
     env.solver().force_exact = True
-    result = stormpy.model_checking(model, props[0], environment=env,
-                                    only_initial_states=True)
+    return model, stormpy.model_checking(model, props[0], environment=env, **options)
+
+
+def storm_value(path: str, prop: str, constants: dict) -> Fraction | None:
+    """Storm's exact value of ``prop`` at the initial state of the PRISM or JANI file
+    ``path``, its open ``constants`` given (only the initial state asked: Storm's
+    reward-bounded until needs that); None for Storm's infinity."""
+    model, result = storm_result(path, prop, constants, only_initial_states=True)
     text = str(result.get_value(model.initial_states[0]))
     return None if text == "inf" else Fraction(text)
+
+
+def storm_holds(path: str, prop: str, constants: dict) -> bool:
+    """Storm's own verdict of the bound ``prop`` (``R<=b``, ``P>=p``) at the initial
+    state of ``path``."""
+    model, result = storm_result(path, prop, constants)
+    return model.initial_states[0] in set(result.get_truth_values_vector())
 
 
 def random_prism(rng: random.Random, n: int, integer: bool = False) -> str:

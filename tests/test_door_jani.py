@@ -63,13 +63,15 @@ def test_exact_is_storms_exact_value(capsys, prop: str) -> None:
 
 def test_the_files_own_properties_all_by_name_by_number(capsys) -> None:
     code, answers = ours(capsys, "--const", "N=3")
-    assert code == 2  # the file's expected-steps property is refused by name
+    assert code == 0  # the file's expected steps (Emin of 1, Storm's T) included
     assert [a["property"] for a in answers] == ["steps", "reach", "avoid", "soon"]
-    assert answers[0]["status"] == "model_error" and "expected time" in answers[0]["error"]
-    for answer in answers[1:]:
+    for answer in answers:
         value = storm_exact(None, {"N": 3}, name=answer["property"])
         assert answer["certified"]
         assert Fraction(answer["lower"]) <= value <= Fraction(answer["upper"])
+    code, [steps] = ours(capsys, "--prop", "steps", "--const", "N=3", "--exact")
+    assert code == 0 and Fraction(steps["value"]) == storm_exact(None, {"N": 3},
+                                                                 name="steps")
     code, [soon] = ours(capsys, "--prop", "soon", "--const", "N=3")
     assert code == 0 and soon["property"] == "soon" and soon["spec"] == "F[0,3] goal"
     code, [third] = ours(capsys, "--prop", "3", "--const", "N=3")

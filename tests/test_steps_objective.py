@@ -136,3 +136,15 @@ def test_safety_task_and_policy_refused(capsys, tmp_path) -> None:
     assert main(["solve", line(tmp_path), "--objective", "min-steps", "--policy",
                  str(policy), "-q"]) == 2
     assert "writes no policy file" in capsys.readouterr().err and not policy.exists()
+
+
+@pytest.mark.parametrize("objective", ["min-steps", "min-cost"])
+def test_model_file_objective_stays_the_probabilitys(capsys, tmp_path,
+                                                     objective: str) -> None:
+    """A model file's ``objective`` is ``max`` or ``min`` (docs/constraints.md): the
+    expected steps are refused there, naming the key, the values taken and the flag."""
+    path = line(tmp_path, extra=f'objective = "{objective}"')
+    assert main(["solve", path, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f'line.toml: objective: must be "max" or "min", got "{objective}"' in err
+    assert f"--objective {objective}" in err and "Traceback" not in err

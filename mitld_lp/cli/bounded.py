@@ -3,7 +3,8 @@
 the reward-bounded probabilities ``Pmax=? [F{"r"}<=b "goal"]``
 (:mod:`mitld_lp.worlds.reward_bounded`, :mod:`mitld_lp.exact.reward_bounded`), each
 exact, one line (one JSON object) per property.  The bracket is the exact value rounded
-outward (certified: the value is the optimum itself, see those modules).
+outward (certified: the value is the optimum itself, see those modules).  A bound
+``R{"r"}<=b`` (``P>=p``) is true or false by that value (:func:`decide`).
 """
 
 from __future__ import annotations
@@ -17,13 +18,38 @@ from typing import Any
 from mitld_lp.cli.kernel import EXIT_OK, EXIT_UNCERTIFIED, json_text, say_answer
 from mitld_lp.report import bracket_text
 
-__all__ = ["answer_horizon", "answer_reward_bounded"]
+__all__ = ["answer_horizon", "answer_reward_bounded", "decide", "reward_head"]
 
 
 def _bracket(value: Fraction) -> tuple[float, float]:
     from mitld_lp.solvers.rounding import float_down, float_up
 
     return float_down(value), float_up(value)
+
+
+def decide(query: Any, bracket: tuple[Any, Any], code: int
+           ) -> tuple[dict[str, Any], bool | None, int]:
+    """An ``R~b`` (``T~b``) ``query`` decided by the optimum's ``bracket`` (exact values,
+    or ``math.inf`` both): the JSON fields it adds, the verdict (None: undecided) and the
+    exit code (3 when undecided, else ``code``); nothing for ``R=?``."""
+    from mitld_lp.worlds.properties import verdict
+
+    if query.comparison is None:
+        return {}, None, code
+    decided = verdict(query, *bracket)
+    fields = {"comparison": query.comparison, "threshold": str(query.threshold),
+              "verdict": decided}
+    return fields, decided, EXIT_UNCERTIFIED if decided is None else code
+
+
+def reward_head(query: Any, bracket: str, infinite: bool, decided: bool | None) -> str:
+    """An ``R`` property's answer, ``in [l, u]`` or ``= inf``, or for ``R~b`` its verdict
+    with the optimum that decides it."""
+    shown = "= inf" if infinite else f"in {bracket}"
+    if query.comparison is None:
+        return shown
+    said = {True: "true", False: "false", None: "undecided"}[decided]
+    return f"{said}: {query.word} {shown}, threshold {query.comparison} {query.threshold}"
 
 
 def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: float) -> int:
@@ -46,6 +72,8 @@ def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: fl
     form = (f"cumulative reward within {query.steps} steps" if query.kind == "cumulative"
             else f"state reward at step {query.steps}")
     no_state = query.kind == "instantaneous" and not model.state_rewards
+    bound, decided, code = decide(query, (lower, upper) if value is None else
+                                  (value, value), EXIT_OK)
     if args.json:
         record = {"property": query.name, "formula": query.text, "reward": query.reward,
                   "objective": query.objective, "kind": query.kind, "steps": query.steps,
@@ -53,11 +81,11 @@ def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: fl
                   "value": None if value is None else str(value),
                   "lower": lower, "upper": upper, "states": model.n_states,
                   "choices": int(model.groups[-1]), "seconds": seconds,
-                  "model": Path(args.model).stem}
+                  "model": Path(args.model).stem, **bound}
         if no_state:
             record["why"] = "the reward structure has no state rewards"
         say_answer(json_text(record))
-        return EXIT_OK
+        return code
     how = (f"exact {value}" if value is not None else
            f"floating-point bracket: {query.steps:,} steps x {int(model.indices.size):,} "
            "transitions past the exact budget")
@@ -67,9 +95,9 @@ def answer_horizon(args: argparse.Namespace, query: Any, model: Any, started: fl
             f"{seconds:.2f} s"]
     if no_state:
         tail.insert(1, "the structure has no state rewards")
-    say_answer(f"{query.name}: {query.text}  in {bracket_text(lower, upper)}  "
-               f"({'; '.join(tail)})")
-    return EXIT_OK
+    head = reward_head(query, bracket_text(lower, upper), False, decided)
+    say_answer(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
+    return code
 
 
 def answer_reward_bounded(args: argparse.Namespace, name: str, prop: Any, program: Any,
@@ -87,7 +115,8 @@ def answer_reward_bounded(args: argparse.Namespace, name: str, prop: Any, progra
     from mitld_lp.worlds.reward_bounded import pose_reward_bounded
 
     started = time.perf_counter()
-    posed = pose_reward_bounded(name, prop, reward_names(program.program))
+    posed = pose_reward_bounded(name, prop, reward_names(program.program),
+                                chain=program.chain)
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states

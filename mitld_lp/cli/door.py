@@ -240,7 +240,8 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
                                      "policy file")
                 codes.append(answer_reward_bounded(args, name, prop, program, ours))
                 continue
-            query = pose_property(name, prop, program.labels, program.reserved)
+            query = pose_property(name, prop, program.labels, program.reserved,
+                                  chain=program.chain)
             game = _world(args, ours, query.define, parse(query.spec))
             model = Model.from_game(game, query.spec, name=Path(args.model).stem,
                                     objective=query.objective)

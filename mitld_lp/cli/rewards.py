@@ -1,5 +1,7 @@
 """``solve FILE.prism --prop 'R{"r"}min=? [F "goal"]'``: an expected reward until a
-target, one line (one JSON object) per property.
+target (``Tmin=? [F "goal"]``: the expected steps, 1 per step), one line (one JSON
+object) per property; ``R{"r"}<=b [...]`` (``T~b``) true or false by the certified
+bracket, undecided (exit 3) when it straddles ``b``.
 
 By default the model is built in doubles and answered by
 :mod:`mitld_lp.solvers.reward`: a certified bracket (a checked sub- and super-solution)
@@ -29,7 +31,7 @@ __all__ = ["answer_reward"]
 
 def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
                   constants: dict[str, Any]) -> int:
-    """One ``R`` property posed, built, solved and said; its exit code.  Raises
+    """One ``R`` (or ``T``) property posed, built, solved and said; its exit code.  Raises
     :class:`mitld_lp.worlds.properties.PropertyError` for a form refused,
     :class:`mitld_lp.model.ModelError` for a file Storm refuses."""
     from mitld_lp.exact.reward import solve_reward
@@ -42,7 +44,8 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
 
     started = time.perf_counter()
     query = pose_reward(name, prop, reward_names(program.program),
-                        first=Path(args.model).suffix.lower() != ".jani")
+                        first=Path(args.model).suffix.lower() != ".jani",
+                        chain=program.chain)
     kwargs: dict[str, Any] = {}
     if args.max_world_states is not None:
         kwargs["max_states"] = args.max_world_states
@@ -61,14 +64,18 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
         return answer_horizon(args, query, model, started)
     if not exact:
         return _say_float(args, query, model, started)
+    from mitld_lp.cli.bounded import decide, reward_head
+
     answer = solve_reward(model, query.objective)
     seconds = time.perf_counter() - started
     value = answer.value
     lower = math.inf if value is None else float_down(value)
     upper = math.inf if value is None else float_up(value)
     why = _why(query.objective)
+    bound, decided, code = decide(query, (math.inf, math.inf) if value is None else
+                                  (value, value), EXIT_OK)
     if args.json:
-        record = {"property": query.name, "formula": query.text, "reward": query.reward,
+        record = {"property": query.name, "formula": query.text, "reward": query.structure,
                   "objective": query.objective, "target": str(query.target),
                   "status": "optimal", "certified": True,
                   "value": "inf" if value is None else str(value),
@@ -76,19 +83,19 @@ def answer_reward(args: argparse.Namespace, name: str, prop: Any, program: Any,
                   "states": model.n_states, "choices": int(model.groups[-1]),
                   "infinite_states": int(answer.infinite.sum()),
                   "policy_evaluations": answer.rounds, "seconds": seconds,
-                  "model": Path(args.model).stem}
+                  "model": Path(args.model).stem, **bound}
         if value is None:
             record["why"] = why
         say_answer(json_text(record))
-        return EXIT_OK
-    head = "= inf" if value is None else f"in {bracket_text(lower, upper)}"
-    tail = [f"reward \"{query.reward}\", target {query.target}",
+        return code
+    head = reward_head(query, bracket_text(lower, upper), value is None, decided)
+    tail = [f"{query.said}, target {query.target}",
             why if value is None else f"exact {value}",
             "certified",
             f"{model.n_states} states, {int(model.groups[-1])} choices, "
             f"{answer.rounds} exact policy evaluations", f"{seconds:.2f} s"]
     say_answer(f"{query.name}: {query.text}  {head}  ({'; '.join(tail)})")
-    return EXIT_OK
+    return code
 
 
 def _why(objective: str) -> str:
@@ -99,15 +106,17 @@ def _why(objective: str) -> str:
 
 def _say_float(args: argparse.Namespace, query: Any, model: Any, started: float) -> int:
     """The float route's answer said (module docs); its exit code (3 when the upper
-    bound's check failed: not certified)."""
+    bound's check failed: not certified, or ``R~b`` undecided)."""
+    from mitld_lp.cli.bounded import decide, reward_head
     from mitld_lp.solvers.reward import solve_reward_float
 
     answer = solve_reward_float(model, query.objective, time_limit=time_left(args))
     seconds = time.perf_counter() - started
-    code = EXIT_OK if answer.certified else EXIT_UNCERTIFIED
+    bound, decided, code = decide(query, (answer.lower, answer.upper),
+                                  EXIT_OK if answer.certified else EXIT_UNCERTIFIED)
     choices = int(model.groups[-1])
     if args.json:
-        record = {"property": query.name, "formula": query.text, "reward": query.reward,
+        record = {"property": query.name, "formula": query.text, "reward": query.structure,
                   "objective": query.objective, "target": str(query.target),
                   "status": "optimal" if answer.certified else "not_certified",
                   "certified": answer.certified,
@@ -116,13 +125,14 @@ def _say_float(args: argparse.Namespace, query: Any, model: Any, started: float)
                   "infinite": answer.infinite, "states": model.n_states,
                   "choices": choices, "policy_iterations": answer.rounds,
                   "lp_value": answer.lp_value, "lp_status": answer.lp_status,
-                  "seconds": seconds, "model": Path(args.model).stem}
+                  "seconds": seconds, "model": Path(args.model).stem, **bound}
         if answer.infinite:
             record["why"] = _why(query.objective)
         say_answer(json_text(record))
         return code
-    head = "= inf" if answer.infinite else f"in {bracket_text(answer.lower, answer.upper)}"
-    tail = [f"reward \"{query.reward}\", target {query.target}"]
+    head = reward_head(query, bracket_text(answer.lower, answer.upper), answer.infinite,
+                       decided)
+    tail = [f"{query.said}, target {query.target}"]
     if answer.infinite:
         tail.append(_why(query.objective))
     tail.append("certified" if answer.certified else

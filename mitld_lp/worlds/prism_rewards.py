@@ -2,19 +2,24 @@
 [F target]``, ``R{"name"}max=? [F target]``, the cumulative reward within ``k`` steps
 ``R{"name"}max=? [C<=k]`` (``C<k``: ``k-1`` steps), the state reward at step ``k``
 ``R{"name"}max=? [I=k]``, each with ``min`` too, and ``Rmin=?`` / ``Rmax=?`` with the
-file's first reward structure (as PRISM takes it).
+file's first reward structure (as PRISM takes it); the expected time ``Tmin=? [F target]``
+(``Tmax``) as the expected reward of 1 in every state (each step), as Storm computes it
+on an MDP or DTMC; and the bounds ``R{"name"}<=b [...]``, ``R>=b``, ``T~b`` (with
+``min``/``max`` or without: for every scheduler, the greatest value deciding ``<=``,
+``<``, the least ``>=``, ``>``, as Storm reads them), decided by the certified value
+(:func:`mitld_lp.worlds.properties.verdict`).
 
 :func:`pose_reward` reads Storm's parsed property into a :class:`RewardQuery` or refuses
 it naming the form (:class:`mitld_lp.worlds.properties.PropertyError`): long-run
-``LRA``, total ``C``, discounted rewards, a time-bounded ``F<=k``, reward bounds ``R~b``,
-a step bound that is not a non-negative integer, a filter, a file without that reward
-structure.  A JANI file's reward structures are its transient variables that are not
-Boolean (Storm's reward models of a JANI model, ``R{"cost"}`` or a property's ``Emin``
-over ``cost``).  :func:`reward_mdp` builds the program
-with Storm in rational arithmetic (``build_model[stormpy.Rational]``: the probabilities
-and rewards as the file writes them; its exploration checks on), within the world
-budgets (``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`,
-and :data:`mitld_lp.defaults.EXACT_MAX_TRANSITIONS` before the rational work),
+``LRA``, total ``C``, discounted rewards, a time-bounded ``F<=k``, ``R=?`` without
+``min`` or ``max``, a step bound that is not a non-negative integer, a filter, a file
+without that reward structure.  A JANI file's reward structures are its transient
+variables that are not Boolean (Storm's reward models of a JANI model, ``R{"cost"}``
+or a property's ``Emin`` over ``cost``).  :func:`reward_mdp` builds the program with
+Storm in rational arithmetic (``build_model[stormpy.Rational]``: the probabilities and
+rewards as the file writes them; its exploration checks on), within the world budgets
+(``max_states``, ``max_memory``, as :func:`mitld_lp.worlds.prism.load_prism`, and
+:data:`mitld_lp.defaults.EXACT_MAX_TRANSITIONS` before the rational work),
 and gives the :class:`RewardMDP` (each choice's reward: its
 state's state reward plus its action reward; the target: the state formula as Storm
 evaluates it on the built model).  Transition rewards (``[a] g : r`` depending on the
@@ -98,6 +103,10 @@ class RewardQuery:
         steps: ``k`` of ``C<=k`` and ``I=k``.
         formula: Storm's formula (what Storm is asked to build the model for).
         left: the left state formula of a reward-bounded until (None: ``true``).
+        per_step: Storm's expected time ``T``: a reward of 1 in every state (``reward``
+            is ``""``; no structure of the file is read).
+        comparison: ``">="``, ``">"``, ``"<="`` or ``"<"`` for ``R~b``, else None.
+        threshold: ``b`` as a fraction, for ``R~b``.
     """
 
     name: str
@@ -109,17 +118,35 @@ class RewardQuery:
     steps: int = 0
     formula: Any = None
     left: Any = None
+    per_step: bool = False
+    comparison: str | None = None
+    threshold: Fraction | None = None
 
     @property
     def word(self) -> str:
-        return f"R{{\"{self.reward}\"}}{self.objective}"
+        """``R{"cost"}min``, or ``Tmin`` for an expected time."""
+        if self.per_step:
+            return f"T{self.objective}"
+        return (f"R{{\"{self.reward}\"}}" if self.reward else "R") + self.objective
+
+    @property
+    def structure(self) -> str | None:
+        """The reward structure's name (None for an expected time, which reads none)."""
+        return None if self.per_step else self.reward
+
+    @property
+    def said(self) -> str:
+        """What is collected, for an answer's line."""
+        return ("expected steps, a reward of 1 per step (Storm's T)" if self.per_step else
+                f"reward \"{self.reward}\"")
 
 
 def is_reward(prop: Any) -> bool:
-    """Whether Storm's property is an ``R`` operator."""
+    """Whether Storm's property is an ``R`` or a ``T`` operator (:func:`pose_reward`)."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
-    return isinstance(prop.get_raw_formula(), logic.RewardOperatorFormula)
+    return isinstance(prop.get_raw_formula(), (logic.RewardOperatorFormula,
+                                               logic.TimeOperatorFormula))
 
 
 def reward_names(program: Any) -> list[str]:
@@ -136,29 +163,26 @@ def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
 
 
 def pose_reward(name: str, prop: Any, reward_names: list[str], *,
-                first: bool = True) -> RewardQuery:
-    """The :class:`RewardQuery` of Storm's ``R`` property ``prop`` over a file whose
-    reward structures are ``reward_names`` (in the file's order), or a
+                first: bool = True, chain: bool = False) -> RewardQuery:
+    """The :class:`RewardQuery` of Storm's ``R`` or ``T`` property ``prop`` over a file
+    whose reward structures are ``reward_names`` (in the file's order), or a
     :class:`PropertyError` naming the form refused.  ``R`` without a name is the first
     structure (PRISM's rule) when ``first``, else only the one structure of the file
-    (Storm's rule for a JANI file)."""
+    (Storm's rule for a JANI file); ``T`` reads no structure (1 per step).  ``chain``:
+    the file is a DTMC (``R=?`` needs no ``min`` or ``max``)."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
-    from mitld_lp.worlds.properties import INIT_FILTER
+    from mitld_lp.worlds.properties import INIT_FILTER, probability_objective
 
     formula = prop.get_raw_formula()
     text = str(formula)
     if not INIT_FILTER.search(str(prop)):
         raise _refuse(name, text, "a filter", "only the value at the initial state is "
                       "answered")
-    if formula.has_bound:
-        raise _refuse(name, text, "a reward bound R~b", "ask R{...}min=? or R{...}max=? "
-                      "and compare the certified value")
-    if not formula.has_optimality_type:
-        raise _refuse(name, text, "R=? without min or max",
-                      "on an MDP the expected reward depends on the scheduler: write Rmax=? "
-                      "or Rmin=?")
-    objective = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
+    per_step = isinstance(formula, logic.TimeOperatorFormula)
+    letter, what = ("T", "the expected time") if per_step else ("R", "the expected reward")
+    objective, comparison, threshold = probability_objective(name, formula, letter, what,
+                                                             chain=chain)
     sub = formula.subformula
     kind, steps, target = "reach", 0, None
     if isinstance(sub, (logic.CumulativeRewardFormula, logic.InstantaneousRewardFormula)):
@@ -183,6 +207,10 @@ def pose_reward(name: str, prop: Any, reward_names: list[str], *,
                       "the state reward at step k (I=k), each with min or max")
     else:
         target = sub.subformula
+    if per_step:
+        return RewardQuery(name=name, text=text, reward="", objective=objective,
+                           target=target, formula=formula, per_step=True,
+                           comparison=comparison, threshold=threshold)
     if formula.has_reward_model_name():
         reward = formula.reward_name
         if reward not in reward_names:
@@ -199,7 +227,8 @@ def pose_reward(name: str, prop: Any, reward_names: list[str], *,
     else:
         raise PropertyError(f"property {name} ({text}): the file has no reward structure")
     return RewardQuery(name=name, text=text, reward=reward, objective=objective,
-                       target=target, kind=kind, steps=steps, formula=formula)
+                       target=target, kind=kind, steps=steps, formula=formula,
+                       comparison=comparison, threshold=threshold)
 
 
 def _steps(name: str, text: str, shown: str) -> int:
@@ -227,6 +256,19 @@ def _fraction(x: Any) -> Fraction:
     return Fraction(str(x))
 
 
+def _structure(model: Any, query: RewardQuery, where: str) -> Any:
+    """Storm's reward model of ``query`` on the built ``model`` (None for an expected
+    time, 1 per step); rewards on transitions are refused."""
+    if query.per_step:
+        return None
+    rm = model.reward_models[query.reward]
+    if rm.has_transition_rewards:
+        raise WorldError(f"{where}: reward structure \"{query.reward}\": rewards on "
+                         "transitions (depending on the successor) are refused; state and "
+                         "action rewards are read")
+    return rm
+
+
 def _float_tables(model: Any, query: RewardQuery, where: str) -> RewardMDP:
     """The built (double) model's :class:`RewardMDP` with float arrays: the transitions
     from Storm's binary export (no loop over states), the rewards per choice."""
@@ -237,15 +279,11 @@ def _float_tables(model: Any, query: RewardQuery, where: str) -> RewardMDP:
     stormpy = stormpy_module()
     groups, indptr, indices, probabilities = transition_arrays(model, where)
     n, m = model.nr_states, int(groups[-1])
-    rm = model.reward_models[query.reward]
-    if rm.has_transition_rewards:
-        raise WorldError(f"{where}: reward structure \"{query.reward}\": rewards on "
-                         "transitions (depending on the successor) are refused; state and "
-                         "action rewards are read")
-    rewards = np.zeros(m)
-    if rm.has_state_action_rewards:
+    rm = _structure(model, query, where)
+    rewards = np.ones(m) if rm is None else np.zeros(m)  # T: 1 per step
+    if rm is not None and rm.has_state_action_rewards:
         rewards += np.asarray(list(rm.state_action_rewards), dtype=np.float64)
-    if rm.has_state_rewards:
+    if rm is not None and rm.has_state_rewards:
         rewards += np.repeat(np.asarray(list(rm.state_rewards), dtype=np.float64),
                              np.diff(groups))
     bad = ~(rewards >= 0) | ~np.isfinite(rewards)
@@ -277,20 +315,18 @@ def _tables(model: Any, query: RewardQuery, where: str) -> Any:
             indices.append(entry.column)
             probabilities.append(_fraction(entry.value))
         indptr.append(len(indices))
-    rm = model.reward_models[query.reward]
-    if rm.has_transition_rewards:
-        raise WorldError(f"{where}: reward structure \"{query.reward}\": rewards on "
-                         "transitions (depending on the successor) are refused; state and "
-                         "action rewards are read")
+    rm = _structure(model, query, where)
     rewards = [Fraction(0)] * matrix.nr_rows
-    if rm.has_state_action_rewards:
+    if rm is not None and rm.has_state_action_rewards:
         rewards = [_fraction(x) for x in rm.state_action_rewards]
     state: list[Fraction] = []
-    if rm.has_state_rewards:
+    if rm is None:  # T: a state reward of 1 in every state
+        state = [Fraction(1)] * n
+    elif rm.has_state_rewards:
         state = [_fraction(x) for x in rm.state_rewards]
-        for s in range(n):
-            for c in range(int(groups[s]), int(groups[s + 1])):
-                rewards[c] += state[s]
+    for s, r in enumerate(state):
+        for c in range(int(groups[s]), int(groups[s + 1])):
+            rewards[c] += r
     negative = [r for r in rewards + state if r < 0]
     if negative:
         raise WorldError(f"{where}: reward structure \"{query.reward}\": a negative reward "
@@ -394,7 +430,8 @@ def reward_mdp(path: str | os.PathLike[str], program: Any, query: RewardQuery, *
         note = str(bound)
     formulas = [query.target] if query.kind == "reach" else [query.formula]
     options = stormpy.BuilderOptions(formulas)
-    options.set_build_all_reward_models()
+    if not query.per_step:  # T reads no structure of the file
+        options.set_build_all_reward_models()
     options.set_exploration_checks(True)
 
     def work() -> Any:

@@ -157,7 +157,10 @@ def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
                     raise WorldError(f"{unsupported} ({name})")
                 return np.fromfile(path, dtype=dtype, count=count, offset=member.offset_data)
 
+            # a DTMC's archive has no state-to-choices (a choice per state, in order)
+            one_each = n == m and "state-to-choices.bin" not in members
             return (
+                np.arange(n + 1, dtype=np.int64) if one_each else
                 read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
                 read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
                 read("branch-to-target.bin", "<u8", b).astype(np.int64),

@@ -22,16 +22,16 @@ answered in its place):
   its own, the state formula as a PRISM expression with the file's labels written out,
   which Storm evaluates (:func:`mitld_lp.worlds.prism.load_prism`'s ``define``).
 
-Expected rewards (``R``) and reward-bounded probabilities are not tasks:
-:func:`pose_property` refuses them, and the command line's door answers
-``R{"r"}min=? [F target]``, ``[C<=k]``, ``[I=k]`` with
-:mod:`mitld_lp.worlds.prism_rewards` and :mod:`mitld_lp.exact.reward` (and
-:mod:`~mitld_lp.exact.horizon`), ``P=? [F{"r"}<=b target]`` with
-:mod:`mitld_lp.worlds.reward_bounded`.
+Expected rewards (``R``), expected times (``T``) and reward-bounded probabilities are
+not tasks: :func:`pose_property` refuses them, and the command line's door answers
+``R{"r"}min=? [F target]``, ``[C<=k]``, ``[I=k]``, ``Tmin=? [F target]`` and their
+bounds ``R~b``, ``T~b`` with :mod:`mitld_lp.worlds.prism_rewards` and
+:mod:`mitld_lp.exact.reward` (and :mod:`~mitld_lp.exact.horizon`),
+``P=? [F{"r"}<=b target]`` with :mod:`mitld_lp.worlds.reward_bounded`.
 
-Refused, by name: expected rewards (``R``), long-run averages (``S``), expected time
-(``T``), multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
-without ``min`` or ``max`` (an MDP needs one, as in Storm), a ``P`` nested in a path
+Refused, by name: expected rewards (``R``) and times (``T``), long-run averages (``S``),
+multi-objective queries, a ``filter`` other than the initial state's, ``P=?``
+without ``min`` or ``max`` on an MDP (it needs one, as in Storm), a ``P`` nested in a path
 formula, Boolean combinations of path formulas and nested temporal operators (LTL),
 reward- and time-bounded operators, a bound with only a lower end, a bound that is not
 an integer, Storm's labels ``"init"`` and ``"deadlock"``, a label the file does not
@@ -132,6 +132,12 @@ class Program:
     constants: frozenset[str]
     properties: tuple[Any, ...] = ()
     reserved: frozenset[str] = frozenset()
+
+    @property
+    def chain(self) -> bool:
+        """Whether the file is a DTMC (one scheduler: ``P=?``, ``R=?`` and ``T=?`` need
+        no ``min`` or ``max``, as Storm reads them)."""
+        return str(getattr(self.program, "model_type", "")).rsplit(".", 1)[-1] == "DTMC"
 
 
 def read_program(path: str) -> Program:
@@ -365,10 +371,11 @@ class _Poser:
 
 
 def pose_property(name: str, prop: Any, labels: Mapping[str, str],
-                  reserved: frozenset[str] = frozenset()) -> Query:
+                  reserved: frozenset[str] = frozenset(), *, chain: bool = False) -> Query:
     """The task of Storm's property ``prop`` (``labels``: the file's ``name ->
-    expression``; ``reserved``: names a new proposition must not take), or
-    :class:`PropertyError` naming the form refused and why."""
+    expression``; ``reserved``: names a new proposition must not take; ``chain``: the
+    file is a DTMC, :attr:`Program.chain`), or :class:`PropertyError` naming the form
+    refused and why."""
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     formula = prop.get_raw_formula()
@@ -382,7 +389,8 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
              (logic.LongRunAverageOperatorFormula, "a long-run average (S)",
               "a long-run average is not a probability of a task"),
              (logic.TimeOperatorFormula, "an expected time (T)",
-              "expected times are not answered yet"),
+              "an expected time is not the probability of a task (the door answers it "
+              "as an expected reward of 1 per step: mitld_lp.worlds.prism_rewards)"),
              (logic.MultiObjectiveFormula, "a multi-objective query",
               "one property poses one objective"))
     for kind, form, why in kinds:
@@ -391,18 +399,22 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     if not isinstance(formula, logic.ProbabilityOperatorFormula):
         raise _refuse(name, text, "a state formula that is not one P operator",
                       "one P[...] per property is answered")
-    objective, comparison, threshold = probability_objective(name, formula)
+    objective, comparison, threshold = probability_objective(name, formula, chain=chain)
     poser = _Poser(name, text, labels, reserved)
     spec = poser.path(formula.subformula)
     return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
                  comparison=comparison, threshold=threshold)
 
 
-def probability_objective(name: str, formula: Any) -> tuple[str, str | None,
-                                                          Fraction | None]:
+def probability_objective(name: str, formula: Any, letter: str = "P",
+                          what: str = "the probability", *, chain: bool = False,
+                          ) -> tuple[str, str | None, Fraction | None]:
     """``(objective, comparison, threshold)`` of Storm's ``P`` operator ``formula``:
     ``Pmax=?`` is ``("max", None, None)``; ``P>=p`` asks for every scheduler, so the
-    least probability decides it, ``("min", ">=", p)`` (``Pmax>=p``: the greatest)."""
+    least probability decides it, ``("min", ">=", p)`` (``Pmax>=p``: the greatest).
+    The same for an ``R`` or ``T`` operator (``letter``; ``what`` its quantity in the
+    refusal), as Storm reads ``R<=b``: the greatest expected reward decides it.  On a
+    DTMC (``chain``) ``P=?`` is its one value (``"max"``, which is also the least)."""
     comparison = threshold = None
     if formula.has_bound:
         comparison = _COMPARISONS[str(formula.comparison_type).rsplit(".", 1)[-1]]
@@ -412,17 +424,20 @@ def probability_objective(name: str, formula: Any) -> tuple[str, str | None,
         objective = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
     elif comparison is not None:  # for every scheduler: the worst one decides
         objective = "min" if comparison in (">=", ">") else "max"
+    elif chain:  # one scheduler: its value is the greatest and the least
+        objective = "max"
     else:
-        raise _refuse(name, str(formula), "P=? without min or max",
-                      "on an MDP the probability depends on the scheduler: write Pmax=? "
-                      "or Pmin=?")
+        raise _refuse(name, str(formula), f"{letter}=? without min or max",
+                      f"on an MDP {what} depends on the scheduler: write {letter}max=? "
+                      f"or {letter}min=?")
     return objective, comparison, threshold
 
 
-def verdict(query: Query, lower: Fraction, upper: Fraction) -> bool | None:
-    """``P~p`` decided by the optimum's bracket ``[lower, upper]`` (exact rationals):
-    True or False when the whole bracket is on one side of ``p``, None (undecided)
-    when it straddles it."""
+def verdict(query: Any, lower: Fraction | float, upper: Fraction | float) -> bool | None:
+    """``P~p`` (or ``R~b``, ``T~b``: any ``query`` with a ``comparison`` and a
+    ``threshold``) decided by the optimum's bracket ``[lower, upper]`` (exact rationals,
+    or ``math.inf`` both for an infinite expected reward): True or False when the whole
+    bracket is on one side of the threshold, None (undecided) when it straddles it."""
     p, op = query.threshold, query.comparison
     if p is None or op is None:
         raise ValueError("not a P~p property")

@@ -73,16 +73,18 @@ def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
     return PropertyError(f"property {name} ({text}): {form} is refused: {why}")
 
 
-def pose_reward_bounded(name: str, prop: Any, reward_names: list[str]) -> RewardBounded:
+def pose_reward_bounded(name: str, prop: Any, reward_names: list[str], *,
+                        chain: bool = False) -> RewardBounded:
     """The :class:`RewardBounded` of Storm's property ``prop`` (one for which
     :func:`is_reward_bounded` holds) over a file whose reward structures are
-    ``reward_names``, or :class:`PropertyError` naming the form refused."""
+    ``reward_names`` (``chain``: a DTMC, ``P=?`` needs no ``min`` or ``max``), or
+    :class:`PropertyError` naming the form refused."""
     formula = prop.get_raw_formula()
     text = str(formula)
     if not INIT_FILTER.search(str(prop)):
         raise _refuse(name, text, "a filter", "only the value at the initial state is "
                       "answered")
-    objective, comparison, threshold = probability_objective(name, formula)
+    objective, comparison, threshold = probability_objective(name, formula, chain=chain)
     sub = formula.subformula
     left, right = sub.left_subformula, sub.right_subformula
     rest = str(sub)[len(str(left)):].lstrip()
