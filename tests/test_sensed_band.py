@@ -134,7 +134,7 @@ def test_a_band_of_one_point_is_the_sensed_point_answer() -> None:
 
 @pytest.mark.parametrize("extra, words", [
     ({"constraints": ["P(F[0,3] A) <= 0.9"], "objective": "min"}, "objective min"),
-    ({"bands": "best"}, "bands 'best'")])
+    ({"bands": "best", "constraints": ["P(F[0,3] A) <= 0.9"]}, "bands 'best'")])
 def test_what_is_not_solved_is_refused_by_name(extra, words) -> None:
     with pytest.raises(ProblemError) as err:
         synthesize(model([0.3, 0.6], 0.6), **extra)

@@ -15,6 +15,7 @@ from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import SensedRoute
 from mitld_lp.routes.sensed_band_constrained import SensedBandConstrainedRoute
 from mitld_lp.routes.sensed_constrained import SensedConstrainedRoute
+from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
 
 __all__ = ["ROUTES", "LP"]
 
@@ -22,6 +23,7 @@ __all__ = ["ROUTES", "LP"]
 ROUTES: list[Route] = [
     SensedBandConstrainedRoute(),  # constraints or then with such a sensor and a band
     SensedConstrainedRoute(),  # constraints or then with such a sensor
+    SensedOptimisticRoute(),  # such a sensor and a band read for its best law
     SensedRoute(),  # a sensor that misses its event: what the robot observes
     RobustConstrainedRoute(),  # constraints and a band
     ConstrainedRoute(),  # constraints or then, point laws
