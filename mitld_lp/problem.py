@@ -356,12 +356,10 @@ def pose_on(routes: Sequence[Route], model: Any, constraints: Iterable[Any] = ()
     if robust and s.bands != "worst" and not owner.optimistic:
         extra = [k for k in asked.beyond_points() if k != "band"]
         said = f"with {' and '.join(extra)}" if extra else f"on the {owner.name} route"
-        refused.append(f"bands {s.bands!r} {said}: a band is read for its best law "
-                       "with constraints or then only without a sensor that misses (the "
-                       "robust and constrained routes; a sensor without constraints: the "
-                       "sensed route), a controller acting on observations that meets each "
-                       "constraint at the law nature chooses is not solved; the "
-                       f"{owner.name} route reads it for the worst law (bands 'worst')")
+        refused.append(f"bands {s.bands!r} {said}: a band is read for "
+                       "its best law only without a sensor that misses (the robust and "
+                       f"constrained routes); the {owner.name} route reads it for the "
+                       "worst law (bands 'worst')")
     posed = Posed(asked.problem, s, owner, fragment, robust)
     if s.exact:  # an exact answer (mitld_lp.exact): what it cannot take, before any work
         from mitld_lp.exact.stage import exact_refusal

@@ -25,7 +25,6 @@ from test_sensed_band import model as bus_model
 from mitld_lp import ExplicitGame, Model, synthesize
 from mitld_lp.controllers.observation import Observation
 from mitld_lp.distributions import from_table
-from mitld_lp.problem import ProblemError
 from mitld_lp.sensing import Sensor
 
 # a robot in "mid" goes to "sa" (A) or waits; from "sa" it must pass "trap" before it is
@@ -60,18 +59,19 @@ def holds(objective: str, t: int, state: str, k: int | None) -> bool | None:
     return False if k is not None or t >= H else None
 
 
-def value(act: Any, band: tuple[str, str], detect: str, objective: str) -> Fraction:
+def value(act: Any, band: tuple[str, str], detect: str, objective: str,
+          verdict: Any = holds) -> Fraction:
     """The task's probability in :data:`TINY` under the robot's ``act`` (an observation
     history to an action), nature picking each step's hazard among the band's ends after
     seeing everything, to the robot's advantage (the greatest for a maximum, the least for
-    a minimum)."""
+    a minimum); ``verdict``: the formula's (default the task's, :func:`holds`)."""
     d, ends = Fraction(detect), tuple(Fraction(x) for x in band)
     pick = max if objective == "max" else min
 
     def go(t: int, state: str, k: int | None, reported: bool, seen: History) -> Fraction:
-        verdict = holds(objective, t, state, k)
-        if verdict is not None:
-            return Fraction(int(verdict))
+        said = verdict(objective, t, state, k)
+        if said is not None:
+            return Fraction(int(said))
         action = act(seen)
         values = []
         for h in (ends if k is None else (None,)):
@@ -127,8 +127,12 @@ def brute_optimum(band: tuple[str, str], detect: str, objective: str) -> Fractio
     """The best over every observation-based policy (:func:`plans`) of its value with
     nature on the robot's side."""
     pick = max if objective == "max" else min
-    return pick(value(lambda seen, p=plan: p.get(seen, "back"), band, detect, objective)
-                for plan in plans())
+    return pick(value(follow(plan), band, detect, objective) for plan in plans())
+
+
+def follow(plan: dict[History, str]) -> Any:
+    """The plan as an observation history's action ("back" where it has no decision)."""
+    return lambda seen: plan.get(seen, "back")
 
 
 def of_controller(controller: Any) -> Any:
@@ -235,7 +239,69 @@ def test_the_command_line_solves_and_exports(tmp_path: Path, capsys) -> None:
     assert Fraction(said["lower"]) <= storm_exact(out_chain) <= Fraction(said["upper"])
 
 
-def test_constraints_with_a_sensor_and_the_best_law_are_refused_by_name() -> None:
-    with pytest.raises(ProblemError, match="bands 'best' with constraints and sensors"):
-        synthesize(tiny(("0.2", "0.7"), "0.5", "max"), bands="best",
-                   constraints=["P(F[0,2] A) <= 0.9"])
+def visits_a(objective: str, t: int, state: str, k: int | None) -> bool | None:
+    """``F[0,H] A`` (the constraints' formula below): the robot at A by step ``H``."""
+    if "A" in TINY.propositions(state):
+        return True
+    return False if t >= H else None
+
+
+def at_law(act: Any, h: str, detect: str, objective: str, verdict: Any) -> Fraction:
+    """The probability of ``verdict`` (a task's, :func:`holds` or :func:`visits_a`) under
+    the robot's ``act`` with the band at the constant law of hazard ``h``."""
+    return value(act, (h, h), detect, objective, verdict)
+
+
+def storm_of(path: Path) -> Any:
+    """Storm's exact ``P=? [F "label"]`` on the plain chain at ``path``, by label."""
+    import stormpy
+
+    chain = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+
+    def storm(label: str) -> Fraction:
+        got = stormpy.model_checking(chain, stormpy.parse_properties(f'P=? [F "{label}"]')[0])
+        return Fraction(str(got.get_value(chain.initial_states[0])))
+    return storm
+
+
+CONSTRAINED = {"max": ("P(F[0,3] A) <= 0.5", "<="), "min": ("P(F[0,3] A) >= 0.5", ">=")}
+
+
+@pytest.mark.parametrize("objective", ["max", "min"])
+def test_constraints_are_met_at_the_law_nature_chose(tmp_path: Path, objective) -> None:
+    """With a constraint the answer is a pair (an observation-based controller, a law of
+    the band) meeting it at that law: at least as good as every deterministic
+    observation-based policy meeting it at one of the band's constant laws tried (the
+    middle and the ends, by enumeration in fractions); at most the fully observed
+    optimistic constrained bound; Storm on the controller's chain at its law finds the
+    task inside the bracket and the constraint met."""
+    band, detect = ("0.2", "0.7"), "0.5"
+    text, sense = CONSTRAINED[objective]
+    r = synthesize(tiny(band, detect, objective), bands="best", constraints=[text])
+    assert r.route == "sensed-constrained" and r.summary()["bands_reading"] == "best"
+    assert r.status == "optimal" and all(v.holds for v in r.constraints)
+    best = None
+    for h in ("0.2", "0.45", "0.7"):
+        for plan in plans():
+            act = follow(plan)
+            c = at_law(act, h, detect, objective, visits_a)
+            if not (c <= Fraction(1, 2) if sense == "<=" else c >= Fraction(1, 2)):
+                continue
+            v = at_law(act, h, detect, objective, holds)
+            best = v if best is None else (max(best, v) if objective == "max" else
+                                           min(best, v))
+    assert best is not None
+    if objective == "max":  # the randomised optimum at a law tried does at least as well
+        assert Fraction(r.lower) >= best - Fraction(1, 10**6) and best <= Fraction(r.upper)
+    else:
+        assert Fraction(r.upper) <= best + Fraction(1, 10**6) and best >= Fraction(r.lower)
+    pytest.importorskip("stormpy")
+    from mitld_lp.running.chain import write_chain
+
+    storm = storm_of(write_chain(r, tmp_path / "c.drn"))
+    # a minimum's chain is its complement's: "accept" marks the runs that fail the task
+    task = storm("accept") if objective == "max" else 1 - storm("accept")
+    assert Fraction(r.lower) - Fraction(1, 10**9) <= task <= Fraction(r.upper) + Fraction(
+        1, 10**9)
+    c1 = storm("c1")
+    assert c1 <= Fraction(1, 2) if sense == "<=" else c1 >= Fraction(1, 2)
