@@ -119,3 +119,42 @@ def test_every_cell_with_a_sensor(task: str, law: str, extra: str, tmp_path: Pat
         got = stormpy.model_checking(chain, stormpy.parse_properties('P=? [F "accept"]')[0])
         value = Fraction(str(got.get_value(chain.initial_states[0])))
         assert Fraction(r.lower) <= value <= Fraction(r.upper), (value, r.lower, r.upper)
+
+
+@pytest.mark.parametrize(("task", "extra"), list(itertools.product(sorted(_TASKS),
+                                                                   sorted(_EXTRAS))))
+def test_every_cell_with_a_sensor_and_the_best_law(task: str, extra: str,
+                                                   tmp_path: Path) -> None:
+    """The band read for its best law (``bands = "best"``) with the camera: solved within
+    the fully observed best case (the robust routes' answer to the same problem), above
+    the worst case (bands 'worst', the same camera) where that is quick, each constraint
+    met, and the exported chain at nature's chosen law worth the claim by Storm (each
+    constraint's label within its bound)."""
+    kwargs = {**_EXTRAS[extra], "bands": "best"}
+    camera = _model(task, "band", 0.6, extra)
+    r = synthesize(camera, **kwargs)
+    assert r.route.startswith("sensed") and r.summary()["bands_reading"] == "best"
+    assert -TOL <= r.lower <= r.upper + TOL <= 1 + 2 * TOL
+    seen = synthesize(_model(task, "band", None, extra), **kwargs)
+    assert not seen.part.observation_based and seen.bands
+    if extra == "min":  # nature and sight both help the robot make the task unlikely
+        assert seen.lower <= r.lower + TOL
+    else:
+        assert r.upper <= seen.upper + TOL
+    if extra == "none":  # (the worst case of the others: the cells above, slower)
+        assert synthesize(camera).lower <= r.lower + TOL
+    assert all(c.holds for c in r.constraints)
+    pytest.importorskip("stormpy")
+    from test_sensed_optimistic import storm_of
+
+    from mitld_lp.running.chain import write_chain
+    from mitld_lp.running.optimistic_chain import optimistic_claim
+
+    storm = storm_of(write_chain(r, tmp_path / "chain.drn"))
+    if extra in ("none", "min"):  # the best case's chain: Storm gives the claim
+        claim = Fraction(optimistic_claim(r)[0])
+        assert claim <= storm("accept") <= claim + Fraction(1, 10**9)
+    else:  # the randomised controller's chain at the law it was solved at
+        assert Fraction(r.lower) <= storm("accept") <= Fraction(r.upper)
+    for i, v in enumerate(r.constraints, start=1):  # P(F puddle) <= 0.2 at nature's law
+        assert storm(f"c{i}") <= Fraction(v.constraint.bound)

@@ -6,10 +6,12 @@ interval MDP, and the one rule of the setting on every surface."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from fractions import Fraction
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
@@ -125,16 +127,19 @@ def test_storms_cooperative_value_is_inside_the_optimistic_bracket(tmp_path: Pat
     assert storm("ROBUST") < cooperative - 0.1
 
 
-def test_a_sensor_with_the_best_law_is_refused_by_name() -> None:
-    # constraints with the best law are solved (tests/test_optimistic_constrained.py)
+def test_a_sensor_with_the_best_law_is_solved_on_the_sensed_routes() -> None:
+    # constraints with the best law are solved (tests/test_optimistic_constrained.py), a
+    # sensor with it too (tests/test_sensed_optimistic.py): never by a fully observed route
     from mitld_lp.sensing import Sensor
 
     sensed = Model.from_game(sides(), SPEC, distributions={
         "mu": from_table({"geometric": [float(x) for x in MU]}, "mu"),
         "nu": from_table({"geometric": [float(x) for x in NU]}, "nu")},
         sensors={"a": Sensor(0.5)})
-    with pytest.raises(ProblemError, match="bands 'best' with sensors: "):
-        synthesize(sensed, bands="best")
+    r = synthesize(sensed, bands="best")
+    assert r.part.observation_based and r.summary()["bands_reading"] == "best"
+    assert r.upper <= synthesize(dataclasses.replace(sensed, sensors=MappingProxyType({})),
+                                 bands="best").upper + 1e-12
     # point laws: the one law of each is both its best and its worst
     m = Model.from_game(sides(), SPEC, distributions={"mu": geometric(0.3),
                                                       "nu": geometric(0.4)})

@@ -176,9 +176,11 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         sensed_band_chain_of,
         sensed_band_claim,
     )
+    from mitld_lp.running.sensed_optimistic_chain import is_sensed_optimistic
 
-    if chain and is_optimistic(r):  # the best law: a plain chain at nature's chosen law
-        plain = chain_drn(optimistic_chain_of(r))
+    if chain and (is_optimistic(r) or is_sensed_optimistic(r)):  # the best law: a plain
+        # chain at nature's chosen law (with sensors, over the truth and the memory)
+        plain = chain_drn(optimistic_chain_of(r) if is_optimistic(r) else chain_of(r))
         write_file(chain, lambda p: drn.write(plain, p, overwrite=True))
         accept, said_chain = optimistic_claim(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)

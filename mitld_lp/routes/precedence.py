@@ -15,13 +15,17 @@ from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import SensedRoute
 from mitld_lp.routes.sensed_band_constrained import SensedBandConstrainedRoute
 from mitld_lp.routes.sensed_constrained import SensedConstrainedRoute
+from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
+from mitld_lp.routes.sensed_optimistic_constrained import SensedOptimisticConstrainedRoute
 
 __all__ = ["ROUTES", "LP"]
 
 #: Every route, in precedence.
 ROUTES: list[Route] = [
+    SensedOptimisticConstrainedRoute(),  # ... with a band read for its best law
     SensedBandConstrainedRoute(),  # constraints or then with such a sensor and a band
     SensedConstrainedRoute(),  # constraints or then with such a sensor
+    SensedOptimisticRoute(),  # such a sensor and a band read for its best law
     SensedRoute(),  # a sensor that misses its event: what the robot observes
     RobustConstrainedRoute(),  # constraints and a band
     ConstrainedRoute(),  # constraints or then, point laws

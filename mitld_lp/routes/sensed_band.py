@@ -53,7 +53,9 @@ from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.certify import float_up
 from mitld_lp.solvers.rounding import one_minus
 
-__all__ = ["SensedBandPart", "end_laws", "solve_sensed_band"]
+__all__ = ["SensedBandPart", "band_gap", "band_result", "end_laws", "full_information",
+           "read_back", "sensed_candidate", "solved_bracket", "solve_sensed_band",
+           "within_time"]
 
 log = logging.getLogger(__name__)
 
@@ -90,10 +92,12 @@ class SensedBandPart(SensedPart):
         return out
 
 
-def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
+def full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
     """The fully observed robust optimum's ``upper`` for the same problem (its sensors
-    read as perfect): a sound upper bound for every observation-based policy; NaN, with
-    the reason, where the robust route does not give it (its budget, a refusal)."""
+    read as perfect), with the bands read as ``posed``'s settings read them (the worst
+    law, or with ``bands = "best"`` the cooperative optimum): a sound upper bound for
+    every observation-based policy; NaN, with the reason, where the robust route does
+    not give it (its budget, a refusal)."""
     from mitld_lp.problem import ProblemError, pose_on
     from mitld_lp.routes.robust import RobustRoute
     from mitld_lp.routes.stages import build_posed
@@ -109,7 +113,7 @@ def _full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
         log.info("fully observed robust bound not used: %s", exc)
         return float("nan"), ()
     failed = tuple(c for c in full.checks if not c.passed)
-    return (_solved(full)[1] if full.controller is not None else float("nan")), failed
+    return (solved_bracket(full)[1] if full.controller is not None else float("nan")), failed
 
 
 def end_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]]]:
@@ -143,7 +147,19 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
                ) -> tuple[Result, Any]:
     """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
     ``built``) and its controller's worst case over the band."""
-    from mitld_lp.running.sensed_band_chain import chain_floor, sensed_band_chain_of, worst_case
+    from mitld_lp.running.sensed_band_chain import worst_case
+
+    point, chain = sensed_candidate(posed, built, laws)
+    return point, None if chain is None else worst_case(chain)
+
+
+def sensed_candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
+                     ) -> tuple[Result, Any]:
+    """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
+    ``built``) and its controller's interval chain over the band
+    (:func:`~mitld_lp.running.sensed_band_chain.sensed_band_chain_of`; None without a
+    controller), its size checked against ``max_states`` before it is unfolded."""
+    from mitld_lp.running.sensed_band_chain import chain_floor, sensed_band_chain_of
     from mitld_lp.util.memory import ProductTooLarge
 
     if laws is not None:
@@ -162,11 +178,10 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
             f"hypotheses of the {reached:,} information states it reaches, each a truth "
             f"the chain holds), more than {budget:,} (max_states); raise max_states, "
             "loosen epsilon, or shrink the model")
-    chain = sensed_band_chain_of(point, max_states=budget)
-    return point, worst_case(chain)
+    return point, sensed_band_chain_of(point, max_states=budget)
 
 
-def _within(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
+def within_time(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
     """``posed`` with the time left of ``limit`` seconds from ``t0`` (None: none left,
     ``what`` is not solved and its bound not used)."""
     if limit is None:
@@ -178,7 +193,7 @@ def _within(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | 
     return replace(posed, settings=replace(posed.settings, time_limit=left))
 
 
-def _solved(r: Result) -> tuple[float, float]:
+def solved_bracket(r: Result) -> tuple[float, float]:
     """``r``'s bracket in the solved automaton's terms: the complement's for a minimum
     read back from it (every minimum with a band, as on the robust route)."""
     if r.complemented:
@@ -186,9 +201,10 @@ def _solved(r: Result) -> tuple[float, float]:
     return r.lower, r.upper
 
 
-def _gap(worst: Any, uppers: tuple[float, ...], precision: float
-         ) -> tuple[float, float, float, float, bool, bool]:
-    """The bracket of the controller's worst case ``worst`` under the least of the sound
+def band_gap(worst: Any, uppers: tuple[float, ...], precision: float
+             ) -> tuple[float, float, float, float, bool, bool]:
+    """The bracket of the controller's worst case ``worst`` (or its best case, read the
+    same: a ``lower`` and a ``truncated_won``) under the least of the sound
     upper bounds ``uppers`` (NaN: not given): ``upper``, ``lower``, the width, the
     truncation's part of it (the controller's worst case with the runs past a truncation
     point counted won, the upper bounds' reading, above its lower: reported apart, as
@@ -204,6 +220,30 @@ def _gap(worst: Any, uppers: tuple[float, ...], precision: float
     return upper, lower, width, cut, agree, agree and width - cut <= precision * max(lower, 0.0)
 
 
+def read_back(point: Result, lower: float, upper: float
+              ) -> tuple[tuple[float, float], tuple[float, float] | None]:
+    """The bracket ``[lower, upper]`` of the solved automaton (``upper`` rounded up) as
+    the task's, and the complement's bracket (None unless ``point`` solved a minimum as
+    its complement's maximum: then ``Pmin(task) = 1 - Pmax(not task)``)."""
+    bracket: tuple[float, float] = (lower, float_up(upper))
+    if point.complemented:
+        return one_minus(*bracket), bracket
+    return bracket, None
+
+
+def band_result(posed: Posed, point: Result, bracket: tuple[float, float],
+                complement: tuple[float, float] | None, checks: tuple[Check, ...],
+                bands: dict[str, str], part: Any, widths: dict[str, float], t0: float
+                ) -> Result:
+    """``point`` (the chosen candidate's sensed answer) with the band's bracket, checks,
+    part and widths, on ``posed``'s model (its band); the band's time from ``t0``."""
+    return replace(point, model=posed.model, lower=bracket[0], upper=bracket[1],
+                   value=bracket[1] if point.complemented else bracket[0],
+                   complement=complement, certified=all(c.passed for c in checks),
+                   checks=checks, bands=bands, part=part, width=widths,
+                   timings={**point.timings, "band": time.perf_counter() - t0})
+
+
 def solve_sensed_band(posed: Posed, built: Built) -> Result:
     """Solve a problem with sensed events and a band (module docs) on its built
     information-state product (the middle law's beliefs), and at the bands' ends.  A
@@ -216,27 +256,27 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
              if c.distribution.is_ambiguous}
     if worst is None:  # no controller: the point answer's status says why
         return replace(point, bands=bands)
-    uppers = {"middle law": _solved(point)[1]}
+    uppers = {"middle law": solved_bracket(point)[1]}
     chosen, name = (point, worst), "middle law"
     limit, s = posed.settings.time_limit, posed.settings
-    timed = _within(posed, t0, limit, "the fully observed robust optimum")
-    full_upper, full_failed = (float("nan"), ()) if timed is None else _full_information(timed)
+    timed = within_time(posed, t0, limit, "the fully observed robust optimum")
+    full_upper, full_failed = (float("nan"), ()) if timed is None else full_information(timed)
     for label, laws in end_laws(posed.model.distributions):
-        _, lower_now, width_now = _gap(chosen[1], (*uppers.values(), full_upper),
+        _, lower_now, width_now = band_gap(chosen[1], (*uppers.values(), full_upper),
                                                s.precision)[:3]
         if width_now <= s.precision * max(lower_now, 0.0):
             break  # closed already, truncation too: no other law's controller does better
-        timed = _within(posed, t0, limit, label)
+        timed = within_time(posed, t0, limit, label)
         if timed is None:
             continue
         other, w = _candidate(timed, None, laws)
         if w is None:  # no controller there (a time limit): its bound is not used
             continue
-        uppers[label] = _solved(other)[1]
+        uppers[label] = solved_bracket(other)[1]
         if w.lower > chosen[1].lower:
             chosen, name = (other, w), label
     point, worst = chosen
-    upper, lower, width, cut, agree, closed = _gap(worst, (*uppers.values(), full_upper),
+    upper, lower, width, cut, agree, closed = band_gap(worst, (*uppers.values(), full_upper),
                                                    s.precision)
     said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
     terms = "the complement's " if point.complemented else ""
@@ -254,10 +294,7 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
               "band": max(width - cut - solver, 0.0)}
     check = Check("worst case over the band", closed, detail)
     checks = (*point.checks, *full_failed, check)
-    bracket: tuple[float, float] = (lower, float_up(upper))
-    complement = None
-    if point.complemented:  # read back: Pmin(task) = 1 - Pmax(not task)
-        complement, bracket = bracket, one_minus(*bracket)
+    bracket, complement = read_back(point, lower, upper)
     what = ("the most probable the task is under some law of the band"
             if point.complemented else "what the returned controller guarantees under "
             "every law of the band")
@@ -269,11 +306,7 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
                           point.part.sensors, point.part.belief, worst=worst,
                           nominal_upper=uppers["middle law"], point_uppers=uppers,
                           chosen_at=name, full_upper=full_upper, message=message)
-    result = replace(point, model=posed.model, lower=bracket[0], upper=bracket[1],
-                     value=bracket[1] if point.complemented else bracket[0],
-                     complement=complement, certified=all(c.passed for c in checks),
-                     checks=checks, bands=bands, part=part, width=widths,
-                     timings={**point.timings, "band": time.perf_counter() - t0})
+    result = band_result(posed, point, bracket, complement, checks, bands, part, widths, t0)
     log.info("sensed synthesis over the band: %s, certified=%s",
              bracket_text(result.lower, result.upper), result.certified)
     return result

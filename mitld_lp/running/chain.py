@@ -71,6 +71,10 @@ def chain_of(result: Any, controller: ControllerLike | None = None) -> Chain:
     from mitld_lp.running.sensed_chain import is_sensed, sensed_chain_of
 
     if is_sensed(result):
+        if getattr(result.part, "band_best", False):  # at nature's chosen law of the band
+            from mitld_lp.running.sensed_optimistic_chain import sensed_optimistic_chain_of
+
+            return sensed_optimistic_chain_of(result, controller)
         if getattr(result.part, "band_worst", False):
             raise ValueError("sensors with a law known only within a band: the controller's "
                              "controlled system is no Markov chain (nature picks each step's "
