@@ -162,3 +162,34 @@ def test_mixed_runs_give_the_level_walks_answer_and_scipys_value(
     # the maximum takes the coin (the larger target step), the minimum the move
     assert np.all(policy[np.arange(9, 120, 21)] == first + (1 if sense is Sense.MAX else 0))
     assert got["compiled"][1].value == pytest.approx(_scipy_value(mdp, sense), abs=1e-7)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_repair_reaches_every_state_a_moved_bound_is_read_by(seed: int) -> None:
+    """The upper bound on the maximum from a poor policy (each state's worst choice):
+    its values fail the Bellman check wherever a better choice exists, the repair moves
+    them level by level (the states reading a moved one found from the matrix's
+    columns), and the repaired vector passes with the first slack and lies above the
+    exact optimum (the backward recursion) at the initial state."""
+    from mitld_lp.solvers import certify as C
+
+    mdp, exact, goal = _layered(seed, depth=40)
+    want = _recursion(exact, goal, goal, Sense.MAX)
+    worst = _recursion(exact, goal, goal, Sense.MIN)
+    policy = np.full(mdp.n_states, -1, dtype=np.int64)
+    for s in range(goal):  # the minimum's choice: the chain of the worst policy
+        scores = []
+        for row in exact[s]:
+            stay = Fraction(row.get(s, 0.0))
+            scores.append(sum((Fraction(p) * (worst[t] if t < goal else int(t == goal))
+                               for t, p in row.items() if t != s), Fraction(0)) / (1 - stay))
+        policy[s] = int(mdp.row_groups[s]) + scores.index(min(scores))
+    zero = np.zeros(mdp.n_states, dtype=bool)
+    zero[goal + 1] = True
+    cert = C.certify(mdp, mdp.target, policy, sense="max", zero=zero, sides=("upper",))
+    (check,) = cert.checks
+    assert check.passed and "slack x1," in check.detail, check.detail
+    moved = int(check.detail.split(" states repaired")[0].rsplit(" ", 1)[1])
+    assert moved > goal // 4  # the repair did the work, over many levels
+    assert Fraction(cert.upper) >= want[0]
+    assert float(want[0]) == pytest.approx(cert.upper, rel=1e-9)

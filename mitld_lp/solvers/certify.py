@@ -53,7 +53,6 @@ from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layer
 from mitld_lp.solvers.graph import (
     gather_ranges,
     maximal_end_components,
-    row_entries,
     rows_dot,
 )
 from mitld_lp.solvers.result import read_only
@@ -239,6 +238,7 @@ class _Repair:
     upper: bool
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
+    readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -264,12 +264,16 @@ class _Repair:
         x[inside] = new
         return np.union1d(states, changed)
 
-    def _reading(self, states: np.ndarray, moved: np.ndarray) -> np.ndarray:
-        """Which of ``states`` have a choice whose support holds a ``moved`` state."""
-        rows, _, state_starts = self.st.rows_of(states)
-        local, cols, _ = row_entries(self.st.matrix, rows)
-        per_row = np.bincount(local, weights=moved[cols], minlength=rows.size)
-        return np.add.reduceat(per_row, state_starts) > 0
+    def _readers(self, moved: np.ndarray) -> np.ndarray:
+        """The states that have a choice whose support holds a state of ``moved`` (with
+        repeats): the matrix's pattern by column, made at the first call."""
+        if self.readers_of is None:
+            m = self.st.matrix
+            by_column = sp.csc_array(sp.csr_array(
+                (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
+            self.readers_of = (by_column.indptr, by_column.indices, self.st.row_state())
+        col_ptr, col_rows, row_state = self.readers_of
+        return row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]
 
     def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
         """Move the bounds of the ``failing`` states and of whatever they move upstream;
@@ -282,15 +286,15 @@ class _Repair:
         bounds = np.flatnonzero(np.diff(lv)) + 1
         starts = np.concatenate([[0], bounds])
         stops = np.concatenate([bounds, [lv.size]])
-        moved = np.zeros(x.shape[0], dtype=bool)
-        now = np.zeros(x.shape[0], dtype=bool)  # scratch: the states one round moved
-        any_moved = False
+        # the states with a choice whose support holds a moved state (kept as states
+        # move, from the pattern by column: a level is not read again to find them)
+        reading = np.zeros(x.shape[0], dtype=bool)
+        now = np.zeros(x.shape[0], dtype=bool)  # scratch: those reading one round's moves
         for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
             if lv[a] < first:
                 continue
             states = live[a:b]
-            todo = states[failing[states] | (self._reading(states, moved) if any_moved
-                                             else False)]
+            todo = states[failing[states] | reading[states]]
             for _ in range(ROUNDS):
                 if todo.size == 0:
                     break
@@ -302,12 +306,11 @@ class _Repair:
                 x[changed] = (np.minimum(need[move], 1.0) if self.upper else
                               np.maximum(need[move], 0.0))
                 self.moved += int(changed.size)
-                changed = self.together(x, changed)
-                moved[changed] = True
-                any_moved = True
-                now[changed] = True
-                todo = states[self._reading(states, now)]  # within the level: its cycles
-                now[changed] = False
+                readers = self._readers(self.together(x, changed))
+                reading[readers] = True
+                now[readers] = True
+                todo = states[now[states]]  # within the level: its cycles
+                now[readers] = False
             else:
                 return False
         return True
