@@ -133,16 +133,14 @@ def single_flow(first, stop, level_state, state_choice, choice_entry, states, ch
 
 
 @numba.njit(cache=True, nogil=True)
-def chain_values(order, single, indptr, indices, data, diag, b, kappa, v,
+def chain_values(order, indptr, indices, data, diag, b, kappa, v,
                  w):  # pragma: no cover - compiled
-    """The single states among ``order`` (downstream first) of a transient chain
-    (CSR arrays; a state's own entry reads its ``v`` and ``w`` still 0): its value
+    """The single states ``order`` (downstream first) of a transient chain (CSR arrays;
+    a state's own entry reads its ``v`` and ``w`` still 0): each one's value
     ``v = (b + sum Q v) / (1 - q)`` and slack ``w = (2 kappa v + sum Q w) / (1 - q)``
     (:func:`mitld_lp.solvers.certify_chain.chain`)."""
     for i in range(order.shape[0]):
         s = order[i]
-        if not single[s]:
-            continue
         dv = 0.0
         dw = 0.0
         for e in range(indptr[s], indptr[s + 1]):
