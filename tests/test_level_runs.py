@@ -77,6 +77,9 @@ def test_acyclic_runs_give_the_level_walks_answer_and_the_exact_values(
     _same(got["levels"], got["numpy"])
     _same(got["levels"], got["compiled"])
     want = _recursion(exact, goal, goal, sense)
+    cert = got["compiled"][2]  # the certified bracket holds the exact optimum
+    assert Fraction(cert.lower) <= want[0] <= Fraction(cert.upper)
+    assert cert.upper - cert.lower <= 1e-6 * cert.lower
     values = got["compiled"][1].values
     for s in range(goal):
         assert abs(Fraction(values[s]) - want[s]) <= Fraction(2.0 ** -48) * want[s], s
