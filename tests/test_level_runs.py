@@ -209,3 +209,27 @@ def test_the_repair_reaches_every_state_a_moved_bound_is_read_by(seed: int) -> N
     assert moved > goal // 4  # the repair did the work, over many levels
     assert Fraction(cert.upper) >= want[0]
     assert float(want[0]) == pytest.approx(cert.upper, rel=1e-9)
+
+
+def test_the_minimums_end_component_check_finds_a_cycle_of_two_states() -> None:
+    """States 0 and 1 can pass the play to each other for ever (an end component of two
+    states, no self-loop): Pmin = 0 there.  Told that only the sink avoids the target,
+    the certificate's search (among the states of cyclic components and those with a
+    choice that stays put) finds it and falls back to the bound 0; told the truth, the
+    bound holds."""
+    from mitld_lp.solvers import certify as C
+
+    goal, sink = 2, 3
+    mdp = build_mdp([[("a", {1: 1.0}), ("b", {goal: 0.5, sink: 0.5})],
+                     [("a", {0: 1.0}), ("b", {goal: 1.0})], [], []],
+                    target=[goal], sink=[sink])
+    policy = np.array([0, 2, -1, -1])  # each state's first choice: the cycle
+    zero = np.zeros(4, dtype=bool)
+    zero[sink] = True
+    cert = C.certify(mdp, mdp.target, policy, sense="min", zero=zero)
+    assert cert.lower == 0.0 and not cert.certified
+    assert any("1 end components outside the zero set (state 0)" in c.detail
+               for c in cert.checks)
+    zero[:2] = True
+    cert = C.certify(mdp, mdp.target, policy, sense="min", zero=zero)
+    assert cert.certified and cert.lower == 0.0 == cert.upper

@@ -49,10 +49,10 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers.analysis import end_components
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.graph import (
     gather_ranges,
-    maximal_end_components,
     rows_dot,
 )
 from mitld_lp.solvers.result import read_only
@@ -412,7 +412,7 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     zero = np.asarray(zero, dtype=bool)
     name = "lower bound: the optimum"
     left = ~zero & ~ch.target
-    ecs = maximal_end_components(mdp, left)
+    ecs = end_components(mdp, np.asarray(layers[0]), left)  # searched where they can be
     if ecs.n_mecs:
         s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
         return Side(0.0, Check(name, False, (
