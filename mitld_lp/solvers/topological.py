@@ -285,10 +285,13 @@ class SingleLevels:
             leave = self.leave[ca:cz]
             score = np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0)
             np.clip(score, 0.0, 1.0, out=score)
-            prefer = to_target[ch]
-            best = segmented_argmax(score, self.state_choice[a:z + 1] - ca, tie=TIE,
-                                    sense=self.sense, prefer=prefer
-                                    if self.sense is Sense.MAX else -prefer)
+            if cz - ca == z - a:  # one choice a state: each its own best
+                best = np.arange(z - a)
+            else:
+                prefer = to_target[ch]
+                best = segmented_argmax(score, self.state_choice[a:z + 1] - ca, tie=TIE,
+                                        sense=self.sense, prefer=prefer
+                                        if self.sense is Sense.MAX else -prefer)
             states = self.states[a:z]
             live = ~skip[states]
             values[states[live]] = score[best[live]]
