@@ -53,6 +53,7 @@ from mitld_lp.solvers.analysis import end_components
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.graph import (
     gather_ranges,
+    row_entries,
     rows_dot,
 )
 from mitld_lp.solvers.result import read_only
@@ -214,8 +215,13 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
     """Per state of ``states``: the least (``upper``) / largest value its choices allow,
     ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
     rows, choice_starts, state_starts = st.rows_of(states)
-    sums = rows_dot(st.matrix, rows, x)
-    ext = support_extreme(st.matrix, rows, x, largest=upper)
+    # the rows' entries read once for both: their sums (rows_dot) and the extreme of x
+    # over their supports (support_extreme), each as those compute it
+    local, cols, vals = row_entries(st.matrix, rows)
+    reached = x[cols]
+    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
+    ext = np.full(rows.size, -np.inf if upper else np.inf)
+    (np.maximum if upper else np.minimum).at(ext, local, reached)
     each = np.minimum(above(rnd, rows, sums), ext) if upper else \
         np.maximum(below(rnd, rows, sums), ext)
     if choice_starts is not None:
@@ -345,6 +351,8 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         return x
 
     tried = []
+    # the end components the repair moves together (none: nothing to gather)
+    mecs = mec_of if upper and mec_of is not None and bool(np.any(mec_of >= 0)) else None
     candidates = [(f"slack x{s:g}", lambda s=s: candidate(s)) for s in _scales()]
     if fallback is not None:
         def from_iteration() -> np.ndarray:
@@ -360,7 +368,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     for label, make in candidates:
         x = make()
         failing = _fails(st, rnd, x, free, upper)
-        repair = _Repair(st, rnd, free, level_of, mec_of if upper else None, upper)
+        repair = _Repair(st, rnd, free, level_of, mecs, upper)
         if failing.any():
             if not repair.run(x, failing):
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
