@@ -96,7 +96,7 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
     """
     x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
     walk: Iterator[Level] = (blk.walk(upstream_first=True)
-                             if singles is None or singles.kernels is None
+                             if singles is None
                              else _flow_runs(blk, singles, weights, x))
     for level in walk:
         states = np.concatenate([level.single, level.rest])
