@@ -194,7 +194,8 @@ class SingleLevels:
     (they keep what they have)."""
 
     __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
-                 "level_state", "state_choice", "choice_entry", "sense", "kernels")
+                 "level_state", "state_choice", "choice_entry", "sense", "kernels",
+                 "positive")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
@@ -214,6 +215,7 @@ class SingleLevels:
         self.local, self.cols, self.vals = local[~own], cols[~own], vals[~own]
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
         self.leave = 1.0 - b.self_loop[self.choices]
+        self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
         # the compiled walks (:func:`level_kernels`): the same answers, one call a run
         self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
@@ -234,22 +236,22 @@ class SingleLevels:
                                        self.leave, np.asarray(rewards, dtype=np.float64),
                                        bounds, self.sense is Sense.MIN)
             return
-        marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
-        cuts = self.state_choice
-        for k in marks.tolist():
-            a, z = int(at[k]), int(at[k + 1])
-            ca, cz = int(cuts[a]), int(cuts[z])
-            ea, ez = int(self.choice_entry[ca]), int(self.choice_entry[cz])
+        rewards = np.asarray(rewards, dtype=np.float64)
+        for a, z, ca, cz, ea, ez in self._runs(first, stop):
             rows = self.local[ea:ez] - ca
             terms = self.vals[ea:ez, None] * bounds[self.cols[ea:ez]]
-            score = rewards[self.choices[ca:cz]].astype(np.float64, copy=True)
+            score = rewards[self.choices[ca:cz]]  # a copy (fancy indexing)
             for j in range(bounds.shape[1]):
                 score[:, j] += np.bincount(rows, weights=terms[:, j], minlength=cz - ca)
             leave = self.leave[ca:cz, None]
-            np.divide(score, leave, out=score, where=leave > 0)
-            score[np.broadcast_to(leave <= 0, score.shape)] = 0.0
+            if self.positive:
+                np.divide(score, leave, out=score)
+            else:
+                np.divide(score, leave, out=score, where=leave > 0)
+                score[np.broadcast_to(leave <= 0, score.shape)] = 0.0
             np.clip(score, 0.0, 1.0, out=score)
-            bounds[self.states[a:z]] = self.sense.reduce(score, cuts[a:z] - ca)
+            bounds[self.states[a:z]] = (score if cz - ca == z - a else  # one choice each
+                                        self.sense.reduce(score, self.state_choice[a:z] - ca))
 
     def _runs(self, first: int, stop: int) -> Iterator[tuple[int, int, int, int, int, int]]:
         """The levels ``first`` to ``stop - 1`` that have single states, as the slices
@@ -283,7 +285,8 @@ class SingleLevels:
             ch = self.choices[ca:cz]
             reward = to_target[ch] + sums
             leave = self.leave[ca:cz]
-            score = np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0)
+            score = (reward / leave if self.positive else
+                     np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
             np.clip(score, 0.0, 1.0, out=score)
             if cz - ca == z - a:  # one choice a state: each its own best
                 best = np.arange(z - a)
