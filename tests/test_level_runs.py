@@ -233,3 +233,27 @@ def test_the_minimums_end_component_check_finds_a_cycle_of_two_states() -> None:
     zero[:2] = True
     cert = C.certify(mdp, mdp.target, policy, sense="min", zero=zero)
     assert cert.certified and cert.lower == 0.0 == cert.upper
+
+
+@pytest.mark.parametrize(("seed", "sense"), [(4, Sense.MAX), (5, Sense.MAX),
+                                            (5, Sense.MIN)])
+def test_runs_leave_the_states_known_to_be_zero_to_their_choice(
+        monkeypatch: pytest.MonkeyPatch, seed: int, sense: Sense) -> None:
+    """The lower model of a truncated product keeps the states that can reach only a
+    truncated state (here: the sinks) with value 0 (``Quotient.zero``): the runs skip
+    them as the level walk does, to the last bit, and the value is scipy's."""
+    from mitld_lp.testing import random_mdp
+
+    mdp = random_mdp(400, seed=seed, target_fraction=0.05, sink_fraction=0.03,
+                     self_loop_fraction=0.02, max_choices=3, max_successors=3, locality=6)
+    got = {}
+    for how in WALKS:
+        _walk(monkeypatch, how)
+        low, _ = analyse(mdp, mdp.target, np.asarray(mdp.sink), sense=sense)
+        assert low.zero.any()
+        got[how] = solve_lp(mdp, low.target, quotient=low, sense=sense, everywhere=True)
+    for how in ("numpy", "compiled"):
+        assert got[how].message == got["levels"].message
+        for name in ("values", "policy", "occupancy", "randomized"):
+            assert np.array_equal(getattr(got[how], name), getattr(got["levels"], name))
+    assert got["compiled"].value == pytest.approx(_scipy_value(mdp, sense), abs=1e-7)
