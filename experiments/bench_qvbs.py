@@ -360,14 +360,15 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         bytes_per_transition=ours["bytes_per_transition"],
         storm_bytes_per_transition=storm["bytes_per_transition"],
         child_cpu=ours["child_cpu"], storm_child_cpu=prism["child_cpu"] if prism else None,
-        **_compared(base, ours, prism, flat),
+        **_compared(base, ours, prism, flat, storm["best_cpu"]),
         **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
     )
 
 
 def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] | None,
-              flat: bool) -> dict[str, Any]:
-    """The ``base_*`` columns of a ``--compare`` run (empty without one)."""
+              flat: bool, storm_check: float) -> dict[str, Any]:
+    """The ``base_*`` columns of a ``--compare`` run (empty without one); the solve
+    stage's ratio to Storm's best check (``storm_check``) as the after's."""
     if not base:
         return {}
     if "error" in base:
@@ -375,6 +376,9 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
     storm = prism["process_cpu"] if prism else None
     return dict(
         base_value=base["lower"], base_upper=base["upper"], base_certified=base["certified"],
+        base_solve_cpu=base["solve_cpu"],
+        base_solve_over_storm_check=None if flat or not storm_check
+        else base["solve_cpu"] / storm_check,
         base_whole_cpu=base["whole_cpu"], base_process_cpu=base["process_cpu"],
         base_bytes_per_transition=base["bytes_per_transition"],
         base_process_over_storm_process=None if flat or not storm
@@ -386,7 +390,9 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
 
 
 COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "states",
-            "transitions", "base_whole_cpu", "whole_cpu", "base_process_cpu", "process_cpu",
+            "transitions", "base_solve_cpu", "solve_cpu", "storm_check_cpu",
+            "base_solve_over_storm_check", "solve_over_storm_check", "base_whole_cpu",
+            "whole_cpu", "base_process_cpu", "process_cpu",
             "storm_process_cpu", "base_process_over_storm_process",
             "process_over_storm_process", "base_bytes_per_transition",
             "bytes_per_transition", "storm_bytes_per_transition")

@@ -63,17 +63,23 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 
-__all__ = ["analyse"]
+__all__ = ["analyse", "end_components"]
 
 
-def _end_components(mdp: MDP, comp: np.ndarray,
-                    maybe: np.ndarray) -> EndComponents:
-    """The maximal end components of the ``maybe`` states (module docs): searched by
-    :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
-    candidates, with one extra absorbing state standing for everything else."""
+def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
+    """The maximal end components of the ``maybe`` states (module docs), given each
+    state's strongly connected component ``comp`` in ``mdp``'s support graph: searched
+    by :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
+    candidates (the states of non-trivial components and those with a choice that
+    stays put), with one extra absorbing state standing for everything else; none
+    searched for when there is no candidate (an acyclic product).  The same components
+    as :func:`~mitld_lp.solvers.graph.maximal_end_components` on ``maybe``, numbered
+    in another order (which it is, on a matrix that stores a zero)."""
     n = mdp.n_states
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
     m = mdp.matrix
+    if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
+        return maximal_end_components(mdp, maybe)
     # a choice that stays put: all its entries (no zeros are stored) in its own column
     first = m.indptr[:-1]
     lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
@@ -167,7 +173,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
-        mecs = _end_components(mdp, found.component, maybe)
+        mecs = end_components(mdp, found.component, maybe)
     else:
         positive = attractor(m, mdp.row_groups, wide)
         prob0 = [~attractor(m, mdp.row_groups, goal) if extra.any() else ~positive & ~goal,

@@ -49,10 +49,10 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers.analysis import end_components
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.graph import (
     gather_ranges,
-    maximal_end_components,
     row_entries,
     rows_dot,
 )
@@ -215,8 +215,13 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
     """Per state of ``states``: the least (``upper``) / largest value its choices allow,
     ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
     rows, choice_starts, state_starts = st.rows_of(states)
-    sums = rows_dot(st.matrix, rows, x)
-    ext = support_extreme(st.matrix, rows, x, largest=upper)
+    # the rows' entries read once for both: their sums (rows_dot) and the extreme of x
+    # over their supports (support_extreme), each as those compute it
+    local, cols, vals = row_entries(st.matrix, rows)
+    reached = x[cols]
+    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
+    ext = np.full(rows.size, -np.inf if upper else np.inf)
+    (np.maximum if upper else np.minimum).at(ext, local, reached)
     each = np.minimum(above(rnd, rows, sums), ext) if upper else \
         np.maximum(below(rnd, rows, sums), ext)
     if choice_starts is not None:
@@ -239,6 +244,7 @@ class _Repair:
     upper: bool
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
+    readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -264,12 +270,16 @@ class _Repair:
         x[inside] = new
         return np.union1d(states, changed)
 
-    def _reading(self, states: np.ndarray, moved: np.ndarray) -> np.ndarray:
-        """Which of ``states`` have a choice whose support holds a ``moved`` state."""
-        rows, _, state_starts = self.st.rows_of(states)
-        local, cols, _ = row_entries(self.st.matrix, rows)
-        per_row = np.bincount(local, weights=moved[cols], minlength=rows.size)
-        return np.add.reduceat(per_row, state_starts) > 0
+    def _readers(self, moved: np.ndarray) -> np.ndarray:
+        """The states that have a choice whose support holds a state of ``moved`` (with
+        repeats): the matrix's pattern by column, made at the first call."""
+        if self.readers_of is None:
+            m = self.st.matrix
+            by_column = sp.csc_array(sp.csr_array(
+                (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
+            self.readers_of = (by_column.indptr, by_column.indices, self.st.row_state())
+        col_ptr, col_rows, row_state = self.readers_of
+        return row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]
 
     def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
         """Move the bounds of the ``failing`` states and of whatever they move upstream;
@@ -282,15 +292,15 @@ class _Repair:
         bounds = np.flatnonzero(np.diff(lv)) + 1
         starts = np.concatenate([[0], bounds])
         stops = np.concatenate([bounds, [lv.size]])
-        moved = np.zeros(x.shape[0], dtype=bool)
-        now = np.zeros(x.shape[0], dtype=bool)  # scratch: the states one round moved
-        any_moved = False
+        # the states with a choice whose support holds a moved state (kept as states
+        # move, from the pattern by column: a level is not read again to find them)
+        reading = np.zeros(x.shape[0], dtype=bool)
+        now = np.zeros(x.shape[0], dtype=bool)  # scratch: those reading one round's moves
         for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
             if lv[a] < first:
                 continue
             states = live[a:b]
-            todo = states[failing[states] | (self._reading(states, moved) if any_moved
-                                             else False)]
+            todo = states[failing[states] | reading[states]]
             for _ in range(ROUNDS):
                 if todo.size == 0:
                     break
@@ -302,12 +312,11 @@ class _Repair:
                 x[changed] = (np.minimum(need[move], 1.0) if self.upper else
                               np.maximum(need[move], 0.0))
                 self.moved += int(changed.size)
-                changed = self.together(x, changed)
-                moved[changed] = True
-                any_moved = True
-                now[changed] = True
-                todo = states[self._reading(states, now)]  # within the level: its cycles
-                now[changed] = False
+                readers = self._readers(self.together(x, changed))
+                reading[readers] = True
+                now[readers] = True
+                todo = states[now[states]]  # within the level: its cycles
+                now[readers] = False
             else:
                 return False
         return True
@@ -342,6 +351,8 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         return x
 
     tried = []
+    # the end components the repair moves together (none: nothing to gather)
+    mecs = mec_of if upper and mec_of is not None and bool(np.any(mec_of >= 0)) else None
     candidates = [(f"slack x{s:g}", lambda s=s: candidate(s)) for s in _scales()]
     if fallback is not None:
         def from_iteration() -> np.ndarray:
@@ -357,7 +368,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     for label, make in candidates:
         x = make()
         failing = _fails(st, rnd, x, free, upper)
-        repair = _Repair(st, rnd, free, level_of, mec_of if upper else None, upper)
+        repair = _Repair(st, rnd, free, level_of, mecs, upper)
         if failing.any():
             if not repair.run(x, failing):
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
@@ -409,7 +420,7 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     zero = np.asarray(zero, dtype=bool)
     name = "lower bound: the optimum"
     left = ~zero & ~ch.target
-    ecs = maximal_end_components(mdp, left)
+    ecs = end_components(mdp, np.asarray(layers[0]), left)  # searched where they can be
     if ecs.n_mecs:
         s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
         return Side(0.0, Check(name, False, (

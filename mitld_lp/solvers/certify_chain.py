@@ -11,6 +11,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
 from mitld_lp.solvers.graph import (
+    Blocks,
     backward_reachable,
     blocks_from,
     gather_ranges,
@@ -20,7 +21,7 @@ from mitld_lp.solvers.graph import (
 )
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
-from mitld_lp.solvers.topological import Factors, transient_solve
+from mitld_lp.solvers.topological import Factors, level_kernels, transient_solve
 
 __all__ = ["Chain", "RowModel", "support_layers", "chain"]
 
@@ -126,18 +127,13 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
            else blocks_from(layers[0], layers[1], diag))
     k = b.shape[0]
     v, w = np.zeros(k), np.zeros(k)
-    for level in blk.walk():
-        one, inner = level.single, level.rest
-        if one.size:
-            # a single state's own entry is still 0 in v and w: the sums see only below;
-            # its formula's residual is a rounding, within kappa
-            local, cols, vals = row_entries(sub, one)
-            down_v = np.bincount(local, weights=vals * v[cols], minlength=one.size)
-            down_w = np.bincount(local, weights=vals * w[cols], minlength=one.size)
-            v[one] = (b[one] + down_v) / (1.0 - diag[one])
-            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
-        if inner.size == 0:
-            continue
+    singles = _Singles(sub, blk)
+    done = 0
+    for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
+        singles.solve(done, index + 1, b, kappa, diag, v, w)
+        done = index + 1
+        inner = blk.states_at(index)
+        inner = inner[~blk.single(inner)]
         rows = sp.csr_array(sub[inner])
         block = sp.csr_array(rows[:, inner])
         known = b[inner] + rows @ v
@@ -158,4 +154,47 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
                 w[inner] = joint * max(1.0, float(np.max(ratio, initial=1.0)))
             else:
                 w[inner] = transient_solve(block, need + rows @ w, factors=factors)
+    singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
+
+
+class _Singles:
+    """The single states of a chain's levels (``blk``), in level order, with their rows'
+    entries gathered once, solved a run of levels at a time (a deadline makes a
+    thousand levels): a state's own entry reads its ``v`` and ``w`` still 0, so the
+    sums see only below; its formula's residual is a rounding, within ``kappa``.
+    Compiled (:mod:`mitld_lp.solvers.level_kernels`) where the quotient's walks are
+    (:func:`~mitld_lp.solvers.topological.level_kernels`), the same arithmetic."""
+
+    def __init__(self, sub: sp.csr_array, blk: Blocks) -> None:
+        order = blk.by_level
+        single = blk.single(order)
+        self.order = order[single]
+        level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
+        self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
+        self.local, self.cols, self.vals = row_entries(sub, self.order)
+        self.entry_at = np.searchsorted(self.local, np.arange(self.order.size + 1))
+        self.sub = sub
+        self.kernels = level_kernels(sub.nnz, blk.n_levels)
+
+    def solve(self, first: int, stop: int, b: np.ndarray, kappa: np.ndarray,
+              diag: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:
+        """``v`` and ``w`` of the single states of levels ``first`` to ``stop - 1``."""
+        at = self.at
+        if at[first] == at[stop]:
+            return
+        if self.kernels is not None:
+            s = self.sub
+            self.kernels.chain_values(self.order[at[first]:at[stop]], s.indptr,
+                                      s.indices, s.data, diag, b, kappa, v, w)
+            return
+        marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
+        for lv in marks.tolist():
+            a, z = int(at[lv]), int(at[lv + 1])
+            ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+            local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]
+            down_v = np.bincount(local, weights=vals * v[cols], minlength=z - a)
+            down_w = np.bincount(local, weights=vals * w[cols], minlength=z - a)
+            one = self.order[a:z]
+            v[one] = (b[one] + down_v) / (1.0 - diag[one])
+            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])

@@ -10,6 +10,7 @@ policy's occupancy (:func:`policy_flow`)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,12 +18,25 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.crossover import polish
 from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
-from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
+from mitld_lp.solvers.graph import (
+    Blocks,
+    Level,
+    Sense,
+    gather_ranges,
+    row_entries,
+    segmented_argmax,
+)
 from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one
 from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
 from mitld_lp.solvers.result import Status
-from mitld_lp.solvers.topological import Block, blocks, solve_single_states, transient_solve
+from mitld_lp.solvers.topological import (
+    Block,
+    SingleLevels,
+    blocks,
+    solve_single_states,
+    transient_solve,
+)
 from mitld_lp.util.progress import tracked
 
 __all__ = ["Answer", "block_lp", "flow_matrix", "may_be_optimal", "policy_flow", "sensed",
@@ -66,7 +80,8 @@ def sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
                                          raw.iterations)
 
 
-def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) -> np.ndarray:
+def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
+                singles: SingleLevels | None = None) -> np.ndarray:
     r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
     per state) from the start weights ``b``: ``x = b + P_w^T x`` with
     ``P_w = sum_c w(c) P_hat(c, .)``, then ``y(c) = w(c) x(owner(c))``.
@@ -75,9 +90,15 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) ->
     higher levels, so a single state gets ``x(s) = (b(s) + inflow(s)) / (1 - w'p)`` and a
     non-trivial component one sparse solve of its own size.  The policy's chain leaves
     the quotient almost surely, so every one of these systems is invertible.
+    ``singles``: the single states of every level with their compiled walk
+    (:class:`~mitld_lp.solvers.topological.SingleLevels` with kernels), which then
+    takes each run of levels between two non-trivial components in one call.
     """
     x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
-    for level in blk.walk(upstream_first=True):
+    walk: Iterator[Level] = (blk.walk(upstream_first=True)
+                             if singles is None
+                             else _flow_runs(blk, singles, weights, x))
+    for level in walk:
         states = np.concatenate([level.single, level.rest])
         n_single = level.single.size
         lo, hi = q.row_groups[states], q.row_groups[states + 1]
@@ -103,6 +124,54 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray) ->
         np.add.at(x, col[out], val[out] * y[row[out]])
     owner = q.choice_state()
     return np.maximum(weights * x[owner], 0.0)
+
+
+RUNS_MIN_LEVELS = 16
+"""Levels from which :func:`solve_decomposed` and :func:`policy_flow` take the single
+states a run of levels at a time from arrays gathered once
+(:class:`~mitld_lp.solvers.topological.SingleLevels`), not level by level (same
+answers; a deadline clock makes a thousand levels)."""
+
+
+def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
+               x: np.ndarray) -> Iterator[Level]:
+    """:func:`policy_flow`'s walk with the single states done a run of levels at a time
+    (:meth:`~mitld_lp.solvers.topological.SingleLevels.flow`: their order and
+    arithmetic the level walk's): yielded are the levels with a non-trivial component,
+    their single states done and ``single`` empty."""
+    empty = np.zeros(0, dtype=np.int64)
+    done = blk.n_levels  # the levels from ``done`` up are pushed out
+    for index in np.unique(blk.level[blk.size > 1])[::-1].tolist():
+        # down to this level's single states, which come first
+        singles.flow(index, done, blk.self_loop, weights, x)
+        done = index
+        rest = blk.states_at(index)
+        yield Level(index, rest, empty, rest[~blk.single(rest)])
+    singles.flow(0, done, blk.self_loop, weights, x)
+
+
+def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndarray,
+                reduced_choice: np.ndarray, weights: np.ndarray) -> Iterator[Level]:
+    """:func:`solve_decomposed`'s walk with the single states (but ``q.zero``) solved a
+    run of levels at a time as :func:`~mitld_lp.solvers.topological.
+    solve_single_states` solves them (:meth:`~mitld_lp.solvers.topological.
+    SingleLevels.values`): yielded are the runs, each ending at a level with a
+    non-trivial component (its states not in ``q.zero`` the ``rest``) or the last,
+    ``states`` as many as were solved (for the progress bar), ``single`` empty."""
+    empty = np.zeros(0, dtype=np.int64)
+    live = np.concatenate([[0], np.cumsum(~q.zero[blk.by_level])])
+    done = 0
+    marks = np.unique(blk.level[blk.size > 1]).tolist() + [blk.n_levels - 1]
+    for index in marks:
+        if index < done:  # the last level had a component: nothing after it
+            continue
+        singles.values(done, index + 1, q.to_target, q.zero, values, reduced_choice,
+                       weights)
+        rest = blk.states_at(index)
+        rest = rest[~blk.single(rest) & ~q.zero[rest]]
+        count = int(live[blk.level_starts[index + 1]] - live[blk.level_starts[done]])
+        done = index + 1
+        yield Level(index, np.empty(count, dtype=np.int64), empty, rest)
 
 
 def block_lp(block: Block, values: np.ndarray) -> Matrices:
@@ -255,7 +324,11 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = n_eliminated = 0
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
-    for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
+    # the single states a run of levels at a time (no skip: the flow's walk too)
+    singles = SingleLevels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
+    walk = (blk.walk(skip=q.zero) if singles is None else
+            _value_runs(q, blk, singles, values, reduced_choice, weights))
+    for level in tracked(walk, progress, lambda lv: lv.states.size,
                          total=todo, desc="block LPs", unit=" states", leave=False):
         upd = solve_single_states(q, blk, level.single, values)
         reduced_choice[upd.states] = upd.choices
@@ -292,7 +365,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights
-    y = policy_flow(q, blk, weights, b_eq)
+    y = policy_flow(q, blk, weights, b_eq, singles)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
                + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"

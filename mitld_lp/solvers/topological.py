@@ -25,8 +25,10 @@ interval iteration, per level).
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -66,6 +68,7 @@ __all__ = [
     "single_scores",
     "SingleLevels",
     "solve_single_states",
+    "level_kernels",
 ]
 
 POLICY_ROUNDS = 50
@@ -84,6 +87,11 @@ def blocks(q: Quotient) -> Blocks:
     return q.order
 
 
+TIE = 1e-12
+"""A single state's choices within this of the best score, relative to it, are tied
+(:func:`solve_single_states`)."""
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class LevelUpdate:
     """The exact values of single-state components and the choices that attain them."""
@@ -94,7 +102,7 @@ class LevelUpdate:
 
 
 def solve_single_states(
-    q: Quotient, b: Blocks, states: np.ndarray, values: np.ndarray, *, tie: float = 1e-12
+    q: Quotient, b: Blocks, states: np.ndarray, values: np.ndarray, *, tie: float = TIE
 ) -> LevelUpdate:
     r"""Solve the single-state components ``states`` given ``values`` downstream.
 
@@ -138,6 +146,42 @@ def single_scores(q: Quotient, b: Blocks, states: np.ndarray, rewards: np.ndarra
     return choices, score, np.concatenate([[0], np.cumsum(hi - lo)])
 
 
+LEVEL_KERNEL_MIN_ENTRIES = 100_000
+"""Quotient entries from which the single-state levels are walked by the compiled
+kernels (:mod:`mitld_lp.solvers.level_kernels`), if numba is loaded already (for a
+block's sweeps) or there are at least :data:`LEVEL_KERNEL_MIN_LEVELS` levels."""
+
+LEVEL_KERNEL_MIN_LEVELS = 3_000
+"""Levels from which the compiled walks pay numba's load.  Measured on QVBS
+``firewire_dl`` 3-600 (168,064 states, 635 levels; CPU seconds): the kernels took the
+solve stage from 0.41 s to 0.28 s once loaded, but numba's import (0.15 s) and its first
+cached kernel (0.22 s: LLVM's set-up) made the first solve 0.75 s; the NumPy runs of
+levels cost some 60 microseconds a level and walk, four walks a solve."""
+
+_LEVEL_KERNELS: Any = None  # the compiled module once imported, False without numba
+
+
+def level_kernels(entries: int, n_levels: int, compiled: bool | None = None) -> Any:
+    """The compiled level walks (:mod:`mitld_lp.solvers.level_kernels`, imported here
+    the first time) for a quotient of ``entries`` entries over ``n_levels`` levels, or
+    ``None`` for the NumPy walks: a small product, a shallow one while numba is not
+    loaded, numba not installed, or ``compiled=False`` (``True``: whatever the size, if
+    numba is installed).  Both walks give the same answers to the last bit."""
+    global _LEVEL_KERNELS
+    if compiled is False or (compiled is None and (
+            entries < LEVEL_KERNEL_MIN_ENTRIES or (n_levels < LEVEL_KERNEL_MIN_LEVELS
+                                                   and "numba" not in sys.modules))):
+        return None
+    if _LEVEL_KERNELS is None:
+        try:
+            from mitld_lp.solvers import level_kernels as compiled_levels
+
+            _LEVEL_KERNELS = compiled_levels
+        except ImportError:
+            _LEVEL_KERNELS = False
+    return _LEVEL_KERNELS or None
+
+
 class SingleLevels:
     """The single-state components of a quotient's levels, gathered once for a walk
     that solves them level by level (:func:`single_scores`' formula): a product with a
@@ -150,9 +194,11 @@ class SingleLevels:
     (they keep what they have)."""
 
     __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
-                 "level_state", "state_choice", "choice_entry", "sense")
+                 "level_state", "state_choice", "choice_entry", "sense", "kernels",
+                 "positive")
 
-    def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None) -> None:
+    def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
+                 compiled: bool | None = None) -> None:
         order = b.by_level
         level_of = np.repeat(np.arange(b.n_levels), np.diff(b.level_starts))
         one = b.size[b.component[order]] == 1
@@ -169,7 +215,10 @@ class SingleLevels:
         self.local, self.cols, self.vals = local[~own], cols[~own], vals[~own]
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
         self.leave = 1.0 - b.self_loop[self.choices]
+        self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
+        # the compiled walks (:func:`level_kernels`): the same answers, one call a run
+        self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
@@ -181,22 +230,101 @@ class SingleLevels:
         lo_s, hi_s = int(at[first]), int(at[stop])
         if lo_s == hi_s:
             return
-        marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
-        cuts = self.state_choice
-        for k in marks.tolist():
-            a, z = int(at[k]), int(at[k + 1])
-            ca, cz = int(cuts[a]), int(cuts[z])
-            ea, ez = int(self.choice_entry[ca]), int(self.choice_entry[cz])
+        if self.kernels is not None:
+            self.kernels.single_bounds(lo_s, hi_s, self.state_choice, self.choice_entry,
+                                       self.states, self.choices, self.cols, self.vals,
+                                       self.leave, np.asarray(rewards, dtype=np.float64),
+                                       bounds, self.sense is Sense.MIN)
+            return
+        rewards = np.asarray(rewards, dtype=np.float64)
+        for a, z, ca, cz, ea, ez in self._runs(first, stop):
             rows = self.local[ea:ez] - ca
             terms = self.vals[ea:ez, None] * bounds[self.cols[ea:ez]]
-            score = rewards[self.choices[ca:cz]].astype(np.float64, copy=True)
+            score = rewards[self.choices[ca:cz]]  # a copy (fancy indexing)
             for j in range(bounds.shape[1]):
                 score[:, j] += np.bincount(rows, weights=terms[:, j], minlength=cz - ca)
             leave = self.leave[ca:cz, None]
-            np.divide(score, leave, out=score, where=leave > 0)
-            score[np.broadcast_to(leave <= 0, score.shape)] = 0.0
+            if self.positive:
+                np.divide(score, leave, out=score)
+            else:
+                np.divide(score, leave, out=score, where=leave > 0)
+                score[np.broadcast_to(leave <= 0, score.shape)] = 0.0
             np.clip(score, 0.0, 1.0, out=score)
-            bounds[self.states[a:z]] = self.sense.reduce(score, cuts[a:z] - ca)
+            bounds[self.states[a:z]] = (score if cz - ca == z - a else  # one choice each
+                                        self.sense.reduce(score, self.state_choice[a:z] - ca))
+
+    def _runs(self, first: int, stop: int) -> Iterator[tuple[int, int, int, int, int, int]]:
+        """The levels ``first`` to ``stop - 1`` that have single states, as the slices
+        of their states, choices and entries."""
+        at = self.level_state
+        marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first
+        for k in marks.tolist():
+            a, z = int(at[k]), int(at[k + 1])
+            ca, cz = int(self.state_choice[a]), int(self.state_choice[z])
+            yield a, z, ca, cz, int(self.choice_entry[ca]), int(self.choice_entry[cz])
+
+    def values(self, first: int, stop: int, to_target: np.ndarray, skip: np.ndarray,
+               values: np.ndarray, reduced_choice: np.ndarray, weights: np.ndarray) -> None:
+        """:func:`solve_single_states` on the single states of levels ``first`` to
+        ``stop - 1`` but the ``skip`` ones, in that order (the same sums in the same
+        order, the same choice among ties): their ``values``, their ``reduced_choice``
+        and that choice's weight 1."""
+        at = self.level_state
+        if at[first] == at[stop]:
+            return
+        if self.kernels is not None:
+            self.kernels.single_values(int(at[first]), int(at[stop]), self.state_choice,
+                                       self.choice_entry, self.states, self.choices,
+                                       self.cols, self.vals, self.leave, to_target, skip,
+                                       values, reduced_choice, weights, TIE,
+                                       self.sense is Sense.MIN)
+            return
+        for a, z, ca, cz, ea, ez in self._runs(first, stop):
+            sums = np.bincount(self.local[ea:ez] - ca, minlength=cz - ca,
+                               weights=self.vals[ea:ez] * values[self.cols[ea:ez]])
+            ch = self.choices[ca:cz]
+            reward = to_target[ch] + sums
+            leave = self.leave[ca:cz]
+            score = (reward / leave if self.positive else
+                     np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
+            np.clip(score, 0.0, 1.0, out=score)
+            if cz - ca == z - a:  # one choice a state: each its own best
+                best = np.arange(z - a)
+            else:
+                prefer = to_target[ch]
+                best = segmented_argmax(score, self.state_choice[a:z + 1] - ca, tie=TIE,
+                                        sense=self.sense, prefer=prefer
+                                        if self.sense is Sense.MAX else -prefer)
+            states = self.states[a:z]
+            live = ~skip[states]
+            values[states[live]] = score[best[live]]
+            reduced_choice[states[live]] = ch[best[live]]
+            weights[ch[best[live]]] = 1.0
+
+    def flow(self, first: int, stop: int, self_loop: np.ndarray, weights: np.ndarray,
+             x: np.ndarray) -> None:
+        """The flow of the randomised policy ``weights`` through the single states of
+        levels ``stop - 1`` down to ``first`` (upstream first): each state's inflow in
+        ``x`` divided by what its choices do not keep, then added to its successors
+        along its choices' entries in their order
+        (:func:`mitld_lp.solvers.lp_blocks.policy_flow`)."""
+        at = self.level_state
+        if at[first] == at[stop]:
+            return
+        if self.kernels is not None:
+            self.kernels.single_flow(first, stop, at, self.state_choice, self.choice_entry,
+                                     self.states, self.choices, self.cols, self.vals,
+                                     self_loop, weights, x)
+            return
+        for a, z, ca, cz, ea, ez in reversed(list(self._runs(first, stop))):
+            ch = self.choices[ca:cz]
+            owner = self.owner[ca:cz] - a
+            w = weights[ch]
+            states = self.states[a:z]
+            x[states] /= 1.0 - np.bincount(owner, weights=w * self_loop[ch],
+                                           minlength=z - a)
+            y = w * x[states[owner]]
+            np.add.at(x, self.cols[ea:ez], self.vals[ea:ez] * y[self.local[ea:ez] - ca])
 
 
 # ---------------------------------------------------------------------------------------

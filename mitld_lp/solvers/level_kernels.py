@@ -1,0 +1,151 @@
+"""The numba kernels of the single-state level walks (imported only through
+:func:`mitld_lp.solvers.topological.level_kernels`, and only for a product of many
+levels large enough to pay numba's import; compiled once, cached on disk).
+
+Each kernel walks a run of levels' single-state components in the order the NumPy
+walk takes them and does the same floating-point operations in the same order (a
+choice's successor terms summed from 0 in its entries' order, then added to its
+reward; a flow added to a successor in the order of the entries that carry it), so
+its answers are the NumPy walk's to the last bit: one call for a run of levels in
+place of a dozen NumPy calls per level (a deadline clock makes a thousand levels and
+more).  The arrays are those of :class:`~mitld_lp.solvers.topological.SingleLevels`
+(states in level order, their choices, the choices' entries less the self-loops), or
+a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["chain_values", "single_bounds", "single_flow", "single_values"]
+
+
+@numba.njit(cache=True, nogil=True)
+def _score(acc, reward, leave):  # pragma: no cover - compiled
+    """``clip((reward + acc) / leave, 0, 1)``, 0 where nothing leaves."""
+    val = (reward + acc) / leave if leave > 0.0 else 0.0
+    return min(max(val, 0.0), 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def single_bounds(a, z, state_choice, choice_entry, states, choices, cols, vals, leave,
+                  rewards, bounds, minimise):  # pragma: no cover - compiled
+    """:meth:`SingleLevels.solve` on the single states ``a`` to ``z - 1`` (their level
+    order): every column of ``bounds`` at once, each state the best over its choices of
+    ``clip((rewards + sum P x) / (1 - p), 0, 1)``."""
+    k = bounds.shape[1]
+    acc = np.empty(k)
+    best = np.empty(k)
+    for i in range(a, z):
+        for c in range(state_choice[i], state_choice[i + 1]):
+            for j in range(k):
+                acc[j] = 0.0
+            for e in range(choice_entry[c], choice_entry[c + 1]):
+                t = cols[e]
+                w = vals[e]
+                for j in range(k):
+                    acc[j] += w * bounds[t, j]
+            ch = choices[c]
+            lv = leave[c]
+            for j in range(k):
+                val = _score(acc[j], rewards[ch, j], lv)
+                if c == state_choice[i]:
+                    best[j] = val
+                elif minimise:
+                    best[j] = min(best[j], val)
+                else:
+                    best[j] = max(best[j], val)
+        s = states[i]
+        for j in range(k):
+            bounds[s, j] = best[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def single_values(a, z, state_choice, choice_entry, states, choices, cols, vals, leave,
+                  to_target, skip, values, reduced_choice, weights, tie,
+                  minimise):  # pragma: no cover - compiled
+    """:func:`~mitld_lp.solvers.topological.solve_single_states` on the single states
+    ``a`` to ``z - 1`` but the ``skip`` ones: each state's value, its choice (ties
+    within ``tie`` of the best relative to it go to the choice of the largest one-step
+    target probability for a maximum, the least for a minimum, then the first:
+    :func:`~mitld_lp.solvers.graph.segmented_argmax`'s rule) and that choice's
+    weight 1."""
+    width = 1
+    for i in range(a, z):
+        width = max(width, state_choice[i + 1] - state_choice[i])
+    score = np.empty(width)
+    for i in range(a, z):
+        s = states[i]
+        if skip[s]:
+            continue
+        c0 = state_choice[i]
+        n = state_choice[i + 1] - c0
+        for m in range(n):
+            c = c0 + m
+            acc = 0.0
+            for e in range(choice_entry[c], choice_entry[c + 1]):
+                acc += vals[e] * values[cols[e]]
+            score[m] = _score(acc, to_target[choices[c]], leave[c])
+        best = score[0]
+        for m in range(1, n):
+            best = min(best, score[m]) if minimise else max(best, score[m])
+        slack = -tie * abs(best)
+        top = -np.inf
+        for m in range(n):
+            gain = best - score[m] if minimise else score[m] - best
+            if gain >= slack:
+                key = to_target[choices[c0 + m]]
+                top = max(top, -key if minimise else key)
+        pick = -1
+        for m in range(n):
+            gain = best - score[m] if minimise else score[m] - best
+            if gain >= slack:
+                key = to_target[choices[c0 + m]]
+                if (-key if minimise else key) >= top:
+                    pick = m
+                    break
+        ch = choices[c0 + pick]
+        values[s] = score[pick]
+        reduced_choice[s] = ch
+        weights[ch] = 1.0
+
+
+@numba.njit(cache=True, nogil=True)
+def single_flow(first, stop, level_state, state_choice, choice_entry, states, choices,
+                cols, vals, self_loop, weights, x):  # pragma: no cover - compiled
+    """:func:`~mitld_lp.solvers.lp_blocks.policy_flow` on the single states of levels
+    ``stop - 1`` down to ``first`` (upstream first): each state's inflow divided by
+    what its choices do not keep, then pushed along its choices' entries (the
+    self-loops are not among them) in their order."""
+    for level in range(stop - 1, first - 1, -1):
+        for i in range(level_state[level], level_state[level + 1]):
+            s = states[i]
+            stay = 0.0
+            for c in range(state_choice[i], state_choice[i + 1]):
+                ch = choices[c]
+                stay += weights[ch] * self_loop[ch]
+            x[s] /= 1.0 - stay
+            for c in range(state_choice[i], state_choice[i + 1]):
+                y = weights[choices[c]] * x[s]
+                for e in range(choice_entry[c], choice_entry[c + 1]):
+                    x[cols[e]] += vals[e] * y
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_values(order, indptr, indices, data, diag, b, kappa, v,
+                 w):  # pragma: no cover - compiled
+    """The single states ``order`` (downstream first) of a transient chain (CSR arrays;
+    a state's own entry reads its ``v`` and ``w`` still 0): each one's value
+    ``v = (b + sum Q v) / (1 - q)`` and slack ``w = (2 kappa v + sum Q w) / (1 - q)``
+    (:func:`mitld_lp.solvers.certify_chain.chain`)."""
+    for i in range(order.shape[0]):
+        s = order[i]
+        dv = 0.0
+        dw = 0.0
+        for e in range(indptr[s], indptr[s + 1]):
+            t = indices[e]
+            dv += data[e] * v[t]
+            dw += data[e] * w[t]
+        v[s] = (b[s] + dv) / (1.0 - diag[s])
+        w[s] = (2.0 * kappa[s] * v[s] + dw) / (1.0 - diag[s])
