@@ -16,8 +16,11 @@ hypothesis by hypothesis (a hash collision is an internal error, never a merge) 
 weight by weight (:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a
 function of the key). Python objects are made only once per world state, event set and
 new information state; the controller's moves are kept as arrays
-(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for. The state
-and memory budgets are checked before each batch of new states is stored."""
+(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for. The states
+are expanded a level at a time (a level: the states first found one step after the
+previous level's), the budgets checked before each batch of new states is stored and,
+from an estimate of the final size, at each level's end
+(:mod:`~mitld_lp.sensing.growth`)."""
 
 from __future__ import annotations
 
@@ -32,7 +35,8 @@ import scipy.sparse as sp
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.product import Absorbing, ProductTooLarge
+from mitld_lp.product import Absorbing
+from mitld_lp.sensing.growth import Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
     BYTES_PER_INFO_STATE,
@@ -66,15 +70,18 @@ _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argu
 
 class FrontierBuilder(StepRules):
     """The information states reachable from the initial one (module docs), under
-    ``max_states`` and ``max_memory`` (``size``: what a state can hold, for the
-    messages)."""
+    ``max_states`` and ``max_memory``, also as estimated at each level's end
+    (:mod:`~mitld_lp.sensing.growth`; ``size``: what a state can hold, ``name``: the
+    model's, for the messages)."""
 
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
                  sensors: Mapping[str, Sensor], max_states: int, max_memory: int,
-                 size: InfoSize, ends: Ends | None = None) -> None:
+                 size: InfoSize, ends: Ends | None = None, name: str | None = None) -> None:
         super().__init__(game, dta, sta, sensed, sensors, ends)
         self.size, self.max_states = size, max_states
         self.max_memory, self.bytes = max_memory, 0
+        self.growth = Growth(max_states=max_states, max_memory=max_memory, size=size,
+                             sensors=sensors, points=sta.truncation_points, name=name)
         self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
@@ -251,20 +258,8 @@ class FrontierBuilder(StepRules):
 
     def check(self, new: int, hyps: int) -> None:
         """Raise :class:`ProductTooLarge` before ``new`` states of ``hyps`` hypotheses in
-        all are stored past a budget."""
-        if len(self.states) + new > self.max_states:
-            raise ProductTooLarge(
-                f"the information-state product has more than {self.max_states:,} states "
-                f"(sensed events: {', '.join(self.sensed)}; truncation points: "
-                f"{self.sta.truncation_points}; {self.size}); raise max_states, loosen "
-                "epsilon, or shrink the model")
-        if self.bytes + BYTES_PER_INFO_STATE * new + BYTES_PER_HYPOTHESIS * hyps > (
-                self.max_memory):
-            raise ProductTooLarge(
-                f"the information-state product would need more than {self.max_memory:,} "
-                f"bytes ({len(self.states):,} states so far, sensed events: "
-                f"{', '.join(self.sensed)}; {self.size}); raise max_memory, loosen "
-                "epsilon, or shrink the model")
+        all are stored past a budget (:meth:`Growth.check`)."""
+        self.growth.check(len(self.states), self.bytes, new, hyps)
 
     def add_states(self, world: np.ndarray, clock: np.ndarray, reported: np.ndarray,
                    pending: np.ndarray, counts: np.ndarray, codes: np.ndarray,
@@ -542,6 +537,7 @@ class FrontierBuilder(StepRules):
                        int(mix64(q0code).view(_I)[0]))] = initial
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
+        self.growth.start(len(self.states))
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
                              leave=False, mininterval=0.5)
         # the build makes many small objects and no reference cycles: the cyclic
@@ -549,11 +545,15 @@ class FrontierBuilder(StepRules):
         collecting = gc.isenabled()
         gc.disable()
         try:
+            level = len(self.states)  # a level: the states first found one step on
             while head < len(self.states):
-                end = min(len(self.states), head + CHUNK)
+                end = min(level, head + CHUNK)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end
+                if head == level:  # a level done: its growth judged before the next
+                    self.growth.level(len(self.states) - level, self.n_hyps, self.bytes)
+                    level = len(self.states)
         finally:
             if collecting:
                 gc.enable()
