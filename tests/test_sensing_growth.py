@@ -21,15 +21,17 @@ MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
 def test_the_projection_by_hand():
-    # levels 1, 10, 20, 40: factors 2 and 2, the least 2; carried to level 5: levels 4
-    # and 5 hold 80 and 160 more, 71 found
-    assert projected([1, 10, 20, 40], 5) == (71 + 80 + 160, 2.0, 5)
-    # the least of the last two factors: 6 / 3 = 2 and 9 / 6 = 1.5
-    assert projected([1, 3, 6, 9], 4) == (19 + 13, 1.5, 4)  # 9 * 1.5 = 13.5, floored
+    # levels 1, 10, 20, 40, 80: factors 2, 2, 2 (least 2, not shrinking), carried from
+    # level 4 to level 6: 160 and 320 more, 151 found
+    assert projected([1, 10, 20, 40, 80], 6) == (151 + 160 + 320, 2.0, 6)
+    # factors 3, 2, 1.5: the least 1.5, shrinking by 1.5 / 2 = 0.75 a level: 1.125 then
+    # 0.84375, so 108 * 1.125 = 121.5 and 121.5 * 0.84375 = 102.515625 more, 229 found
+    assert projected([1, 12, 36, 72, 108], 6) == (229 + 224, 1.5, 6)
     # at or past the clock's end nothing more is expected
-    assert projected([1, 10, 20, 40], 3) == (71, 2.0, 3)
-    # too few levels to judge
-    assert projected([1, 10], 9) == (11, 0.0, 1)
+    assert projected([1, 10, 20, 40, 80], 4) == (151, 2.0, 4)
+    # too few levels, or before the clock's half-way step: the states so far
+    assert projected([1, 10, 20], 3) == (31, 0.0, 2)
+    assert projected([1, 10, 20, 40, 80], 9) == (151, 0.0, 4)
 
 
 def _build(max_states: int):

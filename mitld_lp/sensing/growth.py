@@ -11,9 +11,12 @@ stops the hypotheses are decided and the levels shrink (the bus case with a came
 bus 2: factors of about 1.5 a step up to the clock's end, then none new ten levels on).
 
 No sound bound on the product's size is known short of the hypothesis sets' count (about
-``1e19`` on the bus case), so the budget is checked from an *estimate* that errs low: at
-the end of each level, the levels still to come before the clock stops are taken to grow
-by the least of the last two levels' factors, and none after it.  Where even that passes
+``1e19`` on the bus case), so the budget is checked from an *estimate* meant to err low
+(:func:`projected`): at the end of each level from the clock's half-way step on (the
+first levels grow fast whatever comes after: two cameras on the bus case grow by 2.5 a
+step for four levels, then not at all), the levels still to come before the clock stops
+are taken to grow by the least of the last three levels' factors, shrinking as the last
+factors shrank, and none after it.  Where even that passes
 ``max_states``, or ``max_memory`` at the bytes the states so far took each, the build
 stops there, seconds in, instead of running to the budget; a product the estimate lets
 through still meets the budget's exact check before each batch is stored.  On the cases
@@ -43,18 +46,23 @@ product does not need stopping early; its factors are noise)."""
 
 def projected(sizes: list[int], clock: int) -> tuple[int, float, int]:
     """The estimate (module docs) of the states the build will hold, from the sizes of
-    its levels so far (``sizes[0]`` the first): the least of the last two factors
-    carried on up to level ``clock``, none after.  Returns the estimate, the factor and
-    the level it is carried to.  Fewer than three levels: the states so far."""
-    found = sum(sizes)
-    if len(sizes) < 3 or min(sizes[-3:]) <= 0:
-        return found, 0.0, len(sizes) - 1
-    factor = min(sizes[-1] / sizes[-2], sizes[-2] / sizes[-3])
-    more, n = 0.0, float(sizes[-1])
-    for _ in range(len(sizes) - 1, clock):
+    its levels so far (``sizes[0]`` the first) and the last step the clock runs to: the
+    least of the last three levels' factors, itself shrinking at each level to come by
+    the last factor's ratio to the one before (when that is below 1), carried on up to
+    level ``clock``, none after.  Returns the estimate, the least factor and the level
+    it is carried to.  Fewer than four levels, or before level ``clock / 2`` (the early
+    levels grow fast whatever comes after): the states so far."""
+    found, level = sum(sizes), len(sizes) - 1
+    if level < 3 or 2 * level < clock or min(sizes[-4:]) <= 0:
+        return found, 0.0, level
+    factors = [sizes[-1] / sizes[-2], sizes[-2] / sizes[-3], sizes[-3] / sizes[-4]]
+    factor, shrink = min(factors), min(1.0, factors[0] / factors[1])
+    least, more, n = factor, 0.0, float(sizes[-1])
+    for _ in range(level, clock):
+        factor *= shrink
         n *= factor
         more += n
-    return found + int(more), factor, max(clock, len(sizes) - 1)
+    return found + int(more), least, max(clock, level)
 
 
 class Growth:
@@ -119,14 +127,14 @@ class Growth:
         events = ", ".join(f"{a} (sensors.{a}: detect {s.detect:g}, delay {s.delay}; "
                            f"truncated at step {self.points[a]})"
                            for a, s in sorted(self.sensors.items()))
-        recent = ", ".join(f"{n:,}" for n in self.sizes[-3:])
+        recent = ", ".join(f"{n:,}" for n in self.sizes[-4:])
         raise ProductTooLarge(
             f"the information-state product{self.of()} will not fit: its last levels found "
-            f"{recent} new states, growing by a factor of at least {factor:.2f} a step, "
-            f"and at that rate until the clock stops (step {last}) it holds about "
-            f"{estimate:,} states, past {budget} (stopped after {found:,} states, "
-            f"{time.perf_counter() - self.t0:.1f} s). The cause: the robot's posterior "
-            f"over when {events} happened differs with each observation history the "
-            "sensor leaves ambiguous, and each such history keeps its own information "
-            "state. Raise max_states or max_memory, loosen epsilon (earlier truncation "
-            "points), use a sensor that detects more often, or shrink the model")
+            f"{recent} new states, growing by a factor of {factor:.2f} a step or more, and "
+            f"carried on until the clock stops (step {last}), the growth shrinking as it "
+            f"did, it holds about {estimate:,} states, past {budget} (stopped after "
+            f"{found:,} states, {time.perf_counter() - self.t0:.1f} s). The cause: the "
+            f"robot's posterior over when {events} happened differs with each observation "
+            "history the sensor leaves ambiguous, and each such history keeps its own "
+            "information state. Raise max_states or max_memory, loosen epsilon (earlier "
+            "truncation points), use a sensor that detects more often, or shrink the model")
