@@ -27,7 +27,8 @@ give the same bracket (to 1e-9); ``same`` also says whether the products have th
 size (the merge of :mod:`mitld_lp.sensing.merge` makes them smaller: ``smaller``).
 
 Run: ``python experiments/bench_sensed.py [--quick] [--out DIR] [--compare DIR]
-[--repeats N]`` (``N`` runs of each child, the least CPU reported).
+[--repeats N] [--only TEXT]`` (``N`` runs of each child, the least CPU reported; only
+the cases whose name contains ``TEXT``).
 ``--quick``: two small cases (not the fitted law's: some minutes).  Writes
 ``bench_sensed.csv``, ``bench_sensed.md`` and ``bench_sensed_machine.txt``.
 """
@@ -142,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also build with the mitld_lp of this checkout (before/after)")
     ap.add_argument("--repeats", type=int, default=1,
                     help="runs of each child; the least CPU of them is reported (default 1)")
+    ap.add_argument("--only", default=None, metavar="TEXT",
+                    help="only the cases whose name contains TEXT (e.g. bus_fit)")
     ap.add_argument("--worker", nargs=2, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--no-storm", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -153,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     out = C.out_dir(args)
     rows = []
     for i, case in enumerate(QUICK if args.quick else FULL):
+        if args.only is not None and args.only not in name_of(case):
+            continue
         ours = least([child(i, args.quick, None, storm=k == 0)
                       for k in range(args.repeats)])
         row: dict[str, Any] = {"case": name_of(case), **ours}
