@@ -21,14 +21,18 @@ MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
 def test_the_projection_by_hand():
-    # levels 1, 10, 20, 40, 80: factors 2, 2, 2 (least 2, not shrinking), carried from
-    # level 4 to level 6: 160 and 320 more, 151 found
-    assert projected([1, 10, 20, 40, 80], 6) == (151 + 160 + 320, 2.0, 6)
-    # factors 3, 2, 1.5: the least 1.5, shrinking by 1.5 / 2 = 0.75 a level: 1.125 then
-    # 0.84375, so 108 * 1.125 = 121.5 and 121.5 * 0.84375 = 102.515625 more, 229 found
+    # levels 1, 10, 20, 40, 80: factors 2, 2, 2, steady: carried from level 4 past the
+    # clock's step 6 by two levels, to 8: 160, 320, 640 and 1280 more, 151 found
+    assert projected([1, 10, 20, 40, 80], 6) == (151 + 2400, 2.0, 8)
+    # factors 3, 2, 1.5, not steady: the least 1.5 shrinking by 1.5 / 2 = 0.75 a level,
+    # 1.125 then 0.84375, to the clock's step 6 only: 108 * 1.125 = 121.5 and 121.5 *
+    # 0.84375 = 102.515625 more, 229 found
     assert projected([1, 12, 36, 72, 108], 6) == (229 + 224, 1.5, 6)
-    # at or past the clock's end nothing more is expected
-    assert projected([1, 10, 20, 40, 80], 4) == (151, 2.0, 4)
+    # factors 1.1: steady but slow, to the clock's step 6 only: 1331 * 1.1 = 1464.1 and
+    # 1610.51 more
+    assert projected([1, 1000, 1100, 1210, 1331], 6) == (4642 + 3074, 1.1, 6)
+    # at or past the last level nothing more is expected
+    assert projected([1, 10, 20, 40, 80], 2) == (151, 2.0, 4)
     # too few levels, or before the clock's half-way step: the states so far
     assert projected([1, 10, 20], 3) == (31, 0.0, 2)
     assert projected([1, 10, 20, 40, 80], 9) == (151, 0.0, 4)

@@ -16,7 +16,8 @@ No sound bound on the product's size is known short of the hypothesis sets' coun
 first levels grow fast whatever comes after: two cameras on the bus case grow by 2.5 a
 step for four levels, then not at all), the levels still to come before the clock stops
 are taken to grow by the least of the last three levels' factors, shrinking as the last
-factors shrank, and none after it.  Where even that passes
+factors shrank, and none after it (a steady growth two levels after it: the largest
+level came two steps after the clock's end on every case measured).  Where even that passes
 ``max_states``, or ``max_memory`` at the bytes the states so far took each, the build
 stops there, seconds in, instead of running to the budget; a product the estimate lets
 through still meets the budget's exact check before each batch is stored.  On the cases
@@ -35,13 +36,21 @@ from mitld_lp.product import ProductTooLarge
 from mitld_lp.sensing.info import BYTES_PER_HYPOTHESIS, BYTES_PER_INFO_STATE, InfoSize
 from mitld_lp.sensing.sensors import Sensor
 
-__all__ = ["Growth", "MIN_LEVEL", "projected"]
+__all__ = ["Growth", "MIN_LEVEL", "STEADY", "MIN_GROWTH", "PAST", "projected"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
 MIN_LEVEL = 256
 """The fewest new states a level must have before the growth is judged (a smaller
 product does not need stopping early; its factors are noise)."""
+STEADY = 0.95
+"""How close the last three factors must be for the growth to count as steady."""
+MIN_GROWTH = 1.2
+"""The least factor of a steady growth."""
+PAST = 2
+"""The levels a steady growth is carried past the clock's last step: on every case
+measured the largest level came two steps after it (the hypotheses of the last steps
+still split while the task's windows after them are open)."""
 
 
 def projected(sizes: list[int], clock: int) -> tuple[int, float, int]:
@@ -49,20 +58,24 @@ def projected(sizes: list[int], clock: int) -> tuple[int, float, int]:
     its levels so far (``sizes[0]`` the first) and the last step the clock runs to: the
     least of the last three levels' factors, itself shrinking at each level to come by
     the last factor's ratio to the one before (when that is below 1), carried on up to
-    level ``clock``, none after.  Returns the estimate, the least factor and the level
-    it is carried to.  Fewer than four levels, or before level ``clock / 2`` (the early
-    levels grow fast whatever comes after): the states so far."""
+    level ``clock`` -- :data:`PAST` levels further when the growth is steady (the three
+    factors within :data:`STEADY` of each other, the least at least
+    :data:`MIN_GROWTH`) --, none after.  Returns the estimate, the least factor and the
+    level it is carried to.  Fewer than four levels, or before level ``clock / 2`` (the
+    early levels grow fast whatever comes after): the states so far."""
     found, level = sum(sizes), len(sizes) - 1
     if level < 3 or 2 * level < clock or min(sizes[-4:]) <= 0:
         return found, 0.0, level
     factors = [sizes[-1] / sizes[-2], sizes[-2] / sizes[-3], sizes[-3] / sizes[-4]]
     factor, shrink = min(factors), min(1.0, factors[0] / factors[1])
+    steady = factor >= MIN_GROWTH and factor >= STEADY * max(factors)
+    last = clock + (PAST if steady else 0)
     least, more, n = factor, 0.0, float(sizes[-1])
-    for _ in range(level, clock):
+    for _ in range(level, last):
         factor *= shrink
         n *= factor
         more += n
-    return found + int(more), least, max(clock, level)
+    return found + int(more), least, max(last, level)
 
 
 class Growth:
@@ -131,8 +144,9 @@ class Growth:
         raise ProductTooLarge(
             f"the information-state product{self.of()} will not fit: its last levels found "
             f"{recent} new states, growing by a factor of {factor:.2f} a step or more, and "
-            f"carried on until the clock stops (step {last}), the growth shrinking as it "
-            f"did, it holds about {estimate:,} states, past {budget} (stopped after "
+            f"carried on to level {last} (the clock stops at step {self.size.clock}), the "
+            f"growth shrinking as it did, it holds about {estimate:,} states, past "
+            f"{budget} (stopped after "
             f"{found:,} states, {time.perf_counter() - self.t0:.1f} s). The cause: the "
             f"robot's posterior over when {events} happened differs with each observation "
             "history the sensor leaves ambiguous, and each such history keeps its own "
