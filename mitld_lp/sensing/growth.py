@@ -17,14 +17,13 @@ first levels grow fast whatever comes after: two cameras on the bus case grow by
 step for four levels, then not at all), the levels still to come before the clock stops
 are taken to grow by the least of the last three levels' factors, shrinking as the last
 factors shrank, and none after it (a steady growth two levels after it: the largest
-level came two steps after the clock's end on every case measured).  Where even that passes
-``max_states``, or ``max_memory`` at the bytes the states so far took each, the build
+level came two steps after the clock's end on every case measured).  Where even that
+passes ``max_states``, or ``max_memory`` at the bytes the states so far took each, the build
 stops there, seconds in, instead of running to the budget; a product the estimate lets
 through still meets the budget's exact check before each batch is stored.  On the cases
-measured (experiments/bench_sensed.py) the estimate is below the true size from every
-level on, so it stops a product later than the truth would allow rather than one that
-fits; it is an estimate, not a bound, and raising the budget past it lets the build
-run."""
+measured (experiments/bench_sensed.py's) the estimate is at no level above the true
+size, so it stops a product later than the truth would allow rather than one that fits;
+it is an estimate, not a bound, and raising the budget past it lets the build run."""
 
 from __future__ import annotations
 
