@@ -4,6 +4,8 @@ at a time, dictionaries of tuples, the observations grouped by hand, from the st
 of :mod:`mitld_lp.sensing.rules` (the rules are checked against an exhaustive
 expectimax in test_sensing.py and test_sensing_tasks.py; what is checked here is the
 bookkeeping: which states exist, their posteriors, every transition and every move).
+Built without the merge of :mod:`mitld_lp.sensing.merge` (the reference keeps every
+hypothesis's times as they came; tests/test_sensing_merge.py checks the merge).
 Equal after canonical ordering: the same states (by key), the same choices, the same
 successors with the same probabilities and the same posteriors (to the last bit: both
 sum in the loops' order, with math.fsum where one state at a time uses it), the same
@@ -189,7 +191,7 @@ def test_frontier_build_equals_one_state_at_a_time(case: str) -> None:
     model = CASES[case]()
     belief = belief_product(model.game, to_dta(model.spec), model.distributions,
                             dict(model.sensors), model.epsilon, max_states=10**6,
-                            late_reports=False)
+                            late_reports=False, merge=False)
     assert_same(belief, reference(model, belief))
 
 
@@ -208,7 +210,7 @@ def test_joint_automaton_ends_equal_one_state_at_a_time() -> None:
     laws = {a: c.distribution for a, c in sta.clocks.items()}
     belief = belief_product(model.game, joint.dta, laws, dict(model.sensors),
                             model.epsilon, max_states=10**6, late_reports=False,
-                            ends=JointEnds(joint))
+                            ends=JointEnds(joint), merge=False)
     assert_same(belief, reference(model, belief, joint.dta, JointEnds(joint)))
 
 

@@ -64,7 +64,8 @@ class SensedRoute(Route):
                                 model.epsilon if s.epsilon is None else s.epsilon,
                                 clock_reduction=s.clock_reduction,
                                 truncation=s.truncation_map, max_states=s.max_states,
-                                max_memory=s.max_memory, progress=progress)
+                                max_memory=s.max_memory, progress=progress,
+                                name=model.name)
         return Built(dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      belief=belief, sense="min" if direct else "max")

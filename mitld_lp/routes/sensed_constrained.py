@@ -359,7 +359,7 @@ class SensedConstrainedRoute(Route):
                                 clock_reduction=s.clock_reduction,
                                 truncation=s.truncation_map, max_states=s.max_states,
                                 max_memory=s.max_memory, progress=progress,
-                                late_reports=False, ends=ends)
+                                late_reports=False, ends=ends, name=model.name)
         return Built(joint.dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      joint, belief=(belief, ends))

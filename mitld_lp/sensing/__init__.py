@@ -6,7 +6,10 @@
   robot knows), built a frontier at a time by :mod:`~mitld_lp.sensing.frontier` (its
   array operations in :mod:`~mitld_lp.sensing.rows`) from the step rules of
   :mod:`~mitld_lp.sensing.rules`, its records in :mod:`~mitld_lp.sensing.info`, the
-  controller's moves in :mod:`~mitld_lp.sensing.moves`;
+  controller's moves in :mod:`~mitld_lp.sensing.moves`, its budgets (the exact check
+  before each batch, the estimate of its final size at each level's end) in
+  :mod:`~mitld_lp.sensing.growth`, the states whose futures are identical merged by
+  :mod:`~mitld_lp.sensing.merge`;
 * :mod:`~mitld_lp.sensing.horizon`: the sensors whose reports come too late for the
   task, built as blind ones (the same optimum);
 * :mod:`~mitld_lp.routes.sensed_solve`: the ``sensed`` route, its certified bracket (the one

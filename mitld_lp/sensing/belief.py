@@ -144,7 +144,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                    clock_reduction: bool = True, truncation: Mapping[str, int] | None = None,
                    max_states: int, max_memory: int | None = None,
                    progress: bool | None = None, late_reports: bool = True,
-                   ends: Ends | None = None) -> Belief:
+                   ends: Ends | None = None, name: str | None = None,
+                   merge: bool = True) -> Belief:
     """The reachable information-state MDP (module docs) of a task's automaton ``dta``
     in ``game``, the events of ``sensors`` (missed detections only) hidden.
 
@@ -158,7 +159,13 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
     hypothesis it holds.  ``progress``: a bar of the states built
     (:mod:`mitld_lp.util.progress`: ``None`` on a terminal only), after a line saying
     how large the product may grow.  ``ends``: where a hypothesis ends (:data:`Ends`;
-    every record it returns is an absorbing state of the MDP)."""
+    every record it returns is an absorbing state of the MDP).  The budgets are also
+    checked at the end of each level of the build from an estimate of the size it will
+    reach (:mod:`mitld_lp.sensing.growth`), which stops a product that will not fit
+    seconds in, its message naming the model (``name``) and the sensed events.
+    ``merge``: information states whose futures are identical are one state (a sensed
+    event's times shifted to a canonical place where only their differences matter:
+    :mod:`mitld_lp.sensing.merge`; the same optimum); False builds them apart."""
     sensed = tuple(sorted(sensors))
     sta = sensed_sta(dta, laws, sensed, epsilon, clock_reduction=clock_reduction,
                      truncation=truncation, sensors=sensors)
@@ -181,7 +188,7 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
     size = info_size(game, sta, used)
     _announce(game, sta, sensed, max_states, memory, size)
     belief = FrontierBuilder(game, dta, sta, sensed, used, max_states, memory, size,
-                      ends).build(progress)
+                      ends, name, merge).build(progress)
     return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
 
 

@@ -2,22 +2,23 @@
 (:mod:`mitld_lp.sensing.belief`'s module docs; tests/test_sensing_build.py builds the
 same product one state at a time and compares every state, row, posterior and move).
 
-The states found and not expanded yet (up to :data:`CHUNK` of them, breadth first) are
-expanded together, as numpy rows: each state's choices, the outcomes of its unsensed
-events, its hypotheses, each hypothesis's sensed branches and the world's successors,
-one row per combination; the automaton's step and where a hypothesis ends are looked up
-in tables indexed by small integers (world states, event sets as bit masks, hypotheses'
-event times), which the step rules (:mod:`mitld_lp.sensing.rules`) fill for the keys not
-met before, one Python call per new key. The rows are then grouped by what the robot
-observes into successor information states, and an information state is found by an
-integer key: its world state, clock, reports, pending events, number of hypotheses and a
-64-bit hash of its hypothesis set. A key met before is compared with the stored state
-hypothesis by hypothesis (a hash collision is an internal error, never a merge) and
-weight by weight (:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a
-function of the key). Python objects are made only once per world state, event set and
-new information state; the controller's moves are kept as arrays
-(:class:`~mitld_lp.sensing.moves.Moves`), each state's made when asked for. The state
-and memory budgets are checked before each batch of new states is stored."""
+The states found and not expanded yet (up to :data:`CHUNK` of them, one level at a time:
+the states first found one step after the previous level's) are expanded together, as
+numpy rows: each state's choices, the outcomes of its unsensed events, its hypotheses,
+each one's sensed branches and the world's successors, one row per combination; the
+automaton's step and where a hypothesis ends are looked up in tables indexed by small
+integers (world states, event sets as bit masks, hypotheses' event times), which the
+step rules (:mod:`mitld_lp.sensing.rules`) fill for the keys not met before. The rows
+are grouped by what the robot observes into successor information states, their times
+made canonical (:mod:`mitld_lp.sensing.merge`), and a state is found by an integer key:
+its world state, clock, reports, pending events, number of hypotheses and a 64-bit hash
+of its hypothesis set. A key met before is compared with the stored state hypothesis by
+hypothesis (a hash collision is an internal error, never a merge) and weight by weight
+(:data:`~mitld_lp.sensing.info.WEIGHT_TOL`, the posterior being a function of the key).
+Python objects are made once per world state, event set and new information state; the
+moves are kept as arrays (:class:`~mitld_lp.sensing.moves.Moves`). The budgets are
+checked before each batch of new states is stored and, from an estimate of the final
+size, at each level's end (:mod:`~mitld_lp.sensing.growth`)."""
 
 from __future__ import annotations
 
@@ -32,7 +33,8 @@ import scipy.sparse as sp
 from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
-from mitld_lp.product import Absorbing, ProductTooLarge
+from mitld_lp.product import Absorbing
+from mitld_lp.sensing.growth import Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
     BYTES_PER_INFO_STATE,
@@ -43,6 +45,7 @@ from mitld_lp.sensing.info import (
     InfoSize,
     InfoState,
 )
+from mitld_lp.sensing.merge import Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import INT as _I
 from mitld_lp.sensing.rows import Table, fsum_by, groups, mix64, spread
@@ -55,26 +58,28 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-DENSE = 1 << 22
-"""The most keys a lookup keeps as a dense array (32 MiB)."""
+DENSE = 1 << 22  # the most keys a lookup keeps as a dense array (32 MiB)
 CHUNK = 8_192
-"""The most states expanded together: the rows of one expansion (a state's choices x
-its unsensed outcomes x its hypotheses x their branches x the world's successors, a
-few dozen per state, some fifteen numbers each) stay some tens of megabytes."""
+"""The most states expanded together: the rows of one expansion (a few dozen per state,
+some fifteen numbers each) stay some tens of megabytes."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
 class FrontierBuilder(StepRules):
     """The information states reachable from the initial one (module docs), under
-    ``max_states`` and ``max_memory`` (``size``: what a state can hold, for the
-    messages)."""
+    ``max_states`` and ``max_memory``, also as estimated at each level's end
+    (:mod:`~mitld_lp.sensing.growth`; ``size``: what a state can hold, ``name``: the
+    model's, for the messages); ``merge``: states whose futures are identical merged
+    (:mod:`~mitld_lp.sensing.merge`)."""
 
     def __init__(self, game: Game[Any], dta: DTA, sta: STA, sensed: tuple[str, ...],
                  sensors: Mapping[str, Sensor], max_states: int, max_memory: int,
-                 size: InfoSize, ends: Ends | None = None) -> None:
+                 size: InfoSize, ends: Ends | None = None, name: str | None = None,
+                 merge: bool = True) -> None:
         super().__init__(game, dta, sta, sensed, sensors, ends)
-        self.size, self.max_states = size, max_states
-        self.max_memory, self.bytes = max_memory, 0
+        self.bytes, self.growth = 0, Growth(max_states=max_states, max_memory=max_memory,
+                                            size=size, sensors=sensors,
+                                            points=sta.truncation_points, name=name)
         self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
@@ -98,6 +103,7 @@ class FrontierBuilder(StepRules):
         self.act_id: dict[str, int] = {}
         self.times: list[tuple[int, ...]] = []
         self.times_id: dict[tuple[int, ...], int] = {}
+        self.shifts = Shifts(sta, sensed, sensors, self.times, self.time_id, merge)
         self.outcomes = Table(3, (_I, np.float64, bool))
         self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
         self.successors = Table(2, (_I, np.float64))
@@ -110,8 +116,7 @@ class FrontierBuilder(StepRules):
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
         self.move_rows: list[tuple[np.ndarray, ...]] = []
-        # the absorbing records (ends, the truncation): each one's id and its state
-        # (-1 until stored)
+        # the absorbing records (ends, the truncation): id and state (-1 until stored)
         self.records: list[Hashable] = []
         self.record_id: dict[Hashable, int] = {}
         self.record_state: list[int] = []
@@ -251,20 +256,8 @@ class FrontierBuilder(StepRules):
 
     def check(self, new: int, hyps: int) -> None:
         """Raise :class:`ProductTooLarge` before ``new`` states of ``hyps`` hypotheses in
-        all are stored past a budget."""
-        if len(self.states) + new > self.max_states:
-            raise ProductTooLarge(
-                f"the information-state product has more than {self.max_states:,} states "
-                f"(sensed events: {', '.join(self.sensed)}; truncation points: "
-                f"{self.sta.truncation_points}; {self.size}); raise max_states, loosen "
-                "epsilon, or shrink the model")
-        if self.bytes + BYTES_PER_INFO_STATE * new + BYTES_PER_HYPOTHESIS * hyps > (
-                self.max_memory):
-            raise ProductTooLarge(
-                f"the information-state product would need more than {self.max_memory:,} "
-                f"bytes ({len(self.states):,} states so far, sensed events: "
-                f"{', '.join(self.sensed)}; {self.size}); raise max_memory, loosen "
-                "epsilon, or shrink the model")
+        all are stored past a budget (:meth:`Growth.check`)."""
+        self.growth.check(len(self.states), self.bytes, new, hyps)
 
     def add_states(self, world: np.ndarray, clock: np.ndarray, reported: np.ndarray,
                    pending: np.ndarray, counts: np.ndarray, codes: np.ndarray,
@@ -360,9 +353,10 @@ class FrontierBuilder(StepRules):
         u = ~done
         c, occ, w2, new, tid2, q2, mass, s_seq = (
             x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
-        # the undecided hypotheses grouped by what the robot observes, each group's in
-        # InfoState order
+        # the undecided hypotheses grouped by what the robot observes, their times
+        # canonical (merge.py), each group's in InfoState order
         obs, first = groups(c, w2, occ, new)
+        tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         hid, hfirst = groups(obs, self.order_key(tid2, q2))
         hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
         hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
@@ -542,6 +536,7 @@ class FrontierBuilder(StepRules):
                        int(mix64(q0code).view(_I)[0]))] = initial
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
+        self.growth.start(len(self.states))
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
                              leave=False, mininterval=0.5)
         # the build makes many small objects and no reference cycles: the cyclic
@@ -549,11 +544,15 @@ class FrontierBuilder(StepRules):
         collecting = gc.isenabled()
         gc.disable()
         try:
+            level = len(self.states)  # a level: the states first found one step on
             while head < len(self.states):
-                end = min(len(self.states), head + CHUNK)
+                end = min(level, head + CHUNK)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end
+                if head == level:  # a level done: its growth judged before the next
+                    self.growth.level(len(self.states) - level, self.n_hyps, self.bytes)
+                    level = len(self.states)
         finally:
             if collecting:
                 gc.enable()
@@ -585,8 +584,9 @@ class FrontierBuilder(StepRules):
         number[shown_first] = np.arange(len(shown_first))
         names = tuple(self.act_names[k] for k in shown_first.tolist())
         act = np.where(act < 0, ABSORB, number[np.maximum(act, 0)]).astype(np.int32)
-        log.info("information-state product: %s states, %s choices, %s transitions",
-                 f"{n:,}", f"{n_choices:,}", f"{matrix.nnz:,}")
+        log.info("information-state product: %s states, %s choices, %s transitions (%s "
+                 "groups shifted: merge.py)", *(f"{x:,}" for x in (n, n_choices, matrix.nnz,
+                                                                   self.shifts.merged)))
         kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
                          .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
                         dtype=np.int8)

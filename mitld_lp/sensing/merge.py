@@ -1,0 +1,122 @@
+"""Information states merged where their futures are identical: the times of a sensed
+event that the future cannot tell apart, shifted to a canonical place
+(:mod:`mitld_lp.sensing.frontier` calls :meth:`Shifts.canonical` on each new group of
+hypotheses before it looks the state up).
+
+The claim.  Take a sensed event ``a`` whose law's hazard (as the build reads it,
+:meth:`~mitld_lp.automata.sta.EventClock.hazard`) is one value ``h`` at every clock from
+``c - 1`` to its truncation point ``T`` less one, so that ``P(K = k + 1) = (1 - h)
+P(K = k)`` for ``c <= k < T``; its sensor neither keeps "never" nor cuts at a number of
+misses (``keeps_never``, ``report_limit``: the miss count would matter).  In an
+information state in which every hypothesis has ``a`` happened (``k_a >= 1``) and either
+reported or due (``k_a + delay <= t + 1``, its report can come at every step from now
+on), shifting every hypothesis's ``k_a`` down by the same ``s`` (its least ``m`` to
+``c``, where ``m > c``) gives a state with the same future:
+
+* the *dynamics*: a hypothesis's further steps read ``k_a`` only through whether it is
+  not yet happened, never, reported, or not due, and the miss count under a report
+  limit (:meth:`~mitld_lp.sensing.rules.StepRules.sensed_branches`); none of these
+  changes (reported stays reported, due stays due: the clock the state keeps is at
+  least ``max k_a + delay``, and after the shift at least the shifted one); the
+  automaton's state is in the hypothesis, and ``a`` has happened, so it never reads
+  ``a`` again; the clock the state keeps (:meth:`~mitld_lp.sensing.rules.StepRules.
+  clock_key`) is read by the other events only up to their own needs, which the shift
+  leaves alone;
+* the *posterior*: a hypothesis's weight is its prior times the likelihood of what was
+  observed, a product over the sensed events (independent laws; the world ignores the
+  sensed events) of ``P(K_a = k_a)`` and ``(1 - d)`` per missed report of ``a``
+  (``(1 - d)^(r - k_a - delay) d`` reported at step ``r``, ``(1 - d)^(t + 1 - k_a -
+  delay)`` not yet), times factors common to every hypothesis (the world's moves, the
+  other events' factors, which the shift does not touch).  Shifting ``k_a`` by ``s``
+  multiplies ``P(K_a = k_a)`` by ``(1 - h)^(-s)`` and ``(1 - d)^(-k_a)`` by ``(1 -
+  d)^s``, the same for every hypothesis: the normalised weights are unchanged.
+
+So the two states have the same conditional law of everything that follows (the
+observations, the verdicts, with the same probabilities under every policy), hence the
+same optimum, and the weights stay a function of the key (the build's check of every
+revisit, ``WEIGHT_TOL``, still holds).  The shift is the same for every hypothesis of
+the state, so distinct hypotheses stay distinct.  Inside an end component no shift
+happens (a state's least ``k_a`` rises only when a hypothesis leaves: its mass goes to
+an end, or the state held one not happened or not due, whose clock then runs, so the
+state is on no cycle), so a hypothesis keeps its times there, as
+:mod:`mitld_lp.routes.sensed_mixed` and :mod:`mitld_lp.running.sensed_joint` read them.
+tests/test_sensing_merge.py checks the claim on exact posteriors over every observation
+history of a small case, and the optimum with and without the merge."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from mitld_lp.automata.sta import STA
+from mitld_lp.sensing.rows import INT, groups
+from mitld_lp.sensing.sensors import Sensor
+
+__all__ = ["Shifts", "shift_start"]
+
+
+def shift_start(sta: STA, event: str) -> int | None:
+    """The least ``c >= 1`` with ``P(K = k + 1) = (1 - h) P(K = k)`` for ``c <= k <
+    T`` at the hazards the build reads (module docs), None where the event's times
+    cannot be shifted (a law kept to "never", a report limit, no truncation point)."""
+    clock = sta.clocks[event]
+    T = clock.truncation
+    if T is None or T < 1 or clock.keeps_never or clock.report_limit is not None:
+        return None
+    hz = [clock.hazard(t) for t in range(T)]  # the step after t steps: k = t + 1
+    t0 = T - 1
+    while t0 > 0 and hz[t0 - 1] == hz[T - 1]:
+        t0 -= 1
+    return t0 + 1
+
+
+class Shifts:
+    """The canonical times of the sensed events ``sensed`` (in the build's order) with
+    their ``sensors``; ``times`` and ``time_id`` the build's table of hypotheses' times
+    and its lookup (a new tuple gets a new id).  ``enabled=False``: no shift."""
+
+    def __init__(self, sta: STA, sensed: tuple[str, ...], sensors: Mapping[str, Sensor],
+                 times: list[tuple[int, ...]], time_id: Callable[[tuple[int, ...]], int],
+                 enabled: bool = True) -> None:
+        found = {i: shift_start(sta, a) for i, a in enumerate(sensed)} if enabled else {}
+        self.start = {i: c for i, c in found.items() if c is not None}
+        self.delay = [sensors[a].delay for a in sensed]
+        self.times, self.time_id = times, time_id
+        self.array = np.zeros((0, len(sensed)), INT)
+        self.merged = 0  # the groups shifted, for the log
+
+    def canonical(self, tid: np.ndarray, group: np.ndarray, row: np.ndarray,
+                  reported: np.ndarray, new: np.ndarray, clock: np.ndarray) -> np.ndarray:
+        """The hypotheses' times ``tid`` (one per row, ``group`` each row's group of
+        one observation, ``row`` its parent state's place in ``reported`` and ``clock``,
+        ``new`` the reports the step made) with each group's shiftable events shifted
+        (module docs)."""
+        if not self.start or len(tid) == 0:
+            return tid
+        if len(self.array) < len(self.times):
+            self.array = np.asarray(self.times, INT).reshape(len(self.times), -1)
+        k = self.array[tid]
+        said = reported[row] | new
+        n = int(group.max()) + 1
+        shift = np.zeros((n, k.shape[1]), INT)
+        for i, c in self.start.items():
+            ki = k[:, i]
+            ok = (ki > 0) & (((said >> i) & 1 == 1) | (ki + self.delay[i] <= clock[row] + 1))
+            good = np.ones(n, bool)
+            np.logical_and.at(good, group, ok)
+            least = np.full(n, np.iinfo(INT).max, INT)
+            np.minimum.at(least, group, ki)
+            shift[:, i] = np.where(good & (least > c), least - c, 0)
+        moved = np.flatnonzero(shift.any(axis=1))
+        if len(moved) == 0:
+            return tid
+        self.merged += len(moved)
+        rows = np.flatnonzero(np.isin(group, moved))
+        by = shift[group[rows]]  # each row's shift: one new id per (times, shift)
+        pair, first = groups(tid[rows], *by.T)
+        new_id = np.array([self.time_id(tuple(x)) for x in
+                           (self.array[tid[rows][first]] - by[first]).tolist()], INT)
+        out = tid.copy()
+        out[rows] = new_id[pair]
+        return out
