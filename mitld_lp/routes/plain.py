@@ -177,7 +177,7 @@ def _iterate(mdp: MDP, quotients: list[Quotient], s: Settings,
     return interval_iterations(mdp, quotients, tol=s.tol,
                                precision=None if decided else s.precision,
                                progress=s.progress, time_limit=deadline.left(),
-                               gap="max" if decided else "initial")
+                               gap="max" if decided or s.method == "vi" else "initial")
 
 
 def _keeping(mdp: MDP, accept: Acceptance, solution: ModelSolution) -> ModelSolution:
