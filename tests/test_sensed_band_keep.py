@@ -282,3 +282,44 @@ def test_a_law_that_does_not_give_every_outcome_of_the_band_is_not_trusted() -> 
     assert not covers(at(ends["high ends"]["b"]))
     point = from_table({"geometric": 0.5}, "mu")
     assert covers(at(point))  # no band: nothing to cover
+
+
+def _corners(rows: list[list[dict[int, float]]], accept: set[int]) -> Any:
+    """An interval chain whose every state's choices are nature's corners (point
+    intervals), ``rows[s]`` the distributions of state ``s``'s choices."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from mitld_lp.running.band_chain import BandChain
+
+    flat = [r for here in rows for r in here]
+    n = len(rows)
+    matrix = sp.csr_array(([p for r in flat for p in r.values()],
+                           ([i for i, r in enumerate(flat) for _ in r],
+                            [j for r in flat for j in r])), shape=(len(flat), n))
+    groups = np.cumsum([0] + [len(h) for h in rows])
+    labels = tuple(frozenset({"accept"} if s in accept else ()) for s in range(n))
+    return BandChain(matrix, matrix.data.copy(), groups, tuple(f"c{i}" for i in range(len(flat))),
+                     labels, tuple(str(s) for s in range(n)), np.full(n, -1))
+
+
+@pytest.mark.parametrize(("rows", "expected"), [
+    # nature may loop for ever (the first corner leads to the target): never reached
+    ([[{1: 1.0}, {0: 1.0}], [{1: 1.0}]], Fraction(0)),
+    # a loop left with probability 1e-6 each round: reached for sure, at last (value
+    # iteration from below is still at 0.63 after a million rounds)
+    ([[{0: 1 - 1e-6, 1: 1e-6}], [{1: 1.0}]], Fraction(1)),
+    # the same beside a state where nature may loop for ever
+    ([[{0: 1 - 1e-6, 1: 1e-6}], [{1: 1.0}], [{2: 1.0}, {1: 1.0}]], Fraction(1)),
+    # x0 = min(1/2 + x1/2, 3/10), x1 = 9/10 x0: the second corner, 3/10
+    ([[{1: 0.5, 2: 0.5}, {1: 0.3, 3: 0.7}], [{1: 1.0}], [{0: 0.9, 3: 0.1}], [{3: 1.0}]],
+     Fraction(3, 10)),
+])
+def test_nature_s_least_reaching_probability_by_hand(rows, expected) -> None:
+    """:func:`~mitld_lp.running.sensed_band_chain.reach_min` on small interval chains
+    whose values are worked out by hand: a lower bound within 1e-8 of them."""
+    from mitld_lp.running.sensed_band_chain import reach_min
+
+    chain = _corners(rows, {1})
+    got = Fraction(reach_min(chain, chain.accepting()))
+    assert expected - Fraction(1, 10**8) <= got <= expected

@@ -217,15 +217,18 @@ def _avoiders(chain: BandChain, target: np.ndarray) -> np.ndarray:
         inside = now
 
 
-def _min_strategy(chain: BandChain, target: np.ndarray, margin: float = 1e-12,
+def _min_strategy(chain: BandChain, target: np.ndarray,
+                  margins: tuple[float, ...] = (1e-15, 1e-14, 1e-13, 1e-12),
                   max_rounds: int = 200) -> float | None:
     """Nature's least probability of reaching ``target`` from state 0 by strategy
     improvement, the states of :func:`_avoiders` held at 0 (the rest then has no end
     component, so the one-step operator has one fixed point there and any vector below
-    every corner's one-step image, a sub-solution, is below it): the value lowered by
-    ``margin`` times one plus nature's greatest expected number of steps before the
-    run reaches ``target`` or those states, checked to be a sub-solution; None where
-    the check fails."""
+    every corner's one-step image, a sub-solution, is below it): the value lowered by a
+    margin times one plus nature's greatest expected number of steps before the run
+    reaches ``target`` or those states (each state then has a slack of the margin below
+    every corner's step), checked to be a sub-solution, the least of ``margins`` that
+    passes (the floats' rounding eats the smaller ones on a large chain); None where
+    none does."""
     n = chain.n_states
     zero = _avoiders(chain, target)
     rest = ~zero & ~target
@@ -235,15 +238,16 @@ def _min_strategy(chain: BandChain, target: np.ndarray, margin: float = 1e-12,
                                False, max_rounds, zero=zero | target)
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(steps))):
         return None
-    w = np.where(rest, np.maximum(v - margin * (1.0 + steps), 0.0), 0.0)
-    w[target] = 1.0
     m, groups = chain.matrix, chain.row_groups
-    step = np.minimum.reduceat(m @ w, groups[:-1]) if m.shape[0] else w
-    if not np.all(w[rest] <= step[rest]):
-        log.info("nature's least reaching probability not proven by its strategy; value "
-                 "iteration from below instead")
-        return None
-    return float(w[0])
+    for margin in margins:
+        w = np.where(rest, np.maximum(v - margin * (1.0 + steps), 0.0), 0.0)
+        w[target] = 1.0
+        step = np.minimum.reduceat(m @ w, groups[:-1]) if m.shape[0] else w
+        if np.all(w[rest] <= step[rest]):
+            return float(w[0])
+    log.info("nature's least reaching probability not proven by its strategy; value "
+             "iteration from below instead")
+    return None
 
 
 @dataclass(frozen=True, slots=True)
