@@ -323,3 +323,19 @@ def test_nature_s_least_reaching_probability_by_hand(rows, expected) -> None:
     chain = _corners(rows, {1})
     got = Fraction(reach_min(chain, chain.accepting()))
     assert expected - Fraction(1, 10**8) <= got <= expected
+
+
+@needs_storm
+def test_the_tree_of_the_kept_controller_keeps_its_worst_case(safety, tmp_path: Path) -> None:
+    """``export --tree``: the tree controller (its leaves the controller's mixed
+    decisions, stays and keeps included) has the controller's worst case over the band:
+    Storm's robust check of the tree controller's interval chain gives ``lower``."""
+    from test_band_chain import storm_worst
+
+    from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
+    from mitld_lp.running.tree import tree_controller, tree_of
+
+    tree = tree_of(safety)
+    by_tree = tree_controller(safety, tree)
+    path = write_sensed_band_chain(safety, tmp_path / "tree.drn", controller=by_tree)
+    assert abs(storm_worst(path) - safety.lower) <= 1e-9
