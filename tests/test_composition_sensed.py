@@ -38,17 +38,7 @@ _EXTRAS = {"none": {}, "min": {}, "constraint": {"constraints": ["P(F puddle) <=
 
 #: The cells not solved yet, each with the words of its refusal: the rows of the
 #: composition table (docs/results.md) that say "refused".
-NOT_SOLVED = {
-    ("band", "safety", "constraint"): "a safety task with constraints or then, sensors that "
-                                      "miss events and a law known only within a band",
-    ("band", "safety", "then"): "a safety task with constraints or then, sensors that miss "
-                                "events and a law known only within a band",
-    ("band", "obligation", "constraint"): "an obligation task with constraints or then, "
-                                          "sensors that miss events and a law known only "
-                                          "within a band",
-    ("band", "obligation", "then"): "an obligation task with constraints or then, sensors "
-                                    "that miss events and a law known only within a band",
-}
+NOT_SOLVED: dict[tuple[str, str, str], str] = {}
 
 TOL = 1e-7
 

@@ -20,7 +20,6 @@ import pytest
 from mitld_lp import ExplicitGame, Model, synthesize
 from mitld_lp.controllers.observation import Observation
 from mitld_lp.distributions import from_table
-from mitld_lp.problem import ProblemError
 from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
 from mitld_lp.sensing import Sensor
 
@@ -130,14 +129,6 @@ def test_a_band_of_one_point_is_the_sensed_point_answer() -> None:
     r = synthesize(model([0.45, 0.45], 0.6))
     assert (r.lower, r.upper, r.certified) == (point.lower, point.upper, point.certified)
     assert worst_over_nature(r.controller, "0.45", "0.45", "0.6") >= Fraction(r.lower)
-
-
-@pytest.mark.parametrize("extra, words", [
-    ({"constraints": ["P(F[0,3] A) <= 0.9"], "objective": "min"}, "objective min")])
-def test_what_is_not_solved_is_refused_by_name(extra, words) -> None:
-    with pytest.raises(ProblemError) as err:
-        synthesize(model([0.3, 0.6], 0.6), **extra)
-    assert words in str(err.value) and "sensor" in str(err.value)
 
 
 def test_the_point_chain_of_a_band_answer_is_refused() -> None:

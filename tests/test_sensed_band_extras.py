@@ -95,42 +95,12 @@ def randomised_by_nature(controller: Any, band: tuple[str, str], detect: str,
     """The probability that ``won(t, state, k)`` says True (None: not decided yet)
     under a randomised observation-based controller (its plan's mixed decision after
     each observation history), nature picking the hazard of each step among the band's
-    ends by ``pick`` after seeing the robot's draw, in exact arithmetic."""
-    plan = controller.plan
-    d, ends = Fraction(detect), (Fraction(band[0]), Fraction(band[1]))
+    ends by ``pick`` after seeing the robot's draw, in exact arithmetic
+    (tests/test_sensed_band_keep.py's enumeration; no stay expected)."""
+    from test_sensed_band_keep import enumerated
 
-    def value(t: int, state: str, k: int | None, reported: bool, memory: Any) -> Fraction:
-        verdict = won(t, state, k)
-        if verdict is not None:
-            return Fraction(int(verdict))
-        decision = plan.decision(state, memory)
-        assert not decision.lost and decision.stay == 0, "a stop or a stay: not expected"
-        weights = [Fraction(1)] if decision.weights is None else [
-            Fraction(float(w)) for w in decision.weights]
-        total = sum(weights)
-        out = Fraction(0)
-        for action, w in zip(decision.actions, weights, strict=True):
-            if w == 0:
-                continue
-            options = []
-            for h in (ends if k is None else (None,)):
-                v = Fraction(0)
-                for k2, pe in ([(t + 1, h), (None, 1 - h)] if k is None else [(k, 1)]):
-                    if pe == 0:
-                        continue
-                    told = ([(True, d), (False, 1 - d)] if k2 is not None and not reported
-                            else [(reported, Fraction(1))])
-                    for now, pr in told:
-                        seen = frozenset({"b"}) if now and not reported else frozenset()
-                        for nxt, pw in GAME.successors(state, action, frozenset()):
-                            after, _ = plan.follow(memory, nxt, seen, action)
-                            v += pe * pr * Fraction(str(pw)) * value(t + 1, nxt, k2, now,
-                                                                    after)
-                options.append(v)
-            out += w / total * pick(options)
-        return out
-
-    return value(0, GAME.initial, None, False, plan.start(GAME.initial))
+    return enumerated(controller.plan, GAME, band, detect,
+                      lambda t, state, k, trace: won(t, state, k), pick)
 
 
 def _task(t: int, state: str, k: int | None) -> bool | None:

@@ -32,6 +32,28 @@ otherwise the check ``worst case over the band`` says the gap, both ends sound.
 ``then`` (``min-steps``/``min-cost``): each candidate is that law's lexicographic LP's
 policy; the returned one's expected steps (and cost) at the worst law of the band
 (nature maximising them), proven from above, are its ``steps`` (and ``secondary``).
+
+A task with a safety part (safety, obligation; a co-safe task's minimum): a candidate's
+*keep* (:mod:`mitld_lp.routes.sensed_kept`) is a stay in a keep state, which its chain
+ends with the task accepted exactly when the true run's hypothesis is persistent
+(:meth:`mitld_lp.running.sensed_joint.JointEnds.stayed`); where the controller stays
+elsewhere, the run ends with its verdicts, an undecided component not satisfied.  Both
+rest on the end components of the candidate's information states, built at its law:
+every run of the chain must be a run that law allows.  That holds when at every clock
+the law gives each outcome of a step (the event, no event) that some law of the band
+gives -- its hazard positive where the band's greatest is, below 1 where the band's
+least is (:func:`covers`); persistence and the end components are then the same under
+every law of the band (the band's runs are among the law's, and a hypothesis persistent
+in every state of an end component stays so on each of them).  A candidate that stays
+or keeps at a law that does not cover the band (a geometric band reaching 1, whose
+high end has no "not yet") is not used, and the answer says so.
+
+``objective = "min"``: the complement is maximised (the ``sensed-constrained`` route
+builds the complement's automaton, whose ``accept`` marks the runs failing the task);
+each candidate is judged in those terms (nature making the complement as unlikely, the
+task as likely, as it can), the upper bounds are the complement's at each law, and the
+bracket is read back, ``upper`` the returned controller's worst case (as
+:mod:`mitld_lp.routes.sensed_band` reads a minimum).
 """
 
 from __future__ import annotations
@@ -54,9 +76,10 @@ from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed_constrained import SensedConstrainedPart, SensedConstrainedRoute
 from mitld_lp.sensing.sensors import partial
 from mitld_lp.solvers.result import Status
+from mitld_lp.solvers.rounding import float_up, one_minus
 
 __all__ = ["SensedBandConstrainedRoute", "SensedBandConstrainedPart", "Judged", "judge",
-           "ROUNDS"]
+           "ROUNDS", "covers"]
 
 log = logging.getLogger(__name__)
 
@@ -150,30 +173,16 @@ class SensedBandConstrainedRoute(Route):
             and (posed.problem.constrained or self.every)
 
     def refusal(self, posed: Posed) -> list[str]:
-        from mitld_lp.logic.fragment import CO_SAFE
-        from mitld_lp.problem import band_text, complement_class
+        from mitld_lp.problem import complement_class
 
         # the sensed-constrained route's own conditions at a point law for the task
-        # maximised (its class, the sensors'); the band, and a minimum with it, are this
-        # route's
+        # maximised (its class, the sensors'); the band, and a minimum with it (the
+        # complement maximised, module docs), are this route's
         asked = replace(posed, robust=False)
         if posed.minimise:
             asked = replace(asked, fragment=complement_class(posed.fragment),
                             problem=replace(posed.problem, objective="max"))
-        refused = SensedConstrainedRoute().refusal(asked)
-        if asked.fragment != CO_SAFE:
-            article = "an" if asked.fragment[0] in "aeiou" else "a"
-            refused.append(f"{article} {asked.fragment} task with constraints or then, "
-                           "sensors that miss events and a law known only within a band "
-                           f"({band_text(posed.model)}): not solved (the controller's "
-                           "interval chain judges reaching the task's goal, not keeping "
-                           "in an end component); give the event a point law")
-        if posed.minimise:
-            refused.append(f"objective min with constraints, sensors that miss events and "
-                           f"a law known only within a band ({band_text(posed.model)}): not "
-                           "solved (the worst case over the band is judged for a maximised "
-                           "task); give the event a point law or maximise")
-        return refused
+        return SensedConstrainedRoute().refusal(asked)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Any:
         """The joint automaton and its information-state product at the band's middle
@@ -183,6 +192,35 @@ class SensedBandConstrainedRoute(Route):
     def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
         return _solve(posed, built, costs=costs, seed=seed)
+
+
+def covers(result: Result) -> bool:
+    """Whether the law ``result``'s information states were built at gives every outcome
+    of a step that some law of its band gives (module docs): at each clock of each band
+    event, its hazard positive where the band's greatest is, below 1 where the band's
+    least is."""
+    for c in result.sta.clocks.values():
+        if not c.distribution.is_ambiguous:
+            continue
+        for t in range(c.cap + 1):
+            h, (lo, hi) = c.hazard(t), c.band(t)
+            if (hi > 0.0 and h <= 0.0) or (lo < 1.0 and h >= 1.0):
+                return False
+    return True
+
+
+def _stays(result: Result) -> bool:
+    """Whether ``result``'s policy stays (or keeps) anywhere with positive probability."""
+    part = result.part
+    prob, merged = getattr(part, "prob", None), getattr(part, "merged", None)
+    return prob is not None and merged is not None and bool(np.any(prob[merged.keep] > 0))
+
+
+def _terms(r: Result) -> tuple[float, float]:
+    """``r``'s bracket in the solved automaton's terms: a minimum's complement's."""
+    if r.complemented:
+        return r.complement if r.complement is not None else (1.0 - r.upper, 1.0 - r.lower)
+    return r.lower, r.upper
 
 
 def _at(posed: Posed, laws: Mapping[str, Any] | None, cons: tuple[Any, ...] | None) -> Posed:
@@ -227,6 +265,7 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
     laws_to_try: list[tuple[str, Mapping[str, Any] | None]] = [
         ("middle law", None), *end_laws(posed.model.distributions)]
     at: dict[str, tuple[Posed, Any]] = {}
+    skipped: list[str] = []
     for label, laws in laws_to_try:  # each law's own LP, judged
         here = _at(posed, laws, None)
         b = built if laws is None else inner.build(here, progress=s.progress)
@@ -239,7 +278,12 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         if r.controller is None:
             continue
         if r.status is Status.OPTIMAL:
-            uppers[label] = r.upper
+            uppers[label] = _terms(r)[1]
+        if _stays(r) and not covers(r):
+            log.info("the candidate at the band's %s stays where its law does not cover "
+                     "the band: not used (module docs)", label)
+            skipped.append(label)
+            continue
         tried.append((label, r, judge(r, cons, s.max_states)))
         at[label] = (here, b)
     if tried and not any(j.holds for _, _, j in tried):
@@ -251,7 +295,7 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         for attempt in range(1, ROUNDS + 1):
             r = inner.solve(_at(here, None, _tightened(cons, j.values, margins)), b,
                             costs=costs, seed=seed)
-            if r.controller is None:
+            if r.controller is None or (_stays(r) and not covers(r)):
                 break
             j = judge(r, cons, s.max_states)
             tried.append((f"{label}, tightened {attempt}", r, j))
@@ -265,6 +309,9 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         said = "; ".join(f"{name}: " + ", ".join(
             f"{v.constraint.text} worst case {v.certified:.6g}" for v in j.values
             if not v.holds) for name, _, j in tried) or "no controller at any law"
+        if skipped:
+            said += ("; not used, staying where the law does not give every outcome the "
+                     "band gives: the candidate at the " + ", ".join(skipped))
         message = ("failed: no candidate controller meets every constraint under every law "
                    f"of the band ({said}); whether one exists is not known")
         values = tuple(replace(v, holds=False) for v in first.constraints)
@@ -275,17 +322,20 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
                        part=replace(first.part, constraints=values, message=message),
                        timings={**first.timings, "band": time.perf_counter() - t0})
     name, r, j = max(good, key=lambda t: t[2].lower)
-    lower = float(min(j.lower, upper))
+    lower = float(min(j.lower, upper))  # the complement's, for a minimum
     width = upper - lower
     cut = float(min(max(j.truncated_won - lower, 0.0), width))
     closed = width - cut <= s.precision * max(lower, 0.0)
     said = ", ".join(f"{k} {v!r}" for k, v in uppers.items())
-    detail = (f"lower {lower!r}: the worst case over the band of the sensed-constrained "
-              f"controller at the {name} on its chain ({j.n_states} states); upper "
-              f"{upper!r}: the least of the constrained optima's upper bounds at the "
-              f"band's laws ({said}); gap {width:.3g}, of which {cut:.3g} the truncation's; "
-              f"the rest " + ("within" if closed else "beyond") +
-              f" the precision {s.precision:g}")
+    terms = "the complement's " if r.complemented else ""
+    detail = (f"{terms}lower {lower!r}: the worst case over the band of the "
+              f"sensed-constrained controller at the {name} on its chain ({j.n_states} "
+              f"states); {terms}upper {upper!r}: the least of the constrained optima's upper "
+              f"bounds at the band's laws ({said}); gap {width:.3g}, of which {cut:.3g} the "
+              f"truncation's; the rest " + ("within" if closed else "beyond") +
+              f" the precision {s.precision:g}" + (
+                  f"; not used (staying where the law does not give every outcome the band "
+                  f"gives): the candidate at the {', '.join(skipped)}" if skipped else ""))
     held = "; ".join(f"{v.constraint.text}: worst case {v.certified!r}" for v in j.values)
     checks = (*r.checks, Check("worst case over the band", closed, detail),
               Check("constraints under every law of the band", True, held or "none"))
@@ -303,16 +353,22 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         extra["secondary"] = j.cost[1]
         checks += (Check("worst expected cost over the band", bool(np.isfinite(j.cost[1])),
                          f"E(cost) in [{j.cost[0]!r}, {j.cost[1]!r}] at the worst law"),)
+    bracket: tuple[float, float] = (lower, upper)
+    complement = None
+    if r.complemented:  # read back: Pmin(task) = 1 - Pmax(not task)
+        complement, bracket = bracket, one_minus(lower, upper)
     message = ("" if closed else
                f"not certified: the worst case over the band of an observation-based "
-               f"controller meeting the constraints under every law is in [{lower!r}, "
-               f"{upper!r}] (gap {width:.3g}); both ends sound")
+               f"controller meeting the constraints under every law is in "
+               f"[{bracket[0]!r}, {bracket[1]!r}] (gap {width:.3g}); both ends sound")
     part = SensedBandConstrainedPart(
         **{f.name: getattr(r.part, f.name) for f in dataclasses.fields(r.part)},
         worst=j, chosen_at=name, point_uppers=uppers)
     part = replace(part, constraints=j.values, message=message or r.part.message, **extra)
-    result = replace(r, model=posed.model, lower=lower, upper=upper, value=lower,
-                     certified=all(c.passed for c in checks), checks=checks, part=part,
+    result = replace(r, model=posed.model, lower=bracket[0], upper=bracket[1],
+                     value=bracket[1] if r.complemented else bracket[0],
+                     complement=complement, certified=all(c.passed for c in checks),
+                     checks=checks, part=part,
                      bands=_bands(r), width={"total": width, "truncation": cut,
                                              "band": max(width - cut, 0.0)},
                      timings={**r.timings, "band": time.perf_counter() - t0})
@@ -340,7 +396,11 @@ def _unconstrained_upper(posed: Posed) -> float:
     except (ProblemError, ProductTooLarge) as exc:
         log.info("the sensed optimum over the band without constraints not used: %s", exc)
         return float("nan")
-    return r.upper if r.controller is not None else float("nan")
+    if r.controller is None:
+        return float("nan")
+    if posed.minimise and not r.complemented:  # the complement's upper, read back
+        return r.complement[1] if r.complement is not None else float_up(1.0 - r.lower)
+    return _terms(r)[1]
 
 
 def _bands(r: Result) -> dict[str, str]:

@@ -188,8 +188,66 @@ def worst_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_
 def reach_min(chain: BandChain, target: np.ndarray, *, tol: float = 1e-13,
               max_iterations: int = 1_000_000) -> float:
     """Nature's least probability of reaching ``target`` from state 0, a sound lower
-    bound (value iteration from below, less the floats' rounding allowance)."""
+    bound: nature's best strategy's value (:func:`_min_strategy`), lowered by a margin
+    and proven a sub-solution; where that proof fails, value iteration from below
+    (until no value changes by more than ``tol``, at most ``max_iterations`` rounds),
+    less the floats' rounding allowance.  (Value iteration alone crawls where the
+    controller keeps a run in a loop it leaves with a tiny probability, as a kept
+    safety task's does.)"""
+    proven = _min_strategy(chain, np.asarray(target, dtype=bool))
+    if proven is not None:
+        return proven
     return _from_below(chain, target, tol, max_iterations)[0]
+
+
+def _avoiders(chain: BandChain, target: np.ndarray) -> np.ndarray:
+    """The states from which nature keeps the run out of ``target`` for ever: the
+    greatest set of non-target states each with a choice whose every successor is in
+    it (their least probability is 0; every end component of nature's outside
+    ``target`` lies in it)."""
+    m, starts = chain.matrix, chain.row_groups[:-1]
+    inside = ~target
+    while True:
+        leaks = m @ (~inside).astype(np.float64)
+        ok = np.maximum.reduceat((leaks == 0.0).astype(np.int8), starts) > 0 \
+            if m.shape[0] else np.zeros(0, dtype=bool)
+        now = inside & ok
+        if np.array_equal(now, inside):
+            return inside
+        inside = now
+
+
+def _min_strategy(chain: BandChain, target: np.ndarray,
+                  margins: tuple[float, ...] = (1e-15, 1e-14, 1e-13, 1e-12),
+                  max_rounds: int = 200) -> float | None:
+    """Nature's least probability of reaching ``target`` from state 0 by strategy
+    improvement, the states of :func:`_avoiders` held at 0 (the rest then has no end
+    component, so the one-step operator has one fixed point there and any vector below
+    every corner's one-step image, a sub-solution, is below it): the value lowered by a
+    margin times one plus nature's greatest expected number of steps before the run
+    reaches ``target`` or those states (each state then has a slack of the margin below
+    every corner's step), checked to be a sub-solution, the least of ``margins`` that
+    passes (the floats' rounding eats the smaller ones on a large chain); None where
+    none does."""
+    n = chain.n_states
+    zero = _avoiders(chain, target)
+    rest = ~zero & ~target
+    v, _ = _strategy_value(chain, target, np.zeros(n), True, max_rounds, minimise=True,
+                           zero=zero)
+    steps, _ = _strategy_value(chain, np.zeros(n, dtype=bool), rest.astype(np.float64),
+                               False, max_rounds, zero=zero | target)
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(steps))):
+        return None
+    m, groups = chain.matrix, chain.row_groups
+    for margin in margins:
+        w = np.where(rest, np.maximum(v - margin * (1.0 + steps), 0.0), 0.0)
+        w[target] = 1.0
+        step = np.minimum.reduceat(m @ w, groups[:-1]) if m.shape[0] else w
+        if np.all(w[rest] <= step[rest]):
+            return float(w[0])
+    log.info("nature's least reaching probability not proven by its strategy; value "
+             "iteration from below instead")
+    return None
 
 
 @dataclass(frozen=True, slots=True)
@@ -258,26 +316,60 @@ def _live(rows: sp.csr_array, seeds: np.ndarray) -> np.ndarray:
     return live
 
 
+def _endless(rows: sp.csr_array, gain: np.ndarray) -> np.ndarray:
+    """The states of the chain ``rows`` (a row may be empty: a state held at 0) from which
+    it reaches a bottom strongly connected component holding a positive ``gain``: their
+    expected total is infinite (solving for it would meet a singular system)."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = rows.shape[0]
+    n_comp, comp = connected_components(rows, directed=True, connection="strong")
+    coo = rows.tocoo()
+    on = coo.data > 0.0
+    src, dst = coo.row[on], coo.col[on]
+    bottom = np.ones(n_comp, dtype=bool)
+    bottom[comp[src[comp[src] != comp[dst]]]] = False
+    has_exit = np.zeros(n, dtype=bool)
+    has_exit[src] = True
+    rewarded = np.zeros(n_comp, dtype=bool)
+    rewarded[comp[(gain > 0) & has_exit]] = True  # an empty row ends the run
+    seeds = bottom[comp] & rewarded[comp]
+    return _live(rows, seeds) if seeds.any() else seeds
+
+
 def _strategy_value(chain: BandChain, goal: np.ndarray, gain: np.ndarray, prob: bool,
-                    max_rounds: int) -> tuple[np.ndarray, int]:
+                    max_rounds: int, *, minimise: bool = False,
+                    zero: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Nature's best strategy's values by strategy improvement: each strategy's chain
     solved exactly (in floats), improved where some corner does better by more than
-    1e-12; reaching ``goal`` (``prob``) or the total ``gain``; infinite where a
-    strategy keeps a reward for ever."""
+    1e-12; reaching ``goal`` (``prob``) or the total ``gain``, the greatest (or the
+    least, ``minimise``); the states of ``zero`` held at 0 (their rows dropped);
+    infinite where a strategy keeps a reward for ever."""
     from scipy.sparse.linalg import spsolve
 
     m, groups, n = chain.matrix, chain.row_groups, chain.n_states
     owner = np.repeat(np.arange(n), np.diff(groups))
+    keep = None if zero is None else sp.diags_array((~zero).astype(np.float64))
 
     def solve(rows: sp.csr_array) -> np.ndarray:
+        if keep is not None:
+            rows = sp.csr_array(keep @ rows)
         v = goal.astype(np.float64)
-        live = np.flatnonzero(_live(rows, goal if prob else gain > 0) & ~goal)
+        live_at = _live(rows, goal if prob else gain > 0) & ~goal
+        if not prob:  # a reward for ever where a bottom component holds one
+            endless = _endless(rows, gain)
+            v[endless] = np.inf
+            live_at &= ~endless
+        live = np.flatnonzero(live_at)
         if live.size:
             sub = sp.csc_array(sp.eye(live.size) - rows[live][:, live])
             b = (rows[live][:, np.flatnonzero(goal)].sum(axis=1) if prob else gain[live])
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # a singular system: a reward for ever
-                x = np.atleast_1d(spsolve(sub, np.asarray(b, dtype=np.float64).ravel()))
+                try:
+                    x = np.atleast_1d(spsolve(sub, np.asarray(b, dtype=np.float64).ravel()))
+                except RuntimeError:  # SuperLU's word for an exactly singular one
+                    x = np.full(live.size, np.inf)
             v[live] = np.where(np.isfinite(x) & (x >= -1e-12), np.maximum(x, 0.0), np.inf)
         return v
 
@@ -286,10 +378,11 @@ def _strategy_value(chain: BandChain, goal: np.ndarray, gain: np.ndarray, prob: 
     while rounds < max_rounds and np.all(np.isfinite(v)):
         q = m @ v + gain[owner]
         better = strategy.copy()
+        sign = -1.0 if minimise else 1.0
         for s in np.flatnonzero(np.diff(groups) > 1).tolist():
             lo, hi = int(groups[s]), int(groups[s + 1])
-            k = lo + int(np.argmax(q[lo:hi]))
-            if q[k] > q[strategy[s]] + 1e-12 * (1.0 + abs(q[strategy[s]])):
+            k = lo + int(np.argmax(sign * q[lo:hi]))
+            if sign * (q[k] - q[strategy[s]]) > 1e-12 * (1.0 + abs(q[strategy[s]])):
                 better[s] = k
         if np.array_equal(better, strategy):
             break
