@@ -18,6 +18,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.crossover import polish
 from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
 from mitld_lp.solvers.graph import Blocks, Sense, gather_ranges, row_entries, segmented_argmax
+from mitld_lp.solvers.greedy_block import certified_greedy
 from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one
 from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
@@ -253,7 +254,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
-    iterations = calls = n_columns = n_kept = n_eliminated = 0
+    iterations = calls = n_columns = n_kept = n_eliminated = n_greedy = 0
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     for level in tracked(blk.walk(skip=q.zero), progress, lambda lv: lv.states.size,
                          total=todo, desc="block LPs", unit=" states", leave=False):
@@ -265,6 +266,13 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
             continue
         block = Block.of(q, rest)
         lp = block_lp(block, values)
+        greedy = None if bounds is None or not settings.greedy else certified_greedy(
+            block, lp.objective, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
+            settings.tol, settings.precision)
+        if greedy is not None:  # the LP's optimality conditions hold: no solver call
+            values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
+            weights[block.choices], n_greedy = greedy.weights, n_greedy + rest.size
+            continue
         tight = (None if bounds is None else
                  tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
                             q.sense))
@@ -299,6 +307,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                   if bounds is not None and calls else "")
                + (f"; {n_eliminated} single-choice block states eliminated"
                   if n_eliminated else "")
+               + (f"; {n_greedy} block states by the bounds' greedy policy, certified"
+                  if n_greedy else "")
                + (f"; {worst.message}" if worst.message else ""))
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
