@@ -6,6 +6,7 @@ hand block in Fractions."""
 
 from __future__ import annotations
 
+import re
 from fractions import Fraction
 
 import numpy as np
@@ -165,7 +166,8 @@ def _whole(mdp: MDP):
 def test_a_losing_greedy_policy_is_refused(seed: int) -> None:
     """With the optimal values as the bound the greedy policy is certified, with its
     values; with a bound that ranks a clearly losing choice first (the optimum raised
-    on that choice's own successors) it is refused."""
+    on that choice's own successors) it is refused at that choice's state and every
+    state upstream of it; the states downstream keep the optimum."""
     mdp = _tied(seed)
     want = _linprog_max(mdp)
     q, block, kept = _whole(mdp)
@@ -191,7 +193,20 @@ def test_a_losing_greedy_policy_is_refused(seed: int) -> None:
         pytest.skip("no losing choice with successors of its own")
     bent = v.copy()
     bent[succ] += 2.0 * loss[c] / inner[[c]].data.sum()  # the choice now scores best
-    assert certified_greedy(block, reward, bent, Sense.MAX, 1e-9, 1e-6) is None
+    part = certified_greedy(block, reward, bent, Sense.MAX, 1e-9, 1e-6)
+    if part is None:  # every state can reach the one that fails
+        return
+    assert s in part.left
+    # the settled states (those that cannot reach a failing one) have the optimum
+    settled = np.setdiff1d(np.arange(v.size), part.left)
+    np.testing.assert_allclose(part.values[settled], v[settled], atol=1e-9)
+    graph = np.zeros((v.size, v.size), dtype=bool)  # state -> successor, any choice
+    coo = sp.coo_array(inner)
+    graph[owner[coo.row], coo.col] = True
+    reach = graph | np.eye(v.size, dtype=bool)
+    for _ in range(int(np.ceil(np.log2(v.size))) + 1):  # paths of every length
+        reach = (reach.astype(np.int64) @ reach.astype(np.int64)) > 0
+    assert not reach[np.ix_(settled, [s])].any()
 
 
 def test_hand_block_in_fractions() -> None:
@@ -209,7 +224,7 @@ def test_hand_block_in_fractions() -> None:
                   np.array(reward, dtype=float))
     got = certified_greedy(block, block.to_target, np.array([0.499, 0.499]), Sense.MAX,
                            1e-9, 1e-6)
-    assert got is not None and got.optimal
+    assert got is not None and got.left.size == 0
     np.testing.assert_allclose(got.values, [float(v0), float(v1)], rtol=1e-15)
     assert got.chosen[0] in (0, 1) and got.chosen[1] in (3, 4)
     assert got.weights.sum() == 2.0 and got.weights[got.chosen].sum() == 2.0
@@ -235,3 +250,46 @@ def test_chain_solve_matches_a_dense_solve() -> None:
     rhs = rng.random((n, 2))
     want = np.linalg.solve(np.eye(n) - q.toarray(), rhs)
     np.testing.assert_allclose(chain_solve(q, rhs), want, rtol=1e-12)
+
+
+def test_a_level_of_two_components_is_settled_apart() -> None:
+    """A block of two components of one level, the greedy policy losing in one of
+    them: the other is settled by the certificate, the LP solves the first alone, and
+    the values are linprog's."""
+    a, b = _tied(0), _tied(1)
+    na, nb = a.n_states, b.n_states
+    matrix = sp.block_diag([a.matrix, b.matrix], format="csr")
+    both = MDP(matrix=sp.csr_array(matrix),
+               row_groups=np.concatenate([a.row_groups, a.row_groups[-1] + b.row_groups[1:]]),
+               choice_actions=np.zeros(matrix.shape[0], dtype=np.int32),
+               action_names=("a",), initial=0,
+               target=np.concatenate([a.target, b.target]),
+               sink=np.concatenate([a.sink, b.sink]),
+               truncated=np.zeros(na + nb, dtype=bool), states=tuple(range(na + nb)))
+    want = _linprog_max(both)
+    # the optimum as the lower bound, except that in the first half a state's worst
+    # choice is made greedy by raising its successors' bounds
+    lower = want.copy()
+    p = a.matrix.toarray()
+    score = p @ want[:na]
+    owner = np.repeat(np.arange(na), np.diff(a.row_groups))
+    loss = want[owner] - score
+    loss[a.target[owner] | a.sink[owner]] = 0.0
+    live = ~(a.target | a.sink)
+    for c in np.argsort(-loss):  # a losing choice to live successors of its own
+        succ, mine = np.flatnonzero(p[c] > 0), owner[c]
+        others = [d for d in range(a.row_groups[mine], a.row_groups[mine + 1]) if d != c]
+        if (loss[c] > 1e-3 and live[succ].all() and mine not in succ
+                and not (p[others][:, succ] > 0).any()):
+            break
+    else:
+        pytest.fail("no losing choice with live successors of its own")
+    lower[succ] += 2.0 * loss[c] / p[c, succ].sum()
+    it = interval_iteration(both, both.target, gap="max", progress=False)
+    got = solve_lp(both, both.target, everywhere=True, bounds=(lower, it.upper))
+    assert got.values is not None and got.status.value == "optimal"
+    np.testing.assert_allclose(got.values, want, atol=1e-8)
+    settled = int(re.search(r"(\d+) block states by the bounds' greedy policy",
+                            got.message).group(1))
+    assert 0 < settled
+    assert re.search(r"[1-9]\d* block LP", got.message)

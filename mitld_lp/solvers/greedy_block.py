@@ -17,7 +17,12 @@ state's threshold (``tol``, and ``precision`` of its value) over the policy's lo
 expected exit time, and the policy's own choices must meet their equations to that
 scale too (the evaluation's residual).  Where the test holds, the block's answer is
 what the crossover would accept from the interior-point solution, at the cost of one
-evaluation of a chain; where it fails anywhere, the block goes to the LP as before.
+evaluation of a chain.  Where it fails, at a state and at every state that can reach
+one (by any choice), the values may change; the other states form a set that no
+choice leaves but downwards and on which the test holds throughout, so the
+certificate proves their values alone, and the LP (pruned, eliminated and polished as
+before) is solved over the failing states and those upstream of them, with the
+settled ones as exits.
 
 Which policy: greedy on the bound that a greedy policy's value lies beyond (a
 maximum's lower bound, a minimum's upper: :func:`mitld_lp.solvers.crossover.
@@ -40,16 +45,22 @@ switches whose gains were below 3e-16 of the values, float64 noise.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.crossover import Polished
-from mitld_lp.solvers.graph import Sense, graph_blocks, rows_dot, segmented_argmax
+from mitld_lp.solvers.graph import (
+    Sense,
+    backward_reachable,
+    graph_blocks,
+    rows_dot,
+    segmented_argmax,
+)
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.topological import Block, transient_solve
 
-__all__ = ["certified_greedy", "chain_solve"]
+__all__ = ["Greedy", "certified_greedy", "chain_solve"]
 
 logger = logging.getLogger(__name__)
 
@@ -77,12 +88,34 @@ def chain_solve(chain: sp.csr_array, rhs: np.ndarray) -> np.ndarray:
     return x
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Greedy:
+    """The greedy policy of a block's bounds and what its certificate settles: its
+    choice (local), value and one-hot weights in every state, exact LP answers on the
+    states that cannot reach one where the certificate fails; ``left`` (local state
+    indices, sorted) are the others, for the LP."""
+
+    chosen: np.ndarray
+    values: np.ndarray
+    weights: np.ndarray
+    left: np.ndarray
+
+    @property
+    def n_settled(self) -> int:
+        return int(self.chosen.size - self.left.size)
+
+
 def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense: Sense,
-                     tol: float, precision: float | None) -> Polished | None:
-    """The block LP's answer as the greedy policy (in ``sense``) of ``bound`` (sound
-    bounds on the block's values on the side a policy's value lies beyond: a maximum's
-    lower, a minimum's upper), if its values are dual feasible over every choice to the
-    tie scale (module docs); ``None`` if not (the caller solves the LP)."""
+                     tol: float, precision: float | None) -> Greedy | None:
+    """The block LP's answer as the greedy policy (in ``sense``) of ``bound`` (bounds
+    on the block's values on the side a policy's value lies beyond: a maximum's lower, a
+    minimum's upper; their soundness only decides how often this succeeds) where its
+    values are dual feasible to the tie scale (module docs).  A state where a choice
+    beats the policy's value, or where the evaluation's residual is above the scale,
+    fails, and so does every state of the block that can reach one (by any choice):
+    their values may change; the others form a set no choice leaves but downwards,
+    whose values and policy the certificate proves.  ``None`` if no state is settled
+    (the caller solves the whole block)."""
     groups = block.groups
     counts = np.diff(groups)
     n = counts.size
@@ -98,15 +131,23 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     slack = np.asarray(-sense.gain(reward + block.inner.astype(np.longdouble) @ v_ld,
                                    np.repeat(v_ld, counts)), dtype=np.float64)
     tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / float(np.max(steps))
-    beaten = np.repeat(tie, counts) + slack < 0.0
-    off = np.abs(slack[chosen]) > tie  # the evaluation's own residual
-    if beaten.any() or off.any():
-        logger.info("greedy policy of %d block states not certified: %d choices beat it, "
-                    "%d residuals above the tie scale; the LP solves the block", n,
-                    int(np.count_nonzero(beaten)), int(np.count_nonzero(off)))
+    owner = np.repeat(np.arange(n), counts)
+    failed = np.zeros(n, dtype=bool)
+    failed[owner[np.repeat(tie, counts) + slack < 0.0]] = True  # a choice beats it
+    failed[np.abs(slack[chosen]) > tie] = True  # the evaluation's own residual
+    left = np.flatnonzero(backward_reachable(
+        n, owner[np.repeat(np.arange(owner.size), np.diff(block.inner.indptr))],
+        block.inner.indices, failed)) if failed.any() else np.zeros(0, dtype=np.int64)
+    if left.size:
+        logger.info("greedy policy of %d block states (%d choices): %d fail its dual "
+                    "check and %d more reach them (the LP solves those)", n,
+                    block.choices.size, int(np.count_nonzero(failed)),
+                    left.size - int(np.count_nonzero(failed)))
+    else:
+        logger.info("greedy policy of %d block states (%d choices) certified by its "
+                    "dual values: no LP", n, block.choices.size)
+    if left.size == n:
         return None
     weights = np.zeros(block.choices.size)
     weights[chosen] = 1.0
-    logger.info("greedy policy of %d block states (%d choices) certified by its dual "
-                "values: no LP", n, block.choices.size)
-    return Polished(chosen, np.clip(v, 0.0, 1.0), weights, True)
+    return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left)

@@ -269,10 +269,13 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         greedy = None if bounds is None or not settings.greedy else certified_greedy(
             block, lp.objective, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
             settings.tol, settings.precision)
-        if greedy is not None:  # the LP's optimality conditions hold: no solver call
+        if greedy is not None:  # the LP's optimality conditions hold (where not: left)
             values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
-            weights[block.choices], n_greedy = greedy.weights, n_greedy + rest.size
-            continue
+            weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
+            if greedy.left.size == 0:
+                continue
+            block = Block.of(q, rest := rest[greedy.left])
+            lp = block_lp(block, values)
         tight = (None if bounds is None else
                  tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
                             q.sense))
