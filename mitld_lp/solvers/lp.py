@@ -248,7 +248,8 @@ def solve_lp(
             the bounds' greedy policy where the LP's optimality conditions (its
             values dual feasible over every choice of the block) certify it, without
             a solver call (:mod:`mitld_lp.solvers.greedy_block`); ``False``: every
-            block goes to the solver.
+            block goes to the solver.  Only on the direct Clarabel route (the
+            default): a solver named through cvxpy solves every block, as asked.
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -266,7 +267,7 @@ def solve_lp(
     )
     layout = Layout(layout)
     settings = SolveOptions(solver, backend, tol, precision, Deadline.after(time_limit, start),
-                            dict(solver_options or {}), greedy)
+                            dict(solver_options or {}), greedy and backend == "direct")
 
     def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)
