@@ -11,12 +11,14 @@ the quotient does), the primal point :math:`y_\pi` (the policy's occupancy from
 (the policy's choices are tight at its own values), so the pair is optimal as soon as
 :math:`v_\pi` is dual feasible: no choice ``c`` of a state ``s`` scores above
 :math:`v_\pi(s)`.  That is the test, over every choice of the block (not only those
-the bounds keep), with the crossover's tie scale
-(:func:`mitld_lp.solvers.crossover.polish`): a choice may score above by at most the
-state's threshold (``tol``, and ``precision`` of its value) over the policy's longest
-expected exit time, and the policy's own choices must meet their equations to that
-scale too (the evaluation's residual).  Where the test holds, the block's answer is
-what the crossover would accept from the interior-point solution, at the cost of one
+the bounds keep), on a quarter of the crossover's tie scale
+(:func:`mitld_lp.solvers.crossover.polish`): a choice may score above by at most a
+quarter of the state's threshold (``tol``, and ``precision`` of its value) over the
+policy's longest expected exit time, and the policy's own choices must meet their
+equations to that scale too (the evaluation's residual); the rest of the threshold
+is left to the certificate that checks the answer afterwards
+(:mod:`mitld_lp.solvers.certify`).  Where the test holds, the block's answer is what
+the crossover would accept from the interior-point solution, at the cost of one
 evaluation of a chain.  Where it fails, at a state and at every state that can reach
 one (by any choice), the values may change; the other states form a set that no
 choice leaves but downwards and on which the test holds throughout, so the
@@ -130,7 +132,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     # how far each choice's score falls short of its state's value (below 0: it beats it)
     slack = np.asarray(-sense.gain(reward + block.inner.astype(np.longdouble) @ v_ld,
                                    np.repeat(v_ld, counts)), dtype=np.float64)
-    tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / float(np.max(steps))
+    tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / (_SHARE * float(np.max(steps)))
     owner = np.repeat(np.arange(n), counts)
     failed = np.zeros(n, dtype=bool)
     failed[owner[np.repeat(tie, counts) + slack < 0.0]] = True  # a choice beats it
@@ -151,3 +153,8 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     weights = np.zeros(block.choices.size)
     weights[chosen] = 1.0
     return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left)
+
+
+_SHARE = 4.0
+"""The greedy policy's loss may take a quarter of each state's threshold (as the policy
+jump's shift does, :mod:`mitld_lp.solvers.iteration`); the rest is the certificate's."""
