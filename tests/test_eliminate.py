@@ -106,9 +106,12 @@ def test_default_route_with_elimination_keeps_values_and_policy(
                      self_loop_fraction=0.0, max_choices=4, max_successors=3)
     want = _dense_values(mdp, mdp.target)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
-    plain = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
+    # the LP itself (the bounds' greedy policy, certified, would skip it)
+    plain = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper),
+                     greedy=False)
     _forced(monkeypatch)
-    reduced = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
+    reduced = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper),
+                       greedy=False)
     assert re.search(r"\d+ single-choice block states eliminated", reduced.message)
     assert reduced.status.value == "optimal"
     assert reduced.values is not None and plain.policy is not None
@@ -141,6 +144,7 @@ def test_bundled_case_answer_unchanged_within_its_bracket(
     reduced = []
     monkeypatch.setattr(lp, "eliminate", lambda *a: reduced.append(elim.eliminate(*a))
                         or reduced[-1])
+    monkeypatch.setattr(lp, "certified_greedy", lambda *a: None)  # every block solved
     after = synthesize(model)
     assert any(r is not None and r.n_m < r.n_states for r in reduced)
     assert after.certified and before.certified

@@ -10,7 +10,7 @@ import numpy as np
 __all__ = ["gauss_seidel"]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
            minimise):  # pragma: no cover - compiled
     k = local.shape[1]
@@ -38,7 +38,7 @@ def update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
         elif val < local[s, j]:
             local[s, j] = val
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def update2(indptr, indices, data, starts, leave, exits, local, s,
             minimise):  # pragma: no cover - compiled
     lo_best = np.inf if minimise else -np.inf
@@ -53,12 +53,13 @@ def update2(indptr, indices, data, starts, leave, exits, local, s,
                 lo += w * local[t, 0]
                 hi += w * local[t, 1]
         lv = leave[c]
-        if lv > 0.0:
-            lo /= lv
-            hi /= lv
-        else:
-            lo = 0.0
-            hi = 0.0
+        if lv != 1.0:  # most choices have no self-loop: x / 1.0 is x, and no divide
+            if lv > 0.0:
+                lo /= lv
+                hi /= lv
+            else:
+                lo = 0.0
+                hi = 0.0
         if minimise:
             lo_best = min(lo_best, lo)
             hi_best = min(hi_best, hi)

@@ -205,6 +205,7 @@ def solve_lp(
     solver_options: Mapping[str, Any] | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
     progress: bool | None = None,
+    greedy: bool = True,
 ) -> LPResult:
     """Maximal (``sense=Sense.MIN``: minimal) probability of reaching ``target`` from
     ``mdp.initial``, by the occupancy LP.
@@ -243,6 +244,12 @@ def solve_lp(
             wrong bound costs time, never the answer).
         progress: a bar over the blocks' states (:mod:`mitld_lp.util.progress`:
             ``None`` on a terminal only).
+        greedy: with ``bounds`` and ``Layout.BLOCKS``, a block is first answered by
+            the bounds' greedy policy where the LP's optimality conditions (its
+            values dual feasible over every choice of the block) certify it, without
+            a solver call (:mod:`mitld_lp.solvers.greedy_block`); ``False``: every
+            block goes to the solver.  Only on the direct Clarabel route (the
+            default): a solver named through cvxpy solves every block, as asked.
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -260,7 +267,7 @@ def solve_lp(
     )
     layout = Layout(layout)
     settings = SolveOptions(solver, backend, tol, precision, Deadline.after(time_limit, start),
-                            dict(solver_options or {}))
+                            dict(solver_options or {}), greedy and backend == "direct")
 
     def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)

@@ -26,6 +26,7 @@ from mitld_lp.solvers.graph import (
     row_entries,
     segmented_argmax,
 )
+from mitld_lp.solvers.greedy_block import certified_greedy
 from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one
 from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
@@ -322,7 +323,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
-    iterations = calls = n_columns = n_kept = n_eliminated = 0
+    iterations = calls = n_columns = n_kept = n_eliminated = n_greedy = 0
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     singles = SingleLevels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
@@ -338,6 +339,16 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
             continue
         block = Block.of(q, rest)
         lp = block_lp(block, values)
+        greedy = None if bounds is None or not settings.greedy else certified_greedy(
+            block, lp.objective, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
+            settings.tol, settings.precision)
+        if greedy is not None:  # the LP's optimality conditions hold (where not: left)
+            values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
+            weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
+            if greedy.left.size == 0:
+                continue
+            block = Block.of(q, rest := rest[greedy.left])
+            lp = block_lp(block, values)
         tight = (None if bounds is None else
                  tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
                             q.sense))
@@ -372,6 +383,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
                   if bounds is not None and calls else "")
                + (f"; {n_eliminated} single-choice block states eliminated"
                   if n_eliminated else "")
+               + (f"; {n_greedy} block states by the bounds' greedy policy, certified"
+                  if n_greedy else "")
                + (f"; {worst.message}" if worst.message else ""))
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"

@@ -39,6 +39,9 @@ class SolveOptions:
             (``None``: the tolerance alone).
         deadline: when the solve must stop.
         extra: the caller's own solver keywords (they override the tolerance ones).
+        greedy: a block with sound bounds is first answered by their greedy policy
+            where the LP's optimality conditions certify it, without a solver call
+            (:mod:`mitld_lp.solvers.greedy_block`); ``False``: every block is solved.
     """
 
     solver: str
@@ -47,3 +50,4 @@ class SolveOptions:
     precision: float | None = None
     deadline: Deadline = Deadline()
     extra: Mapping[str, Any] = field(default_factory=dict)
+    greedy: bool = True
