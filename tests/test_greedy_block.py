@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers import lp_blocks
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.greedy_block import certified_greedy, chain_solve
 from mitld_lp.solvers.iteration import interval_iteration
@@ -22,6 +23,13 @@ from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block
 from mitld_lp.testing import random_mdp
+
+
+@pytest.fixture(autouse=True)
+def _every_block_size(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The greedy policy tried on these small blocks too (the package tries it from
+    lp_blocks.GREEDY_MIN_CHOICES choices on)."""
+    monkeypatch.setattr(lp_blocks, "GREEDY_MIN_CHOICES", 0)
 
 
 def _twinned(base: MDP) -> MDP:

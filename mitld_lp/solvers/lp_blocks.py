@@ -128,6 +128,14 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
 
 
 RUNS_MIN_LEVELS = 16
+
+#: The fewest choices of a block the bounds' greedy policy may answer
+#: (:mod:`mitld_lp.solvers.greedy_block`): below it the block goes to the LP solver, so
+#: an ordinary product (the bundled case's blocks have a few hundred choices) is the
+#: solver's occupancy LP with its own duals, the interval iteration an independent
+#: cross-check; above it the interior-point method's cost (6 s an iteration on QVBS
+#: zeroconf 1000-4's 400,806 choices) is what the certificate of the greedy policy saves.
+GREEDY_MIN_CHOICES = 10_000
 """Levels from which :func:`solve_decomposed` and :func:`policy_flow` take the single
 states a run of levels at a time from arrays gathered once
 (:class:`~mitld_lp.solvers.topological.SingleLevels`), not level by level (same
@@ -339,7 +347,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
             continue
         block = Block.of(q, rest)
         lp = block_lp(block, values)
-        greedy = None if bounds is None or not settings.greedy else certified_greedy(
+        greedy = None if (bounds is None or not settings.greedy
+                          or block.choices.size < GREEDY_MIN_CHOICES) else certified_greedy(
             block, lp.objective, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
             settings.tol, settings.precision)
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)

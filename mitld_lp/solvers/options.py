@@ -39,9 +39,11 @@ class SolveOptions:
             (``None``: the tolerance alone).
         deadline: when the solve must stop.
         extra: the caller's own solver keywords (they override the tolerance ones).
-        greedy: a block with sound bounds is first answered by their greedy policy
-            where the LP's optimality conditions certify it, without a solver call
-            (:mod:`mitld_lp.solvers.greedy_block`); ``False``: every block is solved.
+        greedy: a block with sound bounds and at least
+            :data:`mitld_lp.solvers.lp_blocks.GREEDY_MIN_CHOICES` choices is first
+            answered by their greedy policy where the LP's optimality conditions
+            certify it, without a solver call (:mod:`mitld_lp.solvers.greedy_block`);
+            ``False``: every block is solved.
     """
 
     solver: str
