@@ -6,7 +6,6 @@ the package's solvers."""
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -24,11 +23,6 @@ settings.register_profile(
 )
 settings.register_profile("dev", deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
-
-# Storm's exact values are read as Fraction(str(value)): a chain of a few thousand states
-# has values whose numerator runs past Python's 4,300-digit guard on int(str) (a guard
-# against untrusted input; Storm's own output here)
-sys.set_int_max_str_digits(0)
 
 
 def build_mdp(

@@ -29,6 +29,21 @@ PROPS = ['R{"cost"}min=? [F "goal"]', 'R{"cost"}max=? [F "goal"]',
          'R{"cost"}min=? [F lost]', 'R{"cost"}max=? [F !lost]']
 
 
+def exact_fraction(value: object) -> Fraction:
+    """Storm's exact ``value`` (a rational) as a Fraction.  A chain of a few thousand
+    states has values whose numerator runs past Python's 4,300-digit guard on
+    ``int(str)`` (a guard against untrusted input; this is Storm's own output): the guard
+    is lifted for the conversion alone."""
+    import sys
+
+    kept = sys.get_int_max_str_digits()
+    sys.set_int_max_str_digits(0)
+    try:
+        return Fraction(str(value))
+    finally:
+        sys.set_int_max_str_digits(kept)
+
+
 def storm_rational(prism: Path, prop: str) -> Fraction:
     """Storm's exact value of ``prop`` at the initial state of the PRISM file ``prism``."""
     import stormpy

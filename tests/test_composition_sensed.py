@@ -20,6 +20,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 import pytest
+from storm_exact import exact_fraction
 
 from mitld_lp import GridWorld, Model, synthesize
 from mitld_lp.distributions.literal import from_table
@@ -107,7 +108,7 @@ def test_every_cell_with_a_sensor(task: str, law: str, extra: str, tmp_path: Pat
         path = write_chain(r, tmp_path / "chain.drn")
         chain = stormpy.build_model_from_drn[stormpy.Rational](str(path))
         got = stormpy.model_checking(chain, stormpy.parse_properties('P=? [F "accept"]')[0])
-        value = Fraction(str(got.get_value(chain.initial_states[0])))
+        value = exact_fraction(got.get_value(chain.initial_states[0]))
         assert Fraction(r.lower) <= value <= Fraction(r.upper), (value, r.lower, r.upper)
 
 

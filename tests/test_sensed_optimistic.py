@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from storm_exact import exact_fraction
 from test_sensed_band import GAME, worst_over_nature
 from test_sensed_band import model as bus_model
 
@@ -260,7 +261,7 @@ def storm_of(path: Path) -> Any:
 
     def storm(label: str) -> Fraction:
         got = stormpy.model_checking(chain, stormpy.parse_properties(f'P=? [F "{label}"]')[0])
-        return Fraction(str(got.get_value(chain.initial_states[0])))
+        return exact_fraction(got.get_value(chain.initial_states[0]))
     return storm
 
 
