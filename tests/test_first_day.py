@@ -18,19 +18,17 @@ ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
 BUS = MODELS / "bus_grid.toml"
 
-#: Features each refused with sensors that miss events, in one model file (each its
-#: replacements and the words its reason names): a false alarm, and a law known within a
-#: band (b1) with the objective min and a constraint (a band alone with sensors, with the
-#: objective min or a constraint, a constraint and the objective min with sensors, once
-#: refused too, are solved: tests/test_sensed_band.py, tests/test_sensed_band_extras.py,
+#: Features each refused with sensors that miss events (each its replacements in the
+#: model file, its settings and the words its reason names): a false alarm, and an exact
+#: answer (a law known within a band with the objective min and a constraint, once
+#: refused here too, is solved: tests/test_sensed_band_keep.py; a band alone with
+#: sensors, with the objective min or a constraint, and a constraint with the objective
+#: min: tests/test_sensed_band.py, tests/test_sensed_band_extras.py,
 #: tests/test_sensed_constrained.py, tests/test_sensing_tasks.py).
 FOUR = {
     "false alarm": ((("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }"),),
-                    "sensors.b2.false_alarm = 0.1"),
-    "band, min, constraint": (
-        (("mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }"),
-         ("spec = ", 'objective = "min"\nconstraints = ["P(F A) <= 0.9"]\nspec = ')),
-        "b1 ~ geometric([0.7, 0.9])"),
+                    {}, "sensors.b2.false_alarm = 0.1"),
+    "exact": ((), {"exact": True}, "exact with the sensed route"),
 }
 
 
@@ -42,26 +40,30 @@ def _sensed(features: list[str]) -> str:
     return text
 
 
+def _settings(features: list[str]):
+    return settings_from(**{k: v for name in features for k, v in FOUR[name][1].items()})
+
+
 def test_four_features_that_do_not_combine_are_refused_together():
     model = loads_model(_sensed(list(FOUR)))
     with pytest.raises(ProblemError) as info:
-        pose(model)
+        pose(model, settings=_settings(list(FOUR)))
     reasons = info.value.reasons
     assert len(reasons) == len(FOUR)
-    for name, (_, named) in FOUR.items():  # each reason names its own feature
+    for name, (_, _, named) in FOUR.items():  # each reason names its own feature
         assert sum(named in r for r in reasons) == 1, (name, reasons)
     assert str(info.value).startswith(f"not solved, for {len(FOUR)} reasons: (1) ")
     # each feature alone: its one reason, as its own message
-    for name, (_, named) in FOUR.items():
+    for name, (_, _, named) in FOUR.items():
         with pytest.raises(ProblemError) as alone:
-            pose(loads_model(_sensed([name])))
+            pose(loads_model(_sensed([name])), settings=_settings([name]))
         assert len(alone.value.reasons) == 1 and named in str(alone.value), name
 
 
 def test_one_command_line_says_every_reason(tmp_path, capsys):
     path = tmp_path / "four.toml"
     path.write_text(_sensed(list(FOUR)))
-    assert main(["solve", str(path), "--json"]) == 2
+    assert main(["solve", str(path), "--json", "--exact"]) == 2
     out, err = capsys.readouterr()
     record = json.loads(out)
     assert len(record["reasons"]) == len(FOUR) and err.count("\n") == 1
