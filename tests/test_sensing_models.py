@@ -96,6 +96,24 @@ def test_refused_by_name(extra: str, band: bool, words: str | None) -> None:
         synthesize(loads_model(text))
 
 
+@pytest.mark.parametrize("law, words", [
+    # geometric(0.4) surely happens: finite, not built (module docs of routes/sensed.py)
+    ("geometric = 0.4", "surely happens .*up to 2\\^\\(T - 1\\) report patterns"),
+    # pmf [0.3, 0.3]: never with probability 1 - 0.3 - 0.3 = 0.4, by hand
+    ("pmf = [0.3, 0.3]", "b never happens with probability 0.4\\) .*not finite"),
+])
+def test_false_alarm_refusal_says_which_case(law: str, words: str) -> None:
+    """A false alarm is refused with the reason of its case: a law that surely happens
+    gives a finite information state this construction does not build; one that may
+    never happen gives none (the belief in "never" moves with every report)."""
+    text = GRID.replace("geometric = 0.4", law) + \
+        "[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }\n"
+    with pytest.raises(ProblemError, match=words) as info:
+        synthesize(loads_model(text))
+    other = "not finite" if "surely" in words else "surely happens"
+    assert other not in str(info.value)
+
+
 def test_safety_task_solved() -> None:
     """Once refused; ``G (b -> A)`` in a world that is always at ``A`` holds surely."""
     g = ExplicitGame(initial="x", transitions={"x": {"w": {"x": 1.0}}}, labels={"x": {"A"}})

@@ -417,3 +417,69 @@ def test_random_small_worlds_equal_expectimax(seed: int) -> None:
     exact = expectimax(world, [(_frac(masses), Fraction(str(detect)))], judge, horizon,
                        sense=max if objective == "max" else min)
     _within(r, exact, width=r.sta.epsilon_achieved + 1e-7)
+
+
+def expectimax_every_step(game: ExplicitGame, masses: Sequence[Fraction], detect: Fraction,
+                          judge: Judge, horizon: int, *, false_alarm: Fraction = Fraction(0),
+                          delay: int = 0, sense: Callable[..., Fraction] = max) -> Fraction:
+    """:func:`expectimax` with a sensor that reports or not at *every* step (not only
+    until its first report): with probability ``false_alarm`` before step ``K + delay``
+    and ``detect`` from it on, each step independently; one event, ``masses`` its steps
+    1, 2, ... (the rest never).  The alive scenarios are the event's step ``k`` (None:
+    never) with the joint probability of the reports seen so far."""
+
+    def report(k: int | None, s: int) -> Fraction:
+        return detect if k is not None and s >= k + delay else false_alarm
+
+    def best(trace: list[str], alive: list[tuple[int | None, Fraction]]) -> Fraction:
+        t = len(trace) - 1
+        if t == horizon:
+            return sum((p * Fraction(judge(trace, ((k, None),))) for k, p in alive),
+                       Fraction(0))
+        values = []
+        for action in game.actions(trace[-1]):
+            v = Fraction(0)
+            for nxt, ps in game.successors(trace[-1], action, frozenset()):
+                for seen in (True, False):
+                    g = [(k, p * Fraction(str(ps)) * (report(k, t + 1) if seen
+                                                     else 1 - report(k, t + 1)))
+                         for k, p in alive]
+                    g = [(k, p) for k, p in g if p > 0]
+                    if g:
+                        v += best([*trace, nxt], g)
+            values.append(v)
+        return sense(values)
+
+    start = [(k, mu) for k, mu in enumerate(masses, start=1)]
+    never = 1 - sum(masses, Fraction(0))
+    return best([game.initial], start + ([(None, never)] if never else []))
+
+
+@pytest.mark.parametrize("detect, delay", [(0.5, 0), (0.9, 1)])
+def test_every_step_reports_without_false_alarms_give_the_first_report_optimum(
+        detect: float, delay: int) -> None:
+    """With ``false_alarm = 0`` a sensor that reports at every step (independently, from
+    ``K + delay`` on) gives the optimum of one that stops at its first report: after a
+    report every hypothesis left is due, so the later ones tell nothing
+    (docs/semantics.md, "False alarms").  The route's answer (first report) against the
+    every-step expectimax, both objectives of ``G !(b & A)`` and the maximum of a
+    deadline task (an obligation)."""
+    d = Fraction(str(detect))
+    sensors = {"b": {"detect": detect, "delay": delay}}
+    model = Model.from_game(STATION, "G !(b & A)", events={"b": pmf(list(PMF))},
+                            sensors=sensors)
+    judge = avoided(STATION, ["A"])
+    for objective, sense in (("max", max), ("min", min)):
+        exact = expectimax_every_step(STATION, _frac(PMF), d, judge, 5, delay=delay,
+                                      sense=sense)
+        _within(synthesize(model, objective=objective), exact)
+    law = f"D[pmf({', '.join(map(str, PMF))})] b & "
+    bounded = Model.from_game(STATION, law + "F(b & F[0,2] A) & G[0,6] !h",
+                              sensors=sensors)
+    judge = both(caught(STATION, "A", 2), lambda trace, _: "ditch" not in trace)
+    exact = expectimax_every_step(STATION, _frac(PMF), d, judge, 6, delay=delay)
+    _within(synthesize(bounded), exact)
+    # the per-step reports are not pure noise here: a false alarm changes the optimum
+    noisy = expectimax_every_step(STATION, _frac(PMF), d, judge, 6, delay=delay,
+                                  false_alarm=Fraction(1, 5))
+    assert noisy < exact

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
 
-__all__ = ["SensedRoute", "sensed_refusals"]
+__all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal"]
 
 
 class SensedRoute(Route):
@@ -92,10 +92,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     refused = []
     for a, s in sensors.items():
         if s.false_alarm:
-            refused.append(f"sensors.{a}.false_alarm = {s.false_alarm:g}: with false alarms "
-                           "the robot's belief depends on the time of every report, so the "
-                           "information state is not finite; not solved (give "
-                           "false_alarm = 0)")
+            refused.append(false_alarm_refusal(a, s.false_alarm, model.distributions.get(a)))
     if robust:
         refused += band_refusals(model, head, objective, constraints)
     try:
@@ -106,6 +103,30 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
                        "(event_names), so the world's state reveals it; not solved")
     return refused
+
+
+def false_alarm_refusal(event: str, false_alarm: float, law: Any) -> str:
+    """Why a sensor with false alarms is not solved: the sensor then reports or not at
+    every step, so the robot's belief reads every report, not only the first.  With a
+    law that may never happen (``never > 0``) "never" against "happened at ``k``" moves
+    by every report for ever (a random walk in the counts of reports and misses): the
+    information state is not finite.  With one that surely happens, truncated at ``T``,
+    two hypotheses whose reports are both due see the same likelihood at every later
+    step, so the weights stop changing after step ``T + delay``: finite, but each state
+    may hold one of up to ``2^(T - 1)`` report patterns where the first report alone
+    (``false_alarm = 0``) gives ``T``, and the information-state product, which counts
+    the first report only, does not build it."""
+    head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
+           "belief reads the report of every step"
+    if law is not None and float(law.never) > 0.0:
+        return (f"{head}, and with a law that may never happen ({event} never happens with "
+                f"probability {float(law.never):.6g}) the belief that {event} never "
+                "happens moves with every report for ever, so the information state is "
+                "not finite; not solved (give false_alarm = 0)")
+    return (f"{head}: finite for a law that surely happens (the weights stop changing "
+            "once every hypothesis's report is due), but up to 2^(T - 1) report patterns "
+            "a state, T the law's truncation point, which the information-state product "
+            "(the first report only) does not build; not solved (give false_alarm = 0)")
 
 
 def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[Any]

@@ -7,8 +7,9 @@ probability ``d``, independently of everything else, until it has reported it on
 happens); an event without a sensor is seen that way.
 
 ``false_alarm`` (a report in a step before the event) is read and checked here, and
-refused by name when a problem is posed (:func:`mitld_lp.synthesis.pose`): the
-information state is then not finite within this construction.
+refused by name when a problem is posed (:func:`mitld_lp.routes.sensed.false_alarm_refusal`
+says why: with a law that may never happen the information state is not finite; with
+one that surely happens it is, but this construction does not build it).
 
 A model file writes them under ``[sensors]``::
 
