@@ -42,7 +42,8 @@ from mitld_lp.files import write as files
 from mitld_lp.files.drn import DrnModel
 from mitld_lp.product import ProductState
 from mitld_lp.product.imdp import IntervalMDP, vertex_weights
-from mitld_lp.running.chain import choice_of, prop_labels, state_marks, stops
+from mitld_lp.running.chain_model import prop_labels
+from mitld_lp.running.chain_steps import choice_of, state_marks, stops
 from mitld_lp.worlds.names import state_fields
 
 __all__ = ["BandChain", "band_chain", "band_chain_of", "band_chain_drn", "band_claim",

@@ -33,24 +33,24 @@ line is followed by its valuation as a comment, as Storm's own exporter writes i
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Hashable, Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.controllers.format import ACCEPTED, REJECTED, UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.files import drn
 from mitld_lp.files import write as files
 from mitld_lp.files.drn import DrnModel
-from mitld_lp.mdp import MDP, ActionChoices
-from mitld_lp.product import Absorbing, ProductState
+from mitld_lp.mdp import MDP
+from mitld_lp.product import ProductState
 from mitld_lp.running.chain_model import CHAIN_LABELS, Chain, prop_labels, rows_matrix
+from mitld_lp.running.chain_steps import choice_of, state_marks, stops
 from mitld_lp.util.traversal import strong_components
 from mitld_lp.worlds.game import Game
-from mitld_lp.worlds.names import state_fields, state_values, valuation_text
+from mitld_lp.worlds.names import state_fields
 
 __all__ = ["Chain", "controlled_chain", "chain_of", "write_chain", "CHAIN_LABELS",
            "prop_labels", "rows_matrix", "choice_of", "stops", "state_marks"]
@@ -177,26 +177,6 @@ def controlled_chain(mdp: MDP, controller: ControllerLike, persistent: Iterable[
                  modes == _STAY, modes == _KEEP)
 
 
-def state_marks(game: Game[Any], verdicts: Any, rec: Any, props: Callable[[str], str],
-                fields: tuple[str, ...]) -> tuple[set[str], str]:
-    """The labels and the valuation text of product state ``rec`` in a chain: its world
-    propositions (``props``) and ``accept`` / ``reject`` by the controller's automaton
-    ``verdicts``; an absorbing record's own label (``accept``, ``reject``,
-    ``truncated``)."""
-    if not isinstance(rec, ProductState):
-        end = {Absorbing.TARGET: "accept", Absorbing.SINK: "reject",
-               Absorbing.TRUNCATED: "truncated"}[rec]
-        return {end}, str(rec)
-    here = {props(p) for p in game.propositions(rec.game)}
-    v = verdicts[rec.automaton][0]
-    if v == ACCEPTED:
-        here.add("accept")
-    elif v == REJECTED:
-        here.add("reject")
-    pend = ",".join(sorted(rec.pending))
-    return here, valuation_text(fields, (*state_values(game, rec.game), rec.automaton,
-                                         f"{{{pend}}}", rec.clock))
-
 
 _MODE_TEXT = {_GO: "", _STAY: " & staying=true", _KEEP: " & keeping=true"}
 
@@ -255,22 +235,6 @@ def _moves(mdp: MDP, controller: ControllerLike, i: int, mode: int,
             yield j, after, p * q
 
 
-def stops(plan: Any, rec: ProductState) -> str | None:
-    """Where a controller's ``plan`` stops at product state ``rec``: ``"accept"`` or
-    ``"reject"`` once every component of its automaton state is decided, else None."""
-    verdicts = plan.verdicts[rec.automaton]
-    if UNDECIDED in verdicts:
-        return None
-    return "accept" if verdicts[0] == ACCEPTED else "reject"
-
-
-def choice_of(mdp: ActionChoices, i: int, action: str) -> int:
-    """The choice of product state ``i`` whose action is ``action`` (the controller's)."""
-    for c in range(int(mdp.row_groups[i]), int(mdp.row_groups[i + 1])):
-        if mdp.action_name(c) == action:
-            return c
-    raise ValueError(f"product state {i}: the controller chose {action!r}, which is not "
-                     "one of its actions (the controller is not of this product)")
 
 
 def _kept_for_ever(matrix: sp.csr_array, order: list[tuple[int, int]], mdp: MDP,
