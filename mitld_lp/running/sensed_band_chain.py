@@ -39,7 +39,7 @@ from mitld_lp.running.band_chain import BAND_PROPERTY, BandChain, band_chain_drn
 from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
 __all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
-           "sensed_band_chain",
+           "reach_from_below", "sensed_band_chain",
            "sensed_band_chain_of", "sensed_band_unfolding", "sensed_band_unfolding_of",
            "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
            "BAND_PROPERTY"]
@@ -391,19 +391,29 @@ def _strategy_value(chain: BandChain, goal: np.ndarray, gain: np.ndarray, prob: 
     return v, rounds
 
 
+def reach_from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations: int,
+                     *, maximise: bool) -> tuple[np.ndarray, float, int]:
+    """Nature's least (or, ``maximise``, greatest) probability of reaching ``target``
+    from every state, by value iteration from below (each iterate: within that many
+    steps); the last change; the iterations."""
+    m = chain.matrix
+    starts = chain.row_groups[:-1]
+    best = np.maximum if maximise else np.minimum
+    v = target.astype(np.float64)
+    change, k = 1.0, 0
+    while change > tol and k < max_iterations:
+        nxt = best.reduceat(m @ v, starts) if m.shape[0] else v
+        nxt[target] = 1.0
+        change = float(np.max(nxt - v)) if v.size else 0.0
+        v, k = nxt, k + 1
+    return v, change, k
+
+
 def _from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations: int
                 ) -> tuple[float, float, int]:
     """Nature's least probability of reaching ``target`` from state 0, from below, less
     the floats' rounding allowance; the last change; the iterations."""
-    m = chain.matrix
-    starts = chain.row_groups[:-1]
-    v = target.astype(np.float64)
-    change, k = 1.0, 0
-    while change > tol and k < max_iterations:
-        nxt = np.minimum.reduceat(m @ v, starts) if m.shape[0] else v
-        nxt[target] = 1.0
-        change = float(np.max(nxt - v)) if v.size else 0.0
-        v, k = nxt, k + 1
+    v, change, k = reach_from_below(chain, target, tol, max_iterations, maximise=False)
     allowance = 4.0 * np.finfo(np.float64).eps * (k + 1)
     return max(float(v[0]) - allowance, 0.0), change, k
 

@@ -33,7 +33,11 @@ import scipy.sparse as sp
 
 from mitld_lp.running.band_chain import BandChain
 from mitld_lp.running.chain_model import Chain
-from mitld_lp.running.sensed_band_chain import reach_min, sensed_band_chain_of
+from mitld_lp.running.sensed_band_chain import (
+    reach_from_below,
+    reach_min,
+    sensed_band_chain_of,
+)
 
 __all__ = ["BestCase", "best_case", "law_chain", "is_sensed_optimistic",
            "sensed_optimistic_chain_of"]
@@ -65,10 +69,11 @@ def best_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_0
     (module docs)."""
     accept = chain.accepting()
     truncated = np.array(["truncated" in x for x in chain.labels], dtype=bool)
-    v, change, k = _max_from_below(chain, accept, tol, max_iterations)
+    v, change, k = reach_from_below(chain, accept, tol, max_iterations, maximise=True)
     rows = _attracting_rows(chain, accept, v)
     lower = reach_min(_fixed(chain, rows), accept, tol=tol, max_iterations=max_iterations)
-    won = _max_from_below(chain, accept | truncated, tol, max_iterations)[0]
+    won = reach_from_below(chain, accept | truncated, tol, max_iterations,
+                           maximise=True)[0]
     return BestCase(lower, _floor(float(v[0]), k), change, k, chain.n_states, rows,
                     _floor(float(won[0]), k))
 
@@ -102,22 +107,6 @@ def sensed_optimistic_chain_of(result: Any, controller: Any = None,
         return law_chain(part.chain, part.best.rows)
     chain = sensed_band_chain_of(result, controller, max_states)
     return law_chain(chain, best_case(chain).rows)
-
-
-def _max_from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations: int
-                    ) -> tuple[np.ndarray, float, int]:
-    """Nature's greatest probability of reaching ``target`` from every state, by value
-    iteration from below (each iterate: within that many steps); the last change; the
-    iterations."""
-    m, starts = chain.matrix, chain.row_groups[:-1]
-    v = target.astype(np.float64)
-    change, k = 1.0, 0
-    while change > tol and k < max_iterations:
-        nxt = np.maximum.reduceat(m @ v, starts) if m.shape[0] else v
-        nxt[target] = 1.0
-        change = float(np.max(nxt - v)) if v.size else 0.0
-        v, k = nxt, k + 1
-    return v, change, k
 
 
 def _attracting_rows(chain: BandChain, target: np.ndarray, v: np.ndarray) -> np.ndarray:
