@@ -164,7 +164,7 @@ def _command_modules(argv: list[str]) -> dict:
     """Run the console script's ``command`` with ``argv`` in a fresh interpreter started
     as the command (``sys.argv[0]`` is ``mitld-lp``); its exit code, the modules then
     loaded among :data:`NOT_FOR_A_GRID_SOLVE`, and the garbage collector's state."""
-    probe = ("import sys, json, gc, io, contextlib\n"
+    probe = ("import sys, json, gc, io, contextlib, dataclasses\n"
              f"sys.argv = ['mitld-lp', *{argv!r}]\n"
              "from mitld_lp.startup import command\n"
              "out = io.StringIO()\n"
@@ -178,6 +178,7 @@ def _command_modules(argv: list[str]) -> dict:
              "    loaded=sorted(m for m in sys.modules\n"
              "                  if any(m == h or m.startswith(h + '.') for h in heavy)),\n"
              "    collector=gc.isenabled(), frozen=gc.get_freeze_count(),\n"
+             "    records=dataclasses._hash_fn.__module__,\n"
              "    cli='mitld_lp.cli' in sys.modules, numpy='numpy' in sys.modules)))")
     run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          cwd=ROOT, timeout=120, check=True)
@@ -191,6 +192,9 @@ def test_the_command_solves_a_grid_model_without_what_it_does_not_need(tmp_path)
     # the collector, off while the command line imported, is on again for the work,
     # the imported modules' objects out of its passes
     assert solved["collector"] and solved["frozen"] > 0
+    # its dataclasses' methods are closures (startup.dataclass_methods_without_exec)
+    if sys.version_info[:2] in ((3, 11), (3, 12)):
+        assert solved["records"] == "mitld_lp.startup"
     # the probe sees a module once a command needs it: the DRN export's writer
     drn = tmp_path / "case.drn"
     exported = _command_modules(["export", "models/bus_grid.toml", "--drn", str(drn), "-q"])
@@ -264,3 +268,103 @@ def test_the_command_lines_lark_is_lark_without_regex():
     from mitld_lp.logic import parse
 
     assert run.stdout.split(maxsplit=3)[3].strip() == repr(parse("F[0,3] a & G b"))
+
+
+#: Dataclasses of every shape the stdlib makes methods for, and what each method does
+#: (run in a fresh interpreter, with the stdlib's methods or the command line's).
+_RECORDS_PROBE = '''
+import dataclasses, json, math, sys
+from dataclasses import dataclass, field
+if sys.argv[1] == "closures":
+    from mitld_lp import startup
+    startup.dataclass_methods_without_exec()
+
+@dataclass(frozen=True)
+class Empty:
+    pass
+
+@dataclass(frozen=True, slots=True)
+class One:
+    x: float
+
+@dataclass(frozen=True)
+class Three:
+    a: int
+    b: str = "b"
+    c: tuple = field(default=(), compare=False, repr=False)
+
+@dataclass(frozen=True)
+class Four(Three):
+    d: float = field(default=0.5, hash=False)
+
+class Plain(Three):  # not a dataclass: names other than the fields may be set
+    pass
+
+@dataclass(order=True, unsafe_hash=True)
+class Ordered:
+    p: int
+    q: list = field(default_factory=list, hash=False)
+
+@dataclass(eq=False)
+class Identity:
+    r: int
+
+def outcome(f):
+    try:
+        return repr(f())
+    except Exception as err:
+        return f"{type(err).__name__}: {err}"
+
+nan = math.nan
+loop = Ordered(1)
+loop.q.append(loop)
+plain = Plain(1)
+cases = {
+    "repr": [repr(r) for r in (Empty(), One(0.25), Three(1, "x", (2,)), Four(1), loop,
+                                Identity(3))],
+    "eq": [Empty() == Empty(), One(nan) == One(nan), One(1.0) == One(1.0), One(1) == 1,
+           Three(1, "x", (1,)) == Three(1, "x", (2,)), Three(1) == Four(1),
+           Four(1, d=1.0) == Four(1, d=2.0), Identity(1) == Identity(1)],
+    "hash": [hash(Empty()), hash(One(2.0)), hash(Three(1, "x", (9,))),
+             hash(Four(1, "y", d=3.0)), hash(Ordered(4, [1]))],
+    "order": [Ordered(1) < Ordered(2), Ordered(2, [1]) <= Ordered(2, [0]),
+              Ordered(3) > Ordered(2), Ordered(1) >= Ordered(1), outcome(lambda: Ordered(1) < 1)],
+    "frozen": [outcome(lambda: setattr(One(1.0), "x", 2.0)),
+               outcome(lambda: delattr(Three(1), "a")),
+               outcome(lambda: setattr(Three(1), "new", 1)),
+               outcome(lambda: setattr(plain, "new", 1)), getattr(plain, "new", None),
+               outcome(lambda: setattr(plain, "a", 2))],
+    "set": sorted(map(repr, {Three(i % 3, str(i)) for i in range(12)})),
+    "names": [[getattr(getattr(cls, m), k) for k in ("__name__", "__qualname__", "__module__")]
+              for cls, m in ((One, "__eq__"), (Three, "__hash__"), (Four, "__repr__"),
+                             (Ordered, "__lt__"), (One, "__setattr__"))],
+    "compiled": sorted({getattr(Four, m).__code__.co_filename == "<string>"
+                        for m in ("__eq__", "__hash__", "__setattr__", "__delattr__")}),
+}
+print(json.dumps(cases))
+'''
+
+
+def _records(way: str) -> dict:
+    env = {**__import__("os").environ, "PYTHONHASHSEED": "0"}  # the same string hashes
+    run = subprocess.run([sys.executable, "-c", _RECORDS_PROBE, way], capture_output=True,
+                         text=True, cwd=ROOT, timeout=120, check=True, env=env)
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_the_command_lines_dataclass_methods_do_what_the_stdlibs_do():
+    if sys.version_info[:2] not in ((3, 11), (3, 12)):
+        pytest.skip("the stdlib's own methods on this Python (startup.DATACLASS_PYTHONS)")
+    stdlib, closures = _records("stdlib"), _records("closures")
+    # the stdlib's methods are compiled from source; the command line's are not
+    assert stdlib.pop("compiled") == [True] and closures.pop("compiled") == [False]
+    assert closures == stdlib
+    # and what the stdlib's methods do, by hand (so both cannot be wrong the same way)
+    assert stdlib["repr"][:4] == ["Empty()", "One(x=0.25)", "Three(a=1, b='x')",
+                                  "Four(a=1, b='b', d=0.5)"]
+    assert stdlib["repr"][4] == "Ordered(p=1, q=[...])"
+    assert stdlib["eq"] == [True, True, True, False, True, False, False, False]
+    assert stdlib["order"][:4] == [True, False, True, True]
+    assert stdlib["frozen"][:2] == ["FrozenInstanceError: cannot assign to field 'x'",
+                                    "FrozenInstanceError: cannot delete field 'a'"]
+    assert stdlib["frozen"][3:5] == ["None", 1]
