@@ -28,9 +28,11 @@ case's CPU, and each later pass of the solve walked them again.
 Before the command line is imported, :func:`command` also imports SciPy's array-API
 layer without the NumPy submodules no command uses (:func:`lean_scipy`) and lark
 without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundled
-case's CPU.  Both leave every name where it was (the layer hands NumPy's submodules
-over when asked; ``regex`` imports for whoever asks later); a program that imports the
-package gets SciPy and lark as they import themselves.
+case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would import, until a
+masked array is asked for (:func:`numpy_ma_when_used`).  These leave every name where
+it was (the layer hands NumPy's submodules over when asked; ``regex`` and ``numpy.ma``
+import for whoever asks later); a program that imports the package gets SciPy, NumPy
+and lark as they import themselves.
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
 nearly all frozen) made with their comparison, hash, representation and frozen
@@ -52,7 +54,7 @@ if TYPE_CHECKING:
     from dataclasses import Field
 
 __all__ = ["started_as_command", "command", "collect_from_here", "lean_scipy",
-           "lark_without_regex", "dataclass_methods_without_exec"]
+           "lark_without_regex", "dataclass_methods_without_exec", "numpy_ma_when_used"]
 
 
 def started_as_command() -> bool:
@@ -117,6 +119,7 @@ def command() -> None:
         sys.exit(main(argv[1:]))
     dataclass_methods_without_exec()
     lean_scipy()
+    numpy_ma_when_used()
     lark_without_regex()
     from mitld_lp.cli import run
 
@@ -180,6 +183,46 @@ def lean_scipy() -> None:
 
     copy.__getattr__ = handed_over  # type: ignore[attr-defined]
     copy.__all__ = sorted({*copy.__all__, *left_out})
+
+
+def numpy_ma_when_used() -> None:
+    """Put off NumPy's masked arrays (``numpy.ma``) until a masked array or one of the
+    module's names is asked for.
+
+    ``np.unique(values)`` asks ``np.ma.is_masked(values)`` first, which imports
+    ``numpy.ma`` (0.012 s of CPU) on the first call of a process, for a plain array
+    whose answer is False: no array made before that import can be masked, and a plain
+    ``numpy.ndarray`` has no mask.  Here ``numpy.ma`` is a stand-in module whose
+    ``is_masked`` answers False for an exact ``numpy.ndarray`` and asks the real
+    function otherwise; any other name imports the real module (which then replaces the
+    stand-in as ``numpy.ma``) and is its object.
+
+    The command line only (a program importing the package is left alone); nothing when
+    ``numpy.ma`` is already imported."""
+    import types
+
+    import numpy
+
+    if "numpy.ma" in sys.modules or "ma" in vars(numpy):
+        return
+
+    class Later(types.ModuleType):
+        def __getattr__(self, name: str) -> Any:
+            import numpy.ma as real  # numpy.ma is now the real module
+
+            return getattr(real, name)
+
+    def is_masked(x: object) -> Any:
+        if type(x) is numpy.ndarray:
+            return False
+        import numpy.ma as real
+
+        return real.is_masked(x)
+
+    stand_in = Later("numpy.ma", "NumPy's masked arrays, imported when first used "
+                                 "(mitld_lp.startup.numpy_ma_when_used).")
+    stand_in.is_masked = is_masked  # type: ignore[attr-defined]
+    numpy.ma = stand_in  # type: ignore[attr-defined]
 
 
 def lark_without_regex() -> None:

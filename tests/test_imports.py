@@ -151,11 +151,11 @@ NOT_FOR_A_GRID_SOLVE = (
     "mitld_lp.solvers.export", "mitld_lp.files.drn", "mitld_lp.cli.export",
     "mitld_lp.cli.formulas", "mitld_lp.distributions.fit", "mitld_lp.distributions.band",
     "mitld_lp.distributions.scipy_laws",
-    # NumPy's submodules SciPy's array-API layer would copy (mitld_lp.startup.lean_scipy;
-    # numpy.ma is imported by np.unique) and the regex package lark would take
-    # (mitld_lp.startup.lark_without_regex)
+    # NumPy's submodules SciPy's array-API layer would copy (mitld_lp.startup.lean_scipy),
+    # the masked arrays np.unique would import (startup.numpy_ma_when_used) and the regex
+    # package lark would take (mitld_lp.startup.lark_without_regex)
     "numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ctypeslib", "numpy.rec",
-    "numpy.char", "numpy.strings", "regex",
+    "numpy.char", "numpy.strings", "numpy.ma", "regex",
     # the sensed routes' information states, the controller file reader, a notebook's html
     "mitld_lp.sensing.belief", "mitld_lp.running", "mitld_lp.controllers.reader", "html")
 
@@ -368,3 +368,30 @@ def test_the_command_lines_dataclass_methods_do_what_the_stdlibs_do():
     assert stdlib["frozen"][:2] == ["FrozenInstanceError: cannot assign to field 'x'",
                                     "FrozenInstanceError: cannot delete field 'a'"]
     assert stdlib["frozen"][3:5] == ["None", 1]
+
+
+def test_the_command_lines_numpy_ma_is_imported_when_a_masked_array_is_asked_for():
+    probe = ("import sys, json\nsys.argv[0] = 'mitld-lp'\nfrom mitld_lp import startup\n"
+             "import numpy as np\n"
+             "if sys.argv[1] == 'later':\n    startup.numpy_ma_when_used()\n"
+             "plain = [np.ma.is_masked(np.arange(3.0)), np.ma.is_masked(np.array([])),\n"
+             "         np.unique(np.array([3, 1, 3])).tolist()]\n"
+             "before = 'numpy.ma' in sys.modules\n"
+             "matrix = np.ma.is_masked(np.matrix([[1.0]]))  # not a plain array\n"
+             "masked = np.ma.masked_array([1.0, 2.0], mask=[0, 1])\n"
+             "view = np.ma.masked_array([1.0], mask=[0]).view(np.ndarray)\n"
+             "rest = [np.ma.is_masked(masked), np.ma.is_masked(masked[:1]),\n"
+             "        np.ma.is_masked(view), matrix,\n"
+             "        np.unique(masked).tolist(), float(np.ma.mean(masked))]\n"
+             "print(json.dumps(dict(before=before, answers=[plain, rest],\n"
+             "    real=np.ma is sys.modules['numpy.ma'])))")
+    runs = {way: json.loads(subprocess.run(
+        [sys.executable, "-c", probe, way], capture_output=True, text=True, cwd=ROOT,
+        timeout=120, check=True).stdout.strip().splitlines()[-1]) for way in ("now", "later")}
+    # NumPy's own: numpy.ma imported by the first np.unique; the stand-in: not until a
+    # masked array is made, then the real module in its place
+    assert runs["now"]["before"] and not runs["later"]["before"]
+    assert runs["now"]["real"] and runs["later"]["real"]
+    # the same answers, and the ones NumPy's documentation gives
+    assert runs["later"]["answers"] == runs["now"]["answers"] == [
+        [False, False, [1, 3]], [True, False, False, False, [1.0, None], 1.0]]
