@@ -1,6 +1,8 @@
 """The expected steps (or cost) of satisfying an MITLD task, as the primary objective:
-Storm's ``Rmin=? [F accept]`` on the task's product, ``objective = "min-steps"`` /
-``"min-cost"`` (the command line's ``--objective``).
+Storm's ``Rmin=? [F accept]`` on the task's product, asked on the command line with
+``--objective min-steps`` / ``min-cost`` (a model file's ``objective`` key is the
+probability's ``"max"`` or ``"min"`` and refuses these by name, docs/model-files.md;
+``--then min-steps`` after a probability is the constrained route's lexicographic LP).
 
 The product is the plain route's (:func:`mitld_lp.routes.stages.build_posed` of the task
 posed for its maximum probability); each of its transitions is one step of the world,
