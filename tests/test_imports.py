@@ -157,7 +157,9 @@ NOT_FOR_A_GRID_SOLVE = (
     "numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ctypeslib", "numpy.rec",
     "numpy.char", "numpy.strings", "numpy.ma", "regex",
     # the sensed routes' information states, the controller file reader, a notebook's html
-    "mitld_lp.sensing.belief", "mitld_lp.running", "mitld_lp.controllers.reader", "html")
+    "mitld_lp.sensing.belief", "mitld_lp.running", "mitld_lp.controllers.reader", "html",
+    # the package files' reader where the package is not a folder (logic/tables.py)
+    "importlib.resources", "importlib.readers")
 
 
 def _command_modules(argv: list[str]) -> dict:

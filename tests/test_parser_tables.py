@@ -115,3 +115,16 @@ def test_missing_or_damaged_tables_are_built_from_the_grammar(monkeypatch, caplo
         tables.parser.cache_clear()
     if damage != "missing":
         assert "unusable" in caplog.text
+
+
+def test_the_files_are_read_through_importlib_resources_where_not_in_a_folder(monkeypatch):
+    # the package's folder is read directly; a package that is not one (a zip) is read
+    # through importlib.resources: the same grammar and tables, the same parser
+    folder = ROOT / "mitld_lp" / "logic"
+    monkeypatch.setattr(tables, "__file__", str(ROOT / "no_such_folder" / "tables.py"))
+    tables.grammar.cache_clear()
+    try:
+        assert tables.grammar() == (folder / "grammar.lark").read_text(encoding="utf-8")
+        assert tables.stored() == FILE
+    finally:
+        tables.grammar.cache_clear()

@@ -17,7 +17,6 @@ reads every test formula as the grammar does.)
 from __future__ import annotations
 
 import hashlib
-import importlib.resources
 import json
 import logging
 from functools import cache
@@ -47,13 +46,23 @@ OPTIONS: dict[str, object] = dict(
 )
 
 
+def _beside(name: str) -> str:
+    """The text of the package file ``name`` beside this module: read from the folder
+    (0.05 ms of CPU), or through :mod:`importlib.resources` where the package is not a
+    folder of files (a zip), whose first use in a process costs 2.5 ms, about a
+    hundredth of the bundled case's command."""
+    try:
+        return Path(__file__).with_name(name).read_text(encoding="utf-8")
+    except OSError:
+        import importlib.resources
+
+        return importlib.resources.files("mitld_lp.logic").joinpath(name).read_text(
+            encoding="utf-8")
+
+
 @cache
 def grammar() -> str:
-    return (
-        importlib.resources.files("mitld_lp.logic")
-        .joinpath("grammar.lark")
-        .read_text(encoding="utf-8")
-    )
+    return _beside("grammar.lark")
 
 
 def grammar_digest() -> str:
@@ -69,8 +78,7 @@ def _int_keys(pairs: list[tuple[str, Any]]) -> dict[Any, Any]:
 def stored() -> dict[str, Any] | None:
     """The stored tables if they were written from this grammar by this lark."""
     try:
-        text = importlib.resources.files("mitld_lp.logic").joinpath(TABLES).read_text(
-            encoding="utf-8")
+        text = _beside(TABLES)
     except FileNotFoundError:
         return None
     tables = json.loads(text, object_pairs_hook=_int_keys)
