@@ -397,3 +397,17 @@ def test_the_command_lines_numpy_ma_is_imported_when_a_masked_array_is_asked_for
     # the same answers, and the ones NumPy's documentation gives
     assert runs["later"]["answers"] == runs["now"]["answers"] == [
         [False, False, [1, 3]], [True, False, False, False, [1.0, None], 1.0]]
+
+
+def test_the_console_script_reads_its_words_once():
+    # the words are parsed once (they were parsed for the time limit, then again for
+    # the command): help is printed once, a usage error said once
+    def command(*argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "mitld_lp", *argv], capture_output=True,
+                              text=True, cwd=ROOT, timeout=120, check=False)
+
+    shown = command("solve", "--help")
+    assert shown.returncode == 0 and shown.stdout.count("usage: mitld-lp solve") == 1
+    wrong = command("solve", "models/bus_grid.toml", "--no-such-flag")
+    assert wrong.returncode == 2 and wrong.stdout == ""
+    assert wrong.stderr.count("--no-such-flag") == 1, wrong.stderr

@@ -95,10 +95,6 @@ _VERBS: list[
 ]
 
 
-#: The verbs that read one model file, whose ``[budgets] time_limit`` may set theirs.
-_MODEL_VERBS = ("info", "solve", "export", "simulate", "plot", "pareto")
-
-
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: a bad argument raises :class:`UsageError`."""
 
@@ -196,16 +192,28 @@ def main(argv: list[str] | None = None) -> int:
     The command runs in a worker thread while this thread waits, so that Ctrl-C and
     ``--time-limit`` take effect within a tenth of a second whatever the stage is doing
     (the numerical kernels release the interpreter lock)."""
-    global _worker
+    args = _arguments(sys.argv[1:] if argv is None else argv)
+    return args if isinstance(args, int) else _serve(args)
+
+
+def _arguments(words: list[str]) -> argparse.Namespace | int:
+    """The command's arguments, with its time limit (the flag's or its model file's), or
+    the exit status once a usage error, ``--help`` or ``--version`` has been printed."""
     try:
-        args = _build_parser(sys.argv[1:] if argv is None else argv).parse_args(argv)
+        args = _build_parser(words).parse_args(words)
     except UsageError as err:  # no arguments yet: --json is looked for in the words
-        return say_error(_json_asked(sys.argv[1:] if argv is None else argv), "usage_error",
-                         str(err))
+        return say_error(_json_asked(words), "usage_error", str(err))
     except SystemExit as stop:  # --help and --version have printed and exit 0
         return stop.code if isinstance(stop.code, int) else EXIT_USAGE
     args.started = time.monotonic()
     apply_file_time_limit(args)  # a model file's [budgets] time_limit binds as the flag
+    return args
+
+
+def _serve(args: argparse.Namespace) -> int:
+    """Run the command ``args`` in the worker thread, this thread watching for Ctrl-C and
+    the time limit (:func:`main`); its exit status."""
+    global _worker
     cancelled = threading.Event()
     outcome: list[int] = []
 
@@ -253,24 +261,6 @@ def main(argv: list[str] | None = None) -> int:
     return outcome[0] if outcome else EXIT_INTERNAL
 
 
-def _limited(argv: list[str]) -> argparse.Namespace | None:
-    """The arguments of a command with a time limit, ``--time-limit`` or its one model
-    file's ``[budgets] time_limit`` (None without one, when the arguments are wrong,
-    :func:`main` says so, and for ``sweep``, whose worker processes a killed parent would
-    leave running: its points have their own limits)."""
-    if "--time-limit" not in " ".join(argv) and (argv or [""])[0] not in _MODEL_VERBS:
-        return None  # neither the flag nor a model file that could set it
-    try:
-        args = _build_parser(argv).parse_args(argv)
-    except (UsageError, SystemExit):
-        return None
-    if args.verb == "sweep":
-        return None
-    args.started = time.monotonic()
-    apply_file_time_limit(args)
-    return args if args.time_limit is not None else None
-
-
 def _time_stop(args: argparse.Namespace, where: str, limit: TimeLimit | None = None) -> None:
     """The time-limit stop: the stop line naming whose limit it was (``limit``, default
     the command's), and the error object with ``--json``."""
@@ -299,13 +289,17 @@ def run() -> None:
 
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the import's handler ends
     try:
-        limited = _limited(sys.argv[1:])  # reads the arguments (and the model's budgets)
-        if limited is not None:  # the limit is kept from a parent process (watch.py)
+        args = _arguments(sys.argv[1:])  # read once (and the model file's budgets)
+        # a time limit is kept from a parent process (watch.py), but not sweep's, whose
+        # worker processes a killed parent would leave running: its points have their own
+        if (isinstance(args, argparse.Namespace) and args.time_limit is not None
+                and args.verb != "sweep"):
+            limited = args
             code = watch.watched(limited.time_limit, lambda: _time_stop(
                 limited, " (inside a long native call)"))
             if code is not None:
                 sys.exit(code)
-        code = main()
+        code = args if isinstance(args, int) else _serve(args)
     except KeyboardInterrupt:  # before the command started (reading the arguments)
         say("interrupted")
         code = EXIT_INTERRUPTED
