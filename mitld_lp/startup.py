@@ -28,11 +28,11 @@ case's CPU, and each later pass of the solve walked them again.
 Before the command line is imported, :func:`command` also imports SciPy's array-API
 layer without the NumPy submodules no command uses (:func:`lean_scipy`) and lark
 without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundled
-case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would import, until a
-masked array is asked for (:func:`numpy_ma_when_used`).  These leave every name where
-it was (the layer hands NumPy's submodules over when asked; ``regex`` and ``numpy.ma``
-import for whoever asks later); a program that imports the package gets SciPy, NumPy
-and lark as they import themselves.
+case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would
+import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
+These leave every name where it was (the layer hands NumPy's submodules over when
+asked; ``regex`` and ``numpy.ma`` import for whoever asks later); a program that
+imports the package gets SciPy, NumPy and lark as they import themselves.
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
 nearly all frozen) made with their comparison, hash, representation and frozen
@@ -324,21 +324,44 @@ def _cmp_fn(name: str, op: str, self_tuple: str, other_tuple: str,
 
     # self_tuple is dataclasses' source of the tuple: "()" or "(self.a,self.b,)"
     names = tuple(part.split(".", 1)[1] for part in self_tuple[1:-1].split(",") if part)
-    values, compare = _tuple_of(names), getattr(operator, _COMPARISONS[op])
+    values = _tuple_of(names)
+    if op == "==" and len(names) == 1:  # the common cases without a call more than needed
+        get = operator.attrgetter(names[0])
 
-    def method(self: object, other: object) -> Any:
-        if other.__class__ is self.__class__:
-            return compare(values(self), values(other))
-        return NotImplemented
+        def method(self: object, other: object) -> Any:
+            if other.__class__ is self.__class__:
+                return (get(self),) == (get(other),)
+            return NotImplemented
+    elif op == "==":
+        def method(self: object, other: object) -> Any:
+            if other.__class__ is self.__class__:
+                return values(self) == values(other)
+            return NotImplemented
+    else:
+        compare = getattr(operator, _COMPARISONS[op])
+
+        def method(self: object, other: object) -> Any:
+            if other.__class__ is self.__class__:
+                return compare(values(self), values(other))
+            return NotImplemented
 
     return _named(method, name, globals)
 
 
 def _hash_fn(fields: list[Field], globals: dict) -> Callable[..., Any]:
-    values = _tuple_of(tuple(f.name for f in fields))
+    from operator import attrgetter
 
-    def __hash__(self: object) -> int:
-        return hash(values(self))
+    names = tuple(f.name for f in fields)
+    if len(names) == 1:
+        get = attrgetter(names[0])
+
+        def __hash__(self: object) -> int:
+            return hash((get(self),))
+    else:
+        values = _tuple_of(names)
+
+        def __hash__(self: object) -> int:
+            return hash(values(self))
 
     return _named(__hash__, "__hash__", globals)
 
