@@ -159,7 +159,9 @@ NOT_FOR_A_GRID_SOLVE = (
     # the sensed routes' information states, the controller file reader, a notebook's html
     "mitld_lp.sensing.belief", "mitld_lp.running", "mitld_lp.controllers.reader", "html",
     # the package files' reader where the package is not a folder (logic/tables.py)
-    "importlib.resources", "importlib.readers")
+    "importlib.resources", "importlib.readers",
+    # the constrained LP's modules, which the routes claiming constraints load to solve
+    "mitld_lp.solvers.constrained", "mitld_lp.solvers.constrained_model")
 
 
 def _command_modules(argv: list[str]) -> dict:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,10 +41,12 @@ from mitld_lp.problem import Posed, ProblemError, task_words
 from mitld_lp.result import Part, Result, precision_check
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_joint
-from mitld_lp.solvers.constrained import INFEASIBLE, Row, Solved, optimise
-from mitld_lp.solvers.constrained_model import Merged, Quantity, merge
 from mitld_lp.solvers.result import Status
 from mitld_lp.util.clock import Deadline
+
+if TYPE_CHECKING:  # the LP's modules load when a constrained problem is solved
+    from mitld_lp.solvers.constrained import Row, Solved
+    from mitld_lp.solvers.constrained_model import Merged, Quantity
 
 __all__ = ["ConstrainedRoute", "ConstrainedPart", "lp_refusals", "ConstraintValue",
            "ConstrainedController", "quantity_of", "rows_for", "cost_vector"]
@@ -82,6 +84,8 @@ class ConstraintValue:
 def quantity_of(c: Constraint, component: int, model: str) -> Quantity:
     """The quantity a constraint bounds; in the ``"lower"`` model truncation counts as
     violating it, in the ``"upper"`` model as satisfying it."""
+    from mitld_lp.solvers.constrained_model import Quantity
+
     if c.kind != "prob":
         return Quantity(c.kind)
     violate = model == "lower"
@@ -93,6 +97,8 @@ def quantity_of(c: Constraint, component: int, model: str) -> Quantity:
 def rows_for(cons: tuple[Constraint, ...], model: str) -> list[Row]:
     """The LP rows of ``cons`` in the ``"lower"`` or ``"upper"`` model; the ``i``-th
     probability constraint reads joint component ``i`` (the task is component 0)."""
+    from mitld_lp.solvers.constrained import Row
+
     out, k = [], 0
     for c in cons:
         k += c.kind == "prob"
@@ -136,6 +142,8 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     Another route's model (:mod:`mitld_lp.routes.sensed_constrained`) comes as its own
     ``merged`` model with its ``eta``, ``route`` name, ``part`` record and
     ``controller`` (made from the model and the chosen LP)."""
+    from mitld_lp.solvers.constrained import Row, optimise
+    from mitld_lp.solvers.constrained_model import Quantity, merge
     from mitld_lp.solvers.rounding import model_eta
 
     model, s, cons, then = posed.model, posed.settings, posed.problem.constraints, \
@@ -281,6 +289,7 @@ def _values(merged: Any, chosen: Solved, cons: tuple[Constraint, ...], cost_vec:
     """The chosen policy's task probability, each constraint's value and its expected
     steps, bounded in exact arithmetic (lower-model accounting)."""
     from mitld_lp.solvers.constrained import certified_value
+    from mitld_lp.solvers.constrained_model import Quantity
 
     assert chosen.prob is not None and chosen.stay is not None
     task = certified_value(merged, chosen.prob, chosen.stay, Quantity("prob", 0, 0.0),
@@ -312,6 +321,8 @@ def _unsolved(failed: Solved, cons: tuple[Constraint, ...], rows: list[Row], cos
               **common: Any) -> Result:
     """An infeasible (or failed) answer; when infeasible, each constraint's tightest bound
     the others allow (a second LP: optimise that constraint's quantity subject to them)."""
+    from mitld_lp.solvers.constrained import INFEASIBLE, optimise
+
     merged = whole.merged
     assert merged is not None  # solve_merged's part has its model
     values = []

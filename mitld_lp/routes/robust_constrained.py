@@ -50,7 +50,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -71,11 +71,11 @@ from mitld_lp.routes.constrained import (
 )
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_joint
-from mitld_lp.solvers.constrained import OPTIMAL
-from mitld_lp.solvers.constrained_model import Merged, Quantity
 from mitld_lp.solvers.result import Status
-from mitld_lp.solvers.robust import robust_interval_iteration
-from mitld_lp.solvers.robust_graph import RobustGame
+
+if TYPE_CHECKING:  # the LP's and the robust game's modules load when solving
+    from mitld_lp.solvers.constrained_model import Merged, Quantity
+    from mitld_lp.solvers.robust_graph import RobustGame
 
 __all__ = ["RobustConstrainedRoute", "solve_robust_constrained", "worst_case",
            "ROUNDS"]
@@ -101,6 +101,9 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     (weight ``prob[c]``) and to WIN or LOSE for its stay (worth the stay's verdict); a
     node's rows are its choice's vertex rows (nature's rows when it minimises; the
     player's choices, one row each, when it maximises)."""
+    from mitld_lp.solvers.robust import robust_interval_iteration
+    from mitld_lp.solvers.robust_graph import RobustGame
+
     mdp = merged.mdp
     m = mdp.n_states
     rg = np.asarray(mdp.row_groups)
@@ -231,6 +234,7 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     ``then``) and a band, on its built joint interval MDP
     (:func:`mitld_lp.synthesis.solve`)."""
     from mitld_lp.routes.constrained import cost_vector
+    from mitld_lp.solvers.constrained import OPTIMAL
     from mitld_lp.solvers.rounding import model_eta, one_minus
 
     s = posed.settings
@@ -344,6 +348,7 @@ class _Judge:
     def values(self, result: Result) -> list[ConstraintValue]:
         """Each constraint's worst case under ``result``'s policy, bounded in exact
         arithmetic on the side that matters, and whether that meets the bound exactly."""
+        from mitld_lp.solvers.constrained_model import Quantity
         from mitld_lp.solvers.robust_merged import worst_total
 
         assert result.prob is not None and result.stay is not None
@@ -366,6 +371,8 @@ class _Judge:
 
     def task(self, prob: np.ndarray, stay: np.ndarray) -> float:
         """The task's worst case under the policy, from below."""
+        from mitld_lp.solvers.constrained_model import Quantity
+
         return worst_case(self.merged, self.vr, prob, stay, Quantity("prob", 0, 0.0),
                           nature_maximises=False, tol=self.tol, eta=self.eta)[0]
 
@@ -382,6 +389,8 @@ def _tighten(posed: Posed, middle: Any, joint: Any, sta: Any, t0: float,
     ones; a bound missed again is tightened by at least twice its last step.  The
     policy found that meets every bound against every law, the rounds and the
     margins."""
+    from mitld_lp.solvers.constrained import OPTIMAL
+
     cons = posed.problem.constraints
     chosen, values = nominal, judge.values(nominal)
     margins = [0.0] * len(cons)
@@ -451,6 +460,7 @@ def _then_checks(chosen: Result, judge: _Judge, then: str | None
     """The chosen policy's expected steps (and, for ``then = "min-cost"``, cost) at the
     worst law of the bands, bracketed (nature maximising it): the answer's steps and
     secondary; with ``then`` the bracket's proof is a check of the answer."""
+    from mitld_lp.solvers.constrained_model import Quantity
     from mitld_lp.solvers.robust_merged import worst_total
 
     assert chosen.prob is not None and chosen.stay is not None

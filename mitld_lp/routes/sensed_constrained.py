@@ -77,7 +77,6 @@ from mitld_lp.routes.constrained import ConstrainedPart, lp_refusals, solve_merg
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed import sensed_refusals
 from mitld_lp.sensing.sensors import partial
-from mitld_lp.solvers.constrained_model import Merged
 from mitld_lp.solvers.quotient import maximal_end_components
 
 if TYPE_CHECKING:
@@ -86,6 +85,7 @@ if TYPE_CHECKING:
     from mitld_lp.routes.stages import Built
     from mitld_lp.running.sensed_joint import Keeps
     from mitld_lp.sensing.belief import Belief, InfoState, Reaches
+    from mitld_lp.solvers.constrained_model import Merged
 
 __all__ = ["SensedConstrainedRoute", "SensedConstrainedPart", "Verdict", "JointEnds",
            "info_merged", "mixed_states", "STAY"]
@@ -164,6 +164,7 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
     component with some persistent hypothesis (:func:`mixed_states`)."""
     from mitld_lp.running.sensed_joint import winnable
     from mitld_lp.sensing.belief import InfoState
+    from mitld_lp.solvers.constrained_model import Merged
 
     mdp = belief.mdp
     records: list[Any] = list(mdp.states)
