@@ -1,0 +1,68 @@
+"""A transient chain solved level by level over its own components
+(:mod:`mitld_lp.solvers.chain_levels`), against SciPy's direct solve of the whole
+chain and a hand chain in Fractions."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
+from mitld_lp.solvers.graph import graph_blocks
+
+
+def _chain(n: int, seed: int) -> sp.csr_array:
+    """A sub-stochastic chain of ``n`` states: rings of 1 to 6 states (a ring of one a
+    self-loop) and random edges to later states, each row scaled to 0.95."""
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(1, 7, n)
+    first = np.concatenate([[0], np.cumsum(sizes)])
+    first = first[first < n]
+    ring = np.repeat(first, np.diff(np.append(first, n)))  # each state's ring start
+    size = np.diff(np.append(first, n))[np.searchsorted(first, ring)]
+    nxt = ring + (np.arange(n) - ring + 1) % size
+    later = sp.triu(sp.random_array((n, n), density=2.0 / n, rng=rng), k=1)
+    q = sp.csr_array(later + sp.csr_array((rng.random(n) + 0.1, (np.arange(n), nxt)),
+                                          shape=(n, n)))
+    return sp.csr_array(sp.diags_array(0.95 / np.asarray(q.sum(axis=1)).ravel()) @ q)
+
+
+def test_levels_of_a_large_chain_match_one_direct_solve() -> None:
+    n = 1500  # over the dense LU's 256 states: the level walk
+    q = _chain(n, 11)
+    blk = graph_blocks(sp.csr_array(q != 0, dtype=np.float64), q.diagonal())
+    # the chain has what the walk distinguishes: many levels, cycles and single states
+    assert blk.n_levels > 10 and np.any(blk.size > 1) and np.any(blk.size == 1)
+    rhs = np.random.default_rng(2).random((n, 2))
+    a = sp.csc_array(sp.eye_array(n) - q)
+    want = spla.spsolve(a, rhs)
+    walk = ChainLevels(q)
+    np.testing.assert_allclose(walk.solve(rhs), want, rtol=1e-11)
+    # a second right-hand side on the kept factorisations, and a vector
+    np.testing.assert_allclose(walk.solve(rhs[:, 1]), want[:, 1], rtol=1e-11)
+    # the transposed chain (a flow): the same components, the levels reversed
+    flow = spla.spsolve(sp.csc_array(sp.eye_array(n) - q.T), rhs[:, 0])
+    np.testing.assert_allclose(chain_solve(sp.csr_array(q.T), rhs[:, 0]), flow,
+                               rtol=1e-11)
+
+
+def test_a_hand_chain_in_fractions() -> None:
+    """States 0 <-> 1 a cycle, 1 -> 2 -> 3 a path with self-loops, 3 to nothing; more
+    than 256 states padded as single states that only lead to state 0, so the level
+    walk (not the dense LU) answers.  Exact values by hand:
+    x3 = 1 / (1 - 1/2) = 2; x2 = (1 + x3/4) / (1 - 1/4) = 2;
+    x0 = 1 + x1/2, x1 = 1 + x0/3 + x2/3: x1 = (1 + 1/3 + 2/3) / (1 - 1/6) = 12/5,
+    x0 = 11/5; a padding state p: x_p = 1 + x0 / 2 = 21/10."""
+    f = Fraction
+    n = 300
+    entries = {(0, 1): f(1, 2), (1, 0): f(1, 3), (1, 2): f(1, 3), (2, 2): f(1, 4),
+               (2, 3): f(1, 4), (3, 3): f(1, 2)}
+    entries.update({(p, 0): f(1, 2) for p in range(4, n)})
+    rows, cols = zip(*entries, strict=True)
+    q = sp.csr_array(([float(v) for v in entries.values()], (rows, cols)), shape=(n, n))
+    x = chain_solve(q, np.ones(n))
+    want = [f(11, 5), f(12, 5), f(2), f(2)] + [f(21, 10)] * (n - 4)
+    np.testing.assert_allclose(x, [float(v) for v in want], rtol=1e-15)
