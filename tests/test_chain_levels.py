@@ -7,9 +7,11 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from mitld_lp.solvers import chain_levels
 from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
 from mitld_lp.solvers.graph import graph_blocks
 
@@ -30,8 +32,11 @@ def _chain(n: int, seed: int) -> sp.csr_array:
     return sp.csr_array(sp.diags_array(0.95 / np.asarray(q.sum(axis=1)).ravel()) @ q)
 
 
-def test_levels_of_a_large_chain_match_one_direct_solve() -> None:
-    n = 1500  # over the dense LU's 256 states: the level walk
+@pytest.mark.parametrize("walk_from", [256, 10**9])  # the level walk, then one LU
+def test_levels_of_a_large_chain_match_one_direct_solve(walk_from: int,
+                                                        monkeypatch) -> None:
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", walk_from)
+    n = 1500
     q = _chain(n, 11)
     blk = graph_blocks(sp.csr_array(q != 0, dtype=np.float64), q.diagonal())
     # the chain has what the walk distinguishes: many levels, cycles and single states
@@ -40,6 +45,7 @@ def test_levels_of_a_large_chain_match_one_direct_solve() -> None:
     a = sp.csc_array(sp.eye_array(n) - q)
     want = spla.spsolve(a, rhs)
     walk = ChainLevels(q)
+    assert (walk.blocks is not None) == (walk_from < n)
     np.testing.assert_allclose(walk.solve(rhs), want, rtol=1e-11)
     # a second right-hand side on the kept factorisations, and a vector
     np.testing.assert_allclose(walk.solve(rhs[:, 1]), want[:, 1], rtol=1e-11)
@@ -49,13 +55,14 @@ def test_levels_of_a_large_chain_match_one_direct_solve() -> None:
                                rtol=1e-11)
 
 
-def test_a_hand_chain_in_fractions() -> None:
+def test_a_hand_chain_in_fractions(monkeypatch) -> None:
     """States 0 <-> 1 a cycle, 1 -> 2 -> 3 a path with self-loops, 3 to nothing; more
-    than 256 states padded as single states that only lead to state 0, so the level
-    walk (not the dense LU) answers.  Exact values by hand:
+    than 256 states padded as single states that only lead to state 0, and the level
+    walk taken from 256 states.  Exact values by hand:
     x3 = 1 / (1 - 1/2) = 2; x2 = (1 + x3/4) / (1 - 1/4) = 2;
     x0 = 1 + x1/2, x1 = 1 + x0/3 + x2/3: x1 = (1 + 1/3 + 2/3) / (1 - 1/6) = 12/5,
     x0 = 11/5; a padding state p: x_p = 1 + x0 / 2 = 21/10."""
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 256)
     f = Fraction
     n = 300
     entries = {(0, 1): f(1, 2), (1, 0): f(1, 3), (1, 2): f(1, 3), (2, 2): f(1, 4),
