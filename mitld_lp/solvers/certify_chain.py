@@ -68,7 +68,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
           guess: np.ndarray | None = None) -> Chain:
     """The values of ``policy`` (a choice row per state, ``-1`` on the target and the
     absorbing states) and the slack ``W`` of its certificates (module docs), solved
-    level by level with one LU per non-trivial component serving both.  ``layers``:
+    level by level, a non-trivial component of the layers by the walk over the chain's
+    own components there (:class:`~mitld_lp.solvers.chain_levels.ChainLevels`), its
+    factorisations serving both.  ``layers``:
     the components and levels of ``mdp``'s support graph (:func:`support_layers`);
     ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
     m = sp.csr_array(mdp.matrix)
