@@ -1,6 +1,7 @@
 """A transient chain solved level by level over its own components
 (:mod:`mitld_lp.solvers.chain_levels`), against SciPy's direct solve of the whole
-chain and a hand chain in Fractions."""
+chain, a hand chain in Fractions, and its two users on random MDPs (the occupancy flow
+and the certificates' chain) against dense LAPACK solves."""
 
 from __future__ import annotations
 
@@ -12,8 +13,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from mitld_lp.solvers import chain_levels
+from mitld_lp.solvers.certify_chain import chain, support_layers
 from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
 from mitld_lp.solvers.graph import graph_blocks
+from mitld_lp.solvers.lp_blocks import policy_flow
+from mitld_lp.solvers.quotient import reduce
+from mitld_lp.solvers.rounding import rounding
+from mitld_lp.testing import random_mdp
 
 
 def _chain(n: int, seed: int) -> sp.csr_array:
@@ -73,3 +79,41 @@ def test_a_hand_chain_in_fractions(monkeypatch) -> None:
     x = chain_solve(q, np.ones(n))
     want = [f(11, 5), f(12, 5), f(2), f(2)] + [f(21, 10)] * (n - 4)
     np.testing.assert_allclose(x, [float(v) for v in want], rtol=1e-15)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_walked_flow_and_certificate_chain_match_dense_solves(seed: int,
+                                                              monkeypatch) -> None:
+    """Every chain walked over its components (from 2 states): a randomised policy's
+    occupancy (``policy_flow``) against the dense solve of ``x = b + P_w^T x``, and the
+    certificates' chain values (``certify_chain.chain``) against the dense solve of the
+    policy's chain on the states it leaves transient."""
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 2)
+    mdp = random_mdp(240, seed=seed, target_fraction=0.08, sink_fraction=0.08,
+                     self_loop_fraction=0.0, max_choices=3, max_successors=3)
+    q = reduce(mdp, mdp.target)
+    blk = q.order
+    assert blk.size.max() > 2  # a non-trivial block: the walk runs inside it
+    rng = np.random.default_rng(seed)
+    owner = q.choice_state()
+    weights = rng.random(q.n_choices)
+    weights /= np.bincount(owner, weights=weights)[owner]
+    b = rng.random(q.n_states)
+    y = policy_flow(q, blk, weights, b)
+    mixed = np.zeros((q.n_states, q.n_states))
+    np.add.at(mixed, owner, weights[:, None] * q.matrix.toarray())
+    x = np.linalg.solve(np.eye(q.n_states) - mixed.T, b)
+    np.testing.assert_allclose(y, weights * x[owner], rtol=1e-10, atol=1e-14)
+
+    groups = np.asarray(mdp.row_groups)
+    policy = groups[:-1] + (rng.random(mdp.n_states) * np.diff(groups)).astype(np.int64)
+    policy[mdp.target] = -1
+    ch = chain(mdp, mdp.target, policy, rounding(sp.csr_array(mdp.matrix)),
+               support_layers(mdp))
+    live = np.flatnonzero(ch.solved)
+    assert live.size > 20
+    rows = sp.csr_array(mdp.matrix)[policy[live]].toarray()
+    want = np.linalg.solve(np.eye(live.size) - rows[:, live],
+                           rows[:, np.flatnonzero(ch.sure)].sum(axis=1))
+    np.testing.assert_allclose(ch.values[live], np.clip(want, 0.0, 1.0), rtol=1e-10,
+                               atol=1e-15)

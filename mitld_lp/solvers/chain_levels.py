@@ -68,8 +68,11 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         if got is None:
             rows = sp.csr_array(self.chain[states])
             inner = sp.csc_array(rows[:, states])
+            # SuperLU even for a small component when walking: the dense LU's solve is
+            # LAPACK's, whose threads crawled on a loaded machine (16 solves of about
+            # 100 states: 0.8 s against 0.02 s for SciPy's whole-chain solve)
             got = rows, chain_lu(sp.csc_array(sp.eye_array(states.size, format="csc")
-                                              - inner))
+                                              - inner), dense=self.blocks is None)
             self._cyclic[level] = got
         return got
 
