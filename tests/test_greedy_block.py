@@ -16,8 +16,9 @@ from scipy.optimize import linprog
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import lp_blocks
+from mitld_lp.solvers.chain_levels import chain_solve
 from mitld_lp.solvers.graph import Sense
-from mitld_lp.solvers.greedy_block import certified_greedy, chain_solve
+from mitld_lp.solvers.greedy_block import certified_greedy
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import reduce

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import levels
+from mitld_lp.solvers import graph as graph_module
+from mitld_lp.solvers.graph import blocks_from, graph_blocks, levels
 from mitld_lp.util import traversal
 
 
@@ -66,3 +67,50 @@ def test_levels_and_reach_match_a_plain_construction(seed: int, index: type, sma
         for j in range(seeds.shape[1]):
             expect = any(seeds[t, j] for t in reach[s])
             assert bool(got.reach[got.component[s], j]) == expect
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("radix", [True, False])
+def test_blocks_order_states_by_level_and_renumber_ids_in_order(seed: int, radix: bool,
+                                                                monkeypatch) -> None:
+    """``graph_blocks`` (ids and levels as ``levels`` found them) and ``blocks_from``
+    (a subset's ids of a larger graph, renumbered) against their definition written
+    in Python: ``by_level`` the states sorted by level, ties in state order;
+    ``level_starts`` where each level begins; ids and levels renumbered densely in
+    their order; the sizes counted."""
+    monkeypatch.setattr(graph_module, "RADIX_LEVELS", 1 << 16 if radix else 0)
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(30, 150))
+    src = rng.integers(0, n, 3 * n)
+    dst = np.where(rng.random(src.size) < 0.8, np.minimum(src + rng.integers(1, 4, src.size),
+                                                          n - 1), rng.integers(0, n, src.size))
+    graph = sp.csr_array((np.ones(src.size), (src, dst)), shape=(n, n))
+    graph.sum_duplicates()
+    loops = rng.random(n)
+    found = levels(graph)
+
+    def check(blk, component: list[int], level_of: dict[int, int], states: list[int]) -> None:
+        ids = sorted(set(component))
+        used = sorted({level_of[c] for c in ids})
+        dense = [ids.index(c) for c in component]
+        lv = [used.index(level_of[c]) for c in ids]
+        assert blk.component.tolist() == dense and blk.level.tolist() == lv
+        assert blk.size.tolist() == [dense.count(k) for k in range(len(ids))]
+        state_level = [lv[d] for d in dense]
+        order = sorted(range(len(states)), key=lambda i: (state_level[i], i))
+        assert blk.by_level.tolist() == order
+        assert blk.level_starts.tolist() == [sum(x < k for x in state_level)
+                                             for k in range(len(used) + 1)]
+        np.testing.assert_array_equal(blk.self_loop, loops[states])
+
+    level_of = dict(enumerate(found.level.tolist()))
+    check(graph_blocks(graph, loops), found.component.tolist(), level_of, list(range(n)))
+    # a subset of the states under ids spread out (the sorted path) or not (the table)
+    n_comp = found.level.size
+    for spread in (1, 1000):
+        sub = np.sort(rng.choice(n, n // 3, replace=False))
+        comp = found.component[sub] * spread
+        level_at = np.zeros((n_comp - 1) * spread + 1, dtype=np.int64)
+        level_at[np.arange(n_comp) * spread] = found.level
+        check(blocks_from(comp, level_at, loops[sub]), comp.tolist(),
+              {int(c): int(level_at[c]) for c in comp}, sub.tolist())

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
+from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import (
     Blocks,
     backward_reachable,
@@ -21,7 +22,7 @@ from mitld_lp.solvers.graph import (
 )
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
-from mitld_lp.solvers.topological import Factors, level_kernels, transient_solve
+from mitld_lp.solvers.topological import level_kernels
 
 __all__ = ["Chain", "RowModel", "support_layers", "chain"]
 
@@ -67,7 +68,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
           guess: np.ndarray | None = None) -> Chain:
     """The values of ``policy`` (a choice row per state, ``-1`` on the target and the
     absorbing states) and the slack ``W`` of its certificates (module docs), solved
-    level by level with one LU per non-trivial component serving both.  ``layers``:
+    level by level, a non-trivial component of the layers by the walk over the chain's
+    own components there (:class:`~mitld_lp.solvers.chain_levels.ChainLevels`), its
+    factorisations serving both.  ``layers``:
     the components and levels of ``mdp``'s support graph (:func:`support_layers`);
     ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
     m = sp.csr_array(mdp.matrix)
@@ -139,13 +142,12 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         known = b[inner] + rows @ v
         g = None if guess is None else guess[inner]
         joint = None
+        walk = ChainLevels(block)  # the chain's own components: one walk, both solves
         if g is not None and bool(np.all(g > 0)):
-            pair = transient_solve(block, np.column_stack([known, 2.0 * kappa[inner] * g
-                                                           + rows @ w]))
+            pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
             v[inner], joint = pair[:, 0], pair[:, 1]
         else:
-            factors = Factors()
-            v[inner] = transient_solve(block, known, factors=factors)
+            v[inner] = walk.solve(known)
         residual = np.abs(v[inner] - (b[inner] + rows @ v))
         with np.errstate(divide="ignore", invalid="ignore"):
             need = np.where(v[inner] > 0, 2.0 * (residual + kappa[inner] * v[inner]), 0.0)
@@ -153,7 +155,7 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
                 ratio = need / (2.0 * kappa[inner] * g)  # type: ignore[operator]
                 w[inner] = joint * max(1.0, float(np.max(ratio, initial=1.0)))
             else:
-                w[inner] = transient_solve(block, need + rows @ w, factors=factors)
+                w[inner] = walk.solve(need + rows @ w)
     singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
 

@@ -34,8 +34,9 @@ each state's threshold of the optimum, so a choice it picks loses at most that.
 The chain of one deterministic policy is far more acyclic than the block: on QVBS
 ``zeroconf`` 1000-4-false the 213,268-state block's policy chain splits into 208,702
 components (the largest 4,567 states) over 95 levels.  It is solved level by level
-(:func:`chain_solve`: single states by their self-loop, a cyclic component by one
-sparse LU of its own size) in 0.12 s, where one LU of the whole chain took 1.0 s.
+(:func:`~mitld_lp.solvers.chain_levels.chain_solve`: single states by their self-loop,
+a cyclic component by one sparse LU of its own size) in 0.12 s, where one LU of the
+whole chain took 1.0 s.
 
 Why not the LP there: 319,663 of that block's 336,567 choices that the bounds keep are
 exact ties (symmetric hosts), which no bound can prune; the interior-point method
@@ -52,42 +53,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import (
-    Sense,
-    backward_reachable,
-    graph_blocks,
-    rows_dot,
-    segmented_argmax,
-)
+from mitld_lp.solvers.chain_levels import chain_solve
+from mitld_lp.solvers.graph import Sense, backward_reachable, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
-from mitld_lp.solvers.topological import Block, transient_solve
+from mitld_lp.solvers.topological import Block
 
-__all__ = ["Greedy", "certified_greedy", "chain_solve"]
+__all__ = ["Greedy", "certified_greedy"]
 
 logger = logging.getLogger(__name__)
-
-
-def chain_solve(chain: sp.csr_array, rhs: np.ndarray) -> np.ndarray:
-    r"""``x = rhs + Q x`` (``rhs``: ``(n, k)``, a column per right-hand side) for the
-    transient sub-stochastic ``Q`` of ``chain``, level by level downstream first over
-    its own strongly connected components: a single state by
-    :math:`x(s) = (b(s) + \sum_{s' \ne s} Q(s, s') x(s')) / (1 - Q(s, s))`, a cyclic
-    component by one sparse LU (:func:`~mitld_lp.solvers.topological.transient_solve`)
-    in float64."""
-    chain = sp.csr_array(chain)
-    rhs = np.asarray(rhs, dtype=np.float64)
-    self_loop = chain.diagonal()
-    blk = graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), self_loop)
-    x = np.zeros(rhs.shape)
-    for level in blk.walk():
-        one, cyclic = level.single, level.rest
-        # the level's own states are still 0 in x: the products see only below
-        x[one] = (rhs[one] + rows_dot(chain, one, x)) / (1.0 - self_loop[one])[:, None]
-        if cyclic.size:
-            rows = sp.csr_array(chain[cyclic])
-            x[cyclic] = transient_solve(sp.csr_array(rows[:, cyclic]),
-                                        rhs[cyclic] + rows @ x)
-    return x
 
 
 @dataclass(frozen=True, slots=True, eq=False)

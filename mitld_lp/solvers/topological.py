@@ -389,13 +389,13 @@ class DenseLU:
         return np.linalg.solve(self.a, rhs)
 
 
-def chain_lu(a: sp.csc_array) -> SuperLU | DenseLU:
+def chain_lu(a: sp.csc_array, *, dense: bool = True) -> SuperLU | DenseLU:
     """LU of ``I - Q`` for a sub-stochastic ``Q`` (a chain's, or its transpose): dense
-    up to :data:`DENSE_LU_STATES` states, else SuperLU's, the diagonal pivoted on
-    (``I - Q`` is diagonally dominant) in a minimum-degree order of ``A + A'``, which on
-    the product's blocks fills a third less than SuperLU's default column order and
-    factorises in 0.7-0.8x its time."""
-    if a.shape[0] <= DENSE_LU_STATES:
+    up to :data:`DENSE_LU_STATES` states (unless ``dense=False``), else SuperLU's, the
+    diagonal pivoted on (``I - Q`` is diagonally dominant) in a minimum-degree order of
+    ``A + A'``, which on the product's blocks fills a third less than SuperLU's default
+    column order and factorises in 0.7-0.8x its time."""
+    if dense and a.shape[0] <= DENSE_LU_STATES:
         return DenseLU(a)
     import scipy.sparse.linalg as spla
 
