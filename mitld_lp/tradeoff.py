@@ -1,9 +1,13 @@
 """The trade-off curve: the best (constrained) success probability against a bound on a
 second quantity (expected steps, expected cost, or the probability of a formula).
 
-Each point is a constrained synthesis (:func:`mitld_lp.routes.constrained.synthesize_constrained`)
-with the bound as one more constraint, so each comes with its certificate; the curve is
-drawn from the certified points only.
+Each point is a constrained synthesis (:func:`mitld_lp.synthesis.synthesize_constrained`)
+with the bound as one more constraint, on the route the model's features choose (with a
+camera and a band: the worst case's or, ``bands = "best"``, the best law's), so each
+comes with its certificate; the curve is drawn from the certified points only.  A point
+whose synthesis finds no policy meeting its bound (a band's worst case, ``failed``) after
+a point whose policy met a tighter one is that policy's value, not certified
+(:func:`_carried`).
 """
 
 from __future__ import annotations
