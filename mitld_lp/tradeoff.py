@@ -1,14 +1,19 @@
 """The trade-off curve: the best (constrained) success probability against a bound on a
 second quantity (expected steps, expected cost, or the probability of a formula).
 
-Each point is a constrained synthesis (:func:`mitld_lp.routes.constrained.synthesize_constrained`)
-with the bound as one more constraint, so each comes with its certificate; the curve is
-drawn from the certified points only.
+Each point is a constrained synthesis (:func:`mitld_lp.synthesis.synthesize_constrained`)
+with the bound as one more constraint, on the route the model's features choose (with a
+camera and a band: the worst case's or, ``bands = "best"``, the best law's), so each
+comes with its certificate; the curve is drawn from the certified points only.  A point
+whose synthesis finds no policy meeting its bound (a band's worst case, ``failed``) after
+a point whose policy met a tighter one is that policy's value, not certified
+(:func:`_carried`).
 """
 
 from __future__ import annotations
 
 import csv
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,10 +33,13 @@ from mitld_lp.problem import ProblemError
 from mitld_lp.routes.constrained import rows_for
 from mitld_lp.solvers.constrained import OPTIMAL, optimise
 from mitld_lp.solvers.constrained_model import Quantity
+from mitld_lp.solvers.result import Status
 from mitld_lp.synthesis import synthesize_constrained
 from mitld_lp.util.progress import tracked
 
 __all__ = ["ParetoPoint", "pareto", "write_csv", "plot"]
+
+log = logging.getLogger(__name__)
 
 _COLUMNS = ("bound", "probability_lower", "probability_upper", "achieved", "status",
             "certified")
@@ -100,7 +108,8 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
     lo, hi = _range(model, against, options)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConstraintError(f"--against {against}: no finite range ({lo}, {hi})")
-    out = []
+    out: list[ParetoPoint] = []
+    held: ParetoPoint | None = None  # the last point whose policy meets its bound
     for b in tracked(np.linspace(lo, max(hi, lo), points), options.get("progress"),
                      total=points, desc="pareto", unit=" points", leave=False):
         c = against_constraint(against, float(b) + 1e-9)
@@ -118,9 +127,26 @@ def pareto(model: Model, against: str, points: int = 11, **options: Any) -> list
             c = against_constraint(against, float(b) + 1e-9 + loosen)
             r = synthesize_constrained(model, [c], **options)
         achieved = r.constraints[-1].value if r.constraints else float("nan")
-        out.append(ParetoPoint(float(c.bound), r.lower, r.upper, achieved, r.status,
-                               r.certified))
+        point = ParetoPoint(float(c.bound), r.lower, r.upper, achieved, r.status,
+                            r.certified)
+        if r.status == OPTIMAL and all(v.holds for v in r.constraints):
+            held = point
+        elif held is not None and r.status != Status.INFEASIBLE:
+            point = _carried(held, point)
+        out.append(point)
     return out
+
+
+def _carried(held: ParetoPoint, failed: ParetoPoint) -> ParetoPoint:
+    """A point whose synthesis found no policy meeting its bound (a band's worst case:
+    no candidate meets it under every law, status ``failed``), after one whose policy
+    met a tighter bound: that policy meets this looser one too, so its task value is a
+    lower bound here; the upper bound is this point's own (NaN: 1).  Not certified."""
+    upper = failed.upper if failed.upper == failed.upper else 1.0
+    log.info("pareto: no policy found for the bound %r; the policy of the bound %r "
+             "meets it (its value %r a lower bound)", failed.bound, held.bound, held.lower)
+    return ParetoPoint(failed.bound, held.lower, max(upper, held.lower), held.achieved,
+                       held.status, False)
 
 
 def write_csv(points: list[ParetoPoint], path: Path, *, overwrite: bool = False) -> Path:

@@ -162,6 +162,39 @@ def test_safety_task_then_min_steps_keeps_the_best_probability(detect: float,
     _checked_by_storm(r, tmp_path)
 
 
+def test_blind_safety_then_min_steps_takes_four_steps(tmp_path: Path) -> None:
+    """``G !(b & A)`` seen blind (``detect = 0``), then the fewest expected steps.  By
+    hand: the blind robot knows only the step, and the bus may come at steps 1 to 4, so
+    its task holds surely only if it is never at ``A`` before step 4; it may stop (keep)
+    only once no hypothesis is open, at step 4: 4 steps, waiting.  A go before then is
+    at ``A`` when the bus comes with probability at least 0.8 x 0.25, so the
+    lexicographic tolerance 1e-6 buys at most 5e-6 of it, 4 steps each: E(steps) is in
+    [4 - 2e-5, 4].  The interior point's circulation on a ditch's self-loop, reached by
+    a path of tiny flows, left the controller there for ever (steps inf, certified);
+    Storm's expected steps on the exported chain are the answer's."""
+    model = Model.from_game(STATION, "G !(b & A)", events={"b": pmf(list(PMF))},
+                            sensors={"b": {"detect": 0.0}})
+    r = synthesize(model, then="min-steps")
+    assert r.route == "sensed-constrained" and r.certified, r.summary()["failed_checks"]
+    assert 4 - 2e-5 <= r.part.steps <= 4 + 1e-9 and 4 - 2e-5 <= r.secondary <= 4 + 1e-9
+    steps = storm(write_chain(r, tmp_path / "steps.drn"), 'R{"steps"}=? [F "done"]')
+    assert float(steps) == pytest.approx(r.secondary, abs=1e-6)
+    _checked_by_storm(r, tmp_path)
+
+
+def test_a_trapped_policy_is_not_certified(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same problem with the trapped states left as the interior point's policy
+    reads them (the mending switched off): its chain stays undecided for ever, and the
+    answer says so and is not certified (it said inf steps, certified)."""
+    monkeypatch.setattr("mitld_lp.solvers.constrained._exits_kept",
+                        lambda merged, prob, stay, *rest: (prob, stay))
+    model = Model.from_game(STATION, "G !(b & A)", events={"b": pmf(list(PMF))},
+                            sensors={"b": {"detect": 0.0}})
+    r = synthesize(model, then="min-steps")
+    assert r.part.steps == float("inf") and not r.certified
+    assert "expected steps" in " ".join(r.summary()["failed_checks"])
+
+
 @pytest.mark.parametrize(("detect", "bound"), [(0.5, 0.35), (0.0, 0.35), (0.9, 0.5)])
 def test_minimum_with_a_constraint_equals_the_knowledge_lp(detect: float, bound: float,
                                                            tmp_path: Path) -> None:

@@ -35,7 +35,8 @@ ROUTES: list[Route] = [
 
 #: The constrained LP's routes, claiming a problem without constraints too (the
 #: trade-off curve's end points, :func:`mitld_lp.synthesis.synthesize_constrained`).
-LP: tuple[Route, ...] = (SensedBandConstrainedRoute(every=True),
+LP: tuple[Route, ...] = (SensedOptimisticConstrainedRoute(every=True),
+                         SensedBandConstrainedRoute(every=True),
                          SensedConstrainedRoute(every=True),
                          RobustConstrainedRoute(every=True),
                          ConstrainedRoute(every=True))

@@ -131,14 +131,19 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any) -> str:
 
 def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[Any]
                   ) -> list[str]:
-    """Why sensors with a law known only within a band cannot be solved as posed: the
-    worst case over the band is solved for either objective without constraints
-    (:mod:`mitld_lp.routes.sensed_band`)."""
+    """Why sensors with a law known only within a band cannot be solved as posed on a
+    route that reads laws as points: the worst case over the band is solved for either
+    objective without constraints (:mod:`mitld_lp.routes.sensed_band`); with
+    constraints or ``then`` by the routes ahead in the precedence list
+    (:mod:`mitld_lp.routes.sensed_band_constrained`, bands 'worst';
+    :mod:`mitld_lp.routes.sensed_optimistic_constrained`, bands 'best'), so this is
+    said only to a route list without them."""
     bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
                       if d.is_ambiguous)
     with_ = f"{head} with a law known only within a band ({bands})"
     if constraints:
-        return [f"{with_} and constraints: a controller that acts on observations and "
-                "meets the constraints under every law of the band is not solved; give "
-                "the event a point law"]
+        return [f"{with_} and constraints: the sensed-constrained route reads laws as "
+                "points; the band is the sensed band constrained route's (bands 'worst') "
+                "or the sensed optimistic constrained route's (bands 'best'), which this "
+                "list of routes does not hold"]
     return []

@@ -391,8 +391,8 @@ class SensedConstrainedRoute(Route):
                                 seed=seed, build=built.timings, merged=merged, eta=eta,
                                 route=self.name, part=part, controller=controller)
 
-        exact = solve(merged, lambda merged, chosen: mixed_controller(
-            posed.model.game, belief, merged, chosen.prob, Verdict, seed=seed))
+        exact = _steps_checked(solve(merged, lambda merged, chosen: mixed_controller(
+            posed.model.game, belief, merged, chosen.prob, Verdict, seed=seed)), p.then)
         mixed = np.asarray(mixed_states(keeps, timed))
         if not mixed.any():
             return exact
@@ -403,3 +403,20 @@ class SensedConstrainedRoute(Route):
                         lambda merged, chosen: None)
         return bracketed(exact, relaxed, int(mixed.sum()), posed.minimise,
                          posed.settings.precision)
+
+
+def _steps_checked(r: Result, then: str | None) -> Result:
+    """``r`` not certified where ``then`` minimised the expected steps or cost and the
+    policy's chain may stay undecided for ever (its certified expected steps infinite,
+    :func:`mitld_lp.solvers.certify_mixture.mixture_bounds`), with the check saying so."""
+    from dataclasses import replace
+
+    from mitld_lp.checks import Check
+
+    steps = getattr(r.part, "steps", float("nan"))
+    if then is None or not np.isinf(steps):
+        return r
+    check = Check("expected steps", False, (
+        f"then {then}: the policy's chain may stay undecided for ever (infinitely many "
+        "expected steps), where the LP's policy takes finitely many"))
+    return replace(r, certified=False, checks=(*r.checks, check))

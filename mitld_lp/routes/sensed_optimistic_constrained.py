@@ -93,13 +93,16 @@ def point_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, An
 class SensedOptimisticConstrainedRoute(SensedConstrainedRoute):
     """Constraints or ``then``, a sensor that misses its event and a band read for its
     best law (module docs): the sensed constrained route's answer at the band's
-    constant laws, the fully observed optimistic constrained optimum as the other end."""
+    constant laws, the fully observed optimistic constrained optimum as the other end.
+    ``every``: it claims such problems without constraints too (the trade-off curve's
+    end points, :mod:`mitld_lp.tradeoff`)."""
 
     optimistic = True
 
-    def claims(self, posed: Posed) -> bool:
+    def claims(self, posed: Posed) -> bool:  # every: without constraints too (pareto)
         return (bool(partial(posed.model.sensors)) and posed.robust
-                and posed.settings.bands == "best" and posed.problem.constrained)
+                and posed.settings.bands == "best"
+                and (posed.problem.constrained or self.every))
 
     def refusal(self, posed: Posed) -> list[str]:
         """The sensed constrained route's refusals at the band's middle law (the band
@@ -134,7 +137,8 @@ def _full_bound(posed: Posed) -> float:
     p = posed.problem
     model = dataclasses.replace(p.model, sensors=MappingProxyType({}), constraints=())
     try:
-        seen = pose_on([RobustConstrainedRoute()], model, p.constraints, then=p.then,
+        seen = pose_on([RobustConstrainedRoute(every=True)], model, p.constraints,
+                       then=p.then,
                        settings=replace(posed.settings, progress=False),
                        objective=p.objective)
         full = seen.route.solve(seen, build_posed(seen, progress=False))

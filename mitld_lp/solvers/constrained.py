@@ -167,6 +167,7 @@ def optimise(
         return Solved(answer.status, float("nan"), None, None, (), message)
     lp_value = float(vec(0) @ v)
     prob, stay = _policy(mdp.n_choices, mdp.n_states, live_choices, stays, cs, v, allowed)
+    prob, stay = _exits_kept(merged, prob, stay, live_choices, stays, v, allowed)
     values = _exact(merged, prob, stay, quantities, cols)
     # Clarabel's duals satisfy A'z + c = 0 with c = -objective for a maximum: the flow
     # rows' duals y and the rows' lam >= 0 (a cone's duals) give A_eq'y + A_ub'lam >=
@@ -242,6 +243,70 @@ def _policy(n_choices: int, n_states: int, live_choices: np.ndarray, stays: np.n
     x[first & empty[cs]] = 1.0
     total[empty] = 1.0
     return x / total[cs], z / total
+
+
+def _exits_kept(merged: Merged, prob: np.ndarray, stay: np.ndarray,
+                live_choices: np.ndarray, stays: np.ndarray, v: np.ndarray,
+                allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The policy with no state trapped.  Where its chain closes a class of states
+    that reaches neither an absorbing state nor a stay, each state of the class plays
+    instead the solution's choices (and stay) that leave the class, by their flows; a
+    state the solution leaves by none plays its first allowed keep (a stay choice of
+    the model) that leaves, else its first allowed choice that leaves; until no class
+    is closed.  By flow conservation no solution flow enters a set of states its own
+    choices never leave, so such a class is the interior point's circulation (a
+    self-loop's flow of 5e-8 beside a keep's of nothing, at an information state the
+    policy reaches by a path of tiny flows) or a state the solution never visits, never
+    an optimum's; left in, the chain stays there for ever, and where the task is
+    undecided its expected steps are infinite.  The states that only lead into such a
+    class keep their choices: they leave it once it is mended."""
+    from scipy.sparse.csgraph import connected_components
+
+    from mitld_lp.solvers.graph import backward_reachable, gather_ranges
+
+    mdp = merged.mdp
+    n = mdp.n_states
+    cs = mdp.choice_state()
+    m = sp.csr_array(mdp.matrix)
+    fixed = np.asarray(merged.absorbing, dtype=bool)
+    x = np.zeros(mdp.n_choices)
+    x[live_choices] = np.maximum(v[: live_choices.size], 0.0)
+    z = np.zeros(n)
+    z[stays] = np.maximum(v[live_choices.size:], 0.0)
+    owner = np.repeat(np.arange(mdp.n_choices), np.diff(m.indptr))
+    keep = np.asarray(merged.keep, dtype=bool)
+    prob, stay = prob.copy(), stay.copy()
+    while True:
+        used = np.flatnonzero((prob > 0) & ~fixed[cs])
+        lo, hi = m.indptr[used], m.indptr[used + 1]
+        src = np.repeat(cs[used], hi - lo)
+        dst = np.asarray(m.indices[gather_ranges(lo, hi)], dtype=np.int64)
+        trapped = ~fixed & ~backward_reachable(n, src, dst, fixed | (stay > 0))
+        if not trapped.any():
+            return prob, stay
+        _, comp = connected_components(sp.csr_array(
+            (np.ones(src.size), (src, dst)), shape=(n, n)), directed=True,
+            connection="strong")
+        closed = np.ones(comp.max() + 1, dtype=bool)
+        closed[comp[src[comp[src] != comp[dst]]]] = False
+        at = trapped & closed[comp]  # the closed classes (every trapped path ends in one)
+        leaves = np.zeros(mdp.n_choices, dtype=bool)  # a successor outside its class
+        np.logical_or.at(leaves, owner, comp[m.indices] != comp[cs[owner]])
+        leaves &= at[cs]
+        flow = np.where(leaves, x, 0.0)
+        out = np.bincount(cs, weights=flow, minlength=n) + np.where(at, z, 0.0)
+        for pick in (leaves & allowed & keep, leaves & allowed):
+            bare = np.bincount(cs, weights=flow, minlength=n) <= 0
+            none = np.flatnonzero(pick & bare[cs] & (out[cs] <= 0))
+            flow[none[np.flatnonzero(np.diff(np.concatenate([[-1], cs[none]])))]] = 1.0
+        z_out = np.where(at & (out > 0), z, 0.0)
+        total = np.bincount(cs, weights=flow, minlength=n) + z_out
+        mended = at & (total > 0)
+        if not mended.any():  # no way out of what is left: the certificate says so
+            return prob, stay
+        mine = mended[cs]
+        prob[mine] = flow[mine] / total[cs[mine]]
+        stay[mended] = z_out[mended] / total[mended]
 
 
 def _exact(merged: Merged, prob: np.ndarray, stay: np.ndarray, quantities: list[Quantity],
