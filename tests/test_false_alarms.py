@@ -47,7 +47,7 @@ def _safe(world: ExplicitGame) -> Callable[..., Any]:
 #: name: (world, spec, the spec's law given as events (None: in the spec), judge)
 TASKS: dict[str, tuple[ExplicitGame, str, bool, Callable[..., Any]]] = {
     "co-safe": (PUSHED, ON_LAW + "F(b & F[0,1] A)", False, caught(PUSHED, "A", 1)),
-    "safety": (PUSHED, "G[0,5] !(b & A)", True, avoided(PUSHED, ["A"])),
+    "safety": (PUSHED, "G !(b & A)", True, avoided(PUSHED, ["A"])),
     "obligation": (STATION, ON_LAW + "F(b & F[0,1] A) & G[0,5] !h", False,
                    both(caught(STATION, "A", 1), _safe(STATION))),
 }
