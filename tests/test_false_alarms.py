@@ -289,12 +289,14 @@ def test_simulation_draws_false_alarms_within_the_bracket() -> None:
     # a law that may never happen: 1 - 0.3 - 0.3 = 0.4 never, by hand
     ({"law": (0.3, 0.3)}, r"b never happens with probability 0\.4\).*not finite"),
     ({"band": True}, r"false_alarm = 0\.2.*band.*not solved"),
+    ({"band": True, "bands": "best"}, r"false_alarm = 0\.2.*band.*not solved"),
     ({"constraint": True}, r"false_alarm = 0\.2.*route sensed-constrained"),
 ])
 def test_refused_by_name(extra: dict[str, Any], words: str) -> None:
     """What is not built with false alarms is refused naming the sensor's key and the
     reason: a law that may never happen (the information state is not finite), a law
-    known within a band, constraints."""
+    known within a band (its worst case, or its best with ``bands="best"``),
+    constraints."""
     from mitld_lp.distributions import from_table
 
     law = pmf(list(extra.get("law", LAW)))
@@ -302,6 +304,8 @@ def test_refused_by_name(extra: dict[str, Any], words: str) -> None:
         law = from_table({"geometric": [0.2, 0.4]}, "mu")
     model = Model.from_game(STATION, "F(b & F[0,1] A)", events={"b": law},
                             sensors={"b": {"detect": 0.5, "false_alarm": 0.2}})
-    kwargs = {"constraints": ["P(F h) <= 0.5"]} if extra.get("constraint") else {}
+    kwargs: dict[str, Any] = {"bands": extra["bands"]} if "bands" in extra else {}
+    if extra.get("constraint"):
+        kwargs["constraints"] = ["P(F h) <= 0.5"]
     with pytest.raises(ProblemError, match=words):
         synthesize(model, **kwargs)
