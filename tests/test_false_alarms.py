@@ -179,8 +179,10 @@ def test_exported_chain_checked_by_storm(world: ExplicitGame, spec: str, delay: 
     false-alarm sensor, with and without a delay: ``export --chain``'s controlled chain, built from
     the true dynamics (per-step reports drawn from the true event time) and the
     controller's own tables, gives in Storm the controller's ``lower`` (to the DRN's
-    decimals), inside the certified bracket."""
+    decimals), inside the certified bracket; so does the decision tree ``export --tree``
+    writes, run as the controller."""
     from mitld_lp.running.chain import write_chain
+    from mitld_lp.running.tree import tree_controller, tree_of
 
     model = Model.from_game(world, spec, events={"b": geometric(0.4)},
                             sensors={"b": {"detect": 0.7, "false_alarm": 0.15, "delay": delay}},
@@ -190,6 +192,11 @@ def test_exported_chain_checked_by_storm(world: ExplicitGame, spec: str, delay: 
     value = _storm(write_chain(r, tmp_path / "c.drn"), 'P=? [F "accept"]')
     assert abs(value - Fraction(r.lower)) <= Fraction(1, 10**9)
     assert Fraction(r.lower) - Fraction(1, 10**9) <= value <= Fraction(r.upper)
+    # export --tree: the tree over the world's variables and the memory, run as the
+    # controller, has the same chain value
+    tree = tree_controller(r, tree_of(r))
+    assert _storm(write_chain(r, tmp_path / "t.drn", controller=tree),
+                  'P=? [F "accept"]') == value
 
 
 def _posterior(history: list[bool], detect: Fraction, fa: Fraction, delay: int
