@@ -351,6 +351,18 @@ def test_sensed_export(tmp_path):
     assert float(row["storm_risk"]) <= float(row["bound"])
 
 
+def test_false_alarms(tmp_path):
+    """The bus case with a camera on bus 2 with and without false alarms: Storm's exact
+    value of each exported chain is the answer's ``lower`` (to the DRN's decimals)."""
+    pytest.importorskip("stormpy")
+    _run("false_alarms", tmp_path)
+    rows = _csv(tmp_path / "false_alarms.csv")
+    assert [float(row["false_alarm"]) for row in rows] == [0.0, 0.05]
+    for row in rows:
+        assert float(row["lower"]) <= float(row["upper"])
+        assert abs(float(row["storm_accept"]) - float(row["lower"])) <= 1e-7
+
+
 def test_bus_camera_band(tmp_path):
     """The bus case with a camera on bus 1, bus 2's law a band and the puddles to avoid
     always: Storm's robust check of the exported interval chain is the answer's lower

@@ -72,7 +72,8 @@ def test_from_game_names_the_key() -> None:
 
 
 @pytest.mark.parametrize("extra, band, words", [
-    ("[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }", False, "sensors.b.false_alarm"),
+    # (a false alarm at a point law that surely happens is solved: test_false_alarms.py)
+    ("[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }", True, "sensors.b.false_alarm"),
     ('objective = "min"\nconstraints = ["P(F A) >= 0.1"]\n[sensors]\nb = { detect = 0.5 }',
      False, None),
     ('objective = "min"\nconstraints = ["P(F A) >= 0.1"]\n[sensors]\nb = { detect = 0.5 }',
@@ -96,22 +97,17 @@ def test_refused_by_name(extra: str, band: bool, words: str | None) -> None:
         synthesize(loads_model(text))
 
 
-@pytest.mark.parametrize("law, words", [
-    # geometric(0.4) surely happens: finite, not built (module docs of routes/sensed.py)
-    ("geometric = 0.4", "surely happens .*up to 2\\^\\(T - 1\\) report patterns"),
+def test_false_alarm_refusal_says_which_case() -> None:
+    """A false alarm with a law that may never happen is refused with its reason (the
+    belief in "never" moves with every report: no finite information state); with a law
+    that surely happens it is solved (tests/test_false_alarms.py checks the answers)."""
+    sensor = "[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }\n"
     # pmf [0.3, 0.3]: never with probability 1 - 0.3 - 0.3 = 0.4, by hand
-    ("pmf = [0.3, 0.3]", "b never happens with probability 0.4\\) .*not finite"),
-])
-def test_false_alarm_refusal_says_which_case(law: str, words: str) -> None:
-    """A false alarm is refused with the reason of its case: a law that surely happens
-    gives a finite information state this construction does not build; one that may
-    never happen gives none (the belief in "never" moves with every report)."""
-    text = GRID.replace("geometric = 0.4", law) + \
-        "[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }\n"
-    with pytest.raises(ProblemError, match=words) as info:
-        synthesize(loads_model(text))
-    other = "not finite" if "surely" in words else "surely happens"
-    assert other not in str(info.value)
+    with pytest.raises(ProblemError, match="b never happens with probability 0.4\\) .*not "
+                                           "finite"):
+        synthesize(loads_model(GRID.replace("geometric = 0.4", "pmf = [0.3, 0.3]") + sensor))
+    r = synthesize(loads_model(GRID + sensor))  # geometric(0.4) surely happens
+    assert r.route == "sensed" and r.certified
 
 
 def test_safety_task_solved() -> None:
@@ -132,7 +128,8 @@ def _geometric():  # type: ignore[no-untyped-def]
 
 def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
     model = tmp_path / "m.toml"
-    model.write_text(GRID + "[sensors]\nb = { detect = 0.5, false_alarm = 0.2 }\n")
+    never = GRID.replace("geometric = 0.4", "pmf = [0.3, 0.3]")  # may never happen
+    model.write_text(never + "[sensors]\nb = { detect = 0.5, false_alarm = 0.2 }\n")
     run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
                          capture_output=True, text=True)
     assert run.returncode == 2

@@ -130,6 +130,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
             say_answer("sensed:       the policy acts on what the robot observes; " + ", ".join(
                 f"{e} reported w.p. {sensor.detect:g} per step"
                 + (f" from {sensor.delay} steps after it" if sensor.delay else "")
+                + (f", falsely w.p. {sensor.false_alarm:g} before" if sensor.false_alarm
+                   else "")
                 for e, sensor in sorted(r.sensors.items())))
         say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}"
               f"  (epsilon achieved {r.sta.epsilon_achieved:.3g})")

@@ -21,8 +21,9 @@ __all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal"]
 
 
 class SensedRoute(Route):
-    """Some event is reported by a sensor that misses it (``detect < 1``): every task
-    class, either objective, laws that may never happen; point laws, no constraints
+    """Some event is reported by a sensor that misses it (``detect < 1``) or gives false
+    alarms (at laws that surely happen): every task class, either objective, laws that
+    may never happen (without false alarms); point laws, no constraints
     (:mod:`mitld_lp.routes.sensed_solve`), and a law known within a band (the worst case
     over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
@@ -38,7 +39,7 @@ class SensedRoute(Route):
         if not partial(p.model.sensors):
             return ["sensed route: no event has a sensor that misses it"]
         return sensed_refusals(p.model, posed.fragment, p.objective, p.constraints, p.then,
-                               posed.robust)
+                               posed.robust, alarms=True)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton, then the information-state product
@@ -82,17 +83,20 @@ class SensedRoute(Route):
 
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],
-                    then: str | None, robust: bool) -> list[str]:
+                    then: str | None, robust: bool, *, alarms: bool = False) -> list[str]:
     """Why the ``sensed`` route cannot solve this problem as posed: every reason, each
     naming its feature (empty: it can).  ``model`` has at least one sensor that is not
-    perfect."""
+    perfect.  ``alarms``: the caller builds sensors with false alarms (the ``sensed``
+    route's own product, without a band); other callers (constraints, ``then``, the LP
+    over information states) have them refused."""
     sensors = partial(model.sensors)
     named = ", ".join(f"{a} = {s}" for a, s in sensors.items())
     head = f"sensors ({named})"
     refused = []
     for a, s in sensors.items():
         if s.false_alarm:
-            refused.append(false_alarm_refusal(a, s.false_alarm, model.distributions.get(a)))
+            refused += false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
+                                           built=alarms, robust=robust)
     if robust:
         refused += band_refusals(model, head, objective, constraints)
     try:
@@ -105,28 +109,37 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     return refused
 
 
-def false_alarm_refusal(event: str, false_alarm: float, law: Any) -> str:
-    """Why a sensor with false alarms is not solved: the sensor then reports or not at
-    every step, so the robot's belief reads every report, not only the first.  With a
-    law that may never happen (``never > 0``) "never" against "happened at ``k``" moves
-    by every report for ever (a random walk in the counts of reports and misses): the
-    information state is not finite.  With one that surely happens, truncated at ``T``,
-    two hypotheses whose reports are both due see the same likelihood at every later
-    step, so the weights stop changing after step ``T + delay``: finite, but each state
-    may hold one of up to ``2^(T - 1)`` report patterns where the first report alone
-    (``false_alarm = 0``) gives ``T``, and the information-state product, which counts
-    the first report only, does not build it."""
+def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, built: bool = True,
+                        robust: bool = False) -> list[str]:
+    """Why a sensor with false alarms is not solved as posed (empty: it is).  The sensor
+    then reports or not at every step, so the robot's belief reads every report, not
+    only the first.  With a law that surely happens, truncated at ``T``, the belief is a
+    function of each hypothesis's count of reports before its report was due, and two
+    hypotheses whose reports are both due see the same likelihood at every later step:
+    the information state is finite, and the information-state product builds it
+    (:mod:`mitld_lp.sensing.rules`).  With a law that may never happen (``never > 0``)
+    "never" against "happened at ``k``" moves by every report for ever (a random walk in
+    the counts of reports and misses): the information state is not finite.  ``built``:
+    the caller builds false alarms (the ``sensed`` route); bands (``robust``) and the
+    routes of constraints, ``then`` and the LP over information states do not."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
     if law is not None and float(law.never) > 0.0:
-        return (f"{head}, and with a law that may never happen ({event} never happens with "
+        return [f"{head}, and with a law that may never happen ({event} never happens with "
                 f"probability {float(law.never):.6g}) the belief that {event} never "
                 "happens moves with every report for ever, so the information state is "
-                "not finite; not solved (give false_alarm = 0)")
-    return (f"{head}: finite for a law that surely happens (the weights stop changing "
-            "once every hypothesis's report is due), but up to 2^(T - 1) report patterns "
-            "a state, T the law's truncation point, which the information-state product "
-            "(the first report only) does not build; not solved (give false_alarm = 0)")
+                "not finite; not solved (give false_alarm = 0, or a law that surely "
+                "happens)"]
+    refused = []
+    if robust:
+        refused.append(f"{head}: with a law known only within a band (the worst case over "
+                       "the band of a controller that reads every report) not solved; "
+                       "give the event a point law or false_alarm = 0")
+    if not built:
+        refused.append(f"{head}: route sensed-constrained (the randomised controllers "
+                       "over information states: bounds on other formulas, then, pareto, "
+                       "the LP) does not build it; not solved (give false_alarm = 0)")
+    return refused
 
 
 def band_refusals(model: Any, head: str, objective: str, constraints: Sequence[Any]

@@ -299,6 +299,9 @@ class _Unfolding:
         out: list[tuple[frozenset[str], tuple[int, ...], float]] = [(frozenset(), (), 1.0)]
         for a, wait in zip(self.sensed, unreported, strict=True):
             sensor = self.sensors[a]
+            if sensor.false_alarm > 0.0:  # a report or none at every step
+                out = _alarm_reports(out, a, sensor, a in occurred, wait)
+                continue
             if a in occurred:
                 due = sensor.delay  # the event happens now: its report from step + delay
             elif wait == _REPORTED:  # not happened yet, or reported already
@@ -466,3 +469,19 @@ class _CornerUnfolding(_Unfolding):
             h = self.corner.get(a, self.sta.clocks[a].band(clock)[0])
             out = [(e | {a}, p * h) for e, p in out] + [(e, p * (1.0 - h)) for e, p in out]
         return [(e, p) for e, p in out if p > 0.0]
+
+
+def _alarm_reports(out: list[tuple[frozenset[str], tuple[int, ...], float]], a: str,
+                   sensor: Sensor, occurs: bool, wait: int
+                   ) -> list[tuple[frozenset[str], tuple[int, ...], float]]:
+    """:meth:`_Unfolding.reports` for one sensor with false alarms: it reports with
+    probability ``false_alarm`` before the event's report is due (``wait``:
+    :data:`_REPORTED` while the event has not happened, else the steps until it is due)
+    and ``detect`` from then on, at every step; ``wait`` stays 0 once due."""
+    if occurs:
+        wait = sensor.delay
+    elif wait > 0:
+        wait -= 1
+    p = sensor.detect if wait == 0 else sensor.false_alarm
+    return [x for x in ([(r | {a}, (*u, wait), q * p) for r, u, q in out] +
+                        [(r, (*u, wait), q * (1.0 - p)) for r, u, q in out]) if x[2] > 0.0]

@@ -36,6 +36,22 @@ tail (:attr:`mitld_lp.automata.sta.EventClock.tail`), inside the epsilon achieve
 A hypothesis is lost (the sink) when its automaton can reach no persistent state (the
 accepting one, or a safe one of a task with a safety part) with the events left.
 
+A sensor with false alarms (``false_alarm > 0``, a law that surely happens: one that may
+never happen is refused) reports or not at *every* step, with probability
+``false_alarm`` before step ``k + delay`` and ``detect`` from it on; its event is never
+kept as reported, and each hypothesis keeps, after its events' times, its count ``b``
+of that sensor's reports before its own report was due.  The likelihood of the reports
+under ``k`` is ``fa^b (1 - fa)^(p - b) d^(r - b) (1 - d)^(n - p - r + b)`` (``p`` its
+steps before due; ``r`` reports in ``n`` steps, common to all), so the posterior is a
+function of the key (the counts made canonical: :class:`mitld_lp.sensing.merge.Counts`);
+once every hypothesis is due the counts stop changing and the clock is no longer kept.
+Up to ``2^(T - 1)`` report patterns (the steps between the first and the last due step)
+may each keep their own state.  The times are then not shifted
+(:mod:`mitld_lp.sensing.merge`), and no such sensor is collapsed to a blind one
+(:mod:`mitld_lp.sensing.horizon`).  The truncation is the one above: a hypothesis not
+happened by ``T`` goes to the truncation sink, whatever the law (memoryless or not), and
+its mass is counted as failure in the lower model and success in the upper.
+
 One step from an information state under action ``act``: the unsensed events happen by
 their hazards at the clock; each hypothesis's sensed events that had not happened
 happen by their hazards (or stay pending, or cross their truncation point); each
@@ -147,7 +163,8 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                    ends: Ends | None = None, name: str | None = None,
                    merge: bool = True) -> Belief:
     """The reachable information-state MDP (module docs) of a task's automaton ``dta``
-    in ``game``, the events of ``sensors`` (missed detections only) hidden.
+    in ``game``, the events of ``sensors`` (missed detections, and false alarms with
+    laws that surely happen) hidden.
 
     A sensor whose reports all come after the task stops depending on when the sensed
     events happened is built as a blind one, its reports ignored (the same optimum:
@@ -176,7 +193,7 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
     # acceptance is reaching its accepting state) holds for co-safe tasks and laws that
     # surely happen only
     if late_reports and SAFE not in dta.kinds and not any(
-            sta.clocks[a].keeps_never for a in sensed):
+            sta.clocks[a].keeps_never or sensors[a].false_alarm > 0.0 for a in sensed):
         found = collapse(dta, sensors, sta.truncation_points)
         used, ignored = dict(found.sensors), found.blind
         for a in sorted(ignored):

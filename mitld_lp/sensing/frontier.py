@@ -45,7 +45,7 @@ from mitld_lp.sensing.info import (
     InfoSize,
     InfoState,
 )
-from mitld_lp.sensing.merge import Shifts
+from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import INT as _I
 from mitld_lp.sensing.rows import Table, fsum_by, groups, mix64, spread
@@ -103,7 +103,12 @@ class FrontierBuilder(StepRules):
         self.act_id: dict[str, int] = {}
         self.times: list[tuple[int, ...]] = []
         self.times_id: dict[tuple[int, ...], int] = {}
-        self.shifts = Shifts(sta, sensed, sensors, self.times, self.time_id, merge)
+        # with false alarms the times are not shifted (their report counts would be
+        # read at the shifted steps); the counts are made canonical instead (Counts)
+        self.shifts = Shifts(sta, sensed, sensors, self.times, self.time_id,
+                             merge and not self.alarms)
+        self.counts = Counts(ns, self.alarms, self.times, self.time_id)
+        self.alarm_mask = sum(1 << i for i in self.alarms)  # never kept as reported
         self.outcomes = Table(3, (_I, np.float64, bool))
         self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
         self.successors = Table(2, (_I, np.float64))
@@ -357,13 +362,14 @@ class FrontierBuilder(StepRules):
         # canonical (merge.py), each group's in InfoState order
         obs, first = groups(c, w2, occ, new)
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
+        tid2 = self.counts.canonical(tid2, obs)
         hid, hfirst = groups(obs, self.order_key(tid2, q2))
         hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
         hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
         total = fsum_by(hobs, hmass, len(first))
         weight = hmass / total[hobs]
         gst = c_state[c[first]]
-        g_rep = reported[gst] | new[first]
+        g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
         g_pend = pending[gst] & ~occ[first]
         need = self.lookup(self.need_table, tid2[hfirst], g_rep[hobs], self.make_need)
         most = np.full(len(first), -1, _I)
@@ -524,7 +530,7 @@ class FrontierBuilder(StepRules):
             initial = 0
         else:
             initial = len(self.states)
-            times0 = self.time_id((NOT_YET,) * len(self.sensed))
+            times0 = self.time_id((NOT_YET,) * len(self.sensed) + (0,) * len(self.alarms))
             q0code = np.array([times0 * self.nq + q0], _I)
             one = np.array([1], _I)
             w0 = self.world(game.initial)

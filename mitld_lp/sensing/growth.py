@@ -136,7 +136,9 @@ class Growth:
         budget = (f"max_states {self.max_states:,}" if estimate > self.max_states else
                   f"max_memory {self.max_memory:,} bytes, at the {used / found:,.0f} bytes "
                   f"a state the {found:,} so far took")
-        events = ", ".join(f"{a} (sensors.{a}: detect {s.detect:g}, delay {s.delay}; "
+        events = ", ".join(f"{a} (sensors.{a}: detect {s.detect:g}, delay {s.delay}"
+                           + (f", false_alarm {s.false_alarm:g}: every step's report "
+                              "counts" if s.false_alarm else "") + "; "
                            f"truncated at step {self.points[a]})"
                            for a, s in sorted(self.sensors.items()))
         recent = ", ".join(f"{n:,}" for n in self.sizes[-4:])

@@ -101,18 +101,24 @@ class InfoSize:
     :meth:`mitld_lp.sensing.rules.StepRules.clock_key`),
     ``hypotheses`` the most hypotheses a state holds (a step up to the truncation point,
     or not yet, per sensed event; one automaton state each, the observations fixing the
-    run), ``world_states`` (None if the game does not say).  The states themselves are
-    counted as they are built."""
+    run), ``world_states`` (None if the game does not say), ``patterns`` the report
+    patterns whose posteriors a world path may tell apart (1 without false alarms; with
+    them, per such sensor ``sum_t 2^(min(t, T + D - 1) - D)`` over the clock ``t <= T +
+    D``: the reports of the steps between the first and the last due step, multiplied
+    over the sensors).  The states themselves are counted as they are built."""
 
     world_states: int | None
     clock: int
     hypotheses: int
+    patterns: int = 1
 
     def __str__(self) -> str:
         world = "an unknown number of" if self.world_states is None else (
             f"{self.world_states:,}")
+        alarms = "" if self.patterns == 1 else (
+            f", up to {self.patterns:,} report patterns (false alarms) per world path")
         return (f"{world} world states, the clock kept up to step {self.clock:,}, at most "
-                f"{self.hypotheses:,} hypotheses per state")
+                f"{self.hypotheses:,} hypotheses per state{alarms}")
 
 
 def info_size(game: Game[Any], sta: STA, sensors: Mapping[str, Sensor]) -> InfoSize:
@@ -125,5 +131,10 @@ def info_size(game: Game[Any], sta: STA, sensors: Mapping[str, Sensor]) -> InfoS
     assert len(points) == len(sensors)  # every sensed event is truncated (sensed_sta)
     bounds += [points[a] + sensor.delay + (sta.clocks[a].report_limit or 0)
                for a, sensor in sensors.items()]
+    patterns = math.prod(
+        sum(2 ** max(0, min(t, points[a] + s.delay - 1) - s.delay)
+            for t in range(points[a] + s.delay + 1))
+        for a, s in sensors.items() if s.false_alarm > 0.0)
     return InfoSize(world_members(game).n_states, max(bounds, default=0),
-                    math.prod(t + 1 + sta.clocks[a].keeps_never for a, t in points.items()))
+                    math.prod(t + 1 + sta.clocks[a].keeps_never for a, t in points.items()),
+                    patterns)

@@ -53,7 +53,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.sensing.rows import INT, groups
 from mitld_lp.sensing.sensors import Sensor
 
-__all__ = ["Shifts", "shift_start"]
+__all__ = ["Shifts", "Counts", "shift_start"]
 
 
 def shift_start(sta: STA, event: str) -> int | None:
@@ -117,6 +117,53 @@ class Shifts:
         pair, first = groups(tid[rows], *by.T)
         new_id = np.array([self.time_id(tuple(x)) for x in
                            (self.array[tid[rows][first]] - by[first]).tolist()], INT)
+        out = tid.copy()
+        out[rows] = new_id[pair]
+        return out
+
+
+class Counts:
+    """The canonical report counts of the sensed events whose sensors give false alarms
+    (:mod:`mitld_lp.sensing.rules`: each hypothesis keeps, after its events' times, the
+    number of reports of each such event before its report was due, ``b``).
+
+    The claim.  In one information state every hypothesis saw the same reports.  Under
+    hypothesis ``k`` the reports' likelihood is ``fa^b (1 - fa)^(p - b) d^(r - b)
+    (1 - d)^(n - p - r + b)``, ``p = min(t, k + delay - 1)`` its steps before due, ``r``
+    the reports and ``n`` the steps in all (common to every hypothesis): the normalised
+    weights depend on the counts ``b`` only through their differences (a factor
+    ``(fa (1 - d) / (d (1 - fa)))^b`` beside one of ``k`` and ``t``), and the future
+    adds to a count, never reads it.  So subtracting from every hypothesis's count of an
+    event the least count of that event in the state leaves the posterior and the
+    future unchanged, and two states whose counts differ by a constant are one.  The
+    build's check that a key's posterior never changes (``WEIGHT_TOL``) checks this
+    claim at every revisit."""
+
+    def __init__(self, n: int, alarms: tuple[int, ...], times: list[tuple[int, ...]],
+                 time_id: Callable[[tuple[int, ...]], int]) -> None:
+        self.n, self.alarms = n, alarms
+        self.times, self.time_id = times, time_id
+        self.array = np.zeros((0, n + len(alarms)), INT)
+
+    def canonical(self, tid: np.ndarray, group: np.ndarray) -> np.ndarray:
+        """The hypotheses' times ``tid`` (one per row, ``group`` each row's group of one
+        observation) with each group's counts lowered by their least (class docs)."""
+        if not self.alarms or len(tid) == 0:
+            return tid
+        if len(self.array) < len(self.times):
+            self.array = np.asarray(self.times, INT).reshape(len(self.times), -1)
+        b = self.array[tid][:, self.n:]
+        least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
+        for j in range(b.shape[1]):
+            np.minimum.at(least[:, j], group, b[:, j])
+        by = least[group]
+        rows = np.flatnonzero(by.any(axis=1))
+        if len(rows) == 0:
+            return tid
+        pair, first = groups(tid[rows], *by[rows].T)
+        shifted = self.array[tid[rows][first]].copy()
+        shifted[:, self.n:] -= by[rows][first]
+        new_id = np.array([self.time_id(tuple(x)) for x in shifted.tolist()], INT)
         out = tid.copy()
         out[rows] = new_id[pair]
         return out

@@ -56,7 +56,9 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     """Estimate the probability that ``controller`` satisfies ``model``'s task (module
     docs), with a Wilson 95% interval.  Each run draws every event's time from its law,
     then each sensed event's report ``delay + j`` steps after it, ``j ~
-    Geometric(detect)`` (``j = 0``: the step its report is first due); the world moves
+    Geometric(detect)`` (``j = 0``: the step its report is first due), or, for a sensor
+    with false alarms, a report at every step with probability ``false_alarm`` before
+    step ``K + delay`` and ``detect`` from it on; the world moves
     on the true events; the task's automaton reads the true events.  ``beyond_model``
     counts the runs in which the controller met an observation the model gives
     probability 0 (an event past its truncation point);
@@ -76,6 +78,7 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
     game, dta = model.game, to_dta(model.spec)
     hidden = controller.sensed_events
     sensors = {a: s for a, s in model.sensors.items() if a in hidden}
+    alarms = sorted(a for a, s in sensors.items() if s.false_alarm > 0.0)  # every step
     laws = sorted(model.distributions.items())
     ok = beyond = undecided = kept = 0
     persistent = dta.persistent - {dta.accepting}  # safe states (a task's safety part)
@@ -101,7 +104,10 @@ def simulate_sensed(model: Any, controller: SensedController, *, runs: int = def
             if action is None:
                 break
             events = frozenset(a for a, k in times.items() if k == t + 1)
-            reports = frozenset(a for a, k in seen.items() if k == t + 1)
+            reports = frozenset(a for a, k in seen.items() if k == t + 1 and a not in alarms)
+            reports |= {a for a in alarms if rng.random() < (
+                sensors[a].detect if t + 1 >= times[a] + sensors[a].delay
+                else sensors[a].false_alarm)}
             s = sample_successor(rng, game.successors(s, action, events))
             q = dta.step(q, frozenset(game.propositions(s)) | events)
         if verdict is None and (q == dta.accepting or q == dta.rejecting):

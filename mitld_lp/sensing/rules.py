@@ -3,7 +3,9 @@
 unsensed events, the branches of one hypothesis's sensed events and their reports, the
 automaton's step, where a hypothesis ends, and the clock an information state keeps;
 the construction (:mod:`mitld_lp.sensing.frontier`) asks each once per new key, and
-each is cached."""
+each is cached.  A hypothesis's times hold one value per sensed event, then, for each
+sensed event whose sensor gives false alarms (``StepRules.alarms``), the count of its
+reports before its report was due (the belief's module docs)."""
 
 from __future__ import annotations
 
@@ -32,6 +34,9 @@ class StepRules:
         self.game, self.dta, self.sta = game, dta, sta
         self.ends = ends
         self.sensed, self.sensors = sensed, sensors
+        # the sensed events whose sensors give false alarms: each keeps, after the
+        # events' times, the count of its reports before its report is due (module docs)
+        self.alarms = tuple(i for i, a in enumerate(sensed) if sensors[a].false_alarm > 0.0)
         self.unsensed = frozenset(sta.events) - frozenset(sensed)
         self.clocks = sta.clocks
         # the clock matters up to these bounds (a truncated event's point, an exact
@@ -174,13 +179,18 @@ class StepRules:
 
     def _sensed_branches(self, times: tuple[int, ...], reported: frozenset[str], t: int
                          ) -> list[Any]:
+        n = len(self.sensed)
+        count = dict(zip(self.alarms, times[n:], strict=True))
         per_event = []
         for i, a in enumerate(self.sensed):
-            clock, d = self.clocks[a], self.sensors[a].detect
-            delay = self.sensors[a].delay
+            clock, sensor = self.clocks[a], self.sensors[a]
+            d, fa, delay = sensor.detect, sensor.false_alarm, sensor.delay
             k = times[i]
-            options: list[tuple[int, bool, float, bool]] = []
-            if k == NOT_YET:
+            # (k', reported, probability, truncated, reports counted before due)
+            options: list[tuple[int, bool, float, bool, int]] = []
+            if fa > 0.0:  # a report or none at every step (module docs)
+                options = self._alarm_options(k, t, clock, d, fa, delay)
+            elif k == NOT_YET:
                 h = self.hazard(a, t)
                 T = clock.truncation
                 assert T is not None and t < T
@@ -188,30 +198,51 @@ class StepRules:
                     # past T: "never" kept, "later than T" cut (module docs)
                     never = min(float(clock.distribution.never)
                                 / float(clock.distribution.survival(T)), 1.0)
-                    options += [(NEVER, False, (1.0 - h) * never, False),
-                                (NOT_YET, False, (1.0 - h) * (1.0 - never), True)]
+                    options += [(NEVER, False, (1.0 - h) * never, False, 0),
+                                (NOT_YET, False, (1.0 - h) * (1.0 - never), True, 0)]
                 elif h < 1.0:
-                    options.append((NOT_YET, False, 1.0 - h, t + 1 >= T))
+                    options.append((NOT_YET, False, 1.0 - h, t + 1 >= T, 0))
                 if h > 0.0 and delay == 0:
-                    options += [(t + 1, True, h * d, False), (t + 1, False, h * (1 - d), False)]
+                    options += [(t + 1, True, h * d, False, 0),
+                                (t + 1, False, h * (1 - d), False, 0)]
                 elif h > 0.0:  # its report is not due before step t + 1 + delay
-                    options.append((t + 1, False, h, False))
+                    options.append((t + 1, False, h, False, 0))
             elif k == NEVER or a in reported or k + delay > t + 1:
-                options.append((k, False, 1.0, False))
+                options.append((k, False, 1.0, False, 0))
             else:  # due: reported, or missed (cut at the R-th miss, module docs)
                 R = clock.report_limit
-                options += [(k, True, d, False),
-                            (k, False, 1.0 - d, R is not None and t + 2 - k - delay >= R)]
+                options += [(k, True, d, False, 0),
+                            (k, False, 1.0 - d, R is not None and t + 2 - k - delay >= R, 0)]
             per_event.append([o for o in options if o[2] > 0.0])
         out = []
         for combo in itertools.product(*per_event):
             p = math.prod(o[2] for o in combo)
-            times2 = tuple(o[0] for o in combo)
+            times2 = tuple(o[0] for o in combo) + tuple(
+                count[i] + combo[i][4] for i in self.alarms)
             out.append((times2,
                         frozenset(a for a, o in zip(self.sensed, combo, strict=True) if o[1]),
                         p, any(o[3] for o in combo),
-                        frozenset(a for a, k, k2 in zip(self.sensed, times, times2, strict=True)
-                                  if k2 != k and k2 > 0),
-                        frozenset(a for a, k2 in zip(self.sensed, times2, strict=True)
+                        frozenset(a for a, k, k2 in zip(self.sensed, times[:n], times2[:n],
+                                                        strict=True) if k2 != k and k2 > 0),
+                        frozenset(a for a, k2 in zip(self.sensed, times2[:n], strict=True)
                                   if k2 == NOT_YET)))
         return out
+
+    def _alarm_options(self, k: int, t: int, clock: Any, d: float, fa: float, delay: int
+                       ) -> list[tuple[int, bool, float, bool, int]]:
+        """One sensed event's options over step ``t + 1`` when its sensor gives false
+        alarms: it reports with probability ``fa`` before step ``k + delay`` (a report
+        counted) and ``d`` from it on, whether it reported before or not; the law surely
+        happens (a law that may never happen is refused), truncated at ``T``."""
+        def reports(k2: int, p: float, cut: bool) -> list[tuple[int, bool, float, bool, int]]:
+            if k2 != NOT_YET and k2 + delay <= t + 1:  # due
+                return [(k2, True, p * d, cut, 0), (k2, False, p * (1.0 - d), cut, 0)]
+            return [(k2, True, p * fa, cut, 1), (k2, False, p * (1.0 - fa), cut, 0)]
+
+        if k != NOT_YET:
+            return reports(k, 1.0, False)
+        T = clock.truncation
+        assert T is not None and t < T and not clock.keeps_never
+        h = self.hazard(clock.event, t)
+        out = reports(NOT_YET, 1.0 - h, t + 1 >= T) if h < 1.0 else []
+        return out + (reports(t + 1, h, False) if h > 0.0 else [])

@@ -6,10 +6,13 @@ probability ``d``, independently of everything else, until it has reported it on
 ``d = 1, D = 0`` is the fully observed semantics (the robot sees the event the step it
 happens); an event without a sensor is seen that way.
 
-``false_alarm`` (a report in a step before the event) is read and checked here, and
-refused by name when a problem is posed (:func:`mitld_lp.routes.sensed.false_alarm_refusal`
-says why: with a law that may never happen the information state is not finite; with
-one that surely happens it is, but this construction does not build it).
+With ``false_alarm = f > 0`` the sensor reports or not at *every* step, independently:
+with probability ``f`` before step ``K + D`` and ``d`` from it on (a report no longer
+means the event happened, and every report counts, not only the first).  With a law
+that surely happens the information-state product builds it
+(:mod:`mitld_lp.sensing.belief`); a law that may never happen, a law known within a
+band, and the routes of constraints are refused by name
+(:func:`mitld_lp.routes.sensed.false_alarm_refusal` says why).
 
 A model file writes them under ``[sensors]``::
 
