@@ -19,9 +19,10 @@ futures.
 Here an information state is identified by its key *and its posterior, exactly*: every
 probability of a step (the events' hazards, the sensors' reports, the world's moves, as
 the step rules :mod:`mitld_lp.sensing.rules` and the world give them in floating point)
-is read as the exact rational its float stands for (:class:`fractions.Fraction`), the
-posterior is computed and normalised in rationals, and two states are one only when
-their hypotheses and their rational weights are equal.  No float rounding decides an
+is read as the exact rational its float stands for (python-flint's ``fmpq`` where the
+``exact`` extra is installed, else :class:`fractions.Fraction`: the same values, FLINT's
+faster), the posterior is computed and normalised in rationals, and two states are one
+only when their hypotheses and their rational weights are equal.  No float rounding decides an
 identity: two histories whose posteriors differ only in the floats' last bits stay two
 states (the same futures, so the same optimum; only the product is larger).  The MDP's
 rows and the states' ``weights`` are the rationals rounded to floats once.
@@ -41,6 +42,11 @@ import logging
 from collections.abc import Hashable, Mapping
 from fractions import Fraction
 from typing import Any
+
+try:  # FLINT's rationals (the exact extra): the same values as Fraction's, faster
+    from flint import fmpq as _rational
+except ImportError:  # pragma: no cover - the standard library's
+    _rational = Fraction
 
 import numpy as np
 import scipy.sparse as sp
@@ -66,16 +72,15 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game, GameError, world_members
 
-__all__ = ["reacting_events", "reacting_product", "ReactingBuilder", "ExactKey"]
+__all__ = ["reacting_events", "reacting_product", "ReactingBuilder"]
 
 log = logging.getLogger(__name__)
 
-ExactKey = tuple[Hashable, int, frozenset[str], frozenset[str],
-                 tuple[tuple[tuple[tuple[int, ...], int], Fraction], ...]]
-"""An information state's identity here: world state, clock, reported and pending
-events, and its hypotheses each with its exact posterior weight."""
+Rational = Any
+"""An exact rational (``flint.fmpq`` or :class:`fractions.Fraction`)."""
 
 Hyp = tuple[tuple[int, ...], int]  # (times, automaton state)
+ZERO, ONE = _rational(0), _rational(1)
 
 
 def reacting_events(game: Game[Any], sensed: Any) -> frozenset[str]:
@@ -124,7 +129,7 @@ def reacting_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurren
 
 class ReactingBuilder(StepRules):
     """The breadth-first construction (module docs) from the step rules, each state
-    identified by its :data:`ExactKey`; ``growth`` holds the budgets."""
+    identified by its key and its exact posterior; ``growth`` holds the budgets."""
 
     def __init__(self, game: Game[Any], dta: DTA, sta: Any, sensed: tuple[str, ...],
                  sensors: Mapping[str, Sensor], growth: Growth,
@@ -132,60 +137,71 @@ class ReactingBuilder(StepRules):
         super().__init__(game, dta, sta, sensed, sensors, ends)
         self.growth = growth
         self.states: list[InfoState | Hashable] = []
-        self.exact: list[tuple[Fraction, ...]] = []  # each state's exact posterior
-        self.index: dict[Hashable, int] = {}
+        self.exact: list[tuple[Rational, ...]] = []  # each state's exact posterior
+        # the information states by their key and float weights: the candidates' exact
+        # weights and indices (:meth:`info_state`); the absorbing records by themselves
+        self.index: dict[Hashable, list[tuple[tuple[Rational, ...], int]]] = {}
+        self.records: dict[Hashable, int] = {}
         self.bytes = self.hypotheses = 0
-        self.choices: list[tuple[int, str | None, dict[int, Fraction]]] = []
-        self.moves: dict[tuple[int, str], dict[Obs, int | Hashable]] = {}
+        self.choices: list[tuple[int, str | None, dict[int, Rational]]] = []
+        self.moves: dict[tuple[int, str], dict[Obs, Any]] = {}
+        self.rationals: dict[float, Rational] = {}
         self.world_cache: dict[tuple[Hashable, str, frozenset[str]],
-                               tuple[tuple[Hashable, Fraction], ...]] = {}
+                               tuple[tuple[Hashable, Rational], ...]] = {}
 
     # ---------------------------------------------------------------- states
 
-    def find(self, state: InfoState | Hashable, key: Hashable,
-             weights: tuple[Fraction, ...] = ()) -> int:
-        """The index of the state of ``key`` (``("info", ExactKey)``, or an absorbing
-        record as ``("end", record)``), stored (after the budget's check) when first
-        met."""
-        i = self.index.get(key)
-        if i is None:
-            self.growth.check(len(self.states), self.bytes, 1, len(weights))
-            i = self.index[key] = len(self.states)
-            self.states.append(state)
-            self.exact.append(weights)
-            self.bytes += BYTES_PER_INFO_STATE + BYTES_PER_HYPOTHESIS * len(weights)
-            self.hypotheses += len(weights)
-        return i
+    def store(self, state: InfoState | Hashable, weights: tuple[Rational, ...] = ()) -> int:
+        """Store a new state (after the budget's check) and return its index."""
+        self.growth.check(len(self.states), self.bytes, 1, len(weights))
+        self.states.append(state)
+        self.exact.append(weights)
+        self.bytes += BYTES_PER_INFO_STATE + BYTES_PER_HYPOTHESIS * len(weights)
+        self.hypotheses += len(weights)
+        return len(self.states) - 1
 
     def record(self, record: Hashable) -> int:
         """The index of an absorbing record (a verdict, the truncation)."""
-        return self.find(record, ("end", record))
+        i = self.records.get(record)
+        if i is None:
+            i = self.records[record] = self.store(record)
+        return i
 
     def info_state(self, world: Hashable, t: int, reported: frozenset[str],
-                   pending: frozenset[str], mass: Mapping[Hyp, Fraction]) -> int:
+                   pending: frozenset[str], mass: Mapping[Hyp, Rational]) -> int:
         """The index of the information state of these hypotheses with these masses
-        (normalised here, exactly)."""
+        (normalised here, exactly).  Its key with the weights as floats only picks the
+        bucket of candidates (hashing a rational is slow); a candidate is this state
+        when its rational weights are equal, never by the floats."""
         hyps = tuple(sorted(mass))
-        total = sum(mass.values(), Fraction(0))
+        total = sum(mass.values(), ZERO)
         weights = tuple(mass[h] / total for h in hyps)
         clock = self.clock_key(t, [times for times, _ in hyps], pending, reported)
-        key: ExactKey = (world, clock, reported, pending,
-                         tuple(zip(hyps, weights, strict=True)))
-        if ("info", key) in self.index:
-            return self.index[("info", key)]
-        state = InfoState(world, clock, reported, pending, hyps,
-                          tuple(float(w) for w in weights))
-        return self.find(state, ("info", key), weights)
+        near = tuple(float(w) for w in weights)
+        bucket = self.index.setdefault((world, clock, reported, pending, hyps, near), [])
+        for exact, i in bucket:
+            if exact == weights:
+                return i
+        i = self.store(InfoState(world, clock, reported, pending, hyps, near), weights)
+        bucket.append((weights, i))
+        return i
+
+    def exact_of(self, p: float) -> Rational:
+        """The exact rational a float stands for."""
+        q = self.rationals.get(p)
+        if q is None:
+            q = self.rationals[p] = _rational(*float(p).as_integer_ratio())
+        return q
 
     def world_moves(self, world: Hashable, act: str, events: frozenset[str]
-                    ) -> tuple[tuple[Hashable, Fraction], ...]:
+                    ) -> tuple[tuple[Hashable, Rational], ...]:
         """The world's successors under the step's events (sensed ones included), each
         probability as the exact rational of its float."""
         key = (world, act, events)
         hit = self.world_cache.get(key)
         if hit is None:
             hit = self.world_cache[key] = tuple(
-                (g2, Fraction(p)) for g2, p in self.game.successors(world, act, events)
+                (g2, self.exact_of(p)) for g2, p in self.game.successors(world, act, events)
                 if p > 0.0)
         return hit
 
@@ -196,24 +212,25 @@ class ReactingBuilder(StepRules):
         the controller's moves; new states stored."""
         s = self.states[i]
         if not isinstance(s, InfoState):
-            self.choices.append((i, None, {i: Fraction(1)}))
+            self.choices.append((i, None, {i: ONE}))
             return
         for act in self.game.actions(s.world):
-            row: dict[int, Fraction] = {}
-            groups: dict[Obs, dict[Hyp, Fraction]] = {}
+            row: dict[int, Rational] = {}
+            groups: dict[Obs, dict[Hyp, Rational]] = {}
             ended: dict[Obs, set[Hashable]] = {}
 
-            def add(j: int, m: Fraction, row: dict[int, Fraction] = row) -> None:
-                row[j] = row.get(j, Fraction(0)) + m
+            def add(j: int, m: Rational, row: dict[int, Rational] = row) -> None:
+                row[j] = row.get(j, ZERO) + m
 
             for occurred, pu, crossed in self.unsensed_outcomes(s.pending, s.clock):
                 if crossed:
-                    add(self.record(Absorbing.TRUNCATED), Fraction(pu))
+                    add(self.record(Absorbing.TRUNCATED), self.exact_of(pu))
                     continue
                 for (times, q), w in zip(s.hypotheses, self.exact[i], strict=True):
-                    for times2, new, pc, cut, now, waiting in self.sensed_branches(
+                    # six fields (rules.StepRules.sensed_branches says four)
+                    for times2, new, pc, cut, now, waiting in self.sensed_branches(  # pyright: ignore[reportAssignmentType]
                             times, s.reported, s.clock):
-                        m = w * Fraction(pu) * Fraction(pc)
+                        m = w * self.exact_of(pu) * self.exact_of(pc)
                         if cut:
                             add(self.record(Absorbing.TRUNCATED), m)
                             continue
@@ -228,14 +245,14 @@ class ReactingBuilder(StepRules):
                                 ended.setdefault(obs, set()).add(end)
                             else:
                                 group = groups.setdefault(obs, {})
-                                group[(times2, q2)] = group.get((times2, q2), Fraction(0)) \
+                                group[(times2, q2)] = group.get((times2, q2), ZERO) \
                                     + m * pg
-            table: dict[Obs, int | Hashable] = {}
+            table: dict[Obs, Any] = {}
             for obs, mass in groups.items():
                 g2, occurred, new = obs
                 j = self.info_state(g2, s.clock + 1, s.reported | new, s.pending - occurred,
                                     mass)
-                add(j, sum(mass.values(), Fraction(0)))
+                add(j, sum(mass.values(), ZERO))
                 table[obs] = j
             for obs, records in ended.items():
                 if obs not in table:  # nothing undecided left with it: the verdict
@@ -256,7 +273,7 @@ class ReactingBuilder(StepRules):
         else:
             hyp: Hyp = ((NOT_YET,) * len(self.sensed), q0)
             initial = self.info_state(game.initial, 0, frozenset(), self.unsensed,
-                                      {hyp: Fraction(1)})
+                                      {hyp: ONE})
         self.growth.start(len(self.states))
         shown = progress_bar(progress, total=None, unit=" states",
                              desc="information states (a reacting world)", leave=False,
