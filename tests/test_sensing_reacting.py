@@ -319,3 +319,20 @@ def test_a_band_or_a_constraint_with_a_reacting_world_is_refused_by_name() -> No
     for extra in ({"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
         with pytest.raises(ProblemError, match="react to the sensed event 'b'"):
             synthesize(model(game, CAUGHT, 0.5), **extra)
+
+
+def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
+    """models/corridor.toml: the PRISM world's event action ``opened`` sets the door's
+    variable, which the robot observes: a camera on ``opened`` that misses adds nothing,
+    and the answer is the fully observed one (the ``plain`` route on the same file)."""
+    pytest.importorskip("stormpy")
+    from types import MappingProxyType
+
+    from mitld_lp import load_model
+    from mitld_lp.sensing import Sensor
+
+    base = load_model(Path(__file__).resolve().parents[1] / "models" / "corridor.toml")
+    camera = dataclasses.replace(base, sensors=MappingProxyType({"opened": Sensor(0.5)}))
+    seen, r = synthesize(base), synthesize(camera)
+    assert (r.route, seen.route) == ("sensed-reacting", "plain") and r.certified
+    assert abs(r.lower - seen.lower) <= 1e-9 and abs(r.upper - seen.upper) <= 1e-9
