@@ -8,10 +8,9 @@ the same certificate, controller and part record, so ``run``, ``export --chain``
 
 It claims what the ``sensed`` route would (a sensor that misses, no constraints) when
 the world reacts to a sensed event; a law known within a band is refused by name (the
-worst case over the band reads the fully observed product's rows per hypothesis, which
-a reacting world's likelihoods change), as are false alarms (the ``sensed`` route's
-reason).  Constraints or ``then`` with such a world are the ``sensed-constrained``
-route's to refuse."""
+band's solvers, :mod:`mitld_lp.routes.sensed_band`, are not wired to this product), as
+are false alarms (the ``sensed`` route's reason).  Constraints or ``then`` with such a
+world are the ``sensed-constrained`` route's to refuse."""
 
 from __future__ import annotations
 
