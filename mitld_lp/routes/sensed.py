@@ -101,7 +101,8 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         reacts = frozenset()
     for a in sorted(reacts & set(sensors)):
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
-                       "(event_names), so the world's state reveals it; not solved")
+                       "(event_names): solved with point laws and no constraints (route "
+                       "sensed-reacting); with constraints, then or a band not solved")
     return refused
 
 
