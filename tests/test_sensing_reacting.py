@@ -112,17 +112,25 @@ def optimum(game: ExplicitGame, task: str, detect: str, delay: int, sense: Calla
             return sum((p for (k, _), p in alive if holds(trace, k)), Fraction(0))
         values = []
         for action in game.actions(trace[-1]):
-            seen: dict[tuple[str, bool], list[Any]] = {}
-            for (k, r), p in alive:
-                events = frozenset({"b"}) if k == t + 1 else frozenset()
-                for nxt, pw in game.successors(trace[-1], action, events):
-                    seen.setdefault((nxt, r == t + 1), []).append(
-                        ((k, r), p * Fraction(str(pw))))
+            seen = observed(game, trace[-1], action, t, alive)
             values.append(sum((value((*trace, nxt), tuple(group))
                                for (nxt, _), group in seen.items()), Fraction(0)))
         return sense(values)
 
     return value((game.initial,), tuple(x for x in scenarios if x[1] > 0))
+
+
+def observed(game: ExplicitGame, state: str, action: str, t: int, alive: Any
+             ) -> dict[tuple[str, bool], list[Any]]:
+    """The scenarios ``alive`` (``((k, r), mass)``) after ``action`` from ``state`` at
+    step ``t``, the world moved on each one's events of step ``t + 1``, grouped by what
+    the robot observes (the next state, a report)."""
+    seen: dict[tuple[str, bool], list[Any]] = {}
+    for (k, r), p in alive:
+        events = frozenset({"b"}) if k == t + 1 else frozenset()
+        for nxt, pw in game.successors(state, action, events):
+            seen.setdefault((nxt, r == t + 1), []).append(((k, r), p * Fraction(str(pw))))
+    return seen
 
 
 def within(r: Any, exact: Fraction) -> None:
@@ -305,8 +313,11 @@ def test_the_budget_stops_the_build_before_it_passes() -> None:
         synthesize(m, max_states=12)
 
 
-def test_a_band_or_a_constraint_with_a_reacting_world_is_refused_by_name() -> None:
+def test_a_band_with_a_reacting_world_is_refused_by_name() -> None:
+    """Alone, with constraints or then, read for its worst or its best law; and the
+    constrained LP asked with neither constraints nor then."""
     from mitld_lp.distributions import from_table
+    from mitld_lp.synthesis import synthesize_constrained
 
     game = world(0.5)
     band = Model.from_game(game, "D[mu] b & " + CAUGHT, sensors={"b": {"detect": 0.5}},
@@ -317,8 +328,13 @@ def test_a_band_or_a_constraint_with_a_reacting_world_is_refused_by_name() -> No
     with pytest.raises(ProblemError, match="react to the sensed event 'b'"):
         synthesize(band, bands="best")
     for extra in ({"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
-        with pytest.raises(ProblemError, match="react to the sensed event 'b'"):
-            synthesize(model(game, CAUGHT, 0.5), **extra)
+        with pytest.raises(ProblemError, match="react to the sensed event 'b'.*with a band"):
+            synthesize(band, **extra)
+        with pytest.raises(ProblemError, match=r"react to \(b, event_names\) with a band "
+                                               "read for its best law"):
+            synthesize(band, bands="best", **extra)
+    with pytest.raises(ProblemError, match="by the constrained LP with neither"):
+        synthesize_constrained(model(game, CAUGHT, 0.5))
 
 
 def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
@@ -336,3 +352,186 @@ def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
     seen, r = synthesize(base), synthesize(camera)
     assert (r.route, seen.route) == ("sensed-reacting", "plain") and r.certified
     assert abs(r.lower - seen.lower) <= 1e-9 and abs(r.upper - seen.upper) <= 1e-9
+
+
+# ------------------------------------------------------------------ constraints, then
+# (the sensed-constrained route on the reacting product)
+
+RISK = "P(F[0,3] h) <= 0.25"  # in the ditch by step 3: binds on every world below
+EXTRAS = [({"constraints": [RISK]}, "risk"), ({"then": "min-steps"}, "then"),
+          ({"constraints": [RISK], "then": "min-steps"}, "risk-then")]
+
+
+# the task and objective of each case; a constraint's value and the steps compared on
+# the first only (elsewhere the risk does not bind: optimal policies differ in it)
+LIMITS = [(CAUGHT, "max", e) for e, _ in EXTRAS] + [
+    (task, objective, {"constraints": [RISK]}) for task, objective in ((AVOID, "max"),
+                                                                       (CAUGHT, "min"))]
+LIMIT_IDS = [i for _, i in EXTRAS] + ["avoid-max-risk", "caught-min-risk"]
+
+
+def same_answer(a: Any, b: Any, values: bool) -> None:
+    """Two certified answers of one problem: the same bracket and (``values``) the same
+    constraint values and expected steps (each an LP's optimum, so to the solvers'
+    tolerance)."""
+    assert a.certified and b.certified
+    assert abs(a.lower - b.lower) <= 1e-8 and abs(a.upper - b.upper) <= 1e-8
+    if not values:
+        return
+    for x, y in zip(a.constraints, b.constraints, strict=True):
+        assert abs(x.certified - y.certified) <= 1e-6
+    if a.secondary is not None or b.secondary is not None:
+        assert abs(a.secondary - b.secondary) <= 1e-6
+
+
+@pytest.mark.parametrize("task, objective, extra", LIMITS, ids=LIMIT_IDS)
+def test_constraints_with_a_revealing_reaction_are_the_fully_observed_answer(
+        task: str, objective: str, extra: dict[str, Any]) -> None:
+    """The flag raised on every move under the bus: the camera (delayed, missing) adds
+    nothing, and the constrained answer is the fully observed constrained route's
+    (``detect = 1``: the ``constrained`` route on the fully observed product)."""
+    shown = world(1.0)
+    camera = synthesize(model(shown, task, 0.5, delay=1), objective=objective, **extra)
+    seen = synthesize(model(shown, task, 1.0), objective=objective, **extra)
+    assert (camera.route, seen.route) == ("sensed-constrained", "constrained")
+    same_answer(camera, seen, (task, objective) == (CAUGHT, "max"))
+    blind = synthesize(model(world(0.0), task, 0.5, delay=1), objective=objective, **extra)
+    assert abs(blind.lower - camera.lower) > 5e-6  # without the flag: another answer
+
+
+@pytest.mark.parametrize("task, objective, extra", LIMITS, ids=LIMIT_IDS)
+def test_constraints_with_an_invisible_reaction_are_the_sensed_answer(
+        task: str, objective: str, extra: dict[str, Any]) -> None:
+    """A reaction declared but moving alike (the same rows, no flag): the reacting
+    product's constrained answer is the non-reacting sensed-constrained route's."""
+    same = world(0.0, BASE)
+    plain = dataclasses.replace(same, event_transitions={})
+    reacting = synthesize(model(same, task, 0.5), objective=objective, **extra)
+    ignoring = synthesize(model(plain, task, 0.5), objective=objective, **extra)
+    assert reacting.route == ignoring.route == "sensed-constrained"
+    assert reacting_events(same, {"b"}) and not reacting_events(plain, {"b"})
+    same_answer(reacting, ignoring, True)
+
+
+def history_lp(game: ExplicitGame, detect: str, bound: float) -> float:
+    """The greatest probability of ``CAUGHT`` among the randomised policies on
+    observation histories keeping ``P(F[0,3] h) <= bound``: an occupancy LP (scipy) over
+    the tree of observation histories to the horizon, each node holding the hidden
+    scenarios (the bus's step, its report's) that agree with it -- no automaton, no
+    information states, no posterior."""
+    from scipy.optimize import linprog
+
+    d = Fraction(detect)
+    horizon = len(PMF) + 1
+    scenarios = []
+    for k, mu in enumerate(map(Fraction, PMF), start=1):
+        for r in range(k, horizon + 1):
+            scenarios.append(((k, r), mu * d * (1 - d) ** (r - k)))
+        scenarios.append(((k, None), mu * (1 - d) ** (horizon - k + 1)))
+    columns: list[tuple[int, float, float]] = []  # (node, task's mass, risk's mass)
+    inflow: list[list[tuple[int, float]]] = []  # per node: (column, its share) into it
+
+    def node(trace: tuple[str, ...], alive: list[Any], into: list[tuple[int, float]]
+             ) -> None:
+        me = len(inflow)
+        inflow.append(into)
+        mass = sum(p for _, p in alive)
+        t = len(trace) - 1
+        if t == horizon:
+            at = ["A" in game.propositions(s) for s in trace]
+            task = sum(p for (k, _), p in alive if any(at[k:k + 2]))
+            risk = mass if any("h" in game.propositions(s) for s in trace[:4]) else 0
+            columns.append((me, float(task / mass), float(risk / mass)))
+            return
+        for action in game.actions(trace[-1]):
+            col = len(columns)
+            columns.append((me, 0.0, 0.0))
+            for (nxt, _), group in observed(game, trace[-1], action, t, alive).items():
+                share = sum(p for _, p in group) / mass
+                node((*trace, nxt), group, [(col, float(share))])
+
+    node((game.initial,), [x for x in scenarios if x[1] > 0], [])
+    flow = np.zeros((len(inflow), len(columns)))
+    for j, (n, _, _) in enumerate(columns):
+        flow[n, j] += 1.0
+    for n, into in enumerate(inflow):
+        for j, share in into:
+            flow[n, j] -= share
+    start = np.zeros(len(inflow))
+    start[0] = 1.0
+    task = np.array([c[1] for c in columns])
+    risk = np.array([c[2] for c in columns])
+    lp = linprog(-task, A_ub=risk[None, :], b_ub=[bound], A_eq=flow, b_eq=start,
+                 bounds=(0, None), method="highs")
+    assert lp.status == 0, lp.message
+    return -lp.fun
+
+
+@pytest.mark.parametrize("detect, bound", [("0.5", 0.25), ("0.5", 0.3), ("0.8", 0.25)])
+def test_a_risk_constraint_is_the_lp_over_observation_histories(detect: str,
+                                                                bound: float) -> None:
+    game = world(0.5)
+    r = synthesize(model(game, CAUGHT, float(detect)), constraints=[f"P(F[0,3] h) <= {bound}"])
+    assert r.route == "sensed-constrained" and r.certified
+    best = history_lp(game, detect, bound)
+    assert r.lower - 1e-7 <= best <= r.upper + 1e-7
+    assert r.constraints[0].certified <= bound
+    unconstrained = optimum(game, CAUGHT, detect, 0, max)
+    assert best < float(unconstrained) - 1e-4  # the constraint binds
+
+
+def storm_value(path: Path, prop: str) -> Fraction:
+    """Storm's exact value of ``prop`` at the initial state of the DTMC at ``path``."""
+    m = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+    assert "DTMC" in str(m.model_type)
+    result = stormpy.model_checking(m, stormpy.parse_properties(prop)[0])
+    return Fraction(str(result.get_value(m.initial_states[0])))
+
+
+@pytest.mark.parametrize("extra", [e for e, _ in EXTRAS], ids=[i for _, i in EXTRAS])
+def test_storm_on_the_constrained_chain_gives_lower_and_the_constraint(
+        extra: dict[str, Any], tmp_path: Path) -> None:
+    """The randomised controller's chain over the true world (moved on the true events),
+    reports and its memory: Storm's task value inside the bracket (at most the history
+    LP's optimum), the risk at most its certified value and the bound, the expected
+    steps the answer's; the controller read from its file gives the same chain, and
+    ``mitld_lp.runtime`` on the file draws the live controller's actions."""
+    from mitld_lp import load_controller, runtime
+    from mitld_lp.controllers.observation import Observation
+    from mitld_lp.running.chain import write_chain
+    from mitld_lp.util.rollouts import sample_successor
+
+    game = world(0.5)
+    r = synthesize(model(game, CAUGHT, 0.5), **extra)
+    assert r.route == "sensed-constrained" and r.certified
+    path = write_chain(r, tmp_path / "chain.drn")
+    task = storm_value(path, 'P=? [F "accept"]')
+    assert Fraction(r.lower) - Fraction(1, 10**9) <= task <= Fraction(r.upper)
+    assert storm_value(path, 'P=? [F "done"]') == 1
+    if "constraints" in extra:
+        assert task <= Fraction(history_lp(game, "0.5", 0.25)) + Fraction(1, 10**7)
+        risk = storm_value(path, 'P=? [F "c1"]')
+        assert risk <= Fraction(r.constraints[0].certified) <= Fraction("0.25")
+    if "then" in extra:
+        steps = storm_value(path, 'R{"steps"}=? [F "done"]')
+        assert float(steps) == pytest.approx(r.secondary, abs=1e-6)
+    saved = r.controller.save(tmp_path / "mixed.npz")
+    loaded = load_controller(saved)
+    assert loaded.plan.kind == "sensed-randomised"
+    assert storm_value(write_chain(r, tmp_path / "file.drn", controller=loaded),
+                       'P=? [F "accept"]') == task
+    robot, rng = runtime.load(saved), np.random.default_rng(5)
+    for run in range(60):
+        r.controller.reset(seed=run)
+        robot.reset(seed=run)
+        k = int(rng.choice([1, 2, 3], p=[0.3, 0.3, 0.4]))
+        report = k + int(rng.geometric(0.5)) - 1
+        s, reports = game.initial, frozenset()
+        for t in range(6):
+            action = r.controller.act(Observation(s, reports=reports))
+            assert robot.act(s, (), reports) == action
+            if action is None:
+                break
+            events = frozenset({"b"}) if t + 1 == k else frozenset()
+            s = sample_successor(rng, game.successors(s, action, events))
+            reports = frozenset({"b"}) if t + 1 == report else frozenset()
