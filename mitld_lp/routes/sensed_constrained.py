@@ -55,6 +55,10 @@ over observation histories (the fully observed route's semantics).  Its controll
 (:mod:`mitld_lp.sensing.mixed`) is saved as the controller file's ``sensed-randomised``
 kind; its controlled chain is :mod:`mitld_lp.running.sensed_chain`'s over the joint
 automaton (:mod:`mitld_lp.running.sensed_joint`).
+
+A world whose moves react to a sensed event is built by
+:func:`mitld_lp.sensing.reacting.reacting_product` (exact posteriors, every sensor as
+given as here, no states merged by their times); a band with it is refused by name.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ It claims what the ``sensed`` route would (a sensor that misses, no constraints)
 the world reacts to a sensed event; a law known within a band is refused by name (the
 band's solvers, :mod:`mitld_lp.routes.sensed_band`, are not wired to this product), as
 are false alarms (the ``sensed`` route's reason).  Constraints or ``then`` with such a
-world are the ``sensed-constrained`` route's to refuse."""
+world are the ``sensed-constrained`` route's, on the same product."""
 
 from __future__ import annotations
 
