@@ -314,10 +314,8 @@ def test_the_budget_stops_the_build_before_it_passes() -> None:
 
 
 def test_a_band_with_a_reacting_world_is_refused_by_name() -> None:
-    """Alone, with constraints or then, read for its worst or its best law; and the
-    constrained LP asked with neither constraints nor then."""
+    """Alone, with constraints or then, read for its worst or its best law."""
     from mitld_lp.distributions import from_table
-    from mitld_lp.synthesis import synthesize_constrained
 
     game = world(0.5)
     band = Model.from_game(game, "D[mu] b & " + CAUGHT, sensors={"b": {"detect": 0.5}},
@@ -333,8 +331,6 @@ def test_a_band_with_a_reacting_world_is_refused_by_name() -> None:
         with pytest.raises(ProblemError, match=r"react to \(b, event_names\) with a band "
                                                "read for its best law"):
             synthesize(band, bands="best", **extra)
-    with pytest.raises(ProblemError, match="by the constrained LP with neither"):
-        synthesize_constrained(model(game, CAUGHT, 0.5))
 
 
 def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
@@ -411,6 +407,19 @@ def test_constraints_with_an_invisible_reaction_are_the_sensed_answer(
     assert reacting.route == ignoring.route == "sensed-constrained"
     assert reacting_events(same, {"b"}) and not reacting_events(plain, {"b"})
     same_answer(reacting, ignoring, True)
+
+
+@pytest.mark.parametrize("objective", ["max", "min"])
+def test_the_constrained_lp_with_neither_is_the_expectimax(objective: str) -> None:
+    """The constrained LP asked with no constraint and no ``then`` (a trade-off curve's
+    end) on the reacting product: the expectimax over observation histories."""
+    from mitld_lp.synthesis import synthesize_constrained
+
+    game = world(0.5)
+    m = dataclasses.replace(model(game, CAUGHT, 0.5, delay=1), objective=objective)
+    r = synthesize_constrained(m)
+    assert r.route == "sensed-constrained"
+    within(r, optimum(game, CAUGHT, "0.5", 1, max if objective == "max" else min))
 
 
 def history_lp(game: ExplicitGame, detect: str, bound: float) -> float:

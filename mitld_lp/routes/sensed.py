@@ -103,8 +103,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     for a in sorted(reacts & set(sensors)) if banded or not constraints else ():
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
                        "(event_names): solved with point laws (route sensed-reacting; with "
-                       "constraints or then, sensed-constrained); with a band, or by the "
-                       "constrained LP with neither, not solved")
+                       "constraints or then, sensed-constrained); with a band not solved")
     return refused
 
 

@@ -350,7 +350,9 @@ class SensedConstrainedRoute(Route):
             refused.append(f"sensors on events the world's moves react to ({reacts}, "
                            "event_names) with a band read for its best law: not solved; "
                            "give the events point laws")
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", asked, None, posed.robust)
+        # the constrained LP asked with neither (a trade-off curve's end) is this LP too
+        lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the
