@@ -17,6 +17,7 @@ from mitld_lp.routes.sensed_band_constrained import SensedBandConstrainedRoute
 from mitld_lp.routes.sensed_constrained import SensedConstrainedRoute
 from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
 from mitld_lp.routes.sensed_optimistic_constrained import SensedOptimisticConstrainedRoute
+from mitld_lp.routes.sensed_reacting import SensedReactingRoute
 
 __all__ = ["ROUTES", "LP"]
 
@@ -26,6 +27,7 @@ ROUTES: list[Route] = [
     SensedBandConstrainedRoute(),  # constraints or then with such a sensor and a band
     SensedConstrainedRoute(),  # constraints or then with such a sensor
     SensedOptimisticRoute(),  # such a sensor and a band read for its best law
+    SensedReactingRoute(),  # ... on an event the world's moves react to
     SensedRoute(),  # a sensor that misses its event: what the robot observes
     RobustConstrainedRoute(),  # constraints and a band
     ConstrainedRoute(),  # constraints or then, point laws

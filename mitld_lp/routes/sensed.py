@@ -103,9 +103,11 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here
         reacts = frozenset()
-    for a in sorted(reacts & set(sensors)):
+    banded = robust or any(d.is_ambiguous for d in model.distributions.values())
+    for a in sorted(reacts & set(sensors)) if banded or not constraints else ():
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
-                       "(event_names), so the world's state reveals it; not solved")
+                       "(event_names): solved with point laws (route sensed-reacting; with "
+                       "constraints or then, sensed-constrained); with a band not solved")
     return refused
 
 

@@ -55,6 +55,10 @@ over observation histories (the fully observed route's semantics).  Its controll
 (:mod:`mitld_lp.sensing.mixed`) is saved as the controller file's ``sensed-randomised``
 kind; its controlled chain is :mod:`mitld_lp.running.sensed_chain`'s over the joint
 automaton (:mod:`mitld_lp.running.sensed_joint`).
+
+A world whose moves react to a sensed event is built by
+:func:`mitld_lp.sensing.reacting.reacting_product` (exact posteriors, every sensor as
+given as here, no states merged by their times); a band with it is refused by name.
 """
 
 from __future__ import annotations
@@ -334,19 +338,29 @@ class SensedConstrainedRoute(Route):
         return bool(partial(posed.model.sensors)) and (posed.problem.constrained or self.every)
 
     def refusal(self, posed: Posed) -> list[str]:
+        from mitld_lp.sensing.reacting import reacting_events
+
         p = posed.problem
         refused = lp_refusals(posed)  # the task's class, the constraints' formulas
         # the sensors' own conditions (false alarms, bands, laws that may never happen,
         # worlds that react to a sensed event); the task's are said above
         # (constraints or then: a band is refused with them, by name)
         asked = (*p.constraints, *([p.then] if p.then else []))
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", asked, None, posed.robust)
+        reacts = ", ".join(sorted(reacting_events(p.model.game, partial(p.model.sensors))))
+        if reacts and self.optimistic:  # a band read for its best law, asked at a point law
+            refused.append(f"sensors on events the world's moves react to ({reacts}, "
+                           "event_names) with a band read for its best law: not solved; "
+                           "give the events point laws")
+        # the constrained LP asked with neither (a trade-off curve's end) is this LP too
+        lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the
         information-state product on it (module docs), under the problem's budgets."""
         from mitld_lp.routes.stages import Built, joint_sta
         from mitld_lp.sensing.belief import belief_product
+        from mitld_lp.sensing.reacting import reacting_events, reacting_product
 
         model, s = posed.model, posed.settings
         assert s.max_states is not None  # resolved
@@ -355,12 +369,15 @@ class SensedConstrainedRoute(Route):
         laws = {a: c.distribution for a, c in sta.clocks.items()}
         t1 = time.perf_counter()
         ends = JointEnds(joint)
-        belief = belief_product(model.game, joint.dta, laws, partial(model.sensors),
-                                model.epsilon if s.epsilon is None else s.epsilon,
-                                clock_reduction=s.clock_reduction,
-                                truncation=s.truncation_map, max_states=s.max_states,
-                                max_memory=s.max_memory, progress=progress,
-                                late_reports=False, ends=ends, name=model.name)
+        # a world that reacts to a sensed event: its own product (exact posteriors; every
+        # sensor built as given, as here, but no states merged by their times)
+        reacts = reacting_events(model.game, partial(model.sensors))
+        belief = (reacting_product if reacts else belief_product)(
+            model.game, joint.dta, laws, partial(model.sensors),
+            model.epsilon if s.epsilon is None else s.epsilon,
+            clock_reduction=s.clock_reduction, truncation=s.truncation_map,
+            max_states=s.max_states, max_memory=s.max_memory, progress=progress,
+            ends=ends, name=model.name, **({} if reacts else {"late_reports": False}))
         return Built(joint.dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      joint, belief=(belief, ends))
