@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
 
-__all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal"]
+__all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal", "reacting_false_alarm_refusals"]
 
 
 class SensedRoute(Route):
@@ -103,12 +103,24 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here
         reacts = frozenset()
+    if reacts & set(sensors):
+        refused += reacting_false_alarm_refusals(sensors)
     banded = robust or any(d.is_ambiguous for d in model.distributions.values())
     for a in sorted(reacts & set(sensors)) if banded or not constraints else ():
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
                        "(event_names): solved with point laws (route sensed-reacting; with "
                        "constraints or then, sensed-constrained); with a band not solved")
     return refused
+
+
+def reacting_false_alarm_refusals(sensors: Mapping[str, Any]) -> list[str]:
+    """Why sensors with false alarms are not solved when the world's moves react to a
+    sensed event: the reacting product (:mod:`mitld_lp.sensing.reacting`) reads each
+    sensor's first report only, which false alarms make wrong."""
+    return [f"sensors.{a}.false_alarm = {s.false_alarm:g} with a world whose moves react "
+            "to a sensed event: not built (the reacting product reads each sensor's first "
+            "report only); give false_alarm = 0"
+            for a, s in sensors.items() if s.false_alarm]
 
 
 def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, built: bool = True,

@@ -9,15 +9,16 @@ the same certificate, controller and part record, so ``run``, ``export --chain``
 It claims what the ``sensed`` route would (a sensor that misses, no constraints) when
 the world reacts to a sensed event; a law known within a band is refused by name (the
 band's solvers, :mod:`mitld_lp.routes.sensed_band`, are not wired to this product), as
-are false alarms (the ``sensed`` route's reason).  Constraints or ``then`` with such a
-world are the ``sensed-constrained`` route's, on the same product."""
+are false alarms (this product reads each sensor's first report only).  Constraints or
+``then`` with such a world are the ``sensed-constrained`` route's, on the same
+product."""
 
 from __future__ import annotations
 
 import time
 from typing import TYPE_CHECKING
 
-from mitld_lp.routes.sensed import SensedRoute, false_alarm_refusal
+from mitld_lp.routes.sensed import SensedRoute, reacting_false_alarm_refusals
 from mitld_lp.sensing.reacting import reacting_events
 from mitld_lp.sensing.sensors import partial
 
@@ -41,8 +42,7 @@ class SensedReactingRoute(SensedRoute):
     def refusal(self, posed: Posed) -> list[str]:
         model = posed.problem.model
         sensors = partial(model.sensors)
-        refused = [false_alarm_refusal(a, s.false_alarm, model.distributions.get(a))
-                   for a, s in sensors.items() if s.false_alarm]
+        refused = reacting_false_alarm_refusals(sensors)
         if posed.robust:
             reacts = ", ".join(sorted(reacting_events(model.game, sensors)))
             bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
