@@ -779,10 +779,12 @@ def test_library_refusals_name_what_the_caller_gave() -> None:
         synthesize(grid, solver="NOPE")
     with pytest.raises(ProblemError, match="pareto: the curve poses its own constraint"):
         pareto(grid, against="steps", then="min-cost")
-    # (the curve with sensors is solved now: tests/test_sensed_constrained.py; what the
-    # sensed routes refuse is named as the caller gave it)
-    sensed = loads_model((MODELS / "bus_grid.toml").read_text()
-                         + "\n[sensors]\nb1 = { detect = 0.5, false_alarm = 0.1 }\n")
+    # (the curve with sensors is solved now: tests/test_sensed_constrained.py, with false
+    # alarms at a point law too; what the sensed routes refuse, false alarms with a band,
+    # is named as the caller gave it)
+    banded = (MODELS / "bus_grid.toml").read_text().replace(
+        "mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }")
+    sensed = loads_model(banded + "\n[sensors]\nb1 = { detect = 0.5, false_alarm = 0.1 }\n")
     with pytest.raises(ProblemError, match="sensors.b1.false_alarm = 0.1") as info:
         pareto(sensed, against="steps")
     assert "constraint" not in str(info.value)

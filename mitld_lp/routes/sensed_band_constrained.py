@@ -182,7 +182,8 @@ class SensedBandConstrainedRoute(Route):
         if posed.minimise:
             asked = replace(asked, fragment=complement_class(posed.fragment),
                             problem=replace(posed.problem, objective="max"))
-        return SensedConstrainedRoute().refusal(asked)
+        refused = SensedConstrainedRoute().refusal(asked)
+        return refused + [x for x in alarm_band_refusals(posed.model) if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Any:
         """The joint automaton and its information-state product at the band's middle
@@ -192,6 +193,19 @@ class SensedBandConstrainedRoute(Route):
     def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
         return _solve(posed, built, costs=costs, seed=seed)
+
+
+def alarm_band_refusals(model: Any) -> list[str]:
+    """Why a sensor with false alarms is not solved under a band (empty: none has
+    them): the worst (or best) case over the band of a controller that reads every
+    report is not built, constraints or not (:func:`mitld_lp.routes.sensed.
+    false_alarm_refusal`); the sensed constrained route builds false alarms at a point
+    law only, so the band routes that call its refusal at one add this."""
+    from mitld_lp.routes.sensed import false_alarm_refusal
+
+    return [x for a, s in sorted(partial(model.sensors).items()) if s.false_alarm
+            for x in false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
+                                         robust=True)]
 
 
 def covers(result: Result) -> bool:

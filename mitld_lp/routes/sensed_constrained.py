@@ -143,11 +143,13 @@ def _effective(part: DTA, q: int, verdict: int, left: frozenset[str],
 
 
 def _verdicts_of(belief: Belief, ends: JointEnds, s: InfoState) -> list[tuple[int, ...]]:
-    """The verdicts of each hypothesis of ``s``, in its order."""
+    """The verdicts of each hypothesis of ``s``, in its order (its times: one per sensed
+    event, then the report counts of the sensors with false alarms, not read here)."""
     from mitld_lp.sensing.belief import NOT_YET  # the sensed modules load when solving
     out = []
+    n = len(belief.sensed)
     for times, q in s.hypotheses:
-        waiting = frozenset(a for a, k in zip(belief.sensed, times, strict=True)
+        waiting = frozenset(a for a, k in zip(belief.sensed, times[:n], strict=True)
                             if k == NOT_YET)
         out.append(ends.seen[(q, s.pending | waiting)])
     return out
@@ -353,7 +355,8 @@ class SensedConstrainedRoute(Route):
                            "give the events point laws")
         # the constrained LP asked with neither (a trade-off curve's end) is this LP too
         lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust)
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust,
+                                         alarms=True)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the

@@ -106,9 +106,12 @@ class SensedOptimisticConstrainedRoute(SensedConstrainedRoute):
 
     def refusal(self, posed: Posed) -> list[str]:
         """The sensed constrained route's refusals at the band's middle law (the band
-        itself is taken here)."""
+        itself is taken here; false alarms with it are refused)."""
+        from mitld_lp.routes.sensed_band_constrained import alarm_band_refusals
+
         at = _at_law(posed, point_laws(posed.model.distributions)[0][1])
-        return SensedConstrainedRoute.refusal(self, at)
+        refused = SensedConstrainedRoute.refusal(self, at)
+        return refused + [x for x in alarm_band_refusals(posed.model) if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built | None:
         return None  # each candidate builds its own product, at its own law

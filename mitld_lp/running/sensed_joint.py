@@ -200,7 +200,8 @@ def joint_ends(joint: Joint, constraints: Sequence[Any], belief: Any,
 def held(joint: Joint, state: Any, sensed: Sequence[str], live: TaskLive
          ) -> list[bool | None]:
     """Per hypothesis ``(times, q)`` of the information state ``state`` of a product on
-    ``joint`` (``sensed``: its sensed events, in its hypotheses' order): True where it is
+    ``joint`` (``sensed``: its sensed events, in its hypotheses' order; the times then
+    hold the report counts of the sensors with false alarms, not read here): True where it is
     *persistent* -- its task accepted, or its task automaton's state safe (staying there
     for ever keeps a task's safety part) --, False where its task is lost (rejected, or
     no longer reaching acceptance with the events left, ``live``), None where it is
@@ -215,7 +216,7 @@ def held(joint: Joint, state: Any, sensed: Sequence[str], live: TaskLive
             out.append(False)
         else:
             left = state.pending | frozenset(
-                a for a, k in zip(sensed, times, strict=True) if k == NOT_YET)
+                a for a, k in zip(sensed, times[:len(sensed)], strict=True) if k == NOT_YET)
             out.append(None if live(c, left) else False)
     return out
 
