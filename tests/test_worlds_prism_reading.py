@@ -284,3 +284,33 @@ def test_valuation_records_of_another_layout_are_not_read(layout: dict) -> None:
     from mitld_lp.worlds.prism_tables import unpack_valuations
 
     assert unpack_valuations(layout, 3, 3 * 8, lambda: np.zeros(24, dtype=np.uint8)) is None
+
+
+def test_valuations_are_built_when_a_state_is_first_named(tmp_path: Path) -> None:
+    """A world built whole leaves its valuations to Storm until a state other than the
+    initial one is named: a solve names none; then (also after a pickle) Storm's second
+    build gives each state the values Storm's own build with valuations prints for that
+    state number."""
+    import json
+    import pickle
+
+    import stormpy
+
+    from mitld_lp.worlds.prism_valuations import DeferredValuations
+
+    source = write(tmp_path, PACKED)
+    game = load_prism(source, define={"far": "x = 4 & y = 9"})
+    states = game.states
+    assert isinstance(states, DeferredValuations) and not states.built
+    assert len(states) > 100 and game.initial[game.variables.index("w")] == 99990
+    result = synthesize(Model.from_game(game, "F far"))
+    assert result.certified and not states.built  # the solve named no state
+    copy = pickle.loads(pickle.dumps(game))
+    program = stormpy.parse_prism_program(str(source))
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(program, options=options)
+    storm = [json.loads(str(model.state_valuations.to_json(s))) for s in range(model.nr_states)]
+    for named in (copy.states, states):
+        assert list(named) == [tuple(v[name] for name in game.variables) for v in storm]
+    assert states.built

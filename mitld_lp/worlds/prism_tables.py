@@ -27,8 +27,9 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 
-__all__ = ["Tables", "read_model", "transition_arrays", "unpack_valuations", "DEADLOCK_ACTION",
-           "DECIDED_ACTION", "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
+__all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
+           "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
+           "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -107,13 +108,14 @@ def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
     """``(choices, branches, targets, probabilities)`` from Storm's UMB export, checked
     for consistency; branches of probability 0 dropped (negative ones are kept, for
     :func:`read_model` to refuse)."""
-    return _read_export(model, where)[0]
+    return read_export(model, where)[0]
 
 
-def _read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
+def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
                                                    dict[str, np.ndarray] | None]:
-    """:func:`_structure`'s arrays and the state valuations the archive holds, by
-    variable (:func:`unpack_valuations`; None where their layout is not the one read here)."""
+    """:func:`transition_arrays`'s arrays and the state valuations the archive holds,
+    by variable (:func:`unpack_valuations`; None where the layout is not the one read
+    here, or the model was built without them)."""
     try:
         choices, branches, targets, probabilities, packed = _export(model, where)
     except OSError as exc:
@@ -287,7 +289,7 @@ def _narrow(values: np.ndarray) -> np.ndarray:
     return values
 
 
-def _valuations(model: Any, hidden: frozenset[str] = frozenset(),
+def valuations_of(model: Any, hidden: frozenset[str] = frozenset(),
                 packed: Mapping[str, np.ndarray] | None = None,
                 ) -> tuple[tuple[str, ...], Valuations]:
     """The variables (in Storm's order, but ``hidden``) and each state's values: from
@@ -349,6 +351,7 @@ def read_model(
     *,
     silent: str | None = None,
     hidden: frozenset[str] = frozenset(),
+    valuations: tuple[tuple[str, ...], Valuations] | None = None,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -361,7 +364,9 @@ def read_model(
     Storm did not label ``"deadlock"`` (a JANI edge without an action; None: every choice
     without a label is the deadlock self-loop, as in a PRISM build where every command
     has an action).  ``hidden``: variables of Storm's valuations that are not the state's
-    (JANI's transient variables).  Raises :class:`WorldError` for an update that reached
+    (JANI's transient variables).  ``valuations``: the variables and the states, when
+    ``model`` was built without its valuations (:mod:`mitld_lp.worlds.prism_valuations`).
+    Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
     or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
@@ -370,8 +375,9 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
-    (choices, branches, targets, probabilities), packed = _read_export(model, where)
-    variables, states = _valuations(model, hidden, packed)
+    (choices, branches, targets, probabilities), packed = read_export(model, where)
+    variables, states = (valuations if valuations is not None else
+                         valuations_of(model, hidden, packed))
     del packed
     n, m = len(states), len(branches) - 1
 
