@@ -314,3 +314,7 @@ def test_valuations_are_built_when_a_state_is_first_named(tmp_path: Path) -> Non
     for named in (copy.states, states):
         assert list(named) == [tuple(v[name] for name in game.variables) for v in storm]
     assert states.built
+    # a world an event changes is read by name, state by state: valuations at once
+    events = load_prism(write(tmp_path, PACKED.replace("[step] true", "[bus] true"), "e.prism"),
+                        events=["bus"])
+    assert not isinstance(events.states, DeferredValuations)

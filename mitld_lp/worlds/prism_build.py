@@ -109,9 +109,9 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
                  recipe: PrismRecipe | None = None) -> Tables:
     """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
     the states Storm expands before it has found ``limit`` states (the module docstring).
-    Given the ``recipe`` to build it again, a whole build leaves out the state
-    valuations, which Storm makes when a state other than the initial one is first
-    named (:mod:`mitld_lp.worlds.prism_valuations`).
+    Given the ``recipe`` to build it again, a whole build without event effects leaves
+    out the state valuations, which Storm makes when a state other than the initial
+    one is first named (:mod:`mitld_lp.worlds.prism_valuations`).
 
     Storm's exploration checks refuse updates out of a variable's range (without them
     it stores values modulo the range) and probabilities that do not sum to 1, compared
@@ -125,7 +125,9 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     # Two choices of one state named by one action are told apart by the commands they
     # come from (Storm's choice origins, a tenth of the build): only where needed.
     origins = needs_origins(program)
-    deferred = limit is None and recipe is not None
+    # (a world whose events change it is read state by state, every state named: built
+    # with its valuations at once)
+    deferred = limit is None and recipe is not None and not events
 
     def options(checks: bool) -> Any:
         return builder_options(stormpy, program, terminal, checks=checks, origins=origins,

@@ -4,8 +4,9 @@ Storm's state valuations are a sixth of its build (csma 4-2 of QVBS, 608,082 sta
 6.3 s with them, 5.3 s without), and a solve reads none of them: the product numbers
 the world's states as Storm does and asks for a state's values only to name it (a
 policy's table, a controller, an export with valuations, an error message).  So a world
-built whole (:func:`mitld_lp.worlds.prism_build.build_tables` without a state limit) is
-built without them, and its :attr:`~mitld_lp.worlds.prism.PrismGame.states` are
+built whole (:func:`mitld_lp.worlds.prism_build.build_tables` without a state limit) and
+without event effects (the product reads such a world state by state, by name) is built
+without them, and its :attr:`~mitld_lp.worlds.prism.PrismGame.states` are
 :class:`DeferredValuations`: the variables and the initial state come from a build of
 the initial state alone (:func:`head`), and the first other state asked for makes Storm
 build the world again, with its valuations and the same options (:func:`rebuild`):
