@@ -318,3 +318,18 @@ def test_valuations_are_built_when_a_state_is_first_named(tmp_path: Path) -> Non
     events = load_prism(write(tmp_path, PACKED.replace("[step] true", "[bus] true"), "e.prism"),
                         events=["bus"])
     assert not isinstance(events.states, DeferredValuations)
+
+
+def test_labels_over_many_words_are_the_label_expressions(tmp_path: Path) -> None:
+    """Each state's propositions (read from Storm's bit vectors, several 64-bit words
+    long here) are the labels whose expressions hold on the state's values, evaluated
+    here in Python."""
+    labels = 'label "hi" = w >= 99993;\nlabel "neg" = x < 0 & d;\nlabel "far" = g = -1;\n'
+    game = load_prism(write(tmp_path, PACKED + labels))
+    at = {name: game.variables.index(name) for name in game.variables}
+    assert len(game.states) > 3 * 64
+    for s in game.states:
+        expected = {name for name, holds in (
+            ("hi", s[at["w"]] >= 99993), ("neg", s[at["x"]] < 0 and s[at["d"]]),
+            ("far", s[at["g"]] == -1)) if holds}
+        assert game.propositions(s) == expected

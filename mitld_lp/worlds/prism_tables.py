@@ -94,7 +94,20 @@ class Tables:
 
 
 def _indices(bits: Any) -> np.ndarray:
-    """The set positions of one of Storm's bit vectors."""
+    """The set positions of one of Storm's bit vectors: from its text (its size, then
+    its 64-bit words in decimal, the first position the word's most significant bit),
+    read in one numpy pass, checked against its count of set bits; else (another text)
+    by iterating over it, a Python int per position."""
+    try:
+        size, *words = bits.store_as_string().split()
+        n = int(size)
+        if len(words) == (n + 63) // 64:
+            packed = np.array(words, dtype=np.uint64).astype(">u8").view(np.uint8)
+            found = np.flatnonzero(np.unpackbits(packed)[:n])
+            if found.size == bits.get_number_of_set_bits():
+                return found.astype(np.int64, copy=False)
+    except (AttributeError, ValueError, OverflowError):
+        pass
     return np.fromiter(bits, dtype=np.int64)
 
 
