@@ -165,7 +165,8 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
             np.maximum.reduceat(mdp.matrix @ v, starts)
             k += 1
         times.append((bs._cpu() - c) / k)
-    write_drn(mdp, r.acceptance.goal, work / "model.drn", overwrite=True)
+    # (without valuations: Storm checks the file as is; naming 1e6 states costs minutes)
+    write_drn(mdp, r.acceptance.goal, work / "model.drn", overwrite=True, valuations=False)
     # Storm optimises the DRN's target as we do (a checkout before Result.sense: "max")
     (work / "sense.txt").write_text(getattr(r, "sense", "max"))
     return dict(out, sweep_cpu=float(np.median(times)))
@@ -440,9 +441,29 @@ def report(rows: list[dict], skipped: list[tuple[str, str]],
     return text
 
 
-def main(argv: list[str] | None = None) -> list[dict]:
+def _write(out: Path, rows: list[dict], skipped: list[tuple[str, str]],
+           only: list[str] | None, planned: int, argv: list[str] | None) -> str:
+    """``bench_qvbs.csv``, ``.md`` and ``_machine.txt`` of the rows so far (``planned``:
+    how many instances the run takes on; the report says how many are still to come)."""
     from bench_scaling import machine_text
 
+    header = sorted({k for r in rows for k in r}, key=lambda k: (
+        COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
+    _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
+                      [["" if r.get(k) is None else r[k] for k in header] for r in rows])
+    text = report(rows, skipped, only)
+    if len(rows) < planned:
+        text += f"\nRun in progress or cut short: {len(rows)} of {planned} instances done.\n"
+    _common.write_text(out / "bench_qvbs.md", text)
+    _common.write_text(out / "bench_qvbs_machine.txt", machine_text(
+        "shared 2-core machine, other processes running; one run, CPU seconds",
+        [f"command: python experiments/bench_qvbs.py {' '.join(argv or sys.argv[1:])}",
+         "storm: each sound method (force_soundness, 1e-9 absolute) on our DRN; the best "
+         "one again on the PRISM file and property as published, in a process of its own"]))
+    return text
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, required=True,
                     help="the benchmarks/ folder of a checkout of github.com/ahartmanns/qcomp")
@@ -471,6 +492,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         todo.sort(key=lambda t: t[0].qvbs_states)  # smallest first: a cut-short run has rows
         if args.quick:
             todo = todo[-QUICK_COUNT:]
+        text = _write(out, rows, skipped, args.only, len(todo), argv)
         for inst, job in todo:
             work = Path(tmp) / inst.name
             work.mkdir()
@@ -480,17 +502,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
                   bs._line(row) + (f"  apart: {row['trivial']}" if row["trivial"] else
                                    f"  iteration_sweeps={row['iteration_sweeps']}"),
                   flush=True)
-    header = sorted({k for r in rows for k in r}, key=lambda k: (
-        COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
-    _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
-                      [["" if r.get(k) is None else r[k] for k in header] for r in rows])
-    text = report(rows, skipped, args.only)
-    _common.write_text(out / "bench_qvbs.md", text)
-    _common.write_text(out / "bench_qvbs_machine.txt", machine_text(
-        "shared 2-core machine, other processes running; one run, CPU seconds",
-        [f"command: python experiments/bench_qvbs.py {' '.join(argv or sys.argv[1:])}",
-         "storm: each sound method (force_soundness, 1e-9 absolute) on our DRN; the best "
-         "one again on the PRISM file and property as published, in a process of its own"]))
+            # written after every instance: a run cut short keeps the rows it has
+            text = _write(out, rows, skipped, args.only, len(todo), argv)
     print(text)
     print(f"written: {_common.shown(out / 'bench_qvbs.csv')}, "
           f"{_common.shown(out / 'bench_qvbs.md')}")

@@ -23,7 +23,8 @@ expression written as PCTL): unbounded ``P``, step-bounded ``P`` (``F<=k``, ``U<
 time-bounded ``P``, reward-bounded ``P`` (``F^{rew{...}<=b}``, ``U{"r"}<=b``),
 qualitative ``P`` (``P>=1``, ``P<=0``, ``P>0``, ``P<1``), ``P`` against another
 threshold, expected reward until a target (``R[...]=? [F ...]``, ``T=? [F ...]``),
-cumulative ``C<=k``, instantaneous ``I=k``, long-run average / steady state, other.
+one against a bound (``R{"r"}<=b [F ...]``, ``T>=b [F ...]``), cumulative ``C<=k``,
+instantaneous ``I=k``, long-run average / steady state, other.
 
 Inside the reference: QVBS's exact references (``num/den``, or an integer) are compared
 as ``Fraction``\\ s with the bracket's two floats read as the rationals they are, no
@@ -54,7 +55,7 @@ from _common import ROOT, markdown_table, write_csv, write_text
 
 CLASSES = (
     "P unbounded", "P step-bounded", "P time-bounded", "P reward-bounded",
-    "P qualitative", "P threshold", "R reach (F)", "R cumulative (C<=k)",
+    "P qualitative", "P threshold", "R reach (F)", "R threshold (R~b)", "R cumulative (C<=k)",
     "R instantaneous (I=k)", "LRA / steady-state", "other",
 )
 #: A property's class from QVBS's type of it, for the rows with no text to read.
@@ -118,8 +119,8 @@ def classify(text: str) -> str:
             return "R cumulative (C<=k)"
         if re.match(r"^\s*I\s*=", body):
             return "R instantaneous (I=k)"
-        if re.match(r"^\s*F\b", body) and how.startswith("="):
-            return "R reach (F)"
+        if re.match(r"^\s*F\b", body):  # R=? (min, max) or a bound R<=b, T>=b
+            return "R reach (F)" if how.startswith("=") else "R threshold (R~b)"
         return "other"
     if re.search(r"\^\{|rew\{|(?:F|U)\s*\{\s*\"", body):
         return "P reward-bounded"

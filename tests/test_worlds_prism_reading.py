@@ -224,3 +224,112 @@ def test_model_file_label_errors_name_the_key(tmp_path: Path, labels: str, messa
     src = write(tmp_path, ROOM)
     with pytest.raises(ModelError, match=message):
         loads_model(f'name = "t"\nspec = "F top"\n[prism]\nfile = "{src}"\n[labels]\n{labels}\n')
+
+
+# Variables of every shape the valuations' bit-packed records hold: negative lower
+# bounds, Booleans, a range of 17 bits that crosses byte boundaries (six values of it
+# reached), a global.
+PACKED = """mdp
+global g : [-5..-1] init -3;
+module a
+  x : [-3..4] init -2;
+  b : bool init true;
+  w : [0..100000] init 99990;
+  [step] x<4 -> 0.5 : (x'=x+1) & (b'=!b) + 0.5 : (w'=w<99995 ? w+1 : 99990) & (g'=g<-1 ? g+1 : -5);
+  [step] x=4 -> (x'=-3);
+endmodule
+module c
+  y : [5..9] init 7;
+  d : bool init false;
+  [step] true -> 0.5 : (y'=y<9 ? y+1 : 5) + 0.5 : (d'=!d);
+endmodule
+"""
+
+
+def test_valuations_are_storms_state_by_state(tmp_path: Path) -> None:
+    """The states read from Storm's binary export are the valuations Storm prints for
+    each state (its JSON, one state at a time), and the initial one is the program's."""
+    import json
+
+    import stormpy
+
+    source = write(tmp_path, PACKED)
+    game = load_prism(source)
+    assert game.initial == tuple({"g": -3, "x": -2, "b": True, "w": 99990, "y": 7,
+                                  "d": False}[v] for v in game.variables)
+    program = stormpy.parse_prism_program(str(source))
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(program, options=options)
+    storm = [json.loads(str(model.state_valuations.to_json(s))) for s in range(model.nr_states)]
+    assert len(game.states) == model.nr_states > 100
+    assert sorted(game.states) == sorted(tuple(v[name] for name in game.variables)
+                                         for v in storm)
+    booleans = [game.variables.index(name) for name in ("b", "d")]
+    assert all(type(s[j]) is bool for s in game.states for j in booleans)
+
+
+@pytest.mark.parametrize("layout", [
+    {"classes": []},
+    {"classes": [{"variables": [{"name": "x", "type": {"size": 8, "type": "int"}}]}]},
+    {"classes": [{"variables": [{"name": "x", "type": {"size": 7, "type": "uint"}}]}]},
+    {"classes": [{"variables": [{"name": "x", "type": {"size": 60, "type": "uint"}},
+                                {"padding": 4}]}]},
+])
+def test_valuation_records_of_another_layout_are_not_read(layout: dict) -> None:
+    """A layout the archive reader does not know (a signed field, records that do not
+    fill whole bytes, a field wider than 56 bits, no class) is left to Storm's calls."""
+    import numpy as np
+
+    from mitld_lp.worlds.prism_tables import unpack_valuations
+
+    assert unpack_valuations(layout, 3, 3 * 8, lambda: np.zeros(24, dtype=np.uint8)) is None
+
+
+def test_valuations_are_built_when_a_state_is_first_named(tmp_path: Path) -> None:
+    """A world built whole leaves its valuations to Storm until a state other than the
+    initial one is named: a solve names none; then (also after a pickle) Storm's second
+    build gives each state the values Storm's own build with valuations prints for that
+    state number."""
+    import json
+    import pickle
+
+    import stormpy
+
+    from mitld_lp.worlds.prism_valuations import DeferredValuations
+
+    source = write(tmp_path, PACKED)
+    game = load_prism(source, define={"far": "x = 4 & y = 9"})
+    states = game.states
+    assert isinstance(states, DeferredValuations) and not states.built
+    assert len(states) > 100 and game.initial[game.variables.index("w")] == 99990
+    result = synthesize(Model.from_game(game, "F far"))
+    assert result.certified and not states.built  # the solve named no state
+    copy = pickle.loads(pickle.dumps(game))
+    program = stormpy.parse_prism_program(str(source))
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(program, options=options)
+    storm = [json.loads(str(model.state_valuations.to_json(s))) for s in range(model.nr_states)]
+    for named in (copy.states, states):
+        assert list(named) == [tuple(v[name] for name in game.variables) for v in storm]
+    assert states.built
+    # a world an event changes is read by name, state by state: valuations at once
+    events = load_prism(write(tmp_path, PACKED.replace("[step] true", "[bus] true"), "e.prism"),
+                        events=["bus"])
+    assert not isinstance(events.states, DeferredValuations)
+
+
+def test_labels_over_many_words_are_the_label_expressions(tmp_path: Path) -> None:
+    """Each state's propositions (read from Storm's bit vectors, several 64-bit words
+    long here) are the labels whose expressions hold on the state's values, evaluated
+    here in Python."""
+    labels = 'label "hi" = w >= 99993;\nlabel "neg" = x < 0 & d;\nlabel "far" = g = -1;\n'
+    game = load_prism(write(tmp_path, PACKED + labels))
+    at = {name: game.variables.index(name) for name in game.variables}
+    assert len(game.states) > 3 * 64
+    for s in game.states:
+        expected = {name for name, holds in (
+            ("hi", s[at["w"]] >= 99993), ("neg", s[at["x"]] < 0 and s[at["d"]]),
+            ("far", s[at["g"]] == -1)) if holds}
+        assert game.propositions(s) == expected

@@ -527,10 +527,11 @@ def load_prism(
                  "Storm; all states are expanded", where)
         terminal = ""
     program, action_names = name_unlabelled_commands(program, where, stormpy)
+    recipe = PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal)
 
     def work(limit: int | None = None) -> Tables:
         return build_tables(stormpy, program, plain, where, chosen, event_set, action_names,
-                            terminal, max_states, limit)
+                            terminal, max_states, limit, recipe)
 
     lazy = explore == "lazy" or (explore == "auto" and task is not None
                                  and horizon(task) is not None and not event_set
@@ -565,7 +566,7 @@ def load_prism(
         decided=tables.decided,
         normalised=tables.normalised,
         _tables=tables,
-        recipe=PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal),
+        recipe=recipe,
     )
     if tables.unexplored is None:
         return PrismGame(**common)  # type: ignore[arg-type]

@@ -25,17 +25,20 @@ import scipy.sparse as sp
 from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
+from mitld_lp.worlds.prism_exact import PrismRecipe
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     builder_options,
     command_names,
     needs_origins,
     show_sum,
+    storm_build,
     storm_error,
     storm_quiet,
     storm_sum,
 )
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
+from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, head, rebuild
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
            "check_budgets", "build_within", "build_tables", "expanded_within"]
@@ -102,9 +105,13 @@ def build_within(work: Callable[[], Tables], where: str, fits: bool, note: str,
 
 def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
                  events: frozenset[str], action_names: dict[str, str], terminal: str,
-                 max_states: int, limit: int | None = None) -> Tables:
+                 max_states: int, limit: int | None = None,
+                 recipe: PrismRecipe | None = None) -> Tables:
     """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
     the states Storm expands before it has found ``limit`` states (the module docstring).
+    Given the ``recipe`` to build it again, a whole build without event effects leaves
+    out the state valuations, which Storm makes when a state other than the initial
+    one is first named (:mod:`mitld_lp.worlds.prism_valuations`).
 
     Storm's exploration checks refuse updates out of a variable's range (without them
     it stores values modulo the range) and probabilities that do not sum to 1, compared
@@ -118,24 +125,29 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     # Two choices of one state named by one action are told apart by the commands they
     # come from (Storm's choice origins, a tenth of the build): only where needed.
     origins = needs_origins(program)
+    # (a world whose events change it is read state by state, every state named: built
+    # with its valuations at once)
+    deferred = limit is None and recipe is not None and not events
 
     def options(checks: bool) -> Any:
-        return builder_options(stormpy, program, terminal, checks=checks, origins=origins)
+        return builder_options(stormpy, program, terminal, checks=checks, origins=origins,
+                               valuations=not deferred)
 
     errors = (RuntimeError, stormpy.exceptions.StormError)
     try:
         with storm_quiet():
-            model = _storm_build(stormpy, program, options(True), float, limit)
+            model = storm_build(stormpy, program, options(True), float, limit)
     except errors as exc:
         if storm_sum(str(exc)) is None:
             raise storm_error(exc, where, program, plain) from None
         model = None
+    checks = model is not None
     if model is None:
         try:  # (stormpy's exact builder takes no state limit: a limited build's sums
             # are all checked by read_model instead)
             with storm_quiet():
                 if limit is None:
-                    _storm_build(stormpy, program, options(True), stormpy.Rational, None)
+                    storm_build(stormpy, program, options(True), stormpy.Rational, None)
         except errors as exc:
             total = storm_sum(str(exc))
             if total is None or abs(total - 1) > SUM_TOLERANCE:
@@ -145,7 +157,7 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
                      where, show_sum(total), SUM_TOLERANCE)
         try:
             with storm_quiet():
-                model = _storm_build(stormpy, program, options(False), float, limit)
+                model = storm_build(stormpy, program, options(False), float, limit)
         except errors as exc:
             raise storm_error(exc, where, program, plain) from None
     built = set(model.labeling.get_labels())
@@ -172,27 +184,17 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
         cmds = sorted(model.choice_origins.get_command_set(choice))
         return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
 
+    valuations = None
+    if deferred:
+        assert recipe is not None
+        variables, initial, known, booleans = head(stormpy, program, terminal, origins, where)
+        make = ValuationRecipe(recipe, checks, model.nr_states, model.nr_choices,
+                               int(model.initial_states[0]))
+        valuations = variables, (DeferredValuations(make, known, booleans)
+                                 if initial == make.initial else rebuild(make))
     tables = read_model(model, where, chosen, events, action_names, origin,
-                        stopped[0] if len(stopped) == 1 else None)
+                        stopped[0] if len(stopped) == 1 else None, valuations=valuations)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
-
-
-def _storm_build(stormpy: Any, program: Any, options: Any, value_type: Any,
-                 limit: int | None) -> Any:
-    """Storm's sparse build of ``program`` (``value_type``: float or ``stormpy.Rational``,
-    the latter without a limit), breadth first; with ``limit``, no state expanded once
-    that many are found."""
-    if limit is None:
-        return stormpy.build_model[value_type](program, options=options)
-    from stormpy import developer  # pyright: ignore[reportMissingImports]
-
-    explore = developer.ExplicitModelBuilderOptions[float]()
-    explore.exploration_order = developer.ExplorationOrder.BFS  # Storm's default order
-    explore.exploration_state_limit = limit
-    description = developer.SymbolicModelDescription(program)
-    return developer.make_explicit_model_builder[float](
-        description, options, exploration_options=explore).build()
-
 
 
 def expanded_within(tables: Tables, steps: int) -> bool:

@@ -42,7 +42,8 @@ from mitld_lp.worlds.prism_program import (
 )
 from mitld_lp.worlds.prism_tables import Tables
 
-__all__ = ["PrismRecipe", "exact_probabilities", "exact_build", "exact_constants"]
+__all__ = ["PrismRecipe", "exact_probabilities", "exact_build", "exact_constants",
+           "program_of"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,15 +73,16 @@ def exact_constants(stormpy: Any, constants: Mapping[str, Any]) -> dict[str, Any
     return given
 
 
-def _program(stormpy: Any, recipe: PrismRecipe) -> Any:
-    """The program as the world's build prepared it, its constants exact."""
+def program_of(stormpy: Any, recipe: PrismRecipe, *, exact: bool = True) -> Any:
+    """The program as the world's build prepared it, its constants exact (``exact``)
+    or as given."""
     where = recipe.where
     program = parse_program(stormpy, recipe.path, where)
     extra = extra_labels(program, dict(recipe.define), where)
     if extra:
         program = with_labels(stormpy, Path(recipe.path), extra, where)
-    program = with_constants(stormpy, program, exact_constants(stormpy, recipe.constants),
-                             where)
+    given = exact_constants(stormpy, recipe.constants) if exact else dict(recipe.constants)
+    program = with_constants(stormpy, program, given, where)
     program, _ = name_unlabelled_commands(program, where, stormpy)
     return program
 
@@ -89,7 +91,7 @@ def exact_build(recipe: PrismRecipe) -> Any:
     """Storm's exact build of ``recipe`` (the world's program, the same builder options)."""
     import stormpy  # the world was built by it: installed
 
-    program = _program(stormpy, recipe)
+    program = program_of(stormpy, recipe)
     options = builder_options(stormpy, program, recipe.terminal, checks=True,
                               origins=needs_origins(program))
     try:

@@ -37,7 +37,7 @@ __all__ = [
     "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
     "SUM_TOLERANCE", "show_sum", "storm_sum", "check_constants", "command_names",
     "name_unlabelled_commands", "parse_program", "extra_labels", "with_labels",
-    "needs_origins", "builder_options", "with_constants",
+    "needs_origins", "builder_options", "with_constants", "storm_build",
 ]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
@@ -445,9 +445,10 @@ def needs_origins(program: Any) -> bool:
 
 
 def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
-                    origins: bool) -> Any:
+                    origins: bool, valuations: bool = True) -> Any:
     """Storm's builder options for a world: every label (a label left out of the build
-    would be false in every state), choice labels, state valuations, the choice origins
+    would be false in every state), choice labels, state valuations when ``valuations``
+    (a sixth of the build; :mod:`mitld_lp.worlds.prism_valuations`), the choice origins
     when ``origins``, exploration checks when ``checks`` (without them Storm's
     out-of-bounds state, so that an update out of a variable's range stays visible), and
     no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
@@ -464,5 +465,23 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
     o.set_build_choice_labels()
     if origins:
         o.set_build_choice_origins()
-    o.set_build_state_valuations()
+    if valuations:
+        o.set_build_state_valuations()
     return o
+
+
+def storm_build(stormpy: Any, program: Any, options: Any, value_type: Any,
+                limit: int | None) -> Any:
+    """Storm's sparse build of ``program`` (``value_type``: float or ``stormpy.Rational``,
+    the latter without a limit), breadth first; with ``limit``, no state expanded once
+    that many are found."""
+    if limit is None:
+        return stormpy.build_model[value_type](program, options=options)
+    from stormpy import developer  # pyright: ignore[reportMissingImports]
+
+    explore = developer.ExplicitModelBuilderOptions[float]()
+    explore.exploration_order = developer.ExplorationOrder.BFS  # Storm's default order
+    explore.exploration_state_limit = limit
+    description = developer.SymbolicModelDescription(program)
+    return developer.make_explicit_model_builder[float](
+        description, options, exploration_options=explore).build()

@@ -3,8 +3,9 @@
 The transition structure comes from Storm's own binary export (UMB: the offsets of each
 state's choices and of each choice's branches, the branch targets and probabilities, as
 little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.fromfile`;
-the state valuations, state labels and choice labels come from Storm's per-variable and
-per-label calls (one call per variable or label, a bit vector or list each).  Only the
+the state valuations from the same archive's bit-packed records (Storm's per-variable
+calls, which make a Python list of each variable's values, where the layout is another);
+state labels and choice labels from Storm's per-label calls (a bit vector each).  Only the
 choices that need their PRISM commands to be told apart (two enabled commands of one
 action in a state) are looked at one by one.
 """
@@ -26,7 +27,8 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 
-__all__ = ["Tables", "read_model", "transition_arrays", "DEADLOCK_ACTION", "DECIDED_ACTION",
+__all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
+           "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
            "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
@@ -92,7 +94,20 @@ class Tables:
 
 
 def _indices(bits: Any) -> np.ndarray:
-    """The set positions of one of Storm's bit vectors."""
+    """The set positions of one of Storm's bit vectors: from its text (its size, then
+    its 64-bit words in decimal, the first position the word's most significant bit),
+    read in one numpy pass, checked against its count of set bits; else (another text)
+    by iterating over it, a Python int per position."""
+    try:
+        size, *words = bits.store_as_string().split()
+        n = int(size)
+        if len(words) == (n + 63) // 64:
+            packed = np.array(words, dtype=np.uint64).astype(">u8").view(np.uint8)
+            found = np.flatnonzero(np.unpackbits(packed)[:n])
+            if found.size == bits.get_number_of_set_bits():
+                return found.astype(np.int64, copy=False)
+    except (AttributeError, ValueError, OverflowError):
+        pass
     return np.fromiter(bits, dtype=np.int64)
 
 
@@ -106,8 +121,16 @@ def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
     """``(choices, branches, targets, probabilities)`` from Storm's UMB export, checked
     for consistency; branches of probability 0 dropped (negative ones are kept, for
     :func:`read_model` to refuse)."""
+    return read_export(model, where)[0]
+
+
+def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
+                                                   dict[str, np.ndarray] | None]:
+    """:func:`transition_arrays`'s arrays and the state valuations the archive holds,
+    by variable (:func:`unpack_valuations`; None where the layout is not the one read
+    here, or the model was built without them)."""
     try:
-        choices, branches, targets, probabilities = _export(model, where)
+        choices, branches, targets, probabilities, packed = _export(model, where)
     except OSError as exc:
         raise WorldError(
             f"{where}: cannot write Storm's export to a temporary folder: {exc.strerror or exc}"
@@ -125,12 +148,13 @@ def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
         kept = np.add.reduceat(positive.astype(np.int64), branches[:-1])
         branches = np.concatenate(([0], np.cumsum(kept)))
         targets, probabilities = targets[positive], probabilities[positive]
-    return choices, branches, targets, probabilities
+    return (choices, branches, targets, probabilities), packed
 
 
-def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
+def _export(model: Any, where: str) -> tuple[Any, ...]:
     """Write ``model`` as an uncompressed UMB archive to a temporary folder and read its
-    four transition arrays straight from the file."""
+    four transition arrays straight from the file, and its state valuations
+    (:func:`unpack_valuations`)."""
     import stormpy.io  # pyright: ignore[reportMissingImports]
 
     n, m = model.nr_states, model.nr_choices
@@ -144,7 +168,8 @@ def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
         with tarfile.open(path) as tar:
             members = {t.name: t for t in tar.getmembers()}
             index = tar.extractfile(members["index.json"]) if "index.json" in members else None
-            system = json.loads(index.read()).get("transition-system", {}) if index else {}
+            meta = json.loads(index.read()) if index else {}
+            system = meta.get("transition-system", {})
             b = system.get("#branches", -1)
             if (system.get("#states"), system.get("#choices")) != (n, m) or system.get(
                 "branch-probability-type"
@@ -159,13 +184,60 @@ def _export(model: Any, where: str) -> tuple[np.ndarray, ...]:
 
             # a DTMC's archive has no state-to-choices (a choice per state, in order)
             one_each = n == m and "state-to-choices.bin" not in members
+            records = members.get(VALUATIONS_BIN)
+            packed = None if records is None else unpack_valuations(
+                meta.get("valuations", {}).get("states", {}), n, records.size,
+                lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
+                                    offset=records.offset_data))
             return (
                 np.arange(n + 1, dtype=np.int64) if one_each else
                 read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
                 read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
                 read("branch-to-target.bin", "<u8", b).astype(np.int64),
                 read("branch-to-probability.bin", "<f8", b),
+                packed,
             )
+
+
+VALUATIONS_BIN = "valuations/states/valuations.bin"
+"""The UMB archive's state valuations: one record of bit fields per state."""
+
+
+def unpack_valuations(layout: Mapping[str, Any], n: int, size: int,
+            read: Callable[[], np.ndarray]) -> dict[str, np.ndarray] | None:
+    """Each variable's values over the ``n`` states from the UMB archive's records
+    (``read()`` gives the file's ``size`` bytes): per state, one record of the
+    variables' fields in ``layout``'s order, least significant bit first, a Boolean in
+    one bit, an integer as an unsigned field plus its ``offset`` (its range's lower
+    bound), ``padding`` bits between.  None where the layout is not that one (several
+    classes of records, another type, a field wider than 56 bits, records that do not
+    fill whole bytes or the file): the caller then asks Storm variable by variable."""
+    classes = layout.get("classes")
+    if n == 0 or not isinstance(classes, list) or len(classes) != 1:
+        return None
+    fields: list[tuple[str, int, int, int]] = []  # name, bit offset, width, value offset
+    at = 0
+    for var in classes[0].get("variables", ()):
+        if "padding" in var:
+            at += int(var["padding"])
+            continue
+        kind, width = var.get("type", {}).get("type"), int(var.get("type", {}).get("size", 0))
+        if kind not in ("bool", "uint") or not 0 < width <= 56 or (kind == "bool"
+                                                                   and width != 1):
+            return None
+        fields.append((str(var["name"]), at, width, int(var.get("offset", 0))))
+        at += width
+    if at % 8 or at == 0 or size != n * (at // 8):
+        return None
+    width_bytes = at // 8
+    raw = np.zeros((n, width_bytes + 8), dtype=np.uint8)  # 8 spare bytes: any field's word
+    raw[:, :width_bytes] = read().reshape(n, width_bytes)
+    out = {}
+    for name, bit, width, offset in fields:
+        word = np.ascontiguousarray(raw[:, bit // 8 : bit // 8 + 8]).view("<u8").reshape(-1)
+        value = (word >> np.uint64(bit % 8)) & np.uint64((1 << width) - 1)
+        out[name] = value.astype(np.int64) + offset
+    return out
 
 
 class Valuations(Sequence[State]):
@@ -230,10 +302,12 @@ def _narrow(values: np.ndarray) -> np.ndarray:
     return values
 
 
-def _valuations(model: Any, hidden: frozenset[str] = frozenset()) -> tuple[tuple[str, ...],
-                                                                          Valuations]:
-    """The variables (in Storm's order, but ``hidden``) and each state's values, one call
-    per variable."""
+def valuations_of(model: Any, hidden: frozenset[str] = frozenset(),
+                packed: Mapping[str, np.ndarray] | None = None,
+                ) -> tuple[tuple[str, ...], Valuations]:
+    """The variables (in Storm's order, but ``hidden``) and each state's values: from
+    ``packed`` (the UMB archive's, :func:`unpack_valuations`) where it has the variable,
+    else one call to Storm per variable."""
     n = model.nr_states
     valuations = model.state_valuations
     order = tuple(json.loads(str(valuations.to_json(0))) or ()) if n else ()  # null: none
@@ -244,7 +318,11 @@ def _valuations(model: Any, hidden: frozenset[str] = frozenset()) -> tuple[tuple
     booleans = []
     for j, name in enumerate(order):
         var = by_name[name]
-        if var.has_boolean_type():  # a bit vector: the states where it is true
+        if packed is not None and name in packed:  # the archive's, read as one array
+            values[:, j] = packed[name]
+            if var.has_boolean_type():
+                booleans.append(j)
+        elif var.has_boolean_type():  # a bit vector: the states where it is true
             values[_indices(valuations.get_boolean_values(var)), j] = 1
             booleans.append(j)
         else:  # PRISM state variables are booleans and bounded integers
@@ -286,6 +364,7 @@ def read_model(
     *,
     silent: str | None = None,
     hidden: frozenset[str] = frozenset(),
+    valuations: tuple[tuple[str, ...], Valuations] | None = None,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -298,7 +377,9 @@ def read_model(
     Storm did not label ``"deadlock"`` (a JANI edge without an action; None: every choice
     without a label is the deadlock self-loop, as in a PRISM build where every command
     has an action).  ``hidden``: variables of Storm's valuations that are not the state's
-    (JANI's transient variables).  Raises :class:`WorldError` for an update that reached
+    (JANI's transient variables).  ``valuations``: the variables and the states, when
+    ``model`` was built without its valuations (:mod:`mitld_lp.worlds.prism_valuations`).
+    Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
     or a distribution whose probabilities do not sum to 1 within PRISM's tolerance
@@ -307,8 +388,10 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
-    variables, states = _valuations(model, hidden)
-    choices, branches, targets, probabilities = _structure(model, where)
+    (choices, branches, targets, probabilities), packed = read_export(model, where)
+    variables, states = (valuations if valuations is not None else
+                         valuations_of(model, hidden, packed))
+    del packed
     n, m = len(states), len(branches) - 1
 
     def show(s: int) -> str:

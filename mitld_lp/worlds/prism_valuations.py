@@ -1,0 +1,130 @@
+"""A PRISM world's state valuations, made by Storm when first read.
+
+Storm's state valuations are a sixth of its build (csma 4-2 of QVBS, 608,082 states:
+6.3 s with them, 5.3 s without), and a solve reads none of them: the product numbers
+the world's states as Storm does and asks for a state's values only to name it (a
+policy's table, a controller, an export with valuations, an error message).  So a world
+built whole (:func:`mitld_lp.worlds.prism_build.build_tables` without a state limit) and
+without event effects (the product reads such a world state by state, by name) is built
+without them, and its :attr:`~mitld_lp.worlds.prism.PrismGame.states` are
+:class:`DeferredValuations`: the variables and the initial state come from a build of
+the initial state alone (:func:`head`), and the first other state asked for makes Storm
+build the world again, with its valuations and the same options (:func:`rebuild`):
+Storm numbers states in the order its breadth-first search finds them, so the second
+build numbers them alike, which is checked (states, choices, the initial state).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_exact import PrismRecipe, program_of
+from mitld_lp.worlds.prism_program import (
+    builder_options,
+    needs_origins,
+    storm_build,
+    storm_error,
+    storm_quiet,
+)
+from mitld_lp.worlds.prism_tables import Valuations, read_export, valuations_of
+
+__all__ = ["ValuationRecipe", "DeferredValuations", "head", "rebuild"]
+
+State = tuple[Hashable, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ValuationRecipe:
+    """How to build a world again with its valuations: its :class:`PrismRecipe`,
+    whether Storm's exploration checks were on, and what the first build found (to
+    check that the second numbers the states alike)."""
+
+    recipe: PrismRecipe
+    checks: bool
+    n_states: int
+    n_choices: int
+    initial: int
+
+
+def _build(stormpy: Any, program: Any, options: Any, where: str, limit: int | None) -> Any:
+    try:
+        with storm_quiet():
+            return storm_build(stormpy, program, options, float, limit)
+    except (RuntimeError, stormpy.exceptions.StormError) as exc:
+        raise storm_error(exc, where, program) from None
+
+
+def head(stormpy: Any, program: Any, terminal: str, origins: bool, where: str,
+         ) -> tuple[tuple[str, ...], int, State, tuple[int, ...]]:
+    """``(variables, initial, its values, Boolean columns)`` from Storm's build of the
+    initial state alone (one state found, none expanded), with its valuations."""
+    options = builder_options(stormpy, program, terminal, checks=True, origins=origins)
+    model = _build(stormpy, program, options, where, 1)
+    variables, states = valuations_of(model, packed=read_export(model, where)[1])
+    initial = int(model.initial_states[0])
+    return variables, initial, states[initial], states.booleans
+
+
+def rebuild(make: ValuationRecipe) -> Valuations:
+    """The world's valuations from Storm's build of ``make.recipe`` with them (the same
+    options as the first build otherwise); :class:`WorldError` when that build numbers
+    the states otherwise."""
+    import stormpy  # the world was built by it: installed
+
+    where = make.recipe.where
+    program = program_of(stormpy, make.recipe, exact=False)
+    options = builder_options(stormpy, program, make.recipe.terminal, checks=make.checks,
+                              origins=needs_origins(program))
+    model = _build(stormpy, program, options, where, None)
+    found = (model.nr_states, model.nr_choices, int(model.initial_states[0]))
+    if found != (make.n_states, make.n_choices, make.initial):
+        raise WorldError(f"{where}: Storm's build with valuations has {found[0]:,} states "
+                         f"and {found[1]:,} choices, its first build {make.n_states:,} and "
+                         f"{make.n_choices:,}: the states cannot be named")
+    _, states = valuations_of(model, packed=read_export(model, where)[1])
+    return states
+
+
+class DeferredValuations(Valuations):
+    """:class:`~mitld_lp.worlds.prism_tables.Valuations` whose values Storm builds
+    when first read (:func:`rebuild`); the number of states and the initial state's
+    values are known before."""
+
+    def __init__(self, make: ValuationRecipe, known: State, booleans: tuple[int, ...]) -> None:
+        self.make = make
+        self.known = known  # the initial state's values
+        self.booleans = booleans
+        self._values: np.ndarray | None = None
+
+    @property  # type: ignore[override]
+    def values(self) -> np.ndarray:
+        if self._values is None:
+            built = rebuild(self.make)
+            if built.booleans != self.booleans:
+                raise WorldError(f"{self.make.recipe.where}: Storm's build with valuations "
+                                 "has other variables than its first build")
+            self._values = built.values
+        return self._values
+
+    @property
+    def built(self) -> bool:
+        """Whether Storm has built the values yet."""
+        return self._values is not None
+
+    def __len__(self) -> int:
+        return self.make.n_states
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, int | np.integer) and int(i) in (self.make.initial,
+                                                          self.make.initial - len(self)):
+            return self.known
+        return super().__getitem__(i)
+
+    def __repr__(self) -> str:
+        shown = "built" if self.built else "built when first read"
+        return f"DeferredValuations(<{len(self)} states, {shown}>)"
