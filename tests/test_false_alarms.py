@@ -293,15 +293,18 @@ def test_simulation_draws_false_alarms_within_the_bracket() -> None:
 
 
 @pytest.mark.parametrize("extra, words", [
-    # a law that may never happen: 1 - 0.3 - 0.3 = 0.4 never, by hand
-    ({"law": (0.3, 0.3)}, r"b never happens with probability 0\.4\).*not finite"),
+    # a law that may never happen (1 - 0.3 - 0.3 = 0.4 never, by hand) with constraints
+    # (bracketed without: tests/test_false_alarms_never.py)
+    ({"law": (0.3, 0.3), "constraint": True},
+     r"b never happens with probability 0\.4\).*not finite.*sensed-constrained"),
     ({"band": True}, r"false_alarm = 0\.2.*band.*not solved"),
     ({"band": True, "bands": "best"}, r"false_alarm = 0\.2.*band.*not solved"),
     ({"constraint": True}, r"false_alarm = 0\.2.*route sensed-constrained"),
 ])
 def test_refused_by_name(extra: dict[str, Any], words: str) -> None:
     """What is not built with false alarms is refused naming the sensor's key and the
-    reason: a law that may never happen (the information state is not finite), a law
+    reason: a law that may never happen with constraints (the information state is not
+    finite), a law
     known within a band (its worst case, or its best with ``bands="best"``),
     constraints."""
     from mitld_lp.distributions import from_table
