@@ -136,8 +136,8 @@ def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
     model = tmp_path / "m.toml"
     never = GRID.replace("geometric = 0.4", "pmf = [0.3, 0.3]")  # may never happen
     model.write_text(never + "[sensors]\nb = { detect = 0.5, false_alarm = 0.2 }\n")
-    run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
-                         capture_output=True, text=True)
+    run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model), "--then",
+                          "min-steps"], capture_output=True, text=True)  # bracketed without
     assert run.returncode == 2
     assert "sensors.b.false_alarm" in run.stderr and "Traceback" not in run.stderr
     model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")
