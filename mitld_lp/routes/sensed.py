@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from mitld_lp.routes.route import Route
@@ -23,7 +24,8 @@ __all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal", "reacting_fa
 class SensedRoute(Route):
     """Some event is reported by a sensor that misses it (``detect < 1``) or gives false
     alarms (at laws that surely happen): every task class, either objective, laws that
-    may never happen (without false alarms); point laws, no constraints
+    may never happen (with false alarms bracketed: :mod:`mitld_lp.routes.sensed_never`);
+    point laws, no constraints
     (:mod:`mitld_lp.routes.sensed_solve`), and a law known within a band (the worst case
     over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
@@ -39,17 +41,21 @@ class SensedRoute(Route):
         if not partial(p.model.sensors):
             return ["sensed route: no event has a sensor that misses it"]
         return sensed_refusals(p.model, posed.fragment, p.objective, p.constraints, p.then,
-                               posed.robust, alarms=True)
+                               posed.robust, never=True)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton, then the information-state product
         (:mod:`mitld_lp.sensing.belief`: what the robot knows of the events, never the
         events themselves), under the problem's budgets."""
         from mitld_lp.automata.translate import to_dta
+        from mitld_lp.routes.sensed_never import blind_model, never_alarms
         from mitld_lp.routes.stages import Built, reaching
         from mitld_lp.sensing.belief import belief_product
 
         model, s = posed.model, posed.settings
+        blind = never_alarms(model)  # built blind, their reports dropped (sensed_never)
+        if blind:
+            model = blind_model(model)
         assert s.max_states is not None and s.max_automaton_states is not None  # resolved
         t0 = time.perf_counter()
         dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
@@ -67,14 +73,20 @@ class SensedRoute(Route):
                                 truncation=s.truncation_map, max_states=s.max_states,
                                 max_memory=s.max_memory, progress=progress,
                                 name=model.name)
+        if blind:
+            belief = replace(belief, sensors=partial(posed.model.sensors),
+                             ignored=belief.ignored | frozenset(blind))
         return Built(dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      belief=belief, sense="min" if direct else "max")
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never
         from mitld_lp.routes.sensed_solve import solve_sensed
 
+        if never_alarms(posed.model) and not posed.robust:  # bracketed (sensed_never)
+            return solve_never(posed, solve_sensed(posed, built))
         if posed.robust:  # the worst case over the band (mitld_lp.routes.sensed_band)
             from mitld_lp.routes.sensed_band import solve_sensed_band
 
@@ -83,12 +95,12 @@ class SensedRoute(Route):
 
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],
-                    then: str | None, robust: bool, *, alarms: bool = False) -> list[str]:
+                    then: str | None, robust: bool, *, never: bool = False) -> list[str]:
     """Why the ``sensed`` route cannot solve this problem as posed: every reason, each
     naming its feature (empty: it can).  ``model`` has at least one sensor that is not
-    perfect.  ``alarms``: the caller builds sensors with false alarms (the ``sensed``
-    route's own product, without a band); other callers (constraints, ``then``, the LP
-    over information states) have them refused."""
+    perfect.  Every caller builds sensors with false alarms at a point law that surely
+    happens; ``never``: it also brackets them at a law that may never happen (the
+    ``sensed`` route, :mod:`mitld_lp.routes.sensed_never`)."""
     sensors = partial(model.sensors)
     named = ", ".join(f"{a} = {s}" for a, s in sensors.items())
     head = f"sensors ({named})"
@@ -96,7 +108,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     for a, s in sensors.items():
         if s.false_alarm:
             refused += false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
-                                           built=alarms, robust=robust)
+                                           never=never, robust=robust)
     if robust:
         refused += band_refusals(model, head, objective, constraints)
     try:
@@ -123,7 +135,7 @@ def reacting_false_alarm_refusals(sensors: Mapping[str, Any]) -> list[str]:
             for a, s in sensors.items() if s.false_alarm]
 
 
-def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, built: bool = True,
+def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool = False,
                         robust: bool = False) -> list[str]:
     """Why a sensor with false alarms is not solved as posed (empty: it is).  The sensor
     then reports or not at every step, so the robot's belief reads every report, not
@@ -133,26 +145,27 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, built: bool
     the information state is finite, and the information-state product builds it
     (:mod:`mitld_lp.sensing.rules`).  With a law that may never happen (``never > 0``)
     "never" against "happened at ``k``" moves by every report for ever (a random walk in
-    the counts of reports and misses): the information state is not finite.  ``built``:
-    the caller builds false alarms (the ``sensed`` route); bands (``robust``) and the
-    routes of constraints, ``then`` and the LP over information states do not."""
+    the counts of reports and misses): the information state is not finite, and the
+    ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`).  The
+    ``sensed`` and ``sensed-constrained`` routes build false alarms at a point law that
+    surely happens; ``never``: the caller brackets them at a law that may never happen
+    (the ``sensed`` route only); a band (``robust``) is built by neither."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
-    if law is not None and float(law.never) > 0.0:
+    if law is not None and float(law.never) > 0.0 and (robust or not never):
         return [f"{head}, and with a law that may never happen ({event} never happens with "
                 f"probability {float(law.never):.6g}) the belief that {event} never "
                 "happens moves with every report for ever, so the information state is "
-                "not finite; not solved (give false_alarm = 0, or a law that surely "
-                "happens)"]
+                "not finite; bracketed on the sensed route with a point law and no "
+                "constraints, not solved "
+                + ("with a law known only within a band" if robust else
+                   "by route sensed-constrained (bounds on other formulas, then, pareto, "
+                   "the LP)") + " (give false_alarm = 0, or a law that surely happens)"]
     refused = []
     if robust:
         refused.append(f"{head}: with a law known only within a band (the worst case over "
                        "the band of a controller that reads every report) not solved; "
                        "give the event a point law or false_alarm = 0")
-    if not built:
-        refused.append(f"{head}: route sensed-constrained (the randomised controllers "
-                       "over information states: bounds on other formulas, then, pareto, "
-                       "the LP) does not build it; not solved (give false_alarm = 0)")
     return refused
 
 

@@ -355,8 +355,7 @@ class SensedConstrainedRoute(Route):
                            "give the events point laws")
         # the constrained LP asked with neither (a trade-off curve's end) is this LP too
         lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust,
-                                         alarms=True)
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the

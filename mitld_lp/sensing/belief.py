@@ -36,11 +36,12 @@ tail (:attr:`mitld_lp.automata.sta.EventClock.tail`), inside the epsilon achieve
 A hypothesis is lost (the sink) when its automaton can reach no persistent state (the
 accepting one, or a safe one of a task with a safety part) with the events left.
 
-A sensor with false alarms (``false_alarm > 0``, a law that surely happens: one that may
-never happen is refused) reports or not at *every* step, with probability
+A sensor with false alarms (``false_alarm > 0``, a law that surely happens: with one
+that may never happen the route builds the sensor blind,
+:mod:`mitld_lp.routes.sensed_never`) reports or not at *every* step, with probability
 ``false_alarm`` before step ``k + delay`` and ``detect`` from it on; its event is never
-kept as reported, and each hypothesis keeps, after its events' times, its count ``b``
-of that sensor's reports before its own report was due.  The likelihood of the reports
+kept as reported, and each hypothesis keeps, after its events' times, its count ``b`` of
+that sensor's reports before its own report was due.  The likelihood of the reports
 under ``k`` is ``fa^b (1 - fa)^(p - b) d^(r - b) (1 - d)^(n - p - r + b)`` (``p`` its
 steps before due; ``r`` reports in ``n`` steps, common to all), so the posterior is a
 function of the key (the counts made canonical: :class:`mitld_lp.sensing.merge.Counts`);

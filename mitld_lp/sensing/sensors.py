@@ -10,8 +10,9 @@ With ``false_alarm = f > 0`` the sensor reports or not at *every* step, independ
 with probability ``f`` before step ``K + D`` and ``d`` from it on (a report no longer
 means the event happened, and every report counts, not only the first).  With a law
 that surely happens the information-state product builds it
-(:mod:`mitld_lp.sensing.belief`), constraints and ``then`` too; a law that may never
-happen and a law known within a band are refused by name
+(:mod:`mitld_lp.sensing.belief`), constraints and ``then`` too; with a law that may
+never happen the ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`);
+a law known within a band, and a law that may never happen with constraints, are refused by name
 (:func:`mitld_lp.routes.sensed.false_alarm_refusal` says why).
 
 A model file writes them under ``[sensors]``::
