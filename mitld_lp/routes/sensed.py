@@ -86,7 +86,10 @@ class SensedRoute(Route):
         from mitld_lp.routes.sensed_solve import solve_sensed
 
         if never_alarms(posed.model) and not posed.robust:  # bracketed (sensed_never)
-            return solve_never(posed, solve_sensed(posed, built))
+            from mitld_lp.routes.plain import PlainRoute
+
+            # the informed end on this route, or the plain one where no sensor is left
+            return solve_never(posed, solve_sensed(posed, built), (SensedRoute(), PlainRoute()))
         if posed.robust:  # the worst case over the band (mitld_lp.routes.sensed_band)
             from mitld_lp.routes.sensed_band import solve_sensed_band
 

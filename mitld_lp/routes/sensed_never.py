@@ -36,12 +36,13 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import replace
 from types import MappingProxyType
 from typing import Any
 
 from mitld_lp.checks import Check
-from mitld_lp.problem import Posed
+from mitld_lp.problem import Posed, Route
 from mitld_lp.result import Result
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.solvers.rounding import one_minus
@@ -86,20 +87,19 @@ def informed_model(model: Any) -> Any:
                  lambda s: Sensor(informed_detect(s.detect, s.false_alarm), 0.0, s.delay))
 
 
-def solve_never(posed: Posed, low: Result) -> Result:
+def solve_never(posed: Posed, low: Result, routes: Sequence[Route]) -> Result:
     """The bracket of ``posed`` (module docs) from ``low``, the blind end solved (the
     route built its product with these sensors blind, their reports dropped by the
     controller: ``Belief.ignored``), and
-    the informed problem solved here (on the ``sensed`` route, or the plain one where
-    every sensor left is perfect)."""
+    the informed problem solved here on the first of ``routes`` that claims it (the
+    caller's: the ``sensed`` route, or the plain one where every sensor left is
+    perfect)."""
     from mitld_lp.problem import pose_on
-    from mitld_lp.routes.plain import PlainRoute
-    from mitld_lp.routes.sensed import SensedRoute
     from mitld_lp.routes.stages import build_posed
 
     informed = informed_model(posed.model)
     settings = replace(posed.settings, progress=False)
-    seen = pose_on([SensedRoute(), PlainRoute()], informed, posed.problem.constraints,
+    seen = pose_on(list(routes), informed, posed.problem.constraints,
                    then=posed.problem.then, settings=settings,
                    objective=posed.problem.objective)
     high = seen.route.solve(seen, build_posed(seen, progress=False))
