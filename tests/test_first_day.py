@@ -27,11 +27,13 @@ BUS = MODELS / "bus_grid.toml"
 #: tests/test_sensed_constrained.py, tests/test_sensing_tasks.py).
 FOUR = {
     # (with bus 2's law that surely happens a false alarm is solved:
-    # tests/test_false_alarms.py; with one that may never happen it is refused)
+    # tests/test_false_alarms.py; with one that may never happen it is bracketed,
+    # tests/test_false_alarms_never.py, and refused with a constraint)
     "false alarm": ((("b2 = { detect = 0.8 }", "b2 = { detect = 0.8, false_alarm = 0.1 }"),
-                     ("mu2 = { geometric = 0.3 }", "mu2 = { pmf = [0.3, 0.3] }")),
+                     ("mu2 = { geometric = 0.3 }", "mu2 = { pmf = [0.3, 0.3] }"),
+                     ("spec = ", 'constraints = ["P(F[0,3] A) <= 0.5"]\nspec = ')),
                     {}, "sensors.b2.false_alarm = 0.1"),
-    "exact": ((), {"exact": True}, "exact with the sensed route"),
+    "exact": ((), {"exact": True}, "exact with the sensed"),  # route, or -constrained
 }
 
 
