@@ -340,7 +340,7 @@ class SensedConstrainedRoute(Route):
         return bool(partial(posed.model.sensors)) and (posed.problem.constrained or self.every)
 
     def refusal(self, posed: Posed) -> list[str]:
-        from mitld_lp.sensing.reacting import reacting_events
+        from mitld_lp.sensing.sensors import reacting_events
 
         p = posed.problem
         refused = lp_refusals(posed)  # the task's class, the constraints' formulas
@@ -362,7 +362,8 @@ class SensedConstrainedRoute(Route):
         information-state product on it (module docs), under the problem's budgets."""
         from mitld_lp.routes.stages import Built, joint_sta
         from mitld_lp.sensing.belief import belief_product
-        from mitld_lp.sensing.reacting import reacting_events, reacting_product
+        from mitld_lp.sensing.reacting import reacting_product
+        from mitld_lp.sensing.sensors import reacting_events
 
         model, s = posed.model, posed.settings
         assert s.max_states is not None  # resolved

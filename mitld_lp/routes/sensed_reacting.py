@@ -19,8 +19,7 @@ import time
 from typing import TYPE_CHECKING
 
 from mitld_lp.routes.sensed import SensedRoute, reacting_false_alarm_refusals
-from mitld_lp.sensing.reacting import reacting_events
-from mitld_lp.sensing.sensors import partial
+from mitld_lp.sensing.sensors import partial, reacting_events
 
 if TYPE_CHECKING:
     from mitld_lp.problem import Posed

@@ -1,5 +1,6 @@
 """The information-state product when the world's moves react to a sensed event (the
-world's ``event_names`` hold an event a sensor reports: :func:`reacting_events`).
+world's ``event_names`` hold an event a sensor reports:
+:func:`~mitld_lp.sensing.sensors.reacting_events`).
 
 :mod:`mitld_lp.sensing.belief` assumes the world ignores the sensed events: then a
 hypothesis's automaton state is a function of the observed path and its posterior a
@@ -68,9 +69,9 @@ from mitld_lp.sensing.info import (
     info_size,
 )
 from mitld_lp.sensing.rules import StepRules
-from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.sensing.sensors import Sensor, reacting_events
 from mitld_lp.util.progress import bar as progress_bar
-from mitld_lp.worlds.game import Game, GameError, world_members
+from mitld_lp.worlds.game import Game
 
 __all__ = ["reacting_events", "reacting_product", "ReactingBuilder"]
 
@@ -81,17 +82,6 @@ Rational = Any
 
 Hyp = tuple[tuple[int, ...], int]  # (times, automaton state)
 ZERO, ONE = _rational(0), _rational(1)
-
-
-def reacting_events(game: Game[Any], sensed: Any) -> frozenset[str]:
-    """The events of ``sensed`` (names) that the world's moves react to (its
-    ``event_names``); empty for a world whose members do not check (its loader
-    reports that)."""
-    try:
-        names = world_members(game).event_names
-    except GameError:
-        return frozenset()
-    return frozenset(names) & frozenset(sensed)
 
 
 def reacting_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],

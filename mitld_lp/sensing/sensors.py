@@ -30,7 +30,8 @@ from typing import Any
 
 from mitld_lp.files.keys import KeyContext, key_path, toml_text, type_name
 
-__all__ = ["Sensor", "read_sensors", "sensors_from", "partial", "SENSOR_KEYS"]
+__all__ = ["Sensor", "read_sensors", "sensors_from", "partial", "SENSOR_KEYS",
+           "reacting_events"]
 
 SENSOR_KEYS = ("detect", "false_alarm", "delay")
 
@@ -118,3 +119,17 @@ def partial(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
     """The sensors that change the problem: every one but the perfect ones
     (``detect = 1``, no false alarm, no delay), which are the fully observed semantics."""
     return {a: s for a, s in sensors.items() if not s.perfect}
+
+
+def reacting_events(game: Any, sensed: Iterable[str]) -> frozenset[str]:
+    """The events of ``sensed`` (names) that the world's moves react to (its
+    ``event_names``): their sensors are built on the reacting product
+    (:mod:`mitld_lp.sensing.reacting`); empty for a world whose members do not check
+    (its loader reports that).  Here, not there, so that asking costs a route nothing."""
+    from mitld_lp.worlds.game import GameError, world_members
+
+    try:
+        names = world_members(game).event_names
+    except GameError:
+        return frozenset()
+    return frozenset(names) & frozenset(sensed)
