@@ -188,6 +188,8 @@ def test_blind_safety_then_min_steps_takes_four_steps(tmp_path: Path) -> None:
     ("G !(b & A)", [0.5, 0.5], {"detect": 1 - 1e-9}, "sensed-constrained", 1.5),
     ("G !(b & A)", [0.5, 0.5], {"detect": 1.0, "delay": 1}, "sensed-constrained", 2.5),
     ("G !(b & A)", [0.0, 1.0], {"detect": 1.0, "delay": 1}, "sensed-constrained", 3.0),
+    ("G !(b & A)", [0.0, 1.0], {"detect": 0.5}, "sensed-constrained", 3.0),
+    ("G !(b & A)", [0.5, 0.5], {"detect": 0.5, "delay": 1}, "sensed-constrained", 3.5),
     ("!A U b", [0.5, 0.5], {"detect": 1.0, "delay": 1}, "sensed-constrained", 1.5),
 ])
 def test_then_min_steps_counts_until_the_reports_are_in(
@@ -198,7 +200,9 @@ def test_then_min_steps_counts_until_the_reports_are_in(
     then), so E(steps) = E(k) = 1.5, with a perfect sensor and with one that (almost)
     never misses alike; with a report ``delay`` steps late it stops once the report is
     in, at ``k + 1`` (docs/constraints.md, "With a sensor"): 2.5, and 3 for the bus
-    surely at step 2, although the law already tells the robot then.  The lexicographic
+    surely at step 2, although the law already tells the robot then.  A sensor that
+    misses (``detect = 0.5``) reports at each later step with that chance, a wait of
+    ``(1 - detect) / detect = 1`` step on average: E(k) + delay + 1.  The lexicographic
     tolerance (1e-6 of probability) may buy a few steps' worth of 1e-6.  The co-safe
     ``!A U b`` is decided at ``k`` on every hypothesis, the late report adding nothing:
     1.5."""
