@@ -182,6 +182,38 @@ def test_blind_safety_then_min_steps_takes_four_steps(tmp_path: Path) -> None:
     _checked_by_storm(r, tmp_path)
 
 
+@pytest.mark.parametrize(("spec", "law", "sensor", "route", "steps"), [
+    ("G !(b & A)", [0.5, 0.5], None, "constrained", 1.5),
+    ("G !(b & A)", [0.5, 0.5], {"detect": 1.0}, "constrained", 1.5),
+    ("G !(b & A)", [0.5, 0.5], {"detect": 1 - 1e-9}, "sensed-constrained", 1.5),
+    ("G !(b & A)", [0.5, 0.5], {"detect": 1.0, "delay": 1}, "sensed-constrained", 2.5),
+    ("G !(b & A)", [0.0, 1.0], {"detect": 1.0, "delay": 1}, "sensed-constrained", 3.0),
+    ("G !(b & A)", [0.0, 1.0], {"detect": 0.5}, "sensed-constrained", 3.0),
+    ("G !(b & A)", [0.5, 0.5], {"detect": 0.5, "delay": 1}, "sensed-constrained", 3.5),
+    ("!A U b", [0.5, 0.5], {"detect": 1.0, "delay": 1}, "sensed-constrained", 1.5),
+])
+def test_then_min_steps_counts_until_the_reports_are_in(
+        spec: str, law: list[float], sensor: dict | None, route: str, steps: float) -> None:
+    """``G !(b & A)`` then the fewest expected steps, the bus at step 1 or 2 (or surely
+    at 2).  By hand: the robot waits at ``mid`` (never at ``A``: probability 1); seen,
+    its task is kept from the bus's step ``k`` on (``mid``'s wait an end component
+    then), so E(steps) = E(k) = 1.5, with a perfect sensor and with one that (almost)
+    never misses alike; with a report ``delay`` steps late it stops once the report is
+    in, at ``k + 1`` (docs/constraints.md, "With a sensor"): 2.5, and 3 for the bus
+    surely at step 2, although the law already tells the robot then.  A sensor that
+    misses (``detect = 0.5``) reports at each later step with that chance, a wait of
+    ``(1 - detect) / detect = 1`` step on average: E(k) + delay + 1.  The lexicographic
+    tolerance (1e-6 of probability) may buy a few steps' worth of 1e-6.  The co-safe
+    ``!A U b`` is decided at ``k`` on every hypothesis, the late report adding nothing:
+    1.5."""
+    kw = {"sensors": {"b": sensor}} if sensor else {}
+    model = Model.from_game(STATION, spec, events={"b": pmf(law)}, **kw)
+    r = synthesize(model, then="min-steps")
+    assert r.route == route and r.certified, r.summary()["failed_checks"]
+    assert r.upper >= 1 - 1e-9 and r.lower >= 1 - 2e-6
+    assert r.part.steps == pytest.approx(steps, abs=2e-5)
+
+
 def test_a_trapped_policy_is_not_certified(monkeypatch: pytest.MonkeyPatch) -> None:
     """The same problem with the trapped states left as the interior point's policy
     reads them (the mending switched off): its chain stays undecided for ever, and the
