@@ -40,21 +40,27 @@ def model(band: Any, detect: float) -> Model:
                            sensors={"b": Sensor(detect)})
 
 
+def replay(controller: Any, seen: list[tuple[str, frozenset[str]]]) -> str | None:
+    """The controller's action after the observation history ``seen`` (each step's
+    world state and reports), replayed from its start."""
+    controller.reset()
+    action = controller.act(Observation(seen[0][0]))
+    for state, reports in seen[1:]:
+        action = controller.act(Observation(state, reports=reports))
+    return action
+
+
 def worst_over_nature(controller: Any, lo: str, hi: str, detect: str, *,
-                      pick: Any = min, game: ExplicitGame = GAME) -> Fraction:
+                      pick: Any = min, game: ExplicitGame = GAME,
+                      alarm: str | None = None) -> Fraction:
     """The controller's value in ``game`` (default :data:`GAME`, the task :data:`SPEC`)
     with nature choosing the hazard of each step among ``lo`` and ``hi`` after seeing
     everything so far (module docs), by ``pick`` (``min``: against a robot that
-    maximises; ``max``: against one that minimises), as a fraction."""
+    maximises; ``max``: against one that minimises), as a fraction.  ``alarm``: the
+    sensor reports or not at every step, with ``detect`` from the step ``b`` comes and
+    ``alarm`` before it (false alarms; tests/test_false_alarms_band.py)."""
     d = Fraction(detect)
     ends = (Fraction(lo), Fraction(hi))
-
-    def act(seen: list[tuple[str, frozenset[str]]]) -> str | None:
-        controller.reset()
-        action = controller.act(Observation(seen[0][0]))
-        for state, reports in seen[1:]:
-            action = controller.act(Observation(state, reports=reports))
-        return action
 
     def value(t: int, state: str, k: int | None, reported: bool,
               seen: list[tuple[str, frozenset[str]]]) -> Fraction:
@@ -62,7 +68,7 @@ def worst_over_nature(controller: Any, lo: str, hi: str, detect: str, *,
             return Fraction(1)
         if (k is None and t >= 3) or (k is not None and t >= k + 1):
             return Fraction(0)  # the event too late, or its window missed
-        action = act(seen)
+        action = replay(controller, seen)
         if action is None:
             return Fraction(0)
         values = []
@@ -72,10 +78,15 @@ def worst_over_nature(controller: Any, lo: str, hi: str, detect: str, *,
             for k2, pe in comes:
                 if pe == 0:
                     continue
-                told = ([(True, d), (False, 1 - d)] if k2 is not None and not reported
-                        else [(reported, Fraction(1))])
+                if alarm is not None:  # every step's report: due from the step b comes
+                    p = d if k2 is not None else Fraction(alarm)
+                    told = [(True, p), (False, 1 - p)]
+                else:
+                    told = ([(True, d), (False, 1 - d)] if k2 is not None and not reported
+                            else [(reported, Fraction(1))])
                 for now, pr in told:
-                    reports = frozenset({"b"}) if now and not reported else frozenset()
+                    reports = (frozenset({"b"}) if now and (alarm or not reported)
+                               else frozenset())
                     for nxt, pw in game.successors(state, action, frozenset()):
                         v += pe * pr * Fraction(str(pw)) * value(
                             t + 1, nxt, k2, now, [*seen, (nxt, reports)])

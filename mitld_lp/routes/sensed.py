@@ -27,7 +27,8 @@ class SensedRoute(Route):
     may never happen (with false alarms bracketed: :mod:`mitld_lp.routes.sensed_never`);
     point laws, no constraints
     (:mod:`mitld_lp.routes.sensed_solve`), and a law known within a band (the worst case
-    over it, :mod:`mitld_lp.routes.sensed_band`).  It claims every
+    over it, :mod:`mitld_lp.routes.sensed_band`; with false alarms too where its laws
+    surely happen).  It claims every
     problem with such a sensor: the fully observed product would answer another one."""
 
     name = "sensed"
@@ -41,7 +42,7 @@ class SensedRoute(Route):
         if not partial(p.model.sensors):
             return ["sensed route: no event has a sensor that misses it"]
         return sensed_refusals(p.model, posed.fragment, p.objective, p.constraints, p.then,
-                               posed.robust, never=True)
+                               posed.robust, never=True, worst=not self.optimistic)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton, then the information-state product
@@ -98,12 +99,15 @@ class SensedRoute(Route):
 
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],
-                    then: str | None, robust: bool, *, never: bool = False) -> list[str]:
+                    then: str | None, robust: bool, *, never: bool = False,
+                    worst: bool = False) -> list[str]:
     """Why the ``sensed`` route cannot solve this problem as posed: every reason, each
     naming its feature (empty: it can).  ``model`` has at least one sensor that is not
     perfect.  Every caller builds sensors with false alarms at a point law that surely
     happens; ``never``: it also brackets them at a law that may never happen (the
-    ``sensed`` route, :mod:`mitld_lp.routes.sensed_never`)."""
+    ``sensed`` route, :mod:`mitld_lp.routes.sensed_never`); ``worst``: it also solves
+    them under a band read for its worst law, without constraints (the ``sensed`` route,
+    :mod:`mitld_lp.routes.sensed_band`)."""
     sensors = partial(model.sensors)
     named = ", ".join(f"{a} = {s}" for a, s in sensors.items())
     head = f"sensors ({named})"
@@ -111,7 +115,7 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     for a, s in sensors.items():
         if s.false_alarm:
             refused += false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
-                                           never=never, robust=robust)
+                                           never=never, robust=robust, worst=worst)
     if robust:
         refused += band_refusals(model, head, objective, constraints)
     try:
@@ -139,7 +143,7 @@ def reacting_false_alarm_refusals(sensors: Mapping[str, Any]) -> list[str]:
 
 
 def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool = False,
-                        robust: bool = False) -> list[str]:
+                        robust: bool = False, worst: bool = False) -> list[str]:
     """Why a sensor with false alarms is not solved as posed (empty: it is).  The sensor
     then reports or not at every step, so the robot's belief reads every report, not
     only the first.  With a law that surely happens, truncated at ``T``, the belief is a
@@ -152,7 +156,11 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`).  The
     ``sensed`` and ``sensed-constrained`` routes build false alarms at a point law that
     surely happens; ``never``: the caller brackets them at a law that may never happen
-    (the ``sensed`` route only); a band (``robust``) is built by neither."""
+    (the ``sensed`` route only).  A band (``robust``) whose laws surely happen: its worst
+    case without constraints (``worst``, the ``sensed`` route) is solved as without
+    false alarms (:mod:`mitld_lp.routes.sensed_band`: the candidates are point-law
+    solves, and the controller's interval chain draws every step's report as its point
+    chain does); with constraints or ``bands = "best"`` it is not."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
     if law is not None and float(law.never) > 0.0 and (robust or not never):
@@ -165,9 +173,10 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
                    "by route sensed-constrained (bounds on other formulas, then, pareto, "
                    "the LP)") + " (give false_alarm = 0, or a law that surely happens)"]
     refused = []
-    if robust:
-        refused.append(f"{head}: with a law known only within a band (the worst case over "
-                       "the band of a controller that reads every report) not solved; "
+    if robust and not worst:
+        refused.append(f"{head}: with a law known only within a band read for its best "
+                       "law, or with bounds on other formulas, then or the trade-off "
+                       "curve, not solved (its worst case alone is, on the sensed route); "
                        "give the event a point law or false_alarm = 0")
     return refused
 

@@ -6,7 +6,9 @@ The policy: the sensed optimum (:mod:`mitld_lp.routes.sensed_solve`) at a law of
 band, the best by its worst case of three: the band's nominal law (the centre of an
 interval parameter, the fitted law of a fit; the law the robust constrained route
 chooses at too), every band at its low end, every band at its high end (an interval
-parameter's ends, :func:`end_laws`).
+parameter's ends, :func:`end_laws`).  A sensor with false alarms (a band whose laws
+surely happen) changes no step: each candidate is the point-law optimum with false
+alarms, and its chain draws every step's report (:mod:`mitld_lp.running.sensed_chain`).
 
 ``lower``: the chosen controller's worst case over the band, with the band's semantics
 of the robust route (docs/robust.md: at every step nature, who has seen everything,

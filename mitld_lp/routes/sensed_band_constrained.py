@@ -197,8 +197,9 @@ class SensedBandConstrainedRoute(Route):
 
 def alarm_band_refusals(model: Any) -> list[str]:
     """Why a sensor with false alarms is not solved under a band (empty: none has
-    them): the worst (or best) case over the band of a controller that reads every
-    report is not built, constraints or not (:func:`mitld_lp.routes.sensed.
+    them): with constraints, or with the band's best law, the worst (or best) case over
+    the band of a controller that reads every report is not built (only the worst case
+    without constraints is, on the ``sensed`` route: :func:`mitld_lp.routes.sensed.
     false_alarm_refusal`); the sensed constrained route builds false alarms at a point
     law only, so the band routes that call its refusal at one add this."""
     from mitld_lp.routes.sensed import false_alarm_refusal
