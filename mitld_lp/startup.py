@@ -47,11 +47,14 @@ from __future__ import annotations
 import _signal
 import os
 import sys
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
 
+# typing is not imported before the Ctrl-C handler below (a Ctrl-C landing in its import
+# printed a traceback); the names are for annotations only
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from dataclasses import Field
+    from typing import Any
 
 __all__ = ["started_as_command", "command", "collect_from_here", "lean_scipy",
            "lark_without_regex", "dataclass_methods_without_exec", "numpy_ma_when_used"]
