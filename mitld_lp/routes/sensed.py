@@ -42,7 +42,8 @@ class SensedRoute(Route):
         if not partial(p.model.sensors):
             return ["sensed route: no event has a sensor that misses it"]
         return sensed_refusals(p.model, posed.fragment, p.objective, p.constraints, p.then,
-                               posed.robust, never=True, worst=not self.optimistic)
+                               posed.robust, never=True, worst=not self.optimistic,
+                               best=self.optimistic)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton, then the information-state product
@@ -100,14 +101,15 @@ class SensedRoute(Route):
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],
                     then: str | None, robust: bool, *, never: bool = False,
-                    worst: bool = False) -> list[str]:
+                    worst: bool = False, best: bool = False) -> list[str]:
     """Why the ``sensed`` route cannot solve this problem as posed: every reason, each
     naming its feature (empty: it can).  ``model`` has at least one sensor that is not
     perfect.  Every caller builds sensors with false alarms at a point law that surely
     happens; ``never``: it also brackets them at a law that may never happen (the
     ``sensed`` route, :mod:`mitld_lp.routes.sensed_never`); ``worst``: it also solves
     them under a band read for its worst law, without constraints (the ``sensed`` route,
-    :mod:`mitld_lp.routes.sensed_band`)."""
+    :mod:`mitld_lp.routes.sensed_band`); ``best``: under a band read for its best law
+    (the optimistic sensed routes, :mod:`mitld_lp.routes.sensed_optimistic`)."""
     sensors = partial(model.sensors)
     named = ", ".join(f"{a} = {s}" for a, s in sensors.items())
     head = f"sensors ({named})"
@@ -115,7 +117,8 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
     for a, s in sensors.items():
         if s.false_alarm:
             refused += false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
-                                           never=never, robust=robust, worst=worst)
+                                           never=never, robust=robust, worst=worst,
+                                           best=best)
     if robust:
         refused += band_refusals(model, head, objective, constraints)
     try:
@@ -143,7 +146,8 @@ def reacting_false_alarm_refusals(sensors: Mapping[str, Any]) -> list[str]:
 
 
 def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool = False,
-                        robust: bool = False, worst: bool = False) -> list[str]:
+                        robust: bool = False, worst: bool = False, best: bool = False
+                        ) -> list[str]:
     """Why a sensor with false alarms is not solved as posed (empty: it is).  The sensor
     then reports or not at every step, so the robot's belief reads every report, not
     only the first.  With a law that surely happens, truncated at ``T``, the belief is a
@@ -160,7 +164,12 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     case without constraints (``worst``, the ``sensed`` route) is solved as without
     false alarms (:mod:`mitld_lp.routes.sensed_band`: the candidates are point-law
     solves, and the controller's interval chain draws every step's report as its point
-    chain does); with constraints or ``bands = "best"`` it is not."""
+    chain does); with constraints it is not.  Read for its best law (``best``, the
+    optimistic sensed routes, constraints or not) it is solved as without false alarms
+    too (:mod:`mitld_lp.routes.sensed_optimistic`: the candidates are point-law
+    solves, judged on the same interval chain at nature's best corners;
+    :mod:`mitld_lp.routes.sensed_optimistic_constrained`: point-law constrained solves,
+    each at its own law)."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
     if law is not None and float(law.never) > 0.0 and (robust or not never):
@@ -173,11 +182,12 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
                    "by route sensed-constrained (bounds on other formulas, then, pareto, "
                    "the LP)") + " (give false_alarm = 0, or a law that surely happens)"]
     refused = []
-    if robust and not worst:
-        refused.append(f"{head}: with a law known only within a band read for its best "
-                       "law, or with bounds on other formulas, then or the trade-off "
-                       "curve, not solved (its worst case alone is, on the sensed route); "
-                       "give the event a point law or false_alarm = 0")
+    if robust and not (worst or best):
+        refused.append(f"{head}: with a law known only within a band read for its worst "
+                       "law and bounds on other formulas, then or the trade-off curve, not "
+                       "solved (its worst case alone is, on the sensed route, and its best "
+                       "law with or without them, --bands best); give the event a point "
+                       "law or false_alarm = 0")
     return refused
 
 

@@ -17,7 +17,12 @@ one's best case is read on its interval chain over the truth and its memory
 (:mod:`mitld_lp.running.sensed_optimistic_chain`): nature's best corners, fixed, make a
 plain chain whose probability of ``accept``, from below, is a sound lower bound.  The
 best candidate is returned, with that chain (``export --chain``: Storm's ``P=? [F
-"accept"]`` on it is at least ``lower``).
+"accept"]`` on it is at least ``lower``).  A sensor with false alarms (a band whose laws
+surely happen) changes no step, as on the worst-case route: each candidate is the
+point-law optimum with false alarms, and its interval chain draws every step's report
+(:mod:`mitld_lp.running.sensed_chain`), so nature's best corners are read on the runs
+the controller meets (a band that may never happen is refused:
+:func:`mitld_lp.routes.sensed.false_alarm_refusal`).
 
 ``upper``: the fully observed cooperative optimum's ``upper`` (the robust route with
 the bands read for their best law, the sensors read as perfect): a policy that acts on
@@ -60,9 +65,10 @@ __all__ = ["SensedOptimisticRoute"]
 
 
 class SensedOptimisticRoute(SensedRoute):
-    """A sensor that misses its event and a law known only within a band read for its
-    best law (``bands = "best"``), no constraints: either objective, every task class
-    the sensed route takes (module docs)."""
+    """A sensor that misses its event (or gives false alarms, at a band whose laws
+    surely happen) and a law known only within a band read for its best law (``bands =
+    "best"``), no constraints: either objective, every task class the sensed route
+    takes (module docs)."""
 
     optimistic = True
 

@@ -10,7 +10,9 @@ optimum (:mod:`mitld_lp.routes.sensed_constrained`, a randomised controller over
 information states) with the band at a constant law of its own: its middle law, every
 band at its low end, every band at its high end
 (:func:`mitld_lp.routes.sensed_band.end_laws`).  Each is certified at that law by its
-route: its task value from below, each constraint on the side that matters.  That law
+route: its task value from below, each constraint on the side that matters (a sensor
+with false alarms too, at a band whose laws surely happen: the sensed constrained route
+builds them at a point law).  That law
 is one nature may play (a hazard inside the band at every step), so a candidate whose
 every constraint holds is a pair of the kind posed, and ``lower`` is the best such
 candidate's task value (for ``objective = "min"`` ``upper`` is its task value, the
@@ -106,12 +108,17 @@ class SensedOptimisticConstrainedRoute(SensedConstrainedRoute):
 
     def refusal(self, posed: Posed) -> list[str]:
         """The sensed constrained route's refusals at the band's middle law (the band
-        itself is taken here; false alarms with it are refused)."""
-        from mitld_lp.routes.sensed_band_constrained import alarm_band_refusals
+        itself is taken here; false alarms with it too, each candidate a point law's
+        solve with them, except where a law may never happen)."""
+        from mitld_lp.routes.sensed import false_alarm_refusal
 
         at = _at_law(posed, point_laws(posed.model.distributions)[0][1])
         refused = SensedConstrainedRoute.refusal(self, at)
-        return refused + [x for x in alarm_band_refusals(posed.model) if x not in refused]
+        alarms = [x for a, s in sorted(partial(posed.model.sensors).items()) if s.false_alarm
+                  for x in false_alarm_refusal(a, s.false_alarm,
+                                               posed.model.distributions.get(a),
+                                               robust=True, best=True)]
+        return refused + [x for x in alarms if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built | None:
         return None  # each candidate builds its own product, at its own law

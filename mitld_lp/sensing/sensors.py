@@ -12,7 +12,9 @@ means the event happened, and every report counts, not only the first).  With a 
 that surely happens the information-state product builds it
 (:mod:`mitld_lp.sensing.belief`), constraints and ``then`` too; with a law that may
 never happen the ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`);
-a law known within a band, and a law that may never happen with constraints, are refused by name
+a law known within a band is solved where its laws surely happen (its worst case without
+constraints, its best law with or without them); a band read for its worst law with
+constraints, and a law that may never happen with constraints, are refused by name
 (:func:`mitld_lp.routes.sensed.false_alarm_refusal` says why).
 
 A model file writes them under ``[sensors]``::
