@@ -73,7 +73,7 @@ def verdict(objective: str, t: int, here: str, bus: int | None) -> int | None:
     return 0 if bus is None and t >= LAST else None
 
 
-def enumerate_value(act: Callable[[Seen], str], objective: str, band: tuple[str, str] = BAND,
+def enumerate_value(act: Callable[[Seen], str], objective: str, band: tuple[str, ...] = BAND,
                     alarm: str = ALARM, detect: str = DETECT,
                     judge: Callable[[str, int, str, int | None], int | None] = verdict,
                     num: Callable[[Any], Any] = Fraction) -> Any:
@@ -81,7 +81,8 @@ def enumerate_value(act: Callable[[Seen], str], objective: str, band: tuple[str,
     history to an action) with nature picking the hazard of every step the bus has not
     come among the band's two ends, having seen everything, on the robot's side (the
     greatest for a maximum, the least for a minimum); the sensor reports at every step,
-    with ``detect`` from the step the bus comes and ``alarm`` before it; in fractions
+    with ``detect`` from the step the bus comes and ``alarm`` before it (``band`` of one
+    hazard: that constant law); in fractions
     (``num=float``: in floats, for the searches over every policy)."""
     ends = [num(x) for x in band]
     said = {True: num(detect), False: num(alarm)}
@@ -227,6 +228,41 @@ def test_storm_on_the_exported_chain_gives_the_controllers_end(tmp_path: Path,
     assert end - Fraction(1, 10**12) <= value <= end + Fraction(1, 10**9)
 
 
+@needs_storm
+@pytest.mark.parametrize("objective", ["max", "min"])
+@pytest.mark.parametrize("task", ["safety", "obligation"])
+def test_a_safety_part_on_the_chain_at_nature_s_law(task: str, objective: str,
+                                                    tmp_path: Path) -> None:
+    """A task with a safety part (tests/test_sensing_tasks.py's worlds: ``G !(b & A)``,
+    and a catch with a ditch to avoid): Storm's exact value of the exported chain is the
+    controller's end of the bracket, and that end is at least each band end's point-law
+    optimum with false alarms (for a minimum at most)."""
+    from test_robust_optimistic import storm_exact
+    from test_sensing_tasks import PUSHED, STATION
+
+    from mitld_lp.running.chain import write_chain
+
+    world, spec = {"safety": (PUSHED, "G !(b & A)"),
+                   "obligation": (STATION, "F(b & F[0,1] A) & G[0,5] !h")}[task]
+
+    def posed(law: Any) -> Model:
+        return Model.from_game(world, spec, objective=objective, epsilon=0.05,
+                               events={"b": from_table({"geometric": law}, "mu")},
+                               sensors={"b": {"detect": 0.6, "false_alarm": 0.2}})
+
+    r = synthesize(posed([0.6, 0.9]), bands="best")
+    assert r.route == "sensed" and r.part.reading == "best"
+    value = storm_exact(write_chain(r, tmp_path / "c.drn"))
+    end = Fraction(r.lower) if objective == "max" else 1 - Fraction(r.upper)
+    assert end - Fraction(1, 10**12) <= value <= end + Fraction(1, 10**9)
+    for h in (0.6, 0.9):
+        point = synthesize(posed(h))
+        if objective == "max":
+            assert r.lower >= point.lower - 1e-12
+        else:
+            assert r.upper <= point.upper + 1e-12
+
+
 GRID = """name = "wait_for_b"
 spec = "D[mu] b & F[0,2] (b & F[0,1] A)"
 grid = { size = [2, 2], start = [0, 0] }
@@ -288,10 +324,10 @@ def test_constraints_are_met_at_the_law_nature_chose(tmp_path: Path, objective: 
     for h in ("0.1", "0.2", "0.3"):
         for plan in every_plan():
             act = following(plan)
-            c = enumerate_value(act, objective, (h, h), judge=visits, num=float)
+            c = enumerate_value(act, objective, (h,), judge=visits, num=float)
             if not (c <= 0.5 + 1e-12 if sense == "<=" else c >= 0.5 - 1e-12):
                 continue
-            v = enumerate_value(act, objective, (h, h), num=float)
+            v = enumerate_value(act, objective, (h,), num=float)
             best = v if best is None else pick(best, v)
     assert best is not None
     if objective == "max":  # the randomised optimum at a law tried does at least as well
