@@ -105,20 +105,33 @@ def test_then_min_steps_is_the_blind_controllers(tmp_path: Path) -> None:
     assert not check.passed and "then min-steps" in check.detail
 
 
-def test_failed_where_only_reading_the_reports_may_meet_the_constraints(lps: dict) -> None:
+def test_failed_where_only_reading_the_reports_may_meet_the_constraints(
+        lps: dict, capsys: pytest.CaptureFixture[str]) -> None:
     """Risk at most 0.1 and the task at least 0.2: no blind controller meets both (the
     LP at ``detect = 0`` is infeasible) but one reading every report does (the every-step
     LP is feasible): ``failed``, no controller, ``upper`` the informed optimum's bound
-    (at least the every-step LP's optimum); with the task at least 0.3 infeasible even
-    reading the reports (the every-step LP too): ``infeasible``."""
+    (at least the every-step LP's optimum), which ``solve`` prints with the reason (exit
+    3); with the task at least 0.3 infeasible even reading the reports (the every-step
+    LP too): ``infeasible``."""
+    from argparse import Namespace
+
+    from mitld_lp.cli import constrained as cli
+    from mitld_lp.synthesis import pose
+
     rows = [("wet", "<=", 0.1)]
     exact = best(lps[(0.8, 0.2)], "task", True, rows)
     assert best(lps[(0.0, 0.0)], "task", True, rows) < 0.2 < exact < 0.3
     task = "P(F(b & F[0,2] A))"
-    r = synthesize(_model(0.8, 0.2), constraints=["P(F wet) <= 0.1", f"{task} >= 0.2"])
+    asked = ["P(F wet) <= 0.1", f"{task} >= 0.2"]
+    r = synthesize(_model(0.8, 0.2), constraints=asked)
     assert r.status == "failed" and r.controller is None and not r.certified
     assert r.lower != r.lower and exact <= r.upper + 1e-7
     assert "infeasibility is not proved" in r.message
+    assert cli.solve(Namespace(json=False), pose(_model(0.8, 0.2), asked), None) == 3
+    out = capsys.readouterr().out
+    assert "optimum in:   [nan, 0.22" in out and "infeasibility is not proved" in out
+    said = [ln for ln in out.splitlines() if ln.startswith("constraint:")]
+    assert len(said) == 2 and all(ln.endswith(": no controller returned") for ln in said)
     r = synthesize(_model(0.8, 0.2), constraints=["P(F wet) <= 0.1", f"{task} >= 0.3"])
     assert r.status == "infeasible" and r.controller is None
 

@@ -140,6 +140,8 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
     if ok:
         lower = min(lower, upper)  # both bound the same optimum: only rounding can cross
     slack = max(low.upper - low.lower, high.upper - high.lower)
+    # the width's parts: the wider solve's own (truncation, solver, ...), then the gap
+    own = high.width if ok and high.upper - high.lower > low.upper - low.lower else low.width
     gap = max(upper - lower - slack, 0.0) if ok else nan
     met = ok and gap <= (0.0 if posed.settings.precision != posed.settings.precision
                          else posed.settings.precision * max(lower, 0.0))
@@ -162,7 +164,7 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
                    status=low.status if not ok or low.status is high.status else
                    next(s for s in (low.status, high.status) if s.name != "OPTIMAL"),
                    complement=None if low.complement is None else one_minus(lower, upper),
-                   width={**low.width, "total": upper - lower, "information": gap},
+                   width={**own, "total": upper - lower, "information": gap},
                    timings={**low.timings, "informed": high.seconds})
 
 
