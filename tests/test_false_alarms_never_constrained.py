@@ -174,3 +174,40 @@ def test_pareto_points_hold_the_every_step_lp(lps: dict) -> None:
         assert p.lower - 1e-6 <= exact
         assert p.upper != p.upper or exact <= p.upper + 1e-6  # NaN: no bound, said
         assert p.achieved <= p.bound + 1e-9
+
+
+def test_the_randomised_controller_runs_dropping_the_reports(tmp_path: Path) -> None:
+    """The returned randomised controller, simulated with every step's report drawn
+    (false alarms included, the bus that never comes too), succeeds at ``lower``'s rate
+    and meets no observation it cannot read; saved and run by :mod:`mitld_lp.runtime`,
+    it plays the live controller's actions, and so does a copy never given a report:
+    it ignores them."""
+    import numpy as np
+
+    from mitld_lp.controllers.observation import Observation
+    from mitld_lp.runtime import load
+    from mitld_lp.sensing.observe import simulate_sensed
+
+    model = _model(0.8, 0.2)
+    r = synthesize(model, constraints=["P(F wet) <= 0.3"])
+    sim = simulate_sensed(model, r.controller, runs=2000, seed=5, max_steps=20)
+    sigma = (r.lower * (1 - r.lower) / sim.runs) ** 0.5
+    assert abs(sim.estimate - r.lower) <= 4.5 * sigma and sim.beyond_model == 0
+    saved = r.controller.save(tmp_path / "c.npz")
+    loaded, deaf = load(saved), load(saved)
+    rng = np.random.default_rng(7)
+    for run in range(30):
+        r.controller.reset(seed=run)
+        loaded.reset(seed=run)
+        deaf.reset(seed=run)
+        bus = int(rng.choice(len(NEVER), p=NEVER)) + 1  # past the horizon: never
+        w, reports = STATION.initial, frozenset()
+        for t in range(HORIZON + 2):
+            a = r.controller.act(Observation(w, reports=reports))
+            assert loaded.act(w, reports=reports) == a == deaf.act(w, reports=frozenset())
+            if a is None:
+                break
+            succ = STATION.successors(w, a, frozenset())
+            w = succ[int(rng.choice(len(succ), p=[p for _, p in succ]))][0]
+            q = 0.8 if t + 1 >= bus else 0.2
+            reports = frozenset({"b"}) if rng.random() < q else frozenset()
