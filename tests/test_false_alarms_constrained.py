@@ -42,26 +42,30 @@ def _model(false_alarm: float = FALSE_ALARM) -> Model:
                                                          "false_alarm": false_alarm}})
 
 
-def _likelihood(k: int, history: tuple[bool, ...], detect: float, fa: float) -> float:
+def _likelihood(k: int, history: tuple[bool, ...], detect: float, fa: float,
+                law: tuple[float, ...] = PMF) -> float:
     """The probability of the report history (one entry per step from step 1) under the
-    bus at step ``k``: a report w.p. ``fa`` before step ``k``, ``detect`` from it on."""
-    out = PMF[k - 1]
+    bus at step ``k`` (of ``law``): a report w.p. ``fa`` before step ``k``, ``detect``
+    from it on."""
+    out = law[k - 1]
     for j, seen in enumerate(history, start=1):
         q = detect if j >= k else fa
         out *= q if seen else 1.0 - q
     return out
 
 
-def every_step_lp(detect: float, fa: float) -> dict[str, Any]:
+def every_step_lp(detect: float, fa: float, law: tuple[float, ...] = PMF) -> dict[str, Any]:
     """The occupancy LP over the knowledge ``(t, world, reports of steps 1..t, steps at
     the stop)`` (variables per knowledge and action for ``t < HORIZON``), as
     tests/test_sensed_constrained.py's ``knowledge_lp`` with the whole report history in
-    place of the first report's step; sparse (up to 2^HORIZON histories a path)."""
+    place of the first report's step; sparse (up to 2^HORIZON histories a path).
+    ``law``: the bus's step's masses (a mass after ``HORIZON`` is the bus that never
+    comes, as far as the task and the reports up to the horizon tell)."""
     def caught(k: int, at_stop: frozenset[int], t: int) -> bool:
         return any(k <= j <= min(k + WINDOW, t) for j in at_stop)
 
     def mass(t: int, history: tuple[bool, ...]) -> list[tuple[int, float]]:
-        return [(k, _likelihood(k, history, detect, fa)) for k in range(1, len(PMF) + 1)]
+        return [(k, _likelihood(k, history, detect, fa, law)) for k in range(1, len(law) + 1)]
 
     index: dict[tuple, int] = {(0, "mid", (), frozenset()): 0}
     order = list(index)

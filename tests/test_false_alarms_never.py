@@ -4,8 +4,8 @@ reports and a sensor without false alarms at least as informative.  The exact op
 over every controller that reads every step's report (tests/test_sensing_tasks.py's
 ``expectimax_every_step``, in fractions, over a horizon that decides each task) must lie
 in the bracket, for either objective; the bracket is certified only where its ends meet;
-as ``never -> 0`` it holds the answer for the law that surely happens; what is not
-built is refused by name."""
+as ``never -> 0`` it holds the answer for the law that surely happens; a constraint that
+cannot bind gives the same bracket on route sensed-constrained."""
 
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from test_sensing_tasks import PUSHED, STATION, avoided, both, caught, expectima
 
 from mitld_lp import Model, synthesize
 from mitld_lp.distributions import pmf
-from mitld_lp.problem import ProblemError
 
 LAW = (0.25, 0.25, 0.3)  # the bus at step 1, 2 or 3, never with probability 0.2
 MASSES = tuple(Fraction(str(x)) for x in LAW)
@@ -105,13 +104,23 @@ def test_bracket_holds_the_sure_answer_as_never_vanishes() -> None:
         assert tiny.lower - 1e-8 <= sure.lower and sure.upper <= tiny.upper + 1e-8
 
 
-def test_refused_by_name_with_constraints() -> None:
-    """Constraints (route sensed-constrained) do not build it: refused, naming the
-    sensor's key, the law's missing mass and the route."""
-    model = _model("co-safe", 0.5, 0.2, law=(0.3, 0.3))  # never 0.4, by hand
-    with pytest.raises(ProblemError, match=r"false_alarm = 0\.2.*never happens with "
-                                           r"probability 0\.4.*sensed-constrained"):
-        synthesize(model, constraints=["P(F h) <= 0.5"])
+@pytest.mark.parametrize("task", ["co-safe", "safety", "obligation"])
+def test_a_slack_constraint_gives_the_same_bracket(task: str) -> None:
+    """With constraints the bracket is built on route sensed-constrained (its own checks:
+    tests/test_false_alarms_never_constrained.py): a bound no policy can break (``P(F
+    h) <= 1``) gives the unconstrained bracket's controller end (the blind controller's
+    value) and the every-step expectimax inside (the informed end's truncation differs
+    between the two routes' products); a co-safe and an obligation task's reports are
+    worth reading, the safety task's are not (the ends meet within the truncation)."""
+    model = _model(task, 0.8, 0.2)
+    plain = synthesize(model)
+    r = synthesize(model, constraints=["P(F h) <= 1"])
+    assert plain.route == "sensed" and r.route == "sensed-constrained"
+    assert abs(r.lower - plain.lower) <= 1e-7
+    exact = _exact(task, Fraction(8, 10), Fraction(2, 10), "max")
+    assert Fraction(r.lower) <= exact <= Fraction(r.upper)
+    # certified on both routes or neither: whether reading the reports could pay
+    assert r.certified == plain.certified == (task == "safety")
 
 
 def test_exported_chain_and_rollouts_give_the_controllers_value(tmp_path: Any) -> None:

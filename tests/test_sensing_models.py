@@ -102,18 +102,18 @@ def test_refused_by_name(extra: str, band: bool, words: str | None) -> None:
 def test_false_alarm_refusal_says_which_case() -> None:
     """A false alarm with a law that may never happen is bracketed (the belief in
     "never" moves with every report: no finite information state;
-    tests/test_false_alarms_never.py checks the bracket), and refused with its reason
-    with ``then``; with a law that surely happens it is solved
-    (tests/test_false_alarms.py checks the answers)."""
+    tests/test_false_alarms_never.py checks the bracket), with ``then`` too, on route
+    sensed-constrained (tests/test_false_alarms_never_constrained.py); with a law that
+    surely happens it is solved (tests/test_false_alarms.py checks the answers)."""
     sensor = "[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }\n"
     # pmf [0.3, 0.3]: never with probability 1 - 0.3 - 0.3 = 0.4, by hand
     never = loads_model(GRID.replace("geometric = 0.4", "pmf = [0.3, 0.3]") + sensor)
     r = synthesize(never)
     assert r.route == "sensed" and r.lower <= r.upper
     assert any(c.name == "false alarms, law that may never happen" for c in r.checks)
-    with pytest.raises(ProblemError, match="b never happens with probability 0.4\\) .*not "
-                                           "finite"):
-        synthesize(never, then="min-steps")
+    r = synthesize(never, then="min-steps")
+    assert r.route == "sensed-constrained" and r.lower <= r.upper
+    assert any(c.name == "false alarms, law that may never happen" for c in r.checks)
     r = synthesize(loads_model(GRID + sensor))  # geometric(0.4) surely happens
     assert r.route == "sensed" and r.certified
 
@@ -138,10 +138,11 @@ def test_command_line_refusal_exits_2(tmp_path: Path) -> None:
     model = tmp_path / "m.toml"
     never = GRID.replace("geometric = 0.4", "pmf = [0.3, 0.3]")  # may never happen
     model.write_text(never + "[sensors]\nb = { detect = 0.5, false_alarm = 0.2 }\n")
+    # (bracketed with then too, tests/test_false_alarms_never_constrained.py: not exact)
     run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model), "--then",
-                          "min-steps"], capture_output=True, text=True)  # bracketed without
+                          "min-steps", "--exact"], capture_output=True, text=True)
     assert run.returncode == 2
-    assert "sensors.b.false_alarm" in run.stderr and "Traceback" not in run.stderr
+    assert "exact with the sensed" in run.stderr and "Traceback" not in run.stderr
     model.write_text(GRID + "[sensors]\nb = { detect = 0.5 }\n")
     run = subprocess.run([sys.executable, "-m", "mitld_lp", "solve", str(model)],
                          capture_output=True, text=True)

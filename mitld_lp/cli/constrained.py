@@ -54,6 +54,8 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
                     else "best case over the bands (Pmaxmax) ")
             say_answer("robust:       " + said
                        + ", ".join(f"{e} ~ {law}" for e, law in r.bands.items()) + f"; {r.message}")
+        if r.status == "failed" and r.message:  # no controller; a bound where one is known
+            say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}  ({r.message})")
         if r.status == "optimal":
             say_answer(f"optimum in:   {bracket_text(r.lower, r.upper)}  (LP {r.value:.7f})")
             parts = {k: v for k, v in r.width.items() if k != "total" and v}
@@ -70,7 +72,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             for c in r.failed_checks:
                 say_answer(f"  failed: {c.name}: {c.detail}")
         for c in r.constraints:
-            if r.status != "infeasible":  # a failed band answer: its policy's worst cases
+            if r.status == "failed" and c.value != c.value:  # failed with no policy
+                say_answer(f"constraint:   {c.constraint}: no controller returned")
+            elif r.status != "infeasible":  # a failed band answer: its policy's worst cases
                 word = "<=" if c.constraint.sense == "<=" else ">="
                 say_answer(f"constraint:   {c.constraint}: {c.value:.7g} ("
                            + (f"holds: certified {word} {c.certified!r}" if c.holds else

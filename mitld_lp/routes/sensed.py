@@ -157,10 +157,11 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     (:mod:`mitld_lp.sensing.rules`).  With a law that may never happen (``never > 0``)
     "never" against "happened at ``k``" moves by every report for ever (a random walk in
     the counts of reports and misses): the information state is not finite, and the
-    ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`).  The
-    ``sensed`` and ``sensed-constrained`` routes build false alarms at a point law that
-    surely happens; ``never``: the caller brackets them at a law that may never happen
-    (the ``sensed`` route only).  A band (``robust``) whose laws surely happen: its worst
+    ``sensed`` and ``sensed-constrained`` routes bracket the optimum
+    (:mod:`mitld_lp.routes.sensed_never`).  The ``sensed`` and ``sensed-constrained``
+    routes build false alarms at a point law that surely happens; ``never``: the caller
+    brackets them at a law that may never happen (both routes, a point law).  A band
+    (``robust``) whose laws surely happen: its worst
     case without constraints (``worst``, the ``sensed`` route) is solved as without
     false alarms (:mod:`mitld_lp.routes.sensed_band`: the candidates are point-law
     solves, and the controller's interval chain draws every step's report as its point
@@ -176,11 +177,10 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
         return [f"{head}, and with a law that may never happen ({event} never happens with "
                 f"probability {float(law.never):.6g}) the belief that {event} never "
                 "happens moves with every report for ever, so the information state is "
-                "not finite; bracketed on the sensed route with a point law and no "
-                "constraints, not solved "
-                + ("with a law known only within a band" if robust else
-                   "by route sensed-constrained (bounds on other formulas, then, pareto, "
-                   "the LP)") + " (give false_alarm = 0, or a law that surely happens)"]
+                "not finite; bracketed with a point law (routes sensed and "
+                "sensed-constrained), not solved "
+                + ("with a law known only within a band" if robust else "on this route")
+                + " (give false_alarm = 0, or a law that surely happens)"]
     refused = []
     if robust and not (worst or best):
         refused.append(f"{head}: with a law known only within a band read for its worst "

@@ -59,6 +59,11 @@ automaton (:mod:`mitld_lp.running.sensed_joint`).
 A world whose moves react to a sensed event is built by
 :func:`mitld_lp.sensing.reacting.reacting_product` (exact posteriors, every sensor as
 given as here, no states merged by their times); a band with it is refused by name.
+
+A sensor with false alarms on a law that may never happen is built blind, its reports
+dropped by the controller, and the answer bracketed between that constrained optimum and
+a sensor without false alarms at least as informative
+(:mod:`mitld_lp.routes.sensed_never`).
 """
 
 from __future__ import annotations
@@ -66,7 +71,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Hashable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -355,17 +360,22 @@ class SensedConstrainedRoute(Route):
                            "give the events point laws")
         # the constrained LP asked with neither (a trade-off curve's end) is this LP too
         lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust)
+        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust,
+                                         never=True)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the
         information-state product on it (module docs), under the problem's budgets."""
+        from mitld_lp.routes.sensed_never import blind_model, never_alarms
         from mitld_lp.routes.stages import Built, joint_sta
         from mitld_lp.sensing.belief import belief_product
         from mitld_lp.sensing.reacting import reacting_product
         from mitld_lp.sensing.sensors import reacting_events
 
         model, s = posed.model, posed.settings
+        blind = never_alarms(model)  # built blind, their reports dropped (sensed_never)
+        if blind:
+            model = blind_model(model)
         assert s.max_states is not None  # resolved
         t0 = time.perf_counter()
         joint, sta = joint_sta(posed)
@@ -381,12 +391,29 @@ class SensedConstrainedRoute(Route):
             clock_reduction=s.clock_reduction, truncation=s.truncation_map,
             max_states=s.max_states, max_memory=s.max_memory, progress=progress,
             ends=ends, name=model.name, **({} if reacts else {"late_reports": False}))
+        if blind:
+            belief = replace(belief, sensors=partial(posed.model.sensors),
+                             ignored=belief.ignored | frozenset(blind))
         return Built(joint.dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      joint, belief=(belief, ends))
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never
+
+        result = self._solve(posed, built, costs=costs, seed=seed)
+        if not never_alarms(posed.model) or posed.robust:
+            return result
+        from mitld_lp.routes.constrained import ConstrainedRoute
+
+        # false alarms at a law that may never happen: ``result`` is the blind end's; the
+        # informed end on this route, or the constrained one where no sensor is left
+        return solve_never(posed, result, (SensedConstrainedRoute(every=True),
+                                           ConstrainedRoute(every=True)), costs=costs)
+
+    def _solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None,
+               seed: int | None) -> Result:
         from mitld_lp.routes.sensed_kept import bracketed
         from mitld_lp.sensing.mixed import mixed_controller
         from mitld_lp.solvers.rounding import model_eta

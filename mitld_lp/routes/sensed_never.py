@@ -1,5 +1,6 @@
 """False alarms with an event law that may never happen (``never > 0``), bracketed on
-the ``sensed`` route instead of refused.
+the ``sensed`` route, and with constraints, ``then`` or the trade-off curve on the
+``sensed-constrained`` route, instead of refused.
 
 Such a sensor reports or not at every step, and the belief that its event never happens
 moves with every report for ever: the information state is not finite
@@ -30,13 +31,31 @@ the ``sensed`` route solves exactly as posed:
 The bracket is certified (check ``false alarms, law that may never happen``) where the two
 ends meet within the wider of the two solves' own brackets plus the precision: where the
 reports cannot change the optimum.  Otherwise the check says the gap and its cause (the
-reports' information, not read); ``Result.width["information"]`` is that gap."""
+reports' information, not read); ``Result.width["information"]`` is that gap.
+
+**With constraints** (bounds on other formulas, on expected steps or cost; route
+``sensed-constrained``) both ends are constrained optima, the same constraints posed.
+The blind end's randomised controller ignores the reports, and the reports move neither
+world nor task, so its task value *and each constraint's value* are those it has in the
+posed problem: it meets the constraints exactly as certified, its value ``lower`` (for a
+minimum ``upper``), and it is the controller returned (its chain draws and drops every
+report).  Every posed controller is one of the informed sensor's with the same task and
+constraint values (the garbling above), so the informed constrained optimum bounds the
+posed one.  Where no blind controller meets the constraints: ``infeasible`` when the
+informed problem is infeasible too (proved: it holds every posed controller), else
+``failed`` with the informed end's bound and no controller (one reading the reports may
+meet them).  **With** ``then`` the returned controller's expected steps (cost) are the
+blind solve's, exact for it; where the first objective's ends meet, every posed
+controller reaching the optimum is one of the informed problem's reaching it, with the
+same steps, so the posed lexicographic optimum lies between the two ends' second
+objectives: the check also asks those to meet.  The trade-off curve's points are each
+this route's answer."""
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from types import MappingProxyType
 from typing import Any
@@ -45,6 +64,7 @@ from mitld_lp.checks import Check
 from mitld_lp.problem import Posed, Route
 from mitld_lp.result import Result
 from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["never_alarms", "blind_model", "informed_model", "informed_detect",
@@ -87,51 +107,112 @@ def informed_model(model: Any) -> Any:
                  lambda s: Sensor(informed_detect(s.detect, s.false_alarm), 0.0, s.delay))
 
 
-def solve_never(posed: Posed, low: Result, routes: Sequence[Route]) -> Result:
+def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
+                costs: Mapping[str, float] | None = None) -> Result:
     """The bracket of ``posed`` (module docs) from ``low``, the blind end solved (the
     route built its product with these sensors blind, their reports dropped by the
-    controller: ``Belief.ignored``), and
-    the informed problem solved here on the first of ``routes`` that claims it (the
-    caller's: the ``sensed`` route, or the plain one where every sensor left is
-    perfect)."""
+    controller: ``Belief.ignored``), and the informed problem solved here, with the
+    same constraints, ``then``, objective and ``costs``, on the first of ``routes``
+    that claims it (the caller's: the ``sensed`` route, or the plain one where every
+    sensor left is perfect; with constraints or ``then`` the ``sensed-constrained``
+    route, or the constrained one)."""
     from mitld_lp.problem import pose_on
     from mitld_lp.routes.stages import build_posed
 
-    informed = informed_model(posed.model)
+    # the model's own constraints are among the posed problem's already
+    informed = dataclasses.replace(informed_model(posed.model), constraints=())
     settings = replace(posed.settings, progress=False)
     seen = pose_on(list(routes), informed, posed.problem.constraints,
                    then=posed.problem.then, settings=settings,
                    objective=posed.problem.objective)
-    high = seen.route.solve(seen, build_posed(seen, progress=False))
-    minimum = posed.minimise
-    # max: the blind controller's lower, the informed optimum's upper; min: the informed
-    # optimum's lower, the blind controller's upper
-    lower = high.lower if minimum else low.lower
-    upper = low.upper if minimum else high.upper
-    lower = min(lower, upper)  # both bound the same optimum: only rounding can cross
-    slack = max(low.upper - low.lower, high.upper - high.lower)
-    gap = max(upper - lower - slack, 0.0)
-    met = gap <= (0.0 if posed.settings.precision != posed.settings.precision
-                  else posed.settings.precision * max(lower, 0.0))
+    high = seen.route.solve(seen, build_posed(seen, progress=False), costs=costs)
     events = ", ".join(f"{a} (never {float(posed.model.distributions[a].never):.6g}, "
                        f"false_alarm {posed.model.sensors[a].false_alarm:g}, informed "
                        f"detect {informed_detect(posed.model.sensors[a].detect, posed.model.sensors[a].false_alarm):.6g})"  # noqa: E501
                        for a in never_alarms(posed.model))
+    if not low.status.has_solution:
+        return _unsolved(posed, low, high, events)
+    minimum, ok, nan = posed.minimise, high.status.has_solution, float("nan")
+    # max: the blind controller's lower, the informed optimum's upper; min: the informed
+    # optimum's lower, the blind controller's upper
+    lower = (high.lower if ok else nan) if minimum else low.lower
+    upper = low.upper if minimum else (high.upper if ok else nan)
+    if ok:
+        lower = min(lower, upper)  # both bound the same optimum: only rounding can cross
+    slack = max(low.upper - low.lower, high.upper - high.lower)
+    # the width's parts: the wider solve's own (truncation, solver, ...), then the gap
+    own = high.width if ok and high.upper - high.lower > low.upper - low.lower else low.width
+    gap = max(upper - lower - slack, 0.0) if ok else nan
+    met = ok and gap <= (0.0 if posed.settings.precision != posed.settings.precision
+                         else posed.settings.precision * max(lower, 0.0))
+    steps, steps_met = _then(posed, low, high) if ok else ("", True)
     detail = (f"{events}: the controller ignores these reports (information horizon 0); "
               f"bracket [{lower:.7g}, {upper:.7g}] between it and a sensor without false "
               f"alarms at least as informative; " +
-              ("the ends meet: the reports cannot change the optimum" if met else
+              (f"the informed problem is {high.status}, no bound from it" if not ok else
+               "the ends meet: the reports cannot change the optimum" if met else
                f"gap {gap:.3g} beyond the solves' own widths: the reports' information, "
-               "not read (a law that may never happen keeps the belief moving for ever)"))
-    check = Check("false alarms, law that may never happen", bool(met), detail)
+               "not read (a law that may never happen keeps the belief moving for ever)")
+              + steps)
+    check = Check("false alarms, law that may never happen", bool(met and steps_met), detail)
     failed = tuple(Check(f"informed sensor: {c.name}", c.passed, c.detail)
                    for c in high.checks if not c.passed)
     checks = (*low.checks, *failed, check)
     log.info("false alarms with a law that may never happen: %s", detail)
     return replace(low, lower=lower, upper=upper, checks=checks,
                    certified=all(c.passed for c in checks),
-                   status=low.status if low.status is high.status else
+                   status=low.status if not ok or low.status is high.status else
                    next(s for s in (low.status, high.status) if s.name != "OPTIMAL"),
                    complement=None if low.complement is None else one_minus(lower, upper),
-                   width={**low.width, "total": upper - lower, "information": gap},
+                   width={**own, "total": upper - lower, "information": gap},
+                   timings={**low.timings, "informed": high.seconds})
+
+
+def _then(posed: Posed, low: Result, high: Result) -> tuple[str, bool]:
+    """With ``then``: the words on the second objective, and whether its ends meet.
+    The returned controller's expected steps (cost) are the blind solve's, exact for it;
+    where the first objective's ends meet, every posed controller reaching the optimum
+    is one of the informed problem's reaching it, with the same steps and cost (the
+    reports move neither world nor task), so the posed lexicographic optimum lies
+    between the informed end's and the blind end's."""
+    then = posed.problem.then
+    if then is None or low.secondary is None or high.secondary is None:
+        return "", True
+    ours, least = float(low.secondary), float(high.secondary)
+    met = abs(ours - least) <= SECOND_TOL * max(1.0, abs(ours))
+    what = "expected steps" if then == "min-steps" else "expected cost"
+    return (f"; then {then}: the controller's {what} {ours:.7g} (the blind solve's), a "
+            f"controller reading the reports at least {least:.7g}" +
+            ("" if met else " (not met: reading the reports may be faster)")), met
+
+
+#: The relative distance within which the two ends' second objectives (``then``) meet:
+#: both are the lexicographic LPs' optima, each to the solver's tolerance.
+SECOND_TOL = 1e-6
+
+
+def _unsolved(posed: Posed, low: Result, high: Result, events: str) -> Result:
+    """The answer where the blind end has no controller: infeasible where the informed
+    problem is infeasible too (every posed controller is one of its, with the same
+    constraint values: proved), else ``failed`` with the informed end's bound (a
+    controller reading the reports may meet the constraints; none is claimed)."""
+    if low.status != Status.INFEASIBLE:
+        return low
+    if high.status == Status.INFEASIBLE:
+        said = (f"{events}: infeasible with the reports read too (a sensor without false "
+                "alarms at least as informative: every controller of the posed problem is "
+                "one of its, with the same constraint values)")
+        return replace(low, checks=(*low.checks, Check(
+            "false alarms, law that may never happen", True, said)))
+    nan = float("nan")
+    bound = (high.lower, nan) if posed.minimise else (nan, high.upper)
+    said = (f"no controller ignoring the reports of {events} meets the constraints; "
+            f"infeasibility is not proved (with a sensor without false alarms at least as "
+            f"informative the problem is {high.status}, its optimum within "
+            f"[{high.lower:.7g}, {high.upper:.7g}]): the reports' information, not read")
+    log.info("false alarms with a law that may never happen: %s", said)
+    return replace(low, status=Status.FAILED, lower=bound[0], upper=bound[1],
+                   part=replace(low.part, message=said),
+                   checks=(*low.checks, Check("false alarms, law that may never happen",
+                                              False, said)),
                    timings={**low.timings, "informed": high.seconds})
