@@ -185,15 +185,18 @@ def test_the_worst_case_is_the_controller_s_against_nature(
         point = point_optimum(GAME, task, detect, delay, end, robot)
         assert (Fraction(r.lower) <= point + Fraction(1, 10**9) if objective == "max"
                 else point <= Fraction(r.upper) + Fraction(1, 10**9))
-    assert r.certified == all(c.passed for c in r.checks)
+    # certified only where the gap, less the truncation's part, is within the precision
+    assert not r.certified or (r.upper - r.lower - r.width["truncation"]
+                               <= r.precision * r.lower + 1e-12)
 
 
 @pytest.mark.parametrize("task, objective, detect, delay", CASES)
 def test_the_best_law_is_the_controller_s_with_nature_helping(
         task: str, objective: str, detect: str, delay: int) -> None:
     """``bands = "best"``: ``lower`` (a minimum: ``upper``) is the returned controller's
-    best case, nature choosing each step's hazard to help it; at least the point optimum
-    at neither end is beaten by ``upper`` (a minimum: ``lower``)."""
+    best case, nature choosing each step's hazard to help it; ``upper`` is at least the
+    point optimum at either end (a minimum: ``lower`` at most), nature being free to
+    play that end at every step."""
     r = synthesize(model(GAME, task, float(detect), delay), objective=objective,
                    bands="best")
     assert r.route == "sensed-reacting" and r.bands
