@@ -313,20 +313,6 @@ def test_the_budget_stops_the_build_before_it_passes() -> None:
         synthesize(m, max_states=12)
 
 
-def test_a_band_read_for_its_best_law_with_constraints_is_refused_by_name() -> None:
-    """With constraints or then, a band read for its best law (its worst law, and the
-    band alone, are solved: tests/test_sensing_reacting_band.py)."""
-    from mitld_lp.distributions import from_table
-
-    game = world(0.5)
-    band = Model.from_game(game, "D[mu] b & " + CAUGHT, sensors={"b": {"detect": 0.5}},
-                           distributions={"mu": from_table({"geometric": [0.3, 0.6]}, "mu")})
-    for extra in ({"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
-        with pytest.raises(ProblemError, match=r"react to \(b, event_names\) with a band "
-                                               "read for its best law"):
-            synthesize(band, bands="best", **extra)
-
-
 def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
     """models/corridor.toml: the PRISM world's event action ``opened`` sets the door's
     variable, which the robot observes: a camera on ``opened`` that misses adds nothing,

@@ -368,21 +368,14 @@ def test_storm_on_the_constrained_interval_chain(constrained: Any, tmp_path: Pat
     """Storm's robust check of the exported file: ``Pmin [F "accept"]`` (uncertainty
     MINIMIZE) is ``lower``, ``Pmax [F "c1"]`` (MAXIMIZE) the constraint's worst case,
     within its bound."""
-    import stormpy
-    from test_band_chain import storm_worst
+    from test_band_chain import storm_robust, storm_worst
 
     from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
 
     r = constrained
     path = write_sensed_band_chain(r, tmp_path / "c.drn")
     assert abs(storm_worst(path) - r.lower) <= 1e-9
-    chain = stormpy.build_model_from_drn[stormpy.Interval](str(path))
-    env = stormpy.Environment()
-    env.solver().min_max().precision = stormpy.Rational("1/1000000000000")
-    got = stormpy.model_checking(
-        chain, stormpy.parse_properties('Pmax=? [F "c1"]')[0], environment=env,
-        uncertainty_resolution_mode=stormpy.UncertaintyResolutionMode.MAXIMIZE)
-    worst = float(got.get_value(chain.initial_states[0]))
+    worst = storm_robust(path, 'Pmax=? [F "c1"]', maximise=True)
     assert worst <= 0.35 and abs(worst - r.constraints[0].bounds[1]) <= 1e-8
 
 
@@ -399,11 +392,56 @@ def test_then_under_the_band_keeps_the_worst_case() -> None:
     assert 0 < r.secondary < float("inf")
 
 
+HAZARD = {"middle law": "0.45", "low ends": "0.3", "high ends": "0.6"}  # the band's laws
+
+
+@pytest.mark.parametrize("objective, extra", [
+    ("max", {"constraints": [RISK]}), ("min", {"constraints": [RISK]}),
+    ("max", {"then": "min-steps"})], ids=["max-risk", "min-risk", "max-then"])
+def test_the_best_law_with_constraints_is_a_pair_met_at_its_law(
+        objective: str, extra: dict[str, Any], tmp_path: Path) -> None:
+    """``bands = "best"`` with constraints or ``then`` (the optimistic constrained route
+    on the reacting product): a pair of a randomised controller and a constant law of
+    the band, the task's value and each constraint's at that law by the enumeration with
+    nature held to it (its two ends the same hazard): the controller's own end
+    (``lower``, a minimum's ``upper``) and the risk within its bound; the unconstrained
+    point optimum at that law no worse; Storm's exact check of the exported chain at
+    that law the enumeration's value (a minimum's: its complement), its risk the
+    enumeration's."""
+    pytest.importorskip("stormpy")
+    from test_sensed_optimistic import storm_of
+
+    from mitld_lp.running.chain import write_chain
+
+    r = synthesize(model(GAME, CAUGHT, 0.5), objective=objective, bands="best", **extra)
+    assert r.route == "sensed-constrained" and r.bands and r.controller is not None
+    h = HAZARD[r.part.chosen_at]
+    plan, at = r.controller.plan, (h, h)
+    task = plan_value(plan, GAME, lambda trace, k: verdict(GAME, CAUGHT, trace, k), "0.5",
+                      0, min, band=at)
+    own = Fraction(r.upper if objective == "min" else r.lower)
+    assert abs(task - own) <= Fraction(1, 10**7), (float(task), float(own))
+    point = point_optimum(GAME, CAUGHT, "0.5", 0, h, max if objective == "max" else min)
+    assert (own <= point + Fraction(1, 10**9) if objective == "max"
+            else point <= own + Fraction(1, 10**9))
+    storm = storm_of(write_chain(r, tmp_path / "c.drn"))
+    # a minimum's chain is its complement's: "accept" marks the runs that fail the task
+    assert abs(storm("accept") - (1 - task if objective == "min" else task)) \
+        <= Fraction(1, 10**9)
+    if "constraints" in extra:
+        risk = plan_value(plan, GAME, in_ditch, "0.5", 0, max, band=at)
+        (v,) = r.constraints
+        assert v.holds and risk <= Fraction("0.35") + Fraction(1, 10**9)
+        assert abs(storm("c1") - risk) <= Fraction(1, 10**9)
+    else:
+        assert 0 < r.secondary < float("inf")
+
+
 def test_a_route_list_without_the_reacting_route_refuses_by_name() -> None:
     """The ``sensed`` route's band solvers on the product that ignores the reaction
     would answer another problem: asked without the ``sensed-reacting`` route, the
     band is refused, naming the route that solves it (tests/test_sensing_reacting.py
-    has the refusals that remain: a band read for its best law with constraints)."""
+    names what remains refused: false alarms on such a world)."""
     from mitld_lp.problem import pose_on
     from mitld_lp.routes.sensed import SensedRoute
     from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute

@@ -19,8 +19,8 @@ which moves the world on the true events, the sensed ones included
 the candidates' posteriors, and its controller's worst (best) case is read on the real
 dynamics.  False alarms are refused (this product reads each sensor's first report
 only).  Constraints or ``then`` with such a world are the ``sensed-constrained``
-route's, on the same product (with a band, its worst law: :mod:`mitld_lp.routes.
-sensed_band_constrained`)."""
+route's, on the same product (with a band, :mod:`mitld_lp.routes.sensed_band_constrained`
+for its worst law, :mod:`mitld_lp.routes.sensed_optimistic_constrained` for its best)."""
 
 from __future__ import annotations
 
