@@ -392,6 +392,22 @@ def test_then_under_the_band_keeps_the_worst_case() -> None:
     assert 0 < r.secondary < float("inf")
 
 
+def test_the_trade_off_curve_s_end_point_under_the_band() -> None:
+    """The constrained LP asked with no constraint (a trade-off curve's end point) under
+    the band's worst law: its randomised controller's worst case, by the enumeration, is
+    its ``lower``, and, both certified, the band's worst-case answer without the LP."""
+    from mitld_lp.synthesis import synthesize_constrained
+
+    m = model(GAME, CAUGHT, 0.5)
+    r = synthesize_constrained(m)
+    assert r.route == "sensed-constrained" and r.bands and r.controller is not None
+    task = plan_value(r.controller.plan, GAME,
+                      lambda trace, k: verdict(GAME, CAUGHT, trace, k), "0.5", 0, min)
+    assert abs(task - Fraction(r.lower)) <= Fraction(1, 10**9)
+    alone = synthesize(m)
+    assert r.certified and alone.certified and abs(r.lower - alone.lower) <= 1e-6
+
+
 HAZARD = {"middle law": "0.45", "low ends": "0.3", "high ends": "0.6"}  # the band's laws
 
 
