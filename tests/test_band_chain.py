@@ -29,14 +29,21 @@ MODELS = Path(__file__).resolve().parent.parent / "models"
 
 def storm_worst(path: Path) -> float:
     """Storm's value of the exported file, nature minimising."""
+    return storm_robust(path, BAND_PROPERTY)
+
+
+def storm_robust(path: Path, prop: str, *, maximise: bool = False) -> float:
+    """Storm's value of ``prop`` on the interval model at ``path``, its uncertainty
+    resolved to the minimum (``maximise``: the maximum)."""
     import stormpy
 
     model = stormpy.build_model_from_drn[stormpy.Interval](str(path))
     env = stormpy.Environment()
     env.solver().min_max().precision = stormpy.Rational("1/1000000000000")
+    mode = stormpy.UncertaintyResolutionMode
     result = stormpy.model_checking(
-        model, stormpy.parse_properties(BAND_PROPERTY)[0], environment=env,
-        uncertainty_resolution_mode=stormpy.UncertaintyResolutionMode.MINIMIZE)
+        model, stormpy.parse_properties(prop)[0], environment=env,
+        uncertainty_resolution_mode=mode.MAXIMIZE if maximise else mode.MINIMIZE)
     return float(result.get_value(model.initial_states[0]))
 
 

@@ -313,26 +313,6 @@ def test_the_budget_stops_the_build_before_it_passes() -> None:
         synthesize(m, max_states=12)
 
 
-def test_a_band_with_a_reacting_world_is_refused_by_name() -> None:
-    """Alone, with constraints or then, read for its worst or its best law."""
-    from mitld_lp.distributions import from_table
-
-    game = world(0.5)
-    band = Model.from_game(game, "D[mu] b & " + CAUGHT, sensors={"b": {"detect": 0.5}},
-                           distributions={"mu": from_table({"geometric": [0.3, 0.6]}, "mu")})
-    with pytest.raises(ProblemError, match=r"react to \(b, event_names\) with a law known "
-                                           r"only within a band"):
-        synthesize(band)
-    with pytest.raises(ProblemError, match="react to the sensed event 'b'"):
-        synthesize(band, bands="best")
-    for extra in ({"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
-        with pytest.raises(ProblemError, match="react to the sensed event 'b'.*with a band"):
-            synthesize(band, **extra)
-        with pytest.raises(ProblemError, match=r"react to \(b, event_names\) with a band "
-                                               "read for its best law"):
-            synthesize(band, bands="best", **extra)
-
-
 def test_a_prism_door_that_shows_its_opening_is_a_perfect_sensor() -> None:
     """models/corridor.toml: the PRISM world's event action ``opened`` sets the door's
     variable, which the robot observes: a camera on ``opened`` that misses adds nothing,

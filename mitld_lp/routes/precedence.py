@@ -26,8 +26,8 @@ ROUTES: list[Route] = [
     SensedOptimisticConstrainedRoute(),  # ... with a band read for its best law
     SensedBandConstrainedRoute(),  # constraints or then with such a sensor and a band
     SensedConstrainedRoute(),  # constraints or then with such a sensor
+    SensedReactingRoute(),  # such a sensor on an event the world's moves react to
     SensedOptimisticRoute(),  # such a sensor and a band read for its best law
-    SensedReactingRoute(),  # ... on an event the world's moves react to
     SensedRoute(),  # a sensor that misses its event: what the robot observes
     RobustConstrainedRoute(),  # constraints and a band
     ConstrainedRoute(),  # constraints or then, point laws

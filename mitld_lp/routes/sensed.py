@@ -127,11 +127,11 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         reacts = frozenset()
     if reacts & set(sensors):
         refused += reacting_false_alarm_refusals(sensors)
-    banded = robust or any(d.is_ambiguous for d in model.distributions.values())
-    for a in sorted(reacts & set(sensors)) if banded or not constraints else ():
+    for a in sorted(reacts & set(sensors)) if not constraints else ():
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
-                       "(event_names): solved with point laws (route sensed-reacting; with "
-                       "constraints or then, sensed-constrained); with a band not solved")
+                       "(event_names): solved by route sensed-reacting (with a band too, "
+                       "its worst or best law; with constraints or then, sensed-constrained)"
+                       ", which this list of routes does not hold")
     return refused
 
 

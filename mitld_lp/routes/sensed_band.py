@@ -158,7 +158,8 @@ def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
 def sensed_candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
                      ) -> tuple[Result, Any]:
     """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
-    ``built``) and its controller's interval chain over the band
+    ``built``; else on the product the posed route builds at that law: the reacting one
+    on route ``sensed-reacting``) and its controller's interval chain over the band
     (:func:`~mitld_lp.running.sensed_band_chain.sensed_band_chain_of`; None without a
     controller), its size checked against ``max_states`` before it is unfolded."""
     from mitld_lp.running.sensed_band_chain import chain_floor, sensed_band_chain_of

@@ -182,7 +182,7 @@ class SensedBandConstrainedRoute(Route):
         if posed.minimise:
             asked = replace(asked, fragment=complement_class(posed.fragment),
                             problem=replace(posed.problem, objective="max"))
-        refused = SensedConstrainedRoute().refusal(asked)
+        refused = SensedConstrainedRoute(every=self.every).refusal(asked)
         return refused + [x for x in alarm_band_refusals(posed.model) if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Any:

@@ -58,7 +58,10 @@ automaton (:mod:`mitld_lp.running.sensed_joint`).
 
 A world whose moves react to a sensed event is built by
 :func:`mitld_lp.sensing.reacting.reacting_product` (exact posteriors, every sensor as
-given as here, no states merged by their times); a band with it is refused by name.
+given as here, no states merged by their times); so is every candidate of a band's
+routes (:mod:`mitld_lp.routes.sensed_band_constrained`, its worst law;
+:mod:`mitld_lp.routes.sensed_optimistic_constrained`, its best), which build their
+candidates here.
 
 A sensor with false alarms on a law that may never happen is built blind, its reports
 dropped by the controller, and the answer bracketed between that constrained optimum and
@@ -345,19 +348,12 @@ class SensedConstrainedRoute(Route):
         return bool(partial(posed.model.sensors)) and (posed.problem.constrained or self.every)
 
     def refusal(self, posed: Posed) -> list[str]:
-        from mitld_lp.sensing.sensors import reacting_events
-
         p = posed.problem
         refused = lp_refusals(posed)  # the task's class, the constraints' formulas
         # the sensors' own conditions (false alarms, bands, laws that may never happen,
         # worlds that react to a sensed event); the task's are said above
         # (constraints or then: a band is refused with them, by name)
         asked = (*p.constraints, *([p.then] if p.then else []))
-        reacts = ", ".join(sorted(reacting_events(p.model.game, partial(p.model.sensors))))
-        if reacts and self.optimistic:  # a band read for its best law, asked at a point law
-            refused.append(f"sensors on events the world's moves react to ({reacts}, "
-                           "event_names) with a band read for its best law: not solved; "
-                           "give the events point laws")
         # the constrained LP asked with neither (a trade-off curve's end) is this LP too
         lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
         return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust,

@@ -7,15 +7,25 @@ the same certificate, controller and part record, so ``run``, ``export --chain``
 ``export --tree`` read the answer as they read the ``sensed`` route's).
 
 It claims what the ``sensed`` route would (a sensor that misses, no constraints) when
-the world reacts to a sensed event; a law known within a band is refused by name (the
-band's solvers, :mod:`mitld_lp.routes.sensed_band`, are not wired to this product), as
-are false alarms (this product reads each sensor's first report only).  Constraints or
-``then`` with such a world are the ``sensed-constrained`` route's, on the same
-product."""
+the world reacts to a sensed event.  A law known within a band is solved by the band's
+solvers of the ``sensed`` route on this route's product: its worst law
+(:func:`mitld_lp.routes.sensed_band.solve_sensed_band`) and, with ``bands = "best"``,
+its best (:func:`mitld_lp.routes.sensed_optimistic_solve.solve_sensed_optimistic`).
+Their candidates are this route's optima at the band's middle law and ends (each
+candidate's product built by this route, :func:`mitld_lp.routes.sensed_band.
+sensed_candidate`), each judged on its interval chain over the truth and its memory,
+which moves the world on the true events, the sensed ones included
+(:mod:`mitld_lp.running.sensed_chain`): what the world's reaction tells the robot is in
+the candidates' posteriors, and its controller's worst (best) case is read on the real
+dynamics.  False alarms are refused (this product reads each sensor's first report
+only).  Constraints or ``then`` with such a world are the ``sensed-constrained``
+route's, on the same product (with a band, :mod:`mitld_lp.routes.sensed_band_constrained`
+for its worst law, :mod:`mitld_lp.routes.sensed_optimistic_constrained` for its best)."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from mitld_lp.routes.sensed import SensedRoute, reacting_false_alarm_refusals
@@ -23,6 +33,7 @@ from mitld_lp.sensing.sensors import partial, reacting_events
 
 if TYPE_CHECKING:
     from mitld_lp.problem import Posed
+    from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
 
 __all__ = ["SensedReactingRoute"]
@@ -30,28 +41,18 @@ __all__ = ["SensedReactingRoute"]
 
 class SensedReactingRoute(SensedRoute):
     """A sensor that misses an event the world's moves react to (module docs): every
-    task class, either objective, point laws, no constraints."""
+    task class, either objective, point laws or a band (its worst law, or its best
+    with ``bands = "best"``), no constraints."""
 
     name = "sensed-reacting"
+    optimistic = True  # a band's best law too (module docs)
 
     def claims(self, posed: Posed) -> bool:
         return super().claims(posed) and bool(
             reacting_events(posed.model.game, partial(posed.model.sensors)))
 
     def refusal(self, posed: Posed) -> list[str]:
-        model = posed.problem.model
-        sensors = partial(model.sensors)
-        refused = reacting_false_alarm_refusals(sensors)
-        if posed.robust:
-            reacts = ", ".join(sorted(reacting_events(model.game, sensors)))
-            bands = ", ".join(f"{e} ~ {d}" for e, d in sorted(model.distributions.items())
-                              if d.is_ambiguous)
-            refused.append(
-                f"sensors on events the world's moves react to ({reacts}, event_names) with "
-                f"a law known only within a band ({bands}): the worst case over the band "
-                "with a world whose moves reveal the sensed event is not solved; give the "
-                "events point laws")
-        return refused
+        return reacting_false_alarm_refusals(partial(posed.problem.model.sensors))
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton (a minimum posed as the ``sensed`` route poses it), then
@@ -65,7 +66,8 @@ class SensedReactingRoute(SensedRoute):
         assert s.max_states is not None and s.max_automaton_states is not None  # resolved
         t0 = time.perf_counter()
         dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
-        direct = posed.minimise and reaching(dta)  # no band here (refused)
+        # with a band every minimum as its complement's maximum, as the sensed route
+        direct = posed.minimise and reaching(dta) and not posed.robust
         if posed.minimise and not direct:
             dta = dta.complement()
         t1 = time.perf_counter()
@@ -79,3 +81,13 @@ class SensedReactingRoute(SensedRoute):
         return Built(dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      belief=belief, sense="min" if direct else "max")
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        """As the ``sensed`` route solves its product; a band read for its best law by
+        the optimistic band solve (module docs)."""
+        if posed.robust and posed.settings.bands == "best":
+            from mitld_lp.routes.sensed_optimistic_solve import solve_sensed_optimistic
+
+            return solve_sensed_optimistic(posed, built)
+        return super().solve(posed, built, costs=costs, seed=seed)
