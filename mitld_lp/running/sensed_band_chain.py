@@ -191,13 +191,34 @@ def reach_min(chain: BandChain, target: np.ndarray, *, tol: float = 1e-13,
     bound: nature's best strategy's value (:func:`_min_strategy`), lowered by a margin
     and proven a sub-solution; where that proof fails, value iteration from below
     (until no value changes by more than ``tol``, at most ``max_iterations`` rounds),
-    less the floats' rounding allowance.  (Value iteration alone crawls where the
-    controller keeps a run in a loop it leaves with a tiny probability, as a kept
-    safety task's does.)"""
-    proven = _min_strategy(chain, np.asarray(target, dtype=bool))
+    less the floats' rounding allowance.  Both start from the states every strategy of
+    nature leads to ``target`` almost surely (:func:`_sure`, a fact of the graph: their
+    value is 1).  (Value iteration alone crawls where the controller keeps a run in a
+    loop it leaves with a tiny probability, as a kept safety task's does, or one that
+    waits for ever on a sensor with false alarms, its mixed decision's other actions an
+    interior-point solution's residue.)"""
+    target = np.asarray(target, dtype=bool)
+    goal = target | _sure(chain, target)
+    proven = _min_strategy(chain, goal)
     if proven is not None:
         return proven
-    return _from_below(chain, target, tol, max_iterations)[0]
+    return _from_below(chain, goal, tol, max_iterations)[0]
+
+
+def _sure(chain: BandChain, target: np.ndarray) -> np.ndarray:
+    """The states outside ``target`` from which every strategy of nature reaches it with
+    probability 1: those with no path (a positive probability under some corner at each
+    step, through states outside ``target``) to :func:`_avoiders`.  A strategy that
+    keeps runs out of ``target`` for ever with positive probability has them end in an
+    end component outside ``target`` (the pairs a run repeats for ever form one, almost
+    surely), and every such component lies among the avoiders, so such a path exists."""
+    n, groups = chain.n_states, chain.row_groups
+    owner = np.repeat(np.arange(n), np.diff(groups))
+    coo = chain.matrix.tocoo()
+    edge = (coo.data > 0.0) & ~target[owner[coo.row]]  # a path ends at the target
+    src, dst = owner[coo.row[edge]], coo.col[edge]
+    graph = sp.csr_array((np.ones(src.size), (src, dst)), shape=(n, n))
+    return ~target & ~_live(graph, _avoiders(chain, target))
 
 
 def _avoiders(chain: BandChain, target: np.ndarray) -> np.ndarray:
