@@ -26,7 +26,7 @@ import logging
 import os
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,8 @@ from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
 __all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
            "reach_from_below", "sensed_band_chain",
-           "sensed_band_chain_of", "sensed_band_unfolding", "sensed_band_unfolding_of",
+           "sensed_band_chain_of", "sensed_band_drn", "sensed_band_unfolding",
+           "sensed_band_unfolding_of",
            "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
            "BAND_PROPERTY"]
 
@@ -439,11 +440,21 @@ def _from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations
     return max(float(v[0]) - allowance, 0.0), change, k
 
 
+def sensed_band_drn(result: Any, controller: Any = None) -> drn.DrnModel:
+    """The interval chain of a sensed answer with a band (:func:`sensed_band_chain_of`)
+    as Storm's DRN, with its reward models: a randomised controller's (constraints,
+    ``then``) ``steps`` and ``cost``, the same on every corner, each state's (Storm's
+    ``R{"steps"}max=? [F "done"]`` with uncertainty MAXIMIZE is the worst expected steps
+    over the band, the answer's ``steps``)."""
+    chain, rewards = sensed_band_unfolding_of(result, controller)
+    return replace(band_chain_drn(chain), rewards=tuple(
+        drn.Reward(name, state=values) for name, values in rewards))
+
+
 def write_sensed_band_chain(result: Any, path: str | os.PathLike[str], *,
                             controller: Any = None, overwrite: bool = False) -> Path:
-    """Write the interval chain of a sensed answer with a band
-    (:func:`sensed_band_chain_of`) to ``path`` (``.drn``) under the package's rule for
-    output files; Storm's ``Pmin=? [F "accept"]`` with uncertainty MINIMIZE reads it."""
+    """Write the interval chain of a sensed answer with a band (:func:`sensed_band_drn`)
+    to ``path`` (``.drn``) under the package's rule for output files; Storm's
+    ``Pmin=? [F "accept"]`` with uncertainty MINIMIZE reads it."""
     out = files.writable_path(path, overwrite=overwrite, suffixes=drn.SUFFIXES)
-    return drn.write(band_chain_drn(sensed_band_chain_of(result, controller)), out,
-                     overwrite=overwrite)
+    return drn.write(sensed_band_drn(result, controller), out, overwrite=overwrite)
