@@ -298,15 +298,15 @@ def test_simulation_draws_false_alarms_within_the_bracket() -> None:
     ({"law": (0.3, 0.3), "constraint": True},
      r"b never happens with probability 0\.4\).*not finite.*sensed-constrained"),
     ({"band": True, "bands": "best"}, r"false_alarm = 0\.2.*band.*not solved"),
-    ({"band": True, "constraint": True}, r"false_alarm = 0\.2.*band.*not solved"),
 ])
 def test_refused_by_name(extra: dict[str, Any], words: str) -> None:
     """What is not built with false alarms is refused naming the sensor's key and the
     reason: a law that may never happen with constraints (the information state is not
     finite; bracketed without them, tests/test_false_alarms_never.py), a law known within
-    a band read for its best law (``bands="best"``) or with constraints
-    (tests/test_false_alarms_constrained.py solves them at a point law; its worst case
-    without constraints is solved, tests/test_false_alarms_band.py)."""
+    a band read for its best law (``bands="best"``; tests/test_false_alarms_constrained.py
+    solves constraints at a point law; the band's worst case is solved alone,
+    tests/test_false_alarms_band.py, and with constraints,
+    tests/test_false_alarms_band_constrained.py)."""
     from mitld_lp.distributions import from_table
 
     law = pmf(list(extra.get("law", LAW)))

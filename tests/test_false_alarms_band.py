@@ -80,10 +80,10 @@ def test_storm_on_the_exported_interval_chain_with_false_alarms_gives_lower(
     assert abs(storm_worst(path) - r.lower) <= 1e-9
 
 
-@pytest.mark.parametrize("kwargs", [{"bands": "best"}, {"constraints": ["P(F A) <= 0.9"]}])
-def test_best_law_and_constraints_stay_refused(kwargs: dict[str, Any]) -> None:
+def test_best_law_stays_refused() -> None:
+    """(Constraints with the worst case: tests/test_false_alarms_band_constrained.py.)"""
     with pytest.raises(ProblemError, match=r"false_alarm = 0\.2.*band.*not solved"):
-        synthesize(_model([float(x) for x in BAND]), **kwargs)
+        synthesize(_model([float(x) for x in BAND]), bands="best")
 
 
 def test_a_band_that_may_never_happen_stays_refused() -> None:

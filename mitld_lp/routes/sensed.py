@@ -157,10 +157,12 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     ``sensed`` and ``sensed-constrained`` routes build false alarms at a point law that
     surely happens; ``never``: the caller brackets them at a law that may never happen
     (the ``sensed`` route only).  A band (``robust``) whose laws surely happen: its worst
-    case without constraints (``worst``, the ``sensed`` route) is solved as without
-    false alarms (:mod:`mitld_lp.routes.sensed_band`: the candidates are point-law
-    solves, and the controller's interval chain draws every step's report as its point
-    chain does); with constraints or ``bands = "best"`` it is not."""
+    case (``worst``: alone on the ``sensed`` route, :mod:`mitld_lp.routes.sensed_band`;
+    with constraints, ``then`` or the trade-off curve on the sensed band constrained
+    route, :mod:`mitld_lp.routes.sensed_band_constrained`) is solved as without false
+    alarms (the candidates are point-law solves, and the controller's interval chain
+    draws every step's report as its point chain does); with ``bands = "best"`` it is
+    not."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
     if law is not None and float(law.never) > 0.0 and (robust or not never):
@@ -175,9 +177,10 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     refused = []
     if robust and not worst:
         refused.append(f"{head}: with a law known only within a band read for its best "
-                       "law, or with bounds on other formulas, then or the trade-off "
-                       "curve, not solved (its worst case alone is, on the sensed route); "
-                       "give the event a point law or false_alarm = 0")
+                       "law, not solved (its worst case is: alone on the sensed route, with "
+                       "bounds on other formulas, then or the trade-off curve on the "
+                       "sensed band constrained route); give the event a point law or "
+                       "false_alarm = 0")
     return refused
 
 
