@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mitld_lp import ExplicitGame, Model, synthesize
+from mitld_lp import ExplicitGame, Model, load_model, synthesize
 from mitld_lp.distributions import from_table
 from mitld_lp.sensing import Sensor
 
@@ -429,3 +429,32 @@ def test_a_run_left_in_a_loop_for_ever_almost_never_reaches_the_target_surely() 
     assert at(0) == 1.0 and at(n - 1) == 1.0
     assert at(n + 1) == 0.0
     assert 0.5 - 1e-12 <= at(n + 2) <= 0.5
+
+
+@needs_storm
+def test_export_chain_from_a_model_file_carries_the_steps(tmp_path: Path, capsys) -> None:
+    """``mitld-lp export --chain`` of a model file with a band, false alarms and a bound
+    on the expected steps: Storm's robust check of the file gives ``lower`` for the task,
+    at least 0.1 for the reach constraint (nature against it), and for the reward
+    ``steps`` (nature maximising) the bound's worst case the answer gives, within 5."""
+    import json
+
+    from mitld_lp.cli import main
+
+    path = tmp_path / "fa_band.toml"
+    path.write_text('name = "fa_band"\nspec = "D[mu] b & F(b & F[0,2] A)"\n'
+                    'constraints = ["P(F A) >= 0.1", "E(steps) <= 5"]\n'
+                    "[grid]\nsize = [3, 1]\nstart = [0, 0]\n[regions]\nA = [[2, 0]]\n"
+                    "[distributions]\nmu = { geometric = [0.3, 0.5] }\n"
+                    "[sensors]\nb = { detect = 0.5, false_alarm = 0.1 }\n")
+    out = tmp_path / "fa.drn"
+    code = main(["export", str(path), "--epsilon", "0.3", "--chain", str(out), "--json"])
+    said = json.loads(capsys.readouterr().out)
+    assert code == (0 if said["certified"] else 3) and said["chain_accept"] == said["lower"]
+    assert abs(_storm(out, 'Pmin=? [F "accept"]', "MINIMIZE") - said["lower"]) <= 1e-9
+    assert _storm(out, 'Pmin=? [F "c1"]', "MINIMIZE") >= 0.1 - 1e-12
+    r = synthesize(load_model(path), epsilon=0.3)
+    steps = r.constraints[1]
+    assert steps.holds and steps.bounds[1] <= 5
+    worst = _storm(out, 'R{"steps"}max=? [F "done"]', "MAXIMIZE")
+    assert abs(worst - steps.bounds[1]) <= 1e-8
