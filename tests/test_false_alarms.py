@@ -34,7 +34,6 @@ from test_sensing_tasks import (
 
 from mitld_lp import Model, synthesize
 from mitld_lp.distributions import geometric, pmf
-from mitld_lp.problem import ProblemError
 
 LAW = (0.25, 0.25, 0.5)  # the bus comes at step 1, 2 or 3: a law that surely happens
 ON_LAW = f"D[pmf({', '.join(map(str, LAW))})] b & "
@@ -290,27 +289,3 @@ def test_simulation_draws_false_alarms_within_the_bracket() -> None:
     sim = simulate_sensed(model, r.controller, runs=4000, seed=3, max_steps=20)
     sigma = (r.lower * (1 - r.lower) / sim.runs) ** 0.5
     assert abs(sim.estimate - r.lower) <= 4.5 * sigma and sim.beyond_model == 0
-
-
-@pytest.mark.parametrize("extra, words", [
-    ({"band": True, "constraint": True}, r"false_alarm = 0\.2.*band.*not solved"),
-])
-def test_refused_by_name(extra: dict[str, Any], words: str) -> None:
-    """What is not built with false alarms is refused naming the sensor's key and the
-    reason: a law known within a band with constraints (tests/test_false_alarms_constrained.py
-    solves them at a point law; its worst case without constraints is solved,
-    tests/test_false_alarms_band.py, and its best law, tests/test_false_alarms_best.py; a
-    law that may never happen, once refused here with constraints, is bracketed with and
-    without them: tests/test_false_alarms_never*.py)."""
-    from mitld_lp.distributions import from_table
-
-    law = pmf(list(extra.get("law", LAW)))
-    if extra.get("band"):  # a geometric law whose parameter lies in [0.2, 0.4]
-        law = from_table({"geometric": [0.2, 0.4]}, "mu")
-    model = Model.from_game(STATION, "F(b & F[0,1] A)", events={"b": law},
-                            sensors={"b": {"detect": 0.5, "false_alarm": 0.2}})
-    kwargs: dict[str, Any] = {"bands": extra["bands"]} if "bands" in extra else {}
-    if extra.get("constraint"):
-        kwargs["constraints"] = ["P(F h) <= 0.5"]
-    with pytest.raises(ProblemError, match=words):
-        synthesize(model, **kwargs)

@@ -31,8 +31,7 @@ from test_sensed_constrained import (
 )
 
 from mitld_lp import Model, synthesize
-from mitld_lp.distributions import from_table, pmf
-from mitld_lp.problem import ProblemError
+from mitld_lp.distributions import pmf
 
 DETECT, FALSE_ALARM = 0.5, 0.2
 
@@ -245,18 +244,3 @@ def test_then_min_steps_on_the_chain_and_the_controller_runs(lp: dict[str, Any],
             w = succ[int(rng.choice(len(succ), p=[p for _, p in succ]))][0]
             q = DETECT if t + 1 >= bus else FALSE_ALARM
             reports = frozenset({"b"}) if rng.random() < q else frozenset()
-
-
-@pytest.mark.parametrize("bands", [None])
-def test_a_band_with_false_alarms_and_constraints_is_refused(bands: str | None) -> None:
-    """A law known within a band (read for its worst law) stays refused with false
-    alarms and constraints or then, naming the sensor's key (read for its best law it is
-    solved: tests/test_false_alarms_best.py)."""
-    model = Model.from_game(STATION, "F(b & F[0,2] A)",
-                            events={"b": from_table({"geometric": [0.2, 0.4]}, "mu")},
-                            sensors={"b": {"detect": 0.5, "false_alarm": 0.2}})
-    kwargs: dict[str, Any] = {"bands": bands} if bands else {}
-    with pytest.raises(ProblemError, match=r"false_alarm = 0\.2.*band.*not solved"):
-        synthesize(model, constraints=["P(F wet) <= 0.3"], **kwargs)
-    with pytest.raises(ProblemError, match=r"false_alarm = 0\.2.*band.*not solved"):
-        synthesize(model, then="min-steps", **kwargs)

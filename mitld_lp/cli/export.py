@@ -173,8 +173,8 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         _wrote(args, said, "controller", controller, f"wrote {controller}")
     from mitld_lp.running.sensed_band_chain import (
         is_sensed_band,
-        sensed_band_chain_of,
         sensed_band_claim,
+        sensed_band_drn,
     )
     from mitld_lp.running.sensed_optimistic_chain import is_sensed_optimistic
 
@@ -185,7 +185,7 @@ def _controller_exports(args: argparse.Namespace, said: dict[str, Any],
         accept, said_chain = optimistic_claim(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)
     elif chain and is_sensed_band(r):  # sensors and a band: an interval chain too
-        band = band_chain_drn(sensed_band_chain_of(r))
+        band = sensed_band_drn(r)  # its rewards too (constraints, then)
         write_file(chain, lambda p: drn.write(band, p, overwrite=True))
         accept, said_chain = sensed_band_claim(r)
         _wrote(args, said, "chain", chain, f"wrote {chain} ({said_chain})", chain_accept=accept)

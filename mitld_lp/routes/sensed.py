@@ -161,16 +161,17 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     (:mod:`mitld_lp.routes.sensed_never`).  The ``sensed`` and ``sensed-constrained``
     routes build false alarms at a point law that surely happens; ``never``: the caller
     brackets them at a law that may never happen (both routes, a point law).  A band
-    (``robust``) whose laws surely happen: its worst
-    case without constraints (``worst``, the ``sensed`` route) is solved as without
-    false alarms (:mod:`mitld_lp.routes.sensed_band`: the candidates are point-law
-    solves, and the controller's interval chain draws every step's report as its point
-    chain does); with constraints it is not.  Read for its best law (``best``, the
+    (``robust``) whose laws surely happen: its worst case (``worst``: alone on the
+    ``sensed`` route, :mod:`mitld_lp.routes.sensed_band`; with constraints, ``then`` or
+    the trade-off curve on the sensed band constrained route,
+    :mod:`mitld_lp.routes.sensed_band_constrained`) is solved as without false alarms
+    (the candidates are point-law solves, and the controller's interval chain draws
+    every step's report as its point chain does).  Read for its best law (``best``, the
     optimistic sensed routes, constraints or not) it is solved as without false alarms
     too (:mod:`mitld_lp.routes.sensed_optimistic`: the candidates are point-law
     solves, judged on the same interval chain at nature's best corners;
     :mod:`mitld_lp.routes.sensed_optimistic_constrained`: point-law constrained solves,
-    each at its own law)."""
+    each at its own law).  A route that is neither refuses it."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
     if law is not None and float(law.never) > 0.0 and (robust or not never):
@@ -183,11 +184,11 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
                 + " (give false_alarm = 0, or a law that surely happens)"]
     refused = []
     if robust and not (worst or best):
-        refused.append(f"{head}: with a law known only within a band read for its worst "
-                       "law and bounds on other formulas, then or the trade-off curve, not "
-                       "solved (its worst case alone is, on the sensed route, and its best "
-                       "law with or without them, --bands best); give the event a point "
-                       "law or false_alarm = 0")
+        refused.append(f"{head}: with a law known only within a band, not solved on this "
+                       "route (its worst case is: alone on the sensed route, with bounds on "
+                       "other formulas, then or the trade-off curve on the sensed band "
+                       "constrained route; its best law, --bands best, on the optimistic "
+                       "sensed routes); give the event a point law or false_alarm = 0")
     return refused
 
 

@@ -9,6 +9,14 @@ low end, at its high end); where a candidate's constraint fails under some law, 
 LP once more with the constraint's bound tightened by what the band added
 (:data:`ROUNDS` times).
 
+A sensor with false alarms (under a band whose laws surely happen; one that may never
+happen stays refused, :func:`alarm_band_refusals`) changes no step: each candidate is
+the ``sensed-constrained`` solve with false alarms at its law (its information states
+keeping each hypothesis's count of reports), and its interval chain draws the report or
+silence of every step (``false_alarm`` before the event's report is due, ``detect``
+from then on: given the true event times, the same under every law of the band, so the
+keeps below rest on the same argument as without false alarms).
+
 Each candidate is judged on its interval chain (:mod:`mitld_lp.running.
 sensed_band_chain`: the truth and the controller's memory, the joint automaton of the
 task and the constraints' formulas, nature's corners as choices, nature seeing the
@@ -183,7 +191,8 @@ class SensedBandConstrainedRoute(Route):
             asked = replace(asked, fragment=complement_class(posed.fragment),
                             problem=replace(posed.problem, objective="max"))
         refused = SensedConstrainedRoute(every=self.every).refusal(asked)
-        return refused + [x for x in alarm_band_refusals(posed.model) if x not in refused]
+        return refused + [x for x in alarm_band_refusals(posed.model, worst=True)
+                          if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Any:
         """The joint automaton and its information-state product at the band's middle
@@ -195,18 +204,20 @@ class SensedBandConstrainedRoute(Route):
         return _solve(posed, built, costs=costs, seed=seed)
 
 
-def alarm_band_refusals(model: Any) -> list[str]:
-    """Why a sensor with false alarms is not solved under a band (empty: none has
-    them): with constraints, or with the band's best law, the worst (or best) case over
-    the band of a controller that reads every report is not built (only the worst case
-    without constraints is, on the ``sensed`` route: :func:`mitld_lp.routes.sensed.
-    false_alarm_refusal`); the sensed constrained route builds false alarms at a point
-    law only, so the band routes that call its refusal at one add this."""
+def alarm_band_refusals(model: Any, *, worst: bool = False) -> list[str]:
+    """Why a sensor with false alarms is not solved under a band (empty: it is, or none
+    has them; :func:`mitld_lp.routes.sensed.false_alarm_refusal`).  ``worst``: the
+    caller solves the band's worst case (this route: its candidates are the sensed
+    constrained route's solves with false alarms at the band's laws, each judged on its
+    interval chain, which draws every step's report), so only a law that may never
+    happen is refused; else (the band's best law) every false alarm is.  The sensed
+    constrained route builds false alarms at a point law only, so the band routes that
+    call its refusal at one add this."""
     from mitld_lp.routes.sensed import false_alarm_refusal
 
     return [x for a, s in sorted(partial(model.sensors).items()) if s.false_alarm
             for x in false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
-                                         robust=True)]
+                                         robust=True, worst=worst)]
 
 
 def covers(result: Result) -> bool:

@@ -26,7 +26,7 @@ import logging
 import os
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,8 @@ from mitld_lp.running.sensed_chain import sensed_corner_unfolding
 
 __all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
            "reach_from_below", "sensed_band_chain",
-           "sensed_band_chain_of", "sensed_band_unfolding", "sensed_band_unfolding_of",
+           "sensed_band_chain_of", "sensed_band_drn", "sensed_band_unfolding",
+           "sensed_band_unfolding_of",
            "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
            "BAND_PROPERTY"]
 
@@ -191,13 +192,34 @@ def reach_min(chain: BandChain, target: np.ndarray, *, tol: float = 1e-13,
     bound: nature's best strategy's value (:func:`_min_strategy`), lowered by a margin
     and proven a sub-solution; where that proof fails, value iteration from below
     (until no value changes by more than ``tol``, at most ``max_iterations`` rounds),
-    less the floats' rounding allowance.  (Value iteration alone crawls where the
-    controller keeps a run in a loop it leaves with a tiny probability, as a kept
-    safety task's does.)"""
-    proven = _min_strategy(chain, np.asarray(target, dtype=bool))
+    less the floats' rounding allowance.  Both start from the states every strategy of
+    nature leads to ``target`` almost surely (:func:`_sure`, a fact of the graph: their
+    value is 1).  (Value iteration alone crawls where the controller keeps a run in a
+    loop it leaves with a tiny probability, as a kept safety task's does, or one that
+    waits for ever on a sensor with false alarms, its mixed decision's other actions an
+    interior-point solution's residue.)"""
+    target = np.asarray(target, dtype=bool)
+    goal = target | _sure(chain, target)
+    proven = _min_strategy(chain, goal)
     if proven is not None:
         return proven
-    return _from_below(chain, target, tol, max_iterations)[0]
+    return _from_below(chain, goal, tol, max_iterations)[0]
+
+
+def _sure(chain: BandChain, target: np.ndarray) -> np.ndarray:
+    """The states outside ``target`` from which every strategy of nature reaches it with
+    probability 1: those with no path (a positive probability under some corner at each
+    step, through states outside ``target``) to :func:`_avoiders`.  A strategy that
+    keeps runs out of ``target`` for ever with positive probability has them end in an
+    end component outside ``target`` (the pairs a run repeats for ever form one, almost
+    surely), and every such component lies among the avoiders, so such a path exists."""
+    n, groups = chain.n_states, chain.row_groups
+    owner = np.repeat(np.arange(n), np.diff(groups))
+    coo = chain.matrix.tocoo()
+    edge = (coo.data > 0.0) & ~target[owner[coo.row]]  # a path ends at the target
+    src, dst = owner[coo.row[edge]], coo.col[edge]
+    graph = sp.csr_array((np.ones(src.size), (src, dst)), shape=(n, n))
+    return ~target & ~_live(graph, _avoiders(chain, target))
 
 
 def _avoiders(chain: BandChain, target: np.ndarray) -> np.ndarray:
@@ -418,11 +440,21 @@ def _from_below(chain: BandChain, target: np.ndarray, tol: float, max_iterations
     return max(float(v[0]) - allowance, 0.0), change, k
 
 
+def sensed_band_drn(result: Any, controller: Any = None) -> drn.DrnModel:
+    """The interval chain of a sensed answer with a band (:func:`sensed_band_chain_of`)
+    as Storm's DRN, with its reward models: a randomised controller's (constraints,
+    ``then``) ``steps`` and ``cost``, the same on every corner, each state's (Storm's
+    ``R{"steps"}max=? [F "done"]`` with uncertainty MAXIMIZE is the worst expected steps
+    over the band, the answer's ``steps``)."""
+    chain, rewards = sensed_band_unfolding_of(result, controller)
+    return replace(band_chain_drn(chain), rewards=tuple(
+        drn.Reward(name, state=values) for name, values in rewards))
+
+
 def write_sensed_band_chain(result: Any, path: str | os.PathLike[str], *,
                             controller: Any = None, overwrite: bool = False) -> Path:
-    """Write the interval chain of a sensed answer with a band
-    (:func:`sensed_band_chain_of`) to ``path`` (``.drn``) under the package's rule for
-    output files; Storm's ``Pmin=? [F "accept"]`` with uncertainty MINIMIZE reads it."""
+    """Write the interval chain of a sensed answer with a band (:func:`sensed_band_drn`)
+    to ``path`` (``.drn``) under the package's rule for output files; Storm's
+    ``Pmin=? [F "accept"]`` with uncertainty MINIMIZE reads it."""
     out = files.writable_path(path, overwrite=overwrite, suffixes=drn.SUFFIXES)
-    return drn.write(band_chain_drn(sensed_band_chain_of(result, controller)), out,
-                     overwrite=overwrite)
+    return drn.write(sensed_band_drn(result, controller), out, overwrite=overwrite)
