@@ -2,7 +2,8 @@
 
 Each case is the bus case (``models/bus_grid.toml``, ``models/bus_puddle.toml``, or
 ``models/bus_fit.toml``: bus 1 within a band, bus 2's law fitted to data with its 95%
-band) with cameras that miss buses (``[sensors] b = { detect = d }``) at an
+band) with cameras that miss buses (``[sensors] b = { detect = d }``; ``b@d fa=f``: one
+that also gives false alarms, ``false_alarm = f``, every step's report read) at an
 ``epsilon``, solved by ``synthesize`` on the ``sensed`` route in a child process of its
 own.  Per case:
 
@@ -12,7 +13,8 @@ own.  Per case:
   certificate; Storm's check after it is not counted);
 * the product's states, choices and transitions (with a band: the band's middle law's,
   the first of the products the route builds), and the certified bracket ``[lower,
-  upper]``, printed beside each time;
+  upper]``, printed beside each time; ``digest``: the start of a SHA-256 of the
+  product's matrix (every probability's bits, column, row and state's choices);
 * Storm (stormpy), where installed (``storm_of`` says which): ``Pmax=? [F "accept"]`` on
   the same product exported as DRN (truncation losing: our ``lower``), its value beside
   ours and its seconds; not for a task with a safety part (``bus_puddle``: its
@@ -23,8 +25,10 @@ own.  Per case:
 
 ``--compare DIR`` runs each case a second time, in the same run, with the ``mitld_lp`` of
 that checkout (``base_*`` columns: the build before, its states), and checks that both
-give the same bracket (to 1e-9); ``same`` also says whether the products have the same
-size (the merge of :mod:`mitld_lp.sensing.merge` makes them smaller: ``smaller``).
+give the same bracket (to 1e-9); ``same`` says ``yes`` where the products are the same to
+the bit (equal digests) and so are the brackets, ``size`` where the sizes and brackets (to
+1e-9) agree but not every bit, ``smaller`` where the brackets agree on fewer states (the
+merge of :mod:`mitld_lp.sensing.merge`), ``no`` where the brackets differ.
 
 Run: ``python experiments/bench_sensed.py [--quick] [--out DIR] [--compare DIR]
 [--repeats N] [--only TEXT]`` (``N`` runs of each child, the least CPU reported; only
@@ -53,19 +57,23 @@ FULL = (
     ("bus_grid.toml", (("b1", 0.5), ("b2", 0.5)), 1e-3),
     ("bus_puddle.toml", (("b1", 0.5),), 1e-3),
     ("bus_fit.toml", (("b2", 0.5),), 0.01),  # issue 43's case: bands, a fitted law
+    # false alarms (experiments/false_alarms.py's camera): every step's report read
+    ("bus_grid.toml", (("b2", 0.8, 0.05),), 0.05),
 )
 QUICK = (
     ("bus_grid.toml", (("b1", 0.5),), 0.01),
     ("bus_grid.toml", (("b1", 0.7), ("b2", 0.7)), 0.05),
+    ("bus_grid.toml", (("b2", 0.8, 0.05),), 0.1),
 )
-HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "build_cpu",
-          "process_cpu", "base_states", "base_build_cpu", "base_process_cpu", "speedup",
-          "same", "storm_of", "storm_value", "storm_s"]
+HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "digest",
+          "build_cpu", "process_cpu", "base_states", "base_build_cpu", "base_process_cpu",
+          "speedup", "same", "storm_of", "storm_value", "storm_s"]
 
 
 def name_of(case: tuple[Any, ...]) -> str:
     model, sensors, eps = case
-    cams = "+".join(f"{e}@{d:g}" for e, d in sensors)
+    cams = "+".join(f"{e}@{d:g}" + "".join(f" fa={f:g}" for f in fa)
+                    for e, d, *fa in sensors)
     return f"{model.removesuffix('.toml')} {cams} eps={eps:g}"
 
 
@@ -92,13 +100,14 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
     belief.belief_product = timed  # the sensed route imports it when it builds
     base = load_model(C.model_path(model_name))
     model = dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
-        {e: Sensor(d) for e, d in sensors}))
+        {e: Sensor(*s) for e, *s in sensors}))
     r = synthesize(model)
     process = time.process_time()  # this process so far: imports, build, solve
     assert r.route == "sensed", r.route
     row: dict[str, Any] = {
         "states": r.mdp.n_states, "choices": r.mdp.n_choices,
         "transitions": int(r.mdp.matrix.nnz), "lower": r.lower, "upper": r.upper,
+        "digest": digest(r.mdp),
         "build_cpu": built["cpu"], "process_cpu": process,
         "package": str(Path(belief.__file__).parents[1])}
     from mitld_lp.running.sensed_band_chain import is_sensed_band, write_sensed_band_chain
@@ -171,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
             agree = (abs(base["lower"] - ours["lower"]) <= 1e-9
                      and abs(base["upper"] - ours["upper"]) <= 1e-9)
             sizes = all(base[k] == ours[k] for k in ("states", "choices", "transitions"))
-            row["same"] = ("no" if not agree else "yes" if sizes else
+            bits = all(base[k] == ours[k] for k in ("digest", "lower", "upper"))
+            row["same"] = ("no" if not agree else "yes" if bits else "size" if sizes else
                            "smaller" if ours["states"] < base["states"] else "larger")
         rows.append(row)
         print(C.text_table(HEADER, [[fmt(k, row.get(k)) for k in HEADER]]), flush=True)
@@ -181,8 +191,10 @@ def main(argv: list[str] | None = None) -> int:
     C.write_csv(out / "bench_sensed.csv", HEADER, table)
     C.write_text(out / "bench_sensed.md", C.markdown_table(HEADER, table) + (
         "\nCPU seconds; `build_cpu` is belief_product alone, `base_*` the same case with "
-        f"the package of `--compare` ({args.compare}), `same`: equal brackets (1e-9) and "
-        "product sizes (`smaller`: equal brackets, fewer states); Storm (`storm_of`): Pmax "
+        f"the package of `--compare` ({args.compare}), `same`: `yes` the same product to "
+        "the bit (`digest`, a SHA-256 of its matrix) and the same bracket to the bit, `size` "
+        "equal sizes and brackets (1e-9), `smaller` equal brackets on fewer states; Storm "
+        "(`storm_of`): Pmax "
         "on the same product as DRN, or the worst case on the exported interval chain "
         "with a band (parse and check).\n"))
     from bench_scaling import machine_text
@@ -191,6 +203,20 @@ def main(argv: list[str] | None = None) -> int:
         "the machine is shared: the before/after ratio is taken in one run",
         ["each case a child process; CPU seconds (process_time inside the child)"]))
     return 0 if all(r.get("same", "yes") != "no" for r in rows) else 1
+
+
+def digest(mdp: Any) -> str:
+    """The start of a SHA-256 of the product's matrix: every probability's bits, its
+    column, each choice's row and each state's choices."""
+    import hashlib
+
+    import numpy as np
+
+    h = hashlib.sha256()
+    m = mdp.matrix
+    for x in (m.data, m.indices, m.indptr, mdp.row_groups, mdp.choice_actions):
+        h.update(np.ascontiguousarray(x).tobytes())
+    return h.hexdigest()[:12]
 
 
 def least(runs: list[dict[str, Any]]) -> dict[str, Any]:

@@ -48,7 +48,7 @@ from mitld_lp.sensing.info import (
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import INT as _I
-from mitld_lp.sensing.rows import Table, fsum_by, groups, mix64, spread
+from mitld_lp.sensing.rows import Lookup, Table, fsum_by, groups, mix64, spread
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
@@ -58,7 +58,6 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-DENSE = 1 << 22  # the most keys a lookup keeps as a dense array (32 MiB)
 CHUNK = 8_192
 """The most states expanded together: the rows of one expansion (a few dozen per state,
 some fifteen numbers each) stay some tens of megabytes."""
@@ -112,11 +111,10 @@ class FrontierBuilder(StepRules):
         self.outcomes = Table(3, (_I, np.float64, bool))
         self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
         self.successors = Table(2, (_I, np.float64))
-        self.step_table: dict[tuple[int, int], int] = {}
-        self.end_table: dict[tuple[int, int], int] = {}  # -1 undecided, else a record
-        self.need_table: dict[tuple[int, int], int] = {}
-        self.pending_need: dict[tuple[int, int], int] = {}
-        self.dense: dict[int, np.ndarray] = {}  # the lookups' dense copies
+        self.step_table = Lookup(self.make_step)
+        self.end_table = Lookup(self.make_end)  # -1 undecided, else a record
+        self.need_table = Lookup(self.make_need)
+        self.pending_need = Lookup(self.make_pending_need)
         self.actions = Table(1, (_I,))
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
@@ -183,42 +181,6 @@ class FrontierBuilder(StepRules):
         w, act, occurred = key
         return [(self.world(g2), p) for g2, p in self.game.successors(
             self.worlds[w], self.act_names[act], self.u_sets[occurred]) if p > 0.0]
-
-    def lookup(self, table: dict[tuple[int, int], int], a: np.ndarray, b: np.ndarray,
-               make: Any) -> np.ndarray:
-        """``table[(a, b)]`` per row, ``make(a, b)`` filling the keys not met before
-        (values >= -1); kept also as a dense array while the keys' box is small."""
-        if len(a) == 0:
-            return np.zeros(0, _I)
-        shape = (int(a.max()) + 1, int(b.max()) + 1)
-        dense = self.dense.get(id(table))
-        if dense is None or dense.shape[0] < shape[0] or dense.shape[1] < shape[1]:
-            size = (max(shape[0], 0 if dense is None else dense.shape[0]),
-                    max(shape[1], 0 if dense is None else dense.shape[1]))
-            if size[0] * size[1] > DENSE:
-                return self.lookup_sparse(table, a, b, make)
-            grown = np.full(size, -2, _I)  # -2: not asked yet
-            if dense is not None:
-                grown[:dense.shape[0], :dense.shape[1]] = dense
-            dense = self.dense[id(table)] = grown
-        values = dense[a, b]
-        miss = np.flatnonzero(values == -2)
-        if len(miss):
-            found = self.lookup_sparse(table, a[miss], b[miss], make)
-            dense[a[miss], b[miss]] = found
-            values[miss] = found
-        return values
-
-    def lookup_sparse(self, table: dict[tuple[int, int], int], a: np.ndarray,
-                      b: np.ndarray, make: Any) -> np.ndarray:
-        ids, first = groups(a, b)
-        values = np.empty(len(first), _I)
-        for n, (x, y) in enumerate(zip(a[first].tolist(), b[first].tolist(), strict=True)):
-            v = table.get((x, y))
-            if v is None:
-                v = table[(x, y)] = make(x, y)
-            values[n] = v
-        return values[ids]
 
     def make_step(self, q: int, label: int) -> int:
         return self.automaton(q, frozenset(a for i, a in enumerate(self.atoms)
@@ -350,8 +312,8 @@ class FrontierBuilder(StepRules):
         s_seq = np.arange(len(c), dtype=_I)
         mass = base * pg
         label = np.asarray(self.world_label, _I)[w2] | happened
-        q2 = self.lookup(self.step_table, q, label, self.make_step)
-        end = self.lookup(self.end_table, q2, left, self.make_end)
+        q2 = self.step_table(q, label)
+        end = self.end_table(q2, left)
         done = end >= 0
         ends.append((c[done], o_seq[done], b_seq[done], s_seq[done], end[done], mass[done]))
         ended = (c[done], w2[done], occ[done], new[done], end[done])
@@ -371,10 +333,10 @@ class FrontierBuilder(StepRules):
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
         g_pend = pending[gst] & ~occ[first]
-        need = self.lookup(self.need_table, tid2[hfirst], g_rep[hobs], self.make_need)
+        need = self.need_table(tid2[hfirst], g_rep[hobs])
         most = np.full(len(first), -1, _I)
         np.maximum.at(most, hobs, need)
-        pend_need = self.lookup(self.pending_need, g_pend, g_pend, self.make_pending_need)
+        pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         g_count = np.bincount(hobs, minlength=len(first))
         g_hash = np.zeros(len(first), np.uint64)
@@ -520,10 +482,8 @@ class FrontierBuilder(StepRules):
     # ---------------------------------------------------------------- the MDP
 
     def build(self, progress: bool | None = None) -> Belief:
-        game, dta = self.game, self.dta
-        q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
-        first = self.end(q0, frozenset(self.sta.events)) if (
-            self.ends is not None or q0 in (dta.accepting, dta.rejecting)) else None
+        game = self.game
+        q0, first = self.initial_verdict()
         if first is not None:
             self.check(1, 0)
             self.store_record(self.record(first))

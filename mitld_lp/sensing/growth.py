@@ -23,7 +23,11 @@ stops there, seconds in, instead of running to the budget; a product the estimat
 through still meets the budget's exact check before each batch is stored.  On the cases
 measured (experiments/bench_sensed.py's) the estimate is at no level above the true
 size, so it stops a product later than the truth would allow rather than one that fits;
-it is an estimate, not a bound, and raising the budget past it lets the build run."""
+it is an estimate, not a bound, and raising the budget past it lets the build run.  With
+false alarms it errs lower still: the report patterns keep telling hypotheses apart for
+up to three levels past the clock's last step, at some 1.15 a step (the bus case's
+camera on bus 2, ``detect = 0.8, false_alarm = 0.05`` at epsilon 0.05: its largest
+estimate 86,964 states, at level 8, against 193,856 built)."""
 
 from __future__ import annotations
 

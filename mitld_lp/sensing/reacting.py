@@ -254,10 +254,8 @@ class ReactingBuilder(StepRules):
     # ---------------------------------------------------------------- the MDP
 
     def build(self, progress: bool | None = None) -> Belief:
-        game, dta = self.game, self.dta
-        q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
-        first = self.end(q0, frozenset(self.sta.events)) if (
-            self.ends is not None or q0 in (dta.accepting, dta.rejecting)) else None
+        game = self.game
+        q0, first = self.initial_verdict()
         if first is not None:
             initial = self.record(first)
         else:

@@ -10,10 +10,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "INT"]
+__all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "Lookup", "INT",
+           "DENSE"]
 
 INT = np.int64
 _I = INT
+DENSE = 1 << 22
+"""The most keys a :class:`Lookup` keeps as a dense array (32 MiB)."""
 
 
 def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
@@ -163,3 +166,53 @@ class Table:
         parent, rank = spread(counts[ids])
         at = starts[ids][parent] + rank
         return parent, [c[at] for c in cols]
+
+
+class Lookup:
+    """Small integers (``>= -1``) by pairs of small integers ``(a, b)``, each pair's
+    value made once by ``make(a, b)`` (a Python call) and kept in a dict, and also as a
+    dense array while the pairs' box stays within :data:`DENSE` keys (grown by doubling
+    as larger keys come): :meth:`__call__` looks up a row of pairs at a time."""
+
+    def __init__(self, make: Any) -> None:
+        self.make = make
+        self.table: dict[tuple[int, int], int] = {}
+        self.dense: np.ndarray | None = None
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The value of each row's pair ``(a, b)``."""
+        if len(a) == 0:
+            return np.zeros(0, _I)
+        shape = (int(a.max()) + 1, int(b.max()) + 1)
+        dense = self.dense
+        if dense is None or dense.shape[0] < shape[0] or dense.shape[1] < shape[1]:
+            old = (0, 0) if dense is None else dense.shape
+            if max(shape[0], old[0]) * max(shape[1], old[1]) > DENSE:
+                return self.sparse(a, b)
+            size = tuple(max(s, 2 * o if s > o else o) for s, o in zip(shape, old,
+                                                                         strict=True))
+            if size[0] * size[1] > DENSE:
+                size = (max(shape[0], old[0]), max(shape[1], old[1]))
+            grown = np.full(size, -2, _I)  # -2: not asked yet
+            if dense is not None:
+                grown[:old[0], :old[1]] = dense
+            dense = self.dense = grown
+        values = dense[a, b]
+        miss = np.flatnonzero(values == -2)
+        if len(miss):
+            found = self.sparse(a[miss], b[miss])
+            dense[a[miss], b[miss]] = found
+            values[miss] = found
+        return values
+
+    def sparse(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:meth:`__call__` through the dict alone."""
+        ids, first = groups(a, b)
+        values = np.empty(len(first), _I)
+        table, make = self.table, self.make
+        for n, (x, y) in enumerate(zip(a[first].tolist(), b[first].tolist(), strict=True)):
+            v = table.get((x, y))
+            if v is None:
+                v = table[(x, y)] = make(x, y)
+            values[n] = v
+        return values[ids]

@@ -75,6 +75,17 @@ class StepRules:
         return min(t, max(need, default=0))
 
 
+    def initial_verdict(self) -> tuple[int, Hashable | None]:
+        """The automaton's state after the world's initial label, and where a hypothesis
+        in it ends before any step (:meth:`end` with every event still to come; asked
+        only when ``ends`` is given or the state already decides the task), None while
+        it is undecided: the initial information state is then built."""
+        game, dta = self.game, self.dta
+        q0 = dta.step(dta.initial, frozenset(game.propositions(game.initial)))
+        if self.ends is None and q0 not in (dta.accepting, dta.rejecting):
+            return q0, None
+        return q0, self.end(q0, frozenset(self.sta.events))
+
     def automaton(self, q: int, label: frozenset[str]) -> int:
         key = (q, label)
         q2 = self.step_cache.get(key)
