@@ -8,9 +8,9 @@ states (Storm's ``exploration_state_limit``): the states found but not expanded 
 Storm's label ``"unexplored"`` (:attr:`Tables.unexplored`), and every expanded state has
 the number, the choices and the rows it has in the whole build, because Storm numbers
 states in the order its breadth-first search finds them
-(:class:`mitld_lp.worlds.prism.LazyPrismGame` builds on that).  :func:`build_within`
-runs a build in a memory-capped child process when it may not fit
-(:mod:`mitld_lp.worlds.prism_bounded`).
+(:class:`mitld_lp.worlds.prism.LazyPrismGame` builds on that; :class:`Grower` explores
+further, within the budgets).  :func:`build_within` runs a build in a memory-capped
+child process when it may not fit (:mod:`mitld_lp.worlds.prism_bounded`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables,
 from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, head, rebuild
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
-           "check_budgets", "build_within", "build_tables", "expanded_within"]
+           "check_budgets", "build_within", "build_tables", "expanded_within", "Grower"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -102,6 +102,38 @@ def build_within(work: Callable[[], Tables], where: str, fits: bool, note: str,
             f"state, max_memory = {byte_text(memory)}; {note}): raise max_states "
             "(--max-world-states) or max_memory (--max-memory)"
         ) from None
+
+
+class Grower:
+    """A lazily explored world's next exploration: ``grower(limit)``, Storm's build of
+    the states it expands before it has found ``limit`` (``work(limit)``), within the
+    budgets (:func:`build_within`; ``note`` says what bounds the states)."""
+
+    def __init__(self, work: Callable[[int], Tables], where: str, memory: int, note: str,
+                 max_states: int) -> None:
+        self.work, self.where, self.memory = work, where, memory
+        self.note, self.max_states = note, max_states
+
+    def __reduce__(self) -> Any:
+        raise TypeError(f"{self.where}: a world explored as the task reaches it does not "
+                        "pickle (Storm explores it on demand): load it with explore='full'")
+
+    def __call__(self, limit: int) -> Tables:
+        fits = limit * BYTES_PER_STATE <= self.memory
+        return build_within(lambda: self.work(limit), self.where, fits, self.note,
+                            self.max_states, self.memory)
+
+    def within(self, first: int, steps: int | None, growth: int) -> tuple[Tables, int]:
+        """The first exploration, of ``first`` states (all of them when the world is that
+        small), grown ``growth`` times at a time until every state within ``steps`` moves
+        is expanded (a task of that horizon; None: the first alone) or ``max_states``
+        are found; the tables and the limit they were explored with."""
+        tables = self(first)
+        while (steps is not None and not expanded_within(tables, steps)
+               and first < self.max_states):
+            first = min(first * growth, self.max_states)
+            tables = self(first)
+        return tables, first
 
 
 def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
