@@ -50,9 +50,11 @@ must have a non-empty range holding its initial value and every command with con
 probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
-in floating point, so where it alone fails the checks are redone in exact arithmetic
-(:func:`load_prism`), and a choice that sums to 1 only within that tolerance is divided
-by its sum (:attr:`PrismGame.normalised` counts them).  An expression deeper than
+in floating point, so where it alone fails, within the tolerance, the model is built
+without Storm's checks and every sum and range is checked on the copy (Storm's exact
+checks only word a refusal: :func:`~mitld_lp.worlds.prism_build.build_tables`), and a
+choice that sums to 1 only within that tolerance is divided by its sum
+(:attr:`PrismGame.normalised` counts them).  An expression deeper than
 Storm's parser takes is refused before it reads the file
 (:mod:`mitld_lp.worlds.prism_depth`).
 
