@@ -14,6 +14,9 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
   exploration, with the child process Storm explores in when it is capped) and the
   synthesis, ``process_cpu`` the child's CPU up to the end of the synthesis (imports
   included; the bench's extras below are not: ``child_cpu`` is the whole child);
+  of the whole, ``load_cpu`` is the load (Storm's exploration and the copy of its
+  model, in the capped child or not) and ``product_cpu`` what the synthesis does
+  before the solve (the product with the task's automaton, mostly);
   ``bytes_per_transition`` the peak resident size during ``synthesize`` (the peak is
   reset after the load, where Linux allows it) over the size before it, per product
   transition (the product is built inside ``synthesize``).  After the figures are
@@ -29,7 +32,8 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 * ``storm_prism``: Storm's whole run on the PRISM file and the QVBS property as
   published, as a process: import stormpy, parse, build, check with the best method
   found on the DRN (``storm_process_cpu``, up to the end of the check;
-  ``storm_prism_cpu`` the parse, build and check alone).
+  ``storm_prism_cpu`` the parse, build and check alone, ``storm_build_cpu`` the parse
+  and build: the peer of ``load_cpu``).
 
 ``--compare DIR`` runs ``ours`` a second time on each instance, in the same run, with
 the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git worktree add`` or
@@ -89,8 +93,9 @@ _NOT_A_TASK = ("not a probability", "qualitative")
 COLUMNS = ("instance", "value", "reference", "states", "transitions", "sweep_ms",
            "solve_cpu", "solve_sweeps", "iteration_sweeps", "iteration_s", "lp_s",
            "storm_check_cpu", "storm_check_sweeps", "storm_best",
-           "solve_over_storm_check", "whole_cpu", "process_cpu", "storm_prism_cpu",
-           "storm_process_cpu", "process_over_storm_process", "bytes_per_transition",
+           "solve_over_storm_check", "whole_cpu", "load_cpu", "product_cpu",
+           "storm_build_cpu", "process_cpu", "storm_prism_cpu", "storm_process_cpu",
+           "process_over_storm_process", "bytes_per_transition",
            "storm_bytes_per_transition", "storm_agrees", "certified")
 
 
@@ -154,6 +159,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
                certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
                process_cpu=process_cpu,
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
+               product_cpu=max(synth_cpu - r.solve_cpu, 0.0),
                bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
     # untimed from here: the DRN for Storm and the unit sweep
     v = np.random.default_rng(0).random(mdp.n_states)
@@ -351,6 +357,8 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         storm_prism_value=prism["value"] if prism else None,
         solve_cpu=ours["solve_cpu"], solve_sweeps=sweeps(ours["solve_cpu"]),
         whole_cpu=ours["whole_cpu"], process_cpu=ours["process_cpu"],
+        load_cpu=ours["load_cpu"], product_cpu=ours.get("product_cpu"),
+        storm_build_cpu=prism["build_cpu"] if prism else None,
         storm_best=storm["best"].lower(), storm_check_cpu=storm["best_cpu"],
         storm_check_sweeps=sweeps(storm["best_cpu"]),
         solve_over_storm_check=ratio(ours["solve_cpu"], storm["best_cpu"]),
@@ -381,6 +389,7 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
         base_solve_over_storm_check=None if flat or not storm_check
         else base["solve_cpu"] / storm_check,
         base_whole_cpu=base["whole_cpu"], base_process_cpu=base["process_cpu"],
+        base_load_cpu=base["load_cpu"], base_product_cpu=base.get("product_cpu"),
         base_bytes_per_transition=base["bytes_per_transition"],
         base_process_over_storm_process=None if flat or not storm
         else base["process_cpu"] / storm,
@@ -393,7 +402,8 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
 COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "states",
             "transitions", "base_solve_cpu", "solve_cpu", "storm_check_cpu",
             "base_solve_over_storm_check", "solve_over_storm_check", "base_whole_cpu",
-            "whole_cpu", "base_process_cpu", "process_cpu",
+            "whole_cpu", "base_load_cpu", "load_cpu", "storm_build_cpu", "base_product_cpu",
+            "product_cpu", "base_process_cpu", "process_cpu",
             "storm_process_cpu", "base_process_over_storm_process",
             "process_over_storm_process", "base_bytes_per_transition",
             "bytes_per_transition", "storm_bytes_per_transition")

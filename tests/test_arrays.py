@@ -25,6 +25,30 @@ def test_index_finds_what_was_inserted_across_growth(seed):
     assert index.size == len(truth)
 
 
+
+@pytest.mark.parametrize("seed, spread, moves", [
+    (0, 1 << 12, False),      # dense keys: the plain array throughout
+    (1, 1 << 20, True),       # past the bound (2^18): moved to the hash table
+    (2, 1 << 17, True),       # within the bound, but an eighth of the range is not filled
+])
+def test_a_dense_index_finds_what_a_dictionary_holds(seed, spread, moves):
+    rng = np.random.default_rng(seed)
+    index, truth = Index(dense=1 << 18), {}
+    for step in range(12):
+        top = min(spread, 64 << step) if not moves else spread  # growing, as a BFS's
+        keys = np.unique(rng.integers(0, top, size=int(rng.integers(1, 3000))))
+        keys = keys[[int(k) not in truth for k in keys]]
+        ids = rng.integers(0, 1 << 31, size=keys.size).astype(np.int32)
+        index.insert(keys, ids)
+        truth.update(zip(keys.tolist(), ids.tolist(), strict=True))
+        probe = np.concatenate([keys, keys, rng.integers(-5, spread + 5, size=200)])
+        want = [truth.get(k, -7) for k in probe.tolist()]
+        assert index.find(probe, absent=-7).tolist() == want
+    assert index.size == len(truth)
+    assert (index.dense is None) == moves
+    index.insert(np.array([-4, 1 << 40]), np.array([1, 2], dtype=np.int32))  # any int64 key
+    assert index.dense is None and index.find(np.array([-4, 1 << 40, -5])).tolist() == [1, 2, -1]
+
 @pytest.mark.parametrize("limit", [8, 1 << 22])
 def test_memo_computes_each_key_once_dense_or_hashed(limit, monkeypatch):
     monkeypatch.setattr(arrays, "DENSE_LIMIT", limit)

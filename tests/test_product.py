@@ -652,10 +652,12 @@ def test_component_counts_from_codes_equal_the_counts_over_records(name):
 
 @pytest.mark.parametrize("seed", [1, 5])
 def test_array_build_with_hashed_memos_equals_the_state_at_a_time_build(seed, monkeypatch):
-    """Memos beyond the dense limit move to a hash index (forced here with a tiny limit)."""
+    """Memos beyond the dense limit move to a hash index, and so does the index of the
+    states found (forced here with a tiny limit)."""
     import importlib
 
     monkeypatch.setattr(importlib.import_module("mitld_lp.util.arrays"), "DENSE_LIMIT", 8)
+    monkeypatch.setattr(importlib.import_module("mitld_lp.product.build"), "DENSE_LIMIT", 8)
     rng = np.random.default_rng(seed)
     text, dists = RANDOM_SPECS[seed % len(RANDOM_SPECS)]
     game = _random_game(rng, sorted(dists))

@@ -204,6 +204,10 @@ def test_bench_qvbs_measures_ours_and_storm_on_the_same_instances(tmp_path: Path
         assert row["certified"] == "True" and row["storm_agrees"] == "True"
         assert abs(float(row["storm_prism_value"]) - reference) < 1e-6
         assert float(row["solve_cpu"]) > 0 and float(row["storm_check_cpu"]) >= 0
+        # the process outside the solve, each part beside its peer
+        assert 0 <= float(row["load_cpu"]) <= float(row["whole_cpu"])
+        assert 0 <= float(row["product_cpu"]) <= float(row["whole_cpu"])
+        assert 0 < float(row["storm_build_cpu"]) <= float(row["storm_prism_cpu"])
     text = (out / "bench_qvbs.md").read_text()
     assert "no such instance was run" in text  # the quick instances are all small
 

@@ -119,6 +119,55 @@ def test_out_of_range_is_still_refused_when_a_sum_is_rounded(tmp_path: Path) -> 
         load_prism(write(tmp_path, text))
 
 
+
+def test_a_rounded_sum_costs_no_exact_build_when_the_world_is_accepted(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the exact build (three times the float one) runs only to word a refusal; an
+    # accepted world is Storm's unchecked float build, checked on the copy
+    import mitld_lp.worlds.prism_build as build
+
+    kinds: list[str] = []
+
+    def recording(stormpy, program, options, value_type, limit):  # noqa: ANN001, ANN202
+        kinds.append("float" if value_type is float else "exact")
+        return real(stormpy, program, options, value_type, limit)
+
+    real = build.storm_build
+    monkeypatch.setattr(build, "storm_build", recording)
+    game = load_prism(write(tmp_path, ROOM))
+    assert kinds == ["float", "float"]  # the checked build stopped at 0.8+0.1+0.1
+    assert game.n_states == 9  # 3 x 3, every cell reachable (by hand)
+    kinds.clear()
+    text = ROOM.replace("[stay] true -> true;", "[stay] true -> true;\n"
+                        "  [jump] x=2 & y=2 -> (x+3)/10 : (x'=0) + 0.49 : (y'=0);")
+    with pytest.raises(WorldError, match=r"module room, command 4 \(\[jump\] .*\): "
+                       r"probabilities sum to 0\.99( in a state)?, not 1$"):
+        load_prism(write(tmp_path, text, "bad.prism"))
+    # (a state-dependent sum, 0.5 + 0.49 at x=2: Storm's, not the constant pre-check)
+    # refused on the copy, then worded by Storm's exact checks, which pass 0.8+0.1+0.1
+    # and stop at the jump
+    assert kinds == ["float", "float", "exact"]
+
+
+@pytest.mark.parametrize("jump, found", [
+    ("(x'=3)", r"an update gives a variable a value outside its range"),  # not exact:
+    ("(x+3)/10 : (x'=0) + 0.3 : (y'=0)", r"probabilities sum to 0\.8, not 1"),  # 1/3 stops it
+])
+def test_a_refusal_after_an_inexact_sum_is_the_copys(tmp_path: Path, jump: str,
+                                                     found: str) -> None:
+    # 1/3 as 0.333333 sums to 0.999999: within the tolerance, and the exact checks stop
+    # there too, before x=2 & y=2: the refusal found on the copy stands, naming the state
+    text = ROOM.replace("0.8 : (y'=y+1) + 0.1 : (x'=max(x-1,0)) + 0.1 : true",
+                        "0.333333 : (y'=y+1) + 0.333333 : (x'=max(x-1,0)) + 0.333334 : true"
+                        ).replace("[stay] true -> true;",
+                                  f"[stay] true -> true;\n  [jump] x=2 & y=2 -> {jump};")
+    text = text.replace("0.333334", "0.333333")
+    with pytest.raises(WorldError, match=rf"m\.prism: at state \[x=2 & y=2\], action "
+                       rf"'jump': {found}"):
+        load_prism(write(tmp_path, text))
+
+
 # --------------------------------------------------------------------------- decided states
 
 

@@ -16,7 +16,7 @@ from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_si
 from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
-from mitld_lp.util.arrays import Grow, Index, concatenate, merge, ranks
+from mitld_lp.util.arrays import DENSE_LIMIT, Grow, Index, concatenate, merge, ranks
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.task import check_alphabet
@@ -153,27 +153,35 @@ def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:
 
 
 class _Found:
-    """The product states found so far: their keys in the order found, and an index."""
+    """The product states found so far: their keys in the order found, and an index
+    (a plain array by key while the keys are dense: :class:`~mitld_lp.util.arrays.Index`)."""
 
     def __init__(self, f: Layers, budget: BuildBudget) -> None:
         self.f, self.budget = f, budget
-        self.index = Index()
+        self.index = Index(DENSE_LIMIT)
         self.keys = Grow(np.int64)  # per state: its key (>= 0) or absorbing code (< 0)
 
     def intern(self, keys: np.ndarray) -> np.ndarray:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
         The budget is checked before the new states are stored."""
-        uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-        ids = self.index.find(uniq)
-        new = np.flatnonzero(ids < 0)
-        if new.size:
+        # shifted past the absorbing codes (-3 .. -1), so that every key is >= 0
+        ids = self.index.find(keys + _SHIFT)
+        miss = np.flatnonzero(ids < 0)
+        if miss.size:
+            uniq, first, inverse = np.unique(keys[miss], return_index=True,
+                                             return_inverse=True)
             n = self.keys.size
-            self.budget.check(n + new.size)
-            new = new[np.argsort(first[new], kind="stable")]
-            ids[new] = np.arange(n, n + new.size)
-            self.index.insert(uniq[new], ids[new])
-            self.keys.extend(uniq[new])
-        return ids[inverse]
+            self.budget.check(n + uniq.size)
+            new = np.empty(uniq.size, dtype=np.int64)
+            new[np.argsort(first, kind="stable")] = np.arange(n, n + uniq.size)
+            self.index.insert(uniq + _SHIFT, new)
+            self.keys.extend(uniq[np.argsort(new)])
+            ids[miss] = new[inverse.reshape(-1)]
+        return ids
+
+
+_SHIFT = -min(CODE.values())
+"""Added to a key in the index: the absorbing codes become 0 .. 2, every key >= 0."""
 
 
 def _expand(

@@ -1,6 +1,7 @@
 """Array kernels shared by the product construction and the solvers: integer sets
-(:func:`unique`), a growable array (:class:`Grow`), a hash index (:class:`Index`), a
-memo over integer keys (:class:`Memo`), and the row helpers of a batched sparse build
+(:func:`unique`), a growable array (:class:`Grow`), an index of ids by key
+(:class:`Index`: a plain array while the keys are dense, else a hash table), a memo over
+integer keys (:class:`Memo`), and the row helpers of a batched sparse build
 (:func:`ranks`, :func:`merge`, :func:`concatenate`).  Each works on a whole batch of
 keys or entries at once, in numpy."""
 
@@ -128,16 +129,30 @@ class Memo:
 
 
 class Index:
-    """Ids (int32) by int64 key: open addressing over arrays, probed for a whole batch
-    of keys at once (linear probing, load at most 1/2, Fibonacci hashing)."""
+    """Ids (int32) by int64 key, probed for a whole batch of keys at once.
+
+    With ``dense`` (a bound on the keys, e.g. :data:`DENSE_LIMIT`), while every key is
+    in ``[0, dense)`` and they fill at least an eighth of ``[0, largest key]``, a plain
+    array by key (4 bytes a key below the largest: one gather per batch, no hashing,
+    no rehash); else, or once a key breaks either rule, open addressing over arrays
+    (linear probing, load at most 1/2, Fibonacci hashing: 24 to 48 bytes an entry)."""
 
     _EMPTY = -(1 << 62)
+    _SPARSE = 8  # the dense array holds at most this many slots per entry (past 64K)
 
-    def __init__(self) -> None:
+    def __init__(self, dense: int = 0) -> None:
+        self.dense_limit = dense
+        self.dense: np.ndarray | None = np.full(64, -1, dtype=np.int32) if dense else None
         self.bits = 16
+        self.keys = np.zeros(0, dtype=np.int64)  # the hash table's, made when needed
+        self.ids = np.zeros(0, dtype=np.int32)
+        self.size = 0
+        if self.dense is None:
+            self._empty_table()
+
+    def _empty_table(self) -> None:
         self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
         self.ids = np.zeros(1 << self.bits, dtype=np.int32)
-        self.size = 0
 
     def _home(self, keys: np.ndarray) -> np.ndarray:
         h = np.ascontiguousarray(keys, dtype=np.int64).view(np.uint64) * np.uint64(
@@ -146,7 +161,14 @@ class Index:
         return (h >> np.uint64(64 - self.bits)).view(np.int64)
 
     def find(self, keys: np.ndarray, absent: int = -1) -> np.ndarray:
-        """The id of each key, ``absent`` where absent."""
+        """The id of each key, ``absent`` where absent (keys may repeat)."""
+        if self.dense is not None:
+            out = np.full(keys.size, absent, dtype=np.int64)
+            inside = np.flatnonzero((keys >= 0) & (keys < self.dense.size))
+            got = self.dense[keys[inside]]
+            known = got >= 0
+            out[inside[known]] = got[known]
+            return out
         at = self._home(keys)
         found = self.keys[at]
         hit = found == keys
@@ -165,13 +187,31 @@ class Index:
 
     def insert(self, keys: np.ndarray, ids: np.ndarray) -> None:
         """Add distinct keys that are not in the index yet."""
+        if keys.size == 0:
+            return
+        if self.dense is not None:
+            top = int(keys.max()) + 1
+            if (int(keys.min()) >= 0 and top <= self.dense_limit
+                    and top <= max(1 << 16, self._SPARSE * (self.size + keys.size))):
+                if top > self.dense.size:
+                    bigger = np.full(min(max(top, 2 * self.dense.size), self.dense_limit), -1,
+                                     dtype=np.int32)
+                    bigger[: self.dense.size] = self.dense
+                    self.dense = bigger
+                self.dense[keys] = ids
+                self.size += keys.size
+                return
+            known = np.flatnonzero(self.dense >= 0)  # to a hash table, for good
+            held = self.dense[known]
+            self.dense, self.size = None, 0
+            self._empty_table()
+            self.insert(known, held)
         if 2 * (self.size + keys.size) > (1 << self.bits):
             old_keys, old_ids = self.keys[self.keys != self._EMPTY], self.ids[
                 self.keys != self._EMPTY]
             while 2 * (self.size + keys.size) > (1 << self.bits):
                 self.bits += 1
-            self.keys = np.full(1 << self.bits, self._EMPTY, dtype=np.int64)
-            self.ids = np.zeros(1 << self.bits, dtype=np.int32)
+            self._empty_table()
             self.size = 0
             self.insert(old_keys, old_ids)
         pos = self._home(keys)

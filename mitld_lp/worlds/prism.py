@@ -50,9 +50,11 @@ must have a non-empty range holding its initial value and every command with con
 probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
-in floating point, so where it alone fails the checks are redone in exact arithmetic
-(:func:`load_prism`), and a choice that sums to 1 only within that tolerance is divided
-by its sum (:attr:`PrismGame.normalised` counts them).  An expression deeper than
+in floating point, so where it alone fails, within the tolerance, the model is built
+without Storm's checks and every sum and range is checked on the copy (Storm's exact
+checks only word a refusal: :func:`~mitld_lp.worlds.prism_build.build_tables`), and a
+choice that sums to 1 only within that tolerance is divided by its sum
+(:attr:`PrismGame.normalised` counts them).  An expression deeper than
 Storm's parser takes is refused before it reads the file
 (:mod:`mitld_lp.worlds.prism_depth`).
 
@@ -80,7 +82,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -97,11 +99,11 @@ from mitld_lp.worlds.prism_build import (
     BYTES_PER_STATE,
     CAP_BYTES_PER_STATE,
     UNEXPLORED,
+    Grower,
     PrismTooLarge,
     build_tables,
     build_within,
     check_budgets,
-    expanded_within,
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
@@ -334,7 +336,7 @@ class LazyPrismGame(PrismGame):
                       "explore it whole ([prism] explore = \"full\" in a model file, "
                       "load_prism(explore=\"full\"))")
 
-    grow: Any = field(default=None, repr=False)  # limit -> Tables (a _Grower)
+    grow: Any = field(default=None, repr=False)  # limit -> Tables (a prism_build.Grower)
     limit: int = 0
     max_states: int = defaults.MAX_STATES
     program_actions: frozenset[str] = frozenset()
@@ -541,12 +543,9 @@ def load_prism(
                          f"named {UNEXPLORED!r}: use explore='full'")
     first = min(first_states, max_states)
     if lazy:  # the first states Storm finds; all of them when the world is that small
-        grower = _Grower(work, where, memory, str(bound), max_states)
-        tables = grower(first)
+        grower = Grower(work, where, memory, str(bound), max_states)
         steps = horizon(task) if task is not None and explore == "auto" else None
-        while steps is not None and not expanded_within(tables, steps) and first < max_states:
-            first = min(first * LAZY_GROWTH, max_states)  # the task's horizon reaches
-            tables = grower(first)  # further: explored before the product, at once
+        tables, first = grower.within(first, steps, LAZY_GROWTH)
     else:
         fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
         tables = build_within(work, where, fits, str(bound), max_states, memory)
@@ -580,22 +579,3 @@ def _labelled(program: Any) -> set[str]:
     """The actions of the program's commands."""
     return {cmd.action_name for module in program.modules for cmd in module.commands
             if cmd.is_labeled}
-
-
-class _Grower:
-    """A lazily explored world's next exploration: ``grower(limit)``, Storm's build of
-    the states it expands before it has found ``limit``, within the budgets."""
-
-    def __init__(self, work: Callable[[int], Tables], where: str, memory: int, note: str,
-                 max_states: int) -> None:
-        self.work, self.where, self.memory = work, where, memory
-        self.note, self.max_states = note, max_states
-
-    def __reduce__(self) -> Any:
-        raise TypeError(f"{self.where}: a world explored as the task reaches it does not "
-                        "pickle (Storm explores it on demand): load it with explore='full'")
-
-    def __call__(self, limit: int) -> Tables:
-        fits = limit * BYTES_PER_STATE <= self.memory
-        return build_within(lambda: self.work(limit), self.where, fits, self.note, self.max_states,
-                            self.memory)
