@@ -165,3 +165,38 @@ def test_flow_on_a_kept_walk_matches_a_dense_solve(seed: int, monkeypatch) -> No
     x = np.linalg.solve(np.eye(q.n_states) - moves.T, b)
     owner = q.choice_state()
     np.testing.assert_allclose(y, weights * x[owner], rtol=1e-10, atol=1e-14)
+
+
+def test_compiled_single_state_runs_match_the_numpy_walk(monkeypatch) -> None:
+    """The walk with its single states' runs of levels compiled
+    (:mod:`mitld_lp.solvers.level_kernels`) against SciPy's direct solves of the chain
+    and of its transpose, and its values against the NumPy walk's to the last bit (the
+    same sums in the same order)."""
+    pytest.importorskip("numba")
+    from mitld_lp.solvers import topological
+
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 256)
+    n = 1500
+    q = _chain(n, 7)
+    rhs = np.random.default_rng(4).random((n, 2))
+    want = spla.spsolve(sp.csc_array(sp.eye_array(n) - q), rhs)
+    flow = spla.spsolve(sp.csc_array(sp.eye_array(n) - q.T), rhs)
+    compiled = topological.level_kernels(1, 1, compiled=True)
+    calls = []
+
+    class Counted:  # the compiled kernels, each call counted
+        def __getattr__(self, name):
+            calls.append(name)
+            return getattr(compiled, name)
+
+    monkeypatch.setattr(chain_levels, "level_kernels", lambda *a: None)
+    plain = ChainLevels(q)
+    monkeypatch.setattr(chain_levels, "level_kernels", lambda *a: Counted())
+    fast = ChainLevels(q)
+    for walk in (plain, fast):
+        np.testing.assert_allclose(walk.solve(rhs), want, rtol=1e-11)
+        np.testing.assert_allclose(walk.solve(rhs[:, 0]), want[:, 0], rtol=1e-11)
+        np.testing.assert_allclose(walk.solve_transposed(rhs), flow, rtol=1e-11)
+        np.testing.assert_allclose(walk.solve_transposed(rhs[:, 1]), flow[:, 1], rtol=1e-11)
+    assert {"chain_solve", "chain_flow"} <= set(calls)
+    assert np.array_equal(fast.solve(rhs), plain.solve(rhs))
