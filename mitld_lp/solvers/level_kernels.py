@@ -10,7 +10,10 @@ its answers are the NumPy walk's to the last bit: one call for a run of levels i
 place of a dozen NumPy calls per level (a deadline clock makes a thousand levels and
 more).  The arrays are those of :class:`~mitld_lp.solvers.topological.SingleLevels`
 (states in level order, their choices, the choices' entries less the self-loops), or
-a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.
+a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.  One
+exception: :func:`chain_flow` pushes a level's single states before its cyclic ones,
+where :meth:`~mitld_lp.solvers.chain_levels.ChainLevels.solve_transposed`'s NumPy walk
+pushes them in level order, so a successor of both may differ in its last bits.
 """
 
 from __future__ import annotations
