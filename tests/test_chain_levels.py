@@ -117,3 +117,86 @@ def test_walked_flow_and_certificate_chain_match_dense_solves(seed: int,
                            rows[:, np.flatnonzero(ch.sure)].sum(axis=1))
     np.testing.assert_allclose(ch.values[live], np.clip(want, 0.0, 1.0), rtol=1e-10,
                                atol=1e-15)
+
+
+@pytest.mark.parametrize("walk_from", [256, 10**9])  # the level walk, then one LU
+def test_one_walk_solves_the_transposed_chain(walk_from: int, monkeypatch) -> None:
+    """``solve_transposed`` (a flow through the chain) on the walk that solved the
+    chain's values, its factorisations shared, against SciPy's direct solve of
+    ``(I - Q^T) x = rhs``: two columns and a vector, before and after a value solve."""
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", walk_from)
+    n = 1500
+    q = _chain(n, 5)
+    rhs = np.random.default_rng(3).random((n, 2))
+    want = spla.spsolve(sp.csc_array(sp.eye_array(n) - q.T), rhs)
+    walk = ChainLevels(q)
+    np.testing.assert_allclose(walk.solve_transposed(rhs), want, rtol=1e-11)
+    walk.solve(rhs)  # the factorisations kept by a value solve serve the flow too
+    np.testing.assert_allclose(walk.solve_transposed(rhs[:, 1]), want[:, 1], rtol=1e-11)
+    # a wrong direction would be the values' solve: it differs here
+    assert not np.allclose(walk.solve(rhs[:, 1]), want[:, 1], rtol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_flow_on_a_kept_walk_matches_a_dense_solve(seed: int, monkeypatch) -> None:
+    """``policy_flow`` given, for every non-trivial level, the walk of a deterministic
+    policy's chain there (as the greedy block answer hands it on) against the dense
+    solve of ``x = b + P_pi^T x``: the kept walk is that block's flow."""
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 2)
+    mdp = random_mdp(240, seed=seed, target_fraction=0.08, sink_fraction=0.08,
+                     self_loop_fraction=0.1, max_choices=3, max_successors=3)
+    q = reduce(mdp, mdp.target)
+    blk = q.order
+    assert blk.size.max() > 2
+    rng = np.random.default_rng(seed)
+    groups = np.asarray(q.row_groups)
+    pick = groups[:-1] + (rng.random(q.n_states) * np.diff(groups)).astype(np.int64)
+    weights = np.zeros(q.n_choices)
+    weights[pick] = 1.0
+    walks = {}
+    for level in blk.walk():
+        if level.rest.size:
+            block = sp.csr_array(q.matrix[pick[level.rest]][:, level.rest])
+            walks[level.index] = (level.rest, ChainLevels(block))
+    assert walks
+    b = rng.random(q.n_states)
+    y = policy_flow(q, blk, weights, b, walks=walks)
+    moves = q.matrix[pick].toarray()
+    x = np.linalg.solve(np.eye(q.n_states) - moves.T, b)
+    owner = q.choice_state()
+    np.testing.assert_allclose(y, weights * x[owner], rtol=1e-10, atol=1e-14)
+
+
+def test_compiled_single_state_runs_match_the_numpy_walk(monkeypatch) -> None:
+    """The walk with its single states' runs of levels compiled
+    (:mod:`mitld_lp.solvers.level_kernels`) against SciPy's direct solves of the chain
+    and of its transpose, and its values against the NumPy walk's to the last bit (the
+    same sums in the same order)."""
+    pytest.importorskip("numba")
+    from mitld_lp.solvers import topological
+
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 256)
+    n = 1500
+    q = _chain(n, 7)
+    rhs = np.random.default_rng(4).random((n, 2))
+    want = spla.spsolve(sp.csc_array(sp.eye_array(n) - q), rhs)
+    flow = spla.spsolve(sp.csc_array(sp.eye_array(n) - q.T), rhs)
+    compiled = topological.level_kernels(1, 1, compiled=True)
+    calls = []
+
+    class Counted:  # the compiled kernels, each call counted
+        def __getattr__(self, name):
+            calls.append(name)
+            return getattr(compiled, name)
+
+    monkeypatch.setattr(chain_levels, "level_kernels", lambda *a: None)
+    plain = ChainLevels(q)
+    monkeypatch.setattr(chain_levels, "level_kernels", lambda *a: Counted())
+    fast = ChainLevels(q)
+    for walk in (plain, fast):
+        np.testing.assert_allclose(walk.solve(rhs), want, rtol=1e-11)
+        np.testing.assert_allclose(walk.solve(rhs[:, 0]), want[:, 0], rtol=1e-11)
+        np.testing.assert_allclose(walk.solve_transposed(rhs), flow, rtol=1e-11)
+        np.testing.assert_allclose(walk.solve_transposed(rhs[:, 1]), flow[:, 1], rtol=1e-11)
+    assert {"chain_solve", "chain_flow"} <= set(calls)
+    assert np.array_equal(fast.solve(rhs), plain.solve(rhs))

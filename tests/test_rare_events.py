@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from fractions import Fraction
 
+import pytest
 from conftest import build_mdp
 
 from mitld_lp import defaults
@@ -145,3 +146,39 @@ def test_bench_leaves_apart_only_what_the_graph_decides() -> None:
     assert lo == hi == 0.0 and said is not None and said.startswith("0 by the graph")
     lo, hi, said = why("F A", slip=0.3, regions={"A": [(7, 7)]})
     assert lo == hi == 1.0 and said is not None and said.startswith("1 by the graph")
+
+
+@pytest.mark.parametrize("walk_from", [2, 10**9])  # the level walk, then one LU
+def test_rare_event_flow_of_the_greedy_block_is_exact(walk_from: int, monkeypatch) -> None:
+    """The LP stage's block answered by the bounds' greedy policy (its threshold
+    lowered to this small block) and its occupancy flow taken from that policy's own
+    chain walk, transposed (``ChainLevels.solve_transposed``, not a new walk): the
+    expected visits of stage i's ``try`` are p^i / (1 - r (1 + p + ... + p^(K-1))),
+    in Fractions, and the primal objective is the exact rare value."""
+    from mitld_lp.solvers import chain_levels, lp_blocks
+
+    monkeypatch.setattr(lp_blocks, "GREEDY_MIN_CHOICES", 1)
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", walk_from)
+    used = []
+    transposed = chain_levels.ChainLevels.solve_transposed
+
+    def spy(self, rhs):
+        used.append(self.chain.shape[0])
+        return transposed(self, rhs)
+
+    monkeypatch.setattr(chain_levels.ChainLevels, "solve_transposed", spy)
+    mdp = _attempts()
+    exact = _exact(mdp)
+    m = mdp.matrix
+    row = int(mdp.row_groups[0])
+    p, r = Fraction(float(m[row, 1])), Fraction(float(m[row, 0]))
+    visits = 1 / (1 - r * sum(p ** i for i in range(K)))
+    it = interval_iteration(mdp, mdp.target, progress=False)
+    lp = solve_lp(mdp, mdp.target, bounds=(it.lower, it.upper))
+    assert lp.status is Status.OPTIMAL, lp.message
+    assert "by the bounds' greedy policy" in lp.message and used == [K]
+    tries = mdp.row_groups[:K]  # each stage's first choice is ``try``
+    for i in range(K):
+        want = p ** i * visits
+        assert abs(Fraction(float(lp.occupancy[tries[i]])) - want) <= want * Fraction(1, 10**12)
+    assert abs(Fraction(lp.primal_objective) - exact) <= exact * Fraction(1, 10**12)

@@ -9,7 +9,12 @@ whole chain took 0.7 s, the level walk over its own components about 0.1 s.  The
 policy's flow (:func:`mitld_lp.solvers.lp_blocks.policy_flow`, the transposed chain:
 its components are the same, its levels reversed) and the certificates' chain
 (:mod:`mitld_lp.solvers.certify_chain`: its values, then its slack ``W`` on the same
-factorisations) are both solved so.
+factorisations) are both solved so.  One walk serves a chain and its transpose
+(:meth:`ChainLevels.solve_transposed`: the levels upstream first, a cyclic level by
+the transposed solve of the same LU): the flow of a block's greedy policy reuses the
+walk :mod:`mitld_lp.solvers.greedy_block` found for the policy's values, instead of
+finding the same components again (on QVBS ``zeroconf`` 20-8-false, 1,241,065 block
+states, that search is most of the flow's chain solve).
 
 Downstream first: a single state by
 :math:`x(s) = (b(s) + \sum_{s' \ne s} Q(s, s') x(s')) / (1 - Q(s, s))` (its own entry
@@ -26,8 +31,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import Blocks, graph_blocks, rows_dot
-from mitld_lp.solvers.topological import DenseLU, chain_lu
+from mitld_lp.solvers.graph import Blocks, graph_blocks, row_entries, rows_dot
+from mitld_lp.solvers.topological import DenseLU, chain_lu, level_kernels
 
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
@@ -50,7 +55,7 @@ class ChainLevels:
 fewer than :data:`WALK_MIN_STATES` states is one LU
 (:func:`~mitld_lp.solvers.topological.chain_lu`: dense when small)."""
 
-    __slots__ = ("chain", "self_loop", "blocks", "_cyclic")
+    __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles")
 
     def __init__(self, chain: sp.csr_array | sp.csc_array) -> None:
         self.chain = sp.csr_array(chain)
@@ -61,6 +66,11 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
             graph_blocks(sp.csr_array(self.chain != 0, dtype=np.float64), self.self_loop))
         # per level with cyclic states: (their rows, the LU of I - their block)
         self._cyclic: dict[int, tuple[sp.csr_array, SuperLU | DenseLU]] = {}
+        # the single states' runs of levels by one compiled call each, where the
+        # quotient's level walks are compiled (numba loaded, or many levels)
+        self._kernels = (None if self.blocks is None else
+                         level_kernels(self.chain.nnz, self.blocks.n_levels))
+        self._singles: tuple[np.ndarray, np.ndarray, np.ndarray, list[int]] | None = None
 
     def _factor(self, level: int, states: np.ndarray) -> tuple[sp.csr_array,
                                                               SuperLU | DenseLU]:
@@ -83,6 +93,8 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         if self.blocks is None:
             everything = np.arange(self.chain.shape[0])
             return np.asarray(self._factor(0, everything)[1].solve(rhs), dtype=np.float64)
+        if self._kernels is not None:
+            return self._compiled(rhs, transposed=False)
         x = np.zeros(rhs.shape)
         loop = self.self_loop if rhs.ndim == 1 else self.self_loop[:, None]
         for level in self.blocks.walk():
@@ -93,6 +105,96 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
                 # the level's own cyclic states are still 0 in x: rows @ x sees below
                 x[cyclic] = np.asarray(lu.solve(rhs[cyclic] + rows @ x), dtype=np.float64)
         return x
+
+    def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:
+        """``x = rhs + Q^T x`` in float64 (a flow through the chain: ``rhs`` a vector,
+        or a column per right-hand side), over the same components and factorisations
+        as :meth:`solve`: the levels upstream first, a single state divided by its
+        self-loop's complement, a cyclic level by the transposed solve of its LU, then
+        each solved state's flow pushed along its row to the levels below."""
+        x = np.array(rhs, dtype=np.float64)  # the inflow, added level by level
+        if self.blocks is None:
+            everything = np.arange(self.chain.shape[0])
+            lu = self._factor(0, everything)[1]
+            return np.asarray(lu.solve(x, trans="T"), dtype=np.float64)
+        if self._kernels is not None:
+            return self._compiled(x, transposed=True)
+        blk = self.blocks
+        loop = self.self_loop if x.ndim == 1 else self.self_loop[:, None]
+        for level in blk.walk(upstream_first=True):
+            one, cyclic = level.single, level.rest
+            x[one] /= 1.0 - loop[one]
+            if cyclic.size:
+                lu = self._factor(level.index, cyclic)[1]
+                x[cyclic] = np.asarray(lu.solve(x[cyclic], trans="T"), dtype=np.float64)
+            row, col, val = row_entries(self.chain, level.states)
+            out = blk.level[blk.component[col]] != level.index  # below: no edge across
+            flow = x[level.states[row[out]]]
+            np.add.at(x, col[out], flow * (val[out] if x.ndim == 1 else val[out, None]))
+        return x
+
+    def _runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+        """The single states downstream first (in level order), where each level's
+        start among them, the same states upstream first (each level's in the same
+        order), and the levels with cyclic components; gathered once."""
+        if self._singles is None:
+            blk = self.blocks
+            assert blk is not None
+            order = blk.by_level
+            one = blk.single(order)
+            states = np.ascontiguousarray(order[one])
+            level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[one]
+            at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
+            upstream = np.ascontiguousarray(states[np.argsort(-level_of, kind="stable")])
+            self._singles = (states, at, upstream,
+                             np.unique(blk.level[blk.size > 1]).tolist())
+        return self._singles
+
+    def _compiled(self, rhs: np.ndarray, *, transposed: bool) -> np.ndarray:
+        """:meth:`solve` (``rhs``) or :meth:`solve_transposed` (``rhs``: a copy, the
+        flow added into it) with each run of single-state levels between two cyclic
+        ones in one call of :mod:`mitld_lp.solvers.level_kernels`: a policy's chain is
+        mostly single states (QVBS ``zeroconf`` 20-4-false's greedy chain: 212,793 of
+        213,268 states, over 380 levels of which one has a cyclic component), where the
+        NumPy walk costs a few calls per level."""
+        blk, kern, c = self.blocks, self._kernels, self.chain
+        assert blk is not None
+        states, at, upstream, cyclic_levels = self._runs()
+        b = np.ascontiguousarray(rhs.reshape(rhs.shape[0], -1))
+        total = int(at[-1])
+        if transposed:
+            x = b
+            stop = blk.n_levels
+            for lv in reversed(cyclic_levels):
+                # levels lv to stop - 1, upstream first: their flows are complete
+                kern.chain_flow(upstream[total - at[stop]:total - at[lv]], c.indptr,
+                                c.indices, c.data, self.self_loop, x)
+                cyclic = blk.states_at(lv)
+                cyclic = cyclic[~blk.single(cyclic)]
+                lu = self._factor(lv, cyclic)[1]
+                x[cyclic] = np.asarray(lu.solve(x[cyclic], trans="T"),
+                                       dtype=np.float64).reshape(cyclic.size, -1)
+                row, col, val = row_entries(c, cyclic)
+                out = blk.level[blk.component[col]] != lv
+                np.add.at(x, col[out], val[out, None] * x[cyclic[row[out]]])
+                stop = lv
+            kern.chain_flow(upstream[total - at[stop]:], c.indptr, c.indices, c.data,
+                            self.self_loop, x)
+        else:
+            x = np.zeros(b.shape)
+            done = 0
+            for lv in cyclic_levels:
+                kern.chain_solve(states[at[done]:at[lv + 1]], c.indptr, c.indices, c.data,
+                                 self.self_loop, b, x)
+                cyclic = blk.states_at(lv)
+                cyclic = cyclic[~blk.single(cyclic)]
+                rows, lu = self._factor(lv, cyclic)
+                x[cyclic] = np.asarray(lu.solve(b[cyclic] + rows @ x),
+                                       dtype=np.float64).reshape(cyclic.size, -1)
+                done = lv + 1
+            kern.chain_solve(states[at[done]:], c.indptr, c.indices, c.data,
+                             self.self_loop, b, x)
+        return x if rhs.ndim == 2 else x[:, 0]
 
 
 def chain_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray) -> np.ndarray:

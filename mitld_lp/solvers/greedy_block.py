@@ -34,9 +34,10 @@ each state's threshold of the optimum, so a choice it picks loses at most that.
 The chain of one deterministic policy is far more acyclic than the block: on QVBS
 ``zeroconf`` 1000-4-false the 213,268-state block's policy chain splits into 208,702
 components (the largest 4,567 states) over 95 levels.  It is solved level by level
-(:func:`~mitld_lp.solvers.chain_levels.chain_solve`: single states by their self-loop,
-a cyclic component by one sparse LU of its own size) in 0.12 s, where one LU of the
-whole chain took 1.0 s.
+(:class:`~mitld_lp.solvers.chain_levels.ChainLevels`: single states by their
+self-loop, a cyclic component by one sparse LU of its own size) in 0.12 s, where one LU
+of the whole chain took 1.0 s; the walk is kept with the answer, and the block's flow
+under the policy (a block it settles whole) is its transposed solve.
 
 Why not the LP there: 319,663 of that block's 336,567 choices that the bounds keep are
 exact ties (symmetric hosts), which no bound can prune; the interior-point method
@@ -53,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.chain_levels import chain_solve
+from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import Sense, backward_reachable, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.topological import Block
@@ -68,12 +69,16 @@ class Greedy:
     """The greedy policy of a block's bounds and what its certificate settles: its
     choice (local), value and one-hot weights in every state, exact LP answers on the
     states that cannot reach one where the certificate fails; ``left`` (local state
-    indices, sorted) are the others, for the LP."""
+    indices, sorted) are the others, for the LP.  ``walk``: the level walk of the
+    policy's chain over its own components (local indices), its factorisations kept:
+    the block's flow under this policy is its transposed solve
+    (:func:`mitld_lp.solvers.lp_blocks.policy_flow`)."""
 
     chosen: np.ndarray
     values: np.ndarray
     weights: np.ndarray
     left: np.ndarray
+    walk: ChainLevels
 
     @property
     def n_settled(self) -> int:
@@ -95,8 +100,8 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     counts = np.diff(groups)
     n = counts.size
     chosen = segmented_argmax(reward + block.inner @ bound, groups, sense=sense)
-    both = chain_solve(sp.csr_array(block.inner[chosen]),
-                       np.column_stack([reward[chosen], np.ones(n)]))
+    walk = ChainLevels(sp.csr_array(block.inner[chosen]))
+    both = walk.solve(np.column_stack([reward[chosen], np.ones(n)]))
     v, steps = both[:, 0], both[:, 1]
     if not (np.all(np.isfinite(both)) and np.all(steps >= 1.0)):
         logger.info("greedy policy of %d block states: its chain did not solve", n)
@@ -125,7 +130,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
         return None
     weights = np.zeros(block.choices.size)
     weights[chosen] = 1.0
-    return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left)
+    return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left, walk)
 
 
 _SHARE = 4.0

@@ -10,7 +10,10 @@ its answers are the NumPy walk's to the last bit: one call for a run of levels i
 place of a dozen NumPy calls per level (a deadline clock makes a thousand levels and
 more).  The arrays are those of :class:`~mitld_lp.solvers.topological.SingleLevels`
 (states in level order, their choices, the choices' entries less the self-loops), or
-a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.
+a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.  One
+exception: :func:`chain_flow` pushes a level's single states before its cyclic ones,
+where :meth:`~mitld_lp.solvers.chain_levels.ChainLevels.solve_transposed`'s NumPy walk
+pushes them in level order, so a successor of both may differ in its last bits.
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["chain_values", "single_bounds", "single_flow", "single_values"]
+__all__ = ["chain_flow", "chain_solve", "chain_values", "single_bounds", "single_flow",
+           "single_values"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -149,3 +153,44 @@ def chain_values(order, indptr, indices, data, diag, b, kappa, v,
             dw += data[e] * w[t]
         v[s] = (b[s] + dv) / (1.0 - diag[s])
         w[s] = (2.0 * kappa[s] * v[s] + dw) / (1.0 - diag[s])
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_solve(order, indptr, indices, data, diag, rhs, x):  # pragma: no cover - compiled
+    """The single states ``order`` (downstream first) of a transient chain ``x = rhs +
+    Q x`` (CSR arrays; a column of ``rhs`` and ``x`` per right-hand side; a state's own
+    entry reads its ``x`` still 0): ``x = (rhs + sum Q x) / (1 - q)``, the sum from 0
+    in the entries' order (:meth:`mitld_lp.solvers.chain_levels.ChainLevels.solve`)."""
+    k = x.shape[1]
+    acc = np.empty(k)
+    for i in range(order.shape[0]):
+        s = order[i]
+        for j in range(k):
+            acc[j] = 0.0
+        for e in range(indptr[s], indptr[s + 1]):
+            t = indices[e]
+            w = data[e]
+            for j in range(k):
+                acc[j] += w * x[t, j]
+        for j in range(k):
+            x[s, j] = (rhs[s, j] + acc[j]) / (1.0 - diag[s])
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_flow(order, indptr, indices, data, diag, x):  # pragma: no cover - compiled
+    """The single states ``order`` (upstream first) of a flow ``x = rhs + Q^T x``
+    through a transient chain (``x`` holds ``rhs`` plus the inflow so far, a column per
+    right-hand side): each state's inflow divided by ``1 - q``, then pushed along its
+    row's entries but its own, in their order
+    (:meth:`mitld_lp.solvers.chain_levels.ChainLevels.solve_transposed`)."""
+    k = x.shape[1]
+    for i in range(order.shape[0]):
+        s = order[i]
+        for j in range(k):
+            x[s, j] /= 1.0 - diag[s]
+        for e in range(indptr[s], indptr[s + 1]):
+            t = indices[e]
+            if t != s:
+                w = data[e]
+                for j in range(k):
+                    x[t, j] += w * x[s, j]

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.chain_levels import chain_solve
+from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
 from mitld_lp.solvers.crossover import polish
 from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
 from mitld_lp.solvers.graph import (
@@ -82,7 +82,9 @@ def sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
 
 
 def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
-                singles: SingleLevels | None = None) -> np.ndarray:
+                singles: SingleLevels | None = None,
+                walks: dict[int, tuple[np.ndarray, ChainLevels]] | None = None
+                ) -> np.ndarray:
     r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
     per state) from the start weights ``b``: ``x = b + P_w^T x`` with
     ``P_w = sum_c w(c) P_hat(c, .)``, then ``y(c) = w(c) x(owner(c))``.
@@ -97,6 +99,10 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
     ``singles``: the single states of every level with their compiled walk
     (:class:`~mitld_lp.solvers.topological.SingleLevels` with kernels), which then
     takes each run of levels between two non-trivial components in one call.
+    ``walks``: per level index, a non-trivial level's states (in the walk's order) and
+    the walk of ``weights``' chain on them that solved its values
+    (:class:`~mitld_lp.solvers.greedy_block.Greedy`); its flow is that walk's
+    transposed solve (the same components and factorisations), not a new one.
     """
     x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
     walk: Iterator[Level] = (blk.walk(upstream_first=True)
@@ -112,7 +118,10 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
         stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
                            minlength=states.size)
         x[level.single] /= 1.0 - stay[:n_single]
-        if level.rest.size:
+        kept = None if walks is None else walks.get(level.index)
+        if kept is not None and np.array_equal(kept[0], level.rest):
+            x[level.rest] = kept[1].solve_transposed(x[level.rest])
+        elif level.rest.size:
             block = level.rest  # the tail of ``states``: local index = owner - n_single
             pick = owner_local >= n_single
             sub = sp.csr_array(q.matrix[choices[pick]])
@@ -335,6 +344,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = n_eliminated = n_greedy = 0
+    walks: dict[int, tuple[np.ndarray, ChainLevels]] = {}  # greedy chains, for the flow
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     singles = SingleLevels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
@@ -358,6 +368,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
             values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
             weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
             if greedy.left.size == 0:
+                walks[level.index] = (rest, greedy.walk)
                 continue
             block = Block.of(q, rest := rest[greedy.left])
             lp = block_lp(block, values)
@@ -388,7 +399,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights
-    y = policy_flow(q, blk, weights, b_eq, singles)
+    y = policy_flow(q, blk, weights, b_eq, singles, walks)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
                + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"

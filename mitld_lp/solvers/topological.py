@@ -385,8 +385,8 @@ class DenseLU:
     def __init__(self, a: sp.csc_array) -> None:
         self.a = a.toarray()
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return np.linalg.solve(self.a, rhs)
+    def solve(self, rhs: np.ndarray, trans: str = "N") -> np.ndarray:
+        return np.linalg.solve(self.a.T if trans == "T" else self.a, rhs)
 
 
 def chain_lu(a: sp.csc_array, *, dense: bool = True) -> SuperLU | DenseLU:
