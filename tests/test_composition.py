@@ -780,11 +780,12 @@ def test_library_refusals_name_what_the_caller_gave() -> None:
     with pytest.raises(ProblemError, match="pareto: the curve poses its own constraint"):
         pareto(grid, against="steps", then="min-cost")
     # (the curve with sensors is solved now: tests/test_sensed_constrained.py, with false
-    # alarms at a point law and a band's worst case too; what the sensed routes refuse,
-    # false alarms with a band read for its best law, is named as the caller gave it)
-    banded = (MODELS / "bus_grid.toml").read_text().replace(
-        "mu1 = { geometric = 0.8 }", "mu1 = { geometric = [0.7, 0.9] }")
-    sensed = loads_model(banded + "\n[sensors]\nb1 = { detect = 0.5, false_alarm = 0.1 }\n")
-    with pytest.raises(ProblemError, match="sensors.b1.false_alarm = 0.1") as info:
-        pareto(sensed, against="steps", bands="best")
+    # alarms at a point law and under a band too; what the sensed routes still refuse,
+    # false alarms on a world whose moves react to the sensed event, is named as the
+    # caller gave it)
+    corridor = MODELS / "corridor.toml"
+    sensed = loads_model(corridor.read_text() + "\n[sensors]\nopened = { detect = 0.5, "
+                         "false_alarm = 0.1 }\n", source=corridor)
+    with pytest.raises(ProblemError, match="sensors.opened.false_alarm = 0.1") as info:
+        pareto(sensed, against="steps")
     assert "constraint" not in str(info.value)
