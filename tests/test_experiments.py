@@ -382,7 +382,8 @@ def test_bench_sensed(tmp_path):
     _run("bench_sensed", tmp_path)
     rows = _csv(tmp_path / "bench_sensed.csv")
     assert [r["case"] for r in rows] == ["bus_grid b1@0.5 eps=0.01",
-                                         "bus_grid b1@0.7+b2@0.7 eps=0.05"]
+                                         "bus_grid b1@0.7+b2@0.7 eps=0.05",
+                                         "bus_grid b2@0.8 fa=0.05 eps=0.1"]
     for r in rows:
         lower, upper = float(r["lower"]), float(r["upper"])
         assert 0 < lower <= upper < 1
