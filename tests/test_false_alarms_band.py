@@ -79,15 +79,17 @@ def test_storm_on_the_exported_interval_chain_with_false_alarms_gives_lower(
     assert abs(storm_worst(path) - r.lower) <= 1e-9
 
 
-def test_a_band_that_may_never_happen_stays_refused() -> None:
+def test_a_band_that_may_never_happen_is_bracketed_by_the_sensed_route_only() -> None:
     """A law that may never happen (here ``pmf(0.3, 0.3)``: never with 0.4, by hand)
-    under a band: the information state is not finite, refused with the worst case too."""
+    under a band: the information state is not finite; the sensed route brackets it
+    (``never``: tests/test_false_alarms_never_band.py), a route that does not is refused
+    by name, the routes that bracket it named."""
     from mitld_lp.distributions import pmf
     from mitld_lp.routes.sensed import false_alarm_refusal
 
-    said = false_alarm_refusal("b", 0.2, pmf([0.3, 0.3]), never=True, robust=True,
-                               worst=True)
+    said = false_alarm_refusal("b", 0.2, pmf([0.3, 0.3]), robust=True, worst=True)
     assert len(said) == 1 and "never happens with probability 0.4" in said[0]
-    assert "band" in said[0]
-    assert false_alarm_refusal("b", 0.2, pmf([0.3, 0.7]), never=True, robust=True,
+    assert "with a band without constraints (route sensed" in said[0]
+    assert false_alarm_refusal("b", 0.2, pmf([0.3, 0.3]), never=True, robust=True,
                                worst=True) == []
+    assert false_alarm_refusal("b", 0.2, pmf([0.3, 0.7]), robust=True, worst=True) == []

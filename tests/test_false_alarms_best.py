@@ -370,18 +370,29 @@ def test_then_and_the_trade_off_curve() -> None:
     assert all(a.lower <= b.lower + 1e-9 for a, b in zip(points, points[1:], strict=False))
 
 
-@pytest.mark.parametrize("extra", [{}, {"constraints": ["P(F A) <= 0.5"]}])
-def test_a_band_that_may_never_happen_stays_refused(extra: dict[str, Any]) -> None:
+def test_a_band_that_may_never_happen() -> None:
     """A band of laws that leave the bus a chance of never coming (``pmf [0.3, 0.3]``
-    and its neighbours: never with 0.4 at the middle law, by hand): the information
-    state is not finite; refused by name, alone and with constraints."""
-    from mitld_lp.distributions import pmf
+    and its neighbours: never with 0.4 at the middle law, 0.5 and 0.3 at the others, by
+    hand): with constraints refused by name (the information state is not finite, and
+    the band is bracketed without constraints only); alone bracketed
+    (tests/test_false_alarms_never_band.py), but this band, whose laws' never masses
+    differ, is not truncated by the sensed route, camera with or without false alarms:
+    the same error naming the law."""
+    from mitld_lp.distributions import DistributionError, pmf
     from mitld_lp.distributions.band import band_of_laws
 
     band = band_of_laws("mu", pmf([0.3, 0.3]), [pmf([0.2, 0.3]), pmf([0.4, 0.3])])
     assert band.is_ambiguous
-    m = Model.from_game(WORLD, TASKS["max"], distributions={"mu": band},
-                        sensors={"b": Sensor(0.7, false_alarm=0.3)})
+
+    def posed(sensor: Sensor) -> Model:
+        return Model.from_game(WORLD, TASKS["max"], distributions={"mu": band},
+                               sensors={"b": sensor})
+
     with pytest.raises(ProblemError, match=r"false_alarm = 0\.3.*never happens with "
                                            r"probability 0\.4.*not finite"):
-        synthesize(m, bands="best", **extra)
+        synthesize(posed(Sensor(0.7, false_alarm=0.3)), bands="best",
+                   constraints=["P(F A) <= 0.5"])
+    for sensor in (Sensor(0.7, false_alarm=0.3), Sensor(0.7)):
+        with pytest.raises(DistributionError, match="mu: the band's upper survival.*"
+                                                    "allows an event that never happens"):
+            synthesize(posed(sensor), bands="best")

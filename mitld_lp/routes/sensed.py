@@ -84,14 +84,24 @@ class SensedRoute(Route):
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
-        from mitld_lp.routes.sensed_never import never_alarms, solve_never
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never, solve_never_band
         from mitld_lp.routes.sensed_solve import solve_sensed
 
-        if never_alarms(posed.model) and not posed.robust:  # bracketed (sensed_never)
+        if never_alarms(posed.model) and posed.robust:  # bracketed under the band
+            return solve_never_band(posed, self._solve(posed, built))
+        if never_alarms(posed.model):  # bracketed (sensed_never)
             from mitld_lp.routes.plain import PlainRoute
 
             # the informed end on this route, or the plain one where no sensor is left
             return solve_never(posed, solve_sensed(posed, built), (SensedRoute(), PlainRoute()))
+        return self._solve(posed, built)
+
+    def _solve(self, posed: Posed, built: Built) -> Result:
+        """The problem on the product ``built`` (blind where :meth:`build` made it so):
+        with a band its worst case (:mod:`mitld_lp.routes.sensed_band`), else the
+        point-law solve."""
+        from mitld_lp.routes.sensed_solve import solve_sensed
+
         if posed.robust:  # the worst case over the band (mitld_lp.routes.sensed_band)
             from mitld_lp.routes.sensed_band import solve_sensed_band
 
@@ -160,7 +170,10 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     ``sensed`` and ``sensed-constrained`` routes bracket the optimum
     (:mod:`mitld_lp.routes.sensed_never`).  The ``sensed`` and ``sensed-constrained``
     routes build false alarms at a point law that surely happens; ``never``: the caller
-    brackets them at a law that may never happen (both routes, a point law).  A band
+    brackets them at a law that may never happen (a point law on both routes; a band,
+    its worst or best law, without constraints on the ``sensed`` route: each end the
+    band's problem with the sensor blind or informed,
+    :func:`mitld_lp.routes.sensed_never.solve_never_band`).  A band
     (``robust``) whose laws surely happen: its worst case (``worst``: alone on the
     ``sensed`` route, :mod:`mitld_lp.routes.sensed_band`; with constraints, ``then`` or
     the trade-off curve on the sensed band constrained route,
@@ -174,14 +187,14 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     each at its own law).  A route that is neither refuses it."""
     head = f"sensors.{event}.false_alarm = {false_alarm:g}: with false alarms the robot's " \
            "belief reads the report of every step"
-    if law is not None and float(law.never) > 0.0 and (robust or not never):
+    if law is not None and float(law.never) > 0.0 and not never:
         return [f"{head}, and with a law that may never happen ({event} never happens with "
                 f"probability {float(law.never):.6g}) the belief that {event} never "
                 "happens moves with every report for ever, so the information state is "
                 "not finite; bracketed with a point law (routes sensed and "
-                "sensed-constrained), not solved "
-                + ("with a law known only within a band" if robust else "on this route")
-                + " (give false_alarm = 0, or a law that surely happens)"]
+                "sensed-constrained) and with a band without constraints (route sensed, "
+                "its worst or best law), not solved on this route (give false_alarm = 0, "
+                "or a law that surely happens)"]
     refused = []
     if robust and not (worst or best):
         refused.append(f"{head}: with a law known only within a band, not solved on this "

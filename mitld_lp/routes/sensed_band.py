@@ -100,6 +100,7 @@ def full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
     law, or with ``bands = "best"`` the cooperative optimum): a sound upper bound for
     every observation-based policy; NaN, with the reason, where the robust route does
     not give it (its budget, a refusal)."""
+    from mitld_lp.distributions import DistributionError
     from mitld_lp.problem import ProblemError, pose_on
     from mitld_lp.routes.robust import RobustRoute
     from mitld_lp.routes.stages import build_posed
@@ -111,7 +112,10 @@ def full_information(posed: Posed) -> tuple[float, tuple[Check, ...]]:
         seen = pose_on([RobustRoute()], model, settings=settings,
                        objective=posed.problem.objective)
         full = seen.route.solve(seen, build_posed(seen, progress=False))
-    except (ProblemError, ProductTooLarge) as exc:  # a budget or a refusal: the other bound
+    except (ProblemError, ProductTooLarge, DistributionError) as exc:
+        # a budget, a refusal, or a band the robust route cannot truncate (one whose
+        # laws may never happen: its upper survival stays above the share): the other
+        # bounds
         log.info("fully observed robust bound not used: %s", exc)
         return float("nan"), ()
     failed = tuple(c for c in full.checks if not c.passed)

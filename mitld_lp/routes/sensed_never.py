@@ -49,7 +49,23 @@ blind solve's, exact for it; where the first objective's ends meet, every posed
 controller reaching the optimum is one of the informed problem's reaching it, with the
 same steps, so the posed lexicographic optimum lies between the two ends' second
 objectives: the check also asks those to meet.  The trade-off curve's points are each
-this route's answer."""
+this route's answer.
+
+**Under a band** (a law known only within a band whose laws may never happen, its worst
+law or ``bands = "best"`` its best; route ``sensed``, without constraints:
+:func:`solve_never_band`) both ends are the band's problems, posed with the same band.
+The blind end is the band's solve on the product built blind, its controller dropping
+the reports (:mod:`mitld_lp.routes.sensed_band`, :mod:`mitld_lp.routes.
+sensed_optimistic`): its worst (best) case over the band is the one it has in the
+posed problem, the reports moving neither world, task nor nature's choices, and its
+interval chain draws and drops every step's report.  The informed end is the band's
+problem with the more informative sensor, whose ``upper`` bounds every posed controller
+under the band: each of the band route's upper bounds is the optimum at a law nature
+may play at every step, or the fully observed one, and every posed controller is one
+of the informed sensor's (the garbling above).  With constraints or ``then`` such a
+band stays refused (:func:`mitld_lp.routes.sensed.false_alarm_refusal`): the band
+constrained routes' joint automaton is truncated at the band's upper survival, which
+never falls below the never mass."""
 
 from __future__ import annotations
 
@@ -68,7 +84,7 @@ from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["never_alarms", "blind_model", "informed_model", "informed_detect",
-           "solve_never"]
+           "solve_never", "solve_never_band"]
 
 log = logging.getLogger(__name__)
 
@@ -139,12 +155,17 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
     upper = low.upper if minimum else (high.upper if ok else nan)
     if ok:
         lower = min(lower, upper)  # both bound the same optimum: only rounding can cross
-    slack = max(low.upper - low.lower, high.upper - high.lower)
-    # the width's parts: the wider solve's own (truncation, solver, ...), then the gap
-    own = high.width if ok and high.upper - high.lower > low.upper - low.lower else low.width
+    # each solve's own width (truncation, solver, ...), under a band less the band's part
+    # (nature's choices): that gap is between the ends, not within one
+    slack = max(_own(low), _own(high))
+    # the width's parts: the wider solve's own, then the gap
+    own = high.width if ok and _own(high) > _own(low) else low.width
     gap = max(upper - lower - slack, 0.0) if ok else nan
+    # relative to ``lower``; under a band a minimum as its complement's maximum, as the
+    # band's routes read it (relative to the complement's lower, ``1 - upper``)
+    scale = 1.0 - upper if posed.robust and minimum else lower
     met = ok and gap <= (0.0 if posed.settings.precision != posed.settings.precision
-                         else posed.settings.precision * max(lower, 0.0))
+                         else posed.settings.precision * max(scale, 0.0))
     steps, steps_met = _then(posed, low, high) if ok else ("", True)
     detail = (f"{events}: the controller ignores these reports (information horizon 0); "
               f"bracket [{lower:.7g}, {upper:.7g}] between it and a sensor without false "
@@ -152,7 +173,8 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
               (f"the informed problem is {high.status}, no bound from it" if not ok else
                "the ends meet: the reports cannot change the optimum" if met else
                f"gap {gap:.3g} beyond the solves' own widths: the reports' information, "
-               "not read (a law that may never happen keeps the belief moving for ever)")
+               "not read (a law that may never happen keeps the belief moving for ever)"
+               + (", and nature's choices in the band" if posed.robust else ""))
               + steps)
     check = Check("false alarms, law that may never happen", bool(met and steps_met), detail)
     failed = tuple(Check(f"informed sensor: {c.name}", c.passed, c.detail)
@@ -166,6 +188,28 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
                    complement=None if low.complement is None else one_minus(lower, upper),
                    width={**own, "total": upper - lower, "information": gap},
                    timings={**low.timings, "informed": high.seconds})
+
+
+def solve_never_band(posed: Posed, low: Result) -> Result:
+    """The bracket of ``posed``, whose law that may never happen is known only within a
+    band, without constraints (module docs, "Under a band"), from ``low``, the band's
+    problem solved on the product built with these sensors blind, their reports
+    dropped; the informed end is the band's problem with the more informative sensor,
+    read as ``posed`` reads the band (its worst or, ``bands = "best"``, its best law), on
+    the band's sensed routes, or the robust one where no sensor is left."""
+    from mitld_lp.routes.robust import RobustRoute
+    from mitld_lp.routes.sensed import SensedRoute
+    from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
+
+    return solve_never(posed, low, (SensedOptimisticRoute(), SensedRoute(), RobustRoute()))
+
+
+def _own(r: Result) -> float:
+    """``r``'s bracket's width less its band's part (``width["band"]``: the gap between
+    a controller's worst or best case and the band's bounds), NaN-free where it has no
+    controller."""
+    width = r.upper - r.lower - float(r.width.get("band", 0.0))
+    return width if width == width else 0.0
 
 
 def _then(posed: Posed, low: Result, high: Result) -> tuple[str, bool]:

@@ -21,8 +21,8 @@ best candidate is returned, with that chain (``export --chain``: Storm's ``P=? [
 surely happen) changes no step, as on the worst-case route: each candidate is the
 point-law optimum with false alarms, and its interval chain draws every step's report
 (:mod:`mitld_lp.running.sensed_chain`), so nature's best corners are read on the runs
-the controller meets (a band that may never happen is refused:
-:func:`mitld_lp.routes.sensed.false_alarm_refusal`).
+the controller meets (a band that may never happen is bracketed:
+:func:`mitld_lp.routes.sensed_never.solve_never_band`).
 
 ``upper``: the fully observed cooperative optimum's ``upper`` (the robust route with
 the bands read for their best law, the sensors read as perfect): a policy that acts on
@@ -53,8 +53,6 @@ The route (:class:`SensedOptimisticRoute`) is here; the solve in
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 from mitld_lp.problem import Posed
 from mitld_lp.result import Result
 from mitld_lp.routes.sensed import SensedRoute
@@ -76,8 +74,10 @@ class SensedOptimisticRoute(SensedRoute):
         return (bool(partial(posed.model.sensors)) and posed.robust
                 and posed.settings.bands == "best" and not posed.problem.constrained)
 
-    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
-              seed: int | None = 0) -> Result:
+    def _solve(self, posed: Posed, built: Built) -> Result:
+        """The band's best law on the product ``built`` (blind for the sensors
+        :func:`mitld_lp.routes.sensed_never.never_alarms` names, whose bracket
+        :meth:`SensedRoute.solve` makes)."""
         from mitld_lp.routes.sensed_optimistic_solve import solve_sensed_optimistic
 
         return solve_sensed_optimistic(posed, built)
