@@ -79,9 +79,9 @@ def test_storm_on_the_exported_interval_chain_with_false_alarms_gives_lower(
     assert abs(storm_worst(path) - r.lower) <= 1e-9
 
 
-def test_a_band_that_may_never_happen_is_bracketed_by_the_sensed_route_only() -> None:
+def test_a_band_that_may_never_happen_is_bracketed_by_the_sensed_routes_only() -> None:
     """A law that may never happen (here ``pmf(0.3, 0.3)``: never with 0.4, by hand)
-    under a band: the information state is not finite; the sensed route brackets it
+    under a band: the information state is not finite; the sensed routes bracket it
     (``never``: tests/test_false_alarms_never_band.py), a route that does not is refused
     by name, the routes that bracket it named."""
     from mitld_lp.distributions import pmf
@@ -89,7 +89,7 @@ def test_a_band_that_may_never_happen_is_bracketed_by_the_sensed_route_only() ->
 
     said = false_alarm_refusal("b", 0.2, pmf([0.3, 0.3]), robust=True, worst=True)
     assert len(said) == 1 and "never happens with probability 0.4" in said[0]
-    assert "with a band without constraints (route sensed" in said[0]
+    assert "with a band (route sensed, its worst or best law; with constraints" in said[0]
     assert false_alarm_refusal("b", 0.2, pmf([0.3, 0.3]), never=True, robust=True,
                                worst=True) == []
     assert false_alarm_refusal("b", 0.2, pmf([0.3, 0.7]), robust=True, worst=True) == []

@@ -374,9 +374,11 @@ def test_a_safety_task_kept_under_every_law(tmp_path: Path) -> None:
         assert abs(_storm(path, 'Pmin=? [F "accept"]', "MINIMIZE") - r.lower) <= 1e-9
 
 
-def test_a_band_that_may_never_happen_stays_refused() -> None:
-    """A band with false alarms whose law may never happen is refused by this route
-    too (its information state is not finite); one that surely happens is not."""
+def test_a_band_that_may_never_happen_is_bracketed_not_refused() -> None:
+    """A band with false alarms whose law may never happen: its worst case is bracketed
+    by this route (tests/test_false_alarms_never_band.py), so not refused, nor one that
+    surely happens; its best law (``worst = False``) is refused, naming the routes that
+    bracket it."""
     from types import SimpleNamespace
 
     from mitld_lp.distributions import pmf
@@ -386,9 +388,11 @@ def test_a_band_that_may_never_happen_stays_refused() -> None:
         return SimpleNamespace(sensors={"b": Sensor(0.6, false_alarm=0.2)},
                                distributions={"b": law})
 
-    (said,) = alarm_band_refusals(with_law(pmf([0.3, 0.3])), worst=True)
-    assert "never happens with probability 0.4" in said and "band" in said
+    assert alarm_band_refusals(with_law(pmf([0.3, 0.3])), worst=True) == []
     assert alarm_band_refusals(with_law(pmf([0.3, 0.7])), worst=True) == []
+    (said,) = alarm_band_refusals(with_law(pmf([0.3, 0.3])))
+    assert "never happens with probability 0.4" in said
+    assert "with constraints or then its worst law" in said
 
 
 def test_a_run_left_in_a_loop_for_ever_almost_never_reaches_the_target_surely() -> None:

@@ -10,7 +10,7 @@ LP once more with the constraint's bound tightened by what the band added
 (:data:`ROUNDS` times).
 
 A sensor with false alarms (under a band whose laws surely happen; one that may never
-happen stays refused, :func:`alarm_band_refusals`) changes no step: each candidate is
+happen is bracketed, below) changes no step: each candidate is
 the ``sensed-constrained`` solve with false alarms at its law (its information states
 keeping each hypothesis's count of reports), and its interval chain draws the report or
 silence of every step (``false_alarm`` before the event's report is due, ``detect``
@@ -62,6 +62,16 @@ each candidate is judged in those terms (nature making the complement as unlikel
 task as likely, as it can), the upper bounds are the complement's at each law, and the
 bracket is read back, ``upper`` the returned controller's worst case (as
 :mod:`mitld_lp.routes.sensed_band` reads a minimum).
+
+False alarms at a band that may never happen (:mod:`mitld_lp.routes.sensed_never`,
+"Under a band"): every candidate is built blind, its reports dropped
+(:meth:`SensedConstrainedRoute.build`), so the answer above is the blind controller's,
+whose task and constraint values over the band are those it has in the posed problem
+(the reports move neither world, task nor nature's choices); it is bracketed against
+this route's answer with the more informative sensor without false alarms, whose
+``upper`` bounds every posed controller meeting the constraints under every law (each
+of its bounds is a constrained optimum at a law of the band, or the unconstrained
+band's).  With ``then`` the steps are the blind controller's worst case, as above.
 """
 
 from __future__ import annotations
@@ -201,7 +211,19 @@ class SensedBandConstrainedRoute(Route):
 
     def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
-        return _solve(posed, built, costs=costs, seed=seed)
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never
+
+        result = _solve(posed, built, costs=costs, seed=seed)
+        if not never_alarms(posed.model):
+            return result
+        from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
+
+        # false alarms at a band that may never happen: every candidate was built blind,
+        # its reports dropped (SensedConstrainedRoute.build), so ``result`` is the blind
+        # end's; the informed end on this route, or the robust constrained one where no
+        # sensor is left (module docs)
+        return solve_never(posed, result, (SensedBandConstrainedRoute(every=True),
+                                           RobustConstrainedRoute(every=True)), costs=costs)
 
 
 def alarm_band_refusals(model: Any, *, worst: bool = False) -> list[str]:
@@ -209,15 +231,16 @@ def alarm_band_refusals(model: Any, *, worst: bool = False) -> list[str]:
     has them; :func:`mitld_lp.routes.sensed.false_alarm_refusal`).  ``worst``: the
     caller solves the band's worst case (this route: its candidates are the sensed
     constrained route's solves with false alarms at the band's laws, each judged on its
-    interval chain, which draws every step's report), so only a law that may never
-    happen is refused; else (the band's best law) every false alarm is.  The sensed
+    interval chain, which draws every step's report; at a band that may never happen
+    built blind and bracketed: module docs), so none is refused; else (the band's best
+    law) every false alarm is.  The sensed
     constrained route builds false alarms at a point law only, so the band routes that
     call its refusal at one add this."""
     from mitld_lp.routes.sensed import false_alarm_refusal
 
     return [x for a, s in sorted(partial(model.sensors).items()) if s.false_alarm
             for x in false_alarm_refusal(a, s.false_alarm, model.distributions.get(a),
-                                         robust=True, worst=worst)]
+                                         never=worst, robust=True, worst=worst)]
 
 
 def covers(result: Result) -> bool:

@@ -52,8 +52,10 @@ objectives: the check also asks those to meet.  The trade-off curve's points are
 this route's answer.
 
 **Under a band** (a law known only within a band whose laws may never happen, its worst
-law or ``bands = "best"`` its best; route ``sensed``, without constraints:
-:func:`solve_never_band`) both ends are the band's problems, posed with the same band.
+law or ``bands = "best"`` its best, route ``sensed``: :func:`solve_never_band`; its worst
+law with constraints or ``then``, the sensed band constrained route:
+:mod:`mitld_lp.routes.sensed_band_constrained`) both ends are the band's problems, posed
+with the same band.
 The blind end is the band's solve on the product built blind, its controller dropping
 the reports (:mod:`mitld_lp.routes.sensed_band`, :mod:`mitld_lp.routes.
 sensed_optimistic`): its worst (best) case over the band is the one it has in the
@@ -62,10 +64,11 @@ interval chain draws and drops every step's report.  The informed end is the ban
 problem with the more informative sensor, whose ``upper`` bounds every posed controller
 under the band: each of the band route's upper bounds is the optimum at a law nature
 may play at every step, or the fully observed one, and every posed controller is one
-of the informed sensor's (the garbling above).  With constraints or ``then`` such a
-band stays refused (:func:`mitld_lp.routes.sensed.false_alarm_refusal`): the band
-constrained routes' joint automaton is truncated at the band's upper survival, which
-never falls below the never mass."""
+of the informed sensor's (the garbling above).  With constraints the same holds of
+each constraint's value, as with a point law; with ``then`` each end's second objective
+is its controller's worst case over the band, not an optimum, so only the returned
+controller's is said.  With ``bands = "best"`` and constraints such a band stays refused
+(:func:`mitld_lp.routes.sensed.false_alarm_refusal`)."""
 
 from __future__ import annotations
 
@@ -223,8 +226,12 @@ def _then(posed: Posed, low: Result, high: Result) -> tuple[str, bool]:
     if then is None or low.secondary is None or high.secondary is None:
         return "", True
     ours, least = float(low.secondary), float(high.secondary)
-    met = abs(ours - least) <= SECOND_TOL * max(1.0, abs(ours))
     what = "expected steps" if then == "min-steps" else "expected cost"
+    if posed.robust:  # a band: each end's second objective is its controller's worst case
+        return (f"; then {then}: the controller's {what} {ours:.7g}, its worst case over "
+                "the band (the blind solve's; the band's route proves no lexicographic "
+                "optimum, so the ends' are not compared)"), True
+    met = abs(ours - least) <= SECOND_TOL * max(1.0, abs(ours))
     return (f"; then {then}: the controller's {what} {ours:.7g} (the blind solve's), a "
             f"controller reading the reports at least {least:.7g}" +
             ("" if met else " (not met: reading the reports may be faster)")), met
