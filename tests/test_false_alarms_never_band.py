@@ -219,3 +219,19 @@ def test_the_best_law_with_constraints_stays_refused() -> None:
                                                r"probability 0\.4.*with constraints or "
                                                r"then its worst law"):
             synthesize(_model(*POSED), bands="best", **extra)
+
+
+def test_a_camera_without_false_alarms_on_such_a_band(monkeypatch: Any) -> None:
+    """The blind end's route with a camera that gives no false alarms, on this band:
+    solved (the fully observed robust bound, which the robust route cannot give for a
+    band that may never happen, left out), its ``lower`` the controller's worst case by
+    the enumeration with no false alarm (a report at each step from the bus on with
+    ``DETECT``), the best deterministic controller within the bracket."""
+    import test_false_alarms_never_band as here
+
+    monkeypatch.setattr(here, "ALARM", Fraction(0))
+    r = synthesize(_model(float(DETECT)))
+    assert r.route == "sensed" and r.bands
+    ours = value(replayed(r.controller), min)
+    assert abs(ours - Fraction(r.lower)) <= Fraction(1, 10**9)
+    assert Fraction(r.lower) <= best_deterministic(min) <= Fraction(r.upper)
