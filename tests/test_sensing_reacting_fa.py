@@ -15,6 +15,7 @@ rule on drawn runs for the running controller's posterior."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from collections.abc import Callable
@@ -244,12 +245,29 @@ def test_the_running_controller_reads_every_report(tmp_path: Path) -> None:
 
 
 def test_the_budget_stops_the_build_before_it_passes() -> None:
-    m = alarmed(world(0.5), CAUGHT, 0.5, 0.1)
+    m = alarmed(GAME, CAUGHT, 0.5, 0.1)
     with pytest.raises(ProductTooLarge, match="more than 12 states"):
         reacting_product(m.game, to_dta(m.spec), m.distributions, dict(m.sensors), m.epsilon,
                          max_states=12)
     with pytest.raises(ProductTooLarge):
         synthesize(m, max_states=12)
+
+
+def test_the_estimate_stops_a_build_that_will_not_fit_early() -> None:
+    """The bus over five steps, a camera with false alarms: the report patterns keep
+    many posteriors apart.  Under a budget below the product's true size (the build
+    without it, counted here) the estimate stops the build at a level's end, less than
+    half of the budget stored; under one half again the true size (the estimate errs
+    high here, by some 1.3), nothing stops it."""
+    m = alarmed(GAME, AVOID, 0.6, 0.3, law="D[pmf(0.2, 0.2, 0.2, 0.2, 0.2)] b & ")
+    args = (m.game, to_dta(m.spec), m.distributions, dict(m.sensors), m.epsilon)
+    size = len(reacting_product(*args, max_states=10**6).mdp.states)
+    budget = size * 3 // 4
+    with pytest.raises(ProductTooLarge, match=r"will not fit.*stopped after (\d+) states") as e:
+        reacting_product(*args, max_states=budget)
+    stored = int(re.search(r"stopped after ([\d,]+) states", str(e.value))[1].replace(",", ""))
+    assert stored < budget / 2
+    assert len(reacting_product(*args, max_states=size + size // 2).mdp.states) == size
 
 
 # ------------------------------------------------------------------ a band, refusals
@@ -295,3 +313,13 @@ def test_a_law_that_may_never_happen_stays_refused_by_name() -> None:
                                                r"whose moves react to a sensed event and a "
                                                r"law that may never happen"):
             synthesize(m, **extra)
+
+
+def test_a_steady_growth_is_not_carried_past_the_clock_with_false_alarms() -> None:
+    """The estimate the reacting build with false alarms uses (``past = 0``): levels of
+    80 growing by 2 up to the clock's step 6 add 160 + 320 to the 151 found (by hand),
+    where the frontier builder's carries them two levels further (+ 640 + 1280)."""
+    from mitld_lp.sensing.growth import projected
+
+    assert projected([1, 10, 20, 40, 80], 6, past=0) == (151 + 160 + 320, 2.0, 6)
+    assert projected([1, 10, 20, 40, 80], 6) == (151 + 2400, 2.0, 8)
