@@ -142,7 +142,7 @@ def test_a_reaction_that_shows_the_event_is_the_fully_observed_answer(fa: float)
         within(seen, exact)
 
 
-pytest.importorskip("stormpy")
+stormpy = pytest.importorskip("stormpy")
 
 
 @pytest.mark.parametrize("delay", [0, 1])
@@ -323,3 +323,50 @@ def test_a_steady_growth_is_not_carried_past_the_clock_with_false_alarms() -> No
 
     assert projected([1, 10, 20, 40, 80], 6, past=0) == (151 + 160 + 320, 2.0, 6)
     assert projected([1, 10, 20, 40, 80], 6) == (151 + 2400, 2.0, 8)
+
+
+# ------------------------------------------------------------------ constraints, then
+
+
+@pytest.mark.parametrize("extra", [{"constraints": ["P(F[0,3] h) <= 0.25"]},
+                                   {"then": "min-steps"}], ids=["risk", "then"])
+def test_constraints_with_a_revealing_reaction_are_the_fully_observed_answer(
+        extra: dict[str, Any]) -> None:
+    """The flag raised on every move under the bus: the false alarms tell nothing more,
+    and the constrained answer (route ``sensed-constrained`` on this product) is the
+    fully observed constrained route's (``detect = 1``), its constraint value and
+    expected steps too."""
+    shown = world(1.0)
+    camera = synthesize(alarmed(shown, CAUGHT, 0.5, 0.3, 1), **extra)
+    seen = synthesize(Model.from_game(shown, LAW + CAUGHT, sensors={"b": {"detect": 1}}),
+                      **extra)
+    assert (camera.route, seen.route) == ("sensed-constrained", "constrained")
+    assert camera.certified and seen.certified
+    assert abs(camera.lower - seen.lower) <= 1e-8 and abs(camera.upper - seen.upper) <= 1e-8
+    for x, y in zip(camera.constraints, seen.constraints, strict=True):
+        assert abs(x.certified - y.certified) <= 1e-6
+    if "then" in extra:
+        assert abs(camera.secondary - seen.secondary) <= 1e-6
+
+
+def test_storm_on_the_constrained_chain_meets_the_bound(tmp_path: Path) -> None:
+    """The randomised controller's chain (the world moved on the true events, every
+    step's report drawn): Storm's task value inside the bracket, below the answer
+    without the constraint (which binds), the risk at most its certified value and the
+    bound."""
+    from mitld_lp.running.chain import write_chain
+
+    m = alarmed(GAME, CAUGHT, 0.5, 0.1)
+    r = synthesize(m, constraints=["P(F[0,3] h) <= 0.25"])
+    assert r.route == "sensed-constrained" and r.certified
+    path = write_chain(r, tmp_path / "chain.drn")
+    chain = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+
+    def value(prop: str) -> Fraction:
+        result = stormpy.model_checking(chain, stormpy.parse_properties(prop)[0])
+        return Fraction(str(result.get_value(chain.initial_states[0])))
+
+    task = value('P=? [F "accept"]')
+    assert Fraction(r.lower) - Fraction(1, 10**9) <= task <= Fraction(r.upper)
+    assert task < expectimax(GAME, CAUGHT, "0.5", "0.1", 0, max) - Fraction(1, 10**4)
+    assert value('P=? [F "c1"]') <= Fraction(r.constraints[0].certified) <= Fraction("0.25")
