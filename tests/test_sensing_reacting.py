@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mitld_lp import ExplicitGame, Model, ProblemError, synthesize
+from mitld_lp import ExplicitGame, Model, synthesize
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.distributions import pmf
 from mitld_lp.product import ProductTooLarge
@@ -524,16 +524,3 @@ def test_storm_on_the_constrained_chain_gives_lower_and_the_constraint(
             events = frozenset({"b"}) if t + 1 == k else frozenset()
             s = sample_successor(rng, game.successors(s, action, events))
             reports = frozenset({"b"}) if t + 1 == report else frozenset()
-
-
-def test_false_alarms_with_a_reacting_world_are_refused_by_name() -> None:
-    """The reacting product reads each sensor's first report only: a sensor with false
-    alarms on a world that reacts to a sensed event is refused, never solved as if its
-    later reports told nothing (alone, with a constraint, with then)."""
-    game = world(0.5)
-    alarmed = Model.from_game(game, LAW + CAUGHT,
-                              sensors={"b": {"detect": 0.5, "false_alarm": 0.1}})
-    for extra in ({}, {"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
-        with pytest.raises(ProblemError, match=r"false_alarm = 0.1 with a world whose "
-                                               r"moves react"):
-            synthesize(alarmed, **extra)

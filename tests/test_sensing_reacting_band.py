@@ -456,8 +456,7 @@ def test_the_best_law_with_constraints_is_a_pair_met_at_its_law(
 def test_a_route_list_without_the_reacting_route_refuses_by_name() -> None:
     """The ``sensed`` route's band solvers on the product that ignores the reaction
     would answer another problem: asked without the ``sensed-reacting`` route, the
-    band is refused, naming the route that solves it (tests/test_sensing_reacting.py
-    names what remains refused: false alarms on such a world)."""
+    band is refused, naming the route that solves it."""
     from mitld_lp.problem import pose_on
     from mitld_lp.routes.sensed import SensedRoute
     from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
@@ -467,12 +466,3 @@ def test_a_route_list_without_the_reacting_route_refuses_by_name() -> None:
         with pytest.raises(ProblemError, match="react to the sensed event 'b'.*solved by "
                                                "route sensed-reacting .with a band too"):
             pose_on(routes, m, settings=Settings(bands=bands))
-
-
-def test_false_alarms_under_a_band_stay_refused() -> None:
-    law = from_table({"geometric": [0.3, 0.6]}, "mu")
-    m = Model.from_game(GAME, "D[mu] b & " + CAUGHT, distributions={"mu": law},
-                        sensors={"b": {"detect": 0.5, "false_alarm": 0.1}})
-    for bands in ("worst", "best"):
-        with pytest.raises(ProblemError, match="false_alarm = 0.1 with a world whose moves"):
-            synthesize(m, bands=bands)

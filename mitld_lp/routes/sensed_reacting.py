@@ -17,8 +17,10 @@ sensed_candidate`), each judged on its interval chain over the truth and its mem
 which moves the world on the true events, the sensed ones included
 (:mod:`mitld_lp.running.sensed_chain`): what the world's reaction tells the robot is in
 the candidates' posteriors, and its controller's worst (best) case is read on the real
-dynamics.  False alarms are refused (this product reads each sensor's first report
-only).  Constraints or ``then`` with such a world are the ``sensed-constrained``
+dynamics.  False alarms are read at every step (the product weighs each hypothesis by
+every report or silence) where the law surely happens; with a law that may never happen
+they are refused by name (:func:`mitld_lp.routes.sensed.reacting_false_alarm_refusals`).
+Constraints or ``then`` with such a world are the ``sensed-constrained``
 route's, on the same product (with a band, :mod:`mitld_lp.routes.sensed_band_constrained`
 for its worst law, :mod:`mitld_lp.routes.sensed_optimistic_constrained` for its best)."""
 
@@ -42,7 +44,8 @@ __all__ = ["SensedReactingRoute"]
 class SensedReactingRoute(SensedRoute):
     """A sensor that misses an event the world's moves react to (module docs): every
     task class, either objective, point laws or a band (its worst law, or its best
-    with ``bands = "best"``), no constraints."""
+    with ``bands = "best"``), false alarms where the law surely happens, no
+    constraints."""
 
     name = "sensed-reacting"
     optimistic = True  # a band's best law too (module docs)
@@ -52,7 +55,8 @@ class SensedReactingRoute(SensedRoute):
             reacting_events(posed.model.game, partial(posed.model.sensors)))
 
     def refusal(self, posed: Posed) -> list[str]:
-        return reacting_false_alarm_refusals(partial(posed.problem.model.sensors))
+        model = posed.problem.model
+        return reacting_false_alarm_refusals(partial(model.sensors), model.distributions)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The task's automaton (a minimum posed as the ``sensed`` route poses it), then

@@ -27,7 +27,10 @@ it is an estimate, not a bound, and raising the budget past it lets the build ru
 false alarms it errs lower still: the report patterns keep telling hypotheses apart for
 up to three levels past the clock's last step, at some 1.15 a step (the bus case's
 camera on bus 2, ``detect = 0.8, false_alarm = 0.05`` at epsilon 0.05: its largest
-estimate 86,964 states, at level 8, against 193,856 built)."""
+estimate 86,964 states, at level 8, against 193,856 built).  The reacting build
+(:mod:`mitld_lp.sensing.reacting`) with false alarms carries no growth past the clock's
+last step (``past = 0``: its levels shrink from there), and its estimate errs high by
+some 1.2 to 1.3 on the cases measured there."""
 
 from __future__ import annotations
 
@@ -56,12 +59,12 @@ measured the largest level came two steps after it (the hypotheses of the last s
 still split while the task's windows after them are open)."""
 
 
-def projected(sizes: list[int], clock: int) -> tuple[int, float, int]:
+def projected(sizes: list[int], clock: int, past: int = PAST) -> tuple[int, float, int]:
     """The estimate (module docs) of the states the build will hold, from the sizes of
     its levels so far (``sizes[0]`` the first) and the last step the clock runs to: the
     least of the last three levels' factors, itself shrinking at each level to come by
     the last factor's ratio to the one before (when that is below 1), carried on up to
-    level ``clock`` -- :data:`PAST` levels further when the growth is steady (the three
+    level ``clock`` -- ``past`` (:data:`PAST`) levels further when the growth is steady (the three
     factors within :data:`STEADY` of each other, the least at least
     :data:`MIN_GROWTH`) --, none after.  Returns the estimate, the least factor and the
     level it is carried to.  Fewer than four levels, or before level ``clock / 2`` (the
@@ -72,7 +75,7 @@ def projected(sizes: list[int], clock: int) -> tuple[int, float, int]:
     factors = [sizes[-1] / sizes[-2], sizes[-2] / sizes[-3], sizes[-3] / sizes[-4]]
     factor, shrink = min(factors), min(1.0, factors[0] / factors[1])
     steady = factor >= MIN_GROWTH and factor >= STEADY * max(factors)
-    last = clock + (PAST if steady else 0)
+    last = clock + (past if steady else 0)
     least, more, n = factor, 0.0, float(sizes[-1])
     for _ in range(level, last):
         factor *= shrink
@@ -85,11 +88,14 @@ class Growth:
     """The budgets of one build: the exact check before each batch of states is stored
     (:meth:`check`), and the states of each level, judged against the budgets at the end
     of each level (:meth:`level`, module docs).  ``name``: the model's (None: not
-    known); ``points``: the sensed events' truncation points, for the messages."""
+    known); ``points``: the sensed events' truncation points, for the messages;
+    ``past``: the levels a steady growth is carried past the clock's last step
+    (:func:`projected`)."""
 
     def __init__(self, *, max_states: int, max_memory: int, size: InfoSize,
                  sensors: Mapping[str, Sensor], points: Mapping[str, int],
-                 name: str | None = None) -> None:
+                 name: str | None = None, past: int = PAST) -> None:
+        self.past = past
         self.sizes: list[int] = []
         self.max_states, self.max_memory, self.size = max_states, max_memory, size
         self.sensors, self.points, self.name = sensors, points, name
@@ -133,7 +139,7 @@ class Growth:
                   f"{hypotheses:,}", f"{used:,}")
         if new < MIN_LEVEL:
             return
-        estimate, factor, last = projected(self.sizes, self.size.clock)
+        estimate, factor, last = projected(self.sizes, self.size.clock, self.past)
         need = used / max(found, 1) * estimate
         if estimate <= self.max_states and need <= self.max_memory:
             return

@@ -11,7 +11,9 @@ with probability ``f`` before step ``K + D`` and ``d`` from it on (a report no l
 means the event happened, and every report counts, not only the first).  With a law
 that surely happens the information-state product builds it
 (:mod:`mitld_lp.sensing.belief`), constraints and ``then`` too; with a law that may
-never happen the ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`);
+never happen the ``sensed`` route brackets the optimum (:mod:`mitld_lp.routes.sensed_never`),
+but on a world whose moves react to the event (:mod:`mitld_lp.sensing.reacting`, which
+builds the laws that surely happen) it is refused;
 a law known within a band is solved where its laws surely happen (its worst case without
 constraints, its best law with or without them); a band read for its worst law with
 constraints, and a law that may never happen with constraints, are refused by name
