@@ -399,6 +399,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights
+    # the last block's LP, bounds and answers are not the flow's: freed before it
+    block = lp = greedy = tight = columns = y = duals = polished = None  # type: ignore[assignment]
     y = policy_flow(q, blk, weights, b_eq, singles, walks)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
