@@ -103,12 +103,16 @@ def below(r: Rounding, rows: np.ndarray | slice, sums: np.ndarray) -> np.ndarray
     """A lower bound on the exact ``E_c(x)`` of each choice ``rows`` (indices, or
     ``slice(None)`` for every row) from the float sums ``sums`` of ``P^[c] @ x``
     (``x >= 0``)."""
-    return np.maximum((sums - r.slack[rows]) * r.low[rows], 0.0)
+    out = sums - r.slack[rows]  # in place from here: one array a row, not three
+    out *= r.low[rows]
+    return np.maximum(out, 0.0, out=out)
 
 
 def above(r: Rounding, rows: np.ndarray | slice, sums: np.ndarray) -> np.ndarray:
     """An upper bound on the exact ``E_c(x)`` of each choice ``rows`` (``x >= 0``)."""
-    return (sums + r.slack[rows]) * r.high[rows]
+    out = sums + r.slack[rows]
+    out *= r.high[rows]
+    return out
 
 
 def support_extreme(matrix: sp.csr_array, rows: np.ndarray, x: np.ndarray,
