@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers import lp_blocks
+from mitld_lp.solvers import greedy_block, lp_blocks
 from mitld_lp.solvers.chain_levels import chain_solve
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.greedy_block import certified_greedy
@@ -171,12 +171,14 @@ def _whole(mdp: MDP):
     return q, block, kept
 
 
+@pytest.mark.parametrize("batch", [greedy_block.BATCH, 5])  # 5: the choices in batches
 @pytest.mark.parametrize("seed", range(4))
-def test_a_losing_greedy_policy_is_refused(seed: int) -> None:
+def test_a_losing_greedy_policy_is_refused(seed: int, batch: int, monkeypatch) -> None:
     """With the optimal values as the bound the greedy policy is certified, with its
     values; with a bound that ranks a clearly losing choice first (the optimum raised
     on that choice's own successors) it is refused at that choice's state and every
     state upstream of it; the states downstream keep the optimum."""
+    monkeypatch.setattr(greedy_block, "BATCH", batch)
     mdp = _tied(seed)
     want = _linprog_max(mdp)
     q, block, kept = _whole(mdp)

@@ -13,7 +13,7 @@ from mitld_lp.mdp import MDP, MDPShape
 from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import (
     Blocks,
-    backward_reachable,
+    Reversed,
     blocks_from,
     gather_ranges,
     graph_view,
@@ -82,13 +82,19 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     rows = policy[states]
     lo, hi = m.indptr[rows], m.indptr[rows + 1]
     entries = gather_ranges(lo, hi)
-    src = np.repeat(states, hi - lo)
-    dst = np.asarray(m.indices[entries], dtype=np.int64)
+    index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
+    src = np.repeat(states.astype(index), hi - lo)
+    dst = m.indices[entries].astype(index, copy=False)
     val = m.data[entries]
-    del entries
+    del entries, lo, hi
     pos = val > 0
-    never = ~backward_reachable(n, src[pos], dst[pos], target)
-    sure = ~backward_reachable(n, src[pos], dst[pos], never)
+    if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
+        src, dst, val = src[pos], dst[pos], val[pos]
+    del pos
+    edges = Reversed(n, src, dst)
+    never = ~edges.reaching(target)
+    sure = ~edges.reaching(never)
+    del edges
     solved = acting & ~never & ~sure
     values = np.where(sure, 1.0, 0.0)
     slack = np.zeros(n)
@@ -96,8 +102,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     if idx.size:
         at = np.full(n, -1, dtype=np.int64)
         at[idx] = np.arange(idx.size)
-        keep = solved[src] & pos
+        keep = solved[src]
         s_loc, d, p = at[src[keep]], dst[keep], val[keep]
+        del src, dst, val, keep
         into = solved[d]
         b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
         # the entries come row by row in the states' order: the CSR arrays directly

@@ -28,6 +28,7 @@ __all__ = [
     "attractor",
     "Blocks",
     "Edges",
+    "Reversed",
     "EndComponents",
     "Level",
     "Levels",
@@ -93,20 +94,46 @@ def backward_reachable(
     One breadth-first search on the reversed graph from a virtual node ``n`` that points
     at every seed; the seeds themselves are included.
     """
-    seed_idx = np.flatnonzero(seeds)
-    if seed_idx.size == 0:
+    if not np.any(seeds):
         return np.zeros(n, dtype=bool)
-    index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes an edge if it can
-    rows = np.concatenate([succ, np.full(seed_idx.size, n)], dtype=index)
-    cols = np.concatenate([source, seed_idx], dtype=index)
-    graph = sp.csr_array(
-        (np.ones(rows.size, dtype=np.float64), (rows, cols)), shape=(n + 1, n + 1)
-    )
-    del rows, cols
-    order = breadth_first_order(graph, n)
-    reached = np.zeros(n + 1, dtype=bool)
-    reached[np.asarray(order)] = True
-    return reached[:n]
+    return Reversed(n, source, succ).reaching(seeds)
+
+
+class Reversed:
+    """The edges ``source -> succ`` of a graph of ``n`` states reversed once, for
+    several backward searches (:meth:`reaching`) from different seeds: 4 bytes of index
+    and 8 of weight an edge (what SciPy's search reads without a copy), the virtual
+    node's row of seeds written at the end of each search's view of the same arrays."""
+
+    def __init__(self, n: int, source: np.ndarray, succ: np.ndarray) -> None:
+        index = np.int32 if n < np.iinfo(np.int32).max else np.int64
+        rows = np.asarray(succ, dtype=index)
+        cols = np.asarray(source, dtype=index)
+        graph = sp.csr_array((np.ones(rows.size), (rows, cols)), shape=(n, n))
+        del rows, cols
+        self.n, self.nnz = n, graph.nnz
+        self.indices = np.empty(self.nnz + n, dtype=graph.indices.dtype)
+        self.indices[:self.nnz] = graph.indices
+        self.indptr = np.empty(n + 2, dtype=graph.indptr.dtype)
+        self.indptr[:n + 1] = graph.indptr
+        del graph
+        self.weights = np.ones(self.nnz + n)
+
+    def reaching(self, seeds: np.ndarray) -> np.ndarray:
+        """The states with a path to a ``seeds`` state (a mask), the seeds included."""
+        n = self.n
+        seed_idx = np.flatnonzero(seeds)
+        if seed_idx.size == 0:
+            return np.zeros(n, dtype=bool)
+        stop = self.nnz + seed_idx.size
+        self.indices[self.nnz:stop] = seed_idx
+        self.indptr[n + 1] = stop
+        graph = sp.csr_array((self.weights[:stop], self.indices[:stop], self.indptr),
+                             shape=(n + 1, n + 1), copy=False)
+        order = breadth_first_order(graph, n)
+        reached = np.zeros(n + 1, dtype=bool)
+        reached[np.asarray(order)] = True
+        return reached[:n]
 
 
 @dataclass(frozen=True, slots=True, eq=False)

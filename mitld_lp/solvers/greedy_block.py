@@ -107,11 +107,15 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
     v_ld = v.astype(np.longdouble)
-    # how far each choice's score falls short of its state's value (below 0: it beats it)
-    slack = np.asarray(-sense.gain(reward + block.inner.astype(np.longdouble) @ v_ld,
-                                   np.repeat(v_ld, counts)), dtype=np.float64)
-    tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / (_SHARE * float(np.max(steps)))
     owner = np.repeat(np.arange(n), counts)
+    # how far each choice's score falls short of its state's value (below 0: it beats it),
+    # BATCH choices at a time: a long double copy of the whole block is 16 bytes an entry
+    slack = np.empty(owner.size)
+    for a in range(0, owner.size, BATCH):
+        z = min(a + BATCH, owner.size)
+        score = reward[a:z] + block.inner[a:z].astype(np.longdouble) @ v_ld
+        slack[a:z] = -sense.gain(score, v_ld[owner[a:z]])
+    tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / (_SHARE * float(np.max(steps)))
     failed = np.zeros(n, dtype=bool)
     failed[owner[np.repeat(tie, counts) + slack < 0.0]] = True  # a choice beats it
     failed[np.abs(slack[chosen]) > tie] = True  # the evaluation's own residual
@@ -132,6 +136,10 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     weights[chosen] = 1.0
     return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left, walk)
 
+
+BATCH = 1 << 16
+"""Choices scored at a time by :func:`certified_greedy` (its memory bound, not its
+answer: each row's sum is the same)."""
 
 _SHARE = 4.0
 """The greedy policy's loss may take a quarter of each state's threshold (as the policy

@@ -40,8 +40,8 @@ from mitld_lp.solvers.topological import (
 )
 from mitld_lp.util.progress import tracked
 
-__all__ = ["Answer", "block_lp", "flow_matrix", "may_be_optimal", "policy_flow", "sensed",
-           "solve_block", "solve_decomposed", "tightened"]
+__all__ = ["Answer", "block_lp", "exit_reward", "flow_matrix", "may_be_optimal",
+           "policy_flow", "sensed", "solve_block", "solve_decomposed", "tightened"]
 
 logger = logging.getLogger(__name__)
 
@@ -195,13 +195,21 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
         yield Level(index, np.empty(count, dtype=np.int64), empty, rest)
 
 
-def block_lp(block: Block, values: np.ndarray) -> Matrices:
-    """The occupancy LP of ``block`` with the values downstream as exit rewards and
-    ``b = 1`` on all of it."""
-    exit_reward = block.to_target + block.outer @ values
+def block_lp(block: Block, values: np.ndarray, reward: np.ndarray | None = None
+             ) -> Matrices:
+    """The occupancy LP of ``block`` with the values downstream as exit rewards
+    (``reward``, if the caller has them: :func:`exit_reward`) and ``b = 1`` on all of
+    it."""
     n = block.states.size
     owner = np.repeat(np.arange(n), np.diff(block.groups))
-    return Matrices(flow_matrix(owner, n, block.inner), np.ones(n), exit_reward)
+    return Matrices(flow_matrix(owner, n, block.inner), np.ones(n),
+                    exit_reward(block, values) if reward is None else reward)
+
+
+def exit_reward(block: Block, values: np.ndarray) -> np.ndarray:
+    """Per choice of ``block``: what it collects on leaving it, the values downstream
+    (``values``) and the target (the LP's objective, :func:`block_lp`)."""
+    return block.to_target + block.outer @ values
 
 
 def may_be_optimal(block: Block, reward: np.ndarray, lo: np.ndarray,
@@ -359,19 +367,20 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        lp = block_lp(block, values)
+        reward = exit_reward(block, values)
         greedy = None if (bounds is None or not settings.greedy
                           or block.choices.size < GREEDY_MIN_CHOICES) else certified_greedy(
-            block, lp.objective, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
+            block, reward, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
             settings.tol, settings.precision)
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)
             values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
             weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
-            if greedy.left.size == 0:
+            if greedy.left.size == 0:  # no LP: its flow matrix is never built
                 walks[level.index] = (rest, greedy.walk)
                 continue
             block = Block.of(q, rest := rest[greedy.left])
-            lp = block_lp(block, values)
+            reward = exit_reward(block, values)
+        lp = block_lp(block, values, reward)
         tight = (None if bounds is None else
                  tightened(block, lp.objective, bounds[0][rest], bounds[1][rest],
                             q.sense))
@@ -399,6 +408,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights
+    # the last block's LP, bounds and answers are not the flow's: freed before it
+    block = lp = reward = greedy = tight = columns = y = duals = polished = None  # type: ignore[assignment]
     y = policy_flow(q, blk, weights, b_eq, singles, walks)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
