@@ -88,7 +88,12 @@ class SensedRoute(Route):
         from mitld_lp.routes.sensed_solve import solve_sensed
 
         if never_alarms(posed.model) and posed.robust:  # bracketed under the band
-            return solve_never_band(posed, self._solve(posed, built))
+            from mitld_lp.routes.robust import RobustRoute
+
+            # the informed end read as this route reads the band (its best law on the
+            # optimistic route, a subclass), or the robust route where no sensor is left
+            return solve_never_band(posed, self._solve(posed, built),
+                                    (type(self)(), SensedRoute(), RobustRoute()))
         if never_alarms(posed.model):  # bracketed (sensed_never)
             from mitld_lp.routes.plain import PlainRoute
 

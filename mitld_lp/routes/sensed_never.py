@@ -193,18 +193,15 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
                    timings={**low.timings, "informed": high.seconds})
 
 
-def solve_never_band(posed: Posed, low: Result) -> Result:
+def solve_never_band(posed: Posed, low: Result, routes: Sequence[Route]) -> Result:
     """The bracket of ``posed``, whose law that may never happen is known only within a
     band, without constraints (module docs, "Under a band"), from ``low``, the band's
     problem solved on the product built with these sensors blind, their reports
     dropped; the informed end is the band's problem with the more informative sensor,
     read as ``posed`` reads the band (its worst or, ``bands = "best"``, its best law), on
-    the band's sensed routes, or the robust one where no sensor is left."""
-    from mitld_lp.routes.robust import RobustRoute
-    from mitld_lp.routes.sensed import SensedRoute
-    from mitld_lp.routes.sensed_optimistic import SensedOptimisticRoute
-
-    return solve_never(posed, low, (SensedOptimisticRoute(), SensedRoute(), RobustRoute()))
+    the first of ``routes`` that claims it (the caller's: the band's sensed routes, or
+    the robust one where no sensor is left)."""
+    return solve_never(posed, low, routes)
 
 
 def _own(r: Result) -> float:
