@@ -18,7 +18,8 @@ if TYPE_CHECKING:
     from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
 
-__all__ = ["SensedRoute", "sensed_refusals", "false_alarm_refusal", "reacting_false_alarm_refusals"]
+__all__ = ["SensedRoute", "task_automaton", "sensed_refusals", "false_alarm_refusal",
+           "reacting_false_alarm_refusals"]
 
 
 class SensedRoute(Route):
@@ -49,25 +50,16 @@ class SensedRoute(Route):
         """The task's automaton, then the information-state product
         (:mod:`mitld_lp.sensing.belief`: what the robot knows of the events, never the
         events themselves), under the problem's budgets."""
-        from mitld_lp.automata.translate import to_dta
         from mitld_lp.routes.sensed_never import blind_model, never_alarms
-        from mitld_lp.routes.stages import Built, reaching
+        from mitld_lp.routes.stages import Built
         from mitld_lp.sensing.belief import belief_product
 
         model, s = posed.model, posed.settings
         blind = never_alarms(model)  # built blind, their reports dropped (sensed_never)
         if blind:
             model = blind_model(model)
-        assert s.max_states is not None and s.max_automaton_states is not None  # resolved
         t0 = time.perf_counter()
-        dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
-        # a minimum as the plain route poses it: a co-safe task minimised on its own
-        # automaton, any other as its complement's maximum read back; with a band every
-        # one as its complement's maximum (the robust route's reading, nature minimising
-        # it: mitld_lp.routes.sensed_band)
-        direct = posed.minimise and reaching(dta) and not posed.robust
-        if posed.minimise and not direct:
-            dta = dta.complement()
+        dta, direct = task_automaton(posed)
         t1 = time.perf_counter()
         belief = belief_product(model.game, dta, model.distributions, partial(model.sensors),
                                 model.epsilon if s.epsilon is None else s.epsilon,
@@ -112,6 +104,22 @@ class SensedRoute(Route):
 
             return solve_sensed_band(posed, built)
         return solve_sensed(posed, built)
+
+
+def task_automaton(posed: Posed) -> tuple[Any, bool]:
+    """The task's automaton as the sensed routes solve it, and whether a minimum is
+    solved on it directly: a minimum as the plain route poses it (a co-safe task
+    minimised on its own automaton, any other as its complement's maximum read back);
+    with a band every one as its complement's maximum (the robust route's reading,
+    nature minimising it: :mod:`mitld_lp.routes.sensed_band`)."""
+    from mitld_lp.automata.translate import to_dta
+    from mitld_lp.routes.stages import reaching
+
+    s = posed.settings
+    assert s.max_states is not None and s.max_automaton_states is not None  # resolved
+    dta = to_dta(posed.model.spec, max_states=min(s.max_states, s.max_automaton_states))
+    direct = posed.minimise and reaching(dta) and not posed.robust
+    return (dta.complement() if posed.minimise and not direct else dta), direct
 
 
 def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequence[Any],

@@ -30,7 +30,11 @@ import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
-from mitld_lp.routes.sensed import SensedRoute, reacting_false_alarm_refusals
+from mitld_lp.routes.sensed import (
+    SensedRoute,
+    reacting_false_alarm_refusals,
+    task_automaton,
+)
 from mitld_lp.sensing.sensors import partial, reacting_events
 
 if TYPE_CHECKING:
@@ -62,18 +66,12 @@ class SensedReactingRoute(SensedRoute):
         """The task's automaton (a minimum posed as the ``sensed`` route poses it), then
         the information-state product of the reacting world, under the problem's
         budgets."""
-        from mitld_lp.automata.translate import to_dta
-        from mitld_lp.routes.stages import Built, reaching
+        from mitld_lp.routes.stages import Built
         from mitld_lp.sensing.reacting import reacting_product
 
         model, s = posed.model, posed.settings
-        assert s.max_states is not None and s.max_automaton_states is not None  # resolved
         t0 = time.perf_counter()
-        dta = to_dta(model.spec, max_states=min(s.max_states, s.max_automaton_states))
-        # with a band every minimum as its complement's maximum, as the sensed route
-        direct = posed.minimise and reaching(dta) and not posed.robust
-        if posed.minimise and not direct:
-            dta = dta.complement()
+        dta, direct = task_automaton(posed)  # a minimum as the sensed route poses it
         t1 = time.perf_counter()
         belief = reacting_product(model.game, dta, model.distributions,
                                   partial(model.sensors),
