@@ -211,19 +211,18 @@ class SensedBandConstrainedRoute(Route):
 
     def solve(self, posed: Posed, built: Any, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
-        from mitld_lp.routes.sensed_never import never_alarms, solve_never
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never_band
 
         result = _solve(posed, built, costs=costs, seed=seed)
         if not never_alarms(posed.model):
             return result
-        from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
-
         # false alarms at a band that may never happen: every candidate was built blind,
         # its reports dropped (SensedConstrainedRoute.build), so ``result`` is the blind
-        # end's; the informed end on this route, or the robust constrained one where no
-        # sensor is left (module docs)
-        return solve_never(posed, result, (SensedBandConstrainedRoute(every=True),
-                                           RobustConstrainedRoute(every=True)), costs=costs)
+        # end's; the informed end on this route, its sensor kept sensed where it reports
+        # surely and at once (sensed_never.KeptSensor: the robust constrained route does
+        # not truncate such a band)
+        return solve_never_band(posed, result, (SensedBandConstrainedRoute(every=True),),
+                                costs=costs)
 
 
 def alarm_band_refusals(model: Any, *, worst: bool = False) -> list[str]:

@@ -75,7 +75,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -86,7 +86,7 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
-__all__ = ["never_alarms", "blind_model", "informed_model", "informed_detect",
+__all__ = ["KeptSensor", "never_alarms", "blind_model", "informed_model", "informed_detect",
            "solve_never", "solve_never_band"]
 
 log = logging.getLogger(__name__)
@@ -119,11 +119,34 @@ def blind_model(model: Any) -> Any:
     return _with(model, never_alarms(model), lambda s: Sensor(0.0, 0.0, s.delay))
 
 
-def informed_model(model: Any) -> Any:
+@dataclass(frozen=True, slots=True)
+class KeptSensor(Sensor):
+    """A sensor that reports its event the step it happens, surely (``detect = 1``, no
+    false alarm, no delay), kept on the sensed routes instead of read as the fully
+    observed semantics (:attr:`Sensor.perfect` false): the information-state product
+    keeps "never" as a hypothesis of its own and truncates a band that may never happen
+    (:func:`mitld_lp.sensing.belief.sensed_sta`), which the fully observed robust routes
+    do not (the band's upper survival stays above every share).  With ``detect = 1`` a
+    miss rules out every hypothesis that the event has happened, so its information
+    states are the fully observed ones."""
+
+    @property
+    def perfect(self) -> bool:
+        return False
+
+
+def informed_model(model: Any, *, keep: bool = False) -> Any:
     """``model`` with each sensor of :func:`never_alarms` replaced by the sensor without
-    false alarms at least as informative (module docs)."""
-    return _with(model, never_alarms(model),
-                 lambda s: Sensor(informed_detect(s.detect, s.false_alarm), 0.0, s.delay))
+    false alarms at least as informative (module docs).  ``keep``: one that reports
+    surely and at once (``detect = 1``, no delay: the sensor with false alarms detects
+    surely, or never) is a :class:`KeptSensor`, so that a band that may never happen
+    stays on the sensed routes, which truncate it."""
+
+    def informed(s: Sensor) -> Sensor:
+        d = informed_detect(s.detect, s.false_alarm)
+        return (KeptSensor if keep and d == 1.0 and s.delay == 0 else Sensor)(d, 0.0, s.delay)
+
+    return _with(model, never_alarms(model), informed)
 
 
 def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
@@ -139,7 +162,10 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
     from mitld_lp.routes.stages import build_posed
 
     # the model's own constraints are among the posed problem's already
-    informed = dataclasses.replace(informed_model(posed.model), constraints=())
+    # under a band the informed sensor stays sensed where it reports surely and at once
+    # (KeptSensor): the fully observed robust routes do not truncate such a band
+    informed = dataclasses.replace(informed_model(posed.model, keep=posed.robust),
+                                   constraints=())
     settings = replace(posed.settings, progress=False)
     seen = pose_on(list(routes), informed, posed.problem.constraints,
                    then=posed.problem.then, settings=settings,
@@ -193,15 +219,16 @@ def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
                    timings={**low.timings, "informed": high.seconds})
 
 
-def solve_never_band(posed: Posed, low: Result, routes: Sequence[Route]) -> Result:
+def solve_never_band(posed: Posed, low: Result, routes: Sequence[Route], *,
+                     costs: Mapping[str, float] | None = None) -> Result:
     """The bracket of ``posed``, whose law that may never happen is known only within a
-    band, without constraints (module docs, "Under a band"), from ``low``, the band's
-    problem solved on the product built with these sensors blind, their reports
-    dropped; the informed end is the band's problem with the more informative sensor,
-    read as ``posed`` reads the band (its worst or, ``bands = "best"``, its best law), on
-    the first of ``routes`` that claims it (the caller's: the band's sensed routes, or
-    the robust one where no sensor is left)."""
-    return solve_never(posed, low, routes)
+    band (module docs, "Under a band"), from ``low``, the band's problem solved on the
+    product built with these sensors blind, their reports dropped; the informed end is
+    the band's problem with the more informative sensor (a :class:`KeptSensor` where it
+    reports surely and at once), read as ``posed`` reads the band (its worst or, ``bands
+    = "best"``, its best law), with the same constraints, ``then`` and ``costs``, on the
+    first of ``routes`` that claims it (the caller's: the band's sensed routes)."""
+    return solve_never(posed, low, routes, costs=costs)
 
 
 def _own(r: Result) -> float:
