@@ -44,6 +44,17 @@ def exact_fraction(value: object) -> Fraction:
         sys.set_int_max_str_digits(kept)
 
 
+def drn_reach(path: Path, label: str) -> Fraction:
+    """Storm's exact ``P=? [F "label"]`` at the initial state of the chain (a DTMC) in
+    the DRN file ``path``, built in rational arithmetic."""
+    import stormpy
+
+    chain = stormpy.build_model_from_drn[stormpy.Rational](str(path))
+    prop = stormpy.parse_properties(f'P=? [F "{label}"]')[0]
+    return exact_fraction(stormpy.model_checking(chain, prop).get_value(
+        chain.initial_states[0]))
+
+
 def storm_rational(prism: Path, prop: str) -> Fraction:
     """Storm's exact value of ``prop`` at the initial state of the PRISM file ``prism``."""
     import stormpy

@@ -191,9 +191,10 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
     (:mod:`mitld_lp.routes.sensed_never`).  The ``sensed`` and ``sensed-constrained``
     routes build false alarms at a point law that surely happens; ``never``: the caller
     brackets them at a law that may never happen (a point law on both routes; a band,
-    its worst or best law on the ``sensed`` route, its worst law with constraints on the
-    sensed band constrained route: each end the band's problem with the sensor blind or
-    informed, :mod:`mitld_lp.routes.sensed_never`).  A band
+    its worst or best law on the ``sensed`` route, with constraints its worst law on the
+    sensed band constrained route and its best law on the sensed optimistic constrained
+    route: each end the band's problem with the sensor blind or informed,
+    :mod:`mitld_lp.routes.sensed_never`).  A band
     (``robust``) whose laws surely happen: its worst case (``worst``: alone on the
     ``sensed`` route, :mod:`mitld_lp.routes.sensed_band`; with constraints, ``then`` or
     the trade-off curve on the sensed band constrained route,
@@ -213,9 +214,9 @@ def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool
                 "happens moves with every report for ever, so the information state is "
                 "not finite; bracketed with a point law (routes sensed and "
                 "sensed-constrained) and with a band (route sensed, its worst or best "
-                "law; with constraints or then its worst law, route sensed-constrained), "
-                "not solved on this route (give false_alarm = 0, or a law that surely "
-                "happens)"]
+                "law; with constraints or then its worst or best law, route "
+                "sensed-constrained), not solved on this route (give false_alarm = 0, or "
+                "a law that surely happens)"]
     refused = []
     if robust and not (worst or best):
         refused.append(f"{head}: with a law known only within a band, not solved on this "

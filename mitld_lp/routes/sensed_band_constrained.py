@@ -231,8 +231,10 @@ def alarm_band_refusals(model: Any, *, worst: bool = False) -> list[str]:
     caller solves the band's worst case (this route: its candidates are the sensed
     constrained route's solves with false alarms at the band's laws, each judged on its
     interval chain, which draws every step's report; at a band that may never happen
-    built blind and bracketed: module docs), so none is refused; else (the band's best
-    law) every false alarm is.  The sensed
+    built blind and bracketed: module docs), so none is refused; else every false alarm
+    is, the message naming the routes that solve it (the band's best law is the sensed
+    optimistic constrained route's, a band that may never happen bracketed there too:
+    :mod:`mitld_lp.routes.sensed_optimistic_constrained`).  The sensed
     constrained route builds false alarms at a point law only, so the band routes that
     call its refusal at one add this."""
     from mitld_lp.routes.sensed import false_alarm_refusal

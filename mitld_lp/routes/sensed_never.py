@@ -52,10 +52,11 @@ objectives: the check also asks those to meet.  The trade-off curve's points are
 this route's answer.
 
 **Under a band** (a law known only within a band whose laws may never happen, its worst
-law or ``bands = "best"`` its best, route ``sensed``: :func:`solve_never_band`; its worst
-law with constraints or ``then``, the sensed band constrained route:
-:mod:`mitld_lp.routes.sensed_band_constrained`) both ends are the band's problems, posed
-with the same band.
+law or ``bands = "best"`` its best, route ``sensed``: :func:`solve_never_band`; with
+constraints or ``then`` its worst law on the sensed band constrained route,
+:mod:`mitld_lp.routes.sensed_band_constrained`, its best law on the sensed optimistic
+constrained route, :mod:`mitld_lp.routes.sensed_optimistic_constrained`) both ends are
+the band's problems, posed with the same band.
 The blind end is the band's solve on the product built blind, its controller dropping
 the reports (:mod:`mitld_lp.routes.sensed_band`, :mod:`mitld_lp.routes.
 sensed_optimistic`): its worst (best) case over the band is the one it has in the
@@ -67,8 +68,16 @@ may play at every step, or the fully observed one, and every posed controller is
 of the informed sensor's (the garbling above).  With constraints the same holds of
 each constraint's value, as with a point law; with ``then`` each end's second objective
 is its controller's worst case over the band, not an optimum, so only the returned
-controller's is said.  With ``bands = "best"`` and constraints such a band stays refused
-(:func:`mitld_lp.routes.sensed.false_alarm_refusal`)."""
+controller's is said.  With ``bands = "best"`` and constraints each end is the optimistic
+constrained answer (a pair of a controller and a constant law of the band, the
+constraints met at that law): the blind one's pair is one of the posed problem's (its
+controller drops the reports, which move neither world, task nor the law), so its task
+value at its law bounds the posed optimum (``lower``; an optimistic value, as every
+``bands = "best"`` answer); every posed pair is one of the informed sensor's (the
+garbling above, at the same law), so the informed end's ``upper`` bounds it.  The
+informed end's sensor reports surely and at once where the posed one detects surely (or
+never): it is kept on the sensed routes (:class:`KeptSensor`), whose information-state
+product truncates such a band, which the fully observed robust routes cannot."""
 
 from __future__ import annotations
 
@@ -252,9 +261,12 @@ def _then(posed: Posed, low: Result, high: Result) -> tuple[str, bool]:
     ours, least = float(low.secondary), float(high.secondary)
     what = "expected steps" if then == "min-steps" else "expected cost"
     if posed.robust:  # a band: each end's second objective is its controller's worst case
-        return (f"; then {then}: the controller's {what} {ours:.7g}, its worst case over "
-                "the band (the blind solve's; the band's route proves no lexicographic "
-                "optimum, so the ends' are not compared)"), True
+        # (read for the band's best law: its value at the law nature chose)
+        at = ("at the band's law it is played with" if posed.settings.bands == "best"
+              else "its worst case over the band")
+        return (f"; then {then}: the controller's {what} {ours:.7g}, {at} (the blind "
+                "solve's; the band's route proves no lexicographic optimum, so the ends' "
+                "are not compared)"), True
     met = abs(ours - least) <= SECOND_TOL * max(1.0, abs(ours))
     return (f"; then {then}: the controller's {what} {ours:.7g} (the blind solve's), a "
             f"controller reading the reports at least {least:.7g}" +

@@ -33,6 +33,17 @@ not known for a pair, so none of it is taken off).  With ``then`` the second
 objective is the candidate's at its law (its expected steps or cost, as its route
 computes them).  If no candidate meets its constraints, the middle law's answer is
 returned with its status (no constraint said to hold) and not certified.
+
+False alarms at a band that may never happen (:mod:`mitld_lp.routes.sensed_never`,
+"Under a band"): every candidate is built blind, its reports dropped
+(:meth:`SensedConstrainedRoute.build`; :class:`PointLawRoute` solves it at its law
+without bracketing it there), so the answer above is the blind controller's at nature's
+chosen law, whose task and constraint values there are those it has in the posed
+problem; it is bracketed against this route's answer with the more informative sensor
+without false alarms, whose ``upper`` bounds every posed pair.  The fully observed
+bound is not given for such a band (the robust constrained route cannot truncate it:
+NaN, said in the log): the informed end's ``upper`` is then 1 (for a minimum its
+``lower`` 0), the bracket sound but only the blind controller's end informative.
 """
 
 from __future__ import annotations
@@ -55,7 +66,7 @@ from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["SensedOptimisticConstrainedRoute", "SensedOptimisticConstrainedPart",
-           "point_laws", "solve_sensed_optimistic_constrained"]
+           "PointLawRoute", "point_laws", "solve_sensed_optimistic_constrained"]
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +128,7 @@ class SensedOptimisticConstrainedRoute(SensedConstrainedRoute):
         alarms = [x for a, s in sorted(partial(posed.model.sensors).items()) if s.false_alarm
                   for x in false_alarm_refusal(a, s.false_alarm,
                                                posed.model.distributions.get(a),
-                                               robust=True, best=True)]
+                                               never=True, robust=True, best=True)]
         return refused + [x for x in alarms if x not in refused]
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built | None:
@@ -125,20 +136,44 @@ class SensedOptimisticConstrainedRoute(SensedConstrainedRoute):
 
     def solve(self, posed: Posed, built: Built | None, *,
               costs: Mapping[str, float] | None = None, seed: int | None = 0) -> Result:
-        return solve_sensed_optimistic_constrained(posed, costs=costs, seed=seed)
+        from mitld_lp.routes.sensed_never import never_alarms, solve_never_band
+
+        result = solve_sensed_optimistic_constrained(posed, costs=costs, seed=seed)
+        if not never_alarms(posed.model):
+            return result
+        # false alarms at a band that may never happen: every candidate was built blind,
+        # its reports dropped, so ``result`` is the blind end's; the informed end on this
+        # route (module docs)
+        return solve_never_band(posed, result,
+                                (SensedOptimisticConstrainedRoute(every=True),), costs=costs)
+
+
+class PointLawRoute(SensedConstrainedRoute):
+    """The sensed constrained route at one of the band's constant laws, as a candidate:
+    its answer at that law, not bracketed where a sensor with false alarms has a law
+    that may never happen (built blind, its reports dropped:
+    :meth:`SensedConstrainedRoute.build`); the band's answer is bracketed as a whole
+    (:meth:`SensedOptimisticConstrainedRoute.solve`)."""
+
+    def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
+              seed: int | None = 0) -> Result:
+        return self._solve(posed, built, costs=costs, seed=seed)
 
 
 def _at_law(posed: Posed, laws: Mapping[str, Any]) -> Posed:
     """``posed`` with the model's laws ``laws`` (point laws: not robust)."""
     model = dataclasses.replace(posed.model, distributions=MappingProxyType(dict(laws)))
     return replace(posed, problem=replace(posed.problem, model=model), robust=False,
-                   route=SensedConstrainedRoute())
+                   route=PointLawRoute())
 
 
 def _full_bound(posed: Posed) -> float:
     """The fully observed optimistic constrained optimum's sound end for the same
     problem (its sensors read as perfect): its ``upper`` for a maximum, its ``lower``
-    for a minimum; NaN where that route does not give it (a budget, a refusal)."""
+    for a minimum; NaN, said in the log, where that route does not give it (a budget, a
+    refusal, a band it cannot truncate: one whose laws may never happen, its upper
+    survival above every share)."""
+    from mitld_lp.distributions import DistributionError
     from mitld_lp.problem import ProblemError, pose_on
     from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
     from mitld_lp.routes.stages import build_posed
@@ -152,7 +187,7 @@ def _full_bound(posed: Posed) -> float:
                        settings=replace(posed.settings, progress=False),
                        objective=p.objective)
         full = seen.route.solve(seen, build_posed(seen, progress=False))
-    except (ProblemError, ProductTooLarge) as exc:
+    except (ProblemError, ProductTooLarge, DistributionError) as exc:
         log.info("fully observed optimistic constrained bound not used: %s", exc)
         return float("nan")
     return float(full.lower if posed.minimise else full.upper)
