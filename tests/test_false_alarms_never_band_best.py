@@ -228,3 +228,26 @@ def test_detect_one_with_false_alarms_and_a_constraint() -> None:
     blind = synthesize(_model(0.0), constraints=[CONSTRAINT])
     assert abs(r.lower - blind.lower) <= 1e-9 and abs(r.upper - informed.upper) <= 1e-12
     assert all(v.holds for v in r.constraints)
+
+
+def test_infeasible_only_where_proved() -> None:
+    """``P(F (b & A)) >= 0.45``: no law of the band lets the robot meet it (by hand: it is
+    at ``A`` at one step only, and the bus comes at any one step with at most 0.4: at
+    step 1 its hazard is at most 2/5, at step 2 at most ``(1 - 1/5) * 1/2``), but the
+    route proves that only through the fully observed bound, which it cannot give for
+    such a band: ``failed``, no controller, no constraint said to hold (the middle law's
+    LP is infeasible, which alone proves nothing of the band).  A band whose laws surely
+    happen keeps ``infeasible`` where the fully observed problem is (tests/test_false_
+    alarms_best.py's world with contradictory bounds).  ``>= 0.35``: met at an end law
+    (0.4 there, going the step before the bus's likelier step), not at the middle law."""
+    from test_false_alarms_best import model as surely
+
+    r = synthesize(_model(*POSED), bands="best", constraints=["P(F (b & A)) >= 0.45"])
+    assert str(r.status) == "failed" and r.controller is None
+    assert not any(v.holds for v in r.constraints) and not r.certified
+    s = synthesize(surely("max"), bands="best",
+                   constraints=["P(F[0,1] A) >= 0.5", "P(F[0,1] A) <= 0.2"])
+    assert str(s.status) == "infeasible" and s.controller is None
+    r = synthesize(_model(*POSED), bands="best", constraints=["P(F (b & A)) >= 0.35"])
+    assert r.status == "optimal" and r.part.chosen_at in ("low ends", "high ends")
+    assert all(v.holds for v in r.constraints)

@@ -32,7 +32,9 @@ reported in ``width``, but how much of the gap to the other end is the truncatio
 not known for a pair, so none of it is taken off).  With ``then`` the second
 objective is the candidate's at its law (its expected steps or cost, as its route
 computes them).  If no candidate meets its constraints, the middle law's answer is
-returned with its status (no constraint said to hold) and not certified.
+returned with its status (no constraint said to hold) and not certified; ``infeasible``
+there stays so only where the fully observed problem is infeasible too (it holds every
+pair), else the status is ``failed`` (another law of the band may admit a pair).
 
 False alarms at a band that may never happen (:mod:`mitld_lp.routes.sensed_never`,
 "Under a band"): every candidate is built blind, its reports dropped
@@ -167,12 +169,14 @@ def _at_law(posed: Posed, laws: Mapping[str, Any]) -> Posed:
                    route=PointLawRoute())
 
 
-def _full_bound(posed: Posed) -> float:
+def _full_bound(posed: Posed) -> tuple[float, bool]:
     """The fully observed optimistic constrained optimum's sound end for the same
     problem (its sensors read as perfect): its ``upper`` for a maximum, its ``lower``
     for a minimum; NaN, said in the log, where that route does not give it (a budget, a
     refusal, a band it cannot truncate: one whose laws may never happen, its upper
-    survival above every share)."""
+    survival above every share).  And whether that problem is infeasible (no pair of a
+    full-information policy and a law of the band meets the constraints, so no
+    observation-based one does)."""
     from mitld_lp.distributions import DistributionError
     from mitld_lp.problem import ProblemError, pose_on
     from mitld_lp.routes.robust_constrained import RobustConstrainedRoute
@@ -189,8 +193,8 @@ def _full_bound(posed: Posed) -> float:
         full = seen.route.solve(seen, build_posed(seen, progress=False))
     except (ProblemError, ProductTooLarge, DistributionError) as exc:
         log.info("fully observed optimistic constrained bound not used: %s", exc)
-        return float("nan")
-    return float(full.lower if posed.minimise else full.upper)
+        return float("nan"), False
+    return float(full.lower if posed.minimise else full.upper), full.status == Status.INFEASIBLE
 
 
 def _holds(r: Result) -> bool:
@@ -228,14 +232,22 @@ def solve_sensed_optimistic_constrained(posed: Posed, *,
                               own(r) > own(chosen[0])):
             chosen = (r, label)
     timed = within_time(posed, t0, limit, "the fully observed optimistic constrained optimum")
-    full = float("nan") if timed is None else _full_bound(timed)
+    full, none = (float("nan"), False) if timed is None else _full_bound(timed)
     if chosen is None:  # no candidate meets its constraints: the middle law's status
         assert first is not None
-        return replace(first, bands=bands, certified=False, part=_part(
-            first, "middle law", tried, full,
-            f"{first.part.message}; no candidate (the band's middle law and ends) meets "
-            "the constraints: no pair of an observation-based controller and a law of the "
-            "band found; " + SENSED_OPTIMISTIC_CONSTRAINED))
+        # infeasible at the middle law is infeasible under the band only where the fully
+        # observed problem, which holds every pair, is infeasible too
+        unproved = first.status == Status.INFEASIBLE and not none
+        said = ("; infeasible at the band's middle law, not proved for the band (the fully "
+                "observed optimistic constrained problem, which holds every pair, is not "
+                "infeasible or not solved): another law may admit a pair" if unproved else "")
+        return replace(first, bands=bands, certified=False,
+                       status=Status.FAILED if unproved else first.status, part=_part(
+                           first, "middle law", tried, full,
+                           f"{first.part.message}; no candidate (the band's middle law and "
+                           "ends) meets the constraints: no pair of an observation-based "
+                           "controller and a law of the band found" + said + "; "
+                           + SENSED_OPTIMISTIC_CONSTRAINED))
     r, name = chosen
     # in the maximised automaton's terms (a minimum: the complement's), then read back
     low = 1.0 - float(r.upper) if minimise else float(r.lower)
