@@ -232,12 +232,12 @@ def solve_sensed_optimistic_constrained(posed: Posed, *,
                               own(r) > own(chosen[0])):
             chosen = (r, label)
     timed = within_time(posed, t0, limit, "the fully observed optimistic constrained optimum")
-    full, none = (float("nan"), False) if timed is None else _full_bound(timed)
+    full, full_infeasible = (float("nan"), False) if timed is None else _full_bound(timed)
     if chosen is None:  # no candidate meets its constraints: the middle law's status
         assert first is not None
         # infeasible at the middle law is infeasible under the band only where the fully
         # observed problem, which holds every pair, is infeasible too
-        unproved = first.status == Status.INFEASIBLE and not none
+        unproved = first.status == Status.INFEASIBLE and not full_infeasible
         said = ("; infeasible at the band's middle law, not proved for the band (the fully "
                 "observed optimistic constrained problem, which holds every pair, is not "
                 "infeasible or not solved): another law may admit a pair" if unproved else "")
