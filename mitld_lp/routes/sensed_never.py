@@ -82,12 +82,12 @@ from typing import Any
 from mitld_lp.checks import Check
 from mitld_lp.problem import Posed, Route
 from mitld_lp.result import Result
-from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.sensing.sensors import Sensor, partial
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["never_alarms", "blind_model", "informed_model", "informed_detect",
-           "solve_never", "solve_never_band"]
+           "solve_never", "solve_never_band", "dropping"]
 
 log = logging.getLogger(__name__)
 
@@ -124,6 +124,15 @@ def informed_model(model: Any) -> Any:
     false alarms at least as informative (module docs)."""
     return _with(model, never_alarms(model),
                  lambda s: Sensor(informed_detect(s.detect, s.false_alarm), 0.0, s.delay))
+
+
+def dropping(belief: Any, model: Any) -> Any:
+    """``belief``, built on :func:`blind_model` of ``model``, as the posed problem's: its
+    sensors ``model``'s, the reports of :func:`never_alarms`' events dropped by the
+    controller (``Belief.ignored``), so its chain, tree and rollouts draw each step's
+    report from the posed sensor and drop it."""
+    return dataclasses.replace(belief, sensors=partial(model.sensors),
+                               ignored=belief.ignored | frozenset(never_alarms(model)))
 
 
 def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,
