@@ -256,7 +256,7 @@ def test_a_binding_constraint_met_by_the_blind_controller(tmp_path: Path) -> Non
     bound = ["P(F[0,3] h) <= 0.3"]
     r = synthesize(model(CAUGHT, 0.8, 0.2), constraints=bound)
     assert r.route == "sensed-constrained" and r.status.has_solution
-    assert not r.certified  # the reports are worth reading here
+    assert not r.certified and all(c.holds for c in r.constraints)  # reports worth reading
     path = write_chain(r, tmp_path / "c.drn")
     task = storm(path)
     assert abs(task - Fraction(r.lower)) <= Fraction(1, 10**6)
@@ -306,19 +306,24 @@ def test_then_and_the_tradeoff_curve() -> None:
 # ------------------------------------------------------------------ a band
 
 
-@pytest.mark.parametrize("bands", ["worst", "best"])
-def test_a_band_is_bracketed_by_its_blind_and_informed_solves(bands: str) -> None:
-    """A band of laws that may never happen: the band's problem with the camera blind
-    (``lower``) and with the informed camera (``upper``), each the separate reacting
-    band solve; the check names the gap."""
+@pytest.mark.parametrize("bands, extra", [("worst", {}), ("best", {}),
+                                          ("worst", {"constraints": ["P(F[0,3] h) <= 0.4"]})])
+def test_a_band_is_bracketed_by_its_blind_and_informed_solves(
+        bands: str, extra: dict[str, Any]) -> None:
+    """A band of laws that may never happen (its worst or best law; the worst with a
+    constraint): the band's problem with the camera blind (``lower``) and with the
+    informed camera (``upper``), each the separate reacting band solve; the check names
+    the gap."""
     from mitld_lp.distributions.band import band_of_laws
 
     band = band_of_laws("mu", pmf([0.25, 0.25, 0.3]), [pmf([0.2, 0.3, 0.3]),
                                                       pmf([0.3, 0.2, 0.3])])
-    r = synthesize(model(CAUGHT, 0.8, 0.2, band), bands=bands)
-    blind = synthesize(model(CAUGHT, 0.0, 0.0, band), bands=bands)
-    informed = synthesize(model(CAUGHT, 0.75, 0.0, band), bands=bands)
-    assert r.route == blind.route == informed.route == "sensed-reacting" and r.bands
+    r = synthesize(model(CAUGHT, 0.8, 0.2, band), bands=bands, **extra)
+    blind = synthesize(model(CAUGHT, 0.0, 0.0, band), bands=bands, **extra)
+    informed = synthesize(model(CAUGHT, 0.75, 0.0, band), bands=bands, **extra)
+    route = "sensed-constrained" if extra else "sensed-reacting"
+    assert r.route == blind.route == informed.route == route and r.bands
     assert abs(r.lower - blind.lower) <= 1e-9 and abs(r.upper - informed.upper) <= 1e-9
+    assert all(c.holds for c in r.constraints)  # under every law of the band
     check = next(c for c in r.checks if c.name == "false alarms, law that may never happen")
     assert not check.passed and not r.certified
