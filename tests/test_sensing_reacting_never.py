@@ -327,3 +327,19 @@ def test_a_band_is_bracketed_by_its_blind_and_informed_solves(
     assert all(c.holds for c in r.constraints)  # under every law of the band
     check = next(c for c in r.checks if c.name == "false alarms, law that may never happen")
     assert not check.passed and not r.certified
+
+
+def test_storm_on_the_band_s_interval_chain_gives_lower(tmp_path: Path) -> None:
+    """The blind controller's interval chain under the band (the world moved on the
+    true events, every step's report drawn from the posed camera and dropped): Storm's
+    robust check, nature minimising, gives ``lower``."""
+    from test_band_chain import storm_worst
+
+    from mitld_lp.distributions.band import band_of_laws
+    from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
+
+    band = band_of_laws("mu", pmf([0.25, 0.25, 0.3]), [pmf([0.2, 0.3, 0.3]),
+                                                      pmf([0.3, 0.2, 0.3])])
+    r = synthesize(model(CAUGHT, 0.8, 0.2, band))
+    path = write_sensed_band_chain(r, tmp_path / "c.drn")
+    assert abs(storm_worst(path) - r.lower) <= 1e-9
