@@ -1,6 +1,10 @@
 """False alarms with an event law that may never happen (``never > 0``), bracketed on
 the ``sensed`` route, and with constraints, ``then`` or the trade-off curve on the
-``sensed-constrained`` route, instead of refused.
+``sensed-constrained`` route, instead of refused.  On a world whose moves react to the
+event the same bracket is built on the ``sensed-reacting`` route (and
+``sensed-constrained`` on its product), each end a reacting product's solve
+(:mod:`mitld_lp.routes.sensed_reacting`): the blind end still reads the world's moves,
+and the garbling below leaves them alone, so both arguments hold as they are.
 
 Such a sensor reports or not at every step, and the belief that its event never happens
 moves with every report for ever: the information state is not finite
