@@ -218,6 +218,19 @@ def test_storm_on_the_chain_and_the_tree_gives_lower(tmp_path: Path) -> None:
     assert storm(write_chain(r, tmp_path / "t.drn", controller=tree)) == value
 
 
+def test_rollouts_of_the_posed_model_land_on_lower() -> None:
+    """Rollouts of the posed model (the world moved on the drawn bus, every step's report
+    drawn from the posed camera) never meet an observation the controller cannot read,
+    and their success rate lands on ``lower``."""
+    from mitld_lp.sensing.observe import simulate_sensed
+
+    m = model(OBLIGATION, 0.8, 0.2)
+    r = synthesize(m)
+    sim = simulate_sensed(m, r.controller, runs=3000, seed=7, max_steps=12)
+    sigma = (r.lower * (1 - r.lower) / sim.runs) ** 0.5
+    assert sim.beyond_model == 0 and abs(sim.estimate - r.lower) <= 4.5 * sigma
+
+
 def test_the_saved_controller_runs_as_the_live_one(tmp_path: Path) -> None:
     """The controller file, loaded by :mod:`mitld_lp.runtime` and run by ``mitld-lp
     run``, plays the live controller's actions on observations with reports."""
