@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from test_sensing_reacting import AVOID, CAUGHT, LAW, PMF, optimum, storm_exact, world
 
-from mitld_lp import ExplicitGame, Model, ProblemError, synthesize
+from mitld_lp import ExplicitGame, Model, synthesize
 from mitld_lp.automata.translate import to_dta
 from mitld_lp.distributions.literal import from_table
 from mitld_lp.product import ProductTooLarge
@@ -270,7 +270,7 @@ def test_the_estimate_stops_a_build_that_will_not_fit_early() -> None:
     assert len(reacting_product(*args, max_states=size + size // 2).mdp.states) == size
 
 
-# ------------------------------------------------------------------ a band, refusals
+# ------------------------------------------------------------------ a band
 
 
 @pytest.mark.parametrize("bands", ["worst", "best"])
@@ -301,18 +301,6 @@ def test_a_band_is_solved_within_its_point_laws(bands: str) -> None:
             assert Fraction(r.lower) <= point + Fraction(1, 10**9)
         else:  # a candidate is the end law's optimum: its best case is at least that
             assert point <= Fraction(r.lower) + Fraction(1, 10**9)
-
-
-def test_a_law_that_may_never_happen_stays_refused_by_name() -> None:
-    """The bus never comes with probability 0.4: "never" against "came" moves with every
-    report for ever, and the bracket of the sensed route is not built on this product:
-    refused by name alone, with a constraint, with then."""
-    m = alarmed(GAME, CAUGHT, 0.5, 0.1, law="D[pmf(0.3, 0.3)] b & ")
-    for extra in ({}, {"constraints": ["P(F h) <= 0.5"]}, {"then": "min-steps"}):
-        with pytest.raises(ProblemError, match=r"sensors.b.false_alarm = 0.1 with a world "
-                                               r"whose moves react to a sensed event and a "
-                                               r"law that may never happen"):
-            synthesize(m, **extra)
 
 
 def test_a_steady_growth_is_not_carried_past_the_clock_with_false_alarms() -> None:

@@ -18,8 +18,7 @@ if TYPE_CHECKING:
     from mitld_lp.result import Result
     from mitld_lp.routes.stages import Built
 
-__all__ = ["SensedRoute", "task_automaton", "sensed_refusals", "false_alarm_refusal",
-           "reacting_false_alarm_refusals"]
+__all__ = ["SensedRoute", "task_automaton", "sensed_refusals", "false_alarm_refusal"]
 
 
 class SensedRoute(Route):
@@ -148,31 +147,12 @@ def sensed_refusals(model: Any, fragment: str, objective: str, constraints: Sequ
         reacts = world_members(model.game).event_names
     except GameError:  # the model's loader checked the world; nothing to add here
         reacts = frozenset()
-    if reacts & set(sensors):
-        refused += reacting_false_alarm_refusals(sensors, model.distributions)
     for a in sorted(reacts & set(sensors)) if not constraints else ():
         refused.append(f"sensors.{a}: the world's moves react to the sensed event {a!r} "
                        "(event_names): solved by route sensed-reacting (with a band too, "
                        "its worst or best law; with constraints or then, sensed-constrained)"
                        ", which this list of routes does not hold")
     return refused
-
-
-def reacting_false_alarm_refusals(sensors: Mapping[str, Any], laws: Mapping[str, Any]
-                                  ) -> list[str]:
-    """Why sensors with false alarms are not solved when the world's moves react to a
-    sensed event.  With a law that surely happens the reacting product
-    (:mod:`mitld_lp.sensing.reacting`) reads every step's report or silence in each
-    hypothesis's exact posterior, and builds it; with a law that may never happen
-    (``laws``: the model's) the posterior of "never" moves with every report for ever and
-    the bracket of :mod:`mitld_lp.routes.sensed_never` is not built on that product."""
-    return [f"sensors.{a}.false_alarm = {s.false_alarm:g} with a world whose moves react "
-            f"to a sensed event and a law that may never happen ({a} never happens with "
-            f"probability {float(laws[a].never):.6g}): not built (the belief that {a} "
-            "never happens moves with every report for ever); give false_alarm = 0, or a "
-            "law that surely happens"
-            for a, s in sensors.items()
-            if s.false_alarm and a in laws and float(laws[a].never) > 0.0]
 
 
 def false_alarm_refusal(event: str, false_alarm: float, law: Any, *, never: bool = False,

@@ -1,6 +1,10 @@
 """False alarms with an event law that may never happen (``never > 0``), bracketed on
 the ``sensed`` route, and with constraints, ``then`` or the trade-off curve on the
-``sensed-constrained`` route, instead of refused.
+``sensed-constrained`` route, instead of refused.  On a world whose moves react to the
+event the same bracket is built on the ``sensed-reacting`` route (and
+``sensed-constrained`` on its product), each end a reacting product's solve
+(:mod:`mitld_lp.routes.sensed_reacting`): the blind end still reads the world's moves,
+and the garbling below leaves them alone, so both arguments hold as they are.
 
 Such a sensor reports or not at every step, and the belief that its event never happens
 moves with every report for ever: the information state is not finite
@@ -91,12 +95,12 @@ from typing import Any
 from mitld_lp.checks import Check
 from mitld_lp.problem import Posed, Route
 from mitld_lp.result import Result
-from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.sensing.sensors import Sensor, partial
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rounding import one_minus
 
 __all__ = ["KeptSensor", "never_alarms", "blind_model", "informed_model", "informed_detect",
-           "solve_never", "solve_never_band"]
+           "solve_never", "solve_never_band", "dropping"]
 
 log = logging.getLogger(__name__)
 
@@ -156,6 +160,15 @@ def informed_model(model: Any, *, keep: bool = False) -> Any:
         return (KeptSensor if keep and d == 1.0 and s.delay == 0 else Sensor)(d, 0.0, s.delay)
 
     return _with(model, never_alarms(model), informed)
+
+
+def dropping(belief: Any, model: Any) -> Any:
+    """``belief``, built on :func:`blind_model` of ``model``, as the posed problem's: its
+    sensors ``model``'s, the reports of :func:`never_alarms`' events dropped by the
+    controller (``Belief.ignored``), so its chain, tree and rollouts draw each step's
+    report from the posed sensor and drop it."""
+    return dataclasses.replace(belief, sensors=partial(model.sensors),
+                               ignored=belief.ignored | frozenset(never_alarms(model)))
 
 
 def solve_never(posed: Posed, low: Result, routes: Sequence[Route], *,

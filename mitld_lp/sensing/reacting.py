@@ -29,7 +29,7 @@ states (the same futures, so the same optimum; only the product is larger).  The
 rows and the states' ``weights`` are the rationals rounded to floats once.
 
 A sensor with false alarms (``false_alarm > 0``, a law that surely happens; one that may
-never happen is refused: :func:`mitld_lp.routes.sensed.reacting_false_alarm_refusals`)
+never happen is built blind and bracketed: :mod:`mitld_lp.routes.sensed_reacting`)
 reports or not at every step, with probability ``false_alarm`` before a hypothesis's
 step ``k + delay`` and ``detect`` from it on (:meth:`~mitld_lp.sensing.rules.StepRules.
 sensed_branches`): every step's report or silence multiplies each hypothesis's weight
