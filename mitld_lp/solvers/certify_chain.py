@@ -154,7 +154,11 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         known = b[inner] + rows @ v
         g = None if guess is None else guess[inner]
         joint = None
-        walk = ChainLevels(block)  # the chain's own components: one walk, both solves
+        # the chain's own components: one walk, both solves.  Not the greedy block's
+        # walk (solve stage): the chain here is the policy's transient states only,
+        # another graph (QVBS zeroconf 20-4-false: 168,388 of the block's 213,268
+        # states), and its search is 0.027 s of the 1.4 s solve
+        walk = ChainLevels(block)
         if g is not None and bool(np.all(g > 0)):
             pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
             v[inner], joint = pair[:, 0], pair[:, 1]
