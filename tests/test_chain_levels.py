@@ -200,3 +200,36 @@ def test_compiled_single_state_runs_match_the_numpy_walk(monkeypatch) -> None:
         np.testing.assert_allclose(walk.solve_transposed(rhs[:, 1]), flow[:, 1], rtol=1e-11)
     assert {"chain_solve", "chain_flow"} <= set(calls)
     assert np.array_equal(fast.solve(rhs), plain.solve(rhs))
+
+
+def test_certificate_chain_walks_four_byte_indices(monkeypatch) -> None:
+    """The certificates' chain (``certify_chain.chain``) reaches its level walks with
+    4-byte indices where they fit, as the greedy block's chains do: the compiled
+    level kernels then load one variant per process, not one per index type (each a
+    compilation on a fresh cache).  Its values against the dense solve of the chain."""
+    from mitld_lp.solvers import certify_chain
+
+    monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 2)
+    seen = []
+
+    class Recorded(ChainLevels):
+        def __init__(self, chain):  # the chain as the walk receives it
+            seen.append((chain.indices.dtype, chain.indptr.dtype))
+            super().__init__(chain)
+
+    monkeypatch.setattr(certify_chain, "ChainLevels", Recorded)
+    mdp = random_mdp(240, seed=1, target_fraction=0.08, sink_fraction=0.08,
+                     self_loop_fraction=0.0, max_choices=3, max_successors=3)
+    m = sp.csr_array(mdp.matrix)
+    rng = np.random.default_rng(1)
+    groups = np.asarray(mdp.row_groups)
+    policy = groups[:-1] + (rng.random(mdp.n_states) * np.diff(groups)).astype(np.int64)
+    policy[mdp.target] = -1
+    ch = chain(mdp, mdp.target, policy, rounding(m), support_layers(mdp))
+    assert seen and all(d == (np.dtype(np.int32),) * 2 for d in seen)
+    live = np.flatnonzero(ch.solved)
+    rows = m[policy[live]].toarray()
+    want = np.linalg.solve(np.eye(live.size) - rows[:, live],
+                           rows[:, np.flatnonzero(ch.sure)].sum(axis=1))
+    np.testing.assert_allclose(ch.values[live], np.clip(want, 0.0, 1.0), rtol=1e-10,
+                               atol=1e-15)

@@ -100,8 +100,11 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     slack = np.zeros(n)
     idx = np.flatnonzero(solved)
     if idx.size:
-        at = np.full(n, -1, dtype=np.int64)
-        at[idx] = np.arange(idx.size)
+        # the chain in the edges' index type, as the greedy block's chains are: the
+        # level kernels load one variant, not one per type (each a compilation on a
+        # fresh cache and a load per process), and 4 bytes an entry when it can
+        at = np.full(n, -1, dtype=index)
+        at[idx] = np.arange(idx.size, dtype=index)
         keep = solved[src]
         s_loc, d, p = at[src[keep]], dst[keep], val[keep]
         del src, dst, val, keep
@@ -110,6 +113,8 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         # the entries come row by row in the states' order: the CSR arrays directly
         rows_of = s_loc[into]
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
+        if indptr[-1] <= np.iinfo(index).max:
+            indptr = indptr.astype(index)
         sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
         kappa = 1.0 - rnd.low[policy[idx]]
         v, w = _solve(sub, b, kappa, None if layers is None else
@@ -149,7 +154,11 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         known = b[inner] + rows @ v
         g = None if guess is None else guess[inner]
         joint = None
-        walk = ChainLevels(block)  # the chain's own components: one walk, both solves
+        # the chain's own components: one walk, both solves.  Not the greedy block's
+        # walk (solve stage): the chain here is the policy's transient states only,
+        # another graph (QVBS zeroconf 20-4-false: 168,388 of the block's 213,268
+        # states), and its search is 0.027 s of the 1.4 s solve
+        walk = ChainLevels(block)
         if g is not None and bool(np.all(g > 0)):
             pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
             v[inner], joint = pair[:, 0], pair[:, 1]

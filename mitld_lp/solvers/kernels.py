@@ -24,9 +24,17 @@ probability 0.98) is settled in one update instead of hundreds.
   A block is swept by it only in a product of at least
   :data:`COMPILED_MIN_ENTRIES` entries and when the block itself has at least
   :data:`COMPILED_MIN_BLOCK_ENTRIES`; numba is imported at the first such block, so a
-  product whose blocks are all small never loads it (its import and the cached kernels
-  cost about 0.2-0.4 s of CPU and 74 MB, the first compilation on a machine a few
-  seconds, cached after); without numba the NumPy path runs.
+  product whose blocks are all small never loads it; without numba the NumPy path runs.
+  What loading it costs, measured in a solve with SciPy loaded (numba 0.68, CPU
+  seconds on a loaded 2-core machine): ``import numba`` 0.14-0.25 s; the first call of
+  any kernel 0.23-0.31 s even from the on-disk cache, which numba spends on its typing
+  and target registries once a process (0.39-0.43 s when ``scipy.linalg`` is not yet
+  imported: numba imports it to find BLAS); each further kernel, or signature of one,
+  5-10 ms; 74 MB.  A new checkout compiles every kernel it calls once (2.5 s more on the
+  first solve of QVBS ``zeroconf`` 20-4-false, the index files then under each
+  module's ``__pycache__``, keyed by the source file's time stamp).  The NumPy path is
+  no way round that load where a large block needs the kernel: that instance's solve
+  takes 25 s by it against 1.6 s compiled, its load included.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
 They stop when every state's gap is below its threshold: the absolute ``tol``, and with

@@ -1,0 +1,188 @@
+"""Profile: where the solve stage's CPU goes on QVBS instances, and what numba's load costs.
+
+Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their own:
+
+* ``bench_qvbs.measure``: our solve stage (``solve_cpu``, no profiler) beside Storm's
+  best sound check on the same product (``storm_check_cpu``), the answer beside each;
+* ``stages``: the same synthesis again with the entry point of each stage of the
+  solve timed (``timed_solve_cpu`` its solve stage): the analysis (``analyse``), the
+  interval iteration (``interval_iterations``: with numba's import and load where a
+  block is swept compiled), the LP stage (``solve_lp``), the certificate
+  (``certify``), and ``numba_import``: the first call of
+  ``kernels.compiled_kernel`` (``import numba`` and the kernel module, at the first
+  large block), inside the iteration's figure;
+* with ``--numpy-sweeps``, ``stages`` once more with no block swept compiled (numba
+  never loaded): what a size threshold above the instance would cost;
+* ``numba``: a fresh interpreter with NumPy and SciPy loaded as the solve has them:
+  ``import numba``, the first call of the sweep kernel on a 50-state block (the
+  registries' set-up and its load from the cache), then a second kernel's first call.
+
+::
+
+    python experiments/profile_solve.py --qvbs qcomp/benchmarks --out experiments/results
+    python experiments/profile_solve.py --qvbs qcomp/benchmarks --quick  # one small instance
+
+Written: ``profile_solve.csv``, ``profile_solve.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import _common  # noqa: E402
+import bench_qvbs as bq  # noqa: E402  (the same instances, posed and measured the same way)
+import bench_sweeps as bs  # noqa: E402
+
+INSTANCES = ("zeroconf.20-4-false.correct_max", "csma.4-2.some_before")
+STAGES = {"analysis": ("mitld_lp.solvers.analysis", "analyse"),
+          "iteration": ("mitld_lp.solvers.iteration", "interval_iterations"),
+          "lp": ("mitld_lp.solvers.lp", "solve_lp"),
+          "certificate": ("mitld_lp.solvers.certify", "certify")}
+NUMBA_IMPORT = ("mitld_lp.solvers.kernels", "compiled_kernel")  # imports numba, once
+COLUMNS = ("instance", "value", "solve_cpu", "storm_check_cpu", "solve_over_storm_check",
+           "timed_solve_cpu", "analysis", "iteration", "lp", "certificate", "numba_import",
+           "numba_loaded")
+
+
+def child_stages(job: dict[str, Any]) -> dict[str, Any]:
+    """The synthesis with each stage's entry point timed (CPU seconds, no profiler:
+    the functions the solve stage imports when it runs, wrapped)."""
+    import importlib
+
+    from mitld_lp import load_model, synthesize
+
+    model = load_model(job["model"], max_states=job["max_states"])
+    bs.preload()
+    if job.get("numpy_sweeps"):  # no block large enough for the compiled sweeps
+        from mitld_lp.solvers import kernels
+
+        kernels.COMPILED_MIN_ENTRIES = sys.maxsize
+    spent = dict.fromkeys((*STAGES, "numba_import"), 0.0)
+    for stage, (module, name) in {**STAGES, "numba_import": NUMBA_IMPORT}.items():
+        mod = importlib.import_module(module)
+        setattr(mod, name, _timed(getattr(mod, name), stage, spent))
+    r = synthesize(model)
+    return dict(spent, value=r.lower, upper=r.upper, solve_cpu=r.solve_cpu,
+                numba_loaded="numba" in sys.modules)
+
+
+def _timed(func: Any, stage: str, spent: dict[str, float]) -> Any:
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        c = time.process_time()
+        try:
+            return func(*args, **kwargs)
+        finally:
+            spent[stage] += time.process_time() - c
+    return timed
+
+
+def child_numba(job: dict[str, Any]) -> dict[str, Any]:
+    """``import numba`` and the first calls of two cached kernels, in CPU seconds."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    bs.preload()
+    c = time.process_time()
+    import numba  # noqa: F401
+
+    from mitld_lp.solvers.kernels import FLOOR, compiled_kernel
+    from mitld_lp.solvers.topological import level_kernels
+    imported = time.process_time() - c
+    n = 50
+    a = sp.random_array((n, n), density=0.1, format="csr", rng=0)
+    local = np.column_stack([np.zeros(n), np.ones(n)])
+    c = time.process_time()
+    done, _ = compiled_kernel()(a.indptr, a.indices, a.data, np.arange(n + 1), np.ones(n),
+                                np.zeros((n, 2)), local, np.arange(n)[::-1].copy(), 5,
+                                1e-6, False, -1.0, FLOOR)
+    first = time.process_time() - c
+    x = np.zeros((n, 1))
+    c = time.process_time()
+    level_kernels(1, 1, compiled=True).chain_solve(np.arange(n), a.indptr, a.indices,
+                                                  a.data, a.diagonal(), np.ones((n, 1)), x)
+    second = time.process_time() - c
+    return dict(import_numba=imported, first_kernel=first, second_kernel=second,
+                sweeps=int(done), x0=float(x[0, 0]))
+
+
+def _run_child(kind: str, job: dict[str, Any], work: Path) -> dict[str, Any]:
+    (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
+    proc = subprocess.run([sys.executable, __file__, "--child", kind, str(work)],
+                          capture_output=True, text=True, timeout=bq.BUDGET)
+    if proc.returncode != 0:
+        return {"error": proc.stderr.strip().splitlines()[-1:]}
+    return json.loads((work / f"{kind}.json").read_text(encoding="utf-8"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _common.parser(__doc__.splitlines()[0])
+    ap.add_argument("--qvbs", type=Path, required=False,
+                    help="a checkout's benchmarks/ folder of ahartmanns/qcomp")
+    ap.add_argument("--only", nargs="*", default=None, metavar="NAME")
+    ap.add_argument("--numpy-sweeps", action="store_true",
+                    help="a second row per instance with the NumPy sweeps only (numba "
+                         "never loaded): what a size threshold would give")
+    ap.add_argument("--child", nargs=2, default=None, help=argparse_hidden())
+    args = ap.parse_args(argv)
+    if args.child:
+        kind, work = args.child[0], Path(args.child[1])
+        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+        run = child_stages if kind == "stages" else child_numba
+        (work / f"{kind}.json").write_text(json.dumps(run(job)), encoding="utf-8")
+        return 0
+    if args.qvbs is None:
+        ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
+    out = _common.out_dir(args)
+    wanted = set(args.only or INSTANCES)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="profile_solve_") as tmp:
+        work = Path(tmp)
+        high = bq.QUICK_MAX_STATES if args.quick else bq.MAX_STATES
+        found, _ = bq.jobs(args.qvbs, 0 if args.quick else bq.MIN_STATES, high,
+                           bq.FAMILIES, work)
+        found.sort(key=lambda t: t[0].qvbs_states)
+        chosen = found[-1:] if args.quick else [f for f in found if f[0].name in wanted]
+        numba_row = _run_child("numba", {}, work)
+        for inst, job in chosen:
+            (work / inst.name).mkdir()
+            row = bq.measure(inst, job, work / inst.name, bq.BUDGET)
+            stages = _run_child("stages", job, work / inst.name)
+            rows.append([inst.name, row.get("value"), row.get("solve_cpu"),
+                         row.get("storm_check_cpu"), row.get("solve_over_storm_check"),
+                         stages.get("solve_cpu"), *(stages.get(k) for k in COLUMNS[6:])])
+            if args.numpy_sweeps:
+                alone = _run_child("stages", dict(job, numpy_sweeps=True), work / inst.name)
+                rows.append([f"{inst.name} (NumPy sweeps)", alone.get("value"), None,
+                             row.get("storm_check_cpu"), None, alone.get("solve_cpu"),
+                             *(alone.get(k) for k in COLUMNS[6:])])
+            print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
+    shown = [[f"{v:.3g}" if isinstance(v, float) else v for v in r] for r in rows]
+    text = ("## The solve stage by stage, and numba's load (CPU seconds)\n\n"
+            + _common.markdown_table(COLUMNS, shown)
+            + "\n\nnumba in a fresh interpreter with NumPy and SciPy loaded: "
+            + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                        for k, v in numba_row.items()) + "\n")
+    _common.write_text(out / "profile_solve.md", text)
+    _common.write_csv(out / "profile_solve.csv", COLUMNS, rows)
+    print(text)
+    return 0
+
+
+def argparse_hidden() -> str:
+    import argparse
+
+    return argparse.SUPPRESS
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
