@@ -59,9 +59,12 @@ class ParetoPoint:
 
 
 def against_constraint(against: str, bound: float) -> Constraint:
-    """``steps`` / ``cost`` / ``P(FORMULA)`` as the constraint ``... <= bound``."""
+    """``steps`` / ``cost`` / ``P(FORMULA)`` as the constraint ``... <= bound``; a
+    probability's bound held at 1 (the curve's slack past its range's top, whose value may
+    be 1, would otherwise pose a bound no probability bound may have)."""
     if against in ("steps", "cost"):
         return Constraint(against, "<=", bound, None, f"E({against}) <= {bound!r}")
+    bound = min(bound, 1.0)
     text = f"{against} <= {bound!r}"
     c = parse_constraint(text, "--against")
     if c.kind != "prob":

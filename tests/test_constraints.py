@@ -342,6 +342,20 @@ def test_cli_pareto_writes_certified_points_and_refuses_to_overwrite(tmp_path, c
     assert "exists" in capsys.readouterr().err
 
 
+def test_pareto_against_a_probability_whose_range_reaches_one():
+    """``F (goal | !goal)`` holds on every run, so the curve's range is [1, 1]; its bounds
+    (the range's points plus the curve's slack) are held at 1 and each point is the
+    unconstrained optimum, 0.9 by hand (the risky route).  The slack made the bound
+    1.000000001 and the curve stopped with 'a probability bound must be in [0, 1]'."""
+    from mitld_lp import pareto
+
+    points = pareto(Model.from_game(HAND, "F goal"), "P(F (goal | !goal))", 3)
+    assert [p.bound for p in points] == [1.0, 1.0, 1.0]
+    for p in points:
+        assert p.status == "optimal" and p.certified
+        assert p.lower == pytest.approx(0.9, abs=1e-7) and p.achieved == pytest.approx(1.0)
+
+
 def test_cli_simulate_runs_a_model_file_with_constraints(tmp_path, capsys):
     """simulate refused a model file with constraints; it now runs the constrained
     problem's randomised controller, and its bracket is the constrained one (below the
