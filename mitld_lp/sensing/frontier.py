@@ -47,8 +47,18 @@ from mitld_lp.sensing.info import (
 )
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.rows import (
+    COMPILED_MIN_STATES,
+    Lookup,
+    Table,
+    fsum_by,
+    groups,
+    load_kernels,
+    mix64,
+    scatter,
+    spread,
+)
 from mitld_lp.sensing.rows import INT as _I
-from mitld_lp.sensing.rows import Lookup, Table, fsum_by, groups, mix64, spread
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
@@ -335,14 +345,14 @@ class FrontierBuilder(StepRules):
         g_pend = pending[gst] & ~occ[first]
         need = self.need_table(tid2[hfirst], g_rep[hobs])
         most = np.full(len(first), -1, _I)
-        np.maximum.at(most, hobs, need)
+        scatter("max", most, hobs, need)
         pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         g_count = np.bincount(hobs, minlength=len(first))
         g_hash = np.zeros(len(first), np.uint64)
-        np.add.at(g_hash, hobs, mix64(hcode))
+        scatter("add", g_hash, hobs, mix64(hcode))
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
-        np.minimum.at(g_first, obs, s_seq)
+        scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
         target, keys, reps = self.match(*group)
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
@@ -368,7 +378,7 @@ class FrontierBuilder(StepRules):
         ids, _ = groups(c_end, r_end)
         mass = np.bincount(ids, weights=m_end)
         place = np.full(len(mass), np.iinfo(_I).max, _I)
-        np.minimum.at(place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
+        scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
         col = np.asarray(self.record_state, _I)[r_end[place]]
         cc = np.concatenate([loop[0], c_end[place], c])
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
@@ -513,6 +523,8 @@ class FrontierBuilder(StepRules):
             level = len(self.states)  # a level: the states first found one step on
             while head < len(self.states):
                 end = min(level, head + CHUNK)
+                if end - head >= COMPILED_MIN_STATES:
+                    load_kernels()  # numba's load pays from here (rows.py)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end

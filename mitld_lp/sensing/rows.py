@@ -1,22 +1,70 @@
 """Rows of integers grouped, spread and summed without a Python loop per row: the
 array operations of the frontier-at-a-time construction
-(:mod:`mitld_lp.sensing.frontier`)."""
+(:mod:`mitld_lp.sensing.frontier`).
+
+Each runs as NumPy lines or, once :func:`load_kernels` has loaded them (the build does
+at its first chunk of :data:`COMPILED_MIN_STATES` states), as the numba kernels of
+:mod:`mitld_lp.sensing.kernels`, which give the same arrays to the bit."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 __all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "Lookup", "INT",
-           "DENSE"]
+           "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels", "scatter"]
 
 INT = np.int64
 _I = INT
 DENSE = 1 << 22
 """The most keys a :class:`Lookup` keeps as a dense array (32 MiB)."""
+COMPILED_MIN_STATES = 2_048
+"""The states of a chunk from which the build loads the compiled kernels (numba's
+import and the kernels' load from its cache, some 0.3 s CPU, pay for themselves on
+a chunk of a few thousand states: experiments/results/bench_sensed_kernel.md)."""
+_K: Any = None  # mitld_lp.sensing.kernels once loaded, False if numba is not installed
+
+
+def load_kernels() -> bool:
+    """Load the compiled kernels (numba imported the first time): whether they run."""
+    global _K
+    if _K is None:
+        try:
+            from mitld_lp.sensing import kernels
+        except ImportError:
+            _K = False
+        else:
+            _K = kernels
+    return bool(_K)
+
+
+@contextmanager
+def running_kernels(on: bool) -> Iterator[bool]:
+    """Within it, the compiled kernels run (``on``, numba installed) or the NumPy lines
+    (the build's own choice, :data:`COMPILED_MIN_STATES`, suspended); yields whether the
+    kernels run."""
+    global _K
+    before = _K
+    _K = None if on else False
+    if on:
+        load_kernels()
+    try:
+        yield bool(_K)
+    finally:
+        _K = before
+
+
+def scatter(op: str, out: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
+    """``np.maximum.at``, ``np.minimum.at`` or ``np.add.at`` (``op``: ``max``, ``min``,
+    ``add``) of ``vals`` into ``out`` at ``idx``."""
+    if _K:
+        getattr(_K, "scatter_" + op)(out, idx, vals)
+    else:
+        {"max": np.maximum, "min": np.minimum, "add": np.add}[op].at(out, idx, vals)
 
 
 def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
@@ -53,6 +101,8 @@ def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = len(cols[0])
     if n == 0:
         return np.zeros(0, _I), np.zeros(0, _I)
+    if _K:
+        return _compiled_groups(cols, n)
     words, span = pack_words(cols)
     if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):  # a dense count, no sort
         word = words[0]
@@ -73,6 +123,17 @@ def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inverse, order[change]
 
 
+def _compiled_groups(cols: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray,
+                                                                       np.ndarray]:
+    """:func:`groups` by the kernels: the same packing, sort and numbering."""
+    words, span = _K.pack(tuple(np.ascontiguousarray(c, dtype=_I) for c in cols))
+    if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):
+        return _K.dense_groups(words[0], span)
+    order = (np.argsort(words[0], kind="stable") if len(words) == 1
+             else np.lexsort(words[::-1]))
+    return _K.sorted_groups(words, order)
+
+
 def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """The sum of ``values`` per id (``ids`` sorted, every id in ``0 .. n - 1`` present),
     correctly rounded as :func:`math.fsum`.  Summed term by term in double-double
@@ -82,19 +143,10 @@ def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     few sums are redone by :func:`math.fsum`."""
     count = np.bincount(ids, minlength=n)
     starts = np.cumsum(count) - count
-    high = values[starts].copy()
-    low = np.zeros(n)
-    size = np.zeros(n)  # the errors' magnitudes, for the bound on low's own rounding
-    live = np.arange(n, dtype=_I)
-    for k in range(1, int(count.max(initial=0))):
-        live = live[count[live] > k]
-        a, x = high[live], values[starts[live] + k]
-        t = a + x
-        back = t - a
-        error = (a - (t - back)) + (x - back)
-        high[live] = t
-        low[live] += error
-        size[live] += np.abs(error)
+    if _K:
+        high, low, size = _K.dd_sums(starts, count, values)
+    else:
+        high, low, size = _dd_sums(starts, count, values)
     out = high + low
     back = out - high
     rest = (high - (out - back)) + (low - back)  # high + low - out, exactly
@@ -111,8 +163,31 @@ def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def _dd_sums(starts: np.ndarray, count: np.ndarray, values: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray]:
+    """Each group's running sum, carried errors and their magnitudes, a term at a time
+    over all groups (:func:`fsum_by`)."""
+    n = len(starts)
+    high = values[starts].copy()
+    low = np.zeros(n)
+    size = np.zeros(n)  # the errors' magnitudes, for the bound on low's own rounding
+    live = np.arange(n, dtype=_I)
+    for k in range(1, int(count.max(initial=0))):
+        live = live[count[live] > k]
+        a, x = high[live], values[starts[live] + k]
+        t = a + x
+        back = t - a
+        error = (a - (t - back)) + (x - back)
+        high[live] = t
+        low[live] += error
+        size[live] += np.abs(error)
+    return high, low, size
+
+
 def spread(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For parents with ``counts`` children each: every child's parent and its rank."""
+    if _K:
+        return _K.spread(np.ascontiguousarray(counts, dtype=_I))
     parent = np.repeat(np.arange(len(counts), dtype=_I), counts)
     starts = np.cumsum(counts) - counts
     return parent, np.arange(len(parent), dtype=_I) - starts[parent]
@@ -197,8 +272,12 @@ class Lookup:
             if dense is not None:
                 grown[:old[0], :old[1]] = dense
             dense = self.dense = grown
-        values = dense[a, b]
-        miss = np.flatnonzero(values == -2)
+        if _K:
+            values, n_miss = _K.gather2(dense, a, b)
+            miss = np.flatnonzero(values == -2) if n_miss else ()
+        else:
+            values = dense[a, b]
+            miss = np.flatnonzero(values == -2)
         if len(miss):
             found = self.sparse(a[miss], b[miss])
             dense[a[miss], b[miss]] = found
