@@ -142,3 +142,28 @@ def test_compiled_build_is_the_numpy_build(case: str) -> None:
         if not merge and case != "false alarms":
             with rows.running_kernels(True):
                 assert_same(fast, reference(model, fast))
+
+
+@pytest.mark.parametrize("dense", [rows.DENSE, 1 << 6])
+def test_kernel_rows_run_or_give_way(monkeypatch, dense: int) -> None:
+    """The hypotheses' rows come from the kernel (each level's, a table held dense), or,
+    where the automaton's tables are too large to hold dense, from the NumPy lines: the
+    same product either way."""
+    from mitld_lp.sensing import compiled
+
+    answers: list[bool] = []
+    kernel_rows = compiled.hypothesis_rows
+
+    def spy(*args):
+        out = kernel_rows(*args)
+        answers.append(out is not None)
+        return out
+
+    monkeypatch.setattr(compiled, "hypothesis_rows", spy)
+    monkeypatch.setattr(rows, "DENSE", dense)
+    model = FA["false alarms"]()
+    plain, fast = both(build, model, True)
+    same((fast.mdp.matrix.data, fast.mdp.matrix.indices), (plain.mdp.matrix.data,
+                                                           plain.mdp.matrix.indices))
+    assert fast.mdp.states == plain.mdp.states
+    assert answers and all(answers) == (dense == rows.DENSE)  # small: some levels gave way

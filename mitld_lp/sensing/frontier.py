@@ -51,6 +51,7 @@ from mitld_lp.sensing.rows import (
     COMPILED_MIN_STATES,
     Lookup,
     Table,
+    compiled_on,
     fsum_by,
     groups,
     load_kernels,
@@ -291,45 +292,15 @@ class FrontierBuilder(StepRules):
                  pu[crossed])]
         keep = ~crossed
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
-        # each state's hypotheses
-        st = c_state[c]
-        parent, rank = spread(hcount[st])
-        c, occ, pu, st, o_seq = (x[parent] for x in (c, occ, pu, st, o_seq))
-        h = hstart[st] + rank
-        code, w = self.hyp_code[h], self.hyp_weight[h]
-        tid, q = code // self.nq, code % self.nq
-        # each hypothesis's sensed branches
-        t = clock[st]
-        which = self.branches.find((tid, reported[st], t), self.make_branches)
-        parent, (tid2, new, pc, cut, now, wait) = self.branches.rows(which)
-        c, occ, pu, st, q, w, o_seq = (x[parent] for x in (c, occ, pu, st, q, w, o_seq))
-        b_seq = np.arange(len(c), dtype=_I)
-        base = w * pu * pc
-        none = np.full(int(cut.sum()), -1, _I)
-        ends.append((c[cut], o_seq[cut], b_seq[cut], none, np.full(len(none), trunc),
-                     base[cut]))
-        ok = ~cut
-        c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
-            x[ok] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
-        # the world's successors (what the hypothesis saw happen and what may still
-        # come, before they are spread)
-        happened = self.u_atoms[occ] | self.s_atoms[now]
-        left = (pending[st] & ~occ) | (wait << self.nu)
-        which = self.successors.find((world[st], c_act[c], occ), self.make_successors)
-        parent, (w2, pg) = self.successors.rows(which)
-        c, occ, q, base, tid2, new, happened, left, o_seq, b_seq = (
-            x[parent] for x in (c, occ, q, base, tid2, new, happened, left, o_seq, b_seq))
-        s_seq = np.arange(len(c), dtype=_I)
-        mass = base * pg
-        label = np.asarray(self.world_label, _I)[w2] | happened
-        q2 = self.step_table(q, label)
-        end = self.end_table(q2, left)
-        done = end >= 0
-        ends.append((c[done], o_seq[done], b_seq[done], s_seq[done], end[done], mass[done]))
-        ended = (c[done], w2[done], occ[done], new[done], end[done])
-        u = ~done
-        c, occ, w2, new, tid2, q2, mass, s_seq = (
-            x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
+        rows = None
+        if compiled_on():
+            from mitld_lp.sensing.compiled import hypothesis_rows
+
+            rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+        if rows is None:
+            rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+        more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq) = rows
+        ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
         obs, first = groups(c, w2, occ, new)
@@ -363,6 +334,57 @@ class FrontierBuilder(StepRules):
                           ended)
         return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
                                                       target, total))
+
+    def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
+                        c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
+                        o_seq: np.ndarray, trunc: int) -> tuple[Any, ...]:
+        """The rows of the outcomes ``(c, occ, pu, o_seq)`` (choice, unsensed events,
+        probability, place) spread over each state's hypotheses, their sensed branches
+        and the world's successors: the ends met (cut branches, then decided
+        hypotheses), the decided rows' observations and records, and the undecided rows
+        (choice, occurred, world, reported, times, automaton state, mass, place).
+        :func:`mitld_lp.sensing.compiled.hypothesis_rows` gives the same, compiled."""
+        world, clock, reported, pending, hstart, hcount = cols
+        # each state's hypotheses
+        st = c_state[c]
+        parent, rank = spread(hcount[st])
+        c, occ, pu, st, o_seq = (x[parent] for x in (c, occ, pu, st, o_seq))
+        h = hstart[st] + rank
+        code, w = self.hyp_code[h], self.hyp_weight[h]
+        tid, q = code // self.nq, code % self.nq
+        # each hypothesis's sensed branches
+        t = clock[st]
+        which = self.branches.find((tid, reported[st], t), self.make_branches)
+        parent, (tid2, new, pc, cut, now, wait) = self.branches.rows(which)
+        c, occ, pu, st, q, w, o_seq = (x[parent] for x in (c, occ, pu, st, q, w, o_seq))
+        b_seq = np.arange(len(c), dtype=_I)
+        base = w * pu * pc
+        none = np.full(int(cut.sum()), -1, _I)
+        ends = [(c[cut], o_seq[cut], b_seq[cut], none, np.full(len(none), trunc),
+                     base[cut])]
+        ok = ~cut
+        c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
+            x[ok] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
+        # the world's successors (what the hypothesis saw happen and what may still
+        # come, before they are spread)
+        happened = self.u_atoms[occ] | self.s_atoms[now]
+        left = (pending[st] & ~occ) | (wait << self.nu)
+        which = self.successors.find((world[st], c_act[c], occ), self.make_successors)
+        parent, (w2, pg) = self.successors.rows(which)
+        c, occ, q, base, tid2, new, happened, left, o_seq, b_seq = (
+            x[parent] for x in (c, occ, q, base, tid2, new, happened, left, o_seq, b_seq))
+        s_seq = np.arange(len(c), dtype=_I)
+        mass = base * pg
+        label = np.asarray(self.world_label, _I)[w2] | happened
+        q2 = self.step_table(q, label)
+        end = self.end_table(q2, left)
+        done = end >= 0
+        ends.append((c[done], o_seq[done], b_seq[done], s_seq[done], end[done], mass[done]))
+        ended = (c[done], w2[done], occ[done], new[done], end[done])
+        u = ~done
+        c, occ, w2, new, tid2, q2, mass, s_seq = (
+            x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
+        return ends, ended, (c, occ, w2, new, tid2, q2, mass, s_seq)
 
     def transitions(self, loop: tuple[np.ndarray, ...], ends: list[tuple[np.ndarray, ...]],
                     c: np.ndarray, g_first: np.ndarray, target: np.ndarray,

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "Lookup", "INT",
-           "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels", "scatter"]
+           "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels", "compiled_on",
+           "scatter"]
 
 INT = np.int64
 _I = INT
@@ -40,6 +41,11 @@ def load_kernels() -> bool:
         else:
             _K = kernels
     return bool(_K)
+
+
+def compiled_on() -> Any:
+    """The compiled kernels' module where they run (:func:`load_kernels`), else None."""
+    return _K or None
 
 
 @contextmanager
@@ -211,6 +217,24 @@ class Table:
         self.entries: list[tuple[np.ndarray, ...]] = []
         self.dtypes = dtypes
         self.width = width
+        self.flat_cols: tuple[np.ndarray, ...] = tuple(np.zeros(0, d) for d in dtypes)
+        self.flat_start = np.zeros(0, _I)
+        self.flat_len = np.zeros(0, _I)
+
+    def flat(self) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """Every key's entries as flat columns: each key's first entry's place in them,
+        its number of entries, and the columns (grown as keys come)."""
+        done = len(self.flat_start)
+        if done < len(self.entries):
+            new = self.entries[done:]
+            counts = np.array([len(e[0]) for e in new], _I)
+            at = len(self.flat_cols[0])
+            self.flat_start = np.concatenate([self.flat_start,
+                                              at + np.cumsum(counts) - counts])
+            self.flat_len = np.concatenate([self.flat_len, counts])
+            self.flat_cols = tuple(np.concatenate([self.flat_cols[c]] + [e[c] for e in new])
+                                   for c in range(self.width))
+        return self.flat_start, self.flat_len, self.flat_cols
 
     def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:
         """The table index of each row's key (the row's values in ``cols``), ``make``
