@@ -163,8 +163,7 @@ def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     unsure = np.abs(rest) + 4.0 * count * 2.0**-52 * size >= half
     redo = np.flatnonzero(unsure & (count > 2))
     if len(redo):
-        vals = values.tolist()
-        out[redo] = [math.fsum(vals[a:a + k]) for a, k in zip(
+        out[redo] = [math.fsum(values[a:a + k].tolist()) for a, k in zip(
             starts[redo].tolist(), count[redo].tolist(), strict=True)]
     return out
 
