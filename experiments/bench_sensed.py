@@ -12,9 +12,9 @@ own.  Per case:
   child; ``process_cpu`` the child's CPU up to the answer (imports, build, solve,
   certificate; Storm's check after it is not counted);
 * ``states_per_s``: the states the build made a CPU second; ``estimate``: the largest of
-  the size estimates the build made at its levels' ends
-  (:mod:`mitld_lp.sensing.growth`), the one its budgets are checked against before the
-  work;
+  the size estimates (:mod:`mitld_lp.sensing.growth`) the build made at its levels' ends
+  while it had found under half its states (its budgets are checked against them before
+  the work; blank: no level judged that early);
 * the product's states, choices and transitions (with a band: the band's middle law's,
   the first of the products the route builds), and the certified bracket ``[lower,
   upper]``, printed beside each time; ``digest``: the start of a SHA-256 of the
@@ -108,10 +108,11 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
 
     def projected(*args: Any, **kwargs: Any) -> Any:
         out = guess(*args, **kwargs)
-        built["estimate"] = max(built.get("estimate", 0), out[0])
+        seen.append((sum(args[0]), out[0]))  # the states found so far, the estimate
         return out
 
-    growth.projected = projected  # the size estimate at each level's end, the largest
+    seen: list[tuple[int, int]] = []
+    growth.projected = projected  # the size estimate at each level's end
     base = load_model(C.model_path(model_name))
     model = dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
         {e: Sensor(*s) for e, *s in sensors}))
@@ -123,7 +124,8 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
         "transitions": int(r.mdp.matrix.nnz), "lower": r.lower, "upper": r.upper,
         "digest": digest(r.mdp),
         "build_cpu": built["cpu"], "process_cpu": process,
-        "estimate": built.get("estimate"), "states_per_s": r.mdp.n_states / built["cpu"],
+        "estimate": max((e for f, e in seen if 2 * f < r.mdp.n_states), default=None),
+        "states_per_s": r.mdp.n_states / built["cpu"],
         "package": str(Path(belief.__file__).parents[1])}
     from mitld_lp.running.sensed_band_chain import is_sensed_band, write_sensed_band_chain
 
@@ -208,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
     C.write_text(out / "bench_sensed.md", C.markdown_table(HEADER, table) + (
         "\nCPU seconds; `build_cpu` is belief_product alone (`states_per_s`: the states it "
         "made a CPU second), `estimate` the largest of the size estimates made at the "
-        "levels' ends (mitld_lp/sensing/growth.py, blank where no level was judged), "
+        "levels' ends while under half the states were found (mitld_lp/sensing/growth.py, "
+        "blank where no level was judged by then), "
         "`base_*` the same case with "
         f"the package of `--compare` ({args.compare}), `same`: `yes` the same product to "
         "the bit (`digest`, a SHA-256 of its matrix) and the same bracket to the bit, `size` "

@@ -34,7 +34,7 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
-from mitld_lp.sensing.growth import Growth
+from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
     BYTES_PER_INFO_STATE,
@@ -89,7 +89,8 @@ class FrontierBuilder(StepRules):
         super().__init__(game, dta, sta, sensed, sensors, ends)
         self.bytes, self.growth = 0, Growth(max_states=max_states, max_memory=max_memory,
                                             size=size, sensors=sensors,
-                                            points=sta.truncation_points, name=name)
+                                            points=sta.truncation_points, name=name,
+                                            alarm_past=ALARM_PAST if self.alarms else 0)
         self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
