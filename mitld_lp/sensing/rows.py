@@ -24,9 +24,14 @@ _I = INT
 DENSE = 1 << 22
 """The most keys a :class:`Lookup` keeps as a dense array (32 MiB)."""
 COMPILED_MIN_STATES = 2_048
-"""The states of a chunk from which the build loads the compiled kernels (numba's
-import and the kernels' load from its cache, some 0.3 s CPU, pay for themselves on
-a chunk of a few thousand states: experiments/results/bench_sensed_kernel.md)."""
+"""The states of a chunk from which the build loads the compiled kernels.  Their load
+costs some 0.6 s CPU (numba's import 0.2 s, the kernels from numba's disk cache 0.4 s;
+their first compile, once per machine, some 8 s) and they save about a third of the
+build (0.45 s -> 0.28 s on tests/test_sensing_kernels.py's false-alarm case once
+loaded): they pay from a build of some 1.5 s, some 25,000 states.  A level of 2,048
+states comes some levels before the largest on the bus cases, whose products hold ten
+times that or more; the smaller cases of experiments/bench_sensed.py never load them
+(experiments/results/bench_sensed_kernel.md)."""
 _K: Any = None  # mitld_lp.sensing.kernels once loaded, False if numba is not installed
 
 
