@@ -11,6 +11,10 @@ own.  Per case:
   information states, their transitions and the controller's moves), timed inside the
   child; ``process_cpu`` the child's CPU up to the answer (imports, build, solve,
   certificate; Storm's check after it is not counted);
+* ``states_per_s``: the states the build made a CPU second; ``estimate``: the largest of
+  the size estimates (:mod:`mitld_lp.sensing.growth`) the build made at its levels' ends
+  while it had found under half its states (its budgets are checked against them before
+  the work; blank: no level judged that early);
 * the product's states, choices and transitions (with a band: the band's middle law's,
   the first of the products the route builds), and the certified bracket ``[lower,
   upper]``, printed beside each time; ``digest``: the start of a SHA-256 of the
@@ -66,8 +70,9 @@ QUICK = (
     ("bus_grid.toml", (("b2", 0.8, 0.05),), 0.1),
 )
 HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "digest",
-          "build_cpu", "process_cpu", "base_states", "base_build_cpu", "base_process_cpu",
-          "speedup", "same", "storm_of", "storm_value", "storm_s"]
+          "estimate", "build_cpu", "states_per_s", "process_cpu", "base_states",
+          "base_build_cpu", "base_states_per_s", "base_process_cpu", "speedup", "same",
+          "storm_of", "storm_value", "storm_s"]
 
 
 def name_of(case: tuple[Any, ...]) -> str:
@@ -83,6 +88,7 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
     from types import MappingProxyType
 
     import mitld_lp.sensing.belief as belief
+    import mitld_lp.sensing.growth as growth
     from mitld_lp import load_model, synthesize
     from mitld_lp.sensing import Sensor
 
@@ -98,6 +104,15 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
         return b
 
     belief.belief_product = timed  # the sensed route imports it when it builds
+    guess = growth.projected
+
+    def projected(*args: Any, **kwargs: Any) -> Any:
+        out = guess(*args, **kwargs)
+        seen.append((sum(args[0]), out[0]))  # the states found so far, the estimate
+        return out
+
+    seen: list[tuple[int, int]] = []
+    growth.projected = projected  # the size estimate at each level's end
     base = load_model(C.model_path(model_name))
     model = dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
         {e: Sensor(*s) for e, *s in sensors}))
@@ -109,6 +124,8 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
         "transitions": int(r.mdp.matrix.nnz), "lower": r.lower, "upper": r.upper,
         "digest": digest(r.mdp),
         "build_cpu": built["cpu"], "process_cpu": process,
+        "estimate": max((e for f, e in seen if 2 * f < r.mdp.n_states), default=None),
+        "states_per_s": r.mdp.n_states / built["cpu"],
         "package": str(Path(belief.__file__).parents[1])}
     from mitld_lp.running.sensed_band_chain import is_sensed_band, write_sensed_band_chain
 
@@ -176,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
             row["base_build_cpu"], row["base_process_cpu"] = (base["build_cpu"],
                                                               base["process_cpu"])
             row["base_states"] = base["states"]
+            row["base_states_per_s"] = base["states"] / base["build_cpu"]
             row["speedup"] = base["build_cpu"] / ours["build_cpu"]
             agree = (abs(base["lower"] - ours["lower"]) <= 1e-9
                      and abs(base["upper"] - ours["upper"]) <= 1e-9)
@@ -190,7 +208,11 @@ def main(argv: list[str] | None = None) -> int:
     print(C.text_table(HEADER, table))
     C.write_csv(out / "bench_sensed.csv", HEADER, table)
     C.write_text(out / "bench_sensed.md", C.markdown_table(HEADER, table) + (
-        "\nCPU seconds; `build_cpu` is belief_product alone, `base_*` the same case with "
+        "\nCPU seconds; `build_cpu` is belief_product alone (`states_per_s`: the states it "
+        "made a CPU second), `estimate` the largest of the size estimates made at the "
+        "levels' ends while under half the states were found (mitld_lp/sensing/growth.py, "
+        "blank where no level was judged by then), "
+        "`base_*` the same case with "
         f"the package of `--compare` ({args.compare}), `same`: `yes` the same product to "
         "the bit (`digest`, a SHA-256 of its matrix) and the same bracket to the bit, `size` "
         "equal sizes and brackets (1e-9), `smaller` equal brackets on fewer states; Storm "
@@ -225,6 +247,7 @@ def least(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out = dict(runs[0])
     for key in ("build_cpu", "process_cpu"):
         out[key] = min(r[key] for r in runs)
+    out["states_per_s"] = out["states"] / out["build_cpu"]
     return out
 
 
@@ -237,6 +260,8 @@ def fmt(key: str, v: Any) -> str:
         return f"{v:,}"
     if key in ("lower", "upper", "storm_value"):
         return f"{v:.10f}"
+    if key.endswith("states_per_s"):
+        return f"{v:,.0f}"
     return f"{v:.1f}x" if key == "speedup" else f"{v:.3f}"
 
 

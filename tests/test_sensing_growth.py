@@ -38,6 +38,25 @@ def test_the_projection_by_hand():
     assert projected([1, 10, 20, 40, 80], 9) == (151, 0.0, 4)
 
 
+def test_false_alarms_carry_the_growth_past_the_clock():
+    """With false alarms the growth seen at the clock's last step or after is carried
+    ``alarm_past`` levels past it, steady or not, while it stays above 1 (shrunk): the
+    levels of the bus case's camera on bus 2 with false alarms (``detect = 0.8,
+    false_alarm = 0.05``, epsilon 0.05, clock 9; 193,856 states built)."""
+    sizes = [1, 12, 72, 269, 834, 1957, 4353, 9517, 21953, 25621, 29935]
+    # level 10: factors 29935/25621, 25621/21953, 21953/9517; the least, 25621/21953,
+    # shrinks by min(1, first/second) = 1: carried two levels on, to 9 + 3
+    f = 25621 / 21953
+    assert projected(sizes, 9, alarm_past=3) == (
+        sum(sizes) + int(29935 * f + 29935 * f * f), f, 12)
+    assert projected(sizes, 9) == (sum(sizes), f, 10)  # none past it without alarms
+    # level 9: 25621/21953 shrunk by its ratio to 21953/9517 (about 0.5): below 1, none
+    assert projected(sizes[:10], 9, alarm_past=3) == projected(sizes[:10], 9)
+    # every level's estimate under the true size, the one at level 10 within 13% of it
+    estimates = [projected(sizes[:k], 9, alarm_past=3)[0] for k in range(4, 12)]
+    assert max(estimates) < 193_856 and estimates[-1] > 0.87 * 193_856
+
+
 def _build(max_states: int):
     model = load_model(MODELS / "bus_grid.toml")
     return belief_product(model.game, to_dta(model.spec), model.distributions,

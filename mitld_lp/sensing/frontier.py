@@ -34,7 +34,7 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
-from mitld_lp.sensing.growth import Growth
+from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
     BYTES_PER_INFO_STATE,
@@ -47,8 +47,19 @@ from mitld_lp.sensing.info import (
 )
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.rows import (
+    COMPILED_MIN_STATES,
+    Lookup,
+    Table,
+    compiled_on,
+    fsum_by,
+    groups,
+    load_kernels,
+    mix64,
+    scatter,
+    spread,
+)
 from mitld_lp.sensing.rows import INT as _I
-from mitld_lp.sensing.rows import Lookup, Table, fsum_by, groups, mix64, spread
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.util.progress import bar as progress_bar
@@ -78,7 +89,8 @@ class FrontierBuilder(StepRules):
         super().__init__(game, dta, sta, sensed, sensors, ends)
         self.bytes, self.growth = 0, Growth(max_states=max_states, max_memory=max_memory,
                                             size=size, sensors=sensors,
-                                            points=sta.truncation_points, name=name)
+                                            points=sta.truncation_points, name=name,
+                                            alarm_past=ALARM_PAST if self.alarms else 0)
         self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
@@ -281,6 +293,59 @@ class FrontierBuilder(StepRules):
                  pu[crossed])]
         keep = ~crossed
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
+        rows = None
+        if compiled_on():
+            from mitld_lp.sensing.compiled import hypothesis_rows
+
+            rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+        if rows is None:
+            rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+        more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq) = rows
+        ends += more
+        # the undecided hypotheses grouped by what the robot observes, their times
+        # canonical (merge.py), each group's in InfoState order
+        obs, first = groups(c, w2, occ, new)
+        tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
+        tid2 = self.counts.canonical(tid2, obs)
+        hid, hfirst = groups(obs, self.order_key(tid2, q2))
+        hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
+        hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
+        total = fsum_by(hobs, hmass, len(first))
+        weight = hmass / total[hobs]
+        gst = c_state[c[first]]
+        g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
+        g_pend = pending[gst] & ~occ[first]
+        need = self.need_table(tid2[hfirst], g_rep[hobs])
+        most = np.full(len(first), -1, _I)
+        scatter("max", most, hobs, need)
+        pend_need = self.pending_need(g_pend, g_pend)
+        g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
+        g_count = np.bincount(hobs, minlength=len(first))
+        g_hash = np.zeros(len(first), np.uint64)
+        scatter("add", g_hash, hobs, mix64(hcode))
+        g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
+        scatter("min", g_first, obs, s_seq)
+        group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
+        target, keys, reps = self.match(*group)
+        g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
+        self.store(c[first], g_first, target, keys, reps, group, g_start, hcode, weight,
+                   [np.concatenate(x) for x in zip(*ends, strict=True)])
+        self.verify(target, g_count, hobs, hcode, weight)
+        self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
+                          ended)
+        return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
+                                                      target, total))
+
+    def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
+                        c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
+                        o_seq: np.ndarray, trunc: int) -> tuple[Any, ...]:
+        """The rows of the outcomes ``(c, occ, pu, o_seq)`` (choice, unsensed events,
+        probability, place) spread over each state's hypotheses, their sensed branches
+        and the world's successors: the ends met (cut branches, then decided
+        hypotheses), the decided rows' observations and records, and the undecided rows
+        (choice, occurred, world, reported, times, automaton state, mass, place).
+        :func:`mitld_lp.sensing.compiled.hypothesis_rows` gives the same, compiled."""
+        world, clock, reported, pending, hstart, hcount = cols
         # each state's hypotheses
         st = c_state[c]
         parent, rank = spread(hcount[st])
@@ -296,8 +361,8 @@ class FrontierBuilder(StepRules):
         b_seq = np.arange(len(c), dtype=_I)
         base = w * pu * pc
         none = np.full(int(cut.sum()), -1, _I)
-        ends.append((c[cut], o_seq[cut], b_seq[cut], none, np.full(len(none), trunc),
-                     base[cut]))
+        ends = [(c[cut], o_seq[cut], b_seq[cut], none, np.full(len(none), trunc),
+                     base[cut])]
         ok = ~cut
         c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq = (
             x[ok] for x in (c, occ, st, q, base, tid2, new, now, wait, o_seq, b_seq))
@@ -320,39 +385,7 @@ class FrontierBuilder(StepRules):
         u = ~done
         c, occ, w2, new, tid2, q2, mass, s_seq = (
             x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
-        # the undecided hypotheses grouped by what the robot observes, their times
-        # canonical (merge.py), each group's in InfoState order
-        obs, first = groups(c, w2, occ, new)
-        tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
-        tid2 = self.counts.canonical(tid2, obs)
-        hid, hfirst = groups(obs, self.order_key(tid2, q2))
-        hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
-        hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
-        total = fsum_by(hobs, hmass, len(first))
-        weight = hmass / total[hobs]
-        gst = c_state[c[first]]
-        g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
-        g_pend = pending[gst] & ~occ[first]
-        need = self.need_table(tid2[hfirst], g_rep[hobs])
-        most = np.full(len(first), -1, _I)
-        np.maximum.at(most, hobs, need)
-        pend_need = self.pending_need(g_pend, g_pend)
-        g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
-        g_count = np.bincount(hobs, minlength=len(first))
-        g_hash = np.zeros(len(first), np.uint64)
-        np.add.at(g_hash, hobs, mix64(hcode))
-        g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
-        np.minimum.at(g_first, obs, s_seq)
-        group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
-        target, keys, reps = self.match(*group)
-        g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
-        self.store(c[first], g_first, target, keys, reps, group, g_start, hcode, weight,
-                   [np.concatenate(x) for x in zip(*ends, strict=True)])
-        self.verify(target, g_count, hobs, hcode, weight)
-        self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
-                          ended)
-        return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
-                                                      target, total))
+        return ends, ended, (c, occ, w2, new, tid2, q2, mass, s_seq)
 
     def transitions(self, loop: tuple[np.ndarray, ...], ends: list[tuple[np.ndarray, ...]],
                     c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
@@ -368,7 +401,7 @@ class FrontierBuilder(StepRules):
         ids, _ = groups(c_end, r_end)
         mass = np.bincount(ids, weights=m_end)
         place = np.full(len(mass), np.iinfo(_I).max, _I)
-        np.minimum.at(place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
+        scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
         col = np.asarray(self.record_state, _I)[r_end[place]]
         cc = np.concatenate([loop[0], c_end[place], c])
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
@@ -513,6 +546,8 @@ class FrontierBuilder(StepRules):
             level = len(self.states)  # a level: the states first found one step on
             while head < len(self.states):
                 end = min(level, head + CHUNK)
+                if end - head >= COMPILED_MIN_STATES:
+                    load_kernels()  # numba's load pays from here (rows.py)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end

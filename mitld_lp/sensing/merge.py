@@ -50,7 +50,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from mitld_lp.automata.sta import STA
-from mitld_lp.sensing.rows import INT, groups
+from mitld_lp.sensing.rows import INT, groups, scatter
 from mitld_lp.sensing.sensors import Sensor
 
 __all__ = ["Shifts", "Counts", "shift_start"]
@@ -106,7 +106,7 @@ class Shifts:
             good = np.ones(n, bool)
             np.logical_and.at(good, group, ok)
             least = np.full(n, np.iinfo(INT).max, INT)
-            np.minimum.at(least, group, ki)
+            scatter("min", least, group, ki)
             shift[:, i] = np.where(good & (least > c), least - c, 0)
         moved = np.flatnonzero(shift.any(axis=1))
         if len(moved) == 0:
@@ -155,7 +155,7 @@ class Counts:
         b = self.array[tid][:, self.n:]
         least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
         for j in range(b.shape[1]):
-            np.minimum.at(least[:, j], group, b[:, j])
+            scatter("min", least[:, j], group, b[:, j])
         by = least[group]
         rows = np.flatnonzero(by.any(axis=1))
         if len(rows) == 0:

@@ -1,22 +1,81 @@
 """Rows of integers grouped, spread and summed without a Python loop per row: the
 array operations of the frontier-at-a-time construction
-(:mod:`mitld_lp.sensing.frontier`)."""
+(:mod:`mitld_lp.sensing.frontier`).
+
+Each runs as NumPy lines or, once :func:`load_kernels` has loaded them (the build does
+at its first chunk of :data:`COMPILED_MIN_STATES` states), as the numba kernels of
+:mod:`mitld_lp.sensing.kernels`, which give the same arrays to the bit."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 __all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "Lookup", "INT",
-           "DENSE"]
+           "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels", "compiled_on",
+           "scatter"]
 
 INT = np.int64
 _I = INT
 DENSE = 1 << 22
 """The most keys a :class:`Lookup` keeps as a dense array (32 MiB)."""
+COMPILED_MIN_STATES = 2_048
+"""The states of a chunk from which the build loads the compiled kernels.  Their load
+costs some 0.6 s CPU (numba's import 0.2 s, the kernels from numba's disk cache 0.4 s;
+their first compile, once per machine, some 8 s) and they save about a third of the
+build (0.45 s -> 0.28 s on tests/test_sensing_kernels.py's false-alarm case once
+loaded): they pay from a build of some 1.5 s, some 25,000 states.  A level of 2,048
+states comes some levels before the largest on the bus cases, whose products hold ten
+times that or more; the smaller cases of experiments/bench_sensed.py never load them
+(experiments/results/bench_sensed_kernel.md)."""
+_K: Any = None  # mitld_lp.sensing.kernels once loaded, False if numba is not installed
+
+
+def load_kernels() -> bool:
+    """Load the compiled kernels (numba imported the first time): whether they run."""
+    global _K
+    if _K is None:
+        try:
+            from mitld_lp.sensing import kernels
+        except ImportError:
+            _K = False
+        else:
+            _K = kernels
+    return bool(_K)
+
+
+def compiled_on() -> Any:
+    """The compiled kernels' module where they run (:func:`load_kernels`), else None."""
+    return _K or None
+
+
+@contextmanager
+def running_kernels(on: bool) -> Iterator[bool]:
+    """Within it, the compiled kernels run (``on``, numba installed) or the NumPy lines
+    (the build's own choice, :data:`COMPILED_MIN_STATES`, suspended); yields whether the
+    kernels run."""
+    global _K
+    before = _K
+    _K = None if on else False
+    if on:
+        load_kernels()
+    try:
+        yield bool(_K)
+    finally:
+        _K = before
+
+
+def scatter(op: str, out: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
+    """``np.maximum.at``, ``np.minimum.at`` or ``np.add.at`` (``op``: ``max``, ``min``,
+    ``add``) of ``vals`` into ``out`` at ``idx``."""
+    if _K:
+        getattr(_K, "scatter_" + op)(out, idx, vals)
+    else:
+        {"max": np.maximum, "min": np.minimum, "add": np.add}[op].at(out, idx, vals)
 
 
 def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
@@ -53,6 +112,8 @@ def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = len(cols[0])
     if n == 0:
         return np.zeros(0, _I), np.zeros(0, _I)
+    if _K:
+        return _compiled_groups(cols, n)
     words, span = pack_words(cols)
     if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):  # a dense count, no sort
         word = words[0]
@@ -73,6 +134,17 @@ def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inverse, order[change]
 
 
+def _compiled_groups(cols: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray,
+                                                                       np.ndarray]:
+    """:func:`groups` by the kernels: the same packing, sort and numbering."""
+    words, span = _K.pack(tuple(np.ascontiguousarray(c, dtype=_I) for c in cols))
+    if len(words) == 1 and 0 < span <= max(4 * n, 1 << 16):
+        return _K.dense_groups(words[0], span)
+    order = (np.argsort(words[0], kind="stable") if len(words) == 1
+             else np.lexsort(words[::-1]))
+    return _K.sorted_groups(words, order)
+
+
 def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """The sum of ``values`` per id (``ids`` sorted, every id in ``0 .. n - 1`` present),
     correctly rounded as :func:`math.fsum`.  Summed term by term in double-double
@@ -82,6 +154,30 @@ def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     few sums are redone by :func:`math.fsum`."""
     count = np.bincount(ids, minlength=n)
     starts = np.cumsum(count) - count
+    if _K:
+        high, low, size = _K.dd_sums(starts, count, values)
+    else:
+        high, low, size = _dd_sums(starts, count, values)
+    out = high + low
+    back = out - high
+    rest = (high - (out - back)) + (low - back)  # high + low - out, exactly
+    # half the gap to the next float on the rest's side (below a power of two, the gap
+    # is half the one above)
+    half = np.spacing(out) / 2
+    half[(rest < 0) & (np.frexp(out)[0] == 0.5)] /= 2
+    unsure = np.abs(rest) + 4.0 * count * 2.0**-52 * size >= half
+    redo = np.flatnonzero(unsure & (count > 2))
+    if len(redo):
+        out[redo] = [math.fsum(values[a:a + k].tolist()) for a, k in zip(
+            starts[redo].tolist(), count[redo].tolist(), strict=True)]
+    return out
+
+
+def _dd_sums(starts: np.ndarray, count: np.ndarray, values: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray]:
+    """Each group's running sum, carried errors and their magnitudes, a term at a time
+    over all groups (:func:`fsum_by`)."""
+    n = len(starts)
     high = values[starts].copy()
     low = np.zeros(n)
     size = np.zeros(n)  # the errors' magnitudes, for the bound on low's own rounding
@@ -95,24 +191,13 @@ def fsum_by(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
         high[live] = t
         low[live] += error
         size[live] += np.abs(error)
-    out = high + low
-    back = out - high
-    rest = (high - (out - back)) + (low - back)  # high + low - out, exactly
-    # half the gap to the next float on the rest's side (below a power of two, the gap
-    # is half the one above)
-    half = np.spacing(out) / 2
-    half[(rest < 0) & (np.frexp(out)[0] == 0.5)] /= 2
-    unsure = np.abs(rest) + 4.0 * count * 2.0**-52 * size >= half
-    redo = np.flatnonzero(unsure & (count > 2))
-    if len(redo):
-        vals = values.tolist()
-        out[redo] = [math.fsum(vals[a:a + k]) for a, k in zip(
-            starts[redo].tolist(), count[redo].tolist(), strict=True)]
-    return out
+    return high, low, size
 
 
 def spread(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For parents with ``counts`` children each: every child's parent and its rank."""
+    if _K:
+        return _K.spread(np.ascontiguousarray(counts, dtype=_I))
     parent = np.repeat(np.arange(len(counts), dtype=_I), counts)
     starts = np.cumsum(counts) - counts
     return parent, np.arange(len(parent), dtype=_I) - starts[parent]
@@ -136,6 +221,24 @@ class Table:
         self.entries: list[tuple[np.ndarray, ...]] = []
         self.dtypes = dtypes
         self.width = width
+        self.flat_cols: tuple[np.ndarray, ...] = tuple(np.zeros(0, d) for d in dtypes)
+        self.flat_start = np.zeros(0, _I)
+        self.flat_len = np.zeros(0, _I)
+
+    def flat(self) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """Every key's entries as flat columns: each key's first entry's place in them,
+        its number of entries, and the columns (grown as keys come)."""
+        done = len(self.flat_start)
+        if done < len(self.entries):
+            new = self.entries[done:]
+            counts = np.array([len(e[0]) for e in new], _I)
+            at = len(self.flat_cols[0])
+            self.flat_start = np.concatenate([self.flat_start,
+                                              at + np.cumsum(counts) - counts])
+            self.flat_len = np.concatenate([self.flat_len, counts])
+            self.flat_cols = tuple(np.concatenate([self.flat_cols[c]] + [e[c] for e in new])
+                                   for c in range(self.width))
+        return self.flat_start, self.flat_len, self.flat_cols
 
     def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:
         """The table index of each row's key (the row's values in ``cols``), ``make``
@@ -197,8 +300,12 @@ class Lookup:
             if dense is not None:
                 grown[:old[0], :old[1]] = dense
             dense = self.dense = grown
-        values = dense[a, b]
-        miss = np.flatnonzero(values == -2)
+        if _K:
+            values, n_miss = _K.gather2(dense, a, b)
+            miss = np.flatnonzero(values == -2) if n_miss else ()
+        else:
+            values = dense[a, b]
+            miss = np.flatnonzero(values == -2)
         if len(miss):
             found = self.sparse(a[miss], b[miss])
             dense[a[miss], b[miss]] = found

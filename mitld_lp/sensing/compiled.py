@@ -1,0 +1,77 @@
+"""The rows of a level's hypotheses by one compiled kernel
+(:func:`mitld_lp.sensing.kernels.hypothesis_rows`): what
+:meth:`~mitld_lp.sensing.frontier.FrontierBuilder.hypothesis_rows` computes with NumPy
+lines, row for row and bit for bit, without the dozen copies of every column that
+spreading them level by level makes.
+
+The step rules' tables are filled here first, for the keys the NumPy lines would meet
+and in the order they would make them (the order numbers worlds, times and records):
+the branches of the hypotheses of every state with an outcome row, the successors of
+every outcome row with a branch not cut; the automaton's steps and where hypotheses
+end are made as the kernel finds them missing (all missing steps at once, then all
+missing ends, as the NumPy lines' two lookups), the kernel run again after each.
+Where a table is too large to keep dense the NumPy lines run instead."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mitld_lp.sensing.rows import INT, compiled_on, spread
+
+if TYPE_CHECKING:
+    from mitld_lp.sensing.frontier import FrontierBuilder
+
+__all__ = ["hypothesis_rows"]
+
+_TRIES = 3  # the steps missing, then the ends missing, then every row found
+
+
+def hypothesis_rows(fb: FrontierBuilder, cols: list[np.ndarray], c_state: np.ndarray,
+                    c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
+                    o_seq: np.ndarray, trunc: int) -> tuple[Any, ...] | None:
+    """:meth:`FrontierBuilder.hypothesis_rows` of ``fb`` (the same arguments and
+    answer) by the kernel, or None where the NumPy lines must run (a table not dense)."""
+    kernels = compiled_on()
+    world, clock, reported, pending, hstart, hcount = cols
+    st = c_state[c]
+    # the branches of the hypotheses of every state with an outcome row
+    states = np.unique(st)
+    parent, rank = spread(hcount[states])
+    h = hstart[states][parent] + rank
+    code = fb.hyp_code[h]
+    hs = states[parent]
+    which = fb.branches.find((code // fb.nq, reported[hs], clock[hs]), fb.make_branches)
+    h0 = int(hstart[0]) if len(hstart) else 0
+    h_branch = np.zeros(max(int((hstart + hcount).max(initial=h0)) - h0, 1), INT)
+    h_branch[h - h0] = which
+    b_start, b_len, (b_tid, b_new, b_pc, b_cut, b_now, b_wait) = fb.branches.flat()
+    # the successors of every outcome row with a branch not cut
+    key_live = np.bincount(np.repeat(np.arange(len(b_len), dtype=INT), b_len),
+                           weights=~b_cut, minlength=len(b_len)) > 0
+    state_live = np.zeros(len(world), bool)
+    state_live[hs[key_live[which]]] = True
+    reach = np.flatnonzero(state_live[st])
+    o_succ = np.zeros(len(c), INT)
+    o_succ[reach] = fb.successors.find((world[st[reach]], c_act[c[reach]], occ[reach]),
+                                       fb.make_successors)
+    s_start, s_len, (s_w2, s_pg) = fb.successors.flat()
+    label = np.asarray(fb.world_label, INT)
+    empty = np.full((0, 0), -2, INT)
+    for _ in range(_TRIES):
+        step, ends = fb.step_table.dense, fb.end_table.dense
+        out = kernels.hypothesis_rows(
+            c, st, occ, pu, o_seq, o_succ, hstart, hcount, fb.hyp_code, fb.hyp_weight,
+            fb.nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut, b_now, b_wait,
+            s_start, s_len, s_w2, s_pg, label, fb.u_atoms, fb.s_atoms, pending, fb.nu,
+            empty if step is None else step, empty if ends is None else ends)
+        cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out
+        if len(ma) == 0:
+            none = np.full(len(cut_c), -1, INT)
+            more = [(cut_c, cut_o, cut_b, none, np.full(len(none), trunc), cut_m),
+                    (d_i[0], d_i[1], d_i[2], d_i[3], d_i[4], d_m)]
+            ended = (d_i[0], d_i[5], d_i[6], d_new, d_i[4])
+            return more, ended, (*u_i[:6], u_m, u_i[6])
+        (fb.step_table if of_step else fb.end_table)(ma, mb)
+    return None

@@ -1,0 +1,307 @@
+"""The numba kernels of :mod:`mitld_lp.sensing.rows` (imported only from there, and only
+for a build whose rows are many enough to pay numba's load; compiled once, cached on
+disk).  Each does what the NumPy lines it replaces do, with the same floating-point
+operations in the same order, so a product is the same to the bit either way
+(tests/test_sensing_kernels.py)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["pack", "sorted_groups", "dense_groups", "dd_sums", "spread", "scatter_max",
+           "scatter_min", "scatter_add", "gather2"]
+
+_LIMIT = 1 << 62
+
+
+@numba.njit(cache=True, nogil=True)
+def pack(cols):  # pragma: no cover - compiled
+    """:func:`mitld_lp.sensing.rows.pack_words` on a tuple of int64 columns: the words
+    as the rows of an array, and the last word's span."""
+    k = len(cols)
+    n = len(cols[0])
+    lo = np.empty(k, np.int64)
+    hi = np.empty(k, np.int64)
+    for j in range(k):
+        c = cols[j]
+        a = c[0]
+        b = c[0]
+        for i in range(1, n):
+            v = c[i]
+            if v < a:
+                a = v
+            elif v > b:
+                b = v
+        lo[j] = a
+        hi[j] = b
+    words = np.empty((k, n), np.int64)
+    m = 0  # the words begun
+    open_ = False  # whether the last one takes more columns
+    span = 1
+    for j in range(k):
+        c = cols[j]
+        # hi - lo + 1 >= 1 << 62, the difference exact in unsigned arithmetic
+        if np.uint64(hi[j]) - np.uint64(lo[j]) >= np.uint64(_LIMIT - 1):
+            for i in range(n):
+                words[m, i] = c[i]
+            m += 1
+            open_ = False
+            span = 0
+            continue
+        size = hi[j] - lo[j] + 1
+        base = lo[j]
+        if open_ and size <= (_LIMIT - 1) // span:
+            for i in range(n):
+                words[m - 1, i] = words[m - 1, i] * size + (c[i] - base)
+            span = span * size
+        else:
+            for i in range(n):
+                words[m, i] = c[i] - base
+            m += 1
+            open_ = True
+            span = size
+    return words[:m], span
+
+
+@numba.njit(cache=True, nogil=True)
+def sorted_groups(words, order):  # pragma: no cover - compiled
+    """The groups of rows whose words are equal, ``order`` sorting them: each row's
+    group and the first row (in ``order``) of each."""
+    k, n = words.shape
+    inverse = np.empty(n, np.int64)
+    first = np.empty(n, np.int64)
+    g = -1
+    for r in range(n):
+        i = order[r]
+        change = r == 0
+        if not change:
+            p = order[r - 1]
+            for j in range(k):
+                if words[j, i] != words[j, p]:
+                    change = True
+                    break
+        if change:
+            g += 1
+            first[g] = i
+        inverse[i] = g
+    return inverse, first[:g + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def dense_groups(word, span):  # pragma: no cover - compiled
+    """The groups of a word below ``span`` by a dense count: each row's group (in the
+    word's order) and the last row of each."""
+    n = len(word)
+    first = np.full(span, -1, np.int64)
+    for i in range(n):
+        first[word[i]] = i
+    rank = np.empty(span, np.int64)
+    g = 0
+    for v in range(span):
+        rank[v] = g - 1 if first[v] < 0 else g
+        if first[v] >= 0:
+            first[g] = first[v]
+            g += 1
+    inverse = np.empty(n, np.int64)
+    for i in range(n):
+        inverse[i] = rank[word[i]]
+    return inverse, first[:g].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def dd_sums(starts, count, values):  # pragma: no cover - compiled
+    """The double-double sums of :func:`mitld_lp.sensing.rows.fsum_by`: per group its
+    running sum, the carried errors and their magnitudes."""
+    n = len(starts)
+    high = np.empty(n)
+    low = np.zeros(n)
+    size = np.zeros(n)
+    for g in range(n):
+        s = starts[g]
+        a = values[s]
+        lo = 0.0
+        sz = 0.0
+        for k in range(1, count[g]):
+            x = values[s + k]
+            t = a + x
+            back = t - a
+            error = (a - (t - back)) + (x - back)
+            a = t
+            lo += error
+            sz += abs(error)
+        high[g] = a
+        low[g] = lo
+        size[g] = sz
+    return high, low, size
+
+
+@numba.njit(cache=True, nogil=True)
+def spread(counts):  # pragma: no cover - compiled
+    """For parents with ``counts`` children each: every child's parent and its rank."""
+    n = 0
+    for c in counts:
+        n += c
+    parent = np.empty(n, np.int64)
+    rank = np.empty(n, np.int64)
+    at = 0
+    for p in range(len(counts)):
+        for r in range(counts[p]):
+            parent[at] = p
+            rank[at] = r
+            at += 1
+    return parent, rank
+
+
+@numba.njit(cache=True, nogil=True)
+def scatter_max(out, idx, vals):  # pragma: no cover - compiled
+    """``np.maximum.at(out, idx, vals)``."""
+    for i in range(len(idx)):
+        if vals[i] > out[idx[i]]:
+            out[idx[i]] = vals[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def scatter_min(out, idx, vals):  # pragma: no cover - compiled
+    """``np.minimum.at(out, idx, vals)``."""
+    for i in range(len(idx)):
+        if vals[i] < out[idx[i]]:
+            out[idx[i]] = vals[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def scatter_add(out, idx, vals):  # pragma: no cover - compiled
+    """``np.add.at(out, idx, vals)`` (unsigned: wrapping, as a hash sums)."""
+    for i in range(len(idx)):
+        out[idx[i]] += vals[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def gather2(table, a, b):  # pragma: no cover - compiled
+    """``table[a, b]`` and how many of them are -2 (not made yet)."""
+    out = np.empty(len(a), np.int64)
+    miss = 0
+    for i in range(len(a)):
+        v = table[a[i], b[i]]
+        out[i] = v
+        if v == -2:
+            miss += 1
+    return out, miss
+
+
+@numba.njit(cache=True, nogil=True)
+def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_code,
+                    hyp_weight, nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut,
+                    b_now, b_wait, s_start, s_len, s_w2, s_pg, world_label, u_atoms,
+                    s_atoms, pending, nu, step, ends):  # pragma: no cover - compiled
+    """The loops of :meth:`mitld_lp.sensing.frontier.FrontierBuilder.hypothesis_rows`
+    (its rows in its order, the same products): per outcome row (``o_*``; ``o_succ``
+    its key in the successors' table), its state's hypotheses (``h_branch[h - h0]``:
+    each one's key in the branches' table), their branches (``b_*``), the world's
+    successors (``s_*``); ``step``, ``ends``: the automaton's step and where a
+    hypothesis ends as dense tables (-2, or a key outside them: not made yet).
+    Returns the cut rows, the decided rows, the undecided rows, and the keys not made
+    yet: of ``step`` (automaton state, label) and, where every step was found, of
+    ``ends`` (automaton state, events left); with any, the rows are not to be read."""
+    n3 = 0
+    n4 = 0
+    for r in range(len(o_c)):
+        st = o_st[r]
+        for h in range(hstart[st], hstart[st] + hcount[st]):
+            k = h_branch[h - h0]
+            for e in range(b_start[k], b_start[k] + b_len[k]):
+                n3 += 1
+                if not b_cut[e]:
+                    n4 += s_len[o_succ[r]]
+    cut_c = np.empty(n3, np.int64)
+    cut_o = np.empty(n3, np.int64)
+    cut_b = np.empty(n3, np.int64)
+    cut_m = np.empty(n3)
+    d_i = np.empty((7, n4), np.int64)  # c, o, b, s, end, world, occurred
+    d_new = np.empty(n4, np.int64)
+    d_m = np.empty(n4)
+    u_i = np.empty((7, n4), np.int64)  # c, occurred, world, reported, times, q, place
+    u_m = np.empty(n4)
+    miss_a = np.empty(n4, np.int64)
+    miss_b = np.empty(n4, np.int64)
+    n_cut = 0
+    n_done = 0
+    n_und = 0
+    n_step = 0
+    n_end = 0
+    b = -1
+    s = -1
+    for r in range(len(o_c)):
+        st = o_st[r]
+        c = o_c[r]
+        occ = o_occ[r]
+        pu = o_pu[r]
+        left0 = pending[st] & ~occ
+        hu = u_atoms[occ]
+        sw = o_succ[r]
+        for h in range(hstart[st], hstart[st] + hcount[st]):
+            q = hyp_code[h] % nq
+            w = hyp_weight[h]
+            k = h_branch[h - h0]
+            for e in range(b_start[k], b_start[k] + b_len[k]):
+                b += 1
+                base = w * pu * b_pc[e]
+                if b_cut[e]:
+                    cut_c[n_cut] = c
+                    cut_o[n_cut] = o_seq[r]
+                    cut_b[n_cut] = b
+                    cut_m[n_cut] = base
+                    n_cut += 1
+                    continue
+                happened = hu | s_atoms[b_now[e]]
+                left = left0 | (b_wait[e] << nu)
+                for f in range(s_start[sw], s_start[sw] + s_len[sw]):
+                    s += 1
+                    w2 = s_w2[f]
+                    label = world_label[w2] | happened
+                    q2 = -2
+                    if q < step.shape[0] and label < step.shape[1]:
+                        q2 = step[q, label]
+                    if q2 == -2:
+                        miss_a[n_step] = q
+                        miss_b[n_step] = label
+                        n_step += 1
+                        continue
+                    if n_step:
+                        continue
+                    end = -2
+                    if q2 < ends.shape[0] and left < ends.shape[1]:
+                        end = ends[q2, left]
+                    if end == -2:
+                        miss_a[n_end] = q2
+                        miss_b[n_end] = left
+                        n_end += 1
+                        continue
+                    if n_end:
+                        continue
+                    mass = base * s_pg[f]
+                    if end >= 0:
+                        d_i[0, n_done] = c
+                        d_i[1, n_done] = o_seq[r]
+                        d_i[2, n_done] = b
+                        d_i[3, n_done] = s
+                        d_i[4, n_done] = end
+                        d_i[5, n_done] = w2
+                        d_i[6, n_done] = occ
+                        d_new[n_done] = b_new[e]
+                        d_m[n_done] = mass
+                        n_done += 1
+                    else:
+                        u_i[0, n_und] = c
+                        u_i[1, n_und] = occ
+                        u_i[2, n_und] = w2
+                        u_i[3, n_und] = b_new[e]
+                        u_i[4, n_und] = b_tid[e]
+                        u_i[5, n_und] = q2
+                        u_i[6, n_und] = s
+                        u_m[n_und] = mass
+                        n_und += 1
+    n_miss = n_step if n_step else n_end
+    return (cut_c[:n_cut], cut_o[:n_cut], cut_b[:n_cut], cut_m[:n_cut],
+            d_i[:, :n_done], d_new[:n_done], d_m[:n_done], u_i[:, :n_und], u_m[:n_und],
+            n_step > 0, miss_a[:n_miss], miss_b[:n_miss])
