@@ -538,8 +538,7 @@ class FrontierBuilder(StepRules):
         self.growth.start(len(self.states))
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
                              leave=False, mininterval=0.5)
-        # the build makes many small objects and no reference cycles: the cyclic
-        # collector's passes over the whole heap are paused while it runs
+        # many small objects, no reference cycles: the cyclic collector paused meanwhile
         collecting = gc.isenabled()
         gc.disable()
         try:
