@@ -1,14 +1,36 @@
-"""A band whose laws' never masses differ (issue 43).
+"""The band constrained answers that used to end ``failed``, and a band whose laws'
+never masses differ (issue 43).
 
-Independent route: a hand calculation of the probability that the bus ever comes at
-the band's worst and best hazards.
+Independent routes:
+
+* a hand calculation: for a band of tables of masses, the probability that the bus
+  ever comes at the band's worst and best hazards;
+* on the reacting world of tests/test_sensing_reacting_band.py, for a robot that sees
+  the bus (no automaton, no information state): an occupancy LP in scipy over its
+  histories at a constant law of the band (no controller meeting a bound under every
+  law guarantees more than its optimum there), and an expectimin-max in exact
+  arithmetic of the least risk a robot can keep when nature picks each step's hazard (a
+  bound below it is met by no controller); the returned controller's worst cases by that
+  file's enumeration in exact arithmetic.
 """
 
 from __future__ import annotations
 
+from fractions import Fraction
 from typing import Any
 
+import numpy as np
 import pytest
+from scipy.optimize import linprog
+from test_sensing_reacting_band import (
+    CAUGHT,
+    GAME,
+    HORIZON,
+    in_ditch,
+    plan_value,
+    verdict,
+)
+from test_sensing_reacting_band import model as reacting_model
 
 from mitld_lp import ExplicitGame, Model, synthesize
 from mitld_lp.distributions import from_table
@@ -24,6 +46,133 @@ def three(**sensors: Any) -> Model:
     law = from_table({"geometric": [0.3, 0.6]}, "mu")
     return Model.from_game(THREE, "D[mu] b & F b", distributions={"mu": law},
                            sensors=sensors)
+
+
+# ------------------------------------------------- the reacting world's band constraints
+
+def history_lp(h: Fraction, risk: Fraction | None) -> float:
+    """The best probability of CAUGHT over fully observed policies (the robot sees the
+    bus) with ``P(F[0,3] h) <= risk`` (None: minimise the risk instead), the bus's
+    hazard ``h`` at every step: an occupancy LP over the histories of GAME (trace, step
+    of the bus), solved by scipy; NaN when infeasible."""
+    nodes: list[tuple[tuple[str, ...], int | None]] = []
+    index: dict[tuple[tuple[str, ...], int | None], int] = {}
+    pairs: list[tuple[int, str]] = []  # (node, action): the LP's variables
+    edges: list[tuple[int, int, float]] = []  # (pair, child node, probability)
+
+    def node(trace: tuple[str, ...], k: int | None) -> int:
+        key = (trace, k)
+        if key not in index:
+            index[key] = len(nodes)
+            nodes.append(key)
+            t, w = len(trace) - 1, trace[-1]
+            if t < HORIZON and (verdict(GAME, CAUGHT, trace, k) is None
+                                or in_ditch(trace, k) is None):
+                for action in sorted(GAME.transitions[w]):
+                    pair = len(pairs)
+                    pairs.append((index[key], action))
+                    for k2, pe in ([(t + 1, h), (None, 1 - h)] if k is None else [(k, 1)]):
+                        events = frozenset({"b"}) if k2 == t + 1 else frozenset()
+                        for nxt, pw in GAME.successors(w, action, events):
+                            edges.append((pair, node((*trace, nxt), k2),
+                                          float(pe) * float(pw)))
+        return index[key]
+
+    node((GAME.initial,), None)
+    n, m = len(nodes), len(pairs)
+    inflow = np.zeros((n, m))  # the mass each pair sends into each node
+    for pair, child, p in edges:
+        inflow[child, pair] += p
+    out = np.zeros((n, m))
+    for j, (i, _) in enumerate(pairs):
+        out[i, j] = 1.0
+    inner = out.sum(axis=1) > 0
+    start = np.zeros(n)
+    start[0] = 1.0
+    # an inner node's mass leaves it by its actions; a leaf's mass is its inflow
+    a_eq, b_eq = (out - inflow)[inner], start[inner]
+    caught = np.array([bool(verdict(GAME, CAUGHT, tr, k)) for tr, k in nodes])
+    ditch = np.array([bool(in_ditch(tr, k)) for tr, k in nodes])
+    leaf = ~inner
+    reach = inflow[leaf & caught].sum(axis=0)
+    danger = inflow[leaf & ditch].sum(axis=0)
+    if risk is None:
+        got = linprog(danger, A_eq=a_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+        return float(got.fun)
+    got = linprog(-reach, A_ub=danger[None, :], b_ub=[float(risk)], A_eq=a_eq, b_eq=b_eq,
+                  bounds=(0, None), method="highs")
+    return float(-got.fun) if got.status == 0 else float("nan")
+
+
+ENDS = (Fraction(3, 10), Fraction(6, 10))
+
+
+def test_a_tight_risk_on_the_reacting_world_is_met_under_every_law() -> None:
+    """``P(F[0,3] h) <= 0.3`` with a camera (detect 0.5) on the reacting world: the
+    search used to give up (``failed``, lower NaN); its candidates' bounds are now
+    tightened as the fully observed route tightens them.  The returned controller's risk
+    with nature making the ditch as likely as it can is within the bound, its task's
+    worst case is ``lower`` (the enumeration, exactly), and neither end of the band lets
+    a robot that sees the bus do better (the LP)."""
+    r = synthesize(reacting_model(GAME, CAUGHT, 0.5), constraints=["P(F[0,3] h) <= 0.3"])
+    assert r.status.value == "optimal" and r.controller is not None
+    (v,) = r.constraints
+    assert v.holds
+    risk = plan_value(r.controller.plan, GAME, in_ditch, "0.5", 0, max)
+    assert risk <= Fraction(3, 10)
+    task = plan_value(r.controller.plan, GAME,
+                      lambda trace, k: verdict(GAME, CAUGHT, trace, k), "0.5", 0, min)
+    assert abs(task - Fraction(r.lower)) <= Fraction(1, 10**9)
+    assert r.lower <= min(history_lp(h, Fraction(3, 10)) for h in ENDS) + 1e-9
+
+
+def least_risk() -> Fraction:
+    """The least probability of the ditch by step 3 a robot that sees the bus can keep
+    when nature, seeing everything (the robot's action too), picks the bus's hazard at
+    each step among the band's ends to make it most likely: an expectimin-max over the
+    histories of GAME, in exact arithmetic (a robot that sees more does no worse than
+    one acting on a camera's reports)."""
+    def value(trace: tuple[str, ...], k: int | None) -> Fraction:
+        t, w = len(trace) - 1, trace[-1]
+        said = in_ditch(trace, k)
+        if said is not None:
+            return Fraction(int(said))
+        best = None
+        for action in sorted(GAME.transitions[w]):
+            options = []
+            for h in (ENDS if k is None else (None,)):
+                v = Fraction(0)
+                for k2, pe in ([(t + 1, h), (None, 1 - h)] if k is None else [(k, 1)]):
+                    events = frozenset({"b"}) if k2 == t + 1 else frozenset()
+                    for nxt, pw in GAME.successors(w, action, events):
+                        v += pe * Fraction(str(pw)) * value((*trace, nxt), k2)
+                options.append(v)
+            worst = max(options)
+            best = worst if best is None else min(best, worst)
+        assert best is not None
+        return best
+
+    return value((GAME.initial,), None)
+
+
+@pytest.mark.parametrize("detect", [0.5, 1.0], ids=["camera", "seen"])
+def test_a_risk_no_policy_meets_is_infeasible_not_failed(detect: float) -> None:
+    """``P(F[0,3] h) <= 0.25``: nature can make the ditch more likely than 0.25 against
+    every robot that sees the bus (the enumeration), so against every controller; the
+    answer says ``infeasible`` (it said ``failed``, feasibility unknown), with the
+    constraint alone's robust optimum bracketing that least risk, for the camera and
+    for the robot that sees the bus alike.  At each constant law of the band a robot
+    seeing the bus could keep the risk below 0.25 (the LP): the adaptive nature of the
+    band is what makes it infeasible."""
+    least = least_risk()
+    assert least > Fraction(1, 4)
+    assert max(history_lp(h, None) for h in ENDS) < 0.25
+    r = synthesize(reacting_model(GAME, CAUGHT, detect), constraints=["P(F[0,3] h) <= 0.25"])
+    assert r.status.value == "infeasible" and r.controller is None
+    assert "alone, seeing every event" in r.message
+    said = r.message.split("over the bands in [")[1].split("]")[0]
+    low, high = (float(x) for x in said.split(", "))
+    assert low <= least <= high
 
 
 # ------------------------------------------------- a band whose never masses differ
