@@ -1,10 +1,15 @@
-"""The band constrained answers that used to end ``failed``, and a band whose laws'
-never masses differ (issue 43).
+"""What a band's answer reports for its expected steps, the band constrained answers
+that used to end ``failed``, and a band whose laws' never masses differ (issue 43).
 
 Independent routes:
 
-* a hand calculation: for a band of tables of masses, the probability that the bus
-  ever comes at the band's worst and best hazards;
+* a hand calculation: on a world whose task is decided the step the bus comes, the
+  expected steps are the bus's expected arrival step whatever the robot does, ``1 /
+  h`` for a geometric hazard ``h``, and nature (maximising them) plays the band's low
+  end: ``1 / 0.3 = 10 / 3``; for a band of tables of masses, the probability that the
+  bus ever comes at the band's worst and best hazards;
+* Storm's robust check (``R{"steps"}max``, uncertainty MAXIMIZE) of the exported
+  interval chain, fully observed and seen through a sensor with false alarms;
 * on the reacting world of tests/test_sensing_reacting_band.py, for a robot that sees
   the bus (no automaton, no information state): an occupancy LP in scipy over its
   histories at a constant law of the band (no controller meeting a bound under every
@@ -16,12 +21,17 @@ Independent routes:
 
 from __future__ import annotations
 
+import importlib.util
 from fractions import Fraction
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from scipy.optimize import linprog
+from test_band_chain import storm_robust
+from test_false_alarms_band_constrained import CONSTRAINT as ALARM_RISK
+from test_false_alarms_band_constrained import model as alarm_model
 from test_sensing_reacting_band import (
     CAUGHT,
     GAME,
@@ -33,12 +43,19 @@ from test_sensing_reacting_band import (
 from test_sensing_reacting_band import model as reacting_model
 
 from mitld_lp import ExplicitGame, Model, synthesize
+from mitld_lp.cli import main
 from mitld_lp.distributions import from_table
+
+needs_storm = pytest.mark.skipif(importlib.util.find_spec("stormpy") is None,
+                                 reason="needs stormpy")
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
 
 # three states: "go" risks the ditch (h) half the time; the task is the bus b alone
 THREE = ExplicitGame(initial="mid", labels={"d": {"h"}}, transitions={
     "mid": {"go": {"sa": 0.5, "d": 0.5}, "wait": {"mid": 1.0}},
     "sa": {"stay": {"sa": 1.0}}, "d": {"stay": {"d": 1.0}}})
+BUS = Fraction(10, 3)  # 1 / 0.3: the bus's expected step at the band's low end
 
 
 def three(**sensors: Any) -> Model:
@@ -46,6 +63,69 @@ def three(**sensors: Any) -> Model:
     law = from_table({"geometric": [0.3, 0.6]}, "mu")
     return Model.from_game(THREE, "D[mu] b & F b", distributions={"mu": law},
                            sensors=sensors)
+
+
+@pytest.mark.parametrize("sensors", [{}, {"b": {"detect": 0.5}}],
+                         ids=["fully-observed", "sensed"])
+def test_expected_steps_without_then_are_the_band_s_worst_case(sensors: Any) -> None:
+    """A constraint and no ``then`` nor steps bound: ``steps`` is the worst law's, 10/3
+    seeing the bus (its geometric clock is exact); with the camera, whose information
+    states cut the hypotheses at the truncation point ``T`` (the count stops there, as
+    for every truncated run, docs/constraints.md), ``sum_{k < T} 0.7^k = (1 - 0.7^T) /
+    0.3``.  At the middle law, where the answer's policy is solved, it would be about
+    1 / 0.45 (what the sensed answer reported)."""
+    r = synthesize(three(**sensors), constraints=["P(F h) <= 0.25"])
+    assert r.status.value == "optimal" and r.bands and r.constraints[0].holds
+    if sensors:
+        cut = r.sta.truncation_points["b"]
+        expected = (1 - Fraction(7, 10) ** cut) / Fraction(3, 10)
+    else:
+        expected = BUS
+    assert r.steps == pytest.approx(float(expected), abs=1e-8)
+
+
+@needs_storm
+def test_sensed_band_constrained_steps_are_storm_s_worst_case(tmp_path: Path) -> None:
+    """A sensor with false alarms, a band and a risk bound, no ``then``: the answer's
+    ``steps`` is Storm's worst case of the exported interval chain's steps (it was the
+    chosen candidate's at its own law, 2.2005 against Storm's 2.5866)."""
+    from mitld_lp.running.sensed_band_chain import write_sensed_band_chain
+
+    r = synthesize(alarm_model(), constraints=[ALARM_RISK])
+    assert r.route == "sensed-constrained" and r.controller is not None and r.then is None
+    path = write_sensed_band_chain(r, tmp_path / "c.drn")
+    assert abs(storm_robust(path, 'R{"steps"}max=? [F "done"]', maximise=True) - r.steps) <= 1e-8
+
+
+@needs_storm
+def test_fully_observed_band_constrained_steps_are_storm_s_worst_case(
+        tmp_path: Path, capsys: Any) -> None:
+    """bus_fit with a probability constraint, no ``then``: the answer's ``steps`` is
+    Storm's worst case on the exported interval chain, and the printed ``E(steps)`` says
+    it is the worst law's."""
+    from mitld_lp.model import load_model
+    from mitld_lp.running.band_mixture_chain import write_mixture_chain
+
+    path, risk = MODELS / "bus_fit.toml", "P(F A) >= 0.3"
+    r = synthesize(load_model(path), constraints=[risk])
+    storm = storm_robust(write_mixture_chain(r, tmp_path / "c.drn"),
+                         'R{"steps"}max=? [F "decided"]', maximise=True)
+    assert abs(storm - r.steps) <= 1e-7
+    assert main(["solve", str(path), "--constraint", risk, "-q"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("E(steps)"))
+    assert line == f"E(steps):     {r.steps:.6g}  (at the worst law of the bands)"
+
+
+def test_steps_at_the_best_law_say_so(capsys: Any) -> None:
+    """``--bands best``: the steps are those at the law the answer chose, and the line
+    says that it is no worst case; with ``then = "min-steps"`` on the three-state world
+    nature helps the robot decide the task soonest, the band's high end: 1 / 0.6."""
+    assert main(["solve", str(MODELS / "bus_fit.toml"), "--constraint", "E(steps) <= 9",
+                 "--bands", "best", "-q"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("E(steps)"))
+    assert line.endswith("(at the law of the bands the answer chose, not a worst case)")
+    r = synthesize(three(), constraints=["P(F h) <= 0.25"], then="min-steps", bands="best")
+    assert r.part.reading == "best" and r.steps == pytest.approx(1 / 0.6, abs=1e-7)
 
 
 # ------------------------------------------------- the reacting world's band constraints

@@ -62,9 +62,12 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             if set(parts) - {"solver"}:
                 say_answer(f"width:        {r.width['total']:.3g} = " + " + ".join(
                     f"{k} {v:.3g}" for k, v in parts.items()))
-            say_answer(f"E(steps):     {r.steps:.6g}")
+            at = ("" if not r.bands else "  (at the worst law of the bands)"
+                  if r.part.reading == "worst" else "  (at the law of the bands the answer "
+                  "chose, not a worst case)")
+            say_answer(f"E(steps):     {r.steps:.6g}{at}")
             if r.then:
-                say_answer(f"then {r.then}: {r.secondary:.6g}")
+                say_answer(f"then {r.then}: {r.secondary:.6g}{at}")
             elif not r.bands:  # the steps of one optimal policy, not the fewest
                 say_answer("note:         E(steps) is that of one optimal policy; --then min-steps "
                            "gives the fewest among them")

@@ -43,6 +43,8 @@ otherwise the check ``worst case over the band`` says the gap, both ends sound.
 ``then`` (``min-steps``/``min-cost``): each candidate is that law's lexicographic LP's
 policy; the returned one's expected steps (and cost) at the worst law of the band
 (nature maximising them), proven from above, are its ``steps`` (and ``secondary``).
+Without ``then`` too, ``steps`` is the returned controller's worst case over the band,
+not its value at the law it was solved at.
 
 A task with a safety part (safety, obligation; a co-safe task's minimum): a candidate's
 *keep* (:mod:`mitld_lp.routes.sensed_kept`) is a stay in a keep state, which its chain
@@ -128,8 +130,8 @@ class Judged:
     """A candidate's worst case over the band on its interval chain: the task's
     ``lower`` (and ``truncated_won``, its runs past a truncation point counted won),
     each constraint's value with the bounds nature drives it to, whether all hold,
-    the expected steps and cost nature maximises (``(value, upper)``, NaN where not
-    asked), the chain's states."""
+    the expected steps nature maximises and, with ``then = "min-cost"``, the expected
+    cost (``(value, upper)``; NaN where not asked), the chain's states."""
 
     lower: float
     truncated_won: float
@@ -169,10 +171,9 @@ def judge(result: Result, constraints: tuple[Any, ...],
                                       bounds=(nm.value, nm.upper)))
     nan = (float("nan"), float("nan"))
     then = result.part.then
-    steps = cost = nan
-    if then is not None or any(c.kind == "steps" for c in constraints):
-        nm = nature_max(chain, reward=reward["steps"])
-        steps = (nm.value, nm.upper)
+    cost = nan
+    nm = nature_max(chain, reward=reward["steps"])  # the answer's E(steps): the worst law's
+    steps = (nm.value, nm.upper)
     if then == "min-cost":
         nm = nature_max(chain, reward=reward["cost"])
         cost = (nm.value, nm.upper)
