@@ -255,6 +255,22 @@ def test_a_risk_no_policy_meets_is_infeasible_not_failed(detect: float) -> None:
     assert low <= least <= high
 
 
+def test_a_bound_only_some_laws_meet_is_infeasible(capsys: Any) -> None:
+    """bus_fit with ``P(F[0,2] b1) >= 0.95``: the bus by step 2 has probability 1 -
+    0.2^2 = 0.96 at the middle law (0.8) but 1 - 0.3^2 = 0.91 at the band's low end
+    (0.7), whatever the robot does, by hand; the answer is ``infeasible`` (it was
+    ``failed``, feasibility unknown), the constraint alone's robust optimum shown around
+    0.91, exit 3."""
+    assert main(["solve", str(MODELS / "bus_fit.toml"), "--constraint",
+                 "P(F[0,2] b1) >= 0.95", "-q"]) == 3
+    out = capsys.readouterr().out
+    assert "status:       infeasible" in out
+    assert "P(F[0,2] b1) >= 0.95: not met under every law of the bands" in out
+    said = out.split("over the bands in [")[1].split("]")[0]
+    low, high = (float(x) for x in said.split(", "))
+    assert low <= 0.91 <= high and high - low < 1e-9
+
+
 # ------------------------------------------------- a band whose never masses differ
 
 def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -> None:

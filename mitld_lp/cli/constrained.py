@@ -83,6 +83,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
                            + (f"holds: certified {word} {c.certified!r}" if c.holds else
                         f"MISSES by up to {c.miss:.3g}: certified {word} {c.certified!r}")
                      + ")")
+            elif c.feasible_bound is None and r.bands:  # the robust line says why
+                say_answer(f"constraint:   {c.constraint}: not met under every law of the "
+                           "bands")
             else:
                 tight = "none (the others are infeasible)" if c.feasible_bound is None else (
                     f"{c.feasible_bound:.7g}")
