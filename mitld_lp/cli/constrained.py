@@ -62,9 +62,12 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             if set(parts) - {"solver"}:
                 say_answer(f"width:        {r.width['total']:.3g} = " + " + ".join(
                     f"{k} {v:.3g}" for k, v in parts.items()))
-            say_answer(f"E(steps):     {r.steps:.6g}")
+            at = ("" if not r.bands else "  (at the worst law of the bands)"
+                  if r.part.reading == "worst" else "  (at the law of the bands the answer "
+                  "chose, not a worst case)")
+            say_answer(f"E(steps):     {r.steps:.6g}{at}")
             if r.then:
-                say_answer(f"then {r.then}: {r.secondary:.6g}")
+                say_answer(f"then {r.then}: {r.secondary:.6g}{at}")
             elif not r.bands:  # the steps of one optimal policy, not the fewest
                 say_answer("note:         E(steps) is that of one optimal policy; --then min-steps "
                            "gives the fewest among them")
@@ -80,6 +83,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
                            + (f"holds: certified {word} {c.certified!r}" if c.holds else
                         f"MISSES by up to {c.miss:.3g}: certified {word} {c.certified!r}")
                      + ")")
+            elif c.feasible_bound is None and r.bands:  # the robust line says why
+                say_answer(f"constraint:   {c.constraint}: not met under every law of the "
+                           "bands")
             else:
                 tight = "none (the others are infeasible)" if c.feasible_bound is None else (
                     f"{c.feasible_bound:.7g}")

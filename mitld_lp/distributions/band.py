@@ -249,7 +249,13 @@ class EnvelopeBand(Band):
         return self._each(k, "survival").max(axis=0)
 
     def _band_constant_from(self) -> int | None:
-        return None
+        """The step from which every law's hazard is constant (a table of masses: 0 past
+        its support, whatever mass it leaves to never), so the least and the greatest of
+        them are too: the clock stops there and nothing is truncated, where laws whose
+        never masses differ have no truncation point (:meth:`truncation_point`).  None
+        where some law's hazard never settles (a Poisson law)."""
+        starts = [law.constant_hazard_from for law in self.laws]
+        return None if any(k is None for k in starts) else max(starts)  # type: ignore[type-var]
 
 
 def band_of_laws(

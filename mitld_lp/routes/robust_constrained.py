@@ -28,8 +28,10 @@ It is bracketed on the interval MDP of the joint product:
   halved back); the robot's robust policy of each probability constraint alone
   (:func:`mitld_lp.solvers.robust_merged.robust_for`).  If none meets every bound
   against every law, the status is ``failed``, ``lower`` is NaN, no constraint is said
-  to hold, and the answer says the feasibility is unknown.  A problem infeasible at the
-  middle law is infeasible at every law.
+  to hold, and the answer says the feasibility is unknown (with each probability
+  constraint alone's robust optimum, :func:`alone_bounds`).  A problem infeasible at the
+  middle law is infeasible at every law; so is one with a probability constraint whose
+  formula alone has its robust optimum beyond the bound (the status ``infeasible``).
 
 ``then`` (``min-steps``/``min-cost``) with a band: what is optimised is the middle law's
 lexicographic LP (the fastest or cheapest of the policies optimal there, within the
@@ -47,6 +49,7 @@ the optimistic constrained optimum instead (:mod:`mitld_lp.routes.optimistic_con
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping
 from dataclasses import replace
@@ -58,7 +61,7 @@ import scipy.sparse as sp
 from mitld_lp.automata.joint import ACCEPTED
 from mitld_lp.checks import Check
 from mitld_lp.controllers.kinds import ConstrainedController
-from mitld_lp.problem import Posed
+from mitld_lp.problem import Posed, pose_on
 from mitld_lp.product import robust_product
 from mitld_lp.product.imdp import IntervalMDP, VertexRows, middle_rows, point_mdp, vertex_rows
 from mitld_lp.result import Result
@@ -78,7 +81,9 @@ if TYPE_CHECKING:  # the LP's and the robust game's modules load when solving
     from mitld_lp.solvers.robust_graph import RobustGame
 
 __all__ = ["RobustConstrainedRoute", "solve_robust_constrained", "worst_case",
-           "ROUNDS"]
+           "tighten_margins", "alone_bounds", "ROUNDS"]
+
+log = logging.getLogger(__name__)
 
 ROUNDS = 8
 """How many times the middle-law LP is solved again with tightened bounds."""
@@ -269,6 +274,14 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
     if best is None:  # the robot's robust policy for each probability constraint alone
         best, fallback = _fallback(nominal, judge, seed)
     robust_ok = best is not None
+    none, alone = (None, "") if robust_ok else alone_bounds(posed)
+    if none is not None:  # a constraint alone is beyond its bound under the bands
+        return replace(nominal, lower=float("nan"), upper=float("nan"),
+                       value=float("nan"), status=Status.INFEASIBLE, controller=None,
+                       certified=False, bands=bands, part=replace(
+                           nominal.part, message=f"infeasible under the bands: {none}",
+                           constraints=tuple(replace(v, holds=False)
+                                             for v in judge.values(nominal))))
     chosen, values, lower = best if best is not None else (nominal, judge.values(nominal),
                                                            float("nan"))
     extra = _then_checks(chosen, judge, then)
@@ -296,7 +309,9 @@ def solve_robust_constrained(posed: Posed, built: Built, *,
                "(the middle law's optimum, tightened" + (
                    ", and the robust policy of each probability constraint alone"
                    if any(c.kind == "prob" for c in cons) else "")
-               + ", break one): feasibility unknown, no certified lower bound")
+               + ", break one): feasibility unknown, no certified lower bound" + (
+                   f" (each bound is within what the constraint alone reaches: {alone})"
+                   if alone else ""))
     complement = None
     if minimise:
         complement = (lower, raw_upper)
@@ -329,6 +344,48 @@ def _robust_upper(posed: Posed) -> float:
     if posed.minimise:
         return float(r.complement[1]) if r.complement else 1.0 - float(r.lower)
     return float(r.upper)
+
+
+def alone_bounds(posed: Posed) -> tuple[str | None, str]:
+    """Each probability constraint's formula alone, seeing every event: its robust
+    optimum over the bands (:mod:`mitld_lp.routes.robust`; the least worst case of a
+    ``P(.) <= x``, the greatest of a ``P(.) >= x``), which no controller -- fully
+    observed or acting on sensor reports -- betters under every law.  Returns why no
+    policy meets the constraints under every law (a constraint whose bracket lies beyond
+    its bound; None when none does) and what the brackets say (empty when none was
+    solved).  A bracket the robust route does not give (a budget, a refusal) is left out
+    and logged."""
+    import dataclasses
+    from types import MappingProxyType
+
+    from mitld_lp.problem import ProblemError
+    from mitld_lp.routes.robust import RobustRoute
+    from mitld_lp.util.memory import ProductTooLarge
+
+    settings = replace(posed.settings, progress=False, bands="worst")
+    said: list[str] = []
+    for c in posed.problem.constraints:
+        if c.kind != "prob":
+            continue
+        model = dataclasses.replace(
+            posed.model, spec=c.formula, spec_text=c.text, constraints=(),
+            sensors=MappingProxyType({}), objective="min" if c.sense == "<=" else "max")
+        try:
+            alone = pose_on([RobustRoute(points=True)], model, settings=settings)
+            r = alone.route.solve(alone, alone.route.build(alone, False))
+        except (ProblemError, ProductTooLarge) as exc:
+            log.info("constraint %s alone, seeing every event: not solved (%s)", c, exc)
+            continue
+        if not r.certified:
+            log.info("constraint %s alone, seeing every event: not certified", c)
+            continue
+        best = r.lower if c.sense == "<=" else r.upper  # what no policy betters
+        if (best > c.bound) if c.sense == "<=" else (best < c.bound):
+            return (f"{c} alone, seeing every event, has its robust optimum over the bands "
+                    f"in [{r.lower!r}, {r.upper!r}]: no policy meets it under every law"), ""
+        said.append(f"{c} alone, seeing every event: robust optimum in "
+                    f"[{r.lower!r}, {r.upper!r}]")
+    return None, "; ".join(said)
 
 
 class _Judge:
@@ -401,12 +458,7 @@ def _tighten(posed: Posed, middle: Any, joint: Any, sta: Any, t0: float,
             return None, rounds, margins
         rounds += 1
         good = list(margins)  # the last margins whose LP was feasible
-        for i, v in enumerate(values):  # what the bands added, and a little more
-            if not v.holds:  # at least twice the last step: a bound missed again
-                excess = abs(v.value - v.constraint.bound) if v.value == v.value else 0.0
-                steps[i] = max(1.5 * excess + 1e-9 * (1.0 + abs(v.constraint.bound)),
-                               2.0 * steps[i])
-                margins[i] += steps[i]
+        margins = tighten_margins(values, margins, steps)
         again = None
         for _ in range(4):
             tight = tuple(replace(c, bound=c.bound - margins[i] if c.sense == "<=" else
@@ -424,6 +476,21 @@ def _tighten(posed: Posed, middle: Any, joint: Any, sta: Any, t0: float,
         chosen, values = again, judge.values(again)
     assert chosen.prob is not None and chosen.stay is not None
     return (chosen, values, judge.task(chosen.prob, chosen.stay)), rounds, margins
+
+
+def tighten_margins(values: Any, margins: list[float], steps: list[float]) -> list[float]:
+    """The margins by which each constraint's bound is moved in, grown for each bound a
+    candidate's worst case ``values`` (:class:`ConstraintValue`, in the constraints'
+    order) misses: by what the bands added and a little more, and at least twice the last
+    step (``steps``, updated) when a bound is missed again."""
+    out = list(margins)
+    for i, v in enumerate(values):
+        if not v.holds:
+            excess = abs(v.value - v.constraint.bound) if v.value == v.value else 0.0
+            steps[i] = max(1.5 * excess + 1e-9 * (1.0 + abs(v.constraint.bound)),
+                           2.0 * steps[i])
+            out[i] += steps[i]
+    return out
 
 
 def _fallback(nominal: Result, judge: _Judge, seed: int | None

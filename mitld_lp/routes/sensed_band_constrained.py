@@ -6,8 +6,8 @@ Candidates: the ``sensed-constrained`` route's controller (:mod:`mitld_lp.routes
 sensed_constrained`, its information-state LP) at the band's laws that
 :func:`mitld_lp.routes.sensed_band.end_laws` names (the middle law, every band at its
 low end, at its high end); where a candidate's constraint fails under some law, that law's
-LP once more with the constraint's bound tightened by what the band added
-(:data:`ROUNDS` times).
+LP again with the constraint's bound tightened by what the band added, an infeasible
+LP's margins halved back (:data:`ROUNDS` rounds, :func:`_tighten`).
 
 A sensor with false alarms (under a band whose laws surely happen; one that may never
 happen is bracketed, below) changes no step: each candidate is
@@ -27,7 +27,10 @@ sensed_band_chain.nature_max`), each ``P(.) >= x`` one's from below.  A candidat
 constraint's worst case misses its bound is discarded; the best survivor by its task's
 worst case is returned.  If none survives, the status is ``failed``, no controller is
 returned and no constraint is said to hold (a policy meeting a constraint at some laws
-only is never returned as meeting it).
+only is never returned as meeting it); it is ``infeasible`` where a probability
+constraint's formula alone, seeing every event, has its robust optimum over the band
+beyond the bound (:func:`mitld_lp.routes.robust_constrained.alone_bounds`: a robot that
+sees more does no worse), and a ``failed`` answer gives those optima.
 
 ``upper``: the least of the candidates' upper bounds at their laws, each from the LP with
 the problem's own bounds (a policy meeting the constraints under every law meets them at
@@ -40,6 +43,8 @@ otherwise the check ``worst case over the band`` says the gap, both ends sound.
 ``then`` (``min-steps``/``min-cost``): each candidate is that law's lexicographic LP's
 policy; the returned one's expected steps (and cost) at the worst law of the band
 (nature maximising them), proven from above, are its ``steps`` (and ``secondary``).
+Without ``then`` too, ``steps`` is the returned controller's worst case over the band,
+not its value at the law it was solved at.
 
 A task with a safety part (safety, obligation; a co-safe task's minimum): a candidate's
 *keep* (:mod:`mitld_lp.routes.sensed_kept`) is a stay in a keep state, which its chain
@@ -90,6 +95,7 @@ from mitld_lp.checks import Check
 from mitld_lp.problem import Posed
 from mitld_lp.result import Result
 from mitld_lp.routes.constrained import ConstraintValue
+from mitld_lp.routes.robust_constrained import alone_bounds
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.sensed_constrained import SensedConstrainedPart, SensedConstrainedRoute
 from mitld_lp.sensing.sensors import partial
@@ -101,8 +107,11 @@ __all__ = ["SensedBandConstrainedRoute", "SensedBandConstrainedPart", "Judged", 
 
 log = logging.getLogger(__name__)
 
-ROUNDS = 3
+ROUNDS = 6
 """How many times a law's LP is solved again with the bounds the band breaks tightened."""
+
+HALVINGS = 4
+"""How many times a tightened LP found infeasible is solved again, its margins halved."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -121,8 +130,8 @@ class Judged:
     """A candidate's worst case over the band on its interval chain: the task's
     ``lower`` (and ``truncated_won``, its runs past a truncation point counted won),
     each constraint's value with the bounds nature drives it to, whether all hold,
-    the expected steps and cost nature maximises (``(value, upper)``, NaN where not
-    asked), the chain's states."""
+    the expected steps nature maximises and, with ``then = "min-cost"``, the expected
+    cost (``(value, upper)``; NaN where not asked), the chain's states."""
 
     lower: float
     truncated_won: float
@@ -162,10 +171,9 @@ def judge(result: Result, constraints: tuple[Any, ...],
                                       bounds=(nm.value, nm.upper)))
     nan = (float("nan"), float("nan"))
     then = result.part.then
-    steps = cost = nan
-    if then is not None or any(c.kind == "steps" for c in constraints):
-        nm = nature_max(chain, reward=reward["steps"])
-        steps = (nm.value, nm.upper)
+    cost = nan
+    nm = nature_max(chain, reward=reward["steps"])  # the answer's E(steps): the worst law's
+    steps = (nm.value, nm.upper)
     if then == "min-cost":
         nm = nature_max(chain, reward=reward["cost"])
         cost = (nm.value, nm.upper)
@@ -285,20 +293,50 @@ def _at(posed: Posed, laws: Mapping[str, Any] | None, cons: tuple[Any, ...] | No
     return replace(posed, problem=problem)
 
 
-def _tightened(cons: tuple[Any, ...], values: tuple[ConstraintValue, ...],
-               margins: list[float]) -> tuple[Any, ...]:
-    """The constraints with each bound a candidate missed moved in by its miss (doubled,
-    and added to what it was moved before)."""
+def _tightened(cons: tuple[Any, ...], margins: list[float]) -> tuple[Any, ...]:
+    """The constraints with each bound moved in by its margin (a probability's kept in
+    [0, 1], an expected total's at least 0)."""
     out = []
-    for i, (c, v) in enumerate(zip(cons, values, strict=True)):
-        miss = v.miss if v.miss == v.miss else 0.0
-        if miss > 0.0:
-            margins[i] += 2.0 * miss + 1e-9
-        step = margins[i]
+    for c, step in zip(cons, margins, strict=True):
         bound = c.bound - step if c.sense == "<=" else c.bound + step
         out.append(replace(c, bound=min(max(bound, 0.0), 1.0) if c.kind == "prob"
                            else max(bound, 0.0)))
     return tuple(out)
+
+
+def _tighten(inner: SensedConstrainedRoute, here: Posed, b: Any, j: Judged, label: str,
+             costs: Mapping[str, float] | None, seed: int | None
+             ) -> list[tuple[str, Result, Judged]]:
+    """``here``'s LP (a law of the band, built ``b``, judged ``j``) solved again with each
+    bound the band breaks moved in by what the band added and a little more, a bound
+    missed again by at least twice its last step; an LP infeasible so tightened is
+    solved again with the margins halved back towards the last feasible ones
+    (:data:`HALVINGS` times), as the fully observed band constrained route tightens
+    (:func:`mitld_lp.routes.robust_constrained.tighten_margins`); at most :data:`ROUNDS`
+    rounds, until a candidate meets every bound under every law.  The candidates
+    judged, in order."""
+    from mitld_lp.routes.robust_constrained import tighten_margins
+
+    cons = here.problem.constraints
+    margins, steps = [0.0] * len(cons), [0.0] * len(cons)
+    out: list[tuple[str, Result, Judged]] = []
+    for attempt in range(1, ROUNDS + 1):
+        good = list(margins)  # the last margins whose LP was feasible
+        margins = tighten_margins(j.values, margins, steps)
+        for halved in range(HALVINGS + 1):
+            r = inner.solve(_at(here, None, _tightened(cons, margins)), b, costs=costs,
+                            seed=seed)
+            if r.controller is not None or halved == HALVINGS:
+                break
+            margins = [0.5 * (x + y) for x, y in zip(good, margins, strict=True)]
+        if r.controller is None or (_stays(r) and not covers(r)):
+            break
+        steps[:] = [x - y for x, y in zip(margins, good, strict=True)]  # the step taken
+        j = judge(r, cons, here.settings.max_states)
+        out.append((f"{label}, tightened {attempt}", r, j))
+        if j.holds:
+            break
+    return out
 
 
 def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
@@ -341,16 +379,7 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         # breaks tightened by what it added
         label, _, j = max(tried, key=lambda t: t[2].lower)
         here, b = at[label]
-        margins = [0.0] * len(cons)
-        for attempt in range(1, ROUNDS + 1):
-            r = inner.solve(_at(here, None, _tightened(cons, j.values, margins)), b,
-                            costs=costs, seed=seed)
-            if r.controller is None or (_stays(r) and not covers(r)):
-                break
-            j = judge(r, cons, s.max_states)
-            tried.append((f"{label}, tightened {attempt}", r, j))
-            if j.holds:
-                break
+        tried += _tighten(inner, here, b, j, label, costs, seed)
     assert first is not None
     good = [t for t in tried if t[2].holds]
     uppers["without constraints"] = _unconstrained_upper(posed)
@@ -362,9 +391,23 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
         if skipped:
             said += ("; not used, staying where the law does not give every outcome the "
                      "band gives: the candidate at the " + ", ".join(skipped))
-        message = ("failed: no candidate controller meets every constraint under every law "
-                   f"of the band ({said}); whether one exists is not known")
+        # each probability constraint alone, seeing every event: a bound no
+        # observation-based controller betters (robust_constrained.alone_bounds)
+        none, alone = alone_bounds(posed)
         values = tuple(replace(v, holds=False) for v in first.constraints)
+        if none is not None:
+            message = f"infeasible under the band: {none}"
+            check = Check("constraints under every law of the band", False, message)
+            return replace(first, model=posed.model, lower=float("nan"),
+                           upper=float("nan"), value=float("nan"),
+                           status=Status.INFEASIBLE, controller=None, certified=False,
+                           checks=(*first.checks, check), bands=_bands(first),
+                           part=replace(first.part, constraints=values, message=message),
+                           timings={**first.timings, "band": time.perf_counter() - t0})
+        message = ("failed: no candidate controller meets every constraint under every law "
+                   f"of the band ({said}); whether one exists is not known" + (
+                       f" (each bound is within what a controller seeing every event "
+                       f"reaches: {alone})" if alone else ""))
         check = Check("constraints under every law of the band", False, message)
         return replace(first, model=posed.model, lower=float("nan"), upper=upper,
                        value=float("nan"), status=Status.FAILED, controller=None,
