@@ -230,21 +230,29 @@ def test_detect_one_with_false_alarms_and_a_constraint() -> None:
     assert all(v.holds for v in r.constraints)
 
 
-def test_infeasible_only_where_proved() -> None:
+def test_infeasible_only_where_proved(monkeypatch: pytest.MonkeyPatch) -> None:
     """``P(F (b & A)) >= 0.45``: no law of the band lets the robot meet it (by hand: it is
     at ``A`` at one step only, and the bus comes at any one step with at most 0.4: at
-    step 1 its hazard is at most 2/5, at step 2 at most ``(1 - 1/5) * 1/2``), but the
-    route proves that only through the fully observed bound, which it cannot give for
-    such a band: ``failed``, no controller, no constraint said to hold (the middle law's
-    LP is infeasible, which alone proves nothing of the band).  A band whose laws surely
-    happen keeps ``infeasible`` where the fully observed problem is (tests/test_false_
-    alarms_best.py's world with contradictory bounds).  ``>= 0.35``: met at an end law
-    (0.4 there, going the step before the bus's likelier step), not at the middle law."""
+    step 1 its hazard is at most 2/5, at step 2 at most ``(1 - 1/5) * 1/2``).  The route
+    proves that through the fully observed bound (a band of mass tables is constant after
+    its laws' last support): ``infeasible``.  Where that bound cannot be computed (left
+    out, NaN) nothing proves it: ``failed``, no controller, no constraint said to hold (the
+    middle law's LP is infeasible, which alone proves nothing of the band).  A band whose
+    laws surely happen keeps ``infeasible`` where the fully observed problem is (tests/
+    test_false_alarms_best.py's world with contradictory bounds).  ``>= 0.35``: met at an
+    end law (0.4 there, going the step before the bus's likelier step), not at the middle
+    law."""
     from test_false_alarms_best import model as surely
 
+    import mitld_lp.routes.sensed_optimistic_constrained as soc
+
+    r = synthesize(_model(*POSED), bands="best", constraints=["P(F (b & A)) >= 0.45"])
+    assert str(r.status) == "infeasible" and r.controller is None
+    monkeypatch.setattr(soc, "_full_bound", lambda posed: (float("nan"), False))
     r = synthesize(_model(*POSED), bands="best", constraints=["P(F (b & A)) >= 0.45"])
     assert str(r.status) == "failed" and r.controller is None
     assert not any(v.holds for v in r.constraints) and not r.certified
+    monkeypatch.undo()
     s = synthesize(surely("max"), bands="best",
                    constraints=["P(F[0,1] A) >= 0.5", "P(F[0,1] A) <= 0.2"])
     assert str(s.status) == "infeasible" and s.controller is None
