@@ -5,9 +5,10 @@ state's choices and of each choice's branches, the branch targets and probabilit
 little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.fromfile`;
 the state valuations from the same archive's bit-packed records (Storm's per-variable
 calls, which make a Python list of each variable's values, where the layout is another);
-state labels and choice labels from Storm's per-label calls (a bit vector each).  Only the
-choices that need their PRISM commands to be told apart (two enabled commands of one
-action in a state) are looked at one by one.
+each choice's label from the same archive's actions (Storm's per-label bit vectors where
+they disagree with it), state labels from Storm's per-label calls (a bit vector each).
+Only the choices that need their PRISM commands to be told apart (two enabled commands
+of one action in a state) are looked at one by one.
 """
 
 from __future__ import annotations
