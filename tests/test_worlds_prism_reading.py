@@ -382,3 +382,32 @@ def test_labels_over_many_words_are_the_label_expressions(tmp_path: Path) -> Non
             ("hi", s[at["w"]] >= 99993), ("neg", s[at["x"]] < 0 and s[at["d"]]),
             ("far", s[at["g"]] == -1)) if holds}
         assert game.propositions(s) == expected
+
+
+ACTIONS = """mdp
+module m
+  x : [0..199] init 0;
+  [a] x < 150 -> (x'=x+1);
+  [b] mod(x, 3) = 0 & x < 198 -> 0.5 : (x'=x+2) + 0.5 : true;
+  [] x >= 100 -> (x'=0);
+endmodule
+"""
+
+
+@pytest.mark.parametrize("archive", [True, False])
+def test_choice_actions_are_the_enabled_commands(tmp_path: Path, archive: bool,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each state's actions (each choice's name read from Storm's archive in one pass,
+    or, without it, from Storm's bit vector of each choice label) are the commands
+    whose guards hold on the state's values, evaluated here in Python; the unlabelled
+    command is named by its module and place."""
+    from mitld_lp.worlds import prism_tables
+
+    if not archive:
+        monkeypatch.setattr(prism_tables, "_choice_actions", lambda *args: None)
+    game = load_prism(write(tmp_path, ACTIONS))
+    assert len(game.states) > 150
+    for (x,) in game.states:
+        expected = {name for name, holds in (
+            ("a", x < 150), ("b", x % 3 == 0 and x < 198), ("m_cmd3", x >= 100)) if holds}
+        assert set(game.actions((x,))) == expected
