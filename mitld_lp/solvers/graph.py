@@ -102,22 +102,27 @@ def backward_reachable(
 class Reversed:
     """The edges ``source -> succ`` of a graph of ``n`` states reversed once, for
     several backward searches (:meth:`reaching`) from different seeds: 4 bytes of index
-    and 8 of weight an edge (what SciPy's search reads without a copy), the virtual
-    node's row of seeds written at the end of each search's view of the same arrays."""
+    an edge (8 past 2**31 edges and states); the weights SciPy's search is handed are
+    one value repeated (a view of stride 0: the search reads only the structure), and
+    the virtual node's row of seeds is written at the end of each search's view of the
+    same arrays.  The rows are sorted once by ``succ`` (a stable argsort, 8 bytes an
+    edge while it lives), not through a COO matrix and its float copy of the weights."""
 
     def __init__(self, n: int, source: np.ndarray, succ: np.ndarray) -> None:
-        index = np.int32 if n < np.iinfo(np.int32).max else np.int64
-        rows = np.asarray(succ, dtype=index)
-        cols = np.asarray(source, dtype=index)
-        graph = sp.csr_array((np.ones(rows.size), (rows, cols)), shape=(n, n))
-        del rows, cols
-        self.n, self.nnz = n, graph.nnz
-        self.indices = np.empty(self.nnz + n, dtype=graph.indices.dtype)
-        self.indices[:self.nnz] = graph.indices
-        self.indptr = np.empty(n + 2, dtype=graph.indptr.dtype)
-        self.indptr[:n + 1] = graph.indptr
-        del graph
-        self.weights = np.ones(self.nnz + n)
+        source, succ = np.asarray(source), np.asarray(succ)
+        m = succ.size
+        index = np.int32 if n + m < np.iinfo(np.int32).max else np.int64
+        self.n, self.nnz = n, m
+        self.indices = np.empty(m + n, dtype=index)
+        order = np.argsort(succ, kind="stable")
+        if source.dtype == index:  # no copy of the sources in the order
+            np.take(source, order, out=self.indices[:m], mode="clip")
+        else:
+            self.indices[:m] = source[order]
+        del order
+        self.indptr = np.zeros(n + 2, dtype=index)
+        np.cumsum(np.bincount(succ, minlength=n), out=self.indptr[1:n + 1])
+        self.weights = np.broadcast_to(np.float64(1.0), (m + n,))
 
     def reaching(self, seeds: np.ndarray) -> np.ndarray:
         """The states with a path to a ``seeds`` state (a mask), the seeds included."""
