@@ -179,7 +179,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
     states_mask = as_state_mask(mdp, states_mask, "states_mask")
     n = mdp.n_states
     cstate = mdp.choice_state()
-    e = edges(mdp)
+    e = _edge_ends(mdp)
     alive = states_mask.copy()
     allowed = alive[cstate]
     while True:
@@ -187,9 +187,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
         allowed[e.choice[~alive[e.succ]]] = False
         still = alive & (np.bincount(cstate[allowed], minlength=n) > 0)
         keep = allowed[e.choice]
-        graph = sp.csr_matrix(
-            (np.ones(int(keep.sum())), (e.source[keep], e.succ[keep])), shape=(n, n)
-        )
+        graph = _support(n, e.source[keep], e.succ[keep])
         _, scc = strong_components(graph)
         cross = keep & (scc[e.source] != scc[e.succ])
         if not cross.any() and np.array_equal(still, alive):
@@ -202,6 +200,36 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
         mec_of[alive] = ids
     n_mecs = int(mec_of.max()) + 1 if alive.any() else 0
     return EndComponents(read_only(mec_of), read_only(allowed), n_mecs)
+
+
+def _edge_ends(mdp: MDP) -> Edges:
+    """:func:`edges` without the probabilities, in the matrix's index type (4 bytes an
+    entry where it fits, not 8), the choices' rows in their order."""
+    m = sp.csr_array(mdp.matrix)
+    index = m.indices.dtype
+    choice = np.repeat(np.arange(m.shape[0], dtype=index), np.diff(m.indptr))
+    succ = m.indices
+    positive = m.data > 0
+    if not positive.all():
+        choice, succ = choice[positive], succ[positive]
+    source = np.repeat(np.arange(mdp.n_states, dtype=index), np.diff(mdp.row_groups))[choice]
+    return Edges(choice, source, succ, np.zeros(0))
+
+
+def _support(n: int, source: np.ndarray, succ: np.ndarray) -> sp.csr_matrix:
+    """The graph ``source -> succ`` (``source`` sorted) as the CSR matrix that SciPy's
+    ``csr_matrix((ones, (source, succ)))`` builds (each row's columns sorted, repeats
+    merged: the searches see the same order), from a byte an edge instead of the COO's
+    copies and a float; its weights one value repeated (the searches read only the
+    structure)."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(source, minlength=n), out=indptr[1:])
+    index = np.int32 if max(n, succ.size) < np.iinfo(np.int32).max else np.int64
+    graph = sp.csr_matrix((np.ones(succ.size, dtype=bool), succ.astype(index),
+                           indptr.astype(index)), shape=(n, n))
+    graph.sum_duplicates()  # sorts each row's columns, in place (a repeat: True or True)
+    graph.data = np.broadcast_to(np.float64(1.0), (graph.nnz,))
+    return graph
 
 
 def segmented_argmax(
