@@ -172,7 +172,9 @@ class Rows:
         return int(self.groups.shape[0] - 1)
 
     def row_state(self) -> np.ndarray:
-        cs = np.repeat(np.arange(self.n_states), np.diff(self.groups))
+        """The state of each row: 4 bytes a row where the states' count fits."""
+        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
+        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
         return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
 
     def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
@@ -196,10 +198,13 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     choice passes when one of nature's rows does)."""
     m = st.matrix
     row_state = st.row_state()
-    sums = m @ x
     every = slice(None)  # every row: the rounding's own arrays, not a gathered copy
+    sums = m @ x
+    bound = above(rnd, every, sums) if upper else below(rnd, every, sums)
+    del sums  # three float arrays a row alive at once, not four
     own = x[row_state]
-    ok = (above(rnd, every, sums) <= own) if upper else (below(rnd, every, sums) >= own)
+    ok = (bound <= own) if upper else (bound >= own)
+    del bound
     ok |= free[row_state]
     suspect = np.flatnonzero(~ok)
     if suspect.size:

@@ -116,7 +116,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         if indptr[-1] <= np.iinfo(index).max:
             indptr = indptr.astype(index)
         sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
-        kappa = 1.0 - rnd.low[policy[idx]]
+        kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, None if layers is None else
                       (np.asarray(layers[0])[idx], np.asarray(layers[1])),
                       None if guess is None else np.asarray(guess, dtype=np.float64)[idx])

@@ -102,22 +102,27 @@ def backward_reachable(
 class Reversed:
     """The edges ``source -> succ`` of a graph of ``n`` states reversed once, for
     several backward searches (:meth:`reaching`) from different seeds: 4 bytes of index
-    and 8 of weight an edge (what SciPy's search reads without a copy), the virtual
-    node's row of seeds written at the end of each search's view of the same arrays."""
+    an edge (8 past 2**31 edges and states); the weights SciPy's search is handed are
+    one value repeated (a view of stride 0: the search reads only the structure), and
+    the virtual node's row of seeds is written at the end of each search's view of the
+    same arrays.  The rows are sorted once by ``succ`` (a stable argsort, 8 bytes an
+    edge while it lives), not through a COO matrix and its float copy of the weights."""
 
     def __init__(self, n: int, source: np.ndarray, succ: np.ndarray) -> None:
-        index = np.int32 if n < np.iinfo(np.int32).max else np.int64
-        rows = np.asarray(succ, dtype=index)
-        cols = np.asarray(source, dtype=index)
-        graph = sp.csr_array((np.ones(rows.size), (rows, cols)), shape=(n, n))
-        del rows, cols
-        self.n, self.nnz = n, graph.nnz
-        self.indices = np.empty(self.nnz + n, dtype=graph.indices.dtype)
-        self.indices[:self.nnz] = graph.indices
-        self.indptr = np.empty(n + 2, dtype=graph.indptr.dtype)
-        self.indptr[:n + 1] = graph.indptr
-        del graph
-        self.weights = np.ones(self.nnz + n)
+        source, succ = np.asarray(source), np.asarray(succ)
+        m = succ.size
+        index = np.int32 if n + m < np.iinfo(np.int32).max else np.int64
+        self.n, self.nnz = n, m
+        self.indices = np.empty(m + n, dtype=index)
+        order = np.argsort(succ, kind="stable")
+        if source.dtype == index:  # no copy of the sources in the order
+            np.take(source, order, out=self.indices[:m], mode="clip")
+        else:
+            self.indices[:m] = source[order]
+        del order
+        self.indptr = np.zeros(n + 2, dtype=index)
+        np.cumsum(np.bincount(succ, minlength=n), out=self.indptr[1:n + 1])
+        self.weights = np.broadcast_to(np.float64(1.0), (m + n,))
 
     def reaching(self, seeds: np.ndarray) -> np.ndarray:
         """The states with a path to a ``seeds`` state (a mask), the seeds included."""
@@ -174,7 +179,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
     states_mask = as_state_mask(mdp, states_mask, "states_mask")
     n = mdp.n_states
     cstate = mdp.choice_state()
-    e = edges(mdp)
+    e = _edge_ends(mdp)
     alive = states_mask.copy()
     allowed = alive[cstate]
     while True:
@@ -182,9 +187,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
         allowed[e.choice[~alive[e.succ]]] = False
         still = alive & (np.bincount(cstate[allowed], minlength=n) > 0)
         keep = allowed[e.choice]
-        graph = sp.csr_matrix(
-            (np.ones(int(keep.sum())), (e.source[keep], e.succ[keep])), shape=(n, n)
-        )
+        graph = _support(n, e.source[keep], e.succ[keep])
         _, scc = strong_components(graph)
         cross = keep & (scc[e.source] != scc[e.succ])
         if not cross.any() and np.array_equal(still, alive):
@@ -197,6 +200,36 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
         mec_of[alive] = ids
     n_mecs = int(mec_of.max()) + 1 if alive.any() else 0
     return EndComponents(read_only(mec_of), read_only(allowed), n_mecs)
+
+
+def _edge_ends(mdp: MDP) -> Edges:
+    """:func:`edges` without the probabilities, in the matrix's index type (4 bytes an
+    entry where it fits, not 8), the choices' rows in their order."""
+    m = sp.csr_array(mdp.matrix)
+    index = m.indices.dtype
+    choice = np.repeat(np.arange(m.shape[0], dtype=index), np.diff(m.indptr))
+    succ = m.indices
+    positive = m.data > 0
+    if not positive.all():
+        choice, succ = choice[positive], succ[positive]
+    source = np.repeat(np.arange(mdp.n_states, dtype=index), np.diff(mdp.row_groups))[choice]
+    return Edges(choice, source, succ, np.zeros(0))
+
+
+def _support(n: int, source: np.ndarray, succ: np.ndarray) -> sp.csr_matrix:
+    """The graph ``source -> succ`` (``source`` sorted) as the CSR matrix that SciPy's
+    ``csr_matrix((ones, (source, succ)))`` builds (each row's columns sorted, repeats
+    merged: the searches see the same order), from a byte an edge instead of the COO's
+    copies and a float; its weights one value repeated (the searches read only the
+    structure)."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(source, minlength=n), out=indptr[1:])
+    index = np.int32 if max(n, succ.size) < np.iinfo(np.int32).max else np.int64
+    graph = sp.csr_matrix((np.ones(succ.size, dtype=bool), succ.astype(index),
+                           indptr.astype(index)), shape=(n, n))
+    graph.sum_duplicates()  # sorts each row's columns, in place (a repeat: True or True)
+    graph.data = np.broadcast_to(np.float64(1.0), (graph.nnz,))
+    return graph
 
 
 def segmented_argmax(

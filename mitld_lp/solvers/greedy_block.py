@@ -107,7 +107,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
     v_ld = v.astype(np.longdouble)
-    owner = np.repeat(np.arange(n), counts)
+    owner = np.repeat(np.arange(n, dtype=np.int32 if n < 2**31 - 1 else np.int64), counts)
     # how far each choice's score falls short of its state's value (below 0: it beats it),
     # BATCH choices at a time: a long double copy of the whole block is 16 bytes an entry
     slack = np.empty(owner.size)
@@ -120,7 +120,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     failed[owner[np.repeat(tie, counts) + slack < 0.0]] = True  # a choice beats it
     failed[np.abs(slack[chosen]) > tie] = True  # the evaluation's own residual
     left = np.flatnonzero(backward_reachable(
-        n, owner[np.repeat(np.arange(owner.size), np.diff(block.inner.indptr))],
+        n, np.repeat(owner, np.diff(block.inner.indptr)),  # each entry's state
         block.inner.indices, failed)) if failed.any() else np.zeros(0, dtype=np.int64)
     if left.size:
         logger.info("greedy policy of %d block states (%d choices): %d fail its dual "

@@ -378,7 +378,9 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
             if greedy.left.size == 0:  # no LP: its flow matrix is never built
                 walks[level.index] = (rest, greedy.walk)
                 continue
-            block = Block.of(q, rest := rest[greedy.left])
+            rest = rest[greedy.left]
+            block = reward = greedy = None  # type: ignore[assignment]  # freed first
+            block = Block.of(q, rest)
             reward = exit_reward(block, values)
         lp = block_lp(block, values, reward)
         tight = (None if bounds is None else

@@ -68,12 +68,28 @@ BATCH = 1 << 16
 class Rounding:
     """Per row of an MDP's matrix: ``low`` / ``high``, factors that turn a float row sum
     into a bound below / above the exact model's, and ``slack``, the absolute term for
-    underflow (module docs); ``eta`` the probabilities' allowance they include."""
+    underflow (module docs); ``eta`` the probabilities' allowance they include.  Each
+    depends on the row's count of stored entries alone: held as that count per row
+    (``count``, 4 bytes where it fits) and the three values per count (``low_of``,
+    ``high_of``, ``slack_of``), not three floats a row through the whole certificate."""
 
-    low: np.ndarray
-    high: np.ndarray
-    slack: np.ndarray
+    count: np.ndarray
+    low_of: np.ndarray
+    high_of: np.ndarray
+    slack_of: np.ndarray
     eta: float
+
+    @property
+    def low(self) -> np.ndarray:
+        return self.low_of[self.count]
+
+    @property
+    def high(self) -> np.ndarray:
+        return self.high_of[self.count]
+
+    @property
+    def slack(self) -> np.ndarray:
+        return self.slack_of[self.count]
 
 
 ETA_LIMIT = 2.0**-3
@@ -87,31 +103,37 @@ def rounding(matrix: sp.csr_array, eta: float = ETA) -> Rounding:
     :data:`ETA_LIMIT`: the trivial factors 0 and infinity)."""
     if not eta >= 0.0:
         raise ValueError(f"eta: must be a number >= 0, got {eta!r}")
-    n = np.diff(np.asarray(matrix.indptr)).astype(np.float64)
+    indptr = np.asarray(matrix.indptr)
+    count = np.diff(indptr).astype(np.int32 if indptr[-1] < np.iinfo(np.int32).max
+                                   else np.int64)
+    n = np.arange(int(count.max(initial=0)) + 1, dtype=np.float64)  # every count
     slack = read_only((n + 4.0) * TINY)
     if eta > ETA_LIMIT:
-        return Rounding(read_only(np.zeros_like(n)), read_only(np.full_like(n, np.inf)),
-                        slack, float(eta))
+        return Rounding(read_only(count), read_only(np.zeros_like(n)),
+                        read_only(np.full_like(n, np.inf)), slack, float(eta))
     gamma = n * UNIT / (1.0 - n * UNIT)
     margin = 1.0 + 2.0**-20  # the constants' own rounding
     low = (gamma + eta + gamma * eta + 4.0 * UNIT) * margin
     high = (2.0 * (gamma + eta) + 4.0 * UNIT) * margin
-    return Rounding(read_only(1.0 - low), read_only(1.0 + high), slack, float(eta))
+    return Rounding(read_only(count), read_only(1.0 - low), read_only(1.0 + high), slack,
+                    float(eta))
 
 
 def below(r: Rounding, rows: np.ndarray | slice, sums: np.ndarray) -> np.ndarray:
     """A lower bound on the exact ``E_c(x)`` of each choice ``rows`` (indices, or
     ``slice(None)`` for every row) from the float sums ``sums`` of ``P^[c] @ x``
     (``x >= 0``)."""
-    out = sums - r.slack[rows]  # in place from here: one array a row, not three
-    out *= r.low[rows]
+    count = r.count[rows]
+    out = sums - r.slack_of[count]  # in place from here: one array a row, not three
+    out *= r.low_of[count]
     return np.maximum(out, 0.0, out=out)
 
 
 def above(r: Rounding, rows: np.ndarray | slice, sums: np.ndarray) -> np.ndarray:
     """An upper bound on the exact ``E_c(x)`` of each choice ``rows`` (``x >= 0``)."""
-    out = sums + r.slack[rows]
-    out *= r.high[rows]
+    count = r.count[rows]
+    out = sums + r.slack_of[count]
+    out *= r.high_of[count]
     return out
 
 
