@@ -280,7 +280,11 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     [0.3/0.8, 0.3/0.6] at step 2 and 0 after, so the bus ever comes with probability
     at least 1 - 0.8 * (1 - 0.375) = 1/2 and at most 1 - 0.6 * (1 - 0.5) = 7/10, by
     hand; the robust route gives both exactly (nothing truncated), alone and with a
-    constraint; the camera's route still stops on it, naming the law."""
+    constraint; the camera's route too (truncated at step 2, past which no law's bus
+    comes: tests/test_sensed_never_differ.py), here where the robot has nothing to do;
+    it still stops, naming the law, where a law of the band keeps a positive hazard for
+    ever (a Poisson law: the band's upper survival then never comes within a share of
+    the middle law's never mass, and no step is past the band's last event)."""
     from mitld_lp.distributions import DistributionError, pmf
     from mitld_lp.distributions.band import band_of_laws
 
@@ -297,5 +301,12 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     assert r.status.value == "optimal" and r.lower == pytest.approx(0.5, abs=1e-8)
     sensed = Model.from_game(game, "D[mu] b & F b", distributions={"mu": band},
                              sensors={"b": {"detect": 0.7}})
+    seen = synthesize(sensed)
+    assert seen.route == "sensed" and seen.certified
+    assert seen.lower == pytest.approx(0.5, abs=1e-9) == seen.upper
+    poisson = band_of_laws("mu", pmf([0.3, 0.3]), [pmf([0.2, 0.3]),
+                                                   from_table({"poisson": 2}, "mu")])
+    unbounded = Model.from_game(game, "D[mu] b & F b", distributions={"mu": poisson},
+                                sensors={"b": {"detect": 0.7}})
     with pytest.raises(DistributionError, match="mu: .*allows an event that never happens"):
-        synthesize(sensed)
+        synthesize(unbounded)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
+from mitld_lp.distributions.band import last_event_step
 
 __all__ = [
     "EventClock", "STA", "EventOutcome", "Ambiguity", "ClockStep", "TRUNCATED", "advance_clock",
@@ -78,6 +79,9 @@ class EventClock:
         ``P(truncation < K < inf)`` and the sensor's cut (``report_tail``)."""
         if self.truncation is None:
             return 0.0
+        last = last_event_step(self.distribution)
+        if last is not None and last <= self.truncation:  # a band: none happens past it
+            return self.report_tail
         tail = float(self.distribution.survival_upper(self.truncation))
         if self.keeps_never:  # the never-mass is a hypothesis, not cut
             tail = max(tail - float(self.distribution.never), 0.0)

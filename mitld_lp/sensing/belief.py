@@ -77,6 +77,7 @@ from typing import Any
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
+from mitld_lp.distributions.band import last_event_step
 from mitld_lp.product import default_max_memory, estimate_size
 from mitld_lp.sensing.frontier import FrontierBuilder
 from mitld_lp.sensing.horizon import collapse
@@ -132,7 +133,11 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
         d = sensors[a].detect if sensors is not None and a in sensors else 0.0
         if nu > 0.0:
             half = share / 2 if 0.0 < d < 1.0 else share
-            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0)), 1)
+            # a band of tables of masses: cut at its last step, past which no law of it
+            # has the event (whatever never masses they keep): nothing cut there
+            last = last_event_step(laws[a])
+            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0))
+                            if last is None else last, 1)
             if 0.0 < d < 1.0:
                 cuts[a] = max(2, math.ceil(math.log(half) / math.log1p(-d)))
         else:
