@@ -282,9 +282,11 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     hand; the robust route gives both exactly (nothing truncated), alone and with a
     constraint; the camera's route too (truncated at step 2, past which no law's bus
     comes: tests/test_sensed_never_differ.py), here where the robot has nothing to do;
-    it still stops, naming the law, where a law of the band keeps a positive hazard for
-    ever (a Poisson law: the band's upper survival then never comes within a share of
-    the middle law's never mass, and no step is past the band's last event)."""
+    it still stops, naming the law, where the band's hazard may stay positive for ever
+    (a Poisson law among its laws, or a middle law that surely happens, ``pmf [0.5,
+    0.5]``, whose hazard past its support is 1 by convention: nature may bring the bus
+    at any later step, and the band's upper survival never comes within a share of the
+    middle law's never mass)."""
     from mitld_lp.distributions import DistributionError, pmf
     from mitld_lp.distributions.band import band_of_laws
 
@@ -304,9 +306,11 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     seen = synthesize(sensed)
     assert seen.route == "sensed" and seen.certified
     assert seen.lower == pytest.approx(0.5, abs=1e-9) == seen.upper
-    poisson = band_of_laws("mu", pmf([0.3, 0.3]), [pmf([0.2, 0.3]),
-                                                   from_table({"poisson": 2}, "mu")])
-    unbounded = Model.from_game(game, "D[mu] b & F b", distributions={"mu": poisson},
+    for unbounded in (band_of_laws("mu", pmf([0.3, 0.3]), [
+            pmf([0.2, 0.3]), from_table({"poisson": 2}, "mu")]),
+            band_of_laws("mu", pmf([0.5, 0.5]), [pmf([0.4, 0.4]), pmf([0.6, 0.4])])):
+        posed = Model.from_game(game, "D[mu] b & F b", distributions={"mu": unbounded},
                                 sensors={"b": {"detect": 0.7}})
-    with pytest.raises(DistributionError, match="mu: .*allows an event that never happens"):
-        synthesize(unbounded)
+        with pytest.raises(DistributionError,
+                           match="mu: .*allows an event that never happens"):
+            synthesize(posed)
