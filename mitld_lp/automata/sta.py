@@ -79,12 +79,11 @@ class EventClock:
         ``P(truncation < K < inf)`` and the sensor's cut (``report_tail``)."""
         if self.truncation is None:
             return 0.0
-        last = last_event_step(self.distribution)
-        if last is not None and last <= self.truncation:  # a band: none happens past it
-            return self.report_tail
         tail = float(self.distribution.survival_upper(self.truncation))
         if self.keeps_never:  # the never-mass is a hypothesis, not cut
-            tail = max(tail - float(self.distribution.never), 0.0)
+            last = last_event_step(self.distribution)  # a band: none happens past it
+            tail = 0.0 if last is not None and last <= self.truncation else max(
+                tail - float(self.distribution.never), 0.0)
         return tail + self.report_tail
 
 

@@ -286,16 +286,12 @@ class _Unfolding:
             branches = [(pending - occurred, p)]
             for a in sorted(pending - occurred):
                 c = self.sta.clocks[a]
-                if c.truncation is None or clock + 1 < c.truncation:
+                if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
                     continue
                 last = last_event_step(c.distribution)
-                if last is not None and last <= c.truncation:
-                    never = 1.0
-                elif c.keeps_never:
-                    never = min(float(c.distribution.never)
-                                / float(c.distribution.survival(c.truncation)), 1.0)
-                else:
-                    continue
+                never = 1.0 if last is not None and last <= c.truncation else min(
+                    float(c.distribution.never)
+                    / float(c.distribution.survival(c.truncation)), 1.0)
                 branches = [(b - {a}, q * never) for b, q in branches] + [
                     (b, q * (1.0 - never)) for b, q in branches]
             out += [(occurred, b, q) for b, q in branches if q > 0.0]
