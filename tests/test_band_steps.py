@@ -280,7 +280,13 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     [0.3/0.8, 0.3/0.6] at step 2 and 0 after, so the bus ever comes with probability
     at least 1 - 0.8 * (1 - 0.375) = 1/2 and at most 1 - 0.6 * (1 - 0.5) = 7/10, by
     hand; the robust route gives both exactly (nothing truncated), alone and with a
-    constraint; the camera's route still stops on it, naming the law."""
+    constraint; the camera's route too (truncated at step 2, past which no law's bus
+    comes: tests/test_sensed_never_differ.py), here where the robot has nothing to do;
+    it still stops, naming the law, where the band's hazard may stay positive for ever
+    (a Poisson law among its laws, or a middle law that surely happens, ``pmf [0.5,
+    0.5]``, whose hazard past its support is 1 by convention: nature may bring the bus
+    at any later step, and the band's upper survival never comes within a share of the
+    middle law's never mass)."""
     from mitld_lp.distributions import DistributionError, pmf
     from mitld_lp.distributions.band import band_of_laws
 
@@ -297,5 +303,14 @@ def test_a_band_whose_never_masses_differ_is_solved_exactly_seeing_the_event() -
     assert r.status.value == "optimal" and r.lower == pytest.approx(0.5, abs=1e-8)
     sensed = Model.from_game(game, "D[mu] b & F b", distributions={"mu": band},
                              sensors={"b": {"detect": 0.7}})
-    with pytest.raises(DistributionError, match="mu: .*allows an event that never happens"):
-        synthesize(sensed)
+    seen = synthesize(sensed)
+    assert seen.route == "sensed" and seen.certified
+    assert seen.lower == pytest.approx(0.5, abs=1e-9) == seen.upper
+    for unbounded in (band_of_laws("mu", pmf([0.3, 0.3]), [
+            pmf([0.2, 0.3]), from_table({"poisson": 2}, "mu")]),
+            band_of_laws("mu", pmf([0.5, 0.5]), [pmf([0.4, 0.4]), pmf([0.6, 0.4])])):
+        posed = Model.from_game(game, "D[mu] b & F b", distributions={"mu": unbounded},
+                                sensors={"b": {"detect": 0.7}})
+        with pytest.raises(DistributionError,
+                           match="mu: .*allows an event that never happens"):
+            synthesize(posed)

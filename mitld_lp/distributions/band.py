@@ -52,7 +52,7 @@ from mitld_lp.distributions.law import (
 from mitld_lp.distributions.printing import literal_text
 
 __all__ = ["Band", "ConstantBand", "TableBand", "EnvelopeBand", "band_of_laws",
-           "hazard_band_from_survival"]
+           "hazard_band_from_survival", "last_event_step"]
 
 
 def hazard_band_from_survival(
@@ -256,6 +256,21 @@ class EnvelopeBand(Band):
         where some law's hazard never settles (a Poisson law)."""
         starts = [law.constant_hazard_from for law in self.laws]
         return None if any(k is None for k in starts) else max(starts)  # type: ignore[type-var]
+
+
+def last_event_step(law: FirstOccurrence) -> int | None:
+    """The last step at which a band's event can happen, where every hazard of the band
+    is 0 from some step on (a band of tables of masses: each law's hazard is 0 past its
+    support, whatever mass it leaves to never): past it neither a law of the band nor
+    nature's choice of hazards has the event happen, so a truncation there cuts nothing,
+    whatever never masses the laws keep (where they differ, no step has the band's
+    upper survival within a share of the nominal never mass: no
+    :meth:`~Band.truncation_point` serves).  None for a law known exactly or a band
+    whose hazard may stay positive."""
+    c = law.constant_hazard_from
+    if not law.is_ambiguous or c is None:
+        return None
+    return max(c - 1, 0) if float(law.hazard_band(c)[1]) == 0.0 else None
 
 
 def band_of_laws(

@@ -63,6 +63,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.controllers.tables import BEYOND
+from mitld_lp.distributions.band import last_event_step
 from mitld_lp.running.chain_model import Chain, prop_labels, rows_matrix
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
@@ -277,7 +278,9 @@ class _Unfolding:
         """``(events, still pending, probability)`` of the next step: a sensed event that
         may never happen and reaches its truncation point still pending never happens
         with probability ``never / P(K > T)`` (it leaves ``pending``), else it comes
-        later, past the point (the truncation)."""
+        later, past the point (the truncation); a band's event past the band's last step
+        (:func:`~mitld_lp.distributions.band.last_event_step`) never happens, under
+        every law of the band."""
         out = []
         for occurred, p in self.events(pending, clock):
             branches = [(pending - occurred, p)]
@@ -285,8 +288,10 @@ class _Unfolding:
                 c = self.sta.clocks[a]
                 if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
                     continue
-                never = min(float(c.distribution.never)
-                            / float(c.distribution.survival(c.truncation)), 1.0)
+                last = last_event_step(c.distribution)
+                never = 1.0 if last is not None and last <= c.truncation else min(
+                    float(c.distribution.never)
+                    / float(c.distribution.survival(c.truncation)), 1.0)
                 branches = [(b - {a}, q * never) for b, q in branches] + [
                     (b, q * (1.0 - never)) for b, q in branches]
             out += [(occurred, b, q) for b, q in branches if q > 0.0]

@@ -74,9 +74,12 @@ from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
+
 from mitld_lp.automata.dta import DTA, SAFE
 from mitld_lp.automata.sta import STA, make_sta
 from mitld_lp.distributions import FirstOccurrence
+from mitld_lp.distributions.band import last_event_step
 from mitld_lp.product import default_max_memory, estimate_size
 from mitld_lp.sensing.frontier import FrontierBuilder
 from mitld_lp.sensing.horizon import collapse
@@ -121,7 +124,10 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
     "never" against "happened at ``k``, missed since" grows at every miss, so a
     hypothesis missed ``R`` times (``report_limit``) is cut too, ``R`` the first with
     ``(1 - detect)^R <= `` half the event's share (the other half is ``T``'s), and the
-    event's tail is both cuts' mass (``report_tail``)."""
+    event's tail is both cuts' mass (``report_tail``; under a band, at nature's highest
+    hazards).  A band of tables of masses is cut at its last step
+    (:func:`~mitld_lp.distributions.band.last_event_step`), past which no law of it has
+    the event: only the sensor's cut is left, whatever never masses its laws keep."""
     fixed = dict(truncation or {})
     auto = [a for a in sorted(laws) if a not in fixed and (
         a in sensed or not clock_reduction or laws[a].constant_hazard_from is None)]
@@ -132,7 +138,11 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
         d = sensors[a].detect if sensors is not None and a in sensors else 0.0
         if nu > 0.0:
             half = share / 2 if 0.0 < d < 1.0 else share
-            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0)), 1)
+            # a band of tables of masses: cut at its last step, past which no law of it
+            # has the event (whatever never masses they keep): nothing cut there
+            last = last_event_step(laws[a])
+            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0))
+                            if last is None else last, 1)
             if 0.0 < d < 1.0:
                 cuts[a] = max(2, math.ceil(math.log(half) / math.log1p(-d)))
         else:
@@ -151,6 +161,9 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
             R = cuts.get(a)
             d = sensors[a].detect if sensors is not None and a in sensors else 0.0
             reach = 1.0 - float(c.distribution.survival(c.truncation))  # P(K <= T)
+            if c.distribution.is_ambiguous:  # the most nature's hazards give it
+                hi = c.distribution.hazard_band(np.arange(1, c.truncation + 1))[1]
+                reach = 1.0 - float(np.prod(1.0 - np.asarray(hi, dtype=float)))
             clocks[a] = replace(c, keeps_never=True, report_limit=R,
                                 report_tail=0.0 if R is None else reach * (1.0 - d) ** R)
     return STA(dta, clocks)
