@@ -13,8 +13,9 @@ silence of every step, the world's moves) at the law nature chose, held fixed as
 optimistic constrained answer holds it, with the returned randomised controller's
 mixed decision after each observation replayed; Storm, in exact arithmetic, on the
 plain chain ``export --chain`` writes; and for ``detect = 1`` the fully observed band
-optimum by brute force over every deterministic controller (the robust route cannot
-solve this band: its upper survival never falls below a share).
+optimum by brute force over every deterministic controller (written apart from the
+robust route, which solves this band too since a band of mass tables is constant after
+its laws' last support).
 
 The world and band are tests/test_false_alarms_never_band.py's: the bus ``b`` comes at
 step 1 or 2 or never (0.4 at every law of the band), the robot must be at ``A`` the
@@ -195,7 +196,7 @@ def _kept(detect: float = 1.0) -> Any:
 @pytest.mark.parametrize("bands, pick", [("worst", min), ("best", max)])
 def test_detect_one_with_false_alarms(bands: str, pick: Any, monkeypatch: Any) -> None:
     """``detect = 1``, ``false_alarm = 0.2`` (it stopped with exit 2: the informed sensor
-    reports surely and at once, and the fully observed robust route cannot truncate the
+    reports surely and at once, and the fully observed robust route then stopped on the
     band): the informed end is the band's solve with that sensor kept sensed, done
     separately, whose controller attains the fully observed optimum (every deterministic
     controller by brute force, the bus seen the step it comes: 7/15 for the worst law,
