@@ -14,25 +14,23 @@ Where a table is too large to keep dense the NumPy lines run instead."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from mitld_lp.sensing.rows import INT, compiled_on, spread
-
-if TYPE_CHECKING:
-    from mitld_lp.sensing.frontier import FrontierBuilder
 
 __all__ = ["hypothesis_rows"]
 
 _TRIES = 3  # the steps missing, then the ends missing, then every row found
 
 
-def hypothesis_rows(fb: FrontierBuilder, cols: list[np.ndarray], c_state: np.ndarray,
+def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
                     c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
                     o_seq: np.ndarray, trunc: int) -> tuple[Any, ...] | None:
-    """:meth:`FrontierBuilder.hypothesis_rows` of ``fb`` (the same arguments and
-    answer) by the kernel, or None where the NumPy lines must run (a table not dense)."""
+    """:meth:`FrontierBuilder.hypothesis_rows` of ``fb``, the frontier builder that calls
+    this (the same arguments and answer; not imported here: frontier.py imports this
+    module), by the kernel, or None where the NumPy lines must run (a table not dense)."""
     kernels = compiled_on()
     world, clock, reported, pending, hstart, hcount = cols
     st = c_state[c]
