@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 from mitld_lp import defaults
 from mitld_lp.automata.dta import DTA
 from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.distributions.band import last_event_step
 
 __all__ = [
     "EventClock", "STA", "EventOutcome", "Ambiguity", "ClockStep", "TRUNCATED", "advance_clock",
@@ -81,6 +80,8 @@ class EventClock:
             return 0.0
         tail = float(self.distribution.survival_upper(self.truncation))
         if self.keeps_never:  # the never-mass is a hypothesis, not cut
+            from mitld_lp.distributions.band import last_event_step  # bands only
+
             last = last_event_step(self.distribution)  # a band: none happens past it
             tail = 0.0 if last is not None and last <= self.truncation else max(
                 tail - float(self.distribution.never), 0.0)
