@@ -5,6 +5,7 @@ notebook shows.  Files are written by :mod:`mitld_lp.files.write`."""
 
 from __future__ import annotations
 
+import math
 from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from typing import Any
 
@@ -138,7 +139,7 @@ SUMMARY_KEYS = (
     "seconds", "timings", "lp", "iteration", "robust", "bands", "first_step_hazards",
     "ambiguous_choices", "constraints", "then", "secondary", "expected_steps",
     "randomized_states", "message", "sensors", "complement", "precision", "width", "exact",
-    "exact_bracket", "bands_reading",
+    "exact_bracket", "bands_reading", "expected_at",
 )
 
 
@@ -158,7 +159,8 @@ def summary(result: Any) -> dict[str, Any]:
     ``lp`` and ``iteration``: the lower model's solver records where the route has them;
     ``bands_reading``: with a band, ``"worst"`` (the bracket is the worst case over the
     bands, guaranteed by the policy) or ``"best"`` (the best case, PRISM's ``Pmaxmax``:
-    the policy reaches it only under the law its answer names), else ``None``.
+    the policy reaches it only under the law its answer names), else ``None``;
+    ``expected_at``: the law of the bands ``expected_steps`` is at (:func:`expected_at`).
     """
     out = dict.fromkeys(SUMMARY_KEYS)
     mdp, sta = result.mdp, result.sta
@@ -246,9 +248,25 @@ def constrained_summary(result: Any) -> dict[str, Any]:
              **({"feasible_bound": c.feasible_bound} if infeasible else {})}
             for c in result.constraints],
         "then": result.then, "secondary": result.secondary,
-        "expected_steps": result.steps, "message": result.message,
-        "randomized_states": result.randomized_states,
+        "expected_steps": result.steps, "expected_at": expected_at(result),
+        "message": result.message, "randomized_states": result.randomized_states,
     }
+
+
+#: ``expected_at``'s values: a band answer's ``expected_steps`` (and its ``then``'s
+#: ``secondary``) at the worst law of the bands, or at the law the answer chose.
+EXPECTED_AT = ("worst law", "chosen law")
+
+
+def expected_at(result: Any) -> str | None:
+    """The law of the bands a constrained answer's expected steps (cost) are at:
+    ``"worst law"`` (nature maximising them: the policy's guarantee) or, with the bands
+    read for their best law (``--bands best``), ``"chosen law"`` (the law the answer
+    chose, no worst case); ``None`` for point laws, and where no finite expected steps
+    were found (the JSON's ``expected_steps`` is then ``null`` too)."""
+    if not result.bands or not math.isfinite(result.steps):
+        return None
+    return EXPECTED_AT[0] if result.part.reading == "worst" else EXPECTED_AT[1]
 
 
 def html(result: Result) -> str:

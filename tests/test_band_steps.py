@@ -22,6 +22,7 @@ Independent routes:
 from __future__ import annotations
 
 import importlib.util
+import json
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -82,6 +83,19 @@ def test_expected_steps_without_then_are_the_band_s_worst_case(sensors: Any) -> 
     else:
         expected = BUS
     assert r.steps == pytest.approx(float(expected), abs=1e-8)
+    assert r.summary()["expected_at"] == "worst law"
+
+
+def test_sensed_steps_at_the_chosen_law_say_so() -> None:
+    """The camera on the three-state world with ``--bands best``: the steps are at the
+    band's high end, ``sum_{k < T} 0.4^k = (1 - 0.4^T) / 0.6`` with ``T`` the
+    truncation point, and the summary says they are at the chosen law."""
+    r = synthesize(three(b={"detect": 0.5}), constraints=["P(F h) <= 0.25"], bands="best")
+    cut = r.sta.truncation_points["b"]
+    said = r.summary()
+    assert said["expected_at"] == "chosen law" and said["bands_reading"] == "best"
+    assert said["expected_steps"] == pytest.approx(
+        float((1 - Fraction(2, 5) ** cut) / Fraction(3, 5)), abs=1e-8)
 
 
 @needs_storm
@@ -127,6 +141,38 @@ def test_steps_at_the_best_law_say_so(capsys: Any) -> None:
     r = synthesize(three(), constraints=["P(F h) <= 0.25"], then="min-steps", bands="best")
     assert r.part.reading == "best" and r.steps == pytest.approx(1 / 0.6, abs=1e-7)
 
+
+
+@pytest.mark.parametrize(("file", "reading", "at"), [
+    ("bus_fit.toml", "worst", "worst law"), ("bus_fit.toml", "best", "chosen law"),
+    ("bus_risk.toml", "worst", None)], ids=["band-worst", "band-best", "point-law"])
+def test_the_json_says_which_law_the_steps_are_at(file: str, reading: str, at: str | None,
+                                                   capsys: Any) -> None:
+    """``--json``'s ``expected_at``: a band answer's ``expected_steps`` are the worst
+    law's, with ``--bands best`` the law the answer chose; a point law has none (its
+    steps are still reported), and the printed line says the same."""
+    args = ["solve", str(MODELS / file), "--constraint", "E(steps) <= 9", "--bands", reading]
+    assert main([*args, "--json"]) == 0
+    said = json.loads(capsys.readouterr().out)
+    assert said["expected_at"] == at and said["expected_steps"] > 0
+    assert main([*args, "-q"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("E(steps)"))
+    assert line.endswith(")") == (at is not None)
+
+
+@pytest.mark.parametrize(("reading", "at", "steps"), [
+    ("worst", "worst law", BUS), ("best", "chosen law", Fraction(5, 3))])
+def test_the_summary_labels_the_hand_computed_steps(reading: str, at: str,
+                                                   steps: Fraction) -> None:
+    """The library's summary on the three-state world, whose steps are the bus's
+    expected arrival step whatever the robot does: ``1 / 0.3`` at the worst law
+    (``"worst law"``), ``1 / 0.6`` at the law ``--bands best`` chooses with ``then =
+    "min-steps"`` (``"chosen law"``); ``then``'s value is at the same law."""
+    r = synthesize(three(), constraints=["P(F h) <= 0.25"], then="min-steps", bands=reading)
+    said = r.summary()
+    assert said["expected_at"] == at and said["bands_reading"] == reading
+    assert said["expected_steps"] == pytest.approx(float(steps), abs=1e-7)
+    assert said["secondary"] == pytest.approx(float(steps), abs=1e-6)
 
 # ------------------------------------------------- the reacting world's band constraints
 

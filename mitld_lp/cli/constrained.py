@@ -62,9 +62,9 @@ def solve(args: argparse.Namespace, posed: Any, policy_file: Path | None) -> int
             if set(parts) - {"solver"}:
                 say_answer(f"width:        {r.width['total']:.3g} = " + " + ".join(
                     f"{k} {v:.3g}" for k, v in parts.items()))
-            at = ("" if not r.bands else "  (at the worst law of the bands)"
-                  if r.part.reading == "worst" else "  (at the law of the bands the answer "
-                  "chose, not a worst case)")
+            at = {None: "", "worst law": "  (at the worst law of the bands)",
+                  "chosen law": "  (at the law of the bands the answer chose, not a worst "
+                                "case)"}[summary["expected_at"]]
             say_answer(f"E(steps):     {r.steps:.6g}{at}")
             if r.then:
                 say_answer(f"then {r.then}: {r.secondary:.6g}{at}")
