@@ -142,8 +142,8 @@ def test_every_public_name_resolves_to_what_its_module_defines() -> None:
 #: What the command line's solve of a grid model never needs: the other LP solvers, SciPy's
 #: factorisations, graphs, optimisers and laws, the compiler, the sweep, plot, Storm and
 #: exact-arithmetic extras, the progress bar, the PRISM world, the exports' writers, the
-#: other verbs' modules, and the laws' fits, bands and SciPy families (the case's laws
-#: are geometric).
+#: other verbs' modules, the laws' fits, bands and SciPy families (the case's laws
+#: are geometric), and the routes other than the plain one.
 NOT_FOR_A_GRID_SOLVE = (
     "cvxpy", "highspy", "scipy.sparse.linalg", "scipy.linalg", "scipy.sparse.csgraph",
     "scipy.optimize", "scipy.stats", "numba", "pandas", "pyarrow", "matplotlib", "stormpy",
@@ -161,7 +161,13 @@ NOT_FOR_A_GRID_SOLVE = (
     # the package files' reader where the package is not a folder (logic/tables.py)
     "importlib.resources", "importlib.readers",
     # the constrained LP's modules, which the routes claiming constraints load to solve
-    "mitld_lp.solvers.constrained", "mitld_lp.solvers.constrained_model")
+    "mitld_lp.solvers.constrained", "mitld_lp.solvers.constrained_model",
+    # the other routes and the robust route's solvers (routes.precedence.Later)
+    "mitld_lp.routes.constrained", "mitld_lp.routes.robust", "mitld_lp.routes.sensed",
+    "mitld_lp.routes.robust_constrained", "mitld_lp.routes.sensed_constrained",
+    "mitld_lp.routes.sensed_band_constrained", "mitld_lp.routes.sensed_optimistic",
+    "mitld_lp.routes.sensed_optimistic_constrained", "mitld_lp.routes.sensed_reacting",
+    "mitld_lp.solvers.robust", "mitld_lp.solvers.robust_graph", "mitld_lp.solvers.robust_lp")
 
 
 def _command_modules(argv: list[str]) -> dict:
