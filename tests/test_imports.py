@@ -419,3 +419,22 @@ def test_the_console_script_reads_its_words_once():
     wrong = command("solve", "models/bus_grid.toml", "--no-such-flag")
     assert wrong.returncode == 2 and wrong.stdout == ""
     assert wrong.stderr.count("--no-such-flag") == 1, wrong.stderr
+
+
+def test_the_routes_imported_later_claim_what_their_own_classes_claim():
+    # the list's Later entries answer a plain problem without their module; asked of
+    # the routes themselves (imported here), each would refuse it too, and a problem
+    # with a band, constraints or a sensor reaches the route's own claims and name
+    from mitld_lp import load_model
+    from mitld_lp.routes import precedence
+    from mitld_lp.synthesis import pose
+
+    later = [r for r in precedence.ROUTES if isinstance(r, precedence.Later)]
+    assert len(later) == len(precedence.ROUTES) - 1
+    plain = pose(load_model(ROOT / "models" / "bus_grid.toml"))
+    assert plain.route.name == "plain"
+    assert not any(r.route().claims(plain) for r in later)
+    constrained = pose(load_model(ROOT / "models" / "bus_grid.toml"), ["P(F A) >= 0.5"])
+    assert constrained.route.name == "constrained" and constrained.route.takes_constraints
+    # the constrained LP's routes claim a problem without constraints too
+    assert any(r.claims(plain) for r in precedence.LP)
