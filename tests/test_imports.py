@@ -142,8 +142,8 @@ def test_every_public_name_resolves_to_what_its_module_defines() -> None:
 #: What the command line's solve of a grid model never needs: the other LP solvers, SciPy's
 #: factorisations, graphs, optimisers and laws, the compiler, the sweep, plot, Storm and
 #: exact-arithmetic extras, the progress bar, the PRISM world, the exports' writers, the
-#: other verbs' modules, and the laws' fits, bands and SciPy families (the case's laws
-#: are geometric).
+#: other verbs' modules, the laws' fits, bands and SciPy families (the case's laws
+#: are geometric), and the routes other than the plain one.
 NOT_FOR_A_GRID_SOLVE = (
     "cvxpy", "highspy", "scipy.sparse.linalg", "scipy.linalg", "scipy.sparse.csgraph",
     "scipy.optimize", "scipy.stats", "numba", "pandas", "pyarrow", "matplotlib", "stormpy",
@@ -161,7 +161,13 @@ NOT_FOR_A_GRID_SOLVE = (
     # the package files' reader where the package is not a folder (logic/tables.py)
     "importlib.resources", "importlib.readers",
     # the constrained LP's modules, which the routes claiming constraints load to solve
-    "mitld_lp.solvers.constrained", "mitld_lp.solvers.constrained_model")
+    "mitld_lp.solvers.constrained", "mitld_lp.solvers.constrained_model",
+    # the other routes and the robust route's solvers (routes.precedence.Later)
+    "mitld_lp.routes.constrained", "mitld_lp.routes.robust", "mitld_lp.routes.sensed",
+    "mitld_lp.routes.robust_constrained", "mitld_lp.routes.sensed_constrained",
+    "mitld_lp.routes.sensed_band_constrained", "mitld_lp.routes.sensed_optimistic",
+    "mitld_lp.routes.sensed_optimistic_constrained", "mitld_lp.routes.sensed_reacting",
+    "mitld_lp.solvers.robust", "mitld_lp.solvers.robust_graph", "mitld_lp.solvers.robust_lp")
 
 
 def _command_modules(argv: list[str]) -> dict:
@@ -413,3 +419,22 @@ def test_the_console_script_reads_its_words_once():
     wrong = command("solve", "models/bus_grid.toml", "--no-such-flag")
     assert wrong.returncode == 2 and wrong.stdout == ""
     assert wrong.stderr.count("--no-such-flag") == 1, wrong.stderr
+
+
+def test_the_routes_imported_later_claim_what_their_own_classes_claim():
+    # the list's Later entries answer a plain problem without their module; asked of
+    # the routes themselves (imported here), each would refuse it too, and a problem
+    # with a band, constraints or a sensor reaches the route's own claims and name
+    from mitld_lp import load_model
+    from mitld_lp.routes import precedence
+    from mitld_lp.synthesis import pose
+
+    later = [r for r in precedence.ROUTES if isinstance(r, precedence.Later)]
+    assert len(later) == len(precedence.ROUTES) - 1
+    plain = pose(load_model(ROOT / "models" / "bus_grid.toml"))
+    assert plain.route.name == "plain"
+    assert not any(r.route().claims(plain) for r in later)
+    constrained = pose(load_model(ROOT / "models" / "bus_grid.toml"), ["P(F A) >= 0.5"])
+    assert constrained.route.name == "constrained" and constrained.route.takes_constraints
+    # the constrained LP's routes claim a problem without constraints too
+    assert any(r.claims(plain) for r in precedence.LP)
