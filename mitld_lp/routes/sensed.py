@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from mitld_lp.routes.route import Route
@@ -49,7 +48,7 @@ class SensedRoute(Route):
         """The task's automaton, then the information-state product
         (:mod:`mitld_lp.sensing.belief`: what the robot knows of the events, never the
         events themselves), under the problem's budgets."""
-        from mitld_lp.routes.sensed_never import blind_model, never_alarms
+        from mitld_lp.routes.sensed_never import blind_model, dropping, never_alarms
         from mitld_lp.routes.stages import Built
         from mitld_lp.sensing.belief import belief_product
 
@@ -67,8 +66,7 @@ class SensedRoute(Route):
                                 max_memory=s.max_memory, progress=progress,
                                 name=model.name)
         if blind:
-            belief = replace(belief, sensors=partial(posed.model.sensors),
-                             ignored=belief.ignored | frozenset(blind))
+            belief = dropping(belief, posed.model)
         return Built(dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      belief=belief, sense="min" if direct else "max")

@@ -362,7 +362,7 @@ class SensedConstrainedRoute(Route):
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the
         information-state product on it (module docs), under the problem's budgets."""
-        from mitld_lp.routes.sensed_never import blind_model, never_alarms
+        from mitld_lp.routes.sensed_never import blind_model, dropping, never_alarms
         from mitld_lp.routes.stages import Built, joint_sta
         from mitld_lp.sensing.belief import belief_product
         from mitld_lp.sensing.reacting import reacting_product
@@ -396,8 +396,7 @@ class SensedConstrainedRoute(Route):
             max_states=s.max_states, max_memory=s.max_memory, progress=progress,
             ends=ends, name=model.name, **({} if reacts else {"late_reports": False}))
         if blind:
-            belief = replace(belief, sensors=partial(posed.model.sensors),
-                             ignored=belief.ignored | frozenset(blind))
+            belief = dropping(belief, posed.model)
         return Built(joint.dta, belief.sta, belief.mdp,
                      {"automaton": t1 - t0, "product": time.perf_counter() - t1},
                      joint, belief=(belief, ends))
