@@ -153,6 +153,27 @@ def test_the_sweep_forecast(rate: float, at: int, hopeless: bool) -> None:
     assert _hopeless(seen, 1000) is hopeless
 
 
+@pytest.mark.parametrize(("rate", "at", "hopeless"), [
+    # the NumPy sweeps' forecast: from 32 sweeps, over the last 16, to their limit of 100
+    (1.0, 32, True),  # the gap does not shrink
+    (1.0, 16, False),  # too early to judge
+    (0.8, 32, False),  # 72 needed, 2 x 68 left
+    (0.7, 32, False),  # 45 needed
+    (0.9, 32, True),  # 153 needed, 2 x 68 left
+])
+def test_the_numpy_sweeps_forecast(rate: float, at: int, hopeless: bool) -> None:
+    from mitld_lp.solvers.iteration import (
+        _NUMPY_FORECAST_FROM,
+        _NUMPY_FORECAST_WINDOW,
+        _SWEEPS_BEFORE_POLICY,
+        _hopeless,
+    )
+
+    seen = [(k, 1e-2 * rate ** (k - at) / 1e-9) for k in range(16, at + 1, 16)]
+    assert _hopeless(seen, _SWEEPS_BEFORE_POLICY, _NUMPY_FORECAST_FROM,
+                     _NUMPY_FORECAST_WINDOW) is hopeless
+
+
 def _chain(n: int) -> MDP:
     """States 0 .. n-1 explored forward from 0, each moving to the next; the last reaches
     the target with 1/2, a sink with 1/4 and state 0 with 1/4 (so the chain is one
