@@ -185,7 +185,7 @@ def sensed_candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] 
             f"hypotheses of the {reached:,} information states it reaches, each a truth "
             f"the chain holds), more than {budget:,} (max_states); raise max_states, "
             "loosen epsilon, or shrink the model")
-    return point, sensed_band_chain_of(point, max_states=budget)
+    return point, sensed_band_chain_of(point, max_states=budget, reading=posed.settings.bands)
 
 
 def within_time(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
