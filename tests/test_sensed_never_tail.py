@@ -294,6 +294,25 @@ def test_the_inner_tail_is_nature_s_less_for_the_best_law() -> None:
     assert Fraction(r.lower) <= true + TOL
 
 
+def test_the_chain_s_tail_for_each_reading() -> None:
+    """The clocks the controller's chain keeps (``tail_sta``) for ``POISSON`` with a
+    Poisson law of mean 0.5 at epsilon 0.1: the band's own intervals at steps 1 and 2
+    (by hand and SciPy), then for the worst law ``[0, 1]`` (no law of the band has a
+    hazard below the tables' 0 or above the Poisson law's, which tends to 1), for the
+    best ``[0, h(3)]`` (the Poisson law's hazard increases: ``h(3)`` is its least after
+    step 2); nothing truncated."""
+    from mitld_lp.running.sensed_band_chain import tail_sta
+
+    hazards = poisson_hazards(0.5)
+    r = synthesize(model(poisson_band(0.5)), epsilon=0.1)
+    for reading, past in (("worst", (0.0, 1.0)), ("best", (0.0, float(hazards(3)[1])))):
+        clock = tail_sta(r.sta, reading).clocks["b"]
+        assert clock.truncation is None and not clock.keeps_never
+        for t in range(6):
+            want = tuple(map(float, hazards(t + 1))) if t < 2 else past
+            assert clock.band(t) == pytest.approx(want, abs=1e-12)
+
+
 @pytest.mark.skipif(importlib.util.find_spec("stormpy") is None, reason="needs stormpy")
 @pytest.mark.parametrize("band", [sure_band, poisson_band])
 def test_storm_on_the_exported_interval_chain_gives_lower(band: Any, tmp_path: Path) -> None:
