@@ -71,13 +71,13 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
 from mitld_lp.automata.dta import DTA, SAFE
-from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.sta import STA, EventClock, make_sta
 from mitld_lp.distributions import FirstOccurrence
 from mitld_lp.distributions.band import UnboundedBand, last_event_step, tail_bands, tail_step
 from mitld_lp.product import default_max_memory, estimate_size
@@ -176,7 +176,28 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
                 reach = 1.0 - float(np.prod(1.0 - np.asarray(hi, dtype=float)))
             clocks[a] = replace(c, keeps_never=True, report_limit=R,
                                 report_tail=0.0 if R is None else reach * (1.0 - d) ** R)
+    for a in tails:  # what the information states cut is the middle law's
+        clocks[a] = TailClock(**{f.name: getattr(clocks[a], f.name) for f in fields(EventClock)})
     return STA(dta, clocks)
+
+
+@dataclass(frozen=True, slots=True)
+class TailClock(EventClock):
+    """The clock of a sensed band that no truncation serves (:func:`sensed_sta`): its
+    information states are its middle law's, so what their cut takes (``tail``) is that
+    law's ``P(K > T)`` (``P(T < K < inf)`` where it keeps "never") and the sensor's cut;
+    the controller's chain cuts nothing
+    (:func:`mitld_lp.running.sensed_band_chain.tail_sta`)."""
+
+    @property
+    def tail(self) -> float:
+        if self.truncation is None:
+            return 0.0
+        law = self.distribution.nominal  # type: ignore[attr-defined]
+        cut = float(law.survival(self.truncation))
+        if self.keeps_never:
+            cut = max(cut - float(law.never), 0.0)
+        return cut + self.report_tail
 
 
 def _tail(band: Any, eps: float, share: float) -> tuple[int, FirstOccurrence]:
