@@ -267,16 +267,15 @@ def covers(result: Result) -> bool:
     naming the event, is not covered."""
     from mitld_lp.distributions.band import TailBand
 
-    named = {a for v in result.constraints
-             if getattr(v.constraint, "formula", None) is not None
-             for a in atoms(v.constraint.formula)}
-    dta = result.joint.dta if result.joint is not None else result.dta
     for c in result.sta.clocks.values():
         if not c.distribution.is_ambiguous:
             continue
-        if isinstance(c.distribution, TailBand) and c.distribution.hi > 0.0 and (
-                SAFE in dta.kinds or c.event in named):
-            return False
+        if isinstance(c.distribution, TailBand) and c.distribution.hi > 0.0:
+            dta = result.joint.dta if result.joint is not None else result.dta
+            if SAFE in dta.kinds or any(
+                    c.event in atoms(v.constraint.formula) for v in result.constraints
+                    if getattr(v.constraint, "formula", None) is not None):
+                return False
         for t in range(c.cap + 1):
             h, (lo, hi) = c.hazard(t), c.band(t)
             if (hi > 0.0 and h <= 0.0) or (lo < 1.0 and h >= 1.0):
