@@ -40,6 +40,7 @@ import numpy as np
 
 from mitld_lp.distributions.families import build
 from mitld_lp.distributions.law import (
+    MAX_HAZARD_SCAN,
     MAX_STEP,
     DistributionError,
     FirstOccurrence,
@@ -52,7 +53,14 @@ from mitld_lp.distributions.law import (
 from mitld_lp.distributions.printing import literal_text
 
 __all__ = ["Band", "ConstantBand", "TableBand", "EnvelopeBand", "band_of_laws",
-           "hazard_band_from_survival", "last_event_step"]
+           "hazard_band_from_survival", "last_event_step", "UnboundedBand", "TailLaw",
+           "TailBand", "needs_tail", "tail_step", "tail_intervals", "tail_bands"]
+
+
+class UnboundedBand(DistributionError):
+    """A band with no truncation point: its upper survival never comes within the
+    truncation's share (its laws' never masses differ and its hazard may stay positive
+    for ever); the routes bound its tail instead (:func:`tail_bands`)."""
 
 
 def hazard_band_from_survival(
@@ -153,7 +161,7 @@ class Band(FirstOccurrence):
         lo, hi = 0, 1  # invariant: S_hi(lo) > eps
         while float(self.survival_upper(hi)) > e:
             if hi >= MAX_STEP:
-                raise DistributionError(
+                raise UnboundedBand(
                     self.label,
                     f"the band's upper survival is still above eps = {e:.6g} at step 2**62 "
                     "(the band allows an event that never happens)",
@@ -166,6 +174,18 @@ class Band(FirstOccurrence):
             else:
                 lo = mid
         return hi
+
+    def hazard_bounds_from(self, k: int) -> tuple[float, float, float, float]:
+        """Sound bounds on the band's hazard interval over the steps ``j >= k``:
+        ``(a, b, c, d)`` with ``a <= inf h_lo``, ``sup h_lo <= b``, ``c <= inf h_hi`` and
+        ``sup h_hi <= d``; exact from the step where the band is constant (its
+        intervals over ``k..max(k, c0)``), else ``(0, 1, 0, 1)``."""
+        k = max(int(k), 1)
+        c = self._band_constant_from()
+        if c is None or max(k, c) - k > MAX_HAZARD_SCAN:
+            return 0.0, 1.0, 0.0, 1.0
+        lo, hi = self.hazard_band(np.arange(k, max(k, c) + 1, dtype=np.int64))
+        return float(lo.min()), float(lo.max()), float(hi.min()), float(hi.max())
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -257,6 +277,17 @@ class EnvelopeBand(Band):
         starts = [law.constant_hazard_from for law in self.laws]
         return None if any(k is None for k in starts) else max(starts)  # type: ignore[type-var]
 
+    def hazard_bounds_from(self, k: int) -> tuple[float, float, float, float]:
+        """:meth:`Band.hazard_bounds_from` from each law's hazard range over ``j >= k``
+        (:meth:`~.law.FirstOccurrence.hazard_range_from`, ``(i_j, s_j)``) where some
+        law's hazard never settles: ``h_lo(j) = min_l h_l(j)`` lies in ``[min_l i_l,
+        min_l s_l]`` and ``h_hi(j) = max_l h_l(j)`` in ``[max_l i_l, max_l s_l]``."""
+        if self._band_constant_from() is not None:
+            return Band.hazard_bounds_from(self, k)
+        ranges = [law.hazard_range_from(k) for law in self.laws]
+        inf, sup = [r[0] for r in ranges], [r[1] for r in ranges]
+        return min(inf), min(sup), max(inf), max(sup)
+
 
 def last_event_step(law: FirstOccurrence) -> int | None:
     """The last step at which a band's event can happen, where every hazard of the band
@@ -318,3 +349,163 @@ def interval(family: str, lo: object, hi: object, where: str) -> FirstOccurrence
     if a == 0.0:
         return ConstantBand(label, nominal, 0.0, b)
     return band_of_laws(label, nominal, ends)
+
+
+# --------------------------------------------------------------------------- the tail
+# A band whose hazard may stay positive for ever while its laws' never masses differ
+# has no truncation point (UnboundedBand): a cut at any step would lose the runs in
+# which nature brings the event later.  Its tail is bounded instead: past a step K the
+# band is replaced by a constant interval, once holding every interval of the band
+# past K (the outer band: nature may do more than it can) and once lying within every
+# one (the inner band: nature may do less).  Both are constant from K + 1, so the
+# exact machinery solves them with nothing truncated, and for a robust maximum the
+# outer band's policy guarantees its value there on the true band while the inner
+# band's optimum bounds the true one from above (docs/robust.md).
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TailLaw(FirstOccurrence):
+    """``base``'s hazards up to ``step`` and ``rate`` at every step after: the nominal
+    law of a :class:`TailBand`."""
+
+    base: FirstOccurrence
+    step: int
+    rate: float
+
+    def _survival_past(self, k: IntArray) -> FloatArray:
+        """``S(k)`` for steps ``k > step``: ``S(step) (1 - rate)^(k - step)``."""
+        s = float(self.base.survival(self.step))
+        if self.rate >= 1.0:
+            return np.zeros(k.shape)
+        return s * np.exp((k - self.step) * math.log1p(-self.rate))
+
+    def _sf_pos(self, k: IntArray) -> FloatArray:
+        out = np.asarray(self.base.survival(np.minimum(k, self.step)), dtype=np.float64)
+        past = k > self.step
+        if past.any():
+            out = np.array(out)
+            out[past] = self._survival_past(k[past])
+        return out
+
+    def _cdf_pos(self, k: IntArray) -> FloatArray:
+        return 1.0 - self._sf_pos(k)
+
+    def _pmf_pos(self, k: IntArray) -> FloatArray:
+        out = np.asarray(self.base.pmf(np.minimum(k, self.step)), dtype=np.float64)
+        past = k > self.step
+        if past.any():  # S(k - 1) rate
+            out = np.array(out)
+            out[past] = self.rate * np.asarray(self.survival(k[past] - 1), dtype=np.float64)
+        return out
+
+    def _hazard_pos(self, k: IntArray) -> FloatArray:
+        out = np.full(k.shape, self.rate)
+        head = k <= self.step
+        if head.any():
+            out[head] = self.base.hazard(k[head])
+        return out
+
+    def _never(self) -> float:
+        return float(self.base.survival(self.step)) if self.rate == 0.0 else 0.0
+
+    def _last_step(self) -> float:
+        if self.rate > 0.0 and float(self.base.survival(self.step)) > 0.0:
+            return math.inf
+        return min(self.base._last_step(), float(self.step))
+
+    def _constant_hazard_from(self) -> int | None:
+        return self.step + 1
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TailBand(Band):
+    """``base``'s hazard intervals up to ``step`` and ``[lo, hi]`` at every step after
+    (:func:`tail_bands`): constant from ``step + 1``, so nothing of it is truncated."""
+
+    base: FirstOccurrence
+    step: int
+    lo: float
+    hi: float
+
+    def _band_pos(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        lo, hi = np.full(k.shape, self.lo), np.full(k.shape, self.hi)
+        head = k <= self.step
+        if head.any():
+            lo[head], hi[head] = self.base.hazard_band(k[head])
+        return lo, hi
+
+    def _sf_hi_pos(self, k: IntArray) -> FloatArray:
+        out = np.array(self.base.survival_upper(np.minimum(k, self.step)), dtype=np.float64)
+        past = k > self.step
+        if past.any():  # nature's least hazard at every step past it
+            out[past] *= (np.exp((k[past] - self.step) * math.log1p(-self.lo))
+                          if self.lo < 1.0 else 0.0)
+        return out
+
+    def _band_constant_from(self) -> int | None:
+        return self.step + 1
+
+
+def needs_tail(law: FirstOccurrence, eps: float) -> bool:
+    """Whether ``law`` is a band that no truncation at ``eps`` serves
+    (:class:`UnboundedBand`) and that is not constant from some step (which the clock
+    solves exactly): its tail must be bounded (:func:`tail_bands`)."""
+    if not law.is_ambiguous or law.constant_hazard_from is not None:
+        return False
+    try:
+        law.truncation_point(eps)
+    except UnboundedBand:
+        return True
+    return False
+
+
+def _laws_of(band: FirstOccurrence) -> tuple[FirstOccurrence, ...]:
+    return band.laws if isinstance(band, EnvelopeBand) else (band.nominal,)  # type: ignore[attr-defined]
+
+
+def tail_step(band: FirstOccurrence, eps: float) -> int:
+    """The step ``K`` past which :func:`tail_bands` bounds ``band``: the last at which
+    a law of the band that surely happens (no never mass) has survived with
+    probability more than ``eps`` (its truncation point), or at which a law's hazard
+    still changes (its :attr:`~.law.FirstOccurrence.constant_hazard_from` less 1),
+    and at least 1.  Past it the laws' hazard ranges are those of their tails (a table
+    of masses past its support, a Poisson law's increasing hazard from there)."""
+    K = 1
+    for law in _laws_of(band):
+        c = law.constant_hazard_from
+        if c is not None:
+            K = max(K, c - 1)
+        if law.never <= eps and (c is None or law.never == 0.0):
+            K = max(K, law.truncation_point(eps))
+    return K
+
+
+def tail_intervals(
+    band: FirstOccurrence, step: int
+) -> tuple[tuple[float, float], tuple[float, float] | None]:
+    """The outer and inner intervals of ``band``'s hazards past ``step``
+    (:meth:`Band.hazard_bounds_from` at ``step + 1``): the outer ``[inf h_lo, sup
+    h_hi]`` holds every ``[h_lo(k), h_hi(k)]``, ``k > step``; the inner ``[sup h_lo,
+    inf h_hi]`` lies within every one, None where no constant interval does."""
+    if not isinstance(band, Band):
+        raise TypeError(f"tail_intervals: {band} is not a band")
+    a, b, c, d = band.hazard_bounds_from(step + 1)
+    return (a, d), ((b, c) if b <= c else None)
+
+
+def tail_bands(band: FirstOccurrence, step: int) -> tuple[TailBand, TailBand | None]:
+    """``band`` with its hazards past ``step`` replaced by the constant outer interval
+    and by the inner one (:func:`tail_intervals`; None where there is none): every law
+    of ``band``, and every choice of nature's within it, is one of the outer band's,
+    and every one of the inner band's is one of ``band``'s.  Their nominal laws keep
+    the band's nominal hazards up to ``step`` and that of step ``step + 1`` clipped to
+    the interval after."""
+    assert isinstance(band, Band)
+    outer, inner = tail_intervals(band, step)
+    h = float(band.nominal.hazard(step + 1))
+
+    def made(lo: float, hi: float) -> TailBand:
+        nominal = TailLaw(band.nominal.label, band.nominal, step, min(max(h, lo), hi))
+        return TailBand(band.label, nominal, band, step, lo, hi)
+
+    return made(*outer), (None if inner is None else made(*inner))

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -188,7 +188,10 @@ def poisson(lam: float) -> FirstOccurrence:
     lf = _positive(label, "lam", lam)
     from mitld_lp.distributions import scipy_laws  # SciPy's laws: imported when used
 
-    return scipy_laws.shifted(label, "poisson", scipy_laws.stats().poisson, [lf])
+    law = scipy_laws.shifted(label, "poisson", scipy_laws.stats().poisson, [lf])
+    # a Poisson pmf is log-concave (mu(k+1)/mu(k) = lam/k decreases), so its hazard
+    # increases (towards 1): FirstOccurrence.hazard_range_from
+    return replace(law, increasing=True)
 
 
 def scipy_discrete(name: str, *args: float) -> FirstOccurrence:

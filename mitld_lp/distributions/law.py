@@ -332,6 +332,31 @@ class FirstOccurrence(ABC):
             )
         return t
 
+    def hazard_range_from(self, k: int) -> tuple[float, float]:
+        """``(inf, sup)`` of the hazards ``h(j)`` over every step ``j >= k`` (``k >= 1``),
+        sound bounds where they are not attained: from :attr:`constant_hazard_from`
+        ``c`` the hazards of ``k..max(k, c)`` (a table of masses past its support:
+        ``(0, 0)``, or ``(1, 1)`` for one that surely happens, by the convention of
+        ``h``; a geometric ``(p, p)``); a law whose hazard never settles answers with
+        :meth:`_hazard_range_unsettled`, ``(0, 1)`` unless its family knows better (a
+        Poisson law's hazard increases towards 1: :mod:`.scipy_laws`).  The tail of a
+        band whose hazard may stay positive for ever is bounded with it
+        (:func:`mitld_lp.distributions.band.tail_intervals`)."""
+        k = max(int(k), 1)
+        c = self.constant_hazard_from
+        if c is None:
+            return self._hazard_range_unsettled(k)
+        end = max(k, c)
+        if end - k > MAX_HAZARD_SCAN:
+            return 0.0, 1.0
+        h = np.asarray(self.hazard(np.arange(k, end + 1, dtype=np.int64)), dtype=np.float64)
+        return float(h.min()), float(h.max())
+
+    def _hazard_range_unsettled(self, k: int) -> tuple[float, float]:
+        """``(inf, sup)`` of ``h(j)``, ``j >= k``, for a law whose hazard never settles:
+        nothing is known but that hazards lie in ``[0, 1]``."""
+        return 0.0, 1.0
+
     # ------------------------------------------------------------------ exact hazards
     # A law whose hazards are rational for rational parameters (:mod:`.closed`: the
     # geometric, a table of masses, the uniform) overrides these two with the hazards of

@@ -64,6 +64,9 @@ class ScipyBased(FirstOccurrence):
     dist: Any = field(repr=False)  # a frozen scipy.stats distribution
     last: float = field(repr=False)  # the last step with positive mass, or inf
     _chf: Any = field(init=False, repr=False, default=_UNSET)
+    # the hazard never decreases and tends to 1 (a log-concave pmf, e.g. the Poisson's:
+    # families.poisson), so its range from step k is (h(k), 1)
+    increasing: bool = field(default=False, repr=False, kw_only=True)
 
     def _never(self) -> float:
         return 0.0
@@ -75,6 +78,11 @@ class ScipyBased(FirstOccurrence):
         if self._chf is _UNSET:
             object.__setattr__(self, "_chf", self._scan_constant_hazard())
         return self._chf
+
+    def _hazard_range_unsettled(self, k: int) -> tuple[float, float]:
+        if self.increasing:
+            return float(self.hazard(k)), 1.0
+        return 0.0, 1.0
 
     def _scan_constant_hazard(self) -> int | None:
         if math.isfinite(self.last):

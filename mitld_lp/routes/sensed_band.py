@@ -55,9 +55,9 @@ from mitld_lp.routes.stages import Built
 from mitld_lp.solvers.certify import float_up
 from mitld_lp.solvers.rounding import one_minus
 
-__all__ = ["SensedBandPart", "band_gap", "band_result", "end_laws", "full_information",
-           "read_back", "sensed_candidate", "solved_bracket", "solve_sensed_band",
-           "within_time"]
+__all__ = ["SensedBandPart", "band_gap", "band_result", "blind_at", "end_laws",
+           "full_information", "read_back", "sensed_candidate", "solved_bracket",
+           "solve_sensed_band", "within_time"]
 
 log = logging.getLogger(__name__)
 
@@ -149,6 +149,20 @@ def end_laws(distributions: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]
     return out
 
 
+def blind_at(posed: Posed, laws: Mapping[str, Any]) -> list[str]:
+    """The sensed events with false alarms whose candidate at the band's point law
+    ``laws`` is built blind (that law may never happen, :mod:`mitld_lp.routes.
+    sensed_never`) while the posed band's middle law surely happens (a band of such
+    laws beside one that surely happens, whose hazard may stay positive for ever):
+    that candidate's controller drops their reports, a controller like any other, but
+    its upper bound is the blind optimum's, no bound on a controller reading them, so
+    it is not used."""
+    from mitld_lp.routes.sensed_never import never_alarms
+
+    model = dataclasses.replace(posed.model, distributions=MappingProxyType(dict(laws)))
+    return sorted(set(never_alarms(model)) - set(never_alarms(posed.model)))
+
+
 def _candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] | None
                ) -> tuple[Result, Any]:
     """The sensed optimum with the band's point law ``laws`` (None: the middle law, on
@@ -185,7 +199,7 @@ def sensed_candidate(posed: Posed, built: Built | None, laws: Mapping[str, Any] 
             f"hypotheses of the {reached:,} information states it reaches, each a truth "
             f"the chain holds), more than {budget:,} (max_states); raise max_states, "
             "loosen epsilon, or shrink the model")
-    return point, sensed_band_chain_of(point, max_states=budget)
+    return point, sensed_band_chain_of(point, max_states=budget, reading=posed.settings.bands)
 
 
 def within_time(posed: Posed, t0: float, limit: float | None, what: str) -> Posed | None:
@@ -279,7 +293,12 @@ def solve_sensed_band(posed: Posed, built: Built) -> Result:
         other, w = _candidate(timed, None, laws)
         if w is None:  # no controller there (a time limit): its bound is not used
             continue
-        uppers[label] = solved_bracket(other)[1]
+        blind = blind_at(posed, laws)
+        if blind:
+            log.info("the sensed optimum at the band's %s is built with %s blind (its law "
+                     "may never happen): its upper bound is not used", label, ", ".join(blind))
+        else:
+            uppers[label] = solved_bracket(other)[1]
         if w.lower > chosen[1].lower:
             chosen, name = (other, w), label
     point, worst = chosen

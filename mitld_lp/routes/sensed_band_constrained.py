@@ -91,7 +91,9 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.automata.dta import SAFE
 from mitld_lp.checks import Check
+from mitld_lp.logic.syntax import atoms
 from mitld_lp.problem import Posed
 from mitld_lp.result import Result
 from mitld_lp.routes.constrained import ConstraintValue
@@ -256,10 +258,24 @@ def covers(result: Result) -> bool:
     """Whether the law ``result``'s information states were built at gives every outcome
     of a step that some law of its band gives (module docs): at each clock of each band
     event, its hazard positive where the band's greatest is, below 1 where the band's
-    least is."""
+    least is.  A band that no truncation serves
+    (:class:`~mitld_lp.distributions.band.TailBand`, :func:`mitld_lp.sensing.belief.
+    sensed_sta`) may still bring its event past the law's cut, which the information
+    states do not hold: a stay's verdicts stand then only where that event changes none
+    (a co-safe task's, accepted or not already; a constraint's formula that does not
+    name it, the world ignoring it), so a task with a safety part, or a constraint
+    naming the event, is not covered."""
+    from mitld_lp.distributions.band import TailBand
+
     for c in result.sta.clocks.values():
         if not c.distribution.is_ambiguous:
             continue
+        if isinstance(c.distribution, TailBand) and c.distribution.hi > 0.0:
+            dta = result.joint.dta if result.joint is not None else result.dta
+            if SAFE in dta.kinds or any(
+                    c.event in atoms(v.constraint.formula) for v in result.constraints
+                    if getattr(v.constraint, "formula", None) is not None):
+                return False
         for t in range(c.cap + 1):
             h, (lo, hi) = c.hazard(t), c.band(t)
             if (hi > 0.0 and h <= 0.0) or (lo < 1.0 and h >= 1.0):
@@ -341,7 +357,7 @@ def _tighten(inner: SensedConstrainedRoute, here: Posed, b: Any, j: Judged, labe
 
 def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
            seed: int | None) -> Result:
-    from mitld_lp.routes.sensed_band import end_laws
+    from mitld_lp.routes.sensed_band import blind_at, end_laws
 
     t0 = time.perf_counter()
     inner = SensedConstrainedRoute()
@@ -365,8 +381,8 @@ def _solve(posed: Posed, built: Any, *, costs: Mapping[str, float] | None,
                 f"{r.part.message}"))
         if r.controller is None:
             continue
-        if r.status is Status.OPTIMAL:
-            uppers[label] = _terms(r)[1]
+        if r.status is Status.OPTIMAL and not (laws is not None and blind_at(posed, laws)):
+            uppers[label] = _terms(r)[1]  # not a blind build's (sensed_band.blind_at)
         if _stays(r) and not covers(r):
             log.info("the candidate at the band's %s stays where its law does not cover "
                      "the band: not used (module docs)", label)

@@ -374,12 +374,12 @@ class SensedConstrainedRoute(Route):
             model = blind_model(model)
         assert s.max_states is not None  # resolved
         t0 = time.perf_counter()
-        # a sensed band that may never happen: the belief product truncates it (its never
-        # mass a hypothesis of its own: sensing.belief.sensed_sta); only the joint
-        # automaton's laws are read here, which a point for it lets make_sta give
+        # a sensed band that may never happen, or that no truncation serves: the belief
+        # product truncates it (its never mass a hypothesis of its own, its tail bounded:
+        # sensing.belief.sensed_sta); only the joint automaton's laws are read here,
+        # which a point for it lets make_sta give
         never_bands = tuple((a, 1) for a, d in sorted(model.distributions.items())
-                            if d.is_ambiguous and float(d.never) > 0.0
-                            and a in partial(model.sensors)
+                            if d.is_ambiguous and a in partial(model.sensors)
                             and a not in (s.truncation_map or {}))
         joint, sta = joint_sta(replace(posed, settings=replace(
             s, truncation=(*(s.truncation or ()), *never_bands))) if never_bands else posed)

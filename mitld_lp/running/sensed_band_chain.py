@@ -42,8 +42,8 @@ __all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nat
            "reach_from_below", "sensed_band_chain",
            "sensed_band_chain_of", "sensed_band_drn", "sensed_band_unfolding",
            "sensed_band_unfolding_of",
-           "sensed_band_claim", "reach_min", "worst_case", "write_sensed_band_chain",
-           "BAND_PROPERTY"]
+           "sensed_band_claim", "reach_min", "tail_sta", "worst_case",
+           "write_sensed_band_chain", "BAND_PROPERTY"]
 
 log = logging.getLogger(__name__)
 
@@ -84,22 +84,26 @@ def sensed_band_claim(result: Any) -> tuple[float, str]:
 
 
 def sensed_band_chain(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
-                      max_states: int | None = None, *, ends: Any = None) -> BandChain:
+                      max_states: int | None = None, *, ends: Any = None,
+                      reading: str = "worst") -> BandChain:
     """The interval chain (module docs) of ``controller`` in ``game`` with the task's
     automaton ``dta``, the events' clocks ``sta`` (bands included) and the ``sensors``
     (at most ``max_states`` states, else :class:`~mitld_lp.util.memory.ProductTooLarge`);
-    ``ends``: a joint automaton's (:mod:`mitld_lp.running.sensed_joint`)."""
+    ``ends``: a joint automaton's (:mod:`mitld_lp.running.sensed_joint`); ``reading``:
+    the band read for its worst law or its best (:func:`tail_sta`)."""
     return sensed_band_unfolding(game, dta, sta, sensors, controller, max_states,
-                                 ends=ends)[0]
+                                 ends=ends, reading=reading)[0]
 
 
 def sensed_band_unfolding(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
-                          max_states: int | None = None, *, ends: Any = None
+                          max_states: int | None = None, *, ends: Any = None,
+                          reading: str = "worst"
                           ) -> tuple[BandChain, tuple[tuple[str, np.ndarray], ...]]:
     """:func:`sensed_band_chain` and its reward models (a joint automaton's ``steps``
-    and ``cost``, the same for every corner: each state's)."""
-    chain, choices = sensed_corner_unfolding(game, dta, sta, sensors, controller,
-                                             max_states, ends=ends)
+    and ``cost``, the same for every corner: each state's); a band with no truncation
+    point drawn past its step as :func:`tail_sta` says for ``reading``."""
+    chain, choices = sensed_corner_unfolding(game, dta, tail_sta(sta, reading), sensors,
+                                             controller, max_states, ends=ends)
     rows = [row for here in choices for _, row in here]
     names = tuple(name for here in choices for name, _ in here)
     n = len(choices)
@@ -114,6 +118,41 @@ def sensed_band_unfolding(game: Any, dta: Any, sta: Any, sensors: Any, controlle
     np.cumsum([len(h) for h in choices], out=groups[1:])
     return (BandChain(matrix, vals.copy(), groups, names, chain.labels, chain.valuations,
                       chain.origin), chain.rewards)
+
+
+def tail_sta(sta: Any, reading: str = "worst") -> Any:
+    """``sta`` with the clock of each sensed band that no truncation serves (its clock's
+    law a :class:`~mitld_lp.distributions.band.TailBand`,
+    :func:`mitld_lp.sensing.belief.sensed_sta`) kept exact: the chain's clock runs to
+    the band's step ``K`` and stays there, nothing truncated, nature picking the
+    hazard of every later step in a constant interval.  For the worst law
+    (``reading = "worst"``) the outer one, holding every later interval of the band:
+    nature may do more than it can, so the chain's worst case is a sound lower bound of
+    the controller's (exact where the band is constant past ``K``).  For the best law
+    the inner one, within every later interval: nature may do less, so the chain's best
+    case is a sound lower bound of the controller's; where no constant interval lies
+    within every later one, the band's own intervals up to step ``K + 1`` and a run
+    still pending after it cut (counted as failure).  Other clocks unchanged."""
+    from mitld_lp.automata.sta import STA
+    from mitld_lp.distributions.band import TailBand, tail_bands
+
+    clocks, changed = dict(sta.clocks), False
+    for a, c in sta.clocks.items():
+        d = c.distribution
+        if not isinstance(d, TailBand):
+            continue
+        changed, K, c0 = True, d.step, d.base.constant_hazard_from
+        cap = K if c0 is None else min(K, max(c0 - 1, 0))  # constant before K already
+        law, cut = d, None
+        if reading == "best":
+            inner = tail_bands(d.base, K)[1]
+            if inner is None:
+                law, cap, cut = d.base, K, K + 1
+            else:
+                law = replace(inner, nominal=d.nominal)
+        clocks[a] = replace(c, distribution=law, cap=cap, truncation=cut, keeps_never=False,
+                            report_limit=None, report_tail=0.0)
+    return STA(sta.dta, clocks) if changed else sta
 
 
 def chain_floor(mdp: Any, policy: np.ndarray, dta: Any) -> tuple[int, int]:
@@ -146,20 +185,26 @@ def chain_floor(mdp: Any, policy: np.ndarray, dta: Any) -> tuple[int, int]:
 
 def sensed_band_chain_of(result: Any, controller: Any = None,
                          max_states: int | None = None, *,
-                         costs: Mapping[str, float] | None = None) -> BandChain:
+                         costs: Mapping[str, float] | None = None,
+                         reading: str | None = None) -> BandChain:
     """The interval chain of a sensed answer whose laws include a band, under its
     controller or ``controller`` (one of the same model), at most ``max_states``; a
     randomised controller's (constraints, ``then``) over the joint automaton, whose
     labels ``c<i>`` mark each constraint's formula accepted (``costs``: the actions'
-    costs, default the model's)."""
-    return sensed_band_unfolding_of(result, controller, max_states, costs=costs)[0]
+    costs, default the model's); ``reading``: the band's worst law or its best
+    (:func:`tail_sta`; default the answer's)."""
+    return sensed_band_unfolding_of(result, controller, max_states, costs=costs,
+                                    reading=reading)[0]
 
 
 def sensed_band_unfolding_of(result: Any, controller: Any = None,
                              max_states: int | None = None, *,
-                             costs: Mapping[str, float] | None = None
+                             costs: Mapping[str, float] | None = None,
+                             reading: str | None = None
                              ) -> tuple[BandChain, tuple[tuple[str, np.ndarray], ...]]:
     """:func:`sensed_band_chain_of` and its reward models."""
+    if reading is None:
+        reading = getattr(result.part, "reading", "worst")
     c = controller if controller is not None else result.controller
     if c is None:
         raise ValueError(f"no controller to export: the synthesis is {result.status}")
@@ -169,9 +214,10 @@ def sensed_band_unfolding_of(result: Any, controller: Any = None,
         ends = joint_ends(result.joint, [v.constraint for v in result.constraints],
                           result.belief, result.model.costs if costs is None else costs)
         return sensed_band_unfolding(result.model.game, result.joint.dta, result.sta,
-                                     result.sensors, c, max_states, ends=ends)
+                                     result.sensors, c, max_states, ends=ends,
+                                     reading=reading)
     return sensed_band_unfolding(result.model.game, result.dta, result.sta, result.sensors,
-                                 c, max_states)
+                                 c, max_states, reading=reading)
 
 
 def worst_case(chain: BandChain, *, tol: float = 1e-13, max_iterations: int = 1_000_000

@@ -71,15 +71,15 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
 from mitld_lp.automata.dta import DTA, SAFE
-from mitld_lp.automata.sta import STA, make_sta
+from mitld_lp.automata.sta import STA, EventClock, make_sta
 from mitld_lp.distributions import FirstOccurrence
-from mitld_lp.distributions.band import last_event_step
+from mitld_lp.distributions.band import UnboundedBand, last_event_step, tail_bands, tail_step
 from mitld_lp.product import default_max_memory, estimate_size
 from mitld_lp.sensing.frontier import FrontierBuilder
 from mitld_lp.sensing.horizon import collapse
@@ -132,27 +132,37 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
     auto = [a for a in sorted(laws) if a not in fixed and (
         a in sensed or not clock_reduction or laws[a].constant_hazard_from is None)]
     share = epsilon / len(auto) if auto else epsilon
-    points, cuts = {}, {}
+    points, cuts, tails = {}, {}, {}
     for a in auto:
         nu = float(laws[a].never) if a in sensed else 0.0
         d = sensors[a].detect if sensors is not None and a in sensors else 0.0
-        if nu > 0.0:
-            half = share / 2 if 0.0 < d < 1.0 else share
-            # a band of tables of masses: cut at its last step, past which no law of it
-            # has the event (whatever never masses they keep): nothing cut there
-            last = last_event_step(laws[a])
-            points[a] = max(laws[a].truncation_point(min(nu + half, 1.0))
-                            if last is None else last, 1)
-            if 0.0 < d < 1.0:
-                cuts[a] = max(2, math.ceil(math.log(half) / math.log1p(-d)))
-        else:
-            points[a] = laws[a].truncation_point(share)
+        half = share / 2 if nu > 0.0 and 0.0 < d < 1.0 else share
+        eps = min(nu + half, 1.0) if nu > 0.0 else share
+        # a band of tables of masses: cut at its last step, past which no law of it has
+        # the event (whatever never masses they keep): nothing cut there
+        last = last_event_step(laws[a]) if nu > 0.0 else None
+        # a band that may never happen whose hazard may stay positive: its laws' chances
+        # of "never" once the event is pending differ, so no cut is sound (not even at
+        # the middle law's chance); nor is one where the band has no truncation point
+        unbounded = laws[a].is_ambiguous and nu > 0.0 and last is None
+        if not unbounded:
+            try:
+                T = last if last is not None else laws[a].truncation_point(eps)
+            except UnboundedBand:
+                if a not in sensed:
+                    raise
+                unbounded = True
+        if unbounded:  # the middle law's cut, the band's tail bounded
+            T, tails[a] = _tail(laws[a], eps, share)
+        points[a] = max(T, 1) if nu > 0.0 else T
+        if nu > 0.0 and 0.0 < d < 1.0:
+            cuts[a] = max(2, math.ceil(math.log(half) / math.log1p(-d)))
     for a in fixed:  # a fixed point of a sensed event that may never happen
         if a in sensed and float(laws[a].never) > 0.0:
             d = sensors[a].detect if sensors is not None and a in sensors else 0.0
             if 0.0 < d < 1.0:
                 cuts[a] = max(2, math.ceil(math.log(share / 2) / math.log1p(-d)))
-    sta = make_sta(dta, laws, epsilon, clock_reduction=clock_reduction,
+    sta = make_sta(dta, {**laws, **tails}, epsilon, clock_reduction=clock_reduction,
                    truncation={**fixed, **points})
     clocks = dict(sta.clocks)
     for a in sensed:
@@ -166,7 +176,50 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
                 reach = 1.0 - float(np.prod(1.0 - np.asarray(hi, dtype=float)))
             clocks[a] = replace(c, keeps_never=True, report_limit=R,
                                 report_tail=0.0 if R is None else reach * (1.0 - d) ** R)
+    for a in tails:  # what the information states cut is the middle law's
+        clocks[a] = TailClock(**{f.name: getattr(clocks[a], f.name) for f in fields(EventClock)})
     return STA(dta, clocks)
+
+
+@dataclass(frozen=True, slots=True)
+class TailClock(EventClock):
+    """The clock of a sensed band that no truncation serves (:func:`sensed_sta`): its
+    information states are its middle law's, so what their cut takes (``tail``) is that
+    law's ``P(K > T)`` (``P(T < K < inf)`` where it keeps "never") and the sensor's cut;
+    the controller's chain cuts nothing
+    (:func:`mitld_lp.running.sensed_band_chain.tail_sta`)."""
+
+    @property
+    def tail(self) -> float:
+        if self.truncation is None:
+            return 0.0
+        law = self.distribution.nominal  # type: ignore[attr-defined]
+        cut = float(law.survival(self.truncation))
+        if self.keeps_never:
+            cut = max(cut - float(law.never), 0.0)
+        return cut + self.report_tail
+
+
+def _tail(band: Any, eps: float, share: float) -> tuple[int, FirstOccurrence]:
+    """The truncation point of a sensed band that no truncation serves (its laws' never
+    masses differ and its hazard may stay positive for ever) and the law its clock
+    keeps: the point is its middle law's alone at ``eps`` (the information states are
+    that law's, which is fine alone, even one that may never happen); the law is the
+    band with its hazards past a step ``K >= T``
+    (:func:`~mitld_lp.distributions.band.tail_step` at ``share``) replaced by the outer
+    constant interval, which holds every later one
+    (:func:`~mitld_lp.distributions.band.tail_bands`), the middle law kept as its
+    nominal.  The controller's interval chain draws the true event from it, nothing
+    truncated (:func:`mitld_lp.running.sensed_band_chain.tail_sta`)."""
+    T = band.nominal.truncation_point(eps)
+    K = max(T, tail_step(band, share), 1)
+    outer = tail_bands(band, K)[0]
+    log.info("%s: no truncation point serves the band (its laws' never masses differ and "
+             "its hazard may stay positive for ever): the information states are its "
+             "middle law's, cut at step %d; past step %d the controller's chain lets "
+             "nature pick the hazard in [%.6g, %.6g] at every step", band.label, T, K,
+             outer.lo, outer.hi)
+    return T, replace(outer, nominal=band.nominal)
 
 
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
