@@ -158,6 +158,9 @@ def test_attractor_and_reach_match_fixed_points(walks):
         back = cg.backward(mdp.matrix.indptr, mdp.matrix.indices, mdp.row_groups, seeds,
                            np.zeros(mdp.n_choices, dtype=bool), False)
         assert np.array_equal(back, (r & seeds[None, :]).any(axis=1))
+        e = graph.edges(mdp)
+        along = graph.backward_reachable(n, e.source, e.succ, seeds)
+        assert np.array_equal(along, (r & seeds[None, :]).any(axis=1))
 
 
 def test_end_components_are_those_of_the_numpy_rounds(walks):

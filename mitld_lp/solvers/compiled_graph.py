@@ -18,7 +18,8 @@ Each kernel gives what its NumPy counterpart gives, not merely an equivalent ans
 * :func:`state_levels`: the three above on a choice matrix, in one call;
 * :func:`backward`: the least fixed points of :func:`~mitld_lp.solvers.graph.attractor`
   and of :func:`~mitld_lp.solvers.graph.backward_reachable` by a work queue over the
-  transposed pattern (a set: the order of the queue does not change it);
+  transposed pattern (a set: the order of the queue does not change it), and
+  :func:`reaching_edges` the same reach along a list of edges;
 * :func:`end_components_among`: de Alfaro's rounds of
   :func:`~mitld_lp.solvers.graph.maximal_end_components` on the candidate states alone
   (no sub-MDP is built for them).
@@ -29,8 +30,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["backward", "components_and_levels", "end_components_among", "state_graph",
-           "state_levels", "strong_components"]
+__all__ = ["backward", "components_and_levels", "end_components_among", "reaching_edges",
+           "state_graph", "state_levels", "strong_components"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -253,6 +254,42 @@ def backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cove
             if remaining[o] == 0 and not inside[o]:
                 inside[o] = True
                 queue[tail] = o
+                tail += 1
+    return inside
+
+
+@numba.njit(cache=True, nogil=True)
+def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
+    """The states of ``n`` with a path along the edges ``source -> succ`` to a
+    ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
+    backward_reachable`): the edges grouped by ``succ`` (a counting sort), then a work
+    queue from the seeds."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(succ.shape[0]):
+        ptr[succ[e] + 1] += 1
+    for t in range(n):
+        ptr[t + 1] += ptr[t]
+    fill = ptr[:-1].copy()
+    pred = np.empty(succ.shape[0], dtype=np.int64)
+    for e in range(succ.shape[0]):
+        pred[fill[succ[e]]] = source[e]
+        fill[succ[e]] += 1
+    inside = seeds.copy()
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for s in range(n):
+        if inside[s]:
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for e in range(ptr[t], ptr[t + 1]):
+            v = pred[e]
+            if not inside[v]:
+                inside[v] = True
+                queue[tail] = v
                 tail += 1
     return inside
 

@@ -98,10 +98,15 @@ def backward_reachable(
     """States with a path (along the edges ``source -> succ``) to a ``seeds`` state.
 
     One breadth-first search on the reversed graph from a virtual node ``n`` that points
-    at every seed; the seeds themselves are included.
+    at every seed; the seeds themselves are included.  Many edges are walked compiled
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same set.
     """
     if not np.any(seeds):
         return np.zeros(n, dtype=bool)
+    walks = compiled_walks(np.asarray(succ).size)
+    if walks is not None:
+        return walks.reaching_edges(n, np.asarray(source), np.asarray(succ),
+                                    np.array(seeds, dtype=bool))
     return Reversed(n, source, succ).reaching(seeds)
 
 
