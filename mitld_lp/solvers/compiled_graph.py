@@ -232,11 +232,34 @@ def backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cove
         if not every and remaining[s] > 0:
             remaining[s] = 1
     inside = seeds.copy()
-    queue = np.empty(n, dtype=np.int64)
-    tail = 0
     for s in range(n):
         if remaining[s] == 0 and row_groups[s + 1] > row_groups[s]:
             inside[s] = True
+    return _joined(col_ptr, col_rows, owner, remaining, inside, hit)
+
+
+@numba.njit(cache=True, nogil=True)
+def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
+    """The states of ``n`` with a path along the edges ``source -> succ`` to a
+    ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
+    backward_reachable`): :func:`backward` with each edge a choice of its source."""
+    m = succ.shape[0]
+    col_ptr, col_rows = _transpose(np.arange(m + 1), succ, n)
+    remaining = np.ones(n, dtype=np.int64)  # one edge into the set is enough
+    return _joined(col_ptr, col_rows, source, remaining, seeds.copy(),
+                   np.zeros(m, dtype=np.bool_))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _joined(col_ptr, col_rows, owner, remaining, inside, hit):  # pragma: no cover
+    """The work queue of :func:`backward` from the states ``inside``: a choice (a row
+    of the transposed pattern ``col_ptr, col_rows``, owned by ``owner``) not yet
+    ``hit`` is hit by an entry into the set, and its owner joins when its
+    ``remaining`` count of choices to hit reaches 0."""
+    n = inside.shape[0]
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for s in range(n):
         if inside[s]:
             queue[tail] = s
             tail += 1
@@ -254,42 +277,6 @@ def backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cove
             if remaining[o] == 0 and not inside[o]:
                 inside[o] = True
                 queue[tail] = o
-                tail += 1
-    return inside
-
-
-@numba.njit(cache=True, nogil=True)
-def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
-    """The states of ``n`` with a path along the edges ``source -> succ`` to a
-    ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
-    backward_reachable`): the edges grouped by ``succ`` (a counting sort), then a work
-    queue from the seeds."""
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for e in range(succ.shape[0]):
-        ptr[succ[e] + 1] += 1
-    for t in range(n):
-        ptr[t + 1] += ptr[t]
-    fill = ptr[:-1].copy()
-    pred = np.empty(succ.shape[0], dtype=np.int64)
-    for e in range(succ.shape[0]):
-        pred[fill[succ[e]]] = source[e]
-        fill[succ[e]] += 1
-    inside = seeds.copy()
-    queue = np.empty(n, dtype=np.int64)
-    tail = 0
-    for s in range(n):
-        if inside[s]:
-            queue[tail] = s
-            tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for e in range(ptr[t], ptr[t + 1]):
-            v = pred[e]
-            if not inside[v]:
-                inside[v] = True
-                queue[tail] = v
                 tail += 1
     return inside
 
