@@ -10,7 +10,8 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 
 * ``ours``: :func:`mitld_lp.load_model` and :func:`mitld_lp.synthesize` with their
   defaults; ``solve_cpu`` is everything after the product is built (the solver modules
-  imported before, as in ``bench_sweeps.py``), ``whole_cpu`` the load (the PRISM
+  imported before, as in ``bench_sweeps.py``), ``analysis_cpu`` the part of it in the
+  graph analysis (``solvers.analysis.analyse``, timed in place), ``whole_cpu`` the load (the PRISM
   exploration, with the child process Storm explores in when it is capped) and the
   synthesis, ``process_cpu`` the child's CPU up to the end of the synthesis (imports
   included; the bench's extras below are not: ``child_cpu`` is the whole child);
@@ -91,8 +92,8 @@ QUICK_COUNT = 2
 BUDGET = 1800.0  # CPU seconds per child
 _NOT_A_TASK = ("not a probability", "qualitative")
 COLUMNS = ("instance", "value", "reference", "states", "transitions", "sweep_ms",
-           "solve_cpu", "solve_sweeps", "iteration_sweeps", "iteration_s", "lp_s",
-           "storm_check_cpu", "storm_check_sweeps", "storm_best",
+           "solve_cpu", "analysis_cpu", "solve_sweeps", "iteration_sweeps", "iteration_s",
+           "lp_s", "storm_check_cpu", "storm_check_sweeps", "storm_best",
            "solve_over_storm_check", "whole_cpu", "load_cpu", "product_cpu",
            "storm_build_cpu", "process_cpu", "storm_prism_cpu", "storm_process_cpu",
            "process_over_storm_process", "bytes_per_transition",
@@ -130,6 +131,26 @@ def _process_cpu() -> float:
     return own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
 
 
+def _timed_analysis() -> list[float]:
+    """The solve stage's graph analysis (``solvers.analysis.analyse``, which the route
+    imports when it runs) wrapped in place: its CPU seconds, summed, in the list
+    returned."""
+    from mitld_lp.solvers import analysis
+
+    spent = [0.0]
+    inner = analysis.analyse
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        c = bs._cpu()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            spent[0] += bs._cpu() - c
+
+    analysis.analyse = timed
+    return spent
+
+
 def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     import numpy as np
 
@@ -142,6 +163,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     bs.preload()
     fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
     before = bs._rss_kb()
+    analysis = _timed_analysis()
     c = bs._cpu()
     r = synthesize(model)
     synth_cpu = bs._cpu() - c
@@ -157,7 +179,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
                lp_s=sum(m.seconds for m in lp) if lp else None,
                upper=r.upper, product_value=float(r.lower_model.value),
                certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
-               process_cpu=process_cpu,
+               process_cpu=process_cpu, analysis_cpu=analysis[0],
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
                product_cpu=max(synth_cpu - r.solve_cpu, 0.0),
                bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
@@ -356,6 +378,7 @@ def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         storm_agrees=all(abs(v - ours["product_value"]) <= 1e-6 for v in values),
         storm_prism_value=prism["value"] if prism else None,
         solve_cpu=ours["solve_cpu"], solve_sweeps=sweeps(ours["solve_cpu"]),
+        analysis_cpu=ours["analysis_cpu"],
         whole_cpu=ours["whole_cpu"], process_cpu=ours["process_cpu"],
         load_cpu=ours["load_cpu"], product_cpu=ours.get("product_cpu"),
         storm_build_cpu=prism["build_cpu"] if prism else None,
@@ -385,7 +408,7 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
     storm = prism["process_cpu"] if prism else None
     return dict(
         base_value=base["lower"], base_upper=base["upper"], base_certified=base["certified"],
-        base_solve_cpu=base["solve_cpu"],
+        base_solve_cpu=base["solve_cpu"], base_analysis_cpu=base["analysis_cpu"],
         base_solve_over_storm_check=None if flat or not storm_check
         else base["solve_cpu"] / storm_check,
         base_whole_cpu=base["whole_cpu"], base_process_cpu=base["process_cpu"],
@@ -400,7 +423,8 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
 
 
 COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "states",
-            "transitions", "base_solve_cpu", "solve_cpu", "storm_check_cpu",
+            "transitions", "base_analysis_cpu", "analysis_cpu", "base_solve_cpu", "solve_cpu",
+            "storm_check_cpu",
             "base_solve_over_storm_check", "solve_over_storm_check", "base_whole_cpu",
             "whole_cpu", "base_load_cpu", "load_cpu", "storm_build_cpu", "base_product_cpu",
             "product_cpu", "base_process_cpu", "process_cpu",

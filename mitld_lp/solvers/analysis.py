@@ -42,6 +42,7 @@ and never decompose the graph again.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -55,13 +56,14 @@ from mitld_lp.solvers.graph import (
     attractor,
     backward_reachable,
     blocks_from,
+    compiled_end_components,
     gather_ranges,
-    graph_view,
-    levels,
     maximal_end_components,
+    state_levels,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.walks import compiled_walks, load_walks
 
 __all__ = ["analyse", "end_components"]
 
@@ -92,6 +94,9 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     internal = np.zeros(mdp.n_choices, dtype=bool)
     if cand.size == 0:
         return EndComponents(read_only(mec_of), read_only(internal), 0)
+    walks = compiled_walks(m.nnz)
+    if walks is not None:  # the rounds among the candidates, with no sub-MDP built
+        return compiled_end_components(walks, mdp, cand)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
     choices = gather_ranges(lo, hi)
     rows = sp.csr_array(m[choices])
@@ -126,6 +131,22 @@ def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
     return blocks_from(comp_of, level_of, self_loop)
 
 
+def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> bool:
+    """Whether the interval iteration will sweep a block compiled (loading numba): a
+    product of at least :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES` entries
+    with a component of at least :data:`~mitld_lp.solvers.kernels.
+    COMPILED_MIN_BLOCK_ENTRIES` inside it (a level's block holds its components).  A
+    guess from the product, not the quotient: a wrong one costs time, never a result."""
+    from mitld_lp.solvers import kernels
+
+    if m.nnz < kernels.COMPILED_MIN_ENTRIES:
+        return False
+    owner = np.repeat(comp, np.diff(m.indptr[row_groups]))
+    inside = owner[owner == comp[m.indices]]
+    del owner
+    return bool(np.bincount(inside).max(initial=0) >= kernels.COMPILED_MIN_BLOCK_ENTRIES)
+
+
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
     return EndComponents(read_only(np.full(n, -1, dtype=np.int64)),
                          read_only(np.zeros(n_choices, dtype=bool)), 0)
@@ -145,6 +166,10 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     owner = np.repeat(np.arange(n), np.diff(row_groups))
     seeds = zero.copy()
     seeds[owner[leaks]] = True
+    walks = compiled_walks(matrix.nnz)
+    if walks is not None:
+        return ~walks.backward(matrix.indptr, matrix.indices, row_groups, seeds,
+                               np.zeros(matrix.shape[0], dtype=bool), False)
     entry_owner = np.repeat(owner, np.diff(matrix.indptr))
     return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
 
@@ -165,10 +190,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         m.eliminate_zeros()
         mdp = replace(mdp, matrix=m)
     wide = goal | extra
-    graph = graph_view(m, mdp.row_groups)
-    found = levels(graph, np.column_stack([goal, wide]))
+    found = state_levels(m, mdp.row_groups, np.column_stack([goal, wide]))
+    if "numba" not in sys.modules and _sweeps_compiled(m, mdp.row_groups, found.component):
+        load_walks()  # the sweeps will load numba: the walks below run compiled too
     reach = found.reach[found.component]
-    del graph
     n = mdp.n_states
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]

@@ -3,9 +3,12 @@ r"""The support-graph routines every solver shares, below all of them.
 Edges of an MDP, backward reachability, maximal end components, the one strongly
 connected decomposition with its levels (:func:`levels`) and the block order the
 solvers walk (:class:`Blocks`).  All of them look only at which transitions have
-positive probability, so they are exact.  This module imports no other solver module:
-:mod:`~mitld_lp.solvers.analysis`, :mod:`~mitld_lp.solvers.quotient` and
-:mod:`~mitld_lp.solvers.topological` all build on it.
+positive probability, so they are exact.  A large graph is walked by compiled kernels
+(:mod:`~mitld_lp.solvers.compiled_graph`, chosen by :mod:`~mitld_lp.solvers.walks`)
+with the same results.  This module imports no other solver module but those two and
+:mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
+:mod:`~mitld_lp.solvers.quotient` and :mod:`~mitld_lp.solvers.topological` all build
+on it.
 """
 
 from __future__ import annotations
@@ -13,15 +16,16 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import unique
-from mitld_lp.util.traversal import breadth_first_order, strong_components
+from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
 
 __all__ = [
     "Sense",
@@ -34,6 +38,7 @@ __all__ = [
     "Levels",
     "backward_reachable",
     "blocks_from",
+    "compiled_end_components",
     "edges",
     "gather_ranges",
     "graph_blocks",
@@ -42,6 +47,7 @@ __all__ = [
     "rows_dot",
     "levels",
     "maximal_end_components",
+    "state_levels",
     "segmented_argmax",
 ]
 
@@ -92,10 +98,15 @@ def backward_reachable(
     """States with a path (along the edges ``source -> succ``) to a ``seeds`` state.
 
     One breadth-first search on the reversed graph from a virtual node ``n`` that points
-    at every seed; the seeds themselves are included.
+    at every seed; the seeds themselves are included.  Many edges are walked compiled
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same set.
     """
     if not np.any(seeds):
         return np.zeros(n, dtype=bool)
+    walks = compiled_walks(np.asarray(succ).size)
+    if walks is not None:
+        return walks.reaching_edges(n, np.asarray(source), np.asarray(succ),
+                                    np.array(seeds, dtype=bool))
     return Reversed(n, source, succ).reaching(seeds)
 
 
@@ -174,10 +185,16 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
     whose support lies in the current state set, drop the states left with no choice,
     split into strongly connected components (SCCs) and drop every choice that can leave
     its SCC; repeat until nothing changes.  What is left, grouped by SCC, are the MECs.
-    Each round is vectorised (one :func:`~mitld_lp.util.traversal.strong_components`).
+    Each round is vectorised (one :func:`~mitld_lp.util.traversal.strong_components`);
+    on a large MDP the rounds run compiled
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same end components, numbered
+    alike.
     """
     states_mask = as_state_mask(mdp, states_mask, "states_mask")
     n = mdp.n_states
+    walks = compiled_walks(mdp.matrix.nnz)
+    if walks is not None:
+        return compiled_end_components(walks, mdp, np.flatnonzero(states_mask))
     cstate = mdp.choice_state()
     e = _edge_ends(mdp)
     alive = states_mask.copy()
@@ -194,7 +211,36 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
             break
         allowed[e.choice[cross]] = False
         alive = still
-    mec_of = np.full(n, -1, dtype=np.int64)
+    return _numbered(alive, allowed, scc)
+
+
+def compiled_end_components(walks: Any, mdp: MDP, cand: np.ndarray) -> EndComponents:
+    """:func:`maximal_end_components` of the states ``cand`` (sorted ids) by the
+    compiled rounds (``walks``: the module of compiled walks), numbered as the NumPy
+    rounds number them: by their least state (the last round's components are closed,
+    so every search meets them in that order)."""
+    m = sp.csr_array(mdp.matrix)
+    row_groups = np.asarray(mdp.row_groups)
+    alive, allowed, label = walks.end_components_among(
+        m.indptr, m.indices, m.data > 0, row_groups, np.asarray(cand, dtype=np.int64))
+    mec_of = np.full(mdp.n_states, -1, dtype=np.int64)
+    internal = np.zeros(mdp.n_choices, dtype=bool)
+    inside = label[alive]
+    n_mecs = 0
+    if inside.size:
+        ids, first, which = np.unique(inside, return_index=True, return_inverse=True)
+        n_mecs = int(ids.size)
+        rank = np.empty(ids.size, dtype=np.int64)
+        rank[np.argsort(first)] = np.arange(ids.size)
+        mec_of[cand[alive]] = rank[which]
+        internal[gather_ranges(row_groups[cand], row_groups[cand + 1])] = allowed
+    return EndComponents(read_only(mec_of), read_only(internal), n_mecs)
+
+
+def _numbered(alive: np.ndarray, allowed: np.ndarray, scc: np.ndarray) -> EndComponents:
+    """The end components of the states ``alive`` (with their choices ``allowed``),
+    numbered in the order of their last round's component labels ``scc``."""
+    mec_of = np.full(alive.shape[0], -1, dtype=np.int64)
     if alive.any():
         _, ids = np.unique(scc[alive], return_inverse=True)
         mec_of[alive] = ids
@@ -271,14 +317,20 @@ def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
     seeds for ever: ``Prob0E`` of a minimum when the seeds are the target.  Solved
     backwards from the seeds a frontier at a time (a choice is hit once, a state joins
     when its last choice is), vectorised per round; the predecessors are the matrix's
-    pattern in column order (one counting sort)."""
+    pattern in column order (one counting sort).  A large matrix is walked compiled
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`), a state at a time: the same set."""
+    n_choices = int(matrix.indptr.size - 1)
+    walks = compiled_walks(matrix.nnz)
+    if walks is not None:
+        hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
+        return walks.backward(matrix.indptr, matrix.indices, np.asarray(row_groups),
+                              np.array(seeds, dtype=bool), hit, True)
     n = row_groups.shape[0] - 1
     counts = np.diff(row_groups)
     owner = np.repeat(np.arange(n, dtype=np.int64), counts)
     pattern = sp.csc_array(sp.csr_array(
         (np.ones(matrix.nnz, dtype=bool), matrix.indices, matrix.indptr), shape=matrix.shape))
     col_ptr, col_rows = pattern.indptr, pattern.indices
-    n_choices = int(matrix.indptr.size - 1)
     hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
     remaining = counts - np.bincount(owner[hit], minlength=n)
     inside = np.array(seeds, dtype=bool)
@@ -421,7 +473,12 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     """The strongly connected components of ``graph``, their levels (Kahn's algorithm
     run backwards: sinks are level 0, a component's level is one more than its highest
     successor's) and, propagated up the same walk, which components can reach a state
-    of each seed set (``seeds``: ``(n, k)`` bool)."""
+    of each seed set (``seeds``: ``(n, k)`` bool).  A large graph is walked compiled
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same components, numbered
+    alike, and levels."""
+    walks = compiled_walks(graph.nnz)
+    if walks is not None and graph.has_canonical_format:
+        return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
     n_comp, comp = strong_components(graph)
     # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
     index = graph.indices.dtype
@@ -466,6 +523,37 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
     return Levels(comp, level, reach)
+
+
+def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,
+                 seeds: np.ndarray | None = None) -> Levels:
+    """:func:`levels` of ``graph_view(matrix, row_groups)`` (no stored zero), the state
+    graph built by the compiled walk itself where they are used."""
+    walks = compiled_walks(matrix.nnz)
+    if walks is None:
+        return levels(graph_view(matrix, row_groups), seeds)
+    n = row_groups.shape[0] - 1
+    if seeds is None:
+        seeds = np.zeros((n, 0), dtype=bool)
+    comp, level, reach = walks.state_levels(matrix.indptr, matrix.indices,
+                                            np.asarray(row_groups),
+                                            np.ascontiguousarray(seeds, dtype=bool), SMALL)
+    return Levels(np.asarray(comp, dtype=np.int64), level, reach)
+
+
+def _compiled_levels(walks: Any, ptr: np.ndarray, succ: np.ndarray,
+                     seeds: np.ndarray | None) -> Levels:
+    """:func:`levels` of the graph ``ptr, succ`` (CSR, each row sorted without repeats)
+    by the compiled walks: the components labelled as the routine :func:`levels` calls
+    labels them (SciPy's search looks at a node's successors from the last, the plain
+    walk of a graph of at most :data:`~mitld_lp.util.traversal.SMALL` nodes and entries
+    from the first)."""
+    n = ptr.shape[0] - 1
+    if seeds is None:
+        seeds = np.zeros((n, 0), dtype=bool)
+    _, comp, level, reach = walks.components_and_levels(
+        ptr, succ, n + succ.shape[0] > SMALL, np.ascontiguousarray(seeds, dtype=bool), True)
+    return Levels(np.asarray(comp, dtype=np.int64), level, reach)
 
 
 def _distinct(values: np.ndarray, stamp: np.ndarray) -> np.ndarray:
