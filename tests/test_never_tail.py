@@ -164,12 +164,13 @@ def true_intervals(n: int):
     return out
 
 
-def brute(n: int, worst: bool):
+def brute(n: int, worst: bool, go_at: int | None = None):
     """The max over the robot's policies of nature's min (``worst``) or max over its
     choice of hazard at every step within the true intervals, of P(b happens, and h or
     b within n steps) (``D[mu] b`` asks that b happens), by backward induction in
     fractions (nature's best choice is an end of the interval: the value is linear in
-    the hazard).  The tail past step n by hand: once h is reached, b may still come at
+    the hazard); ``go_at``: the robot's policy fixed, waiting at "mid" until that step
+    and going there.  The tail past step n by hand: once h is reached, b may still come at
     any later step; nature's least hazards are 0 from step 3 on (the tables' past their
     support), so the worst law's chance of it from step t is ``1 - prod_{t < k <= 2}
     (1 - lo_k)``; its greatest are the Poisson law's at least, which tend to 1, so
@@ -195,7 +196,9 @@ def brute(n: int, worst: bool):
         moves = {"mid": {"go": {"sa": Fraction(1, 2), "d": Fraction(1, 2)},
                          "wait": {"mid": Fraction(1)}}, "sa": {"stay": {"sa": Fraction(1)}}}
         best = Fraction(0)
-        for succ in moves[w].values():
+        allowed = moves[w] if w != "mid" or go_at is None else {
+            a: moves[w][a] for a in (("go",) if t == go_at else ("wait",))}
+        for succ in allowed.values():
             after = sum(p * value(v, t + 1) for v, p in succ.items())
             ends = [h + (1 - h) * after for h in (lo, hi)]
             best = max(best, min(ends) if worst else max(ends))
@@ -271,3 +274,61 @@ def test_a_constraint_met_under_every_law_and_the_cli(tmp_path):
     # never more than the unconstrained worst case, never less than waiting for the bus
     wait = 1 - float(np.prod([1 - float(lo) for lo, _ in true_intervals(5)]))
     assert wait - 1e-9 <= r.lower <= float(brute(5, True)) + 1e-9
+
+
+@pytest.mark.parametrize("bands", ["worst", "best"])
+def test_the_returned_controller_replayed_reaches_lower(bands):
+    """The controller's first "go" at "mid" found by replaying it (the bus not come),
+    that fixed policy's value by backward induction against nature's choice at every
+    step within the true band is ``lower`` (the policy side's value is exact: 9 < K's
+    tail does not matter, the deadline before it)."""
+    from mitld_lp import Observation, synthesize
+
+    r = synthesize(three("D[mu] b & F[0,6] (h | b)"), bands=bands)
+    c = r.controller
+    c.reset()
+    go_at = None
+    for t in range(7):
+        if c.act(Observation("mid")) == "go":
+            go_at = t
+            break
+    assert r.lower == pytest.approx(float(brute(6, bands == "worst", go_at)), abs=1e-9)
+
+
+def test_storm_on_the_constrained_chain(tmp_path):
+    """The randomised constrained controller's interval chain (the outer tail's, which
+    holds every law of the band): Storm's worst case of "accept" is ``lower`` and its
+    greatest probability of the constraint's formula is within the bound, so the
+    constraint holds under every law of the true band."""
+    from test_band_chain import storm_robust
+
+    from mitld_lp import synthesize
+    from mitld_lp.running.band_mixture_chain import write_mixture_chain
+
+    r = synthesize(three("D[mu] b & F[0,5] (h | b)"), constraints=["P(F h) <= 0.25"])
+    path = write_mixture_chain(r, tmp_path / "c.drn")
+    assert storm_robust(path, 'Pmin=? [F "accept"]') == pytest.approx(r.lower, abs=1e-9)
+    assert storm_robust(path, 'Pmax=? [F "c1"]', maximise=True) <= 0.25 + 1e-9
+
+
+def test_the_exported_interval_mdp_is_the_policy_side_s(tmp_path):
+    """``export --drn`` of such a model is no longer refused: the outer tail's interval
+    MDP, the one ``lower`` is solved on (same states and choices), with the tail's
+    interval [0, 1] past K (which reaches 0: Storm reads it but will not check it,
+    docs/robust.md); with ``--upper`` the inner tail's, ``[0, h_P(K+1)]``."""
+    from mitld_lp import synthesize
+    from mitld_lp.routes.robust import interval_export
+    from mitld_lp.solvers.robust_export import write_interval_drn
+
+    m = three("D[mu] b & F[0,9] (h | b)")
+    r = synthesize(m)
+    imdp, target = interval_export(m)
+    assert imdp.n_states == r.mdp.n_states and imdp.n_choices == r.mdp.n_choices
+    write_interval_drn(imdp, target, tmp_path / "m.drn")  # written, not refused
+    intervals = set(zip(imdp.band_lo.tolist(), imdp.band_hi.tolist(), strict=True))
+    assert (0.0, 1.0) in intervals  # the outer tail past K
+    upper, _ = interval_export(m, upper=True)
+    h = poisson_hazard(2.0, tail_step(UNSETTLED, 0.01) + 1)
+    inner = set(zip(upper.band_lo.tolist(), upper.band_hi.tolist(), strict=True))
+    assert (0.0, 1.0) not in inner
+    assert any(lo == 0.0 and hi == pytest.approx(h, rel=1e-9) for lo, hi in inner)
