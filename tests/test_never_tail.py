@@ -332,3 +332,16 @@ def test_the_exported_interval_mdp_is_the_policy_side_s(tmp_path):
     inner = set(zip(upper.band_lo.tolist(), upper.band_hi.tolist(), strict=True))
     assert (0.0, 1.0) not in inner
     assert any(lo == 0.0 and hi == pytest.approx(h, rel=1e-9) for lo, hi in inner)
+
+
+@pytest.mark.parametrize("bands", ["worst", "best"])
+def test_a_minimum_bracketed(bands):
+    """``objective = "min"``: the robot keeps away from h (reaching it satisfies the
+    task once the bus comes), so the task holds iff the bus comes within 5 steps:
+    against the worst law nature brings it at the greatest hazards (``upper``, the
+    controller's worst case, the outer tail's), with the best at the least."""
+    from mitld_lp import synthesize
+
+    r = synthesize(three("D[mu] b & F[0,5] (h | b)"), objective="min", bands=bands)
+    exact = float(brute_bus(5, bands == "best"))
+    assert r.certified and r.lower == pytest.approx(exact, abs=1e-9) == r.upper

@@ -177,7 +177,8 @@ def _joined(posed: Posed, tail: Tail, pol: Result, bound: Result, which: str) ->
     total = upper - lower
     gap = max(total - own, 0.0)
     eps = posed.model.epsilon if posed.settings.epsilon is None else posed.settings.epsilon
-    met = bool(total == total and gap <= eps + posed.settings.certify_tol)
+    tol = posed.settings.certify_tol
+    met = bool(total == total and -tol <= total and gap <= eps + tol)
     check = Check(f"band's tail past step {', '.join(map(str, tail.steps.values()))}", met,
                   f"{tail.said}; the policy on the {which} tail, the other end on the "
                   f"other; the two ends {'meet' if met else 'do not meet'}: gap {gap:.3g} "
