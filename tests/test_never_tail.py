@@ -74,9 +74,9 @@ def test_outer_and_inner_intervals_by_hand():
 
 
 def test_no_inner_interval_where_none_lies_within_all():
-    # two Poisson laws beside a table: past K every interval is [0, max of Poisson
-    # hazards]; with a law of hazard 0.3 for ever (a geometric) and one of 0 the lower
-    # ends reach 0 and the upper ends stay >= h_P; an inner one exists ([0, h_P(K+1)])
+    # a geometric(0.5) and a Poisson law beside a table leaving mass to never: past K
+    # the lower ends are 0 and the upper ones at least max(0.5, h_P(K+1)): an inner
+    # interval exists
     from mitld_lp.distributions import geometric
 
     b = band_of_laws("mu", pmf([0.3, 0.3]), [geometric(0.5), poisson(2.0)])
