@@ -259,7 +259,7 @@ def synthesize_robust(model: Model | Posed, **options: Any) -> Result:
         posed = model
     else:
         posed = pose_on((POINTS_TOO,), model, settings=settings_from(**options))
-    return solve_robust(posed, build_interval(posed, posed.settings.progress))
+    return POINTS_TOO.solve(posed, POINTS_TOO.build(posed, posed.settings.progress))
 
 
 def solve_robust(posed: Posed, built: Built) -> Result:
@@ -321,7 +321,7 @@ def interval_model(
     """The interval MDP that :func:`synthesize_robust` solves for ``model`` (for export:
     :func:`interval_export`)."""
     return _interval(model, epsilon, clock_reduction, max_states, max_automaton_states,
-                     max_memory)[0]
+                     max_memory, False)[0]
 
 
 def interval_export(
@@ -343,17 +343,29 @@ def interval_export(
     is then ``lower`` (``upper`` with ``upper=True``), or at most it with several
     ambiguous events at once (docs/robust.md)."""
     imdp, dta = _interval(model, epsilon, clock_reduction, max_states, max_automaton_states,
-                          max_memory)
+                          max_memory, upper)
     reached = imdp.target | imdp.truncated if upper else imdp.target
     goal, _ = _goal(robust_game(imdp), imdp, dta, np.asarray(reached, dtype=bool))
     return imdp, np.asarray(goal, dtype=bool)
 
 
 def _interval(model: Model, epsilon: float | None, clock_reduction: bool, max_states: int,
-              max_automaton_states: int, max_memory: int | None) -> tuple[IntervalMDP, DTA]:
+              max_automaton_states: int, max_memory: int | None,
+              upper: bool) -> tuple[IntervalMDP, DTA]:
+    """The interval MDP and automaton of ``model``; a band that needs its tail bounded
+    (:mod:`mitld_lp.routes.robust_tail`) with its outer tail, or with ``upper`` its
+    inner one (truncated past its step where it has none)."""
     eps = model.epsilon if epsilon is None else defaults.check_epsilon(epsilon)
     dta = to_dta(model.spec, max_states=min(max_states, max_automaton_states))
-    sta = make_sta(dta, model.distributions, eps, clock_reduction=clock_reduction)
+    laws, cut = model.distributions, None
+    from mitld_lp.routes.robust_tail import tail_of
+
+    tail = tail_of(model, eps, None)
+    if tail is not None:  # a band's tail: outer for lower, inner (or a cut) for upper
+        side = tail.inner if upper else tail.outer
+        laws = {**laws, **side}
+        cut = {a: K + 1 for a, K in tail.steps.items() if a not in side} or None
+    sta = make_sta(dta, laws, eps, clock_reduction=clock_reduction, truncation=cut)
     return robust_product(model.game, sta, max_states=max_states, max_memory=max_memory), dta
 
 
@@ -406,11 +418,15 @@ class RobustRoute(Route):
         return refused
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
-        return build_interval(posed, progress)
+        from mitld_lp.routes.robust_tail import policy_side
+
+        return build_interval(policy_side(posed), progress)
 
     def solve(self, posed: Posed, built: Built, *, costs: Any = None,
               seed: int | None = 0) -> Result:
-        return solve_robust(posed, built)
+        from mitld_lp.routes.robust_tail import solve_tailed
+
+        return solve_tailed(self, posed, built, solve_robust)
 
 
 #: The robust route claiming point laws too (:func:`synthesize_robust`).

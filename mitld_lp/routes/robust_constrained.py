@@ -571,12 +571,18 @@ class RobustConstrainedRoute(Route):
         return lp_refusals(posed)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
-        return build_joint(posed, progress, make=robust_product)
+        from mitld_lp.routes.robust_tail import policy_side
+
+        return build_joint(policy_side(posed), progress, make=robust_product)
 
     def solve(self, posed: Posed, built: Built, *, costs: Mapping[str, float] | None = None,
               seed: int | None = 0) -> Result:
+        from mitld_lp.routes.robust_tail import solve_tailed
+
         if posed.settings.bands == "best":
             from mitld_lp.routes.optimistic_constrained import solve_optimistic_constrained
 
-            return solve_optimistic_constrained(posed, built, costs=costs, seed=seed)
-        return solve_robust_constrained(posed, built, costs=costs, seed=seed)
+            return solve_tailed(self, posed, built, lambda p, b: solve_optimistic_constrained(
+                p, b, costs=costs, seed=seed))
+        return solve_tailed(self, posed, built, lambda p, b: solve_robust_constrained(
+            p, b, costs=costs, seed=seed))
