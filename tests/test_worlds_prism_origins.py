@@ -154,3 +154,16 @@ def test_a_lazily_explored_world_names_its_choices_alike(tmp_path: Path) -> None
         assert lazy.actions(s) == whole.actions(s)
     assert lazy.robot_actions() >= {"a_cmd1", "a_cmd2", "a_cmd5", "b_cmd1", "b_cmd3",
                                     "b_cmd4", "go"}
+
+
+def test_an_action_named_as_an_unlabelled_command_is_told_apart(tmp_path: Path) -> None:
+    """Module ``a``'s first command has no action, so it is ``a_cmd1``, and its second
+    command's action is written ``a_cmd1``: both are enabled in the initial state, and
+    each name gets the command it comes from."""
+    path = tmp_path / "m.prism"
+    path.write_text("mdp\nmodule a\n  x : [0..1] init 0;\n  [] x=0 -> (x'=1);\n"
+                    "  [a_cmd1] true -> (x'=0);\nendmodule\n")
+    game = load_prism(path)
+    assert sorted(game.actions((0,))) == ["a_cmd1@a_cmd1", "a_cmd1@a_cmd2"]
+    assert game.successors((0,), "a_cmd1@a_cmd1", frozenset()) == (((1,), 1.0),)
+    assert game.actions((1,)) == ("a_cmd1",)

@@ -27,7 +27,7 @@ from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_exact import PrismRecipe
-from mitld_lp.worlds.prism_origins import OriginNames, needs_origins
+from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_origins
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     builder_options,
@@ -223,7 +223,7 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     try:
         tables = read_model(model, where, chosen, events, {}, origin,
                             stopped[0] if len(stopped) == 1 else None, valuations=valuations,
-                            named=named)
+                            named=named, shared=may_share_names(program))
     except WorldError:
         if not checks and limit is None:  # Storm's own words where its exact checks
             _exact_refusal(stormpy, program, plain, where, options(True))  # find it

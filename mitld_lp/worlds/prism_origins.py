@@ -30,9 +30,26 @@ import numpy as np
 
 from mitld_lp.worlds import WorldError
 
-__all__ = ["OriginNames", "needs_origins", "origin_names"]
+__all__ = ["OriginNames", "may_share_names", "needs_origins", "origin_names"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
+
+
+def may_share_names(program: Any) -> bool:
+    """Whether two choices of one state may have one name: a module with two commands
+    of one action (a choice of an action joins one enabled command of it from each
+    module that has it), or an action named as a command without one is
+    (``[a_cmd1]`` beside module ``a``'s first command ``[]``).  Otherwise the check for
+    such choices (a sort of every choice by state and name) is left out."""
+    names = set()
+    for module in program.modules:
+        actions = [c.action_name for c in module.commands if c.is_labeled]
+        if len(actions) != len(set(actions)):
+            return True
+        names.update(actions)
+    return any(not cmd.is_labeled and f"{module.name}_cmd{k}" in names
+               for module in program.modules
+               for k, cmd in enumerate(module.commands, start=1))
 
 
 def needs_origins(program: Any) -> bool:
@@ -102,8 +119,11 @@ def origin_names(model: Any, archive: tuple[np.ndarray, list[str]] | None,
     m = model.nr_choices
     if archive is not None and _is_identifiers(archive, origins):
         index = archive[0].astype(np.int64)
-        ids, first = np.unique(index, return_index=True)
-        asked = [name(origins.get_command_set(c)) for c in first.tolist()]
+        k = len(archive[1])
+        ids = np.flatnonzero(np.bincount(index, minlength=k))
+        some = np.zeros(k, dtype=np.int64)
+        some[index] = np.arange(m, dtype=np.int64)  # a choice of each identifier (no sort)
+        asked = [name(origins.get_command_set(c)) for c in some[ids].tolist()]
     else:  # another archive: Storm asked choice by choice
         log.info("%s: Storm's archive does not hold the choices' origins as read here; "
                  "asked choice by choice", where)

@@ -6,7 +6,9 @@ little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.from
 the state valuations from the same archive's bit-packed records (Storm's per-variable
 calls, which make a Python list of each variable's values, where the layout is another);
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
-they disagree with it), state labels from Storm's per-label calls (a bit vector each).
+they disagree with it), or its choice origin where the choices are named from the
+commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from
+Storm's per-label calls (a bit vector each).
 Only the choices that need their PRISM commands to be told apart (two enabled commands
 of one action in a state) are looked at one by one.
 """
@@ -432,6 +434,7 @@ def read_model(
     valuations: tuple[tuple[str, ...], Valuations] | None = None,
     named: Callable[[Any, tuple[np.ndarray, list[str]] | None],
                     tuple[list[str], np.ndarray]] | None = None,
+    shared: bool = True,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -449,6 +452,8 @@ def read_model(
     ``named``: where ``model`` has Storm's choice origins in place of its choice labels,
     what names the choices from them (``named(model, origins)``, the origins the archive
     holds: :class:`mitld_lp.worlds.prism_origins.OriginNames`), as the labels would.
+    ``shared``: whether two choices of one state may have one name (False: the program
+    allows none, :func:`mitld_lp.worlds.prism_origins.may_share_names`; not looked for).
     Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
@@ -540,9 +545,11 @@ def read_model(
         )
 
     # Two robot choices of one state with one name: told apart by their commands.
-    key = state_of * (len(label_names) + 1) + label_of + 1
-    keys, counts = np.unique(key[robot], return_counts=True)
-    clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
+    clash = np.zeros(0, dtype=np.int64)
+    if shared:
+        key = state_of * (len(label_names) + 1) + label_of + 1
+        keys, counts = np.unique(key[robot], return_counts=True)
+        clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
     for c in clash.tolist():
         table.append(f"{table[int(code[c])]}@{origin(c)}")
         code[c] = len(table) - 1
