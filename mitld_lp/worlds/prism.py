@@ -111,7 +111,6 @@ from mitld_lp.worlds.prism_program import (
     check_constants,
     check_program,
     extra_labels,
-    name_unlabelled_commands,
     parse_program,
     storm_error,
     storm_quiet,
@@ -528,12 +527,11 @@ def load_prism(
         log.info("%s: the states where the task is decided are too deep an expression for "
                  "Storm; all states are expanded", where)
         terminal = ""
-    program, action_names = name_unlabelled_commands(program, where, stormpy)
     recipe = PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal)
 
     def work(limit: int | None = None) -> Tables:
-        return build_tables(stormpy, program, plain, where, chosen, event_set, action_names,
-                            terminal, max_states, limit, recipe)
+        return build_tables(stormpy, program, plain, where, chosen, event_set, terminal,
+                            max_states, limit, recipe)
 
     lazy = explore == "lazy" or (explore == "auto" and task is not None
                                  and horizon(task) is not None and not event_set
@@ -571,11 +569,18 @@ def load_prism(
         return PrismGame(**common)  # type: ignore[arg-type]
     return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
                          max_states=max_states,
-                         program_actions=frozenset(action_names.get(a, a) for a in
-                                                   _labelled(program)) - event_set)
+                         program_actions=frozenset(_names(program)) - event_set)
 
 
 def _labelled(program: Any) -> set[str]:
     """The actions of the program's commands."""
     return {cmd.action_name for module in program.modules for cmd in module.commands
             if cmd.is_labeled}
+
+
+def _names(program: Any) -> set[str]:
+    """The names of the program's commands: their actions, ``<module>_cmd<k>`` for a
+    command without one (the module docstring)."""
+    return {cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}"
+            for module in program.modules
+            for k, cmd in enumerate(module.commands, start=1)}

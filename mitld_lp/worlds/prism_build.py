@@ -27,11 +27,10 @@ from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_exact import PrismRecipe
+from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_origins
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     builder_options,
-    command_names,
-    needs_origins,
     show_sum,
     storm_build,
     storm_error,
@@ -137,7 +136,7 @@ class Grower:
 
 
 def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
-                 events: frozenset[str], action_names: dict[str, str], terminal: str,
+                 events: frozenset[str], terminal: str,
                  max_states: int, limit: int | None = None,
                  recipe: PrismRecipe | None = None) -> Tables:
     """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
@@ -156,9 +155,11 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     checked build in exact arithmetic (``1/10`` is exact there; three times the float
     build: zeroconf 20-4, 6.4 s against 2.1 s) runs only when that refuses the world, so
     that the refusal names the module and command where Storm's checks find them
-    (:func:`_exact_refusal`)."""
-    # Two choices of one state named by one action are told apart by the commands they
-    # come from (Storm's choice origins, a tenth of the build): only where needed.
+    (:func:`_exact_refusal`).
+
+    The choices are named by Storm's choice labels, or, where a command has no action
+    or a module two commands of one action, by the commands they come from (Storm's
+    choice origins: :mod:`mitld_lp.worlds.prism_origins`)."""
     origins = needs_origins(program)
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
@@ -202,14 +203,14 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     if limit is not None:
         known.add(UNEXPLORED)
     stopped = sorted(built - known) if terminal else []
-    commands = command_names(program)
+    named = OriginNames(program, where) if origins else None
 
     def origin(choice: int) -> str:
         """The commands a choice comes from, ``robot_cmd2``."""
-        if not origins:  # no module has two commands of one action: see above
+        if named is None:  # no module has two commands of one action: see above
             raise AssertionError("two choices of one action without two such commands")
-        cmds = sorted(model.choice_origins.get_command_set(choice))
-        return "+".join(commands[c] for c in cmds) if cmds else DEADLOCK_ACTION
+        cmds = model.choice_origins.get_command_set(choice)
+        return named.command_text(cmds) if cmds else DEADLOCK_ACTION
 
     valuations = None
     if deferred:
@@ -220,8 +221,9 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
         valuations = variables, (DeferredValuations(make, known, booleans)
                                  if initial == make.initial else rebuild(make))
     try:
-        tables = read_model(model, where, chosen, events, action_names, origin,
-                            stopped[0] if len(stopped) == 1 else None, valuations=valuations)
+        tables = read_model(model, where, chosen, events, {}, origin,
+                            stopped[0] if len(stopped) == 1 else None, valuations=valuations,
+                            named=named, shared=may_share_names(program))
     except WorldError:
         if not checks and limit is None:  # Storm's own words where its exact checks
             _exact_refusal(stormpy, program, plain, where, options(True))  # find it

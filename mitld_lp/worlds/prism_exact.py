@@ -29,11 +29,10 @@ import numpy as np
 
 from mitld_lp.util.decimals import exact_value
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_origins import needs_origins
 from mitld_lp.worlds.prism_program import (
     builder_options,
     extra_labels,
-    name_unlabelled_commands,
-    needs_origins,
     parse_program,
     storm_error,
     storm_quiet,
@@ -82,9 +81,7 @@ def program_of(stormpy: Any, recipe: PrismRecipe, *, exact: bool = True) -> Any:
     if extra:
         program = with_labels(stormpy, Path(recipe.path), extra, where)
     given = exact_constants(stormpy, recipe.constants) if exact else dict(recipe.constants)
-    program = with_constants(stormpy, program, given, where)
-    program, _ = name_unlabelled_commands(program, where, stormpy)
-    return program
+    return with_constants(stormpy, program, given, where)
 
 
 def exact_build(recipe: PrismRecipe) -> Any:

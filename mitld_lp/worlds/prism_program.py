@@ -35,9 +35,8 @@ from mitld_lp.worlds.prism_depth import ExpressionDepth
 
 __all__ = [
     "SizeBound", "check_program", "storm_error", "storm_quiet", "excerpt", "EXCERPT",
-    "SUM_TOLERANCE", "show_sum", "storm_sum", "check_constants", "command_names",
-    "name_unlabelled_commands", "parse_program", "extra_labels", "with_labels",
-    "needs_origins", "builder_options", "with_constants", "storm_build",
+    "SUM_TOLERANCE", "show_sum", "storm_sum", "check_constants", "parse_program",
+    "extra_labels", "with_labels", "builder_options", "with_constants", "storm_build",
 ]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
@@ -323,41 +322,6 @@ def check_constants(program: Any, constants: Mapping[str, Any], where: str) -> N
         )
 
 
-def command_names(program: Any) -> dict[int, str]:
-    """Global command index -> ``<module>_cmd<k>`` (k from 1 within the module)."""
-    return {
-        cmd.global_index: f"{module.name}_cmd{k}"
-        for module in program.modules
-        for k, cmd in enumerate(module.commands, start=1)
-    }
-
-
-def name_unlabelled_commands(program: Any, where: str, stormpy: Any) -> tuple[Any, dict[str, str]]:
-    """Give every command without an action a fresh action of its own (it synchronises
-    with nothing, as before), so that Storm's choice labels name every choice; returns
-    the program and ``fresh action -> <module>_cmd<k>``."""
-    taken = {c.action_name for m in program.modules for c in m.commands}
-    taken |= {m.name for m in program.modules} | {c.name for c in program.constants}
-    taken |= {v.name for v in program.variables} | {lab.name for lab in program.labels}
-    fresh: dict[int, str] = {}
-    names: dict[str, str] = {}
-    for module in program.modules:
-        for k, cmd in enumerate(module.commands, start=1):
-            if not cmd.is_labeled:
-                action = f"_mitld_cmd{cmd.global_index}"
-                while action in taken:
-                    action = "_" + action
-                fresh[cmd.global_index] = action
-                names[action] = f"{module.name}_cmd{k}"
-    if not fresh:
-        return program, names
-    try:
-        with storm_quiet():
-            return program.label_unlabelled_commands(fresh), names
-    except (RuntimeError, stormpy.exceptions.StormError) as exc:
-        raise storm_error(exc, where) from None
-
-
 # --------------------------------------------------------------------------- the build
 
 
@@ -432,24 +396,13 @@ def with_constants(stormpy: Any, program: Any, given: Mapping[str, Any], where: 
         raise storm_error(exc, where) from None
 
 
-def needs_origins(program: Any) -> bool:
-    """Whether two choices of one state may carry one action's name, to be told apart by
-    the commands they come from (Storm's choice origins, a tenth of the build): that
-    takes a module with two commands of one action (every command has an action here,
-    and a choice of an action joins one enabled command of it from each module that has
-    it)."""
-    return any(
-        len(names) != len(set(names))
-        for names in ([c.action_name for c in module.commands] for module in program.modules)
-    )
-
-
 def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
                     origins: bool, valuations: bool = True) -> Any:
     """Storm's builder options for a world: every label (a label left out of the build
-    would be false in every state), choice labels, state valuations when ``valuations``
-    (a sixth of the build; :mod:`mitld_lp.worlds.prism_valuations`), the choice origins
-    when ``origins``, exploration checks when ``checks`` (without them Storm's
+    would be false in every state), state valuations when ``valuations`` (a sixth of the
+    build; :mod:`mitld_lp.worlds.prism_valuations`), the choice origins when ``origins``
+    (they name every choice: :mod:`mitld_lp.worlds.prism_origins`), else the choice
+    labels, exploration checks when ``checks`` (without them Storm's
     out-of-bounds state, so that an update out of a variable's range stays visible), and
     no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
     none)."""
@@ -462,9 +415,10 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
     o.set_exploration_checks(checks)
     o.set_add_out_of_bounds_state(not checks)  # range errors kept visible
     o.set_build_all_labels()
-    o.set_build_choice_labels()
     if origins:
         o.set_build_choice_origins()
+    else:
+        o.set_build_choice_labels()
     if valuations:
         o.set_build_state_valuations()
     return o

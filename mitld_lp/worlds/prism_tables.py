@@ -6,7 +6,9 @@ little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.from
 the state valuations from the same archive's bit-packed records (Storm's per-variable
 calls, which make a Python list of each variable's values, where the layout is another);
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
-they disagree with it), state labels from Storm's per-label calls (a bit vector each).
+they disagree with it), or its choice origin where the choices are named from the
+commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from
+Storm's per-label calls (a bit vector each).
 Only the choices that need their PRISM commands to be told apart (two enabled commands
 of one action in a state) are looked at one by one.
 """
@@ -134,13 +136,14 @@ def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
     return arrays, packed
 
 
-def _read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
-                                                  dict[str, np.ndarray] | None,
-                                                  tuple[np.ndarray, list[str]] | None]:
+def _read_export(model: Any, where: str, origins: bool = False,
+                 ) -> tuple[tuple[np.ndarray, ...], dict[str, np.ndarray] | None,
+                            tuple[np.ndarray, list[str]] | None]:
     """:func:`read_export`'s arrays and valuations, and each choice's label as the
-    archive holds it (:func:`_choice_actions`)."""
+    archive holds it (:func:`_choice_actions`; its origin instead when ``origins``)."""
     try:
-        choices, branches, targets, probabilities, packed, actions = _export(model, where)
+        choices, branches, targets, probabilities, packed, actions = _export(model, where,
+                                                                             origins)
     except OSError as exc:
         raise WorldError(
             f"{where}: cannot write Storm's export to a temporary folder: {exc.strerror or exc}"
@@ -161,15 +164,19 @@ def _read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
     return (choices, branches, targets, probabilities), packed, actions
 
 
-def _export(model: Any, where: str) -> tuple[Any, ...]:
+def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
     """Write ``model`` as an uncompressed UMB archive to a temporary folder and read its
     four transition arrays straight from the file, its state valuations
-    (:func:`unpack_valuations`) and its choices' labels (:func:`_choice_actions`)."""
+    (:func:`unpack_valuations`) and its choices' labels (:func:`_choice_actions`; with
+    ``origins``, the identifiers of their choice origins, which Storm then writes as
+    the choices' actions, :mod:`mitld_lp.worlds.prism_origins`)."""
     import stormpy.io  # pyright: ignore[reportMissingImports]
 
     n, m = model.nr_states, model.nr_choices
     options = stormpy.io.UmbExportOptions()
     options.compression = stormpy.io.CompressionMode.NO_COMPRESSION
+    if origins:
+        options.allow_choice_origins_as_actions = True
     unsupported = f"{where}: Storm's UMB export is not as expected; this stormpy is not supported"
     with tempfile.TemporaryDirectory(prefix="mitld-prism-") as folder:
         path = os.path.join(folder, "model.umb")
@@ -425,6 +432,9 @@ def read_model(
     silent: str | None = None,
     hidden: frozenset[str] = frozenset(),
     valuations: tuple[tuple[str, ...], Valuations] | None = None,
+    named: Callable[[Any, tuple[np.ndarray, list[str]] | None],
+                    tuple[list[str], np.ndarray]] | None = None,
+    shared: bool = True,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -439,6 +449,11 @@ def read_model(
     has an action).  ``hidden``: variables of Storm's valuations that are not the state's
     (JANI's transient variables).  ``valuations``: the variables and the states, when
     ``model`` was built without its valuations (:mod:`mitld_lp.worlds.prism_valuations`).
+    ``named``: where ``model`` has Storm's choice origins in place of its choice labels,
+    what names the choices from them (``named(model, origins)``, the origins the archive
+    holds: :class:`mitld_lp.worlds.prism_origins.OriginNames`), as the labels would.
+    ``shared``: whether two choices of one state may have one name (False: the program
+    allows none, :func:`mitld_lp.worlds.prism_origins.may_share_names`; not looked for).
     Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
@@ -448,7 +463,8 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
-    (choices, branches, targets, probabilities), packed, actions = _read_export(model, where)
+    (choices, branches, targets, probabilities), packed, actions = _read_export(
+        model, where, origins=named is not None)
     variables, states = (valuations if valuations is not None else
                          valuations_of(model, hidden, packed))
     del packed
@@ -458,8 +474,11 @@ def read_model(
         return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
 
     state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))
-    label_names = sorted(model.choice_labeling.get_labels())
-    label_of = _label_of(model, label_names, m, actions)  # -1: no label, the deadlock self-loop
+    if named is not None:  # every choice named by the commands it comes from
+        label_names, label_of = named(model, actions)
+    else:
+        label_names = sorted(model.choice_labeling.get_labels())
+        label_of = _label_of(model, label_names, m, actions)  # -1: no label, the deadlock self-loop
     # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
@@ -526,9 +545,11 @@ def read_model(
         )
 
     # Two robot choices of one state with one name: told apart by their commands.
-    key = state_of * (len(label_names) + 1) + label_of + 1
-    keys, counts = np.unique(key[robot], return_counts=True)
-    clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
+    clash = np.zeros(0, dtype=np.int64)
+    if shared:
+        key = state_of * (len(label_names) + 1) + label_of + 1
+        keys, counts = np.unique(key[robot], return_counts=True)
+        clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
     for c in clash.tolist():
         table.append(f"{table[int(code[c])]}@{origin(c)}")
         code[c] = len(table) - 1

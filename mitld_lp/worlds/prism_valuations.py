@@ -24,9 +24,9 @@ import numpy as np
 
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_exact import PrismRecipe, program_of
+from mitld_lp.worlds.prism_origins import needs_origins
 from mitld_lp.worlds.prism_program import (
     builder_options,
-    needs_origins,
     storm_build,
     storm_error,
     storm_quiet,
