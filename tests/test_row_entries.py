@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import row_entries, rows_dot
+from mitld_lp.solvers.rows import row_entries, rows_dot
 
 
 def _matrix(seed: int) -> sp.csr_array:

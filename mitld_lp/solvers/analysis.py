@@ -57,12 +57,12 @@ from mitld_lp.solvers.graph import (
     backward_reachable,
     blocks_from,
     compiled_end_components,
-    gather_ranges,
     maximal_end_components,
     state_levels,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 
 __all__ = ["analyse", "end_components"]

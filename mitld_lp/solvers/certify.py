@@ -51,11 +51,6 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
-from mitld_lp.solvers.graph import (
-    gather_ranges,
-    row_entries,
-    rows_dot,
-)
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
     ETA,
@@ -71,6 +66,7 @@ from mitld_lp.solvers.rounding import (
     rounding,
     support_extreme,
 )
+from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",

@@ -11,17 +11,10 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
 from mitld_lp.solvers.chain_levels import ChainLevels
-from mitld_lp.solvers.graph import (
-    Blocks,
-    Reversed,
-    blocks_from,
-    gather_ranges,
-    graph_view,
-    levels,
-    row_entries,
-)
+from mitld_lp.solvers.graph import Blocks, Reversed, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.solvers.topological import level_kernels
 
 __all__ = ["Chain", "RowModel", "support_layers", "chain"]

@@ -32,8 +32,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.checks import Check
-from mitld_lp.solvers.graph import gather_ranges, maximal_end_components, row_entries
+from mitld_lp.solvers.graph import maximal_end_components
 from mitld_lp.solvers.rounding import UNIT, above, float_up, rounding, support_extreme
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 
 __all__ = ["dual_bound"]
 

@@ -31,8 +31,9 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.graph import backward_reachable, gather_ranges, row_entries
+from mitld_lp.solvers.graph import backward_reachable
 from mitld_lp.solvers.rounding import ETA, UNIT, above, below, rounding
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 
 __all__ = ["Mixture", "mixture_bounds"]
 

@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import Blocks, graph_blocks, row_entries, rows_dot
+from mitld_lp.solvers.graph import Blocks, graph_blocks
+from mitld_lp.solvers.rows import row_entries, rows_dot
 from mitld_lp.solvers.topological import DenseLU, chain_lu, level_kernels
 
 if TYPE_CHECKING:

@@ -262,7 +262,8 @@ def _exits_kept(merged: Merged, prob: np.ndarray, stay: np.ndarray,
     class keep their choices: they leave it once it is mended."""
     from scipy.sparse.csgraph import connected_components
 
-    from mitld_lp.solvers.graph import backward_reachable, gather_ranges
+    from mitld_lp.solvers.graph import backward_reachable
+    from mitld_lp.solvers.rows import gather_ranges
 
     mdp = merged.mdp
     n = mdp.n_states

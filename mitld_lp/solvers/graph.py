@@ -23,6 +23,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import unique
 from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
@@ -40,11 +41,8 @@ __all__ = [
     "blocks_from",
     "compiled_end_components",
     "edges",
-    "gather_ranges",
     "graph_blocks",
     "graph_view",
-    "row_entries",
-    "rows_dot",
     "levels",
     "maximal_end_components",
     "state_levels",
@@ -409,40 +407,6 @@ class Level(NamedTuple):
     states: np.ndarray
     single: np.ndarray
     rest: np.ndarray
-
-
-def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised."""
-    starts = np.asarray(starts, dtype=np.int64)
-    counts = np.asarray(stops, dtype=np.int64) - starts
-    total = int(counts.sum())
-    offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
-    return offsets + np.arange(total, dtype=np.int64)
-
-
-def row_entries(matrix: sp.csr_array, rows: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The stored entries of ``matrix``'s ``rows`` as ``(local row, column, value)``
-    arrays (``local row``: the position in ``rows``), read straight from its CSR arrays:
-    no matrix is made for them (scipy's row indexing costs ~0.2 ms a call, which on a
-    product of thousands of levels -- a deadline clock -- was most of the solve)."""
-    rows = np.asarray(rows, dtype=np.int64)
-    lo, hi = matrix.indptr[rows], matrix.indptr[rows + 1]
-    entries = gather_ranges(lo, hi)
-    local = np.repeat(np.arange(rows.size, dtype=np.int64), hi - lo)
-    return local, matrix.indices[entries], matrix.data[entries]
-
-
-def rows_dot(matrix: sp.csr_array, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``matrix[rows] @ x`` (``x``: a vector, or a column per right-hand side) from the
-    CSR arrays (:func:`row_entries`), each row summed in its entries' order."""
-    local, cols, vals = row_entries(matrix, rows)
-    n = np.asarray(rows).shape[0]
-    if x.ndim == 1:
-        return np.bincount(local, weights=vals * x[cols], minlength=n)
-    terms = vals[:, None] * x[cols]
-    return np.column_stack([np.bincount(local, weights=terms[:, j], minlength=n)
-                            for j in range(x.shape[1])]).reshape(n, x.shape[1])
 
 
 def graph_view(matrix: sp.csr_array, row_groups: np.ndarray) -> sp.csr_array:

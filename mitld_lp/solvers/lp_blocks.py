@@ -19,19 +19,13 @@ import scipy.sparse as sp
 from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
 from mitld_lp.solvers.crossover import polish
 from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
-from mitld_lp.solvers.graph import (
-    Blocks,
-    Level,
-    Sense,
-    gather_ranges,
-    row_entries,
-    segmented_argmax,
-)
+from mitld_lp.solvers.graph import Blocks, Level, Sense, segmented_argmax
 from mitld_lp.solvers.greedy_block import certified_greedy
 from mitld_lp.solvers.lp_backends import Matrices, Raw, solve_one
 from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
 from mitld_lp.solvers.result import Status
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.solvers.topological import (
     Block,
     SingleLevels,

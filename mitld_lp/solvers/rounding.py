@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.graph import row_entries
 from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rows import row_entries
 
 if TYPE_CHECKING:
     from mitld_lp.automata.sta import STA

@@ -38,14 +38,12 @@ from mitld_lp.solvers.graph import (
     Level,
     Sense,
     blocks_from,
-    gather_ranges,
     graph_blocks,
     graph_view,
-    row_entries,
-    rows_dot,
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient
+from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
 
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
