@@ -587,9 +587,11 @@ class FrontierBuilder(StepRules):
         log.info("information-state product: %s states, %s choices, %s transitions (%s "
                  "groups shifted: merge.py)", *(f"{x:,}" for x in (n, n_choices, matrix.nnz,
                                                                    self.shifts.merged)))
-        kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
-                         .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
-                        dtype=np.int8)
+        kind = np.zeros(n, np.int8)  # the records stored are the only absorbing states
+        for record, at in zip(self.records, self.record_state, strict=True):
+            if at >= 0 and isinstance(record, Absorbing):
+                kind[at] = {Absorbing.TARGET: 1, Absorbing.SINK: 2,
+                            Absorbing.TRUNCATED: 3}.get(record, 0)
         mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
