@@ -45,6 +45,7 @@ from mitld_lp.sensing.info import (
     InfoSize,
     InfoState,
 )
+from mitld_lp.sensing.keys import Columns, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import (
@@ -91,7 +92,7 @@ class FrontierBuilder(StepRules):
                                             size=size, sensors=sensors,
                                             points=sta.truncation_points, name=name,
                                             alarm_past=ALARM_PAST if self.alarms else 0)
-        self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
+        self.keys = Keys(6)  # the information states' keys (match)
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
         self.unsensed_order = tuple(sorted(self.unsensed))
@@ -138,7 +139,7 @@ class FrontierBuilder(StepRules):
         self.tid_rank = np.zeros(0, _I)  # each hypothesis times' rank in sorted order
         # per state: world, clock, reported, pending, first hypothesis, hypotheses;
         # -1 clock for an absorbing state
-        self.cols: list[list[int]] = [[], [], [], [], [], []]
+        self.cols = Columns(6)
         self.hyp_code = np.zeros(1024, _I)  # every state's hypotheses, in state order
         self.hyp_weight = np.zeros(1024, np.float64)
         self.n_hyps = 0
@@ -220,8 +221,7 @@ class FrontierBuilder(StepRules):
     def store_record(self, r: int) -> None:
         self.record_state[r] = len(self.states)
         self.states.append(self.records[r])
-        for c, v in zip(self.cols, (-1, -1, 0, 0, self.n_hyps, 0), strict=True):
-            c.append(v)
+        self.cols.append((-1, -1, 0, 0, self.n_hyps, 0))
         self.bytes += BYTES_PER_INFO_STATE
 
     def order_key(self, tid: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -244,9 +244,7 @@ class FrontierBuilder(StepRules):
         """Store new information states (columns), their hypotheses' codes and weights
         concatenated in state order, each state's in :class:`InfoState` order."""
         starts = self.n_hyps + np.cumsum(counts) - counts
-        for c, v in zip(self.cols, (world, clock, reported, pending, starts, counts),
-                        strict=True):
-            c.extend(v.tolist())
+        self.cols.extend((world, clock, reported, pending, starts, counts))
         end = self.n_hyps + len(codes)
         if end > len(self.hyp_code):
             size = max(end, 2 * len(self.hyp_code))
@@ -271,7 +269,7 @@ class FrontierBuilder(StepRules):
     def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
         """Expand the states ``a .. b - 1``: their choices (state, action) in order, and
         the transitions (choice, column, probability), new states stored."""
-        cols = [np.asarray(c[a:b], _I) for c in self.cols]
+        cols = self.cols.rows(a, b)
         world, clock, reported, pending, hstart, hcount = cols
         # the choices: each state's actions, an absorbing state its loop
         c_state, (c_act,) = self.actions.rows(self.actions.find((world,), self.make_acts))
@@ -326,9 +324,9 @@ class FrontierBuilder(StepRules):
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
         scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
-        target, keys, reps = self.match(*group)
+        target, reps = self.keys.match(group)  # -1 - k: the k-th new key
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
-        self.store(c[first], g_first, target, keys, reps, group, g_start, hcode, weight,
+        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight,
                    [np.concatenate(x) for x in zip(*ends, strict=True)])
         self.verify(target, g_count, hobs, hcode, weight)
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
@@ -411,19 +409,8 @@ class FrontierBuilder(StepRules):
         return (cc[order], np.concatenate([loop[1], col, target])[order],
                 np.concatenate([loop[2], mass, total])[order])
 
-    def match(self, *group: np.ndarray) -> tuple[np.ndarray, list[tuple[int, ...]],
-                                                   np.ndarray]:
-        """Each group's state by its key (``-1 - k`` for the ``k``-th new key), the new
-        keys, and a group of each."""
-        ids, first = groups(*group)
-        keys = list(zip(*(x[first].tolist() for x in group), strict=True))
-        found = np.array([self.keys.get(k, -1) for k in keys], _I)
-        fresh = np.flatnonzero(found < 0)
-        found[fresh] = -1 - np.arange(len(fresh), dtype=_I)
-        return found[ids], [keys[k] for k in fresh.tolist()], first[fresh]
-
     def store(self, c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
-              keys: list[tuple[int, ...]], reps: np.ndarray, group: tuple[np.ndarray, ...],
+              reps: np.ndarray, group: tuple[np.ndarray, ...],
               g_start: np.ndarray, hcode: np.ndarray, weight: np.ndarray,
               ends: list[np.ndarray]) -> None:
         """Store the new states (records and information states, ``target`` updated) in
@@ -447,7 +434,7 @@ class FrontierBuilder(StepRules):
         sequence = item[order][np.sort(at)].tolist()
         counts = group[4]
         self.check(len(sequence), int(counts[reps].sum()))
-        index = np.empty(len(keys), _I)
+        index = np.empty(len(reps), _I)
         batch: list[int] = []
 
         def flush() -> None:
@@ -467,15 +454,14 @@ class FrontierBuilder(StepRules):
             else:
                 batch.append(x - n_rec)
         flush()
-        for k, key in enumerate(keys):
-            self.keys[key] = int(index[k])
+        self.keys.settle(index)
         target[new_group] = index[-1 - target[new_group]]
 
     def verify(self, target: np.ndarray, count: np.ndarray, hobs: np.ndarray,
                hcode: np.ndarray, weight: np.ndarray) -> None:
         """Check every group against its state, hypothesis by hypothesis: the same
         hypotheses (else two sets share a hash) and the same posterior."""
-        starts = np.asarray(self.cols[4], _I)[target]
+        starts = self.cols.col(4)[target]
         _, rank = spread(count)
         at = starts[hobs] + rank
         if not np.array_equal(self.hyp_code[at], hcode):
@@ -531,8 +517,8 @@ class FrontierBuilder(StepRules):
             self.add_states(np.array([w0], _I), np.array([clock0], _I), np.zeros(1, _I),
                             np.array([self.mask(self.unsensed, self.unsensed_order)], _I),
                             one, q0code, np.ones(1))
-            self.keys[(w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)), 1,
-                       int(mix64(q0code).view(_I)[0]))] = initial
+            self.keys.add((w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)),
+                           1, int(mix64(q0code).view(_I)[0])), initial)
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
         self.growth.start(len(self.states))
@@ -597,6 +583,6 @@ class FrontierBuilder(StepRules):
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=tuple(self.states))
         cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
-        moves = Moves(mdp.row_groups, np.asarray(self.cols[0], _I), self.world_acts,
+        moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, *cols)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
