@@ -113,3 +113,53 @@ def test_random_builds_equal_the_dict_build(seed: int) -> None:
         if not merge and seed != 3:
             with rows.running_kernels(True):
                 assert_same(fast, reference(model, fast))
+
+
+def stored(seed: int):
+    """States with random hypotheses stored, and groups that meet them again: each
+    group's state, hypotheses count, rows' groups, codes and weights."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    n = 50
+    count = rng.integers(1, 6, n)
+    starts = np.cumsum(count) - count
+    cols = Columns(6)
+    cols.extend(tuple(np.zeros(n, np.int64) for _ in range(4)) + (starts, count))
+    codes = rng.integers(0, 1000, int(count.sum()))
+    weights = rng.random(len(codes))
+    fb = SimpleNamespace(cols=cols, hyp_code=codes, hyp_weight=weights,
+                         states=[f"state {i}" for i in range(n)])
+    target = rng.permutation(n)[:20]  # the groups' states, each group met once
+    g_count = count[target]
+    hobs = np.repeat(np.arange(20), g_count)
+    rows_ = np.concatenate([np.arange(starts[t], starts[t] + count[t]) for t in target])
+    return fb, target, g_count, hobs, codes[rows_].copy(), weights[rows_].copy()
+
+
+@pytest.mark.parametrize("wrong", [None, "code", "weight"])
+def test_revisits_checked_hypothesis_by_hypothesis(wrong: str | None) -> None:
+    """A state met again with its own hypotheses passes; one hypothesis's code changed
+    is a collision, one weight moved past WEIGHT_TOL names the state and the gap: the
+    kernel and the NumPy lines alike."""
+    from mitld_lp.sensing.frontier import FrontierBuilder
+    from mitld_lp.sensing.info import WEIGHT_TOL
+
+    for on in (False, True):
+        fb, target, g_count, hobs, hcode, weight = stored(7)
+        k = len(hcode) // 2
+        if wrong == "code":
+            hcode[k] += 1
+        elif wrong == "weight":
+            weight[k] += 3 * WEIGHT_TOL
+        with rows.running_kernels(on):
+            if wrong is None:
+                FrontierBuilder.verify(fb, target, g_count, hobs, hcode, weight)
+                continue
+            with pytest.raises(RuntimeError) as err:
+                FrontierBuilder.verify(fb, target, g_count, hobs, hcode, weight)
+        if wrong == "code":
+            assert "hash collision" in str(err.value)
+        else:
+            assert f"state {target[hobs[k]]}" in str(err.value)
+            assert f"{3 * WEIGHT_TOL:.3g}" in str(err.value)

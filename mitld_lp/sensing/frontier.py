@@ -45,13 +45,12 @@ from mitld_lp.sensing.info import (
     InfoSize,
     InfoState,
 )
-from mitld_lp.sensing.keys import Columns, Keys
+from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import (
     COMPILED_MIN_STATES,
     Lookup,
-    Table,
     compiled_on,
     fsum_by,
     groups,
@@ -121,14 +120,14 @@ class FrontierBuilder(StepRules):
                              merge and not self.alarms)
         self.counts = Counts(ns, self.alarms, self.times, self.time_id)
         self.alarm_mask = sum(1 << i for i in self.alarms)  # never kept as reported
-        self.outcomes = Table(3, (_I, np.float64, bool))
-        self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
-        self.successors = Table(2, (_I, np.float64))
+        self.outcomes = KeyedTable(3, (_I, np.float64, bool))
+        self.branches = KeyedTable(6, (_I, _I, np.float64, bool, _I, _I))
+        self.successors = KeyedTable(2, (_I, np.float64))
         self.step_table = Lookup(self.make_step)
         self.end_table = Lookup(self.make_end)  # -1 undecided, else a record
         self.need_table = Lookup(self.make_need)
         self.pending_need = Lookup(self.make_pending_need)
-        self.actions = Table(1, (_I,))
+        self.actions = KeyedTable(1, (_I,))
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
         self.move_rows: list[tuple[np.ndarray, ...]] = []
@@ -462,17 +461,25 @@ class FrontierBuilder(StepRules):
         """Check every group against its state, hypothesis by hypothesis: the same
         hypotheses (else two sets share a hash) and the same posterior."""
         starts = self.cols.col(4)[target]
-        _, rank = spread(count)
-        at = starts[hobs] + rank
-        if not np.array_equal(self.hyp_code[at], hcode):
+        kernels = compiled_on()
+        if kernels:
+            collided, worst, row = kernels.verify(starts, count, hobs, hcode, weight,
+                                                  self.hyp_code, self.hyp_weight)
+        else:
+            _, rank = spread(count)
+            at = starts[hobs] + rank
+            collided = not np.array_equal(self.hyp_code[at], hcode)
+            gap = np.abs(self.hyp_weight[at] - weight)
+            row = int(np.argmax(gap)) if len(gap) and not collided else -1
+            worst = float(gap[row]) if row >= 0 else 0.0
+        if collided:
             raise RuntimeError("internal error: two information states with one key "
                                "(a hash collision of their hypothesis sets)")
-        gap = np.abs(self.hyp_weight[at] - weight)
-        if len(gap) and gap.max() > WEIGHT_TOL:
-            bad = int(hobs[int(np.argmax(gap))])
+        if row >= 0 and worst > WEIGHT_TOL:
+            bad = int(hobs[row])
             raise RuntimeError(
                 f"internal error: information state {self.states[int(target[bad])]!r} "
-                f"reached with two posteriors (they differ by {gap.max():.3g})")
+                f"reached with two posteriors (they differ by {worst:.3g})")
 
     def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
                      ended: tuple[np.ndarray, ...]) -> None:

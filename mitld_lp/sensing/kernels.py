@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 __all__ = ["pack", "sorted_groups", "dense_groups", "dd_sums", "spread", "scatter_max",
-           "scatter_min", "scatter_add", "gather2", "key_match", "key_rehash"]
+           "scatter_min", "scatter_add", "gather2", "key_match", "key_rehash", "verify"]
 
 _LIMIT = 1 << 62
 
@@ -366,3 +366,28 @@ def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
             s = (s + np.uint64(1)) & mask
     return out, reps[:fresh], n
 
+
+
+@numba.njit(cache=True, nogil=True)
+def verify(starts, count, hobs, hcode, weight, hyp_code, hyp_weight):  # pragma: no cover
+    """:meth:`mitld_lp.sensing.frontier.FrontierBuilder.verify`'s comparisons in one
+    pass: whether a group's hypotheses differ from its state's (the ``k``-th row of
+    group ``hobs`` against hypothesis ``starts[g] + k``), the largest weight gap and
+    its first row."""
+    at = np.empty(len(count), np.int64)  # each group's first row
+    s = 0
+    for g in range(len(count)):
+        at[g] = s
+        s += count[g]
+    worst = 0.0
+    worst_row = -1
+    for i in range(len(hobs)):
+        g = hobs[i]
+        h = starts[g] + i - at[g]
+        if hyp_code[h] != hcode[i]:
+            return True, worst, worst_row
+        gap = abs(hyp_weight[h] - weight[i])
+        if gap > worst or worst_row < 0:
+            worst = gap
+            worst_row = i
+    return False, worst, worst_row

@@ -9,11 +9,13 @@ as they come: a key met before gets its state, the ``k``-th key not met before
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from mitld_lp.sensing.rows import INT, compiled_on
+from mitld_lp.sensing.rows import INT, Table, compiled_on
 
-__all__ = ["Columns", "Keys"]
+__all__ = ["Columns", "Keys", "KeyedTable"]
 
 
 class Columns:
@@ -138,3 +140,31 @@ class Keys:
             size = 1 << max(11, (4 * need - 1).bit_length())
             self.slots = np.full(size, -1, INT)
             compiled_on().key_rehash(self.slots, self.keys, self.n)
+
+
+class KeyedTable(Table):
+    """A :class:`~mitld_lp.sensing.rows.Table` whose keys are found by :class:`Keys`
+    (compiled, once the kernels run) instead of a sort of the rows and a dict: the keys
+    not met before are made in their lexicographic order, as :meth:`Table.find` makes
+    them (the order numbers worlds, times and records), so the tables are the same."""
+
+    def __init__(self, width: int, dtypes: tuple[Any, ...]) -> None:
+        super().__init__(width, dtypes)
+        self.keyed: Keys | None = None
+
+    def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:
+        if self.keyed is None:
+            self.keyed = Keys(len(cols))
+        target, reps = self.keyed.match(cols)
+        if len(reps):
+            new = list(zip(*(c[reps].tolist() for c in cols), strict=True))
+            index = np.empty(len(new), INT)
+            for k in sorted(range(len(new)), key=new.__getitem__):
+                rows = make(new[k])
+                index[k] = len(self.entries)
+                self.entries.append(tuple(np.asarray([r[c] for r in rows], dtype=d)
+                                          for c, d in enumerate(self.dtypes)))
+            self.keyed.settle(index)
+            fresh = target < 0
+            target[fresh] = index[-1 - target[fresh]]
+        return target
