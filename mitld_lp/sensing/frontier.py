@@ -45,12 +45,12 @@ from mitld_lp.sensing.info import (
     InfoSize,
     InfoState,
 )
+from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import (
     COMPILED_MIN_STATES,
     Lookup,
-    Table,
     compiled_on,
     fsum_by,
     groups,
@@ -91,7 +91,7 @@ class FrontierBuilder(StepRules):
                                             size=size, sensors=sensors,
                                             points=sta.truncation_points, name=name,
                                             alarm_past=ALARM_PAST if self.alarms else 0)
-        self.keys: dict[tuple[int, ...], int] = {}  # the information states' keys
+        self.keys = Keys(6)  # the information states' keys (match)
         self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
         self.unsensed_order = tuple(sorted(self.unsensed))
@@ -120,14 +120,14 @@ class FrontierBuilder(StepRules):
                              merge and not self.alarms)
         self.counts = Counts(ns, self.alarms, self.times, self.time_id)
         self.alarm_mask = sum(1 << i for i in self.alarms)  # never kept as reported
-        self.outcomes = Table(3, (_I, np.float64, bool))
-        self.branches = Table(6, (_I, _I, np.float64, bool, _I, _I))
-        self.successors = Table(2, (_I, np.float64))
+        self.outcomes = KeyedTable(3, (_I, np.float64, bool))
+        self.branches = KeyedTable(6, (_I, _I, np.float64, bool, _I, _I))
+        self.successors = KeyedTable(2, (_I, np.float64))
         self.step_table = Lookup(self.make_step)
         self.end_table = Lookup(self.make_end)  # -1 undecided, else a record
         self.need_table = Lookup(self.make_need)
         self.pending_need = Lookup(self.make_pending_need)
-        self.actions = Table(1, (_I,))
+        self.actions = KeyedTable(1, (_I,))
         # the moves (Moves): (choice, world, occurred, new, target) per level
         self.n_choices = 0
         self.move_rows: list[tuple[np.ndarray, ...]] = []
@@ -138,7 +138,7 @@ class FrontierBuilder(StepRules):
         self.tid_rank = np.zeros(0, _I)  # each hypothesis times' rank in sorted order
         # per state: world, clock, reported, pending, first hypothesis, hypotheses;
         # -1 clock for an absorbing state
-        self.cols: list[list[int]] = [[], [], [], [], [], []]
+        self.cols = Columns(6)
         self.hyp_code = np.zeros(1024, _I)  # every state's hypotheses, in state order
         self.hyp_weight = np.zeros(1024, np.float64)
         self.n_hyps = 0
@@ -220,8 +220,7 @@ class FrontierBuilder(StepRules):
     def store_record(self, r: int) -> None:
         self.record_state[r] = len(self.states)
         self.states.append(self.records[r])
-        for c, v in zip(self.cols, (-1, -1, 0, 0, self.n_hyps, 0), strict=True):
-            c.append(v)
+        self.cols.append((-1, -1, 0, 0, self.n_hyps, 0))
         self.bytes += BYTES_PER_INFO_STATE
 
     def order_key(self, tid: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -244,9 +243,7 @@ class FrontierBuilder(StepRules):
         """Store new information states (columns), their hypotheses' codes and weights
         concatenated in state order, each state's in :class:`InfoState` order."""
         starts = self.n_hyps + np.cumsum(counts) - counts
-        for c, v in zip(self.cols, (world, clock, reported, pending, starts, counts),
-                        strict=True):
-            c.extend(v.tolist())
+        self.cols.extend((world, clock, reported, pending, starts, counts))
         end = self.n_hyps + len(codes)
         if end > len(self.hyp_code):
             size = max(end, 2 * len(self.hyp_code))
@@ -271,7 +268,7 @@ class FrontierBuilder(StepRules):
     def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
         """Expand the states ``a .. b - 1``: their choices (state, action) in order, and
         the transitions (choice, column, probability), new states stored."""
-        cols = [np.asarray(c[a:b], _I) for c in self.cols]
+        cols = self.cols.rows(a, b)
         world, clock, reported, pending, hstart, hcount = cols
         # the choices: each state's actions, an absorbing state its loop
         c_state, (c_act,) = self.actions.rows(self.actions.find((world,), self.make_acts))
@@ -326,9 +323,9 @@ class FrontierBuilder(StepRules):
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
         scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
-        target, keys, reps = self.match(*group)
+        target, reps = self.keys.match(group)  # -1 - k: the k-th new key
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
-        self.store(c[first], g_first, target, keys, reps, group, g_start, hcode, weight,
+        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight,
                    [np.concatenate(x) for x in zip(*ends, strict=True)])
         self.verify(target, g_count, hobs, hcode, weight)
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
@@ -411,19 +408,8 @@ class FrontierBuilder(StepRules):
         return (cc[order], np.concatenate([loop[1], col, target])[order],
                 np.concatenate([loop[2], mass, total])[order])
 
-    def match(self, *group: np.ndarray) -> tuple[np.ndarray, list[tuple[int, ...]],
-                                                   np.ndarray]:
-        """Each group's state by its key (``-1 - k`` for the ``k``-th new key), the new
-        keys, and a group of each."""
-        ids, first = groups(*group)
-        keys = list(zip(*(x[first].tolist() for x in group), strict=True))
-        found = np.array([self.keys.get(k, -1) for k in keys], _I)
-        fresh = np.flatnonzero(found < 0)
-        found[fresh] = -1 - np.arange(len(fresh), dtype=_I)
-        return found[ids], [keys[k] for k in fresh.tolist()], first[fresh]
-
     def store(self, c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
-              keys: list[tuple[int, ...]], reps: np.ndarray, group: tuple[np.ndarray, ...],
+              reps: np.ndarray, group: tuple[np.ndarray, ...],
               g_start: np.ndarray, hcode: np.ndarray, weight: np.ndarray,
               ends: list[np.ndarray]) -> None:
         """Store the new states (records and information states, ``target`` updated) in
@@ -447,7 +433,7 @@ class FrontierBuilder(StepRules):
         sequence = item[order][np.sort(at)].tolist()
         counts = group[4]
         self.check(len(sequence), int(counts[reps].sum()))
-        index = np.empty(len(keys), _I)
+        index = np.empty(len(reps), _I)
         batch: list[int] = []
 
         def flush() -> None:
@@ -467,26 +453,33 @@ class FrontierBuilder(StepRules):
             else:
                 batch.append(x - n_rec)
         flush()
-        for k, key in enumerate(keys):
-            self.keys[key] = int(index[k])
+        self.keys.settle(index)
         target[new_group] = index[-1 - target[new_group]]
 
     def verify(self, target: np.ndarray, count: np.ndarray, hobs: np.ndarray,
                hcode: np.ndarray, weight: np.ndarray) -> None:
         """Check every group against its state, hypothesis by hypothesis: the same
         hypotheses (else two sets share a hash) and the same posterior."""
-        starts = np.asarray(self.cols[4], _I)[target]
-        _, rank = spread(count)
-        at = starts[hobs] + rank
-        if not np.array_equal(self.hyp_code[at], hcode):
+        starts = self.cols.col(4)[target]
+        kernels = compiled_on()
+        if kernels:
+            collided, worst, row = kernels.verify(starts, count, hobs, hcode, weight,
+                                                  self.hyp_code, self.hyp_weight)
+        else:
+            _, rank = spread(count)
+            at = starts[hobs] + rank
+            collided = not np.array_equal(self.hyp_code[at], hcode)
+            gap = np.abs(self.hyp_weight[at] - weight)
+            row = int(np.argmax(gap)) if len(gap) and not collided else -1
+            worst = float(gap[row]) if row >= 0 else 0.0
+        if collided:
             raise RuntimeError("internal error: two information states with one key "
                                "(a hash collision of their hypothesis sets)")
-        gap = np.abs(self.hyp_weight[at] - weight)
-        if len(gap) and gap.max() > WEIGHT_TOL:
-            bad = int(hobs[int(np.argmax(gap))])
+        if row >= 0 and worst > WEIGHT_TOL:
+            bad = int(hobs[row])
             raise RuntimeError(
                 f"internal error: information state {self.states[int(target[bad])]!r} "
-                f"reached with two posteriors (they differ by {gap.max():.3g})")
+                f"reached with two posteriors (they differ by {worst:.3g})")
 
     def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
                      ended: tuple[np.ndarray, ...]) -> None:
@@ -531,8 +524,8 @@ class FrontierBuilder(StepRules):
             self.add_states(np.array([w0], _I), np.array([clock0], _I), np.zeros(1, _I),
                             np.array([self.mask(self.unsensed, self.unsensed_order)], _I),
                             one, q0code, np.ones(1))
-            self.keys[(w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)), 1,
-                       int(mix64(q0code).view(_I)[0]))] = initial
+            self.keys.add((w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)),
+                           1, int(mix64(q0code).view(_I)[0])), initial)
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
         self.growth.start(len(self.states))
@@ -587,14 +580,16 @@ class FrontierBuilder(StepRules):
         log.info("information-state product: %s states, %s choices, %s transitions (%s "
                  "groups shifted: merge.py)", *(f"{x:,}" for x in (n, n_choices, matrix.nnz,
                                                                    self.shifts.merged)))
-        kind = np.array([{Absorbing.TARGET: 1, Absorbing.SINK: 2, Absorbing.TRUNCATED: 3}
-                         .get(s, 0) if isinstance(s, Absorbing) else 0 for s in self.states],
-                        dtype=np.int8)
+        kind = np.zeros(n, np.int8)  # the records stored are the only absorbing states
+        for record, at in zip(self.records, self.record_state, strict=True):
+            if at >= 0 and isinstance(record, Absorbing):
+                kind[at] = {Absorbing.TARGET: 1, Absorbing.SINK: 2,
+                            Absorbing.TRUNCATED: 3}.get(record, 0)
         mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=tuple(self.states))
         cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
-        moves = Moves(mdp.row_groups, np.asarray(self.cols[0], _I), self.world_acts,
+        moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, *cols)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)

@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 __all__ = ["pack", "sorted_groups", "dense_groups", "dd_sums", "spread", "scatter_max",
-           "scatter_min", "scatter_add", "gather2"]
+           "scatter_min", "scatter_add", "gather2", "key_match", "key_rehash", "verify"]
 
 _LIMIT = 1 << 62
 
@@ -305,3 +305,89 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
     return (cut_c[:n_cut], cut_o[:n_cut], cut_b[:n_cut], cut_m[:n_cut],
             d_i[:, :n_done], d_new[:n_done], d_m[:n_done], u_i[:, :n_und], u_m[:n_und],
             n_step > 0, miss_a[:n_miss], miss_b[:n_miss])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _key_hash(keys, i):  # pragma: no cover - compiled
+    h = np.uint64(0x9E3779B97F4A7C15)
+    for j in range(keys.shape[1]):
+        z = h ^ np.uint64(keys[i, j])
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        h = z ^ (z >> np.uint64(31))
+    return h
+
+
+@numba.njit(cache=True, nogil=True)
+def key_rehash(slots, keys, n):  # pragma: no cover - compiled
+    """The first ``n`` rows of ``keys`` entered into the empty ``slots`` (a power of
+    two of them, -1 each; linear probing)."""
+    mask = np.uint64(len(slots) - 1)
+    for e in range(n):
+        s = _key_hash(keys, e) & mask
+        while slots[s] >= 0:
+            s = (s + np.uint64(1)) & mask
+        slots[s] = e
+
+
+@numba.njit(cache=True, nogil=True)
+def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
+    """:meth:`mitld_lp.sensing.keys.Keys.match` on the table of ``n`` keys (``keys``,
+    their ``state``, ``slots`` their places by hash, room made for every row): each
+    row's state, ``-1 - k`` for the ``k``-th key new (entered with it), the first row of
+    each new key, and the keys now held."""
+    m, width = rows.shape
+    mask = np.uint64(len(slots) - 1)
+    out = np.empty(m, np.int64)
+    reps = np.empty(m, np.int64)
+    fresh = 0
+    for i in range(m):
+        s = _key_hash(rows, i) & mask
+        while True:
+            e = slots[s]
+            if e < 0:
+                slots[s] = n
+                for j in range(width):
+                    keys[n, j] = rows[i, j]
+                state[n] = -1 - fresh
+                out[i] = -1 - fresh
+                reps[fresh] = i
+                fresh += 1
+                n += 1
+                break
+            same = True
+            for j in range(width):
+                if keys[e, j] != rows[i, j]:
+                    same = False
+                    break
+            if same:
+                out[i] = state[e]
+                break
+            s = (s + np.uint64(1)) & mask
+    return out, reps[:fresh], n
+
+
+
+@numba.njit(cache=True, nogil=True)
+def verify(starts, count, hobs, hcode, weight, hyp_code, hyp_weight):  # pragma: no cover
+    """:meth:`mitld_lp.sensing.frontier.FrontierBuilder.verify`'s comparisons in one
+    pass: whether a group's hypotheses differ from its state's (the ``k``-th row of
+    group ``hobs`` against hypothesis ``starts[g] + k``), the largest weight gap and
+    its first row."""
+    at = np.empty(len(count), np.int64)  # each group's first row
+    s = 0
+    for g in range(len(count)):
+        at[g] = s
+        s += count[g]
+    worst = 0.0
+    worst_row = -1
+    for i in range(len(hobs)):
+        g = hobs[i]
+        h = starts[g] + i - at[g]
+        if hyp_code[h] != hcode[i]:
+            return True, worst, worst_row
+        gap = abs(hyp_weight[h] - weight[i])
+        if gap > worst or worst_row < 0:
+            worst = gap
+            worst_row = i
+    return False, worst, worst_row

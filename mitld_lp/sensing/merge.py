@@ -56,6 +56,16 @@ from mitld_lp.sensing.sensors import Sensor
 __all__ = ["Shifts", "Counts", "shift_start"]
 
 
+def grown(array: np.ndarray, times: list[tuple[int, ...]]) -> np.ndarray:
+    """``array`` (the first rows of ``times`` as a matrix) with the rows of the times
+    added since: only the new tuples are converted (the whole list was, at every
+    chunk, some 0.5 s of a build with false alarms' hundred thousand times)."""
+    if len(array) >= len(times):
+        return array
+    new = np.asarray(times[len(array):], INT).reshape(len(times) - len(array), -1)
+    return np.concatenate([array, new]) if len(array) else new
+
+
 def shift_start(sta: STA, event: str) -> int | None:
     """The least ``c >= 1`` with ``P(K = k + 1) = (1 - h) P(K = k)`` for ``c <= k <
     T`` at the hazards the build reads (module docs), None where the event's times
@@ -94,8 +104,7 @@ class Shifts:
         (module docs)."""
         if not self.start or len(tid) == 0:
             return tid
-        if len(self.array) < len(self.times):
-            self.array = np.asarray(self.times, INT).reshape(len(self.times), -1)
+        self.array = grown(self.array, self.times)
         k = self.array[tid]
         said = reported[row] | new
         n = int(group.max()) + 1
@@ -150,8 +159,7 @@ class Counts:
         observation) with each group's counts lowered by their least (class docs)."""
         if not self.alarms or len(tid) == 0:
             return tid
-        if len(self.array) < len(self.times):
-            self.array = np.asarray(self.times, INT).reshape(len(self.times), -1)
+        self.array = grown(self.array, self.times)
         b = self.array[tid][:, self.n:]
         least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
         for j in range(b.shape[1]):
