@@ -106,7 +106,7 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     (weight ``prob[c]``) and to WIN or LOSE for its stay (worth the stay's verdict); a
     node's rows are its choice's vertex rows (nature's rows when it minimises; the
     player's choices, one row each, when it maximises)."""
-    from mitld_lp.solvers.robust import robust_interval_iteration
+    from mitld_lp.solvers.robust import robust_interval_iteration, sweep_budget
     from mitld_lp.solvers.robust_graph import RobustGame
 
     mdp = merged.mdp
@@ -196,7 +196,10 @@ def worst_case(merged: Merged, vr: VertexRows, prob: np.ndarray, stay: np.ndarra
     row_groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(choices_per_state, out=row_groups[1:])
     game = RobustGame(matrix, vertex_groups, row_groups)
-    it = robust_interval_iteration(game, target, tol=tol)
+    it = robust_interval_iteration(game, target, tol=tol, max_sweeps=sweep_budget(game))
+    if it.status is not Status.OPTIMAL:  # the bracket is sound, only wider than tol
+        log.warning("worst case of %s: %s; its bounds are the iteration's so far",
+                    q.kind, it.message)
     return _checked(game, target, it, nature_maximises, eta, int(mdp.initial),
                     int(np.max(np.diff(rg), initial=1)) + 1)
 

@@ -23,6 +23,11 @@ function is attained at a vertex).  The robust value ``V*`` is its least fixed p
   when nature uses only its rows optimal for ``L``, no state is worth more than the best
   exit the robot has, ``U(s) <- min(U(s), max_{exits c} min_v P_v . U)``.  The iteration
   stops when ``U - L <= tol`` on the block, so ``[L(s), U(s)]`` brackets ``V*(s)``.
+* **Solves for slow blocks**: a block left only by rare steps closes at about their
+  probability per sweep.  A Markov-chain block is solved directly; in others the values
+  of the rows greedy for ``L`` (or ``U``) are solved for (:meth:`_Block.jump`) and kept
+  where sound: for ``L`` when the block has no nature's choice, for ``U`` when they are
+  a pre-fixed point of ``B`` (above the least fixed point, Knaster-Tarski).
 
 :func:`robust_policy` reads a robot policy off ``L`` (near-optimal choices, and among them
 ones that make progress against every nature: the positive attractor restricted to them);
@@ -38,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from mitld_lp import defaults
 from mitld_lp.solvers.result import Status, read_only
@@ -52,13 +58,36 @@ from mitld_lp.solvers.robust_graph import (
 )
 
 __all__ = ["RobustIteration", "robust_interval_iteration", "robust_policy", "bellman",
-           "bellman_residual"]
+           "bellman_residual", "sweep_budget"]
 
 DEFLATE_EVERY = 16
 """Sweeps of a block between two deflations of its upper bound."""
 
 MAX_SWEEPS = 10_000_000
 """Sweeps over all blocks after which the iteration stops (status ``MAX_ITERATIONS``)."""
+
+WORK = 2e8
+"""The work (nonzeros read, a sweep's own overhead counted as :data:`SWEEP_COST` of
+them) of an iteration given :func:`sweep_budget`: some seconds."""
+
+JUMP_SLACK = 1e-13
+"""How far ``B u`` may exceed ``u`` (rounding of a sparse solve) for :meth:`_Block.jump`
+to take ``u`` as an upper bound."""
+
+JUMP_STATES = 20_000
+"""The largest block whose values :meth:`_Block.jump` solves for directly."""
+
+SWEEP_COST = 4000
+"""A sweep's fixed overhead in nonzeros read (numpy calls on a small block)."""
+
+
+def sweep_budget(game: RobustGame, work: float = WORK) -> int:
+    """The sweeps of :func:`robust_interval_iteration` on ``game`` that fit in ``work``,
+    estimated before it starts (each sweep reading at most every row once): for callers
+    with no time limit, so that a block converging slowly ends with a status
+    (``MAX_ITERATIONS``, the bracket still sound) rather than running for hours."""
+    per_sweep = float(game.matrix.nnz) + SWEEP_COST
+    return int(min(MAX_SWEEPS, max(DEFLATE_EVERY, work // per_sweep)))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -109,6 +138,78 @@ class _Block:
                                                             np.diff(self.vertex_groups))]
         entry_state = np.repeat(own, np.diff(self.matrix.indptr))
         self.cyclic = bool(states.size > 1 or np.any(cols == entry_state))
+        # one choice of one row per state: a Markov chain, solved rather than iterated
+        self.chain = bool(self.cyclic and choices.size == states.size
+                          and rows.size == choices.size)
+        # every choice one row (no nature to answer): any choice's value is below B's
+        self.robot_only = bool(rows.size == choices.size)
+
+    def evaluate(self, row: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """The reachability values of the block's states when state ``i`` plays its
+        local row ``row[i]`` for ever, given ``values`` outside the block: the solution
+        of ``(I - P_BB) x = P_B,out . values`` on the states that leave the block with
+        positive probability, 0 on the others (they never leave).  A block left only by
+        rare steps takes ``B`` about the inverse of their probability in sweeps; this
+        is one sparse solve."""
+        m = self.states.size
+        mat = take_rows(self.matrix, row, self.matrix.shape[1]).tocoo()
+        cols = self._local_of[mat.col]
+        inner = cols < m
+        p_bb = sp.csr_array((mat.data[inner], (mat.row[inner], cols[inner])), shape=(m, m))
+        leak = np.bincount(mat.row[~inner], weights=mat.data[~inner], minlength=m) > 0
+        support = sp.csr_array((np.ones(int(inner.sum())), (cols[inner], mat.row[inner])),
+                               shape=(m, m))  # reversed edges
+        leaves = leak.copy()
+        frontier = leak.copy()
+        while frontier.any():
+            frontier = (support @ frontier.astype(np.float64) > 0) & ~leaves
+            leaves |= frontier
+        outside = np.asarray(values, dtype=np.float64).copy()
+        outside[self.states] = 0.0
+        rhs = np.asarray(sp.csr_array(take_rows(self.matrix, row, self.matrix.shape[1]))
+                         @ outside)
+        x = np.zeros(m)
+        keep = np.flatnonzero(leaves)
+        if keep.size:
+            # each row read as summing to 1: the diagonal of I - P_BB is what the row
+            # gives elsewhere, not 1 - p_ii (which loses the digits of a rare exit)
+            inside = p_bb[keep][:, keep]
+            diag = inside.diagonal()
+            away = np.bincount(mat.row, weights=mat.data, minlength=m)[keep] - diag
+            sub = sp.csc_array(sp.diags_array(away) - (inside - sp.diags_array(diag)))
+            x[keep] = np.atleast_1d(spla.spsolve(sub, rhs[keep]))
+        return np.clip(np.nan_to_num(x, nan=0.0), 0.0, 1.0)
+
+    def greedy_rows(self, values: np.ndarray) -> np.ndarray:
+        """Per block state the local row of its best choice against nature's best row
+        for ``values`` (the first of equals)."""
+        q = self.matrix @ values
+        vg, rg = self.vertex_groups, self.row_groups
+        rows = np.arange(q.size)
+        cmin = np.minimum.reduceat(q, vg[:-1])
+        rc = self.game.row_choice()
+        nat = np.minimum.reduceat(np.where(q == cmin[rc], rows, q.size), vg[:-1])
+        cs = self.game.choice_state()
+        best = np.maximum.reduceat(cmin, rg[:-1])
+        ch = np.arange(cmin.size)
+        pick = np.minimum.reduceat(np.where(cmin == best[cs], ch, cmin.size), rg[:-1])
+        return nat[pick]
+
+    def jump(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Move both bounds to the values of the rows greedy for them (:meth:`evaluate`)
+        where that is sound: ``lower`` when the block has no nature's choice (a policy's
+        value is at most the best); ``upper`` when the candidate is a pre-fixed point of
+        ``B`` (``B u <= u``, to rounding: every such ``u`` is above the least fixed
+        point, Knaster-Tarski)."""
+        s = self.states
+        if self.robot_only:
+            lower[s] = np.maximum(lower[s], self.evaluate(self.greedy_rows(lower), lower))
+        for guide in (lower, upper):
+            cand = upper.copy()
+            cand[s] = np.maximum(self.evaluate(self.greedy_rows(guide), upper), lower[s])
+            if (bellman(self.game, cand)[1] <= cand[s] + JUMP_SLACK).all():
+                upper[s] = np.minimum(upper[s], cand[s])
+                return
 
     def local(self) -> RobustGame:
         if self._local is None:
@@ -173,6 +274,13 @@ def robust_interval_iteration(
     sweeps, status, message = 0, Status.OPTIMAL, ""
     for states in levels(game, todo):
         block = _Block(game, states)
+        if block.chain:  # its one row per state: the values given the outside's
+            only = np.zeros(states.size, dtype=np.int64) + np.arange(states.size)
+            lower[states] = np.maximum(lower[states], block.evaluate(only, lower))
+            upper[states] = np.maximum(np.minimum(upper[states], block.evaluate(only, upper)),
+                                       lower[states])
+            sweeps += 1
+            continue
         while True:
             for _ in range(DEFLATE_EVERY):
                 lower[states] = np.maximum(lower[states], bellman(block.game, lower)[1])
@@ -184,6 +292,8 @@ def robust_interval_iteration(
                 break
             if block.cyclic:
                 block.deflate(lower, upper)
+                if states.size <= JUMP_STATES:
+                    block.jump(lower, upper)
             if sweeps >= max_sweeps:
                 status, message = Status.MAX_ITERATIONS, f"stopped after {sweeps} sweeps"
                 break

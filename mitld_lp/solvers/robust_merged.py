@@ -254,7 +254,7 @@ def robust_for(merged: Merged, opts: Options, q: Quantity, *, maximise: bool,
     against every law of the bands: maximising its worst case (``maximise``) or
     minimising its worst case (nature maximising it), by robust interval iteration on
     the merged game with a stay choice in each state of an end component (module docs)."""
-    from mitld_lp.solvers.robust import robust_interval_iteration, robust_policy
+    from mitld_lp.solvers.robust import robust_interval_iteration, robust_policy, sweep_budget
 
     mdp = merged.mdp
     m = mdp.n_states
@@ -288,7 +288,7 @@ def robust_for(merged: Merged, opts: Options, q: Quantity, *, maximise: bool,
     matrix = sp.csr_array((vals, (rows, cols)), shape=(int(vgroups[-1]), m + 2))
     game = RobustGame(matrix, vgroups, row_groups)
     target = np.concatenate([good, [True, False]])
-    it = robust_interval_iteration(game, target, tol=tol)
+    it = robust_interval_iteration(game, target, tol=tol, max_sweeps=sweep_budget(game))
     choice = robust_policy(game, target, it.lower, tie=max(tol, 1e-12))[:m]
     prob = np.zeros(mdp.n_choices)
     stay = np.zeros(m)
