@@ -127,7 +127,9 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
     event's tail is both cuts' mass (``report_tail``; under a band, at nature's highest
     hazards).  A band of tables of masses is cut at its last step
     (:func:`~mitld_lp.distributions.band.last_event_step`), past which no law of it has
-    the event: only the sensor's cut is left, whatever never masses its laws keep."""
+    the event: only the sensor's cut is left, whatever never masses its laws keep.  A
+    band that no truncation serves keeps a :class:`TailClock` (:func:`_tail`; an
+    unsensed event's, :func:`_seen_tail`, exact at its middle law where it can be)."""
     fixed = dict(truncation or {})
     auto = [a for a in sorted(laws) if a not in fixed and (
         a in sensed or not clock_reduction or laws[a].constant_hazard_from is None)]
@@ -149,10 +151,12 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
             try:
                 T = last if last is not None else laws[a].truncation_point(eps)
             except UnboundedBand:
-                if a not in sensed:
-                    raise
                 unbounded = True
-        if unbounded:  # the middle law's cut, the band's tail bounded
+        if unbounded and a not in sensed:  # fully seen: the middle law's clock, exact
+            T, tails[a] = _seen_tail(laws[a], share, clock_reduction)
+            if T is None:  # its middle law's hazard constant from a step: no cut
+                continue
+        elif unbounded:  # the middle law's cut, the band's tail bounded
             T, tails[a] = _tail(laws[a], eps, share)
         points[a] = max(T, 1) if nu > 0.0 else T
         if nu > 0.0 and 0.0 < d < 1.0:
@@ -183,9 +187,10 @@ def sensed_sta(dta: DTA, laws: Mapping[str, FirstOccurrence], sensed: tuple[str,
 
 @dataclass(frozen=True, slots=True)
 class TailClock(EventClock):
-    """The clock of a sensed band that no truncation serves (:func:`sensed_sta`): its
-    information states are its middle law's, so what their cut takes (``tail``) is that
-    law's ``P(K > T)`` (``P(T < K < inf)`` where it keeps "never") and the sensor's cut;
+    """The clock of a band that no truncation serves (:func:`sensed_sta`; a sensed
+    event's or one seen when it happens): its information states are its middle law's,
+    so what their cut takes (``tail``) is that law's ``P(K > T)`` (``P(T < K < inf)``
+    where it keeps "never") and the sensor's cut, nothing where it has no cut;
     the controller's chain cuts nothing
     (:func:`mitld_lp.running.sensed_band_chain.tail_sta`)."""
 
@@ -220,6 +225,34 @@ def _tail(band: Any, eps: float, share: float) -> tuple[int, FirstOccurrence]:
              "nature pick the hazard in [%.6g, %.6g] at every step", band.label, T, K,
              outer.lo, outer.hi)
     return T, replace(outer, nominal=band.nominal)
+
+
+def _seen_tail(band: Any, share: float, clock_reduction: bool
+               ) -> tuple[int | None, FirstOccurrence]:
+    """:func:`_tail` for an unsensed event (seen when it happens): the information
+    states are its middle law's, exact where that law's hazard is constant from a step
+    (no point: ``None``; the clock runs to the band's step ``K``, past every law's
+    change), else cut at its truncation point at ``share``.  Raises
+    :class:`UnboundedBand` where that law may never happen and its hazard changes for
+    ever (no cut of it is sound, none is exact) or where the clock is not reduced."""
+    law = band.nominal
+    c0 = law.constant_hazard_from if clock_reduction else None
+    if c0 is None and law.never > 0.0:
+        raise UnboundedBand(
+            band.label, f"the band's middle law {law.label} may never happen and its hazard "
+            "is not constant from any step" + ("" if clock_reduction else
+                                              " (the clock is not reduced)") +
+            ": no information states of it serve a band that no truncation serves "
+            "on an event no sensor reports (docs/robust.md)")
+    T = None if c0 is not None else law.truncation_point(share)
+    K = max(T or 1, tail_step(band, share), 1 if c0 is None else c0 - 1)
+    outer = tail_bands(band, K)[0]
+    log.info("%s: no truncation point serves the band (its laws' never masses differ and "
+             "its hazard may stay positive for ever): the information states are its "
+             "middle law's%s; past step %d the controller's chain lets nature pick the "
+             "hazard in [%.6g, %.6g] at every step", band.label,
+             "" if T is None else f", cut at step {T}", K, outer.lo, outer.hi)
+    return T, replace(outer, nominal=law)
 
 
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
