@@ -217,14 +217,20 @@ def _tail(band: Any, eps: float, share: float) -> tuple[int, FirstOccurrence]:
     nominal.  The controller's interval chain draws the true event from it, nothing
     truncated (:func:`mitld_lp.running.sensed_band_chain.tail_sta`)."""
     T = band.nominal.truncation_point(eps)
-    K = max(T, tail_step(band, share), 1)
+    return T, _outer_clock(band, T, max(T, tail_step(band, share), 1))
+
+
+def _outer_clock(band: Any, T: int | None, K: int) -> FirstOccurrence:
+    """The law a tail band's clock keeps: ``band`` with its hazards past ``K`` replaced
+    by the outer constant interval (:func:`~mitld_lp.distributions.band.tail_bands`),
+    its middle law kept as the nominal (cut at ``T``, or exact where ``T`` is None)."""
     outer = tail_bands(band, K)[0]
     log.info("%s: no truncation point serves the band (its laws' never masses differ and "
              "its hazard may stay positive for ever): the information states are its "
-             "middle law's, cut at step %d; past step %d the controller's chain lets "
-             "nature pick the hazard in [%.6g, %.6g] at every step", band.label, T, K,
-             outer.lo, outer.hi)
-    return T, replace(outer, nominal=band.nominal)
+             "middle law's%s; past step %d the controller's chain lets nature pick the "
+             "hazard in [%.6g, %.6g] at every step", band.label,
+             "" if T is None else f", cut at step {T}", K, outer.lo, outer.hi)
+    return replace(outer, nominal=band.nominal)
 
 
 def _seen_tail(band: Any, share: float, clock_reduction: bool
@@ -246,13 +252,7 @@ def _seen_tail(band: Any, share: float, clock_reduction: bool
             "on an event no sensor reports (docs/robust.md)")
     T = None if c0 is not None else law.truncation_point(share)
     K = max(T or 1, tail_step(band, share), 1 if c0 is None else c0 - 1)
-    outer = tail_bands(band, K)[0]
-    log.info("%s: no truncation point serves the band (its laws' never masses differ and "
-             "its hazard may stay positive for ever): the information states are its "
-             "middle law's%s; past step %d the controller's chain lets nature pick the "
-             "hazard in [%.6g, %.6g] at every step", band.label,
-             "" if T is None else f", cut at step {T}", K, outer.lo, outer.hi)
-    return T, replace(outer, nominal=law)
+    return T, _outer_clock(band, T, K)
 
 
 def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence],
