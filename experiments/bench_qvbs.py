@@ -60,6 +60,10 @@ The QVBS files are not part of this repository; give a checkout's ``benchmarks/`
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --only csma.4-2.some_before \
         --compare ../old-checkout --out /tmp/qvbs  # before and after, one run
 
+``--memory``: also, in a child of its own, each stage's resident and traced peaks and
+what it keeps (``experiments/memory_stages.py``), bytes per transition above the size
+before ``synthesize``: ``mem_<stage>_*`` columns and a table per instance.
+
 Written: ``bench_qvbs.csv``, ``bench_qvbs.md`` and ``bench_qvbs_machine.txt``.
 """
 
@@ -264,7 +268,20 @@ def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
                 process_cpu=_process_cpu(), **checks)
 
 
-WORKERS = {"ours": work_ours, "storm_check": work_storm_check, "storm_prism": work_storm_prism}
+def work_memory(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    """``synthesize`` with each stage's memory tracked (``memory_stages``; ``--memory``)."""
+    import memory_stages
+
+    from mitld_lp import load_model, synthesize
+
+    model = load_model(job["model"], max_states=job["max_states"])
+    bs.preload()
+    return memory_stages.Tracker(traced=True).run(
+        lambda: synthesize(model), lambda r: r.mdp.n_transitions)[1]
+
+
+WORKERS = {"ours": work_ours, "storm_check": work_storm_check, "storm_prism": work_storm_prism,
+           "memory": work_memory}
 
 
 def _child(route: str, job: dict[str, Any], work: Path, budget: float,
@@ -338,10 +355,26 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
 
 
 def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
-            budget: float, compare: Path | None = None) -> dict[str, Any]:
+            budget: float, compare: Path | None = None, memory: bool = False,
+            ) -> dict[str, Any]:
     """Every route on one instance and its row; ratios only if not trivial (decided
     by the graph alone, :func:`trivial`).
-    ``compare``: also ours from that checkout (``base_*`` columns)."""
+    ``compare``: also ours from that checkout (``base_*`` columns); ``memory``: also the
+    stage-by-stage memory of ours (``mem_*`` columns, :func:`work_memory`)."""
+    row = _measure(inst, job, work, budget, compare)
+    if not memory or "error" in row:
+        return row
+    got = _child("memory", job, work, budget)
+    if "error" in got:
+        return dict(row, mem_error=got["error"])
+    flat = {f"mem_{stage}_{k}": v for stage, r in got["stages"].items()
+            for k, v in (("peak", r["peak"]), ("traced", r.get("traced_peak")),
+                         ("kept", r["kept"]))}
+    return dict(row, **flat, mem_breakdown=got)
+
+
+def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
+             budget: float, compare: Path | None) -> dict[str, Any]:
     base: dict[str, Any] = {}
     if compare is not None:
         base = _child("ours", job, work, budget, compare)
@@ -468,6 +501,14 @@ def report(rows: list[dict], skipped: list[tuple[str, str]],
         s for s in skipped if not s[1].startswith(_NOT_A_TASK)]
     if left:
         text += "\nNot run:\n\n" + "".join(f"- {what}: {why}\n" for what, why in left)
+    broken = [r for r in done if "mem_breakdown" in r]
+    if broken:
+        import memory_stages
+
+        text += ("\nMemory by stage (`--memory`, a child of its own under tracemalloc; "
+                 "`peak` resident, `traced_peak` Python's traced allocations, `kept` the "
+                 "resident size at the stage's exit):\n\n" + "\n".join(
+                     memory_stages.text(r["instance"], r["mem_breakdown"]) for r in broken))
     quiet = len(skipped) - len(left) + len([r for r in rows if "error" in r])
     if quiet:
         text += (f"\n{quiet} QVBS properties of these families are not probabilities a "
@@ -481,7 +522,7 @@ def _write(out: Path, rows: list[dict], skipped: list[tuple[str, str]],
     how many instances the run takes on; the report says how many are still to come)."""
     from bench_scaling import machine_text
 
-    header = sorted({k for r in rows for k in r}, key=lambda k: (
+    header = sorted({k for r in rows for k in r} - {"mem_breakdown"}, key=lambda k: (
         COLUMNS.index(k) if k in COLUMNS else len(COLUMNS), k))
     _common.write_csv(out / "bench_qvbs.csv", header,  # full precision (the md rounds)
                       [["" if r.get(k) is None else r[k] for k in header] for r in rows])
@@ -510,6 +551,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
                     help="also run ours from the checkout DIR (its mitld_lp) on each "
                     "instance, before this checkout's, and report both")
+    ap.add_argument("--memory", action="store_true", help="also each instance's memory "
+                    "stage by stage (a child of its own): mem_* columns, a table each")
     ap.add_argument("--budget", type=float, default=BUDGET,
                     help=f"CPU seconds per child process (default {BUDGET:g})")
     args = ap.parse_args(argv)
@@ -530,7 +573,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for inst, job in todo:
             work = Path(tmp) / inst.name
             work.mkdir()
-            rows.append(measure(inst, job, work, args.budget, args.compare))
+            rows.append(measure(inst, job, work, args.budget, args.compare, args.memory))
             row = rows[-1]
             print(f"{inst.name}: not run ({row['error']})" if "error" in row else
                   bs._line(row) + (f"  apart: {row['trivial']}" if row["trivial"] else
