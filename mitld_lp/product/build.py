@@ -16,7 +16,15 @@ from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_si
 from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
-from mitld_lp.util.arrays import DENSE_LIMIT, Grow, Index, concatenate, merge, ranks
+from mitld_lp.util.arrays import (
+    DENSE_LIMIT,
+    Grow,
+    Index,
+    concatenate,
+    merge,
+    narrow_copy,
+    ranks,
+)
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.task import check_alphabet
@@ -109,7 +117,7 @@ def _build(
     # per batch: cols, vals, row lengths, actions (robust: then branches and bands per
     # choice, the bands' lo, hi and events)
     chunks: list[tuple[np.ndarray, ...]] = []
-    state_choices = Grow(np.int64)
+    state_choices = Grow(np.int32)  # choices per state: row_groups sums them in int64
     bar = progress_bar(progress, total=None, unit=" states", leave=False, mininterval=0.5,
                        desc="product")
     head, batch = 0, 256
@@ -128,11 +136,11 @@ def _build(
         batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
     bar.close()
     f.check_rows()  # the rows not checked yet: every distribution read is checked
-    keys = states.keys.view.copy()
+    # the states' keys in 4 bytes where they fit (the product keeps them, one a state)
+    keys = narrow_copy(states.keys.view)
     del states  # the index is not needed any more: free it before the matrix is assembled
-    built = _assemble(f, chunks, state_choices.view, keys, initial)
-    f.release()  # its arrays go now, not at the next cyclic collection
-    return built
+    f.release()  # the world's rows and the memos go before the matrix is assembled
+    return _assemble(f, chunks, state_choices.view, keys, initial)
 
 
 def _vertex_cost(chunk: tuple[np.ndarray, ...]) -> tuple[int, int, int, int]:
@@ -242,7 +250,7 @@ def _expand(
     else:
         cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
     actions = f.slot_aid.view[c_slot]
-    choices = np.ones(keys.size, dtype=np.int64)
+    choices = np.ones(keys.size, dtype=np.int32)
     choices[ordinary] = n_act
     # the absorbing states of the batch (at most three in the whole product): one
     # self-loop each, inserted where their state falls in the order
@@ -277,12 +285,14 @@ def _assemble(
     chunks.clear()
     cols = concatenate(columns[0], np.int32)
     vals = concatenate(columns[1], np.float64)
-    row_len = concatenate(columns[2], np.int64)
+    row_len = concatenate(columns[2], np.int32)
     actions = concatenate(columns[3], np.int32)
-    indptr = np.zeros(row_len.size + 1, dtype=np.int64)
-    np.cumsum(row_len, out=indptr[1:])
+    n_rows = row_len.size
+    # int32 indices where they fit: 12 bytes a transition, not 16
+    index = np.int32 if max(cols.size, keys.size) < 2**31 else np.int64
+    indptr = np.zeros(n_rows + 1, dtype=index)
+    np.cumsum(row_len, out=indptr[1:], dtype=index)
     del row_len
-    n_rows = indptr.size - 1
     # action ids in order of first use, as names
     used = actions >= 0
     uniq, first = np.unique(actions[used], return_index=True)
@@ -296,10 +306,7 @@ def _assemble(
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
     n = keys.size
-    # int32 indices where they fit: 12 bytes a transition, not 16
-    index = np.int32 if max(int(indptr[-1]), n) < 2**31 else np.int64
-    matrix = sp.csr_array((vals, cols.astype(index, copy=False), indptr.astype(index)),
-                          shape=(n_rows, n))
+    matrix = sp.csr_array((vals, cols.astype(index, copy=False), indptr), shape=(n_rows, n))
     row_groups = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(state_choices, out=row_groups[1:])
     common: dict[str, Any] = dict(

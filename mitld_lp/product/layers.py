@@ -32,6 +32,11 @@ from mitld_lp.worlds.table import WorldTable, table_of
 __all__ = ["Layers"]
 
 _CHECK_ROWS = 4096  # successor rows checked together (numpy's cost per call amortised)
+_ROW_ARRAYS = ("props", "act_start", "act_count", "slot_aid", "row_start", "row_len",
+               "row_succ", "row_prob", "row_asked", "out_start", "out_count", "out_occ",
+               "out_prob", "out_next", "out_branch", "band_start", "band_count", "band_lo",
+               "band_hi", "band_event", "_faulty")
+"""The arrays :meth:`Layers.release` drops once every row is expanded and checked."""
 
 
 class Layers:
@@ -144,11 +149,20 @@ class Layers:
         self.rows_checked = self.row_len.size
 
     def release(self) -> None:
-        """Drop the memos, whose bound methods refer back to this object: without them
+        """Drop the memos, whose bound methods refer back to this object (without them
         the layers are freed as soon as the build lets go of them, not at the next
-        cyclic garbage collection (on a product of a million transitions they hold tens
-        of megabytes that the solver could use)."""
+        cyclic garbage collection), and every per-row, per-slot and per-outcome array:
+        the world's rows read whole are int64 copies of the table's (8 bytes a world
+        transition each for the successors and the starts), which the assembly of the
+        matrix need not share its peak with.  What the assembly and the states' records
+        still read stays: the action ids, the game states, the situations, the codec,
+        the events."""
         del self._rows, self._delta
+        for name in _ROW_ARRAYS:
+            setattr(self, name, None)
+        self.table = None
+        self.gid, self.row_by_object, self.sid = {}, {}, {}
+        self.slot_action, self.slot_owner = [], []
 
     def occ_set(self, mask: int) -> frozenset[str]:
         """The events of an outcome's bit mask (over the sorted events)."""

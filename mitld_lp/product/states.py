@@ -95,7 +95,8 @@ class ProductStates(Sequence[Hashable]):
 
     Item ``i`` is a :class:`ProductState` or an :class:`Absorbing` member; a million
     records would cost more time and memory than the rest of the construction, and most
-    are never looked at.  :meth:`position` maps a record back to its state index.
+    are never looked at.  The codes are int32 when they all fit (the product's build
+    narrows them), else int64.  :meth:`position` maps a record back to its state index.
     """
 
     __slots__ = ("_keys", "_games", "_situations", "_codec", "_sorted", "_where")
@@ -197,6 +198,9 @@ class ProductStates(Sequence[Hashable]):
                 return None
             key = self._codec.key(g, state.automaton, sid)
         else:
+            return None
+        bounds = np.iinfo(self._keys.dtype)  # the keys are int32 where they all fit
+        if not bounds.min <= key <= bounds.max:
             return None
         if self._sorted is None:
             self._sorted = np.argsort(self._keys, kind="stable")

@@ -21,6 +21,7 @@ __all__ = [
     "ranks",
     "merge",
     "concatenate",
+    "narrow_copy",
 ]
 
 
@@ -276,3 +277,14 @@ def concatenate(parts: list[Any], dtype: Any) -> np.ndarray:
         at += part.size
         parts[i] = None
     return out
+
+
+_INT32 = np.iinfo(np.int32)
+
+
+def narrow_copy(values: np.ndarray) -> np.ndarray:
+    """A copy of the integer array ``values`` as int32 when every entry fits (half the
+    bytes of int64), else in its own type."""
+    fits = values.size == 0 or (int(values.min()) >= _INT32.min
+                                and int(values.max()) <= _INT32.max)
+    return values.astype(np.int32 if fits else values.dtype, copy=True)
