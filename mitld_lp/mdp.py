@@ -79,8 +79,12 @@ class MDPShape:
         return range(int(self.row_groups[state]), int(self.row_groups[state + 1]))
 
     def choice_state(self) -> np.ndarray:
-        """``(n_choices,)``: the state each choice belongs to."""
-        return np.repeat(np.arange(self.n_states), np.diff(self.row_groups))
+        """``(n_choices,)`` int64: the state each choice belongs to.  Counted up from
+        where each state's choices start: the one array it returns, no per-state
+        temporaries (the analysis asks for it while the quotient is built)."""
+        starts = self.row_groups[1:-1]
+        out = np.bincount(starts, minlength=self.n_choices + 1)[: self.n_choices]
+        return np.cumsum(out, out=out)
 
     def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
         """``(rows, groups)``: the successor distributions, one CSR row each, and the
