@@ -12,15 +12,20 @@ caller looks it up at call time, and at every entry and exit of one the tracker 
 The peak between two boundaries is credited to every stage open then (the outer
 ``synthesize`` too), so a stage's peak is the highest point reached while it ran; what a
 stage keeps is the size at its exit.  Every figure is in bytes above the size just
-before ``synthesize``, per product transition.  ``top`` lists the allocation sites that
-held the most traced memory at the traced peak's stage exit (a snapshot taken at the
-exit of the stage with the highest traced peak, so at most one snapshot a run).
+before ``synthesize``, per product transition.  ``top``: the allocation sites in the
+package holding the most traced bytes at the exit of the stage with the highest traced
+peak (one snapshot, taken after that stage's figures are read; the peaks are reset
+after it, so that it counts in no stage).  ``top_where``: where the synthesis stood when
+the traced size was highest (a thread reads it every 5 ms and, at each new high, the
+synthesis's innermost frames in the package; no snapshot, nothing allocated).
 """
 
 from __future__ import annotations
 
 import importlib
 import os
+import sys
+import threading
 import tracemalloc
 from collections.abc import Callable
 from typing import Any
@@ -82,8 +87,30 @@ class Tracker:
         self.tkept: dict[str, int] = {}
         self.calls: dict[str, int] = {}
         self.top: list[tuple[str, int]] = []
-        self.top_stage = ""
+        self.top_exit = ""
         self._best_traced = -1
+        self.top_stage = ""
+        self.top_where = ""
+        self._level = 0
+        self._done = threading.Event()
+
+    def _sample(self, main: int) -> None:
+        """The sampling thread (module docs); ``main``: the synthesis's thread id."""
+        while not self._done.wait(0.005):
+            now = tracemalloc.get_traced_memory()[0]
+            if now <= self._level:
+                continue
+            self._level = now
+            frame, where = sys._current_frames().get(main), []
+            while frame is not None and len(where) < 3:
+                name = frame.f_code.co_filename.replace(os.sep, "/")
+                if "/mitld_lp/" in name:
+                    where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{frame.f_lineno}"
+                                 f" ({frame.f_code.co_name})")
+                frame = frame.f_back
+            frame = None  # a frame held here would keep its arrays alive
+            self.top_where = " <- ".join(where)
+            self.top_stage = self.open[-1] if self.open else ""
 
     def _boundary(self) -> None:
         hwm = _hwm()
@@ -108,8 +135,10 @@ class Tracker:
             self.tkept[name] = tracemalloc.get_traced_memory()[0]
             if name != OUTER and self.tpeak.get(name, 0) > self._best_traced:
                 self._best_traced = self.tpeak[name]
-                self.top_stage = name
+                self.top_exit = name
                 self.top = _sites(tracemalloc.take_snapshot())
+                tracemalloc.reset_peak()  # the snapshot counts in no stage
+                _reset_hwm()
 
     def wrap(self, fn: Callable[..., Any], name: str) -> Callable[..., Any]:
         def tracked(*args: Any, **kwargs: Any) -> Any:
@@ -137,15 +166,24 @@ class Tracker:
         the resident and traced peaks and what it keeps, in bytes above the start per
         transition (``transitions_of(result)``)."""
         self.install()
+        sampler = None
         if self.traced:
             tracemalloc.start(16)
+            sampler = threading.Thread(target=self._sample, args=(threading.get_ident(),),
+                                       daemon=True)
         _reset_hwm()
         base, tbase = _rss(), (tracemalloc.get_traced_memory()[0] if self.traced else 0)
+        self._level = tbase
+        if sampler is not None:
+            sampler.start()
         self.enter(OUTER)
         try:
             out = call()
         finally:
             self.exit(OUTER)
+            self._done.set()
+            if sampler is not None:
+                sampler.join()
             if self.traced:
                 tracemalloc.stop()
         n = max(transitions_of(out), 1)
@@ -160,7 +198,8 @@ class Tracker:
                                 traced_kept=per(self.tkept[s], tbase)) if self.traced
                            else {})) for s in names}
         return out, dict(stages=rows, base_mb=round(base / 2**20, 1),
-                         top_stage=self.top_stage,
+                         top_exit=self.top_exit, top_stage=self.top_stage,
+                         top_where=self.top_where, top_traced=per(self._level, tbase),
                          top=[(w, round(b / n, 1)) for w, b in self.top])
 
 
@@ -174,8 +213,13 @@ def text(name: str, breakdown: dict[str, Any]) -> str:
     for stage, r in rows.items():
         out.append("| " + " | ".join(str(r.get(c, "")) if c != "stage" else stage
                                      for c in cols) + " |")
+    if breakdown["top_where"]:
+        out.append(f"\nThe traced size was highest ({breakdown['top_traced']} bytes a "
+                   f"transition) in `{breakdown['top_stage']}`, at "
+                   f"`{breakdown['top_where']}`.")
     if breakdown["top"]:
-        out.append(f"\nAt the exit of `{breakdown['top_stage']}` (the highest traced "
-                   "peak), the largest traced allocation sites, bytes per transition:\n")
+        out.append(f"\nAt the exit of `{breakdown['top_exit']}` (the stage with the "
+                   "highest traced peak), the largest allocation sites in the package "
+                   "(each allocation at its innermost frame in it), bytes per transition:\n")
         out += [f"- `{w}`: {b}" for w, b in breakdown["top"]]
     return "\n".join(out) + "\n"
