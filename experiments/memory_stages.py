@@ -151,21 +151,25 @@ class Tracker:
         tracked.__wrapped__ = fn  # type: ignore[attr-defined]
         return tracked
 
-    def install(self) -> None:
+    def install(self) -> list[tuple[Any, str, Any]]:
+        """The stages wrapped in place; the originals, to put back."""
+        saved = []
         for module, attr, name in STAGES:
             try:
                 mod = importlib.import_module(module)
             except ImportError:  # an older checkout (--compare) without the module
                 continue
             if hasattr(mod, attr):
+                saved.append((mod, attr, getattr(mod, attr)))
                 setattr(mod, attr, self.wrap(getattr(mod, attr), name))
+        return saved
 
     def run(self, call: Callable[[], Any], transitions_of: Callable[[Any], int],
             ) -> tuple[Any, dict[str, Any]]:
         """``call()`` (the synthesis) tracked; its result and the breakdown: per stage,
         the resident and traced peaks and what it keeps, in bytes above the start per
         transition (``transitions_of(result)``)."""
-        self.install()
+        saved = self.install()
         sampler = None
         if self.traced:
             tracemalloc.start(16)
@@ -186,6 +190,8 @@ class Tracker:
                 sampler.join()
             if self.traced:
                 tracemalloc.stop()
+            for mod, attr, fn in saved:  # the stages as they were
+                setattr(mod, attr, fn)
         n = max(transitions_of(out), 1)
         names = [OUTER] + [s for _, _, s in STAGES if s in self.calls]
 
