@@ -51,6 +51,7 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
+from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
     ETA,
@@ -421,8 +422,8 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     zero = np.asarray(zero, dtype=bool)
     name = "lower bound: the optimum"
     left = ~zero & ~ch.target
-    ecs = end_components(mdp, np.asarray(layers[0]), left)  # searched where they can be
-    if ecs.n_mecs:
+    ecs = None if _escapes(mdp, left) else end_components(mdp, np.asarray(layers[0]), left)
+    if ecs is not None and ecs.n_mecs:
         s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
         return Side(0.0, Check(name, False, (
             f"{ecs.n_mecs} end components outside the zero set (state {s}): the minimum "
@@ -431,6 +432,25 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     st = Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
     return _optimum_side(st, int(mdp.initial), ch, rnd, upper=False, zero=zero, one=one,
                          fallback=fallback, layers=layers, mec_of=None, name=name)
+
+
+def _escapes(mdp: MDP, left: np.ndarray) -> bool:
+    """Whether every policy leaves the ``left`` states with positive probability from
+    each of them: then no end component lies among them, shown by one
+    :func:`~mitld_lp.solvers.graph.attractor` of the other states (and of the states
+    with no choice, where a play stops) that covers them.  An end component inside
+    ``left`` keeps its states out of that attractor (each has a choice whose support
+    stays in it), so True proves there is none; False (some state may stay for ever)
+    leaves the search for the components themselves to the caller.  A matrix that
+    stores a zero is left to the caller too (its pattern is more than the support)."""
+    m = sp.csr_array(mdp.matrix)
+    if not left.any():
+        return True
+    if m.nnz and not bool(np.all(m.data > 0)):
+        return False
+    groups = np.asarray(mdp.row_groups, dtype=np.int64)
+    seeds = ~left | (np.diff(groups) == 0)
+    return bool(np.all(attractor(m, groups, seeds)[left]))
 
 
 # ------------------------------------------------------------------ one model
