@@ -212,23 +212,66 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     return ~np.logical_and.reduceat(ok, st.groups[:-1])
 
 
-def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
-            upper: bool) -> np.ndarray:
-    """Per state of ``states``: the least (``upper``) / largest value its choices allow,
-    ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
-    rows, choice_starts, state_starts = st.rows_of(states)
-    # the rows' entries read once for both: their sums (rows_dot) and the extreme of x
-    # over their supports (support_extreme), each as those compute it
-    local, cols, vals = row_entries(st.matrix, rows)
-    reached = x[cols]
-    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
-    ext = np.full(rows.size, -np.inf if upper else np.inf)
-    (np.maximum if upper else np.minimum).at(ext, local, reached)
-    each = np.minimum(above(rnd, rows, sums), ext) if upper else \
-        np.maximum(below(rnd, rows, sums), ext)
-    if choice_starts is not None:
-        each = np.minimum.reduceat(each, choice_starts)
-    return (np.maximum if upper else np.minimum).reduceat(each, state_starts)
+class _Walk:
+    """The live states of the levels a repair walks (from the lowest failing one up),
+    in level order, with their rows and the rows' entries gathered once: a level's
+    states, rows and entries are contiguous slices here, so a round on a level costs a
+    few NumPy calls on its slices, not a gather of its rows and of their readers (a
+    deadline clock makes a thousand levels: QVBS ``zeroconf_dl`` 1000-1-30)."""
+
+    __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
+                 "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at")
+
+    def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
+        self.states = states
+        bounds = np.flatnonzero(np.diff(levels)) + 1
+        self.level_at = np.concatenate([[0], bounds, [states.size]]).astype(np.int64)
+        rows, choice_starts, state_starts = st.rows_of(states)
+        self.rows, self.choice_starts, self.state_starts = rows, choice_starts, state_starts
+        self.local, self.cols, self.vals = row_entries(st.matrix, rows)
+        if choice_starts is None:  # a choice a row: the states' first choices are rows
+            self.choice_at = None
+            self.row_at = np.append(state_starts, rows.size)
+        else:  # per state its first choice, and that choice's first row
+            self.choice_at = np.append(state_starts, choice_starts.size)
+            self.row_at = np.append(choice_starts, rows.size)[self.choice_at]
+        row_state = np.repeat(np.arange(states.size), np.diff(self.row_at))
+        self.entry_state = row_state[self.local]
+        self.entry_at = np.searchsorted(self.local, self.row_at)  # per state, first entry
+
+    def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
+               upper: bool) -> np.ndarray:
+        """Per state ``a:z`` of the walk: the least (``upper``) / largest value its
+        choices allow, ``max_c min_rows min(above, max support)`` / ``min_c max(below,
+        min support)``, each row's sum over its entries in their order (the rows' sums
+        and the support's extreme read from one gather)."""
+        ra, rz = int(self.row_at[a]), int(self.row_at[z])
+        if rz == ra:  # no row to read: nothing to move
+            return np.full(z - a, -np.inf if upper else np.inf)
+        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        local = self.local[ea:ez] - ra
+        reached = x[self.cols[ea:ez]]
+        sums = np.bincount(local, weights=self.vals[ea:ez] * reached, minlength=rz - ra)
+        ext = np.full(rz - ra, -np.inf if upper else np.inf)
+        (np.maximum if upper else np.minimum).at(ext, local, reached)
+        rows = self.rows[ra:rz]
+        each = np.minimum(above(rnd, rows, sums), ext) if upper else \
+            np.maximum(below(rnd, rows, sums), ext)
+        if self.choice_at is not None:
+            ca, cz = int(self.choice_at[a]), int(self.choice_at[z])
+            each = np.minimum.reduceat(each, self.choice_starts[ca:cz] - ra)
+            starts = self.state_starts[a:z] - ca
+        else:
+            starts = self.state_starts[a:z] - ra
+        return (np.maximum if upper else np.minimum).reduceat(each, starts)
+
+    def reading(self, mark: np.ndarray, a: int, z: int) -> np.ndarray:
+        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state."""
+        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        hit = self.entry_state[ea:ez][mark[self.cols[ea:ez]]]
+        out = np.zeros(z - a, dtype=bool)
+        out[hit - a] = True
+        return out
 
 
 @dataclass(slots=True, eq=False)
@@ -246,7 +289,6 @@ class _Repair:
     upper: bool
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
-    readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -272,53 +314,39 @@ class _Repair:
         x[inside] = new
         return np.union1d(states, changed)
 
-    def _readers(self, moved: np.ndarray) -> np.ndarray:
-        """The states that have a choice whose support holds a state of ``moved`` (with
-        repeats): the matrix's pattern by column, made at the first call."""
-        if self.readers_of is None:
-            m = self.st.matrix
-            by_column = sp.csc_array(sp.csr_array(
-                (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
-            self.readers_of = (by_column.indptr, by_column.indices, self.st.row_state())
-        col_ptr, col_rows, row_state = self.readers_of
-        return row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]
-
     def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
-        """Move the bounds of the ``failing`` states and of whatever they move upstream;
-        False when a level does not settle within :data:`ROUNDS` rounds."""
+        """Move the bounds of the ``failing`` states and of whatever they move upstream
+        (a state is taken up when a row of its choices holds a moved state); False when
+        a level does not settle within :data:`ROUNDS` rounds."""
         live = np.flatnonzero(~self.free)
         lv = self.level_of[live]
-        order = np.argsort(lv, kind="stable")
-        live, lv = live[order], lv[order]
         first = int(self.level_of[failing].min())
-        bounds = np.flatnonzero(np.diff(lv)) + 1
-        starts = np.concatenate([[0], bounds])
-        stops = np.concatenate([bounds, [lv.size]])
-        # the states with a choice whose support holds a moved state (kept as states
-        # move, from the pattern by column: a level is not read again to find them)
-        reading = np.zeros(x.shape[0], dtype=bool)
-        now = np.zeros(x.shape[0], dtype=bool)  # scratch: those reading one round's moves
-        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
-            if lv[a] < first:
-                continue
-            states = live[a:b]
-            todo = states[failing[states] | reading[states]]
+        live, lv = live[lv >= first], lv[lv >= first]
+        order = np.argsort(lv, kind="stable")
+        walk = _Walk(self.st, live[order], lv[order])
+        states = walk.states
+        moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
+        fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
+        at = walk.level_at.tolist()
+        for a, z in zip(at[:-1], at[1:], strict=True):
+            todo = failing[states[a:z]] | walk.reading(moved, a, z)
             for _ in range(ROUNDS):
-                if todo.size == 0:
+                if not todo.any():
                     break
-                need = _needed(self.st, self.rnd, x, todo, self.upper)
-                move = (need > x[todo]) if self.upper else (need < x[todo])
-                changed = todo[move]
+                need = walk.needed(self.rnd, x, a, z, self.upper)
+                mine = states[a:z]
+                move = todo & ((need > x[mine]) if self.upper else (need < x[mine]))
+                changed = mine[move]
                 if changed.size == 0:
                     break
                 x[changed] = (np.minimum(need[move], 1.0) if self.upper else
                               np.maximum(need[move], 0.0))
                 self.moved += int(changed.size)
-                readers = self._readers(self.together(x, changed))
-                reading[readers] = True
-                now[readers] = True
-                todo = states[now[states]]  # within the level: its cycles
-                now[readers] = False
+                now = self.together(x, changed)
+                moved[now] = True
+                fresh[now] = True
+                todo = walk.reading(fresh, a, z)  # within the level: its cycles
+                fresh[now] = False
             else:
                 return False
         return True
