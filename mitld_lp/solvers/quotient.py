@@ -31,6 +31,7 @@ from mitld_lp.solvers.graph import (
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
+from mitld_lp.solvers.rows import row_entries
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
@@ -178,10 +179,16 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     cstate = mdp.choice_state()  # one entry a choice: only where there are MECs
     owners = cstate[exits]
     policy[owners] = exits
-    # BFS on the reversed internal-choice graph from the owners (virtual root n).
-    e = edges(mdp)
-    internal = mecs.internal[e.choice]
-    src, dst = e.source[internal], e.succ[internal]
+    # BFS on the reversed internal-choice graph from the owners (virtual root n): the
+    # positive entries of the internal choices' rows, in the matrix's order
+    inside = np.flatnonzero(mecs.internal)
+    local, succ, data = row_entries(sp.csr_array(mdp.matrix), inside)
+    positive = data > 0
+    e_choice = inside[local[positive]]
+    e_succ = np.asarray(succ[positive], dtype=np.int64)
+    e_source = cstate[e_choice]
+    del local, succ, data, positive
+    src, dst = e_source, e_succ
     rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])
     cols = np.concatenate([src, owners])
     graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
@@ -190,10 +197,10 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     others = np.setdiff1d(members, owners)
     if np.any(pred[others] < 0):  # pragma: no cover - MECs are strongly connected
         raise AssertionError("a MEC member cannot reach its exit inside the MEC")
-    toward = internal & (e.succ == pred[e.source])
+    toward = e_succ == pred[e_source]
     # For each member, the first internal choice that has the BFS parent as a successor.
-    cand_state = e.source[toward]
-    cand_choice = e.choice[toward]
+    cand_state = e_source[toward]
+    cand_choice = e_choice[toward]
     ordering = np.lexsort((cand_choice, cand_state))
     cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
     first = np.unique(cand_state, return_index=True)[1]
