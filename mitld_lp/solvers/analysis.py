@@ -256,6 +256,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     order = _order(matrix, row_groups, comp_of, found.level)
     layers = (read_only(found.component), read_only(found.level))
     init = int(mdp.initial)
+    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
@@ -273,7 +274,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             choice_origin=read_only(kept), initial=int(state_map[init]),
             initial_value=initial_value if state_map[init] < 0 else float("nan"),
             order=order, zero=read_only(zero), layers=layers, sense=sense,
-            qualitative=decided)
+            qualitative=decided, shared=shared)
 
     if to_extra is None:
         one = quotient(goal, to_goal, 1)

@@ -7,7 +7,8 @@ name it without importing the others.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -115,6 +116,10 @@ class Quotient(MDPShape):
     layers: tuple[np.ndarray, np.ndarray]
     sense: Sense
     qualitative: Qualitative
+    # what the solvers gather once from the matrix and the order, for every quotient of
+    # one analysis (they share both): the single-state levels the iteration and the LP
+    # walk (:func:`mitld_lp.solvers.topological.single_levels`)
+    shared: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def lift(self, reduced: np.ndarray) -> np.ndarray:
         """Map a per-reduced-state value vector back to the original states.

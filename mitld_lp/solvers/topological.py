@@ -64,6 +64,7 @@ __all__ = [
     "GAIN",
     "single_scores",
     "SingleLevels",
+    "single_levels",
     "solve_single_states",
     "level_kernels",
 ]
@@ -177,6 +178,20 @@ def level_kernels(entries: int, n_levels: int, compiled: bool | None = None) -> 
         except ImportError:
             _LEVEL_KERNELS = False
     return _LEVEL_KERNELS or None
+
+
+def single_levels(q: Quotient, b: Blocks) -> SingleLevels:
+    """``SingleLevels(q, b)`` (no state skipped), gathered once for the quotients of one
+    analysis (``q.shared``: they share the matrix and the order it reads) and walked by
+    the interval iteration and the LP alike; its compiled walks picked again at each
+    call (the iteration's blocks may have loaded numba since)."""
+    found = q.shared.get("single_levels")
+    if found is None or found[0] is not b:
+        found = (b, SingleLevels(q, b))
+        q.shared["single_levels"] = found
+    else:
+        found[1].kernels = level_kernels(q.matrix.nnz, b.n_levels)
+    return found[1]
 
 
 class SingleLevels:
