@@ -49,7 +49,7 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.analysis import end_components
+from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
@@ -450,7 +450,8 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     zero = np.asarray(zero, dtype=bool)
     name = "lower bound: the optimum"
     left = ~zero & ~ch.target
-    ecs = None if _escapes(mdp, left) else end_components(mdp, np.asarray(layers[0]), left)
+    comp = np.asarray(layers[0])
+    ecs = None if _escapes(mdp, left, comp) else end_components(mdp, comp, left)
     if ecs is not None and ecs.n_mecs:
         s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
         return Side(0.0, Check(name, False, (
@@ -462,23 +463,26 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
                          fallback=fallback, layers=layers, mec_of=None, name=name)
 
 
-def _escapes(mdp: MDP, left: np.ndarray) -> bool:
-    """Whether every policy leaves the ``left`` states with positive probability from
-    each of them: then no end component lies among them, shown by one
+def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
+    """Whether no end component lies among the ``left`` states (``comp``: each state's
+    strongly connected component in ``mdp``'s support graph), shown without searching
+    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`),
+    or every policy leaves those that may with positive probability, one
     :func:`~mitld_lp.solvers.graph.attractor` of the other states (and of the states
-    with no choice, where a play stops) that covers them.  An end component inside
-    ``left`` keeps its states out of that attractor (each has a choice whose support
-    stays in it), so True proves there is none; False (some state may stay for ever)
-    leaves the search for the components themselves to the caller.  A matrix that
-    stores a zero is left to the caller too (its pattern is more than the support)."""
+    with no choice, where a play stops) covering them.  An end component inside ``left``
+    keeps its states out of that attractor (each has a choice whose support stays in
+    it), so True proves there is none; False leaves the search for the components to
+    the caller, as does a matrix that stores a zero (its pattern is more than the
+    support)."""
     m = sp.csr_array(mdp.matrix)
-    if not left.any():
-        return True
     if m.nnz and not bool(np.all(m.data > 0)):
         return False
+    inside = left & may_cycle(mdp, comp)
+    if not inside.any():
+        return True
     groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    seeds = ~left | (np.diff(groups) == 0)
-    return bool(np.all(attractor(m, groups, seeds)[left]))
+    seeds = ~inside | (np.diff(groups) == 0)
+    return bool(np.all(attractor(m, groups, seeds)[inside]))
 
 
 # ------------------------------------------------------------------ one model
