@@ -51,6 +51,7 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
+from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, _Repair
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
@@ -67,12 +68,13 @@ from mitld_lp.solvers.rounding import (
     rounding,
     support_extreme,
 )
-from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
+from mitld_lp.solvers.rows import gather_ranges, rows_dot
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
-           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
+           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE", "ROUNDS",
+           "SPARSE_LEVEL",
            "is_certificate_check"]
 
 log = logging.getLogger(__name__)
@@ -82,9 +84,6 @@ GROWTH = 16.0
 
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
-
-ROUNDS = 64
-"""Repair rounds on one level of non-trivial components before giving up."""
 
 EVERYWHERE = "policy optimal in every state"
 """The name of :func:`everywhere`'s check."""
@@ -210,146 +209,6 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     if st.nature is not None:
         ok = np.logical_or.reduceat(ok, st.nature[:-1])
     return ~np.logical_and.reduceat(ok, st.groups[:-1])
-
-
-class _Walk:
-    """The live states of the levels a repair walks (from the lowest failing one up),
-    in level order, with their rows and the rows' entries gathered once: a level's
-    states, rows and entries are contiguous slices here, so a round on a level costs a
-    few NumPy calls on its slices, not a gather of its rows and of their readers (a
-    deadline clock makes a thousand levels: QVBS ``zeroconf_dl`` 1000-1-30)."""
-
-    __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
-                 "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at")
-
-    def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
-        self.states = states
-        bounds = np.flatnonzero(np.diff(levels)) + 1
-        self.level_at = np.concatenate([[0], bounds, [states.size]]).astype(np.int64)
-        rows, choice_starts, state_starts = st.rows_of(states)
-        self.rows, self.choice_starts, self.state_starts = rows, choice_starts, state_starts
-        self.local, self.cols, self.vals = row_entries(st.matrix, rows)
-        if choice_starts is None:  # a choice a row: the states' first choices are rows
-            self.choice_at = None
-            self.row_at = np.append(state_starts, rows.size)
-        else:  # per state its first choice, and that choice's first row
-            self.choice_at = np.append(state_starts, choice_starts.size)
-            self.row_at = np.append(choice_starts, rows.size)[self.choice_at]
-        row_state = np.repeat(np.arange(states.size), np.diff(self.row_at))
-        self.entry_state = row_state[self.local]
-        self.entry_at = np.searchsorted(self.local, self.row_at)  # per state, first entry
-
-    def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
-               upper: bool) -> np.ndarray:
-        """Per state ``a:z`` of the walk: the least (``upper``) / largest value its
-        choices allow, ``max_c min_rows min(above, max support)`` / ``min_c max(below,
-        min support)``, each row's sum over its entries in their order (the rows' sums
-        and the support's extreme read from one gather)."""
-        ra, rz = int(self.row_at[a]), int(self.row_at[z])
-        if rz == ra:  # no row to read: nothing to move
-            return np.full(z - a, -np.inf if upper else np.inf)
-        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
-        local = self.local[ea:ez] - ra
-        reached = x[self.cols[ea:ez]]
-        sums = np.bincount(local, weights=self.vals[ea:ez] * reached, minlength=rz - ra)
-        ext = np.full(rz - ra, -np.inf if upper else np.inf)
-        (np.maximum if upper else np.minimum).at(ext, local, reached)
-        rows = self.rows[ra:rz]
-        each = np.minimum(above(rnd, rows, sums), ext) if upper else \
-            np.maximum(below(rnd, rows, sums), ext)
-        if self.choice_at is not None:
-            ca, cz = int(self.choice_at[a]), int(self.choice_at[z])
-            each = np.minimum.reduceat(each, self.choice_starts[ca:cz] - ra)
-            starts = self.state_starts[a:z] - ca
-        else:
-            starts = self.state_starts[a:z] - ra
-        return (np.maximum if upper else np.minimum).reduceat(each, starts)
-
-    def reading(self, mark: np.ndarray, a: int, z: int) -> np.ndarray:
-        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state."""
-        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
-        hit = self.entry_state[ea:ez][mark[self.cols[ea:ez]]]
-        out = np.zeros(z - a, dtype=bool)
-        out[hit - a] = True
-        return out
-
-
-@dataclass(slots=True, eq=False)
-class _Repair:
-    """The repair of a candidate (module docs): a failing state's bound moved to what its
-    choices need, levels downstream first (one pass over the levels above the lowest
-    failing one, a level's states taken again while they move, at most :data:`ROUNDS`
-    times), an end component's states together."""
-
-    st: Rows
-    rnd: Rounding
-    free: np.ndarray
-    level_of: np.ndarray
-    mec_of: np.ndarray | None
-    upper: bool
-    members: tuple[np.ndarray, np.ndarray] | None = None
-    moved: int = 0
-
-    def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
-        """Bring each end component touched by ``states`` to its members' extreme value;
-        the states whose value moved."""
-        if self.mec_of is None:
-            return states
-        mecs = np.unique(self.mec_of[states])
-        mecs = mecs[mecs >= 0]
-        if mecs.size == 0:
-            return states
-        if self.members is None:
-            order = np.argsort(self.mec_of, kind="stable")
-            self.members = (order, self.mec_of[order])
-        order, sorted_ids = self.members
-        lo = np.searchsorted(sorted_ids, mecs, side="left")
-        hi = np.searchsorted(sorted_ids, mecs, side="right")
-        inside = order[gather_ranges(lo, hi)]
-        group = np.repeat(np.arange(mecs.size), hi - lo)
-        best = np.full(mecs.size, -np.inf if self.upper else np.inf)
-        (np.maximum if self.upper else np.minimum).at(best, group, x[inside])
-        new = best[group]
-        changed = inside[new != x[inside]]
-        x[inside] = new
-        return np.union1d(states, changed)
-
-    def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
-        """Move the bounds of the ``failing`` states and of whatever they move upstream
-        (a state is taken up when a row of its choices holds a moved state); False when
-        a level does not settle within :data:`ROUNDS` rounds."""
-        live = np.flatnonzero(~self.free)
-        lv = self.level_of[live]
-        first = int(self.level_of[failing].min())
-        live, lv = live[lv >= first], lv[lv >= first]
-        order = np.argsort(lv, kind="stable")
-        walk = _Walk(self.st, live[order], lv[order])
-        states = walk.states
-        moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
-        fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
-        at = walk.level_at.tolist()
-        for a, z in zip(at[:-1], at[1:], strict=True):
-            todo = failing[states[a:z]] | walk.reading(moved, a, z)
-            for _ in range(ROUNDS):
-                if not todo.any():
-                    break
-                need = walk.needed(self.rnd, x, a, z, self.upper)
-                mine = states[a:z]
-                move = todo & ((need > x[mine]) if self.upper else (need < x[mine]))
-                changed = mine[move]
-                if changed.size == 0:
-                    break
-                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
-                              np.maximum(need[move], 0.0))
-                self.moved += int(changed.size)
-                now = self.together(x, changed)
-                moved[now] = True
-                fresh[now] = True
-                todo = walk.reading(fresh, a, z)  # within the level: its cycles
-                fresh[now] = False
-            else:
-                return False
-        return True
 
 
 def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bool,
