@@ -118,8 +118,9 @@ class Quotient(MDPShape):
     qualitative: Qualitative
     # what the solvers gather once from the matrix and the order, for every quotient of
     # one analysis (they share both): the single-state levels the iteration and the LP
-    # walk (:func:`mitld_lp.solvers.topological.single_levels`)
-    shared: dict[str, Any] = field(default_factory=dict, repr=False)
+    # walk (:func:`mitld_lp.solvers.topological.single_levels`), the removed states'
+    # choices every lifted policy takes (:func:`mitld_lp.solvers.quotient.lift_policy`)
+    shared: dict[Any, Any] = field(default_factory=dict, repr=False)
 
     def lift(self, reduced: np.ndarray) -> np.ndarray:
         """Map a per-reduced-state value vector back to the original states.
