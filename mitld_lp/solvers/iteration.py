@@ -85,7 +85,6 @@ from mitld_lp.solvers.topological import (
     blocks,
     evaluate_chain,
     improve_policy,
-    single_levels,
     state_graph,
 )
 from mitld_lp.util.progress import Bar
@@ -350,8 +349,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     loaded at the first of them)."""
     blk = blocks(q)
     sense = q.sense
-    singles = (single_levels(q, blk) if skip is None or not skip.any() else
-               SingleLevels(q, blk, skip))
+    singles = SingleLevels(q, blk, skip)
     done = 0  # the levels whose single states are solved
     for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
         singles.solve(done, index + 1, rewards, bounds)

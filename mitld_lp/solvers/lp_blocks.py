@@ -30,7 +30,6 @@ from mitld_lp.solvers.topological import (
     Block,
     SingleLevels,
     blocks,
-    single_levels,
     solve_single_states,
 )
 from mitld_lp.util.progress import tracked
@@ -350,7 +349,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     walks: dict[int, tuple[np.ndarray, ChainLevels]] = {}  # greedy chains, for the flow
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
-    singles = single_levels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
+    singles = SingleLevels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
     walk = (blk.walk(skip=q.zero) if singles is None else
             _value_runs(q, blk, singles, values, reduced_choice, weights))
     for level in tracked(walk, progress, lambda lv: lv.states.size,

@@ -64,7 +64,6 @@ __all__ = [
     "GAIN",
     "single_scores",
     "SingleLevels",
-    "single_levels",
     "solve_single_states",
     "level_kernels",
 ]
@@ -180,20 +179,6 @@ def level_kernels(entries: int, n_levels: int, compiled: bool | None = None) -> 
     return _LEVEL_KERNELS or None
 
 
-def single_levels(q: Quotient, b: Blocks) -> SingleLevels:
-    """``SingleLevels(q, b)`` (no state skipped), gathered once for the quotients of one
-    analysis (``q.shared``: they share the matrix and the order it reads) and walked by
-    the interval iteration and the LP alike; its compiled walks picked again at each
-    call (the iteration's blocks may have loaded numba since)."""
-    found = q.shared.get("single_levels")
-    if found is None or found[0] is not b:
-        found = (b, SingleLevels(q, b))
-        q.shared["single_levels"] = found
-    else:
-        found[1].kernels = level_kernels(q.matrix.nnz, b.n_levels)
-    return found[1]
-
-
 class SingleLevels:
     """The single-state components of a quotient's levels, gathered once for a walk
     that solves them level by level (:func:`single_scores`' formula): a product with a
@@ -243,9 +228,11 @@ class SingleLevels:
                              self.choice_entry[ca].tolist(), self.choice_entry[cz].tolist(),
                              strict=True))
         self.run_at = np.searchsorted(marks, np.arange(b.n_levels + 1)).tolist()
+        # 4 bytes an index where the choices' count fits (a level's offsets are below it)
+        small = np.int32 if self.choices.size < np.iinfo(np.int32).max else np.int64
         level_first = np.repeat(ca, z - a)  # per state, its level's first choice
-        self.first_choice = self.state_choice[:-1] - level_first
-        self.owner_at = self.owner - np.repeat(a, z - a)[self.owner]
+        self.first_choice = (self.state_choice[:-1] - level_first).astype(small)
+        self.owner_at = (self.owner - np.repeat(a, z - a)[self.owner]).astype(small)
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
@@ -263,16 +250,11 @@ class SingleLevels:
                                        self.leave, np.asarray(rewards, dtype=np.float64),
                                        bounds, self.sense is Sense.MIN)
             return
-        runs = self._runs(first, stop)
-        if not runs:
-            return
-        # the walked choices' rewards, gathered once (a level's slice is then copied)
-        c0, c1 = runs[0][2], runs[-1][3]
-        reward_of = np.asarray(rewards, dtype=np.float64)[self.choices[c0:c1]]
-        for a, z, ca, cz, ea, ez in runs:
+        rewards = np.asarray(rewards, dtype=np.float64)
+        for a, z, ca, cz, ea, ez in self._runs(first, stop):
             rows = self.local[ea:ez] - ca
             terms = self.vals[ea:ez, None] * bounds[self.cols[ea:ez]]
-            score = reward_of[ca - c0:cz - c0].copy()
+            score = rewards[self.choices[ca:cz]]  # a copy (fancy indexing)
             for j in range(bounds.shape[1]):
                 score[:, j] += np.bincount(rows, weights=terms[:, j], minlength=cz - ca)
             leave = self.leave[ca:cz, None]
@@ -306,30 +288,30 @@ class SingleLevels:
                                        values, reduced_choice, weights, TIE,
                                        self.sense is Sense.MIN)
             return
-        reward_of = to_target[self.choices]  # per walked choice, gathered once
-        prefer = reward_of if self.sense is Sense.MAX else -reward_of
         live_of = ~skip[self.states]
         every = bool(live_of.all())
         reduce = np.maximum if self.sense is Sense.MAX else np.minimum
         for a, z, ca, cz, ea, ez in self._runs(first, stop):
             sums = np.bincount(self.local[ea:ez] - ca, minlength=cz - ca,
                                weights=self.vals[ea:ez] * values[self.cols[ea:ez]])
-            reward = reward_of[ca:cz] + sums
+            ch = self.choices[ca:cz]
+            reward = to_target[ch] + sums
             leave = self.leave[ca:cz]
             score = (reward / leave if self.positive else
                      np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
             np.clip(score, 0.0, 1.0, out=score)
             if cz - ca == z - a:  # one choice a state: each its own best
-                best, pick = score, self.choices[ca:cz]
+                best, pick = score, ch
             else:  # segmented_argmax's ties and preference, on the level's segments
                 starts, own = self.first_choice[a:z], self.owner_at[ca:cz]
                 top = reduce.reduceat(score, starts)[own]
                 tied = self.sense.gain(score, top) >= -TIE * np.abs(top)
-                key = np.where(tied, prefer[ca:cz], -np.inf)
+                prefer = to_target[ch] if self.sense is Sense.MAX else -to_target[ch]
+                key = np.where(tied, prefer, -np.inf)
                 tied &= key >= np.maximum.reduceat(key, starts)[own]
                 at = np.minimum.reduceat(np.where(tied, np.arange(cz - ca),
                                                   np.iinfo(np.int64).max), starts)
-                best, pick = score[at], self.choices[ca:cz][at]
+                best, pick = score[at], ch[at]
             states = self.states[a:z]
             if not every:
                 live = live_of[a:z]
