@@ -51,7 +51,7 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
-from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, _Repair
+from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
@@ -68,7 +68,7 @@ from mitld_lp.solvers.rounding import (
     rounding,
     support_extreme,
 )
-from mitld_lp.solvers.rows import gather_ranges, rows_dot
+from mitld_lp.solvers.rows import rows_dot
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
@@ -150,41 +150,6 @@ def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
         f"the {'pre' if upper else 'sub'}-fixed point check failed in {int((~ok).sum())} "
         f"states (first {worst}) at every slack; the bound is the trivial "
         f"{x[s0]:g}")), read_only(x))
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Rows:
-    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
-    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
-    picks one, as in a robust game; ``None``: one row per choice) and the choices into
-    states by ``groups``."""
-
-    matrix: sp.csr_array
-    groups: np.ndarray
-    nature: np.ndarray | None = None
-
-    @property
-    def n_states(self) -> int:
-        return int(self.groups.shape[0] - 1)
-
-    def row_state(self) -> np.ndarray:
-        """The state of each row: 4 bytes a row where the states' count fits."""
-        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
-        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
-        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
-
-    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
-                                                    np.ndarray]:
-        """The rows of ``states``' choices, where each choice's rows start (``None``
-        without nature) and where each state's choices start, both within the rows."""
-        choices = gather_ranges(self.groups[states], self.groups[states + 1])
-        per_state = self.groups[states + 1] - self.groups[states]
-        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
-        if self.nature is None:
-            return choices, None, state_starts
-        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
-        per_choice = self.nature[choices + 1] - self.nature[choices]
-        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
 
 
 def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,

@@ -1,12 +1,13 @@
 """The repair of a Bellman candidate (:mod:`mitld_lp.solvers.certify`): a failing
 state's bound moved to what its choices need, levels downstream first, an end
 component's states together, and the states reading a moved one taken up after it.
-The bounds it moves are checked again by the caller: the repair only proposes."""
+The bounds it moves are checked again by the caller: the repair only proposes.  The
+rows the Bellman checks read (:class:`Rows`) are defined here, beside the repair that
+walks them, and :mod:`~mitld_lp.solvers.certify` imports them (one way, no circle)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -14,10 +15,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 
-if TYPE_CHECKING:
-    from mitld_lp.solvers.certify import Rows
-
-__all__ = ["ROUNDS", "SPARSE_LEVEL"]
+__all__ = ["ROUNDS", "SPARSE_LEVEL", "Rows"]
 
 ROUNDS = 64
 """Repair rounds on one level of non-trivial components before giving up."""
@@ -27,6 +25,41 @@ SPARSE_LEVEL = 4096
 up and finds their readers by column (a large component's rounds move few of its
 states: QVBS zeroconf 1000-4's 213,268-state level, 3,497 failing), not the slices of
 every state of the level (:class:`_Walk`)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Rows:
+    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
+    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
+    picks one, as in a robust game; ``None``: one row per choice) and the choices into
+    states by ``groups``."""
+
+    matrix: sp.csr_array
+    groups: np.ndarray
+    nature: np.ndarray | None = None
+
+    @property
+    def n_states(self) -> int:
+        return int(self.groups.shape[0] - 1)
+
+    def row_state(self) -> np.ndarray:
+        """The state of each row: 4 bytes a row where the states' count fits."""
+        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
+        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
+        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
+
+    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
+                                                    np.ndarray]:
+        """The rows of ``states``' choices, where each choice's rows start (``None``
+        without nature) and where each state's choices start, both within the rows."""
+        choices = gather_ranges(self.groups[states], self.groups[states + 1])
+        per_state = self.groups[states + 1] - self.groups[states]
+        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
+        if self.nature is None:
+            return choices, None, state_starts
+        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
+        per_choice = self.nature[choices + 1] - self.nature[choices]
+        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
 
 
 def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
