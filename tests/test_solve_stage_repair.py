@@ -36,10 +36,12 @@ def _optimum(mdp, target: np.ndarray, sweeps: int = 20_000) -> np.ndarray:
     return v
 
 
-def _repaired(mdp, x0: np.ndarray, free: np.ndarray, upper: bool, nature=None,
+def _repaired(mdp, x0: np.ndarray, free: np.ndarray, upper: bool, st: C.Rows | None = None,
               sparse_level: int = R.SPARSE_LEVEL):
-    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64),
-                nature)
+    """The repair of ``x0`` on ``mdp``'s rows (or ``st``'s), its levels read from slices
+    (``sparse_level`` above every level) or state by state (``sparse_level=1``)."""
+    if st is None:
+        st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
     rnd = rounding(st.matrix)
     comp, level = support_layers(mdp)
     level_of = np.asarray(level)[np.asarray(comp)]
@@ -95,32 +97,13 @@ def test_the_repair_reads_natures_rows_the_same_both_ways(seed: int) -> None:
     rows = sp.csr_array(rows[order])
     nature = np.arange(0, rows.shape[0] + 1, 2)
 
-    class Game:
-        matrix = rows
-        row_groups = mdp.row_groups
-
     target = np.asarray(mdp.target, dtype=bool)
     x0 = np.where(target, 1.0, np.random.default_rng(seed).random(mdp.n_states) * 0.5)
-    free = target.copy()
     st = C.Rows(rows, np.asarray(mdp.row_groups, dtype=np.int64), nature)
-    rnd = rounding(rows)
-    comp, level = support_layers(mdp)
-    level_of = np.asarray(level)[np.asarray(comp)]
-    out = []
-    for sparse_level in (10**9, 1):
-        x = x0.copy()
-        failing = C._fails(st, rnd, x, free, True)
-        assert failing.any()
-        old = R.SPARSE_LEVEL
-        R.SPARSE_LEVEL = sparse_level
-        try:
-            rep = R._Repair(st, rnd, free, level_of, None, True)
-            ok = rep.run(x, failing)
-        finally:
-            R.SPARSE_LEVEL = old
-        out.append((x, ok, rep.moved))
-    assert np.array_equal(out[0][0], out[1][0]) and out[0][1:] == out[1][1:]
-    assert out[0][2] > 0
+    slices, single = (_repaired(mdp, x0, target.copy(), True, st, sparse_level=level)
+                      for level in (10**9, 1))
+    assert np.array_equal(slices[0], single[0]) and slices[1:3] == single[1:3]
+    assert slices[2] > 0
 
 
 @pytest.mark.parametrize("seed", range(6))
