@@ -65,7 +65,24 @@ from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 
-__all__ = ["analyse", "end_components"]
+__all__ = ["analyse", "end_components", "may_cycle"]
+
+
+def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
+    """``(n_states,)`` bool: the states an end component may hold, given each state's
+    strongly connected component ``comp`` in ``mdp``'s support graph (no zero stored):
+    those of a non-trivial component, and those with a choice that stays put (all its
+    entries in its own column).  An end component is strongly connected: it is one of
+    these states or lies among them."""
+    size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
+    m = mdp.matrix
+    first = m.indptr[:-1]
+    lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
+    hi = np.maximum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
+    pure = (lo == hi) & (lo == mdp.choice_state())
+    del lo, hi
+    loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
+    return (size[comp] > 1) | loops
 
 
 def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
@@ -78,18 +95,10 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     as :func:`~mitld_lp.solvers.graph.maximal_end_components` on ``maybe``, numbered
     in another order (which it is, on a matrix that stores a zero)."""
     n = mdp.n_states
-    size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
     m = mdp.matrix
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
-    # a choice that stays put: all its entries (no zeros are stored) in its own column
-    first = m.indptr[:-1]
-    lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    hi = np.maximum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    pure = (lo == hi) & (lo == mdp.choice_state())
-    del lo, hi
-    loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
-    cand = np.flatnonzero(maybe & ((size[comp] > 1) | loops))
+    cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
     mec_of = np.full(n, -1, dtype=np.int64)
     internal = np.zeros(mdp.n_choices, dtype=bool)
     if cand.size == 0:
@@ -141,7 +150,13 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
 
     if m.nnz < kernels.COMPILED_MIN_ENTRIES:
         return False
-    owner = np.repeat(comp, np.diff(m.indptr[row_groups]))
+    per_state = np.diff(m.indptr[row_groups])
+    # a component's entries bound those inside it: most products decide here, a state
+    # at a time, before the count over every entry
+    if np.bincount(comp, weights=per_state).max(initial=0) < \
+            kernels.COMPILED_MIN_BLOCK_ENTRIES:
+        return False
+    owner = np.repeat(comp, per_state)
     inside = owner[owner == comp[m.indices]]
     del owner
     return bool(np.bincount(inside).max(initial=0) >= kernels.COMPILED_MIN_BLOCK_ENTRIES)
@@ -256,6 +271,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     order = _order(matrix, row_groups, comp_of, found.level)
     layers = (read_only(found.component), read_only(found.level))
     init = int(mdp.initial)
+    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
@@ -273,7 +289,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             choice_origin=read_only(kept), initial=int(state_map[init]),
             initial_value=initial_value if state_map[init] < 0 else float("nan"),
             order=order, zero=read_only(zero), layers=layers, sense=sense,
-            qualitative=decided)
+            qualitative=decided, shared=shared)
 
     if to_extra is None:
         one = quotient(goal, to_goal, 1)

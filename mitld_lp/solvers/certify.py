@@ -49,8 +49,10 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.analysis import end_components
+from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
+from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
+from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
     ETA,
@@ -66,12 +68,13 @@ from mitld_lp.solvers.rounding import (
     rounding,
     support_extreme,
 )
-from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
+from mitld_lp.solvers.rows import rows_dot
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
-           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
+           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE", "ROUNDS",
+           "SPARSE_LEVEL",
            "is_certificate_check"]
 
 log = logging.getLogger(__name__)
@@ -81,9 +84,6 @@ GROWTH = 16.0
 
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
-
-ROUNDS = 64
-"""Repair rounds on one level of non-trivial components before giving up."""
 
 EVERYWHERE = "policy optimal in every state"
 """The name of :func:`everywhere`'s check."""
@@ -152,41 +152,6 @@ def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
         f"{x[s0]:g}")), read_only(x))
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class Rows:
-    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
-    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
-    picks one, as in a robust game; ``None``: one row per choice) and the choices into
-    states by ``groups``."""
-
-    matrix: sp.csr_array
-    groups: np.ndarray
-    nature: np.ndarray | None = None
-
-    @property
-    def n_states(self) -> int:
-        return int(self.groups.shape[0] - 1)
-
-    def row_state(self) -> np.ndarray:
-        """The state of each row: 4 bytes a row where the states' count fits."""
-        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
-        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
-        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
-
-    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
-                                                    np.ndarray]:
-        """The rows of ``states``' choices, where each choice's rows start (``None``
-        without nature) and where each state's choices start, both within the rows."""
-        choices = gather_ranges(self.groups[states], self.groups[states + 1])
-        per_state = self.groups[states + 1] - self.groups[states]
-        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
-        if self.nature is None:
-            return choices, None, state_starts
-        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
-        per_choice = self.nature[choices + 1] - self.nature[choices]
-        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
-
-
 def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
            upper: bool) -> np.ndarray:
     """The states (not ``free``) where some choice breaks the pre- (``upper``) or
@@ -209,118 +174,6 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     if st.nature is not None:
         ok = np.logical_or.reduceat(ok, st.nature[:-1])
     return ~np.logical_and.reduceat(ok, st.groups[:-1])
-
-
-def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
-            upper: bool) -> np.ndarray:
-    """Per state of ``states``: the least (``upper``) / largest value its choices allow,
-    ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
-    rows, choice_starts, state_starts = st.rows_of(states)
-    # the rows' entries read once for both: their sums (rows_dot) and the extreme of x
-    # over their supports (support_extreme), each as those compute it
-    local, cols, vals = row_entries(st.matrix, rows)
-    reached = x[cols]
-    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
-    ext = np.full(rows.size, -np.inf if upper else np.inf)
-    (np.maximum if upper else np.minimum).at(ext, local, reached)
-    each = np.minimum(above(rnd, rows, sums), ext) if upper else \
-        np.maximum(below(rnd, rows, sums), ext)
-    if choice_starts is not None:
-        each = np.minimum.reduceat(each, choice_starts)
-    return (np.maximum if upper else np.minimum).reduceat(each, state_starts)
-
-
-@dataclass(slots=True, eq=False)
-class _Repair:
-    """The repair of a candidate (module docs): a failing state's bound moved to what its
-    choices need, levels downstream first (one pass over the levels above the lowest
-    failing one, a level's states taken again while they move, at most :data:`ROUNDS`
-    times), an end component's states together."""
-
-    st: Rows
-    rnd: Rounding
-    free: np.ndarray
-    level_of: np.ndarray
-    mec_of: np.ndarray | None
-    upper: bool
-    members: tuple[np.ndarray, np.ndarray] | None = None
-    moved: int = 0
-    readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-
-    def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
-        """Bring each end component touched by ``states`` to its members' extreme value;
-        the states whose value moved."""
-        if self.mec_of is None:
-            return states
-        mecs = np.unique(self.mec_of[states])
-        mecs = mecs[mecs >= 0]
-        if mecs.size == 0:
-            return states
-        if self.members is None:
-            order = np.argsort(self.mec_of, kind="stable")
-            self.members = (order, self.mec_of[order])
-        order, sorted_ids = self.members
-        lo = np.searchsorted(sorted_ids, mecs, side="left")
-        hi = np.searchsorted(sorted_ids, mecs, side="right")
-        inside = order[gather_ranges(lo, hi)]
-        group = np.repeat(np.arange(mecs.size), hi - lo)
-        best = np.full(mecs.size, -np.inf if self.upper else np.inf)
-        (np.maximum if self.upper else np.minimum).at(best, group, x[inside])
-        new = best[group]
-        changed = inside[new != x[inside]]
-        x[inside] = new
-        return np.union1d(states, changed)
-
-    def _readers(self, moved: np.ndarray) -> np.ndarray:
-        """The states that have a choice whose support holds a state of ``moved`` (with
-        repeats): the matrix's pattern by column, made at the first call."""
-        if self.readers_of is None:
-            m = self.st.matrix
-            by_column = sp.csc_array(sp.csr_array(
-                (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
-            self.readers_of = (by_column.indptr, by_column.indices, self.st.row_state())
-        col_ptr, col_rows, row_state = self.readers_of
-        return row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]
-
-    def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
-        """Move the bounds of the ``failing`` states and of whatever they move upstream;
-        False when a level does not settle within :data:`ROUNDS` rounds."""
-        live = np.flatnonzero(~self.free)
-        lv = self.level_of[live]
-        order = np.argsort(lv, kind="stable")
-        live, lv = live[order], lv[order]
-        first = int(self.level_of[failing].min())
-        bounds = np.flatnonzero(np.diff(lv)) + 1
-        starts = np.concatenate([[0], bounds])
-        stops = np.concatenate([bounds, [lv.size]])
-        # the states with a choice whose support holds a moved state (kept as states
-        # move, from the pattern by column: a level is not read again to find them)
-        reading = np.zeros(x.shape[0], dtype=bool)
-        now = np.zeros(x.shape[0], dtype=bool)  # scratch: those reading one round's moves
-        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
-            if lv[a] < first:
-                continue
-            states = live[a:b]
-            todo = states[failing[states] | reading[states]]
-            for _ in range(ROUNDS):
-                if todo.size == 0:
-                    break
-                need = _needed(self.st, self.rnd, x, todo, self.upper)
-                move = (need > x[todo]) if self.upper else (need < x[todo])
-                changed = todo[move]
-                if changed.size == 0:
-                    break
-                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
-                              np.maximum(need[move], 0.0))
-                self.moved += int(changed.size)
-                readers = self._readers(self.together(x, changed))
-                reading[readers] = True
-                now[readers] = True
-                todo = states[now[states]]  # within the level: its cycles
-                now[readers] = False
-            else:
-                return False
-        return True
 
 
 def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bool,
@@ -421,8 +274,9 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     zero = np.asarray(zero, dtype=bool)
     name = "lower bound: the optimum"
     left = ~zero & ~ch.target
-    ecs = end_components(mdp, np.asarray(layers[0]), left)  # searched where they can be
-    if ecs.n_mecs:
+    comp = np.asarray(layers[0])
+    ecs = None if _escapes(mdp, left, comp) else end_components(mdp, comp, left)
+    if ecs is not None and ecs.n_mecs:
         s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
         return Side(0.0, Check(name, False, (
             f"{ecs.n_mecs} end components outside the zero set (state {s}): the minimum "
@@ -431,6 +285,28 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     st = Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
     return _optimum_side(st, int(mdp.initial), ch, rnd, upper=False, zero=zero, one=one,
                          fallback=fallback, layers=layers, mec_of=None, name=name)
+
+
+def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
+    """Whether no end component lies among the ``left`` states (``comp``: each state's
+    strongly connected component in ``mdp``'s support graph), shown without searching
+    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`),
+    or every policy leaves those that may with positive probability, one
+    :func:`~mitld_lp.solvers.graph.attractor` of the other states (and of the states
+    with no choice, where a play stops) covering them.  An end component inside ``left``
+    keeps its states out of that attractor (each has a choice whose support stays in
+    it), so True proves there is none; False leaves the search for the components to
+    the caller, as does a matrix that stores a zero (its pattern is more than the
+    support)."""
+    m = sp.csr_array(mdp.matrix)
+    if m.nnz and not bool(np.all(m.data > 0)):
+        return False
+    inside = left & may_cycle(mdp, comp)
+    if not inside.any():
+        return True
+    groups = np.asarray(mdp.row_groups, dtype=np.int64)
+    seeds = ~inside | (np.diff(groups) == 0)
+    return bool(np.all(attractor(m, groups, seeds)[inside]))
 
 
 # ------------------------------------------------------------------ one model

@@ -31,6 +31,8 @@ from mitld_lp.solvers.graph import (
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
+from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.rows import row_entries
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
@@ -140,6 +142,29 @@ def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None,
     return quotient
 
 
+def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
+    """:func:`lift_policy`'s choices of the states the quotient removed (every other
+    state's first choice), the same for every policy lifted: made once per quotient
+    (``quotient.shared``: the iteration's policy and the LP's are lifted on it)."""
+    key = ("outside", id(quotient.prob0), id(quotient.target))  # one per model
+    kept = quotient.shared.get(key)
+    if kept is not None and kept[0] is quotient.prob0 and kept[1] is quotient.target:
+        return kept[2]
+    policy = np.asarray(mdp.row_groups[:-1], dtype=np.int64).copy()
+    if quotient.sense is Sense.MIN and quotient.prob0.any():
+        m = sp.csr_array(mdp.matrix)
+        leaves = (m @ (~quotient.prob0).astype(np.float64)) > 0
+        # each state's first choice that stays (segmented_argmax of ~leaves), else its
+        # first choice
+        first = np.minimum.reduceat(np.where(leaves, np.iinfo(np.int64).max,
+                                             np.arange(leaves.size)), policy)
+        stays = np.where(first == np.iinfo(np.int64).max, policy, first)
+        policy[quotient.prob0] = stays[quotient.prob0]
+    policy[quotient.target | absorbing_states(mdp)] = -1
+    quotient.shared[key] = (quotient.prob0, quotient.target, read_only(policy))
+    return policy
+
+
 def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.ndarray:
     """Turn a policy of the quotient into a deterministic policy of ``mdp``.
 
@@ -159,13 +184,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       and staying avoids the target for ever).
     """
     n = mdp.n_states
-    policy = np.asarray(mdp.row_groups[:-1], dtype=np.int64).copy()
-    if quotient.sense is Sense.MIN and quotient.prob0.any():
-        m = sp.csr_array(mdp.matrix)
-        leaves = (m @ (~quotient.prob0).astype(np.float64)) > 0
-        stays = segmented_argmax((~leaves).astype(np.float64), mdp.row_groups)
-        policy[quotient.prob0] = stays[quotient.prob0]
-    policy[quotient.target | absorbing_states(mdp)] = -1
+    policy = _outside(mdp, quotient).copy()
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
     plain = np.flatnonzero((quotient.state_map >= 0) & (quotient.mecs.mec_of < 0))
@@ -178,10 +197,16 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     cstate = mdp.choice_state()  # one entry a choice: only where there are MECs
     owners = cstate[exits]
     policy[owners] = exits
-    # BFS on the reversed internal-choice graph from the owners (virtual root n).
-    e = edges(mdp)
-    internal = mecs.internal[e.choice]
-    src, dst = e.source[internal], e.succ[internal]
+    # BFS on the reversed internal-choice graph from the owners (virtual root n): the
+    # positive entries of the internal choices' rows, in the matrix's order
+    inside = np.flatnonzero(mecs.internal)
+    local, succ, data = row_entries(sp.csr_array(mdp.matrix), inside)
+    positive = data > 0
+    e_choice = inside[local[positive]]
+    e_succ = np.asarray(succ[positive], dtype=np.int64)
+    e_source = cstate[e_choice]
+    del local, succ, data, positive
+    src, dst = e_source, e_succ
     rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])
     cols = np.concatenate([src, owners])
     graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
@@ -190,10 +215,10 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     others = np.setdiff1d(members, owners)
     if np.any(pred[others] < 0):  # pragma: no cover - MECs are strongly connected
         raise AssertionError("a MEC member cannot reach its exit inside the MEC")
-    toward = internal & (e.succ == pred[e.source])
+    toward = e_succ == pred[e_source]
     # For each member, the first internal choice that has the BFS parent as a successor.
-    cand_state = e.source[toward]
-    cand_choice = e.choice[toward]
+    cand_state = e_source[toward]
+    cand_choice = e_choice[toward]
     ordering = np.lexsort((cand_choice, cand_state))
     cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
     first = np.unique(cand_state, return_index=True)[1]

@@ -26,7 +26,6 @@ interval iteration, per level).
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -193,7 +192,7 @@ class SingleLevels:
 
     __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
                  "level_state", "state_choice", "choice_entry", "sense", "kernels",
-                 "positive")
+                 "positive", "runs", "run_at", "first_choice", "owner_at")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
@@ -217,6 +216,23 @@ class SingleLevels:
         self.sense = q.sense
         # the compiled walks (:func:`level_kernels`): the same answers, one call a run
         self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
+        # the NumPy walks' slices, once: per level with single states its states',
+        # choices' and entries' bounds (``runs``, ``run_at[k]`` the first run of level
+        # ``k`` or above); per state its first choice and per choice its state, both
+        # counted from the start of their level (a level's segments without arithmetic)
+        at = self.level_state
+        marks = np.flatnonzero(np.diff(at))
+        a, z = at[marks], at[marks + 1]
+        ca, cz = self.state_choice[a], self.state_choice[z]
+        self.runs = list(zip(a.tolist(), z.tolist(), ca.tolist(), cz.tolist(),
+                             self.choice_entry[ca].tolist(), self.choice_entry[cz].tolist(),
+                             strict=True))
+        self.run_at = np.searchsorted(marks, np.arange(b.n_levels + 1)).tolist()
+        # 4 bytes an index where the choices' count fits (a level's offsets are below it)
+        small = np.int32 if self.choices.size < np.iinfo(np.int32).max else np.int64
+        level_first = np.repeat(ca, z - a)  # per state, its level's first choice
+        self.first_choice = (self.state_choice[:-1] - level_first).astype(small)
+        self.owner_at = (self.owner - np.repeat(a, z - a)[self.owner]).astype(small)
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
@@ -249,17 +265,12 @@ class SingleLevels:
                 score[np.broadcast_to(leave <= 0, score.shape)] = 0.0
             np.clip(score, 0.0, 1.0, out=score)
             bounds[self.states[a:z]] = (score if cz - ca == z - a else  # one choice each
-                                        self.sense.reduce(score, self.state_choice[a:z] - ca))
+                                        self.sense.reduce(score, self.first_choice[a:z]))
 
-    def _runs(self, first: int, stop: int) -> Iterator[tuple[int, int, int, int, int, int]]:
+    def _runs(self, first: int, stop: int) -> list[tuple[int, int, int, int, int, int]]:
         """The levels ``first`` to ``stop - 1`` that have single states, as the slices
         of their states, choices and entries."""
-        at = self.level_state
-        marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first
-        for k in marks.tolist():
-            a, z = int(at[k]), int(at[k + 1])
-            ca, cz = int(self.state_choice[a]), int(self.state_choice[z])
-            yield a, z, ca, cz, int(self.choice_entry[ca]), int(self.choice_entry[cz])
+        return self.runs[self.run_at[first]:self.run_at[stop]]
 
     def values(self, first: int, stop: int, to_target: np.ndarray, skip: np.ndarray,
                values: np.ndarray, reduced_choice: np.ndarray, weights: np.ndarray) -> None:
@@ -277,6 +288,9 @@ class SingleLevels:
                                        values, reduced_choice, weights, TIE,
                                        self.sense is Sense.MIN)
             return
+        live_of = ~skip[self.states]
+        every = bool(live_of.all())
+        reduce = np.maximum if self.sense is Sense.MAX else np.minimum
         for a, z, ca, cz, ea, ez in self._runs(first, stop):
             sums = np.bincount(self.local[ea:ez] - ca, minlength=cz - ca,
                                weights=self.vals[ea:ez] * values[self.cols[ea:ez]])
@@ -287,17 +301,24 @@ class SingleLevels:
                      np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
             np.clip(score, 0.0, 1.0, out=score)
             if cz - ca == z - a:  # one choice a state: each its own best
-                best = np.arange(z - a)
-            else:
-                prefer = to_target[ch]
-                best = segmented_argmax(score, self.state_choice[a:z + 1] - ca, tie=TIE,
-                                        sense=self.sense, prefer=prefer
-                                        if self.sense is Sense.MAX else -prefer)
+                best, pick = score, ch
+            else:  # segmented_argmax's ties and preference, on the level's segments
+                starts, own = self.first_choice[a:z], self.owner_at[ca:cz]
+                top = reduce.reduceat(score, starts)[own]
+                tied = self.sense.gain(score, top) >= -TIE * np.abs(top)
+                prefer = to_target[ch] if self.sense is Sense.MAX else -to_target[ch]
+                key = np.where(tied, prefer, -np.inf)
+                tied &= key >= np.maximum.reduceat(key, starts)[own]
+                at = np.minimum.reduceat(np.where(tied, np.arange(cz - ca),
+                                                  np.iinfo(np.int64).max), starts)
+                best, pick = score[at], ch[at]
             states = self.states[a:z]
-            live = ~skip[states]
-            values[states[live]] = score[best[live]]
-            reduced_choice[states[live]] = ch[best[live]]
-            weights[ch[best[live]]] = 1.0
+            if not every:
+                live = live_of[a:z]
+                states, best, pick = states[live], best[live], pick[live]
+            values[states] = best
+            reduced_choice[states] = pick
+            weights[pick] = 1.0
 
     def flow(self, first: int, stop: int, self_loop: np.ndarray, weights: np.ndarray,
              x: np.ndarray) -> None:

@@ -1,0 +1,257 @@
+"""The repair of a Bellman candidate (:mod:`mitld_lp.solvers.certify`): a failing
+state's bound moved to what its choices need, levels downstream first, an end
+component's states together, and the states reading a moved one taken up after it.
+The bounds it moves are checked again by the caller: the repair only proposes.  The
+rows the Bellman checks read (:class:`Rows`) are defined here, beside the repair that
+walks them, and :mod:`~mitld_lp.solvers.certify` imports them (one way, no circle)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.solvers.rounding import Rounding, above, below
+from mitld_lp.solvers.rows import gather_ranges, row_entries
+
+__all__ = ["ROUNDS", "SPARSE_LEVEL", "Rows"]
+
+ROUNDS = 64
+"""Repair rounds on one level of non-trivial components before giving up."""
+
+SPARSE_LEVEL = 4096
+"""States of a level from which the repair reads only the rows of the states it takes
+up and finds their readers by column (a large component's rounds move few of its
+states: QVBS zeroconf 1000-4's 213,268-state level, 3,497 failing), not the slices of
+every state of the level (:class:`_Walk`)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Rows:
+    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
+    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
+    picks one, as in a robust game; ``None``: one row per choice) and the choices into
+    states by ``groups``."""
+
+    matrix: sp.csr_array
+    groups: np.ndarray
+    nature: np.ndarray | None = None
+
+    @property
+    def n_states(self) -> int:
+        return int(self.groups.shape[0] - 1)
+
+    def row_state(self) -> np.ndarray:
+        """The state of each row: 4 bytes a row where the states' count fits."""
+        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
+        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
+        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
+
+    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
+                                                    np.ndarray]:
+        """The rows of ``states``' choices, where each choice's rows start (``None``
+        without nature) and where each state's choices start, both within the rows."""
+        choices = gather_ranges(self.groups[states], self.groups[states + 1])
+        per_state = self.groups[states + 1] - self.groups[states]
+        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
+        if self.nature is None:
+            return choices, None, state_starts
+        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
+        per_choice = self.nature[choices + 1] - self.nature[choices]
+        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
+
+
+def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
+            upper: bool) -> np.ndarray:
+    """Per state of ``states``: the least (``upper``) / largest value its choices allow,
+    ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
+    rows, choice_starts, state_starts = st.rows_of(states)
+    local, cols, vals = row_entries(st.matrix, rows)
+    return _need_of(rnd, x, local, cols, vals, rows, choice_starts, state_starts, upper)
+
+
+def _need_of(rnd: Rounding, x: np.ndarray, local: np.ndarray, cols: np.ndarray,
+             vals: np.ndarray, rows: np.ndarray, choice_starts: np.ndarray | None,
+             state_starts: np.ndarray, upper: bool) -> np.ndarray:
+    """:func:`_needed` from the rows' entries (``local``: each one's position in
+    ``rows``), read once for both: their sums (rows_dot) and the extreme of ``x`` over
+    their supports (support_extreme), each as those compute it."""
+    reached = x[cols]
+    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
+    ext = np.full(rows.size, -np.inf if upper else np.inf)
+    (np.maximum if upper else np.minimum).at(ext, local, reached)
+    each = np.minimum(above(rnd, rows, sums), ext) if upper else \
+        np.maximum(below(rnd, rows, sums), ext)
+    if choice_starts is not None:
+        each = np.minimum.reduceat(each, choice_starts)
+    return (np.maximum if upper else np.minimum).reduceat(each, state_starts)
+
+
+class _Walk:
+    """The live states of the levels a repair walks (from the lowest failing one up),
+    in level order, with their rows and the rows' entries gathered once: a level's
+    states, rows and entries are contiguous slices here, so a round on a level costs a
+    few NumPy calls on its slices, not a gather of its rows and of their readers (a
+    deadline clock makes a thousand levels: QVBS ``zeroconf_dl`` 1000-1-30)."""
+
+    __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
+                 "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at")
+
+    def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
+        self.states = states
+        bounds = np.flatnonzero(np.diff(levels)) + 1
+        self.level_at = np.concatenate([[0], bounds, [states.size]]).astype(np.int64)
+        rows, choice_starts, state_starts = st.rows_of(states)
+        self.rows, self.choice_starts, self.state_starts = rows, choice_starts, state_starts
+        self.local, self.cols, self.vals = row_entries(st.matrix, rows)
+        if choice_starts is None:  # a choice a row: the states' first choices are rows
+            self.choice_at = None
+            self.row_at = np.append(state_starts, rows.size)
+        else:  # per state its first choice, and that choice's first row
+            self.choice_at = np.append(state_starts, choice_starts.size)
+            self.row_at = np.append(choice_starts, rows.size)[self.choice_at]
+        row_state = np.repeat(np.arange(states.size), np.diff(self.row_at))
+        self.entry_state = row_state[self.local]
+        self.entry_at = np.searchsorted(self.local, self.row_at)  # per state, first entry
+
+    def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
+               upper: bool) -> np.ndarray:
+        """:func:`_needed` of the states ``a:z`` of the walk, read from its slices."""
+        ra, rz = int(self.row_at[a]), int(self.row_at[z])
+        if rz == ra:  # no row to read: nothing to move
+            return np.full(z - a, -np.inf if upper else np.inf)
+        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        if self.choice_at is not None:
+            ca, cz = int(self.choice_at[a]), int(self.choice_at[z])
+            choice_starts = self.choice_starts[ca:cz] - ra
+            state_starts = self.state_starts[a:z] - ca
+        else:
+            choice_starts, state_starts = None, self.state_starts[a:z] - ra
+        return _need_of(rnd, x, self.local[ea:ez] - ra, self.cols[ea:ez],
+                        self.vals[ea:ez], self.rows[ra:rz], choice_starts, state_starts,
+                        upper)
+
+    def reading(self, mark: np.ndarray, a: int, z: int) -> np.ndarray:
+        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state."""
+        ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        hit = self.entry_state[ea:ez][mark[self.cols[ea:ez]]]
+        out = np.zeros(z - a, dtype=bool)
+        out[hit - a] = True
+        return out
+
+
+@dataclass(slots=True, eq=False)
+class _Repair:
+    """The repair of a candidate (module docs): a failing state's bound moved to what its
+    choices need, levels downstream first (one pass over the levels above the lowest
+    failing one, a level's states taken again while they move, at most :data:`ROUNDS`
+    times), an end component's states together."""
+
+    st: Rows
+    rnd: Rounding
+    free: np.ndarray
+    level_of: np.ndarray
+    mec_of: np.ndarray | None
+    upper: bool
+    members: tuple[np.ndarray, np.ndarray] | None = None
+    moved: int = 0
+    readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """Bring each end component touched by ``states`` to its members' extreme value;
+        the states whose value moved."""
+        if self.mec_of is None:
+            return states
+        mecs = np.unique(self.mec_of[states])
+        mecs = mecs[mecs >= 0]
+        if mecs.size == 0:
+            return states
+        if self.members is None:
+            order = np.argsort(self.mec_of, kind="stable")
+            self.members = (order, self.mec_of[order])
+        order, sorted_ids = self.members
+        lo = np.searchsorted(sorted_ids, mecs, side="left")
+        hi = np.searchsorted(sorted_ids, mecs, side="right")
+        inside = order[gather_ranges(lo, hi)]
+        group = np.repeat(np.arange(mecs.size), hi - lo)
+        best = np.full(mecs.size, -np.inf if self.upper else np.inf)
+        (np.maximum if self.upper else np.minimum).at(best, group, x[inside])
+        new = best[group]
+        changed = inside[new != x[inside]]
+        x[inside] = new
+        return np.union1d(states, changed)
+
+    def readers(self, moved: np.ndarray, states: np.ndarray,
+                scratch: np.ndarray) -> np.ndarray:
+        """Per state of ``states``: whether a row of its choices holds a ``moved`` state,
+        from the matrix's pattern by column (made at the first call): a few states moved
+        in a large level, whose rows are not all read again to find their readers."""
+        if self.readers_of is None:
+            m = self.st.matrix
+            by_column = sp.csc_array(sp.csr_array(
+                (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
+            self.readers_of = (by_column.indptr, by_column.indices, self.st.row_state())
+        col_ptr, col_rows, row_state = self.readers_of
+        found = row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]
+        scratch[found] = True
+        out = scratch[states]
+        scratch[found] = False
+        return out
+
+    def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
+        """Move the bounds of the ``failing`` states and of whatever they move upstream
+        (a state is taken up when a row of its choices holds a moved state); False when
+        a level does not settle within :data:`ROUNDS` rounds.  A level of fewer than
+        :data:`SPARSE_LEVEL` states is read from slices gathered once for all of them
+        (:class:`_Walk`), a larger one state by state: the rows of the states taken up,
+        their readers from the pattern by column."""
+        live = np.flatnonzero(~self.free)
+        lv = self.level_of[live]
+        first = int(self.level_of[failing].min())
+        live, lv = live[lv >= first], lv[lv >= first]
+        order = np.argsort(lv, kind="stable")
+        live, lv = live[order], lv[order]
+        at = np.concatenate([[0], np.flatnonzero(np.diff(lv)) + 1, [lv.size]])
+        sizes = np.diff(at)
+        small = sizes < SPARSE_LEVEL
+        walked = np.repeat(small, sizes)
+        walk = _Walk(self.st, live[walked], lv[walked])
+        walk_at = np.concatenate([[0], np.cumsum(np.where(small, sizes, 0))]).tolist()
+        moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
+        fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
+        bounds = at.tolist()
+        for k, is_small in enumerate(small.tolist()):
+            mine = live[bounds[k]:bounds[k + 1]]
+            a, z = walk_at[k], walk_at[k + 1]
+            todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
+                                    self.readers(np.flatnonzero(moved), mine, fresh))
+            for _ in range(ROUNDS):
+                if not todo.any():
+                    break
+                if is_small:  # the level's slices, the states not to do masked
+                    need = walk.needed(self.rnd, x, a, z, self.upper)
+                    move = todo & ((need > x[mine]) if self.upper else (need < x[mine]))
+                    changed = mine[move]
+                else:  # the rows of the states to do
+                    doing = mine[todo]
+                    need = _needed(self.st, self.rnd, x, doing, self.upper)
+                    move = (need > x[doing]) if self.upper else (need < x[doing])
+                    changed = doing[move]
+                if changed.size == 0:
+                    break
+                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
+                              np.maximum(need[move], 0.0))
+                self.moved += int(changed.size)
+                now = self.together(x, changed)
+                moved[now] = True
+                # within the level (its cycles): the states reading those just moved
+                if is_small:
+                    fresh[now] = True
+                    todo = walk.reading(fresh, a, z)
+                    fresh[now] = False
+                else:
+                    todo = self.readers(now, mine, fresh)
+            else:
+                return False
+        return True
