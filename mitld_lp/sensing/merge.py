@@ -50,7 +50,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from mitld_lp.automata.sta import STA
-from mitld_lp.sensing.rows import INT, groups, scatter
+from mitld_lp.sensing.rows import INT, compiled_on, groups, scatter
 from mitld_lp.sensing.sensors import Sensor
 
 __all__ = ["Shifts", "Counts", "shift_start"]
@@ -160,17 +160,23 @@ class Counts:
         if not self.alarms or len(tid) == 0:
             return tid
         self.array = grown(self.array, self.times)
-        b = self.array[tid][:, self.n:]
-        least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
-        for j in range(b.shape[1]):
-            scatter("min", least[:, j], group, b[:, j])
-        by = least[group]
-        rows = np.flatnonzero(by.any(axis=1))
+        if compiled_on():  # the same rows and counts by one kernel pass
+            from mitld_lp.sensing.group_kernels import least_counts
+
+            rows, by = least_counts(np.ascontiguousarray(self.array[:, self.n:]),
+                                    tid, group, int(group.max()) + 1)
+        else:
+            b = self.array[tid][:, self.n:]
+            least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
+            for j in range(b.shape[1]):
+                scatter("min", least[:, j], group, b[:, j])
+            rows = np.flatnonzero(least[group].any(axis=1))
+            by = least[group[rows]]
         if len(rows) == 0:
             return tid
-        pair, first = groups(tid[rows], *by[rows].T)
+        pair, first = groups(tid[rows], *by.T)
         shifted = self.array[tid[rows][first]].copy()
-        shifted[:, self.n:] -= by[rows][first]
+        shifted[:, self.n:] -= by[first]
         new_id = np.array([self.time_id(tuple(x)) for x in shifted.tolist()], INT)
         out = tid.copy()
         out[rows] = new_id[pair]
