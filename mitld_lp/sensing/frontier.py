@@ -290,8 +290,8 @@ class FrontierBuilder(StepRules):
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
         rows = None
         if compiled_on():
+            from mitld_lp.sensing import group_kernels as gk
             from mitld_lp.sensing.compiled import hypothesis_rows
-            from mitld_lp.sensing.group_kernels import by_hypothesis, by_observation
 
             rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         if rows is None:
@@ -301,12 +301,12 @@ class FrontierBuilder(StepRules):
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
         kernels = compiled_on()
-        found = by_observation(kernels, c, w2, occ, new) if kernels else None
+        found = gk.by_observation(kernels, c, w2, occ, new) if kernels else None
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
         hid, hfirst = (groups(obs, self.order_key(tid2, q2)) if found is None else
-                       by_hypothesis(found[2], obs, self.order_key(tid2, q2)))
+                       gk.by_hypothesis(found[2], obs, self.order_key(tid2, q2)))
         hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
         hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
         total = fsum_by(hobs, hmass, len(first))
@@ -321,7 +321,10 @@ class FrontierBuilder(StepRules):
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         g_count = np.bincount(hobs, minlength=len(first))
         g_hash = np.zeros(len(first), np.uint64)
-        scatter("add", g_hash, hobs, mix64(hcode))
+        if found is not None:  # the kernels run: the mix and the sum in one pass
+            gk.hash_add(g_hash, hobs, hcode)
+        else:
+            scatter("add", g_hash, hobs, mix64(hcode))
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
         scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))

@@ -18,7 +18,7 @@ import numpy as np
 
 from mitld_lp.sensing.rows import INT
 
-__all__ = ["by_observation", "by_hypothesis"]
+__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -221,3 +221,14 @@ def least_counts(counts, tid, group, n_groups):  # pragma: no cover - compiled
                 by[at, j] = least[g, j]
             at += 1
     return rows, by
+
+
+@numba.njit(cache=True, nogil=True)
+def hash_add(out, idx, codes):  # pragma: no cover - compiled
+    """``out[idx] +=`` :func:`mitld_lp.sensing.rows.mix64` of ``codes`` (wrapping, as
+    ``np.add.at`` on unsigned words): each group's hash of its hypotheses."""
+    for i in range(len(idx)):
+        z = np.uint64(codes[i]) + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        out[idx[i]] += z ^ (z >> np.uint64(31))
