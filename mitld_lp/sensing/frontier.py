@@ -55,6 +55,7 @@ from mitld_lp.sensing.rows import (
     groups,
     load_kernels,
     mix64,
+    ordered_groups,
     scatter,
     spread,
 )
@@ -300,8 +301,7 @@ class FrontierBuilder(StepRules):
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        kernels = compiled_on()
-        found = gk.by_observation(kernels, c, w2, occ, new) if kernels else None
+        found = gk.by_observation(compiled_on(), c, w2, occ, new) if compiled_on() else None
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
@@ -400,7 +400,7 @@ class FrontierBuilder(StepRules):
                                                     zip(*ends, strict=True))
         order = np.lexsort((s_end, b_end, o_end, c_end))
         c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
-        ids, _ = groups(c_end, r_end)
+        ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
         mass = np.bincount(ids, weights=m_end)
         place = np.full(len(mass), np.iinfo(_I).max, _I)
         scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
@@ -492,9 +492,9 @@ class FrontierBuilder(StepRules):
         row): each observation's successor state, or, when nothing undecided is left
         with it, the verdict: the one record its hypotheses ended in, or
         :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        _, once = groups(*ended)  # each (observation, record) once
+        _, once = ordered_groups(*ended)  # each (observation, record) once
         c, w2, occ, new, end = (x[once] for x in ended)
-        obs, first = groups(c, w2, occ, new)
+        obs, first = ordered_groups(c, w2, occ, new)
         kinds = np.bincount(obs)
         n = len(grouped[0])
         both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in

@@ -18,7 +18,8 @@ import numpy as np
 
 from mitld_lp.sensing.rows import INT
 
-__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add"]
+__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add",
+           "group_shifts"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -232,3 +233,32 @@ def hash_add(out, idx, codes):  # pragma: no cover - compiled
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
         out[idx[i]] += z ^ (z >> np.uint64(31))
+
+
+@numba.njit(cache=True, nogil=True)
+def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
+                 delays):  # pragma: no cover - compiled
+    """Each group's shift of each shiftable sensed event's times
+    (:meth:`mitld_lp.sensing.merge.Shifts.canonical`): ``times`` each times index's
+    steps, ``tid`` each row's, ``said`` its reports (kept and new), ``clock`` its
+    parent's clock; ``events`` the shiftable events, ``starts`` their least places,
+    ``delays`` every sensed event's delay."""
+    n, k = len(tid), len(events)
+    good = np.ones((n_groups, k), np.bool_)
+    least = np.full((n_groups, k), np.iinfo(np.int64).max, np.int64)
+    for r in range(n):
+        g = group[r]
+        t = tid[r]
+        for e in range(k):
+            i = events[e]
+            ki = times[t, i]
+            if not (ki > 0 and ((said[r] >> i) & 1 == 1 or ki + delays[i] <= clock[r] + 1)):
+                good[g, e] = False
+            if ki < least[g, e]:
+                least[g, e] = ki
+    shift = np.zeros((n_groups, times.shape[1]), np.int64)
+    for g in range(n_groups):
+        for e in range(k):
+            if good[g, e] and least[g, e] > starts[e]:
+                shift[g, events[e]] = least[g, e] - starts[e]
+    return shift
