@@ -16,7 +16,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from mitld_lp.sensing.rows import INT
+INT = np.int64  # rows.INT (not imported: rows imports this module)
 
 __all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add",
            "group_shifts"]
