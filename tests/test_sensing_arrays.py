@@ -129,7 +129,7 @@ def stored(seed: int):
     codes = rng.integers(0, 1000, int(count.sum()))
     weights = rng.random(len(codes))
     fb = SimpleNamespace(cols=cols, hyp_code=codes, hyp_weight=weights,
-                         states=[f"state {i}" for i in range(n)])
+                         states=lambda: [f"state {i}" for i in range(n)])
     target = rng.permutation(n)[:20]  # the groups' states, each group met once
     g_count = count[target]
     hobs = np.repeat(np.arange(20), g_count)

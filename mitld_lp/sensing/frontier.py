@@ -43,7 +43,6 @@ from mitld_lp.sensing.info import (
     Belief,
     Ends,
     InfoSize,
-    InfoState,
 )
 from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
@@ -56,12 +55,14 @@ from mitld_lp.sensing.rows import (
     groups,
     load_kernels,
     mix64,
+    ordered_groups,
     scatter,
     spread,
 )
 from mitld_lp.sensing.rows import INT as _I
 from mitld_lp.sensing.rules import StepRules
 from mitld_lp.sensing.sensors import Sensor
+from mitld_lp.sensing.states import InfoStates
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
 
@@ -92,7 +93,6 @@ class FrontierBuilder(StepRules):
                                             points=sta.truncation_points, name=name,
                                             alarm_past=ALARM_PAST if self.alarms else 0)
         self.keys = Keys(6)  # the information states' keys (match)
-        self.states: list[InfoState | Hashable] = []
         self.nq = dta.n_states
         self.unsensed_order = tuple(sorted(self.unsensed))
         nu, ns = len(self.unsensed_order), len(sensed)
@@ -218,8 +218,7 @@ class FrontierBuilder(StepRules):
         return r
 
     def store_record(self, r: int) -> None:
-        self.record_state[r] = len(self.states)
-        self.states.append(self.records[r])
+        self.record_state[r] = self.cols.n
         self.cols.append((-1, -1, 0, 0, self.n_hyps, 0))
         self.bytes += BYTES_PER_INFO_STATE
 
@@ -235,7 +234,7 @@ class FrontierBuilder(StepRules):
     def check(self, new: int, hyps: int) -> None:
         """Raise :class:`ProductTooLarge` before ``new`` states of ``hyps`` hypotheses in
         all are stored past a budget (:meth:`Growth.check`)."""
-        self.growth.check(len(self.states), self.bytes, new, hyps)
+        self.growth.check(self.cols.n, self.bytes, new, hyps)
 
     def add_states(self, world: np.ndarray, clock: np.ndarray, reported: np.ndarray,
                    pending: np.ndarray, counts: np.ndarray, codes: np.ndarray,
@@ -253,15 +252,15 @@ class FrontierBuilder(StepRules):
         self.hyp_weight[self.n_hyps:end] = weights
         self.n_hyps = end
         self.bytes += BYTES_PER_INFO_STATE * len(world) + BYTES_PER_HYPOTHESIS * len(codes)
-        times = self.times
-        pairs = [(times[c // self.nq], c % self.nq) for c in codes.tolist()]
-        mass = weights.tolist()
-        at = 0
-        for w, t, r, p, n in zip(world.tolist(), clock.tolist(), reported.tolist(),
-                                 pending.tolist(), counts.tolist(), strict=True):
-            self.states.append(InfoState(self.worlds[w], t, self.s_sets[r], self.u_sets[p],
-                                         tuple(pairs[at:at + n]), tuple(mass[at:at + n])))
-            at += n
+
+    def states(self) -> InfoStates:
+        """The states stored so far, their records made when asked for."""
+        n = self.cols.n
+        return InfoStates(self.cols.data[:, :n].copy(), self.hyp_code[:self.n_hyps].copy(),
+                          self.hyp_weight[:self.n_hyps].copy(), self.nq, self.times,
+                          self.worlds, self.s_sets, self.u_sets,
+                          {at: r for r, at in zip(self.records, self.record_state,
+                                                  strict=True) if at >= 0})
 
     # ---------------------------------------------------------------- one level
 
@@ -292,6 +291,7 @@ class FrontierBuilder(StepRules):
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
         rows = None
         if compiled_on():
+            from mitld_lp.sensing import group_kernels as gk
             from mitld_lp.sensing.compiled import hypothesis_rows
 
             rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
@@ -301,10 +301,12 @@ class FrontierBuilder(StepRules):
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        obs, first = groups(c, w2, occ, new)
+        found = gk.by_observation(compiled_on(), c, w2, occ, new) if compiled_on() else None
+        obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        hid, hfirst = groups(obs, self.order_key(tid2, q2))
+        hid, hfirst = (groups(obs, self.order_key(tid2, q2)) if found is None else
+                       gk.by_hypothesis(found[2], obs, self.order_key(tid2, q2)))
         hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
         hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
         total = fsum_by(hobs, hmass, len(first))
@@ -319,7 +321,10 @@ class FrontierBuilder(StepRules):
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         g_count = np.bincount(hobs, minlength=len(first))
         g_hash = np.zeros(len(first), np.uint64)
-        scatter("add", g_hash, hobs, mix64(hcode))
+        if found is not None:  # the kernels run: the mix and the sum in one pass
+            gk.hash_add(g_hash, hobs, hcode)
+        else:
+            scatter("add", g_hash, hobs, mix64(hcode))
         g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
         scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
@@ -395,7 +400,7 @@ class FrontierBuilder(StepRules):
                                                     zip(*ends, strict=True))
         order = np.lexsort((s_end, b_end, o_end, c_end))
         c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
-        ids, _ = groups(c_end, r_end)
+        ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
         mass = np.bincount(ids, weights=m_end)
         place = np.full(len(mass), np.iinfo(_I).max, _I)
         scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
@@ -442,7 +447,7 @@ class FrontierBuilder(StepRules):
             g = reps[batch]
             parent, rank = spread(counts[g])
             rows = g_start[g][parent] + rank
-            index[batch] = len(self.states) + np.arange(len(batch), dtype=_I)
+            index[batch] = self.cols.n + np.arange(len(batch), dtype=_I)
             self.add_states(*(x[g] for x in group[:5]), hcode[rows], weight[rows])
             batch.clear()
 
@@ -478,7 +483,7 @@ class FrontierBuilder(StepRules):
         if row >= 0 and worst > WEIGHT_TOL:
             bad = int(hobs[row])
             raise RuntimeError(
-                f"internal error: information state {self.states[int(target[bad])]!r} "
+                f"internal error: information state {self.states()[int(target[bad])]!r} "
                 f"reached with two posteriors (they differ by {worst:.3g})")
 
     def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
@@ -487,9 +492,9 @@ class FrontierBuilder(StepRules):
         row): each observation's successor state, or, when nothing undecided is left
         with it, the verdict: the one record its hypotheses ended in, or
         :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        _, once = groups(*ended)  # each (observation, record) once
+        _, once = ordered_groups(*ended)  # each (observation, record) once
         c, w2, occ, new, end = (x[once] for x in ended)
-        obs, first = groups(c, w2, occ, new)
+        obs, first = ordered_groups(c, w2, occ, new)
         kinds = np.bincount(obs)
         n = len(grouped[0])
         both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
@@ -515,7 +520,7 @@ class FrontierBuilder(StepRules):
             self.store_record(self.record(first))
             initial = 0
         else:
-            initial = len(self.states)
+            initial = self.cols.n
             times0 = self.time_id((NOT_YET,) * len(self.sensed) + (0,) * len(self.alarms))
             q0code = np.array([times0 * self.nq + q0], _I)
             one = np.array([1], _I)
@@ -528,15 +533,15 @@ class FrontierBuilder(StepRules):
                            1, int(mix64(q0code).view(_I)[0])), initial)
         parts: list[tuple[np.ndarray, ...]] = []
         head = 0
-        self.growth.start(len(self.states))
+        self.growth.start(self.cols.n)
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
                              leave=False, mininterval=0.5)
         # many small objects, no reference cycles: the cyclic collector paused meanwhile
         collecting = gc.isenabled()
         gc.disable()
         try:
-            level = len(self.states)  # a level: the states first found one step on
-            while head < len(self.states):
+            level = self.cols.n  # a level: the states first found one step on
+            while head < self.cols.n:
                 end = min(level, head + CHUNK)
                 if end - head >= COMPILED_MIN_STATES:
                     load_kernels()  # numba's load pays from here (rows.py)
@@ -544,8 +549,8 @@ class FrontierBuilder(StepRules):
                 shown.update(end - head)
                 head = end
                 if head == level:  # a level done: its growth judged before the next
-                    self.growth.level(len(self.states) - level, self.n_hyps, self.bytes)
-                    level = len(self.states)
+                    self.growth.level(self.cols.n - level, self.n_hyps, self.bytes)
+                    level = self.cols.n
         finally:
             if collecting:
                 gc.enable()
@@ -559,7 +564,7 @@ class FrontierBuilder(StepRules):
             owners.append(owner)
             acts.append(act)
             offset += len(owner)
-        n, n_choices = len(self.states), offset
+        n, n_choices = self.cols.n, offset
         owner = np.concatenate(owners)
         row = np.concatenate(rows)  # choice by choice, each in its own order
         indptr = np.zeros(n_choices + 1, np.int64)
@@ -588,7 +593,7 @@ class FrontierBuilder(StepRules):
         mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
-                  states=tuple(self.states))
+                  states=self.states())
         cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
         moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, *cols)

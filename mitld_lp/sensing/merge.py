@@ -50,7 +50,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from mitld_lp.automata.sta import STA
-from mitld_lp.sensing.rows import INT, groups, scatter
+from mitld_lp.sensing.rows import INT, compiled_on, groups, scatter
 from mitld_lp.sensing.sensors import Sensor
 
 __all__ = ["Shifts", "Counts", "shift_start"]
@@ -105,9 +105,34 @@ class Shifts:
         if not self.start or len(tid) == 0:
             return tid
         self.array = grown(self.array, self.times)
-        k = self.array[tid]
         said = reported[row] | new
         n = int(group.max()) + 1
+        if compiled_on():  # the same shifts by one kernel pass
+            from mitld_lp.sensing.group_kernels import group_shifts
+
+            shift = group_shifts(self.array, tid, group, n, said, clock[row],
+                                 np.array(list(self.start), INT),
+                                 np.array(list(self.start.values()), INT),
+                                 np.array(self.delay, INT))
+        else:
+            shift = self.numpy_shifts(tid, group, row, said, clock, n)
+        moved = shift.any(axis=1)
+        if not moved.any():
+            return tid
+        self.merged += int(moved.sum())
+        rows = np.flatnonzero(moved[group])
+        by = shift[group[rows]]  # each row's shift: one new id per (times, shift)
+        pair, first = groups(tid[rows], *by.T)
+        new_id = np.array([self.time_id(tuple(x)) for x in
+                           (self.array[tid[rows][first]] - by[first]).tolist()], INT)
+        out = tid.copy()
+        out[rows] = new_id[pair]
+        return out
+
+    def numpy_shifts(self, tid: np.ndarray, group: np.ndarray, row: np.ndarray,
+                     said: np.ndarray, clock: np.ndarray, n: int) -> np.ndarray:
+        """Each group's shift of each event's times (:meth:`canonical`), by NumPy."""
+        k = self.array[tid]
         shift = np.zeros((n, k.shape[1]), INT)
         for i, c in self.start.items():
             ki = k[:, i]
@@ -117,18 +142,7 @@ class Shifts:
             least = np.full(n, np.iinfo(INT).max, INT)
             scatter("min", least, group, ki)
             shift[:, i] = np.where(good & (least > c), least - c, 0)
-        moved = np.flatnonzero(shift.any(axis=1))
-        if len(moved) == 0:
-            return tid
-        self.merged += len(moved)
-        rows = np.flatnonzero(np.isin(group, moved))
-        by = shift[group[rows]]  # each row's shift: one new id per (times, shift)
-        pair, first = groups(tid[rows], *by.T)
-        new_id = np.array([self.time_id(tuple(x)) for x in
-                           (self.array[tid[rows][first]] - by[first]).tolist()], INT)
-        out = tid.copy()
-        out[rows] = new_id[pair]
-        return out
+        return shift
 
 
 class Counts:
@@ -160,17 +174,23 @@ class Counts:
         if not self.alarms or len(tid) == 0:
             return tid
         self.array = grown(self.array, self.times)
-        b = self.array[tid][:, self.n:]
-        least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
-        for j in range(b.shape[1]):
-            scatter("min", least[:, j], group, b[:, j])
-        by = least[group]
-        rows = np.flatnonzero(by.any(axis=1))
+        if compiled_on():  # the same rows and counts by one kernel pass
+            from mitld_lp.sensing.group_kernels import least_counts
+
+            rows, by = least_counts(np.ascontiguousarray(self.array[:, self.n:]),
+                                    tid, group, int(group.max()) + 1)
+        else:
+            b = self.array[tid][:, self.n:]
+            least = np.full((int(group.max()) + 1, b.shape[1]), np.iinfo(INT).max, INT)
+            for j in range(b.shape[1]):
+                scatter("min", least[:, j], group, b[:, j])
+            rows = np.flatnonzero(least[group].any(axis=1))
+            by = least[group[rows]]
         if len(rows) == 0:
             return tid
-        pair, first = groups(tid[rows], *by[rows].T)
+        pair, first = groups(tid[rows], *by.T)
         shifted = self.array[tid[rows][first]].copy()
-        shifted[:, self.n:] -= by[rows][first]
+        shifted[:, self.n:] -= by[first]
         new_id = np.array([self.time_id(tuple(x)) for x in shifted.tolist()], INT)
         out = tid.copy()
         out[rows] = new_id[pair]

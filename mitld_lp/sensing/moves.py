@@ -35,8 +35,7 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
                  new: np.ndarray, target: np.ndarray) -> None:
         order = np.argsort(choice, kind="stable")
         self.ptr = np.zeros(int(row_groups[-1]) + 1, np.int64)
-        np.add.at(self.ptr, choice + 1, 1)
-        self.ptr = np.cumsum(self.ptr)
+        np.cumsum(np.bincount(choice, minlength=len(self.ptr) - 1), out=self.ptr[1:])
         self.world, self.occurred = world[order], occurred[order]
         self.new, self.target = new[order], target[order]
         self.row_groups, self.state_world = row_groups, state_world
@@ -46,7 +45,9 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
         self.worlds, self.records = worlds, records
         self.unsensed_sets, self.sensed_sets = unsensed_sets, sensed_sets
         self.made: dict[int, dict[Obs, Any]] = {}
-        self.size = sum(len(world_actions[int(w)]) for w in state_world if w >= 0)
+        used, times = np.unique(state_world[state_world >= 0], return_counts=True)
+        self.size = sum(len(world_actions[w]) * k for w, k in zip(
+            used.tolist(), times.tolist(), strict=True))
 
     def choice(self, key: tuple[int, str]) -> int | None:
         try:

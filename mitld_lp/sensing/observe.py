@@ -42,8 +42,12 @@ def controller_of(game: Game[Any], belief: Belief, policy: np.ndarray) -> Sensed
     """The controller of ``policy`` (a choice row per state) on ``belief``'s MDP."""
     mdp = belief.mdp
     initial = mdp.states[mdp.initial]
-    actions = [None if isinstance(s, Absorbing) or policy[i] < 0 else
-               mdp.action_name(int(policy[i])) for i, s in enumerate(mdp.states)]
+    chosen = np.asarray(policy)
+    absorbing = getattr(mdp.states, "absorbing", None)  # InfoStates: no record made
+    kept = (chosen >= 0) & ~(absorbing() if absorbing is not None else np.array(
+        [isinstance(s, Absorbing) for s in mdp.states], bool))
+    actions = [mdp.action_name(c) if k else None
+               for c, k in zip(chosen.tolist(), kept.tolist(), strict=True)]
     return SensedController(
         initial=initial if isinstance(initial, Absorbing) else mdp.initial, actions=actions,
         moves=belief.moves, sensed=belief.sensed, events=belief.sta.events, game=game,

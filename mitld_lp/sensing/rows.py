@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["groups", "spread", "fsum_by", "mix64", "pack_words", "Table", "Lookup", "INT",
-           "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels", "compiled_on",
-           "scatter"]
+__all__ = ["groups", "ordered_groups", "spread", "fsum_by", "mix64", "pack_words", "Table",
+           "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels",
+           "compiled_on", "scatter"]
 
 INT = np.int64
 _I = INT
@@ -132,6 +132,20 @@ def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     inverse = np.empty(n, _I)
     inverse[order] = np.cumsum(change) - 1
     return inverse, order[change]
+
+
+def ordered_groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`groups` of rows that come in the order of their first column (a level's
+    rows come choice by choice): by the kernels, each run of one first value sorted
+    apart (:func:`mitld_lp.sensing.group_kernels.by_observation`), else as
+    :func:`groups`."""
+    if _K:
+        from mitld_lp.sensing.group_kernels import by_observation
+
+        found = by_observation(_K, cols[0], *cols[1:])
+        if found is not None:
+            return found[0], found[1]
+    return groups(*cols)
 
 
 def _compiled_groups(cols: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray,
@@ -256,18 +270,12 @@ class Table:
         return out[ids]
 
     def rows(self, which: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-        """``which``: a table index per parent row; the children's parents and columns."""
-        ids, first = groups(which)
-        used = which[first]
-        counts = np.array([len(self.entries[i][0]) for i in used], dtype=_I)
-        if len(used):
-            cols = [np.concatenate([self.entries[i][c] for i in used])
-                    for c in range(self.width)]
-        else:
-            cols = [np.zeros(0, d) for d in self.dtypes]
-        starts = np.cumsum(counts) - counts
-        parent, rank = spread(counts[ids])
-        at = starts[ids][parent] + rank
+        """``which``: a table index per parent row; the children's parents and columns
+        (read from the flat columns: no Python loop over the keys used)."""
+        starts, lengths, cols = self.flat()
+        which = np.asarray(which, _I)
+        parent, rank = spread(lengths[which])
+        at = starts[which][parent] + rank
         return parent, [c[at] for c in cols]
 
 

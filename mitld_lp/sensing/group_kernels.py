@@ -1,0 +1,264 @@
+"""The two groupings of a level's undecided hypotheses (:mod:`mitld_lp.sensing.frontier`)
+by numba kernels that use the rows' order: the rows come choice by choice (the
+hypothesis kernel spreads each choice's outcomes, hypotheses, branches and successors
+in turn), so grouping them by observation ``(choice, world, unsensed events, reports)``
+sorts each choice's few rows, not the level's millions, and grouping them by
+``(observation, hypothesis)`` sorts each observation's handful.
+
+Both give the numbering :func:`mitld_lp.sensing.rows.groups` gives (the groups in the
+columns' lexicographic order) and one row of each group (which one is no matter: every
+caller reads only the grouped columns from it), so the product is the same to the bit
+(tests/test_sensed_level.py).  Imported only where the compiled kernels run
+(:func:`mitld_lp.sensing.rows.compiled_on`)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+INT = np.int64  # rows.INT (not imported: rows imports this module)
+
+__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add",
+           "group_shifts"]
+
+
+@numba.njit(cache=True, nogil=True)
+def _runs(c):  # pragma: no cover - compiled
+    """Whether ``c`` never decreases."""
+    for i in range(1, len(c)):
+        if c[i] < c[i - 1]:
+            return False
+    return True
+
+
+_SMALL = 24  # up to this many rows sorted by insertion, in place (no allocation)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort(vals, idx, m):  # pragma: no cover - compiled
+    """``idx[:m]`` and ``vals[:m]`` sorted together by ``vals``."""
+    if m > _SMALL:
+        order = np.argsort(vals[:m])
+        v = vals[:m][order]
+        x = idx[:m][order]
+        vals[:m] = v
+        idx[:m] = x
+        return
+    for r in range(1, m):
+        v = vals[r]
+        x = idx[r]
+        k = r - 1
+        while k >= 0 and vals[k] > v:
+            vals[k + 1] = vals[k]
+            idx[k + 1] = idx[k]
+            k -= 1
+        vals[k + 1] = v
+        idx[k + 1] = x
+
+
+@numba.njit(cache=True, nogil=True)
+def _number(vals, idx, m, g, inverse, first):  # pragma: no cover - compiled
+    """Number the sorted rows ``idx[:m]`` (values ``vals[:m]``) from group ``g`` on;
+    the next group's number."""
+    for r in range(m):
+        if r == 0 or vals[r] != vals[r - 1]:
+            first[g] = idx[r]
+            g += 1
+        inverse[idx[r]] = g - 1
+    return g
+
+
+@numba.njit(cache=True, nogil=True)
+def _block_groups(c, word):  # pragma: no cover - compiled
+    """Rows grouped by ``(c, word)``, ``c`` non-decreasing: each row's group, one row of
+    each, and the rows in the groups' order (a permutation).  A choice's few distinct
+    words are found by a scan of those met (a sort where they are many), sorted, and
+    its rows placed by a counting sort."""
+    n = len(c)
+    inverse = np.empty(n, np.int64)
+    first = np.empty(n, np.int64)
+    perm = np.empty(n, np.int64)
+    vals = np.empty(64, np.int64)
+    seen = np.empty(_SMALL, np.int64)  # a choice's distinct words as met
+    where = np.empty(_SMALL, np.int64)  # their rank once sorted, then their next slot
+    local = np.empty(64, np.int64)
+    g = 0
+    i = 0
+    while i < n:
+        j = i + 1
+        while j < n and c[j] == c[i]:
+            j += 1
+        m = j - i
+        if len(vals) < m:
+            vals = np.empty(2 * m, np.int64)
+            local = np.empty(2 * m, np.int64)
+        k = 0  # distinct words met
+        for r in range(m):
+            v = word[i + r]
+            s = 0
+            while s < k and seen[s] != v:
+                s += 1
+            if s == k:
+                if k == _SMALL:
+                    break
+                seen[k] = v
+                first[g + k] = i + r
+                k += 1
+            local[r] = s
+        else:
+            # the distinct words in order: each one's rank among them
+            for a in range(k):
+                rank = 0
+                for b in range(k):
+                    if seen[b] < seen[a]:
+                        rank += 1
+                where[a] = rank
+                vals[rank] = first[g + a]
+            for a in range(k):
+                first[g + a] = vals[a]
+            count = np.zeros(k + 1, np.int64)
+            for r in range(m):
+                count[where[local[r]] + 1] += 1
+            for a in range(k):
+                count[a + 1] += count[a]
+            for r in range(m):
+                rk = where[local[r]]
+                perm[i + count[rk]] = i + r
+                count[rk] += 1
+                inverse[i + r] = g + rk
+            g += k
+            i = j
+            continue
+        for r in range(m):
+            vals[r] = word[i + r]
+            perm[i + r] = i + r
+        _sort(vals, perm[i:j], m)
+        g = _number(vals, perm[i:j], m, g, inverse, first)
+        i = j
+    return inverse, first[:g].copy(), perm
+
+
+@numba.njit(cache=True, nogil=True)
+def _nested_groups(perm, outer, key):  # pragma: no cover - compiled
+    """Rows grouped by ``(outer, key)``, ``perm`` the rows ordered by ``outer`` (its
+    groups numbered in that order): each row's group and one row of each."""
+    n = len(perm)
+    inverse = np.empty(n, np.int64)
+    first = np.empty(n, np.int64)
+    vals = np.empty(64, np.int64)
+    idx = np.empty(64, np.int64)
+    g = 0
+    i = 0
+    while i < n:
+        o = outer[perm[i]]
+        j = i + 1
+        while j < n and outer[perm[j]] == o:
+            j += 1
+        m = j - i
+        if len(vals) < m:
+            vals = np.empty(2 * m, np.int64)
+            idx = np.empty(2 * m, np.int64)
+        for r in range(m):
+            idx[r] = perm[i + r]
+            vals[r] = key[idx[r]]
+        _sort(vals, idx, m)
+        g = _number(vals, idx, m, g, inverse, first)
+        i = j
+    return inverse, first[:g].copy()
+
+
+def by_observation(kernels, c: np.ndarray, *cols: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`~mitld_lp.sensing.rows.groups` of ``(c, *cols)`` with the rows in their
+    groups' order (``kernels``: :mod:`mitld_lp.sensing.kernels`), or None where ``c``
+    is not in order or ``cols`` do not pack into one word (the caller groups them
+    itself)."""
+    if len(c) == 0 or not _runs(c):
+        return None
+    words, span = kernels.pack(tuple(np.ascontiguousarray(x, dtype=INT) for x in cols))
+    if len(words) != 1:
+        return None
+    return _block_groups(np.ascontiguousarray(c, dtype=INT), words[0])
+
+
+def by_hypothesis(perm: np.ndarray, outer: np.ndarray, key: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~mitld_lp.sensing.rows.groups` of ``(outer, key)``, ``perm`` the rows in
+    ``outer``'s groups' order (:func:`by_observation`)."""
+    return _nested_groups(perm, outer, np.ascontiguousarray(key, dtype=INT))
+
+
+@numba.njit(cache=True, nogil=True)
+def least_counts(counts, tid, group, n_groups):  # pragma: no cover - compiled
+    """The rows whose group's least report counts are not all zero and those least
+    counts (:meth:`mitld_lp.sensing.merge.Counts.canonical`): ``counts`` each times
+    index's counts, ``tid`` each row's, ``group`` each row's group."""
+    n, k = len(tid), counts.shape[1]
+    least = np.full((n_groups, k), np.iinfo(np.int64).max, np.int64)
+    for r in range(n):
+        g = group[r]
+        t = tid[r]
+        for j in range(k):
+            v = counts[t, j]
+            if v < least[g, j]:
+                least[g, j] = v
+    moved = np.zeros(n_groups, np.bool_)
+    for g in range(n_groups):
+        for j in range(k):
+            if least[g, j] != 0:
+                moved[g] = True
+    m = 0
+    for r in range(n):
+        if moved[group[r]]:
+            m += 1
+    rows = np.empty(m, np.int64)
+    by = np.empty((m, k), np.int64)
+    at = 0
+    for r in range(n):
+        g = group[r]
+        if moved[g]:
+            rows[at] = r
+            for j in range(k):
+                by[at, j] = least[g, j]
+            at += 1
+    return rows, by
+
+
+@numba.njit(cache=True, nogil=True)
+def hash_add(out, idx, codes):  # pragma: no cover - compiled
+    """``out[idx] +=`` :func:`mitld_lp.sensing.rows.mix64` of ``codes`` (wrapping, as
+    ``np.add.at`` on unsigned words): each group's hash of its hypotheses."""
+    for i in range(len(idx)):
+        z = np.uint64(codes[i]) + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        out[idx[i]] += z ^ (z >> np.uint64(31))
+
+
+@numba.njit(cache=True, nogil=True)
+def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
+                 delays):  # pragma: no cover - compiled
+    """Each group's shift of each shiftable sensed event's times
+    (:meth:`mitld_lp.sensing.merge.Shifts.canonical`): ``times`` each times index's
+    steps, ``tid`` each row's, ``said`` its reports (kept and new), ``clock`` its
+    parent's clock; ``events`` the shiftable events, ``starts`` their least places,
+    ``delays`` every sensed event's delay."""
+    n, k = len(tid), len(events)
+    good = np.ones((n_groups, k), np.bool_)
+    least = np.full((n_groups, k), np.iinfo(np.int64).max, np.int64)
+    for r in range(n):
+        g = group[r]
+        t = tid[r]
+        for e in range(k):
+            i = events[e]
+            ki = times[t, i]
+            if not (ki > 0 and ((said[r] >> i) & 1 == 1 or ki + delays[i] <= clock[r] + 1)):
+                good[g, e] = False
+            if ki < least[g, e]:
+                least[g, e] = ki
+    shift = np.zeros((n_groups, times.shape[1]), np.int64)
+    for g in range(n_groups):
+        for e in range(k):
+            if good[g, e] and least[g, e] > starts[e]:
+                shift[g, events[e]] = least[g, e] - starts[e]
+    return shift
