@@ -14,11 +14,13 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
 from mitld_lp.product.imdp import IntervalMDP
+from mitld_lp.product.late_names import LateActionNames
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
 from mitld_lp.util.arrays import DENSE_LIMIT, Grow, Index, concatenate, merge, ranks
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.table import LATE, LateNames
 from mitld_lp.worlds.task import check_alphabet
 
 __all__ = ["product", "robust_product"]
@@ -283,15 +285,22 @@ def _assemble(
     np.cumsum(row_len, out=indptr[1:])
     del row_len
     n_rows = indptr.size - 1
-    # action ids in order of first use, as names
-    used = actions >= 0
+    # action ids in order of first use, as names; the choices of a world that names
+    # them when first read keep their ids (mitld_lp.product.late_names)
+    late = actions >= LATE
+    used = (actions >= 0) & ~late
     uniq, first = np.unique(actions[used], return_index=True)
     order = uniq[np.argsort(first)]
     remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
     remap[order] = np.arange(order.size, dtype=np.int32)
     choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
     choice_actions[used] = remap[actions[used]]
+    choice_actions[late] = actions[late]
     by_id = {i: a for a, i in f.action_id.items()}
+    names: Any = tuple(by_id[int(i)] for i in order)
+    if late.any():
+        assert f.table is not None and isinstance(f.table.action_names, LateNames)
+        names = LateActionNames(f.table.action_names, choice_actions)
     kind = np.zeros(keys.size, dtype=np.int8)
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
@@ -305,7 +314,7 @@ def _assemble(
     common: dict[str, Any] = dict(
         row_groups=row_groups,
         choice_actions=choice_actions,
-        action_names=tuple(by_id[int(i)] for i in order),
+        action_names=names,
         initial=initial,
         target=kind == 1,
         sink=kind == 2,

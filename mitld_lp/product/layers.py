@@ -27,7 +27,7 @@ from mitld_lp.worlds.successors import (
     distribution_faults,
     place,
 )
-from mitld_lp.worlds.table import WorldTable, table_of
+from mitld_lp.worlds.table import LATE, LateNames, WorldTable, table_of
 
 __all__ = ["Layers"]
 
@@ -132,6 +132,8 @@ class Layers:
         self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
         self.action_id = {a: i for i, a in enumerate(t.action_names)}
         self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
+        if isinstance(t.action_names, LateNames):  # choice c named when first read
+            self.slot_aid = Grow.of(LATE + np.arange(t.action_of.size, dtype=np.int32))
         # row c: robot choice c, the table's own arrays (not copied); the truncation row
         # after them, its entry never read
         lengths = np.diff(t.branches).astype(np.int64, copy=False)

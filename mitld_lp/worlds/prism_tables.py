@@ -29,6 +29,7 @@ import numpy as np
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
+from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
@@ -435,6 +436,7 @@ def read_model(
     named: Callable[[Any, tuple[np.ndarray, list[str]] | None],
                     tuple[list[str], np.ndarray]] | None = None,
     shared: bool = True,
+    late: bool = False,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -454,6 +456,9 @@ def read_model(
     holds: :class:`mitld_lp.worlds.prism_origins.OriginNames`), as the labels would.
     ``shared``: whether two choices of one state may have one name (False: the program
     allows none, :func:`mitld_lp.worlds.prism_origins.may_share_names`; not looked for).
+    ``late``: a choice without a label at a state Storm did not label ``deadlock`` (and
+    not decided) is an unlabelled command's, named when first read: its id is ``LATE +
+    c`` (:mod:`mitld_lp.worlds.prism_names`).
     Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
@@ -482,6 +487,7 @@ def read_model(
     # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
+    dead = len(table) - 1
     if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
         stuck = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
@@ -563,6 +569,12 @@ def read_model(
     remap = np.array([distinct.setdefault(a, len(distinct)) for a in table], dtype=np.int32)
     action_index = remap[code]
     action_index[~robot] = -1
+    if late:  # an unlabelled command's choice: no label, not Storm's self-loop
+        loop = np.zeros(n, dtype=bool)
+        if "deadlock" in model.labeling.get_labels():
+            loop[_indices(model.labeling.get_states("deadlock"))] = True
+        mine = np.flatnonzero((label_of < 0) & (code == dead) & ~loop[state_of])
+        action_index[mine] = LATE + mine
 
     initial = list(model.initial_states)
     if len(initial) != 1:
