@@ -232,11 +232,14 @@ class PrismGame:
         """Every name of a robot action at some state (where the names of choices of
         commands without an action are not made yet: the names of those commands)."""
         t = self._tables
-        used = np.unique(t.action_index)
-        names = t.action_names
-        if isinstance(names, DeferredNames) and not names.resolved:  # not named yet:
-            used = used[used < LATE]  # every command without an action counts
-            return frozenset(names[k] for k in used[used >= 0].tolist()) | names.commands
+        names, ids = t.action_names, t.action_index
+        if isinstance(names, DeferredNames):
+            if not names.resolved:  # not named yet: every command without an action
+                used = np.unique(ids[ids < LATE])
+                return frozenset(names[k] for k in used.tolist()) | names.commands
+            codes, table = names.names_of(np.arange(ids.size))
+            return frozenset(table[k] for k in np.unique(codes).tolist())
+        used = np.unique(ids)
         return frozenset(names[k] for k in used[used >= 0].tolist())
 
     def as_table(self) -> WorldTable | None:
