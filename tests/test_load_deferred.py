@@ -151,3 +151,30 @@ def test_two_commands_of_one_action_are_named_at_once(tmp_path: Path) -> None:
     game = load_prism(path)
     assert isinstance(game._tables.action_names, tuple)
     assert {"go@robot_cmd3", "go@robot_cmd4"} <= set(game.actions(game.states[1]))
+
+
+def test_the_names_and_the_valuations_come_from_one_second_build(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from mitld_lp.worlds import prism_names, prism_valuations
+
+    builds: list[int] = []
+    for module in (prism_names, prism_valuations):
+        real = module._build
+        monkeypatch.setattr(module, "_build",
+                            lambda *a, real=real, **k: builds.append(1) or real(*a, **k))
+    path = tmp_path / "m.prism"
+    path.write_text(MODEL, encoding="utf-8")
+    want = storm_names(path)
+    for read_first in ("names", "states"):
+        game = load_prism(path)
+        before = len(builds)
+        if read_first == "names":
+            assert [list(game.actions(game.states[0]))] == want[:1]  # the initial state
+            assert len(builds) == before + 1
+            assert game._tables.states.built
+        else:
+            assert len(list(game.states)) == len(want)
+            assert len(builds) == before + 1
+            assert game._tables.action_names.resolved
+        assert [list(game.actions(s)) for s in game.states] == want
+        assert len(builds) == before + 1

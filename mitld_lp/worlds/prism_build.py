@@ -242,9 +242,10 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
             _exact_refusal(stormpy, program, plain, where, options(True))  # find it
         raise
     if late:
-        tables = dataclasses.replace(tables, action_names=DeferredNames(
-            tuple(tables.action_names), make, unlabelled_commands(program), tables.choices,
-            tables.targets, tables.action_index))
+        names = DeferredNames(tuple(tables.action_names), make, unlabelled_commands(program),
+                              tables.choices, tables.targets, tables.action_index)
+        names.share(tables.states)  # one second build for the values and the names
+        tables = dataclasses.replace(tables, action_names=names)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
 
 

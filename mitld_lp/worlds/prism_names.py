@@ -29,8 +29,13 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_exact import program_of
 from mitld_lp.worlds.prism_origins import OriginNames
 from mitld_lp.worlds.prism_program import builder_options
-from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, _read_export
-from mitld_lp.worlds.prism_valuations import ValuationRecipe, _build
+from mitld_lp.worlds.prism_tables import (
+    DEADLOCK_ACTION,
+    DECIDED_ACTION,
+    _read_export,
+    valuations_of,
+)
+from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, _build
 from mitld_lp.worlds.table import LATE, LateNames
 
 __all__ = ["DeferredNames", "origin_codes", "unlabelled_commands"]
@@ -44,21 +49,23 @@ def unlabelled_commands(program: Any) -> frozenset[str]:
 
 
 def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray,
-                 ) -> tuple[np.ndarray, list[str]]:
+                 states: DeferredValuations | None = None) -> tuple[np.ndarray, list[str]]:
     """``(of, names)``: each choice's name as an index into ``names`` (-1: no command, a
     self-loop Storm added), from Storm's build of ``make.recipe`` with its choice
     origins and otherwise the first build's options; :class:`WorldError` when that
     build has other states or choices than the first (``choices``: its offsets of each
-    state's choices, ``targets``: its branches' targets)."""
+    state's choices, ``targets``: its branches' targets).  Given ``states`` not built
+    yet, the same build makes their values (one build for both)."""
     import stormpy  # the world was built by it: installed
 
     where = make.recipe.where
     program = program_of(stormpy, make.recipe, exact=False)
+    values = states is not None and not states.built
     options = builder_options(stormpy, program, make.recipe.terminal, checks=make.checks,
-                              origins=True, valuations=False)
+                              origins=True, valuations=values)
     model = _build(stormpy, program, options, where, None)
     found = (model.nr_states, model.nr_choices, int(model.initial_states[0]))
-    (offsets, _, again, _), _, archive = _read_export(model, where, origins=True)
+    (offsets, _, again, _), packed, archive = _read_export(model, where, origins=True)
     if found != (make.n_states, make.n_choices, make.initial) or not (
             np.array_equal(offsets, choices) and np.array_equal(again, targets)):
         raise WorldError(f"{where}: Storm's build with choice origins has {found[0]:,} "
@@ -66,6 +73,9 @@ def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray
                          f"{make.n_states:,} and {make.n_choices:,} (or other moves): the "
                          "choices cannot be named")
     names, of = OriginNames(program, where)(model, archive)
+    if values:
+        assert states is not None
+        states.take(valuations_of(model, packed=packed)[1])
     return of, names
 
 
@@ -86,6 +96,14 @@ class DeferredNames(LateNames):
         self.choices, self.targets, self.action_index = choices, targets, action_index
         self._of: np.ndarray | None = None
         self._names: tuple[str, ...] = ()
+        self.states: DeferredValuations | None = None
+
+    def share(self, states: Any) -> None:
+        """Make the world's ``states``, if their values are made when first read too,
+        in the same second build as the names (whichever is read first)."""
+        if isinstance(states, DeferredValuations):
+            self.states = states
+            states.joint = self.resolve
 
     @property
     def resolved(self) -> bool:
@@ -100,14 +118,16 @@ class DeferredNames(LateNames):
         late = codes >= LATE
         if not late.any():
             return codes, self.known
-        if self._of is None:
-            self._resolve()
+        self.resolve()
         assert self._of is not None
         codes[late] = len(self.known) + self._of[choices[late]]
         return codes, self.known + self._names
 
-    def _resolve(self) -> None:
-        of, names = origin_codes(self.make, self.choices, self.targets)
+    def resolve(self) -> None:
+        """Name the late choices (Storm's second build), once."""
+        if self._of is not None:
+            return
+        of, names = origin_codes(self.make, self.choices, self.targets, self.states)
         where = self.make.recipe.where
         ids = self.action_index
         late = ids >= LATE
