@@ -103,7 +103,7 @@ def _solve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, at_once: bool) -> tu
 
     with monkeypatch.context() as patch:
         if at_once:  # the first build with Storm's choice origins, as before
-            patch.setattr(prism_build, "may_share_names", lambda program: True)
+            patch.setattr(prism_build, "is_late", lambda program: False)
         (tmp_path / "m.prism").write_text(MODEL, encoding="utf-8")
         (tmp_path / "m.toml").write_text(
             'name = "m"\nspec = "F goal"\n\n[prism]\nfile = "m.prism"\n', encoding="utf-8")
@@ -142,15 +142,36 @@ def test_a_controller_and_an_export_after_a_deferred_load(tmp_path: Path,
         list(mdp.action_names)[int(copied[copied >= 0][0])]
 
 
-def test_two_commands_of_one_action_are_named_at_once(tmp_path: Path) -> None:
-    """Two choices of one state may then share an action, told apart by their commands:
-    the first build has Storm's choice origins, as before."""
+def test_two_choices_of_one_action_are_told_apart_when_named(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A module with two commands of one action: where both are enabled the two choices
+    are ``go@robot_cmd3`` and ``go@robot_cmd4`` (their commands), named when first read
+    as the load that names every choice at once names them."""
+    from mitld_lp.worlds import prism_build
+
     path = tmp_path / "two.prism"
     path.write_text(MODEL.replace("[go] x=1 -> (x'=3);", "[go] x=1 -> (x'=3);\n"
                                   "  [go] x>=1 -> (x'=0);"), encoding="utf-8")
     game = load_prism(path)
+    assert not game._tables.action_names.resolved
+    late = [list(game.actions(s)) for s in game.states]
+    with monkeypatch.context() as patch:
+        patch.setattr(prism_build, "is_late", lambda program: False)
+        now = load_prism(path)
+    assert isinstance(now._tables.action_names, tuple)
+    assert late == [list(now.actions(s)) for s in now.states]
+    told = [row for row in late if "go@robot_cmd3" in row]
+    assert told and all("go@robot_cmd4" in row and "go" not in row for row in told)
+    # elsewhere the choices are Storm's origins' (one go choice: "go")
+    want = storm_names(path)
+    assert [[a.split("@")[0] for a in row] for row in late] == want
+
+
+def test_an_action_named_as_a_command_is_named_at_once(tmp_path: Path) -> None:
+    path = tmp_path / "named.prism"
+    path.write_text(MODEL.replace("[go]", "[robot_cmd1]"), encoding="utf-8")
+    game = load_prism(path)
     assert isinstance(game._tables.action_names, tuple)
-    assert {"go@robot_cmd3", "go@robot_cmd4"} <= set(game.actions(game.states[1]))
 
 
 def test_the_names_and_the_valuations_come_from_one_second_build(

@@ -28,6 +28,7 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_exact import PrismRecipe
 from mitld_lp.worlds.prism_names import DeferredNames, unlabelled_commands
+from mitld_lp.worlds.prism_names import late_names as is_late
 from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_origins
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
@@ -161,15 +162,14 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
 
     The choices are named by Storm's choice labels, or, where a command has no action
     or a module two commands of one action, by the commands they come from (Storm's
-    choice origins: :mod:`mitld_lp.worlds.prism_origins`); where every choice has one
-    name, and the valuations are left out, an unlabelled command's choices are named
+    choice origins: :mod:`mitld_lp.worlds.prism_origins`); where the valuations are
+    left out (and no action is named as a command), the choices the origins name are named
     when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`), and Storm
     builds no choice origins."""
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
     deferred = limit is None and recipe is not None and not events
-    late = (late_names and deferred and needs_origins(program)
-            and not may_share_names(program))
+    late = late_names and deferred and is_late(program)
     origins = needs_origins(program) and not late
 
     def options(checks: bool) -> Any:
@@ -243,7 +243,8 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
         raise
     if late:
         names = DeferredNames(tuple(tables.action_names), make, unlabelled_commands(program),
-                              tables.choices, tables.targets, tables.action_index)
+                              tables.choices, tables.targets, tables.action_index,
+                              may_share_names(program))
         names.share(tables.states)  # one second build for the values and the names
         tables = dataclasses.replace(tables, action_names=names)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables

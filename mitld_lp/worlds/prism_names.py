@@ -6,12 +6,13 @@ choice labels leave such a choice unlabelled.  The origins cost a third of Storm
 plain build (QVBS consensus 6-2, 1,258,240 states: 17.3 s of CPU with them, 13.0 s with
 the choice labels alone), and a solve reads no name: only a policy or a controller
 shown or exported does.  So a world built whole, without event effects, whose program
-has a command without an action and no module with two commands of one action (each
-choice then has one name: its action, or its one command's), is built with the choice
-labels alone (:func:`mitld_lp.worlds.prism_build.build_tables`): a labelled choice is
-named at once, as is the deadlock self-loop (the one unlabelled choice of a state
-Storm labels ``deadlock``) and a decided state's; every other unlabelled choice ``c``
-gets the id ``LATE + c`` (:data:`mitld_lp.worlds.table.LATE`), and
+has a command without an action or a module with two commands of one action (and no
+action named as a command without one, ``[lift_cmd1]``), is built with the choice labels
+alone (:func:`mitld_lp.worlds.prism_build.build_tables`): a labelled choice is named at
+once, unless another choice of its state has its label (both are then told apart by
+their commands, ``go@lift_cmd2``), as are the deadlock self-loop (the one unlabelled
+choice of a state Storm labels ``deadlock``) and a decided state's; every other choice
+``c`` gets the id ``LATE + c`` (:data:`mitld_lp.worlds.table.LATE`), and
 :class:`DeferredNames` names it when first read, from Storm's build with its choice
 origins (:func:`origin_codes`): Storm numbers states and choices alike in both builds
 (its breadth-first order; the choice origins change no choice), which is checked (the
@@ -27,7 +28,7 @@ import numpy as np
 
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_exact import program_of
-from mitld_lp.worlds.prism_origins import OriginNames
+from mitld_lp.worlds.prism_origins import OriginNames, needs_origins
 from mitld_lp.worlds.prism_program import builder_options
 from mitld_lp.worlds.prism_tables import (
     DEADLOCK_ACTION,
@@ -38,7 +39,18 @@ from mitld_lp.worlds.prism_tables import (
 from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, _build
 from mitld_lp.worlds.table import LATE, LateNames
 
-__all__ = ["DeferredNames", "origin_codes", "unlabelled_commands"]
+__all__ = ["DeferredNames", "late_names", "origin_codes", "unlabelled_commands"]
+
+
+def late_names(program: Any) -> bool:
+    """Whether ``program``'s choices may be named when first read (the module
+    docstring): a command without an action or a module with two commands of one
+    action, and no action named as a command without one."""
+    if not needs_origins(program):
+        return False  # every choice is named by its label at once
+    commands = unlabelled_commands(program)
+    return not any(cmd.is_labeled and cmd.action_name in commands
+                   for module in program.modules for cmd in module.commands)
 
 
 def unlabelled_commands(program: Any) -> frozenset[str]:
@@ -49,13 +61,16 @@ def unlabelled_commands(program: Any) -> frozenset[str]:
 
 
 def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray,
-                 states: DeferredValuations | None = None) -> tuple[np.ndarray, list[str]]:
+                 states: DeferredValuations | None = None, shared: bool = False,
+                 ) -> tuple[np.ndarray, list[str]]:
     """``(of, names)``: each choice's name as an index into ``names`` (-1: no command, a
     self-loop Storm added), from Storm's build of ``make.recipe`` with its choice
     origins and otherwise the first build's options; :class:`WorldError` when that
     build has other states or choices than the first (``choices``: its offsets of each
     state's choices, ``targets``: its branches' targets).  Given ``states`` not built
-    yet, the same build makes their values (one build for both)."""
+    yet, the same build makes their values (one build for both).  ``shared``: two
+    choices of a state may have one name, then told apart by their commands
+    (``go@lift_cmd2``), as :func:`mitld_lp.worlds.prism_tables.read_model` names them."""
     import stormpy  # the world was built by it: installed
 
     where = make.recipe.where
@@ -72,10 +87,37 @@ def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray
                          f"states and {found[1]:,} choices, its first build "
                          f"{make.n_states:,} and {make.n_choices:,} (or other moves): the "
                          "choices cannot be named")
-    names, of = OriginNames(program, where)(model, archive)
+    named = OriginNames(program, where)
+    names, of = named(model, archive)
+    if shared:
+        of, names = _told_apart(of, names, choices, named, model, where)
     if values:
         assert states is not None
         states.take(valuations_of(model, packed=packed)[1])
+    return of, names
+
+
+def _told_apart(of: np.ndarray, names: list[str], choices: np.ndarray, named: OriginNames,
+                model: Any, where: str) -> tuple[np.ndarray, list[str]]:
+    """The choices of a state that share a name renamed ``<name>@<their commands>``."""
+    state_of = np.repeat(np.arange(choices.size - 1, dtype=np.int64), np.diff(choices))
+    key = state_of * (len(names) + 1) + of + 1
+    some = of >= 0  # a self-loop Storm added is alone in its state
+    keys, counts = np.unique(key[some], return_counts=True)
+    clash = np.flatnonzero(some & np.isin(key, keys[counts > 1]))
+    if clash.size == 0:
+        return of, names
+    names, of = list(names), of.copy()
+    position = {x: k for k, x in enumerate(names)}
+    for c in clash.tolist():
+        name = f"{names[int(of[c])]}@{named.command_text(model.choice_origins.get_command_set(c))}"
+        of[c] = position.setdefault(name, len(position))
+        if of[c] == len(names):
+            names.append(name)
+    for s in np.unique(state_of[clash]).tolist():
+        row = of[choices[s]:choices[s + 1]].tolist()
+        for k in sorted({x for x in row if row.count(x) > 1}):
+            raise WorldError(f"{where}: two choices named {names[k]!r} at state number {s}")
     return of, names
 
 
@@ -89,8 +131,9 @@ class DeferredNames(LateNames):
 
     def __init__(self, known: tuple[str, ...], make: ValuationRecipe,
                  commands: frozenset[str], choices: np.ndarray, targets: np.ndarray,
-                 action_index: np.ndarray) -> None:
+                 action_index: np.ndarray, shared: bool = False) -> None:
         self.known = known
+        self.shared = shared
         self.make = make
         self.commands = commands
         self.choices, self.targets, self.action_index = choices, targets, action_index
@@ -127,7 +170,8 @@ class DeferredNames(LateNames):
         """Name the late choices (Storm's second build), once."""
         if self._of is not None:
             return
-        of, names = origin_codes(self.make, self.choices, self.targets, self.states)
+        of, names = origin_codes(self.make, self.choices, self.targets, self.states,
+                                 self.shared)
         where = self.make.recipe.where
         ids = self.action_index
         late = ids >= LATE
@@ -141,10 +185,7 @@ class DeferredNames(LateNames):
                          + [False], dtype=bool)
         first = np.where(now, ids, len(self.known))
         agree = np.where(given == -3, loops[first], given == ids)
-        late_named = of[late]
-        if not (agree[now].all() and (late_named >= 0).all()
-                and all(names[int(k)] in self.commands
-                        for k in np.unique(late_named).tolist())):
+        if not (agree[now].all() and (of[late] >= 0).all()):
             raise WorldError(f"{where}: Storm's build with choice origins names the "
                              "choices otherwise than its first build")
         self._of = np.asarray(of, dtype=np.int64)
