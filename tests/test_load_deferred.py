@@ -199,3 +199,60 @@ def test_the_names_and_the_valuations_come_from_one_second_build(
             assert game._tables.action_names.resolved
         assert [list(game.actions(s)) for s in game.states] == want
         assert len(builds) == before + 1
+
+
+ROUTES = """mdp
+module robot
+  x : [0..4] init 0;
+  [] x<3 -> 0.8 : (x'=x+1) + 0.2 : true;
+  [] x<3 -> 0.5 : (x'=x+2) + 0.5 : (x'=0);
+  [fast] x=1 -> (x'=3);
+  [] x=3 -> 0.9 : (x'=4) + 0.1 : (x'=0);
+  [] x=4 -> true;
+endmodule
+module other
+  y : [0..1] init 0;
+  [] y=0 & x=0 -> 0.5 : (y'=1) + 0.5 : true;
+  [] y=1 -> (y'=0);
+endmodule
+label "goal" = x=4;
+label "risky" = x=2;
+"""
+
+
+def _routes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, at_once: bool) -> list:
+    from mitld_lp import synthesize
+    from mitld_lp.model import load_model
+    from mitld_lp.worlds import prism_build
+
+    (tmp_path / "w.prism").write_text(ROUTES, encoding="utf-8")
+    law = {"point": "0.5", "band": "[0.4, 0.6]"}
+    for kind, mu in law.items():
+        (tmp_path / f"{kind}.toml").write_text(
+            'name = "w"\nspec = "D[mu] b & F(b & F[0,4] goal)"\n[prism]\nfile = "w.prism"\n'
+            f"[distributions]\nmu = {{ geometric = {mu} }}\n", encoding="utf-8")
+    out = []
+    with monkeypatch.context() as patch:
+        if at_once:
+            patch.setattr(prism_build, "is_late", lambda program: False)
+        for kind, options in (("point", {"constraints": ["P(F risky) <= 0.3"]}),
+                              ("point", {"then": "min-steps"}), ("band", {}),
+                              ("point", {"exact": True})):
+            model = load_model(tmp_path / f"{kind}.toml")
+            late = getattr(model.game._tables.action_names, "resolved", None)
+            assert late is (None if at_once else False)
+            result = synthesize(model, **options)
+            saved = tmp_path / f"{kind}{len(out)}{at_once}.npz"
+            result.controller.save(saved)
+            out.append((result.lower, result.upper, result.policy_table(),
+                        {k: v.tolist() for k, v in np.load(saved).items()}))
+    return out
+
+
+def test_the_other_routes_after_a_deferred_load(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """Constraints, a lexicographic ``then``, a band and the exact answer: the same
+    brackets, policies and controllers as after the load that names at once."""
+    late = _routes(tmp_path, monkeypatch, False)
+    assert late == _routes(tmp_path, monkeypatch, True)
+    assert any("robot_cmd" in str(row["action"]) for row in late[0][2])
