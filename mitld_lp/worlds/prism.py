@@ -235,7 +235,7 @@ class PrismGame:
         names, ids = t.action_names, t.action_index
         if isinstance(names, DeferredNames):
             if not names.resolved:  # not named yet: every command without an action
-                used = np.unique(ids[ids < LATE])
+                used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))
                 return frozenset(names[k] for k in used.tolist()) | names.commands
             codes, table = names.names_of(np.arange(ids.size))
             return frozenset(table[k] for k in np.unique(codes).tolist())

@@ -568,9 +568,9 @@ def read_model(
         loop = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
             loop[_indices(model.labeling.get_states("deadlock"))] = True
-        mine = np.union1d(np.flatnonzero((label_of < 0) & (code == dead) & ~loop[state_of]),
-                          clash)
-        action_index[mine] = LATE + mine
+        mine = (label_of < 0) & (code == dead) & ~loop[state_of]
+        mine[clash] = True
+        action_index[mine] = LATE + np.flatnonzero(mine)
 
     initial = list(model.initial_states)
     if len(initial) != 1:
