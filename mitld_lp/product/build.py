@@ -243,7 +243,8 @@ def _expand(
                  f.band_event.view[at]]
     else:
         cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
-    actions = f.slot_aid.view[c_slot]
+    # a table's action slot c is its robot choice c (named when first read: LATE + c)
+    actions = c_slot + LATE if f.late else f.slot_aid.view[c_slot]
     choices = np.ones(keys.size, dtype=np.int64)
     choices[ordinary] = n_act
     # the absorbing states of the batch (at most three in the whole product): one

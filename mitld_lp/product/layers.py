@@ -27,7 +27,7 @@ from mitld_lp.worlds.successors import (
     distribution_faults,
     place,
 )
-from mitld_lp.worlds.table import LATE, LateNames, WorldTable, table_of
+from mitld_lp.worlds.table import LateNames, WorldTable, table_of
 
 __all__ = ["Layers"]
 
@@ -77,6 +77,7 @@ class Layers:
         self.slot_action: list[str] = []  # per action slot: its name, game state, action id
         self.slot_owner: list[int] = []
         self.slot_aid = Grow(np.int64)
+        self.late = False  # the table's choices named when first read (late_names)
         self.action_id: dict[str, int] = {}
         self._rows = Memo(self._new_rows)
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
@@ -132,8 +133,8 @@ class Layers:
         self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
         self.action_id = {a: i for i, a in enumerate(t.action_names)}
         self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
-        if isinstance(t.action_names, LateNames):  # choice c named when first read
-            self.slot_aid = Grow.of(LATE + np.arange(t.action_of.size, dtype=np.int32))
+        # choices named when first read: robot choice c's id is LATE + c (product.build)
+        self.late = isinstance(t.action_names, LateNames)
         # row c: robot choice c, the table's own arrays (not copied); the truncation row
         # after them, its entry never read
         lengths = np.diff(t.branches).astype(np.int64, copy=False)
