@@ -286,22 +286,21 @@ def _assemble(
     np.cumsum(row_len, out=indptr[1:])
     del row_len
     n_rows = indptr.size - 1
-    # action ids in order of first use, as names; the choices of a world that names
-    # them when first read keep their ids (mitld_lp.product.late_names)
-    late = actions >= LATE
-    used = (actions >= 0) & ~late
-    uniq, first = np.unique(actions[used], return_index=True)
-    order = uniq[np.argsort(first)]
-    remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
-    remap[order] = np.arange(order.size, dtype=np.int32)
-    choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
-    choice_actions[used] = remap[actions[used]]
-    choice_actions[late] = actions[late]
-    by_id = {i: a for a, i in f.action_id.items()}
-    names: Any = tuple(by_id[int(i)] for i in order)
-    if late.any():
+    names: Any
+    if f.late:  # named when first read, in order of first use (product.late_names)
         assert f.table is not None and isinstance(f.table.action_names, LateNames)
+        choice_actions = actions  # LATE + the world's robot choice, ABSORB
         names = LateActionNames(f.table.action_names, choice_actions)
+    else:  # action ids in order of first use, as names
+        used = actions >= 0
+        uniq, first = np.unique(actions[used], return_index=True)
+        order = uniq[np.argsort(first)]
+        remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
+        remap[order] = np.arange(order.size, dtype=np.int32)
+        choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
+        choice_actions[used] = remap[actions[used]]
+        by_id = {i: a for a, i in f.action_id.items()}
+        names = tuple(by_id[int(i)] for i in order)
     kind = np.zeros(keys.size, dtype=np.int8)
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
