@@ -76,6 +76,9 @@ class StateByState:
 
 
 def same_mdp(a: Any, b: Any) -> None:
+    # the names first: a world whose choices are named when first read gives the MDP
+    # its actions' ids then (mitld_lp.product.late_names)
+    assert a.action_names == b.action_names
     for name in ("row_groups", "choice_actions", "target", "sink", "truncated"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     ma = a.matrix if hasattr(a, "matrix") else a.branches

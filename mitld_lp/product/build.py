@@ -14,6 +14,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product.budget import BuildBudget, default_max_memory, estimate_size
 from mitld_lp.product.imdp import IntervalMDP
+from mitld_lp.product.late_names import LateActionNames
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
 from mitld_lp.util.arrays import (
@@ -27,6 +28,7 @@ from mitld_lp.util.arrays import (
 )
 from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.worlds.game import Game
+from mitld_lp.worlds.table import LATE
 from mitld_lp.worlds.task import check_alphabet
 
 __all__ = ["product", "robust_product"]
@@ -249,7 +251,8 @@ def _expand(
                  f.band_event.view[at]]
     else:
         cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
-    actions = f.slot_aid.view[c_slot]
+    # a table's action slot c is its robot choice c (named when first read: LATE + c)
+    actions = c_slot + LATE if f.late else f.slot_aid.view[c_slot]
     choices = np.ones(keys.size, dtype=np.int32)
     choices[ordinary] = n_act
     # the absorbing states of the batch (at most three in the whole product): one
@@ -293,15 +296,21 @@ def _assemble(
     indptr = np.zeros(n_rows + 1, dtype=index)
     np.cumsum(row_len, out=indptr[1:], dtype=index)
     del row_len
-    # action ids in order of first use, as names
-    used = actions >= 0
-    uniq, first = np.unique(actions[used], return_index=True)
-    order = uniq[np.argsort(first)]
-    remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
-    remap[order] = np.arange(order.size, dtype=np.int32)
-    choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
-    choice_actions[used] = remap[actions[used]]
-    by_id = {i: a for a, i in f.action_id.items()}
+    names: Any
+    if f.late:  # named when first read, in order of first use (product.late_names)
+        assert f.late_names is not None  # kept by Layers past its release()
+        choice_actions = actions  # LATE + the world's robot choice, ABSORB
+        names = LateActionNames(f.late_names, choice_actions)
+    else:  # action ids in order of first use, as names
+        used = actions >= 0
+        uniq, first = np.unique(actions[used], return_index=True)
+        order = uniq[np.argsort(first)]
+        remap = np.full(max(len(f.action_id), 1), -1, dtype=np.int32)
+        remap[order] = np.arange(order.size, dtype=np.int32)
+        choice_actions = np.full(actions.size, ABSORB, dtype=np.int32)
+        choice_actions[used] = remap[actions[used]]
+        by_id = {i: a for a, i in f.action_id.items()}
+        names = tuple(by_id[int(i)] for i in order)
     kind = np.zeros(keys.size, dtype=np.int8)
     for code, k in MASK_OF_CODE.items():
         kind[keys == code] = k
@@ -312,7 +321,7 @@ def _assemble(
     common: dict[str, Any] = dict(
         row_groups=row_groups,
         choice_actions=choice_actions,
-        action_names=tuple(by_id[int(i)] for i in order),
+        action_names=names,
         initial=initial,
         target=kind == 1,
         sink=kind == 2,

@@ -27,7 +27,7 @@ from mitld_lp.worlds.successors import (
     distribution_faults,
     place,
 )
-from mitld_lp.worlds.table import WorldTable, table_of
+from mitld_lp.worlds.table import LateNames, WorldTable, table_of
 
 __all__ = ["Layers"]
 
@@ -82,6 +82,8 @@ class Layers:
         self.slot_action: list[str] = []  # per action slot: its name, game state, action id
         self.slot_owner: list[int] = []
         self.slot_aid = Grow(np.int64)
+        self.late = False  # the table's choices named when first read (late_names)
+        self.late_names: LateNames | None = None
         self.action_id: dict[str, int] = {}
         self._rows = Memo(self._new_rows)
         self.row_by_object: dict[int, tuple[Any, int]] = {}  # id(answer) -> (answer, row)
@@ -137,6 +139,10 @@ class Layers:
         self.act_count = Grow.of(np.diff(t.choices).astype(np.int64, copy=False))
         self.action_id = {a: i for i, a in enumerate(t.action_names)}
         self.slot_aid = Grow.of(t.action_of)  # int32, as the MDP keeps them
+        # choices named when first read: robot choice c's id is LATE + c (product.build)
+        self.late = isinstance(t.action_names, LateNames)
+        # the names a late-named table makes when first read: kept past release()
+        self.late_names = t.action_names if self.late else None
         # row c: robot choice c, the table's own arrays (not copied); the truncation row
         # after them, its entry never read
         lengths = np.diff(t.branches).astype(np.int64, copy=False)

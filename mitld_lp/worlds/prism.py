@@ -107,6 +107,7 @@ from mitld_lp.worlds.prism_build import (
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
+from mitld_lp.worlds.prism_names import DeferredNames
 from mitld_lp.worlds.prism_program import (
     check_constants,
     check_program,
@@ -121,7 +122,7 @@ from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 from mitld_lp.worlds.successors import Normalisation
-from mitld_lp.worlds.table import WorldTable
+from mitld_lp.worlds.table import LATE, WorldTable
 
 __all__ = [
     "PrismGame", "LazyPrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION",
@@ -228,10 +229,18 @@ class PrismGame:
         return t.label_sets[int(t.label_index[self._at(state)])]
 
     def robot_actions(self) -> frozenset[str]:
-        """Every name of a robot action at some state."""
+        """Every name of a robot action at some state (where the names of choices of
+        commands without an action are not made yet: the names of those commands)."""
         t = self._tables
-        used = np.unique(t.action_index)
-        return frozenset(t.action_names[k] for k in used[used >= 0].tolist())
+        names, ids = t.action_names, t.action_index
+        if isinstance(names, DeferredNames):
+            if not names.resolved:  # not named yet: every command without an action
+                used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))
+                return frozenset(names[k] for k in used.tolist()) | names.commands
+            codes, table = names.names_of(np.arange(ids.size))
+            return frozenset(table[k] for k in np.unique(codes).tolist())
+        used = np.unique(ids)
+        return frozenset(names[k] for k in used[used >= 0].tolist())
 
     def as_table(self) -> WorldTable | None:
         """The world as a :class:`~mitld_lp.worlds.table.WorldTable` for the product (no

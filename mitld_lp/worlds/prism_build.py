@@ -27,6 +27,8 @@ from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_exact import PrismRecipe
+from mitld_lp.worlds.prism_names import DeferredNames, unlabelled_commands
+from mitld_lp.worlds.prism_names import late_names as is_late
 from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_origins
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
@@ -39,6 +41,7 @@ from mitld_lp.worlds.prism_program import (
 )
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
 from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, head, rebuild
+from mitld_lp.worlds.table import LATE
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
            "check_budgets", "build_within", "build_tables", "expanded_within", "Grower"]
@@ -138,7 +141,7 @@ class Grower:
 def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
                  events: frozenset[str], terminal: str,
                  max_states: int, limit: int | None = None,
-                 recipe: PrismRecipe | None = None) -> Tables:
+                 recipe: PrismRecipe | None = None, late_names: bool = True) -> Tables:
     """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
     the states Storm expands before it has found ``limit`` states (the module docstring).
     Given the ``recipe`` to build it again, a whole build without event effects leaves
@@ -159,11 +162,15 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
 
     The choices are named by Storm's choice labels, or, where a command has no action
     or a module two commands of one action, by the commands they come from (Storm's
-    choice origins: :mod:`mitld_lp.worlds.prism_origins`)."""
-    origins = needs_origins(program)
+    choice origins: :mod:`mitld_lp.worlds.prism_origins`); where the valuations are
+    left out (and no action is named as a command), the choices the origins name are named
+    when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`), and Storm
+    builds no choice origins."""
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
     deferred = limit is None and recipe is not None and not events
+    late = late_names and deferred and is_late(program)
+    origins = needs_origins(program) and not late
 
     def options(checks: bool) -> Any:
         return builder_options(stormpy, program, terminal, checks=checks, origins=origins,
@@ -220,14 +227,26 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
                                int(model.initial_states[0]))
         valuations = variables, (DeferredValuations(make, known, booleans)
                                  if initial == make.initial else rebuild(make))
+    if late and model.nr_choices >= LATE:  # the ids would not fit: named at once
+        return build_tables(stormpy, program, plain, where, chosen, events, terminal,
+                            max_states, limit, recipe, late_names=False)
     try:
         tables = read_model(model, where, chosen, events, {}, origin,
                             stopped[0] if len(stopped) == 1 else None, valuations=valuations,
-                            named=named, shared=may_share_names(program))
+                            named=named, shared=may_share_names(program), late=late)
     except WorldError:
+        if late:  # refused: built again with the choice origins, to name the choice
+            return build_tables(stormpy, program, plain, where, chosen, events, terminal,
+                                max_states, limit, recipe, late_names=False)
         if not checks and limit is None:  # Storm's own words where its exact checks
             _exact_refusal(stormpy, program, plain, where, options(True))  # find it
         raise
+    if late:
+        names = DeferredNames(tuple(tables.action_names), make, unlabelled_commands(program),
+                              tables.choices, tables.targets, tables.action_index,
+                              may_share_names(program))
+        names.share(tables.states)  # one second build for the values and the names
+        tables = dataclasses.replace(tables, action_names=names)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
 
 

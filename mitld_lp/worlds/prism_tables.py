@@ -8,9 +8,8 @@ calls, which make a Python list of each variable's values, where the layout is a
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
 they disagree with it), or its choice origin where the choices are named from the
 commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from
-Storm's per-label calls (a bit vector each).
-Only the choices that need their PRISM commands to be told apart (two enabled commands
-of one action in a state) are looked at one by one.
+Storm's per-label calls (a bit vector each).  Only the choices that need their commands
+to be told apart (two enabled commands of one action in a state) are looked at one by one.
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ import numpy as np
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
+from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
@@ -116,14 +116,8 @@ def _indices(bits: Any) -> np.ndarray:
 
 def transition_arrays(model: Any, where: str) -> tuple[np.ndarray, ...]:
     """``(choices, branches, targets, probabilities)`` of a model Storm built in doubles
-    (its UMB export, checked; branches of probability 0 dropped)."""
-    return _structure(model, where)
-
-
-def _structure(model: Any, where: str) -> tuple[np.ndarray, ...]:
-    """``(choices, branches, targets, probabilities)`` from Storm's UMB export, checked
-    for consistency; branches of probability 0 dropped (negative ones are kept, for
-    :func:`read_model` to refuse)."""
+    (its UMB export, checked for consistency; branches of probability 0 dropped, negative
+    ones kept for :func:`read_model` to refuse)."""
     return read_export(model, where)[0]
 
 
@@ -435,6 +429,7 @@ def read_model(
     named: Callable[[Any, tuple[np.ndarray, list[str]] | None],
                     tuple[list[str], np.ndarray]] | None = None,
     shared: bool = True,
+    late: bool = False,
 ) -> Tables:
     """Copy Storm's ``model`` into :class:`Tables`.
 
@@ -454,6 +449,9 @@ def read_model(
     holds: :class:`mitld_lp.worlds.prism_origins.OriginNames`), as the labels would.
     ``shared``: whether two choices of one state may have one name (False: the program
     allows none, :func:`mitld_lp.worlds.prism_origins.may_share_names`; not looked for).
+    ``late``: a choice without a label at a state Storm did not label ``deadlock`` (and
+    not decided), or of a label twice in its state, is named when first read: its id is
+    ``LATE + c`` (:mod:`mitld_lp.worlds.prism_names`).
     Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
@@ -482,6 +480,7 @@ def read_model(
     # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
+    dead = len(table) - 1
     if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
         stuck = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
@@ -544,16 +543,18 @@ def read_model(
             "robot needs an action there (e.g. [wait] true -> true;)"
         )
 
-    # Two robot choices of one state with one name: told apart by their commands.
+    # Two robot choices of one state with one name: told apart by their commands (when
+    # first read if ``late``: two of one label are late choices then).
     clash = np.zeros(0, dtype=np.int64)
     if shared:
+        look = robot & (label_of >= 0) if late else robot
         key = state_of * (len(label_names) + 1) + label_of + 1
-        keys, counts = np.unique(key[robot], return_counts=True)
-        clash = np.flatnonzero(robot & np.isin(key, keys[counts > 1]))
-    for c in clash.tolist():
+        keys, counts = np.unique(key[look], return_counts=True)
+        clash = np.flatnonzero(look & np.isin(key, keys[counts > 1]))
+    for c in [] if late else clash.tolist():
         table.append(f"{table[int(code[c])]}@{origin(c)}")
         code[c] = len(table) - 1
-    for s in np.unique(state_of[clash]).tolist():
+    for s in [] if late else np.unique(state_of[clash]).tolist():
         mine = slice(choices[s], choices[s + 1])
         row = [table[k] for k in code[mine][robot[mine]].tolist()]
         for name in sorted({x for x in row if row.count(x) > 1}):
@@ -563,6 +564,13 @@ def read_model(
     remap = np.array([distinct.setdefault(a, len(distinct)) for a in table], dtype=np.int32)
     action_index = remap[code]
     action_index[~robot] = -1
+    if late:  # an unlabelled command's choice (no label, not Storm's self-loop), a clash
+        loop = np.zeros(n, dtype=bool)
+        if "deadlock" in model.labeling.get_labels():
+            loop[_indices(model.labeling.get_states("deadlock"))] = True
+        mine = (label_of < 0) & (code == dead) & ~loop[state_of]
+        mine[clash] = True
+        action_index[mine] = LATE + np.flatnonzero(mine)
 
     initial = list(model.initial_states)
     if len(initial) != 1:

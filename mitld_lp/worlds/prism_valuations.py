@@ -16,7 +16,7 @@ build numbers them alike, which is checked (states, choices, the initial state).
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
 
@@ -100,16 +100,25 @@ class DeferredValuations(Valuations):
         self.known = known  # the initial state's values
         self.booleans = booleans
         self._values: np.ndarray | None = None
+        # Storm's second build of another part made when first read (the choices' names:
+        # mitld_lp.worlds.prism_names), asked to make the values in the same build
+        self.joint: Callable[[], None] | None = None
 
     @property  # type: ignore[override]
     def values(self) -> np.ndarray:
+        if self._values is None and self.joint is not None:
+            self.joint()
         if self._values is None:
-            built = rebuild(self.make)
-            if built.booleans != self.booleans:
-                raise WorldError(f"{self.make.recipe.where}: Storm's build with valuations "
-                                 "has other variables than its first build")
-            self._values = built.values
+            self.take(rebuild(self.make))
+        assert self._values is not None
         return self._values
+
+    def take(self, built: Valuations) -> None:
+        """Keep the values of Storm's second build (checked: the same variables)."""
+        if built.booleans != self.booleans:
+            raise WorldError(f"{self.make.recipe.where}: Storm's build with valuations "
+                             "has other variables than its first build")
+        self._values = built.values
 
     @property
     def built(self) -> bool:

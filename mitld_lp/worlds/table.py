@@ -15,6 +15,12 @@ propositions ``label_sets[label_of[i]]``, its actions (in the game's order) the
 choices ``choices[i]:choices[i+1]``, choice ``c`` named ``action_names[action_of[c]]``
 with the successors ``targets[branches[c]:branches[c+1]]`` (state indices) and their
 probabilities, in the order :meth:`Game.successors` lists them.
+
+A world may leave some choices' names to be made when first read (a PRISM program's
+unlabelled commands: :mod:`mitld_lp.worlds.prism_names`): its ``action_names`` is then a
+:class:`LateNames`, whose ids from :data:`LATE` on name one choice each (``LATE + c``:
+robot choice ``c``); the product passes such ids on and names them when the MDP's names
+are first read (:mod:`mitld_lp.product.late_names`).
 """
 
 from __future__ import annotations
@@ -25,7 +31,39 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["WorldTable", "table_of"]
+__all__ = ["LATE", "LateNames", "WorldTable", "table_of"]
+
+LATE = 1 << 30
+"""The first id of a choice whose name is made when first read (:class:`LateNames`)."""
+
+
+class LateNames(Sequence[str]):
+    """A world's action names where some choices are named when first read: ``len``,
+    iteration and ids below :data:`LATE` are the names known at once (a tuple's
+    answers); id ``LATE + c`` is robot choice ``c``'s name, made on first use
+    (:meth:`names_of`)."""
+
+    known: tuple[str, ...]
+
+    def names_of(self, choices: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+        """``(codes, names)``: the name of each of ``choices`` (robot choice indices)
+        as ``names[codes[i]]``."""
+        raise NotImplementedError
+
+    def __len__(self) -> int:
+        return len(self.known)
+
+    def __iter__(self) -> Any:
+        return iter(self.known)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, int | np.integer) and int(i) >= LATE:
+            codes, names = self.names_of(np.array([int(i) - LATE], dtype=np.int64))
+            return names[int(codes[0])]
+        return self.known[i]
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.known!r} and choices named when first read)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,8 +77,10 @@ class WorldTable:
         label_sets: the distinct proposition sets.
         label_of: ``n`` indices into ``label_sets``.
         choices: ``n + 1`` offsets into the robot's choices (every state has one).
-        action_names: the distinct action names.
-        action_of: ``m`` indices into ``action_names`` (distinct within a state).
+        action_names: the distinct action names (a :class:`LateNames` where some are
+            made when first read).
+        action_of: ``m`` indices into ``action_names`` (distinct within a state; from
+            :data:`LATE` on, a choice named when first read).
         branches: ``m + 1`` offsets into ``targets`` and ``probabilities``.
         targets: ``b`` state numbers.
         probabilities: ``b`` probabilities (float64).
@@ -51,7 +91,7 @@ class WorldTable:
     label_sets: tuple[frozenset[str], ...]
     label_of: np.ndarray
     choices: np.ndarray
-    action_names: tuple[str, ...]
+    action_names: Sequence[str]
     action_of: np.ndarray
     branches: np.ndarray
     targets: np.ndarray
@@ -70,7 +110,8 @@ class WorldTable:
             and bool(np.all(np.diff(self.branches) > 0))
             and (b == 0 or (int(self.targets.min()) >= 0 and int(self.targets.max()) < n))
             and (m == 0 or (int(self.action_of.min()) >= 0
-                            and int(self.action_of.max()) < len(self.action_names)))
+                            and (int(self.action_of.max()) < len(self.action_names)
+                                 or isinstance(self.action_names, LateNames))))
             and (int(self.label_of.min()) >= 0
                  and int(self.label_of.max()) < len(self.label_sets))
         )

@@ -1,0 +1,159 @@
+"""What each of Storm's build options costs on QVBS instances, beside Storm's own build.
+
+The PRISM load (:func:`mitld_lp.worlds.prism.load_prism`) asks Storm for a build with
+some of its options (``stormpy.BuilderOptions``) and copies it through Storm's UMB
+export.  Per instance (posed as ``bench_qvbs.py`` poses it), in one process, the CPU
+seconds of Storm's build of the program
+
+* ``storm``: as Storm's own run builds it for the property (``build_model(program,
+  properties)``: the property's labels, its terminal states), the peer of ``load_cpu``;
+* ``plain``: no option; ``all_labels``: every label of the file;
+* ``labels``: every label and the choice labels (the load now, where the choices are
+  named when first read: :mod:`mitld_lp.worlds.prism_names`);
+* ``origins``: every label and the choice origins (the load before, for a program with
+  a command without an action or a module with two commands of one action);
+* ``valuations``: every label and the state valuations (left out of a whole load);
+* ``origins_valuations``: both (the second build, made when a name or a state is
+  first read);
+
+each with the states, choices and transitions it built (the answer: every build of
+one instance must agree; the peer's differ where its property stops the exploration),
+the minimum over ``--repeat`` builds; then the export (``export``: Storm's UMB archive
+of the ``labels`` build, uncompressed) and the read (``read``: the arrays copied from
+it, :func:`mitld_lp.worlds.prism_tables.read_export`).
+
+    python experiments/bench_build_options.py --qvbs /work/shared/qvbs \\
+        --only consensus.4-4.c2 firewire_dl.3-600.deadline --out /tmp/options
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import bench_qvbs  # noqa: E402  (the same instances, posed the same way)
+
+OPTIONS = ("plain", "all_labels", "labels", "origins", "valuations", "origins_valuations")
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _options(stormpy: Any, kind: str) -> Any:
+    o = stormpy.BuilderOptions()
+    if kind != "plain":
+        o.set_build_all_labels()
+    if kind == "labels":
+        o.set_build_choice_labels()
+    if kind in ("origins", "origins_valuations"):
+        o.set_build_choice_origins()
+    if kind in ("valuations", "origins_valuations"):
+        o.set_build_state_valuations()
+    return o
+
+
+def measure(job: dict[str, Any], repeat: int) -> dict[str, Any]:
+    """The figures of one instance (the module docstring)."""
+    import stormpy
+    import stormpy.io
+
+    from mitld_lp.worlds.prism_tables import read_export
+
+    program = stormpy.parse_prism_program(job["prism"])
+    undefined = {k.name for k in program.constants if not k.defined}
+    given = {k: v for k, v in job["constants"].items() if k in undefined}
+    program = stormpy.instantiate_constants(program, given)[0] if given else program
+    text = job["property"]
+    for name, value in job["constants"].items():  # the properties file's own constants
+        if name not in undefined:
+            shown = str(value).lower() if isinstance(value, bool) else str(value)
+            text = re.sub(rf"(?<![\w\"]){re.escape(name)}(?![\w\"])", shown, text)
+    props = stormpy.parse_properties(text, program)[:1]
+    row: dict[str, Any] = {}
+
+    def timed(name: str, build: Any) -> Any:
+        best, model = None, None
+        for _ in range(repeat):
+            del model
+            c = _cpu()
+            model = build()
+            t = _cpu() - c
+            best = t if best is None else min(best, t)
+        row[f"{name}_cpu"] = round(best, 4)
+        row[f"{name}_size"] = (f"{model.nr_states}/{model.nr_choices}/"
+                               f"{model.nr_transitions}")
+        return model
+
+    timed("storm", lambda: stormpy.build_model(program, props))
+    kept = None
+    for kind in OPTIONS:
+        model = timed(kind, lambda kind=kind: stormpy.build_model(
+            program, options=_options(stormpy, kind)))
+        if kind == "labels":
+            kept = model
+        del model
+    assert kept is not None
+    options = stormpy.io.UmbExportOptions()
+    options.compression = stormpy.io.CompressionMode.NO_COMPRESSION
+    with tempfile.TemporaryDirectory() as folder:
+        c = _cpu()
+        stormpy.io.export_to_umb(kept, os.path.join(folder, "m.umb"), options=options)
+        row["export_cpu"] = round(_cpu() - c, 4)
+    c = _cpu()
+    read_export(kept, job["prism"])
+    row["read_cpu"] = round(_cpu() - c, 4)  # its own export again, and the arrays
+    return row
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--qvbs", type=Path, required=True)
+    ap.add_argument("--only", nargs="+", required=True)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--out", type=Path, required=True)
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as work:
+        found, _ = bench_qvbs.jobs(args.qvbs, 0, bench_qvbs.MAX_STATES, bench_qvbs.FAMILIES,
+                                   Path(work))
+        jobs = {inst.name: job for inst, job in found}
+        missing = sorted(set(args.only) - set(jobs))
+        if missing:
+            raise SystemExit(f"not found: {', '.join(missing)}")
+        rows = []
+        for name in args.only:
+            row = {"instance": name, **measure(jobs[name], args.repeat)}
+            base = row["plain_cpu"]
+            print("  ".join(f"{k}={v}" for k, v in row.items())
+                  + "  " + "  ".join(f"{k}/plain={row[f'{k}_cpu'] / base:.2f}"
+                                     for k in OPTIONS[1:]), flush=True)
+            rows.append(row)
+    args.out.mkdir(parents=True, exist_ok=True)
+    head = ["instance", *[f"{k}_{x}" for k in ("storm", *OPTIONS) for x in ("cpu", "size")],
+            "export_cpu", "read_cpu"]
+    lines = [",".join(head)] + [",".join(str(r[h]) for h in head) for r in rows]
+    (args.out / "bench_build_options.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    md = ["| instance | " + " | ".join(("storm", *OPTIONS, "export", "read")) + " |",
+          "|---" * (len(OPTIONS) + 4) + "|"]
+    for r in rows:
+        md.append(f"| {r['instance']} ({r['plain_size']}) | " + " | ".join(
+            f"{r[f'{k}_cpu']:.3f}" for k in ("storm", *OPTIONS, "export", "read")) + " |")
+    (args.out / "bench_build_options.md").write_text(
+        "CPU seconds of Storm's build per option set (states/choices/transitions of the "
+        "plain build beside the name; `storm`: Storm's own build for the property)\n\n"
+        + "\n".join(md) + "\n", encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()
