@@ -30,7 +30,12 @@ probability 0.98) is settled in one update instead of hundreds.
   any kernel 0.23-0.31 s even from the on-disk cache, which numba spends on its typing
   and target registries once a process (0.39-0.43 s when ``scipy.linalg`` is not yet
   imported: numba imports it to find BLAS); each further kernel, or signature of one,
-  5-10 ms; 74 MB.  A new checkout compiles every kernel it calls once (2.5 s more on the
+  5-10 ms; 74 MB.  Part by part (``experiments/numba_load.py``): the import 0.26 s, the
+  typing registries 0.05 s, the CPU target's registries 0.34-0.37 s (numba refreshes
+  them before it loads any kernel from its cache), the block kernel itself 0.03 s and a
+  level kernel 0.01 s.  Every kernel is loaded at its first call only (a dispatcher
+  each), so loading fewer kernels saves their hundredths of a second, not numba's
+  registries.  A new checkout compiles every kernel it calls once (2.5 s more on the
   first solve of QVBS ``zeroconf`` 20-4-false, the index files then under each
   module's ``__pycache__``, keyed by the source file's time stamp).  The NumPy path is
   no way round that load where a large block needs the kernel: that instance's solve
@@ -55,8 +60,14 @@ same way (``L <= T(L)``).  Only then is a guess written into the bounds, a lower
 raised and an upper one lowered; a guess that crosses the other side's proven bound,
 or is not proven within :data:`~mitld_lp.solvers.compiled_kernels.VERIFY_SWEEPS`
 sweeps, is dropped.  The bounds the kernel returns are proven ones only, wherever it
-stops.  ``consensus`` 6-2's largest block (139,566 states): 1,204 sweeps without
-guesses, 473 with them.
+stops.  QVBS ``consensus`` 6-2 (one run, CPU seconds on a loaded 2-core machine): its
+blocks of 87,225 and 139,566 states close in 358 and 391 sweeps (3.3 and 7.0 s) where
+the plain sweeps took 800 each (4.2 and 7.9 s) and then the policy jump; the interval
+iteration 1,217 sweeps instead of 2,512.  A verifying sweep costs about 2.4 plain ones
+(two vectors read a state's successors), and half of the sweeps verify.  Where many
+modes decay at nearly the same rate (a ring of 40 states left once in 300 steps) the
+extrapolation is poor and the guesses gain little (5,616 -> 4,507 sweeps); on a
+ring of 10, 4,699 -> 344.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
 They stop when every state's gap is below its threshold: the absolute ``tol``, and with
