@@ -277,7 +277,7 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
     ``guess`` holds each bound's change in the last sweep, while verifying the guesses
     on trial; ``local`` holds proven bounds only, a guess written into it once proven.
     Each kind of sweep is its own function: one loop with all three branches in it
-    compiled to sweeps three times slower."""
+    compiled to much slower plain sweeps."""
     k = local.shape[1]
     best = np.empty(2 * k)
     acc = np.empty(2 * k)

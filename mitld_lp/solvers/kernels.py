@@ -60,14 +60,14 @@ same way (``L <= T(L)``).  Only then is a guess written into the bounds, a lower
 raised and an upper one lowered; a guess that crosses the other side's proven bound,
 or is not proven within :data:`~mitld_lp.solvers.compiled_kernels.VERIFY_SWEEPS`
 sweeps, is dropped.  The bounds the kernel returns are proven ones only, wherever it
-stops.  QVBS ``consensus`` 6-2 (one run, CPU seconds on a loaded 2-core machine): its
-blocks of 87,225 and 139,566 states close in 358 and 391 sweeps (3.3 and 7.0 s) where
-the plain sweeps took 800 each (4.2 and 7.9 s) and then the policy jump; the interval
-iteration 1,217 sweeps instead of 2,512.  A verifying sweep costs about 2.4 plain ones
-(two vectors read a state's successors), and half of the sweeps verify.  Where many
-modes decay at nearly the same rate (a ring of 40 states left once in 300 steps) the
-extrapolation is poor and the guesses gain little (5,616 -> 4,507 sweeps); on a
-ring of 10, 4,699 -> 344.
+stops.  QVBS ``consensus`` 6-2 c2: its blocks of 87,225 and 139,566 states close in 358
+and 391 sweeps where the plain sweeps took 800 each and then the policy jump; the
+interval iteration 1,217 sweeps instead of 2,512, the solve stage's CPU in
+``experiments/results/bench_qvbs_solve_kernels.md``.  A verifying sweep reads two
+vectors at every entry, and about half of the sweeps verify.  Where many modes decay
+at nearly the same rate (a ring of 40 states left once in 300 steps) the extrapolation
+is poor and the guesses gain little (5,616 -> 4,507 sweeps); on a ring of 10, 4,699 ->
+344.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
 They stop when every state's gap is below its threshold: the absolute ``tol``, and with
