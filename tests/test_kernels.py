@@ -119,7 +119,7 @@ def _ping_pong() -> MDP:
                sink=np.array([False, False, False, True]), truncated=no, states=(0, 1, 2, 3))
 
 
-def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit() -> None:
+def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit(monkeypatch) -> None:
     if kernels_module.compiled_kernel() is None:
         pytest.skip("numba is not installed")
     from mitld_lp.solvers import iteration
@@ -127,12 +127,19 @@ def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit() -> N
     mdp = _ping_pong()
     # by hand: a = 0.0005 + 0.999 b, b = 0.0004 + 0.999 a
     a = (0.0005 + 0.999 * 0.0004) / (1 - 0.999 ** 2)
-    r = interval_iteration(mdp, mdp.target, gap="max", progress=False, compiled=True)
-    assert r.status == Status.OPTIMAL
-    assert r.lower[0] <= a + 1e-15 and a <= r.upper[0] + 1e-15
-    assert float(np.max(r.upper - r.lower)) < 1e-9
-    # the forecast gave up on the sweeps, well before their limit of 1000
-    assert iteration._FORECAST_FROM <= r.iterations < iteration._COMPILED_SWEEPS_BEFORE_POLICY
+    sweeps = {}
+    for optimistic in (False, True):
+        monkeypatch.setattr(kernels_module, "OPTIMISTIC", optimistic)
+        r = interval_iteration(mdp, mdp.target, gap="max", progress=False, compiled=True)
+        assert r.status == Status.OPTIMAL
+        assert r.lower[0] <= a + 1e-15 and a <= r.upper[0] + 1e-15
+        assert float(np.max(r.upper - r.lower)) < 1e-9
+        sweeps[optimistic] = r.iterations
+    # plain sweeps: the forecast gave up on them, well before their limit of 1000
+    assert (iteration._FORECAST_FROM <= sweeps[False]
+            < iteration._COMPILED_SWEEPS_BEFORE_POLICY)
+    # with guesses (kernels' module docs) the sweeps close it before the forecast looks
+    assert sweeps[True] < iteration._FORECAST_FROM
 
 
 @pytest.mark.parametrize(("rate", "at", "hopeless"), [
@@ -192,14 +199,16 @@ def _chain(n: int) -> MDP:
                truncated=np.zeros(n + 2, dtype=bool), states=tuple(range(n + 2)))
 
 
-def test_the_sweeps_run_backward_over_a_block_explored_forward() -> None:
+def test_the_sweeps_run_backward_over_a_block_explored_forward(monkeypatch) -> None:
     """A value entering the chain at its end reaches its start in one backward sweep,
     so both bounds' gap is 4^-k everywhere after k sweeps (the last state's update
     ``1/2 + v(0)/4`` from bounds 0 and 1): 15 sweeps bring it below 1e-9 (4^-15 =
     9.3e-10, 4^-14 = 3.7e-9).  The forward order moves it one state a sweep: state 0
-    keeps its gap of 1 for n - 1 sweeps."""
+    keeps its gap of 1 for n - 1 sweeps.  (The plain sweeps, without the guesses that
+    can save a sweep or two here: tests/test_solve_kernels_optimistic.py.)"""
     if kernels_module.compiled_kernel() is None:
         pytest.skip("numba is not installed")
+    monkeypatch.setattr(kernels_module, "OPTIMISTIC", False)
     n = 200
     inner = sp.csr_array(([1.0] * (n - 1) + [0.25], ([*range(n - 1), n - 1], [*range(1, n), 0])),
                          shape=(n, n))

@@ -7,7 +7,51 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["gauss_seidel"]
+__all__ = ["OFF", "VERIFY_SWEEPS", "WATCH_SWEEPS", "gauss_seidel"]
+
+OFF = 8
+"""``track``'s header: [0] the phase (-1: plain sweeps, 0: watching the changes, 1:
+verifying guesses), [1] sweeps of the verification, [2] guesses made, [3] columns
+verified, [4] sweeps watched since the last verification, [5] the guesses' margin (a
+share of the extrapolated correction), [6] verifying sweeps in all.  Then six slots
+per column: the largest change of the last sweep and of the one before, the ratio of
+the two, the column's trial (1: on trial, 2: verified, 3: crossed the other bound, 0:
+none), this sweep's largest change, and whether its guess failed to move one way (an
+upper rose, a lower fell) in this sweep."""
+WATCH_SWEEPS = 8
+"""Sweeps watched before a guess (and after a verification ends)."""
+VERIFY_SWEEPS = 16
+"""Sweeps a guess has to become monotone (verified) before it is given up."""
+STEADY = 0.05
+"""A column's changes are steady when the ratio of two successive sweeps' largest
+changes moved by at most this share of ``1 - ratio`` since the last sweep."""
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def sums(indptr, indices, data, exits, x, c, s, acc, off, k):  # pragma: no cover
+    """``acc[off + j]``: choice ``c``'s exit reward plus its entries' sum over ``x``'s
+    column ``j`` (all but ``s``'s self-loop, which the caller solves)."""
+    for j in range(k):
+        acc[off + j] = exits[c, j]
+    for e in range(indptr[c], indptr[c + 1]):
+        t = indices[e]
+        if t != s:
+            w = data[e]
+            for j in range(k):
+                acc[off + j] += w * x[t, j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def keep(local, s, best, k):  # pragma: no cover - compiled
+    """``best`` (clipped to [0, 1]) kept where it improves ``s``'s bounds: a lower bound
+    (even column) only raised, an upper one only lowered."""
+    for j in range(k):
+        val = min(max(best[j], 0.0), 1.0)
+        if j % 2 == 0:
+            if val > local[s, j]:
+                local[s, j] = val
+        elif val < local[s, j]:
+            local[s, j] = val
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -17,26 +61,13 @@ def update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
     for j in range(k):
         best[j] = np.inf if minimise else -np.inf
     for c in range(starts[s], starts[s + 1]):
-        for j in range(k):
-            acc[j] = exits[c, j]
-        for e in range(indptr[c], indptr[c + 1]):
-            t = indices[e]
-            if t != s:
-                w = data[e]
-                for j in range(k):
-                    acc[j] += w * local[t, j]
+        sums(indptr, indices, data, exits, local, c, s, acc, 0, k)
         lv = leave[c]
         for j in range(k):
             val = acc[j] / lv if lv > 0.0 else 0.0
             if (val < best[j]) if minimise else (val > best[j]):
                 best[j] = val
-    for j in range(k):
-        val = min(max(best[j], 0.0), 1.0)
-        if j % 2 == 0:
-            if val > local[s, j]:
-                local[s, j] = val
-        elif val < local[s, j]:
-            local[s, j] = val
+    keep(local, s, best, k)
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update2(indptr, indices, data, starts, leave, exits, local, s,
@@ -69,36 +100,289 @@ def update2(indptr, indices, data, starts, leave, exits, local, s,
     local[s, 0] = max(local[s, 0], min(max(lo_best, 0.0), 1.0))
     local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def checked(indptr, indices, data, starts, leave, exits, local, guess, s, best, acc,
+            minimise, track, k):  # pragma: no cover - compiled
+    """:func:`update` of ``local`` in a verifying sweep, and in the same pass over the
+    entries the update of the guesses on trial (``guess``), each choice's value widened
+    by a bound on its rounding error (every term is non-negative: a sum of ``m`` of them
+    is within ``m`` units of its last place, the self-loop's ``1 - p`` and the division
+    add two), a lower guess lowered and an upper one raised, so they lie beyond the
+    exact update.  A guess is replaced by its update; one whose update moved it the
+    wrong way (a lower down, an upper up) is flagged, one that crossed the proven
+    bound on its other side is out of the trial."""
+    for j in range(2 * k):
+        best[j] = np.inf if minimise else -np.inf
+    for c in range(starts[s], starts[s + 1]):
+        sums(indptr, indices, data, exits, local, c, s, acc, 0, k)
+        sums(indptr, indices, data, exits, guess, c, s, acc, k, k)
+        lv = leave[c]
+        wide = (indptr[c + 1] - indptr[c] + 8) * 2.0**-52
+        for j in range(2 * k):
+            val = acc[j] / lv if lv > 0.0 else 0.0
+            if j >= k:
+                val = val * (1.0 - wide) if j % 2 == 0 else val * (1.0 + wide)
+            if (val < best[j]) if minimise else (val > best[j]):
+                best[j] = val
+    keep(local, s, best, k)
+    for j in range(k):
+        if track[OFF + 3 * k + j] != 1.0:
+            continue
+        val = min(max(best[k + j], 0.0), 1.0)
+        if (val < guess[s, j]) if j % 2 == 0 else (val > guess[s, j]):
+            track[OFF + 5 * k + j] = 1.0
+        guess[s, j] = val
+        if (val > local[s, j + 1]) if j % 2 == 0 else (val < local[s, j - 1]):
+            track[OFF + 3 * k + j] = 3.0  # beyond the other side's proven bound
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def checked2(indptr, indices, data, starts, leave, exits, local, guess, s, minimise,
+             track):  # pragma: no cover - compiled
+    """:func:`checked` for one model (two columns), its sums in scalars."""
+    lo_best = np.inf if minimise else -np.inf
+    hi_best = lo_best
+    gl_best = lo_best
+    gh_best = lo_best
+    for c in range(starts[s], starts[s + 1]):
+        lo = exits[c, 0]
+        hi = exits[c, 1]
+        gl = lo
+        gh = hi
+        for e in range(indptr[c], indptr[c + 1]):
+            t = indices[e]
+            if t != s:
+                w = data[e]
+                lo += w * local[t, 0]
+                hi += w * local[t, 1]
+                gl += w * guess[t, 0]
+                gh += w * guess[t, 1]
+        lv = leave[c]
+        if lv > 0.0:
+            lo /= lv
+            hi /= lv
+            gl /= lv
+            gh /= lv
+        else:
+            lo = hi = gl = gh = 0.0
+        wide = (indptr[c + 1] - indptr[c] + 8) * 2.0**-52
+        gl *= 1.0 - wide
+        gh *= 1.0 + wide
+        if minimise:
+            lo_best = min(lo_best, lo)
+            hi_best = min(hi_best, hi)
+            gl_best = min(gl_best, gl)
+            gh_best = min(gh_best, gh)
+        else:
+            lo_best = max(lo_best, lo)
+            hi_best = max(hi_best, hi)
+            gl_best = max(gl_best, gl)
+            gh_best = max(gh_best, gh)
+    local[s, 0] = max(local[s, 0], min(max(lo_best, 0.0), 1.0))
+    local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
+    if track[OFF + 6] == 1.0:  # the lower guess on trial
+        val = min(max(gl_best, 0.0), 1.0)
+        if val < guess[s, 0]:
+            track[OFF + 10] = 1.0
+        guess[s, 0] = val
+        if val > local[s, 1]:
+            track[OFF + 6] = 3.0
+    if track[OFF + 7] == 1.0:  # the upper guess on trial
+        val = min(max(gh_best, 0.0), 1.0)
+        if val > guess[s, 1]:
+            track[OFF + 11] = 1.0
+        guess[s, 1] = val
+        if val < local[s, 0]:
+            track[OFF + 7] = 3.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def threshold(low, tol, precision, floor):  # pragma: no cover - compiled
+    """The gap below which a state of lower bound ``low`` is known (kernels.thresholds)."""
+    return tol if precision < 0.0 else min(tol, max(precision * low, floor))
+
+
+@numba.njit(cache=True, nogil=True)
+def _over(local, tol, precision, floor):  # pragma: no cover - compiled
+    n, k = local.shape
+    over = 0.0
+    for s in range(n):
+        for j in range(0, k, 2):
+            r = (local[s, j + 1] - local[s, j]) / threshold(local[s, j], tol, precision,
+                                                            floor)
+            if r > over:
+                over = r
+    return over
+
+
+@numba.njit(cache=True, nogil=True)
+def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
+           acc, minimise):  # pragma: no cover - compiled
+    """One sweep of ``local`` through the states in ``order``."""
+    n, k = local.shape
+    for i in range(n):
+        s = order[i]
+        if k == 2:
+            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
+        else:
+            update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
+                   minimise)
+
+
+@numba.njit(cache=True, nogil=True)
+def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
+             acc, minimise, guess, track):  # pragma: no cover - compiled
+    """:func:`_plain`, each bound's change written into ``guess`` and each column's
+    largest change into ``track``."""
+    n, k = local.shape
+    for i in range(n):
+        s = order[i]
+        for j in range(k):
+            guess[s, j] = local[s, j]
+        if k == 2:
+            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
+        else:
+            update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
+                   minimise)
+        for j in range(k):
+            d = abs(local[s, j] - guess[s, j])
+            guess[s, j] = d
+            if d > track[OFF + 4 * k + j]:
+                track[OFF + 4 * k + j] = d
+
+
+@numba.njit(cache=True, nogil=True)
+def _verifying(indptr, indices, data, starts, leave, exits, local, order, best,
+               acc, minimise, guess, track):  # pragma: no cover - compiled
+    """One sweep of ``local`` and of the guesses on trial (:func:`checked`)."""
+    n, k = local.shape
+    for i in range(n):
+        if k == 2:
+            checked2(indptr, indices, data, starts, leave, exits, local, guess, order[i],
+                     minimise, track)
+        else:
+            checked(indptr, indices, data, starts, leave, exits, local, guess, order[i],
+                    best, acc, minimise, track, k)
+
+
 @numba.njit(cache=True, nogil=True)
 def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_sweeps,
-                 tol, minimise, precision, floor):  # pragma: no cover - compiled
+                 tol, minimise, precision, floor, guess, track):  # pragma: no cover - compiled
     """Sweeps through the states in ``order`` until every gap is below ``tol`` and,
     when ``precision >= 0``, below ``precision`` times its lower bound (never below
-    ``floor``); returns the sweeps and the largest gap over its threshold."""
-    n, k = local.shape
-    best = np.empty(k)
-    acc = np.empty(k)
+    ``floor``); returns the sweeps and the largest gap over its threshold.
+
+    With ``track[0] >= 0`` the sweeps also guess and verify bounds (kernels.py's module
+    docs), ``track`` keeping their state between calls (:data:`OFF`): while watching,
+    ``guess`` holds each bound's change in the last sweep, while verifying the guesses
+    on trial; ``local`` holds proven bounds only, a guess written into it once proven.
+    Each kind of sweep is its own function: one loop with all three branches in it
+    compiled to much slower plain sweeps."""
+    k = local.shape[1]
+    best = np.empty(2 * k)
+    acc = np.empty(2 * k)
     done = 0
     over = np.inf
+    optimistic = track[0] >= 0.0
     while done < max_sweeps:
-        for i in range(n):
-            s = order[i]
-            if k == 2:
-                update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
-            else:
-                update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
-                       minimise)
+        for j in range(k):
+            track[OFF + 4 * k + j] = 0.0
+            track[OFF + 5 * k + j] = 0.0
+        if not optimistic:
+            _plain(indptr, indices, data, starts, leave, exits, local, order, best, acc,
+                   minimise)
+        elif track[0] == 1.0:
+            _verifying(indptr, indices, data, starts, leave, exits, local, order, best,
+                       acc, minimise, guess, track)
+        else:
+            _watched(indptr, indices, data, starts, leave, exits, local, order, best, acc,
+                     minimise, guess, track)
         done += 1
-        over = 0.0
-        for s in range(n):
-            for j in range(0, k, 2):
-                d = local[s, j + 1] - local[s, j]
-                if precision < 0.0:
-                    r = d / tol
-                else:
-                    r = d / min(tol, max(precision * local[s, j], floor))
-                if r > over:
-                    over = r
+        if optimistic:
+            _after_sweep(local, guess, track, k, tol, precision, floor)
+        over = _over(local, tol, precision, floor)
         if over < 1.0:
             break
     return done, over
+
+
+@numba.njit(cache=True, nogil=True)
+def _after_sweep(local, guess, track, k, tol, precision, floor):  # pragma: no cover
+    """The bookkeeping of :func:`gauss_seidel`'s guesses after a sweep (the phases of
+    ``track``, :data:`OFF`): while watching, once every moving column's changes shrink
+    at a steady ratio, extrapolate into ``guess``; while verifying, a guess whose sweep
+    was monotone is proven (module docs) and written into ``local``, one that crossed
+    or ran out of sweeps is dropped."""
+    n = local.shape[0]
+    if track[0] == 0.0:
+        track[4] += 1.0
+        steady = True
+        moving = False
+        for j in range(k):
+            d = track[OFF + 4 * k + j]
+            d1 = track[OFF + j]
+            track[OFF + k + j] = d1
+            track[OFF + j] = d
+            if d <= 0.0:
+                continue
+            moving = True
+            ratio = d / d1 if d1 > 0.0 else 2.0
+            last = track[OFF + 2 * k + j]
+            track[OFF + 2 * k + j] = ratio
+            if not (ratio < 1.0 and abs(ratio - last) <= STEADY * (1.0 - ratio)):
+                steady = False
+        if not (steady and moving and track[4] >= WATCH_SWEEPS):
+            return
+        eta = track[5]
+        for p in range(0, k, 2):
+            if track[OFF + p] <= 0.0 or track[OFF + p + 1] <= 0.0:
+                continue  # a pair that no longer moves: nothing to extrapolate
+            ql = track[OFF + 2 * k + p]
+            qh = track[OFF + 2 * k + p + 1]
+            rl = ql / (1.0 - ql)
+            rh = qh / (1.0 - qh)
+            for s in range(n):
+                low = local[s, p]
+                high = local[s, p + 1]
+                cl = low + guess[s, p] * rl
+                ch = high - guess[s, p + 1] * rh
+                lo_c = min(cl, ch)
+                hi_c = max(cl, ch)
+                margin = eta * max(cl - low, high - ch) \
+                    + threshold(low, tol, precision, floor) / 16.0
+                guess[s, p] = min(high, max(low, lo_c - margin))
+                guess[s, p + 1] = max(guess[s, p], min(high, hi_c + margin))
+            track[OFF + 3 * k + p] = 1.0
+            track[OFF + 3 * k + p + 1] = 1.0
+        track[0] = 1.0
+        track[1] = 0.0
+        track[2] += 1.0
+        return
+    track[1] += 1.0
+    track[6] += 1.0
+    left = False
+    for j in range(k):
+        trial = track[OFF + 3 * k + j]
+        if trial == 1.0 and track[OFF + 5 * k + j] == 0.0:
+            track[OFF + 3 * k + j] = 2.0  # monotone: an inductive bound (module docs)
+            track[3] += 1.0
+            for s in range(n):
+                if j % 2 == 1:
+                    local[s, j] = min(local[s, j], guess[s, j])
+                else:
+                    local[s, j] = max(local[s, j], guess[s, j])
+        elif trial == 1.0:
+            left = True
+    if left and track[1] < VERIFY_SWEEPS:
+        return
+    failed = False
+    for j in range(k):
+        if track[OFF + 3 * k + j] == 1.0 or track[OFF + 3 * k + j] == 3.0:
+            failed = True
+        track[OFF + 3 * k + j] = 0.0
+        track[OFF + j] = 0.0
+        track[OFF + k + j] = 0.0
+        track[OFF + 2 * k + j] = 0.0
+    track[5] = min(track[5] * 2.0, 1.0) if failed else max(track[5] / 2.0, 1.0 / 256.0)
+    track[0] = 0.0
+    track[4] = 0.0

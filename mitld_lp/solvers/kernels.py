@@ -30,11 +30,44 @@ probability 0.98) is settled in one update instead of hundreds.
   any kernel 0.23-0.31 s even from the on-disk cache, which numba spends on its typing
   and target registries once a process (0.39-0.43 s when ``scipy.linalg`` is not yet
   imported: numba imports it to find BLAS); each further kernel, or signature of one,
-  5-10 ms; 74 MB.  A new checkout compiles every kernel it calls once (2.5 s more on the
+  5-10 ms; 74 MB.  Part by part (``experiments/numba_load.py``): the import 0.26 s, the
+  typing registries 0.05 s, the CPU target's registries 0.34-0.37 s (numba refreshes
+  them before it loads any kernel from its cache), the block kernel itself 0.03 s and a
+  level kernel 0.01 s.  Every kernel is loaded at its first call only (a dispatcher
+  each), so loading fewer kernels saves their hundredths of a second, not numba's
+  registries.  A new checkout compiles every kernel it calls once (2.5 s more on the
   first solve of QVBS ``zeroconf`` 20-4-false, the index files then under each
   module's ``__pycache__``, keyed by the source file's time stamp).  The NumPy path is
   no way round that load where a large block needs the kernel: that instance's solve
   takes 25 s by it against 1.6 s compiled, its load included.
+
+**Guessed and verified bounds** (the compiled kernel only; optimistic value iteration,
+Hartmanns & Kaminski, CAV 2020, with the guess extrapolated).  A block that mixes slowly
+closes its gap by a steady ratio ``q`` a sweep (QVBS ``consensus`` 6-2: 0.983, some
+1,200 sweeps from ``[0, 1]`` to 1e-9).  Where each bound's largest change keeps that
+ratio for two sweeps running (after :data:`~mitld_lp.solvers.compiled_kernels.WATCH_SWEEPS`
+sweeps), its error is about its last change times ``q / (1 - q)``: the kernel
+extrapolates both bounds so, and guesses a lower and an upper bound a margin outside
+the two extrapolations (a share of the correction, halved after each verified guess,
+doubled after a failed one).  The guesses are then swept beside the proven bounds, in
+the same pass over the entries, each choice's value widened by a bound on its rounding
+error (every term is non-negative, so a sum of ``m`` terms is within ``m`` units of its
+last place): a sweep in which no upper guess rose is a proof that the swept guess ``U``
+is an upper bound (each ``U(s)`` is at least the update of a vector at least ``U``, so
+``T(U) <= U``, and on a quotient, without end components, ``T(U) <= U`` implies
+``U >= `` the optimum), and one in which no lower guess fell proves a lower bound the
+same way (``L <= T(L)``).  Only then is a guess written into the bounds, a lower bound
+raised and an upper one lowered; a guess that crosses the other side's proven bound,
+or is not proven within :data:`~mitld_lp.solvers.compiled_kernels.VERIFY_SWEEPS`
+sweeps, is dropped.  The bounds the kernel returns are proven ones only, wherever it
+stops.  QVBS ``consensus`` 6-2 c2: its blocks of 87,225 and 139,566 states close in 358
+and 391 sweeps where the plain sweeps took 800 each and then the policy jump; the
+interval iteration 1,217 sweeps instead of 2,512, the solve stage's CPU in
+``experiments/results/bench_qvbs_solve_kernels.md``.  A verifying sweep reads two
+vectors at every entry, and about half of the sweeps verify.  Where many modes decay
+at nearly the same rate (a ring of 40 states left once in 300 steps) the extrapolation
+is poor and the guesses gain little (5,616 -> 4,507 sweeps); on a ring of 10, 4,699 ->
+344.
 
 Both paths give sound bounds; they differ in how many sweeps the gap takes to close.
 They stop when every state's gap is below its threshold: the absolute ``tol``, and with
@@ -145,7 +178,8 @@ class Prepared:
     """A block's matrix prepared for the sweeps: each choice's ``1 - self-loop`` and,
     for the NumPy sweeps, the matrix without its diagonal."""
 
-    __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off")
+    __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off", "guess",
+                 "track")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -160,6 +194,8 @@ class Prepared:
         self._diag = np.flatnonzero(diag)
         self._off: sp.csr_array | None = None
         self.order = sweep_order(self.groups.size - 1)
+        self.guess: np.ndarray | None = None  # the compiled sweeps' guesses, made there
+        self.track: np.ndarray | None = None
 
     @property
     def off(self) -> sp.csr_array:
@@ -204,8 +240,26 @@ def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: f
     if over < 1.0 or max_sweeps <= 0:
         return 0, over
     inner = prep.inner  # its own index type: no int64 copy of the block
+    if prep.guess is None or prep.guess.shape != local.shape:
+        prep.guess = np.zeros_like(local)
+        prep.track = _new_track(local.shape[1], OPTIMISTIC)
     done, over = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
                         np.ascontiguousarray(exits, dtype=np.float64), local,
                         prep.order, int(max_sweeps), float(tol), sense is Sense.MIN,
-                        -1.0 if precision is None else float(precision), FLOOR)
+                        -1.0 if precision is None else float(precision), FLOOR,
+                        prep.guess, prep.track)
     return int(done), float(over)
+
+
+OPTIMISTIC = True
+"""Whether the compiled sweeps guess and verify bounds (module docs)."""
+
+
+def _new_track(k: int, optimistic: bool) -> np.ndarray:
+    """The compiled kernel's state between calls for ``k`` columns (its layout:
+    :data:`mitld_lp.solvers.compiled_kernels.OFF`): watching (or plain sweeps), the
+    guesses' first margin 1/16 of the extrapolated correction."""
+    track = np.zeros(8 + 6 * k)
+    track[0] = 0.0 if optimistic else -1.0
+    track[5] = 1.0 / 16.0
+    return track

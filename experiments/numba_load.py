@@ -1,0 +1,79 @@
+"""What a process pays to load numba and the compiled block kernel, part by part.
+
+Each round is a fresh process (``--rounds``, default 5) that imports NumPy, SciPy's
+sparse matrices and ``scipy.linalg`` (loaded by every solve of a product large enough to
+sweep with the kernel), then times in CPU seconds: ``import numba``; the typing
+context's registries; the CPU target's registries (numba refreshes them before loading
+any kernel from its disk cache, :func:`numba.core.caching` ``load_overload``); the
+first call of the block kernel (:func:`mitld_lp.solvers.kernels.compiled_sweeps`, its
+load from the cache and its run on a two-state block: its bracket of 1/2 is printed beside);
+and the first call of one level kernel.  The kernels must be in the disk cache (run the
+script twice after a change: the first run compiles them).  Prints the median and
+least of each part::
+
+    python experiments/numba_load.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+
+CHILD = r"""
+import json, time
+c = time.process_time
+import numpy as np, scipy.sparse as sp, scipy.linalg  # noqa: F401
+t = [c()]
+import numba  # noqa: F401
+t.append(c())
+from numba.core.registry import cpu_target
+cpu_target.typing_context.refresh()
+t.append(c())
+cpu_target.target_context.refresh()
+t.append(c())
+from mitld_lp.solvers import kernels
+inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
+prep = kernels.Prepared(inner, np.array([0, 1, 2]))
+local = np.column_stack([np.zeros(2), np.ones(2)])
+kernels.compiled_sweeps(prep, np.full((2, 2), 0.25), local, 1e-12, 1000)
+t.append(c())
+from mitld_lp.solvers import level_kernels
+x = np.zeros((2, 1))
+level_kernels.chain_solve(np.arange(2), inner.indptr, inner.indices, inner.data,
+                          np.zeros(2), np.ones((2, 1)), x)
+t.append(c())
+parts = [b - a for a, b in zip(t, t[1:])]
+print(json.dumps({"parts": parts, "answer": [float(local[0, 0]), float(local[0, 1])]}))
+"""
+
+NAMES = ("import numba", "typing registries", "target registries",
+         "block kernel, first call", "a level kernel, first call")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=5, help="fresh processes (default 5)")
+    args = ap.parse_args(argv)
+    runs = []
+    for _ in range(args.rounds):
+        done = subprocess.run([sys.executable, "-c", CHILD], text=True,
+                              capture_output=True)
+        if done.returncode:
+            sys.exit(f"the child failed:\n{done.stderr}")
+        runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    answer = runs[-1]["answer"]
+    print(f"block kernel's bracket on the two-state block: [{answer[0]:.12f}, "
+          f"{answer[1]:.12f}] (exact 1/2: x = 1/4 + x/2)")
+    print(f"{'part':<28} {'median s':>9} {'least s':>9}")
+    for i, name in enumerate(NAMES):
+        xs = [r["parts"][i] for r in runs]
+        print(f"{name:<28} {statistics.median(xs):9.3f} {min(xs):9.3f}")
+    total = [sum(r["parts"]) for r in runs]
+    print(f"{'total':<28} {statistics.median(total):9.3f} {min(total):9.3f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,31 @@
+"""experiments/numba_load.py: numba's load part by part, in fresh processes, with the
+block kernel's bracket beside (the two-state block x = 1/4 + x/2: exactly 1/2)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("numba")
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_numba_load_prints_every_part_and_the_kernels_bracket() -> None:
+    path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    done = subprocess.run([sys.executable, str(ROOT / "experiments" / "numba_load.py"),
+                           "--rounds", "1"], capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "PYTHONPATH": path}, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    low, high = map(float, re.search(r"\[([0-9.]+), ([0-9.]+)\]", done.stdout).groups())
+    assert low <= 0.5 <= high and high - low < 1e-9
+    for part in ("import numba", "typing registries", "target registries",
+                 "block kernel, first call", "a level kernel, first call", "total"):
+        seconds = re.search(rf"^{re.escape(part)}\s+([0-9.]+)\s+([0-9.]+)$", done.stdout,
+                            re.MULTILINE)
+        assert seconds is not None, part
+        assert float(seconds.group(2)) <= float(seconds.group(1))  # least <= median
