@@ -55,6 +55,7 @@ from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
+    BATCH,
     ETA,
     HAZARD_ACCURACY,
     UNIT,
@@ -159,18 +160,22 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     choice passes when one of nature's rows does)."""
     m = st.matrix
     row_state = st.row_state()
-    every = slice(None)  # every row: the rounding's own arrays, not a gathered copy
-    sums = m @ x
-    bound = above(rnd, every, sums) if upper else below(rnd, every, sums)
-    del sums  # three float arrays a row alive at once, not four
-    own = x[row_state]
-    ok = (bound <= own) if upper else (bound >= own)
-    del bound
+    ok = np.empty(m.shape[0], dtype=bool)
+    # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not gathered
+    # copies): the float arrays of every row at once were the certificate's peak on
+    # QVBS wlan_dl; each row's sum is the same (scipy sums a row in its entries' order)
+    for a in range(0, m.shape[0], BATCH):
+        z = min(a + BATCH, m.shape[0])
+        sums = m[a:z] @ x
+        bound = above(rnd, slice(a, z), sums) if upper else below(rnd, slice(a, z), sums)
+        own = x[row_state[a:z]]
+        ok[a:z] = (bound <= own) if upper else (bound >= own)
     ok |= free[row_state]
     suspect = np.flatnonzero(~ok)
     if suspect.size:
         ext = support_extreme(m, suspect, x, largest=upper)
-        ok[suspect] = (ext <= own[suspect]) if upper else (ext >= own[suspect])
+        own = x[row_state[suspect]]
+        ok[suspect] = (ext <= own) if upper else (ext >= own)
     if st.nature is not None:
         ok = np.logical_or.reduceat(ok, st.nature[:-1])
     return ~np.logical_and.reduceat(ok, st.groups[:-1])

@@ -151,8 +151,10 @@ def _randomized(
     state_flow = np.bincount(cstate, weights=occupancy, minlength=mdp.n_states)
     seen = state_flow > _visit_threshold(tol)
     randomized = np.zeros(mdp.n_choices)
-    seen_c = seen[cstate]
-    randomized[seen_c] = occupancy[seen_c] / state_flow[cstate[seen_c]]
+    # one division in place where the state is seen (the same quotients): not the
+    # gathered copies of the seen choices' occupancies, states and flows, four float or
+    # index arrays a choice that were the LP stage's peak on QVBS wlan_dl and csma
+    np.divide(occupancy, state_flow[cstate], out=randomized, where=seen[cstate])
     acting = np.flatnonzero(~seen & (policy >= 0))
     randomized[policy[acting]] = 1.0
     return randomized

@@ -42,7 +42,7 @@ from mitld_lp.solvers.graph import (
     segmented_argmax,
 )
 from mitld_lp.solvers.reduced import Quotient
-from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
+from mitld_lp.solvers.rows import gather_ranges, off_diagonal_entries, rows_dot
 
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
@@ -207,9 +207,9 @@ class SingleLevels:
         self.choices = gather_ranges(lo, hi)
         self.state_choice = np.concatenate([[0], np.cumsum(hi - lo)])
         self.owner = np.repeat(np.arange(self.states.size, dtype=np.int64), hi - lo)
-        local, cols, vals = row_entries(q.matrix, self.choices)
-        own = cols == self.states[self.owner[local]]  # the self-loops, divided out
-        self.local, self.cols, self.vals = local[~own], cols[~own], vals[~own]
+        # the self-loops left out (divided out), read in batches, ``local`` int32
+        self.local, self.cols, self.vals = off_diagonal_entries(
+            q.matrix, self.choices, self.states[self.owner])
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
         self.leave = 1.0 - b.self_loop[self.choices]
         self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
