@@ -180,8 +180,8 @@ def test_the_names_and_the_valuations_come_from_one_second_build(
 
     builds: list[int] = []
     for module in (prism_names, prism_valuations):
-        real = module._build
-        monkeypatch.setattr(module, "_build",
+        real = module.quiet_build
+        monkeypatch.setattr(module, "quiet_build",
                             lambda *a, real=real, **k: builds.append(1) or real(*a, **k))
     path = tmp_path / "m.prism"
     path.write_text(MODEL, encoding="utf-8")

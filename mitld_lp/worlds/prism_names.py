@@ -36,7 +36,7 @@ from mitld_lp.worlds.prism_tables import (
     _read_export,
     valuations_of,
 )
-from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, _build
+from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, quiet_build
 from mitld_lp.worlds.table import LATE, LateNames
 
 __all__ = ["DeferredNames", "late_names", "origin_codes", "unlabelled_commands"]
@@ -78,7 +78,7 @@ def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray
     values = states is not None and not states.built
     options = builder_options(stormpy, program, make.recipe.terminal, checks=make.checks,
                               origins=True, valuations=values)
-    model = _build(stormpy, program, options, where, None)
+    model = quiet_build(stormpy, program, options, where, None)
     found = (model.nr_states, model.nr_choices, int(model.initial_states[0]))
     (offsets, _, again, _), packed, archive = _read_export(model, where, origins=True)
     if found != (make.n_states, make.n_choices, make.initial) or not (

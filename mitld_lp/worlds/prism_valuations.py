@@ -51,7 +51,9 @@ class ValuationRecipe:
     initial: int
 
 
-def _build(stormpy: Any, program: Any, options: Any, where: str, limit: int | None) -> Any:
+def quiet_build(stormpy: Any, program: Any, options: Any, where: str, limit: int | None) -> Any:
+    """Storm's build of ``program`` with ``options`` (at most ``limit`` states), its
+    printing silenced and its errors raised as ours, naming ``where``."""
     try:
         with storm_quiet():
             return storm_build(stormpy, program, options, float, limit)
@@ -64,7 +66,7 @@ def head(stormpy: Any, program: Any, terminal: str, origins: bool, where: str,
     """``(variables, initial, its values, Boolean columns)`` from Storm's build of the
     initial state alone (one state found, none expanded), with its valuations."""
     options = builder_options(stormpy, program, terminal, checks=True, origins=origins)
-    model = _build(stormpy, program, options, where, 1)
+    model = quiet_build(stormpy, program, options, where, 1)
     variables, states = valuations_of(model, packed=read_export(model, where)[1])
     initial = int(model.initial_states[0])
     return variables, initial, states[initial], states.booleans
@@ -80,7 +82,7 @@ def rebuild(make: ValuationRecipe) -> Valuations:
     program = program_of(stormpy, make.recipe, exact=False)
     options = builder_options(stormpy, program, make.recipe.terminal, checks=make.checks,
                               origins=needs_origins(program))
-    model = _build(stormpy, program, options, where, None)
+    model = quiet_build(stormpy, program, options, where, None)
     found = (model.nr_states, model.nr_choices, int(model.initial_states[0]))
     if found != (make.n_states, make.n_choices, make.initial):
         raise WorldError(f"{where}: Storm's build with valuations has {found[0]:,} states "
