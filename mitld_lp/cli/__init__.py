@@ -39,7 +39,6 @@ from mitld_lp.cli.kernel import (
     EXIT_UNCERTIFIED,
     EXIT_USAGE,
     PROG,
-    USER_ERRORS,
     TimeLimit,
     UsageError,
     apply_file_time_limit,
@@ -49,6 +48,7 @@ from mitld_lp.cli.kernel import (
     json_text,
     say,
     say_error,
+    user_errors,
 )
 from mitld_lp.files import write as files
 from mitld_lp.util import progress, watch
@@ -164,7 +164,7 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     except BUDGET_STOPS as err:  # before the user errors: some budgets subclass them
         return say_error(args, "budget", str(err), err)
-    except USER_ERRORS as err:
+    except user_errors() as err:  # (evaluated only when an exception arrives)
         return say_error(args, error_status(err), str(err), err)
     except BrokenPipeError:  # the reader (e.g. `| head`) went away: not an error
         sys.stderr.close()
