@@ -33,9 +33,11 @@ probability 0.98) is settled in one update instead of hundreds.
   5-10 ms; 74 MB.  Part by part (``experiments/numba_load.py``): the import 0.26 s, the
   typing registries 0.05 s, the CPU target's registries 0.34-0.37 s (numba refreshes
   them before it loads any kernel from its cache), the block kernel itself 0.03 s and a
-  level kernel 0.01 s.  Every kernel is loaded at its first call only (a dispatcher
-  each), so loading fewer kernels saves their hundredths of a second, not numba's
-  registries.  A new checkout compiles every kernel it calls once (2.5 s more on the
+  level kernel 0.01 s.  The target's registries are for compiling: a kernel loaded
+  from the cache needs only numba's runtime of them, and
+  :mod:`mitld_lp.solvers.numba_narrow` (put in place here) loads it so, 0.2-0.25 s
+  less CPU.  Every kernel is loaded at its first call only (a dispatcher each), so
+  loading fewer kernels saves their hundredths of a second, not numba's registries.  A new checkout compiles every kernel it calls once (2.5 s more on the
   first solve of QVBS ``zeroconf`` 20-4-false, the index files then under each
   module's ``__pycache__``, keyed by the source file's time stamp).  The NumPy path is
   no way round that load where a large block needs the kernel: that instance's solve
@@ -156,7 +158,9 @@ def compiled_kernel() -> Any:
 
 
 def _build() -> Any:
-    from mitld_lp.solvers import compiled_kernels
+    from mitld_lp.solvers import compiled_kernels, numba_narrow
+
+    numba_narrow.install()  # the kernel from numba's cache without its whole registry
 
     return compiled_kernels.gauss_seidel
 
