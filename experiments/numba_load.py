@@ -12,6 +12,11 @@ script twice after a change: the first run compiles them).  Prints the median an
 least of each part::
 
     python experiments/numba_load.py
+
+A second set of rounds (``narrow``) loads the block kernel as the solver does since
+:mod:`mitld_lp.solvers.numba_narrow`: the target's registries are not refreshed before,
+and the first call loads the kernel with numba's runtime only; its bracket must be the
+same to the bit as the whole load's.
 """
 
 from __future__ import annotations
@@ -29,11 +34,16 @@ import numpy as np, scipy.sparse as sp, scipy.linalg  # noqa: F401
 t = [c()]
 import numba  # noqa: F401
 t.append(c())
-from numba.core.registry import cpu_target
-cpu_target.typing_context.refresh()
-t.append(c())
-cpu_target.target_context.refresh()
-t.append(c())
+if NARROW:
+    from mitld_lp.solvers import numba_narrow
+    assert numba_narrow.install()
+    t += [c(), c()]
+else:
+    from numba.core.registry import cpu_target
+    cpu_target.typing_context.refresh()
+    t.append(c())
+    cpu_target.target_context.refresh()
+    t.append(c())
 from mitld_lp.solvers import kernels
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
 prep = kernels.Prepared(inner, np.array([0, 1, 2]))
@@ -46,7 +56,7 @@ level_kernels.chain_solve(np.arange(2), inner.indptr, inner.indices, inner.data,
                           np.zeros(2), np.ones((2, 1)), x)
 t.append(c())
 parts = [b - a for a, b in zip(t, t[1:])]
-print(json.dumps({"parts": parts, "answer": [float(local[0, 0]), float(local[0, 1])]}))
+print(json.dumps({"parts": parts, "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()]}))
 """
 
 NAMES = ("import numba", "typing registries", "target registries",
@@ -57,22 +67,29 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=5, help="fresh processes (default 5)")
     args = ap.parse_args(argv)
-    runs = []
-    for _ in range(args.rounds):
-        done = subprocess.run([sys.executable, "-c", CHILD], text=True,
-                              capture_output=True)
-        if done.returncode:
-            sys.exit(f"the child failed:\n{done.stderr}")
-        runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
-    answer = runs[-1]["answer"]
-    print(f"block kernel's bracket on the two-state block: [{answer[0]:.12f}, "
-          f"{answer[1]:.12f}] (exact 1/2: x = 1/4 + x/2)")
-    print(f"{'part':<28} {'median s':>9} {'least s':>9}")
-    for i, name in enumerate(NAMES):
-        xs = [r["parts"][i] for r in runs]
-        print(f"{name:<28} {statistics.median(xs):9.3f} {min(xs):9.3f}")
-    total = [sum(r["parts"]) for r in runs]
-    print(f"{'total':<28} {statistics.median(total):9.3f} {min(total):9.3f}")
+    runs: dict[bool, list[dict]] = {False: [], True: []}
+    for _ in range(args.rounds):  # the two loads taking turns
+        for narrow in (False, True):
+            done = subprocess.run([sys.executable, "-c", f"NARROW = {narrow}\n" + CHILD],
+                                  text=True, capture_output=True)
+            if done.returncode:
+                sys.exit(f"the child failed:\n{done.stderr}")
+            runs[narrow].append(json.loads(done.stdout.strip().splitlines()[-1]))
+    answers = {tuple(r["answer"]) for rs in runs.values() for r in rs}
+    if len(answers) != 1:
+        sys.exit(f"the loads' brackets differ: {answers}")
+    low, high = (float.fromhex(x) for x in answers.pop())
+    print(f"block kernel's bracket on the two-state block, both loads: [{low:.12f}, "
+          f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")
+    print(f"{'part':<28} {'whole: median s':>15} {'least s':>8} {'narrow: median s':>17} "
+          f"{'least s':>8}")
+    for i, name in enumerate((*NAMES, "total")):
+        cells = []
+        for narrow in (False, True):
+            xs = [sum(r["parts"]) if name == "total" else r["parts"][i]
+                  for r in runs[narrow]]
+            cells.append(f"{statistics.median(xs):{17 if narrow else 15}.3f} {min(xs):8.3f}")
+        print(f"{name:<28} {cells[0]} {cells[1]}")
 
 
 if __name__ == "__main__":
