@@ -37,10 +37,11 @@ probability 0.98) is settled in one update instead of hundreds.
   from the cache needs only numba's runtime of them, and
   :mod:`mitld_lp.solvers.numba_narrow` (put in place here) loads it so, 0.2-0.25 s
   less CPU.  Every kernel is loaded at its first call only (a dispatcher each), so
-  loading fewer kernels saves their hundredths of a second, not numba's registries.  A new checkout compiles every kernel it calls once (2.5 s more on the
-  first solve of QVBS ``zeroconf`` 20-4-false, the index files then under each
-  module's ``__pycache__``, keyed by the source file's time stamp).  The NumPy path is
-  no way round that load where a large block needs the kernel: that instance's solve
+  loading fewer kernels saves their hundredths of a second, not numba's registries. A
+  new checkout compiles every kernel it calls once (2.5 s more on the first solve of
+  QVBS ``zeroconf`` 20-4-false, the index files then under each module's
+  ``__pycache__``, keyed by the source file's time stamp). The NumPy path is no way
+  round that load where a large block needs the kernel: that instance's solve
   takes 25 s by it against 1.6 s compiled, its load included.
 
 **Guessed and verified bounds** (the compiled kernel only; optimistic value iteration,
