@@ -2,13 +2,15 @@
 
 Python 3.11 and 3.12 write each dataclass's ``__init__`` as source text and compile it
 (``dataclasses._create_fn``): the bundled case's command makes 97 dataclasses while it
-runs, and compiling their ``__init__`` methods is 0.035 s of its 0.55 s of CPU (the other
-generated methods are closures already, :func:`mitld_lp.startup.dataclass_methods_without_exec`).
-Here ``_create_fn`` takes the code object compiled from the same text from a table kept
-beside the package's bytecode (``mitld_lp/__pycache__/dataclass_inits.<tag>.marshal``),
-compiling only a text the table lacks; the table gets the new texts when the process
-ends.  The code is the compiler's own output for the same text, file name ``<string>``,
-run with the same globals and locals: the method is the one ``exec`` of the text makes.
+runs, and compiling their ``__init__`` methods is 0.035 s of its 0.55 s of CPU (the
+other generated methods are closures already,
+:func:`mitld_lp.startup.dataclass_methods_without_exec`). Here ``_create_fn`` takes the
+code object compiled from the same text from a table kept beside the package's bytecode
+(``mitld_lp/__pycache__/dataclass_inits.<tag>.marshal``), compiling only a text the
+table lacks; the table gets the new texts when the process ends (unless Python writes no
+bytecode either: ``-B``, ``PYTHONDONTWRITEBYTECODE``). The code is the compiler's own
+output for the same text, file name ``<string>``, run with the same globals and locals:
+the method is the one ``exec`` of the text makes.
 
 The table is trusted as the ``.pyc`` files beside it are; it is keyed by the whole
 source text and carries the interpreter's bytecode magic number (another Python ignores
@@ -140,5 +142,6 @@ def install() -> bool:
         return ns["__create_fn__"](**locals)
 
     dataclasses._create_fn = _create_fn
-    atexit.register(_write, path)
+    if not sys.dont_write_bytecode:  # ``-B``, PYTHONDONTWRITEBYTECODE: read it only
+        atexit.register(_write, path)
     return True
