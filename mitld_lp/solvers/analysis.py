@@ -64,6 +64,7 @@ from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks, load_walks
+from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["analyse", "end_components", "may_cycle"]
 
@@ -99,7 +100,7 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
     cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
-    mec_of = np.full(n, -1, dtype=np.int64)
+    mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
     if cand.size == 0:
         return EndComponents(read_only(mec_of), read_only(internal), 0)
@@ -163,7 +164,7 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
 
 
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
-    return EndComponents(read_only(np.full(n, -1, dtype=np.int64)),
+    return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
                          read_only(np.zeros(n_choices, dtype=bool)), 0)
 
 
@@ -224,7 +225,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
 
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
-    state_map = np.full(n, -1, dtype=np.int64)
+    # each state's reduced state and each kept choice's product choice, the quotient's
+    # two per-state / per-choice index arrays, kept by both models: int32 where the
+    # product's size allows (half the bytes), int64 past 2**31 - 1 (index_dtype)
+    state_map = np.full(n, -1, dtype=index_dtype(n))
     state_map[plain] = np.arange(n_plain)
     in_mec = mecs.mec_of >= 0
     state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
@@ -234,6 +238,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     kept = np.flatnonzero(maybe[cstate] & ~mecs.internal)
     if mecs.n_mecs:
         kept = kept[np.argsort(state_map[cstate[kept]], kind="stable")]
+    kept = kept.astype(index_dtype(mdp.n_choices), copy=False)
     counts = np.bincount(state_map[cstate[kept]], minlength=n_red)
     del cstate
     row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

@@ -78,6 +78,7 @@ from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import LPResult, Status, read_only
+from mitld_lp.util.arrays import SLICE_STATES, spread
 
 __all__ = ["Layout", "OccupancyLP", "occupancy_lp", "solve_lp"]
 
@@ -142,22 +143,36 @@ def _visit_threshold(tol: float) -> float:
     return max(1e-7, 100.0 * tol)
 
 
-def _randomized(
-    mdp: MDP, q: Quotient, occupancy: np.ndarray, policy: np.ndarray, tol: float
-) -> np.ndarray:
-    """The randomised policy of the occupancies: ``y(c) / sum_{c' of s} y(c')`` at the
-    states whose outflow exceeds the visit threshold, ``policy`` elsewhere."""
-    cstate = mdp.choice_state()
-    state_flow = np.bincount(cstate, weights=occupancy, minlength=mdp.n_states)
+def _randomized(mdp: MDP, origin: np.ndarray, y: np.ndarray, policy: np.ndarray,
+                tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The occupancy of every choice of ``mdp`` (``y`` at the choices ``origin``, 0
+    elsewhere) and its randomised policy: ``y(c) / sum_{c' of s} y(c')`` at the states
+    whose outflow exceeds the visit threshold, ``policy`` elsewhere.
+
+    ``origin`` (``Quotient.choice_origin``) lists a state's choices in increasing order
+    (its other entries in any order), so each state's outflow adds its choices' ``y``
+    in the product's order, as a sum over all of its choices would (the others add
+    +0.0, which changes no sum that starts at +0.0).  Only arrays of the quotient's
+    choices, the two results and a slice of states at a time (:data:`SLICE_STATES`)
+    are made: the product's ``choice_state`` and its gathered flows and masks, a float
+    and an int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma."""
+    groups = np.asarray(mdp.row_groups)
+    owner = np.searchsorted(groups, origin, side="right")
+    np.subtract(owner, 1, out=owner)  # the state of each entry of ``y``
+    state_flow = np.bincount(owner, weights=y, minlength=mdp.n_states)
+    del owner
     seen = state_flow > _visit_threshold(tol)
+    occupancy = np.zeros(mdp.n_choices)
+    occupancy[origin] = y
     randomized = np.zeros(mdp.n_choices)
-    # one division in place where the state is seen (the same quotients): not the
-    # gathered copies of the seen choices' occupancies, states and flows, four float or
-    # index arrays a choice that were the LP stage's peak on QVBS wlan_dl and csma
-    np.divide(occupancy, state_flow[cstate], out=randomized, where=seen[cstate])
+    for lo in range(0, mdp.n_states, SLICE_STATES):
+        hi = min(lo + SLICE_STATES, mdp.n_states)
+        a, b = int(groups[lo]), int(groups[hi])
+        np.divide(occupancy[a:b], spread(state_flow, groups, lo, hi), out=randomized[a:b],
+                  where=spread(seen, groups, lo, hi))
     acting = np.flatnonzero(~seen & (policy >= 0))
     randomized[policy[acting]] = 1.0
-    return randomized
+    return occupancy, randomized
 
 
 def _occupancy_policy(q: Quotient, y: np.ndarray, v: np.ndarray, tol: float) -> np.ndarray:
@@ -323,9 +338,7 @@ def _result(mdp: MDP, q: Quotient, answer: Answer, settings: SolveOptions, start
     values = q.lift(answer.v)
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
     policy = lift_policy(mdp, q, answer.reduced_choice)
-    occupancy = np.zeros(mdp.n_choices)
-    occupancy[q.choice_origin] = answer.y
-    randomized = _randomized(mdp, q, occupancy, policy, settings.tol)
+    occupancy, randomized = _randomized(mdp, q.choice_origin, answer.y, policy, settings.tol)
     seconds = time.perf_counter() - start
     raw = answer.raw
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,

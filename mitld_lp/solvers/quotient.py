@@ -187,8 +187,12 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     policy = _outside(mdp, quotient).copy()
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
-    plain = np.flatnonzero((quotient.state_map >= 0) & (quotient.mecs.mec_of < 0))
-    policy[plain] = chosen[quotient.state_map[plain]]
+    if chosen.size:  # one gather over every state, kept where plain (a removed state's
+        # -1 reads the last entry and is not kept): not the plain states' indices, their
+        # reduced states and choices, three int64 arrays a state
+        plain = (quotient.state_map >= 0) & (quotient.mecs.mec_of < 0)
+        np.copyto(policy, chosen[quotient.state_map], where=plain)
+        del plain
 
     mecs = quotient.mecs
     if mecs.n_mecs == 0:

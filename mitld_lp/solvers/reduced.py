@@ -129,9 +129,14 @@ class Quotient(MDPShape):
         Members of a collapsed MEC all get the MEC's value; target states get 1 and
         prob-0 states 0.
         """
-        out = np.where(self.target, 1.0, 0.0)
-        keep = self.state_map >= 0
-        out[keep] = np.asarray(reduced, dtype=np.float64)[self.state_map[keep]]
+        values = np.asarray(reduced, dtype=np.float64)
+        if values.size == 0:  # nothing kept: every state is a target or of value 0
+            return np.where(self.target, 1.0, 0.0)
+        # one gather over every state (a removed one, -1, reads the last value and is
+        # overwritten), not the kept states' indices and values gathered apart: one
+        # float a state and a mask where there were three arrays a state
+        out = values[self.state_map]
+        np.copyto(out, self.target, where=self.state_map < 0)
         return out
 
 
