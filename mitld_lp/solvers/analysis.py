@@ -253,13 +253,17 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     del mapped
     # One pass over the product for both targets' one-step probabilities and each
     # model's removed states of value 0 (a choice that may move there can lose).
+    # Two columns a product (each column's sums as in one product of all four: the
+    # sparse kernel adds each column on its own), not four: the four floats a choice
+    # and a state were the analysis's peak on QVBS wlan_dl.
     removed = state_map < 0
-    lost = [p & removed for p in prob0]
-    one_step = m @ np.column_stack([goal, extra, *lost]).astype(np.float64)
+    one_step = m @ np.column_stack([goal, extra]).astype(np.float64)
     to_goal = np.ascontiguousarray(one_step[kept, 0])
     to_extra = np.ascontiguousarray(one_step[kept, 1]) if extra.any() else None
-    leaks = [one_step[kept, 2 + j] > 0 for j in range(2)]
-    del one_step, lost, removed
+    del one_step
+    one_step = m @ np.column_stack([p & removed for p in prob0]).astype(np.float64)
+    leaks = [one_step[kept, j] > 0 for j in range(2)]
+    del one_step, removed
     data, cols = rows.data, rows.indices
     gone = cols == n_red
     data[gone] = 0.0

@@ -33,6 +33,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import row_entries
+from mitld_lp.util.arrays import index_dtype
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
@@ -161,7 +162,10 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
         stays = np.where(first == np.iinfo(np.int64).max, policy, first)
         policy[quotient.prob0] = stays[quotient.prob0]
     policy[quotient.target | absorbing_states(mdp)] = -1
-    quotient.shared[key] = (quotient.prob0, quotient.target, read_only(policy))
+    # kept for the quotient's life: int32 where the choices' count allows (lift_policy
+    # widens its own copy)
+    policy = read_only(policy.astype(index_dtype(mdp.n_choices), copy=False))
+    quotient.shared[key] = (quotient.prob0, quotient.target, policy)
     return policy
 
 
@@ -184,7 +188,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       and staying avoids the target for ever).
     """
     n = mdp.n_states
-    policy = _outside(mdp, quotient).copy()
+    policy = _outside(mdp, quotient).astype(np.int64)  # a copy, int64 as promised
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
     if chosen.size:  # one gather over every state, kept where plain (a removed state's
