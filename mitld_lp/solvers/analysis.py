@@ -134,9 +134,13 @@ def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
     choice's probability of staying where it is."""
     n = row_groups.shape[0] - 1
     n_choices = q_matrix.shape[0]
-    owner = np.repeat(np.arange(n), np.diff(row_groups))
-    entry_row = np.repeat(np.arange(n_choices), np.diff(q_matrix.indptr))
+    # each entry's row and the row's state in the index type (int32 where it fits: two
+    # of these an entry were the analysis's peak)
+    owner = np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(row_groups))
+    entry_row = np.repeat(np.arange(n_choices, dtype=index_dtype(n_choices)),
+                          np.diff(q_matrix.indptr))
     hit = q_matrix.indices == owner[entry_row]
+    del owner
     self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
     return blocks_from(comp_of, level_of, self_loop)
 

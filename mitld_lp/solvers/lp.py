@@ -153,8 +153,7 @@ def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
     product's order, as a sum over all of its choices would (the others add +0.0,
     which changes no sum that starts at +0.0): from arrays of the quotient's choices,
     not the product's ``choice_state`` (an int64 a choice)."""
-    owner = np.searchsorted(np.asarray(mdp.row_groups), origin, side="right")
-    np.subtract(owner, 1, out=owner)  # the state of each entry of ``y``
+    owner = mdp.state_of(origin)  # the state of each entry of ``y``
     state_flow = np.bincount(owner, weights=y, minlength=mdp.n_states)
     del owner
     occupancy = np.zeros(mdp.n_choices)

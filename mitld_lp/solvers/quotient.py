@@ -202,8 +202,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     if mecs.n_mecs == 0:
         return policy
     exits = chosen[quotient.n_plain :]
-    cstate = mdp.choice_state()  # one entry a choice: only where there are MECs
-    owners = cstate[exits]
+    owners = mdp.state_of(exits)  # not choice_state(): an int64 a choice of the product
     policy[owners] = exits
     # BFS on the reversed internal-choice graph from the owners (virtual root n): the
     # positive entries of the internal choices' rows, in the matrix's order
@@ -212,7 +211,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     positive = data > 0
     e_choice = inside[local[positive]]
     e_succ = np.asarray(succ[positive], dtype=np.int64)
-    e_source = cstate[e_choice]
+    e_source = mdp.state_of(e_choice)
     del local, succ, data, positive
     src, dst = e_source, e_succ
     rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])
