@@ -248,13 +248,12 @@ def text(name: str, breakdown: dict[str, Any]) -> str:
         out.append("| " + " | ".join(str(r.get(c, "")) if c != "stage" else stage
                                      for c in cols) + " |")
     if "numba_mb" in breakdown:
-        outer = rows[OUTER]
-        out.append(f"\nnumba {'loaded by' if breakdown['numba_mb'] else 'not loaded in'} "
-                   f"`{OUTER}`" + (f": its import alone {breakdown['numba_mb']} MB resident "
-                                   f"(in a fresh interpreter), {round(breakdown['numba_mb'] * 2**20 / breakdown['transitions'], 1)} bytes a transition; the peak "
-                                   f"without that floor {outer['without_numba']} bytes a "
-                                   f"transition, {outer['peak']} with it"
-                                   if breakdown["numba_mb"] else "") + ".")
+        mb, outer = breakdown["numba_mb"], rows[OUTER]
+        out.append(f"\nnumba not loaded in `{OUTER}`." if not mb else
+                   f"\nnumba loaded by `{OUTER}`: its import alone {mb} MB resident (in a "
+                   f"fresh interpreter), {round(mb * 2**20 / breakdown['transitions'], 1)} "
+                   f"bytes a transition; the peak without that floor "
+                   f"{outer['without_numba']} bytes a transition, {outer['peak']} with it.")
     if breakdown["top_where"]:
         out.append(f"\nThe traced size was highest ({breakdown['top_traced']} bytes a "
                    f"transition) in `{breakdown['top_stage']}`, at "

@@ -178,3 +178,21 @@ def test_int32_indices_give_the_int64_answers_to_the_bit(mdps, monkeypatch) -> N
                 assert np.array_equal(a, b, equal_nan=True)
                 if a.dtype.kind == "f":  # the same bits, not only equal
                     assert np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def test_the_stage_table_reports_the_peak_with_and_without_numbas_floor() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    import memory_stages
+
+    rows = {"synthesize": dict(calls=1, peak=200.0, kept=150.0, without_numba=147.5)}
+    loaded = memory_stages.text("x", dict(stages=rows, base_mb=1.0, numba_mb=50.0,
+                                          transitions=2**20, top_where="", top=[]))
+    # 50 MB over 2**20 transitions: 50 bytes a transition
+    assert "50.0 MB" in loaded and "50.0 bytes a transition" in loaded
+    assert "without that floor 147.5 bytes a transition, 200.0 with it" in loaded
+    quiet = memory_stages.text("x", dict(stages=rows, base_mb=1.0, numba_mb=0,
+                                         transitions=2**20, top_where="", top=[]))
+    assert "numba not loaded" in quiet and "floor" not in quiet
