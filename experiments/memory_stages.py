@@ -18,6 +18,13 @@ peak (one snapshot, taken after that stage's figures are read; the peaks are res
 after it, so that it counts in no stage).  ``top_where``: where the synthesis stood when
 the traced size was highest (a thread reads it every 5 ms and, at each new high, the
 synthesis's innermost frames in the package; no snapshot, nothing allocated).
+
+``numba``: numba is imported only for a large product, inside ``synthesize``, and its
+import alone is ~50 MB resident, whatever the product's size.  Where the synthesis
+loaded it, that floor (:func:`numba_floor`: the resident growth of ``import numba`` in
+a fresh interpreter that has numpy and scipy already, ``numba_mb``) is reported beside
+the peak, with the synthesis's peak without it (``without_numba`` in its row): the part
+that grows with the product.
 """
 
 from __future__ import annotations
@@ -73,6 +80,22 @@ def _hwm() -> int:
 def _reset_hwm() -> None:
     with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
         f.write("5")
+
+
+def numba_floor() -> int:
+    """Bytes resident that ``import numba`` adds to an interpreter that has numpy and
+    scipy's sparse module already (measured in a child of its own, so that nothing of
+    this process counts): the floor a synthesis that loads numba pays at any size."""
+    import subprocess
+
+    code = ("import os, numpy, scipy.sparse\n"
+            "def rss():\n"
+            "    with open('/proc/self/statm') as f:\n"
+            "        return int(f.read().split()[1]) * os.sysconf('SC_PAGE_SIZE')\n"
+            "a = rss()\nimport numba\nprint(rss() - a)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    return int(out.stdout.strip())
 
 
 class Tracker:
@@ -170,6 +193,7 @@ class Tracker:
         the resident and traced peaks and what it keeps, in bytes above the start per
         transition (``transitions_of(result)``)."""
         saved = self.install()
+        had_numba = "numba" in sys.modules
         sampler = None
         if self.traced:
             tracemalloc.start(16)
@@ -203,7 +227,11 @@ class Tracker:
                         **(dict(traced_peak=per(self.tpeak[s], tbase),
                                 traced_kept=per(self.tkept[s], tbase)) if self.traced
                            else {})) for s in names}
+        loaded = not had_numba and "numba" in sys.modules  # by the synthesis
+        floor = numba_floor() if loaded else 0
+        rows[OUTER]["without_numba"] = per(self.peak[OUTER] - floor, base)
         return out, dict(stages=rows, base_mb=round(base / 2**20, 1),
+                         numba_mb=round(floor / 2**20, 1), transitions=n,
                          top_exit=self.top_exit, top_stage=self.top_stage,
                          top_where=self.top_where, top_traced=per(self._level, tbase),
                          top=[(w, round(b / n, 1)) for w, b in self.top])
@@ -219,6 +247,13 @@ def text(name: str, breakdown: dict[str, Any]) -> str:
     for stage, r in rows.items():
         out.append("| " + " | ".join(str(r.get(c, "")) if c != "stage" else stage
                                      for c in cols) + " |")
+    if "numba_mb" in breakdown:
+        mb, outer = breakdown["numba_mb"], rows[OUTER]
+        out.append(f"\nnumba not loaded in `{OUTER}`." if not mb else
+                   f"\nnumba loaded by `{OUTER}`: its import alone {mb} MB resident (in a "
+                   f"fresh interpreter), {round(mb * 2**20 / breakdown['transitions'], 1)} "
+                   f"bytes a transition; the peak without that floor "
+                   f"{outer['without_numba']} bytes a transition, {outer['peak']} with it.")
     if breakdown["top_where"]:
         out.append(f"\nThe traced size was highest ({breakdown['top_traced']} bytes a "
                    f"transition) in `{breakdown['top_stage']}`, at "

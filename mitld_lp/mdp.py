@@ -86,6 +86,14 @@ class MDPShape:
         out = np.bincount(starts, minlength=self.n_choices + 1)[: self.n_choices]
         return np.cumsum(out, out=out)
 
+    def state_of(self, choices: np.ndarray) -> np.ndarray:
+        """``(len(choices),)`` int64: the state each of ``choices`` belongs to, as
+        ``choice_state()[choices]`` without the array a choice of the whole model (a
+        binary search in ``row_groups``)."""
+        out = np.searchsorted(self.row_groups, choices, side="right")
+        out -= 1
+        return out
+
     def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
         """``(rows, groups)``: the successor distributions, one CSR row each, and the
         rows of choice ``c``, ``groups[c]:groups[c+1]`` (``None``: row ``c`` alone)."""

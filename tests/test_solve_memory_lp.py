@@ -44,7 +44,9 @@ def test_the_randomised_policy_is_each_choices_share_of_its_state() -> None:
     policy = np.full(mdp.n_states, -1)
     policy[2] = groups[2] + 2  # the deterministic choice where unvisited
     tol = 1e-9
-    got = lp_mod._randomized(mdp, None, occupancy, policy, tol)
+    every, flow = lp_mod._occupancy(mdp, np.arange(mdp.n_choices), occupancy)
+    assert np.array_equal(every, occupancy)
+    got = lp_mod._randomized(mdp, every, flow, policy, tol)
     want = _by_loop(groups, occupancy, policy, lp_mod._visit_threshold(tol))
     assert got.dtype == np.float64
     assert np.array_equal(got, want)

@@ -64,6 +64,7 @@ from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks, load_walks
+from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["analyse", "end_components", "may_cycle"]
 
@@ -99,7 +100,7 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
     cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
-    mec_of = np.full(n, -1, dtype=np.int64)
+    mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
     if cand.size == 0:
         return EndComponents(read_only(mec_of), read_only(internal), 0)
@@ -133,9 +134,13 @@ def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
     choice's probability of staying where it is."""
     n = row_groups.shape[0] - 1
     n_choices = q_matrix.shape[0]
-    owner = np.repeat(np.arange(n), np.diff(row_groups))
-    entry_row = np.repeat(np.arange(n_choices), np.diff(q_matrix.indptr))
+    # each entry's row and the row's state in the index type (int32 where it fits: two
+    # of these an entry were the analysis's peak)
+    owner = np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(row_groups))
+    entry_row = np.repeat(np.arange(n_choices, dtype=index_dtype(n_choices)),
+                          np.diff(q_matrix.indptr))
     hit = q_matrix.indices == owner[entry_row]
+    del owner
     self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
     return blocks_from(comp_of, level_of, self_loop)
 
@@ -163,7 +168,7 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
 
 
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
-    return EndComponents(read_only(np.full(n, -1, dtype=np.int64)),
+    return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
                          read_only(np.zeros(n_choices, dtype=bool)), 0)
 
 
@@ -224,7 +229,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
 
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
-    state_map = np.full(n, -1, dtype=np.int64)
+    # each state's reduced state and each kept choice's product choice, the quotient's
+    # two per-state / per-choice index arrays, kept by both models: int32 where the
+    # product's size allows (half the bytes), int64 past 2**31 - 1 (index_dtype)
+    state_map = np.full(n, -1, dtype=index_dtype(n))
     state_map[plain] = np.arange(n_plain)
     in_mec = mecs.mec_of >= 0
     state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
@@ -234,6 +242,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     kept = np.flatnonzero(maybe[cstate] & ~mecs.internal)
     if mecs.n_mecs:
         kept = kept[np.argsort(state_map[cstate[kept]], kind="stable")]
+    kept = kept.astype(index_dtype(mdp.n_choices), copy=False)
     counts = np.bincount(state_map[cstate[kept]], minlength=n_red)
     del cstate
     row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -248,13 +257,17 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     del mapped
     # One pass over the product for both targets' one-step probabilities and each
     # model's removed states of value 0 (a choice that may move there can lose).
+    # Two columns a product (each column's sums as in one product of all four: the
+    # sparse kernel adds each column on its own), not four: the four floats a choice
+    # and a state were the analysis's peak on QVBS wlan_dl.
     removed = state_map < 0
-    lost = [p & removed for p in prob0]
-    one_step = m @ np.column_stack([goal, extra, *lost]).astype(np.float64)
+    one_step = m @ np.column_stack([goal, extra]).astype(np.float64)
     to_goal = np.ascontiguousarray(one_step[kept, 0])
     to_extra = np.ascontiguousarray(one_step[kept, 1]) if extra.any() else None
-    leaks = [one_step[kept, 2 + j] > 0 for j in range(2)]
-    del one_step, lost, removed
+    del one_step
+    one_step = m @ np.column_stack([p & removed for p in prob0]).astype(np.float64)
+    leaks = [one_step[kept, j] > 0 for j in range(2)]
+    del one_step, removed
     data, cols = rows.data, rows.indices
     gone = cols == n_red
     data[gone] = 0.0

@@ -78,6 +78,7 @@ from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import LPResult, Status, read_only
+from mitld_lp.util.arrays import SLICE_STATES, spread
 
 __all__ = ["Layout", "OccupancyLP", "occupancy_lp", "solve_lp"]
 
@@ -142,21 +143,42 @@ def _visit_threshold(tol: float) -> float:
     return max(1e-7, 100.0 * tol)
 
 
-def _randomized(
-    mdp: MDP, q: Quotient, occupancy: np.ndarray, policy: np.ndarray, tol: float
-) -> np.ndarray:
-    """The randomised policy of the occupancies: ``y(c) / sum_{c' of s} y(c')`` at the
-    states whose outflow exceeds the visit threshold, ``policy`` elsewhere."""
-    cstate = mdp.choice_state()
-    state_flow = np.bincount(cstate, weights=occupancy, minlength=mdp.n_states)
+def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The occupancy of every choice of ``mdp`` (``y`` at the choices ``origin``, 0
+    elsewhere) and each state's outflow (the sum of its choices' occupancies).
+
+    ``origin`` (``Quotient.choice_origin``) lists a state's choices in increasing order
+    (its other entries in any order), so each outflow adds its choices' ``y`` in the
+    product's order, as a sum over all of its choices would (the others add +0.0,
+    which changes no sum that starts at +0.0): from arrays of the quotient's choices,
+    not the product's ``choice_state`` (an int64 a choice)."""
+    owner = mdp.state_of(origin)  # the state of each entry of ``y``
+    state_flow = np.bincount(owner, weights=y, minlength=mdp.n_states)
+    del owner
+    occupancy = np.zeros(mdp.n_choices)
+    occupancy[origin] = y
+    return occupancy, state_flow
+
+
+def _randomized(mdp: MDP, occupancy: np.ndarray, state_flow: np.ndarray, policy: np.ndarray,
+                tol: float) -> np.ndarray:
+    """The randomised policy of the occupancies (:func:`_occupancy`): ``y(c) /
+    sum_{c' of s} y(c')`` at the states whose outflow exceeds the visit threshold,
+    ``policy`` elsewhere.  Divided a slice of states at a time (:data:`SLICE_STATES`):
+    the product's ``choice_state`` and its gathered flows and masks, a float and an
+    int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma."""
+    groups = np.asarray(mdp.row_groups)
     seen = state_flow > _visit_threshold(tol)
     randomized = np.zeros(mdp.n_choices)
-    # one division in place where the state is seen (the same quotients): not the
-    # gathered copies of the seen choices' occupancies, states and flows, four float or
-    # index arrays a choice that were the LP stage's peak on QVBS wlan_dl and csma
-    np.divide(occupancy, state_flow[cstate], out=randomized, where=seen[cstate])
-    acting = np.flatnonzero(~seen & (policy >= 0))
-    randomized[policy[acting]] = 1.0
+    for lo in range(0, mdp.n_states, SLICE_STATES):
+        hi = min(lo + SLICE_STATES, mdp.n_states)
+        a, b = int(groups[lo]), int(groups[hi])
+        np.divide(occupancy[a:b], spread(state_flow, groups, lo, hi), out=randomized[a:b],
+                  where=spread(seen, groups, lo, hi))
+    np.logical_not(seen, out=seen)  # now: not visited
+    seen &= policy >= 0
+    randomized[policy[seen]] = 1.0
     return randomized
 
 
@@ -299,7 +321,9 @@ def solve_lp(
                                                 quotient=q), settings)
     if isinstance(answer, Raw):
         return failed(answer)
-    return _result(mdp, q, answer, settings, start, shape)
+    taken = [answer]  # _result empties it: the reduced arrays freed once mapped back
+    del answer
+    return _result(mdp, q, taken, settings, start, shape)
 
 
 def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
@@ -317,17 +341,25 @@ def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
     return lo[rep], hi[rep]
 
 
-def _result(mdp: MDP, q: Quotient, answer: Answer, settings: SolveOptions, start: float,
-            shape: tuple[int, int]) -> LPResult:
-    """The answer of a route mapped back to ``mdp`` (values, policies, occupancy)."""
-    values = q.lift(answer.v)
+def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
+            start: float, shape: tuple[int, int]) -> LPResult:
+    """The answer of a route mapped back to ``mdp`` (values, policies, occupancy).
+    ``taken``: a list holding the answer, emptied here, so that its reduced arrays are
+    freed as soon as they are mapped back (not held through the per-choice ones)."""
+    answer = taken.pop()
+    raw, primal, dual, calls = answer.raw, answer.primal, answer.dual, answer.n_solver_calls
+    v, reduced_choice, y = answer.v, answer.reduced_choice, answer.y
+    del answer
+    values = q.lift(v)
+    del v
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
-    policy = lift_policy(mdp, q, answer.reduced_choice)
-    occupancy = np.zeros(mdp.n_choices)
-    occupancy[q.choice_origin] = answer.y
-    randomized = _randomized(mdp, q, occupancy, policy, settings.tol)
+    policy = lift_policy(mdp, q, reduced_choice)
+    del reduced_choice
+    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y)
+    del y
+    randomized = _randomized(mdp, occupancy, state_flow, policy, settings.tol)
+    del state_flow
     seconds = time.perf_counter() - start
-    raw = answer.raw
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)
     return LPResult(
@@ -335,12 +367,12 @@ def _result(mdp: MDP, q: Quotient, answer: Answer, settings: SolveOptions, start
         message=raw.message,
         value=value,
         values=read_only(values),
-        primal_objective=answer.primal,
-        dual_objective=answer.dual,
+        primal_objective=primal,
+        dual_objective=dual,
         occupancy=read_only(occupancy),
         policy=read_only(policy),
         randomized=read_only(randomized),
-        solver=settings.solver if answer.n_solver_calls else "",
+        solver=settings.solver if calls else "",
         backend=settings.backend,
         iterations=raw.iterations,
         seconds=seconds,

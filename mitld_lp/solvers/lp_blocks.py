@@ -129,8 +129,12 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
         row, col, val = row_entries(q.matrix, choices)
         out = blk.level[blk.component[col]] != level.index
         np.add.at(x, col[out], val[out] * y[row[out]])
-    owner = q.choice_state()
-    return np.maximum(weights * x[owner], 0.0)
+    # y(c) = w(c) x(owner(c)): x spread over the choices and multiplied in place, not the
+    # int64 owner of every choice and three float copies a choice (the LP stage's peak
+    # on QVBS zeroconf_dl); the same products, in the same operand order
+    y = np.repeat(x, np.diff(np.asarray(q.row_groups)))
+    np.multiply(weights, y, out=y)
+    return np.maximum(y, 0.0, out=y)
 
 
 RUNS_MIN_LEVELS = 16

@@ -33,6 +33,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import row_entries
+from mitld_lp.util.arrays import index_dtype
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
@@ -161,7 +162,10 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
         stays = np.where(first == np.iinfo(np.int64).max, policy, first)
         policy[quotient.prob0] = stays[quotient.prob0]
     policy[quotient.target | absorbing_states(mdp)] = -1
-    quotient.shared[key] = (quotient.prob0, quotient.target, read_only(policy))
+    # kept for the quotient's life: int32 where the choices' count allows (lift_policy
+    # widens its own copy)
+    policy = read_only(policy.astype(index_dtype(mdp.n_choices), copy=False))
+    quotient.shared[key] = (quotient.prob0, quotient.target, policy)
     return policy
 
 
@@ -184,18 +188,21 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       and staying avoids the target for ever).
     """
     n = mdp.n_states
-    policy = _outside(mdp, quotient).copy()
+    policy = _outside(mdp, quotient).astype(np.int64)  # a copy, int64 as promised
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
-    plain = np.flatnonzero((quotient.state_map >= 0) & (quotient.mecs.mec_of < 0))
-    policy[plain] = chosen[quotient.state_map[plain]]
+    if chosen.size:  # one gather over every state, kept where plain (a removed state's
+        # -1 reads the last entry and is not kept): not the plain states' indices, their
+        # reduced states and choices, three int64 arrays a state
+        plain = (quotient.state_map >= 0) & (quotient.mecs.mec_of < 0)
+        np.copyto(policy, chosen[quotient.state_map], where=plain)
+        del plain
 
     mecs = quotient.mecs
     if mecs.n_mecs == 0:
         return policy
     exits = chosen[quotient.n_plain :]
-    cstate = mdp.choice_state()  # one entry a choice: only where there are MECs
-    owners = cstate[exits]
+    owners = mdp.state_of(exits)  # not choice_state(): an int64 a choice of the product
     policy[owners] = exits
     # BFS on the reversed internal-choice graph from the owners (virtual root n): the
     # positive entries of the internal choices' rows, in the matrix's order
@@ -204,7 +211,7 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     positive = data > 0
     e_choice = inside[local[positive]]
     e_succ = np.asarray(succ[positive], dtype=np.int64)
-    e_source = cstate[e_choice]
+    e_source = mdp.state_of(e_choice)
     del local, succ, data, positive
     src, dst = e_source, e_succ
     rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])

@@ -72,8 +72,9 @@ class Quotient(MDPShape):
         target: ``(n_states,)`` bool, the original target mask (value 1).
         prob0: ``(n_states,)`` bool, the states removed with value 0: ``Prob0A`` (no
             path to the target) for a maximum, ``Prob0E`` for a minimum.
-        state_map: ``(n_states,)`` int64, the reduced state of each original state,
-            ``-1`` for removed (target / prob-0) ones.
+        state_map: ``(n_states,)`` the reduced state of each original state, ``-1``
+            for removed (target / prob-0) ones; int32 where the count of states
+            allows, else int64 (:func:`mitld_lp.util.arrays.index_dtype`).
         mecs: the MECs of the maybe states (ids as in ``mecs.mec_of``).
         n_plain: number of maybe states outside any MEC.
         matrix: ``(n_reduced_choices, n_reduced_states)`` CSR, probability of moving
@@ -81,7 +82,9 @@ class Quotient(MDPShape):
         to_target: ``(n_reduced_choices,)`` probability of entering ``target`` in one
             step; the rest of a row's mass (``1 - to_target - row sum``) enters prob-0.
         row_groups: ``(n_reduced_states + 1,)`` the choices of each reduced state.
-        choice_origin: ``(n_reduced_choices,)`` the original choice of each reduced one.
+        choice_origin: ``(n_reduced_choices,)`` the original choice of each reduced
+            one (increasing among one original state's choices); int32 where the count
+            of choices allows, else int64.
         initial: the reduced initial state, or ``-1`` if the initial state was removed.
         initial_value: the value of the initial state if it was removed (1.0 if it is a
             target state, 0.0 if it is prob-0), else ``nan``.
@@ -129,9 +132,14 @@ class Quotient(MDPShape):
         Members of a collapsed MEC all get the MEC's value; target states get 1 and
         prob-0 states 0.
         """
-        out = np.where(self.target, 1.0, 0.0)
-        keep = self.state_map >= 0
-        out[keep] = np.asarray(reduced, dtype=np.float64)[self.state_map[keep]]
+        values = np.asarray(reduced, dtype=np.float64)
+        if values.size == 0:  # nothing kept: every state is a target or of value 0
+            return np.where(self.target, 1.0, 0.0)
+        # one gather over every state (a removed one, -1, reads the last value and is
+        # overwritten), not the kept states' indices and values gathered apart: one
+        # float a state and a mask where there were three arrays a state
+        out = values[self.state_map]
+        np.copyto(out, self.target, where=self.state_map < 0)
         return out
 
 

@@ -2,7 +2,8 @@
 (:func:`unique`), a growable array (:class:`Grow`), an index of ids by key
 (:class:`Index`: a plain array while the keys are dense, else a hash table), a memo over
 integer keys (:class:`Memo`), and the row helpers of a batched sparse build
-(:func:`ranks`, :func:`merge`, :func:`concatenate`).  Each works on a whole batch of
+(:func:`ranks`, :func:`merge`, :func:`concatenate`), and the solvers' per-choice
+helpers (:func:`index_dtype`, :func:`spread`).  Each works on a whole batch of
 keys or entries at once, in numpy."""
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ __all__ = [
     "merge",
     "concatenate",
     "narrow_copy",
+    "index_dtype",
+    "spread",
+    "SLICE_STATES",
 ]
 
 
@@ -288,3 +292,25 @@ def narrow_copy(values: np.ndarray) -> np.ndarray:
     fits = values.size == 0 or (int(values.min()) >= _INT32.min
                                 and int(values.max()) <= _INT32.max)
     return values.astype(np.int32 if fits else values.dtype, copy=True)
+
+
+#: States a slice of a per-choice loop over :func:`spread`: each slice's gathered copies
+#: are a few MB, not a float (and a mask) a choice of the whole product.
+SLICE_STATES = 1 << 16
+
+
+def index_dtype(largest: int) -> type:
+    """``np.int32`` if every index up to ``largest`` (an array's length, a count) fits
+    in it, else ``np.int64``: the solvers' state and choice arrays in half the bytes
+    where the size allows, the wide type past 2**31 - 1 (never a wrapped index)."""
+    if int(largest) < 0:
+        raise ValueError(f"index_dtype: a size cannot be negative ({largest})")
+    return np.int32 if int(largest) <= np.iinfo(np.int32).max else np.int64
+
+
+def spread(per_state: np.ndarray, row_groups: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """``per_state[s]`` repeated once for each choice of each state ``s`` in ``lo:hi``
+    (state ``s`` owns the choices ``row_groups[s]:row_groups[s + 1]``): the gather
+    ``per_state[choice_state]`` of those choices without the whole ``choice_state``
+    (an int64 a choice of the product)."""
+    return np.repeat(per_state[lo:hi], np.diff(row_groups[lo:hi + 1]))
