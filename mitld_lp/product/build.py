@@ -135,7 +135,7 @@ def _build(
             budget.check(states.keys.size)
         bar.update(keys.size)
         head += keys.size
-        batch = int(np.clip(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16, 1 << 20))
+        batch = min(max(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16), 1 << 20)
     bar.close()
     f.check_rows()  # the rows not checked yet: every distribution read is checked
     # the states' keys in 4 bytes where they fit (the product keeps them, one a state)

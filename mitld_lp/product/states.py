@@ -80,14 +80,32 @@ class KeyCodec:
         return (g * self.n_q + q) * self.n_sit + sid
 
     def unkey(self, keys: Any) -> tuple[Any, Any, Any]:
-        """``(g, q, sid)`` of keys."""
-        rest, sid = divmod(keys, self.n_sit)
-        g, q = divmod(rest, self.n_q)
+        """``(g, q, sid)`` of keys (non-negative: an ordinary state's).  An array is split
+        with shifts and masks where a factor is a power of two (one situation, no event:
+        the plain PRISM task), else by division; the same numbers either way, new arrays."""
+        if not isinstance(keys, np.ndarray):
+            rest, sid = divmod(keys, self.n_sit)
+            g, q = divmod(rest, self.n_q)
+            return g, q, sid
+        rest, sid = _split(keys, self.n_sit)
+        g, q = _split(rest, self.n_q)
         return g, q, sid
 
     def fits(self, n_games: int) -> bool:
         """Whether the keys of ``n_games`` game states stay below ``2^62``."""
         return n_games * self.n_q * self.n_sit < 1 << _KEY_BITS
+
+
+def _split(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``divmod(keys, n)`` of non-negative integer ``keys``, as new arrays: a shift and a
+    mask when ``n`` is a power of two (a copy and zeros when it is 1)."""
+    if n == 1:
+        return keys.copy(), np.zeros_like(keys)
+    if n & (n - 1) == 0:
+        bits = n.bit_length() - 1
+        return keys >> bits, keys & (n - 1)
+    quotient, remainder = np.divmod(keys, n)
+    return quotient, remainder
 
 
 class ProductStates(Sequence[Hashable]):

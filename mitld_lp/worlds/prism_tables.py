@@ -26,6 +26,7 @@ from typing import Any, overload
 import numpy as np
 
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_labels import choice_labels, indices, repeated, state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
 from mitld_lp.worlds.table import LATE
@@ -94,24 +95,6 @@ class Tables:
     decided: int = 0
     normalised: Normalisation | None = None
     unexplored: np.ndarray | None = None
-
-
-def _indices(bits: Any) -> np.ndarray:
-    """The set positions of one of Storm's bit vectors: from its text (its size, then
-    its 64-bit words in decimal, the first position the word's most significant bit),
-    read in one numpy pass, checked against its count of set bits; else (another text)
-    by iterating over it, a Python int per position."""
-    try:
-        size, *words = bits.store_as_string().split()
-        n = int(size)
-        if len(words) == (n + 63) // 64:
-            packed = np.array(words, dtype=np.uint64).astype(">u8").view(np.uint8)
-            found = np.flatnonzero(np.unpackbits(packed)[:n])
-            if found.size == bits.get_number_of_set_bits():
-                return found.astype(np.int64, copy=False)
-    except (AttributeError, ValueError, OverflowError):
-        pass
-    return np.fromiter(bits, dtype=np.int64)
 
 
 def transition_arrays(model: Any, where: str) -> tuple[np.ndarray, ...]:
@@ -361,57 +344,11 @@ def valuations_of(model: Any, hidden: frozenset[str] = frozenset(),
             if var.has_boolean_type():
                 booleans.append(j)
         elif var.has_boolean_type():  # a bit vector: the states where it is true
-            values[_indices(valuations.get_boolean_values(var)), j] = 1
+            values[indices(valuations.get_boolean_values(var)), j] = 1
             booleans.append(j)
         else:  # PRISM state variables are booleans and bounded integers
             values[:, j] = np.asarray(valuations.get_int64_values(var), dtype=np.int64)
     return order, Valuations(_narrow(values), tuple(booleans))
-
-
-def _state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[str], ...],
-                                                                np.ndarray]:
-    """The distinct sets of the ``chosen`` labels a state satisfies, and per state the
-    index of its set."""
-    n = model.nr_states
-    names = sorted(chosen)
-    if not names:
-        return (frozenset(),), np.zeros(n, dtype=np.int32)
-    packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
-    for k, label in enumerate(names):
-        packed[_indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
-    if packed.shape[1] <= 8:  # a state's labels as one big-endian integer: a 1-d unique
-        wide = np.zeros((n, 8), dtype=np.uint8)
-        wide[:, : packed.shape[1]] = packed
-        codes, inverse = np.unique(wide.view(">u8").reshape(-1), return_inverse=True)
-        rows = codes.astype(">u8").view(np.uint8).reshape(-1, 8)[:, : packed.shape[1]]
-    else:
-        rows, inverse = np.unique(packed, axis=0, return_inverse=True)
-    bits = np.unpackbits(rows, axis=1)[:, : len(names)]
-    sets = tuple(frozenset(np.asarray(names)[row.astype(bool)].tolist()) for row in bits)
-    return sets, np.asarray(inverse).reshape(-1).astype(np.int32)
-
-
-def _label_of(model: Any, names: list[str], m: int,
-              actions: tuple[np.ndarray, list[str]] | None) -> np.ndarray:
-    """Each of the ``m`` choices' label as an index into ``names`` (Storm's choice
-    labels, sorted), -1 for none: from the archive's actions in one pass where each is
-    one of ``names`` or empty and each label counts the choices Storm's bit vector of it
-    has (so no choice has two), else from those bit vectors (a pass over the choices per
-    label: 1.3 s of CPU for 37 labels on QVBS consensus 6-2's 5.0M choices)."""
-    if actions is not None:
-        index, strings = actions
-        position = {name: k for k, name in enumerate(names)}
-        position[""] = -1
-        if all(x in position for x in strings) and len(set(strings)) == len(strings):
-            label_of = np.array([position[x] for x in strings], dtype=np.int64)[index]
-            counts = np.bincount(label_of + 1, minlength=len(names) + 1)[1:]
-            if all(int(counts[k]) == model.choice_labeling.get_choices(name)
-                   .get_number_of_set_bits() for k, name in enumerate(names)):
-                return label_of
-    label_of = np.full(m, -1, dtype=np.int64)
-    for k, label in enumerate(names):
-        label_of[_indices(model.choice_labeling.get_choices(label))] = k
-    return label_of
 
 
 def read_model(
@@ -476,7 +413,7 @@ def read_model(
         label_names, label_of = named(model, actions)
     else:
         label_names = sorted(model.choice_labeling.get_labels())
-        label_of = _label_of(model, label_names, m, actions)  # -1: no label, the deadlock self-loop
+        label_of = choice_labels(model, label_names, m, actions)  # -1: none, the deadlock loop
     # each choice's name as an index into ``table`` (no object per choice)
     table = [action_names.get(label, label) for label in label_names] + [DEADLOCK_ACTION]
     code = np.where(label_of < 0, len(table) - 1, label_of)  # -1: the deadlock self-loop
@@ -484,14 +421,14 @@ def read_model(
     if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
         stuck = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            stuck[_indices(model.labeling.get_states("deadlock"))] = True
+            stuck[indices(model.labeling.get_states("deadlock"))] = True
         table.append(silent)
         code[(label_of < 0) & ~stuck[state_of]] = len(table) - 1
 
     n_decided = 0
     if decided is not None:
         stopped = np.zeros(n, dtype=bool)
-        stopped[_indices(model.labeling.get_states(decided))] = True
+        stopped[indices(model.labeling.get_states(decided))] = True
         alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
         table.append(DECIDED_ACTION)
@@ -500,7 +437,7 @@ def read_model(
 
     if OUT_OF_BOUNDS in model.labeling.get_labels():  # Storm built without its checks
         outside = np.zeros(n, dtype=bool)
-        outside[_indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
+        outside[indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
         choice_of = np.repeat(np.arange(m), np.diff(branches))  # per branch
         c = int(choice_of[np.flatnonzero(outside[targets] & ~outside[state_of[choice_of]])[0]])
         raise WorldError(f"{where}: at state {show(int(state_of[c]))}, action "
@@ -549,8 +486,9 @@ def read_model(
     if shared:
         look = robot & (label_of >= 0) if late else robot
         key = state_of * (len(label_names) + 1) + label_of + 1
-        keys, counts = np.unique(key[look], return_counts=True)
-        clash = np.flatnonzero(look & np.isin(key, keys[counts > 1]))
+        twice = repeated(key[look])
+        if twice.size:
+            clash = np.flatnonzero(look & np.isin(key, twice))
     for c in [] if late else clash.tolist():
         table.append(f"{table[int(code[c])]}@{origin(c)}")
         code[c] = len(table) - 1
@@ -567,7 +505,7 @@ def read_model(
     if late:  # an unlabelled command's choice (no label, not Storm's self-loop), a clash
         loop = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            loop[_indices(model.labeling.get_states("deadlock"))] = True
+            loop[indices(model.labeling.get_states("deadlock"))] = True
         mine = (label_of < 0) & (code == dead) & ~loop[state_of]
         mine[clash] = True
         action_index[mine] = LATE + np.flatnonzero(mine)
@@ -577,7 +515,7 @@ def read_model(
         raise WorldError(
             f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
         )
-    label_sets, label_index = _state_labels(model, chosen)
+    label_sets, label_index = state_labels(model, chosen)
     return Tables(
         variables=variables,
         states=states,
