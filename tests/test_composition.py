@@ -223,12 +223,18 @@ def _rollouts(result, p1: float, runs: int, seed: int) -> tuple[float, float]:  
     return won / runs, wet / runs
 
 
-def test_bands_with_a_probability_constraint_get_a_sound_bracket() -> None:
+def test_bands_with_a_probability_constraint_get_a_sound_bracket(tmp_path: Path) -> None:
     """Bus 1's hazard anywhere in [0.7, 0.9], the puddle's risk at most 0.05.  upper is
     the constrained optimum at the middle law (geometric(0.8), a law of the band);
-    lower is at most the constrained optimum at every fixed law of the band, and the
-    controller, run against the band's ends with the buses drawn here, succeeds at
-    least that often and keeps the risk (4-sigma bands)."""
+    lower is at most the constrained optimum at every fixed law of the band.  The band's
+    controller, run at each end of the band, succeeds at least ``lower`` and keeps the
+    risk: exactly, by Storm on the controller's chain in the world of that law (rational
+    arithmetic), and by runs with the buses drawn here, which must agree with Storm's
+    values (4-sigma bands)."""
+    from test_sensed_optimistic import storm_of
+
+    from mitld_lp.running.chain import write_chain
+
     r = synthesize(_bus_risk_band("[0.7, 0.9]"), constraints=["P(F puddle) <= 0.05"])
     assert r.route == "constrained" and r.certified, r.checks
     assert r.summary()["robust"] and r.summary()["bands"]
@@ -238,10 +244,16 @@ def test_bands_with_a_probability_constraint_get_a_sound_bracket() -> None:
     assert all(r.lower <= f.lower + 1e-9 for f in fixed.values())
     assert r.lower > 0.4  # a bracket, not a vacuous one
     assert r.constraints[0].holds and r.constraints[0].value <= 0.05 + 1e-6
+    runs = 400
     for p1 in (0.7, 0.9):
-        success, risk = _rollouts(r, p1, runs=1500, seed=int(p1 * 10))
-        assert success >= r.lower - 4 * (0.25 / 1500) ** 0.5
-        assert risk <= 0.05 + 4 * (0.05 * 0.95 / 1500) ** 0.5
+        storm = storm_of(write_chain(fixed[p1], tmp_path / f"band_{p1}.drn",
+                                     controller=r.controller))
+        exact_success, exact_risk = float(storm("accept")), float(storm("puddle"))
+        assert exact_success >= r.lower - 1e-9
+        assert exact_risk <= 0.05 + 1e-9
+        success, risk = _rollouts(r, p1, runs=runs, seed=int(p1 * 10))
+        assert abs(success - exact_success) <= 4 * (0.25 / runs) ** 0.5
+        assert abs(risk - exact_risk) <= 4 * (exact_risk * (1 - exact_risk) / runs) ** 0.5
 
 
 
