@@ -18,9 +18,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")  # headless: the scripts only write files
+# headless: the scripts only write files.  Set for when a script draws, without
+# importing matplotlib here: a benchmark's worker processes import this module, and
+# matplotlib's import (~0.4 s CPU) would be counted in the process times it measures.
+os.environ["MPLBACKEND"] = "Agg"
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
