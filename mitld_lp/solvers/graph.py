@@ -439,7 +439,10 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     successor's) and, propagated up the same walk, which components can reach a state
     of each seed set (``seeds``: ``(n, k)`` bool).  A large graph is walked compiled
     (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same components, numbered
-    alike, and levels."""
+    alike, and levels.  Else a graph that SciPy decomposed, once its levels turn out
+    thin (:func:`_thin`, judged at each doubling of the depth from
+    :data:`PROBE_LEVELS`), is finished by SciPy's compiled searches
+    (:func:`_searched_levels`): the same levels and reach."""
     walks = compiled_walks(graph.nnz)
     if walks is not None and graph.has_canonical_format:
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)

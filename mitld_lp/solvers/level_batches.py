@@ -22,14 +22,14 @@ walk's 0.100 s.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from mitld_lp.solvers.graph import Sense
 
-if TYPE_CHECKING:
-    from mitld_lp.solvers.topological import SingleLevels
+SingleLevels = Any  # :class:`~mitld_lp.solvers.topological.SingleLevels` (which imports
+# this module: its annotation here would make a circle)
 
 __all__ = ["TIE", "bounds", "values", "flow"]
 
