@@ -81,13 +81,23 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     topological.solve_single_states` a level at a time): each level's choice picked
     before the next level is scored.  ``live_of``: per single state, whether it is
     solved (not skipped)."""
+    if not runs:
+        return
     every = bool(live_of.all())
-    reduce = np.maximum if sl.sense is Sense.MAX else np.minimum
+    maximum = sl.sense is Sense.MAX
+    reduce = np.maximum if maximum else np.minimum
+    # what no level's values change, gathered once: the choices' rewards, the
+    # preference among ties, the positions; the choices written after the walk
+    ca0, cz1 = runs[0][2], runs[-1][3]
+    reward_of = to_target[sl.choices[ca0:cz1]]
+    prefer_of = reward_of if maximum else -reward_of
+    index = np.arange(max(cz - ca for _, _, ca, cz, _, _ in runs))
+    done_states, done_picks = [], []
     for a, z, ca, cz, ea, ez in runs:
         sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
                            weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
         ch = sl.choices[ca:cz]
-        reward = to_target[ch] + sums
+        reward = reward_of[ca - ca0:cz - ca0] + sums
         leave = sl.leave[ca:cz]
         score = (reward / leave if sl.positive else
                  np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
@@ -97,19 +107,21 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
         else:  # segmented_argmax's ties and preference, on the level's segments
             starts, own = sl.first_choice[a:z], sl.owner_at[ca:cz]
             top = reduce.reduceat(score, starts)[own]
-            tied = sl.sense.gain(score, top) >= -TIE * np.abs(top)
-            prefer = to_target[ch] if sl.sense is Sense.MAX else -to_target[ch]
-            key = np.where(tied, prefer, -np.inf)
+            tied = (score - top if maximum else top - score) >= -TIE * np.abs(top)
+            key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
             tied &= key >= np.maximum.reduceat(key, starts)[own]
-            at = np.minimum.reduceat(np.where(tied, np.arange(cz - ca), _LAST), starts)
+            at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
             best, pick = score[at], ch[at]
         states = sl.states[a:z]
         if not every:
             live = live_of[a:z]
             states, best, pick = states[live], best[live], pick[live]
         out[states] = best
-        reduced_choice[states] = pick
-        weights[pick] = 1.0
+        done_states.append(states)
+        done_picks.append(pick)
+    picks = np.concatenate(done_picks)
+    reduced_choice[np.concatenate(done_states)] = picks
+    weights[picks] = 1.0
 
 
 def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
