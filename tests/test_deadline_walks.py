@@ -1,5 +1,5 @@
 """The deadline walks (issue 45): the component levels found by SciPy's searches
-(graph._searched_levels) and the batched NumPy walks of the single-state levels
+(graph.searched_levels) and the batched NumPy walks of the single-state levels
 (level_batches.bounds / flow), each against a plain state-by-state computation written
 here, and a small PRISM deadline model solved end to end against Storm's exact engine."""
 
@@ -14,7 +14,7 @@ import pytest
 import scipy.sparse as sp
 from conftest import build_mdp
 
-from mitld_lp.solvers import graph
+from mitld_lp.solvers import graph, level_search
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.topological import SingleLevels
@@ -113,18 +113,18 @@ def how(request, monkeypatch):
     if request.param == "searched":
         monkeypatch.setattr(graph, "SMALL", 0)
         monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
-        monkeypatch.setattr(graph, "LEVEL_CALL_SECONDS", 1.0)
+        monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
     else:
-        monkeypatch.setattr(graph, "LEVEL_CALL_SECONDS", 0.0)
+        monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 0.0)
     used = []
-    inner = graph._searched_levels
+    inner = graph.searched_levels
 
     def spy(*args):
         got = inner(*args)
         used.append(got is not None)
         return got
 
-    monkeypatch.setattr(graph, "_searched_levels", spy)
+    monkeypatch.setattr(graph, "searched_levels", spy)
     return request.param, used
 
 
@@ -153,11 +153,11 @@ def test_a_component_graph_off_tarjans_order_is_walked(monkeypatch) -> None:
     # the search relies on edges running from higher ids to lower: where they do not,
     # it declines and the level-by-level walk answers
     preds = sp.csr_array((np.ones(2), ([0, 1], [1, 2])), shape=(3, 3))  # 1->0, 2->1 ok
-    assert graph._searched_levels(preds, np.array([0]), np.arange(3),
-                                  np.zeros((3, 0), dtype=bool)).level.tolist() == [0, 1, 2]
+    assert graph.searched_levels(preds, np.array([0]), np.arange(3),
+                                 np.zeros((3, 0), dtype=bool))[0].tolist() == [0, 1, 2]
     wrong = sp.csr_array((np.ones(2), ([1, 2], [0, 1])), shape=(3, 3))  # 0->1: uphill
-    assert graph._searched_levels(wrong, np.array([2]), np.arange(3),
-                                  np.zeros((3, 0), dtype=bool)) is None
+    assert graph.searched_levels(wrong, np.array([2]), np.arange(3),
+                                 np.zeros((3, 0), dtype=bool)) is None
 
 
 # ------------------------------------------------------------- the single-state walks
@@ -295,14 +295,14 @@ def test_prism_deadline_bracket_holds_storms_exact_value(tmp_path, monkeypatch,
                      f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "x=12"\n')
     exact = storm_rational(prism, prop)
     brackets, used = [], []
-    inner = graph._searched_levels
-    monkeypatch.setattr(graph, "_searched_levels",
+    inner = graph.searched_levels
+    monkeypatch.setattr(graph, "searched_levels",
                         lambda *a: used.append(inner(*a)) or used[-1])
     for searched in (False, True):
         if searched:  # every graph large and thin: the levels searched
             monkeypatch.setattr(graph, "SMALL", 0)
             monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
-            monkeypatch.setattr(graph, "LEVEL_CALL_SECONDS", 1.0)
+            monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
         r = synthesize(load_model(model))
         assert bool(used) == searched and all(u is not None for u in used)
         assert r.certified, r.failed_checks

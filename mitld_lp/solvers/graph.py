@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.level_search import PROBE_LEVELS, searched_levels, thin
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
@@ -439,10 +440,8 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     successor's) and, propagated up the same walk, which components can reach a state
     of each seed set (``seeds``: ``(n, k)`` bool).  A large graph is walked compiled
     (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same components, numbered
-    alike, and levels.  Else a graph that SciPy decomposed, once its levels turn out
-    thin (:func:`_thin`, judged at each doubling of the depth from
-    :data:`PROBE_LEVELS`), is finished by SciPy's compiled searches
-    (:func:`_searched_levels`): the same levels and reach."""
+    alike, and levels.  Else a graph SciPy decomposed whose levels turn out thin is
+    finished by SciPy's searches (:mod:`~mitld_lp.solvers.level_search`), alike."""
     walks = compiled_walks(graph.nnz)
     if walks is not None and graph.has_canonical_format:
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
@@ -463,12 +462,11 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
                             shape=(n_comp, n_comp))
     del up, down
+    if seeds is None:
+        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
     # the counts in the degrees' own type: ufunc.at on mixed types takes numpy's
     # generic loop, 50-80x slower (2 of 3 s of the analysis on a 2e6-state product);
     # cast once here, as the offsets, not at every level (a deadline makes thousands)
-    if seeds is None:
-        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
-    searched = graph.shape[0] + graph.nnz > SMALL  # csgraph is loaded (the components)
     pred_ptr, preds = preds_of.indptr.astype(np.int64), preds_of.indices
     times = preds_of.data.astype(out_degree.dtype)
     k = seeds.shape[1]
@@ -477,17 +475,14 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
         reach[comp[seeds[:, j]], j] = True
     level = np.full(n_comp, -1, dtype=np.int64)
     stamp = np.empty(n_comp, dtype=np.int64)  # scratch of _distinct
-    frontier = np.flatnonzero(out_degree == 0)
-    sinks = frontier
-    depth = done = since = 0
-    probe = PROBE_LEVELS
-    while frontier.size:
-        if searched and depth == probe:  # thin levels: the rest searched whole
-            if _thin(done - since, probe // 2 if probe > PROBE_LEVELS else probe,
-                     n_comp, preds.size):
-                found = _searched_levels(preds_of, sinks, comp, seeds)
-                if found is not None:
-                    return found
+    frontier = sinks = np.flatnonzero(out_degree == 0)
+    depth, done, since, probe = 0, 0, 0, PROBE_LEVELS
+    while frontier.size:  # SMALL: csgraph found the components, and can search
+        if depth == probe and graph.shape[0] + graph.nnz > SMALL:
+            found = (thin(done - since, probe, n_comp, preds.size)
+                     and searched_levels(preds_of, sinks, comp, seeds))
+            if found:  # thin levels: the rest searched whole
+                return Levels(comp, *found)
             probe, since = 2 * probe, done
         level[frontier] = depth
         done += frontier.size
@@ -504,83 +499,6 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
         depth += 1
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
-    return Levels(comp, level, reach)
-
-
-PROBE_LEVELS = 64
-""":func:`levels` walks the levels one by one up to this depth, then judges at each
-doubling of the depth whether the levels just walked were thin (:func:`_thin`)."""
-
-LEVEL_CALL_SECONDS = 1e-4
-"""About what one level of :func:`levels`' loop costs in NumPy calls, whatever its
-size (QVBS ``zeroconf_dl`` 1000-1-30: 0.12 s for 1,164 levels)."""
-
-SEARCH_SECONDS = 1.2e-7
-"""About what :func:`_searched_levels` costs a component and an edge between components.
-Measured (CPU seconds, searched against walked level by level): QVBS ``zeroconf_dl``
-1000-1-30 (113,542 components, 248,268 edges, 1,164 levels) 0.049 against 0.12;
-``firewire_dl`` 3-600 (168,064, 196,845, 792 levels) 0.033 against 0.10; ``wlan_dl``
-0-80 (189,642, 330,803, 212 levels) 0.059 against 0.07; ``csma`` 4-2 (591,933,
-1,066,969, 382 levels) 0.20 against 0.20."""
-
-
-def _thin(walked: int, depth: int, n_comp: int, n_edges: int) -> bool:
-    """Whether the last ``depth`` levels walked, ``walked`` components in all, cost more a
-    component than the search does (levels narrower than about 300 components on the
-    products measured)."""
-    per_component = SEARCH_SECONDS * (n_comp + n_edges) / max(n_comp, 1)
-    return depth * LEVEL_CALL_SECONDS > walked * per_component
-
-
-def _searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
-                     seeds: np.ndarray) -> Levels | None:
-    """:func:`levels` from the component graph (``preds_of``: row ``d`` lists the
-    components with an edge to ``d``) by SciPy's compiled searches instead of one round
-    of NumPy calls per level (a deadline makes a thousand levels and more): the level of
-    a component is its longest path to a sink, found as a shortest path by Dijkstra's
-    algorithm on the reversed graph, each edge ``d -> c`` of weight -1 reweighted by the
-    potential ``h(x) = -2 x`` into ``2 (c - d) - 1 >= 1`` (Johnson's reweighting).  That
-    holds iff every edge runs from a higher component id to a lower one, as Tarjan's
-    numbering (csgraph's and :func:`~mitld_lp.util.traversal.strong_components`') makes
-    it: checked, and ``None`` where it does not hold (the caller walks the levels).
-    Which components reach each seed set: a breadth-first search of the reversed graph
-    from a node joined to the seeds' components.  The same :class:`Levels` (levels are
-    integers, exact in float64 below 2**53; the reach is a set)."""
-    from scipy.sparse import csgraph
-
-    n_comp = preds_of.shape[0]
-    below = preds_of.indices.astype(np.int64)  # the predecessors c of each row d
-    row = np.repeat(np.arange(n_comp, dtype=np.int64), np.diff(preds_of.indptr))
-    if not bool(np.all(below > row)):
-        return None
-    source = n_comp  # a node joined to every sink, at potential h = 2 (id -1)
-    ptr = np.concatenate([np.asarray(preds_of.indptr, dtype=np.int64),
-                          [preds_of.indptr[-1] + sinks.size]])
-    cols = np.concatenate([below, sinks])
-    weight = np.concatenate([2.0 * (below - row) - 1.0, 2.0 + 2.0 * sinks])
-    del row
-    reweighted = sp.csr_array((weight, cols, ptr), shape=(n_comp + 1, n_comp + 1))
-    dist = csgraph.dijkstra(reweighted, directed=True, indices=source)[:n_comp]
-    del reweighted, weight
-    # d(x) = d'(x) - h(source) + h(x); the level is -d(x)
-    level = np.rint(2.0 + 2.0 * np.arange(n_comp) - dist).astype(np.int64)
-    if not bool(np.all(level >= 0)):  # pragma: no cover - every component reaches a sink
-        raise AssertionError("the component graph has a node that reaches no sink")
-    k = seeds.shape[1]
-    reach = np.zeros((n_comp, k), dtype=bool)
-    pattern = np.ones(cols.size, dtype=np.int8)
-    for j in range(k):
-        start = np.unique(comp[seeds[:, j]])
-        if start.size == 0:
-            continue
-        # the reversed graph again, the joined node now to the seeds' components
-        graph = sp.csr_array((pattern[:below.size + start.size],
-                              np.concatenate([below, start]),
-                              np.concatenate([ptr[:-1], [below.size + start.size]])),
-                             shape=(n_comp + 1, n_comp + 1))
-        found = csgraph.breadth_first_order(graph, source, directed=True,
-                                            return_predecessors=False)
-        reach[found[found < n_comp], j] = True
     return Levels(comp, level, reach)
 
 
@@ -616,9 +534,8 @@ def _compiled_levels(walks: Any, ptr: np.ndarray, succ: np.ndarray,
 
 
 def _distinct(values: np.ndarray, stamp: np.ndarray) -> np.ndarray:
-    """The distinct entries of ``values`` (ids below ``stamp.size``), in no set order,
-    without sorting: each entry writes its position into ``stamp`` and an entry is kept
-    iff its position is the one that stayed (one per id, whichever write won)."""
+    """The distinct entries of ``values`` (ids below ``stamp.size``), unsorted: each
+    writes its position into ``stamp``, and is kept iff its position stayed."""
     at = np.arange(values.size)
     stamp[values] = at
     return values[stamp[values] == at]
