@@ -116,16 +116,15 @@ def how(request, monkeypatch):
         monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
     else:
         monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 0.0)
-    used = []
-    inner = graph.searched_levels
+    return request.param, _searches(monkeypatch)
 
-    def spy(*args):
-        got = inner(*args)
-        used.append(got is not None)
-        return got
 
-    monkeypatch.setattr(graph, "searched_levels", spy)
-    return request.param, used
+def _searches(monkeypatch) -> list[bool]:
+    """Per call of the search from :func:`graph.levels`, whether it answered."""
+    inner, used = graph.searched_levels, []
+    monkeypatch.setattr(graph, "searched_levels",
+                        lambda *a: used.append((got := inner(*a)) is not None) or got)
+    return used
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
@@ -294,17 +293,14 @@ def test_prism_deadline_bracket_holds_storms_exact_value(tmp_path, monkeypatch,
     model.write_text(f'name = "deadline"\nspec = "F reached"\nobjective = "{objective}"\n\n'
                      f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "x=12"\n')
     exact = storm_rational(prism, prop)
-    brackets, used = [], []
-    inner = graph.searched_levels
-    monkeypatch.setattr(graph, "searched_levels",
-                        lambda *a: used.append(inner(*a)) or used[-1])
+    brackets, used = [], _searches(monkeypatch)
     for searched in (False, True):
         if searched:  # every graph large and thin: the levels searched
             monkeypatch.setattr(graph, "SMALL", 0)
             monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
             monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
         r = synthesize(load_model(model))
-        assert bool(used) == searched and all(u is not None for u in used)
+        assert bool(used) == searched and all(used)
         assert r.certified, r.failed_checks
         assert Fraction(r.lower) <= exact <= Fraction(r.upper)
         assert r.upper - r.lower < 1e-6
