@@ -13,6 +13,8 @@ Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their 
   large block), inside the iteration's figure;
 * with ``--numpy-sweeps``, ``stages`` once more with no block swept compiled (numba
   never loaded): what a size threshold above the instance would cost;
+* the level walks inside those stages (:data:`WALKS`: ``levels``, ``single_bounds``,
+  ``single_values``, ``single_flow``, ``chain_singles``, ``repair``), timed alike;
 * ``numba``: a fresh interpreter with NumPy and SciPy loaded as the solve has them:
   ``import numba``, the first call of the sweep kernel on a 50-state block (the
   registries' set-up and its load from the cache), then a second kernel's first call.
@@ -49,9 +51,18 @@ STAGES = {"analysis": ("mitld_lp.solvers.analysis", "analyse"),
           "lp": ("mitld_lp.solvers.lp", "solve_lp"),
           "certificate": ("mitld_lp.solvers.certify", "certify")}
 NUMBA_IMPORT = ("mitld_lp.solvers.kernels", "compiled_kernel")  # imports numba, once
+WALKS = {"levels": ("mitld_lp.solvers.graph", "levels"),
+         "single_bounds": ("mitld_lp.solvers.topological", "SingleLevels.solve"),
+         "single_values": ("mitld_lp.solvers.topological", "SingleLevels.values"),
+         "single_flow": ("mitld_lp.solvers.topological", "SingleLevels.flow"),
+         "chain_singles": ("mitld_lp.solvers.certify_chain", "_Singles.solve"),
+         "repair": ("mitld_lp.solvers.certify_repair", "_Repair.run")}
+"""The level walks inside the stages, timed alike (each inside its stage's figure): the
+component levels of the analysis, the single-state walks of the iteration (bounds) and
+of the LP (values, flow), the certificate's chain and its repair."""
 COLUMNS = ("instance", "value", "solve_cpu", "storm_check_cpu", "solve_over_storm_check",
            "timed_solve_cpu", "analysis", "iteration", "lp", "certificate", "numba_import",
-           "numba_loaded")
+           "numba_loaded", *WALKS)
 
 
 def child_stages(job: dict[str, Any]) -> dict[str, Any]:
@@ -67,10 +78,14 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
         from mitld_lp.solvers import kernels
 
         kernels.COMPILED_MIN_ENTRIES = sys.maxsize
-    spent = dict.fromkeys((*STAGES, "numba_import"), 0.0)
-    for stage, (module, name) in {**STAGES, "numba_import": NUMBA_IMPORT}.items():
-        mod = importlib.import_module(module)
-        setattr(mod, name, _timed(getattr(mod, name), stage, spent))
+    spent = dict.fromkeys((*STAGES, "numba_import", *WALKS), 0.0)
+    for stage, (module, name) in {**STAGES, "numba_import": NUMBA_IMPORT,
+                                  **WALKS}.items():
+        owner: Any = importlib.import_module(module)
+        *path, name = name.split(".")  # a method: wrapped on its class
+        for part in path:
+            owner = getattr(owner, part)
+        setattr(owner, name, _timed(getattr(owner, name), stage, spent))
     r = synthesize(model)
     return dict(spent, value=r.lower, upper=r.upper, solve_cpu=r.solve_cpu,
                 numba_loaded="numba" in sys.modules)

@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.level_search import PROBE_LEVELS, searched_levels, thin
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
@@ -439,7 +440,8 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     successor's) and, propagated up the same walk, which components can reach a state
     of each seed set (``seeds``: ``(n, k)`` bool).  A large graph is walked compiled
     (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same components, numbered
-    alike, and levels."""
+    alike, and levels.  Else a graph SciPy decomposed whose levels turn out thin is
+    finished by SciPy's searches (:mod:`~mitld_lp.solvers.level_search`), alike."""
     walks = compiled_walks(graph.nnz)
     if walks is not None and graph.has_canonical_format:
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
@@ -460,23 +462,30 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
                             shape=(n_comp, n_comp))
     del up, down
+    if seeds is None:
+        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
     # the counts in the degrees' own type: ufunc.at on mixed types takes numpy's
     # generic loop, 50-80x slower (2 of 3 s of the analysis on a 2e6-state product);
     # cast once here, as the offsets, not at every level (a deadline makes thousands)
     pred_ptr, preds = preds_of.indptr.astype(np.int64), preds_of.indices
     times = preds_of.data.astype(out_degree.dtype)
-    if seeds is None:
-        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
     k = seeds.shape[1]
     reach = np.zeros((n_comp, k), dtype=bool)
     for j in range(k):
         reach[comp[seeds[:, j]], j] = True
     level = np.full(n_comp, -1, dtype=np.int64)
     stamp = np.empty(n_comp, dtype=np.int64)  # scratch of _distinct
-    frontier = np.flatnonzero(out_degree == 0)
-    depth = 0
-    while frontier.size:
+    frontier = sinks = np.flatnonzero(out_degree == 0)
+    depth, done, since, probe = 0, 0, 0, PROBE_LEVELS
+    while frontier.size:  # SMALL: csgraph found the components, and can search
+        if depth == probe and graph.shape[0] + graph.nnz > SMALL:
+            found = (thin(done - since, probe, n_comp, preds.size)
+                     and searched_levels(preds_of, sinks, comp, seeds))
+            if found:  # thin levels: the rest searched whole
+                return Levels(comp, *found)
+            probe, since = 2 * probe, done
         level[frontier] = depth
+        done += frontier.size
         lo = pred_ptr[frontier]
         count = pred_ptr[frontier + 1] - lo
         at = np.repeat(lo - np.cumsum(count) + count, count)  # gather_ranges, inline
@@ -525,9 +534,8 @@ def _compiled_levels(walks: Any, ptr: np.ndarray, succ: np.ndarray,
 
 
 def _distinct(values: np.ndarray, stamp: np.ndarray) -> np.ndarray:
-    """The distinct entries of ``values`` (ids below ``stamp.size``), in no set order,
-    without sorting: each entry writes its position into ``stamp`` and an entry is kept
-    iff its position is the one that stayed (one per id, whichever write won)."""
+    """The distinct entries of ``values`` (ids below ``stamp.size``), unsorted: each
+    writes its position into ``stamp``, and is kept iff its position stayed."""
     at = np.arange(values.size)
     stamp[values] = at
     return values[stamp[values] == at]

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers import level_batches
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
@@ -41,6 +42,7 @@ from mitld_lp.solvers.graph import (
     graph_view,
     segmented_argmax,
 )
+from mitld_lp.solvers.level_batches import TIE
 from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.rows import gather_ranges, off_diagonal_entries, rows_dot
 
@@ -84,9 +86,6 @@ def blocks(q: Quotient) -> Blocks:
     return q.order
 
 
-TIE = 1e-12
-"""A single state's choices within this of the best score, relative to it, are tied
-(:func:`solve_single_states`)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -250,8 +249,12 @@ class SingleLevels:
                                        self.leave, np.asarray(rewards, dtype=np.float64),
                                        bounds, self.sense is Sense.MIN)
             return
+        runs = self._runs(first, stop)
+        if runs and self.positive:  # the same sums, fewer NumPy calls a level
+            level_batches.bounds(self, runs, np.asarray(rewards, dtype=np.float64), bounds)
+            return
         rewards = np.asarray(rewards, dtype=np.float64)
-        for a, z, ca, cz, ea, ez in self._runs(first, stop):
+        for a, z, ca, cz, ea, ez in runs:
             rows = self.local[ea:ez] - ca
             terms = self.vals[ea:ez, None] * bounds[self.cols[ea:ez]]
             score = rewards[self.choices[ca:cz]]  # a copy (fancy indexing)
@@ -288,37 +291,8 @@ class SingleLevels:
                                        values, reduced_choice, weights, TIE,
                                        self.sense is Sense.MIN)
             return
-        live_of = ~skip[self.states]
-        every = bool(live_of.all())
-        reduce = np.maximum if self.sense is Sense.MAX else np.minimum
-        for a, z, ca, cz, ea, ez in self._runs(first, stop):
-            sums = np.bincount(self.local[ea:ez] - ca, minlength=cz - ca,
-                               weights=self.vals[ea:ez] * values[self.cols[ea:ez]])
-            ch = self.choices[ca:cz]
-            reward = to_target[ch] + sums
-            leave = self.leave[ca:cz]
-            score = (reward / leave if self.positive else
-                     np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
-            np.clip(score, 0.0, 1.0, out=score)
-            if cz - ca == z - a:  # one choice a state: each its own best
-                best, pick = score, ch
-            else:  # segmented_argmax's ties and preference, on the level's segments
-                starts, own = self.first_choice[a:z], self.owner_at[ca:cz]
-                top = reduce.reduceat(score, starts)[own]
-                tied = self.sense.gain(score, top) >= -TIE * np.abs(top)
-                prefer = to_target[ch] if self.sense is Sense.MAX else -to_target[ch]
-                key = np.where(tied, prefer, -np.inf)
-                tied &= key >= np.maximum.reduceat(key, starts)[own]
-                at = np.minimum.reduceat(np.where(tied, np.arange(cz - ca),
-                                                  np.iinfo(np.int64).max), starts)
-                best, pick = score[at], ch[at]
-            states = self.states[a:z]
-            if not every:
-                live = live_of[a:z]
-                states, best, pick = states[live], best[live], pick[live]
-            values[states] = best
-            reduced_choice[states] = pick
-            weights[pick] = 1.0
+        level_batches.values(self, self._runs(first, stop), to_target, ~skip[self.states],
+                             values, reduced_choice, weights)
 
     def flow(self, first: int, stop: int, self_loop: np.ndarray, weights: np.ndarray,
              x: np.ndarray) -> None:
@@ -335,15 +309,9 @@ class SingleLevels:
                                      self.states, self.choices, self.cols, self.vals,
                                      self_loop, weights, x)
             return
-        for a, z, ca, cz, ea, ez in reversed(list(self._runs(first, stop))):
-            ch = self.choices[ca:cz]
-            owner = self.owner[ca:cz] - a
-            w = weights[ch]
-            states = self.states[a:z]
-            x[states] /= 1.0 - np.bincount(owner, weights=w * self_loop[ch],
-                                           minlength=z - a)
-            y = w * x[states[owner]]
-            np.add.at(x, self.cols[ea:ez], self.vals[ea:ez] * y[self.local[ea:ez] - ca])
+        runs = self._runs(first, stop)
+        if runs:  # each state's divisor and each entry's weight gathered once
+            level_batches.flow(self, runs, self_loop, weights, x)
 
 
 # ---------------------------------------------------------------------------------------
