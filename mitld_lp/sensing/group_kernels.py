@@ -16,6 +16,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 INT = np.int64  # rows.INT (not imported: rows imports this module)
 
 __all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add",

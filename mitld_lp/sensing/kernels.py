@@ -9,6 +9,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 __all__ = ["pack", "sorted_groups", "dense_groups", "dd_sums", "spread", "scatter_max",
            "scatter_min", "scatter_add", "gather2", "key_match", "key_rehash", "verify"]
 

@@ -14,6 +14,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 __all__ = ["boundary_rows", "downstream", "reach", "reduced_rows", "upstream"]
 
 

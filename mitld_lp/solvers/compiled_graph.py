@@ -30,6 +30,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 __all__ = ["backward", "components_and_levels", "end_components_among", "reaching_edges",
            "state_graph", "state_levels", "strong_components"]
 

@@ -7,6 +7,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 __all__ = ["OFF", "VERIFY_SWEEPS", "WATCH_SWEEPS", "gauss_seidel"]
 
 OFF = 8

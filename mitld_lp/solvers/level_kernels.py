@@ -21,6 +21,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.util import numba_cache
+
+numba_cache.install()  # processes compiling at once share the disk cache safely
+
 __all__ = ["chain_flow", "chain_solve", "chain_values", "single_bounds", "single_flow",
            "single_values"]
 
