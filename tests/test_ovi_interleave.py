@@ -128,8 +128,8 @@ def _exact(inner, groups, exits: np.ndarray, sense: Sense) -> list[Fraction]:
                 if r != col and a[r][col] != 0:
                     a[r] = [v - a[r][col] * w for v, w in zip(a[r], a[col], strict=True)]
         values = [a[s][n] for s in range(n)]
-        pick = max if sense is Sense.MAX else min
-        best = values if best is None else [pick(b, v) for b, v in zip(best, values,
+        better = max if sense is Sense.MAX else min
+        best = values if best is None else [better(b, v) for b, v in zip(best, values,
                                                                         strict=True)]
     return best
 
