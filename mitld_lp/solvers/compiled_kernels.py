@@ -1,5 +1,11 @@
 """The numba kernels of :mod:`mitld_lp.solvers.kernels` (imported only from there, and
 only for a product large enough to pay numba's import; compiled once, cached on disk).
+
+A verification (the guesses swept beside the proven bounds) runs on packed rows: at its
+start each state's bounds and guesses are copied side by side into one row of a work
+array (:func:`_pack`), swept there, and copied back when it ends or the call returns, so
+an entry reads one row (32 bytes for one model) where the two arrays cost two reads far
+apart in memory.  The arithmetic is the same, and so are the bounds, to the bit.
 """
 
 from __future__ import annotations
