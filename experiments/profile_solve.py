@@ -110,7 +110,7 @@ def child_numba(job: dict[str, Any]) -> dict[str, Any]:
     c = time.process_time()
     import numba  # noqa: F401
 
-    from mitld_lp.solvers.kernels import FLOOR, compiled_kernel
+    from mitld_lp.solvers.kernels import FLOOR, _new_track, compiled_kernel
     from mitld_lp.solvers.topological import level_kernels
     imported = time.process_time() - c
     n = 50
@@ -119,7 +119,8 @@ def child_numba(job: dict[str, Any]) -> dict[str, Any]:
     c = time.process_time()
     done, _ = compiled_kernel()(a.indptr, a.indices, a.data, np.arange(n + 1), np.ones(n),
                                 np.zeros((n, 2)), local, np.arange(n)[::-1].copy(), 5,
-                                1e-6, False, -1.0, FLOOR)
+                                1e-6, False, -1.0, FLOOR, np.zeros((n, 2)),
+                                _new_track(2, False))
     first = time.process_time() - c
     x = np.zeros((n, 1))
     c = time.process_time()
