@@ -106,7 +106,9 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
         return EndComponents(read_only(mec_of), read_only(internal), 0)
     walks = compiled_walks(m.nnz)
     if walks is not None:  # the rounds among the candidates, with no sub-MDP built
-        return compiled_end_components(walks, mdp, cand)
+        found = compiled_end_components(walks, mdp, cand)
+        return EndComponents(read_only(found.mec_of.astype(mec_of.dtype, copy=False)),
+                             found.internal, found.n_mecs)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
     choices = gather_ranges(lo, hi)
     rows = sp.csr_array(m[choices])
