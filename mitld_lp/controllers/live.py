@@ -73,6 +73,21 @@ class _OnTheModel(AutomatonMemory):
         return self.game.actions(state)[0]
 
 
+_VERDICTS: dict[int, tuple[Any, tuple[tuple[int, ...], ...]]] = {}
+
+
+def _once(source: Any, make: Callable[[], tuple[tuple[int, ...], ...]]
+          ) -> tuple[tuple[int, ...], ...]:
+    """The verdicts of each automaton state of ``source`` (an automaton, fixed once
+    built), made on the first call for it: a controller reads them twice a step."""
+    got = _VERDICTS.get(id(source))
+    if got is None or got[0] is not source:
+        if len(_VERDICTS) >= 256:
+            _VERDICTS.clear()
+        got = _VERDICTS[id(source)] = (source, make())
+    return got[1]
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class LivePlan(_OnTheModel):
     """The synthesised model itself: the world, the STA, the product MDP, the policy
@@ -100,8 +115,9 @@ class LivePlan(_OnTheModel):
     @property
     def verdicts(self) -> tuple[tuple[int, ...], ...]:
         dta = self.sta.dta
-        return tuple((ACCEPTED,) if q == dta.accepting else (REJECTED,)
-                     if q == dta.rejecting else (UNDECIDED,) for q in range(dta.n_states))
+        return _once(dta, lambda: tuple(
+            (ACCEPTED,) if q == dta.accepting else (REJECTED,) if q == dta.rejecting
+            else (UNDECIDED,) for q in range(dta.n_states)))
 
     def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
         i = _position(self.mdp, ProductState(state, q, pending, clock), self._index)
@@ -145,7 +161,8 @@ class LiveRandomPlan(_OnTheModel):
 
     @property
     def verdicts(self) -> tuple[tuple[int, ...], ...]:
-        return tuple(tuple(v) for v in self.joint.verdicts)
+        joint = self.joint
+        return _once(joint, lambda: tuple(tuple(v) for v in joint.verdicts))
 
     def decide(self, state: Hashable, q: int, pending: frozenset[str], clock: int) -> Decision:
         i = _position(self.mdp, ProductState(state, q, pending, clock), {})

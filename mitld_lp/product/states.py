@@ -117,7 +117,7 @@ class ProductStates(Sequence[Hashable]):
     narrows them), else int64.  :meth:`position` maps a record back to its state index.
     """
 
-    __slots__ = ("_keys", "_games", "_situations", "_codec", "_sorted", "_where")
+    __slots__ = ("_keys", "_games", "_situations", "_codec", "_sorted", "_where", "_bounds")
 
     def __init__(
         self,
@@ -131,6 +131,8 @@ class ProductStates(Sequence[Hashable]):
         self._games, self._situations = games, situations
         self._codec = codec
         self._sorted: np.ndarray | None = None
+        bounds = np.iinfo(keys.dtype)  # the keys are int32 where they all fit
+        self._bounds = (int(bounds.min), int(bounds.max))
         self._where: tuple[dict[Hashable, int], dict[tuple[frozenset[str], int], int]] | None
         self._where = None
 
@@ -217,8 +219,7 @@ class ProductStates(Sequence[Hashable]):
             key = self._codec.key(g, state.automaton, sid)
         else:
             return None
-        bounds = np.iinfo(self._keys.dtype)  # the keys are int32 where they all fit
-        if not bounds.min <= key <= bounds.max:
+        if not self._bounds[0] <= key <= self._bounds[1]:
             return None
         if self._sorted is None:
             self._sorted = np.argsort(self._keys, kind="stable")
