@@ -378,7 +378,7 @@ def test_simulate_runs_the_constrained_controller(capsys: pytest.CaptureFixture[
     """simulate took no --constraint; it now runs the randomised controller of the
     constrained problem, and its estimate agrees with the certified value."""
     code = main(["simulate", str(MODELS / "bus_risk.toml"), "--constraint",
-                 "P(F puddle) <= 0.05", "-n", "3000", "--seed", "3", "--json", "-q"])
+                 "P(F puddle) <= 0.05", "-n", "1500", "--seed", "3", "--json", "-q"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0
     lo, hi = out["certified_bracket"]

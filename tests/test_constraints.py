@@ -260,7 +260,7 @@ def test_simulated_frequencies_fall_in_their_intervals():
     m = loads_model(BUS_PUDDLE)
     r = synthesize_constrained(m, ["P(F puddle) <= 0.05", "E(steps) <= 3.9"], seed=7)
     assert r.status == "optimal" and r.certified
-    stats = run_constrained(r, runs=4000, seed=11)
+    stats = run_constrained(r, runs=2000, seed=11)
     # a run still open after max_steps (after the task, a randomised walk that has not
     # yet drawn its stay) could still go either way: it widens the interval
     n = stats.runs

@@ -75,7 +75,7 @@ def test_simulate_takes_the_randomised_controller(bus_risk) -> None:
     assert r.status == "optimal" and r.certified
     # bus_risk's laws are geometric: nothing is truncated, the policy's exact value is
     # its value in the real world, which the Monte-Carlo estimate must meet
-    n = 4000
+    n = 2000
     sim = simulate(m, r.controller, runs=n, seed=1, max_steps=200)
     half = 4 * math.sqrt(r.lower * (1 - r.lower) / n)
     assert abs(sim.estimate - r.lower) <= half, (sim.estimate, r.lower)

@@ -123,11 +123,11 @@ def test_controller_follows_the_policy_and_tracks_the_automaton():
 def test_simulation_confidence_interval_contains_the_certified_value():
     model = load_model(RED_LIGHT)
     r = synthesize(model)
-    sim = simulate(model, r.controller, runs=20000, seed=7, max_steps=200)
+    sim = simulate(model, r.controller, runs=8000, seed=7, max_steps=200)
     # The controller's true value lies between its value in the lower model and the
     # upper bound; the 95% interval must meet that range.
     assert sim.ci_low <= r.upper + 1e-9 and sim.ci_high >= r.lower - 1e-9
-    assert sim.runs == 20000
+    assert sim.runs == 8000
     assert sim.beyond_model > 0  # P(K > T) > 0: some runs outlive the model
     assert 0 <= sim.successes <= sim.runs
 
