@@ -14,7 +14,10 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
   graph analysis (``solvers.analysis.analyse``, timed in place), ``whole_cpu`` the load (the PRISM
   exploration, with the child process Storm explores in when it is capped) and the
   synthesis, ``process_cpu`` the child's CPU up to the end of the synthesis (imports
-  included; the bench's extras below are not: ``child_cpu`` is the whole child);
+  included; the bench's extras below are not: ``child_cpu`` is the whole child;
+  ``harness_cpu`` the interpreter and this script's own imports, before the route,
+  which every route's process pays alike: they import neither ``mitld_lp``, NumPy
+  nor lark, so Storm's process pays nothing of ours);
   of the whole, ``load_cpu`` is the load (Storm's exploration and the copy of its
   model, in the capped child or not) and ``product_cpu`` what the synthesis does
   before the solve (the product with the task's automaton, mostly);
@@ -39,7 +42,9 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
 ``--compare DIR`` runs ``ours`` a second time on each instance, in the same run, with
 the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git worktree add`` or
 ``git archive``), and adds its figures as ``base_*`` columns and a before/after table:
-the same bracket, the same product, CPU and bytes per transition side by side.
+the same bracket, the same product (``same_product``: the same states, transitions and
+:func:`product_digest`, a hash of the product's arrays bit for bit), CPU and bytes per
+transition side by side.
 
 An instance is *trivial* only if its answer is decided by the graph alone, before any
 number: both truncation models' qualitative sets (Storm's prob01) put the initial state
@@ -60,6 +65,11 @@ The QVBS files are not part of this repository; give a checkout's ``benchmarks/`
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --only csma.4-2.some_before \
         --compare ../old-checkout --out /tmp/qvbs  # before and after, one run
 
+``--start command``: our worker process starts as the command line ``mitld-lp`` starts
+(``mitld_lp.startup.lean_start``, the garbage collector held while importing), which is
+what a user's ``mitld-lp`` process pays; by default it starts as a program that imports
+the package (the package then leaves NumPy, SciPy and lark as they import themselves).
+
 ``--memory``: also, in a child of its own, each stage's resident and traced peaks and
 what it keeps (``experiments/memory_stages.py``), bytes per transition above the size
 before ``synthesize``: ``mem_<stage>_*`` columns and a table per instance.
@@ -77,7 +87,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
@@ -85,7 +95,10 @@ if str(HERE) not in sys.path:
 
 import _common  # noqa: E402
 import bench_sweeps as bs  # noqa: E402  (the same routes and targets)
-import qvbs  # noqa: E402  (the same instances, posed the same way)
+
+if TYPE_CHECKING:
+    import qvbs  # the same instances, posed the same way (imported where used: it
+    # imports mitld_lp, NumPy and lark, which Storm's worker process must not pay)
 
 FAMILIES = ("consensus", "csma", "wlan", "wlan_dl", "zeroconf", "zeroconf_dl", "firewire_dl",
             "resource-gathering")
@@ -155,12 +168,40 @@ def _timed_analysis() -> list[float]:
     return spent
 
 
+def _command_start() -> None:
+    """The command line's start-up (``mitld_lp.startup.command``, before its verbs):
+    the garbage collector off while the imports run, then
+    ``mitld_lp.startup.lean_start`` (a checkout from before it: the same steps)."""
+    import gc
+
+    from mitld_lp import startup
+
+    gc.disable()
+    lean = getattr(startup, "lean_start", None)
+    if lean is None:
+        from mitld_lp import init_cache
+
+        for step in (startup.dataclass_methods_without_exec, init_cache.install,
+                     startup.lean_scipy, startup.numpy_ma_when_used,
+                     startup.lark_without_regex):
+            step()
+    else:
+        lean()
+
+
 def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    command = job.get("start") == "command"
+    if command:
+        _command_start()
     import numpy as np
 
     from mitld_lp import load_model, synthesize
-    from mitld_lp.solvers import write_drn
 
+    if command:  # the work starts: the collector on, the imports out of its reach
+        import gc
+
+        gc.freeze()
+        gc.enable()
     c = _process_cpu()  # with the child in which Storm explores the PRISM program
     model = load_model(job["model"], max_states=job["max_states"])
     load_cpu = _process_cpu() - c
@@ -187,7 +228,10 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
                product_cpu=max(synth_cpu - r.solve_cpu, 0.0),
                bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
-    # untimed from here: the DRN for Storm and the unit sweep
+    # untimed from here: the product's digest, the DRN for Storm and the unit sweep
+    out["product_digest"] = product_digest(mdp)
+    from mitld_lp.solvers import write_drn  # (the route itself does not import it)
+
     v = np.random.default_rng(0).random(mdp.n_states)
     starts = np.asarray(mdp.row_groups[:-1])
     times = []
@@ -326,6 +370,7 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
          ) -> tuple[list[tuple[qvbs.Instance, dict[str, Any]]], list[tuple[str, str]]]:
     """The instances to run as jobs (their model files written to ``work``), and the
     ones left out with the reason."""
+    import qvbs
     found, skipped = qvbs.find_instances(benchmarks, high)
     skipped = [s for s in skipped if s[0].split("/")[0].split(" ")[0] in families]
     out = []
@@ -425,6 +470,8 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         bytes_per_transition=ours["bytes_per_transition"],
         storm_bytes_per_transition=storm["bytes_per_transition"],
         child_cpu=ours["child_cpu"], storm_child_cpu=prism["child_cpu"] if prism else None,
+        harness_cpu=ours.get("harness_cpu"),
+        storm_harness_cpu=prism.get("harness_cpu") if prism else None,
         **_compared(base, ours, prism, flat, storm["best_cpu"]),
         **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
     )
@@ -450,9 +497,31 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
         base_process_over_storm_process=None if flat or not storm
         else base["process_cpu"] / storm,
         same_bracket=(base["lower"], base["upper"]) == (ours["lower"], ours["upper"]),
-        same_product=(base["states"], base["transitions"]) == (ours["states"],
-                                                                 ours["transitions"]),
+        same_product=(base["states"], base["transitions"], base.get("product_digest"))
+        == (ours["states"], ours["transitions"], ours.get("product_digest")),
     )
+
+
+def product_digest(mdp: Any) -> str:
+    """A SHA-256 of the product as built: its choices, their actions and rows (indices
+    and probabilities, bit for bit), the initial state, the target, sink and truncated
+    masks, the states' codes and the records of 64 states spread over it; two products
+    with the same digest are the same product, state for state."""
+    import hashlib
+
+    import numpy as np
+
+    h = hashlib.sha256()
+    m = mdp.matrix
+    for a in (mdp.row_groups, mdp.choice_actions, m.indptr, m.indices, m.data, mdp.target,
+              mdp.sink, mdp.truncated, getattr(mdp.states, "_keys", np.zeros(0))):
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    n = len(mdp.states)
+    shown = [repr(mdp.states[int(i)]) for i in np.unique(np.linspace(0, n - 1, 64).astype(int))]
+    h.update(repr((mdp.action_names, mdp.initial, m.shape, shown)).encode())
+    return h.hexdigest()
 
 
 COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "states",
@@ -553,6 +622,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     "instance, before this checkout's, and report both")
     ap.add_argument("--memory", action="store_true", help="also each instance's memory "
                     "stage by stage (a child of its own): mem_* columns, a table each")
+    ap.add_argument("--start", choices=("library", "command"), default="library",
+                    help="how our worker process starts: as a program importing the "
+                    "package (default), or as the command line starts "
+                    "(mitld_lp.startup.lean_start and the collector held while importing)")
     ap.add_argument("--budget", type=float, default=BUDGET,
                     help=f"CPU seconds per child process (default {BUDGET:g})")
     args = ap.parse_args(argv)
@@ -564,6 +637,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="bench_qvbs_") as tmp:
         todo, skipped = jobs(args.qvbs, low, high, families, Path(tmp))
+        todo = [(i, dict(j, start=args.start)) for i, j in todo]
         if args.only:
             todo = [(i, j) for i, j in todo if i.name in set(args.only)]
         todo.sort(key=lambda t: t[0].qvbs_states)  # smallest first: a cut-short run has rows
@@ -588,8 +662,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
 
 
 def worker(route: str, work: str) -> None:
+    # the CPU before the route: the interpreter and this script's own imports (the
+    # same for every route; ``harness_cpu``), included in the process figures
+    harness = _process_cpu()
     job = json.loads((Path(work) / "job.json").read_text(encoding="utf-8"))
-    result = WORKERS[route](job, Path(work))
+    result = dict(WORKERS[route](job, Path(work)), harness_cpu=harness)
     (Path(work) / f"{route}.json").write_text(json.dumps(result), encoding="utf-8")
 
 
