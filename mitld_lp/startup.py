@@ -58,8 +58,9 @@ if TYPE_CHECKING:
     from dataclasses import Field
     from typing import Any
 
-__all__ = ["started_as_command", "command", "collect_from_here", "lean_scipy",
-           "lark_without_regex", "dataclass_methods_without_exec", "numpy_ma_when_used"]
+__all__ = ["started_as_command", "command", "collect_from_here", "hold_collector", "lean_start",
+           "lean_scipy", "lark_without_regex", "dataclass_methods_without_exec",
+           "numpy_ma_when_used"]
 
 
 def started_as_command() -> bool:
@@ -122,6 +123,25 @@ def command() -> None:
 
         collect_from_here()
         sys.exit(main(argv[1:]))
+    lean_start()
+    from mitld_lp.cli import run
+
+    run()
+
+
+def lean_start() -> None:
+    """The command line's start-up, before anything heavy is imported: the dataclass
+    methods as closures and their ``__init__`` code from the table of an earlier run
+    (:func:`dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`), SciPy's
+    array-API layer without NumPy's extra submodules (:func:`lean_scipy`), ``numpy.ma``
+    when first used (:func:`numpy_ma_when_used`) and lark without ``regex``
+    (:func:`lark_without_regex`).
+
+    :func:`command` calls it; a program that runs the package's routes and nothing else
+    (a benchmark's worker process measuring what the command line's process costs) may
+    call it first, before NumPy, SciPy and lark are imported; what each of those
+    functions changes then holds for the whole process.  The answers are the same to
+    the bit."""
     dataclass_methods_without_exec()
     from mitld_lp import init_cache
 
@@ -129,9 +149,18 @@ def command() -> None:
     lean_scipy()
     numpy_ma_when_used()
     lark_without_regex()
-    from mitld_lp.cli import run
 
-    run()
+
+def hold_collector() -> None:
+    """Turn Python's cyclic garbage collector off while the imports run, as the command
+    line does from its first line; :func:`collect_from_here` turns it back on when the
+    work starts.  Nothing if it is off already."""
+    global _collector_held
+    import gc
+
+    if gc.isenabled():
+        gc.disable()
+        _collector_held = True
 
 
 #: NumPy's submodules that it imports on first use, which SciPy's array-API layer would

@@ -179,7 +179,7 @@ class PlanController(Stepper):
 
 def _made(cls: type[PlanController], plan: Any, seed: int | None) -> Any:
     controller = cls.__new__(cls)
-    controller._begin(plan, np.random.default_rng(seed))
+    controller._begin(plan, seed=seed)
     return controller
 
 
@@ -200,7 +200,7 @@ class Controller(PlanController):
 
     def __init__(self, game: Game[Any], sta: STA, mdp: MDP, policy: np.ndarray,
                  hopeless: np.ndarray | None = None) -> None:
-        self._begin(LivePlan(game, sta, mdp, policy, hopeless), np.random.default_rng(0))
+        self._begin(LivePlan(game, sta, mdp, policy, hopeless), seed=0)  # never draws
 
 
 class ConstrainedController(PlanController):
@@ -272,7 +272,7 @@ class SensedController(PlanController):
                           sensed=frozenset(sensed), events=frozenset(events),
                           ignored=frozenset(ignored), game=game,
                           first=dict(first_actions or {}))
-        self._begin(plan, np.random.default_rng(0))
+        self._begin(plan, seed=0)
 
     def _sensed_plan(self) -> SensedPlan:
         assert isinstance(self._plan, SensedPlan)

@@ -139,10 +139,28 @@ class Stepper:
     than its truncation point), after which the controller acts on as its plan says.
     """
 
-    def _begin(self, plan: Plan, rng: np.random.Generator) -> None:
+    def _begin(self, plan: Plan, rng: np.random.Generator | None = None, *,
+               seed: int | None = 0) -> None:
+        """Act by ``plan``, drawing from ``rng``; without one, from a generator seeded
+        with ``seed`` made on the first draw (:attr:`rng`)."""
         self._plan = plan
-        self.rng = rng
+        self._rng = rng
+        self._seed = seed
         self._restart()
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The generator a randomised decision draws from.  Made on first use when the
+        controller was given a seed only: a deterministic controller never draws, and
+        a solve that returns one need not load ``numpy.random``.  The same stream as a
+        generator made at the start, since nothing draws before."""
+        if self._rng is None:
+            self._rng = np.random.default_rng(self._seed)
+        return self._rng
+
+    @rng.setter
+    def rng(self, value: np.random.Generator) -> None:
+        self._rng = value
 
     def _restart(self) -> None:
         self._memory: Any = None
