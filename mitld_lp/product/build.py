@@ -178,15 +178,26 @@ class _Found:
         ids = self.index.find(keys + _SHIFT)
         miss = np.flatnonzero(ids < 0)
         if miss.size:
-            uniq, first, inverse = np.unique(keys[miss], return_index=True,
-                                             return_inverse=True)
+            # the distinct missing keys, each's first occurrence and each entry's
+            # distinct key, as np.unique(..., return_index, return_inverse) gives them
+            # (by one stable sort: fewer NumPy calls, as a thin frontier's batch is small)
+            missing = keys[miss]
+            order = np.argsort(missing, kind="stable")
+            ordered = missing[order]
+            head = np.empty(ordered.size, dtype=bool)
+            head[0] = True
+            np.not_equal(ordered[1:], ordered[:-1], out=head[1:])
+            uniq, first = ordered[head], order[head]  # stable: the first occurrence
+            inverse = np.empty(missing.size, dtype=np.int64)
+            inverse[order] = np.cumsum(head) - 1
             n = self.keys.size
             self.budget.check(n + uniq.size)
+            found = np.argsort(first, kind="stable")  # the distinct keys as first found
             new = np.empty(uniq.size, dtype=np.int64)
-            new[np.argsort(first, kind="stable")] = np.arange(n, n + uniq.size)
+            new[found] = np.arange(n, n + uniq.size)
             self.index.insert(uniq + _SHIFT, new)
-            self.keys.extend(uniq[np.argsort(new)])
-            ids[miss] = new[inverse.reshape(-1)]
+            self.keys.extend(uniq[found])
+            ids[miss] = new[inverse]
         return ids
 
 
@@ -203,37 +214,61 @@ def _expand(
     of entries before merging (to size the next batch).
     """
     ordinary = keys >= 0
-    g, q, sid = f.codec.unkey(keys[ordinary])
+    plain = bool(ordinary.all())  # no absorbing state in the batch (nearly always)
+    g, q, sid = f.codec.unkey(keys if plain else keys[ordinary])
     f.ensure_actions(g)
     f.ensure_outcomes(sid)
+    # A thin frontier makes small batches, whose time is NumPy's cost per call: the
+    # steps below skip the calls that would do nothing (one outcome per situation, no
+    # truncation point crossed, no event), with the same numbers.
     # choices: one per (state, action slot)
     n_act = f.act_count.view[g]
     c_state = np.repeat(np.arange(g.size), n_act)
     c_slot = f.act_start.view[g][c_state] + ranks(n_act)
     # pairs: one per (choice, event outcome)
     c_sid = sid[c_state]
-    n_out = f.out_count.view[c_sid]
-    p_choice = np.repeat(np.arange(c_slot.size), n_out)
-    p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
+    if f.single_outcome:  # one outcome per situation: a pair is its choice
+        p_choice = np.arange(c_slot.size)
+        p_out = f.out_start.view[c_sid]
+    else:
+        n_out = f.out_count.view[c_sid]
+        p_choice = np.repeat(np.arange(c_slot.size), n_out)
+        p_out = f.out_start.view[c_sid][p_choice] + ranks(n_out)
     p_occ = f.out_occ.view[p_out]
     p_next = f.out_next.view[p_out]
-    p_row = np.full(p_choice.size, f.cut_row, dtype=np.int64)  # crossed a truncation point
     alive = p_next >= 0
-    p_row[alive] = f.rows(c_slot[p_choice[alive]], p_occ[alive])
+    every = bool(alive.all())  # no outcome crossed a truncation point
+    if every:
+        p_row = f.rows(c_slot[p_choice], p_occ)
+    else:
+        p_row = np.full(p_choice.size, f.cut_row, dtype=np.int64)  # crossed one
+        p_row[alive] = f.rows(c_slot[p_choice[alive]], p_occ[alive])
     # entries: one per (pair, game successor); the truncation row's one entry has
     # probability 1 and no successor (neither is read)
     n_succ = f.row_len.view[p_row]
     e_pair = np.repeat(np.arange(p_choice.size), n_succ)
     e_at = f.row_start.view[p_row][e_pair] + ranks(n_succ)
-    moving = alive[e_pair]
     vals = f.out_prob.view[p_out][e_pair]
-    vals[moving] *= f.row_prob.view[e_at[moving]]
-    e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
-    g2 = f.row_succ.view[e_at[moving]]
-    e_pm = e_pair[moving]
     f.flush()
-    q2 = f.step(q[c_state[p_choice[e_pm]]], f.props.view[g2] | f.occ_letter(p_occ[e_pm]))
-    e_key[moving] = np.where(q2 < 0, q2, f.codec.key(g2, q2, p_next[e_pm]))
+    if every:
+        vals *= f.row_prob.view[e_at]
+        g2 = f.row_succ.view[e_at]
+        e_pm = e_pair
+    else:
+        moving = alive[e_pair]
+        vals[moving] *= f.row_prob.view[e_at[moving]]
+        g2 = f.row_succ.view[e_at[moving]]
+        e_pm = e_pair[moving]
+    letter = f.props.view[g2]
+    if f.events:  # the events that occurred, as letters
+        letter = letter | f.occ_letter(p_occ[e_pm])
+    q2 = f.step(q[c_state[p_choice[e_pm]]], letter)
+    moved = np.where(q2 < 0, q2, f.codec.key(g2, q2, p_next[e_pm]))
+    if every:
+        e_key = moved
+    else:
+        e_key = np.full(e_pair.size, CODE[Absorbing.TRUNCATED], dtype=np.int64)
+        e_key[moving] = moved
     cols = intern(e_key).astype(np.int32)
     e_choice = p_choice[e_pair]
     extra: list[np.ndarray] = []
@@ -253,6 +288,9 @@ def _expand(
         cols, vals, row_len = merge(e_choice, cols, vals, c_slot.size)
     # a table's action slot c is its robot choice c (named when first read: LATE + c)
     actions = c_slot + LATE if f.late else f.slot_aid.view[c_slot]
+    if plain:
+        return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32),
+                n_act.astype(np.int32), *extra), int(e_key.size)
     choices = np.ones(keys.size, dtype=np.int32)
     choices[ordinary] = n_act
     # the absorbing states of the batch (at most three in the whole product): one

@@ -101,6 +101,7 @@ class Layers:
         self.sid: dict[tuple[frozenset[str], int], int] = {}
         self.situations: list[tuple[frozenset[str], int]] = []
         self.out_start, self.out_count = Grow(np.int64), Grow(np.int64)
+        self.single_outcome = True  # every situation expanded so far has one outcome
         self.out_occ, self.out_prob, self.out_next = (
             Grow(np.int64), Grow(np.float64), Grow(np.int64)
         )
@@ -350,8 +351,12 @@ class Layers:
         return i
 
     def ensure_outcomes(self, sids: np.ndarray) -> None:
-        """The STA's outcomes of the situations ``sids`` not yet expanded."""
-        missing = unique(sids[self.out_count.view[sids] < 0])
+        """The STA's outcomes of the situations ``sids`` not yet expanded
+        (:attr:`single_outcome` stays true while each has one outcome)."""
+        new = self.out_count.view[sids] < 0
+        if not new.any():
+            return
+        missing = unique(sids[new])
         bit = {e: 1 << i for i, e in enumerate(self.events)}
         for i in missing.tolist():
             pending, clock = self.situations[i]
@@ -367,6 +372,7 @@ class Layers:
                 outs = self.sta.outcomes(pending, clock)
             self.out_start.data[i] = self.out_occ.size
             self.out_count.data[i] = len(outs)
+            self.single_outcome &= len(outs) == 1
             self.out_occ.extend([sum(bit[e] for e in o.occurred) for o in outs])
             self.out_prob.extend([o.probability for o in outs])
             self.out_next.extend(
