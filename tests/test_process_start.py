@@ -54,9 +54,9 @@ r = synthesize(load_model(sys.argv[1]))
 print(json.dumps({"lower": r.lower, "upper": r.upper, "modules": sorted(sys.modules)}))
 """
 
-# what a plain PRISM solve never needs: other solvers and plotting, the command line,
-# the sweeps, the DRN writer, the simulator, exact arithmetic, plots, a saved controller's reader, numba (a
-# small product), NumPy's test and build tools
+# what a plain PRISM solve never needs: other solvers, the command line, the sweeps,
+# the DRN writer, the simulator, exact arithmetic, plots, the trade-off curves, a saved
+# controller's reader, numba (a small product)
 NEVER = ("cvxpy", "pandas", "matplotlib", "numba", "highspy", "mitld_lp.cli",
          "mitld_lp.sweep", "mitld_lp.files.drn", "mitld_lp.running",
          "mitld_lp.controllers.reader", "mitld_lp.plot", "mitld_lp.exact",
