@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_product import assert_same_mdp  # equal state for state, bit for bit
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -131,16 +132,6 @@ def test_bench_worker_imports_neither_the_package_nor_numpy():
     assert out.stdout.strip() == "[]"
 
 
-def _same_mdp(a, b) -> None:
-    assert a.n_states == b.n_states and a.initial == b.initial
-    assert list(a.states) == list(b.states)
-    assert a.action_names == b.action_names
-    for name in ("row_groups", "choice_actions", "target", "sink", "truncated"):
-        assert np.array_equal(getattr(a, name), getattr(b, name)), name
-    for name in ("indptr", "indices", "data"):
-        assert np.array_equal(getattr(a.matrix, name), getattr(b.matrix, name)), name
-
-
 def _cases(tmp_path: Path):
     """(game, sta) of: a PRISM table with a plain task (one outcome per situation, no
     events), the corridor (an event with a truncation point, several outcomes), and a
@@ -181,7 +172,7 @@ def test_thin_batches_give_the_state_at_a_time_product(tmp_path, monkeypatch, en
     for game, sta in _cases(tmp_path):
         batches.clear()
         mdp = product(game, sta)
-        _same_mdp(mdp, reference_product(game, sta))
+        assert_same_mdp(mdp, reference_product(game, sta))
         if entries == 1 and mdp.n_states > 40:  # thin: several batches, some mixed
             assert len(batches) > 2
             assert any(absorbing for _, absorbing in batches)
