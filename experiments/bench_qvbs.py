@@ -505,8 +505,8 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
 def product_digest(mdp: Any) -> str:
     """A SHA-256 of the product as built: its choices, their actions and rows (indices
     and probabilities, bit for bit), the initial state, the target, sink and truncated
-    masks, the states' codes and the records of 64 states spread over it; two products
-    with the same digest are the same product, state for state."""
+    masks, the states' codes and the records of 64 states spread over it (two products
+    with one digest are taken to be the same product, state for state)."""
     import hashlib
 
     import numpy as np

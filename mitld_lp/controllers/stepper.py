@@ -151,9 +151,9 @@ class Stepper:
     @property
     def rng(self) -> np.random.Generator:
         """The generator a randomised decision draws from.  Made on first use when the
-        controller was given a seed only: a deterministic controller never draws, and
-        a solve that returns one need not load ``numpy.random``.  The same stream as a
-        generator made at the start, since nothing draws before."""
+        controller was given a seed only: a deterministic controller never draws, so a
+        solve that returns one makes no generator.  The same stream as a generator made
+        at the start, since nothing draws before."""
         if self._rng is None:
             self._rng = np.random.default_rng(self._seed)
         return self._rng
