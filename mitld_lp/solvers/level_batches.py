@@ -28,6 +28,11 @@ import numpy as np
 
 from mitld_lp.solvers.graph import Sense
 
+try:  # SciPy's compiled CSR/CSC products, as scipy.sparse's own products call them
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: the NumPy calls below
+    _st = None
+
 SingleLevels = Any  # :class:`~mitld_lp.solvers.topological.SingleLevels` (which imports
 # this module: its annotation here would make a circle)
 
@@ -38,6 +43,15 @@ _LAST = np.iinfo(np.int64).max
 TIE = 1e-12
 """A single state's choices within this of the best score, relative to it, are tied
 (:func:`~mitld_lp.solvers.topological.solve_single_states`; re-exported there)."""
+
+
+def _flat(sl: SingleLevels, out: np.ndarray) -> np.ndarray | None:
+    """``out`` as the flat float64 vector SciPy's compiled CSR/CSC products
+    (``scipy.sparse._sparsetools``) read and write in place, or ``None`` where they
+    cannot be used (no entry pointers of the walk's index type, a strided ``out``)."""
+    if _st is None or sl.ptr is None or out.dtype != np.float64 or not out.flags.c_contiguous:
+        return None
+    return out.reshape(-1)
 
 
 def _relative_choices(runs: list[tuple[int, ...]]) -> np.ndarray:
@@ -57,15 +71,23 @@ def bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
     k = out.shape[1]
     ca0, cz1, ea0, ez1 = runs[0][2], runs[-1][3], runs[0][4], runs[-1][5]
     reward = rewards[sl.choices[ca0:cz1]]  # (choices, k), a copy: the scores' storage
-    rel = _relative_choices(runs)[np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0]
-    bins = (rel[:, None] * k + np.arange(k)).ravel()
-    del rel
     leave = sl.leave[:, None]
     reduce = np.maximum if sl.sense is Sense.MAX else np.minimum
+    flat = _flat(sl, out)
+    if flat is None:
+        rel = _relative_choices(runs)[np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0]
+        bins = (rel[:, None] * k + np.arange(k)).ravel()
+        del rel
+    n = out.shape[0]
     for a, z, ca, cz, ea, ez in runs:
-        terms = sl.vals[ea:ez, None] * out[sl.cols[ea:ez]]
-        sums = np.bincount(bins[(ea - ea0) * k:(ez - ea0) * k], weights=terms.ravel(),
-                           minlength=(cz - ca) * k).reshape(cz - ca, k)
+        if flat is not None:  # SciPy's compiled product: one call, the same sums
+            sums = np.zeros((cz - ca, k))
+            _st.csr_matvecs(cz - ca, n, k, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat,
+                            sums.reshape(-1))
+        else:
+            terms = sl.vals[ea:ez, None] * out[sl.cols[ea:ez]]
+            sums = np.bincount(bins[(ea - ea0) * k:(ez - ea0) * k], weights=terms.ravel(),
+                               minlength=(cz - ca) * k).reshape(cz - ca, k)
         score = reward[ca - ca0:cz - ca0]
         score += sums
         np.divide(score, leave[ca:cz], out=score)
@@ -93,9 +115,14 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     prefer_of = reward_of if maximum else -reward_of
     index = np.arange(max(cz - ca for _, _, ca, cz, _, _ in runs))
     done_states, done_picks = [], []
+    flat, n = _flat(sl, out), out.shape[0]
     for a, z, ca, cz, ea, ez in runs:
-        sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
-                           weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
+        if flat is not None:  # SciPy's compiled product: one call, the same sums
+            sums = np.zeros(cz - ca)
+            _st.csr_matvec(cz - ca, n, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat, sums)
+        else:
+            sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
+                               weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
         ch = sl.choices[ca:cz]
         reward = reward_of[ca - ca0:cz - ca0] + sums
         leave = sl.leave[ca:cz]
@@ -137,6 +164,17 @@ def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
     w = weights[ch]
     keep = 1.0 - np.bincount(owner, weights=w * self_loop[ch], minlength=z1 - a0)
     local = np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0
+    flat, n = _flat(sl, x), x.shape[0]
+    if flat is not None:  # per choice its state's inflow times its weight, then SciPy's
+        # compiled scatter along the choice's entries (CSC by choice: the same order)
+        choice_state = sl.states[a0:z1][owner]
+        del local, owner
+        for a, z, ca, cz, _, _ in reversed(runs):
+            states = sl.states[a:z]
+            x[states] /= keep[a - a0:z - a0]
+            y = w[ca - ca0:cz - ca0] * x[choice_state[ca - ca0:cz - ca0]]
+            _st.csc_matvec(n, cz - ca, sl.ptr[ca:cz + 1], sl.cols, sl.vals, y, flat)
+        return
     entry_state = sl.states[a0:z1][owner[local]]  # whose inflow each entry carries
     entry_weight = w[local]
     del local, owner, w
