@@ -135,9 +135,12 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
             starts, own = sl.first_choice[a:z], sl.owner_at[ca:cz]
             top = reduce.reduceat(score, starts)[own]
             tied = (score - top if maximum else top - score) >= -TIE * np.abs(top)
-            key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
-            tied &= key >= np.maximum.reduceat(key, starts)[own]
-            at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
+            if np.count_nonzero(tied) == z - a:  # each state's best alone within TIE
+                at = np.flatnonzero(tied)  # (the preference and the first index agree)
+            else:
+                key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
+                tied &= key >= np.maximum.reduceat(key, starts)[own]
+                at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
             best, pick = score[at], ch[at]
         states = sl.states[a:z]
         if not every:

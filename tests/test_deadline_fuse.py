@@ -1,0 +1,255 @@
+"""The deadline walks summed by SciPy's compiled CSR/CSC products (issue 45): the LP's
+values walk (its choice among near-ties included), the iteration's bounds walk, the
+flow walk and the repair's level reads, each against a plain state-by-state loop written
+here and against the NumPy calls they replace (to the bit), on random acyclic MDPs with
+exact ties; and a small PRISM deadline model with tied actions solved end to end
+against Storm's exact engine, the same bits either way."""
+
+from __future__ import annotations
+
+import sys
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from conftest import build_mdp
+
+from mitld_lp.solvers import certify as C
+from mitld_lp.solvers import certify_repair as R
+from mitld_lp.solvers import level_batches
+from mitld_lp.solvers.analysis import analyse
+from mitld_lp.solvers.certify_chain import support_layers
+from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.rounding import rounding
+from mitld_lp.solvers.topological import SingleLevels
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from storm_exact import storm_rational  # noqa: E402
+
+
+def _tied_deadline_mdp(seed: int, depth: int = 30, width: int = 5):
+    """``depth`` layers of ``width`` states; each choice stays put, moves one or two
+    layers ahead, or to the goal / the dead end; a third of the states repeat a choice
+    (an exact tie: the walk's preference and first index decide)."""
+    rng = np.random.default_rng(seed)
+    n = depth * width
+    goal, dead = n, n + 1
+    states = []
+    for s in range(n):
+        layer = s // width
+        mine = []
+        for a in range(int(rng.integers(1, 4))):
+            ahead = [(layer + int(rng.integers(1, 3))) * width + int(j)
+                     for j in rng.choice(width, 2, replace=False)]
+            nxt = [goal, dead] + [t if t < n else dead for t in ahead]
+            w = rng.integers(1, 9, size=len(nxt) + 1).astype(float)
+            w[0] = w[0] if rng.random() < 0.5 else 0.0
+            w[1] = w[1] if rng.random() < 0.6 else 0.0  # some choices never reach it
+            p = w / w.sum()
+            row = {s: float(p[0])} if p[0] > 0 else {}
+            for t, q in zip(nxt, p[1:], strict=True):
+                row[t] = row.get(t, 0.0) + float(q)
+            row[dead] += 1.0 - sum(row.values())
+            mine.append((f"a{a}", row))
+        if rng.random() < 0.35:  # the same distribution again: an exact tie
+            mine.append((f"a{len(mine)}", dict(mine[0][1])))
+        states.append(mine)
+    states += [[], []]
+    return build_mdp(states, target=[goal], sink=[dead])
+
+
+def _rows(q, s: int):
+    """State ``s``'s choices: (choice, self-loop, [(col, p)] in the matrix's order)."""
+    out = []
+    for c in range(int(q.row_groups[s]), int(q.row_groups[s + 1])):
+        lo, hi = q.matrix.indptr[c], q.matrix.indptr[c + 1]
+        cols, vals = q.matrix.indices[lo:hi].tolist(), q.matrix.data[lo:hi].tolist()
+        stay = sum(v for col, v in zip(cols, vals, strict=True) if col == s)
+        out.append((c, stay, [(col, v) for col, v in zip(cols, vals, strict=True)
+                              if col != s]))
+    return out
+
+
+def _levels(sl: SingleLevels) -> list[list[int]]:
+    at = sl.level_state
+    return [[int(s) for s in sl.states[int(at[k]):int(at[k + 1])]]
+            for k in range(at.size - 1)]
+
+
+def _plain_values(q, sl: SingleLevels, skip: np.ndarray, start: np.ndarray):
+    """The values walk state by state: each choice's score from the values below, the
+    best within TIE (relative) of the top, the larger one-step reward among those
+    preferred (the smaller for a minimum), then the first."""
+    maximum = q.sense is Sense.MAX
+    v = start.copy()
+    choice = np.full(q.n_states, -1, dtype=np.int64)
+    weights = np.zeros(q.matrix.shape[0])
+    for level in _levels(sl):
+        for s in level:
+            if skip[s]:
+                continue
+            scored = []
+            for c, stay, entries in _rows(q, s):
+                acc = 0.0
+                for col, p in entries:
+                    acc += p * v[col]
+                scored.append((c, min(max((q.to_target[c] + acc) / (1.0 - stay), 0.0),
+                                      1.0)))
+            top = (max if maximum else min)(score for _, score in scored)
+            tied = [(c, score) for c, score in scored
+                    if ((score - top) if maximum else (top - score)) >= -1e-12 * abs(top)]
+            prefer = [q.to_target[c] if maximum else -q.to_target[c] for c, _ in tied]
+            c, score = tied[prefer.index(max(prefer))]
+            v[s], choice[s] = score, c
+            weights[c] = 1.0
+    return v, choice, weights
+
+
+def _walk_values(q, sl: SingleLevels, skip: np.ndarray, start: np.ndarray):
+    v = start.copy()
+    choice = np.full(q.n_states, -1, dtype=np.int64)
+    weights = np.zeros(q.matrix.shape[0])
+    sl.values(0, q.order.n_levels, q.to_target, skip, v, choice, weights)
+    return v, choice, weights
+
+
+def _numpy_only(sl: SingleLevels) -> SingleLevels:
+    """``sl`` walked by the NumPy calls the compiled products replace."""
+    sl.ptr = None
+    return sl
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+def test_values_walk_is_the_plain_loop_to_the_bit(seed: int, sense: Sense) -> None:
+    mdp = _tied_deadline_mdp(seed)
+    q, _ = analyse(mdp, mdp.target, sense=sense)
+    sl = SingleLevels(q, q.order, compiled=False)
+    assert sl.ptr is not None and len(sl.runs) > 20
+    rng = np.random.default_rng(seed)
+    skip = rng.random(q.n_states) < 0.1  # kept as they are, read by the others
+    start = np.where(skip, rng.random(q.n_states), 0.0)
+    want = _plain_values(q, sl, skip, start)
+    got = _walk_values(q, sl, skip, start)
+    assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want, strict=True))
+    # exact ties were decided by the rule, not all by a lone best
+    ties = sum(len(_rows(q, s)) > 1 for s in sl.states.tolist())
+    assert ties > 20
+    numpy = _walk_values(q, _numpy_only(SingleLevels(q, q.order, compiled=False)),
+                         skip, start)
+    assert all(g.tobytes() == w.tobytes() for g, w in zip(got, numpy, strict=True))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+def test_bounds_and_flow_by_compiled_products_are_the_numpy_walks(seed: int,
+                                                                 sense: Sense) -> None:
+    mdp = _tied_deadline_mdp(seed)
+    q, _ = analyse(mdp, mdp.target, sense=sense)
+    fast = SingleLevels(q, q.order, compiled=False)
+    slow = _numpy_only(SingleLevels(q, q.order, compiled=False))
+    rewards = np.column_stack([q.to_target, 0.25 * q.to_target, q.to_target ** 2])
+    got, want = np.zeros((q.n_states, 3)), np.zeros((q.n_states, 3))
+    fast.solve(0, q.order.n_levels, rewards, got)
+    slow.solve(0, q.order.n_levels, rewards, want)
+    assert got.tobytes() == want.tobytes() and np.any(got > 0)
+    # the plain recursion of the first column, written here
+    plain = np.zeros(q.n_states)
+    pick = max if sense is Sense.MAX else min
+    for level in _levels(fast):
+        for s in level:
+            scores = []
+            for c, stay, entries in _rows(q, s):
+                acc = 0.0
+                for col, p in entries:
+                    acc += p * plain[col]
+                scores.append(min(max((q.to_target[c] + acc) / (1.0 - stay), 0.0), 1.0))
+            plain[s] = pick(scores)
+    assert got[:, 0].tobytes() == plain.tobytes()
+    # the flow of a randomised policy, upstream first, both ways and by hand
+    rng = np.random.default_rng(seed)
+    weights = rng.random(q.matrix.shape[0])
+    groups = q.row_groups
+    weights /= np.repeat(np.add.reduceat(weights, groups[:-1]), np.diff(groups))
+    self_loop = np.asarray(q.order.self_loop)
+    x0 = rng.random(q.n_states)
+    a, b = x0.copy(), x0.copy()
+    fast.flow(0, q.order.n_levels, self_loop, weights, a)
+    slow.flow(0, q.order.n_levels, self_loop, weights, b)
+    assert a.tobytes() == b.tobytes()
+    hand = x0.copy()
+    for level in reversed(_levels(fast)):
+        rows = [(s, _rows(q, s)) for s in level]
+        for s, choices in rows:
+            kept = 0.0
+            for c, _, _ in choices:
+                kept += weights[c] * self_loop[c]
+            hand[s] /= 1.0 - kept
+        for s, choices in rows:
+            for c, _, entries in choices:
+                for col, p in entries:
+                    hand[col] += p * (weights[c] * hand[s])
+    assert a.tobytes() == hand.tobytes()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("upper", [True, False])
+def test_repair_reads_by_compiled_product_as_by_bincount(seed: int, upper: bool) -> None:
+    mdp = _tied_deadline_mdp(seed, depth=20)
+    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
+    rnd = rounding(st.matrix)
+    comp, level = support_layers(mdp)
+    level_of = np.asarray(level)[np.asarray(comp)]
+    live = np.flatnonzero(np.diff(st.groups) > 0)
+    order = live[np.argsort(level_of[live], kind="stable")]
+    walk = R._Walk(st, order, level_of[order])
+    assert walk.row_entry is not None
+    x = np.random.default_rng(seed).random(mdp.n_states)
+    at = walk.level_at.tolist()
+    for a, z in zip(at[:-1], at[1:], strict=True):
+        got = walk.needed(rnd, x, a, z, upper)
+        # each state's need read again from its own rows (the state-by-state route)
+        want = R._needed(st, rnd, x, order[a:z], upper)
+        assert got.tobytes() == want.tobytes()
+
+
+DEADLINE = """mdp
+const int D = 40;
+module m
+  t : [0..D] init 0;
+  x : [0..10] init 0;
+  [go] t<D & x<10 -> 0.3 : (x'=x+1)&(t'=t+1) + 0.1 : (x'=0)&(t'=t+1) + 0.6 : (t'=t+1);
+  [go2] t<D & x<10 -> 0.3 : (x'=x+1)&(t'=t+1) + 0.1 : (x'=0)&(t'=t+1) + 0.6 : (t'=t+1);
+  [slow] t<D & x<10 -> 0.2 : (x'=x+1)&(t'=t+1) + 0.7 : (t'=t+1) + 0.1 : (t'=t);
+  [jump] t<D-1 & x<9 -> 0.15 : (x'=x+2)&(t'=t+2) + 0.85 : (t'=t+2);
+  [stop] t=D | x=10 -> true;
+endmodule
+label "goal" = x=10;
+"""
+
+
+@pytest.mark.parametrize("objective, prop", [("max", "Pmax=? [F \"goal\"]"),
+                                             ("min", "Pmin=? [F \"goal\"]")])
+def test_prism_deadline_with_ties_holds_storms_exact_value(tmp_path, monkeypatch,
+                                                           objective: str,
+                                                           prop: str) -> None:
+    from mitld_lp import load_model, synthesize
+
+    prism = tmp_path / "deadline.prism"
+    prism.write_text(DEADLINE)
+    model = tmp_path / "deadline.toml"
+    model.write_text(f'name = "deadline"\nspec = "F reached"\nobjective = "{objective}"\n\n'
+                     f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "x=10"\n')
+    exact = storm_rational(prism, prop)
+    fast = synthesize(load_model(model))
+    assert fast.certified, fast.failed_checks
+    assert Fraction(fast.lower) <= exact <= Fraction(fast.upper)
+    assert fast.upper - fast.lower < 1e-6
+    assert 0.01 < float(exact) < 0.99  # not decided by the graph alone
+    # the NumPy calls the compiled products replace: the same bits
+    monkeypatch.setattr(level_batches, "_st", None)
+    monkeypatch.setattr(R, "_st", None)
+    slow = synthesize(load_model(model))
+    assert (slow.lower, slow.upper) == (fast.lower, fast.upper)
