@@ -206,13 +206,22 @@ def test_repair_reads_by_compiled_product_as_by_bincount(seed: int, upper: bool)
     order = live[np.argsort(level_of[live], kind="stable")]
     walk = R._Walk(st, order, level_of[order])
     assert walk.row_entry is not None
-    x = np.random.default_rng(seed).random(mdp.n_states)
+    assert walk.filled
+    rng = np.random.default_rng(seed)
+    x = rng.random(mdp.n_states)
+    mark = rng.random(mdp.n_states) < 0.05
     at = walk.level_at.tolist()
+    m = st.matrix
     for a, z in zip(at[:-1], at[1:], strict=True):
         got = walk.needed(rnd, x, a, z, upper)
         # each state's need read again from its own rows (the state-by-state route)
         want = R._needed(st, rnd, x, order[a:z], upper)
         assert got.tobytes() == want.tobytes()
+        # whether a row of a state's choices holds a marked state, by hand
+        reads = [any(mark[m.indices[e]] for c in range(st.groups[s], st.groups[s + 1])
+                     for e in range(m.indptr[c], m.indptr[c + 1]))
+                 for s in order[a:z].tolist()]
+        assert walk.reading(mark, a, z).tolist() == reads
 
 
 DEADLINE = """mdp

@@ -114,7 +114,7 @@ class _Walk:
 
     __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
                  "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at",
-                 "row_entry")
+                 "row_entry", "filled")
 
     def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
         self.states = states
@@ -139,6 +139,7 @@ class _Walk:
                 and self.vals.dtype == np.float64 and bool(np.all(np.diff(row_entry) > 0))
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         self.row_entry = row_entry.astype(self.cols.dtype) if fits else None
+        self.filled = bool(np.all(np.diff(self.entry_at) > 0))  # every state an entry
 
     def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
                upper: bool) -> np.ndarray:
@@ -162,8 +163,12 @@ class _Walk:
                         upper, compiled)
 
     def reading(self, mark: np.ndarray, a: int, z: int) -> np.ndarray:
-        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state."""
+        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state (one
+        segmented ``or`` where every state of the walk has an entry)."""
         ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        if self.filled:
+            return np.logical_or.reduceat(mark[self.cols[ea:ez]],
+                                          self.entry_at[a:z] - ea)
         hit = self.entry_state[ea:ez][mark[self.cols[ea:ez]]]
         out = np.zeros(z - a, dtype=bool)
         out[hit - a] = True
@@ -186,11 +191,16 @@ class _Repair:
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
     readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    in_mec: np.ndarray | None = None  # ``mec_of >= 0``, made at the first call
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
         the states whose value moved."""
         if self.mec_of is None:
+            return states
+        if self.in_mec is None:
+            self.in_mec = self.mec_of >= 0
+        if not self.in_mec[states].any():  # (most moves, on a deadline's levels)
             return states
         mecs = np.unique(self.mec_of[states])
         mecs = mecs[mecs >= 0]
