@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.rows import gather_ranges
 
 try:  # SciPy's compiled CSR/CSC products, as scipy.sparse's own products call them
     from scipy.sparse import _sparsetools as _st
@@ -115,6 +116,7 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     prefer_of = reward_of if maximum else -reward_of
     index = np.arange(max(cz - ca for _, _, ca, cz, _, _ in runs))
     done_states, done_picks = [], []
+    deferred: list[tuple[int, int, int, int, np.ndarray]] = []
     flat, n = _flat(sl, out), out.shape[0]
     for a, z, ca, cz, ea, ez in runs:
         if flat is not None:  # SciPy's compiled product: one call, the same sums
@@ -133,25 +135,60 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
             best, pick = score, ch
         else:  # segmented_argmax's ties and preference, on the level's segments
             starts, own = sl.first_choice[a:z], sl.owner_at[ca:cz]
-            top = reduce.reduceat(score, starts)[own]
+            best = reduce.reduceat(score, starts)
+            top = best[own]
             tied = (score - top if maximum else top - score) >= -TIE * np.abs(top)
-            if np.count_nonzero(tied) == z - a:  # each state's best alone within TIE
-                at = np.flatnonzero(tied)  # (the preference and the first index agree)
-            else:
+            if (tied & (score != top)).any():  # a near-tie: the pick sets the value
                 key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
                 tied &= key >= np.maximum.reduceat(key, starts)[own]
                 at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
-            best, pick = score[at], ch[at]
+                best, pick = score[at], ch[at]
+            else:  # every tied choice scores the top: the value is the top whichever
+                # is picked, and the pick is made after the walk (:func:`_picked`)
+                deferred.append((a, z, ca, cz, tied))
+                pick = None
         states = sl.states[a:z]
         if not every:
             live = live_of[a:z]
-            states, best, pick = states[live], best[live], pick[live]
+            states, best = states[live], best[live]
         out[states] = best
+        if pick is not None:
+            done_states.append(states)
+            done_picks.append(pick if every else pick[live])
+    if deferred:
+        states, pick = _picked(sl, deferred, prefer_of, ca0)
+        if not every:
+            live = live_of[states]
+            states, pick = sl.states[states[live]], pick[live]
+        else:
+            states = sl.states[states]
         done_states.append(states)
         done_picks.append(pick)
     picks = np.concatenate(done_picks)
     reduced_choice[np.concatenate(done_states)] = picks
     weights[picks] = 1.0
+
+
+def _picked(sl: SingleLevels, deferred: list[tuple[int, int, int, int, np.ndarray]],
+            prefer_of: np.ndarray, ca0: int) -> tuple[np.ndarray, np.ndarray]:
+    """The choices of the levels whose value did not wait for their pick (``deferred``:
+    each level's slices and its choices within TIE of their state's top), picked at once
+    by the walk's rule on the levels' segments laid end to end: among the tied, the
+    largest preference, then the first.  Returns the positions of their states in
+    ``sl.states`` and each one's choice."""
+    a, z, ca, cz, masks = (list(t) for t in zip(*deferred, strict=True))
+    tied = np.concatenate(masks)
+    at = gather_ranges(np.asarray(ca), np.asarray(cz))  # the choices' positions in sl
+    per_level = np.asarray(cz) - np.asarray(ca)
+    size = np.asarray(z) - np.asarray(a)
+    where = gather_ranges(np.asarray(a), np.asarray(z))  # the states' positions in sl
+    starts = (np.asarray(sl.first_choice[where], dtype=np.int64)
+              + np.repeat(np.cumsum(per_level) - per_level, size))
+    own = np.repeat(np.arange(where.size), np.diff(np.append(starts, tied.size)))
+    key = np.where(tied, prefer_of[at - ca0], -np.inf)
+    tied &= key >= np.maximum.reduceat(key, starts)[own]
+    first = np.minimum.reduceat(np.where(tied, np.arange(tied.size), _LAST), starts)
+    return where, sl.choices[at[first]]
 
 
 def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
