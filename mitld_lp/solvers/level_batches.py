@@ -6,18 +6,23 @@ states each (QVBS ``zeroconf_dl`` 1000-1-30: 1,164 levels, 91,929 single states)
 walk's cost is its NumPy calls a level (each some microseconds whatever its size), not
 its arithmetic.  :func:`bounds` (the interval iteration's walk) and :func:`flow` (the
 LP's policy flow) do once for the whole walk, not per level, whatever does not depend
-on the values below a level -- each choice's one-step reward gathered, the index of
-each entry's sum (for every column of the bounds at once: one ``bincount`` with ``k``
-bins a choice instead of ``k``), the flow's divisors (they depend only on the policy)
--- with the same floating-point operations on the same operands in the same
-order as the plain walks, so the same bits.
+on the values below a level -- each choice's one-step reward gathered, the flow's
+divisors (they depend only on the policy) -- with the same floating-point operations on
+the same operands in the same order as the plain walks, so the same bits.
 
-:meth:`SingleLevels.values` keeps its plain walk (:func:`values`, moved here): its
-levels need each state's *chosen* score, and the choice among near-ties (within
-:data:`TIE`, the larger one-step reward preferred) is a level's own: on ``zeroconf_dl``
-1000-1-30, 466 of its 1,099 levels with several choices a state have a near-tie, and
-the walk that picks only those levels the plain way measured 0.115 s against the plain
-walk's 0.100 s.
+A level's sums are one call of SciPy's compiled CSR product (``csr_matvec``, or
+``csr_matvecs`` for the bounds' columns) on the walk's own arrays, the level's choices'
+entry pointers a slice (:attr:`SingleLevels.ptr`), and the flow's scatter one call of
+the CSC product (``csc_matvec``, a choice a column): each sum starts from 0 and adds its
+entries' products in their order, as ``bincount`` and ``ufunc.at`` did, so the same
+bits (where the index types do not allow it, the ``bincount`` walks are kept).
+
+:func:`values` (the LP's values walk) needs each state's *chosen* score: the choice
+among near-ties (within :data:`TIE`, the larger one-step reward preferred, then the
+first) is a level's own where a tied choice scores below the top (466 of
+``zeroconf_dl`` 1000-1-30's 1,099 levels with several choices a state).  Where every
+tied choice scores the top exactly (or none ties), the value is the top whichever is
+picked: those levels' picks are made after the walk, all at once (:func:`_picked`).
 """
 
 from __future__ import annotations
