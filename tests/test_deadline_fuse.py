@@ -1,9 +1,11 @@
-"""The deadline walks summed by SciPy's compiled CSR/CSC products (issue 45): the LP's
-values walk (its choice among near-ties included), the iteration's bounds walk, the
-flow walk and the repair's level reads, each against a plain state-by-state loop written
-here and against the NumPy calls they replace (to the bit), on random acyclic MDPs with
-exact ties; and a small PRISM deadline model with tied actions solved end to end
-against Storm's exact engine, the same bits either way."""
+"""The deadline walks summed by SciPy's compiled CSR/CSC products (issue 45), to the bit,
+on random acyclic MDPs with exact ties: the LP's values walk (its choice among near-ties
+and the picks left to after the walk included) and the repair's level reads against
+plain state-by-state loops written here; those two, the iteration's bounds walk and the
+flow walk against the NumPy calls they replace (the bounds' and flow's plain loops are
+``test_deadline_walks``', which run on the products too); and a small PRISM deadline
+model with tied actions solved end to end against Storm's exact engine, the same bits
+either way."""
 
 from __future__ import annotations
 
@@ -14,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import build_mdp
 
 from mitld_lp.solvers import certify as C
 from mitld_lp.solvers import certify_repair as R
@@ -26,56 +27,29 @@ from mitld_lp.solvers.rounding import rounding
 from mitld_lp.solvers.topological import SingleLevels
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from storm_exact import storm_rational  # noqa: E402
+from test_deadline_walks import _deadline_mdp, _plain_order, _plain_rows, _posed  # noqa: E402,I001
 
 
 def _tied_deadline_mdp(seed: int, depth: int = 30, width: int = 5):
-    """``depth`` layers of ``width`` states; each choice stays put, moves one or two
-    layers ahead, or to the goal / the dead end; a third of the states repeat a choice
-    (an exact tie: the walk's preference and first index decide)."""
-    rng = np.random.default_rng(seed)
-    n = depth * width
-    goal, dead = n, n + 1
-    states = []
-    for s in range(n):
-        layer = s // width
-        mine = []
-        for a in range(int(rng.integers(1, 4))):
-            ahead = [(layer + int(rng.integers(1, 3))) * width + int(j)
-                     for j in rng.choice(width, 2, replace=False)]
-            nxt = [goal, dead] + [t if t < n else dead for t in ahead]
-            w = rng.integers(1, 9, size=len(nxt) + 1).astype(float)
-            w[0] = w[0] if rng.random() < 0.5 else 0.0
-            w[1] = w[1] if rng.random() < 0.6 else 0.0  # some choices never reach it
-            p = w / w.sum()
-            row = {s: float(p[0])} if p[0] > 0 else {}
-            for t, q in zip(nxt, p[1:], strict=True):
-                row[t] = row.get(t, 0.0) + float(q)
-            row[dead] += 1.0 - sum(row.values())
-            mine.append((f"a{a}", row))
-        if rng.random() < 0.35:  # the same distribution again: an exact tie
-            mine.append((f"a{len(mine)}", dict(mine[0][1])))
-        states.append(mine)
-    states += [[], []]
-    return build_mdp(states, target=[goal], sink=[dead])
+    """``test_deadline_walks``' deadline-like MDP with exact ties (repeated choices)."""
+    return _deadline_mdp(seed, depth, width, ties=True)
 
 
-def _rows(q, s: int):
+def _singles(seed: int, sense: Sense):
+    """The quotient of a tied deadline MDP and its single levels, walked by NumPy."""
+    mdp = _tied_deadline_mdp(seed)
+    q, _ = analyse(mdp, mdp.target, sense=sense)
+    return q, SingleLevels(q, q.order, compiled=False)
+
+
+def _rows(q, sl: SingleLevels, s: int):
     """State ``s``'s choices: (choice, self-loop, [(col, p)] in the matrix's order)."""
-    out = []
-    for c in range(int(q.row_groups[s]), int(q.row_groups[s + 1])):
-        lo, hi = q.matrix.indptr[c], q.matrix.indptr[c + 1]
-        cols, vals = q.matrix.indices[lo:hi].tolist(), q.matrix.data[lo:hi].tolist()
-        stay = sum(v for col, v in zip(cols, vals, strict=True) if col == s)
-        out.append((c, stay, [(col, v) for col, v in zip(cols, vals, strict=True)
-                              if col != s]))
-    return out
+    return _plain_rows(q, sl, int(np.flatnonzero(sl.states == s)[0]))[1]
 
 
 def _levels(sl: SingleLevels) -> list[list[int]]:
-    at = sl.level_state
-    return [[int(s) for s in sl.states[int(at[k]):int(at[k + 1])]]
-            for k in range(at.size - 1)]
+    """The single states of ``sl``, level by level."""
+    return [[int(sl.states[i]) for i in level] for level in _plain_order(sl)]
 
 
 def _plain_values(q, sl: SingleLevels, skip: np.ndarray, start: np.ndarray):
@@ -91,7 +65,7 @@ def _plain_values(q, sl: SingleLevels, skip: np.ndarray, start: np.ndarray):
             if skip[s]:
                 continue
             scored = []
-            for c, stay, entries in _rows(q, s):
+            for c, stay, entries in _rows(q, sl, s):
                 acc = 0.0
                 for col, p in entries:
                     acc += p * v[col]
@@ -124,9 +98,7 @@ def _numpy_only(sl: SingleLevels) -> SingleLevels:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_values_walk_is_the_plain_loop_to_the_bit(seed: int, sense: Sense) -> None:
-    mdp = _tied_deadline_mdp(seed)
-    q, _ = analyse(mdp, mdp.target, sense=sense)
-    sl = SingleLevels(q, q.order, compiled=False)
+    q, sl = _singles(seed, sense)
     assert sl.ptr is not None and len(sl.runs) > 20
     rng = np.random.default_rng(seed)
     skip = rng.random(q.n_states) < 0.1  # kept as they are, read by the others
@@ -135,7 +107,7 @@ def test_values_walk_is_the_plain_loop_to_the_bit(seed: int, sense: Sense) -> No
     got = _walk_values(q, sl, skip, start)
     assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want, strict=True))
     # exact ties were decided by the rule, not all by a lone best
-    ties = sum(len(_rows(q, s)) > 1 for s in sl.states.tolist())
+    ties = sum(len(_rows(q, sl, s)) > 1 for s in sl.states.tolist())
     assert ties > 20
     numpy = _walk_values(q, _numpy_only(SingleLevels(q, q.order, compiled=False)),
                          skip, start)
@@ -146,52 +118,23 @@ def test_values_walk_is_the_plain_loop_to_the_bit(seed: int, sense: Sense) -> No
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_bounds_and_flow_by_compiled_products_are_the_numpy_walks(seed: int,
                                                                  sense: Sense) -> None:
-    mdp = _tied_deadline_mdp(seed)
-    q, _ = analyse(mdp, mdp.target, sense=sense)
-    fast = SingleLevels(q, q.order, compiled=False)
+    """The bounds and flow walks by SciPy's products against their NumPy calls (their
+    plain state-by-state loops: ``test_deadline_walks``, run on the products too)."""
+    q, fast = _singles(seed, sense)
     slow = _numpy_only(SingleLevels(q, q.order, compiled=False))
     rewards = np.column_stack([q.to_target, 0.25 * q.to_target, q.to_target ** 2])
     got, want = np.zeros((q.n_states, 3)), np.zeros((q.n_states, 3))
     fast.solve(0, q.order.n_levels, rewards, got)
     slow.solve(0, q.order.n_levels, rewards, want)
     assert got.tobytes() == want.tobytes() and np.any(got > 0)
-    # the plain recursion of the first column, written here
-    plain = np.zeros(q.n_states)
-    pick = max if sense is Sense.MAX else min
-    for level in _levels(fast):
-        for s in level:
-            scores = []
-            for c, stay, entries in _rows(q, s):
-                acc = 0.0
-                for col, p in entries:
-                    acc += p * plain[col]
-                scores.append(min(max((q.to_target[c] + acc) / (1.0 - stay), 0.0), 1.0))
-            plain[s] = pick(scores)
-    assert got[:, 0].tobytes() == plain.tobytes()
-    # the flow of a randomised policy, upstream first, both ways and by hand
-    rng = np.random.default_rng(seed)
-    weights = rng.random(q.matrix.shape[0])
-    groups = q.row_groups
-    weights /= np.repeat(np.add.reduceat(weights, groups[:-1]), np.diff(groups))
-    self_loop = np.asarray(q.order.self_loop)
-    x0 = rng.random(q.n_states)
+    # the flow of the uniform randomised policy, upstream first, both ways
+    counts = np.diff(q.row_groups)
+    uniform = np.repeat(1.0 / np.maximum(counts, 1), counts)
+    x0 = np.random.default_rng(seed).random(q.n_states)
     a, b = x0.copy(), x0.copy()
-    fast.flow(0, q.order.n_levels, self_loop, weights, a)
-    slow.flow(0, q.order.n_levels, self_loop, weights, b)
-    assert a.tobytes() == b.tobytes()
-    hand = x0.copy()
-    for level in reversed(_levels(fast)):
-        rows = [(s, _rows(q, s)) for s in level]
-        for s, choices in rows:
-            kept = 0.0
-            for c, _, _ in choices:
-                kept += weights[c] * self_loop[c]
-            hand[s] /= 1.0 - kept
-        for s, choices in rows:
-            for c, _, entries in choices:
-                for col, p in entries:
-                    hand[col] += p * (weights[c] * hand[s])
-    assert a.tobytes() == hand.tobytes()
+    fast.flow(0, q.order.n_levels, np.asarray(q.order.self_loop), uniform, a)
+    slow.flow(0, q.order.n_levels, np.asarray(q.order.self_loop), uniform, b)
+    assert a.tobytes() == b.tobytes() and not np.array_equal(a, x0)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -246,12 +189,7 @@ def test_prism_deadline_with_ties_holds_storms_exact_value(tmp_path, monkeypatch
                                                            prop: str) -> None:
     from mitld_lp import load_model, synthesize
 
-    prism = tmp_path / "deadline.prism"
-    prism.write_text(DEADLINE)
-    model = tmp_path / "deadline.toml"
-    model.write_text(f'name = "deadline"\nspec = "F reached"\nobjective = "{objective}"\n\n'
-                     f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "x=10"\n')
-    exact = storm_rational(prism, prop)
+    model, exact = _posed(tmp_path, DEADLINE, "x=10", objective, prop)
     fast = synthesize(load_model(model))
     assert fast.certified, fast.failed_checks
     assert Fraction(fast.lower) <= exact <= Fraction(fast.upper)
