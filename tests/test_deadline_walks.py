@@ -162,9 +162,10 @@ def test_a_component_graph_off_tarjans_order_is_walked(monkeypatch) -> None:
 # ------------------------------------------------------------- the single-state walks
 
 
-def _deadline_mdp(seed: int, depth: int = 40, width: int = 6):
+def _deadline_mdp(seed: int, depth: int = 40, width: int = 6, ties: bool = False):
     """A deadline-like MDP: ``depth`` layers of ``width`` states, each choice staying put,
-    moving to the next layers, or to the goal / the dead end."""
+    moving to the next layers, or to the goal / the dead end.  ``ties``: some choices
+    never reach the goal, and a third of the states repeat a choice (an exact tie)."""
     rng = np.random.default_rng(seed)
     n = depth * width
     goal, dead = n, n + 1
@@ -178,12 +179,16 @@ def _deadline_mdp(seed: int, depth: int = 40, width: int = 6):
             nxt = [goal, dead] + [t if t < n else dead for t in ahead]
             w = rng.integers(1, 9, size=len(nxt) + 1).astype(float)
             w[0] = w[0] if rng.random() < 0.5 else 0.0
+            if ties:
+                w[1] = w[1] if rng.random() < 0.6 else 0.0
             p = w / w.sum()
             row = {s: float(p[0])} if p[0] > 0 else {}
             for t, q in zip(nxt, p[1:], strict=True):
                 row[t] = row.get(t, 0.0) + float(q)
             row[dead] += 1.0 - sum(row.values())
             mine.append((f"a{a}", row))
+        if ties and rng.random() < 0.35:  # the same distribution again
+            mine.append((f"a{len(mine)}", dict(mine[0][1])))
         states.append(mine)
     states += [[], []]
     return build_mdp(states, target=[goal], sink=[dead])
@@ -281,18 +286,24 @@ label "goal" = x=12;
 """
 
 
+def _posed(tmp_path: Path, program: str, reached: str, objective: str, prop: str):
+    """The PRISM ``program`` as a model file whose task is to reach ``reached`` (the
+    ``objective``), and Storm's exact value of ``prop`` on it."""
+    prism = tmp_path / "deadline.prism"
+    prism.write_text(program)
+    model = tmp_path / "deadline.toml"
+    model.write_text(f'name = "deadline"\nspec = "F reached"\nobjective = "{objective}"\n\n'
+                     f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "{reached}"\n')
+    return model, storm_rational(prism, prop)
+
+
 @pytest.mark.parametrize("objective, prop", [("max", "Pmax=? [F \"goal\"]"),
                                              ("min", "Pmin=? [F \"goal\"]")])
 def test_prism_deadline_bracket_holds_storms_exact_value(tmp_path, monkeypatch,
                                                          objective: str, prop: str) -> None:
     from mitld_lp import load_model, synthesize
 
-    prism = tmp_path / "deadline.prism"
-    prism.write_text(DEADLINE)
-    model = tmp_path / "deadline.toml"
-    model.write_text(f'name = "deadline"\nspec = "F reached"\nobjective = "{objective}"\n\n'
-                     f'[prism]\nfile = "{prism}"\n\n[labels]\nreached = "x=12"\n')
-    exact = storm_rational(prism, prop)
+    model, exact = _posed(tmp_path, DEADLINE, "x=12", objective, prop)
     brackets, used = [], _searches(monkeypatch)
     for searched in (False, True):
         if searched:  # every graph large and thin: the levels searched

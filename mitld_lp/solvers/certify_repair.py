@@ -15,6 +15,11 @@ import scipy.sparse as sp
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 
+try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
+    _st = None
+
 __all__ = ["ROUNDS", "SPARSE_LEVEL", "Rows"]
 
 ROUNDS = 64
@@ -73,14 +78,26 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
 
 def _need_of(rnd: Rounding, x: np.ndarray, local: np.ndarray, cols: np.ndarray,
              vals: np.ndarray, rows: np.ndarray, choice_starts: np.ndarray | None,
-             state_starts: np.ndarray, upper: bool) -> np.ndarray:
+             state_starts: np.ndarray, upper: bool,
+             compiled: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+             ) -> np.ndarray:
     """:func:`_needed` from the rows' entries (``local``: each one's position in
     ``rows``), read once for both: their sums (rows_dot) and the extreme of ``x`` over
-    their supports (support_extreme), each as those compute it."""
+    their supports (support_extreme), each as those compute it.  ``compiled``: the
+    rows' entry pointers (no row empty) with the whole walk's columns and values, for
+    SciPy's compiled CSR product (the same sums: each row's from 0 in its entries'
+    order) and a segmented extreme (the same extreme) in place of ``bincount`` and
+    ``ufunc.at``, a few calls fewer on a level."""
     reached = x[cols]
-    sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
-    ext = np.full(rows.size, -np.inf if upper else np.inf)
-    (np.maximum if upper else np.minimum).at(ext, local, reached)
+    if compiled is not None:
+        ptr, all_cols, all_vals = compiled
+        sums = np.zeros(rows.size)
+        _st.csr_matvec(rows.size, x.shape[0], ptr, all_cols, all_vals, x, sums)
+        ext = (np.maximum if upper else np.minimum).reduceat(reached, ptr[:-1] - ptr[0])
+    else:
+        sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
+        ext = np.full(rows.size, -np.inf if upper else np.inf)
+        (np.maximum if upper else np.minimum).at(ext, local, reached)
     each = np.minimum(above(rnd, rows, sums), ext) if upper else \
         np.maximum(below(rnd, rows, sums), ext)
     if choice_starts is not None:
@@ -96,7 +113,8 @@ class _Walk:
     deadline clock makes a thousand levels: QVBS ``zeroconf_dl`` 1000-1-30)."""
 
     __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
-                 "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at")
+                 "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at",
+                 "row_entry", "filled")
 
     def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
         self.states = states
@@ -114,6 +132,14 @@ class _Walk:
         row_state = np.repeat(np.arange(states.size), np.diff(self.row_at))
         self.entry_state = row_state[self.local]
         self.entry_at = np.searchsorted(self.local, self.row_at)  # per state, first entry
+        # per row its first entry, in the columns' index type, for SciPy's compiled
+        # product (:func:`_need_of`); ``None`` where a row is empty or the types differ
+        row_entry = np.searchsorted(self.local, np.arange(rows.size + 1))
+        fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
+                and self.vals.dtype == np.float64 and bool(np.all(np.diff(row_entry) > 0))
+                and self.cols.size < np.iinfo(self.cols.dtype).max)
+        self.row_entry = row_entry.astype(self.cols.dtype) if fits else None
+        self.filled = bool(np.all(np.diff(self.entry_at) > 0))  # every state an entry
 
     def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
                upper: bool) -> np.ndarray:
@@ -128,13 +154,21 @@ class _Walk:
             state_starts = self.state_starts[a:z] - ca
         else:
             choice_starts, state_starts = None, self.state_starts[a:z] - ra
+        compiled = None
+        if (self.row_entry is not None and x.dtype == np.float64
+                and x.flags.c_contiguous and x.ndim == 1):
+            compiled = (self.row_entry[ra:rz + 1], self.cols, self.vals)
         return _need_of(rnd, x, self.local[ea:ez] - ra, self.cols[ea:ez],
                         self.vals[ea:ez], self.rows[ra:rz], choice_starts, state_starts,
-                        upper)
+                        upper, compiled)
 
     def reading(self, mark: np.ndarray, a: int, z: int) -> np.ndarray:
-        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state."""
+        """Per state ``a:z``: whether a row of its choices holds a ``mark`` state (one
+        segmented ``or`` where every state of the walk has an entry)."""
         ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+        if self.filled:
+            return np.logical_or.reduceat(mark[self.cols[ea:ez]],
+                                          self.entry_at[a:z] - ea)
         hit = self.entry_state[ea:ez][mark[self.cols[ea:ez]]]
         out = np.zeros(z - a, dtype=bool)
         out[hit - a] = True
@@ -157,11 +191,16 @@ class _Repair:
     members: tuple[np.ndarray, np.ndarray] | None = None
     moved: int = 0
     readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    in_mec: np.ndarray | None = None  # ``mec_of >= 0``, made at the first call
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
         the states whose value moved."""
         if self.mec_of is None:
+            return states
+        if self.in_mec is None:
+            self.in_mec = self.mec_of >= 0
+        if not self.in_mec[states].any():  # (most moves, on a deadline's levels)
             return states
         mecs = np.unique(self.mec_of[states])
         mecs = mecs[mecs >= 0]

@@ -6,18 +6,23 @@ states each (QVBS ``zeroconf_dl`` 1000-1-30: 1,164 levels, 91,929 single states)
 walk's cost is its NumPy calls a level (each some microseconds whatever its size), not
 its arithmetic.  :func:`bounds` (the interval iteration's walk) and :func:`flow` (the
 LP's policy flow) do once for the whole walk, not per level, whatever does not depend
-on the values below a level -- each choice's one-step reward gathered, the index of
-each entry's sum (for every column of the bounds at once: one ``bincount`` with ``k``
-bins a choice instead of ``k``), the flow's divisors (they depend only on the policy)
--- with the same floating-point operations on the same operands in the same
-order as the plain walks, so the same bits.
+on the values below a level -- each choice's one-step reward gathered, the flow's
+divisors (they depend only on the policy) -- with the same floating-point operations on
+the same operands in the same order as the plain walks, so the same bits.
 
-:meth:`SingleLevels.values` keeps its plain walk (:func:`values`, moved here): its
-levels need each state's *chosen* score, and the choice among near-ties (within
-:data:`TIE`, the larger one-step reward preferred) is a level's own: on ``zeroconf_dl``
-1000-1-30, 466 of its 1,099 levels with several choices a state have a near-tie, and
-the walk that picks only those levels the plain way measured 0.115 s against the plain
-walk's 0.100 s.
+A level's sums are one call of SciPy's compiled CSR product (``csr_matvec``, or
+``csr_matvecs`` for the bounds' columns) on the walk's own arrays, the level's choices'
+entry pointers a slice (:attr:`SingleLevels.ptr`), and the flow's scatter one call of
+the CSC product (``csc_matvec``, a choice a column): each sum starts from 0 and adds its
+entries' products in their order, as ``bincount`` and ``ufunc.at`` did, so the same
+bits (where the index types do not allow it, the ``bincount`` walks are kept).
+
+:func:`values` (the LP's values walk) needs each state's *chosen* score: the choice
+among near-ties (within :data:`TIE`, the larger one-step reward preferred, then the
+first) is a level's own where a tied choice scores below the top (466 of
+``zeroconf_dl`` 1000-1-30's 1,099 levels with several choices a state).  Where every
+tied choice scores the top exactly (or none ties), the value is the top whichever is
+picked: those levels' picks are made after the walk, all at once (:func:`_picked`).
 """
 
 from __future__ import annotations
@@ -27,6 +32,12 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.rows import gather_ranges
+
+try:  # SciPy's compiled CSR/CSC products, as scipy.sparse's own products call them
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: the NumPy calls below
+    _st = None
 
 SingleLevels = Any  # :class:`~mitld_lp.solvers.topological.SingleLevels` (which imports
 # this module: its annotation here would make a circle)
@@ -38,6 +49,15 @@ _LAST = np.iinfo(np.int64).max
 TIE = 1e-12
 """A single state's choices within this of the best score, relative to it, are tied
 (:func:`~mitld_lp.solvers.topological.solve_single_states`; re-exported there)."""
+
+
+def _flat(sl: SingleLevels, out: np.ndarray) -> np.ndarray | None:
+    """``out`` as the flat float64 vector SciPy's compiled CSR/CSC products
+    (``scipy.sparse._sparsetools``) read and write in place, or ``None`` where they
+    cannot be used (no entry pointers of the walk's index type, a strided ``out``)."""
+    if _st is None or sl.ptr is None or out.dtype != np.float64 or not out.flags.c_contiguous:
+        return None
+    return out.reshape(-1)
 
 
 def _relative_choices(runs: list[tuple[int, ...]]) -> np.ndarray:
@@ -57,15 +77,23 @@ def bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
     k = out.shape[1]
     ca0, cz1, ea0, ez1 = runs[0][2], runs[-1][3], runs[0][4], runs[-1][5]
     reward = rewards[sl.choices[ca0:cz1]]  # (choices, k), a copy: the scores' storage
-    rel = _relative_choices(runs)[np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0]
-    bins = (rel[:, None] * k + np.arange(k)).ravel()
-    del rel
     leave = sl.leave[:, None]
     reduce = np.maximum if sl.sense is Sense.MAX else np.minimum
+    flat = _flat(sl, out)
+    if flat is None:
+        rel = _relative_choices(runs)[np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0]
+        bins = (rel[:, None] * k + np.arange(k)).ravel()
+        del rel
+    n = out.shape[0]
     for a, z, ca, cz, ea, ez in runs:
-        terms = sl.vals[ea:ez, None] * out[sl.cols[ea:ez]]
-        sums = np.bincount(bins[(ea - ea0) * k:(ez - ea0) * k], weights=terms.ravel(),
-                           minlength=(cz - ca) * k).reshape(cz - ca, k)
+        if flat is not None:  # SciPy's compiled product: one call, the same sums
+            sums = np.zeros((cz - ca, k))
+            _st.csr_matvecs(cz - ca, n, k, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat,
+                            sums.reshape(-1))
+        else:
+            terms = sl.vals[ea:ez, None] * out[sl.cols[ea:ez]]
+            sums = np.bincount(bins[(ea - ea0) * k:(ez - ea0) * k], weights=terms.ravel(),
+                               minlength=(cz - ca) * k).reshape(cz - ca, k)
         score = reward[ca - ca0:cz - ca0]
         score += sums
         np.divide(score, leave[ca:cz], out=score)
@@ -93,9 +121,15 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     prefer_of = reward_of if maximum else -reward_of
     index = np.arange(max(cz - ca for _, _, ca, cz, _, _ in runs))
     done_states, done_picks = [], []
+    deferred: list[tuple[int, int, int, int, np.ndarray]] = []
+    flat, n = _flat(sl, out), out.shape[0]
     for a, z, ca, cz, ea, ez in runs:
-        sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
-                           weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
+        if flat is not None:  # SciPy's compiled product: one call, the same sums
+            sums = np.zeros(cz - ca)
+            _st.csr_matvec(cz - ca, n, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat, sums)
+        else:
+            sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
+                               weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
         ch = sl.choices[ca:cz]
         reward = reward_of[ca - ca0:cz - ca0] + sums
         leave = sl.leave[ca:cz]
@@ -106,22 +140,60 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
             best, pick = score, ch
         else:  # segmented_argmax's ties and preference, on the level's segments
             starts, own = sl.first_choice[a:z], sl.owner_at[ca:cz]
-            top = reduce.reduceat(score, starts)[own]
+            best = reduce.reduceat(score, starts)
+            top = best[own]
             tied = (score - top if maximum else top - score) >= -TIE * np.abs(top)
-            key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
-            tied &= key >= np.maximum.reduceat(key, starts)[own]
-            at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
-            best, pick = score[at], ch[at]
+            if (tied & (score != top)).any():  # a near-tie: the pick sets the value
+                key = np.where(tied, prefer_of[ca - ca0:cz - ca0], -np.inf)
+                tied &= key >= np.maximum.reduceat(key, starts)[own]
+                at = np.minimum.reduceat(np.where(tied, index[:cz - ca], _LAST), starts)
+                best, pick = score[at], ch[at]
+            else:  # every tied choice scores the top: the value is the top whichever
+                # is picked, and the pick is made after the walk (:func:`_picked`)
+                deferred.append((a, z, ca, cz, tied))
+                pick = None
         states = sl.states[a:z]
         if not every:
             live = live_of[a:z]
-            states, best, pick = states[live], best[live], pick[live]
+            states, best = states[live], best[live]
         out[states] = best
+        if pick is not None:
+            done_states.append(states)
+            done_picks.append(pick if every else pick[live])
+    if deferred:
+        states, pick = _picked(sl, deferred, prefer_of, ca0)
+        if not every:
+            live = live_of[states]
+            states, pick = sl.states[states[live]], pick[live]
+        else:
+            states = sl.states[states]
         done_states.append(states)
         done_picks.append(pick)
     picks = np.concatenate(done_picks)
     reduced_choice[np.concatenate(done_states)] = picks
     weights[picks] = 1.0
+
+
+def _picked(sl: SingleLevels, deferred: list[tuple[int, int, int, int, np.ndarray]],
+            prefer_of: np.ndarray, ca0: int) -> tuple[np.ndarray, np.ndarray]:
+    """The choices of the levels whose value did not wait for their pick (``deferred``:
+    each level's slices and its choices within TIE of their state's top), picked at once
+    by the walk's rule on the levels' segments laid end to end: among the tied, the
+    largest preference, then the first.  Returns the positions of their states in
+    ``sl.states`` and each one's choice."""
+    a, z, ca, cz, masks = (list(t) for t in zip(*deferred, strict=True))
+    tied = np.concatenate(masks)
+    at = gather_ranges(np.asarray(ca), np.asarray(cz))  # the choices' positions in sl
+    per_level = np.asarray(cz) - np.asarray(ca)
+    size = np.asarray(z) - np.asarray(a)
+    where = gather_ranges(np.asarray(a), np.asarray(z))  # the states' positions in sl
+    starts = (np.asarray(sl.first_choice[where], dtype=np.int64)
+              + np.repeat(np.cumsum(per_level) - per_level, size))
+    own = np.repeat(np.arange(where.size), np.diff(np.append(starts, tied.size)))
+    key = np.where(tied, prefer_of[at - ca0], -np.inf)
+    tied &= key >= np.maximum.reduceat(key, starts)[own]
+    first = np.minimum.reduceat(np.where(tied, np.arange(tied.size), _LAST), starts)
+    return where, sl.choices[at[first]]
 
 
 def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
@@ -137,6 +209,17 @@ def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
     w = weights[ch]
     keep = 1.0 - np.bincount(owner, weights=w * self_loop[ch], minlength=z1 - a0)
     local = np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0
+    flat, n = _flat(sl, x), x.shape[0]
+    if flat is not None:  # per choice its state's inflow times its weight, then SciPy's
+        # compiled scatter along the choice's entries (CSC by choice: the same order)
+        choice_state = sl.states[a0:z1][owner]
+        del local, owner
+        for a, z, ca, cz, _, _ in reversed(runs):
+            states = sl.states[a:z]
+            x[states] /= keep[a - a0:z - a0]
+            y = w[ca - ca0:cz - ca0] * x[choice_state[ca - ca0:cz - ca0]]
+            _st.csc_matvec(n, cz - ca, sl.ptr[ca:cz + 1], sl.cols, sl.vals, y, flat)
+        return
     entry_state = sl.states[a0:z1][owner[local]]  # whose inflow each entry carries
     entry_weight = w[local]
     del local, owner, w

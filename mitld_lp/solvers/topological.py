@@ -191,7 +191,7 @@ class SingleLevels:
 
     __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
                  "level_state", "state_choice", "choice_entry", "sense", "kernels",
-                 "positive", "runs", "run_at", "first_choice", "owner_at")
+                 "positive", "runs", "run_at", "first_choice", "owner_at", "ptr")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
@@ -210,6 +210,12 @@ class SingleLevels:
         self.local, self.cols, self.vals = off_diagonal_entries(
             q.matrix, self.choices, self.states[self.owner])
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
+        # the choices' entry pointers in the columns' index type: a level's sums (and
+        # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
+        # on the walk's arrays as they are (:mod:`~mitld_lp.solvers.level_batches`)
+        fits = (self.cols.dtype in (np.int32, np.int64) and self.vals.dtype == np.float64
+                and self.cols.size < np.iinfo(self.cols.dtype).max)
+        self.ptr = self.choice_entry.astype(self.cols.dtype) if fits else None
         self.leave = 1.0 - b.self_loop[self.choices]
         self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
