@@ -284,7 +284,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     comp_of = np.zeros(n_red, dtype=np.int64)
     comp_of[state_map[maybe]] = found.component[maybe]
     order = _order(matrix, row_groups, comp_of, found.level)
-    layers = (read_only(found.component), read_only(found.level))
+    # kept by the models for the certificate: in the index type (4 bytes a state and a
+    # component where the size allows; the same numbers)
+    layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
+              read_only(found.level.astype(index_dtype(n), copy=False)))
     init = int(mdp.initial)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
 

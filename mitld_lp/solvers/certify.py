@@ -189,13 +189,17 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     # a lower bound may be 0 anywhere; an upper bound's 0 on ``zero`` is a candidate,
     # checked like every other value (the graph's word is not taken on trust)
     free = target | zero if not upper else target.copy()
-    level_of = np.asarray(layers[1])[np.asarray(layers[0])]
-    base = np.where(target, 1.0, 0.0)
-    if one is not None:
-        base[one] = 1.0
+
+    def base() -> np.ndarray:
+        # made for each candidate, not held beside it (a float a state): the
+        # certificate's peak on QVBS wlan_dl
+        x = np.where(target, 1.0, 0.0)
+        if one is not None:
+            x[one] = 1.0
+        return x
 
     def candidate(scale: float) -> np.ndarray:
-        x = base.copy()
+        x = base()
         idx = ch.solved & ~free
         if upper:
             x[idx] = np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0)
@@ -224,12 +228,18 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
                 x[live] = np.maximum(np.minimum(x[live], f[live] * (1.0 - 2.0**-30)), 0.0)
             return x
         candidates.append(("the iteration's bound", from_iteration))
+    level_of = None  # each state's level, made when a candidate first needs a repair
     for label, make in candidates:
         x = make()
         failing = _fails(st, rnd, x, free, upper)
-        repair = _Repair(st, rnd, free, level_of, mecs, upper)
+        moved = 0
         if failing.any():
-            if not repair.run(x, failing):
+            if level_of is None:
+                level_of = np.asarray(layers[1])[np.asarray(layers[0])]
+            repair = _Repair(st, rnd, free, level_of, mecs, upper)
+            closed = repair.run(x, failing)
+            moved = repair.moved
+            if not closed:
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
                 continue
             failing = _fails(st, rnd, x, free, upper)
@@ -239,10 +249,10 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         return Side(float(x[initial]), Check(name, True, (
             f"{'pre' if upper else 'sub'}-fixed point of the Bellman operator checked in "
             f"exact arithmetic on {int((~free).sum())} states and every choice "
-            f"({label}, eta {rnd.eta:.2g}" + (f", {repair.moved} states repaired" if
-                                               repair.moved else "")
+            f"({label}, eta {rnd.eta:.2g}" + (f", {moved} states repaired" if
+                                               moved else "")
             + f"): {float(x[initial])!r}")), read_only(x))
-    x = base.copy()
+    x = base()
     x[~free] = 1.0 if upper else 0.0
     return Side(float(x[initial]), Check(name, False, (
         "no candidate passed (" + "; ".join(tried) + f"); the bound is the trivial "

@@ -79,7 +79,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     src = np.repeat(states.astype(index), hi - lo)
     dst = m.indices[entries].astype(index, copy=False)
     val = m.data[entries]
-    del entries, lo, hi
+    # the acting states and their rows (two int64 a state) are in ``src`` now: freed
+    # before the search's reversed edges (the certificate's peak on QVBS csma)
+    del entries, lo, hi, states, rows
     pos = val > 0
     if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
         src, dst, val = src[pos], dst[pos], val[pos]

@@ -190,7 +190,9 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
         rest = rest[~blk.single(rest) & ~q.zero[rest]]
         count = int(live[blk.level_starts[index + 1]] - live[blk.level_starts[done]])
         done = index + 1
-        yield Level(index, np.empty(count, dtype=np.int64), empty, rest)
+        # ``states`` only counts them (the progress bar): a read-only view of one
+        # int64 of that size, no array of a state each held through the walk
+        yield Level(index, np.broadcast_to(np.int64(0), (count,)), empty, rest)
 
 
 def block_lp(block: Block, values: np.ndarray, reward: np.ndarray | None = None
@@ -408,13 +410,17 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         values[rest] = polished.values
         reduced_choice[rest] = block.choices[polished.chosen]
         weights[block.choices] = polished.weights
-    # the last block's LP, bounds and answers are not the flow's: freed before it
+    # the last block's LP, bounds and answers are not the flow's: freed before it, and
+    # so are the reduced states' bounds (two floats a state, this function's own: the
+    # caller passes them as a temporary) and the last level (its arrays)
     block = lp = reward = greedy = tight = columns = y = duals = polished = None  # type: ignore[assignment]
+    pruned = bounds is not None
+    bounds = level = upd = rest = None  # type: ignore[assignment]
     y = policy_flow(q, blk, weights, b_eq, singles, walks)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
                + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"
-                  if bounds is not None and calls else "")
+                  if pruned and calls else "")
                + (f"; {n_eliminated} single-choice block states eliminated"
                   if n_eliminated else "")
                + (f"; {n_greedy} block states by the bounds' greedy policy, certified"
