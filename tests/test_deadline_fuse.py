@@ -200,3 +200,42 @@ def test_prism_deadline_with_ties_holds_storms_exact_value(tmp_path, monkeypatch
     monkeypatch.setattr(R, "_st", None)
     slow = synthesize(load_model(model))
     assert (slow.lower, slow.upper) == (fast.lower, fast.upper)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_chain_levels_by_compiled_product_as_by_bincount(seed: int, monkeypatch) -> None:
+    """The certificate's chain walk (``certify_chain._Singles.solve``) sums a level by
+    SciPy's CSR product where it can: the same ``v`` and ``w`` to the bit as the
+    bincounts, and ``v`` the chain's solution (a dense solve, written apart)."""
+    from mitld_lp.solvers import certify_chain as CC
+
+    monkeypatch.setattr(CC, "level_kernels", lambda *a: None)  # the NumPy walk
+    rng = np.random.default_rng(seed)
+    n = 60
+    rows, cols, vals = [], [], []
+    for s in range(n):  # a transient chain: entries to higher states only, a self-loop
+        succ = rng.choice(np.arange(s, n), size=min(3, n - s), replace=False)
+        p = rng.random(succ.size)
+        p = 0.9 * p / p.sum()
+        rows += [s] * succ.size
+        cols += succ.tolist()
+        vals += p.tolist()
+    sub = sp.csr_array((np.array(vals), (np.array(rows), np.array(cols))), shape=(n, n))
+    b = rng.random(n) * 0.1
+    kappa = np.full(n, 1e-16)
+    calls = []
+
+    class Spy:  # SciPy's product, counted
+        def csr_matvec(self, *a):
+            calls.append(1)
+            return st.csr_matvec(*a)
+
+    st, spy = CC._st, Spy()
+    monkeypatch.setattr(CC, "_st", spy)
+    v, w = CC._solve(sub, b, kappa, None)
+    assert calls  # the compiled product was used
+    monkeypatch.setattr(CC, "_st", None)
+    v0, w0 = CC._solve(sub, b, kappa, None)
+    assert np.array_equal(v, v0) and np.array_equal(w, w0)
+    dense = np.linalg.solve(np.eye(n) - sub.toarray(), b)
+    assert np.allclose(v, dense, rtol=1e-12, atol=1e-14)

@@ -17,6 +17,11 @@ from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.solvers.topological import level_kernels
 
+try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
+    _st = None
+
 __all__ = ["Chain", "RowModel", "support_layers", "chain"]
 
 
@@ -187,6 +192,11 @@ class _Singles:
         self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
         self.local, self.cols, self.vals = row_entries(sub, self.order)
         self.entry_at = np.searchsorted(self.local, np.arange(self.order.size + 1))
+        fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
+                and self.vals.dtype == np.float64
+                and self.cols.size < np.iinfo(self.cols.dtype).max)
+        # entry pointers of the columns' type: SciPy's product sums a level's rows
+        self.ptr = self.entry_at.astype(self.cols.dtype) if fits else None
         self.sub = sub
         self.kernels = level_kernels(sub.nnz, blk.n_levels)
 
@@ -202,12 +212,18 @@ class _Singles:
                                       s.indices, s.data, diag, b, kappa, v, w)
             return
         marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
+        n = v.shape[0]
         for lv in marks.tolist():
             a, z = int(at[lv]), int(at[lv + 1])
-            ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
-            local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]
-            down_v = np.bincount(local, weights=vals * v[cols], minlength=z - a)
-            down_w = np.bincount(local, weights=vals * w[cols], minlength=z - a)
+            if self.ptr is not None:  # one compiled call a sum: from 0, in the entries' order
+                down_v, down_w = np.zeros(z - a), np.zeros(z - a)
+                _st.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, v, down_v)
+                _st.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, w, down_w)
+            else:
+                ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
+                local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]
+                down_v = np.bincount(local, weights=vals * v[cols], minlength=z - a)
+                down_w = np.bincount(local, weights=vals * w[cols], minlength=z - a)
             one = self.order[a:z]
             v[one] = (b[one] + down_v) / (1.0 - diag[one])
             w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
