@@ -33,10 +33,7 @@ Run: ``python experiments/bench_sensed_corners.py [--quick] [--out DIR] [--compa
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -44,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import _common as C
+from bench_sensed import parsed, run_child
 
 _TASKS = {  # class -> (spec, whether the spec asks for the event's law by D[mu] b)
     "co-safe": ("D[mu] b & F(b & F[0,2] goal)", True),
@@ -134,26 +132,6 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
     out.write_text(json.dumps(row), encoding="utf-8")
 
 
-def child(index: int, quick: bool, code: Path | None, storm: bool) -> dict[str, Any]:
-    """:func:`worker` in a child process (``code``: the checkout it imports, default this
-    one)."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(code or C.ROOT), str(C.HERE)])
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "row.json"
-        argv = [sys.executable, __file__, "--worker", str(index), str(out)]
-        argv += ["--quick"] if quick else []
-        argv += [] if storm else ["--no-storm"]
-        with tempfile.TemporaryFile() as errors:
-            proc = subprocess.run(argv, cwd=code or C.ROOT, stdout=subprocess.DEVNULL,
-                                  stderr=errors, env=env, check=False)
-            errors.seek(0)
-            err = errors.read().decode(errors="replace")
-        if proc.returncode != 0:
-            raise RuntimeError(f"case {index} failed:\n{err[-2000:]}")
-        return json.loads(out.read_text(encoding="utf-8"))
-
-
 def least(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The first run's answer with the least CPU seconds of all runs."""
     out = dict(runs[0])
@@ -177,31 +155,21 @@ def fmt(key: str, v: Any) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = C.parser(__doc__.splitlines()[0])
-    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
-                    help="also run with the mitld_lp of this checkout (before/after)")
-    ap.add_argument("--repeats", type=int, default=1,
-                    help="runs of each child; the least CPU of them is reported (default 1)")
-    ap.add_argument("--only", default=None, metavar="TEXT",
-                    help="only the cases whose name contains TEXT (e.g. safety)")
-    ap.add_argument("--worker", nargs=2, default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--no-storm", action="store_true", help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.worker is not None:
-        worker(int(args.worker[0]), args.quick, Path(args.worker[1]), not args.no_storm)
+    args = parsed(__doc__.splitlines()[0], "safety", worker, argv)
+    if args is None:
         return 0
-    if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
-        ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
     out = C.out_dir(args)
     rows = []
     for i, (task, extra) in enumerate(QUICK if args.quick else FULL):
         name = f"{task} band {extra}"
         if args.only is not None and args.only not in name:
             continue
-        ours = least([child(i, args.quick, None, storm=k == 0) for k in range(args.repeats)])
+        ours = least([run_child(__file__, i, args.quick, None, storm=k == 0)
+                      for k in range(args.repeats)])
         row: dict[str, Any] = {"case": name, **ours}
         if args.compare is not None:
-            base = least([child(i, args.quick, args.compare.resolve(), storm=False)
+            base = least([run_child(__file__, i, args.quick, args.compare.resolve(),
+                                    storm=False)
                           for _ in range(args.repeats)])
             for key in ("solve_cpu", "unfold_cpu", "process_cpu"):
                 row[f"base_{key}"] = base[key]

@@ -59,13 +59,9 @@ class _Reference(_Unfolding):
                     for a, e in zip(open_, ends, strict=True)])
                 here.append((name, self.step(node)))
             choices.append(here)
-        union = []
-        for here in choices:
-            row: dict[int, float] = {}
-            for _, r in here:
-                for k, p in r.items():
-                    row[k] = max(row.get(k, 0.0), p)
-            union.append(row)
+        # each successor's greatest probability over the corners, in order of first sight
+        union = [{k: max(r.get(k, 0.0) for _, r in here)
+                  for k in dict.fromkeys(k for _, r in here for k in r)} for here in choices]
         return self.record(union), choices
 
     def drawn(self, node: tuple[Any, ...]) -> list[Any]:

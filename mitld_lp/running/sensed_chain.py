@@ -284,13 +284,9 @@ class _Unfolding:
         for occurred, p in self.events(pending, clock):
             branches = [(pending - occurred, p)]
             for a in sorted(pending - occurred):
-                c = self.sta.clocks[a]
-                if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+                never = never_share(self.sta.clocks[a], clock)
+                if never is None:
                     continue
-                last = last_event_step(c.distribution)
-                never = 1.0 if last is not None and last <= c.truncation else min(
-                    float(c.distribution.never)
-                    / float(c.distribution.survival(c.truncation)), 1.0)
                 branches = [(b - {a}, q * never) for b, q in branches] + [
                     (b, q * (1.0 - never)) for b, q in branches]
             out += [(occurred, b, q) for b, q in branches if q > 0.0]
@@ -362,6 +358,19 @@ class _Unfolding:
                                      for x in self.order], self.mixes)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
                      rewards)
+
+
+def never_share(c: Any, clock: int) -> float | None:
+    """The probability that the event of the clock ``c``, a sensed event that may never
+    happen, still pending when the step from ``clock`` reaches its truncation point,
+    never happens: ``never / P(K > T)``, or 1 past a band's last step
+    (:meth:`_Unfolding.outcomes`); None where the step does not reach that point or the
+    event keeps no such hypothesis."""
+    if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+        return None
+    last = last_event_step(c.distribution)
+    return 1.0 if last is not None and last <= c.truncation else min(
+        float(c.distribution.never) / float(c.distribution.survival(c.truncation)), 1.0)
 
 
 def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int]

@@ -28,9 +28,8 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
-from mitld_lp.distributions.band import last_event_step
 from mitld_lp.running.chain_model import Chain
-from mitld_lp.running.sensed_chain import _plan_of, _TaskEnds, _Unfolding
+from mitld_lp.running.sensed_chain import _plan_of, _TaskEnds, _Unfolding, never_share
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 
@@ -255,13 +254,9 @@ class _CornerUnfolding(_Unfolding):
         that may never happen, at its truncation point)."""
         branches: list[tuple[frozenset[str], tuple[float, ...]]] = [(pending - occurred, ())]
         for a in sorted(pending - occurred):
-            c = self.sta.clocks[a]
-            if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+            never = never_share(self.sta.clocks[a], clock)
+            if never is None:
                 continue
-            last = last_event_step(c.distribution)
-            never = 1.0 if last is not None and last <= c.truncation else min(
-                float(c.distribution.never)
-                / float(c.distribution.survival(c.truncation)), 1.0)
             branches = [(b - {a}, (*f, never)) for b, f in branches] + [
                 (b, (*f, 1.0 - never)) for b, f in branches]
         return branches
