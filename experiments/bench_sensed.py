@@ -144,12 +144,19 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
 def child(index: int, quick: bool, code: Path | None, storm: bool) -> dict[str, Any]:
     """:func:`worker` in a child process (``code``: the checkout it imports, default this
     one)."""
+    return run_child(__file__, index, quick, code, storm)
+
+
+def run_child(script: str, index: int, quick: bool, code: Path | None,
+              storm: bool) -> dict[str, Any]:
+    """The worker of ``script`` (an experiment with this one's options,
+    :func:`add_options`) for case ``index`` in a child process importing the
+    ``mitld_lp`` of ``code`` (default this checkout); its row."""
     env = dict(os.environ)
-    if code is not None:
-        env["PYTHONPATH"] = os.pathsep.join([str(code), str(C.HERE)])
+    env["PYTHONPATH"] = os.pathsep.join([str(code or C.ROOT), str(C.HERE)])
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "row.json"
-        argv = [sys.executable, __file__, "--worker", str(index), str(out)]
+        argv = [sys.executable, script, "--worker", str(index), str(out)]
         argv += ["--quick"] if quick else []
         argv += [] if storm else ["--no-storm"]
         with tempfile.TemporaryFile() as errors:
@@ -163,22 +170,34 @@ def child(index: int, quick: bool, code: Path | None, storm: bool) -> dict[str, 
         return json.loads(out.read_text(encoding="utf-8"))
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = C.parser(__doc__.splitlines()[0])
+def parsed(description: str, only: str, worker: Any, argv: list[str] | None
+           ) -> argparse.Namespace | None:
+    """The options of a before/after benchmark run case by case in child processes
+    (``--quick``, ``--out``, ``--compare``, ``--repeats``, ``--only``, with ``only`` an
+    example, and the child's own); None when this process is a child, after running
+    its case by ``worker(index, quick, out, storm)``."""
+    ap = C.parser(description)
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
-                    help="also build with the mitld_lp of this checkout (before/after)")
+                    help="also run with the mitld_lp of this checkout (before/after)")
     ap.add_argument("--repeats", type=int, default=1,
                     help="runs of each child; the least CPU of them is reported (default 1)")
     ap.add_argument("--only", default=None, metavar="TEXT",
-                    help="only the cases whose name contains TEXT (e.g. bus_fit)")
+                    help=f"only the cases whose name contains TEXT (e.g. {only})")
     ap.add_argument("--worker", nargs=2, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--no-storm", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
         worker(int(args.worker[0]), args.quick, Path(args.worker[1]), not args.no_storm)
-        return 0
+        return None
     if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
         ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parsed(__doc__.splitlines()[0], "bus_fit", worker, argv)
+    if args is None:
+        return 0
     out = C.out_dir(args)
     rows = []
     for i, case in enumerate(QUICK if args.quick else FULL):

@@ -189,9 +189,12 @@ def info_merged(belief: Belief, ends: JointEnds, *, timed: bool,
     plain: list[dict[Verdict, float]] = [{} for _ in range(n)]
     for i in np.flatnonzero(info).tolist():
         s = records[i]
+        row = worth[i]
         for w, v in zip(s.weights, _verdicts_of(belief, ends, s), strict=True):
             share[i] += w if v[0] == UNDECIDED else 0.0
-            worth[i] += w * (np.asarray(v) == ACCEPTED)
+            for j, x in enumerate(v):  # w on each component accepted (0.0 added elsewhere)
+                if x == ACCEPTED:
+                    row[j] += w
             _add(plain[i], v, None, w)
     share *= winnable(belief, keeps)  # no step counts where the task is lost
     mecs = maximal_end_components(mdp, info)

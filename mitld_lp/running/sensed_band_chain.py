@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from mitld_lp.files import drn
 from mitld_lp.files import write as files
 from mitld_lp.running.band_chain import BAND_PROPERTY, BandChain, band_chain_drn
-from mitld_lp.running.sensed_chain import sensed_corner_unfolding
+from mitld_lp.running.sensed_corners import sensed_corner_unfolding
 
 __all__ = ["SensedBandValue", "NatureMax", "chain_floor", "is_sensed_band", "nature_max",
            "reach_from_below", "sensed_band_chain",
@@ -376,11 +376,20 @@ def _live(rows: sp.csr_array, seeds: np.ndarray) -> np.ndarray:
     (``seeds`` included)."""
     from scipy.sparse.csgraph import breadth_first_order
 
+    n = rows.shape[0]
     back = sp.csr_array(rows.T)
-    live = np.zeros(rows.shape[0], dtype=bool)
-    for s0 in np.flatnonzero(seeds).tolist():
-        if not live[s0]:
-            live[breadth_first_order(back, s0, return_predecessors=False)] = True
+    live = np.zeros(n, dtype=bool)
+    starts = np.flatnonzero(seeds)
+    if not starts.size:
+        return live
+    # one search from a state n added before every seed (an edge to each), not one
+    # search a seed: the same states, found in one pass over the graph
+    indptr = np.append(back.indptr, back.indptr[-1] + starts.size)
+    indices = np.concatenate([back.indices, starts.astype(back.indices.dtype)])
+    data = np.concatenate([back.data, np.ones(starts.size, dtype=back.data.dtype)])
+    joined = sp.csr_array((data, indices, indptr), shape=(n + 1, n + 1))
+    found = breadth_first_order(joined, n, return_predecessors=False)
+    live[found[found < n]] = True
     return live
 
 

@@ -51,7 +51,6 @@ and labels (``c<i>``, ``done``, the reward ``steps``) are
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Hashable, Mapping
 from typing import Any
 
@@ -69,7 +68,7 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["is_sensed", "sensed_chain", "sensed_corner_unfolding", "sensed_chain_of"]
+__all__ = ["is_sensed", "sensed_chain", "sensed_chain_of"]
 
 
 _REPORTED = -1
@@ -285,13 +284,9 @@ class _Unfolding:
         for occurred, p in self.events(pending, clock):
             branches = [(pending - occurred, p)]
             for a in sorted(pending - occurred):
-                c = self.sta.clocks[a]
-                if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+                never = never_share(self.sta.clocks[a], clock)
+                if never is None:
                     continue
-                last = last_event_step(c.distribution)
-                never = 1.0 if last is not None and last <= c.truncation else min(
-                    float(c.distribution.never)
-                    / float(c.distribution.survival(c.truncation)), 1.0)
                 branches = [(b - {a}, q * never) for b, q in branches] + [
                     (b, q * (1.0 - never)) for b, q in branches]
             out += [(occurred, b, q) for b, q in branches if q > 0.0]
@@ -326,7 +321,9 @@ class _Unfolding:
         n = len(rows)
         matrix = rows_matrix(rows)
         props = prop_labels()
-        fields = (*state_fields(self.game), "q", "pending", "clock", "unreported", "memory")
+        fields = ("q", "pending", "clock", "unreported", "memory")
+        world_fields = state_fields(self.game)
+        worlds: dict[Hashable, tuple[frozenset[str], str]] = {}  # labels, valuation text
         labels: list[frozenset[str]] = []
         valuations: list[str] = []
         origin = np.full(n, -1, dtype=np.int64)
@@ -336,7 +333,11 @@ class _Unfolding:
                 valuations.append(node)
                 continue
             g, q, pending, clock, unreported, memory = node
-            here = {props(p) for p in self.label(g)} | self.ends.labels(q)
+            world = worlds.get(g)
+            if world is None:
+                world = worlds[g] = (frozenset(props(p) for p in self.label(g)),
+                                     valuation_text(world_fields, state_values(self.game, g)))
+            here = set(world[0]) | self.ends.labels(q)
             if q in self.dta.persistent:
                 here.add("persistent")
             if memory == BEYOND:
@@ -346,9 +347,9 @@ class _Unfolding:
             labels.append(frozenset(here))
             waiting = ",".join(f"{a}:{w}" for a, w in zip(self.sensed, unreported, strict=True)
                                if w != _REPORTED)
-            valuations.append(valuation_text(fields, (
-                *state_values(self.game, g), q, "{" + ",".join(sorted(pending)) + "}", clock,
-                "{" + waiting + "}", "beyond" if memory == BEYOND else str(memory))))
+            valuations.append(world[1] + " & " + valuation_text(fields, (
+                q, "{" + ",".join(sorted(pending)) + "}", clock, "{" + waiting + "}",
+                "beyond" if memory == BEYOND else str(memory))))
         if SAFE in self.dta.kinds:
             for k in _kept_for_ever(matrix, self.order, self.dta.persistent):
                 labels[k] = labels[k] | {"accept"}
@@ -357,6 +358,19 @@ class _Unfolding:
                                      for x in self.order], self.mixes)
         return Chain(matrix, tuple(labels), tuple(valuations), origin, none, none.copy(),
                      rewards)
+
+
+def never_share(c: Any, clock: int) -> float | None:
+    """The probability that the event of the clock ``c``, a sensed event that may never
+    happen, still pending when the step from ``clock`` reaches its truncation point,
+    never happens: ``never / P(K > T)``, or 1 past a band's last step
+    (:meth:`_Unfolding.outcomes`); None where the step does not reach that point or the
+    event keeps no such hypothesis."""
+    if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
+        return None
+    last = last_event_step(c.distribution)
+    return 1.0 if last is not None and last <= c.truncation else min(
+        float(c.distribution.never) / float(c.distribution.survival(c.truncation)), 1.0)
 
 
 def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int]
@@ -378,102 +392,6 @@ def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int
         if isinstance(node, str) or node[1] not in persistent:
             good[comp[k]] = False
     return [k for k in range(n) if good[comp[k]]]
-
-
-def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
-                            sensors: Mapping[str, Sensor], controller: ControllerLike,
-                            max_states: int | None = None, *, ends: Any = None
-                            ) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
-    """The chain of ``controller`` (a controller that acts on sensor reports) where some
-    event's law is a band (``sta``'s clocks then give each step's hazard interval,
-    :meth:`~mitld_lp.automata.sta.EventClock.band`): every state has one choice per
-    corner of the box of the hazards of its pending events whose band is open at its
-    clock, nature's (:mod:`mitld_lp.running.sensed_band_chain`); where a randomised
-    controller draws among several actions, one per corner for each action drawn
-    (nature sees the robot's action, docs/robust.md).  Returns the chain of the union of
-    those choices' supports (its labels, valuations, states and rewards) and each
-    state's choices ``(name, row)``; past ``max_states`` states it stops
-    (:class:`~mitld_lp.util.memory.ProductTooLarge`).  ``ends``: as for
-    :func:`sensed_chain` (a joint automaton's)."""
-    plan, sensed = _plan_of(controller, sensors)
-    unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan,
-                                 ends or _TaskEnds(dta))
-    unfolding.max_states = max_states
-    return unfolding.corners()
-
-
-class _CornerUnfolding(_Unfolding):
-    """:class:`_Unfolding` with each step's hazards at one corner of the bands at a
-    time (``corner``: the hazard each open band event has in the step unfolded now)."""
-
-    corner: dict[str, float]
-    per_action: dict[str | None, dict[str, float]]
-    max_states: int | None = None
-
-    def corners(self) -> tuple[Chain, list[list[tuple[str, dict[int, float]]]]]:
-        self.start()
-        choices: list[list[tuple[str, dict[int, float]]]] = []
-        while len(choices) < len(self.order):
-            if self.max_states is not None and len(self.order) > self.max_states:
-                from mitld_lp.util.memory import ProductTooLarge
-
-                raise ProductTooLarge(
-                    f"the sensed controller's interval chain has more than "
-                    f"{self.max_states:,} states (max_states); raise max_states")
-            node = self.order[len(choices)]
-            if isinstance(node, str):
-                choices.append([("stay", {len(choices): 1.0})])
-                continue
-            _, _, pending, clock, _, _ = node
-            bands = {a: self.sta.clocks[a].band(clock) for a in sorted(pending)}
-            open_ = [a for a, (lo, hi) in bands.items() if lo < hi]
-            here = []
-            boxes = list(itertools.product((0, 1), repeat=len(open_)))
-            drawn = self.drawn(node) if open_ else [None]
-            for pick in itertools.product(boxes, repeat=len(drawn)):
-                self.per_action = {act: {a: bands[a][e] for a, e in zip(open_, ends,
-                                                                         strict=True)}
-                                   for act, ends in zip(drawn, pick, strict=True)}
-                name = "/".join(["act", *(
-                    ("" if act is None else f"{act}:") + f"{a}={('lo', 'hi')[e]}"
-                    for act, ends in zip(drawn, pick, strict=True)
-                    for a, e in zip(open_, ends, strict=True))])
-                here.append((name, self.step(node)))
-            choices.append(here)
-        union: list[dict[int, float]] = []
-        for here in choices:
-            row: dict[int, float] = {}
-            for _, r in here:
-                for k, p in r.items():
-                    row[k] = max(row.get(k, 0.0), p)
-            union.append(row)
-        return self.record(union), choices
-
-    def drawn(self, node: tuple[Any, ...]) -> list[str | None]:
-        """The actions a randomised controller draws among at ``node`` when it draws
-        among several (nature's corner is then chosen for each); else ``[None]``: one
-        corner for the step, whatever the controller does."""
-        g, _, _, _, _, memory = node
-        if UNDECIDED not in self.plan.verdicts_at(memory):
-            return [None]
-        d = self.plan.decision(g, memory)
-        if d.lost or d.weights is None or not d.actions:
-            return [None]
-        acts = [a for a, x in zip(d.actions, d.weights, strict=True) if x > 0.0]
-        return acts if len(acts) > 1 else [None]
-
-    def moves(self, node: tuple[Any, ...], action: str, p_action: float,
-              row: dict[int, float]) -> None:
-        self.corner = self.per_action.get(action, self.per_action.get(None, {}))
-        super().moves(node, action, p_action, row)
-
-    def events(self, pending: frozenset[str], clock: int
-               ) -> list[tuple[frozenset[str], float]]:
-        out: list[tuple[frozenset[str], float]] = [(frozenset(), 1.0)]
-        for a in sorted(pending):
-            h = self.corner.get(a, self.sta.clocks[a].band(clock)[0])
-            out = [(e | {a}, p * h) for e, p in out] + [(e, p * (1.0 - h)) for e, p in out]
-        return [(e, p) for e, p in out if p > 0.0]
 
 
 def _alarm_reports(out: list[tuple[frozenset[str], tuple[int, ...], float]], a: str,

@@ -244,8 +244,11 @@ class Keeps:
         info = np.array([isinstance(r, InfoState) for r in mdp.states], dtype=bool)
         self.every = np.zeros(n, dtype=bool)
         self.some = np.zeros(n, dtype=bool)
+        hypotheses: dict[int, Any] = {}  # each information state made once
         for i in np.flatnonzero(info).tolist():
-            kinds = self.status[i] = held(joint, mdp.states[i], belief.sensed, self.live)
+            s = mdp.states[i]
+            hypotheses[i] = s.hypotheses
+            kinds = self.status[i] = held(joint, s, belief.sensed, self.live)
             self.every[i], self.some[i] = None not in kinds, True in kinds
         whole = maximal_end_components(mdp, info & self.every)
         wider = maximal_end_components(mdp, info & self.some)
@@ -254,21 +257,23 @@ class Keeps:
         self.in_some = np.asarray(wider.mec_of) >= 0
         cs = mdp.choice_state()
         for ecs in (whole, wider):  # the first found keeps its own end component
+            internal = np.asarray(ecs.internal, dtype=bool)
             for m in range(ecs.n_mecs):
                 members = ecs.states_of(m)
-                if self._uniform(mdp, members):
+                if self._uniform(hypotheses, members):
                     fresh = members[~self.states[members]]
                     self.states[fresh] = True
-                    self.inside |= np.asarray(ecs.internal, dtype=bool) & np.isin(cs, fresh)
+                    among = np.zeros(n, dtype=bool)
+                    among[fresh] = True
+                    self.inside |= internal & among[cs]
         self.open_keeps = self.states & ~self.every
 
-    def _uniform(self, mdp: Any, members: np.ndarray) -> bool:
-        """Whether each hypothesis of these states is persistent in all that hold it
-        or in none."""
+    def _uniform(self, hypotheses: Mapping[int, Any], members: np.ndarray) -> bool:
+        """Whether each hypothesis of these states (``hypotheses``: per state, its
+        hypotheses) is persistent in all that hold it or in none."""
         seen: dict[tuple[int, ...], bool] = {}
         for y in members.tolist():
-            for (times, _), kind in zip(mdp.states[y].hypotheses, self.status[y],
-                                        strict=True):
+            for (times, _), kind in zip(hypotheses[y], self.status[y], strict=True):
                 mine = kind is True
                 if seen.setdefault(times, mine) != mine:
                     return False

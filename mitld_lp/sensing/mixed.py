@@ -16,6 +16,7 @@ once nothing undecided is left).  Its ``save`` writes the
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -65,16 +66,45 @@ def mixed_controller(game: Game[Any], belief: Any, merged: Any, prob: np.ndarray
         decisions[s] = Decision(tuple(names), np.asarray(weights), stay=min(stay, 1.0),
                                 inside=tuple(kept[s] or inside[s]))
 
-    def end(v: Any) -> Any:
-        if isinstance(v, verdict_type):
-            return "target" if v.verdicts[0] == ACCEPTED else "sink"
-        return v
-
-    moves = {k: {obs: end(v) for obs, v in row.items()} for k, row in belief.moves.items()}
+    moves = _EndedMoves(belief.moves, verdict_type)
     initial = mdp.states[mdp.initial]
     plan = MixedSensedPlan(
-        initial=end(initial) if merged.absorbing[mdp.initial] else mdp.initial,
+        initial=_end(initial, verdict_type) if merged.absorbing[mdp.initial] else mdp.initial,
         actions=(None,) * n, moves=moves, sensed=frozenset(belief.sensed),
         events=frozenset(belief.sta.events), ignored=frozenset(belief.ignored), game=game,
         decisions=tuple(decisions))
     return MixedSensedController(plan, seed=seed)
+
+
+def _end(v: Any, verdict_type: type) -> Any:
+    """A successor as the plan keeps it: a verdict record as its end, ``target`` where
+    the task is accepted, else ``sink``; any other as it is."""
+    if isinstance(v, verdict_type):
+        return "target" if v.verdicts[0] == ACCEPTED else "sink"
+    return v
+
+
+class _EndedMoves(Mapping[Any, Mapping[Any, Any]]):
+    """The product's moves (``moves[(state, action)][obs]``) with each successor read by
+    :func:`_end`, a state and action's table made the first time it is asked for (not
+    all of them when the controller is made: a chain or a run asks for few)."""
+
+    def __init__(self, moves: Mapping[Any, Mapping[Any, Any]], verdict_type: type) -> None:
+        self._moves, self._type = moves, verdict_type
+        self._made: dict[Any, dict[Any, Any]] = {}
+
+    def __getitem__(self, key: Any) -> Mapping[Any, Any]:
+        table = self._made.get(key)
+        if table is None:
+            table = self._made[key] = {obs: _end(v, self._type)
+                                       for obs, v in self._moves[key].items()}
+        return table
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self._moves)
+
+    def __len__(self) -> int:
+        return len(self._moves)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._moves
