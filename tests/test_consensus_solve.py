@@ -219,3 +219,35 @@ def test_the_line_holds_storms_exact_value(tmp_path: Path) -> None:
     lo, hi = Fraction(r.value_lower), Fraction(r.value_upper)
     assert lo <= exact * (1 + Fraction(1, 2**50)) and exact <= hi, (lo, exact, hi)
     assert hi - lo <= Fraction(defaults.TOL)
+
+
+def test_a_slower_tied_choice_makes_the_jump_seek_the_slowest_totals(monkeypatch) -> None:
+    """State 0 stops for 1/2 at once (1 step) or moves to a pair of states that pay 1/2
+    too, one step in fifty (by hand: v = 0.01 + 0.98 v = 1/2, 50 steps to leave): the two
+    choices tie, so the upper bound's shift by the policy's own exit times (1 at state
+    0) is refused by the check over every choice (the slow one's image is larger), and
+    the jump proves it with the slowest choices' totals (state 0: 1 + 50)."""
+    from mitld_lp.solvers import policy_jump
+
+    half, p, q = Fraction(1, 2), Fraction(98, 100), Fraction(1, 100)
+    rows = [[({}, half), ({1: Fraction(1)}, Fraction(0))],
+            [({2: p}, q)],
+            [({1: p}, q)]]
+    block, _ = _block(rows)
+    block = Block(block.states, block.choices, block.inner, sp.csr_array((4, 3)),
+                  block.starts, block.to_target)
+    calls = []
+    real = policy_jump.improve_ahead
+
+    def spy(*args, **kwargs):
+        calls.append(len(args) > 3 and args[3] is not None)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(policy_jump, "improve_ahead", spy)
+    lo, hi = np.zeros(3), np.ones(3)
+    tol = 1e-9
+    assert policy_jump.jump(block, lo, hi, tol, None, Sense.MAX)
+    for s in range(3):
+        assert Fraction(lo[s]) <= half <= Fraction(hi[s]), (s, lo[s], hi[s])
+        assert hi[s] - lo[s] <= tol
+    assert calls[-1] is True  # the slowest totals, over the tied choices

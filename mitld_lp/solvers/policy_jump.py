@@ -19,6 +19,14 @@ same, reversed).  The same block's jump then costs 0.36-0.39 s.  The fixpoint te
 unchanged (no choice gains more than :data:`~mitld_lp.solvers.topological.GAIN` over
 the exactly evaluated policy), and the bounds are proven by the checks whatever the
 policy, so the look-ahead can cost time but never soundness.
+
+**The policy's own totals first.**  The bound checked over every choice is shifted by
+``e W`` with ``W`` the largest expected total over the nearly optimal choices (one more
+policy iteration, one LU at least).  When the policy iterations end on the policy they
+started from, its own totals ``W = t`` are tried first and the check decides: on QVBS
+``consensus`` 4-4 ``c2`` it passed on all four blocks (excess -3e-13 to -4e-14), solve
+stage 0.72-0.77 -> 0.65 s CPU, the same bracket to the bit; where it refuses, the
+slowest choices' totals are computed as before.
 """
 
 from __future__ import annotations
@@ -146,11 +154,25 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
         return improve_ahead(block, np.repeat(u, counts), chosen_best, tied,
                              factors=factors)[1]
 
-    every_bound = _shifted(w, None, 1 if every else -1, tol, precision, slowest)
-    image = exit2[:, every] + inner_ld @ every_bound
     sign = 1.0 if every else -1.0
-    worst = float(np.max(sign * (image - np.repeat(every_bound, counts))))
-    every_ok = worst <= 0.0
+
+    def check(bound: np.ndarray) -> float:
+        image = exit2[:, every] + inner_ld @ bound
+        return float(np.max(sign * (image - np.repeat(bound, counts))))
+
+    # First the policy's own totals (no solve more): the check below proves the bound
+    # whatever W is, so the slowest choices' totals are sought only if it refuses.
+    every_ok = False
+    if np.array_equal(chosen_best, chosen):
+        every_bound = _shifted(w, t, 1 if every else -1, tol, precision,
+                               lambda u: evaluate_chain(block.inner, chosen,
+                                                        np.repeat(u, counts), factors)[0])
+        worst = check(every_bound)
+        every_ok = worst <= 0.0
+    if not every_ok:
+        every_bound = _shifted(w, None, 1 if every else -1, tol, precision, slowest)
+        worst = check(every_bound)
+        every_ok = worst <= 0.0
     for ok, side, bound in ((own_ok, own, own_bound), (every_ok, every, every_bound)):
         if not ok:
             continue
