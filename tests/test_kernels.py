@@ -135,9 +135,8 @@ def test_a_block_the_sweeps_cannot_close_is_jumped_before_the_sweep_limit(monkey
         assert r.lower[0] <= a + 1e-15 and a <= r.upper[0] + 1e-15
         assert float(np.max(r.upper - r.lower)) < 1e-9
         sweeps[optimistic] = r.iterations
-    # plain sweeps: the forecast gave up on them at its first look (from
-    # _EARLY_FROM sweeps), well before their limit of 1000
-    assert (iteration._EARLY_FROM <= sweeps[False]
+    # plain sweeps: the forecast gave up on them, well before their limit of 1000
+    assert (iteration._FORECAST_FROM <= sweeps[False]
             < iteration._COMPILED_SWEEPS_BEFORE_POLICY)
     # with guesses (kernels' module docs) the sweeps close it before the forecast looks
     assert sweeps[True] < iteration._FORECAST_FROM

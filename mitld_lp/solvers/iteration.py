@@ -185,23 +185,6 @@ of 89,760 states: 2.6 s CPU of sweeps, a jump of 0.65 s); jumped at 192, its swe
 took 1.1 s and its jump 8.1 s, as policy iteration from the greedy policy of a lower
 bound still 0.05 off takes many more rounds, each a factorisation."""
 _FORECAST_WINDOW = 64
-_EARLY_FROM = 32
-"""The compiled sweeps' forecast (:func:`_hopeless`) is read from this many sweeps, over
-the last :data:`_EARLY_WINDOW`, and a block it forecasts to need more than
-:data:`_EARLY_AHEAD` more sweeps is jumped there (:data:`_FORECAST_FROM` and
-:data:`_FORECAST_WINDOW` are the forecast's defaults, read before the jump's
-look-ahead: :mod:`mitld_lp.solvers.policy_jump`).  The jump then starts from the
-policy greedy on the block's *first* bounds (those its sweeps started from), not on
-the bounds the sweeps reached.  QVBS ``consensus`` 6-2 ``c2``'s three large blocks
-(87,225, 139,566 and 93,067 states), each alone from the bounds it is first given, CPU
-seconds on a loaded machine: swept to the end by the optimistic kernel 2.9, 5.8 and 4.2
-s (358, 391 and 372 sweeps); jumped at once 1.4-1.5, 3.6 and 2.6 s; after 32 sweeps,
-jumped from the bounds they reached 3.5 and 10.0 s (the first two), as policy iteration
-from the greedy policy of the guessed bounds takes many more rounds.  At 32 sweeps the
-forecast reads 580, 736 and 405 sweeps still needed.  A block that closes in a few dozen
-sweeps (QVBS ``zeroconf`` 1000-4-false's, 39) is not forecast to need more."""
-_EARLY_WINDOW = 16
-_EARLY_AHEAD = 256
 _NUMPY_FORECAST_FROM = 8
 """The same for the NumPy (Jacobi) sweeps, whose limit is :data:`_SWEEPS_BEFORE_POLICY`
 (their forecast from :data:`_FORECAST_FROM` was never read), over the last
@@ -233,8 +216,8 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
     Gauss--Seidel if ``compiled``, else Jacobi) until every model's gap on the block is
     below its threshold; ``False`` if the budget or ``limit`` sweeps ran out first."""
     run = compiled_sweeps if compiled else numpy_sweeps
-    forecast = ((_EARLY_FROM, _EARLY_WINDOW, _EARLY_AHEAD) if compiled
-                else (_NUMPY_FORECAST_FROM, _NUMPY_FORECAST_WINDOW, None))
+    forecast = ((_FORECAST_FROM, _FORECAST_WINDOW) if compiled
+                else (_NUMPY_FORECAST_FROM, _NUMPY_FORECAST_WINDOW))
     local = bounds[block.states]
     done = 0
     seen: list[tuple[int, float]] = []  # (sweeps done, gap over threshold) per chunk
@@ -260,11 +243,10 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
 
 
 def _hopeless(seen: list[tuple[int, float]], limit: int, start: int = _FORECAST_FROM,
-              window: int = _FORECAST_WINDOW, ahead: int | None = None) -> bool:
+              window: int = _FORECAST_WINDOW) -> bool:
     """Whether a block's gap (over its threshold, read after each chunk of sweeps:
-    ``seen``) would still be open at twice the sweeps left to ``limit`` (and, if
-    given, after ``ahead`` more sweeps) if it kept shrinking at the rate of the last
-    ``window`` sweeps (never before ``start``)."""
+    ``seen``) would still be open at twice the sweeps left to ``limit`` if it kept
+    shrinking at the rate of the last ``window`` sweeps (never before ``start``)."""
     done, over = seen[-1]
     if done < start:
         return False
@@ -275,8 +257,7 @@ def _hopeless(seen: list[tuple[int, float]], limit: int, start: int = _FORECAST_
     if rate >= 1.0:
         return True
     needed = np.log(1.0 / over) / np.log(rate)
-    left = 2 * (limit - done) if ahead is None else min(ahead, 2 * (limit - done))
-    return bool(needed > left)
+    return bool(needed > 2 * (limit - done))
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
@@ -308,9 +289,6 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         prep = Prepared(block.inner, block.groups)
         fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
                 else compiled)
-        # the compiled blocks are jumped from the policy greedy on their first bounds
-        # (:data:`_EARLY_AHEAD`); the NumPy ones from the bounds their sweeps reached
-        first = bounds[block.states] if fast else None
         if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
                          fast,
                          _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY):
@@ -320,8 +298,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             for j in range(bounds.shape[1] // 2):
                 model = replace(block, to_target=rewards[block.choices, 2 * j])
                 lo, hi = bounds[:, 2 * j], bounds[:, 2 * j + 1]  # views: written through
-                proven &= jump(model, lo, hi, tol, precision, sense,
-                               None if first is None else first[:, 2 * j:2 * j + 2])
+                proven &= jump(model, lo, hi, tol, precision, sense)
             if proven and excess(bounds[rest], tol, precision) < 1.0:
                 continue
         if not _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,

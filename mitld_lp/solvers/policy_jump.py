@@ -109,7 +109,7 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
 
 
 def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
-         precision: float | None, sense: Sense, first: np.ndarray | None = None) -> bool:
+         precision: float | None, sense: Sense) -> bool:
     """Try the verified policy jump of :mod:`mitld_lp.solvers.iteration`'s module docs
     on ``block``; update ``lo`` and ``hi`` where it proves better bounds.  ``True`` if
     both bounds were proven.
@@ -129,8 +129,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
     # the one checked over every choice; -1 lowers a bound, +1 raises it
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
-    seed = local if first is None else first
-    start = segmented_argmax(exit2[:, own] + block.inner @ seed[:, own], groups,
+    start = segmented_argmax(exit2[:, own] + block.inner @ local[:, own], groups,
                              sense=sense)
     factors = Factors()  # the policy iterations below share their factorisations
     chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
