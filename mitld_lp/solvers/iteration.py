@@ -34,8 +34,10 @@ non-trivial components of a level are iterated on their own until their gap is b
 
 A component that drains slowly (an event of hazard 1e-6 leaves it once in a million
 steps) would need millions of sweeps.  After ``_SWEEPS_BEFORE_POLICY`` sweeps such a
-component is *jumped*: a policy is improved to a fixpoint with exact solves of its
-chain, and the candidate bounds it gives are kept only if they prove themselves.  With
+component is *jumped* (:mod:`mitld_lp.solvers.policy_jump`): a policy is improved to a
+fixpoint with exact solves of its chain (policy iteration, each improvement looking
+ahead by a few Bellman sweeps), and the candidate bounds it gives are kept only if they
+prove themselves.  With
 ``W = u + P W`` the policy's expected total of a positive ``u`` before it leaves the
 component (``u = 1``: its expected number of steps ``t``) and ``e > 0``, ``L = v - e W``
 satisfies ``L <= T(L)`` (``T_pi(L) = L + e u``) and ``U = w + e W'`` (``w`` from the
