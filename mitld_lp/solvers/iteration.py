@@ -34,8 +34,10 @@ non-trivial components of a level are iterated on their own until their gap is b
 
 A component that drains slowly (an event of hazard 1e-6 leaves it once in a million
 steps) would need millions of sweeps.  After ``_SWEEPS_BEFORE_POLICY`` sweeps such a
-component is *jumped*: a policy is improved to a fixpoint with exact solves of its
-chain, and the candidate bounds it gives are kept only if they prove themselves.  With
+component is *jumped* (:mod:`mitld_lp.solvers.policy_jump`): a policy is improved to a
+fixpoint with exact solves of its chain (policy iteration, each improvement looking
+ahead by a few Bellman sweeps), and the candidate bounds it gives are kept only if they
+prove themselves.  With
 ``W = u + P W`` the policy's expected total of a positive ``u`` before it leaves the
 component (``u = 1``: its expected number of steps ``t``) and ``e > 0``, ``L = v - e W``
 satisfies ``L <= T(L)`` (``T_pi(L) = L + e u``) and ``U = w + e W'`` (``w`` from the
@@ -57,7 +59,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -66,25 +68,22 @@ import numpy as np
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.evaluation import evaluate_policy
-from mitld_lp.solvers.graph import Sense, segmented_argmax
+from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.kernels import (
     Prepared,
     compiled_sweeps,
     excess,
     numpy_sweeps,
-    thresholds,
     use_compiled,
 )
+from mitld_lp.solvers.policy_jump import jump
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
-    Factors,
     SingleLevels,
     blocks,
-    evaluate_chain,
-    improve_policy,
     state_graph,
 )
 from mitld_lp.util.progress import Bar
@@ -188,7 +187,7 @@ of 89,760 states: 2.6 s CPU of sweeps, a jump of 0.65 s); jumped at 192, its swe
 took 1.1 s and its jump 8.1 s, as policy iteration from the greedy policy of a lower
 bound still 0.05 off takes many more rounds, each a factorisation."""
 _FORECAST_WINDOW = 64
-_NUMPY_FORECAST_FROM = 32
+_NUMPY_FORECAST_FROM = 8
 """The same for the NumPy (Jacobi) sweeps, whose limit is :data:`_SWEEPS_BEFORE_POLICY`
 (their forecast from :data:`_FORECAST_FROM` was never read), over the last
 :data:`_NUMPY_FORECAST_WINDOW`.  QVBS ``consensus`` 4-4: each of the four blocks (3,904
@@ -198,8 +197,17 @@ jumped anyway; jumped at 32 the same blocks close (400 -> 128 sweeps).  What tha
 saves, the policy jump's extra rounds from a rougher start take back in part: solve
 stage 1.07-1.28 -> 0.91-1.06 s CPU on ``c2``, 1.57-1.87 -> 1.62-1.74 s on
 ``disagree`` (three runs each, twice, in one session); on ``bus_scaled`` n64 d3
-(blocks of NumPy size) 200 -> 64 sweeps, 1.93 -> 1.96 s."""
-_NUMPY_FORECAST_WINDOW = 16
+(blocks of NumPy size) 200 -> 64 sweeps, 1.93 -> 1.96 s.  Read from 8 sweeps over 4
+since the jump's look-ahead (:data:`_NUMPY_CHUNK`)."""
+_NUMPY_FORECAST_WINDOW = 4
+_NUMPY_CHUNK = 4
+"""The NumPy sweeps' chunk (:data:`_CHUNK`), so that their forecast can be read early.
+With the policy jump's look-ahead (:mod:`mitld_lp.solvers.policy_jump`) a rougher start
+costs the jump little: QVBS ``consensus`` 4-4 ``c2``'s four blocks each kept their gap
+flat for the first sweeps and are jumped at 8 (forecast from 8 over 4) instead of 32
+(from 32 over 16): 128 -> 32 sweeps, solve stage 0.78-0.80 -> 0.67-0.70 s CPU in
+pairs of runs in one session, the same jumps' cost (0.24 against 0.24 s on its two
+large blocks)."""
 
 
 def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.ndarray,
@@ -217,7 +225,8 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
     seen: list[tuple[int, float]] = []  # (sweeps done, gap over threshold) per chunk
     try:
         while True:
-            wanted = _CHUNK if limit is None else min(_CHUNK, limit - done)
+            chunk = _CHUNK if compiled else _NUMPY_CHUNK
+            wanted = chunk if limit is None else min(chunk, limit - done)
             granted = budget.take(wanted) if wanted > 0 else 0
             swept, over = run(prep, exits, local, tol, granted, sense, precision)
             budget.iterations += swept
@@ -251,89 +260,6 @@ def _hopeless(seen: list[tuple[int, float]], limit: int, start: int = _FORECAST_
         return True
     needed = np.log(1.0 / over) / np.log(rate)
     return bool(needed > 2 * (limit - done))
-
-
-def _jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
-          precision: float | None, sense: Sense) -> bool:
-    """Try the verified policy jump of the module docs on ``block``; update ``lo`` and
-    ``hi`` where it proves better bounds.  ``True`` if both bounds were proven.
-
-    Measured and not done: stopping the policy iterations once no choice gains more
-    than ``tol / 64`` over the longest exit time (both bounds are checked whatever the
-    policy), redone to the exact fixpoint where the checks then refuse.  On
-    ``bus_scaled`` n64 d3 it saves three of the 8,192-state block's fourteen
-    factorisations (interval iteration 0.46 -> 0.40 s), nothing on d10; a slippery
-    40x40 grid (``experiments/bench_big_component.py``) and one random model in four
-    needed the redo, as a choice tied with the policy took far longer to leave than the
-    policy's own, which the upper bound's margin must cover."""
-    exit2 = block.exits(lo, hi)
-    groups = np.append(block.starts, block.choices.shape[0])
-    counts = np.diff(groups)
-    local = np.column_stack([lo[block.states], hi[block.states]])
-    # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
-    # the one checked over every choice; -1 lowers a bound, +1 raises it
-    own, every = (0, 1) if sense is Sense.MAX else (1, 0)
-    start = segmented_argmax(exit2[:, own] + block.inner @ local[:, own], groups,
-                             sense=sense)
-    factors = Factors()  # the policy iterations below share their factorisations
-    chosen, v, t = improve_policy(block, exit2[:, own], start, factors=factors,
-                                  sense=sense)
-    own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
-                         lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
-                                                  factors)[0])
-    inner_ld = block.inner.astype(np.longdouble)
-    own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
-    own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
-    chosen_best, w, _ = improve_policy(block, exit2[:, every], chosen, factors=factors,
-                                       sense=sense)
-    # The shift must cover the slowest of the (nearly) optimal choices, not only the
-    # policy's: W = u + max over the choices within a quarter of the threshold of P W.
-    owner_w = np.repeat(w, counts)
-    loses = -sense.gain(exit2[:, every] + inner_ld @ w, owner_w)
-    tied = loses < np.repeat(thresholds(np.asarray(w, dtype=np.float64), tol, precision),
-                             counts) / 4.0
-
-    def slowest(u: np.ndarray) -> np.ndarray:
-        return improve_policy(block, np.repeat(u, counts), chosen_best, tied,
-                              factors=factors)[1]
-
-    every_bound = _shifted(w, None, 1 if every else -1, tol, precision, slowest)
-    image = exit2[:, every] + inner_ld @ every_bound
-    sign = 1.0 if every else -1.0
-    worst = float(np.max(sign * (image - np.repeat(every_bound, counts))))
-    every_ok = worst <= 0.0
-    for ok, side, bound in ((own_ok, own, own_bound), (every_ok, every, every_bound)):
-        if not ok:
-            continue
-        if side == 0:
-            low64 = np.nextafter(bound.astype(np.float64), -np.inf)
-            local[:, 0] = np.maximum(local[:, 0], np.clip(low64, 0.0, 1.0))
-        else:
-            up64 = np.nextafter(bound.astype(np.float64), np.inf)
-            local[:, 1] = np.minimum(local[:, 1], np.clip(up64, 0.0, 1.0))
-    lo[block.states], hi[block.states] = local[:, 0], local[:, 1]
-    logger.debug("policy jump on %d states: policy's bound %s, every choice's %s "
-                 "(excess %.1e)", block.states.size, own_ok, every_ok, worst)
-    return own_ok and every_ok
-
-
-def _shifted(x: np.ndarray, steps: np.ndarray | None, sign: int, tol: float,
-             precision: float | None, total: Callable[[np.ndarray], np.ndarray]
-             ) -> np.ndarray:
-    """``x + sign * e * W`` (module docs): ``W = total(u)``, the chain's expected total
-    of ``u`` (the states' gap thresholds scaled to at most 1) before it leaves, and
-    ``e`` so that ``e W`` is at most a quarter of each threshold (over the states of
-    positive value; a state of value 0 keeps its bound there).  With thresholds all
-    ``tol``, ``u = 1`` and ``W`` is the expected exit time (``steps`` if given)."""
-    target = thresholds(np.asarray(x, dtype=np.float64), tol, precision)
-    scale = float(np.max(target))
-    u = target / scale
-    flat = bool(np.all(u == 1.0))
-    w = steps if flat and steps is not None else total(u)
-    positive = np.asarray(x > 0) if not flat else np.ones(x.shape, dtype=bool)
-    ratio = (w / u)[positive] if positive.any() else w / u
-    eps = (scale / 4.0) / float(np.max(ratio))
-    return x + sign * eps * w
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
@@ -374,7 +300,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             for j in range(bounds.shape[1] // 2):
                 model = replace(block, to_target=rewards[block.choices, 2 * j])
                 lo, hi = bounds[:, 2 * j], bounds[:, 2 * j + 1]  # views: written through
-                proven &= _jump(model, lo, hi, tol, precision, sense)
+                proven &= jump(model, lo, hi, tol, precision, sense)
             if proven and excess(bounds[rest], tol, precision) < 1.0:
                 continue
         if not _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
