@@ -38,6 +38,7 @@ DEFAULT_TESTS = (
     "tests/test_single_levels.py", "tests/test_level_runs.py", "tests/test_deadline_walks.py",
     "tests/test_sensing_kernels.py", "tests/test_sensing_arrays.py",
     "tests/test_sensing_rows.py", "tests/test_sensing_merge.py", "tests/test_sensed_level.py",
+    "tests/test_kernel_sigs.py",
 )
 
 ENV_OUT = "KERNEL_SIGS_OUT"

@@ -211,3 +211,122 @@ def test_a_graph_kernel_first_is_loaded_narrowly() -> None:
     # leave theirs with probability 1/2 from state 0 (no other choice), so not
     assert last["alive"] == [False, False, True]
     assert runs[0]["alive"] == last["alive"]
+
+
+# ------------------------------------------------------------------ the graph kernels
+def _literal(sigs: list) -> list:
+    """The signatures of ``sigs`` with an argument typed as a literal constant (each one
+    compiled apart from the plain type's)."""
+    return [sig for sig in sigs if any(isinstance(t, numba.types.Literal) for t in sig)]
+
+
+def _random_choices(rng: np.random.Generator, n: int) -> tuple[sp.csr_array, np.ndarray]:
+    """1-3 choices a state, 1-3 successors a choice, each 1/k."""
+    rows, groups = [], [0]
+    for _ in range(n):
+        for _ in range(int(rng.integers(1, 4))):
+            rows.append(sorted(set(rng.integers(0, n, int(rng.integers(1, 4))).tolist())))
+        groups.append(len(rows))
+    ptr = np.cumsum([0] + [len(r) for r in rows])
+    data = np.concatenate([np.full(len(r), 1.0 / len(r)) for r in rows])
+    matrix = sp.csr_array((data, np.concatenate(rows), ptr), shape=(len(rows), n))
+    return matrix, np.array(groups, dtype=np.int64)
+
+
+def _attractor(matrix: sp.csr_array, groups: np.ndarray, seeds: np.ndarray,
+               every: bool) -> np.ndarray:
+    """The least set holding ``seeds`` and each state with all (``every``) or one of its
+    choices having an entry in it: iterated to the fixed point."""
+    inside = seeds.copy()
+    rows = [set(matrix.indices[matrix.indptr[c]:matrix.indptr[c + 1]].tolist())
+            for c in range(matrix.shape[0])]
+    grew = True
+    while grew:
+        grew = False
+        for s in np.flatnonzero(~inside):
+            hits = [any(inside[t] for t in rows[c]) for c in range(groups[s], groups[s + 1])]
+            if (all if every else any)(hits):
+                inside[s] = grew = True
+    return inside
+
+
+def test_graph_kernels_one_signature_and_fixed_point_answers() -> None:
+    from mitld_lp.solvers import compiled_graph as cg
+
+    rng = np.random.default_rng(7)
+    for trial in range(12):
+        n = int(rng.integers(2, 30))
+        matrix, groups = _random_choices(rng, n)
+        matrix = _with_index(matrix, np.int32)
+        seeds = rng.random(n) < 0.2
+        frozen = groups.copy()
+        frozen.flags.writeable = False
+        for every in (True, False):
+            want = _attractor(matrix, groups, seeds, every)
+            for rg in (groups, frozen):  # writable and read-only row groups
+                got = cg.backward(matrix.indptr, matrix.indices, rg, seeds,
+                                  np.zeros(matrix.shape[0], dtype=bool), every)
+                assert np.array_equal(got, want), (trial, every)
+        assert groups.flags.writeable  # the caller's array is left as it was
+        # the components by the three entry points that reach components_and_levels
+        label, _, _ = cg.state_levels(matrix.indptr, matrix.indices, groups,
+                                      np.zeros((n, 1), dtype=bool), 10**9)
+        ptr, succ = cg.state_graph(matrix.indptr, matrix.indices, groups, n)
+        _, label2 = cg.strong_components(ptr, succ, False)
+        assert np.array_equal(label, label2)
+        cg.end_components_among(matrix.indptr, matrix.indices, matrix.data > 0, groups,
+                                np.arange(n))
+    sigs = list(cg._backward.signatures)
+    assert sigs and all(not sig[2].mutable for sig in sigs)  # row groups read-only
+    for kernel in (cg.components_and_levels, cg.strong_components):
+        assert kernel.signatures and _literal(list(kernel.signatures)) == []
+
+
+# ------------------------------------------------------------------ the sensing kernels
+def test_pack_is_pack_words_with_one_signature_a_kernel() -> None:
+    """The compiled packing a column at a time against
+    :func:`mitld_lp.sensing.rows.pack_words` (NumPy), on 1-6 columns of small, wide
+    (hash-like: kept whole) and constant values."""
+    from mitld_lp.sensing import kernels as sk
+    from mitld_lp.sensing.rows import pack_words
+
+    rng = np.random.default_rng(11)
+    top = np.iinfo(np.int64)
+    for _ in range(60):
+        n = int(rng.integers(1, 30))
+        cols = []
+        for _ in range(int(rng.integers(1, 7))):
+            kind = int(rng.integers(0, 4))
+            c = (rng.integers(-5, 5, n) if kind == 0 else rng.integers(0, 1 << 40, n)
+                 if kind == 1 else rng.integers(top.min, top.max, n, dtype=np.int64)
+                 if kind == 2 else np.full(n, int(rng.integers(-100, 100))))
+            cols.append(np.ascontiguousarray(c, dtype=np.int64))
+        words, span = sk.pack(tuple(cols))
+        want, want_span = pack_words(tuple(cols))
+        assert span == want_span and len(words) == len(want)
+        for a, b in zip(words, want, strict=True):
+            assert np.array_equal(a, b)
+    for kernel in (sk._bounds, sk._fold, sk._shift):
+        assert len(kernel.signatures) == 1
+
+
+def test_dd_sums_of_integers_on_float64_same_bits() -> None:
+    """Integer values summed by the float64 kernel: the sums as the int64 kernel's code
+    gives them (run here as Python, exact integers) and as :func:`math.fsum` does."""
+    import math
+
+    from mitld_lp.sensing import kernels as sk
+
+    rng = np.random.default_rng(5)
+    count = np.array([3, 1, 6, 2, 4])
+    starts = np.cumsum(count) - count
+    for scale in (10, 10**9, 10**14):
+        values = rng.integers(-scale, scale, int(count.sum()))
+        high, low, size = sk.dd_sums(starts, count, values)
+        exact = [math.fsum(values[a:a + k].tolist()) for a, k in zip(starts, count, strict=True)]
+        assert high.tolist() == exact and not low.any() and not size.any()
+        ref = sk._dd_sums.py_func(starts, count, values)
+        assert all(np.array_equal(a, b) for a, b in zip((high, low, size), ref, strict=True))
+    floats = rng.random(int(count.sum()))
+    high, _, _ = sk.dd_sums(starts, count, floats)
+    assert all(sig[2].dtype == numba.float64 for sig in sk._dd_sums.signatures)
