@@ -92,11 +92,11 @@ def main(argv: list[str] | None = None) -> None:
     comps = {json.dumps(r["components"]) for rs in runs.values() for r in rs}
     if len(comps) != 1:
         sys.exit(f"the loads' end components differ: {comps}")
-    print(f"graph kernel's end components of the two-state block, both loads (alive, "
-          f"label): {comps.pop()} (one end component of both states)")
     low, high = (float.fromhex(x) for x in answers.pop())
     print(f"block kernel's bracket on the two-state block, both loads: [{low:.12f}, "
           f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")
+    print(f"graph kernel's end components of the two-state block, both loads (alive, "
+          f"label): {comps.pop()} (one end component of both states)")
     print(f"{'part':<28} {'whole: median s':>15} {'least s':>8} {'narrow: median s':>17} "
           f"{'least s':>8}")
     for i, name in enumerate((*NAMES, "total")):

@@ -134,10 +134,10 @@ def dd_sums(starts: np.ndarray, count: np.ndarray, values: np.ndarray
     2**53): each addition is then exact, its error 0, and the sums are the integer
     ones rounded once, as on int64 values, to the bit.  The kernel is so compiled for
     one type of values (it was for int64 and float64 in the test suite)."""
-    if values.dtype.kind in "iu" and values.size:
-        largest = max(abs(int(values.min())), abs(int(values.max())))
-        if largest * values.size < 2**53:
-            values = values.astype(np.float64)
+    if values.dtype.kind in "iu" and (
+            values.size == 0
+            or max(abs(int(values.min())), abs(int(values.max()))) * values.size < 2**53):
+        values = values.astype(np.float64)
     return _dd_sums(starts, count, values)
 
 
