@@ -62,8 +62,10 @@ kernels.compiled_sweeps(prep, np.full((2, 2), 0.25), local, 1e-12, 1000)
 t.append(c())
 from mitld_lp.solvers import level_kernels
 x = np.zeros((2, 1))
-level_kernels.chain_solve(np.arange(2), inner.indptr, inner.indices, inner.data,
-                          np.zeros(2), np.ones((2, 1)), x)
+diag = np.zeros(2)
+diag.flags.writeable = False  # the types the solver passes: no signature of its own
+level_kernels.chain_solve(np.arange(2), inner.indptr.astype(np.int64),
+                          inner.indices.astype(np.int64), inner.data, diag, np.ones((2, 1)), x)
 t.append(c())
 parts = [b - a for a, b in zip(t, t[1:])]
 print(json.dumps({"parts": parts, "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
