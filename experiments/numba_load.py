@@ -1,22 +1,26 @@
-"""What a process pays to load numba and the compiled block kernel, part by part.
+"""What a process pays to load numba and the compiled kernels, part by part.
 
 Each round is a fresh process (``--rounds``, default 5) that imports NumPy, SciPy's
 sparse matrices and ``scipy.linalg`` (loaded by every solve of a product large enough to
 sweep with the kernel), then times in CPU seconds: ``import numba``; the typing
 context's registries; the CPU target's registries (numba refreshes them before loading
 any kernel from its disk cache, :func:`numba.core.caching` ``load_overload``); the
-first call of the block kernel (:func:`mitld_lp.solvers.kernels.compiled_sweeps`, its
-load from the cache and its run on a two-state block: its bracket of 1/2 is printed beside);
-and the first call of one level kernel.  The kernels must be in the disk cache (run the
-script twice after a change: the first run compiles them).  Prints the median and
-least of each part::
+first call of a graph kernel (:func:`mitld_lp.solvers.compiled_graph.end_components_among`,
+the first kernel the analysis of a large product asks for; its end components of a
+two-state block printed beside); the first call of the block kernel
+(:func:`mitld_lp.solvers.kernels.compiled_sweeps`, its load from the cache and its run
+on the same block: its bracket of 1/2 is printed beside); and the first call of one
+level kernel.  The kernels must be in the disk cache (run the script twice after a
+change: the first run compiles them).  Prints the median and least of each part::
 
     python experiments/numba_load.py
 
-A second set of rounds (``narrow``) loads the block kernel as the solver does since
-:mod:`mitld_lp.solvers.numba_narrow`: the target's registries are not refreshed before,
-and the first call loads the kernel with numba's runtime only; its bracket must be the
-same to the bit as the whole load's.
+Two sets of rounds take turns: ``whole`` (:data:`mitld_lp.solvers.numba_narrow.ENABLED`
+set to False: numba's own load, as a process that asked for a graph kernel first had
+before every compiled module put the narrow load in place) and ``narrow`` (what every
+compiled module does since: the target's registries are not refreshed, and the first
+call loads the kernel with numba's runtime only).  The answers must be the same to the
+bit in both.
 """
 
 from __future__ import annotations
@@ -39,28 +43,37 @@ if NARROW:
     assert numba_narrow.install()
     t += [c(), c()]
 else:
+    from mitld_lp.solvers import numba_narrow
+    numba_narrow.ENABLED = False  # every compiled module would put it in place
     from numba.core.registry import cpu_target
     cpu_target.typing_context.refresh()
     t.append(c())
     cpu_target.target_context.refresh()
     t.append(c())
-from mitld_lp.solvers import kernels
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
+from mitld_lp.solvers import compiled_graph
+alive, allowed, label = compiled_graph.end_components_among(
+    inner.indptr, inner.indices, inner.data > 0, np.array([0, 1, 2]), np.arange(2))
+t.append(c())
+from mitld_lp.solvers import kernels
 prep = kernels.Prepared(inner, np.array([0, 1, 2]))
 local = np.column_stack([np.zeros(2), np.ones(2)])
 kernels.compiled_sweeps(prep, np.full((2, 2), 0.25), local, 1e-12, 1000)
 t.append(c())
 from mitld_lp.solvers import level_kernels
 x = np.zeros((2, 1))
-level_kernels.chain_solve(np.arange(2), inner.indptr, inner.indices, inner.data,
-                          np.zeros(2), np.ones((2, 1)), x)
+diag = np.zeros(2)
+diag.flags.writeable = False  # the types the solver passes: no signature of its own
+level_kernels.chain_solve(np.arange(2), inner.indptr.astype(np.int64),
+                          inner.indices.astype(np.int64), inner.data, diag, np.ones((2, 1)), x)
 t.append(c())
 parts = [b - a for a, b in zip(t, t[1:])]
-print(json.dumps({"parts": parts, "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()]}))
+print(json.dumps({"parts": parts, "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
+                  "components": [alive.tolist(), label.tolist()]}))
 """
 
 NAMES = ("import numba", "typing registries", "target registries",
-         "block kernel, first call", "a level kernel, first call")
+         "graph kernel, first call", "block kernel, first call", "a level kernel, first call")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -78,9 +91,14 @@ def main(argv: list[str] | None = None) -> None:
     answers = {tuple(r["answer"]) for rs in runs.values() for r in rs}
     if len(answers) != 1:
         sys.exit(f"the loads' brackets differ: {answers}")
+    comps = {json.dumps(r["components"]) for rs in runs.values() for r in rs}
+    if len(comps) != 1:
+        sys.exit(f"the loads' end components differ: {comps}")
     low, high = (float.fromhex(x) for x in answers.pop())
     print(f"block kernel's bracket on the two-state block, both loads: [{low:.12f}, "
           f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")
+    print(f"graph kernel's end components of the two-state block, both loads (alive, "
+          f"label): {comps.pop()} (one end component of both states)")
     print(f"{'part':<28} {'whole: median s':>15} {'least s':>8} {'narrow: median s':>17} "
           f"{'least s':>8}")
     for i, name in enumerate((*NAMES, "total")):

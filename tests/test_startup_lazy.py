@@ -156,9 +156,10 @@ def test_table_round_trip_and_bad_tables(tmp_path: Path,
 
 #: The bundled case and the puddle case solved with the block sweeps by NumPy (the gate's
 #: default on these small products), by the compiled kernel loaded narrowly
-#: (:mod:`mitld_lp.solvers.numba_narrow`, what ``kernels`` does), or by the compiled kernel
-#: with numba's whole registries (argv[1]); then, in the compiled modes, a function
-#: compiled afresh (a cache miss, NumPy's linear algebra) after the kernel's load.
+#: (:mod:`mitld_lp.solvers.numba_narrow`, what every compiled module does), or by the
+#: compiled kernel with numba's whole registries (argv[1]); then, in the compiled modes,
+#: a function compiled afresh (a cache miss, NumPy's linear algebra) after the kernel's
+#: load.
 GATE = r"""
 import json, sys
 import numpy as np
@@ -168,6 +169,8 @@ mode = sys.argv[1]
 if mode != "numpy":
     kernels.COMPILED_MIN_ENTRIES = kernels.COMPILED_MIN_BLOCK_ENTRIES = 0
 if mode == "full":
+    from mitld_lp.solvers import numba_narrow
+    numba_narrow.ENABLED = False  # every compiled module would put the narrow load in place
     from mitld_lp.solvers import compiled_kernels
     kernels._KERNEL = compiled_kernels.gauss_seidel
 out = {}

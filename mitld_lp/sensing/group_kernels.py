@@ -16,8 +16,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
@@ -137,7 +139,7 @@ def _block_groups(c, word):  # pragma: no cover - compiled
             vals[r] = word[i + r]
             perm[i + r] = i + r
         _sort(vals, perm[i:j], m)
-        g = _number(vals, perm[i:j], m, g, inverse, first)
+        g = _number(vals, perm[i:j], m, np.int64(g), inverse, first)  # not Literal[int](0)
         i = j
     return inverse, first[:g].copy(), perm
 
@@ -166,7 +168,7 @@ def _nested_groups(perm, outer, key):  # pragma: no cover - compiled
             idx[r] = perm[i + r]
             vals[r] = key[idx[r]]
         _sort(vals, idx, m)
-        g = _number(vals, idx, m, g, inverse, first)
+        g = _number(vals, idx, m, np.int64(g), inverse, first)  # one signature
         i = j
     return inverse, first[:g].copy()
 

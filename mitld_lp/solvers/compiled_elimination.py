@@ -14,8 +14,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
 __all__ = ["boundary_rows", "downstream", "reach", "reduced_rows", "upstream"]
@@ -119,7 +121,7 @@ def boundary_rows(comp_ptr, comp_states, needed, port, s_ptr, s_idx, s_val, s_re
                     unit[i, r] = 1.0
                     r += 1
             sol = np.linalg.solve(np.ascontiguousarray(mat.T), unit).T @ rhs
-        b_idx, b_val = _grow(b_idx, b_val, used, n_p * nt)
+        b_idx, b_val = _grow(b_idx, b_val, np.int64(used), np.int64(n_p * nt))  # one signature
         r = 0
         for i in range(k):
             s = comp_states[lo + i]
@@ -179,7 +181,7 @@ def reduced_rows(c_ptr, c_idx, c_val, c_rew, a, row_ptr, row_len, b_idx, b_val,
                         nt += 1
                     spa[j] += w * b_val[f]
         rew[c] = acc
-        o_idx, o_val = _grow(o_idx, o_val, used, nt)
+        o_idx, o_val = _grow(o_idx, o_val, np.int64(used), np.int64(nt))  # one signature
         for i in range(nt):
             j = touched[i]
             o_idx[used] = j

@@ -30,8 +30,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
 __all__ = ["backward", "components_and_levels", "end_components_among", "reaching_edges",
@@ -84,8 +86,10 @@ def state_levels(indptr, indices, row_groups, seeds, small):  # pragma: no cover
     point: numba reads each from its cache at its first call (~0.03 s)."""
     n = row_groups.shape[0] - 1
     ptr, succ = state_graph(indptr, indices, row_groups, n)
+    # np.bool_: a bool, not numba's Literal[bool](True), so that one signature serves
+    # this call and the Python callers' (a literal argument is compiled for apart)
     _, label, level, reach = components_and_levels(ptr, succ, n + succ.shape[0] > small,
-                                                   seeds, True)
+                                                   seeds, np.bool_(True))
     return label, level, reach
 
 
@@ -95,7 +99,8 @@ def strong_components(ptr, succ, descending):  # pragma: no cover - compiled
     the roots taken in increasing order, each node's successors from the last when
     ``descending``; components numbered as completed."""
     n_comp, label, _, _ = components_and_levels(
-        ptr, succ, descending, np.zeros((ptr.shape[0] - 1, 0), dtype=np.bool_), False)
+        ptr, succ, descending, np.zeros((ptr.shape[0] - 1, 0), dtype=np.bool_),
+        np.bool_(False))
     return n_comp, label
 
 
@@ -217,8 +222,21 @@ def _transpose(indptr, indices, n_cols):  # pragma: no cover - compiled
     return col_ptr, rows
 
 
+def backward(indptr: np.ndarray, indices: np.ndarray, row_groups: np.ndarray,
+             seeds: np.ndarray, hit: np.ndarray, every: bool) -> np.ndarray:
+    """:func:`_backward` (the docs there) with ``row_groups`` passed read-only: a view,
+    not a copy.  The suite's callers pass read-only row groups and writable ones, and
+    numba compiles one machine code for each (1 s of CPU on a cold cache); the kernel
+    only reads them."""
+    row_groups = np.asarray(row_groups)
+    if row_groups.flags.writeable:
+        row_groups = row_groups.view()
+        row_groups.flags.writeable = False
+    return _backward(indptr, indices, row_groups, seeds, hit, bool(every))
+
+
 @numba.njit(cache=True, nogil=True)
-def backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cover
+def _backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cover
     """The least set holding ``seeds`` and each state with a choice hit (``every``: all
     its choices, at least one), a choice being hit if it is in ``hit`` (a copy the
     kernel may write) or has an entry into the set: with ``every`` the attractor of
@@ -246,7 +264,7 @@ def backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cove
 def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
     """The states of ``n`` with a path along the edges ``source -> succ`` to a
     ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
-    backward_reachable`): :func:`backward` with each edge a choice of its source."""
+    backward_reachable`): :func:`_backward` with each edge a choice of its source."""
     m = succ.shape[0]
     col_ptr, col_rows = _transpose(np.arange(m + 1), succ, n)
     remaining = np.ones(n, dtype=np.int64)  # one edge into the set is enough
@@ -338,7 +356,7 @@ def end_components_among(indptr, indices, positive, row_groups,
                             pos += 1
             ptr[i + 1] = pos
         mark[:] = -1
-        _, label = strong_components(ptr, succ[:pos], False)
+        _, label = strong_components(ptr, succ[:pos], np.bool_(False))
         any_cross = False
         for i in range(k):
             first = row_groups[cand[i]]

@@ -35,14 +35,15 @@ probability 0.98) is settled in one update instead of hundreds.
   them before it loads any kernel from its cache), the block kernel itself 0.03 s and a
   level kernel 0.01 s.  The target's registries are for compiling: a kernel loaded
   from the cache needs only numba's runtime of them, and
-  :mod:`mitld_lp.solvers.numba_narrow` (put in place here) loads it so, 0.2-0.25 s
-  less CPU.  Every kernel is loaded at its first call only (a dispatcher each), so
-  loading fewer kernels saves their hundredths of a second, not numba's registries. A
-  new checkout compiles every kernel it calls once (2.5 s more on the first solve of
-  QVBS ``zeroconf`` 20-4-false, the index files then under each module's
-  ``__pycache__``, keyed by the source file's time stamp). The NumPy path is no way
-  round that load where a large block needs the kernel: that instance's solve
-  takes 25 s by it against 1.6 s compiled, its load included.
+  :mod:`mitld_lp.solvers.numba_narrow` (put in place by every compiled module as it is
+  imported) loads it so, 0.2-0.25 s less CPU.  Every kernel is loaded at its first call
+  only (a dispatcher each), so loading fewer kernels saves their hundredths of a
+  second, not numba's registries. A new checkout compiles every kernel it calls once
+  (for one index type: :func:`kernel_index`; 2.5 s more on the first solve of QVBS
+  ``zeroconf`` 20-4-false, the index files then under each module's ``__pycache__``,
+  keyed by the source file's time stamp). The NumPy path is no way round that load
+  where a large block needs the kernel: that instance's solve takes 25 s by it against
+  1.6 s compiled, its load included.
 
 **Guessed and verified bounds** (the compiled kernel only; optimistic value iteration,
 Hartmanns & Kaminski, CAV 2020, with the guess extrapolated).  A block that mixes slowly
@@ -88,6 +89,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import Sense
+from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
            "compiled_sweeps", "excess", "numpy_sweeps", "sweep_order", "thresholds",
@@ -159,11 +161,20 @@ def compiled_kernel() -> Any:
 
 
 def _build() -> Any:
-    from mitld_lp.solvers import compiled_kernels, numba_narrow
-
-    numba_narrow.install()  # the kernel from numba's cache without its whole registry
+    from mitld_lp.solvers import compiled_kernels  # puts numba's narrow load in place
 
     return compiled_kernels.gauss_seidel
+
+
+def kernel_index(matrix: sp.csr_array) -> tuple[np.ndarray, np.ndarray]:
+    """``matrix``'s ``indptr`` and ``indices`` as :func:`~mitld_lp.util.arrays.index_dtype`
+    of its entries and columns: int32 where they fit, as SciPy gives them, else int64.
+    The compiled kernel is then compiled for one index type a run (numba compiles one
+    machine code per argument type: 12 s each on a cold cache), not for int32 and int64
+    both; an array of the other type is copied once a block, one that has it is not."""
+    dtype = index_dtype(max(int(matrix.indptr[-1]), matrix.shape[1]))
+    return (matrix.indptr.astype(dtype, copy=False),
+            matrix.indices.astype(dtype, copy=False))
 
 
 def sweep_order(n: int) -> np.ndarray:
@@ -184,7 +195,7 @@ class Prepared:
     for the NumPy sweeps, the matrix without its diagonal."""
 
     __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off", "guess",
-                 "track")
+                 "track", "_index")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -201,6 +212,16 @@ class Prepared:
         self.order = sweep_order(self.groups.size - 1)
         self.guess: np.ndarray | None = None  # the compiled sweeps' guesses, made there
         self.track: np.ndarray | None = None
+        self._index: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def index(self) -> tuple[np.ndarray, np.ndarray]:
+        """The matrix's ``indptr`` and ``indices`` in the one index type the compiled
+        kernel is compiled for (:func:`kernel_index`; no copy where they have it already,
+        as SciPy's int32 blocks of the solver do)."""
+        if self._index is None:
+            self._index = kernel_index(self.inner)
+        return self._index
 
     @property
     def off(self) -> sp.csr_array:
@@ -244,11 +265,12 @@ def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: f
     over = excess(local, tol, precision)
     if over < 1.0 or max_sweeps <= 0:
         return 0, over
-    inner = prep.inner  # its own index type: no int64 copy of the block
+    inner = prep.inner
+    indptr, indices = prep.index
     if prep.guess is None or prep.guess.shape != local.shape:
         prep.guess = np.zeros_like(local)
         prep.track = _new_track(local.shape[1], OPTIMISTIC)
-    done, over = kernel(inner.indptr, inner.indices, inner.data, prep.groups, prep.leave,
+    done, over = kernel(indptr, indices, inner.data, prep.groups, prep.leave,
                         np.ascontiguousarray(exits, dtype=np.float64), local,
                         prep.order, int(max_sweeps), float(tol), sense is Sense.MIN,
                         -1.0 if precision is None else float(precision), FLOOR,

@@ -16,6 +16,13 @@ are installed then (numba's refresh installs whatever its registries have gained
 kernel that runs is the same cached machine code either way: results are the same to the
 bit (``tests/test_startup_lazy.py``).  On a numba whose version or internals are not the
 ones checked here nothing is changed.
+
+Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_kernels`,
+:mod:`~mitld_lp.solvers.level_kernels`, :mod:`~mitld_lp.solvers.compiled_graph`,
+:mod:`~mitld_lp.solvers.compiled_elimination`, :mod:`mitld_lp.sensing.kernels`,
+:mod:`mitld_lp.sensing.group_kernels`) calls :func:`install` right after ``import numba``,
+so whichever kernel a process asks for first is loaded narrowly.  :data:`ENABLED` set to
+False before the first of them is imported keeps numba's whole load (to measure it).
 """
 
 from __future__ import annotations
@@ -23,7 +30,10 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-__all__ = ["TESTED_NUMBA", "install", "installed"]
+__all__ = ["ENABLED", "TESTED_NUMBA", "install", "installed"]
+
+ENABLED = True
+"""Whether :func:`install` puts the narrow load in place (False: numba's whole load)."""
 
 #: numba's versions (major.minor) whose loading path this was written and checked for.
 TESTED_NUMBA = ("0.68",)
@@ -39,10 +49,13 @@ def installed() -> bool:
 
 def install() -> bool:
     """Put the narrow load in place (imports numba); False, nothing changed, where numba
-    is missing, of an untested version, or not as expected."""
+    is missing, of an untested version, or not as expected, or :data:`ENABLED` is
+    False."""
     global _installed
     if _installed:
         return True
+    if not ENABLED:
+        return False
     try:
         import numba
         from numba.core import caching, cpu
