@@ -39,11 +39,11 @@ import numpy as np
 from mitld_lp.solvers.graph import Sense, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.topological import (
-    GAIN,
     POLICY_ROUNDS,
     Block,
     Factors,
     evaluate_chain,
+    policy_round,
 )
 
 __all__ = ["AHEAD_SWEEPS", "improve_ahead", "jump"]
@@ -74,24 +74,15 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     its expected exit times (extended precision).  The fixpoint is
     :func:`~mitld_lp.solvers.topological.improve_policy`'s: no choice beats the policy by
     more than ``GAIN`` of the values compared."""
-    groups = block.groups
     starts = block.starts
     inner_ld = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
     worst = -np.inf if sense is Sense.MAX else np.inf
     reward64 = np.asarray(reward, dtype=np.float64)
     for _ in range(POLICY_ROUNDS):
-        v, t = evaluate_chain(block.inner, chosen, reward, factors)
-        score = reward + inner_ld @ v
-        if allowed is not None:
-            score = np.where(allowed, score, worst)
-        better = segmented_argmax(score, groups, sense=sense)
-        gain = sense.gain(score[better], score[chosen])
-        scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
-        switch = gain > GAIN * scale
-        if not switch.any():
+        v, t, nxt = policy_round(block, inner_ld, reward, chosen, allowed, factors, sense)
+        if np.array_equal(nxt, chosen):
             return chosen, v, t
-        nxt = np.where(switch, better, chosen)
         if sweeps > 0:
             x = np.asarray(v, dtype=np.float64)
             for _ in range(sweeps + 1):
@@ -99,7 +90,7 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                 if allowed is not None:
                     ahead = np.where(allowed, ahead, worst)
                 x = sense.reduce(ahead, starts)
-            best = segmented_argmax(ahead, groups, sense=sense)
+            best = segmented_argmax(ahead, block.groups, sense=sense)
             with np.errstate(invalid="ignore"):  # -inf against -inf: not a lead
                 lead = sense.gain(ahead[best], ahead[chosen])
                 size = np.maximum(np.abs(ahead[best]), np.abs(ahead[chosen]))

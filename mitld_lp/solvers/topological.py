@@ -521,23 +521,31 @@ def improve_policy(block: Block, reward: np.ndarray, chosen: np.ndarray,
     interval iteration rely on that); a switch needs a gain above that, so rounding
     cannot make it cycle.  ``factors``: shared by the caller across calls on the same
     block, so that a call starting where the last one ended reuses its factorisation."""
-    groups = block.groups
     inner = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
-    worst = -np.inf if sense is Sense.MAX else np.inf
     for _ in range(POLICY_ROUNDS):
-        v, t = evaluate_chain(block.inner, chosen, reward, factors)
-        score = reward + inner @ v
-        if allowed is not None:
-            score = np.where(allowed, score, worst)
-        better = segmented_argmax(score, groups, sense=sense)
-        gain = sense.gain(score[better], score[chosen])
-        scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
-        nxt = np.where(gain > GAIN * scale, better, chosen)
+        v, t, nxt = policy_round(block, inner, reward, chosen, allowed, factors, sense)
         if np.array_equal(nxt, chosen):
             return chosen, v, t
         chosen = nxt
     return chosen, v, t
+
+
+def policy_round(block: Block, inner: np.ndarray, reward: np.ndarray, chosen: np.ndarray,
+                 allowed: np.ndarray | None, factors: Factors,
+                 sense: Sense) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One round of :func:`improve_policy` (``inner``: the block's rows in extended
+    precision): the policy's values and exit times, and the next policy (a state's best
+    choice where it beats ``chosen`` by more than :data:`GAIN`, else its own)."""
+    worst = -np.inf if sense is Sense.MAX else np.inf
+    v, t = evaluate_chain(block.inner, chosen, reward, factors)
+    score = reward + inner @ v
+    if allowed is not None:
+        score = np.where(allowed, score, worst)
+    better = segmented_argmax(score, block.groups, sense=sense)
+    gain = sense.gain(score[better], score[chosen])
+    scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
+    return v, t, np.where(gain > GAIN * scale, better, chosen)
 
 
 GAIN = 1e-17
