@@ -32,6 +32,7 @@ slowest choices' totals are computed as before.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -46,7 +47,7 @@ from mitld_lp.solvers.topological import (
     policy_round,
 )
 
-__all__ = ["AHEAD_SWEEPS", "improve_ahead", "jump"]
+__all__ = ["AHEAD_SWEEPS", "Abandoned", "improve_ahead", "jump"]
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +59,11 @@ with 20, 2 LUs and 0.43 s with 50; on ``consensus`` 4-4 ``c2``'s block of 7,863 
 (in its jump the policy iterations take 7 + 0 + 1 LUs without) 0.19 s without, 0.13 s
 with 10 sweeps, 0.16-0.17 s with 20 and 50.  Looked at only once a round switches at
 most 1/64 of the states (the tail): 0.61-0.69 s and 0.17-0.19 s."""
+class Abandoned(Exception):
+    """A budgeted jump stopped before a round it forecast to end past its deadline
+    (:func:`improve_ahead`'s ``deadline``); nothing of it was written."""
+
+
 AHEAD_GAIN = 1e-12
 """The least gain, relative to the scores compared, for which the look-ahead switches a
 choice (its float64 sweeps round to about ``K`` units in the last place)."""
@@ -66,23 +72,31 @@ choice (its float64 sweeps round to about ``K`` units in the last place)."""
 def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                   allowed: np.ndarray | None = None, *,
                   factors: Factors | None = None, sense: Sense = Sense.MAX,
-                  sweeps: int = AHEAD_SWEEPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  sweeps: int = AHEAD_SWEEPS, deadline: float | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
     choice indices) to a fixpoint, maximising (or minimising, ``sense``), over the
     ``allowed`` choices only if given, each improvement greedy on ``sweeps`` Bellman
     sweeps from the policy's values (module docs).  Returns the policy, its values and
     its expected exit times (extended precision).  The fixpoint is
     :func:`~mitld_lp.solvers.topological.improve_policy`'s: no choice beats the policy by
-    more than ``GAIN`` of the values compared."""
+    more than ``GAIN`` of the values compared.  ``deadline`` (a
+    :func:`time.process_time`): :class:`Abandoned` is raised before a round that, as
+    costly as the last one, would end past it (the policy jump's budget)."""
     starts = block.starts
     inner_ld = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
     worst = -np.inf if sense is Sense.MAX else np.inf
     reward64 = np.asarray(reward, dtype=np.float64)
     for _ in range(POLICY_ROUNDS):
+        began = time.process_time()
         v, t, nxt = policy_round(block, inner_ld, reward, chosen, allowed, factors, sense)
         if np.array_equal(nxt, chosen):
             return chosen, v, t
+        if deadline is not None:
+            now = time.process_time()
+            if now + (now - began) > deadline:
+                raise Abandoned
         if sweeps > 0:
             x = np.asarray(v, dtype=np.float64)
             for _ in range(sweeps + 1):
@@ -100,10 +114,15 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
 
 
 def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
-         precision: float | None, sense: Sense) -> bool:
+         precision: float | None, sense: Sense, first: np.ndarray | None = None,
+         deadline: float | None = None) -> bool:
     """Try the verified policy jump of :mod:`mitld_lp.solvers.iteration`'s module docs
     on ``block``; update ``lo`` and ``hi`` where it proves better bounds.  ``True`` if
-    both bounds were proven.
+    both bounds were proven.  ``first``: the block's bounds (a lower and an upper
+    column) the policy iterations start greedy on, else ``lo`` and ``hi``.
+    ``deadline`` (a :func:`time.process_time`): the jump's budget; :class:`Abandoned`
+    (``lo`` and ``hi`` untouched) before a policy iteration's round forecast to end
+    past it.
 
     Measured and not done: stopping the policy iterations once no choice gains more
     than ``tol / 64`` over the longest exit time (both bounds are checked whatever the
@@ -120,11 +139,12 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
     # the one checked over every choice; -1 lowers a bound, +1 raises it
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
-    start = segmented_argmax(exit2[:, own] + block.inner @ local[:, own], groups,
+    seed = local if first is None else first
+    start = segmented_argmax(exit2[:, own] + block.inner @ seed[:, own], groups,
                              sense=sense)
     factors = Factors()  # the policy iterations below share their factorisations
     chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
-                                 sense=sense)
+                                 sense=sense, deadline=deadline)
     own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
                          lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
                                                   factors)[0])
@@ -132,7 +152,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
     own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
     chosen_best, w, _ = improve_ahead(block, exit2[:, every], chosen, factors=factors,
-                                      sense=sense)
+                                      sense=sense, deadline=deadline)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: W = u + max over the choices within a quarter of the threshold of P W.
     owner_w = np.repeat(w, counts)
@@ -142,7 +162,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
 
     def slowest(u: np.ndarray) -> np.ndarray:
         return improve_ahead(block, np.repeat(u, counts), chosen_best, tied,
-                             factors=factors)[1]
+                             factors=factors, deadline=deadline)[1]
 
     sign = 1.0 if every else -1.0
 

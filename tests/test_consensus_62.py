@@ -1,0 +1,127 @@
+"""The early jump's budget (mitld_lp.solvers.iteration._EARLY, policy_jump.Abandoned):
+a compiled block forecast at 32 sweeps to need many more is jumped there, but only
+within the CPU seconds of the sweeps it would save; a block whose LUs fill (a random
+sparse chain) makes the jump abandon, one whose LUs do not (a line) is jumped; either
+way the interval iteration's bracket holds Storm's exact value.
+
+Expected values from independent routes: the budget by hand; Storm's exact engine on
+the gambler's ruin of tests/test_sweep_forecast.py written in PRISM."""
+
+from __future__ import annotations
+
+import logging
+import time
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from storm_exact import storm_rational
+from test_sweep_forecast import PRISM as RUIN
+from test_sweep_forecast import _ruin
+
+from mitld_lp import defaults
+from mitld_lp.solvers import Status, interval_iteration, iteration
+from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.policy_jump import Abandoned, jump
+from mitld_lp.solvers.topological import Block
+
+LEAK = 1e-3
+
+
+def _block(n: int, successors) -> Block:
+    """``n`` states with two choices each, ``successors(s, k)`` giving choice ``k``'s
+    four successors (probabilities 0.3, 0.3, 0.2, 0.2 - LEAK; the rest leaves the
+    block), its exit reward LEAK or LEAK / 2."""
+    r, c, v, starts, reward = [], [], [], [], []
+    for s in range(n):
+        starts.append(len(reward))
+        for k in range(2):
+            for t, p in zip(successors(s, k), (0.3, 0.3, 0.2, 0.2 - LEAK), strict=True):
+                r.append(len(reward)), c.append(int(t)), v.append(p)
+            reward.append(LEAK * (0.5 + 0.5 * ((s + k) % 3 == 0)))
+    m = len(reward)
+    inner = sp.csr_array((v, (r, c)), shape=(m, n))
+    return Block(np.arange(n), np.arange(m), inner, sp.csr_array((m, n)),
+                 np.array(starts, dtype=np.int64), np.array(reward))
+
+
+def _random(n: int) -> Block:
+    """Each choice moves to four random states: the LU of such a chain fills."""
+    rng = np.random.default_rng(7)
+    picks = {(s, k): rng.choice(n, 4, replace=False) for s in range(n) for k in range(2)}
+    return _block(n, lambda s, k: picks[s, k])
+
+
+def _line(n: int) -> Block:
+    """A ring, each choice a step one way or the other: its LU does not fill."""
+    return _block(n, lambda s, k: [(s + 1) % n, (s + 2) % n, (s - 1) % n, (s - 2) % n]
+                  if k == 0 else [(s - 1) % n, (s - 2) % n, (s + 1) % n, (s + 2) % n])
+
+
+def _sweep_cost(block: Block, sweeps: int = 200) -> float:
+    """CPU seconds of one Bellman sweep of the block (both bounds)."""
+    n = block.states.size
+    x = np.column_stack([np.zeros(n), np.ones(n)])
+    exits = np.column_stack([block.to_target, block.to_target])
+    began = time.process_time()
+    for _ in range(sweeps):
+        x = Sense.MAX.reduce(block.inner @ x + exits, block.starts)
+    return (time.process_time() - began) / sweeps
+
+
+def test_the_budget_is_the_sweeps_it_saves_at_their_cost_so_far() -> None:
+    # 32 sweeps took 0.32 s: 10 ms a sweep; 500 more forecast, 968 left to the limit
+    early = iteration._Early(done=32, needed=500.0, cpu=0.32, stopped=True)
+    assert iteration._budget(early, 1000) == pytest.approx(5.0)
+    early.needed = 5000.0  # no more than the limit's sweeps are saved
+    assert iteration._budget(early, 1000) == pytest.approx(9.68)
+
+
+def test_the_budget_abandons_a_block_that_fills_and_jumps_one_that_does_not() -> None:
+    """With a budget of 300 sweeps' cost on each block: the random chain (1,500 states;
+    its jump costs thousands of sweeps) is abandoned with its bounds untouched, the
+    line (1,500 states; a few dozen) is jumped to within the tolerance."""
+    tol = 1e-6
+    for block, fills in ((_random(1500), True), (_line(1500), False)):
+        n = block.states.size
+        lo, hi = np.zeros(n), np.ones(n)
+        deadline = time.process_time() + 300 * _sweep_cost(block)
+        if fills:
+            with pytest.raises(Abandoned):
+                jump(block, lo, hi, tol, None, Sense.MAX, deadline=deadline)
+            assert np.all(lo == 0.0) and np.all(hi == 1.0)
+        else:
+            assert jump(block, lo, hi, tol, None, Sense.MAX, deadline=deadline)
+            assert np.all(hi - lo <= tol) and np.all(lo <= hi)
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("budget", [None, 0.0])
+def test_the_ruin_jumped_early_or_abandoned_holds_storms_exact_value(
+        tmp_path: Path, sense: Sense, budget: float | None, monkeypatch, caplog) -> None:
+    """The ruin's block swept by the compiled kernel: read at 32 sweeps and jumped
+    there (its own budget), or, with no budget at all, the jump abandoned and the block
+    swept on; both brackets hold Storm's exact value."""
+    pytest.importorskip("stormpy")
+    pytest.importorskip("numba")
+    path = tmp_path / "ruin.prism"
+    path.write_text(RUIN, encoding="utf-8")
+    exact = storm_rational(path, f'P{sense.value}=? [F "goal"]')
+    if budget is not None:
+        monkeypatch.setattr(iteration, "_budget", lambda early, limit: budget)
+    mdp = _ruin()
+    with caplog.at_level(logging.DEBUG, logger="mitld_lp.solvers.iteration"):
+        r = interval_iteration(mdp, mdp.target, sense=sense, progress=False,
+                               compiled=True)
+    assert r.status is Status.OPTIMAL, r.message
+    lo, hi = Fraction(r.value_lower), Fraction(r.value_upper)
+    # rounded to nearest, the lower bound may sit one rounding above the exact value
+    # (tests/test_rare_events.py), the upper one not below it
+    assert lo <= exact * (1 + Fraction(1, 2**50)) and exact <= hi, (lo, exact, hi)
+    assert hi - lo <= Fraction(defaults.TOL)
+    abandoned = "abandoned" in caplog.text
+    assert abandoned is (budget is not None), caplog.text
+    if budget is None:  # jumped at the early look
+        assert r.iterations == iteration._EARLY[0], r.iterations
