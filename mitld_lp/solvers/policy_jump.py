@@ -88,6 +88,7 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     factors = Factors() if factors is None else factors
     worst = -np.inf if sense is Sense.MAX else np.inf
     reward64 = np.asarray(reward, dtype=np.float64)
+    before: int | None = None  # the switches of the last round
     for _ in range(POLICY_ROUNDS):
         began = time.process_time()
         v, t, nxt = policy_round(block, inner_ld, reward, chosen, allowed, factors, sense)
@@ -95,8 +96,14 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
             return chosen, v, t
         if deadline is not None:
             now = time.process_time()
-            if now + (now - began) > deadline:
+            switched = int(np.count_nonzero(nxt != chosen))
+            left = _rounds_left(before, switched)
+            logger.debug("budgeted policy iteration: a round of %.3f s, %d switches, "
+                         "%.1f rounds forecast, %.3f s left", now - began, switched, left,
+                         deadline - now)
+            if now + left * (now - began) > deadline:
                 raise Abandoned
+            before = switched
         if sweeps > 0:
             x = np.asarray(v, dtype=np.float64)
             for _ in range(sweeps + 1):
@@ -111,6 +118,20 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                 nxt = np.where(lead > AHEAD_GAIN * size, best, nxt)
         chosen = nxt
     return chosen, v, t
+
+
+def _rounds_left(before: int | None, switched: int) -> float:
+    """The rounds of policy iteration a budgeted jump forecasts before its fixpoint:
+    ``switched`` states switch now, ``before`` did a round earlier (``None``: the first
+    round, one more at least); the switches falling at that rate, ``inf`` if they do
+    not fall.  Policy iteration on ``bus_scaled`` n128 d3's grid block of 32,768 states
+    switches 9,495, 9,187, 7,302, ... states a round (18 rounds went by in its budget of
+    3.7 s without a fixpoint); on QVBS ``consensus`` the look-ahead ends in a few."""
+    if before is None or switched <= 1:
+        return 1.0
+    if switched >= before:
+        return float("inf")
+    return max(1.0, float(np.log(switched) / np.log(before / switched)))
 
 
 def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
