@@ -201,7 +201,11 @@ iteration forecast (as dear as the last) to end past it, and the block is swept 
 before.  QVBS ``consensus`` 6-2 ``c2``'s three large blocks (87,225, 139,566 and 93,067
 states) cost 1.4-1.5, 3.6 and 2.6 s jumped at once against 2.9, 5.8 and 4.2 s of
 sweeps; ``bus_scaled`` n128 d3's block of 32,768 states (a grid: its LUs fill) took a
-13.6 s jump where 1,000 sweeps and a late jump close it."""
+13.6 s jump where 1,000 sweeps and a late jump close it.  With the budget and its
+rounds' forecast (:func:`~mitld_lp.solvers.policy_jump.improve_ahead`), in one run
+against main 9265e48: consensus 6-2 ``c2``'s solve stage 18.16 -> 13.21 s (120 sweeps,
+were 1,145), bus n128 d3 5.90 -> 6.65 s (two rounds abandoned on each of its blocks),
+the same brackets to the bit (``experiments/results/bench_qvbs_consensus_62.md``)."""
 _NUMPY_FORECAST_FROM = 8
 """The same for the NumPy (Jacobi) sweeps, whose limit is :data:`_SWEEPS_BEFORE_POLICY`
 (their forecast from :data:`_FORECAST_FROM` was never read), over the last

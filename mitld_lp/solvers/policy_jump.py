@@ -27,6 +27,12 @@ started from, its own totals ``W = t`` are tried first and the check decides: on
 ``consensus`` 4-4 ``c2`` it passed on all four blocks (excess -3e-13 to -4e-14), solve
 stage 0.72-0.77 -> 0.65 s CPU, the same bracket to the bit; where it refuses, the
 slowest choices' totals are computed as before.
+
+**A budget** (``deadline``: the compiled blocks' early jump of
+:mod:`mitld_lp.solvers.iteration`).  Before each round of policy iteration the rest is
+forecast: the last round's CPU time times the rounds left, read from how fast the
+switches fall (:func:`_rounds_left`).  If that ends past the deadline the jump raises
+:class:`Abandoned` and writes nothing; the caller sweeps on.
 """
 
 from __future__ import annotations
