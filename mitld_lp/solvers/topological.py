@@ -189,8 +189,7 @@ class SingleLevels:
     here, so a level costs a few NumPy calls on its slice.  ``skip``: states left out
     (they keep what they have)."""
 
-    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
-                 "level_state", "state_choice", "choice_entry", "sense", "kernels",
+    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "level_state", "state_choice", "choice_entry", "sense", "kernels",
                  "positive", "runs", "run_at", "first_choice", "owner_at", "ptr")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
@@ -204,11 +203,14 @@ class SingleLevels:
         self.level_state = np.searchsorted(level_of[one], np.arange(b.n_levels + 1))
         lo, hi = q.row_groups[self.states], q.row_groups[self.states + 1]
         self.choices = gather_ranges(lo, hi)
-        self.state_choice = np.concatenate([[0], np.cumsum(hi - lo)])
-        self.owner = np.repeat(np.arange(self.states.size, dtype=np.int64), hi - lo)
-        # the self-loops left out (divided out), read in batches, ``local`` int32
+        counts = hi - lo  # per state, its choices
+        del lo, hi
+        self.state_choice = np.concatenate([[0], np.cumsum(counts)])
+        # the self-loops left out (divided out), read in batches, ``local`` int32 where
+        # the choices' count allows; no per-choice owner is kept (the flow's walk makes
+        # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
         self.local, self.cols, self.vals = off_diagonal_entries(
-            q.matrix, self.choices, self.states[self.owner])
+            q.matrix, self.choices, np.repeat(self.states, counts))
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
         # the choices' entry pointers in the columns' index type: a level's sums (and
         # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
@@ -237,7 +239,9 @@ class SingleLevels:
         small = np.int32 if self.choices.size < np.iinfo(np.int32).max else np.int64
         level_first = np.repeat(ca, z - a)  # per state, its level's first choice
         self.first_choice = (self.state_choice[:-1] - level_first).astype(small)
-        self.owner_at = (self.owner - np.repeat(a, z - a)[self.owner]).astype(small)
+        # per choice its state counted from its level's first state
+        self.owner_at = np.repeat((np.arange(self.states.size, dtype=small)
+                                   - np.repeat(a, z - a).astype(small)), counts)
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
