@@ -189,8 +189,9 @@ class SingleLevels:
     here, so a level costs a few NumPy calls on its slice.  ``skip``: states left out
     (they keep what they have)."""
 
-    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "level_state", "state_choice", "choice_entry", "sense", "kernels",
-                 "positive", "runs", "run_at", "first_choice", "owner_at", "ptr")
+    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "level_state",
+                 "state_choice", "choice_entry", "sense", "kernels", "positive", "runs",
+                 "run_at", "first_choice", "owner_at", "ptr")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
