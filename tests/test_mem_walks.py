@@ -216,3 +216,62 @@ def test_single_levels_keeps_no_owner_and_its_level_offsets_are_right() -> None:
         for i in level:
             want += [i - level[0]] * int(sl.state_choice[i + 1] - sl.state_choice[i])
     assert sl.owner_at.tolist() == want and sl.owner_at.dtype == np.int32
+
+
+def _values(q, sl, skip):
+    out = np.zeros(q.n_states)
+    reduced = np.full(q.n_states, -1, dtype=np.int64)
+    weights = np.zeros(q.matrix.shape[0])
+    sl.values(0, q.order.n_levels, q.to_target, skip, out, reduced, weights)
+    return out, reduced, weights
+
+
+@pytest.mark.parametrize("csr", [True, False])
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("skipping", [False, True])
+def test_grouped_values_walk_equals_the_whole_walk_and_the_plain_loop(
+        monkeypatch, sense: Sense, skipping: bool, csr: bool) -> None:
+    # the LP's values walk: each level's values and the choice among near-ties (the
+    # larger preference, then the first), the deferred picks made per group
+    _walks(monkeypatch, csr)
+    mdp = _deadline_mdp(7, depth=30, ties=True)
+    q, _ = analyse(mdp, mdp.target, sense=sense)
+    sl = SingleLevels(q, q.order, compiled=False)
+    skip = np.zeros(q.n_states, dtype=bool)
+    if skipping:
+        skip[np.random.default_rng(7).choice(q.n_states, q.n_states // 5, replace=False)] = True
+    monkeypatch.setattr(level_batches, "GROUP_ENTRIES", 1 << 40)
+    whole = _values(q, sl, skip)
+    picked = level_batches._picked
+    calls = []
+    monkeypatch.setattr(level_batches, "_picked",
+                        lambda *a: calls.append(1) or picked(*a))  # deferred picks made
+    for limit in (1, 7, 30):
+        monkeypatch.setattr(level_batches, "GROUP_ENTRIES", limit)
+        calls.clear()
+        got = _values(q, sl, skip)
+        assert len(calls) > 1  # the deferred picks of several groups
+        assert all(g.tobytes() == w.tobytes() for g, w in zip(got, whole, strict=True))
+    out = np.zeros(q.n_states)  # the plain loop, state by state
+    reduced = np.full(q.n_states, -1, dtype=np.int64)
+    maximum = sense is Sense.MAX
+    for level in _plain_order(sl):
+        for i in level:
+            s, choices = _plain_rows(q, sl, i)
+            if skip[s]:
+                continue
+            scores = []
+            for c, stay, entries in choices:
+                acc = 0.0
+                for col, v in entries:
+                    acc += v * out[col]
+                scores.append(min(max((q.to_target[c] + acc) / (1.0 - stay), 0.0), 1.0))
+            top = max(scores) if maximum else min(scores)
+            tied = [j for j, x in enumerate(scores)
+                    if (x - top if maximum else top - x) >= -level_batches.TIE * abs(top)]
+            pref = [q.to_target[choices[j][0]] * (1 if maximum else -1) for j in tied]
+            j = tied[pref.index(max(pref))]  # the largest preference, then the first
+            out[s], reduced[s] = scores[j], choices[j][0]
+    assert whole[0].tobytes() == out.tobytes()
+    assert whole[1].tolist() == reduced.tolist()
+    assert np.flatnonzero(whole[2]).tolist() == sorted(reduced[reduced >= 0].tolist())

@@ -135,10 +135,18 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     """The plain walk of :meth:`SingleLevels.values` (:func:`~mitld_lp.solvers.
     topological.solve_single_states` a level at a time): each level's choice picked
     before the next level is scored.  ``live_of``: per single state, whether it is
-    solved (not skipped)."""
-    if not runs:
-        return
+    solved (not skipped).  The runs are walked in consecutive groups (:func:`_groups`),
+    upward, each group's deferred picks made at its end: a level's value reads only the
+    levels below, and a pick only its own level."""
     every = bool(live_of.all())
+    for group in _groups(runs):
+        _values(sl, group, to_target, live_of, every, out, reduced_choice, weights)
+
+
+def _values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
+            live_of: np.ndarray, every: bool, out: np.ndarray, reduced_choice: np.ndarray,
+            weights: np.ndarray) -> None:
+    """:func:`values` on one group of consecutive runs (``every``: no state skipped)."""
     maximum = sl.sense is Sense.MAX
     reduce = np.maximum if maximum else np.minimum
     # what no level's values change, gathered once: the choices' rewards, the
