@@ -216,6 +216,14 @@ def test_single_levels_keeps_no_owner_and_its_level_offsets_are_right() -> None:
         for i in level:
             want += [i - level[0]] * int(sl.state_choice[i + 1] - sl.state_choice[i])
     assert sl.owner_at.tolist() == want and sl.owner_at.dtype == np.int32
+    # the NumPy walks' indices in 4 bytes, one array of entry pointers
+    for name in ("states", "choices", "state_choice", "choice_entry", "local", "cols"):
+        assert getattr(sl, name).dtype == np.int32, name
+    assert sl.choice_entry is sl.ptr
+    lo = np.asarray(q.row_groups)[sl.states.astype(np.int64)]  # each state's choices in order
+    assert np.array_equal(sl.choices[sl.state_choice[:-1]], lo)
+    assert np.array_equal(np.diff(sl.state_choice),
+                          np.asarray(q.row_groups)[sl.states.astype(np.int64) + 1] - lo)
 
 
 def _values(q, sl, skip):
