@@ -11,8 +11,10 @@ import scipy.sparse as sp
 
 __all__ = ["gather_ranges", "off_diagonal_entries", "row_entries", "rows_dot"]
 
-#: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's)
-BATCH = 1 << 16
+#: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's,
+#: some 40 bytes an entry; 2**16 rows of two entries were 20 bytes a transition of
+#: QVBS ``zeroconf_dl`` 1000-1-30 at the LP's set-up)
+BATCH = 1 << 14
 
 
 def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
