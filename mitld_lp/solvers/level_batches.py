@@ -73,7 +73,34 @@ def bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
     """:meth:`SingleLevels.solve`'s NumPy walk over ``runs`` (``sl``'s choices have no
     self-loop of 1): each level's sums for all ``k`` columns of ``out`` by one
     ``bincount`` (bin ``k * choice + column``: each bin sums its entries in their order
-    from 0, as the plain walk's ``bincount`` a column does)."""
+    from 0, as the plain walk's ``bincount`` a column does).  The runs are walked in
+    consecutive groups (:func:`_groups`), upward: a level reads only the levels below."""
+    for group in _groups(runs):
+        _bounds(sl, group, rewards, out)
+
+
+GROUP_ENTRIES = 1 << 16
+"""The entries (and choices) of the runs a walk gathers at once: its per-entry and
+per-choice arrays are a group's, not the whole walk's (a run of more is gathered
+alone).  Every level's arithmetic is the same whatever the groups: the same bits."""
+
+
+def _groups(runs: list[tuple[int, ...]]) -> list[list[tuple[int, ...]]]:
+    """``runs`` (in their order) cut into consecutive groups of at most
+    :data:`GROUP_ENTRIES` entries and as many choices; a run of more is a group alone."""
+    out: list[list[tuple[int, ...]]] = []
+    ca0 = ea0 = 0
+    for r in runs:
+        if not out or r[5] - ea0 > GROUP_ENTRIES or r[3] - ca0 > GROUP_ENTRIES:
+            out.append([])
+            ca0, ea0 = r[2], r[4]
+        out[-1].append(r)
+    return out
+
+
+def _bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
+            out: np.ndarray) -> None:
+    """:func:`bounds` on one group of consecutive runs."""
     k = out.shape[1]
     ca0, cz1, ea0, ez1 = runs[0][2], runs[-1][3], runs[0][4], runs[-1][5]
     reward = rewards[sl.choices[ca0:cz1]]  # (choices, k), a copy: the scores' storage
@@ -108,10 +135,18 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     """The plain walk of :meth:`SingleLevels.values` (:func:`~mitld_lp.solvers.
     topological.solve_single_states` a level at a time): each level's choice picked
     before the next level is scored.  ``live_of``: per single state, whether it is
-    solved (not skipped)."""
-    if not runs:
-        return
+    solved (not skipped).  The runs are walked in consecutive groups (:func:`_groups`),
+    upward, each group's deferred picks made at its end: a level's value reads only the
+    levels below, and a pick only its own level."""
     every = bool(live_of.all())
+    for group in _groups(runs):
+        _values(sl, group, to_target, live_of, every, out, reduced_choice, weights)
+
+
+def _values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
+            live_of: np.ndarray, every: bool, out: np.ndarray, reduced_choice: np.ndarray,
+            weights: np.ndarray) -> None:
+    """:func:`values` on one group of consecutive runs (``every``: no state skipped)."""
     maximum = sl.sense is Sense.MAX
     reduce = np.maximum if maximum else np.minimum
     # what no level's values change, gathered once: the choices' rewards, the
@@ -200,12 +235,22 @@ def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
          weights: np.ndarray, x: np.ndarray) -> None:
     """:meth:`SingleLevels.flow`'s NumPy walk over ``runs`` (upstream first): each
     state's divisor (what its choices do not keep, a ``bincount`` a state in its
-    choices' order) and each entry's weight gathered once for the whole walk; then a
-    level divides its states' inflow and adds it along its entries."""
+    choices' order) and each entry's weight gathered once for a group of runs
+    (:func:`_groups`); then a level divides its states' inflow and adds it along its
+    entries.  The groups are walked downward as the levels are: the last group first."""
+    for group in reversed(_groups(runs)):  # upstream first
+        _flow(sl, group, self_loop, weights, x)
+
+
+def _flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
+          weights: np.ndarray, x: np.ndarray) -> None:
+    """:func:`flow` on one group of consecutive runs (its last level first)."""
     a0, z1, ca0, cz1 = runs[0][0], runs[-1][1], runs[0][2], runs[-1][3]
     ea0, ez1 = runs[0][4], runs[-1][5]
     ch = sl.choices[ca0:cz1]
-    owner = sl.owner[ca0:cz1] - a0
+    # per choice its state, counted from the group's first state (built per group:
+    # the walk keeps no int64 a choice for it)
+    owner = np.repeat(np.arange(z1 - a0, dtype=np.int64), np.diff(sl.state_choice[a0:z1 + 1]))
     w = weights[ch]
     keep = 1.0 - np.bincount(owner, weights=w * self_loop[ch], minlength=z1 - a0)
     local = np.asarray(sl.local[ea0:ez1], dtype=np.int64) - ca0

@@ -11,8 +11,10 @@ import scipy.sparse as sp
 
 __all__ = ["gather_ranges", "off_diagonal_entries", "row_entries", "rows_dot"]
 
-#: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's)
-BATCH = 1 << 16
+#: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's,
+#: some 40 bytes an entry; 2**16 rows of two entries were 20 bytes a transition of
+#: QVBS ``zeroconf_dl`` 1000-1-30 at the LP's set-up)
+BATCH = 1 << 14
 
 
 def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
@@ -43,19 +45,32 @@ def off_diagonal_entries(matrix: sp.csr_array, rows: np.ndarray, row_state: np.n
     ``row_state[i]`` (its self-loop), in the same order, read :data:`BATCH` rows at a
     time: the whole gather (an int64 index and an int64 local row per entry, then the
     filtered copies) was the solve stage's memory peak on QVBS ``zeroconf_dl`` and
-    ``csma``.  ``local`` is int32 when the rows' count fits (4 bytes an entry, not 8)."""
+    ``csma``.  Each batch's kept entries are written straight into the three outputs,
+    made once for the rows' stored entries and shrunk in place to the kept ones at the
+    end (the tail never written: no page of it is touched), so the peak is the result
+    plus one batch, not the batches' parts and their concatenation.  ``local`` is
+    int32 where the rows' count allows (:func:`~mitld_lp.util.arrays.index_dtype`)."""
+    from mitld_lp.util.arrays import index_dtype
+
     rows = np.asarray(rows, dtype=np.int64)
     row_state = np.asarray(row_state)
-    small = np.int32 if rows.size < np.iinfo(np.int32).max else np.int64
-    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    stored = int((matrix.indptr[rows + 1] - matrix.indptr[rows]).sum()) if rows.size else 0
+    local_out = np.empty(stored, dtype=index_dtype(rows.size))
+    cols_out = np.empty(stored, dtype=matrix.indices.dtype)
+    vals_out = np.empty(stored, dtype=matrix.data.dtype)
+    at = 0
     for a in range(0, rows.size, BATCH):
         local, cols, vals = row_entries(matrix, rows[a:a + BATCH])
         keep = cols != row_state[a:a + BATCH][local]
-        parts.append(((local[keep] + a).astype(small), cols[keep], vals[keep]))
-    if not parts:
-        return (np.zeros(0, dtype=small), matrix.indices[:0].copy(),
-                matrix.data[:0].copy())
-    return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))  # type: ignore[return-value]
+        n = int(np.count_nonzero(keep))
+        np.add(local[keep], a, out=local_out[at:at + n], casting="unsafe")
+        np.compress(keep, cols, out=cols_out[at:at + n])
+        np.compress(keep, vals, out=vals_out[at:at + n])
+        at += n
+        del local, cols, vals, keep
+    for out in (local_out, cols_out, vals_out):  # the kept entries only (in place:
+        out.resize(at, refcheck=False)  # no view of them exists yet)
+    return local_out, cols_out, vals_out
 
 
 def rows_dot(matrix: sp.csr_array, rows: np.ndarray, x: np.ndarray) -> np.ndarray:

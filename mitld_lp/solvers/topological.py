@@ -45,6 +45,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.level_batches import TIE
 from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.rows import gather_ranges, off_diagonal_entries, rows_dot
+from mitld_lp.util.arrays import index_dtype
 
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
@@ -189,9 +190,9 @@ class SingleLevels:
     here, so a level costs a few NumPy calls on its slice.  ``skip``: states left out
     (they keep what they have)."""
 
-    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "owner",
-                 "level_state", "state_choice", "choice_entry", "sense", "kernels",
-                 "positive", "runs", "run_at", "first_choice", "owner_at", "ptr")
+    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "level_state",
+                 "state_choice", "choice_entry", "sense", "kernels", "positive", "runs",
+                 "run_at", "first_choice", "owner_at", "ptr")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
@@ -200,15 +201,30 @@ class SingleLevels:
         one = b.size[b.component[order]] == 1
         if skip is not None:
             one &= ~skip[order]
+        # the compiled walks (:func:`level_kernels`): the same answers, one call a run
+        self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
+        # the NumPy walks index with any integer type: their states, choices and
+        # pointers in 4 bytes where the sizes allow (index_dtype); the compiled walks'
+        # signatures take int64's
+        wide = self.kernels is not None
         self.states = order[one]
+        if not wide:
+            self.states = self.states.astype(index_dtype(q.matrix.shape[1]), copy=False)
         self.level_state = np.searchsorted(level_of[one], np.arange(b.n_levels + 1))
         lo, hi = q.row_groups[self.states], q.row_groups[self.states + 1]
         self.choices = gather_ranges(lo, hi)
-        self.state_choice = np.concatenate([[0], np.cumsum(hi - lo)])
-        self.owner = np.repeat(np.arange(self.states.size, dtype=np.int64), hi - lo)
-        # the self-loops left out (divided out), read in batches, ``local`` int32
+        if not wide:
+            self.choices = self.choices.astype(index_dtype(q.matrix.shape[0]))
+        counts = hi - lo  # per state, its choices
+        del lo, hi
+        self.state_choice = np.concatenate([[0], np.cumsum(counts)])
+        if not wide:
+            self.state_choice = self.state_choice.astype(index_dtype(self.choices.size))
+        # the self-loops left out (divided out), read in batches, ``local`` int32 where
+        # the choices' count allows; no per-choice owner is kept (the flow's walk makes
+        # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
         self.local, self.cols, self.vals = off_diagonal_entries(
-            q.matrix, self.choices, self.states[self.owner])
+            q.matrix, self.choices, np.repeat(self.states, counts))
         self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
         # the choices' entry pointers in the columns' index type: a level's sums (and
         # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
@@ -216,11 +232,11 @@ class SingleLevels:
         fits = (self.cols.dtype in (np.int32, np.int64) and self.vals.dtype == np.float64
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         self.ptr = self.choice_entry.astype(self.cols.dtype) if fits else None
+        if not wide and self.ptr is not None:  # one array of pointers, not two
+            self.choice_entry = self.ptr
         self.leave = 1.0 - b.self_loop[self.choices]
         self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
-        # the compiled walks (:func:`level_kernels`): the same answers, one call a run
-        self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
         # the NumPy walks' slices, once: per level with single states its states',
         # choices' and entries' bounds (``runs``, ``run_at[k]`` the first run of level
         # ``k`` or above); per state its first choice and per choice its state, both
@@ -237,7 +253,9 @@ class SingleLevels:
         small = np.int32 if self.choices.size < np.iinfo(np.int32).max else np.int64
         level_first = np.repeat(ca, z - a)  # per state, its level's first choice
         self.first_choice = (self.state_choice[:-1] - level_first).astype(small)
-        self.owner_at = (self.owner - np.repeat(a, z - a)[self.owner]).astype(small)
+        # per choice its state counted from its level's first state
+        self.owner_at = np.repeat((np.arange(self.states.size, dtype=small)
+                                   - np.repeat(a, z - a).astype(small)), counts)
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
