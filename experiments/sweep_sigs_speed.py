@@ -14,7 +14,9 @@ For one model (two columns: the scalar path) and two (four: the general path), m
 The bounds, guesses, kernel state and sweep counts of the two checkouts must be equal to
 the bit (printed: ``same``); the answer (the bracket at the block's first state) is
 printed beside every time.  Each kernel is called once before the timing (its compile or
-its load from numba's cache is not timed)::
+its load is not timed); they are compiled into a scratch numba cache of the run's own,
+as their module names are not the package's (an entry cached under such a name cannot
+be loaded by the package)::
 
     python experiments/sweep_sigs_speed.py --compare /tmp/base --states 200000
 """
@@ -22,9 +24,13 @@ its load from numba's cache is not timed)::
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib.util
+import os
+import shutil
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -88,6 +94,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--chunk", type=int, default=64, help="sweeps a kernel call")
     ap.add_argument("--rounds", type=int, default=5)
     args = ap.parse_args(argv)
+    scratch = tempfile.mkdtemp(prefix="sweep-sigs-speed-")
+    atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+    os.environ["NUMBA_CACHE_DIR"] = scratch  # numba reads it when first imported, below
     here = Path(__file__).resolve().parent.parent
     from mitld_lp.solvers import kernels
 
