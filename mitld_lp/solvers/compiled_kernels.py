@@ -221,8 +221,11 @@ def threshold(low, tol, precision, floor):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _over(local, tol, precision, floor):  # pragma: no cover - compiled
-    n, k = local.shape
+def _over(local, k, tol, precision, floor):  # pragma: no cover - compiled
+    """The largest gap over its threshold among the bounds in ``local``'s first ``k``
+    columns (all of them, or a verification's packed rows: one C-contiguous layout,
+    so compiled once)."""
+    n = local.shape[0]
     over = 0.0
     for s in range(n):
         for j in range(0, k, 2):
@@ -333,7 +336,7 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
             if not packed:
                 if work.shape[0] != n:
                     work = np.empty((n, 2 * k))
-                _pack(local, guess, work, False)
+                _pack(local, guess, work, np.bool_(False))  # bool_: not a literal type
                 packed = True
             _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
                        acc, minimise, track)
@@ -341,30 +344,35 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
             _watched(indptr, indices, data, starts, leave, exits, local, order, best, acc,
                      minimise, guess, track)
         done += 1
+        # one layout and no literal for the helpers below, so each is compiled once (a
+        # slice work[:, :k] is typed apart from a C array, a constant 0 or True apart
+        # from an int64 or bool): the packed rows are passed whole, the guesses at k
         if packed:
-            _after_sweep(work[:, :k], work[:, k:], track, k, tol, precision, floor)
-            over = _over(work[:, :k], tol, precision, floor)
+            _after_sweep(work, work, k, track, k, tol, precision, floor)
+            over = _over(work, k, tol, precision, floor)
             if track[0] != 1.0:  # the verification is over: watched sweeps next
-                _pack(local, guess, work, True)
+                _pack(local, guess, work, np.bool_(True))
                 packed = False
         else:
             if optimistic:
-                _after_sweep(local, guess, track, k, tol, precision, floor)
-            over = _over(local, tol, precision, floor)
+                _after_sweep(local, guess, np.int64(0), track, k, tol, precision, floor)
+            over = _over(local, k, tol, precision, floor)
         if over < 1.0:
             break
     if packed:
-        _pack(local, guess, work, True)
+        _pack(local, guess, work, np.bool_(True))
     return done, over
 
 
 @numba.njit(cache=True, nogil=True)
-def _after_sweep(local, guess, track, k, tol, precision, floor):  # pragma: no cover
+def _after_sweep(local, guess, g, track, k, tol, precision, floor):  # pragma: no cover
     """The bookkeeping of :func:`gauss_seidel`'s guesses after a sweep (the phases of
     ``track``, :data:`OFF`): while watching, once every moving column's changes shrink
     at a steady ratio, extrapolate into ``guess``; while verifying, a guess whose sweep
     was monotone is proven (module docs) and written into ``local``, one that crossed
-    or ran out of sweeps is dropped."""
+    or ran out of sweeps is dropped.  The bounds are ``local``'s first ``k`` columns,
+    the guesses ``guess``'s ``k`` columns from ``g`` (the packed rows: both ``work``,
+    ``g = k``)."""
     n = local.shape[0]
     if track[0] == 0.0:
         track[4] += 1.0
@@ -396,14 +404,14 @@ def _after_sweep(local, guess, track, k, tol, precision, floor):  # pragma: no c
             for s in range(n):
                 low = local[s, p]
                 high = local[s, p + 1]
-                cl = low + guess[s, p] * rl
-                ch = high - guess[s, p + 1] * rh
+                cl = low + guess[s, g + p] * rl
+                ch = high - guess[s, g + p + 1] * rh
                 lo_c = min(cl, ch)
                 hi_c = max(cl, ch)
                 margin = eta * max(cl - low, high - ch) \
                     + threshold(low, tol, precision, floor) / 16.0
-                guess[s, p] = min(high, max(low, lo_c - margin))
-                guess[s, p + 1] = max(guess[s, p], min(high, hi_c + margin))
+                guess[s, g + p] = min(high, max(low, lo_c - margin))
+                guess[s, g + p + 1] = max(guess[s, g + p], min(high, hi_c + margin))
             track[OFF + 3 * k + p] = 1.0
             track[OFF + 3 * k + p + 1] = 1.0
         track[0] = 1.0
@@ -420,9 +428,9 @@ def _after_sweep(local, guess, track, k, tol, precision, floor):  # pragma: no c
             track[3] += 1.0
             for s in range(n):
                 if j % 2 == 1:
-                    local[s, j] = min(local[s, j], guess[s, j])
+                    local[s, j] = min(local[s, j], guess[s, g + j])
                 else:
-                    local[s, j] = max(local[s, j], guess[s, j])
+                    local[s, j] = max(local[s, j], guess[s, g + j])
         elif trial == 1.0:
             left = True
     if left and track[1] < VERIFY_SWEEPS:
