@@ -45,6 +45,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
+import _common  # noqa: E402
 import bench_qvbs  # noqa: E402  (the same instances, posed the same way)
 
 OPTIONS = ("plain", "all_labels", "labels", "origins", "valuations", "origins_valuations",
@@ -133,8 +134,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--qvbs", type=Path, required=True)
     ap.add_argument("--only", nargs="+", required=True)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=None,
+                    help="the folder written (required unless --quick)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"one repeat, written to the scratch folder {_common.QUICK_OUT}")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.repeat, args.out = 1, _common.QUICK_OUT
+    elif args.out is None:
+        ap.error("--out is required (or --quick)")
     with tempfile.TemporaryDirectory() as work:
         found, _ = bench_qvbs.jobs(args.qvbs, 0, bench_qvbs.MAX_STATES, bench_qvbs.FAMILIES,
                                    Path(work))

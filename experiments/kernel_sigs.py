@@ -172,10 +172,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("tests", nargs="*", help="test files (default: the kernels' own)")
     ap.add_argument("--workers", type=int, default=1, help="pytest-xdist workers (1: none)")
     ap.add_argument("--compare", type=Path, help="a 'before' checkout to run the same tests on")
-    ap.add_argument("--json", type=Path, help="write both runs' records here")
+    ap.add_argument("--json", type=Path, help="write both runs' records here (a new file: "
+                    "never one that exists)")
+    ap.add_argument("--quick", action="store_true",
+                    help="the first default test file only (it prints only, unless --json)")
     args = ap.parse_args(argv)
+    if args.json is not None and args.json.exists():
+        ap.error(f"--json {args.json}: the file exists; give a new one")
     here = Path(__file__).resolve().parent.parent
     tests = args.tests or [t for t in DEFAULT_TESTS if (here / t).exists()]
+    if args.quick:
+        tests = tests[:1]
     after = run(here, tests, args.workers)
     before = None
     if args.compare is not None:

@@ -79,7 +79,11 @@ NAMES = ("import numba", "typing registries", "target registries",
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=5, help="fresh processes (default 5)")
+    ap.add_argument("--quick", action="store_true",
+                    help="one round (it prints only: no file is written either way)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.rounds = 1
     runs: dict[bool, list[dict]] = {False: [], True: []}
     for _ in range(args.rounds):  # the two loads taking turns
         for narrow in (False, True):

@@ -93,7 +93,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--tol", type=float, default=1e-6)
     ap.add_argument("--chunk", type=int, default=64, help="sweeps a kernel call")
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--quick", action="store_true",
+                    help="a block of 2,000 states, one round (it prints only)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.states, args.rounds = 2_000, 1
     scratch = tempfile.mkdtemp(prefix="sweep-sigs-speed-")
     atexit.register(shutil.rmtree, scratch, ignore_errors=True)
     os.environ["NUMBA_CACHE_DIR"] = scratch  # numba reads it when first imported, below
