@@ -66,7 +66,9 @@ def test_single_levels_hold_each_choices_entries_but_its_self_loop_in_int32(
     assert singles.choices.size > 0
     assert singles.local.dtype == np.int32
     dense = q.matrix.toarray()
-    want = _by_loop(dense, singles.choices, singles.states[singles.owner])
+    # each choice's state, from the states' choice pointers (the walks keep no owner)
+    owner = np.repeat(np.arange(singles.states.size), np.diff(singles.state_choice))
+    want = _by_loop(dense, singles.choices, singles.states[owner])
     assert np.array_equal(singles.local, want[0])
     assert np.array_equal(singles.cols, want[1]) and np.array_equal(singles.vals, want[2])
     # each choice's entries start where the walks read them
