@@ -2,7 +2,7 @@
 (:mod:`mitld_lp.running.sensed_corners`: each state's step unfolded once and shared by
 nature's corners) against the construction it replaced, written here: every corner's
 step made from scratch by the one-corner-at-a-time chain's own step
-(:class:`~mitld_lp.running.sensed_chain._Unfolding` with the corner's hazards), the
+(:class:`~mitld_lp.running.sensed_chain.Unfolding` with the corner's hazards), the
 valuations from the whole state's fields at once.  The two must give the same chain to
 the bit: the same states in the same order, the same choices, every probability's
 bits, labels, valuations, origins and reward models.  Small answers of the sensed band
@@ -28,12 +28,12 @@ from mitld_lp.controllers.tables import BEYOND
 from mitld_lp.distributions import from_table, pmf
 from mitld_lp.distributions.band import band_of_laws
 from mitld_lp.running import sensed_band_chain
-from mitld_lp.running.sensed_chain import _plan_of, _TaskEnds, _Unfolding
+from mitld_lp.running.sensed_chain import TaskEnds, Unfolding, plan_of
 from mitld_lp.sensing import Sensor
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
 
-class _Reference(_Unfolding):
+class _Reference(Unfolding):
     """Every corner's step made from scratch (the construction before the template)."""
 
     def corners(self) -> tuple[Any, list[list[tuple[str, dict[int, float]]]]]:
@@ -86,7 +86,7 @@ class _Reference(_Unfolding):
         return [(e, p) for e, p in out if p > 0.0]
 
 
-def _old_valuation(u: _Unfolding, node: Any) -> str:
+def _old_valuation(u: Unfolding, node: Any) -> str:
     """A state's valuation from all its fields at once."""
     if isinstance(node, str):
         return node
@@ -102,8 +102,8 @@ def _old_valuation(u: _Unfolding, node: Any) -> str:
 def _reference(made: list[_Reference]) -> Any:
     def unfold(game: Any, dta: Any, sta: Any, sensors: Any, controller: Any,
                max_states: int | None = None, *, ends: Any = None) -> Any:
-        plan, sensed = _plan_of(controller, sensors)
-        u = _Reference(game, dta, sta, sensors, sensed, plan, ends or _TaskEnds(dta))
+        plan, sensed = plan_of(controller, sensors)
+        u = _Reference(game, dta, sta, sensors, sensed, plan, ends or TaskEnds(dta))
         made.append(u)
         return u.corners()
     return unfold

@@ -68,7 +68,8 @@ from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 from mitld_lp.worlds.names import state_fields, state_values, valuation_text
 
-__all__ = ["is_sensed", "sensed_chain", "sensed_chain_of"]
+__all__ = ["TaskEnds", "Unfolding", "is_sensed", "never_share", "plan_of", "sensed_chain",
+           "sensed_chain_of"]
 
 
 _REPORTED = -1
@@ -111,11 +112,11 @@ def sensed_chain(game: Game[Any], dta: DTA, sta: STA, sensors: Mapping[str, Sens
     truncated, as the synthesis did) and the ``sensors`` that miss events.  ``ends``:
     for a joint automaton (:mod:`mitld_lp.running.sensed_joint`), its states' ends and
     labels; None: the task's accepting and rejecting states."""
-    plan, sensed = _plan_of(controller, sensors)
-    return _Unfolding(game, dta, sta, sensors, sensed, plan, ends or _TaskEnds(dta)).chain()
+    plan, sensed = plan_of(controller, sensors)
+    return Unfolding(game, dta, sta, sensors, sensed, plan, ends or TaskEnds(dta)).chain()
 
 
-def _plan_of(controller: ControllerLike, sensors: Mapping[str, Sensor]
+def plan_of(controller: ControllerLike, sensors: Mapping[str, Sensor]
              ) -> tuple[Any, tuple[str, ...]]:
     """The controller's plan and the sensed events, refused unless it acts on the
     reports of exactly these sensors."""
@@ -127,7 +128,7 @@ def _plan_of(controller: ControllerLike, sensors: Mapping[str, Sensor]
     return plan, sensed
 
 
-class _TaskEnds:
+class TaskEnds:
     """The ends of a task's own automaton: ``accept`` and ``reject`` (no label on the
     states before).  :class:`mitld_lp.running.sensed_joint.JointEnds` is its joint
     automaton's twin."""
@@ -165,7 +166,7 @@ class _TaskEnds:
         return ()
 
 
-class _Unfolding:
+class Unfolding:
     """The reachable states of the chain, one step at a time (module docs).  A node is
     ``(world, q, pending, clock, unreported, memory)``; ``unreported`` one value per
     sensed event: :data:`_REPORTED`, or the steps until its report can come (0: it can
@@ -364,7 +365,7 @@ def never_share(c: Any, clock: int) -> float | None:
     """The probability that the event of the clock ``c``, a sensed event that may never
     happen, still pending when the step from ``clock`` reaches its truncation point,
     never happens: ``never / P(K > T)``, or 1 past a band's last step
-    (:meth:`_Unfolding.outcomes`); None where the step does not reach that point or the
+    (:meth:`Unfolding.outcomes`); None where the step does not reach that point or the
     event keeps no such hypothesis."""
     if not c.keeps_never or c.truncation is None or clock + 1 < c.truncation:
         return None
@@ -397,7 +398,7 @@ def _kept_for_ever(matrix: Any, order: list[Hashable], persistent: frozenset[int
 def _alarm_reports(out: list[tuple[frozenset[str], tuple[int, ...], float]], a: str,
                    sensor: Sensor, occurs: bool, wait: int
                    ) -> list[tuple[frozenset[str], tuple[int, ...], float]]:
-    """:meth:`_Unfolding.reports` for one sensor with false alarms: it reports with
+    """:meth:`Unfolding.reports` for one sensor with false alarms: it reports with
     probability ``false_alarm`` before the event's report is due (``wait``:
     :data:`_REPORTED` while the event has not happened, else the steps until it is due)
     and ``detect`` from then on, at every step; ``wait`` stays 0 once due."""

@@ -29,7 +29,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.controllers.format import UNDECIDED
 from mitld_lp.controllers.kinds import ControllerLike
 from mitld_lp.running.chain_model import Chain
-from mitld_lp.running.sensed_chain import _plan_of, _TaskEnds, _Unfolding, never_share
+from mitld_lp.running.sensed_chain import TaskEnds, Unfolding, never_share, plan_of
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 
@@ -56,9 +56,9 @@ def sensed_corner_unfolding(game: Game[Any], dta: DTA, sta: STA,
     state's choices ``(name, row)``; past ``max_states`` states it stops
     (:class:`~mitld_lp.util.memory.ProductTooLarge`).  ``ends``: as for
     :func:`~mitld_lp.running.sensed_chain.sensed_chain` (a joint automaton's)."""
-    plan, sensed = _plan_of(controller, sensors)
+    plan, sensed = plan_of(controller, sensors)
     unfolding = _CornerUnfolding(game, dta, sta, sensors, sensed, plan,
-                                 ends or _TaskEnds(dta))
+                                 ends or TaskEnds(dta))
     unfolding.max_states = max_states
     return unfolding.corners()
 
@@ -93,7 +93,7 @@ class _Branch:
 
 class _Template:
     """A state's step under one action, for every corner (module docs): per set of
-    events that may happen (in the order of :meth:`_Unfolding.events`), which of the
+    events that may happen (in the order of :meth:`Unfolding.events`), which of the
     pending events it holds (``bits``, in sorted order) and its branches."""
 
     __slots__ = ("occurred", "bits", "branches")
@@ -103,8 +103,8 @@ class _Template:
         self.occurred, self.bits, self.branches = occurred, bits, branches
 
 
-class _CornerUnfolding(_Unfolding):
-    """:class:`~mitld_lp.running.sensed_chain._Unfolding` with each state's step at
+class _CornerUnfolding(Unfolding):
+    """:class:`~mitld_lp.running.sensed_chain.Unfolding` with each state's step at
     every corner of the bands (module docs)."""
 
     max_states: int | None = None
@@ -236,7 +236,7 @@ class _CornerUnfolding(_Unfolding):
 
     def _subsets_of(self, pending: frozenset[str]
                     ) -> tuple[list[frozenset[str]], list[tuple[bool, ...]]]:
-        """Every set of ``pending`` events in the order :meth:`_Unfolding.events` lists
+        """Every set of ``pending`` events in the order :meth:`Unfolding.events` lists
         them, with which of the sorted pending events each holds."""
         hit = self._subsets.get(pending)
         if hit is None:
@@ -249,7 +249,7 @@ class _CornerUnfolding(_Unfolding):
 
     def _never_branches(self, pending: frozenset[str], occurred: frozenset[str], clock: int
                         ) -> list[tuple[frozenset[str], tuple[float, ...]]]:
-        """:meth:`_Unfolding.outcomes`'s branches of one set of events: what is left
+        """:meth:`Unfolding.outcomes`'s branches of one set of events: what is left
         pending and the factors of its probability after the events' (a sensed event
         that may never happen, at its truncation point)."""
         branches: list[tuple[frozenset[str], tuple[float, ...]]] = [(pending - occurred, ())]
@@ -265,7 +265,7 @@ class _CornerUnfolding(_Unfolding):
               p_action: float, row: dict[int, float]) -> None:
         """Add to ``row`` the successors of ``node`` under ``action`` at the corner whose
         hazards (per sorted pending event) are ``hazards``: the arithmetic and the order
-        of :meth:`_Unfolding.moves`."""
+        of :meth:`Unfolding.moves`."""
         index = self.index
         for e, bits, branches in zip(t.occurred, t.bits, t.branches, strict=True):
             p_events = 1.0
@@ -328,7 +328,7 @@ class _CornerUnfolding(_Unfolding):
     def _key(self, node: tuple[Any, ...], action: str, occurred: frozenset[str],
              seen: frozenset[str], unreported2: tuple[int, ...], br: _Branch,
              g2: Hashable) -> Hashable:
-        """The chain key of a successor (:meth:`_Unfolding.enter`'s): the automaton's
+        """The chain key of a successor (:meth:`Unfolding.enter`'s): the automaton's
         step on the new state's propositions and the true events, the controller's
         memory after its observation."""
         _, q, _, _, _, memory = node
