@@ -153,16 +153,23 @@ def test_bundled_case_answer_unchanged_within_its_bracket(
     assert after.lower == pytest.approx(0.9244053, abs=1e-6)  # Storm's value (README)
 
 
-def test_a_block_whose_cycles_would_mostly_stay_is_not_reduced(
+def test_a_block_whose_cycles_would_mostly_stay_goes_to_the_sparse_lu(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Three one-choice states in a cycle, one state of two choices: with cyclic
     components limited to 2 states, all three would stay in the LP (more than
-    MAX_KEPT_SHARE of them): no reduction, the caller solves the whole LP."""
+    MAX_KEPT_SHARE of them, or every one): the compiled walk refuses and one sparse LU
+    eliminates them all (:mod:`mitld_lp.solvers.sparse_elimination`); with its budget
+    at zero, no reduction, the caller solves the whole LP."""
+    import mitld_lp.solvers.sparse_elimination as spe
+
     inner = sp.csr_array(np.array([[0, .8, 0, .1], [0, 0, .8, .1], [.8, 0, 0, .1],
                                    [0, 0, 0, 0], [.6, 0, 0, 0]]))
     args = (inner, np.array([.1, .1, .1, .5, .3]), np.array([0, 1, 2, 3, 5]),
             np.ones(5, bool))
     monkeypatch.setattr(elim, "DENSE_LIMIT", 2)
+    for share in (0.2, 1.0):  # more than the share would stay; every state would
+        monkeypatch.setattr(elim, "MAX_KEPT_SHARE", share)
+        red = elim.eliminate(*args)
+        assert isinstance(red, spe.SparseElimination) and list(red.s_states) == [0, 1, 2]
+    monkeypatch.setattr(spe, "WORK_PER_ENTRY", 0.0)
     assert elim.eliminate(*args) is None
-    monkeypatch.setattr(elim, "MAX_KEPT_SHARE", 1.0)
-    assert elim.eliminate(*args) is None  # every state would stay: nothing to reduce

@@ -20,7 +20,7 @@ from mitld_lp.util import numba_cache
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
-__all__ = ["boundary_rows", "downstream", "reach", "reduced_rows", "upstream"]
+__all__ = ["boundary_rows", "downstream", "lu_solve", "reach", "reduced_rows", "upstream"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -288,3 +288,40 @@ def reach(comp_ptr, comp_states, comp_of, s_ptr, s_idx, seed):  # pragma: no cov
                 if t >= 0 and comp_of[t] != c:
                     port[t] = True
     return hit, port
+
+
+@numba.njit(cache=True, nogil=True)
+def lu_solve(l_ptr, l_idx, l_val, u_ptr, u_idx, u_val, x):  # pragma: no cover - compiled
+    """``x <- U^-1 L^-1 x`` in place for the CSC factors ``L`` (lower) and ``U`` (upper)
+    of a sparse LU (:mod:`.sparse_elimination`: SuperLU's, permutations applied by the
+    caller) and a C-ordered block of right-hand sides ``x`` (one row a state): every
+    entry of a factor is one pass over a row of ``x``, where SuperLU's own solve takes
+    the right-hand sides one at a time."""
+    n, k = x.shape
+    for j in range(n):  # forward, column by column
+        d = 0.0
+        for e in range(l_ptr[j], l_ptr[j + 1]):
+            if l_idx[e] == j:
+                d = l_val[e]
+        if d != 1.0:
+            for c in range(k):
+                x[j, c] /= d
+        for e in range(l_ptr[j], l_ptr[j + 1]):
+            i = l_idx[e]
+            if i > j:
+                w = l_val[e]
+                for c in range(k):
+                    x[i, c] -= w * x[j, c]
+    for j in range(n - 1, -1, -1):  # backward
+        d = 0.0
+        for e in range(u_ptr[j], u_ptr[j + 1]):
+            if u_idx[e] == j:
+                d = u_val[e]
+        for c in range(k):
+            x[j, c] /= d
+        for e in range(u_ptr[j], u_ptr[j + 1]):
+            i = u_idx[e]
+            if i < j:
+                w = u_val[e]
+                for c in range(k):
+                    x[i, c] -= w * x[j, c]

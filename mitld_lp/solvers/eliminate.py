@@ -23,7 +23,9 @@ self-loop, a cyclic component (the grid's back-and-forth moves make most of them
 over the columns of ``M`` it reaches.  A cyclic component of more than
 :data:`DENSE_LIMIT` states is not eliminated: its states stay in the LP as ``M``
 states with their one column (and if more than :data:`MAX_KEPT_SHARE` of ``S`` would
-stay, the block is not reduced).  If ``B`` would hold more than :data:`FILL_FACTOR` times
+stay, or every one, they are all eliminated by one sparse LU instead,
+:mod:`mitld_lp.solvers.sparse_elimination`).  If ``B`` would hold more than
+:data:`FILL_FACTOR` times
 the block's kept entries, or its dense solves more than :data:`WORK_PER_ENTRY`
 operations per kept entry (checked before each solve), the block's whole LP is solved
 instead.
@@ -45,6 +47,7 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import levels
 from mitld_lp.solvers.kernels import COMPILED_MIN_BLOCK_ENTRIES, COMPILED_MIN_ENTRIES
+from mitld_lp.solvers.sparse_elimination import SparseElimination, sparse_eliminate
 
 __all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_BLOCK_ENTRIES", "MIN_ENTRIES",
            "MIN_PRODUCT_ENTRIES", "MAX_KEPT_SHARE", "WORK_PER_ENTRY", "Elimination", "eliminate",
@@ -69,7 +72,8 @@ a larger component stays in the LP."""
 
 MAX_KEPT_SHARE = 0.2
 """The largest share of the single-choice states that may stay in the LP (in components
-past :data:`DENSE_LIMIT`) for the block to be reduced at all: every state kept widens
+past :data:`DENSE_LIMIT`) for the compiled walk to reduce the block (past it, one sparse
+LU eliminates them all, :mod:`mitld_lp.solvers.sparse_elimination`): every state kept widens
 the rows of ``B`` of the states upstream (``bus_scaled`` n128 d3's smaller block: 5,995
 of its 15,063 would stay, the reduced LP has 7,316 rows and its elimination costs 2-3x
 Clarabel's solve of the whole block; its larger block keeps 1,142 of 22,296)."""
@@ -168,11 +172,13 @@ def _split(groups: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray,
-              keep: np.ndarray) -> Elimination | None:
+              keep: np.ndarray) -> Elimination | SparseElimination | None:
     """The reduced LP of a block (``inner``: its choices' moves inside it, ``reward``
     their exit rewards, ``groups`` its states' ranges of choices, ``keep`` the columns
     left after pruning), or ``None`` when nothing is eliminated or ``B`` would fill past
-    its budget (module docs)."""
+    its budget (module docs).  Where too many of the single-choice states lie in
+    components past :data:`DENSE_LIMIT`, they are all eliminated by one sparse LU
+    instead (:mod:`mitld_lp.solvers.sparse_elimination`, on its own budget)."""
     k = _kernels()
     if k is None:
         return None
@@ -195,12 +201,11 @@ def eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray,
                                 shape=(s_states.size, s_states.size)))
     size = np.bincount(found.component)
     big = size[found.component] > DENSE_LIMIT
-    if np.count_nonzero(big) > MAX_KEPT_SHARE * s_states.size:
-        logger.info("no elimination: %d of the %d single-choice states lie in components "
-                    "of more than %d", np.count_nonzero(big), s_states.size, DENSE_LIMIT)
-        return None
-    if big.all():
-        return None
+    if np.count_nonzero(big) > MAX_KEPT_SHARE * s_states.size or big.all():
+        logger.info("no compiled elimination: %d of the %d single-choice states lie in "
+                    "components of more than %d: one sparse LU instead",
+                    np.count_nonzero(big), s_states.size, DENSE_LIMIT)
+        return sparse_eliminate(inner, reward, groups, keep)
     if big.any():
         single[s_states[big]] = False
     return _reduce(k, inner, reward, groups, cols, single, owner_all,
