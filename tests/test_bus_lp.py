@@ -13,22 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from scipy.optimize import linprog
+from test_eliminate import _lp
 
 import mitld_lp.solvers.eliminate as elim
 import mitld_lp.solvers.sparse_elimination as spe
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import Block
 from mitld_lp.testing import random_mdp
-
-
-def _highs(owner: np.ndarray, n: int, moves: sp.spmatrix, b: np.ndarray, r: np.ndarray):
-    """``max r'y  s.t.  (E - P') y = b, y >= 0`` by HiGHS: optimum, y, duals."""
-    m = owner.size
-    a = sp.csr_array((np.ones(m), (owner, np.arange(m))), shape=(n, m)) - sp.csr_array(moves).T
-    res = linprog(-r, A_eq=a, b_eq=b, bounds=(0, None), method="highs")
-    assert res.status == 0, res.message
-    return -res.fun, res.x, -res.eqlin.marginals
 
 
 def _case(seed: int, n: int = 80):
@@ -51,11 +42,11 @@ def test_sparse_reduced_lp_has_the_whole_lps_optimum_and_lifts_to_it(seed: int) 
     owner = np.repeat(np.arange(n), np.diff(groups))
     cols = np.flatnonzero(keep)
     r = block.to_target
-    want, _, v_want = _highs(owner[cols], n, block.inner[cols], np.ones(n), r[cols])
+    want, _, v_want = _lp(owner[cols], n, block.inner[cols], np.ones(n), r[cols])
     red = spe.sparse_eliminate(block.inner, r, groups, keep)
     assert red is not None and 0 < red.n_m < n
     assert red.s_states.size + red.n_m == n
-    got, y_m, v_m = _highs(red.owner, red.n_m, red.moves, red.b_eq, red.objective)
+    got, y_m, v_m = _lp(red.owner, red.n_m, red.moves, red.b_eq, red.objective)
     assert got * red.scale + red.offset == pytest.approx(want, rel=1e-9, abs=1e-12)
     y, v = red.lift(y_m, v_m)
     # b = 1 on every state: the LP's duals are unique, the optimal values of the block
@@ -91,7 +82,7 @@ def test_eliminate_falls_back_to_the_sparse_lu_and_agrees_with_the_compiled_walk
     np.testing.assert_allclose(walked.objective, lu.objective, atol=1e-12)
     np.testing.assert_allclose(walked.b_eq, lu.b_eq * lu.scale, rtol=1e-10)
     np.testing.assert_allclose(walked.moves.toarray(), lu.moves.toarray(), atol=1e-12)
-    _, y_m, v_m = _highs(lu.owner, lu.n_m, lu.moves, lu.b_eq, lu.objective)
+    _, y_m, v_m = _lp(lu.owner, lu.n_m, lu.moves, lu.b_eq, lu.objective)
     np.testing.assert_allclose(walked.lift(y_m * lu.scale, v_m)[1], lu.lift(y_m, v_m)[1],
                                atol=1e-10)
 
@@ -106,7 +97,7 @@ def test_a_cycle_by_the_sparse_lu_has_the_hand_values() -> None:
     reward = np.array([.1, .1, .1, .5, .3])
     red = spe.sparse_eliminate(inner, reward, np.array([0, 1, 2, 3, 5]), np.ones(5, bool))
     assert red is not None and red.n_m == 1 and list(red.s_states) == [0, 1, 2]
-    _, y_m, v_m = _highs(red.owner, 1, red.moves, red.b_eq, red.objective)
+    _, y_m, v_m = _lp(red.owner, 1, red.moves, red.b_eq, red.objective)
     y, v = red.lift(y_m, v_m)
     v3 = 6 / 7
     np.testing.assert_allclose(v, [0.5 + 0.5 * v3] * 3 + [v3], rtol=1e-12)

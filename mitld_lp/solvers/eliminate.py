@@ -47,7 +47,11 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import levels
 from mitld_lp.solvers.kernels import COMPILED_MIN_BLOCK_ENTRIES, COMPILED_MIN_ENTRIES
-from mitld_lp.solvers.sparse_elimination import SparseElimination, sparse_eliminate
+from mitld_lp.solvers.sparse_elimination import (
+    ReducedBlock,
+    SparseElimination,
+    sparse_eliminate,
+)
 
 __all__ = ["DENSE_LIMIT", "FILL_FACTOR", "MIN_BLOCK_ENTRIES", "MIN_ENTRIES",
            "MIN_PRODUCT_ENTRIES", "MAX_KEPT_SHARE", "WORK_PER_ENTRY", "Elimination", "eliminate",
@@ -113,32 +117,13 @@ def worth_eliminating(product_entries: int, block_entries: int, kept_entries: in
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class Elimination:
-    """The LP over ``M`` (``moves``, ``objective``, ``b_eq``; columns ``m_cols`` owned
-    by ``owner``, ``M``-local) and what :meth:`lift` needs (block-local ids).
+class Elimination(ReducedBlock):
+    """A :class:`~mitld_lp.solvers.sparse_elimination.ReducedBlock` by the compiled walk
+    over ``S``'s components, and what :meth:`lift` needs."""
 
-    Attributes:
-        offset: :math:`r_S' x_0`: the reduced objective plus it is the block LP's.
-    """
-
-    n_states: int
-    n_choices: int
-    m_states: np.ndarray
-    m_cols: np.ndarray
-    s_states: np.ndarray
-    s_cols: np.ndarray  # the one kept column of each S state
-    owner: np.ndarray
-    moves: sp.csr_array
-    objective: np.ndarray
-    b_eq: np.ndarray
-    offset: float
     _comps: tuple[np.ndarray, np.ndarray]
     _s_rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # ptr, idx, val, rew
     _m_rows: tuple[np.ndarray, np.ndarray, np.ndarray]  # ptr, idx, val
-
-    @property
-    def n_m(self) -> int:
-        return int(self.m_states.size)
 
     def lift(self, y_m: np.ndarray, v_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The block's occupancy per column (0 on the pruned ones) and value per state

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["FILL_FACTOR", "WORK_PER_ENTRY", "SparseElimination", "sparse_eliminate"]
+__all__ = ["FILL_FACTOR", "WORK_PER_ENTRY", "ReducedBlock", "SparseElimination",
+           "sparse_eliminate"]
 
 logger = logging.getLogger(__name__)
 
@@ -48,18 +49,13 @@ whole elimination against 0.94 s for Clarabel on the block)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class SparseElimination:
-    """The LP over ``M`` (``moves``, ``objective``, ``b_eq``; columns ``m_cols`` owned by
-    ``owner``, ``M``-local) and what :meth:`lift` needs (block-local ids), the interface
-    of :class:`mitld_lp.solvers.eliminate.Elimination`.
+class ReducedBlock:
+    """What a block's reduction gives the LP (both eliminations'): the LP over ``M``
+    (``moves``, ``objective``, ``b_eq``; columns ``m_cols`` owned by ``owner``,
+    ``M``-local) and the block's partition (block-local ids).
 
     Attributes:
-        b_eq: the start weights divided by ``scale`` (their mean): the flow through the
-            eliminated states makes them run to hundreds, where Clarabel stopped at its
-            reduced tolerances on the LP as it comes (n128 d3's smaller block), and the
-            duals (the values) do not depend on it.
-        offset: :math:`r_S' x_0`: ``scale`` times the reduced objective plus it is the
-            block LP's.
+        offset: :math:`r_S' x_0`: the reduced objective plus it is the block LP's.
     """
 
     n_states: int
@@ -73,15 +69,30 @@ class SparseElimination:
     objective: np.ndarray
     b_eq: np.ndarray
     offset: float
+
+    @property
+    def n_m(self) -> int:
+        return int(self.m_states.size)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SparseElimination(ReducedBlock):
+    """A :class:`ReducedBlock` by one sparse LU, and what :meth:`lift` needs.
+
+    Attributes:
+        b_eq: the start weights divided by ``scale`` (their mean): the flow through the
+            eliminated states makes them run to hundreds, where Clarabel stopped at its
+            reduced tolerances on the LP as it comes (n128 d3's smaller block), and the
+            duals (the values) do not depend on it.
+        offset: :math:`r_S' x_0`: ``scale`` times the reduced objective plus it is the
+            block LP's.
+    """
+
     scale: float
     _lu: _Factor  # A = I - P_SS factored
     _p_sm: sp.csr_array
     _p_ms: sp.csr_array  # the M columns' rows into S
     _r_s: np.ndarray
-
-    @property
-    def n_m(self) -> int:
-        return int(self.m_states.size)
 
     def lift(self, y_m: np.ndarray, v_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The block's occupancy per column (0 on the pruned ones) and value per state
