@@ -15,8 +15,11 @@ parts (eliminations, Clarabel, the crossover's polish).  Storm's best sound chec
 (``bench_sweeps.py``'s: every sound method on our DRN, 1e-9 absolute) in the same run,
 its value beside.  Each figure the least CPU of the rounds.
 
-    python experiments/bench_bus_lp.py --compare /tmp/base --out /tmp/bus_lp
+    python experiments/bench_bus_lp.py --compare /tmp/base --stages --out /tmp/bus_lp
 
+``--stages`` adds, per round, the default route (the greedy certificate on) in this
+checkout with its stages' CPU (the analysis, the iteration, the LP stage and its greedy
+certificate and flow, the certificate): ``bench_bus_lp_stages.csv``/``.md``.
 ``--quick``: ``bus_scaled`` n8 d3, one round, into ``experiments/out/quick``.
 """
 
@@ -38,10 +41,23 @@ from bench_scaling import Instance  # noqa: E402  (the same instances)
 FULL = [("bus_scaled", 64, 3), ("bus_scaled", 128, 3)]
 QUICK = [("bus_scaled", 8, 3)]
 PARTS = {"eliminate": "eliminate", "clarabel": "sensed", "polish": "polish"}
+STAGES = (("analysis", "mitld_lp.solvers.analysis", "analyse"),
+          ("iteration", "mitld_lp.solvers.iteration", "interval_iterations"),
+          ("lp", "mitld_lp.solvers.lp", "solve_lp"),
+          ("certificate", "mitld_lp.solvers.certify", "certify"),
+          ("greedy", "mitld_lp.solvers.lp_blocks", "certified_greedy"),
+          ("flow", "mitld_lp.solvers.lp_blocks", "policy_flow"))
+"""The default route's stages (and the LP stage's two parts there) timed by ``--stages``:
+each function is imported by its caller when called, so wrapping it in its module
+times every call."""
 
 
-def work_lp(inst: Instance) -> dict[str, Any]:
-    """``synthesize`` with every block an LP; the CPU of the LP stage and its parts."""
+def work_lp(inst: Instance, stages: bool = False) -> dict[str, Any]:
+    """``synthesize`` with every block an LP; the CPU of the LP stage and its parts.
+    ``stages``: the default route instead (the greedy certificate on), its stages'
+    CPU (:data:`STAGES`)."""
+    import importlib
+
     import bench_sweeps
 
     import mitld_lp.solvers.lp as lp_stage
@@ -50,7 +66,8 @@ def work_lp(inst: Instance) -> dict[str, Any]:
 
     model = bench_sweeps._model(inst)
     bench_sweeps.preload()
-    blocks.GREEDY_MIN_CHOICES = 1 << 62  # no block answered by the greedy certificate
+    if not stages:
+        blocks.GREEDY_MIN_CHOICES = 1 << 62  # no block answered by the greedy certificate
     spent: dict[str, float] = {}
 
     def timed(module: Any, name: str, key: str) -> None:
@@ -65,35 +82,48 @@ def work_lp(inst: Instance) -> dict[str, Any]:
 
         setattr(module, name, run)
 
-    for key, name in PARTS.items():
-        timed(blocks, name, key)
-    timed(lp_stage, "solve_lp", "lp")
+    if stages:
+        for key, module, name in STAGES:
+            timed(importlib.import_module(module), name, key)
+    else:
+        for key, name in PARTS.items():
+            timed(blocks, name, key)
+        timed(lp_stage, "solve_lp", "lp")
     r = synthesize(model)
     lp = r.lower_model.lp
+    keys = [k for k, _, _ in STAGES] if stages else ["lp", *PARTS]
     return dict(value=r.lower, upper=r.upper, certified=r.certified,
                 solve_cpu=r.solve_cpu, message=lp.message if lp is not None else "",
-                **{f"{k}_cpu": spent.get(k, 0.0) for k in ("lp", *PARTS)})
+                **{f"{k}_cpu": spent.get(k, 0.0) for k in keys})
 
 
-def _ours(inst: Instance, work: Path, code: Path | None) -> dict[str, Any]:
+def _ours(inst: Instance, work: Path, code: Path | None, stages: bool = False
+          ) -> dict[str, Any]:
     import bench_sweeps
 
     out = work / "lp.json"
     argv = [sys.executable, __file__, "--worker", inst.family, str(inst.n), str(inst.d),
-            str(out)]
+            str(out), "stages" if stages else "lp"]
     cpu, err = bench_sweeps._cpu_of(argv, code)
     if cpu is None:
         raise RuntimeError(f"LP route on {inst.name} failed:\n{err[-2000:]}")
     return json.loads(out.read_text(encoding="utf-8"))
 
 
-def measure(inst: Instance, work: Path, base: Path, repeats: int) -> list[dict[str, Any]]:
+def measure(inst: Instance, work: Path, base: Path, repeats: int, stages: bool = False
+            ) -> list[dict[str, Any]]:
+    """The LP route before and after (a row each) and, with ``stages``, the default
+    route's stages in this checkout (a third row, ``checkout`` "default route")."""
     import bench_sweeps
 
     runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+    if stages:
+        runs["default route"] = []
     for _ in range(repeats):
         runs["before"].append(_ours(inst, work, base))
         runs["after"].append(_ours(inst, work, None))
+        if stages:
+            runs["default route"].append(_ours(inst, work, None, stages=True))
     bench_sweeps._child("export", inst, work)
     storm = bench_sweeps._child("storm_check", inst, work)
     (work / "model.drn").unlink()
@@ -114,6 +144,9 @@ def measure(inst: Instance, work: Path, base: Path, repeats: int) -> list[dict[s
 COLUMNS = ("instance", "checkout", "value", "upper", "certified", "solve_cpu", "lp_cpu",
            "eliminate_cpu", "clarabel_cpu", "polish_cpu", "storm_best", "storm_value",
            "storm_check_cpu", "solve_over_storm_check")
+STAGE_COLUMNS = ("instance", "checkout", "value", "upper", "certified", "solve_cpu",
+                 *(f"{k}_cpu" for k, _, _ in STAGES), "storm_check_cpu",
+                 "solve_over_storm_check")
 
 
 ANSWERS = ("value", "upper", "storm_value")
@@ -133,6 +166,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
                     help="the checkout whose mitld_lp is 'before'")
     ap.add_argument("--repeats", type=int, default=None,
                     help="rounds of before and after (default 3, 1 with --quick)")
+    ap.add_argument("--stages", action="store_true",
+                    help="also the default route's stages in this checkout (a table of "
+                         "their own)")
     args = ap.parse_args(argv)
     if not (args.compare / "mitld_lp").is_dir():
         ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
@@ -144,11 +180,16 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             work = Path(tmp) / inst.name
             work.mkdir()
             rows += measure(inst, work, args.compare.resolve(),
-                            args.repeats or (1 if args.quick else 3))
-        for r in rows[-2:]:
-            print(" ".join(f"{k}={_fmt(k, r[k])}" for k in COLUMNS), flush=True)
-    table = [[_fmt(k, r[k]) for k in COLUMNS] for r in rows]
-    _common.write_tables(out, "bench_bus_lp", COLUMNS, table)
+                            args.repeats or (1 if args.quick else 3), args.stages)
+        for r in rows[-3 if args.stages else -2:]:
+            cols = STAGE_COLUMNS if r["checkout"] == "default route" else COLUMNS
+            print(" ".join(f"{k}={_fmt(k, r[k])}" for k in cols), flush=True)
+    lp_rows = [r for r in rows if r["checkout"] != "default route"]
+    _common.write_tables(out, "bench_bus_lp", COLUMNS,
+                         [[_fmt(k, r[k]) for k in COLUMNS] for r in lp_rows])
+    if args.stages:
+        _common.write_tables(out, "bench_bus_lp_stages", STAGE_COLUMNS, [
+            [_fmt(k, r[k]) for k in STAGE_COLUMNS] for r in rows if r not in lp_rows])
     _common.write_text(out / "bench_bus_lp_messages.txt", "".join(
         f"{r['instance']} {r['checkout']}: {r['message']}\n" for r in rows))
     _common.write_text(out / "bench_bus_lp_machine.txt", machine_text(
@@ -159,9 +200,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
 
 def worker(argv: list[str]) -> None:
-    family, n, d, out = argv
-    Path(out).write_text(json.dumps(work_lp(Instance(family, int(n), int(d)))),
-                         encoding="utf-8")
+    family, n, d, out, route = argv
+    Path(out).write_text(json.dumps(work_lp(Instance(family, int(n), int(d)),
+                                            stages=route == "stages")), encoding="utf-8")
 
 
 if __name__ == "__main__":
