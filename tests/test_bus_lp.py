@@ -154,3 +154,18 @@ def test_bus_case_by_the_sparse_lu_keeps_its_bracket_around_storms_exact_value(
     exact = exact_fraction(stormpy.model_checking(mdp, prop, environment=env).get_value(
         mdp.initial_states[0]))
     assert result.lower <= exact <= result.upper
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_one_right_hand_side_at_a_time_gives_the_same_lp(
+        seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ports' rows solved a block of right-hand sides at a time or one at a time
+    (``BLOCK_FLOATS`` below one state's column): the same reduced LP."""
+    block, keep = _case(seed)
+    args = (block.inner, block.to_target, block.groups, keep)
+    whole = spe.sparse_eliminate(*args)
+    monkeypatch.setattr(spe, "BLOCK_FLOATS", 1)
+    single = spe.sparse_eliminate(*args)
+    assert whole is not None and single is not None
+    np.testing.assert_allclose(single.moves.toarray(), whole.moves.toarray(), atol=1e-14)
+    np.testing.assert_allclose(single.objective, whole.objective, atol=1e-14)

@@ -14,10 +14,12 @@ optimum plus :math:`r_S' x_0` is the block LP's.  Here ``A`` is factored once by
 (5,995 of them in cyclic components of more than 400 states, where the compiled
 walk's dense solves would cost more than the LP), 187 columns of ``M`` reached.
 
-The work is estimated before it is done: the factor's fill is checked against
-:data:`FILL_FACTOR` times the block's kept entries, and the port solves (two
-operations per entry of the factor and port) against :data:`WORK_PER_ENTRY` per kept
-entry; past either, the block's whole LP is solved as before.  :meth:`SparseElimination.
+The work is estimated before it is done: once the factor is made (its cost, one
+SuperLU factorisation, is the one step taken before its check), its fill and the ports'
+dense rows are checked against :data:`FILL_FACTOR` times the block's kept entries, and
+the port solves (two operations per entry of the factor and right-hand side) against
+:data:`WORK_PER_ENTRY` per kept entry; past either, the block's whole LP is solved as
+before.  :meth:`SparseElimination.
 lift` gives back the block: :math:`v_S = A^{-1}(r_S + P_{SM} v_M)` and the flow of ``S``,
 :math:`x_S = A^{-T}(\mathbf 1 + P_{MS}^T y_M)`, by the same factor.
 """
@@ -146,7 +148,8 @@ def sparse_eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray
     fill = lu.fill
     # the port solves by the side with fewer right-hand sides, x0 and the two lifts
     work = 2.0 * fill * (min(ports.size, used.size + 1) + 3)
-    if fill > FILL_FACTOR * kept or work > WORK_PER_ENTRY * kept:
+    dense = ports.size * (used.size + 1)  # the ports' rows, held dense
+    if max(fill, dense) > FILL_FACTOR * kept or work > WORK_PER_ENTRY * kept:
         logger.info("no sparse elimination of %d states: a factor of %d entries, %.3g "
                     "operations for %d ports (budgets %.3g entries, %.3g operations)",
                     s_states.size, fill, work, ports.size, FILL_FACTOR * kept,
@@ -175,7 +178,11 @@ def sparse_eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray
 
 
 BATCH = 256
-"""Right-hand sides solved at a time (a dense block of this many columns per state)."""
+"""Right-hand sides solved at a time (a dense block of this many columns per state), at
+most :data:`BLOCK_FLOATS` floats in all."""
+
+BLOCK_FLOATS = 1 << 22
+"""The largest block of right-hand sides solved at once, in floats (32 MB)."""
 
 
 class _Factor:
@@ -215,14 +222,15 @@ def _port_rows(lu: _Factor, p_sm: sp.csr_array, r_s: np.ndarray, ports: np.ndarr
     """The ports' rows of ``A^-1 [P_SM, r_S]``: ``(ports, used)`` dense and the rewards
     ``(ports,)``, by the side :func:`sparse_eliminate` factored (the ports' unit vectors
     through ``A^T``, or the used columns and the rewards through ``A``), :data:`BATCH`
-    right-hand sides at a time."""
+    right-hand sides at a time (fewer past :data:`BLOCK_FLOATS`)."""
     n_s = r_s.size
+    step = max(1, min(BATCH, BLOCK_FLOATS // max(n_s, 1)))
     if lu.transposed:
         rhs_p = sp.csc_array(p_sm[:, used])
         b = np.empty((ports.size, used.size))
         a = np.empty(ports.size)
-        for lo in range(0, ports.size, BATCH):
-            hi = min(lo + BATCH, ports.size)
+        for lo in range(0, ports.size, step):
+            hi = min(lo + step, ports.size)
             unit = np.zeros((n_s, hi - lo))
             unit[ports[lo:hi], np.arange(hi - lo)] = 1.0
             cols = lu.block(unit)  # columns of A^-T: the ports' rows of A^-1
@@ -231,7 +239,7 @@ def _port_rows(lu: _Factor, p_sm: sp.csr_array, r_s: np.ndarray, ports: np.ndarr
         return b, a
     rhs = sp.csc_array(sp.hstack([p_sm[:, used], sp.csc_array(r_s[:, None])]))
     out = np.empty((ports.size, used.size + 1))
-    for lo in range(0, used.size + 1, BATCH):
-        hi = min(lo + BATCH, used.size + 1)
+    for lo in range(0, used.size + 1, step):
+        hi = min(lo + step, used.size + 1)
         out[:, lo:hi] = lu.block(rhs[:, lo:hi].toarray())[ports]
     return out[:, :-1], out[:, -1]
