@@ -117,7 +117,8 @@ def _arrays() -> dict[str, object]:
     rng = np.random.default_rng(3)
     return {"f": rng.random(70_001), "i": np.arange(123_457, dtype=np.int64) * 3,
             "u": rng.integers(0, 255, size=(301, 7), dtype=np.uint8),
-            "s": np.arange(10)[::2], "t": ("a", frozenset({"b"}), 1.5)}
+            "s": np.arange(10)[::2], "F": np.asfortranarray(rng.random((50, 3))),
+            "t": ("a", frozenset({"b"}), 1.5)}
 
 
 @pytest.mark.skipif(not prism_bounded.can_cap(), reason="no capped child on this platform")
@@ -125,10 +126,11 @@ def test_the_capped_childs_arrays_come_back_bit_for_bit():
     got = prism_bounded.run_capped(_arrays, 1 << 30)
     want = _arrays()
     assert got.keys() == want.keys() and got["t"] == want["t"]
-    for key in ("f", "i", "u", "s"):
+    for key in ("f", "i", "u", "s", "F"):
         assert got[key].dtype == want[key].dtype and got[key].shape == want[key].shape
         assert got[key].tobytes() == want[key].tobytes()
         got[key][...] = 0  # writable, like an array unpickled in band
+    assert got["F"].flags.f_contiguous and not got["F"].flags.c_contiguous  # its order kept
     with pytest.raises(KeyError, match="nothing here"):
         prism_bounded.run_capped(lambda: {}["nothing here"], 1 << 30)
 
