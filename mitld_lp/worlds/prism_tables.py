@@ -2,7 +2,8 @@
 
 The transition structure comes from Storm's own binary export (UMB: the offsets of each
 state's choices and of each choice's branches, the branch targets and probabilities, as
-little-endian 64-bit arrays in an uncompressed tar), read with :func:`numpy.fromfile`;
+little-endian 64-bit arrays in an uncompressed tar, its members found from the tar
+headers: :mod:`mitld_lp.worlds.prism_archive`), read with :func:`numpy.fromfile`;
 the state valuations from the same archive's bit-packed records (Storm's per-variable
 calls, which make a Python list of each variable's values, where the layout is another);
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
@@ -17,7 +18,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import tarfile
 import tempfile
 from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -26,6 +26,8 @@ from typing import Any, overload
 import numpy as np
 
 from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_archive import members as archive_members
+from mitld_lp.worlds.prism_archive import read_member
 from mitld_lp.worlds.prism_labels import choice_labels, indices, repeated, state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
@@ -159,39 +161,38 @@ def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
         path = os.path.join(folder, "model.umb")
         with storm_quiet():
             stormpy.io.export_to_umb(model, path, options=options)
-        with tarfile.open(path) as tar:
-            members = {t.name: t for t in tar.getmembers()}
-            index = tar.extractfile(members["index.json"]) if "index.json" in members else None
-            meta = json.loads(index.read()) if index else {}
-            system = meta.get("transition-system", {})
-            b = system.get("#branches", -1)
-            if (system.get("#states"), system.get("#choices")) != (n, m) or system.get(
-                "branch-probability-type"
-            ) != {"size": 64, "type": "double"}:
-                raise WorldError(unsupported)
+        members = archive_members(path)  # from the tar headers: prism_archive
+        index = members.get("index.json")
+        meta = json.loads(read_member(path, index)) if index else {}
+        system = meta.get("transition-system", {})
+        b = system.get("#branches", -1)
+        if (system.get("#states"), system.get("#choices")) != (n, m) or system.get(
+            "branch-probability-type"
+        ) != {"size": 64, "type": "double"}:
+            raise WorldError(unsupported)
 
-            def read(name: str, dtype: str, count: int) -> np.ndarray:
-                member = members.get(name)
-                if member is None or member.size != count * 8:
-                    raise WorldError(f"{unsupported} ({name})")
-                return np.fromfile(path, dtype=dtype, count=count, offset=member.offset_data)
+        def read(name: str, dtype: str, count: int) -> np.ndarray:
+            member = members.get(name)
+            if member is None or member.size != count * 8:
+                raise WorldError(f"{unsupported} ({name})")
+            return np.fromfile(path, dtype=dtype, count=count, offset=member.offset_data)
 
-            # a DTMC's archive has no state-to-choices (a choice per state, in order)
-            one_each = n == m and "state-to-choices.bin" not in members
-            records = members.get(VALUATIONS_BIN)
-            packed = None if records is None else unpack_valuations(
-                meta.get("valuations", {}).get("states", {}), n, records.size,
-                lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
-                                    offset=records.offset_data))
-            return (
-                np.arange(n + 1, dtype=np.int64) if one_each else
-                read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
-                read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
-                read("branch-to-target.bin", "<u8", b).astype(np.int64),
-                read("branch-to-probability.bin", "<f8", b),
-                packed,
-                _choice_actions(path, members, m),
-            )
+        # a DTMC's archive has no state-to-choices (a choice per state, in order)
+        one_each = n == m and "state-to-choices.bin" not in members
+        records = members.get(VALUATIONS_BIN)
+        packed = None if records is None else unpack_valuations(
+            meta.get("valuations", {}).get("states", {}), n, records.size,
+            lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
+                                offset=records.offset_data))
+        return (
+            np.arange(n + 1, dtype=np.int64) if one_each else
+            read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
+            read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
+            read("branch-to-target.bin", "<u8", b).astype(np.int64),
+            read("branch-to-probability.bin", "<f8", b),
+            packed,
+            _choice_actions(path, members, m),
+        )
 
 
 def _choice_actions(path: str, members: Mapping[str, Any], m: int,

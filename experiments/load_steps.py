@@ -1,0 +1,107 @@
+"""What the PRISM load spends beside Storm's build, step by step, in CPU seconds.
+
+For each model file (a ``[prism]`` world, as ``bench_qvbs.py`` writes them), in fresh
+processes, the load (``mitld_lp.load_model``) timed whole, once with Storm's exploration
+in the memory-capped child as the budgets ask (``capped``: this process and the child)
+and once with the build in this process (``here``), the steps of the latter timed apart
+(each function's CPU while it runs): Storm's build of the world (``storm_build``), its
+build of the initial state alone for the variables and the initial state's values
+(``head``), the copy of Storm's model into arrays (``read_model``: the UMB export and its
+read, the labels, the checks of every distribution), the spec's parse, the PRISM file's
+parse and the labels added to it, the program's checks.  The answer printed beside: the
+world's states and transitions.  The least over ``--repeats`` runs of each.
+
+    python experiments/load_steps.py /tmp/jobs/zeroconf_dl.1000-1-false-30.deadline_max.toml
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import _common  # noqa: E402
+
+ROOT = HERE.parent
+
+PROBE = r"""
+import functools, json, resource, sys, time
+import stormpy
+from mitld_lp import load_model
+from mitld_lp import game_tables as gt
+from mitld_lp.worlds import prism as pr, prism_build as pb
+def cpu():
+    u, c = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return u.ru_utime + u.ru_stime + c.ru_utime + c.ru_stime
+steps = {}
+def timed(module, name, label):
+    f = getattr(module, name)
+    @functools.wraps(f)
+    def run(*a, **k):
+        c = time.process_time()
+        try:
+            return f(*a, **k)
+        finally:
+            steps[label] = steps.get(label, 0.0) + time.process_time() - c
+    setattr(module, name, run)
+here = sys.argv[2] == "here"
+if here:
+    pb.can_cap = lambda: False
+    for module, name, label in ((pb, "storm_build", "storm_build"), (pb, "head", "head"),
+                                (pb, "read_model", "read_model"),
+                                (gt, "parse_spec", "parse_spec"),
+                                (pr, "parse_program", "parse_program"),
+                                (pr, "with_labels", "with_labels"),
+                                (pr, "check_program", "check_program")):
+        timed(module, name, label)
+c = cpu()
+model = load_model(sys.argv[1], max_states=2_000_000)
+load = cpu() - c
+t = model.game._tables
+print(json.dumps(dict(load=load, steps=steps, states=len(t.states),
+                      transitions=int(t.targets.size))))
+"""
+
+
+def run(model: Path, where: str) -> dict:
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", PROBE, str(model), where], cwd=ROOT, env=env,
+                         capture_output=True, text=True, check=True, timeout=3600)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+STEPS = ("storm_build", "head", "read_model", "parse_spec", "parse_program", "with_labels",
+         "check_program")
+
+
+def main(argv: list[str] | None = None) -> list[list[object]]:
+    p = _common.parser(__doc__.splitlines()[0])
+    p.add_argument("models", type=Path, nargs="+", help="model files with a [prism] world")
+    p.add_argument("--repeats", type=int, default=None, help="runs of each (default 3)")
+    args = p.parse_args(argv)
+    repeats = args.repeats or (1 if args.quick else 3)
+    header = ["model", "states", "transitions", "capped", "here", *STEPS, "rest"]
+    rows: list[list[object]] = []
+    for model in args.models:
+        capped, here = [], []
+        for _ in range(repeats):  # taking turns
+            capped.append(run(model, "capped"))
+            here.append(run(model, "here"))
+        best = min(here, key=lambda r: r["load"])
+        steps = [round(min(r["steps"].get(s, 0.0) for r in here), 4) for s in STEPS]
+        rest = best["load"] - sum(best["steps"].get(s, 0.0) for s in STEPS)
+        rows.append([model.stem, best["states"], best["transitions"],
+                     round(min(r["load"] for r in capped), 4), round(best["load"], 4),
+                     *steps, round(rest, 4)])
+        print(dict(zip(header, rows[-1], strict=True)))
+    _common.write_tables(_common.out_dir(args), "load_steps", header, rows)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
