@@ -191,7 +191,11 @@ class _Singles:
         level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
         self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
         self.local, self.cols, self.vals = row_entries(sub, self.order)
-        self.entry_at = np.searchsorted(self.local, np.arange(self.order.size + 1))
+        # each state's first entry: its row's length counted (``local`` is sorted), not
+        # a binary search of every state in ``local``: the same pointers
+        self.entry_at = np.zeros(self.order.size + 1, dtype=np.int64)
+        np.cumsum(np.bincount(self.local, minlength=self.order.size),
+                  out=self.entry_at[1:])
         fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
                 and self.vals.dtype == np.float64
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
@@ -213,6 +217,13 @@ class _Singles:
             return
         marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
         n = v.shape[0]
+        # what no level's sums change, gathered once for the run (the same operands, so
+        # the same bits): each state's b, its 2 kappa and what its self-loop leaves
+        lo_s, hi_s = int(at[first]), int(at[stop])
+        states = self.order[lo_s:hi_s]
+        b_of, twice_kappa = b[states], 2.0 * kappa[states]
+        leave = 1.0 - diag[states]
+        del states
         for lv in marks.tolist():
             a, z = int(at[lv]), int(at[lv + 1])
             if self.ptr is not None:  # one compiled call a sum: from 0, in the entries' order
@@ -224,6 +235,7 @@ class _Singles:
                 local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]
                 down_v = np.bincount(local, weights=vals * v[cols], minlength=z - a)
                 down_w = np.bincount(local, weights=vals * w[cols], minlength=z - a)
-            one = self.order[a:z]
-            v[one] = (b[one] + down_v) / (1.0 - diag[one])
-            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
+            one, r = self.order[a:z], slice(a - lo_s, z - lo_s)
+            value = (b_of[r] + down_v) / leave[r]
+            v[one] = value
+            w[one] = (twice_kappa[r] * value + down_w) / leave[r]
