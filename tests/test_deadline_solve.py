@@ -2,7 +2,9 @@
 written here on random acyclic models: the single levels' choice pointers counted, not
 searched (``SingleLevels.choice_entry``); the certificate's chain walk with each state's
 right-hand side, rounding term and divisor gathered once for a run
-(``certify_chain._Singles``); the component levels' reach searched from the seeds' one
+(``certify_chain._Singles``); the rows' entries copied by SciPy's compiled row gather
+(``rows.row_entries``, ``off_diagonal_entries``); the level walks' clip by its ufunc (the
+bounds and values walks are ``test_deadline_walks``' and ``test_deadline_fuse``'); the component levels' reach searched from the seeds' one
 component on the reversed graph itself (``level_search.searched_levels``); and a small
 PRISM deadline model solved end to end against Storm's exact engine, with the levels
 walked and searched: the bracket holds the exact value, the same bits either way."""
@@ -18,6 +20,7 @@ import pytest
 import scipy.sparse as sp
 
 from mitld_lp.solvers import certify_chain, graph, level_search
+from mitld_lp.solvers import rows as rows_mod
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense, graph_blocks
 from mitld_lp.solvers.topological import SingleLevels
@@ -179,3 +182,30 @@ def test_prism_deadline_solve_holds_storms_exact_value(tmp_path, monkeypatch,
         assert r.upper - r.lower < 1e-6
         brackets.append((r.lower, r.upper))
     assert brackets[0] == brackets[1]  # the same bits either way
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+def test_row_entries_are_each_rows_stored_entries_in_order(index) -> None:
+    rng = np.random.default_rng(7)
+    n_rows, n_cols = 60, 40
+    lengths = rng.integers(0, 5, n_rows)
+    ptr = np.concatenate([[0], np.cumsum(lengths)]).astype(index)
+    cols = rng.integers(0, n_cols, int(ptr[-1])).astype(index)  # unsorted, repeats
+    vals = rng.random(int(ptr[-1]))
+    m = sp.csr_array((vals, cols, ptr), shape=(n_rows, n_cols))
+    rows = rng.integers(0, n_rows, 90)  # repeats, any order
+    want = [(i, int(m.indices[e]), float(m.data[e])) for i, r in enumerate(rows.tolist())
+            for e in range(int(ptr[r]), int(ptr[r + 1]))]
+    for got in (rows_mod.row_entries(m, rows),
+                rows_mod.row_entries(m, rows.astype(np.int32))):
+        local, c, v = got
+        assert list(zip(local.tolist(), c.tolist(), v.tolist(), strict=True)) == want
+        assert c.dtype == m.indices.dtype
+    # a row past the last is refused, as NumPy's indexing refuses it
+    with pytest.raises(IndexError):
+        rows_mod.row_entries(m, np.array([n_rows]))
+    # the off-diagonal entries: each row's entry in its state's column left out
+    state = rng.integers(0, n_cols, rows.size)
+    local, c, v = rows_mod.off_diagonal_entries(m, rows, state)
+    kept = [(i, col, val) for i, col, val in want if col != state[i]]
+    assert list(zip(local.tolist(), c.tolist(), v.tolist(), strict=True)) == kept
