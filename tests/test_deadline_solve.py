@@ -3,16 +3,16 @@ written here on random acyclic models: the single levels' choice pointers counte
 searched (``SingleLevels.choice_entry``); the certificate's chain walk with each state's
 right-hand side, rounding term and divisor gathered once for a run
 (``certify_chain._Singles``); the rows' entries copied by SciPy's compiled row gather
-(``rows.row_entries``, ``off_diagonal_entries``); the level walks' clip by its ufunc (the
-bounds and values walks are ``test_deadline_walks``' and ``test_deadline_fuse``'); the component levels' reach searched from the seeds' one
-component on the reversed graph itself (``level_search.searched_levels``); and a small
-PRISM deadline model solved end to end against Storm's exact engine, with the levels
-walked and searched: the bracket holds the exact value, the same bits either way."""
+(``rows.row_entries``, ``off_diagonal_entries``); the level walks' clip by its ufunc
+(the bounds and values walks are ``test_deadline_walks``' and ``test_deadline_fuse``');
+the component levels' reach searched from the seeds' one component on the reversed graph
+itself (``level_search.searched_levels``); and a small PRISM deadline model solved end
+to end against Storm's exact engine, with the levels walked and searched: the bracket
+holds the exact value, the same bits either way."""
 
 from __future__ import annotations
 
 import sys
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +30,9 @@ from test_deadline_walks import (  # noqa: E402,I001
     _deadline_mdp,
     _plain_components,
     _plain_levels,
-    _posed,
     _random_graph,
     _searches,
+    walked_and_searched,
 )
 
 
@@ -165,23 +165,7 @@ label "goal" = x=9;
                                              ("min", "Pmin=? [F \"goal\"]")])
 def test_prism_deadline_solve_holds_storms_exact_value(tmp_path, monkeypatch,
                                                        objective: str, prop: str) -> None:
-    from mitld_lp import load_model, synthesize
-
-    model, exact = _posed(tmp_path, LATE, "x=9", objective, prop)
-    assert 0.01 < float(exact) < 0.99  # not decided by the graph alone
-    brackets, used = [], _searches(monkeypatch)
-    for searched in (False, True):
-        if searched:  # every graph large and thin: the levels searched
-            monkeypatch.setattr(graph, "SMALL", 0)
-            monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
-            monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
-        r = synthesize(load_model(model))
-        assert bool(used) == searched and all(used)
-        assert r.certified, r.failed_checks
-        assert Fraction(r.lower) <= exact <= Fraction(r.upper)  # no tolerance
-        assert r.upper - r.lower < 1e-6
-        brackets.append((r.lower, r.upper))
-    assert brackets[0] == brackets[1]  # the same bits either way
+    walked_and_searched(tmp_path, monkeypatch, LATE, "x=9", objective, prop)
 
 
 @pytest.mark.parametrize("index", [np.int32, np.int64])

@@ -50,10 +50,11 @@ def searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
     ``2 (c - d) - 1 >= 1`` (Johnson's reweighting). That holds iff every edge runs from a
     higher component id to a lower one, as Tarjan's numbering (csgraph's and
     :func:`~mitld_lp.util.traversal.strong_components`') makes it: checked, and ``None``
-    where it does not hold (the caller walks the levels). Which components reach each
-    seed set: a breadth-first search of the reversed graph (``preds_of``) from the
-    seeds' component, or, where they lie in several, from a node joined to them. The levels and reach of :class:`~mitld_lp.solvers.graph.Levels`
-    (levels are integers, exact in float64 below 2**53; the reach is a set)."""
+    where it does not hold (the caller walks the levels). Which components reach each seed
+    set: a breadth-first search of the reversed graph (``preds_of``) from the seeds'
+    component, or, where they lie in several, from a node joined to them. The levels and
+    reach of :class:`~mitld_lp.solvers.graph.Levels` (levels are integers, exact in
+    float64 below 2**53; the reach is a set)."""
     from scipy.sparse import csgraph
 
     n_comp = preds_of.shape[0]
