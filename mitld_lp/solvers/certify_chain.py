@@ -14,7 +14,7 @@ from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import Blocks, Reversed, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
-from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.solvers.rows import row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
@@ -78,15 +78,13 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     acting = (policy >= 0) & ~target
     states = np.flatnonzero(acting)
     rows = policy[states]
-    lo, hi = m.indptr[rows], m.indptr[rows + 1]
-    entries = gather_ranges(lo, hi)
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    src = np.repeat(states.astype(index), hi - lo)
-    dst = m.indices[entries].astype(index, copy=False)
-    val = m.data[entries]
+    src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
+    dst, val = row_columns(m, rows)  # compiled: no index array of every entry
+    dst = dst.astype(index, copy=False)
     # the acting states and their rows (two int64 a state) are in ``src`` now: freed
     # before the search's reversed edges (the certificate's peak on QVBS csma)
-    del entries, lo, hi, states, rows
+    del states, rows
     pos = val > 0
     if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
         src, dst, val = src[pos], dst[pos], val[pos]
