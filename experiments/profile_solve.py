@@ -172,15 +172,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.qvbs is None:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
-    wanted = set(args.only or INSTANCES)
     rows = []
     with tempfile.TemporaryDirectory(prefix="profile_solve_") as tmp:
         work = Path(tmp)
-        high = bq.QUICK_MAX_STATES if args.quick else bq.MAX_STATES
-        found, _ = bq.jobs(args.qvbs, 0 if args.quick else bq.MIN_STATES, high,
-                           bq.FAMILIES, work)
-        found.sort(key=lambda t: t[0].qvbs_states)
-        chosen = found[-1:] if args.quick else [f for f in found if f[0].name in wanted]
+        chosen = chosen_jobs(args.qvbs, args.quick, set(args.only or INSTANCES), work)
         numba_row = _run_child("numba", {}, work)
         for inst, job in chosen:
             (work / inst.name).mkdir()
@@ -205,6 +200,17 @@ def main(argv: list[str] | None = None) -> int:
     _common.write_csv(out / "profile_solve.csv", COLUMNS, rows)
     print(text)
     return 0
+
+
+def chosen_jobs(benchmarks: Path, quick: bool, wanted: set[str], work: Path
+                ) -> list[tuple[Any, dict[str, Any]]]:
+    """The QVBS instances to run, posed as ``bench_qvbs.py`` poses them (their model
+    files written to ``work``): with ``quick`` the largest under its quick bound, else
+    those ``wanted`` (names) of the benchmark's sizes, smallest first."""
+    high = bq.QUICK_MAX_STATES if quick else bq.MAX_STATES
+    found, _ = bq.jobs(benchmarks, 0 if quick else bq.MIN_STATES, high, bq.FAMILIES, work)
+    found.sort(key=lambda t: t[0].qvbs_states)
+    return found[-1:] if quick else [f for f in found if f[0].name in wanted]
 
 
 def argparse_hidden() -> str:

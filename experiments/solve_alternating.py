@@ -33,7 +33,8 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
 import _common  # noqa: E402
-import bench_qvbs as bq  # noqa: E402  (the same instances, posed the same way)
+import bench_qvbs as bq  # noqa: E402
+import profile_solve as ps  # noqa: E402  (the same instances, posed the same way)
 
 ROOT = HERE.parent
 COLUMNS = ("instance", "value", "calls", "before_min", "before_median", "after_min",
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=3, help="solves a process")
-    ap.add_argument("--child", default=None, help=_hidden())
+    ap.add_argument("--child", default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
         work = Path(args.child)
@@ -94,12 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="solve_alternating_") as tmp:
         work = Path(tmp)
-        high = bq.QUICK_MAX_STATES if args.quick else bq.MAX_STATES
-        found, _ = bq.jobs(args.qvbs, 0, high, bq.FAMILIES, work)
-        found.sort(key=lambda t: t[0].qvbs_states)
-        chosen = (found[:1] if args.quick else
-                  [f for f in found if args.only is None or f[0].name in args.only])
-        for inst, job in chosen:
+        for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
+                                        set(args.only or ps.INSTANCES), work):
             spent: dict[str, list[float]] = {"before": [], "after": []}
             seen: dict[str, Any] = {}
             for _ in range(rounds):
@@ -122,12 +119,6 @@ def main(argv: list[str] | None = None) -> int:
     _common.write_text(out / "solve_alternating.md", text)
     print(text)
     return 0
-
-
-def _hidden() -> str:
-    import argparse
-
-    return argparse.SUPPRESS
 
 
 if __name__ == "__main__":
