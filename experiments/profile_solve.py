@@ -15,6 +15,8 @@ Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their 
   never loaded): what a size threshold above the instance would cost;
 * the level walks inside those stages (:data:`WALKS`: ``levels``, ``single_bounds``,
   ``single_values``, ``single_flow``, ``chain_singles``, ``repair``), timed alike;
+* what is not a walk (:data:`SETUP`: ``components``, ``search``, ``single_setup``,
+  ``chain``, ``bellman_check``), timed alike;
 * ``numba``: a fresh interpreter with NumPy and SciPy loaded as the solve has them:
   ``import numba``, the first call of the sweep kernel on a 50-state block (the
   registries' set-up and its load from the cache), then a second kernel's first call.
@@ -60,9 +62,20 @@ WALKS = {"levels": ("mitld_lp.solvers.graph", "levels"),
 """The level walks inside the stages, timed alike (each inside its stage's figure): the
 component levels of the analysis, the single-state walks of the iteration (bounds) and
 of the LP (values, flow), the certificate's chain and its repair."""
+SETUP = {"components": ("mitld_lp.solvers.graph", "strong_components"),
+         "search": ("mitld_lp.solvers.graph", "searched_levels"),
+         "single_setup": ("mitld_lp.solvers.topological", "SingleLevels.__init__"),
+         "chain": ("mitld_lp.solvers.certify", "chain"),
+         "bellman_check": ("mitld_lp.solvers.certify", "_fails")}
+"""What is not a walk, timed alike where the stages call it (each inside its stage's
+figure, and ``search`` inside ``levels``): Tarjan's searches called from
+:mod:`~mitld_lp.solvers.graph` (the levels' and the end components'), the search of thin
+levels, the single levels' set-up (the iteration and the LP each build theirs), the
+certificate's whole chain (its set-up, searches and walk: ``chain_singles`` inside it)
+and its Bellman checks of each candidate."""
 COLUMNS = ("instance", "value", "solve_cpu", "storm_check_cpu", "solve_over_storm_check",
            "timed_solve_cpu", "analysis", "iteration", "lp", "certificate", "numba_import",
-           "numba_loaded", *WALKS)
+           "numba_loaded", *WALKS, *SETUP)
 
 
 def child_stages(job: dict[str, Any]) -> dict[str, Any]:
@@ -78,9 +91,9 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
         from mitld_lp.solvers import kernels
 
         kernels.COMPILED_MIN_ENTRIES = sys.maxsize
-    spent = dict.fromkeys((*STAGES, "numba_import", *WALKS), 0.0)
+    spent = dict.fromkeys((*STAGES, "numba_import", *WALKS, *SETUP), 0.0)
     for stage, (module, name) in {**STAGES, "numba_import": NUMBA_IMPORT,
-                                  **WALKS}.items():
+                                  **WALKS, **SETUP}.items():
         owner: Any = importlib.import_module(module)
         *path, name = name.split(".")  # a method: wrapped on its class
         for part in path:
@@ -159,15 +172,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.qvbs is None:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
-    wanted = set(args.only or INSTANCES)
     rows = []
     with tempfile.TemporaryDirectory(prefix="profile_solve_") as tmp:
         work = Path(tmp)
-        high = bq.QUICK_MAX_STATES if args.quick else bq.MAX_STATES
-        found, _ = bq.jobs(args.qvbs, 0 if args.quick else bq.MIN_STATES, high,
-                           bq.FAMILIES, work)
-        found.sort(key=lambda t: t[0].qvbs_states)
-        chosen = found[-1:] if args.quick else [f for f in found if f[0].name in wanted]
+        chosen = chosen_jobs(args.qvbs, args.quick, set(args.only or INSTANCES), work)
         numba_row = _run_child("numba", {}, work)
         for inst, job in chosen:
             (work / inst.name).mkdir()
@@ -192,6 +200,17 @@ def main(argv: list[str] | None = None) -> int:
     _common.write_csv(out / "profile_solve.csv", COLUMNS, rows)
     print(text)
     return 0
+
+
+def chosen_jobs(benchmarks: Path, quick: bool, wanted: set[str], work: Path
+                ) -> list[tuple[Any, dict[str, Any]]]:
+    """The QVBS instances to run, posed as ``bench_qvbs.py`` poses them (their model
+    files written to ``work``): with ``quick`` the largest under its quick bound, else
+    those ``wanted`` (names) of the benchmark's sizes, smallest first."""
+    high = bq.QUICK_MAX_STATES if quick else bq.MAX_STATES
+    found, _ = bq.jobs(benchmarks, 0 if quick else bq.MIN_STATES, high, bq.FAMILIES, work)
+    found.sort(key=lambda t: t[0].qvbs_states)
+    return found[-1:] if quick else [f for f in found if f[0].name in wanted]
 
 
 def argparse_hidden() -> str:

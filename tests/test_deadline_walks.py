@@ -301,9 +301,17 @@ def _posed(tmp_path: Path, program: str, reached: str, objective: str, prop: str
                                              ("min", "Pmin=? [F \"goal\"]")])
 def test_prism_deadline_bracket_holds_storms_exact_value(tmp_path, monkeypatch,
                                                          objective: str, prop: str) -> None:
+    walked_and_searched(tmp_path, monkeypatch, DEADLINE, "x=12", objective, prop)
+
+
+def walked_and_searched(tmp_path: Path, monkeypatch, program: str, reached: str,
+                        objective: str, prop: str) -> None:
+    """The PRISM ``program`` solved end to end with its levels walked, then searched
+    (every graph counts as large and thin): each bracket certified and holding Storm's
+    exact value of ``prop`` (no tolerance), the two the same bits."""
     from mitld_lp import load_model, synthesize
 
-    model, exact = _posed(tmp_path, DEADLINE, "x=12", objective, prop)
+    model, exact = _posed(tmp_path, program, reached, objective, prop)
     brackets, used = [], _searches(monkeypatch)
     for searched in (False, True):
         if searched:  # every graph large and thin: the levels searched

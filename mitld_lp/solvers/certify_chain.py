@@ -14,7 +14,7 @@ from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import Blocks, Reversed, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
-from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.solvers.rows import row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
@@ -78,15 +78,13 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     acting = (policy >= 0) & ~target
     states = np.flatnonzero(acting)
     rows = policy[states]
-    lo, hi = m.indptr[rows], m.indptr[rows + 1]
-    entries = gather_ranges(lo, hi)
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    src = np.repeat(states.astype(index), hi - lo)
-    dst = m.indices[entries].astype(index, copy=False)
-    val = m.data[entries]
+    src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
+    dst, val = row_columns(m, rows)  # compiled: no index array of every entry
+    dst = dst.astype(index, copy=False)
     # the acting states and their rows (two int64 a state) are in ``src`` now: freed
     # before the search's reversed edges (the certificate's peak on QVBS csma)
-    del entries, lo, hi, states, rows
+    del states, rows
     pos = val > 0
     if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
         src, dst, val = src[pos], dst[pos], val[pos]
@@ -191,7 +189,11 @@ class _Singles:
         level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
         self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
         self.local, self.cols, self.vals = row_entries(sub, self.order)
-        self.entry_at = np.searchsorted(self.local, np.arange(self.order.size + 1))
+        # each state's first entry: its row's length counted (``local`` is sorted), not
+        # a binary search of every state in ``local``: the same pointers
+        self.entry_at = np.zeros(self.order.size + 1, dtype=np.int64)
+        np.cumsum(np.bincount(self.local, minlength=self.order.size),
+                  out=self.entry_at[1:])
         fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
                 and self.vals.dtype == np.float64
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
@@ -213,6 +215,13 @@ class _Singles:
             return
         marks = np.flatnonzero(np.diff(at[first:stop + 1])) + first  # levels with states
         n = v.shape[0]
+        # what no level's sums change, gathered once for the run (the same operands, so
+        # the same bits): each state's b, its 2 kappa and what its self-loop leaves
+        lo_s, hi_s = int(at[first]), int(at[stop])
+        states = self.order[lo_s:hi_s]
+        b_of, twice_kappa = b[states], 2.0 * kappa[states]
+        leave = 1.0 - diag[states]
+        del states
         for lv in marks.tolist():
             a, z = int(at[lv]), int(at[lv + 1])
             if self.ptr is not None:  # one compiled call a sum: from 0, in the entries' order
@@ -224,6 +233,7 @@ class _Singles:
                 local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]
                 down_v = np.bincount(local, weights=vals * v[cols], minlength=z - a)
                 down_w = np.bincount(local, weights=vals * w[cols], minlength=z - a)
-            one = self.order[a:z]
-            v[one] = (b[one] + down_v) / (1.0 - diag[one])
-            w[one] = (2.0 * kappa[one] * v[one] + down_w) / (1.0 - diag[one])
+            one, r = self.order[a:z], slice(a - lo_s, z - lo_s)
+            value = (b_of[r] + down_v) / leave[r]
+            v[one] = value
+            w[one] = (twice_kappa[r] * value + down_w) / leave[r]

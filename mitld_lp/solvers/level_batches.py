@@ -39,6 +39,12 @@ try:  # SciPy's compiled CSR/CSC products, as scipy.sparse's own products call t
 except ImportError:  # pragma: no cover - a SciPy without it: the NumPy calls below
     _st = None
 
+try:  # the ufunc ``np.clip`` calls on floats: its Python wrappers cost two to three
+    # times the clip of a level's scores (some 10 microseconds a level and walk)
+    from numpy._core.umath import clip as _clip
+except ImportError:  # pragma: no cover - a NumPy without it: np.clip, the same ufunc
+    _clip = np.clip
+
 SingleLevels = Any  # :class:`~mitld_lp.solvers.topological.SingleLevels` (which imports
 # this module: its annotation here would make a circle)
 
@@ -124,7 +130,7 @@ def _bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
         score = reward[ca - ca0:cz - ca0]
         score += sums
         np.divide(score, leave[ca:cz], out=score)
-        np.clip(score, 0.0, 1.0, out=score)
+        _clip(score, 0.0, 1.0, out=score)
         out[sl.states[a:z]] = (score if cz - ca == z - a else
                                reduce.reduceat(score, sl.first_choice[a:z], axis=0))
 
@@ -170,7 +176,7 @@ def _values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray
         leave = sl.leave[ca:cz]
         score = (reward / leave if sl.positive else
                  np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
-        np.clip(score, 0.0, 1.0, out=score)
+        _clip(score, 0.0, 1.0, out=score)
         if cz - ca == z - a:  # one choice a state: each its own best
             best, pick = score, ch
         else:  # segmented_argmax's ties and preference, on the level's segments

@@ -50,21 +50,26 @@ def searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
     ``2 (c - d) - 1 >= 1`` (Johnson's reweighting). That holds iff every edge runs from a
     higher component id to a lower one, as Tarjan's numbering (csgraph's and
     :func:`~mitld_lp.util.traversal.strong_components`') makes it: checked, and ``None``
-    where it does not hold (the caller walks the levels). Which components reach each
-    seed set: a breadth-first search of the reversed graph from a node joined to the
-    seeds' components. The levels and reach of :class:`~mitld_lp.solvers.graph.Levels`
-    (levels are integers, exact in float64 below 2**53; the reach is a set)."""
+    where it does not hold (the caller walks the levels). Which components reach each seed
+    set: a breadth-first search of the reversed graph (``preds_of``) from the seeds'
+    component, or, where they lie in several, from a node joined to them. The levels and
+    reach of :class:`~mitld_lp.solvers.graph.Levels` (levels are integers, exact in
+    float64 below 2**53; the reach is a set)."""
     from scipy.sparse import csgraph
 
     n_comp = preds_of.shape[0]
-    below = preds_of.indices.astype(np.int64)  # the predecessors c of each row d
-    row = np.repeat(np.arange(n_comp, dtype=np.int64), np.diff(preds_of.indptr))
+    # the search's graph in 4-byte indices where its size allows (csgraph's own type:
+    # no conversion of int64 arrays made here first); the weights are the same floats
+    index = np.int32 if n_comp + preds_of.nnz + sinks.size < np.iinfo(np.int32).max \
+        else np.int64
+    below = preds_of.indices.astype(index, copy=False)  # the predecessors c of each row d
+    row = np.repeat(np.arange(n_comp, dtype=index), np.diff(preds_of.indptr))
     if not bool(np.all(below > row)):
         return None
     source = n_comp  # a node joined to every sink, at potential h = 2 (id -1)
-    ptr = np.concatenate([np.asarray(preds_of.indptr, dtype=np.int64),
-                          [preds_of.indptr[-1] + sinks.size]])
-    cols = np.concatenate([below, sinks])
+    ptr = np.concatenate([np.asarray(preds_of.indptr, dtype=index),
+                          np.asarray([preds_of.indptr[-1] + sinks.size], dtype=index)])
+    cols = np.concatenate([below, np.asarray(sinks, dtype=index)])
     weight = np.concatenate([2.0 * (below - row) - 1.0, 2.0 + 2.0 * sinks])
     del row
     reweighted = sp.csr_array((weight, cols, ptr), shape=(n_comp + 1, n_comp + 1))
@@ -80,6 +85,11 @@ def searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
     for j in range(k):
         start = np.unique(comp[seeds[:, j]])
         if start.size == 0:
+            continue
+        if start.size == 1:  # one component: searched from it on ``preds_of`` itself
+            found = csgraph.breadth_first_order(preds_of, int(start[0]), directed=True,
+                                                return_predecessors=False)
+            reach[found, j] = True
             continue
         # the reversed graph again, the joined node now to the seeds' components
         graph = sp.csr_array((pattern[:below.size + start.size],

@@ -9,7 +9,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["gather_ranges", "off_diagonal_entries", "row_entries", "rows_dot"]
+try:  # SciPy's compiled row gather, as ``matrix[rows]`` calls it
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: NumPy's gathers
+    _st = None
+
+__all__ = ["gather_ranges", "off_diagonal_entries", "row_columns", "row_entries",
+           "rows_dot"]
 
 #: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's,
 #: some 40 bytes an entry; 2**16 rows of two entries were 20 bytes a transition of
@@ -33,10 +39,32 @@ def row_entries(matrix: sp.csr_array, rows: np.ndarray
     no matrix is made for them (scipy's row indexing costs ~0.2 ms a call, which on a
     product of thousands of levels -- a deadline clock -- was most of the solve)."""
     rows = np.asarray(rows, dtype=np.int64)
-    lo, hi = matrix.indptr[rows], matrix.indptr[rows + 1]
-    entries = gather_ranges(lo, hi)
-    local = np.repeat(np.arange(rows.size, dtype=np.int64), hi - lo)
-    return local, matrix.indices[entries], matrix.data[entries]
+    ptr = matrix.indptr
+    local = np.repeat(np.arange(rows.size, dtype=np.int64), ptr[rows + 1] - ptr[rows])
+    return (local, *row_columns(matrix, rows))
+
+
+def row_columns(matrix: sp.csr_array, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The columns and values of ``matrix``'s ``rows``, row after row in their stored
+    order (:func:`row_entries` without the local rows).  Copied by SciPy's compiled row
+    gather (``csr_row_index``, what ``matrix[rows]`` calls: one pass) where the matrix's
+    index arrays share a type, not through an index array of every entry and two
+    fancy-indexed copies: the same entries in the same order either way."""
+    rows = np.asarray(rows, dtype=np.int64)
+    ptr, idx = matrix.indptr, matrix.indices
+    lo, hi = ptr[rows], ptr[rows + 1]
+    # (``ptr[rows + 1]`` refused a row past the last; a negative row, which NumPy's
+    # indexing would wrap, is left to NumPy's gathers, not to the compiled loop)
+    if (_st is None or ptr.dtype != idx.dtype or idx.dtype not in (np.int32, np.int64)
+            or (rows.size and int(rows.min()) < 0)):
+        entries = gather_ranges(lo, hi)
+        return idx[entries], matrix.data[entries]
+    total = int((hi - lo).sum())
+    cols = np.empty(total, dtype=idx.dtype)
+    vals = np.empty(total, dtype=matrix.data.dtype)
+    _st.csr_row_index(rows.size, rows.astype(idx.dtype, copy=False), ptr, idx,
+                      matrix.data, cols, vals)
+    return cols, vals
 
 
 def off_diagonal_entries(matrix: sp.csr_array, rows: np.ndarray, row_state: np.ndarray

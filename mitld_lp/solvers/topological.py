@@ -225,7 +225,11 @@ class SingleLevels:
         # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
         self.local, self.cols, self.vals = off_diagonal_entries(
             q.matrix, self.choices, np.repeat(self.states, counts))
-        self.choice_entry = np.searchsorted(self.local, np.arange(self.choices.size + 1))
+        # each choice's first entry: its kept entries counted (``local`` is sorted), not
+        # a binary search of every choice in ``local``: the same pointers
+        self.choice_entry = np.zeros(self.choices.size + 1, dtype=np.int64)
+        np.cumsum(np.bincount(self.local, minlength=self.choices.size),
+                  out=self.choice_entry[1:])
         # the choices' entry pointers in the columns' index type: a level's sums (and
         # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
         # on the walk's arrays as they are (:mod:`~mitld_lp.solvers.level_batches`)
