@@ -290,3 +290,27 @@ def test_a_rare_models_bracket_holds_storms_exact_value(tmp_path, walks, prism,
         assert Fraction(r.upper) - Fraction(r.lower) <= exact / 10**6
         got.append((r.lower, r.upper))
     assert got[0] == got[1]  # the compiled walks and NumPy's: the same bits
+
+
+def test_backward_reachable_on_int64_edges_is_the_closure(walks) -> None:
+    """The compiled reach along a list of edges, handed int64 edges (cast to int32 for
+    the kernel) and int32 ones, against a fixed point over sets."""
+    walks(True)
+    from mitld_lp.solvers.graph import backward_reachable
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        n, m = int(rng.integers(2, 30)), int(rng.integers(0, 60))
+        source, succ = rng.integers(0, n, m), rng.integers(0, n, m)
+        seeds = rng.random(n) < 0.2
+        inside = set(np.flatnonzero(seeds).tolist())
+        grew = True
+        while grew:
+            grew = False
+            for a, b in zip(source.tolist(), succ.tolist(), strict=True):
+                if b in inside and a not in inside:
+                    inside.add(a)
+                    grew = True
+        for dtype in (np.int64, np.int32):
+            got = backward_reachable(n, source.astype(dtype), succ.astype(dtype), seeds)
+            assert set(np.flatnonzero(got).tolist()) == inside

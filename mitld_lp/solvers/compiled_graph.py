@@ -267,9 +267,15 @@ def _backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cov
 def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
     """The states of ``n`` with a path along the edges ``source -> succ`` to a
     ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
-    backward_reachable`): :func:`_backward` with each edge a choice of its source."""
+    backward_reachable`): :func:`_backward` with each edge a choice of its source.
+    The edges' pointers in ``succ``'s type (int32 where the caller could): the pattern
+    handed to :func:`_transpose` then has the types of a product's matrix, and
+    :func:`_transpose` is compiled for one signature with :func:`_backward`'s."""
     m = succ.shape[0]
-    col_ptr, col_rows = _transpose(np.arange(m + 1), succ, n)
+    ptr = np.empty(m + 1, dtype=succ.dtype)
+    for e in range(m + 1):
+        ptr[e] = e
+    col_ptr, col_rows = _transpose(ptr, succ, n)
     remaining = np.ones(n, dtype=np.int64)  # one edge into the set is enough
     return _joined(col_ptr, col_rows, source, remaining, seeds.copy(),
                    np.zeros(m, dtype=np.bool_))
