@@ -14,9 +14,10 @@ analysis serves both:
 * the **maximal end components** of the upper model's *maybe* states (neither target
   nor prob-0), searched only among the states of non-trivial components (and single
   states with a choice that stays put): an end component is strongly connected, so it
-  lies inside one component.  They are the lower model's end components too: an end
-  component's states reach the same states, so it lies either wholly among the lower
-  model's maybe states or wholly outside them;
+  lies inside one component (on a large product one attractor pass first shows
+  whether there is any: a rare event's product often has none).  They are the lower
+  model's end components too: an end component's states reach the same states, so it
+  lies either wholly among the lower model's maybe states or wholly outside them;
 * one **quotient** (:class:`~mitld_lp.solvers.reduced.Quotient`): the upper model's
   maybe states with those end components collapsed, and its matrix, shared by the two
   models, which differ only in the one-step probability of reaching their target.  A
@@ -44,6 +45,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -92,19 +94,23 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     by :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
     candidates (the states of non-trivial components and those with a choice that
     stays put), with one extra absorbing state standing for everything else; none
-    searched for when there is no candidate (an acyclic product).  The same components
-    as :func:`~mitld_lp.solvers.graph.maximal_end_components` on ``maybe``, numbered
-    in another order (which it is, on a matrix that stores a zero)."""
+    searched for when there is no candidate (an acyclic product) or, on the compiled
+    walks, when one attractor pass shows there is none (:func:`_none_among`).  The
+    same components as :func:`~mitld_lp.solvers.graph.maximal_end_components` on
+    ``maybe``, numbered in another order (which it is, on a matrix that stores a
+    zero)."""
     n = mdp.n_states
     m = mdp.matrix
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
+    walks = compiled_walks(m.nnz)
+    if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
+        return _no_end_components(n, mdp.n_choices)
     cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
     mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
     if cand.size == 0:
         return EndComponents(read_only(mec_of), read_only(internal), 0)
-    walks = compiled_walks(m.nnz)
     if walks is not None:  # the rounds among the candidates, with no sub-MDP built
         found = compiled_end_components(walks, mdp, cand)
         return EndComponents(read_only(found.mec_of.astype(mec_of.dtype, copy=False)),
@@ -127,6 +133,23 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     mec_of[cand] = found.mec_of[: cand.size]
     internal[choices] = found.internal[: choices.size]
     return EndComponents(read_only(mec_of), read_only(internal), found.n_mecs)
+
+
+def _none_among(walks: Any, m: sp.csr_array, groups: np.ndarray, maybe: np.ndarray,
+                ) -> bool:
+    """Whether no end component lies among the ``maybe`` states, shown by one compiled
+    :func:`~mitld_lp.solvers.graph.attractor` pass instead of de Alfaro's rounds: the
+    states from which every policy leaves them (or stops: a state with no choice) with
+    positive probability.  Its complement among them is closed (each such state has a
+    choice whose support stays there), so it holds an end component iff it is not
+    empty; an end component's states never join (each keeps a choice inside it).  A
+    rare event's product (QVBS zeroconf 1000-4: 213,268 candidates, none) is decided
+    here in one pass over the pattern, with the attractor's kernel, which the
+    quotient's prob-1 states load anyway.  ``m`` stores no zero (the caller checked)."""
+    seeds = ~maybe | (np.diff(groups) == 0)
+    left = walks.backward(m.indptr, m.indices, groups, seeds,
+                          np.zeros(m.shape[0], dtype=bool), True)
+    return bool(np.all(left[maybe]))
 
 
 def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,

@@ -71,6 +71,11 @@ from mitld_lp.solvers.rounding import (
 )
 from mitld_lp.solvers.rows import rows_dot
 
+try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: the rows sliced
+    _st = None
+
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
@@ -153,6 +158,17 @@ def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
         f"{x[s0]:g}")), read_only(x))
 
 
+def _direct(m: sp.csr_array, x: np.ndarray) -> bool:
+    """Whether :func:`_fails` may hand a batch of ``m``'s rows to SciPy's compiled CSR
+    product by their pointers into the whole matrix (``m[a:z] @ x`` calls the same
+    kernel on a copy of those rows: each row's sum from 0 in its entries' order, the
+    same bits) rather than slice them: float64 values and vector, one index type."""
+    return (_st is not None and m.data.dtype == np.float64 and x.dtype == np.float64
+            and x.ndim == 1 and x.flags.c_contiguous and m.indptr.dtype == m.indices.dtype
+            and m.indices.dtype in (np.int32, np.int64)
+            and x.shape[0] == m.shape[1])
+
+
 def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
            upper: bool) -> np.ndarray:
     """The states (not ``free``) where some choice breaks the pre- (``upper``) or
@@ -161,12 +177,18 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     m = st.matrix
     row_state = st.row_state()
     ok = np.empty(m.shape[0], dtype=bool)
+    direct = _direct(m, x)
     # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not gathered
     # copies): the float arrays of every row at once were the certificate's peak on
     # QVBS wlan_dl; each row's sum is the same (scipy sums a row in its entries' order)
     for a in range(0, m.shape[0], BATCH):
         z = min(a + BATCH, m.shape[0])
-        sums = m[a:z] @ x
+        if direct:  # SciPy's product kernel on the rows' pointers, no copy of the rows
+            sums = np.zeros(z - a)
+            _st.csr_matvec(z - a, x.shape[0], m.indptr[a:z + 1], m.indices, m.data, x,
+                           sums)
+        else:
+            sums = m[a:z] @ x
         bound = above(rnd, slice(a, z), sums) if upper else below(rnd, slice(a, z), sums)
         own = x[row_state[a:z]]
         ok[a:z] = (bound <= own) if upper else (bound >= own)

@@ -59,10 +59,13 @@ def _sort_run(a, lo, hi):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def state_graph(indptr, indices, row_groups, n):  # pragma: no cover - compiled
     """``(ptr, succ)``: the successors of each of the ``n`` states (the columns of its
-    choices' rows ``row_groups[s]:row_groups[s+1]``), sorted, each once."""
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    succ = np.empty(indices.shape[0], dtype=np.int64)
-    mark = np.full(n, -1, dtype=np.int64)
+    choices' rows ``row_groups[s]:row_groups[s+1]``), sorted, each once; in the types of
+    ``indptr`` and ``indices`` (a product's int32 where it fits: the graph of
+    :func:`~mitld_lp.solvers.graph.graph_view`, so that :func:`components_and_levels`
+    is compiled for one signature on the analysis's and the certificate's graphs)."""
+    ptr = np.zeros(n + 1, dtype=indptr.dtype)  # the matrix's index types: 4 bytes an
+    succ = np.empty(indices.shape[0], dtype=indices.dtype)  # entry where they fit, and
+    mark = np.full(n, -1, dtype=np.int64)  # one signature with levels()'s graph
     pos = 0
     for s in range(n):
         start = pos
@@ -264,9 +267,15 @@ def _backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cov
 def reaching_edges(n, source, succ, seeds):  # pragma: no cover - compiled
     """The states of ``n`` with a path along the edges ``source -> succ`` to a
     ``seeds`` state, the seeds included (:func:`mitld_lp.solvers.graph.
-    backward_reachable`): :func:`_backward` with each edge a choice of its source."""
+    backward_reachable`): :func:`_backward` with each edge a choice of its source.
+    The edges' pointers in ``succ``'s type (int32 where the caller could): the pattern
+    handed to :func:`_transpose` then has the types of a product's matrix, and
+    :func:`_transpose` is compiled for one signature with :func:`_backward`'s."""
     m = succ.shape[0]
-    col_ptr, col_rows = _transpose(np.arange(m + 1), succ, n)
+    ptr = np.empty(m + 1, dtype=succ.dtype)
+    for e in range(m + 1):
+        ptr[e] = e
+    col_ptr, col_rows = _transpose(ptr, succ, n)
     remaining = np.ones(n, dtype=np.int64)  # one edge into the set is enough
     return _joined(col_ptr, col_rows, source, remaining, seeds.copy(),
                    np.zeros(m, dtype=np.bool_))
@@ -324,8 +333,10 @@ def end_components_among(indptr, indices, positive, row_groups,
     alive = np.ones(k, dtype=np.bool_)
     allowed = np.ones(cptr[k], dtype=np.bool_)
     still = np.zeros(k, dtype=np.bool_)
-    ptr = np.zeros(k + 1, dtype=np.int64)
-    succ = np.empty(indptr[row_groups[n]], dtype=np.int64)
+    # the candidates' graph in the matrix's index types (a local id is below a column
+    # id, a position below an entry's): components_and_levels compiled once for them
+    ptr = np.zeros(k + 1, dtype=indptr.dtype)
+    succ = np.empty(indptr[row_groups[n]], dtype=indices.dtype)
     mark = np.full(k, -1, dtype=np.int64)
     while True:
         pos = 0

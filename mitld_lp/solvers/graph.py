@@ -30,8 +30,7 @@ from mitld_lp.util.arrays import unique
 from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
 
 __all__ = [
-    "Sense",
-    "attractor",
+    "Sense", "attractor",
     "Blocks",
     "Edges",
     "Reversed",
@@ -103,9 +102,10 @@ def backward_reachable(
     if not np.any(seeds):
         return np.zeros(n, dtype=bool)
     walks = compiled_walks(np.asarray(succ).size)
-    if walks is not None:
-        return walks.reaching_edges(n, np.asarray(source), np.asarray(succ),
-                                    np.array(seeds, dtype=bool))
+    if walks is not None:  # the edges in int32 where they fit (one kernel signature)
+        index = np.int32 if max(n, np.asarray(succ).size) < 2**31 - 1 else np.int64
+        source, succ = np.asarray(source, dtype=index), np.asarray(succ, dtype=index)
+        return walks.reaching_edges(n, source, succ, np.array(seeds, dtype=bool))
     return Reversed(n, source, succ).reaching(seeds)
 
 
