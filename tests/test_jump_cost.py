@@ -26,7 +26,6 @@ from test_sweep_forecast import _ruin
 from mitld_lp import defaults
 from mitld_lp.solvers import Status, interval_iteration, iteration, jump_cost
 from mitld_lp.solvers.graph import Sense
-from mitld_lp.solvers.policy_jump import AHEAD_SWEEPS
 from mitld_lp.solvers.topological import Block
 
 
@@ -66,13 +65,15 @@ def test_the_depth_of_a_path_and_of_a_grid() -> None:
     n = 50
     path = sp.csr_array((np.ones(n - 1), (np.arange(n - 1), np.arange(1, n))), shape=(n, n))
     assert jump_cost._depth(path)[0] == n - 1  # from state 0 to the far end and back
+    # a block of two components, the short path first: the longer one's depth counts
+    two = sp.block_diag([path[:10, :10], path], format="csr")
+    assert jump_cost._depth(two)[0] == n - 1
     side = 12  # a grid of side x side: the corners are 2 (side - 1) apart
     g = sp.kron(sp.eye_array(side), sp.diags_array([1.0, 1.0], offsets=[-1, 1],
                                                     shape=(side, side)))
     g = sp.csr_array(g + sp.kron(sp.diags_array([1.0, 1.0], offsets=[-1, 1],
                                                 shape=(side, side)), sp.eye_array(side)))
     assert jump_cost._depth(g)[0] == 2 * (side - 1)
-    assert jump_cost.LOOK_AHEAD == AHEAD_SWEEPS + 1
 
 
 def test_the_rule_jumps_a_block_whose_lu_does_not_fill_and_refuses_one_that_does() -> None:

@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.policy_jump import AHEAD_SWEEPS
 from mitld_lp.solvers.topological import Block
 
 __all__ = ["Cost", "ROUND_ENTRY", "ROUND_FLOP", "ROUND_STATE", "SAMPLE", "cost",
@@ -69,10 +70,9 @@ the scores and residuals in extended precision)."""
 SAMPLE = 4096
 """The largest state graph whose LU is counted exactly (a few ms); above, balls of
 ``SAMPLE / 4`` and ``SAMPLE`` states are counted and extrapolated."""
-LOOK_AHEAD = 11
-"""Steps a round carries an improvement: the look-ahead's ``AHEAD_SWEEPS`` Bellman
-sweeps and the greedy step (:data:`mitld_lp.solvers.policy_jump.AHEAD_SWEEPS`, kept
-equal by a test: the cost model is imported by the jump's caller, not by the jump)."""
+LOOK_AHEAD = AHEAD_SWEEPS + 1
+"""Steps a round carries an improvement: the look-ahead's
+:data:`~mitld_lp.solvers.policy_jump.AHEAD_SWEEPS` Bellman sweeps and the greedy step."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,14 +140,18 @@ def _rows(m: sp.csr_array) -> np.ndarray:
 
 
 def _depth(graph: sp.csr_array) -> tuple[int, np.ndarray]:
-    """The eccentricity of the far end of a breadth-first search from state 0 (on the
-    graph without directions; a lower bound of its diameter, exact on grids and trees),
-    and the states by their distance from state 0 (the samples' balls)."""
-    from scipy.sparse.csgraph import dijkstra
+    """The eccentricity of the far end of a breadth-first search (on the graph without
+    directions, from the first state of its largest component: a block may hold several
+    components of one level, and its rounds are its largest's), a lower bound of that
+    component's diameter, exact on grids and trees; and the states by their distance
+    from that first state (the samples' balls; other components' states last)."""
+    from scipy.sparse.csgraph import connected_components, dijkstra
 
     if graph.shape[0] == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    first = dijkstra(graph, directed=False, indices=0, unweighted=True)
+    _, label = connected_components(graph, directed=False)
+    source = int(np.argmax(label == np.argmax(np.bincount(label))))
+    first = dijkstra(graph, directed=False, indices=source, unweighted=True)
     reached = np.isfinite(first)
     far = int(np.argmax(np.where(reached, first, -1.0)))
     second = dijkstra(graph, directed=False, indices=far, unweighted=True)
