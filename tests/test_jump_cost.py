@@ -63,7 +63,8 @@ def test_the_lu_multiplies_of_a_tree_and_of_a_complete_graph() -> None:
 
 def test_the_depth_of_a_path_and_of_a_grid() -> None:
     n = 50
-    path = sp.csr_array((np.ones(n - 1), (np.arange(n - 1), np.arange(1, n))), shape=(n, n))
+    step = sp.csr_array((np.ones(n - 1), (np.arange(n - 1), np.arange(1, n))), shape=(n, n))
+    path = sp.csr_array(step + step.T)  # _depth reads a graph without directions
     assert jump_cost._depth(path)[0] == n - 1  # from state 0 to the far end and back
     # a block of two components, the short path first: the longer one's depth counts
     two = sp.block_diag([path[:10, :10], path], format="csr")
@@ -74,6 +75,16 @@ def test_the_depth_of_a_path_and_of_a_grid() -> None:
     g = sp.csr_array(g + sp.kron(sp.diags_array([1.0, 1.0], offsets=[-1, 1],
                                                 shape=(side, side)), sp.eye_array(side)))
     assert jump_cost._depth(g)[0] == 2 * (side - 1)
+
+
+def test_the_state_graph_is_every_choice_s_moves_both_ways() -> None:
+    block = _random(40)
+    want = np.zeros((40, 40), dtype=bool)
+    for s in range(40):  # by hand: each choice of s, each of its entries
+        for c in range(int(block.starts[s]), int(block.groups[s + 1])):
+            for t in block.inner.indices[block.inner.indptr[c]:block.inner.indptr[c + 1]]:
+                want[s, t] = want[t, s] = True
+    assert np.array_equal(jump_cost._state_graph(block).toarray() != 0, want)
 
 
 def test_the_rule_jumps_a_block_whose_lu_does_not_fill_and_refuses_one_that_does() -> None:

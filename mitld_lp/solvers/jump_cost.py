@@ -123,38 +123,48 @@ def cost(block: Block, chosen: np.ndarray) -> Cost:
 
 
 def _state_graph(block: Block) -> sp.csr_array:
-    """``(n, n)`` pattern of the block: ``s -> s'`` if a choice of ``s`` may move to
-    ``s'`` inside the block (ones)."""
+    """``(n, n)`` pattern of the block without directions: ``s - s'`` if a choice of
+    ``s`` may move to ``s'`` inside the block or one of ``s'`` to ``s``.  A state's
+    choices are consecutive rows, so its entries are read in place."""
     n = block.states.size
-    counts = np.diff(block.groups)
-    owner = np.repeat(np.arange(n), counts)[_rows(block.inner)]
-    g = sp.csr_array((np.ones(owner.size), (owner, block.inner.indices)), shape=(n, n))
-    g.sum_duplicates()
-    g.data[:] = 1.0
-    return g
+    inner = block.inner
+    moves = sp.csr_array((np.ones(inner.nnz), inner.indices, inner.indptr[block.groups]),
+                         shape=(n, n))
+    return sp.csr_array(moves + moves.T)
 
 
-def _rows(m: sp.csr_array) -> np.ndarray:
-    """The row of each stored entry of ``m``."""
-    return np.repeat(np.arange(m.shape[0]), np.diff(m.indptr))
+SEARCHES = 8
+"""At most this many components of a block are searched for its largest (module docs of
+:func:`_depth`)."""
 
 
 def _depth(graph: sp.csr_array) -> tuple[int, np.ndarray]:
-    """The eccentricity of the far end of a breadth-first search (on the graph without
-    directions, from the first state of its largest component: a block may hold several
-    components of one level, and its rounds are its largest's), a lower bound of that
-    component's diameter, exact on grids and trees; and the states by their distance
-    from that first state (the samples' balls; other components' states last)."""
-    from scipy.sparse.csgraph import connected_components, dijkstra
+    """The eccentricity of the far end of a breadth-first search in the block's largest
+    component (``graph`` without directions; a block may hold several components of one
+    level, and its rounds are its largest's: searched from the first state not reached
+    yet, at most :data:`SEARCHES` times, until no unreached part could be larger), a
+    lower bound of that component's diameter, exact on grids and trees; and the states
+    by their distance from where that component's search began (the samples' balls;
+    other components' states last)."""
+    from scipy.sparse.csgraph import dijkstra
 
-    if graph.shape[0] == 0:
+    n = graph.shape[0]
+    if n == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    _, label = connected_components(graph, directed=False)
-    source = int(np.argmax(label == np.argmax(np.bincount(label))))
-    first = dijkstra(graph, directed=False, indices=source, unweighted=True)
-    reached = np.isfinite(first)
-    far = int(np.argmax(np.where(reached, first, -1.0)))
-    second = dijkstra(graph, directed=False, indices=far, unweighted=True)
+    seen = np.zeros(n, dtype=bool)
+    best, first = -1, np.zeros(0)
+    for _ in range(SEARCHES):
+        source = int(np.argmin(seen))
+        dist = dijkstra(graph, directed=True, indices=source, unweighted=True)
+        reached = np.isfinite(dist)
+        seen |= reached
+        size = int(np.count_nonzero(reached))
+        if size > best:
+            best, first = size, dist
+        if n - int(np.count_nonzero(seen)) <= best:
+            break
+    far = int(np.argmax(np.where(np.isfinite(first), first, -1.0)))
+    second = dijkstra(graph, directed=True, indices=far, unweighted=True)
     depth = int(np.max(second[np.isfinite(second)]))
     return depth, np.argsort(first, kind="stable")  # unreached (inf) last
 
