@@ -39,8 +39,9 @@ jump; depth 49-51; LUs of 0.07-0.40 s with 4 multiplies a state, i.e. the orderi
 1-3 us a state; a whole round 0.31-0.63 s) and ``bus_scaled`` n128 d3 (32,768 and
 16,384 states, grids of depth 254; LUs of 0.14-0.17 s and 0.06 s with 1,500 and 425
 multiplies a state, 3.4-8.5 ns a multiply; a round 0.22 and 0.095 s).  A round in
-sweeps of its block, measured (modelled): consensus 56 (56), 47 (47), 41 (50); bus 63
-(49 with the sampled multiplies, 80 with the exact), 57 (49).  The model then jumps the
+sweeps of its block, measured (modelled): consensus 41 (56), 48 (48), 50 (41); bus 63
+and 57 (49 and 49, the LU's multiplies sampled: 280-300 a state against the 425-1,500 a
+policy's full LU makes).  The model then jumps the
 three consensus blocks (about 5.5 rounds against 400-700 sweeps saved: the jumps took
 4-5 LUs) and refuses both bus blocks (24 rounds of about 50 sweeps against 968 and 468:
 policy iteration switched 9,495, 9,187, ... and 2,950, 3,232 states a round there, 18
