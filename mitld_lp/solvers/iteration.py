@@ -380,9 +380,9 @@ def _early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np
     policy iteration within what they pay for; ``True`` if it closed the block's gap
     (else its bounds are at least as tight)."""
     models = bounds.shape[1] // 2
-    lo, hi = bounds[:, 0], bounds[:, 1]
-    c = jump_cost.cost(block, start_policy(replace(block, to_target=rewards[block.choices, 0]),
-                                           lo, hi, sense, first[:, :2]))
+    own = 0 if sense is Sense.MAX else 1  # the first model's start (policy_jump.jump)
+    exit_own = rewards[block.choices, own] + block.outer @ bounds[:, own]
+    c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense))
     logger.debug("early jump on %d states: %.0f sweeps saved, %.1f rounds of %.1f "
                  "sweeps forecast (depth %d, %.3g LU multiplies)", block.states.size,
                  saved, c.rounds, c.round / c.sweep, c.depth, c.flops)

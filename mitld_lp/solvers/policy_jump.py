@@ -167,7 +167,8 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
     # the one checked over every choice; -1 lowers a bound, +1 raises it
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
-    start = start_policy(block, lo, hi, sense, first)
+    seed = local if first is None else first
+    start = start_policy(block, exit2[:, own], seed[:, own], sense)
     # the policy iterations below share their factorisations
     factors = Factors() if factors is None else factors
     chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
@@ -226,14 +227,11 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     return own_ok and every_ok
 
 
-def start_policy(block: Block, lo: np.ndarray, hi: np.ndarray, sense: Sense,
-                 first: np.ndarray | None = None) -> np.ndarray:
-    """The policy :func:`jump` starts from (local choice indices): greedy on the bound a
-    policy's own values give (a maximum's lower, a minimum's upper), from ``first`` (the
-    block's bounds, a lower and an upper column) if given, else ``lo`` and ``hi``."""
-    own = 0 if sense is Sense.MAX else 1
-    exit_own = block.exits(lo, hi)[:, own]
-    seed = (lo if own == 0 else hi)[block.states] if first is None else first[:, own]
+def start_policy(block: Block, exit_own: np.ndarray, seed: np.ndarray,
+                 sense: Sense) -> np.ndarray:
+    """The policy :func:`jump` starts from (local choice indices): greedy on ``seed``,
+    the block's bound a policy's own values give (a maximum's lower, a minimum's
+    upper), with ``exit_own`` that bound's exit rewards per choice."""
     return segmented_argmax(exit_own + block.inner @ seed, block.groups, sense=sense)
 
 
