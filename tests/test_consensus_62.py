@@ -1,16 +1,16 @@
 """The early jump's budget (mitld_lp.solvers.iteration._EARLY, policy_jump.Abandoned):
 a compiled block forecast at 32 sweeps to need many more is jumped there, but only
-within the CPU seconds of the sweeps it would save; a block whose LUs fill (a random
-sparse chain) makes the jump abandon, one whose LUs do not (a line) is jumped; either
-way the interval iteration's bracket holds Storm's exact value.
+within the rounds of policy iteration that the sweeps it would save pay for (in entries
+touched, mitld_lp.solvers.jump_cost); a block whose LUs fill (a random sparse chain)
+makes the jump abandon, one whose LUs do not (a line) is jumped; either way the
+interval iteration's bracket holds Storm's exact value.
 
-Expected values from independent routes: the budget by hand; Storm's exact engine on
-the gambler's ruin of tests/test_sweep_forecast.py written in PRISM."""
+Expected values from independent routes: the sweeps saved by hand; Storm's exact
+engine on the gambler's ruin of tests/test_sweep_forecast.py written in PRISM."""
 
 from __future__ import annotations
 
 import logging
-import time
 from fractions import Fraction
 from pathlib import Path
 
@@ -22,7 +22,7 @@ from test_sweep_forecast import PRISM as RUIN
 from test_sweep_forecast import _ruin
 
 from mitld_lp import defaults
-from mitld_lp.solvers import Status, interval_iteration, iteration
+from mitld_lp.solvers import Status, interval_iteration, iteration, jump_cost
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.policy_jump import Abandoned, jump
 from mitld_lp.solvers.topological import Block
@@ -60,58 +60,51 @@ def _line(n: int) -> Block:
                   if k == 0 else [(s - 1) % n, (s - 2) % n, (s + 1) % n, (s + 2) % n])
 
 
-def _sweep_cost(block: Block, sweeps: int = 200) -> float:
-    """CPU seconds of one Bellman sweep of the block (both bounds)."""
-    n = block.states.size
-    x = np.column_stack([np.zeros(n), np.ones(n)])
-    exits = np.column_stack([block.to_target, block.to_target])
-    began = time.process_time()
-    for _ in range(sweeps):
-        x = Sense.MAX.reduce(block.inner @ x + exits, block.starts)
-    return (time.process_time() - began) / sweeps
-
-
-def test_the_budget_is_the_sweeps_it_saves_at_their_cost_so_far() -> None:
-    # 32 sweeps took 0.32 s: 10 ms a sweep; 500 more forecast, 968 left to the limit
-    early = iteration._Early(done=32, needed=500.0, cpu=0.32, stopped=True)
-    assert iteration._budget(early, 1000) == pytest.approx(5.0)
+def test_the_sweeps_saved_are_those_forecast_at_most_the_limit_s() -> None:
+    # 500 more forecast after 32, 968 left to the limit of 1,000
+    early = iteration._Early(done=32, needed=500.0, stopped=True)
+    assert iteration._saved(early, 1000) == 500.0
     early.needed = 5000.0  # no more than the limit's sweeps are saved
-    assert iteration._budget(early, 1000) == pytest.approx(9.68)
+    assert iteration._saved(early, 1000) == 968.0
 
 
 def test_the_budget_abandons_a_block_that_fills_and_jumps_one_that_does_not() -> None:
-    """With a budget of 100 sweeps' cost on each block: the random chain (1,500 states;
-    its first round alone, one LU that fills, costs some 800 sweeps) is abandoned with
-    its bounds untouched, the line (1,500 states; one round, a few dozen sweeps' worth)
-    is jumped to within the tolerance."""
+    """With a budget of 100 sweeps on each block, in rounds of policy iteration (entries
+    touched): the random chain (1,500 states; one round, an LU that fills, costs some
+    2,500 sweeps) is abandoned after its first round with its bounds untouched, the
+    line (1,500 states; a round some 60 sweeps) is jumped to within the tolerance."""
     tol = 1e-6
     for block, fills in ((_random(1500), True), (_line(1500), False)):
         n = block.states.size
         lo, hi = np.zeros(n), np.ones(n)
-        deadline = time.process_time() + 100 * _sweep_cost(block)
+        start = block.starts  # the rounds' cost: any policy's chain fills alike here
+        allowance = jump_cost.cost(block, start).allowance(100.0)
         if fills:
+            assert allowance < 1.0
             with pytest.raises(Abandoned):
-                jump(block, lo, hi, tol, None, Sense.MAX, deadline=deadline)
+                jump(block, lo, hi, tol, None, Sense.MAX, allowance=allowance)
             assert np.all(lo == 0.0) and np.all(hi == 1.0)
         else:
-            assert jump(block, lo, hi, tol, None, Sense.MAX, deadline=deadline)
+            assert allowance > 1.0
+            assert jump(block, lo, hi, tol, None, Sense.MAX, allowance=allowance)
             assert np.all(hi - lo <= tol) and np.all(lo <= hi)
 
 
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
-@pytest.mark.parametrize("budget", [60.0, 0.0])
-def test_the_ruin_jumped_early_or_abandoned_holds_storms_exact_value(
-        tmp_path: Path, sense: Sense, budget: float, monkeypatch, caplog) -> None:
+@pytest.mark.parametrize("budget", [None, 1e9, 0.0])
+def test_the_ruin_jumped_early_or_refused_holds_storms_exact_value(
+        tmp_path: Path, sense: Sense, budget: float | None, monkeypatch, caplog) -> None:
     """The ruin's block swept by the compiled kernel: read at 32 sweeps and jumped
-    there (a budget of a minute: its own, a few milliseconds of sweeps, would make the
-    decision the machine's), or, with no budget at all, the jump abandoned and the
-    block swept on; both brackets hold Storm's exact value."""
+    there (its own cost model's decision, ``None``, or sweeps saved without end), or,
+    with no sweeps to save, the jump refused before the work and the block swept on;
+    every bracket holds Storm's exact value."""
     pytest.importorskip("stormpy")
     pytest.importorskip("numba")
     path = tmp_path / "ruin.prism"
     path.write_text(RUIN, encoding="utf-8")
     exact = storm_rational(path, f'P{sense.value}=? [F "goal"]')
-    monkeypatch.setattr(iteration, "_budget", lambda early, limit: budget)
+    if budget is not None:
+        monkeypatch.setattr(iteration, "_saved", lambda early, limit: budget)
     mdp = _ruin()
     with caplog.at_level(logging.DEBUG, logger="mitld_lp.solvers.iteration"):
         r = interval_iteration(mdp, mdp.target, sense=sense, progress=False,
@@ -122,10 +115,13 @@ def test_the_ruin_jumped_early_or_abandoned_holds_storms_exact_value(
     # (tests/test_rare_events.py), the upper one not below it
     assert lo <= exact * (1 + Fraction(1, 2**50)) and exact <= hi, (lo, exact, hi)
     assert hi - lo <= Fraction(defaults.TOL)
-    abandoned = "abandoned" in caplog.text
-    assert abandoned is (budget == 0.0), caplog.text
-    if budget > 0.0:  # jumped at the early look
+    refused = "refused" in caplog.text
+    assert refused is (budget == 0.0), caplog.text
+    assert "abandoned" not in caplog.text, caplog.text
+    if budget != 0.0:  # jumped at the early look
         assert r.iterations == iteration._EARLY[0], r.iterations
+    else:  # swept on past the early look
+        assert r.iterations > iteration._EARLY[0], r.iterations
 
 
 def test_the_rounds_forecast_reads_the_switches_rate() -> None:

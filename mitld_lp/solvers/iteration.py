@@ -54,9 +54,10 @@ bound is checked over every choice.
 A block is jumped before ``_SWEEPS_BEFORE_POLICY`` sweeps where the rate at which its
 gap shrinks forecasts that the sweeps cannot close it by then (``_hopeless``).  A
 compiled block is first looked at after 32 sweeps (``_EARLY``): one forecast to need
-many more is jumped there on a budget, the CPU seconds of the sweeps the jump would
-save; a jump whose rounds of policy iteration (their LUs) cost more is abandoned, its
-bounds untouched, and the block swept on.
+many more is jumped there if the jump's cost, estimated from the block's structure
+(:mod:`mitld_lp.solvers.jump_cost`: entries touched, no clock), is at most what the
+sweeps it would save cost; a jump whose rounds of policy iteration (their LUs) are
+forecast to pass that is abandoned, its bounds untouched, and the block swept on.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ import numpy as np
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers import jump_cost
 from mitld_lp.solvers.evaluation import evaluate_policy
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.kernels import (
@@ -80,12 +82,13 @@ from mitld_lp.solvers.kernels import (
     numpy_sweeps,
     use_compiled,
 )
-from mitld_lp.solvers.policy_jump import Abandoned, jump
+from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.topological import (
     Block,
+    Factors,
     SingleLevels,
     blocks,
     state_graph,
@@ -194,18 +197,21 @@ _FORECAST_WINDOW = 64
 _EARLY = (32, 16, 256)
 """The compiled sweeps' early look (:func:`_needed` read from 32 sweeps over the last
 16): a block forecast to need more than 256 sweeps more is jumped there, from the
-policy greedy on the bounds its sweeps started from, on a budget (:func:`_budget`): the
-CPU seconds of the sweeps it would save, at the sweeps' own cost so far.  The jump
-abandons (:class:`~mitld_lp.solvers.policy_jump.Abandoned`) before a round of policy
-iteration forecast (as dear as the last) to end past it, and the block is swept on as
-before.  QVBS ``consensus`` 6-2 ``c2``'s three large blocks (87,225, 139,566 and 93,067
-states) cost 1.4-1.5, 3.6 and 2.6 s jumped at once against 2.9, 5.8 and 4.2 s of
-sweeps; ``bus_scaled`` n128 d3's block of 32,768 states (a grid: its LUs fill) took a
-13.6 s jump where 1,000 sweeps and a late jump close it.  With the budget and its
-rounds' forecast (:func:`~mitld_lp.solvers.policy_jump.improve_ahead`), in one run
-against main 9265e48: consensus 6-2 ``c2``'s solve stage 18.16 -> 13.21 s (120 sweeps,
-were 1,145), bus n128 d3 5.90 -> 6.65 s (two rounds abandoned on each of its blocks),
-the same brackets to the bit (``experiments/results/bench_qvbs_consensus_62.md``)."""
+policy greedy on the bounds its sweeps started from, if the jump's cost is at most the
+sweeps' it would save (those forecast still needed, at most the limit's left), both
+estimated from the block's structure in entries touched
+(:mod:`mitld_lp.solvers.jump_cost`; before the work, no clock read: the same block
+decides the same on an idle and on a loaded machine).  The jump abandons
+(:class:`~mitld_lp.solvers.policy_jump.Abandoned`) before a round of policy iteration
+that its forecast (the switches' rate) takes past the rounds those sweeps pay for, and
+the block is swept on as before.  QVBS ``consensus`` 6-2 ``c2``'s three large blocks
+(87,225, 139,566 and 93,067 states) cost 1.4-1.5, 3.6 and 2.6 s jumped at once against
+2.9, 5.8 and 4.2 s of sweeps; ``bus_scaled`` n128 d3's blocks of 32,768 and 16,384
+states (grids of depth 254: their LUs fill, policy iteration takes many rounds) took a
+13.6 s jump where 1,000 sweeps and a late jump close them.  The last wave's budget in
+CPU seconds (measured as the sweeps ran) started the bus jumps and abandoned each after
+two rounds (5.90 -> 6.65 s); the cost model refuses them before the work
+(``experiments/results/bench_sweeps_jump_cost.md``)."""
 _NUMPY_FORECAST_FROM = 8
 """The same for the NumPy (Jacobi) sweeps, whose limit is :data:`_SWEEPS_BEFORE_POLICY`
 (their forecast from :data:`_FORECAST_FROM` was never read), over the last
@@ -235,7 +241,6 @@ class _Early:
 
     done: int = 0
     needed: float = 0.0
-    cpu: float = 0.0
     stopped: bool = False
 
 
@@ -255,7 +260,6 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
     local = bounds[block.states]
     done = 0
     seen: list[tuple[int, float]] = []  # (sweeps done, gap over threshold) per chunk
-    began = time.process_time()
     try:
         while True:
             chunk = _CHUNK if compiled else _NUMPY_CHUNK
@@ -275,7 +279,6 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
                     needed = _needed(seen, *_EARLY[:2])
                     if needed is not None and needed > min(_EARLY[2], 2 * (limit - done)):
                         early.done, early.needed, early.stopped = done, needed, True
-                        early.cpu = time.process_time() - began
                         return False
                 elif _hopeless(seen, limit, *forecast):
                     return False
@@ -308,12 +311,10 @@ def _hopeless(seen: list[tuple[int, float]], limit: int, start: int = _FORECAST_
     return needed is not None and needed > 2 * (limit - seen[-1][0])
 
 
-def _budget(early: _Early, limit: int) -> float:
-    """The early jump's budget (:data:`_EARLY`), CPU seconds: the sweeps it would save
-    (those forecast still needed, at most the ``limit``'s left) at the sweeps' cost so
-    far."""
-    saved = min(early.needed, float(limit - early.done))
-    return saved * early.cpu / max(early.done, 1)
+def _saved(early: _Early, limit: int) -> float:
+    """The sweeps the early jump would save (:data:`_EARLY`): those forecast still
+    needed, at most the ``limit``'s left."""
+    return min(early.needed, float(limit - early.done))
 
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
@@ -353,7 +354,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
             continue
         if early is not None and early.stopped and budget.stopped is None:
             if _early_jump(block, rewards, bounds, first, tol, precision, sense,
-                           _budget(early, limit)):
+                           _saved(early, limit)):
                 continue
             if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
                              bar, fast, limit - early.done):
@@ -373,20 +374,37 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
 
 
 def _early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.ndarray,
-                tol: float, precision: float | None, sense: Sense, seconds: float) -> bool:
-    """The early jump of :data:`_EARLY` on every model, within ``seconds`` of CPU;
-    ``True`` if it closed the block's gap (else its bounds are at least as tight)."""
-    deadline = time.process_time() + seconds
+                tol: float, precision: float | None, sense: Sense, saved: float) -> bool:
+    """The early jump of :data:`_EARLY` on every model, if its cost is at most that of
+    the ``saved`` sweeps (:func:`mitld_lp.solvers.jump_cost.worth`), its rounds of
+    policy iteration within what they pay for; ``True`` if it closed the block's gap
+    (else its bounds are at least as tight)."""
+    models = bounds.shape[1] // 2
+    own = 0 if sense is Sense.MAX else 1  # the first model's start (policy_jump.jump)
+    exit_own = rewards[block.choices, own] + block.outer @ bounds[:, own]
+    c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense))
+    logger.debug("early jump on %d states: %.0f sweeps saved, %.1f rounds of %.1f "
+                 "sweeps forecast (depth %d, %.3g LU multiplies)", block.states.size,
+                 saved, c.rounds, c.round / c.sweep, c.depth, c.flops)
+    # a sweep and a jump both cost once per model: the models cancel in the decision
+    if not jump_cost.worth(c, saved):
+        logger.debug("early jump on %d states refused: it would cost more than the "
+                     "sweeps it saves", block.states.size)
+        return False
+    allowance = c.allowance(saved * models)
     try:
-        for j in range(bounds.shape[1] // 2):
+        for j in range(models):
             model = replace(block, to_target=rewards[block.choices, 2 * j])
             lo, hi = bounds[:, 2 * j], bounds[:, 2 * j + 1]  # views: written through
-            if not jump(model, lo, hi, tol, precision, sense, first[:, 2 * j:2 * j + 2],
-                        deadline):
+            factors = Factors()
+            ok = jump(model, lo, hi, tol, precision, sense, first[:, 2 * j:2 * j + 2],
+                      allowance, factors)
+            allowance -= factors.factorised
+            if not ok:
                 return False
     except Abandoned:
-        logger.debug("early jump on %d states abandoned: over its budget of %.3f s",
-                     block.states.size, seconds)
+        logger.debug("early jump on %d states abandoned: past its %.1f rounds",
+                     block.states.size, c.allowance(saved * models))
         return False
     return excess(bounds[block.states], tol, precision) < 1.0
 

@@ -28,17 +28,18 @@ started from, its own totals ``W = t`` are tried first and the check decides: on
 stage 0.72-0.77 -> 0.65 s CPU, the same bracket to the bit; where it refuses, the
 slowest choices' totals are computed as before.
 
-**A budget** (``deadline``: the compiled blocks' early jump of
-:mod:`mitld_lp.solvers.iteration`).  Before each round of policy iteration the rest is
-forecast: the last round's CPU time times the rounds left, read from how fast the
-switches fall (:func:`_rounds_left`).  If that ends past the deadline the jump raises
-:class:`Abandoned` and writes nothing; the caller sweeps on.
+**A budget in rounds** (``allowance``: the compiled blocks' early jump of
+:mod:`mitld_lp.solvers.iteration`, priced by :mod:`mitld_lp.solvers.jump_cost`).  Before
+each round of policy iteration the rest is forecast: the LUs made so far (shared by the
+jump's policy iterations through their :class:`~mitld_lp.solvers.topological.Factors`)
+and the rounds left, read from how fast the switches fall (:func:`_rounds_left`).  If
+that passes the allowance the jump raises :class:`Abandoned` and writes nothing; the
+caller sweeps on.  No clock is read: the same block gives the same decisions.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -53,7 +54,7 @@ from mitld_lp.solvers.topological import (
     policy_round,
 )
 
-__all__ = ["AHEAD_SWEEPS", "Abandoned", "improve_ahead", "jump"]
+__all__ = ["AHEAD_SWEEPS", "Abandoned", "improve_ahead", "jump", "start_policy"]
 
 logger = logging.getLogger(__name__)
 
@@ -66,8 +67,8 @@ with 20, 2 LUs and 0.43 s with 50; on ``consensus`` 4-4 ``c2``'s block of 7,863 
 with 10 sweeps, 0.16-0.17 s with 20 and 50.  Looked at only once a round switches at
 most 1/64 of the states (the tail): 0.61-0.69 s and 0.17-0.19 s."""
 class Abandoned(Exception):
-    """A budgeted jump stopped before a round it forecast to end past its deadline
-    (:func:`improve_ahead`'s ``deadline``); nothing of it was written."""
+    """A budgeted jump stopped before a round it forecast to take it past its allowance
+    of rounds (:func:`improve_ahead`'s ``allowance``); nothing of it was written."""
 
 
 AHEAD_GAIN = 1e-12
@@ -78,7 +79,7 @@ choice (its float64 sweeps round to about ``K`` units in the last place)."""
 def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                   allowed: np.ndarray | None = None, *,
                   factors: Factors | None = None, sense: Sense = Sense.MAX,
-                  sweeps: int = AHEAD_SWEEPS, deadline: float | None = None
+                  sweeps: int = AHEAD_SWEEPS, allowance: float | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
     choice indices) to a fixpoint, maximising (or minimising, ``sense``), over the
@@ -86,9 +87,10 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     sweeps from the policy's values (module docs).  Returns the policy, its values and
     its expected exit times (extended precision).  The fixpoint is
     :func:`~mitld_lp.solvers.topological.improve_policy`'s: no choice beats the policy by
-    more than ``GAIN`` of the values compared.  ``deadline`` (a
-    :func:`time.process_time`): :class:`Abandoned` is raised before a round that, as
-    costly as the last one, would end past it (the policy jump's budget)."""
+    more than ``GAIN`` of the values compared.  ``allowance``: :class:`Abandoned` is
+    raised before a round after which the LUs made (``factors.factorised``, shared by
+    the jump's calls) and the rounds forecast left would pass it (the policy jump's
+    budget, module docs)."""
     starts = block.starts
     inner_ld = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
@@ -96,18 +98,16 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     reward64 = np.asarray(reward, dtype=np.float64)
     before: int | None = None  # the switches of the last round
     for _ in range(POLICY_ROUNDS):
-        began = time.process_time()
         v, t, nxt = policy_round(block, inner_ld, reward, chosen, allowed, factors, sense)
         if np.array_equal(nxt, chosen):
             return chosen, v, t
-        if deadline is not None:
-            now = time.process_time()
+        if allowance is not None:
             switched = int(np.count_nonzero(nxt != chosen))
             left = _rounds_left(before, switched)
-            logger.debug("budgeted policy iteration: a round of %.3f s, %d switches, "
-                         "%.1f rounds forecast, %.3f s left", now - began, switched, left,
-                         deadline - now)
-            if now + left * (now - began) > deadline:
+            logger.debug("budgeted policy iteration: %d LUs made, %d switches, %.1f "
+                         "rounds forecast, %.1f allowed", factors.factorised, switched,
+                         left, allowance)
+            if factors.factorised + left > allowance:
                 raise Abandoned
             before = switched
         if sweeps > 0:
@@ -142,14 +142,15 @@ def _rounds_left(before: int | None, switched: int) -> float:
 
 def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
          precision: float | None, sense: Sense, first: np.ndarray | None = None,
-         deadline: float | None = None) -> bool:
+         allowance: float | None = None, factors: Factors | None = None) -> bool:
     """Try the verified policy jump of :mod:`mitld_lp.solvers.iteration`'s module docs
     on ``block``; update ``lo`` and ``hi`` where it proves better bounds.  ``True`` if
     both bounds were proven.  ``first``: the block's bounds (a lower and an upper
     column) the policy iterations start greedy on, else ``lo`` and ``hi``.
-    ``deadline`` (a :func:`time.process_time`): the jump's budget; :class:`Abandoned`
-    (``lo`` and ``hi`` untouched) before a policy iteration's round forecast to end
-    past it.
+    ``allowance``: the jump's budget in rounds of policy iteration (LUs);
+    :class:`Abandoned` (``lo`` and ``hi`` untouched) before a round forecast to take it
+    past them.  ``factors``: where the jump's factorisations are kept (and counted),
+    new if not given.
 
     Measured and not done: stopping the policy iterations once no choice gains more
     than ``tol / 64`` over the longest exit time (both bounds are checked whatever the
@@ -167,11 +168,11 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     # the one checked over every choice; -1 lowers a bound, +1 raises it
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
     seed = local if first is None else first
-    start = segmented_argmax(exit2[:, own] + block.inner @ seed[:, own], groups,
-                             sense=sense)
-    factors = Factors()  # the policy iterations below share their factorisations
+    start = start_policy(block, exit2[:, own], seed[:, own], sense)
+    # the policy iterations below share their factorisations
+    factors = Factors() if factors is None else factors
     chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
-                                 sense=sense, deadline=deadline)
+                                 sense=sense, allowance=allowance)
     own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
                          lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
                                                   factors)[0])
@@ -179,7 +180,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
     own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
     chosen_best, w, _ = improve_ahead(block, exit2[:, every], chosen, factors=factors,
-                                      sense=sense, deadline=deadline)
+                                      sense=sense, allowance=allowance)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: W = u + max over the choices within a quarter of the threshold of P W.
     owner_w = np.repeat(w, counts)
@@ -189,7 +190,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
 
     def slowest(u: np.ndarray) -> np.ndarray:
         return improve_ahead(block, np.repeat(u, counts), chosen_best, tied,
-                             factors=factors, deadline=deadline)[1]
+                             factors=factors, allowance=allowance)[1]
 
     sign = 1.0 if every else -1.0
 
@@ -224,6 +225,14 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
                  "(excess %.1e; %d LUs)", block.states.size, own_ok, every_ok, worst,
                  factors.factorised)
     return own_ok and every_ok
+
+
+def start_policy(block: Block, exit_own: np.ndarray, seed: np.ndarray,
+                 sense: Sense) -> np.ndarray:
+    """The policy :func:`jump` starts from (local choice indices): greedy on ``seed``,
+    the block's bound a policy's own values give (a maximum's lower, a minimum's
+    upper), with ``exit_own`` that bound's exit rewards per choice."""
+    return segmented_argmax(exit_own + block.inner @ seed, block.groups, sense=sense)
 
 
 def _shifted(x: np.ndarray, steps: np.ndarray | None, sign: int, tol: float,
