@@ -225,8 +225,7 @@ class SingleLevels:
         # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
         self.local, self.cols, self.vals = off_diagonal_entries(
             q.matrix, self.choices, np.repeat(self.states, counts))
-        # each choice's first entry: its kept entries counted (``local`` is sorted), not
-        # a binary search of every choice in ``local``: the same pointers
+        # each choice's first entry: its kept entries counted (``local`` is sorted)
         self.choice_entry = np.zeros(self.choices.size + 1, dtype=np.int64)
         np.cumsum(np.bincount(self.local, minlength=self.choices.size),
                   out=self.choice_entry[1:])
