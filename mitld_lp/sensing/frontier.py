@@ -305,12 +305,22 @@ class FrontierBuilder(StepRules):
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        hid, hfirst = (groups(obs, self.order_key(tid2, q2)) if found is None else
-                       gk.by_hypothesis(found[2], obs, self.order_key(tid2, q2)))
-        hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
-        hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
-        total = fsum_by(hobs, hmass, len(first))
-        weight = hmass / total[hobs]
+        if found is not None:  # the kernels run: grouped, summed and hashed in one pass
+            self.order_key(tid2[:0], q2[:0])  # the times' ranks made for the new ones
+            hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
+                gk.level_hypotheses(found[2], obs, len(first), tid2, q2, mass, s_seq,
+                                    self.tid_rank, self.nq))
+        else:
+            hid, hfirst = groups(obs, self.order_key(tid2, q2))
+            hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
+            hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
+            total = fsum_by(hobs, hmass, len(first))
+            weight = hmass / total[hobs]
+            g_count = np.bincount(hobs, minlength=len(first))
+            g_hash = np.zeros(len(first), np.uint64)
+            scatter("add", g_hash, hobs, mix64(hcode))
+            g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
+            scatter("min", g_first, obs, s_seq)
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
         g_pend = pending[gst] & ~occ[first]
@@ -319,14 +329,6 @@ class FrontierBuilder(StepRules):
         scatter("max", most, hobs, need)
         pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
-        g_count = np.bincount(hobs, minlength=len(first))
-        g_hash = np.zeros(len(first), np.uint64)
-        if found is not None:  # the kernels run: the mix and the sum in one pass
-            gk.hash_add(g_hash, hobs, hcode)
-        else:
-            scatter("add", g_hash, hobs, mix64(hcode))
-        g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
-        scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
         target, reps = self.keys.match(group)  # -1 - k: the k-th new key
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis

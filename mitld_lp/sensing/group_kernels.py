@@ -24,7 +24,7 @@ numba_cache.install()  # processes compiling at once share the disk cache safely
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
 
-__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add",
+__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add", "level_hypotheses",
            "group_shifts"]
 
 
@@ -268,3 +268,127 @@ def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
             if good[g, e] and least[g, e] > starts[e]:
                 shift[g, events[e]] = least[g, e] - starts[e]
     return shift
+
+
+@numba.njit(cache=True, nogil=True)
+def _fsum(values, start, count, partials):  # pragma: no cover - compiled
+    """:func:`math.fsum` of ``values[start:start + count]`` (finite values), CPython's
+    algorithm step for step: Shewchuk's exact partials (``partials``: room for them),
+    then their sum rounded once, half-way cases to even."""
+    n = 0
+    for k in range(start, start + count):
+        x = values[k]
+        i = 0
+        for j in range(n):
+            y = partials[j]
+            if abs(x) < abs(y):
+                x, y = y, x
+            hi = x + y
+            lo = y - (hi - x)
+            if lo != 0.0:
+                partials[i] = lo
+                i += 1
+            x = hi
+        partials[i] = x
+        n = i + 1
+    hi = 0.0
+    if n > 0:
+        n -= 1
+        hi = partials[n]
+        lo = 0.0
+        while n > 0:
+            x = hi
+            n -= 1
+            y = partials[n]
+            hi = x + y
+            yr = hi - x
+            lo = y - yr
+            if lo != 0.0:
+                break
+        if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0)
+                      or (lo > 0.0 and partials[n - 1] > 0.0)):
+            y = lo * 2.0
+            x = hi + y
+            yr = x - hi
+            if y == yr:
+                hi = x
+    return hi
+
+
+@numba.njit(cache=True, nogil=True)
+def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
+                     ):  # pragma: no cover - compiled
+    """A level's undecided rows (``perm``: the rows in their observation groups' order,
+    :func:`by_observation`; ``obs`` each row's group of ``n_obs``) made into the new
+    states' hypotheses in one pass: the rows grouped by ``(observation, rank[tid] * nq
+    + q)`` (:func:`mitld_lp.sensing.rows.groups`' numbering: the hypotheses in
+    InfoState order within each observation), each hypothesis's mass summed in the
+    rows' order (``np.bincount``), each observation's total correctly rounded
+    (:func:`math.fsum`, as :func:`mitld_lp.sensing.rows.fsum_by`), the weights, and per
+    observation its number of hypotheses, the hash of its set (the sum of
+    :func:`mitld_lp.sensing.rows.mix64` of the codes ``tid * nq + q``, wrapping) and its
+    first row's place ``s_seq``.  Returns ``(hfirst, hobs, hcode, hmass, weight,
+    total, count, hash, first)``."""
+    n = len(perm)
+    inverse = np.empty(n, np.int64)
+    hfirst = np.empty(n, np.int64)
+    vals = np.empty(64, np.int64)
+    idx = np.empty(64, np.int64)
+    g = 0
+    i = 0
+    last = -1
+    while i < n:
+        o = obs[perm[i]]
+        if o <= last:
+            raise ValueError("level_hypotheses: the rows are not in their groups' order")
+        last = o
+        j = i + 1
+        while j < n and obs[perm[j]] == o:
+            j += 1
+        m = j - i
+        if len(vals) < m:
+            vals = np.empty(2 * m, np.int64)
+            idx = np.empty(2 * m, np.int64)
+        for r in range(m):
+            x = perm[i + r]
+            idx[r] = x
+            vals[r] = rank[tid[x]] * nq + q[x]
+        _sort(vals, idx, m)
+        g = _number(vals, idx, m, np.int64(g), inverse, hfirst)
+        i = j
+    hmass = np.zeros(g)
+    for r in range(n):  # in the rows' order, as np.bincount sums
+        hmass[inverse[r]] += mass[r]
+    hobs = np.empty(g, np.int64)
+    hcode = np.empty(g, np.int64)
+    count = np.zeros(n_obs, np.int64)
+    hash_ = np.zeros(n_obs, np.uint64)
+    for h in range(g):
+        x = hfirst[h]
+        b = obs[x]
+        hobs[h] = b
+        code = tid[x] * nq + q[x]
+        hcode[h] = code
+        count[b] += 1
+        z = np.uint64(code) + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        hash_[b] += z ^ (z >> np.uint64(31))
+    total = np.empty(n_obs)
+    weight = np.empty(g)
+    partials = np.empty(64)
+    h = 0
+    for b in range(n_obs):  # the hypotheses come observation by observation
+        k = count[b]
+        if len(partials) < k + 1:
+            partials = np.empty(2 * k + 2)
+        t = _fsum(hmass, h, k, partials)
+        total[b] = t
+        for e in range(h, h + k):
+            weight[e] = hmass[e] / t
+        h += k
+    first = np.full(n_obs, np.iinfo(np.int64).max, np.int64)
+    for r in range(n):
+        if s_seq[r] < first[obs[r]]:
+            first[obs[r]] = s_seq[r]
+    return hfirst[:g].copy(), hobs, hcode, hmass, weight, total, count, hash_, first
