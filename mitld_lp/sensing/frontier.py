@@ -301,7 +301,12 @@ class FrontierBuilder(StepRules):
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        found = gk.by_observation(compiled_on(), c, w2, occ, new) if compiled_on() else None
+        found = None
+        if compiled_on():
+            bits = self.nu + len(self.sensed)
+            found = (gk.by_observation_bits(c, w2, occ, new, self.nu, len(self.sensed))
+                     if len(self.worlds) < 1 << (62 - bits) else
+                     gk.by_observation(compiled_on(), c, w2, occ, new))
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)

@@ -13,6 +13,8 @@ caller reads only the grouped columns from it), so the product is the same to th
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -24,7 +26,7 @@ numba_cache.install()  # processes compiling at once share the disk cache safely
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
 
-__all__ = ["by_observation", "by_hypothesis", "least_counts", "hash_add", "level_hypotheses",
+__all__ = ["by_observation", "by_observation_bits", "by_hypothesis", "least_counts", "hash_add", "level_hypotheses",
            "group_shifts"]
 
 
@@ -187,6 +189,32 @@ def by_observation(kernels, c: np.ndarray, *cols: np.ndarray
     return _block_groups(np.ascontiguousarray(c, dtype=INT), words[0])
 
 
+@numba.njit(cache=True, nogil=True)
+def _observation_word(c, w2, occ, new, nu, ns):  # pragma: no cover - compiled
+    """Whether ``c`` never decreases, and each row's observation ``(w2, occ, new)`` as
+    one word ``(w2 << nu | occ) << ns | new`` (the same order)."""
+    n = len(c)
+    word = np.empty(n, np.int64)
+    runs = True
+    for i in range(n):
+        if i and c[i] < c[i - 1]:
+            runs = False
+        word[i] = ((w2[i] << nu) | occ[i]) << ns | new[i]
+    return runs, word
+
+
+def by_observation_bits(c: np.ndarray, w2: np.ndarray, occ: np.ndarray, new: np.ndarray,
+                        nu: int, ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`by_observation` of ``(c, w2, occ, new)`` with ``occ`` below ``2**nu``,
+    ``new`` below ``2**ns`` and ``w2`` non-negative below ``2**(62 - nu - ns)``: the
+    word made in one pass from the known widths, not packed from the columns' bounds
+    (the same order, so the same groups)."""
+    if len(c) == 0:
+        return None
+    runs, word = _observation_word(c, w2, occ, new, np.int64(nu), np.int64(ns))
+    return _block_groups(c, word) if runs else None
+
+
 def by_hypothesis(perm: np.ndarray, outer: np.ndarray, key: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`~mitld_lp.sensing.rows.groups` of ``(outer, key)``, ``perm`` the rows in
@@ -316,6 +344,37 @@ def _fsum(values, start, count, partials):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _sum_of(values, start, count, partials):  # pragma: no cover - compiled
+    """:func:`mitld_lp.sensing.rows.fsum_by`'s sum of ``values[start:start + count]``
+    (positive values), decided as it decides: the double-double sum rounded once,
+    or, where that may not be the correctly rounded sum, :func:`_fsum`."""
+    high = values[start]
+    low = 0.0
+    size = 0.0
+    for k in range(start + 1, start + count):
+        x = values[k]
+        t = high + x
+        back = t - high
+        error = (high - (t - back)) + (x - back)
+        high = t
+        low += error
+        size += abs(error)
+    out = high + low
+    back = out - high
+    rest = (high - (out - back)) + (low - back)
+    m, e = math.frexp(out)
+    if out == 0.0 or abs(out) < 2.2250738585072014e-308:
+        half = 5e-324 / 2
+    else:
+        half = math.ldexp(1.0, e - 53) / 2
+    if rest < 0.0 and m == 0.5:
+        half /= 2
+    if count > 2 and abs(rest) + 4.0 * count * 2.0**-52 * size >= half:
+        return _fsum(values, start, count, partials)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
                      ):  # pragma: no cover - compiled
     """A level's undecided rows (``perm``: the rows in their observation groups' order,
@@ -382,7 +441,7 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         k = count[b]
         if len(partials) < k + 1:
             partials = np.empty(2 * k + 2)
-        t = _fsum(hmass, h, k, partials)
+        t = _sum_of(hmass, h, k, partials)
         total[b] = t
         for e in range(h, h + k):
             weight[e] = hmass[e] / t
