@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.sensing.rows import INT, compiled_on, spread
+from mitld_lp.sensing.rows import INT, compiled_on, fsum_by, groups, mix64, scatter, spread
 
 __all__ = ["hypothesis_rows"]
 
@@ -73,3 +73,66 @@ def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
             return more, ended, (*u_i[:6], u_m, u_i[6])
         (fb.step_table if of_step else fb.end_table)(ma, mb)
     return None
+
+
+def observations(fb: Any, c: np.ndarray, w2: np.ndarray, occ: np.ndarray,
+                 new: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The undecided rows grouped by observation ``(c, w2, occ, new)`` by the kernels
+    (:func:`~mitld_lp.sensing.group_kernels.by_observation`: each row's group, a row of
+    each, the rows in the groups' order), the observation made one word from its parts'
+    widths where they fit; None where the rows must be grouped otherwise."""
+    from mitld_lp.sensing import group_kernels as gk
+
+    if _fits(fb):
+        return gk.by_observation_bits(c, w2, occ, new, fb.nu, len(fb.sensed))
+    return gk.by_observation(compiled_on(), c, w2, occ, new)
+
+
+def _fits(fb: Any) -> bool:
+    """Whether an observation of ``fb``'s build fits one word: world, unsensed events and
+    new reports (:func:`~mitld_lp.sensing.group_kernels.by_observation_bits`)."""
+    return len(fb.worlds) < 1 << (62 - fb.nu - len(fb.sensed))
+
+
+def decided_alone(fb: Any, ended: tuple[np.ndarray, ...], grouped: tuple[np.ndarray, ...]
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """:meth:`FrontierBuilder.record_moves`'s observations with nothing undecided left
+    with them, by one kernel pass (:func:`~mitld_lp.sensing.group_kernels.decided_alone`):
+    a row of each in ``ended``, and its record where all its rows ended in one (-1
+    where they disagree); None where the NumPy lines must find them."""
+    if not compiled_on() or not _fits(fb):
+        return None
+    from mitld_lp.sensing import group_kernels as gk
+
+    cols = tuple(np.ascontiguousarray(x, dtype=INT) for x in (*ended, *grouped))
+    return gk.decided_alone(*cols, np.int64(fb.nu), np.int64(len(fb.sensed)))
+
+
+def grouped_hypotheses(fb: Any, found: tuple[np.ndarray, ...] | None, obs: np.ndarray,
+                       n_obs: int, tid: np.ndarray, q: np.ndarray, mass: np.ndarray,
+                       s_seq: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A level's undecided rows (``obs`` each one's observation of ``n_obs``; ``found``:
+    :func:`observations`' answer, None where the rows were grouped otherwise) made into
+    the new states' hypotheses: a row of each hypothesis (``hfirst``), its observation,
+    code ``tid * nq + q`` and mass (summed in the rows' order), its weight, each
+    observation's total (correctly rounded: :func:`~mitld_lp.sensing.rows.fsum_by`),
+    number of hypotheses, hash of its set and first row's place ``s_seq``: by one
+    kernel pass (:func:`~mitld_lp.sensing.group_kernels.level_hypotheses`) where
+    ``found`` is given, else by NumPy lines (the same arrays, to the bit)."""
+    if found is not None:
+        from mitld_lp.sensing import group_kernels as gk
+
+        fb.order_key(tid[:0], q[:0])  # the times' ranks made for the new ones
+        return gk.level_hypotheses(found[2], obs, n_obs, tid, q, mass, s_seq,
+                                   fb.tid_rank, fb.nq)
+    hid, hfirst = groups(obs, fb.order_key(tid, q))
+    hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
+    hobs, hcode = obs[hfirst], tid[hfirst] * fb.nq + q[hfirst]
+    total = fsum_by(hobs, hmass, n_obs)
+    g_count = np.bincount(hobs, minlength=n_obs)
+    g_hash = np.zeros(n_obs, np.uint64)
+    scatter("add", g_hash, hobs, mix64(hcode))
+    g_first = np.full(n_obs, np.iinfo(INT).max, INT)  # each group's first row
+    scatter("min", g_first, obs, s_seq)
+    return (hfirst, hobs, hcode, hmass, hmass / total[hobs], total, g_count, g_hash,
+            g_first)

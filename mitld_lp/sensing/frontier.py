@@ -34,6 +34,7 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
+from mitld_lp.sensing import compiled
 from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
@@ -51,7 +52,6 @@ from mitld_lp.sensing.rows import (
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
-    fsum_by,
     groups,
     load_kernels,
     mix64,
@@ -291,41 +291,19 @@ class FrontierBuilder(StepRules):
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
         rows = None
         if compiled_on():
-            from mitld_lp.sensing import group_kernels as gk
-            from mitld_lp.sensing.compiled import hypothesis_rows
-
-            rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+            rows = compiled.hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         if rows is None:
             rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq) = rows
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        found = None
-        if compiled_on():
-            bits = self.nu + len(self.sensed)
-            found = (gk.by_observation_bits(c, w2, occ, new, self.nu, len(self.sensed))
-                     if len(self.worlds) < 1 << (62 - bits) else
-                     gk.by_observation(compiled_on(), c, w2, occ, new))
+        found = compiled.observations(self, c, w2, occ, new) if compiled_on() else None
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        if found is not None:  # the kernels run: grouped, summed and hashed in one pass
-            self.order_key(tid2[:0], q2[:0])  # the times' ranks made for the new ones
-            hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
-                gk.level_hypotheses(found[2], obs, len(first), tid2, q2, mass, s_seq,
-                                    self.tid_rank, self.nq))
-        else:
-            hid, hfirst = groups(obs, self.order_key(tid2, q2))
-            hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
-            hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
-            total = fsum_by(hobs, hmass, len(first))
-            weight = hmass / total[hobs]
-            g_count = np.bincount(hobs, minlength=len(first))
-            g_hash = np.zeros(len(first), np.uint64)
-            scatter("add", g_hash, hobs, mix64(hcode))
-            g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
-            scatter("min", g_first, obs, s_seq)
+        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
+            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
         g_pend = pending[gst] & ~occ[first]
@@ -499,17 +477,23 @@ class FrontierBuilder(StepRules):
         row): each observation's successor state, or, when nothing undecided is left
         with it, the verdict: the one record its hypotheses ended in, or
         :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        _, once = ordered_groups(*ended)  # each (observation, record) once
-        c, w2, occ, new, end = (x[once] for x in ended)
-        obs, first = ordered_groups(c, w2, occ, new)
-        kinds = np.bincount(obs)
-        n = len(grouped[0])
-        both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
-                            zip(grouped, (c, w2, occ, new), strict=True)))
-        alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
-        pick = first[alone]
         trunc = self.record(Absorbing.TRUNCATED)
-        code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
+        found = compiled.decided_alone(self, ended, grouped)
+        if found is not None:  # by the kernels: one pass
+            pick, one = found
+            c, w2, occ, new, _ = ended
+            code = -1 - np.where(one >= 0, one, trunc)
+        else:
+            _, once = ordered_groups(*ended)  # each (observation, record) once
+            c, w2, occ, new, end = (x[once] for x in ended)
+            obs, first = ordered_groups(c, w2, occ, new)
+            kinds = np.bincount(obs)
+            n = len(grouped[0])
+            both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
+                                zip(grouped, (c, w2, occ, new), strict=True)))
+            alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
+            pick = first[alone]
+            code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
         gc, gw, go, gn = grouped
         self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
                                np.concatenate([gw, w2[pick]]),

@@ -26,8 +26,8 @@ numba_cache.install()  # processes compiling at once share the disk cache safely
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
 
-__all__ = ["by_observation", "by_observation_bits", "by_hypothesis", "least_counts", "hash_add", "level_hypotheses",
-           "group_shifts"]
+__all__ = ["by_observation", "by_observation_bits", "by_hypothesis", "decided_alone",
+           "least_counts", "hash_add", "level_hypotheses", "group_shifts"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -451,3 +451,61 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         if s_seq[r] < first[obs[r]]:
             first[obs[r]] = s_seq[r]
     return hfirst[:g].copy(), hobs, hcode, hmass, weight, total, count, hash_, first
+
+
+@numba.njit(cache=True, nogil=True)
+def decided_alone(c, w2, occ, new, end, gc, gw, go, gn, nu, ns):  # pragma: no cover
+    """The observations of a level's decided rows (``c, w2, occ, new``, ``c``
+    non-decreasing; ``end`` each row's record) that no undecided group has (``gc, gw,
+    go, gn``: the groups in lexicographic order), in lexicographic order: each one's
+    row of ``c``, ``w2``, ``occ``, ``new``, and its record where every row of it ended
+    in one, else -1 (:meth:`mitld_lp.sensing.frontier.FrontierBuilder.record_moves`).
+    Returns None where ``c`` decreases (the caller groups the rows itself)."""
+    n = len(c)
+    for i in range(1, n):
+        if c[i] < c[i - 1]:
+            return None
+    word = np.empty(n, np.int64)
+    for i in range(n):
+        word[i] = ((w2[i] << nu) | occ[i]) << ns | new[i]
+    out = np.empty(n, np.int64)  # a row of each observation kept
+    rec = np.empty(n, np.int64)
+    k = 0
+    vals = np.empty(64, np.int64)
+    idx = np.empty(64, np.int64)
+    u = 0  # the undecided groups met so far
+    m_u = len(gc)
+    i = 0
+    while i < n:
+        j = i + 1
+        while j < n and c[j] == c[i]:
+            j += 1
+        m = j - i
+        if len(vals) < m:
+            vals = np.empty(2 * m, np.int64)
+            idx = np.empty(2 * m, np.int64)
+        for r in range(m):
+            vals[r] = word[i + r]
+            idx[r] = i + r
+        _sort(vals, idx, m)
+        while u < m_u and gc[u] < c[i]:
+            u += 1
+        r = 0
+        while r < m:
+            s = r + 1
+            one = end[idx[r]]
+            while s < m and vals[s] == vals[r]:
+                if end[idx[s]] != one:
+                    one = -1
+                s += 1
+            v = vals[r]
+            while u < m_u and gc[u] == c[i] and (((gw[u] << nu) | go[u]) << ns | gn[u]) < v:
+                u += 1
+            if not (u < m_u and gc[u] == c[i]
+                    and (((gw[u] << nu) | go[u]) << ns | gn[u]) == v):
+                out[k] = idx[r]
+                rec[k] = one
+                k += 1
+            r = s
+        i = j
+    return out[:k].copy(), rec[:k].copy()
