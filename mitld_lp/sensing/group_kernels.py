@@ -25,6 +25,10 @@ numba_narrow.install()  # cached kernels loaded without numba's whole target reg
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
+_MAX = 9_223_372_036_854_775_807
+"""The largest int64, written out: ``np.iinfo`` in a kernel makes loading it from the
+cache import ``numba.np.arraymath``, which imports ``scipy.linalg`` (some 0.2 s of CPU in
+a build that has not imported it)."""
 
 __all__ = ["by_observation", "by_observation_bits", "by_hypothesis", "decided_alone",
            "least_counts", "hash_add", "level_hypotheses", "group_shifts"]
@@ -228,7 +232,7 @@ def least_counts(counts, tid, group, n_groups):  # pragma: no cover - compiled
     counts (:meth:`mitld_lp.sensing.merge.Counts.canonical`): ``counts`` each times
     index's counts, ``tid`` each row's, ``group`` each row's group."""
     n, k = len(tid), counts.shape[1]
-    least = np.full((n_groups, k), np.iinfo(np.int64).max, np.int64)
+    least = np.full((n_groups, k), _MAX, np.int64)
     for r in range(n):
         g = group[r]
         t = tid[r]
@@ -279,7 +283,7 @@ def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
     ``delays`` every sensed event's delay."""
     n, k = len(tid), len(events)
     good = np.ones((n_groups, k), np.bool_)
-    least = np.full((n_groups, k), np.iinfo(np.int64).max, np.int64)
+    least = np.full((n_groups, k), _MAX, np.int64)
     for r in range(n):
         g = group[r]
         t = tid[r]
@@ -446,7 +450,7 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         for e in range(h, h + k):
             weight[e] = hmass[e] / t
         h += k
-    first = np.full(n_obs, np.iinfo(np.int64).max, np.int64)
+    first = np.full(n_obs, _MAX, np.int64)
     for r in range(n):
         if s_seq[r] < first[obs[r]]:
             first[obs[r]] = s_seq[r]
