@@ -136,3 +136,22 @@ def grouped_hypotheses(fb: Any, found: tuple[np.ndarray, ...] | None, obs: np.nd
     scatter("min", g_first, obs, s_seq)
     return (hfirst, hobs, hcode, hmass, hmass / total[hobs], total, g_count, g_hash,
             g_first)
+
+
+def end_sums(ends: list[np.ndarray], lists: np.ndarray
+             ) -> tuple[np.ndarray, ...] | None:
+    """:meth:`FrontierBuilder.transitions`' records of each choice by one kernel pass
+    (:func:`~mitld_lp.sensing.group_kernels.end_sums`): the rows that end in a record
+    (``ends``: choice, outcome, branch, successor, record, mass; concatenated from
+    lists bounded by ``lists``, each in the loops' order) merged into the loops' order
+    and grouped by (choice, record): each group's choice, record, mass and first row's
+    place in that order; None where the NumPy lines must sort them."""
+    if not compiled_on():
+        return None
+    from mitld_lp.sensing import group_kernels as gk
+
+    cols = tuple(np.ascontiguousarray(x, dtype=INT) for x in ends[:5])
+    ok, g_c, g_r, mass, place = gk.end_sums(*cols, np.ascontiguousarray(ends[5],
+                                                                          dtype=np.float64),
+                                            np.asarray(lists, INT))
+    return (g_c, g_r, mass, place) if ok else None

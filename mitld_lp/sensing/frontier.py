@@ -315,12 +315,13 @@ class FrontierBuilder(StepRules):
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
         target, reps = self.keys.match(group)  # -1 - k: the k-th new key
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
-        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight,
-                   [np.concatenate(x) for x in zip(*ends, strict=True)])
+        flat = [np.concatenate(x) for x in zip(*ends, strict=True)]
+        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight, flat)
         self.verify(target, g_count, hobs, hcode, weight)
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
                           ended)
-        return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
+        lists = np.cumsum([0] + [len(x[0]) for x in ends])
+        return (a + c_state, c_act, *self.transitions(loop, flat, lists, c[first], g_first,
                                                       target, total))
 
     def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
@@ -374,23 +375,28 @@ class FrontierBuilder(StepRules):
             x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
         return ends, ended, (c, occ, w2, new, tid2, q2, mass, s_seq)
 
-    def transitions(self, loop: tuple[np.ndarray, ...], ends: list[tuple[np.ndarray, ...]],
-                    c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
-                    total: np.ndarray) -> tuple[np.ndarray, ...]:
+    def transitions(self, loop: tuple[np.ndarray, ...], ends: list[np.ndarray],
+                    lists: np.ndarray, c: np.ndarray, g_first: np.ndarray,
+                    target: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, ...]:
         """The expansion's transitions (choice, column, probability) in each choice's
         order one state at a time would make them, with the same sums: the absorbing
         records as the loops meet them (their mass summed in the loops' order), then
-        the information states as their observations come."""
-        c_end, o_end, b_end, s_end, r_end, m_end = (np.concatenate(x) for x in
-                                                    zip(*ends, strict=True))
-        order = np.lexsort((s_end, b_end, o_end, c_end))
-        c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
-        ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
-        mass = np.bincount(ids, weights=m_end)
-        place = np.full(len(mass), np.iinfo(_I).max, _I)
-        scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
-        col = np.asarray(self.record_state, _I)[r_end[place]]
-        cc = np.concatenate([loop[0], c_end[place], c])
+        the information states as their observations come.  ``ends``: the rows that
+        end in a record, concatenated from lists bounded by ``lists``."""
+        found = compiled.end_sums(ends, lists)
+        if found is not None:  # by the kernels: the lists merged, one pass
+            g_c, g_r, mass, place = found
+        else:
+            c_end, o_end, b_end, s_end, r_end, m_end = ends
+            order = np.lexsort((s_end, b_end, o_end, c_end))
+            c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
+            ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
+            mass = np.bincount(ids, weights=m_end)
+            place = np.full(len(mass), np.iinfo(_I).max, _I)
+            scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
+            g_c, g_r = c_end[place], r_end[place]
+        col = np.asarray(self.record_state, _I)[g_r]
+        cc = np.concatenate([loop[0], g_c, c])
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
                                 np.ones(len(c), _I)])
         pos = np.concatenate([np.zeros(len(loop[0]), _I), place, g_first])

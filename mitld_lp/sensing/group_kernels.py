@@ -513,3 +513,85 @@ def decided_alone(c, w2, occ, new, end, gc, gw, go, gn, nu, ns):  # pragma: no c
             r = s
         i = j
     return out[:k].copy(), rec[:k].copy()
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _before(c, o, b, s, i, j):  # pragma: no cover - compiled
+    """Whether row ``i`` comes strictly before row ``j`` by ``(c, o, b, s)``."""
+    if c[i] != c[j]:
+        return c[i] < c[j]
+    if o[i] != o[j]:
+        return o[i] < o[j]
+    if b[i] != b[j]:
+        return b[i] < b[j]
+    return s[i] < s[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def end_sums(c, o, b, s, r, m, starts):  # pragma: no cover - compiled
+    """A level's rows that end in a record (``starts``: the bounds of the lists they
+    were concatenated from, each in the loops' order ``(c, o, b, s)``), merged into the
+    loops' order (a stable ``np.lexsort`` of the concatenation, ties to the earlier list)
+    and grouped by ``(c, r)`` in that lexicographic order: each group's choice, record,
+    mass (summed in the loops' order, as ``np.bincount``) and place of its first row
+    in the loops' order.  Returns ``ok`` False (and nothing) where a list is not in
+    the loops' order (the caller sorts the rows itself)."""
+    k = len(starts) - 1
+    n = starts[k]
+    for t in range(k):
+        for i in range(starts[t] + 1, starts[t + 1]):
+            if _before(c, o, b, s, i, i - 1):
+                z = np.zeros(0, np.int64)
+                return False, z, z, np.zeros(0), z
+    head = starts[:k].copy()
+    g_c = np.empty(n, np.int64)
+    g_r = np.empty(n, np.int64)
+    g_m = np.empty(n)
+    g_p = np.empty(n, np.int64)
+    n_rec = 1
+    for i in range(n):
+        if r[i] + 1 > n_rec:
+            n_rec = r[i] + 1
+    slot = np.full(n_rec, -1, np.int64)  # each record's place in the current choice
+    met = np.empty(n_rec, np.int64)  # the records met in the current choice, as met
+    tm = np.empty(n_rec)  # their sums
+    tp = np.empty(n_rec, np.int64)  # their first rows' places
+    n_met = 0
+    g = 0  # groups of the choices done
+    cur = -1
+    pick = 0
+    for p in range(n + 1):
+        i = -1
+        if p < n:
+            for t in range(k):  # the next row: the least head, the earlier list on ties
+                if head[t] < starts[t + 1] and (i < 0 or _before(c, o, b, s, head[t], i)):
+                    i = head[t]
+                    pick = t
+            head[pick] += 1
+        if p == n or c[i] != cur:  # the choice done: its records in ascending order
+            for x in range(n_met):
+                e = met[x]
+                rank = 0
+                for y in range(n_met):
+                    if met[y] < e:
+                        rank += 1
+                g_c[g + rank] = cur
+                g_r[g + rank] = e
+                g_m[g + rank] = tm[x]
+                g_p[g + rank] = tp[x]
+                slot[e] = -1
+            g += n_met
+            n_met = 0
+            if p == n:
+                break
+            cur = c[i]
+        e = r[i]
+        x = slot[e]
+        if x < 0:
+            x = slot[e] = n_met
+            met[x] = e
+            tm[x] = 0.0
+            tp[x] = p
+            n_met += 1
+        tm[x] += m[i]
+    return True, g_c[:g].copy(), g_r[:g].copy(), g_m[:g].copy(), g_p[:g].copy()
