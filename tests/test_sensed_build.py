@@ -183,3 +183,60 @@ def test_random_cases_merged_equal_the_numpy_lines(seed: int) -> None:
         assert np.array_equal(x, y)
     assert a.states == b.states
     assert list(fast.moves) == list(plain.moves)
+
+
+def test_end_sums_as_sorted_by_hand() -> None:
+    """Rows ending in a record, from three lists each in the loops' order: merged as a
+    stable sort of their keys would, grouped by (choice, record) in ascending order,
+    each group's mass summed in that order with Python floats, its first row's place;
+    a list out of order: refused (the caller sorts)."""
+    rng = np.random.default_rng(7)
+    lists = []
+    for width in (2, 3, 4):  # (c, o), (c, o, b), (c, o, b, s) drawn, the rest -1
+        keys = sorted({tuple(rng.integers(0, 6, width).tolist()) for _ in range(300)})
+        lists.append([k + (-1,) * (4 - width) + (int(rng.integers(0, 4)),
+                                                 float(rng.random()) * 10.0 ** -int(
+                                                     rng.integers(0, 9)))
+                      for k in keys])
+    rows_ = [r for lst in lists for r in lst]
+    cols = [np.array([r[j] for r in rows_], np.int64) for j in range(5)]
+    mass = np.array([r[5] for r in rows_])
+    starts = np.cumsum([0] + [len(x) for x in lists]).astype(np.int64)
+    ok, g_c, g_r, g_m, g_p = gk.end_sums(*cols, mass, starts)
+    assert ok
+    merged = sorted(range(len(rows_)), key=lambda i: rows_[i][:4])  # stable
+    want: dict[tuple[int, int], list] = {}
+    for p, i in enumerate(merged):
+        k = (rows_[i][0], rows_[i][4])
+        if k not in want:
+            want[k] = [0.0, p]
+        want[k][0] += rows_[i][5]
+    keys = sorted(want)
+    assert list(zip(g_c.tolist(), g_r.tolist(), strict=True)) == keys
+    assert g_m.tolist() == [want[k][0] for k in keys]
+    assert g_p.tolist() == [want[k][1] for k in keys]
+    backwards = [x.copy() for x in cols]
+    backwards[0][: starts[1]] = backwards[0][: starts[1]][::-1]
+    assert not gk.end_sums(*backwards, mass, starts)[0]
+
+
+def test_decided_alone_by_hand() -> None:
+    """The decided rows' observations that no undecided group has, in order, each with
+    its one record or -1 where its rows disagree: against sets and dictionaries."""
+    rng = np.random.default_rng(8)
+    n = 2000
+    c = np.sort(rng.integers(0, 60, n))
+    w2, occ, new = rng.integers(0, 9, n), rng.integers(0, 2, n), rng.integers(0, 4, n)
+    end = rng.integers(0, 3, n)
+    undecided = sorted({(int(rng.integers(0, 60)), int(rng.integers(0, 9)),
+                         int(rng.integers(0, 2)), int(rng.integers(0, 4)))
+                        for _ in range(800)})
+    g = [np.array(x, np.int64) for x in zip(*undecided, strict=True)]
+    pick, one = gk.decided_alone(c, w2, occ, new, end, *g, np.int64(1), np.int64(2))
+    records: dict[tuple[int, ...], set[int]] = {}
+    for row in zip(c.tolist(), w2.tolist(), occ.tolist(), new.tolist(), end.tolist(),
+                   strict=True):
+        records.setdefault(row[:4], set()).add(row[4])
+    alone = sorted(k for k in records if k not in set(undecided))
+    assert [(int(c[i]), int(w2[i]), int(occ[i]), int(new[i])) for i in pick] == alone
+    assert one.tolist() == [min(records[k]) if len(records[k]) == 1 else -1 for k in alone]

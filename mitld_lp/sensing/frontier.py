@@ -569,7 +569,7 @@ class FrontierBuilder(StepRules):
         matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
                                indptr), shape=(n_choices, n))
         per_state = np.zeros(n + 1, np.int64)
-        np.add.at(per_state, owner + 1, 1)
+        per_state[1:] = np.bincount(owner, minlength=n)  # np.add.at's counts, unbuffered
         act = np.concatenate(acts)
         # the actions numbered as the choices first show them
         used = np.flatnonzero(act >= 0)
