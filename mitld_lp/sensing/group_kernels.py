@@ -379,24 +379,63 @@ def _sum_of(values, start, count, partials):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _sort_rows(vals, idx, m):  # pragma: no cover - compiled
+    """``idx[:m]`` and ``vals[:m]`` sorted together by ``(vals, idx)``: the rows of one
+    key come in their own order."""
+    if m > _SMALL:
+        for r in range(1, m):  # the rows in their order first (any order before)
+            if idx[r] < idx[r - 1]:
+                order = np.argsort(idx[:m])
+                v = vals[:m][order]
+                x = idx[:m][order]
+                vals[:m] = v
+                idx[:m] = x
+                break
+        order = np.argsort(vals[:m], kind="mergesort")  # stable: ties in row order
+        v = vals[:m][order]
+        x = idx[:m][order]
+        vals[:m] = v
+        idx[:m] = x
+        return
+    for r in range(1, m):
+        v = vals[r]
+        x = idx[r]
+        k = r - 1
+        while k >= 0 and (vals[k] > v or (vals[k] == v and idx[k] > x)):
+            vals[k + 1] = vals[k]
+            idx[k + 1] = idx[k]
+            k -= 1
+        vals[k + 1] = v
+        idx[k + 1] = x
+
+
+@numba.njit(cache=True, nogil=True)
 def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
                      ):  # pragma: no cover - compiled
     """A level's undecided rows (``perm``: the rows in their observation groups' order,
     :func:`by_observation`; ``obs`` each row's group of ``n_obs``) made into the new
-    states' hypotheses in one pass: the rows grouped by ``(observation, rank[tid] * nq
-    + q)`` (:func:`mitld_lp.sensing.rows.groups`' numbering: the hypotheses in
-    InfoState order within each observation), each hypothesis's mass summed in the
-    rows' order (``np.bincount``), each observation's total correctly rounded
-    (:func:`math.fsum`, as :func:`mitld_lp.sensing.rows.fsum_by`), the weights, and per
-    observation its number of hypotheses, the hash of its set (the sum of
-    :func:`mitld_lp.sensing.rows.mix64` of the codes ``tid * nq + q``, wrapping) and its
-    first row's place ``s_seq``.  Returns ``(hfirst, hobs, hcode, hmass, weight,
-    total, count, hash, first)``."""
+    states' hypotheses in one pass over each observation's rows: grouped by
+    ``rank[tid] * nq + q`` (:func:`mitld_lp.sensing.rows.groups`' numbering of
+    ``(observation, key)``: the hypotheses in InfoState order within each observation),
+    each hypothesis's mass summed in the rows' order (as ``np.bincount``), each
+    observation's total correctly rounded (as :func:`mitld_lp.sensing.rows.fsum_by`),
+    the weights, and per observation its number of hypotheses, the hash of its set (the
+    sum of :func:`mitld_lp.sensing.rows.mix64` of the codes ``tid * nq + q``, wrapping)
+    and its first row's place ``s_seq``.  Returns ``(hfirst, hobs, hcode, hmass,
+    weight, total, count, hash, first)``."""
     n = len(perm)
-    inverse = np.empty(n, np.int64)
     hfirst = np.empty(n, np.int64)
+    hobs = np.empty(n, np.int64)
+    hcode = np.empty(n, np.int64)
+    hmass = np.empty(n)
+    weight = np.empty(n)
+    total = np.empty(n_obs)
+    count = np.zeros(n_obs, np.int64)
+    hash_ = np.zeros(n_obs, np.uint64)
+    first = np.full(n_obs, _MAX, np.int64)
     vals = np.empty(64, np.int64)
     idx = np.empty(64, np.int64)
+    partials = np.empty(64)
     g = 0
     i = 0
     last = -1
@@ -412,49 +451,43 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         if len(vals) < m:
             vals = np.empty(2 * m, np.int64)
             idx = np.empty(2 * m, np.int64)
+        least = _MAX
         for r in range(m):
             x = perm[i + r]
             idx[r] = x
             vals[r] = rank[tid[x]] * nq + q[x]
-        _sort(vals, idx, m)
-        g = _number(vals, idx, m, np.int64(g), inverse, hfirst)
-        i = j
-    hmass = np.zeros(g)
-    for r in range(n):  # in the rows' order, as np.bincount sums
-        hmass[inverse[r]] += mass[r]
-    hobs = np.empty(g, np.int64)
-    hcode = np.empty(g, np.int64)
-    count = np.zeros(n_obs, np.int64)
-    hash_ = np.zeros(n_obs, np.uint64)
-    for h in range(g):
-        x = hfirst[h]
-        b = obs[x]
-        hobs[h] = b
-        code = tid[x] * nq + q[x]
-        hcode[h] = code
-        count[b] += 1
-        z = np.uint64(code) + np.uint64(0x9E3779B97F4A7C15)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        hash_[b] += z ^ (z >> np.uint64(31))
-    total = np.empty(n_obs)
-    weight = np.empty(g)
-    partials = np.empty(64)
-    h = 0
-    for b in range(n_obs):  # the hypotheses come observation by observation
-        k = count[b]
-        if len(partials) < k + 1:
-            partials = np.empty(2 * k + 2)
-        t = _sum_of(hmass, h, k, partials)
-        total[b] = t
-        for e in range(h, h + k):
+            if s_seq[x] < least:
+                least = s_seq[x]
+        first[o] = least
+        _sort_rows(vals, idx, m)
+        g0 = g
+        h = 0
+        for r in range(m):
+            x = idx[r]
+            if r == 0 or vals[r] != vals[r - 1]:
+                code = tid[x] * nq + q[x]
+                hfirst[g] = x
+                hobs[g] = o
+                hcode[g] = code
+                hmass[g] = 0.0 + mass[x]  # as np.bincount: from 0.0, in the rows' order
+                z = np.uint64(code) + np.uint64(0x9E3779B97F4A7C15)
+                z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+                z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+                hash_[o] += z ^ (z >> np.uint64(31))
+                g += 1
+                h += 1
+            else:
+                hmass[g - 1] += mass[x]
+        count[o] = h
+        if len(partials) < h + 1:
+            partials = np.empty(2 * h + 2)
+        t = _sum_of(hmass, g0, h, partials)
+        total[o] = t
+        for e in range(g0, g):
             weight[e] = hmass[e] / t
-        h += k
-    first = np.full(n_obs, _MAX, np.int64)
-    for r in range(n):
-        if s_seq[r] < first[obs[r]]:
-            first[obs[r]] = s_seq[r]
-    return hfirst[:g].copy(), hobs, hcode, hmass, weight, total, count, hash_, first
+        i = j
+    return (hfirst[:g].copy(), hobs[:g].copy(), hcode[:g].copy(), hmass[:g].copy(),
+            weight[:g].copy(), total, count, hash_, first)
 
 
 @numba.njit(cache=True, nogil=True)
