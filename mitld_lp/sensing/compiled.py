@@ -10,7 +10,12 @@ the branches of the hypotheses of every state with an outcome row, the successor
 every outcome row with a branch not cut; the automaton's steps and where hypotheses
 end are made as the kernel finds them missing (all missing steps at once, then all
 missing ends, as the NumPy lines' two lookups), the kernel run again after each.
-Where a table is too large to keep dense the NumPy lines run instead."""
+Where a table is too large to keep dense the NumPy lines run instead.
+
+The level's other compiled passes are driven from here too (:func:`observations`,
+:func:`grouped_hypotheses`, :func:`decided_alone`, :func:`end_sums`: the kernels of
+:mod:`mitld_lp.sensing.group_kernels`), each giving what the NumPy lines of
+:mod:`mitld_lp.sensing.frontier` give, to the bit, or None where those must run."""
 
 from __future__ import annotations
 
