@@ -46,26 +46,38 @@ def _runs(c):  # pragma: no cover - compiled
 _SMALL = 24  # up to this many rows sorted by insertion, in place (no allocation)
 
 
-@numba.njit(cache=True, nogil=True)
-def _sort(vals, idx, m):  # pragma: no cover - compiled
-    """``idx[:m]`` and ``vals[:m]`` sorted together by ``vals``."""
-    if m > _SMALL:
-        order = np.argsort(vals[:m])
-        v = vals[:m][order]
-        x = idx[:m][order]
-        vals[:m] = v
-        idx[:m] = x
-        return
+@numba.njit(cache=True, nogil=True, inline="always")
+def _reorder(vals, idx, m, order):  # pragma: no cover - compiled
+    """``vals[:m]`` and ``idx[:m]`` taken in ``order``."""
+    v = vals[:m][order]
+    x = idx[:m][order]
+    vals[:m] = v
+    idx[:m] = x
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _insertion(vals, idx, m, by_row):  # pragma: no cover - compiled
+    """``idx[:m]`` and ``vals[:m]`` sorted together by insertion, by ``vals`` (and
+    ``idx`` on ties where ``by_row``)."""
     for r in range(1, m):
         v = vals[r]
         x = idx[r]
         k = r - 1
-        while k >= 0 and vals[k] > v:
+        while k >= 0 and (vals[k] > v or (by_row and vals[k] == v and idx[k] > x)):
             vals[k + 1] = vals[k]
             idx[k + 1] = idx[k]
             k -= 1
         vals[k + 1] = v
         idx[k + 1] = x
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort(vals, idx, m):  # pragma: no cover - compiled
+    """``idx[:m]`` and ``vals[:m]`` sorted together by ``vals``."""
+    if m > _SMALL:
+        _reorder(vals, idx, m, np.argsort(vals[:m]))
+    else:
+        _insertion(vals, idx, m, False)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -382,31 +394,14 @@ def _sum_of(values, start, count, partials):  # pragma: no cover - compiled
 def _sort_rows(vals, idx, m):  # pragma: no cover - compiled
     """``idx[:m]`` and ``vals[:m]`` sorted together by ``(vals, idx)``: the rows of one
     key come in their own order."""
-    if m > _SMALL:
-        for r in range(1, m):  # the rows in their order first (any order before)
-            if idx[r] < idx[r - 1]:
-                order = np.argsort(idx[:m])
-                v = vals[:m][order]
-                x = idx[:m][order]
-                vals[:m] = v
-                idx[:m] = x
-                break
-        order = np.argsort(vals[:m], kind="mergesort")  # stable: ties in row order
-        v = vals[:m][order]
-        x = idx[:m][order]
-        vals[:m] = v
-        idx[:m] = x
+    if m <= _SMALL:
+        _insertion(vals, idx, m, True)
         return
-    for r in range(1, m):
-        v = vals[r]
-        x = idx[r]
-        k = r - 1
-        while k >= 0 and (vals[k] > v or (vals[k] == v and idx[k] > x)):
-            vals[k + 1] = vals[k]
-            idx[k + 1] = idx[k]
-            k -= 1
-        vals[k + 1] = v
-        idx[k + 1] = x
+    for r in range(1, m):  # the rows in their order first (any order before)
+        if idx[r] < idx[r - 1]:
+            _reorder(vals, idx, m, np.argsort(idx[:m]))
+            break
+    _reorder(vals, idx, m, np.argsort(vals[:m], kind="mergesort"))  # ties in row order
 
 
 @numba.njit(cache=True, nogil=True)
@@ -433,8 +428,8 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
     count = np.zeros(n_obs, np.int64)
     hash_ = np.zeros(n_obs, np.uint64)
     first = np.full(n_obs, _MAX, np.int64)
-    vals = np.empty(64, np.int64)
-    idx = np.empty(64, np.int64)
+    vals = np.empty(n, np.int64)  # each observation's keys, sorted with their rows
+    idx = np.empty(n, np.int64)
     partials = np.empty(64)
     g = 0
     i = 0
@@ -448,9 +443,6 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         while j < n and obs[perm[j]] == o:
             j += 1
         m = j - i
-        if len(vals) < m:
-            vals = np.empty(2 * m, np.int64)
-            idx = np.empty(2 * m, np.int64)
         least = _MAX
         for r in range(m):
             x = perm[i + r]
@@ -490,6 +482,15 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
             weight[:g].copy(), total, count, hash_, first)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _run_end(c, i):  # pragma: no cover - compiled
+    """The end of the run of rows from ``i`` with ``c[i]``'s value."""
+    j = i + 1
+    while j < len(c) and c[j] == c[i]:
+        j += 1
+    return j
+
+
 @numba.njit(cache=True, nogil=True)
 def decided_alone(c, w2, occ, new, end, gc, gw, go, gn, nu, ns):  # pragma: no cover
     """The observations of a level's decided rows (``c, w2, occ, new``, ``c``
@@ -502,27 +503,19 @@ def decided_alone(c, w2, occ, new, end, gc, gw, go, gn, nu, ns):  # pragma: no c
     for i in range(1, n):
         if c[i] < c[i - 1]:
             return None
-    word = np.empty(n, np.int64)
-    for i in range(n):
-        word[i] = ((w2[i] << nu) | occ[i]) << ns | new[i]
     out = np.empty(n, np.int64)  # a row of each observation kept
     rec = np.empty(n, np.int64)
     k = 0
-    vals = np.empty(64, np.int64)
-    idx = np.empty(64, np.int64)
+    vals = np.empty(n, np.int64)  # each choice's words, sorted with their rows
+    idx = np.empty(n, np.int64)
     u = 0  # the undecided groups met so far
     m_u = len(gc)
     i = 0
     while i < n:
-        j = i + 1
-        while j < n and c[j] == c[i]:
-            j += 1
+        j = _run_end(c, i)
         m = j - i
-        if len(vals) < m:
-            vals = np.empty(2 * m, np.int64)
-            idx = np.empty(2 * m, np.int64)
         for r in range(m):
-            vals[r] = word[i + r]
+            vals[r] = ((w2[i + r] << nu) | occ[i + r]) << ns | new[i + r]
             idx[r] = i + r
         _sort(vals, idx, m)
         while u < m_u and gc[u] < c[i]:
