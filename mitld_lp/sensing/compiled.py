@@ -10,7 +10,12 @@ the branches of the hypotheses of every state with an outcome row, the successor
 every outcome row with a branch not cut; the automaton's steps and where hypotheses
 end are made as the kernel finds them missing (all missing steps at once, then all
 missing ends, as the NumPy lines' two lookups), the kernel run again after each.
-Where a table is too large to keep dense the NumPy lines run instead."""
+Where a table is too large to keep dense the NumPy lines run instead.
+
+The level's other compiled passes are driven from here too (:func:`observations`,
+:func:`grouped_hypotheses`, :func:`decided_alone`, :func:`end_sums`: the kernels of
+:mod:`mitld_lp.sensing.group_kernels`), each giving what the NumPy lines of
+:mod:`mitld_lp.sensing.frontier` give, to the bit, or None where those must run."""
 
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.sensing.rows import INT, compiled_on, spread
+from mitld_lp.sensing.rows import INT, compiled_on, fsum_by, groups, mix64, scatter, spread
 
 __all__ = ["hypothesis_rows"]
 
@@ -73,3 +78,85 @@ def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
             return more, ended, (*u_i[:6], u_m, u_i[6])
         (fb.step_table if of_step else fb.end_table)(ma, mb)
     return None
+
+
+def observations(fb: Any, c: np.ndarray, w2: np.ndarray, occ: np.ndarray,
+                 new: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The undecided rows grouped by observation ``(c, w2, occ, new)`` by the kernels
+    (:func:`~mitld_lp.sensing.group_kernels.by_observation`: each row's group, a row of
+    each, the rows in the groups' order), the observation made one word from its parts'
+    widths where they fit; None where the rows must be grouped otherwise."""
+    from mitld_lp.sensing import group_kernels as gk
+
+    if _fits(fb):
+        return gk.by_observation_bits(c, w2, occ, new, fb.nu, len(fb.sensed))
+    return gk.by_observation(compiled_on(), c, w2, occ, new)
+
+
+def _fits(fb: Any) -> bool:
+    """Whether an observation of ``fb``'s build fits one word: world, unsensed events and
+    new reports (:func:`~mitld_lp.sensing.group_kernels.by_observation_bits`)."""
+    return len(fb.worlds) < 1 << (62 - fb.nu - len(fb.sensed))
+
+
+def decided_alone(fb: Any, ended: tuple[np.ndarray, ...], grouped: tuple[np.ndarray, ...]
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """:meth:`FrontierBuilder.record_moves`'s observations with nothing undecided left
+    with them, by one kernel pass (:func:`~mitld_lp.sensing.group_kernels.decided_alone`):
+    a row of each in ``ended``, and its record where all its rows ended in one (-1
+    where they disagree); None where the NumPy lines must find them."""
+    if not compiled_on() or not _fits(fb):
+        return None
+    from mitld_lp.sensing import group_kernels as gk
+
+    cols = tuple(np.ascontiguousarray(x, dtype=INT) for x in (*ended, *grouped))
+    return gk.decided_alone(*cols, np.int64(fb.nu), np.int64(len(fb.sensed)))
+
+
+def grouped_hypotheses(fb: Any, found: tuple[np.ndarray, ...] | None, obs: np.ndarray,
+                       n_obs: int, tid: np.ndarray, q: np.ndarray, mass: np.ndarray,
+                       s_seq: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A level's undecided rows (``obs`` each one's observation of ``n_obs``; ``found``:
+    :func:`observations`' answer, None where the rows were grouped otherwise) made into
+    the new states' hypotheses: a row of each hypothesis (``hfirst``), its observation,
+    code ``tid * nq + q`` and mass (summed in the rows' order), its weight, each
+    observation's total (correctly rounded: :func:`~mitld_lp.sensing.rows.fsum_by`),
+    number of hypotheses, hash of its set and first row's place ``s_seq``: by one
+    kernel pass (:func:`~mitld_lp.sensing.group_kernels.level_hypotheses`) where
+    ``found`` is given, else by NumPy lines (the same arrays, to the bit)."""
+    if found is not None:
+        from mitld_lp.sensing import group_kernels as gk
+
+        fb.order_key(tid[:0], q[:0])  # the times' ranks made for the new ones
+        return gk.level_hypotheses(found[2], obs, n_obs, tid, q, mass, s_seq,
+                                   fb.tid_rank, fb.nq)
+    hid, hfirst = groups(obs, fb.order_key(tid, q))
+    hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
+    hobs, hcode = obs[hfirst], tid[hfirst] * fb.nq + q[hfirst]
+    total = fsum_by(hobs, hmass, n_obs)
+    g_count = np.bincount(hobs, minlength=n_obs)
+    g_hash = np.zeros(n_obs, np.uint64)
+    scatter("add", g_hash, hobs, mix64(hcode))
+    g_first = np.full(n_obs, np.iinfo(INT).max, INT)  # each group's first row
+    scatter("min", g_first, obs, s_seq)
+    return (hfirst, hobs, hcode, hmass, hmass / total[hobs], total, g_count, g_hash,
+            g_first)
+
+
+def end_sums(ends: list[np.ndarray], lists: np.ndarray
+             ) -> tuple[np.ndarray, ...] | None:
+    """:meth:`FrontierBuilder.transitions`' records of each choice by one kernel pass
+    (:func:`~mitld_lp.sensing.group_kernels.end_sums`): the rows that end in a record
+    (``ends``: choice, outcome, branch, successor, record, mass; concatenated from
+    lists bounded by ``lists``, each in the loops' order) merged into the loops' order
+    and grouped by (choice, record): each group's choice, record, mass and first row's
+    place in that order; None where the NumPy lines must sort them."""
+    if not compiled_on():
+        return None
+    from mitld_lp.sensing import group_kernels as gk
+
+    cols = tuple(np.ascontiguousarray(x, dtype=INT) for x in ends[:5])
+    ok, g_c, g_r, mass, place = gk.end_sums(*cols, np.ascontiguousarray(ends[5],
+                                                                          dtype=np.float64),
+                                            np.asarray(lists, INT))
+    return (g_c, g_r, mass, place) if ok else None

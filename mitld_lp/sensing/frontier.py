@@ -34,6 +34,7 @@ from mitld_lp.automata.dta import DTA
 from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
+from mitld_lp.sensing import compiled
 from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
@@ -51,7 +52,6 @@ from mitld_lp.sensing.rows import (
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
-    fsum_by,
     groups,
     load_kernels,
     mix64,
@@ -291,26 +291,19 @@ class FrontierBuilder(StepRules):
         c, occ, pu, o_seq = (x[keep] for x in (c, occ, pu, o_seq))
         rows = None
         if compiled_on():
-            from mitld_lp.sensing import group_kernels as gk
-            from mitld_lp.sensing.compiled import hypothesis_rows
-
-            rows = hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
+            rows = compiled.hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         if rows is None:
             rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq) = rows
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        found = gk.by_observation(compiled_on(), c, w2, occ, new) if compiled_on() else None
+        found = compiled.observations(self, c, w2, occ, new) if compiled_on() else None
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        hid, hfirst = (groups(obs, self.order_key(tid2, q2)) if found is None else
-                       gk.by_hypothesis(found[2], obs, self.order_key(tid2, q2)))
-        hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
-        hobs, hcode = obs[hfirst], tid2[hfirst] * self.nq + q2[hfirst]
-        total = fsum_by(hobs, hmass, len(first))
-        weight = hmass / total[hobs]
+        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
+            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
         g_pend = pending[gst] & ~occ[first]
@@ -319,23 +312,16 @@ class FrontierBuilder(StepRules):
         scatter("max", most, hobs, need)
         pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
-        g_count = np.bincount(hobs, minlength=len(first))
-        g_hash = np.zeros(len(first), np.uint64)
-        if found is not None:  # the kernels run: the mix and the sum in one pass
-            gk.hash_add(g_hash, hobs, hcode)
-        else:
-            scatter("add", g_hash, hobs, mix64(hcode))
-        g_first = np.full(len(first), np.iinfo(_I).max, _I)  # each group's first row
-        scatter("min", g_first, obs, s_seq)
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
         target, reps = self.keys.match(group)  # -1 - k: the k-th new key
         g_start = np.cumsum(g_count) - g_count  # each group's first hypothesis
-        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight,
-                   [np.concatenate(x) for x in zip(*ends, strict=True)])
+        flat = [np.concatenate(x) for x in zip(*ends, strict=True)]
+        self.store(c[first], g_first, target, reps, group, g_start, hcode, weight, flat)
         self.verify(target, g_count, hobs, hcode, weight)
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
                           ended)
-        return (a + c_state, c_act, *self.transitions(loop, ends, c[first], g_first,
+        lists = np.cumsum([0] + [len(x[0]) for x in ends])
+        return (a + c_state, c_act, *self.transitions(loop, flat, lists, c[first], g_first,
                                                       target, total))
 
     def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
@@ -389,23 +375,28 @@ class FrontierBuilder(StepRules):
             x[u] for x in (c, occ, w2, new, tid2, q2, mass, s_seq))
         return ends, ended, (c, occ, w2, new, tid2, q2, mass, s_seq)
 
-    def transitions(self, loop: tuple[np.ndarray, ...], ends: list[tuple[np.ndarray, ...]],
-                    c: np.ndarray, g_first: np.ndarray, target: np.ndarray,
-                    total: np.ndarray) -> tuple[np.ndarray, ...]:
+    def transitions(self, loop: tuple[np.ndarray, ...], ends: list[np.ndarray],
+                    lists: np.ndarray, c: np.ndarray, g_first: np.ndarray,
+                    target: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, ...]:
         """The expansion's transitions (choice, column, probability) in each choice's
         order one state at a time would make them, with the same sums: the absorbing
         records as the loops meet them (their mass summed in the loops' order), then
-        the information states as their observations come."""
-        c_end, o_end, b_end, s_end, r_end, m_end = (np.concatenate(x) for x in
-                                                    zip(*ends, strict=True))
-        order = np.lexsort((s_end, b_end, o_end, c_end))
-        c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
-        ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
-        mass = np.bincount(ids, weights=m_end)
-        place = np.full(len(mass), np.iinfo(_I).max, _I)
-        scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
-        col = np.asarray(self.record_state, _I)[r_end[place]]
-        cc = np.concatenate([loop[0], c_end[place], c])
+        the information states as their observations come.  ``ends``: the rows that
+        end in a record, concatenated from lists bounded by ``lists``."""
+        found = compiled.end_sums(ends, lists)
+        if found is not None:  # by the kernels: the lists merged, one pass
+            g_c, g_r, mass, place = found
+        else:
+            c_end, o_end, b_end, s_end, r_end, m_end = ends
+            order = np.lexsort((s_end, b_end, o_end, c_end))
+            c_end, o_end, r_end, m_end = (x[order] for x in (c_end, o_end, r_end, m_end))
+            ids, _ = ordered_groups(c_end, r_end)  # by choice: the lexsort's first key
+            mass = np.bincount(ids, weights=m_end)
+            place = np.full(len(mass), np.iinfo(_I).max, _I)
+            scatter("min", place, ids, np.arange(len(ids), dtype=_I))  # first met, sorted
+            g_c, g_r = c_end[place], r_end[place]
+        col = np.asarray(self.record_state, _I)[g_r]
+        cc = np.concatenate([loop[0], g_c, c])
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
                                 np.ones(len(c), _I)])
         pos = np.concatenate([np.zeros(len(loop[0]), _I), place, g_first])
@@ -492,17 +483,23 @@ class FrontierBuilder(StepRules):
         row): each observation's successor state, or, when nothing undecided is left
         with it, the verdict: the one record its hypotheses ended in, or
         :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        _, once = ordered_groups(*ended)  # each (observation, record) once
-        c, w2, occ, new, end = (x[once] for x in ended)
-        obs, first = ordered_groups(c, w2, occ, new)
-        kinds = np.bincount(obs)
-        n = len(grouped[0])
-        both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
-                            zip(grouped, (c, w2, occ, new), strict=True)))
-        alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
-        pick = first[alone]
         trunc = self.record(Absorbing.TRUNCATED)
-        code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
+        found = compiled.decided_alone(self, ended, grouped)
+        if found is not None:  # by the kernels: one pass
+            pick, one = found
+            c, w2, occ, new, _ = ended
+            code = -1 - np.where(one >= 0, one, trunc)
+        else:
+            _, once = ordered_groups(*ended)  # each (observation, record) once
+            c, w2, occ, new, end = (x[once] for x in ended)
+            obs, first = ordered_groups(c, w2, occ, new)
+            kinds = np.bincount(obs)
+            n = len(grouped[0])
+            both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
+                                zip(grouped, (c, w2, occ, new), strict=True)))
+            alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
+            pick = first[alone]
+            code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
         gc, gw, go, gn = grouped
         self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
                                np.concatenate([gw, w2[pick]]),
@@ -572,7 +569,7 @@ class FrontierBuilder(StepRules):
         matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
                                indptr), shape=(n_choices, n))
         per_state = np.zeros(n + 1, np.int64)
-        np.add.at(per_state, owner + 1, 1)
+        per_state[1:] = np.bincount(owner, minlength=n)  # np.add.at's counts, unbuffered
         act = np.concatenate(acts)
         # the actions numbered as the choices first show them
         used = np.flatnonzero(act >= 0)
