@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 COMPILED_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level_kernels",
                     "mitld_lp.solvers.compiled_graph", "mitld_lp.solvers.compiled_elimination",
-                    "mitld_lp.sensing.kernels", "mitld_lp.sensing.group_kernels")
+                    "mitld_lp.sensing.kernels", "mitld_lp.sensing.group_kernels",
+                    "mitld_lp.sensing.fsum_kernels")
 
 
 def _env() -> dict[str, str]:

@@ -13,11 +13,10 @@ caller reads only the grouped columns from it), so the product is the same to th
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
+from mitld_lp.sensing.fsum_kernels import sum_of
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
@@ -315,82 +314,6 @@ def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
 
 
 @numba.njit(cache=True, nogil=True)
-def _fsum(values, start, count, partials):  # pragma: no cover - compiled
-    """:func:`math.fsum` of ``values[start:start + count]`` (finite values), CPython's
-    algorithm step for step: Shewchuk's exact partials (``partials``: room for them),
-    then their sum rounded once, half-way cases to even."""
-    n = 0
-    for k in range(start, start + count):
-        x = values[k]
-        i = 0
-        for j in range(n):
-            y = partials[j]
-            if abs(x) < abs(y):
-                x, y = y, x
-            hi = x + y
-            lo = y - (hi - x)
-            if lo != 0.0:
-                partials[i] = lo
-                i += 1
-            x = hi
-        partials[i] = x
-        n = i + 1
-    hi = 0.0
-    if n > 0:
-        n -= 1
-        hi = partials[n]
-        lo = 0.0
-        while n > 0:
-            x = hi
-            n -= 1
-            y = partials[n]
-            hi = x + y
-            yr = hi - x
-            lo = y - yr
-            if lo != 0.0:
-                break
-        if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0)
-                      or (lo > 0.0 and partials[n - 1] > 0.0)):
-            y = lo * 2.0
-            x = hi + y
-            yr = x - hi
-            if y == yr:
-                hi = x
-    return hi
-
-
-@numba.njit(cache=True, nogil=True)
-def _sum_of(values, start, count, partials):  # pragma: no cover - compiled
-    """:func:`mitld_lp.sensing.rows.fsum_by`'s sum of ``values[start:start + count]``
-    (positive values), decided as it decides: the double-double sum rounded once,
-    or, where that may not be the correctly rounded sum, :func:`_fsum`."""
-    high = values[start]
-    low = 0.0
-    size = 0.0
-    for k in range(start + 1, start + count):
-        x = values[k]
-        t = high + x
-        back = t - high
-        error = (high - (t - back)) + (x - back)
-        high = t
-        low += error
-        size += abs(error)
-    out = high + low
-    back = out - high
-    rest = (high - (out - back)) + (low - back)
-    m, e = math.frexp(out)
-    if out == 0.0 or abs(out) < 2.2250738585072014e-308:
-        half = 5e-324 / 2
-    else:
-        half = math.ldexp(1.0, e - 53) / 2
-    if rest < 0.0 and m == 0.5:
-        half /= 2
-    if count > 2 and abs(rest) + 4.0 * count * 2.0**-52 * size >= half:
-        return _fsum(values, start, count, partials)
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
 def _sort_rows(vals, idx, m):  # pragma: no cover - compiled
     """``idx[:m]`` and ``vals[:m]`` sorted together by ``(vals, idx)``: the rows of one
     key come in their own order."""
@@ -473,7 +396,7 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         count[o] = h
         if len(partials) < h + 1:
             partials = np.empty(2 * h + 2)
-        t = _sum_of(hmass, g0, h, partials)
+        t = sum_of(hmass, g0, h, partials)
         total[o] = t
         for e in range(g0, g):
             weight[e] = hmass[e] / t
