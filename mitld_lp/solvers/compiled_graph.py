@@ -59,13 +59,13 @@ def _sort_run(a, lo, hi):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def state_graph(indptr, indices, row_groups, n):  # pragma: no cover - compiled
     """``(ptr, succ)``: the successors of each of the ``n`` states (the columns of its
-    choices' rows ``row_groups[s]:row_groups[s+1]``), sorted, each once; in the types of
-    ``indptr`` and ``indices`` (a product's int32 where it fits: the graph of
-    :func:`~mitld_lp.solvers.graph.graph_view`, so that :func:`components_and_levels`
-    is compiled for one signature on the analysis's and the certificate's graphs)."""
-    ptr = np.zeros(n + 1, dtype=indptr.dtype)  # the matrix's index types: 4 bytes an
-    succ = np.empty(indices.shape[0], dtype=indices.dtype)  # entry where they fit, and
-    mark = np.full(n, -1, dtype=np.int64)  # one signature with levels()'s graph
+    choices' rows ``row_groups[s]:row_groups[s+1]``), sorted, each once; in int64
+    whatever the matrix's index types, so that :func:`components_and_levels` is compiled
+    for one signature (an int32 state graph beside the int64 graphs of other callers
+    compiled it twice in the whole test suite)."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    succ = np.empty(indices.shape[0], dtype=np.int64)
+    mark = np.full(n, -1, dtype=np.int64)
     pos = 0
     for s in range(n):
         start = pos
@@ -333,10 +333,10 @@ def end_components_among(indptr, indices, positive, row_groups,
     alive = np.ones(k, dtype=np.bool_)
     allowed = np.ones(cptr[k], dtype=np.bool_)
     still = np.zeros(k, dtype=np.bool_)
-    # the candidates' graph in the matrix's index types (a local id is below a column
-    # id, a position below an entry's): components_and_levels compiled once for them
-    ptr = np.zeros(k + 1, dtype=indptr.dtype)
-    succ = np.empty(indptr[row_groups[n]], dtype=indices.dtype)
+    # the candidates' graph in int64, as state_graph's: components_and_levels compiled
+    # for one signature
+    ptr = np.zeros(k + 1, dtype=np.int64)
+    succ = np.empty(indptr[row_groups[n]], dtype=np.int64)
     mark = np.full(k, -1, dtype=np.int64)
     while True:
         pos = 0
