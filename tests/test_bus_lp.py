@@ -122,6 +122,22 @@ def test_the_budget_refuses_before_the_solves(monkeypatch: pytest.MonkeyPatch) -
     assert not calls
 
 
+def test_dense_port_rows_past_the_budget_are_refused_before_the_factor(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ports' dense rows are known before SuperLU runs: past the budget, nothing is
+    factored (a factorisation would fail the test)."""
+    import scipy.sparse.linalg as spla
+
+    block, keep = _case(0)
+
+    def no_factor(*args, **kwargs):
+        raise AssertionError("factored past the budget")
+
+    monkeypatch.setattr(spla, "splu", no_factor)
+    monkeypatch.setattr(spe, "FILL_FACTOR", 0.0)
+    assert spe.sparse_eliminate(block.inner, block.to_target, block.groups, keep) is None
+
+
 def test_bus_case_by_the_sparse_lu_keeps_its_bracket_around_storms_exact_value(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """The bundled bus case with every block an LP (no greedy certificate), every block

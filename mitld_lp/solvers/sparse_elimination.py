@@ -14,9 +14,10 @@ optimum plus :math:`r_S' x_0` is the block LP's.  Here ``A`` is factored once by
 (5,995 of them in cyclic components of more than 400 states, where the compiled
 walk's dense solves would cost more than the LP), 187 columns of ``M`` reached.
 
-The work is estimated before it is done: once the factor is made (its cost, one
-SuperLU factorisation, is the one step taken before its check), its fill and the ports'
-dense rows are checked against :data:`FILL_FACTOR` times the block's kept entries, and
+The work is estimated before it is done: the ports' dense rows are checked against
+:data:`FILL_FACTOR` times the block's kept entries before anything is factored; once the
+factor is made (its cost, one SuperLU factorisation, is the one step taken before its
+check: SuperLU tells no fill before it factors), its fill is checked against the same, and
 the port solves (two operations per entry of the factor and right-hand side) against
 :data:`WORK_PER_ENTRY` per kept entry; past either, the block's whole LP is solved as
 before.  :meth:`SparseElimination.
@@ -137,6 +138,12 @@ def sparse_eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray
     # fewer ports than columns reached: their rows of A^-1 as columns of A^-T, by a
     # factor of A^T; else the columns reached (and the rewards) through A's
     transposed = ports.size < used.size + 1
+    dense = ports.size * (used.size + 1)  # the ports' rows, held dense
+    if dense > FILL_FACTOR * kept:  # known before the factor: refused before it
+        logger.info("no sparse elimination of %d states: %d ports' dense rows of %d "
+                    "entries (budget %.3g entries)", s_states.size, ports.size,
+                    used.size + 1, FILL_FACTOR * kept)
+        return None
     try:
         # the symmetric pattern's minimum degree: on the bus grid's blocks 0.7x the fill
         # of COLAMD (SuperLU's default), and the solves are what the elimination costs
@@ -148,8 +155,7 @@ def sparse_eliminate(inner: sp.csr_array, reward: np.ndarray, groups: np.ndarray
     fill = lu.fill
     # the port solves by the side with fewer right-hand sides, x0 and the two lifts
     work = 2.0 * fill * (min(ports.size, used.size + 1) + 3)
-    dense = ports.size * (used.size + 1)  # the ports' rows, held dense
-    if max(fill, dense) > FILL_FACTOR * kept or work > WORK_PER_ENTRY * kept:
+    if fill > FILL_FACTOR * kept or work > WORK_PER_ENTRY * kept:
         logger.info("no sparse elimination of %d states: a factor of %d entries, %.3g "
                     "operations for %d ports (budgets %.3g entries, %.3g operations)",
                     s_states.size, fill, work, ports.size, FILL_FACTOR * kept,
