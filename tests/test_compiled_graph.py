@@ -41,13 +41,9 @@ def walks(monkeypatch):
 
 
 def random_graph(rng: np.random.Generator, n: int, m: int) -> sp.csr_array:
-    """A random graph in int32 index arrays, the type the package hands the kernels
-    (:func:`~mitld_lp.solvers.graph.graph_view`'s, and the state graph of an int32
-    product): one signature each, as ``test_kernel_sigs`` checks."""
     g = sp.csr_array((np.ones(m, dtype=bool), (rng.integers(0, n, m), rng.integers(0, n, m))),
                      shape=(n, n))
     g.sum_duplicates()
-    g.indptr, g.indices = g.indptr.astype(np.int32), g.indices.astype(np.int32)
     return g
 
 
