@@ -1,12 +1,14 @@
 r"""The support-graph routines every solver shares, below all of them.
 
-Edges of an MDP, backward reachability, maximal end components, the one strongly
-connected decomposition with its levels (:func:`levels`) and the block order the
-solvers walk (:class:`Blocks`).  All of them look only at which transitions have
+Edges of an MDP, the attractor, the one strongly connected decomposition with its
+levels (:func:`levels`) and the block order the solvers walk (:class:`Blocks`); the
+backward searches (:mod:`~mitld_lp.solvers.reach`) and the maximal end components
+(:mod:`~mitld_lp.solvers.end_components`) live in modules of their own below this one,
+their names importable from here.  All of them look only at which transitions have
 positive probability, so they are exact.  A large graph is walked by compiled kernels
 (:mod:`~mitld_lp.solvers.compiled_graph`, chosen by :mod:`~mitld_lp.solvers.walks`)
-with the same results.  This module imports no other solver module but those two and
-:mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
+with the same results.  This module imports no solver module but those, the level
+search, the rows and :mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
 :mod:`~mitld_lp.solvers.quotient` and :mod:`~mitld_lp.solvers.topological` all build
 on it.
 """
@@ -21,13 +23,19 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.mdp import MDP
+from mitld_lp.solvers.end_components import (
+    EndComponents,
+    compiled_end_components,
+    maximal_end_components,
+)
 from mitld_lp.solvers.level_search import PROBE_LEVELS, searched_levels, thin
+from mitld_lp.solvers.reach import Reversed, backward_reachable
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import unique
-from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
+from mitld_lp.util.traversal import SMALL, strong_components
 
 __all__ = [
     "Sense", "attractor",
@@ -88,193 +96,6 @@ def edges(mdp: MDP) -> Edges:
     choice = np.asarray(coo.row[keep], dtype=np.int64)
     succ = np.asarray(coo.col[keep], dtype=np.int64)
     return Edges(choice, mdp.choice_state()[choice], succ, np.asarray(coo.data[keep]))
-
-
-def backward_reachable(
-    n: int, source: np.ndarray, succ: np.ndarray, seeds: np.ndarray
-) -> np.ndarray:
-    """States with a path (along the edges ``source -> succ``) to a ``seeds`` state.
-
-    One breadth-first search on the reversed graph from a virtual node ``n`` that points
-    at every seed; the seeds themselves are included.  Many edges are walked compiled
-    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same set.
-    """
-    if not np.any(seeds):
-        return np.zeros(n, dtype=bool)
-    walks = compiled_walks(np.asarray(succ).size)
-    if walks is not None:  # the edges in int32 where they fit (one kernel signature)
-        index = np.int32 if max(n, np.asarray(succ).size) < 2**31 - 1 else np.int64
-        source, succ = np.asarray(source, dtype=index), np.asarray(succ, dtype=index)
-        return walks.reaching_edges(n, source, succ, np.array(seeds, dtype=bool))
-    return Reversed(n, source, succ).reaching(seeds)
-
-
-class Reversed:
-    """The edges ``source -> succ`` of a graph of ``n`` states reversed once, for
-    several backward searches (:meth:`reaching`) from different seeds: 4 bytes of index
-    an edge (8 past 2**31 edges and states); the weights SciPy's search is handed are
-    one value repeated (a view of stride 0: the search reads only the structure), and
-    the virtual node's row of seeds is written at the end of each search's view of the
-    same arrays.  The rows are sorted once by ``succ`` (a stable argsort, 8 bytes an
-    edge while it lives), not through a COO matrix and its float copy of the weights."""
-
-    def __init__(self, n: int, source: np.ndarray, succ: np.ndarray) -> None:
-        source, succ = np.asarray(source), np.asarray(succ)
-        m = succ.size
-        index = np.int32 if n + m < np.iinfo(np.int32).max else np.int64
-        self.n, self.nnz = n, m
-        self.indices = np.empty(m + n, dtype=index)
-        order = np.argsort(succ, kind="stable")
-        if source.dtype == index:  # no copy of the sources in the order
-            np.take(source, order, out=self.indices[:m], mode="clip")
-        else:
-            self.indices[:m] = source[order]
-        del order
-        self.indptr = np.zeros(n + 2, dtype=index)
-        np.cumsum(np.bincount(succ, minlength=n), out=self.indptr[1:n + 1])
-        self.weights = np.broadcast_to(np.float64(1.0), (m + n,))
-
-    def reaching(self, seeds: np.ndarray) -> np.ndarray:
-        """The states with a path to a ``seeds`` state (a mask), the seeds included."""
-        n = self.n
-        seed_idx = np.flatnonzero(seeds)
-        if seed_idx.size == 0:
-            return np.zeros(n, dtype=bool)
-        stop = self.nnz + seed_idx.size
-        self.indices[self.nnz:stop] = seed_idx
-        self.indptr[n + 1] = stop
-        graph = sp.csr_array((self.weights[:stop], self.indices[:stop], self.indptr),
-                             shape=(n + 1, n + 1), copy=False)
-        order = breadth_first_order(graph, n)
-        reached = np.zeros(n + 1, dtype=bool)
-        reached[np.asarray(order)] = True
-        return reached[:n]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class EndComponents:
-    """The maximal end components (MECs) of a sub-MDP.
-
-    Attributes:
-        mec_of: ``(n_states,)`` int64, the MEC of each state, ``-1`` if in none.
-        internal: ``(n_choices,)`` bool, the choices that belong to a MEC: their state is
-            in the MEC and their whole support lies in the same MEC.
-        n_mecs: the number of MECs (ids ``0 .. n_mecs - 1``).
-    """
-
-    mec_of: np.ndarray
-    internal: np.ndarray
-    n_mecs: int
-
-    def states_of(self, mec: int) -> np.ndarray:
-        """The states of MEC ``mec``."""
-        return np.flatnonzero(self.mec_of == mec)
-
-    def choices_of(self, mec: int, mdp: MDP) -> np.ndarray:
-        """The internal choices of MEC ``mec`` (those that stay in it with probability 1)."""
-        return np.flatnonzero(self.internal & (self.mec_of[mdp.choice_state()] == mec))
-
-
-def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
-    """The MECs of the sub-MDP induced by ``states_mask``.
-
-    An end component is a set ``C`` of states with, for each, a non-empty set of choices
-    whose support lies in ``C``, such that the graph of those choices is strongly
-    connected.  Algorithm (de Alfaro 1997; Baier & Katoen, Alg. 47): keep the choices
-    whose support lies in the current state set, drop the states left with no choice,
-    split into strongly connected components (SCCs) and drop every choice that can leave
-    its SCC; repeat until nothing changes.  What is left, grouped by SCC, are the MECs.
-    Each round is vectorised (one :func:`~mitld_lp.util.traversal.strong_components`);
-    on a large MDP the rounds run compiled
-    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same end components, numbered
-    alike.
-    """
-    states_mask = as_state_mask(mdp, states_mask, "states_mask")
-    n = mdp.n_states
-    walks = compiled_walks(mdp.matrix.nnz)
-    if walks is not None:
-        return compiled_end_components(walks, mdp, np.flatnonzero(states_mask))
-    cstate = mdp.choice_state()
-    e = _edge_ends(mdp)
-    alive = states_mask.copy()
-    allowed = alive[cstate]
-    while True:
-        allowed &= alive[cstate]
-        allowed[e.choice[~alive[e.succ]]] = False
-        still = alive & (np.bincount(cstate[allowed], minlength=n) > 0)
-        keep = allowed[e.choice]
-        graph = _support(n, e.source[keep], e.succ[keep])
-        _, scc = strong_components(graph)
-        cross = keep & (scc[e.source] != scc[e.succ])
-        if not cross.any() and np.array_equal(still, alive):
-            break
-        allowed[e.choice[cross]] = False
-        alive = still
-    return _numbered(alive, allowed, scc)
-
-
-def compiled_end_components(walks: Any, mdp: MDP, cand: np.ndarray) -> EndComponents:
-    """:func:`maximal_end_components` of the states ``cand`` (sorted ids) by the
-    compiled rounds (``walks``: the module of compiled walks), numbered as the NumPy
-    rounds number them: by their least state (the last round's components are closed,
-    so every search meets them in that order)."""
-    m = sp.csr_array(mdp.matrix)
-    row_groups = np.asarray(mdp.row_groups)
-    alive, allowed, label = walks.end_components_among(
-        m.indptr, m.indices, m.data > 0, row_groups, np.asarray(cand, dtype=np.int64))
-    mec_of = np.full(mdp.n_states, -1, dtype=np.int64)
-    internal = np.zeros(mdp.n_choices, dtype=bool)
-    inside = label[alive]
-    n_mecs = 0
-    if inside.size:
-        ids, first, which = np.unique(inside, return_index=True, return_inverse=True)
-        n_mecs = int(ids.size)
-        rank = np.empty(ids.size, dtype=np.int64)
-        rank[np.argsort(first)] = np.arange(ids.size)
-        mec_of[cand[alive]] = rank[which]
-        internal[gather_ranges(row_groups[cand], row_groups[cand + 1])] = allowed
-    return EndComponents(read_only(mec_of), read_only(internal), n_mecs)
-
-
-def _numbered(alive: np.ndarray, allowed: np.ndarray, scc: np.ndarray) -> EndComponents:
-    """The end components of the states ``alive`` (with their choices ``allowed``),
-    numbered in the order of their last round's component labels ``scc``."""
-    mec_of = np.full(alive.shape[0], -1, dtype=np.int64)
-    if alive.any():
-        _, ids = np.unique(scc[alive], return_inverse=True)
-        mec_of[alive] = ids
-    n_mecs = int(mec_of.max()) + 1 if alive.any() else 0
-    return EndComponents(read_only(mec_of), read_only(allowed), n_mecs)
-
-
-def _edge_ends(mdp: MDP) -> Edges:
-    """:func:`edges` without the probabilities, in the matrix's index type (4 bytes an
-    entry where it fits, not 8), the choices' rows in their order."""
-    m = sp.csr_array(mdp.matrix)
-    index = m.indices.dtype
-    choice = np.repeat(np.arange(m.shape[0], dtype=index), np.diff(m.indptr))
-    succ = m.indices
-    positive = m.data > 0
-    if not positive.all():
-        choice, succ = choice[positive], succ[positive]
-    source = np.repeat(np.arange(mdp.n_states, dtype=index), np.diff(mdp.row_groups))[choice]
-    return Edges(choice, source, succ, np.zeros(0))
-
-
-def _support(n: int, source: np.ndarray, succ: np.ndarray) -> sp.csr_matrix:
-    """The graph ``source -> succ`` (``source`` sorted) as the CSR matrix that SciPy's
-    ``csr_matrix((ones, (source, succ)))`` builds (each row's columns sorted, repeats
-    merged: the searches see the same order), from a byte an edge instead of the COO's
-    copies and a float; its weights one value repeated (the searches read only the
-    structure)."""
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(source, minlength=n), out=indptr[1:])
-    index = np.int32 if max(n, succ.size) < np.iinfo(np.int32).max else np.int64
-    graph = sp.csr_matrix((np.ones(succ.size, dtype=bool), succ.astype(index),
-                           indptr.astype(index)), shape=(n, n))
-    graph.sum_duplicates()  # sorts each row's columns, in place (a repeat: True or True)
-    graph.data = np.broadcast_to(np.float64(1.0), (graph.nnz,))
-    return graph
 
 
 def segmented_argmax(
