@@ -131,10 +131,13 @@ class _Walk:
             self.row_at = np.append(choice_starts, rows.size)[self.choice_at]
         row_state = np.repeat(np.arange(states.size), np.diff(self.row_at))
         self.entry_state = row_state[self.local]
-        self.entry_at = np.searchsorted(self.local, self.row_at)  # per state, first entry
-        # per row its first entry, in the columns' index type, for SciPy's compiled
-        # product (:func:`_need_of`); ``None`` where a row is empty or the types differ
-        row_entry = np.searchsorted(self.local, np.arange(rows.size + 1))
+        # per row its first entry: the rows' lengths counted (``local`` is sorted), not
+        # a binary search of every row in ``local``: the same pointers; per state, its
+        # first row's.  In the columns' index type below, for SciPy's compiled product
+        # (:func:`_need_of`); ``None`` where a row is empty or the types differ
+        row_entry = np.zeros(rows.size + 1, dtype=np.int64)
+        np.cumsum(np.bincount(self.local, minlength=rows.size), out=row_entry[1:])
+        self.entry_at = row_entry[self.row_at]
         fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
                 and self.vals.dtype == np.float64 and bool(np.all(np.diff(row_entry) > 0))
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
