@@ -9,19 +9,17 @@ without."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 import pytest
+import test_rare_solve as rare
 
 from mitld_lp.solvers import graph, reach
-from mitld_lp.solvers import walks as walks_module
 
-needs_storm = pytest.mark.skipif(importlib.util.find_spec("stormpy") is None,
-                                 reason="needs stormpy: pip install -e '.[prism]'")
+needs_storm = rare.needs_storm
+walks = rare.walks  # the fixture: ``walks(True)`` every graph walk compiled, else none
 
 
 def _argsorted(n: int, source: np.ndarray, succ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -38,15 +36,18 @@ def _argsorted(n: int, source: np.ndarray, succ: np.ndarray) -> tuple[np.ndarray
 
 
 def _closure(source: np.ndarray, succ: np.ndarray, seeds: np.ndarray) -> set[int]:
-    inside = set(np.flatnonzero(seeds).tolist())
-    grew = True
-    while grew:
-        grew = False
-        for a, b in zip(source.tolist(), succ.tolist(), strict=True):
-            if b in inside and a not in inside:
-                inside.add(a)
-                grew = True
-    return inside
+    """The states with a path to a seed: a search over Python dicts of predecessors."""
+    preds: dict[int, list[int]] = {}
+    for a, b in zip(source.tolist(), succ.tolist(), strict=True):
+        preds.setdefault(b, []).append(a)
+    todo = np.flatnonzero(seeds).tolist()
+    seen = set(todo)
+    while todo:
+        for a in preds.get(todo.pop(), []):
+            if a not in seen:
+                seen.add(a)
+                todo.append(a)
+    return seen
 
 
 @pytest.mark.parametrize("dtype", [np.int32, np.int64])
@@ -113,18 +114,6 @@ label "hit" = x=3 & y=3 & !f;
 """
 
 
-@pytest.fixture
-def walks(monkeypatch):
-    """``walks(True)``: every graph walk compiled (numba); ``walks(False)``: none."""
-    def use(compiled: bool) -> None:
-        if compiled:
-            pytest.importorskip("numba")
-        low = 0 if compiled else sys.maxsize
-        monkeypatch.setattr(walks_module, "COMPILED_MIN_ENTRIES", low)
-        monkeypatch.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", low)
-    return use
-
-
 @needs_storm
 @pytest.mark.parametrize("objective", ["max", "min"])
 def test_a_rare_models_bracket_holds_storms_exact_value(tmp_path: Path, walks, monkeypatch,
@@ -133,12 +122,9 @@ def test_a_rare_models_bracket_holds_storms_exact_value(tmp_path: Path, walks, m
 
     from mitld_lp import load_model, synthesize
 
-    (tmp_path / "m.prism").write_text(STATIONS)
+    path = rare._model_file(tmp_path, STATIONS, objective)
     exact = storm_rational(tmp_path / "m.prism", f'P{objective}=? [F "hit"]')
     assert 0 < exact < Fraction(1, 10**5)  # a rare event, not a graph-decided value
-    path = tmp_path / "m.toml"
-    path.write_text(f'name = "m"\nspec = "F hit"\nobjective = "{objective}"\n\n'
-                    '[prism]\nfile = "m.prism"\n')
     got = []
     for compiled in (True, False):
         walks(compiled)
