@@ -1,0 +1,147 @@
+"""Profile: the certificate's pieces on QVBS instances, before and after, in one run.
+
+Per instance (posed as ``bench_qvbs.py`` poses it) and per checkout (this one, and with
+``--compare DIR`` the ``mitld_lp`` of another checkout), in a child process of its own,
+rounds alternating between the checkouts so that the machine's load hits both alike:
+the synthesis with the entry points below timed in place (CPU seconds, no profiler;
+each inside its stage's figure), the bracket printed beside the times (its hex digits:
+the same bits before and after, or not).  Storm's check of the same product is in
+``bench_qvbs.py``'s run; this script only splits our solve stage.
+
+* the stages: ``analyse``, ``interval_iterations``, ``solve_lp``, ``certify``;
+* inside the certificate: the policy's chain (``chain``), its edges reversed
+  (``Reversed.__init__``) and its two searches (``Reversed.reaching``), its values and
+  slack (``_solve``), the Bellman checks (``_fails``) and the repair (``_Repair.run``);
+* ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
+  certificate's).
+
+::
+
+    python experiments/cert_stages.py --qvbs qcomp/benchmarks \\
+        --only zeroconf.1000-4-false.correct_max --compare /tmp/base --rounds 2
+
+Written: ``cert_stages.csv``, ``cert_stages.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import _common  # noqa: E402
+import bench_qvbs as bq  # noqa: E402
+
+TIMED = (("mitld_lp.solvers.analysis", "analyse"),
+         ("mitld_lp.solvers.iteration", "interval_iterations"),
+         ("mitld_lp.solvers.lp", "solve_lp"),
+         ("mitld_lp.solvers.certify", "certify"),
+         ("mitld_lp.solvers.certify", "chain"),
+         ("mitld_lp.solvers.certify_chain", "Reversed.__init__"),
+         ("mitld_lp.solvers.certify_chain", "Reversed.reaching"),
+         ("mitld_lp.solvers.certify_chain", "_solve"),
+         ("mitld_lp.solvers.certify", "_fails"),
+         ("mitld_lp.solvers.certify_repair", "_Repair.run"),
+         ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"))
+COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu",
+           *(name for _, name in TIMED))
+
+
+def child(job: dict[str, Any]) -> dict[str, Any]:
+    """The synthesis with each entry point of :data:`TIMED` wrapped (CPU seconds)."""
+    import importlib
+
+    import bench_sweeps as bs
+
+    from mitld_lp import load_model, synthesize
+
+    model = load_model(job["model"], max_states=job["max_states"])
+    bs.preload()
+    spent: dict[str, float] = defaultdict(float)
+    for module, name in TIMED:
+        owner: Any = importlib.import_module(module)
+        *path, last = name.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        setattr(owner, last, _timed(getattr(owner, last), name, spent))
+    c = time.process_time()
+    r = synthesize(model)
+    return dict(spent, solve_cpu=time.process_time() - c, lower=r.lower.hex(),
+                upper=r.upper.hex())
+
+
+def _timed(func: Any, name: str, spent: dict[str, float]) -> Any:
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        c = time.process_time()
+        try:
+            return func(*args, **kwargs)
+        finally:
+            spent[name] += time.process_time() - c
+    return timed
+
+
+def _run(job: dict[str, Any], work: Path, package: Path) -> dict[str, Any]:
+    (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(package), str(HERE)]))
+    proc = subprocess.run([sys.executable, __file__, "--child", str(work)], env=env,
+                          capture_output=True, text=True, timeout=bq.BUDGET)
+    if proc.returncode != 0:
+        return {"error": proc.stderr.strip().splitlines()[-1:]}
+    return json.loads((work / "out.json").read_text(encoding="utf-8"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _common.parser(__doc__.splitlines()[0])
+    ap.add_argument("--qvbs", type=Path, help="a checkout's benchmarks/ of ahartmanns/qcomp")
+    ap.add_argument("--only", nargs="*", default=["zeroconf.1000-4-false.correct_max"])
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR")
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--child", default=None, help=argparse_hidden())
+    args = ap.parse_args(argv)
+    if args.child:
+        work = Path(args.child)
+        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+        (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+        return 0
+    if args.qvbs is None:
+        ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
+    out = _common.out_dir(args)
+    checkouts = [("after", HERE.parent)]
+    if args.compare is not None:
+        checkouts.insert(0, ("before", args.compare.resolve()))
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="cert_stages_") as tmp:
+        found, _ = bq.jobs(args.qvbs, 0, bq.MAX_STATES, bq.FAMILIES, Path(tmp))
+        for inst, job in [f for f in found if f[0].name in set(args.only)]:
+            for k in range(args.rounds):
+                for label, package in checkouts:
+                    got = _run(job, Path(tmp), package)
+                    rows.append([inst.name, label, k, got.get("lower"), got.get("upper"),
+                                 *(_short(got.get(c)) for c in COLUMNS[5:])])
+                    print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
+    _common.write_tables(out, "cert_stages", COLUMNS, rows)
+    return 0
+
+
+def _short(v: Any) -> Any:
+    return round(v, 4) if isinstance(v, float) else v
+
+
+def argparse_hidden() -> str:
+    import argparse
+
+    return argparse.SUPPRESS
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
