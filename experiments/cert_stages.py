@@ -41,6 +41,7 @@ if str(HERE) not in sys.path:
 
 import _common  # noqa: E402
 import bench_qvbs as bq  # noqa: E402
+from profile_solve import _timed  # noqa: E402  (a function timed in place, alike)
 
 TIMED = (("mitld_lp.solvers.analysis", "analyse"),
          ("mitld_lp.solvers.iteration", "interval_iterations"),
@@ -78,16 +79,6 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     r = synthesize(model)
     return dict(spent, solve_cpu=time.process_time() - c, lower=r.lower.hex(),
                 upper=r.upper.hex())
-
-
-def _timed(func: Any, name: str, spent: dict[str, float]) -> Any:
-    def timed(*args: Any, **kwargs: Any) -> Any:
-        c = time.process_time()
-        try:
-            return func(*args, **kwargs)
-        finally:
-            spent[name] += time.process_time() - c
-    return timed
 
 
 def _run(job: dict[str, Any], work: Path, package: Path) -> dict[str, Any]:
