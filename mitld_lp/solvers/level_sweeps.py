@@ -71,49 +71,60 @@ def _slots(n: int, inner: np.ndarray, cols: np.ndarray, index: np.dtype) -> np.n
     return at[cols]
 
 
-def flow(sl: Any, runs: list[Run], self_loop: np.ndarray, weights: np.ndarray,
+def flow(sl: Any, groups: list[list[Run]], self_loop: np.ndarray, weights: np.ndarray,
          x: np.ndarray) -> bool:
-    """:func:`~mitld_lp.solvers.level_batches.flow` over ``runs`` (all of them, upstream
-    first) by one compiled product, if the walk is linear there (module docs): returns
-    whether it was done (else ``x`` is untouched and the caller walks)."""
-    if _st is None or sl.ptr is None or not runs or x.dtype != np.float64 \
-            or not x.flags.c_contiguous \
-            or runs[-1][1] - runs[0][0] > THIN * len(runs):
+    """:func:`~mitld_lp.solvers.level_batches.flow` over ``groups`` (consecutive groups
+    of runs, in level order; walked the last group first) by one compiled product a
+    group, if the walk is linear there (module docs): returns whether it was done (else
+    ``x`` is untouched and the caller walks).  A group at a time, as the walk gathers
+    (``level_batches.GROUP_ENTRIES``): the sweep's arrays are a group's, not the walk's."""
+    if _st is None or sl.ptr is None or not groups or x.dtype != np.float64 \
+            or not x.flags.c_contiguous:
         return False
-    ca0, cz1 = runs[0][2], runs[-1][3]
-    ch = sl.choices[ca0:cz1]
+    first, last = groups[0][0], groups[-1][-1]
+    if last[1] - first[0] > THIN * sum(len(g) for g in groups) \
+            or last[1] - first[0] + x.shape[0] >= np.iinfo(sl.ptr.dtype).max:
+        return False
+    ch = sl.choices[first[2]:last[3]]
     w = weights[ch]
     one = w == 1.0
     if not (one | (w == 0.0)).all() or (self_loop[ch[one]] != 0.0).any():
         return False
+    del ch, w
+    for group in reversed(groups):  # upstream first
+        _sweep(sl, group, one[group[0][2] - first[2]:group[-1][3] - first[2]], x)
+    return True
+
+
+def _sweep(sl: Any, runs: list[Run], one: np.ndarray, x: np.ndarray) -> None:
+    """:func:`flow` on one group of runs (``one``: its choices of weight 1)."""
+    ca0 = runs[0][2]
     back = runs[::-1]  # the walk's order: the top level first, in each its states
     a = np.array([r[0] for r in back], dtype=np.int64)
     z = np.array([r[1] for r in back], dtype=np.int64)
-    ca = np.array([r[2] for r in back], dtype=np.int64)
     seq = gather_ranges(a, z)  # positions in sl.states, in the walk's order
     counts = sl.state_choice[seq + 1] - sl.state_choice[seq]  # per state, its choices
-    cz = np.array([r[3] for r in back], dtype=np.int64)
-    chosen = gather_ranges(ca, cz)  # the choices, in the walk's order
+    chosen = gather_ranges(np.array([r[2] for r in back], dtype=np.int64),
+                           np.array([r[3] for r in back], dtype=np.int64))
     # per state its chosen choices' entries (a choice of weight 0 sends nothing)
     size = np.where(one[chosen - ca0], sl.ptr[chosen + 1] - sl.ptr[chosen], 0)
-    ptr = np.zeros(seq.size + 1, dtype=sl.ptr.dtype)
-    before = np.zeros(size.size + 1, dtype=np.int64)  # entries before each choice
-    np.cumsum(size, out=before[1:])
-    ptr[1:] = before[np.cumsum(counts)]
     chosen = chosen[size > 0]
+    ptr = np.zeros(seq.size + 1, dtype=sl.ptr.dtype)
+    np.cumsum(size, out=size)
+    ptr[1:] = size[np.cumsum(counts) - 1]  # entries up to each state's last choice
+    del size, counts
     cols, vals = row_columns(_Rows(sl.ptr, sl.cols, sl.vals), chosen)
+    del chosen
     states = sl.states[seq]
-    n = x.shape[0]
-    if seq.size + n >= np.iinfo(sl.ptr.dtype).max:
-        return False
-    rows = _slots(n, states, cols, sl.ptr.dtype)
+    del seq
+    rows = _slots(x.shape[0], states, cols, sl.ptr.dtype)
+    del cols
     vec = np.concatenate([x[states], x])
     # a column a state: vec[t] += P(c, t) vec[s], the state's value read when its column
     # comes (after every column above it has added to it)
-    _st.csc_matvec(vec.size, seq.size, ptr, rows, vals, vec, vec)
-    x[:] = vec[seq.size:]
-    x[states] = vec[:seq.size]
-    return True
+    _st.csc_matvec(vec.size, states.size, ptr, rows, vals, vec, vec)
+    x[:] = vec[states.size:]
+    x[states] = vec[:states.size]
 
 
 class _Rows:
