@@ -7,11 +7,11 @@ clock.  Where a walk is *linear* over a stretch of levels -- no maximum to take,
 division that is not by exactly 1, no clip that can bite -- its levels need no Python
 between them: SciPy's compiled products read and write one array, so a product whose
 input and output are the same vector (the stretch's states laid out in the order the
-walk visits them, then the states it reads or writes outside the stretch) reads each
+walk visits them, then a copy of the whole vector for the states outside) reads each
 state's value after the rows before it have written it.  That is the walk itself, the
 same multiplications and additions in the same order, so the same bits:
 
-* :func:`flow`, the LP's policy flow, over the whole walk at once where the policy is
+* :func:`flow`, the LP's policy flow, a group of levels a call (the walk's groups), where the policy is
   deterministic (each choice's weight exactly 0 or 1) and no chosen choice of a single
   state keeps a self-loop (so the walk's divisor is exactly 1): ``csc_matvec``, a
   column a state (its chosen choices' entries in their order), ``x[t] += P(c, t) x[s]``
@@ -55,9 +55,9 @@ THIN = 256
 """At most this many single states a level on average for :func:`flow` to sweep: its
 set-up costs about fifteen passes over the walk's states and entries, the walk about
 twenty NumPy calls a level.  Measured (CPU ms, best of 9, the flow walk alone): QVBS
-``zeroconf_dl`` 1000-1-30 (79 states a level) 26.0 -> 15.7, ``firewire_dl`` 3-600 (151)
-16.0 -> 10.6, ``firewire_dl`` 36-400 (227) 13.6 -> 12.2, ``wlan_dl`` 0-80 (316) 8.1 ->
-8.6."""
+``zeroconf_dl`` 1000-1-30 (79 states a level) 26.0 -> 14.7, ``firewire_dl`` 3-600 (151)
+15.7 -> 10.4, ``firewire_dl`` 36-400 (227) 13.8 -> 12.1; ``wlan_dl`` 0-80 (321) 8.1 ->
+8.6 (swept whole, not by groups)."""
 
 
 def _slots(n: int, inner: np.ndarray, cols: np.ndarray, index: np.dtype) -> np.ndarray:
