@@ -11,8 +11,8 @@ walk visits them, then a copy of the whole vector for the states outside) reads 
 state's value after the rows before it have written it.  That is the walk itself, the
 same multiplications and additions in the same order, so the same bits:
 
-* :func:`flow`, the LP's policy flow, a group of levels a call (the walk's groups), where the policy is
-  deterministic (each choice's weight exactly 0 or 1) and no chosen choice of a single
+* :func:`flow`, the LP's policy flow, a group of levels a call (the walk's groups),
+  where the policy is deterministic (each choice's weight exactly 0 or 1) and no chosen choice of a single
   state keeps a self-loop (so the walk's divisor is exactly 1): ``csc_matvec``, a
   column a state (its chosen choices' entries in their order), ``x[t] += P(c, t) x[s]``
   in the walk's order (levels downstream from the top, a level's states and their
