@@ -12,11 +12,12 @@ state's value after the rows before it have written it.  That is the walk itself
 same multiplications and additions in the same order, so the same bits:
 
 * :func:`flow`, the LP's policy flow, a group of levels a call (the walk's groups),
-  where the policy is deterministic (each choice's weight exactly 0 or 1) and no chosen choice of a single
-  state keeps a self-loop (so the walk's divisor is exactly 1): ``csc_matvec``, a
-  column a state (its chosen choices' entries in their order), ``x[t] += P(c, t) x[s]``
-  in the walk's order (levels downstream from the top, a level's states and their
-  choices in order).  A choice of weight 0 adds ``0 * x[s] = +0.0`` in the walk:
+  where the policy is deterministic (each choice's weight exactly 0 or 1) and no chosen
+  choice of a single state keeps a self-loop (so the walk's divisor is exactly 1):
+  ``csc_matvec``, a column a state (its chosen choices' entries in their order),
+  ``x[t] += P(c, t) x[s]`` in the walk's order (levels downstream from the top, a
+  level's states and their choices in order).  A choice of weight 0 adds
+  ``0 * x[s] = +0.0`` in the walk:
   nothing to a sum of non-negative terms.
 
 Where the walk is not linear (a maximum, a randomised policy, a self-loop kept), the
