@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.solvers import level_sweeps
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.rows import gather_ranges
 
@@ -244,7 +245,10 @@ def flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
     choices' order) and each entry's weight gathered once for a group of runs
     (:func:`_groups`); then a level divides its states' inflow and adds it along its
     entries.  The groups are walked downward as the levels are: the last group first."""
-    for group in reversed(_groups(runs)):  # upstream first
+    groups = _groups(runs)
+    if level_sweeps.flow(sl, groups, self_loop, weights, x):  # linear: a compiled call
+        return  # a group
+    for group in reversed(groups):  # upstream first
         _flow(sl, group, self_loop, weights, x)
 
 
