@@ -222,3 +222,23 @@ def test_lp_stage_gives_the_backward_induction_value(seed, sense, loops, monkeyp
     assert abs(r.primal_objective - want[mdp.initial]) <= 1e-12
     if not loops:  # a deterministic policy without self-loops: the flow was swept
         assert swept and all(swept)
+
+
+def test_in_place_probe_refuses_a_product_that_reads_its_input_first(monkeypatch):
+    """The sweep relies on SciPy's loop order: the probe says yes on this SciPy, and a
+    product that reads a copy of its input (as a SciPy might) makes the flow decline."""
+    from mitld_lp.solvers import level_sweeps
+
+    monkeypatch.setattr(level_sweeps, "_IN_PLACE", None)
+    assert level_sweeps._in_place() is True
+
+    real = level_sweeps._st
+
+    class _Copying:
+        @staticmethod
+        def csc_matvec(n_row, n_col, ptr, rows, vals, x, y):
+            real.csc_matvec(n_row, n_col, ptr, rows, vals, x.copy(), y)
+
+    monkeypatch.setattr(level_sweeps, "_st", _Copying)
+    monkeypatch.setattr(level_sweeps, "_IN_PLACE", None)
+    assert level_sweeps._in_place() is False

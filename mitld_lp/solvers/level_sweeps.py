@@ -61,6 +61,25 @@ twenty NumPy calls a level.  Measured (CPU ms, best of 9, the flow walk alone): 
 8.6 (swept whole, not by groups)."""
 
 
+_IN_PLACE: bool | None = None
+
+
+def _in_place() -> bool:
+    """Whether SciPy's ``csc_matvec`` with one array as input and output reads a
+    column's input after the columns before it have written it, as the sweep needs:
+    probed once a process on a three-state chain (``1 -> 0.5 -> 0.25``), since a private
+    routine's loop order is not a promise; if a SciPy reads its input otherwise, the
+    level walks run."""
+    global _IN_PLACE
+    if _IN_PLACE is None:
+        vec = np.array([1.0, 0.0, 0.0])
+        ptr = np.array([0, 1, 2, 2], dtype=np.int32)
+        _st.csc_matvec(3, 3, ptr, np.array([1, 2], dtype=np.int32), np.array([0.5, 0.5]),
+                       vec, vec)
+        _IN_PLACE = vec.tolist() == [1.0, 0.5, 0.25]
+    return _IN_PLACE
+
+
 def _slots(n: int, inner: np.ndarray, cols: np.ndarray, index: np.dtype) -> np.ndarray:
     """The sweep's vector: ``inner`` (quotient states, in the sweep's order) at
     positions ``0..m-1``, then a copy of the whole vector (state ``t`` at ``m + t``).
@@ -80,7 +99,7 @@ def flow(sl: Any, groups: list[list[Run]], self_loop: np.ndarray, weights: np.nd
     ``x`` is untouched and the caller walks).  A group at a time, as the walk gathers
     (``level_batches.GROUP_ENTRIES``): the sweep's arrays are a group's, not the walk's."""
     if _st is None or sl.ptr is None or not groups or x.dtype != np.float64 \
-            or not x.flags.c_contiguous:
+            or not x.flags.c_contiguous or not _in_place():
         return False
     first, last = groups[0][0], groups[-1][-1]
     if last[1] - first[0] > THIN * sum(len(g) for g in groups) \
