@@ -349,6 +349,9 @@ def _compiled_levels(walks: Any, ptr: np.ndarray, succ: np.ndarray,
     n = ptr.shape[0] - 1
     if seeds is None:
         seeds = np.zeros((n, 0), dtype=bool)
+    # int64 as the state graph's: one compiled signature (a chain's int32 graph would
+    # compile, or load, a second one in the same process)
+    ptr, succ = ptr.astype(np.int64, copy=False), succ.astype(np.int64, copy=False)
     _, comp, level, reach = walks.components_and_levels(
         ptr, succ, n + succ.shape[0] > SMALL, np.ascontiguousarray(seeds, dtype=bool), True)
     return Levels(np.asarray(comp, dtype=np.int64), level, reach)
