@@ -161,6 +161,9 @@ def compiled_kernel() -> Any:
 
 
 def _build() -> Any:
+    from mitld_lp.solvers import numba_narrow
+
+    numba_narrow.import_numba()  # without PyYAML, where numba is not loaded yet
     from mitld_lp.solvers import compiled_kernels  # puts numba's narrow load in place
 
     return compiled_kernels.gauss_seidel
