@@ -119,11 +119,11 @@ of 393,200 and 196,600 entries 6.0 / 6.5 s against 10.7 / 13.9 s (n128 d3) and 9
 Measured again on every instance of the benchmarks that could load numba
 (``experiments/profile_solve.py --numpy-sweeps --compiled-sweeps``, 2026-11-30,
 ``experiments/results/profile_solve_numba_gate.md``): only QVBS ``zeroconf`` 20-4 and
-1000-4 do (one block of 483,692 entries), and there NumPy loses by 25-30x: its Jacobi
+1000-4 do (one block of 483,692 entries), and there NumPy loses by 26-85x: its Jacobi
 sweeps give up after 16 and the policy jump's factorisations take 50 s (20-4
 ``correct_max``: 1.9 s compiled, 53 s NumPy).  ``consensus`` 4-4 (blocks of at most
 38,684 entries), ``csma`` 4-2 (no block) and ``bus_scaled`` n64 d3 (98,288 and 49,144)
-stay on NumPy; swept compiled, consensus 4-4 takes 1.01 s against 0.55 and bus n64 d3
+stay on NumPy; swept compiled, consensus 4-4 takes 1.01 s against 0.57 and bus n64 d3
 1.47 s against 1.72 (its NumPy sweeps give up after 8 and jump): there the sizes pick
 the slower side by 0.25 s, which only a forecast of the sweeps would see."""
 
