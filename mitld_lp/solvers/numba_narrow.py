@@ -33,6 +33,9 @@ Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_kernels`,
 :mod:`mitld_lp.sensing.group_kernels`) calls :func:`install` right after ``import numba``,
 so whichever kernel a process asks for first is loaded narrowly.  :data:`ENABLED` set to
 False before the first of them is imported keeps numba's whole load (to measure it).
+:func:`import_numba` imports numba without PyYAML (the sweeps and the analysis call it
+before their first kernel); while it runs, ``import yaml`` in another thread of the
+process would fail, as it would without PyYAML installed.
 """
 
 from __future__ import annotations
