@@ -19,27 +19,39 @@ Two sets of rounds take turns: ``whole`` (:data:`mitld_lp.solvers.numba_narrow.E
 set to False: numba's own load, as a process that asked for a graph kernel first had
 before every compiled module put the narrow load in place) and ``narrow`` (what every
 compiled module does since: the target's registries are not refreshed, and the first
-call loads the kernel with numba's runtime only).  The answers must be the same to the
-bit in both.
+call loads the kernel with numba's runtime only; since the numba-gate branch the typing
+context is not refreshed either, and numba is imported by
+:func:`mitld_lp.solvers.numba_narrow.import_numba`, without PyYAML).  The answers must
+be the same to the bit in both; which of PyYAML, cffi and pycparser each load left in
+the process is printed.  ``--compare DIR`` also runs the narrow load of another
+checkout's ``mitld_lp`` (a ``git archive`` of an older commit), taking turns.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
 
 CHILD = r"""
 import json, time
 c = time.process_time
 import numpy as np, scipy.sparse as sp, scipy.linalg  # noqa: F401
 t = [c()]
-import numba  # noqa: F401
-t.append(c())
 if NARROW:
     from mitld_lp.solvers import numba_narrow
+    getattr(numba_narrow, "import_numba", lambda: __import__("numba"))()  # without PyYAML
+else:
+    import numba  # noqa: F401
+t.append(c())
+if NARROW:
     assert numba_narrow.install()
     t += [c(), c()]
 else:
@@ -68,7 +80,10 @@ level_kernels.chain_solve(np.arange(2), inner.indptr.astype(np.int64),
                           inner.indices.astype(np.int64), inner.data, diag, np.ones((2, 1)), x)
 t.append(c())
 parts = [b - a for a, b in zip(t, t[1:])]
-print(json.dumps({"parts": parts, "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
+import sys
+print(json.dumps({"parts": parts,
+                  "modules": [m for m in ("yaml", "cffi", "pycparser") if m in sys.modules],
+                  "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
                   "components": [alive.tolist(), label.tolist()]}))
 """
 
@@ -81,37 +96,50 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=int, default=5, help="fresh processes (default 5)")
     ap.add_argument("--quick", action="store_true",
                     help="one round (it prints only: no file is written either way)")
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                    help="also the narrow load of this checkout's mitld_lp (before/after)")
     args = ap.parse_args(argv)
     if args.quick:
         args.rounds = 1
-    runs: dict[bool, list[dict]] = {False: [], True: []}
-    for _ in range(args.rounds):  # the two loads taking turns
-        for narrow in (False, True):
+    if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
+        ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
+    modes = {"whole": (False, None), "narrow": (True, None)}
+    if args.compare is not None:
+        modes = {"whole": (False, None), "base narrow": (True, args.compare.resolve()),
+                 "narrow": (True, None)}
+    runs: dict[str, list[dict]] = {m: [] for m in modes}
+    for _ in range(args.rounds):  # the loads taking turns
+        for mode, (narrow, code) in modes.items():
+            env = dict(os.environ)  # the checkout's package first; run from elsewhere
+            env["PYTHONPATH"] = os.pathsep.join([str(code or ROOT), *filter(None, [
+                env.get("PYTHONPATH")])])
             done = subprocess.run([sys.executable, "-c", f"NARROW = {narrow}\n" + CHILD],
-                                  text=True, capture_output=True)
+                                  text=True, capture_output=True, env=env,
+                                  cwd=tempfile.gettempdir())
             if done.returncode:
                 sys.exit(f"the child failed:\n{done.stderr}")
-            runs[narrow].append(json.loads(done.stdout.strip().splitlines()[-1]))
+            runs[mode].append(json.loads(done.stdout.strip().splitlines()[-1]))
     answers = {tuple(r["answer"]) for rs in runs.values() for r in rs}
     if len(answers) != 1:
         sys.exit(f"the loads' brackets differ: {answers}")
     comps = {json.dumps(r["components"]) for rs in runs.values() for r in rs}
     if len(comps) != 1:
         sys.exit(f"the loads' end components differ: {comps}")
+    for mode, rs in runs.items():
+        print(f"{mode} load: of PyYAML, cffi, pycparser loaded: "
+              f"{sorted({m for r in rs for m in r['modules']})}")
     low, high = (float.fromhex(x) for x in answers.pop())
-    print(f"block kernel's bracket on the two-state block, both loads: [{low:.12f}, "
+    print(f"block kernel's bracket on the two-state block, every load: [{low:.12f}, "
           f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")
-    print(f"graph kernel's end components of the two-state block, both loads (alive, "
+    print(f"graph kernel's end components of the two-state block, every load (alive, "
           f"label): {comps.pop()} (one end component of both states)")
-    print(f"{'part':<28} {'whole: median s':>15} {'least s':>8} {'narrow: median s':>17} "
-          f"{'least s':>8}")
+    print(f"{'part':<28}" + "".join(f" {m + ': median s':>22} {'least s':>8}" for m in runs))
     for i, name in enumerate((*NAMES, "total")):
         cells = []
-        for narrow in (False, True):
-            xs = [sum(r["parts"]) if name == "total" else r["parts"][i]
-                  for r in runs[narrow]]
-            cells.append(f"{statistics.median(xs):{17 if narrow else 15}.3f} {min(xs):8.3f}")
-        print(f"{name:<28} {cells[0]} {cells[1]}")
+        for rs in runs.values():
+            xs = [sum(r["parts"]) if name == "total" else r["parts"][i] for r in rs]
+            cells.append(f" {statistics.median(xs):22.3f} {min(xs):8.3f}")
+        print(f"{name:<28}" + "".join(cells))
 
 
 if __name__ == "__main__":

@@ -12,7 +12,9 @@ Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their 
   ``kernels.compiled_kernel`` (``import numba`` and the kernel module, at the first
   large block), inside the iteration's figure;
 * with ``--numpy-sweeps``, ``stages`` once more with no block swept compiled (numba
-  never loaded): what a size threshold above the instance would cost;
+  never loaded): what a size threshold above the instance would cost; with
+  ``--compiled-sweeps``, once more with every block swept compiled (numba loaded
+  whatever the sizes): what a threshold below it would cost;
 * the level walks inside those stages (:data:`WALKS`: ``levels``, ``single_bounds``,
   ``single_values``, ``single_flow``, ``chain_singles``, ``repair``), timed alike;
 * what is not a walk (:data:`SETUP`: ``components``, ``search``, ``single_setup``,
@@ -25,6 +27,12 @@ Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their 
 
     python experiments/profile_solve.py --qvbs qcomp/benchmarks --out experiments/results
     python experiments/profile_solve.py --qvbs qcomp/benchmarks --quick  # one small instance
+    python experiments/profile_solve.py --qvbs qcomp/benchmarks --min-states 0 \
+        --only consensus.4-4.c2 --bus bus_scaled_n64_d3 --numpy-sweeps --compiled-sweeps
+
+``--bus`` adds instances of ``bench_sweeps.py`` (posed as it poses them, Storm's best
+check on our DRN beside); ``--min-states`` lets in QVBS instances below the benchmark's
+1e5 states.
 
 Written: ``profile_solve.csv``, ``profile_solve.md``.
 """
@@ -85,12 +93,20 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
 
     from mitld_lp import load_model, synthesize
 
-    model = load_model(job["model"], max_states=job["max_states"])
+    if "bus" in job:  # an instance of bench_sweeps.py's families, posed as it poses them
+        from bench_scaling import Instance
+
+        model = bs._model(Instance(*job["bus"]))
+    else:
+        model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
-    if job.get("numpy_sweeps"):  # no block large enough for the compiled sweeps
+    if job.get("numpy_sweeps") or job.get("compiled_sweeps"):
         from mitld_lp.solvers import kernels
 
-        kernels.COMPILED_MIN_ENTRIES = sys.maxsize
+        if job.get("numpy_sweeps"):  # no block large enough for the compiled sweeps
+            kernels.COMPILED_MIN_ENTRIES = sys.maxsize
+        else:  # every block large enough
+            kernels.COMPILED_MIN_ENTRIES = kernels.COMPILED_MIN_BLOCK_ENTRIES = 0
     spent = dict.fromkeys((*STAGES, "numba_import", *WALKS, *SETUP), 0.0)
     for stage, (module, name) in {**STAGES, "numba_import": NUMBA_IMPORT,
                                   **WALKS, **SETUP}.items():
@@ -158,9 +174,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--qvbs", type=Path, required=False,
                     help="a checkout's benchmarks/ folder of ahartmanns/qcomp")
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME")
+    ap.add_argument("--min-states", type=int, default=bq.MIN_STATES,
+                    help="the least QVBS size of an instance (default: the benchmark's)")
+    ap.add_argument("--bus", nargs="*", default=(), metavar="NAME",
+                    help="also these instances of bench_sweeps.py (e.g. bus_scaled_n64_d3), "
+                         "its Storm check beside")
     ap.add_argument("--numpy-sweeps", action="store_true",
                     help="a second row per instance with the NumPy sweeps only (numba "
                          "never loaded): what a size threshold would give")
+    ap.add_argument("--compiled-sweeps", action="store_true",
+                    help="a row per instance with every block swept compiled (numba "
+                         "loaded whatever the sizes): the gate's other side")
     ap.add_argument("--child", nargs=2, default=None, help=argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
@@ -175,21 +199,28 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="profile_solve_") as tmp:
         work = Path(tmp)
-        chosen = chosen_jobs(args.qvbs, args.quick, set(args.only or INSTANCES), work)
+        wanted = set(args.only or ([] if args.bus else INSTANCES))
+        chosen = [*chosen_jobs(args.qvbs, args.quick, wanted, work, args.min_states),
+                  *bus_jobs(args.bus)]
         numba_row = _run_child("numba", {}, work)
         for inst, job in chosen:
             (work / inst.name).mkdir()
-            row = bq.measure(inst, job, work / inst.name, bq.BUDGET)
+            row = (bs.measure(inst, work / inst.name) if "bus" in job
+                   else bq.measure(inst, job, work / inst.name, bq.BUDGET))
             stages = _run_child("stages", job, work / inst.name)
+            first = len(rows)
             rows.append([inst.name, row.get("value"), row.get("solve_cpu"),
                          row.get("storm_check_cpu"), row.get("solve_over_storm_check"),
                          stages.get("solve_cpu"), *(stages.get(k) for k in COLUMNS[6:])])
-            if args.numpy_sweeps:
-                alone = _run_child("stages", dict(job, numpy_sweeps=True), work / inst.name)
-                rows.append([f"{inst.name} (NumPy sweeps)", alone.get("value"), None,
+            for flag, label in (("numpy_sweeps", "NumPy sweeps"),
+                                ("compiled_sweeps", "compiled sweeps")):
+                if not getattr(args, flag):
+                    continue
+                alone = _run_child("stages", dict(job, **{flag: True}), work / inst.name)
+                rows.append([f"{inst.name} ({label})", alone.get("value"), None,
                              row.get("storm_check_cpu"), None, alone.get("solve_cpu"),
                              *(alone.get(k) for k in COLUMNS[6:])])
-            print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
+            print(_common.text_table(COLUMNS, rows[first:]), flush=True)
     shown = [[f"{v:.3g}" if isinstance(v, float) else v for v in r] for r in rows]
     text = ("## The solve stage by stage, and numba's load (CPU seconds)\n\n"
             + _common.markdown_table(COLUMNS, shown)
@@ -202,15 +233,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def chosen_jobs(benchmarks: Path, quick: bool, wanted: set[str], work: Path
-                ) -> list[tuple[Any, dict[str, Any]]]:
+def chosen_jobs(benchmarks: Path, quick: bool, wanted: set[str], work: Path,
+                low: int = bq.MIN_STATES) -> list[tuple[Any, dict[str, Any]]]:
     """The QVBS instances to run, posed as ``bench_qvbs.py`` poses them (their model
     files written to ``work``): with ``quick`` the largest under its quick bound, else
-    those ``wanted`` (names) of the benchmark's sizes, smallest first."""
+    those ``wanted`` (names) of at least ``low`` QVBS states, smallest first."""
     high = bq.QUICK_MAX_STATES if quick else bq.MAX_STATES
-    found, _ = bq.jobs(benchmarks, 0 if quick else bq.MIN_STATES, high, bq.FAMILIES, work)
+    found, _ = bq.jobs(benchmarks, 0 if quick else low, high, bq.FAMILIES, work)
     found.sort(key=lambda t: t[0].qvbs_states)
     return found[-1:] if quick else [f for f in found if f[0].name in wanted]
+
+
+def bus_jobs(names: Any) -> list[tuple[Any, dict[str, Any]]]:
+    """``bench_sweeps.py``'s instances named in ``names`` (e.g. ``bus_scaled_n64_d3``)."""
+    from bench_scaling import Instance
+
+    known = {Instance(*i).name: i for i in bs.FULL}
+    unknown = sorted(set(names) - set(known))
+    if unknown:
+        raise SystemExit(f"--bus: no such instance of bench_sweeps.py: {unknown}")
+    return [(Instance(*known[n]), {"bus": list(known[n])}) for n in names]
 
 
 def argparse_hidden() -> str:

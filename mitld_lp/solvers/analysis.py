@@ -237,6 +237,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     wide = goal | extra
     found = state_levels(m, mdp.row_groups, np.column_stack([goal, wide]))
     if "numba" not in sys.modules and _sweeps_compiled(m, mdp.row_groups, found.component):
+        from mitld_lp.solvers import numba_narrow
+
+        numba_narrow.import_numba()  # without PyYAML (numba_narrow.import_numba)
         load_walks()  # the sweeps will load numba: the walks below run compiled too
     reach = found.reach[found.component]
     n = mdp.n_states

@@ -36,7 +36,10 @@ probability 0.98) is settled in one update instead of hundreds.
   level kernel 0.01 s.  The target's registries are for compiling: a kernel loaded
   from the cache needs only numba's runtime of them, and
   :mod:`mitld_lp.solvers.numba_narrow` (put in place by every compiled module as it is
-  imported) loads it so, 0.2-0.25 s less CPU.  Every kernel is loaded at its first call
+  imported) loads it so, 0.2-0.25 s less CPU; it now skips the typing context's
+  refresh too (cffi's C parser among it) and imports numba without PyYAML: numba's
+  import and a graph, block and level kernel's first calls 0.54 -> 0.44 s
+  (``experiments/results/numba_load_numba_gate.txt``).  Every kernel is loaded at its first call
   only (a dispatcher each), so loading fewer kernels saves their hundredths of a
   second, not numba's registries. A new checkout compiles every kernel it calls once
   (for one index type: :func:`kernel_index`; 2.5 s more on the first solve of QVBS
@@ -111,7 +114,18 @@ CPU seconds of the solve stage on ``bus_scaled``, numba's load included, two run
 n64 d10 (blocks of 98,288 and 49,144 entries) 2.07 / 1.93 s compiled against 2.08 /
 1.97 s with NumPy, with 11 more bytes a transition at the peak (65 against 54); blocks
 of 393,200 and 196,600 entries 6.0 / 6.5 s against 10.7 / 13.9 s (n128 d3) and 9.2 /
-12.0 s against 14.3 / 15.9 s (n128 d10)."""
+12.0 s against 14.3 / 15.9 s (n128 d10).
+
+Measured again on every instance of the benchmarks that could load numba
+(``experiments/profile_solve.py --numpy-sweeps --compiled-sweeps``, 2026-11-30,
+``experiments/results/profile_solve_numba_gate.md``): only QVBS ``zeroconf`` 20-4 and
+1000-4 do (one block of 483,692 entries), and there NumPy loses by 26-85x: its Jacobi
+sweeps give up after 16 and the policy jump's factorisations take 50 s (20-4
+``correct_max``: 1.9 s compiled, 53 s NumPy).  ``consensus`` 4-4 (blocks of at most
+38,684 entries), ``csma`` 4-2 (no block) and ``bus_scaled`` n64 d3 (98,288 and 49,144)
+stay on NumPy; swept compiled, consensus 4-4 takes 1.01 s against 0.57 and bus n64 d3
+1.47 s against 1.72 (its NumPy sweeps give up after 8 and jump): there the sizes pick
+the slower side by 0.25 s, which only a forecast of the sweeps would see."""
 
 _KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
 
@@ -161,6 +175,9 @@ def compiled_kernel() -> Any:
 
 
 def _build() -> Any:
+    from mitld_lp.solvers import numba_narrow
+
+    numba_narrow.import_numba()  # without PyYAML, where numba is not loaded yet
     from mitld_lp.solvers import compiled_kernels  # puts numba's narrow load in place
 
     return compiled_kernels.gauss_seidel

@@ -7,7 +7,17 @@ linear algebra, random generators and polynomials, typed lists, dicts and sets,
 ``jitclass``, datetimes...) and installs their implementations: 0.35 s of CPU a process
 (``experiments/numba_load.py``), which only *compiling* a function needs.  A cached
 kernel is machine code already; the one thing of that step it needs is numba's runtime
-(``rtsys.initialize``, for the arrays the kernel allocates).
+(``rtsys.initialize``, for the arrays the kernel allocates).  The same refresh then
+refreshes the *typing* context: its additional registries (``cffi_utils``, whose
+``cffi.FFI()`` imports cffi's C parser, pycparser and its lexer, and the maths, list,
+set and dict declarations) and its builtins, 0.044 + 0.005 s a process, which only the
+typing of a function being compiled reads; numba's compiler refreshes both contexts
+itself before it compiles (``numba.core.compiler.compile_extra``), so a cache miss
+installs them then.  What a cached kernel's first call still pays, measured with
+NumPy and SciPy loaded (``experiments/numba_load.py``'s parts, 2026-11-30): numba's
+runtime 0.036 s (its functions compiled by LLVM), ``numba.np.arrayobj`` 0.05 s (imported
+by the pickled environment of the array helpers inlined in the kernels: its globals are
+that module's), and the cache's read and link.
 
 :func:`install` has that step do only the runtime while a kernel is being loaded from the
 cache; everywhere else (compiling a kernel on a cache miss, which refreshes the context
@@ -23,14 +33,20 @@ Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_kernels`,
 :mod:`mitld_lp.sensing.group_kernels`) calls :func:`install` right after ``import numba``,
 so whichever kernel a process asks for first is loaded narrowly.  :data:`ENABLED` set to
 False before the first of them is imported keeps numba's whole load (to measure it).
+:func:`import_numba` imports numba without PyYAML (the sweeps and the analysis call it
+before their first kernel); while it runs, ``import yaml`` in another thread of the
+process would fail, as it would without PyYAML installed.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import os
+import sys
 import threading
 from typing import Any
 
-__all__ = ["ENABLED", "TESTED_NUMBA", "install", "installed"]
+__all__ = ["ENABLED", "TESTED_NUMBA", "import_numba", "install", "installed"]
 
 ENABLED = True
 """Whether :func:`install` puts the narrow load in place (False: numba's whole load)."""
@@ -60,13 +76,17 @@ def install() -> bool:
         import numba
         from numba.core import caching, cpu
         from numba.core.runtime import rtsys
+        from numba.core.typing import context as typing_context
     except ImportError:
         return False
     if ".".join(numba.__version__.split(".")[:2]) not in TESTED_NUMBA:
         return False
     full = getattr(cpu.CPUContext, "load_additional_registries", None)
     load = getattr(caching.Cache, "load_overload", None)
-    if full is None or load is None or not hasattr(rtsys, "initialize"):
+    typing_class = getattr(typing_context, "Context", None)
+    typing_full = getattr(typing_class, "refresh", None)
+    if (full is None or load is None or typing_full is None
+            or not hasattr(rtsys, "initialize")):
         return False
 
     def load_additional_registries(self: Any) -> None:
@@ -74,6 +94,11 @@ def install() -> bool:
             rtsys.initialize(self)  # the runtime: what a cached kernel needs of this step
             return
         full(self)
+
+    def typing_refresh(self: Any) -> None:
+        if getattr(_loading, "active", False):
+            return  # typing is for compiling; a compile refreshes it first (module docs)
+        typing_full(self)
 
     def load_overload(self: Any, sig: Any, target_context: Any) -> Any:
         outer = getattr(_loading, "active", False)
@@ -84,6 +109,48 @@ def install() -> bool:
             _loading.active = outer
 
     cpu.CPUContext.load_additional_registries = load_additional_registries
+    typing_class.refresh = typing_refresh
     caching.Cache.load_overload = load_overload
     _installed = True
     return True
+
+
+class _LazyYaml:
+    """PyYAML for ``numba.core.config``, imported at its first use: numba reads a
+    ``.numba_config.yaml`` of the working directory with it, if there is one, when it
+    compiles (``config.reload_config``)."""
+
+    def __getattr__(self, name: str) -> Any:
+        import yaml
+
+        return getattr(yaml, name)
+
+
+def import_numba() -> Any:
+    """``import numba`` (the module, or None where it is missing) without importing
+    PyYAML with it: ``numba.core.config`` imports it at numba's import (0.024 s of CPU)
+    only to read a ``.numba_config.yaml`` of the working directory.  Where there is no
+    such file and PyYAML is not loaded yet, numba is imported with ``yaml`` marked
+    missing, and its config then given PyYAML imported lazily (:class:`_LazyYaml`), so a
+    config file that appears later is read as numba would (its ``reload_config`` before
+    each compile).  numba itself is not changed, and neither is any kernel.  Every
+    compiled module imports numba; where one of them imports it first, PyYAML comes
+    with it as before (nothing else differs)."""
+    if "numba" in sys.modules:
+        return sys.modules["numba"]
+    hide = ("yaml" not in sys.modules and not os.path.isfile(".numba_config.yaml")
+            and importlib.util.find_spec("yaml") is not None)
+    if hide:
+        sys.modules["yaml"] = None  # type: ignore[assignment]  # import yaml: ImportError
+    try:
+        import numba
+    except ImportError:
+        return None
+    finally:
+        if hide and "yaml" in sys.modules and sys.modules["yaml"] is None:
+            del sys.modules["yaml"]
+    config = sys.modules.get("numba.core.config")
+    if hide and config is not None and not getattr(config, "_HAVE_YAML", True):
+        config.yaml = _LazyYaml()
+        config._HAVE_YAML = True
+    return numba
