@@ -6,6 +6,7 @@ by :mod:`mitld_lp.model`, which reads the rest of the file."""
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,16 +26,22 @@ __all__ = ["GAME_KINDS", "GameKind", "parse_spec"]
 
 def parse_spec(text: str, ctx: KeyContext) -> tuple[Formula, FragmentReport]:
     """Parse the spec (errors carry ``line:column`` within the spec string) and check it
-    is in the supported co-safe fragment."""
+    is in the supported co-safe fragment.  A text read before is not parsed again (a
+    PRISM model file reads its spec for the loader's decided states, then for its task):
+    the report and its formula are frozen, so the same objects serve both."""
     try:
-        source = parse_source(text)
+        report = _checked(text)
     except ParseError as exc:
         raise ctx.error("spec", f"{exc.line}:{exc.column}: {exc.reason}") from exc
-    try:
-        report = check(source)  # the events of every D[mu] a written, also folded ones
     except FragmentError as exc:
         raise ctx.error("spec", str(exc)) from exc
     return report.formula, report
+
+
+@functools.lru_cache(maxsize=32)
+def _checked(text: str) -> FragmentReport:
+    """The spec's report, by its text (a failure is not kept: it raises again)."""
+    return check(parse_source(text))  # the events of every D[mu] a written, also folded ones
 
 
 
