@@ -11,15 +11,17 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp.files.keys import KeyContext, key_path, toml_text, type_name
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
 from mitld_lp.worlds.game import Game
-from mitld_lp.worlds.grid import GridWorld
 from mitld_lp.worlds.task import Task
+
+if TYPE_CHECKING:  # a grid's module is read only where a file describes a grid
+    from mitld_lp.worlds.grid import GridWorld
 
 __all__ = ["GAME_KINDS", "GameKind", "parse_spec"]
 
@@ -74,7 +76,7 @@ class GameKind:
 def _build_grid(doc: dict[str, Any], ctx: KeyContext) -> GridWorld:
     """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
     values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
-    from mitld_lp.worlds.grid import GridError
+    from mitld_lp.worlds.grid import GridError, GridWorld
 
     grid = ctx.table(doc["grid"], "grid")
     ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})
