@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from mitld_lp.distributions.closed import Finite, Geometric, Uniform
 from mitld_lp.distributions.law import (
     MASS_TOLERANCE,
     MAX_STEP,
@@ -115,6 +114,8 @@ def geometric(p: float) -> FirstOccurrence:
     pf = _real(label, "p", p)
     if not 0 < pf <= 1:
         raise DistributionError(label, "p must be in (0, 1]")
+    from mitld_lp.distributions.closed import Geometric  # read once a law is built
+
     return Geometric(label, pf, written=p)
 
 
@@ -152,6 +153,8 @@ def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
         raise DistributionError(label, "masses sum to more than the largest float > 1") from None
     if total > 1 + MASS_TOLERANCE:
         raise DistributionError(label, f"masses sum to {total:.12g} > 1")
+    from mitld_lp.distributions.closed import Finite
+
     return Finite(label, m, written=("masses", tuple(values)))
 
 
@@ -174,6 +177,8 @@ def uniform(a: int, b: int) -> FirstOccurrence:
         )
     if hi < lo:
         raise DistributionError(label, f"b must be >= a = {int_text(lo)}, got {int_text(hi)}")
+    from mitld_lp.distributions.closed import Finite, Uniform
+
     if hi > MAX_TABLE_STEPS:
         return Uniform(label, lo, hi)
     m = np.zeros(hi)
