@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
@@ -191,12 +191,13 @@ def poisson(lam: float) -> FirstOccurrence:
     ``P(K = k) = exp(-lam) lam^(k-1) / (k-1)!``."""
     label = _label("poisson", lam)
     lf = _positive(label, "lam", lam)
-    from mitld_lp.distributions import scipy_laws  # SciPy's laws: imported when used
+    from mitld_lp.distributions import scipy_laws  # the adapter; scipy.stats not imported
+    from mitld_lp.distributions.poisson_law import PoissonX  # closed form, no scipy.stats
 
-    law = scipy_laws.shifted(label, "poisson", scipy_laws.stats().poisson, [lf])
     # a Poisson pmf is log-concave (mu(k+1)/mu(k) = lam/k decreases), so its hazard
     # increases (towards 1): FirstOccurrence.hazard_range_from
-    return replace(law, increasing=True)
+    law = scipy_laws.ShiftedDiscrete(label, PoissonX(lf), math.inf, shift=1, increasing=True)
+    return scipy_laws.evaluable(law, "poisson")
 
 
 def scipy_discrete(name: str, *args: float) -> FirstOccurrence:
@@ -230,9 +231,7 @@ def exponential(rate: float) -> FirstOccurrence:
     ``geometric(1 - exp(-rate))``."""
     label = _label("exponential", rate)
     r = _positive(label, "rate", rate)
-    from mitld_lp.distributions import scipy_laws
-
-    return scipy_laws.discretised(label, "expon", scipy_laws.stats().expon, [], {"scale": 1.0 / r})
+    return _weibull_form(label, "expon", 1.0, 1.0 / r)
 
 
 def weibull(shape: float, scale: float) -> FirstOccurrence:
@@ -240,11 +239,17 @@ def weibull(shape: float, scale: float) -> FirstOccurrence:
     label = _label("weibull", shape, scale)
     c = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    from mitld_lp.distributions import scipy_laws
+    return _weibull_form(label, "weibull_min", c, s)
 
-    return scipy_laws.discretised(
-        label, "weibull_min", scipy_laws.stats().weibull_min, [c], {"scale": s}
-    )
+
+def _weibull_form(label: str, name: str, shape: float, scale: float) -> FirstOccurrence:
+    """``K = ceil(X)`` for ``X`` with survival ``exp(-(x/scale)^shape)``, in closed form
+    (SciPy's ``name`` by the same formulas, without importing ``scipy.stats``)."""
+    from mitld_lp.distributions import scipy_laws
+    from mitld_lp.distributions.weibull_law import WeibullX
+
+    return scipy_laws.evaluable(scipy_laws.Discretised(label, WeibullX(shape, scale), math.inf),
+                                name)
 
 
 def gamma(shape: float, scale: float) -> FirstOccurrence:
