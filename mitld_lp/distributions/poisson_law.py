@@ -161,8 +161,9 @@ class PoissonX:
         return self._pmf_nonneg(x) * s
 
     def _tail(self, x: np.ndarray) -> np.ndarray:
-        """``sum_{j > x} pmf(j)`` at integers ``x >= 0``: from ``pmf(x + 1)`` up, each term
-        ``lam/j`` times the one below (decreasing once ``j > lam``)."""
+        """``sum_{j > x} pmf(j) / pmf(x + 1)`` at integers ``x >= 0``: from 1 up, each term
+        ``lam/j`` times the one below (decreasing once ``j > lam``), so that the tail's
+        logarithm does not underflow where the tail does."""
         lam = self.lam
         s = np.ones(x.shape)
         term = np.ones(x.shape)
@@ -176,29 +177,37 @@ class PoissonX:
             term[idx] = t
             s[idx] += t
             live[idx] = (t >= _NEGLIGIBLE * s[idx]) | (j <= lam)
-        return self._pmf_nonneg(x + 1) * s
+        return s
 
-    def _both(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
-        """``(cdf, sf)`` at ``x``: each summed directly where it may be under one half,
-        else one minus the other."""
+    def _both(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(cdf, sf, log sf)`` at ``x``: each side summed directly where it may be under
+        one half, else one minus the other; the log of a direct tail as ``log pmf(x+1)
+        + log(sum / pmf(x+1))``, finite (and the hazard near 1) where the tail underflows."""
         xs = np.asarray(x, dtype=np.int64)
         cdf = np.zeros(xs.shape)
         sf = np.ones(xs.shape)
+        log_sf = np.zeros(xs.shape)
         ok = xs >= 0
         xo = xs[ok]
         head = np.full(xo.shape, np.nan)
-        tail = np.full(xo.shape, np.nan)
+        ratio = np.full(xo.shape, np.nan)  # the tail over pmf(x + 1)
         below = xo < self.lam
         head[below] = self._head(xo[below])
-        tail[~below] = self._tail(xo[~below])
+        ratio[~below] = self._tail(xo[~below])
+        tail = self._pmf_nonneg(xo + 1) * ratio
         # the other side where this one is above one half (x near the mean)
         more = below & (head > 0.5)
-        tail[more] = self._tail(xo[more])
+        ratio[more] = self._tail(xo[more])
+        tail[more] = self._pmf_nonneg(xo[more] + 1) * ratio[more]
         more = ~below & (tail > 0.5)
         head[more] = self._head(xo[more])
+        direct = ~np.isnan(tail)
         cdf[ok] = np.where(np.isnan(head), 1.0 - tail, head)
-        sf[ok] = np.where(np.isnan(tail), 1.0 - head, tail)
-        return cdf, sf
+        sf[ok] = np.where(direct, tail, 1.0 - head)
+        with np.errstate(divide="ignore"):
+            log_sf[ok] = np.where(direct, self._logpmf_nonneg(xo + 1) + np.log(ratio),
+                                  np.log1p(-head))
+        return cdf, sf, log_sf
 
     def cdf(self, x: Any) -> np.ndarray:
         return self._both(x)[0]
@@ -207,5 +216,4 @@ class PoissonX:
         return self._both(x)[1]
 
     def logsf(self, x: Any) -> np.ndarray:
-        with np.errstate(divide="ignore"):
-            return np.log(self.sf(x))
+        return self._both(x)[2]
