@@ -73,7 +73,7 @@ def test_poisson_hazard_increases_towards_one_past_the_tails_underflow(lam: floa
     (``hazard_range_from``): it must hold also where the tail is subnormal or 0."""
     law = D.poisson(lam)
     h = law.hazard(np.arange(1, int(lam) + 800))
-    assert np.all(np.diff(h) >= 0) and np.all(h <= 1.0) and h[-1] > 0.99
+    assert np.all(np.diff(h) >= 0) and np.all(h <= 1.0) and h[-1] > 0.95
     assert law.hazard_range_from(40 + int(lam))[0] <= h[-1]
 
 
