@@ -89,6 +89,25 @@ def _bd0(x: np.ndarray, lam: float) -> np.ndarray:
     return out
 
 
+def _running_sum(x: np.ndarray, step: Any) -> np.ndarray:
+    """``1 + t_1 + t_2 + ...`` at each ``x``, ``t_i = t_(i-1) * factor`` with ``(factor,
+    more, rising) = step(x, i)``: summed largest term first while ``more`` and until a
+    term no longer counts, unless the terms may still be ``rising``."""
+    s = np.ones(x.shape)
+    term = np.ones(x.shape)
+    live = np.ones(x.shape, dtype=bool)
+    for i in range(1, _MAX_TERMS):
+        idx = np.flatnonzero(live)
+        if idx.size == 0:
+            break
+        factor, more, rising = step(x[idx], i)
+        t = term[idx] * factor
+        term[idx] = t
+        s[idx] += t
+        live[idx] = more & ((t >= _NEGLIGIBLE * s[idx]) | rising)
+    return s
+
+
 class PoissonX:
     """``X ~ Poisson(lam)``, ``lam > 0`` finite, at integer arrays (the methods of a frozen
     ``scipy.stats.poisson`` that the shifted law reads)."""
@@ -146,38 +165,24 @@ class PoissonX:
         """``sum_{j <= x} pmf(j)`` at integers ``x >= 0``: from ``pmf(x)`` down, each term
         ``j/lam`` times the one above (decreasing while ``j < lam``)."""
         lam = self.lam
-        s = np.ones(x.shape)
-        term = np.ones(x.shape)
-        live = np.ones(x.shape, dtype=bool)
-        for i in range(1, _MAX_TERMS):
-            idx = np.flatnonzero(live)
-            if idx.size == 0:
-                break
-            j = x[idx] - i + 1  # the term pmf(x - i) = pmf(x - i + 1) (x - i + 1)/lam
-            t = term[idx] * (j / lam)
-            term[idx] = t
-            s[idx] += t
-            live[idx] = (j > 1) & ((t >= _NEGLIGIBLE * s[idx]) | (j > lam))
-        return self._pmf_nonneg(x) * s
+
+        def step(xi: np.ndarray, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            j = xi - i + 1  # pmf(x - i) = pmf(x - i + 1) (x - i + 1)/lam
+            return j / lam, j > 1, j > lam
+
+        return self._pmf_nonneg(x) * _running_sum(x, step)
 
     def _tail(self, x: np.ndarray) -> np.ndarray:
         """``sum_{j > x} pmf(j) / pmf(x + 1)`` at integers ``x >= 0``: from 1 up, each term
         ``lam/j`` times the one below (decreasing once ``j > lam``), so that the tail's
         logarithm does not underflow where the tail does."""
         lam = self.lam
-        s = np.ones(x.shape)
-        term = np.ones(x.shape)
-        live = np.ones(x.shape, dtype=bool)
-        for i in range(2, _MAX_TERMS):
-            idx = np.flatnonzero(live)
-            if idx.size == 0:
-                break
-            j = (x[idx] + i).astype(np.float64)
-            t = term[idx] * (lam / j)
-            term[idx] = t
-            s[idx] += t
-            live[idx] = (t >= _NEGLIGIBLE * s[idx]) | (j <= lam)
-        return s
+
+        def step(xi: np.ndarray, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            j = (xi + i + 1).astype(np.float64)  # pmf(x + i + 1) = pmf(x + i) lam/(x + i + 1)
+            return lam / j, np.ones(j.shape, dtype=bool), j <= lam
+
+        return _running_sum(x, step)
 
     def _both(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(cdf, sf, log sf)`` at ``x``: each side summed directly where it may be under
