@@ -8,8 +8,9 @@ continuous ``X >= 0`` read at whole steps.
 
 Survival is never computed as ``1 - cdf``, so tails far below machine epsilon stay
 accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the import takes
-~0.6 s, which ``import mitld_lp`` and a model with only geometric and table laws should
-not pay.  The families that use these adapters validate their numbers first
+~0.6-1 s, which ``import mitld_lp`` and a model with only geometric, table, Poisson,
+exponential or Weibull laws should not pay (the last three give these adapters a closed
+form in place of a frozen scipy law: :mod:`.poisson_law`, :mod:`.weibull_law`).  The families that use these adapters validate their numbers first
 (:mod:`.families`); here the frozen law's support is checked, and its values at step 1
 must be numbers (scipy accepts some parameters it then evaluates to nan).
 """
