@@ -6,12 +6,13 @@ continuous ``X >= 0`` read at whole steps.
 * :class:`Discretised`: ``K = ceil(X)``, ``mu(k) = F(k) - F(k-1)``; the hazard is
   ``1 - S(k)/S(k-1) = -expm1(logsf(k) - logsf(k-1))``.
 
-Survival is never computed as ``1 - cdf``, so tails far below machine epsilon stay
-accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the import takes
-~0.6-1 s, which ``import mitld_lp`` and a model with only geometric, table, Poisson,
-exponential or Weibull laws should not pay (the last three give these adapters a closed
-form in place of a frozen scipy law: :mod:`.poisson_law`, :mod:`.weibull_law`).  The families that use these adapters validate their numbers first
-(:mod:`.families`); here the frozen law's support is checked, and its values at step 1
+Survival is never computed as ``1 - cdf`` where it is small, so tails far below machine
+epsilon stay accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the
+import takes ~0.6-1 s, which ``import mitld_lp`` and a model with only geometric, table,
+Poisson, exponential or Weibull laws should not pay (the last three give these adapters
+a closed form in place of a frozen scipy law: :mod:`.poisson_law`, :mod:`.weibull_law`).
+The families that use these adapters validate their numbers first (:mod:`.families`);
+here the frozen law's support is checked, and its values at step 1
 must be numbers (scipy accepts some parameters it then evaluates to nan).
 """
 
