@@ -23,8 +23,9 @@ Each name is imported from its module on first use (PEP 562): a solve whose task
 no law (a PRISM property) imports none of them.
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from mitld_lp.util.lazy import lazy_names
 
 if TYPE_CHECKING:
     from mitld_lp.distributions.families import (
@@ -94,16 +95,4 @@ __all__ = [
     "MAX_STEP",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """A public name, from its module on first use."""
-    where = _WHERE.get(name)
-    if where is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(where), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_names(globals(), _WHERE)

@@ -3,8 +3,7 @@
 The reference evaluators (:mod:`.semantics`: ``holds``, ``holds_lasso``, ``Verdict``) are
 imported on first use: a solve reads formulas but never evaluates one on a word."""
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from mitld_lp.logic.fragment import (
     FragmentError,
@@ -49,6 +48,7 @@ from mitld_lp.logic.syntax import (
     until,
     weak,
 )
+from mitld_lp.util.lazy import lazy_names
 
 if TYPE_CHECKING:
     from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
@@ -105,16 +105,4 @@ __all__ = [
     "subformulas",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """A public name of a module imported on first use (PEP 562)."""
-    where = _LAZY.get(name)
-    if where is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(where), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names(globals(), _LAZY)
