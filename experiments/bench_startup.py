@@ -18,6 +18,9 @@ child, ``os.wait4``), beside stormpy scripts doing the same task's work, in one 
   (a PRISM file through Storm's builder, our analysis and solve), beside
   ``storm_corridor``: a stormpy script on the same file with the constant written in,
   the same property checked soundly;
+* ``ours_corridor_law``: the bundled corridor model file, ``mitld-lp solve
+  models/corridor.toml`` (the same PRISM file, the door's opening a Poisson law: what a
+  law in closed form saves, without SciPy's statistics);
 * ``version``: ``mitld-lp --version`` (the package's import and the console script's
   start, nothing of the command line) and ``check``: ``mitld-lp check`` on the case's
   formula (the command line and the formula parser, no model): trivial commands;
@@ -31,7 +34,7 @@ each stormpy script is the median of the rounds' ratios (each round's pair ran s
 side, which keeps it meaningful on a machine whose speed drifts).  The target (issue 45):
 the case as a process <= 2x the stormpy script on the PRISM encoding.
 
-``--compare BASE`` also runs ``ours``, ``ours_corridor``, ``version`` and ``check`` with
+``--compare BASE`` also runs ``ours``, ``ours_corridor(_law)``, ``version`` and ``check`` with
 another ``mitld_lp``, in the same rounds, as ``*_base`` rows: before and after in one run.
 ``BASE`` is a checkout's folder or a commit of this repository (its ``mitld_lp`` taken
 with ``git archive`` into a scratch folder).  Bytecode is cached for both (the
@@ -142,6 +145,8 @@ def commands(work: Path, compare: Path | None) -> dict[str, tuple[list[str], Pat
         "ours_corridor": ([py, "-m", "mitld_lp", "solve", str(CORRIDOR), "--prop",
                            CORRIDOR_PROPERTY, "--const", "open_at_start=true", "--json", "-q"],
                           _bracket),
+        "ours_corridor_law": ([py, "-m", "mitld_lp", "solve", str(CORRIDOR.with_suffix(".toml")),
+                               "--json", "-q"], _bracket),
     }
     rows: dict[str, tuple[list[str], Path | None, Any]] = {
         name: (argv, None, read) for name, (argv, read) in ours.items()}

@@ -6,35 +6,44 @@ by :mod:`mitld_lp.model`, which reads the rest of the file."""
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp.files.keys import KeyContext, key_path, toml_text, type_name
 from mitld_lp.logic.fragment import FragmentError, FragmentReport, check
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.syntax import Formula, atoms
 from mitld_lp.worlds.game import Game
-from mitld_lp.worlds.grid import GridWorld
 from mitld_lp.worlds.task import Task
+
+if TYPE_CHECKING:  # a grid's module is read only where a file describes a grid
+    from mitld_lp.worlds.grid import GridWorld
 
 __all__ = ["GAME_KINDS", "GameKind", "parse_spec"]
 
 
 def parse_spec(text: str, ctx: KeyContext) -> tuple[Formula, FragmentReport]:
     """Parse the spec (errors carry ``line:column`` within the spec string) and check it
-    is in the supported co-safe fragment."""
+    is in the supported co-safe fragment.  A text read before is not parsed again (a
+    PRISM model file reads its spec for the loader's decided states, then for its task):
+    the report and its formula are frozen, so the same objects serve both."""
     try:
-        source = parse_source(text)
+        report = _checked(text)
     except ParseError as exc:
         raise ctx.error("spec", f"{exc.line}:{exc.column}: {exc.reason}") from exc
-    try:
-        report = check(source)  # the events of every D[mu] a written, also folded ones
     except FragmentError as exc:
         raise ctx.error("spec", str(exc)) from exc
     return report.formula, report
+
+
+@functools.lru_cache(maxsize=32)
+def _checked(text: str) -> FragmentReport:
+    """The spec's report, by its text (a failure is not kept: it raises again)."""
+    return check(parse_source(text))  # the events of every D[mu] a written, also folded ones
 
 
 
@@ -67,7 +76,7 @@ class GameKind:
 def _build_grid(doc: dict[str, Any], ctx: KeyContext) -> GridWorld:
     """The ``[grid]`` and ``[regions]`` tables: their TOML types are checked here, their
     values by :class:`GridWorld`, whose :class:`GridError` paths map to key paths."""
-    from mitld_lp.worlds.grid import GridError
+    from mitld_lp.worlds.grid import GridError, GridWorld
 
     grid = ctx.table(doc["grid"], "grid")
     ctx.keys(grid, "grid", {"size", "start"}, {"slip", "obstacles", "stay"})

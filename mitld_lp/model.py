@@ -46,10 +46,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mitld_lp import defaults
-from mitld_lp.distributions import DistributionError, FirstOccurrence, from_table
 from mitld_lp.files import rules as file_rules
 from mitld_lp.files.constants import substitute
 from mitld_lp.files.keys import (
@@ -67,6 +66,9 @@ from mitld_lp.sensing.sensors import Sensor, read_sensors, sensors_from
 from mitld_lp.util.decimals import Written
 from mitld_lp.worlds.game import Game, GameError, world_members
 from mitld_lp.worlds.task import BindError, Task, bind, resolve_laws
+
+if TYPE_CHECKING:  # the laws' package is read only where a file names a law
+    from mitld_lp.distributions import FirstOccurrence
 
 __all__ = [
     "Model",
@@ -278,9 +280,14 @@ def _law_tables(doc: Mapping[str, Any], key: str, ctx: KeyContext) -> dict[str, 
     """The laws of a model file's ``[distributions]`` or ``[events]`` table: each entry
     an inline table such as ``{ geometric = 0.5 }`` (errors at ``key.name``)."""
     laws: dict[str, FirstOccurrence] = {}
+    tables = ctx.table(doc.get(key, {}), key)
+    if not tables:  # a PRISM file's world with no law: the families are not imported
+        return laws
+    from mitld_lp.distributions import DistributionError, from_table
+
     source = Path(ctx.source)  # a fit's data file is read beside the model file
     base = source.parent if source.is_file() else None
-    for name, value in ctx.table(doc.get(key, {}), key).items():
+    for name, value in tables.items():
         path = key_path(key, name)
         if not isinstance(value, dict):
             raise ctx.error(

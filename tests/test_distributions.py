@@ -678,14 +678,15 @@ def test_chi_square_rejects_pmf_used_as_hazard(make: Callable[[], FirstOccurrenc
 
 
 def test_import_does_not_load_scipy_stats() -> None:
-    """``import mitld_lp`` must not pay for ``scipy.stats`` (~0.6 s); a scipy family
-    imports it when first built."""
+    """``import mitld_lp`` must not pay for ``scipy.stats`` (~0.6 s), nor the Poisson law
+    (closed form); a family built on scipy imports it when first built."""
     import subprocess
     import sys
 
     code = (
         "import sys, mitld_lp; assert 'scipy.stats' not in sys.modules, 'at import'; "
-        "mitld_lp.distributions.poisson(2.0); assert 'scipy.stats' in sys.modules"
+        "mitld_lp.distributions.poisson(2.0); assert 'scipy.stats' not in sys.modules; "
+        "mitld_lp.distributions.gamma(2.0, 1.0); assert 'scipy.stats' in sys.modules"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)

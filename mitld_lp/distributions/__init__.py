@@ -18,34 +18,55 @@ The package, cut by concern (nothing here imports the formula layer; it imports 
 * :mod:`.printing`: how a literal is written (labels and the formula printer share it);
 * :mod:`.literal`: the written forms -- the formula node :class:`DistLiteral`, which
   builds its law once, and a model file's inline table (:func:`from_table`).
+
+Each name is imported from its module on first use (PEP 562): a solve whose task names
+no law (a PRISM property) imports none of them.
 """
 
-from mitld_lp.distributions.families import (
-    FAMILIES,
-    Family,
-    discretised,
-    exponential,
-    gamma,
-    geometric,
-    pmf,
-    poisson,
-    scipy_discrete,
-    uniform,
-    weibull,
-)
-from mitld_lp.distributions.law import (
-    HAZARD_ATOL,
-    HAZARD_RTOL,
-    MASS_TOLERANCE,
-    MAX_HAZARD_SCAN,
-    MAX_STEP,
-    MAX_TABLE_STEPS,
-    NEGLIGIBLE_TAIL,
-    DistributionError,
-    FirstOccurrence,
-)
-from mitld_lp.distributions.literal import DistLiteral, from_spec, from_table
-from mitld_lp.distributions.printing import DistArg
+from typing import TYPE_CHECKING
+
+from mitld_lp.util.lazy import lazy_names
+
+if TYPE_CHECKING:
+    from mitld_lp.distributions.families import (
+        FAMILIES,
+        Family,
+        discretised,
+        exponential,
+        gamma,
+        geometric,
+        pmf,
+        poisson,
+        scipy_discrete,
+        uniform,
+        weibull,
+    )
+    from mitld_lp.distributions.law import (
+        HAZARD_ATOL,
+        HAZARD_RTOL,
+        MASS_TOLERANCE,
+        MAX_HAZARD_SCAN,
+        MAX_STEP,
+        MAX_TABLE_STEPS,
+        NEGLIGIBLE_TAIL,
+        DistributionError,
+        FirstOccurrence,
+    )
+    from mitld_lp.distributions.literal import DistLiteral, from_spec, from_table
+    from mitld_lp.distributions.printing import DistArg
+
+
+_WHERE = {
+    **dict.fromkeys(("FAMILIES", "Family", "discretised", "exponential", "gamma", "geometric",
+                     "pmf", "poisson", "scipy_discrete", "uniform", "weibull"),
+                    "mitld_lp.distributions.families"),
+    **dict.fromkeys(("HAZARD_ATOL", "HAZARD_RTOL", "MASS_TOLERANCE", "MAX_HAZARD_SCAN",
+                     "MAX_STEP", "MAX_TABLE_STEPS", "NEGLIGIBLE_TAIL", "DistributionError",
+                     "FirstOccurrence"), "mitld_lp.distributions.law"),
+    **dict.fromkeys(("DistLiteral", "from_spec", "from_table"),
+                    "mitld_lp.distributions.literal"),
+    "DistArg": "mitld_lp.distributions.printing",
+}
 
 __all__ = [
     "DistributionError",
@@ -73,3 +94,5 @@ __all__ = [
     "MAX_TABLE_STEPS",
     "MAX_STEP",
 ]
+
+__getattr__, __dir__ = lazy_names(globals(), _WHERE)

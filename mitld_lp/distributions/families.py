@@ -22,14 +22,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from mitld_lp.distributions.closed import Finite, Geometric, Uniform
 from mitld_lp.distributions.law import (
     MASS_TOLERANCE,
     MAX_STEP,
@@ -115,6 +114,8 @@ def geometric(p: float) -> FirstOccurrence:
     pf = _real(label, "p", p)
     if not 0 < pf <= 1:
         raise DistributionError(label, "p must be in (0, 1]")
+    from mitld_lp.distributions.closed import Geometric  # read once a law is built
+
     return Geometric(label, pf, written=p)
 
 
@@ -152,6 +153,8 @@ def pmf(masses: Sequence[float] | npt.NDArray[Any]) -> FirstOccurrence:
         raise DistributionError(label, "masses sum to more than the largest float > 1") from None
     if total > 1 + MASS_TOLERANCE:
         raise DistributionError(label, f"masses sum to {total:.12g} > 1")
+    from mitld_lp.distributions.closed import Finite
+
     return Finite(label, m, written=("masses", tuple(values)))
 
 
@@ -174,6 +177,8 @@ def uniform(a: int, b: int) -> FirstOccurrence:
         )
     if hi < lo:
         raise DistributionError(label, f"b must be >= a = {int_text(lo)}, got {int_text(hi)}")
+    from mitld_lp.distributions.closed import Finite, Uniform
+
     if hi > MAX_TABLE_STEPS:
         return Uniform(label, lo, hi)
     m = np.zeros(hi)
@@ -186,12 +191,13 @@ def poisson(lam: float) -> FirstOccurrence:
     ``P(K = k) = exp(-lam) lam^(k-1) / (k-1)!``."""
     label = _label("poisson", lam)
     lf = _positive(label, "lam", lam)
-    from mitld_lp.distributions import scipy_laws  # SciPy's laws: imported when used
+    from mitld_lp.distributions import scipy_laws  # the adapter; scipy.stats not imported
+    from mitld_lp.distributions.poisson_law import PoissonX  # closed form, no scipy.stats
 
-    law = scipy_laws.shifted(label, "poisson", scipy_laws.stats().poisson, [lf])
     # a Poisson pmf is log-concave (mu(k+1)/mu(k) = lam/k decreases), so its hazard
     # increases (towards 1): FirstOccurrence.hazard_range_from
-    return replace(law, increasing=True)
+    law = scipy_laws.ShiftedDiscrete(label, PoissonX(lf), math.inf, shift=1, increasing=True)
+    return scipy_laws.evaluable(law, "poisson")
 
 
 def scipy_discrete(name: str, *args: float) -> FirstOccurrence:
@@ -225,9 +231,7 @@ def exponential(rate: float) -> FirstOccurrence:
     ``geometric(1 - exp(-rate))``."""
     label = _label("exponential", rate)
     r = _positive(label, "rate", rate)
-    from mitld_lp.distributions import scipy_laws
-
-    return scipy_laws.discretised(label, "expon", scipy_laws.stats().expon, [], {"scale": 1.0 / r})
+    return _weibull_form(label, "expon", 1.0, 1.0 / r)
 
 
 def weibull(shape: float, scale: float) -> FirstOccurrence:
@@ -235,11 +239,17 @@ def weibull(shape: float, scale: float) -> FirstOccurrence:
     label = _label("weibull", shape, scale)
     c = _positive(label, "shape", shape)
     s = _positive(label, "scale", scale)
-    from mitld_lp.distributions import scipy_laws
+    return _weibull_form(label, "weibull_min", c, s)
 
-    return scipy_laws.discretised(
-        label, "weibull_min", scipy_laws.stats().weibull_min, [c], {"scale": s}
-    )
+
+def _weibull_form(label: str, name: str, shape: float, scale: float) -> FirstOccurrence:
+    """``K = ceil(X)`` for ``X`` with survival ``exp(-(x/scale)^shape)``, in closed form
+    (SciPy's ``name`` by the same formulas, without importing ``scipy.stats``)."""
+    from mitld_lp.distributions import scipy_laws
+    from mitld_lp.distributions.weibull_law import WeibullX
+
+    return scipy_laws.evaluable(scipy_laws.Discretised(label, WeibullX(shape, scale), math.inf),
+                                name)
 
 
 def gamma(shape: float, scale: float) -> FirstOccurrence:

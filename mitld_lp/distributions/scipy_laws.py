@@ -6,11 +6,13 @@ continuous ``X >= 0`` read at whole steps.
 * :class:`Discretised`: ``K = ceil(X)``, ``mu(k) = F(k) - F(k-1)``; the hazard is
   ``1 - S(k)/S(k-1) = -expm1(logsf(k) - logsf(k-1))``.
 
-Survival is never computed as ``1 - cdf``, so tails far below machine epsilon stay
-accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the import takes
-~0.6 s, which ``import mitld_lp`` and a model with only geometric and table laws should
-not pay.  The families that use these adapters validate their numbers first
-(:mod:`.families`); here the frozen law's support is checked, and its values at step 1
+Survival is never computed as ``1 - cdf`` where it is small, so tails far below machine
+epsilon stay accurate.  ``scipy.stats`` is imported on first use (:func:`stats`): the
+import takes ~0.6-1 s, which ``import mitld_lp`` and a model with only geometric, table,
+Poisson, exponential or Weibull laws should not pay (the last three give these adapters
+a closed form in place of a frozen scipy law: :mod:`.poisson_law`, :mod:`.weibull_law`).
+The families that use these adapters validate their numbers first (:mod:`.families`);
+here the frozen law's support is checked, and its values at step 1
 must be numbers (scipy accepts some parameters it then evaluates to nan).
 """
 
@@ -34,7 +36,8 @@ from mitld_lp.distributions.law import (
     hazards_close,
 )
 
-__all__ = ["stats", "generator", "ShiftedDiscrete", "Discretised", "shifted", "discretised"]
+__all__ = ["stats", "generator", "ShiftedDiscrete", "Discretised", "shifted", "discretised",
+           "evaluable"]
 
 
 def stats() -> Any:
@@ -180,9 +183,11 @@ def _freeze(
     return frozen, lo, hi
 
 
-def _evaluable(law: ScipyBased, name: str) -> ScipyBased:
+def evaluable(law: ScipyBased, name: str) -> ScipyBased:
     """``law``, once its pmf, survival and hazard at step 1 are numbers (a
-    :class:`DistributionError` naming the first that is not)."""
+    :class:`DistributionError` naming the first that is not).  ``law.dist`` may be any
+    object with a frozen scipy law's ``pmf``, ``cdf``, ``sf``, ``logpmf`` and ``logsf``
+    (:class:`~mitld_lp.distributions.poisson_law.PoissonX`)."""
     try:
         with np.errstate(all="ignore"):
             law.pmf(1)
@@ -206,7 +211,7 @@ def shifted(label: str, name: str, gen: Any, args: Sequence[float]) -> FirstOccu
     if lo != math.floor(lo):
         raise DistributionError(label, f"support must start at an integer, got {lo:g}")
     shift = 1 if lo == 0 else 0
-    return _evaluable(ShiftedDiscrete(label, frozen, hi + shift, shift=shift), name)
+    return evaluable(ShiftedDiscrete(label, frozen, hi + shift, shift=shift), name)
 
 
 def discretised(
@@ -223,4 +228,4 @@ def discretised(
     if f0 > 0:
         raise DistributionError(label, f"mass on step 0: F(0) = {f0:.6g} > 0")
     last = float(math.ceil(hi)) if math.isfinite(hi) else math.inf
-    return _evaluable(Discretised(label, frozen, last), name)
+    return evaluable(Discretised(label, frozen, last), name)

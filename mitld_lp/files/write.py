@@ -53,7 +53,6 @@ from mitld_lp.files.rules import (
     read_limit,
     read_text,
 )
-from mitld_lp.util import watch
 
 #: A result of :func:`mitld_lp.synthesis.synthesize` (not imported: this module is below
 #: every stage; :func:`write_policy` asks the result for its table).
@@ -237,6 +236,8 @@ def _new_scratch(final: Path, folder: bool) -> Path:
             except FileExistsError:
                 continue
             _scratch[scratch] = me
+            from mitld_lp.util import watch  # imported by the first scratch file
+
             watch.report(str(scratch))  # a watching parent removes it if it kills us
             return scratch
 

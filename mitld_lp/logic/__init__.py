@@ -1,4 +1,9 @@
-"""MITLD formulas: the AST, the parser, the supported fragment and reference evaluators."""
+"""MITLD formulas: the AST, the parser, the supported fragment and reference evaluators.
+
+The reference evaluators (:mod:`.semantics`: ``holds``, ``holds_lasso``, ``Verdict``) are
+imported on first use: a solve reads formulas but never evaluates one on a word."""
+
+from typing import TYPE_CHECKING
 
 from mitld_lp.logic.fragment import (
     FragmentError,
@@ -11,7 +16,6 @@ from mitld_lp.logic.fragment import (
     nnf,
 )
 from mitld_lp.logic.parser import ParseError, parse, parse_distribution, parse_source
-from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
 from mitld_lp.logic.source import LawSite, Source
 from mitld_lp.logic.syntax import (
     FALSE,
@@ -44,6 +48,13 @@ from mitld_lp.logic.syntax import (
     until,
     weak,
 )
+from mitld_lp.util.lazy import lazy_names
+
+if TYPE_CHECKING:
+    from mitld_lp.logic.semantics import Verdict, holds, holds_lasso
+
+_LAZY = {"holds": "mitld_lp.logic.semantics", "holds_lasso": "mitld_lp.logic.semantics",
+         "Verdict": "mitld_lp.logic.semantics"}
 
 __all__ = [
     "parse",
@@ -93,3 +104,5 @@ __all__ = [
     "atoms",
     "subformulas",
 ]
+
+__getattr__, __dir__ = lazy_names(globals(), _LAZY)

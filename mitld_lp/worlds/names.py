@@ -5,11 +5,11 @@ explicit game's state) under the one name ``state``."""
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Hashable
 from typing import Any
 
 from mitld_lp.worlds.game import Game
-from mitld_lp.worlds.grid import GridWorld
 
 __all__ = ["state_fields", "state_record", "state_values", "valuation_text", "world_variables"]
 
@@ -28,7 +28,8 @@ def world_variables(game: Game[Any]) -> tuple[str, ...] | None:
 def state_fields(game: Game[Any]) -> tuple[str, ...]:
     """The names of a world state's parts: ``("x", "y")`` for a grid, a PRISM world's
     variables, else ``("state",)``."""
-    if isinstance(game, GridWorld):
+    grid = sys.modules.get("mitld_lp.worlds.grid")  # not imported: no game is a grid
+    if grid is not None and isinstance(game, grid.GridWorld):
         return ("x", "y")
     names = world_variables(game)
     return names if names is not None else ("state",)
