@@ -166,3 +166,20 @@ def test_a_numba_config_file_keeps_yaml_loaded(tmp_path: Path) -> None:
             "print(json.dumps({'yaml': 'yaml' in sys.modules}))")
     assert _run(code, cwd=tmp_path)["yaml"] is True
 
+
+COMPILED_MODULES = ("mitld_lp.solvers.compiled_graph", "mitld_lp.solvers.level_kernels",
+                    "mitld_lp.solvers.compiled_kernels")
+
+
+@pytest.mark.parametrize("module", COMPILED_MODULES)
+def test_each_compiled_module_imports_numba_without_yaml(module: str,
+                                                          tmp_path: Path) -> None:
+    """Whichever compiled module imports numba first in a process, PyYAML stays out
+    (no config file in the working directory), and numba's config can still read one."""
+    pytest.importorskip("yaml")
+    code = ("import importlib, json, sys\n"
+            f"importlib.import_module({module!r})\n"
+            "config = sys.modules['numba.core.config']\n"
+            "print(json.dumps({'yaml': 'yaml' in sys.modules,"
+            " 'lazy': callable(config.yaml.safe_load)}))")
+    assert _run(code, cwd=tmp_path) == {"yaml": False, "lazy": True}

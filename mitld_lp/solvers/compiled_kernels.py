@@ -10,12 +10,12 @@ apart in memory.  The arithmetic is the same, and so are the bounds, to the bit.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba = numba_narrow.require_numba()  # numba without PyYAML
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 

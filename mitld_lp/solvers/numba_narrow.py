@@ -126,6 +126,15 @@ class _LazyYaml:
         return getattr(yaml, name)
 
 
+def require_numba() -> Any:
+    """:func:`import_numba` for a compiled module, which cannot work without numba: the
+    module, or ImportError where numba is missing (its importers fall back on that)."""
+    numba = import_numba()
+    if numba is None:
+        raise ImportError("numba is not installed")
+    return numba
+
+
 def import_numba() -> Any:
     """``import numba`` (the module, or None where it is missing) without importing
     PyYAML with it: ``numba.core.config`` imports it at numba's import (0.024 s of CPU)
