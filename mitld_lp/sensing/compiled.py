@@ -68,8 +68,10 @@ def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
             c, st, occ, pu, o_seq, o_succ, hstart, hcount, fb.hyp_code, fb.hyp_weight,
             fb.nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut, b_now, b_wait,
             s_start, s_len, s_w2, s_pg, label, fb.u_atoms, fb.s_atoms, pending, fb.nu,
-            empty if step is None else step, empty if ends is None else ends)
-        cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out
+            empty if step is None else step, empty if ends is None else ends,
+            *fb.row_work)
+        cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out[:12]
+        fb.row_work = out[12:]  # the rows' pages kept for the next level (the kernel's)
         if len(ma) == 0:
             none = np.full(len(cut_c), -1, INT)
             more = [(cut_c, cut_o, cut_b, none, np.full(len(none), trunc), cut_m),

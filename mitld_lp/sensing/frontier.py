@@ -142,6 +142,7 @@ class FrontierBuilder(StepRules):
         self.hyp_code = np.zeros(1024, _I)  # every state's hypotheses, in state order
         self.hyp_weight = np.zeros(1024, np.float64)
         self.n_hyps = 0
+        self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))  # compiled.py's pages
 
     # ---------------------------------------------------------------- small tables
 

@@ -401,8 +401,8 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         for e in range(g0, g):
             weight[e] = hmass[e] / t
         i = j
-    return (hfirst[:g].copy(), hobs[:g].copy(), hcode[:g].copy(), hmass[:g].copy(),
-            weight[:g].copy(), total, count, hash_, first)
+    # no copies: every row is a hypothesis of its own in the bus cases (g = n)
+    return hfirst[:g], hobs[:g], hcode[:g], hmass[:g], weight[:g], total, count, hash_, first
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
