@@ -28,6 +28,9 @@ from mitld_lp.sensing.rows import INT, compiled_on, fsum_by, groups, mix64, scat
 __all__ = ["hypothesis_rows"]
 
 _TRIES = 3  # the steps missing, then the ends missing, then every row found
+GROUPED = True
+"""Whether the hypothesis kernel also groups each choice's rows by observation (False:
+:func:`observations` groups the level's rows after it, as before; the same groups)."""
 
 
 def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
@@ -69,7 +72,7 @@ def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
             fb.nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut, b_now, b_wait,
             s_start, s_len, s_w2, s_pg, label, fb.u_atoms, fb.s_atoms, pending, fb.nu,
             empty if step is None else step, empty if ends is None else ends,
-            np.int64(len(fb.sensed) if _fits(fb) else -1), *fb.row_work)
+            np.int64(len(fb.sensed) if GROUPED and _fits(fb) else -1), *fb.row_work)
         cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out[:12]
         n_obs, obs, first, perm = out[12:16]
         fb.row_work = out[16:]  # the rows' pages kept for the next level (the kernel's)
