@@ -301,7 +301,7 @@ class FrontierBuilder(StepRules):
         # canonical (merge.py), each group's in InfoState order
         found = compiled_on() and compiled.observations(self, c, w2, occ, new, *done)
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
-        tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
+        tid2 = self.shifts.canonical(tid2, obs, c, c_state, reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
         hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
             compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))

@@ -298,23 +298,26 @@ def hash_add(out, idx, codes):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
-                 delays):  # pragma: no cover - compiled
+def group_shifts(times, tid, group, n_groups, c, c_state, reported, new, clock, events,
+                 starts, delays):  # pragma: no cover - compiled
     """Each group's shift of each shiftable sensed event's times
     (:meth:`mitld_lp.sensing.merge.Shifts.canonical`): ``times`` each times index's
-    steps, ``tid`` each row's, ``said`` its reports (kept and new), ``clock`` its
-    parent's clock; ``events`` the shiftable events, ``starts`` their least places,
-    ``delays`` every sensed event's delay."""
+    steps, ``tid`` each row's, ``c_state[c]`` its parent state, whose ``reported`` and
+    ``clock`` it reads (with the row's ``new`` reports), read here row by row rather
+    than gathered into arrays of the level's length first; ``events`` the shiftable
+    events, ``starts`` their least places, ``delays`` every sensed event's delay."""
     n, k = len(tid), len(events)
     good = np.ones((n_groups, k), np.bool_)
     least = np.full((n_groups, k), _MAX, np.int64)
     for r in range(n):
         g = group[r]
         t = tid[r]
+        st = c_state[c[r]]
+        said = reported[st] | new[r]
         for e in range(k):
             i = events[e]
             ki = times[t, i]
-            if not (ki > 0 and ((said[r] >> i) & 1 == 1 or ki + delays[i] <= clock[r] + 1)):
+            if not (ki > 0 and ((said >> i) & 1 == 1 or ki + delays[i] <= clock[st] + 1)):
                 good[g, e] = False
             if ki < least[g, e]:
                 least[g, e] = ki
