@@ -98,6 +98,7 @@ from mitld_lp.sensing.info import (
     Reaches,
     info_size,
 )
+from mitld_lp.sensing.rows import small_pages
 from mitld_lp.sensing.sensors import Sensor
 from mitld_lp.worlds.game import Game
 
@@ -304,8 +305,9 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
                      found.decided_from, found.last)
     size = info_size(game, sta, used)
     _announce(game, sta, sensed, max_states, memory, size)
-    belief = FrontierBuilder(game, dta, sta, sensed, used, max_states, memory, size,
-                      ends, name, merge).build(progress)
+    with small_pages():  # rows.py: the levels' rows in small pages
+        belief = FrontierBuilder(game, dta, sta, sensed, used, max_states, memory, size,
+                                 ends, name, merge).build(progress)
     return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
 
 

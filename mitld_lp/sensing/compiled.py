@@ -28,6 +28,9 @@ from mitld_lp.sensing.rows import INT, compiled_on, fsum_by, groups, mix64, scat
 __all__ = ["hypothesis_rows"]
 
 _TRIES = 3  # the steps missing, then the ends missing, then every row found
+GROUPED = True
+"""Whether the hypothesis kernel also groups each choice's rows by observation (False:
+:func:`observations` groups the level's rows after it, as before; the same groups)."""
 
 
 def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
@@ -68,26 +71,35 @@ def hypothesis_rows(fb: Any, cols: list[np.ndarray], c_state: np.ndarray,
             c, st, occ, pu, o_seq, o_succ, hstart, hcount, fb.hyp_code, fb.hyp_weight,
             fb.nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut, b_now, b_wait,
             s_start, s_len, s_w2, s_pg, label, fb.u_atoms, fb.s_atoms, pending, fb.nu,
-            empty if step is None else step, empty if ends is None else ends)
-        cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out
+            empty if step is None else step, empty if ends is None else ends,
+            np.int64(len(fb.sensed) if GROUPED and _fits(fb) else -1), *fb.row_work)
+        cut_c, cut_o, cut_b, cut_m, d_i, d_new, d_m, u_i, u_m, of_step, ma, mb = out[:12]
+        n_obs, obs, first, perm = out[12:16]
+        fb.row_work = out[16:]  # the rows' pages kept for the next level (the kernel's)
         if len(ma) == 0:
             none = np.full(len(cut_c), -1, INT)
             more = [(cut_c, cut_o, cut_b, none, np.full(len(none), trunc), cut_m),
                     (d_i[0], d_i[1], d_i[2], d_i[3], d_i[4], d_m)]
             ended = (d_i[0], d_i[5], d_i[6], d_new, d_i[4])
-            return more, ended, (*u_i[:6], u_m, u_i[6])
+            grouped = (obs, first, perm) if n_obs >= 0 else None  # observations'
+            return more, ended, (*u_i[:6], u_m, u_i[6]), grouped
         (fb.step_table if of_step else fb.end_table)(ma, mb)
     return None
 
 
 def observations(fb: Any, c: np.ndarray, w2: np.ndarray, occ: np.ndarray,
-                 new: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                 new: np.ndarray, done: tuple[np.ndarray, ...] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The undecided rows grouped by observation ``(c, w2, occ, new)`` by the kernels
     (:func:`~mitld_lp.sensing.group_kernels.by_observation`: each row's group, a row of
     each, the rows in the groups' order), the observation made one word from its parts'
-    widths where they fit; None where the rows must be grouped otherwise."""
+    widths where they fit; None where the rows must be grouped otherwise.  ``done``:
+    the same grouping made by the hypothesis kernel as it made the rows (returned as it
+    is; None where it did not)."""
     from mitld_lp.sensing import group_kernels as gk
 
+    if done is not None:
+        return done
     if _fits(fb):
         return gk.by_observation_bits(c, w2, occ, new, fb.nu, len(fb.sensed))
     return gk.by_observation(compiled_on(), c, w2, occ, new)

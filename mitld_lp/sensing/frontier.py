@@ -142,6 +142,7 @@ class FrontierBuilder(StepRules):
         self.hyp_code = np.zeros(1024, _I)  # every state's hypotheses, in state order
         self.hyp_weight = np.zeros(1024, np.float64)
         self.n_hyps = 0
+        self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))  # compiled.py's pages
 
     # ---------------------------------------------------------------- small tables
 
@@ -294,13 +295,13 @@ class FrontierBuilder(StepRules):
             rows = compiled.hypothesis_rows(self, cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         if rows is None:
             rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
-        more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq) = rows
+        more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq), *done = rows
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
-        found = compiled.observations(self, c, w2, occ, new) if compiled_on() else None
+        found = compiled_on() and compiled.observations(self, c, w2, occ, new, *done)
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
-        tid2 = self.shifts.canonical(tid2, obs, c_state[c], reported, new, clock)
+        tid2 = self.shifts.canonical(tid2, obs, c, c_state, reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
         hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
             compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))

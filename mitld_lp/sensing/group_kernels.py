@@ -94,71 +94,84 @@ def _number(vals, idx, m, g, inverse, first):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def _block_groups(c, word):  # pragma: no cover - compiled
     """Rows grouped by ``(c, word)``, ``c`` non-decreasing: each row's group, one row of
-    each, and the rows in the groups' order (a permutation).  A choice's few distinct
-    words are found by a scan of those met (a sort where they are many), sorted, and
-    its rows placed by a counting sort."""
+    each, and the rows in the groups' order (a permutation), a run of one ``c`` at a
+    time (:func:`group_run`)."""
     n = len(c)
     inverse = np.empty(n, np.int64)
     first = np.empty(n, np.int64)
     perm = np.empty(n, np.int64)
     vals = np.empty(64, np.int64)
-    seen = np.empty(_SMALL, np.int64)  # a choice's distinct words as met
-    where = np.empty(_SMALL, np.int64)  # their rank once sorted, then their next slot
     local = np.empty(64, np.int64)
+    seen = np.empty(_SMALL, np.int64)
+    where = np.empty(_SMALL, np.int64)
     g = 0
     i = 0
     while i < n:
-        j = i + 1
-        while j < n and c[j] == c[i]:
-            j += 1
-        m = j - i
-        if len(vals) < m:
-            vals = np.empty(2 * m, np.int64)
-            local = np.empty(2 * m, np.int64)
-        k = 0  # distinct words met
-        for r in range(m):
-            v = word[i + r]
-            s = 0
-            while s < k and seen[s] != v:
-                s += 1
-            if s == k:
-                if k == _SMALL:
-                    break
-                seen[k] = v
-                first[g + k] = i + r
-                k += 1
-            local[r] = s
-        else:
-            # the distinct words in order: each one's rank among them
-            for a in range(k):
-                rank = 0
-                for b in range(k):
-                    if seen[b] < seen[a]:
-                        rank += 1
-                where[a] = rank
-                vals[rank] = first[g + a]
-            for a in range(k):
-                first[g + a] = vals[a]
-            count = np.zeros(k + 1, np.int64)
-            for r in range(m):
-                count[where[local[r]] + 1] += 1
-            for a in range(k):
-                count[a + 1] += count[a]
-            for r in range(m):
-                rk = where[local[r]]
-                perm[i + count[rk]] = i + r
-                count[rk] += 1
-                inverse[i + r] = g + rk
-            g += k
-            i = j
-            continue
+        j = _run_end(c, i)
+        g, vals, local = group_run(word, i, j, g, inverse, first, perm, vals, local, seen,
+                                   where)
+        i = j
+    return inverse, first[:g].copy(), perm
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def group_run(word, i, j, g, inverse, first, perm, vals, local, seen,
+              where):  # pragma: no cover - compiled
+    """The rows ``i .. j - 1`` (one choice's) grouped by ``word``, their groups
+    numbered from ``g`` in ascending order of their words: each row's group
+    (``inverse``), one row of each (``first``), the rows in the groups' order (``perm``,
+    stable).  A choice's few distinct words are found by a scan of those met (a sort
+    where they are many), sorted, and its rows placed by a counting sort.  Returns the
+    next group's number and the scratch arrays ``vals``, ``local`` (grown if needed;
+    ``seen``, ``where``: :data:`_SMALL` long)."""
+    m = j - i
+    if len(vals) < m:
+        vals = np.empty(2 * m, np.int64)
+        local = np.empty(2 * m, np.int64)
+    # seen: a choice's distinct words as met; where: their rank once sorted, then
+    # their next slot
+    k = 0  # distinct words met
+    many = False
+    for r in range(m):
+        v = word[i + r]
+        s = 0
+        while s < k and seen[s] != v:
+            s += 1
+        if s == k:
+            if k == _SMALL:
+                many = True
+                break
+            seen[k] = v
+            first[g + k] = i + r
+            k += 1
+        local[r] = s
+    if many:
         for r in range(m):
             vals[r] = word[i + r]
             perm[i + r] = i + r
         _sort(vals, perm[i:j], m)
-        g = _number(vals, perm[i:j], m, np.int64(g), inverse, first)  # not Literal[int](0)
-        i = j
-    return inverse, first[:g].copy(), perm
+        return _number(vals, perm[i:j], m, np.int64(g), inverse, first), vals, local
+    # the distinct words in order: each one's rank among them
+    for a in range(k):
+        rank = 0
+        for b in range(k):
+            if seen[b] < seen[a]:
+                rank += 1
+        where[a] = rank
+        vals[rank] = first[g + a]
+    for a in range(k):
+        first[g + a] = vals[a]
+    count = np.zeros(k + 1, np.int64)
+    for r in range(m):
+        count[where[local[r]] + 1] += 1
+    for a in range(k):
+        count[a + 1] += count[a]
+    for r in range(m):
+        rk = where[local[r]]
+        perm[i + count[rk]] = i + r
+        count[rk] += 1
+        inverse[i + r] = g + rk
+    return g + k, vals, local
 
 
 @numba.njit(cache=True, nogil=True)
@@ -285,23 +298,26 @@ def hash_add(out, idx, codes):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def group_shifts(times, tid, group, n_groups, said, clock, events, starts,
-                 delays):  # pragma: no cover - compiled
+def group_shifts(times, tid, group, n_groups, c, c_state, reported, new, clock, events,
+                 starts, delays):  # pragma: no cover - compiled
     """Each group's shift of each shiftable sensed event's times
     (:meth:`mitld_lp.sensing.merge.Shifts.canonical`): ``times`` each times index's
-    steps, ``tid`` each row's, ``said`` its reports (kept and new), ``clock`` its
-    parent's clock; ``events`` the shiftable events, ``starts`` their least places,
-    ``delays`` every sensed event's delay."""
+    steps, ``tid`` each row's, ``c_state[c]`` its parent state, whose ``reported`` and
+    ``clock`` it reads (with the row's ``new`` reports), read here row by row rather
+    than gathered into arrays of the level's length first; ``events`` the shiftable
+    events, ``starts`` their least places, ``delays`` every sensed event's delay."""
     n, k = len(tid), len(events)
     good = np.ones((n_groups, k), np.bool_)
     least = np.full((n_groups, k), _MAX, np.int64)
     for r in range(n):
         g = group[r]
         t = tid[r]
+        st = c_state[c[r]]
+        said = reported[st] | new[r]
         for e in range(k):
             i = events[e]
             ki = times[t, i]
-            if not (ki > 0 and ((said[r] >> i) & 1 == 1 or ki + delays[i] <= clock[r] + 1)):
+            if not (ki > 0 and ((said >> i) & 1 == 1 or ki + delays[i] <= clock[st] + 1)):
                 good[g, e] = False
             if ki < least[g, e]:
                 least[g, e] = ki
@@ -401,8 +417,8 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         for e in range(g0, g):
             weight[e] = hmass[e] / t
         i = j
-    return (hfirst[:g].copy(), hobs[:g].copy(), hcode[:g].copy(), hmass[:g].copy(),
-            weight[:g].copy(), total, count, hash_, first)
+    # no copies: every row is a hypothesis of its own in the bus cases (g = n)
+    return hfirst[:g], hobs[:g], hcode[:g], hmass[:g], weight[:g], total, count, hash_, first
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

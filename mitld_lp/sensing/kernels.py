@@ -9,6 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mitld_lp.sensing.group_kernels import _SMALL, group_run
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
@@ -225,7 +226,8 @@ def gather2(table, a, b):  # pragma: no cover - compiled
 def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_code,
                     hyp_weight, nq, h0, h_branch, b_start, b_len, b_tid, b_new, b_pc, b_cut,
                     b_now, b_wait, s_start, s_len, s_w2, s_pg, world_label, u_atoms,
-                    s_atoms, pending, nu, step, ends):  # pragma: no cover - compiled
+                    s_atoms, pending, nu, step, ends, ns, work, work_m
+                    ):  # pragma: no cover - compiled
     """The loops of :meth:`mitld_lp.sensing.frontier.FrontierBuilder.hypothesis_rows`
     (its rows in its order, the same products): per outcome row (``o_*``; ``o_succ``
     its key in the successors' table), its state's hypotheses (``h_branch[h - h0]``:
@@ -234,7 +236,18 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
     hypothesis ends as dense tables (-2, or a key outside them: not made yet).
     Returns the cut rows, the decided rows, the undecided rows, and the keys not made
     yet: of ``step`` (automaton state, label) and, where every step was found, of
-    ``ends`` (automaton state, events left); with any, the rows are not to be read."""
+    ``ends`` (automaton state, events left); with any, the rows are not to be read.
+    ``work`` (19 rows) and ``work_m`` (2 rows) hold the decided and undecided rows
+    where they are long enough (else new ones, twice as long, are made and returned
+    last): a level's rows land in pages the previous level's already touched, not in
+    fresh ones the system must zero (half a million page faults, some 0.8 s of system
+    time, on the false-alarm case's 29 million rows).  With ``ns >= 0`` (an
+    observation fits one word, :func:`mitld_lp.sensing.compiled.observations`) and
+    ``o_c`` non-decreasing, each choice's undecided rows are also grouped by
+    observation as soon as they are made (:func:`~mitld_lp.sensing.group_kernels.
+    group_run`: each row's group, one row of each, the rows in the groups' order, as
+    :func:`~mitld_lp.sensing.group_kernels.by_observation_bits` gives them), while
+    they are in the cache; the number of groups is -1 where they were not."""
     n3 = 0
     n4 = 0
     for r in range(len(o_c)):
@@ -249,11 +262,25 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
     cut_o = np.empty(n3, np.int64)
     cut_b = np.empty(n3, np.int64)
     cut_m = np.empty(n3)
-    d_i = np.empty((7, n4), np.int64)  # c, o, b, s, end, world, occurred
-    d_new = np.empty(n4, np.int64)
-    d_m = np.empty(n4)
-    u_i = np.empty((7, n4), np.int64)  # c, occurred, world, reported, times, q, place
-    u_m = np.empty(n4)
+    if work.shape[1] < n4:
+        work = np.empty((19, 2 * n4), np.int64)
+        work_m = np.empty((2, 2 * n4))
+    d_i = work[:7]  # c, o, b, s, end, world, occurred
+    d_new = work[7]
+    d_m = work_m[0]
+    u_i = work[8:15]  # c, occurred, world, reported, times, q, place
+    u_m = work_m[1]
+    inverse, first, perm, word = work[15], work[16], work[17], work[18]
+    vals = np.empty(64, np.int64)  # group_run's scratch
+    local = np.empty(64, np.int64)
+    seen = np.empty(_SMALL, np.int64)
+    where = np.empty(_SMALL, np.int64)
+    grouping = ns >= 0
+    for r in range(1, len(o_c)):
+        if o_c[r] < o_c[r - 1]:
+            grouping = False
+    g = 0
+    u0 = 0
     miss_a = np.empty(n4, np.int64)
     miss_b = np.empty(n4, np.int64)
     n_cut = 0
@@ -268,6 +295,8 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
         c = o_c[r]
         occ = o_occ[r]
         pu = o_pu[r]
+        if r == 0 or c != o_c[r - 1]:
+            u0 = n_und  # the choice's first undecided row
         left0 = pending[st] & ~occ
         hu = u_atoms[occ]
         sw = o_succ[r]
@@ -333,10 +362,19 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
                         u_i[6, n_und] = s
                         u_m[n_und] = mass
                         n_und += 1
+        if (grouping and n_step == 0 and n_end == 0 and n_und > u0
+                and (r + 1 == len(o_c) or o_c[r + 1] != c)):  # the choice's rows made
+            for x in range(u0, n_und):
+                word[x] = ((u_i[2, x] << nu) | u_i[1, x]) << ns | u_i[3, x]
+            g, vals, local = group_run(word, u0, n_und, g, inverse, first, perm, vals,
+                                       local, seen, where)
     n_miss = n_step if n_step else n_end
+    if not grouping or n_und == 0:
+        g = -1
     return (cut_c[:n_cut], cut_o[:n_cut], cut_b[:n_cut], cut_m[:n_cut],
             d_i[:, :n_done], d_new[:n_done], d_m[:n_done], u_i[:, :n_und], u_m[:n_und],
-            n_step > 0, miss_a[:n_miss], miss_b[:n_miss])
+            n_step > 0, miss_a[:n_miss], miss_b[:n_miss], g, inverse[:n_und],
+            first[:max(g, 0)], perm[:n_und], work, work_m)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -96,26 +96,27 @@ class Shifts:
         self.array = np.zeros((0, len(sensed)), INT)
         self.merged = 0  # the groups shifted, for the log
 
-    def canonical(self, tid: np.ndarray, group: np.ndarray, row: np.ndarray,
-                  reported: np.ndarray, new: np.ndarray, clock: np.ndarray) -> np.ndarray:
+    def canonical(self, tid: np.ndarray, group: np.ndarray, c: np.ndarray,
+                  c_state: np.ndarray, reported: np.ndarray, new: np.ndarray,
+                  clock: np.ndarray) -> np.ndarray:
         """The hypotheses' times ``tid`` (one per row, ``group`` each row's group of
-        one observation, ``row`` its parent state's place in ``reported`` and ``clock``,
-        ``new`` the reports the step made) with each group's shiftable events shifted
-        (module docs)."""
+        one observation, ``c_state[c]`` its parent state's place in ``reported`` and
+        ``clock``, ``new`` the reports the step made) with each group's shiftable events
+        shifted (module docs)."""
         if not self.start or len(tid) == 0:
             return tid
         self.array = grown(self.array, self.times)
-        said = reported[row] | new
         n = int(group.max()) + 1
         if compiled_on():  # the same shifts by one kernel pass
             from mitld_lp.sensing.group_kernels import group_shifts
 
-            shift = group_shifts(self.array, tid, group, n, said, clock[row],
-                                 np.array(list(self.start), INT),
+            shift = group_shifts(self.array, tid, group, n, c, c_state, reported, new,
+                                 clock, np.array(list(self.start), INT),
                                  np.array(list(self.start.values()), INT),
                                  np.array(self.delay, INT))
         else:
-            shift = self.numpy_shifts(tid, group, row, said, clock, n)
+            row = c_state[c]
+            shift = self.numpy_shifts(tid, group, row, reported[row] | new, clock, n)
         moved = shift.any(axis=1)
         if not moved.any():
             return tid
