@@ -168,7 +168,8 @@ def test_a_numba_config_file_keeps_yaml_loaded(tmp_path: Path) -> None:
 
 
 COMPILED_MODULES = ("mitld_lp.solvers.compiled_graph", "mitld_lp.solvers.level_kernels",
-                    "mitld_lp.solvers.compiled_kernels")
+                    "mitld_lp.solvers.compiled_kernels", "mitld_lp.sensing.kernels",
+                    "mitld_lp.sensing.group_kernels", "mitld_lp.sensing.fsum_kernels")
 
 
 @pytest.mark.parametrize("module", COMPILED_MODULES)

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import math
 
-import numba
-
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba = numba_narrow.require_numba()  # numba without PyYAML
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 

@@ -13,13 +13,13 @@ caller reads only the grouped columns from it), so the product is the same to th
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from mitld_lp.sensing.fsum_kernels import sum_of
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba = numba_narrow.require_numba()  # numba without PyYAML
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 

@@ -6,13 +6,13 @@ operations in the same order, so a product is the same to the bit either way
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from mitld_lp.sensing.group_kernels import _SMALL, group_run
 from mitld_lp.solvers import numba_narrow
 from mitld_lp.util import numba_cache
 
+numba = numba_narrow.require_numba()  # numba without PyYAML
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely
 
