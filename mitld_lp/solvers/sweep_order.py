@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import shortest_path
+from scipy.sparse.csgraph import breadth_first_order
 
 from mitld_lp.solvers.kernels import sweep_order
 from mitld_lp.solvers.topological import Block
@@ -60,7 +60,7 @@ def value_order(block: Block) -> np.ndarray:
     seen = np.zeros(n, dtype=bool)
     parts = []
     for seeds in (target, leaving):
-        if seeds.size == 0:
+        if seeds.size == 0 or seen.all():
             continue
         reached = _backwards(succ, row, seeds, n)
         reached = reached[~seen[reached]]
@@ -87,7 +87,19 @@ def _backwards(succ: np.ndarray, row: np.ndarray, seeds: np.ndarray, n: int) -> 
     graph = sp.csr_array((np.ones(succ.size + seeds.size),
                           (np.concatenate([succ, np.full(seeds.size, n)]),
                            np.concatenate([row, seeds]))), shape=(n + 1, n + 1))
-    dist = shortest_path(graph, method="D", unweighted=True, indices=n)[:n]
-    found = np.flatnonzero(np.isfinite(dist))
+    found, parent = breadth_first_order(graph, n, directed=True, return_predecessors=True)
+    found = np.asarray(found[1:], dtype=np.int64)
+    # each state's distance, by pointer jumping up the search tree (its depth's log
+    # passes over the states, not one a state)
+    up = np.full(n + 1, n, dtype=np.int64)
+    up[found] = parent[found]
+    dist = np.ones(n + 1, dtype=np.int64)
+    dist[n] = 0
+    while True:
+        higher = up[up]
+        if np.array_equal(higher, up):
+            break
+        dist += dist[up] * (up != n)
+        up = higher
     # by distance, and within a distance in the default order (the last state first)
-    return found[np.lexsort((-found, dist[found]))].astype(np.int64)
+    return found[np.lexsort((-found, dist[found]))]
