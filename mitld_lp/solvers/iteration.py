@@ -57,7 +57,10 @@ compiled block is first looked at after 32 sweeps (``_EARLY``): one forecast to 
 many more is jumped there if the jump's cost, estimated from the block's structure
 (:mod:`mitld_lp.solvers.jump_cost`: entries touched, no clock), is at most what the
 sweeps it would save cost; a jump whose rounds of policy iteration (their LUs) are
-forecast to pass that is abandoned, its bounds untouched, and the block swept on.
+forecast to pass that is abandoned, its bounds untouched, and the block swept on.  The
+compiled sweeps visit a block's states by their distance to the target inside it
+(:mod:`mitld_lp.solvers.sweep_order`), so that one sweep carries the target's value back
+across the block.
 """
 
 from __future__ import annotations
@@ -86,6 +89,7 @@ from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.sweep_order import value_order
 from mitld_lp.solvers.topological import (
     Block,
     Factors,
@@ -342,10 +346,15 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        exits = rewards[block.choices] + block.outer @ bounds
-        prep = Prepared(block.inner, block.groups)
         fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
                 else compiled)
+        if fast:  # the target's value carried back in one sweep (sweep_order's docs),
+            # the block renumbered so that the kernel's sweep from its last state to its
+            # first visits them in that order and reads its rows in memory order
+            rest = rest[value_order(block)[::-1]]
+            block = Block.of(q, rest)
+        exits = rewards[block.choices] + block.outer @ bounds
+        prep = Prepared(block.inner, block.groups)
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY
         first = bounds[block.states]  # a copy: the early jump starts greedy on it
         early = _Early() if fast else None
