@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
 
 from mitld_lp.solvers.kernels import sweep_order
 from mitld_lp.solvers.topological import Block
@@ -87,6 +86,10 @@ def _backwards(succ: np.ndarray, row: np.ndarray, seeds: np.ndarray, n: int) -> 
     graph = sp.csr_array((np.ones(succ.size + seeds.size),
                           (np.concatenate([succ, np.full(seeds.size, n)]),
                            np.concatenate([row, seeds]))), shape=(n + 1, n + 1))
+    # csgraph imports scipy.sparse.linalg and scipy.linalg: only a compiled block's order
+    # needs it, not every route that imports the iteration
+    from scipy.sparse.csgraph import breadth_first_order
+
     found, parent = breadth_first_order(graph, n, directed=True, return_predecessors=True)
     found = np.asarray(found[1:], dtype=np.int64)
     # each state's distance, by pointer jumping up the search tree (its depth's log
