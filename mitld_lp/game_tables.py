@@ -46,8 +46,6 @@ def _checked(text: str) -> FragmentReport:
     return check(parse_source(text))  # the events of every D[mu] a written, also folded ones
 
 
-
-
 def _no_check(game: Game[Any], task: Task, ctx: KeyContext) -> None:
     """A kind with nothing to check beyond :func:`mitld_lp.worlds.task.bind`."""
 
