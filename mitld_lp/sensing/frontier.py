@@ -49,6 +49,7 @@ from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import (
+    COMPILED_MIN_ESTIMATE,
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
@@ -128,9 +129,10 @@ class FrontierBuilder(StepRules):
         self.need_table = Lookup(self.make_need)
         self.pending_need = Lookup(self.make_pending_need)
         self.actions = KeyedTable(1, (_I,))
-        # the moves (Moves): (choice, world, occurred, new, target) per level
+        # the moves (Moves): per level its first choice and its runs of rows (choice,
+        # world, occurred, new, target)
         self.n_choices = 0
-        self.move_rows: list[tuple[np.ndarray, ...]] = []
+        self.move_rows: list[tuple[int, tuple[tuple[np.ndarray, ...], ...]]] = []
         # the absorbing records (ends, the truncation): id and state (-1 until stored)
         self.records: list[Hashable] = []
         self.record_id: dict[Hashable, int] = {}
@@ -303,14 +305,12 @@ class FrontierBuilder(StepRules):
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c, c_state, reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
-            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
+        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first, most = (
+            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq,
+                                        g_rep))
         g_pend = pending[gst] & ~occ[first]
-        need = self.need_table(tid2[hfirst], g_rep[hobs])
-        most = np.full(len(first), -1, _I)
-        scatter("max", most, hobs, need)
         pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
@@ -502,11 +502,9 @@ class FrontierBuilder(StepRules):
             pick = first[alone]
             code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
         gc, gw, go, gn = grouped
-        self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
-                               np.concatenate([gw, w2[pick]]),
-                               np.concatenate([go, occ[pick]]),
-                               np.concatenate([gn, new[pick]]),
-                               np.concatenate([target, code])))
+        self.move_rows.append((base, ((base + gc, gw, go, gn, target),
+                                      (base + c[pick], w2[pick], occ[pick], new[pick],
+                                       code))))
 
     # ---------------------------------------------------------------- the MDP
 
@@ -549,6 +547,8 @@ class FrontierBuilder(StepRules):
                 if head == level:  # a level done: its growth judged before the next
                     self.growth.level(self.cols.n - level, self.n_hyps, self.bytes)
                     level = self.cols.n
+                    if self.growth.estimate >= COMPILED_MIN_ESTIMATE:
+                        load_kernels()  # a large product foreseen (rows.py)
         finally:
             if collecting:
                 gc.enable()
@@ -592,7 +592,6 @@ class FrontierBuilder(StepRules):
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=self.states())
-        cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
         moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
-                      self.worlds, self.u_sets, self.s_sets, self.records, *cols)
+                      self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
