@@ -54,6 +54,7 @@ from mitld_lp.sensing.rows import (
     Lookup,
     compiled_on,
     groups,
+    lex_order,
     load_kernels,
     mix64,
     ordered_groups,
@@ -401,7 +402,7 @@ class FrontierBuilder(StepRules):
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
                                 np.ones(len(c), _I)])
         pos = np.concatenate([np.zeros(len(loop[0]), _I), place, g_first])
-        order = np.lexsort((pos, phase, cc))
+        order = lex_order(cc, phase, pos)
         return (cc[order], np.concatenate([loop[1], col, target])[order],
                 np.concatenate([loop[2], mass, total])[order])
 
@@ -420,36 +421,30 @@ class FrontierBuilder(StepRules):
         item = np.concatenate([r_end[fresh_record], n_rec - 1 - target[new_group]])
         phase = np.concatenate([np.zeros(int(fresh_record.sum()), _I),
                                 np.ones(int(new_group.sum()), _I)])
-        order = np.lexsort((
-            np.concatenate([s_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
-            np.concatenate([b_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
-            np.concatenate([o_end[fresh_record], g_first[new_group]]),
+        order = lex_order(
+            np.concatenate([c_end[fresh_record], c[new_group]]),
             phase,
-            np.concatenate([c_end[fresh_record], c[new_group]])))
+            np.concatenate([o_end[fresh_record], g_first[new_group]]),
+            np.concatenate([b_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
+            np.concatenate([s_end[fresh_record], np.zeros(int(new_group.sum()), _I)]))
         _, at = np.unique(item[order], return_index=True)
-        sequence = item[order][np.sort(at)].tolist()
+        sequence = item[order][np.sort(at)]
         counts = group[4]
         self.check(len(sequence), int(counts[reps].sum()))
         index = np.empty(len(reps), _I)
-        batch: list[int] = []
-
-        def flush() -> None:
-            if not batch:
-                return
-            g = reps[batch]
-            parent, rank = spread(counts[g])
-            rows = g_start[g][parent] + rank
-            index[batch] = self.cols.n + np.arange(len(batch), dtype=_I)
-            self.add_states(*(x[g] for x in group[:5]), hcode[rows], weight[rows])
-            batch.clear()
-
-        for x in sequence:
-            if x < n_rec:
-                flush()
-                self.store_record(x)
-            else:
-                batch.append(x - n_rec)
-        flush()
+        # the new states between two records stored together, each record in its place
+        start = 0
+        for x in np.flatnonzero(sequence < n_rec).tolist() + [len(sequence)]:
+            if x > start:
+                batch = sequence[start:x] - n_rec
+                g = reps[batch]
+                parent, rank = spread(counts[g])
+                rows = g_start[g][parent] + rank
+                index[batch] = self.cols.n + np.arange(len(batch), dtype=_I)
+                self.add_states(*(y[g] for y in group[:5]), hcode[rows], weight[rows])
+            if x < len(sequence):
+                self.store_record(int(sequence[x]))
+            start = x + 1
         self.keys.settle(index)
         target[new_group] = index[-1 - target[new_group]]
 

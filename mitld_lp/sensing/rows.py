@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["groups", "ordered_groups", "spread", "fsum_by", "mix64", "pack_words", "Table",
-           "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES", "COMPILED_MIN_ESTIMATE",
-           "load_kernels", "running_kernels", "compiled_on", "scatter", "small_pages"]
+__all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
+           "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
+           "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
+           "scatter", "small_pages"]
 
 INT = np.int64
 _I = INT
@@ -131,6 +132,20 @@ def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
     if word is not None:
         words.append(word)
     return words, span
+
+
+def lex_order(*cols: np.ndarray) -> np.ndarray:
+    """``np.lexsort(cols[::-1])``: the rows' stable order by the first column, then the
+    second, and so on; the columns packed into one word where they fit
+    (:func:`pack_words`) and that word sorted stably, which is the same order (a
+    level's columns come in sorted runs, which the stable sort merges in a pass, where
+    ``np.lexsort`` sorts each column in turn)."""
+    if len(cols[0]) == 0:
+        return np.zeros(0, np.intp)
+    words, _ = pack_words(cols)
+    if len(words) == 1:
+        return np.argsort(words[0], kind="stable")
+    return np.lexsort(words[::-1])
 
 
 def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
