@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_sensed_build import build, random_case
+from test_sensed_pass import enumerate_match
 from test_sensing_build import assert_same, reference
 
 from mitld_lp.sensing import compiled, rows
@@ -120,32 +121,21 @@ def test_moves_by_level_as_plain_python() -> None:
 
 def test_keys_by_columns_as_a_dict() -> None:
     """Chunks of random keys (repeats within and across chunks) matched by the
-    compiled table: each row's state, or -1 - k for the k-th key new in its chunk, as
-    a Python dict numbers them; the table grown and rehashed on the way."""
+    compiled table, stored a column a key: each row's state, or -1 - k for the k-th key
+    new in its chunk, and each new key's first row, as test_sensed_pass's enumeration
+    one row at a time gives them; the table grown and rehashed on the way."""
     rng = np.random.default_rng(5)
+    keys, table = Keys(3), {}
     with rows.running_kernels(True):
-        keys = Keys(3)
-        known: dict[tuple[int, ...], int] = {}
-        state = 100
         for size in (1, 40, 700, 3000, 5):
             cols = tuple(rng.integers(-3, 9, size) for _ in range(3))
-            out, reps = keys.match(cols)
-            new: list[tuple[int, ...]] = []
-            want, first = [], []
-            for i, key in enumerate(zip(*(c.tolist() for c in cols), strict=True)):
-                if key in known:
-                    want.append(known[key])
-                    continue
-                if key not in new:
-                    new.append(key)
-                    first.append(i)
-                want.append(-1 - new.index(key))
-            assert out.tolist() == want
-            assert reps.tolist() == first
-            states = np.arange(state, state + len(new), dtype=np.int64)
+            want = enumerate_match(table, cols)
+            got = keys.match(cols)
+            assert (got[0].tolist(), got[1].tolist()) == want[:2]
+            states = len(table) + np.arange(len(want[2]), dtype=np.int64)
             keys.settle(states)
-            known.update(zip(new, states.tolist(), strict=True))
-            state += len(new)
+            table.update(zip(want[2], states.tolist(), strict=True))
+    assert len(table) == keys.n
 
 
 @pytest.mark.parametrize("seed", [0, 1])
