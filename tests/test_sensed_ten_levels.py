@@ -117,6 +117,8 @@ def test_moves_by_level_as_plain_python() -> None:
             assert list(moves[(i, action)]) == list(want[int(row_groups[i]) + k])
     assert list(moves) == keys and len(moves) == len(keys)
     assert (3, "l") not in moves and moves.get((99, "l")) is None
+    none = Moves(row_groups, state_world, acts, worlds, u_sets, s_sets, records, [])
+    assert none[(0, "l")] == {} and len(none) == len(keys)  # no level: no rows
 
 
 def test_keys_by_columns_as_a_dict() -> None:

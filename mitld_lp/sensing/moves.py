@@ -57,10 +57,10 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
         order, and the columns ``world``, ``occurred``, ``new``, ``target``."""
         found = self.indexed.get(k)
         if found is None:
-            runs = self.levels[k]
+            runs = self.levels[k] if k < len(self.levels) else ()
             cols = [np.concatenate([r[j] for r in runs]) if runs else np.zeros(0, np.int64)
                     for j in range(5)]
-            local = cols[0] - self.bases[k]
+            local = cols[0] - (self.bases[k] if len(runs) else 0)
             order = np.argsort(local, kind="stable")
             ptr = np.zeros(int(local.max(initial=-1)) + 2, np.int64)
             np.cumsum(np.bincount(local, minlength=len(ptr) - 1), out=ptr[1:])
@@ -82,9 +82,9 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
             raise KeyError(key)
         table = self.made.get(c)
         if table is None:
-            k = int(np.searchsorted(self.bases, c, side="right")) - 1
-            ptr, order, (world, occurred, new, target) = self.level(k)
-            at = c - int(self.bases[k])
+            k = int(np.searchsorted(self.bases, c, side="right")) - 1  # its level
+            ptr, order, (world, occurred, new, target) = self.level(max(k, 0))
+            at = c - int(self.bases[k]) if k >= 0 else -1
             rows = order[ptr[at]:ptr[at + 1]] if 0 <= at < len(ptr) - 1 else order[:0]
             table = self.made[c] = {
                 (self.worlds[w], self.unsensed_sets[o], self.sensed_sets[n]):
