@@ -90,9 +90,10 @@ def test_level_hypotheses_as_written_by_hand(seed: int, halfway: bool) -> None:
     perm = perm[np.argsort(obs[perm], kind="stable")]
     rank = rng.permutation(int(tid.max()) + 1).astype(np.int64)
     nq = 3
-    got = gk.level_hypotheses(perm, obs, int(obs.max()) + 1, tid, q, mass, s_seq, rank,
-                              np.int64(nq))
-    hfirst, hobs, hcode, hmass, weight, total, count, hashes, first = got
+    n_obs = int(obs.max()) + 1
+    got = gk.level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, np.int64(nq),
+                              np.full((0, 0), -2, np.int64), np.zeros(n_obs, np.int64))
+    hfirst, hobs, hcode, hmass, weight, total, count, hashes, first, _, _ = got
     want = by_hand(obs.tolist(), tid.tolist(), q.tolist(), mass.tolist(),
                    s_seq.tolist(), rank.tolist(), nq)
     assert hobs.tolist() == want["hobs"]
@@ -118,7 +119,8 @@ def test_sums_half_way_are_math_fsum() -> None:
         got = gk.level_hypotheses(np.arange(n, dtype=np.int64), z, 1,
                                   np.arange(n, dtype=np.int64), z,
                                   np.array(terms), np.arange(n, dtype=np.int64),
-                                  np.arange(n, dtype=np.int64), np.int64(1))
+                                  np.arange(n, dtype=np.int64), np.int64(1),
+                                  np.full((0, 0), -2, np.int64), np.zeros(1, np.int64))
         assert got[5][0] == math.fsum(terms), terms
 
 

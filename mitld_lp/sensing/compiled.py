@@ -127,21 +127,30 @@ def decided_alone(fb: Any, ended: tuple[np.ndarray, ...], grouped: tuple[np.ndar
 
 def grouped_hypotheses(fb: Any, found: tuple[np.ndarray, ...] | None, obs: np.ndarray,
                        n_obs: int, tid: np.ndarray, q: np.ndarray, mass: np.ndarray,
-                       s_seq: np.ndarray) -> tuple[np.ndarray, ...]:
+                       s_seq: np.ndarray, rep: np.ndarray) -> tuple[Any, ...]:
     """A level's undecided rows (``obs`` each one's observation of ``n_obs``; ``found``:
     :func:`observations`' answer, None where the rows were grouped otherwise) made into
     the new states' hypotheses: a row of each hypothesis (``hfirst``), its observation,
     code ``tid * nq + q`` and mass (summed in the rows' order), its weight, each
     observation's total (correctly rounded: :func:`~mitld_lp.sensing.rows.fsum_by`),
-    number of hypotheses, hash of its set and first row's place ``s_seq``: by one
-    kernel pass (:func:`~mitld_lp.sensing.group_kernels.level_hypotheses`) where
-    ``found`` is given, else by NumPy lines (the same arrays, to the bit)."""
+    number of hypotheses, hash of its set and first row's place ``s_seq``, and the
+    largest need (``fb.need_table``) of its hypotheses' times with its reports ``rep``
+    (-1 if none): by one kernel pass
+    (:func:`~mitld_lp.sensing.group_kernels.level_hypotheses`) where ``found`` is
+    given, else by NumPy lines (the same arrays, to the bit); the needs by the table's
+    own lookup where the kernel finds a pair the table has not made yet."""
     if found is not None:
         from mitld_lp.sensing import group_kernels as gk
 
         fb.order_key(tid[:0], q[:0])  # the times' ranks made for the new ones
-        return gk.level_hypotheses(found[2], obs, n_obs, tid, q, mass, s_seq,
-                                   fb.tid_rank, fb.nq)
+        need = fb.need_table.dense
+        *out, most, missing = gk.level_hypotheses(
+            found[2], obs, n_obs, tid, q, mass, s_seq, fb.tid_rank, fb.nq,
+            _EMPTY if need is None else need, np.ascontiguousarray(rep, dtype=INT))
+        if len(missing):  # the pairs not made yet: by the table (which makes them)
+            hobs = out[1][missing]
+            scatter("max", most, hobs, fb.need_table(tid[out[0][missing]], rep[hobs]))
+        return (*out, most)
     hid, hfirst = groups(obs, fb.order_key(tid, q))
     hmass = np.bincount(hid, weights=mass)  # in the loops' order, as one at a time
     hobs, hcode = obs[hfirst], tid[hfirst] * fb.nq + q[hfirst]
@@ -152,7 +161,20 @@ def grouped_hypotheses(fb: Any, found: tuple[np.ndarray, ...] | None, obs: np.nd
     g_first = np.full(n_obs, np.iinfo(INT).max, INT)  # each group's first row
     scatter("min", g_first, obs, s_seq)
     return (hfirst, hobs, hcode, hmass, hmass / total[hobs], total, g_count, g_hash,
-            g_first)
+            g_first, _most_need(fb, tid[hfirst], rep, hobs, n_obs))
+
+
+_EMPTY = np.full((0, 0), -2, INT)  # no dense table yet: every pair missing
+
+
+def _most_need(fb: Any, htid: np.ndarray, rep: np.ndarray, hobs: np.ndarray,
+               n_obs: int) -> np.ndarray:
+    """Per observation the largest ``fb.need_table`` value of its hypotheses' times
+    ``htid`` (``hobs`` each one's observation) with its reports ``rep``, -1 if none,
+    by the table's lookup (which makes the pairs not met before)."""
+    most = np.full(n_obs, -1, INT)
+    scatter("max", most, hobs, fb.need_table(htid, rep[hobs]))
+    return most
 
 
 def end_sums(ends: list[np.ndarray], lists: np.ndarray

@@ -49,10 +49,12 @@ from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
 from mitld_lp.sensing.moves import Moves
 from mitld_lp.sensing.rows import (
+    COMPILED_MIN_ESTIMATE,
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
     groups,
+    lex_order,
     load_kernels,
     mix64,
     ordered_groups,
@@ -128,9 +130,10 @@ class FrontierBuilder(StepRules):
         self.need_table = Lookup(self.make_need)
         self.pending_need = Lookup(self.make_pending_need)
         self.actions = KeyedTable(1, (_I,))
-        # the moves (Moves): (choice, world, occurred, new, target) per level
+        # the moves (Moves): per level its first choice and its runs of rows (choice,
+        # world, occurred, new, target)
         self.n_choices = 0
-        self.move_rows: list[tuple[np.ndarray, ...]] = []
+        self.move_rows: list[tuple[int, tuple[tuple[np.ndarray, ...], ...]]] = []
         # the absorbing records (ends, the truncation): id and state (-1 until stored)
         self.records: list[Hashable] = []
         self.record_id: dict[Hashable, int] = {}
@@ -303,14 +306,12 @@ class FrontierBuilder(StepRules):
         obs, first = groups(c, w2, occ, new) if found is None else found[:2]
         tid2 = self.shifts.canonical(tid2, obs, c, c_state, reported, new, clock)
         tid2 = self.counts.canonical(tid2, obs)
-        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first = (
-            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq))
         gst = c_state[c[first]]
         g_rep = reported[gst] | (new[first] & ~self.alarm_mask)
+        hfirst, hobs, hcode, hmass, weight, total, g_count, g_hash, g_first, most = (
+            compiled.grouped_hypotheses(self, found, obs, len(first), tid2, q2, mass, s_seq,
+                                        g_rep))
         g_pend = pending[gst] & ~occ[first]
-        need = self.need_table(tid2[hfirst], g_rep[hobs])
-        most = np.full(len(first), -1, _I)
-        scatter("max", most, hobs, need)
         pend_need = self.pending_need(g_pend, g_pend)
         g_clock = np.minimum(clock[gst] + 1, np.maximum(np.maximum(most, pend_need), 0))
         group = (w2[first], g_clock, g_rep, g_pend, g_count, g_hash.view(_I))
@@ -401,7 +402,7 @@ class FrontierBuilder(StepRules):
         phase = np.concatenate([np.zeros(len(loop[0]) + len(place), _I),
                                 np.ones(len(c), _I)])
         pos = np.concatenate([np.zeros(len(loop[0]), _I), place, g_first])
-        order = np.lexsort((pos, phase, cc))
+        order = lex_order(cc, phase, pos)
         return (cc[order], np.concatenate([loop[1], col, target])[order],
                 np.concatenate([loop[2], mass, total])[order])
 
@@ -420,36 +421,30 @@ class FrontierBuilder(StepRules):
         item = np.concatenate([r_end[fresh_record], n_rec - 1 - target[new_group]])
         phase = np.concatenate([np.zeros(int(fresh_record.sum()), _I),
                                 np.ones(int(new_group.sum()), _I)])
-        order = np.lexsort((
-            np.concatenate([s_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
-            np.concatenate([b_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
-            np.concatenate([o_end[fresh_record], g_first[new_group]]),
+        order = lex_order(
+            np.concatenate([c_end[fresh_record], c[new_group]]),
             phase,
-            np.concatenate([c_end[fresh_record], c[new_group]])))
+            np.concatenate([o_end[fresh_record], g_first[new_group]]),
+            np.concatenate([b_end[fresh_record], np.zeros(int(new_group.sum()), _I)]),
+            np.concatenate([s_end[fresh_record], np.zeros(int(new_group.sum()), _I)]))
         _, at = np.unique(item[order], return_index=True)
-        sequence = item[order][np.sort(at)].tolist()
+        sequence = item[order][np.sort(at)]
         counts = group[4]
         self.check(len(sequence), int(counts[reps].sum()))
         index = np.empty(len(reps), _I)
-        batch: list[int] = []
-
-        def flush() -> None:
-            if not batch:
-                return
-            g = reps[batch]
-            parent, rank = spread(counts[g])
-            rows = g_start[g][parent] + rank
-            index[batch] = self.cols.n + np.arange(len(batch), dtype=_I)
-            self.add_states(*(x[g] for x in group[:5]), hcode[rows], weight[rows])
-            batch.clear()
-
-        for x in sequence:
-            if x < n_rec:
-                flush()
-                self.store_record(x)
-            else:
-                batch.append(x - n_rec)
-        flush()
+        # the new states between two records stored together, each record in its place
+        start = 0
+        for x in np.flatnonzero(sequence < n_rec).tolist() + [len(sequence)]:
+            if x > start:
+                batch = sequence[start:x] - n_rec
+                g = reps[batch]
+                parent, rank = spread(counts[g])
+                rows = g_start[g][parent] + rank
+                index[batch] = self.cols.n + np.arange(len(batch), dtype=_I)
+                self.add_states(*(y[g] for y in group[:5]), hcode[rows], weight[rows])
+            if x < len(sequence):
+                self.store_record(int(sequence[x]))
+            start = x + 1
         self.keys.settle(index)
         target[new_group] = index[-1 - target[new_group]]
 
@@ -502,11 +497,9 @@ class FrontierBuilder(StepRules):
             pick = first[alone]
             code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
         gc, gw, go, gn = grouped
-        self.move_rows.append((np.concatenate([base + gc, base + c[pick]]),
-                               np.concatenate([gw, w2[pick]]),
-                               np.concatenate([go, occ[pick]]),
-                               np.concatenate([gn, new[pick]]),
-                               np.concatenate([target, code])))
+        self.move_rows.append((base, ((base + gc, gw, go, gn, target),
+                                      (base + c[pick], w2[pick], occ[pick], new[pick],
+                                       code))))
 
     # ---------------------------------------------------------------- the MDP
 
@@ -549,6 +542,8 @@ class FrontierBuilder(StepRules):
                 if head == level:  # a level done: its growth judged before the next
                     self.growth.level(self.cols.n - level, self.n_hyps, self.bytes)
                     level = self.cols.n
+                    if self.growth.estimate >= COMPILED_MIN_ESTIMATE:
+                        load_kernels()  # a large product foreseen (rows.py)
         finally:
             if collecting:
                 gc.enable()
@@ -592,7 +587,6 @@ class FrontierBuilder(StepRules):
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=self.states())
-        cols = [np.concatenate(x) for x in zip(*self.move_rows, strict=True)]
         moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
-                      self.worlds, self.u_sets, self.s_sets, self.records, *cols)
+                      self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)

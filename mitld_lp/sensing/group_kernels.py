@@ -344,7 +344,7 @@ def _sort_rows(vals, idx, m):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
+def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq, need, rep
                      ):  # pragma: no cover - compiled
     """A level's undecided rows (``perm``: the rows in their observation groups' order,
     :func:`by_observation`; ``obs`` each row's group of ``n_obs``) made into the new
@@ -355,8 +355,13 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
     observation's total correctly rounded (as :func:`mitld_lp.sensing.rows.fsum_by`),
     the weights, and per observation its number of hypotheses, the hash of its set (the
     sum of :func:`mitld_lp.sensing.rows.mix64` of the codes ``tid * nq + q``, wrapping)
-    and its first row's place ``s_seq``.  Returns ``(hfirst, hobs, hcode, hmass,
-    weight, total, count, hash, first)``."""
+    and its first row's place ``s_seq``; and per observation ``o`` the largest
+    ``need[tid, rep[o]]`` of its hypotheses' times ``tid`` (-1 if none: the clock the
+    new state keeps, :meth:`~mitld_lp.sensing.frontier.FrontierBuilder.expand`), read
+    from the dense table of :class:`~mitld_lp.sensing.rows.Lookup` (``-2``, or a pair
+    outside it: not made yet, left out of ``most``; the caller looks those hypotheses
+    up itself, ``missing``).  Returns ``(hfirst, hobs, hcode, hmass, weight, total,
+    count, hash, first, most, missing)``."""
     n = len(perm)
     hfirst = np.empty(n, np.int64)
     hobs = np.empty(n, np.int64)
@@ -367,6 +372,10 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
     count = np.zeros(n_obs, np.int64)
     hash_ = np.zeros(n_obs, np.uint64)
     first = np.full(n_obs, _MAX, np.int64)
+    most = np.full(n_obs, -1, np.int64)
+    missing = 0
+    lost = np.empty(n, np.int64)  # the hypotheses whose need is not in the table
+    n_tid, n_rep = need.shape
     vals = np.empty(n, np.int64)  # each observation's keys, sorted with their rows
     idx = np.empty(n, np.int64)
     partials = np.empty(64)
@@ -393,10 +402,19 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
         _sort_rows(vals, idx, m)
         g0 = g
         h = 0
+        b = rep[o]
+        top = -1
         for r in range(m):
             x = idx[r]
             if r == 0 or vals[r] != vals[r - 1]:
-                code = tid[x] * nq + q[x]
+                a = tid[x]
+                v = need[a, b] if a < n_tid and b < n_rep else -2
+                if v == -2:
+                    lost[missing] = g
+                    missing += 1
+                elif v > top:
+                    top = v
+                code = a * nq + q[x]
                 hfirst[g] = x
                 hobs[g] = o
                 hcode[g] = code
@@ -410,6 +428,7 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
             else:
                 hmass[g - 1] += mass[x]
         count[o] = h
+        most[o] = top
         if len(partials) < h + 1:
             partials = np.empty(2 * h + 2)
         t = sum_of(hmass, g0, h, partials)
@@ -418,7 +437,8 @@ def level_hypotheses(perm, obs, n_obs, tid, q, mass, s_seq, rank, nq
             weight[e] = hmass[e] / t
         i = j
     # no copies: every row is a hypothesis of its own in the bus cases (g = n)
-    return hfirst[:g], hobs[:g], hcode[:g], hmass[:g], weight[:g], total, count, hash_, first
+    return (hfirst[:g], hobs[:g], hcode[:g], hmass[:g], weight[:g], total, count, hash_,
+            first, most, lost[:missing])
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -111,6 +111,7 @@ class Growth:
                  name: str | None = None, past: int = PAST, alarm_past: int = 0) -> None:
         self.past, self.alarm_past = past, alarm_past
         self.sizes: list[int] = []
+        self.estimate = 0  # the last level's estimate (the states so far before any)
         self.max_states, self.max_memory, self.size = max_states, max_memory, size
         self.sensors, self.points, self.name = sensors, points, name
         self.t0 = time.perf_counter()
@@ -118,6 +119,7 @@ class Growth:
     def start(self, first: int) -> None:
         """The build's first level: the ``first`` states stored before any expansion."""
         self.sizes = [first]
+        self.estimate = 0
         self.t0 = time.perf_counter()
 
     def check(self, stored: int, used: int, new: int, hyps: int) -> None:
@@ -155,6 +157,7 @@ class Growth:
             return
         estimate, factor, last = projected(self.sizes, self.size.clock, self.past,
                                            self.alarm_past)
+        self.estimate = estimate
         need = used / max(found, 1) * estimate
         if estimate <= self.max_states and need <= self.max_memory:
             return

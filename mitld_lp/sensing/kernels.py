@@ -379,9 +379,11 @@ def hypothesis_rows(o_c, o_st, o_occ, o_pu, o_seq, o_succ, hstart, hcount, hyp_c
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _key_hash(keys, i):  # pragma: no cover - compiled
+    """The hash of key ``i``, the column ``keys[:, i]`` (the keys stored a column of
+    each, as the columns they come from: stacked without a strided copy)."""
     h = np.uint64(0x9E3779B97F4A7C15)
-    for j in range(keys.shape[1]):
-        z = h ^ np.uint64(keys[i, j])
+    for j in range(keys.shape[0]):
+        z = h ^ np.uint64(keys[j, i])
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
         h = z ^ (z >> np.uint64(31))
@@ -390,8 +392,8 @@ def _key_hash(keys, i):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def key_rehash(slots, keys, n):  # pragma: no cover - compiled
-    """The first ``n`` rows of ``keys`` entered into the empty ``slots`` (a power of
-    two of them, -1 each; linear probing)."""
+    """The first ``n`` keys (columns of ``keys``) entered into the empty ``slots`` (a
+    power of two of them, -1 each; linear probing)."""
     mask = np.uint64(len(slots) - 1)
     for e in range(n):
         s = _key_hash(keys, e) & mask
@@ -403,10 +405,10 @@ def key_rehash(slots, keys, n):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
     """:meth:`mitld_lp.sensing.keys.Keys.match` on the table of ``n`` keys (``keys``,
-    their ``state``, ``slots`` their places by hash, room made for every row): each
-    row's state, ``-1 - k`` for the ``k``-th key new (entered with it), the first row of
-    each new key, and the keys now held."""
-    m, width = rows.shape
+    a column each, their ``state``, ``slots`` their places by hash, room made for every
+    row): each row (a column of ``rows``)'s state, ``-1 - k`` for the ``k``-th key new
+    (entered with it), the first row of each new key, and the keys now held."""
+    width, m = rows.shape
     mask = np.uint64(len(slots) - 1)
     out = np.empty(m, np.int64)
     reps = np.empty(m, np.int64)
@@ -418,7 +420,7 @@ def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
             if e < 0:
                 slots[s] = n
                 for j in range(width):
-                    keys[n, j] = rows[i, j]
+                    keys[j, n] = rows[j, i]
                 state[n] = -1 - fresh
                 out[i] = -1 - fresh
                 reps[fresh] = i
@@ -427,7 +429,7 @@ def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
                 break
             same = True
             for j in range(width):
-                if keys[e, j] != rows[i, j]:
+                if keys[j, e] != rows[j, i]:
                     same = False
                     break
             if same:
@@ -435,7 +437,6 @@ def key_match(slots, keys, state, n, rows):  # pragma: no cover - compiled
                 break
             s = (s + np.uint64(1)) & mask
     return out, reps[:fresh], n
-
 
 
 @numba.njit(cache=True, nogil=True)

@@ -61,7 +61,8 @@ class Keys:
     def __init__(self, width: int) -> None:
         self.width = width
         self.table: dict[tuple[int, ...], int] | None = {}
-        self.keys = np.zeros((0, width), INT)  # the compiled table's rows and states
+        self.keys = np.zeros((width, 0), INT)  # the compiled table's keys (a column
+        # each) and states
         self.state = np.zeros(0, INT)
         self.slots = np.zeros(0, INT)
         self.n = 0
@@ -83,7 +84,7 @@ class Keys:
             self.to_arrays()
             self.grow(m)
             self.fresh_at = self.n
-            rows = np.ascontiguousarray(np.stack([np.asarray(c, INT) for c in cols], 1))
+            rows = np.stack([np.asarray(c, INT) for c in cols])  # a row per column
             out, reps, self.n = kernels.key_match(self.slots, self.keys, self.state,
                                                   self.n, rows)
             return out, reps
@@ -129,7 +130,8 @@ class Keys:
         self.table = None
         if items:
             self.grow(len(items))
-            rows = np.array([k for k, _ in items], INT).reshape(len(items), self.width)
+            rows = np.array([k for k, _ in items], INT).reshape(len(items), self.width).T
+            rows = np.ascontiguousarray(rows)
             _, _, self.n = compiled_on().key_match(self.slots, self.keys, self.state,
                                                    self.n, rows)
             self.state[:self.n] = [v for _, v in items]
@@ -140,8 +142,8 @@ class Keys:
         need = self.n + more
         if need > len(self.state):
             size = max(need, 2 * len(self.state), 1024)
-            keys = np.zeros((size, self.width), INT)
-            keys[:self.n] = self.keys[:self.n]
+            keys = np.zeros((self.width, size), INT)
+            keys[:, :self.n] = self.keys[:, :self.n]
             state = np.zeros(size, INT)
             state[:self.n] = self.state[:self.n]
             self.keys, self.state = keys, state

@@ -19,25 +19,27 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
     state's actions, each observation's successor (a state's index, or an absorbing
     record when nothing undecided is left with it: :class:`~mitld_lp.sensing.info.Belief`).
 
-    Built from one row per (choice, observation): ``choice`` the MDP's choice row,
-    ``world``, ``occurred`` and ``new`` the observation's world state, unsensed events
-    and new reports as indices into ``worlds``, ``unsensed_sets`` and ``sensed_sets``,
-    ``target`` a state's index, or ``-1 - r`` for ``records[r]``.  ``row_groups``: each
-    state's first choice row; ``state_world``: each state's world index (-1 for an
-    absorbing state); ``world_actions``: each world index's action names in choice
-    order."""
+    Built from one row per (choice, observation), the rows of each level of the build
+    apart (``levels``: each level's first choice row, non-decreasing, and its runs of
+    rows, each run five arrays): ``choice`` the MDP's choice row (in the level's range,
+    up to the next level's first), ``world``, ``occurred`` and ``new`` the observation's
+    world state, unsensed events and new reports as indices into ``worlds``,
+    ``unsensed_sets`` and ``sensed_sets``, ``target`` a state's index, or ``-1 - r`` for
+    ``records[r]``.  A choice's rows are those of its level's runs in their order
+    (run by run, each run's in its own order).  A level's rows are put in choice order
+    when one of its choices is first asked for, not while the product is built.
+    ``row_groups``: each state's first choice row; ``state_world``: each state's world
+    index (-1 for an absorbing state); ``world_actions``: each world index's action
+    names in choice order."""
 
     def __init__(self, row_groups: np.ndarray, state_world: np.ndarray,
                  world_actions: Mapping[int, Sequence[str]], worlds: Sequence[Hashable],
                  unsensed_sets: Sequence[frozenset[str]],
                  sensed_sets: Sequence[frozenset[str]], records: Sequence[Hashable],
-                 choice: np.ndarray, world: np.ndarray, occurred: np.ndarray,
-                 new: np.ndarray, target: np.ndarray) -> None:
-        order = np.argsort(choice, kind="stable")
-        self.ptr = np.zeros(int(row_groups[-1]) + 1, np.int64)
-        np.cumsum(np.bincount(choice, minlength=len(self.ptr) - 1), out=self.ptr[1:])
-        self.world, self.occurred = world[order], occurred[order]
-        self.new, self.target = new[order], target[order]
+                 levels: Sequence[tuple[int, Sequence[tuple[np.ndarray, ...]]]]) -> None:
+        self.bases = np.array([b for b, _ in levels], np.int64)
+        self.levels = [runs for _, runs in levels]
+        self.indexed: dict[int, tuple[np.ndarray, np.ndarray, list[np.ndarray]]] = {}
         self.row_groups, self.state_world = row_groups, state_world
         self.world_actions = {w: {a: k for k, a in enumerate(acts)}
                               for w, acts in world_actions.items()}
@@ -48,6 +50,22 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
         used, times = np.unique(state_world[state_world >= 0], return_counts=True)
         self.size = sum(len(world_actions[w]) * k for w, k in zip(
             used.tolist(), times.tolist(), strict=True))
+
+    def level(self, k: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+        """Level ``k``'s rows in choice order (a stable sort of its runs' rows): each of
+        its choices' first row in that order (from the level's first choice on), the
+        order, and the columns ``world``, ``occurred``, ``new``, ``target``."""
+        found = self.indexed.get(k)
+        if found is None:
+            runs = self.levels[k] if k < len(self.levels) else ()
+            cols = [np.concatenate([r[j] for r in runs]) if runs else np.zeros(0, np.int64)
+                    for j in range(5)]
+            local = cols[0] - (self.bases[k] if len(runs) else 0)
+            order = np.argsort(local, kind="stable")
+            ptr = np.zeros(int(local.max(initial=-1)) + 2, np.int64)
+            np.cumsum(np.bincount(local, minlength=len(ptr) - 1), out=ptr[1:])
+            found = self.indexed[k] = (ptr, order, cols[1:])
+        return found
 
     def choice(self, key: tuple[int, str]) -> int | None:
         try:
@@ -64,14 +82,16 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
             raise KeyError(key)
         table = self.made.get(c)
         if table is None:
-            lo, hi = int(self.ptr[c]), int(self.ptr[c + 1])
+            k = int(np.searchsorted(self.bases, c, side="right")) - 1  # its level
+            ptr, order, (world, occurred, new, target) = self.level(max(k, 0))
+            at = c - int(self.bases[k]) if k >= 0 else -1
+            rows = order[ptr[at]:ptr[at + 1]] if 0 <= at < len(ptr) - 1 else order[:0]
             table = self.made[c] = {
                 (self.worlds[w], self.unsensed_sets[o], self.sensed_sets[n]):
                     (j if j >= 0 else self.records[-1 - j])
-                for w, o, n, j in zip(self.world[lo:hi].tolist(),
-                                      self.occurred[lo:hi].tolist(),
-                                      self.new[lo:hi].tolist(),
-                                      self.target[lo:hi].tolist(), strict=True)}
+                for w, o, n, j in zip(world[rows].tolist(), occurred[rows].tolist(),
+                                      new[rows].tolist(), target[rows].tolist(),
+                                      strict=True)}
         return table
 
     def __iter__(self) -> Iterator[tuple[int, str]]:

@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["groups", "ordered_groups", "spread", "fsum_by", "mix64", "pack_words", "Table",
-           "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES", "load_kernels", "running_kernels",
-           "compiled_on", "scatter", "small_pages"]
+__all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
+           "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
+           "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
+           "scatter", "small_pages"]
 
 INT = np.int64
 _I = INT
@@ -32,6 +33,14 @@ loaded): they pay from a build of some 1.5 s, some 25,000 states.  A level of 2,
 states comes some levels before the largest on the bus cases, whose products hold ten
 times that or more; the smaller cases of experiments/bench_sensed.py never load them
 (experiments/results/bench_sensed_kernel.md)."""
+COMPILED_MIN_ESTIMATE = 8_192
+"""The size estimate (:mod:`mitld_lp.sensing.growth`, made at a level's end from the
+clock's half-way step on, meant to err low) from which the build loads the kernels
+before any chunk reaches :data:`COMPILED_MIN_STATES`: the bus case's camera on bus 2
+at epsilon 0.01 estimates 8,918 states at level 7 (1,909 found; 52,498 built), whose
+next three levels (4,321 states) take 0.20 s CPU by the NumPy lines and some 0.07 s by
+the kernels.  The smaller cases of experiments/bench_sensed.py estimate none this large
+and still never load them."""
 _K: Any = None  # mitld_lp.sensing.kernels once loaded, False if numba is not installed
 
 
@@ -123,6 +132,20 @@ def pack_words(cols: tuple[np.ndarray, ...]) -> tuple[list[np.ndarray], int]:
     if word is not None:
         words.append(word)
     return words, span
+
+
+def lex_order(*cols: np.ndarray) -> np.ndarray:
+    """``np.lexsort(cols[::-1])``: the rows' stable order by the first column, then the
+    second, and so on; the columns packed into one word where they fit
+    (:func:`pack_words`) and that word sorted stably, which is the same order (a
+    level's columns come in sorted runs, which the stable sort merges in a pass, where
+    ``np.lexsort`` sorts each column in turn)."""
+    if len(cols[0]) == 0:
+        return np.zeros(0, np.intp)
+    words, _ = pack_words(cols)
+    if len(words) == 1:
+        return np.argsort(words[0], kind="stable")
+    return np.lexsort(words[::-1])
 
 
 def groups(*cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
