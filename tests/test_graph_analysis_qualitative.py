@@ -4,8 +4,8 @@ without cycles, against constructions written differently here: the qualitative 
 points over Python sets, and the maximal end components by enumerating every subset of
 states.  Each MDP is analysed on three routes: the NumPy walks (a small graph's reach
 propagated up its levels), the NumPy walks with every graph counted large (the reach
-searched once a seed set after the levels: ``level_search.reaching``, and the levels'
-probe and search), and the compiled walks (numba)."""
+searched once a seed set after the levels: ``level_search.reaching``, the levels'
+probe and search, the attractor's counts by a sort), and the compiled walks (numba)."""
 
 from __future__ import annotations
 
@@ -166,6 +166,7 @@ def route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> st
         monkeypatch.setattr(walks, "COMPILED_MIN_ENTRIES", 10**12)
         monkeypatch.setattr(graph, "SMALL", 0)
         monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
+        monkeypatch.setattr(graph, "SORTED_COUNTS", 1)  # the attractor's counts sorted
     else:
         pytest.importorskip("numba")
         monkeypatch.setattr(walks, "COMPILED_LOADED_MIN_ENTRIES", 0)
