@@ -37,11 +37,6 @@ from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import unique
 from mitld_lp.util.traversal import SMALL, strong_components
 
-try:  # SciPy's compiled COO -> CSR counting sort, as scipy.sparse's own tocsr calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: a COO matrix converted
-    _st = None
-
 __all__ = [
     "Sense", "attractor",
     "Blocks",
@@ -301,7 +296,10 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     up, down = up[cross], down[cross]
     del cross
     out_degree = np.bincount(up, minlength=n_comp)
-    preds_of = _grouped(down, up, n_comp)
+    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
+    # the duplicates: its data are the multiplicities the out-degrees counted)
+    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
+                            shape=(n_comp, n_comp))
     del up, down
     if seeds is None:
         seeds = np.zeros((graph.shape[0], 0), dtype=bool)
@@ -345,26 +343,6 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
     return Levels(comp, level, reach if walked else reaching(preds_of, comp, seeds))
-
-
-def _grouped(head: np.ndarray, tail: np.ndarray, n: int) -> sp.csr_array:
-    """The edges ``tail -> head`` grouped by head: row ``d`` lists the ``tail`` of each
-    edge into ``d`` (a repeated edge as often as it comes, each of value 1: the
-    multiplicities :func:`levels`' out-degrees count), by SciPy's compiled counting sort
-    (coo -> csr) alone: a row's entries in the edges' order, not sorted and not merged
-    (the levels and the reach are sets of the graph's edges, and SciPy's searches take
-    a repeated edge as one).  Half the time of a COO matrix's conversion, which sorts
-    and merges them (0.028 -> 0.012 s on QVBS csma 4-2's 1,070,237 edges); through it
-    where SciPy lacks the routine (the entries merged, their values the counts)."""
-    index = head.dtype
-    if _st is None:  # pragma: no cover - a SciPy without the routine
-        return sp.csr_array((np.ones(head.size, dtype=index), (head, tail)), shape=(n, n))
-    ptr = np.empty(n + 1, dtype=index)
-    cols = np.empty(head.size, dtype=index)
-    ones = np.ones(head.size, dtype=index)
-    _st.coo_tocsr(n, n, head.size, head, tail.astype(index, copy=False), ones, ptr, cols,
-                  np.empty(head.size, dtype=index))
-    return sp.csr_array((ones, cols, ptr), shape=(n, n))
 
 
 def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,
