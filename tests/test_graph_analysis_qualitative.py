@@ -14,6 +14,7 @@ from itertools import combinations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from test_rare_solve import prob0_e  # Prob0E: the greatest fixed point over sets
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import graph, walks
@@ -81,17 +82,6 @@ def _reach(supports: list[list[set[int]]], target: set[int]) -> set[int]:
         found |= more
 
 
-def _prob0e(supports: list[list[set[int]]], target: set[int]) -> set[int]:
-    """Some policy avoids the target for ever: the greatest set outside it in which
-    every state has a choice whose support stays in the set."""
-    keep = set(range(len(supports))) - target
-    while True:
-        smaller = {s for s in keep if any(post <= keep for post in supports[s])}
-        if smaller == keep:
-            return keep
-        keep = smaller
-
-
 def _prob1e(supports: list[list[set[int]]], target: set[int]) -> set[int]:
     """Some policy reaches the target almost surely: the nested fixed point (greatest
     outer, least inner) of Baier & Katoen's Alg. 45."""
@@ -112,7 +102,7 @@ def _prob1e(supports: list[list[set[int]]], target: set[int]) -> set[int]:
 def _prob1a(supports: list[list[set[int]]], target: set[int]) -> set[int]:
     """Every policy reaches the target almost surely: the states from which no path
     avoiding the target leads to a state of Prob0E."""
-    bad = _prob0e(supports, target)
+    bad = prob0_e(supports, target)
     found = set(bad)
     while True:
         more = _pre_exists(supports, found, set(range(len(supports))) - found - target)
@@ -133,18 +123,9 @@ def _brute_mecs(supports: list[list[set[int]]], among: set[int]) -> set[frozense
             inside = {s: [p for p in supports[s] if p <= cs] for s in cs}
             if any(not v for v in inside.values()):
                 continue
-            edges = {s: set().union(*inside[s]) for s in cs}
-            strongly = True
-            for s in cs:  # every state reaches every other along the kept choices
-                seen, todo = {s}, [s]
-                while todo:
-                    for t in edges[todo.pop()]:
-                        if t not in seen:
-                            seen.add(t)
-                            todo.append(t)
-                if seen != cs:
-                    strongly = False
-                    break
+            kept = [inside.get(s, []) for s in range(len(supports))]
+            # strongly connected by the kept choices: every state reaches each one
+            strongly = all(cs <= _reach(kept, {s}) for s in cs)
             if strongly:
                 ecs.append(frozenset(cs))
     return {e for e in ecs if not any(e < f for f in ecs)}
@@ -193,7 +174,7 @@ def test_qualitative_sets_and_end_components(route: str, acyclic: bool,
                 assert np.array_equal(decided.zero, unreachable), where
                 assert np.array_equal(decided.one, _mask(n, _prob1e(supports, target))), where
             else:
-                assert np.array_equal(decided.zero, _mask(n, _prob0e(supports, target))), where
+                assert np.array_equal(decided.zero, _mask(n, prob0_e(supports, target))), where
                 assert np.array_equal(decided.one, _mask(n, _prob1a(supports, target))), where
         # the end components: among the upper model's maybe states for a maximum, none
         # for a minimum (the states left have none: they could avoid the target)
