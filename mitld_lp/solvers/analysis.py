@@ -205,6 +205,8 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     is 1 where some choice keeps among such states (the complement: every choice can
     lose, an :func:`~mitld_lp.solvers.graph.attractor`); a minimum where no path leads
     to a state or a choice that can lose (a backward search)."""
+    if not (zero.any() or leaks.any()):  # nothing can lose: every state is 1
+        return np.ones(row_groups.shape[0] - 1, dtype=bool)
     if sense is Sense.MAX:
         return ~attractor(matrix, row_groups, zero, leaks)
     n = row_groups.shape[0] - 1
@@ -235,13 +237,17 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         m.eliminate_zeros()
         mdp = replace(mdp, matrix=m)
     wide = goal | extra
-    found = state_levels(m, mdp.row_groups, np.column_stack([goal, wide]))
+    # nothing truncated: one target, so one seed set, one reach and one set of leaks
+    # (the second model's columns are the first's)
+    same = not extra.any()
+    found = state_levels(m, mdp.row_groups,
+                         np.column_stack([goal] if same else [goal, wide]))
     if "numba" not in sys.modules and _sweeps_compiled(m, mdp.row_groups, found.component):
         from mitld_lp.solvers import numba_narrow
 
         numba_narrow.import_numba()  # without PyYAML (numba_narrow.import_numba)
         load_walks()  # the sweeps will load numba: the walks below run compiled too
-    reach = found.reach[found.component]
+    reach = found.reach[:, [0, 0] if same else [0, 1]][found.component]
     n = mdp.n_states
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
@@ -289,12 +295,15 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # sparse kernel adds each column on its own), not four: the four floats a choice
     # and a state were the analysis's peak on QVBS wlan_dl.
     removed = state_map < 0
-    one_step = m @ np.column_stack([goal, extra]).astype(np.float64)
+    one_step = m @ np.column_stack([goal] if same else [goal, extra]).astype(np.float64)
     to_goal = np.ascontiguousarray(one_step[kept, 0])
-    to_extra = np.ascontiguousarray(one_step[kept, 1]) if extra.any() else None
+    to_extra = None if same else np.ascontiguousarray(one_step[kept, 1])
     del one_step
-    one_step = m @ np.column_stack([p & removed for p in prob0]).astype(np.float64)
-    leaks = [one_step[kept, j] > 0 for j in range(2)]
+    one_step = m @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
+                                   ).astype(np.float64)
+    leaks = [one_step[kept, j] > 0 for j in range(one_step.shape[1])]
+    if same:  # the one model's, as both
+        leaks = [leaks[0], leaks[0]]
     del one_step, removed
     data, cols = rows.data, rows.indices
     gone = cols == n_red

@@ -29,7 +29,7 @@ from mitld_lp.solvers.end_components import (
     compiled_end_components,
     maximal_end_components,
 )
-from mitld_lp.solvers.level_search import PROBE_LEVELS, searched_levels, thin
+from mitld_lp.solvers.level_search import PROBE_LEVELS, reaching, searched_levels, thin
 from mitld_lp.solvers.reach import Reversed, backward_reachable
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -162,11 +162,26 @@ def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
         rows = _distinct(np.asarray(rows[~hit[rows]], dtype=np.int64), stamp)
         hit[rows] = True
         owners = owner[rows]
-        np.subtract.at(remaining, owners, 1)
+        if owners.size < SORTED_COUNTS:
+            np.subtract.at(remaining, owners, 1)
+        else:  # a wide frontier: its owners counted by a sort, not ufunc.at
+            owners.sort()
+            first = np.flatnonzero(np.concatenate(([True], owners[1:] != owners[:-1])))
+            owners = owners[first]
+            remaining[owners] -= np.diff(first, append=rows.size)
         joined = owners[(remaining[owners] == 0) & ~inside[owners]]
         frontier = _distinct(joined, stamp)
         inside[frontier] = True
     return inside
+
+
+SORTED_COUNTS = 2048
+"""From this many choices hit in one round of :func:`attractor`'s NumPy walk, their
+owners' counts are taken by a sort instead of ``np.subtract.at`` (which cost about 1 ms
+a round of 3,000 on QVBS csma 4-2's 600,267 states: its random writes; the same
+counts): 0.080 -> 0.059 s for the whole attractor there.  On narrow rounds (QVBS
+firewire_dl 3-600: 275 choices a round) the sort's extra calls cost more than they
+save."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -258,11 +273,14 @@ class Levels:
 def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     """The strongly connected components of ``graph``, their levels (Kahn's algorithm
     run backwards: sinks are level 0, a component's level is one more than its highest
-    successor's) and, propagated up the same walk, which components can reach a state
-    of each seed set (``seeds``: ``(n, k)`` bool).  A large graph is walked compiled
-    (:func:`~mitld_lp.solvers.walks.compiled_walks`): the same components, numbered
-    alike, and levels.  Else a graph SciPy decomposed whose levels turn out thin is
-    finished by SciPy's searches (:mod:`~mitld_lp.solvers.level_search`), alike."""
+    successor's) and which components can reach a state of each seed set (``seeds``:
+    ``(n, k)`` bool): propagated up the same walk on a small graph, else one compiled
+    search a set once the levels are known (:func:`~mitld_lp.solvers.level_search.
+    reaching`: the same sets, without two NumPy calls a level and a set).  A large
+    graph is walked compiled (:func:`~mitld_lp.solvers.walks.compiled_walks`): the
+    same components, numbered alike, and levels.  Else a graph SciPy decomposed whose
+    levels turn out thin is finished by SciPy's searches
+    (:mod:`~mitld_lp.solvers.level_search`), alike."""
     walks = compiled_walks(graph.nnz)
     if walks is not None and graph.has_canonical_format:
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
@@ -291,8 +309,11 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     pred_ptr, preds = preds_of.indptr.astype(np.int64), preds_of.indices
     times = preds_of.data.astype(out_degree.dtype)
     k = seeds.shape[1]
-    reach = np.zeros((n_comp, k), dtype=bool)
-    for j in range(k):
+    # a small graph's reach walked up its levels (csgraph not imported for it), a large
+    # one's searched once a seed set when the levels are known (:func:`reaching`)
+    walked = graph.shape[0] + graph.nnz <= SMALL
+    reach = np.zeros((n_comp, k if walked else 0), dtype=bool)
+    for j in range(reach.shape[1]):
         reach[comp[seeds[:, j]], j] = True
     level = np.full(n_comp, -1, dtype=np.int64)
     stamp = np.empty(n_comp, dtype=np.int64)  # scratch of _distinct
@@ -312,15 +333,16 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
         at = np.repeat(lo - np.cumsum(count) + count, count)  # gather_ranges, inline
         at += np.arange(at.size)
         above = np.asarray(preds[at], dtype=np.int64)
-        below = np.repeat(frontier, count)
-        for j in range(k):  # the frontier's reach is final: its successors are done
-            reach[above[reach[below, j]], j] = True
+        if walked:
+            below = np.repeat(frontier, count)
+            for j in range(k):  # the frontier's reach is final: its successors are done
+                reach[above[reach[below, j]], j] = True
         np.subtract.at(out_degree, above, times[at])
         frontier = _distinct(above[out_degree[above] == 0], stamp)
         depth += 1
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
-    return Levels(comp, level, reach)
+    return Levels(comp, level, reach if walked else reaching(preds_of, comp, seeds))
 
 
 def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["LEVEL_CALL_SECONDS", "PROBE_LEVELS", "SEARCH_SECONDS", "searched_levels",
-           "thin"]
+__all__ = ["LEVEL_CALL_SECONDS", "PROBE_LEVELS", "SEARCH_SECONDS", "reaching",
+           "searched_levels", "thin"]
 
-PROBE_LEVELS = 64
+PROBE_LEVELS = 16
 """:func:`~mitld_lp.solvers.graph.levels` walks the levels one by one up to this
 depth, then judges at each doubling of the depth whether the levels just walked were
 thin (:func:`thin`)."""
@@ -79,11 +79,25 @@ def searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
     level = np.rint(2.0 + 2.0 * np.arange(n_comp) - dist).astype(np.int64)
     if not bool(np.all(level >= 0)):  # pragma: no cover - every component reaches a sink
         raise AssertionError("the component graph has a node that reaches no sink")
+    del cols, ptr, below
+    return level, reaching(preds_of, comp, seeds)
+
+
+def reaching(preds_of: sp.csr_array, comp: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """``(n_components, k)`` bool: which components reach a state of each seed set
+    (``seeds``: ``(n_states, k)`` bool; ``comp``: each state's component), by one
+    breadth-first search a set on the reversed component graph (``preds_of``: row ``d``
+    lists the components with an edge to ``d``), from the seeds' component or, where
+    they lie in several, from a node joined to them.  A set, so the same whatever walk
+    finds it (:func:`~mitld_lp.solvers.graph.levels` walks it up its levels on a small
+    graph)."""
+    from scipy.sparse import csgraph
+
+    n_comp = preds_of.shape[0]
     k = seeds.shape[1]
     reach = np.zeros((n_comp, k), dtype=bool)
-    pattern = np.ones(cols.size, dtype=np.int8)
     for j in range(k):
-        start = np.unique(comp[seeds[:, j]])
+        start = np.flatnonzero(np.bincount(comp[seeds[:, j]], minlength=n_comp))
         if start.size == 0:
             continue
         if start.size == 1:  # one component: searched from it on ``preds_of`` itself
@@ -91,14 +105,14 @@ def searched_levels(preds_of: sp.csr_array, sinks: np.ndarray, comp: np.ndarray,
                                                 return_predecessors=False)
             reach[found, j] = True
             continue
-        # the reversed graph again, the joined node now to the seeds' components
-        graph = sp.csr_array((pattern[:below.size + start.size],
-                              np.concatenate([below, start]),
-                              np.concatenate([ptr[:-1], [below.size + start.size]])),
+        # the reversed graph again, with a node joined to the seeds' components
+        index = preds_of.indices.dtype
+        graph = sp.csr_array((np.ones(preds_of.nnz + start.size, dtype=np.int8),
+                              np.concatenate([preds_of.indices, start.astype(index)]),
+                              np.concatenate([preds_of.indptr,
+                                              [preds_of.nnz + start.size]]).astype(index)),
                              shape=(n_comp + 1, n_comp + 1))
-        found = csgraph.breadth_first_order(graph, source, directed=True,
+        found = csgraph.breadth_first_order(graph, n_comp, directed=True,
                                             return_predecessors=False)
         reach[found[found < n_comp], j] = True
-    return level, reach
-
-
+    return reach
