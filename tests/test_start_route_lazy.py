@@ -171,3 +171,18 @@ def test_a_verb_s_parser_has_only_that_verb():
     for words in ([], ["--help"], ["solv", "x"]):
         sub = next(a for a in _build_parser(words)._actions if a.dest == "verb")
         assert list(sub.choices) == [verb for verb, *_ in _VERBS]
+
+
+def test_flatten_tells_constants_apart_as_the_dataclass_comparison_does():
+    from mitld_lp.logic.syntax import FALSE, TRUE, And, Const, Or, Prop, flatten
+
+    a, b = Prop("a"), Prop("b")
+    # fresh constants (not the module's TRUE/FALSE objects): the unit is dropped, the
+    # zero decides, nested operands of the same kind are flattened, duplicates dropped
+    assert flatten(And, [a, Const(True), And((a, b)), b]) == [a, b]
+    assert flatten(And, [a, Const(False), b]) is FALSE
+    assert flatten(Or, [Const(False), a, Or((b, a))]) == [a, b]
+    assert flatten(Or, [a, Const(True)]) is TRUE
+    assert flatten(And, [Const(True), Const(True)]) == []
+    # operands of the other kind stay whole, in order of first occurrence
+    assert flatten(Or, [And((a, b)), a, And((a, b))]) == [And((a, b)), a]
