@@ -44,8 +44,9 @@ SCIPY_TESTS = "scipy._lib._testutils"
 class _Later(types.ModuleType):
     """A module imported when one of its names is first read (:func:`modules_when_used`).
 
-    Its dunder names are its own (``__name__``, a ``__spec__`` of None: the import
-    system reads them without importing it), and so are the names given as ``kept``;
+    Its dunder names are its own (``__name__``, a ``__spec__`` of None: the import system
+    reads them without importing it) but a package's ``__path__``, and so are the names
+    given as ``kept``;
     any other name is the real module's: reading, writing or deleting one imports the
     real module (which then replaces the stand-in in ``sys.modules``) and acts on it, so
     the module's state (``tempfile.tempdir``) is one."""
@@ -66,6 +67,11 @@ class _Later(types.ModuleType):
         return real
 
     def __getattr__(self, name: str) -> Any:
+        # a package's ``__path__`` is the real one's: importing a submodule of a package
+        # put off (``zipfile._path`` on Python 3.12) reads it, and imports the package
+        # first; a module's has none (``from m import x`` asks, and must not import it)
+        if name == "__path__" and vars(self).get("_package"):
+            return self._real().__path__
         if name.startswith("__") and name.endswith("__"):
             raise AttributeError(name)
         return getattr(self._real(), name)
@@ -91,8 +97,10 @@ def modules_when_used() -> None:
     calls it; ``from pickle import Pickler`` imports it at once.  A module that cannot
     be found is left alone (its importer's own ``ImportError`` stays where it was)."""
     for name in LATER_MODULES:
-        if name not in sys.modules and importlib.util.find_spec(name) is not None:
-            sys.modules[name] = _Later(name)
+        spec = None if name in sys.modules else importlib.util.find_spec(name)
+        if spec is not None:
+            sys.modules[name] = _Later(name, {
+                "_package": spec.submodule_search_locations is not None})
 
 
 def numpy_docs_left_out() -> None:

@@ -186,3 +186,22 @@ def test_flatten_tells_constants_apart_as_the_dataclass_comparison_does():
     assert flatten(And, [Const(True), Const(True)]) == []
     # operands of the other kind stay whole, in order of first occurrence
     assert flatten(Or, [And((a, b)), a, And((a, b))]) == [And((a, b)), a]
+
+
+def test_a_submodule_of_a_put_off_package_imports(tmp_path, monkeypatch):
+    package = tmp_path / "sr_later_package"
+    package.mkdir()
+    (package / "__init__.py").write_text("name = 'package'\n", encoding="utf-8")
+    (package / "part.py").write_text("name = 'part'\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(stand_ins, "LATER_MODULES", ("sr_later_package",))
+    try:
+        stand_ins.modules_when_used()
+        import sr_later_package.part as part  # the package's __path__: the real package's
+
+        assert part.name == "part"
+        assert sys.modules["sr_later_package"].name == "package"
+        assert sys.modules["sr_later_package"].__file__.endswith("__init__.py")
+    finally:
+        for name in ("sr_later_package.part", "sr_later_package"):
+            sys.modules.pop(name, None)
