@@ -134,8 +134,10 @@ def lean_start() -> None:
     methods as closures and their ``__init__`` code from the table of an earlier run
     (:func:`dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`), SciPy's
     array-API layer without NumPy's extra submodules (:func:`lean_scipy`), ``numpy.ma``
-    when first used (:func:`numpy_ma_when_used`) and lark without ``regex``
-    (:func:`lark_without_regex`).
+    when first used (:func:`numpy_ma_when_used`), lark without ``regex``
+    (:func:`lark_without_regex`), and the stand-ins of :mod:`mitld_lp.stand_ins`: NumPy
+    without the docstrings of its C objects, SciPy's test runner and a few standard
+    modules imported when first used.
 
     :func:`command` calls it; a program that runs the package's routes and nothing else
     (a benchmark's worker process measuring what the command line's process costs) may
@@ -146,6 +148,11 @@ def lean_start() -> None:
     from mitld_lp import init_cache
 
     init_cache.install()
+    from mitld_lp import stand_ins
+
+    stand_ins.numpy_docs_left_out()
+    stand_ins.scipy_tests_when_used()
+    stand_ins.modules_when_used()
     lean_scipy()
     numpy_ma_when_used()
     lark_without_regex()

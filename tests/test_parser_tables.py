@@ -47,6 +47,10 @@ def test_the_tables_were_written_from_this_grammar():
     assert FILE["grammar_sha256"] == tables.grammar_digest(), (
         "grammar.lark or the parser's options changed: regenerate the tables with "
         'python -c "import mitld_lp.logic.tables as t; t.write()"')
+    # the text the package compares is the text digested, the grammar file's own
+    assert FILE["grammar_key"] == tables.grammar_key()
+    assert FILE["grammar_key"].startswith(
+        (ROOT / "mitld_lp" / "logic" / "grammar.lark").read_text(encoding="utf-8"))
 
 
 def _model_specs() -> list[str]:
@@ -83,8 +87,12 @@ def test_the_parser_in_use_is_the_stored_one():
     assert tables.stored() == FILE
 
 
-def test_stale_tables_are_not_used(monkeypatch):
-    monkeypatch.setattr(tables, "grammar_digest", lambda: "0" * 64)
+@pytest.mark.parametrize("stale", ["grammar", "options"])
+def test_stale_tables_are_not_used(monkeypatch, stale):
+    if stale == "grammar":  # one character more in the grammar's text
+        monkeypatch.setattr(tables, "grammar", lambda: tables._beside("grammar.lark") + " ")
+    else:
+        monkeypatch.setattr(tables, "OPTIONS", dict(tables.OPTIONS, maybe_placeholders=False))
     assert tables.stored() is None
     tables.parser.cache_clear()
     try:

@@ -273,15 +273,19 @@ def flatten(kind: type[And] | type[Or], args: Iterable[Formula]) -> list[Formula
     of first occurrence; or the zero (``false``/``true``) when an operand is it.  Shared by
     the simplifying constructors here and the canonical ones of
     :mod:`mitld_lp.logic.normal`."""
-    unit, zero = (TRUE, FALSE) if kind is And else (FALSE, TRUE)
+    zero = FALSE if kind is And else TRUE
     out: dict[Formula, None] = {}
     for a in args:
         if not isinstance(a, Formula):
             raise TypeError(f"expected a Formula, got {a!r}")
         for p in a.args if isinstance(a, kind) else (a,):
-            if p == zero:
-                return zero
-            if p != unit:
+            # ``p == zero`` and ``p != unit`` as the dataclass compares: only a Const
+            # equals a Const, by its value (asked here first: the automaton's
+            # construction flattens thousands of operands, most of them not constants)
+            if type(p) is Const:
+                if p.value == zero.value:
+                    return zero
+            else:
                 out[p] = None
     return list(out)
 
