@@ -346,7 +346,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
+        fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block) if compiled is None
                 else compiled)
         if fast:  # the target's value carried back in one sweep (sweep_order's docs),
             # the block renumbered so that the kernel's sweep from its last state to its

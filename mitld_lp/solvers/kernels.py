@@ -153,12 +153,24 @@ def excess(local: np.ndarray, tol: float, precision: float | None) -> float:
     return float(np.max(gaps / thresholds(local[:, 0::2], tol, precision), initial=0.0))
 
 
-def use_compiled(entries: int, block_entries: int) -> bool:
+def use_compiled(entries: int, block_entries: int, block: Any = None) -> bool:
     """Whether a block of ``block_entries`` entries in a product of ``entries``
-    transitions is swept with the compiled kernel (both large enough to pay numba's
-    import and memory, and numba importable: imported here the first time)."""
-    return (entries >= COMPILED_MIN_ENTRIES and block_entries >= COMPILED_MIN_BLOCK_ENTRIES
-            and compiled_kernel() is not None)
+    transitions is swept with the compiled kernel (numba importable: imported here the
+    first time).  A product below :data:`COMPILED_MIN_ENTRIES` never; a block of at
+    least :data:`COMPILED_MIN_BLOCK_ENTRIES` always; a smaller one, when ``block`` (a
+    :class:`~mitld_lp.solvers.topological.Block`) is given, where its forecast work is
+    less compiled than by NumPy (:mod:`mitld_lp.solvers.sweep_gate`: its depth, and
+    numba's load unless loaded already)."""
+    if entries < COMPILED_MIN_ENTRIES:
+        return False
+    if block_entries < COMPILED_MIN_BLOCK_ENTRIES:
+        if block is None:
+            return False
+        from mitld_lp.solvers import sweep_gate
+
+        if not sweep_gate.prefers_compiled(block, loaded=bool(_KERNEL)):
+            return False
+    return compiled_kernel() is not None
 
 
 def compiled_kernel() -> Any:
