@@ -132,11 +132,15 @@ def test_both_routes_hold_the_closed_form(monkeypatch: pytest.MonkeyPatch,
     monkeypatch.setattr(sweep_gate, "NUMBA_LOAD", load)
     monkeypatch.setattr(kernels, "_KERNEL", None)  # as if not loaded yet (its load counted)
     called = {"compiled": 0, "numpy": 0}
+
+    def spy(func, key):
+        def counted(*args, **kwargs):
+            called[key] += 1
+            return func(*args, **kwargs)
+        return counted
+
     for name, key in (("compiled_sweeps", "compiled"), ("numpy_sweeps", "numpy")):
-        def spy(*args, _f=getattr(iteration, name), _k=key, **kwargs):
-            called[_k] += 1
-            return _f(*args, **kwargs)
-        monkeypatch.setattr(iteration, name, spy)
+        monkeypatch.setattr(iteration, name, spy(getattr(iteration, name), key))
     r = interval_iteration(mdp, mdp.target, gap="max", tol=1e-10, precision=None,
                            progress=False)
     assert (called["compiled"] > 0) == (load == 0.0)
@@ -145,3 +149,31 @@ def test_both_routes_hold_the_closed_form(monkeypatch: pytest.MonkeyPatch,
     assert np.all(r.lower[inner] <= exact[inner] + 1e-13)
     assert np.all(exact[inner] <= r.upper[inner] + 1e-13)
     assert np.max(r.upper - r.lower) < 1e-10
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_value_order_distances_read_by_levels_as_by_pointer_jumping(seed: int) -> None:
+    # the two ways of reading the search's distances, and the radix sort against
+    # lexsort, give one order on random blocks (and a chain deeper than the levels read)
+    from mitld_lp.solvers import sweep_order
+
+    rng = np.random.default_rng(seed)
+    n = 3000
+    succ = [sorted(set(rng.integers(max(0, s - 20), min(n, s + 20), size=3).tolist()))
+            for s in range(n)]
+    block = _block(succ, leave=0.0)
+    block = Block(block.states, block.choices, block.inner, block.outer, block.starts,
+                  np.where(rng.random(n) < 0.002, 0.1, 0.0))
+    fast = sweep_order.value_order(block)
+    levels, by_distance = sweep_order._levels, sweep_order._by_distance
+    try:
+        sweep_order._levels = lambda *a: None
+        sweep_order._by_distance = lambda f, d, m: f[np.lexsort((-f, d))]
+        slow = sweep_order.value_order(block)
+    finally:
+        sweep_order._levels, sweep_order._by_distance = levels, by_distance
+    assert np.array_equal(fast, slow)
+    chain = np.arange(sweep_order.LEVEL_STEPS + 10, dtype=np.int64)
+    parent = np.concatenate([[chain.size], chain[:-1], [-9999]])
+    assert sweep_order._levels(chain, parent, chain.size) is None
+    np.testing.assert_array_equal(sweep_order._jumped(chain, parent, chain.size), chain + 1)
