@@ -22,8 +22,6 @@ Written: ``gate_blocks.md``.
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -35,7 +33,6 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
 import _common  # noqa: E402
-import bench_qvbs as bq  # noqa: E402
 import bench_sweeps as bs  # noqa: E402
 import profile_solve as ps  # noqa: E402
 
@@ -106,28 +103,13 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
                 numba_load=load)
 
 
-def _run(job: dict[str, Any], work: Path) -> dict[str, Any]:
-    (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
-    proc = subprocess.run([sys.executable, __file__, "--child", str(work)],
-                          capture_output=True, text=True, timeout=bq.BUDGET)
-    if proc.returncode != 0:
-        return {"error": proc.stderr.strip().splitlines()[-3:]}
-    return json.loads((work / "out.json").read_text(encoding="utf-8"))
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, default=None)
     ap.add_argument("--only", nargs="*", default=(), metavar="NAME")
     ap.add_argument("--bus", nargs="*", default=(), metavar="NAME")
     ap.add_argument("--routes", nargs="*", default=("numpy", "compiled", "default"))
-    ap.add_argument("--child", default=None)
     args = ap.parse_args(argv)
-    if args.child:
-        work = Path(args.child)
-        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
-        return 0
     out = _common.out_dir(args)
     rows, lines = [], []
     with tempfile.TemporaryDirectory(prefix="gate_blocks_") as tmp:
@@ -139,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             chosen = ps.chosen_jobs(args.qvbs, False, set(args.only), work, 0) + chosen
         for inst, job in chosen:
             for route in args.routes:
-                got = _run(dict(job, route=route), work)
+                got = ps._run_child("blocks", dict(job, route=route), work)
                 if "error" in got:
                     lines.append(f"{inst.name} {route}: error {got['error']}")
                     continue

@@ -120,6 +120,13 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
                 numba_loaded="numba" in sys.modules)
 
 
+def child_blocks(job: dict[str, Any]) -> dict[str, Any]:
+    """``gate_blocks.py``'s child: one route's solve with its blocks timed."""
+    import gate_blocks
+
+    return gate_blocks.child(job)
+
+
 def _timed(func: Any, stage: str, spent: dict[str, float]) -> Any:
     def timed(*args: Any, **kwargs: Any) -> Any:
         c = time.process_time()
@@ -190,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.child:
         kind, work = args.child[0], Path(args.child[1])
         job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        run = child_stages if kind == "stages" else child_numba
+        run = {"stages": child_stages, "numba": child_numba, "blocks": child_blocks}[kind]
         (work / f"{kind}.json").write_text(json.dumps(run(job)), encoding="utf-8")
         return 0
     if args.qvbs is None:

@@ -452,7 +452,9 @@ def interval_iteration(
     ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
     (:mod:`mitld_lp.solvers.kernels`); None (default) uses it, when numba is installed,
     on the blocks of at least ``kernels.COMPILED_MIN_BLOCK_ENTRIES`` entries of a
-    quotient of at least ``kernels.COMPILED_MIN_ENTRIES``; ``True`` on every block,
+    quotient of at least ``kernels.COMPILED_MIN_ENTRIES``, and on the smaller blocks
+    there that :mod:`mitld_lp.solvers.sweep_gate` forecasts cheaper so (deep blocks,
+    which NumPy's sweeps would leave to the policy jump); ``True`` on every block,
     ``False`` never.
     """
     q = quotient_for(mdp, target, quotient, sense)

@@ -23,7 +23,8 @@ probability 0.98) is settled in one update instead of hundreds.
   than the forward one on the bus blocks and, jumping through memory, 5x the time).
   A block is swept by it only in a product of at least
   :data:`COMPILED_MIN_ENTRIES` entries and when the block itself has at least
-  :data:`COMPILED_MIN_BLOCK_ENTRIES`; numba is imported at the first such block, so a
+  :data:`COMPILED_MIN_BLOCK_ENTRIES`, or is forecast cheaper so from its depth
+  (:mod:`mitld_lp.solvers.sweep_gate`); numba is imported at the first such block, so a
   product whose blocks are all small never loads it; without numba the NumPy path runs.
   What loading it costs, measured in a solve with SciPy loaded (numba 0.68, CPU
   seconds on a loaded 2-core machine): ``import numba`` 0.14-0.25 s; the first call of
@@ -125,7 +126,10 @@ sweeps give up after 16 and the policy jump's factorisations take 50 s (20-4
 38,684 entries), ``csma`` 4-2 (no block) and ``bus_scaled`` n64 d3 (98,288 and 49,144)
 stay on NumPy; swept compiled, consensus 4-4 takes 1.01 s against 0.57 and bus n64 d3
 1.47 s against 1.72 (its NumPy sweeps give up after 8 and jump): there the sizes pick
-the slower side by 0.25 s, which only a forecast of the sweeps would see."""
+the slower side by 0.25 s, which only a forecast of the sweeps would see.  A block below
+this size is now asked that forecast (:mod:`mitld_lp.solvers.sweep_gate`, from the
+block's depth): bus n64 d3's blocks (depth 126) are swept compiled, consensus's (depth
+45-65; 6-2's block of 106,860 entries among them) stay on NumPy."""
 
 _KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
 
