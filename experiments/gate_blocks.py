@@ -22,6 +22,7 @@ Written: ``gate_blocks.md``.
 
 from __future__ import annotations
 
+import json
 import sys
 import tempfile
 import time
@@ -60,7 +61,7 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         kernels.compiled_kernel()
         load = time.process_time() - c
     blocks: list[dict[str, Any]] = []
-    gate = kernels.use_compiled
+    gate = sweep_gate.use_compiled
 
     def use(entries: int, block_entries: int, block: Any = None) -> bool:
         f = sweep_gate.forecast(block, loaded=False)
@@ -109,7 +110,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=(), metavar="NAME")
     ap.add_argument("--bus", nargs="*", default=(), metavar="NAME")
     ap.add_argument("--routes", nargs="*", default=("numpy", "compiled", "default"))
+    ap.add_argument("--child", nargs=2, default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
+    if args.child:  # run by profile_solve._run_child
+        work = Path(args.child[1])
+        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+        (work / f"{args.child[0]}.json").write_text(json.dumps(child(job)), encoding="utf-8")
+        return 0
     out = _common.out_dir(args)
     rows, lines = [], []
     with tempfile.TemporaryDirectory(prefix="gate_blocks_") as tmp:
@@ -121,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             chosen = ps.chosen_jobs(args.qvbs, False, set(args.only), work, 0) + chosen
         for inst, job in chosen:
             for route in args.routes:
-                got = ps._run_child("blocks", dict(job, route=route), work)
+                got = ps._run_child("blocks", dict(job, route=route), work, __file__)
                 if "error" in got:
                     lines.append(f"{inst.name} {route}: error {got['error']}")
                     continue

@@ -120,13 +120,6 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
                 numba_loaded="numba" in sys.modules)
 
 
-def child_blocks(job: dict[str, Any]) -> dict[str, Any]:
-    """``gate_blocks.py``'s child: one route's solve with its blocks timed."""
-    import gate_blocks
-
-    return gate_blocks.child(job)
-
-
 def _timed(func: Any, stage: str, spent: dict[str, float]) -> Any:
     def timed(*args: Any, **kwargs: Any) -> Any:
         c = time.process_time()
@@ -167,9 +160,12 @@ def child_numba(job: dict[str, Any]) -> dict[str, Any]:
                 sweeps=int(done), x0=float(x[0, 0]))
 
 
-def _run_child(kind: str, job: dict[str, Any], work: Path) -> dict[str, Any]:
+def _run_child(kind: str, job: dict[str, Any], work: Path,
+               script: str = __file__) -> dict[str, Any]:
+    """``job`` run by ``script --child kind work`` (this one's, or another experiment's
+    that answers the same way: ``gate_blocks.py``), its answer read back."""
     (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
-    proc = subprocess.run([sys.executable, __file__, "--child", kind, str(work)],
+    proc = subprocess.run([sys.executable, script, "--child", kind, str(work)],
                           capture_output=True, text=True, timeout=bq.BUDGET)
     if proc.returncode != 0:
         return {"error": proc.stderr.strip().splitlines()[-1:]}
@@ -197,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.child:
         kind, work = args.child[0], Path(args.child[1])
         job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        run = {"stages": child_stages, "numba": child_numba, "blocks": child_blocks}[kind]
+        run = child_stages if kind == "stages" else child_numba
         (work / f"{kind}.json").write_text(json.dumps(run(job)), encoding="utf-8")
         return 0
     if args.qvbs is None:

@@ -1,4 +1,4 @@
-"""The sweeps' gate (``solvers/sweep_gate.py``, called by ``kernels.use_compiled``): its
+"""The sweeps' gate (``solvers/sweep_gate.py``, the iteration's ``use_compiled``): its
 choice on hand-built blocks of known size and depth, and the brackets of both routes it
 picks between holding a value known in closed form."""
 
@@ -78,12 +78,12 @@ def test_numba_load_decides_a_middle_block() -> None:
 
 def test_use_compiled_keeps_its_size_floors(monkeypatch: pytest.MonkeyPatch) -> None:
     deep = _block(_grid(128, 64))
-    assert not kernels.use_compiled(kernels.COMPILED_MIN_ENTRIES - 1, deep.inner.nnz, deep)
-    assert not kernels.use_compiled(10**7, deep.inner.nnz)  # no block: sizes alone
+    assert not sweep_gate.use_compiled(kernels.COMPILED_MIN_ENTRIES - 1, deep.inner.nnz, deep)
+    assert not sweep_gate.use_compiled(10**7, deep.inner.nnz)  # no block: sizes alone
     # a block of at most JACOBI_SWEEPS states is decided without a search
     monkeypatch.setattr(jump_cost, "block_depth", lambda block: 1 / 0)
     small = _block(_grid(10, 10))
-    assert not kernels.use_compiled(10**7, small.inner.nnz, small)
+    assert not sweep_gate.use_compiled(10**7, small.inner.nnz, small)
 
 
 def _gamblers_mdp(n: int) -> tuple[MDP, np.ndarray]:
@@ -130,7 +130,7 @@ def test_both_routes_hold_the_closed_form(monkeypatch: pytest.MonkeyPatch,
     mdp, exact = _gamblers_mdp(n)
     monkeypatch.setattr(kernels, "COMPILED_MIN_ENTRIES", 0)
     monkeypatch.setattr(sweep_gate, "NUMBA_LOAD", load)
-    monkeypatch.setattr(kernels, "_KERNEL", None)  # as if not loaded yet (its load counted)
+    monkeypatch.setattr(kernels, "_KERNEL", None)  # not loaded yet: its load is counted
     called = {"compiled": 0, "numpy": 0}
 
     def spy(func, key):

@@ -83,12 +83,12 @@ from mitld_lp.solvers.kernels import (
     compiled_sweeps,
     excess,
     numpy_sweeps,
-    use_compiled,
 )
 from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import value_order
 from mitld_lp.solvers.topological import (
     Block,
@@ -330,7 +330,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     out of budget.  ``skip``: states left out (those the initial state cannot reach:
     their successors are unreachable too, so nothing the others need is skipped); they
     keep what they had.  ``compiled``: the blocks are swept by the compiled kernel
-    (``None``: the blocks :func:`~mitld_lp.solvers.kernels.use_compiled` picks, numba
+    (``None``: the blocks :func:`~mitld_lp.solvers.sweep_gate.use_compiled` picks, numba
     loaded at the first of them)."""
     blk = blocks(q)
     sense = q.sense

@@ -96,8 +96,8 @@ from mitld_lp.solvers.graph import Sense
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
-           "compiled_sweeps", "excess", "numpy_sweeps", "sweep_order", "thresholds",
-           "use_compiled"]
+           "compiled_sweeps", "excess", "kernel_loaded", "numpy_sweeps", "sweep_order",
+           "thresholds", "use_compiled"]
 
 logger = logging.getLogger(__name__)
 
@@ -157,24 +157,19 @@ def excess(local: np.ndarray, tol: float, precision: float | None) -> float:
     return float(np.max(gaps / thresholds(local[:, 0::2], tol, precision), initial=0.0))
 
 
-def use_compiled(entries: int, block_entries: int, block: Any = None) -> bool:
+def use_compiled(entries: int, block_entries: int) -> bool:
     """Whether a block of ``block_entries`` entries in a product of ``entries``
-    transitions is swept with the compiled kernel (numba importable: imported here the
-    first time).  A product below :data:`COMPILED_MIN_ENTRIES` never; a block of at
-    least :data:`COMPILED_MIN_BLOCK_ENTRIES` always; a smaller one, when ``block`` (a
-    :class:`~mitld_lp.solvers.topological.Block`) is given, where its forecast work is
-    less compiled than by NumPy (:mod:`mitld_lp.solvers.sweep_gate`: its depth, and
-    numba's load unless loaded already)."""
-    if entries < COMPILED_MIN_ENTRIES:
-        return False
-    if block_entries < COMPILED_MIN_BLOCK_ENTRIES:
-        if block is None:
-            return False
-        from mitld_lp.solvers import sweep_gate
+    transitions is swept with the compiled kernel by size alone (both large enough to
+    pay numba's import and memory, and numba importable: imported here the first time).
+    The iteration asks :func:`mitld_lp.solvers.sweep_gate.use_compiled`, which also
+    sends a smaller block there where its forecast work is less."""
+    return (entries >= COMPILED_MIN_ENTRIES and block_entries >= COMPILED_MIN_BLOCK_ENTRIES
+            and compiled_kernel() is not None)
 
-        if not sweep_gate.prefers_compiled(block, loaded=bool(_KERNEL)):
-            return False
-    return compiled_kernel() is not None
+
+def kernel_loaded() -> bool:
+    """Whether the compiled kernel is loaded already (its load paid in this process)."""
+    return bool(_KERNEL)
 
 
 def compiled_kernel() -> Any:
