@@ -160,9 +160,12 @@ def child_numba(job: dict[str, Any]) -> dict[str, Any]:
                 sweeps=int(done), x0=float(x[0, 0]))
 
 
-def _run_child(kind: str, job: dict[str, Any], work: Path) -> dict[str, Any]:
+def _run_child(kind: str, job: dict[str, Any], work: Path,
+               script: str = __file__) -> dict[str, Any]:
+    """``job`` run by ``script --child kind work`` (this one's, or another experiment's
+    that answers the same way: ``gate_blocks.py``), its answer read back."""
     (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
-    proc = subprocess.run([sys.executable, __file__, "--child", kind, str(work)],
+    proc = subprocess.run([sys.executable, script, "--child", kind, str(work)],
                           capture_output=True, text=True, timeout=bq.BUDGET)
     if proc.returncode != 0:
         return {"error": proc.stderr.strip().splitlines()[-1:]}

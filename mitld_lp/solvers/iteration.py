@@ -83,12 +83,12 @@ from mitld_lp.solvers.kernels import (
     compiled_sweeps,
     excess,
     numpy_sweeps,
-    use_compiled,
 )
 from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import value_order
 from mitld_lp.solvers.topological import (
     Block,
@@ -330,7 +330,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     out of budget.  ``skip``: states left out (those the initial state cannot reach:
     their successors are unreachable too, so nothing the others need is skipped); they
     keep what they had.  ``compiled``: the blocks are swept by the compiled kernel
-    (``None``: the blocks :func:`~mitld_lp.solvers.kernels.use_compiled` picks, numba
+    (``None``: the blocks :func:`~mitld_lp.solvers.sweep_gate.use_compiled` picks, numba
     loaded at the first of them)."""
     blk = blocks(q)
     sense = q.sense
@@ -346,7 +346,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        fast = (use_compiled(q.matrix.nnz, block.inner.nnz) if compiled is None
+        fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block) if compiled is None
                 else compiled)
         if fast:  # the target's value carried back in one sweep (sweep_order's docs),
             # the block renumbered so that the kernel's sweep from its last state to its
@@ -452,7 +452,9 @@ def interval_iteration(
     ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
     (:mod:`mitld_lp.solvers.kernels`); None (default) uses it, when numba is installed,
     on the blocks of at least ``kernels.COMPILED_MIN_BLOCK_ENTRIES`` entries of a
-    quotient of at least ``kernels.COMPILED_MIN_ENTRIES``; ``True`` on every block,
+    quotient of at least ``kernels.COMPILED_MIN_ENTRIES``, and on the smaller blocks
+    there that :mod:`mitld_lp.solvers.sweep_gate` forecasts cheaper so (deep blocks,
+    which NumPy's sweeps would leave to the policy jump); ``True`` on every block,
     ``False`` never.
     """
     q = quotient_for(mdp, target, quotient, sense)

@@ -59,8 +59,8 @@ import scipy.sparse as sp
 from mitld_lp.solvers.policy_jump import AHEAD_SWEEPS
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["Cost", "ROUND_ENTRY", "ROUND_FLOP", "ROUND_STATE", "SAMPLE", "cost",
-           "lu_flops", "worth"]
+__all__ = ["Cost", "ROUND_ENTRY", "ROUND_FLOP", "ROUND_STATE", "SAMPLE", "block_depth",
+           "cost", "lu_flops", "worth"]
 
 ROUND_STATE = 400.0
 """Entries a state that a round of policy iteration costs besides the LU's multiplies
@@ -123,6 +123,12 @@ def cost(block: Block, chosen: np.ndarray) -> Cost:
     per_round = ROUND_STATE * n + ROUND_FLOP * flops + ROUND_ENTRY * entries
     return Cost(sweep=sweep, round=per_round, rounds=1.0 + depth / LOOK_AHEAD,
                 depth=depth, flops=flops)
+
+
+def block_depth(block: Block) -> int:
+    """The depth of the block's state graph (:func:`_depth`; the sweeps' gate,
+    :mod:`mitld_lp.solvers.sweep_gate`)."""
+    return _depth(_state_graph(block))[0]
 
 
 def _state_graph(block: Block) -> sp.csr_array:

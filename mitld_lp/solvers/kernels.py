@@ -23,7 +23,8 @@ probability 0.98) is settled in one update instead of hundreds.
   than the forward one on the bus blocks and, jumping through memory, 5x the time).
   A block is swept by it only in a product of at least
   :data:`COMPILED_MIN_ENTRIES` entries and when the block itself has at least
-  :data:`COMPILED_MIN_BLOCK_ENTRIES`; numba is imported at the first such block, so a
+  :data:`COMPILED_MIN_BLOCK_ENTRIES`, or is forecast cheaper so from its depth
+  (:mod:`mitld_lp.solvers.sweep_gate`); numba is imported at the first such block, so a
   product whose blocks are all small never loads it; without numba the NumPy path runs.
   What loading it costs, measured in a solve with SciPy loaded (numba 0.68, CPU
   seconds on a loaded 2-core machine): ``import numba`` 0.14-0.25 s; the first call of
@@ -95,8 +96,8 @@ from mitld_lp.solvers.graph import Sense
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
-           "compiled_sweeps", "excess", "numpy_sweeps", "sweep_order", "thresholds",
-           "use_compiled"]
+           "compiled_sweeps", "excess", "kernel_loaded", "numpy_sweeps", "sweep_order",
+           "thresholds", "use_compiled"]
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +126,10 @@ sweeps give up after 16 and the policy jump's factorisations take 50 s (20-4
 38,684 entries), ``csma`` 4-2 (no block) and ``bus_scaled`` n64 d3 (98,288 and 49,144)
 stay on NumPy; swept compiled, consensus 4-4 takes 1.01 s against 0.57 and bus n64 d3
 1.47 s against 1.72 (its NumPy sweeps give up after 8 and jump): there the sizes pick
-the slower side by 0.25 s, which only a forecast of the sweeps would see."""
+the slower side by 0.25 s, which only a forecast of the sweeps would see.  A block below
+this size is now asked that forecast (:mod:`mitld_lp.solvers.sweep_gate`, from the
+block's depth): bus n64 d3's blocks (depth 126) are swept compiled, consensus's (depth
+45-65; 6-2's block of 106,860 entries among them) stay on NumPy."""
 
 _KERNEL: Any = None  # the compiled kernel once built, False if numba is not available
 
@@ -155,10 +159,17 @@ def excess(local: np.ndarray, tol: float, precision: float | None) -> float:
 
 def use_compiled(entries: int, block_entries: int) -> bool:
     """Whether a block of ``block_entries`` entries in a product of ``entries``
-    transitions is swept with the compiled kernel (both large enough to pay numba's
-    import and memory, and numba importable: imported here the first time)."""
+    transitions is swept with the compiled kernel by size alone (both large enough to
+    pay numba's import and memory, and numba importable: imported here the first time).
+    The iteration asks :func:`mitld_lp.solvers.sweep_gate.use_compiled`, which also
+    sends a smaller block there where its forecast work is less."""
     return (entries >= COMPILED_MIN_ENTRIES and block_entries >= COMPILED_MIN_BLOCK_ENTRIES
             and compiled_kernel() is not None)
+
+
+def kernel_loaded() -> bool:
+    """Whether the compiled kernel is loaded already (its load paid in this process)."""
+    return bool(_KERNEL)
 
 
 def compiled_kernel() -> Any:

@@ -1,0 +1,134 @@
+"""Which sweeps a block of the interval iteration gets, forecast from the block itself:
+NumPy's Jacobi sweeps (and the policy jump where they cannot close it) or the compiled
+Gauss--Seidel kernel (and numba's load where it is not loaded yet).
+
+:func:`use_compiled` (the iteration's gate) sends a block to the compiled kernel by size
+alone from :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_BLOCK_ENTRIES`
+(:func:`mitld_lp.solvers.kernels.use_compiled`); below it, in a product of at least
+:data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES`, it asks :func:`prefers_compiled`.
+Sizes alone cannot tell the blocks apart:
+``bus_scaled`` n64 d3's grid blocks (98,288 and 49,144 entries) are cheaper compiled
+(1.79 -> 1.51 s solve, numba's load included), QVBS ``consensus`` 4-4's (at most 38,684)
+dearer (0.55 -> 1.01 s).  What does tell them apart is the block's *depth* (the
+eccentricity of its state graph without directions, :func:`~mitld_lp.solvers.jump_cost.
+block_depth`): a Jacobi sweep carries a value one step, so a block deeper than
+:data:`JACOBI_SWEEPS` steps is not closed by the NumPy sweeps, and the policy jump's
+rounds of policy iteration grow with the depth too (each carries an improvement
+:data:`~mitld_lp.solvers.jump_cost.LOOK_AHEAD` steps); a Gauss--Seidel sweep in the
+block's value order (:mod:`mitld_lp.solvers.sweep_order`) carries it across.
+
+Both sides in one unit, *entries touched by a compiled sweep* (as
+:mod:`mitld_lp.solvers.jump_cost`; a sweep of a block touches ``sweep = inner.nnz +
+choices``), no clock read (the same block decides the same on an idle and on a loaded
+machine):
+
+* NumPy: ``NUMPY_ENTRY * min(depth, JACOBI_SWEEPS) * sweep``, and where the depth
+  exceeds :data:`JACOBI_SWEEPS`, the jump's rounds (``1 + depth / LOOK_AHEAD``) times
+  a round's cost without its LU's multiplies (``ROUND_STATE * states + ROUND_ENTRY *
+  entries``: a lower bound of the jump's, so that a doubt stays on NumPy, the route
+  that loads nothing);
+* compiled: :data:`NUMBA_LOAD` (0 once the kernel is loaded) plus
+  ``GS_BASE + GS_PER_DEPTH * depth`` sweeps of ``sweep`` entries.
+
+The depth costs two breadth-first searches of the block (2.5-5 ms on the blocks
+above); a block too small for NumPy's forecast to reach numba's load even at the
+greatest depth it could have (its states) is decided without them.
+
+Calibrated on this machine (2 cores, CPU seconds, 2026-11-30, with
+``experiments/gate_blocks.py``: every block of an instance swept by each route in a
+process of its own; ``experiments/results/gate_blocks_sweep_gate.md``): see each
+constant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mitld_lp.solvers import jump_cost, kernels
+from mitld_lp.solvers.topological import Block
+
+__all__ = ["Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS", "NUMBA_LOAD",
+           "NUMPY_ENTRY", "forecast", "prefers_compiled", "use_compiled"]
+
+JACOBI_SWEEPS = 100
+"""The NumPy sweeps before a block is jumped (the iteration's ``_SWEEPS_BEFORE_POLICY``):
+a block deeper than this many steps is forecast to need the jump.  A block that is not
+stays on NumPy whatever the forecast: QVBS ``consensus`` 4-4's blocks (depth 61-65; their
+gap stays flat, a random walk's, and both routes end in a jump) cost 0.87-1.5x compiled
+with numba loaded, 20x on its 488-state block (548 sweeps), where a forecast from the
+depth alone would pick the compiled sweeps once numba is loaded."""
+NUMPY_ENTRY = 3.0
+"""What a NumPy (Jacobi) sweep costs an entry, in compiled sweeps' entries: 17-33 ns an
+entry on the bus n64 d3 and consensus 4-4 blocks against 8.4-10 ns compiled."""
+NUMBA_LOAD = 5.0e7
+"""numba's load (its import, the registries, the kernel's first call from the cache) in
+compiled sweeps' entries: 0.44 s (``experiments/numba_load.py``'s median, numba's import
+and three kernels' first calls) over 8.6 ns an entry."""
+GS_BASE = 16.0
+"""Gauss--Seidel sweeps of a block whatever its depth (one chunk of the kernel)."""
+GS_PER_DEPTH = 1.0
+"""Gauss--Seidel sweeps a step of the block's depth, in the value order: an upper figure
+of those measured, bus n64 d3 (depth 126) 96 (and an early jump) and 129, bus n128 d3
+(depth 254) 200 and 265, QVBS ``zeroconf`` 1000-4 (depth 66) 39."""
+
+
+@dataclass(frozen=True, slots=True)
+class Forecast:
+    """A block's forecast work by each route, in compiled sweeps' entries."""
+
+    depth: int
+    numpy: float
+    compiled: float
+
+
+def _numpy(states: int, entries: float, sweep: float, depth: int) -> float:
+    work = NUMPY_ENTRY * min(depth, JACOBI_SWEEPS) * sweep
+    if depth > JACOBI_SWEEPS:
+        rounds = 1.0 + depth / jump_cost.LOOK_AHEAD
+        work += rounds * (jump_cost.ROUND_STATE * states + jump_cost.ROUND_ENTRY * entries)
+    return work
+
+
+def _compiled(sweep: float, depth: int, loaded: bool) -> float:
+    return (0.0 if loaded else NUMBA_LOAD) + (GS_BASE + GS_PER_DEPTH * depth) * sweep
+
+
+def forecast(block: Block, loaded: bool) -> Forecast:
+    """The block's forecast work by each route (module docs); ``loaded``: numba's
+    kernel is loaded already."""
+    states = int(block.states.size)
+    entries = float(block.inner.nnz)
+    sweep = entries + float(block.choices.shape[0])
+    depth = jump_cost.block_depth(block)
+    return Forecast(depth, _numpy(states, entries, sweep, depth),
+                    _compiled(sweep, depth, loaded))
+
+
+def prefers_compiled(block: Block, loaded: bool) -> bool:
+    """Whether the block's compiled sweeps are forecast to cost less than its NumPy
+    sweeps and jump (module docs); ``loaded``: numba's kernel is loaded already."""
+    states = int(block.states.size)
+    entries = float(block.inner.nnz)
+    sweep = entries + float(block.choices.shape[0])
+    # the most NumPy could be forecast to cost (the depth at most the states) against
+    # the least the compiled sweeps could: if even that does not pay, no search
+    if (states <= JACOBI_SWEEPS
+            or _numpy(states, entries, sweep, states) <= _compiled(sweep, 0, loaded)):
+        return False
+    f = forecast(block, loaded)
+    return f.depth > JACOBI_SWEEPS and f.compiled < f.numpy
+
+
+def use_compiled(entries: int, block_entries: int, block: Block | None = None) -> bool:
+    """Whether a block of ``block_entries`` entries in a product of ``entries``
+    transitions is swept with the compiled kernel (numba importable: imported here the
+    first time).  A product below :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES`
+    never; a block of at least :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_BLOCK_ENTRIES`
+    always; a smaller one, when ``block`` is given, where :func:`prefers_compiled`
+    (numba's load counted unless the kernel is loaded already)."""
+    if entries < kernels.COMPILED_MIN_ENTRIES:
+        return False
+    if block_entries < kernels.COMPILED_MIN_BLOCK_ENTRIES and (
+            block is None or not prefers_compiled(block, loaded=kernels.kernel_loaded())):
+        return False
+    return kernels.compiled_kernel() is not None
