@@ -30,7 +30,7 @@ from mitld_lp.worlds.prism_archive import members as archive_members
 from mitld_lp.worlds.prism_archive import read_member
 from mitld_lp.worlds.prism_labels import choice_labels, indices, repeated, state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
-from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
+from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
@@ -80,6 +80,10 @@ class Tables:
         unexplored: ``n`` flags, the states found but not expanded by a build with a
             state limit (:func:`mitld_lp.worlds.prism_build.build_tables`); their rows
             are Storm's self-loops, not the program's (None: every state expanded).
+        checked: every row was checked to be a distribution within the game's
+            tolerance (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) when
+            read (:func:`read_model`, after normalising): the product need not check it
+            again (:attr:`mitld_lp.worlds.table.WorldTable.checked`).
     """
 
     variables: tuple[str, ...]
@@ -97,6 +101,7 @@ class Tables:
     decided: int = 0
     normalised: Normalisation | None = None
     unexplored: np.ndarray | None = None
+    checked: bool = False
 
 
 def transition_arrays(model: Any, where: str) -> tuple[np.ndarray, ...]:
@@ -184,11 +189,13 @@ def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
             meta.get("valuations", {}).get("states", {}), n, records.size,
             lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
                                 offset=records.offset_data))
+        # Storm's unsigned 64-bit offsets and targets read as int64 at once (no copy):
+        # one of 2^63 or more would read negative, which _read_export's checks refuse
         return (
             np.arange(n + 1, dtype=np.int64) if one_each else
-            read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
-            read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
-            read("branch-to-target.bin", "<u8", b).astype(np.int64),
+            read("state-to-choices.bin", "<i8", n + 1),
+            read("choice-to-branches.bin", "<i8", m + 1),
+            read("branch-to-target.bin", "<i8", b),
             read("branch-to-probability.bin", "<f8", b),
             packed,
             _choice_actions(path, members, m),
@@ -445,7 +452,8 @@ def read_model(
                          f"{table[int(code[c])]!r}: an update gives a variable a value "
                          "outside its range")
 
-    bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
+    lengths = np.diff(branches)
+    bad, total, branch_row = checked_rows(lengths, probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
         row = probabilities[int(branches[c]):int(branches[c + 1])]
@@ -454,7 +462,8 @@ def read_model(
         if negative.size:
             raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
         raise WorldError(f"{at}: probabilities sum to {show_sum(float(row.sum()))}, not 1")
-    probabilities, rows, largest = normalise_rows(np.diff(branches), probabilities)
+    probabilities, rows, largest = normalise_rows(lengths, probabilities, (total, branch_row))
+    del total, branch_row
     normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
     if normalised is not None:
         log.info("%s", normalised)
@@ -532,4 +541,5 @@ def read_model(
         effects=effects,
         decided=n_decided,
         normalised=normalised,
+        checked=True,  # every row: checked_rows above, and normalise_rows
     )
