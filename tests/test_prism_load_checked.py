@@ -209,3 +209,79 @@ def test_the_world_budget_refuses_a_large_model_before_its_rows_are_read(
     small.write_text(SMALL)
     assert load_prism(small).n_states == 5
     assert marks.read_text() == "read\n"  # the same route reads a model that fits
+
+
+# Globals, Booleans, a renamed module, initial values from constants, a
+# variable no command changes (Storm makes it a constant), names out of their order.
+HEADS = """mdp
+const int K = 2;
+global zeta : [0..5] init K + 1;
+global flag : bool init true;
+module alpha
+  m : [0..3] init K;
+  b : bool init false;
+  idle : [0..9] init 4;
+  [go] m<3 -> 0.5 : (m'=m+1) & (b'=!b) + 0.5 : (zeta'=min(zeta+1,5));
+  [stop] m=3 -> (flag'=false) & (m'=0);
+endmodule
+module beta = alpha [m=n, b=c, idle=idle2, go=go2, stop=stop2] endmodule
+label "goal" = m=3 & n=3;
+"""
+
+
+def _with_init_block() -> str:
+    """HEADS with an ``init`` block in place of the variables' initial values."""
+    import re
+
+    return re.sub(r" init [^;]+;", ";", HEADS).replace(
+        'label "goal"', "init zeta=1 & flag & m=0 & n=1 & !b & !c & idle=4 & idle2=4 endinit\nlabel \"goal\"")
+
+
+@needs_storm
+def test_the_head_read_from_the_program_is_storms_build_of_one_state(tmp_path: Path) -> None:
+    import stormpy
+
+    from mitld_lp.worlds.prism_valuations import head, program_head
+
+    path = tmp_path / "heads.prism"
+    path.write_text(HEADS)
+    plain = stormpy.parse_prism_program(str(path)).substitute_constants()
+    variables, initial, known, booleans = head(stormpy, plain, "", False, str(path))
+    assert program_head(plain) == (variables, known, booleans)
+    assert initial == 0
+    # by hand: sorted names; idle and idle2 are constants in Storm's program
+    assert variables == ("b", "c", "flag", "m", "n", "zeta")
+    assert known == (False, False, True, 2, 2, 3) and booleans == (0, 1, 2)
+    other = tmp_path / "init.prism"
+    other.write_text(_with_init_block())
+    assert program_head(stormpy.parse_prism_program(str(other)).substitute_constants()) is None
+
+
+@needs_storm
+@pytest.mark.parametrize("name", ["heads.prism", "init.prism"])
+def test_the_states_named_later_are_storms_valuations(tmp_path: Path, name: str) -> None:
+    import json
+
+    import stormpy
+
+    from mitld_lp.worlds.prism import load_prism
+    from mitld_lp.worlds.prism_valuations import DeferredValuations
+
+    text = HEADS if name == "heads.prism" else _with_init_block()
+    path = tmp_path / name
+    path.write_text(text)
+    game = load_prism(path)
+    states = game._tables.states
+    assert isinstance(states, DeferredValuations) and not states.built
+    program = stormpy.parse_prism_program(str(path))
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    model = stormpy.build_model(program, options=options)
+    names = game.variables
+    want = []
+    for s in range(model.nr_states):  # Storm's own valuations, one state at a time
+        values = json.loads(str(model.state_valuations.to_json(s)))
+        want.append(tuple(values[v] for v in names))
+    assert len(states) == model.nr_states
+    assert game.initial == want[model.initial_states[0]]
+    assert list(states) == want and states.built
