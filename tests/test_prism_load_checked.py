@@ -233,8 +233,8 @@ def _with_init_block() -> str:
     """HEADS with an ``init`` block in place of the variables' initial values."""
     import re
 
-    return re.sub(r" init [^;]+;", ";", HEADS).replace(
-        'label "goal"', "init zeta=1 & flag & m=0 & n=1 & !b & !c & idle=4 & idle2=4 endinit\nlabel \"goal\"")
+    block = "init zeta=1 & flag & m=0 & n=1 & !b & !c & idle=4 & idle2=4 endinit\n"
+    return re.sub(r" init [^;]+;", ";", HEADS).replace('label "goal"', block + 'label "goal"')
 
 
 @needs_storm
