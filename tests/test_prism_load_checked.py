@@ -285,3 +285,69 @@ def test_the_states_named_later_are_storms_valuations(tmp_path: Path, name: str)
     assert len(states) == model.nr_states
     assert game.initial == want[model.initial_states[0]]
     assert list(states) == want and states.built
+
+
+# 3 x 50 states (more than a 64-bit word of a bit vector, not a whole number of bytes
+# past it), labels true on scattered states.
+WIDE_LABELS = """mdp
+module m
+  x : [0..49] init 0;
+  y : [0..2] init 0;
+  [go] x<49 -> 0.5 : (x'=x+1) + 0.5 : (y'=mod(y+1,3));
+  [back] x>0 -> (x'=x-1);
+endmodule
+label "odd" = mod(x, 2) = 1;
+label "corner" = x=49 & y=2;
+label "never" = x>60;
+label "thirds" = mod(x + y, 3) = 0;
+"""
+
+
+@needs_storm
+def test_state_labels_read_from_the_export_are_storms_bit_vectors(tmp_path: Path) -> None:
+    import stormpy
+
+    from mitld_lp.worlds.prism_labels import agrees, indices
+    from mitld_lp.worlds.prism_tables import _read_export, label_states
+
+    path = tmp_path / "wide.prism"
+    path.write_text(WIDE_LABELS)
+    program = stormpy.parse_prism_program(str(path))
+    options = stormpy.BuilderOptions()
+    options.set_build_all_labels()
+    model = stormpy.build_model(program, options=options)
+    assert model.nr_states == 150
+    archive: dict[str, np.ndarray] = {}
+    _read_export(model, str(path), labels=archive)
+    assert {"odd", "corner", "never", "thirds"} <= set(archive)
+    for label in ("odd", "corner", "never", "thirds", "deadlock"):
+        want = np.fromiter(model.labeling.get_states(label), dtype=np.int64)  # one by one
+        assert np.array_equal(label_states(model, label, archive), want)
+        assert np.array_equal(indices(model.labeling.get_states(label)), want)
+    # a bit order read wrong (each byte reversed) keeps the count, and is caught
+    odd = archive["odd"]
+    wrong = odd.copy()  # the whole bytes' bits reversed
+    wrong[:144] = odd[:144].reshape(-1, 8)[:, ::-1].reshape(-1)
+    assert int(wrong.sum()) == int(odd.sum()) and not np.array_equal(wrong, odd)
+    assert agrees(odd, model.labeling.get_states("odd"))
+    assert not agrees(wrong, model.labeling.get_states("odd"))
+    assert np.array_equal(label_states(model, "odd", {"odd": wrong}),
+                          np.flatnonzero(odd))  # Storm's bit vector then, not the flags
+
+
+@needs_storm
+def test_a_worlds_labels_are_storms(tmp_path: Path) -> None:
+    import stormpy
+
+    from mitld_lp.worlds.prism import load_prism
+
+    path = tmp_path / "wide.prism"
+    path.write_text(WIDE_LABELS)
+    game = load_prism(path)
+    t = game._tables
+    model = stormpy.build_model(stormpy.parse_prism_program(str(path)))
+    assert len(t.states) == model.nr_states
+    for label in ("odd", "corner", "never", "thirds"):
+        want = set(np.fromiter(model.labeling.get_states(label), dtype=np.int64).tolist())
+        got = {s for s in range(len(t.states)) if label in t.label_sets[t.label_index[s]]}
+        assert got == want, label

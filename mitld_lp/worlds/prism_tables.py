@@ -28,12 +28,13 @@ import numpy as np
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_archive import members as archive_members
 from mitld_lp.worlds.prism_archive import read_member
-from mitld_lp.worlds.prism_labels import choice_labels, indices, repeated, state_labels
+from mitld_lp.worlds.prism_labels import agrees, choice_labels, indices, repeated, state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
+           "label_states",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
            "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
@@ -121,13 +122,15 @@ def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
 
 
 def _read_export(model: Any, where: str, origins: bool = False,
+                 labels: dict[str, np.ndarray] | None = None,
                  ) -> tuple[tuple[np.ndarray, ...], dict[str, np.ndarray] | None,
                             tuple[np.ndarray, list[str]] | None]:
     """:func:`read_export`'s arrays and valuations, and each choice's label as the
-    archive holds it (:func:`_choice_actions`; its origin instead when ``origins``)."""
+    archive holds it (:func:`_choice_actions`; its origin instead when ``origins``);
+    given ``labels``, the state labels the archive holds put there (:func:`_state_labels`)."""
     try:
         choices, branches, targets, probabilities, packed, actions = _export(model, where,
-                                                                             origins)
+                                                                             origins, labels)
     except OSError as exc:
         raise WorldError(
             f"{where}: cannot write Storm's export to a temporary folder: {exc.strerror or exc}"
@@ -148,7 +151,8 @@ def _read_export(model: Any, where: str, origins: bool = False,
     return (choices, branches, targets, probabilities), packed, actions
 
 
-def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
+def _export(model: Any, where: str, origins: bool = False,
+            labels: dict[str, np.ndarray] | None = None) -> tuple[Any, ...]:
     """Write ``model`` as an uncompressed UMB archive to a temporary folder and read its
     four transition arrays straight from the file, its state valuations
     (:func:`unpack_valuations`) and its choices' labels (:func:`_choice_actions`; with
@@ -184,6 +188,8 @@ def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
 
         # a DTMC's archive has no state-to-choices (a choice per state, in order)
         one_each = n == m and "state-to-choices.bin" not in members
+        if labels is not None:
+            labels.update(_state_labels(path, members, meta, n))
         records = members.get(VALUATIONS_BIN)
         packed = None if records is None else unpack_valuations(
             meta.get("valuations", {}).get("states", {}), n, records.size,
@@ -224,6 +230,44 @@ def _choice_actions(path: str, members: Mapping[str, Any], m: int,
         return None
     return index, strings
 
+
+def _state_labels(path: str, members: Mapping[str, Any], meta: Mapping[str, Any], n: int,
+                  ) -> dict[str, np.ndarray]:
+    """Each state label the UMB archive at ``path`` holds, by name (its ``alias``): ``n``
+    flags from its bit vector (``annotations/aps/<key>/states/values.bin``, bit ``i`` of
+    byte ``i // 8`` least significant first), read in one call where Storm's own bit
+    vector is read from its text (:func:`~mitld_lp.worlds.prism_labels.indices`); the
+    labels of another type or layout left out (:func:`label_states` asks Storm)."""
+    out: dict[str, np.ndarray] = {}
+    aps = meta.get("annotations", {}).get("aps", {})
+    if not isinstance(aps, dict):
+        return out
+    for key, about in aps.items():
+        if not isinstance(about, dict) or about.get("type") != {"size": 1, "type": "bool"} \
+                or about.get("applies-to") != ["states"]:
+            continue
+        member = members.get(f"{APS}{key}/states/values.bin")
+        if member is None or member.size < (n + 7) // 8:
+            continue
+        raw = np.fromfile(path, dtype=np.uint8, count=(n + 7) // 8, offset=member.offset_data)
+        out[str(about.get("alias", key))] = np.unpackbits(raw, bitorder="little")[:n].view(bool)
+    return out
+
+
+def label_states(model: Any, label: str, archive: Mapping[str, np.ndarray] | None = None,
+                 ) -> np.ndarray:
+    """The states of Storm's state label ``label``: from the archive's flags
+    (:func:`_state_labels`) where it holds them and they agree with Storm's bit vector
+    (:func:`~mitld_lp.worlds.prism_labels.agrees`), else from that bit vector."""
+    bits = model.labeling.get_states(label)
+    flags = None if archive is None else archive.get(label)
+    if flags is not None and agrees(flags, bits):
+        return np.flatnonzero(flags)
+    return indices(bits)
+
+
+APS = "annotations/aps/"
+"""The UMB archive's folder of the state labels (atomic propositions)."""
 
 VALUATIONS_BIN = "valuations/states/valuations.bin"
 """The UMB archive's state valuations: one record of bit fields per state."""
@@ -406,8 +450,9 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
+    archive: dict[str, np.ndarray] = {}  # the state labels the export holds
     (choices, branches, targets, probabilities), packed, actions = _read_export(
-        model, where, origins=named is not None)
+        model, where, origins=named is not None, labels=archive)
     variables, states = (valuations if valuations is not None else
                          valuations_of(model, hidden, packed))
     del packed
@@ -429,14 +474,14 @@ def read_model(
     if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
         stuck = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            stuck[indices(model.labeling.get_states("deadlock"))] = True
+            stuck[label_states(model, "deadlock", archive)] = True
         table.append(silent)
         code[(label_of < 0) & ~stuck[state_of]] = len(table) - 1
 
     n_decided = 0
     if decided is not None:
         stopped = np.zeros(n, dtype=bool)
-        stopped[indices(model.labeling.get_states(decided))] = True
+        stopped[label_states(model, decided, archive)] = True
         alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
         table.append(DECIDED_ACTION)
@@ -445,7 +490,7 @@ def read_model(
 
     if OUT_OF_BOUNDS in model.labeling.get_labels():  # Storm built without its checks
         outside = np.zeros(n, dtype=bool)
-        outside[indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
+        outside[label_states(model, OUT_OF_BOUNDS, archive)] = True
         choice_of = np.repeat(np.arange(m), np.diff(branches))  # per branch
         c = int(choice_of[np.flatnonzero(outside[targets] & ~outside[state_of[choice_of]])[0]])
         raise WorldError(f"{where}: at state {show(int(state_of[c]))}, action "
@@ -515,7 +560,7 @@ def read_model(
     if late:  # an unlabelled command's choice (no label, not Storm's self-loop), a clash
         loop = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            loop[indices(model.labeling.get_states("deadlock"))] = True
+            loop[label_states(model, "deadlock", archive)] = True
         mine = (label_of < 0) & (code == dead) & ~loop[state_of]
         mine[clash] = True
         action_index[mine] = LATE + np.flatnonzero(mine)
@@ -525,7 +570,7 @@ def read_model(
         raise WorldError(
             f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
         )
-    label_sets, label_index = state_labels(model, chosen)
+    label_sets, label_index = state_labels(model, chosen, archive)
     return Tables(
         variables=variables,
         states=states,
