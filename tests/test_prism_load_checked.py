@@ -111,14 +111,20 @@ def _storm_rows(path: Path) -> tuple[int, int, dict[int, list[dict[int, float]]]
     return model.nr_states, model.nr_transitions, rows, float(value)
 
 
+def _loaded(tmp_path: Path, name: str, text: str) -> tuple[Path, object]:
+    """The PRISM file ``text`` written as ``name`` and loaded as a world."""
+    from mitld_lp.worlds.prism import load_prism
+
+    path = tmp_path / name
+    path.write_text(text)
+    return path, load_prism(path)
+
+
 @needs_storm
 def test_a_loaded_table_is_storms_model_its_rows_checked(tmp_path: Path) -> None:
-    from mitld_lp.worlds.prism import load_prism
     from mitld_lp.worlds.table import table_of
 
-    path = tmp_path / "small.prism"
-    path.write_text(SMALL)
-    game = load_prism(path)
+    path, game = _loaded(tmp_path, "small.prism", SMALL)
     t = game._tables
     assert t.checked and game.normalised is not None and game.normalised.rows == 1
     n, transitions, rows, _ = _storm_rows(path)
@@ -339,11 +345,7 @@ def test_state_labels_read_from_the_export_are_storms_bit_vectors(tmp_path: Path
 def test_a_worlds_labels_are_storms(tmp_path: Path) -> None:
     import stormpy
 
-    from mitld_lp.worlds.prism import load_prism
-
-    path = tmp_path / "wide.prism"
-    path.write_text(WIDE_LABELS)
-    game = load_prism(path)
+    path, game = _loaded(tmp_path, "wide.prism", WIDE_LABELS)
     t = game._tables
     model = stormpy.build_model(stormpy.parse_prism_program(str(path)))
     assert len(t.states) == model.nr_states
