@@ -8,9 +8,13 @@ the state valuations from the same archive's bit-packed records (Storm's per-var
 calls, which make a Python list of each variable's values, where the layout is another);
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
 they disagree with it), or its choice origin where the choices are named from the
-commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from
-Storm's per-label calls (a bit vector each).  Only the choices that need their commands
-to be told apart (two enabled commands of one action in a state) are looked at one by one.
+commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from the
+same archive's bit vectors where they agree with Storm's own (else Storm's per-label
+calls, a bit vector each).  Each row's sum is computed once, for the check of PRISM's
+tolerance and the normalisation, and the table says its rows were checked
+(:attr:`Tables.checked`), so the product does not check them again.  Only the choices
+that need their commands to be told apart (two enabled commands of one action in a
+state) are looked at one by one.
 """
 
 from __future__ import annotations

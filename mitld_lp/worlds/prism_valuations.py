@@ -7,8 +7,9 @@ policy's table, a controller, an export with valuations, an error message).  So 
 built whole (:func:`mitld_lp.worlds.prism_build.build_tables` without a state limit) and
 without event effects (the product reads such a world state by state, by name) is built
 without them, and its :attr:`~mitld_lp.worlds.prism.PrismGame.states` are
-:class:`DeferredValuations`: the variables and the initial state come from a build of
-the initial state alone (:func:`head`), and the first other state asked for makes Storm
+:class:`DeferredValuations`: the variables and the initial state come from Storm's
+program (:func:`program_head`; where it has an ``init`` block, from a build of the
+initial state alone, :func:`head`), and the first other state asked for makes Storm
 build the world again, with its valuations and the same options (:func:`rebuild`):
 Storm numbers states in the order its breadth-first search finds them, so the second
 build numbers them alike, which is checked (states, choices, the initial state).
