@@ -4,14 +4,18 @@ For each model file (a ``[prism]`` world, as ``bench_qvbs.py`` writes them), in 
 processes, the load (``mitld_lp.load_model``) timed whole, once with Storm's exploration
 in the memory-capped child as the budgets ask (``capped``: this process and the child)
 and once with the build in this process (``here``), the steps of the latter timed apart
-(each function's CPU while it runs): Storm's build of the world (``storm_build``), its
-build of the initial state alone for the variables and the initial state's values
-(``head``), the copy of Storm's model into arrays (``read_model``: the UMB export and its
-read, the labels, the checks of every distribution), the spec's parse, the PRISM file's
-parse and the labels added to it, the program's checks.  The answer printed beside: the
+(each function's CPU while it runs): Storm's build of the world (``storm_build``), the
+variables and the initial state's values (``head``: read from Storm's program, or its
+build of the initial state alone where the program has an ``init`` block), the copy of
+Storm's model into arrays (``read_model``: the UMB export and its read, the labels, the
+checks of every distribution), the spec's parse, the PRISM file's parse and the labels
+added to it, the program's checks.  The answer printed beside: the
 world's states and transitions.  The least over ``--repeats`` runs of each.
+``--compare DIR``: the same for the package of the checkout DIR (before), the two taking
+turns, a row each.
 
     python experiments/load_steps.py /tmp/jobs/zeroconf_dl.1000-1-false-30.deadline_max.toml
+    python experiments/load_steps.py --compare /tmp/base --repeats 5 /tmp/jobs/*.toml
 """
 
 from __future__ import annotations
@@ -40,7 +44,9 @@ def cpu():
     return u.ru_utime + u.ru_stime + c.ru_utime + c.ru_stime
 steps = {}
 def timed(module, name, label):
-    f = getattr(module, name)
+    f = getattr(module, name, None)
+    if f is None:  # an older checkout (--compare) without this step
+        return
     @functools.wraps(f)
     def run(*a, **k):
         c = time.process_time()
@@ -53,6 +59,7 @@ here = sys.argv[2] == "here"
 if here:
     pb.can_cap = lambda: False
     for module, name, label in ((pb, "storm_build", "storm_build"), (pb, "head", "head"),
+                                (pb, "program_head", "head"),
                                 (pb, "read_model", "read_model"),
                                 (gt, "parse_spec", "parse_spec"),
                                 (pr, "parse_program", "parse_program"),
@@ -68,9 +75,9 @@ print(json.dumps(dict(load=load, steps=steps, states=len(t.states),
 """
 
 
-def run(model: Path, where: str) -> dict:
-    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
-    out = subprocess.run([sys.executable, "-c", PROBE, str(model), where], cwd=ROOT, env=env,
+def run(model: Path, where: str, root: Path = ROOT) -> dict:
+    env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", PROBE, str(model), where], cwd=root, env=env,
                          capture_output=True, text=True, check=True, timeout=3600)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -83,22 +90,34 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
     p = _common.parser(__doc__.splitlines()[0])
     p.add_argument("models", type=Path, nargs="+", help="model files with a [prism] world")
     p.add_argument("--repeats", type=int, default=None, help="runs of each (default 3)")
+    p.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                   help="also the checkout DIR's package (before), taking turns with this "
+                   "one's, a row each; the same states and transitions are checked")
     args = p.parse_args(argv)
     repeats = args.repeats or (1 if args.quick else 3)
-    header = ["model", "states", "transitions", "capped", "here", *STEPS, "rest"]
+    header = ["model", "checkout", "states", "transitions", "capped", "here", *STEPS, "rest"]
+    roots = [("before", args.compare.resolve()), ("after", ROOT)] if args.compare else [
+        ("this", ROOT)]
     rows: list[list[object]] = []
     for model in args.models:
-        capped, here = [], []
+        capped: dict[str, list[dict]] = {name: [] for name, _ in roots}
+        here: dict[str, list[dict]] = {name: [] for name, _ in roots}
         for _ in range(repeats):  # taking turns
-            capped.append(run(model, "capped"))
-            here.append(run(model, "here"))
-        best = min(here, key=lambda r: r["load"])
-        steps = [round(min(r["steps"].get(s, 0.0) for r in here), 4) for s in STEPS]
-        rest = best["load"] - sum(best["steps"].get(s, 0.0) for s in STEPS)
-        rows.append([model.stem, best["states"], best["transitions"],
-                     round(min(r["load"] for r in capped), 4), round(best["load"], 4),
-                     *steps, round(rest, 4)])
-        print(dict(zip(header, rows[-1], strict=True)))
+            for name, root in roots:
+                capped[name].append(run(model, "capped", root))
+                here[name].append(run(model, "here", root))
+        sizes = {(r["states"], r["transitions"]) for name, _ in roots
+                 for r in capped[name] + here[name]}
+        if len(sizes) != 1:
+            raise SystemExit(f"{model}: the checkouts load other worlds: {sorted(sizes)}")
+        for name, _ in roots:
+            best = min(here[name], key=lambda r: r["load"])
+            steps = [round(min(r["steps"].get(s, 0.0) for r in here[name]), 4) for s in STEPS]
+            rest = best["load"] - sum(best["steps"].get(s, 0.0) for s in STEPS)
+            rows.append([model.stem, name, best["states"], best["transitions"],
+                         round(min(r["load"] for r in capped[name]), 4),
+                         round(best["load"], 4), *steps, round(rest, 4)])
+            print(dict(zip(header, rows[-1], strict=True)))
     _common.write_tables(_common.out_dir(args), "load_steps", header, rows)
     return rows
 

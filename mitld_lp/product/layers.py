@@ -128,7 +128,9 @@ class Layers:
         table's state ``g``, action slot ``c`` its robot choice ``c``, row ``c`` that
         choice's successors, in the table's own arrays (the truncation row after them:
         its length alone is stored, its entry is never read).  The rows that are not
-        distributions are found here, and refused when the product first reads one."""
+        distributions are found here (unless the table's rows were checked where it was
+        made: :attr:`~mitld_lp.worlds.table.WorldTable.checked`), and refused when the
+        product first reads one."""
         self.table = t
         self.game_states = t.states  # type: ignore[assignment]  # a sequence, not copied
         masks = np.array(
@@ -152,7 +154,8 @@ class Layers:
         self.row_len = Grow.of(np.concatenate((lengths, [1]), dtype=np.int64))
         self.row_succ = Grow.of(t.targets.astype(np.int64, copy=False))
         self.row_prob = Grow.of(t.probabilities.astype(np.float64, copy=False))
-        self._faulty = distribution_faults(lengths, self.row_prob.view)
+        if not t.checked:  # else every row was checked where the table was made
+            self._faulty = distribution_faults(lengths, self.row_prob.view)
         self.rows_checked = self.row_len.size
 
     def release(self) -> None:

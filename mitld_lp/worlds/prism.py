@@ -253,7 +253,7 @@ class PrismGame:
             states=self.states, initial=t.initial, label_sets=t.label_sets,
             label_of=t.label_index, choices=t.choices, action_names=t.action_names,
             action_of=t.action_index, branches=t.branches, targets=t.targets,
-            probabilities=t.probabilities,
+            probabilities=t.probabilities, checked=t.checked,
         )
 
     def _distribution(self, choice: int, exact: bool = False) -> dict[int, Any]:

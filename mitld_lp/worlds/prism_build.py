@@ -40,7 +40,13 @@ from mitld_lp.worlds.prism_program import (
     storm_sum,
 )
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
-from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, head, rebuild
+from mitld_lp.worlds.prism_valuations import (
+    DeferredValuations,
+    ValuationRecipe,
+    head,
+    program_head,
+    rebuild,
+)
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
@@ -222,11 +228,17 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     valuations = None
     if deferred:
         assert recipe is not None
-        variables, initial, known, booleans = head(stormpy, program, terminal, origins, where)
         make = ValuationRecipe(recipe, checks, model.nr_states, model.nr_choices,
                                int(model.initial_states[0]))
-        valuations = variables, (DeferredValuations(make, known, booleans)
-                                 if initial == make.initial else rebuild(make))
+        read = program_head(plain)  # from the program; else Storm's build of one state
+        if read is not None:
+            variables, known, booleans = read
+            initial = make.initial
+        else:
+            variables, initial, known, booleans = head(stormpy, program, terminal, origins,
+                                                       where)
+        valuations = ((variables, DeferredValuations(make, known, booleans, variables))
+                      if initial == make.initial else rebuild(make))
     if late and model.nr_choices >= LATE:  # the ids would not fit: named at once
         return build_tables(stormpy, program, plain, where, chosen, events, terminal,
                             max_states, limit, recipe, late_names=False)

@@ -6,11 +6,12 @@ of a state-sized array where a count per code does (16 labels or fewer)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-__all__ = ["indices", "state_labels", "choice_labels", "repeated"]
+__all__ = ["indices", "agrees", "state_labels", "choice_labels", "repeated"]
 
 
 def indices(bits: Any) -> np.ndarray:
@@ -31,17 +32,39 @@ def indices(bits: Any) -> np.ndarray:
     return np.fromiter(bits, dtype=np.int64)
 
 
-def state_labels(model: Any, chosen: frozenset[str]) -> tuple[tuple[frozenset[str], ...],
-                                                                np.ndarray]:
+def agrees(flags: np.ndarray, bits: Any, samples: int = 32) -> bool:
+    """Whether the flags read from Storm's UMB export are its bit vector ``bits``: as
+    many set, and Storm's own bit set at up to ``samples`` of the flagged positions
+    spread over them (the first and the last among them), each with as many set
+    before it (a bit order read wrong moves them)."""
+    found = np.flatnonzero(flags)
+    if flags.size != bits.size() or found.size != bits.get_number_of_set_bits():
+        return False
+    if found.size == 0:
+        return True
+    picks = np.unique(np.linspace(0, found.size - 1, min(samples, found.size)).astype(np.int64))
+    return all(bits.get(int(found[j])) and bits.get_number_of_set_bits_before_index(
+        int(found[j])) == int(j) for j in picks.tolist())
+
+
+def state_labels(model: Any, chosen: frozenset[str],
+                 archive: Mapping[str, np.ndarray] | None = None,
+                 ) -> tuple[tuple[frozenset[str], ...], np.ndarray]:
     """The distinct sets of the ``chosen`` labels a state satisfies, and per state the
-    index of its set."""
+    index of its set.  ``archive``: each label's ``n`` flags as Storm's UMB export holds
+    them, used where they count the states Storm's bit vector counts."""
     n = model.nr_states
     names = sorted(chosen)
     if not names:
         return (frozenset(),), np.zeros(n, dtype=np.int32)
     packed = np.zeros((n, (len(names) + 7) // 8), dtype=np.uint8)
     for k, label in enumerate(names):
-        packed[indices(model.labeling.get_states(label)), k // 8] |= np.uint8(128 >> (k % 8))
+        bits = model.labeling.get_states(label)
+        flags = None if archive is None else archive.get(label)
+        if flags is not None and agrees(flags, bits):
+            packed[:, k // 8] |= flags.view(np.uint8) * np.uint8(128 >> (k % 8))
+        else:
+            packed[indices(bits), k // 8] |= np.uint8(128 >> (k % 8))
     if packed.shape[1] <= 2:  # at most 16 labels: a count per code, no sort
         rows, inverse = _small_unique(packed)
     elif packed.shape[1] <= 8:  # a state's labels as one big-endian integer: a 1-d unique

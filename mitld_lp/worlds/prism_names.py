@@ -93,7 +93,7 @@ def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray
         of, names = _told_apart(of, names, choices, named, model, where)
     if values:
         assert states is not None
-        states.take(valuations_of(model, packed=packed)[1])
+        states.take(*valuations_of(model, packed=packed))
     return of, names
 
 

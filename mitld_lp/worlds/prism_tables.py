@@ -8,9 +8,13 @@ the state valuations from the same archive's bit-packed records (Storm's per-var
 calls, which make a Python list of each variable's values, where the layout is another);
 each choice's label from the same archive's actions (Storm's per-label bit vectors where
 they disagree with it), or its choice origin where the choices are named from the
-commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from
-Storm's per-label calls (a bit vector each).  Only the choices that need their commands
-to be told apart (two enabled commands of one action in a state) are looked at one by one.
+commands they come from (:mod:`mitld_lp.worlds.prism_origins`), state labels from the
+same archive's bit vectors where they agree with Storm's own (else Storm's per-label
+calls, a bit vector each).  Each row's sum is computed once, for the check of PRISM's
+tolerance and the normalisation, and the table says its rows were checked
+(:attr:`Tables.checked`), so the product does not check them again.  Only the choices
+that need their commands to be told apart (two enabled commands of one action in a
+state) are looked at one by one.
 """
 
 from __future__ import annotations
@@ -28,12 +32,13 @@ import numpy as np
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_archive import members as archive_members
 from mitld_lp.worlds.prism_archive import read_member
-from mitld_lp.worlds.prism_labels import choice_labels, indices, repeated, state_labels
+from mitld_lp.worlds.prism_labels import agrees, choice_labels, indices, repeated, state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
-from mitld_lp.worlds.successors import Normalisation, distribution_faults, normalise_rows
+from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
+           "label_states",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
            "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
@@ -80,6 +85,10 @@ class Tables:
         unexplored: ``n`` flags, the states found but not expanded by a build with a
             state limit (:func:`mitld_lp.worlds.prism_build.build_tables`); their rows
             are Storm's self-loops, not the program's (None: every state expanded).
+        checked: every row was checked to be a distribution within the game's
+            tolerance (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) when
+            read (:func:`read_model`, after normalising): the product need not check it
+            again (:attr:`mitld_lp.worlds.table.WorldTable.checked`).
     """
 
     variables: tuple[str, ...]
@@ -97,6 +106,7 @@ class Tables:
     decided: int = 0
     normalised: Normalisation | None = None
     unexplored: np.ndarray | None = None
+    checked: bool = False
 
 
 def transition_arrays(model: Any, where: str) -> tuple[np.ndarray, ...]:
@@ -116,13 +126,15 @@ def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
 
 
 def _read_export(model: Any, where: str, origins: bool = False,
+                 labels: dict[str, np.ndarray] | None = None,
                  ) -> tuple[tuple[np.ndarray, ...], dict[str, np.ndarray] | None,
                             tuple[np.ndarray, list[str]] | None]:
     """:func:`read_export`'s arrays and valuations, and each choice's label as the
-    archive holds it (:func:`_choice_actions`; its origin instead when ``origins``)."""
+    archive holds it (:func:`_choice_actions`; its origin instead when ``origins``);
+    given ``labels``, the state labels the archive holds put there (:func:`_state_labels`)."""
     try:
         choices, branches, targets, probabilities, packed, actions = _export(model, where,
-                                                                             origins)
+                                                                             origins, labels)
     except OSError as exc:
         raise WorldError(
             f"{where}: cannot write Storm's export to a temporary folder: {exc.strerror or exc}"
@@ -143,7 +155,8 @@ def _read_export(model: Any, where: str, origins: bool = False,
     return (choices, branches, targets, probabilities), packed, actions
 
 
-def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
+def _export(model: Any, where: str, origins: bool = False,
+            labels: dict[str, np.ndarray] | None = None) -> tuple[Any, ...]:
     """Write ``model`` as an uncompressed UMB archive to a temporary folder and read its
     four transition arrays straight from the file, its state valuations
     (:func:`unpack_valuations`) and its choices' labels (:func:`_choice_actions`; with
@@ -179,16 +192,20 @@ def _export(model: Any, where: str, origins: bool = False) -> tuple[Any, ...]:
 
         # a DTMC's archive has no state-to-choices (a choice per state, in order)
         one_each = n == m and "state-to-choices.bin" not in members
+        if labels is not None:
+            labels.update(_state_labels(path, members, meta, n))
         records = members.get(VALUATIONS_BIN)
         packed = None if records is None else unpack_valuations(
             meta.get("valuations", {}).get("states", {}), n, records.size,
             lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
                                 offset=records.offset_data))
+        # Storm's unsigned 64-bit offsets and targets read as int64 at once (no copy):
+        # one of 2^63 or more would read negative, which _read_export's checks refuse
         return (
             np.arange(n + 1, dtype=np.int64) if one_each else
-            read("state-to-choices.bin", "<u8", n + 1).astype(np.int64),
-            read("choice-to-branches.bin", "<u8", m + 1).astype(np.int64),
-            read("branch-to-target.bin", "<u8", b).astype(np.int64),
+            read("state-to-choices.bin", "<i8", n + 1),
+            read("choice-to-branches.bin", "<i8", m + 1),
+            read("branch-to-target.bin", "<i8", b),
             read("branch-to-probability.bin", "<f8", b),
             packed,
             _choice_actions(path, members, m),
@@ -217,6 +234,44 @@ def _choice_actions(path: str, members: Mapping[str, Any], m: int,
         return None
     return index, strings
 
+
+def _state_labels(path: str, members: Mapping[str, Any], meta: Mapping[str, Any], n: int,
+                  ) -> dict[str, np.ndarray]:
+    """Each state label the UMB archive at ``path`` holds, by name (its ``alias``): ``n``
+    flags from its bit vector (``annotations/aps/<key>/states/values.bin``, bit ``i`` of
+    byte ``i // 8`` least significant first), read in one call where Storm's own bit
+    vector is read from its text (:func:`~mitld_lp.worlds.prism_labels.indices`); the
+    labels of another type or layout left out (:func:`label_states` asks Storm)."""
+    out: dict[str, np.ndarray] = {}
+    aps = meta.get("annotations", {}).get("aps", {})
+    if not isinstance(aps, dict):
+        return out
+    for key, about in aps.items():
+        if not isinstance(about, dict) or about.get("type") != {"size": 1, "type": "bool"} \
+                or about.get("applies-to") != ["states"]:
+            continue
+        member = members.get(f"{APS}{key}/states/values.bin")
+        if member is None or member.size < (n + 7) // 8:
+            continue
+        raw = np.fromfile(path, dtype=np.uint8, count=(n + 7) // 8, offset=member.offset_data)
+        out[str(about.get("alias", key))] = np.unpackbits(raw, bitorder="little")[:n].view(bool)
+    return out
+
+
+def label_states(model: Any, label: str, archive: Mapping[str, np.ndarray] | None = None,
+                 ) -> np.ndarray:
+    """The states of Storm's state label ``label``: from the archive's flags
+    (:func:`_state_labels`) where it holds them and they agree with Storm's bit vector
+    (:func:`~mitld_lp.worlds.prism_labels.agrees`), else from that bit vector."""
+    bits = model.labeling.get_states(label)
+    flags = None if archive is None else archive.get(label)
+    if flags is not None and agrees(flags, bits):
+        return np.flatnonzero(flags)
+    return indices(bits)
+
+
+APS = "annotations/aps/"
+"""The UMB archive's folder of the state labels (atomic propositions)."""
 
 VALUATIONS_BIN = "valuations/states/valuations.bin"
 """The UMB archive's state valuations: one record of bit fields per state."""
@@ -399,8 +454,9 @@ def read_model(
     (:data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`) is divided by its sum,
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
+    archive: dict[str, np.ndarray] = {}  # the state labels the export holds
     (choices, branches, targets, probabilities), packed, actions = _read_export(
-        model, where, origins=named is not None)
+        model, where, origins=named is not None, labels=archive)
     variables, states = (valuations if valuations is not None else
                          valuations_of(model, hidden, packed))
     del packed
@@ -422,14 +478,14 @@ def read_model(
     if silent is not None and np.any(label_of < 0):  # or a silent edge, where no deadlock
         stuck = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            stuck[indices(model.labeling.get_states("deadlock"))] = True
+            stuck[label_states(model, "deadlock", archive)] = True
         table.append(silent)
         code[(label_of < 0) & ~stuck[state_of]] = len(table) - 1
 
     n_decided = 0
     if decided is not None:
         stopped = np.zeros(n, dtype=bool)
-        stopped[indices(model.labeling.get_states(decided))] = True
+        stopped[label_states(model, decided, archive)] = True
         alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
         table.append(DECIDED_ACTION)
@@ -438,14 +494,15 @@ def read_model(
 
     if OUT_OF_BOUNDS in model.labeling.get_labels():  # Storm built without its checks
         outside = np.zeros(n, dtype=bool)
-        outside[indices(model.labeling.get_states(OUT_OF_BOUNDS))] = True
+        outside[label_states(model, OUT_OF_BOUNDS, archive)] = True
         choice_of = np.repeat(np.arange(m), np.diff(branches))  # per branch
         c = int(choice_of[np.flatnonzero(outside[targets] & ~outside[state_of[choice_of]])[0]])
         raise WorldError(f"{where}: at state {show(int(state_of[c]))}, action "
                          f"{table[int(code[c])]!r}: an update gives a variable a value "
                          "outside its range")
 
-    bad = distribution_faults(np.diff(branches), probabilities, SUM_TOLERANCE)
+    lengths = np.diff(branches)
+    bad, total, branch_row = checked_rows(lengths, probabilities, SUM_TOLERANCE)
     if bad.size:
         c = int(bad[0])
         row = probabilities[int(branches[c]):int(branches[c + 1])]
@@ -454,7 +511,8 @@ def read_model(
         if negative.size:
             raise WorldError(f"{at}: a probability is negative ({float(negative[0])!r})")
         raise WorldError(f"{at}: probabilities sum to {show_sum(float(row.sum()))}, not 1")
-    probabilities, rows, largest = normalise_rows(np.diff(branches), probabilities)
+    probabilities, rows, largest = normalise_rows(lengths, probabilities, (total, branch_row))
+    del total, branch_row
     normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
     if normalised is not None:
         log.info("%s", normalised)
@@ -506,7 +564,7 @@ def read_model(
     if late:  # an unlabelled command's choice (no label, not Storm's self-loop), a clash
         loop = np.zeros(n, dtype=bool)
         if "deadlock" in model.labeling.get_labels():
-            loop[indices(model.labeling.get_states("deadlock"))] = True
+            loop[label_states(model, "deadlock", archive)] = True
         mine = (label_of < 0) & (code == dead) & ~loop[state_of]
         mine[clash] = True
         action_index[mine] = LATE + np.flatnonzero(mine)
@@ -516,7 +574,7 @@ def read_model(
         raise WorldError(
             f"{where}: the model has {len(initial)} initial states; a game needs exactly one"
         )
-    label_sets, label_index = state_labels(model, chosen)
+    label_sets, label_index = state_labels(model, chosen, archive)
     return Tables(
         variables=variables,
         states=states,
@@ -532,4 +590,5 @@ def read_model(
         effects=effects,
         decided=n_decided,
         normalised=normalised,
+        checked=True,  # every row: checked_rows above, and normalise_rows
     )

@@ -7,8 +7,9 @@ policy's table, a controller, an export with valuations, an error message).  So 
 built whole (:func:`mitld_lp.worlds.prism_build.build_tables` without a state limit) and
 without event effects (the product reads such a world state by state, by name) is built
 without them, and its :attr:`~mitld_lp.worlds.prism.PrismGame.states` are
-:class:`DeferredValuations`: the variables and the initial state come from a build of
-the initial state alone (:func:`head`), and the first other state asked for makes Storm
+:class:`DeferredValuations`: the variables and the initial state come from Storm's
+program (:func:`program_head`; where it has an ``init`` block, from a build of the
+initial state alone, :func:`head`), and the first other state asked for makes Storm
 build the world again, with its valuations and the same options (:func:`rebuild`):
 Storm numbers states in the order its breadth-first search finds them, so the second
 build numbers them alike, which is checked (states, choices, the initial state).
@@ -33,7 +34,7 @@ from mitld_lp.worlds.prism_program import (
 )
 from mitld_lp.worlds.prism_tables import Valuations, read_export, valuations_of
 
-__all__ = ["ValuationRecipe", "DeferredValuations", "head", "rebuild"]
+__all__ = ["ValuationRecipe", "DeferredValuations", "head", "program_head", "rebuild"]
 
 State = tuple[Hashable, ...]
 
@@ -72,10 +73,47 @@ def head(stormpy: Any, program: Any, terminal: str, origins: bool, where: str,
     return variables, initial, states[initial], states.booleans
 
 
-def rebuild(make: ValuationRecipe) -> Valuations:
-    """The world's valuations from Storm's build of ``make.recipe`` with them (the same
-    options as the first build otherwise); :class:`WorldError` when that build numbers
-    the states otherwise."""
+def program_head(plain: Any) -> tuple[tuple[str, ...], State, tuple[int, ...]] | None:
+    """:func:`head`'s ``(variables, the initial state's values, Boolean columns)`` read
+    from Storm's program itself (``plain``: its constants substituted), without a build
+    (Storm's build of the initial state alone costs some 25 ms, its builder's set-up):
+    the state variables by name, the order of Storm's valuations, each with its initial
+    value (Storm's parser gives every variable one, and turns a variable no command
+    changes into a constant).  None where the program has an ``init`` block or a value
+    does not evaluate: :func:`head` builds the initial state then.  The values Storm
+    builds later are taken by name and checked against these
+    (:meth:`DeferredValuations.take`)."""
+    try:
+        if plain.has_initial_states_expression:
+            return None
+        values: dict[str, Hashable] = {}
+        booleans: set[str] = set()
+        pairs = [(v, True) for v in plain.global_boolean_variables]
+        pairs += [(v, False) for v in plain.global_integer_variables]
+        for module in plain.modules:
+            pairs += [(v, True) for v in module.boolean_variables]
+            pairs += [(v, False) for v in module.integer_variables]
+        for var, boolean in pairs:
+            if var.name in values:
+                return None
+            e = var.initial_value_expression
+            values[var.name] = bool(e.evaluate_as_bool()) if boolean else int(
+                e.evaluate_as_int())
+            if boolean:
+                booleans.add(var.name)
+    except Exception:  # noqa: BLE001 - any doubt: Storm's build of the initial state
+        return None
+    if not values:
+        return None
+    order = tuple(sorted(values))
+    return (order, tuple(values[name] for name in order),
+            tuple(j for j, name in enumerate(order) if name in booleans))
+
+
+def rebuild(make: ValuationRecipe) -> tuple[tuple[str, ...], Valuations]:
+    """The world's variables and valuations from Storm's build of ``make.recipe`` with
+    them (the same options as the first build otherwise); :class:`WorldError` when that
+    build numbers the states otherwise."""
     import stormpy  # the world was built by it: installed
 
     where = make.recipe.where
@@ -88,8 +126,7 @@ def rebuild(make: ValuationRecipe) -> Valuations:
         raise WorldError(f"{where}: Storm's build with valuations has {found[0]:,} states "
                          f"and {found[1]:,} choices, its first build {make.n_states:,} and "
                          f"{make.n_choices:,}: the states cannot be named")
-    _, states = valuations_of(model, packed=read_export(model, where)[1])
-    return states
+    return valuations_of(model, packed=read_export(model, where)[1])
 
 
 class DeferredValuations(Valuations):
@@ -97,10 +134,12 @@ class DeferredValuations(Valuations):
     when first read (:func:`rebuild`); the number of states and the initial state's
     values are known before."""
 
-    def __init__(self, make: ValuationRecipe, known: State, booleans: tuple[int, ...]) -> None:
+    def __init__(self, make: ValuationRecipe, known: State, booleans: tuple[int, ...],
+                 variables: tuple[str, ...]) -> None:
         self.make = make
         self.known = known  # the initial state's values
         self.booleans = booleans
+        self.variables = variables  # the order of the values' columns
         self._values: np.ndarray | None = None
         # Storm's second build of another part made when first read (the choices' names:
         # mitld_lp.worlds.prism_names), asked to make the values in the same build
@@ -111,16 +150,29 @@ class DeferredValuations(Valuations):
         if self._values is None and self.joint is not None:
             self.joint()
         if self._values is None:
-            self.take(rebuild(self.make))
+            self.take(*rebuild(self.make))
         assert self._values is not None
         return self._values
 
-    def take(self, built: Valuations) -> None:
-        """Keep the values of Storm's second build (checked: the same variables)."""
-        if built.booleans != self.booleans:
-            raise WorldError(f"{self.make.recipe.where}: Storm's build with valuations "
-                             "has other variables than its first build")
-        self._values = built.values
+    def take(self, order: tuple[str, ...], built: Valuations) -> None:
+        """Keep the values of Storm's second build, whose columns are the variables
+        ``order``, in this one's order of the variables; checked: the same variables,
+        the same Boolean ones and the same initial state."""
+        where = self.make.recipe.where
+        if sorted(order) != sorted(self.variables) or (
+                {order[j] for j in built.booleans}
+                != {self.variables[j] for j in self.booleans}):
+            raise WorldError(f"{where}: Storm's build with valuations has other variables "
+                             f"({', '.join(order)}) than its first build "
+                             f"({', '.join(self.variables)})")
+        at = [order.index(name) for name in self.variables]
+        values = built.values if at == list(range(len(at))) else np.ascontiguousarray(
+            built.values[:, at])
+        first = Valuations(values, self.booleans)[self.make.initial]
+        if first != self.known:
+            raise WorldError(f"{where}: Storm's build with valuations starts in "
+                             f"{first}, the program in {self.known}")
+        self._values = values
 
     @property
     def built(self) -> bool:

@@ -33,6 +33,7 @@ __all__ = [
     "place",
     "as_probabilities",
     "distribution_faults",
+    "checked_rows",
     "distribution_fault",
     "strict_distribution_fault",
     "table_distribution",
@@ -79,14 +80,25 @@ def distribution_faults(
     rule the product applies to every answer of :meth:`Game.successors`, for a batch of
     answers at once.  :func:`distribution_fault` says what is wrong with one of them.
     """
+    return checked_rows(lengths, probs, tolerance)[0]
+
+
+def checked_rows(lengths: np.ndarray, probs: np.ndarray, tolerance: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`distribution_faults`' indices, and what it computed on the way: each
+    row's total (summed in order, a wrong probability counted as 0) and each entry's
+    row, which :func:`normalise_rows` takes instead of computing them again (where no
+    row is faulty the totals are its own, bit for bit: the same sums in the same order)."""
     n = lengths.size
     row = np.repeat(np.arange(n), lengths)
     wrong = ~np.isfinite(probs) | (probs < 0.0)
     bad = lengths == 0
-    bad[row[wrong]] = True
-    total = np.bincount(row, weights=np.where(wrong, 0.0, probs), minlength=n)
+    if wrong.any():
+        bad[row[wrong]] = True
+        probs = np.where(wrong, 0.0, probs)
+    total = np.bincount(row, weights=probs, minlength=n)
     bad |= np.abs(total - 1.0) > tolerance
-    return np.flatnonzero(bad)
+    return np.flatnonzero(bad), total, row
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,21 +129,32 @@ class Normalisation:
                 "the answer is for the normalised world")
 
 
-def normalise_rows(lengths: np.ndarray, probs: np.ndarray
+def normalise_rows(lengths: np.ndarray, probs: np.ndarray,
+                   checked: tuple[np.ndarray, np.ndarray] | None = None,
                    ) -> tuple[np.ndarray, int, float]:
     """Rows (as for :func:`distribution_faults`, already checked with a wider tolerance)
     whose total is more than :data:`PROBABILITY_TOLERANCE` from 1, each divided by its
     total: returns the probabilities, how many rows changed and their largest
-    ``|total - 1|`` (``probs`` itself, 0 and 0.0 when none did)."""
+    ``|total - 1|`` (``probs`` itself, 0 and 0.0 when none did).  ``checked``: the
+    totals and the entries' rows of :func:`checked_rows` on these rows, none faulty
+    (else computed here).  Every row returned is a distribution within
+    :data:`PROBABILITY_TOLERANCE` (a divided row's new total is checked)."""
     n = lengths.size
-    row = np.repeat(np.arange(n), lengths)
-    total = np.bincount(row, weights=probs, minlength=n)
+    if checked is None:
+        row = np.repeat(np.arange(n), lengths)
+        total = np.bincount(row, weights=probs, minlength=n)
+    else:
+        total, row = checked
     deviation = np.abs(total - 1.0)
     off = deviation > PROBABILITY_TOLERANCE
     if not off.any():
         return probs, 0, 0.0
-    return (probs / np.where(off, total, 1.0)[row], int(np.count_nonzero(off)),
-            float(deviation[off].max()))
+    out = probs / np.where(off, total, 1.0)[row]
+    mine = off[row]  # the divided rows' entries, their new totals summed in order
+    again = np.bincount(row[mine], weights=out[mine], minlength=n)[off]
+    if np.any(np.abs(again - 1.0) > PROBABILITY_TOLERANCE):  # cannot happen: never trust
+        raise ValueError("a row divided by its sum does not sum to 1")
+    return out, int(np.count_nonzero(off)), float(deviation[off].max())
 
 
 def _short(value: Any) -> str:

@@ -84,6 +84,10 @@ class WorldTable:
         branches: ``m + 1`` offsets into ``targets`` and ``probabilities``.
         targets: ``b`` state numbers.
         probabilities: ``b`` probabilities (float64).
+        checked: every row is known to be a distribution within
+            :data:`~mitld_lp.worlds.successors.PROBABILITY_TOLERANCE`, checked where
+            the table was made (a PRISM world's, :func:`mitld_lp.worlds.prism_tables.read_model`):
+            the product does not check the rows again (False: it checks every row).
     """
 
     states: Sequence[Hashable]
@@ -96,6 +100,7 @@ class WorldTable:
     branches: np.ndarray
     targets: np.ndarray
     probabilities: np.ndarray
+    checked: bool = False
 
     def __post_init__(self) -> None:
         n, m = len(self.states), self.action_of.size
