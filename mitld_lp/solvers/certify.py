@@ -52,6 +52,7 @@ from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
+from mitld_lp.solvers.chain_levels import forget
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
@@ -386,7 +387,10 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
     if layers is None:
         layers = support_layers(mdp)
-    ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
+    try:  # the LP's walks offered to the chain (:func:`chain_levels.offer`), then freed
+        ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
+    finally:
+        forget()
     low = high = None
     if "lower" in sides:
         low = (policy_lower(mdp, ch, rnd) if sense == "max" else

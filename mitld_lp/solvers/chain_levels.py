@@ -38,7 +38,7 @@ from mitld_lp.solvers.topological import DenseLU, chain_lu, level_kernels
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
 
-__all__ = ["WALK_MIN_STATES", "ChainLevels", "chain_solve"]
+__all__ = ["WALK_MIN_STATES", "ChainLevels", "chain_solve", "forget", "offer", "walk_of"]
 
 
 WALK_MIN_STATES = 32_768
@@ -58,8 +58,18 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
 
     __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles")
 
+    def same_chain(self, other: sp.csr_array) -> bool:
+        """Whether ``other`` (CSR) has this walk's chain entry for entry (its rows'
+        pointers, columns and values), so that this walk's components and
+        factorisations are its own."""
+        c = self.chain
+        return (other.shape == c.shape and other.nnz == c.nnz
+                and np.array_equal(other.indptr, c.indptr)
+                and np.array_equal(other.indices, c.indices)
+                and np.array_equal(other.data, c.data))
+
     def __init__(self, chain: sp.csr_array | sp.csc_array) -> None:
-        self.chain = sp.csr_array(chain)
+        self.chain = _walked(sp.csr_array(chain))
         self.self_loop = self.chain.diagonal()
         # a smaller chain is one LU, faster than finding its components
         self.blocks: Blocks | None = (
@@ -196,6 +206,51 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
             kern.chain_solve(states[at[done]:], c.indptr, c.indices, c.data,
                              self.self_loop, b, x)
         return x if rhs.ndim == 2 else x[:, 0]
+
+
+OFFER_MAX = 4
+"""The most walks :func:`offer` keeps at a time (the oldest dropped first)."""
+
+_OFFERED: list[ChainLevels] = []
+
+
+def offer(walk: ChainLevels) -> None:
+    """Keep ``walk`` (its components and factorisations) for a later chain equal to its
+    own (:func:`walk_of`).  The LP stage offers the walk of each block its greedy policy
+    settles whole (:func:`mitld_lp.solvers.lp_blocks.solve_decomposed`): the
+    certificate's chain on that block is the same policy's chain, entry for entry, on
+    ``bus_scaled`` n128 d3 both blocks' (32,768 states over 120 levels with cyclic
+    components, and 16,384 states), which it used to factorise a second time.  At most
+    :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at its
+    end)."""
+    _OFFERED.append(walk)
+    del _OFFERED[:-OFFER_MAX]
+
+
+def forget() -> None:
+    """Drop every walk :func:`offer` kept (their factorisations freed)."""
+    _OFFERED.clear()
+
+
+def _walked(c: sp.csr_array) -> sp.csr_array:
+    """``c`` as :class:`ChainLevels` keeps it: a chain it walks over its components in
+    canonical form (each row's columns sorted, no duplicates; in place, as SciPy's
+    ``c != 0`` for the component search always did), a smaller one as it comes."""
+    if c.shape[0] >= WALK_MIN_STATES:
+        c.sum_duplicates()
+    return c
+
+
+def walk_of(chain: sp.csr_array | sp.csc_array) -> ChainLevels:
+    """The walk of ``chain``: an offered one whose chain is ``chain`` entry for entry as
+    :class:`ChainLevels` would keep it (:meth:`ChainLevels.same_chain`; taken out of
+    the offers), its components and factorisations those of ``chain`` itself, so every
+    solve on it has the bits of a new walk's; else a new :class:`ChainLevels`."""
+    c = _walked(sp.csr_array(chain))
+    for k, walk in enumerate(_OFFERED):
+        if walk.same_chain(c):
+            return _OFFERED.pop(k)
+    return ChainLevels(c)
 
 
 def chain_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray) -> np.ndarray:
