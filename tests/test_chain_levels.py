@@ -217,7 +217,7 @@ def test_certificate_chain_walks_four_byte_indices(monkeypatch) -> None:
             seen.append((chain.indices.dtype, chain.indptr.dtype))
             super().__init__(chain)
 
-    monkeypatch.setattr(certify_chain, "ChainLevels", Recorded)
+    monkeypatch.setattr(chain_levels, "ChainLevels", Recorded)  # walk_of makes it
     mdp = random_mdp(240, seed=1, target_fraction=0.08, sink_fraction=0.08,
                      self_loop_fraction=0.0, max_choices=3, max_successors=3)
     m = sp.csr_array(mdp.matrix)
