@@ -207,7 +207,6 @@ def test_certificate_chain_walks_four_byte_indices(monkeypatch) -> None:
     4-byte indices where they fit, as the greedy block's chains do: the compiled
     level kernels then load one variant per process, not one per index type (each a
     compilation on a fresh cache).  Its values against the dense solve of the chain."""
-    from mitld_lp.solvers import certify_chain
 
     monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 2)
     seen = []
