@@ -252,6 +252,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             return x
         candidates.append(("the iteration's bound", from_iteration))
     level_of = None  # each state's level, made when a candidate first needs a repair
+    last = None  # the last repair: its pattern by column and end components' members
     for label, make in candidates:
         x = make()
         failing = _fails(st, rnd, x, free, upper)
@@ -259,7 +260,11 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
-            repair = _Repair(st, rnd, free, level_of, mecs, upper)
+            # what a repair reads of the model alone, made once for every candidate
+            # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
+            repair = last = _Repair(st, rnd, free, level_of, mecs, upper,
+                                    members=None if last is None else last.members,
+                                    readers_of=None if last is None else last.readers_of)
             closed = repair.run(x, failing)
             moved = repair.moved
             if not closed:
