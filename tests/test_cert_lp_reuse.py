@@ -88,3 +88,23 @@ def test_certify_frees_the_offers() -> None:
     cert = certify(mdp, target, np.array([0, -1, -1]), zero=sink)
     assert cl._OFFERED == []
     assert cert.certified and cert.lower <= 0.5 <= cert.upper
+
+
+def test_a_walk_of_few_factorised_levels_is_not_kept(monkeypatch) -> None:
+    """Holding a large walk for a certificate whose chain is another graph costs memory
+    and saves little where it factorised few levels: such a walk is not kept."""
+    monkeypatch.setattr(cl, "WALK_MIN_STATES", 2)
+    cl.forget()
+    n = 64
+    i = np.arange(n)
+    # one cycle of 8 states, the rest single states leading into it: one cyclic level
+    nxt = np.where(i < 8, (i + 1) % 8, i - 1)
+    walk = cl.ChainLevels(sp.csr_array((np.full(n, 0.5), nxt, np.arange(n + 1)),
+                                       shape=(n, n)))
+    x = walk.solve(np.ones(n))
+    assert len(walk._cyclic) == 1 < cl.OFFER_MIN_LEVELS
+    cl.offer(walk)
+    assert cl._OFFERED == []
+    # the cycle's states: x = 1 + x/2 around it, so 2; the states above it 1 + x/2
+    assert np.allclose(x[:8], 2.0)
+    assert np.allclose(x[8], 1.0 + 0.5 * 2.0)

@@ -252,6 +252,10 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
 OFFER_MAX = 4
 """The most walks :func:`offer` keeps at a time (the oldest dropped first)."""
 
+OFFER_MIN_LEVELS = 16
+"""The fewest factorised levels of a walk over its components that :func:`offer`
+keeps (a chain of one LU, below :data:`WALK_MIN_STATES` states, is always kept)."""
+
 _OFFERED: list[ChainLevels] = []
 
 
@@ -263,7 +267,13 @@ def offer(walk: ChainLevels) -> None:
     ``bus_scaled`` n128 d3 both blocks' (32,768 states over 120 levels with cyclic
     components, and 16,384 states), which it used to factorise a second time.  At most
     :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at its
-    end)."""
+    end).  A walk over its components that factorised fewer than
+    :data:`OFFER_MIN_LEVELS` levels is not kept: holding it costs more than it saves
+    (QVBS ``zeroconf`` 1000-4-false: the greedy chain's 213,268 states, two cyclic
+    levels, and the certificate's chain another graph: held, it was 27 bytes a
+    transition more at the certificate's traced peak)."""
+    if walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
+        return
     _OFFERED.append(walk)
     del _OFFERED[:-OFFER_MAX]
 
