@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.rows import row_columns
+from mitld_lp.solvers.rows import row_entries
 
 if TYPE_CHECKING:
     from mitld_lp.automata.sta import STA
@@ -144,14 +144,9 @@ def support_extreme(matrix: sp.csr_array, rows: np.ndarray, x: np.ndarray,
     bytes an entry: most of the certificate's peak on a product of a million choices)."""
     out = np.full(rows.size, -np.inf if largest else np.inf)
     pick = np.maximum if largest else np.minimum
-    ptr = matrix.indptr
     for a in range(0, rows.size, BATCH):
-        part = np.asarray(rows[a:a + BATCH], dtype=np.int64)
-        cols, _ = row_columns(matrix, part)  # row after row, each row's entries together
-        counts = ptr[part + 1] - ptr[part]
-        has = np.flatnonzero(counts > 0)  # an empty row keeps its infinity
-        if has.size:  # each row's extreme over its own slice, not one ``at`` an entry
-            out[a + has] = pick.reduceat(x[cols], (np.cumsum(counts) - counts)[has])
+        local, cols, _ = row_entries(matrix, rows[a:a + BATCH])
+        pick.at(out[a:a + BATCH], local, x[cols])
     return out
 
 
