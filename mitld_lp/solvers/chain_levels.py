@@ -56,7 +56,7 @@ class ChainLevels:
 fewer than :data:`WALK_MIN_STATES` states is one LU
 (:func:`~mitld_lp.solvers.topological.chain_lu`: dense when small)."""
 
-    __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles", "_local")
+    __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles")
 
     def same_chain(self, other: sp.csr_array) -> bool:
         """Whether ``other`` (CSR) has this walk's chain entry for entry (its rows'
@@ -82,7 +82,6 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         self._kernels = (None if self.blocks is None else
                          level_kernels(self.chain.nnz, self.blocks.n_levels))
         self._singles: tuple[np.ndarray, np.ndarray, np.ndarray, list[int]] | None = None
-        self._local: np.ndarray | None = None  # a level's local index per state, else -1
 
     def _factor(self, level: int, states: np.ndarray) -> tuple[sp.csr_array,
                                                               SuperLU | DenseLU]:
@@ -112,20 +111,19 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         constructions and checks."""
         c = self.chain
         n, k = c.shape[0], states.size
-        if self._local is None:
-            self._local = np.full(n, -1, dtype=np.int64)
-        local = self._local
         cols, vals = row_columns(c, states)
         counts = c.indptr[states + 1] - c.indptr[states]
         ptr = np.zeros(k + 1, dtype=c.indptr.dtype)
         np.cumsum(counts, out=ptr[1:])
         rows = sp.csr_array((vals, cols, ptr), shape=(k, n))
-        local[states] = np.arange(k)
-        to = local[cols]
-        local[states] = -1
-        inside = to >= 0
+        # each entry's column as a local index (-1: off the level), by a search of the
+        # level's states, not an array of the chain's size
+        order = np.argsort(states, kind="stable")
+        ranked = states[order]
+        at = np.minimum(np.searchsorted(ranked, cols), k - 1)
+        inside = ranked[at] == cols
         r = np.repeat(np.arange(k), counts)[inside]
-        to, q = to[inside], vals[inside]
+        to, q = order[at[inside]], vals[inside]
         diag = r == to
         one = np.ones(k)
         one[r[diag]] = 1.0 - q[diag]  # eye - inner on the diagonal, as SciPy subtracts
