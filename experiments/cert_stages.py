@@ -19,6 +19,9 @@ the same bits before and after, or not).  Storm's check of the same product is i
 
     python experiments/cert_stages.py --qvbs qcomp/benchmarks \\
         --only zeroconf.1000-4-false.correct_max --compare /tmp/base --rounds 2
+    python experiments/cert_stages.py --only --bus bus_scaled_n128_d3 --compare /tmp/base
+
+``--bus`` adds instances of ``bench_sweeps.py`` (posed as it poses them).
 
 Written: ``cert_stages.csv``, ``cert_stages.md``.
 """
@@ -41,7 +44,7 @@ if str(HERE) not in sys.path:
 
 import _common  # noqa: E402
 import bench_qvbs as bq  # noqa: E402
-from profile_solve import _timed  # noqa: E402  (a function timed in place, alike)
+from profile_solve import _timed, bus_jobs  # noqa: E402  (timed in place, alike)
 
 TIMED = (("mitld_lp.solvers.analysis", "analyse"),
          ("mitld_lp.solvers.iteration", "interval_iterations"),
@@ -66,7 +69,12 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
 
     from mitld_lp import load_model, synthesize
 
-    model = load_model(job["model"], max_states=job["max_states"])
+    if "bus" in job:  # an instance of bench_sweeps.py, posed as it poses them
+        from bench_scaling import Instance
+
+        model = bs._model(Instance(*job["bus"]))
+    else:
+        model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
     spent: dict[str, float] = defaultdict(float)
     for module, name in TIMED:
@@ -95,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, help="a checkout's benchmarks/ of ahartmanns/qcomp")
     ap.add_argument("--only", nargs="*", default=["zeroconf.1000-4-false.correct_max"])
+    ap.add_argument("--bus", nargs="*", default=(), metavar="NAME",
+                    help="also these instances of bench_sweeps.py (e.g. bus_scaled_n128_d3)")
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR")
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--child", default=None, help=argparse_hidden())
@@ -104,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         job = json.loads((work / "job.json").read_text(encoding="utf-8"))
         (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
         return 0
-    if args.qvbs is None:
+    if args.qvbs is None and (args.only or not args.bus):
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
     checkouts = [("after", HERE.parent)]
@@ -112,8 +122,10 @@ def main(argv: list[str] | None = None) -> int:
         checkouts.insert(0, ("before", args.compare.resolve()))
     rows = []
     with tempfile.TemporaryDirectory(prefix="cert_stages_") as tmp:
-        found, _ = bq.jobs(args.qvbs, 0, bq.MAX_STATES, bq.FAMILIES, Path(tmp))
-        for inst, job in [f for f in found if f[0].name in set(args.only)]:
+        found = (bq.jobs(args.qvbs, 0, bq.MAX_STATES, bq.FAMILIES, Path(tmp))[0]
+                 if args.qvbs is not None and args.only else [])
+        for inst, job in ([f for f in found if f[0].name in set(args.only)]
+                          + bus_jobs(args.bus)):
             for k in range(args.rounds):
                 for label, package in checkouts:
                     got = _run(job, Path(tmp), package)

@@ -207,7 +207,6 @@ def test_certificate_chain_walks_four_byte_indices(monkeypatch) -> None:
     4-byte indices where they fit, as the greedy block's chains do: the compiled
     level kernels then load one variant per process, not one per index type (each a
     compilation on a fresh cache).  Its values against the dense solve of the chain."""
-    from mitld_lp.solvers import certify_chain
 
     monkeypatch.setattr(chain_levels, "WALK_MIN_STATES", 2)
     seen = []
@@ -217,7 +216,7 @@ def test_certificate_chain_walks_four_byte_indices(monkeypatch) -> None:
             seen.append((chain.indices.dtype, chain.indptr.dtype))
             super().__init__(chain)
 
-    monkeypatch.setattr(certify_chain, "ChainLevels", Recorded)
+    monkeypatch.setattr(chain_levels, "ChainLevels", Recorded)  # walk_of makes it
     mdp = random_mdp(240, seed=1, target_fraction=0.08, sink_fraction=0.08,
                      self_loop_fraction=0.0, max_choices=3, max_successors=3)
     m = sp.csr_array(mdp.matrix)

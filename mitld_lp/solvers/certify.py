@@ -52,6 +52,7 @@ from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
 from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
+from mitld_lp.solvers.chain_levels import forget
 from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
@@ -251,6 +252,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             return x
         candidates.append(("the iteration's bound", from_iteration))
     level_of = None  # each state's level, made when a candidate first needs a repair
+    last = None  # the last repair: its pattern by column and end components' members
     for label, make in candidates:
         x = make()
         failing = _fails(st, rnd, x, free, upper)
@@ -258,7 +260,11 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
-            repair = _Repair(st, rnd, free, level_of, mecs, upper)
+            # what a repair reads of the model alone, made once for every candidate
+            # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
+            repair = last = _Repair(st, rnd, free, level_of, mecs, upper,
+                                    members=None if last is None else last.members,
+                                    readers_of=None if last is None else last.readers_of)
             closed = repair.run(x, failing)
             moved = repair.moved
             if not closed:
@@ -386,7 +392,10 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
     if layers is None:
         layers = support_layers(mdp)
-    ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
+    try:  # the LP's walks offered to the chain (:func:`chain_levels.offer`), then freed
+        ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
+    finally:
+        forget()
     low = high = None
     if "lower" in sides:
         low = (policy_lower(mdp, ch, rnd) if sense == "max" else

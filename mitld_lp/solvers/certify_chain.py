@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
-from mitld_lp.solvers.chain_levels import ChainLevels
+from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
@@ -152,11 +152,12 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         known = b[inner] + rows @ v
         g = None if guess is None else guess[inner]
         joint = None
-        # the chain's own components: one walk, both solves.  Not the greedy block's
-        # walk (solve stage): the chain here is the policy's transient states only,
-        # another graph (QVBS zeroconf 20-4-false: 168,388 of the block's 213,268
-        # states), and its search is 0.027 s of the 1.4 s solve
-        walk = ChainLevels(block)
+        # the chain's own components: one walk, both solves.  The greedy block's walk
+        # (solve stage) where it is this chain entry for entry (:func:`~mitld_lp.
+        # solvers.chain_levels.walk_of`: bus_scaled n128 d3, both blocks), not on QVBS
+        # zeroconf 20-4-false, where the chain here is the policy's transient states
+        # only (168,388 of the block's 213,268 states)
+        walk = walk_of(block)
         if g is not None and bool(np.all(g > 0)):
             pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
             v[inner], joint = pair[:, 0], pair[:, 1]

@@ -32,13 +32,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import Blocks, graph_blocks
-from mitld_lp.solvers.rows import row_entries, rows_dot
+from mitld_lp.solvers.rows import row_columns, row_entries, rows_dot
 from mitld_lp.solvers.topological import DenseLU, chain_lu, level_kernels
 
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
 
-__all__ = ["WALK_MIN_STATES", "ChainLevels", "chain_solve"]
+__all__ = ["WALK_MIN_STATES", "ChainLevels", "chain_solve", "forget", "offer", "walk_of"]
 
 
 WALK_MIN_STATES = 32_768
@@ -58,8 +58,18 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
 
     __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles")
 
+    def same_chain(self, other: sp.csr_array) -> bool:
+        """Whether ``other`` (CSR) has this walk's chain entry for entry (its rows'
+        pointers, columns and values), so that this walk's components and
+        factorisations are its own."""
+        c = self.chain
+        return (other.shape == c.shape and other.nnz == c.nnz
+                and np.array_equal(other.indptr, c.indptr)
+                and np.array_equal(other.indices, c.indices)
+                and np.array_equal(other.data, c.data))
+
     def __init__(self, chain: sp.csr_array | sp.csc_array) -> None:
-        self.chain = sp.csr_array(chain)
+        self.chain = _walked(sp.csr_array(chain))
         self.self_loop = self.chain.diagonal()
         # a smaller chain is one LU, faster than finding its components
         self.blocks: Blocks | None = (
@@ -76,6 +86,8 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
     def _factor(self, level: int, states: np.ndarray) -> tuple[sp.csr_array,
                                                               SuperLU | DenseLU]:
         got = self._cyclic.get(level)
+        if got is None and self.blocks is not None:
+            got = self._cyclic[level] = self._level_factor(states)
         if got is None:
             rows = sp.csr_array(self.chain[states])
             inner = sp.csc_array(rows[:, states])
@@ -86,6 +98,43 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
                                               - inner), dense=self.blocks is None)
             self._cyclic[level] = got
         return got
+
+    def _level_factor(self, states: np.ndarray) -> tuple[sp.csr_array, SuperLU]:
+        """:meth:`_factor` of a walked chain's level (its chain canonical: no two
+        entries of a row in one column), from the chain's arrays: its rows by the
+        compiled row gather (the entries of ``chain[states]`` in their order, so
+        ``rows @ x`` sums as before) and ``I - Q`` on the level's ``states`` made in
+        canonical form directly, the matrix SciPy's ``eye - inner`` gave (that drops an
+        entry whose difference is 0; SuperLU canonicalises its input), not through
+        SciPy's indexing and sparse arithmetic: 120 levels with cyclic components on
+        ``bus_scaled`` n128 d3's 32,768-state policy chain, each level a few SciPy
+        constructions and checks."""
+        c = self.chain
+        n, k = c.shape[0], states.size
+        cols, vals = row_columns(c, states)
+        counts = c.indptr[states + 1] - c.indptr[states]
+        ptr = np.zeros(k + 1, dtype=c.indptr.dtype)
+        np.cumsum(counts, out=ptr[1:])
+        rows = sp.csr_array((vals, cols, ptr), shape=(k, n))
+        # each entry's column as a local index (-1: off the level), by a search of the
+        # level's states, not an array of the chain's size
+        order = np.argsort(states, kind="stable")
+        ranked = states[order]
+        at = np.minimum(np.searchsorted(ranked, cols), k - 1)
+        inside = ranked[at] == cols
+        r = np.repeat(np.arange(k), counts)[inside]
+        to, q = order[at[inside]], vals[inside]
+        diag = r == to
+        one = np.ones(k)
+        one[r[diag]] = 1.0 - q[diag]  # eye - inner on the diagonal, as SciPy subtracts
+        off = ~diag
+        r_all = np.concatenate([np.arange(k), r[off]])
+        c_all = np.concatenate([np.arange(k), to[off]])
+        v_all = np.concatenate([one, -q[off]])
+        keep = v_all != 0.0
+        a = sp.csc_array((v_all[keep], (r_all[keep], c_all[keep])), shape=(k, k))
+        a.sum_duplicates()
+        return rows, chain_lu(a, dense=False)  # type: ignore[return-value]
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``x = rhs + Q x`` in float64 (``rhs``: a vector, or a column per right-hand
@@ -196,6 +245,61 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
             kern.chain_solve(states[at[done]:], c.indptr, c.indices, c.data,
                              self.self_loop, b, x)
         return x if rhs.ndim == 2 else x[:, 0]
+
+
+OFFER_MAX = 4
+"""The most walks :func:`offer` keeps at a time (the oldest dropped first)."""
+
+OFFER_MIN_LEVELS = 16
+"""The fewest factorised levels of a walk over its components that :func:`offer`
+keeps (a chain of one LU, below :data:`WALK_MIN_STATES` states, is always kept)."""
+
+_OFFERED: list[ChainLevels] = []
+
+
+def offer(walk: ChainLevels) -> None:
+    """Keep ``walk`` (its components and factorisations) for a later chain equal to its
+    own (:func:`walk_of`).  The LP stage offers the walk of each block its greedy policy
+    settles whole (:func:`mitld_lp.solvers.lp_blocks.solve_decomposed`): the
+    certificate's chain on that block is the same policy's chain, entry for entry, on
+    ``bus_scaled`` n128 d3 both blocks' (32,768 states over 120 levels with cyclic
+    components, and 16,384 states), which it used to factorise a second time.  At most
+    :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at its
+    end).  A walk over its components that factorised fewer than
+    :data:`OFFER_MIN_LEVELS` levels is not kept: holding it costs more than it saves
+    (QVBS ``zeroconf`` 1000-4-false: the greedy chain's 213,268 states, two cyclic
+    levels, and the certificate's chain another graph: held, it was 27 bytes a
+    transition more at the certificate's traced peak)."""
+    if walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
+        return
+    _OFFERED.append(walk)
+    del _OFFERED[:-OFFER_MAX]
+
+
+def forget() -> None:
+    """Drop every walk :func:`offer` kept (their factorisations freed)."""
+    _OFFERED.clear()
+
+
+def _walked(c: sp.csr_array) -> sp.csr_array:
+    """``c`` as :class:`ChainLevels` keeps it: a chain it walks over its components in
+    canonical form (each row's columns sorted, no duplicates; in place, as SciPy's
+    ``c != 0`` for the component search always did), a smaller one as it comes."""
+    if c.shape[0] >= WALK_MIN_STATES:
+        c.sum_duplicates()
+    return c
+
+
+def walk_of(chain: sp.csr_array | sp.csc_array) -> ChainLevels:
+    """The walk of ``chain``: an offered one whose chain is ``chain`` entry for entry as
+    :class:`ChainLevels` would keep it (:meth:`ChainLevels.same_chain`; taken out of
+    the offers), its components and factorisations those of ``chain`` itself, so every
+    solve on it has the bits of a new walk's; else a new :class:`ChainLevels`."""
+    c = _walked(sp.csr_array(chain))
+    for k, walk in enumerate(_OFFERED):
+        if walk.same_chain(c):
+            return _OFFERED.pop(k)
+    return ChainLevels(c)
 
 
 def chain_solve(chain: sp.csr_array | sp.csc_array, rhs: np.ndarray) -> np.ndarray:

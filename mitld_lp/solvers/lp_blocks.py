@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
+from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve, offer
 from mitld_lp.solvers.crossover import polish
 from mitld_lp.solvers.eliminate import eliminate, worth_eliminating
 from mitld_lp.solvers.graph import Blocks, Level, Sense, segmented_argmax
@@ -375,6 +375,9 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)
             values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
             weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
+            # the certificate's chain there, where the policy ends up the same (whether
+            # the LP solves some of the states or none)
+            offer(greedy.walk)
             if greedy.left.size == 0:  # no LP: its flow matrix is never built
                 walks[level.index] = (rest, greedy.walk)
                 continue
