@@ -17,6 +17,7 @@ from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.product.late_names import LateActionNames
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
+from mitld_lp.product.table_levels import Plain, plain_table
 from mitld_lp.util.arrays import (
     DENSE_LIMIT,
     Grow,
@@ -37,6 +38,10 @@ log = logging.getLogger(__name__)
 
 BATCH_ENTRIES = 1 << 18
 """Transitions (before merging) per batch of expanded states."""
+
+LEAN_TABLES = True
+"""Whether a plain table world's levels are built by :mod:`~mitld_lp.product.table_levels`
+(the same arrays in fewer NumPy calls; False: every level by :func:`_expand`, for tests)."""
 
 
 def product(
@@ -123,9 +128,15 @@ def _build(
     bar = progress_bar(progress, total=None, unit=" states", leave=False, mininterval=0.5,
                        desc="product")
     head, batch = 0, 256
+    lean: Plain | None = None
     while head < states.keys.size:
         keys = states.keys.view[head : head + batch].copy()
-        chunk, n_entries = _expand(f, keys, head, states.intern)
+        if lean is None and LEAN_TABLES and head and plain_table(f):
+            lean = Plain(f)  # after the first level: its situation is expanded
+        if lean is not None and int(keys.min()) >= 0:
+            chunk, n_entries = lean.expand(keys, states.intern)
+        else:
+            chunk, n_entries = _expand(f, keys, head, states.intern)
         chunks.append(chunk)
         state_choices.extend(chunk[4])
         budget.expanded += keys.size
@@ -175,7 +186,12 @@ class _Found:
         """Product state ids of ``keys``, new ones numbered in order of first occurrence.
         The budget is checked before the new states are stored."""
         # shifted past the absorbing codes (-3 .. -1), so that every key is >= 0
-        ids = self.index.find(keys + _SHIFT)
+        shifted = keys + _SHIFT
+        dense = self.index.dense
+        if dense is not None and shifted.size and int(shifted.max()) < dense.size:
+            ids = dense[shifted].astype(np.int64)  # Index.find's answer, in one gather
+        else:
+            ids = self.index.find(shifted)
         miss = np.flatnonzero(ids < 0)
         if miss.size:
             # the distinct missing keys, each's first occurrence and each entry's

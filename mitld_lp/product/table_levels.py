@@ -1,0 +1,139 @@
+"""A breadth-first level of a table world's product in few NumPy calls.
+
+The plain PRISM task (a world read whole as a :class:`~mitld_lp.worlds.table.WorldTable`,
+no event, one situation, a task that is not robust) builds its product level by level;
+a level of a thin frontier holds a few hundred states, so the time of a level is NumPy's
+fixed cost per call, not the states.  :func:`expand` is :func:`mitld_lp.product.build.
+_expand` for that case with the steps that do nothing there left out:
+
+* a state's choices are contiguous in the table, and so are their rows: the entries of
+  the level's states are gathered as one run per state (``branches[choices[g]]`` up to
+  ``branches[choices[g + 1]]``), not per choice and then per row;
+* the one situation has one outcome that crosses no truncation point: no pair, no
+  outcome, no event letter;
+* the automaton's steps are tabulated for every automaton state and every label of the
+  table once (:meth:`Plain.steps`), so a level reads them by one gather;
+* entries to one product state within one choice are merged (:func:`~mitld_lp.util.
+  arrays.merge`) only where they can meet: at an absorbing state, or where a row of the
+  table names one successor twice (checked once for the whole table).
+
+The same arrays as :func:`~mitld_lp.product.build._expand`, bit for bit (a test compares
+them level by level and against a product built state by state); the budgets are checked
+where the old path checks them (the new states, in ``intern``, before they are stored).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.product.layers import Layers
+from mitld_lp.util.arrays import DENSE_LIMIT, merge, unique
+from mitld_lp.worlds.table import LATE
+
+__all__ = ["Plain", "plain_table"]
+
+_MAX_STEPS = 1 << 16
+"""Automaton steps tabulated at most (automaton states x the table's labels)."""
+
+
+class Plain:
+    """What :func:`expand` reads of a table world's layers, made once per build."""
+
+    __slots__ = ("f", "n_q", "shift", "steps", "step_bits", "scale", "distinct")
+
+    def __init__(self, f: Layers) -> None:
+        t = f.table
+        assert t is not None
+        self.f = f
+        n_q = f.codec.n_q
+        self.n_q = n_q
+        self.shift = n_q.bit_length() - 1 if n_q & (n_q - 1) == 0 else -1
+        out = f.out_start.view[0]
+        self.scale = float(f.out_prob.view[out])  # the one outcome's probability (1.0)
+        # every automaton step of every (state, label of the table), coded as f.step codes
+        masks = unique(np.array(
+            [sum(1 << i for a, i in f.atoms.items() if a in labels) for labels in t.label_sets],
+            dtype=np.int64))
+        self.step_bits = len(f.atoms)
+        self.steps: np.ndarray | None = None
+        dta = f.dta  # the product steps from its ordinary states only
+        live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
+                        dtype=np.int64)
+        if live.size * masks.size <= _MAX_STEPS and (n_q << self.step_bits) <= DENSE_LIMIT:
+            qs = np.repeat(live, masks.size)
+            f.step(qs, np.tile(masks, live.size))  # fills the automaton's memo for them all
+            table = f._delta.table
+            if table is not None:
+                self.steps = table
+        self.distinct = _rows_distinct(t.targets, t.branches)
+
+    def expand(self, keys: np.ndarray, intern: Any) -> tuple[tuple[np.ndarray, ...], int]:
+        """The rows of the product states ``keys`` (all ordinary): as
+        :func:`mitld_lp.product.build._expand` returns them."""
+        f = self.f
+        if self.shift >= 0:
+            g, q = keys >> self.shift, keys & (self.n_q - 1)
+        else:
+            g, q = np.divmod(keys, self.n_q)
+        c_lo = f.act_start.view[g]
+        n_act = f.act_count.view[g]
+        row_start = f.row_start.view
+        e_lo = row_start[c_lo]
+        n_ent = row_start[c_lo + n_act] - e_lo  # the state's entries: one run
+        ends = np.cumsum(n_ent)
+        n_e = int(ends[-1])
+        e_at = np.arange(n_e) + np.repeat(e_lo - ends + n_ent, n_ent)
+        vals = f.row_prob.view[e_at]
+        if self.scale != 1.0:
+            vals = vals * self.scale
+        g2 = f.row_succ.view[e_at]
+        letter = f.props.view[g2]
+        q_e = np.repeat(q, n_ent)
+        if self.steps is not None:
+            q2 = self.steps[(q_e << self.step_bits) | letter]
+        else:
+            q2 = f.step(q_e, letter)
+        ends_c = np.cumsum(n_act)
+        n_c = int(ends_c[-1])
+        c_slot = np.arange(n_c) + np.repeat(c_lo - ends_c + n_act, n_act)
+        n_succ = f.row_len.view[c_slot]
+        absorbed = q2 < 0
+        meet = bool(absorbed.any())
+        moved = g2 * self.n_q + q2
+        if meet:
+            moved = np.where(absorbed, q2, moved)
+        cols = intern(moved).astype(np.int32)
+        if meet or not self.distinct:
+            e_choice = np.repeat(np.arange(n_c), n_succ)
+            cols, vals, row_len = merge(e_choice, cols, vals, n_c)
+        else:  # every entry of a choice goes to a state of its own
+            row_len = n_succ
+        actions = c_slot + LATE if f.late else f.slot_aid.view[c_slot]
+        return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32),
+                n_act.astype(np.int32)), n_e
+
+
+def plain_table(f: Layers) -> bool:
+    """Whether :class:`Plain` builds ``f``'s levels: a table world read whole whose rows
+    are all distributions, no event, one situation expanded with one outcome that
+    crosses no truncation point, not robust."""
+    if f.table is None or f.robust or f.events or f.codec.n_sit != 1 or f._faulty.size:
+        return False
+    if f.out_count.size == 0 or f.out_count.view[0] != 1:
+        return False
+    return bool(f.out_next.view[f.out_start.view[0]] >= 0)
+
+
+def _rows_distinct(targets: np.ndarray, branches: np.ndarray) -> bool:
+    """Whether no row ``targets[branches[c]:branches[c + 1]]`` names a state twice
+    (checked as: every row strictly increasing, as Storm's sparse rows are; a row that
+    is not counts as one that might repeat)."""
+    if targets.size < 2:
+        return True
+    up = np.diff(targets) > 0
+    inner = branches[1:-1]
+    inner = inner[(inner > 0) & (inner < targets.size)]
+    up[inner - 1] = True  # a row's first entry follows another row's last
+    return bool(up.all())
