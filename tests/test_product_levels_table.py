@@ -270,3 +270,16 @@ def test_a_prism_program_lean_general_and_brute(
     lean, old, _ = both(game, sta, monkeypatch)
     same_mdp(lean, old)
     same_as_brute(lean, game, sta)
+
+
+@pytest.mark.parametrize("spec", ["F[0,4] goal", "!bad U goal"])
+def test_steps_asked_level_by_level_when_not_tabulated(
+    spec: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(tl, "_MAX_STEPS", 0)  # too many (automaton state, label) pairs
+    world = TableWorld(np.random.default_rng(4), 90, repeat=False)
+    sta = task(spec)
+    lean, old, levels = both(world, sta, monkeypatch)
+    assert levels > 0
+    same_mdp(lean, old)
+    same_as_brute(lean, world, sta)

@@ -148,6 +148,7 @@ def _build(
         head += keys.size
         batch = min(max(BATCH_ENTRIES * keys.size // max(n_entries, 1), 16), 1 << 20)
     bar.close()
+    lean = None  # its views of the table's arrays go with the layers' below
     f.check_rows()  # the rows not checked yet: every distribution read is checked
     # the states' keys in 4 bytes where they fit (the product keeps them, one a state)
     keys = narrow_copy(states.keys.view)
@@ -190,8 +191,11 @@ class _Found:
         dense = self.index.dense
         if dense is not None and shifted.size and int(shifted.max()) < dense.size:
             ids = dense[shifted].astype(np.int64)  # Index.find's answer, in one gather
-        else:
-            ids = self.index.find(shifted)
+            miss = np.flatnonzero(ids < 0)
+            if miss.size:
+                self._add_dense(dense, shifted[miss], miss, ids)
+            return ids
+        ids = self.index.find(shifted)
         miss = np.flatnonzero(ids < 0)
         if miss.size:
             # the distinct missing keys, each's first occurrence and each entry's
@@ -215,6 +219,30 @@ class _Found:
             self.keys.extend(uniq[found])
             ids[miss] = new[inverse]
         return ids
+
+    def _add_dense(
+        self, dense: np.ndarray, missing: np.ndarray, miss: np.ndarray, ids: np.ndarray
+    ) -> None:
+        """Number the distinct keys of ``missing`` (shifted, all inside the index's dense
+        array, none in it yet) in order of first occurrence and write each entry's id
+        at ``ids[miss]``: the first occurrence of each key is found with the dense array
+        as scratch (its entries at ``missing`` are -1 before and after), a minimum per
+        key, instead of two sorts."""
+        m = missing.size
+        pos = np.arange(m, dtype=dense.dtype)
+        dense[missing] = m
+        np.minimum.at(dense, missing, pos)  # each key's first position in missing
+        first_at = dense[missing]
+        dense[missing] = -1  # the scratch undone before anything may raise
+        first = np.flatnonzero(first_at == pos)  # in order of first occurrence
+        n = self.keys.size
+        self.budget.check(n + first.size)
+        new = np.empty(m, dtype=np.int64)
+        new[first] = np.arange(n, n + first.size)
+        uniq = missing[first]
+        self.index.insert(uniq, new[first])
+        self.keys.extend(uniq - _SHIFT)
+        ids[miss] = new[first_at]
 
 
 _SHIFT = -min(CODE.values())

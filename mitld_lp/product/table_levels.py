@@ -41,76 +41,92 @@ _MAX_STEPS = 1 << 16
 class Plain:
     """What :func:`expand` reads of a table world's layers, made once per build."""
 
-    __slots__ = ("f", "n_q", "shift", "steps", "step_bits", "scale", "distinct")
+    __slots__ = ("late", "n_q", "shift", "scale", "steps", "step_bits", "only", "distinct",
+                 "act_start", "act_count", "row_start", "row_len", "row_succ", "row_prob",
+                 "props", "slot_aid", "step")
 
     def __init__(self, f: Layers) -> None:
         t = f.table
         assert t is not None
-        self.f = f
         n_q = f.codec.n_q
         self.n_q = n_q
         self.shift = n_q.bit_length() - 1 if n_q & (n_q - 1) == 0 else -1
-        out = f.out_start.view[0]
-        self.scale = float(f.out_prob.view[out])  # the one outcome's probability (1.0)
-        # every automaton step of every (state, label of the table), coded as f.step codes
+        self.scale = float(f.out_prob.view[f.out_start.view[0]])  # the one outcome's (1.0)
+        # a table's arrays are read whole and never grow: kept here as views (the build
+        # lets go of this object before the layers are released)
+        self.late = f.late
+        self.act_start, self.act_count = f.act_start.view, f.act_count.view
+        self.row_start, self.row_len = f.row_start.view, f.row_len.view
+        self.row_succ, self.row_prob = f.row_succ.view, f.row_prob.view
+        self.props, self.slot_aid = f.props.view, f.slot_aid.view
+        self.step = f.step
+        # every automaton step from every ordinary automaton state on every label of the
+        # table, coded as Layers.step codes them, in the automaton's memo (a dense array)
         masks = unique(np.array(
             [sum(1 << i for a, i in f.atoms.items() if a in labels) for labels in t.label_sets],
             dtype=np.int64))
         self.step_bits = len(f.atoms)
         self.steps: np.ndarray | None = None
-        dta = f.dta  # the product steps from its ordinary states only
+        self.only = -1  # the one ordinary automaton state, if there is one
+        dta = f.dta
         live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
                         dtype=np.int64)
         if live.size * masks.size <= _MAX_STEPS and (n_q << self.step_bits) <= DENSE_LIMIT:
-            qs = np.repeat(live, masks.size)
-            f.step(qs, np.tile(masks, live.size))  # fills the automaton's memo for them all
+            f.step(np.repeat(live, masks.size), np.tile(masks, live.size))
             table = f._delta.table
             if table is not None:
                 self.steps = table
+                if live.size == 1:  # its row of steps alone, read by the letter
+                    self.only = int(live[0])
+                    self.steps = table[self.only << self.step_bits:]
         self.distinct = _rows_distinct(t.targets, t.branches)
 
     def expand(self, keys: np.ndarray, intern: Any) -> tuple[tuple[np.ndarray, ...], int]:
         """The rows of the product states ``keys`` (all ordinary): as
         :func:`mitld_lp.product.build._expand` returns them."""
-        f = self.f
-        if self.shift >= 0:
-            g, q = keys >> self.shift, keys & (self.n_q - 1)
+        n_q, shift = self.n_q, self.shift
+        if self.only >= 0:  # every ordinary key is g * n_q + only
+            g = keys >> shift if shift >= 0 else keys // n_q
+            q = None
+        elif shift >= 0:
+            g, q = keys >> shift, keys & (n_q - 1)
         else:
-            g, q = np.divmod(keys, self.n_q)
-        c_lo = f.act_start.view[g]
-        n_act = f.act_count.view[g]
-        row_start = f.row_start.view
+            g, q = np.divmod(keys, n_q)
+        c_lo = self.act_start[g]
+        n_act = self.act_count[g]
+        row_start = self.row_start
         e_lo = row_start[c_lo]
         n_ent = row_start[c_lo + n_act] - e_lo  # the state's entries: one run
-        ends = np.cumsum(n_ent)
+        ends = n_ent.cumsum()
         n_e = int(ends[-1])
-        e_at = np.arange(n_e) + np.repeat(e_lo - ends + n_ent, n_ent)
-        vals = f.row_prob.view[e_at]
+        e_at = np.arange(n_e) + (e_lo - ends + n_ent).repeat(n_ent)
+        vals = self.row_prob[e_at]
         if self.scale != 1.0:
             vals = vals * self.scale
-        g2 = f.row_succ.view[e_at]
-        letter = f.props.view[g2]
-        q_e = np.repeat(q, n_ent)
-        if self.steps is not None:
-            q2 = self.steps[(q_e << self.step_bits) | letter]
+        g2 = self.row_succ[e_at]
+        letter = self.props[g2]
+        if q is None:  # (only with the steps tabulated)
+            q2 = self.steps[letter]
+        elif self.steps is not None:
+            q2 = self.steps[(q.repeat(n_ent) << self.step_bits) | letter]
         else:
-            q2 = f.step(q_e, letter)
-        ends_c = np.cumsum(n_act)
+            q2 = self.step(q.repeat(n_ent), letter)
+        ends_c = n_act.cumsum()
         n_c = int(ends_c[-1])
-        c_slot = np.arange(n_c) + np.repeat(c_lo - ends_c + n_act, n_act)
-        n_succ = f.row_len.view[c_slot]
+        c_slot = np.arange(n_c) + (c_lo - ends_c + n_act).repeat(n_act)
+        n_succ = self.row_len[c_slot]
         absorbed = q2 < 0
         meet = bool(absorbed.any())
-        moved = g2 * self.n_q + q2
+        moved = (g2 << shift if shift >= 0 else g2 * n_q) + q2
         if meet:
             moved = np.where(absorbed, q2, moved)
         cols = intern(moved).astype(np.int32)
         if meet or not self.distinct:
-            e_choice = np.repeat(np.arange(n_c), n_succ)
+            e_choice = np.arange(n_c).repeat(n_succ)
             cols, vals, row_len = merge(e_choice, cols, vals, n_c)
         else:  # every entry of a choice goes to a state of its own
             row_len = n_succ
-        actions = c_slot + LATE if f.late else f.slot_aid.view[c_slot]
+        actions = c_slot + LATE if self.late else self.slot_aid[c_slot]
         return (cols, vals, row_len.astype(np.int32), actions.astype(np.int32),
                 n_act.astype(np.int32)), n_e
 
