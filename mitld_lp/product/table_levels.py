@@ -29,13 +29,14 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.product.layers import Layers
-from mitld_lp.util.arrays import DENSE_LIMIT, merge, unique
+from mitld_lp.util.arrays import merge, unique
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["Plain", "plain_table"]
 
 _MAX_STEPS = 1 << 16
-"""Automaton steps tabulated at most (automaton states x the table's labels)."""
+"""The automaton's steps are tabulated where its memo (automaton states times the
+letters of its atoms) has at most this many entries."""
 
 
 class Plain:
@@ -71,7 +72,7 @@ class Plain:
         dta = f.dta
         live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
                         dtype=np.int64)
-        if live.size * masks.size <= _MAX_STEPS and (n_q << self.step_bits) <= DENSE_LIMIT:
+        if (n_q << self.step_bits) <= _MAX_STEPS:  # a memo of 512 KB at most
             f.step(np.repeat(live, masks.size), np.tile(masks, live.size))
             table = f._delta.table
             if table is not None:
