@@ -3,23 +3,29 @@
 The plain PRISM task (a world read whole as a :class:`~mitld_lp.worlds.table.WorldTable`,
 no event, one situation, a task that is not robust) builds its product level by level;
 a level of a thin frontier holds a few hundred states, so the time of a level is NumPy's
-fixed cost per call, not the states.  :func:`expand` is :func:`mitld_lp.product.build.
-_expand` for that case with the steps that do nothing there left out:
+fixed cost per call, not the states.  :meth:`Plain.expand` is :func:`mitld_lp.product.
+build._expand` for that case with the steps that do nothing there left out:
 
 * a state's choices are contiguous in the table, and so are their rows: the entries of
   the level's states are gathered as one run per state (``branches[choices[g]]`` up to
   ``branches[choices[g + 1]]``), not per choice and then per row;
 * the one situation has one outcome that crosses no truncation point: no pair, no
   outcome, no event letter;
-* the automaton's steps are tabulated for every automaton state and every label of the
-  table once (:meth:`Plain.steps`), so a level reads them by one gather;
+* the automaton's steps from every ordinary automaton state on every label of the table
+  are asked once, where its memo stays small (:data:`_MAX_STEPS`), so a level reads them
+  by one gather (by the letter alone where one automaton state is ordinary, as in
+  ``F goal``);
+* a level's new states are numbered in ``intern`` by a minimum per key in the dense
+  index (:meth:`mitld_lp.product.build._Found._add_dense`), not by two sorts (every
+  world's levels use it);
 * entries to one product state within one choice are merged (:func:`~mitld_lp.util.
   arrays.merge`) only where they can meet: at an absorbing state, or where a row of the
   table names one successor twice (checked once for the whole table).
 
-The same arrays as :func:`~mitld_lp.product.build._expand`, bit for bit (a test compares
-them level by level and against a product built state by state); the budgets are checked
-where the old path checks them (the new states, in ``intern``, before they are stored).
+The same arrays as :func:`~mitld_lp.product.build._expand`, bit for bit (the tests compare
+the products built either way, and with one built by a breadth-first search state by
+state); the budgets are checked where the old path checks them (the new states, in
+``intern``, before they are stored; the memory per batch in the build's loop).
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ letters of its atoms) has at most this many entries."""
 
 
 class Plain:
-    """What :func:`expand` reads of a table world's layers, made once per build."""
+    """What :meth:`expand` reads of a table world's layers, made once per build (after
+    its first level, which expands the one situation)."""
 
     __slots__ = ("late", "n_q", "shift", "scale", "steps", "step_bits", "only", "distinct",
                  "act_start", "act_count", "row_start", "row_len", "row_succ", "row_prob",
