@@ -25,7 +25,8 @@ A product state is an integer key (:class:`mitld_lp.product.states.KeyCodec`);
 them.
 
 The modules, one concern each: :mod:`~mitld_lp.product.build` (the breadth-first
-construction and the MDP's assembly), :mod:`~mitld_lp.product.layers` (the factors,
+construction and the MDP's assembly), :mod:`~mitld_lp.product.table_levels` (a plain
+table world's levels in few NumPy calls), :mod:`~mitld_lp.product.layers` (the factors,
 each asked once), :mod:`~mitld_lp.product.states` (the key codec and the state
 records), :mod:`~mitld_lp.product.budget` (the size estimate and the budgets); the array
 kernels they use are in :mod:`mitld_lp.util.arrays`.
