@@ -77,7 +77,7 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import jump_cost
 from mitld_lp.solvers.evaluation import evaluate_policy
-from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.graph import Blocks, Sense
 from mitld_lp.solvers.kernels import (
     Prepared,
     compiled_sweeps,
@@ -88,6 +88,7 @@ from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import value_order
 from mitld_lp.solvers.topological import (
@@ -333,8 +334,28 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     (``None``: the blocks :func:`~mitld_lp.solvers.sweep_gate.use_compiled` picks, numba
     loaded at the first of them)."""
     blk = blocks(q)
+    if blk.n_levels < RUNS_MIN_LEVELS:  # the LP walks its levels one by one
+        _levels(q, blk, rewards, bounds, tol, precision, budget, bar, SingleLevels(
+            q, blk, skip), skip=skip, compiled=compiled)
+        return
+    # the LP's levels (shared_levels: built once a quotient), the skipped single states
+    # walked too and their bounds put back: no state the initial one reaches reads them
+    singles = shared_levels(q, blk)
+    held = None if skip is None else singles.states[skip[singles.states]]
+    kept = None if held is None else bounds[held]
+    try:
+        _levels(q, blk, rewards, bounds, tol, precision, budget, bar, singles, skip=skip,
+                compiled=compiled)
+    finally:
+        if held is not None:
+            bounds[held] = kept
+
+
+def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, tol: float,
+            precision: float | None, budget: _Budget, bar: Bar, singles: SingleLevels, *,
+            skip: np.ndarray | None, compiled: bool | None) -> None:
+    """:func:`_topological`'s walk of the levels with the single states' ``singles``."""
     sense = q.sense
-    singles = SingleLevels(q, blk, skip)
     done = 0  # the levels whose single states are solved
     for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
         singles.solve(done, index + 1, rewards, bounds)
