@@ -572,13 +572,14 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    one = np.asarray(q.qualitative.one)
-    lower = np.where(one, 1.0, q.lift(bounds[:, 0]))
-    upper = np.where(one, 1.0, q.lift(bounds[:, 1]))
     # greedy on the bound that a greedy policy's value lies beyond (a maximum's lower, a
-    # minimum's upper: the policy's operator maps it to the optimum's side)
+    # minimum's upper: the policy's operator maps it to the optimum's side); before the
+    # bounds are lifted, so that its scores and the lifted bounds are not held together
     known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
     policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+    one = np.asarray(q.qualitative.one)
+    lower, upper = q.lift(bounds[:, 0]), q.lift(bounds[:, 1])  # fresh arrays: the
+    lower[one] = upper[one] = 1.0  # ones set in place (no third array a state each)
     threshold = f"tol {tol:.1e}" + ("" if precision is None else
                                     f" and {precision:.0e} of the lower bound")
     message = (

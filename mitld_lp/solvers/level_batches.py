@@ -92,13 +92,15 @@ per-choice arrays are a group's, not the whole walk's (a run of more is gathered
 alone).  Every level's arithmetic is the same whatever the groups: the same bits."""
 
 
-def _groups(runs: list[tuple[int, ...]]) -> list[list[tuple[int, ...]]]:
-    """``runs`` (in their order) cut into consecutive groups of at most
-    :data:`GROUP_ENTRIES` entries and as many choices; a run of more is a group alone."""
+def _groups(runs: list[tuple[int, ...]], limit: int | None = None
+            ) -> list[list[tuple[int, ...]]]:
+    """``runs`` (in their order) cut into consecutive groups of at most ``limit``
+    (:data:`GROUP_ENTRIES`) entries and as many choices; a run of more is a group alone."""
+    limit = GROUP_ENTRIES if limit is None else limit
     out: list[list[tuple[int, ...]]] = []
     ca0 = ea0 = 0
     for r in runs:
-        if not out or r[5] - ea0 > GROUP_ENTRIES or r[3] - ca0 > GROUP_ENTRIES:
+        if not out or r[5] - ea0 > limit or r[3] - ca0 > limit:
             out.append([])
             ca0, ea0 = r[2], r[4]
         out[-1].append(r)
@@ -150,11 +152,22 @@ def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
     every = bool(live_of.all())
     for group in _groups(runs):
         if guess is not None and _flat(sl, out) is not None:
-            k = _checked(sl, group, to_target, live_of, guess, out, reduced_choice, weights)
+            k = 0
+            for part in _groups(group, CHECK_CHOICES):  # the check's arrays: a part's
+                got = _checked(sl, part, to_target, live_of, guess, out, reduced_choice,
+                               weights)
+                k += got
+                if got < len(part):
+                    break
             if k == len(group):
                 continue
             group, guess = group[k:], None  # missed: what reads the miss is walked
         _values(sl, group, to_target, live_of, every, out, reduced_choice, weights)
+
+
+CHECK_CHOICES = 1 << 12
+"""The choices (and entries) of the runs :func:`_checked` scores at once: its dozen
+arrays a choice are a part's (some 0.4 MB), not a group's (a walk's memory peak)."""
 
 
 def _checked(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
@@ -173,7 +186,9 @@ def _checked(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarra
     reduce = np.maximum if maximum else np.minimum
     a0, z1, ca0, cz1 = runs[0][0], runs[-1][1], runs[0][2], runs[-1][3]
     states, live = sl.states[a0:z1], live_of[a0:z1]
-    trial = out.copy()
+    # the guess written in place: a state's value is read only by the levels above its
+    # own, and the walk writes every live state of the levels it walks before those
+    trial = out
     trial[states[live]] = guess[states[live]]
     sums = np.zeros(cz1 - ca0)
     _st.csr_matvec(cz1 - ca0, out.shape[0], sl.ptr[ca0:cz1 + 1], sl.cols, sl.vals, trial,

@@ -354,7 +354,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     # (shared_levels: the iteration's, where it built them for this quotient)
-    singles = shared_levels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
+    singles = (shared_levels(q, blk, last=True) if blk.n_levels >= RUNS_MIN_LEVELS
+               else None)
     walk = (blk.walk(skip=q.zero) if singles is None else
             _value_runs(q, blk, singles, values, reduced_choice, weights,
                         None if bounds is None else bounds[0 if q.sense is Sense.MAX else 1]))

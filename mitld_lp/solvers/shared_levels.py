@@ -17,9 +17,12 @@ they are put back afterwards (:func:`mitld_lp.solvers.iteration._topological`): 
 the initial state reaches has only such successors, so no bound it reads changes, and the
 bounds are those of the walk with the skip, bit for bit.
 
-The object is kept while the quotient's matrix lives (a weak reference to it): the plain
-route frees the quotients before the certificate, and the levels with them.  It is kept
-only for quotients of at least :data:`RUNS_MIN_LEVELS` levels, where the LP walks it.
+The object is kept while the quotient's matrix lives (a weak reference to it), until the
+LP stage takes it (``last``): the LP's peak and what it keeps are what they were.  It is
+kept only for quotients of at least :data:`RUNS_MIN_LEVELS` levels, where the LP walks
+it.  Held from the iteration's end to the LP, it adds its size (some 30 bytes a
+transition on the deadline products) to the iteration's lifting of its bounds and
+greedy policy (``_result``).
 """
 
 from __future__ import annotations
@@ -45,20 +48,24 @@ levels), and from which the iteration shares its levels with them."""
 _KEPT: dict[int, tuple[weakref.ref[Any], Blocks, Any, Any, SingleLevels]] = {}
 
 
-def shared_levels(q: Quotient, b: Blocks) -> SingleLevels:
+def shared_levels(q: Quotient, b: Blocks, *, last: bool = False) -> SingleLevels:
     """``SingleLevels(q, b)`` (no skip, the walks :func:`level_kernels` picks now): the
     one built before for the same matrix, row groups, sense, order and walks, else a new
-    one, kept for the next caller while ``q.matrix`` lives."""
+    one, kept for the next caller while ``q.matrix`` lives.  ``last``: the caller is the
+    last to use them (the LP stage): they are not kept past its use, whose memory peak
+    is then the one of levels built for it alone."""
     kernels = level_kernels(q.matrix.nnz, b.n_levels)
     key = id(q.matrix)
-    kept = _KEPT.get(key)
+    kept = _KEPT.pop(key, None) if last else _KEPT.get(key)
     if kept is not None:
         ref, order, groups, sense, levels = kept
         if (ref() is q.matrix and order is b and groups is q.row_groups
                 and sense is q.sense and levels.kernels is kernels):
             return levels
     levels = SingleLevels(q, b)
-    _KEPT[key] = (weakref.ref(q.matrix, _forget(key)), b, q.row_groups, q.sense, levels)
+    if not last:
+        _KEPT[key] = (weakref.ref(q.matrix, _forget(key)), b, q.row_groups, q.sense,
+                      levels)
     return levels
 
 
