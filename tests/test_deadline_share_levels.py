@@ -1,12 +1,10 @@
-"""The single-state levels built once a quotient (solvers.shared_levels) and the LP's
-values walk checking the iteration's bounds first (level_batches.values' ``guess``).
+"""The single-state levels built once a quotient (solvers.shared_levels).
 
 * the shared levels are, array for array, those built afresh, on random acyclic and
   cyclic MDPs; the iteration walking them without its skip set and putting the
-  skipped states back gives the bounds of the walk with the skip, bit for bit;
-* the values walk with a guess (right, wrong by one ulp, or the iteration's bound
-  where a near-tie's pick scores below the top) writes what the walk without one
-  writes, bit for bit;
+  skipped states back gives the bounds of the walk with the skip, bit for bit, and the
+  iteration's result is the one of its own levels with the skip;
+* the kept levels go when their quotient goes, and the LP stage takes them;
 * on a small deadline-like MDP with a near-tie, the certified bracket holds the value
   found by enumerating every deterministic policy in exact arithmetic.
 """
@@ -23,7 +21,7 @@ from conftest import build_mdp
 from test_level_runs import _mixed
 from test_single_levels import _layered
 
-from mitld_lp.solvers import iteration, level_batches, shared_levels
+from mitld_lp.solvers import iteration, shared_levels
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.iteration import interval_iteration
@@ -123,6 +121,16 @@ def test_the_kept_levels_go_with_their_quotient() -> None:
     assert key not in shared_levels._KEPT
 
 
+def test_the_lp_stage_takes_the_levels_it_is_the_last_to_use() -> None:
+    q = _quotient(_layered(1, depth=30)[0], Sense.MAX)
+    first = shared_levels.shared_levels(q, q.order)
+    assert shared_levels.shared_levels(q, q.order, last=True) is first
+    assert id(q.matrix) not in shared_levels._KEPT  # not kept past the LP
+    again = shared_levels.shared_levels(q, q.order, last=True)  # built anew, not kept
+    assert again is not first and id(q.matrix) not in shared_levels._KEPT
+    _equal(first, again)
+
+
 def _near_tie(depth: int = 20):
     """A chain of ``depth`` layers; layer ``k``'s state ``2k`` has two choices: ``A``
     to the goal with probability ``x`` (the rest to the sink) and ``B`` to the goal with
@@ -152,72 +160,6 @@ def _row(moves, sink: int) -> dict[int, float]:
         row[t] = row.get(t, 0.0) + p
     row[sink] = row.get(sink, 0.0) + 1.0 - sum(p for _, p in moves)
     return row
-
-
-def _walk_values(q, sl, guess):
-    values = np.zeros(q.n_states)
-    choice = np.full(q.n_states, -1, dtype=np.int64)
-    weights = np.zeros(q.n_choices)
-    sl.values(0, q.order.n_levels, q.to_target, q.zero, values, choice, weights, guess)
-    return values, choice, weights
-
-
-def _same_walk(a, b) -> None:
-    for x, y in zip(a, b, strict=True):
-        assert np.array_equal(x.view(np.int64), y.view(np.int64))
-
-
-@pytest.mark.parametrize("case", ["acyclic", "near_tie"])
-@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
-def test_the_values_walk_with_a_guess_writes_what_the_walk_without_one_writes(
-        monkeypatch: pytest.MonkeyPatch, case: str, sense: Sense) -> None:
-    mdp = _layered(3, depth=40)[0] if case == "acyclic" else _near_tie()
-    q = _quotient(mdp, sense)
-    if (q.order.size > 1).any():
-        pytest.skip("not single states only")
-    sl = SingleLevels(q, q.order, compiled=False)
-    assert sl.ptr is not None  # the compiled CSR product's path (where the guess is read)
-    monkeypatch.setattr(level_batches, "GROUP_ENTRIES", 16)  # several groups
-    want = _walk_values(q, sl, None)
-    seen = []
-    checked = level_batches._checked
-
-    def counted(*args):
-        k = checked(*args)
-        seen.append((k, len(args[1])))
-        return k
-
-    monkeypatch.setattr(level_batches, "_checked", counted)
-    # the walk's own values: every level taken from the guess
-    _same_walk(want, _walk_values(q, sl, want[0].copy()))
-    assert all(k == n for k, n in seen)
-    # one ulp off at a state half-way up: the levels from there on are walked
-    wrong = want[0].copy()
-    s = int(sl.states[sl.states.size // 2])
-    wrong[s] = np.nextafter(wrong[s], 2.0)
-    seen.clear()
-    _same_walk(want, _walk_values(q, sl, wrong))
-    assert any(k < n for k, n in seen)
-    # the iteration's bound (the top of each state's scores)
-    it = interval_iteration(mdp, mdp.target, sense=sense, gap="max", progress=False)
-    kept = np.asarray(q.state_map) >= 0
-    bound = np.zeros(q.n_states)
-    bound[np.asarray(q.state_map)[kept]] = np.asarray(it.lower)[kept]
-    _same_walk(want, _walk_values(q, sl, bound))
-
-
-def test_a_near_tie_makes_the_pick_score_below_the_top() -> None:
-    """The near-tie case does what it is there for: the walk's value at a state with
-    the tie is the preferred choice's, one ulp below the top its bound takes."""
-    mdp = _near_tie()
-    q = _quotient(mdp, Sense.MAX)
-    sl = SingleLevels(q, q.order, compiled=False)
-    values, _, _ = _walk_values(q, sl, None)
-    bounds = np.zeros((q.n_states, 1))
-    sl.solve(0, q.order.n_levels, q.to_target[:, None], bounds)
-    assert (values < bounds[:, 0]).any()
-    # and with the top as the guess, the walk's answer all the same
-    _same_walk(_walk_values(q, sl, None), _walk_values(q, sl, bounds[:, 0].copy()))
 
 
 def _exact_optimum(mdp, sense: Sense) -> Fraction:

@@ -92,15 +92,13 @@ per-choice arrays are a group's, not the whole walk's (a run of more is gathered
 alone).  Every level's arithmetic is the same whatever the groups: the same bits."""
 
 
-def _groups(runs: list[tuple[int, ...]], limit: int | None = None
-            ) -> list[list[tuple[int, ...]]]:
-    """``runs`` (in their order) cut into consecutive groups of at most ``limit``
-    (:data:`GROUP_ENTRIES`) entries and as many choices; a run of more is a group alone."""
-    limit = GROUP_ENTRIES if limit is None else limit
+def _groups(runs: list[tuple[int, ...]]) -> list[list[tuple[int, ...]]]:
+    """``runs`` (in their order) cut into consecutive groups of at most
+    :data:`GROUP_ENTRIES` entries and as many choices; a run of more is a group alone."""
     out: list[list[tuple[int, ...]]] = []
     ca0 = ea0 = 0
     for r in runs:
-        if not out or r[5] - ea0 > limit or r[3] - ca0 > limit:
+        if not out or r[5] - ea0 > GROUP_ENTRIES or r[3] - ca0 > GROUP_ENTRIES:
             out.append([])
             ca0, ea0 = r[2], r[4]
         out[-1].append(r)
@@ -140,91 +138,16 @@ def _bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
 
 def values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
            live_of: np.ndarray, out: np.ndarray, reduced_choice: np.ndarray,
-           weights: np.ndarray, guess: np.ndarray | None = None) -> None:
+           weights: np.ndarray) -> None:
     """The plain walk of :meth:`SingleLevels.values` (:func:`~mitld_lp.solvers.
     topological.solve_single_states` a level at a time): each level's choice picked
     before the next level is scored.  ``live_of``: per single state, whether it is
     solved (not skipped).  The runs are walked in consecutive groups (:func:`_groups`),
     upward, each group's deferred picks made at its end: a level's value reads only the
-    levels below, and a pick only its own level.  ``guess``: values per quotient state
-    (the iteration's bounds), whose levels are checked a group at a time in one pass
-    (:func:`_checked`): those below the first level they miss are the walk's."""
+    levels below, and a pick only its own level."""
     every = bool(live_of.all())
     for group in _groups(runs):
-        if guess is not None and _flat(sl, out) is not None:
-            k = 0
-            for part in _groups(group, CHECK_CHOICES):  # the check's arrays: a part's
-                got = _checked(sl, part, to_target, live_of, guess, out, reduced_choice,
-                               weights)
-                k += got
-                if got < len(part):
-                    break
-            if k == len(group):
-                continue
-            group, guess = group[k:], None  # missed: what reads the miss is walked
         _values(sl, group, to_target, live_of, every, out, reduced_choice, weights)
-
-
-CHECK_CHOICES = 1 << 12
-"""The choices (and entries) of the runs :func:`_checked` scores at once: its dozen
-arrays a choice are a part's (some 0.4 MB), not a group's (a walk's memory peak)."""
-
-
-def _checked(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,
-             live_of: np.ndarray, guess: np.ndarray, out: np.ndarray,
-             reduced_choice: np.ndarray, weights: np.ndarray) -> int:
-    """The leading runs of one group whose walk :func:`_values` would write ``guess``,
-    found in one pass, their values, choices and weights written as it would; returns
-    their count.  The pass scores every choice of the group against ``out`` with the
-    group's live single states set to ``guess``, with the walk's arithmetic (each
-    choice's sum one row of the same compiled product, the same division and clip),
-    and picks as the walk does (ties, preference, a level's near-tie rule).  Where the
-    levels below level ``k`` got, bit for bit, their guessed values, level ``k``'s
-    scores read what the walk's read, so they are the walk's: by induction, the
-    levels below the first one with a value other than its guess are the walk's."""
-    maximum = sl.sense is Sense.MAX
-    reduce = np.maximum if maximum else np.minimum
-    a0, z1, ca0, cz1 = runs[0][0], runs[-1][1], runs[0][2], runs[-1][3]
-    states, live = sl.states[a0:z1], live_of[a0:z1]
-    # the guess written in place: a state's value is read only by the levels above its
-    # own, and the walk writes every live state of the levels it walks before those
-    trial = out
-    trial[states[live]] = guess[states[live]]
-    sums = np.zeros(cz1 - ca0)
-    _st.csr_matvec(cz1 - ca0, out.shape[0], sl.ptr[ca0:cz1 + 1], sl.cols, sl.vals, trial,
-                   sums)
-    reward_of = to_target[sl.choices[ca0:cz1]]
-    reward = reward_of + sums
-    leave = sl.leave[ca0:cz1]
-    score = (reward / leave if sl.positive else
-             np.divide(reward, leave, out=np.zeros_like(reward), where=leave > 0))
-    _clip(score, 0.0, 1.0, out=score)
-    starts = np.asarray(sl.state_choice[a0:z1], dtype=np.int64) - ca0
-    own = np.repeat(np.arange(z1 - a0), np.diff(starts, append=cz1 - ca0))
-    best = reduce.reduceat(score, starts)
-    top = best[own]
-    tied = (score - top if maximum else top - score) >= -TIE * np.abs(top)
-    # per level whether a tied choice scores below the top: its value is then the pick's
-    level_ca = np.array([r[2] for r in runs], dtype=np.int64) - ca0
-    odd = np.logical_or.reduceat(tied & (score != top), level_ca)
-    key = np.where(tied, reward_of if maximum else -reward_of, -np.inf)
-    tied &= key >= np.maximum.reduceat(key, starts)[own]
-    first = np.minimum.reduceat(np.where(tied, np.arange(score.size), _LAST), starts)
-    lost = first == _LAST  # no choice tied (a NaN score): not the walk's pick
-    first[lost] = 0
-    level_a = np.array([r[0] for r in runs], dtype=np.int64) - a0
-    picked = np.repeat(odd, np.diff(level_a, append=z1 - a0))  # per state
-    value = np.where(picked, score[first], best)
-    same = value.view(np.int64) == trial[states].view(np.int64)  # bit for bit
-    miss = np.flatnonzero(~((same & ~lost) | ~live))
-    k = len(runs) if miss.size == 0 else int(np.searchsorted(level_a, miss[0], "right")) - 1
-    m = z1 - a0 if k == len(runs) else int(level_a[k])
-    keep = np.flatnonzero(live[:m])
-    out[states[keep]] = value[keep]
-    picks = sl.choices[ca0 + first[keep]]
-    reduced_choice[states[keep]] = picks
-    weights[picks] = 1.0
-    return k
 
 
 def _values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray,

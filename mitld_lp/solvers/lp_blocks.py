@@ -165,16 +165,13 @@ def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
 
 
 def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndarray,
-                reduced_choice: np.ndarray, weights: np.ndarray,
-                guess: np.ndarray | None = None) -> Iterator[Level]:
+                reduced_choice: np.ndarray, weights: np.ndarray) -> Iterator[Level]:
     """:func:`solve_decomposed`'s walk with the single states (but ``q.zero``) solved a
     run of levels at a time as :func:`~mitld_lp.solvers.topological.
     solve_single_states` solves them (:meth:`~mitld_lp.solvers.topological.
     SingleLevels.values`): yielded are the runs, each ending at a level with a
     non-trivial component (its states not in ``q.zero`` the ``rest``) or the last,
-    ``states`` as many as were solved (for the progress bar), ``single`` empty.
-    ``guess``: the iteration's bound, checked as the walk's values before the walk
-    (:func:`~mitld_lp.solvers.level_batches.values`: taken where they are its values)."""
+    ``states`` as many as were solved (for the progress bar), ``single`` empty."""
     empty = np.zeros(0, dtype=np.int64)
     live = np.concatenate([[0], np.cumsum(~q.zero[blk.by_level])])
     done = 0
@@ -183,7 +180,7 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
         if index < done:  # the last level had a component: nothing after it
             continue
         singles.values(done, index + 1, q.to_target, q.zero, values, reduced_choice,
-                       weights, guess)
+                       weights)
         rest = blk.states_at(index)
         rest = rest[~blk.single(rest) & ~q.zero[rest]]
         count = int(live[blk.level_starts[index + 1]] - live[blk.level_starts[done]])
@@ -357,8 +354,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     singles = (shared_levels(q, blk, last=True) if blk.n_levels >= RUNS_MIN_LEVELS
                else None)
     walk = (blk.walk(skip=q.zero) if singles is None else
-            _value_runs(q, blk, singles, values, reduced_choice, weights,
-                        None if bounds is None else bounds[0 if q.sense is Sense.MAX else 1]))
+            _value_runs(q, blk, singles, values, reduced_choice, weights))
     for level in tracked(walk, progress, lambda lv: lv.states.size,
                          total=todo, desc="block LPs", unit=" states", leave=False):
         upd = solve_single_states(q, blk, level.single, values)

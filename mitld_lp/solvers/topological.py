@@ -87,6 +87,8 @@ def blocks(q: Quotient) -> Blocks:
     return q.order
 
 
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class LevelUpdate:
     """The exact values of single-state components and the choices that attain them."""
@@ -301,12 +303,11 @@ class SingleLevels:
         return self.runs[self.run_at[first]:self.run_at[stop]]
 
     def values(self, first: int, stop: int, to_target: np.ndarray, skip: np.ndarray,
-               values: np.ndarray, reduced_choice: np.ndarray, weights: np.ndarray,
-               guess: np.ndarray | None = None) -> None:
+               values: np.ndarray, reduced_choice: np.ndarray, weights: np.ndarray) -> None:
         """:func:`solve_single_states` on the single states of levels ``first`` to
-        ``stop - 1`` but the ``skip`` ones, in that order (the same sums, the same choice
-        among ties): their ``values``, ``reduced_choice`` and that choice's weight 1;
-        ``guess``: values to check first (:func:`level_batches.values`)."""
+        ``stop - 1`` but the ``skip`` ones, in that order (the same sums in the same
+        order, the same choice among ties): their ``values``, their ``reduced_choice``
+        and that choice's weight 1."""
         at = self.level_state
         if at[first] == at[stop]:
             return
@@ -318,7 +319,7 @@ class SingleLevels:
                                        self.sense is Sense.MIN)
             return
         level_batches.values(self, self._runs(first, stop), to_target, ~skip[self.states],
-                             values, reduced_choice, weights, guess)
+                             values, reduced_choice, weights)
 
     def flow(self, first: int, stop: int, self_loop: np.ndarray, weights: np.ndarray,
              x: np.ndarray) -> None:
