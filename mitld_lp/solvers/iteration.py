@@ -572,9 +572,8 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    # greedy on the bound that a greedy policy's value lies beyond (a maximum's lower, a
-    # minimum's upper: the policy's operator maps it to the optimum's side); before the
-    # bounds are lifted, so that its scores and the lifted bounds are not held together
+    # greedy on the bound a greedy policy's value lies beyond (a maximum's lower, a
+    # minimum's upper); before the bounds are lifted: its scores not held beside them
     known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
     policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
     one = np.asarray(q.qualitative.one)
