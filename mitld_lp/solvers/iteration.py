@@ -77,7 +77,7 @@ from mitld_lp import defaults
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import jump_cost
 from mitld_lp.solvers.evaluation import evaluate_policy
-from mitld_lp.solvers.graph import Sense
+from mitld_lp.solvers.graph import Blocks, Sense
 from mitld_lp.solvers.kernels import (
     Prepared,
     compiled_sweeps,
@@ -88,6 +88,7 @@ from mitld_lp.solvers.policy_jump import Abandoned, jump, start_policy
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import value_order
 from mitld_lp.solvers.topological import (
@@ -333,8 +334,28 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     (``None``: the blocks :func:`~mitld_lp.solvers.sweep_gate.use_compiled` picks, numba
     loaded at the first of them)."""
     blk = blocks(q)
+    if blk.n_levels < RUNS_MIN_LEVELS:  # the LP walks its levels one by one
+        _levels(q, blk, rewards, bounds, tol, precision, budget, bar, SingleLevels(
+            q, blk, skip), skip=skip, compiled=compiled)
+        return
+    # the LP's levels (shared_levels: built once a quotient), the skipped single states
+    # walked too and their bounds put back: no state the initial one reaches reads them
+    singles = shared_levels(q, blk)
+    held = None if skip is None else singles.states[skip[singles.states]]
+    kept = None if held is None else bounds[held]
+    try:
+        _levels(q, blk, rewards, bounds, tol, precision, budget, bar, singles, skip=skip,
+                compiled=compiled)
+    finally:
+        if held is not None:
+            bounds[held] = kept
+
+
+def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, tol: float,
+            precision: float | None, budget: _Budget, bar: Bar, singles: SingleLevels, *,
+            skip: np.ndarray | None, compiled: bool | None) -> None:
+    """:func:`_topological`'s walk of the levels with the single states' ``singles``."""
     sense = q.sense
-    singles = SingleLevels(q, blk, skip)
     done = 0  # the levels whose single states are solved
     for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
         singles.solve(done, index + 1, rewards, bounds)
@@ -551,13 +572,13 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    one = np.asarray(q.qualitative.one)
-    lower = np.where(one, 1.0, q.lift(bounds[:, 0]))
-    upper = np.where(one, 1.0, q.lift(bounds[:, 1]))
-    # greedy on the bound that a greedy policy's value lies beyond (a maximum's lower, a
-    # minimum's upper: the policy's operator maps it to the optimum's side)
+    # greedy on the bound a greedy policy's value lies beyond (a maximum's lower, a
+    # minimum's upper); before the bounds are lifted: its scores not held beside them
     known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
     policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+    one = np.asarray(q.qualitative.one)
+    lower, upper = q.lift(bounds[:, 0]), q.lift(bounds[:, 1])  # fresh arrays: the
+    lower[one] = upper[one] = 1.0  # ones set in place (no third array a state each)
     threshold = f"tol {tol:.1e}" + ("" if precision is None else
                                     f" and {precision:.0e} of the lower bound")
     message = (

@@ -26,6 +26,7 @@ from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.topological import (
     Block,
     SingleLevels,
@@ -137,8 +138,6 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
     return np.maximum(y, 0.0, out=y)
 
 
-RUNS_MIN_LEVELS = 16
-
 #: The fewest choices of a block the bounds' greedy policy may answer
 #: (:mod:`mitld_lp.solvers.greedy_block`): below it the block goes to the LP solver, so
 #: an ordinary product (the bundled case's blocks have a few hundred choices) is the
@@ -146,10 +145,6 @@ RUNS_MIN_LEVELS = 16
 #: cross-check; above it the interior-point method's cost (6 s an iteration on QVBS
 #: zeroconf 1000-4's 400,806 choices) is what the certificate of the greedy policy saves.
 GREEDY_MIN_CHOICES = 10_000
-"""Levels from which :func:`solve_decomposed` and :func:`policy_flow` take the single
-states a run of levels at a time from arrays gathered once
-(:class:`~mitld_lp.solvers.topological.SingleLevels`), not level by level (same
-answers; a deadline clock makes a thousand levels)."""
 
 
 def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
@@ -355,7 +350,9 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     walks: dict[int, tuple[np.ndarray, ChainLevels]] = {}  # greedy chains, for the flow
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
-    singles = SingleLevels(q, blk) if blk.n_levels >= RUNS_MIN_LEVELS else None
+    # (shared_levels: the iteration's, where it built them for this quotient)
+    singles = (shared_levels(q, blk, last=True) if blk.n_levels >= RUNS_MIN_LEVELS
+               else None)
     walk = (blk.walk(skip=q.zero) if singles is None else
             _value_runs(q, blk, singles, values, reduced_choice, weights))
     for level in tracked(walk, progress, lambda lv: lv.states.size,
