@@ -107,20 +107,27 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
     v_ld = v.astype(np.longdouble)
-    owner = np.repeat(np.arange(n, dtype=np.int32 if n < 2**31 - 1 else np.int64), counts)
-    # how far each choice's score falls short of its state's value (below 0: it beats it),
-    # BATCH choices at a time: a long double copy of the whole block is 16 bytes an entry
-    slack = np.empty(owner.size)
-    for a in range(0, owner.size, BATCH):
-        z = min(a + BATCH, owner.size)
-        score = reward[a:z] + block.inner[a:z].astype(np.longdouble) @ v_ld
-        slack[a:z] = -sense.gain(score, v_ld[owner[a:z]])
+    index = np.int32 if max(n, block.inner.nnz) < 2**31 - 1 else np.int64
     tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / (_SHARE * float(np.max(steps)))
+    # how far each choice's score falls short of its state's value (below 0: it beats
+    # it), BATCH choices at a time and judged there: no array a choice (a long double
+    # copy of the whole block is 16 bytes an entry; the slack, each choice's state and
+    # their tie scale were 8 + 4 + 8 bytes a choice alive at the LP stage's peak)
     failed = np.zeros(n, dtype=bool)
-    failed[owner[np.repeat(tie, counts) + slack < 0.0]] = True  # a choice beats it
-    failed[np.abs(slack[chosen]) > tie] = True  # the evaluation's own residual
+    m = int(groups[-1])
+    for a in range(0, m, BATCH):
+        z = min(a + BATCH, m)
+        owner = np.searchsorted(groups, np.arange(a, z), side="right").astype(index) - 1
+        score = reward[a:z] + _rows(block.inner, a, z).astype(np.longdouble) @ v_ld
+        slack = (-sense.gain(score, v_ld[owner])).astype(np.float64)
+        del score
+        failed[owner[tie[owner] + slack < 0.0]] = True  # a choice beats it
+        # the policy's own choices there (one a state, increasing with it)
+        mine = np.arange(*np.searchsorted(chosen, (a, z)))
+        failed[mine[np.abs(slack[chosen[mine] - a]) > tie[mine]]] = True  # its residual
     left = np.flatnonzero(backward_reachable(
-        n, np.repeat(owner, np.diff(block.inner.indptr)),  # each entry's state
+        n, np.repeat(np.arange(n, dtype=index),  # each entry's state
+                     np.diff(block.inner.indptr[groups])),
         block.inner.indices, failed)) if failed.any() else np.zeros(0, dtype=np.int64)
     if left.size:
         logger.info("greedy policy of %d block states (%d choices): %d fail its dual "
@@ -135,6 +142,14 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     weights = np.zeros(block.choices.size)
     weights[chosen] = 1.0
     return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left, walk)
+
+
+def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
+    """Rows ``a:z`` of ``m`` on views of its arrays (SciPy's slice copies them): the
+    same entries in the same order, so each row's product sums as before."""
+    lo, hi = int(m.indptr[a]), int(m.indptr[z])
+    return sp.csr_array((m.data[lo:hi], m.indices[lo:hi], m.indptr[a:z + 1] - lo),
+                        shape=(z - a, m.shape[1]))
 
 
 BATCH = 1 << 16
