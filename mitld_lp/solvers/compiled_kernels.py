@@ -252,10 +252,43 @@ def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
 
 @numba.njit(cache=True, nogil=True)
 def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
-             acc, minimise, guess, track):  # pragma: no cover - compiled
+             acc, minimise, guess, track, tol, precision, floor):  # pragma: no cover
     """:func:`_plain`, each bound's change written into ``guess`` and each column's
-    largest change into ``track``."""
+    largest change into ``track``; returns the largest gap over its threshold after the
+    sweep (:func:`_over`) for one model, -1 for more (the caller reads it then).
+
+    One model (two columns) runs on scalars: a state's old bounds held in registers, not
+    written into ``guess`` and read back, its gap read as it is set (a state is updated
+    once a sweep and nothing after the sweep moves a bound while watching, so the
+    largest of those is :func:`_over`'s, the same maximum of the same ratios): QVBS
+    ``zeroconf`` 1000-4's block of 213,268 states, whose 39 sweeps all watch, 13.4 ->
+    10.1 ms a sweep, the bounds the same to the bit."""
     n, k = local.shape
+    if k == 2:
+        m0 = track[OFF + 8]  # OFF + 4 k + j, k = 2: this sweep's largest changes
+        m1 = track[OFF + 9]
+        over = 0.0
+        for i in range(n):
+            s = order[i]
+            a = local[s, 0]
+            b = local[s, 1]
+            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
+            lo = local[s, 0]
+            hi = local[s, 1]
+            d0 = abs(lo - a)
+            d1 = abs(hi - b)
+            guess[s, 0] = d0
+            guess[s, 1] = d1
+            if d0 > m0:
+                m0 = d0
+            if d1 > m1:
+                m1 = d1
+            r = (hi - lo) / threshold(lo, tol, precision, floor)
+            if r > over:
+                over = r
+        track[OFF + 8] = m0
+        track[OFF + 9] = m1
+        return over
     for i in range(n):
         s = order[i]
         for j in range(k):
@@ -270,6 +303,7 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
             guess[s, j] = d
             if d > track[OFF + 4 * k + j]:
                 track[OFF + 4 * k + j] = d
+    return -1.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -325,7 +359,9 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
     optimistic = track[0] >= 0.0
     work = np.empty((0, 2 * k))  # the packed rows of a verification, made at its start
     packed = False
+    whole = order.shape[0] == n  # every state once a sweep: a watched sweep reads the gap
     while done < max_sweeps:
+        watched = -1.0  # the gap over its threshold read by a watched sweep (-1: not)
         for j in range(k):
             track[OFF + 4 * k + j] = 0.0
             track[OFF + 5 * k + j] = 0.0
@@ -341,8 +377,10 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
             _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
                        acc, minimise, track)
         else:
-            _watched(indptr, indices, data, starts, leave, exits, local, order, best, acc,
-                     minimise, guess, track)
+            watched = _watched(indptr, indices, data, starts, leave, exits, local, order,
+                               best, acc, minimise, guess, track, tol, precision, floor)
+            if not whole:
+                watched = -1.0
         done += 1
         # one layout and no literal for the helpers below, so each is compiled once (a
         # slice work[:, :k] is typed apart from a C array, a constant 0 or True apart
@@ -354,9 +392,9 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
                 _pack(local, guess, work, np.bool_(True))
                 packed = False
         else:
-            if optimistic:
+            if optimistic:  # watching: moves guess and track only, never local
                 _after_sweep(local, guess, np.int64(0), track, k, tol, precision, floor)
-            over = _over(local, k, tol, precision, floor)
+            over = watched if watched >= 0.0 else _over(local, k, tol, precision, floor)
         if over < 1.0:
             break
     if packed:
