@@ -90,7 +90,7 @@ from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.sweep_gate import use_compiled
-from mitld_lp.solvers.sweep_order import value_order
+from mitld_lp.solvers.sweep_order import renumbered, value_order
 from mitld_lp.solvers.topological import (
     Block,
     Factors,
@@ -372,8 +372,8 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if fast:  # the target's value carried back in one sweep (sweep_order's docs),
             # the block renumbered so that the kernel's sweep from its last state to its
             # first visits them in that order and reads its rows in memory order
-            rest = rest[value_order(block)[::-1]]
-            block = Block.of(q, rest)
+            block = renumbered(block, value_order(block)[::-1])  # = Block.of's, to the bit
+            rest = block.states
         exits = rewards[block.choices] + block.outer @ bounds
         prep = Prepared(block.inner, block.groups)
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY

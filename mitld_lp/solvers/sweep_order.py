@@ -41,9 +41,42 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.kernels import sweep_order
+from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["value_order"]
+__all__ = ["renumbered", "value_order"]
+
+
+def renumbered(block: Block, order: np.ndarray) -> Block:
+    """``Block.of(q, block.states[order])`` from the block itself: its states, choices
+    and rows taken in ``order`` (a permutation of its local indices), the inner columns
+    renamed to the new places.  Each row keeps its entries in their stored order, as
+    ``Block.of`` splits them from the quotient's rows, so every field is the same to the
+    bit and in the same types; the quotient's rows are not gathered and split a second
+    time."""
+    order = np.asarray(order, dtype=np.int64)
+    n = block.states.size
+    groups = block.groups
+    picked = gather_ranges(groups[order], groups[order + 1])  # old choice places
+    place = np.empty(n, dtype=block.inner.indices.dtype)
+    place[order] = np.arange(n, dtype=place.dtype)
+    inner = _rows(block.inner, picked, place)
+    outer = _rows(block.outer, picked, None)
+    counts = groups[order + 1] - groups[order]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    return Block(block.states[order], block.choices[picked], inner, outer, starts,
+                 block.to_target[picked])
+
+
+def _rows(m: sp.csr_array, rows: np.ndarray, rename: np.ndarray | None) -> sp.csr_array:
+    """``m``'s ``rows`` in that order (SciPy's row gather: each row's entries in their
+    stored order), the columns renamed by ``rename`` where given; ``m``'s index types
+    kept."""
+    out = sp.csr_array(m[rows])
+    if rename is not None:
+        out.indices = rename[out.indices].astype(m.indices.dtype, copy=False)
+    out.indptr = out.indptr.astype(m.indptr.dtype, copy=False)
+    return out
 
 
 def value_order(block: Block) -> np.ndarray:
