@@ -30,6 +30,11 @@ Per instance (posed as ``bench_qvbs.py`` poses it), in child processes of their 
     python experiments/profile_solve.py --qvbs qcomp/benchmarks --min-states 0 \
         --only consensus.4-4.c2 --bus bus_scaled_n64_d3 --numpy-sweeps --compiled-sweeps
 
+``--compare DIR`` runs ``stages`` once more per instance with the library of another
+checkout (``DIR``, e.g. ``git archive`` of the base; this script's harness, that
+checkout's ``mitld_lp``), right after this one's, and writes its figures beside as
+``base_*`` columns: the iteration, its sweeps, the timed solve stage and the value.
+
 ``--bus`` adds instances of ``bench_sweeps.py`` (posed as it poses them, Storm's best
 check on our DRN beside); ``--min-states`` lets in QVBS instances below the benchmark's
 1e5 states.
@@ -40,6 +45,7 @@ Written: ``profile_solve.csv``, ``profile_solve.md``.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -82,8 +88,12 @@ levels, the single levels' set-up (the iteration and the LP each build theirs), 
 certificate's whole chain (its set-up, searches and walk: ``chain_singles`` inside it)
 and its Bellman checks of each candidate."""
 COLUMNS = ("instance", "value", "solve_cpu", "storm_check_cpu", "solve_over_storm_check",
-           "timed_solve_cpu", "analysis", "iteration", "lp", "certificate", "numba_import",
-           "numba_loaded", *WALKS, *SETUP)
+           "timed_solve_cpu", "analysis", "iteration", "sweeps", "lp", "certificate",
+           "numba_import", "numba_loaded", *WALKS, *SETUP)
+BASE = ("base_value", "base_upper", "upper", "same_bracket", "base_timed_solve_cpu",
+        "base_iteration", "base_sweeps")
+"""The columns ``--compare`` adds (``upper`` this checkout's, beside the base's;
+``same_bracket``: both ends equal to the bit)."""
 
 
 def child_stages(job: dict[str, Any]) -> dict[str, Any]:
@@ -115,9 +125,19 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
         for part in path:
             owner = getattr(owner, part)
         setattr(owner, name, _timed(getattr(owner, name), stage, spent))
+    iteration = importlib.import_module(STAGES["iteration"][0])
+    timed_iteration = iteration.interval_iterations
+    sweeps = [0]
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        results = timed_iteration(*args, **kwargs)
+        sweeps[0] += results[0].iterations if results else 0
+        return results
+
+    iteration.interval_iterations = counted
     r = synthesize(model)
     return dict(spent, value=r.lower, upper=r.upper, solve_cpu=r.solve_cpu,
-                numba_loaded="numba" in sys.modules)
+                sweeps=sweeps[0], numba_loaded="numba" in sys.modules)
 
 
 def _timed(func: Any, stage: str, spent: dict[str, float]) -> Any:
@@ -161,12 +181,17 @@ def child_numba(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def _run_child(kind: str, job: dict[str, Any], work: Path,
-               script: str = __file__) -> dict[str, Any]:
+               script: str = __file__, library: Path | None = None) -> dict[str, Any]:
     """``job`` run by ``script --child kind work`` (this one's, or another experiment's
-    that answers the same way: ``gate_blocks.py``), its answer read back."""
+    that answers the same way: ``gate_blocks.py``), its answer read back; ``library``:
+    another checkout whose ``mitld_lp`` the child imports (``--compare``)."""
     (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
+    env = None
+    if library is not None:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            [str(library.resolve()), *filter(None, [os.environ.get("PYTHONPATH")])]))
     proc = subprocess.run([sys.executable, script, "--child", kind, str(work)],
-                          capture_output=True, text=True, timeout=bq.BUDGET)
+                          capture_output=True, text=True, timeout=bq.BUDGET, env=env)
     if proc.returncode != 0:
         return {"error": proc.stderr.strip().splitlines()[-1:]}
     return json.loads((work / f"{kind}.json").read_text(encoding="utf-8"))
@@ -188,6 +213,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compiled-sweeps", action="store_true",
                     help="a row per instance with every block swept compiled (numba "
                          "loaded whatever the sizes): the gate's other side")
+    ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                    help="also the stages with another checkout's mitld_lp (base_* "
+                         "columns; warm its numba cache with one run first)")
     ap.add_argument("--child", nargs=2, default=None, help=argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
@@ -199,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.qvbs is None:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
+    columns = COLUMNS + (BASE if args.compare else ())
     rows = []
     with tempfile.TemporaryDirectory(prefix="profile_solve_") as tmp:
         work = Path(tmp)
@@ -211,10 +240,20 @@ def main(argv: list[str] | None = None) -> int:
             row = (bs.measure(inst, work / inst.name) if "bus" in job
                    else bq.measure(inst, job, work / inst.name, bq.BUDGET))
             stages = _run_child("stages", job, work / inst.name)
+            base = {}
+            if args.compare:  # right after this checkout's run: the same noise on both
+                base = _run_child("stages", job, work / inst.name, library=args.compare)
+                if "error" in base:
+                    print(f"{inst.name}: the base's stages failed: {base['error']}")
             first = len(rows)
             rows.append([inst.name, row.get("value"), row.get("solve_cpu"),
                          row.get("storm_check_cpu"), row.get("solve_over_storm_check"),
-                         stages.get("solve_cpu"), *(stages.get(k) for k in COLUMNS[6:])])
+                         stages.get("solve_cpu"), *(stages.get(k) for k in COLUMNS[6:]),
+                         *([base.get("value"), base.get("upper"), stages.get("upper"),
+                            "yes" if (base.get("value"), base.get("upper"))
+                            == (stages.get("value"), stages.get("upper")) else "no",
+                            base.get("solve_cpu"), base.get("iteration"),
+                            base.get("sweeps")] if args.compare else [])])
             for flag, label in (("numpy_sweeps", "NumPy sweeps"),
                                 ("compiled_sweeps", "compiled sweeps")):
                 if not getattr(args, flag):
@@ -222,16 +261,20 @@ def main(argv: list[str] | None = None) -> int:
                 alone = _run_child("stages", dict(job, **{flag: True}), work / inst.name)
                 rows.append([f"{inst.name} ({label})", alone.get("value"), None,
                              row.get("storm_check_cpu"), None, alone.get("solve_cpu"),
-                             *(alone.get(k) for k in COLUMNS[6:])])
-            print(_common.text_table(COLUMNS, rows[first:]), flush=True)
-    shown = [[f"{v:.3g}" if isinstance(v, float) else v for v in r] for r in rows]
+                             *(alone.get(k) for k in COLUMNS[6:]),
+                             *([None] * len(BASE) if args.compare else [])])
+            print(_common.text_table(columns, rows[first:]), flush=True)
+    exact = {columns.index(c) for c in ("value", "base_value", "base_upper", "upper")
+             if c in columns}  # the answers in full: each beside its time
+    shown = [[f"{v:.3g}" if isinstance(v, float) and i not in exact else v
+              for i, v in enumerate(r)] for r in rows]
     text = ("## The solve stage by stage, and numba's load (CPU seconds)\n\n"
-            + _common.markdown_table(COLUMNS, shown)
+            + _common.markdown_table(columns, shown)
             + "\n\nnumba in a fresh interpreter with NumPy and SciPy loaded: "
             + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
                         for k, v in numba_row.items()) + "\n")
     _common.write_text(out / "profile_solve.md", text)
-    _common.write_csv(out / "profile_solve.csv", COLUMNS, rows)
+    _common.write_csv(out / "profile_solve.csv", columns, rows)
     print(text)
     return 0
 
