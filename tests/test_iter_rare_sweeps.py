@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import Status, interval_iteration, kernels
 from mitld_lp.solvers.graph import Sense
+from mitld_lp.testing.exact import chain_values
 
 pytestmark = pytest.mark.skipif(kernels.compiled_kernel() is None,
                                 reason="numba is not installed")
@@ -160,35 +161,11 @@ def _exact(choices: list[list[dict[int, Fraction]]], n_states: int,
                     good.add(s)
                     grew = True
         maybe = sorted(good - {goal})
-        value = _solve(step, maybe, goal)
+        value = chain_values(step, maybe, goal)
         v = value.get(0, Fraction(0))
         best = v if best is None else (max(best, v) if maximise else min(best, v))
     assert best is not None
     return best
-
-
-def _solve(step: dict[int, dict[int, Fraction]], maybe: list[int],
-           goal: int) -> dict[int, Fraction]:
-    """``x = P x + b`` on ``maybe`` by Gauss--Jordan elimination in fractions."""
-    at = {s: i for i, s in enumerate(maybe)}
-    m = len(maybe)
-    a = [[Fraction(int(i == j)) for j in range(m)] + [Fraction(0)] for i in range(m)]
-    for s in maybe:
-        for t, p in step[s].items():
-            if t == goal:
-                a[at[s]][m] += p
-            elif t in at:
-                a[at[s]][at[t]] -= p
-    for col in range(m):
-        pivot = next(r for r in range(col, m) if a[r][col] != 0)
-        a[col], a[pivot] = a[pivot], a[col]
-        inv = 1 / a[col][col]
-        a[col] = [v * inv for v in a[col]]
-        for r in range(m):
-            if r != col and a[r][col] != 0:
-                f = a[r][col]
-                a[r] = [v - f * w for v, w in zip(a[r], a[col], strict=True)]
-    return {s: a[at[s]][m] for s in maybe}
 
 
 def _dyadic_choices(seed: int, n: int) -> list[list[dict[int, Fraction]]]:
