@@ -262,7 +262,7 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
     once a sweep and nothing after the sweep moves a bound while watching, so the
     largest of those is :func:`_over`'s, the same maximum of the same ratios): QVBS
     ``zeroconf`` 1000-4's block of 213,268 states, whose 39 sweeps all watch, 13.4 ->
-    10.1 ms a sweep, the bounds the same to the bit."""
+    10.0 ms a sweep, the bounds the same to the bit."""
     n, k = local.shape
     if k == 2:
         m0 = track[OFF + 8]  # OFF + 4 k + j, k = 2: this sweep's largest changes
@@ -341,9 +341,11 @@ def _pack(local, guess, work, back):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_sweeps,
                  tol, minimise, precision, floor, guess, track):  # pragma: no cover - compiled
-    """Sweeps through the states in ``order`` until every gap is below ``tol`` and,
-    when ``precision >= 0``, below ``precision`` times its lower bound (never below
-    ``floor``); returns the sweeps and the largest gap over its threshold.
+    """Sweeps through the states in ``order`` (each state once: a permutation, as
+    :func:`~mitld_lp.solvers.kernels.sweep_order` gives; a watched sweep reads the gaps
+    as it sets them only when ``order`` has one place a state) until every gap is below
+    ``tol`` and, when ``precision >= 0``, below ``precision`` times its lower bound
+    (never below ``floor``); returns the sweeps and the largest gap over its threshold.
 
     With ``track[0] >= 0`` the sweeps also guess and verify bounds (kernels.py's module
     docs), ``track`` keeping their state between calls (:data:`OFF`): while watching,
