@@ -253,3 +253,39 @@ def test_a_candidate_below_the_exact_optimum_is_refused() -> None:
     zero = x.copy()
     zero[0] = 0.0  # a 0 the graph does not give: its successors are positive
     assert C._fails(st, rnd, zero, free, True)[0]
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("loops", [0.0, 0.2])
+def test_a_repair_skips_no_round_a_level_needs(seed, loops, monkeypatch) -> None:
+    # a level none of whose rows reads the level stops after its first round: the same
+    # bounds as taking every level up again (``inward`` True everywhere, as before)
+    from mitld_lp.solvers import certify_repair as R
+    from mitld_lp.solvers.certify_chain import support_layers
+
+    mdp = random_mdp(400, seed=seed, locality=5, self_loop_fraction=loops, max_choices=3)
+    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
+    rnd = rounding(st.matrix)
+    comp, level = support_layers(mdp)
+    level_of = np.asarray(level)[np.asarray(comp)]
+    free = np.asarray(mdp.target, dtype=bool)
+    rng = np.random.default_rng(seed)
+    x0 = np.where(free, 1.0, rng.random(mdp.n_states) * 0.5)
+    failing = C._fails(st, rnd, x0, free, True)
+    assert failing.any()
+    runs = []
+    for always in (False, True):
+        if always:
+            init = R._Walk.__init__
+
+            def everywhere(self, *args, init=init):
+                init(self, *args)
+                self.inward = np.ones_like(self.inward)
+            monkeypatch.setattr(R._Walk, "__init__", everywhere)
+        x = x0.copy()
+        repair = R._Repair(st, rnd, free, level_of, None, True)
+        runs.append((repair.run(x, failing), x, repair.moved))
+    (ok_a, a, moved_a), (ok_b, b, moved_b) = runs
+    assert ok_a == ok_b and np.array_equal(a, b) and moved_a == moved_b > 0
+    if ok_a:
+        assert not C._fails(st, rnd, a, free, True).any()
