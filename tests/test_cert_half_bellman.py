@@ -12,6 +12,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from test_certify import exact_value  # rational: Gauss-Jordan on a policy's chain
 
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.solvers import certify as C
@@ -49,47 +50,11 @@ def _mdp(rows: list[list[dict[int, Fraction]]], target: set[int], sink: set[int]
     return mdp, exact
 
 
-def _value(exact: list[dict[int, Fraction]], groups: np.ndarray, target: np.ndarray,
-           policy: tuple[int, ...]) -> list[Fraction]:
-    """A deterministic policy's value in rational arithmetic: Gauss-Jordan on the
-    states that reach the target in its chain."""
-    n = len(policy)
-    row = [exact[policy[s]] for s in range(n)]
-    can = set(np.flatnonzero(target).tolist())
-    while True:
-        more = {s for s in range(n) if s not in can
-                and any(t in can and p > 0 for t, p in row[s].items())}
-        if not more:
-            break
-        can |= more
-    unknown = [s for s in range(n) if s in can and not target[s]]
-    at = {s: i for i, s in enumerate(unknown)}
-    k = len(unknown)
-    a = [[Fraction(int(i == j)) for j in range(k)] + [Fraction(0)] for i in range(k)]
-    for s in unknown:
-        for t, p in row[s].items():
-            if target[t]:
-                a[at[s]][k] += p
-            elif t in at:
-                a[at[s]][at[t]] -= p
-    for i in range(k):
-        piv = next(r for r in range(i, k) if a[r][i] != 0)
-        a[i], a[piv] = a[piv], a[i]
-        for r in range(k):
-            if r != i and a[r][i] != 0:
-                f = a[r][i] / a[i][i]
-                a[r] = [x - f * y for x, y in zip(a[r], a[i], strict=True)]
-    out = [Fraction(int(target[s])) for s in range(n)]
-    for s in unknown:
-        out[s] = a[at[s]][k] / a[at[s]][at[s]]
-    return out
-
-
 def _optima(mdp: MDP, exact: list[dict[int, Fraction]]
             ) -> tuple[list[Fraction], list[Fraction], dict]:
     groups = np.asarray(mdp.row_groups)
     target = np.asarray(mdp.target)
-    values = {pol: _value(exact, groups, target, pol) for pol in itertools.product(
+    values = {pol: exact_value(mdp, exact, target, pol) for pol in itertools.product(
         *[range(groups[s], groups[s + 1]) for s in range(mdp.n_states)])}
     n = mdp.n_states
     return ([max(v[s] for v in values.values()) for s in range(n)],
