@@ -254,3 +254,33 @@ def test_a_repair_skips_no_round_a_level_needs(seed, loops, monkeypatch) -> None
     assert ok_a == ok_b and np.array_equal(a, b) and moved_a == moved_b > 0
     if ok_a:
         assert not C._fails(st, rnd, a, free, True).any()
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("upper", [True, False])
+def test_a_robust_games_recheck_agrees_with_the_whole_check(seed, upper) -> None:
+    # nature's rows: a state's rows paired into choices (nature picks one of a pair)
+    mdp = random_mdp(150, seed=seed, max_choices=4, max_successors=3, locality=5)
+    groups = np.asarray(mdp.row_groups, dtype=np.int64)
+    nature, per_state = [0], []
+    for s in range(mdp.n_states):
+        k = int(groups[s + 1] - groups[s])
+        starts = list(range(int(groups[s]), int(groups[s + 1]), 2))
+        nature += [min(a + 2, int(groups[s]) + k) for a in starts]
+        per_state.append(len(starts))
+    st = C.Rows(sp.csr_array(mdp.matrix),
+                np.concatenate([[0], np.cumsum(per_state)]).astype(np.int64),
+                np.array(nature, dtype=np.int64))
+    rnd = rounding(st.matrix)
+    rng = np.random.default_rng(seed)
+    free = np.asarray(mdp.target, dtype=bool)
+    x = _candidate(rng, mdp.n_states)
+    whole = C._fails(st, rnd, x, free, upper)
+    assert whole.any() and not whole.all()
+    assert np.array_equal(C._fails_among(st, rnd, x, free, upper,
+                                         np.diff(st.groups) > 0), whole)
+    y = x.copy()
+    y[rng.choice(mdp.n_states, 5, replace=False)] = rng.random(5)
+    again = C._touched(st, y != x, None) | whole
+    assert np.array_equal(C._fails_among(st, rnd, y, free, upper, again),
+                          C._fails(st, rnd, y, free, upper))

@@ -387,9 +387,12 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             # passed just now on the same values (:func:`_fails_among`)
             again = _touched(st, x != before, repair.readers_of) | failing
             del before
+            # (a state without a choice, or a choice without nature's rows, is left to
+            # the whole check: its verdict there reads the next row's)
             failing = (_fails_among(st, rnd, x, free, upper, again)
-                       if bool(np.all(np.diff(st.groups)[again] > 0)) else
-                       _fails(st, rnd, x, free, upper))
+                       if bool(np.all(np.diff(st.groups)[again] > 0)) and (
+                           st.nature is None or bool(np.all(np.diff(st.nature) > 0)))
+                       else _fails(st, rnd, x, free, upper))
             if failing.any():
                 tried.append(f"{label}: {int(failing.sum())} states after the repair")
                 continue
