@@ -11,7 +11,8 @@ the same bits before and after, or not).  Storm's check of the same product is i
 * the stages: ``analyse``, ``interval_iterations``, ``solve_lp``, ``certify``;
 * inside the certificate: the policy's chain (``chain``), its edges reversed
   (``Reversed.__init__``) and its two searches (``Reversed.reaching``), its values and
-  slack (``_solve``), the Bellman checks (``_fails``) and the repair (``_Repair.run``);
+  slack (``_solve``), the Bellman checks (``_fails``), the repair (``_Repair.run``) and
+  the recheck after it (``_touched``, ``_fails_among``: cert-half's, empty before);
 * ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
   certificate's).
 
@@ -21,9 +22,13 @@ the same bits before and after, or not).  Storm's check of the same product is i
         --only zeroconf.1000-4-false.correct_max --compare /tmp/base --rounds 2
     python experiments/cert_stages.py --only --bus bus_scaled_n128_d3 --compare /tmp/base
 
-``--bus`` adds instances of ``bench_sweeps.py`` (posed as it poses them).
+``--bus`` adds instances of ``bench_sweeps.py`` (posed as it poses them).  ``--storm``
+runs ``bench_qvbs.measure`` once per QVBS instance first, for Storm's best sound check
+of the same product in the same run (``storm_check_cpu``, its value beside).
 
-Written: ``cert_stages.csv``, ``cert_stages.md``.
+Written: ``cert_stages.csv``, ``cert_stages.md``, and ``cert_stages_summary.md`` (per
+instance: the bracket, whether its bits are the same in every run, the least
+certificate and solve of each checkout, Storm's best check).
 """
 
 from __future__ import annotations
@@ -55,6 +60,8 @@ TIMED = (("mitld_lp.solvers.analysis", "analyse"),
          ("mitld_lp.solvers.certify_chain", "Reversed.reaching"),
          ("mitld_lp.solvers.certify_chain", "_solve"),
          ("mitld_lp.solvers.certify", "_fails"),
+         ("mitld_lp.solvers.certify", "_fails_among"),
+         ("mitld_lp.solvers.certify", "_touched"),
          ("mitld_lp.solvers.certify_repair", "_Repair.run"),
          ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"))
 COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu",
@@ -82,7 +89,8 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         *path, last = name.split(".")
         for part in path:
             owner = getattr(owner, part)
-        setattr(owner, last, _timed(getattr(owner, last), name, spent))
+        if hasattr(owner, last):  # (a checkout before it was written: no column)
+            setattr(owner, last, _timed(getattr(owner, last), name, spent))
     c = time.process_time()
     r = synthesize(model)
     return dict(spent, solve_cpu=time.process_time() - c, lower=r.lower.hex(),
@@ -107,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="also these instances of bench_sweeps.py (e.g. bus_scaled_n128_d3)")
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--storm", action="store_true",
+                    help="Storm's best sound check of each QVBS instance beside (one "
+                         "bench_qvbs.measure run each, first)")
     ap.add_argument("--child", default=None, help=argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
@@ -124,8 +135,16 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="cert_stages_") as tmp:
         found = (bq.jobs(args.qvbs, 0, bq.MAX_STATES, bq.FAMILIES, Path(tmp))[0]
                  if args.qvbs is not None and args.only else [])
+        storm: dict[str, dict[str, Any]] = {}
         for inst, job in ([f for f in found if f[0].name in set(args.only)]
                           + bus_jobs(args.bus)):
+            if args.storm and "bus" not in job:
+                (Path(tmp) / inst.name).mkdir()
+                storm[inst.name] = bq.measure(inst, job, Path(tmp) / inst.name, bq.BUDGET)
+                got = storm[inst.name]
+                print(inst.name, "Storm's best check", got.get("storm_check_cpu"),
+                      got.get("storm_best"), "agrees:", got.get("storm_agrees"),
+                      "QVBS reference:", got.get("reference"), flush=True)
             for k in range(args.rounds):
                 for label, package in checkouts:
                     got = _run(job, Path(tmp), package)
@@ -133,7 +152,37 @@ def main(argv: list[str] | None = None) -> int:
                                  *(_short(got.get(c)) for c in COLUMNS[5:])])
                     print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
     _common.write_tables(out, "cert_stages", COLUMNS, rows)
+    _common.write_text(out / "cert_stages_summary.md", _summary(rows, storm))
+    print(f"wrote {out / 'cert_stages_summary.md'}")
     return 0
+
+
+def _summary(rows: list[list[Any]], storm: dict[str, dict[str, Any]]) -> str:
+    """Per instance: the bracket (lower, upper), whether its bits are the same in
+    every run of both checkouts, the least certificate and solve of each checkout
+    (CPU seconds), and Storm's best check (with ``--storm``)."""
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    out = []
+    for name in dict.fromkeys(r[0] for r in rows):
+        mine = [r for r in rows if r[0] == name]
+        brackets = {(r[col["lower"]], r[col["upper"]]) for r in mine}
+        lower, upper = next(iter(brackets))
+
+        def least(label: str, key: str, mine: list = mine) -> str:
+            got = [r[col[key]] for r in mine if r[1] == label and r[col[key]] is not None]
+            return f"{min(got):.3f}" if got else "-"
+
+        s = storm.get(name, {})
+        out.append([name, float.fromhex(lower) if lower else None,
+                    float.fromhex(upper) if upper else None, len(brackets) == 1,
+                    f"{least('before', 'certify')} -> {least('after', 'certify')}",
+                    f"{least('before', 'solve_cpu')} -> {least('after', 'solve_cpu')}",
+                    s.get("reference", "-"), s.get("storm_agrees", "-"),
+                    s.get("storm_check_cpu", "-")])
+    return _common.markdown_table(("instance", "lower", "upper", "same bits",
+                                   "certificate before -> after",
+                                   "solve before -> after", "QVBS reference",
+                                   "Storm agrees", "Storm's best check"), out)
 
 
 def _short(v: Any) -> Any:

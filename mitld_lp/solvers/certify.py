@@ -67,10 +67,11 @@ from mitld_lp.solvers.rounding import (
     float_up,
     model_eta,
     one_minus,
+    range_extreme,
     rounding,
     support_extreme,
 )
-from mitld_lp.solvers.rows import rows_dot
+from mitld_lp.solvers.rows import gather_ranges, rows_dot
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
@@ -91,6 +92,12 @@ GROWTH = 16.0
 
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
+
+SPARSE_SUSPECTS = 8
+"""A batch of the Bellman checks reads the support's extreme from its whole slice of
+the matrix (:func:`~mitld_lp.solvers.rounding.range_extreme`) when at least one row in
+this many fails the arithmetic, else from the failing rows' entries
+(:func:`~mitld_lp.solvers.rounding.support_extreme`): the same extremes either way."""
 
 EVERYWHERE = "policy optimal in every state"
 """The name of :func:`everywhere`'s check."""
@@ -179,6 +186,7 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     row_state = st.row_state()
     ok = np.empty(m.shape[0], dtype=bool)
     direct = _direct(m, x)
+    rule = _rule_values(m, x, upper, direct)
     # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not gathered
     # copies): the float arrays of every row at once were the certificate's peak on
     # QVBS wlan_dl; each row's sum is the same (scipy sums a row in its entries' order)
@@ -190,18 +198,122 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                            sums)
         else:
             sums = m[a:z] @ x
-        bound = above(rnd, slice(a, z), sums) if upper else below(rnd, slice(a, z), sums)
-        own = x[row_state[a:z]]
-        ok[a:z] = (bound <= own) if upper else (bound >= own)
+        ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state[a:z]], upper, rule)
     ok |= free[row_state]
-    suspect = np.flatnonzero(~ok)
-    if suspect.size:
-        ext = support_extreme(m, suspect, x, largest=upper)
-        own = x[row_state[suspect]]
-        ok[suspect] = (ext <= own) if upper else (ext >= own)
     if st.nature is not None:
         ok = np.logical_or.reduceat(ok, st.nature[:-1])
     return ~np.logical_and.reduceat(ok, st.groups[:-1])
+
+
+def _rows_pass(m: sp.csr_array, rnd: Rounding, x: np.ndarray, rows: np.ndarray | slice,
+               sums: np.ndarray, own: np.ndarray, upper: bool,
+               rule: tuple[float | None, float | None, np.ndarray | None]) -> np.ndarray:
+    """Per row of ``rows`` (a slice of the matrix's rows, or their indices), with its
+    float sum ``sums`` and its state's value ``own``: whether it passes the check of
+    :func:`_fails`, by the rounded sum or by the convex rule (the extreme of ``x`` over
+    the row's support against ``own``).  Most rows the arithmetic does not pass (QVBS
+    products: those of the states at 1 and at 0) are settled by ``x``'s own extremes
+    (``rule``, :func:`_rule_values`); the rest read their supports."""
+    bound = above(rnd, rows, sums) if upper else below(rnd, rows, sums)
+    good = (bound <= own) if upper else (bound >= own)
+    miss = np.flatnonzero(~good)
+    top, bottom, past = rule
+    sliced = isinstance(rows, slice)
+    at = (lambda k: k + rows.start) if sliced else (lambda k: rows[k])  # noqa: E731
+    if miss.size and top is not None:
+        at_top = own[miss] == top  # the support's extreme is within ``x``'s range
+        good[miss[at_top]] = True
+        miss = miss[~at_top]
+        at_bottom = own[miss] == bottom
+        if past is not None and at_bottom.any():
+            # no successor past ``bottom``: no mass on ``past`` (every entry > 0)
+            low = miss[at_bottom]
+            if sliced:
+                mass = np.zeros(own.size)
+                _st.csr_matvec(own.size, x.shape[0], m.indptr[rows.start:rows.stop + 1],
+                               m.indices, m.data, past, mass)
+                good[low] = mass[low] == 0.0
+            else:
+                good[low] = rows_dot(m, at(low), past) == 0.0
+            miss = miss[~at_bottom]
+    if sliced and miss.size * SPARSE_SUSPECTS >= own.size:
+        ext = range_extreme(m, rows.start, rows.stop, x, largest=upper)[miss]
+    elif miss.size:
+        ext = support_extreme(m, at(miss), x, largest=upper)
+    else:
+        return good
+    good[miss] = (ext <= own[miss]) if upper else (ext >= own[miss])
+    return good
+
+
+def _fails_among(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray, upper: bool,
+                 states: np.ndarray) -> np.ndarray:
+    """:func:`_fails` on the ``states`` (a mask; each with a choice) alone, every other
+    state reported passing: for a candidate whose other states passed :func:`_fails`
+    with every value their rows read the same, so that their rows' checks are the same
+    computations, with the same outcome (:func:`_touched`)."""
+    m = st.matrix
+    among = np.flatnonzero(states)
+    rows, choice_starts, state_starts = st.rows_of(among)
+    per_row = np.diff(np.append(state_starts if choice_starts is None else
+                                choice_starts[state_starts], rows.size))
+    own_state = np.repeat(among, per_row)
+    good = _rows_pass(m, rnd, x, rows, rows_dot(m, rows, x), x[own_state], upper,
+                      _rule_values(m, x, upper, _direct(m, x)))
+    good |= free[own_state]
+    if choice_starts is not None:
+        good = np.logical_or.reduceat(good, choice_starts)
+    failing = np.zeros(st.n_states, dtype=bool)
+    failing[among] = ~np.logical_and.reduceat(good, state_starts)
+    return failing
+
+
+def _touched(st: Rows, changed: np.ndarray,
+             readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """The states whose check can differ once the ``changed`` states' values moved:
+    those, and those with a row holding one of them (the other rows read the same
+    values, so their sums and their states' values are the same).  ``readers_of``: the
+    matrix's pattern by column and each row's state, where the repair made them (then
+    only the changed states' columns are read)."""
+    out = changed.copy()
+    if readers_of is not None:
+        col_ptr, col_rows, row_state = readers_of
+        moved = np.flatnonzero(changed)
+        out[row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]] = True
+        return out
+    m = st.matrix
+    hit = changed[m.indices]
+    filled = np.diff(m.indptr) > 0
+    reads = np.zeros(m.shape[0], dtype=bool)
+    if hit.size:
+        reads[filled] = np.logical_or.reduceat(hit, m.indptr[:-1][filled])
+    out[st.row_state()[reads]] = True
+    return out
+
+
+def _rule_values(m: sp.csr_array, x: np.ndarray, upper: bool, direct: bool
+                 ) -> tuple[float | None, float | None, np.ndarray | None]:
+    """What settles the convex rule of :func:`_fails` without reading a row's support,
+    from ``x``'s extremes ``lo`` and ``hi`` (finite: else ``(None, None, None)``, every
+    support read): ``top``, the own value at which the rule holds for every row (an
+    upper check's ``hi``: the largest ``x`` over a support is at most ``hi``; a lower
+    check's ``lo``); ``bottom``, the own value at which it holds exactly when no
+    successor is past it (an upper check's ``lo``: no successor above ``lo``); and
+    ``past``, 1.0 on the states past ``bottom`` and 0.0 elsewhere, so that a row's
+    product with it is 0 exactly when none of its successors is past (every stored
+    entry positive: a sum of positive terms is positive in floating point; ``None``
+    where an entry is not, or without SciPy's product, and those rows read their
+    supports)."""
+    if x.size == 0:
+        return None, None, None
+    lo, hi = float(np.min(x)), float(np.max(x))
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return None, None, None
+    top, bottom = (hi, lo) if upper else (lo, hi)
+    past = None
+    if direct and (m.nnz == 0 or float(np.min(m.data)) > 0.0):
+        past = ((x > bottom) if upper else (x < bottom)).astype(np.float64)
+    return top, bottom, past
 
 
 def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bool,
@@ -265,12 +377,22 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             repair = last = _Repair(st, rnd, free, level_of, mecs, upper,
                                     members=None if last is None else last.members,
                                     readers_of=None if last is None else last.readers_of)
+            before = x.copy()
             closed = repair.run(x, failing)
             moved = repair.moved
             if not closed:
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
                 continue
-            failing = _fails(st, rnd, x, free, upper)
+            # checked again where a value it reads moved, and where it failed: the rest
+            # passed just now on the same values (:func:`_fails_among`)
+            again = _touched(st, x != before, repair.readers_of) | failing
+            del before
+            # (a state without a choice, or a choice without nature's rows, is left to
+            # the whole check: its verdict there reads the next row's)
+            failing = (_fails_among(st, rnd, x, free, upper, again)
+                       if bool(np.all(np.diff(st.groups)[again] > 0)) and (
+                           st.nature is None or bool(np.all(np.diff(st.nature) > 0)))
+                       else _fails(st, rnd, x, free, upper))
             if failing.any():
                 tried.append(f"{label}: {int(failing.sum())} states after the repair")
                 continue

@@ -114,7 +114,7 @@ class _Walk:
 
     __slots__ = ("states", "level_at", "rows", "choice_starts", "state_starts", "local",
                  "cols", "vals", "entry_state", "row_at", "entry_at", "choice_at",
-                 "row_entry", "filled")
+                 "row_entry", "filled", "inward")
 
     def __init__(self, st: Rows, states: np.ndarray, levels: np.ndarray) -> None:
         self.states = states
@@ -143,6 +143,16 @@ class _Walk:
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         self.row_entry = row_entry.astype(self.cols.dtype) if fits else None
         self.filled = bool(np.all(np.diff(self.entry_at) > 0))  # every state an entry
+        # per state: whether a row of its level holds a state of that level (a cycle,
+        # or a self-loop).  A level without one has nothing to take up again after a
+        # round: the states it moved are read only from the levels above (QVBS
+        # ``zeroconf_dl`` 1000-1-30: none of its 920 walked levels has one)
+        level = np.repeat(np.arange(self.level_at.size - 1), np.diff(self.level_at))
+        where = np.full(st.n_states, -1, dtype=np.int64)
+        where[states] = level
+        same = where[self.cols] == level[self.entry_state]
+        self.inward = (np.bincount(level[self.entry_state[same]],
+                                   minlength=self.level_at.size - 1) > 0)[level]
 
     def needed(self, rnd: Rounding, x: np.ndarray, a: int, z: int,
                upper: bool) -> np.ndarray:
@@ -268,7 +278,7 @@ class _Repair:
             a, z = walk_at[k], walk_at[k + 1]
             todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
                                     self.readers(np.flatnonzero(moved), mine, fresh))
-            for _ in range(ROUNDS):
+            for r in range(ROUNDS):
                 if not todo.any():
                     break
                 if is_small:  # the level's slices, the states not to do masked
@@ -289,6 +299,8 @@ class _Repair:
                 moved[now] = True
                 # within the level (its cycles): the states reading those just moved
                 if is_small:
+                    if not walk.inward[a] and r + 1 < ROUNDS:
+                        break  # no row of the level reads it: none to take up again
                     fresh[now] = True
                     todo = walk.reading(fresh, a, z)
                     fresh[now] = False

@@ -30,7 +30,8 @@ if TYPE_CHECKING:
     from mitld_lp.automata.sta import STA
 
 __all__ = ["UNIT", "ETA", "ETA_LIMIT", "TINY", "HAZARD_ACCURACY", "Rounding", "rounding", "below",
-           "above", "support_extreme", "model_eta", "float_down", "float_up", "one_minus"]
+           "above", "support_extreme", "range_extreme", "model_eta", "float_down", "float_up",
+           "one_minus"]
 
 UNIT = 2.0**-53
 """The unit roundoff of IEEE double precision (round to nearest)."""
@@ -147,6 +148,31 @@ def support_extreme(matrix: sp.csr_array, rows: np.ndarray, x: np.ndarray,
     for a in range(0, rows.size, BATCH):
         local, cols, _ = row_entries(matrix, rows[a:a + BATCH])
         pick.at(out[a:a + BATCH], local, x[cols])
+    return out
+
+
+def range_extreme(matrix: sp.csr_array, a: int, z: int, x: np.ndarray,
+                  largest: bool) -> np.ndarray:
+    """:func:`support_extreme` of the consecutive rows ``a:z`` (-inf / inf on an empty
+    row, as there): their entries are one slice of the matrix's arrays, so ``x`` is
+    read at the slice's columns and reduced row by row where each row starts (one
+    gather and one ``reduceat``), with no index array of the rows, no gathered copy of
+    their entries and no ``ufunc.at``.  A maximum or minimum is exact, in any order:
+    the same values.  For a batch where most rows are asked (QVBS ``zeroconf_dl``
+    1000-1-30: 161,464 of 195,261 rows in the Bellman check of the upper bound, those of
+    the states at 1 and at 0)."""
+    ptr = matrix.indptr
+    ea, ez = int(ptr[a]), int(ptr[z])
+    out = np.full(z - a, -np.inf if largest else np.inf)
+    if ez == ea:
+        return out
+    starts = ptr[a:z] - ea
+    filled = ptr[a + 1:z + 1] > ptr[a:z]
+    reached = x[matrix.indices[ea:ez]]
+    pick = np.maximum if largest else np.minimum
+    if filled.all():
+        return pick.reduceat(reached, starts)
+    out[filled] = pick.reduceat(reached, starts[filled])
     return out
 
 
