@@ -141,6 +141,12 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
                 first_compiled=first, compiled=compiled)
 
 
+def _answer(work: Path) -> int:
+    job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+    (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, default=None,
@@ -151,11 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reps", type=int, default=5, help="timed analyses an instance")
     ap.add_argument("--child", default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
-    if args.child:
-        work = Path(args.child)
-        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
-        return 0
+    if args.child:  # one instance, in this process: its job and answer in that folder
+        return _answer(Path(args.child))
     if args.qvbs is None:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
