@@ -6,8 +6,13 @@ Here each round runs a process of the ``--compare`` checkout and then one of thi
 checkout, each posing the instance as ``bench_qvbs.py`` poses it, loading the model once
 and calling ``synthesize`` ``--reps`` times.  The script prints each checkout's solve
 stage (CPU seconds, ``SynthesisResult.solve_cpu``): the minimum and the median over
-every call of every round.  It prints the bracket beside them, as the hex of both
-floats, and whether the two checkouts gave the same bracket to the bit.
+every call of every round, and the median of its graph analysis (the calls of
+``mitld_lp.solvers.analysis.analyse`` inside it, timed by this script in both
+checkouts).  It prints the bracket beside them, as the hex of both floats, and whether
+the two checkouts gave the same bracket to the bit.  Unless ``--no-storm``, Storm's best
+sound check of the same product (``bench_qvbs.py``'s route: our DRN export read by
+stormpy, each of its sound methods, the cheapest kept) is measured once an instance,
+its value beside.
 
 ::
 
@@ -38,23 +43,51 @@ import profile_solve as ps  # noqa: E402  (the same instances, posed the same wa
 
 ROOT = HERE.parent
 COLUMNS = ("instance", "value", "calls", "before_min", "before_median", "after_min",
-           "after_median", "after_over_before_median", "same_bracket", "certified")
+           "after_median", "after_over_before_median", "analysis_before_median",
+           "analysis_after_median", "storm_check_cpu", "storm_value", "same_bracket",
+           "certified")
 
 
 def child(job: dict[str, Any], reps: int) -> dict[str, Any]:
     """``reps`` solves of the posed instance in this process (the package on the path)."""
+    import time
+
     import bench_sweeps as bs
 
     from mitld_lp import load_model, synthesize
+    from mitld_lp.solvers import analysis
 
     model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
+    inner = analysis.analyse
+    timed: list[float] = []
+
+    def analyse(*args: Any, **kwargs: Any) -> Any:  # the route imports it at each call
+        c = time.process_time()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            timed[-1] += time.process_time() - c
+
+    analysis.analyse = analyse
     spent = []
     for _ in range(reps):
+        timed.append(0.0)
         r = synthesize(model)
         spent.append(r.solve_cpu)
-    return dict(solve=spent, lower=r.lower, bracket=[r.lower.hex(), r.upper.hex()],
-                certified=bool(r.certified))
+    return dict(solve=spent, analysis=timed, lower=r.lower,
+                bracket=[r.lower.hex(), r.upper.hex()], certified=bool(r.certified))
+
+
+def storm_check(job: dict[str, Any], work: Path) -> dict[str, Any]:
+    """Storm's best sound check of the posed product, as ``bench_qvbs.py`` measures it
+    (its worker writes our DRN export, then stormpy checks it), or ``{}`` on an error."""
+    ours = bq._child("ours", job, work, bq.BUDGET)
+    storm = {} if "error" in ours else bq._child("storm_check", job, work, bq.BUDGET)
+    (work / "model.drn").unlink(missing_ok=True)
+    if not storm or "error" in storm:
+        return {}
+    return dict(cpu=storm["best_cpu"], value=storm["methods"][storm["best"]]["value"])
 
 
 def _run(root: Path, job: dict[str, Any], reps: int, work: Path) -> dict[str, Any]:
@@ -81,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=3, help="solves a process")
+    ap.add_argument("--no-storm", action="store_true",
+                    help="without Storm's best check (two processes an instance fewer)")
     ap.add_argument("--child", default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
@@ -98,16 +133,23 @@ def main(argv: list[str] | None = None) -> int:
         for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
                                         set(args.only or ps.INSTANCES), work):
             spent: dict[str, list[float]] = {"before": [], "after": []}
+            stage: dict[str, list[float]] = {"before": [], "after": []}
             seen: dict[str, Any] = {}
             for _ in range(rounds):
                 for side, root in (("before", args.compare), ("after", ROOT)):
                     got = _run(Path(root).resolve(), job, reps, work)
                     spent[side] += got["solve"]
+                    stage[side] += got.get("analysis", [])
                     seen[side] = got
             b, a = _median(spent["before"]), _median(spent["after"])
+            storm = {} if args.no_storm else storm_check(job, work)
             rows.append([inst.name, f"{seen['after']['lower']:.4g}", len(spent["after"]),
                          round(min(spent["before"]), 4), round(b, 4),
                          round(min(spent["after"]), 4), round(a, 4), round(a / b, 3),
+                         *(round(_median(stage[k]), 4) if stage[k] else None
+                           for k in ("before", "after")),
+                         round(storm["cpu"], 4) if storm else None,
+                         f"{storm['value']:.4g}" if storm else None,
                          seen["before"]["bracket"] == seen["after"]["bracket"],
                          seen["before"]["certified"] and seen["after"]["certified"]])
             print(_common.text_table(COLUMNS, rows[-1:]), "bracket (hex):",

@@ -152,6 +152,14 @@ def _none_among(walks: Any, m: sp.csr_array, groups: np.ndarray, maybe: np.ndarr
     return bool(np.all(left[maybe]))
 
 
+def _choices_of(row_groups: np.ndarray, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The choices of ``states`` (ascending ids) in ascending order, and each one's
+    state: read from their ranges of ``row_groups``, as ``np.flatnonzero(mask[
+    choice_state])`` would give them with no array a choice of the whole product."""
+    lo, hi = row_groups[states], row_groups[states + 1]
+    return gather_ranges(lo, hi), np.repeat(states, hi - lo)
+
+
 def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
            level_of: np.ndarray) -> Blocks:
     """The quotient's components (``comp_of``, per reduced state, ids of the product's
@@ -272,40 +280,49 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
     n_red = n_plain + mecs.n_mecs
 
-    cstate = mdp.choice_state()
-    kept = np.flatnonzero(maybe[cstate] & ~mecs.internal)
+    # the maybe states' choices read from their ranges (no array a choice of the whole
+    # product: most products keep a third to two thirds of their choices), ascending
+    kept, owner = _choices_of(np.asarray(mdp.row_groups), np.flatnonzero(maybe))
+    inside = mecs.internal[kept]
+    if inside.any():
+        kept, owner = kept[~inside], owner[~inside]
+    del inside
     if mecs.n_mecs:
-        kept = kept[np.argsort(state_map[cstate[kept]], kind="stable")]
+        by_state = np.argsort(state_map[owner], kind="stable")
+        kept, owner = kept[by_state], owner[by_state]
+        del by_state
     kept = kept.astype(index_dtype(mdp.n_choices), copy=False)
-    counts = np.bincount(state_map[cstate[kept]], minlength=n_red)
-    del cstate
+    counts = np.bincount(state_map[owner], minlength=n_red)
+    del owner
     row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     index = np.int32 if n_red < 2**31 and m.nnz < 2**31 else np.int64
-    # Each entry's column as a reduced state (a removed one as the extra column n_red),
-    # then the kept rows of that: one copy of the kept entries, in the index type.
+    # The kept rows of the product, copied once (their entries in stored order), then
+    # each entry's column as a reduced state (a removed one as the extra column n_red,
+    # made 0 below), in the index type.
+    rows = sp.csr_array(m[kept])
     column = np.where(state_map >= 0, state_map, n_red).astype(index)
-    mapped = sp.csr_array((m.data, column[m.indices], m.indptr.astype(index, copy=False)),
-                          shape=(m.shape[0], n_red + 1))
+    cols = column[rows.indices]
     del column
-    rows = sp.csr_array(mapped[kept]) if kept.size != mdp.n_choices else mapped.copy()
-    del mapped
-    # One pass over the product for both targets' one-step probabilities and each
-    # model's removed states of value 0 (a choice that may move there can lose).
-    # Two columns a product (each column's sums as in one product of all four: the
-    # sparse kernel adds each column on its own), not four: the four floats a choice
-    # and a state were the analysis's peak on QVBS wlan_dl.
+    # One pass over the kept rows for both targets' one-step probabilities and each
+    # model's removed states of value 0 (a choice that may move there can lose): each
+    # row's sum in its stored order, as over the whole product.  Two columns a product
+    # (each column's sums as in one product of all four: the sparse kernel adds each
+    # column on its own), not four: the four floats a choice and a state were the
+    # analysis's peak on QVBS wlan_dl.
     removed = state_map < 0
-    one_step = m @ np.column_stack([goal] if same else [goal, extra]).astype(np.float64)
-    to_goal = np.ascontiguousarray(one_step[kept, 0])
-    to_extra = None if same else np.ascontiguousarray(one_step[kept, 1])
+    one_step = rows @ np.column_stack([goal] if same else [goal, extra]).astype(np.float64)
+    to_goal = np.ascontiguousarray(one_step[:, 0])
+    to_extra = None if same else np.ascontiguousarray(one_step[:, 1])
     del one_step
-    one_step = m @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
-                                   ).astype(np.float64)
-    leaks = [one_step[kept, j] > 0 for j in range(one_step.shape[1])]
+    one_step = rows @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
+                                      ).astype(np.float64)
+    leaks = [one_step[:, j] > 0 for j in range(one_step.shape[1])]
     if same:  # the one model's, as both
         leaks = [leaks[0], leaks[0]]
     del one_step, removed
-    data, cols = rows.data, rows.indices
+    data = rows.data  # written below: never the product's own
+    if np.may_share_memory(data, m.data):  # pragma: no cover - SciPy's gather copies
+        data = data.copy()
     gone = cols == n_red
     data[gone] = 0.0
     cols[gone] = 0

@@ -1,0 +1,193 @@
+"""Where the solve stage's graph analysis goes, part by part, on QVBS instances; and what
+it would cost compiled, beside numba's load.
+
+Per instance (posed as ``bench_qvbs.py`` poses it), in a child process: the model
+loaded, one ``synthesize`` whose call of ``analysis.analyse`` is kept (its product,
+target and sense), then that call repeated ``--reps`` times (after one call not timed)
+with the entry point of each part timed (CPU seconds, medians):
+
+* ``analyse``: the whole analysis; ``levels``: the components, levels and reach
+  (``graph.state_levels``), of which ``components`` (SciPy's Tarjan, ``graph.
+  strong_components``) and ``searched`` (``graph.searched_levels``: Dijkstra where the
+  levels are thin) and ``reach`` (``graph.reaching``: a breadth-first search a target);
+* ``end_components`` (maxima), ``attractor`` (the minima's ``Prob0E``, and the
+  maxima's value-1 states inside ``one``), ``one`` (the quotients' value-1 states),
+  ``order`` (the quotient's blocks); ``rest``: the quotient's arrays, the analysis less
+  the parts above;
+* then, in the same child, numba imported and the compiled walks loaded
+  (``numba_import``, ``walks_load``), the first analysis on the compiled walks
+  (``first_compiled``: each kernel's load from the disk cache inside) and the median of
+  the next (``compiled``).  Where the instance's sweeps load numba anyway, the analysis
+  above already ran compiled and ``numba_import`` is 0.
+
+The answer (the solve's lower bound) is printed beside.  ::
+
+    python experiments/analysis_parts.py --qvbs qcomp/benchmarks --min-states 0 \\
+        --only zeroconf_dl.1000-1-false-30.deadline_max csma.4-2.some_before
+
+Written: ``analysis_parts.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import _common  # noqa: E402
+import bench_qvbs as bq  # noqa: E402
+import profile_solve as ps  # noqa: E402  (the same instances, posed the same way)
+
+PARTS = {"levels": ("analysis", "state_levels"),
+         "components": ("graph", "strong_components"),
+         "searched": ("graph", "searched_levels"),
+         "reach": ("graph", "reaching"),
+         "end_components": ("analysis", "end_components"),
+         "attractor": ("analysis", "attractor"),
+         "one": ("analysis", "_one"),
+         "order": ("analysis", "_order")}
+"""Each part: the module (of ``mitld_lp.solvers``) whose name the analysis calls it by."""
+OUTER = ("levels", "end_components", "attractor", "order")
+"""The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
+``rest`` is ``analyse`` less these and ``one``'s own time)."""
+COLUMNS = ("instance", "value", "numba_before", "analyse", *PARTS, "rest", "numba_import",
+           "walks_load", "first_compiled", "compiled")
+
+
+def _median(xs: list[float]) -> float:
+    s = sorted(xs)
+    return s[len(s) // 2] if len(s) % 2 else 0.5 * (s[len(s) // 2 - 1] + s[len(s) // 2])
+
+
+def child(job: dict[str, Any]) -> dict[str, Any]:
+    """One instance's parts (module docs), in this process."""
+    import importlib
+
+    import bench_sweeps as bs
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.solvers import analysis
+
+    model = load_model(job["model"], max_states=job["max_states"])
+    bs.preload()
+    inner = analysis.analyse
+    kept: dict[str, Any] = {}
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        kept.update(args=args, kwargs=kwargs)
+        return inner(*args, **kwargs)
+
+    analysis.analyse = spy
+    try:
+        result = synthesize(model)
+    finally:
+        analysis.analyse = inner
+    spent: dict[str, float] = {}
+
+    def timed(name: str, f: Any) -> Any:
+        def call(*args: Any, **kwargs: Any) -> Any:
+            c = time.process_time()
+            try:
+                return f(*args, **kwargs)
+            finally:
+                spent[name] = spent.get(name, 0.0) + time.process_time() - c
+        return call
+
+    originals = []
+    for name, (module, attr) in PARTS.items():
+        mod = importlib.import_module(f"mitld_lp.solvers.{module}")
+        originals.append((mod, attr, getattr(mod, attr)))
+        setattr(mod, attr, timed(name, getattr(mod, attr)))
+    numba_before = "numba" in sys.modules
+
+    def run() -> float:
+        c = time.process_time()
+        inner(*kept["args"], **kept["kwargs"])
+        return time.process_time() - c
+
+    rows: list[dict[str, float]] = []
+    try:
+        run()
+        for _ in range(job["reps"]):
+            spent.clear()
+            whole = run()
+            inside = sum(spent.get(k, 0.0) for k in OUTER) + spent.get("one", 0.0) - (
+                spent.get("attractor", 0.0) if str(kept["kwargs"].get("sense")) == "max"
+                else 0.0)
+            rows.append(dict(spent, analyse=whole, rest=whole - inside))
+    finally:
+        for mod, attr, f in originals:
+            setattr(mod, attr, f)
+    out = {k: _median([r.get(k, 0.0) for r in rows]) for k in (*PARTS, "analyse", "rest")}
+    c = time.process_time()
+    from mitld_lp.solvers import numba_narrow, walks
+
+    numba_narrow.import_numba()
+    loaded = time.process_time()
+    walks.load_walks()
+    walks_loaded = time.process_time()
+    first = run()
+    compiled = _median([run() for _ in range(job["reps"])])
+    return dict(out, value=result.lower, numba_before=numba_before,
+                numba_import=loaded - c, walks_load=walks_loaded - loaded,
+                first_compiled=first, compiled=compiled)
+
+
+def _answer(work: Path) -> int:
+    job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+    (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _common.parser(__doc__.splitlines()[0])
+    ap.add_argument("--qvbs", type=Path, default=None,
+                    help="a checkout's benchmarks/ folder of ahartmanns/qcomp")
+    ap.add_argument("--only", nargs="*", default=None, metavar="NAME")
+    ap.add_argument("--min-states", type=int, default=bq.MIN_STATES,
+                    help="the least QVBS size of an instance (default: the benchmark's)")
+    ap.add_argument("--reps", type=int, default=5, help="timed analyses an instance")
+    ap.add_argument("--child", default=None, help=ps.argparse_hidden())
+    args = ap.parse_args(argv)
+    if args.child:  # one instance, in this process: its job and answer in that folder
+        return _answer(Path(args.child))
+    if args.qvbs is None:
+        ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
+    out = _common.out_dir(args)
+    reps = 2 if args.quick else args.reps
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="analysis_parts_") as tmp:
+        work = Path(tmp)
+        for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
+                                        set(args.only or ps.INSTANCES), work,
+                                        args.min_states):
+            (work / "job.json").write_text(json.dumps(dict(job, reps=reps)), encoding="utf-8")
+            proc = subprocess.run([sys.executable, __file__, "--child", str(work)],
+                                  capture_output=True, text=True, timeout=bq.BUDGET)
+            if proc.returncode != 0:
+                print(inst.name, "error:", proc.stderr.strip().splitlines()[-1:], flush=True)
+                continue
+            got = json.loads((work / "out.json").read_text(encoding="utf-8"))
+            rows.append([inst.name, f"{got['value']:.6g}", got["numba_before"],
+                         *(round(got[k], 4) for k in COLUMNS[3:])])
+            print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
+    text = ("## The graph analysis part by part, and compiled (CPU seconds, medians)\n\n"
+            + _common.markdown_table(COLUMNS, rows)
+            + f"\n\n{reps} timed analyses an instance after one untimed, in one process; "
+              "the compiled ones after numba's import and the walks' load in the same "
+              "process.\n")
+    _common.write_text(out / "analysis_parts.md", text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
