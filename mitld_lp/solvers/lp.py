@@ -283,7 +283,6 @@ def solve_lp(
     if backend == "auto":
         backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
     q = quotient_for(mdp, target, quotient, sense)
-    b_eq = _start_weights(q, everywhere)
     shape = (q.n_states, q.n_choices)
     logger.info(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
@@ -315,7 +314,10 @@ def solve_lp(
             greedy_choices(q, np.full(q.n_states, 1.0 if q.sense is Sense.MAX else 0.0)),
             0.0, 0.0, 0)
     elif layout is Layout.BLOCKS:
-        answer = solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds), progress)
+        # the start weights made when the flow needs them (a float a state less
+        # through the blocks)
+        answer = solve_decomposed(q, lambda: _start_weights(q, everywhere), settings,
+                                  _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
