@@ -117,12 +117,17 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     if not (np.all(np.isfinite(both)) and np.all(both[:, 1] >= 1.0)):
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
-    # the answer's values, the long double copy the check reads and the tie scale; the
-    # solve's two columns (the exit times only for their maximum) freed before the check
-    values = np.clip(both[:, 0], 0.0, 1.0)
-    v_ld = both[:, 0].astype(np.longdouble)
-    tie = thresholds(values, tol, precision) / (_SHARE * float(np.max(both[:, 1])))
+    # the values, their long double copy the check reads and the tie scale, made one
+    # after the other: the solve's two columns (the exit times only for their
+    # maximum) freed first, the values clipped in place (the long double copy is of
+    # the values unclipped), the scale divided in place
+    longest = float(np.max(both[:, 1]))
+    values = both[:, 0].copy()
     del both
+    v_ld = values.astype(np.longdouble)
+    np.clip(values, 0.0, 1.0, out=values)
+    tie = thresholds(values, tol, precision)
+    tie /= _SHARE * longest
     index = np.int32 if max(n, block.inner.nnz) < 2**31 - 1 else np.int64
     # how far each choice's score falls short of its state's value (below 0: it beats
     # it), BATCH choices at a time and judged there: no array a choice (a long double
@@ -166,9 +171,11 @@ def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
                         shape=(z - a, m.shape[1]))
 
 
-BATCH = 1 << 16
+BATCH = 1 << 14
 """Choices scored at a time by :func:`certified_greedy` (its memory bound, not its
-answer: each row's sum is the same)."""
+answer: each row's sum is the same).  2**16 choices' long double scores and rows were
+the LP stage's traced peak on QVBS ``zeroconf`` 1000-4 (90.0 bytes a transition above
+its entry; 86.2 at 2**14, where the chain's component search peaks instead)."""
 
 _SHARE = 4.0
 """The greedy policy's loss may take a quarter of each state's threshold (as the policy
