@@ -143,7 +143,27 @@ def _visit_threshold(tol: float) -> float:
     return max(1e-7, 100.0 * tol)
 
 
-def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
+def _origin_states(mdp: MDP, q: Quotient, origin: np.ndarray) -> np.ndarray:
+    """``mdp.state_of(origin)`` for the quotient's ``choice_origin``: the product state
+    of each reduced choice.  The plain reduced states (outside any end component) are
+    numbered first, in the product's order, each with the choices of its one product
+    state (:class:`~mitld_lp.solvers.reduced.Quotient`), so their choices' states are
+    those states spread by a repeat, one sequential pass; only the collapsed end
+    components' choices are searched in the product's row groups (a binary search a
+    choice was a tenth of the LP stage on QVBS csma 4-2)."""
+    n_plain = q.n_plain
+    plain = np.flatnonzero((q.state_map >= 0) & (q.state_map < n_plain))
+    if plain.size != n_plain or origin.shape[0] != q.n_choices:
+        return mdp.state_of(origin)
+    cut = int(q.row_groups[n_plain])
+    owner = np.empty(origin.shape[0], dtype=np.int64)
+    owner[:cut] = np.repeat(plain, np.diff(q.row_groups[:n_plain + 1]))
+    del plain
+    owner[cut:] = mdp.state_of(origin[cut:])
+    return owner
+
+
+def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray, q: Quotient | None = None,
                ) -> tuple[np.ndarray, np.ndarray]:
     """The occupancy of every choice of ``mdp`` (``y`` at the choices ``origin``, 0
     elsewhere) and each state's outflow (the sum of its choices' occupancies).
@@ -153,7 +173,9 @@ def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
     product's order, as a sum over all of its choices would (the others add +0.0,
     which changes no sum that starts at +0.0): from arrays of the quotient's choices,
     not the product's ``choice_state`` (an int64 a choice)."""
-    owner = mdp.state_of(origin)  # the state of each entry of ``y``
+    # the state of each entry of ``y`` (``q``: the quotient whose ``choice_origin``
+    # ``origin`` is, :func:`_origin_states`)
+    owner = mdp.state_of(origin) if q is None else _origin_states(mdp, q, origin)
     state_flow = np.bincount(owner, weights=y, minlength=mdp.n_states)
     del owner
     occupancy = np.zeros(mdp.n_choices)
@@ -357,7 +379,7 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
     policy = lift_policy(mdp, q, reduced_choice)
     del reduced_choice
-    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y)
+    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y, q)
     del y
     randomized = _randomized(mdp, occupancy, state_flow, policy, settings.tol)
     del state_flow
