@@ -52,7 +52,6 @@ def _policy_reach(mdp, policy: np.ndarray) -> np.ndarray:
     """The reach probability of the deterministic ``policy`` (a product choice a state,
     -1 where it does not matter) from every state: the chain's states that can reach
     the target solved by one sparse LU, the others 0."""
-    n = mdp.n_states
     target = np.asarray(mdp.target, dtype=bool)
     pick = np.where(policy >= 0, policy, np.asarray(mdp.row_groups[:-1]))
     chain = sp.csr_array(mdp.matrix[pick])
@@ -101,6 +100,7 @@ def test_greedy_levels_against_highs_and_the_policy_chain(
                             progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=everywhere, bounds=(it.lower, it.upper))
     assert got.status.value == "optimal"
+    assert all(rows >= 0 for rows in pushes)
     want = _highs_max_reach(mdp)
     assert abs(got.value - want[mdp.initial]) <= 1e-7
     policy_value = _policy_reach(mdp, np.asarray(got.policy))
