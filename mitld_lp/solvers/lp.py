@@ -183,24 +183,32 @@ def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray, q: Quotient | None =
     return occupancy, state_flow
 
 
-def _randomized(mdp: MDP, occupancy: np.ndarray, state_flow: np.ndarray, policy: np.ndarray,
+def _randomized(mdp: MDP, occupancy: np.ndarray,
+                state_flow: np.ndarray | list[np.ndarray], policy: np.ndarray,
                 tol: float) -> np.ndarray:
     """The randomised policy of the occupancies (:func:`_occupancy`): ``y(c) /
     sum_{c' of s} y(c')`` at the states whose outflow exceeds the visit threshold,
     ``policy`` elsewhere.  Divided a slice of states at a time (:data:`SLICE_STATES`):
     the product's ``choice_state`` and its gathered flows and masks, a float and an
-    int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma."""
+    int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma.
+    ``state_flow`` may come in a one-element list, emptied here once the division is
+    done, so that it is freed before the policy's ones are written; those are written
+    a slice of states at a time too (the policy's choices of every state not visited,
+    an int64 a state, were the LP stage's peak on QVBS csma 4-2)."""
+    flows = state_flow if isinstance(state_flow, list) else [state_flow]
+    flow = flows.pop()
     groups = np.asarray(mdp.row_groups)
-    seen = state_flow > _visit_threshold(tol)
+    seen = flow > _visit_threshold(tol)
     randomized = np.zeros(mdp.n_choices)
     for lo in range(0, mdp.n_states, SLICE_STATES):
         hi = min(lo + SLICE_STATES, mdp.n_states)
         a, b = int(groups[lo]), int(groups[hi])
-        np.divide(occupancy[a:b], spread(state_flow, groups, lo, hi), out=randomized[a:b],
+        np.divide(occupancy[a:b], spread(flow, groups, lo, hi), out=randomized[a:b],
                   where=spread(seen, groups, lo, hi))
-    np.logical_not(seen, out=seen)  # now: not visited
-    seen &= policy >= 0
-    randomized[policy[seen]] = 1.0
+    del flow
+    for lo in range(0, mdp.n_states, SLICE_STATES):  # not visited: the policy's choice
+        mine = policy[lo:lo + SLICE_STATES]
+        randomized[mine[~seen[lo:lo + SLICE_STATES] & (mine >= 0)]] = 1.0
     return randomized
 
 
@@ -381,8 +389,9 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     del reduced_choice
     occupancy, state_flow = _occupancy(mdp, q.choice_origin, y, q)
     del y
-    randomized = _randomized(mdp, occupancy, state_flow, policy, settings.tol)
+    flows = [state_flow]  # emptied by _randomized: freed there once it is used
     del state_flow
+    randomized = _randomized(mdp, occupancy, flows, policy, settings.tol)
     seconds = time.perf_counter() - start
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)
