@@ -1,17 +1,30 @@
-"""The LP stage's traced peak on one QVBS instance, fast: ``tracemalloc`` (one frame) on
-from the entry of ``solve_lp`` only, so the product, the analysis and the iteration run
-untraced.  Printed in bytes per transition above the traced size at the LP's entry, with
-each ``certified_greedy`` call's own peak above its entry, and the answer beside them::
+"""The LP stage's CPU and traced peak on QVBS instances, fast: ``tracemalloc`` (one
+frame) on from the entry of ``solve_lp`` only, so the product, the analysis and the
+iteration run untraced.  Printed in bytes per transition above the traced size at the
+LP's entry, with each ``certified_greedy`` call's own peak above its entry, and the
+answer beside them::
 
-    python experiments/lp_stage_peak.py <checkout> <QVBS benchmarks dir> <instance>
+    python experiments/lp_stage_peak.py <checkout> <QVBS benchmarks dir> <instance>...
+    python experiments/lp_stage_peak.py <checkout> <QVBS dir> <instance>... \\
+        --compare <other checkout> [--out FILE.md]
 
-Run once per checkout (before/after, the checkout's package on ``PYTHONPATH``).
+Each instance and checkout runs in a child process of its own (the checkout's package
+on ``sys.path``), two synthesis runs a child: the first untraced, for the LP stage's
+CPU seconds (``solve_lp``, process time) and the solve's (``synthesize`` after the
+product: the stages ``bench_qvbs.py`` counts as the solve, here the LP, the iteration,
+the analysis and the certificate, each timed in place), the second traced, for the
+peak.  With ``--compare`` the other checkout runs right after, instance by instance,
+so the machine's load hits both; the brackets are compared to the bit.
 ``memory_stages.py`` (``bench_qvbs.py --memory``) traces the whole synthesis with
 tracebacks, which took over 15 CPU minutes on zeroconf 1000-4 on a loaded machine.
-The CPU times printed are under tracing."""
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -19,10 +32,19 @@ import tracemalloc
 from pathlib import Path
 from typing import Any
 
+#: the solve's stages, timed in place in the child (module, attribute)
+SOLVE_STAGES = (("mitld_lp.solvers.analysis", "analyse"),
+                ("mitld_lp.solvers.iteration", "interval_iterations"),
+                ("mitld_lp.solvers.lp", "solve_lp"),
+                ("mitld_lp.solvers.certify", "certify"))
 
-def main(argv: list[str]) -> None:
-    root, benchmarks, name = Path(argv[0]).resolve(), Path(argv[1]), argv[2]
+
+def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
+    """One instance in this process with ``root``'s package: the LP stage's and the
+    solve's CPU (untraced), then the LP stage's traced peak."""
     sys.path[:0] = [str(root), str(root / "experiments")]
+    import importlib
+
     import bench_qvbs as bq
 
     import mitld_lp.solvers.lp as lpm
@@ -34,36 +56,103 @@ def main(argv: list[str]) -> None:
     job = next(j for i, j in found if i.name == name)
     model = load_model(job["model"], max_states=job["max_states"])
     bq.bs.preload()
-    out: dict[str, Any] = {"greedy": []}
-    solve_lp, greedy = lpm.solve_lp, lb.certified_greedy
+    out: dict[str, Any] = {"greedy": [], "stage_cpu": {}, "traced": False}
+    greedy = lb.certified_greedy
+
+    def timed(key: str, f: Any) -> Any:
+        def run(*a: Any, **k: Any) -> Any:
+            t = time.process_time()
+            try:
+                return f(*a, **k)
+            finally:
+                if not out["traced"]:
+                    out["stage_cpu"][key] = (out["stage_cpu"].get(key, 0.0)
+                                             + time.process_time() - t)
+        return run
+
+    originals = []
+    for module, attr in SOLVE_STAGES:
+        mod = importlib.import_module(module)
+        originals.append((mod, attr, getattr(mod, attr)))
+        setattr(mod, attr, timed(attr, getattr(mod, attr)))
+    lp_timed = lpm.solve_lp
+    r = synthesize(model)
+    first = (repr(r.lower), repr(r.upper))
 
     def traced_lp(*a: Any, **k: Any) -> Any:
         tracemalloc.start(1)
-        base, t = tracemalloc.get_traced_memory()[0], time.process_time()
+        base = tracemalloc.get_traced_memory()[0]
         try:
-            return solve_lp(*a, **k)
+            return lp_timed(*a, **k)
         finally:
-            out["lp_cpu"] = time.process_time() - t
             out["lp_peak"] = tracemalloc.get_traced_memory()[1] - base
             tracemalloc.stop()
 
     def traced_greedy(*a: Any, **k: Any) -> Any:
-        cur, t = tracemalloc.get_traced_memory()[0], time.process_time()
+        cur = tracemalloc.get_traced_memory()[0]
         tracemalloc.reset_peak()
         got = greedy(*a, **k)
-        out["greedy"].append((tracemalloc.get_traced_memory()[1] - cur,
-                              time.process_time() - t))
+        out["greedy"].append((tracemalloc.get_traced_memory()[1] - cur) / n)
         return got
 
+    out["traced"] = True
+    n = r.mdp.n_transitions
+    del r
     lpm.solve_lp, lb.certified_greedy = traced_lp, traced_greedy
     r = synthesize(model)
-    n = r.mdp.n_transitions
-    print(f"{root} {name}: transitions {n}, lower {r.lower!r}, upper {r.upper!r}")
-    print(f"LP stage traced peak above its entry: {out['lp_peak'] / n:.1f} B/t, "
-          f"cpu {out['lp_cpu']:.3f} (traced)")
-    for peak, cpu in out["greedy"]:
-        print(f"  certified_greedy: traced peak above its entry {peak / n:.1f} B/t, "
-              f"cpu {cpu:.3f}")
+    assert (repr(r.lower), repr(r.upper)) == first, "two runs, two brackets"
+    return {"instance": name, "transitions": n, "lower": first[0], "upper": first[1],
+            "lp_cpu": out["stage_cpu"]["solve_lp"],
+            "solve_cpu": sum(out["stage_cpu"].values()),
+            "stage_cpu": out["stage_cpu"], "lp_peak": out["lp_peak"] / n,
+            "greedy_peaks": out["greedy"]}
+
+
+def run_child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
+    env = dict(os.environ, PYTHONPATH=str(root))
+    got = subprocess.run([sys.executable, __file__, "--child", str(root), str(benchmarks),
+                          name], capture_output=True, text=True, env=env, check=False)
+    if got.returncode:
+        return {"instance": name, "error": got.stderr[-2000:]}
+    return json.loads(got.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str]) -> None:
+    if argv and argv[0] == "--child":
+        print(json.dumps(child(Path(argv[1]).resolve(), Path(argv[2]), argv[3])))
+        return
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkout", type=Path)
+    ap.add_argument("benchmarks", type=Path)
+    ap.add_argument("instances", nargs="+")
+    ap.add_argument("--compare", type=Path, help="another checkout, run right after")
+    ap.add_argument("--out", type=Path, help="also write the table here (markdown)")
+    args = ap.parse_args(argv)
+    roots = [args.checkout.resolve()] + ([args.compare.resolve()] if args.compare else [])
+    lines = ["| instance | transitions | lower | same bracket | LP CPU | solve CPU | "
+             "LP traced peak B/t | greedy peaks B/t | checkout |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name in args.instances:
+        rows = [run_child(root, args.benchmarks, name) for root in roots]
+        same = (len(rows) == 2 and "error" not in rows[0] and "error" not in rows[1]
+                and (rows[0]["lower"], rows[0]["upper"]) == (rows[1]["lower"],
+                                                             rows[1]["upper"]))
+        for root, row in zip(roots, rows, strict=True):
+            if "error" in row:
+                lines.append(f"| {name} | | | | | | | | {root} (error) |")
+                print(row["error"], file=sys.stderr)
+                continue
+            peaks = ", ".join(f"{p:.1f}" for p in row["greedy_peaks"]) or "-"
+            lines.append(
+                f"| {name} | {row['transitions']} | {row['lower']} | "
+                f"{'yes' if same else ('-' if len(rows) == 1 else 'NO')} | "
+                f"{row['lp_cpu']:.3f} | {row['solve_cpu']:.3f} | {row['lp_peak']:.1f} | "
+                f"{peaks} | {root} |")
+        print("\n".join(lines[-len(rows):]), flush=True)
+    text = "\n".join(lines)
+    print(text)
+    if args.out:
+        args.out.write_text(text + "\n")
 
 
 if __name__ == "__main__":

@@ -76,17 +76,27 @@ class Greedy:
 
     chosen: np.ndarray
     values: np.ndarray
-    weights: np.ndarray
     left: np.ndarray
     walk: ChainLevels
+    n_choices: int  # the block's
 
     @property
     def n_settled(self) -> int:
         return int(self.chosen.size - self.left.size)
 
+    @property
+    def weights(self) -> np.ndarray:
+        """Per block choice, 1 where the policy takes it, else 0 (made when asked: the
+        caller writes the ones where they go, so no float a choice is held beside the
+        block at the LP stage's peak)."""
+        weights = np.zeros(self.n_choices)
+        weights[self.chosen] = 1.0
+        return weights
+
 
 def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense: Sense,
-                     tol: float, precision: float | None) -> Greedy | None:
+                     tol: float, precision: float | None, *,
+                     of_quotient: bool = False) -> Greedy | None:
     """The block LP's answer as the greedy policy (in ``sense``) of ``bound`` (bounds
     on the block's values on the side a policy's value lies beyond: a maximum's lower, a
     minimum's upper; their soundness only decides how often this succeeds) where its
@@ -95,20 +105,30 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     fails, and so does every state of the block that can reach one (by any choice):
     their values may change; the others form a set no choice leaves but downwards,
     whose values and policy the certificate proves.  ``None`` if no state is settled
-    (the caller solves the whole block)."""
+    (the caller solves the whole block).  ``of_quotient``: ``bound`` is per quotient
+    state (read here at ``block.states``), so the caller holds no copy of the block's
+    bounds while this runs."""
     groups = block.groups
-    counts = np.diff(groups)
-    n = counts.size
-    chosen = segmented_argmax(reward + block.inner @ bound, groups, sense=sense)
+    n = groups.size - 1
+    chosen = segmented_argmax(reward + block.inner @ (bound[block.states] if of_quotient
+                                                      else bound), groups, sense=sense)
     walk = ChainLevels(sp.csr_array(block.inner[chosen]))
     both = walk.solve(np.column_stack([reward[chosen], np.ones(n)]))
-    v, steps = both[:, 0], both[:, 1]
-    if not (np.all(np.isfinite(both)) and np.all(steps >= 1.0)):
+    if not (np.all(np.isfinite(both)) and np.all(both[:, 1] >= 1.0)):
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
-    v_ld = v.astype(np.longdouble)
+    # the values, their long double copy the check reads and the tie scale, made one
+    # after the other: the solve's two columns (the exit times only for their
+    # maximum) freed first, the values clipped in place (the long double copy is of
+    # the values unclipped), the scale divided in place
+    longest = float(np.max(both[:, 1]))
+    values = both[:, 0].copy()
+    del both
+    v_ld = values.astype(np.longdouble)
+    np.clip(values, 0.0, 1.0, out=values)
+    tie = thresholds(values, tol, precision)
+    tie /= _SHARE * longest
     index = np.int32 if max(n, block.inner.nnz) < 2**31 - 1 else np.int64
-    tie = thresholds(np.clip(v, 0.0, 1.0), tol, precision) / (_SHARE * float(np.max(steps)))
     # how far each choice's score falls short of its state's value (below 0: it beats
     # it), BATCH choices at a time and judged there: no array a choice (a long double
     # copy of the whole block is 16 bytes an entry; the slack, each choice's state and
@@ -125,6 +145,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
         # the policy's own choices there (one a state, increasing with it)
         mine = np.arange(*np.searchsorted(chosen, (a, z)))
         failed[mine[np.abs(slack[chosen[mine] - a]) > tie[mine]]] = True  # its residual
+    del v_ld, tie
     left = np.flatnonzero(backward_reachable(
         n, np.repeat(np.arange(n, dtype=index),  # each entry's state
                      np.diff(block.inner.indptr[groups])),
@@ -139,9 +160,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
                     "dual values: no LP", n, block.choices.size)
     if left.size == n:
         return None
-    weights = np.zeros(block.choices.size)
-    weights[chosen] = 1.0
-    return Greedy(chosen, np.clip(v, 0.0, 1.0), weights, left, walk)
+    return Greedy(chosen, values, left, walk, int(groups[-1]))
 
 
 def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
@@ -152,9 +171,11 @@ def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
                         shape=(z - a, m.shape[1]))
 
 
-BATCH = 1 << 16
+BATCH = 1 << 14
 """Choices scored at a time by :func:`certified_greedy` (its memory bound, not its
-answer: each row's sum is the same)."""
+answer: each row's sum is the same).  2**16 choices' long double scores and rows were
+the LP stage's traced peak on QVBS ``zeroconf`` 1000-4 (90.0 bytes a transition above
+its entry; 86.2 at 2**14, where the chain's component search peaks instead)."""
 
 _SHARE = 4.0
 """The greedy policy's loss may take a quarter of each state's threshold (as the policy

@@ -143,7 +143,27 @@ def _visit_threshold(tol: float) -> float:
     return max(1e-7, 100.0 * tol)
 
 
-def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
+def _origin_states(mdp: MDP, q: Quotient, origin: np.ndarray) -> np.ndarray:
+    """``mdp.state_of(origin)`` for the quotient's ``choice_origin``: the product state
+    of each reduced choice.  The plain reduced states (outside any end component) are
+    numbered first, in the product's order, each with the choices of its one product
+    state (:class:`~mitld_lp.solvers.reduced.Quotient`), so their choices' states are
+    those states spread by a repeat, one sequential pass; only the collapsed end
+    components' choices are searched in the product's row groups (a binary search a
+    choice was a tenth of the LP stage on QVBS csma 4-2)."""
+    n_plain = q.n_plain
+    plain = np.flatnonzero((q.state_map >= 0) & (q.state_map < n_plain))
+    if plain.size != n_plain or origin.shape[0] != q.n_choices:
+        return mdp.state_of(origin)
+    cut = int(q.row_groups[n_plain])
+    owner = np.empty(origin.shape[0], dtype=np.int64)
+    owner[:cut] = np.repeat(plain, np.diff(q.row_groups[:n_plain + 1]))
+    del plain
+    owner[cut:] = mdp.state_of(origin[cut:])
+    return owner
+
+
+def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray, q: Quotient | None = None,
                ) -> tuple[np.ndarray, np.ndarray]:
     """The occupancy of every choice of ``mdp`` (``y`` at the choices ``origin``, 0
     elsewhere) and each state's outflow (the sum of its choices' occupancies).
@@ -153,7 +173,9 @@ def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
     product's order, as a sum over all of its choices would (the others add +0.0,
     which changes no sum that starts at +0.0): from arrays of the quotient's choices,
     not the product's ``choice_state`` (an int64 a choice)."""
-    owner = mdp.state_of(origin)  # the state of each entry of ``y``
+    # the state of each entry of ``y`` (``q``: the quotient whose ``choice_origin``
+    # ``origin`` is, :func:`_origin_states`)
+    owner = mdp.state_of(origin) if q is None else _origin_states(mdp, q, origin)
     state_flow = np.bincount(owner, weights=y, minlength=mdp.n_states)
     del owner
     occupancy = np.zeros(mdp.n_choices)
@@ -161,24 +183,32 @@ def _occupancy(mdp: MDP, origin: np.ndarray, y: np.ndarray,
     return occupancy, state_flow
 
 
-def _randomized(mdp: MDP, occupancy: np.ndarray, state_flow: np.ndarray, policy: np.ndarray,
+def _randomized(mdp: MDP, occupancy: np.ndarray,
+                state_flow: np.ndarray | list[np.ndarray], policy: np.ndarray,
                 tol: float) -> np.ndarray:
     """The randomised policy of the occupancies (:func:`_occupancy`): ``y(c) /
     sum_{c' of s} y(c')`` at the states whose outflow exceeds the visit threshold,
     ``policy`` elsewhere.  Divided a slice of states at a time (:data:`SLICE_STATES`):
     the product's ``choice_state`` and its gathered flows and masks, a float and an
-    int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma."""
+    int64 a choice each, were the LP stage's peak on QVBS wlan_dl and csma.
+    ``state_flow`` may come in a one-element list, emptied here once the division is
+    done, so that it is freed before the policy's ones are written; those are written
+    a slice of states at a time too (the policy's choices of every state not visited,
+    an int64 a state, were the LP stage's peak on QVBS csma 4-2)."""
+    flows = state_flow if isinstance(state_flow, list) else [state_flow]
+    flow = flows.pop()
     groups = np.asarray(mdp.row_groups)
-    seen = state_flow > _visit_threshold(tol)
+    seen = flow > _visit_threshold(tol)
     randomized = np.zeros(mdp.n_choices)
     for lo in range(0, mdp.n_states, SLICE_STATES):
         hi = min(lo + SLICE_STATES, mdp.n_states)
         a, b = int(groups[lo]), int(groups[hi])
-        np.divide(occupancy[a:b], spread(state_flow, groups, lo, hi), out=randomized[a:b],
+        np.divide(occupancy[a:b], spread(flow, groups, lo, hi), out=randomized[a:b],
                   where=spread(seen, groups, lo, hi))
-    np.logical_not(seen, out=seen)  # now: not visited
-    seen &= policy >= 0
-    randomized[policy[seen]] = 1.0
+    del flow
+    for lo in range(0, mdp.n_states, SLICE_STATES):  # not visited: the policy's choice
+        mine = policy[lo:lo + SLICE_STATES]
+        randomized[mine[~seen[lo:lo + SLICE_STATES] & (mine >= 0)]] = 1.0
     return randomized
 
 
@@ -283,7 +313,6 @@ def solve_lp(
     if backend == "auto":
         backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
     q = quotient_for(mdp, target, quotient, sense)
-    b_eq = _start_weights(q, everywhere)
     shape = (q.n_states, q.n_choices)
     logger.info(
         "occupancy LP: %d states -> %d reduced states (%d MECs), %d columns",
@@ -315,7 +344,10 @@ def solve_lp(
             greedy_choices(q, np.full(q.n_states, 1.0 if q.sense is Sense.MAX else 0.0)),
             0.0, 0.0, 0)
     elif layout is Layout.BLOCKS:
-        answer = solve_decomposed(q, b_eq, settings, _reduced_bounds(q, bounds), progress)
+        # the start weights made when the flow needs them (a float a state less
+        # through the blocks)
+        answer = solve_decomposed(q, lambda: _start_weights(q, everywhere), settings,
+                                  _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -355,10 +387,11 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
     policy = lift_policy(mdp, q, reduced_choice)
     del reduced_choice
-    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y)
+    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y, q)
     del y
-    randomized = _randomized(mdp, occupancy, state_flow, policy, settings.tol)
+    flows = [state_flow]  # emptied by _randomized: freed there once it is used
     del state_flow
+    randomized = _randomized(mdp, occupancy, flows, policy, settings.tol)
     seconds = time.perf_counter() - start
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)

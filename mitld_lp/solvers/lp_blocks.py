@@ -10,7 +10,7 @@ policy's occupancy (:func:`policy_flow`)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,7 +78,7 @@ def sensed(matrices: Matrices, sense: Sense, settings: SolveOptions, *,
 
 def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
                 singles: SingleLevels | None = None,
-                walks: dict[int, tuple[np.ndarray, ChainLevels]] | None = None
+                walks: dict[int, Walked] | None = None
                 ) -> np.ndarray:
     r"""Occupancy of the randomised policy ``weights`` (per reduced choice, summing to 1
     per state) from the start weights ``b``: ``x = b + P_w^T x`` with
@@ -94,16 +94,25 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
     ``singles``: the single states of every level with their compiled walk
     (:class:`~mitld_lp.solvers.topological.SingleLevels` with kernels), which then
     takes each run of levels between two non-trivial components in one call.
-    ``walks``: per level index, a non-trivial level's states (in the walk's order) and
-    the walk of ``weights``' chain on them that solved its values
-    (:class:`~mitld_lp.solvers.greedy_block.Greedy`); its flow is that walk's
-    transposed solve (the same components and factorisations), not a new one.
+    ``walks``: per level index, a non-trivial level's states (in the walk's order), the
+    walk of ``weights``' chain on them that solved its values
+    (:class:`~mitld_lp.solvers.greedy_block.Greedy`) and the entries of their choices
+    that leave the level (:class:`Walked`); its flow is that walk's transposed solve
+    (the same components and factorisations), not a new one, and only those entries
+    push it out (the same products added in the same order as the level's whole rows
+    with their own entries masked out).
     """
     x = np.asarray(b, dtype=np.float64).copy()  # b, then inflow added level by level
     walk: Iterator[Level] = (blk.walk(upstream_first=True)
                              if singles is None
                              else _flow_runs(blk, singles, weights, x))
     for level in walk:
+        kept = None if walks is None else walks.get(level.index)
+        if (kept is not None and level.single.size == 0
+                and np.array_equal(kept.states, level.rest)):
+            x[level.rest] = kept.walk.solve_transposed(x[level.rest])
+            kept.push(q, weights, x)
+            continue
         states = np.concatenate([level.single, level.rest])
         n_single = level.single.size
         lo, hi = q.row_groups[states], q.row_groups[states + 1]
@@ -113,9 +122,8 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
         stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
                            minlength=states.size)
         x[level.single] /= 1.0 - stay[:n_single]
-        kept = None if walks is None else walks.get(level.index)
-        if kept is not None and np.array_equal(kept[0], level.rest):
-            x[level.rest] = kept[1].solve_transposed(x[level.rest])
+        if kept is not None and np.array_equal(kept.states, level.rest):
+            x[level.rest] = kept.walk.solve_transposed(x[level.rest])
         elif level.rest.size:
             block = level.rest  # the tail of ``states``: local index = owner - n_single
             pick = owner_local >= n_single
@@ -136,6 +144,41 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
     y = np.repeat(x, np.diff(np.asarray(q.row_groups)))
     np.multiply(weights, y, out=y)
     return np.maximum(y, 0.0, out=y)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Walked:
+    """A level settled whole by its greedy policy, kept for :func:`policy_flow`: its
+    states (in the block's order), the walk of the policy's chain on them, and its
+    choices' entries that leave it (the block's ``outer`` entries, in their order: row
+    by row, each row's in its stored order): the local choice (its position among the
+    block's choices), column and value of each."""
+
+    states: np.ndarray
+    walk: ChainLevels
+    row: np.ndarray
+    col: np.ndarray
+    val: np.ndarray
+
+    @staticmethod
+    def of(block: Block, walk: ChainLevels) -> Walked:
+        outer = block.outer
+        row = np.repeat(np.arange(outer.shape[0], dtype=np.int64), np.diff(outer.indptr))
+        return Walked(block.states, walk, row, outer.indices.copy(), outer.data.copy())
+
+    def push(self, q: Quotient, weights: np.ndarray, x: np.ndarray) -> None:
+        """Add the flow ``x`` of the level's states (solved) along its exits: each
+        exit's value times its choice's weight times its state's flow, added into
+        ``x`` at its column in the entries' order (:func:`policy_flow`'s products and
+        order, without the level's inner entries, which it masks out)."""
+        if self.row.size == 0:
+            return
+        lo, hi = q.row_groups[self.states], q.row_groups[self.states + 1]
+        first = np.cumsum(hi - lo) - (hi - lo)  # each state's first local choice
+        owner = np.searchsorted(first, self.row, side="right") - 1
+        choice = lo[owner] + (self.row - first[owner])
+        y = weights[choice] * x[self.states[owner]]
+        np.add.at(x, self.col, self.val * y)
 
 
 #: The fewest choices of a block the bounds' greedy policy may answer
@@ -173,9 +216,13 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
     non-trivial component (its states not in ``q.zero`` the ``rest``) or the last,
     ``states`` as many as were solved (for the progress bar), ``single`` empty."""
     empty = np.zeros(0, dtype=np.int64)
-    live = np.concatenate([[0], np.cumsum(~q.zero[blk.by_level])])
-    done = 0
+    done = last = 0
     marks = np.unique(blk.level[blk.size > 1]).tolist() + [blk.n_levels - 1]
+    # the states not in ``q.zero`` up to each mark's level's end, counted once (no
+    # count a state held through the walk)
+    live = np.cumsum(~q.zero[blk.by_level])[blk.level_starts[np.add(marks, 1)] - 1]
+    live_at = dict(zip(marks, live.tolist(), strict=True))
+    del live
     for index in marks:
         if index < done:  # the last level had a component: nothing after it
             continue
@@ -183,8 +230,8 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
                        weights)
         rest = blk.states_at(index)
         rest = rest[~blk.single(rest) & ~q.zero[rest]]
-        count = int(live[blk.level_starts[index + 1]] - live[blk.level_starts[done]])
-        done = index + 1
+        count = live_at[index] - (live_at[last] if done else 0)
+        done, last = index + 1, index
         # ``states`` only counts them (the progress bar): a read-only view of one
         # int64 of that size, no array of a state each held through the walk
         yield Level(index, np.broadcast_to(np.int64(0), (count,)), empty, rest)
@@ -306,14 +353,16 @@ def solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
     return raw, y, v, rows
 
 
-def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
+def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
+                      settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
                       progress: bool | None = None
                       ) -> Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
     :func:`~mitld_lp.solvers.crossover.polish`; the occupancy of the resulting
-    randomised policy from ``b_eq`` is the primal point, the values the dual one.  With
+    randomised policy from ``b_eq`` (or what it returns, if a function: called only
+    for the flow) is the primal point, the values the dual one.  With
     sound ``bounds`` on the reduced states' values, a block's LP has
     only the columns of the choices that may be optimal (:func:`may_be_optimal`); the
     polish then checks every choice of the block against the exact values, so the
@@ -347,7 +396,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = n_eliminated = n_greedy = 0
-    walks: dict[int, tuple[np.ndarray, ChainLevels]] = {}  # greedy chains, for the flow
+    walks: dict[int, Walked] = {}  # greedy chains, for the flow
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     # (shared_levels: the iteration's, where it built them for this quotient)
@@ -367,16 +416,21 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
         reward = exit_reward(block, values)
         greedy = None if (bounds is None or not settings.greedy
                           or block.choices.size < GREEDY_MIN_CHOICES) else certified_greedy(
-            block, reward, bounds[0 if q.sense is Sense.MAX else 1][rest], q.sense,
-            settings.tol, settings.precision)
+            block, reward, bounds[0 if q.sense is Sense.MAX else 1], q.sense,
+            settings.tol, settings.precision, of_quotient=True)
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)
-            values[rest], reduced_choice[rest] = greedy.values, block.choices[greedy.chosen]
-            weights[block.choices], n_greedy = greedy.weights, n_greedy + greedy.n_settled
+            picked = block.choices[greedy.chosen]
+            values[rest], reduced_choice[rest] = greedy.values, picked
+            # its one-hot weights written where they go (no float a block choice)
+            weights[block.choices] = 0.0
+            weights[picked] = 1.0
+            n_greedy += greedy.n_settled
+            del picked
             # the certificate's chain there, where the policy ends up the same (whether
             # the LP solves some of the states or none)
             offer(greedy.walk)
             if greedy.left.size == 0:  # no LP: its flow matrix is never built
-                walks[level.index] = (rest, greedy.walk)
+                walks[level.index] = Walked.of(block, greedy.walk)
                 continue
             rest = rest[greedy.left]
             block = reward = greedy = None  # type: ignore[assignment]  # freed first
@@ -416,6 +470,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray, settings: SolveOptions,
     block = lp = reward = greedy = tight = columns = y = duals = polished = None  # type: ignore[assignment]
     pruned = bounds is not None
     bounds = level = upd = rest = None  # type: ignore[assignment]
+    if callable(b_eq):  # made only now: not held through the levels' peaks
+        b_eq = b_eq()
     y = policy_flow(q, blk, weights, b_eq, singles, walks)
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
