@@ -144,6 +144,9 @@ def lean_start() -> None:
     call it first, before NumPy, SciPy and lark are imported; what each of those
     functions changes then holds for the whole process.  The answers are the same to
     the bit."""
+    from mitld_lp import library_start
+
+    library_start.remove()  # a program's narrower cuts (import mitld_lp): these are wider
     dataclass_methods_without_exec()
     from mitld_lp import init_cache
 
@@ -199,6 +202,20 @@ def lean_scipy() -> None:
         return
     import importlib
 
+    restore, extras = numpy_listed_without_extras()
+    try:
+        copy = importlib.import_module(SCIPY_NUMPY_COPY)
+    except ImportError:  # another SciPy: its own import, later, is left as it is
+        return
+    finally:
+        restore()
+    hand_over_extras(copy, extras)
+
+
+def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
+    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
+    imported yet, until the function returned is called (which puts both back); and
+    those names.  :func:`lean_scipy`'s first half."""
     import numpy
 
     kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
@@ -207,14 +224,21 @@ def lean_scipy() -> None:
     numpy.__all__ = [name for name in kept_all if name not in extras]
     if kept_dir is not None:
         numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
-    try:
-        copy = importlib.import_module(SCIPY_NUMPY_COPY)
-    except ImportError:  # another SciPy: its own import, later, is left as it is
-        return
-    finally:
+
+    def restore() -> None:
         numpy.__all__ = kept_all
         if kept_dir is not None:
             numpy.__dir__ = kept_dir
+
+    return restore, extras
+
+
+def hand_over_extras(copy: Any, extras: set[str]) -> None:
+    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
+    held ``extras`` back, hands each of them over from NumPy when first asked (importing
+    it then) and lists them in its ``__all__``.  :func:`lean_scipy`'s second half."""
+    import numpy
+
     left_out = extras - vars(copy).keys()
     own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
 
@@ -225,7 +249,7 @@ def lean_scipy() -> None:
             return own(name)
         raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
 
-    copy.__getattr__ = handed_over  # type: ignore[attr-defined]
+    copy.__getattr__ = handed_over
     copy.__all__ = sorted({*copy.__all__, *left_out})
 
 
@@ -296,7 +320,7 @@ _DATACLASS_MAKERS = ("_repr_fn", "_cmp_fn", "_hash_fn", "_frozen_get_del_attr",
                      "_recursive_repr", "FrozenInstanceError")
 
 
-def dataclass_methods_without_exec() -> None:
+def dataclass_methods_without_exec(package_only: bool = False) -> None:
     """Have :func:`dataclasses.dataclass` make ``__repr__``, ``__eq__`` (and the order),
     ``__hash__`` and a frozen class's ``__setattr__`` and ``__delattr__`` as closures
     over the field names instead of compiling each method's source with ``exec``.
@@ -314,17 +338,50 @@ def dataclass_methods_without_exec() -> None:
     against recursion), and a frozen class refuses an assignment or a deletion with the
     same :class:`dataclasses.FrozenInstanceError`.
 
-    The command line only (a program importing the package gets dataclasses as they
-    are); nothing on another Python (3.13 compiles a class's methods in one go) or if
-    the module's makers are not the ones replaced here."""
+    The command line makes every class's methods so; a program importing the package
+    only the package's own (``package_only``, :mod:`mitld_lp.library_start`): a class
+    of another module gets the stdlib's methods.  A later call without
+    ``package_only`` widens it to every class.  Nothing on another Python (3.13
+    compiles a class's methods in one go) or if the module's makers are not the ones
+    replaced here."""
+    global _closures_for_all
     import dataclasses
 
     if (sys.version_info[:2] not in DATACLASS_PYTHONS
             or not all(hasattr(dataclasses, name) for name in _DATACLASS_MAKERS)):
         return
+    _closures_for_all = _closures_for_all or not package_only
+    if getattr(dataclasses._repr_fn, "__module__", None) == __name__:
+        return  # installed already: the scope is all that changes
     for name, maker in (("_repr_fn", _repr_fn), ("_cmp_fn", _cmp_fn), ("_hash_fn", _hash_fn),
                         ("_frozen_get_del_attr", _frozen_get_del_attr)):
-        setattr(dataclasses, name, maker)
+        setattr(dataclasses, name, _chosen(maker, getattr(dataclasses, name)))
+
+
+#: Whether every dataclass gets the closures (the command line), or only the package's.
+_closures_for_all = False
+
+
+def in_package(globals: dict | None) -> bool:
+    """Whether a dataclass made with the module globals ``globals`` is one of the
+    package's own (its module is ``mitld_lp`` or below it)."""
+    name = (globals or {}).get("__name__", "")
+    return isinstance(name, str) and name.partition(".")[0] == "mitld_lp"
+
+
+def _chosen(closures: Callable[..., Any], stdlib: Callable[..., Any]) -> Callable[..., Any]:
+    """The maker dataclasses calls: ``closures`` for the classes in scope
+    (:data:`_closures_for_all`, else the package's own), ``stdlib`` for the others.
+    Its ``globals`` argument (the class's module's), last, is positional or named."""
+
+    def maker(*args: Any, **kwargs: Any) -> Any:
+        globals = kwargs["globals"] if "globals" in kwargs else args[-1]
+        if _closures_for_all or in_package(globals):
+            return closures(*args, **kwargs)
+        return stdlib(*args, **kwargs)
+
+    maker.__name__ = maker.__qualname__ = closures.__name__
+    return maker
 
 
 def _tuple_of(names: tuple[str, ...]) -> Callable[[object], tuple]:

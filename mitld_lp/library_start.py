@@ -1,0 +1,163 @@
+"""A program importing the package: the package's own start-up costs cut, nobody else's.
+
+The command line's start-up (:func:`mitld_lp.startup.lean_start`) changes what the
+whole process imports and how every dataclass is made.  A program that imports the
+package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
+service) gets the two cuts that change nothing it can see, made when their module is
+first imported, not at ``import mitld_lp`` (which stays free of NumPy and
+``dataclasses``: :mod:`mitld_lp.runtime` imports NumPy alone):
+
+* SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
+  ``scipy.sparse`` import loads) copies NumPy's namespace without importing
+  ``numpy.f2py``, ``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``... which the copy
+  hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`, the
+  same two halves): 0.1 s of CPU on a PRISM route.  The copy lists the same names, each
+  NumPy's own object; NumPy's ``__all__`` and ``dir`` are put back at once.  Nothing if
+  SciPy's layer was imported before the package.
+* The package's own dataclasses get their comparison, hash, representation and frozen
+  methods as closures and their ``__init__`` from the table of compiled code
+  (:func:`mitld_lp.startup.dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`,
+  both with ``package_only``): 0.1 s on a PRISM route.  Every other module's dataclasses
+  are made by the stdlib as before.
+
+The hook is a finder at the front of ``sys.meta_path`` that answers for those two
+modules only, once each (the module's own finder finds it; the loader is wrapped for
+the one import, then put back on the module), and leaves ``sys.meta_path`` when both
+were seen.  The command line's :func:`mitld_lp.startup.lean_start` takes it out first
+(its cuts are wider).  Nothing changes an answer: the same objects, the same methods.
+"""
+
+from __future__ import annotations
+
+import sys
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from importlib.machinery import ModuleSpec
+    from types import ModuleType
+    from typing import Any
+
+__all__ = ["install", "remove", "installed"]
+
+
+def _dataclasses_around() -> Callable[[ModuleType | None], None]:
+    """Nothing before ``dataclasses`` runs; after it, the package's makers."""
+
+    def after(module: ModuleType | None) -> None:
+        if module is not None:
+            _dataclasses_cut()
+
+    return after
+
+
+def _dataclasses_cut() -> None:
+    from mitld_lp import init_cache, startup
+
+    startup.dataclass_methods_without_exec(package_only=True)
+    init_cache.install(package_only=True)
+
+
+def _scipy_copy_around() -> Callable[[ModuleType | None], None]:
+    """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
+    function to call after it (NumPy put back, then the copy handing the extras over;
+    ``None``: the import failed, NumPy is put back only)."""
+    from mitld_lp import startup
+
+    restore, extras = startup.numpy_listed_without_extras()
+
+    def after(copy: ModuleType | None) -> None:
+        restore()
+        if copy is not None:
+            startup.hand_over_extras(copy, extras)
+
+    return after
+
+
+class _Loader:
+    """The module's own loader for one import, with what runs around its
+    ``exec_module``; every other attribute is the loader's own."""
+
+    def __init__(self, loader: Any, around: Any) -> None:
+        self._loader, self._around = loader, around
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loader, name)
+
+    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: ModuleType) -> None:
+        loader = self._loader
+        module.__loader__ = loader  # the module's own loader, as without the hook
+        if module.__spec__ is not None:
+            module.__spec__.loader = loader
+        after = self._around()
+        try:
+            loader.exec_module(module)
+        except BaseException:
+            after(None)
+            raise
+        after(module)
+
+
+class _Hook:
+    """The finder: the modules it waits for, and what runs around each one's import."""
+
+    def __init__(self) -> None:
+        self.waiting: dict[str, Any] = {}  # name -> what runs around its import
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> ModuleSpec | None:
+        around = self.waiting.pop(name, None)
+        if around is None:
+            return None
+        if not self.waiting:
+            remove()
+        for finder in sys.meta_path:
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(name, path, target)
+            if spec is not None:
+                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                    spec.loader = _Loader(spec.loader, around)
+                return spec
+        return None
+
+
+_hook: _Hook | None = None
+
+
+def install() -> None:
+    """Put the hook in place (``import mitld_lp`` does, unless started as the command
+    line): each cut now if its module is imported already, else when it is."""
+    global _hook
+    from mitld_lp import startup
+
+    if _hook is not None:
+        return
+    hook = _Hook()
+    if "dataclasses" in sys.modules:
+        _dataclasses_cut()
+    else:
+        hook.waiting["dataclasses"] = _dataclasses_around
+    if startup.SCIPY_NUMPY_COPY not in sys.modules:
+        hook.waiting[startup.SCIPY_NUMPY_COPY] = _scipy_copy_around
+    if hook.waiting:
+        _hook = hook
+        sys.meta_path.insert(0, hook)
+
+
+def remove() -> None:
+    """Take the hook out of ``sys.meta_path`` (what it has done stays)."""
+    global _hook
+    if _hook is not None:
+        try:
+            sys.meta_path.remove(_hook)
+        except ValueError:
+            pass
+        _hook = None
+
+
+def installed() -> bool:
+    """Whether the hook is waiting for a module."""
+    return _hook is not None
