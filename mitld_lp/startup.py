@@ -146,7 +146,7 @@ def lean_start() -> None:
     the bit."""
     from mitld_lp import library_start
 
-    library_start.remove()  # a program's narrower cuts (import mitld_lp): these are wider
+    library_start.install(command=True)  # a program's cuts: these are wider
     dataclass_methods_without_exec()
     from mitld_lp import init_cache
 
