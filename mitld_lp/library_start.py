@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from types import ModuleType
     from typing import Any
 
-__all__ = ["install", "remove", "installed"]
+__all__ = ["install", "remove", "installed", "waiting_for", "sparse_linalg_later"]
 
 
 def _dataclasses_around() -> Callable[[ModuleType | None], None]:
@@ -219,3 +219,8 @@ def remove() -> None:
 def installed() -> bool:
     """Whether the hook is waiting for a module."""
     return _hook is not None
+
+
+def waiting_for() -> list[str]:
+    """The modules whose import the hook still waits for."""
+    return sorted(_hook.waiting) if _hook is not None else []
