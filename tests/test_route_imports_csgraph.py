@@ -72,7 +72,7 @@ def test_graph_searches_leave_scipys_linear_algebra_until_a_factorisation() -> N
         # the factorisation solves the system: A x gives back the right-hand side
         a = [[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 2.0]]
         back = [sum(a[i][j] * run["solved"][j] for j in range(3)) for i in range(3)]
-        assert max(abs(b - t) for b, t in zip(back, [1.0, 2.0, 3.0])) < 1e-12
+        assert max(abs(b - t) for b, t in zip(back, [1.0, 2.0, 3.0], strict=True)) < 1e-12
         assert run["solved"] == plain["solved"]
         # then SciPy's own module: a plain module, the same names, bound as a submodule
         assert run["kind"] == plain["kind"] == "module"
