@@ -1,9 +1,9 @@
-"""A program importing the package: the package's own start-up costs cut, nobody else's.
+"""A program importing the package: the package's start-up costs cut where nobody sees it.
 
 The command line's start-up (:func:`mitld_lp.startup.lean_start`) changes what the
 whole process imports and how every dataclass is made.  A program that imports the
 package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
-service) gets the two cuts that change nothing it can see, made when their module is
+service) gets the three cuts that change nothing it can use, made when their module is
 first imported, not at ``import mitld_lp`` (which stays free of NumPy and
 ``dataclasses``: :mod:`mitld_lp.runtime` imports NumPy alone):
 
@@ -19,12 +19,18 @@ first imported, not at ``import mitld_lp`` (which stays free of NumPy and
   (:func:`mitld_lp.startup.dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`,
   both with ``package_only``): 0.1 s on a PRISM route.  Every other module's dataclasses
   are made by the stdlib as before.
+* ``scipy.sparse.csgraph`` is imported without ``scipy.sparse.linalg``'s ``__init__``
+  and so without ``scipy.linalg`` (LAPACK and BLAS wrappers, whose OpenBLAS starts its
+  threads): csgraph's searches need neither, and ``scipy.sparse.linalg`` loads whole at
+  the first name read other than ``LinearOperator`` (:func:`sparse_linalg_later`):
+  0.11 s of CPU on a PRISM route that walks graphs and factorises nothing (the
+  deadline instances); a route that factorises pays it at its first ``splu``.  The
+  command line's start keeps this one (:func:`install` with ``command``).
 
-The hook is a finder at the front of ``sys.meta_path`` that answers for those two
-modules only, once each (the module's own finder finds it; the loader is wrapped for
-the one import, then put back on the module), and leaves ``sys.meta_path`` when both
-were seen.  The command line's :func:`mitld_lp.startup.lean_start` takes it out first
-(its cuts are wider).  Nothing changes an answer: the same objects, the same methods.
+The hook is a finder at the front of ``sys.meta_path`` that answers for those modules
+only, once each (the module's own finder finds it; the loader is wrapped for the one
+import, then put back on the module), and leaves ``sys.meta_path`` when all were
+seen.  Nothing changes an answer: the same objects, the same methods.
 """
 
 from __future__ import annotations

@@ -31,8 +31,11 @@ without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundl
 case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would
 import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
 These leave every name where it was (the layer hands NumPy's submodules over when
-asked; ``regex`` and ``numpy.ma`` import for whoever asks later); a program that
-imports the package gets SciPy, NumPy and lark as they import themselves.
+asked; ``regex`` and ``numpy.ma`` import for whoever asks later).  A program that
+imports the package gets NumPy, SciPy and lark as they import themselves, but for the
+cuts nobody can see, made by :mod:`mitld_lp.library_start`: SciPy's layer as here, the
+package's own dataclasses as below (not the program's), and ``scipy.sparse.csgraph``
+without ``scipy.linalg`` until a factorisation (the command line too).
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
 nearly all frozen) made with their comparison, hash, representation and frozen
@@ -137,7 +140,9 @@ def lean_start() -> None:
     when first used (:func:`numpy_ma_when_used`), lark without ``regex``
     (:func:`lark_without_regex`), and the stand-ins of :mod:`mitld_lp.stand_ins`: NumPy
     without the docstrings of its C objects, SciPy's test runner and a few standard
-    modules imported when first used.
+    modules imported when first used; and ``scipy.sparse.csgraph`` without
+    ``scipy.linalg`` (:func:`mitld_lp.library_start.sparse_linalg_later`, the one cut of
+    the program's start it keeps).
 
     :func:`command` calls it; a program that runs the package's routes and nothing else
     (a benchmark's worker process measuring what the command line's process costs) may
@@ -196,8 +201,10 @@ def lean_scipy() -> None:
     back at once, and the copy hands them over from NumPy when asked (a module
     ``__getattr__``, importing them then): the layer sees the same objects, later.
 
-    The command line only (a program importing the package is left alone); nothing when
-    the layer is already imported or this SciPy has no such module."""
+    The command line does it at its start; a program importing the package has it
+    done when SciPy imports the layer (:mod:`mitld_lp.library_start`, the same two
+    halves); nothing when the layer is already imported or this SciPy has no such
+    module."""
     if SCIPY_NUMPY_COPY in sys.modules:
         return
     import importlib
