@@ -4,7 +4,7 @@ Python 3.11 and 3.12 write each dataclass's ``__init__`` as source text and comp
 (``dataclasses._create_fn``): the bundled case's command makes 97 dataclasses while it
 runs, and compiling their ``__init__`` methods is 0.035 s of its 0.55 s of CPU (the
 other generated methods are closures already,
-:func:`mitld_lp.startup.dataclass_methods_without_exec`). Here ``_create_fn`` takes the
+:mod:`mitld_lp.dataclass_closures`). Here ``_create_fn`` takes the
 code object compiled from the same text from a table kept beside the package's bytecode
 (``mitld_lp/__pycache__/dataclass_inits.<tag>.marshal``), compiling only a text the
 table lacks; the table gets the new texts when the process ends (unless Python writes no
@@ -118,7 +118,7 @@ def install(package_only: bool = False) -> bool:
     import dataclasses
     import inspect
 
-    from mitld_lp.startup import in_package
+    from mitld_lp.dataclass_closures import in_package
 
     if sys.version_info[:2] not in ((3, 11), (3, 12)):
         return False

@@ -16,7 +16,7 @@ first imported, not at ``import mitld_lp`` (which stays free of NumPy and
   SciPy's layer was imported before the package.
 * The package's own dataclasses get their comparison, hash, representation and frozen
   methods as closures and their ``__init__`` from the table of compiled code
-  (:func:`mitld_lp.startup.dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`,
+  (:mod:`mitld_lp.dataclass_closures`, :mod:`mitld_lp.init_cache`,
   both with ``package_only``): 0.1 s on a PRISM route.  Every other module's dataclasses
   are made by the stdlib as before.
 * ``scipy.sparse.csgraph`` is imported without ``scipy.sparse.linalg``'s ``__init__``
@@ -45,7 +45,60 @@ if TYPE_CHECKING:
     from types import ModuleType
     from typing import Any
 
-__all__ = ["install", "remove", "installed", "waiting_for", "sparse_linalg_later"]
+__all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "install", "remove", "installed", "waiting_for",
+           "sparse_linalg_later", "numpy_listed_without_extras", "hand_over_extras"]
+
+
+#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
+#: import all at once and which no array-API function needs
+#: (:func:`mitld_lp.startup.lean_scipy`).
+NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
+                "char", "strings", "core")
+
+#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
+SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
+
+
+def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
+    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
+    imported yet, until the function returned is called (which puts both back); and
+    those names.  :func:`mitld_lp.startup.lean_scipy`'s first half."""
+    import numpy
+
+    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
+    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
+    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
+    numpy.__all__ = [name for name in kept_all if name not in extras]
+    if kept_dir is not None:
+        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+
+    def restore() -> None:
+        numpy.__all__ = kept_all
+        if kept_dir is not None:
+            numpy.__dir__ = kept_dir
+
+    return restore, extras
+
+
+def hand_over_extras(copy: Any, extras: set[str]) -> None:
+    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
+    held ``extras`` back, hands each of them over from NumPy when first asked (importing
+    it then) and lists them in its ``__all__``.  :func:`mitld_lp.startup.lean_scipy`'s
+    second half."""
+    import numpy
+
+    left_out = extras - vars(copy).keys()
+    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
+
+    def handed_over(name: str) -> object:
+        if name in left_out:
+            return getattr(numpy, name)
+        if own is not None:
+            return own(name)
+        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
+
+    copy.__getattr__ = handed_over
+    copy.__all__ = sorted({*copy.__all__, *left_out})
 
 
 def _dataclasses_around() -> Callable[[ModuleType | None], None]:
@@ -59,9 +112,10 @@ def _dataclasses_around() -> Callable[[ModuleType | None], None]:
 
 
 def _dataclasses_cut() -> None:
-    from mitld_lp import init_cache, startup
+    from mitld_lp import init_cache
+    from mitld_lp.dataclass_closures import methods_without_exec
 
-    startup.dataclass_methods_without_exec(package_only=True)
+    methods_without_exec(package_only=True)
     init_cache.install(package_only=True)
 
 
@@ -69,14 +123,12 @@ def _scipy_copy_around() -> Callable[[ModuleType | None], None]:
     """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
     function to call after it (NumPy put back, then the copy handing the extras over;
     ``None``: the import failed, NumPy is put back only)."""
-    from mitld_lp import startup
-
-    restore, extras = startup.numpy_listed_without_extras()
+    restore, extras = numpy_listed_without_extras()
 
     def after(copy: ModuleType | None) -> None:
         restore()
         if copy is not None:
-            startup.hand_over_extras(copy, extras)
+            hand_over_extras(copy, extras)
 
     return after
 
@@ -193,8 +245,6 @@ def install(command: bool = False) -> None:
     for csgraph only): each cut now if its module is imported already, else when it
     is."""
     global _hook
-    from mitld_lp import startup
-
     remove()
     hook = _Hook()
     if not command:
@@ -202,8 +252,8 @@ def install(command: bool = False) -> None:
             _dataclasses_cut()
         else:
             hook.waiting["dataclasses"] = _dataclasses_around
-        if startup.SCIPY_NUMPY_COPY not in sys.modules:
-            hook.waiting[startup.SCIPY_NUMPY_COPY] = _scipy_copy_around
+        if SCIPY_NUMPY_COPY not in sys.modules:
+            hook.waiting[SCIPY_NUMPY_COPY] = _scipy_copy_around
     if "scipy.sparse.csgraph" not in sys.modules:
         hook.waiting["scipy.sparse.csgraph"] = sparse_linalg_later
     if hook.waiting:
