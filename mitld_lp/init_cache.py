@@ -4,7 +4,7 @@ Python 3.11 and 3.12 write each dataclass's ``__init__`` as source text and comp
 (``dataclasses._create_fn``): the bundled case's command makes 97 dataclasses while it
 runs, and compiling their ``__init__`` methods is 0.035 s of its 0.55 s of CPU (the
 other generated methods are closures already,
-:func:`mitld_lp.startup.dataclass_methods_without_exec`). Here ``_create_fn`` takes the
+:mod:`mitld_lp.dataclass_closures`). Here ``_create_fn`` takes the
 code object compiled from the same text from a table kept beside the package's bytecode
 (``mitld_lp/__pycache__/dataclass_inits.<tag>.marshal``), compiling only a text the
 table lacks; the table gets the new texts when the process ends (unless Python writes no
@@ -101,16 +101,30 @@ def _code(text: str) -> CodeType:
     return code
 
 
-def install() -> bool:
+#: Whether every dataclass's ``__init__`` comes from the table (the command line), or
+#: only the package's own (a program importing the package); None: not installed.
+_for_all: bool | None = None
+
+
+def install(package_only: bool = False) -> bool:
     """Have ``dataclasses._create_fn`` take its code from the table (loaded now, written
     at exit); False (nothing done) on a Python whose ``_create_fn`` is not the one
-    replaced here."""
+    replaced here.  ``package_only`` (a program importing the package,
+    :mod:`mitld_lp.library_start`): only for the package's own dataclasses, every other
+    class's methods compiled by dataclasses itself; a later call without it widens the
+    table to every class."""
+    global _for_all
     import atexit
     import dataclasses
     import inspect
 
+    from mitld_lp.dataclass_closures import in_package
+
     if sys.version_info[:2] not in ((3, 11), (3, 12)):
         return False
+    if _for_all is not None:  # installed already: the scope is all that changes
+        _for_all = _for_all or not package_only
+        return True
     original = getattr(dataclasses, "_create_fn", None)
     try:
         params = list(inspect.signature(original).parameters) if original else []
@@ -125,6 +139,9 @@ def install() -> bool:
     def _create_fn(name: str, args: list[str], body: list[str], *,
                    globals: dict | None = None, locals: dict | None = None,
                    return_type: Any = missing) -> Any:
+        if not (_for_all or in_package(globals)):
+            return original(name, args, body, globals=globals, locals=locals,
+                            return_type=return_type)
         # dataclasses' own text, line for line (3.11, 3.12)
         if locals is None:
             locals = {}
@@ -141,6 +158,7 @@ def install() -> bool:
         exec(_code(txt), globals, ns)
         return ns["__create_fn__"](**locals)
 
+    _for_all = not package_only
     dataclasses._create_fn = _create_fn
     if not sys.dont_write_bytecode:  # ``-B``, PYTHONDONTWRITEBYTECODE: read it only
         atexit.register(_write, path)

@@ -31,8 +31,11 @@ without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundl
 case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would
 import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
 These leave every name where it was (the layer hands NumPy's submodules over when
-asked; ``regex`` and ``numpy.ma`` import for whoever asks later); a program that
-imports the package gets SciPy, NumPy and lark as they import themselves.
+asked; ``regex`` and ``numpy.ma`` import for whoever asks later).  A program that
+imports the package gets NumPy, SciPy and lark as they import themselves, but for the
+cuts nobody can see, made by :mod:`mitld_lp.library_start`: SciPy's layer as here, the
+package's own dataclasses as below (not the program's), and ``scipy.sparse.csgraph``
+without ``scipy.linalg`` until a factorisation (the command line too).
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
 nearly all frozen) made with their comparison, hash, representation and frozen
@@ -54,8 +57,6 @@ import sys
 # printed a traceback); the names are for annotations only
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Callable
-    from dataclasses import Field
     from typing import Any
 
 __all__ = ["started_as_command", "command", "collect_from_here", "hold_collector", "lean_start",
@@ -137,13 +138,18 @@ def lean_start() -> None:
     when first used (:func:`numpy_ma_when_used`), lark without ``regex``
     (:func:`lark_without_regex`), and the stand-ins of :mod:`mitld_lp.stand_ins`: NumPy
     without the docstrings of its C objects, SciPy's test runner and a few standard
-    modules imported when first used.
+    modules imported when first used; and ``scipy.sparse.csgraph`` without
+    ``scipy.linalg`` (:func:`mitld_lp.library_start.sparse_linalg_later`, the one cut of
+    the program's start it keeps).
 
     :func:`command` calls it; a program that runs the package's routes and nothing else
     (a benchmark's worker process measuring what the command line's process costs) may
     call it first, before NumPy, SciPy and lark are imported; what each of those
     functions changes then holds for the whole process.  The answers are the same to
     the bit."""
+    from mitld_lp import library_start
+
+    library_start.install(command=True)  # a program's cuts: these are wider
     dataclass_methods_without_exec()
     from mitld_lp import init_cache
 
@@ -170,18 +176,9 @@ def hold_collector() -> None:
         _collector_held = True
 
 
-#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
-#: import all at once and which no array-API function needs (:func:`lean_scipy`).
-NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
-                "char", "strings", "core")
-
-#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
-SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
-
-
 def lean_scipy() -> None:
     """Import SciPy's array-API layer (which every ``scipy.sparse`` import loads) without
-    the NumPy submodules in :data:`NUMPY_EXTRAS`.
+    the NumPy submodules in :data:`mitld_lp.library_start.NUMPY_EXTRAS`.
 
     The layer copies NumPy's namespace name by name (``from numpy import *`` and a
     ``getattr`` of every name ``dir(numpy)`` lists), and so imports every submodule NumPy
@@ -193,40 +190,29 @@ def lean_scipy() -> None:
     back at once, and the copy hands them over from NumPy when asked (a module
     ``__getattr__``, importing them then): the layer sees the same objects, later.
 
-    The command line only (a program importing the package is left alone); nothing when
-    the layer is already imported or this SciPy has no such module."""
-    if SCIPY_NUMPY_COPY in sys.modules:
-        return
+    The command line does it at its start; a program importing the package has it
+    done when SciPy imports the layer (:mod:`mitld_lp.library_start`, the same two
+    halves); nothing when the layer is already imported or this SciPy has no such
+    module."""
     import importlib
 
-    import numpy
+    from mitld_lp.library_start import (
+        SCIPY_NUMPY_COPY,
+        hand_over_extras,
+        numpy_listed_without_extras,
+    )
 
-    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
-    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
-    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
-    numpy.__all__ = [name for name in kept_all if name not in extras]
-    if kept_dir is not None:
-        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+    if SCIPY_NUMPY_COPY in sys.modules:
+        return
+
+    restore, extras = numpy_listed_without_extras()
     try:
         copy = importlib.import_module(SCIPY_NUMPY_COPY)
     except ImportError:  # another SciPy: its own import, later, is left as it is
         return
     finally:
-        numpy.__all__ = kept_all
-        if kept_dir is not None:
-            numpy.__dir__ = kept_dir
-    left_out = extras - vars(copy).keys()
-    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
-
-    def handed_over(name: str) -> object:
-        if name in left_out:
-            return getattr(numpy, name)
-        if own is not None:
-            return own(name)
-        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
-
-    copy.__getattr__ = handed_over  # type: ignore[attr-defined]
-    copy.__all__ = sorted({*copy.__all__, *left_out})
+        restore()
+    hand_over_extras(copy, extras)
 
 
 def numpy_ma_when_used() -> None:
@@ -289,143 +275,11 @@ def lark_without_regex() -> None:
         del sys.modules["regex"]
 
 
-#: The Pythons whose ``dataclasses`` make the methods below with these functions, each
-#: compiling its method's source (3.13 compiles a class's methods at once).
-DATACLASS_PYTHONS = ((3, 11), (3, 12))
-_DATACLASS_MAKERS = ("_repr_fn", "_cmp_fn", "_hash_fn", "_frozen_get_del_attr",
-                     "_recursive_repr", "FrozenInstanceError")
+def dataclass_methods_without_exec(package_only: bool = False) -> None:
+    """:func:`mitld_lp.dataclass_closures.methods_without_exec`: a dataclass's
+    comparison, hash, representation and frozen methods as closures instead of source
+    compiled with ``exec`` (about 0.05 s of the bundled case's CPU); every class's, or
+    the package's only (``package_only``)."""
+    from mitld_lp.dataclass_closures import methods_without_exec
 
-
-def dataclass_methods_without_exec() -> None:
-    """Have :func:`dataclasses.dataclass` make ``__repr__``, ``__eq__`` (and the order),
-    ``__hash__`` and a frozen class's ``__setattr__`` and ``__delattr__`` as closures
-    over the field names instead of compiling each method's source with ``exec``.
-
-    Python 3.11 and 3.12 write every such method as text and compile it: 0.2 ms of CPU
-    each, six for a frozen record with equality, so about 1 ms a class, while its
-    ``__init__`` (kept compiled: its signature and speed matter) is one of the six.
-    The bundled case's command makes 118 dataclasses, 113 frozen (formula nodes,
-    automata, product tables, the routes' and solvers' records): about 0.09 s of its
-    CPU, 0.045 s with the closures.  The closures do what the compiled methods do,
-    operation for operation: ``__eq__`` and the order compare the tuples of the
-    compared fields when both are of the same class (else ``NotImplemented``),
-    ``__hash__`` hashes that tuple (the same number, so sets of records iterate in the
-    same order), ``__repr__`` writes the same text (through dataclasses' own guard
-    against recursion), and a frozen class refuses an assignment or a deletion with the
-    same :class:`dataclasses.FrozenInstanceError`.
-
-    The command line only (a program importing the package gets dataclasses as they
-    are); nothing on another Python (3.13 compiles a class's methods in one go) or if
-    the module's makers are not the ones replaced here."""
-    import dataclasses
-
-    if (sys.version_info[:2] not in DATACLASS_PYTHONS
-            or not all(hasattr(dataclasses, name) for name in _DATACLASS_MAKERS)):
-        return
-    for name, maker in (("_repr_fn", _repr_fn), ("_cmp_fn", _cmp_fn), ("_hash_fn", _hash_fn),
-                        ("_frozen_get_del_attr", _frozen_get_del_attr)):
-        setattr(dataclasses, name, maker)
-
-
-def _tuple_of(names: tuple[str, ...]) -> Callable[[object], tuple]:
-    """The function giving ``(obj.a, obj.b, ...)`` for the field names ``names``, as
-    dataclasses' source writes it (a tuple also for one field or none)."""
-    from operator import attrgetter
-
-    if len(names) > 1:
-        return attrgetter(*names)  # a tuple already
-    if names:
-        get = attrgetter(names[0])
-        return lambda obj: (get(obj),)
-    return lambda obj: ()
-
-
-def _named(fn: Callable[..., Any], name: str, globals: dict) -> Callable[..., Any]:
-    """``fn`` named as dataclasses names the method, of the class's module."""
-    fn.__name__ = fn.__qualname__ = name
-    fn.__module__ = globals.get("__name__", fn.__module__)
-    return fn
-
-
-def _repr_fn(fields: list[Field], globals: dict) -> Callable[..., Any]:
-    import dataclasses
-
-    names = tuple(f.name for f in fields)
-
-    def __repr__(self: object) -> str:
-        return (self.__class__.__qualname__ + "("
-                + ", ".join([f"{name}={getattr(self, name)!r}" for name in names]) + ")")
-
-    return dataclasses._recursive_repr(_named(__repr__, "__repr__", globals))
-
-
-#: The comparisons dataclasses writes (``op`` of ``_cmp_fn``).
-_COMPARISONS = {"==": "eq", "<": "lt", "<=": "le", ">": "gt", ">=": "ge"}
-
-
-def _cmp_fn(name: str, op: str, self_tuple: str, other_tuple: str,
-            globals: dict) -> Callable[..., Any]:
-    import operator
-
-    # self_tuple is dataclasses' source of the tuple: "()" or "(self.a,self.b,)"
-    names = tuple(part.split(".", 1)[1] for part in self_tuple[1:-1].split(",") if part)
-    values = _tuple_of(names)
-    if op == "==" and len(names) == 1:  # the common cases without a call more than needed
-        get = operator.attrgetter(names[0])
-
-        def method(self: object, other: object) -> Any:
-            if other.__class__ is self.__class__:
-                return (get(self),) == (get(other),)
-            return NotImplemented
-    elif op == "==":
-        def method(self: object, other: object) -> Any:
-            if other.__class__ is self.__class__:
-                return values(self) == values(other)
-            return NotImplemented
-    else:
-        compare = getattr(operator, _COMPARISONS[op])
-
-        def method(self: object, other: object) -> Any:
-            if other.__class__ is self.__class__:
-                return compare(values(self), values(other))
-            return NotImplemented
-
-    return _named(method, name, globals)
-
-
-def _hash_fn(fields: list[Field], globals: dict) -> Callable[..., Any]:
-    from operator import attrgetter
-
-    names = tuple(f.name for f in fields)
-    if len(names) == 1:
-        get = attrgetter(names[0])
-
-        def __hash__(self: object) -> int:
-            return hash((get(self),))
-    else:
-        values = _tuple_of(names)
-
-        def __hash__(self: object) -> int:
-            return hash(values(self))
-
-    return _named(__hash__, "__hash__", globals)
-
-
-def _frozen_get_del_attr(cls: type, fields: list[Field],
-                         globals: dict) -> tuple[Callable[..., Any], ...]:
-    from dataclasses import FrozenInstanceError
-
-    names = tuple(f.name for f in fields)
-
-    def __setattr__(self: object, name: str, value: object) -> None:
-        if type(self) is cls or name in names:
-            raise FrozenInstanceError(f"cannot assign to field {name!r}")
-        super(cls, self).__setattr__(name, value)
-
-    def __delattr__(self: object, name: str) -> None:
-        if type(self) is cls or name in names:
-            raise FrozenInstanceError(f"cannot delete field {name!r}")
-        super(cls, self).__delattr__(name)
-
-    return (_named(__setattr__, "__setattr__", globals),
-            _named(__delattr__, "__delattr__", globals))
+    methods_without_exec(package_only)

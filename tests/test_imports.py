@@ -50,6 +50,19 @@ def test_a_large_graph_loads_scipys_linear_algebra():
         "ring = sp.csr_array((np.ones(n), (np.arange(n), (np.arange(n) + 1) % n)))\n"
         "assert traversal.strong_components(ring)[0] == 1")
     assert "scipy.sparse.linalg" in loaded
+    # csgraph's searches: SciPy's sparse linear algebra stands in for csgraph's one name,
+    # so its dense linear algebra (LAPACK, BLAS) waits for a factorisation
+    # (mitld_lp.library_start.sparse_linalg_later)
+    assert "scipy.linalg" not in loaded
+    factorised = _loaded_after(
+        "import numpy as np, scipy.sparse as sp\n"
+        "from mitld_lp.util import traversal\n"
+        "n = traversal.SMALL + 1\n"
+        "ring = sp.csr_array((np.ones(n), (np.arange(n), (np.arange(n) + 1) % n)))\n"
+        "assert traversal.strong_components(ring)[0] == 1\n"
+        "from scipy.sparse.linalg import splu\n"
+        "assert splu(sp.csc_array(np.eye(2))).solve(np.ones(2)).tolist() == [1.0, 1.0]")
+    assert "scipy.linalg" in factorised
 
 
 def test_a_solve_nobody_watches_imports_no_progress_bar():
@@ -202,9 +215,9 @@ def test_the_command_solves_a_grid_model_without_what_it_does_not_need(tmp_path)
     # the collector, off while the command line imported, is on again for the work,
     # the imported modules' objects out of its passes
     assert solved["collector"] and solved["frozen"] > 0
-    # its dataclasses' methods are closures (startup.dataclass_methods_without_exec)
+    # its dataclasses' methods are closures (mitld_lp.dataclass_closures)
     if sys.version_info[:2] in ((3, 11), (3, 12)):
-        assert solved["records"] == "mitld_lp.startup"
+        assert solved["records"] == "mitld_lp.dataclass_closures"
     # the probe sees a module once a command needs it: the DRN export's writer
     drn = tmp_path / "case.drn"
     exported = _command_modules(["export", "models/bus_grid.toml", "--drn", str(drn), "-q"])
@@ -229,7 +242,7 @@ def _array_api_copy(lean: bool) -> dict:
     made by the command line's :func:`mitld_lp.startup.lean_scipy` or by SciPy itself:
     the names it lists, whether each of NumPy's later submodules it hands over is
     NumPy's own, NumPy's ``__all__`` and ``dir`` after, and what was imported."""
-    from mitld_lp.startup import NUMPY_EXTRAS, SCIPY_NUMPY_COPY
+    from mitld_lp.library_start import NUMPY_EXTRAS, SCIPY_NUMPY_COPY
 
     probe = ("import sys, json, importlib\n"
              "sys.argv[0] = 'mitld-lp'\n"

@@ -1,0 +1,282 @@
+"""A program importing the package: the package's start-up costs cut where nobody sees it.
+
+The command line's start-up (:func:`mitld_lp.startup.lean_start`) changes what the
+whole process imports and how every dataclass is made.  A program that imports the
+package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
+service) gets the three cuts that change nothing it can use, made when their module is
+first imported, not at ``import mitld_lp`` (which stays free of NumPy and
+``dataclasses``: :mod:`mitld_lp.runtime` imports NumPy alone):
+
+* SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
+  ``scipy.sparse`` import loads) copies NumPy's namespace without importing
+  ``numpy.f2py``, ``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``... which the copy
+  hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`, the
+  same two halves): 0.1 s of CPU on a PRISM route.  The copy lists the same names, each
+  NumPy's own object; NumPy's ``__all__`` and ``dir`` are put back at once.  Nothing if
+  SciPy's layer was imported before the package.
+* The package's own dataclasses get their comparison, hash, representation and frozen
+  methods as closures and their ``__init__`` from the table of compiled code
+  (:mod:`mitld_lp.dataclass_closures`, :mod:`mitld_lp.init_cache`,
+  both with ``package_only``): 0.1 s on a PRISM route.  Every other module's dataclasses
+  are made by the stdlib as before.
+* ``scipy.sparse.csgraph`` is imported without ``scipy.sparse.linalg``'s ``__init__``
+  and so without ``scipy.linalg`` (LAPACK and BLAS wrappers, whose OpenBLAS starts its
+  threads): csgraph's searches need neither, and ``scipy.sparse.linalg`` loads whole at
+  the first name read other than ``LinearOperator`` (:func:`sparse_linalg_later`):
+  0.11 s of CPU on a PRISM route that walks graphs and factorises nothing (the
+  deadline instances); a route that factorises pays it at its first ``splu``.  The
+  command line's start keeps this one (:func:`install` with ``command``).
+
+The hook is a finder at the front of ``sys.meta_path`` that answers for those modules
+only, once each (the module's own finder finds it; the loader is wrapped for the one
+import, then put back on the module), and leaves ``sys.meta_path`` when all were
+seen.  Nothing changes an answer: the same objects, the same methods.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from importlib.machinery import ModuleSpec
+    from types import ModuleType
+    from typing import Any
+
+__all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "install", "remove", "installed", "waiting_for",
+           "sparse_linalg_later", "numpy_listed_without_extras", "hand_over_extras"]
+
+
+#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
+#: import all at once and which no array-API function needs
+#: (:func:`mitld_lp.startup.lean_scipy`).
+NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
+                "char", "strings", "core")
+
+#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
+SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
+
+
+def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
+    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
+    imported yet, until the function returned is called (which puts both back); and
+    those names.  :func:`mitld_lp.startup.lean_scipy`'s first half."""
+    import numpy
+
+    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
+    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
+    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
+    numpy.__all__ = [name for name in kept_all if name not in extras]
+    if kept_dir is not None:
+        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+
+    def restore() -> None:
+        numpy.__all__ = kept_all
+        if kept_dir is not None:
+            numpy.__dir__ = kept_dir
+
+    return restore, extras
+
+
+def hand_over_extras(copy: Any, extras: set[str]) -> None:
+    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
+    held ``extras`` back, hands each of them over from NumPy when first asked (importing
+    it then) and lists them in its ``__all__``.  :func:`mitld_lp.startup.lean_scipy`'s
+    second half."""
+    import numpy
+
+    left_out = extras - vars(copy).keys()
+    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
+
+    def handed_over(name: str) -> object:
+        if name in left_out:
+            return getattr(numpy, name)
+        if own is not None:
+            return own(name)
+        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
+
+    copy.__getattr__ = handed_over
+    copy.__all__ = sorted({*copy.__all__, *left_out})
+
+
+def _dataclasses_around() -> Callable[[ModuleType | None], None]:
+    """Nothing before ``dataclasses`` runs; after it, the package's makers."""
+
+    def after(module: ModuleType | None) -> None:
+        if module is not None:
+            _dataclasses_cut()
+
+    return after
+
+
+def _dataclasses_cut() -> None:
+    from mitld_lp import init_cache
+    from mitld_lp.dataclass_closures import methods_without_exec
+
+    methods_without_exec(package_only=True)
+    init_cache.install(package_only=True)
+
+
+def _scipy_copy_around() -> Callable[[ModuleType | None], None]:
+    """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
+    function to call after it (NumPy put back, then the copy handing the extras over;
+    ``None``: the import failed, NumPy is put back only)."""
+    restore, extras = numpy_listed_without_extras()
+
+    def after(copy: ModuleType | None) -> None:
+        restore()
+        if copy is not None:
+            hand_over_extras(copy, extras)
+
+    return after
+
+
+#: SciPy's sparse linear algebra, which ``scipy.sparse.csgraph`` imports at its start
+#: for one name (:func:`sparse_linalg_later`).
+SPARSE_LINALG = "scipy.sparse.linalg"
+
+
+class _LinalgLater(types.ModuleType):
+    """``scipy.sparse.linalg`` before its ``__init__`` ran: its spec, path and
+    ``LinearOperator`` (from its submodule ``_interface``) are there; reading any other
+    name, or ``dir``, runs the real ``__init__`` in this same module, which then is the
+    plain module SciPy's import makes."""
+
+    def _load(self) -> None:
+        spec = vars(self)["__spec__"]
+        self.__class__ = types.ModuleType  # no more stand-in, whatever happens below
+        spec.loader.exec_module(self)
+
+    def __getattr__(self, name: str) -> Any:
+        self._load()
+        return getattr(self, name)
+
+    def __dir__(self) -> list[str]:
+        self._load()
+        return dir(self)
+
+
+def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
+    """Before ``scipy.sparse.csgraph`` runs: ``scipy.sparse.linalg`` in ``sys.modules`` as
+    a :class:`_LinalgLater`, which csgraph's ``_laplacian`` takes its one name from
+    (``LinearOperator``, for ``laplacian(form="lo")``).  csgraph's searches need none of
+    it; its ``__init__`` imports ``scipy.linalg`` (LAPACK, BLAS, decompositions): 0.11 s
+    of CPU on a PRISM route that only walks graphs.  The first other name read (``splu``,
+    ``spsolve``...) loads it whole.  Nothing if it is imported already."""
+    if SPARSE_LINALG not in sys.modules:
+        import importlib
+        import importlib.util
+
+        sparse = importlib.import_module("scipy.sparse")
+        spec = importlib.util.find_spec(SPARSE_LINALG)
+        if spec is not None and spec.loader is not None and hasattr(spec.loader,
+                                                                      "exec_module"):
+            module = importlib.util.module_from_spec(spec)  # the import system's own
+            module.__class__ = _LinalgLater
+            sys.modules[SPARSE_LINALG] = module
+            try:
+                interface = importlib.import_module(f"{SPARSE_LINALG}._interface")
+            except BaseException:
+                del sys.modules[SPARSE_LINALG]
+                raise
+            vars(module)["LinearOperator"] = interface.LinearOperator
+            vars(sparse)["linalg"] = module  # as the import system binds a submodule
+    return lambda csgraph: None
+
+
+class _Loader:
+    """The module's own loader for one import, with what runs around its
+    ``exec_module``; every other attribute is the loader's own."""
+
+    def __init__(self, loader: Any, around: Any) -> None:
+        self._loader, self._around = loader, around
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loader, name)
+
+    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: ModuleType) -> None:
+        loader = self._loader
+        module.__loader__ = loader  # the module's own loader, as without the hook
+        if module.__spec__ is not None:
+            module.__spec__.loader = loader
+        after = self._around()
+        try:
+            loader.exec_module(module)
+        except BaseException:
+            after(None)
+            raise
+        after(module)
+
+
+class _Hook:
+    """The finder: the modules it waits for, and what runs around each one's import."""
+
+    def __init__(self) -> None:
+        self.waiting: dict[str, Any] = {}  # name -> what runs around its import
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> ModuleSpec | None:
+        around = self.waiting.pop(name, None)
+        if around is None:
+            return None
+        if not self.waiting:
+            remove()
+        for finder in sys.meta_path:
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(name, path, target)
+            if spec is not None:
+                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                    spec.loader = _Loader(spec.loader, around)
+                return spec
+        return None
+
+
+_hook: _Hook | None = None
+
+
+def install(command: bool = False) -> None:
+    """Put the hook in place (``import mitld_lp`` does; ``command``: the command line's
+    :func:`mitld_lp.startup.lean_start` does, with its own wider cuts, so the hook waits
+    for csgraph only): each cut now if its module is imported already, else when it
+    is."""
+    global _hook
+    remove()
+    hook = _Hook()
+    if not command:
+        if "dataclasses" in sys.modules:
+            _dataclasses_cut()
+        else:
+            hook.waiting["dataclasses"] = _dataclasses_around
+        if SCIPY_NUMPY_COPY not in sys.modules:
+            hook.waiting[SCIPY_NUMPY_COPY] = _scipy_copy_around
+    if "scipy.sparse.csgraph" not in sys.modules:
+        hook.waiting["scipy.sparse.csgraph"] = sparse_linalg_later
+    if hook.waiting:
+        _hook = hook
+        sys.meta_path.insert(0, hook)
+
+
+def remove() -> None:
+    """Take the hook out of ``sys.meta_path`` (what it has done stays)."""
+    global _hook
+    if _hook is not None:
+        try:
+            sys.meta_path.remove(_hook)
+        except ValueError:
+            pass
+        _hook = None
+
+
+def installed() -> bool:
+    """Whether the hook is waiting for a module."""
+    return _hook is not None
+
+
+def waiting_for() -> list[str]:
+    """The modules whose import the hook still waits for."""
+    return sorted(_hook.waiting) if _hook is not None else []
