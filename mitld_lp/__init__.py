@@ -156,11 +156,6 @@ class _Package(types.ModuleType):
 
 sys.modules[__name__].__class__ = _Package
 
-if not startup.started_as_command():  # a program importing the package: its own cuts
-    from mitld_lp import library_start
-
-    library_start.install()
-
 
 __version__ = "0.1.0"
 

@@ -3,9 +3,12 @@
 The command line's start-up (:func:`mitld_lp.startup.lean_start`) changes what the
 whole process imports and how every dataclass is made.  A program that imports the
 package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
-service) gets the three cuts that change nothing it can use, made when their module is
-first imported, not at ``import mitld_lp`` (which stays free of NumPy and
-``dataclasses``: :mod:`mitld_lp.runtime` imports NumPy alone):
+service) may ask for three cuts that change nothing it can use, by calling
+:func:`install` before its own heavy imports; each is made when its module is first
+imported.  ``import mitld_lp`` alone installs nothing: the cuts reach into SciPy's and
+the standard library's import-time behaviour, which a library does not do to a
+program unasked (and ``import mitld_lp`` stays free of NumPy and ``dataclasses``:
+:mod:`mitld_lp.runtime` imports NumPy alone):
 
 * SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
   ``scipy.sparse`` import loads) copies NumPy's namespace without importing
@@ -240,7 +243,7 @@ _hook: _Hook | None = None
 
 
 def install(command: bool = False) -> None:
-    """Put the hook in place (``import mitld_lp`` does; ``command``: the command line's
+    """Put the hook in place (a program asks for it; ``command``: the command line's
     :func:`mitld_lp.startup.lean_start` does, with its own wider cuts, so the hook waits
     for csgraph only): each cut now if its module is imported already, else when it
     is."""

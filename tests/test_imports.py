@@ -50,19 +50,8 @@ def test_a_large_graph_loads_scipys_linear_algebra():
         "ring = sp.csr_array((np.ones(n), (np.arange(n), (np.arange(n) + 1) % n)))\n"
         "assert traversal.strong_components(ring)[0] == 1")
     assert "scipy.sparse.linalg" in loaded
-    # csgraph's searches: SciPy's sparse linear algebra stands in for csgraph's one name,
-    # so its dense linear algebra (LAPACK, BLAS) waits for a factorisation
-    # (mitld_lp.library_start.sparse_linalg_later)
-    assert "scipy.linalg" not in loaded
-    factorised = _loaded_after(
-        "import numpy as np, scipy.sparse as sp\n"
-        "from mitld_lp.util import traversal\n"
-        "n = traversal.SMALL + 1\n"
-        "ring = sp.csr_array((np.ones(n), (np.arange(n), (np.arange(n) + 1) % n)))\n"
-        "assert traversal.strong_components(ring)[0] == 1\n"
-        "from scipy.sparse.linalg import splu\n"
-        "assert splu(sp.csc_array(np.eye(2))).solve(np.ones(2)).tolist() == [1.0, 1.0]")
-    assert "scipy.linalg" in factorised
+    # a program's csgraph (no hook asked for) is SciPy's as published: its linear
+    # algebra comes with it; with the hook, tests/test_route_imports_csgraph.py
 
 
 def test_a_solve_nobody_watches_imports_no_progress_bar():

@@ -13,8 +13,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-#: argv[1]: "program" (import mitld_lp first), "command" (the command line's start),
-#: "plain" (the hook taken out at once).  A strongly connected ring past the small-graph
+#: argv[1]: "program" (import mitld_lp, then library_start.install()), "command" (the
+#: command line's start), "plain" (import mitld_lp alone: no hook).  A strongly connected ring past the small-graph
 #: walks, searched by the package; then csgraph's Laplacian as an operator; then a
 #: factorisation.
 PROBE = r"""
@@ -22,8 +22,8 @@ import json, sys
 way = sys.argv[1]
 import mitld_lp
 from mitld_lp import library_start, startup
-if way == "plain":
-    library_start.remove()
+if way == "program":
+    library_start.install()
 if way == "command":
     startup.lean_start()
 import numpy as np, scipy.sparse as sp

@@ -32,17 +32,18 @@ VALUE = (6 / 7) ** 3
 UNLOADED = ("numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ctypeslib",
             "numpy.rec", "numpy.char", "numpy.strings")
 
-#: The route as a program runs it (argv[2]: "hooked", as imported, or "plain", the
-#: hook taken out before anything else is imported); prints the answer, the modules
+#: The route as a program runs it (argv[2]: "hooked", the program asking for the hook
+#: before anything else is imported, or "plain", as imported); prints the answer, the modules
 #: loaded, how dataclasses were made, and SciPy's copy of NumPy's namespace.
 PROBE = r"""
 import json, sys
 import mitld_lp
 from mitld_lp import library_start
-waiting = library_start.installed()
 plain_import = sorted(m for m in ("numpy", "dataclasses", "scipy") if m in sys.modules)
-if sys.argv[2] == "plain":
-    library_start.remove()
+unasked = library_start.installed()
+if sys.argv[2] == "hooked":
+    library_start.install()
+waiting = library_start.installed()
 from dataclasses import dataclass
 @dataclass(frozen=True)
 class Mine:
@@ -61,7 +62,7 @@ print(json.dumps(dict(
     mine=[Mine.__eq__.__code__.co_filename, Mine.__init__.__code__.co_filename,
           repr(Mine(1)), Mine(1) == Mine(1), hash(Mine(1)) == hash((1,))],
     ours=[Prop.__eq__.__code__.co_filename == "<string>", repr(Prop("goal"))],
-    copy_all=sorted(copy.__all__), copy_dir=sorted(dir(copy)), same=same,
+    unasked=unasked, copy_all=sorted(copy.__all__), copy_dir=sorted(dir(copy)), same=same,
     numpy_all=sorted(numpy.__all__))))
 """
 
@@ -89,8 +90,11 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
 
 def test_the_library_route_leaves_numpys_extras_unloaded(runs: dict[str, dict]) -> None:
     hooked, plain = runs["hooked"], runs["plain"]
-    # import mitld_lp alone: nothing of NumPy, SciPy or dataclasses yet; the hook waits
-    assert hooked["plain_import"] == [] and hooked["waiting"] is True
+    # import mitld_lp alone: nothing of NumPy, SciPy or dataclasses, and no hook until
+    # the program asks for it (install); then it waits
+    assert hooked["plain_import"] == [] and hooked["unasked"] is False
+    assert plain["unasked"] is False and plain["waiting"] is False
+    assert hooked["waiting"] is True
     # both modules seen; csgraph, which this small product's walks do not need, awaited
     assert hooked["left"] == ["scipy.sparse.csgraph"]
     assert hooked["loaded"] == []
