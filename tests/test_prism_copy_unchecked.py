@@ -7,6 +7,7 @@ budget still refusing a model too large before any row is read."""
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,19 +30,25 @@ label "hurt" = hit;
 """
 
 
-def _recording(monkeypatch: pytest.MonkeyPatch, log: Path) -> None:
-    """Each build's exploration checks (True/False) appended to ``log`` (a file: the
-    capped child writes it as well)."""
-    from mitld_lp.worlds import prism_build
+def _marked(monkeypatch: pytest.MonkeyPatch, module: object, name: str, log: Path,
+            mark: Callable[..., str]) -> None:
+    """``module.name`` writing a line to ``log`` at each call, ``mark(*args, **kwargs)``
+    (a file: the capped child writes it as well)."""
+    real = getattr(module, name)
 
-    real = prism_build.builder_options
-
-    def recorded(*a, **k):  # noqa: ANN002, ANN003, ANN202
+    def marking(*a, **k):  # noqa: ANN002, ANN003, ANN202
         with log.open("a") as fh:
-            fh.write(f"{k['checks']}\n")
+            fh.write(mark(*a, **k) + "\n")
         return real(*a, **k)
 
-    monkeypatch.setattr(prism_build, "builder_options", recorded)
+    monkeypatch.setattr(module, name, marking)
+
+
+def _recording(monkeypatch: pytest.MonkeyPatch, log: Path) -> None:
+    """Each build's exploration checks (True/False) written to ``log``."""
+    from mitld_lp.worlds import prism_build
+
+    _marked(monkeypatch, prism_build, "builder_options", log, lambda *a, **k: str(k["checks"]))
 
 
 def _pmax(t, goal: np.ndarray) -> float:  # noqa: ANN001
@@ -146,14 +153,7 @@ def test_the_budget_refuses_a_large_model_with_the_unchecked_build(
     log = tmp_path / "checks.txt"
     _recording(monkeypatch, log)
     reads = tmp_path / "reads.txt"
-    real = prism_tables.checked_rows
-
-    def counted(*a, **k):  # noqa: ANN002, ANN003, ANN202
-        with reads.open("a") as fh:
-            fh.write("read\n")
-        return real(*a, **k)
-
-    monkeypatch.setattr(prism_tables, "checked_rows", counted)
+    _marked(monkeypatch, prism_tables, "checked_rows", reads, lambda *a, **k: "read")
     path = tmp_path / "plane.prism"
     path.write_text("mdp\nmodule m\n  x : [0..2999] init 0;\n  y : [0..2999] init 0;\n"
                     "  [a] x<2999 -> 0.5 : (x'=x+1) + 0.5 : (y'=min(y+1, 2999));\n"
