@@ -43,18 +43,15 @@ interleaving of moves and events reaches is built), and a PRISM user writes an e
 they would write any other action.  An event's command must be unique where enabled
 (one choice per state): an event is the environment's, not a choice.
 
-Checks.  An update that leaves a variable's range or probabilities that do not sum to
-1 in some state are refused: a whole world is built without Storm's exploration checks
-but with its out-of-bounds state, and every range and sum is checked on the copy
-(:func:`~mitld_lp.worlds.prism_build.unchecked_first`; without that state Storm would
-store values modulo the range), a world explored a part at a time with Storm's checks
-on; before it builds, every variable
+Checks.  Storm builds with its exploration checks on, so an update that leaves a
+variable's range or probabilities that do not sum to 1 in some state stop the build
+(without them Storm stores values modulo the range); before it builds, every variable
 must have a non-empty range holding its initial value and every command with constant
 probabilities must have them in [0, 1] summing to 1 (:mod:`mitld_lp.worlds.prism_program`).
 Sums are compared as PRISM compares them, within
 :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE` (1e-5): Storm's own check is exact
-in floating point, so where it alone fails, within the tolerance, a checked build is
-made again without Storm's checks and every sum and range is checked on the copy (Storm's exact
+in floating point, so where it alone fails, within the tolerance, the model is built
+without Storm's checks and every sum and range is checked on the copy (Storm's exact
 checks only word a refusal: :func:`~mitld_lp.worlds.prism_build.build_tables`), and a
 choice that sums to 1 only within that tolerance is divided by its sum
 (:attr:`PrismGame.normalised` counts them).  An expression deeper than

@@ -39,13 +39,7 @@ from mitld_lp.worlds.prism_program import (
     storm_quiet,
     storm_sum,
 )
-from mitld_lp.worlds.prism_tables import (
-    DEADLOCK_ACTION,
-    OUT_OF_BOUNDS,
-    OUT_OF_BOUNDS_BIT,
-    Tables,
-    read_model,
-)
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, OUT_OF_BOUNDS, Tables, read_model
 from mitld_lp.worlds.prism_valuations import (
     DeferredValuations,
     ValuationRecipe,
@@ -56,8 +50,7 @@ from mitld_lp.worlds.prism_valuations import (
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["PrismTooLarge", "BYTES_PER_STATE", "CAP_BYTES_PER_STATE", "UNEXPLORED",
-           "check_budgets", "build_within", "build_tables", "expanded_within", "Grower",
-           "unchecked_first"]
+           "check_budgets", "build_within", "build_tables", "expanded_within", "Grower"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -163,13 +156,11 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
 
     Storm's exploration checks refuse updates out of a variable's range (without them
     it stores values modulo the range) and probabilities that do not sum to 1, compared
-    *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  A whole build runs
-    without them at once (:func:`unchecked_first`), with Storm's out-of-bounds state;
-    a build with a limit runs with them, and when only a sum fails, by no more than
-    PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE`, again without them.
-    Without them :func:`~mitld_lp.worlds.prism_tables.read_model` checks (and
-    normalises) every sum, with the tolerance, and refuses an update that reached the
-    out-of-bounds state.  Storm's
+    *exactly* in floating point: ``0.8 + 0.1 + 0.1`` fails.  When only a sum fails, and
+    by no more than PRISM's :data:`~mitld_lp.worlds.prism_program.SUM_TOLERANCE`, the
+    model is built again without the checks, with Storm's out-of-bounds state:
+    :func:`~mitld_lp.worlds.prism_tables.read_model` then checks (and normalises) every
+    sum, with the tolerance, and refuses an update that reached that state.  Storm's
     checked build in exact arithmetic (``1/10`` is exact there; three times the float
     build: zeroconf 20-4, 6.4 s against 2.1 s) runs only when that refuses the world, so
     that the refusal names the module and command where Storm's checks find them
@@ -192,20 +183,19 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
                                valuations=not deferred)
 
     errors = (RuntimeError, stormpy.exceptions.StormError)
-    model = None
-    if not unchecked_first(program, limit):
-        try:
-            with storm_quiet():
-                model = storm_build(stormpy, program, options(True), float, limit)
-        except errors as exc:
-            total = storm_sum(str(exc))
-            if total is None or abs(total - 1) > SUM_TOLERANCE:  # the float sum, 1e-16 off
-                raise storm_error(exc, where, program, plain) from None
-            log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
-                     "built without Storm's checks, the sums checked on the model",
-                     where, show_sum(total), SUM_TOLERANCE)
+    try:
+        with storm_quiet():
+            model = storm_build(stormpy, program, options(True), float, limit)
+    except errors as exc:
+        total = storm_sum(str(exc))
+        if total is None or abs(total - 1) > SUM_TOLERANCE:  # the float sum, 1e-16 off
+            raise storm_error(exc, where, program, plain) from None
+        model = None
     checks = model is not None
-    if model is None:  # read_model checks every sum and range on the copy
+    if model is None:  # a sum within PRISM's tolerance: read_model checks the rest
+        log.info("%s: probabilities sum to %s somewhere, within PRISM's tolerance %g; "
+                 "built without Storm's checks, the sums checked on the model",
+                 where, show_sum(total), SUM_TOLERANCE)
         try:
             with storm_quiet():
                 model = storm_build(stormpy, program, options(False), float, limit)
@@ -270,21 +260,6 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
         names.share(tables.states)  # one second build for the values and the names
         tables = dataclasses.replace(tables, action_names=names)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
-
-
-def unchecked_first(program: Any, limit: int | None) -> bool:
-    """Whether a build of ``program`` runs without Storm's exploration checks at once,
-    with its out-of-bounds state: a whole build (``limit`` None) of a program Storm has
-    not built so yet.  Its copy checks what the checks would (:func:`build_tables`):
-    every update out of a variable's range reaches the out-of-bounds state, refused
-    with Storm's own words (:func:`_exact_refusal`), and every sum is checked within
-    PRISM's tolerance; Storm numbers the states alike (the out-of-bounds state is a
-    state only where an update reaches it).  The checks cost 3% of csma 4-2's build
-    (0.3 s of 9.0 s).  A build with a limit keeps them (a lazily explored world builds
-    one program again and again), and so does a second build of one program: Storm
-    adds its out-of-bounds variable to the program's expressions, and refuses to add
-    it twice."""
-    return limit is None and not program.expression_manager.has_variable(OUT_OF_BOUNDS_BIT)
 
 
 def _exact_refusal(stormpy: Any, program: Any, plain: Any, where: str, options: Any) -> None:
