@@ -15,14 +15,15 @@ seconds of Storm's build of the program
 * ``valuations``: every label and the state valuations (left out of a whole load);
 * ``origins_valuations``: both (the second build, made when a name or a state is
   first read);
-* ``load``: the set the load asked for on these instances before prism-copy (every label,
+* ``load``: the set the load asks for on these instances (every label,
   the choice labels, Storm's exploration checks, no state expanded past the property's
   terminal states, as the load stops where the task is decided: the same states as
   ``storm``), the peer of ``storm`` option for option;
 * ``load_unchecked``: the same without Storm's exploration checks, with its
-  out-of-bounds state (the load's whole build now:
-  :func:`mitld_lp.worlds.prism_build.unchecked_first`), each build of a program parsed
-  again (Storm adds its out-of-bounds variable to a program once), the parse untimed;
+  out-of-bounds state (the copy would check every range and sum, as the load's fallback
+  for a sum within PRISM's tolerance does), each build of a program parsed again (Storm
+  adds its out-of-bounds variable to a program once), the parse untimed: what leaving
+  the checks to the copy would gain;
 
 each with the states, choices and transitions it built (the answer: every build of
 one instance must agree; the peer's differ where its property stops the exploration),
