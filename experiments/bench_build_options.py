@@ -15,14 +15,21 @@ seconds of Storm's build of the program
 * ``valuations``: every label and the state valuations (left out of a whole load);
 * ``origins_valuations``: both (the second build, made when a name or a state is
   first read);
-* ``load``: the set the load asks for on these instances (every label, the choice labels,
-  Storm's exploration checks, no state expanded past the property's terminal states, as
-  the load stops where the task is decided: the same states as ``storm``), the peer of
-  ``storm`` option for option;
+* ``load``: the set the load asks for on these instances (every label,
+  the choice labels, Storm's exploration checks, no state expanded past the property's
+  terminal states, as the load stops where the task is decided: the same states as
+  ``storm``), the peer of ``storm`` option for option;
+* ``load_unchecked``: the same without Storm's exploration checks, with its
+  out-of-bounds state (the copy would check every range and sum, as the load's fallback
+  for a sum within PRISM's tolerance does), each build of a program parsed again (Storm
+  adds its out-of-bounds variable to a program once), the parse untimed: what leaving
+  the checks to the copy would gain;
 
 each with the states, choices and transitions it built (the answer: every build of
 one instance must agree; the peer's differ where its property stops the exploration),
-the minimum over ``--repeat`` builds; then the export (``export``: Storm's UMB archive
+the minimum and the median over ``--repeat`` builds (``load`` and ``load_unchecked`` taking
+turns, so that the machine's noise hits both; ``--kinds`` measures some option sets
+alone); then the export (``export``: Storm's UMB archive
 of the ``labels`` build, uncompressed) and the read (``read``: the arrays copied from
 it, :func:`mitld_lp.worlds.prism_tables.read_export`).
 
@@ -49,7 +56,7 @@ import _common  # noqa: E402
 import bench_qvbs  # noqa: E402  (the same instances, posed the same way)
 
 OPTIONS = ("plain", "all_labels", "labels", "origins", "valuations", "origins_valuations",
-           "load")
+           "load", "load_unchecked")
 
 
 def _cpu() -> float:
@@ -58,9 +65,10 @@ def _cpu() -> float:
 
 
 def _options(stormpy: Any, kind: str, prop: Any = None) -> Any:
-    if kind == "load":  # what the load asks for, stopped where the property is decided
+    if kind in ("load", "load_unchecked"):  # stopped where the property is decided
         o = stormpy.BuilderOptions([prop.get_raw_formula()])
-        o.set_exploration_checks(True)
+        o.set_exploration_checks(kind == "load")
+        o.set_add_out_of_bounds_state(kind == "load_unchecked")
         o.set_build_all_labels()
         o.set_build_choice_labels()
         return o
@@ -76,17 +84,23 @@ def _options(stormpy: Any, kind: str, prop: Any = None) -> Any:
     return o
 
 
-def measure(job: dict[str, Any], repeat: int) -> dict[str, Any]:
+def _program(stormpy: Any, job: dict[str, Any]) -> tuple[Any, set[str]]:
+    """The instance's program, its constants given, and its undefined constants."""
+    program = stormpy.parse_prism_program(job["prism"])
+    undefined = {k.name for k in program.constants if not k.defined}
+    given = {k: v for k, v in job["constants"].items() if k in undefined}
+    return (stormpy.instantiate_constants(program, given)[0] if given else program), undefined
+
+
+def measure(job: dict[str, Any], repeat: int, kinds: tuple[str, ...] = OPTIONS,
+            ) -> dict[str, Any]:
     """The figures of one instance (the module docstring)."""
     import stormpy
     import stormpy.io
 
     from mitld_lp.worlds.prism_tables import read_export
 
-    program = stormpy.parse_prism_program(job["prism"])
-    undefined = {k.name for k in program.constants if not k.defined}
-    given = {k: v for k, v in job["constants"].items() if k in undefined}
-    program = stormpy.instantiate_constants(program, given)[0] if given else program
+    program, undefined = _program(stormpy, job)
     text = job["property"]
     for name, value in job["constants"].items():  # the properties file's own constants
         if name not in undefined:
@@ -110,13 +124,29 @@ def measure(job: dict[str, Any], repeat: int) -> dict[str, Any]:
 
     timed("storm", lambda: stormpy.build_model(program, props))
     kept = None
-    for kind in OPTIONS:
+    for kind in [k for k in OPTIONS if k in kinds and not k.startswith("load")]:
         model = timed(kind, lambda kind=kind: stormpy.build_model(
             program, options=_options(stormpy, kind, props[0])))
         if kind == "labels":
             kept = model
         del model
-    assert kept is not None
+    loads = [k for k in ("load", "load_unchecked") if k in kinds]
+    times: dict[str, list[float]] = {k: [] for k in loads}
+    for r in range(repeat):  # taking turns
+        for kind in loads if r % 2 == 0 else loads[::-1]:
+            fresh = program if kind == "load" else _program(stormpy, job)[0]
+            fresh_props = stormpy.parse_properties(text, fresh)[:1]
+            options = _options(stormpy, kind, fresh_props[0])
+            c = _cpu()
+            model = stormpy.build_model(fresh, options=options)
+            times[kind].append(_cpu() - c)
+            row[f"{kind}_size"] = f"{model.nr_states}/{model.nr_choices}/{model.nr_transitions}"
+            del model
+    for kind, t in times.items():
+        row[f"{kind}_cpu"] = round(min(t), 4)
+        row[f"{kind}_median"] = round(sorted(t)[len(t) // 2], 4)
+    if kept is None:
+        kept = stormpy.build_model(program, options=_options(stormpy, "labels"))
     options = stormpy.io.UmbExportOptions()
     options.compression = stormpy.io.CompressionMode.NO_COMPRESSION
     with tempfile.TemporaryDirectory() as folder:
@@ -134,6 +164,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--qvbs", type=Path, required=True)
     ap.add_argument("--only", nargs="+", required=True)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--kinds", nargs="+", choices=OPTIONS, default=list(OPTIONS),
+                    help="the option sets measured (default all; 'plain' is always built, "
+                    "for the ratios)")
     ap.add_argument("--out", type=Path, default=None,
                     help="the folder written (required unless --quick)")
     ap.add_argument("--quick", action="store_true",
@@ -152,25 +185,29 @@ def main(argv: list[str] | None = None) -> None:
             raise SystemExit(f"not found: {', '.join(missing)}")
         rows = []
         for name in args.only:
-            row = {"instance": name, **measure(jobs[name], args.repeat)}
+            kinds = tuple(k for k in OPTIONS if k in args.kinds or k == "plain")
+            row = {"instance": name, **measure(jobs[name], args.repeat, kinds)}
             base = row["plain_cpu"]
             print("  ".join(f"{k}={v}" for k, v in row.items())
                   + "  " + "  ".join(f"{k}/plain={row[f'{k}_cpu'] / base:.2f}"
-                                     for k in OPTIONS[1:]), flush=True)
+                                     for k in kinds[1:]), flush=True)
             rows.append(row)
     args.out.mkdir(parents=True, exist_ok=True)
-    head = ["instance", *[f"{k}_{x}" for k in ("storm", *OPTIONS) for x in ("cpu", "size")],
-            "export_cpu", "read_cpu"]
+    kinds = tuple(k for k in OPTIONS if k in args.kinds or k == "plain")
+    medians = [f"{k}_median" for k in ("load", "load_unchecked") if k in kinds]
+    head = ["instance", *[f"{k}_{x}" for k in ("storm", *kinds) for x in ("cpu", "size")],
+            *medians, "export_cpu", "read_cpu"]
     lines = [",".join(head)] + [",".join(str(r[h]) for h in head) for r in rows]
     (args.out / "bench_build_options.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    md = ["| instance | " + " | ".join(("storm", *OPTIONS, "export", "read")) + " |",
-          "|---" * (len(OPTIONS) + 4) + "|"]
+    shown = ("storm", *kinds, *[m.removesuffix("_cpu") for m in medians], "export", "read")
+    md = ["| instance | " + " | ".join(shown) + " |", "|---" * (len(shown) + 1) + "|"]
     for r in rows:
         md.append(f"| {r['instance']} ({r['plain_size']}) | " + " | ".join(
-            f"{r[f'{k}_cpu']:.3f}" for k in ("storm", *OPTIONS, "export", "read")) + " |")
+            f"{r[k if k.endswith('_median') else f'{k}_cpu']:.3f}" for k in shown) + " |")
     (args.out / "bench_build_options.md").write_text(
-        "CPU seconds of Storm's build per option set (states/choices/transitions of the "
-        "plain build beside the name; `storm`: Storm's own build for the property)\n\n"
+        "CPU seconds of Storm's build per option set, the least of the repeats "
+        "(states/choices/transitions of the plain build beside the name; `storm`: Storm's "
+        "own build for the property; `*_median`: the median of the repeats)\n\n"
         + "\n".join(md) + "\n", encoding="utf-8")
 
 

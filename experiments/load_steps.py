@@ -8,8 +8,11 @@ and once with the build in this process (``here``), the steps of the latter time
 variables and the initial state's values (``head``: read from Storm's program, or its
 build of the initial state alone where the program has an ``init`` block), the copy of
 Storm's model into arrays (``read_model``: the UMB export and its read, the labels, the
-checks of every distribution), the spec's parse, the PRISM file's parse and the labels
-added to it, the program's checks.  The answer printed beside: the
+checks of every distribution; inside it, timed apart: Storm's export ``umb_export``, the
+archive's headers ``umb_members``, the rows' check ``checked_rows``, the state and choice
+labels), the spec's parse, the PRISM file's parse and the labels
+added to it, the program's checks; and in the capped load, the parent's copy of the
+arrays the child sends (``child_receive``).  The answer printed beside: the
 world's states and transitions.  The least over ``--repeats`` runs of each.
 ``--compare DIR``: the same for the package of the checkout DIR (before), the two taking
 turns, a row each.
@@ -55,6 +58,8 @@ def timed(module, name, label):
         finally:
             steps[label] = steps.get(label, 0.0) + time.process_time() - c
     setattr(module, name, run)
+import stormpy.io
+from mitld_lp.worlds import prism_bounded as pbd, prism_tables as pt
 here = sys.argv[2] == "here"
 if here:
     pb.can_cap = lambda: False
@@ -64,8 +69,16 @@ if here:
                                 (gt, "parse_spec", "parse_spec"),
                                 (pr, "parse_program", "parse_program"),
                                 (pr, "with_labels", "with_labels"),
-                                (pr, "check_program", "check_program")):
+                                (pr, "check_program", "check_program"),
+                                # inside read_model:
+                                (stormpy.io, "export_to_umb", "umb_export"),
+                                (pt, "archive_members", "umb_members"),
+                                (pt, "checked_rows", "checked_rows"),
+                                (pt, "state_labels", "state_labels"),
+                                (pt, "choice_labels", "choice_labels")):
         timed(module, name, label)
+else:  # the parent's side of the capped child: the model's arrays received
+    timed(pbd, "_receive", "child_receive")
 c = cpu()
 model = load_model(sys.argv[1], max_states=2_000_000)
 load = cpu() - c
@@ -84,6 +97,8 @@ def run(model: Path, where: str, root: Path = ROOT) -> dict:
 
 STEPS = ("storm_build", "head", "read_model", "parse_spec", "parse_program", "with_labels",
          "check_program")
+INSIDE = ("umb_export", "umb_members", "checked_rows", "state_labels", "choice_labels")
+"""Steps inside ``read_model`` (in its time already, not in ``rest``)."""
 
 
 def main(argv: list[str] | None = None) -> list[list[object]]:
@@ -95,7 +110,8 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
                    "one's, a row each; the same states and transitions are checked")
     args = p.parse_args(argv)
     repeats = args.repeats or (1 if args.quick else 3)
-    header = ["model", "checkout", "states", "transitions", "capped", "here", *STEPS, "rest"]
+    header = ["model", "checkout", "states", "transitions", "capped", "here", *STEPS, "rest",
+              *INSIDE, "child_receive"]
     roots = [("before", args.compare.resolve()), ("after", ROOT)] if args.compare else [
         ("this", ROOT)]
     rows: list[list[object]] = []
@@ -114,9 +130,12 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
             best = min(here[name], key=lambda r: r["load"])
             steps = [round(min(r["steps"].get(s, 0.0) for r in here[name]), 4) for s in STEPS]
             rest = best["load"] - sum(best["steps"].get(s, 0.0) for s in STEPS)
+            inside = [round(min(r["steps"].get(s, 0.0) for r in here[name]), 4)
+                      for s in INSIDE]
+            receive = round(min(r["steps"].get("child_receive", 0.0) for r in capped[name]), 4)
             rows.append([model.stem, name, best["states"], best["transitions"],
                          round(min(r["load"] for r in capped[name]), 4),
-                         round(best["load"], 4), *steps, round(rest, 4)])
+                         round(best["load"], 4), *steps, round(rest, 4), *inside, receive])
             print(dict(zip(header, rows[-1], strict=True)))
     _common.write_tables(_common.out_dir(args), "load_steps", header, rows)
     return rows
