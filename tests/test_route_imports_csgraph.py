@@ -14,9 +14,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 #: argv[1]: "program" (import mitld_lp, then library_start.install()), "command" (the
-#: command line's start), "plain" (import mitld_lp alone: no hook).  A strongly connected ring past the small-graph
-#: walks, searched by the package; then csgraph's Laplacian as an operator; then a
-#: factorisation.
+#: command line's start), "plain" (import mitld_lp alone: no hook).  A strongly
+#: connected ring past the small-graph walks, searched by the package; then csgraph's
+#: Laplacian as an operator; then a factorisation.
 PROBE = r"""
 import json, sys
 way = sys.argv[1]
