@@ -22,6 +22,7 @@ from mitld_lp.exact.errors import ExactError, ExactTooLarge
 from mitld_lp.model import load_model
 from mitld_lp.problem import ProblemError
 from mitld_lp.synthesis import synthesize
+from mitld_lp.testing.exact import chain_values
 
 flint = pytest.importorskip("flint")
 
@@ -198,24 +199,8 @@ def _brute_force(choices, target, sense):
                 break
             reach |= more
         unknown = [s for s in rows if s in reach]
-        at = {s: i for i, s in enumerate(unknown)}
-        k = len(unknown)
-        a = [[Fraction(int(i == j)) for j in range(k)] + [Fraction(0)] for i in range(k)]
-        for s in unknown:
-            for t, p in rows[s].items():
-                if t in target:
-                    a[at[s]][k] += p
-                elif t in at:
-                    a[at[s]][at[t]] -= p
-        for col in range(k):
-            piv = next(r for r in range(col, k) if a[r][col] != 0)
-            a[col], a[piv] = a[piv], a[col]
-            a[col] = [x / a[col][col] for x in a[col]]
-            for r in range(k):
-                if r != col and a[r][col] != 0:
-                    f = a[r][col]
-                    a[r] = [x - f * y for x, y in zip(a[r], a[col], strict=True)]
-        value = Fraction(1) if 0 in target else a[at[0]][k] if 0 in at else Fraction(0)
+        solved = chain_values(rows, unknown, target)
+        value = Fraction(1) if 0 in target else solved.get(0, Fraction(0))
         if best is None or (value > best if sense == "max" else value < best):
             best = value
     return best

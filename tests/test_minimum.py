@@ -25,6 +25,7 @@ from mitld_lp.solvers import Layout, Status, evaluate_policy, interval_iteration
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.quotient import prob0_min, prob1_max, prob1_min
+from mitld_lp.testing.exact import chain_values
 
 needs_storm = pytest.mark.skipif(importlib.util.find_spec("stormpy") is None,
                                  reason="needs stormpy: pip install -e '.[prism]'")
@@ -65,28 +66,10 @@ def _chain_value(rows: list[list[dict[int, Fraction]]], pick: tuple[int, ...],
                 can.add(s)
                 grew = True
     solve = [s for s in range(n) if s in can and s not in target]
-    index = {s: i for i, s in enumerate(solve)}
-    k = len(solve)
-    a = [[Fraction(0)] * (k + 1) for _ in range(k)]
-    for s, i in index.items():
-        a[i][i] += 1
-        for t, p in succ[s].items():
-            if t in target:
-                a[i][k] += p
-            elif t in index:
-                a[i][index[t]] -= p
-    for col in range(k):
-        piv = next(r for r in range(col, k) if a[r][col] != 0)
-        a[col], a[piv] = a[piv], a[col]
-        inv = 1 / a[col][col]
-        a[col] = [x * inv for x in a[col]]
-        for r in range(k):
-            if r != col and a[r][col] != 0:
-                f = a[r][col]
-                a[r] = [x - f * y for x, y in zip(a[r], a[col], strict=True)]
+    solved = chain_values(succ, solve, target)
     value = [Fraction(1) if s in target else Fraction(0) for s in range(n)]
-    for s, i in index.items():
-        value[s] = a[i][k]
+    for s, v in solved.items():
+        value[s] = v
     return value
 
 
