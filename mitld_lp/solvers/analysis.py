@@ -44,7 +44,7 @@ and never decompose the graph again.
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -229,6 +229,62 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
 
 
+class _Decided(Quotient):
+    """A :class:`~mitld_lp.solvers.reduced.Quotient` whose removed states include
+    states of value 1 that are not targets (a minimum's ``Prob1A``, :func:`analyse`):
+    :meth:`lift` gives each removed state its graph-decided value, 1 on
+    ``qualitative.one`` (the target included), else 0, where the record's own lift
+    reads the target alone.  The same values everywhere else."""
+
+    __slots__ = ()
+
+    def lift(self, reduced: np.ndarray) -> np.ndarray:
+        out = Quotient.lift(self, reduced)
+        np.copyto(out, self.qualitative.one, where=self.state_map < 0)
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Cut:
+    """The quotient without its states of value 1 (:func:`_without_one`)."""
+
+    matrix: sp.csr_array
+    row_groups: np.ndarray
+    choices: np.ndarray  # each kept choice's row in the quotient before
+    new_id: np.ndarray  # each reduced state's id after, -1 where removed
+    to_goal: np.ndarray
+    to_extra: np.ndarray | None
+    leaks: list[np.ndarray]
+
+
+def _without_one(matrix: sp.csr_array, row_groups: np.ndarray, sure: np.ndarray,
+                 to: list[np.ndarray | None], leaks: list[np.ndarray]) -> _Cut:
+    """The quotient ``matrix`` (choices grouped by ``row_groups``) without its reduced
+    states ``sure`` (value 1 in both models: ``Prob1A`` of the smaller target, so of
+    the larger one too) and their choices: the probability of moving into one of them
+    joins the one-step probability of reaching the goal (``to[0]``), as a target
+    state's does; ``to[1]`` (the truncated states', or None) and ``leaks`` are kept for
+    the choices left."""
+    keep = ~sure
+    new_id = np.full(sure.size, -1, dtype=np.int64)
+    new_id[keep] = np.arange(int(keep.sum()))
+    states = np.flatnonzero(keep)
+    lo, hi = row_groups[states], row_groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    groups = np.concatenate([[0], np.cumsum(hi - lo)]).astype(np.int64)
+    rows = sp.csr_array(matrix[choices])
+    into = rows @ sure.astype(np.float64)
+    out = ~sure[rows.indices]  # the entries that stay among the kept states
+    per_row = np.bincount(np.repeat(np.arange(choices.size), np.diff(rows.indptr))[out],
+                          minlength=choices.size)
+    index = rows.indices.dtype
+    indptr = np.concatenate([[0], np.cumsum(per_row)])
+    cut = sp.csr_array((rows.data[out], new_id[rows.indices[out]].astype(index),
+                        indptr.astype(index)), shape=(choices.size, states.size))
+    return _Cut(cut, groups, choices, new_id, to[0][choices] + into,
+                None if to[1] is None else to[1][choices], [k[choices] for k in leaks])
+
+
 def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             sense: Sense = Sense.MAX) -> tuple[Quotient, Quotient]:
     """The quotients for reaching ``goal`` and for reaching ``goal | extra`` (module
@@ -333,6 +389,28 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         matrix.sum_duplicates()
     matrix.eliminate_zeros()
 
+    if sense is Sense.MIN:  # Prob1A out of the quotient (_without_one)
+        j0 = 1 if same else 0
+        zero0 = np.zeros(n_red, dtype=bool)
+        zero0[state_map[maybe & prob0[j0]]] = True
+        sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
+        del zero0
+        if sure.any():
+            cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
+            matrix, row_groups, kept = cut.matrix, cut.row_groups, kept[cut.choices]
+            to_goal, to_extra, leaks = cut.to_goal, cut.to_extra, cut.leaks
+            sure_state = maybe & sure[np.maximum(state_map, 0)]
+            maybe = maybe & ~sure_state
+            state_map = np.where(state_map >= 0, cut.new_id[np.maximum(state_map, 0)], -1
+                                 ).astype(state_map.dtype, copy=False)
+            n_red = n_plain = int(cut.row_groups.shape[0] - 1)
+            del cut
+        else:
+            sure_state = np.zeros(n, dtype=bool)
+        del sure
+    else:
+        sure_state = np.zeros(n, dtype=bool)
+
     comp_of = np.zeros(n_red, dtype=np.int64)
     comp_of[state_map[maybe]] = found.component[maybe]
     order = _order(matrix, row_groups, comp_of, found.level)
@@ -346,13 +424,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
         zero[state_map[maybe & prob0[j]]] = True
-        one = target.copy()
+        one = target | sure_state
         one[maybe] = _one(sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
         unreachable = ~reach[:, j] & ~target
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))
-        initial_value = 1.0 if target[init] else (0.0 if prob0[j][init] else float("nan"))
-        return Quotient(
+        initial_value = 1.0 if one[init] else (0.0 if prob0[j][init] else float("nan"))
+        return _Decided(
             target=read_only(target.copy()), prob0=read_only(prob0[j]),
             state_map=read_only(state_map), mecs=mecs, n_plain=n_plain, matrix=matrix,
             to_target=read_only(to_target), row_groups=read_only(row_groups),
