@@ -1,11 +1,12 @@
-"""A minimum's states of value 1 (``Prob1A``) out of the quotient
-(:func:`~mitld_lp.solvers.analysis.analyse`), checked against exact values: on random
-MDPs of 3-6 states (with cycles and without, with and without truncated states) every
-deterministic policy is evaluated in fractions, and the optimum of each state is the
-least (or, for the maximum's sets, the greatest) of them.  The states the quotient
-removes beside the target and the value-0 states are exactly those whose minimum is 1
-for the goal; every solver's values there are 1; the lifted policy is a valid choice
-there and, evaluated exactly, is optimal within the tolerance everywhere.  The step
+"""The states of value 1 (a minimum's ``Prob1A``, a maximum's ``Prob1E``) out of the
+quotient (:func:`~mitld_lp.solvers.analysis.analyse`), checked against exact values: on
+random MDPs of 3-6 states (with cycles and without, with and without truncated states)
+every deterministic policy is evaluated in fractions, and the optimum of each state is
+the least (the greatest) of them.  The states the quotient removes beside the target
+and the value-0 states are exactly those whose optimum is 1 for the goal (end
+components of them among them, for a maximum); every solver's values there are 1; the
+lifted policy is a valid choice there and, evaluated exactly, reaches the target with
+probability exactly 1 there and is optimal within the tolerance everywhere.  The step
 objectives do not read the quotient: a ``--then min-steps`` answer on a world whose
 states all have the minimum 1 is the hand-counted one."""
 
@@ -23,6 +24,7 @@ from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import solve_lp
+from mitld_lp.solvers.quotient import maximal_end_components, prob0_max
 
 SEEDS = range(30)
 
@@ -123,10 +125,15 @@ def _optimum(rows: list[list[Fraction]], owner: list[int], target: np.ndarray,
 @pytest.mark.parametrize("sense", [Sense.MIN, Sense.MAX])
 def test_value_one_sets_and_what_leaves_the_quotient(sense: Sense, acyclic: bool,
                                                      truncated: bool) -> None:
-    removed_seen = 0
+    removed_seen = in_components = 0
     for seed in SEEDS:
         mdp, rows, owner, goal, extra = _draw(seed, acyclic, truncated)
         low, high = analyse(mdp, goal, extra, sense=sense)
+        if sense is Sense.MAX:  # the end components the analysis finds before removing
+            maybe = ~prob0_max(mdp, goal | extra) & ~goal & ~extra
+            in_components += int(np.count_nonzero(
+                (np.asarray(maximal_end_components(mdp, maybe).mec_of) >= 0)
+                & (np.asarray(low.state_map) < 0)))
         for q, target in ((low, goal), (high, goal | extra)):
             exact = _optimum(rows, owner, target, sense)
             one = np.array([v == 1 for v in exact])
@@ -134,9 +141,6 @@ def test_value_one_sets_and_what_leaves_the_quotient(sense: Sense, acyclic: bool
             assert np.array_equal(np.asarray(q.qualitative.one), one), seed
             assert np.array_equal(np.asarray(q.qualitative.zero), zero), seed
             gone = (np.asarray(q.state_map) < 0) & ~target & ~np.asarray(q.prob0)
-            if sense is Sense.MAX:  # a maximum's value-1 states stay (for now)
-                assert not (gone & ~extra).any()
-                continue
             # removed: the goal's value-1 states (value 1 for the wider target too), and
             # in the lower model the truncated states (value 0 there)
             goal_one = np.array([v == 1 for v in _optimum(rows, owner, goal, sense)])
@@ -148,26 +152,31 @@ def test_value_one_sets_and_what_leaves_the_quotient(sense: Sense, acyclic: bool
             assert np.all(lifted[np.asarray(q.state_map) >= 0] == 0.5)
             if q.initial < 0:
                 assert q.initial_value == float(exact[int(mdp.initial)])
-    assert sense is Sense.MAX or removed_seen > 10  # the draws do exercise the removal
+    assert removed_seen > 10  # the draws do exercise the removal
+    if sense is Sense.MAX and not acyclic:
+        assert in_components > 0  # and a collapsed end component's
 
 
 @pytest.mark.parametrize("method", ["iteration", "lp"])
 @pytest.mark.parametrize("acyclic", [False, True])
-def test_lifted_policy_reaches_the_minimum(method: str, acyclic: bool) -> None:
-    """The policy lifted from the smaller quotient, evaluated exactly, is the minimum
-    in every state within the tolerance; on a removed state it is a valid choice (any
-    choice reaches the goal almost surely there), and the solvers' values are 1."""
+@pytest.mark.parametrize("sense", [Sense.MIN, Sense.MAX])
+def test_lifted_policy_reaches_the_optimum(sense: Sense, method: str, acyclic: bool,
+                                           ) -> None:
+    """The policy lifted from the smaller quotient, evaluated exactly, is the optimum
+    in every state within the tolerance, and exactly 1 on the removed value-1 states
+    (a minimum's: any choice reaches the goal almost surely; a maximum's: the attractor
+    strategy does); there it is a valid choice, and the solvers' values are 1."""
     removed_seen = 0
     for seed in SEEDS:
         mdp, rows, owner, goal, _ = _draw(seed, acyclic, False)
-        exact = _optimum(rows, owner, goal, Sense.MIN)
+        exact = _optimum(rows, owner, goal, sense)
         if method == "iteration":
-            got = interval_iteration(mdp, goal, sense=Sense.MIN, gap="max", tol=1e-12)
+            got = interval_iteration(mdp, goal, sense=sense, gap="max", tol=1e-12)
             values = np.asarray(got.lower)
             assert np.all(np.asarray(got.upper) >= np.array([float(v) for v in exact])
                           - 1e-12)
         else:
-            got = solve_lp(mdp, goal, sense=Sense.MIN, everywhere=True)
+            got = solve_lp(mdp, goal, sense=sense, everywhere=True)
             values = np.asarray(got.values)
         policy = np.asarray(got.policy)
         n = mdp.n_states
@@ -181,6 +190,7 @@ def test_lifted_policy_reaches_the_minimum(method: str, acyclic: bool) -> None:
         assert np.all(values[one] == 1.0)
         played = _policy_values(rows, [int(c) if c >= 0 else int(lo[s])
                                        for s, c in enumerate(policy)], goal)
+        assert all(played[s] == 1 for s in np.flatnonzero(one))  # exactly
         for s in range(n):
             assert float(played[s]) == pytest.approx(float(exact[s]), abs=1e-9), (seed, s)
             assert abs(values[s] - float(exact[s])) <= 1e-9, (seed, s)
