@@ -330,11 +330,13 @@ def _split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
 
 
 def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
-            sense: Sense = Sense.MAX) -> tuple[Quotient, Quotient]:
+            sense: Sense = Sense.MAX, without_one: bool = True,
+            ) -> tuple[Quotient, Quotient]:
     """The quotients for reaching ``goal`` and for reaching ``goal | extra`` (module
     docs), from one analysis, sharing their matrix, end components and block order,
     for the optimum in ``sense``.  With ``extra`` None or empty both are the same
-    object."""
+    object.  ``without_one``: the goal's states of value 1 leave the quotient (module
+    docs); False keeps them, as :func:`mitld_lp.solvers.quotient.reduce` does."""
     goal = as_state_mask(mdp, goal, "goal")
     extra = np.zeros_like(goal) if extra is None else as_state_mask(mdp, extra, "extra")
     extra = extra & ~goal
@@ -436,10 +438,12 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # the goal's value-1 states out of the quotient (_without_one): Prob1A of a minimum,
     # Prob1E of a maximum (a collapsed end component leaves whole)
     j0 = 1 if same else 0
-    zero0 = np.zeros(n_red, dtype=bool)
-    zero0[state_map[maybe & prob0[j0]]] = True
-    sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
-    del zero0
+    sure = np.zeros(n_red, dtype=bool)
+    if without_one:
+        zero0 = np.zeros(n_red, dtype=bool)
+        zero0[state_map[maybe & prob0[j0]]] = True
+        sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
+        del zero0
     sure_state = np.zeros(n, dtype=bool)
     if sure.any():
         cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)

@@ -122,9 +122,11 @@ def reduce(mdp: MDP, target: np.ndarray, *, sense: Sense = Sense.MAX) -> Quotien
     MEC redirected to the MEC's reduced state (so a choice may keep a self-loop of
     probability < 1 on its collapsed MEC).  For ``sense=Sense.MIN`` the prob-0 states
     are :func:`prob0_min`'s and no end component remains to collapse.  One model's
-    :func:`mitld_lp.solvers.analysis.analyse`.
+    :func:`mitld_lp.solvers.analysis.analyse`, its states of value 1 kept (the
+    record as documented; the plain route's analysis removes them).
     """
-    return analyse(mdp, as_state_mask(mdp, target, "target"), sense=sense)[0]
+    return analyse(mdp, as_state_mask(mdp, target, "target"), sense=sense,
+                   without_one=False)[0]
 
 
 def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None,
