@@ -43,8 +43,9 @@ import bench_qvbs as bq  # noqa: E402
 import profile_solve as ps  # noqa: E402  (the same instances, posed the same way)
 
 ROOT = HERE.parent
-COLUMNS = ("instance", "value", "maybe_before", "maybe_after", "calls", "before_min", "before_median", "after_min",
-           "after_median", "after_over_before_median", "analysis_before_median",
+COLUMNS = ("instance", "value", "maybe_before", "maybe_after", "calls", "before_min",
+           "before_median", "after_min", "after_median", "after_over_before_median",
+           "analysis_before_median",
            "analysis_after_median", "storm_check_cpu", "storm_value", "same_bracket",
            "certified")
 

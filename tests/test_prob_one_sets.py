@@ -25,6 +25,7 @@ from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import maximal_end_components, prob0_max
+from mitld_lp.testing.exact import chain_values
 
 SEEDS = range(30)
 
@@ -72,7 +73,7 @@ def _policy_values(rows: list[list[Fraction]], policy: list[int], target: np.nda
                    ) -> list[Fraction]:
     """The exact probability of reaching ``target`` from each state under the
     deterministic ``policy`` (a row per state): 0 where the chain cannot reach it, else
-    the linear system solved by Gauss-Jordan elimination in fractions."""
+    :func:`~mitld_lp.testing.exact.chain_values` (the target merged into one state)."""
     n = target.size
     reach = set(np.flatnonzero(target).tolist())
     grew = True
@@ -82,32 +83,16 @@ def _policy_values(rows: list[list[Fraction]], policy: list[int], target: np.nda
             if s not in reach and any(rows[policy[s]][t] > 0 for t in reach):
                 reach.add(s)
                 grew = True
+    step: dict[int, dict[int, Fraction]] = {}
+    for s in range(n):
+        step[s] = {}
+        for t, p in enumerate(rows[policy[s]]):
+            if p:
+                key = -1 if target[t] else t
+                step[s][key] = step[s].get(key, Fraction(0)) + p
     unknown = [s for s in range(n) if s in reach and not target[s]]
-    pos = {s: i for i, s in enumerate(unknown)}
-    k = len(unknown)
-    a = [[Fraction(0)] * (k + 1) for _ in range(k)]
-    for s, i in pos.items():
-        a[i][i] += 1
-        for t in range(n):
-            p = rows[policy[s]][t]
-            if p == 0:
-                continue
-            if target[t]:
-                a[i][k] += p
-            elif t in pos:
-                a[i][pos[t]] -= p
-    for c in range(k):
-        pivot = next(r for r in range(c, k) if a[r][c] != 0)
-        a[c], a[pivot] = a[pivot], a[c]
-        a[c] = [x / a[c][c] for x in a[c]]
-        for r in range(k):
-            if r != c and a[r][c] != 0:
-                f = a[r][c]
-                a[r] = [x - f * y for x, y in zip(a[r], a[c], strict=True)]
-    out = [Fraction(1) if target[s] else Fraction(0) for s in range(n)]
-    for s, i in pos.items():
-        out[s] = a[i][k]
-    return out
+    solved = chain_values(step, unknown, -1)
+    return [Fraction(1) if target[s] else solved.get(s, Fraction(0)) for s in range(n)]
 
 
 def _optimum(rows: list[list[Fraction]], owner: list[int], target: np.ndarray,
@@ -170,17 +155,21 @@ def test_lifted_policy_reaches_the_optimum(sense: Sense, method: str, acyclic: b
     for seed in SEEDS:
         mdp, rows, owner, goal, _ = _draw(seed, acyclic, False)
         exact = _optimum(rows, owner, goal, sense)
+        q = analyse(mdp, goal, sense=sense)[0]  # the plain route's, value-1 states out
         if method == "iteration":
-            got = interval_iteration(mdp, goal, sense=sense, gap="max", tol=1e-12)
+            got = interval_iteration(mdp, goal, quotient=q, sense=sense, gap="max",
+                                     tol=1e-12)
             values = np.asarray(got.lower)
             assert np.all(np.asarray(got.upper) >= np.array([float(v) for v in exact])
                           - 1e-12)
         else:
-            got = solve_lp(mdp, goal, sense=sense, everywhere=True)
+            got = solve_lp(mdp, goal, quotient=q, sense=sense, everywhere=True)
             values = np.asarray(got.values)
         policy = np.asarray(got.policy)
         n = mdp.n_states
         one = np.array([v == 1 for v in exact]) & ~goal
+        assert np.array_equal((np.asarray(q.state_map) < 0) & ~goal
+                              & ~np.asarray(q.prob0), one), seed  # removed, all of them
         removed_seen += int(one.sum())
         groups = np.asarray(mdp.row_groups)
         lo, hi = groups[:-1], groups[1:]
