@@ -53,6 +53,14 @@ def _mdp(seed: int, acyclic: bool, truncated: bool) -> tuple[MDP, np.ndarray, np
             table.append(row)
             owner.append(s)
     dense = np.array(table)
+    return as_mdp(dense, owner, truncated), dense, np.array(owner)
+
+
+def as_mdp(dense: np.ndarray, owner: list[int], truncated: bool) -> MDP:
+    """The MDP of a dense (choices x states) table whose choices' states are ``owner``
+    (ascending): its last state the goal, with ``truncated`` the one before it the
+    truncated set; both in ``target``."""
+    n = dense.shape[1]
     groups = np.searchsorted(np.array(owner), np.arange(n + 1))
     goal = np.zeros(n, dtype=bool)
     goal[-1] = True
@@ -60,10 +68,9 @@ def _mdp(seed: int, acyclic: bool, truncated: bool) -> tuple[MDP, np.ndarray, np
     if truncated:
         extra[-2] = True
     no = np.zeros(n, dtype=bool)
-    mdp = MDP(matrix=sp.csr_array(dense), row_groups=groups.astype(np.int64),
-              choice_actions=np.zeros(len(table), dtype=np.int32), action_names=(),
-              initial=0, target=goal | extra, sink=no, truncated=extra, states=range(n))
-    return mdp, dense, np.array(owner)
+    return MDP(matrix=sp.csr_array(dense), row_groups=groups.astype(np.int64),
+               choice_actions=np.zeros(len(owner), dtype=np.int32), action_names=(),
+               initial=0, target=goal | extra, sink=no, truncated=extra, states=range(n))
 
 
 def _closure(adj: np.ndarray) -> np.ndarray:

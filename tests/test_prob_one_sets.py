@@ -17,7 +17,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+from test_analysis_half_quotient import as_mdp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import analyse
@@ -55,18 +55,8 @@ def _draw(seed: int, acyclic: bool, truncated: bool
             total = sum(w)
             rows.append([Fraction(x, total) for x in w])
             owner.append(s)
-    dense = np.array([[float(x) for x in r] for r in rows])
-    groups = np.searchsorted(np.array(owner), np.arange(n + 1)).astype(np.int64)
-    goal = np.zeros(n, dtype=bool)
-    goal[-1] = True
-    extra = np.zeros(n, dtype=bool)
-    if truncated:
-        extra[-2] = True
-    no = np.zeros(n, dtype=bool)
-    mdp = MDP(matrix=sp.csr_array(dense), row_groups=groups,
-              choice_actions=np.zeros(len(rows), dtype=np.int32), action_names=(),
-              initial=0, target=goal | extra, sink=no, truncated=extra, states=range(n))
-    return mdp, rows, owner, goal, extra
+    mdp = as_mdp(np.array([[float(x) for x in r] for r in rows]), owner, truncated)
+    return mdp, rows, owner, np.asarray(mdp.target & ~mdp.truncated), np.asarray(mdp.truncated)
 
 
 def _policy_values(rows: list[list[Fraction]], policy: list[int], target: np.ndarray
