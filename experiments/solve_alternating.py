@@ -8,8 +8,9 @@ and calling ``synthesize`` ``--reps`` times.  The script prints each checkout's 
 stage (CPU seconds, ``SynthesisResult.solve_cpu``): the minimum and the median over
 every call of every round, and the median of its graph analysis (the calls of
 ``mitld_lp.solvers.analysis.analyse`` inside it, timed by this script in both
-checkouts).  It prints the bracket beside them, as the hex of both floats, and whether
-the two checkouts gave the same bracket to the bit.  Unless ``--no-storm``, Storm's best
+checkouts), and how many states its quotient kept (the first model's).  It prints the
+bracket beside them, as the hex of both floats in each checkout, and whether the two
+checkouts gave the same bracket to the bit.  Unless ``--no-storm``, Storm's best
 sound check of the same product (``bench_qvbs.py``'s route: our DRN export read by
 stormpy, each of its sound methods, the cheapest kept) is measured once an instance,
 its value beside.
@@ -42,8 +43,9 @@ import bench_qvbs as bq  # noqa: E402
 import profile_solve as ps  # noqa: E402  (the same instances, posed the same way)
 
 ROOT = HERE.parent
-COLUMNS = ("instance", "value", "calls", "before_min", "before_median", "after_min",
-           "after_median", "after_over_before_median", "analysis_before_median",
+COLUMNS = ("instance", "value", "maybe_before", "maybe_after", "calls", "before_min",
+           "before_median", "after_min", "after_median", "after_over_before_median",
+           "analysis_before_median",
            "analysis_after_median", "storm_check_cpu", "storm_value", "same_bracket",
            "certified")
 
@@ -62,12 +64,16 @@ def child(job: dict[str, Any], reps: int) -> dict[str, Any]:
     inner = analysis.analyse
     timed: list[float] = []
 
+    kept: list[int] = []  # the states of the quotient (the first model's)
+
     def analyse(*args: Any, **kwargs: Any) -> Any:  # the route imports it at each call
         c = time.process_time()
         try:
-            return inner(*args, **kwargs)
+            got = inner(*args, **kwargs)
         finally:
             timed[-1] += time.process_time() - c
+        kept.append(int(got[0].n_states))
+        return got
 
     analysis.analyse = analyse
     spent = []
@@ -75,7 +81,7 @@ def child(job: dict[str, Any], reps: int) -> dict[str, Any]:
         timed.append(0.0)
         r = synthesize(model)
         spent.append(r.solve_cpu)
-    return dict(solve=spent, analysis=timed, lower=r.lower,
+    return dict(solve=spent, analysis=timed, lower=r.lower, maybe=kept[-1] if kept else None,
                 bracket=[r.lower.hex(), r.upper.hex()], certified=bool(r.certified))
 
 
@@ -143,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
                     seen[side] = got
             b, a = _median(spent["before"]), _median(spent["after"])
             storm = {} if args.no_storm else storm_check(job, work)
-            rows.append([inst.name, f"{seen['after']['lower']:.4g}", len(spent["after"]),
+            rows.append([inst.name, repr(seen["after"]["lower"]), seen["before"].get("maybe"),
+                         seen["after"].get("maybe"), len(spent["after"]),
                          round(min(spent["before"]), 4), round(b, 4),
                          round(min(spent["after"]), 4), round(a, 4), round(a / b, 3),
                          *(round(_median(stage[k]), 4) if stage[k] else None
@@ -152,8 +159,8 @@ def main(argv: list[str] | None = None) -> int:
                          f"{storm['value']:.4g}" if storm else None,
                          seen["before"]["bracket"] == seen["after"]["bracket"],
                          seen["before"]["certified"] and seen["after"]["certified"]])
-            print(_common.text_table(COLUMNS, rows[-1:]), "bracket (hex):",
-                  seen["after"]["bracket"], flush=True)
+            print(_common.text_table(COLUMNS, rows[-1:]), "bracket (hex) before:",
+                  seen["before"]["bracket"], "after:", seen["after"]["bracket"], flush=True)
     text = ("## The solve stage before and after, in turns (CPU seconds)\n\n"
             + _common.markdown_table(COLUMNS, rows)
             + f"\n\n{rounds} rounds, each a process of the checkout before then one of this "

@@ -35,7 +35,22 @@ from which some policy avoids the target for ever, the complement of the
 component among them (its states could avoid the target for ever), so nothing is
 collapsed; a state of the lower model that some policy keeps from the goal, but not
 from a truncated state, is kept with value 0 as above.  The states of value 1
-(``Prob1A``) are those that cannot reach a prob-0 state before the target.
+(``Prob1A``) are those that cannot reach a prob-0 state before the target.  Those of
+the goal's (so of the wider target's too: every policy that reaches the goal almost
+surely reaches it) leave the quotient with value 1, as Storm's *prob1* does before any
+number (:func:`_without_one`): a choice's probability of entering one joins its
+one-step probability of the target, and the solvers, the iteration and the LP, work
+only on the states whose value is unknown (99% of QVBS csma 4-2's maybe states and 69%
+of firewire_dl 3-600's had value 1).  Any choice is optimal there (every policy
+reaches the target almost surely): the lifted policy plays the first.  A state of value
+1 for the wider target only stays (its value still in ``qualitative.one``).
+
+A maximum's value-1 states of the goal (``Prob1E``, so the wider target's too) leave the
+quotient the same way, a collapsed end component of them whole (the others renumbered);
+there the lifted policy plays an attractor strategy
+(:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
+surely.  The step and cost objectives never read this quotient (their routes count the
+steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
 and never decompose the graph again.
@@ -44,7 +59,7 @@ and never decompose the graph again.
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -229,12 +244,99 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
 
 
+class _Decided(Quotient):
+    """A :class:`~mitld_lp.solvers.reduced.Quotient` whose removed states include
+    states of value 1 that are not targets (:func:`analyse`):
+    :meth:`lift` gives each removed state its graph-decided value, 1 on
+    ``qualitative.one`` (the target included), else 0, where the record's own lift
+    reads the target alone.  The same values everywhere else."""
+
+    __slots__ = ()
+
+    def lift(self, reduced: np.ndarray) -> np.ndarray:
+        out = Quotient.lift(self, reduced)
+        np.copyto(out, self.qualitative.one, where=self.state_map < 0)
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Cut:
+    """The quotient without its states of value 1 (:func:`_without_one`)."""
+
+    matrix: sp.csr_array
+    row_groups: np.ndarray
+    choices: np.ndarray  # each kept choice's row in the quotient before
+    new_id: np.ndarray  # each reduced state's id after, -1 where removed
+    to_goal: np.ndarray
+    to_extra: np.ndarray | None
+    leaks: list[np.ndarray]
+
+
+def _without_one(matrix: sp.csr_array, row_groups: np.ndarray, sure: np.ndarray,
+                 to: list[np.ndarray | None], leaks: list[np.ndarray]) -> _Cut:
+    """The quotient ``matrix`` (choices grouped by ``row_groups``) without its reduced
+    states ``sure`` (value 1 in both models: ``Prob1A`` or ``Prob1E`` of the smaller
+    target, so of the larger one too) and their choices: the probability of moving into one of them
+    joins the one-step probability of reaching the goal (``to[0]``), as a target
+    state's does; ``to[1]`` (the truncated states', or None) and ``leaks`` are kept for
+    the choices left."""
+    keep = ~sure
+    new_id = np.full(sure.size, -1, dtype=np.int64)
+    new_id[keep] = np.arange(int(keep.sum()))
+    states = np.flatnonzero(keep)
+    lo, hi = row_groups[states], row_groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    groups = np.concatenate([[0], np.cumsum(hi - lo)]).astype(np.int64)
+    rows = sp.csr_array(matrix[choices])
+    into = rows @ sure.astype(np.float64)
+    out = ~sure[rows.indices]  # the entries that stay among the kept states
+    per_row = np.bincount(np.repeat(np.arange(choices.size), np.diff(rows.indptr))[out],
+                          minlength=choices.size)
+    index = rows.indices.dtype
+    indptr = np.concatenate([[0], np.cumsum(per_row)])
+    cut = sp.csr_array((rows.data[out], new_id[rows.indices[out]].astype(index),
+                        indptr.astype(index)), shape=(choices.size, states.size))
+    return _Cut(cut, groups, choices, new_id, to[0][choices] + into,
+                None if to[1] is None else to[1][choices], [k[choices] for k in leaks])
+
+
+def _fewer_components(mecs: EndComponents, new_id: np.ndarray, sure: np.ndarray,
+                      n_plain: int, mdp: MDP) -> EndComponents:
+    """``mecs`` without the end components whose reduced state (``n_plain`` + id) left
+    the quotient (``sure``), the others numbered as their reduced states now are (in
+    the same order): a removed component's members and internal choices are no longer
+    any component's."""
+    kept_plain = int(np.count_nonzero(~sure[:n_plain]))
+    renumber = new_id[n_plain:] - kept_plain  # -1 - kept_plain where removed
+    renumber[sure[n_plain:]] = -1
+    mec_of = np.asarray(mecs.mec_of)
+    inside = mec_of >= 0
+    new_of = np.where(inside, renumber[np.maximum(mec_of, 0)], -1).astype(mec_of.dtype)
+    internal = np.array(mecs.internal, dtype=bool)
+    was = np.flatnonzero(internal)
+    internal[was[new_of[mdp.state_of(was)] < 0]] = False
+    return EndComponents(read_only(new_of), read_only(internal),
+                         int(np.count_nonzero(~sure[n_plain:])))
+
+
+def _split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
+    """Whether a component of the product holds both a state left in the quotient
+    (``maybe``) and one removed with value 1 (``sure``)."""
+    if not sure.any():
+        return False
+    kept = np.zeros(int(component.max(initial=-1)) + 1, dtype=bool)
+    kept[component[maybe]] = True
+    return bool(kept[component[sure]].any())
+
+
 def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
-            sense: Sense = Sense.MAX) -> tuple[Quotient, Quotient]:
+            sense: Sense = Sense.MAX, without_one: bool = True,
+            ) -> tuple[Quotient, Quotient]:
     """The quotients for reaching ``goal`` and for reaching ``goal | extra`` (module
     docs), from one analysis, sharing their matrix, end components and block order,
     for the optimum in ``sense``.  With ``extra`` None or empty both are the same
-    object."""
+    object.  ``without_one``: the goal's states of value 1 leave the quotient (module
+    docs); False keeps them, as :func:`mitld_lp.solvers.quotient.reduce` does."""
     goal = as_state_mask(mdp, goal, "goal")
     extra = np.zeros_like(goal) if extra is None else as_state_mask(mdp, extra, "extra")
     extra = extra & ~goal
@@ -333,9 +435,43 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         matrix.sum_duplicates()
     matrix.eliminate_zeros()
 
+    # the goal's value-1 states out of the quotient (_without_one): Prob1A of a minimum,
+    # Prob1E of a maximum (a collapsed end component leaves whole)
+    j0 = 1 if same else 0
+    sure = np.zeros(n_red, dtype=bool)
+    if without_one:
+        zero0 = np.zeros(n_red, dtype=bool)
+        zero0[state_map[maybe & prob0[j0]]] = True
+        sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
+        del zero0
+    sure_state = np.zeros(n, dtype=bool)
+    if sure.any():
+        cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
+        matrix, row_groups, kept = cut.matrix, cut.row_groups, kept[cut.choices]
+        to_goal, to_extra, leaks = cut.to_goal, cut.to_extra, cut.leaks
+        sure_state[maybe] = sure[state_map[maybe]]
+        maybe = maybe & ~sure_state
+        if mecs.n_mecs:
+            mecs = _fewer_components(mecs, cut.new_id, sure, n_plain, mdp)
+        n_plain = int(np.count_nonzero(~sure[:n_plain]))
+        state_map = np.where(state_map >= 0, cut.new_id[np.maximum(state_map, 0)], -1
+                             ).astype(state_map.dtype, copy=False)
+        n_red = int(cut.row_groups.shape[0] - 1)
+        del cut
+    del sure
+
     comp_of = np.zeros(n_red, dtype=np.int64)
     comp_of[state_map[maybe]] = found.component[maybe]
-    order = _order(matrix, row_groups, comp_of, found.level)
+    if _split(found.component, maybe, sure_state):
+        # a component of the product lost some of its states: what is left of it may
+        # be several components of the quotient, so the quotient's own are found
+        # (levels of one graph are levels of its subgraphs, but a block is one
+        # component: a single state is solved apart)
+        own = state_levels(matrix, row_groups)
+        order = _order(matrix, row_groups, own.component, own.level)
+        del own
+    else:
+        order = _order(matrix, row_groups, comp_of, found.level)
     # kept by the models for the certificate: in the index type (4 bytes a state and a
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
@@ -346,13 +482,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
         zero[state_map[maybe & prob0[j]]] = True
-        one = target.copy()
+        one = target | sure_state
         one[maybe] = _one(sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
         unreachable = ~reach[:, j] & ~target
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))
-        initial_value = 1.0 if target[init] else (0.0 if prob0[j][init] else float("nan"))
-        return Quotient(
+        initial_value = 1.0 if one[init] else (0.0 if prob0[j][init] else float("nan"))
+        return _Decided(
             target=read_only(target.copy()), prob0=read_only(prob0[j]),
             state_map=read_only(state_map), mecs=mecs, n_plain=n_plain, matrix=matrix,
             to_target=read_only(to_target), row_groups=read_only(row_groups),

@@ -32,7 +32,7 @@ from mitld_lp.solvers.graph import (
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.rows import row_entries
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.util.arrays import index_dtype
 from mitld_lp.util.traversal import breadth_first_order
 
@@ -122,9 +122,11 @@ def reduce(mdp: MDP, target: np.ndarray, *, sense: Sense = Sense.MAX) -> Quotien
     MEC redirected to the MEC's reduced state (so a choice may keep a self-loop of
     probability < 1 on its collapsed MEC).  For ``sense=Sense.MIN`` the prob-0 states
     are :func:`prob0_min`'s and no end component remains to collapse.  One model's
-    :func:`mitld_lp.solvers.analysis.analyse`.
+    :func:`mitld_lp.solvers.analysis.analyse`, its states of value 1 kept (the
+    record as documented; the plain route's analysis removes them).
     """
-    return analyse(mdp, as_state_mask(mdp, target, "target"), sense=sense)[0]
+    return analyse(mdp, as_state_mask(mdp, target, "target"), sense=sense,
+                   without_one=False)[0]
 
 
 def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None,
@@ -161,12 +163,64 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
                                              np.arange(leaves.size)), policy)
         stays = np.where(first == np.iinfo(np.int64).max, policy, first)
         policy[quotient.prob0] = stays[quotient.prob0]
+    if quotient.sense is Sense.MAX:  # the removed value-1 states: toward the target
+        sure = np.asarray(quotient.qualitative.one) & (quotient.state_map < 0) \
+            & ~quotient.target
+        if sure.any():
+            step = _almost_surely(mdp, sure, np.asarray(quotient.target))
+            policy[sure] = step[sure]
     policy[quotient.target | absorbing_states(mdp)] = -1
     # kept for the quotient's life: int32 where the choices' count allows (lift_policy
     # widens its own copy)
     policy = read_only(policy.astype(index_dtype(mdp.n_choices), copy=False))
     quotient.shared[key] = (quotient.prob0, quotient.target, policy)
     return policy
+
+
+def _almost_surely(mdp: MDP, sure: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """An attractor strategy of the ``sure`` states (value 1 for a maximum, ``Prob1E``
+    less the target): per state, a choice whose whole support stays among ``sure`` and
+    ``target`` and that moves, with positive probability, one step closer to the
+    target along a breadth-first tree of such choices (:func:`_toward`).  The chain it
+    makes never leaves them and, from every state, reaches the target with positive
+    probability within ``n`` steps: it reaches it almost surely (value 1, as the
+    quotient's lift says).  ``-1`` for the other states."""
+    choices = gather_ranges(mdp.row_groups[:-1][sure], mdp.row_groups[1:][sure])
+    local, succ, _ = row_entries(sp.csr_array(mdp.matrix), choices)
+    stays = sure | target
+    leaves = np.zeros(choices.size, dtype=bool)
+    leaves[local[~stays[succ]]] = True
+    step = _toward(mdp, choices[~leaves], np.flatnonzero(target))
+    if np.any(step[sure] < 0):  # pragma: no cover - Prob1E has such a tree
+        raise AssertionError("a state of value 1 has no choice toward the target")
+    return step
+
+
+def _toward(mdp: MDP, choices: np.ndarray, roots: np.ndarray) -> np.ndarray:
+    """Per state of ``mdp``, its first choice among ``choices`` that has its parent as a
+    successor in a breadth-first tree of the edges of ``choices`` reversed, from the
+    ``roots`` (``-1`` for a root and a state the tree does not reach): followed, each
+    step moves one level closer to a root with positive probability."""
+    n = mdp.n_states
+    local, succ, data = row_entries(sp.csr_array(mdp.matrix), choices)
+    positive = data > 0
+    e_choice = choices[local[positive]]
+    e_succ = np.asarray(succ[positive], dtype=np.int64)
+    e_source = mdp.state_of(e_choice)
+    del local, succ, data, positive
+    rows = np.concatenate([e_succ, np.full(roots.size, n, dtype=np.int64)])
+    cols = np.concatenate([e_source, roots])
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
+    _, pred = breadth_first_order(graph, n, return_predecessors=True)
+    toward = e_succ == pred[e_source]
+    cand_state, cand_choice = e_source[toward], e_choice[toward]
+    ordering = np.lexsort((cand_choice, cand_state))
+    cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
+    first = np.unique(cand_state, return_index=True)[1]
+    step = np.full(n, -1, dtype=np.int64)
+    step[cand_state[first]] = cand_choice[first]
+    step[roots] = -1
+    return step
 
 
 def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.ndarray:
@@ -183,11 +237,14 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       positive probability, so the policy leaves the MEC almost surely and its value is
       the quotient policy's value;
     * target states and absorbing states (a single ``ABSORB`` self-loop) get ``-1``;
-      the other prob-0 states get their first choice (every choice has value 0 there);
+      the other prob-0 states get their first choice (every choice has value 0 there),
+      and so do a minimum's states of value 1 the analysis removed (``Prob1A``: every
+      choice reaches the target almost surely there); a maximum's removed states of
+      value 1 (``Prob1E``) play an attractor strategy (:func:`_almost_surely`): it
+      reaches the target almost surely, so the controller achieves their value 1;
       for a minimum, their first choice that stays among them (``Prob0E``: one does,
       and staying avoids the target for ever).
     """
-    n = mdp.n_states
     policy = _outside(mdp, quotient).astype(np.int64)  # a copy, int64 as promised
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
@@ -204,32 +261,12 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     exits = chosen[quotient.n_plain :]
     owners = mdp.state_of(exits)  # not choice_state(): an int64 a choice of the product
     policy[owners] = exits
-    # BFS on the reversed internal-choice graph from the owners (virtual root n): the
-    # positive entries of the internal choices' rows, in the matrix's order
-    inside = np.flatnonzero(mecs.internal)
-    local, succ, data = row_entries(sp.csr_array(mdp.matrix), inside)
-    positive = data > 0
-    e_choice = inside[local[positive]]
-    e_succ = np.asarray(succ[positive], dtype=np.int64)
-    e_source = mdp.state_of(e_choice)
-    del local, succ, data, positive
-    src, dst = e_source, e_succ
-    rows = np.concatenate([dst, np.full(owners.size, n, dtype=np.int64)])
-    cols = np.concatenate([src, owners])
-    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
-    _, pred = breadth_first_order(graph, n, return_predecessors=True)
+    # each other member: a step along a breadth-first tree of the internal choices,
+    # toward the exit's owner (_toward)
+    step = _toward(mdp, np.flatnonzero(mecs.internal), owners)
     members = np.flatnonzero(mecs.mec_of >= 0)
     others = np.setdiff1d(members, owners)
-    if np.any(pred[others] < 0):  # pragma: no cover - MECs are strongly connected
+    if np.any(step[others] < 0):  # pragma: no cover - MECs are strongly connected
         raise AssertionError("a MEC member cannot reach its exit inside the MEC")
-    toward = e_succ == pred[e_source]
-    # For each member, the first internal choice that has the BFS parent as a successor.
-    cand_state = e_source[toward]
-    cand_choice = e_choice[toward]
-    ordering = np.lexsort((cand_choice, cand_state))
-    cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
-    first = np.unique(cand_state, return_index=True)[1]
-    step = np.full(n, -1, dtype=np.int64)
-    step[cand_state[first]] = cand_choice[first]
     policy[others] = step[others]
     return policy
