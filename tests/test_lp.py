@@ -391,15 +391,28 @@ def test_inaccurate_clarabel_solve_is_retried() -> None:
 def test_unfixable_lp_is_replaced_by_the_iteration_policy(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    # every solve comes back "optimal_inaccurate" and no retry helps: the route must
+    # fall back to the iteration's policy and still certify.  (Issue 12's product,
+    # where Clarabel said so by itself, is now decided by the graph: its initial state
+    # has value 1 and no LP is left to fail; the bundled grid's value is not 0 or 1.)
     import mitld_lp.solvers.lp_backends as lp_module
-    from mitld_lp import synthesize
+    from mitld_lp import load_model, synthesize
 
+    real = lp_module._run_backend
+
+    def inaccurate(*args, **kwargs):
+        raw = real(*args, **kwargs)
+        return lp_module.Raw(Status.INACCURATE, f"{raw.message} (made inaccurate)",
+                             raw.y, raw.v, raw.iterations)
+
+    monkeypatch.setattr(lp_module, "_run_backend", inaccurate)
     monkeypatch.setattr(lp_module, "_retries", lambda settings: iter(()))
-    result = synthesize(_inaccurate_case(), decompose=False)
+    model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
+    result = synthesize(model, decompose=False)
     assert result.lower_model.lp is not None
     assert result.lower_model.lp.status == Status.INACCURATE
     assert result.certified and result.status == Status.OPTIMAL
-    assert result.lower == pytest.approx(1.0, abs=1e-9)
+    assert result.lower <= 0.9244053 + 1e-7 and 0.9244053 - 1e-7 <= result.upper  # Storm
     names = [c.name for c in result.lower_model.checks]
     assert "LP replaced by the iteration policy" in names
 

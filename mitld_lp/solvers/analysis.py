@@ -244,21 +244,6 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
 
 
-class _Decided(Quotient):
-    """A :class:`~mitld_lp.solvers.reduced.Quotient` whose removed states include
-    states of value 1 that are not targets (:func:`analyse`):
-    :meth:`lift` gives each removed state its graph-decided value, 1 on
-    ``qualitative.one`` (the target included), else 0, where the record's own lift
-    reads the target alone.  The same values everywhere else."""
-
-    __slots__ = ()
-
-    def lift(self, reduced: np.ndarray) -> np.ndarray:
-        out = Quotient.lift(self, reduced)
-        np.copyto(out, self.qualitative.one, where=self.state_map < 0)
-        return out
-
-
 @dataclass(frozen=True, slots=True)
 class _Cut:
     """The quotient without its states of value 1 (:func:`_without_one`)."""
@@ -488,7 +473,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))
         initial_value = 1.0 if one[init] else (0.0 if prob0[j][init] else float("nan"))
-        return _Decided(
+        return Quotient(
             target=read_only(target.copy()), prob0=read_only(prob0[j]),
             state_map=read_only(state_map), mecs=mecs, n_plain=n_plain, matrix=matrix,
             to_target=read_only(to_target), row_groups=read_only(row_groups),

@@ -336,7 +336,8 @@ def solve_lp(
         return failed(Raw(Status.FAILED, unusable))
     if q.n_states == 0 or (q.initial < 0 and not everywhere):
         # Nothing to optimise: the initial state is decided by the graph analysis.
-        reason = "a target state" if q.target[mdp.initial] else "a prob-0 state"
+        reason = ("a target state" if q.target[mdp.initial] else
+                  "a state of value 1" if q.initial_value == 1.0 else "a prob-0 state")
         answer: Answer | Raw = Answer(
             Raw(Status.OPTIMAL, f"initial state is {reason}: decided by graph analysis, "
                  "no LP solved (values of the other maybe states are nan)"),

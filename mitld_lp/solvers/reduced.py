@@ -54,7 +54,9 @@ class Quotient(MDPShape):
     ``sense`` on a model with no end component.
 
     Built by :func:`reduce`.  Target states (value 1) and prob-0 states (value 0) are
-    removed; for a maximum every MEC of the remaining *maybe* states becomes one state
+    removed (and by :func:`~mitld_lp.solvers.analysis.analyse`, the plain route's, the
+    goal's other states of value 1 too: Prob1A / Prob1E, their probability counted in
+    ``to_target``); for a maximum every MEC of the remaining *maybe* states becomes one state
     whose choices are the choices of its members that are not internal to it (they
     leave the MEC with positive probability).  For a minimum the prob-0 states are
     ``Prob0E`` (some policy avoids the target for ever), and no end component is left
@@ -129,17 +131,19 @@ class Quotient(MDPShape):
     def lift(self, reduced: np.ndarray) -> np.ndarray:
         """Map a per-reduced-state value vector back to the original states.
 
-        Members of a collapsed MEC all get the MEC's value; target states get 1 and
-        prob-0 states 0.
+        Members of a collapsed MEC all get the MEC's value; a removed state its value
+        decided by the graph: 1 on ``qualitative.one`` (the target, and the goal's other
+        states of value 1 that :func:`~mitld_lp.solvers.analysis.analyse` removes), 0
+        on the prob-0 states.
         """
         values = np.asarray(reduced, dtype=np.float64)
-        if values.size == 0:  # nothing kept: every state is a target or of value 0
-            return np.where(self.target, 1.0, 0.0)
+        if values.size == 0:  # nothing kept: every state is of value 1 or 0
+            return np.where(self.qualitative.one, 1.0, 0.0)
         # one gather over every state (a removed one, -1, reads the last value and is
         # overwritten), not the kept states' indices and values gathered apart: one
         # float a state and a mask where there were three arrays a state
         out = values[self.state_map]
-        np.copyto(out, self.target, where=self.state_map < 0)
+        np.copyto(out, self.qualitative.one, where=self.state_map < 0)
         return out
 
 
