@@ -16,9 +16,10 @@ from mitld_lp.solvers import chain_levels
 from mitld_lp.solvers.certify_chain import chain, support_layers
 from mitld_lp.solvers.chain_levels import ChainLevels, chain_solve
 from mitld_lp.solvers.graph import graph_blocks
-from mitld_lp.solvers.lp_blocks import policy_flow
+from mitld_lp.solvers.lp_blocks import Walked, policy_flow
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.rounding import rounding
+from mitld_lp.solvers.topological import Block
 from mitld_lp.testing import random_mdp
 
 
@@ -157,7 +158,8 @@ def test_flow_on_a_kept_walk_matches_a_dense_solve(seed: int, monkeypatch) -> No
     for level in blk.walk():
         if level.rest.size:
             block = sp.csr_array(q.matrix[pick[level.rest]][:, level.rest])
-            walks[level.index] = (level.rest, ChainLevels(block))
+            # as the greedy block answer hands it on (lp_blocks.Walked.of)
+            walks[level.index] = Walked.of(Block.of(q, level.rest), ChainLevels(block))
     assert walks
     b = rng.random(q.n_states)
     y = policy_flow(q, blk, weights, b, walks=walks)
