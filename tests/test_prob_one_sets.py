@@ -192,3 +192,30 @@ def test_then_min_steps_counts_the_steps_of_value_one_states() -> None:
     r = synthesize_constrained(Model.from_game(g, "F goal"), [], then="min-steps")
     assert r.lower == pytest.approx(1.0, abs=1e-6)
     assert r.secondary == pytest.approx(1.0, abs=1e-6)
+
+
+def test_a_stored_zero_is_not_an_edge_of_the_attractor_strategy() -> None:
+    """A maximum's removed value-1 state whose best choice stores a zero toward a dead
+    state (the sensed routes' chains keep such entries): the analysis's graph has no
+    such edge, so its attractor strategy takes that choice (it reaches the goal with
+    probability 1, the other choice with 1/2).  It once found no choice there and
+    failed: the strategy read the zero as a way out of the value-1 states."""
+    import scipy.sparse as sp
+
+    from mitld_lp.solvers.quotient import lift_policy
+
+    # states: 0 start, 1 dead (loops), 2 goal (absorbing); choices: 0 -> {2: 1, 1: 0},
+    # 0 -> {1: 1/2, 2: 1/2}, 1 -> {1: 1}, 2 -> {2: 1}
+    matrix = sp.csr_array((np.array([0.0, 1.0, 0.5, 0.5, 1.0, 1.0]),
+                           np.array([1, 2, 1, 2, 1, 2]), np.array([0, 2, 4, 5, 6])),
+                          shape=(4, 3))
+    assert matrix.nnz == 6  # the zero is stored
+    no = np.zeros(3, dtype=bool)
+    mdp = MDP(matrix=matrix, row_groups=np.array([0, 2, 3, 4], dtype=np.int64),
+              choice_actions=np.zeros(4, dtype=np.int32), action_names=(), initial=0,
+              target=np.array([False, False, True]), sink=no, truncated=no,
+              states=range(3))
+    q = analyse(mdp, mdp.target, sense=Sense.MAX)[0]
+    assert q.state_map[0] < 0 and q.qualitative.one[0]  # decided 1, removed
+    policy = lift_policy(mdp, q, np.zeros(q.n_states, dtype=np.int64))
+    assert policy[0] == 0  # the sure choice, not the coin

@@ -186,10 +186,11 @@ def _almost_surely(mdp: MDP, sure: np.ndarray, target: np.ndarray) -> np.ndarray
     probability within ``n`` steps: it reaches it almost surely (value 1, as the
     quotient's lift says).  ``-1`` for the other states."""
     choices = gather_ranges(mdp.row_groups[:-1][sure], mdp.row_groups[1:][sure])
-    local, succ, _ = row_entries(sp.csr_array(mdp.matrix), choices)
+    local, succ, data = row_entries(sp.csr_array(mdp.matrix), choices)
     stays = sure | target
     leaves = np.zeros(choices.size, dtype=bool)
-    leaves[local[~stays[succ]]] = True
+    # a stored zero is not an edge (the analysis's graph drops them too)
+    leaves[local[~stays[succ] & (data > 0)]] = True
     step = _toward(mdp, choices[~leaves], np.flatnonzero(target))
     if np.any(step[sure] < 0):  # pragma: no cover - Prob1E has such a tree
         raise AssertionError("a state of value 1 has no choice toward the target")
