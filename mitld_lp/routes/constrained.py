@@ -151,7 +151,7 @@ def solve_merged(posed: Posed, mdp: MDP, joint: Joint, sta: STA, t0: float, *,
     cost_map = dict(model.costs if costs is None else costs)
     deadline = Deadline.after(s.time_limit, t0)
     eps = model.epsilon if s.epsilon is None else s.epsilon
-    merged = merge(mdp, joint) if merged is None else merged
+    merged = merge(mdp, joint, negated=posed.minimise) if merged is None else merged
     cost_vec = cost_vector(mdp, cost_map)
     eta = model_eta(sta) if eta is None else eta
 

@@ -139,7 +139,7 @@ def solve_optimistic_constrained(posed: Posed, built: Built, *,
     snapped = independent_weights(imdp, vr, weight)
     moved = float(np.max(np.abs(snapped - weight), initial=0.0))
     law = at_law(imdp, vr, snapped)
-    law_merged = merge(law, joint)
+    law_merged = merge(law, joint, negated=posed.minimise)
     prob, stay, unmapped = _mapped(merged, law_merged, imdp, vr, part.prob, part.stay)
     r = replace(r, mdp=law, part=replace(part, merged=law_merged, prob=prob, stay=stay))
     return _judged(posed, r, prob, moved, bands, seed, unmapped,

@@ -8,7 +8,9 @@ worth for each quantity.
 * **Decided task** (:attr:`Merged.undecided`): a state is *undecided* when its task
   component has neither accepted nor rejected and some policy still reaches task
   acceptance or truncation from it (graph reachability); expected steps and costs
-  count the actions taken in undecided states only.
+  count the actions taken in undecided states only.  For a minimum (the component is
+  the complement of the posed task) the acceptance is the posed task's: the
+  complement's rejection.
 * **End components**: a run may stay for ever in an end component of the
   non-absorbing states; it then decides nothing more (a component that accepts or
   rejects leaves the component's automaton state, which an end component cannot do),
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.automata.joint import ACCEPTED, UNDECIDED, Joint
+from mitld_lp.automata.joint import ACCEPTED, REJECTED, UNDECIDED, Joint
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing, ProductState
 from mitld_lp.solvers.quotient import backward_reachable, maximal_end_components
@@ -101,8 +103,15 @@ class Merged:
     stay_values: np.ndarray | None = None
 
 
-def merge(mdp: MDP, joint: Joint) -> Merged:
-    """:class:`Merged` of the product ``mdp`` of a world with ``joint.dta``."""
+def merge(mdp: MDP, joint: Joint, *, negated: bool = False) -> Merged:
+    """:class:`Merged` of the product ``mdp`` of a world with ``joint.dta``.
+
+    ``negated``: the joint's first component is the complement of the posed task (a
+    minimum, solved as the complement's maximum).  Steps and costs still count while the
+    *posed* task is undecided: neither of them has a verdict and some policy could still
+    make the posed task accept, that is, make the complement reject (or reach truncation).
+    Counted against the complement instead, a state from which every policy satisfies
+    the posed task would not be charged on its way there."""
     n = mdp.n_states
     k = len(joint.parts)
     jstate = np.full(n, -1, dtype=np.int64)
@@ -215,10 +224,10 @@ def merge(mdp: MDP, joint: Joint) -> Merged:
         task_acc = verdicts[:, 0] == ACCEPTED
     else:
         keep_choice = keep_internal = np.zeros(new.n_choices, dtype=bool)
-    # undecided: task open and task acceptance (or truncation) still reachable
+    # undecided: task open and the posed task's acceptance (or truncation) still reachable
     e = new.matrix.tocoo()
     cs = new.choice_state()
-    seeds = task_acc | truncated
+    seeds = ((verdicts[:, 0] == REJECTED) if negated else task_acc) | truncated
     can = backward_reachable(m, cs[e.row], e.col, seeds)
     undecided = ~absorbing & (verdicts[:, 0] == UNDECIDED) & can
     mecs = maximal_end_components(new, ~absorbing)
