@@ -359,8 +359,8 @@ class SensedConstrainedRoute(Route):
         asked = (*p.constraints, *([p.then] if p.then else []))
         # the constrained LP asked with neither (a trade-off curve's end) is this LP too
         lp = asked or (("the constrained LP",) if self.every and not posed.robust else ())
-        return refused + sensed_refusals(p.model, CO_SAFE, "max", lp, None, posed.robust,
-                                         never=True)
+        return refused + timed_minimum_refusal(posed) + sensed_refusals(
+            p.model, CO_SAFE, "max", lp, None, posed.robust, never=True)
 
     def build(self, posed: Posed, progress: bool | None = None) -> Built:
         """The joint automaton of the task and the constraints' formulas, then the
@@ -473,3 +473,20 @@ def _steps_checked(r: Result, then: str | None) -> Result:
         f"then {then}: the policy's chain may stay undecided for ever (infinitely many "
         "expected steps), where the LP's policy takes finitely many"))
     return replace(r, certified=False, checks=(*r.checks, check))
+
+
+def timed_minimum_refusal(posed: Posed) -> list[str]:
+    """A minimum with expected steps or costs (``then``, ``E(steps)``, ``E(cost)``): the
+    information-state product counts them while the automaton it solves, the complement
+    of a minimised task, is undecided and can still be won, which is not while the posed
+    task is (a state from which every run satisfies the task would go uncharged), so the
+    combination is refused by name until the sensed steps are counted on the posed task."""
+    p = posed.problem
+    timed = [str(c) for c in p.constraints if c.kind in ("steps", "cost")]
+    timed += [f"then {p.then}"] if p.then else []
+    if not posed.minimise or not timed:
+        return []
+    return [f"objective min with {', '.join(timed)} and a sensor: the sensed routes count "
+            "steps and costs on the complement a minimum is solved as, not until the "
+            "posed task is decided (without a sensor the constrained route counts them on "
+            "the posed task)"]
