@@ -3,17 +3,18 @@ value-1 states left the quotient, on random MDPs larger than exact policy enumer
 reaches (8-24 states, end components, self-loops, truncated states or none): since the
 goal's own model is no longer searched a second time on the cut quotient
 (:func:`~mitld_lp.solvers.analysis.analyse`), each model's set is checked against the
-textbook fixpoints computed here on a dict-of-sets graph (Baier and Katoen, chapter
-10.6): a maximum's ``Prob1E`` as the nested fixpoint ``nu X. mu Y. T | {s : some choice
-stays in X and hits Y}``, a minimum's ``Prob1A`` as the states that cannot reach
-``Prob0E`` (``nu Z. {s not in T : some choice stays in Z}``) through states outside
-the target."""
+textbook fixpoints on a list-of-sets graph (Baier and Katoen, chapter 10.6; the brute
+forces of ``test_rare_solve``): a maximum's ``Prob1E`` as the nested fixpoint ``nu X.
+mu Y. T | {s : some choice stays in X and hits Y}``, a minimum's ``Prob1A`` as the
+states that cannot reach ``Prob0E`` (``nu Z. {s not in T : some choice stays in Z}``)
+through states outside the target."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from test_analysis_half_quotient import as_mdp
+from test_rare_solve import prob0_e, prob1_e, reach_avoiding
 
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
@@ -42,46 +43,18 @@ def _draw(seed: int, truncated: bool) -> tuple[np.ndarray, list[int]]:
     return np.array(rows), owner
 
 
-def _supports(dense: np.ndarray, owner: list[int]) -> dict[int, list[frozenset[int]]]:
+def _choices(dense: np.ndarray, owner: list[int]) -> list[list[set[int]]]:
     """Each state's choices as the sets of their successors."""
-    out: dict[int, list[frozenset[int]]] = {s: [] for s in range(dense.shape[1])}
+    out: list[list[set[int]]] = [[] for _ in range(dense.shape[1])]
     for c, s in enumerate(owner):
-        out[s].append(frozenset(np.flatnonzero(dense[c] > 0).tolist()))
+        out[s].append(set(np.flatnonzero(dense[c] > 0).tolist()))
     return out
 
 
-def _prob1e(succ: dict[int, list[frozenset[int]]], target: set[int]) -> set[int]:
-    x = set(succ)
-    while True:
-        y = set(target)
-        grew = True
-        while grew:
-            grew = False
-            for s, choices in succ.items():
-                if s not in y and any(c <= x and c & y for c in choices):
-                    y.add(s)
-                    grew = True
-        if y == x:
-            return x
-        x = y
-
-
-def _prob1a(succ: dict[int, list[frozenset[int]]], target: set[int]) -> set[int]:
-    z = set(succ) - target
-    while True:
-        keep = {s for s in z if any(c <= z for c in succ[s])}
-        if keep == z:
-            break
-        z = keep
-    bad = set(z)  # Prob0E, then every state with a path to it outside the target
-    grew = True
-    while grew:
-        grew = False
-        for s, choices in succ.items():
-            if s not in bad and s not in target and any(c & bad for c in choices):
-                bad.add(s)
-                grew = True
-    return set(succ) - bad
+def _prob1a(choices: list[list[set[int]]], target: set[int]) -> set[int]:
+    """``Prob1A``: the states with no path to ``Prob0E`` outside the target."""
+    bad = reach_avoiding(choices, prob0_e(choices, target), target)
+    return set(range(len(choices))) - bad
 
 
 @pytest.mark.parametrize("truncated", [False, True])
@@ -96,10 +69,10 @@ def test_value_one_sets_of_both_models(sense: Sense, truncated: bool) -> None:
         goal[-1] = True
         extra = np.asarray(mdp.truncated)
         low, high = analyse(mdp, goal, extra, sense=sense)
-        succ = _supports(dense, owner)
+        succ = _choices(dense, owner)
         for q, target in ((low, goal), (high, goal | extra)):
             t = set(np.flatnonzero(target).tolist())
-            want = _prob1e(succ, t) if sense is Sense.MAX else _prob1a(succ, t)
+            want = prob1_e(succ, t) if sense is Sense.MAX else _prob1a(succ, t)
             got = set(np.flatnonzero(np.asarray(q.qualitative.one)).tolist())
             assert got == want, (seed, sense, truncated)
         removed += int(np.count_nonzero((np.asarray(low.state_map) < 0)
