@@ -468,7 +468,12 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         zero = np.zeros(n_red, dtype=bool)
         zero[state_map[maybe & prob0[j]]] = True
         one = target | sure_state
-        one[maybe] = _one(sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
+        # the goal's own value-1 states left the quotient, and none is left: the states
+        # that remain reach a losing state or choice (a minimum) or cannot avoid one (a
+        # maximum) through states that remain, so _one would find none; the wider
+        # target's, from other seeds, are searched
+        one[maybe] = False if without_one and j == j0 else _one(
+            sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
         unreachable = ~reach[:, j] & ~target
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))
