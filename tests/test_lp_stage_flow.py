@@ -6,7 +6,8 @@ greedy walk finds each exit entry's state by a gather (``Walked.push``).
 
 Checked against an exact route written here: the occupancy ``y(c) = w(c) x(owner(c))``
 with ``x = b + P_w^T x`` solved in fractions (Gauss-Jordan on the rationals of the
-float64 entries), so the float answer may differ from it by rounding only."""
+float64 entries, ``mitld_lp.testing.exact``), so the float answer may differ from it by
+rounding only."""
 
 from __future__ import annotations
 
@@ -21,33 +22,27 @@ from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.quotient import reduce
 from mitld_lp.solvers.topological import blocks
 from mitld_lp.testing import random_mdp
+from mitld_lp.testing.exact import chain_values
 
 
 def _exact_flow(q, weights: np.ndarray, b: np.ndarray) -> list[Fraction]:
-    """``y(c) = w(c) x(owner(c))``, ``x = b + P_w^T x`` in exact rationals."""
+    """``y(c) = w(c) x(owner(c))``, ``x = b + P_w^T x`` in exact rationals: the chain
+    ``P_w^T`` with ``b(s)`` as each state's step into a goal of its own, solved by the
+    shared fractions elimination (``mitld_lp.testing.exact``)."""
     n = q.n_states
     groups = np.asarray(q.row_groups)
     m = q.matrix.tocsr()
-    # (I - P_w^T) x = b, P_w[s, t] = sum over s's choices c of w(c) P(c, t)
-    a = [[Fraction(int(i == j)) for j in range(n)] + [Fraction(float(b[i]))]
-         for i in range(n)]
-    for s in range(n):
+    goal = n
+    step: list[dict[int, Fraction]] = [{goal: Fraction(float(b[s]))} for s in range(n)]
+    for s in range(n):  # P_w^T[t, s] += w(c) P(c, t) for each choice c of s
         for c in range(int(groups[s]), int(groups[s + 1])):
             w = Fraction(float(weights[c]))
             if w == 0:
                 continue
             for k in range(int(m.indptr[c]), int(m.indptr[c + 1])):
-                a[int(m.indices[k])][s] -= w * Fraction(float(m.data[k]))
-    for col in range(n):  # Gauss-Jordan; I - P_w^T is invertible (no end component)
-        piv = next(r for r in range(col, n) if a[r][col] != 0)
-        a[col], a[piv] = a[piv], a[col]
-        inv = 1 / a[col][col]
-        a[col] = [v * inv for v in a[col]]
-        for r in range(n):
-            if r != col and a[r][col] != 0:
-                f = a[r][col]
-                a[r] = [v - f * p for v, p in zip(a[r], a[col], strict=True)]
-    x = [a[i][n] for i in range(n)]
+                t = int(m.indices[k])
+                step[t][s] = step[t].get(s, Fraction(0)) + w * Fraction(float(m.data[k]))
+    x = chain_values(step, list(range(n)), goal)
     return [Fraction(float(weights[c])) * x[s]
             for s in range(n) for c in range(int(groups[s]), int(groups[s + 1]))]
 
