@@ -108,27 +108,37 @@ def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
             "greedy_peaks": out["greedy"]}
 
 
-def run_child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
+def run_child(root: Path, benchmarks: Path, name: str, script: str = __file__
+              ) -> dict[str, Any]:
+    """``script --child root benchmarks name`` in a process of its own with ``root``'s
+    package: the JSON it prints last, or the error."""
     env = dict(os.environ, PYTHONPATH=str(root))
-    got = subprocess.run([sys.executable, __file__, "--child", str(root), str(benchmarks),
+    got = subprocess.run([sys.executable, script, "--child", str(root), str(benchmarks),
                           name], capture_output=True, text=True, env=env, check=False)
     if got.returncode:
         return {"instance": name, "error": got.stderr[-2000:]}
     return json.loads(got.stdout.strip().splitlines()[-1])
 
 
-def main(argv: list[str]) -> None:
-    if argv and argv[0] == "--child":
-        print(json.dumps(child(Path(argv[1]).resolve(), Path(argv[2]), argv[3])))
-        return
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def arguments(argv: list[str], doc: str) -> tuple[argparse.Namespace, list[Path]]:
+    """The command line this script and ``lp_stage_parts.py`` share, and the
+    checkouts to run (this one, then ``--compare``'s)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("checkout", type=Path)
     ap.add_argument("benchmarks", type=Path)
     ap.add_argument("instances", nargs="+")
     ap.add_argument("--compare", type=Path, help="another checkout, run right after")
     ap.add_argument("--out", type=Path, help="also write the table here (markdown)")
     args = ap.parse_args(argv)
-    roots = [args.checkout.resolve()] + ([args.compare.resolve()] if args.compare else [])
+    return args, [args.checkout.resolve()] + ([args.compare.resolve()] if args.compare
+                                              else [])
+
+
+def main(argv: list[str]) -> None:
+    if argv and argv[0] == "--child":
+        print(json.dumps(child(Path(argv[1]).resolve(), Path(argv[2]), argv[3])))
+        return
+    args, roots = arguments(argv, __doc__)
     lines = ["| instance | transitions | lower | same bracket | LP CPU | solve CPU | "
              "LP traced peak B/t | greedy peaks B/t | checkout |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -149,10 +159,15 @@ def main(argv: list[str]) -> None:
                 f"{row['lp_cpu']:.3f} | {row['solve_cpu']:.3f} | {row['lp_peak']:.1f} | "
                 f"{peaks} | {root} |")
         print("\n".join(lines[-len(rows):]), flush=True)
+    finish(lines, args.out)
+
+
+def finish(lines: list[str], out: Path | None) -> None:
+    """The table printed whole, and written to ``out`` if given."""
     text = "\n".join(lines)
     print(text)
-    if args.out:
-        args.out.write_text(text + "\n")
+    if out:
+        out.write_text(text + "\n")
 
 
 if __name__ == "__main__":

@@ -137,7 +137,7 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     m = int(groups[-1])
     for a in range(0, m, BATCH):
         z = min(a + BATCH, m)
-        owner = np.searchsorted(groups, np.arange(a, z), side="right").astype(index) - 1
+        owner = _owners(groups, a, z, index)
         score = reward[a:z] + _rows(block.inner, a, z).astype(np.longdouble) @ v_ld
         slack = (-sense.gain(score, v_ld[owner])).astype(np.float64)
         del score
@@ -161,6 +161,15 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     if left.size == n:
         return None
     return Greedy(chosen, values, left, walk, int(groups[-1]))
+
+
+def _owners(groups: np.ndarray, a: int, z: int, index: type) -> np.ndarray:
+    """The state of each choice ``a`` to ``z - 1`` (``groups``: the states' first
+    choices, then the total): the states the batch spans, each repeated by its choices
+    inside it (two binary searches a batch, not one a choice)."""
+    first, last = np.searchsorted(groups, (a, z - 1), side="right") - 1
+    starts = np.clip(groups[first:last + 2], a, z)
+    return np.repeat(np.arange(first, last + 1, dtype=index), np.diff(starts))
 
 
 def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:

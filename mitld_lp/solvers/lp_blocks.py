@@ -119,10 +119,20 @@ def policy_flow(q: Quotient, blk: Blocks, weights: np.ndarray, b: np.ndarray,
         choices = gather_ranges(lo, hi)
         owner_local = np.repeat(np.arange(states.size), hi - lo)
         w = weights[choices]
+        walked = kept is not None and np.array_equal(kept.states, level.rest)
+        if walked or level.rest.size == 0:
+            # only the choices the policy takes carry flow: one of a deterministic
+            # state's several (the others add +0.0 terms to the sums below, which
+            # change no sum of non-negative terms: the same bits without their
+            # entries); a cyclic level's chain is built from all of them, as before
+            taken = w != 0.0
+            if not taken.all():
+                choices, owner_local, w = choices[taken], owner_local[taken], w[taken]
+            del taken
         stay = np.bincount(owner_local, weights=w * blk.self_loop[choices],
                            minlength=states.size)
         x[level.single] /= 1.0 - stay[:n_single]
-        if kept is not None and np.array_equal(kept.states, level.rest):
+        if walked:
             x[level.rest] = kept.walk.solve_transposed(x[level.rest])
         elif level.rest.size:
             block = level.rest  # the tail of ``states``: local index = owner - n_single
@@ -175,7 +185,9 @@ class Walked:
             return
         lo, hi = q.row_groups[self.states], q.row_groups[self.states + 1]
         first = np.cumsum(hi - lo) - (hi - lo)  # each state's first local choice
-        owner = np.searchsorted(first, self.row, side="right") - 1
+        # each local choice's state, then each entry's by a gather (not a binary
+        # search an entry over the level's states)
+        owner = np.repeat(np.arange(self.states.size), hi - lo)[self.row]
         choice = lo[owner] + (self.row - first[owner])
         y = weights[choice] * x[self.states[owner]]
         np.add.at(x, self.col, self.val * y)
