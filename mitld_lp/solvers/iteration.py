@@ -573,9 +573,13 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
     # greedy on the bound a greedy policy's value lies beyond (a maximum's lower, a
-    # minimum's upper); before the bounds are lifted: its scores not held beside them
-    known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
-    policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+    # minimum's upper), made at its first read (IterationResult.policy): the route that
+    # certifies the LP's policy never reads it.  A copy: ``bounds`` is the pass's array.
+    known = (bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]).copy()
+
+    def policy() -> np.ndarray:
+        return lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+
     one = np.asarray(q.qualitative.one)
     lower, upper = q.lift(bounds[:, 0]), q.lift(bounds[:, 1])  # fresh arrays: the
     lower[one] = upper[one] = 1.0  # ones set in place (no third array a state each)
@@ -595,6 +599,6 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         value_upper=float(upper[mdp.initial]),
         iterations=budget.iterations,
         seconds=seconds,
-        policy=read_only(policy),
+        greedy=policy,
         message=message,
     )
