@@ -321,16 +321,25 @@ class _Repair:
         ever = np.zeros(x.shape[0], dtype=bool)
         todo = np.flatnonzero(failing & in_walk)
         while todo.size:
-            need = _needed(self.st, self.rnd, x, todo, self.upper)
-            move = (need > x[todo]) if self.upper else (need < x[todo])
-            changed = todo[move]
+            changed = self._move(x, todo, _needed(self.st, self.rnd, x, todo, self.upper))
             if changed.size == 0:
                 break
-            x[changed] = (np.minimum(need[move], 1.0) if self.upper else
-                          np.maximum(need[move], 0.0))
             ever[changed] = True
             todo = self.reader_states(changed, in_walk)
         self.moved += int(np.count_nonzero(ever))
+
+    def _move(self, x: np.ndarray, states: np.ndarray, need: np.ndarray,
+              among: np.ndarray | None = None) -> np.ndarray:
+        """The ``states`` (of the mask ``among``) whose ``need`` is past their bound in
+        ``x``, their bounds moved to it (at most 1; at least 0 for a lower bound)."""
+        move = (need > x[states]) if self.upper else (need < x[states])
+        if among is not None:
+            move &= among
+        changed = states[move]
+        if changed.size:
+            x[changed] = (np.minimum(need[move], 1.0) if self.upper else
+                          np.maximum(need[move], 0.0))
+        return changed
 
     def reader_states(self, moved: np.ndarray, among: np.ndarray) -> np.ndarray:
         """The states of the mask ``among`` with a row holding a ``moved`` state,
@@ -386,18 +395,14 @@ class _Repair:
                 if not todo.any():
                     break
                 if is_small:  # the level's slices, the states not to do masked
-                    need = walk.needed(self.rnd, x, a, z, self.upper)
-                    move = todo & ((need > x[mine]) if self.upper else (need < x[mine]))
-                    changed = mine[move]
+                    changed = self._move(x, mine, walk.needed(self.rnd, x, a, z,
+                                                              self.upper), todo)
                 else:  # the rows of the states to do
                     doing = mine[todo]
-                    need = _needed(self.st, self.rnd, x, doing, self.upper)
-                    move = (need > x[doing]) if self.upper else (need < x[doing])
-                    changed = doing[move]
+                    changed = self._move(x, doing, _needed(self.st, self.rnd, x, doing,
+                                                           self.upper))
                 if changed.size == 0:
                     break
-                x[changed] = (np.minimum(need[move], 1.0) if self.upper else
-                              np.maximum(need[move], 0.0))
                 self.moved += int(changed.size)
                 now = self.together(x, changed)
                 moved[now] = True
