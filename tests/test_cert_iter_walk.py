@@ -114,6 +114,13 @@ def test_needed_is_the_row_by_row_reference(seed: int, nature: bool, single: boo
         assert got.tobytes() == R._needed(st, rnd, x, order[a:z], upper).tobytes()
 
 
+def _inputs(mdp) -> tuple[R.Rows, object, np.ndarray]:
+    """What a repair reads of ``mdp``: its rows, their rounding, each state's level."""
+    comp, level = support_layers(mdp)
+    st = R.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
+    return st, rounding(st.matrix), np.asarray(level)[np.asarray(comp)]
+
+
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("upper", [True, False])
 def test_a_repair_by_the_walk_is_the_repair_state_by_state(seed: int, upper: bool,
@@ -122,10 +129,7 @@ def test_a_repair_by_the_walk_is_the_repair_state_by_state(seed: int, upper: boo
     states it takes up (``SPARSE_LEVEL`` 1) as by the walk's slices; and after it the
     whole Bellman check passes where the repair closed."""
     mdp = random_mdp(400, seed=seed, locality=4, self_loop_fraction=0.0, max_choices=3)
-    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
-    rnd = rounding(st.matrix)
-    comp, level = support_layers(mdp)
-    level_of = np.asarray(level)[np.asarray(comp)]
+    st, rnd, level_of = _inputs(mdp)
     free = np.asarray(mdp.target, dtype=bool)
     rng = np.random.default_rng(seed)
     x0 = np.where(free, 1.0, rng.random(mdp.n_states) * (0.5 if upper else 1.0))
@@ -146,31 +150,32 @@ def test_a_repair_by_the_walk_is_the_repair_state_by_state(seed: int, upper: boo
 
 def _layered(seed: int, depth: int = 25, width: int = 6):
     """A deadline-like MDP without a cycle: ``depth`` layers of ``width`` states, each
-    choice moving 1-2 layers ahead, to the goal or to the dead end, by multiples of
-    1/8 (exact floats summing to 1 exactly); the goal and the dead end absorbing."""
+    with 1-3 choices (a third of the states with a copy of their first: an exact tie),
+    each choice to the goal, the dead end and two states 1-2 layers ahead (past the
+    last layer: the dead end), by multiples of 1/8 (exact floats, summing to 1
+    exactly); the goal and the dead end absorbing."""
+    from conftest import build_mdp
+
     rng = np.random.default_rng(seed)
     n = depth * width
     goal, dead = n, n + 1
-    states = []
-    for s in range(n):
-        layer = s // width
-        mine = []
-        for a in range(int(rng.integers(1, 4))):
-            ahead = [(layer + int(rng.integers(1, 3))) * width + int(j)
-                     for j in rng.choice(width, 2, replace=False)]
-            nxt = [goal, dead] + [t if t < n else dead for t in ahead]
-            eighths = rng.multinomial(8, [0.15, 0.15, 0.35, 0.35])
-            row: dict[int, float] = {}
-            for t, k in zip(nxt, eighths, strict=True):
-                if k:
-                    row[t] = row.get(t, 0.0) + k / 8
-            mine.append((f"a{a}", row))
-        if rng.random() < 0.3:  # an exact tie
-            mine.append((f"a{len(mine)}", dict(mine[0][1])))
-        states.append(mine)
+    layer_of = np.arange(n) // width
+    counts = rng.integers(1, 4, size=n)
+    states: list[list[tuple[str, dict[int, float]]]] = [[] for _ in range(n)]
+    for s_, c in zip(np.repeat(np.arange(n), counts).tolist(),
+                     rng.multinomial(8, [0.15, 0.15, 0.35, 0.35], size=int(counts.sum())),
+                     strict=True):
+        ahead = (layer_of[s_] + rng.integers(1, 3, size=2)) * width + rng.choice(
+            width, 2, replace=False)
+        row: dict[int, float] = {}
+        for t, k in zip([goal, dead, *np.where(ahead < n, ahead, dead).tolist()],
+                        c.tolist(), strict=True):
+            if k:
+                row[t] = row.get(t, 0.0) + k / 8
+        states[s_].append((f"a{len(states[s_])}", row))
+    for s_ in np.flatnonzero(rng.random(n) < 0.3).tolist():
+        states[s_].append((f"a{len(states[s_])}", dict(states[s_][0][1])))
     states += [[], []]
-    from conftest import build_mdp
-
     return build_mdp(states, target=[goal], sink=[dead]), goal, dead
 
 
@@ -200,10 +205,7 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
     1); the result passes the whole check, and is a bound of the exact optimum (in
     fractions: above Pmax, below Pmin)."""
     mdp, goal, dead = _layered(seed)
-    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
-    rnd = rounding(st.matrix)
-    comp, level = support_layers(mdp)
-    level_of = np.asarray(level)[np.asarray(comp)]
+    st, rnd, level_of = _inputs(mdp)
     target = np.asarray(mdp.target, dtype=bool)
     zero = np.zeros(mdp.n_states, dtype=bool)
     zero[dead] = True
