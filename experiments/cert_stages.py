@@ -8,7 +8,12 @@ each inside its stage's figure), the bracket printed beside the times (its hex d
 the same bits before and after, or not).  Storm's check of the same product is in
 ``bench_qvbs.py``'s run; this script only splits our solve stage.
 
-* the stages: ``analyse``, ``interval_iterations``, ``solve_lp``, ``certify``;
+* the stages: ``solve_stage`` (the route's ``solve_models``), ``analyse``,
+  ``interval_iterations`` (``iteration_result`` inside it: its results built, the
+  bounds lifted), ``iteration_policy`` (the iteration's policy made where the route
+  reads it), ``solve_lp``, ``certify``, ``_keeping``;
+* the certificate's sides: ``rounding`` (its factors), ``policy_lower`` /
+  ``policy_upper``, ``optimum_upper`` / ``optimum_lower``, ``everywhere``;
 * inside the certificate: the policy's chain (``chain``), its edges reversed
   (``Reversed.__init__``) and its two searches (``Reversed.reaching``), its values and
   slack (``_solve``), the Bellman checks (``_fails``), the repair (``_Repair.run``) and
@@ -51,21 +56,37 @@ import _common  # noqa: E402
 import bench_qvbs as bq  # noqa: E402
 from profile_solve import _timed, bus_jobs  # noqa: E402  (timed in place, alike)
 
-TIMED = (("mitld_lp.solvers.analysis", "analyse"),
+TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
+         ("mitld_lp.solvers.analysis", "analyse"),
          ("mitld_lp.solvers.iteration", "interval_iterations"),
+         ("mitld_lp.solvers.iteration", "_result", "iteration_result"),
+         ("mitld_lp.routes.plain", "_settled", "iteration_policy"),
          ("mitld_lp.solvers.lp", "solve_lp"),
          ("mitld_lp.solvers.certify", "certify"),
+         ("mitld_lp.solvers.certify", "rounding"),
          ("mitld_lp.solvers.certify", "chain"),
          ("mitld_lp.solvers.certify_chain", "Reversed.__init__"),
          ("mitld_lp.solvers.certify_chain", "Reversed.reaching"),
          ("mitld_lp.solvers.certify_chain", "_solve"),
+         ("mitld_lp.solvers.certify", "policy_lower"),
+         ("mitld_lp.solvers.certify", "policy_upper"),
+         ("mitld_lp.solvers.certify", "optimum_upper"),
+         ("mitld_lp.solvers.certify", "optimum_lower"),
          ("mitld_lp.solvers.certify", "_fails"),
          ("mitld_lp.solvers.certify", "_fails_among"),
          ("mitld_lp.solvers.certify", "_touched"),
          ("mitld_lp.solvers.certify_repair", "_Repair.run"),
-         ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"))
+         ("mitld_lp.solvers.certify", "everywhere"),
+         ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"),
+         ("mitld_lp.routes.plain", "_keeping"))
+"""The entry points timed in place: (module, attribute, column); the column is the
+attribute's name where no third is given.  ``solve_stage``: the plain route's
+``solve_models`` (the analysis to the certificates, without the result's record);
+``iteration_result``: the iteration's results built (the bounds lifted to the product;
+the policy was made there before it was made at its first read); ``iteration_policy``:
+that first read, where the route needs it (absent before)."""
 COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu",
-           *(name for _, name in TIMED))
+           *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
 
 
 def child(job: dict[str, Any]) -> dict[str, Any]:
@@ -84,13 +105,14 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
     spent: dict[str, float] = defaultdict(float)
-    for module, name in TIMED:
+    for module, name, *column in TIMED:
         owner: Any = importlib.import_module(module)
         *path, last = name.split(".")
         for part in path:
             owner = getattr(owner, part)
         if hasattr(owner, last):  # (a checkout before it was written: no column)
-            setattr(owner, last, _timed(getattr(owner, last), name, spent))
+            setattr(owner, last, _timed(getattr(owner, last), (column or [name])[0],
+                                        spent))
     c = time.process_time()
     r = synthesize(model)
     return dict(spent, solve_cpu=time.process_time() - c, lower=r.lower.hex(),

@@ -136,11 +136,13 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     checks = [
         Check("iteration converged", it.status is Status.OPTIMAL, it.message),
     ]
-    policy, value, status = it.policy, it.value_lower, it.status
-    if lp is not None:
-        if lp.status is Status.OPTIMAL and lp.policy is not None:
-            policy, value, status = lp.policy, lp.value, lp.status
-            checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
+    if _lp_policy(lp):
+        policy, value, status = lp.policy, lp.value, lp.status
+        checks.append(Check("LP solved", True, f"{lp.status.value}: {lp.message}"))
+    else:  # the iteration's policy (made by _settled while the quotient lived)
+        policy, value, status = it.policy, it.value_lower, it.status
+        if lp is None:
+            pass
         elif lp.status in (Status.INACCURATE, Status.MAX_ITERATIONS) and (
                 it.status is Status.OPTIMAL):
             # A numerical failure after the LP's own retries: the answer is the converged
@@ -160,6 +162,23 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
                          (it.value_lower, it.value_upper), lp, it, decided.unreachable,
                          tuple(checks), sense, (cert.lower, cert.upper), decided)
+
+
+def _lp_policy(lp: LPResult | None) -> bool:
+    """Whether the model's answer is the LP's policy (else the iteration's)."""
+    from mitld_lp.solvers.result import Status
+
+    return lp is not None and lp.status is Status.OPTIMAL and lp.policy is not None
+
+
+def _settled(it: IterationResult, lp: LPResult | None) -> IterationResult:
+    """``it`` as the certificate reads it, before the model's quotient is released: its
+    policy made where the answer is the iteration's (the LP gave none), else let go
+    unread with the quotient its function holds (:attr:`IterationResult.policy`)."""
+    if _lp_policy(lp):
+        return it.without_greedy()
+    it.policy  # noqa: B018 - made now, while the quotient lives
+    return it
 
 
 def _iterate(mdp: MDP, quotients: list[Quotient], s: Settings,
@@ -224,6 +243,7 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     # transitions) is released before the exact evaluations, where memory peaks.
     kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
             for q in quotients]
+    its = [_settled(it, lp) for it, lp in zip(its, lps, strict=True)]
     del quotients
     eta = ETA if eta is None else eta
     solutions = [_certified(mdp, *k, it, lp, which, s, eta, complement)

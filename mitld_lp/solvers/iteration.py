@@ -468,21 +468,22 @@ def interval_iteration(
     needed with ``gap="initial"``.  ``max_iterations`` counts sweeps (over all
     components); reaching it gives status ``MAX_ITERATIONS``, reaching ``time_limit``
     seconds ``TIME_LIMIT``, both with the bracket so far (``[0, 1]`` where nothing was
-    done).
-    ``quotient``: ``reduce(mdp, target, sense=sense)`` if the caller already has it.
+    done). ``quotient``: ``reduce(mdp, target, sense=sense)`` if the caller already has
+    it (the result then holds it until its policy is read: :class:`IterationResult`).
     ``compiled``: the blocks swept by the compiled (numba) Gauss--Seidel kernel
     (:mod:`mitld_lp.solvers.kernels`); None (default) uses it, when numba is installed,
     on the blocks of at least ``kernels.COMPILED_MIN_BLOCK_ENTRIES`` entries of a
     quotient of at least ``kernels.COMPILED_MIN_ENTRIES``, and on the smaller blocks
     there that :mod:`mitld_lp.solvers.sweep_gate` forecasts cheaper so (deep blocks,
     which NumPy's sweeps would leave to the policy jump); ``True`` on every block,
-    ``False`` never.
-    """
+    ``False`` never."""
     q = quotient_for(mdp, target, quotient, sense)
     (result,) = interval_iterations(mdp, [q], tol=tol, precision=precision,
                                     max_iterations=max_iterations, progress=progress,
                                     gap=gap, topological=topological,
                                     time_limit=time_limit, compiled=compiled)
+    if quotient is None:
+        result.policy  # noqa: B018 - made while the quotient made here lives
     return result
 
 
@@ -504,7 +505,7 @@ def interval_iterations(
     :func:`mitld_lp.solvers.analysis.analyse`) and differ in their one-step target
     probabilities; each sweep updates the lower and upper bounds of every model with one
     sparse product.  One result per quotient; the sweep count and the seconds are the
-    pass's."""
+    pass's; each holds its quotient until its policy is read (:class:`IterationResult`)."""
     start = time.perf_counter()
     q = quotients[0]
     if any(other.matrix is not q.matrix or other.order is not q.order
@@ -572,10 +573,8 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    # greedy on the bound a greedy policy's value lies beyond (a maximum's lower, a
-    # minimum's upper); before the bounds are lifted: its scores not held beside them
-    known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
-    policy = lift_policy(mdp, q, greedy_choices(q, known) if n else np.zeros(0, int))
+    # greedy on a maximum's lower, a minimum's upper bound, at its first read (a copy)
+    known = (bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]).copy()
     one = np.asarray(q.qualitative.one)
     lower, upper = q.lift(bounds[:, 0]), q.lift(bounds[:, 1])  # fresh arrays: the
     lower[one] = upper[one] = 1.0  # ones set in place (no third array a state each)
@@ -595,6 +594,7 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         value_upper=float(upper[mdp.initial]),
         iterations=budget.iterations,
         seconds=seconds,
-        policy=read_only(policy),
+        greedy=lambda: lift_policy(mdp, q, greedy_choices(q, known) if n else
+                                   np.zeros(0, int)),
         message=message,
     )

@@ -9,7 +9,8 @@ are read-only.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -104,9 +105,10 @@ class IterationResult:
         value_lower, value_upper: the bounds at ``mdp.initial``.
         iterations: Bellman updates performed.
         seconds: wall-clock time of the whole call.
-        policy: ``(n_states,)`` int64, the greedy policy on ``lower`` (lifted through
-            the MEC quotient, so it never stays in an end component forever); ``-1`` for
-            target and absorbing states.
+        greedy: the policy (:attr:`policy`) or how to make it: a function of no
+            argument, called at the first read of :attr:`policy` (a solve whose LP
+            returns a policy never reads the iteration's), or ``None`` once
+            :meth:`without_greedy` has let it go unread.
         message: a human-readable summary (the final gap).
     """
 
@@ -117,5 +119,38 @@ class IterationResult:
     value_upper: float
     iterations: int
     seconds: float
-    policy: np.ndarray
+    greedy: np.ndarray | Callable[[], np.ndarray] | None
     message: str
+
+    @property
+    def policy(self) -> np.ndarray:
+        """``(n_states,)`` int64, the greedy policy on the bound a greedy policy's value
+        lies beyond (a maximum's ``lower``, a minimum's ``upper``), lifted through the
+        MEC quotient (so it never stays in an end component forever); ``-1`` for target
+        and absorbing states.  Made at the first read, then kept (read-only)."""
+        made = self.greedy
+        if made is None:
+            raise AttributeError(
+                "IterationResult.policy was not kept: the solve let the iteration's "
+                "policy go unread with its quotient (it certified the LP's policy); "
+                "mitld_lp.solvers.interval_iteration gives a result that keeps it")
+        if callable(made):
+            made = read_only(made())
+            object.__setattr__(self, "greedy", made)  # a cache: the same record after
+        return made
+
+    def without_greedy(self) -> IterationResult:
+        """This record without what its policy would be made from, unless it was read
+        already (the function holds the reduction the policy is greedy on: a solve that
+        releases its quotient drops it this way)."""
+        return self if not callable(self.greedy) else replace(self, greedy=None)
+
+    def __getstate__(self) -> list[object]:
+        """The fields, the policy made (a function does not pickle)."""
+        if callable(self.greedy):
+            self.policy  # noqa: B018 - made and kept
+        return [getattr(self, f.name) for f in fields(self)]
+
+    def __setstate__(self, state: list[object]) -> None:
+        for f, v in zip(fields(self), state, strict=True):
+            object.__setattr__(self, f.name, v)
