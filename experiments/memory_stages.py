@@ -174,7 +174,8 @@ class Tracker:
         f = None
         self.peak_top = _sites(tracemalloc.take_snapshot(), 14)
         self.peak_top_at = now
-        self.peak_top_where = f"{self.open[-1] if self.open else ''}, {event}: " + " <- ".join(where)
+        stage = self.open[-1] if self.open else ""
+        self.peak_top_where = f"{stage}, {event}: " + " <- ".join(where)
         self._snap_level = int(now * 1.05)
 
     def _boundary(self) -> None:
