@@ -19,7 +19,7 @@ after it, so that it counts in no stage).  ``top_where``: where the synthesis st
 the traced size was highest (a thread reads it every 5 ms and, at each new high, the
 synthesis's innermost frames in the package; no snapshot, nothing allocated).
 
-``at_peak`` (``--at-peak`` when run as a script): a profile hook also takes a snapshot
+``at_peak`` (``--at-peak`` when run as a script): a trace function also takes a snapshot
 at a call or return of a function of the package when the traced size has passed its
 last snapshot's by 5% (from 8 MB above the start; at a return the function's arrays are
 still alive), so ``peak_top`` names the allocation sites alive at the highest traced point
@@ -155,12 +155,25 @@ class Tracker:
             self.top_where = " <- ".join(where)
             self.top_stage = self.open[-1] if self.open else ""
 
-    def _profile(self, frame: Any, event: str, arg: Any) -> None:
-        """``at_peak``: at every call and return of a function of the package (its locals
-        still alive at its return), a snapshot when the traced size has grown 5% past
-        the last one's (module docs)."""
-        if event not in ("call", "return") or "/mitld_lp/" not in frame.f_code.co_filename:
-            return
+    def _trace(self, frame: Any, event: str, arg: Any) -> Any:
+        """``at_peak``'s trace function (``sys.settrace``: Python calls only, no C call
+        reaches it): a function of the package is watched at its call and its return
+        (its lines are not traced), any other is not traced at all."""
+        if "/mitld_lp/" not in frame.f_code.co_filename:
+            return None
+        frame.f_trace_lines = False
+        self._watch(frame, event)
+        return self._returns
+
+    def _returns(self, frame: Any, event: str, arg: Any) -> Any:
+        if event == "return":
+            self._watch(frame, event)
+        return self._returns
+
+    def _watch(self, frame: Any, event: str) -> None:
+        """At a call or return of a function of the package (its locals still alive at
+        its return), a snapshot when the traced size has grown 5% past the last one's
+        (module docs)."""
         now = tracemalloc.get_traced_memory()[0]
         if now <= self._snap_level:
             return
@@ -250,11 +263,11 @@ class Tracker:
             sampler.start()
         self.enter(OUTER)
         if self.at_peak:
-            sys.setprofile(self._profile)
+            sys.settrace(self._trace)
         try:
             out = call()
         finally:
-            sys.setprofile(None)
+            sys.settrace(None)
             self.exit(OUTER)
             self._done.set()
             if sampler is not None:
