@@ -79,6 +79,20 @@ def _sites(snap: tracemalloc.Snapshot, n: int = 10) -> list[tuple[str, int]]:
     return sorted(held.items(), key=lambda kv: -kv[1])[:n]
 
 
+def _innermost(frame: Any, n: int = 3) -> str:
+    """The ``n`` innermost frames of the package from ``frame`` outward, as
+    ``path:line (function)`` joined by `` <- `` (no frame is kept: a frame held would
+    keep its arrays alive)."""
+    where = []
+    while frame is not None and len(where) < n:
+        name = frame.f_code.co_filename.replace(os.sep, "/")
+        if "/mitld_lp/" in name:
+            where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{frame.f_lineno}"
+                         f" ({frame.f_code.co_name})")
+        frame = frame.f_back
+    return " <- ".join(where)
+
+
 def _rss() -> int:
     with open("/proc/self/statm", encoding="ascii") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
@@ -144,15 +158,7 @@ class Tracker:
             if now <= self._level:
                 continue
             self._level = now
-            frame, where = sys._current_frames().get(main), []
-            while frame is not None and len(where) < 3:
-                name = frame.f_code.co_filename.replace(os.sep, "/")
-                if "/mitld_lp/" in name:
-                    where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{frame.f_lineno}"
-                                 f" ({frame.f_code.co_name})")
-                frame = frame.f_back
-            frame = None  # a frame held here would keep its arrays alive
-            self.top_where = " <- ".join(where)
+            self.top_where = _innermost(sys._current_frames().get(main))
             self.top_stage = self.open[-1] if self.open else ""
 
     def _trace(self, frame: Any, event: str, arg: Any) -> Any:
@@ -177,18 +183,11 @@ class Tracker:
         now = tracemalloc.get_traced_memory()[0]
         if now <= self._snap_level:
             return
-        where, f = [], frame
-        while f is not None and len(where) < 3:
-            name = f.f_code.co_filename.replace(os.sep, "/")
-            if "/mitld_lp/" in name:
-                where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{f.f_lineno}"
-                             f" ({f.f_code.co_name})")
-            f = f.f_back
-        f = None
+        where = _innermost(frame)
         self.peak_top = _sites(tracemalloc.take_snapshot(), 14)
         self.peak_top_at = now
         stage = self.open[-1] if self.open else ""
-        self.peak_top_where = f"{stage}, {event}: " + " <- ".join(where)
+        self.peak_top_where = f"{stage}, {event}: {where}"
         self._snap_level = int(now * 1.05)
 
     def _boundary(self) -> None:
