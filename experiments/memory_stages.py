@@ -25,7 +25,9 @@ last snapshot's by 5% (from 8 MB above the start; at a return the function's arr
 still alive), so ``peak_top`` names the allocation sites alive at the highest traced point
 itself, not at a stage's exit (numpy's arrays are freed between the two).  The
 snapshots' own objects are traced too: in that mode the traced peaks read a little
-high, and the run is slower; take the stage figures from a run without it.
+high, and the run is slower (zeroconf_dl 1000-1-30: 37 s; zeroconf 1000-4, numba loaded
+and many traced objects to snapshot, did not finish in 15 minutes); take the stage figures
+from a run without it.
 
 Run as a script, it tracks one synthesis in this process (no Storm, no bench): a model
 file (a QVBS instance's, as ``bench_qvbs.py`` writes them) or a ``bench_sweeps``
