@@ -71,7 +71,7 @@ def test_the_stage_table_names_the_sites_alive_at_the_peak() -> None:
     assert "near the traced peak" not in plain
 
 
-def test_the_profile_hook_snapshots_an_array_alive_only_inside_a_call() -> None:
+def test_the_trace_snapshots_an_array_alive_only_inside_a_call() -> None:
     """A 16 MB array that lives only while a package function runs is named by the
     at-peak snapshot (taken at that function's return, its locals alive), while the
     size at the stage's exit no longer holds it."""
