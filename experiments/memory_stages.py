@@ -19,6 +19,23 @@ after it, so that it counts in no stage).  ``top_where``: where the synthesis st
 the traced size was highest (a thread reads it every 5 ms and, at each new high, the
 synthesis's innermost frames in the package; no snapshot, nothing allocated).
 
+``at_peak`` (``--at-peak`` when run as a script): a trace function also takes a snapshot
+at a call or return of a function of the package when the traced size has passed its
+last snapshot's by 5% (from 8 MB above the start; at a return the function's arrays are
+still alive), so ``peak_top`` names the allocation sites alive at the highest traced point
+itself, not at a stage's exit (numpy's arrays are freed between the two).  The
+snapshots' own objects are traced too: in that mode the traced peaks read a little
+high, and the run is slower (zeroconf_dl 1000-1-30: 37 s; zeroconf 1000-4, numba loaded
+and many traced objects to snapshot, did not finish in 15 minutes); take the stage figures
+from a run without it.
+
+Run as a script, it tracks one synthesis in this process (no Storm, no bench): a model
+file (a QVBS instance's, as ``bench_qvbs.py`` writes them) or a ``bench_sweeps``
+instance::
+
+    python experiments/memory_stages.py --model zeroconf.toml --at-peak
+    python experiments/memory_stages.py --sweeps bus_scaled_n64_d3 --resident
+
 ``numba``: numba is imported only for a large product, inside ``synthesize``, and its
 import alone is ~50 MB resident, whatever the product's size.  Where the synthesis
 loaded it, that floor (:func:`numba_floor`: the resident growth of ``import numba`` in
@@ -64,6 +81,20 @@ def _sites(snap: tracemalloc.Snapshot, n: int = 10) -> list[tuple[str, int]]:
     return sorted(held.items(), key=lambda kv: -kv[1])[:n]
 
 
+def _innermost(frame: Any, n: int = 3) -> str:
+    """The ``n`` innermost frames of the package from ``frame`` outward, as
+    ``path:line (function)`` joined by `` <- `` (no frame is kept: a frame held would
+    keep its arrays alive)."""
+    where = []
+    while frame is not None and len(where) < n:
+        name = frame.f_code.co_filename.replace(os.sep, "/")
+        if "/mitld_lp/" in name:
+            where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{frame.f_lineno}"
+                         f" ({frame.f_code.co_name})")
+        frame = frame.f_back
+    return " <- ".join(where)
+
+
 def _rss() -> int:
     with open("/proc/self/statm", encoding="ascii") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
@@ -101,8 +132,13 @@ def numba_floor() -> int:
 class Tracker:
     """The stages' peaks and kept sizes (module docs); ``traced``: tracemalloc too."""
 
-    def __init__(self, traced: bool) -> None:
+    def __init__(self, traced: bool, at_peak: bool = False) -> None:
         self.traced = traced
+        self.at_peak = traced and at_peak
+        self.peak_top: list[tuple[str, int]] = []
+        self.peak_top_at = 0  # the traced size when peak_top was taken
+        self.peak_top_where = ""
+        self._snap_level = 0
         self.open: list[str] = []
         self.peak: dict[str, int] = {}  # resident
         self.tpeak: dict[str, int] = {}  # traced
@@ -124,16 +160,37 @@ class Tracker:
             if now <= self._level:
                 continue
             self._level = now
-            frame, where = sys._current_frames().get(main), []
-            while frame is not None and len(where) < 3:
-                name = frame.f_code.co_filename.replace(os.sep, "/")
-                if "/mitld_lp/" in name:
-                    where.append(f"{name[name.rfind('/mitld_lp/') + 1:]}:{frame.f_lineno}"
-                                 f" ({frame.f_code.co_name})")
-                frame = frame.f_back
-            frame = None  # a frame held here would keep its arrays alive
-            self.top_where = " <- ".join(where)
+            self.top_where = _innermost(sys._current_frames().get(main))
             self.top_stage = self.open[-1] if self.open else ""
+
+    def _trace(self, frame: Any, event: str, arg: Any) -> Any:
+        """``at_peak``'s trace function (``sys.settrace``: Python calls only, no C call
+        reaches it): a function of the package is watched at its call and its return
+        (its lines are not traced), any other is not traced at all."""
+        if "/mitld_lp/" not in frame.f_code.co_filename:
+            return None
+        frame.f_trace_lines = False
+        self._watch(frame, event)
+        return self._returns
+
+    def _returns(self, frame: Any, event: str, arg: Any) -> Any:
+        if event == "return":
+            self._watch(frame, event)
+        return self._returns
+
+    def _watch(self, frame: Any, event: str) -> None:
+        """At a call or return of a function of the package (its locals still alive at
+        its return), a snapshot when the traced size has grown 5% past the last one's
+        (module docs)."""
+        now = tracemalloc.get_traced_memory()[0]
+        if now <= self._snap_level:
+            return
+        where = _innermost(frame)
+        self.peak_top = _sites(tracemalloc.take_snapshot(), 14)
+        self.peak_top_at = now
+        stage = self.open[-1] if self.open else ""
+        self.peak_top_where = f"{stage}, {event}: {where}"
+        self._snap_level = int(now * 1.05)
 
     def _boundary(self) -> None:
         hwm = _hwm()
@@ -202,12 +259,16 @@ class Tracker:
         _reset_hwm()
         base, tbase = _rss(), (tracemalloc.get_traced_memory()[0] if self.traced else 0)
         self._level = tbase
+        self._snap_level = tbase + (8 << 20)
         if sampler is not None:
             sampler.start()
         self.enter(OUTER)
+        if self.at_peak:
+            sys.settrace(self._trace)
         try:
             out = call()
         finally:
+            sys.settrace(None)
             self.exit(OUTER)
             self._done.set()
             if sampler is not None:
@@ -234,7 +295,10 @@ class Tracker:
                          numba_mb=round(floor / 2**20, 1), transitions=n,
                          top_exit=self.top_exit, top_stage=self.top_stage,
                          top_where=self.top_where, top_traced=per(self._level, tbase),
-                         top=[(w, round(b / n, 1)) for w, b in self.top])
+                         top=[(w, round(b / n, 1)) for w, b in self.top],
+                         peak_top=[(w, round(b / n, 1)) for w, b in self.peak_top],
+                         peak_top_at=per(self.peak_top_at, tbase),
+                         peak_top_where=self.peak_top_where)
 
 
 def text(name: str, breakdown: dict[str, Any]) -> str:
@@ -263,4 +327,50 @@ def text(name: str, breakdown: dict[str, Any]) -> str:
                    "highest traced peak), the largest allocation sites in the package "
                    "(each allocation at its innermost frame in it), bytes per transition:\n")
         out += [f"- `{w}`: {b}" for w, b in breakdown["top"]]
+    if breakdown.get("peak_top"):
+        out.append(f"\nAlive at the last snapshot near the traced peak "
+                   f"({breakdown['peak_top_at']} bytes a transition, in "
+                   f"`{breakdown['peak_top_where']}`), bytes per transition:\n")
+        out += [f"- `{w}`: {b}" for w, b in breakdown["peak_top"]]
     return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """One synthesis tracked in this process (module docs); prints its table."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    what = ap.add_mutually_exclusive_group(required=True)
+    what.add_argument("--model", help="a model file (e.g. one bench_qvbs.py writes)")
+    what.add_argument("--sweeps", help="a bench_sweeps instance, e.g. bus_scaled_n64_d3")
+    ap.add_argument("--max-states", type=int, default=2_000_000)
+    ap.add_argument("--resident", action="store_true",
+                    help="resident sizes only (no tracemalloc: its own cost out)")
+    ap.add_argument("--at-peak", action="store_true",
+                    help="also the allocation sites alive near the traced peak")
+    args = ap.parse_args(argv)
+    here = os.path.dirname(os.path.abspath(__file__))
+    if here not in sys.path:
+        sys.path.insert(0, here)
+    import bench_sweeps
+
+    from mitld_lp import load_model, synthesize
+
+    if args.model:
+        name, model = args.model, load_model(args.model, max_states=args.max_states)
+    else:
+        import bench_scaling
+
+        family, n, d = args.sweeps.rsplit("_", 2)
+        inst = bench_scaling.Instance(family, int(n[1:]), int(d[1:]))
+        name, model = inst.name, bench_sweeps._model(inst)
+    bench_sweeps.preload()  # the solver modules, as both benches load them before
+    result, breakdown = Tracker(traced=not args.resident, at_peak=args.at_peak).run(
+        lambda: synthesize(model), lambda r: r.mdp.n_transitions)
+    print(text(name, breakdown))
+    print(f"answer: [{result.lower!r}, {result.upper!r}], certified={result.certified}")
+    return breakdown
+
+
+if __name__ == "__main__":
+    main()

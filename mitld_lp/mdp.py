@@ -27,11 +27,16 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.util.arrays import index_dtype
+
 __all__ = ["ABSORB", "MDP", "MDPShape", "ActionChoices", "absorbing_states",
            "as_state_mask"]
 
 ABSORB = -1
 """Action label of the self-loop choice of an absorbing state."""
+
+STATE_OF_SLICE = 1 << 16
+"""Choices :meth:`MDPShape.state_of` searches at a time."""
 
 
 class MDPShape:
@@ -87,11 +92,24 @@ class MDPShape:
         return np.cumsum(out, out=out)
 
     def state_of(self, choices: np.ndarray) -> np.ndarray:
-        """``(len(choices),)`` int64: the state each of ``choices`` belongs to, as
+        """``(len(choices),)``: the state each of ``choices`` belongs to, as
         ``choice_state()[choices]`` without the array a choice of the whole model (a
-        binary search in ``row_groups``)."""
-        out = np.searchsorted(self.row_groups, choices, side="right")
-        out -= 1
+        binary search in ``row_groups``).  Int32 where the states fit in it
+        (:func:`~mitld_lp.util.arrays.index_dtype`), else int64, searched
+        :data:`STATE_OF_SLICE` choices at a time: the search's own int64 answer is never
+        one of the whole array (its callers gather and index with it; no compiled kernel
+        reads it).  The prob-one attractor's edge sources (``solvers.quotient``) were
+        5 bytes a transition of QVBS zeroconf_dl's peak."""
+        choices = np.asarray(choices)
+        if choices.ndim != 1:
+            out = np.searchsorted(self.row_groups, choices, side="right")
+            out -= 1
+            return out
+        out = np.empty(choices.shape[0], dtype=index_dtype(self.n_states))
+        for lo in range(0, out.shape[0], STATE_OF_SLICE):
+            part = np.searchsorted(self.row_groups, choices[lo : lo + STATE_OF_SLICE],
+                                   side="right")
+            np.subtract(part, 1, out=out[lo : lo + STATE_OF_SLICE], casting="unsafe")
         return out
 
     def distributions(self) -> tuple[sp.csr_array, np.ndarray | None]:
