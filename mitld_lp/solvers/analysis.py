@@ -71,11 +71,13 @@ from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
     attractor,
+    attractor_spared,
     backward_reachable,
     blocks_from,
     compiled_end_components,
     maximal_end_components,
     state_levels,
+    toward,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
@@ -221,17 +223,21 @@ def _no_end_components(n: int, n_choices: int) -> EndComponents:
 
 
 def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.ndarray,
-         leaks: np.ndarray) -> np.ndarray:
+         leaks: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """``(n_reduced,)`` bool: the reduced states of value exactly 1 in ``sense``, on the
     quotient (no end component), from its pattern, its states known to be 0 (``zero``)
     and the choices that may move to a removed state of value 0 (``leaks``).  A maximum
     is 1 where some choice keeps among such states (the complement: every choice can
     lose, an :func:`~mitld_lp.solvers.graph.attractor`); a minimum where no path leads
-    to a state or a choice that can lose (a backward search)."""
+    to a state or a choice that can lose (a backward search).  Second, for a maximum,
+    the quotient's choices that cannot lose (``(n_choices,)`` bool, those the attractor
+    spared: :func:`_attractor_strategy` plays them); None for a minimum."""
     if not (zero.any() or leaks.any()):  # nothing can lose: every state is 1
-        return np.ones(row_groups.shape[0] - 1, dtype=bool)
+        return (np.ones(row_groups.shape[0] - 1, dtype=bool),
+                np.ones(matrix.shape[0], dtype=bool) if sense is Sense.MAX else None)
     if sense is Sense.MAX:
-        return ~attractor(matrix, row_groups, zero, leaks)
+        lose, hit = attractor_spared(matrix, row_groups, zero, leaks)
+        return ~lose, ~hit
     n = row_groups.shape[0] - 1
     owner = np.repeat(np.arange(n), np.diff(row_groups))
     seeds = zero.copy()
@@ -239,9 +245,63 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     walks = compiled_walks(matrix.nnz)
     if walks is not None:
         return ~walks.backward(matrix.indptr, matrix.indices, row_groups, seeds,
-                               np.zeros(matrix.shape[0], dtype=bool), False)
+                               np.zeros(matrix.shape[0], dtype=bool), False), None
     entry_owner = np.repeat(owner, np.diff(matrix.indptr))
-    return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
+    return ~backward_reachable(n, entry_owner, matrix.indices, seeds), None
+
+
+ATTRACTOR_STRATEGY = "attractor strategy"
+"""The key in ``Quotient.shared`` of a maximum's strategy for its removed value-1 states
+(:func:`_attractor_strategy`): ``(states, choices)``, the states ascending."""
+
+
+def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
+                        row_groups: np.ndarray, kept: np.ndarray, state_map: np.ndarray,
+                        n_plain: int, mecs: EndComponents,
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A maximum's strategy for the product states of the reduced states ``sure``
+    (``Prob1E`` of the goal, about to leave the quotient), read from the attractor that
+    found them (:func:`_one`): each such reduced state plays its first choice
+    ``spared`` (one that cannot lose: its support stays among the ``sure`` states, and
+    what leaves the quotient goes to the target), a collapsed end component's through
+    the member that owns that exit, the other members a step along a breadth-first tree
+    of the component's internal choices toward it (as
+    :func:`~mitld_lp.solvers.quotient.lift_policy` does).  It reaches the target almost
+    surely: a closed class of its chain among the ``sure`` states would map to a set
+    of reduced states each with a choice staying among them, holding an end component
+    of the quotient, which has none (its maximal ones are collapsed; a member's walk
+    reaches the exit's owner with positive probability).  ``(states, choices)``: the
+    product states ascending and each one's choice (rows of ``mdp``); None if a state
+    has no such choice (never, by the attractor's fixed point: the caller keeps the
+    second search then)."""
+    red = np.flatnonzero(sure)
+    rows, owner = _choices_of(row_groups, red)
+    free = spared[rows]
+    rows, owner = rows[free], owner[free]
+    has, first = np.unique(owner, return_index=True)  # ascending: each one's first
+    if has.size != red.size:  # pragma: no cover - the attractor spares one a state
+        return None
+    play = np.full(sure.size, -1, dtype=np.int64)
+    play[red] = kept[rows[first]]
+    del rows, owner, free, has, first
+    mapped = state_map >= 0
+    states = np.flatnonzero(mapped)
+    states = states[sure[state_map[states]]]
+    choices = play[state_map[states]]
+    if sure[n_plain:].any():  # members of a collapsed end component: toward its exit
+        exits = play[n_plain:][sure[n_plain:]]
+        owners = mdp.state_of(exits)
+        member = np.asarray(mecs.mec_of)[states] >= 0
+        internal = np.flatnonzero(mecs.internal)
+        internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[mdp.state_of(internal)]]]
+        step = toward(mdp, internal, owners)
+        walk = member & ~np.isin(states, owners)
+        if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
+            return None
+        choices[walk] = step[states[walk]]
+    itype = index_dtype(mdp.n_choices)
+    return (read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
+            read_only(choices.astype(itype, copy=False)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -424,11 +484,19 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # Prob1E of a maximum (a collapsed end component leaves whole)
     j0 = 1 if same else 0
     sure = np.zeros(n_red, dtype=bool)
+    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one:
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
-        sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
+        sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])
+        sure &= ~zero0
         del zero0
+        if spared is not None and sure.any():  # the lift's strategy there (the docs)
+            played = _attractor_strategy(mdp, sure, spared, row_groups, kept, state_map,
+                                         n_plain, mecs)
+            if played is not None:
+                shared[ATTRACTOR_STRATEGY] = played
+        del spared
     sure_state = np.zeros(n, dtype=bool)
     if sure.any():
         cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
@@ -462,7 +530,6 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
               read_only(found.level.astype(index_dtype(n), copy=False)))
     init = int(mdp.initial)
-    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
@@ -473,7 +540,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         # maximum) through states that remain, so _one would find none; the wider
         # target's, from other seeds, are searched
         one[maybe] = False if without_one and j == j0 else _one(
-            sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
+            sense, matrix, row_groups, zero, leaks[j])[0][state_map[maybe]]
         unreachable = ~reach[:, j] & ~target
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))
