@@ -91,18 +91,34 @@ __all__ = ["analyse", "end_components", "may_cycle"]
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
     """``(n_states,)`` bool: the states an end component may hold, given each state's
     strongly connected component ``comp`` in ``mdp``'s support graph (no zero stored):
-    those of a non-trivial component, and those with a choice that stays put (all its
-    entries in its own column).  An end component is strongly connected: it is one of
-    these states or lies among them."""
+    those of a non-trivial component, and those with a choice that stays put (it has
+    entries, all in its own column: :func:`_stays_put`).  An end component is
+    strongly connected: it is one of these states or lies among them."""
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
+    out = (size > 1)[comp]
+    out[_stays_put(mdp)] = True
+    return out
+
+
+def _stays_put(mdp: MDP) -> np.ndarray:
+    """The states (ascending, maybe repeated) with a choice all of whose entries lie in
+    their own column.  Such a choice's first entry does: only the choices whose first
+    entry does (few: a product's self-loops) have their other entries read, not a
+    minimum and a maximum over every entry of the matrix and a reduction over every
+    choice (0.044 -> 0.02 s of CPU on QVBS csma 4-2's 1.1 million entries; the same
+    states).  A choice with no entry stays nowhere (none in a product) and a state
+    with no choice has none that stays."""
     m = mdp.matrix
-    first = m.indptr[:-1]
-    lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    hi = np.maximum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    pure = (lo == hi) & (lo == mdp.choice_state())
-    del lo, hi
-    loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
-    return (size[comp] > 1) | loops
+    if not m.nnz:
+        return np.zeros(0, dtype=np.int64)
+    own = mdp.choice_state()
+    lo, hi = m.indptr[:-1], m.indptr[1:]
+    cand = np.flatnonzero((hi > lo) & (m.indices[np.minimum(lo, m.nnz - 1)] == own))
+    lo, hi = lo[cand], hi[cand]
+    apart = m.indices[gather_ranges(lo, hi)] != np.repeat(own[cand], hi - lo)
+    pure = np.ones(cand.size, dtype=bool)
+    pure[np.repeat(np.arange(cand.size), hi - lo)[apart]] = False
+    return own[cand[pure]]
 
 
 def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
