@@ -104,7 +104,8 @@ def test_recorded_strategy_reaches_the_goal_almost_surely(truncated: bool) -> No
         if not expected.any():
             assert ATTRACTOR_STRATEGY not in low.shared, seed
             continue
-        states, choices = low.shared[ATTRACTOR_STRATEGY]
+        played = low.shared[ATTRACTOR_STRATEGY]
+        states, choices = played.states, played.choices
         assert np.array_equal(states, np.flatnonzero(expected)), seed
         groups = np.asarray(mdp.row_groups)
         assert np.all((choices >= groups[states]) & (choices < groups[states + 1])), seed

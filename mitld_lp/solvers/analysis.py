@@ -268,13 +268,32 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
 
 ATTRACTOR_STRATEGY = "attractor strategy"
 """The key in ``Quotient.shared`` of a maximum's strategy for its removed value-1 states
-(:func:`_attractor_strategy`): ``(states, choices)``, the states ascending."""
+(:func:`_attractor_strategy`, a :class:`SureStrategy`)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SureStrategy:
+    """A strategy of some states: ``states`` (ascending) and each one's choice (a row of
+    the product).  Equal to another with the same arrays (two analyses of one product
+    compare equal, as their other records do)."""
+
+    states: np.ndarray
+    choices: np.ndarray
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, SureStrategy)
+                and self.states.dtype == other.states.dtype
+                and self.choices.dtype == other.choices.dtype
+                and np.array_equal(self.states, other.states)
+                and np.array_equal(self.choices, other.choices))
+
+    __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: unhashable
 
 
 def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
                         row_groups: np.ndarray, kept: np.ndarray, state_map: np.ndarray,
                         n_plain: int, mecs: EndComponents,
-                        ) -> tuple[np.ndarray, np.ndarray] | None:
+                        ) -> SureStrategy | None:
     """A maximum's strategy for the product states of the reduced states ``sure``
     (``Prob1E`` of the goal, about to leave the quotient), read from the attractor that
     found them (:func:`_one`): each such reduced state plays its first choice
@@ -286,8 +305,8 @@ def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
     surely: a closed class of its chain among the ``sure`` states would map to a set
     of reduced states each with a choice staying among them, holding an end component
     of the quotient, which has none (its maximal ones are collapsed; a member's walk
-    reaches the exit's owner with positive probability).  ``(states, choices)``: the
-    product states ascending and each one's choice (rows of ``mdp``); None if a state
+    reaches the exit's owner with positive probability).  The product states ascending
+    and each one's choice (rows of ``mdp``); None if a state
     has no such choice (never, by the attractor's fixed point: the caller keeps the
     second search then)."""
     red = np.flatnonzero(sure)
@@ -316,8 +335,8 @@ def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
             return None
         choices[walk] = step[states[walk]]
     itype = index_dtype(mdp.n_choices)
-    return (read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
-            read_only(choices.astype(itype, copy=False)))
+    return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
+                        read_only(choices.astype(itype, copy=False)))
 
 
 @dataclass(frozen=True, slots=True)

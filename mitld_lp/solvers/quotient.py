@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
-from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, analyse
+from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, SureStrategy, analyse
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -169,7 +169,7 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
         if sure.any():
             played = _recorded(quotient, sure)
             if played is not None:  # the analysis's attractor strategy
-                policy[played[0]] = played[1]
+                policy[played.states] = played.choices
             else:
                 step = _almost_surely(mdp, sure, np.asarray(quotient.target))
                 policy[sure] = step[sure]
@@ -181,7 +181,7 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
     return policy
 
 
-def _recorded(quotient: Quotient, sure: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:
     """The strategy the analysis recorded for the ``sure`` states from the attractor
     that found them (:func:`mitld_lp.solvers.analysis._attractor_strategy`, kept in
     ``quotient.shared``), if it covers exactly these states; else None (a quotient
@@ -189,7 +189,7 @@ def _recorded(quotient: Quotient, sure: np.ndarray) -> tuple[np.ndarray, np.ndar
     played = quotient.shared.get(ATTRACTOR_STRATEGY)
     if played is None:
         return None
-    states = played[0]
+    states = played.states
     if states.size != int(np.count_nonzero(sure)) or not bool(np.all(sure[states])):
         return None
     return played
