@@ -59,25 +59,17 @@ def _reaches_surely(rows: list[list[Fraction]], policy: np.ndarray, goal: np.nda
     """Per state, whether the chain of ``policy`` reaches ``goal`` almost surely by the
     graph criterion, and its exact probability of reaching it (fractions)."""
     n = goal.size
-    succ = [set() if goal[s] else {t for t, p in enumerate(rows[int(policy[s])]) if p}
-            for s in range(n)]
-    can = set(np.flatnonzero(goal).tolist())  # states with a path to the goal
-    grew = True
-    while grew:
-        grew = False
-        for s in range(n):
-            if s not in can and succ[s] & can:
-                can.add(s)
-                grew = True
-    sure = np.zeros(n, dtype=bool)
-    for s in range(n):
-        seen, todo = {s}, [s]
-        while todo:
-            for t in succ[todo.pop()]:
-                if t not in seen:
-                    seen.add(t)
-                    todo.append(t)
-        sure[s] = seen <= can
+    adj = np.eye(n, dtype=bool)  # the chain's steps (none out of the goal), reflexive
+    for s in np.flatnonzero(~goal):
+        adj[s, [t for t, p in enumerate(rows[int(policy[s])]) if p]] = True
+    closure = adj
+    while True:  # transitive closure by squaring
+        wider = (closure.astype(np.int64) @ closure.astype(np.int64)) > 0
+        if np.array_equal(wider, closure):
+            break
+        closure = wider
+    can = closure[:, goal].any(axis=1)  # a path to the goal
+    sure = np.array([bool(np.all(can[closure[s]])) for s in range(n)])
     step: dict[int, dict[int, Fraction]] = {}
     for s in np.flatnonzero(~goal).tolist():  # the goal's states merged into one, -1
         step[s] = {}
@@ -85,7 +77,7 @@ def _reaches_surely(rows: list[list[Fraction]], policy: np.ndarray, goal: np.nda
             if p:
                 key = -1 if goal[t] else t
                 step[s][key] = step[s].get(key, Fraction(0)) + p
-    unknown = [s for s in range(n) if s in can and not goal[s]]
+    unknown = [s for s in range(n) if can[s] and not goal[s]]
     solved = chain_values(step, unknown, -1)
     return sure, [Fraction(1) if goal[s] else solved.get(s, Fraction(0)) for s in range(n)]
 

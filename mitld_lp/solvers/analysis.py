@@ -49,8 +49,9 @@ A maximum's value-1 states of the goal (``Prob1E``, so the wider target's too) l
 quotient the same way, a collapsed end component of them whole (the others renumbered);
 there the lifted policy plays an attractor strategy
 (:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
-surely.  The step and cost objectives never read this quotient (their routes count the
-steps of such states).
+surely: the one read from the attractor that found them (:func:`_attractor_strategy`,
+kept in ``Quotient.shared``), no second search.  The step and cost objectives never
+read this quotient (their routes count the steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
 and never decompose the graph again.
