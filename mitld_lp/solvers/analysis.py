@@ -49,8 +49,9 @@ A maximum's value-1 states of the goal (``Prob1E``, so the wider target's too) l
 quotient the same way, a collapsed end component of them whole (the others renumbered);
 there the lifted policy plays an attractor strategy
 (:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
-surely.  The step and cost objectives never read this quotient (their routes count the
-steps of such states).
+surely: the one read from the attractor that found them (:func:`_attractor_strategy`,
+kept in ``Quotient.shared``), no second search.  The step and cost objectives never
+read this quotient (their routes count the steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
 and never decompose the graph again.
@@ -71,11 +72,13 @@ from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
     attractor,
+    attractor_spared,
     backward_reachable,
     blocks_from,
     compiled_end_components,
     maximal_end_components,
     state_levels,
+    toward,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
@@ -89,18 +92,34 @@ __all__ = ["analyse", "end_components", "may_cycle"]
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
     """``(n_states,)`` bool: the states an end component may hold, given each state's
     strongly connected component ``comp`` in ``mdp``'s support graph (no zero stored):
-    those of a non-trivial component, and those with a choice that stays put (all its
-    entries in its own column).  An end component is strongly connected: it is one of
-    these states or lies among them."""
+    those of a non-trivial component, and those with a choice that stays put (it has
+    entries, all in its own column: :func:`_stays_put`).  An end component is
+    strongly connected: it is one of these states or lies among them."""
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
+    out = (size > 1)[comp]
+    out[_stays_put(mdp)] = True
+    return out
+
+
+def _stays_put(mdp: MDP) -> np.ndarray:
+    """The states (ascending, maybe repeated) with a choice all of whose entries lie in
+    their own column.  Such a choice's first entry does: only the choices whose first
+    entry does (few: a product's self-loops) have their other entries read, not a
+    minimum and a maximum over every entry of the matrix and a reduction over every
+    choice (0.044 -> 0.02 s of CPU on QVBS csma 4-2's 1.1 million entries; the same
+    states).  A choice with no entry stays nowhere (none in a product) and a state
+    with no choice has none that stays."""
     m = mdp.matrix
-    first = m.indptr[:-1]
-    lo = np.minimum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    hi = np.maximum.reduceat(m.indices, first) if m.nnz else np.zeros(0, np.int64)
-    pure = (lo == hi) & (lo == mdp.choice_state())
-    del lo, hi
-    loops = np.logical_or.reduceat(pure, mdp.row_groups[:-1]) if pure.size else pure
-    return (size[comp] > 1) | loops
+    if not m.nnz:
+        return np.zeros(0, dtype=np.int64)
+    own = mdp.choice_state()
+    lo, hi = m.indptr[:-1], m.indptr[1:]
+    cand = np.flatnonzero((hi > lo) & (m.indices[np.minimum(lo, m.nnz - 1)] == own))
+    lo, hi = lo[cand], hi[cand]
+    apart = m.indices[gather_ranges(lo, hi)] != np.repeat(own[cand], hi - lo)
+    pure = np.ones(cand.size, dtype=bool)
+    pure[np.repeat(np.arange(cand.size), hi - lo)[apart]] = False
+    return own[cand[pure]]
 
 
 def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
@@ -221,17 +240,21 @@ def _no_end_components(n: int, n_choices: int) -> EndComponents:
 
 
 def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.ndarray,
-         leaks: np.ndarray) -> np.ndarray:
+         leaks: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """``(n_reduced,)`` bool: the reduced states of value exactly 1 in ``sense``, on the
     quotient (no end component), from its pattern, its states known to be 0 (``zero``)
     and the choices that may move to a removed state of value 0 (``leaks``).  A maximum
     is 1 where some choice keeps among such states (the complement: every choice can
     lose, an :func:`~mitld_lp.solvers.graph.attractor`); a minimum where no path leads
-    to a state or a choice that can lose (a backward search)."""
+    to a state or a choice that can lose (a backward search).  Second, for a maximum,
+    the quotient's choices that cannot lose (``(n_choices,)`` bool, those the attractor
+    spared: :func:`_attractor_strategy` plays them); None for a minimum."""
     if not (zero.any() or leaks.any()):  # nothing can lose: every state is 1
-        return np.ones(row_groups.shape[0] - 1, dtype=bool)
+        return (np.ones(row_groups.shape[0] - 1, dtype=bool),
+                np.ones(matrix.shape[0], dtype=bool) if sense is Sense.MAX else None)
     if sense is Sense.MAX:
-        return ~attractor(matrix, row_groups, zero, leaks)
+        lose, hit = attractor_spared(matrix, row_groups, zero, leaks)
+        return ~lose, ~hit
     n = row_groups.shape[0] - 1
     owner = np.repeat(np.arange(n), np.diff(row_groups))
     seeds = zero.copy()
@@ -239,9 +262,82 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     walks = compiled_walks(matrix.nnz)
     if walks is not None:
         return ~walks.backward(matrix.indptr, matrix.indices, row_groups, seeds,
-                               np.zeros(matrix.shape[0], dtype=bool), False)
+                               np.zeros(matrix.shape[0], dtype=bool), False), None
     entry_owner = np.repeat(owner, np.diff(matrix.indptr))
-    return ~backward_reachable(n, entry_owner, matrix.indices, seeds)
+    return ~backward_reachable(n, entry_owner, matrix.indices, seeds), None
+
+
+ATTRACTOR_STRATEGY = "attractor strategy"
+"""The key in ``Quotient.shared`` of a maximum's strategy for its removed value-1 states
+(:func:`_attractor_strategy`, a :class:`SureStrategy`)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SureStrategy:
+    """A strategy of some states: ``states`` (ascending) and each one's choice (a row of
+    the product).  Equal to another with the same arrays (two analyses of one product
+    compare equal, as their other records do)."""
+
+    states: np.ndarray
+    choices: np.ndarray
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, SureStrategy)
+                and self.states.dtype == other.states.dtype
+                and self.choices.dtype == other.choices.dtype
+                and np.array_equal(self.states, other.states)
+                and np.array_equal(self.choices, other.choices))
+
+    __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: unhashable
+
+
+def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
+                        row_groups: np.ndarray, kept: np.ndarray, state_map: np.ndarray,
+                        n_plain: int, mecs: EndComponents,
+                        ) -> SureStrategy | None:
+    """A maximum's strategy for the product states of the reduced states ``sure``
+    (``Prob1E`` of the goal, about to leave the quotient), read from the attractor that
+    found them (:func:`_one`): each such reduced state plays its first choice
+    ``spared`` (one that cannot lose: its support stays among the ``sure`` states, and
+    what leaves the quotient goes to the target), a collapsed end component's through
+    the member that owns that exit, the other members a step along a breadth-first tree
+    of the component's internal choices toward it (as
+    :func:`~mitld_lp.solvers.quotient.lift_policy` does).  It reaches the target almost
+    surely: a closed class of its chain among the ``sure`` states would map to a set
+    of reduced states each with a choice staying among them, holding an end component
+    of the quotient, which has none (its maximal ones are collapsed; a member's walk
+    reaches the exit's owner with positive probability).  The product states ascending
+    and each one's choice (rows of ``mdp``); None if a state
+    has no such choice (never, by the attractor's fixed point: the caller keeps the
+    second search then)."""
+    red = np.flatnonzero(sure)
+    rows, owner = _choices_of(row_groups, red)
+    free = spared[rows]
+    rows, owner = rows[free], owner[free]
+    has, first = np.unique(owner, return_index=True)  # ascending: each one's first
+    if has.size != red.size:  # pragma: no cover - the attractor spares one a state
+        return None
+    play = np.full(sure.size, -1, dtype=np.int64)
+    play[red] = kept[rows[first]]
+    del rows, owner, free, has, first
+    mapped = state_map >= 0
+    states = np.flatnonzero(mapped)
+    states = states[sure[state_map[states]]]
+    choices = play[state_map[states]]
+    if sure[n_plain:].any():  # members of a collapsed end component: toward its exit
+        exits = play[n_plain:][sure[n_plain:]]
+        owners = mdp.state_of(exits)
+        member = np.asarray(mecs.mec_of)[states] >= 0
+        internal = np.flatnonzero(mecs.internal)
+        internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[mdp.state_of(internal)]]]
+        step = toward(mdp, internal, owners)
+        walk = member & ~np.isin(states, owners)
+        if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
+            return None
+        choices[walk] = step[states[walk]]
+    itype = index_dtype(mdp.n_choices)
+    return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
+                        read_only(choices.astype(itype, copy=False)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -424,11 +520,19 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # Prob1E of a maximum (a collapsed end component leaves whole)
     j0 = 1 if same else 0
     sure = np.zeros(n_red, dtype=bool)
+    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one:
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
-        sure = _one(sense, matrix, row_groups, zero0, leaks[j0]) & ~zero0
+        sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])
+        sure &= ~zero0
         del zero0
+        if spared is not None and sure.any():  # the lift's strategy there (the docs)
+            played = _attractor_strategy(mdp, sure, spared, row_groups, kept, state_map,
+                                         n_plain, mecs)
+            if played is not None:
+                shared[ATTRACTOR_STRATEGY] = played
+        del spared
     sure_state = np.zeros(n, dtype=bool)
     if sure.any():
         cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
@@ -462,7 +566,6 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
               read_only(found.level.astype(index_dtype(n), copy=False)))
     init = int(mdp.initial)
-    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
         zero = np.zeros(n_red, dtype=bool)
@@ -473,7 +576,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         # maximum) through states that remain, so _one would find none; the wider
         # target's, from other seeds, are searched
         one[maybe] = False if without_one and j == j0 else _one(
-            sense, matrix, row_groups, zero, leaks[j])[state_map[maybe]]
+            sense, matrix, row_groups, zero, leaks[j])[0][state_map[maybe]]
         unreachable = ~reach[:, j] & ~target
         decided = Qualitative(sense, read_only(prob0[j]), read_only(one),
                               read_only(prob0[j] if sense is Sense.MAX else unreachable))

@@ -32,13 +32,13 @@ from mitld_lp.solvers.end_components import (
 from mitld_lp.solvers.level_search import PROBE_LEVELS, reaching, searched_levels, thin
 from mitld_lp.solvers.reach import Reversed, backward_reachable
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.rows import gather_ranges
+from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import unique
-from mitld_lp.util.traversal import SMALL, strong_components
+from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
 
 __all__ = [
-    "Sense", "attractor",
+    "Sense", "attractor", "attractor_spared",
     "Blocks",
     "Edges",
     "Reversed",
@@ -55,6 +55,7 @@ __all__ = [
     "maximal_end_components",
     "state_levels",
     "segmented_argmax",
+    "toward",
 ]
 
 
@@ -124,6 +125,12 @@ def segmented_argmax(
 
 def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
               hit: np.ndarray | None = None) -> np.ndarray:
+    """:func:`attractor_spared`'s set of states (the docs there)."""
+    return attractor_spared(matrix, row_groups, seeds, hit)[0]
+
+
+def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
+                     hit: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     r"""The states from which *every* policy reaches ``seeds`` with positive
     probability, on the support graph of ``matrix`` (rows: choices grouped per state by
     ``row_groups``; columns: states; no zero stored): the least set
@@ -138,13 +145,21 @@ def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
     backwards from the seeds a frontier at a time (a choice is hit once, a state joins
     when its last choice is), vectorised per round; the predecessors are the matrix's
     pattern in column order (one counting sort).  A large matrix is walked compiled
-    (:func:`~mitld_lp.solvers.walks.compiled_walks`), a state at a time: the same set."""
+    (:func:`~mitld_lp.solvers.walks.compiled_walks`), a state at a time: the same set.
+
+    Returned with the choices **hit** at the end (``(n_choices,)`` bool: those of
+    ``hit`` and those with an entry into the set; both walks mark every such choice).
+    A state outside the set with a choice keeps at least one not hit (else it
+    would have joined), and such a choice's whole support lies outside the set: the choices
+    *spared* are the ones by which a policy stays out of the set."""
     n_choices = int(matrix.indptr.size - 1)
     walks = compiled_walks(matrix.nnz)
     if walks is not None:
         hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
-        return walks.backward(matrix.indptr, matrix.indices, np.asarray(row_groups),
-                              np.array(seeds, dtype=bool), hit, True)
+        # the kernel writes its hits into this copy
+        inside = walks.backward(matrix.indptr, matrix.indices, np.asarray(row_groups),
+                                np.array(seeds, dtype=bool), hit, True)
+        return inside, hit
     n = row_groups.shape[0] - 1
     counts = np.diff(row_groups)
     owner = np.repeat(np.arange(n, dtype=np.int64), counts)
@@ -172,7 +187,7 @@ def attractor(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
         joined = owners[(remaining[owners] == 0) & ~inside[owners]]
         frontier = _distinct(joined, stamp)
         inside[frontier] = True
-    return inside
+    return inside, hit
 
 
 SORTED_COUNTS = 2048
@@ -444,3 +459,30 @@ def graph_blocks(graph: sp.csr_array, self_loop: np.ndarray) -> Blocks:
     found = levels(graph)  # dense ids and levels already: nothing to renumber
     n_levels = int(found.level.max()) + 1 if found.level.size else 0
     return _layered(found.component, found.level, found.level.size, n_levels, self_loop)
+
+
+def toward(mdp: MDP, choices: np.ndarray, roots: np.ndarray) -> np.ndarray:
+    """Per state of ``mdp``, its first choice among ``choices`` that has its parent as a
+    successor in a breadth-first tree of the edges of ``choices`` reversed, from the
+    ``roots`` (``-1`` for a root and a state the tree does not reach): followed, each
+    step moves one level closer to a root with positive probability."""
+    n = mdp.n_states
+    local, succ, data = row_entries(sp.csr_array(mdp.matrix), choices)
+    positive = data > 0
+    e_choice = choices[local[positive]]
+    e_succ = np.asarray(succ[positive], dtype=np.int64)
+    e_source = mdp.state_of(e_choice)
+    del local, succ, data, positive
+    rows = np.concatenate([e_succ, np.full(roots.size, n, dtype=np.int64)])
+    cols = np.concatenate([e_source, roots])
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
+    _, pred = breadth_first_order(graph, n, return_predecessors=True)
+    closer = e_succ == pred[e_source]
+    cand_state, cand_choice = e_source[closer], e_choice[closer]
+    ordering = np.lexsort((cand_choice, cand_state))
+    cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
+    first = np.unique(cand_state, return_index=True)[1]
+    step = np.full(n, -1, dtype=np.int64)
+    step[cand_state[first]] = cand_choice[first]
+    step[roots] = -1
+    return step

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
-from mitld_lp.solvers.analysis import analyse
+from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, SureStrategy, analyse
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -29,12 +29,12 @@ from mitld_lp.solvers.graph import (
     edges,
     maximal_end_components,
     segmented_argmax,
+    toward,
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.util.arrays import index_dtype
-from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = [
     "EndComponents",
@@ -167,8 +167,12 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
         sure = np.asarray(quotient.qualitative.one) & (quotient.state_map < 0) \
             & ~quotient.target
         if sure.any():
-            step = _almost_surely(mdp, sure, np.asarray(quotient.target))
-            policy[sure] = step[sure]
+            played = _recorded(quotient, sure)
+            if played is not None:  # the analysis's attractor strategy
+                policy[played.states] = played.choices
+            else:
+                step = _almost_surely(mdp, sure, np.asarray(quotient.target))
+                policy[sure] = step[sure]
     policy[quotient.target | absorbing_states(mdp)] = -1
     # kept for the quotient's life: int32 where the choices' count allows (lift_policy
     # widens its own copy)
@@ -177,50 +181,39 @@ def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
     return policy
 
 
+def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:
+    """The strategy the analysis recorded for the ``sure`` states from the attractor
+    that found them (:func:`mitld_lp.solvers.analysis._attractor_strategy`, kept in
+    ``quotient.shared``), if it covers exactly these states; else None (a quotient
+    built otherwise: :func:`_almost_surely` searches one)."""
+    played = quotient.shared.get(ATTRACTOR_STRATEGY)
+    if played is None:
+        return None
+    states = played.states
+    if states.size != int(np.count_nonzero(sure)) or not bool(np.all(sure[states])):
+        return None
+    return played
+
+
 def _almost_surely(mdp: MDP, sure: np.ndarray, target: np.ndarray) -> np.ndarray:
     """An attractor strategy of the ``sure`` states (value 1 for a maximum, ``Prob1E``
     less the target): per state, a choice whose whole support stays among ``sure`` and
     ``target`` and that moves, with positive probability, one step closer to the
-    target along a breadth-first tree of such choices (:func:`_toward`).  The chain it
-    makes never leaves them and, from every state, reaches the target with positive
-    probability within ``n`` steps: it reaches it almost surely (value 1, as the
-    quotient's lift says).  ``-1`` for the other states."""
+    target along a breadth-first tree of such choices
+    (:func:`~mitld_lp.solvers.graph.toward`).  The chain it makes never leaves them
+    and, from every state, reaches the target with positive probability within ``n``
+    steps: it reaches it almost surely (value 1, as the quotient's lift says).  ``-1``
+    for the other states.  The analysis's own quotients carry such a strategy already
+    (:func:`_recorded`): this search is for the others."""
     choices = gather_ranges(mdp.row_groups[:-1][sure], mdp.row_groups[1:][sure])
     local, succ, data = row_entries(sp.csr_array(mdp.matrix), choices)
     stays = sure | target
     leaves = np.zeros(choices.size, dtype=bool)
     # a stored zero is not an edge (the analysis's graph drops them too)
     leaves[local[~stays[succ] & (data > 0)]] = True
-    step = _toward(mdp, choices[~leaves], np.flatnonzero(target))
+    step = toward(mdp, choices[~leaves], np.flatnonzero(target))
     if np.any(step[sure] < 0):  # pragma: no cover - Prob1E has such a tree
         raise AssertionError("a state of value 1 has no choice toward the target")
-    return step
-
-
-def _toward(mdp: MDP, choices: np.ndarray, roots: np.ndarray) -> np.ndarray:
-    """Per state of ``mdp``, its first choice among ``choices`` that has its parent as a
-    successor in a breadth-first tree of the edges of ``choices`` reversed, from the
-    ``roots`` (``-1`` for a root and a state the tree does not reach): followed, each
-    step moves one level closer to a root with positive probability."""
-    n = mdp.n_states
-    local, succ, data = row_entries(sp.csr_array(mdp.matrix), choices)
-    positive = data > 0
-    e_choice = choices[local[positive]]
-    e_succ = np.asarray(succ[positive], dtype=np.int64)
-    e_source = mdp.state_of(e_choice)
-    del local, succ, data, positive
-    rows = np.concatenate([e_succ, np.full(roots.size, n, dtype=np.int64)])
-    cols = np.concatenate([e_source, roots])
-    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
-    _, pred = breadth_first_order(graph, n, return_predecessors=True)
-    toward = e_succ == pred[e_source]
-    cand_state, cand_choice = e_source[toward], e_choice[toward]
-    ordering = np.lexsort((cand_choice, cand_state))
-    cand_state, cand_choice = cand_state[ordering], cand_choice[ordering]
-    first = np.unique(cand_state, return_index=True)[1]
-    step = np.full(n, -1, dtype=np.int64)
-    step[cand_state[first]] = cand_choice[first]
-    step[roots] = -1
     return step
 
 
@@ -241,8 +234,9 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       the other prob-0 states get their first choice (every choice has value 0 there),
       and so do a minimum's states of value 1 the analysis removed (``Prob1A``: every
       choice reaches the target almost surely there); a maximum's removed states of
-      value 1 (``Prob1E``) play an attractor strategy (:func:`_almost_surely`): it
-      reaches the target almost surely, so the controller achieves their value 1;
+      value 1 (``Prob1E``) play an attractor strategy (the one the analysis read from
+      the attractor that found them, else :func:`_almost_surely`'s): it reaches the
+      target almost surely, so the controller achieves their value 1;
       for a minimum, their first choice that stays among them (``Prob0E``: one does,
       and staying avoids the target for ever).
     """
@@ -263,8 +257,8 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
     owners = mdp.state_of(exits)  # not choice_state(): an int64 a choice of the product
     policy[owners] = exits
     # each other member: a step along a breadth-first tree of the internal choices,
-    # toward the exit's owner (_toward)
-    step = _toward(mdp, np.flatnonzero(mecs.internal), owners)
+    # toward the exit's owner (graph.toward)
+    step = toward(mdp, np.flatnonzero(mecs.internal), owners)
     members = np.flatnonzero(mecs.mec_of >= 0)
     others = np.setdiff1d(members, owners)
     if np.any(step[others] < 0):  # pragma: no cover - MECs are strongly connected
