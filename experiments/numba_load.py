@@ -43,52 +43,72 @@ ROOT = Path(__file__).resolve().parent.parent
 CHILD = r"""
 import json, time
 c = time.process_time
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / 2**20
 import numpy as np, scipy.sparse as sp, scipy.linalg  # noqa: F401
 t = [c()]
+m = [rss()]
+def mark():
+    t.append(c())
+    m.append(rss())
 if NARROW:
     from mitld_lp.solvers import numba_narrow
     getattr(numba_narrow, "import_numba", lambda: __import__("numba"))()  # without PyYAML
 else:
     import numba  # noqa: F401
-t.append(c())
+mark()
+from numba.core.registry import cpu_target
+from numba.core.runtime import rtsys
 if NARROW:
     assert numba_narrow.install()
-    t += [c(), c()]
+    mark()
+    mark()
+    try:  # what the narrow load does at the first kernel's call, made a part of its own
+        from mitld_lp.solvers import nrt_cache
+        nrt_cache.initialize(cpu_target.target_context)
+    except ImportError:  # an older checkout: numba compiles its runtime
+        rtsys.initialize(cpu_target.target_context)
+    mark()
 else:
     from mitld_lp.solvers import numba_narrow
     numba_narrow.ENABLED = False  # every compiled module would put it in place
-    from numba.core.registry import cpu_target
     cpu_target.typing_context.refresh()
-    t.append(c())
+    mark()
+    rtsys.initialize(cpu_target.target_context)  # the first step of the refresh
+    mark()
     cpu_target.target_context.refresh()
-    t.append(c())
+    mark()
+import numba.np.arrayobj  # noqa: F401  # the modules of the kernels' environments
+mark()
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
 from mitld_lp.solvers import compiled_graph
 alive, allowed, label = compiled_graph.end_components_among(
     inner.indptr, inner.indices, inner.data > 0, np.array([0, 1, 2]), np.arange(2))
-t.append(c())
+mark()
 from mitld_lp.solvers import kernels
 prep = kernels.Prepared(inner, np.array([0, 1, 2]))
 local = np.column_stack([np.zeros(2), np.ones(2)])
 kernels.compiled_sweeps(prep, np.full((2, 2), 0.25), local, 1e-12, 1000)
-t.append(c())
+mark()
 from mitld_lp.solvers import level_kernels
 x = np.zeros((2, 1))
 diag = np.zeros(2)
 diag.flags.writeable = False  # the types the solver passes: no signature of its own
-level_kernels.chain_solve(np.arange(2), inner.indptr.astype(np.int64),
-                          inner.indices.astype(np.int64), inner.data, diag, np.ones((2, 1)), x)
-t.append(c())
+level_kernels.chain_solve(np.arange(2), inner.indptr, inner.indices, inner.data, diag,
+                          np.ones((2, 1)), x)  # SciPy's int32 index, as chain_levels passes
+mark()
 parts = [b - a for a, b in zip(t, t[1:])]
 import sys
-print(json.dumps({"parts": parts,
+print(json.dumps({"parts": parts, "rss": [b - a for a, b in zip(m, m[1:])],
                   "modules": [m for m in ("yaml", "cffi", "pycparser") if m in sys.modules],
                   "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
                   "components": [alive.tolist(), label.tolist()]}))
 """
 
-NAMES = ("import numba", "typing registries", "target registries",
-         "graph kernel, first call", "block kernel, first call", "a level kernel, first call")
+NAMES = ("import numba", "typing registries", "numba's runtime (NRT)",
+         "target registries (rest)", "numba.np.arrayobj (envs)", "graph kernel, first call",
+         "block kernel, first call", "a level kernel, first call")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -133,13 +153,31 @@ def main(argv: list[str] | None = None) -> None:
           f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")
     print(f"graph kernel's end components of the two-state block, every load (alive, "
           f"label): {comps.pop()} (one end component of both states)")
-    print(f"{'part':<28}" + "".join(f" {m + ': median s':>22} {'least s':>8}" for m in runs))
+    print(f"{'part':<28}" + "".join(f" {m + ': median s':>22} {'least s':>8} {'MB':>6}"
+                                    for m in runs))
     for i, name in enumerate((*NAMES, "total")):
         cells = []
         for rs in runs.values():
             xs = [sum(r["parts"]) if name == "total" else r["parts"][i] for r in rs]
-            cells.append(f" {statistics.median(xs):22.3f} {min(xs):8.3f}")
+            mb = [sum(r["rss"]) if name == "total" else r["rss"][i] for r in rs]
+            cells.append(f" {statistics.median(xs):22.3f} {min(xs):8.3f} "
+                         f"{statistics.median(mb):6.1f}")
         print(f"{name:<28}" + "".join(cells))
+    print("MB: the process's resident memory gained in the part (median)")
+    _sizes()
+
+
+def _sizes() -> None:
+    """The cache files a process of this checkout loads: each kernel's machine code
+    (numba's ``.nbc``; a kernel's callees are linked into it) and the runtime's."""
+    cache = ROOT / "mitld_lp" / "solvers" / "__pycache__"
+    files = sorted(cache.glob("*.nbc")) + sorted(cache.glob("nrt-*.bin"))
+    if not files:
+        print(f"no cache files under {cache} (numba's user-wide cache or NUMBA_CACHE_DIR)")
+        return
+    print("cache files of mitld_lp/solvers (bytes):")
+    for path in files:
+        print(f"  {path.stat().st_size:9d}  {path.name}")
 
 
 if __name__ == "__main__":
