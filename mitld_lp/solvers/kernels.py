@@ -40,16 +40,15 @@ probability 0.98) is settled in one update instead of hundreds.
   imported) loads it so, 0.2-0.25 s less CPU; it now skips the typing context's
   refresh too (cffi's C parser among it) and imports numba without PyYAML: numba's
   import and a graph, block and level kernel's first calls 0.54 -> 0.44 s
-  (``experiments/results/numba_load_numba_gate.txt``); since the numba-load branch the
-  first call reads numba's runtime as machine code and skips ``numba.np.arrayobj``
-  (:mod:`mitld_lp.solvers.nrt_cache`, :mod:`mitld_lp.solvers.numba_narrow`).  Every
-  kernel is loaded at its first call only (a dispatcher each), so loading fewer kernels
-  saves their hundredths of a second, not numba's registries. A new checkout compiles
-  every kernel it calls once (for one index type: :func:`kernel_index`; 2.5 s more on the first solve of QVBS
-  ``zeroconf`` 20-4-false, the index files then under each module's ``__pycache__``,
-  keyed by the source file's time stamp). The NumPy path is no way round that load
-  where a large block needs the kernel: that instance's solve takes 25 s by it against
-  1.6 s compiled, its load included.
+  (``experiments/results/numba_load_numba_gate.txt``); since the numba-load branch the first call
+  reads numba's runtime as machine code and skips ``numba.np.arrayobj``
+  (:mod:`mitld_lp.solvers.nrt_cache`, :mod:`mitld_lp.solvers.numba_narrow`).  Every kernel is loaded
+  at its first call only (a dispatcher each), so loading fewer kernels saves their hundredths of a
+  second, not numba's registries. A new checkout compiles every kernel it calls once (for one index
+  type: :func:`kernel_index`; 2.5 s more on the first solve of QVBS ``zeroconf`` 20-4-false, the
+  index files then under each module's ``__pycache__``, keyed by the source file's time stamp). The
+  NumPy path is no way round that load where a large block needs the kernel: that instance's solve
+  takes 25 s by it against 1.6 s compiled, its load included.
 
 **Guessed and verified bounds** (the compiled kernel only; optimistic value iteration,
 Hartmanns & Kaminski, CAV 2020, with the guess extrapolated).  A block that mixes slowly
