@@ -62,14 +62,14 @@ from numba.core.registry import cpu_target
 from numba.core.runtime import rtsys
 if NARROW:
     assert numba_narrow.install()
-    mark()
-    mark()
+    mark()  # the typing registries: not refreshed by the narrow load
     try:  # what the narrow load does at the first kernel's call, made a part of its own
         from mitld_lp.solvers import nrt_cache
         nrt_cache.initialize(cpu_target.target_context)
     except ImportError:  # an older checkout: numba compiles its runtime
         rtsys.initialize(cpu_target.target_context)
     mark()
+    mark()  # the rest of the target's registries: not refreshed by the narrow load
 else:
     from mitld_lp.solvers import numba_narrow
     numba_narrow.ENABLED = False  # every compiled module would put it in place
@@ -79,7 +79,10 @@ else:
     mark()
     cpu_target.target_context.refresh()
     mark()
-import numba.np.arrayobj  # noqa: F401  # the modules of the kernels' environments
+if not (NARROW and hasattr(numba_narrow, "_rebuild_env")):
+    # the module of the array helpers' environments, which the first call of a kernel
+    # imports (numba's load and older checkouts; since numba-load the narrow load does not)
+    import numba.np.arrayobj  # noqa: F401
 mark()
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
 from mitld_lp.solvers import compiled_graph
