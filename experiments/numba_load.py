@@ -104,7 +104,8 @@ mark()
 parts = [b - a for a, b in zip(t, t[1:])]
 import sys
 print(json.dumps({"parts": parts, "rss": [b - a for a, b in zip(m, m[1:])],
-                  "modules": [m for m in ("yaml", "cffi", "pycparser") if m in sys.modules],
+                  "modules": [m for m in ("yaml", "cffi", "pycparser", "numba.np.arrayobj")
+                              if m in sys.modules],
                   "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
                   "components": [alive.tolist(), label.tolist()]}))
 """
@@ -149,7 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     if len(comps) != 1:
         sys.exit(f"the loads' end components differ: {comps}")
     for mode, rs in runs.items():
-        print(f"{mode} load: of PyYAML, cffi, pycparser loaded: "
+        print(f"{mode} load: of PyYAML, cffi, pycparser, numba.np.arrayobj loaded: "
               f"{sorted({m for r in rs for m in r['modules']})}")
     low, high = (float.fromhex(x) for x in answers.pop())
     print(f"block kernel's bracket on the two-state block, every load: [{low:.12f}, "
