@@ -61,7 +61,17 @@ prep = kernels.Prepared(inner, np.arange(n + 1))
 local = np.column_stack([np.zeros(n), np.ones(n)])
 done, over = kernels.compiled_sweeps(prep, np.column_stack([exits, exits]), local, 1e-13,
                                      100000)
+# a function compiled now (no cache) links against the runtime's library as it came
+import numba
+@numba.njit
+def made(n):
+    a = np.zeros(n)
+    for i in range(n):
+        a[i] = 1.5 * i
+    return a, a.sum()
+fresh, total = made(5)
 print(json.dumps({"loads": loads, "after": after, "cell": cell.value,
+                  "fresh": fresh.tolist(), "total": total,
                   "lower": local[:, 0].tolist(), "upper": local[:, 1].tolist(),
                   "over": over}))
 """
@@ -103,6 +113,7 @@ def _check_answer(out: dict) -> None:
     assert np.all(lower <= exact + 1e-12) and np.all(upper >= exact - 1e-12)
     assert np.all(upper - lower <= 1e-13)
     assert out["after"] == 42 and out["cell"] == 42  # the atomic add's own result
+    assert out["fresh"] == [0.0, 1.5, 3.0, 4.5, 6.0] and out["total"] == 15.0
 
 
 def test_compiled_then_loaded_then_stale_recompiled(tmp_path: Path) -> None:
