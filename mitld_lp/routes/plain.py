@@ -113,7 +113,8 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
                     tol=s.tol, precision=s.precision,
                     layout="blocks" if s.decompose is not False else "whole",
                     time_limit=deadline.left(), bounds=(it.lower, it.upper),
-                    everywhere=quotient.initial < 0, progress=s.progress)
+                    everywhere=quotient.initial < 0, progress=s.progress,
+                    flows=False)  # nothing reads a model's occupancy: not at the peak
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,

@@ -260,6 +260,7 @@ def solve_lp(
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
     progress: bool | None = None,
     greedy: bool = True,
+    flows: bool = True,
 ) -> LPResult:
     """Maximal (``sense=Sense.MIN``: minimal) probability of reaching ``target`` from
     ``mdp.initial``, by the occupancy LP.
@@ -304,6 +305,10 @@ def solve_lp(
             a solver call (:mod:`mitld_lp.solvers.greedy_block`); ``False``: every
             block goes to the solver.  Only on the direct Clarabel route (the
             default): a solver named through cvxpy solves every block, as asked.
+        flows: ``False``: the result's ``occupancy`` and ``randomized`` are ``None``,
+            not made (two floats a choice of the product; a caller that reads only
+            the policy and the values, as the plain route does, keeps them out of the
+            certificate's peak).  Everything else is the same to the bit.
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -356,7 +361,7 @@ def solve_lp(
         return failed(answer)
     taken = [answer]  # _result empties it: the reduced arrays freed once mapped back
     del answer
-    return _result(mdp, q, taken, settings, start, shape)
+    return _result(mdp, q, taken, settings, start, shape, flows)
 
 
 def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
@@ -375,10 +380,12 @@ def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
 
 
 def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
-            start: float, shape: tuple[int, int]) -> LPResult:
+            start: float, shape: tuple[int, int], flows: bool = True) -> LPResult:
     """The answer of a route mapped back to ``mdp`` (values, policies, occupancy).
     ``taken``: a list holding the answer, emptied here, so that its reduced arrays are
-    freed as soon as they are mapped back (not held through the per-choice ones)."""
+    freed as soon as they are mapped back (not held through the per-choice ones).
+    ``flows``: whether the occupancy and the randomised policy are made
+    (:func:`solve_lp`)."""
     answer = taken.pop()
     raw, primal, dual, calls = answer.raw, answer.primal, answer.dual, answer.n_solver_calls
     v, reduced_choice, y = answer.v, answer.reduced_choice, answer.y
@@ -388,11 +395,16 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
     policy = lift_policy(mdp, q, reduced_choice)
     del reduced_choice
-    occupancy, state_flow = _occupancy(mdp, q.choice_origin, y, q)
-    del y
-    flows = [state_flow]  # emptied by _randomized: freed there once it is used
-    del state_flow
-    randomized = _randomized(mdp, occupancy, flows, policy, settings.tol)
+    occupancy = randomized = None
+    if flows:
+        occupancy, state_flow = _occupancy(mdp, q.choice_origin, y, q)
+        del y
+        flow = [state_flow]  # emptied by _randomized: freed there once it is used
+        del state_flow
+        randomized = read_only(_randomized(mdp, occupancy, flow, policy, settings.tol))
+        occupancy = read_only(occupancy)
+    else:
+        del y
     seconds = time.perf_counter() - start
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)
@@ -403,9 +415,9 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
         values=read_only(values),
         primal_objective=primal,
         dual_objective=dual,
-        occupancy=read_only(occupancy),
+        occupancy=occupancy,
         policy=read_only(policy),
-        randomized=read_only(randomized),
+        randomized=randomized,
         solver=settings.solver if calls else "",
         backend=settings.backend,
         iterations=raw.iterations,

@@ -64,11 +64,14 @@ class LPResult:
         dual_objective: ``sum_s b(s) v(s)`` at the returned duals.
         occupancy: ``(n_choices,)`` expected number of times each original choice is
             taken (0 for choices not in the LP: MEC-internal, target, prob-0).
+            ``None`` without a solution, and where the caller did not ask for the
+            flows (``solve_lp(..., flows=False)``: the plain route's models).
         policy: ``(n_states,)`` int64, a deterministic optimal policy: the chosen choice
             row per state, ``-1`` for target and absorbing states.
         randomized: ``(n_choices,)`` the randomised policy of the occupancies: per
             visited state ``y(c) / sum_{c' of s} y(c')``, elsewhere the deterministic
             policy's choice with probability 1 (all zero for states with policy -1).
+            ``None`` where ``occupancy`` is.
         solver: the solver's name (``"CLARABEL"``, ``"HIGHS"``, ...), ``""`` if none ran.
         backend: ``"cvxpy"`` or ``"direct"``.
         iterations: the solver's iteration count (0 if unknown or none ran).
