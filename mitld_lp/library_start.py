@@ -41,6 +41,8 @@ from __future__ import annotations
 import sys
 import types
 
+from mitld_lp.own_imports import SCIPY_NUMPY_COPY, Loader
+
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -58,8 +60,6 @@ __all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "install", "remove", "installed",
 NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
                 "char", "strings", "core")
 
-#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
-SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
 
 
 def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
@@ -189,33 +189,6 @@ def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
     return lambda csgraph: None
 
 
-class _Loader:
-    """The module's own loader for one import, with what runs around its
-    ``exec_module``; every other attribute is the loader's own."""
-
-    def __init__(self, loader: Any, around: Any) -> None:
-        self._loader, self._around = loader, around
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._loader, name)
-
-    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
-        return self._loader.create_module(spec)
-
-    def exec_module(self, module: ModuleType) -> None:
-        loader = self._loader
-        module.__loader__ = loader  # the module's own loader, as without the hook
-        if module.__spec__ is not None:
-            module.__spec__.loader = loader
-        after = self._around()
-        try:
-            loader.exec_module(module)
-        except BaseException:
-            after(None)
-            raise
-        after(module)
-
-
 class _Hook:
     """The finder: the modules it waits for, and what runs around each one's import."""
 
@@ -234,7 +207,7 @@ class _Hook:
             spec = finder.find_spec(name, path, target)
             if spec is not None:
                 if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                    spec.loader = _Loader(spec.loader, around)
+                    spec.loader = Loader(spec.loader, around)
                 return spec
         return None
 
