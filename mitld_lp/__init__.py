@@ -11,16 +11,15 @@ controller, NumPy alone) imports nothing else of the package.
 from mitld_lp import startup  # noqa: F401 - first: Ctrl-C while the command line imports
 
 # isort: split
-from mitld_lp import own_imports
-
-own_imports.install()  # the package's modules imported with the collector held (and put back)
-
-# isort: split
 import importlib
 import importlib.util
 import sys
 import types
 from typing import TYPE_CHECKING, Any
+
+from mitld_lp import own_imports
+
+own_imports.install()  # the package's modules imported with the collector held (and put back)
 
 if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA

@@ -29,6 +29,7 @@ the environment leaves the finder out (the imports exactly as Python makes them)
 
 from __future__ import annotations
 
+import _thread
 import sys
 
 TYPE_CHECKING = False
@@ -48,8 +49,6 @@ SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
 
 #: The ``dataclasses`` functions the package's makers replace while a body runs.
 MAKERS = ("_repr_fn", "_cmp_fn", "_hash_fn", "_frozen_get_del_attr", "_create_fn")
-
-import _thread
 
 _lock = _thread.RLock()  # the count below, for imports in several threads
 _depth = 0  # package bodies running (nested, or in several threads)
