@@ -39,7 +39,8 @@ if TYPE_CHECKING:
     from types import ModuleType
     from typing import Any
 
-__all__ = ["SCIPY_NUMPY_COPY", "Loader", "install", "remove", "installed", "inside"]
+__all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "Loader", "install", "installed", "inside",
+           "numpy_listed_without_extras", "hand_over_extras", "scipy_copy_around", "spec_around"]
 
 #: The package whose modules open the window.
 PACKAGE = "mitld_lp"
@@ -103,10 +104,68 @@ def _dataclasses_imported() -> Callable[[ModuleType | None], None]:
     return after
 
 
-def _scipy_copy() -> Callable[[ModuleType | None], None]:
-    from mitld_lp.library_start import _scipy_copy_around
+#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
+#: import all at once and which no array-API function needs
+#: (:func:`mitld_lp.startup.lean_scipy`).
+NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
+                "char", "strings", "core")
 
-    return _scipy_copy_around()
+
+
+def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
+    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
+    imported yet, until the function returned is called (which puts both back); and
+    those names.  :func:`mitld_lp.startup.lean_scipy`'s first half."""
+    import numpy
+
+    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
+    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
+    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
+    numpy.__all__ = [name for name in kept_all if name not in extras]
+    if kept_dir is not None:
+        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+
+    def restore() -> None:
+        numpy.__all__ = kept_all
+        if kept_dir is not None:
+            numpy.__dir__ = kept_dir
+
+    return restore, extras
+
+
+def hand_over_extras(copy: Any, extras: set[str]) -> None:
+    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
+    held ``extras`` back, hands each of them over from NumPy when first asked (importing
+    it then) and lists them in its ``__all__``.  :func:`mitld_lp.startup.lean_scipy`'s
+    second half."""
+    import numpy
+
+    left_out = extras - vars(copy).keys()
+    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
+
+    def handed_over(name: str) -> object:
+        if name in left_out:
+            return getattr(numpy, name)
+        if own is not None:
+            return own(name)
+        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
+
+    copy.__getattr__ = handed_over
+    copy.__all__ = sorted({*copy.__all__, *left_out})
+
+
+def scipy_copy_around() -> Callable[[ModuleType | None], None]:
+    """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
+    function to call after it (NumPy put back, then the copy handing the extras over;
+    ``None``: the import failed, NumPy is put back only)."""
+    restore, extras = numpy_listed_without_extras()
+
+    def after(copy: ModuleType | None) -> None:
+        restore()
+        if copy is not None:
+            hand_over_extras(copy, extras)
+
+    return after
 
 
 def _makers_on() -> None:
@@ -189,7 +248,7 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         if name == "dataclasses":
             return _dataclasses_imported
         if name == SCIPY_NUMPY_COPY:
-            return _scipy_copy
+            return scipy_copy_around
     return None
 
 
@@ -230,15 +289,21 @@ class _Finder:
         around = _around(name)
         if around is None:
             return None
-        for finder in sys.meta_path:
-            if finder is self or not hasattr(finder, "find_spec"):
-                continue
-            spec = finder.find_spec(name, path, target)
-            if spec is not None:
-                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                    spec.loader = Loader(spec.loader, around)
-                return spec
-        return None
+        return spec_around(self, name, path, target, around)
+
+
+def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> ModuleSpec | None:
+    """The spec of ``name`` as the finders of ``sys.meta_path`` other than ``skip`` find
+    it, its loader wrapped (:class:`Loader`) to run ``around`` about its body."""
+    for finder in sys.meta_path:
+        if finder is skip or not hasattr(finder, "find_spec"):
+            continue
+        spec = finder.find_spec(name, path, target)
+        if spec is not None:
+            if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                spec.loader = Loader(spec.loader, around)
+            return spec
+    return None
 
 
 def install() -> None:
@@ -251,17 +316,6 @@ def install() -> None:
         return
     _finder = _Finder()
     sys.meta_path.insert(0, _finder)
-
-
-def remove() -> None:
-    """Take the finder out of ``sys.meta_path`` (a window open now still closes)."""
-    global _finder
-    if _finder is not None:
-        try:
-            sys.meta_path.remove(_finder)
-        except ValueError:
-            pass
-        _finder = None
 
 
 def installed() -> bool:

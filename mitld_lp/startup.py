@@ -33,8 +33,10 @@ import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
 These leave every name where it was (the layer hands NumPy's submodules over when
 asked; ``regex`` and ``numpy.ma`` import for whoever asks later).  A program that
 imports the package gets NumPy, SciPy and lark as they import themselves, but for the
-cuts nobody can see, made by :mod:`mitld_lp.library_start`: SciPy's layer as here, the
-package's own dataclasses as below (not the program's), and ``scipy.sparse.csgraph``
+cuts nobody can see, made while the package's own modules import
+(:mod:`mitld_lp.own_imports`: the collector held and put back, SciPy's layer as here
+when the package imports it, the package's own dataclasses as below, not the
+program's), and on request (:mod:`mitld_lp.library_start`) ``scipy.sparse.csgraph``
 without ``scipy.linalg`` until a factorisation (the command line too).
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
@@ -191,9 +193,10 @@ def lean_scipy() -> None:
     ``__getattr__``, importing them then): the layer sees the same objects, later.
 
     The command line does it at its start; a program importing the package has it
-    done when SciPy imports the layer (:mod:`mitld_lp.library_start`, the same two
-    halves); nothing when the layer is already imported or this SciPy has no such
-    module."""
+    done when the package's import makes SciPy import the layer
+    (:mod:`mitld_lp.own_imports`), or whenever SciPy does if it asked for
+    :mod:`mitld_lp.library_start` (the same two halves); nothing when the layer is
+    already imported or this SciPy has no such module."""
     import importlib
 
     from mitld_lp.library_start import (

@@ -167,3 +167,28 @@ def test_the_packages_import_of_a_later_module_holds_the_collector() -> None:
     got = _run(LATER)
     assert got["seen"] == {"scipy.sparse.csgraph._laplacian": False}
     assert got["enabled"] is True and got["inside"] is False
+
+
+#: The PRISM route's imports (``load_model``, ``synthesize``: SciPy's sparse matrices
+#: come with them), then which of NumPy's extra submodules are loaded, and SciPy's copy
+#: of NumPy's namespace asked for one of them.
+EXTRAS = r"""
+import json, sys
+from mitld_lp import load_model, synthesize
+import scipy.sparse
+loaded = sorted(m for m in ("numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ma")
+                if m in sys.modules)
+import numpy
+from scipy._lib.array_api_compat import numpy as copy
+print(json.dumps(dict(loaded=loaded, handed=copy.testing is numpy.testing,
+                      listed="testing" in copy.__all__)))
+"""
+
+
+def test_the_prism_routes_imports_leave_numpys_extras_unloaded() -> None:
+    got = _run(EXTRAS)
+    assert got["loaded"] == []
+    assert got["handed"] is True and got["listed"] is True  # handed over when asked
+    plain = _run(EXTRAS, plain=True)
+    assert set(plain["loaded"]) >= {"numpy.f2py", "numpy.testing", "numpy.polynomial"}
+    assert plain["handed"] is True and plain["listed"] is True
