@@ -19,9 +19,7 @@ import sys
 import types
 from typing import TYPE_CHECKING, Any
 
-from mitld_lp import own_imports
-
-own_imports.install()  # the package's modules imported with the collector held (and put back)
+startup.package_imports_held()  # the package's modules import with the collector held
 
 if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA

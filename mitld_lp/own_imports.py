@@ -1,9 +1,9 @@
 """The package's own imports in a program, made cheaper without touching the program.
 
-``import mitld_lp`` puts a finder at the front of ``sys.meta_path`` that answers for the
-package's modules only (``mitld_lp.*``; the module's own finder finds it, as without
-the finder).  While such a module runs its body -- the outermost one, with every import
-it starts, SciPy's and lark's included -- and only then:
+A finder at the front of ``sys.meta_path`` answers for the package's modules only
+(``mitld_lp.*``; the module's own finder finds it, as without the finder). While such a
+module runs its body -- the outermost one, with every import it starts, SciPy's and
+lark's included -- and only then:
 
 * Python's cyclic garbage collector is held (``gc.disable``) and put back as the caller
   had it when the body ends (on if it was on; nothing is frozen: a program's objects
@@ -20,6 +20,10 @@ it starts, SciPy's and lark's included -- and only then:
   hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`'s two
   halves): the same names, each NumPy's own object, later.
 
+:func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
+of the package's modules to import and installs the finder then, but for the robot's
+runtime (``mitld_lp.runtime`` with the saved controller's readers, ``mitld_lp.controllers``
+and ``mitld_lp.files``, imported first), whose process imports NumPy and those alone.
 A program that imported SciPy (or made the layer) before is left as it was; what the
 command line's start did already (:func:`mitld_lp.startup.lean_start`, every class's
 makers, the collector off) is not done twice.  Nothing changes an answer: the same
@@ -306,16 +310,16 @@ def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> Mo
     return None
 
 
-def install() -> None:
-    """Put the finder at the front of ``sys.meta_path`` (once); nothing when the
-    environment asks for plain imports (``MITLD_LP_PLAIN_IMPORTS=1``)."""
+def install() -> _Finder | None:
+    """Put the finder at the front of ``sys.meta_path`` (once), and return it; nothing
+    (None) when the environment asks for plain imports (``MITLD_LP_PLAIN_IMPORTS=1``)."""
     global _finder
     import os
 
-    if _finder is not None or os.environ.get("MITLD_LP_PLAIN_IMPORTS") == "1":
-        return
-    _finder = _Finder()
-    sys.meta_path.insert(0, _finder)
+    if _finder is None and os.environ.get("MITLD_LP_PLAIN_IMPORTS") != "1":
+        _finder = _Finder()
+        sys.meta_path.insert(0, _finder)
+    return _finder
 
 
 def installed() -> bool:

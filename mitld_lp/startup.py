@@ -61,7 +61,8 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from typing import Any
 
-__all__ = ["started_as_command", "command", "collect_from_here", "hold_collector", "lean_start",
+__all__ = ["started_as_command", "package_imports_held", "command", "collect_from_here",
+           "hold_collector", "lean_start",
            "lean_scipy", "lark_without_regex", "dataclass_methods_without_exec",
            "numpy_ma_when_used"]
 
@@ -93,6 +94,36 @@ if started_as_command():
     if gc.isenabled():
         gc.disable()
         _collector_held = True
+
+
+#: The package's modules a first import of which leaves the imports as Python makes them:
+#: the robot's runtime and what it reads a saved controller with (NumPy alone beside).
+PLAIN_FIRST = ("mitld_lp.runtime", "mitld_lp.controllers", "mitld_lp.files",
+               "mitld_lp.own_imports")
+
+
+class _FirstImport:
+    """A finder waiting for the first import of one of the package's modules (not one
+    of :data:`PLAIN_FIRST`): it then steps aside for :mod:`mitld_lp.own_imports`'s."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if not name.startswith("mitld_lp.") or name.startswith(PLAIN_FIRST):
+            return None
+        try:
+            sys.meta_path.remove(self)
+        except ValueError:
+            pass
+        from mitld_lp import own_imports
+
+        finder = own_imports.install()
+        return finder.find_spec(name, path, target) if finder is not None else None
+
+
+def package_imports_held() -> None:
+    """``import mitld_lp`` calls it: the package's modules will import with the collector
+    held and the package's dataclass makers (:mod:`mitld_lp.own_imports`, installed at
+    the first import of one of them, which the robot's runtime never makes)."""
+    sys.meta_path.insert(0, _FirstImport())
 
 
 def collect_from_here() -> None:
