@@ -316,9 +316,10 @@ def install() -> _Finder | None:
     global _finder
     import os
 
-    if _finder is None and os.environ.get("MITLD_LP_PLAIN_IMPORTS") != "1":
-        _finder = _Finder()
-        sys.meta_path.insert(0, _finder)
+    with _lock:  # once, whichever thread imports first
+        if _finder is None and os.environ.get("MITLD_LP_PLAIN_IMPORTS") != "1":
+            _finder = _Finder()
+            sys.meta_path.insert(0, _finder)
     return _finder
 
 
