@@ -21,6 +21,9 @@ child, ``os.wait4``), beside stormpy scripts doing the same task's work, in one 
 * ``ours_corridor_law``: the bundled corridor model file, ``mitld-lp solve
   models/corridor.toml`` (the same PRISM file, the door's opening a Poisson law: what a
   law in closed form saves, without SciPy's statistics);
+* ``ours_corridor_program``: the same model file solved by a program that imports the
+  package (``load_model`` and ``synthesize``, the start ``bench_qvbs.py``'s worker has by
+  default): what the library's start costs beside the command line's;
 * ``version``: ``mitld-lp --version`` (the package's import and the console script's
   start, nothing of the command line) and ``check``: ``mitld-lp check`` on the case's
   formula (the command line and the formula parser, no model): trivial commands;
@@ -34,8 +37,9 @@ each stormpy script is the median of the rounds' ratios (each round's pair ran s
 side, which keeps it meaningful on a machine whose speed drifts).  The target (issue 45):
 the case as a process <= 2x the stormpy script on the PRISM encoding.
 
-``--compare BASE`` also runs ``ours``, ``ours_corridor(_law)``, ``version`` and ``check`` with
-another ``mitld_lp``, in the same rounds, as ``*_base`` rows: before and after in one run.
+``--compare BASE`` also runs ``ours``, ``ours_corridor(_law, _program)``, ``version`` and
+``check`` with another ``mitld_lp``, in the same rounds, as ``*_base`` rows: before and
+after in one run.
 ``BASE`` is a checkout's folder or a commit of this repository (its ``mitld_lp`` taken
 with ``git archive`` into a scratch folder).  Bytecode is cached for both (the
 variable ``PYTHONDONTWRITEBYTECODE`` is cleared, as ``bench_sweeps.py`` does: an
@@ -82,6 +86,14 @@ model = stormpy.build_model(program, [prop])
 env = stormpy.Environment()
 env.solver().force_soundness = True
 print(stormpy.model_checking(model, prop, environment=env).get_value(model.initial_states[0]))
+"""
+#: A program importing the package (the library's start, no command line) and solving a
+#: model file as ``bench_qvbs.py``'s worker does by default.
+PROGRAM = """
+import json, sys
+from mitld_lp import load_model, synthesize
+r = synthesize(load_model(sys.argv[1]))
+print(json.dumps(dict(lower=r.lower, upper=r.upper, certified=r.certified)))
 """
 CORRIDOR = ROOT / "models" / "corridor.prism"
 CORRIDOR_PROPERTY = 'Pmax=? [F<=6 "goal"]'
@@ -147,6 +159,8 @@ def commands(work: Path, compare: Path | None) -> dict[str, tuple[list[str], Pat
                           _bracket),
         "ours_corridor_law": ([py, "-m", "mitld_lp", "solve", str(CORRIDOR.with_suffix(".toml")),
                                "--json", "-q"], _bracket),
+        "ours_corridor_program": ([py, "-c", PROGRAM, str(CORRIDOR.with_suffix(".toml"))],
+                                  _bracket),
     }
     rows: dict[str, tuple[list[str], Path | None, Any]] = {
         name: (argv, None, read) for name, (argv, read) in ours.items()}

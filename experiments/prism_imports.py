@@ -5,14 +5,15 @@ mostly other processes' time.  Here each module's import is timed in CPU seconds
 hook on the import system's loader step; a module's own time is its import less the
 imports it starts), in a fresh interpreter that solves a PRISM model file the way the
 benchmark's worker does (``load_model`` then ``synthesize``), started as a program
-importing the package and as the command line starts (``mitld_lp.startup.lean_start``,
-the collector held while importing).  Printed per start: the answer, the CPU of the whole
-process, of every import, and of each top-level package's modules (the package's own
-by subpackage), the least over ``--repeats`` runs; and the package's modules (not its
-packages' ``__init__``) no function of which ran in this process (:mod:`cProfile` over
-the route, a run of its own; a PRISM world explored in the memory-capped child runs
-the copy of Storm's model there, which this process does not see).  The process's CPU
-includes that child's.
+importing the package (as imported; with its imports exactly as Python makes them,
+``plain``; having asked for :mod:`mitld_lp.library_start`, ``hooked``) and as the command
+line starts (``mitld_lp.startup.lean_start``, the collector held while importing).
+Printed per start: the answer, the CPU of the whole process, of every import, and of
+each top-level package's modules (the package's own by subpackage), the least over
+``--repeats`` runs; and the package's modules (not its packages' ``__init__``) no
+function of which ran in this process (:mod:`cProfile` over the route, a run of its own;
+a PRISM world explored in the memory-capped child runs the copy of Storm's model there,
+which this process does not see). The process's CPU includes that child's.
 
     python experiments/prism_imports.py                       # models/corridor.toml
     python experiments/prism_imports.py --model /tmp/jobs/consensus.4-4.c2.toml
@@ -55,6 +56,9 @@ if sys.argv[2] == "command":
     from mitld_lp import startup
     gc.disable()
     startup.lean_start()
+if sys.argv[2] == "hooked":
+    from mitld_lp import library_start
+    library_start.install()
 from mitld_lp import load_model, synthesize
 if sys.argv[2] == "command":
     gc.freeze(); gc.enable()
@@ -77,8 +81,18 @@ print(json.dumps(dict(lower=r.lower, upper=r.upper,
 """
 
 
+#: The starts measured: ``plain``, a program importing the package with the imports
+#: exactly as Python makes them (``MITLD_LP_PLAIN_IMPORTS=1``: without
+#: :mod:`mitld_lp.own_imports`, the library start before it); ``library``, a program
+#: importing the package; ``hooked``, a program that asks for
+#: :func:`mitld_lp.library_start.install` first; ``command``, the command line's start.
+STARTS = ("plain", "library", "hooked", "command")
+
+
 def run(model: Path, start: str, profile: bool) -> dict:
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    if start == "plain":
+        env["MITLD_LP_PLAIN_IMPORTS"] = "1"
     out = subprocess.run([sys.executable, "-c", PROBE, str(model), start,
                           "profile" if profile else "time"], cwd=ROOT, env=env,
                          capture_output=True, text=True, check=True, timeout=1800)
@@ -99,7 +113,7 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
     args = p.parse_args(argv)
     repeats = args.repeats or (1 if args.quick else 3)
     rows: list[list[object]] = []
-    for start in ("library", "command"):
+    for start in STARTS:
         runs = [run(args.model, start, False) for _ in range(repeats)]
         best = min(runs, key=lambda r: r["process"])
         groups: dict[str, float] = {}

@@ -5,7 +5,9 @@ eventualities) by occupancy-measure linear programming.
 algebra, ``mitld_lp.solvers``): :func:`synthesize` imports it at its first solve
 (tests/test_imports.py checks this in a fresh interpreter).  The public names are
 loaded from their modules on first use, so that :mod:`mitld_lp.runtime` (a saved
-controller, NumPy alone) imports nothing else of the package.
+controller, NumPy alone) imports nothing else of the package.  The package's modules
+import with Python's garbage collector held (put back as the program had it) and their
+dataclasses made without ``exec`` (:mod:`mitld_lp.own_imports`).
 """
 
 from mitld_lp import startup  # noqa: F401 - first: Ctrl-C while the command line imports
@@ -16,6 +18,8 @@ import importlib.util
 import sys
 import types
 from typing import TYPE_CHECKING, Any
+
+startup.package_imports_held()  # the package's modules import with the collector held
 
 if TYPE_CHECKING:  # what the names are, for type checkers and readers
     from mitld_lp.automata.dta import DTA

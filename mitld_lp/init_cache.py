@@ -104,6 +104,8 @@ def _code(text: str) -> CodeType:
 #: Whether every dataclass's ``__init__`` comes from the table (the command line), or
 #: only the package's own (a program importing the package); None: not installed.
 _for_all: bool | None = None
+#: The ``_create_fn`` installed (None: not installed).
+_installed: Any = None
 
 
 def install(package_only: bool = False) -> bool:
@@ -113,7 +115,7 @@ def install(package_only: bool = False) -> bool:
     :mod:`mitld_lp.library_start`): only for the package's own dataclasses, every other
     class's methods compiled by dataclasses itself; a later call without it widens the
     table to every class."""
-    global _for_all
+    global _for_all, _installed
     import atexit
     import dataclasses
     import inspect
@@ -124,6 +126,8 @@ def install(package_only: bool = False) -> bool:
         return False
     if _for_all is not None:  # installed already: the scope is all that changes
         _for_all = _for_all or not package_only
+        if _installed is not None:  # (back in place if the stdlib's was put back)
+            dataclasses._create_fn = _installed
         return True
     original = getattr(dataclasses, "_create_fn", None)
     try:
@@ -159,7 +163,7 @@ def install(package_only: bool = False) -> bool:
         return ns["__create_fn__"](**locals)
 
     _for_all = not package_only
-    dataclasses._create_fn = _create_fn
+    _installed = dataclasses._create_fn = _create_fn
     if not sys.dont_write_bytecode:  # ``-B``, PYTHONDONTWRITEBYTECODE: read it only
         atexit.register(_write, path)
     return True

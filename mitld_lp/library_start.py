@@ -5,10 +5,12 @@ whole process imports and how every dataclass is made.  A program that imports t
 package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
 service) may ask for three cuts that change nothing it can use, by calling
 :func:`install` before its own heavy imports; each is made when its module is first
-imported.  ``import mitld_lp`` alone installs nothing: the cuts reach into SciPy's and
-the standard library's import-time behaviour, which a library does not do to a
-program unasked (and ``import mitld_lp`` stays free of NumPy and ``dataclasses``:
-:mod:`mitld_lp.runtime` imports NumPy alone):
+imported.  ``import mitld_lp`` alone installs none of this hook; it makes the first two
+cuts only for what the package itself imports, while its modules import
+(:mod:`mitld_lp.own_imports`, the collector held too), and leaves the third to a program
+that asks: it leaves a stand-in for a SciPy module in the program's modules (and
+``import mitld_lp`` stays free of NumPy and ``dataclasses``: :mod:`mitld_lp.runtime`
+imports NumPy alone):
 
 * SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
   ``scipy.sparse`` import loads) copies NumPy's namespace without importing
@@ -41,6 +43,15 @@ from __future__ import annotations
 import sys
 import types
 
+from mitld_lp.own_imports import (  # the halves, named here too (startup, tests)
+    NUMPY_EXTRAS,
+    SCIPY_NUMPY_COPY,
+    hand_over_extras,
+    numpy_listed_without_extras,
+    scipy_copy_around,
+    spec_around,
+)
+
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -50,58 +61,6 @@ if TYPE_CHECKING:
 
 __all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "install", "remove", "installed", "waiting_for",
            "sparse_linalg_later", "numpy_listed_without_extras", "hand_over_extras"]
-
-
-#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
-#: import all at once and which no array-API function needs
-#: (:func:`mitld_lp.startup.lean_scipy`).
-NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
-                "char", "strings", "core")
-
-#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
-SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
-
-
-def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
-    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
-    imported yet, until the function returned is called (which puts both back); and
-    those names.  :func:`mitld_lp.startup.lean_scipy`'s first half."""
-    import numpy
-
-    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
-    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
-    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
-    numpy.__all__ = [name for name in kept_all if name not in extras]
-    if kept_dir is not None:
-        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
-
-    def restore() -> None:
-        numpy.__all__ = kept_all
-        if kept_dir is not None:
-            numpy.__dir__ = kept_dir
-
-    return restore, extras
-
-
-def hand_over_extras(copy: Any, extras: set[str]) -> None:
-    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
-    held ``extras`` back, hands each of them over from NumPy when first asked (importing
-    it then) and lists them in its ``__all__``.  :func:`mitld_lp.startup.lean_scipy`'s
-    second half."""
-    import numpy
-
-    left_out = extras - vars(copy).keys()
-    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
-
-    def handed_over(name: str) -> object:
-        if name in left_out:
-            return getattr(numpy, name)
-        if own is not None:
-            return own(name)
-        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
-
-    copy.__getattr__ = handed_over
-    copy.__all__ = sorted({*copy.__all__, *left_out})
 
 
 def _dataclasses_around() -> Callable[[ModuleType | None], None]:
@@ -120,20 +79,6 @@ def _dataclasses_cut() -> None:
 
     methods_without_exec(package_only=True)
     init_cache.install(package_only=True)
-
-
-def _scipy_copy_around() -> Callable[[ModuleType | None], None]:
-    """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
-    function to call after it (NumPy put back, then the copy handing the extras over;
-    ``None``: the import failed, NumPy is put back only)."""
-    restore, extras = numpy_listed_without_extras()
-
-    def after(copy: ModuleType | None) -> None:
-        restore()
-        if copy is not None:
-            hand_over_extras(copy, extras)
-
-    return after
 
 
 #: SciPy's sparse linear algebra, which ``scipy.sparse.csgraph`` imports at its start
@@ -189,33 +134,6 @@ def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
     return lambda csgraph: None
 
 
-class _Loader:
-    """The module's own loader for one import, with what runs around its
-    ``exec_module``; every other attribute is the loader's own."""
-
-    def __init__(self, loader: Any, around: Any) -> None:
-        self._loader, self._around = loader, around
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._loader, name)
-
-    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
-        return self._loader.create_module(spec)
-
-    def exec_module(self, module: ModuleType) -> None:
-        loader = self._loader
-        module.__loader__ = loader  # the module's own loader, as without the hook
-        if module.__spec__ is not None:
-            module.__spec__.loader = loader
-        after = self._around()
-        try:
-            loader.exec_module(module)
-        except BaseException:
-            after(None)
-            raise
-        after(module)
-
-
 class _Hook:
     """The finder: the modules it waits for, and what runs around each one's import."""
 
@@ -228,15 +146,7 @@ class _Hook:
             return None
         if not self.waiting:
             remove()
-        for finder in sys.meta_path:
-            if finder is self or not hasattr(finder, "find_spec"):
-                continue
-            spec = finder.find_spec(name, path, target)
-            if spec is not None:
-                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                    spec.loader = _Loader(spec.loader, around)
-                return spec
-        return None
+        return spec_around(self, name, path, target, around)
 
 
 _hook: _Hook | None = None
@@ -256,7 +166,7 @@ def install(command: bool = False) -> None:
         else:
             hook.waiting["dataclasses"] = _dataclasses_around
         if SCIPY_NUMPY_COPY not in sys.modules:
-            hook.waiting[SCIPY_NUMPY_COPY] = _scipy_copy_around
+            hook.waiting[SCIPY_NUMPY_COPY] = scipy_copy_around
     if "scipy.sparse.csgraph" not in sys.modules:
         hook.waiting["scipy.sparse.csgraph"] = sparse_linalg_later
     if hook.waiting:

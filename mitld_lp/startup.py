@@ -33,8 +33,10 @@ import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
 These leave every name where it was (the layer hands NumPy's submodules over when
 asked; ``regex`` and ``numpy.ma`` import for whoever asks later).  A program that
 imports the package gets NumPy, SciPy and lark as they import themselves, but for the
-cuts nobody can see, made by :mod:`mitld_lp.library_start`: SciPy's layer as here, the
-package's own dataclasses as below (not the program's), and ``scipy.sparse.csgraph``
+cuts nobody can see, made while the package's own modules import
+(:mod:`mitld_lp.own_imports`: the collector held and put back, SciPy's layer as here
+when the package imports it, the package's own dataclasses as below, not the
+program's), and on request (:mod:`mitld_lp.library_start`) ``scipy.sparse.csgraph``
 without ``scipy.linalg`` until a factorisation (the command line too).
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
@@ -59,7 +61,8 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from typing import Any
 
-__all__ = ["started_as_command", "command", "collect_from_here", "hold_collector", "lean_start",
+__all__ = ["started_as_command", "package_imports_held", "command", "collect_from_here",
+           "hold_collector", "lean_start",
            "lean_scipy", "lark_without_regex", "dataclass_methods_without_exec",
            "numpy_ma_when_used"]
 
@@ -91,6 +94,36 @@ if started_as_command():
     if gc.isenabled():
         gc.disable()
         _collector_held = True
+
+
+#: The package's modules a first import of which leaves the imports as Python makes them:
+#: the robot's runtime and what it reads a saved controller with (NumPy alone beside).
+PLAIN_FIRST = ("mitld_lp.runtime", "mitld_lp.controllers", "mitld_lp.files",
+               "mitld_lp.own_imports")
+
+
+class _FirstImport:
+    """A finder waiting for the first import of one of the package's modules (not one
+    of :data:`PLAIN_FIRST`): it then steps aside for :mod:`mitld_lp.own_imports`'s."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if not name.startswith("mitld_lp.") or name.startswith(PLAIN_FIRST):
+            return None
+        try:
+            sys.meta_path.remove(self)
+        except ValueError:
+            pass
+        from mitld_lp import own_imports
+
+        finder = own_imports.install()
+        return finder.find_spec(name, path, target) if finder is not None else None
+
+
+def package_imports_held() -> None:
+    """``import mitld_lp`` calls it: the package's modules will import with the collector
+    held and the package's dataclass makers (:mod:`mitld_lp.own_imports`, installed at
+    the first import of one of them, which the robot's runtime never makes)."""
+    sys.meta_path.insert(0, _FirstImport())
 
 
 def collect_from_here() -> None:
@@ -191,9 +224,10 @@ def lean_scipy() -> None:
     ``__getattr__``, importing them then): the layer sees the same objects, later.
 
     The command line does it at its start; a program importing the package has it
-    done when SciPy imports the layer (:mod:`mitld_lp.library_start`, the same two
-    halves); nothing when the layer is already imported or this SciPy has no such
-    module."""
+    done when the package's import makes SciPy import the layer
+    (:mod:`mitld_lp.own_imports`), or whenever SciPy does if it asked for
+    :mod:`mitld_lp.library_start` (the same two halves); nothing when the layer is
+    already imported or this SciPy has no such module."""
     import importlib
 
     from mitld_lp.library_start import (

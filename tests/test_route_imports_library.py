@@ -68,7 +68,10 @@ print(json.dumps(dict(
 
 
 def _route(model: Path, how: str) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("PYTHONDONTWRITEBYTECODE", "MITLD_LP_PLAIN_IMPORTS")}
+    if how == "plain":  # the imports exactly as Python makes them (mitld_lp.own_imports out)
+        env["MITLD_LP_PLAIN_IMPORTS"] = "1"
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     done = subprocess.run([sys.executable, "-c", PROBE, str(model), how, json.dumps(UNLOADED)],
                           cwd=model.parent, env=env, capture_output=True, text=True,
@@ -85,7 +88,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     model = where / "robot.toml"
     model.write_text('name = "robot"\nspec = "F goal"\nobjective = "max"\n\n'
                      '[prism]\nfile = "robot.prism"\n', encoding="utf-8")
-    return {how: _route(model, how) for how in ("hooked", "plain")}
+    return {how: _route(model, how) for how in ("hooked", "default", "plain")}
 
 
 def test_the_library_route_leaves_numpys_extras_unloaded(runs: dict[str, dict]) -> None:
@@ -98,24 +101,30 @@ def test_the_library_route_leaves_numpys_extras_unloaded(runs: dict[str, dict]) 
     # both modules seen; csgraph, which this small product's walks do not need, awaited
     assert hooked["left"] == ["scipy.sparse.csgraph"]
     assert hooked["loaded"] == []
-    # without the hook, SciPy's copy imports them: the probe can see them
+    # as imported (mitld_lp.own_imports): SciPy's layer, imported by the package's
+    # modules, leaves them too, without the program's hook
+    assert runs["default"]["loaded"] == [] and runs["default"]["waiting"] is False
+    # with the imports as Python makes them, SciPy's copy imports them: the probe sees them
     assert set(plain["loaded"]) >= {"numpy.f2py", "numpy.testing", "numpy.polynomial"}
 
 
 def test_scipys_copy_of_numpy_is_the_same_namespace(runs: dict[str, dict]) -> None:
-    hooked, plain = runs["hooked"], runs["plain"]
-    assert hooked["copy_all"] == plain["copy_all"]
-    assert set(hooked["copy_dir"]) == set(plain["copy_dir"])
-    assert hooked["same"] == plain["same"] == [True] * 4  # NumPy's own objects, asked later
-    assert hooked["numpy_all"] == plain["numpy_all"]  # NumPy's __all__ put back
+    plain = runs["plain"]
+    for cut in (runs["hooked"], runs["default"]):
+        assert cut["copy_all"] == plain["copy_all"]
+        assert set(cut["copy_dir"]) == set(plain["copy_dir"])
+        assert cut["same"] == plain["same"] == [True] * 4  # NumPy's own objects, asked later
+        assert cut["numpy_all"] == plain["numpy_all"]  # NumPy's __all__ put back
 
 
 def test_only_the_packages_dataclasses_are_made_without_exec(runs: dict[str, dict]) -> None:
-    hooked, plain = runs["hooked"], runs["plain"]
+    hooked, default, plain = runs["hooked"], runs["default"], runs["plain"]
     # the program's own class: the stdlib's compiled methods, hooked or not
-    assert hooked["mine"] == plain["mine"] == ["<string>", "<string>", "Mine(x=1)", True, True]
+    assert (hooked["mine"] == default["mine"] == plain["mine"]
+            == ["<string>", "<string>", "Mine(x=1)", True, True])
     if sys.version_info[:2] in ((3, 11), (3, 12)):  # startup.DATACLASS_PYTHONS
-        assert hooked["ours"] == [False, plain["ours"][1]] and plain["ours"][0] is True
+        assert hooked["ours"] == default["ours"] == [False, plain["ours"][1]]
+        assert plain["ours"][0] is True
 
 
 def test_the_answer_is_the_same_to_the_bit_and_storms(runs: dict[str, dict],
@@ -123,7 +132,7 @@ def test_the_answer_is_the_same_to_the_bit_and_storms(runs: dict[str, dict],
     import stormpy
 
     hooked, plain = runs["hooked"], runs["plain"]
-    assert hooked["answer"] == plain["answer"]
+    assert hooked["answer"] == runs["default"]["answer"] == plain["answer"]
     lower, upper, certified = (float.fromhex(hooked["answer"][0]),
                                float.fromhex(hooked["answer"][1]), hooked["answer"][2])
     assert certified and lower <= upper

@@ -1,0 +1,328 @@
+"""The package's own imports in a program, made cheaper without touching the program.
+
+A finder at the front of ``sys.meta_path`` answers for the package's modules only
+(``mitld_lp.*``; the module's own finder finds it, as without the finder). While such a
+module runs its body -- the outermost one, with every import it starts, SciPy's and
+lark's included -- and only then:
+
+* Python's cyclic garbage collector is held (``gc.disable``) and put back as the caller
+  had it when the body ends (on if it was on; nothing is frozen: a program's objects
+  stay in the collector's reach).  Imports make no garbage cycles worth collecting,
+  yet their allocations triggered the collector over the modules already imported;
+* the package's own dataclasses get their comparison, hash, representation and frozen
+  methods as closures and their ``__init__`` from the table of compiled code
+  (:mod:`mitld_lp.dataclass_closures`, :mod:`mitld_lp.init_cache`, ``package_only``):
+  ``dataclasses``'s makers are the package's for the body's time and the stdlib's
+  again after it (a class of another module made meanwhile, in another thread, gets the
+  stdlib's methods: the makers ask whose class it is);
+* SciPy's array-API layer, if the body is what imports it, copies NumPy's namespace
+  without importing ``numpy.f2py``, ``numpy.testing``, ``numpy.ma``... which the copy
+  hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`'s two
+  halves): the same names, each NumPy's own object, later.
+
+:func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
+of the package's modules to import and installs the finder then, but for the robot's
+runtime (``mitld_lp.runtime`` with the saved controller's readers, ``mitld_lp.controllers``
+and ``mitld_lp.files``, imported first), whose process imports NumPy and those alone.
+A program that imported SciPy (or made the layer) before is left as it was; what the
+command line's start did already (:func:`mitld_lp.startup.lean_start`, every class's
+makers, the collector off) is not done twice.  Nothing changes an answer: the same
+classes with the same behaviour, the same objects.  ``MITLD_LP_PLAIN_IMPORTS=1`` in
+the environment leaves the finder out (the imports exactly as Python makes them).
+"""
+
+from __future__ import annotations
+
+import _thread
+import sys
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from importlib.machinery import ModuleSpec
+    from types import ModuleType
+    from typing import Any
+
+__all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "Loader", "install", "installed", "inside",
+           "numpy_listed_without_extras", "hand_over_extras", "scipy_copy_around", "spec_around"]
+
+#: The package whose modules open the window.
+PACKAGE = "mitld_lp"
+
+#: The module where SciPy copies NumPy's namespace (``clone_module``), SciPy 1.15 on.
+SCIPY_NUMPY_COPY = "scipy._lib.array_api_compat.numpy"
+
+#: The ``dataclasses`` functions the package's makers replace while a body runs.
+MAKERS = ("_repr_fn", "_cmp_fn", "_hash_fn", "_frozen_get_del_attr", "_create_fn")
+
+_lock = _thread.RLock()  # the count below, for imports in several threads
+_depth = 0  # package bodies running (nested, or in several threads)
+_held = False  # whether the window turned the collector off
+_stdlib: dict[str, Any] = {}  # dataclasses' own makers, put back when the window closes
+_ours: dict[str, Any] = {}  # the package's makers, made once
+_finder: _Finder | None = None
+
+
+def inside() -> bool:
+    """Whether a body of the package's modules is running (the window is open)."""
+    return _depth > 0
+
+
+def _open(makers: bool = True) -> Callable[[ModuleType | None], None]:
+    """A package module's body starts: the window opens if it is the outermost (the
+    package's dataclass makers in place unless ``makers`` is false: the makers' own
+    modules); the function that closes it (called when the body ends, whatever
+    happened)."""
+    global _depth, _held
+    import gc
+
+    with _lock:
+        _depth += 1
+        if _depth == 1:
+            _held = gc.isenabled()
+            if _held:
+                gc.disable()
+            if makers and "dataclasses" in sys.modules:
+                _makers_on()
+
+    def close(_module: ModuleType | None) -> None:
+        global _depth, _held
+        with _lock:
+            _depth -= 1
+            if _depth == 0:
+                _makers_off()
+                if _held:
+                    _held = False
+                    gc.enable()
+
+    return close
+
+
+def _dataclasses_imported() -> Callable[[ModuleType | None], None]:
+    """``dataclasses`` imported inside the window: the package's makers after it."""
+
+    def after(module: ModuleType | None) -> None:
+        if module is not None and _depth > 0:
+            _makers_on()
+
+    return after
+
+
+#: NumPy's submodules that it imports on first use, which SciPy's array-API layer would
+#: import all at once and which no array-API function needs
+#: (:func:`mitld_lp.startup.lean_scipy`).
+NUMPY_EXTRAS = ("f2py", "testing", "ma", "random", "polynomial", "ctypeslib", "rec",
+                "char", "strings", "core")
+
+
+
+def numpy_listed_without_extras() -> tuple[Callable[[], None], set[str]]:
+    """NumPy's ``__all__`` and ``dir`` without the names of :data:`NUMPY_EXTRAS` not
+    imported yet, until the function returned is called (which puts both back); and
+    those names.  :func:`mitld_lp.startup.lean_scipy`'s first half."""
+    import numpy
+
+    kept_all, kept_dir = numpy.__all__, vars(numpy).get("__dir__")
+    listed = {*kept_all, *(kept_dir() if kept_dir is not None else ())}
+    extras = {name for name in NUMPY_EXTRAS if name in listed and name not in vars(numpy)}
+    numpy.__all__ = [name for name in kept_all if name not in extras]
+    if kept_dir is not None:
+        numpy.__dir__ = lambda: [name for name in kept_dir() if name not in extras]
+
+    def restore() -> None:
+        numpy.__all__ = kept_all
+        if kept_dir is not None:
+            numpy.__dir__ = kept_dir
+
+    return restore, extras
+
+
+def hand_over_extras(copy: Any, extras: set[str]) -> None:
+    """SciPy's copy of NumPy's namespace, made while :func:`numpy_listed_without_extras`
+    held ``extras`` back, hands each of them over from NumPy when first asked (importing
+    it then) and lists them in its ``__all__``.  :func:`mitld_lp.startup.lean_scipy`'s
+    second half."""
+    import numpy
+
+    left_out = extras - vars(copy).keys()
+    own = vars(copy).get("__getattr__")  # a later SciPy's own, asked for the rest
+
+    def handed_over(name: str) -> object:
+        if name in left_out:
+            return getattr(numpy, name)
+        if own is not None:
+            return own(name)
+        raise AttributeError(f"module {SCIPY_NUMPY_COPY!r} has no attribute {name!r}")
+
+    copy.__getattr__ = handed_over
+    copy.__all__ = sorted({*copy.__all__, *left_out})
+
+
+def scipy_copy_around() -> Callable[[ModuleType | None], None]:
+    """Before SciPy's copy of NumPy's namespace runs: NumPy lists no extras; the
+    function to call after it (NumPy put back, then the copy handing the extras over;
+    ``None``: the import failed, NumPy is put back only)."""
+    restore, extras = numpy_listed_without_extras()
+
+    def after(copy: ModuleType | None) -> None:
+        restore()
+        if copy is not None:
+            hand_over_extras(copy, extras)
+
+    return after
+
+
+def _makers_on() -> None:
+    """``dataclasses`` makes the package's classes with the package's makers (the
+    stdlib's for every other class); nothing if they are in place already (the command
+    line's start put them there for every class)."""
+    import dataclasses
+
+    if _stdlib or getattr(getattr(dataclasses, "_repr_fn", None), "__module__",
+                          None) != "dataclasses":
+        return  # on already, or another's (the command line's, for every class)
+    if not _ours:
+        saved = {name: getattr(dataclasses, name, None) for name in MAKERS}
+        from mitld_lp import init_cache
+        from mitld_lp.dataclass_closures import methods_without_exec
+
+        methods_without_exec(package_only=True)
+        init_cache.install(package_only=True)
+        _ours.update({name: getattr(dataclasses, name, None) for name in MAKERS})
+        _stdlib.update(saved)
+        return
+    for name in MAKERS:
+        if _ours[name] is not None:
+            _stdlib[name] = getattr(dataclasses, name)
+            setattr(dataclasses, name, _ours[name])
+
+
+def _makers_off() -> None:
+    """``dataclasses``'s own makers back (each one still the package's: one put in its
+    place meanwhile is left where it is)."""
+    if not _stdlib:
+        return
+    dataclasses = sys.modules.get("dataclasses")
+    if dataclasses is not None:
+        for name, own in _stdlib.items():
+            if own is not None and getattr(dataclasses, name, None) is _ours.get(name):
+                setattr(dataclasses, name, own)
+    _stdlib.clear()
+
+
+#: Other packages' modules the package imports inside its functions (not at a module's
+#: top): when the package's code imports one of them, the window opens as for its own.
+LATER = frozenset(("numba", "stormpy", "scipy.sparse.csgraph", "scipy.sparse.linalg",
+                   "scipy.linalg", "scipy.optimize", "scipy.stats", "clarabel", "highspy",
+                   "cvxpy", "lark"))
+
+
+#: The modules the package's makers come from (their window cannot put them in place).
+_MAKERS_OWN = frozenset((f"{PACKAGE}.dataclass_closures", f"{PACKAGE}.init_cache"))
+
+
+def _open_without_makers() -> Callable[[ModuleType | None], None]:
+    return _open(makers=False)
+
+
+def _imported_by_package() -> bool:
+    """Whether the code importing now (the first frame outside ``importlib``) is one of
+    the package's modules."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        name = frame.f_globals.get("__name__", "")
+        if not isinstance(name, str):
+            return False
+        if name != __name__ and name.partition(".")[0] not in ("importlib",
+                                                                "_frozen_importlib"):
+            return name.partition(".")[0] == PACKAGE
+        frame = frame.f_back
+    return False
+
+
+def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | None:
+    """What runs around the import of ``name``; None: nothing (the finder steps aside)."""
+    if name in _MAKERS_OWN:
+        return _open_without_makers
+    if name.startswith(PACKAGE + "."):
+        return _open
+    if _depth == 0 and name in LATER and _imported_by_package():
+        return _open
+    if _depth > 0:
+        if name == "dataclasses":
+            return _dataclasses_imported
+        if name == SCIPY_NUMPY_COPY:
+            return scipy_copy_around
+    return None
+
+
+class Loader:
+    """The module's own loader for one import, with what runs around its
+    ``exec_module`` (``around()`` before it, the function it returns after it, with the
+    module, or None if the body failed); every other attribute is the loader's own."""
+
+    def __init__(self, loader: Any, around: Any) -> None:
+        self._loader, self._around = loader, around
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loader, name)
+
+    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: ModuleType) -> None:
+        loader = self._loader
+        module.__loader__ = loader  # the module's own loader, as without the hook
+        if module.__spec__ is not None:
+            module.__spec__.loader = loader
+        after = self._around()
+        try:
+            loader.exec_module(module)
+        except BaseException:
+            after(None)
+            raise
+        after(module)
+
+
+class _Finder:
+    """The finder: the package's modules and, inside the window, ``dataclasses`` and
+    SciPy's layer; each found by the finders after it, its loader wrapped for the one
+    import (then put back on the module)."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> ModuleSpec | None:
+        around = _around(name)
+        if around is None:
+            return None
+        return spec_around(self, name, path, target, around)
+
+
+def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> ModuleSpec | None:
+    """The spec of ``name`` as the finders of ``sys.meta_path`` other than ``skip`` find
+    it, its loader wrapped (:class:`Loader`) to run ``around`` about its body."""
+    for finder in sys.meta_path:
+        if finder is skip or not hasattr(finder, "find_spec"):
+            continue
+        spec = finder.find_spec(name, path, target)
+        if spec is not None:
+            if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                spec.loader = Loader(spec.loader, around)
+            return spec
+    return None
+
+
+def install() -> _Finder | None:
+    """Put the finder at the front of ``sys.meta_path`` (once), and return it; nothing
+    (None) when the environment asks for plain imports (``MITLD_LP_PLAIN_IMPORTS=1``)."""
+    global _finder
+    import os
+
+    with _lock:  # once, whichever thread imports first
+        if _finder is None and os.environ.get("MITLD_LP_PLAIN_IMPORTS") != "1":
+            _finder = _Finder()
+            sys.meta_path.insert(0, _finder)
+    return _finder
+
+
+def installed() -> bool:
+    """Whether the finder is in place."""
+    return _finder is not None
