@@ -124,7 +124,7 @@ def _check_against_storm(game, storm: dict) -> None:
     assert len(ours) == len(storm["states"])
     assert ours[storm["initial"]] == game.initial
     index = {}
-    for s, (values, labels, names, rows) in enumerate(storm["states"]):
+    for s, (values, labels, names, _) in enumerate(storm["states"]):
         state = ours[s]
         # Storm writes a Boolean as true/false, an integer as its value
         assert dict(zip(game.variables, state, strict=True)) == values
@@ -191,7 +191,8 @@ def test_an_action_never_enabled_named_like_an_event_is_not_refused(tmp_path: Pa
     from mitld_lp import load_model
     from mitld_lp.model import ModelError
 
-    never = STOP.replace("label \"goal\"", "module idle\n  z : [0..1] init 0;\n  [jump] z=1 -> (z'=0);\n"
+    never = STOP.replace("label \"goal\"", "module idle\n  z : [0..1] init 0;\n"
+                         "  [jump] z=1 -> (z'=0);\n"
                          "  [] true -> true;\nendmodule\nlabel \"goal\"")
     model = load_model(_toml(tmp_path, "never", never, "D[geometric(0.5)] jump & F goal"))
     assert model.events == {"jump"}

@@ -171,8 +171,8 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     choice origins: :mod:`mitld_lp.worlds.prism_origins`); where the valuations are
     left out (and no action is named as a command), every choice but Storm's own
     self-loops is named when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`),
-    and Storm builds neither choice origins nor choice labels (csma 4-2 of QVBS: 8% of
-    its build), both made by the second build that makes the valuations."""
+    and Storm builds neither choice origins nor choice labels (up to 4% of its build),
+    the names made by the second build that makes the valuations."""
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
     deferred = limit is None and recipe is not None and not events

@@ -403,8 +403,9 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
     build; :mod:`mitld_lp.worlds.prism_valuations`), the choice origins when ``origins``
     (they name every choice: :mod:`mitld_lp.worlds.prism_origins`), else the choice
     labels when ``labels`` (False: no choice named by this build, every one named when
-    first read, :mod:`mitld_lp.worlds.prism_names`), exploration checks when ``checks`` (without them Storm's
-    out-of-bounds state, so that an update out of a variable's range stays visible), and
+    first read, :mod:`mitld_lp.worlds.prism_names`), exploration checks when ``checks``
+    (without them Storm's out-of-bounds state, so that an update out of a variable's
+    range stays visible), and
     no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
     none)."""
     formula = None
