@@ -24,6 +24,9 @@ seconds of Storm's build of the program
   for a sum within PRISM's tolerance does), each build of a program parsed again (Storm
   adds its out-of-bounds variable to a program once), the parse untimed: what leaving
   the checks to the copy would gain;
+* ``load_late``: ``load`` without the choice labels, as the load asks for where every
+  choice is named when first read (:mod:`mitld_lp.worlds.prism_names`: a program with
+  a command without an action or a module with two commands of one action);
 
 each with the states, choices and transitions it built (the answer: every build of
 one instance must agree; the peer's differ where its property stops the exploration),
@@ -56,7 +59,7 @@ import _common  # noqa: E402
 import bench_qvbs  # noqa: E402  (the same instances, posed the same way)
 
 OPTIONS = ("plain", "all_labels", "labels", "origins", "valuations", "origins_valuations",
-           "load", "load_unchecked")
+           "load", "load_unchecked", "load_late")
 
 
 def _cpu() -> float:
@@ -65,12 +68,13 @@ def _cpu() -> float:
 
 
 def _options(stormpy: Any, kind: str, prop: Any = None) -> Any:
-    if kind in ("load", "load_unchecked"):  # stopped where the property is decided
+    if kind.startswith("load"):  # stopped where the property is decided
         o = stormpy.BuilderOptions([prop.get_raw_formula()])
-        o.set_exploration_checks(kind == "load")
+        o.set_exploration_checks(kind != "load_unchecked")
         o.set_add_out_of_bounds_state(kind == "load_unchecked")
         o.set_build_all_labels()
-        o.set_build_choice_labels()
+        if kind != "load_late":
+            o.set_build_choice_labels()
         return o
     o = stormpy.BuilderOptions()
     if kind != "plain":
@@ -130,11 +134,11 @@ def measure(job: dict[str, Any], repeat: int, kinds: tuple[str, ...] = OPTIONS,
         if kind == "labels":
             kept = model
         del model
-    loads = [k for k in ("load", "load_unchecked") if k in kinds]
+    loads = [k for k in ("load", "load_unchecked", "load_late") if k in kinds]
     times: dict[str, list[float]] = {k: [] for k in loads}
     for r in range(repeat):  # taking turns
         for kind in loads if r % 2 == 0 else loads[::-1]:
-            fresh = program if kind == "load" else _program(stormpy, job)[0]
+            fresh = program if kind != "load_unchecked" else _program(stormpy, job)[0]
             fresh_props = stormpy.parse_properties(text, fresh)[:1]
             options = _options(stormpy, kind, fresh_props[0])
             c = _cpu()
@@ -194,7 +198,7 @@ def main(argv: list[str] | None = None) -> None:
             rows.append(row)
     args.out.mkdir(parents=True, exist_ok=True)
     kinds = tuple(k for k in OPTIONS if k in args.kinds or k == "plain")
-    medians = [f"{k}_median" for k in ("load", "load_unchecked") if k in kinds]
+    medians = [f"{k}_median" for k in ("load", "load_unchecked", "load_late") if k in kinds]
     head = ["instance", *[f"{k}_{x}" for k in ("storm", *kinds) for x in ("cpu", "size")],
             *medians, "export_cpu", "read_cpu"]
     lines = [",".join(head)] + [",".join(str(r[h]) for h in head) for r in rows]

@@ -181,10 +181,13 @@ def _check_prism_task(game: Game[Any], task: Task, ctx: KeyContext) -> None:
     from mitld_lp.worlds.prism import PrismGame
 
     assert isinstance(game, PrismGame)
-    robot_actions = game.robot_actions()  # from the tables, not state by state
-    # a label of the world named like an action is the label (the spec reads labels)
-    for action in sorted((atoms(task.formula) - set(game.proposition_names))
-                         & robot_actions):
+    # from the tables, not state by state; where the choices are named when first read,
+    # every name a command may give first, and Storm's names only if one is an atom
+    # (a label of the world named like an action is the label: the spec reads labels)
+    named = (atoms(task.formula) - set(game.proposition_names)) & game.robot_actions()
+    if named:
+        named &= game.robot_actions(exact=True)
+    for action in sorted(named):
         raise ctx.error(
             "prism.events",
             f"PRISM action {action!r} has the name of a proposition of spec; list it in "

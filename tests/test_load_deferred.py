@@ -83,16 +83,22 @@ def test_names_on_demand_are_storms_choice_origins(tmp_path: Path) -> None:
     assert game.robot_actions() == {a for row in want for a in row}
 
 
-def test_a_known_name_is_read_without_storms_second_build(tmp_path: Path) -> None:
+def test_storms_own_loop_is_named_without_its_second_build(tmp_path: Path) -> None:
+    """The first build has no choice labels (prism-copy): Storm's deadlock self-loop is
+    named at once, every other choice (go, sync, the unlabelled commands') is late."""
     path = tmp_path / "m.prism"
     path.write_text(MODEL, encoding="utf-8")
     game = load_prism(path)
     t = game._tables
     known = np.flatnonzero(t.action_index < len(t.action_names))
-    assert known.size  # go, sync and the deadlock self-loop
+    assert known.size  # the deadlock self-loop
     codes, table = t.action_names.names_of(known)
-    assert {table[k] for k in codes.tolist()} == {"go", "sync", "deadlock"}
+    assert {table[k] for k in codes.tolist()} == {"deadlock"}
     assert not t.action_names.resolved
+    late = np.flatnonzero(t.action_index >= len(t.action_names))
+    codes, table = t.action_names.names_of(late)
+    assert {"go", "sync"} <= {table[k] for k in codes.tolist()}
+    assert t.action_names.resolved
 
 
 def _solve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, at_once: bool) -> tuple:

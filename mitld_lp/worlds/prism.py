@@ -228,13 +228,16 @@ class PrismGame:
         t = self._tables
         return t.label_sets[int(t.label_index[self._at(state)])]
 
-    def robot_actions(self) -> frozenset[str]:
-        """Every name of a robot action at some state (where the names of choices of
-        commands without an action are not made yet: the names of those commands)."""
+    def robot_actions(self, exact: bool = False) -> frozenset[str]:
+        """Every name of a robot action at some state (where the choices are not named
+        yet, :mod:`mitld_lp.worlds.prism_names`: every name a command's choice may have,
+        unless ``exact``, which names them)."""
         t = self._tables
         names, ids = t.action_names, t.action_index
         if isinstance(names, DeferredNames):
-            if not names.resolved:  # not named yet: every command without an action
+            if exact:
+                names.resolve()
+            if not names.resolved:  # not named yet: every name of a command
                 used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))
                 return frozenset(names[k] for k in used.tolist()) | names.commands
             codes, table = names.names_of(np.arange(ids.size))
@@ -399,8 +402,8 @@ class LazyPrismGame(PrismGame):
         t = self._tables  # a state found is labelled, expanded or not
         return t.label_sets[int(t.label_index[self._at(state, expanded=False)])]
 
-    def robot_actions(self) -> frozenset[str]:
-        return self.program_actions
+    def robot_actions(self, exact: bool = False) -> frozenset[str]:
+        return self.program_actions  # the states found so far: not all of the world's
 
     def as_table(self) -> WorldTable | None:
         return None

@@ -27,7 +27,7 @@ from mitld_lp.util.memory import ProductTooLarge, byte_text, default_max_memory
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_bounded import OutOfBudget, can_cap, run_capped
 from mitld_lp.worlds.prism_exact import PrismRecipe
-from mitld_lp.worlds.prism_names import DeferredNames, unlabelled_commands
+from mitld_lp.worlds.prism_names import DeferredNames, command_names
 from mitld_lp.worlds.prism_names import late_names as is_late
 from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_origins
 from mitld_lp.worlds.prism_program import (
@@ -169,18 +169,19 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     The choices are named by Storm's choice labels, or, where a command has no action
     or a module two commands of one action, by the commands they come from (Storm's
     choice origins: :mod:`mitld_lp.worlds.prism_origins`); where the valuations are
-    left out (and no action is named as a command), the choices the origins name are named
-    when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`), and Storm
-    builds no choice origins."""
+    left out (and no action is named as a command), every choice but Storm's own
+    self-loops is named when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`),
+    and Storm builds neither choice origins nor choice labels (up to 4% of its build),
+    the names made by the second build that makes the valuations."""
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
     deferred = limit is None and recipe is not None and not events
     late = late_names and deferred and is_late(program)
     origins = needs_origins(program) and not late
 
-    def options(checks: bool) -> Any:
+    def options(checks: bool) -> Any:  # late: no choice labels, every choice named late
         return builder_options(stormpy, program, terminal, checks=checks, origins=origins,
-                               valuations=not deferred)
+                               valuations=not deferred, labels=not late)
 
     errors = (RuntimeError, stormpy.exceptions.StormError)
     try:
@@ -254,7 +255,7 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
             _exact_refusal(stormpy, program, plain, where, options(True))  # find it
         raise
     if late:
-        names = DeferredNames(tuple(tables.action_names), make, unlabelled_commands(program),
+        names = DeferredNames(tuple(tables.action_names), make, command_names(program),
                               tables.choices, tables.targets, tables.action_index,
                               may_share_names(program))
         names.share(tables.states)  # one second build for the values and the names

@@ -397,13 +397,15 @@ def with_constants(stormpy: Any, program: Any, given: Mapping[str, Any], where: 
 
 
 def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
-                    origins: bool, valuations: bool = True) -> Any:
+                    origins: bool, valuations: bool = True, labels: bool = True) -> Any:
     """Storm's builder options for a world: every label (a label left out of the build
     would be false in every state), state valuations when ``valuations`` (a sixth of the
     build; :mod:`mitld_lp.worlds.prism_valuations`), the choice origins when ``origins``
     (they name every choice: :mod:`mitld_lp.worlds.prism_origins`), else the choice
-    labels, exploration checks when ``checks`` (without them Storm's
-    out-of-bounds state, so that an update out of a variable's range stays visible), and
+    labels when ``labels`` (False: no choice named by this build, every one named when
+    first read, :mod:`mitld_lp.worlds.prism_names`), exploration checks when ``checks``
+    (without them Storm's out-of-bounds state, so that an update out of a variable's
+    range stays visible), and
     no expansion past the states where ``terminal`` holds (a PRISM expression; "" for
     none)."""
     formula = None
@@ -417,7 +419,7 @@ def builder_options(stormpy: Any, program: Any, terminal: str, *, checks: bool,
     o.set_build_all_labels()
     if origins:
         o.set_build_choice_origins()
-    else:
+    elif labels:
         o.set_build_choice_labels()
     if valuations:
         o.set_build_state_valuations()

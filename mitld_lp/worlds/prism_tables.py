@@ -444,7 +444,8 @@ def read_model(
     allows none, :func:`mitld_lp.worlds.prism_origins.may_share_names`; not looked for).
     ``late``: a choice without a label at a state Storm did not label ``deadlock`` (and
     not decided), or of a label twice in its state, is named when first read: its id is
-    ``LATE + c`` (:mod:`mitld_lp.worlds.prism_names`).
+    ``LATE + c`` (:mod:`mitld_lp.worlds.prism_names`); ``model`` may then have no choice
+    labels (every choice but those self-loops is late).
     Raises :class:`WorldError` for an update that reached
     Storm's :data:`OUT_OF_BOUNDS` state (out of a variable's range), a state where only
     events are enabled, an event with two enabled commands in a state, a negative probability,
@@ -468,6 +469,10 @@ def read_model(
     state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))
     if named is not None:  # every choice named by the commands it comes from
         label_names, label_of = named(model, actions)
+    elif not model.has_choice_labeling():  # built without: every choice named late
+        if not late:
+            raise AssertionError("a model without choice labels is read with late names")
+        label_names, label_of = [], np.full(m, -1, dtype=np.int64)
     else:
         label_names = sorted(model.choice_labeling.get_labels())
         label_of = choice_labels(model, label_names, m, actions)  # -1: none, the deadlock loop
