@@ -372,13 +372,15 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
+            level_of, held = _repair_levels(st, level_of, x, free, upper)
             # what a repair reads of the model alone, made once for every candidate
             # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
-            repair = last = _Repair(st, rnd, free, level_of, mecs, upper,
+            repair = last = _Repair(st, rnd, held, level_of, mecs, upper,
                                     members=None if last is None else last.members,
                                     readers_of=None if last is None else last.readers_of)
             before = x.copy()
-            closed = repair.run(x, failing)
+            closed = repair.run(x, failing & ~held) if bool(np.any(failing & ~held)) \
+                else False
             moved = repair.moved
             if not closed:
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
@@ -407,6 +409,31 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     return Side(float(x[initial]), Check(name, False, (
         "no candidate passed (" + "; ".join(tried) + f"); the bound is the trivial "
         f"{x[initial]:g}")), read_only(x))
+
+
+def _repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
+                   upper: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the repair walks, and the states it holds fixed (``free`` and more).
+    A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
+    whose bound is already at its extreme (1 for an upper bound, 0 for a lower one) is
+    held: the repair moves a bound only towards that extreme, never past it, so such a
+    state keeps its value and needs no level (the Bellman check still reads it, and the
+    caller checks it again if it failed).  If some other state has none, the levels of
+    the whole support graph are found (:func:`support_layers`), as a caller without the
+    analysis's gets them."""
+    unknown = level_of < 0
+    if not unknown.any():
+        return level_of, free
+    held = free | (unknown & (x == (1.0 if upper else 0.0)))
+    if not bool(np.any(unknown & ~held)):
+        return level_of, held
+    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    return np.asarray(level)[np.asarray(comp)], free
+
+
+def _state_groups(st: Rows) -> np.ndarray:
+    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
+    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
 
 
 def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
