@@ -7,10 +7,13 @@ analysis serves both:
 * the **state graph** is a view of the product's matrix (a state's choices are
   consecutive rows, so its successors are a slice of the matrix's column indices): no
   copy;
-* one **strongly connected decomposition** of it, and its components in levels
-  (level 0 has no successor component; every edge between components goes down);
-* walking the levels upwards, which components can reach the goal and which the goal
-  or a truncated state: the prob-0 sets of both models (``Pmax = 0`` iff no path);
+* one **strongly connected decomposition** of it
+  (:func:`~mitld_lp.solvers.graph.state_components`), and which components can reach
+  the goal and which the goal or a truncated state: the prob-0 sets of both models
+  (``Pmax = 0`` iff no path).  The components' levels (level 0 has no successor
+  component; every edge between components goes down) are found on the quotient alone
+  (:mod:`~mitld_lp.solvers.quotient_order`), unless the compiled walk gives the
+  product's in the same pass;
 * the **maximal end components** of the upper model's *maybe* states (neither target
   nor prob-0), searched only among the states of non-trivial components (and single
   states with a choice that stays put): an end component is strongly connected, so it

@@ -372,7 +372,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
-            level_of, held = _repair_levels(st, level_of, x, free, upper)
+            level_of, held = _repair_levels(st, level_of, x, free, zero if upper else None)
             # what a repair reads of the model alone, made once for every candidate
             # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
             repair = last = _Repair(st, rnd, held, level_of, mecs, upper,
@@ -412,19 +412,23 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
 
 
 def _repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
-                   upper: bool) -> tuple[np.ndarray, np.ndarray]:
+                   zero: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The levels the repair walks, and the states it holds fixed (``free`` and more).
     A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
-    whose bound is already at its extreme (1 for an upper bound, 0 for a lower one) is
-    held: the repair moves a bound only towards that extreme, never past it, so such a
-    state keeps its value and needs no level (the Bellman check still reads it, and the
-    caller checks it again if it failed).  If some other state has none, the levels of
-    the whole support graph are found (:func:`support_layers`), as a caller without the
-    analysis's gets them."""
+    is held where its bound cannot need a move: at its extreme (1 for an upper bound,
+    ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
+    for an upper bound, in ``zero`` (a maximum's prob-0 set: every choice stays in it,
+    all 0).  Holding a state is sound whatever it is: the caller checks again every
+    state that failed and every reader of a moved one.  If some other state has no
+    level, the levels of the whole support graph are found (:func:`support_layers`),
+    as a caller without the analysis's gets them."""
     unknown = level_of < 0
     if not unknown.any():
         return level_of, free
-    held = free | (unknown & (x == (1.0 if upper else 0.0)))
+    still = (x == 1.0) if zero is not None else (x == 0.0)
+    if zero is not None:
+        still |= zero
+    held = free | (unknown & still)
     if not bool(np.any(unknown & ~held)):
         return level_of, held
     comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))

@@ -55,28 +55,41 @@ def split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
     return bool(kept[component[sure]].any())
 
 
+def _mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
+    """Whether a component of the product holds both a state of the quotient
+    (``maybe``) and one out of it (then the quotient's levels are not the product's
+    lifted, and the product's are walked: QVBS zeroconf 1000-4's large component)."""
+    size = np.bincount(comp)
+    inside = np.bincount(comp[maybe], minlength=size.size)
+    return bool(np.any((inside > 0) & (inside < size)))
+
+
 def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
                     maybe: np.ndarray, sure_state: np.ndarray, state_map: np.ndarray,
                     ) -> tuple[Blocks, np.ndarray]:
     """The quotient's block order and a level per component of the product for the
     certificate (``Quotient.layers``): the product's (``found.level``, from the
-    compiled walk), else the quotient's own, found on the quotient alone (its maybe
-    states after prob-one), lifted to each component of the product whose states are
-    all in the quotient (they form one of its components); -1 elsewhere, where the
-    certificate finds levels of its own if it reads one (:mod:`~mitld_lp.solvers.
-    certify`)."""
+    compiled walk, or walked now on the condensation ``found`` kept where a component
+    of the product holds states in and out of the quotient: the order and layers as
+    before), else the quotient's own, found on the quotient alone (its maybe states
+    after prob-one), lifted to the components of the product that hold its states (each
+    is one of its components); -1 for the others, where the certificate finds levels
+    of its own if it reads one (:mod:`~mitld_lp.solvers.certify`)."""
     comp = found.component
-    if found.level is not None and not split(comp, maybe, sure_state):
+    level = found.level
+    if level is None and _mixed(comp, maybe):  # the product's levels, as before
+        level = found.later()
+    if level is not None and not split(comp, maybe, sure_state):
         comp_of = np.zeros(row_groups.shape[0] - 1, dtype=np.int64)
         comp_of[state_map[maybe]] = comp[maybe]
-        return order_of(matrix, row_groups, comp_of, found.level), found.level
+        return order_of(matrix, row_groups, comp_of, level), level
     # a component of the product may hold several of the quotient (states removed by
     # prob-one, or a target inside it): the quotient's own are found (a block is one
     # component: a single state is solved apart)
     own = state_levels(matrix, row_groups)
     order = order_of(matrix, row_groups, own.component, own.level)
-    if found.level is not None:
-        return order, found.level
+    if level is not None:
+        return order, level
     states = np.flatnonzero(maybe)
     c, q = comp[states], own.component[state_map[states]]
     first = np.full(int(comp.max(initial=-1)) + 1, -1, dtype=np.int64)
