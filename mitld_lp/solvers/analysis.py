@@ -79,9 +79,10 @@ from mitld_lp.solvers.graph import (
     compiled_end_components,
     maximal_end_components,
     state_components,
+    state_levels,
     toward,
 )
-from mitld_lp.solvers.quotient_order import quotient_blocks
+from mitld_lp.solvers.quotient_order import mixed, quotient_blocks
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -428,6 +429,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         mecs = _no_end_components(n, mdp.n_choices)
         del positive
 
+    if found.level is None and mixed(found.component, maybe):  # the order as before
+        found = replace(found, level=found.later())
+    found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
@@ -526,7 +530,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     del sure
 
     order, comp_level = quotient_blocks(found, matrix, row_groups, maybe, sure_state,
-                                        state_map)
+                                        state_map, lambda: state_levels(m, mdp.row_groups))
     # kept by the models for the certificate: in the index type (4 bytes a state and a
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),

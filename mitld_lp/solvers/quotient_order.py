@@ -16,6 +16,7 @@ connected), -1 for the others, where it finds levels of its own if it reads one.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,7 +25,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.graph import Blocks, blocks_from, state_levels
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["order_of", "quotient_blocks", "split"]
+__all__ = ["mixed", "order_of", "quotient_blocks", "split"]
 
 
 def order_of(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
@@ -55,7 +56,7 @@ def split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
     return bool(kept[component[sure]].any())
 
 
-def _mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
+def mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
     """Whether a component of the product holds both a state of the quotient
     (``maybe``) and one out of it (then the quotient's levels are not the product's
     lifted, and the product's are walked: QVBS zeroconf 1000-4's large component)."""
@@ -66,36 +67,33 @@ def _mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
 
 def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
                     maybe: np.ndarray, sure_state: np.ndarray, state_map: np.ndarray,
-                    ) -> tuple[Blocks, np.ndarray]:
+                    product_levels: Callable[[], Any]) -> tuple[Blocks, np.ndarray]:
     """The quotient's block order and a level per component of the product for the
-    certificate (``Quotient.layers``): the product's (``found.level``, from the
-    compiled walk, or walked now on the condensation ``found`` kept where a component
-    of the product holds states in and out of the quotient: the order and layers as
-    before), else the quotient's own, found on the quotient alone (its maybe states
-    after prob-one), lifted to the components of the product that hold its states (each
-    is one of its components); -1 for the others, where the certificate finds levels
-    of its own if it reads one (:mod:`~mitld_lp.solvers.certify`)."""
+    certificate (``Quotient.layers``).  With the product's levels (``found.level``:
+    from the compiled walk, or walked by the caller where a component of the product
+    holds states in and out of the quotient, :func:`mixed`) the order and layers are
+    those of the product, as before.  Else the quotient's own levels, found on the
+    quotient alone (its maybe states after prob-one), lifted to the components of the
+    product that hold its states (each is one of its components); -1 for the others,
+    where the certificate finds levels of its own if it reads one
+    (:mod:`~mitld_lp.solvers.certify`).  Where prob-one's removal split a component
+    (:func:`split`), the product's levels are found again (``product_levels()``: the
+    same components) for the layers, as before."""
     comp = found.component
     level = found.level
-    if level is None and _mixed(comp, maybe):  # the product's levels, as before
-        level = found.later()
-    if level is not None and not split(comp, maybe, sure_state):
+    cut = split(comp, maybe, sure_state)
+    if level is not None and not cut:
         comp_of = np.zeros(row_groups.shape[0] - 1, dtype=np.int64)
         comp_of[state_map[maybe]] = comp[maybe]
         return order_of(matrix, row_groups, comp_of, level), level
-    # a component of the product may hold several of the quotient (states removed by
-    # prob-one, or a target inside it): the quotient's own are found (a block is one
-    # component: a single state is solved apart)
+    # a component of the product that lost states to prob-one may be several of the
+    # quotient: the quotient's own are found (a block is one component: a single
+    # state is solved apart)
     own = state_levels(matrix, row_groups)
     order = order_of(matrix, row_groups, own.component, own.level)
-    if level is not None:
-        return order, level
-    states = np.flatnonzero(maybe)
-    c, q = comp[states], own.component[state_map[states]]
-    first = np.full(int(comp.max(initial=-1)) + 1, -1, dtype=np.int64)
-    first[c] = q
-    level = np.full(first.size, -1, dtype=np.int64)
-    level[first >= 0] = own.level[first[first >= 0]]
-    level[c[first[c] != q]] = -1  # several of the quotient's: no one level
-    level[comp[~maybe]] = -1  # a state out of the quotient: its edges are not layered
+    if cut:
+        return order, (level if level is not None else product_levels().level)
+    level = np.full(int(comp.max(initial=-1)) + 1, -1, dtype=np.int64)
+    at = np.flatnonzero(maybe)
+    level[comp[at]] = own.level[own.component[state_map[at]]]
     return order, level
