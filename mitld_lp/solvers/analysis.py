@@ -82,7 +82,7 @@ from mitld_lp.solvers.graph import (
     state_levels,
     toward,
 )
-from mitld_lp.solvers.quotient_order import mixed, quotient_blocks
+from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -431,7 +431,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
 
     if found.level is None and mixed(found.component, maybe):  # the order as before
         found = replace(found, level=found.later())
-    found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
+    if found.level is not None or not may_split(found.component, maybe):
+        found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.graph import Blocks, blocks_from, state_levels
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["mixed", "order_of", "quotient_blocks", "split"]
+__all__ = ["may_split", "mixed", "order_of", "quotient_blocks", "split"]
 
 
 def order_of(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
@@ -65,6 +65,14 @@ def mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
     return bool(np.any((inside > 0) & (inside < size)))
 
 
+def may_split(comp: np.ndarray, maybe: np.ndarray) -> bool:
+    """Whether prob-one may split a component of the product (:func:`split`): some
+    ``maybe`` state lies in a component of more than one state.  If not, the caller
+    needs the product's levels in no case and frees what would walk them."""
+    size = np.bincount(comp)
+    return bool(np.any(size[comp[maybe]] > 1))
+
+
 def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
                     maybe: np.ndarray, sure_state: np.ndarray, state_map: np.ndarray,
                     product_levels: Callable[[], Any]) -> tuple[Blocks, np.ndarray]:
@@ -77,8 +85,9 @@ def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
     product that hold its states (each is one of its components); -1 for the others,
     where the certificate finds levels of its own if it reads one
     (:mod:`~mitld_lp.solvers.certify`).  Where prob-one's removal split a component
-    (:func:`split`), the product's levels are found again (``product_levels()``: the
-    same components) for the layers, as before."""
+    (:func:`split`), the product's levels are walked (``found.later()``, kept by the
+    caller where :func:`may_split`; else ``product_levels()``, the same components)
+    for the layers, as before."""
     comp = found.component
     level = found.level
     cut = split(comp, maybe, sure_state)
@@ -91,8 +100,10 @@ def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
     # state is solved apart)
     own = state_levels(matrix, row_groups)
     order = order_of(matrix, row_groups, own.component, own.level)
-    if cut:
-        return order, (level if level is not None else product_levels().level)
+    if cut:  # the product's levels for the layers, as before
+        if level is None:
+            level = found.later() if found.later is not None else product_levels().level
+        return order, level
     level = np.full(int(comp.max(initial=-1)) + 1, -1, dtype=np.int64)
     at = np.flatnonzero(maybe)
     level[comp[at]] = own.level[own.component[state_map[at]]]
