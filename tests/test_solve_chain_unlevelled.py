@@ -1,11 +1,11 @@
-"""``solve_chain`` given layers in which a component has no level (-1, as the analysis
-lifts the quotient's levels only to the components inside it) decomposes the chain
+"""A policy's chain solved with layers in which a component has no level (-1, as the
+analysis lifts the quotient's levels only to the components inside it) is decomposed by
 itself: the values equal a dense solve of ``x = b + Q x`` written here."""
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.topological import solve_chain
+from mitld_lp.solvers.evaluation import _solve_transient
 
 
 def test_unlevelled_component_decomposed_here() -> None:
@@ -20,6 +20,7 @@ def test_unlevelled_component_decomposed_here() -> None:
     # components 0:{0} 1:{1} 2:{2,3}; component 0 has no level, the others wrong on purpose
     comp = np.array([0, 1, 2, 2])
     level = np.array([-1, 0, 0])
-    got = solve_chain(sp.csr_array(q), b, (comp, level))
+    got = _solve_transient(sp.csr_array(q), b, "auto", (comp, level))
     np.testing.assert_allclose(got, expected, rtol=1e-14)
-    assert np.allclose(solve_chain(sp.csr_array(q), b), expected, rtol=1e-14)
+    np.testing.assert_allclose(_solve_transient(sp.csr_array(q), b, "auto"), expected,
+                               rtol=1e-14)

@@ -102,7 +102,7 @@ class Quotient(MDPShape):
             else the quotient's own levels lifted to the components whose states all stay
             in the quotient, -1 for the others (a reader of a -1 finds levels of its own:
             ``certify_chain.chain``, ``certify._repair_levels``,
-            :func:`mitld_lp.solvers.topological.solve_chain`).
+            ``evaluation._solve_transient``).
         sense: whether the solvers maximise or minimise on it.
         qualitative: the values the graph decides (:class:`Qualitative`, per original
             state).

@@ -583,13 +583,9 @@ def solve_chain(chain: sp.csr_array, b: np.ndarray,
     BLAS call, so a loaded machine cannot make it crawl, and no fill-in across
     components.  ``layers``: the component
     of each state and the level of each component in a graph that contains the chain's
-    (the analysis of its MDP, :func:`blocks_from`); else, or where a state's component
-    has no level (-1: the analysis lifts the quotient's levels only to the components
-    inside it, ``Quotient.layers``), the chain is decomposed here.
+    (the analysis of its MDP, :func:`blocks_from`); else the chain is decomposed here.
     A level's states in non-trivial components are solved together by one LU."""
     chain = sp.csr_array(chain)
-    if layers is not None and bool(np.any(np.asarray(layers[1])[np.asarray(layers[0])] < 0)):
-        layers = None
     blk = (graph_blocks(sp.csr_array(chain != 0, dtype=np.float64), chain.diagonal())
            if layers is None else blocks_from(layers[0], layers[1], chain.diagonal()))
     x = np.zeros(b.shape[0])
