@@ -417,22 +417,35 @@ def _repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarr
     A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
     is held where its bound cannot need a move: at its extreme (1 for an upper bound,
     ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
-    for an upper bound, in ``zero`` (a maximum's prob-0 set: every choice stays in it,
-    all 0).  Holding a state is sound whatever it is: the caller checks again every
-    state that failed and every reader of a moved one.  If some other state has no
-    level, the levels of the whole support graph are found (:func:`support_layers`),
-    as a caller without the analysis's gets them."""
+    for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
+    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
+    is sound whatever it is: the caller checks again every state that failed and every
+    reader of a moved one.  If some other state has no level, the levels of the whole
+    support graph are found (:func:`support_layers`)."""
     unknown = level_of < 0
     if not unknown.any():
         return level_of, free
     still = (x == 1.0) if zero is not None else (x == 0.0)
-    if zero is not None:
+    if zero is not None and _closed_at_zero(st, zero, x):
         still |= zero
     held = free | (unknown & still)
     if not bool(np.any(unknown & ~held)):
         return level_of, held
     comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
     return np.asarray(level)[np.asarray(comp)], free
+
+
+def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+    """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
+    every stored entry of their rows (nature's included) in ``zero``.  The graph reads
+    no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
+    the rule ask the rounded sum's bound, above 0 (``test_levels_quotient_stored_zero``)."""
+    states = np.flatnonzero(zero)
+    if bool(np.any(x[states] != 0.0)):
+        return False
+    rows, _, _ = st.rows_of(states)
+    m = st.matrix
+    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
 
 
 def _state_groups(st: Rows) -> np.ndarray:
