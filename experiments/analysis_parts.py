@@ -6,10 +6,13 @@ loaded, one ``synthesize`` whose call of ``analysis.analyse`` is kept (its produ
 target and sense), then that call repeated ``--reps`` times (after one call not timed)
 with the entry point of each part timed (CPU seconds, medians):
 
-* ``analyse``: the whole analysis; ``levels``: the components, levels and reach
-  (``graph.state_levels``), of which ``components`` (SciPy's Tarjan, ``graph.
-  strong_components``) and ``searched`` (``graph.searched_levels``: Dijkstra where the
-  levels are thin) and ``reach`` (``graph.reaching``: a breadth-first search a target);
+* ``analyse``: the whole analysis; ``levels``: the product's components and reach, and
+  its levels where the compiled walk finds them at no cost (``graph.state_components``);
+  ``quotient_levels``: the quotient's own components and levels, found on the quotient
+  where the product's are not (``quotient_order.state_levels``); of ``levels``,
+  ``components`` (SciPy's Tarjan, ``graph.strong_components``) and ``searched``
+  (``graph.searched_levels``: Dijkstra where the levels are thin) and ``reach``
+  (``graph.reaching``: a breadth-first search a target);
 * ``end_components`` (maxima), ``attractor`` (the minima's ``Prob0E``, and the
   maxima's value-1 states inside ``one``), ``one`` (the quotients' value-1 states),
   ``order`` (the quotient's blocks); ``rest``: the quotient's arrays, the analysis less
@@ -46,16 +49,17 @@ import _common  # noqa: E402
 import bench_qvbs as bq  # noqa: E402
 import profile_solve as ps  # noqa: E402  (the same instances, posed the same way)
 
-PARTS = {"levels": ("analysis", "state_levels"),
+PARTS = {"levels": ("analysis", "state_components"),
+         "quotient_levels": ("quotient_order", "state_levels"),
          "components": ("graph", "strong_components"),
          "searched": ("graph", "searched_levels"),
          "reach": ("graph", "reaching"),
          "end_components": ("analysis", "end_components"),
          "attractor": ("analysis", "attractor"),
          "one": ("analysis", "_one"),
-         "order": ("analysis", "_order")}
+         "order": ("quotient_order", "order_of")}
 """Each part: the module (of ``mitld_lp.solvers``) whose name the analysis calls it by."""
-OUTER = ("levels", "end_components", "attractor", "order")
+OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order")
 """The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
 ``rest`` is ``analyse`` less these and ``one``'s own time)."""
 COLUMNS = ("instance", "value", "numba_before", "analyse", *PARTS, "rest", "numba_import",

@@ -8,7 +8,7 @@ import importlib.util
 import json
 import subprocess
 import sys
-from dataclasses import fields, is_dataclass
+from dataclasses import fields, is_dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -207,8 +207,40 @@ def _same(a, b, where="quotient"):
         assert a == b, where
 
 
+def _goes_down(owner: np.ndarray, succ: np.ndarray, comp: np.ndarray,
+               level: np.ndarray) -> None:
+    """Every edge ``owner -> succ`` between two components that have a level (-1: none)
+    goes to a lower one."""
+    a, b = comp[owner], comp[succ]
+    both = (a != b) & (level[a] >= 0) & (level[b] >= 0)
+    assert np.all(level[a[both]] > level[b[both]])
+
+
+def _same_blocks(a, b, q) -> None:
+    """Two block orders of the quotient ``q``: the same components (ids may differ),
+    sizes and self-loops, and each grouped by a layering of the quotient's graph."""
+    pairs = np.unique(np.column_stack([a.component, b.component]), axis=0)
+    assert pairs.shape[0] == a.n_components == b.n_components  # one partition
+    assert np.array_equal(a.size[pairs[:, 0]], b.size[pairs[:, 1]])
+    assert np.array_equal(a.self_loop, b.self_loop)
+    owner = np.repeat(np.arange(q.n_states), np.diff(q.row_groups))
+    owner = np.repeat(owner, np.diff(q.matrix.indptr))
+    for o in (a, b):
+        _goes_down(owner, q.matrix.indices, o.component, o.level)
+        assert np.all(o.level >= 0)
+        for k in range(o.n_levels):
+            assert np.all(o.level[o.component[o.states_at(k)]] == k)
+
+
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_analysis_compiled_is_the_numpy_analysis(walks, sense):
+    """The same quotient, sets and components whether the walks are compiled or not.
+    The levels may differ: the compiled walk finds the product's in the same pass and
+    they are kept, the NumPy analysis finds the quotient's own (the product-wide walk
+    was half its time) and lifts them to the product's components, -1 outside the
+    quotient.  So the levels, and the quotient's block order grouped by them, are
+    checked to be layerings (every edge between components goes down), -1 only where
+    no state of the component is in the quotient."""
     rng = np.random.default_rng(6)
     for _ in range(15):
         mdp = random_mdp(rng, int(rng.integers(3, 60)))
@@ -216,8 +248,20 @@ def test_analysis_compiled_is_the_numpy_analysis(walks, sense):
         want = analyse(mdp, mdp.target, mdp.truncated, sense=sense)
         walks(True)
         got = analyse(mdp, mdp.target, mdp.truncated, sense=sense)
+        g = graph.graph_view(sp.csr_array(mdp.matrix), mdp.row_groups)
+        owner = np.repeat(np.arange(mdp.n_states), np.diff(g.indptr))
         for q, p in zip(got, want, strict=True):
-            _same(q, p)
+            _same(replace(q, layers=None, order=None), replace(p, layers=None, order=None))
+            _same(q.layers[0], p.layers[0], "layers[0]")
+            _same_blocks(q.order, p.order, q)
+            comp = np.asarray(q.layers[0])
+            inside = np.zeros(int(comp.max()) + 1, dtype=bool)
+            inside[comp[np.asarray(q.state_map) >= 0]] = True
+            for level in (np.asarray(q.layers[1]), np.asarray(p.layers[1])):
+                assert level.dtype == np.asarray(p.layers[1]).dtype
+                _goes_down(owner, g.indices, comp, level)
+                assert np.all((level >= 0) | ~inside)
+            assert np.all(np.asarray(q.layers[1]) >= 0)  # the compiled walk's: all
 
 
 @needs_storm

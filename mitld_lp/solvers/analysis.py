@@ -7,10 +7,13 @@ analysis serves both:
 * the **state graph** is a view of the product's matrix (a state's choices are
   consecutive rows, so its successors are a slice of the matrix's column indices): no
   copy;
-* one **strongly connected decomposition** of it, and its components in levels
-  (level 0 has no successor component; every edge between components goes down);
-* walking the levels upwards, which components can reach the goal and which the goal
-  or a truncated state: the prob-0 sets of both models (``Pmax = 0`` iff no path);
+* one **strongly connected decomposition** of it
+  (:func:`~mitld_lp.solvers.graph.state_components`), and which components can reach
+  the goal and which the goal or a truncated state: the prob-0 sets of both models
+  (``Pmax = 0`` iff no path).  The components' levels (level 0 has no successor
+  component; every edge between components goes down) are found on the quotient alone
+  (:mod:`~mitld_lp.solvers.quotient_order`), unless the compiled walk gives the
+  product's in the same pass;
 * the **maximal end components** of the upper model's *maybe* states (neither target
   nor prob-0), searched only among the states of non-trivial components (and single
   states with a choice that stays put): an end component is strongly connected, so it
@@ -68,18 +71,18 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.graph import (
-    Blocks,
     EndComponents,
     Sense,
     attractor,
     attractor_spared,
     backward_reachable,
-    blocks_from,
     compiled_end_components,
     maximal_end_components,
+    state_components,
     state_levels,
     toward,
 )
+from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -192,24 +195,6 @@ def _choices_of(row_groups: np.ndarray, states: np.ndarray) -> tuple[np.ndarray,
     choice_state])`` would give them with no array a choice of the whole product."""
     lo, hi = row_groups[states], row_groups[states + 1]
     return gather_ranges(lo, hi), np.repeat(states, hi - lo)
-
-
-def _order(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
-           level_of: np.ndarray) -> Blocks:
-    """The quotient's components (``comp_of``, per reduced state, ids of the product's
-    components) and levels (``level_of`` per product component), with each reduced
-    choice's probability of staying where it is."""
-    n = row_groups.shape[0] - 1
-    n_choices = q_matrix.shape[0]
-    # each entry's row and the row's state in the index type (int32 where it fits: two
-    # of these an entry were the analysis's peak)
-    owner = np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(row_groups))
-    entry_row = np.repeat(np.arange(n_choices, dtype=index_dtype(n_choices)),
-                          np.diff(q_matrix.indptr))
-    hit = q_matrix.indices == owner[entry_row]
-    del owner
-    self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
-    return blocks_from(comp_of, level_of, self_loop)
 
 
 def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> bool:
@@ -400,16 +385,6 @@ def _fewer_components(mecs: EndComponents, new_id: np.ndarray, sure: np.ndarray,
                          int(np.count_nonzero(~sure[n_plain:])))
 
 
-def _split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
-    """Whether a component of the product holds both a state left in the quotient
-    (``maybe``) and one removed with value 1 (``sure``)."""
-    if not sure.any():
-        return False
-    kept = np.zeros(int(component.max(initial=-1)) + 1, dtype=bool)
-    kept[component[maybe]] = True
-    return bool(kept[component[sure]].any())
-
-
 def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             sense: Sense = Sense.MAX, without_one: bool = True,
             ) -> tuple[Quotient, Quotient]:
@@ -431,8 +406,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # nothing truncated: one target, so one seed set, one reach and one set of leaks
     # (the second model's columns are the first's)
     same = not extra.any()
-    found = state_levels(m, mdp.row_groups,
-                         np.column_stack([goal] if same else [goal, wide]))
+    # the product's components and reach; its levels only where the walk gives them
+    # free (compiled): else the quotient's own are found below
+    found = state_components(m, mdp.row_groups,
+                             np.column_stack([goal] if same else [goal, wide]))
     if "numba" not in sys.modules and _sweeps_compiled(m, mdp.row_groups, found.component):
         from mitld_lp.solvers import numba_narrow
 
@@ -452,6 +429,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         mecs = _no_end_components(n, mdp.n_choices)
         del positive
 
+    if found.level is None and mixed(found.component, maybe):  # the order as before
+        found = replace(found, level=found.later())
+    if found.level is not None or not may_split(found.component, maybe):
+        found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
@@ -549,22 +530,12 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         del cut
     del sure
 
-    comp_of = np.zeros(n_red, dtype=np.int64)
-    comp_of[state_map[maybe]] = found.component[maybe]
-    if _split(found.component, maybe, sure_state):
-        # a component of the product lost some of its states: what is left of it may
-        # be several components of the quotient, so the quotient's own are found
-        # (levels of one graph are levels of its subgraphs, but a block is one
-        # component: a single state is solved apart)
-        own = state_levels(matrix, row_groups)
-        order = _order(matrix, row_groups, own.component, own.level)
-        del own
-    else:
-        order = _order(matrix, row_groups, comp_of, found.level)
+    order, comp_level = quotient_blocks(found, matrix, row_groups, maybe, sure_state,
+                                        state_map, lambda: state_levels(m, mdp.row_groups))
     # kept by the models for the certificate: in the index type (4 bytes a state and a
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
-              read_only(found.level.astype(index_dtype(n), copy=False)))
+              read_only(comp_level.astype(index_dtype(n), copy=False)))
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:

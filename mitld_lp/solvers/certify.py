@@ -372,13 +372,15 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
+            level_of, held = _repair_levels(st, level_of, x, free, zero if upper else None)
             # what a repair reads of the model alone, made once for every candidate
             # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
-            repair = last = _Repair(st, rnd, free, level_of, mecs, upper,
+            repair = last = _Repair(st, rnd, held, level_of, mecs, upper,
                                     members=None if last is None else last.members,
                                     readers_of=None if last is None else last.readers_of)
             before = x.copy()
-            closed = repair.run(x, failing)
+            closed = repair.run(x, failing & ~held) if bool(np.any(failing & ~held)) \
+                else False
             moved = repair.moved
             if not closed:
                 tried.append(f"{label}: {int(failing.sum())} states, repair did not close")
@@ -407,6 +409,48 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     return Side(float(x[initial]), Check(name, False, (
         "no candidate passed (" + "; ".join(tried) + f"); the bound is the trivial "
         f"{x[initial]:g}")), read_only(x))
+
+
+def _repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
+                   zero: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the repair walks, and the states it holds fixed (``free`` and more).
+    A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
+    is held where its bound cannot need a move: at its extreme (1 for an upper bound,
+    ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
+    for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
+    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
+    is sound whatever it is: the caller checks again every state that failed and every
+    reader of a moved one.  If some other state has no level, the levels of the whole
+    support graph are found (:func:`support_layers`)."""
+    unknown = level_of < 0
+    if not unknown.any():
+        return level_of, free
+    still = (x == 1.0) if zero is not None else (x == 0.0)
+    if zero is not None and _closed_at_zero(st, zero, x):
+        still |= zero
+    held = free | (unknown & still)
+    if not bool(np.any(unknown & ~held)):
+        return level_of, held
+    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    return np.asarray(level)[np.asarray(comp)], free
+
+
+def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+    """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
+    every stored entry of their rows (nature's included) in ``zero``.  The graph reads
+    no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
+    the rule ask the rounded sum's bound, above 0 (``test_levels_quotient_stored_zero``)."""
+    states = np.flatnonzero(zero)
+    if bool(np.any(x[states] != 0.0)):
+        return False
+    rows, _, _ = st.rows_of(states)
+    m = st.matrix
+    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
+
+
+def _state_groups(st: Rows) -> np.ndarray:
+    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
+    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
 
 
 def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,

@@ -69,7 +69,8 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     level by level, a non-trivial component of the layers by the walk over the chain's
     own components there (:class:`~mitld_lp.solvers.chain_levels.ChainLevels`), its
     factorisations serving both.  ``layers``:
-    the components and levels of ``mdp``'s support graph (:func:`support_layers`);
+    the components and levels of ``mdp``'s support graph (:func:`support_layers`; a
+    level -1 where unknown: the chain's own levels are found then);
     ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
     m = sp.csr_array(mdp.matrix)
     n = mdp.n_states
@@ -115,13 +116,23 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
             indptr = indptr.astype(index)
         sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
-        v, w = _solve(sub, b, kappa, None if layers is None else
-                      (np.asarray(layers[0])[idx], np.asarray(layers[1])),
+        v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
                       None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
         values[idx] = np.clip(v, 0.0, 1.0)
         slack[idx] = np.maximum(w, 0.0)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
+
+
+def _solved_layers(layers: tuple[np.ndarray, np.ndarray] | None, idx: np.ndarray,
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The components and levels of the ``idx`` states from ``layers``; None (the
+    chain's own, :func:`_solve`) where one of them has no level (-1: the analysis's
+    quotient left its component out, ``Quotient.layers``)."""
+    if layers is None:
+        return None
+    comp, level = np.asarray(layers[0])[idx], np.asarray(layers[1])
+    return None if bool(np.any(level[comp] < 0)) else (comp, level)
 
 
 def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,

@@ -108,8 +108,12 @@ def _solve_transient(
     components in topological order (``"auto"``,
     :func:`mitld_lp.solvers.topological.solve_chain`), one sparse LU of ``I - Q``
     (``"direct"``, :func:`mitld_lp.solvers.topological.transient_solve`) or BiCGSTAB
-    to a residual of 1e-12 (``"iterative"``)."""
+    to a residual of 1e-12 (``"iterative"``).  ``layers`` where a state's component has
+    level -1 (outside the analysis's quotient, ``Quotient.layers``): not used, the chain
+    is decomposed by itself."""
     if method == "auto":
+        if layers is not None and (np.asarray(layers[1])[np.asarray(layers[0])] < 0).any():
+            layers = None
         return solve_chain(chain, b, layers)
     if method == "direct":
         return transient_solve(chain, b)

@@ -16,7 +16,7 @@ on it.
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -53,6 +53,7 @@ __all__ = [
     "graph_view",
     "levels",
     "maximal_end_components",
+    "state_components",
     "state_levels",
     "segmented_argmax",
     "toward",
@@ -281,8 +282,9 @@ class Levels:
     """Components of the state graph, their levels and which targets they can reach."""
 
     component: np.ndarray  # (n,) the component of each state
-    level: np.ndarray  # (n_components,)
+    level: np.ndarray  # (n_components,); None from state_components where not walked
     reach: np.ndarray  # (n_components, k) bool: can reach target set j
+    later: Callable[[], np.ndarray] | None = None  # state_components: the levels walked
 
 
 def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
@@ -299,25 +301,15 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     walks = compiled_walks(graph.nnz)
     if walks is not None and graph.has_canonical_format:
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
-    n_comp, comp = strong_components(graph)
-    # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
-    index = graph.indices.dtype
-    small = np.asarray(comp, dtype=index)
-    comp = np.asarray(comp, dtype=np.int64)
-    owner = np.repeat(np.arange(graph.shape[0], dtype=index), np.diff(graph.indptr))
-    up, down = small[owner], small[graph.indices]
-    del owner, small
-    cross = up != down
-    up, down = up[cross], down[cross]
-    del cross
-    out_degree = np.bincount(up, minlength=n_comp)
-    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
-    # the duplicates: its data are the multiplicities the out-degrees counted)
-    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
-                            shape=(n_comp, n_comp))
-    del up, down
+    return _leveled(graph.shape[0] + graph.nnz, *_condensed(graph), seeds)
+
+
+def _leveled(size: int, n_comp: int, comp: np.ndarray, out_degree: np.ndarray,
+             preds_of: sp.csr_array, seeds: np.ndarray | None) -> Levels:
+    """:func:`levels` of a graph of ``size`` nodes plus entries, condensed
+    (:func:`_condensed`; ``out_degree`` is used up)."""
     if seeds is None:
-        seeds = np.zeros((graph.shape[0], 0), dtype=bool)
+        seeds = np.zeros((comp.size, 0), dtype=bool)
     # the counts in the degrees' own type: ufunc.at on mixed types takes numpy's
     # generic loop, 50-80x slower (2 of 3 s of the analysis on a 2e6-state product);
     # cast once here, as the offsets, not at every level (a deadline makes thousands)
@@ -326,7 +318,7 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     k = seeds.shape[1]
     # a small graph's reach walked up its levels (csgraph not imported for it), a large
     # one's searched once a seed set when the levels are known (:func:`reaching`)
-    walked = graph.shape[0] + graph.nnz <= SMALL
+    walked = size <= SMALL
     reach = np.zeros((n_comp, k if walked else 0), dtype=bool)
     for j in range(reach.shape[1]):
         reach[comp[seeds[:, j]], j] = True
@@ -335,7 +327,7 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     frontier = sinks = np.flatnonzero(out_degree == 0)
     depth, done, since, probe = 0, 0, 0, PROBE_LEVELS
     while frontier.size:  # SMALL: csgraph found the components, and can search
-        if depth == probe and graph.shape[0] + graph.nnz > SMALL:
+        if depth == probe and size > SMALL:
             found = (thin(done - since, probe, n_comp, preds.size)
                      and searched_levels(preds_of, sinks, comp, seeds))
             if found:  # thin levels: the rest searched whole
@@ -358,6 +350,60 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     if np.any(level < 0):  # pragma: no cover - the graph of components is acyclic
         raise AssertionError("the component graph has a cycle")
     return Levels(comp, level, reach if walked else reaching(preds_of, comp, seeds))
+
+
+def _condensed(graph: sp.csr_array) -> tuple[int, np.ndarray, np.ndarray, sp.csr_array]:
+    """The strongly connected components of ``graph`` (their count, each node's), each
+    component's out-degree to the others (with multiplicity) and its predecessors
+    (``preds_of``: row ``d`` lists the components with an edge to ``d``; its data the
+    multiplicities)."""
+    n_comp, comp = strong_components(graph)
+    # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
+    index = graph.indices.dtype
+    small = np.asarray(comp, dtype=index)
+    comp = np.asarray(comp, dtype=np.int64)
+    owner = np.repeat(np.arange(graph.shape[0], dtype=index), np.diff(graph.indptr))
+    up, down = small[owner], small[graph.indices]
+    del owner, small
+    cross = up != down
+    up, down = up[cross], down[cross]
+    del cross
+    out_degree = np.bincount(up, minlength=n_comp)
+    # predecessors grouped by component, by a counting sort (coo -> csr, which sums
+    # the duplicates: its data are the multiplicities the out-degrees counted)
+    preds_of = sp.csr_array((np.ones(up.size, dtype=index), (down, up)),
+                            shape=(n_comp, n_comp))
+    return n_comp, comp, out_degree, preds_of
+
+
+def state_components(matrix: sp.csr_array, row_groups: np.ndarray,
+                     seeds: np.ndarray) -> Levels:
+    """The components of ``graph_view(matrix, row_groups)`` and which reach each seed set
+    (``seeds``: ``(n, k)`` bool), with ``level`` None: no level walk where the graph
+    is large and walked by SciPy (the walk was half the analysis of QVBS csma 4-2: the
+    quotient's own levels are what the solvers read, :func:`~mitld_lp.solvers.analysis.
+    analyse`).  Where the levels cost nothing more (the compiled walk finds all three
+    in one pass) they are kept: :func:`state_levels`'s answer.  A small graph's are
+    walked and set aside (the same path whatever the size, for the analysis and its
+    tests).  ``later()`` gives the levels :func:`levels` finds, from the same
+    condensation (once: it uses up the out-degrees)."""
+    walks = compiled_walks(matrix.nnz)
+    if walks is not None:
+        return state_levels(matrix, row_groups, seeds)
+    graph = graph_view(matrix, row_groups)
+    if graph.shape[0] + graph.nnz <= SMALL:  # csgraph not imported for it
+        found = levels(graph, seeds)
+        return Levels(found.component, None, found.reach,  # type: ignore[arg-type]
+                      lambda: found.level)
+    size = graph.shape[0] + graph.nnz
+    n_comp, comp, out_degree, preds_of = _condensed(graph)
+    del graph
+
+    def later() -> np.ndarray:  # the walk levels() makes, on the same condensation
+        return _leveled(size, n_comp, comp, out_degree, preds_of, None).level
+
+    return Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
+                  later)
 
 
 def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,

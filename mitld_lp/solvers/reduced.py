@@ -98,8 +98,11 @@ class Quotient(MDPShape):
             analyse`) keeps the states that reach only the larger one; empty for
             :func:`reduce`'s own.
         layers: the component of each *original* state in the product's support graph
-            and the level of each component: the order in which a policy's chain is
-            evaluated (:func:`mitld_lp.solvers.iteration.evaluate_policy`).
+            and a level per component: the product's where the compiled walk found them,
+            else the quotient's own levels lifted to the components whose states all stay
+            in the quotient, -1 for the others (a reader of a -1 finds levels of its own:
+            ``certify_chain.chain``, ``certify._repair_levels``,
+            ``evaluation._solve_transient``).
         sense: whether the solvers maximise or minimise on it.
         qualitative: the values the graph decides (:class:`Qualitative`, per original
             state).

@@ -1,0 +1,110 @@
+"""The quotient's block order and the levels the certificate keeps, for
+:func:`mitld_lp.solvers.analysis.analyse`.
+
+The analysis finds the product's components and what they reach
+(:func:`~mitld_lp.solvers.graph.state_components`); the levels of those components were
+half of the analysis on QVBS products walked by SciPy (csma 4-2: 0.16 of 0.35 s CPU),
+and every solver reads only the quotient's.  So where the product's levels are not
+found at no cost (the compiled walk finds all three in one pass), the quotient's own
+components and levels are found on the quotient alone (its maybe states after prob-one:
+678 to 28,812 states on those products) and give the solvers' block order; the
+certificate (:mod:`~mitld_lp.solvers.certify`) reads them lifted to the product's
+components (``Quotient.layers``: a component whose states all stay in the quotient is
+one of the quotient's, an end component collapsed inside it keeping it strongly
+connected), -1 for the others, where it finds levels of its own if it reads one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.solvers.graph import Blocks, blocks_from, state_levels
+from mitld_lp.util.arrays import index_dtype
+
+__all__ = ["may_split", "mixed", "order_of", "quotient_blocks", "split"]
+
+
+def order_of(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
+             level_of: np.ndarray) -> Blocks:
+    """The quotient's components (``comp_of``, per reduced state: ids of the product's
+    components or of the quotient's own) and levels (``level_of`` per component), with
+    each reduced choice's probability of staying where it is."""
+    n = row_groups.shape[0] - 1
+    n_choices = q_matrix.shape[0]
+    # each entry's row and the row's state in the index type (int32 where it fits: two
+    # of these an entry were the analysis's peak)
+    owner = np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(row_groups))
+    entry_row = np.repeat(np.arange(n_choices, dtype=index_dtype(n_choices)),
+                          np.diff(q_matrix.indptr))
+    hit = q_matrix.indices == owner[entry_row]
+    del owner
+    self_loop = np.bincount(entry_row[hit], weights=q_matrix.data[hit], minlength=n_choices)
+    return blocks_from(comp_of, level_of, self_loop)
+
+
+def split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
+    """Whether a component of the product holds both a state left in the quotient
+    (``maybe``) and one removed with value 1 (``sure``)."""
+    if not sure.any():
+        return False
+    kept = np.zeros(int(component.max(initial=-1)) + 1, dtype=bool)
+    kept[component[maybe]] = True
+    return bool(kept[component[sure]].any())
+
+
+def mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
+    """Whether a component of the product holds both a state of the quotient
+    (``maybe``) and one out of it (then the quotient's levels are not the product's
+    lifted, and the product's are walked: QVBS zeroconf 1000-4's large component)."""
+    size = np.bincount(comp)
+    inside = np.bincount(comp[maybe], minlength=size.size)
+    return bool(np.any((inside > 0) & (inside < size)))
+
+
+def may_split(comp: np.ndarray, maybe: np.ndarray) -> bool:
+    """Whether prob-one may split a component of the product (:func:`split`): some
+    ``maybe`` state lies in a component of more than one state.  If not, the caller
+    needs the product's levels in no case and frees what would walk them."""
+    size = np.bincount(comp)
+    return bool(np.any(size[comp[maybe]] > 1))
+
+
+def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
+                    maybe: np.ndarray, sure_state: np.ndarray, state_map: np.ndarray,
+                    product_levels: Callable[[], Any]) -> tuple[Blocks, np.ndarray]:
+    """The quotient's block order and a level per component of the product for the
+    certificate (``Quotient.layers``).  With the product's levels (``found.level``:
+    from the compiled walk, or walked by the caller where a component of the product
+    holds states in and out of the quotient, :func:`mixed`) the order and layers are
+    those of the product, as before.  Else the quotient's own levels, found on the
+    quotient alone (its maybe states after prob-one), lifted to the components of the
+    product that hold its states (each is one of its components); -1 for the others,
+    where the certificate finds levels of its own if it reads one
+    (:mod:`~mitld_lp.solvers.certify`).  Where prob-one's removal split a component
+    (:func:`split`), the product's levels are walked (``found.later()``, kept by the
+    caller where :func:`may_split`; else ``product_levels()``, the same components)
+    for the layers, as before."""
+    comp = found.component
+    level = found.level
+    cut = split(comp, maybe, sure_state)
+    if level is not None and not cut:
+        comp_of = np.zeros(row_groups.shape[0] - 1, dtype=np.int64)
+        comp_of[state_map[maybe]] = comp[maybe]
+        return order_of(matrix, row_groups, comp_of, level), level
+    # a component of the product that lost states to prob-one may be several of the
+    # quotient: the quotient's own are found (a block is one component: a single
+    # state is solved apart)
+    own = state_levels(matrix, row_groups)
+    order = order_of(matrix, row_groups, own.component, own.level)
+    if cut:  # the product's levels for the layers, as before
+        if level is None:
+            level = found.later() if found.later is not None else product_levels().level
+        return order, level
+    level = np.full(int(comp.max(initial=-1)) + 1, -1, dtype=np.int64)
+    at = np.flatnonzero(maybe)
+    level[comp[at]] = own.level[own.component[state_map[at]]]
+    return order, level
