@@ -46,10 +46,16 @@ STAGES = (("analysis", "mitld_lp.solvers.analysis", "analyse"),
           ("lp", "mitld_lp.solvers.lp", "solve_lp"),
           ("certificate", "mitld_lp.solvers.certify", "certify"),
           ("greedy", "mitld_lp.solvers.lp_blocks", "certified_greedy"),
-          ("flow", "mitld_lp.solvers.lp_blocks", "policy_flow"))
+          ("flow", "mitld_lp.solvers.lp_blocks", "policy_flow"),
+          ("kernel", "mitld_lp.solvers.kernels", "compiled_kernel"),
+          ("numba_import", "mitld_lp.solvers.numba_narrow", "import_numba"))
 """The default route's stages (and the LP stage's two parts there) timed by ``--stages``:
 each function is imported by its caller when called, so wrapping it in its module
-times every call."""
+times every call.  ``kernel`` is the compiled sweeps' kernel asked for (its load from
+numba's cache the first time, numba's import too where the analysis has not imported
+it), ``numba_import`` ``import numba`` alone, wherever it happens (the analysis, where
+it finds a component the compiled sweeps will take); both are inside the stage that
+asks first."""
 
 
 def work_lp(inst: Instance, stages: bool = False) -> dict[str, Any]:
