@@ -19,7 +19,12 @@ the same bits before and after, or not).  Storm's check of the same product is i
   slack (``_solve``), the Bellman checks (``_fails``), the repair (``_Repair.run``) and
   the recheck after it (``_touched``, ``_fails_among``: cert-half's, empty before);
 * ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
-  certificate's).
+  certificate's), ``chain_walk_solve`` their solves;
+* the iteration's pieces: its sweeps (``compiled_sweeps``, ``numpy_sweeps``; their
+  count ``sweeps`` and ``ms_per_sweep``), the compiled sweeps' order and the block
+  renumbered in it (``sweep_order``, ``renumbered``), the policy jump
+  (``policy_jump``); the LP stage's greedy block (``lp_greedy``); the minimum's proof
+  that no end component is left (``_escapes``).
 
 ::
 
@@ -78,15 +83,29 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          ("mitld_lp.solvers.certify_repair", "_Repair.run"),
          ("mitld_lp.solvers.certify", "everywhere"),
          ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"),
-         ("mitld_lp.routes.plain", "_keeping"))
+         ("mitld_lp.routes.plain", "_keeping"),
+         # the iteration's pieces (cert-cut): the sweeps (compiled or NumPy), their
+         # set-up (the order of the compiled sweeps, the block renumbered), the policy
+         # jump; the LP stage's greedy block and every chain walk's solve
+         ("mitld_lp.solvers.iteration", "compiled_sweeps"),
+         ("mitld_lp.solvers.iteration", "numpy_sweeps"),
+         ("mitld_lp.solvers.iteration", "value_order", "sweep_order"),
+         ("mitld_lp.solvers.iteration", "renumbered"),
+         ("mitld_lp.solvers.iteration", "jump", "policy_jump"),
+         ("mitld_lp.solvers.lp_blocks", "certified_greedy", "lp_greedy"),
+         ("mitld_lp.solvers.chain_levels", "ChainLevels.solve", "chain_walk_solve"),
+         # the certificate's proof that a minimum leaves no end component
+         ("mitld_lp.solvers.certify", "_escapes"))
 """The entry points timed in place: (module, attribute, column); the column is the
 attribute's name where no third is given.  ``solve_stage``: the plain route's
 ``solve_models`` (the analysis to the certificates, without the result's record);
 ``iteration_result``: the iteration's results built (the bounds lifted to the product;
 the policy was made there before it was made at its first read); ``iteration_policy``:
-that first read, where the route needs it (absent before)."""
-COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu",
-           *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
+that first read, where the route needs it (absent before).  ``sweeps``: the interval
+iteration's sweeps (every block's), ``ms_per_sweep`` the sweeps' CPU (compiled and
+NumPy) over them (empty where none)."""
+COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu", "sweeps",
+           "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
 
 
 def child(job: dict[str, Any]) -> dict[str, Any]:
@@ -115,8 +134,13 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
                                         spent))
     c = time.process_time()
     r = synthesize(model)
-    return dict(spent, solve_cpu=time.process_time() - c, lower=r.lower.hex(),
-                upper=r.upper.hex())
+    solve_cpu = time.process_time() - c
+    part = getattr(r, "part", None)
+    it = getattr(getattr(part, "lower_model", None), "iteration", None)
+    sweeps = None if it is None else int(it.iterations)
+    swept = spent.get("compiled_sweeps", 0.0) + spent.get("numpy_sweeps", 0.0)
+    return dict(spent, solve_cpu=solve_cpu, lower=r.lower.hex(), upper=r.upper.hex(),
+                sweeps=sweeps, ms_per_sweep=1e3 * swept / sweeps if sweeps else None)
 
 
 def _run(job: dict[str, Any], work: Path, package: Path) -> dict[str, Any]:

@@ -50,10 +50,9 @@ import scipy.sparse as sp
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
-from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, support_layers
+from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
 from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
 from mitld_lp.solvers.chain_levels import forget
-from mitld_lp.solvers.graph import attractor
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
     BATCH,
@@ -506,16 +505,15 @@ def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
     keeps its states out of that attractor (each has a choice whose support stays in
     it), so True proves there is none; False leaves the search for the components to
     the caller, as does a matrix that stores a zero (its pattern is more than the
-    support)."""
+    support).  The attractor is walked on those states' own rows alone
+    (:func:`~mitld_lp.solvers.certify_chain.attracted`): the same set there."""
     m = sp.csr_array(mdp.matrix)
     if m.nnz and not bool(np.all(m.data > 0)):
         return False
-    inside = left & may_cycle(mdp, comp)
-    if not inside.any():
-        return True
     groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    seeds = ~inside | (np.diff(groups) == 0)
-    return bool(np.all(attractor(m, groups, seeds)[inside]))
+    # (a state with no choice is a seed: attracted)
+    inside = left & may_cycle(mdp, comp) & (np.diff(groups) > 0)
+    return True if not inside.any() else attracted(m, groups, inside)
 
 
 # ------------------------------------------------------------------ one model

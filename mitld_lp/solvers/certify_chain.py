@@ -11,10 +11,10 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
 from mitld_lp.solvers.chain_levels import walk_of
-from mitld_lp.solvers.graph import Blocks, Reversed, blocks_from, graph_view, levels
+from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
-from mitld_lp.solvers.rows import row_columns, row_entries
+from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
@@ -22,7 +22,7 @@ try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
 except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
     _st = None
 
-__all__ = ["Chain", "RowModel", "support_layers", "chain"]
+__all__ = ["Chain", "RowModel", "support_layers", "chain", "attracted"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -249,3 +249,37 @@ class _Singles:
             value = (b_of[r] + down_v) / leave[r]
             v[one] = value
             w[one] = (twice_kappa[r] * value + down_w) / leave[r]
+
+
+def attracted(m: sp.csr_array, groups: np.ndarray, inside: np.ndarray) -> bool:
+    """Whether every ``inside`` state (each with a choice) is in the attractor of the
+    other states: ``attractor(m, groups, ~inside)[inside].all()``, walked on the
+    ``inside`` states' rows only.  Every other state is a seed, so a choice of an
+    ``inside`` state with an entry out of them is hit from the start, and the rest of
+    the least fixed point lies among them: the attractor of no seed on their rows with
+    their columns (those hits given), the same set on them.  QVBS ``consensus`` 4-4
+    ``c2``: 19,157 of 43,133 states, whose first round of the whole walk read the
+    predecessors of every other state."""
+    states = np.flatnonzero(inside)
+    lo, hi = groups[states], groups[states + 1]
+    choices = gather_ranges(lo, hi)
+    starts, stops = m.indptr[choices], m.indptr[choices + 1]
+    entries = gather_ranges(starts, stops)
+    at = np.full(inside.size, -1, dtype=np.int64)  # a column's place among them
+    at[states] = np.arange(states.size)
+    cols = at[m.indices[entries]]
+    del entries
+    kept = cols >= 0
+    counts = stops - starts
+    row_of = np.repeat(np.arange(choices.size), counts)
+    hit = np.zeros(choices.size, dtype=bool)
+    hit[row_of[~kept]] = True  # an entry out of them: a seed is a successor
+    ptr = np.zeros(choices.size + 1, dtype=np.int64)
+    np.cumsum(np.bincount(row_of[kept], minlength=choices.size), out=ptr[1:])
+    # the product's index types (a compiled walk loads one variant, not one a type)
+    sub = sp.csr_array((np.ones(int(ptr[-1])), cols[kept].astype(m.indices.dtype),
+                        ptr.astype(m.indptr.dtype)), shape=(choices.size, states.size))
+    sub_groups = np.zeros(states.size + 1, dtype=np.int64)
+    np.cumsum(hi - lo, out=sub_groups[1:])
+    return bool(np.all(attractor(sub, sub_groups, np.zeros(states.size, dtype=bool),
+                                 hit)))

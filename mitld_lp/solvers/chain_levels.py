@@ -74,7 +74,7 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         # a smaller chain is one LU, faster than finding its components
         self.blocks: Blocks | None = (
             None if self.chain.shape[0] < WALK_MIN_STATES else
-            graph_blocks(sp.csr_array(self.chain != 0, dtype=np.float64), self.self_loop))
+            graph_blocks(_support(self.chain), self.self_loop))
         # per level with cyclic states: (their rows, the LU of I - their block)
         self._cyclic: dict[int, tuple[sp.csr_array, SuperLU | DenseLU]] = {}
         # the single states' runs of levels by one compiled call each, where the
@@ -279,6 +279,17 @@ def offer(walk: ChainLevels) -> None:
 def forget() -> None:
     """Drop every walk :func:`offer` kept (their factorisations freed)."""
     _OFFERED.clear()
+
+
+def _support(c: sp.csr_array) -> sp.csr_array:
+    """The graph whose components and levels :class:`ChainLevels` walks: ``c`` itself
+    where it is canonical and stores no zero (the search reads its pattern alone), else
+    its nonzero pattern as a float matrix (``c != 0``), as it always was.  Not a boolean
+    copy of the pattern and a float copy of that beside the chain: QVBS ``zeroconf``
+    1000-4's greedy chain of the LP stage, where the solve's traced memory peaked."""
+    if c.has_canonical_format and np.count_nonzero(c.data) == c.nnz:
+        return c
+    return sp.csr_array(c != 0, dtype=np.float64)
 
 
 def _walked(c: sp.csr_array) -> sp.csr_array:
