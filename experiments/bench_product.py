@@ -22,11 +22,12 @@ Run: ``python experiments/bench_product.py [--sizes 16 32 64] [--deadlines 4 12]
 automaton, its passes timed apart in CPU milliseconds (the least over ``--repeats``
 builds): the automaton (``automaton``: to_dta and make_sta), the world's table read
 into the layers (``layers``), the lean table levels' set-up (``lean_init``: the
-automaton's steps tabulated, whether rows repeat a state), the levels' rows (``expand``: the lean table levels, or
-the general expansion), the new states numbered (``intern``, inside ``expand``; its
-dense-index part ``add_dense`` inside that), the matrix assembled (``assemble``) and the
-rest of the build (``rest``); the answer beside: the product's states, transitions and
-a digest of its arrays (the same digest before and after a change: the same product).
+automaton's steps tabulated, whether rows repeat a state), the levels' rows
+(``expand``: the lean table levels, or the general expansion), the new states
+numbered (``intern``, inside ``expand``; its dense-index part ``add_dense`` inside
+it), the matrix assembled (``assemble``) and the rest of the build (``rest``); the
+answer beside: the product's states, transitions and a digest of its arrays (the
+same digest before and after a change: the same product).
 
     python experiments/bench_product.py --prism /tmp/jobs/*.toml --repeats 5
 """
