@@ -25,24 +25,42 @@ def _rising_loop(values: list[int]) -> bool:
     return all(a < b for a, b in zip(values, values[1:], strict=False))
 
 
-def test_offsets_rise_exactly_where_a_loop_says_so() -> None:
+def _fake(choices: list[int], branches: list[int]):
+    """A stand-in for Storm's export: these offsets, every branch to state 0 at 1."""
+    def export(model, where, origins=False, labels=None):
+        targets = np.zeros(branches[-1], dtype=np.int64)
+        probs = np.ones(branches[-1])
+        return (np.array(choices, dtype=np.int64), np.array(branches, dtype=np.int64),
+                targets, probs, None, None)
+    return export
+
+
+def test_offsets_are_taken_exactly_where_a_loop_says_they_rise(monkeypatch) -> None:
     rng = np.random.default_rng(11)
-    cases = [np.array([0]), np.array([0, 1]), np.array([0, 0]), np.array([3, 2])]
+    cases = [[0, 1], [0, 0, 1], [0, 1, 1], [0, 2, 1]]
     for _ in range(200):
         steps = rng.integers(0, 3, size=int(rng.integers(1, 30)))  # 0: a repeat
-        cases.append(np.concatenate(([0], np.cumsum(steps))).astype(np.int64))
-    for offsets in cases:
-        assert pt._rising(offsets) == _rising_loop(offsets.tolist()), offsets
+        cases.append([0, *np.cumsum(steps).tolist()])
+    for choices in cases:  # as many branches as choices, one each
+        m = choices[-1]
+        monkeypatch.setattr(pt, "_export", _fake(choices, list(range(m + 1))))
+        if m > 0 and _rising_loop(choices):
+            assert pt.transition_arrays(None, "w.prism")[0].tolist() == choices
+        else:
+            with pytest.raises(WorldError, match="inconsistent"):
+                pt.transition_arrays(None, "w.prism")
+    for branches in cases:  # one choice per state, as many as the branches' rows
+        m = len(branches) - 1
+        monkeypatch.setattr(pt, "_export", _fake(list(range(m + 1)), branches))
+        if branches[-1] > 0 and _rising_loop(branches):
+            assert pt.transition_arrays(None, "w.prism")[1].tolist() == branches
+        else:
+            with pytest.raises(WorldError, match="inconsistent"):
+                pt.transition_arrays(None, "w.prism")
 
 
 def test_an_export_with_an_empty_state_or_choice_is_refused(monkeypatch) -> None:
-    def fake(choices: list[int], branches: list[int]):
-        def export(model, where, origins=False, labels=None):
-            targets = np.zeros(branches[-1], dtype=np.int64)
-            probs = np.ones(branches[-1])
-            return (np.array(choices, dtype=np.int64), np.array(branches, dtype=np.int64),
-                    targets, probs, None, None)
-        return export
+    fake = _fake
 
     good = ([0, 1, 2], [0, 1, 2])
     monkeypatch.setattr(pt, "_export", fake(*good))

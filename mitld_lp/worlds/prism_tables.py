@@ -142,7 +142,8 @@ def _read_export(model: Any, where: str, origins: bool = False,
     n, m, b = len(choices) - 1, len(branches) - 1, len(targets)
     ok = (
         choices[0] == 0 and choices[-1] == m and branches[0] == 0 and branches[-1] == b
-        and _rising(choices) and _rising(branches)
+        and bool((choices[1:] > choices[:-1]).all())  # rising: no array of differences
+        and bool((branches[1:] > branches[:-1]).all())
         and (b == 0 or (targets.min() >= 0 and targets.max() < n))
     )
     if not ok:
@@ -153,12 +154,6 @@ def _read_export(model: Any, where: str, origins: bool = False,
         branches = np.concatenate(([0], np.cumsum(kept)))
         targets, probabilities = targets[positive], probabilities[positive]
     return (choices, branches, targets, probabilities), packed, actions
-
-
-def _rising(offsets: np.ndarray) -> bool:
-    """Whether ``offsets`` strictly increase (each state a choice, each choice a branch):
-    one comparison of neighbours, no array of differences."""
-    return bool((offsets[1:] > offsets[:-1]).all())
 
 
 def _export(model: Any, where: str, origins: bool = False,
@@ -472,8 +467,7 @@ def read_model(
     def show(s: int) -> str:
         return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
 
-    per_state = np.diff(choices)  # >= 1 each: _read_export checked it
-    state_of = np.repeat(np.arange(n, dtype=np.int64), per_state)
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))  # each >= 1
     if named is not None:  # every choice named by the commands it comes from
         label_names, label_of = named(model, actions)
     elif not model.has_choice_labeling():  # built without: every choice named late
@@ -498,7 +492,7 @@ def read_model(
     if decided is not None:
         stopped = np.zeros(n, dtype=bool)
         stopped[label_states(model, decided, archive)] = True
-        alone = stopped & (per_state == 1)  # Storm's one self-loop, unlabelled
+        alone = stopped & (np.diff(choices) == 1)  # Storm's one self-loop, unlabelled
         unlabelled = alone[state_of] & (label_of == -1)
         table.append(DECIDED_ACTION)
         code[unlabelled] = len(table) - 1
@@ -544,10 +538,8 @@ def read_model(
         effect = np.full(n, -1, dtype=np.int64)
         effect[at] = mine
         effects[event] = effect
-    # where every choice is the robot's, every state has one (per_state): none to look for
-    stuck = (np.zeros(0, dtype=np.int64) if robot.all()
-             else np.flatnonzero(np.bincount(state_of[robot], minlength=n) == 0))
-    if stuck.size:
+    stuck = np.flatnonzero(np.bincount(state_of[robot], minlength=n) == 0) if events else ()
+    if len(stuck):  # (without events every choice is the robot's, and every state has one)
         raise WorldError(
             f"{where}: at state {show(int(stuck[0]))} only event commands are enabled; the "
             "robot needs an action there (e.g. [wait] true -> true;)"
