@@ -16,6 +16,20 @@ a 1e6-state product in under 20 s and under 1 GB.
 
 Run: ``python experiments/bench_product.py [--sizes 16 32 64] [--deadlines 4 12]``;
 ``--quick`` runs two small rows.  The script prints its table and writes nothing.
+
+``--prism MODEL.toml ...``: instead, the product of each model file's world (a
+``[prism]`` world, as ``bench_qvbs.py`` writes them; loaded untimed) with its task's
+automaton, its passes timed apart in CPU milliseconds (the least over ``--repeats``
+builds): the automaton (``automaton``: to_dta and make_sta), the world's table read
+into the layers (``layers``), the lean table levels' set-up (``lean_init``: the
+automaton's steps tabulated, whether rows repeat a state), the levels' rows
+(``expand``: the lean table levels, or the general expansion), the new states
+numbered (``intern``, inside ``expand``; its dense-index part ``add_dense`` inside
+it), the matrix assembled (``assemble``) and the rest of the build (``rest``); the
+answer beside: the product's states, transitions and a digest of its arrays (the
+same digest before and after a change: the same product).
+
+    python experiments/bench_product.py --prism /tmp/jobs/*.toml --repeats 5
 """
 
 from __future__ import annotations
@@ -102,6 +116,92 @@ def measure(n: int, deadline: int, epsilon: float, *, reference: bool, memory: b
                per)
 
 
+PASSES = (("automaton", "mitld_lp.routes.stages", "to_dta"),
+          ("automaton", "mitld_lp.routes.stages", "make_sta"),
+          ("layers", "mitld_lp.product.build", "Layers"),
+          ("lean_init", "mitld_lp.product.build", "Plain"),
+          ("expand", "mitld_lp.product.table_levels.Plain", "expand"),
+          ("expand", "mitld_lp.product.build", "_expand"),
+          ("intern", "mitld_lp.product.build._Found", "intern"),
+          ("add_dense", "mitld_lp.product.build._Found", "_add_dense"),
+          ("assemble", "mitld_lp.product.build", "_assemble"))
+"""Each pass: its column, where the function lives (a module, or a module's class) and
+its name; a pass's CPU is summed over its calls."""
+
+
+def _owner(where: str) -> object:
+    import importlib
+
+    try:
+        return importlib.import_module(where)
+    except ImportError:
+        module, _, cls = where.rpartition(".")
+        return getattr(importlib.import_module(module), cls)
+
+
+def product_passes(model_file: str, repeats: int) -> dict[str, object]:
+    """The product of ``model_file``'s world and task, built ``repeats`` times: each
+    pass's least CPU milliseconds, the whole build's, and the product's size and digest."""
+    import functools
+    import hashlib
+
+    from mitld_lp import load_model
+    from mitld_lp.routes.stages import build_posed
+    from mitld_lp.synthesis import pose
+
+    spent: dict[str, float] = {}
+
+    def timed(column: str, f: object) -> object:
+        @functools.wraps(f)  # type: ignore[arg-type]
+        def run(*a: object, **k: object) -> object:
+            c = time.process_time()
+            try:
+                return f(*a, **k)  # type: ignore[operator]
+            finally:
+                spent[column] = spent.get(column, 0.0) + time.process_time() - c
+        return run
+
+    for column, where, name in PASSES:
+        owner = _owner(where)
+        setattr(owner, name, timed(column, getattr(owner, name)))
+    model = load_model(model_file, max_states=2_000_000)
+    best: dict[str, float] = {}
+    for _ in range(repeats):
+        spent.clear()
+        posed = pose(model)
+        c = time.process_time()
+        built = build_posed(posed, progress=False)
+        spent["whole"] = time.process_time() - c
+        for k, v in spent.items():
+            best[k] = min(best.get(k, float("inf")), v)
+    mdp = built.mdp
+    h = hashlib.sha256()
+    for a in (mdp.row_groups, mdp.choice_actions, mdp.matrix.indptr, mdp.matrix.indices,
+              mdp.matrix.data, mdp.target, mdp.sink, mdp.truncated):
+        h.update(np.ascontiguousarray(a).tobytes())
+    inner = sum(best.get(k, 0.0) for k in ("automaton", "layers", "lean_init", "expand",
+                                             "assemble"))
+    return dict(states=mdp.n_states, transitions=mdp.n_transitions,
+                digest=h.hexdigest()[:16], **{k: round(v * 1e3, 2) for k, v in best.items()},
+                rest=round((best["whole"] - inner) * 1e3, 2))
+
+
+def main_prism(files: list[str], repeats: int) -> list[dict[str, object]]:
+    """``--prism``: each model file's product passes, in a fresh process each."""
+    import json
+    import subprocess
+    import sys
+
+    rows = []
+    for f in files:
+        out = subprocess.run([sys.executable, __file__, "--prism-one", f, str(repeats)],
+                             capture_output=True, text=True, check=True)
+        row = dict(model=f.rsplit("/", 1)[-1], **json.loads(out.stdout.splitlines()[-1]))
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> list[Row]:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two small rows (seconds)")
@@ -113,7 +213,13 @@ def main(argv: list[str] | None = None) -> list[Row]:
                     help="skip the state-at-a-time peer (for the largest rows)")
     ap.add_argument("--no-memory", action="store_true",
                     help="skip the tracemalloc build (it slows the build down)")
+    ap.add_argument("--prism", nargs="+", default=None, metavar="MODEL",
+                    help="the product passes of these model files' PRISM worlds instead")
+    ap.add_argument("--repeats", type=int, default=3, help="builds of each (--prism)")
     args = ap.parse_args(argv)
+    if args.prism:
+        main_prism(args.prism, 1 if args.quick else args.repeats)
+        return []
     rows_wanted = [(8, 4), (16, 4)] if args.quick else [
         (n, d) for d in args.deadlines for n in args.sizes
     ]
@@ -139,4 +245,10 @@ def main(argv: list[str] | None = None) -> list[Row]:
 
 
 if __name__ == "__main__":
-    main()
+    import json
+    import sys
+
+    if sys.argv[1:2] == ["--prism-one"]:  # main_prism's child
+        print(json.dumps(product_passes(sys.argv[2], int(sys.argv[3]))))
+    else:
+        main()

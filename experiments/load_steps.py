@@ -10,9 +10,12 @@ build of the initial state alone where the program has an ``init`` block), the c
 Storm's model into arrays (``read_model``: the UMB export and its read, the labels, the
 checks of every distribution; inside it, timed apart: Storm's export ``umb_export``, the
 archive's headers ``umb_members``, the rows' check ``checked_rows``, the state and choice
-labels), the spec's parse, the PRISM file's parse and the labels
-added to it, the program's checks; and in the capped load, the parent's copy of the
-arrays the child sends (``child_receive``).  The answer printed beside: the
+labels, the states of one of Storm's labels read for the decided, deadlock and
+out-of-bounds states ``label_states``), the spec's parse, the PRISM file's parse and the
+labels added to it, the program's checks; and in the capped load, the parent's copy of the
+arrays the child sends (``child_receive``); apart, stormpy's import before the load
+(``stormpy_import``, which the load does not count here and the benchmark's ``load_cpu``
+does: Storm's ``storm_build_cpu`` leaves it out).  The answer printed beside: the
 world's states and transitions.  The least over ``--repeats`` runs of each.
 ``--compare DIR``: the same for the package of the checkout DIR (before), the two taking
 turns, a row each.
@@ -38,7 +41,9 @@ ROOT = HERE.parent
 
 PROBE = r"""
 import functools, json, resource, sys, time
+c = time.process_time()
 import stormpy
+stormpy_import = time.process_time() - c
 from mitld_lp import load_model
 from mitld_lp import game_tables as gt
 from mitld_lp.worlds import prism as pr, prism_build as pb
@@ -75,6 +80,7 @@ if here:
                                 (pt, "archive_members", "umb_members"),
                                 (pt, "checked_rows", "checked_rows"),
                                 (pt, "state_labels", "state_labels"),
+                                (pt, "label_states", "label_states"),
                                 (pt, "choice_labels", "choice_labels")):
         timed(module, name, label)
 else:  # the parent's side of the capped child: the model's arrays received
@@ -83,6 +89,7 @@ c = cpu()
 model = load_model(sys.argv[1], max_states=2_000_000)
 load = cpu() - c
 t = model.game._tables
+steps["stormpy_import"] = stormpy_import  # before the load: not in it
 print(json.dumps(dict(load=load, steps=steps, states=len(t.states),
                       transitions=int(t.targets.size))))
 """
@@ -97,7 +104,8 @@ def run(model: Path, where: str, root: Path = ROOT) -> dict:
 
 STEPS = ("storm_build", "head", "read_model", "parse_spec", "parse_program", "with_labels",
          "check_program")
-INSIDE = ("umb_export", "umb_members", "checked_rows", "state_labels", "choice_labels")
+INSIDE = ("umb_export", "umb_members", "checked_rows", "state_labels", "label_states",
+          "choice_labels")
 """Steps inside ``read_model`` (in its time already, not in ``rest``)."""
 
 
@@ -111,7 +119,7 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
     args = p.parse_args(argv)
     repeats = args.repeats or (1 if args.quick else 3)
     header = ["model", "checkout", "states", "transitions", "capped", "here", *STEPS, "rest",
-              *INSIDE, "child_receive"]
+              *INSIDE, "child_receive", "stormpy_import"]
     roots = [("before", args.compare.resolve()), ("after", ROOT)] if args.compare else [
         ("this", ROOT)]
     rows: list[list[object]] = []
@@ -133,9 +141,12 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
             inside = [round(min(r["steps"].get(s, 0.0) for r in here[name]), 4)
                       for s in INSIDE]
             receive = round(min(r["steps"].get("child_receive", 0.0) for r in capped[name]), 4)
+            imported = round(min(r["steps"]["stormpy_import"] for r in capped[name]
+                                 + here[name]), 4)
             rows.append([model.stem, name, best["states"], best["transitions"],
                          round(min(r["load"] for r in capped[name]), 4),
-                         round(best["load"], 4), *steps, round(rest, 4), *inside, receive])
+                         round(best["load"], 4), *steps, round(rest, 4), *inside, receive,
+                         imported])
             print(dict(zip(header, rows[-1], strict=True)))
     _common.write_tables(_common.out_dir(args), "load_steps", header, rows)
     return rows

@@ -156,7 +156,7 @@ def _rows_distinct(targets: np.ndarray, branches: np.ndarray) -> bool:
     is not counts as one that might repeat)."""
     if targets.size < 2:
         return True
-    up = np.diff(targets) > 0
+    up = targets[1:] > targets[:-1]
     inner = branches[1:-1]
     inner = inner[(inner > 0) & (inner < targets.size)]
     up[inner - 1] = True  # a row's first entry follows another row's last

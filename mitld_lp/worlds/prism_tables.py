@@ -142,7 +142,8 @@ def _read_export(model: Any, where: str, origins: bool = False,
     n, m, b = len(choices) - 1, len(branches) - 1, len(targets)
     ok = (
         choices[0] == 0 and choices[-1] == m and branches[0] == 0 and branches[-1] == b
-        and bool(np.all(np.diff(choices) > 0)) and bool(np.all(np.diff(branches) > 0))
+        and bool((choices[1:] > choices[:-1]).all())  # rising: no array of differences
+        and bool((branches[1:] > branches[:-1]).all())
         and (b == 0 or (targets.min() >= 0 and targets.max() < n))
     )
     if not ok:
@@ -466,7 +467,7 @@ def read_model(
     def show(s: int) -> str:
         return "[" + " & ".join(f"{k}={v}" for k, v in zip(variables, states[s], strict=True)) + "]"
 
-    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(choices))  # each >= 1
     if named is not None:  # every choice named by the commands it comes from
         label_names, label_of = named(model, actions)
     elif not model.has_choice_labeling():  # built without: every choice named late
@@ -537,8 +538,8 @@ def read_model(
         effect = np.full(n, -1, dtype=np.int64)
         effect[at] = mine
         effects[event] = effect
-    stuck = np.flatnonzero(np.bincount(state_of[robot], minlength=n) == 0)
-    if stuck.size:
+    stuck = np.flatnonzero(np.bincount(state_of[robot], minlength=n) == 0) if events else ()
+    if len(stuck):  # (without events every choice is the robot's, and every state has one)
         raise WorldError(
             f"{where}: at state {show(int(stuck[0]))} only event commands are enabled; the "
             "robot needs an action there (e.g. [wait] true -> true;)"
