@@ -35,7 +35,7 @@ machine code that runs is therefore numba's, byte for byte, and so are the resul
 Where the cache files go: numba's directory for the kernel's function (its locators:
 ``NUMBA_CACHE_DIR``, the module's ``__pycache__``, the user's cache directory), so that a
 file sits beside numba's ``.nbi`` / ``.nbc`` of the same kernel; a reader looks there in
-numba's order.  The file's format: :func:`_pack`.
+numba's order.  The file's format: :func:`mitld_lp.solvers.kernel_files.pack`.
 """
 
 from __future__ import annotations
@@ -46,24 +46,19 @@ import importlib.machinery
 import importlib.util
 import marshal
 import os
-import struct
 import sys
-import tempfile
 import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mitld_lp.solvers import kernel_files
+
 __all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
 
 ENABLED = os.environ.get("MITLD_LP_KERNEL_LOADER", "1") != "0"
 """Whether kernels are read from this module's cache (False: every call is numba's)."""
-
-FORMAT = "mitld_lp kernel object 1"
-MAGIC = (FORMAT + "\n").encode()
-_HEADER = struct.Struct("<QQ")  # lengths of the metadata and of the object code
-SUFFIX = ".kobj"
 
 _lock = threading.RLock()
 _registries: list[LazyNumba] = []
@@ -78,8 +73,32 @@ def loaded_count() -> int:
 
 def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
     """What a module of kernels calls ``numba``: its ``njit`` makes :class:`Kernel`s (or,
-    once numba is loaded, numba's own dispatchers); any other name is numba's."""
+    once numba is loaded, numba's own dispatchers); any other name is numba's.
+    ImportError where numba is not installed (its importers fall back on that, as on
+    ``import numba``), found without importing it."""
+    if "numba" not in sys.modules and importlib.util.find_spec("numba") is None:
+        raise ImportError("numba is not installed")
     return LazyNumba(module_globals)
+
+
+def compiled_paid() -> bool:
+    """Whether a compiled kernel costs this process no further load than reading it:
+    numba is imported, or this module's run-time pieces are set up (llvmlite, numba's
+    helpers).  The gates that send mid-sized work to compiled kernels once their load is
+    paid ask this (it was ``"numba" in sys.modules``)."""
+    return "numba" in sys.modules or bool(_runtime and _runtime[0])
+
+
+def prepare() -> None:
+    """Pay the compiled kernels' load now (a caller that knows they will run): this
+    module's run-time pieces, or numba's import where they cannot be set up."""
+    if ENABLED and not _numba_settings():
+        with _lock:
+            if _setup() is not None:
+                return
+    from mitld_lp.solvers import numba_narrow
+
+    numba_narrow.import_numba()
 
 
 class LazyNumba:
@@ -99,8 +118,6 @@ class LazyNumba:
 
         def decorate(pyfunc: Any) -> Any:
             with _lock:
-                if _numba:
-                    return _numba[0].njit(**options)(pyfunc)
                 kernel = Kernel(pyfunc, options)
                 self.kernels.append(kernel)
                 return kernel
@@ -113,9 +130,12 @@ class LazyNumba:
 
 def numba_module() -> Any:
     """numba, imported as the compiled modules import it (without PyYAML, the narrow load
-    of cached kernels, the disk cache's lock), with every lazy module's kernels turned
-    into numba's dispatchers (each module's globals then name those); ImportError where
-    numba is missing."""
+    of cached kernels, the disk cache's lock), with a numba dispatcher made for every
+    lazy module's kernel; ImportError where numba is missing.  The modules' globals keep
+    naming the :class:`Kernel` objects: numba types one as its dispatcher
+    (``_numba_type_``, which numba's ``typeof`` asks of any object) and inlines it by its
+    ``targetoptions`` and ``py_func`` (both the dispatcher's), so what it compiles is
+    what it compiled with the dispatcher there."""
     with _lock:
         if _numba:
             return _numba[0]
@@ -128,10 +148,6 @@ def numba_module() -> Any:
         kernels = [k for r in _registries for k in r.kernels]
         for k in kernels:
             k.dispatcher = numba.njit(**k.options)(k.py_func)
-        for registry in _registries:  # a module's own kernels and those it imported
-            for name, value in list(registry.globals.items()):
-                if isinstance(value, Kernel):
-                    registry.globals[name] = value.dispatcher
         _numba.append(numba)
         return numba
 
@@ -153,8 +169,10 @@ class Kernel:
     def __repr__(self) -> str:
         return f"<lazy kernel {self.__module__}.{self.__qualname__}>"
 
-    def __getattr__(self, name: str) -> Any:  # numba's attributes (overloads, ...)
-        if name.startswith("__"):
+    def __getattr__(self, name: str) -> Any:
+        """numba's dispatcher's attributes (``overloads``, ``targetoptions``, and
+        ``_numba_type_``, by which numba types a kernel a kernel calls)."""
+        if name.startswith("__") or name in ("dispatcher", "py_func", "options"):
             raise AttributeError(name)
         return getattr(self.numba_dispatcher(), name)
 
@@ -322,7 +340,7 @@ def _setup_once() -> list[Any] | None:
                                       codemodel="jitdefault", jit=True)
     engine = ll.create_mcjit_compiler(ll.parse_assembly(""), tm)
     machine = (triple, cpu, features)
-    parts = (FORMAT, sys.version, numba_id, llvmlite.__version__,
+    parts = (sys.version, numba_id, llvmlite.__version__,
              tuple(ll.llvm_version_info), machine)
     return [dynfunc, ll, engine, parts]
 
@@ -406,58 +424,9 @@ def _source_hash(path: str) -> str:
 def _runtime_key(kernel: Kernel, key: tuple, parts: tuple) -> bytes:
     """The key a cache file must carry (module docs)."""
     code = kernel.py_func.__code__
-    return repr((parts, kernel.__module__, kernel.__qualname__,
+    return repr((kernel_files.FORMAT, parts, kernel.__module__, kernel.__qualname__,
                  _source_hash(code.co_filename),
                  hashlib.sha256(code.co_code).hexdigest(), key)).encode()
-
-
-def _subpath(py_file: str) -> str:
-    """numba's ``get_suitable_cache_subpath``."""
-    sub = os.path.dirname(os.path.abspath(py_file))
-    return "_".join([os.path.split(sub)[-1], hashlib.sha1(sub.encode()).hexdigest()])
-
-
-def _directories(py_file: str) -> list[Path]:
-    """numba's cache directories for a function of ``py_file``, in its locators' order."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env:
-        return [Path(os.path.abspath(env)) / _subpath(py_file)]
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
-                                                             ".cache")
-    return [Path(os.path.dirname(py_file)) / "__pycache__",
-            Path(home) / "numba" / _subpath(py_file)]
-
-
-def _file_name(kernel: Kernel, key: tuple) -> str:
-    stem = os.path.splitext(os.path.basename(kernel.py_func.__code__.co_filename))[0]
-    digest = hashlib.sha256(repr(key).encode()).hexdigest()[:20]
-    return f"{stem}.{kernel.__qualname__}-{digest}{SUFFIX}"
-
-
-def _pack(meta: bytes, object_code: bytes) -> bytes:
-    """A cache file: MAGIC, the two lengths, the SHA-256 of what follows, the metadata
-    (marshal: the key, the wrapper's and environments' names, the constants' dtypes, the
-    undefined symbols) and the object code."""
-    payload = meta + object_code
-    return MAGIC + _HEADER.pack(len(meta), len(object_code)) + \
-        hashlib.sha256(payload).digest() + payload
-
-
-def _unpack(data: bytes) -> tuple[dict[str, Any], bytes] | None:
-    start = len(MAGIC) + _HEADER.size + 32
-    if len(data) < start or not data.startswith(MAGIC):
-        return None
-    nm, no = _HEADER.unpack_from(data, len(MAGIC))
-    payload = data[start:]
-    if len(payload) != nm + no or hashlib.sha256(payload).digest() != data[start - 32:start]:
-        return None
-    try:
-        meta = marshal.loads(payload[:nm])
-    except (EOFError, ValueError, TypeError):
-        return None
-    if not isinstance(meta, dict):
-        return None
-    return meta, payload[nm:]
 
 
 def _load(kernel: Kernel, key: tuple) -> Any:
@@ -466,9 +435,9 @@ def _load(kernel: Kernel, key: tuple) -> Any:
     if _numba_settings():
         return None
     py_file = kernel.py_func.__code__.co_filename
-    name = _file_name(kernel, key)
+    name = kernel_files.file_name(py_file, kernel.__qualname__, key)
     data = None
-    for directory in _directories(py_file):
+    for directory in kernel_files.directories(py_file):
         try:
             data = (directory / name).read_bytes()
             break
@@ -483,7 +452,7 @@ def _load(kernel: Kernel, key: tuple) -> Any:
 
 
 def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
-    found = _unpack(data)
+    found = kernel_files.unpack(data)
     if found is None:
         return None
     meta, object_code = found
@@ -568,7 +537,7 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
             or tuple(signature.args) != sig):
         return
     object_code = payload[0]
-    undefined = _undefined_symbols(object_code)
+    undefined = kernel_files.undefined_symbols(object_code)
     if undefined is None or any(s.startswith(".numba.unresolved$") for s in undefined):
         return
     envs = []
@@ -589,46 +558,8 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
     meta = {"key": _runtime_key(kernel, key, parts),
             "wrapper": fndesc.llvm_cpython_wrapper_name, "env": fndesc.env_name,
             "envs": tuple(envs), "undefined": tuple(sorted(undefined))}
-    _write(Path(cache._cache_path) / _file_name(kernel, key),
-           _pack(marshal.dumps(meta), object_code))
+    name = kernel_files.file_name(kernel.py_func.__code__.co_filename, kernel.__qualname__, key)
+    kernel_files.write(Path(cache._cache_path) / name,
+                       kernel_files.pack(marshal.dumps(meta), object_code))
 
 
-def _undefined_symbols(obj: bytes) -> set[str] | None:
-    """The undefined symbols of an ELF64 little-endian relocatable object (numba's object
-    code on Linux), or None for another format."""
-    if obj[:4] != b"\x7fELF" or obj[4] != 2 or obj[5] != 1:
-        return None
-    shoff = struct.unpack_from("<Q", obj, 0x28)[0]
-    shentsize, shnum = struct.unpack_from("<HH", obj, 0x3A)
-    sections = [struct.unpack_from("<IIQQQQIIQQ", obj, shoff + i * shentsize)
-                for i in range(shnum)]
-    names: set[str] = set()
-    for sec in sections:
-        if sec[1] != 2:  # SHT_SYMTAB
-            continue
-        strtab = sections[sec[6]]
-        for off in range(sec[4] + 24, sec[4] + sec[5], 24):  # entry 0 is null
-            st_name, _info, _other, shndx = struct.unpack_from("<IBBH", obj, off)
-            if shndx == 0 and st_name:
-                start = strtab[4] + st_name
-                names.add(obj[start:obj.index(b"\0", start)].decode())
-    return names
-
-
-def _write(path: Path, data: bytes) -> None:
-    """``data`` into ``path`` by a temporary file renamed over it; nothing where the
-    directory cannot be written."""
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    except OSError:
-        return
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except OSError:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
