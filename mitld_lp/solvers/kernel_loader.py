@@ -61,9 +61,9 @@ ENABLED = os.environ.get("MITLD_LP_KERNEL_LOADER", "1") != "0"
 """Whether kernels are read from this module's cache (False: every call is numba's)."""
 
 _lock = threading.RLock()
-_registries: list[LazyNumba] = []
 _numba: list[Any] = []  # numba, once some kernel needed it
 _loaded = [0]  # kernels linked from this module's cache in this process
+_linked: dict[tuple, Any] = {}  # (object's digest, wrapper) -> its call, once linked
 
 
 def loaded_count() -> int:
@@ -106,9 +106,7 @@ class LazyNumba:
 
     def __init__(self, module_globals: dict[str, Any]) -> None:
         self.globals = module_globals
-        self.kernels: list[Kernel] = []
-        with _lock:
-            _registries.append(self)
+        self.kernels: list[Kernel] = []  # the module's, in their order
 
     def njit(self, *args: Any, **options: Any) -> Any:
         if args and callable(args[0]) and len(args) == 1 and not options:
@@ -130,12 +128,12 @@ class LazyNumba:
 
 def numba_module() -> Any:
     """numba, imported as the compiled modules import it (without PyYAML, the narrow load
-    of cached kernels, the disk cache's lock), with a numba dispatcher made for every
-    lazy module's kernel; ImportError where numba is missing.  The modules' globals keep
-    naming the :class:`Kernel` objects: numba types one as its dispatcher
-    (``_numba_type_``, which numba's ``typeof`` asks of any object) and inlines it by its
-    ``targetoptions`` and ``py_func`` (both the dispatcher's), so what it compiles is
-    what it compiled with the dispatcher there."""
+    of cached kernels, the disk cache's lock); ImportError where numba is missing.  Each
+    :class:`Kernel` makes its numba dispatcher when first asked
+    (:meth:`Kernel.numba_dispatcher`); the modules' globals keep naming the kernels:
+    numba types one as its dispatcher (``_numba_type_``, which numba's ``typeof`` asks of
+    any object) and inlines it by its ``targetoptions`` and ``py_func`` (both the
+    dispatcher's), so what it compiles is what it compiled with the dispatcher there."""
     with _lock:
         if _numba:
             return _numba[0]
@@ -145,9 +143,6 @@ def numba_module() -> Any:
         numba = numba_narrow.require_numba()
         numba_narrow.install()
         numba_cache.install()
-        kernels = [k for r in _registries for k in r.kernels]
-        for k in kernels:
-            k.dispatcher = numba.njit(**k.options)(k.py_func)
         _numba.append(numba)
         return numba
 
@@ -177,8 +172,12 @@ class Kernel:
         return getattr(self.numba_dispatcher(), name)
 
     def numba_dispatcher(self) -> Any:
+        """numba's dispatcher of this kernel (numba imported, :func:`numba_module`)."""
         if self.dispatcher is None:
-            numba_module()
+            numba = numba_module()
+            with _lock:
+                if self.dispatcher is None:
+                    self.dispatcher = numba.njit(**self.options)(self.py_func)
         return self.dispatcher
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
@@ -467,13 +466,18 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
     module = sys.modules.get(kernel.__module__)
     if module is None:
         return None
+    digest = (hashlib.sha256(object_code).digest(), meta["wrapper"])
+    if digest in _linked:  # an object is linked once a process (its symbols are global)
+        return _linked[digest]
     envs = []
     for env_name, modname, consts in meta["envs"]:
         if modname == kernel.__module__:
             scope = module.__dict__
         elif modname in sys.modules and modname.startswith("mitld_lp."):
             scope = sys.modules[modname].__dict__
-        else:
+        else:  # a numba helper's (no constants: the writer refuses others) or a module
+            # not imported: nopython code never reads an environment's globals (only
+            # object mode's lowering does), as numba_narrow's stand-in has it
             scope = {"__name__": modname}
         env = dynfunc.Environment(scope)
         env.consts.extend(np.dtype(c) for c in consts)
@@ -495,6 +499,7 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
                                  f"compiled wrapper for {kernel.__qualname__!r}",
                                  wrapper, own, (engine, tuple(e for _, e in envs)))
     _loaded[0] += 1
+    _linked[digest] = call
     return call
 
 
@@ -550,7 +555,7 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
             return
         if consts and not modname.startswith("mitld_lp."):
             return
-        if not modname.startswith(("mitld_lp.", "numba.np.")):
+        if not modname.startswith(("mitld_lp.", "numba.")):
             return
         envs.append((e.env_name, modname, tuple(c.str for c in consts)))
     if len({n for n, _, _ in envs}) != len(envs):
