@@ -125,7 +125,7 @@ def _file_of(kernel: kernel_loader.Kernel, args: tuple) -> Path:
     raise AssertionError("no cache file")
 
 
-@pytest.mark.parametrize("damage", ["flip", "truncate", "foreign", "garbage"])
+@pytest.mark.parametrize("damage", ["flip", "truncate", "foreign", "garbage", "callee"])
 def test_damaged_or_foreign_file_falls_back_and_is_rewritten(damage: str) -> None:
     kernel = compiled_graph.strong_components
     rng = np.random.default_rng(3)
@@ -144,6 +144,11 @@ def test_damaged_or_foreign_file_falls_back_and_is_rewritten(damage: str) -> Non
         bad = data[: len(data) // 2]
     elif damage == "garbage":
         bad = b"not a cache file"
+    elif damage == "callee":  # a kernel of another module compiled in, since changed
+        import marshal
+
+        other = dict(meta, sources=(("mitld_lp.solvers.level_kernels", "0" * 64),))
+        bad = kernel_files.pack(marshal.dumps(other), obj)
     else:  # a whole, well-formed file for another numba / CPU
         import marshal
 

@@ -404,9 +404,32 @@ def _prime_unpickle(address: int) -> bool:
 
 
 def _numba_settings() -> bool:
-    """Whether a ``NUMBA_*`` setting other than the cache directory is in force (it may
-    change what numba compiles: the loader then leaves every call to numba)."""
-    return any(k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR" for k in os.environ)
+    """Whether a ``NUMBA_*`` setting other than the cache directory, or a numba config
+    file in the working directory, is in force (it may change what numba compiles: the
+    loader then leaves every call to numba)."""
+    return (any(k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR" for k in os.environ)
+            or os.path.isfile(".numba_config.yaml"))
+
+
+def _callee_sources(modules: Any) -> tuple:
+    """``(module, SHA-256 of its source)`` of each of our modules named (the modules of
+    the kernels linked into a kernel: their environments name them), or () where one
+    cannot be read: a kernel's key holds its own module's source, and these hold the
+    source of every kernel compiled into it from another module."""
+    out = []
+    for name in sorted(set(modules)):
+        module = sys.modules.get(name)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            spec = importlib.util.find_spec(name)
+            path = None if spec is None else spec.origin
+        if path is None:
+            return ()
+        try:
+            out.append((name, _source_hash(path)))
+        except OSError:
+            return ()
+    return tuple(out)
 
 
 _sources: dict[str, str] = {}
@@ -461,6 +484,9 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
     dynfunc, ll, engine, parts = pieces
     if meta.get("key") != _runtime_key(kernel, key, parts):
         return None
+    sources = meta.get("sources", ())
+    if _callee_sources(m for m, _ in sources) != sources:
+        return None  # a kernel of another module compiled into it has changed
     if any(ll.address_of_symbol(s) is None for s in meta["undefined"]):
         return None  # LLVM's linker would abort the process on it
     module = sys.modules.get(kernel.__module__)
@@ -560,9 +586,13 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
         envs.append((e.env_name, modname, tuple(c.str for c in consts)))
     if len({n for n, _, _ in envs}) != len(envs):
         envs = list(dict.fromkeys(envs))
+    callees = [m for _, m, _ in envs if m.startswith("mitld_lp.") and m != kernel.__module__]
+    sources = _callee_sources(callees)
+    if callees and not sources:
+        return
     meta = {"key": _runtime_key(kernel, key, parts),
             "wrapper": fndesc.llvm_cpython_wrapper_name, "env": fndesc.env_name,
-            "envs": tuple(envs), "undefined": tuple(sorted(undefined))}
+            "envs": tuple(envs), "undefined": tuple(sorted(undefined)), "sources": sources}
     name = kernel_files.file_name(kernel.py_func.__code__.co_filename, kernel.__qualname__, key)
     kernel_files.write(Path(cache._cache_path) / name,
                        kernel_files.pack(marshal.dumps(meta), object_code))
