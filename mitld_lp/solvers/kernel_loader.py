@@ -22,12 +22,15 @@ as ``numba.typeof``); where the cache file of that signature exists and its key 
 process's exactly (:func:`_runtime_key`: the format, Python's, numba's and llvmlite's
 versions and numba's extension files, LLVM's version, the target triple, CPU name and
 features as numba's ``magic_tuple`` gives them, the kernel's module source and bytecode,
-the argument types), its object code is linked once and its CPython wrapper called, the
-wrapper numba's dispatcher calls.  Anything else (no file, another key, a damaged or
-half-written file, a symbol the linker would not find, an argument of another kind, any
-``NUMBA_*`` setting other than the cache directory, :data:`ENABLED` False) goes to numba:
-every kernel of every lazy module gets its numba dispatcher (a kernel's globals must name
-numba's dispatchers for numba to compile it), the call is numba's, and the cache file is
+the argument types; the file also names the source of every other module whose kernels
+are compiled into it), its object code is linked once and its CPython wrapper called, the
+wrapper numba's dispatcher calls (the one Python function of numba a wrapper reaches, the
+unpickling of the class of the arrays it returns, is primed with a copy:
+:func:`_prime_unpickle`).  Anything else (no file, another key, a damaged or half-written
+file, a symbol the linker would not find, an argument of another kind, any ``NUMBA_*``
+setting other than the cache directory or a numba config file, :data:`ENABLED` False) goes
+to numba: the kernel's numba dispatcher is made (the kernels stay in their modules'
+globals; numba types each as its dispatcher), the call is numba's, and the cache file is
 written from numba's own cache entry of that signature (read under
 :mod:`mitld_lp.util.numba_cache`'s lock), a temporary file renamed over the old one.  The
 machine code that runs is therefore numba's, byte for byte, and so are the results.
@@ -66,14 +69,13 @@ _loaded = [0]  # kernels linked from this module's cache in this process
 _linked: dict[tuple, Any] = {}  # (object's digest, wrapper) -> its call, once linked
 
 
-def loaded_count() -> int:
-    """How many kernel signatures this process linked from this module's cache."""
+def loaded_count() -> int:  # kernel signatures linked from this module's cache
     return _loaded[0]
 
 
 def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
-    """What a module of kernels calls ``numba``: its ``njit`` makes :class:`Kernel`s (or,
-    once numba is loaded, numba's own dispatchers); any other name is numba's.
+    """What a module of kernels calls ``numba``: its ``njit`` makes :class:`Kernel`s; any
+    other name is numba's (imported then).
     ImportError where numba is not installed (its importers fall back on that, as on
     ``import numba``), found without importing it."""
     if "numba" not in sys.modules and importlib.util.find_spec("numba") is None:
@@ -135,16 +137,14 @@ def numba_module() -> Any:
     any object) and inlines it by its ``targetoptions`` and ``py_func`` (both the
     dispatcher's), so what it compiles is what it compiled with the dispatcher there."""
     with _lock:
-        if _numba:
-            return _numba[0]
-        from mitld_lp.solvers import numba_narrow
-        from mitld_lp.util import numba_cache
+        if not _numba:
+            from mitld_lp.solvers import numba_narrow
+            from mitld_lp.util import numba_cache
 
-        numba = numba_narrow.require_numba()
-        numba_narrow.install()
-        numba_cache.install()
-        _numba.append(numba)
-        return numba
+            _numba.append(numba_narrow.require_numba())
+            numba_narrow.install()
+            numba_cache.install()
+        return _numba[0]
 
 
 class Kernel:
