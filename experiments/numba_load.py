@@ -52,38 +52,47 @@ m = [rss()]
 def mark():
     t.append(c())
     m.append(rss())
-if NARROW:
-    from mitld_lp.solvers import numba_narrow
-    getattr(numba_narrow, "import_numba", lambda: __import__("numba"))()  # without PyYAML
+try:  # the loader (kernel-loader branch): on in the loader's rounds only
+    from mitld_lp.solvers import kernel_loader
+    kernel_loader.ENABLED = LOADER
+except ImportError:  # an older checkout
+    pass
+if LOADER:  # numba is never imported: no part of its load happens
+    for _ in range(5):
+        mark()
 else:
-    import numba  # noqa: F401
-mark()
-from numba.core.registry import cpu_target
-from numba.core.runtime import rtsys
-if NARROW:
-    assert numba_narrow.install()
-    mark()  # the typing registries: not refreshed by the narrow load
-    try:  # what the narrow load does at the first kernel's call, made a part of its own
-        from mitld_lp.solvers import nrt_cache
-        nrt_cache.initialize(cpu_target.target_context)
-    except ImportError:  # an older checkout: numba compiles its runtime
-        rtsys.initialize(cpu_target.target_context)
+    if NARROW:
+        from mitld_lp.solvers import numba_narrow
+        getattr(numba_narrow, "import_numba", lambda: __import__("numba"))()  # without PyYAML
+    else:
+        import numba  # noqa: F401
     mark()
-    mark()  # the rest of the target's registries: not refreshed by the narrow load
-else:
-    from mitld_lp.solvers import numba_narrow
-    numba_narrow.ENABLED = False  # every compiled module would put it in place
-    cpu_target.typing_context.refresh()
+    from numba.core.registry import cpu_target
+    from numba.core.runtime import rtsys
+    if NARROW:
+        assert numba_narrow.install()
+        mark()  # the typing registries: not refreshed by the narrow load
+        try:  # what the narrow load does at the first kernel's call, made a part of its own
+            from mitld_lp.solvers import nrt_cache
+            nrt_cache.initialize(cpu_target.target_context)
+        except ImportError:  # an older checkout: numba compiles its runtime
+            rtsys.initialize(cpu_target.target_context)
+        mark()
+        mark()  # the rest of the target's registries: not refreshed by the narrow load
+    else:
+        from mitld_lp.solvers import numba_narrow
+        numba_narrow.ENABLED = False  # every compiled module would put it in place
+        cpu_target.typing_context.refresh()
+        mark()
+        rtsys.initialize(cpu_target.target_context)  # the first step of the refresh
+        mark()
+        cpu_target.target_context.refresh()
+        mark()
+    if not (NARROW and hasattr(numba_narrow, "_rebuild_env")):
+        # the module of the array helpers' environments, which the first call of a kernel
+        # imports (numba's load and older checkouts; since numba-load the narrow load does not)
+        import numba.np.arrayobj  # noqa: F401
     mark()
-    rtsys.initialize(cpu_target.target_context)  # the first step of the refresh
-    mark()
-    cpu_target.target_context.refresh()
-    mark()
-if not (NARROW and hasattr(numba_narrow, "_rebuild_env")):
-    # the module of the array helpers' environments, which the first call of a kernel
-    # imports (numba's load and older checkouts; since numba-load the narrow load does not)
-    import numba.np.arrayobj  # noqa: F401
-mark()
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
 from mitld_lp.solvers import compiled_graph
 alive, allowed, label = compiled_graph.end_components_among(
@@ -104,6 +113,7 @@ mark()
 parts = [b - a for a, b in zip(t, t[1:])]
 import sys
 print(json.dumps({"parts": parts, "rss": [b - a for a, b in zip(m, m[1:])],
+                  "numba": "numba" in sys.modules,
                   "modules": [m for m in ("yaml", "cffi", "pycparser", "numba.np.arrayobj")
                               if m in sys.modules],
                   "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
@@ -127,17 +137,18 @@ def main(argv: list[str] | None = None) -> None:
         args.rounds = 1
     if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
         ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
-    modes = {"whole": (False, None), "narrow": (True, None)}
+    modes = {"whole": (False, None), "narrow": (True, None), "loader": ("loader", None)}
     if args.compare is not None:
         modes = {"whole": (False, None), "base narrow": (True, args.compare.resolve()),
-                 "narrow": (True, None)}
+                 "narrow": (True, None), "loader": ("loader", None)}
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     for _ in range(args.rounds):  # the loads taking turns
         for mode, (narrow, code) in modes.items():
             env = dict(os.environ)  # the checkout's package first; run from elsewhere
             env["PYTHONPATH"] = os.pathsep.join([str(code or ROOT), *filter(None, [
                 env.get("PYTHONPATH")])])
-            done = subprocess.run([sys.executable, "-c", f"NARROW = {narrow}\n" + CHILD],
+            head = f"NARROW = {bool(narrow)}\nLOADER = {narrow == 'loader'}\n"
+            done = subprocess.run([sys.executable, "-c", head + CHILD],
                                   text=True, capture_output=True, env=env,
                                   cwd=tempfile.gettempdir())
             if done.returncode:
@@ -151,7 +162,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(f"the loads' end components differ: {comps}")
     for mode, rs in runs.items():
         print(f"{mode} load: of PyYAML, cffi, pycparser, numba.np.arrayobj loaded: "
-              f"{sorted({m for r in rs for m in r['modules']})}")
+              f"{sorted({m for r in rs for m in r['modules']})}; numba imported: "
+              f"{sorted({r.get('numba') for r in rs}, key=str)}")
     low, high = (float.fromhex(x) for x in answers.pop())
     print(f"block kernel's bracket on the two-state block, every load: [{low:.12f}, "
           f"{high:.12f}] (exact 1/2: x = 1/4 + x/2)")

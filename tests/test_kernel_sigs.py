@@ -28,10 +28,23 @@ COMPILED_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level
                     "mitld_lp.solvers.compiled_graph", "mitld_lp.solvers.compiled_elimination",
                     "mitld_lp.sensing.kernels", "mitld_lp.sensing.group_kernels",
                     "mitld_lp.sensing.fsum_kernels")
+#: the modules whose kernels the kernel loader runs (numba imported on a miss only, by
+#: kernel_loader.numba_module, which puts the narrow load in place then)
+LAZY_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level_kernels",
+                "mitld_lp.solvers.compiled_graph")
+
+
+@pytest.fixture(autouse=True)
+def _numba_load(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests are about numba's load of its own cache: the kernel loader off."""
+    from mitld_lp.solvers import kernel_loader
+
+    monkeypatch.setattr(kernel_loader, "ENABLED", False)
 
 
 def _env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["MITLD_LP_KERNEL_LOADER"] = "0"  # numba's own load of its cache (kernel_loader)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     return env
 
@@ -81,8 +94,16 @@ def swept() -> dict:
     and by the NumPy sweeps; the kernel's signatures after."""
     if kernels.compiled_kernel() is None:
         pytest.skip("numba is not installed")
-    from mitld_lp.solvers import compiled_kernels
+    from mitld_lp.solvers import compiled_kernels, kernel_loader
 
+    kernel_loader.ENABLED = False  # numba's dispatcher, its signatures (a module fixture)
+    try:
+        return _sweep_all(compiled_kernels)
+    finally:
+        kernel_loader.ENABLED = True
+
+
+def _sweep_all(compiled_kernels) -> dict:
     out: dict = {}
     for name, make in (("ring", _block), ("half", _half_block)):
         inner, groups, exits, exact = make()
@@ -169,17 +190,26 @@ numba_narrow.install = install
 import importlib
 for name in json.loads(sys.argv[1]):
     importlib.import_module(name)
-print(json.dumps({"calls": calls, "installed": numba_narrow.installed()}))
+lazy_numba = "numba" in sys.modules  # the lazy modules are imported first
+from mitld_lp.solvers import kernel_loader
+kernel_loader.numba_module()  # what a kernel's miss calls
+print(json.dumps({"calls": calls, "installed": numba_narrow.installed(),
+                  "numba_at_import": lazy_numba}))
 """
 
 
 def test_every_compiled_module_puts_the_narrow_load_in_place() -> None:
-    done = subprocess.run([sys.executable, "-c", PROBE, json.dumps(COMPILED_MODULES)],
-                          cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    out = json.loads(done.stdout.strip().splitlines()[-1])
-    assert sorted(set(out["calls"])) == sorted(COMPILED_MODULES)
-    assert out["installed"] is True
+    for modules, numba_at_import in ((LAZY_MODULES, False), (COMPILED_MODULES, True)):
+        done = subprocess.run([sys.executable, "-c", PROBE, json.dumps(modules)],
+                              cwd=ROOT, env=_env(), capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        out = json.loads(done.stdout.strip().splitlines()[-1])
+        assert out["numba_at_import"] is numba_at_import
+        want = {m for m in modules if m not in LAZY_MODULES} | {
+            "mitld_lp.solvers.kernel_loader"}
+        assert set(out["calls"]) == want
+        assert out["installed"] is True
 
 
 #: A graph kernel asked for first (as the analysis of a large product does): from the

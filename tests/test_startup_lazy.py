@@ -195,6 +195,7 @@ print(json.dumps(out))
 def gate_runs() -> dict[str, dict]:
     pytest.importorskip("numba")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["MITLD_LP_KERNEL_LOADER"] = "0"  # numba's own load of its cache (kernel_loader)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     runs = {}
     for mode in ("numpy", "narrow", "full"):

@@ -62,7 +62,6 @@ and never decompose the graph again.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -70,6 +69,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers import kernel_loader
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -410,11 +410,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # free (compiled): else the quotient's own are found below
     found = state_components(m, mdp.row_groups,
                              np.column_stack([goal] if same else [goal, wide]))
-    if "numba" not in sys.modules and _sweeps_compiled(m, mdp.row_groups, found.component):
-        from mitld_lp.solvers import numba_narrow
-
-        numba_narrow.import_numba()  # without PyYAML (numba_narrow.import_numba)
-        load_walks()  # the sweeps will load numba: the walks below run compiled too
+    if not kernel_loader.compiled_paid() and _sweeps_compiled(m, mdp.row_groups,
+                                                               found.component):
+        kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
+        load_walks()  # the sweeps will load them: the walks below run compiled too
     reach = found.reach[:, [0, 0] if same else [0, 1]][found.component]
     n = mdp.n_states
     if sense is Sense.MAX:

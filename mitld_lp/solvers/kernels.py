@@ -187,10 +187,9 @@ def compiled_kernel() -> Any:
 
 
 def _build() -> Any:
-    from mitld_lp.solvers import numba_narrow
-
-    numba_narrow.import_numba()  # without PyYAML, where numba is not loaded yet
-    from mitld_lp.solvers import compiled_kernels  # puts numba's narrow load in place
+    # numba is imported (without PyYAML, narrowly) only where a kernel misses the
+    # loader's cache (mitld_lp.solvers.kernel_loader); ImportError without numba
+    from mitld_lp.solvers import compiled_kernels
 
     return compiled_kernels.gauss_seidel
 

@@ -33,11 +33,11 @@ that compiles a kernel first initialises the runtime the usual way, and then
 from __future__ import annotations
 
 import hashlib
-import os
 import struct
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from mitld_lp.solvers import kernel_files
 
 __all__ = ["MAGIC", "cache_file", "initialize", "runtime_key"]
 
@@ -101,25 +101,6 @@ def _unpack(data: bytes, key: bytes) -> tuple[bytes, bytes] | None:
     return payload[nk:nk + no], payload[nk + no:]
 
 
-def _write(path: Path, data: bytes) -> None:
-    """``data`` into ``path`` by a temporary file renamed over it; nothing where the
-    directory cannot be written."""
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    except OSError:
-        return
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)  # as numba's cache files: readable by whoever shares the cache
-        os.replace(tmp, path)
-    except OSError:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-
-
 def _library(ctx: Any) -> Any:
     """The runtime module's library: from the cache file where its key is this
     process's, else compiled (numba's ``compile_nrt_functions``) and written there."""
@@ -142,7 +123,7 @@ def _library(ctx: Any) -> Any:
     library.finalize()
     if path is not None:
         _name, _kind, (object_code, bitcode) = library.serialize_using_object_code()
-        _write(path, _pack(key, object_code, bitcode))
+        kernel_files.write(path, _pack(key, object_code, bitcode))
     return library
 
 

@@ -33,11 +33,14 @@ kernel that runs is the same cached machine code either way: results are the sam
 bit (``tests/test_startup_lazy.py``).  On a numba whose version or internals are not the
 ones checked here nothing is changed.
 
-Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_kernels`,
-:mod:`~mitld_lp.solvers.level_kernels`, :mod:`~mitld_lp.solvers.compiled_graph`,
-:mod:`~mitld_lp.solvers.compiled_elimination`, :mod:`mitld_lp.sensing.kernels`,
-:mod:`mitld_lp.sensing.group_kernels`) calls :func:`install` right after ``import numba``,
-so whichever kernel a process asks for first is loaded narrowly.  :data:`ENABLED` set to
+Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_elimination`,
+:mod:`mitld_lp.sensing.kernels`, :mod:`mitld_lp.sensing.group_kernels`) calls
+:func:`install` right after ``import numba``, and the kernel loader
+(:mod:`mitld_lp.solvers.kernel_loader`, which runs the kernels of
+:mod:`~mitld_lp.solvers.compiled_kernels`, :mod:`~mitld_lp.solvers.level_kernels` and
+:mod:`~mitld_lp.solvers.compiled_graph` without numba where its cache holds them) calls it
+when it imports numba at a miss, so whichever kernel a process asks numba for first is
+loaded narrowly.  :data:`ENABLED` set to
 False before the first of them is imported keeps numba's whole load (to measure it).
 :func:`import_numba` imports numba without PyYAML (the sweeps and the analysis call it
 before their first kernel); while it runs, ``import yaml`` in another thread of the

@@ -25,14 +25,13 @@ interval iteration, per level).
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers import level_batches
+from mitld_lp.solvers import kernel_loader, level_batches
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
@@ -167,7 +166,7 @@ def level_kernels(entries: int, n_levels: int, compiled: bool | None = None) -> 
     global _LEVEL_KERNELS
     if compiled is False or (compiled is None and (
             entries < LEVEL_KERNEL_MIN_ENTRIES or (n_levels < LEVEL_KERNEL_MIN_LEVELS
-                                                   and "numba" not in sys.modules))):
+                                                   and not kernel_loader.compiled_paid()))):
         return None
     if _LEVEL_KERNELS is None:
         try:

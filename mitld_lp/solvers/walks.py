@@ -1,13 +1,16 @@
 """Which graph walks run compiled: the NumPy walks of :mod:`~mitld_lp.solvers.graph`
 ask :func:`compiled_walks` for the module of compiled ones
-(:mod:`~mitld_lp.solvers.compiled_graph`, which imports numba), by the size of the
-graph and whether numba is loaded already; a small solve never loads numba (its walks
-give the same results, only later).  This module imports nothing of the solvers."""
+(:mod:`~mitld_lp.solvers.compiled_graph`, run from the kernel loader's cache or by
+numba), by the size of the graph and whether compiled kernels are loaded already
+(:func:`~mitld_lp.solvers.kernel_loader.compiled_paid`); a small solve never loads them
+(its walks give the same results, only later).  This module imports nothing of the
+solvers but the kernel loader (NumPy and the standard library)."""
 
 from __future__ import annotations
 
-import sys
 from typing import Any
+
+from mitld_lp.solvers import kernel_loader
 
 __all__ = ["COMPILED_LOADED_MIN_ENTRIES", "COMPILED_MIN_ENTRIES", "compiled_walks",
            "load_walks"]
@@ -31,7 +34,7 @@ def compiled_walks(entries: int) -> Any:
     :data:`COMPILED_LOADED_MIN_ENTRIES`, below :data:`COMPILED_MIN_ENTRIES` while numba
     is not loaded (a small solve never loads it), and without numba."""
     if entries < COMPILED_LOADED_MIN_ENTRIES or (
-            entries < COMPILED_MIN_ENTRIES and "numba" not in sys.modules):
+            entries < COMPILED_MIN_ENTRIES and not kernel_loader.compiled_paid()):
         return None
     return load_walks()
 

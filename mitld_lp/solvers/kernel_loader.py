@@ -1,0 +1,600 @@
+"""numba's cached kernels run without importing numba: numba's own machine code, loaded
+by llvmlite from a cache of our own, numba itself only on a miss.
+
+A process that solves a large product imports numba (0.14 s of CPU, numba 0.68) only to
+read machine code numba compiled in an earlier process from its disk cache.  That code
+needs, at run time, not numba's compiler but four things: the C helpers of three of
+numba's extension modules (``numba._helperlib``: raising, the GIL, unpickling an
+exception; ``numba.core.runtime._nrt_python``: numba's runtime, NRT, its allocator and
+the adaptors between NumPy arrays and NRT's; ``numba._dynfunc``: the environment object
+and the closure that calls a CPython wrapper), each loaded here from its shared library
+*without* running ``numba/__init__.py``; the process's own Python C API; LLVM's runtime
+linker (llvmlite, 0.02 s); and, per kernel, its environment (the module's globals and the
+constants its wrapper boxes with: the NumPy dtypes of the arrays it returns).  numba's
+runtime's own LLVM module is not needed: each kernel's object defines the ``NRT_incref``
+/ ``NRT_decref`` it calls.
+
+A module of kernels says ``numba = kernel_loader.lazy_numba(globals())`` instead of
+importing numba; its ``@numba.njit(...)`` lines are unchanged and make :class:`Kernel`
+objects.  A kernel's call computes the numba type of each argument with NumPy alone
+(:func:`type_key`: an array's dtype, dimensions, layout, read-only and alignment flags,
+as ``numba.typeof``); where the cache file of that signature exists and its key is this
+process's exactly (:func:`_runtime_key`: the format, Python's, numba's and llvmlite's
+versions and numba's extension files, LLVM's version, the target triple, CPU name and
+features as numba's ``magic_tuple`` gives them, the kernel's module source and bytecode,
+the argument types; the file also names the source of every other module whose kernels
+are compiled into it), its object code is linked once and its CPython wrapper called, the
+wrapper numba's dispatcher calls (the one Python function of numba a wrapper reaches, the
+unpickling of the class of the arrays it returns, is primed with a copy:
+:func:`_prime_unpickle`).  Anything else (no file, another key, a damaged or half-written
+file, a symbol the linker would not find, an argument of another kind, any ``NUMBA_*``
+setting other than the cache directory or a numba config file, :data:`ENABLED` False) goes
+to numba: the kernel's numba dispatcher is made (the kernels stay in their modules'
+globals; numba types each as its dispatcher), the call is numba's, and the cache file is
+written from numba's own cache entry of that signature (read under
+:mod:`mitld_lp.util.numba_cache`'s lock), a temporary file renamed over the old one.  The
+machine code that runs is therefore numba's, byte for byte, and so are the results.
+
+Where the cache files go: numba's directory for the kernel's function (its locators:
+``NUMBA_CACHE_DIR``, the module's ``__pycache__``, the user's cache directory), so that a
+file sits beside numba's ``.nbi`` / ``.nbc`` of the same kernel; a reader looks there in
+numba's order.  The file's format: :func:`mitld_lp.solvers.kernel_files.pack`.
+"""
+
+from __future__ import annotations
+
+import builtins
+import hashlib
+import importlib.machinery
+import importlib.util
+import marshal
+import os
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.solvers import kernel_files
+
+__all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
+
+ENABLED = os.environ.get("MITLD_LP_KERNEL_LOADER", "1") != "0"
+"""Whether kernels are read from this module's cache (False: every call is numba's)."""
+
+_lock = threading.RLock()
+_numba: list[Any] = []  # numba, once some kernel needed it
+_loaded = [0]  # kernels linked from this module's cache in this process
+_linked: dict[tuple, Any] = {}  # (object's digest, wrapper) -> its call, once linked
+
+
+def loaded_count() -> int:  # kernel signatures linked from this module's cache
+    return _loaded[0]
+
+
+def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
+    """What a module of kernels calls ``numba``: its ``njit`` makes :class:`Kernel`s; any
+    other name is numba's (imported then).
+    ImportError where numba is not installed (its importers fall back on that, as on
+    ``import numba``), found without importing it."""
+    if "numba" not in sys.modules and importlib.util.find_spec("numba") is None:
+        raise ImportError("numba is not installed")
+    return LazyNumba(module_globals)
+
+
+def compiled_paid() -> bool:
+    """Whether a compiled kernel costs this process no further load than reading it:
+    numba is imported, or this module's run-time pieces are set up (llvmlite, numba's
+    helpers).  The gates that send mid-sized work to compiled kernels once their load is
+    paid ask this (it was ``"numba" in sys.modules``)."""
+    return "numba" in sys.modules or bool(_runtime and _runtime[0])
+
+
+def prepare() -> None:
+    """Pay the compiled kernels' load now (a caller that knows they will run): this
+    module's run-time pieces, or numba's import where they cannot be set up."""
+    if ENABLED and not _numba_settings():
+        with _lock:
+            if _setup() is not None:
+                return
+    from mitld_lp.solvers import numba_narrow
+
+    numba_narrow.import_numba()
+
+
+class LazyNumba:
+    """A module's stand-in for numba (:func:`lazy_numba`)."""
+
+    def __init__(self, module_globals: dict[str, Any]) -> None:
+        self.globals = module_globals
+        self.kernels: list[Kernel] = []  # the module's, in their order
+
+    def njit(self, *args: Any, **options: Any) -> Any:
+        if args and callable(args[0]) and len(args) == 1 and not options:
+            return self.njit()(args[0])
+        if args:  # explicit signatures: numba's business
+            return numba_module().njit(*args, **options)
+
+        def decorate(pyfunc: Any) -> Any:
+            with _lock:
+                kernel = Kernel(pyfunc, options)
+                self.kernels.append(kernel)
+                return kernel
+
+        return decorate
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(numba_module(), name)
+
+
+def numba_module() -> Any:
+    """numba, imported as the compiled modules import it (without PyYAML, the narrow load
+    of cached kernels, the disk cache's lock); ImportError where numba is missing.  Each
+    :class:`Kernel` makes its numba dispatcher when first asked
+    (:meth:`Kernel.numba_dispatcher`); the modules' globals keep naming the kernels:
+    numba types one as its dispatcher (``_numba_type_``, which numba's ``typeof`` asks of
+    any object) and inlines it by its ``targetoptions`` and ``py_func`` (both the
+    dispatcher's), so what it compiles is what it compiled with the dispatcher there."""
+    with _lock:
+        if not _numba:
+            from mitld_lp.solvers import numba_narrow
+            from mitld_lp.util import numba_cache
+
+            _numba.append(numba_narrow.require_numba())
+            numba_narrow.install()
+            numba_cache.install()
+        return _numba[0]
+
+
+class Kernel:
+    """A kernel of a lazy module (module docs): called as numba's dispatcher is."""
+
+    def __init__(self, pyfunc: Any, options: dict[str, Any]) -> None:
+        self.py_func = pyfunc
+        self.options = options
+        self.dispatcher: Any = None
+        self.__name__ = pyfunc.__name__
+        self.__qualname__ = pyfunc.__qualname__
+        self.__module__ = pyfunc.__module__
+        self.__doc__ = pyfunc.__doc__
+        self.__wrapped__ = pyfunc
+        self._calls: dict[tuple, Any] = {}  # type key -> callable, None: numba's
+
+    def __repr__(self) -> str:
+        return f"<lazy kernel {self.__module__}.{self.__qualname__}>"
+
+    def __getattr__(self, name: str) -> Any:
+        """numba's dispatcher's attributes (``overloads``, ``targetoptions``, and
+        ``_numba_type_``, by which numba types a kernel a kernel calls)."""
+        if name.startswith("__") or name in ("dispatcher", "py_func", "options"):
+            raise AttributeError(name)
+        return getattr(self.numba_dispatcher(), name)
+
+    def numba_dispatcher(self) -> Any:
+        """numba's dispatcher of this kernel (numba imported, :func:`numba_module`)."""
+        if self.dispatcher is None:
+            numba = numba_module()
+            with _lock:
+                if self.dispatcher is None:
+                    self.dispatcher = numba.njit(**self.options)(self.py_func)
+        return self.dispatcher
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        key = type_key(args) if ENABLED and not kwargs and self.cacheable() else None
+        if key is None:
+            return self.numba_dispatcher()(*args, **kwargs)
+        call = self._calls.get(key, _UNSET)
+        if call is _UNSET:
+            with _lock:
+                call = self._calls.get(key, _UNSET)
+                if call is _UNSET:
+                    call = _load(self, key)
+                    self._calls[key] = call
+        if call is not None:
+            return call(*args)
+        dispatcher = self.numba_dispatcher()
+        result = dispatcher(*args)
+        with _lock:
+            if self._calls.get(key) is None:
+                _store(self, key, args, dispatcher)
+                self._calls[key] = dispatcher
+        return result
+
+    def cacheable(self) -> bool:
+        return (bool(self.options.get("cache")) and self.py_func.__closure__ is None
+                and not self.options.get("parallel"))
+
+
+_UNSET = object()
+
+
+def type_key(args: tuple) -> tuple | None:
+    """numba's type of each argument as NumPy gives it (``numba.typeof``'s inputs: an
+    array's dtype, dimensions, layout C / F / A, read-only and aligned flags; a Python
+    bool, int (int64) or float; a NumPy scalar's dtype), or None for anything else
+    (numba's dispatcher then decides)."""
+    out: list[tuple] = []
+    for a in args:
+        t = type(a)
+        if t is np.ndarray:
+            dt = a.dtype
+            if dt.kind not in "biufc" or not dt.isnative or dt.fields is not None:
+                return None
+            f = a.flags
+            layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
+            out.append(("array", dt.str, a.ndim, layout, not f.writeable, f.aligned))
+        elif t is bool or t is np.bool_:
+            out.append((t.__name__,))
+        elif t is int:
+            if not -(2 ** 63) <= a < 2 ** 63:
+                return None
+            out.append(("int",))
+        elif t is float:
+            out.append(("float",))
+        elif isinstance(a, np.generic) and a.dtype.kind in "iuf" and a.dtype.isnative:
+            out.append(("scalar", a.dtype.str))
+        else:
+            return None
+    return tuple(out)
+
+
+# --- the run-time pieces: numba's extension modules, llvmlite's linker ------------------
+
+_EXTENSIONS = (("numba._helperlib", "_helperlib"),
+               ("numba.core.runtime._nrt_python", "core/runtime/_nrt_python"),
+               ("numba._dynfunc", "_dynfunc"))
+_runtime: list[Any] = []  # (helperlib, nrt, dynfunc, ll, engine, key parts) once set up
+
+
+def _numba_dir() -> Path | None:
+    spec = importlib.util.find_spec("numba")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    return Path(list(spec.submodule_search_locations)[0])
+
+
+def _extension(base: Path, rel: str) -> Path | None:
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = base / (rel + suffix)
+        if path.is_file():
+            return path
+    return None
+
+
+def _load_extensions() -> tuple[list[Any], tuple] | None:
+    """numba's three extension modules (loaded from their shared libraries without
+    numba's package where numba is not imported yet: ``import numba`` later finds and
+    keeps them, CPython initialises such a module once), and what identifies them."""
+    base = _numba_dir()
+    if base is None:
+        return None
+    mods, stamps = [], []
+    for name, rel in _EXTENSIONS:
+        path = _extension(base, rel)
+        if path is None:
+            return None
+        st = path.stat()
+        stamps.append((rel, st.st_size, st.st_mtime_ns))
+        mod = sys.modules.get(name)
+        if mod is None:
+            loader = importlib.machinery.ExtensionFileLoader(name, str(path))
+            spec = importlib.util.spec_from_file_location(name, str(path), loader=loader)
+            if spec is None:
+                return None
+            mod = importlib.util.module_from_spec(spec)
+            loader.exec_module(mod)
+            sys.modules[name] = mod
+        mods.append(mod)
+    try:
+        version = (base / "_version.py").read_bytes()
+    except OSError:
+        return None
+    return mods, (hashlib.sha256(version).hexdigest(), tuple(stamps))
+
+
+def _setup() -> list[Any] | None:
+    """The run-time pieces, set up once (module docs); None where any is missing."""
+    if _runtime:
+        return _runtime[0] or None
+    found = None
+    try:
+        found = _setup_once()
+    finally:
+        _runtime.append(found)
+    return found
+
+
+def _setup_once() -> list[Any] | None:
+    ext = _load_extensions()
+    if ext is None:
+        return None
+    (helperlib, nrt, dynfunc), numba_id = ext
+    import llvmlite
+    from llvmlite import binding as ll
+
+    ll.initialize_native_target()
+    ll.initialize_native_asmprinter()
+    triple = ll.get_process_triple()
+    cpu = ll.get_host_cpu_name()
+    try:
+        features = ll.get_host_cpu_features().flatten()
+    except RuntimeError:
+        features = ""
+    # the symbols numba's own load adds (numba.core.base._load_global_helpers, the
+    # runtime's rtsys.initialize): the same addresses, so adding them twice is harmless
+    ll.add_symbol("_Py_NoneStruct", id(None))
+    for helpers in (helperlib.c_helpers, dynfunc.c_helpers):
+        for name, address in helpers.items():
+            ll.add_symbol("numba_" + name, address)
+    for obj in builtins.__dict__.values():
+        if isinstance(obj, type) and issubclass(obj, BaseException):
+            ll.add_symbol(f"PyExc_{obj.__name__}", id(obj))
+    for name, address in nrt.c_helpers.items():
+        ll.add_symbol(name if name.startswith("_") else "NRT_" + name, address)
+    if not _prime_unpickle(helperlib.c_helpers["unpickle"]):
+        return None
+    target = ll.Target.from_triple(triple)
+    tm = target.create_target_machine(cpu=cpu, features=features, reloc="static",
+                                      codemodel="jitdefault", jit=True)
+    engine = ll.create_mcjit_compiler(ll.parse_assembly(""), tm)
+    machine = (triple, cpu, features)
+    parts = (sys.version, numba_id, llvmlite.__version__,
+             tuple(ll.llvm_version_info), machine)
+    return [dynfunc, ll, engine, parts]
+
+
+_unpickled_memo: dict[tuple, Any] = {}
+
+
+def _numba_unpickle(address: int, bytedata: bytes, hashed: bytes) -> Any:
+    """numba's ``numba.core.serialize._numba_unpickle`` (numba 0.68), line for line:
+    ``numba_unpickle`` of ``numba._helperlib`` calls it for the constants a wrapper boxes
+    with (the class of the arrays it returns) and keeps it for the process
+    (:func:`_prime_unpickle`); numba's vendored cloudpickle's ``loads`` is pickle's."""
+    import pickle
+
+    key = (address, hashed)
+    try:
+        obj = _unpickled_memo[key]
+    except KeyError:
+        _unpickled_memo[key] = obj = pickle.loads(bytedata)
+    return obj
+
+
+def _prime_unpickle(address: int) -> bool:
+    """Have ``numba_unpickle`` of ``numba._helperlib`` fetch its Python function now, from
+    a stand-in of ``numba.core.serialize`` holding :func:`_numba_unpickle` alone (and
+    empty stand-ins of its parents, which ``PyImport_ImportModule`` imports first), put in
+    ``sys.modules`` for this one call under the import lock: the helper imports that
+    module once a process and keeps the function (a static of the C helper), and the real
+    module imports all of numba.  Where numba is loaded already nothing is done (the
+    helper takes numba's)."""
+    import _imp
+    import ctypes
+    import pickle
+    import types
+
+    names = ("numba", "numba.core", "numba.core.serialize")
+    if "numba" in sys.modules:
+        return True
+    stand_ins = {name: types.ModuleType(name) for name in names}
+    stand_ins["numba.core.serialize"]._numba_unpickle = _numba_unpickle  # type: ignore[attr-defined]
+    for name in names[:2]:
+        stand_ins[name].__path__ = []  # type: ignore[attr-defined]  # a package: no finder
+    proto = ctypes.PYFUNCTYPE(ctypes.py_object, ctypes.c_char_p, ctypes.c_int,
+                              ctypes.c_char_p)
+    data = pickle.dumps(None)
+    _imp.acquire_lock()
+    try:
+        if any(name in sys.modules for name in names):
+            return False
+        sys.modules.update(stand_ins)
+        try:
+            got = proto(address)(data, len(data), b"\0" * 20)
+        except Exception:  # noqa: BLE001 - the helper could not be primed: numba's load
+            return False
+        finally:
+            for name in names:
+                if sys.modules.get(name) is stand_ins[name]:
+                    del sys.modules[name]
+    finally:
+        _imp.release_lock()
+    return got is None
+
+
+def _numba_settings() -> bool:
+    """Whether a ``NUMBA_*`` setting other than the cache directory, or a numba config
+    file in the working directory, is in force (it may change what numba compiles: the
+    loader then leaves every call to numba)."""
+    return (any(k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR" for k in os.environ)
+            or os.path.isfile(".numba_config.yaml"))
+
+
+def _callee_sources(modules: Any) -> tuple:
+    """``(module, SHA-256 of its source)`` of each of our modules named (the modules of
+    the kernels linked into a kernel: their environments name them), or () where one
+    cannot be read: a kernel's key holds its own module's source, and these hold the
+    source of every kernel compiled into it from another module."""
+    out = []
+    for name in sorted(set(modules)):
+        module = sys.modules.get(name)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            spec = importlib.util.find_spec(name)
+            path = None if spec is None else spec.origin
+        if path is None:
+            return ()
+        try:
+            out.append((name, _source_hash(path)))
+        except OSError:
+            return ()
+    return tuple(out)
+
+
+_sources: dict[str, str] = {}
+
+
+def _source_hash(path: str) -> str:
+    digest = _sources.get(path)
+    if digest is None:
+        with open(path, "rb") as f:
+            digest = _sources[path] = hashlib.sha256(f.read()).hexdigest()
+    return digest
+
+
+def _runtime_key(kernel: Kernel, key: tuple, parts: tuple) -> bytes:
+    """The key a cache file must carry (module docs)."""
+    code = kernel.py_func.__code__
+    return repr((kernel_files.FORMAT, parts, kernel.__module__, kernel.__qualname__,
+                 _source_hash(code.co_filename),
+                 hashlib.sha256(code.co_code).hexdigest(), key)).encode()
+
+
+def _load(kernel: Kernel, key: tuple) -> Any:
+    """The kernel's compiled call for arguments of type ``key`` from the cache, or None
+    (module docs); never raises."""
+    if _numba_settings():
+        return None
+    py_file = kernel.py_func.__code__.co_filename
+    name = kernel_files.file_name(py_file, kernel.__qualname__, key)
+    data = None
+    for directory in kernel_files.directories(py_file):
+        try:
+            data = (directory / name).read_bytes()
+            break
+        except OSError:
+            continue
+    if data is None:
+        return None
+    try:
+        return _link(kernel, key, data)
+    except Exception:  # noqa: BLE001 - any failure: numba's call, the file rewritten
+        return None
+
+
+def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
+    found = kernel_files.unpack(data)
+    if found is None:
+        return None
+    meta, object_code = found
+    pieces = _setup()
+    if pieces is None:
+        return None
+    dynfunc, ll, engine, parts = pieces
+    if meta.get("key") != _runtime_key(kernel, key, parts):
+        return None
+    sources = meta.get("sources", ())
+    if _callee_sources(m for m, _ in sources) != sources:
+        return None  # a kernel of another module compiled into it has changed
+    if any(ll.address_of_symbol(s) is None for s in meta["undefined"]):
+        return None  # LLVM's linker would abort the process on it
+    module = sys.modules.get(kernel.__module__)
+    if module is None:
+        return None
+    digest = (hashlib.sha256(object_code).digest(), meta["wrapper"])
+    if digest in _linked:  # an object is linked once a process (its symbols are global)
+        return _linked[digest]
+    envs = []
+    for env_name, modname, consts in meta["envs"]:
+        if modname == kernel.__module__:
+            scope = module.__dict__
+        elif modname in sys.modules and modname.startswith("mitld_lp."):
+            scope = sys.modules[modname].__dict__
+        else:  # a numba helper's (no constants: the writer refuses others) or a module
+            # not imported: nopython code never reads an environment's globals (only
+            # object mode's lowering does), as numba_narrow's stand-in has it
+            scope = {"__name__": modname}
+        env = dynfunc.Environment(scope)
+        env.consts.extend(np.dtype(c) for c in consts)
+        envs.append((env_name, env))
+    engine.add_object_file(ll.ObjectFileRef.from_data(object_code))
+    engine.finalize_object()
+    import ctypes
+
+    for env_name, env in envs:
+        address = engine.get_global_value_address(env_name)
+        if not address:
+            return None
+        ctypes.c_void_p.from_address(address).value = id(env)
+    wrapper = engine.get_function_address(meta["wrapper"])
+    own = dict(envs)[meta["env"]]
+    if not wrapper:
+        return None
+    call = dynfunc.make_function(module, kernel.__name__,
+                                 f"compiled wrapper for {kernel.__qualname__!r}",
+                                 wrapper, own, (engine, tuple(e for _, e in envs)))
+    _loaded[0] += 1
+    _linked[digest] = call
+    return call
+
+
+# --- writing a cache file from numba's own cache entry ---------------------------------
+
+
+def _store(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> None:
+    """Write the cache file of ``key`` from numba's cache entry of the signature numba
+    gave these arguments; nothing where anything is not as expected (never raises)."""
+    if _numba_settings():
+        return
+    try:
+        _store_entry(kernel, key, args, dispatcher)
+    except Exception:  # noqa: BLE001 - the cache is an optimisation; numba's call stands
+        return
+
+
+def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> None:
+    sig = tuple(dispatcher.typeof_pyval(a) for a in args)
+    cres = dispatcher.overloads.get(sig)
+    cache = getattr(dispatcher, "_cache", None)
+    if cres is None or cache is None or not hasattr(cache, "_cache_file"):
+        return
+    pieces = _setup()
+    if pieces is None:
+        return
+    _dynfunc, _ll, _engine, parts = pieces
+    codegen = cres.target_context.codegen()
+    if tuple(codegen.magic_tuple()) != parts[-1]:
+        return  # numba compiled for another CPU description than the loader would key
+    from mitld_lp.util import numba_cache
+
+    with numba_cache.locked(cache._cache_path):
+        data = cache._cache_file.load(cache._index_key(sig, codegen))
+    if data is None:
+        return
+    libdata, fndesc, env, signature, objectmode, lifted, _ann, reload_init, refs = data
+    name, kind, payload = libdata
+    if (kind != "object" or objectmode or lifted or reload_init
+            or tuple(signature.args) != sig):
+        return
+    object_code = payload[0]
+    undefined = kernel_files.undefined_symbols(object_code)
+    if undefined is None or any(s.startswith(".numba.unresolved$") for s in undefined):
+        return
+    envs = []
+    for e in [env, *refs]:
+        modname = e.globals.get("__name__")
+        consts = list(e.consts)
+        if not isinstance(modname, str) or not all(
+                isinstance(c, np.dtype) and c.fields is None and c.kind in "biufc"
+                for c in consts):
+            return
+        if consts and not modname.startswith("mitld_lp."):
+            return
+        if not modname.startswith(("mitld_lp.", "numba.")):
+            return
+        envs.append((e.env_name, modname, tuple(c.str for c in consts)))
+    if len({n for n, _, _ in envs}) != len(envs):
+        envs = list(dict.fromkeys(envs))
+    callees = [m for _, m, _ in envs if m.startswith("mitld_lp.") and m != kernel.__module__]
+    sources = _callee_sources(callees)
+    if callees and not sources:
+        return
+    meta = {"key": _runtime_key(kernel, key, parts),
+            "wrapper": fndesc.llvm_cpython_wrapper_name, "env": fndesc.env_name,
+            "envs": tuple(envs), "undefined": tuple(sorted(undefined)), "sources": sources}
+    name = kernel_files.file_name(kernel.py_func.__code__.co_filename, kernel.__qualname__, key)
+    kernel_files.write(Path(cache._cache_path) / name,
+                       kernel_files.pack(marshal.dumps(meta), object_code))
+
+
