@@ -255,12 +255,11 @@ def _timed_sensed_solve() -> list[float]:
     solve, controller = sensed_solve.solve_sensed, sensed_solve.controller_of
 
     def timed(inner: Any, sign: float) -> Any:
-        def run(*args: Any, **kwargs: Any) -> Any:
+        def run(*args: Any, **kwargs: Any) -> Any:  # (a failed solve fails the child)
             c = bs._cpu()
-            try:
-                return inner(*args, **kwargs)
-            finally:
-                spent[0] += sign * (bs._cpu() - c)
+            out = inner(*args, **kwargs)
+            spent[0] += sign * (bs._cpu() - c)
+            return out
         return run
 
     sensed_solve.solve_sensed = timed(solve, 1.0)
