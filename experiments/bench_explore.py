@@ -47,6 +47,7 @@ if str(HERE) not in sys.path:
 import _common  # noqa: E402
 
 SPEC = "F[0,10] goal"
+STORM_PROPERTY = 'Pmax=? [F<=10 "goal"]'  # SPEC as Storm reads it on the PRISM file
 SMALL = 12
 RESOURCE = ("resource-gathering", {"B": 200, "GOLD_TO_COLLECT": 15, "GEM_TO_COLLECT": 15},
             "F[0,200] success", 'Pmax=? [F<=200 "success"]')
@@ -75,6 +76,15 @@ def model_text(prism: Path, spec: str, explore: str, constants: dict[str, int]) 
         lines.append("constants = { " + ", ".join(f"{k} = {v}" for k, v in constants.items())
                      + " }")
     return "\n".join(lines) + "\n"
+
+
+def write_grid(folder: Path, n: int, explore: str = "auto") -> tuple[Path, Path]:
+    """The n x n grid's PRISM file (``grid<n>.prism``) and its model file (the task
+    :data:`SPEC` from that file, explored as ``explore`` says) written in ``folder``."""
+    prism = _common.write_text(folder / f"grid{n}.prism", grid_prism(n))
+    model = _common.write_text(folder / f"grid{n}_{explore}.toml",
+                               model_text(prism, SPEC, explore, {}))
+    return prism, model
 
 
 def _usage() -> tuple[float, int]:
@@ -156,16 +166,12 @@ def main(argv: list[str] | None = None) -> int:
     failures: list[str] = []
 
     grids = {}
-    for side in (n, SMALL):
-        prism = _common.write_text(out / f"grid{side}.prism", grid_prism(side))
-        grids[side] = prism
     results: dict[str, dict[str, Any]] = {}
     for key, side, explore in (("auto", n, "auto"), ("full", n, "full"),
                                ("small", SMALL, "auto")):
-        model = _common.write_text(out / f"grid{side}_{explore}.toml",
-                                   model_text(grids[side], SPEC, explore, {}))
+        grids[side], model = write_grid(out, side, explore)
         results[key] = run_child("ours", str(model), timeout=timeout)
-    results["storm"] = run_child("storm", str(grids[n]), "{}", 'Pmax=? [F<=10 "goal"]',
+    results["storm"] = run_child("storm", str(grids[n]), "{}", STORM_PROPERTY,
                                  timeout=timeout)
     big = f"{n * n:,}"
     for key, label, states in (("small", f"ours auto ({SMALL}x{SMALL})", f"{SMALL * SMALL}"),

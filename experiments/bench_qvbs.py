@@ -28,8 +28,10 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
   of it is timed (a sparse product and a maximum per state; the median of seven
   batches of at least 0.05 s each, as the CPU clock ticks in milliseconds);
 * ``storm_check``: stormpy reads that DRN and checks ``Pmax=? [F "target"]`` with each
-  of Storm's sound methods (``force_soundness``, precision 1e-9 absolute); the fastest
-  is Storm's best check, and every method must agree with our product's optimum within
+  of Storm's sound methods (``force_soundness``, precision 1e-9 absolute; a method whose
+  check reads 0 CPU seconds, under the clock's tick, is timed again in batches:
+  :func:`batched`); the fastest is Storm's best check (``storm_value`` its answer), and
+  every method must agree with our product's optimum within
   1e-6 (``Pmin=?`` where ours minimises the product, ``Result.sense``: a ``Pmin``
   property of a co-safe task; a task with a safety part is minimised as its
   complement's maximum, whose product is written);
@@ -58,12 +60,47 @@ the others (all have at least 1e5 states): solve <= 2x Storm's best check, whole
 process <= 1x Storm's whole process, <= 50 bytes per transition.  Instances not run are
 listed with the reason (not in the checkout, not a probability, over the CPU budget).
 
+**The issue's own cases** (``--cases grid sensed``, the default: both, after the QVBS
+instances selected; ``--no-cases``: the QVBS instances alone; without ``--qvbs`` the cases
+alone) are rows of the same table, with the same columns where they apply, in the
+ratios and the target check unless trivial (whatever their product's size: the grid's
+product is the few hundred states within the horizon):
+
+* ``grid``: the 2001 x 2001 PRISM grid of ``experiments/bench_explore.py`` (4,004,001
+  states; ``--quick`` 201 x 201), task ``F[0,10] goal``.  Ours runs from the PRISM file
+  and the spec as the command line runs it (a model file, ``explore = "auto"``: the
+  world explored up to the task's horizon); Storm's whole run is on the same PRISM file
+  with ``Pmax=? [F<=10 "goal"]`` (``storm_prism``: it builds all 4,004,001 states,
+  ``storm_prism_states``), and Storm's best sound check is on our product's DRN as for
+  the QVBS rows (``storm_check``; the product is that small, so its check is timed in
+  batches, :func:`batched`).  ``storm_prism_inside``: Storm's value inside our bracket
+  within 1e-9.
+* ``sensed``: the bus case with one camera (``experiments/bench_sensed.py``'s first
+  case, ``bus_grid`` with bus 2's camera detecting with 0.5 at epsilon 0.01; ``--quick``
+  its smallest, bus 1's), on the ``sensed`` route.  The product is an MDP over
+  information states; Storm's sound checks (``storm_check``) read its DRN and compute
+  ``Pmax=? [F "target"]`` over every policy of that MDP, which is our lower model's
+  optimum (truncated hypotheses lose): they check our solve and certificate on that
+  product.  They do not check the sensing build (that the information states, their
+  transitions and the observation-based moves are what the cameras allow): that build is
+  ours alone, and Storm has no peer of it, so the process ratio is left out
+  (``process_note`` says why, the report prints it) while ``process_cpu`` is reported.
+  A peer made of Storm's parse and check of our DRN (what ``bench_sensed.py`` sets
+  beside its build) would price our build against nothing and flatter neither side, so
+  it is not taken.  ``solve_cpu`` is the route's solve (``solve_sensed``) less the
+  controller made after it, as the plain route's is; ``product_cpu`` holds the sensing
+  build.  No PRISM file, no ``storm_build_cpu``.
+
+Neither case has a published ``reference``; Storm's values (``storm_value`` on the DRN,
+``storm_prism_value`` on the PRISM file) stand beside ours, as for every row.
+
 The QVBS files are not part of this repository; give a checkout's ``benchmarks/``::
 
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --out experiments/results
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --quick  # two small instances
     python experiments/bench_qvbs.py --qvbs qcomp/benchmarks --only csma.4-2.some_before \
         --compare ../old-checkout --out /tmp/qvbs  # before and after, one run
+    python experiments/bench_qvbs.py --quick --cases grid  # the 201 x 201 grid alone
 
 ``--start command``: our worker process starts as the command line ``mitld-lp`` starts
 (``mitld_lp.startup.lean_start``, the garbage collector held while importing), which is
@@ -87,7 +124,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
@@ -108,13 +145,18 @@ QUICK_MAX_STATES = 20_000
 QUICK_COUNT = 2
 BUDGET = 1800.0  # CPU seconds per child
 _NOT_A_TASK = ("not a probability", "qualitative")
-COLUMNS = ("instance", "value", "reference", "states", "transitions", "sweep_ms",
+COLUMNS = ("instance", "value", "upper", "reference", "states", "transitions", "sweep_ms",
            "solve_cpu", "analysis_cpu", "solve_sweeps", "iteration_sweeps", "iteration_s",
-           "lp_s", "storm_check_cpu", "storm_check_sweeps", "storm_best",
+           "lp_s", "storm_value", "storm_check_cpu", "storm_check_sweeps", "storm_best",
            "solve_over_storm_check", "whole_cpu", "load_cpu", "product_cpu",
-           "storm_build_cpu", "process_cpu", "storm_prism_cpu", "storm_process_cpu",
-           "process_over_storm_process", "bytes_per_transition",
+           "storm_build_cpu", "process_cpu", "storm_prism_value", "storm_prism_cpu",
+           "storm_process_cpu", "process_over_storm_process", "bytes_per_transition",
            "storm_bytes_per_transition", "storm_agrees", "certified")
+CASES = ("grid", "sensed")  # the issue's own cases, rows beside the QVBS instances
+GRID_N, QUICK_GRID_N = 2001, 201  # the grid's side: 4,004,001 states (--quick 40,401)
+SENSED, QUICK_SENSED = 0, 0  # bench_sensed.FULL[0] (one camera), bench_sensed.QUICK[0]
+NO_STORM_PROCESS = ("no Storm peer: the information-state product is built by our sensing "
+                    "alone (Storm has no such build); Storm checks that product as DRN")
 
 
 # ----------------------------------------------------------------------------- workers
@@ -189,13 +231,65 @@ def _command_start() -> None:
         lean()
 
 
+def _load(job: dict[str, Any]) -> Any:
+    """The job's model: a model file (a QVBS instance, the grid), or the sensed case
+    (``bench_sensed``'s case, the bus case with its cameras)."""
+    if job.get("case") == "sensed":
+        import bench_sensed
+
+        return bench_sensed.case_model(job["index"], job["quick"])
+    from mitld_lp import load_model
+
+    return load_model(job["model"], max_states=job["max_states"])
+
+
+def _timed_sensed_solve() -> list[float]:
+    """The sensed route's solve stage (``routes.sensed_solve.solve_sensed``, which the
+    route imports when it solves) wrapped in place, less the observation-based
+    controller made after it (``controller_of``: the plain route's ``solve_cpu`` stops
+    before its controller too): its CPU seconds, summed, in the list returned (the
+    sensed route leaves ``Result.solve_cpu`` unset)."""
+    from mitld_lp.routes import sensed_solve
+
+    spent = [0.0]
+    solve, controller = sensed_solve.solve_sensed, sensed_solve.controller_of
+
+    def timed(inner: Any, sign: float) -> Any:
+        def run(*args: Any, **kwargs: Any) -> Any:  # (a failed solve fails the child)
+            c = bs._cpu()
+            out = inner(*args, **kwargs)
+            spent[0] += sign * (bs._cpu() - c)
+            return out
+        return run
+
+    sensed_solve.solve_sensed = timed(solve, 1.0)
+    sensed_solve.controller_of = timed(controller, -1.0)
+    return spent
+
+
+def _goal(r: Any) -> Any:
+    """The target our bracket is about, for Storm's check of the DRN: the route's
+    acceptance; on the sensed route the information states' (``sensed_acceptance``),
+    which is a reachability target only where no end component mixes persistent
+    hypotheses with others."""
+    if r.acceptance is not None:
+        return r.acceptance.goal
+    from mitld_lp.routes.sensed_solve import sensed_acceptance
+
+    accept, mixed, _ = sensed_acceptance(r.mdp, r.dta)
+    if mixed is not None:
+        raise SystemExit("the sensed case's task credits mixed end components: Storm's "
+                         "reachability check of the DRN is not the same question")
+    return accept.goal
+
+
 def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     command = job.get("start") == "command"
     if command:
         _command_start()
     import numpy as np
 
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import synthesize
 
     if command:  # the work starts: the collector on, the imports out of its reach
         import gc
@@ -203,15 +297,17 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
         gc.freeze()
         gc.enable()
     c = _process_cpu()  # with the child in which Storm explores the PRISM program
-    model = load_model(job["model"], max_states=job["max_states"])
+    model = _load(job)
     load_cpu = _process_cpu() - c
     bs.preload()
     fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
     before = bs._rss_kb()
     analysis = _timed_analysis()
+    sensed = _timed_sensed_solve() if job.get("case") == "sensed" else None
     c = bs._cpu()
     r = synthesize(model)
     synth_cpu = bs._cpu() - c
+    solve_cpu = r.solve_cpu if sensed is None else sensed[0]
     process_cpu = _process_cpu()  # the process so far; the bench's extras below are not ours
     peak = _hwm_kb() if fresh else bs._peak_kb()
     mdp = r.mdp
@@ -223,10 +319,10 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
                iteration_s=max(m.iteration.seconds for m in solved),
                lp_s=sum(m.seconds for m in lp) if lp else None,
                upper=r.upper, product_value=float(r.lower_model.value),
-               certified=r.certified, status=r.status.value, solve_cpu=r.solve_cpu,
+               certified=r.certified, status=r.status.value, solve_cpu=solve_cpu,
                process_cpu=process_cpu, analysis_cpu=analysis[0],
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
-               product_cpu=max(synth_cpu - r.solve_cpu, 0.0),
+               product_cpu=max(synth_cpu - solve_cpu, 0.0),
                bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
     # untimed from here: the product's digest, the DRN for Storm and the unit sweep
     out["product_digest"] = product_digest(mdp)
@@ -242,7 +338,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
             k += 1
         times.append((bs._cpu() - c) / k)
     # (without valuations: Storm checks the file as is; naming 1e6 states costs minutes)
-    write_drn(mdp, r.acceptance.goal, work / "model.drn", overwrite=True, valuations=False)
+    write_drn(mdp, _goal(r), work / "model.drn", overwrite=True, valuations=False)
     # Storm optimises the DRN's target as we do (a checkout before Result.sense: "max")
     (work / "sense.txt").write_text(getattr(r, "sense", "max"))
     return dict(out, sweep_cpu=float(np.median(times)))
@@ -278,11 +374,36 @@ def work_storm_check(job: dict[str, Any], work: Path) -> dict[str, Any]:
     c = bs._cpu()
     model = stormpy.build_model_from_drn(str(work / "model.drn"))
     parse_cpu = bs._cpu() - c
-    checks = bs._checks(model, prop, bs.METHODS)
+    checks = batched(model, prop, bs._checks(model, prop, bs.METHODS))
     peak = bs._peak_kb()
     return dict(parse_cpu=parse_cpu, states=model.nr_states, transitions=model.nr_transitions,
                 bytes_per_transition=max(peak - before, 0) * 1024 / max(model.nr_transitions, 1),
                 **checks)
+
+
+BATCH = 0.05  # CPU seconds: a check that reads 0 is timed again in batches this long
+
+
+def batched(model: Any, prop: Any, checks: dict[str, Any]) -> dict[str, Any]:
+    """``bench_sweeps._checks``'s figures with each method's check that read 0 CPU
+    seconds (under one tick of the CPU clock, which ticks in milliseconds: a tiny
+    product's, the grid's) timed again as the unit sweep is: run until a batch takes
+    :data:`BATCH` s, the batch over its runs; the best method chosen again from these.
+    A check that the clock sees keeps its one reading (the QVBS rows' as before)."""
+    import stormpy
+
+    methods = dict(checks["methods"])
+    for name, got in methods.items():
+        if got["cpu"] > 0:
+            continue
+        env = bs._env(name)
+        c, k = bs._cpu(), 0
+        while k == 0 or bs._cpu() - c < BATCH:
+            stormpy.model_checking(model, prop, environment=env)
+            k += 1
+        methods[name] = dict(got, cpu=(bs._cpu() - c) / k, once_cpu=got["cpu"], runs=k)
+    best = min(methods, key=lambda m: methods[m]["cpu"])
+    return dict(methods=methods, best=best, best_cpu=methods[best]["cpu"])
 
 
 def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
@@ -316,9 +437,9 @@ def work_memory(job: dict[str, Any], work: Path) -> dict[str, Any]:
     """``synthesize`` with each stage's memory tracked (``memory_stages``; ``--memory``)."""
     import memory_stages
 
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import synthesize
 
-    model = load_model(job["model"], max_states=job["max_states"])
+    model = _load(job)
     bs.preload()
     return memory_stages.Tracker(traced=True).run(
         lambda: synthesize(model), lambda r: r.mdp.n_transitions)[1]
@@ -399,6 +520,41 @@ def jobs(benchmarks: Path, low: int, high: int, families: tuple[str, ...], work:
     return out, skipped
 
 
+class Case(NamedTuple):
+    """One of the issue's own cases (:data:`CASES`) as a row: its name; no published
+    reference (Storm's values stand beside ours instead)."""
+
+    name: str
+    reference: float | None = None
+
+
+def case_jobs(cases: list[str], quick: bool, work: Path) -> list[tuple[Case, dict[str, Any]]]:
+    """The cases as jobs (the grid's PRISM and model files written to ``work``): the
+    grid (``bench_explore``'s, side :data:`GRID_N`, --quick :data:`QUICK_GRID_N`) from
+    its PRISM file and spec as the command line runs it, Storm's whole run on the same
+    file with ``Pmax=? [F<=10 "goal"]``; the sensed case (``bench_sensed``'s case
+    :data:`SENSED`, --quick :data:`QUICK_SENSED`), no PRISM file."""
+    import bench_explore
+    import bench_sensed
+
+    out = []
+    for case in cases:
+        if case == "grid":
+            n = QUICK_GRID_N if quick else GRID_N
+            prism, model = bench_explore.write_grid(work, n)
+            out.append((Case(f"grid.{n}x{n}.{bench_explore.SPEC.replace(' ', '_')}"),
+                        dict(case="grid", model=str(model), max_states=None,
+                             prism=str(prism), constants={},
+                             property=bench_explore.STORM_PROPERTY)))
+        else:
+            index = QUICK_SENSED if quick else SENSED
+            name = bench_sensed.name_of((bench_sensed.QUICK if quick else
+                                         bench_sensed.FULL)[index])
+            out.append((Case("sensed." + name.replace(" ", "_")),
+                        dict(case="sensed", index=index, quick=quick)))
+    return out
+
+
 def measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
             budget: float, compare: Path | None = None, memory: bool = False,
             ) -> dict[str, Any]:
@@ -431,10 +587,11 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
     (work / "model.drn").unlink(missing_ok=True)
     if "error" in storm:
         return dict(instance=inst.name, error=storm["error"])
-    prism = _child("storm_prism", dict(job, best=storm["best"]), work, budget)
-    if "error" in prism:
+    prism = (_child("storm_prism", dict(job, best=storm["best"]), work, budget)
+             if "prism" in job else None)  # the sensed case has no PRISM file
+    if prism is not None and "error" in prism:
         prism = None
-    reference = float(inst.reference)
+    reference = None if inst.reference is None else float(inst.reference)
     why = ours["trivial"]
     flat = why is not None
     sweep = ours["sweep_cpu"]
@@ -446,6 +603,14 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         return a / sweep if sweep > 0 else None
 
     values = [m["value"] for m in storm["methods"].values()]
+    case = job.get("case")
+    extra: dict[str, Any] = {}
+    if case is not None:  # the issue's own cases: Storm's PRISM run's world and answer
+        extra = dict(case=case, storm_prism_states=prism["states"] if prism else None,
+                     storm_prism_inside=None if prism is None else
+                     ours["lower"] - 1e-9 <= prism["value"] <= ours["upper"] + 1e-9)
+        if case == "sensed":
+            extra["process_note"] = NO_STORM_PROCESS
     return dict(
         instance=inst.name, value=ours["lower"], upper=ours["upper"], reference=reference,
         degenerate=flat, trivial=why, states=ours["states"],
@@ -461,6 +626,7 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         load_cpu=ours["load_cpu"], product_cpu=ours.get("product_cpu"),
         storm_build_cpu=prism["build_cpu"] if prism else None,
         storm_best=storm["best"].lower(), storm_check_cpu=storm["best_cpu"],
+        storm_value=storm["methods"][storm["best"]]["value"],
         storm_check_sweeps=sweeps(storm["best_cpu"]),
         solve_over_storm_check=ratio(ours["solve_cpu"], storm["best_cpu"]),
         storm_prism_cpu=prism["whole_cpu"] if prism else None,
@@ -474,6 +640,7 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
         storm_harness_cpu=prism.get("harness_cpu") if prism else None,
         **_compared(base, ours, prism, flat, storm["best_cpu"]),
         **{f"storm_{k.lower()}_cpu": v["cpu"] for k, v in storm["methods"].items()},
+        **extra,
     )
 
 
@@ -535,6 +702,31 @@ COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "
             "bytes_per_transition", "storm_bytes_per_transition")
 
 
+def _line(row: dict) -> str:
+    """A row on one line: every column of :data:`COLUMNS` it has, each answer in full
+    beside its times."""
+    return "  ".join(f"{k}={bs._full(k, row.get(k))}" for k in COLUMNS
+                     if row.get(k) is not None)
+
+
+def misses(rows: list[dict]) -> list[str]:
+    """The targets missed (``bench_sweeps.misses``): on the QVBS instances from
+    ``bench_sweeps.BIG`` states up; on the cases whatever their product's size (the
+    grid's world has 4,004,001 states, its product those within the horizon; the
+    sensed product is built by the route), each ratio that has a peer; trivial rows
+    never."""
+    out = bs.misses([r for r in rows if not r.get("case")])
+    for r in rows:
+        if not r.get("case") or r.get("degenerate"):
+            continue
+        for key, target in bs.TARGETS.items():
+            got = r.get(key)
+            if got is not None and got > target:
+                out.append(f"{r['instance']}: {key} = {got:.3g}, target {target:g} "
+                           f"(missed by {got / target:.2f}x)")
+    return out
+
+
 def report(rows: list[dict], skipped: list[tuple[str, str]],
            only: list[str] | None = None) -> str:
     def table(part: list[dict]) -> str:
@@ -546,8 +738,9 @@ def report(rows: list[dict], skipped: list[tuple[str, str]],
     flat = [r for r in done if r["degenerate"]]
     text = "## QVBS PRISM MDPs of at least 1e5 states, ours and Storm in one run\n\n"
     if only:
-        text += (f"A subset (`--only`): the {len(rows)} instances below; the families' "
-                 "other instances were not run here.\n\n")
+        text += (f"A subset (`--only`): the {len([r for r in rows if not r.get('case')])} "
+                 "QVBS instances below; the families' other instances were not run "
+                 "here.\n\n")
     text += table(good) if good else "No non-trivial instance was run.\n"
     compared = [r for r in done if "base_value" in r]
     if compared:
@@ -559,13 +752,24 @@ def report(rows: list[dict], skipped: list[tuple[str, str]],
         text += ("\nTrivial instances (the answer decided by the graph alone, exactly 0 or "
                  "1 before any number; no ratio is taken from them):\n\n" + table(flat)
                  + "\n" + "".join(f"- {r['instance']}: {r['trivial']}\n" for r in flat))
-    missed = bs.misses(good)
-    big = [r for r in good if r["states"] >= bs.BIG]
+    missed = misses(good)
+    big = [r for r in good if r["states"] >= bs.BIG or r.get("case")]
     text += (f"\nTargets on the non-trivial instances of at least {bs.BIG:,} states "
+             "and on the non-trivial cases (grid, sensed) "
              "(solve <= 2x Storm's best check, whole process <= 1x Storm's, <= 50 bytes "
              "per transition): " + ("no such instance was run.\n" if not big else
                                      "all met.\n" if not missed else
                                      "missed:\n\n" + "".join(f"- {m}\n" for m in missed)))
+    cases = [r for r in done if r.get("case")]
+    if cases:
+        text += ("\nThe cases: " + "".join(
+            f"\n- {r['instance']}: " + "; ".join(filter(None, [
+                f"Storm's PRISM run on {r['storm_prism_states']:,} states, its value "
+                f"{'inside' if r['storm_prism_inside'] else 'OUTSIDE'} our bracket (1e-9)"
+                if r.get("storm_prism_states") is not None else None,
+                f"process ratio left out: {r['process_note']}"
+                if r.get("process_note") else None]))
+            for r in cases) + "\n")
     left = [(r["instance"], r["error"]) for r in rows if "error" in r] + [
         s for s in skipped if not s[1].startswith(_NOT_A_TASK)]
     if left:
@@ -609,8 +813,13 @@ def _write(out: Path, rows: list[dict], skipped: list[tuple[str, str]],
 
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = _common.parser(__doc__.splitlines()[0])
-    ap.add_argument("--qvbs", type=Path, required=True,
-                    help="the benchmarks/ folder of a checkout of github.com/ahartmanns/qcomp")
+    ap.add_argument("--qvbs", type=Path, default=None,
+                    help="the benchmarks/ folder of a checkout of github.com/ahartmanns/qcomp "
+                    "(without it: the cases alone)")
+    ap.add_argument("--cases", nargs="*", choices=CASES, default=list(CASES),
+                    help="the issue's own cases, after the QVBS instances (default: both; "
+                    "--quick: the 201x201 grid and the smallest sensed case)")
+    ap.add_argument("--no-cases", action="store_true", help="the QVBS instances alone")
     ap.add_argument("--min-states", type=int, default=MIN_STATES)
     ap.add_argument("--max-states", type=int, default=MAX_STATES)
     ap.add_argument("--family", action="append", choices=FAMILIES,
@@ -629,29 +838,35 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--budget", type=float, default=BUDGET,
                     help=f"CPU seconds per child process (default {BUDGET:g})")
     args = ap.parse_args(argv)
-    if not (args.qvbs / "mdp").is_dir():
+    cases = [] if args.no_cases else list(dict.fromkeys(args.cases))
+    if args.qvbs is None and not cases:
+        ap.error("--qvbs is required unless a case runs (--cases grid sensed)")
+    if args.qvbs is not None and not (args.qvbs / "mdp").is_dir():
         ap.error(f"--qvbs {args.qvbs}: no mdp/ folder (give qcomp's benchmarks/ folder)")
     out = _common.out_dir(args)
     low, high = ((0, QUICK_MAX_STATES) if args.quick else (args.min_states, args.max_states))
     families = tuple(args.family or FAMILIES)
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="bench_qvbs_") as tmp:
-        todo, skipped = jobs(args.qvbs, low, high, families, Path(tmp))
-        todo = [(i, dict(j, start=args.start)) for i, j in todo]
+        todo: list[tuple[Any, dict[str, Any]]] = []
+        skipped: list[tuple[str, str]] = []
+        if args.qvbs is not None:
+            todo, skipped = jobs(args.qvbs, low, high, families, Path(tmp))
         if args.only:
             todo = [(i, j) for i, j in todo if i.name in set(args.only)]
         todo.sort(key=lambda t: t[0].qvbs_states)  # smallest first: a cut-short run has rows
         if args.quick:
             todo = todo[-QUICK_COUNT:]
+        todo += case_jobs(cases, args.quick, Path(tmp))  # after the QVBS instances
+        todo = [(i, dict(j, start=args.start)) for i, j in todo]
         text = _write(out, rows, skipped, args.only, len(todo), argv)
         for inst, job in todo:
-            work = Path(tmp) / inst.name
+            work = Path(tmp) / re.sub(r"[^\w.+-]+", "_", inst.name)
             work.mkdir()
             rows.append(measure(inst, job, work, args.budget, args.compare, args.memory))
             row = rows[-1]
             print(f"{inst.name}: not run ({row['error']})" if "error" in row else
-                  bs._line(row) + (f"  apart: {row['trivial']}" if row["trivial"] else
-                                   f"  iteration_sweeps={row['iteration_sweeps']}"),
+                  _line(row) + (f"  apart: {row['trivial']}" if row["trivial"] else ""),
                   flush=True)
             # written after every instance: a run cut short keeps the rows it has
             text = _write(out, rows, skipped, args.only, len(todo), argv)

@@ -82,17 +82,28 @@ def name_of(case: tuple[Any, ...]) -> str:
     return f"{model.removesuffix('.toml')} {cams} eps={eps:g}"
 
 
-def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
-    """One case in this process: the build timed, the answer, Storm on the product."""
+def case_model(index: int, quick: bool) -> Any:
+    """Case ``index`` of :data:`QUICK` (``quick``) or :data:`FULL` as a model: the bus
+    case's model file loaded, with the case's cameras at its ``epsilon``."""
     import dataclasses
     from types import MappingProxyType
 
-    import mitld_lp.sensing.belief as belief
-    import mitld_lp.sensing.growth as growth
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import load_model
     from mitld_lp.sensing import Sensor
 
     model_name, sensors, eps = (QUICK if quick else FULL)[index]
+    base = load_model(C.model_path(model_name))
+    return dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
+        {e: Sensor(*s) for e, *s in sensors}))
+
+
+def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
+    """One case in this process: the build timed, the answer, Storm on the product."""
+    import mitld_lp.sensing.belief as belief
+    import mitld_lp.sensing.growth as growth
+    from mitld_lp import synthesize
+
+    model_name = (QUICK if quick else FULL)[index][0]
     storm = storm and model_name != "bus_puddle.toml"  # a safety part: not reachability
     built: dict[str, float] = {}
     build = belief.belief_product
@@ -113,10 +124,7 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
 
     seen: list[tuple[int, int]] = []
     growth.projected = projected  # the size estimate at each level's end
-    base = load_model(C.model_path(model_name))
-    model = dataclasses.replace(base, epsilon=eps, sensors=MappingProxyType(
-        {e: Sensor(*s) for e, *s in sensors}))
-    r = synthesize(model)
+    r = synthesize(case_model(index, quick))
     process = time.process_time()  # this process so far: imports, build, solve
     assert r.route == "sensed", r.route
     row: dict[str, Any] = {
