@@ -41,10 +41,13 @@ from a truncated state, is kept with value 0 as above.  The states of value 1
 (``Prob1A``) are those that cannot reach a prob-0 state before the target.  Those of
 the goal's (so of the wider target's too: every policy that reaches the goal almost
 surely reaches it) leave the quotient with value 1, as Storm's *prob1* does before any
-number (:func:`_without_one`): a choice's probability of entering one joins its
-one-step probability of the target, and the solvers, the iteration and the LP, work
-only on the states whose value is unknown (99% of QVBS csma 4-2's maybe states and 69%
-of firewire_dl 3-600's had value 1).  Any choice is optimal there (every policy
+number: found on the product's pattern before the quotient is made (the maybe states
+with no path through maybe states to a prob-0 state, :func:`~mitld_lp.solvers.reach.
+reaching_through`: no quotient of the 99% of QVBS csma 4-2's maybe states and 69% of
+firewire_dl 3-600's that had value 1 is built and cut), a choice's probability of
+entering one joins its one-step probability of the target (the two sums added, as
+:func:`_without_one` adds them), and the solvers, the iteration and the LP, work only
+on the states whose value is unknown.  Any choice is optimal there (every policy
 reaches the target almost surely): the lifted policy plays the first.  A state of value
 1 for the wider target only stays (its value still in ``qualitative.one``).
 
@@ -83,6 +86,7 @@ from mitld_lp.solvers.graph import (
     toward,
 )
 from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
+from mitld_lp.solvers.reach import reaching_through
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -433,6 +437,11 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
+    j0 = 1 if same else 0
+    sure_state = np.zeros(n, dtype=bool)  # the goal's value-1 states out of the quotient
+    if without_one and sense is Sense.MIN:  # Prob1A on the pattern, before the quotient
+        sure_state[maybe] = ~reaching_through(m, mdp.row_groups, maybe, prob0[j0])[maybe]
+        maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
@@ -478,6 +487,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     to_goal = np.ascontiguousarray(one_step[:, 0])
     to_extra = None if same else np.ascontiguousarray(one_step[:, 1])
     del one_step
+    if sure_state.any():  # a move into a value-1 state joins the goal's (_without_one's sum)
+        to_goal = to_goal + rows @ sure_state.astype(np.float64)
     one_step = rows @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
                                       ).astype(np.float64)
     leaks = [one_step[:, j] > 0 for j in range(one_step.shape[1])]
@@ -497,12 +508,11 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         matrix.sum_duplicates()
     matrix.eliminate_zeros()
 
-    # the goal's value-1 states out of the quotient (_without_one): Prob1A of a minimum,
-    # Prob1E of a maximum (a collapsed end component leaves whole)
-    j0 = 1 if same else 0
+    # a maximum's value-1 states out of the quotient (_without_one): Prob1E (a collapsed
+    # end component leaves whole)
     sure = np.zeros(n_red, dtype=bool)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
-    if without_one:
+    if without_one and sense is Sense.MAX:
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
         sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])
@@ -514,7 +524,6 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             if played is not None:
                 shared[ATTRACTOR_STRATEGY] = played
         del spared
-    sure_state = np.zeros(n, dtype=bool)
     if sure.any():
         cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
         matrix, row_groups, kept = cut.matrix, cut.row_groups, kept[cut.choices]
