@@ -10,7 +10,9 @@ list-of-sets graphs (no library):
   ``test_rare_solve``), its entries the table's among them in their order, and each
   choice's one-step probability of the target is the table's into the goal plus its
   move into a removed value-1 state (the two sums added, as the cut quotient added
-  them), with truncated states or none."""
+  them), with truncated states or none;
+* a maximum's ``Prob1E`` (``prob1_e``) out of the quotient and the lift's strategy kept
+  for it, which reaches the goal almost surely (a plain walk of the chain it plays)."""
 
 from __future__ import annotations
 
@@ -19,9 +21,9 @@ import pytest
 import scipy.sparse as sp
 from test_analysis_cut_one import _choices, _draw, _prob1a
 from test_analysis_half_quotient import as_mdp
-from test_rare_solve import prob0_e
+from test_rare_solve import prob0_e, prob1_e
 
-from mitld_lp.solvers.analysis import analyse
+from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.reach import reaching_through
 
@@ -106,3 +108,76 @@ def test_minimum_quotient_without_its_value_one_states(truncated: bool) -> None:
                 into += row[t] * float(t in sure)
             assert low.to_target[r] == (to_goal + into if sure else to_goal), (seed, c)
     assert removed > 0  # some value-1 states did leave the quotient
+
+
+def _almost_surely(choices: list[list[set[int]]], play: dict[int, int], target: set[int],
+                   ) -> set[int]:
+    """The states of ``play`` from which the chain playing it reaches ``target`` with
+    probability 1, the other states stopping: every state it can reach has a path to
+    the target (a finite chain)."""
+    def succ(s: int) -> set[int]:
+        return choices[s][play[s]] if s in play and s not in target else set()
+
+    def reach(s: int) -> set[int]:
+        seen, todo = {s}, [s]
+        while todo:
+            for t in succ(todo.pop()):
+                if t not in seen:
+                    seen.add(t)
+                    todo.append(t)
+        return seen
+
+    return {s for s in play if all(reach(t) & target for t in reach(s))}
+
+
+def _draw_acyclic(seed: int) -> tuple[np.ndarray, list[int]]:
+    """A dense (choices x states) table without end components but the absorbing ones:
+    10-30 states, each other one's 1-3 choices of 1-3 successors among the states after
+    it; the last absorbing (the goal), the one before it absorbing (a sink)."""
+    rng = np.random.default_rng(8300 + seed)
+    n = int(rng.integers(10, 31))
+    rows, owner = [], []
+    for s in range(n):
+        for _ in range(1 if s >= n - 2 else int(rng.integers(1, 4))):
+            w = np.zeros(n)
+            if s >= n - 2:
+                w[s] = 1.0
+            else:
+                k = int(min(rng.integers(1, 4), n - 1 - s))
+                w[rng.choice(np.arange(s + 1, n), k, replace=False)] = rng.integers(1, 5, k)
+            rows.append(w / w.sum())
+            owner.append(s)
+    return np.array(rows), owner
+
+
+@pytest.mark.parametrize("acyclic", [False, True])
+def test_maximum_value_one_states_and_their_strategy(acyclic: bool) -> None:
+    """A maximum's Prob1E of the goal (``prob1_e``) leaves the quotient, and the lifted
+    strategy kept for those states reaches the goal almost surely: on draws with end
+    components (their sets and strategy found on the quotient) and without (found on
+    the product's pattern, :func:`~mitld_lp.solvers.value_one.prob1e_first`)."""
+    played = 0
+    for seed in range(40):
+        dense, owner = _draw_acyclic(seed) if acyclic else _draw(seed, False)
+        mdp = as_mdp(dense, owner, False)
+        n = dense.shape[1]
+        goal = np.zeros(n, dtype=bool)
+        goal[-1] = True
+        low, _ = analyse(mdp, goal, sense=Sense.MAX)
+        succ = _choices(dense, owner)
+        g = set(np.flatnonzero(goal).tolist())
+        sure = prob1_e(succ, g) - g
+        assert sure == set(np.flatnonzero(np.asarray(low.state_map) < 0).tolist()) & (
+            set(range(n)) - g - set(np.flatnonzero(np.asarray(low.prob0)).tolist())), seed
+        strategy = low.shared.get(ATTRACTOR_STRATEGY)
+        if not sure:
+            continue
+        assert strategy is not None, seed
+        assert set(np.asarray(strategy.states).tolist()) == sure, seed
+        groups = np.asarray(mdp.row_groups)
+        play = {int(s): int(c) - int(groups[s])
+                for s, c in zip(strategy.states, strategy.choices, strict=True)}
+        assert all(0 <= play[s] < len(succ[s]) for s in play), seed
+        assert _almost_surely(succ, play, g) == sure, seed
+        played += sum(len(succ[s]) > 1 for s in sure)
+    assert played > 0  # states with a choice to make

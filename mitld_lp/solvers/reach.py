@@ -51,14 +51,14 @@ def reaching_through(matrix: sp.csr_array, row_groups: np.ndarray, through: np.n
     states of value 1 (``Prob1A``) are the maybe states it leaves out, with the
     prob-0 states as seeds and the maybe states as ``through``: their quotient's own
     backward search, with no quotient made for it."""
+    groups = np.asarray(row_groups)
     states = np.flatnonzero(through)
-    lo, hi = np.asarray(row_groups)[states], np.asarray(row_groups)[states + 1]
-    choices = gather_ranges(lo, hi)
-    start, stop = matrix.indptr[choices], matrix.indptr[choices + 1]
-    source = np.repeat(np.repeat(states, hi - lo), stop - start)  # ascending
+    # a state's choices are consecutive rows, so its entries one range of the matrix's
+    start, stop = matrix.indptr[groups[states]], matrix.indptr[groups[states + 1]]
     succ = matrix.indices[gather_ranges(start, stop)]
-    del choices, start, stop
-    return backward_reachable(int(np.asarray(row_groups).shape[0] - 1), source, succ,
+    source = np.repeat(states, stop - start)  # ascending
+    del start, stop
+    return backward_reachable(int(groups.shape[0] - 1), source, succ,
                               np.asarray(seeds, dtype=bool))
 
 
