@@ -15,9 +15,12 @@ with the entry point of each part timed (CPU seconds, medians):
   (``graph.reaching``: a breadth-first search a target);
 * ``end_components`` (maxima), ``attractor`` (the minima's ``Prob0E``, and the
   maxima's value-1 states inside ``one``), ``one`` (the quotients' value-1 states),
-  ``order`` (the quotient's blocks), ``numba_load`` and ``walks_loaded`` (numba's import
-  and the compiled walks' load where the analysis makes them, the sweeps to come being
-  compiled); ``rest``: the quotient's arrays, the analysis less the parts above;
+  ``order`` (the quotient's blocks), ``prob1a_first`` / ``prob1e_first`` (the goal's
+  value-1 states found before the quotient: ``solvers.value_one``; 0 in a checkout
+  without them, where ``one`` finds them on the quotient), ``numba_load`` and
+  ``walks_loaded`` (numba's import and the compiled walks' load where the analysis makes
+  them, the sweeps to come being compiled); ``rest``: the quotient's arrays, the
+  analysis less the parts above;
 * the same parts of the *first* call, the route's own in ``synthesize`` (what
   ``bench_qvbs.py``'s ``analysis_cpu`` counts: numba's import and each kernel's load
   from the disk cache inside, and the first touch of every array);
@@ -62,11 +65,13 @@ PARTS = {"levels": ("analysis", "state_components"),
          "attractor": ("analysis", "attractor"),
          "one": ("analysis", "_one"),
          "order": ("quotient_order", "order_of"),
+         "prob1a_first": ("analysis", "prob1a_first"),
+         "prob1e_first": ("analysis", "prob1e_first"),
          "numba_load": ("numba_narrow", "import_numba"),
          "walks_loaded": ("analysis", "load_walks")}
 """Each part: the module (of ``mitld_lp.solvers``) whose name the analysis calls it by."""
-OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order", "numba_load",
-         "walks_loaded")
+OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order", "prob1a_first",
+         "prob1e_first", "numba_load", "walks_loaded")
 """The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
 ``rest`` is ``analyse`` less these and ``one``'s own time)."""
 COLUMNS = ("instance", "value", "numba_before", "analyse", *PARTS, "rest", "numba_import",
@@ -113,6 +118,8 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     originals = []
     for name, (module, attr) in PARTS.items():
         mod = importlib.import_module(f"mitld_lp.solvers.{module}")
+        if not hasattr(mod, attr):  # an older checkout first on PYTHONPATH: the part is 0
+            continue
         originals.append((mod, attr, getattr(mod, attr)))
         setattr(mod, attr, timed(name, getattr(mod, attr)))
     analysis.analyse = timed("analyse", spy)
