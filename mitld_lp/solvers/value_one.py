@@ -1,8 +1,8 @@
 r"""The goal's states of value 1 found before the analysis makes its quotient (for
 :func:`~mitld_lp.solvers.analysis.analyse`), on the product's pattern alone, as Storm's
 *prob01* finds them before any number: the quotient is then built once, of the states
-whose value is unknown, not of every maybe state and then cut (QVBS csma 4-2: 232,133 of
-its 232,811 maybe states have value 1; zeroconf_dl 1000-1: 72,909 of 91,930).
+whose value is unknown, not of every maybe state and then cut (QVBS csma 4-2: 232,132 of
+its 232,810 maybe states have value 1; zeroconf 1000-4: 49,892 of 214,063).
 
 * a minimum's (``Prob1A``, :func:`prob1a_first`): the maybe states with no path through
   maybe states to a prob-0 state (:func:`~mitld_lp.solvers.reach.reaching_through`);
