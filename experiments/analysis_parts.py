@@ -15,8 +15,15 @@ with the entry point of each part timed (CPU seconds, medians):
   (``graph.reaching``: a breadth-first search a target);
 * ``end_components`` (maxima), ``attractor`` (the minima's ``Prob0E``, and the
   maxima's value-1 states inside ``one``), ``one`` (the quotients' value-1 states),
-  ``order`` (the quotient's blocks); ``rest``: the quotient's arrays, the analysis less
-  the parts above;
+  ``order`` (the quotient's blocks), ``prob1a_first`` / ``prob1e_first`` (the goal's
+  value-1 states found before the quotient: ``solvers.value_one``; 0 in a checkout
+  without them, where ``one`` finds them on the quotient), ``numba_load`` and
+  ``walks_loaded`` (numba's import and the compiled walks' load where the analysis makes
+  them, the sweeps to come being compiled); ``rest``: the quotient's arrays, the
+  analysis less the parts above;
+* the same parts of the *first* call, the route's own in ``synthesize`` (what
+  ``bench_qvbs.py``'s ``analysis_cpu`` counts: numba's import and each kernel's load
+  from the disk cache inside, and the first touch of every array);
 * then, in the same child, numba imported and the compiled walks loaded
   (``numba_import``, ``walks_load``), the first analysis on the compiled walks
   (``first_compiled``: each kernel's load from the disk cache inside) and the median of
@@ -57,13 +64,21 @@ PARTS = {"levels": ("analysis", "state_components"),
          "end_components": ("analysis", "end_components"),
          "attractor": ("analysis", "attractor"),
          "one": ("analysis", "_one"),
-         "order": ("quotient_order", "order_of")}
+         "order": ("quotient_order", "order_of"),
+         "prob1a_first": ("analysis", "prob1a_first"),
+         "prob1e_first": ("analysis", "prob1e_first"),
+         "numba_load": ("numba_narrow", "import_numba"),
+         "walks_loaded": ("analysis", "load_walks")}
 """Each part: the module (of ``mitld_lp.solvers``) whose name the analysis calls it by."""
-OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order")
+OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order", "prob1a_first",
+         "prob1e_first", "numba_load", "walks_loaded")
 """The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
 ``rest`` is ``analyse`` less these and ``one``'s own time)."""
 COLUMNS = ("instance", "value", "numba_before", "analyse", *PARTS, "rest", "numba_import",
            "walks_load", "first_compiled", "compiled")
+FIRST = ("instance", "value", "analyse", *PARTS, "rest")
+"""The first call's columns (the route's own, in ``synthesize``: numba's import and the
+kernels' loads from the disk cache inside where the analysis makes them)."""
 
 
 def _median(xs: list[float]) -> float:
@@ -89,11 +104,6 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         kept.update(args=args, kwargs=kwargs)
         return inner(*args, **kwargs)
 
-    analysis.analyse = spy
-    try:
-        result = synthesize(model)
-    finally:
-        analysis.analyse = inner
     spent: dict[str, float] = {}
 
     def timed(name: str, f: Any) -> Any:
@@ -108,8 +118,17 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     originals = []
     for name, (module, attr) in PARTS.items():
         mod = importlib.import_module(f"mitld_lp.solvers.{module}")
+        if not hasattr(mod, attr):  # an older checkout first on PYTHONPATH: the part is 0
+            continue
         originals.append((mod, attr, getattr(mod, attr)))
         setattr(mod, attr, timed(name, getattr(mod, attr)))
+    analysis.analyse = timed("analyse", spy)
+    try:  # the first call, in the route's solve: what bench_qvbs's analysis_cpu counts
+        result = synthesize(model)
+    finally:
+        analysis.analyse = inner
+    first_call = dict(spent, rest=spent.get("analyse", 0.0) - _inside(spent, kept))
+    spent.clear()
     numba_before = "numba" in sys.modules
 
     def run() -> float:
@@ -123,10 +142,7 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         for _ in range(job["reps"]):
             spent.clear()
             whole = run()
-            inside = sum(spent.get(k, 0.0) for k in OUTER) + spent.get("one", 0.0) - (
-                spent.get("attractor", 0.0) if str(kept["kwargs"].get("sense")) == "max"
-                else 0.0)
-            rows.append(dict(spent, analyse=whole, rest=whole - inside))
+            rows.append(dict(spent, analyse=whole, rest=whole - _inside(spent, kept)))
     finally:
         for mod, attr, f in originals:
             setattr(mod, attr, f)
@@ -140,9 +156,16 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     walks_loaded = time.process_time()
     first = run()
     compiled = _median([run() for _ in range(job["reps"])])
-    return dict(out, value=result.lower, numba_before=numba_before,
+    return dict(out, value=result.lower, numba_before=numba_before, first_call=first_call,
                 numba_import=loaded - c, walks_load=walks_loaded - loaded,
                 first_compiled=first, compiled=compiled)
+
+
+def _inside(spent: dict[str, float], kept: dict[str, Any]) -> float:
+    """The time of the parts :func:`analyse` calls itself (``one``'s own on a maximum:
+    its attractor is counted once)."""
+    return sum(spent.get(k, 0.0) for k in OUTER) + spent.get("one", 0.0) - (
+        spent.get("attractor", 0.0) if str(kept["kwargs"].get("sense")) == "max" else 0.0)
 
 
 def _answer(work: Path) -> int:
@@ -167,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
     reps = 2 if args.quick else args.reps
-    rows = []
+    rows, firsts = [], []
     with tempfile.TemporaryDirectory(prefix="analysis_parts_") as tmp:
         work = Path(tmp)
         for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
@@ -182,12 +205,20 @@ def main(argv: list[str] | None = None) -> int:
             got = json.loads((work / "out.json").read_text(encoding="utf-8"))
             rows.append([inst.name, f"{got['value']:.6g}", got["numba_before"],
                          *(round(got[k], 4) for k in COLUMNS[3:])])
+            firsts.append([inst.name, f"{got['value']:.6g}",
+                           *(round(got["first_call"].get(k, 0.0), 4) for k in FIRST[2:])])
             print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
+            print(_common.text_table(FIRST, firsts[-1:]), flush=True)
     text = ("## The graph analysis part by part, and compiled (CPU seconds, medians)\n\n"
             + _common.markdown_table(COLUMNS, rows)
             + f"\n\n{reps} timed analyses an instance after one untimed, in one process; "
               "the compiled ones after numba's import and the walks' load in the same "
-              "process.\n")
+              "process.\n\n"
+              "## The first analysis of each process, part by part (CPU seconds)\n\n"
+            + _common.markdown_table(FIRST, firsts)
+            + "\n\nThe route's own call (what bench_qvbs.py's analysis_cpu counts): "
+              "numba's import (numba_load) and each kernel's load from the disk cache "
+              "inside the parts that make them.\n")
     _common.write_text(out / "analysis_parts.md", text)
     print(text)
     return 0

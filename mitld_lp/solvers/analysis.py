@@ -41,10 +41,13 @@ from a truncated state, is kept with value 0 as above.  The states of value 1
 (``Prob1A``) are those that cannot reach a prob-0 state before the target.  Those of
 the goal's (so of the wider target's too: every policy that reaches the goal almost
 surely reaches it) leave the quotient with value 1, as Storm's *prob1* does before any
-number (:func:`_without_one`): a choice's probability of entering one joins its
-one-step probability of the target, and the solvers, the iteration and the LP, work
-only on the states whose value is unknown (99% of QVBS csma 4-2's maybe states and 69%
-of firewire_dl 3-600's had value 1).  Any choice is optimal there (every policy
+number: found on the product's pattern before the quotient is made (the maybe states
+with no path through maybe states to a prob-0 state, :func:`~mitld_lp.solvers.reach.
+reaching_through`: no quotient of the 99% of QVBS csma 4-2's maybe states and 69% of
+firewire_dl 3-600's that had value 1 is built and cut), a choice's probability of
+entering one joins its one-step probability of the target (the two sums added, as
+:func:`_without_one` adds them), and the solvers, the iteration and the LP, work only
+on the states whose value is unknown.  Any choice is optimal there (every policy
 reaches the target almost surely): the lifted policy plays the first.  A state of value
 1 for the wider target only stays (its value still in ``qualitative.one``).
 
@@ -52,8 +55,9 @@ A maximum's value-1 states of the goal (``Prob1E``, so the wider target's too) l
 quotient the same way, a collapsed end component of them whole (the others renumbered);
 there the lifted policy plays an attractor strategy
 (:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
-surely: the one read from the attractor that found them (:func:`_attractor_strategy`,
-kept in ``Quotient.shared``), no second search.  The step and cost objectives never
+surely: the one read from the attractor that found them
+(:func:`~mitld_lp.solvers.value_one.attractor_strategy`, kept in ``Quotient.shared``),
+no second search.  The step and cost objectives never
 read this quotient (their routes count the steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
@@ -80,16 +84,23 @@ from mitld_lp.solvers.graph import (
     maximal_end_components,
     state_components,
     state_levels,
-    toward,
 )
 from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
+from mitld_lp.solvers.value_one import (
+    ATTRACTOR_STRATEGY,
+    SureStrategy,
+    attractor_strategy,
+    choices_of,
+    prob1a_first,
+    prob1e_first,
+)
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["analyse", "end_components", "may_cycle"]
+__all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "analyse", "end_components", "may_cycle"]
 
 
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
@@ -189,14 +200,6 @@ def _none_among(walks: Any, m: sp.csr_array, groups: np.ndarray, maybe: np.ndarr
     return bool(np.all(left[maybe]))
 
 
-def _choices_of(row_groups: np.ndarray, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The choices of ``states`` (ascending ids) in ascending order, and each one's
-    state: read from their ranges of ``row_groups``, as ``np.flatnonzero(mask[
-    choice_state])`` would give them with no array a choice of the whole product."""
-    lo, hi = row_groups[states], row_groups[states + 1]
-    return gather_ranges(lo, hi), np.repeat(states, hi - lo)
-
-
 def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> bool:
     """Whether the interval iteration will sweep a block compiled (loading numba): a
     product of at least :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES` entries
@@ -233,7 +236,8 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     lose, an :func:`~mitld_lp.solvers.graph.attractor`); a minimum where no path leads
     to a state or a choice that can lose (a backward search).  Second, for a maximum,
     the quotient's choices that cannot lose (``(n_choices,)`` bool, those the attractor
-    spared: :func:`_attractor_strategy` plays them); None for a minimum."""
+    spared: :func:`~mitld_lp.solvers.value_one.attractor_strategy` plays them); None
+    for a minimum."""
     if not (zero.any() or leaks.any()):  # nothing can lose: every state is 1
         return (np.ones(row_groups.shape[0] - 1, dtype=bool),
                 np.ones(matrix.shape[0], dtype=bool) if sense is Sense.MAX else None)
@@ -250,79 +254,6 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
                                np.zeros(matrix.shape[0], dtype=bool), False), None
     entry_owner = np.repeat(owner, np.diff(matrix.indptr))
     return ~backward_reachable(n, entry_owner, matrix.indices, seeds), None
-
-
-ATTRACTOR_STRATEGY = "attractor strategy"
-"""The key in ``Quotient.shared`` of a maximum's strategy for its removed value-1 states
-(:func:`_attractor_strategy`, a :class:`SureStrategy`)."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class SureStrategy:
-    """A strategy of some states: ``states`` (ascending) and each one's choice (a row of
-    the product).  Equal to another with the same arrays (two analyses of one product
-    compare equal, as their other records do)."""
-
-    states: np.ndarray
-    choices: np.ndarray
-
-    def __eq__(self, other: object) -> bool:
-        return (isinstance(other, SureStrategy)
-                and self.states.dtype == other.states.dtype
-                and self.choices.dtype == other.choices.dtype
-                and np.array_equal(self.states, other.states)
-                and np.array_equal(self.choices, other.choices))
-
-    __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: unhashable
-
-
-def _attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
-                        row_groups: np.ndarray, kept: np.ndarray, state_map: np.ndarray,
-                        n_plain: int, mecs: EndComponents,
-                        ) -> SureStrategy | None:
-    """A maximum's strategy for the product states of the reduced states ``sure``
-    (``Prob1E`` of the goal, about to leave the quotient), read from the attractor that
-    found them (:func:`_one`): each such reduced state plays its first choice
-    ``spared`` (one that cannot lose: its support stays among the ``sure`` states, and
-    what leaves the quotient goes to the target), a collapsed end component's through
-    the member that owns that exit, the other members a step along a breadth-first tree
-    of the component's internal choices toward it (as
-    :func:`~mitld_lp.solvers.quotient.lift_policy` does).  It reaches the target almost
-    surely: a closed class of its chain among the ``sure`` states would map to a set
-    of reduced states each with a choice staying among them, holding an end component
-    of the quotient, which has none (its maximal ones are collapsed; a member's walk
-    reaches the exit's owner with positive probability).  The product states ascending
-    and each one's choice (rows of ``mdp``); None if a state
-    has no such choice (never, by the attractor's fixed point: the caller keeps the
-    second search then)."""
-    red = np.flatnonzero(sure)
-    rows, owner = _choices_of(row_groups, red)
-    free = spared[rows]
-    rows, owner = rows[free], owner[free]
-    has, first = np.unique(owner, return_index=True)  # ascending: each one's first
-    if has.size != red.size:  # pragma: no cover - the attractor spares one a state
-        return None
-    play = np.full(sure.size, -1, dtype=np.int64)
-    play[red] = kept[rows[first]]
-    del rows, owner, free, has, first
-    mapped = state_map >= 0
-    states = np.flatnonzero(mapped)
-    states = states[sure[state_map[states]]]
-    choices = play[state_map[states]]
-    if sure[n_plain:].any():  # members of a collapsed end component: toward its exit
-        exits = play[n_plain:][sure[n_plain:]]
-        owners = mdp.state_of(exits)
-        member = np.asarray(mecs.mec_of)[states] >= 0
-        internal = np.flatnonzero(mecs.internal)
-        internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[mdp.state_of(internal)]]]
-        step = toward(mdp, internal, owners)
-        walk = member & ~np.isin(states, owners)
-        if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
-            return None
-        choices[walk] = step[states[walk]]
-    itype = index_dtype(mdp.n_choices)
-    return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
-                        read_only(choices.astype(itype, copy=False)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -432,6 +363,20 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
+    # the goal's value-1 states out of the quotient, found on the pattern before it is
+    # made (value_one): Prob1A of a minimum, Prob1E of a maximum where no end component
+    # is collapsed (else on the quotient below, _without_one cutting them out)
+    j0 = 1 if same else 0
+    sure_state = np.zeros(n, dtype=bool)
+    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
+    if without_one and sense is Sense.MIN:
+        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0])
+    elif without_one and not mecs.n_mecs:
+        sure_state, played = prob1e_first(mdp, m, maybe, prob0[j0], mecs)
+        if played is not None:
+            shared[ATTRACTOR_STRATEGY] = played
+        del played
+    maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
@@ -445,7 +390,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
 
     # the maybe states' choices read from their ranges (no array a choice of the whole
     # product: most products keep a third to two thirds of their choices), ascending
-    kept, owner = _choices_of(np.asarray(mdp.row_groups), np.flatnonzero(maybe))
+    kept, owner = choices_of(np.asarray(mdp.row_groups), np.flatnonzero(maybe))
     inside = mecs.internal[kept]
     if inside.any():
         kept, owner = kept[~inside], owner[~inside]
@@ -477,6 +422,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     to_goal = np.ascontiguousarray(one_step[:, 0])
     to_extra = None if same else np.ascontiguousarray(one_step[:, 1])
     del one_step
+    if sure_state.any():  # a move into a value-1 state joins the goal's (_without_one's sum)
+        to_goal = to_goal + rows @ sure_state.astype(np.float64)
     one_step = rows @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
                                       ).astype(np.float64)
     leaks = [one_step[:, j] > 0 for j in range(one_step.shape[1])]
@@ -496,24 +443,21 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         matrix.sum_duplicates()
     matrix.eliminate_zeros()
 
-    # the goal's value-1 states out of the quotient (_without_one): Prob1A of a minimum,
-    # Prob1E of a maximum (a collapsed end component leaves whole)
-    j0 = 1 if same else 0
+    # with collapsed end components, a maximum's value-1 states out of the quotient
+    # (_without_one): Prob1E (a collapsed end component leaves whole)
     sure = np.zeros(n_red, dtype=bool)
-    shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
-    if without_one:
+    if without_one and sense is Sense.MAX and mecs.n_mecs:
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
         sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])
         sure &= ~zero0
         del zero0
         if spared is not None and sure.any():  # the lift's strategy there (the docs)
-            played = _attractor_strategy(mdp, sure, spared, row_groups, kept, state_map,
+            played = attractor_strategy(mdp, sure, spared, row_groups, kept, state_map,
                                          n_plain, mecs)
             if played is not None:
                 shared[ATTRACTOR_STRATEGY] = played
         del spared
-    sure_state = np.zeros(n, dtype=bool)
     if sure.any():
         cut = _without_one(matrix, row_groups, sure, [to_goal, to_extra], leaks)
         matrix, row_groups, kept = cut.matrix, cut.row_groups, kept[cut.choices]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.traversal import breadth_first_order
 
@@ -19,7 +20,7 @@ try:  # SciPy's compiled CSR -> CSC transpose, as scipy.sparse's own tocsc calls
 except ImportError:  # pragma: no cover - a SciPy without it: a stable argsort
     _st = None
 
-__all__ = ["Reversed", "backward_reachable"]
+__all__ = ["Reversed", "backward_reachable", "reaching_through"]
 
 
 def backward_reachable(
@@ -39,6 +40,26 @@ def backward_reachable(
         source, succ = np.asarray(source, dtype=index), np.asarray(succ, dtype=index)
         return walks.reaching_edges(n, source, succ, np.array(seeds, dtype=bool))
     return Reversed(n, source, succ).reaching(seeds)
+
+
+def reaching_through(matrix: sp.csr_array, row_groups: np.ndarray, through: np.ndarray,
+                     seeds: np.ndarray) -> np.ndarray:
+    """The states with a path to a ``seeds`` state on the support graph of ``matrix``
+    (rows: choices grouped per state by ``row_groups``; no zero stored) whose states
+    before the seed are all ``through`` states: :func:`backward_reachable` along the
+    entries of the ``through`` states' choices alone (the seeds included).  A minimum's
+    states of value 1 (``Prob1A``) are the maybe states it leaves out, with the
+    prob-0 states as seeds and the maybe states as ``through``: their quotient's own
+    backward search, with no quotient made for it."""
+    groups = np.asarray(row_groups)
+    states = np.flatnonzero(through)
+    # a state's choices are consecutive rows, so its entries one range of the matrix's
+    start, stop = matrix.indptr[groups[states]], matrix.indptr[groups[states + 1]]
+    succ = matrix.indices[gather_ranges(start, stop)]
+    source = np.repeat(states, stop - start)  # ascending
+    del start, stop
+    return backward_reachable(int(groups.shape[0] - 1), source, succ,
+                              np.asarray(seeds, dtype=bool))
 
 
 class Reversed:
