@@ -34,7 +34,8 @@ def _walk(monkeypatch: pytest.MonkeyPatch, how: str) -> None:
     big = how != "compiled"
     monkeypatch.setattr(topological, "LEVEL_KERNEL_MIN_ENTRIES", 10**12 if big else 0)
     monkeypatch.setattr(topological, "LEVEL_KERNEL_MIN_LEVELS", 10**12 if big else 0)
-    monkeypatch.setattr(topological, "sys", type("S", (), {"modules": {}}))
+    # the gate as if no compiled kernel's load were paid in this process
+    monkeypatch.setattr(topological.kernel_loader, "compiled_paid", lambda: False)
 
 
 def _answers(monkeypatch, mdp, sense: Sense):
