@@ -179,7 +179,12 @@ def _scores(rows: sp.csr_array, values: np.ndarray, index: type) -> np.ndarray:
     """Each row's sum of its entries times ``values`` at their columns, in long double:
     what ``rows.astype(np.longdouble) @ values.astype(np.longdouble)`` sums (the same
     products, each row's added in its stored order from 0), with only the values the
-    rows read widened (one a stored entry, not one a column)."""
+    rows read widened (one a stored entry, not one a column).  Rows not in canonical
+    order (sorted columns, no duplicate) are put in it first, in place, as SciPy's
+    ``astype`` does (on the block's arrays, which ``rows`` views: the same sums and the
+    same block afterwards as that product)."""
+    if not rows.has_canonical_format:
+        rows.sum_duplicates()
     if rows.nnz == 0:
         return np.zeros(rows.shape[0], dtype=np.longdouble)
     widened = values[rows.indices].astype(np.longdouble)
