@@ -124,12 +124,24 @@ def test_block_left_to_the_lp_after_the_greedy_gets_linprogs_values(
         calls.append(greedy_block.certified_greedy(*args, **kwargs))
         return None
 
-    monkeypatch.setattr(lp_blocks, "certified_greedy", refused)
     mdp = _tied(seed)
+    q = reduce(mdp, mdp.target)
+    polish = lp_blocks.polish
+    polished = []
+
+    def checked(block, *args, **kwargs):
+        # the block the crossover reads: its target column the quotient's there
+        np.testing.assert_array_equal(block.to_target, q.to_target[block.choices])
+        polished.append(block.states.size)
+        return polish(block, *args, **kwargs)
+
+    monkeypatch.setattr(lp_blocks, "certified_greedy", refused)
+    monkeypatch.setattr(lp_blocks, "polish", checked)
     want = _linprog_max(mdp)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
     assert calls, "no block went through the greedy check"
+    assert len(polished) == len(calls)
     assert got.status.value == "optimal" and got.values is not None
     assert "by the bounds' greedy policy" not in got.message
     np.testing.assert_allclose(got.values, want, atol=1e-8)
