@@ -55,7 +55,8 @@ def test_scores_are_each_rows_long_double_sum(seed: int, shuffled: bool) -> None
     for i in range(m):
         at = slice(int(rows.indptr[i]), int(rows.indptr[i + 1]))
         total = np.longdouble(0.0)
-        for col, val in sorted(zip(rows.indices[at].tolist(), rows.data[at].tolist())):
+        pairs = zip(rows.indices[at].tolist(), rows.data[at].tolist(), strict=True)
+        for col, val in sorted(pairs):
             total += np.longdouble(val) * np.longdouble(values[col])
         want.append(total)
     whole = rows.copy().astype(np.longdouble) @ values.astype(np.longdouble)
