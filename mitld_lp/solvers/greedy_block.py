@@ -202,11 +202,14 @@ def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
                         shape=(z - a, m.shape[1]))
 
 
-BATCH = 1 << 14
+BATCH = 1 << 13
 """Choices scored at a time by :func:`certified_greedy` (its memory bound, not its
 answer: each row's sum is the same).  2**16 choices' long double scores and rows were
 the LP stage's traced peak on QVBS ``zeroconf`` 1000-4 (90.0 bytes a transition above
-its entry; 86.2 at 2**14, where the chain's component search peaks instead)."""
+its entry; 86.2 at 2**14, where the chain's component search peaks instead).  2**13
+since a batch also widens the values its rows read (16 bytes an entry, where no long
+double copy of the block's values is held): QVBS ``consensus`` 4-4's greedy checks
+peaked at 12.5 and 14.4 bytes a transition above their entry at 2**14, 9.9 at 2**13."""
 
 _SHARE = 4.0
 """The greedy policy's loss may take a quarter of each state's threshold (as the policy
