@@ -48,23 +48,32 @@ SOLVE_STAGES = (("mitld_lp.solvers.analysis", "analyse"),
                 ("mitld_lp.solvers.certify", "certify"))
 
 
-def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
-    """One instance in this process with ``root``'s package: the LP stage's and the
-    solve's CPU (untraced), then the LP stage's traced peak."""
+def _model(root: Path, benchmarks: Path, name: str) -> Any:
+    """The QVBS instance ``name`` loaded with ``root``'s package (put first on the path),
+    the bench's imports preloaded."""
     sys.path[:0] = [str(root), str(root / "experiments")]
-    import importlib
-
     import bench_qvbs as bq
 
-    import mitld_lp.solvers.lp as lpm
-    import mitld_lp.solvers.lp_blocks as lb
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import load_model
 
     work = Path(tempfile.mkdtemp(prefix="lp_stage_peak_"))
     found, _ = bq.jobs(benchmarks, 0, bq.MAX_STATES, bq.FAMILIES, work)
     job = next(j for i, j in found if i.name == name)
     model = load_model(job["model"], max_states=job["max_states"])
     bq.bs.preload()
+    return model
+
+
+def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
+    """One instance in this process with ``root``'s package: the LP stage's and the
+    solve's CPU (untraced), then the LP stage's traced peak."""
+    model = _model(root, benchmarks, name)
+    import importlib
+
+    import mitld_lp.solvers.lp as lpm
+    import mitld_lp.solvers.lp_blocks as lb
+    from mitld_lp import synthesize
+
     out: dict[str, Any] = {"greedy": [], "stage_cpu": {}, "traced": False}
     greedy = lb.certified_greedy
 
@@ -121,17 +130,10 @@ def alive(root: Path, benchmarks: Path, name: str, top: int = 40) -> list[str]:
     """What is alive at the first batch of the first greedy check (``--alive``)."""
     import collections
 
-    sys.path[:0] = [str(root), str(root / "experiments")]
-    import bench_qvbs as bq
-
+    model = _model(root, benchmarks, name)
     import mitld_lp.solvers.greedy_block as gb
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import synthesize
 
-    work = Path(tempfile.mkdtemp(prefix="lp_stage_peak_"))
-    found, _ = bq.jobs(benchmarks, 0, bq.MAX_STATES, bq.FAMILIES, work)
-    job = next(j for i, j in found if i.name == name)
-    model = load_model(job["model"], max_states=job["max_states"])
-    bq.bs.preload()
     r = synthesize(model)  # untraced: the kernels compiled and loaded
     n, first = r.mdp.n_transitions, (repr(r.lower), repr(r.upper))
     del r
