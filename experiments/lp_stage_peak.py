@@ -17,6 +17,15 @@ peak.  With ``--compare`` the other checkout runs right after, instance by insta
 so the machine's load hits both; the brackets are compared to the bit.
 ``memory_stages.py`` (``bench_qvbs.py --memory``) traces the whole synthesis with
 tracebacks, which took over 15 CPU minutes on zeroconf 1000-4 on a loaded machine.
+
+``--alive`` (one checkout, one instance) instead lists what is alive at the greedy
+check's first batch: the whole second synthesis traced (25 frames), one snapshot there,
+each allocation grouped by its frames from the LP stage's first (``LP``) or, made
+before the stage, by its last three frames in the package (``caller``), in bytes per
+transition above the traced size before ``synthesize`` (about a minute on zeroconf
+1000-4)::
+
+    python experiments/lp_stage_peak.py <checkout> <QVBS dir> <instance> --alive
 """
 
 from __future__ import annotations
@@ -39,23 +48,32 @@ SOLVE_STAGES = (("mitld_lp.solvers.analysis", "analyse"),
                 ("mitld_lp.solvers.certify", "certify"))
 
 
-def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
-    """One instance in this process with ``root``'s package: the LP stage's and the
-    solve's CPU (untraced), then the LP stage's traced peak."""
+def _model(root: Path, benchmarks: Path, name: str) -> Any:
+    """The QVBS instance ``name`` loaded with ``root``'s package (put first on the path),
+    the bench's imports preloaded."""
     sys.path[:0] = [str(root), str(root / "experiments")]
-    import importlib
-
     import bench_qvbs as bq
 
-    import mitld_lp.solvers.lp as lpm
-    import mitld_lp.solvers.lp_blocks as lb
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import load_model
 
     work = Path(tempfile.mkdtemp(prefix="lp_stage_peak_"))
     found, _ = bq.jobs(benchmarks, 0, bq.MAX_STATES, bq.FAMILIES, work)
     job = next(j for i, j in found if i.name == name)
     model = load_model(job["model"], max_states=job["max_states"])
     bq.bs.preload()
+    return model
+
+
+def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
+    """One instance in this process with ``root``'s package: the LP stage's and the
+    solve's CPU (untraced), then the LP stage's traced peak."""
+    model = _model(root, benchmarks, name)
+    import importlib
+
+    import mitld_lp.solvers.lp as lpm
+    import mitld_lp.solvers.lp_blocks as lb
+    from mitld_lp import synthesize
+
     out: dict[str, Any] = {"greedy": [], "stage_cpu": {}, "traced": False}
     greedy = lb.certified_greedy
 
@@ -108,6 +126,53 @@ def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
             "greedy_peaks": out["greedy"]}
 
 
+def alive(root: Path, benchmarks: Path, name: str, top: int = 40) -> list[str]:
+    """What is alive at the first batch of the first greedy check (``--alive``)."""
+    import collections
+
+    model = _model(root, benchmarks, name)
+    import mitld_lp.solvers.greedy_block as gb
+    from mitld_lp import synthesize
+
+    r = synthesize(model)  # untraced: the kernels compiled and loaded
+    n, first = r.mdp.n_transitions, (repr(r.lower), repr(r.upper))
+    del r
+    snaps: list[Any] = []
+    owners = gb._owners
+
+    def snapped(*a: Any) -> Any:
+        got = owners(*a)
+        if not snaps:
+            snaps.append((tracemalloc.get_traced_memory()[0], tracemalloc.take_snapshot()))
+        return got
+
+    gb._owners = snapped
+    tracemalloc.start(25)
+    base = tracemalloc.get_traced_memory()[0]
+    r = synthesize(model)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert (repr(r.lower), repr(r.upper)) == first, "two runs, two brackets"
+    lines = [f"{name}: {n} transitions, bracket {first}; traced peak of the synthesis "
+             f"{(peak - base) / n:.2f} B/t"]
+    if not snaps:
+        return lines + ["no greedy check ran"]
+    at, snap = snaps[0]
+    lp = ("solvers/lp.py", "solvers/lp_blocks.py", "solvers/greedy_block.py")
+    groups: collections.Counter[str] = collections.Counter()
+    for trace in snap.traces:
+        frames = [f"{f.filename.split('mitld_lp/')[-1]}:{f.lineno}"
+                  for f in trace.traceback if "mitld_lp" in f.filename]
+        ours = [i for i, f in enumerate(frames) if f.startswith(lp)]
+        groups[("LP " + " > ".join(frames[ours[0]:])) if ours else
+               ("caller " + " > ".join(frames[-3:])) if frames else "other"] += trace.size
+    lines.append(f"alive at the greedy check's first batch: {(at - base) / n:.2f} B/t "
+                 f"(LP {sum(v for k, v in groups.items() if k.startswith('LP')) / n:.2f}, "
+                 f"caller {sum(v for k, v in groups.items() if k.startswith('caller')) / n:.2f})")
+    lines += [f"{v / n:7.2f}  {k}" for k, v in groups.most_common(top)]
+    return lines
+
+
 def run_child(root: Path, benchmarks: Path, name: str, script: str = __file__
               ) -> dict[str, Any]:
     """``script --child root benchmarks name`` in a process of its own with ``root``'s
@@ -137,6 +202,10 @@ def arguments(argv: list[str], doc: str) -> tuple[argparse.Namespace, list[Path]
 def main(argv: list[str]) -> None:
     if argv and argv[0] == "--child":
         print(json.dumps(child(Path(argv[1]).resolve(), Path(argv[2]), argv[3])))
+        return
+    if "--alive" in argv:
+        rest = [a for a in argv if a != "--alive"]
+        print("\n".join(alive(Path(rest[0]).resolve(), Path(rest[1]), rest[2])))
         return
     args, roots = arguments(argv, __doc__)
     lines = ["| instance | transitions | lower | same bracket | LP CPU | solve CPU | "

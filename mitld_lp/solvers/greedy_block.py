@@ -108,47 +108,50 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     (the caller solves the whole block).  ``of_quotient``: ``bound`` is per quotient
     state (read here at ``block.states``), so the caller holds no copy of the block's
     bounds while this runs."""
-    groups = block.groups
-    n = groups.size - 1
+    # the block's ``groups`` (a copy of ``starts`` with the total) only where a call
+    # takes them, not held beside the batches; the policy's choices in the index type
+    # the batches use (a block choice each fits it)
+    starts = block.starts
+    n, m = starts.size, int(block.choices.size)
+    index = np.int32 if max(n, m, block.inner.nnz) < 2**31 - 1 else np.int64
     chosen = segmented_argmax(reward + block.inner @ (bound[block.states] if of_quotient
-                                                      else bound), groups, sense=sense)
+                                                      else bound), block.groups,
+                              sense=sense).astype(index)
     walk = ChainLevels(sp.csr_array(block.inner[chosen]))
     both = walk.solve(np.column_stack([reward[chosen], np.ones(n)]))
     if not (np.all(np.isfinite(both)) and np.all(both[:, 1] >= 1.0)):
         logger.info("greedy policy of %d block states: its chain did not solve", n)
         return None
-    # the values, their long double copy the check reads and the tie scale, made one
-    # after the other: the solve's two columns (the exit times only for their
-    # maximum) freed first, the values clipped in place (the long double copy is of
-    # the values unclipped), the scale divided in place
+    # the values unclipped (what the check reads, each entry widened to long double
+    # where a batch reads it: no long double copy of the block's values, 16 bytes a
+    # state, held), the values clipped and the tie scale, made one after the other:
+    # the solve's two columns (the exit times only for their maximum) freed first,
+    # the scale divided in place
     longest = float(np.max(both[:, 1]))
-    values = both[:, 0].copy()
+    raw = both[:, 0].copy()
     del both
-    v_ld = values.astype(np.longdouble)
-    np.clip(values, 0.0, 1.0, out=values)
+    values = np.clip(raw, 0.0, 1.0)
     tie = thresholds(values, tol, precision)
     tie /= _SHARE * longest
-    index = np.int32 if max(n, block.inner.nnz) < 2**31 - 1 else np.int64
     # how far each choice's score falls short of its state's value (below 0: it beats
     # it), BATCH choices at a time and judged there: no array a choice (a long double
     # copy of the whole block is 16 bytes an entry; the slack, each choice's state and
     # their tie scale were 8 + 4 + 8 bytes a choice alive at the LP stage's peak)
     failed = np.zeros(n, dtype=bool)
-    m = int(groups[-1])
     for a in range(0, m, BATCH):
         z = min(a + BATCH, m)
-        owner = _owners(groups, a, z, index)
-        score = reward[a:z] + _rows(block.inner, a, z).astype(np.longdouble) @ v_ld
-        slack = (-sense.gain(score, v_ld[owner])).astype(np.float64)
+        owner = _owners(starts, a, z, index)
+        score = reward[a:z] + _scores(_rows(block.inner, a, z), raw, index)
+        slack = (-sense.gain(score, raw[owner].astype(np.longdouble))).astype(np.float64)
         del score
         failed[owner[tie[owner] + slack < 0.0]] = True  # a choice beats it
         # the policy's own choices there (one a state, increasing with it)
         mine = np.arange(*np.searchsorted(chosen, (a, z)))
         failed[mine[np.abs(slack[chosen[mine] - a]) > tie[mine]]] = True  # its residual
-    del v_ld, tie
+    del raw, tie
     left = np.flatnonzero(backward_reachable(
         n, np.repeat(np.arange(n, dtype=index),  # each entry's state
-                     np.diff(block.inner.indptr[groups])),
+                     np.diff(block.inner.indptr[block.groups])),
         block.inner.indices, failed)) if failed.any() else np.zeros(0, dtype=np.int64)
     if left.size:
         logger.info("greedy policy of %d block states (%d choices): %d fail its dual "
@@ -160,16 +163,35 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
                     "dual values: no LP", n, block.choices.size)
     if left.size == n:
         return None
-    return Greedy(chosen, values, left, walk, int(groups[-1]))
+    return Greedy(chosen, values, left, walk, m)
 
 
-def _owners(groups: np.ndarray, a: int, z: int, index: type) -> np.ndarray:
-    """The state of each choice ``a`` to ``z - 1`` (``groups``: the states' first
-    choices, then the total): the states the batch spans, each repeated by its choices
-    inside it (two binary searches a batch, not one a choice)."""
-    first, last = np.searchsorted(groups, (a, z - 1), side="right") - 1
-    starts = np.clip(groups[first:last + 2], a, z)
-    return np.repeat(np.arange(first, last + 1, dtype=index), np.diff(starts))
+def _owners(starts: np.ndarray, a: int, z: int, index: type) -> np.ndarray:
+    """The state of each choice ``a`` to ``z - 1`` (``starts``: the states' first
+    choices, the total after them or not): the states the batch spans, each repeated by
+    its choices inside it (two binary searches a batch, not one a choice)."""
+    first, last = np.searchsorted(starts, (a, z - 1), side="right") - 1
+    ends = np.append(np.clip(starts[first:last + 1], a, z), z)
+    return np.repeat(np.arange(first, last + 1, dtype=index), np.diff(ends))
+
+
+def _scores(rows: sp.csr_array, values: np.ndarray, index: type) -> np.ndarray:
+    """Each row's sum of its entries times ``values`` at their columns, in long double:
+    what ``rows.astype(np.longdouble) @ values.astype(np.longdouble)`` sums (the same
+    products, each row's added in its stored order from 0), with only the values the
+    rows read widened (one a stored entry, not one a column).  Rows not in canonical
+    order (sorted columns, no duplicate) are put in it first, in place, as SciPy's
+    ``astype`` does (on the block's arrays, which ``rows`` views: the same sums and the
+    same block afterwards as that product)."""
+    if not rows.has_canonical_format:
+        rows.sum_duplicates()
+    if rows.nnz == 0:
+        return np.zeros(rows.shape[0], dtype=np.longdouble)
+    widened = values[rows.indices].astype(np.longdouble)
+    spread = sp.csr_array((rows.data.astype(np.longdouble),
+                           np.arange(rows.nnz, dtype=index), rows.indptr.astype(index)),
+                          shape=(rows.shape[0], rows.nnz))
+    return spread @ widened
 
 
 def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
@@ -180,11 +202,14 @@ def _rows(m: sp.csr_array, a: int, z: int) -> sp.csr_array:
                         shape=(z - a, m.shape[1]))
 
 
-BATCH = 1 << 14
+BATCH = 1 << 13
 """Choices scored at a time by :func:`certified_greedy` (its memory bound, not its
 answer: each row's sum is the same).  2**16 choices' long double scores and rows were
 the LP stage's traced peak on QVBS ``zeroconf`` 1000-4 (90.0 bytes a transition above
-its entry; 86.2 at 2**14, where the chain's component search peaks instead)."""
+its entry; 86.2 at 2**14, where the chain's component search peaks instead).  2**13
+since a batch also widens the values its rows read (16 bytes an entry, where no long
+double copy of the block's values is held): QVBS ``consensus`` 4-4's greedy checks
+peaked at 12.5 and 14.4 bytes a transition above their entry at 2**14, 9.9 at 2**13."""
 
 _SHARE = 4.0
 """The greedy policy's loss may take a quarter of each state's threshold (as the policy

@@ -365,18 +365,35 @@ def solve_lp(
 
 
 def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
-                   ) -> tuple[np.ndarray, np.ndarray] | None:
+                   ) -> tuple[OnReduced, OnReduced] | None:
     """Per-state ``bounds`` read on the reduced states (a collapsed end component's
-    members share their value, so any member speaks for it)."""
+    members share their value, so any member speaks for it), each gathered where a block
+    indexes it (:class:`OnReduced`): one index a reduced state held, not two floats."""
     if bounds is None:
         return None
     kept = np.flatnonzero(q.state_map >= 0)
-    rep = np.zeros(q.n_states, dtype=np.int64)
+    rep = np.zeros(q.n_states, dtype=np.int32 if q.state_map.size < 2**31 else np.int64)
     rep[q.state_map[kept]] = kept
+    del kept
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     if lo.shape != q.state_map.shape or hi.shape != q.state_map.shape:
         raise ValueError(f"bounds: expected two arrays of shape {q.state_map.shape}")
-    return lo[rep], hi[rep]
+    return OnReduced(lo, rep), OnReduced(hi, rep)
+
+
+class OnReduced:
+    """A bound per state of the product read on the reduced states: ``self[index]`` is
+    ``bound[rep[index]]`` (``rep``: a member of each reduced state), the same floats as
+    the whole reduced array indexed there, gathered only for the states asked (a block's:
+    the reduced bounds are not held through the LP stage's peak)."""
+
+    __slots__ = ("bound", "rep")
+
+    def __init__(self, bound: np.ndarray, rep: np.ndarray) -> None:
+        self.bound, self.rep = bound, rep
+
+    def __getitem__(self, index: Any) -> np.ndarray:
+        return self.bound[self.rep[index]]
 
 
 def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -200,6 +200,10 @@ class Walked:
 #: cross-check; above it the interior-point method's cost (6 s an iteration on QVBS
 #: zeroconf 1000-4's 400,806 choices) is what the certificate of the greedy policy saves.
 GREEDY_MIN_CHOICES = 10_000
+
+_TAKEN = np.zeros(0)
+"""A greedy block's ``to_target`` while its array holds the exit rewards
+(:func:`solve_decomposed`): empty, so that a read of it as the target's column fails."""
 
 
 def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
@@ -395,6 +399,10 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     exact optimal values, 37,368 of the 38,496 kept columns of its largest block are
     within 1e-15 of optimal (the symmetric processes), so no bound prunes them.
 
+    ``bounds`` may be anything a block's states index to give their floats (the
+    reduced bounds, or :class:`mitld_lp.solvers.lp.OnReduced` gathering them from the
+    product's states).
+
     The states left with one column are eliminated before the solver when the block
     is large (:mod:`mitld_lp.solvers.eliminate`, :func:`solve_block`): the LP is
     over the states that keep a choice, and its answer is lifted back to the whole
@@ -425,11 +433,22 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        reward = exit_reward(block, values)
-        greedy = None if (bounds is None or not settings.greedy
-                          or block.choices.size < GREEDY_MIN_CHOICES) else certified_greedy(
-            block, reward, bounds[0 if q.sense is Sense.MAX else 1], q.sense,
-            settings.tol, settings.precision, of_quotient=True)
+        greedy = None
+        if not (bounds is None or not settings.greedy
+                or block.choices.size < GREEDY_MIN_CHOICES):
+            # the exit rewards summed into the block's own copy of the target's column
+            # (the sums of exit_reward): not a second float a choice through the
+            # greedy check's peak; the block takes a fresh copy back if the LP runs
+            reward = block.to_target
+            reward += block.outer @ values
+            block = replace(block, to_target=_TAKEN)
+            greedy = certified_greedy(block, reward,
+                                      bounds[0 if q.sense is Sense.MAX else 1], q.sense,
+                                      settings.tol, settings.precision, of_quotient=True)
+            if greedy is None:
+                block = replace(block, to_target=q.to_target[block.choices])
+        else:
+            reward = exit_reward(block, values)
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)
             picked = block.choices[greedy.chosen]
             values[rest], reduced_choice[rest] = greedy.values, picked
