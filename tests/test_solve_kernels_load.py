@@ -35,5 +35,5 @@ def test_numba_load_prints_every_part_and_the_kernels_bracket() -> None:
                           + "$", done.stdout, re.MULTILINE)
         assert cells is not None, part
         figures = list(map(float, cells.groups()))
-        for median, least in zip(figures[0::3], figures[1::3]):
+        for median, least in zip(figures[0::3], figures[1::3], strict=True):
             assert least <= median
