@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import math
 
-from mitld_lp.solvers import numba_narrow
-from mitld_lp.util import numba_cache
+from mitld_lp.solvers import kernel_loader
 
-numba = numba_narrow.require_numba()  # numba without PyYAML
-numba_narrow.install()  # cached kernels loaded without numba's whole target registry
-numba_cache.install()  # processes compiling at once share the disk cache safely
+# numba's cached machine code run without importing numba; numba itself on a miss
+# (without PyYAML, the narrow load, the disk cache's lock: kernel_loader.numba_module)
+numba = kernel_loader.lazy_numba(globals())
 
 
 @numba.njit(cache=True, nogil=True)

@@ -16,12 +16,11 @@ from __future__ import annotations
 import numpy as np
 
 from mitld_lp.sensing.fsum_kernels import sum_of
-from mitld_lp.solvers import numba_narrow
-from mitld_lp.util import numba_cache
+from mitld_lp.solvers import kernel_loader
 
-numba = numba_narrow.require_numba()  # numba without PyYAML
-numba_narrow.install()  # cached kernels loaded without numba's whole target registry
-numba_cache.install()  # processes compiling at once share the disk cache safely
+# numba's cached machine code run without importing numba; numba itself on a miss
+# (without PyYAML, the narrow load, the disk cache's lock: kernel_loader.numba_module)
+numba = kernel_loader.lazy_numba(globals())
 
 INT = np.int64  # rows.INT (not imported: rows imports this module)
 _MAX = 9_223_372_036_854_775_807

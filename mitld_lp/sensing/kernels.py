@@ -9,12 +9,11 @@ from __future__ import annotations
 import numpy as np
 
 from mitld_lp.sensing.group_kernels import _SMALL, group_run
-from mitld_lp.solvers import numba_narrow
-from mitld_lp.util import numba_cache
+from mitld_lp.solvers import kernel_loader
 
-numba = numba_narrow.require_numba()  # numba without PyYAML
-numba_narrow.install()  # cached kernels loaded without numba's whole target registry
-numba_cache.install()  # processes compiling at once share the disk cache safely
+# numba's cached machine code run without importing numba; numba itself on a miss
+# (without PyYAML, the narrow load, the disk cache's lock: kernel_loader.numba_module)
+numba = kernel_loader.lazy_numba(globals())
 
 __all__ = ["pack", "sorted_groups", "dense_groups", "dd_sums", "spread", "scatter_max",
            "scatter_min", "scatter_add", "gather2", "key_match", "key_rehash", "verify"]
