@@ -309,10 +309,7 @@ def belief_product(game: Game[Any], dta: DTA, laws: Mapping[str, FirstOccurrence
         builder = FrontierBuilder(game, dta, sta, sensed, used, max_states, memory, size,
                                   ends, name, merge)
         belief = builder.build(progress)
-    # The builder's tables hold its bound methods (reference cycles), so it would live,
-    # with its rows' pages and its keys' tables (some 90 MB on issue 45's sensed case),
-    # until the collector's next full pass: through the solve, above the build's peak.
-    vars(builder).clear()
+    builder.release()
     return Belief(belief.mdp, sta, sensed, sensors, belief.moves, ignored)
 
 

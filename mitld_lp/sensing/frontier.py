@@ -266,6 +266,14 @@ class FrontierBuilder(StepRules):
                           {at: r for r, at in zip(self.records, self.record_state,
                                                   strict=True) if at >= 0})
 
+    def release(self) -> None:
+        """Drop the rows' pages (compiled.py's) and the states' keys once built: the
+        builder's tables hold its bound methods (cycles), so it lives until the
+        collector's next full pass, and those (some 90 MB on issue 45's sensed case)
+        would hold the solve above the build's peak."""
+        self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))
+        self.keys = Keys(6)
+
     # ---------------------------------------------------------------- one level
 
     def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
