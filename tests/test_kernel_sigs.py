@@ -31,7 +31,8 @@ COMPILED_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level
 #: the modules whose kernels the kernel loader runs (numba imported on a miss only, by
 #: kernel_loader.numba_module, which puts the narrow load in place then)
 LAZY_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level_kernels",
-                "mitld_lp.solvers.compiled_graph")
+                "mitld_lp.solvers.compiled_graph", "mitld_lp.sensing.kernels",
+                "mitld_lp.sensing.group_kernels", "mitld_lp.sensing.fsum_kernels")
 
 
 @pytest.fixture(autouse=True)
