@@ -87,10 +87,12 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     # before the search's reversed edges (the certificate's peak on QVBS csma)
     del states, rows
     pos = val > 0
+    del val  # (the solved rows' values are gathered again below, not held here)
     if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
-        src, dst, val = src[pos], dst[pos], val[pos]
+        src, dst = src[pos], dst[pos]
     del pos
     edges = Reversed(n, src, dst)
+    del src, dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
     never = ~edges.reaching(target)
     sure = ~edges.reaching(never)
     del edges
@@ -104,9 +106,18 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         # fresh cache and a load per process), and 4 bytes an entry when it can
         at = np.full(n, -1, dtype=index)
         at[idx] = np.arange(idx.size, dtype=index)
-        keep = solved[src]
-        s_loc, d, p = at[src[keep]], dst[keep], val[keep]
-        del src, dst, val, keep
+        # the solved states' rows gathered again, their positive entries in the rows'
+        # order: the entries the edges above held for them (each its local row)
+        rows = policy[idx]
+        s_loc = np.repeat(np.arange(idx.size, dtype=index),
+                          m.indptr[rows + 1] - m.indptr[rows])
+        d, p = row_columns(m, rows)
+        d = d.astype(index, copy=False)
+        del rows
+        pos = p > 0
+        if not pos.all():
+            s_loc, d, p = s_loc[pos], d[pos], p[pos]
+        del pos
         into = solved[d]
         b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
         # the entries come row by row in the states' order: the CSR arrays directly
