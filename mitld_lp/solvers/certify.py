@@ -268,17 +268,18 @@ def _fails_among(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray, upper
 
 
 def _touched(st: Rows, changed: np.ndarray,
-             readers_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> np.ndarray:
+             readers_of: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
     """The states whose check can differ once the ``changed`` states' values moved:
     those, and those with a row holding one of them (the other rows read the same
     values, so their sums and their states' values are the same).  ``readers_of``: the
-    matrix's pattern by column and each row's state, where the repair made them (then
-    only the changed states' columns are read)."""
+    matrix's pattern by column as each entry's state, where the repair made it
+    (:func:`~mitld_lp.solvers.certify_repair.readers_by_column`; then only the changed
+    states' columns are read)."""
     out = changed.copy()
     if readers_of is not None:
-        col_ptr, col_rows, row_state = readers_of
+        col_ptr, col_state = readers_of
         moved = np.flatnonzero(changed)
-        out[row_state[col_rows[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]]] = True
+        out[col_state[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]] = True
         return out
     m = st.matrix
     hit = changed[m.indices]

@@ -87,37 +87,58 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     # before the search's reversed edges (the certificate's peak on QVBS csma)
     del states, rows
     pos = val > 0
+    del val  # (the solved rows' values are gathered again below, not held here)
     if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
-        src, dst, val = src[pos], dst[pos], val[pos]
+        src, dst = src[pos], dst[pos]
     del pos
     edges = Reversed(n, src, dst)
+    del src, dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
     never = ~edges.reaching(target)
     sure = ~edges.reaching(never)
     del edges
     solved = acting & ~never & ~sure
-    values = np.where(sure, 1.0, 0.0)
-    slack = np.zeros(n)
+    del acting
     idx = np.flatnonzero(solved)
+    v = w = None
     if idx.size:
         # the chain in the edges' index type, as the greedy block's chains are: the
         # level kernels load one variant, not one per type (each a compilation on a
         # fresh cache and a load per process), and 4 bytes an entry when it can
         at = np.full(n, -1, dtype=index)
         at[idx] = np.arange(idx.size, dtype=index)
-        keep = solved[src]
-        s_loc, d, p = at[src[keep]], dst[keep], val[keep]
-        del src, dst, val, keep
+        # the solved states' rows gathered again, their positive entries in the rows'
+        # order: the entries the edges above held for them (each its local row)
+        rows = policy[idx]
+        s_loc = np.repeat(np.arange(idx.size, dtype=index),
+                          m.indptr[rows + 1] - m.indptr[rows])
+        d, p = row_columns(m, rows)
+        d = d.astype(index, copy=False)
+        del rows
+        pos = p > 0
+        if not pos.all():
+            s_loc, d, p = s_loc[pos], d[pos], p[pos]
+        del pos
         into = solved[d]
         b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
         # the entries come row by row in the states' order: the CSR arrays directly
         rows_of = s_loc[into]
+        del s_loc
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
+        del rows_of
         if indptr[-1] <= np.iinfo(index).max:
             indptr = indptr.astype(index)
         sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
+        # the entries' copies and the map freed before the chain's own components are
+        # searched (QVBS zeroconf 1000-4: the certificate's traced peak, in the walk)
+        del at, d, p, into, indptr
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
                       None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
+        del sub, b, kappa
+    # the values and slack of every state made after the solve, not held through it
+    values = np.where(sure, 1.0, 0.0)
+    slack = np.zeros(n)
+    if v is not None:
         values[idx] = np.clip(v, 0.0, 1.0)
         slack[idx] = np.maximum(w, 0.0)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
@@ -158,10 +179,20 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         done = index + 1
         inner = blk.states_at(index)
         inner = inner[~blk.single(inner)]
-        rows = sp.csr_array(sub[inner])
-        block = sp.csr_array(rows[:, inner])
+        if inner.size == k and sub.has_canonical_format:
+            # every state of the chain in one level's components (``inner`` ascending:
+            # ``arange(k)``): its rows and its block are the chain itself, entry for
+            # entry, in its order; not two copies beside it (QVBS zeroconf 1000-4's
+            # 166,000-state chain, at the certificate's traced peak).  Canonical: the
+            # walk keeps it as it is (:func:`~mitld_lp.solvers.chain_levels.walk_of`)
+            rows = block = sub
+        else:
+            rows = sp.csr_array(sub[inner])
+            block = sp.csr_array(rows[:, inner])
         known = b[inner] + rows @ v
         g = None if guess is None else guess[inner]
+        if g is not None and not bool(np.all(g > 0)):
+            g = None  # not read: W solved on its own (not held through the walk)
         joint = None
         # the chain's own components: one walk, both solves.  The greedy block's walk
         # (solve stage) where it is this chain entry for entry (:func:`~mitld_lp.
@@ -169,19 +200,24 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         # zeroconf 20-4-false, where the chain here is the policy's transient states
         # only (168,388 of the block's 213,268 states)
         walk = walk_of(block)
-        if g is not None and bool(np.all(g > 0)):
+        if g is not None:
             pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
             v[inner], joint = pair[:, 0], pair[:, 1]
+            del pair
         else:
             v[inner] = walk.solve(known)
+        del known  # each temporary a float of the chain's states, freed before the next
         residual = np.abs(v[inner] - (b[inner] + rows @ v))
         with np.errstate(divide="ignore", invalid="ignore"):
             need = np.where(v[inner] > 0, 2.0 * (residual + kappa[inner] * v[inner]), 0.0)
+            del residual
             if joint is not None:
                 ratio = need / (2.0 * kappa[inner] * g)  # type: ignore[operator]
                 w[inner] = joint * max(1.0, float(np.max(ratio, initial=1.0)))
             else:
-                w[inner] = walk.solve(need + rows @ w)
+                need += rows @ w  # need + rows @ w in place: the same sums
+                w[inner] = walk.solve(need)
+        del need
     singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
 
