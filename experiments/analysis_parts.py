@@ -67,9 +67,10 @@ PARTS = {"levels": ("analysis", "state_components"),
          "order": ("quotient_order", "order_of"),
          "prob1a_first": ("analysis", "prob1a_first"),
          "prob1e_first": ("analysis", "prob1e_first"),
-         "numba_load": ("numba_narrow", "import_numba"),
+         "numba_load": ("util.numba_narrow", "import_numba"),
          "walks_loaded": ("analysis", "load_walks")}
-"""Each part: the module (of ``mitld_lp.solvers``) whose name the analysis calls it by."""
+"""Each part: the module (of ``mitld_lp.solvers``, or the package path below ``mitld_lp`` where
+it has a dot) whose name the analysis calls it by."""
 OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order", "prob1a_first",
          "prob1e_first", "numba_load", "walks_loaded")
 """The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
@@ -117,7 +118,8 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
 
     originals = []
     for name, (module, attr) in PARTS.items():
-        mod = importlib.import_module(f"mitld_lp.solvers.{module}")
+        mod = importlib.import_module(f"mitld_lp.{module}" if "." in module
+                                      else f"mitld_lp.solvers.{module}")
         if not hasattr(mod, attr):  # an older checkout first on PYTHONPATH: the part is 0
             continue
         originals.append((mod, attr, getattr(mod, attr)))
@@ -148,8 +150,8 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
             setattr(mod, attr, f)
     out = {k: _median([r.get(k, 0.0) for r in rows]) for k in (*PARTS, "analyse", "rest")}
     c = time.process_time()
-    from mitld_lp.solvers import numba_narrow, walks
-
+    from mitld_lp.solvers import walks
+    from mitld_lp.util import numba_narrow
     numba_narrow.import_numba()
     loaded = time.process_time()
     walks.load_walks()

@@ -48,7 +48,7 @@ STAGES = (("analysis", "mitld_lp.solvers.analysis", "analyse"),
           ("greedy", "mitld_lp.solvers.lp_blocks", "certified_greedy"),
           ("flow", "mitld_lp.solvers.lp_blocks", "policy_flow"),
           ("kernel", "mitld_lp.solvers.kernels", "compiled_kernel"),
-          ("numba_import", "mitld_lp.solvers.numba_narrow", "import_numba"))
+          ("numba_import", "mitld_lp.util.numba_narrow", "import_numba"))
 """The default route's stages (and the LP stage's two parts there) timed by ``--stages``:
 each function is imported by its caller when called, so wrapping it in its module
 times every call.  ``kernel`` is the compiled sweeps' kernel asked for (its load from

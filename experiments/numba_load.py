@@ -15,13 +15,13 @@ change: the first run compiles them).  Prints the median and least of each part:
 
     python experiments/numba_load.py
 
-Two sets of rounds take turns: ``whole`` (:data:`mitld_lp.solvers.numba_narrow.ENABLED`
+Two sets of rounds take turns: ``whole`` (:data:`mitld_lp.util.numba_narrow.ENABLED`
 set to False: numba's own load, as a process that asked for a graph kernel first had
 before every compiled module put the narrow load in place) and ``narrow`` (what every
 compiled module does since: the target's registries are not refreshed, and the first
 call loads the kernel with numba's runtime only; since the numba-gate branch the typing
 context is not refreshed either, and numba is imported by
-:func:`mitld_lp.solvers.numba_narrow.import_numba`, without PyYAML).  The answers must
+:func:`mitld_lp.util.numba_narrow.import_numba`, without PyYAML).  The answers must
 be the same to the bit in both; which of PyYAML, cffi and pycparser each load left in
 the process is printed.  ``--compare DIR`` also runs the narrow load of another
 checkout's ``mitld_lp`` (a ``git archive`` of an older commit), taking turns.
@@ -53,7 +53,7 @@ def mark():
     t.append(c())
     m.append(rss())
 try:  # the loader (kernel-loader branch): on in the loader's rounds only
-    from mitld_lp.solvers import kernel_loader
+    from mitld_lp.util import kernel_loader
     kernel_loader.ENABLED = LOADER
 except ImportError:  # an older checkout
     pass
@@ -62,7 +62,7 @@ if LOADER:  # numba is never imported: no part of its load happens
         mark()
 else:
     if NARROW:
-        from mitld_lp.solvers import numba_narrow
+        from mitld_lp.util import numba_narrow
         getattr(numba_narrow, "import_numba", lambda: __import__("numba"))()  # without PyYAML
     else:
         import numba  # noqa: F401
@@ -73,14 +73,14 @@ else:
         assert numba_narrow.install()
         mark()  # the typing registries: not refreshed by the narrow load
         try:  # what the narrow load does at the first kernel's call, made a part of its own
-            from mitld_lp.solvers import nrt_cache
+            from mitld_lp.util import nrt_cache
             nrt_cache.initialize(cpu_target.target_context)
         except ImportError:  # an older checkout: numba compiles its runtime
             rtsys.initialize(cpu_target.target_context)
         mark()
         mark()  # the rest of the target's registries: not refreshed by the narrow load
     else:
-        from mitld_lp.solvers import numba_narrow
+        from mitld_lp.util import numba_narrow
         numba_narrow.ENABLED = False  # every compiled module would put it in place
         cpu_target.typing_context.refresh()
         mark()

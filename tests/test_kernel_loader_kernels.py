@@ -1,4 +1,4 @@
-"""The kernel loader (mitld_lp.solvers.kernel_loader): a kernel linked from its cache
+"""The kernel loader (mitld_lp.util.kernel_loader): a kernel linked from its cache
 file gives numba's arrays to the bit, a damaged, foreign or half-written file is left to
 numba and written again, and a process whose cache is warm never imports numba."""
 
@@ -17,7 +17,8 @@ from scipy.sparse.csgraph import connected_components
 
 pytest.importorskip("numba")
 
-from mitld_lp.solvers import compiled_graph, kernel_files, kernel_loader  # noqa: E402
+from mitld_lp.solvers import compiled_graph
+from mitld_lp.util import kernel_files, kernel_loader  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -168,7 +169,8 @@ def test_damaged_or_foreign_file_falls_back_and_is_rewritten(damage: str) -> Non
 CHILD = r"""
 import json, sys
 import numpy as np
-from mitld_lp.solvers import compiled_graph, kernel_loader
+from mitld_lp.solvers import compiled_graph
+from mitld_lp.util import kernel_loader
 ptr = np.array(PTR, dtype=np.int64)
 succ = np.array(SUCC, dtype=np.int64)
 n, label = compiled_graph.strong_components(ptr, succ, np.bool_(False))

@@ -2,7 +2,7 @@
 the index arrays it passes: int32 where the sizes fit, as
 :func:`mitld_lp.util.arrays.index_dtype` decides), with the same answers to the bit; and
 every module of compiled kernels puts numba's narrow cached load in place as it is
-imported (:mod:`mitld_lp.solvers.numba_narrow`)."""
+imported (:mod:`mitld_lp.util.numba_narrow`)."""
 
 from __future__ import annotations
 
@@ -38,8 +38,7 @@ LAZY_MODULES = ("mitld_lp.solvers.compiled_kernels", "mitld_lp.solvers.level_ker
 @pytest.fixture(autouse=True)
 def _numba_load(monkeypatch: pytest.MonkeyPatch) -> None:
     """These tests are about numba's load of its own cache: the kernel loader off."""
-    from mitld_lp.solvers import kernel_loader
-
+    from mitld_lp.util import kernel_loader
     monkeypatch.setattr(kernel_loader, "ENABLED", False)
 
 
@@ -95,8 +94,8 @@ def swept() -> dict:
     and by the NumPy sweeps; the kernel's signatures after."""
     if kernels.compiled_kernel() is None:
         pytest.skip("numba is not installed")
-    from mitld_lp.solvers import compiled_kernels, kernel_loader
-
+    from mitld_lp.solvers import compiled_kernels
+    from mitld_lp.util import kernel_loader
     kernel_loader.ENABLED = False  # numba's dispatcher, its signatures (a module fixture)
     try:
         return _sweep_all(compiled_kernels)
@@ -181,7 +180,7 @@ def test_block_index_stays_wide_past_int32() -> None:
 # ------------------------------------------------------------------ the narrow load
 PROBE = r"""
 import json, sys
-from mitld_lp.solvers import numba_narrow
+from mitld_lp.util import numba_narrow
 calls = []
 real = numba_narrow.install
 def install():
@@ -192,7 +191,7 @@ import importlib
 for name in json.loads(sys.argv[1]):
     importlib.import_module(name)
 lazy_numba = "numba" in sys.modules  # the lazy modules are imported first
-from mitld_lp.solvers import kernel_loader
+from mitld_lp.util import kernel_loader
 kernel_loader.numba_module()  # what a kernel's miss calls
 print(json.dumps({"calls": calls, "installed": numba_narrow.installed(),
                   "numba_at_import": lazy_numba}))
@@ -208,7 +207,7 @@ def test_every_compiled_module_puts_the_narrow_load_in_place() -> None:
         out = json.loads(done.stdout.strip().splitlines()[-1])
         assert out["numba_at_import"] is numba_at_import
         want = {m for m in modules if m not in LAZY_MODULES} | {
-            "mitld_lp.solvers.kernel_loader"}
+            "mitld_lp.util.kernel_loader"}
         assert set(out["calls"]) == want
         assert out["installed"] is True
 
@@ -219,7 +218,8 @@ def test_every_compiled_module_puts_the_narrow_load_in_place() -> None:
 GRAPH_FIRST = r"""
 import json, sys
 import numpy as np, scipy.sparse as sp
-from mitld_lp.solvers import compiled_graph, numba_narrow
+from mitld_lp.solvers import compiled_graph
+from mitld_lp.util import numba_narrow
 inner = sp.csr_array(np.array([[0.0, 0.5, 0.5], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
 alive, allowed, label = compiled_graph.end_components_among(
     inner.indptr, inner.indices, inner.data > 0, np.array([0, 1, 2, 3]), np.arange(3))

@@ -122,7 +122,8 @@ NARROW = r"""
 import json, sys
 import numpy as np, scipy.sparse as sp
 before = {m: m in sys.modules for m in ("yaml", "cffi", "pycparser")}
-from mitld_lp.solvers import numba_narrow, kernels
+from mitld_lp.solvers import kernels
+from mitld_lp.util import numba_narrow
 numba = numba_narrow.import_numba()
 after_import = "yaml" in sys.modules
 inner = sp.csr_array(np.array([[0.0, 0.5], [0.5, 0.0]]))
@@ -162,7 +163,7 @@ def test_a_numba_config_file_keeps_yaml_loaded(tmp_path: Path) -> None:
     pytest.importorskip("numba")
     pytest.importorskip("yaml")
     (tmp_path / ".numba_config.yaml").write_text("debug_cache: 0\n", encoding="utf-8")
-    code = ("import json, sys\nfrom mitld_lp.solvers import numba_narrow\n"
+    code = ("import json, sys\nfrom mitld_lp.util import numba_narrow\n"
             "numba_narrow.import_numba()\n"
             "print(json.dumps({'yaml': 'yaml' in sys.modules}))")
     assert _run(code, cwd=tmp_path)["yaml"] is True
@@ -181,7 +182,7 @@ def test_each_compiled_module_imports_numba_without_yaml(module: str,
     pytest.importorskip("yaml")
     code = ("import importlib, json, sys\n"
             f"importlib.import_module({module!r})\n"
-            "from mitld_lp.solvers import kernel_loader\n"
+            "from mitld_lp.util import kernel_loader\n"
             "kernel_loader.numba_module()  # a lazy module's kernel's miss\n"
             "config = sys.modules['numba.core.config']\n"
             "print(json.dumps({'yaml': 'yaml' in sys.modules,"

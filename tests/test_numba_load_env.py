@@ -1,5 +1,5 @@
 """The array helpers' environments of a cached kernel rebuilt without importing
-``numba.np.arrayobj`` (:func:`mitld_lp.solvers.numba_narrow._stand_in_environments`):
+``numba.np.arrayobj`` (:func:`mitld_lp.util.numba_narrow._stand_in_environments`):
 only while a kernel is loaded from the cache, only for that module not imported yet and
 only for an environment without constants; numba's own rebuild everywhere else; and a
 kernel that allocates arrays gives the answer worked out by hand here.  Each case runs in
@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 REBUILD = r"""
 import json, sys
-from mitld_lp.solvers import numba_narrow
+from mitld_lp.util import numba_narrow
 numba_narrow.import_numba()
 assert numba_narrow.install()
 from numba.core import environment, serialize
@@ -48,7 +48,7 @@ print(json.dumps(out))
 GRAPH = r"""
 import json, sys
 import numpy as np, scipy.sparse as sp
-from mitld_lp.solvers import numba_narrow
+from mitld_lp.util import numba_narrow
 numba_narrow.import_numba()
 from mitld_lp.solvers import compiled_graph
 # choices: state 0 a -> 1; state 0 b -> 3 (1/2), 0 (1/2); state 1 -> 0; state 2 -> 2, 3;

@@ -1,4 +1,4 @@
-"""numba's runtime module read from its own cache (:mod:`mitld_lp.solvers.nrt_cache`): a
+"""numba's runtime module read from its own cache (:mod:`mitld_lp.util.nrt_cache`): a
 file is loaded only where it is whole and of exactly this process's key; a stale or
 foreign file is compiled again and rewritten; the kernels give the answers of a NumPy
 computation written here whichever way the runtime came (loaded or compiled).
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mitld_lp.solvers import nrt_cache
+from mitld_lp.util import nrt_cache
 
 pytest.importorskip("numba")
 
@@ -28,7 +28,7 @@ CHILD = r"""
 import ctypes, json, sys
 from pathlib import Path
 import numpy as np, scipy.sparse as sp
-from mitld_lp.solvers import numba_narrow, nrt_cache
+from mitld_lp.util import numba_narrow, nrt_cache
 numba_narrow.import_numba()
 assert numba_narrow.install()
 base = Path(sys.argv[1])

@@ -2,7 +2,7 @@
 freed when ``belief_product`` returns (the builder lives on in reference cycles until
 the collector's next full pass), and a process whose kernel cache is warm
 builds with the compiled kernels without importing numba (they are linked by
-:mod:`mitld_lp.solvers.kernel_loader`), the same product to the bit as the NumPy lines."""
+:mod:`mitld_lp.util.kernel_loader`), the same product to the bit as the NumPy lines."""
 
 from __future__ import annotations
 
@@ -76,7 +76,7 @@ _CHILD = """
 import json, sys
 from test_sensed_solve_memory import CASES, _build, _digest
 from mitld_lp.sensing import rows
-from mitld_lp.solvers import kernel_loader
+from mitld_lp.util import kernel_loader
 with rows.running_kernels(True):
     belief = _build(CASES["two cameras"]())
 print(json.dumps(dict(numba="numba" in sys.modules, linked=kernel_loader.loaded_count(),

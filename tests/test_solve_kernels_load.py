@@ -1,5 +1,5 @@
 """experiments/numba_load.py: numba's load part by part, in fresh processes, whole and
-narrow (:mod:`mitld_lp.solvers.numba_narrow`), with the block kernel's bracket beside
+narrow (:mod:`mitld_lp.util.numba_narrow`), with the block kernel's bracket beside
 (the two-state block x = 1/4 + x/2: exactly 1/2)."""
 
 from __future__ import annotations

@@ -156,7 +156,7 @@ def test_table_round_trip_and_bad_tables(tmp_path: Path,
 
 #: The bundled case and the puddle case solved with the block sweeps by NumPy (the gate's
 #: default on these small products), by the compiled kernel loaded narrowly
-#: (:mod:`mitld_lp.solvers.numba_narrow`, what every compiled module does), or by the
+#: (:mod:`mitld_lp.util.numba_narrow`, what every compiled module does), or by the
 #: compiled kernel with numba's whole registries (argv[1]); then, in the compiled modes,
 #: a function compiled afresh (a cache miss, NumPy's linear algebra) after the kernel's
 #: load.
@@ -169,7 +169,7 @@ mode = sys.argv[1]
 if mode != "numpy":
     kernels.COMPILED_MIN_ENTRIES = kernels.COMPILED_MIN_BLOCK_ENTRIES = 0
 if mode == "full":
-    from mitld_lp.solvers import numba_narrow
+    from mitld_lp.util import numba_narrow
     numba_narrow.ENABLED = False  # every compiled module would put the narrow load in place
     from mitld_lp.solvers import compiled_kernels
     kernels._KERNEL = compiled_kernels.gauss_seidel
@@ -178,7 +178,7 @@ for name in ("bus_grid", "bus_puddle"):
     r = synthesize(load_model(f"models/{name}.toml"))
     out[name] = [r.lower.hex(), r.upper.hex(), r.certified,
                  max(m.iteration.iterations for m in (r.lower_model, r.upper_model) if m)]
-from mitld_lp.solvers import numba_narrow
+from mitld_lp.util import numba_narrow
 out["narrow"] = numba_narrow.installed()
 out["numba"] = "numba" in sys.modules
 if mode != "numpy":

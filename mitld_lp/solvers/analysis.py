@@ -73,7 +73,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
-from mitld_lp.solvers import kernel_loader
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -98,6 +97,7 @@ from mitld_lp.solvers.value_one import (
     prob1e_first,
 )
 from mitld_lp.solvers.walks import compiled_walks, load_walks
+from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "analyse", "end_components", "may_cycle"]

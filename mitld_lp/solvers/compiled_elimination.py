@@ -14,8 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from mitld_lp.solvers import numba_narrow
-from mitld_lp.util import numba_cache
+from mitld_lp.util import numba_cache, numba_narrow
 
 numba_narrow.install()  # cached kernels loaded without numba's whole target registry
 numba_cache.install()  # processes compiling at once share the disk cache safely

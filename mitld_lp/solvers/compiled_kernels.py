@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mitld_lp.solvers import kernel_loader
+from mitld_lp.util import kernel_loader
 
 # numba's cached machine code run without importing numba; numba itself on a miss
 # (without PyYAML, the narrow load, the disk cache's lock: kernel_loader.numba_module)

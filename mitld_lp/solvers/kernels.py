@@ -36,13 +36,13 @@ probability 0.98) is settled in one update instead of hundreds.
   them before it loads any kernel from its cache), the block kernel itself 0.03 s and a
   level kernel 0.01 s.  The target's registries are for compiling: a kernel loaded
   from the cache needs only numba's runtime of them, and
-  :mod:`mitld_lp.solvers.numba_narrow` (put in place by every compiled module as it is
+  :mod:`mitld_lp.util.numba_narrow` (put in place by every compiled module as it is
   imported) loads it so, 0.2-0.25 s less CPU; it now skips the typing context's
   refresh too (cffi's C parser among it) and imports numba without PyYAML: numba's
   import and a graph, block and level kernel's first calls 0.54 -> 0.44 s
   (``experiments/results/numba_load_numba_gate.txt``); since the numba-load branch the first call
   reads numba's runtime as machine code and skips ``numba.np.arrayobj``
-  (:mod:`mitld_lp.solvers.nrt_cache`, :mod:`mitld_lp.solvers.numba_narrow`).  Every kernel is loaded
+  (:mod:`mitld_lp.util.nrt_cache`, :mod:`mitld_lp.util.numba_narrow`).  Every kernel is loaded
   at its first call only (a dispatcher each), so loading fewer kernels saves their hundredths of a
   second, not numba's registries. A new checkout compiles every kernel it calls once (for one index
   type: :func:`kernel_index`; 2.5 s more on the first solve of QVBS ``zeroconf`` 20-4-false, the
@@ -188,7 +188,7 @@ def compiled_kernel() -> Any:
 
 def _build() -> Any:
     # numba is imported (without PyYAML, narrowly) only where a kernel misses the
-    # loader's cache (mitld_lp.solvers.kernel_loader); ImportError without numba
+    # loader's cache (mitld_lp.util.kernel_loader); ImportError without numba
     from mitld_lp.solvers import compiled_kernels
 
     return compiled_kernels.gauss_seidel

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers import kernel_loader, level_batches
+from mitld_lp.solvers import level_batches
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
@@ -44,6 +44,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.level_batches import TIE
 from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.rows import gather_ranges, off_diagonal_entries, rows_dot
+from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
 if TYPE_CHECKING:

@@ -2,7 +2,7 @@
 ask :func:`compiled_walks` for the module of compiled ones
 (:mod:`~mitld_lp.solvers.compiled_graph`, run from the kernel loader's cache or by
 numba), by the size of the graph and whether compiled kernels are loaded already
-(:func:`~mitld_lp.solvers.kernel_loader.compiled_paid`); a small solve never loads them
+(:func:`~mitld_lp.util.kernel_loader.compiled_paid`); a small solve never loads them
 (its walks give the same results, only later).  This module imports nothing of the
 solvers but the kernel loader (NumPy and the standard library)."""
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from mitld_lp.solvers import kernel_loader
+from mitld_lp.util import kernel_loader
 
 __all__ = ["COMPILED_LOADED_MIN_ENTRIES", "COMPILED_MIN_ENTRIES", "compiled_walks",
            "load_walks"]

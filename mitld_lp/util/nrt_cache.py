@@ -25,7 +25,7 @@ puts this package's kernel caches (its own locators: ``NUMBA_CACHE_DIR``, the pa
 ``__pycache__``, or the user's cache directory); where none is writable the module is
 compiled as before.
 
-Only :mod:`mitld_lp.solvers.numba_narrow`'s load of a cached kernel calls it; a process
+Only :mod:`mitld_lp.util.numba_narrow`'s load of a cached kernel calls it; a process
 that compiles a kernel first initialises the runtime the usual way, and then
 :func:`initialize` finds it done.
 """
@@ -37,7 +37,7 @@ import struct
 from pathlib import Path
 from typing import Any
 
-from mitld_lp.solvers import kernel_files
+from mitld_lp.util import kernel_files
 
 __all__ = ["MAGIC", "cache_file", "initialize", "runtime_key"]
 

@@ -38,7 +38,7 @@ machine code that runs is therefore numba's, byte for byte, and so are the resul
 Where the cache files go: numba's directory for the kernel's function (its locators:
 ``NUMBA_CACHE_DIR``, the module's ``__pycache__``, the user's cache directory), so that a
 file sits beside numba's ``.nbi`` / ``.nbc`` of the same kernel; a reader looks there in
-numba's order.  The file's format: :func:`mitld_lp.solvers.kernel_files.pack`.
+numba's order.  The file's format: :func:`mitld_lp.util.kernel_files.pack`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.solvers import kernel_files
+from mitld_lp.util import kernel_files
 
 __all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
 
@@ -98,8 +98,7 @@ def prepare() -> None:
         with _lock:
             if _setup() is not None:
                 return
-    from mitld_lp.solvers import numba_narrow
-
+    from mitld_lp.util import numba_narrow
     numba_narrow.import_numba()
 
 
@@ -138,8 +137,7 @@ def numba_module() -> Any:
     dispatcher's), so what it compiles is what it compiled with the dispatcher there."""
     with _lock:
         if not _numba:
-            from mitld_lp.solvers import numba_narrow
-            from mitld_lp.util import numba_cache
+            from mitld_lp.util import numba_cache, numba_narrow
 
             _numba.append(numba_narrow.require_numba())
             numba_narrow.install()

@@ -9,7 +9,7 @@ linear algebra, random generators and polynomials, typed lists, dicts and sets,
 kernel is machine code already; the one thing of that step it needs is numba's runtime
 (``rtsys.initialize``, for the arrays the kernel allocates), and even that is read as
 machine code from a cache of its own where the cache is this process's
-(:mod:`mitld_lp.solvers.nrt_cache`: 0.042 -> 0.011 s, 29 -> 10 MB).  The same refresh then
+(:mod:`mitld_lp.util.nrt_cache`: 0.042 -> 0.011 s, 29 -> 10 MB).  The same refresh then
 refreshes the *typing* context: its additional registries (``cffi_utils``, whose
 ``cffi.FFI()`` imports cffi's C parser, pycparser and its lexer, and the maths, list,
 set and dict declarations) and its builtins, 0.044 + 0.005 s a process, which only the
@@ -21,7 +21,7 @@ runtime 0.036 s (its functions compiled by LLVM), ``numba.np.arrayobj`` 0.05 s (
 by the pickled environment of the array helpers inlined in the kernels: its globals are
 that module's), and the cache's read and link.  Since the numba-load branch the first two
 are cut as well: the runtime's machine code is read from its own cache
-(:mod:`mitld_lp.solvers.nrt_cache`) and the array helpers' environments get a stand-in
+(:mod:`mitld_lp.util.nrt_cache`) and the array helpers' environments get a stand-in
 for the globals their nopython code never reads (:func:`_rebuild_env`): a
 graph kernel's first call 0.144 -> 0.050 s of CPU and 39 -> 16 MB resident.
 
@@ -36,7 +36,7 @@ ones checked here nothing is changed.
 Every module of compiled kernels (:mod:`~mitld_lp.solvers.compiled_elimination`,
 :mod:`mitld_lp.sensing.kernels`, :mod:`mitld_lp.sensing.group_kernels`) calls
 :func:`install` right after ``import numba``, and the kernel loader
-(:mod:`mitld_lp.solvers.kernel_loader`, which runs the kernels of
+(:mod:`mitld_lp.util.kernel_loader`, which runs the kernels of
 :mod:`~mitld_lp.solvers.compiled_kernels`, :mod:`~mitld_lp.solvers.level_kernels` and
 :mod:`~mitld_lp.solvers.compiled_graph` without numba where its cache holds them) calls it
 when it imports numba at a miss, so whichever kernel a process asks numba for first is
@@ -98,8 +98,7 @@ def install() -> bool:
     if (full is None or load is None or typing_full is None
             or not hasattr(rtsys, "initialize") or not hasattr(rtsys, "_init")):
         return False
-    from mitld_lp.solvers import nrt_cache
-
+    from mitld_lp.util import nrt_cache
     def load_additional_registries(self: Any) -> None:
         if getattr(_loading, "active", False):
             # the runtime: what a cached kernel needs of this step, its module's machine

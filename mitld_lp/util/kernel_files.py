@@ -1,4 +1,4 @@
-"""The kernel loader's cache files (:mod:`mitld_lp.solvers.kernel_loader`): where they
+"""The kernel loader's cache files (:mod:`mitld_lp.util.kernel_loader`): where they
 go (numba's cache directories for a function, in its locators' order), their layout
 (:func:`pack`), the undefined symbols of an object file, and a file written whole (a
 temporary file renamed over the old one).  NumPy-free, numba-free: only the standard
