@@ -34,11 +34,13 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.mdp import ABSORB
 from mitld_lp.product.layers import Layers
+from mitld_lp.product.states import CODE, Absorbing
 from mitld_lp.util.arrays import merge, unique
 from mitld_lp.worlds.table import LATE
 
-__all__ = ["Plain", "plain_table"]
+__all__ = ["Plain", "compiled_wanted", "plain_table", "run_compiled"]
 
 _MAX_STEPS = 1 << 16
 """The automaton's steps are tabulated where its memo (automaton states times the
@@ -51,7 +53,7 @@ class Plain:
 
     __slots__ = ("late", "n_q", "shift", "scale", "steps", "step_bits", "only", "distinct",
                  "act_start", "act_count", "row_start", "row_len", "row_succ", "row_prob",
-                 "props", "slot_aid", "step")
+                 "props", "slot_aid", "step", "table_steps", "batches")
 
     def __init__(self, f: Layers) -> None:
         t = f.table
@@ -75,6 +77,8 @@ class Plain:
             dtype=np.int64))
         self.step_bits = len(f.atoms)
         self.steps: np.ndarray | None = None
+        self.table_steps: np.ndarray | None = None  # every step, by (q << bits) | letter
+        self.batches = 0  # levels' batches expanded by NumPy so far
         self.only = -1  # the one ordinary automaton state, if there is one
         dta = f.dta
         live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
@@ -83,7 +87,7 @@ class Plain:
             f.step(np.repeat(live, masks.size), np.tile(masks, live.size))
             table = f._delta.table
             if table is not None:
-                self.steps = table
+                self.steps = self.table_steps = table
                 if live.size == 1:  # its row of steps alone, read by the letter
                     self.only = int(live[0])
                     self.steps = table[self.only << self.step_bits:]
@@ -161,3 +165,87 @@ def _rows_distinct(targets: np.ndarray, branches: np.ndarray) -> bool:
     inner = inner[(inner > 0) & (inner < targets.size)]
     up[inner - 1] = True  # a row's first entry follows another row's last
     return bool(up.all())
+
+
+COMPILED = True
+"""Whether the levels may go to the compiled loop (:mod:`mitld_lp.product.bfs_kernels`;
+False: NumPy's batches only, for tests and measurements)."""
+
+COMPILED_MIN_STATES = 1_000_000
+"""The compiled loop is used from the start, its load unpaid, for a world of this many
+states or more (measured with ``experiments/bench_product.py --prism``: NumPy's levels
+cost 0.08-0.25 us a state and about 80 us a batch, the compiled loop about 0.02 us a
+state and, the first time in a process, about 0.035 s to load: from a million states
+NumPy's levels cost more than twice the load)."""
+
+COMPILED_AFTER_BATCHES = 400
+"""...or once NumPy has expanded this many batches of levels (a thin frontier: each
+batch costs NumPy about 80 us of calls whatever its size, so 400 of them are about the
+load; the levels left are then as many again or more, as often as not)."""
+
+_CHUNK_STATES = 1 << 18
+"""New states one call of the compiled loop may number before the budget is checked."""
+
+
+def compiled_wanted(lean: Plain, n_world: int) -> bool:
+    """Whether the compiled loop should expand the levels from here: its load is paid
+    already, or the world's states (``n_world``) or NumPy's batches so far say it pays
+    for itself."""
+    if not COMPILED or lean.table_steps is None:
+        return False
+    if n_world >= COMPILED_MIN_STATES or lean.batches >= COMPILED_AFTER_BATCHES:
+        return True
+    from mitld_lp.solvers import kernel_loader
+
+    return kernel_loader.compiled_paid()
+
+
+def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
+                 n_keys: int) -> tuple[tuple[np.ndarray, ...], int, int] | None:
+    """Expand the queue from ``head`` by the compiled loop: ``(chunk, states expanded,
+    entries)`` as :meth:`Plain.expand` returns a batch (the states found numbered in
+    ``found``'s keys and dense index), or None where it cannot run (numba missing, the
+    index not a dense array of every key); the budget is counted and checked as the
+    batched build checks it (states found past ``budget.max_states`` stop the loop
+    before they are stored: the batched build then finds them and refuses)."""
+    index = found.index
+    if index.dense is None or n_keys > index.dense_limit:
+        return None
+    try:
+        from mitld_lp.product import bfs_kernels
+    except ImportError:  # numba missing: NumPy's batches
+        return None
+    if index.dense.size < n_keys:
+        bigger = np.full(n_keys, -1, dtype=np.int32)
+        bigger[: index.dense.size] = index.dense
+        index.dense = bigger
+    keys = found.keys
+    size = max(1 << 16, min(budget.transitions, 1 << 24))
+    n_found = keys.size
+    if keys.data.size < n_found + size:
+        bigger = np.empty(max(2 * keys.data.size, n_found + size), dtype=keys.data.dtype)
+        bigger[:n_found] = keys.data[:n_found]
+        keys.data = bigger
+    cap = min(n_found + _CHUNK_STATES, budget.max_states)
+    cols = np.empty(size, dtype=np.int32)
+    vals = np.empty(size, dtype=np.float64)
+    row_len = np.empty(size, dtype=np.int32)
+    actions = np.empty(size, dtype=np.int32)
+    choices = np.empty(size, dtype=np.int32)
+    out = np.zeros(5, dtype=np.int64)
+    bfs_kernels.table_levels(
+        keys.data, n_found, head, 1 << 62, cap, index.dense,
+        -CODE[Absorbing.TRUNCATED], lean.act_start, lean.act_count, lean.row_start,
+        lean.row_succ, lean.row_prob, lean.props, lean.table_steps, lean.step_bits,
+        lean.n_q, lean.scale, lean.distinct, lean.slot_aid, LATE if lean.late else 0,
+        ABSORB, cols, vals, row_len, actions, choices, out)
+    _, n_found, ne, nc, ns = (int(x) for x in out)
+    keys.size = index.size = n_found
+    if ns == 0:
+        return None
+    budget.expanded += ns
+    budget.transitions += ne
+    budget.check(n_found)
+    parts = [cols[:ne], vals[:ne], row_len[:nc], actions[:nc], choices[:ns]]
+    chunk = tuple(p.copy() if 2 * p.size < size else p for p in parts)
+    return chunk, ns, ne
