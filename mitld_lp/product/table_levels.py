@@ -186,6 +186,10 @@ load; the levels left are then as many again or more, as often as not)."""
 _CHUNK_STATES = 1 << 18
 """New states one call of the compiled loop may number before the budget is checked."""
 
+_MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 24
+"""The entries one call of the compiled loop has room for: as many as the transitions
+so far, within these bounds."""
+
 
 def compiled_wanted(lean: Plain, n_world: int) -> bool:
     """Whether the compiled loop should expand the levels from here: its load is paid
@@ -220,7 +224,7 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
         bigger[: index.dense.size] = index.dense
         index.dense = bigger
     keys = found.keys
-    size = max(1 << 16, min(budget.transitions, 1 << 24))
+    size = max(_MIN_ENTRIES, min(budget.transitions, _MAX_ENTRIES))
     n_found = keys.size
     if keys.data.size < n_found + size:
         bigger = np.empty(max(2 * keys.data.size, n_found + size), dtype=keys.data.dtype)
