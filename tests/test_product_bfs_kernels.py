@@ -213,7 +213,8 @@ def test_stopped_and_resumed_at_every_edge(spec: str, monkeypatch: pytest.Monkey
 
 
 def test_switched_to_after_numpys_batches(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Unpaid and small, the loop takes over once NumPy has expanded enough batches."""
+    """Unpaid and small, the loop takes over once NumPy's batches so far say the levels
+    left pay for its load."""
     from mitld_lp.solvers import kernel_loader
 
     world = Table(4, 400, repeat=False)
@@ -232,14 +233,15 @@ def test_switched_to_after_numpys_batches(monkeypatch: pytest.MonkeyPatch) -> No
         return real(self, *a)
 
     monkeypatch.setattr(tl.Plain, "expand", counted)
-    monkeypatch.setattr(tl, "COMPILED_AFTER_BATCHES", 4)
+    monkeypatch.setattr(tl, "LOAD_SECONDS", 1e-9)  # any levels left pay for it
+    monkeypatch.setattr(tl, "_SEEN", 2)
     mdp = product(world, sta)
-    assert calls[0] == 4
+    assert calls[0] == tl._SEEN  # the frontier's width seen, then the loop
     assert_same(mdp, expected)
-    monkeypatch.setattr(tl, "COMPILED_AFTER_BATCHES", 10**9)
+    monkeypatch.setattr(tl, "LOAD_SECONDS", 1e9)  # no levels pay for it
     calls[0] = 0
     assert_same(product(world, sta), expected)
-    assert calls[0] > 4  # every level NumPy's
+    assert calls[0] > 2  # every level NumPy's
 
 
 def test_the_state_budget_under_the_compiled_loop(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -171,17 +171,25 @@ COMPILED = True
 """Whether the levels may go to the compiled loop (:mod:`mitld_lp.product.bfs_kernels`;
 False: NumPy's batches only, for tests and measurements)."""
 
-COMPILED_MIN_STATES = 1_000_000
-"""The compiled loop is used from the start, its load unpaid, for a world of this many
-states or more (measured with ``experiments/bench_product.py --prism``: NumPy's levels
-cost 0.08-0.25 us a state and about 80 us a batch, the compiled loop about 0.02 us a
-state and, the first time in a process, about 0.035 s to load: from a million states
-NumPy's levels cost more than twice the load)."""
+LOAD_SECONDS = 0.04
+"""The compiled loop's load the first time in a process (the kernel loader's pieces and
+the kernel linked; ``experiments/bench_product.py --prism``: 0.03-0.045 s)."""
 
-COMPILED_AFTER_BATCHES = 400
-"""...or once NumPy has expanded this many batches of levels (a thin frontier: each
-batch costs NumPy about 80 us of calls whatever its size, so 400 of them are about the
-load; the levels left are then as many again or more, as often as not)."""
+BATCH_SECONDS, STATE_SECONDS = 75e-6, 0.08e-6
+"""NumPy's levels: about 75 us of calls a batch whatever its size, and 0.08 us a state
+(the same measurements: firewire_dl 3-600's 633 thin batches, csma 4-2's 600k states);
+the compiled loop costs about 0.02 us a state."""
+
+PAYS = 2.0
+"""The compiled loop is loaded (not yet paid) where NumPy's levels still to come are
+estimated at this many loads or more: it then saves at least one load, and an estimate
+off by half still breaks even."""
+
+COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
+"""A world of this many states (a million) is estimated to pay from the first level."""
+
+_SEEN = 8
+"""NumPy's batches seen before their width is trusted for the estimate."""
 
 _CHUNK_STATES = 1 << 18
 """New states one call of the compiled loop may number before the budget is checked."""
@@ -191,14 +199,22 @@ _MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 24
 so far, within these bounds."""
 
 
-def compiled_wanted(lean: Plain, n_world: int) -> bool:
-    """Whether the compiled loop should expand the levels from here: its load is paid
-    already, or the world's states (``n_world``) or NumPy's batches so far say it pays
-    for itself."""
+def compiled_wanted(lean: Plain, n_world: int, expanded: int) -> bool:
+    """Whether the compiled loop should expand the levels from here, with ``expanded``
+    states expanded so far of a world of ``n_world``: its load is paid already, or the
+    levels still to come are estimated to cost NumPy :data:`PAYS` loads or more (from the
+    world's states before the work; then from the frontier's width so far, the states
+    not yet expanded taken as the world's: a thin frontier's batches each cost
+    :data:`BATCH_SECONDS`)."""
     if not COMPILED or lean.table_steps is None:
         return False
-    if n_world >= COMPILED_MIN_STATES or lean.batches >= COMPILED_AFTER_BATCHES:
+    if n_world >= COMPILED_MIN_STATES:
         return True
+    if lean.batches >= _SEEN:
+        width = max(expanded / (lean.batches + 1), 1.0)  # the first level's batch too
+        left = max(n_world - expanded, 0)
+        if left / width * BATCH_SECONDS + left * STATE_SECONDS >= PAYS * LOAD_SECONDS:
+            return True
     from mitld_lp.solvers import kernel_loader
 
     return kernel_loader.compiled_paid()
