@@ -188,8 +188,9 @@ off by half still breaks even."""
 COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
 """A world of this many states (a million) is estimated to pay from the first level."""
 
-_SEEN = 8
-"""NumPy's batches seen before their width is trusted for the estimate."""
+_SEEN = 32
+"""NumPy's batches seen before the frontier's width is trusted for the estimate (a
+breadth-first search's first levels are narrow however wide the later ones)."""
 
 _CHUNK_STATES = 1 << 18
 """New states one call of the compiled loop may number before the budget is checked."""
@@ -199,21 +200,22 @@ _MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 24
 so far, within these bounds."""
 
 
-def compiled_wanted(lean: Plain, n_world: int, expanded: int) -> bool:
+def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int) -> bool:
     """Whether the compiled loop should expand the levels from here, with ``expanded``
-    states expanded so far of a world of ``n_world``: its load is paid already, or the
-    levels still to come are estimated to cost NumPy :data:`PAYS` loads or more (from the
-    world's states before the work; then from the frontier's width so far, the states
-    not yet expanded taken as the world's: a thin frontier's batches each cost
+    states expanded so far of a world of ``n_world`` and ``queued`` found and not yet
+    expanded: its load is paid already, or the levels still to come are estimated to
+    cost NumPy :data:`PAYS` loads or more (from the world's states before the work; then,
+    once :data:`_SEEN` batches have let the frontier grow, from the queue's length as the
+    frontier's width, the states not yet expanded taken as the world's, while fewer
+    than half the world's are: a thin frontier's batches each cost
     :data:`BATCH_SECONDS`)."""
     if not COMPILED or lean.table_steps is None:
         return False
     if n_world >= COMPILED_MIN_STATES:
         return True
-    if lean.batches >= _SEEN:
-        width = max(expanded / (lean.batches + 1), 1.0)  # the first level's batch too
-        left = max(n_world - expanded, 0)
-        if left / width * BATCH_SECONDS + left * STATE_SECONDS >= PAYS * LOAD_SECONDS:
+    if lean.batches >= _SEEN and 2 * expanded < n_world:  # past half the world, the
+        left = n_world - expanded  # states left may never be reached: a guess too wide
+        if left / max(queued, 1) * BATCH_SECONDS + left * STATE_SECONDS >= PAYS * LOAD_SECONDS:
             return True
     from mitld_lp.solvers import kernel_loader
 
