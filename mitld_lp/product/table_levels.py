@@ -195,9 +195,9 @@ breadth-first search's first levels are narrow however wide the later ones)."""
 _CHUNK_STATES = 1 << 18
 """New states one call of the compiled loop may number before the budget is checked."""
 
-_MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 24
+_MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 22
 """The entries one call of the compiled loop has room for: as many as the transitions
-so far, within these bounds."""
+so far, within these bounds (its buffers, 24 bytes an entry, at most about 100 MB)."""
 
 
 def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int) -> bool:
