@@ -40,8 +40,9 @@ child process of its own:
 
 The targets checked on every non-degenerate instance of at least 1e5 states: solve <=
 2x Storm's best check, whole process <= 1x Storm's whole process, <= 50 bytes per
-transition; the case as a process <= 2x the stormpy script.  Each miss is listed with
-its factor.
+transition on a product of at least 1e6 transitions (:data:`MEMORY_FROM`, the issue's
+words; smaller rows print theirs with no target); the case as a process <= 2x the
+stormpy script.  Each miss is listed with its factor.
 
 ``--compare DIR`` runs ``ours`` a second time on each instance, in the same run, with
 the ``mitld_lp`` of another checkout ``DIR`` (an older commit, ``git archive``), and
@@ -85,6 +86,7 @@ BIG = 100_000  # states: the targets are checked from this size up
 TARGETS = {"solve_over_storm_check": 2.0, "process_over_storm_process": 1.0,
            "bytes_per_transition": 50.0}
 CASE_TARGET = 2.0
+MEMORY_FROM = 1_000_000  # issue 45: "<= 50 bytes per transition at 1e6 transitions and more"
 METHODS = ("SOUND_VALUE_ITERATION", "INTERVAL_ITERATION", "OPTIMISTIC_VALUE_ITERATION",
            "TOPOLOGICAL")
 PRECISION = "1/1000000000"
@@ -408,11 +410,23 @@ def misses(rows: list[dict]) -> list[str]:
             continue
         if r["states"] < BIG:
             continue
-        for key, target in TARGETS.items():
-            got = r.get(key)
-            if got is not None and got > target:
-                out.append(f"{r['instance']}: {key} = {got:.3g}, target {target:g} "
-                           f"(missed by {got / target:.2f}x)")
+        out += target_misses(r)
+    return out
+
+
+def target_misses(r: dict) -> list[str]:
+    """The row's ratios over :data:`TARGETS`, each with the factor by which it misses;
+    the memory target only on a product of at least :data:`MEMORY_FROM` transitions
+    (below it the row still prints its bytes per transition, and no target is
+    claimed for it)."""
+    out = []
+    for key, target in TARGETS.items():
+        got = r.get(key)
+        if key == "bytes_per_transition" and (r.get("transitions") or 0) < MEMORY_FROM:
+            continue
+        if got is not None and got > target:
+            out.append(f"{r['instance']}: {key} = {got:.3g}, target {target:g} "
+                       f"(missed by {got / target:.2f}x)")
     return out
 
 
@@ -439,7 +453,8 @@ def report(rows: list[dict]) -> str:
     missed = misses(rows)
     text += (f"\nTargets on the non-degenerate instances of at least {BIG:,} states "
              "(solve <= 2x Storm's best check, whole process <= 1x Storm's, <= 50 bytes "
-             "per transition; the case as a process <= 2x the stormpy script): "
+             f"per transition from {MEMORY_FROM:,} transitions; the case as a process <= 2x "
+             "the stormpy script): "
              + ("all met.\n" if not missed else "missed:\n\n"
                 + "".join(f"- {m}\n" for m in missed)))
     return text
