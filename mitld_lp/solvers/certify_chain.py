@@ -16,13 +16,21 @@ from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
+from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
 except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
     _st = None
 
-__all__ = ["Chain", "RowModel", "support_layers", "chain", "attracted"]
+__all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "support_layers", "chain",
+           "attracted"]
+
+CHAIN_KERNEL_MIN_LEVELS = 200
+"""The fewest levels of a chain whose single states are solved by the compiled walk
+whatever its size, once a compiled kernel's load is paid in the process (the kernel's
+own first read, about 2 ms, against some 10 microseconds a level of NumPy calls); the
+same values to the last bit (:mod:`mitld_lp.solvers.level_kernels`)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -248,7 +256,12 @@ class _Singles:
         # entry pointers of the columns' type: SciPy's product sums a level's rows
         self.ptr = self.entry_at.astype(self.cols.dtype) if fits else None
         self.sub = sub
-        self.kernels = level_kernels(sub.nnz, blk.n_levels)
+        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
+        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
+        # 5 ms of NumPy calls against one call)
+        self.kernels = level_kernels(sub.nnz, blk.n_levels, compiled=True if (
+            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
+            else None)
 
     def solve(self, first: int, stop: int, b: np.ndarray, kappa: np.ndarray,
               diag: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:

@@ -12,15 +12,23 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.certify_chain import RowModel, support_layers
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
 except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
     _st = None
 
-__all__ = ["PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "readers_by_column"]
+__all__ = ["COMPILED_CHECK_MIN_ROWS", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows",
+           "compiled_checks", "readers_by_column", "repair_levels"]
+
+COMPILED_CHECK_MIN_ROWS = 20_000
+"""The fewest rows whose Bellman check (:func:`compiled_checks`) runs compiled, once a
+compiled kernel's load is paid (the kernel's own first read, about 2 ms, against the
+NumPy check's 10-20 ns a row and its dozen calls a batch)."""
 
 PASSES = True
 """Whether a repair whose levels read only lower ones is made pass by pass over the
@@ -71,6 +79,88 @@ class Rows:
         rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
         per_choice = self.nature[choices + 1] - self.nature[choices]
         return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
+
+
+def compiled_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+                    upper: bool, states: np.ndarray | None = None) -> np.ndarray | None:
+    """Per row of the ``states``' choices (every state: the matrix's rows), whether it
+    passes the Bellman check of :func:`~mitld_lp.solvers.certify._fails` (a ``free``
+    state's rows pass), by one compiled pass
+    (:func:`~mitld_lp.solvers.certify_kernels.bellman_rows`: the same verdicts); None
+    where the NumPy check runs instead: fewer than :data:`COMPILED_CHECK_MIN_ROWS`
+    rows, no compiled kernel loaded yet in this process, numba not installed, a value
+    of ``x`` not finite, or arrays of other kinds than SciPy's product takes."""
+    m = st.matrix
+    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
+            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
+            or m.indices.dtype not in (np.int32, np.int64)
+            or not bool(np.isfinite(x).all())):
+        return None
+    groups = np.asarray(st.groups, dtype=np.int64)
+    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
+              np.asarray(st.nature, dtype=np.int64))
+    ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
+    if states is None and (int(ends[0]) != 0 or int(ends[1]) != m.shape[0]):
+        return None  # (the rows are not the states' choices one after the other)
+    try:
+        from mitld_lp.solvers.certify_kernels import bellman_rows
+    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
+        return None
+    if states is None:
+        states, n_rows = np.arange(st.n_states, dtype=np.int64), m.shape[0]
+    else:
+        states = np.asarray(states, dtype=np.int64)
+        first = groups[states] if st.nature is None else nature[groups[states]]
+        last = groups[states + 1] if st.nature is None else nature[groups[states + 1]]
+        n_rows = int(np.sum(last - first))
+    ok = np.empty(n_rows, dtype=bool)
+    bellman_rows(states, groups, nature, m.indptr, m.indices, m.data,
+                 np.ascontiguousarray(x), rnd.count, rnd.slack_of,
+                 rnd.high_of if upper else rnd.low_of,
+                 np.ascontiguousarray(free, dtype=bool), bool(upper), ok)
+    return ok
+
+
+def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
+                   zero: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the repair walks, and the states it holds fixed (``free`` and more).
+    A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
+    is held where its bound cannot need a move: at its extreme (1 for an upper bound,
+    ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
+    for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
+    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
+    is sound whatever it is: the caller checks again every state that failed and every
+    reader of a moved one.  If some other state has no level, the levels of the whole
+    support graph are found (:func:`support_layers`)."""
+    unknown = level_of < 0
+    if not unknown.any():
+        return level_of, free
+    still = (x == 1.0) if zero is not None else (x == 0.0)
+    if zero is not None and _closed_at_zero(st, zero, x):
+        still |= zero
+    held = free | (unknown & still)
+    if not bool(np.any(unknown & ~held)):
+        return level_of, held
+    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    return np.asarray(level)[np.asarray(comp)], free
+
+
+def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+    """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
+    every stored entry of their rows (nature's included) in ``zero``.  The graph reads
+    no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
+    the rule ask the rounded sum's bound, above 0 (``test_levels_quotient_stored_zero``)."""
+    states = np.flatnonzero(zero)
+    if bool(np.any(x[states] != 0.0)):
+        return False
+    rows, _, _ = st.rows_of(states)
+    m = st.matrix
+    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
+
+
+def _state_groups(st: Rows) -> np.ndarray:
+    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
+    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
 
 
 def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
