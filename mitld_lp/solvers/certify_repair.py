@@ -361,6 +361,21 @@ class _Walk:
         return out
 
 
+def _downward(st: Rows, live: np.ndarray, lv: np.ndarray, level_of: np.ndarray) -> bool:
+    """:attr:`_Walk.downward` of the ``live`` states (their levels ``lv``, ascending)
+    without the walk: whether no stored entry of their rows reads a ``live`` state of
+    their own level or above.  A state's rows are consecutive (nature's too), so its
+    entries are one range of the matrix's arrays: read there, not gathered row by row."""
+    m = st.matrix
+    first = st.groups[live] if st.nature is None else st.nature[st.groups[live]]
+    stop = st.groups[live + 1] if st.nature is None else st.nature[st.groups[live + 1]]
+    a, z = m.indptr[first], m.indptr[stop]
+    cols = m.indices[gather_ranges(a, z)]
+    in_walk = np.zeros(st.n_states, dtype=bool)
+    in_walk[live] = True
+    return not bool(np.any(in_walk[cols] & (level_of[cols] >= np.repeat(lv, z - a))))
+
+
 @dataclass(slots=True, eq=False)
 class _Repair:
     """The repair of a candidate (module docs): a failing state's bound moved to what its
@@ -490,12 +505,14 @@ class _Repair:
         sizes = np.diff(at)
         small = sizes < SPARSE_LEVEL
         walked = np.repeat(small, sizes)
-        walk = _Walk(self.st, live[walked], lv[walked])
-        del lv, walked  # (the levels' bounds are in ``at``: not held through the rounds)
-        if (PASSES and bool(small.all()) and walk.downward
-                and (self.mec_of is None or not bool(np.any(self.mec_of[live] >= 0)))):
+        if (PASSES and bool(small.all())
+                and (self.mec_of is None or not bool(np.any(self.mec_of[live] >= 0)))
+                and _downward(self.st, live, lv, self.level_of)):
+            # (the walk's own test, without gathering its slices: the passes read none)
             self._passes(x, failing, live)
             return True
+        walk = _Walk(self.st, live[walked], lv[walked])
+        del lv, walked  # (the levels' bounds are in ``at``: not held through the rounds)
         walk_at = np.concatenate([[0], np.cumsum(np.where(small, sizes, 0))]).tolist()
         moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
         fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
