@@ -1,5 +1,5 @@
 """cert-fast: the certificate's compiled Bellman check (``certify_kernels.bellman_rows``
-through ``certify_repair.compiled_checks``), its chain's single levels compiled where a
+through ``certify_compiled.compiled_checks``), its chain's single levels compiled where a
 kernel's load is paid, and the repair's pass-by-pass test read without its walk.
 
 Every bracket is held against exact values computed here in rational arithmetic
@@ -22,7 +22,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.solvers import certify as C
-from mitld_lp.solvers import certify_chain, certify_repair
+from mitld_lp.solvers import certify_chain, certify_compiled, certify_repair
 from mitld_lp.solvers.rounding import float_down, float_up, rounding
 
 RARE = (1e-30, 1e-22, 1e-15, 3e-9)
@@ -166,9 +166,9 @@ CASES = [(seed, cyclic) for seed in range(6) for cyclic in (False, True)]
 def _paid(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
     """The compiled check (and the chain's compiled single levels) on or off,
     whatever this process loaded before."""
-    monkeypatch.setattr(certify_repair, "kernel_loader",
+    monkeypatch.setattr(certify_compiled, "kernel_loader",
                         SimpleNamespace(compiled_paid=lambda: compiled))
-    monkeypatch.setattr(certify_repair, "COMPILED_CHECK_MIN_ROWS", 0)
+    monkeypatch.setattr(certify_compiled, "COMPILED_CHECK_MIN_ROWS", 0)
     monkeypatch.setattr(certify_chain, "kernel_loader",
                         SimpleNamespace(compiled_paid=lambda: compiled))
     monkeypatch.setattr(certify_chain, "CHAIN_KERNEL_MIN_LEVELS", 0)
@@ -268,14 +268,14 @@ def test_compiled_check_gives_numpys_verdict_on_every_row(seed, nature,
         for y in (x, x * (1 + 1e-13), np.where(rng.random(x.size) < 0.5, 0.0, x)):
             want = C._numpy_checks(st, rnd, y, free, upper)
             _paid(monkeypatch, True)
-            got = certify_repair.compiled_checks(st, rnd, y, free, upper)
+            got = certify_compiled.compiled_checks(st, rnd, y, free, upper)
             assert got is not None and np.array_equal(got, want)
             states = np.flatnonzero(rng.random(x.size) < 0.5)
-            part = certify_repair.compiled_checks(st, rnd, y, free, upper, states)
+            part = certify_compiled.compiled_checks(st, rnd, y, free, upper, states)
             rows, _, _ = st.rows_of(states)
             assert np.array_equal(part, want[rows])
             _paid(monkeypatch, False)
-            assert certify_repair.compiled_checks(st, rnd, y, free, upper) is None
+            assert certify_compiled.compiled_checks(st, rnd, y, free, upper) is None
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -299,3 +299,34 @@ def test_downward_without_the_walk_is_the_walks(seed) -> None:
     assert certify_repair._downward(chain_rows, live, live, live)
     assert not certify_repair._downward(chain_rows, live, np.zeros(n, dtype=np.int64),
                                         np.zeros(n, dtype=np.int64))
+
+
+@pytest.mark.parametrize("nature", [False, True])
+@pytest.mark.parametrize("seed", range(8))
+def test_compiled_needs_are_numpys_to_the_bit(seed, nature, monkeypatch) -> None:
+    st, x = _rows_of(seed, nature)
+    rng = np.random.default_rng(200 + seed)
+    rnd = rounding(st.matrix)
+    states = np.flatnonzero(rng.random(x.size) < 0.6)
+    for upper in (True, False):
+        _paid(monkeypatch, False)
+        want = certify_repair._needed(st, rnd, x, states, upper)
+        _paid(monkeypatch, True)
+        got = certify_compiled.compiled_needs(st, rnd, x, states, upper)
+        assert got is not None
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))  # the bits
+        assert np.array_equal(certify_repair._needed(st, rnd, x, states, upper).view(
+            np.int64), want.view(np.int64))
+
+
+@pytest.mark.parametrize("nature", [False, True])
+@pytest.mark.parametrize("seed", range(4))
+def test_readers_by_column_lists_each_entrys_state_in_row_order(seed, nature) -> None:
+    st, _ = _rows_of(seed, nature)
+    col_ptr, col_state = certify_repair.readers_by_column(st)
+    m = st.matrix
+    row_state = st.row_state()
+    for j in range(st.n_states):  # brute force: every row holding column j, in order
+        want = [int(row_state[r]) for r in range(m.shape[0])
+                for c in m.indices[m.indptr[r]:m.indptr[r + 1]] if c == j]
+        assert col_state[col_ptr[j]:col_ptr[j + 1]].tolist() == want

@@ -51,12 +51,12 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
+from mitld_lp.solvers.certify_compiled import compiled_checks
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
     SPARSE_LEVEL,
     Rows,
     _Repair,
-    compiled_checks,
     repair_levels,
 )
 from mitld_lp.solvers.chain_levels import forget

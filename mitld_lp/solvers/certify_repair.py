@@ -13,22 +13,18 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.certify_chain import RowModel, support_layers
+from mitld_lp.solvers.certify_compiled import compiled_needs
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
-from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
 except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
     _st = None
 
-__all__ = ["COMPILED_CHECK_MIN_ROWS", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows",
-           "compiled_checks", "readers_by_column", "repair_levels"]
+__all__ = ["PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "readers_by_column",
+           "repair_levels"]
 
-COMPILED_CHECK_MIN_ROWS = 20_000
-"""The fewest rows whose Bellman check (:func:`compiled_checks`) runs compiled, once a
-compiled kernel's load is paid (the kernel's own first read, about 2 ms, against the
-NumPy check's 10-20 ns a row and its dozen calls a batch)."""
 
 PASSES = True
 """Whether a repair whose levels read only lower ones is made pass by pass over the
@@ -79,46 +75,6 @@ class Rows:
         rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
         per_choice = self.nature[choices + 1] - self.nature[choices]
         return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
-
-
-def compiled_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
-                    upper: bool, states: np.ndarray | None = None) -> np.ndarray | None:
-    """Per row of the ``states``' choices (every state: the matrix's rows), whether it
-    passes the Bellman check of :func:`~mitld_lp.solvers.certify._fails` (a ``free``
-    state's rows pass), by one compiled pass
-    (:func:`~mitld_lp.solvers.certify_kernels.bellman_rows`: the same verdicts); None
-    where the NumPy check runs instead: fewer than :data:`COMPILED_CHECK_MIN_ROWS`
-    rows, no compiled kernel loaded yet in this process, numba not installed, a value
-    of ``x`` not finite, or arrays of other kinds than SciPy's product takes."""
-    m = st.matrix
-    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
-            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
-            or m.indices.dtype not in (np.int32, np.int64)
-            or not bool(np.isfinite(x).all())):
-        return None
-    groups = np.asarray(st.groups, dtype=np.int64)
-    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
-              np.asarray(st.nature, dtype=np.int64))
-    ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
-    if states is None and (int(ends[0]) != 0 or int(ends[1]) != m.shape[0]):
-        return None  # (the rows are not the states' choices one after the other)
-    try:
-        from mitld_lp.solvers.certify_kernels import bellman_rows
-    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
-        return None
-    if states is None:
-        states, n_rows = np.arange(st.n_states, dtype=np.int64), m.shape[0]
-    else:
-        states = np.asarray(states, dtype=np.int64)
-        first = groups[states] if st.nature is None else nature[groups[states]]
-        last = groups[states + 1] if st.nature is None else nature[groups[states + 1]]
-        n_rows = int(np.sum(last - first))
-    ok = np.empty(n_rows, dtype=bool)
-    bellman_rows(states, groups, nature, m.indptr, m.indices, m.data,
-                 np.ascontiguousarray(x), rnd.count, rnd.slack_of,
-                 rnd.high_of if upper else rnd.low_of,
-                 np.ascontiguousarray(free, dtype=bool), bool(upper), ok)
-    return ok
 
 
 def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
@@ -181,6 +137,16 @@ def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
     index = np.int32 if max(m.nnz, n_rows, n) < np.iinfo(np.int32).max else np.int64
     col_ptr = np.empty(n + 1, dtype=index)
     col_rows = np.empty(m.nnz, dtype=index)
+    first = _state_groups(st)
+    if int(first[0]) == 0 and int(first[-1]) == n_rows:
+        # a state's rows are consecutive, so its entries one range: the transpose of
+        # the states' ranges gives each entry's state directly, in the same order (the
+        # states ascending, a state's entries in the rows' order), with no row-to-state
+        # map of every row and no gather of it at every entry
+        _st.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
+                      m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
+                      col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
+        return col_ptr, col_rows
     _st.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
                   m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
                   col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
@@ -192,6 +158,9 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
             upper: bool) -> np.ndarray:
     """Per state of ``states``: the least (``upper``) / largest value its choices allow,
     ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
+    got = compiled_needs(st, rnd, x, states, upper)
+    if got is not None:
+        return got
     rows, choice_starts, state_starts = st.rows_of(states)
     local, cols, vals = row_entries(st.matrix, rows)
     return _need_of(rnd, x, local, cols, vals, rows, choice_starts, state_starts, upper)
