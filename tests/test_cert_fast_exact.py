@@ -330,3 +330,25 @@ def test_readers_by_column_lists_each_entrys_state_in_row_order(seed, nature) ->
         want = [int(row_state[r]) for r in range(m.shape[0])
                 for c in m.indices[m.indptr[r]:m.indptr[r + 1]] if c == j]
         assert col_state[col_ptr[j]:col_ptr[j + 1]].tolist() == want
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_reversed_from_state_pointers_reaches_what_a_plain_search_does(seed) -> None:
+    from mitld_lp.solvers.reach import Reversed
+
+    rng = np.random.default_rng(300 + seed)
+    n = 30
+    counts = rng.integers(0, 4, size=n)
+    succ = rng.integers(0, n, size=int(counts.sum()))
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    edges = Reversed(n, None, succ, starts=starts)
+    for _ in range(4):
+        seeds = rng.random(n) < 0.15
+        reach = seeds.copy()  # brute force: grow the set until no edge adds a state
+        grew = True
+        while grew:
+            grew = False
+            for s in range(n):
+                if not reach[s] and reach[succ[starts[s]:starts[s + 1]]].any():
+                    reach[s] = grew = True
+        assert np.array_equal(edges.reaching(seeds), reach)

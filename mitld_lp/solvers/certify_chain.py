@@ -88,19 +88,25 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     states = np.flatnonzero(acting)
     rows = policy[states]
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
     dst, val = row_columns(m, rows)  # compiled: no index array of every entry
     dst = dst.astype(index, copy=False)
-    # the acting states and their rows (two int64 a state) are in ``src`` now: freed
-    # before the search's reversed edges (the certificate's peak on QVBS csma)
-    del states, rows
     pos = val > 0
     del val  # (the solved rows' values are gathered again below, not held here)
-    if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
+    if pos.all():  # the chain's edges as a CSR over the states: no source an edge
+        starts = np.zeros(n + 1, dtype=np.int64)
+        starts[states + 1] = m.indptr[rows + 1] - m.indptr[rows]
+        np.cumsum(starts, out=starts)
+        del states, rows, pos
+        edges = Reversed(n, None, dst, starts=starts)
+        del starts
+    else:  # its positive entries (in the rows' order), each with its source
+        src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
+        del states, rows
         src, dst = src[pos], dst[pos]
-    del pos
-    edges = Reversed(n, src, dst)
-    del src, dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
+        del pos
+        edges = Reversed(n, src, dst)
+        del src
+    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
     never = ~edges.reaching(target)
     sure = ~edges.reaching(never)
     del edges
@@ -259,7 +265,7 @@ class _Singles:
         # compiled as the quotient's walks are, or wherever a compiled kernel's load is
         # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
         # 5 ms of NumPy calls against one call)
-        self.kernels = level_kernels(sub.nnz, blk.n_levels, compiled=True if (
+        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
             blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
             else None)
 
