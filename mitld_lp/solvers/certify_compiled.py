@@ -5,19 +5,17 @@ is large, the Bellman check's verdicts and the repair's needs by one call of a k
 of :mod:`mitld_lp.solvers.certify_kernels`, the same floating-point operations on the
 same operands as the NumPy code they replace (so the same verdicts and the same
 values); None elsewhere, and the NumPy code runs.  This module imports no other module
-of the certificates (the records it reads are passed in)."""
+of the certificates: ``st`` is :class:`~mitld_lp.solvers.certify_repair.Rows`
+(its ``matrix``, ``groups``, ``nature`` and ``n_states`` read), which imports this."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
+from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.util import kernel_loader
-
-if TYPE_CHECKING:
-    from mitld_lp.solvers.certify_repair import Rows
-    from mitld_lp.solvers.rounding import Rounding
 
 __all__ = ["COMPILED_CHECK_MIN_ROWS", "compiled_checks", "compiled_needs"]
 
@@ -27,7 +25,7 @@ compiled kernel's load is paid (the kernel's own first read, about 2 ms, against
 NumPy check's 10-20 ns a row and its dozen calls a batch)."""
 
 
-def compiled_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                     upper: bool, states: np.ndarray | None = None) -> np.ndarray | None:
     """Per row of the ``states``' choices (every state: the matrix's rows), whether it
     passes the Bellman check of :func:`~mitld_lp.solvers.certify._fails` (a ``free``
@@ -67,7 +65,7 @@ def compiled_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     return ok
 
 
-def compiled_needs(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
+def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
                     upper: bool) -> np.ndarray | None:
     """:func:`~mitld_lp.solvers.certify_repair._needed` by one compiled call
     (:func:`~mitld_lp.solvers.certify_kernels.state_needs`: the same operations on the
