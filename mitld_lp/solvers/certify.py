@@ -51,7 +51,14 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
-from mitld_lp.solvers.certify_repair import ROUNDS, SPARSE_LEVEL, Rows, _Repair
+from mitld_lp.solvers.certify_compiled import compiled_checks
+from mitld_lp.solvers.certify_repair import (
+    ROUNDS,
+    SPARSE_LEVEL,
+    Rows,
+    _Repair,
+    repair_levels,
+)
 from mitld_lp.solvers.chain_levels import forget
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
@@ -181,6 +188,17 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     """The states (not ``free``) where some choice breaks the pre- (``upper``) or
     sub-fixed point inequality, rounding and the convex rule accounted for (a robust
     choice passes when one of nature's rows does)."""
+    ok = compiled_checks(st, rnd, x, free, upper)  # one compiled pass, where paid
+    if ok is None:
+        ok = _numpy_checks(st, rnd, x, free, upper)
+    if st.nature is not None:
+        ok = np.logical_or.reduceat(ok, st.nature[:-1])
+    return ~np.logical_and.reduceat(ok, st.groups[:-1])
+
+
+def _numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+                  upper: bool) -> np.ndarray:
+    """Per row of ``st.matrix``: whether it passes :func:`_fails`'s check, by NumPy."""
     m = st.matrix
     row_state = st.row_state()
     ok = np.empty(m.shape[0], dtype=bool)
@@ -199,9 +217,7 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
             sums = m[a:z] @ x
         ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state[a:z]], upper, rule)
     ok |= free[row_state]
-    if st.nature is not None:
-        ok = np.logical_or.reduceat(ok, st.nature[:-1])
-    return ~np.logical_and.reduceat(ok, st.groups[:-1])
+    return ok
 
 
 def _rows_pass(m: sp.csr_array, rnd: Rounding, x: np.ndarray, rows: np.ndarray | slice,
@@ -254,12 +270,14 @@ def _fails_among(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray, upper
     m = st.matrix
     among = np.flatnonzero(states)
     rows, choice_starts, state_starts = st.rows_of(among)
-    per_row = np.diff(np.append(state_starts if choice_starts is None else
-                                choice_starts[state_starts], rows.size))
-    own_state = np.repeat(among, per_row)
-    good = _rows_pass(m, rnd, x, rows, rows_dot(m, rows, x), x[own_state], upper,
-                      _rule_values(m, x, upper, _direct(m, x)))
-    good |= free[own_state]
+    good = compiled_checks(st, rnd, x, free, upper, among)
+    if good is None:
+        per_row = np.diff(np.append(state_starts if choice_starts is None else
+                                    choice_starts[state_starts], rows.size))
+        own_state = np.repeat(among, per_row)
+        good = _rows_pass(m, rnd, x, rows, rows_dot(m, rows, x), x[own_state], upper,
+                          _rule_values(m, x, upper, _direct(m, x)))
+        good |= free[own_state]
     if choice_starts is not None:
         good = np.logical_or.reduceat(good, choice_starts)
     failing = np.zeros(st.n_states, dtype=bool)
@@ -372,7 +390,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
         if failing.any():
             if level_of is None:
                 level_of = np.asarray(layers[1])[np.asarray(layers[0])]
-            level_of, held = _repair_levels(st, level_of, x, free, zero if upper else None)
+            level_of, held = repair_levels(st, level_of, x, free, zero if upper else None)
             # what a repair reads of the model alone, made once for every candidate
             # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
             repair = last = _Repair(st, rnd, held, level_of, mecs, upper,
@@ -409,48 +427,6 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     return Side(float(x[initial]), Check(name, False, (
         "no candidate passed (" + "; ".join(tried) + f"); the bound is the trivial "
         f"{x[initial]:g}")), read_only(x))
-
-
-def _repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
-                   zero: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """The levels the repair walks, and the states it holds fixed (``free`` and more).
-    A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
-    is held where its bound cannot need a move: at its extreme (1 for an upper bound,
-    ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
-    for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
-    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
-    is sound whatever it is: the caller checks again every state that failed and every
-    reader of a moved one.  If some other state has no level, the levels of the whole
-    support graph are found (:func:`support_layers`)."""
-    unknown = level_of < 0
-    if not unknown.any():
-        return level_of, free
-    still = (x == 1.0) if zero is not None else (x == 0.0)
-    if zero is not None and _closed_at_zero(st, zero, x):
-        still |= zero
-    held = free | (unknown & still)
-    if not bool(np.any(unknown & ~held)):
-        return level_of, held
-    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
-    return np.asarray(level)[np.asarray(comp)], free
-
-
-def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
-    """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
-    every stored entry of their rows (nature's included) in ``zero``.  The graph reads
-    no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
-    the rule ask the rounded sum's bound, above 0 (``test_levels_quotient_stored_zero``)."""
-    states = np.flatnonzero(zero)
-    if bool(np.any(x[states] != 0.0)):
-        return False
-    rows, _, _ = st.rows_of(states)
-    m = st.matrix
-    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
-
-
-def _state_groups(st: Rows) -> np.ndarray:
-    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
-    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
 
 
 def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,

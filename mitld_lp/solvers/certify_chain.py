@@ -16,13 +16,21 @@ from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
+from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
 except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
     _st = None
 
-__all__ = ["Chain", "RowModel", "support_layers", "chain", "attracted"]
+__all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "support_layers", "chain",
+           "attracted"]
+
+CHAIN_KERNEL_MIN_LEVELS = 200
+"""The fewest levels of a chain whose single states are solved by the compiled walk
+whatever its size, once a compiled kernel's load is paid in the process (the kernel's
+own first read, about 2 ms, against some 10 microseconds a level of NumPy calls); the
+same values to the last bit (:mod:`mitld_lp.solvers.level_kernels`)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -80,19 +88,25 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     states = np.flatnonzero(acting)
     rows = policy[states]
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
     dst, val = row_columns(m, rows)  # compiled: no index array of every entry
     dst = dst.astype(index, copy=False)
-    # the acting states and their rows (two int64 a state) are in ``src`` now: freed
-    # before the search's reversed edges (the certificate's peak on QVBS csma)
-    del states, rows
     pos = val > 0
     del val  # (the solved rows' values are gathered again below, not held here)
-    if not pos.all():  # the chain's edges: its positive entries (in the rows' order)
+    if pos.all():  # the chain's edges as a CSR over the states: no source an edge
+        starts = np.zeros(n + 1, dtype=np.int64)
+        starts[states + 1] = m.indptr[rows + 1] - m.indptr[rows]
+        np.cumsum(starts, out=starts)
+        del states, rows, pos
+        edges = Reversed(n, None, dst, starts=starts)
+        del starts
+    else:  # its positive entries (in the rows' order), each with its source
+        src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
+        del states, rows
         src, dst = src[pos], dst[pos]
-    del pos
-    edges = Reversed(n, src, dst)
-    del src, dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
+        del pos
+        edges = Reversed(n, src, dst)
+        del src
+    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
     never = ~edges.reaching(target)
     sure = ~edges.reaching(never)
     del edges
@@ -248,7 +262,12 @@ class _Singles:
         # entry pointers of the columns' type: SciPy's product sums a level's rows
         self.ptr = self.entry_at.astype(self.cols.dtype) if fits else None
         self.sub = sub
-        self.kernels = level_kernels(sub.nnz, blk.n_levels)
+        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
+        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
+        # 5 ms of NumPy calls against one call)
+        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
+            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
+            else None)
 
     def solve(self, first: int, stop: int, b: np.ndarray, kappa: np.ndarray,
               diag: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.certify_chain import RowModel, support_layers
+from mitld_lp.solvers.certify_compiled import compiled_needs
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 
@@ -20,7 +22,9 @@ try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
 except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
     _st = None
 
-__all__ = ["PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "readers_by_column"]
+__all__ = ["PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "readers_by_column",
+           "repair_levels"]
+
 
 PASSES = True
 """Whether a repair whose levels read only lower ones is made pass by pass over the
@@ -73,6 +77,48 @@ class Rows:
         return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
 
 
+def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
+                   zero: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the repair walks, and the states it holds fixed (``free`` and more).
+    A state without a level (-1: outside the analysis's quotient, ``Quotient.layers``)
+    is held where its bound cannot need a move: at its extreme (1 for an upper bound,
+    ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
+    for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
+    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
+    is sound whatever it is: the caller checks again every state that failed and every
+    reader of a moved one.  If some other state has no level, the levels of the whole
+    support graph are found (:func:`support_layers`)."""
+    unknown = level_of < 0
+    if not unknown.any():
+        return level_of, free
+    still = (x == 1.0) if zero is not None else (x == 0.0)
+    if zero is not None and _closed_at_zero(st, zero, x):
+        still |= zero
+    held = free | (unknown & still)
+    if not bool(np.any(unknown & ~held)):
+        return level_of, held
+    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    return np.asarray(level)[np.asarray(comp)], free
+
+
+def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+    """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
+    every stored entry of their rows (nature's included) in ``zero``.  The graph reads
+    no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
+    the rule ask the rounded sum's bound, above 0 (``test_levels_quotient_stored_zero``)."""
+    states = np.flatnonzero(zero)
+    if bool(np.any(x[states] != 0.0)):
+        return False
+    rows, _, _ = st.rows_of(states)
+    m = st.matrix
+    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
+
+
+def _state_groups(st: Rows) -> np.ndarray:
+    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
+    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
+
+
 def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
     """The matrix's pattern by column as each entry's state: ``(col_ptr, col_state)``,
     the states of the rows holding column ``j`` at ``col_state[col_ptr[j]:col_ptr[j +
@@ -91,6 +137,16 @@ def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
     index = np.int32 if max(m.nnz, n_rows, n) < np.iinfo(np.int32).max else np.int64
     col_ptr = np.empty(n + 1, dtype=index)
     col_rows = np.empty(m.nnz, dtype=index)
+    first = _state_groups(st)
+    if int(first[0]) == 0 and int(first[-1]) == n_rows:
+        # a state's rows are consecutive, so its entries one range: the transpose of
+        # the states' ranges gives each entry's state directly, in the same order (the
+        # states ascending, a state's entries in the rows' order), with no row-to-state
+        # map of every row and no gather of it at every entry
+        _st.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
+                      m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
+                      col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
+        return col_ptr, col_rows
     _st.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
                   m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
                   col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
@@ -102,6 +158,9 @@ def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
             upper: bool) -> np.ndarray:
     """Per state of ``states``: the least (``upper``) / largest value its choices allow,
     ``max_c min_rows min(above, max support)`` / ``min_c max(below, min support)``."""
+    got = compiled_needs(st, rnd, x, states, upper)
+    if got is not None:
+        return got
     rows, choice_starts, state_starts = st.rows_of(states)
     local, cols, vals = row_entries(st.matrix, rows)
     return _need_of(rnd, x, local, cols, vals, rows, choice_starts, state_starts, upper)
@@ -271,6 +330,21 @@ class _Walk:
         return out
 
 
+def _downward(st: Rows, live: np.ndarray, lv: np.ndarray, level_of: np.ndarray) -> bool:
+    """:attr:`_Walk.downward` of the ``live`` states (their levels ``lv``, ascending)
+    without the walk: whether no stored entry of their rows reads a ``live`` state of
+    their own level or above.  A state's rows are consecutive (nature's too), so its
+    entries are one range of the matrix's arrays: read there, not gathered row by row."""
+    m = st.matrix
+    first = st.groups[live] if st.nature is None else st.nature[st.groups[live]]
+    stop = st.groups[live + 1] if st.nature is None else st.nature[st.groups[live + 1]]
+    a, z = m.indptr[first], m.indptr[stop]
+    cols = m.indices[gather_ranges(a, z)]
+    in_walk = np.zeros(st.n_states, dtype=bool)
+    in_walk[live] = True
+    return not bool(np.any(in_walk[cols] & (level_of[cols] >= np.repeat(lv, z - a))))
+
+
 @dataclass(slots=True, eq=False)
 class _Repair:
     """The repair of a candidate (module docs): a failing state's bound moved to what its
@@ -400,12 +474,14 @@ class _Repair:
         sizes = np.diff(at)
         small = sizes < SPARSE_LEVEL
         walked = np.repeat(small, sizes)
-        walk = _Walk(self.st, live[walked], lv[walked])
-        del lv, walked  # (the levels' bounds are in ``at``: not held through the rounds)
-        if (PASSES and bool(small.all()) and walk.downward
-                and (self.mec_of is None or not bool(np.any(self.mec_of[live] >= 0)))):
+        if (PASSES and bool(small.all())
+                and (self.mec_of is None or not bool(np.any(self.mec_of[live] >= 0)))
+                and _downward(self.st, live, lv, self.level_of)):
+            # (the walk's own test, without gathering its slices: the passes read none)
             self._passes(x, failing, live)
             return True
+        walk = _Walk(self.st, live[walked], lv[walked])
+        del lv, walked  # (the levels' bounds are in ``at``: not held through the rounds)
         walk_at = np.concatenate([[0], np.cumsum(np.where(small, sizes, 0))]).tolist()
         moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
         fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round

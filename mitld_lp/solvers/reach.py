@@ -76,20 +76,32 @@ class Reversed:
     argsort's (without the routine, that argsort).  Not through a COO matrix and its
     float copy of the weights."""
 
-    def __init__(self, n: int, source: np.ndarray, succ: np.ndarray) -> None:
-        source, succ = np.asarray(source), np.asarray(succ)
+    def __init__(self, n: int, source: np.ndarray | None, succ: np.ndarray, *,
+                 starts: np.ndarray | None = None) -> None:
+        """``starts``: in place of ``source`` (None), the edges as a CSR over the
+        states, state ``s``'s heads at ``succ[starts[s]:starts[s + 1]]``: the graph of
+        ``source = repeat(arange(n), diff(starts))``, reversed alike without that
+        array of every edge (QVBS csma 4-2's certificate chain: a million edges)."""
+        succ = np.asarray(succ)
         m = succ.size
         index = np.int32 if n + m < np.iinfo(np.int32).max else np.int64
         self.n, self.nnz = n, m
         self.indices = np.empty(m + n, dtype=index)
         self.indptr = np.zeros(n + 2, dtype=index)
+        if starts is not None and (_st is None or m == 0):
+            source = np.repeat(np.arange(n, dtype=index), np.diff(starts))
+        if starts is None:
+            source = np.asarray(source)
         if _st is None or m == 0:
             self._argsorted(source, succ)
-        elif bool(np.all(source[1:] >= source[:-1])):
+        elif starts is not None or bool(np.all(source[1:] >= source[:-1])):
             # the sources sorted (a CSR's rows, each row's entries in their order):
             # SciPy's transpose walks the rows in order into their columns' buckets
             rows = np.zeros(n + 1, dtype=index)
-            np.cumsum(np.bincount(source, minlength=n), out=rows[1:])
+            if starts is not None:
+                rows[:] = starts
+            else:
+                np.cumsum(np.bincount(source, minlength=n), out=rows[1:])
             _st.csr_tocsc(n, n, rows, succ.astype(index, copy=False),
                           np.zeros(m, dtype=np.int8), self.indptr[:n + 1],
                           self.indices[:m], np.empty(m, dtype=np.int8))

@@ -1,0 +1,138 @@
+"""The numba kernel of the certificates' Bellman check (:mod:`mitld_lp.solvers.
+certify`), run through :mod:`mitld_lp.util.kernel_loader` and only where a compiled
+kernel's load is paid already (:func:`~mitld_lp.util.kernel_loader.compiled_paid`).
+
+:func:`bellman_rows` decides, row by row, what :func:`~mitld_lp.solvers.certify.
+_rows_pass` decides with NumPy: a row passes when its float sum, bounded by the
+rounding's factors (``(s + slack) * high`` above, ``max((s - slack) * low, 0)``
+below, :func:`~mitld_lp.solvers.rounding.above` / ``below``), is on the right side of
+the state's own value, or else when the extreme of ``x`` over the row's stored entries
+is (the convex rule).  The sum is SciPy's product's: from 0, in the entries' order, one
+product and one addition a term, so the same bits; the extreme is exact in any order.
+NumPy's rule settles some rows by ``x``'s own extremes first (:func:`~mitld_lp.solvers.
+certify._rule_values`): each of those shortcuts is the support's extreme compared with
+the own value, which the kernel reads directly, so every row gets the same verdict.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mitld_lp.util import kernel_loader
+
+# numba's cached machine code run without importing numba; numba itself on a miss
+numba = kernel_loader.lazy_numba(globals())
+
+__all__ = ["bellman_rows", "state_needs"]
+
+
+@numba.njit(cache=True, nogil=True)
+def bellman_rows(states, groups, nature, indptr, indices, data, x, count, slack_of,
+                 factor_of, free, upper, ok):  # pragma: no cover - compiled
+    """Per row of the ``states``' choices (their rows one after the other, in the
+    states' order: the order of :meth:`~mitld_lp.solvers.certify_repair.Rows.rows_of`),
+    whether it passes the pre- (``upper``) or sub-fixed point check of the state's
+    value ``x[s]`` (module docs); every row of a ``free`` state passes.  ``groups``:
+    each state's first choice; ``nature``: each choice's first row (empty: a row a
+    choice).  Written into ``ok``; returns the rows written."""
+    has_nature = nature.shape[0] > 0
+    pos = 0
+    for i in range(states.shape[0]):
+        s = states[i]
+        lo = groups[s]
+        hi = groups[s + 1]
+        if has_nature:
+            lo = nature[lo]
+            hi = nature[hi]
+        own = x[s]
+        if free[s]:
+            for _r in range(lo, hi):
+                ok[pos] = True
+                pos += 1
+            continue
+        for r in range(lo, hi):
+            acc = 0.0
+            for e in range(indptr[r], indptr[r + 1]):
+                acc += data[e] * x[indices[e]]
+            k = count[r]
+            if upper:
+                bound = (acc + slack_of[k]) * factor_of[k]
+                good = bound <= own
+            else:
+                bound = (acc - slack_of[k]) * factor_of[k]
+                if bound < 0.0:
+                    bound = 0.0
+                good = bound >= own
+            if not good:
+                if upper:
+                    ext = -np.inf
+                    for e in range(indptr[r], indptr[r + 1]):
+                        v = x[indices[e]]
+                        if v > ext:
+                            ext = v
+                    good = ext <= own
+                else:
+                    ext = np.inf
+                    for e in range(indptr[r], indptr[r + 1]):
+                        v = x[indices[e]]
+                        if v < ext:
+                            ext = v
+                    good = ext >= own
+            ok[pos] = good
+            pos += 1
+    return pos
+
+
+@numba.njit(cache=True, nogil=True)
+def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_of,
+                factor_of, upper, out):  # pragma: no cover - compiled
+    """Per state of ``states`` (each with a choice, each choice with a row), what the
+    repair's :func:`~mitld_lp.solvers.certify_repair._need_of` computes: per row the
+    rounded bound of its float sum (:func:`bellman_rows`' arithmetic) capped by the
+    extreme of ``x`` over its stored entries (``min`` of the two above, ``max`` below),
+    the least over a choice's rows (nature's pick), and the largest (``upper``) or
+    least over the state's choices.  Written into ``out``."""
+    has_nature = nature.shape[0] > 0
+    for i in range(states.shape[0]):
+        s = states[i]
+        best = -np.inf if upper else np.inf
+        for c in range(groups[s], groups[s + 1]):
+            lo = c
+            hi = c + 1
+            if has_nature:
+                lo = nature[c]
+                hi = nature[c + 1]
+            pick = np.inf
+            for r in range(lo, hi):
+                acc = 0.0
+                for e in range(indptr[r], indptr[r + 1]):
+                    acc += data[e] * x[indices[e]]
+                k = count[r]
+                if upper:
+                    each = (acc + slack_of[k]) * factor_of[k]
+                    ext = -np.inf
+                    for e in range(indptr[r], indptr[r + 1]):
+                        v = x[indices[e]]
+                        if v > ext:
+                            ext = v
+                    if ext < each:
+                        each = ext
+                else:
+                    each = (acc - slack_of[k]) * factor_of[k]
+                    if each < 0.0:
+                        each = 0.0
+                    ext = np.inf
+                    for e in range(indptr[r], indptr[r + 1]):
+                        v = x[indices[e]]
+                        if v < ext:
+                            ext = v
+                    if ext > each:
+                        each = ext
+                if each < pick:
+                    pick = each
+            if upper:
+                if pick > best:
+                    best = pick
+            elif pick < best:
+                best = pick
+        out[i] = best
