@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -58,6 +59,7 @@ from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import Sense, backward_reachable, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.topological import Block
+from mitld_lp.util import kernel_loader
 
 __all__ = ["Greedy", "certified_greedy"]
 
@@ -138,7 +140,20 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     # copy of the whole block is 16 bytes an entry; the slack, each choice's state and
     # their tie scale were 8 + 4 + 8 bytes a choice alive at the LP stage's peak)
     failed = np.zeros(n, dtype=bool)
-    for a in range(0, m, BATCH):
+    batches: range | np.ndarray = range(0, m, BATCH)
+    kernels = _kernels(block, m)
+    if kernels is not None:
+        # one compiled pass decides every choice float64 can (the same decisions);
+        # the batches holding a choice it cannot are judged as below
+        flag = kernels.dual_check(block.inner.indptr, block.inner.indices,
+                                  block.inner.data, block.groups, reward, raw, tie,
+                                  chosen, sense is Sense.MAX)
+        failed = flag == kernels.FAILED
+        unsure = np.flatnonzero(flag == kernels.UNSURE)
+        del flag
+        batches = _batches_of(starts, m, unsure) * BATCH
+    for a in batches:
+        a = int(a)
         z = min(a + BATCH, m)
         owner = _owners(starts, a, z, index)
         score = reward[a:z] + _scores(_rows(block.inner, a, z), raw, index)
@@ -164,6 +179,46 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     if left.size == n:
         return None
     return Greedy(chosen, values, left, walk, m)
+
+
+KERNEL_MIN_CHOICES = 1 << 14
+"""The fewest choices of a block whose dual check is the compiled pass
+(:mod:`mitld_lp.solvers.greedy_kernels`), once the compiled kernels' load is paid."""
+
+
+def _kernels(block: Block, m: int) -> Any:
+    """:mod:`mitld_lp.solvers.greedy_kernels` where its pass pays (a block of
+    :data:`KERNEL_MIN_CHOICES` choices and more, the compiled kernels' load paid, its
+    rows canonical, as the long double route makes them), else ``None``."""
+    if m < KERNEL_MIN_CHOICES or not kernel_loader.compiled_paid():
+        return None
+    inner = block.inner
+    if not inner.has_canonical_format:
+        # its rows' columns sorted in place, as the long double route's
+        # ``sum_duplicates`` sorts them batch by batch; a row with a repeated column is
+        # left to that route
+        inner.sort_indices()
+        if not sp.csr_array((inner.data, inner.indices, inner.indptr),
+                            shape=inner.shape).has_canonical_format:
+            return None
+    try:
+        from mitld_lp.solvers import greedy_kernels
+    except ImportError:  # numba not installed
+        return None
+    return greedy_kernels
+
+
+def _batches_of(starts: np.ndarray, m: int, states: np.ndarray) -> np.ndarray:
+    """The indices of the batches (of :data:`BATCH` choices) holding a choice of one of
+    ``states`` (sorted), each once, increasing."""
+    if states.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    first = starts[states] // BATCH
+    ends = np.append(starts, m)[states + 1]
+    last = (ends - 1) // BATCH
+    spans = [np.arange(f, z + 1) for f, z in zip(first.tolist(), last.tolist(),
+                                                   strict=True)]
+    return np.unique(np.concatenate(spans))
 
 
 def _owners(starts: np.ndarray, a: int, z: int, index: type) -> np.ndarray:

@@ -79,7 +79,8 @@ choice (its float64 sweeps round to about ``K`` units in the last place)."""
 def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                   allowed: np.ndarray | None = None, *,
                   factors: Factors | None = None, sense: Sense = Sense.MAX,
-                  sweeps: int = AHEAD_SWEEPS, allowance: float | None = None
+                  sweeps: int = AHEAD_SWEEPS, allowance: float | None = None,
+                  inner_ld: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Policy iteration on the block with exit rewards ``reward`` from ``chosen`` (local
     choice indices) to a fixpoint, maximising (or minimising, ``sense``), over the
@@ -90,9 +91,11 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     more than ``GAIN`` of the values compared.  ``allowance``: :class:`Abandoned` is
     raised before a round after which the LUs made (``factors.factorised``, shared by
     the jump's calls) and the rounds forecast left would pass it (the policy jump's
-    budget, module docs)."""
+    budget, module docs).  ``inner_ld``: the block's rows in extended precision, if
+    the caller has them (:func:`jump` makes them once for its calls)."""
     starts = block.starts
-    inner_ld = block.inner.astype(np.longdouble)
+    if inner_ld is None:
+        inner_ld = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
     worst = -np.inf if sense is Sense.MAX else np.inf
     reward64 = np.asarray(reward, dtype=np.float64)
@@ -112,11 +115,12 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
             before = switched
         if sweeps > 0:
             x = np.asarray(v, dtype=np.float64)
-            for _ in range(sweeps + 1):
+            for sweep in range(sweeps + 1):
                 ahead = reward64 + block.inner @ x
                 if allowed is not None:
                     ahead = np.where(allowed, ahead, worst)
-                x = sense.reduce(ahead, starts)
+                if sweep < sweeps:  # the last sweep's scores are what is compared
+                    x = sense.reduce(ahead, starts)
             best = segmented_argmax(ahead, block.groups, sense=sense)
             with np.errstate(invalid="ignore"):  # -inf against -inf: not a lead
                 lead = sense.gain(ahead[best], ahead[chosen])
@@ -169,18 +173,20 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
     seed = local if first is None else first
     start = start_policy(block, exit2[:, own], seed[:, own], sense)
-    # the policy iterations below share their factorisations
+    # the policy iterations below share their factorisations and the block's rows in
+    # extended precision
     factors = Factors() if factors is None else factors
+    inner_ld = block.inner.astype(np.longdouble)
     chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
-                                 sense=sense, allowance=allowance)
+                                 sense=sense, allowance=allowance, inner_ld=inner_ld)
     own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
                          lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
                                                   factors)[0])
-    inner_ld = block.inner.astype(np.longdouble)
     own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
     own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
     chosen_best, w, _ = improve_ahead(block, exit2[:, every], chosen, factors=factors,
-                                      sense=sense, allowance=allowance)
+                                      sense=sense, allowance=allowance,
+                                      inner_ld=inner_ld)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: W = u + max over the choices within a quarter of the threshold of P W.
     owner_w = np.repeat(w, counts)
@@ -190,7 +196,7 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
 
     def slowest(u: np.ndarray) -> np.ndarray:
         return improve_ahead(block, np.repeat(u, counts), chosen_best, tied,
-                             factors=factors, allowance=allowance)[1]
+                             factors=factors, allowance=allowance, inner_ld=inner_ld)[1]
 
     sign = 1.0 if every else -1.0
 
