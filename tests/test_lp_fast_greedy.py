@@ -119,13 +119,34 @@ def test_certified_greedy_same_with_and_without_the_pass(seed: int, sense: Sense
     bound = rng.random(block.states.size) * 0.5
     reward = block.to_target.copy()
     got = certified_greedy(block, reward.copy(), bound, sense, 1e-9, 1e-6)
-    monkeypatch.setattr(greedy_block, "_kernels", lambda *a: None)
+    monkeypatch.setattr(greedy_block, "_paid", lambda m: False)
     want = certified_greedy(block, reward.copy(), bound, sense, 1e-9, 1e-6)
     assert (got is None) == (want is None)
     if got is not None:
         np.testing.assert_array_equal(got.chosen, want.chosen)
         np.testing.assert_array_equal(got.values, want.values)
         np.testing.assert_array_equal(got.left, want.left)
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("seed", range(3))
+def test_greedy_choices_are_segmented_argmaxs(seed: int, sense: Sense) -> None:
+    """The compiled greedy choice is SciPy's product and segmented_argmax's pick, tied
+    choices included (every choice has an exact copy: the lowest index wins)."""
+    from mitld_lp.solvers.graph import segmented_argmax
+
+    block, _ = _block(seed)
+    rows = block.inner
+    twice = np.repeat(np.arange(rows.shape[0]), 2)  # each choice and its copy
+    inner = sp.csr_array(rows[twice])
+    groups = 2 * block.groups
+    reward = np.repeat(block.to_target, 2)
+    bound = np.random.default_rng(seed).random(block.states.size)
+    want = segmented_argmax(reward + inner @ bound, groups, sense=sense)
+    got = kernels.greedy_choices(inner.indptr, inner.indices, inner.data, groups,
+                                 reward, bound, sense is Sense.MAX)
+    np.testing.assert_array_equal(got, want)
+    assert np.all(got % 2 == 0)  # the first of two tied copies
 
 
 def test_the_pass_is_taken_and_fails_states(monkeypatch) -> None:
@@ -144,6 +165,31 @@ def test_the_pass_is_taken_and_fails_states(monkeypatch) -> None:
     bound = np.random.default_rng(0).random(block.states.size) * 0.5
     certified_greedy(block, block.to_target.copy(), bound, Sense.MAX, 1e-9, 1e-6)
     assert seen and (seen[0] == kernels.FAILED).any()
+
+
+def test_an_unsorted_block_is_left_as_it_came(monkeypatch) -> None:
+    """A block whose rows list their columns out of order: the compiled check reads a
+    sorted copy (as the long double route sums them) and leaves the block's own rows
+    alone; both routes settle the same."""
+    block, _ = _block(1)
+    rows = block.inner
+    order = np.concatenate([np.arange(rows.indptr[c], rows.indptr[c + 1])[::-1]
+                            for c in range(rows.shape[0])])
+    unsorted = sp.csr_array((rows.data[order], rows.indices[order], rows.indptr),
+                            shape=rows.shape)
+    block = Block(block.states, block.choices, unsorted, block.outer, block.starts,
+                  block.to_target)
+    before = unsorted.indices.copy()
+    bound = np.random.default_rng(1).random(block.states.size) * 0.5
+    got = certified_greedy(block, block.to_target.copy(), bound, Sense.MAX, 1e-9, 1e-6)
+    np.testing.assert_array_equal(unsorted.indices, before)
+    monkeypatch.setattr(greedy_block, "_paid", lambda m: False)
+    want = certified_greedy(block, block.to_target.copy(), bound, Sense.MAX, 1e-9, 1e-6)
+    assert (got is None) == (want is None)
+    if got is not None:
+        np.testing.assert_array_equal(got.chosen, want.chosen)
+        np.testing.assert_array_equal(got.values, want.values)
+        np.testing.assert_array_equal(got.left, want.left)
 
 
 def test_a_policy_not_dual_feasible_is_refused() -> None:

@@ -116,9 +116,15 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     starts = block.starts
     n, m = starts.size, int(block.choices.size)
     index = np.int32 if max(n, m, block.inner.nnz) < 2**31 - 1 else np.int64
-    chosen = segmented_argmax(reward + block.inner @ (bound[block.states] if of_quotient
-                                                      else bound), block.groups,
-                              sense=sense).astype(index)
+    local = bound[block.states] if of_quotient else bound
+    inner = block.inner
+    chosen = (segmented_argmax(reward + inner @ local, block.groups, sense=sense)
+              if not _paid(m) else
+              _compiled().greedy_choices(inner.indptr, inner.indices, inner.data,
+                                         block.groups, reward,
+                                         np.asarray(local, dtype=np.float64),
+                                         sense is Sense.MAX)).astype(index)
+    del local
     walk = ChainLevels(sp.csr_array(block.inner[chosen]))
     both = walk.solve(np.column_stack([reward[chosen], np.ones(n)]))
     if not (np.all(np.isfinite(both)) and np.all(both[:, 1] >= 1.0)):
@@ -141,13 +147,14 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     # their tie scale were 8 + 4 + 8 bytes a choice alive at the LP stage's peak)
     failed = np.zeros(n, dtype=bool)
     batches: range | np.ndarray = range(0, m, BATCH)
-    kernels = _kernels(block, m)
-    if kernels is not None:
+    rows = _canonical(block, m)
+    if rows is not None:
         # one compiled pass decides every choice float64 can (the same decisions);
         # the batches holding a choice it cannot are judged as below
-        flag = kernels.dual_check(block.inner.indptr, block.inner.indices,
-                                  block.inner.data, block.groups, reward, raw, tie,
-                                  chosen, sense is Sense.MAX)
+        kernels = _compiled()
+        flag = kernels.dual_check(rows.indptr, rows.indices, rows.data, block.groups,
+                                  reward, raw, tie, chosen, sense is Sense.MAX)
+        del rows
         failed = flag == kernels.FAILED
         unsure = np.flatnonzero(flag == kernels.UNSURE)
         del flag
@@ -186,26 +193,37 @@ KERNEL_MIN_CHOICES = 1 << 14
 (:mod:`mitld_lp.solvers.greedy_kernels`), once the compiled kernels' load is paid."""
 
 
-def _kernels(block: Block, m: int) -> Any:
-    """:mod:`mitld_lp.solvers.greedy_kernels` where its pass pays (a block of
-    :data:`KERNEL_MIN_CHOICES` choices and more, the compiled kernels' load paid, its
-    rows canonical, as the long double route makes them), else ``None``."""
-    if m < KERNEL_MIN_CHOICES or not kernel_loader.compiled_paid():
-        return None
-    inner = block.inner
-    if not inner.has_canonical_format:
-        # its rows' columns sorted in place, as the long double route's
-        # ``sum_duplicates`` sorts them batch by batch; a row with a repeated column is
-        # left to that route
-        inner.sort_indices()
-        if not sp.csr_array((inner.data, inner.indices, inner.indptr),
-                            shape=inner.shape).has_canonical_format:
-            return None
+def _paid(m: int) -> bool:
+    """Whether a block of ``m`` choices takes the compiled kernels
+    (:data:`KERNEL_MIN_CHOICES` and more, their load paid, numba installed)."""
+    return (m >= KERNEL_MIN_CHOICES and kernel_loader.compiled_paid()
+            and _compiled() is not None)
+
+
+def _compiled() -> Any:
+    """:mod:`mitld_lp.solvers.greedy_kernels`, ``None`` without numba."""
     try:
         from mitld_lp.solvers import greedy_kernels
     except ImportError:  # numba not installed
         return None
     return greedy_kernels
+
+
+def _canonical(block: Block, m: int) -> sp.csr_array | None:
+    """The block's rows as the long double route sums them (each row's columns sorted,
+    as its ``sum_duplicates`` sorts a batch's), where the compiled dual check pays
+    (:func:`_paid`): the block's own rows where they are canonical, else a sorted copy
+    (the block is left as it came); ``None`` where a row repeats a column (that route
+    merges them) or the check does not pay."""
+    if not _paid(m):
+        return None
+    inner = block.inner
+    if inner.has_canonical_format:
+        return inner
+    inner = inner.copy()
+    inner.sort_indices()
+    rows = sp.csr_array((inner.data, inner.indices, inner.indptr), shape=inner.shape)
+    return rows if rows.has_canonical_format else None
 
 
 def _batches_of(starts: np.ndarray, m: int, states: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ from mitld_lp.util import kernel_loader
 
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["FAILED", "UNSURE", "dual_check"]
+__all__ = ["FAILED", "UNSURE", "dual_check", "greedy_choices"]
 
 FAILED = 1
 """A state whose greedy choice some choice beats, or whose residual is above the scale."""
@@ -88,3 +88,35 @@ def dual_check(indptr, indices, data, groups, reward, raw, tie, chosen,
                     flag[s] = FAILED
                     break
     return flag
+
+
+@numba.njit(cache=True, nogil=True)
+def greedy_choices(indptr, indices, data, groups, reward, bound,
+                   maximise):  # pragma: no cover - compiled
+    """Per state, its first choice of best score ``reward + rows @ bound`` (each row's
+    products summed from 0 in their stored order, then added to its reward: the sums
+    of SciPy's product), as :func:`~mitld_lp.solvers.graph.segmented_argmax` picks it
+    (the lowest index among the scores equal to the best; a state whose best is NaN
+    or infinite gets the largest int64, as there)."""
+    n = groups.shape[0] - 1
+    out = np.empty(n, dtype=np.int64)
+    for s in range(n):
+        lo = groups[s]
+        hi = groups[s + 1]
+        best = 0.0
+        pick = -1
+        nan = False
+        for c in range(lo, hi):
+            acc = 0.0
+            for e in range(indptr[c], indptr[c + 1]):
+                acc += data[e] * bound[indices[e]]
+            score = reward[c] + acc
+            if score != score:
+                nan = True
+                break
+            if pick < 0 or (score > best if maximise else score < best):
+                best = score
+                pick = c
+        # no score equal to an infinite or NaN best, there
+        out[s] = np.iinfo(np.int64).max if nan or pick < 0 or abs(best) == np.inf else pick
+    return out
