@@ -31,6 +31,20 @@ def test_fold_is_reduceat(width: int, sense: Sense) -> None:
     assert got.tobytes() == want.tobytes()  # the same bits, NaN and zero signs too
 
 
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("width", [1, 2, 3, 5])
+def test_argbest_is_segmented_argmax(width: int, sense: Sense) -> None:
+    from mitld_lp.solvers.graph import segmented_argmax
+
+    rng = np.random.default_rng(10 + width)
+    n = 400
+    scores = rng.choice([0.0, -0.0, 1.0, 0.5, 0.25, np.nan], size=n * width)
+    groups = np.arange(0, n * width + 1, width)
+    want = segmented_argmax(scores, groups, sense=sense)
+    got = policy_jump._argbest(scores, groups, width, sense)
+    np.testing.assert_array_equal(got, want)
+
+
 def _uniform_block(seed: int, n: int = 6, width: int = 2) -> Block:
     """``n`` states of ``width`` choices each, every choice moving inside the block
     with probability below 1 and leaving with a reward of its own."""

@@ -122,7 +122,7 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                     ahead = np.where(allowed, ahead, worst)
                 if sweep < sweeps:  # the last sweep's scores are what is compared
                     x = _best(ahead, starts, width, sense)
-            best = segmented_argmax(ahead, block.groups, sense=sense)
+            best = _argbest(ahead, block.groups, width, sense)
             with np.errstate(invalid="ignore"):  # -inf against -inf: not a lead
                 lead = sense.gain(ahead[best], ahead[chosen])
                 size = np.maximum(np.abs(ahead[best]), np.abs(ahead[chosen]))
@@ -158,6 +158,25 @@ def _best(scores: np.ndarray, starts: np.ndarray, width: int, sense: Sense
     for j in range(1, width):
         op(best, rows[:, j], out=best)
     return best
+
+
+def _argbest(scores: np.ndarray, groups: np.ndarray, width: int, sense: Sense
+             ) -> np.ndarray:
+    """``segmented_argmax(scores, groups, sense=sense)``: each state's first choice of
+    best score; where every state has ``width`` choices, by :func:`_best` and the
+    least tied index folded over the columns (the same comparisons and the same
+    least index as its ``reduceat`` segments)."""
+    if width == 0:
+        return segmented_argmax(scores, groups, sense=sense)
+    rows = scores.reshape(-1, width)
+    best = _best(scores, groups[:-1], width, sense)[:, None]
+    tied = sense.gain(rows, best) >= -0.0 * np.abs(best)
+    idx = np.where(tied, np.arange(scores.shape[0]).reshape(-1, width),
+                   np.iinfo(np.int64).max)
+    first = idx[:, 0].copy()
+    for j in range(1, width):
+        np.minimum(first, idx[:, j], out=first)
+    return first
 
 
 def _rounds_left(before: int | None, switched: int) -> float:
