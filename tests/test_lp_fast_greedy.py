@@ -32,18 +32,24 @@ def _compiled(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(lp_blocks, "GREEDY_MIN_CHOICES", 0)
 
 
+def _slack_ld(indptr, indices, data, reward, raw, c, s, maximise) -> np.float64:
+    """Choice ``c``'s slack at state ``s``, its score summed in long double term by
+    term, rounded to float64."""
+    acc = np.longdouble(0.0)
+    for e in range(indptr[c], indptr[c + 1]):
+        acc += np.longdouble(data[e]) * np.longdouble(raw[indices[e]])
+    score = np.longdouble(reward[c]) + acc
+    gain = score - np.longdouble(raw[s]) if maximise else np.longdouble(raw[s]) - score
+    return np.float64(-gain)
+
+
 def _reference(indptr, indices, data, groups, reward, raw, tie, chosen, maximise):
     """Per state, whether a choice beats the policy (``tie + slack < 0``) or its own
-    residual is above ``tie``, each score summed in long double term by term."""
+    residual is above ``tie``, by :func:`_slack_ld`."""
     failed = np.zeros(groups.size - 1, dtype=bool)
     for s in range(groups.size - 1):
         for c in range(groups[s], groups[s + 1]):
-            acc = np.longdouble(0.0)
-            for e in range(indptr[c], indptr[c + 1]):
-                acc += np.longdouble(data[e]) * np.longdouble(raw[indices[e]])
-            score = np.longdouble(reward[c]) + acc
-            gain = score - np.longdouble(raw[s]) if maximise else np.longdouble(raw[s]) - score
-            slack = np.float64(-gain)
+            slack = _slack_ld(indptr, indices, data, reward, raw, c, s, maximise)
             if tie[s] + slack < 0.0 or (c == chosen[s] and abs(slack) > tie[s]):
                 failed[s] = True
     return failed
@@ -81,12 +87,7 @@ def test_kernel_decides_as_long_double_sums(seed: int, maximise: bool) -> None:
     borderline = []
     for s in np.flatnonzero(per == 1):
         c = groups[s]
-        acc = np.longdouble(0.0)
-        for e in range(indptr[c], indptr[c + 1]):
-            acc += np.longdouble(data[e]) * np.longdouble(raw[indices[e]])
-        score = np.longdouble(reward[c]) + acc
-        gain = score - np.longdouble(raw[s]) if maximise else np.longdouble(raw[s]) - score
-        ld = np.float64(-gain)
+        ld = _slack_ld(indptr, indices, data, reward, raw, c, s, maximise)
         if _slack_f64(indptr, indices, data, reward, raw, c, s, maximise) < ld < 0.0:
             tie[s] = -ld  # long double: neither beaten nor off; float64 alone: beaten
             borderline.append(s)
@@ -99,6 +100,15 @@ def test_kernel_decides_as_long_double_sums(seed: int, maximise: bool) -> None:
     assert not want[borderline].any()
     assert (flag[borderline] == kernels.UNSURE).all()
     assert want.any() and sure.sum() > n // 2  # failures, most decided by float64
+
+
+def _same(got, want) -> None:
+    """Both refused, or the same policy, values and states left to the LP."""
+    assert (got is None) == (want is None)
+    if got is not None:
+        for a, b in ((got.chosen, want.chosen), (got.values, want.values),
+                     (got.left, want.left)):
+            assert a.tobytes() == b.tobytes()
 
 
 def _block(seed: int) -> tuple[Block, np.ndarray]:
@@ -121,11 +131,7 @@ def test_certified_greedy_same_with_and_without_the_pass(seed: int, sense: Sense
     got = certified_greedy(block, reward.copy(), bound, sense, 1e-9, 1e-6)
     monkeypatch.setattr(greedy_block, "_paid", lambda m: False)
     want = certified_greedy(block, reward.copy(), bound, sense, 1e-9, 1e-6)
-    assert (got is None) == (want is None)
-    if got is not None:
-        np.testing.assert_array_equal(got.chosen, want.chosen)
-        np.testing.assert_array_equal(got.values, want.values)
-        np.testing.assert_array_equal(got.left, want.left)
+    _same(got, want)
 
 
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
@@ -185,11 +191,7 @@ def test_an_unsorted_block_is_left_as_it_came(monkeypatch) -> None:
     np.testing.assert_array_equal(unsorted.indices, before)
     monkeypatch.setattr(greedy_block, "_paid", lambda m: False)
     want = certified_greedy(block, block.to_target.copy(), bound, Sense.MAX, 1e-9, 1e-6)
-    assert (got is None) == (want is None)
-    if got is not None:
-        np.testing.assert_array_equal(got.chosen, want.chosen)
-        np.testing.assert_array_equal(got.values, want.values)
-        np.testing.assert_array_equal(got.left, want.left)
+    _same(got, want)
 
 
 def test_a_policy_not_dual_feasible_is_refused() -> None:
