@@ -13,7 +13,9 @@ chain walks (``ChainLevels``: a policy's chain, its components found and levels
 factorised, and its forward solves) are inside whichever part makes them (the greedy
 check's policy chain, the crossover's, a flow's cyclic level), the numba loads inside
 whichever part first calls a kernel; ``other`` is the stage less the top-level
-parts.
+parts.  ``jump``, outside the LP stage, is the interval iteration's policy jumps
+(:func:`mitld_lp.solvers.policy_jump.jump`: their policy iterations' factorisations
+and look-ahead sweeps), which the LP stage's bounds come from.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ PARTS = (("mitld_lp.solvers.lp_blocks", "certified_greedy", "greedy"),
          ("mitld_lp.solvers.chain_levels", "ChainLevels.solve", "chain walks"))
 TOP = ("greedy", "blocks", "singles", "tighten", "solver", "crossover", "flow",
        "mapped back")
-COLUMNS = TOP + ("chain walks", "numba loads", "other")
+COLUMNS = TOP + ("chain walks", "numba loads", "other", "jump")
 
 
 def _model(root: Path, benchmarks: Path, name: str) -> Any:
@@ -104,6 +106,17 @@ def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
                                                 nd.Dispatcher._compile_for_args)
     except ImportError:
         pass
+    import mitld_lp.solvers.iteration as iteration
+
+    jump = iteration.jump
+
+    def jump_timed(*a: Any, **k: Any) -> Any:  # the iteration's, outside the LP stage
+        t = time.process_time()
+        try:
+            return jump(*a, **k)
+        finally:
+            cpu["jump"] = cpu.get("jump", 0.0) + time.process_time() - t
+    iteration.jump = jump_timed
     solve_lp = lpm.solve_lp
 
     def lp_timed(*a: Any, **k: Any) -> Any:

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -58,6 +59,7 @@ from mitld_lp.solvers.chain_levels import ChainLevels
 from mitld_lp.solvers.graph import Sense, backward_reachable, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.topological import Block
+from mitld_lp.util import kernel_loader
 
 __all__ = ["Greedy", "certified_greedy"]
 
@@ -114,9 +116,15 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     starts = block.starts
     n, m = starts.size, int(block.choices.size)
     index = np.int32 if max(n, m, block.inner.nnz) < 2**31 - 1 else np.int64
-    chosen = segmented_argmax(reward + block.inner @ (bound[block.states] if of_quotient
-                                                      else bound), block.groups,
-                              sense=sense).astype(index)
+    local = bound[block.states] if of_quotient else bound
+    inner = block.inner
+    chosen = (segmented_argmax(reward + inner @ local, block.groups, sense=sense)
+              if not _paid(m) else
+              _compiled().greedy_choices(inner.indptr, inner.indices, inner.data,
+                                         block.groups, reward,
+                                         np.asarray(local, dtype=np.float64),
+                                         sense is Sense.MAX)).astype(index)
+    del local
     walk = ChainLevels(sp.csr_array(block.inner[chosen]))
     both = walk.solve(np.column_stack([reward[chosen], np.ones(n)]))
     if not (np.all(np.isfinite(both)) and np.all(both[:, 1] >= 1.0)):
@@ -138,7 +146,21 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     # copy of the whole block is 16 bytes an entry; the slack, each choice's state and
     # their tie scale were 8 + 4 + 8 bytes a choice alive at the LP stage's peak)
     failed = np.zeros(n, dtype=bool)
-    for a in range(0, m, BATCH):
+    batches: range | np.ndarray = range(0, m, BATCH)
+    rows = _canonical(block, m)
+    if rows is not None:
+        # one compiled pass decides every choice float64 can (the same decisions);
+        # the batches holding a choice it cannot are judged as below
+        kernels = _compiled()
+        flag = kernels.dual_check(rows.indptr, rows.indices, rows.data, block.groups,
+                                  reward, raw, tie, chosen, sense is Sense.MAX)
+        del rows
+        failed = flag == kernels.FAILED
+        unsure = np.flatnonzero(flag == kernels.UNSURE)
+        del flag
+        batches = _batches_of(starts, m, unsure) * BATCH
+    for a in batches:
+        a = int(a)
         z = min(a + BATCH, m)
         owner = _owners(starts, a, z, index)
         score = reward[a:z] + _scores(_rows(block.inner, a, z), raw, index)
@@ -164,6 +186,57 @@ def certified_greedy(block: Block, reward: np.ndarray, bound: np.ndarray, sense:
     if left.size == n:
         return None
     return Greedy(chosen, values, left, walk, m)
+
+
+KERNEL_MIN_CHOICES = 1 << 14
+"""The fewest choices of a block whose dual check is the compiled pass
+(:mod:`mitld_lp.solvers.greedy_kernels`), once the compiled kernels' load is paid."""
+
+
+def _paid(m: int) -> bool:
+    """Whether a block of ``m`` choices takes the compiled kernels
+    (:data:`KERNEL_MIN_CHOICES` and more, their load paid, numba installed)."""
+    return (m >= KERNEL_MIN_CHOICES and kernel_loader.compiled_paid()
+            and _compiled() is not None)
+
+
+def _compiled() -> Any:
+    """:mod:`mitld_lp.solvers.greedy_kernels`, ``None`` without numba."""
+    try:
+        from mitld_lp.solvers import greedy_kernels
+    except ImportError:  # numba not installed
+        return None
+    return greedy_kernels
+
+
+def _canonical(block: Block, m: int) -> sp.csr_array | None:
+    """The block's rows as the long double route sums them (each row's columns sorted,
+    as its ``sum_duplicates`` sorts a batch's), where the compiled dual check pays
+    (:func:`_paid`): the block's own rows where they are canonical, else a sorted copy
+    (the block is left as it came); ``None`` where a row repeats a column (that route
+    merges them) or the check does not pay."""
+    if not _paid(m):
+        return None
+    inner = block.inner
+    if inner.has_canonical_format:
+        return inner
+    inner = inner.copy()
+    inner.sort_indices()
+    rows = sp.csr_array((inner.data, inner.indices, inner.indptr), shape=inner.shape)
+    return rows if rows.has_canonical_format else None
+
+
+def _batches_of(starts: np.ndarray, m: int, states: np.ndarray) -> np.ndarray:
+    """The indices of the batches (of :data:`BATCH` choices) holding a choice of one of
+    ``states`` (sorted), each once, increasing."""
+    if states.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    first = starts[states] // BATCH
+    ends = np.append(starts, m)[states + 1]
+    last = (ends - 1) // BATCH
+    spans = [np.arange(f, z + 1) for f, z in zip(first.tolist(), last.tolist(),
+                                                   strict=True)]
+    return np.unique(np.concatenate(spans))
 
 
 def _owners(starts: np.ndarray, a: int, z: int, index: type) -> np.ndarray:
