@@ -372,7 +372,11 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if fast:  # the target's value carried back in one sweep (sweep_order's docs),
             # the block renumbered so that the kernel's sweep from its last state to its
             # first visits them in that order and reads its rows in memory order
-            block = renumbered(block, value_order(block)[::-1])  # = Block.of's, to the bit
+            order = value_order(block)[::-1]
+            held = [block]  # renumbered lets the old block's matrices go as it goes
+            del block
+            block = renumbered(held, order)  # = Block.of's, to the bit
+            del order
             rest = block.states
         exits = rewards[block.choices] + block.outer @ bounds
         prep = Prepared(block.inner, block.groups)
