@@ -66,3 +66,28 @@ def test_renumbered_lets_the_old_block_go(seed: int) -> None:
             x, y = getattr(a, part), getattr(b, part)
             assert x.dtype == y.dtype
             np.testing.assert_array_equal(x.view(np.uint8), y.view(np.uint8))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_for_sweeps_drops_the_outer_moves_and_keeps_the_exits_to_the_bit(seed: int) -> None:
+    from mitld_lp.solvers.sweep_order import for_sweeps, whole
+
+    q, block = _block(seed, 3_000)
+    rng = np.random.default_rng(seed)
+    bounds = rng.random((q.n_states, 2))
+    order = value_order(block)[::-1]
+    want = Block.of(q, block.states[order])
+    # the exits as the iteration made them on the renumbered block before
+    want_exits = np.column_stack([want.to_target, want.to_target]) + want.outer @ bounds
+    exits = np.column_stack([block.to_target, block.to_target]) + block.outer @ bounds
+    ref = weakref.ref(block.outer)
+    held = [block]
+    del block
+    got, got_exits = for_sweeps(held, order, exits)
+    gc.collect()
+    assert got.outer is None and ref() is None
+    np.testing.assert_array_equal(got_exits.view(np.uint64), want_exits.view(np.uint64))
+    back = whole(q, got)
+    for part in ("indptr", "indices", "data"):
+        np.testing.assert_array_equal(getattr(back.outer, part), getattr(want.outer, part))
+    np.testing.assert_array_equal(back.inner.data, want.inner.data)

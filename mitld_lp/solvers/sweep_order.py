@@ -37,6 +37,8 @@ distance says little); 168 + 233 with or without the tie-break below (``docs/res
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -44,7 +46,28 @@ from mitld_lp.solvers.kernels import sweep_order
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["renumbered", "value_order"]
+if TYPE_CHECKING:
+    from mitld_lp.solvers.reduced import Quotient
+
+__all__ = ["for_sweeps", "renumbered", "value_order", "whole"]
+
+
+def for_sweeps(held: list[Block], order: np.ndarray, exits: np.ndarray,
+               ) -> tuple[Block, np.ndarray]:
+    """:func:`renumbered` without the block's moves out of it (``outer`` is ``None``)
+    and its ``exits`` (a row a choice, made from them before) taken in the new order:
+    the sweeps read no more of them (QVBS ``zeroconf`` 1000-4: the moves out of its
+    block of 213,268 states held 9 bytes a transition through the sweeps).  The same
+    exits to the bit: each row's product adds the same entries in the same order.  A
+    jump rebuilds the whole block (:func:`whole`)."""
+    block, picked = _renumber(held, order, outer=False)
+    return block, exits[picked]
+
+
+def whole(q: Quotient, block: Block) -> Block:
+    """``block`` with its moves out of it: itself if it has them, else ``Block.of`` the
+    quotient's ``q`` states in its order (:func:`renumbered`'s block, to the bit)."""
+    return block if block.outer is not None else Block.of(q, block.states)
 
 
 def renumbered(block: Block | list[Block], order: np.ndarray) -> Block:
@@ -56,8 +79,14 @@ def renumbered(block: Block | list[Block], order: np.ndarray) -> Block:
     time.  ``block`` as a list holding it (the caller's only reference): taken out of it,
     and each of its matrices let go once its new copy is made (QVBS ``zeroconf``
     1000-4: the iteration's traced peak was the old block beside the new one)."""
-    if isinstance(block, list):
-        block = block.pop()
+    return _renumber(block if isinstance(block, list) else [block], order, outer=True)[0]
+
+
+def _renumber(held: list[Block], order: np.ndarray, *, outer: bool,
+              ) -> tuple[Block, np.ndarray]:
+    """:func:`renumbered` (``outer``: with the moves out of the block, else ``None``)
+    and the old places of the new choices."""
+    block = held.pop()
     order = np.asarray(order, dtype=np.int64)
     n = block.states.size
     groups = block.groups
@@ -67,13 +96,14 @@ def renumbered(block: Block | list[Block], order: np.ndarray) -> Block:
     place = np.empty(n, dtype=block.inner.indices.dtype)
     place[order] = np.arange(n, dtype=place.dtype)
     states, choices, to_target = block.states, block.choices, block.to_target
-    matrices = [block.outer, block.inner]
+    matrices = [block.outer if outer else None, block.inner]
     del block  # the caller's list held the only other reference: its matrices go below
     inner = _rows(matrices, picked, place)
     del place
-    outer = _rows(matrices, picked, None)
+    moved = _rows(matrices, picked, None) if outer else None
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    return Block(states[order], choices[picked], inner, outer, starts, to_target[picked])
+    return Block(states[order], choices[picked], inner, moved, starts,
+                 to_target[picked]), picked
 
 
 def _rows(held: list[sp.csr_array], rows: np.ndarray, rename: np.ndarray | None,
