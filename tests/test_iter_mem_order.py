@@ -91,3 +91,27 @@ def test_for_sweeps_drops_the_outer_moves_and_keeps_the_exits_to_the_bit(seed: i
     for part in ("indptr", "indices", "data"):
         np.testing.assert_array_equal(getattr(back.outer, part), getattr(want.outer, part))
     np.testing.assert_array_equal(back.inner.data, want.inner.data)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_prepared_self_loops_by_hand(seed: int) -> None:
+    """Each choice's ``1 - self-loop`` and the diagonal entries' places, by a loop over
+    the block's rows written here."""
+    from mitld_lp.solvers.kernels import Prepared
+
+    mdp = random_mdp(800, seed=seed, locality=5, self_loop_fraction=0.4)
+    q = quotient_for(mdp, mdp.target, None, Sense.MAX)
+    block = Block.of(q, np.arange(q.n_states))
+    prep = Prepared(block.inner, block.groups)
+    groups, m = block.groups, block.inner
+    loops = np.zeros(m.shape[0])
+    places = []
+    for s in range(groups.size - 1):
+        for c in range(int(groups[s]), int(groups[s + 1])):
+            for e in range(int(m.indptr[c]), int(m.indptr[c + 1])):
+                if int(m.indices[e]) == s:
+                    loops[c] += float(m.data[e])
+                    places.append(e)
+    assert places  # the block has self-loops
+    np.testing.assert_array_equal(prep._diag, places)
+    np.testing.assert_array_equal(prep.leave, 1.0 - loops)
