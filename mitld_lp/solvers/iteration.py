@@ -68,7 +68,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -90,7 +90,7 @@ from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.sweep_gate import use_compiled
-from mitld_lp.solvers.sweep_order import renumbered, value_order
+from mitld_lp.solvers.sweep_order import for_sweeps, value_order, whole
 from mitld_lp.solvers.topological import (
     Block,
     Factors,
@@ -121,7 +121,6 @@ were then jumped anyway (interval iteration 73 s); jumped after 192-208 sweeps, 
 same bracket in 27 s."""
 
 
-
 @dataclass(slots=True)
 class _Budget:
     """Sweeps and seconds left for one call (mutable: shared by every component)."""
@@ -129,11 +128,10 @@ class _Budget:
     max_iterations: int
     deadline: float
     iterations: int = 0
-    stopped: Status | None = field(default=None)
+    stopped: Status | None = None
 
     def take(self, wanted: int) -> int:
-        """Up to ``wanted`` sweeps granted at once (counted when :meth:`spent`); 0 (and
-        the reason in ``stopped``) once out of budget."""
+        """Up to ``wanted`` sweeps granted at once; 0 (why: ``stopped``) out of budget."""
         if self.iterations >= self.max_iterations:
             self.stopped = Status.MAX_ITERATIONS
             return 0
@@ -357,7 +355,9 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
     """:func:`_topological`'s walk of the levels with the single states' ``singles``."""
     sense = q.sense
     done = 0  # the levels whose single states are solved
-    for index in np.unique(blk.level[blk.size > 1]).tolist():  # the levels with blocks
+    with_blocks = np.zeros(blk.n_levels, dtype=bool)  # not np.unique: it imports numpy.ma
+    with_blocks[blk.level[blk.size > 1]] = True
+    for index in np.flatnonzero(with_blocks).tolist():  # the levels with blocks
         singles.solve(done, index + 1, rewards, bounds)
         done = index + 1
         rest = blk.states_at(index)
@@ -369,12 +369,13 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         block = Block.of(q, rest)
         fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block) if compiled is None
                 else compiled)
-        if fast:  # the target's value carried back in one sweep (sweep_order's docs),
-            # the block renumbered so that the kernel's sweep from its last state to its
-            # first visits them in that order and reads its rows in memory order
-            block = renumbered(block, value_order(block)[::-1])  # = Block.of's, to the bit
-            rest = block.states
         exits = rewards[block.choices] + block.outer @ bounds
+        if fast:  # the target's value carried back in one sweep, the block renumbered
+            # for the kernel's sweep from last to first (sweep_order's docs)
+            held, order = [block], value_order(block)[::-1]
+            del block  # renumbered lets the old block's matrices go as it goes
+            block, exits = for_sweeps(held, order, exits)  # Block.of's, without its outer
+            rest = block.states
         prep = Prepared(block.inner, block.groups)
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY
         first = bounds[block.states]  # a copy: the early jump starts greedy on it
@@ -382,6 +383,7 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
                          fast, limit, early):
             continue
+        block = whole(q, block) if budget.stopped is None else block  # the jumps' outer
         if early is not None and early.stopped and budget.stopped is None:
             if _early_jump(block, rewards, bounds, first, tol, precision, sense,
                            _saved(early, limit)):
@@ -519,8 +521,7 @@ def interval_iterations(
     bounds = np.zeros((n, 2 * k))
     for j, o in enumerate(quotients):
         bounds[:, 2 * j + 1] = np.where(o.zero, 0.0, 1.0)
-    budget = _Budget(max_iterations,
-                     start + time_limit if time_limit is not None else np.inf)
+    budget = _Budget(max_iterations, start + time_limit if time_limit is not None else np.inf)
     bar = progress_bar(progress if n >= _PROGRESS_MIN_STATES else False, total=None,
                        desc="interval iteration", unit="it", leave=False)
     decided = gap == "initial" and q.initial < 0
@@ -557,8 +558,7 @@ def _over(bounds: np.ndarray, q: Quotient, gap: Literal["initial", "max"], tol: 
     """The largest gap over its threshold where the stopping rule looks (the initial
     state, or every state)."""
     if gap == "initial":
-        return excess(bounds[q.initial:q.initial + 1], tol, precision) if q.initial >= 0 \
-            else 0.0
+        return excess(bounds[q.initial:q.initial + 1], tol, precision) if q.initial >= 0 else 0.0
     return excess(bounds, tol, precision)
 
 

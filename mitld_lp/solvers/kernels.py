@@ -230,12 +230,18 @@ class Prepared:
         self.groups = np.asarray(groups, dtype=np.int64)
         self.starts = self.groups[:-1]
         n_choices = inner.shape[0]
-        owner = np.repeat(np.arange(self.groups.size - 1), np.diff(self.groups))
-        row = np.repeat(np.arange(n_choices), np.diff(inner.indptr))
-        diag = inner.indices == owner[row]
-        self_loop = np.bincount(row[diag], weights=inner.data[diag], minlength=n_choices)
-        self.leave = 1.0 - self_loop
+        n = self.groups.size - 1
+        # each entry's owner state in the matrix's index type, the rows of the diagonal
+        # entries alone found after (not an int64 owner and row an entry)
+        owner = np.repeat(np.arange(n, dtype=inner.indices.dtype),
+                          np.diff(np.asarray(inner.indptr)[self.groups]))
+        diag = inner.indices == owner
+        del owner
         self._diag = np.flatnonzero(diag)
+        del diag
+        row = np.searchsorted(inner.indptr, self._diag, side="right") - 1
+        self_loop = np.bincount(row, weights=inner.data[self._diag], minlength=n_choices)
+        self.leave = 1.0 - self_loop
         self._off: sp.csr_array | None = None
         self.order = sweep_order(self.groups.size - 1)
         self.guess: np.ndarray | None = None  # the compiled sweeps' guesses, made there
