@@ -57,6 +57,7 @@ from mitld_lp.sensing.rows import (
     lex_order,
     load_kernels,
     mix64,
+    narrow,
     ordered_groups,
     scatter,
     spread,
@@ -75,6 +76,8 @@ log = logging.getLogger("mitld_lp.sensing.belief")
 CHUNK = 8_192
 """The most states expanded together: the rows of one expansion (a few dozen per state,
 some fifteen numbers each) stay some tens of megabytes."""
+CHUNK_HYPOTHESES = 16_384
+"""The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`)."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
@@ -276,9 +279,10 @@ class FrontierBuilder(StepRules):
 
     # ---------------------------------------------------------------- one level
 
-    def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
-        """Expand the states ``a .. b - 1``: their choices (state, action) in order, and
-        the transitions (choice, column, probability), new states stored."""
+    def expand(self, a: int, b: int) -> list[np.ndarray]:
+        """Expand the states ``a .. b - 1``, new states stored: each state's number of
+        choices, the choices' actions (in order) and numbers of transitions, and the
+        transitions' columns and probabilities (choice by choice)."""
         cols = self.cols.rows(a, b)
         world, clock, reported, pending, hstart, hcount = cols
         # the choices: each state's actions, an absorbing state its loop
@@ -331,8 +335,13 @@ class FrontierBuilder(StepRules):
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
                           ended)
         lists = np.cumsum([0] + [len(x[0]) for x in ends])
-        return (a + c_state, c_act, *self.transitions(loop, flat, lists, c[first], g_first,
-                                                      target, total))
+        choice, col, val = self.transitions(loop, flat, lists, c[first], g_first, target,
+                                            total)
+        # kept until the product is assembled, each in the form the MDP keeps it: the
+        # states' numbers of choices, the choices' actions and numbers of transitions,
+        # the columns (int32, the matrix's) and probabilities in choice order
+        return [np.bincount(c_state, minlength=b - a), c_act.astype(np.int32),
+                np.bincount(choice, minlength=len(c_state)), col.astype(np.int32), val]
 
     def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
                         c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
@@ -505,9 +514,17 @@ class FrontierBuilder(StepRules):
             pick = first[alone]
             code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
         gc, gw, go, gn = grouped
-        self.move_rows.append((base, ((base + gc, gw, go, gn, target),
-                                      (base + c[pick], w2[pick], occ[pick], new[pick],
-                                       code))))
+        self.move_rows.append((base, (
+            tuple(narrow(x) for x in (base + gc, gw, go, gn, target)),
+            tuple(narrow(x) for x in (base + c[pick], w2[pick], occ[pick], new[pick],
+                                      code)))))
+
+    def chunk_end(self, head: int, end: int) -> int:
+        """The end of the chunk from ``head``: at most ``end``, and past the first state
+        only while its states hold :data:`CHUNK_HYPOTHESES` hypotheses in all (a chunk's
+        rows, hence its working arrays, grow with its hypotheses, not its states)."""
+        held = np.cumsum(self.cols.data[5, head:end])
+        return head + max(int(np.searchsorted(held, CHUNK_HYPOTHESES, side="right")), 1)
 
     # ---------------------------------------------------------------- the MDP
 
@@ -530,7 +547,7 @@ class FrontierBuilder(StepRules):
                             one, q0code, np.ones(1))
             self.keys.add((w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)),
                            1, int(mix64(q0code).view(_I)[0])), initial)
-        parts: list[tuple[np.ndarray, ...]] = []
+        parts: list[list[np.ndarray]] = []
         head = 0
         self.growth.start(self.cols.n)
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
@@ -544,6 +561,7 @@ class FrontierBuilder(StepRules):
                 end = min(level, head + CHUNK)
                 if end - head >= COMPILED_MIN_STATES:
                     load_kernels()  # numba's load pays from here (rows.py)
+                end = self.chunk_end(head, end)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end
@@ -556,25 +574,16 @@ class FrontierBuilder(StepRules):
             if collecting:
                 gc.enable()
         shown.close()
-        offset = 0
-        rows, cols, vals, owners, acts = [], [], [], [], []
-        for owner, act, c, col, val in parts:
-            rows.append(c + offset)
-            cols.append(col)
-            vals.append(val)
-            owners.append(owner)
-            acts.append(act)
-            offset += len(owner)
-        n, n_choices = self.cols.n, offset
-        owner = np.concatenate(owners)
-        row = np.concatenate(rows)  # choice by choice, each in its own order
+        self.release()  # the levels' pages and the keys have no reader past the last level
+        n, n_choices = self.cols.n, self.n_choices
         indptr = np.zeros(n_choices + 1, np.int64)
-        np.cumsum(np.bincount(row, minlength=n_choices), out=indptr[1:])
-        matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
-                               indptr), shape=(n_choices, n))
+        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:])
         per_state = np.zeros(n + 1, np.int64)
-        per_state[1:] = np.bincount(owner, minlength=n)  # np.add.at's counts, unbuffered
-        act = np.concatenate(acts)
+        np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
+        act = np.concatenate([p[1] for p in parts])
+        matrix = sp.csr_array((_joined(parts, 4, np.float64), _joined(parts, 3, np.int32),
+                               indptr), shape=(n_choices, n))
+        del parts
         # the actions numbered as the choices first show them
         used = np.flatnonzero(act >= 0)
         seen, at = np.unique(act[used], return_index=True)
@@ -591,10 +600,22 @@ class FrontierBuilder(StepRules):
             if at >= 0 and isinstance(record, Absorbing):
                 kind[at] = {Absorbing.TARGET: 1, Absorbing.SINK: 2,
                             Absorbing.TRUNCATED: 3}.get(record, 0)
-        mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
+        mdp = MDP(matrix=matrix, row_groups=per_state,
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=self.states())
         moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
+
+
+def _joined(parts: list[list[np.ndarray]], k: int, dtype: type) -> np.ndarray:
+    """The ``k``-th arrays of ``parts`` joined, each dropped from its part once copied
+    (the product's transitions are not held twice over)."""
+    out = np.empty(sum(len(p[k]) for p in parts), dtype)
+    at = 0
+    for p in parts:
+        out[at:at + len(p[k])] = p[k]
+        at += len(p[k])
+        p[k] = None
+    return out
