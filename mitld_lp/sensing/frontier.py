@@ -76,7 +76,7 @@ log = logging.getLogger("mitld_lp.sensing.belief")
 CHUNK = 8_192
 """The most states expanded together: the rows of one expansion (a few dozen per state,
 some fifteen numbers each) stay some tens of megabytes."""
-CHUNK_HYPOTHESES = 16_384
+CHUNK_HYPOTHESES = 8_192
 """The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`)."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
@@ -269,13 +269,22 @@ class FrontierBuilder(StepRules):
                           {at: r for r, at in zip(self.records, self.record_state,
                                                   strict=True) if at >= 0})
 
-    def release(self) -> None:
-        """Drop the rows' pages (compiled.py's) and the states' keys once built: the
-        builder's tables hold its bound methods (cycles), so it lives until the
-        collector's next full pass, and those (some 90 MB on issue 45's sensed case)
-        would hold the solve above the build's peak."""
+    def release_levels(self) -> None:
+        """Drop the rows' pages (compiled.py's) and the states' keys once the last level
+        is expanded, before the product is assembled: nothing reads them after."""
         self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))
         self.keys = Keys(6)
+
+    def release(self) -> None:
+        """Drop every array of the build once built (:meth:`release_levels`'s, and the
+        states' columns and hypotheses, which :meth:`states` copied): the builder's
+        tables hold its bound methods (cycles), so it lives until the collector's next
+        full pass, and those (some 100 MB on issue 45's sensed case) would hold the
+        solve above the build's peak."""
+        self.release_levels()
+        self.cols = Columns(6)
+        self.hyp_code, self.hyp_weight = np.zeros(0, _I), np.zeros(0, np.float64)
+        self.n_hyps = 0
 
     # ---------------------------------------------------------------- one level
 
@@ -574,14 +583,15 @@ class FrontierBuilder(StepRules):
             if collecting:
                 gc.enable()
         shown.close()
-        self.release()  # the levels' pages and the keys have no reader past the last level
+        self.release_levels()
         n, n_choices = self.cols.n, self.n_choices
         indptr = np.zeros(n_choices + 1, np.int64)
         np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:])
         per_state = np.zeros(n + 1, np.int64)
         np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
         act = np.concatenate([p[1] for p in parts])
-        matrix = sp.csr_array((_joined(parts, 4, np.float64), _joined(parts, 3, np.int32),
+        # the columns int64 as scipy keeps them beside an int64 indptr (no second copy)
+        matrix = sp.csr_array((_joined(parts, 4, np.float64), _joined(parts, 3, np.int64),
                                indptr), shape=(n_choices, n))
         del parts
         # the actions numbered as the choices first show them
