@@ -48,12 +48,11 @@ from mitld_lp.problem import Posed
 from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.acceptance import Acceptance
-from mitld_lp.routes.plain import TRIM_FROM_TRANSITIONS, ModelSolution, solve_models
+from mitld_lp.routes.plain import ModelSolution, solve_models
 from mitld_lp.routes.stages import Built
 from mitld_lp.sensing.belief import InfoState
 from mitld_lp.sensing.observe import controller_of
 from mitld_lp.solvers.accepting import accepting_end_components
-from mitld_lp.util.heap import release_free_memory
 
 __all__ = ["SensedPart", "Mixed", "sensed_acceptance", "solve_sensed"]
 
@@ -170,10 +169,6 @@ def solve_sensed(posed: Posed, built: Built) -> Result:
     belief, dta = built.belief, built.dta
     t2 = time.perf_counter()
     mdp = belief.mdp
-    # the build's freed level arrays go back to the system, as after the plain route's
-    # product (mitld_lp.util.heap)
-    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
-        release_free_memory()
     # an ordinary MDP with a reachability target: solved and certified as the plain
     # route's product is (both truncation models, bounds checked in exact arithmetic)
     from mitld_lp.solvers.certify import model_eta
