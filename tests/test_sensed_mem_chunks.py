@@ -88,7 +88,7 @@ def test_joined_drops_each_part_once_copied() -> None:
     collecting = gc.isenabled()
     gc.disable()
     try:
-        out = frontier._joined(parts, 1, np.int64)
+        out = rows.join_parts(parts, 1, np.int64)
         assert out.dtype == np.int64
         assert out.tolist() == [0, 2, 4] + [0, 2, 4, 6, 8]
         assert all(ref() is None for ref in held)

@@ -47,17 +47,17 @@ from mitld_lp.sensing.info import (
 )
 from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
-from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.moves import Moves, level_moves
 from mitld_lp.sensing.rows import (
     COMPILED_MIN_ESTIMATE,
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
     groups,
+    join_parts,
     lex_order,
     load_kernels,
     mix64,
-    narrow,
     ordered_groups,
     scatter,
     spread,
@@ -73,11 +73,14 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-CHUNK = 8_192
-"""The most states expanded together: the rows of one expansion (a few dozen per state,
-some fifteen numbers each) stay some tens of megabytes."""
+CHUNK = 8_192  # the most states expanded together (and CHUNK_HYPOTHESES)
 CHUNK_HYPOTHESES = 8_192
-"""The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`)."""
+"""The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`; one
+state alone may hold more).  A chunk's rows, some twenty numbers each, are its
+hypotheses' branches and successors: on issue 45's sensed case 8,192 states of a late
+level held some 50,000 hypotheses and made 635,000 rows, whose pages and arrays (some
+200 MB) set the build's peak at 323 bytes a transition; bounded so, a chunk makes at
+most some 210,000 rows and the peak is 130, for the same build time."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
@@ -501,32 +504,9 @@ class FrontierBuilder(StepRules):
 
     def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
                      ended: tuple[np.ndarray, ...]) -> None:
-        """The controller's moves of the level's choices (``base``: its first choice's
-        row): each observation's successor state, or, when nothing undecided is left
-        with it, the verdict: the one record its hypotheses ended in, or
-        :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        trunc = self.record(Absorbing.TRUNCATED)
-        found = compiled.decided_alone(self, ended, grouped)
-        if found is not None:  # by the kernels: one pass
-            pick, one = found
-            c, w2, occ, new, _ = ended
-            code = -1 - np.where(one >= 0, one, trunc)
-        else:
-            _, once = ordered_groups(*ended)  # each (observation, record) once
-            c, w2, occ, new, end = (x[once] for x in ended)
-            obs, first = ordered_groups(c, w2, occ, new)
-            kinds = np.bincount(obs)
-            n = len(grouped[0])
-            both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
-                                zip(grouped, (c, w2, occ, new), strict=True)))
-            alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
-            pick = first[alone]
-            code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
-        gc, gw, go, gn = grouped
-        self.move_rows.append((base, (
-            tuple(narrow(x) for x in (base + gc, gw, go, gn, target)),
-            tuple(narrow(x) for x in (base + c[pick], w2[pick], occ[pick], new[pick],
-                                      code)))))
+        """The controller's moves of the level's choices (:func:`level_moves`)."""
+        self.move_rows.append(level_moves(self, base, grouped, target, ended,
+                                          self.record(Absorbing.TRUNCATED)))
 
     def chunk_end(self, head: int, end: int) -> int:
         """The end of the chunk from ``head``: at most ``end``, and past the first state
@@ -591,7 +571,7 @@ class FrontierBuilder(StepRules):
         np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
         act = np.concatenate([p[1] for p in parts])
         # the columns int64 as scipy keeps them beside an int64 indptr (no second copy)
-        matrix = sp.csr_array((_joined(parts, 4, np.float64), _joined(parts, 3, np.int64),
+        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, np.int64),
                                indptr), shape=(n_choices, n))
         del parts
         # the actions numbered as the choices first show them
@@ -618,14 +598,3 @@ class FrontierBuilder(StepRules):
                       self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
 
-
-def _joined(parts: list[list[np.ndarray]], k: int, dtype: type) -> np.ndarray:
-    """The ``k``-th arrays of ``parts`` joined, each dropped from its part once copied
-    (the product's transitions are not held twice over)."""
-    out = np.empty(sum(len(p[k]) for p in parts), dtype)
-    at = 0
-    for p in parts:
-        out[at:at + len(p[k])] = p[k]
-        at += len(p[k])
-        p[k] = None
-    return out

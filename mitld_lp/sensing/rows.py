@@ -18,7 +18,7 @@ import numpy as np
 __all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
            "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
            "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
-           "scatter", "small_pages", "narrow"]
+           "scatter", "small_pages", "narrow", "join_parts"]
 
 INT = np.int64
 _I = INT
@@ -109,6 +109,18 @@ def narrow(x: np.ndarray) -> np.ndarray:
         if info.min <= lo and hi <= info.max:
             return x.astype(dtype)
     return x
+
+
+def join_parts(parts: list[list[Any]], k: int, dtype: Any) -> np.ndarray:
+    """The ``k``-th arrays of ``parts`` joined in order as ``dtype``, each dropped from
+    its part once copied (a build's transitions are not held twice over)."""
+    out = np.empty(sum(len(p[k]) for p in parts), dtype)
+    at = 0
+    for p in parts:
+        out[at:at + len(p[k])] = p[k]
+        at += len(p[k])
+        p[k] = None
+    return out
 
 
 def scatter(op: str, out: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
