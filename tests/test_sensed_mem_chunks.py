@@ -101,8 +101,9 @@ def test_joined_drops_each_part_once_copied() -> None:
 @pytest.mark.parametrize("kernels", [False, True])
 def test_level_arrays_and_state_columns_freed(monkeypatch, kernels: bool) -> None:
     """With the cyclic collector off, no array a level of the build returned (its
-    states' choices, the choices' actions and transitions, columns and probabilities)
-    nor the builder's state columns and hypotheses outlive ``belief_product``: only
+    states' choices, the choices' actions and transitions, columns and probabilities),
+    nor the rows' pages and keys the levels used, nor the builder's state columns and
+    hypotheses outlive ``belief_product``: only
     reference counting frees them, so none holds the solve above the build."""
     if kernels:
         pytest.importorskip("numba")
@@ -111,7 +112,9 @@ def test_level_arrays_and_state_columns_freed(monkeypatch, kernels: bool) -> Non
 
     def expanded(self, a, b):
         out = expand(self, a, b)
-        held.extend(weakref.ref(x) for x in out)
+        # the level's own arrays, the kernel's row pages and the keys' table as they are
+        held.extend(weakref.ref(x) for x in (*out, *self.row_work, self.keys.slots,
+                                             self.keys.keys))
         return out
 
     def built(self, *args, **kwargs):
