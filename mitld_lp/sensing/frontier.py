@@ -47,13 +47,14 @@ from mitld_lp.sensing.info import (
 )
 from mitld_lp.sensing.keys import Columns, KeyedTable, Keys
 from mitld_lp.sensing.merge import Counts, Shifts
-from mitld_lp.sensing.moves import Moves
+from mitld_lp.sensing.moves import Moves, level_moves
 from mitld_lp.sensing.rows import (
     COMPILED_MIN_ESTIMATE,
     COMPILED_MIN_STATES,
     Lookup,
     compiled_on,
     groups,
+    join_parts,
     lex_order,
     load_kernels,
     mix64,
@@ -72,9 +73,14 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-CHUNK = 8_192
-"""The most states expanded together: the rows of one expansion (a few dozen per state,
-some fifteen numbers each) stay some tens of megabytes."""
+CHUNK = 8_192  # the most states expanded together (and CHUNK_HYPOTHESES)
+CHUNK_HYPOTHESES = 8_192
+"""The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`; one
+state alone may hold more).  A chunk's rows, some twenty numbers each, are its
+hypotheses' branches and successors: on issue 45's sensed case 8,192 states of a late
+level held some 50,000 hypotheses and made 635,000 rows, whose pages and arrays (some
+200 MB) set the build's peak at 323 bytes a transition; bounded so, a chunk makes at
+most some 210,000 rows and the peak is 130, for the same build time."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
@@ -266,19 +272,29 @@ class FrontierBuilder(StepRules):
                           {at: r for r, at in zip(self.records, self.record_state,
                                                   strict=True) if at >= 0})
 
-    def release(self) -> None:
-        """Drop the rows' pages (compiled.py's) and the states' keys once built: the
-        builder's tables hold its bound methods (cycles), so it lives until the
-        collector's next full pass, and those (some 90 MB on issue 45's sensed case)
-        would hold the solve above the build's peak."""
+    def release_levels(self) -> None:
+        """Drop the rows' pages (compiled.py's) and the states' keys once the last level
+        is expanded, before the product is assembled: nothing reads them after."""
         self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))
         self.keys = Keys(6)
 
+    def release(self) -> None:
+        """Drop every array of the build once built (:meth:`release_levels`'s, and the
+        states' columns and hypotheses, which :meth:`states` copied): the builder's
+        tables hold its bound methods (cycles), so it lives until the collector's next
+        full pass, and those (some 100 MB on issue 45's sensed case) would hold the
+        solve above the build's peak."""
+        self.release_levels()
+        self.cols = Columns(6)
+        self.hyp_code, self.hyp_weight = np.zeros(0, _I), np.zeros(0, np.float64)
+        self.n_hyps = 0
+
     # ---------------------------------------------------------------- one level
 
-    def expand(self, a: int, b: int) -> tuple[np.ndarray, ...]:
-        """Expand the states ``a .. b - 1``: their choices (state, action) in order, and
-        the transitions (choice, column, probability), new states stored."""
+    def expand(self, a: int, b: int) -> list[np.ndarray]:
+        """Expand the states ``a .. b - 1``, new states stored: each state's number of
+        choices, the choices' actions (in order) and numbers of transitions, and the
+        transitions' columns and probabilities (choice by choice)."""
         cols = self.cols.rows(a, b)
         world, clock, reported, pending, hstart, hcount = cols
         # the choices: each state's actions, an absorbing state its loop
@@ -331,8 +347,13 @@ class FrontierBuilder(StepRules):
         self.record_moves(row0, (c[first], w2[first], occ[first], new[first]), target,
                           ended)
         lists = np.cumsum([0] + [len(x[0]) for x in ends])
-        return (a + c_state, c_act, *self.transitions(loop, flat, lists, c[first], g_first,
-                                                      target, total))
+        choice, col, val = self.transitions(loop, flat, lists, c[first], g_first, target,
+                                            total)
+        # kept until the product is assembled, each in the form the MDP keeps it: the
+        # states' numbers of choices, the choices' actions and numbers of transitions,
+        # the columns (int32, the matrix's) and probabilities in choice order
+        return [np.bincount(c_state, minlength=b - a), c_act.astype(np.int32),
+                np.bincount(choice, minlength=len(c_state)), col.astype(np.int32), val]
 
     def hypothesis_rows(self, cols: list[np.ndarray], c_state: np.ndarray,
                         c_act: np.ndarray, c: np.ndarray, occ: np.ndarray, pu: np.ndarray,
@@ -483,31 +504,16 @@ class FrontierBuilder(StepRules):
 
     def record_moves(self, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
                      ended: tuple[np.ndarray, ...]) -> None:
-        """The controller's moves of the level's choices (``base``: its first choice's
-        row): each observation's successor state, or, when nothing undecided is left
-        with it, the verdict: the one record its hypotheses ended in, or
-        :attr:`Absorbing.TRUNCATED` when they disagree (the robot cannot tell which)."""
-        trunc = self.record(Absorbing.TRUNCATED)
-        found = compiled.decided_alone(self, ended, grouped)
-        if found is not None:  # by the kernels: one pass
-            pick, one = found
-            c, w2, occ, new, _ = ended
-            code = -1 - np.where(one >= 0, one, trunc)
-        else:
-            _, once = ordered_groups(*ended)  # each (observation, record) once
-            c, w2, occ, new, end = (x[once] for x in ended)
-            obs, first = ordered_groups(c, w2, occ, new)
-            kinds = np.bincount(obs)
-            n = len(grouped[0])
-            both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
-                                zip(grouped, (c, w2, occ, new), strict=True)))
-            alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
-            pick = first[alone]
-            code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
-        gc, gw, go, gn = grouped
-        self.move_rows.append((base, ((base + gc, gw, go, gn, target),
-                                      (base + c[pick], w2[pick], occ[pick], new[pick],
-                                       code))))
+        """The controller's moves of the level's choices (:func:`level_moves`)."""
+        self.move_rows.append(level_moves(self, base, grouped, target, ended,
+                                          self.record(Absorbing.TRUNCATED)))
+
+    def chunk_end(self, head: int, end: int) -> int:
+        """The end of the chunk from ``head``: at most ``end``, and past the first state
+        only while its states hold :data:`CHUNK_HYPOTHESES` hypotheses in all (a chunk's
+        rows, hence its working arrays, grow with its hypotheses, not its states)."""
+        held = np.cumsum(self.cols.data[5, head:end])
+        return head + max(int(np.searchsorted(held, CHUNK_HYPOTHESES, side="right")), 1)
 
     # ---------------------------------------------------------------- the MDP
 
@@ -530,7 +536,7 @@ class FrontierBuilder(StepRules):
                             one, q0code, np.ones(1))
             self.keys.add((w0, clock0, 0, int(self.mask(self.unsensed, self.unsensed_order)),
                            1, int(mix64(q0code).view(_I)[0])), initial)
-        parts: list[tuple[np.ndarray, ...]] = []
+        parts: list[list[np.ndarray]] = []
         head = 0
         self.growth.start(self.cols.n)
         shown = progress_bar(progress, total=None, unit=" states", desc="information states",
@@ -544,6 +550,7 @@ class FrontierBuilder(StepRules):
                 end = min(level, head + CHUNK)
                 if end - head >= COMPILED_MIN_STATES:
                     load_kernels()  # numba's load pays from here (rows.py)
+                end = self.chunk_end(head, end)
                 parts.append(self.expand(head, end))
                 shown.update(end - head)
                 head = end
@@ -556,25 +563,17 @@ class FrontierBuilder(StepRules):
             if collecting:
                 gc.enable()
         shown.close()
-        offset = 0
-        rows, cols, vals, owners, acts = [], [], [], [], []
-        for owner, act, c, col, val in parts:
-            rows.append(c + offset)
-            cols.append(col)
-            vals.append(val)
-            owners.append(owner)
-            acts.append(act)
-            offset += len(owner)
-        n, n_choices = self.cols.n, offset
-        owner = np.concatenate(owners)
-        row = np.concatenate(rows)  # choice by choice, each in its own order
+        self.release_levels()
+        n, n_choices = self.cols.n, self.n_choices
         indptr = np.zeros(n_choices + 1, np.int64)
-        np.cumsum(np.bincount(row, minlength=n_choices), out=indptr[1:])
-        matrix = sp.csr_array((np.concatenate(vals), np.concatenate(cols).astype(np.int32),
-                               indptr), shape=(n_choices, n))
+        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:])
         per_state = np.zeros(n + 1, np.int64)
-        per_state[1:] = np.bincount(owner, minlength=n)  # np.add.at's counts, unbuffered
-        act = np.concatenate(acts)
+        np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
+        act = np.concatenate([p[1] for p in parts])
+        # the columns int64 as scipy keeps them beside an int64 indptr (no second copy)
+        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, np.int64),
+                               indptr), shape=(n_choices, n))
+        del parts
         # the actions numbered as the choices first show them
         used = np.flatnonzero(act >= 0)
         seen, at = np.unique(act[used], return_index=True)
@@ -591,10 +590,11 @@ class FrontierBuilder(StepRules):
             if at >= 0 and isinstance(record, Absorbing):
                 kind[at] = {Absorbing.TARGET: 1, Absorbing.SINK: 2,
                             Absorbing.TRUNCATED: 3}.get(record, 0)
-        mdp = MDP(matrix=matrix, row_groups=np.cumsum(per_state),
+        mdp = MDP(matrix=matrix, row_groups=per_state,
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=self.states())
         moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
+

@@ -9,9 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.sensing import compiled
 from mitld_lp.sensing.info import Obs
+from mitld_lp.sensing.rows import groups, narrow, ordered_groups
 
-__all__ = ["Moves"]
+__all__ = ["Moves", "level_moves"]
 
 
 class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
@@ -106,3 +108,35 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
     def __contains__(self, key: object) -> bool:
         return isinstance(key, tuple) and self.choice(key) is not None  # type: ignore[arg-type]
 
+
+def level_moves(fb: Any, base: int, grouped: tuple[np.ndarray, ...], target: np.ndarray,
+                ended: tuple[np.ndarray, ...], trunc: int
+                ) -> tuple[int, tuple[tuple[np.ndarray, ...], ...]]:
+    """The controller's moves of a level's choices in :class:`Moves`' form (``base``:
+    its first choice's row; ``fb`` the frontier builder, for the kernels): each
+    observation ``grouped`` its successor state ``target``, or, when nothing undecided
+    is left with it (the rows ``ended``), the verdict: the one record its hypotheses
+    ended in, or ``trunc`` (:attr:`Absorbing.TRUNCATED`'s record) when they disagree
+    (the robot cannot tell which).  Each column in the narrowest integer type that
+    holds it (:func:`~mitld_lp.sensing.rows.narrow`): kept until the controller is
+    made."""
+    found = compiled.decided_alone(fb, ended, grouped)
+    if found is not None:  # by the kernels: one pass
+        pick, one = found
+        c, w2, occ, new, _ = ended
+        code = -1 - np.where(one >= 0, one, trunc)
+    else:
+        _, once = ordered_groups(*ended)  # each (observation, record) once
+        c, w2, occ, new, end = (x[once] for x in ended)
+        obs, first = ordered_groups(c, w2, occ, new)
+        kinds = np.bincount(obs)
+        n = len(grouped[0])
+        both, _ = groups(*(np.concatenate([g, e[first]]) for g, e in
+                            zip(grouped, (c, w2, occ, new), strict=True)))
+        alone = ~np.isin(both[n:], both[:n])  # no undecided hypothesis left with it
+        pick = first[alone]
+        code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
+    gc, gw, go, gn = grouped
+    return base, (tuple(narrow(x) for x in (base + gc, gw, go, gn, target)),
+                  tuple(narrow(x) for x in (base + c[pick], w2[pick], occ[pick], new[pick],
+                                            code)))

@@ -18,7 +18,7 @@ import numpy as np
 __all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
            "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
            "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
-           "scatter", "small_pages"]
+           "scatter", "small_pages", "narrow", "join_parts"]
 
 INT = np.int64
 _I = INT
@@ -96,6 +96,31 @@ def small_pages() -> Iterator[None]:
         yield
     finally:
         _set_madvise_hugepage(before)
+
+
+def narrow(x: np.ndarray) -> np.ndarray:
+    """``x`` (integers) in the narrowest of int8, int16, int32 and int64 that holds
+    every value (a copy where narrower): for arrays kept until the build's end."""
+    if len(x) == 0:
+        return x
+    lo, hi = int(x.min()), int(x.max())
+    for dtype in (np.int8, np.int16, np.int32):
+        info = np.iinfo(dtype)
+        if info.min <= lo and hi <= info.max:
+            return x.astype(dtype)
+    return x
+
+
+def join_parts(parts: list[list[Any]], k: int, dtype: Any) -> np.ndarray:
+    """The ``k``-th arrays of ``parts`` joined in order as ``dtype``, each dropped from
+    its part once copied (a build's transitions are not held twice over)."""
+    out = np.empty(sum(len(p[k]) for p in parts), dtype)
+    at = 0
+    for p in parts:
+        out[at:at + len(p[k])] = p[k]
+        at += len(p[k])
+        p[k] = None
+    return out
 
 
 def scatter(op: str, out: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
