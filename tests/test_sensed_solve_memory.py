@@ -1,18 +1,16 @@
-"""What the sensed build leaves to the solve: the arrays only the build needs are
-freed when ``belief_product`` returns (the builder lives on in reference cycles until
-the collector's next full pass), and a process whose kernel cache is warm
+"""What the sensed build leaves to the solve: a process whose kernel cache is warm
 builds with the compiled kernels without importing numba (they are linked by
-:mod:`mitld_lp.util.kernel_loader`), the same product to the bit as the NumPy lines."""
+:mod:`mitld_lp.util.kernel_loader`), the same product to the bit as the NumPy lines.
+(That the build's arrays are freed when ``belief_product`` returns, with the collector
+off, is checked level by level in ``test_sensed_mem_chunks.py``.)"""
 
 from __future__ import annotations
 
-import gc
 import hashlib
 import json
 import os
 import subprocess
 import sys
-import weakref
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +18,7 @@ import pytest
 from test_sensing_build import CASES
 
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.sensing import frontier, rows
+from mitld_lp.sensing import rows
 from mitld_lp.sensing.belief import belief_product
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -37,41 +35,6 @@ def _digest(mdp) -> str:
     for x in (m.data, m.indices, m.indptr, mdp.row_groups, mdp.choice_actions):
         h.update(np.ascontiguousarray(x).tobytes())
     return h.hexdigest()
-
-
-@pytest.mark.parametrize("kernels", [False, True])
-def test_build_arrays_freed_without_the_collector(monkeypatch, kernels: bool) -> None:
-    """With the cyclic collector off, the arrays only the build needs (the rows' pages,
-    the information states' keys) do not outlive it: only reference counting frees
-    them, so no cycle through the builder holds them into the solve."""
-    if kernels:
-        pytest.importorskip("numba")
-    held: list[weakref.ref] = []
-    build = frontier.FrontierBuilder.build
-
-    def recorded(self, *args, **kwargs):
-        out = build(self, *args, **kwargs)
-        arrays = (*self.row_work, self.keys.slots, self.keys.keys)
-        assert all(isinstance(a, np.ndarray) for a in arrays)
-        held.extend(weakref.ref(a) for a in arrays)
-        return out
-
-    model = CASES["two cameras"]()
-    with rows.running_kernels(kernels):  # a kernel compiled in the build (a cold cache)
-        _build(model)  # leaves numba's own cycles behind: compiled here, before the count
-    monkeypatch.setattr(frontier.FrontierBuilder, "build", recorded)
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        with rows.running_kernels(kernels):
-            belief = _build(model)
-        assert belief.mdp.n_states > 1
-        assert len(held) == 4
-        alive = [i for i, ref in enumerate(held) if ref() is not None]
-        assert not alive, f"the build's arrays {alive} outlived it"
-    finally:
-        if collecting:
-            gc.enable()
 
 
 _CHILD = """
