@@ -34,11 +34,13 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.mdp import ABSORB
 from mitld_lp.product.layers import Layers
+from mitld_lp.product.states import CODE, Absorbing
 from mitld_lp.util.arrays import merge, unique
 from mitld_lp.worlds.table import LATE
 
-__all__ = ["Plain", "plain_table"]
+__all__ = ["Plain", "compiled_wanted", "plain_table", "run_compiled"]
 
 _MAX_STEPS = 1 << 16
 """The automaton's steps are tabulated where its memo (automaton states times the
@@ -51,7 +53,7 @@ class Plain:
 
     __slots__ = ("late", "n_q", "shift", "scale", "steps", "step_bits", "only", "distinct",
                  "act_start", "act_count", "row_start", "row_len", "row_succ", "row_prob",
-                 "props", "slot_aid", "step")
+                 "props", "slot_aid", "step", "table_steps", "batches")
 
     def __init__(self, f: Layers) -> None:
         t = f.table
@@ -75,6 +77,8 @@ class Plain:
             dtype=np.int64))
         self.step_bits = len(f.atoms)
         self.steps: np.ndarray | None = None
+        self.table_steps: np.ndarray | None = None  # every step, by (q << bits) | letter
+        self.batches = 0  # levels' batches expanded by NumPy so far
         self.only = -1  # the one ordinary automaton state, if there is one
         dta = f.dta
         live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
@@ -83,7 +87,7 @@ class Plain:
             f.step(np.repeat(live, masks.size), np.tile(masks, live.size))
             table = f._delta.table
             if table is not None:
-                self.steps = table
+                self.steps = self.table_steps = table
                 if live.size == 1:  # its row of steps alone, read by the letter
                     self.only = int(live[0])
                     self.steps = table[self.only << self.step_bits:]
@@ -161,3 +165,109 @@ def _rows_distinct(targets: np.ndarray, branches: np.ndarray) -> bool:
     inner = inner[(inner > 0) & (inner < targets.size)]
     up[inner - 1] = True  # a row's first entry follows another row's last
     return bool(up.all())
+
+
+COMPILED = True
+"""Whether the levels may go to the compiled loop (:mod:`mitld_lp.product.bfs_kernels`;
+False: NumPy's batches only, for tests and measurements)."""
+
+LOAD_SECONDS = 0.04
+"""The compiled loop's load the first time in a process (the kernel loader's pieces and
+the kernel linked; ``experiments/bench_product.py --prism``: 0.03-0.045 s)."""
+
+BATCH_SECONDS, STATE_SECONDS = 75e-6, 0.08e-6
+"""NumPy's levels: about 75 us of calls a batch whatever its size, and 0.08 us a state
+(the same measurements: firewire_dl 3-600's 633 thin batches, csma 4-2's 600k states);
+the compiled loop costs about 0.02 us a state."""
+
+PAYS = 2.0
+"""The compiled loop is loaded (not yet paid) where NumPy's levels still to come are
+estimated at this many loads or more: it then saves at least one load, and an estimate
+off by half still breaks even."""
+
+COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
+"""A world of this many states (a million) is estimated to pay from the first level."""
+
+_SEEN = 32
+"""NumPy's batches seen before the frontier's width is trusted for the estimate (a
+breadth-first search's first levels are narrow however wide the later ones)."""
+
+_CHUNK_STATES = 1 << 18
+"""New states one call of the compiled loop may number before the budget is checked."""
+
+_MIN_ENTRIES, _MAX_ENTRIES = 1 << 16, 1 << 22
+"""The entries one call of the compiled loop has room for: as many as the transitions
+so far, within these bounds (its buffers, 24 bytes an entry, at most about 100 MB)."""
+
+
+def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int) -> bool:
+    """Whether the compiled loop should expand the levels from here, with ``expanded``
+    states expanded so far of a world of ``n_world`` and ``queued`` found and not yet
+    expanded: its load is paid already, or the levels still to come are estimated to
+    cost NumPy :data:`PAYS` loads or more (from the world's states before the work; then,
+    once :data:`_SEEN` batches have let the frontier grow, from the queue's length as the
+    frontier's width, the states not yet expanded taken as the world's, while fewer
+    than half the world's are: a thin frontier's batches each cost
+    :data:`BATCH_SECONDS`)."""
+    if not COMPILED or lean.table_steps is None:
+        return False
+    if n_world >= COMPILED_MIN_STATES:
+        return True
+    if lean.batches >= _SEEN and 2 * expanded < n_world:  # past half the world, the
+        left = n_world - expanded  # states left may never be reached: a guess too wide
+        if left / max(queued, 1) * BATCH_SECONDS + left * STATE_SECONDS >= PAYS * LOAD_SECONDS:
+            return True
+    from mitld_lp.solvers import kernel_loader
+
+    return kernel_loader.compiled_paid()
+
+
+def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
+                 n_keys: int) -> tuple[tuple[np.ndarray, ...], int, int] | None:
+    """Expand the queue from ``head`` by the compiled loop: ``(chunk, states expanded,
+    entries)`` as :meth:`Plain.expand` returns a batch (the states found numbered in
+    ``found``'s keys and dense index), or None where it cannot run (numba missing, the
+    index not a dense array of every key); the budget is counted and checked as the
+    batched build checks it (states found past ``budget.max_states`` stop the loop
+    before they are stored: the batched build then finds them and refuses)."""
+    index = found.index
+    if index.dense is None or n_keys > index.dense_limit:
+        return None
+    try:
+        from mitld_lp.product import bfs_kernels
+    except ImportError:  # numba missing: NumPy's batches
+        return None
+    if index.dense.size < n_keys:
+        bigger = np.full(n_keys, -1, dtype=np.int32)
+        bigger[: index.dense.size] = index.dense
+        index.dense = bigger
+    keys = found.keys
+    size = max(_MIN_ENTRIES, min(budget.transitions, _MAX_ENTRIES))
+    n_found = keys.size
+    if keys.data.size < n_found + size:
+        bigger = np.empty(max(2 * keys.data.size, n_found + size), dtype=keys.data.dtype)
+        bigger[:n_found] = keys.data[:n_found]
+        keys.data = bigger
+    cap = min(n_found + _CHUNK_STATES, budget.max_states)
+    cols = np.empty(size, dtype=np.int32)
+    vals = np.empty(size, dtype=np.float64)
+    row_len = np.empty(size, dtype=np.int32)
+    actions = np.empty(size, dtype=np.int32)
+    choices = np.empty(size, dtype=np.int32)
+    out = np.zeros(5, dtype=np.int64)
+    bfs_kernels.table_levels(
+        keys.data, n_found, head, 1 << 62, cap, index.dense,
+        -CODE[Absorbing.TRUNCATED], lean.act_start, lean.act_count, lean.row_start,
+        lean.row_succ, lean.row_prob, lean.props, lean.table_steps, lean.step_bits,
+        lean.n_q, lean.scale, lean.distinct, lean.slot_aid, LATE if lean.late else 0,
+        ABSORB, cols, vals, row_len, actions, choices, out)
+    _, n_found, ne, nc, ns = (int(x) for x in out)
+    keys.size = index.size = n_found
+    if ns == 0:
+        return None
+    budget.expanded += ns
+    budget.transitions += ne
+    budget.check(n_found)
+    parts = [cols[:ne], vals[:ne], row_len[:nc], actions[:nc], choices[:ns]]
+    chunk = tuple(p.copy() if 2 * p.size < size else p for p in parts)
+    return chunk, ns, ne
