@@ -215,7 +215,7 @@ def test_stopped_and_resumed_at_every_edge(spec: str, monkeypatch: pytest.Monkey
 def test_switched_to_after_numpys_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """Unpaid and small, the loop takes over once NumPy's batches so far say the levels
     left pay for its load."""
-    from mitld_lp.solvers import kernel_loader
+    from mitld_lp.util import kernel_loader
 
     world = Table(4, 400, repeat=False)
     sta = task("(F[0,7] goal) & F mid")

@@ -3,7 +3,7 @@
 Imported only by :mod:`mitld_lp.product.table_levels` (:class:`~mitld_lp.product.
 table_levels.Compiled`), and only where the compiled load is paid or the product is
 large or deep enough to pay it; compiled once, cached on disk, and run without importing
-numba when its machine code is cached (:mod:`mitld_lp.solvers.kernel_loader`).
+numba when its machine code is cached (:mod:`mitld_lp.util.kernel_loader`).
 
 :func:`table_levels` expands the queue's states one after the other, as a breadth-first
 search does, and gives exactly the arrays :meth:`~mitld_lp.product.table_levels.Plain.
@@ -21,7 +21,7 @@ state's self-loop) give for the same states in batches:
 
 from __future__ import annotations
 
-from mitld_lp.solvers import kernel_loader
+from mitld_lp.util import kernel_loader
 
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())

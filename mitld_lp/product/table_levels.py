@@ -217,7 +217,7 @@ def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int) -> bo
         left = n_world - expanded  # states left may never be reached: a guess too wide
         if left / max(queued, 1) * BATCH_SECONDS + left * STATE_SECONDS >= PAYS * LOAD_SECONDS:
             return True
-    from mitld_lp.solvers import kernel_loader
+    from mitld_lp.util import kernel_loader
 
     return kernel_loader.compiled_paid()
 
