@@ -127,9 +127,11 @@ def search(world: Table, sta: Any) -> tuple[list[Any], list[list[Any]]]:
 
 
 def compiled_product(world: Table, sta: Any, monkeypatch: pytest.MonkeyPatch,
-                     **kw: Any) -> tuple[Any, int]:
-    """The product with every level after the first by the compiled loop (its load
-    counted as paid: no size threshold), and how many of its calls expanded states."""
+                     paid: bool = True, **kw: Any) -> tuple[Any, int]:
+    """The product with every level after the first by the compiled loop (``paid``: its
+    load counted as paid), and how many of its calls expanded states."""
+    from mitld_lp.util import kernel_loader
+
     ran = [0]
     real = tl.run_compiled
 
@@ -139,7 +141,8 @@ def compiled_product(world: Table, sta: Any, monkeypatch: pytest.MonkeyPatch,
         return got
 
     monkeypatch.setattr(tl, "COMPILED", True)
-    monkeypatch.setattr(tl, "COMPILED_MIN_STATES", 0)
+    if paid:
+        monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: True)
     monkeypatch.setattr(build, "run_compiled", counted)
     return product(world, sta, **kw), ran[0]
 
@@ -221,7 +224,9 @@ def test_switched_to_after_numpys_batches(monkeypatch: pytest.MonkeyPatch) -> No
     sta = task("(F[0,7] goal) & F mid")
     expected = numpy_product(world, sta, monkeypatch)
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: False)
-    mdp, ran = compiled_product(world, sta, monkeypatch)  # from the first level on
+    monkeypatch.setattr(tl, "LOAD_SHARE", float("inf"))  # the load's memory no matter
+    monkeypatch.setattr(tl, "COMPILED_MIN_STATES", 0)
+    mdp, ran = compiled_product(world, sta, monkeypatch, paid=False)  # from the first level
     assert ran > 0
     assert_same(mdp, expected)
     monkeypatch.setattr(tl, "COMPILED_MIN_STATES", 10**9)

@@ -37,17 +37,26 @@ def table_levels(keys, n_found, head, stop, cap, index, shift, act_start, act_co
     """Expand the queue's states ``keys[head:]`` (``n_found`` keys so far) up to state
     ``stop``, numbering new keys at ``keys[n_found:]`` and in ``index`` (by key +
     ``shift``); stops before a state whose entries might not fit the output arrays or
-    ``keys``, or might take the states found past ``cap``.  Writes the rows' columns,
-    values and lengths, the choices' actions (``late``: the choice's number plus
-    ``late``, else ``slot_aid`` of it; ``absorb`` an absorbing state's) and the choices
-    per state; ``out``: head, states found, entries, choices, states expanded."""
+    ``keys``, might take the states found past ``cap``, or might name a key past the
+    end of ``index`` (a dense array that grows by doubling, as the caller's).  Writes
+    the rows' columns, values and lengths, the choices' actions (``late``: the choice's
+    number plus ``late``, else ``slot_aid`` of it; ``absorb`` an absorbing state's) and
+    the choices per state; ``out``: head, states found, entries, choices, states
+    expanded, why it stopped (0: at ``stop`` or the queue's end, 1: the output arrays
+    full, 2: ``keys`` full or ``cap`` reached, 3: a key past ``index``) and, for 3, the
+    index's length that state needs."""
     ne = 0
     nc = 0
     ns = 0
+    why = 0
+    need = 0
+    n_index = index.shape[0]
+    every = n_index >= act_start.shape[0] * n_q + shift  # the index holds every key
     while head < n_found and head < stop:
         key = keys[head]
         if key < 0:  # an absorbing state: its one self-loop
             if ne + 1 > cols.shape[0] or nc + 1 > row_len.shape[0] or ns + 1 > choices.shape[0]:
+                why = 1
                 break
             cols[ne] = head
             vals[ne] = 1.0
@@ -64,11 +73,24 @@ def table_levels(keys, n_found, head, stop, cap, index, shift, act_start, act_co
         c_lo = act_start[g]
         n_act = act_count[g]
         n_e = row_start[c_lo + n_act] - row_start[c_lo]
-        if (ne + n_e > cols.shape[0] or nc + n_act > row_len.shape[0]
-                or ns + 1 > choices.shape[0] or n_found + n_e > keys.shape[0]
-                or n_found + n_e > cap):
+        if ne + n_e > cols.shape[0] or nc + n_act > row_len.shape[0] or ns + 1 > choices.shape[0]:
+            why = 1
+            break
+        if n_found + n_e > keys.shape[0] or n_found + n_e > cap:
+            why = 2
             break
         base = q << step_bits
+        if not every:
+            top = 0  # the index's length this state's successors need
+            for e in range(row_start[c_lo], row_start[c_lo + n_act]):
+                g2 = row_succ[e]
+                q2 = steps[base | props[g2]]
+                k2 = q2 if q2 < 0 else g2 * n_q + q2
+                top = max(top, k2 + shift + 1)
+            if top > n_index:
+                why = 3
+                need = top
+                break
         for c in range(c_lo, c_lo + n_act):
             first = ne
             for e in range(row_start[c], row_start[c + 1]):
@@ -103,3 +125,5 @@ def table_levels(keys, n_found, head, stop, cap, index, shift, act_start, act_co
     out[2] = ne
     out[3] = nc
     out[4] = ns
+    out[5] = why
+    out[6] = need

@@ -135,7 +135,8 @@ def _build(
         if lean is None and LEAN_TABLES and head and plain_table(f):
             lean = Plain(f)  # after the first level: its situation is expanded
         if lean is not None and (compiled or compiled_wanted(
-                lean, n_keys // f.codec.n_q, budget.expanded, states.keys.size - head)):
+                lean, n_keys // f.codec.n_q, budget.expanded, states.keys.size - head,
+                budget.transitions / max(budget.expanded, 1))):
             ran = run_compiled(lean, states, head, budget, n_keys)
             compiled = ran is not None
             if ran is not None:  # else (numba missing, no progress) a batch of NumPy's
