@@ -80,7 +80,7 @@ class Plain:
         self.steps: np.ndarray | None = None
         self.table_steps: np.ndarray | None = None  # every step, by (q << bits) | letter
         self.batches = 0  # levels' batches expanded by NumPy so far
-        self.widest = -1  # the world's most entries of one state (the loop's, when it runs)
+        self.widest = -1  # a bound on one state's entries (the loop's, when it runs)
         self.room = 0  # the entries the loop's last call had room for
         self.only = -1  # the one ordinary automaton state, if there is one
         dta = f.dta
@@ -214,10 +214,11 @@ _CHUNK_STATES = 1 << 18
 
 _MIN_ENTRIES, _MAX_ENTRIES = 1 << 12, 1 << 22
 """The entries one call of the compiled loop has room for, at least and at most.  In
-between, the room is the frontier's states times the world's widest state (its entries
-over all its choices), doubled after a call that filled it, and never more than half the
-transitions built so far (24 bytes an entry: its buffers stay under 12 bytes a
-transition of the product, which the batches' rows and the matrix's assembly exceed)."""
+between, the room is the frontier's states times a bound on one state's entries (the
+world's longest row times its most choices of a state), doubled after a call that
+filled it, and never more than half the transitions built so far (24 bytes an entry:
+its buffers stay under 12 bytes a transition of the product, which the batches' rows
+and the matrix's assembly exceed)."""
 
 _SPARSE = 8
 """The dense index grows for the loop, as for NumPy's batches
@@ -280,10 +281,9 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
         return None
     keys = found.keys
     n_found = keys.size
-    if lean.widest < 0:  # the world's widest state, in entries (one pass, once a build)
-        t_lo = lean.row_start[lean.act_start]
-        lean.widest = int((lean.row_start[lean.act_start + lean.act_count] - t_lo).max(
-            initial=1))
+    if lean.widest < 0:  # a bound on one state's entries: no array of the world's size
+        lean.widest = max(int(lean.row_len.max(initial=1)) * int(lean.act_count.max(
+            initial=1)), 1)
     frontier = n_found - head
     high = max(_MIN_ENTRIES, lean.widest + 1, min(budget.transitions // 2, _MAX_ENTRIES))
     room = min(max(_MIN_ENTRIES, frontier * lean.widest, lean.room), high)
