@@ -43,8 +43,8 @@ def table_levels(keys, n_found, head, stop, cap, index, shift, act_start, act_co
     number plus ``late``, else ``slot_aid`` of it; ``absorb`` an absorbing state's) and
     the choices per state; ``out``: head, states found, entries, choices, states
     expanded, why it stopped (0: at ``stop`` or the queue's end, 1: the output arrays
-    full, 2: ``keys`` full or ``cap`` reached, 3: a key past ``index``) and, for 3, the
-    index's length that state needs."""
+    full, 2: ``keys`` full, 3: a key past ``index``, 4: ``cap`` reached) and, for 3,
+    the index's length that state needs."""
     ne = 0
     nc = 0
     ns = 0
@@ -76,8 +76,11 @@ def table_levels(keys, n_found, head, stop, cap, index, shift, act_start, act_co
         if ne + n_e > cols.shape[0] or nc + n_act > row_len.shape[0] or ns + 1 > choices.shape[0]:
             why = 1
             break
-        if n_found + n_e > keys.shape[0] or n_found + n_e > cap:
+        if n_found + n_e > keys.shape[0]:
             why = 2
+            break
+        if n_found + n_e > cap:
+            why = 4
             break
         base = q << step_bits
         if not every:

@@ -270,8 +270,9 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
     Its buffers are sized from what the build knows before the call: the frontier's
     states, the world's widest state and the transitions so far (:data:`_MIN_ENTRIES`);
     the rows it wrote are copied out at their length, so that nothing of the buffers
-    outlives the call.  Where it stopped for lack of room (entries, keys, or a key past
-    the dense index), the room is doubled and the loop called again."""
+    outlives the call.  Where it stopped for lack of room, that room is doubled (the
+    entries', within the bound above; the keys' array and the dense index, as the
+    batched build grows them) and the loop called again."""
     index = found.index
     if index.dense is None or n_keys > index.dense_limit:
         return None
@@ -292,10 +293,8 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
     parts: list[list[np.ndarray]] = [[], [], [], [], []]
     ns_all = ne_all = 0
     while True:
-        if keys.data.size < n_found + room:  # room for the new states, grown by doubling
-            bigger = np.empty(max(2 * keys.data.size, n_found + room), dtype=keys.data.dtype)
-            bigger[:n_found] = keys.data[:n_found]
-            keys.data = bigger
+        if keys.data.size < n_found + lean.widest:  # room for one state's new keys at least
+            _grow(keys, n_found + lean.widest)
         cols = np.empty(room, dtype=np.int32)
         vals = np.empty(room, dtype=np.float64)
         row_len = np.empty(room, dtype=np.int32)
@@ -316,11 +315,15 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
         del cols, vals, row_len, actions, choices
         ns_all += ns
         ne_all += ne
-        if why in (1, 2) and room < high:  # filled: twice the room next time
+        if why == 1 and room < high:  # filled: twice the room next time
             room = min(2 * room, high)
-            if ns == 0 and why == 1:
+            if ns == 0:
                 continue
         lean.room = room
+        if why == 2:  # the keys' array full
+            _grow(keys, keys.data.size + 1)
+            if ns == 0:
+                continue
         if why == 3:  # the dense index grown by doubling, within Index's rule
             dense = index.dense
             if need > min(index.dense_limit, max(1 << 16, _SPARSE * n_found)):
@@ -342,3 +345,11 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
                   for p, d in zip(parts, (np.int32, np.float64, np.int32, np.int32, np.int32),
                                   strict=True))
     return chunk, ns_all, ne_all
+
+
+def _grow(keys: Any, need: int) -> None:
+    """The found keys' array (a :class:`~mitld_lp.util.arrays.Grow`) at least ``need``
+    long, grown as ``Grow.extend`` grows it: to twice its length, or ``need``."""
+    bigger = np.empty(max(need, 2 * keys.data.size), dtype=keys.data.dtype)
+    bigger[: keys.size] = keys.data[: keys.size]
+    keys.data = bigger
