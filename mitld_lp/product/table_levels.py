@@ -332,7 +332,8 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
             dense = index.dense
             if need > min(index.dense_limit, max(1 << 16, _SPARSE * n_found)):
                 break  # NumPy's batch next: its insert turns the index into a hash table
-            bigger = np.full(min(max(need, 2 * dense.size), index.dense_limit), -1,
+            # never past every key's slot (NumPy's batches would double past it)
+            bigger = np.full(min(max(need, 2 * dense.size), index.dense_limit, n_keys), -1,
                              dtype=np.int32)
             bigger[: dense.size] = dense
             index.dense = dense = bigger
