@@ -32,8 +32,8 @@ compiled breadth-first loop's calls (:mod:`mitld_lp.product.bfs_kernels`), insid
 ``expand``'s place; ``first`` the first build's whole CPU (the compiled loop's load is
 in it where the loop runs).  ``--levels numpy`` builds every level by NumPy,
 ``--levels compiled`` by the compiled loop from the first level on (its load paid
-before the builds: ``kernel_loader.prepare()``), ``auto`` (the default) as the build decides; a checkout without the loop
-ignores it.
+before the builds: ``kernel_loader.prepare()``), ``auto`` (the default) as the build
+decides; a checkout without the loop ignores it.
 
     python experiments/bench_product.py --prism /tmp/jobs/*.toml --repeats 5
 """
