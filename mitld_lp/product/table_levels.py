@@ -294,11 +294,12 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
     room = min(max(_MIN_ENTRIES, frontier * lean.widest, lean.room), high)
     cap = min(n_found + _CHUNK_STATES, budget.max_states)
     out = np.zeros(7, dtype=np.int64)
+    most = budget.estimate.states  # the product's states at most, from its factors
     parts: list[list[np.ndarray]] = [[], [], [], [], []]
     ns_all = ne_all = 0
     while True:
         if keys.data.size < n_found + lean.widest:  # room for one state's new keys at least
-            _grow(keys, n_found + lean.widest)
+            _grow(keys, n_found + lean.widest, most)
         cols = np.empty(room, dtype=np.int32)
         vals = np.empty(room, dtype=np.float64)
         row_len = np.empty(room, dtype=np.int32)
@@ -325,7 +326,7 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
                 continue
         lean.room = room
         if why == 2:  # the keys' array full
-            _grow(keys, keys.data.size + 1)
+            _grow(keys, n_found + lean.widest, most)
             if ns == 0:
                 continue
         if why == 3:  # the dense index grown by doubling, within Index's rule
@@ -352,9 +353,14 @@ def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
     return chunk, ns_all, ne_all
 
 
-def _grow(keys: Any, need: int) -> None:
+def _grow(keys: Any, need: int, most: int | None) -> None:
     """The found keys' array (a :class:`~mitld_lp.util.arrays.Grow`) at least ``need``
-    long, grown as ``Grow.extend`` grows it: to twice its length, or ``need``."""
-    bigger = np.empty(max(need, 2 * keys.data.size), dtype=keys.data.dtype)
+    long, grown as ``Grow.extend`` grows it (to twice its length, or ``need``) but not
+    past ``most``, the product's states at most (:class:`~mitld_lp.product.budget.
+    SizeEstimate`; csma 4-2: 608,085 for 600,267, where doubling made 1,048,576 near the
+    end of the levels, 3.4 MB more than NumPy's batches, which grow it to what a wide
+    batch needs)."""
+    longer = 2 * keys.data.size if most is None else min(2 * keys.data.size, most)
+    bigger = np.empty(max(need, longer), dtype=keys.data.dtype)
     bigger[: keys.size] = keys.data[: keys.size]
     keys.data = bigger
