@@ -27,7 +27,13 @@ automaton's steps tabulated, whether rows repeat a state), the levels' rows
 numbered (``intern``, inside ``expand``; its dense-index part ``add_dense`` inside
 it), the matrix assembled (``assemble``) and the rest of the build (``rest``); the
 answer beside: the product's states, transitions and a digest of its arrays (the
-same digest before and after a change: the same product).
+same digest before and after a change: the same product).  ``compiled`` is the
+compiled breadth-first loop's calls (:mod:`mitld_lp.product.bfs_kernels`), inside
+``expand``'s place; ``first`` the first build's whole CPU (the compiled loop's load is
+in it where the loop runs).  ``--levels numpy`` builds every level by NumPy,
+``--levels compiled`` by the compiled loop from the first level on (its load paid
+before the builds: ``kernel_loader.prepare()``), ``auto`` (the default) as the build
+decides; a checkout without the loop ignores it.
 
     python experiments/bench_product.py --prism /tmp/jobs/*.toml --repeats 5
 """
@@ -124,7 +130,8 @@ PASSES = (("automaton", "mitld_lp.routes.stages", "to_dta"),
           ("expand", "mitld_lp.product.build", "_expand"),
           ("intern", "mitld_lp.product.build._Found", "intern"),
           ("add_dense", "mitld_lp.product.build._Found", "_add_dense"),
-          ("assemble", "mitld_lp.product.build", "_assemble"))
+          ("assemble", "mitld_lp.product.build", "_assemble"),
+          ("compiled", "mitld_lp.product.build", "run_compiled"))
 """Each pass: its column, where the function lives (a module, or a module's class) and
 its name; a pass's CPU is summed over its calls."""
 
@@ -139,7 +146,24 @@ def _owner(where: str) -> object:
         return getattr(importlib.import_module(module), cls)
 
 
-def product_passes(model_file: str, repeats: int) -> dict[str, object]:
+def _levels(mode: str) -> None:
+    """The levels' path (``--levels``): NumPy's, the compiled loop's, or the build's."""
+    import importlib
+
+    try:
+        tl = importlib.import_module("mitld_lp.product.table_levels")
+    except ImportError:
+        return
+    if mode != "auto" and hasattr(tl, "COMPILED"):
+        tl.COMPILED = mode == "compiled"
+        tl.COMPILED_MIN_STATES = 0 if mode == "compiled" else tl.COMPILED_MIN_STATES
+        if mode == "compiled":  # the load paid before the builds (outside their times)
+            from mitld_lp.util import kernel_loader
+
+            kernel_loader.prepare()
+
+
+def product_passes(model_file: str, repeats: int, levels: str = "auto") -> dict[str, object]:
     """The product of ``model_file``'s world and task, built ``repeats`` times: each
     pass's least CPU milliseconds, the whole build's, and the product's size and digest."""
     import functools
@@ -161,17 +185,21 @@ def product_passes(model_file: str, repeats: int) -> dict[str, object]:
                 spent[column] = spent.get(column, 0.0) + time.process_time() - c
         return run
 
+    _levels(levels)
     for column, where, name in PASSES:
         owner = _owner(where)
-        setattr(owner, name, timed(column, getattr(owner, name)))
+        if hasattr(owner, name):  # a pass this checkout does not have is left out
+            setattr(owner, name, timed(column, getattr(owner, name)))
     model = load_model(model_file, max_states=2_000_000)
     best: dict[str, float] = {}
+    first = None
     for _ in range(repeats):
         spent.clear()
         posed = pose(model)
         c = time.process_time()
         built = build_posed(posed, progress=False)
         spent["whole"] = time.process_time() - c
+        first = spent["whole"] if first is None else first
         for k, v in spent.items():
             best[k] = min(best.get(k, float("inf")), v)
     mdp = built.mdp
@@ -179,14 +207,15 @@ def product_passes(model_file: str, repeats: int) -> dict[str, object]:
     for a in (mdp.row_groups, mdp.choice_actions, mdp.matrix.indptr, mdp.matrix.indices,
               mdp.matrix.data, mdp.target, mdp.sink, mdp.truncated):
         h.update(np.ascontiguousarray(a).tobytes())
-    inner = sum(best.get(k, 0.0) for k in ("automaton", "layers", "lean_init", "expand",
+    inner = sum(best.get(k, 0.0) for k in ("automaton", "layers", "lean_init", "expand", "compiled",
                                              "assemble"))
     return dict(states=mdp.n_states, transitions=mdp.n_transitions,
-                digest=h.hexdigest()[:16], **{k: round(v * 1e3, 2) for k, v in best.items()},
+                digest=h.hexdigest()[:16], first=round((first or 0.0) * 1e3, 2),
+                **{k: round(v * 1e3, 2) for k, v in best.items()},
                 rest=round((best["whole"] - inner) * 1e3, 2))
 
 
-def main_prism(files: list[str], repeats: int) -> list[dict[str, object]]:
+def main_prism(files: list[str], repeats: int, levels: str = "auto") -> list[dict[str, object]]:
     """``--prism``: each model file's product passes, in a fresh process each."""
     import json
     import subprocess
@@ -194,7 +223,7 @@ def main_prism(files: list[str], repeats: int) -> list[dict[str, object]]:
 
     rows = []
     for f in files:
-        out = subprocess.run([sys.executable, __file__, "--prism-one", f, str(repeats)],
+        out = subprocess.run([sys.executable, __file__, "--prism-one", f, str(repeats), levels],
                              capture_output=True, text=True, check=True)
         row = dict(model=f.rsplit("/", 1)[-1], **json.loads(out.stdout.splitlines()[-1]))
         print(row, flush=True)
@@ -216,9 +245,11 @@ def main(argv: list[str] | None = None) -> list[Row]:
     ap.add_argument("--prism", nargs="+", default=None, metavar="MODEL",
                     help="the product passes of these model files' PRISM worlds instead")
     ap.add_argument("--repeats", type=int, default=3, help="builds of each (--prism)")
+    ap.add_argument("--levels", choices=("auto", "numpy", "compiled"), default="auto",
+                    help="the levels' path (--prism): as the build decides, NumPy's, compiled")
     args = ap.parse_args(argv)
     if args.prism:
-        main_prism(args.prism, 1 if args.quick else args.repeats)
+        main_prism(args.prism, 1 if args.quick else args.repeats, args.levels)
         return []
     rows_wanted = [(8, 4), (16, 4)] if args.quick else [
         (n, d) for d in args.deadlines for n in args.sizes
@@ -249,6 +280,6 @@ if __name__ == "__main__":
     import sys
 
     if sys.argv[1:2] == ["--prism-one"]:  # main_prism's child
-        print(json.dumps(product_passes(sys.argv[2], int(sys.argv[3]))))
+        print(json.dumps(product_passes(sys.argv[2], int(sys.argv[3]), *sys.argv[4:5])))
     else:
         main()

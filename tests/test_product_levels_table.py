@@ -180,7 +180,9 @@ def both(world: Any, sta: Any, monkeypatch: pytest.MonkeyPatch, **kw: Any) -> tu
         return real(self, *a)
 
     monkeypatch.setattr(tl.Plain, "expand", counted)
-    lean = product(world, sta, **kw)
+    monkeypatch.setattr(tl, "COMPILED", False)  # NumPy's lean levels (the compiled loop:
+    lean = product(world, sta, **kw)            # tests/test_product_bfs_kernels.py)
+    monkeypatch.setattr(tl, "COMPILED", True)
     monkeypatch.setattr(build, "LEAN_TABLES", False)
     old = product(world, sta, **kw)
     monkeypatch.setattr(build, "LEAN_TABLES", True)

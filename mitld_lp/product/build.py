@@ -17,7 +17,7 @@ from mitld_lp.product.imdp import IntervalMDP
 from mitld_lp.product.late_names import LateActionNames
 from mitld_lp.product.layers import Layers
 from mitld_lp.product.states import CODE, MASK_OF_CODE, Absorbing, ProductStates
-from mitld_lp.product.table_levels import Plain, plain_table
+from mitld_lp.product.table_levels import Plain, compiled_wanted, plain_table, run_compiled
 from mitld_lp.util.arrays import (
     DENSE_LIMIT,
     Grow,
@@ -129,12 +129,26 @@ def _build(
                        desc="product")
     head, batch = 0, 256
     lean: Plain | None = None
+    n_keys = f.codec.key(f.table.n_states, 0, 0) + _SHIFT if f.table is not None else 0
+    compiled = False  # the levels go to the compiled loop (table_levels.run_compiled)
     while head < states.keys.size:
-        keys = states.keys.view[head : head + batch].copy()
         if lean is None and LEAN_TABLES and head and plain_table(f):
             lean = Plain(f)  # after the first level: its situation is expanded
+        if lean is not None and (compiled or compiled_wanted(
+                lean, n_keys // f.codec.n_q, budget.expanded, states.keys.size - head,
+                budget.transitions / max(budget.expanded, 1))):
+            ran = run_compiled(lean, states, head, budget, n_keys)
+            compiled = ran is not None
+            if ran is not None:  # else (numba missing, no progress) a batch of NumPy's
+                chunks.append(ran[0])
+                state_choices.extend(ran[0][4])
+                bar.update(ran[1])
+                head += ran[1]
+                continue
+        keys = states.keys.view[head : head + batch].copy()
         if lean is not None and int(keys.min()) >= 0:
             chunk, n_entries = lean.expand(keys, states.intern)
+            lean.batches += 1
         else:
             chunk, n_entries = _expand(f, keys, head, states.intern)
         chunks.append(chunk)

@@ -34,11 +34,14 @@ from typing import Any
 
 import numpy as np
 
+from mitld_lp.mdp import ABSORB
+from mitld_lp.product.budget import BYTES_PER_STATE, BYTES_PER_TRANSITION
 from mitld_lp.product.layers import Layers
+from mitld_lp.product.states import CODE, Absorbing
 from mitld_lp.util.arrays import merge, unique
 from mitld_lp.worlds.table import LATE
 
-__all__ = ["Plain", "plain_table"]
+__all__ = ["Plain", "compiled_wanted", "plain_table", "run_compiled"]
 
 _MAX_STEPS = 1 << 16
 """The automaton's steps are tabulated where its memo (automaton states times the
@@ -51,7 +54,7 @@ class Plain:
 
     __slots__ = ("late", "n_q", "shift", "scale", "steps", "step_bits", "only", "distinct",
                  "act_start", "act_count", "row_start", "row_len", "row_succ", "row_prob",
-                 "props", "slot_aid", "step")
+                 "props", "slot_aid", "step", "table_steps", "batches", "widest", "room")
 
     def __init__(self, f: Layers) -> None:
         t = f.table
@@ -75,6 +78,10 @@ class Plain:
             dtype=np.int64))
         self.step_bits = len(f.atoms)
         self.steps: np.ndarray | None = None
+        self.table_steps: np.ndarray | None = None  # every step, by (q << bits) | letter
+        self.batches = 0  # levels' batches expanded by NumPy so far
+        self.widest = -1  # a bound on one state's entries (the loop's, when it runs)
+        self.room = 0  # the entries the loop's last call had room for
         self.only = -1  # the one ordinary automaton state, if there is one
         dta = f.dta
         live = np.array([s for s in range(n_q) if s not in (dta.accepting, dta.rejecting)],
@@ -83,7 +90,7 @@ class Plain:
             f.step(np.repeat(live, masks.size), np.tile(masks, live.size))
             table = f._delta.table
             if table is not None:
-                self.steps = table
+                self.steps = self.table_steps = table
                 if live.size == 1:  # its row of steps alone, read by the letter
                     self.only = int(live[0])
                     self.steps = table[self.only << self.step_bits:]
@@ -161,3 +168,199 @@ def _rows_distinct(targets: np.ndarray, branches: np.ndarray) -> bool:
     inner = inner[(inner > 0) & (inner < targets.size)]
     up[inner - 1] = True  # a row's first entry follows another row's last
     return bool(up.all())
+
+
+COMPILED = True
+"""Whether the levels may go to the compiled loop (:mod:`mitld_lp.product.bfs_kernels`;
+False: NumPy's batches only, for tests and measurements)."""
+
+LOAD_SECONDS = 0.04
+"""The compiled loop's load the first time in a process (the kernel loader's pieces and
+the kernel linked; ``experiments/bench_product.py --prism``: 0.03-0.045 s)."""
+
+LOAD_BYTES = 48 << 20
+"""What that load adds to the process's resident size: llvmlite's LLVM and numba's
+helpers, about 46 MB (``kernel_loader.prepare()`` in an interpreter that has NumPy and
+SciPy already: 45.8 -> 92.4 MB).  None of it is traced by tracemalloc, all of it is in
+the synthesis's resident peak (``bench_qvbs.py``'s bytes per transition)."""
+
+BATCH_SECONDS, STATE_SECONDS = 75e-6, 0.08e-6
+"""NumPy's levels: about 75 us of calls a batch whatever its size, and 0.08 us a state
+(the same measurements: firewire_dl 3-600's 633 thin batches, csma 4-2's 600k states);
+the compiled loop costs about 0.02 us a state."""
+
+PAYS = 2.0
+"""The compiled loop is loaded (not yet paid) where NumPy's levels still to come are
+estimated at this many loads or more: it then saves at least one load, and an estimate
+off by half still breaks even."""
+
+LOAD_SHARE = 0.02
+"""... and where the load's resident bytes (:data:`LOAD_BYTES`) are at most this share
+of the product's own (its states still to come at the build budget's bytes a state and
+a transition): the 2 bytes a transition of ~100 the synthesis's peak may rise.  On every
+QVBS instance this project runs (at most 2 million states) that rule keeps the loop to
+processes whose load is paid already."""
+
+COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
+"""States still to come (a million) that pay the load by their per-state cost alone:
+trusted before :data:`_SEEN` batches have shown the frontier's width."""
+
+_SEEN = 32
+"""NumPy's batches seen before the frontier's width is trusted for the estimate (a
+breadth-first search's first levels are narrow however wide the later ones)."""
+
+_CHUNK_STATES = 1 << 18
+"""New states one call of the compiled loop may number before the budget is checked."""
+
+_MIN_ENTRIES, _MAX_ENTRIES = 1 << 12, 1 << 22
+"""The entries one call of the compiled loop has room for, at least and at most.  In
+between, the room is the frontier's states times a bound on one state's entries (the
+world's longest row times its most choices of a state), doubled after a call that
+filled it, and never more than :data:`_SHARE`-th of the transitions built so far."""
+
+_SHARE = 8
+"""The buffers (24 bytes an entry) and the rows copied out of them (16) stay under 5
+bytes a transition of the product so far, on top of the batches' rows it holds: the
+matrix's assembly, which holds those rows twice, stays the build's peak.  (Half the
+transitions, 20 bytes a transition, raised csma 4-2's traced peak by 10.6.)"""
+
+_SPARSE = 8
+"""The dense index grows for the loop, as for NumPy's batches
+(:class:`mitld_lp.util.arrays.Index`), while it holds at most this many slots per state
+found (past 64K slots); past that, NumPy's batches take over and the index turns into a
+hash table."""
+
+
+def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int,
+                    per_state: float = 1.0) -> bool:
+    """Whether the compiled loop should expand the levels from here, with ``expanded``
+    states expanded so far of a world of ``n_world``, ``queued`` found and not yet
+    expanded, and ``per_state`` transitions a state so far: its load is paid already
+    (:func:`~mitld_lp.util.kernel_loader.compiled_paid`), or it is estimated to pay for
+    itself in time and memory both.  Time: NumPy's levels still to come estimated at
+    :data:`PAYS` loads or more, from the states not yet expanded taken as the world's
+    (at :data:`STATE_SECONDS` each), and once :data:`_SEEN` batches have let the
+    frontier grow, the queue's length as the frontier's width (a batch each
+    :data:`BATCH_SECONDS`), while fewer than half the world's states are expanded (past
+    that, the states left may never be reached).  Memory: the load's
+    :data:`LOAD_BYTES` at most :data:`LOAD_SHARE` of the product still to come."""
+    if not COMPILED or lean.table_steps is None:
+        return False
+    from mitld_lp.util import kernel_loader
+
+    if kernel_loader.compiled_paid():
+        return True
+    left = n_world - expanded
+    if 2 * expanded >= n_world:
+        return False
+    if LOAD_BYTES > LOAD_SHARE * left * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION):
+        return False
+    if left >= COMPILED_MIN_STATES:  # by their per-state cost alone
+        return True
+    return lean.batches >= _SEEN and (left / max(queued, 1) * BATCH_SECONDS
+                                      + left * STATE_SECONDS >= PAYS * LOAD_SECONDS)
+
+
+def run_compiled(lean: Plain, found: Any, head: int, budget: Any,
+                 n_keys: int) -> tuple[tuple[np.ndarray, ...], int, int] | None:
+    """Expand the queue from ``head`` by the compiled loop: ``(chunk, states expanded,
+    entries)`` as :meth:`Plain.expand` returns a batch (the states found numbered in
+    ``found``'s keys and dense index), or None where it cannot run (numba missing, the
+    index not a dense array, or a key the index would hold only as a hash table); the
+    budget is counted and checked as the batched build checks it (states found past
+    ``budget.max_states`` stop the loop before they are stored: the batched build then
+    finds them and refuses).
+
+    Its buffers are sized from what the build knows before the call: the frontier's
+    states, the world's widest state and the transitions so far (:data:`_MIN_ENTRIES`);
+    the rows it wrote are copied out at their length, so that nothing of the buffers
+    outlives the call.  Where it stopped for lack of room, that room is doubled (the
+    entries', within the bound above; the keys' array and the dense index, as the
+    batched build grows them) and the loop called again."""
+    index = found.index
+    if index.dense is None or n_keys > index.dense_limit:
+        return None
+    try:
+        from mitld_lp.product import bfs_kernels
+    except ImportError:  # numba missing: NumPy's batches
+        return None
+    keys = found.keys
+    n_found = keys.size
+    if lean.widest < 0:  # a bound on one state's entries: no array of the world's size
+        lean.widest = max(int(lean.row_len.max(initial=1)) * int(lean.act_count.max(
+            initial=1)), 1)
+    frontier = n_found - head
+    high = max(_MIN_ENTRIES, lean.widest + 1, min(budget.transitions // _SHARE, _MAX_ENTRIES))
+    room = min(max(_MIN_ENTRIES, frontier * lean.widest, lean.room), high)
+    cap = min(n_found + _CHUNK_STATES, budget.max_states)
+    out = np.zeros(7, dtype=np.int64)
+    most = budget.estimate.states  # the product's states at most, from its factors
+    parts: list[list[np.ndarray]] = [[], [], [], [], []]
+    ns_all = ne_all = 0
+    while True:
+        if keys.data.size < n_found + lean.widest:  # room for one state's new keys at least
+            _grow(keys, n_found + lean.widest, most)
+        cols = np.empty(room, dtype=np.int32)
+        vals = np.empty(room, dtype=np.float64)
+        row_len = np.empty(room, dtype=np.int32)
+        actions = np.empty(room, dtype=np.int32)
+        choices = np.empty(room, dtype=np.int32)
+        bfs_kernels.table_levels(
+            keys.data, n_found, head, 1 << 62, cap, index.dense,
+            -CODE[Absorbing.TRUNCATED], lean.act_start, lean.act_count, lean.row_start,
+            lean.row_succ, lean.row_prob, lean.props, lean.table_steps, lean.step_bits,
+            lean.n_q, lean.scale, lean.distinct, lean.slot_aid, LATE if lean.late else 0,
+            ABSORB, cols, vals, row_len, actions, choices, out)
+        head, n_found, ne, nc, ns, why, need = (int(x) for x in out)
+        keys.size = index.size = n_found
+        for part, buf, n in zip(parts, (cols, vals, row_len, actions, choices),
+                                (ne, ne, nc, nc, ns), strict=True):
+            if n:
+                part.append(buf[:n].copy())  # the buffer goes with this call
+        del cols, vals, row_len, actions, choices
+        ns_all += ns
+        ne_all += ne
+        if why == 1 and room < high:  # filled: twice the room next time
+            room = min(2 * room, high)
+            if ns == 0:
+                continue
+        lean.room = room
+        if why == 2:  # the keys' array full
+            _grow(keys, n_found + lean.widest, most)
+            if ns == 0:
+                continue
+        if why == 3:  # the dense index grown by doubling, within Index's rule
+            dense = index.dense
+            if need > min(index.dense_limit, max(1 << 16, _SPARSE * n_found)):
+                break  # NumPy's batch next: its insert turns the index into a hash table
+            # never past every key's slot (NumPy's batches would double past it)
+            bigger = np.full(min(max(need, 2 * dense.size), index.dense_limit, n_keys), -1,
+                             dtype=np.int32)
+            bigger[: dense.size] = dense
+            index.dense = dense = bigger
+            if ns == 0:
+                continue
+        break
+    if ns_all == 0:
+        return None
+    budget.expanded += ns_all
+    budget.transitions += ne_all
+    budget.check(n_found)
+    chunk = tuple(p[0] if len(p) == 1 else (np.concatenate(p) if p else
+                                             np.zeros(0, dtype=d))
+                  for p, d in zip(parts, (np.int32, np.float64, np.int32, np.int32, np.int32),
+                                  strict=True))
+    return chunk, ns_all, ne_all
+
+
+def _grow(keys: Any, need: int, most: int | None) -> None:
+    """The found keys' array (a :class:`~mitld_lp.util.arrays.Grow`) at least ``need``
+    long, grown as ``Grow.extend`` grows it (to twice its length, or ``need``) but not
+    past ``most``, the product's states at most (:class:`~mitld_lp.product.budget.
+    SizeEstimate`; csma 4-2: 608,085 for 600,267, where doubling made 1,048,576 near the
+    end of the levels, 3.4 MB more than NumPy's batches, which grow it to what a wide
+    batch needs)."""
+    longer = 2 * keys.data.size if most is None else min(2 * keys.data.size, most)
+    bigger = np.empty(max(need, longer), dtype=keys.data.dtype)
+    bigger[: keys.size] = keys.data[: keys.size]
+    keys.data = bigger
