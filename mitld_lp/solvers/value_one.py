@@ -158,13 +158,15 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
         exits = play[n_plain:][sure[n_plain:]]
         owners = mdp.state_of(exits)
         member = np.asarray(mecs.mec_of)[states] >= 0
-        internal = np.flatnonzero(mecs.internal)
-        internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[mdp.state_of(internal)]]]
-        step = toward(mdp, internal, owners)
         walk = member & ~np.isin(states, owners)
-        if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
-            return None
-        choices[walk] = step[states[walk]]
+        if walk.any():  # none where each such component is one state (a self-loop)
+            internal = np.flatnonzero(mecs.internal)
+            internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[
+                mdp.state_of(internal)]]]
+            step = toward(mdp, internal, owners)
+            if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
+                return None
+            choices[walk] = step[states[walk]]
     itype = index_dtype(mdp.n_choices)
     return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
                         read_only(choices.astype(itype, copy=False)))
