@@ -36,12 +36,12 @@ from mitld_lp.solvers.graph import Sense, maximal_end_components, state_componen
 from mitld_lp.testing import random_mdp
 
 
-def _acyclic(seed: int) -> MDP:
+def _acyclic(seed: int, n: int | None = None) -> MDP:
     """States 0..n-1; each choice moves to lower-numbered states, or stays put (alone,
     or with its own column among others: a loop, yet no end component); 0 and 1 are
     absorbing (target, sink), and about a tenth of the others."""
     rng = np.random.default_rng(7100 + seed)
-    n = int(rng.integers(4, 60))
+    n = int(rng.integers(4, 60)) if n is None else n
     rows: list[list[int]] = []
     groups = [0]
     for s in range(n):
@@ -174,27 +174,36 @@ def _scc(mdp: MDP) -> np.ndarray:
 
 
 def _cases() -> list[tuple[str, int]]:
-    return [("acyclic", s) for s in range(40)] + [("random", s) for s in range(25)]
+    return ([("acyclic", s) for s in range(40)] + [("random", s) for s in range(25)]
+            + [("large acyclic", s) for s in range(2)] + [("large", s) for s in range(2)])
 
 
 def _make(kind: str, seed: int) -> MDP:
     if kind == "acyclic":
         return _acyclic(seed)
-    return random_mdp(int(np.random.default_rng(seed).integers(5, 70)), seed=4400 + seed,
-                      self_loop_fraction=0.25, target_fraction=0.1, sink_fraction=0.1)
+    if kind == "large acyclic":  # past SMALL: SciPy's walks, the reversed state graph
+        return _acyclic(seed, 9000)
+    n = 9000 if kind == "large" else int(np.random.default_rng(seed).integers(5, 70))
+    return random_mdp(n, seed=4400 + seed, self_loop_fraction=0.25, target_fraction=0.1,
+                      sink_fraction=0.1)
 
 
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
-@pytest.mark.parametrize("with_extra", [False, True])
+@pytest.mark.parametrize("with_extra", [False, True, "open"])
 @pytest.mark.parametrize(("kind", "seed"), _cases())
 def test_sets_against_fixed_points(kind: str, seed: int, sense: Sense,
-                                   with_extra: bool) -> None:
+                                   with_extra: bool | str) -> None:
+    """``open``: a goal of states that move on (not absorbing, so paths run through
+    them: a minimum's value-1 states are then searched through the maybe states only)."""
     mdp = _make(kind, seed)
     ch = _choices(mdp)
     n = mdp.n_states
     goal = np.asarray(mdp.target, dtype=bool)
     extra = np.zeros(n, dtype=bool)
-    if with_extra:  # truncated states are absorbing, as a product's are
+    if with_extra == "open":
+        goal = np.random.default_rng(seed).random(n) < 0.2
+        goal[mdp.initial] = False
+    elif with_extra:  # truncated states are absorbing, as a product's are
         g = np.asarray(mdp.row_groups)
         alone = [s for s in range(n) if g[s + 1] - g[s] == 1 and ch[s] == [{s}]]
         extra[[s for s in alone if np.random.default_rng(seed + s).random() < 0.5]] = True

@@ -80,8 +80,8 @@ from mitld_lp.solvers.graph import (
     attractor_spared,
     backward_reachable,
     compiled_end_components,
+    components_reaching,
     maximal_end_components,
-    state_components,
     state_levels,
 )
 from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
@@ -367,13 +367,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     same = not extra.any()
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
-    found = state_components(m, mdp.row_groups,
-                             np.column_stack([goal] if same else [goal, wide]))
+    found, reach, back = components_reaching(
+        m, mdp.row_groups, np.column_stack([goal] if same else [goal, wide]))
     if not kernel_loader.compiled_paid() and _sweeps_compiled(m, mdp.row_groups,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
-    reach = found.reach[:, [0, 0] if same else [0, 1]][found.component]
+    reach = reach[:, [0, 0] if same else [0, 1]]
     n = mdp.n_states
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
@@ -398,12 +398,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     sure_state = np.zeros(n, dtype=bool)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one and sense is Sense.MIN:
-        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0])
+        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
     elif without_one and not mecs.n_mecs:
         sure_state, played = prob1e_first(mdp, m, maybe, prob0[j0], mecs)
         if played is not None:
             shared[ATTRACTOR_STRATEGY] = played
         del played
+    del back
     maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())
