@@ -422,7 +422,9 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     levels (QVBS csma 4-2: the condensation and its search were 0.02 of the
     analysis's 0.12 s of CPU, the reversal and search 0.006).  ``reach`` is then None
     in the record, and the reversed graph is returned third for further searches (None
-    where it was not made)."""
+    where it was not made).  Where the components are fewer than half the states, the
+    condensation is searched as :func:`state_components` does (QVBS zeroconf 1000-4:
+    87,952 components of 301,219 states, whose levels are walked anyway)."""
     if compiled_walks(matrix.nnz) is not None:
         found = state_components(matrix, row_groups, seeds)
         return found, found.reach[found.component], None
@@ -433,6 +435,12 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
         return found, found.reach[found.component], None
     n_comp, label = strong_components(graph)
     n = graph.shape[0]
+    if 2 * n_comp < n:  # few components: their condensation is the smaller graph
+        n_comp, comp, out_degree, preds_of = _condensation(graph, n_comp, label)
+        del graph
+        found = Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
+                       lambda: _leveled(size, n_comp, comp, out_degree, preds_of, None).level)
+        return found, found.reach[comp], None
     back = Reversed(n, np.repeat(np.arange(n, dtype=graph.indices.dtype),
                                  np.diff(graph.indptr)), graph.indices)
     reach = np.zeros((n, seeds.shape[1]), dtype=bool)
