@@ -8,17 +8,21 @@ analysis serves both:
   consecutive rows, so its successors are a slice of the matrix's column indices): no
   copy;
 * one **strongly connected decomposition** of it
-  (:func:`~mitld_lp.solvers.graph.state_components`), and which components can reach
-  the goal and which the goal or a truncated state: the prob-0 sets of both models
-  (``Pmax = 0`` iff no path).  The components' levels (level 0 has no successor
-  component; every edge between components goes down) are found on the quotient alone
+  (:func:`~mitld_lp.solvers.graph.components_reaching`), and which states can reach
+  the goal and which the goal or a truncated state (a search of the state graph
+  reversed where most components are single states, else of the condensation): the
+  prob-0 sets of both models (``Pmax = 0`` iff no path).  The components' levels
+  (level 0 has no successor component; every edge between components goes down) are
+  found on the quotient alone
   (:mod:`~mitld_lp.solvers.quotient_order`), unless the compiled walk gives the
   product's in the same pass;
 * the **maximal end components** of the upper model's *maybe* states (neither target
   nor prob-0), searched only among the states of non-trivial components (and single
   states with a choice that stays put): an end component is strongly connected, so it
   lies inside one component (on a large product one attractor pass first shows
-  whether there is any: a rare event's product often has none).  They are the lower
+  whether there is any: a rare event's product often has none; where every component
+  is one state, each maybe state with a choice that stays put is one, found without a
+  search).  They are the lower
   model's end components too: an end component's states reach the same states, so it
   lies either wholly among the lower model's maybe states or wholly outside them;
 * one **quotient** (:class:`~mitld_lp.solvers.reduced.Quotient`): the upper model's
