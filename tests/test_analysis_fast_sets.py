@@ -268,3 +268,67 @@ def test_end_components_against_rounds(kind: str, seed: int) -> None:
     plain = maximal_end_components(mdp, maybe)  # the package's general search
     assert np.array_equal(np.asarray(plain.internal), np.asarray(got.internal))
     assert _partition(np.asarray(plain.mec_of), np.asarray(plain.mec_of) >= 0) == set(want)
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("with_extra", [False, True, "open"])
+@pytest.mark.parametrize(("kind", "seed"), [("large acyclic", 0), ("large", 0),
+                                             ("acyclic", 3), ("random", 3)])
+def test_quotients_as_the_searches_replaced(kind: str, seed: int, sense: Sense,
+                                            with_extra: bool | str,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every array of both quotients the same to the bit as with the searches the
+    analysis replaced, still in the package: the reach from the condensation
+    (``state_components``, no reversed graph handed on, so a minimum's Prob1A searched
+    through the maybe states) and the end components searched (``_searched``, every
+    component a state of its own)."""
+    import dataclasses
+
+    from mitld_lp.solvers import analysis
+
+    mdp = _make(kind, seed)
+    n = mdp.n_states
+    goal = np.asarray(mdp.target, dtype=bool)
+    extra = np.zeros(n, dtype=bool)
+    if with_extra == "open":
+        goal = np.random.default_rng(seed).random(n) < 0.2
+        goal[mdp.initial] = False
+    elif with_extra:
+        g = np.asarray(mdp.row_groups)
+        ch = _choices(mdp)
+        extra[[s for s in range(n) if g[s + 1] - g[s] == 1 and ch[s] == [{s}]
+               and s % 2]] = True
+        extra &= ~goal
+    new = analyse(mdp, goal, extra, sense=sense)
+
+    def old_reach(m: sp.csr_array, groups: np.ndarray, seeds: np.ndarray):  # type: ignore[no-untyped-def]
+        found = state_components(m, groups, seeds)
+        return found, found.reach[found.component], None
+
+    monkeypatch.setattr(analysis, "components_reaching", old_reach)
+    monkeypatch.setattr(analysis, "_self_loops_only", lambda mdp, maybe: analysis._searched(
+        mdp, np.arange(mdp.n_states), maybe))
+    old = analyse(mdp, goal, extra, sense=sense)
+
+    def arrays(x: object, at: str = "") -> dict[str, object]:
+        if isinstance(x, np.ndarray):
+            return {at: (x.dtype.str, x.shape, x.tobytes())}
+        if sp.issparse(x):
+            x = sp.csr_array(x)
+            return {f"{at}.{k}": arrays(getattr(x, k))[""] for k in ("data", "indices", "indptr")}
+        if dataclasses.is_dataclass(x):
+            return {k: v for f in dataclasses.fields(x)
+                    for k, v in arrays(getattr(x, f.name), f"{at}.{f.name}").items()}
+        if isinstance(x, (tuple, list)):
+            return {k: v for i, y in enumerate(x) for k, v in arrays(y, f"{at}[{i}]").items()}
+        if isinstance(x, dict):
+            return {k: v for key, y in x.items() for k, v in arrays(y, f"{at}{{{key}}}").items()}
+        if hasattr(x, "__slots__") and not isinstance(x, (int, float, str)):
+            return {k: v for name in x.__slots__
+                    for k, v in arrays(getattr(x, name), f"{at}.{name}").items()}
+        return {at: repr(x)}
+
+    for a, b in zip(new, old, strict=True):
+        got, want = arrays(a), arrays(b)
+        assert got.keys() == want.keys()
+        assert [k for k in got if got[k] != want[k]] == []

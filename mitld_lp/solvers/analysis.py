@@ -176,13 +176,19 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     walks, when one attractor pass shows there is none (:func:`_none_among`).  The
     same components as :func:`~mitld_lp.solvers.graph.maximal_end_components` on
     ``maybe``, numbered in another order (which it is, on a matrix that stores a
-    zero)."""
-    n = mdp.n_states
+    zero).  Where every component is one state, :func:`_self_loops_only`."""
     m = mdp.matrix
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
     if comp.size and int(np.bincount(comp).max()) == 1:  # acyclic apart from self-loops
         return _self_loops_only(mdp, maybe)
+    return _searched(mdp, comp, maybe)
+
+
+def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
+    """:func:`end_components` by the search (no stored zero)."""
+    n = mdp.n_states
+    m = mdp.matrix
     walks = compiled_walks(m.nnz)
     if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
         return _no_end_components(n, mdp.n_choices)
