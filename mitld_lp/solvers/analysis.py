@@ -384,6 +384,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
     reach = reach[:, [0, 0] if same else [0, 1]]
+    if sense is Sense.MAX or not without_one:  # only a minimum's Prob1A searches it again
+        back = None
     n = mdp.n_states
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
