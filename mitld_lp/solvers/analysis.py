@@ -8,17 +8,21 @@ analysis serves both:
   consecutive rows, so its successors are a slice of the matrix's column indices): no
   copy;
 * one **strongly connected decomposition** of it
-  (:func:`~mitld_lp.solvers.graph.state_components`), and which components can reach
-  the goal and which the goal or a truncated state: the prob-0 sets of both models
-  (``Pmax = 0`` iff no path).  The components' levels (level 0 has no successor
-  component; every edge between components goes down) are found on the quotient alone
+  (:func:`~mitld_lp.solvers.graph.components_reaching`), and which states can reach
+  the goal and which the goal or a truncated state (a search of the state graph
+  reversed where most components are single states, else of the condensation): the
+  prob-0 sets of both models (``Pmax = 0`` iff no path).  The components' levels
+  (level 0 has no successor component; every edge between components goes down) are
+  found on the quotient alone
   (:mod:`~mitld_lp.solvers.quotient_order`), unless the compiled walk gives the
   product's in the same pass;
 * the **maximal end components** of the upper model's *maybe* states (neither target
   nor prob-0), searched only among the states of non-trivial components (and single
   states with a choice that stays put): an end component is strongly connected, so it
   lies inside one component (on a large product one attractor pass first shows
-  whether there is any: a rare event's product often has none).  They are the lower
+  whether there is any: a rare event's product often has none; where every component
+  is one state, each maybe state with a choice that stays put is one, found without a
+  search).  They are the lower
   model's end components too: an end component's states reach the same states, so it
   lies either wholly among the lower model's maybe states or wholly outside them;
 * one **quotient** (:class:`~mitld_lp.solvers.reduced.Quotient`): the upper model's
@@ -80,8 +84,8 @@ from mitld_lp.solvers.graph import (
     attractor_spared,
     backward_reachable,
     compiled_end_components,
+    components_reaching,
     maximal_end_components,
-    state_components,
     state_levels,
 )
 from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
@@ -117,12 +121,19 @@ def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
 
 def _stays_put(mdp: MDP) -> np.ndarray:
     """The states (ascending, maybe repeated) with a choice all of whose entries lie in
-    their own column.  Such a choice's first entry does: only the choices whose first
-    entry does (few: a product's self-loops) have their other entries read, not a
-    minimum and a maximum over every entry of the matrix and a reduction over every
-    choice (0.044 -> 0.02 s of CPU on QVBS csma 4-2's 1.1 million entries; the same
-    states).  A choice with no entry stays nowhere (none in a product) and a state
-    with no choice has none that stays."""
+    their own column (:func:`_staying_choices`' owners)."""
+    return mdp.state_of(_staying_choices(mdp)) if mdp.matrix.nnz else \
+        np.zeros(0, dtype=np.int64)
+
+
+def _staying_choices(mdp: MDP) -> np.ndarray:
+    """The choices (ascending) all of whose entries lie in their own state's column.
+    Such a choice's first entry does: only the choices whose first entry does (few: a
+    product's self-loops) have their other entries read, not a minimum and a maximum
+    over every entry of the matrix and a reduction over every choice (0.044 -> 0.02 s
+    of CPU on QVBS csma 4-2's 1.1 million entries; the same states).  A choice with no
+    entry stays nowhere (none in a product) and a state with no choice has none that
+    stays."""
     m = mdp.matrix
     if not m.nnz:
         return np.zeros(0, dtype=np.int64)
@@ -133,7 +144,26 @@ def _stays_put(mdp: MDP) -> np.ndarray:
     apart = m.indices[gather_ranges(lo, hi)] != np.repeat(own[cand], hi - lo)
     pure = np.ones(cand.size, dtype=bool)
     pure[np.repeat(np.arange(cand.size), hi - lo)[apart]] = False
-    return own[cand[pure]]
+    return cand[pure]
+
+
+def _self_loops_only(mdp: MDP, maybe: np.ndarray) -> EndComponents:
+    """The maximal end components of the ``maybe`` states of a product whose strongly
+    connected components are single states (acyclic apart from self-loops: a deadline's
+    clock counts time): each ``maybe`` state with a choice that stays put is one, alone,
+    its internal choices those that stay put; numbered by their states, ascending, as
+    the rounds number them (:func:`end_components`).  No sub-MDP, no rounds: the end
+    components of such a graph need no search (QVBS zeroconf_dl 1000-1-30: 3,070
+    self-loops)."""
+    n = mdp.n_states
+    stay = _staying_choices(mdp)
+    stay = stay[maybe[mdp.state_of(stay)]]
+    mec_of = np.full(n, -1, dtype=index_dtype(n))
+    internal = np.zeros(mdp.n_choices, dtype=bool)
+    internal[stay] = True
+    members = np.unique(mdp.state_of(stay))
+    mec_of[members] = np.arange(members.size)
+    return EndComponents(read_only(mec_of), read_only(internal), int(members.size))
 
 
 def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
@@ -146,11 +176,19 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     walks, when one attractor pass shows there is none (:func:`_none_among`).  The
     same components as :func:`~mitld_lp.solvers.graph.maximal_end_components` on
     ``maybe``, numbered in another order (which it is, on a matrix that stores a
-    zero)."""
-    n = mdp.n_states
+    zero).  Where every component is one state, :func:`_self_loops_only`."""
     m = mdp.matrix
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
+    if comp.size and int(np.bincount(comp).max()) == 1:  # acyclic apart from self-loops
+        return _self_loops_only(mdp, maybe)
+    return _searched(mdp, comp, maybe)
+
+
+def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
+    """:func:`end_components` by the search (no stored zero)."""
+    n = mdp.n_states
+    m = mdp.matrix
     walks = compiled_walks(m.nnz)
     if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
         return _no_end_components(n, mdp.n_choices)
@@ -339,13 +377,15 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     same = not extra.any()
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
-    found = state_components(m, mdp.row_groups,
-                             np.column_stack([goal] if same else [goal, wide]))
+    found, reach, back = components_reaching(
+        m, mdp.row_groups, np.column_stack([goal] if same else [goal, wide]))
     if not kernel_loader.compiled_paid() and _sweeps_compiled(m, mdp.row_groups,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
-    reach = found.reach[:, [0, 0] if same else [0, 1]][found.component]
+    reach = reach[:, [0, 0] if same else [0, 1]]
+    if sense is Sense.MAX or not without_one:  # only a minimum's Prob1A searches it again
+        back = None
     n = mdp.n_states
     if sense is Sense.MAX:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
@@ -370,12 +410,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     sure_state = np.zeros(n, dtype=bool)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one and sense is Sense.MIN:
-        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0])
+        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
     elif without_one and not mecs.n_mecs:
         sure_state, played = prob1e_first(mdp, m, maybe, prob0[j0], mecs)
         if played is not None:
             shared[ATTRACTOR_STRATEGY] = played
         del played
+    del back
     maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
     n_plain = int(plain.sum())

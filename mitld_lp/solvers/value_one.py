@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.graph import EndComponents, attractor_spared, toward
-from mitld_lp.solvers.reach import reaching_through
+from mitld_lp.solvers.reach import Reversed, reaching_through
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.util.arrays import index_dtype
@@ -38,12 +38,28 @@ __all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "attractor_strategy", "choices_
 
 
 def prob1a_first(m: sp.csr_array, row_groups: np.ndarray, maybe: np.ndarray,
-                 zero: np.ndarray) -> np.ndarray:
+                 zero: np.ndarray, back: Reversed | None = None) -> np.ndarray:
     """``(n,)`` bool: a minimum's ``maybe`` states of value 1 for the target whose
-    prob-0 states are ``zero``: those with no path through ``maybe`` states to one."""
+    prob-0 states are ``zero``: those with no path through ``maybe`` states to one.
+    With ``back`` (the state graph reversed, :func:`~mitld_lp.solvers.graph.
+    components_reaching`'s) and the other states closed (:func:`_closed`: every entry
+    of their choices stays among them, as a product's absorbing targets do), no path
+    to ``zero`` runs through them, so the plain backward search on ``back`` gives the
+    same states, with no edge list gathered and reversed for it (QVBS csma 4-2: 0.015
+    -> 0.004 s of CPU)."""
     sure = np.zeros(maybe.size, dtype=bool)
-    sure[maybe] = ~reaching_through(m, row_groups, maybe, zero)[maybe]
+    if back is not None and _closed(m, np.asarray(row_groups), ~maybe & ~zero):
+        sure[maybe] = ~back.reaching(zero)[maybe]
+    else:
+        sure[maybe] = ~reaching_through(m, row_groups, maybe, zero)[maybe]
     return sure
+
+
+def _closed(m: sp.csr_array, row_groups: np.ndarray, states: np.ndarray) -> bool:
+    """Whether every entry of the choices of ``states`` lies in a column of ``states``."""
+    at = np.flatnonzero(states)
+    entries = gather_ranges(m.indptr[row_groups[at]], m.indptr[row_groups[at + 1]])
+    return bool(np.all(states[m.indices[entries]]))
 
 
 def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
@@ -158,13 +174,15 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
         exits = play[n_plain:][sure[n_plain:]]
         owners = mdp.state_of(exits)
         member = np.asarray(mecs.mec_of)[states] >= 0
-        internal = np.flatnonzero(mecs.internal)
-        internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[mdp.state_of(internal)]]]
-        step = toward(mdp, internal, owners)
         walk = member & ~np.isin(states, owners)
-        if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
-            return None
-        choices[walk] = step[states[walk]]
+        if walk.any():  # none where each such component is one state (a self-loop)
+            internal = np.flatnonzero(mecs.internal)
+            internal = internal[sure[n_plain + np.asarray(mecs.mec_of)[
+                mdp.state_of(internal)]]]
+            step = toward(mdp, internal, owners)
+            if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
+                return None
+            choices[walk] = step[states[walk]]
     itype = index_dtype(mdp.n_choices)
     return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
                         read_only(choices.astype(itype, copy=False)))
