@@ -26,7 +26,7 @@ the argument types; the file also names the source of every other module whose k
 are compiled into it), its object code is linked once and its CPython wrapper called, the
 wrapper numba's dispatcher calls (the one Python function of numba a wrapper reaches, the
 unpickling of the class of the arrays it returns, is primed with a copy:
-:func:`_prime_unpickle`).  Anything else (no file, another key, a damaged or half-written
+:func:`mitld_lp.util.elf_runtime.prime_unpickle`).  Anything else (no file, another key, a damaged or half-written
 file, a symbol the linker would not find, an argument of another kind, any ``NUMBA_*``
 setting other than the cache directory or a numba config file, :data:`ENABLED` False) goes
 to numba: the kernel's numba dispatcher is made (the kernels stay in their modules'
@@ -43,7 +43,6 @@ numba's order.  The file's format: :func:`mitld_lp.util.kernel_files.pack`.
 
 from __future__ import annotations
 
-import builtins
 import hashlib
 import importlib.machinery
 import importlib.util
@@ -56,21 +55,27 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.util import kernel_files
+from mitld_lp.util import elf_link, elf_runtime, kernel_files
 
 __all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
 
 ENABLED = os.environ.get("MITLD_LP_KERNEL_LOADER", "1") != "0"
 """Whether kernels are read from this module's cache (False: every call is numba's)."""
 
+LINKER = os.environ.get("MITLD_LP_KERNEL_LINKER", "elf")
+"""How a cached kernel's object is linked: ``"elf"`` by :mod:`mitld_lp.util.elf_link`
+(llvmlite is not imported; llvmlite's linker where it refuses), anything else by
+llvmlite's MCJIT (``MITLD_LP_KERNEL_LINKER=llvm``: the tests' way to compare the two)."""
+
 _lock = threading.RLock()
 _numba: list[Any] = []  # numba, once some kernel needed it
-_loaded = [0]  # kernels linked from this module's cache in this process
+_loaded = [0, 0]  # kernels linked from this module's cache in this process, by elf_link
 _linked: dict[tuple, Any] = {}  # (object's digest, wrapper) -> its call, once linked
 
 
-def loaded_count() -> int:  # kernel signatures linked from this module's cache
-    return _loaded[0]
+def loaded_count(elf: bool = False) -> int:
+    """Kernel signatures linked from this module's cache (by ``elf_link`` alone)."""
+    return _loaded[1 if elf else 0]
 
 
 def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
@@ -85,10 +90,10 @@ def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
 
 def compiled_paid() -> bool:
     """Whether a compiled kernel costs this process no further load than reading it:
-    numba is imported, or this module's run-time pieces are set up (llvmlite, numba's
-    helpers).  The gates that send mid-sized work to compiled kernels once their load is
+    numba is imported, or this module's run-time pieces are set up (numba's helpers,
+    the key's parts).  The gates that send mid-sized work to compiled kernels once their load is
     paid ask this (it was ``"numba" in sys.modules``)."""
-    return "numba" in sys.modules or bool(_runtime and _runtime[0])
+    return "numba" in sys.modules or bool(_runtime and _runtime[0] and _runtime[0].parts)
 
 
 def prepare() -> None:
@@ -96,7 +101,8 @@ def prepare() -> None:
     module's run-time pieces, or numba's import where they cannot be set up."""
     if ENABLED and not _numba_settings():
         with _lock:
-            if _setup() is not None:
+            rt = _setup()
+            if rt is not None and _parts(rt) is not None:
                 return
     from mitld_lp.util import numba_narrow
     numba_narrow.import_numba()
@@ -242,59 +248,14 @@ def type_key(args: tuple) -> tuple | None:
 _EXTENSIONS = (("numba._helperlib", "_helperlib"),
                ("numba.core.runtime._nrt_python", "core/runtime/_nrt_python"),
                ("numba._dynfunc", "_dynfunc"))
-_runtime: list[Any] = []  # (helperlib, nrt, dynfunc, ll, engine, key parts) once set up
+_runtime: list[Any] = []  # [_Runtime or None] once set up
+_llvm: list[Any] = []  # [(llvmlite.binding, its MCJIT engine) or None] once set up
 
 
-def _numba_dir() -> Path | None:
-    spec = importlib.util.find_spec("numba")
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    return Path(list(spec.submodule_search_locations)[0])
-
-
-def _extension(base: Path, rel: str) -> Path | None:
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = base / (rel + suffix)
-        if path.is_file():
-            return path
-    return None
-
-
-def _load_extensions() -> tuple[list[Any], tuple] | None:
-    """numba's three extension modules (loaded from their shared libraries without
-    numba's package where numba is not imported yet: ``import numba`` later finds and
-    keeps them, CPython initialises such a module once), and what identifies them."""
-    base = _numba_dir()
-    if base is None:
-        return None
-    mods, stamps = [], []
-    for name, rel in _EXTENSIONS:
-        path = _extension(base, rel)
-        if path is None:
-            return None
-        st = path.stat()
-        stamps.append((rel, st.st_size, st.st_mtime_ns))
-        mod = sys.modules.get(name)
-        if mod is None:
-            loader = importlib.machinery.ExtensionFileLoader(name, str(path))
-            spec = importlib.util.spec_from_file_location(name, str(path), loader=loader)
-            if spec is None:
-                return None
-            mod = importlib.util.module_from_spec(spec)
-            loader.exec_module(mod)
-            sys.modules[name] = mod
-        mods.append(mod)
-    try:
-        version = (base / "_version.py").read_bytes()
-    except OSError:
-        return None
-    return mods, (hashlib.sha256(version).hexdigest(), tuple(stamps))
-
-
-def _setup() -> list[Any] | None:
+def _setup() -> _Runtime | None:
     """The run-time pieces, set up once (module docs); None where any is missing."""
     if _runtime:
-        return _runtime[0] or None
+        return _runtime[0]
     found = None
     try:
         found = _setup_once()
@@ -303,11 +264,43 @@ def _setup() -> list[Any] | None:
     return found
 
 
-def _setup_once() -> list[Any] | None:
-    ext = _load_extensions()
+class _Runtime:
+    """numba's extension modules' pieces, the symbols a kernel's object may name, and
+    the cache key's parts (None until known: remembered, or from llvmlite)."""
+
+    def __init__(self, dynfunc: Any, symbols: dict[str, int], probe: Any,
+                 machine: tuple | None) -> None:
+        self.dynfunc = dynfunc
+        self.symbols = symbols
+        self.probe = probe
+        self.parts = None if machine is None else (sys.version, probe[1], *machine)
+
+
+def _setup_once() -> _Runtime | None:
+    ext = elf_runtime.load_extensions(_EXTENSIONS)
     if ext is None:
         return None
     (helperlib, nrt, dynfunc), numba_id = ext
+    if not elf_runtime.prime_unpickle(helperlib.c_helpers["unpickle"]):
+        return None
+    probe = elf_runtime.probe(sys.version, numba_id)
+    return _Runtime(dynfunc, elf_runtime.explicit_symbols(helperlib, nrt, dynfunc),
+                    (None, numba_id) if probe is None else probe,
+                    elf_runtime.read_machine(probe))
+
+
+def _parts(rt: _Runtime) -> tuple | None:
+    """The cache key's parts of this process (remembered, else llvmlite's)."""
+    if rt.parts is None:
+        _setup_llvm(rt)
+    return rt.parts
+
+
+def _setup_llvm(rt: _Runtime) -> tuple | None:
+    """llvmlite's MCJIT with the symbols numba's load adds, once: (ll, engine)."""
+    if _llvm:
+        return _llvm[0]
+    _llvm.append(None)
     import llvmlite
     from llvmlite import binding as ll
 
@@ -319,86 +312,22 @@ def _setup_once() -> list[Any] | None:
         features = ll.get_host_cpu_features().flatten()
     except RuntimeError:
         features = ""
-    # the symbols numba's own load adds (numba.core.base._load_global_helpers, the
-    # runtime's rtsys.initialize): the same addresses, so adding them twice is harmless
-    ll.add_symbol("_Py_NoneStruct", id(None))
-    for helpers in (helperlib.c_helpers, dynfunc.c_helpers):
-        for name, address in helpers.items():
-            ll.add_symbol("numba_" + name, address)
-    for obj in builtins.__dict__.values():
-        if isinstance(obj, type) and issubclass(obj, BaseException):
-            ll.add_symbol(f"PyExc_{obj.__name__}", id(obj))
-    for name, address in nrt.c_helpers.items():
-        ll.add_symbol(name if name.startswith("_") else "NRT_" + name, address)
-    if not _prime_unpickle(helperlib.c_helpers["unpickle"]):
-        return None
+    # the same addresses numba's own load adds, so adding them twice is harmless
+    for name, address in rt.symbols.items():
+        ll.add_symbol(name, address)
     target = ll.Target.from_triple(triple)
     tm = target.create_target_machine(cpu=cpu, features=features, reloc="static",
                                       codemodel="jitdefault", jit=True)
     engine = ll.create_mcjit_compiler(ll.parse_assembly(""), tm)
-    machine = (triple, cpu, features)
-    parts = (sys.version, numba_id, llvmlite.__version__,
-             tuple(ll.llvm_version_info), machine)
-    return [dynfunc, ll, engine, parts]
-
-
-_unpickled_memo: dict[tuple, Any] = {}
-
-
-def _numba_unpickle(address: int, bytedata: bytes, hashed: bytes) -> Any:
-    """numba's ``numba.core.serialize._numba_unpickle`` (numba 0.68), line for line:
-    ``numba_unpickle`` of ``numba._helperlib`` calls it for the constants a wrapper boxes
-    with (the class of the arrays it returns) and keeps it for the process
-    (:func:`_prime_unpickle`); numba's vendored cloudpickle's ``loads`` is pickle's."""
-    import pickle
-
-    key = (address, hashed)
-    try:
-        obj = _unpickled_memo[key]
-    except KeyError:
-        _unpickled_memo[key] = obj = pickle.loads(bytedata)
-    return obj
-
-
-def _prime_unpickle(address: int) -> bool:
-    """Have ``numba_unpickle`` of ``numba._helperlib`` fetch its Python function now, from
-    a stand-in of ``numba.core.serialize`` holding :func:`_numba_unpickle` alone (and
-    empty stand-ins of its parents, which ``PyImport_ImportModule`` imports first), put in
-    ``sys.modules`` for this one call under the import lock: the helper imports that
-    module once a process and keeps the function (a static of the C helper), and the real
-    module imports all of numba.  Where numba is loaded already nothing is done (the
-    helper takes numba's)."""
-    import _imp
-    import ctypes
-    import pickle
-    import types
-
-    names = ("numba", "numba.core", "numba.core.serialize")
-    if "numba" in sys.modules:
-        return True
-    stand_ins = {name: types.ModuleType(name) for name in names}
-    stand_ins["numba.core.serialize"]._numba_unpickle = _numba_unpickle  # type: ignore[attr-defined]
-    for name in names[:2]:
-        stand_ins[name].__path__ = []  # type: ignore[attr-defined]  # a package: no finder
-    proto = ctypes.PYFUNCTYPE(ctypes.py_object, ctypes.c_char_p, ctypes.c_int,
-                              ctypes.c_char_p)
-    data = pickle.dumps(None)
-    _imp.acquire_lock()
-    try:
-        if any(name in sys.modules for name in names):
-            return False
-        sys.modules.update(stand_ins)
-        try:
-            got = proto(address)(data, len(data), b"\0" * 20)
-        except Exception:  # noqa: BLE001 - the helper could not be primed: numba's load
-            return False
-        finally:
-            for name in names:
-                if sys.modules.get(name) is stand_ins[name]:
-                    del sys.modules[name]
-    finally:
-        _imp.release_lock()
-    return got is None
+    machine = (llvmlite.__version__, tuple(ll.llvm_version_info), (triple, cpu, features))
+    parts = (sys.version, rt.probe[1], *machine)
+    if rt.parts is not None and rt.parts != parts:
+        return None  # the remembered description is wrong: link nothing
+    rt.parts = parts
+    if rt.probe[0] is not None:
+        elf_runtime.write_machine(rt.probe, machine)
+    _llvm[0] = (ll, engine)
+    return _llvm[0]
 
 
 def _numba_settings() -> bool:
@@ -476,17 +405,15 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
     if found is None:
         return None
     meta, object_code = found
-    pieces = _setup()
-    if pieces is None:
+    rt = _setup()
+    parts = None if rt is None else _parts(rt)
+    if rt is None or parts is None:
         return None
-    dynfunc, ll, engine, parts = pieces
     if meta.get("key") != _runtime_key(kernel, key, parts):
         return None
     sources = meta.get("sources", ())
     if _callee_sources(m for m, _ in sources) != sources:
         return None  # a kernel of another module compiled into it has changed
-    if any(ll.address_of_symbol(s) is None for s in meta["undefined"]):
-        return None  # LLVM's linker would abort the process on it
     module = sys.modules.get(kernel.__module__)
     if module is None:
         return None
@@ -503,28 +430,66 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
             # not imported: nopython code never reads an environment's globals (only
             # object mode's lowering does), as numba_narrow's stand-in has it
             scope = {"__name__": modname}
-        env = dynfunc.Environment(scope)
+        env = rt.dynfunc.Environment(scope)
         env.consts.extend(np.dtype(c) for c in consts)
         envs.append((env_name, env))
-    engine.add_object_file(ll.ObjectFileRef.from_data(object_code))
-    engine.finalize_object()
+    linked = _link_elf(object_code, rt) if LINKER == "elf" else None
+    if linked is None:
+        linked = _link_llvm(object_code, meta, rt)
+        if linked is None:
+            return None
+    address, keep = linked
     import ctypes
 
     for env_name, env in envs:
-        address = engine.get_global_value_address(env_name)
-        if not address:
+        at = address(env_name, False)
+        if not at:
             return None
-        ctypes.c_void_p.from_address(address).value = id(env)
-    wrapper = engine.get_function_address(meta["wrapper"])
+        ctypes.c_void_p.from_address(at).value = id(env)
+    wrapper = address(meta["wrapper"], True)
     own = dict(envs)[meta["env"]]
     if not wrapper:
         return None
-    call = dynfunc.make_function(module, kernel.__name__,
-                                 f"compiled wrapper for {kernel.__qualname__!r}",
-                                 wrapper, own, (engine, tuple(e for _, e in envs)))
+    call = rt.dynfunc.make_function(module, kernel.__name__,
+                                    f"compiled wrapper for {kernel.__qualname__!r}",
+                                    wrapper, own, (keep, tuple(e for _, e in envs)))
     _loaded[0] += 1
+    _loaded[1] += keep is not _llvm
     _linked[digest] = call
     return call
+
+
+def _link_elf(object_code: bytes, rt: _Runtime) -> tuple | None:
+    """The object linked by :mod:`mitld_lp.util.elf_link`: (address of a symbol, what
+    keeps it), or None where it refuses."""
+    if not elf_link.supported():
+        return None
+    if rt.__dict__.get("resolve") is None:
+        rt.resolve = elf_runtime.resolver(rt.symbols)
+    try:
+        linked = elf_link.link(object_code, rt.resolve)
+    except elf_link.Refused:
+        return None
+    return (lambda name, _function: linked.symbols.get(name)), linked
+
+
+def _link_llvm(object_code: bytes, meta: dict, rt: _Runtime) -> tuple | None:
+    """The object linked by llvmlite's MCJIT, as :func:`_link_elf`."""
+    found = _setup_llvm(rt)
+    if found is None:
+        return None
+    ll, engine = found
+    if any(ll.address_of_symbol(s) is None for s in meta["undefined"]):
+        return None  # LLVM's linker would abort the process on it
+    engine.add_object_file(ll.ObjectFileRef.from_data(object_code))
+    engine.finalize_object()
+
+    def address(name: str, function: bool) -> int:
+        if function:
+            return engine.get_function_address(name)
+        return engine.get_global_value_address(name)
+
+    return address, _llvm
 
 
 # --- writing a cache file from numba's own cache entry ---------------------------------
@@ -547,10 +512,10 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
     cache = getattr(dispatcher, "_cache", None)
     if cres is None or cache is None or not hasattr(cache, "_cache_file"):
         return
-    pieces = _setup()
-    if pieces is None:
+    rt = _setup()
+    parts = None if rt is None else _parts(rt)
+    if parts is None:
         return
-    _dynfunc, _ll, _engine, parts = pieces
     codegen = cres.target_context.codegen()
     if tuple(codegen.magic_tuple()) != parts[-1]:
         return  # numba compiled for another CPU description than the loader would key
