@@ -55,6 +55,7 @@ def mark():
 try:  # the loader (kernel-loader branch): on in the loader's rounds only
     from mitld_lp.util import kernel_loader
     kernel_loader.ENABLED = LOADER
+    kernel_loader.LINKER = LINKER  # "elf" (loader-floor branch) or "llvm" (llvmlite's MCJIT)
 except ImportError:  # an older checkout
     pass
 if LOADER:  # numba is never imported: no part of its load happens
@@ -114,7 +115,8 @@ parts = [b - a for a, b in zip(t, t[1:])]
 import sys
 print(json.dumps({"parts": parts, "rss": [b - a for a, b in zip(m, m[1:])],
                   "numba": "numba" in sys.modules,
-                  "modules": [m for m in ("yaml", "cffi", "pycparser", "numba.np.arrayobj")
+                  "modules": [m for m in ("yaml", "cffi", "pycparser", "numba.np.arrayobj",
+                                          "llvmlite.binding")
                               if m in sys.modules],
                   "answer": [float(local[0, 0]).hex(), float(local[0, 1]).hex()],
                   "components": [alive.tolist(), label.tolist()]}))
@@ -132,22 +134,31 @@ def main(argv: list[str] | None = None) -> None:
                     help="one round (it prints only: no file is written either way)")
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
                     help="also the narrow load of this checkout's mitld_lp (before/after)")
+    ap.add_argument("--steps", action="store_true",
+                    help="instead: RssAnon / RssFile and CPU at each step of the loader's "
+                         "set-up and of one kernel's link, llvmlite's MCJIT then elf_link")
     args = ap.parse_args(argv)
     if args.quick:
         args.rounds = 1
     if args.compare is not None and not (args.compare / "mitld_lp").is_dir():
         ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
-    modes = {"whole": (False, None), "narrow": (True, None), "loader": ("loader", None)}
+    if args.steps:
+        return _steps(args.rounds)
+    modes = {"whole": (False, None), "narrow": (True, None),
+             "loader llvm": ("llvm", None), "loader": ("elf", None)}
     if args.compare is not None:
         modes = {"whole": (False, None), "base narrow": (True, args.compare.resolve()),
-                 "narrow": (True, None), "loader": ("loader", None)}
+                 "narrow": (True, None), "base loader": ("elf", args.compare.resolve()),
+                 "loader llvm": ("llvm", None), "loader": ("elf", None)}
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     for _ in range(args.rounds):  # the loads taking turns
         for mode, (narrow, code) in modes.items():
             env = dict(os.environ)  # the checkout's package first; run from elsewhere
             env["PYTHONPATH"] = os.pathsep.join([str(code or ROOT), *filter(None, [
                 env.get("PYTHONPATH")])])
-            head = f"NARROW = {bool(narrow)}\nLOADER = {narrow == 'loader'}\n"
+            linker = narrow if narrow in ("elf", "llvm") else "elf"
+            head = (f"NARROW = {bool(narrow)}\nLOADER = {linker == narrow}\n"
+                    f"LINKER = {linker!r}\n")
             done = subprocess.run([sys.executable, "-c", head + CHILD],
                                   text=True, capture_output=True, env=env,
                                   cwd=tempfile.gettempdir())
@@ -181,6 +192,104 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{name:<28}" + "".join(cells))
     print("MB: the process's resident memory gained in the part (median)")
     _sizes()
+
+
+STEPS_CHILD = r"""
+import json, sys, time
+def status():
+    with open("/proc/self/status") as f:
+        d = dict(line.split(":", 1) for line in f)
+    return [int(d[k].split()[0]) / 1024 for k in ("RssAnon", "RssFile")]
+import numpy as np, scipy.sparse as sp, scipy.linalg  # noqa: F401
+from mitld_lp.util import elf_link, elf_runtime, kernel_files, kernel_loader as kl
+from mitld_lp.solvers import compiled_graph
+marks = []
+def mark(name):
+    marks.append((name, time.process_time(), *status()))
+mark("start")
+(helperlib, nrt, dynfunc), numba_id = elf_runtime.load_extensions(kl._EXTENSIONS)
+mark("numba's 3 extension modules")
+elf_runtime.prime_unpickle(helperlib.c_helpers["unpickle"])
+mark("unpickle primed")
+symbols = elf_runtime.explicit_symbols(helperlib, nrt, dynfunc)
+probe = elf_runtime.probe(sys.version, numba_id)
+machine = elf_runtime.read_machine(probe)
+mark("symbols, remembered machine")
+kernel = compiled_graph.strong_components
+args = (np.array([0, 1, 2], dtype=np.int64), np.array([1, 0], dtype=np.int64), np.bool_(False))
+key = kl.type_key(args)
+py = kernel.py_func.__code__.co_filename
+name = kernel_files.file_name(py, kernel.__qualname__, key)
+data = next((d / name).read_bytes() for d in kernel_files.directories(py)
+            if (d / name).is_file())
+meta, obj = kernel_files.unpack(data)
+mark("cache file read")
+if LINKER == "llvm":
+    from llvmlite import binding as ll
+    mark("import llvmlite.binding")
+    ll.initialize_native_target()
+    ll.initialize_native_asmprinter()
+    mark("initialize native target")
+    triple, cpu = ll.get_process_triple(), ll.get_host_cpu_name()
+    features = ll.get_host_cpu_features().flatten()
+    mark("host CPU name, features")
+    for s, a in symbols.items():
+        ll.add_symbol(s, a)
+    tm = ll.Target.from_triple(triple).create_target_machine(
+        cpu=cpu, features=features, reloc="static", codemodel="jitdefault", jit=True)
+    engine = ll.create_mcjit_compiler(ll.parse_assembly(""), tm)
+    mark("symbols added, MCJIT engine")
+    engine.add_object_file(ll.ObjectFileRef.from_data(obj))
+    engine.finalize_object()
+    address = lambda n: engine.get_global_value_address(n)  # noqa: E731
+    mark("object added, finalized")
+else:
+    resolve = elf_runtime.resolver(symbols)
+    linked = elf_link.link(obj, resolve)
+    address = linked.symbols.get
+    mark("elf_link.link")
+import ctypes
+envs = []
+for env_name, modname, consts in meta["envs"]:
+    env = dynfunc.Environment(sys.modules.get(modname, compiled_graph).__dict__)
+    env.consts.extend(np.dtype(c) for c in consts)
+    envs.append((env_name, env))
+    ctypes.c_void_p.from_address(address(env_name)).value = id(env)
+call = dynfunc.make_function(compiled_graph, "k", "", address(meta["wrapper"]),
+                             dict(envs)[meta["env"]], (envs,))
+mark("environments, make_function")
+n, labels = call(*args)
+mark("first call")
+print(json.dumps({"marks": marks, "answer": [int(n), labels.tolist()],
+                  "llvmlite": "llvmlite.binding" in sys.modules}))
+"""
+
+
+def _steps(rounds: int) -> None:
+    """The loader's steps, part by part (``--steps``): medians over ``rounds``."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
+    for linker in ("llvm", "elf"):
+        runs = []
+        for _ in range(rounds):
+            done = subprocess.run([sys.executable, "-c", f"LINKER = {linker!r}\n" + STEPS_CHILD],
+                                  text=True, capture_output=True, env=env,
+                                  cwd=tempfile.gettempdir())
+            if done.returncode:
+                sys.exit(f"the child failed (warm the cache first):\n{done.stderr}")
+            runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        print(f"linker {linker}: strong_components of a 2-cycle -> {runs[0]['answer']} "
+              f"(one component of both states); llvmlite.binding imported: "
+              f"{sorted({r['llvmlite'] for r in runs})}")
+        print(f"  {'step':<32} {'CPU s':>7} {'RssAnon MB':>11} {'RssFile MB':>11}")
+        names = [m[0] for m in runs[0]["marks"]]
+        for i in range(1, len(names)):
+            d = [[r["marks"][i][j] - r["marks"][i - 1][j] for r in runs] for j in (1, 2, 3)]
+            print(f"  {names[i]:<32} {statistics.median(d[0]):7.4f} "
+                  f"{statistics.median(d[1]):11.1f} {statistics.median(d[2]):11.1f}")
+        tot = [[r["marks"][-1][j] - r["marks"][0][j] for r in runs] for j in (1, 2, 3)]
+        print(f"  {'total':<32} {statistics.median(tot[0]):7.4f} "
+              f"{statistics.median(tot[1]):11.1f} {statistics.median(tot[2]):11.1f}")
 
 
 def _sizes() -> None:
