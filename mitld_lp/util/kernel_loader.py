@@ -1,5 +1,5 @@
-"""numba's cached kernels run without importing numba: numba's own machine code, loaded
-by llvmlite from a cache of our own, numba itself only on a miss.
+"""numba's cached kernels run without importing numba: numba's own machine code, linked
+from a cache of our own (without llvmlite where it can), numba itself only on a miss.
 
 A process that solves a large product imports numba (0.14 s of CPU, numba 0.68) only to
 read machine code numba compiled in an earlier process from its disk cache.  That code
@@ -8,11 +8,11 @@ numba's extension modules (``numba._helperlib``: raising, the GIL, unpickling an
 exception; ``numba.core.runtime._nrt_python``: numba's runtime, NRT, its allocator and
 the adaptors between NumPy arrays and NRT's; ``numba._dynfunc``: the environment object
 and the closure that calls a CPython wrapper), each loaded here from its shared library
-*without* running ``numba/__init__.py``; the process's own Python C API; LLVM's runtime
-linker (llvmlite, 0.02 s); and, per kernel, its environment (the module's globals and the
-constants its wrapper boxes with: the NumPy dtypes of the arrays it returns).  numba's
-runtime's own LLVM module is not needed: each kernel's object defines the ``NRT_incref``
-/ ``NRT_decref`` it calls.
+*without* running ``numba/__init__.py``; the process's own Python C API; a runtime linker
+(:mod:`mitld_lp.util.elf_link`, or llvmlite's, 0.02 s and 40 MB); and, per kernel, its
+environment (the module's globals and the constants its wrapper boxes with: the NumPy
+dtypes of the arrays it returns).  numba's runtime's own LLVM module is not needed: each
+kernel's object defines the ``NRT_incref`` / ``NRT_decref`` it calls.
 
 A module of kernels says ``numba = kernel_loader.lazy_numba(globals())`` instead of
 importing numba; its ``@numba.njit(...)`` lines are unchanged and make :class:`Kernel`
@@ -26,7 +26,11 @@ the argument types; the file also names the source of every other module whose k
 are compiled into it), its object code is linked once and its CPython wrapper called, the
 wrapper numba's dispatcher calls (the one Python function of numba a wrapper reaches, the
 unpickling of the class of the arrays it returns, is primed with a copy:
-:func:`mitld_lp.util.elf_runtime.prime_unpickle`).  Anything else (no file, another key, a damaged or half-written
+:func:`mitld_lp.util.elf_runtime.prime_unpickle`).  The object is linked by
+:mod:`mitld_lp.util.elf_link` (no llvmlite: its library adds about 40 MB to a process;
+the key's parts only llvmlite can say are remembered by :mod:`mitld_lp.util.elf_runtime`
+from a process that set llvmlite up), by llvmlite's MCJIT where that refuses it or where
+:data:`LINKER` says so.  Anything else (no file, another key, a damaged or half-written
 file, a symbol the linker would not find, an argument of another kind, any ``NUMBA_*``
 setting other than the cache directory or a numba config file, :data:`ENABLED` False) goes
 to numba: the kernel's numba dispatcher is made (the kernels stay in their modules'
