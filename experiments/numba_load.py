@@ -24,7 +24,12 @@ context is not refreshed either, and numba is imported by
 :func:`mitld_lp.util.numba_narrow.import_numba`, without PyYAML).  The answers must
 be the same to the bit in both; which of PyYAML, cffi and pycparser each load left in
 the process is printed.  ``--compare DIR`` also runs the narrow load of another
-checkout's ``mitld_lp`` (a ``git archive`` of an older commit), taking turns.
+checkout's ``mitld_lp`` (a ``git archive`` of an older commit), taking turns, and the
+kernel loader's rounds of both checkouts: the other's, this one's with llvmlite's linker
+(``loader llvm``: ``kernel_loader.LINKER = "llvm"``) and this one's own (``loader``:
+:mod:`mitld_lp.util.elf_link`).  ``--steps`` instead prints the resident memory
+(``RssAnon``, ``RssFile``) and CPU of each step of the loader's set-up and of one kernel's
+link, with llvmlite's linker and with ``elf_link``.
 """
 
 from __future__ import annotations
@@ -144,8 +149,7 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"--compare {args.compare}: no mitld_lp package in that directory")
     if args.steps:
         return _steps(args.rounds)
-    modes = {"whole": (False, None), "narrow": (True, None),
-             "loader llvm": ("llvm", None), "loader": ("elf", None)}
+    modes = {"whole": (False, None), "narrow": (True, None), "loader": ("elf", None)}
     if args.compare is not None:
         modes = {"whole": (False, None), "base narrow": (True, args.compare.resolve()),
                  "narrow": (True, None), "base loader": ("elf", args.compare.resolve()),

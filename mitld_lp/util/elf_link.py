@@ -30,12 +30,15 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-__all__ = ["Linked", "Refused", "link", "supported"]
+__all__ = ["KNOWN", "Linked", "Refused", "link", "supported"]
 
 R_X86_64_NONE, R_X86_64_64, R_X86_64_PC32, R_X86_64_PLT32 = 0, 1, 2, 4
 R_X86_64_GOTPCREL, R_X86_64_32, R_X86_64_32S, R_X86_64_PC64 = 9, 10, 11, 24
 R_X86_64_GOTPCRELX, R_X86_64_REX_GOTPCRELX = 41, 42
 _GOT_TYPES = (R_X86_64_GOTPCREL, R_X86_64_GOTPCRELX, R_X86_64_REX_GOTPCRELX)
+KNOWN = frozenset((R_X86_64_NONE, R_X86_64_64, R_X86_64_PC32, R_X86_64_PLT32, R_X86_64_32,
+                   R_X86_64_32S, R_X86_64_PC64, *_GOT_TYPES))
+"""The relocation types :func:`link` applies; any other is refused."""
 
 SHT_PROGBITS, SHT_SYMTAB, SHT_RELA, SHT_NOBITS, SHT_REL = 1, 2, 4, 8, 9
 SHT_X86_64_UNWIND = 0x70000001
@@ -174,8 +177,7 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             r_offset, r_info, addend = _RELA.unpack_from(obj, off)
             relocations.append((target, r_offset, r_info & 0xFFFFFFFF, r_info >> 32, addend))
     for _t, _o, typ, sym, _a in relocations:
-        if typ not in (R_X86_64_NONE, R_X86_64_64, R_X86_64_PC32, R_X86_64_PLT32,
-                       R_X86_64_32, R_X86_64_32S, R_X86_64_PC64, *_GOT_TYPES):
+        if typ not in KNOWN:
             raise Refused(f"relocation type {typ}")
         if sym >= len(symbols):
             raise Refused("relocation of a symbol past the table")

@@ -296,7 +296,10 @@ def _setup_once() -> _Runtime | None:
 def _parts(rt: _Runtime) -> tuple | None:
     """The cache key's parts of this process (remembered, else llvmlite's)."""
     if rt.parts is None:
-        _setup_llvm(rt)
+        try:
+            _setup_llvm(rt)
+        except Exception:  # noqa: BLE001 - no llvmlite: no key, numba's calls
+            return None
     return rt.parts
 
 
@@ -325,9 +328,7 @@ def _setup_llvm(rt: _Runtime) -> tuple | None:
     engine = ll.create_mcjit_compiler(ll.parse_assembly(""), tm)
     machine = (llvmlite.__version__, tuple(ll.llvm_version_info), (triple, cpu, features))
     parts = (sys.version, rt.probe[1], *machine)
-    if rt.parts is not None and rt.parts != parts:
-        return None  # the remembered description is wrong: link nothing
-    rt.parts = parts
+    rt.parts = parts  # llvmlite's word over a remembered one (rewritten just below)
     if rt.probe[0] is not None:
         elf_runtime.write_machine(rt.probe, machine)
     _llvm[0] = (ll, engine)
