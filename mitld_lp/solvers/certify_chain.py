@@ -88,20 +88,19 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     states = np.flatnonzero(acting)
     rows = policy[states]
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    dst, val = row_columns(m, rows)  # compiled: no index array of every entry
-    dst = dst.astype(index, copy=False)
-    pos = val > 0
-    del val  # (the solved rows' values are gathered again below, not held here)
-    if pos.all():  # the chain's edges as a CSR over the states: no source an edge
+    counts = m.indptr[rows + 1] - m.indptr[rows]
+    dst, pos = _columns(m, rows, counts, index)
+    del rows
+    if pos is None:  # the chain's edges as a CSR over the states: no source an edge
         starts = np.zeros(n + 1, dtype=np.int64)
-        starts[states + 1] = m.indptr[rows + 1] - m.indptr[rows]
+        starts[states + 1] = counts
         np.cumsum(starts, out=starts)
-        del states, rows, pos
+        del states, counts
         edges = Reversed(n, None, dst, starts=starts)
         del starts
     else:  # its positive entries (in the rows' order), each with its source
-        src = np.repeat(states.astype(index), m.indptr[rows + 1] - m.indptr[rows])
-        del states, rows
+        src = np.repeat(states.astype(index), counts)
+        del states, counts
         src, dst = src[pos], dst[pos]
         del pos
         edges = Reversed(n, src, dst)
@@ -157,6 +156,35 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         slack[idx] = np.maximum(w, 0.0)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
+
+
+COLUMNS_BATCH = 1 << 14
+"""Rows whose entries :func:`_columns` gathers at a time (its memory bound)."""
+
+
+def _columns(m: sp.csr_array, rows: np.ndarray, counts: np.ndarray, index: type,
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The columns of ``m``'s ``rows`` (``counts``: their stored entries), row after row
+    in their stored order, as ``index`` (:func:`~mitld_lp.solvers.rows.row_columns`'
+    entries), and which are positive (None: all are).  Gathered
+    :data:`COLUMNS_BATCH` rows at a time into the one output: the rows' pointers, the
+    columns and the float values of every row at once were the certificate's traced
+    peak on QVBS csma 4-2; the same entries in the same order."""
+    dst = np.empty(int(counts.sum()), dtype=index)
+    pos = None
+    at = 0
+    for a in range(0, rows.size, COLUMNS_BATCH):
+        cols, vals = row_columns(m, rows[a:a + COLUMNS_BATCH])
+        z = at + cols.size
+        dst[at:z] = cols  # (each column below the states' count: it fits ``index``)
+        positive = vals > 0
+        if pos is None and not positive.all():
+            pos = np.ones(dst.size, dtype=bool)
+        if pos is not None:
+            pos[at:z] = positive
+        at = z
+        del cols, vals, positive
+    return dst, pos
 
 
 def _solved_layers(layers: tuple[np.ndarray, np.ndarray] | None, idx: np.ndarray,
