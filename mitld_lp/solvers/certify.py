@@ -63,7 +63,6 @@ from mitld_lp.solvers.certify_repair import (
 from mitld_lp.solvers.chain_levels import forget
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
-    BATCH,
     ETA,
     HAZARD_ACCURACY,
     UNIT,
@@ -100,6 +99,10 @@ GROWTH = 16.0
 
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
+
+BATCH = 1 << 14
+"""Rows the NumPy Bellman check reads at a time (:func:`_fails`; its temporaries,
+some 70 bytes a row: its memory bound, not its verdicts)."""
 
 SPARSE_SUSPECTS = 8
 """A batch of the Bellman checks reads the support's extreme from its whole slice of
@@ -153,8 +156,8 @@ def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
         return Side(float(x[s0]), Check(name, True, "decided by the chain's graph: "
                                         f"{x[s0]:g} (no state left to solve)"), read_only(x))
     for scale in _scales():
-        x[idx] = (np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0) if upper else
-                  np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0))
+        x[idx] = (np.minimum(ch.values[idx] + scale * ch.w, 1.0) if upper else
+                  np.maximum(ch.values[idx] - scale * ch.w, 0.0))
         sums = rows_dot(m, rows, x)
         ok = (x[idx] >= above(rnd, rows, sums)) if upper else (x[idx] <= below(rnd, rows, sums))
         if ok.all():
@@ -198,23 +201,26 @@ def _numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                   upper: bool) -> np.ndarray:
     """Per row of ``st.matrix``: whether it passes :func:`_fails`'s check, by NumPy."""
     m = st.matrix
-    row_state = st.row_state()
     ok = np.empty(m.shape[0], dtype=bool)
     direct = _direct(m, x)
     rule = _rule_values(x, upper)
-    # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not gathered
-    # copies): the float arrays of every row at once were the certificate's peak on
-    # QVBS wlan_dl; each row's sum is the same (scipy sums a row in its entries' order)
+    # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not
+    # gathered copies), each batch's states found from the groups (no state a row of
+    # the whole matrix): the float arrays of every row at once were the certificate's
+    # peak on QVBS wlan_dl; each row's sum is the same (scipy sums a row in its
+    # entries' order)
     for a in range(0, m.shape[0], BATCH):
         z = min(a + BATCH, m.shape[0])
+        row_state = st.row_states(a, z)
         if direct:  # SciPy's product kernel on the rows' pointers, no copy of the rows
             sums = np.zeros(z - a)
             _st.csr_matvec(z - a, x.shape[0], m.indptr[a:z + 1], m.indices, m.data, x,
                            sums)
         else:
             sums = m[a:z] @ x
-        ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state[a:z]], upper, rule)
-    ok |= free[row_state]
+        ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state], upper, rule)
+        ok[a:z] |= free[row_state]
+        del sums, row_state
     return ok
 
 
@@ -363,14 +369,15 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     def candidate(scale: float) -> np.ndarray:
         x = base()
         idx = ch.solved & ~free
+        w = ch.w[~free[ch.solved]]  # (``w`` is the solved states', in their order)
         if upper:
-            x[idx] = np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0)
+            x[idx] = np.minimum(ch.values[idx] + scale * w, 1.0)
             x[ch.sure & ~free] = 1.0
             rest = ch.never & ~free
             x[rest] = 1.0 if fallback is None else np.minimum(fallback[rest] * 1.0000001, 1.0)
             x[zero & ~free] = 0.0
         else:
-            x[idx] = np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0)
+            x[idx] = np.maximum(ch.values[idx] - scale * w, 0.0)
             x[ch.sure & ~free] = 1.0
             x[ch.never & ~free] = 0.0
         return x

@@ -36,17 +36,33 @@ same values to the last bit (:mod:`mitld_lp.solvers.level_kernels`)."""
 @dataclass(frozen=True, slots=True, eq=False)
 class Chain:
     """A policy's chain solved for the certificates: ``values`` (float, every state; 1
-    on ``sure``, 0 on ``never``), ``slack`` (``W``, 0 outside ``solved``), and the three
-    sets of its graph: ``sure`` (the target reached almost surely, the target
-    included), ``never`` (the target unreachable) and ``solved`` (the rest: transient)."""
+    on ``sure``, 0 on ``never``), ``w`` (the slack ``W`` on the ``solved`` states, in
+    their order: a float a solved state, not one a state held through both sides of
+    the certificate; QVBS csma 4-2 solves 678 of 600,267 states), and the three sets of
+    its graph: ``sure`` (the target reached almost surely, the target included),
+    ``never`` (the target unreachable) and ``solved`` (the rest: transient).  Given a
+    ``w`` of every state (the slack of each, 0 outside ``solved``), it keeps the
+    ``solved`` states' entries."""
 
     values: np.ndarray
-    slack: np.ndarray
+    w: np.ndarray
     solved: np.ndarray
     sure: np.ndarray
     never: np.ndarray
     policy: np.ndarray
     target: np.ndarray
+
+    def __post_init__(self) -> None:
+        w = np.asarray(self.w)
+        if w.shape[0] != int(np.count_nonzero(self.solved)):  # one a state: kept compact
+            object.__setattr__(self, "w", read_only(w[np.asarray(self.solved, dtype=bool)]))
+
+    @property
+    def slack(self) -> np.ndarray:
+        """``W`` on every state, 0 outside ``solved`` (made on each call)."""
+        out = np.zeros(self.values.shape[0])
+        out[np.asarray(self.solved, dtype=bool)] = self.w
+        return out
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -148,12 +164,12 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
                       None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
         del sub, b, kappa
-    # the values and slack of every state made after the solve, not held through it
+    # the values of every state made after the solve, not held through it
     values = np.where(sure, 1.0, 0.0)
-    slack = np.zeros(n)
+    slack = np.zeros(idx.size)
     if v is not None:
         values[idx] = np.clip(v, 0.0, 1.0)
-        slack[idx] = np.maximum(w, 0.0)
+        np.maximum(w, 0.0, out=slack)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
 
