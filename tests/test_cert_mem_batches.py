@@ -161,3 +161,28 @@ def test_the_chains_columns_are_the_rows_entries_whatever_the_batch(
     dst, pos = certify_chain._columns(z, rows, counts, np.int32)
     want_pos = [float(v) > 0 for r in rows for v in z.data[z.indptr[r]:z.indptr[r + 1]]]
     assert dst.tolist() == want_cols and pos is not None and pos.tolist() == want_pos
+
+
+@pytest.mark.parametrize("batch", [1, 3, 1 << 16])
+def test_reaching_with_its_seeds_written_in_batches_is_a_plain_search(
+        monkeypatch: pytest.MonkeyPatch, batch: int) -> None:
+    from mitld_lp.solvers import reach
+
+    monkeypatch.setattr(reach, "SEED_BATCH", batch)
+    rng = np.random.default_rng(batch)
+    n = 40
+    source = rng.integers(0, n, size=70)
+    succ = rng.integers(0, n, size=70)
+    edges = reach.Reversed(n, source, succ)
+    for _ in range(3):  # several searches on the one reversal
+        seeds = rng.random(n) < 0.15
+        back = {s: set() for s in range(n)}
+        for a, b in zip(source.tolist(), succ.tolist(), strict=True):
+            back[b].add(a)
+        seen, todo = set(np.flatnonzero(seeds).tolist()), list(np.flatnonzero(seeds))
+        while todo:
+            for p in back[int(todo.pop())]:
+                if p not in seen:
+                    seen.add(p)
+                    todo.append(p)
+        assert np.flatnonzero(edges.reaching(seeds)).tolist() == sorted(seen)

@@ -108,9 +108,11 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     dst, pos = _columns(m, rows, counts, index)
     del rows
     if pos is None:  # the chain's edges as a CSR over the states: no source an edge
-        starts = np.zeros(n + 1, dtype=np.int64)
+        # in the reversal's index type where it fits: it reads them without a copy
+        small = n + dst.size < np.iinfo(np.int32).max
+        starts = np.zeros(n + 1, dtype=np.int32 if small else np.int64)
         starts[states + 1] = counts
-        np.cumsum(starts, out=starts)
+        np.cumsum(starts, out=starts, dtype=starts.dtype)
         del states, counts
         edges = Reversed(n, None, dst, starts=starts)
         del starts
