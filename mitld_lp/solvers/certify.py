@@ -248,7 +248,7 @@ def _rows_pass(m: sp.csr_array, rnd: Rounding, x: np.ndarray, rows: np.ndarray |
             # no stored successor past ``bottom``
             low = miss[at_bottom]
             if sliced:
-                good[low] = ~_reaching(m, rows.start, rows.stop, past)[low]
+                good[low] = ~_reaching(m, rows.start, rows.stop, past, low)
             else:
                 local, cols, _ = row_entries(m, at(low))
                 reached = np.zeros(low.size, dtype=bool)
@@ -314,18 +314,20 @@ def _touched(st: Rows, changed: np.ndarray,
     return out
 
 
-def _reaching(m: sp.csr_array, a: int, z: int, past: np.ndarray) -> np.ndarray:
-    """Per row of the consecutive rows ``a:z``: whether a stored entry's column is
-    ``past`` (False on an empty row), from one slice of the matrix's arrays as
-    :func:`~mitld_lp.solvers.rounding.range_extreme` reads them."""
+def _reaching(m: sp.csr_array, a: int, z: int, past: np.ndarray,
+              among: np.ndarray) -> np.ndarray:
+    """Per row ``a + among[i]`` of the consecutive rows ``a:z``: whether a stored
+    entry's column is ``past`` (False on an empty row), from one slice of the matrix's
+    arrays as :func:`~mitld_lp.solvers.rounding.range_extreme` reads them: the count of
+    such entries before each row's end and start (a running sum over the slice, exact
+    in integers; a segmented ``reduceat`` took three times as long)."""
     ptr = m.indptr
     ea, ez = int(ptr[a]), int(ptr[z])
-    out = np.zeros(z - a, dtype=bool)
     if ez == ea:
-        return out
-    filled = ptr[a + 1:z + 1] > ptr[a:z]
-    out[filled] = np.logical_or.reduceat(past[m.indices[ea:ez]], (ptr[a:z] - ea)[filled])
-    return out
+        return np.zeros(among.size, dtype=bool)
+    seen = np.zeros(ez - ea + 1, dtype=np.int32 if ez - ea < 2**31 - 1 else np.int64)
+    np.cumsum(past[m.indices[ea:ez]], out=seen[1:])
+    return seen[ptr[a + 1 + among] - ea] > seen[ptr[a + among] - ea]
 
 
 def _rule_values(x: np.ndarray, upper: bool
