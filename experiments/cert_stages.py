@@ -223,6 +223,7 @@ def memory_child(job: dict[str, Any]) -> dict[str, Any]:
                         where.append(frame.f_code.co_filename.split("mitld_lp/")[-1]
                                      + f":{frame.f_lineno} ({frame.f_code.co_name})")
                     frame = frame.f_back
+                frame = None  # (a frame held here would keep its arrays alive)
                 watch.update(high=now, where=" <- ".join(where))
 
     threading.Thread(target=sample, daemon=True).start()
