@@ -97,6 +97,8 @@ log = logging.getLogger(__name__)
 GROWTH = 16.0
 """How much the candidates' slack grows on each retry."""
 
+_LOWER_OPTIMUM = "lower bound: the optimum"  # the name of :func:`optimum_lower`'s check
+
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
 
@@ -487,9 +489,6 @@ def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
     return _optimum_side(st, int(mdp.initial), ch, rnd, upper=False, zero=zero, one=one,
                          fallback=fallback, layers=layers, mec_of=None,
                          name=_LOWER_OPTIMUM)
-
-
-_LOWER_OPTIMUM = "lower bound: the optimum"
 
 
 def _trapped(mdp: MDP, zero: np.ndarray, target: np.ndarray,
