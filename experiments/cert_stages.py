@@ -127,20 +127,11 @@ COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu", "swee
            "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
 
 
-TRACED = (("mitld_lp.solvers.certify", "certify"),
-          ("mitld_lp.solvers.certify", "rounding"),
-          ("mitld_lp.solvers.certify", "_trapped"),
-          ("mitld_lp.solvers.certify", "chain"),
-          ("mitld_lp.solvers.certify_chain", "Reversed.__init__"),
-          ("mitld_lp.solvers.certify_chain", "Reversed.reaching"),
-          ("mitld_lp.solvers.certify_chain", "_solve"),
-          ("mitld_lp.solvers.certify", "policy_lower"),
-          ("mitld_lp.solvers.certify", "policy_upper"),
-          ("mitld_lp.solvers.certify", "optimum_upper"),
-          ("mitld_lp.solvers.certify", "optimum_lower"),
-          ("mitld_lp.solvers.certify", "_fails"),
-          ("mitld_lp.solvers.certify_repair", "_Repair.run"),
-          ("mitld_lp.solvers.certify", "everywhere"))
+TRACED = tuple((module, name) for module, name, *_ in TIMED
+               if module.startswith("mitld_lp.solvers.certify") and name not in (
+                   "_fails_among", "_touched", "_escapes", "compiled_checks",
+                   "compiled_needs", "readers_by_column")) + (
+    ("mitld_lp.solvers.certify", "_trapped"),)
 """The certificate's pieces whose traced peaks ``--memory`` reads (module, attribute);
 a checkout without one has no figure for it."""
 MEM_COLUMNS = ("instance", "checkout", "lower", "upper", "synthesize", "certify_entry",
