@@ -186,3 +186,34 @@ def test_reaching_with_its_seeds_written_in_batches_is_a_plain_search(
                     seen.add(p)
                     todo.append(p)
         assert np.flatnonzero(edges.reaching(seeds)).tolist() == sorted(seen)
+
+
+def test_a_solved_state_in_the_zero_set_leaves_the_others_their_own_slack() -> None:
+    """A minimum's candidate reads the slack of the solved states outside its free set
+    (``Chain.w`` holds every solved state's, in order): a policy that does not avoid
+    the target from state 1, which some policy avoids it from (the zero set), makes 1
+    solved and free between the solved 0 and 2, whose candidates must each be their
+    own value less their own slack (the chain's slack of every state), and below the
+    minimum: 3/4 at 0 (through 2 alone), 1/2 at 2 (by hand)."""
+    from conftest import build_mdp
+
+    goal, dead = 3, 4
+    mdp = build_mdp([[("a", {goal: 0.5, 2: 0.5})],
+                     [("go", {goal: 0.25, dead: 0.75}), ("stay", {1: 1.0})],
+                     [("a", {goal: 0.5, dead: 0.5})], [], []],
+                    target=[goal], sink=[dead])
+    policy = np.array([0, 1, 3, -1, -1])  # state 1 plays "go" (row 1), not "stay"
+    target = np.asarray(mdp.target, dtype=bool)
+    zero = np.array([False, True, False, False, True])
+    rnd = rounding(mdp.matrix)
+    ch = C.chain(mdp, target, policy, rnd)
+    assert np.flatnonzero(ch.solved).tolist() == [0, 1, 2]
+    full = ch.slack  # W of every state, 0 outside the solved ones
+    assert full[0] > 0 and full[2] > 0 and len({full[0], full[1], full[2]}) == 3
+    side = C.optimum_lower(mdp, ch, rnd, zero=zero, layers=C.support_layers(mdp))
+    assert side.check.passed and "slack x1," in side.check.detail, side.check.detail
+    for s in (0, 2):
+        assert side.vector[s] == max(ch.values[s] - full[s], 0.0)
+    assert side.vector[1] == 0.0
+    assert Fraction(float(side.vector[0])) <= Fraction(3, 4)
+    assert Fraction(float(side.vector[2])) <= Fraction(1, 2)
