@@ -39,6 +39,18 @@ of the same product in the same run (``storm_check_cpu``, its value beside).
 Written: ``cert_stages.csv``, ``cert_stages.md``, and ``cert_stages_summary.md`` (per
 instance: the bracket, whether its bits are the same in every run, the least
 certificate and solve of each checkout, Storm's best check).
+
+``--memory`` (cert-mem): instead of the times, the traced peak (``tracemalloc``) of
+each of the certificate's pieces of :data:`TRACED` and of the whole synthesis, bytes a
+product transition above the traced size before ``synthesize`` (the highest of its
+calls; a piece's peak includes the pieces inside it), the size at ``certify``'s entry
+(``certify_entry``: what the route holds for it), and where inside the certificate the
+traced size was highest (``certify_where``: a thread reads the innermost frames of the
+package every half millisecond at each new high); one round, the bracket beside.
+``--sensed`` adds the sensed case (``bench_qvbs.py``'s, ``--quick``: its smallest)::
+
+    python experiments/cert_stages.py --qvbs qcomp/benchmarks --memory --sensed \\
+        --only csma.4-2.some_before --compare /tmp/base
 """
 
 from __future__ import annotations
@@ -115,6 +127,113 @@ COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu", "swee
            "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
 
 
+TRACED = tuple((module, name) for module, name, *_ in TIMED
+               if module.startswith("mitld_lp.solvers.certify") and name not in (
+                   "_fails_among", "_touched", "_escapes", "compiled_checks",
+                   "compiled_needs", "readers_by_column")) + (
+    ("mitld_lp.solvers.certify", "_trapped"),)
+"""The certificate's pieces whose traced peaks ``--memory`` reads (module, attribute);
+a checkout without one has no figure for it."""
+MEM_COLUMNS = ("instance", "checkout", "lower", "upper", "synthesize", "certify_entry",
+               *(t[1] for t in TRACED), "certify_where")
+
+
+def _load_model(job: dict[str, Any]) -> Any:
+    import bench_sweeps as bs
+
+    from mitld_lp import load_model
+
+    if "bus" in job:  # an instance of bench_sweeps.py, posed as it poses them
+        from bench_scaling import Instance
+
+        return bs._model(Instance(*job["bus"]))
+    if job.get("case") == "sensed":
+        import bench_sensed
+
+        return bench_sensed.case_model(job["index"], job["quick"])
+    return load_model(job["model"], max_states=job["max_states"])
+
+
+def memory_child(job: dict[str, Any]) -> dict[str, Any]:
+    """The synthesis with each piece of :data:`TRACED` wrapped for its traced peak
+    (``--memory``): peaks nest (an inner piece's reset of the peak is carried to the
+    pieces around it), bytes a transition above the traced size before ``synthesize``."""
+    import importlib
+    import threading
+    import tracemalloc
+
+    from mitld_lp import synthesize
+
+    model = _load_model(job)
+    peaks: dict[str, int] = {}
+    open_: list[int] = []  # the running peak of each piece open, innermost last
+    watch = {"on": False, "high": 0, "where": None}
+    entry: list[int] = []
+
+    def traced(f: Any, name: str) -> Any:
+        def wrapper(*a: Any, **k: Any) -> Any:
+            now, peak = tracemalloc.get_traced_memory()
+            if open_:
+                open_[-1] = max(open_[-1], peak)
+            open_.append(now)
+            tracemalloc.reset_peak()
+            if name == "certify":
+                entry.append(now)
+                watch.update(on=True, high=now)
+            try:
+                return f(*a, **k)
+            finally:
+                got = max(open_.pop(), tracemalloc.get_traced_memory()[1])
+                peaks[name] = max(peaks.get(name, 0), got)
+                if open_:
+                    open_[-1] = max(open_[-1], got)
+                tracemalloc.reset_peak()
+                if name == "certify":
+                    watch["on"] = False
+        return wrapper
+
+    for module, name in TRACED:
+        owner: Any = importlib.import_module(module)
+        *path, last = name.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        if hasattr(owner, last):
+            setattr(owner, last, traced(getattr(owner, last), name))
+    main_id = threading.get_ident()
+
+    def sample() -> None:
+        while True:
+            time.sleep(0.0005)
+            if not watch["on"]:
+                continue
+            now = tracemalloc.get_traced_memory()[0]
+            if now > watch["high"]:
+                frame, where = sys._current_frames().get(main_id), []
+                while frame is not None and len(where) < 3:
+                    if "mitld_lp" in frame.f_code.co_filename:
+                        where.append(frame.f_code.co_filename.split("mitld_lp/")[-1]
+                                     + f":{frame.f_lineno} ({frame.f_code.co_name})")
+                    frame = frame.f_back
+                frame = None  # (a frame held here would keep its arrays alive)
+                watch.update(high=now, where=" <- ".join(where))
+
+    threading.Thread(target=sample, daemon=True).start()
+    tracemalloc.start()
+    base = tracemalloc.get_traced_memory()[0]
+    tracemalloc.reset_peak()
+    open_.append(base)
+    r = synthesize(model)
+    whole = max(open_.pop(), tracemalloc.get_traced_memory()[1])
+    tracemalloc.stop()
+    per = float(r.mdp.n_transitions)
+    out: dict[str, Any] = {k: round((v - base) / per, 1) for k, v in peaks.items()}
+    out.update(lower=r.lower.hex(), upper=r.upper.hex(),
+               synthesize=round((whole - base) / per, 1),
+               certify_entry=round((max(entry) - base) / per, 1) if entry else None,
+               certify_where=watch["where"])
+    return out
+
+
 def child(job: dict[str, Any]) -> dict[str, Any]:
     """The synthesis with each entry point of :data:`TIMED` wrapped (CPU seconds)."""
     import importlib
@@ -174,14 +293,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--storm", action="store_true",
                     help="Storm's best sound check of each QVBS instance beside (one "
                          "bench_qvbs.measure run each, first)")
+    ap.add_argument("--memory", action="store_true",
+                    help="the certificate's pieces' traced peaks instead of their times "
+                         "(one round)")
+    ap.add_argument("--sensed", action="store_true",
+                    help="also bench_qvbs.py's sensed case")
     ap.add_argument("--child", default=None, help=argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:
         work = Path(args.child)
         job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+        got = memory_child(job) if job.get("memory") else child(job)
+        (work / "out.json").write_text(json.dumps(got), encoding="utf-8")
         return 0
-    if args.qvbs is None and (args.only or not args.bus):
+    if args.qvbs is None and (args.only or not (args.bus or args.sensed)):
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
     checkouts = [("after", HERE.parent)]
@@ -192,8 +317,11 @@ def main(argv: list[str] | None = None) -> int:
         found = (bq.jobs(args.qvbs, 0, bq.MAX_STATES, bq.FAMILIES, Path(tmp))[0]
                  if args.qvbs is not None and args.only else [])
         storm: dict[str, dict[str, Any]] = {}
-        for inst, job in ([f for f in found if f[0].name in set(args.only)]
-                          + bus_jobs(args.bus)):
+        jobs = ([f for f in found if f[0].name in set(args.only)] + bus_jobs(args.bus)
+                + (bq.case_jobs(["sensed"], args.quick, Path(tmp)) if args.sensed else []))
+        if args.memory:
+            return _memory(jobs, checkouts, Path(tmp), out)
+        for inst, job in jobs:
             if args.storm and "bus" not in job:
                 (Path(tmp) / inst.name).mkdir()
                 storm[inst.name] = bq.measure(inst, job, Path(tmp) / inst.name, bq.BUDGET)
@@ -210,6 +338,23 @@ def main(argv: list[str] | None = None) -> int:
     _common.write_tables(out, "cert_stages", COLUMNS, rows)
     _common.write_text(out / "cert_stages_summary.md", _summary(rows, storm))
     print(f"wrote {out / 'cert_stages_summary.md'}")
+    return 0
+
+
+def _memory(jobs: list[tuple[Any, dict[str, Any]]], checkouts: list[tuple[str, Path]],
+            tmp: Path, out: Path) -> int:
+    """``--memory``: one traced run of each job in each checkout (:func:`memory_child`),
+    written as ``cert_stages_memory.csv`` / ``.md``."""
+    rows = []
+    for inst, job in jobs:
+        for label, package in checkouts:
+            got = _run(dict(job, memory=True), tmp, package)
+            rows.append([inst.name, label, *(got.get(c) for c in MEM_COLUMNS[2:])])
+            if "error" in got:
+                rows[-1][-1] = f"error: {got['error']}"
+            print(_common.text_table(MEM_COLUMNS, rows[-1:]), flush=True)
+    _common.write_tables(out, "cert_stages_memory", MEM_COLUMNS, rows)
+    print(f"wrote {out / 'cert_stages_memory.md'}")
     return 0
 
 

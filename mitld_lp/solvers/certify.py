@@ -52,6 +52,7 @@ from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_checks
+from mitld_lp.solvers.certify_everywhere import EVERYWHERE, EVERYWHERE_BATCH, everywhere
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
     SPARSE_LEVEL,
@@ -62,7 +63,6 @@ from mitld_lp.solvers.certify_repair import (
 from mitld_lp.solvers.chain_levels import forget
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import (
-    BATCH,
     ETA,
     HAZARD_ACCURACY,
     UNIT,
@@ -77,7 +77,7 @@ from mitld_lp.solvers.rounding import (
     rounding,
     support_extreme,
 )
-from mitld_lp.solvers.rows import gather_ranges, rows_dot
+from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
     from scipy.sparse import _sparsetools as _st
@@ -87,7 +87,8 @@ except ImportError:  # pragma: no cover - a SciPy without it: the rows sliced
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
-           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE", "ROUNDS",
+           "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
+           "EVERYWHERE_BATCH", "ROUNDS",
            "SPARSE_LEVEL",
            "is_certificate_check"]
 
@@ -96,18 +97,20 @@ log = logging.getLogger(__name__)
 GROWTH = 16.0
 """How much the candidates' slack grows on each retry."""
 
+_LOWER_OPTIMUM = "lower bound: the optimum"  # the name of :func:`optimum_lower`'s check
+
 RETRIES = 2
 """Retries with a larger slack before the repair and the fallbacks."""
+
+BATCH = 1 << 14
+"""Rows the NumPy Bellman check reads at a time (:func:`_fails`; its temporaries,
+some 70 bytes a row: its memory bound, not its verdicts)."""
 
 SPARSE_SUSPECTS = 8
 """A batch of the Bellman checks reads the support's extreme from its whole slice of
 the matrix (:func:`~mitld_lp.solvers.rounding.range_extreme`) when at least one row in
 this many fails the arithmetic, else from the failing rows' entries
 (:func:`~mitld_lp.solvers.rounding.support_extreme`): the same extremes either way."""
-
-EVERYWHERE = "policy optimal in every state"
-"""The name of :func:`everywhere`'s check."""
-
 
 def is_certificate_check(check: Check) -> bool:
     """Whether ``check`` is one of a model's certificate checks (a bound or
@@ -155,8 +158,8 @@ def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
         return Side(float(x[s0]), Check(name, True, "decided by the chain's graph: "
                                         f"{x[s0]:g} (no state left to solve)"), read_only(x))
     for scale in _scales():
-        x[idx] = (np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0) if upper else
-                  np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0))
+        x[idx] = (np.minimum(ch.values[idx] + scale * ch.w, 1.0) if upper else
+                  np.maximum(ch.values[idx] - scale * ch.w, 0.0))
         sums = rows_dot(m, rows, x)
         ok = (x[idx] >= above(rnd, rows, sums)) if upper else (x[idx] <= below(rnd, rows, sums))
         if ok.all():
@@ -200,23 +203,26 @@ def _numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                   upper: bool) -> np.ndarray:
     """Per row of ``st.matrix``: whether it passes :func:`_fails`'s check, by NumPy."""
     m = st.matrix
-    row_state = st.row_state()
     ok = np.empty(m.shape[0], dtype=bool)
     direct = _direct(m, x)
-    rule = _rule_values(m, x, upper, direct)
-    # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not gathered
-    # copies): the float arrays of every row at once were the certificate's peak on
-    # QVBS wlan_dl; each row's sum is the same (scipy sums a row in its entries' order)
+    rule = _rule_values(x, upper)
+    # :data:`BATCH` rows at a time (slices: the rounding's own arrays, not
+    # gathered copies), each batch's states found from the groups (no state a row of
+    # the whole matrix): the float arrays of every row at once were the certificate's
+    # peak on QVBS wlan_dl; each row's sum is the same (scipy sums a row in its
+    # entries' order)
     for a in range(0, m.shape[0], BATCH):
         z = min(a + BATCH, m.shape[0])
+        row_state = st.row_states(a, z)
         if direct:  # SciPy's product kernel on the rows' pointers, no copy of the rows
             sums = np.zeros(z - a)
             _st.csr_matvec(z - a, x.shape[0], m.indptr[a:z + 1], m.indices, m.data, x,
                            sums)
         else:
             sums = m[a:z] @ x
-        ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state[a:z]], upper, rule)
-    ok |= free[row_state]
+        ok[a:z] = _rows_pass(m, rnd, x, slice(a, z), sums, x[row_state], upper, rule)
+        ok[a:z] |= free[row_state]
+        del sums, row_state
     return ok
 
 
@@ -241,15 +247,16 @@ def _rows_pass(m: sp.csr_array, rnd: Rounding, x: np.ndarray, rows: np.ndarray |
         miss = miss[~at_top]
         at_bottom = own[miss] == bottom
         if past is not None and at_bottom.any():
-            # no successor past ``bottom``: no mass on ``past`` (every entry > 0)
+            # no stored successor past ``bottom``
             low = miss[at_bottom]
             if sliced:
-                mass = np.zeros(own.size)
-                _st.csr_matvec(own.size, x.shape[0], m.indptr[rows.start:rows.stop + 1],
-                               m.indices, m.data, past, mass)
-                good[low] = mass[low] == 0.0
+                good[low] = ~_reaching(m, rows.start, rows.stop, past, low)
             else:
-                good[low] = rows_dot(m, at(low), past) == 0.0
+                local, cols, _ = row_entries(m, at(low))
+                reached = np.zeros(low.size, dtype=bool)
+                reached[local[past[cols]]] = True
+                good[low] = ~reached
+                del local, cols, reached
             miss = miss[~at_bottom]
     if sliced and miss.size * SPARSE_SUSPECTS >= own.size:
         ext = range_extreme(m, rows.start, rows.stop, x, largest=upper)[miss]
@@ -276,7 +283,7 @@ def _fails_among(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray, upper
                                     choice_starts[state_starts], rows.size))
         own_state = np.repeat(among, per_row)
         good = _rows_pass(m, rnd, x, rows, rows_dot(m, rows, x), x[own_state], upper,
-                          _rule_values(m, x, upper, _direct(m, x)))
+                          _rule_values(x, upper))
         good |= free[own_state]
     if choice_starts is not None:
         good = np.logical_or.reduceat(good, choice_starts)
@@ -309,7 +316,23 @@ def _touched(st: Rows, changed: np.ndarray,
     return out
 
 
-def _rule_values(m: sp.csr_array, x: np.ndarray, upper: bool, direct: bool
+def _reaching(m: sp.csr_array, a: int, z: int, past: np.ndarray,
+              among: np.ndarray) -> np.ndarray:
+    """Per row ``a + among[i]`` of the consecutive rows ``a:z``: whether a stored
+    entry's column is ``past`` (False on an empty row), from one slice of the matrix's
+    arrays as :func:`~mitld_lp.solvers.rounding.range_extreme` reads them: the count of
+    such entries before each row's end and start (a running sum over the slice, exact
+    in integers; a segmented ``reduceat`` took three times as long)."""
+    ptr = m.indptr
+    ea, ez = int(ptr[a]), int(ptr[z])
+    if ez == ea:
+        return np.zeros(among.size, dtype=bool)
+    seen = np.zeros(ez - ea + 1, dtype=np.int32 if ez - ea < 2**31 - 1 else np.int64)
+    np.cumsum(past[m.indices[ea:ez]], out=seen[1:])
+    return seen[ptr[a + 1 + among] - ea] > seen[ptr[a + among] - ea]
+
+
+def _rule_values(x: np.ndarray, upper: bool
                  ) -> tuple[float | None, float | None, np.ndarray | None]:
     """What settles the convex rule of :func:`_fails` without reading a row's support,
     from ``x``'s extremes ``lo`` and ``hi`` (finite: else ``(None, None, None)``, every
@@ -317,21 +340,17 @@ def _rule_values(m: sp.csr_array, x: np.ndarray, upper: bool, direct: bool
     upper check's ``hi``: the largest ``x`` over a support is at most ``hi``; a lower
     check's ``lo``); ``bottom``, the own value at which it holds exactly when no
     successor is past it (an upper check's ``lo``: no successor above ``lo``); and
-    ``past``, 1.0 on the states past ``bottom`` and 0.0 elsewhere, so that a row's
-    product with it is 0 exactly when none of its successors is past (every stored
-    entry positive: a sum of positive terms is positive in floating point; ``None``
-    where an entry is not, or without SciPy's product, and those rows read their
-    supports)."""
+    ``past``, the states past ``bottom`` (a bool a state: it was a float a state, 1.0
+    on them, for SciPy's product, 4.4 bytes a transition at QVBS csma 4-2's Bellman
+    check), so that a row passes there exactly when no stored entry's column is past:
+    the support's extreme against ``bottom``, the same verdict."""
     if x.size == 0:
         return None, None, None
     lo, hi = float(np.min(x)), float(np.max(x))
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return None, None, None
     top, bottom = (hi, lo) if upper else (lo, hi)
-    past = None
-    if direct and (m.nnz == 0 or float(np.min(m.data)) > 0.0):
-        past = ((x > bottom) if upper else (x < bottom)).astype(np.float64)
-    return top, bottom, past
+    return top, bottom, (x > bottom) if upper else (x < bottom)
 
 
 def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bool,
@@ -354,14 +373,15 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     def candidate(scale: float) -> np.ndarray:
         x = base()
         idx = ch.solved & ~free
+        w = ch.w[~free[ch.solved]]  # (``w`` is the solved states', in their order)
         if upper:
-            x[idx] = np.minimum(ch.values[idx] + scale * ch.slack[idx], 1.0)
+            x[idx] = np.minimum(ch.values[idx] + scale * w, 1.0)
             x[ch.sure & ~free] = 1.0
             rest = ch.never & ~free
             x[rest] = 1.0 if fallback is None else np.minimum(fallback[rest] * 1.0000001, 1.0)
             x[zero & ~free] = 0.0
         else:
-            x[idx] = np.maximum(ch.values[idx] - scale * ch.slack[idx], 0.0)
+            x[idx] = np.maximum(ch.values[idx] - scale * w, 0.0)
             x[ch.sure & ~free] = 1.0
             x[ch.never & ~free] = 0.0
         return x
@@ -450,26 +470,44 @@ def optimum_upper(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
 
 def optimum_lower(mdp: MDP, ch: Chain, rnd: Rounding, *, zero: np.ndarray,
                   layers: tuple[np.ndarray, np.ndarray], one: np.ndarray | None = None,
-                  fallback: np.ndarray | None = None) -> Side:
+                  fallback: np.ndarray | None = None, trapped: Side | None = None,
+                  checked: bool = False) -> Side:
     """A lower bound on the minimal probability of reaching the target (module docs).
     ``zero``: the states from which some policy avoids the target for ever (checked:
     no end component may remain outside it and the target, else the bound is 0);
     ``one``: the states from which every policy reaches it (a candidate value of 1,
-    checked); ``fallback``: a lower vector to try (the iteration's)."""
+    checked); ``fallback``: a lower vector to try (the iteration's).  ``checked``: that
+    check was made before, its outcome ``trapped`` (:func:`_trapped` of the same model,
+    zero set and target: :func:`certify` makes it before the chain, whose vectors are
+    not alive then)."""
     zero = np.asarray(zero, dtype=bool)
-    name = "lower bound: the optimum"
-    left = ~zero & ~ch.target
-    comp = np.asarray(layers[0])
-    ecs = None if _escapes(mdp, left, comp) else end_components(mdp, comp, left)
-    if ecs is not None and ecs.n_mecs:
-        s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
-        return Side(0.0, Check(name, False, (
-            f"{ecs.n_mecs} end components outside the zero set (state {s}): the minimum "
-            "is not the operator's only fixed point there; the bound is the trivial 0")),
-            read_only(np.where(ch.target, 1.0, 0.0)))
+    if not checked:
+        trapped = _trapped(mdp, zero, ch.target, layers)
+    if trapped is not None:
+        return trapped
     st = Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
     return _optimum_side(st, int(mdp.initial), ch, rnd, upper=False, zero=zero, one=one,
-                         fallback=fallback, layers=layers, mec_of=None, name=name)
+                         fallback=fallback, layers=layers, mec_of=None,
+                         name=_LOWER_OPTIMUM)
+
+
+def _trapped(mdp: MDP, zero: np.ndarray, target: np.ndarray,
+             layers: tuple[np.ndarray, np.ndarray]) -> Side | None:
+    """:func:`optimum_lower`'s trivial bound where an end component lies outside the
+    ``zero`` set and the ``target`` (the minimum is then not the operator's only fixed
+    point there); None where none does (:func:`_escapes`, else the search)."""
+    zero = np.asarray(zero, dtype=bool)
+    target = np.asarray(target, dtype=bool)
+    left = ~zero & ~target
+    comp = np.asarray(layers[0])
+    ecs = None if _escapes(mdp, left, comp) else end_components(mdp, comp, left)
+    if ecs is None or not ecs.n_mecs:
+        return None
+    s = int(np.flatnonzero(ecs.mec_of >= 0)[0])
+    return Side(0.0, Check(_LOWER_OPTIMUM, False, (
+        f"{ecs.n_mecs} end components outside the zero set (state {s}): the minimum "
+        "is not the operator's only fixed point there; the bound is the trivial 0")),
+        read_only(np.where(target, 1.0, 0.0)))
 
 
 def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
@@ -533,6 +571,10 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
     if layers is None:
         layers = support_layers(mdp)
+    # a minimum's end-component check reads no chain: made before it, whose vectors
+    # are not alive yet (its walks were the certificate's peak on QVBS csma 4-2)
+    checked = sense == "min" and "lower" in sides
+    trapped = _trapped(mdp, zero, target, layers) if checked else None
     try:  # the LP's walks offered to the chain (:func:`chain_levels.offer`), then freed
         ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
     finally:
@@ -541,35 +583,18 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     if "lower" in sides:
         low = (policy_lower(mdp, ch, rnd) if sense == "max" else
                optimum_lower(mdp, ch, rnd, zero=zero, one=one, layers=layers,
-                             fallback=fallback_lower))
+                             fallback=fallback_lower, trapped=trapped,
+                             checked=checked))
     if "upper" in sides:
         high = (optimum_upper(mdp, ch, rnd, zero=zero, layers=layers, mec_of=mec_of,
                               fallback=fallback_upper) if sense == "max" else
                 policy_upper(mdp, ch, rnd))
+    values = ch.values
+    del ch  # its slack and sets, read by the sides alone: freed before the last check
     checks = [s.check for s in (low, high) if s is not None]
     if low is not None and high is not None and precision is not None:
         checks.append(everywhere(low.vector, high.vector, int(mdp.initial), precision,
                                  complement=complement))
     return Certificate(float("nan") if low is None else low.value,
-                       float("nan") if high is None else high.value, ch.values,
+                       float("nan") if high is None else high.value, values,
                        tuple(checks))
-
-
-def everywhere(lower: np.ndarray, upper: np.ndarray, initial: int, precision: float, *,
-               complement: bool = False) -> Check:
-    """The check that the policy is optimal in every state, not only where it goes: the
-    certified bounds of its value and of the optimum (one of them the policy's) are
-    within ``precision`` of each other in every state, relative to the larger of the
-    state's value and the initial state's (a state far rarer than the answer is held
-    to the answer's scale).  ``complement``: the answer is ``1 -`` the values (a
-    minimum read back from its complement's maximum), the scale too."""
-    gap = upper - lower
-    value = 1.0 - upper if complement else lower
-    scale = np.maximum(value, value[initial])
-    bad = np.flatnonzero(gap > precision * scale)
-    worst = int(bad[np.argmax(gap[bad] / np.maximum(scale[bad], 1e-300))]) if bad.size else -1
-    return Check(EVERYWHERE, bad.size == 0, (
-        f"certified bounds of the policy's value and of the optimum within {precision:g} "
-        f"(relative) in all {lower.size} states" if bad.size == 0 else
-        f"{bad.size} states apart by more than {precision:g} (relative), e.g. state "
-        f"{worst}: [{float(lower[worst])!r}, {float(upper[worst])!r}]"))

@@ -63,6 +63,15 @@ class Rows:
         cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
         return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
 
+    def row_states(self, a: int, z: int) -> np.ndarray:
+        """``row_state()[a:z]`` (``a < z``), made from the groups around those rows
+        alone: not an index a row of the whole matrix held through a check."""
+        choices = _owners(self.nature, a, z) if self.nature is not None else None
+        if choices is None:
+            return _owners(self.groups, a, z)
+        first, last = int(choices[0]), int(choices[-1])
+        return _owners(self.groups, first, last + 1)[choices - first]
+
     def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
                                                     np.ndarray]:
         """The rows of ``states``' choices, where each choice's rows start (``None``
@@ -75,6 +84,16 @@ class Rows:
         rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
         per_choice = self.nature[choices + 1] - self.nature[choices]
         return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
+
+
+def _owners(starts: np.ndarray, a: int, z: int) -> np.ndarray:
+    """The owner of each of the items ``a:z`` (``a < z``), owner ``k``'s items being
+    ``starts[k]:starts[k + 1]``: the last owner starting at or before each, as
+    ``np.repeat(arange(len(starts) - 1), np.diff(starts))[a:z]``."""
+    lo = int(np.searchsorted(starts, a, side="right")) - 1
+    hi = int(np.searchsorted(starts, z - 1, side="right")) - 1
+    edges = np.clip(starts[lo:hi + 2], a, z)
+    return np.repeat(np.arange(lo, hi + 1, dtype=np.int64), np.diff(edges))
 
 
 def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
