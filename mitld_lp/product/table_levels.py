@@ -274,14 +274,21 @@ def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int,
 def loop_cached() -> bool:
     """Whether the compiled loop's load is the cheap one: the kernel loader on and a
     cache file of the loop (:func:`~mitld_lp.util.kernel_loader.cached`); False without
-    numba."""
-    from mitld_lp.util import kernel_loader
+    numba.  Looked up once a process (the gate asks it before each NumPy batch; a file
+    this process writes comes with the load paid)."""
+    if not _CACHED:
+        from mitld_lp.util import kernel_loader
 
-    try:
-        from mitld_lp.product import bfs_kernels
-    except ImportError:  # numba missing
-        return False
-    return kernel_loader.cached(bfs_kernels.__file__, "table_levels")
+        try:
+            from mitld_lp.product import bfs_kernels
+        except ImportError:  # numba missing
+            _CACHED.append(False)
+        else:
+            _CACHED.append(kernel_loader.cached(bfs_kernels.__file__, "table_levels"))
+    return _CACHED[0]
+
+
+_CACHED: list[bool] = []
 
 
 def load_pays(left: int, expanded: int, queued: int, batches: int, per_state: float,
