@@ -217,8 +217,10 @@ COLD_LOAD_SHARE = 0.02
 
 COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
 """States still to come (half a million) that pay a warm load by their per-state cost
-alone: trusted before :data:`_SEEN` batches have shown the frontier's width (a million,
-``PAYS * COLD_LOAD_SECONDS / STATE_SECONDS``, on a cold cache)."""
+alone: trusted before :data:`_SEEN` batches have shown the frontier's width."""
+
+COLD_MIN_STATES = int(PAYS * COLD_LOAD_SECONDS / STATE_SECONDS)
+"""The same on a cold cache or with the loader off (a million, the old rule's)."""
 
 _SEEN = 32
 """NumPy's batches seen before the frontier's width is trusted for the estimate (a
@@ -267,8 +269,9 @@ def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int,
         return True
     warm = loop_cached()
     return load_pays(n_world - expanded, expanded, queued, lean.batches, per_state,
-                     *((LOAD_SECONDS, LOAD_BYTES, LOAD_SHARE) if warm else
-                       (COLD_LOAD_SECONDS, COLD_LOAD_BYTES, COLD_LOAD_SHARE)))
+                     *((LOAD_SECONDS, LOAD_BYTES, LOAD_SHARE, COMPILED_MIN_STATES) if warm
+                       else (COLD_LOAD_SECONDS, COLD_LOAD_BYTES, COLD_LOAD_SHARE,
+                             COLD_MIN_STATES)))
 
 
 def loop_cached() -> bool:
@@ -292,16 +295,17 @@ _CACHED: list[bool] = []
 
 
 def load_pays(left: int, expanded: int, queued: int, batches: int, per_state: float,
-              load_seconds: float, load_bytes: int, share: float) -> bool:
+              load_seconds: float, load_bytes: int, share: float, min_states: int) -> bool:
     """:func:`compiled_wanted`'s rule where the load is not paid, for a load of
     ``load_seconds`` and ``load_bytes`` (at most ``share`` of the product's bytes still
-    to come): ``left`` states still to come of the world's
+    to come; ``min_states`` states still to come pay it by their per-state cost alone):
+    ``left`` states still to come of the world's
     (``expanded`` so far), ``queued`` in the queue, after ``batches`` NumPy batches."""
     if 2 * expanded >= left + expanded:
         return False
     if load_bytes > share * left * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION):
         return False
-    if left >= int(PAYS * load_seconds / STATE_SECONDS):  # by their per-state cost alone
+    if left >= min_states:  # by their per-state cost alone
         return True
     return batches >= _SEEN and (left / max(queued, 1) * BATCH_SECONDS
                                  + left * STATE_SECONDS >= PAYS * load_seconds)
