@@ -178,6 +178,7 @@ def test_the_load_is_wanted_where_it_pays_in_time_and_memory(
     lean = SimpleNamespace(table_steps=np.zeros(1), batches=0)
     paid = [False]
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid[0])
+    monkeypatch.setattr(tl, "loop_cached", lambda: False)  # the cold rule's figures
     # 2M states at 2 transitions each: 2% of 2e6 * 160 B = 6.4 MB < 48 MiB: not loaded
     assert not tl.compiled_wanted(lean, 2_000_000, 0, 1, 2.0)
     # 20M states: 2% of 20e6 * 160 B = 64 MB >= 48 MiB, and 20M >= 1M states: loaded

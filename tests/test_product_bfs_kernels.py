@@ -224,6 +224,7 @@ def test_switched_to_after_numpys_batches(monkeypatch: pytest.MonkeyPatch) -> No
     sta = task("(F[0,7] goal) & F mid")
     expected = numpy_product(world, sta, monkeypatch)
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: False)
+    monkeypatch.setattr(tl, "loop_cached", lambda: True)  # the warm rule's constants
     monkeypatch.setattr(tl, "LOAD_SHARE", float("inf"))  # the load's memory no matter
     monkeypatch.setattr(tl, "COMPILED_MIN_STATES", 0)
     mdp, ran = compiled_product(world, sta, monkeypatch, paid=False)  # from the first level

@@ -63,7 +63,8 @@ def test_same_size_different_depth_different_route() -> None:
     assert f.depth == 190 and f.compiled < f.numpy
 
 
-def test_numba_load_decides_a_middle_block() -> None:
+def test_numba_load_decides_a_middle_block(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sweep_gate, "_CHEAP", [False])  # numba's load: a cold cache
     # a 64 x 32 grid (depth 94) stays within what 100 Jacobi sweeps carry; a 64 x 64 one
     # (depth 126, 4,096 states as bus n64 d3's second block) does not, but its NumPy
     # work is below numba's load: compiled only where numba is loaded already
@@ -130,6 +131,7 @@ def test_both_routes_hold_the_closed_form(monkeypatch: pytest.MonkeyPatch,
     mdp, exact = _gamblers_mdp(n)
     monkeypatch.setattr(kernels, "COMPILED_MIN_ENTRIES", 0)
     monkeypatch.setattr(sweep_gate, "NUMBA_LOAD", load)
+    monkeypatch.setattr(sweep_gate, "_CHEAP", [False])  # NUMBA_LOAD counted
     monkeypatch.setattr(kernels, "_KERNEL", None)  # not loaded yet: its load is counted
     called = {"compiled": 0, "numpy": 0}
 

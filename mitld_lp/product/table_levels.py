@@ -41,7 +41,7 @@ from mitld_lp.product.states import CODE, Absorbing
 from mitld_lp.util.arrays import merge, unique
 from mitld_lp.worlds.table import LATE
 
-__all__ = ["Plain", "compiled_wanted", "plain_table", "run_compiled"]
+__all__ = ["Plain", "compiled_wanted", "load_pays", "loop_cached", "plain_table", "run_compiled"]
 
 _MAX_STEPS = 1 << 16
 """The automaton's steps are tabulated where its memo (automaton states times the
@@ -174,15 +174,24 @@ COMPILED = True
 """Whether the levels may go to the compiled loop (:mod:`mitld_lp.product.bfs_kernels`;
 False: NumPy's batches only, for tests and measurements)."""
 
-LOAD_SECONDS = 0.04
-"""The compiled loop's load the first time in a process (the kernel loader's pieces and
-the kernel linked; ``experiments/bench_product.py --prism``: 0.03-0.045 s)."""
+LOAD_SECONDS = 0.02
+"""The compiled loop's load the first time in a process, from a warm cache: the kernel
+loader's pieces and the kernel linked by its own ELF linker (``experiments/numba_load.py``:
+0.019-0.020 s; it was 0.03-0.045 s through llvmlite)."""
 
-LOAD_BYTES = 48 << 20
-"""What that load adds to the process's resident size: llvmlite's LLVM and numba's
-helpers, about 46 MB (``kernel_loader.prepare()`` in an interpreter that has NumPy and
-SciPy already: 45.8 -> 92.4 MB).  None of it is traced by tracemalloc, all of it is in
-the synthesis's resident peak (``bench_qvbs.py``'s bytes per transition)."""
+LOAD_BYTES = 3 << 20
+"""What that load adds to the process's resident size: numba's helpers and the linked
+code, about 3 MB (``numba_load.py``: 2.9-3.0 MB; it was 46-53 MB with llvmlite's LLVM).
+None of it is traced by tracemalloc, all of it is in the synthesis's resident peak
+(``bench_qvbs.py``'s bytes per transition)."""
+
+COLD_LOAD_SECONDS, COLD_LOAD_BYTES = 0.04, 48 << 20
+"""The figures the rule uses where the load is not known to be that cheap: the loop's
+cache file is missing (numba would compile it) or the loader is off
+(``MITLD_LP_KERNEL_LOADER=0``: numba's import).  They are the rule's figures from before
+the ELF linker, so that a cold cache or the loader off loads the loop exactly where it
+did then (a product of a million states and more still to come) and never makes a
+smaller one pay numba's compile."""
 
 BATCH_SECONDS, STATE_SECONDS = 75e-6, 0.08e-6
 """NumPy's levels: about 75 us of calls a batch whatever its size, and 0.08 us a state
@@ -194,16 +203,24 @@ PAYS = 2.0
 estimated at this many loads or more: it then saves at least one load, and an estimate
 off by half still breaks even."""
 
-LOAD_SHARE = 0.02
-"""... and where the load's resident bytes (:data:`LOAD_BYTES`) are at most this share
-of the product's own (its states still to come at the build budget's bytes a state and
-a transition): the 2 bytes a transition of ~100 the synthesis's peak may rise.  On every
-QVBS instance this project runs (at most 2 million states) that rule keeps the loop to
-processes whose load is paid already."""
+LOAD_SHARE = 0.2
+"""... and where the load's resident bytes are at most this share of the product's own
+(its states still to come at the build budget's bytes a state and a transition).  With
+the ELF linker's 3 MB (:data:`LOAD_BYTES`) that admits a product of about 110,000 states
+and more (some 15 bytes a transition at most on a synthesis peak of ~100-240); with
+llvmlite's 48 MiB (:data:`COLD_LOAD_BYTES`) it was 0.02 (2 bytes a transition), which
+kept the loop to processes whose load was paid already on every QVBS instance this
+project runs (at most 2 million states): the cold rule keeps that share
+(:data:`COLD_LOAD_SHARE`)."""
+
+COLD_LOAD_SHARE = 0.02
 
 COMPILED_MIN_STATES = int(PAYS * LOAD_SECONDS / STATE_SECONDS)
-"""States still to come (a million) that pay the load by their per-state cost alone:
-trusted before :data:`_SEEN` batches have shown the frontier's width."""
+"""States still to come (half a million) that pay a warm load by their per-state cost
+alone: trusted before :data:`_SEEN` batches have shown the frontier's width."""
+
+COLD_MIN_STATES = int(PAYS * COLD_LOAD_SECONDS / STATE_SECONDS)
+"""The same on a cold cache or with the loader off (a million, the old rule's)."""
 
 _SEEN = 32
 """NumPy's batches seen before the frontier's width is trusted for the estimate (a
@@ -250,15 +267,48 @@ def compiled_wanted(lean: Plain, n_world: int, expanded: int, queued: int,
 
     if kernel_loader.compiled_paid():
         return True
-    left = n_world - expanded
-    if 2 * expanded >= n_world:
+    warm = loop_cached()
+    return load_pays(n_world - expanded, expanded, queued, lean.batches, per_state,
+                     *((LOAD_SECONDS, LOAD_BYTES, LOAD_SHARE, COMPILED_MIN_STATES) if warm
+                       else (COLD_LOAD_SECONDS, COLD_LOAD_BYTES, COLD_LOAD_SHARE,
+                             COLD_MIN_STATES)))
+
+
+def loop_cached() -> bool:
+    """Whether the compiled loop's load is the cheap one: the kernel loader on and a
+    cache file of the loop (:func:`~mitld_lp.util.kernel_loader.cached`); False without
+    numba.  Looked up once a process (the gate asks it before each NumPy batch; a file
+    this process writes comes with the load paid)."""
+    if not _CACHED:
+        from mitld_lp.util import kernel_loader
+
+        try:
+            from mitld_lp.product import bfs_kernels
+        except ImportError:  # numba missing
+            _CACHED.append(False)
+        else:
+            _CACHED.append(kernel_loader.cached(bfs_kernels.__file__, "table_levels"))
+    return _CACHED[0]
+
+
+_CACHED: list[bool] = []
+
+
+def load_pays(left: int, expanded: int, queued: int, batches: int, per_state: float,
+              load_seconds: float, load_bytes: int, share: float, min_states: int) -> bool:
+    """:func:`compiled_wanted`'s rule where the load is not paid, for a load of
+    ``load_seconds`` and ``load_bytes`` (at most ``share`` of the product's bytes still
+    to come; ``min_states`` states still to come pay it by their per-state cost alone):
+    ``left`` states still to come of the world's
+    (``expanded`` so far), ``queued`` in the queue, after ``batches`` NumPy batches."""
+    if 2 * expanded >= left + expanded:
         return False
-    if LOAD_BYTES > LOAD_SHARE * left * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION):
+    if load_bytes > share * left * (BYTES_PER_STATE + per_state * BYTES_PER_TRANSITION):
         return False
-    if left >= COMPILED_MIN_STATES:  # by their per-state cost alone
+    if left >= min_states:  # by their per-state cost alone
         return True
-    return lean.batches >= _SEEN and (left / max(queued, 1) * BATCH_SECONDS
-                                      + left * STATE_SECONDS >= PAYS * LOAD_SECONDS)
+    return batches >= _SEEN and (left / max(queued, 1) * BATCH_SECONDS
+                                 + left * STATE_SECONDS >= PAYS * load_seconds)
 
 
 def run_compiled(lean: Plain, found: Any, head: int, budget: Any,

@@ -27,7 +27,8 @@ machine):
   a round's cost without its LU's multiplies (``ROUND_STATE * states + ROUND_ENTRY *
   entries``: a lower bound of the jump's, so that a doubt stays on NumPy, the route
   that loads nothing);
-* compiled: :data:`NUMBA_LOAD` (0 once the kernel is loaded) plus
+* compiled: the kernel's load (0 once it is loaded; :data:`LOADER_LOAD`, the kernel
+  loader's link, where its cache file is there; :data:`NUMBA_LOAD` otherwise) plus
   ``GS_BASE + GS_PER_DEPTH * depth`` sweeps of ``sweep`` entries.
 
 The depth costs two breadth-first searches of the block (2.5-5 ms on the blocks
@@ -47,8 +48,9 @@ from dataclasses import dataclass
 from mitld_lp.solvers import jump_cost, kernels
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS", "NUMBA_LOAD",
-           "NUMPY_ENTRY", "forecast", "prefers_compiled", "use_compiled"]
+__all__ = ["Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS", "LOADER_LOAD",
+           "NUMBA_LOAD", "NUMPY_ENTRY", "forecast", "load_is_cheap", "prefers_compiled",
+           "use_compiled"]
 
 JACOBI_SWEEPS = 100
 """The NumPy sweeps before a block is jumped (the iteration's ``_SWEEPS_BEFORE_POLICY``):
@@ -64,6 +66,10 @@ NUMBA_LOAD = 5.0e7
 """numba's load (its import, the registries, the kernel's first call from the cache) in
 compiled sweeps' entries: 0.44 s (``experiments/numba_load.py``'s median, numba's import
 and three kernels' first calls) over 8.6 ns an entry."""
+LOADER_LOAD = 2.3e6
+"""The kernel's load where the kernel loader links it from a warm cache (its ELF
+linker: 0.020 s, ``experiments/numba_load.py``, loader-floor) over 8.6 ns an entry:
+used in place of :data:`NUMBA_LOAD` where :func:`load_is_cheap`."""
 GS_BASE = 16.0
 """Gauss--Seidel sweeps of a block whatever its depth (one chunk of the kernel)."""
 GS_PER_DEPTH = 1.0
@@ -90,7 +96,29 @@ def _numpy(states: int, entries: float, sweep: float, depth: int) -> float:
 
 
 def _compiled(sweep: float, depth: int, loaded: bool) -> float:
-    return (0.0 if loaded else NUMBA_LOAD) + (GS_BASE + GS_PER_DEPTH * depth) * sweep
+    load = 0.0 if loaded else LOADER_LOAD if load_is_cheap() else NUMBA_LOAD
+    return load + (GS_BASE + GS_PER_DEPTH * depth) * sweep
+
+
+def load_is_cheap() -> bool:
+    """Whether the Gauss--Seidel kernel's load is the loader's (:data:`LOADER_LOAD`):
+    the loader on and the kernel's cache file there
+    (:func:`~mitld_lp.util.kernel_loader.cached`), looked up once a process.  A cold
+    cache (numba's compile, seconds), the loader off (numba's import) or numba missing:
+    :data:`NUMBA_LOAD`, as before the loader's linker."""
+    if not _CHEAP:
+        from mitld_lp.util import kernel_loader
+
+        try:
+            from mitld_lp.solvers import compiled_kernels
+        except ImportError:  # numba missing
+            _CHEAP.append(False)
+        else:
+            _CHEAP.append(kernel_loader.cached(compiled_kernels.__file__, "gauss_seidel"))
+    return _CHEAP[0]
+
+
+_CHEAP: list[bool] = []
 
 
 def forecast(block: Block, loaded: bool) -> Forecast:

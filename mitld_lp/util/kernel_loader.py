@@ -100,6 +100,18 @@ def compiled_paid() -> bool:
     return "numba" in sys.modules or bool(_runtime and _runtime[0] and _runtime[0].parts)
 
 
+def cached(module_file: str, qualname: str) -> bool:
+    """Whether the loader could link the kernel ``qualname`` of ``module_file`` from a
+    cache file instead of compiling it (a warm cache): the loader is on and a cache file
+    of some signature of it exists.  The gates that load a kernel before its load is
+    paid ask this, so that a cold cache never makes them pay numba's compile."""
+    if not ENABLED or _numba_settings():
+        return False
+    stem = kernel_files.file_name(module_file, qualname, ()).rsplit("-", 1)[0]
+    return any(any(d.glob(stem + "-*" + kernel_files.SUFFIX))
+               for d in kernel_files.directories(module_file) if d.is_dir())
+
+
 def prepare() -> None:
     """Pay the compiled kernels' load now (a caller that knows they will run): this
     module's run-time pieces, or numba's import where they cannot be set up."""
