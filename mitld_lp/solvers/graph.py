@@ -163,16 +163,23 @@ def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.nda
                                 np.array(seeds, dtype=bool), hit, True)
         return inside, hit
     n = row_groups.shape[0] - 1
-    counts = np.diff(row_groups)
-    owner = np.repeat(np.arange(n, dtype=np.int64), counts)
+    # the per-state and per-choice scratch in 4 bytes where the sizes allow (csma 4-2's
+    # minimum: 4 such arrays of 600,000-660,000, 10 MB at the analysis's peak)
+    index = np.int32 if max(n, n_choices) < 2**31 - 1 else np.int64
+    counts = np.diff(row_groups).astype(index)
+    owner = np.repeat(np.arange(n, dtype=index), counts)
     pattern = sp.csc_array(sp.csr_array(
         (np.ones(matrix.nnz, dtype=bool), matrix.indices, matrix.indptr), shape=matrix.shape))
     col_ptr, col_rows = pattern.indptr, pattern.indices
+    del pattern
     hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
-    remaining = counts - np.bincount(owner[hit], minlength=n)
+    remaining = counts.copy()
+    if hit.any():
+        remaining -= np.bincount(owner[hit], minlength=n).astype(index)
     inside = np.array(seeds, dtype=bool)
     inside |= (remaining == 0) & (counts > 0)
-    stamp = np.empty(max(n, n_choices), dtype=np.int64)  # scratch of _distinct
+    del counts
+    stamp = np.empty(max(n, n_choices), dtype=index)  # scratch of _distinct
     frontier = np.flatnonzero(inside)
     while frontier.size:
         rows = col_rows[gather_ranges(col_ptr[frontier], col_ptr[frontier + 1])]
@@ -441,18 +448,22 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
         found = Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
                        lambda: _leveled(size, n_comp, comp, out_degree, preds_of, None).level)
         return found, found.reach[comp], None
-    back = Reversed(n, np.repeat(np.arange(n, dtype=graph.indices.dtype),
-                                 np.diff(graph.indptr)), graph.indices)
+    # reversed from the graph's rows themselves (Reversed's starts): no array of each
+    # edge's source, nor its count a state (csma 4-2: 9 MB at the analysis's peak)
+    back = Reversed(n, None, graph.indices, starts=graph.indptr)
+    del graph  # rebuilt by later() if asked: not kept through the analysis (csma: 7 B/t)
     reach = np.zeros((n, seeds.shape[1]), dtype=bool)
     for j in range(seeds.shape[1]):
         reach[:, j] = back.reaching(seeds[:, j])
+    comp = np.asarray(label, dtype=np.int64)
+    del label  # _condensation reads the same numbers from comp
 
     def later() -> np.ndarray:  # the walk levels() makes, on the same components
-        _, comp, out_degree, preds_of = _condensation(graph, n_comp, label)
-        return _leveled(size, n_comp, comp, out_degree, preds_of, None).level
+        _, c, out_degree, preds_of = _condensation(graph_view(matrix, row_groups), n_comp,
+                                                   comp)
+        return _leveled(size, n_comp, c, out_degree, preds_of, None).level
 
-    return Levels(np.asarray(label, dtype=np.int64), None, None,  # type: ignore[arg-type]
-                  later), reach, back
+    return Levels(comp, None, None, later), reach, back  # type: ignore[arg-type]
 
 
 def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,
