@@ -82,6 +82,7 @@ from mitld_lp.solvers.graph import (
     Sense,
     attractor,
     attractor_spared,
+    attractors,
     backward_reachable,
     compiled_end_components,
     components_reaching,
@@ -270,6 +271,18 @@ def _compact(matrix: sp.csr_array) -> None:
             setattr(matrix, name, a.copy())
 
 
+def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
+            two: bool) -> tuple[list[np.ndarray], np.ndarray]:
+    """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
+    attractor of each; ``two``: the targets differ, so two attractors on one reversed
+    pattern) and its maybe states (in the wide attractor, outside ``wide``)."""
+    if two:
+        positive, reach_goal = attractors(m, row_groups, [wide, goal])
+        return [~reach_goal, ~positive], positive & ~wide
+    positive = attractor(m, row_groups, wide)
+    return [~positive & ~goal, ~positive], positive & ~wide
+
+
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
     return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
                          read_only(np.zeros(n_choices, dtype=bool)), 0)
@@ -385,6 +398,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # nothing truncated: one target, so one seed set, one reach and one set of leaks
     # (the second model's columns are the first's)
     same = not extra.any()
+    # a minimum's Prob0E (the attractors of its targets) first where NumPy walks it:
+    # its reversed choices are freed before the state graph's reversal is made, which
+    # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
+    # analysis's peak); compiled, it holds no such graph and runs after, as before
+    early = sense is Sense.MIN and compiled_walks(m.nnz) is None
+    if early:
+        attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
     found, reach, back = components_reaching(
@@ -402,12 +422,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         maybe = reach[:, 1] & ~wide
         mecs = end_components(mdp, found.component, maybe)
     else:
-        positive = attractor(m, mdp.row_groups, wide)
-        prob0 = [~attractor(m, mdp.row_groups, goal) if extra.any() else ~positive & ~goal,
-                 ~positive]
-        maybe = positive & ~wide
+        prob0, maybe = attracted if early else _prob0e(m, mdp.row_groups, goal, wide,
+                                                       extra.any())
         mecs = _no_end_components(n, mdp.n_choices)
-        del positive
 
     if found.level is None and mixed(found.component, maybe):  # the order as before
         found = replace(found, level=found.later())

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
 
-__all__ = ["CLASSES", "QuotientRows", "quotient_rows"]
+__all__ = ["CLASSES", "QuotientRows", "quotient_rows", "take_ranges"]
 
 SLICE = 1 << 16
 """Entries of the product gathered at a time (their temporaries: some 30 bytes an
@@ -65,14 +65,20 @@ def quotient_rows(m: sp.csr_array, kept: np.ndarray, state_map: np.ndarray, n_re
     masks = [g for group in groups for g in (group if isinstance(group, list) else [group])]
     if len(masks) > 5:
         raise ValueError(f"quotient_rows: {len(masks)} masks, at most 5")
-    kept_state = state_map >= 0
-    code = np.zeros(state_map.size, dtype=np.int64)
+    # each state's column: its reduced state, or n_red + its class (a byte a state,
+    # then written into the removed states' places: no int64 array a state)
+    if n_red + CLASSES > np.iinfo(index).max:  # the classes' columns past the type
+        index = np.int64
+    column = state_map.astype(index)
+    removed = column < 0
+    code = np.zeros(state_map.size, dtype=np.uint8)
     for bit, mask in enumerate(masks):
-        if bool(np.any(mask & kept_state)):
+        if bool(np.any(mask & ~removed)):
             raise ValueError(f"quotient_rows: mask {bit} holds a kept state")
-        code[mask] |= 1 << bit
-    column = np.where(kept_state, state_map, n_red + code).astype(index)
-    del code, kept_state
+        code[mask] |= np.uint8(1 << bit)
+    column[removed] = code[removed]
+    column[removed] += index(n_red)
+    del code, removed
     width = n_red + CLASSES
     vectors = []  # each group's factors over the mapped columns
     at = 0
@@ -125,6 +131,20 @@ def quotient_rows(m: sp.csr_array, kept: np.ndarray, state_map: np.ndarray, n_re
             data[p:q], indices[p:q] = d, cols
         del d, cols, gone
     return QuotientRows(data, indices, indptr, sums)
+
+
+def take_ranges(values: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """``values[gather_ranges(starts, stops)]`` (the concatenated ranges, in ``values``'s
+    dtype), taken :data:`SLICE` entries at a time: no index array of every entry (the
+    gather's three, 24 bytes an entry, were the sensed case's analysis peak)."""
+    starts = np.asarray(starts, dtype=np.int64)
+    lens = np.asarray(stops, dtype=np.int64) - starts
+    ends = np.cumsum(lens)
+    out = np.empty(int(ends[-1]) if ends.size else 0, dtype=values.dtype)
+    for a, b in _slices(ends):
+        p = int(ends[a - 1]) if a else 0
+        out[p:int(ends[b - 1])] = values[gather_ranges(starts[a:b], starts[a:b] + lens[a:b])]
+    return out
 
 
 def _slices(ends: np.ndarray) -> list[tuple[int, int]]:
