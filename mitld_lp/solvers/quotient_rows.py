@@ -27,7 +27,12 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
 
-__all__ = ["CLASSES", "QuotientRows", "quotient_rows", "take_ranges"]
+try:  # SciPy's compiled row gather, as ``matrix[rows]`` calls it
+    from scipy.sparse import _sparsetools as _st
+except ImportError:  # pragma: no cover - a SciPy without it: NumPy's gathers
+    _st = None
+
+__all__ = ["CLASSES", "QuotientRows", "quotient_rows", "row_columns", "take_ranges"]
 
 SLICE = 1 << 16
 """Entries of the product gathered at a time (their temporaries: some 30 bytes an
@@ -89,48 +94,71 @@ def quotient_rows(m: sp.csr_array, kept: np.ndarray, state_map: np.ndarray, n_re
             x[n_red:, j] = (np.arange(CLASSES) >> (at + j)) & 1
         vectors.append(x if k else x[:, 0].copy())
         at += max(k, 1)
-    ptr = m.indptr
-    lo = np.asarray(ptr[kept], dtype=np.int64)
-    counts = np.asarray(ptr[np.asarray(kept, dtype=np.int64) + 1], dtype=np.int64)
-    counts -= lo  # each row's entries (then those that stay)
-    cuts = _slices(np.cumsum(counts))
-    lens = counts.astype(index) if drop else counts
-    if drop:  # each row's surviving entries first (the final arrays' size)
-        for a, b in cuts:
-            cols = column[m.indices[gather_ranges(lo[a:b], lo[a:b] + lens[a:b])]]
-            stay = np.concatenate([[0], np.cumsum(cols < n_red)])
-            local = np.concatenate([[0], np.cumsum(lens[a:b])])
-            counts[a:b] = stay[local[1:]] - stay[local[:-1]]
-            del cols, stay, local
+    kept = np.asarray(kept)
+    starts = np.concatenate([[0], np.cumsum(m.indptr[kept + 1] - m.indptr[kept])])
+    cuts = _slices(starts[1:])  # (starts: each kept row's first entry)
+    # the arrays at the kept rows' size, each slice's surviving entries written on,
+    # then cut to their count in place (a shrinking realloc: no second array, no
+    # second pass over the entries to count them first)
+    data = np.empty(int(starts[-1]), dtype=m.data.dtype)
+    indices = np.empty(int(starts[-1]), dtype=index)
     indptr = np.zeros(kept.size + 1, dtype=index)
-    np.cumsum(counts, out=indptr[1:])
-    del counts
-    total = int(indptr[-1])
-    data = np.empty(total, dtype=m.data.dtype)
-    indices = np.empty(total, dtype=index)
     sums = [np.empty((kept.size,) + x.shape[1:], dtype=bool if g in positive else np.float64)
             for g, x in enumerate(vectors)]
+    at = 0
     for a, b in cuts:
-        sel = gather_ranges(lo[a:b], lo[a:b] + lens[a:b])
-        d, cols = m.data[sel], column[m.indices[sel]]
-        del sel
-        local = np.zeros(b - a + 1, dtype=index)
-        np.cumsum(lens[a:b], out=local[1:])
+        cols, d = _entries(m, kept[a:b])
+        cols = column[cols]
+        local = (starts[a:b + 1] - starts[a]).astype(index)
         part = sp.csr_array((d, cols, local), shape=(b - a, width), copy=False)
         for g, (s, x) in enumerate(zip(sums, vectors, strict=True)):
             s[a:b] = (part @ x) > 0 if g in positive else part @ x
         del part
         gone = cols >= n_red
-        p, q = int(indptr[a]), int(indptr[b])
         if drop:
             keep = ~gone
-            data[p:q], indices[p:q] = d[keep], cols[keep]
+            stay = np.concatenate([[0], np.cumsum(keep)])
+            indptr[a + 1:b + 1] = at + stay[local[1:]]
+            q = at + int(stay[-1])
+            data[at:q], indices[at:q] = d[keep], cols[keep]
+            del keep, stay
         else:
             d[gone] = 0.0
             cols[gone] = 0
-            data[p:q], indices[p:q] = d, cols
-        del d, cols, gone
+            q = at + d.size
+            indptr[a + 1:b + 1] = at + local[1:]
+            data[at:q], indices[at:q] = d, cols
+        at = q
+        del d, cols, gone, local
+    if at < data.size:
+        data.resize(at, refcheck=False)  # no view of them exists
+        indices.resize(at, refcheck=False)
     return QuotientRows(data, indices, indptr, sums)
+
+
+def _entries(m: sp.csr_array, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The columns and values of ``m``'s ``rows``, concatenated in order, by SciPy's
+    compiled row gather (as ``m[rows]`` makes them, without the matrix)."""
+    idx = m.indptr.dtype
+    if _st is None or m.indices.dtype != idx:  # pragma: no cover - NumPy's gathers
+        sel = gather_ranges(m.indptr[rows], m.indptr[rows + 1])
+        return m.indices[sel], m.data[sel]
+    rows = np.asarray(rows, dtype=idx)
+    count = int((m.indptr[rows + 1] - m.indptr[rows]).sum())
+    cols, data = np.empty(count, dtype=idx), np.empty(count, dtype=m.data.dtype)
+    _st.csr_row_index(rows.size, rows, m.indptr, m.indices, m.data, cols, data)
+    return cols, data
+
+
+def row_columns(m: sp.csr_array, rows: np.ndarray) -> np.ndarray:
+    """The columns of ``m``'s ``rows`` concatenated (``m[rows].indices``), gathered
+    :data:`SLICE` entries at a time (no per-entry index array, nor the values)."""
+    rows = np.asarray(rows)
+    ends = np.cumsum(np.asarray(m.indptr[rows + 1] - m.indptr[rows], dtype=np.int64))
+    out = np.empty(int(ends[-1]) if ends.size else 0, dtype=m.indices.dtype)
+    for a, b in _slices(ends):
+        out[int(ends[a - 1]) if a else 0:int(ends[b - 1])] = _entries(m, rows[a:b])[0]
+    return out
 
 
 def take_ranges(values: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:

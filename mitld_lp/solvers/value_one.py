@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.graph import EndComponents, attractor_spared, toward
-from mitld_lp.solvers.quotient_rows import take_ranges
+from mitld_lp.solvers.quotient_rows import row_columns, take_ranges
 from mitld_lp.solvers.reach import Reversed, reaching_through
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -77,16 +77,15 @@ def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
     groups = np.asarray(mdp.row_groups)
     states = np.flatnonzero(maybe)
     kept, _ = choices_of(groups, states)
-    start, stop = m.indptr[kept], m.indptr[kept + 1]
     per_state = np.zeros(n, dtype=np.int64)
     per_state[states] = groups[states + 1] - groups[states]
     sub_groups = np.concatenate([[0], np.cumsum(per_state)])
     del per_state
-    indptr = np.concatenate([[0], np.cumsum(stop - start)]).astype(m.indptr.dtype)
+    indptr = np.concatenate([[0], np.cumsum(m.indptr[kept + 1] - m.indptr[kept])]
+                            ).astype(m.indptr.dtype)
     pattern = sp.csr_array((np.broadcast_to(np.float64(1.0), (int(indptr[-1]),)),
-                            take_ranges(m.indices, start, stop), indptr),
+                            row_columns(m, kept), indptr),
                            shape=(kept.size, n), copy=False)
-    del start, stop
     lose, hit = attractor_spared(pattern, sub_groups, zero)
     del pattern, sub_groups
     sure = np.zeros(n, dtype=bool)
