@@ -70,19 +70,16 @@ def quotient_rows(m: sp.csr_array, kept: np.ndarray, state_map: np.ndarray, n_re
     masks = [g for group in groups for g in (group if isinstance(group, list) else [group])]
     if len(masks) > 5:
         raise ValueError(f"quotient_rows: {len(masks)} masks, at most 5")
-    # each state's column: its reduced state, or n_red + its class (a byte a state,
-    # then written into the removed states' places: no int64 array a state)
-    if n_red + CLASSES > np.iinfo(index).max:  # the classes' columns past the type
-        index = np.int64
-    column = state_map.astype(index)
-    removed = column < 0
+    # each state's column: its reduced state, or n_red + its class (a byte a state)
+    col_type = index if n_red + CLASSES <= np.iinfo(index).max else np.int64
+    removed = state_map < 0
     code = np.zeros(state_map.size, dtype=np.uint8)
     for bit, mask in enumerate(masks):
-        if bool(np.any(mask & ~removed)):
-            raise ValueError(f"quotient_rows: mask {bit} holds a kept state")
-        code[mask] |= np.uint8(1 << bit)
-    column[removed] = code[removed]
-    column[removed] += index(n_red)
+        code |= np.asarray(mask, dtype=bool).view(np.uint8) << np.uint8(bit)
+    if bool(np.any((code != 0) & ~removed)):
+        raise ValueError("quotient_rows: a mask holds a kept state")
+    column = np.where(removed, code.astype(col_type) + col_type(n_red),
+                      state_map).astype(col_type, copy=False)
     del code, removed
     width = n_red + CLASSES
     vectors = []  # each group's factors over the mapped columns
