@@ -82,6 +82,7 @@ from mitld_lp.solvers.graph import (
     Sense,
     attractor,
     attractor_spared,
+    attractors,
     backward_reachable,
     compiled_end_components,
     components_reaching,
@@ -89,6 +90,7 @@ from mitld_lp.solvers.graph import (
     state_levels,
 )
 from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
+from mitld_lp.solvers.quotient_rows import quotient_rows
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -260,6 +262,27 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
     return bool(np.bincount(inside).max(initial=0) >= kernels.COMPILED_MIN_BLOCK_ENTRIES)
 
 
+def _compact(matrix: sp.csr_array) -> None:
+    """``matrix``'s entries in arrays of their own size where ``eliminate_zeros`` left
+    them views of larger ones (it copies only below half)."""
+    for name in ("data", "indices"):
+        a = getattr(matrix, name)
+        if a.base is not None and a.size < a.base.size:
+            setattr(matrix, name, a.copy())
+
+
+def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
+            two: bool) -> tuple[list[np.ndarray], np.ndarray]:
+    """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
+    attractor of each; ``two``: the targets differ, so two attractors on one reversed
+    pattern) and its maybe states (in the wide attractor, outside ``wide``)."""
+    if two:
+        positive, reach_goal = attractors(m, row_groups, [wide, goal])
+        return [~reach_goal, ~positive], positive & ~wide
+    positive = attractor(m, row_groups, wide)
+    return [~positive & ~goal, ~positive], positive & ~wide
+
+
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
     return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
                          read_only(np.zeros(n_choices, dtype=bool)), 0)
@@ -375,6 +398,13 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # nothing truncated: one target, so one seed set, one reach and one set of leaks
     # (the second model's columns are the first's)
     same = not extra.any()
+    # a minimum's Prob0E (the attractors of its targets) first where NumPy walks it:
+    # its reversed choices are freed before the state graph's reversal is made, which
+    # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
+    # analysis's peak); compiled, it holds no such graph and runs after, as before
+    early = sense is Sense.MIN and compiled_walks(m.nnz) is None
+    if early:
+        attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
     found, reach, back = components_reaching(
@@ -392,12 +422,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         maybe = reach[:, 1] & ~wide
         mecs = end_components(mdp, found.component, maybe)
     else:
-        positive = attractor(m, mdp.row_groups, wide)
-        prob0 = [~attractor(m, mdp.row_groups, goal) if extra.any() else ~positive & ~goal,
-                 ~positive]
-        maybe = positive & ~wide
+        prob0, maybe = attracted if early else _prob0e(m, mdp.row_groups, goal, wide,
+                                                       extra.any())
         mecs = _no_end_components(n, mdp.n_choices)
-        del positive
 
     if found.level is None and mixed(found.component, maybe):  # the order as before
         found = replace(found, level=found.later())
@@ -445,44 +472,38 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     del owner
     row_groups = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     index = np.int32 if n_red < 2**31 and m.nnz < 2**31 else np.int64
-    # The kept rows of the product, copied once (their entries in stored order), then
-    # each entry's column as a reduced state (a removed one as the extra column n_red,
-    # made 0 below), in the index type.
-    rows = sp.csr_array(m[kept])
-    column = np.where(state_map >= 0, state_map, n_red).astype(index)
-    cols = column[rows.indices]
-    del column
-    # One pass over the kept rows for both targets' one-step probabilities and each
-    # model's removed states of value 0 (a choice that may move there can lose): each
-    # row's sum in its stored order, as over the whole product.  Two columns a product
-    # (each column's sums as in one product of all four: the sparse kernel adds each
-    # column on its own), not four: the four floats a choice and a state were the
-    # analysis's peak on QVBS wlan_dl.
+    # The kept rows of the product read a slice at a time into the quotient's arrays
+    # (quotient_rows: each entry's column a reduced state, in the index type), with one
+    # pass for both targets' one-step probabilities and each model's removed states of
+    # value 0 (a choice that may move there can lose): each row's sum in its stored
+    # order, as over the whole product.  Two columns a product (each column's sums as
+    # in one product of all four: the sparse kernel adds each column on its own), not
+    # four: the four floats a choice and a state were the analysis's peak on QVBS
+    # wlan_dl.  The entries into removed states are dropped there, unless end
+    # components are collapsed: then made explicit zeros in column 0, summed with their
+    # row's duplicates and dropped as before (the duplicates' order of addition).
     removed = state_map < 0
-    one_step = rows @ np.column_stack([goal] if same else [goal, extra]).astype(np.float64)
+    targets = [goal] if same else [goal, extra]
+    losing = [p & removed for p in prob0[1 if same else 0:]]
+    groups = [targets, sure_state, losing] if sure_state.any() else [targets, losing]
+    got = quotient_rows(m, kept, state_map, n_red, groups, index, drop=not mecs.n_mecs,
+                        positive=(len(groups) - 1,))
+    del removed, targets, losing, groups
+    one_step = got.sums[0]
     to_goal = np.ascontiguousarray(one_step[:, 0])
     to_extra = None if same else np.ascontiguousarray(one_step[:, 1])
-    del one_step
     if sure_state.any():  # a move into a value-1 state joins the goal's (_without_one's sum)
-        to_goal = to_goal + rows @ sure_state.astype(np.float64)
-    one_step = rows @ np.column_stack([p & removed for p in prob0[1 if same else 0:]]
-                                      ).astype(np.float64)
-    leaks = [one_step[:, j] > 0 for j in range(one_step.shape[1])]
+        to_goal = to_goal + got.sums[1]
+    one_step = got.sums[-1]  # whether each choice may move to a losing removed state
+    leaks = [np.ascontiguousarray(one_step[:, j]) for j in range(one_step.shape[1])]
     if same:  # the one model's, as both
         leaks = [leaks[0], leaks[0]]
-    del one_step, removed
-    data = rows.data  # written below: never the product's own
-    if np.may_share_memory(data, m.data):  # pragma: no cover - SciPy's gather copies
-        data = data.copy()
-    gone = cols == n_red
-    data[gone] = 0.0
-    cols[gone] = 0
-    matrix = sp.csr_array((data, cols, rows.indptr.astype(index)),
-                          shape=(kept.size, n_red))
-    del rows, cols, gone
+    matrix = sp.csr_array((got.data, got.indices, got.indptr), shape=(kept.size, n_red))
+    del one_step, got
     if mecs.n_mecs:
         matrix.sum_duplicates()
-    matrix.eliminate_zeros()
+        matrix.eliminate_zeros()
+        _compact(matrix)
 
     # with collapsed end components, a maximum's value-1 states out of the quotient
     # (_without_one): Prob1E (a collapsed end component leaves whole)

@@ -38,26 +38,11 @@ from mitld_lp.util.arrays import unique
 from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_components
 
 __all__ = [
-    "Sense", "attractor", "attractor_spared",
-    "Blocks",
-    "Edges",
-    "Reversed",
-    "EndComponents",
-    "Level",
-    "Levels",
-    "backward_reachable",
-    "blocks_from",
-    "components_reaching",
-    "compiled_end_components",
-    "edges",
-    "graph_blocks",
-    "graph_view",
-    "levels",
-    "maximal_end_components",
-    "state_components",
-    "state_levels",
-    "segmented_argmax",
-    "toward",
+    "Sense", "attractor", "attractor_spared", "attractors", "Blocks", "Edges", "Reversed",
+    "EndComponents", "Level", "Levels", "backward_reachable", "blocks_from",
+    "components_reaching", "compiled_end_components", "edges", "graph_blocks", "graph_view",
+    "levels", "maximal_end_components", "state_components", "state_levels",
+    "segmented_argmax", "toward",
 ]
 
 
@@ -162,17 +147,42 @@ def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.nda
         inside = walks.backward(matrix.indptr, matrix.indices, np.asarray(row_groups),
                                 np.array(seeds, dtype=bool), hit, True)
         return inside, hit
-    n = row_groups.shape[0] - 1
-    counts = np.diff(row_groups)
-    owner = np.repeat(np.arange(n, dtype=np.int64), counts)
+    return _attract(_choices_reversed(matrix, row_groups), seeds, hit)
+
+
+def attractors(matrix: sp.csr_array, row_groups: np.ndarray, seed_sets: list[np.ndarray],
+               ) -> list[np.ndarray]:
+    """:func:`attractor` of each of ``seed_sets``: one reversed pattern for all."""
+    back = None if compiled_walks(matrix.nnz) else _choices_reversed(matrix, row_groups)
+    return [attractor(matrix, row_groups, s) if back is None else _attract(back, s, None)[0]
+            for s in seed_sets]
+
+
+def _choices_reversed(matrix: sp.csr_array, row_groups: np.ndarray) -> tuple:
+    """The NumPy attractor's graph: each choice's state and each column's choices (CSC),
+    4 bytes an index where the sizes allow (csma 4-2: 10 MB less than int64)."""
+    n, n_choices = row_groups.shape[0] - 1, int(matrix.indptr.size - 1)
+    index = np.int32 if max(n, n_choices) < 2**31 - 1 else np.int64
+    owner = np.repeat(np.arange(n, dtype=index), np.diff(row_groups).astype(index))
     pattern = sp.csc_array(sp.csr_array(
         (np.ones(matrix.nnz, dtype=bool), matrix.indices, matrix.indptr), shape=matrix.shape))
-    col_ptr, col_rows = pattern.indptr, pattern.indices
+    return row_groups, index, owner, pattern.indptr, pattern.indices
+
+
+def _attract(back: tuple, seeds: np.ndarray, hit: np.ndarray | None,
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`attractor_spared`'s NumPy walk on :func:`_choices_reversed`'s graph."""
+    row_groups, index, owner, col_ptr, col_rows = back
+    n, n_choices = row_groups.shape[0] - 1, owner.size
+    counts = np.diff(row_groups).astype(index)
     hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
-    remaining = counts - np.bincount(owner[hit], minlength=n)
+    remaining = counts.copy()
+    if hit.any():
+        remaining -= np.bincount(owner[hit], minlength=n).astype(index)
     inside = np.array(seeds, dtype=bool)
     inside |= (remaining == 0) & (counts > 0)
-    stamp = np.empty(max(n, n_choices), dtype=np.int64)  # scratch of _distinct
+    del counts
+    stamp = np.empty(max(n, n_choices), dtype=index)  # scratch of _distinct
     frontier = np.flatnonzero(inside)
     while frontier.size:
         rows = col_rows[gather_ranges(col_ptr[frontier], col_ptr[frontier + 1])]
@@ -433,7 +443,11 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     if size <= SMALL:  # csgraph not imported for it
         found = state_components(matrix, row_groups, seeds)
         return found, found.reach[found.component], None
-    n_comp, label = strong_components(graph)
+    # SciPy reads the structure only: data a float64 view of stride 0, not its float64
+    # copy of every edge (csma 4-2: 8.7 MB at the analysis's peak)
+    n_comp, label = strong_components(sp.csr_array(
+        (np.broadcast_to(np.float64(1.0), (graph.nnz,)), graph.indices, graph.indptr),
+        shape=graph.shape, copy=False))
     n = graph.shape[0]
     if 2 * n_comp < n:  # few components: their condensation is the smaller graph
         n_comp, comp, out_degree, preds_of = _condensation(graph, n_comp, label)
@@ -441,18 +455,21 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
         found = Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
                        lambda: _leveled(size, n_comp, comp, out_degree, preds_of, None).level)
         return found, found.reach[comp], None
-    back = Reversed(n, np.repeat(np.arange(n, dtype=graph.indices.dtype),
-                                 np.diff(graph.indptr)), graph.indices)
+    # reversed from the graph's rows (starts): no source an edge (csma 4-2: 9 MB)
+    back = Reversed(n, None, graph.indices, starts=graph.indptr)
+    del graph  # rebuilt by later() if asked, not kept through the analysis (csma: 7 B/t)
     reach = np.zeros((n, seeds.shape[1]), dtype=bool)
     for j in range(seeds.shape[1]):
         reach[:, j] = back.reaching(seeds[:, j])
+    comp = np.asarray(label, dtype=np.int64)  # later()'s _condensation reads it
+    del label
 
     def later() -> np.ndarray:  # the walk levels() makes, on the same components
-        _, comp, out_degree, preds_of = _condensation(graph, n_comp, label)
-        return _leveled(size, n_comp, comp, out_degree, preds_of, None).level
+        _, c, out_degree, preds_of = _condensation(graph_view(matrix, row_groups), n_comp,
+                                                   comp)
+        return _leveled(size, n_comp, c, out_degree, preds_of, None).level
 
-    return Levels(np.asarray(label, dtype=np.int64), None, None,  # type: ignore[arg-type]
-                  later), reach, back
+    return Levels(comp, None, None, later), reach, back  # type: ignore[arg-type]
 
 
 def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,

@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.graph import EndComponents, attractor_spared, toward
+from mitld_lp.solvers.quotient_rows import row_columns, take_ranges
 from mitld_lp.solvers.reach import Reversed, reaching_through
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges
@@ -58,8 +59,9 @@ def prob1a_first(m: sp.csr_array, row_groups: np.ndarray, maybe: np.ndarray,
 def _closed(m: sp.csr_array, row_groups: np.ndarray, states: np.ndarray) -> bool:
     """Whether every entry of the choices of ``states`` lies in a column of ``states``."""
     at = np.flatnonzero(states)
-    entries = gather_ranges(m.indptr[row_groups[at]], m.indptr[row_groups[at + 1]])
-    return bool(np.all(states[m.indices[entries]]))
+    # the columns read a slice at a time (take_ranges), not an index array every entry
+    return bool(np.all(states[take_ranges(m.indices, m.indptr[row_groups[at]],
+                                          m.indptr[row_groups[at + 1]])]))
 
 
 def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
@@ -75,16 +77,15 @@ def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
     groups = np.asarray(mdp.row_groups)
     states = np.flatnonzero(maybe)
     kept, _ = choices_of(groups, states)
-    start, stop = m.indptr[kept], m.indptr[kept + 1]
     per_state = np.zeros(n, dtype=np.int64)
     per_state[states] = groups[states + 1] - groups[states]
     sub_groups = np.concatenate([[0], np.cumsum(per_state)])
     del per_state
-    indptr = np.concatenate([[0], np.cumsum(stop - start)]).astype(m.indptr.dtype)
+    indptr = np.concatenate([[0], np.cumsum(m.indptr[kept + 1] - m.indptr[kept])]
+                            ).astype(m.indptr.dtype)
     pattern = sp.csr_array((np.broadcast_to(np.float64(1.0), (int(indptr[-1]),)),
-                            m.indices[gather_ranges(start, stop)], indptr),
+                            row_columns(m, kept), indptr),
                            shape=(kept.size, n), copy=False)
-    del start, stop
     lose, hit = attractor_spared(pattern, sub_groups, zero)
     del pattern, sub_groups
     sure = np.zeros(n, dtype=bool)
