@@ -282,12 +282,8 @@ def loop_cached() -> bool:
     if not _CACHED:
         from mitld_lp.util import kernel_loader
 
-        try:
-            from mitld_lp.product import bfs_kernels
-        except ImportError:  # numba missing
-            _CACHED.append(False)
-        else:
-            _CACHED.append(kernel_loader.cached(bfs_kernels.__file__, "table_levels"))
+        _CACHED.append(kernel_loader.module_cached("mitld_lp.product.bfs_kernels",
+                                                   "table_levels"))
     return _CACHED[0]
 
 

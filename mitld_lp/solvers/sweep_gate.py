@@ -109,12 +109,8 @@ def load_is_cheap() -> bool:
     if not _CHEAP:
         from mitld_lp.util import kernel_loader
 
-        try:
-            from mitld_lp.solvers import compiled_kernels
-        except ImportError:  # numba missing
-            _CHEAP.append(False)
-        else:
-            _CHEAP.append(kernel_loader.cached(compiled_kernels.__file__, "gauss_seidel"))
+        _CHEAP.append(kernel_loader.module_cached("mitld_lp.solvers.compiled_kernels",
+                                                  "gauss_seidel"))
     return _CHEAP[0]
 
 

@@ -48,6 +48,7 @@ numba's order.  The file's format: :func:`mitld_lp.util.kernel_files.pack`.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import importlib.machinery
 import importlib.util
 import marshal
@@ -110,6 +111,16 @@ def cached(module_file: str, qualname: str) -> bool:
     stem = kernel_files.file_name(module_file, qualname, ()).rsplit("-", 1)[0]
     return any(any(d.glob(stem + "-*" + kernel_files.SUFFIX))
                for d in kernel_files.directories(module_file) if d.is_dir())
+
+
+def module_cached(module: str, qualname: str) -> bool:
+    """:func:`cached` for the kernel ``qualname`` of the kernel module named ``module``,
+    imported here; False where it does not import (numba missing)."""
+    try:
+        found = importlib.import_module(module)
+    except ImportError:
+        return False
+    return cached(found.__file__, qualname)
 
 
 def prepare() -> None:
