@@ -7,6 +7,7 @@ and the product the same to the bit with the gate forced either way."""
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 from types import SimpleNamespace
 
@@ -108,6 +109,27 @@ def test_cached_sees_a_cache_file_and_refuses_with_the_loader_off(
     monkeypatch.setattr(kernel_loader, "ENABLED", True)
     monkeypatch.setenv("NUMBA_OPT", "1")
     assert not kernel_loader.cached(py_file, "table_levels")
+
+
+def test_a_cache_file_older_than_the_source_is_not_warm(
+        tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A cache file written before the kernel module's source last changed (an upgrade
+    or an edit: the load would refuse its key and compile) does not count as warm; the
+    same file written after the source does.  The times are set by hand."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    source = tmp_path / "src" / "some_kernels.py"
+    source.parent.mkdir()
+    source.write_text("# a kernel module\n")
+    (directory,) = kernel_files.directories(str(source))
+    directory.mkdir(parents=True)
+    cache = directory / kernel_files.file_name(str(source), "table_levels", (("int",),))
+    cache.write_bytes(b"x")
+    os.utime(source, ns=(2_000_000_000_000_000_000, 2_000_000_000_000_000_000))
+    os.utime(cache, ns=(1_000_000_000_000_000_000, 1_000_000_000_000_000_000))
+    assert not kernel_loader.cached(str(source), "table_levels")
+    os.utime(cache, ns=(3_000_000_000_000_000_000, 3_000_000_000_000_000_000))
+    assert kernel_loader.cached(str(source), "table_levels")
 
 
 def test_no_numba_no_warm_load(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -104,13 +104,22 @@ def compiled_paid() -> bool:
 def cached(module_file: str, qualname: str) -> bool:
     """Whether the loader could link the kernel ``qualname`` of ``module_file`` from a
     cache file instead of compiling it (a warm cache): the loader is on and a cache file
-    of some signature of it exists.  The gates that load a kernel before its load is
-    paid ask this, so that a cold cache never makes them pay numba's compile."""
+    of some signature of it exists, not older than ``module_file`` (after an upgrade or an
+    edit the load would refuse it and compile).  The gates that load a kernel before its
+    load is paid ask this, so that a cold cache never makes them pay numba's compile."""
     if not ENABLED or _numba_settings():
         return False
     stem = kernel_files.file_name(module_file, qualname, ()).rsplit("-", 1)[0]
-    return any(any(d.glob(stem + "-*" + kernel_files.SUFFIX))
-               for d in kernel_files.directories(module_file) if d.is_dir())
+    source = _mtime(Path(module_file), 0)  # (a source not there counts against nothing)
+    return any(_mtime(f, -1) >= source for d in kernel_files.directories(module_file)
+               if d.is_dir() for f in d.glob(stem + "-*" + kernel_files.SUFFIX))
+
+
+def _mtime(path: Path, missing: int) -> int:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return missing
 
 
 def module_cached(module: str, qualname: str) -> bool:
