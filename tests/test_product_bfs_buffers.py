@@ -12,8 +12,8 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import numpy.testing as npt
 import pytest
+from test_product_bfs_kernels import assert_same
 
 from mitld_lp.automata.sta import make_sta
 from mitld_lp.automata.translate import to_dta
@@ -120,16 +120,6 @@ def built(world: Chain, sta: Any, monkeypatch: pytest.MonkeyPatch, *, compiled: 
     finally:
         tracemalloc.stop()
     return mdp, rooms, peaks
-
-
-def assert_same(a: Any, b: Any) -> None:
-    assert a.action_names == b.action_names and a.initial == b.initial
-    for name in ("row_groups", "choice_actions", "target", "sink", "truncated"):
-        npt.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-    npt.assert_array_equal(a.matrix.indptr, b.matrix.indptr)
-    npt.assert_array_equal(a.matrix.indices, b.matrix.indices)
-    assert a.matrix.data.tobytes() == b.matrix.data.tobytes()  # to the bit
-    npt.assert_array_equal(a.states._keys, b.states._keys)
 
 
 @pytest.mark.parametrize("spec", ["F goal", "G !goal", "G (goal -> F[0,9] goal)"])
