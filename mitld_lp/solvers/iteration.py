@@ -383,15 +383,19 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
                          fast, limit, early):
             continue
-        block = whole(q, block) if budget.stopped is None else block  # the jumps' outer
         if early is not None and early.stopped and budget.stopped is None:
-            if _early_jump(block, rewards, bounds, first, tol, precision, sense,
-                           _saved(early, limit)):
+            # the jump's cost forecast on the block as swept; the moves out of it
+            # (``whole``) made only for a jump that is taken
+            jumped = _early_jump(block, rewards, bounds, first, tol, precision, sense,
+                                 _saved(early, limit), exits, q)
+            if jumped is True:
                 continue
+            block = jumped or block
             if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
                              bar, fast, limit - early.done):
                 continue
         if budget.stopped is None:
+            block = whole(q, block)  # the jump's moves out of the block
             proven = True
             for j in range(bounds.shape[1] // 2):
                 model = replace(block, to_target=rewards[block.choices, 2 * j])
@@ -406,14 +410,21 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
 
 
 def _early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.ndarray,
-                tol: float, precision: float | None, sense: Sense, saved: float) -> bool:
+                tol: float, precision: float | None, sense: Sense, saved: float,
+                exits: np.ndarray, q: Quotient) -> bool | Block | None:
     """The early jump of :data:`_EARLY` on every model, if its cost is at most that of
     the ``saved`` sweeps (:func:`mitld_lp.solvers.jump_cost.worth`), its rounds of
     policy iteration within what they pay for; ``True`` if it closed the block's gap
-    (else its bounds are at least as tight)."""
+    (else its bounds are at least as tight, and the block with its moves out of it,
+    made for the jump, is returned; ``None`` where the jump was refused before it).
+    The cost is forecast on ``block`` as swept (its moves out of it may be left out:
+    :func:`~mitld_lp.solvers.sweep_order.for_sweeps`), the start policy greedy on its
+    ``exits`` (the sweeps' exit rewards, a row a choice: each the same to the bit as
+    the block's own ``to_target + outer @ bounds`` of that column, the same entries
+    added in the same order), so a refused jump never makes the block's moves out."""
     models = bounds.shape[1] // 2
     own = 0 if sense is Sense.MAX else 1  # the first model's start (policy_jump.jump)
-    exit_own = rewards[block.choices, own] + block.outer @ bounds[:, own]
+    exit_own = np.ascontiguousarray(exits[:, own])
     c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense))
     logger.debug("early jump on %d states: %.0f sweeps saved, %.1f rounds of %.1f "
                  "sweeps forecast (depth %d, %.3g LU multiplies)", block.states.size,
@@ -422,7 +433,8 @@ def _early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np
     if not jump_cost.worth(c, saved):
         logger.debug("early jump on %d states refused: it would cost more than the "
                      "sweeps it saves", block.states.size)
-        return False
+        return None
+    block = whole(q, block)
     allowance = c.allowance(saved * models)
     try:
         for j in range(models):
@@ -433,12 +445,12 @@ def _early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np
                       allowance, factors)
             allowance -= factors.factorised
             if not ok:
-                return False
+                return block
     except Abandoned:
         logger.debug("early jump on %d states abandoned: past its %.1f rounds",
                      block.states.size, c.allowance(saved * models))
-        return False
-    return excess(bounds[block.states], tol, precision) < 1.0
+        return block
+    return excess(bounds[block.states], tol, precision) < 1.0 or block
 
 
 def interval_iteration(
