@@ -10,7 +10,9 @@ the captured call runs again
 * once with the iteration's parts wrapped (each part's CPU inside it): the setup of the
   whole pass (``blocks``: the quotient's components and levels; ``levels``: the single
   states' runs, shared with the LP stage; ``reach``: the states the initial one
-  reaches), the single states' walk (``singles``), and per block with states of its own
+  reaches, and the state graph it is searched on), the single states' walk
+  (``singles``), each model's result (``result``: the bounds lifted to the product),
+  and per block with states of its own
   (a non-trivial level): its states and entries, the route (``compiled`` Gauss--Seidel
   or ``numpy`` Jacobi) and which rule of :mod:`mitld_lp.solvers.sweep_gate` decided
   (``product small``: a product under ``COMPILED_MIN_ENTRIES``; ``size``: a block of at
@@ -59,7 +61,7 @@ import _common  # noqa: E402
 
 QUICK = ("consensus.2-2.c2",)
 BUDGET = 900.0
-PASS_PARTS = ("blocks", "levels", "reach", "singles")
+PASS_PARTS = ("blocks", "levels", "reach", "singles", "result")
 BLOCK_PARTS = ("gate", "block", "order", "prepare", "sweeps_cpu", "stop_test", "jump",
                "early_jump")
 
@@ -210,6 +212,8 @@ def _instrument(iteration: Any) -> _Split:
     split.wrap(iteration, "blocks", "blocks")
     split.wrap(iteration, "shared_levels", "levels")
     split.wrap(iteration, "breadth_first_order", "reach")
+    split.wrap(iteration, "state_graph", "reach")
+    split.wrap(iteration, "_result", "result")
     split.wrap(topological.SingleLevels, "solve", "singles")
     # Block.of runs before the gate: its CPU is held and given to the block it makes
     of = topological.Block.of

@@ -72,6 +72,7 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
+import scipy.sparse as sp
 
 from mitld_lp import defaults
 from mitld_lp.mdp import MDP
@@ -96,7 +97,6 @@ from mitld_lp.solvers.topological import (
     Factors,
     SingleLevels,
     blocks,
-    state_graph,
 )
 from mitld_lp.util.progress import Bar
 from mitld_lp.util.progress import bar as progress_bar
@@ -378,7 +378,8 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
             rest = block.states
         prep = Prepared(block.inner, block.groups)
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY
-        first = bounds[block.states]  # a copy: the early jump starts greedy on it
+        # a copy: the early jump (compiled blocks only) starts greedy on it
+        first = bounds[block.states] if fast else None
         early = _Early() if fast else None
         if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
                          fast, limit, early):
@@ -543,7 +544,7 @@ def interval_iterations(
                 skip = None
                 if gap == "initial":
                     skip = np.ones(q.n_states, dtype=bool)
-                    skip[np.asarray(breadth_first_order(state_graph(q), q.initial))] = False
+                    skip[np.asarray(breadth_first_order(_moves(q), q.initial))] = False
                 # first to ``tol`` alone (what an answer of ordinary size needs), then,
                 # where the bracket is still wider than the relative precision, again
                 # with both thresholds per state (module docs)
@@ -563,6 +564,20 @@ def interval_iterations(
     seconds = time.perf_counter() - start
     return [_result(mdp, o, bounds[:, 2 * j:2 * j + 2], tol, precision, gap, decided,
                     budget, seconds, time_limit) for j, o in enumerate(quotients)]
+
+
+def _moves(q: Quotient) -> sp.csr_array:
+    """The quotient's moves between states for the search of the states the initial
+    one reaches: each state's row the column indices of its choices' rows (a slice of
+    the matrix's own arrays, its probabilities as the weights, no copy), a successor
+    reached by several choices listed once a choice.  A search reaches the same states
+    as on :func:`~mitld_lp.solvers.topological.state_graph`, whose duplicates merged
+    (a sort of every entry) only the strongly connected components need."""
+    m = q.matrix
+    n = q.row_groups.shape[0] - 1
+    index = np.int32 if max(n, m.nnz) < 2**31 else np.int64
+    return sp.csr_array((m.data, m.indices.astype(index, copy=False),
+                         np.asarray(m.indptr[q.row_groups], dtype=index)), shape=(n, n))
 
 
 def _over(bounds: np.ndarray, q: Quotient, gap: Literal["initial", "max"], tol: float,
