@@ -34,7 +34,9 @@ The wrapped run's total is printed beside the plain one (the wrappers cost a lit
         --bus bus_scaled_n64_d3 bus_scaled_n128_d3 --compare /tmp/base
     python experiments/iteration_sweeps.py --qvbs /work/shared/qvbs --quick
 
-``--compare DIR`` runs every child again with the ``mitld_lp`` of another checkout (the
+``--routes`` also runs the captured iteration with every block compiled and with none
+(numba loaded in the first), each with its sweeps and bracket: what the gate chose
+between.  ``--compare DIR`` runs every child again with the ``mitld_lp`` of another checkout (the
 same harness) right after this one's, and prints both with ``same_bracket`` (both ends
 of the initial state's bracket equal to the bit).  ``--quick`` runs one small QVBS
 instance into ``experiments/out/quick`` (or ``--out``).  Written: ``iteration_sweeps.json``
@@ -190,6 +192,12 @@ def child_split(job: dict[str, Any]) -> dict[str, Any]:
     out.update(iteration_s=best, sweeps=res.iterations,
                lower=repr(res.value_lower), upper_iter=repr(res.value_upper),
                brackets=[[repr(x.value_lower), repr(x.value_upper)] for x in results])
+    if job.get("routes"):  # every block compiled, then none (the gate's alternatives)
+        for name, compiled in (("all_compiled", True), ("all_numpy", False)):
+            c = _cpu()
+            got = plain(*args, **dict(kwargs, compiled=compiled))
+            out[name] = {"iteration_s": _cpu() - c, "sweeps": got[0].iterations,
+                         "bracket": [repr(got[0].value_lower), repr(got[0].value_upper)]}
     split = _instrument(iteration)
     c = _cpu()
     results = plain(*args, **kwargs)
@@ -308,7 +316,8 @@ def _jobs(args: argparse.Namespace, work: Path) -> list[tuple[str, dict[str, Any
         if missing:
             raise SystemExit(f"iteration_sweeps.py: --only: no such QVBS instance under "
                              f"{args.qvbs}: {', '.join(missing)}")
-        out += [(name, dict(byname[name], repeats=args.repeats)) for name in sorted(wanted)]
+        out += [(name, dict(byname[name], repeats=args.repeats, routes=args.routes))
+                for name in sorted(wanted)]
     if args.bus and not args.quick:
         import bench_sweeps as bs
         from bench_scaling import Instance
@@ -318,7 +327,8 @@ def _jobs(args: argparse.Namespace, work: Path) -> list[tuple[str, dict[str, Any
         if unknown:
             raise SystemExit(f"iteration_sweeps.py: --bus: no such instance of "
                              f"bench_sweeps.py: {', '.join(unknown)}")
-        out += [(n, {"bus": list(known[n]), "repeats": args.repeats}) for n in args.bus]
+        out += [(n, {"bus": list(known[n]), "repeats": args.repeats, "routes": args.routes})
+                for n in args.bus]
     return out
 
 
@@ -350,7 +360,10 @@ def report(rows: list[dict[str, Any]]) -> str:
                       f"split run {_f(r['split_total_s'])} s (same bracket: "
                       f"{r['split_same']}): " + ", ".join(
                           f"{k} {_f(v)}" for k, v in r["parts"].items())
-                      + f", other {_f(r['other'])}", "",
+                      + f", other {_f(r['other'])}", *(
+                          f"{k}: iteration_s {_f(r[k]['iteration_s'])}, {r[k]['sweeps']} "
+                          f"sweeps, bracket [{r[k]['bracket'][0]}, {r[k]['bracket'][1]}]"
+                          for k in ("all_compiled", "all_numpy") if k in r), "",
                       "| block | states | entries | route | gate | gate_s | sweeps | sweeps_s "
                       "| ms/sweep | block_s | order_s | prepare_s | stop_test_s | jumps "
                       "| jump_s | early_jump_s |",
@@ -390,6 +403,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="plain runs of the iteration")
     ap.add_argument("--compare", type=Path, default=None, metavar="DIR",
                     help="another checkout whose mitld_lp runs the same children")
+    ap.add_argument("--routes", action="store_true",
+                    help="also every block compiled, and none (after the plain runs)")
     ap.add_argument("--quick", action="store_true", help="one small instance")
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
