@@ -1,4 +1,4 @@
-"""The interval iteration's early jump on a compiled block (``iteration._early_jump``),
+"""The interval iteration's early jump on a compiled block (``solvers/early_jump.py``),
 its cost forecast made on the block as swept (no moves out of it) with the sweeps' own
 exit rewards, and the sweeps' gate (``sweep_gate.use_compiled``), against routes written
 here: every state's exact optimum by value iteration in fractions over every
@@ -18,7 +18,7 @@ import pytest
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers import iteration, jump_cost, kernels, sweep_gate
+from mitld_lp.solvers import early_jump, iteration, jump_cost, kernels, sweep_gate
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.policy_jump import start_policy
 from mitld_lp.solvers.topological import Block
@@ -139,14 +139,15 @@ def _force_early(monkeypatch: pytest.MonkeyPatch, worth: bool) -> dict[str, int]
     monkeypatch.setattr(kernels, "OPTIMISTIC", False)
     monkeypatch.setattr(jump_cost, "worth", lambda c, saved: worth)
     calls = {"early": 0, "whole": 0}
-    for name, key in (("_early_jump", "early"), ("whole", "whole")):
-        func = getattr(iteration, name)
+    for module, name, key in ((iteration, "_early_jump", "early"),
+                              (iteration, "whole", "whole"), (early_jump, "whole", "whole")):
+        func = getattr(module, name)
 
         def counted(*args, _func=func, _key=key, **kwargs):
             calls[_key] += 1
             return _func(*args, **kwargs)
 
-        monkeypatch.setattr(iteration, name, counted)
+        monkeypatch.setattr(module, name, counted)
     return calls
 
 
