@@ -27,7 +27,8 @@ from mitld_lp.solvers.topological import Block, Factors
 
 __all__ = ["early_jump"]
 
-logger = logging.getLogger(__name__)
+# the iteration's own logger: its lines (taken, refused, abandoned) stay where they were
+logger = logging.getLogger("mitld_lp.solvers.iteration")
 
 
 def early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.ndarray,
