@@ -1,8 +1,8 @@
 """The interval iteration's early jump on a compiled block (``solvers/early_jump.py``),
 its cost forecast made on the block as swept (no moves out of it) with the sweeps' own
 exit rewards, and the sweeps' gate (``sweep_gate.use_compiled``), against routes written
-here: every state's exact optimum by value iteration in fractions over every
-deterministic policy's chain (small MDPs of dyadic probabilities, so the floats the
+here: every state's exact optimum, the best over every memoryless deterministic policy
+of its chain solved in fractions (small MDPs of dyadic probabilities, so the floats the
 solver reads are the fractions exactly), the start policy and exit rewards recomputed on
 the whole block as the iteration made them before, and the gate's rule from its
 documented formula on grids, whose depth is known in closed form."""
@@ -15,13 +15,14 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+from test_iter_rare_sweeps import _mdp as rare_mdp
+from test_sweep_gate_choice import _block
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import early_jump, iteration, jump_cost, kernels, sweep_gate
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.policy_jump import start_policy
-from mitld_lp.solvers.topological import Block
+from mitld_lp.testing.exact import chain_values
 
 needs_numba = pytest.mark.skipif(kernels.compiled_kernel() is None,
                                  reason="numba is not installed")
@@ -54,29 +55,13 @@ def _choices(seed: int, n: int) -> list[list[dict[int, Fraction]]]:
 
 
 def _mdp(choices: list[list[dict[int, Fraction]]]) -> MDP:
-    n = len(choices) + 2
-    rows, cols, vals, groups = [], [], [], [0]
-    row = 0
-    for s in range(n):
-        for option in (choices[s] if s < len(choices) else [{s: Fraction(1)}]):
-            assert sum(option.values()) == 1
-            for t, p in sorted(option.items()):
-                rows.append(row), cols.append(t), vals.append(float(p))
-            row += 1
-        groups.append(row)
-    target = np.zeros(n, dtype=bool)
-    sink = np.zeros(n, dtype=bool)
-    target[n - 2], sink[n - 1] = True, True
-    return MDP(matrix=sp.csr_array((vals, (rows, cols)), shape=(row, n)),
-               row_groups=np.array(groups, dtype=np.int64),
-               choice_actions=np.zeros(row, dtype=np.int32), action_names=("a",),
-               initial=0, target=target, sink=sink,
-               truncated=np.zeros(n, dtype=bool), states=tuple(range(n)))
+    """The MDP of ``choices`` and two absorbing states after them, the goal and fail."""
+    return rare_mdp(choices, len(choices) + 2)
 
 
 def _policy_values(step: dict[int, dict[int, Fraction]], goal: int) -> dict[int, Fraction]:
-    """Each state's probability of reaching ``goal`` in the chain ``step``, by Gaussian
-    elimination in fractions over the states that reach it (the others 0)."""
+    """Each state's probability of reaching ``goal`` in the chain ``step``: solved in
+    fractions over the states that reach it (``chain_values``), the others 0."""
     good = {goal}
     grew = True
     while grew:
@@ -85,24 +70,7 @@ def _policy_values(step: dict[int, dict[int, Fraction]], goal: int) -> dict[int,
             if s not in good and any(t in good for t in option):
                 good.add(s)
                 grew = True
-    maybe = sorted(good - {goal})
-    at = {s: i for i, s in enumerate(maybe)}
-    m = len(maybe)
-    a = [[Fraction(int(i == j)) for j in range(m)] + [Fraction(0)] for i in range(m)]
-    for s in maybe:
-        for t, p in step[s].items():
-            if t == goal:
-                a[at[s]][m] += p
-            elif t in at:
-                a[at[s]][at[t]] -= p
-    for col in range(m):
-        pivot = next(r for r in range(col, m) if a[r][col] != 0)
-        a[col], a[pivot] = a[pivot], a[col]
-        for r in range(m):
-            if r != col and a[r][col] != 0:
-                f = a[r][col] / a[col][col]
-                a[r] = [x - f * y for x, y in zip(a[r], a[col], strict=True)]
-    return {s: a[at[s]][m] / a[at[s]][at[s]] for s in maybe}
+    return chain_values(step, sorted(good - {goal}), goal)
 
 
 def _exact(choices: list[list[dict[int, Fraction]]], sense: Sense) -> list[Fraction]:
@@ -254,17 +222,6 @@ def test_reach_search_finds_the_states_the_state_graph_gives() -> None:
 
 
 # ------------------------------------------------------------------------- the gate
-def _block(succ: list[list[int]], leave: float = 1 / 64) -> Block:
-    """One choice a state, moving to ``succ[s]`` in equal shares of ``1 - leave``."""
-    n = len(succ)
-    row = [s for s in range(n) for _ in succ[s]]
-    col = [t for s in range(n) for t in succ[s]]
-    val = [(1.0 - leave) / len(succ[s]) for s in range(n) for _ in succ[s]]
-    inner = sp.csr_array((val, (row, col)), shape=(n, n))
-    return Block(np.arange(n), np.arange(n), inner, sp.csr_array((n, 1)),
-                 np.arange(n, dtype=np.int64), np.full(n, leave))
-
-
 def _forecast(n: int, nnz: int, depth: int, entries: int, loaded: bool,
               cheap: bool) -> bool:
     """The gate's documented rule (sweep_gate's module docs), its constants as written
