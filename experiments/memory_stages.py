@@ -30,11 +30,13 @@ and many traced objects to snapshot, did not finish in 15 minutes); take the sta
 from a run without it.
 
 Run as a script, it tracks one synthesis in this process (no Storm, no bench): a model
-file (a QVBS instance's, as ``bench_qvbs.py`` writes them) or a ``bench_sweeps``
-instance::
+file (a QVBS instance's, as ``bench_qvbs.py`` writes them), a ``bench_sweeps``
+instance or a ``bench_sensed`` case (the sensed route: its build is the ``product``
+row's, its stages those of the plain route's solve it runs)::
 
     python experiments/memory_stages.py --model zeroconf.toml --at-peak
     python experiments/memory_stages.py --sweeps bus_scaled_n64_d3 --resident
+    python experiments/memory_stages.py --sensed 0  # bench_sensed's case 0 (sensed route)
 
 ``numba``: numba is imported only for a large product, inside ``synthesize``, and its
 import alone is ~50 MB resident, whatever the product's size.  Where the synthesis
@@ -62,6 +64,8 @@ STAGES = (  # (module, attribute, stage name): looked up at call time by their c
     ("mitld_lp.solvers.lp", "solve_lp", "lp"),
     ("mitld_lp.solvers.certify", "certify", "certificate"),
 )
+#: the sensed route's build, the ``product`` row of a ``--sensed`` case
+SENSED_BUILD = ("mitld_lp.sensing.belief", "belief_product", "product")
 OUTER = "synthesize"
 
 
@@ -132,7 +136,9 @@ def numba_floor() -> int:
 class Tracker:
     """The stages' peaks and kept sizes (module docs); ``traced``: tracemalloc too."""
 
-    def __init__(self, traced: bool, at_peak: bool = False) -> None:
+    def __init__(self, traced: bool, at_peak: bool = False,
+                 stages: tuple[tuple[str, str, str], ...] = STAGES) -> None:
+        self.stages = stages
         self.traced = traced
         self.at_peak = traced and at_peak
         self.peak_top: list[tuple[str, int]] = []
@@ -234,7 +240,7 @@ class Tracker:
     def install(self) -> list[tuple[Any, str, Any]]:
         """The stages wrapped in place; the originals, to put back."""
         saved = []
-        for module, attr, name in STAGES:
+        for module, attr, name in self.stages:
             try:
                 mod = importlib.import_module(module)
             except ImportError:  # an older checkout (--compare) without the module
@@ -278,7 +284,7 @@ class Tracker:
             for mod, attr, fn in saved:  # the stages as they were
                 setattr(mod, attr, fn)
         n = max(transitions_of(out), 1)
-        names = [OUTER] + [s for _, _, s in STAGES if s in self.calls]
+        names = [OUTER] + list(dict.fromkeys(s for _, _, s in self.stages if s in self.calls))
 
         def per(x: int, b: int) -> float:
             return round(max(x - b, 0) / n, 1)
@@ -343,6 +349,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     what = ap.add_mutually_exclusive_group(required=True)
     what.add_argument("--model", help="a model file (e.g. one bench_qvbs.py writes)")
     what.add_argument("--sweeps", help="a bench_sweeps instance, e.g. bus_scaled_n64_d3")
+    what.add_argument("--sensed", type=int, metavar="INDEX",
+                      help="bench_sensed's case INDEX (0: the issue's 1.08e6 transitions)")
     ap.add_argument("--max-states", type=int, default=2_000_000)
     ap.add_argument("--resident", action="store_true",
                     help="resident sizes only (no tracemalloc: its own cost out)")
@@ -358,6 +366,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
     if args.model:
         name, model = args.model, load_model(args.model, max_states=args.max_states)
+    elif args.sensed is not None:
+        import bench_sensed
+
+        case = bench_sensed.FULL[args.sensed]
+        name, model = bench_sensed.name_of(case), bench_sensed.case_model(args.sensed, False)
     else:
         import bench_scaling
 
@@ -365,7 +378,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         inst = bench_scaling.Instance(family, int(n[1:]), int(d[1:]))
         name, model = inst.name, bench_sweeps._model(inst)
     bench_sweeps.preload()  # the solver modules, as both benches load them before
-    result, breakdown = Tracker(traced=not args.resident, at_peak=args.at_peak).run(
+    stages = (SENSED_BUILD, *STAGES) if args.sensed is not None else STAGES
+    result, breakdown = Tracker(traced=not args.resident, at_peak=args.at_peak,
+                                stages=stages).run(
         lambda: synthesize(model), lambda r: r.mdp.n_transitions)
     print(text(name, breakdown))
     print(f"answer: [{result.lower!r}, {result.upper!r}], certified={result.certified}")

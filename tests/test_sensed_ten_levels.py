@@ -101,7 +101,9 @@ def test_moves_by_level_as_plain_python() -> None:
             m = int(rng.integers(0, 12)) if b > a else 0
             run = (rng.integers(a, max(b, a + 1), m), rng.integers(0, 5, m),
                    rng.integers(0, 2, m), rng.integers(0, 4, m), rng.integers(-3, 12, m))
-            runs.append(tuple(np.asarray(x, np.int64) for x in run))
+            # a run's choices are kept as rows of their level (from its first, ``a``)
+            runs.append((np.asarray(run[0] - a, np.int64),
+                         *(np.asarray(x, np.int64) for x in run[1:])))
             every.append(run)
         levels.append((a, tuple(runs)))
     moves = Moves(row_groups, state_world, acts, worlds, u_sets, s_sets, records, levels)

@@ -118,7 +118,7 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
-               layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray,
+               layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None,
                it: IterationResult, lp: LPResult | None, which: str,
                s: Settings, eta: float, complement: bool,
                fallback: tuple[np.ndarray | None, np.ndarray | None]) -> ModelSolution:
@@ -345,14 +345,20 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     from mitld_lp.solvers.graph import Sense
 
     deadline = Deadline.after(s.time_limit, t0)
+    # The builder's freed temporaries go back to the system (mitld_lp.util.heap): every
+    # route's product (the plain one, the sensed information states) is solved here.
+    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
+        release_free_memory()
     quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
     its = _iterate(mdp, quotients, s, deadline)
     lps = [_solve_lp(mdp, q, it, s, deadline) for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
-    kept = [(np.asarray(q.target), q.qualitative, q.layers, q.mecs.mec_of)
-            for q in quotients]
+    # (a minimum's certificate reads no end components: its quotient has none, and
+    # their map, an index a state, is not held through the certificates)
+    kept = [(np.asarray(q.target), q.qualitative, q.layers,
+             None if q.sense is Sense.MIN else q.mecs.mec_of) for q in quotients]
     its = [_settled(it, lp) for it, lp in zip(its, lps, strict=True)]
     # the lifted bounds (a float a product state each: the iteration's two, the LP's
     # values) held through the certificates as their quotient's values where that is
@@ -423,9 +429,6 @@ def solve_plain(posed: Posed, built: Built) -> Result:
     mdp = built.mdp
     timings: dict[str, float] = dict(built.timings)
     t0, c0 = time.perf_counter(), time.process_time()
-    # The builder's freed temporaries go back to the system (mitld_lp.util.heap).
-    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
-        release_free_memory()
     from mitld_lp.solvers.certify import model_eta
 
     accept = acceptance(mdp, built.dta)

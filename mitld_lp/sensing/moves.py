@@ -23,8 +23,9 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
 
     Built from one row per (choice, observation), the rows of each level of the build
     apart (``levels``: each level's first choice row, non-decreasing, and its runs of
-    rows, each run five arrays): ``choice`` the MDP's choice row (in the level's range,
-    up to the next level's first), ``world``, ``occurred`` and ``new`` the observation's
+    rows, each run five arrays): ``choice`` the MDP's choice row less the level's first
+    (below the next level's first: int16 where a level has fewer than 32,768 choices),
+    ``world``, ``occurred`` and ``new`` the observation's
     world state, unsensed events and new reports as indices into ``worlds``,
     ``unsensed_sets`` and ``sensed_sets``, ``target`` a state's index, or ``-1 - r`` for
     ``records[r]``.  A choice's rows are those of its level's runs in their order
@@ -62,7 +63,7 @@ class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
             runs = self.levels[k] if k < len(self.levels) else ()
             cols = [np.concatenate([r[j] for r in runs]) if runs else np.zeros(0, np.int64)
                     for j in range(5)]
-            local = cols[0] - (self.bases[k] if len(runs) else 0)
+            local = cols[0].astype(np.int64)  # each row's choice less the level's first
             order = np.argsort(local, kind="stable")
             ptr = np.zeros(int(local.max(initial=-1)) + 2, np.int64)
             np.cumsum(np.bincount(local, minlength=len(ptr) - 1), out=ptr[1:])
@@ -137,6 +138,7 @@ def level_moves(fb: Any, base: int, grouped: tuple[np.ndarray, ...], target: np.
         pick = first[alone]
         code = -1 - np.where(kinds[alone] == 1, end[pick], trunc)
     gc, gw, go, gn = grouped
-    return base, (tuple(narrow(x) for x in (base + gc, gw, go, gn, target)),
-                  tuple(narrow(x) for x in (base + c[pick], w2[pick], occ[pick], new[pick],
-                                            code)))
+    # the choices as rows of the level (from ``base``): int16 where the level's choices
+    # are fewer than 32,768, not the product's row numbers in int32
+    return base, (tuple(narrow(x) for x in (gc, gw, go, gn, target)),
+                  tuple(narrow(x) for x in (c[pick], w2[pick], occ[pick], new[pick], code)))
