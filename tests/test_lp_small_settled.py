@@ -125,7 +125,8 @@ def _occupancy_lp(mdp: MDP, sense: Sense) -> float:
     gain = p[:, mdp.target].sum(axis=1)
     sign = -1.0 if sense is Sense.MAX else 1.0
     res = linprog(sign * gain, A_eq=a[free], b_eq=b[free], bounds=(0, None),
-                  method="highs")
+                  method="highs", options={"primal_feasibility_tolerance": 1e-10,
+                                           "dual_feasibility_tolerance": 1e-10})
     assert res.status == 0
     return float(gain @ res.x)
 
@@ -265,3 +266,25 @@ def _policy_values_any(mdp: MDP, policy: np.ndarray) -> np.ndarray:
     v[live] = np.linalg.solve(np.eye(live.size) - p[np.ix_(live, live)],
                               p[live][:, mdp.target].sum(axis=1))
     return v
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_mid_sized_block_greedy_or_lp_the_same_optimum(seed: int) -> None:
+    """A block of 1,000 to 10,000 choices (the bounds' greedy policy answers it since
+    ``GREEDY_MIN_CHOICES`` is 1,000): its policy attains HiGHS's optimum of the
+    occupancy LP on the product, and so does Clarabel's on the same block
+    (``greedy=False``), both values within 1e-9."""
+    mdp = random_mdp(1200, seed=40 + seed, target_fraction=0.05, sink_fraction=0.3,
+                     self_loop_fraction=0.0, max_choices=4, max_successors=5)
+    it = interval_iteration(mdp, mdp.target, sense=Sense.MAX, gap="max", progress=False)
+    bounds = (it.lower, it.upper)
+    greedy = solve_lp(mdp, mdp.target, everywhere=True, bounds=bounds)
+    lp = solve_lp(mdp, mdp.target, everywhere=True, bounds=bounds, greedy=False)
+    assert "by the bounds' greedy policy" in greedy.message
+    assert "block states by the bounds' greedy policy" not in lp.message
+    assert 1_000 <= lp.lp_shape[1] < 10_000
+    want = _occupancy_lp(mdp, Sense.MAX)
+    for got in (greedy, lp):
+        attained = _policy_values_any(mdp, np.asarray(got.policy))
+        assert attained[mdp.initial] == pytest.approx(want, abs=1e-9)
+        np.testing.assert_allclose(attained, np.asarray(lp.values), rtol=0, atol=1e-9)
