@@ -288,3 +288,28 @@ def test_mid_sized_block_greedy_or_lp_the_same_optimum(seed: int) -> None:
         attained = _policy_values_any(mdp, np.asarray(got.policy))
         assert attained[mdp.initial] == pytest.approx(want, abs=1e-9)
         np.testing.assert_allclose(attained, np.asarray(lp.values), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+def test_compiled_walk_and_shortcut_give_the_same_bits(sense: Sense,
+                                                       monkeypatch: pytest.MonkeyPatch,
+                                                       calls: list[bool]) -> None:
+    """Where the level walk is the compiled one (numba's kernels, forced on this small
+    quotient), the shortcut's NumPy sums and picks are its values and choices too."""
+    pytest.importorskip("numba")
+    from mitld_lp.solvers import topological
+
+    monkeypatch.setattr(topological, "LEVEL_KERNEL_MIN_ENTRIES", 0)
+    monkeypatch.setattr(topological, "LEVEL_KERNEL_MIN_LEVELS", 0)
+    walks: list[bool] = []
+    spy = lp_blocks.settled_by_bounds
+
+    def seen(q, blk, singles, *a):
+        walks.append(singles.kernels is not None)
+        return spy(q, blk, singles, *a)
+    monkeypatch.setattr(lp_blocks, "settled_by_bounds", seen)
+    for seed in range(3):
+        mdp = _layered(50 + seed, ties=True)
+        _same(_solved(mdp, sense, True), _solved(mdp, sense, False))
+    assert calls == [True, False] * 3
+    assert walks == [True] * 6  # the compiled walks' levels
