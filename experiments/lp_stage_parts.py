@@ -13,7 +13,9 @@ chain walks (``ChainLevels``: a policy's chain, its components found and levels
 factorised, and its forward solves) are inside whichever part makes them (the greedy
 check's policy chain, the crossover's, a flow's cyclic level), the numba loads inside
 whichever part first calls a kernel; ``other`` is the stage less the top-level
-parts.  ``jump``, outside the LP stage, is the interval iteration's policy jumps
+parts; ``singles`` holds the single states' level walk and, where the iteration's
+bounds already answer it, their check (``settled_by_bounds``).  ``jump``, outside the
+LP stage, is the interval iteration's policy jumps
 (:func:`mitld_lp.solvers.policy_jump.jump`: their policy iterations' factorisations
 and look-ahead sweeps), which the LP stage's bounds come from.
 """
@@ -35,6 +37,7 @@ from lp_stage_peak import arguments, finish, run_child  # noqa: E402  (the same 
 PARTS = (("mitld_lp.solvers.lp_blocks", "certified_greedy", "greedy"),
          ("mitld_lp.solvers.topological", "Block.of", "blocks"),
          ("mitld_lp.solvers.lp_blocks", "solve_single_states", "singles"),
+         ("mitld_lp.solvers.lp_blocks", "settled_by_bounds", "singles"),
          ("mitld_lp.solvers.topological", "SingleLevels.values", "singles"),
          ("mitld_lp.solvers.lp_blocks", "tightened", "tighten"),
          ("mitld_lp.solvers.lp_blocks", "solve_block", "solver"),
@@ -95,7 +98,9 @@ def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
         mod = importlib.import_module(module)
         owner, _, name_ = attr.rpartition(".")
         host = getattr(mod, owner) if owner else mod
-        f = getattr(host, name_)
+        f = getattr(host, name_, None)
+        if f is None:  # a checkout from before the part (a base of --compare)
+            continue
         wrapped = timed(part, f)
         setattr(host, name_, staticmethod(wrapped) if owner and attr == "Block.of"
                 else wrapped)

@@ -234,9 +234,11 @@ def _batches_of(starts: np.ndarray, m: int, states: np.ndarray) -> np.ndarray:
     first = starts[states] // BATCH
     ends = np.append(starts, m)[states + 1]
     last = (ends - 1) // BATCH
-    spans = [np.arange(f, z + 1) for f, z in zip(first.tolist(), last.tolist(),
-                                                   strict=True)]
-    return np.unique(np.concatenate(spans))
+    # each once, increasing: marked (``np.unique`` imports ``numpy.ma``, 15 ms once)
+    marked = np.zeros(int(last.max()) + 1, dtype=bool)
+    for f, z in zip(first.tolist(), last.tolist(), strict=True):
+        marked[f:z + 1] = True
+    return np.flatnonzero(marked)
 
 
 def _owners(starts: np.ndarray, a: int, z: int, index: type) -> np.ndarray:

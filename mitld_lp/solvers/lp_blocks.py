@@ -26,6 +26,7 @@ from mitld_lp.solvers.options import SolveOptions
 from mitld_lp.solvers.reduced import Quotient, keeping_zero
 from mitld_lp.solvers.result import Status
 from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.solvers.settled_levels import settled_by_bounds
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
 from mitld_lp.solvers.topological import (
     Block,
@@ -195,15 +196,28 @@ class Walked:
 
 #: The fewest choices of a block the bounds' greedy policy may answer
 #: (:mod:`mitld_lp.solvers.greedy_block`): below it the block goes to the LP solver, so
-#: an ordinary product (the bundled case's blocks have a few hundred choices) is the
-#: solver's occupancy LP with its own duals, the interval iteration an independent
-#: cross-check; above it the interior-point method's cost (6 s an iteration on QVBS
-#: zeroconf 1000-4's 400,806 choices) is what the certificate of the greedy policy saves.
-GREEDY_MIN_CHOICES = 10_000
+#: an ordinary product (the bundled case's blocks have a few hundred choices: 192 over
+#: two blocks) is the solver's occupancy LP with its own duals, the interval iteration
+#: an independent cross-check; above it the interior-point method's cost (6 s an
+#: iteration on QVBS zeroconf 1000-4's 400,806 choices) is what the certificate of the
+#: greedy policy saves.  It was 10,000: QVBS consensus 4-4's block of 5,892 choices then
+#: went to Clarabel, its bounds pruned and its answer polished (0.03 s of the stage's
+#: 0.07 s), where the greedy policy's check settles it whole; the policy there is then
+#: the greedy one, another optimum within the certificate's precision, and the
+#: certified bracket is the same to the bit.
+GREEDY_MIN_CHOICES = 1_000
 
 _TAKEN = np.zeros(0)
 """A greedy block's ``to_target`` while its array holds the exit rewards
 (:func:`solve_decomposed`): empty, so that a read of it as the target's column fails."""
+
+
+def _block_levels(blk: Blocks) -> np.ndarray:
+    """The levels holding a non-trivial component, increasing (``np.unique`` of them,
+    without its import of ``numpy.ma``: 15 ms of a process's first call)."""
+    marked = np.zeros(blk.n_levels, dtype=bool)
+    marked[blk.level[blk.size > 1]] = True
+    return np.flatnonzero(marked)
 
 
 def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
@@ -214,7 +228,7 @@ def _flow_runs(blk: Blocks, singles: SingleLevels, weights: np.ndarray,
     their single states done and ``single`` empty."""
     empty = np.zeros(0, dtype=np.int64)
     done = blk.n_levels  # the levels from ``done`` up are pushed out
-    for index in np.unique(blk.level[blk.size > 1])[::-1].tolist():
+    for index in _block_levels(blk)[::-1].tolist():
         # down to this level's single states, which come first
         singles.flow(index, done, blk.self_loop, weights, x)
         done = index
@@ -233,7 +247,7 @@ def _value_runs(q: Quotient, blk: Blocks, singles: SingleLevels, values: np.ndar
     ``states`` as many as were solved (for the progress bar), ``single`` empty."""
     empty = np.zeros(0, dtype=np.int64)
     done = last = 0
-    marks = np.unique(blk.level[blk.size > 1]).tolist() + [blk.n_levels - 1]
+    marks = _block_levels(blk).tolist() + [blk.n_levels - 1]
     # the states not in ``q.zero`` up to each mark's level's end, counted once (no
     # count a state held through the walk)
     live = np.cumsum(~q.zero[blk.by_level])[blk.level_starts[np.add(marks, 1)] - 1]
@@ -423,6 +437,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     singles = (shared_levels(q, blk, last=True) if blk.n_levels >= RUNS_MIN_LEVELS
                else None)
     walk = (blk.walk(skip=q.zero) if singles is None else
+            iter(()) if settled_by_bounds(q, blk, singles, bounds, values, reduced_choice,
+                                          weights) else
             _value_runs(q, blk, singles, values, reduced_choice, weights))
     for level in tracked(walk, progress, lambda lv: lv.states.size,
                          total=todo, desc="block LPs", unit=" states", leave=False):
@@ -516,5 +532,10 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     if calls:
         solver_word = "cvxpy/" + settings.solver if settings.backend == "cvxpy" else "clarabel"
         message = f"{solver_word}: {message}"
+    # the objectives by NumPy's own sum of products, not BLAS's dot: a threaded BLAS
+    # wakes its threads for it (5-12 ms of process time for 31,503 choices on QVBS
+    # zeroconf_dl on a loaded machine, where the sum is 0.05 ms; the report's figures
+    # only, which may move in their last bits)
     return Answer(Raw(worst.status, message, iterations=iterations), y, values,
-                   reduced_choice, float(q.to_target @ y), float(b_eq @ values), calls)
+                   reduced_choice, float(np.einsum("i,i->", q.to_target, y)),
+                   float(np.einsum("i,i->", b_eq, values)), calls)
