@@ -41,11 +41,12 @@ seen.  Nothing changes an answer: the same objects, the same methods.
 from __future__ import annotations
 
 import sys
-import types
 
 from mitld_lp.own_imports import (  # the halves, named here too (startup, tests)
     NUMPY_EXTRAS,
     SCIPY_NUMPY_COPY,
+    SPARSE_LINALG,
+    body_later,
     hand_over_extras,
     numpy_listed_without_extras,
     scipy_copy_around,
@@ -81,56 +82,16 @@ def _dataclasses_cut() -> None:
     init_cache.install(package_only=True)
 
 
-#: SciPy's sparse linear algebra, which ``scipy.sparse.csgraph`` imports at its start
-#: for one name (:func:`sparse_linalg_later`).
-SPARSE_LINALG = "scipy.sparse.linalg"
-
-
-class _LinalgLater(types.ModuleType):
-    """``scipy.sparse.linalg`` before its ``__init__`` ran: its spec, path and
-    ``LinearOperator`` (from its submodule ``_interface``) are there; reading any other
-    name, or ``dir``, runs the real ``__init__`` in this same module, which then is the
-    plain module SciPy's import makes."""
-
-    def _load(self) -> None:
-        spec = vars(self)["__spec__"]
-        self.__class__ = types.ModuleType  # no more stand-in, whatever happens below
-        spec.loader.exec_module(self)
-
-    def __getattr__(self, name: str) -> Any:
-        self._load()
-        return getattr(self, name)
-
-    def __dir__(self) -> list[str]:
-        self._load()
-        return dir(self)
-
-
 def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
     """Before ``scipy.sparse.csgraph`` runs: ``scipy.sparse.linalg`` in ``sys.modules`` as
-    a :class:`_LinalgLater`, which csgraph's ``_laplacian`` takes its one name from
-    (``LinearOperator``, for ``laplacian(form="lo")``).  csgraph's searches need none of
-    it; its ``__init__`` imports ``scipy.linalg`` (LAPACK, BLAS, decompositions): 0.11 s
-    of CPU on a PRISM route that only walks graphs.  The first other name read (``splu``,
-    ``spsolve``...) loads it whole.  Nothing if it is imported already."""
-    if SPARSE_LINALG not in sys.modules:
-        import importlib
-        import importlib.util
-
-        sparse = importlib.import_module("scipy.sparse")
-        spec = importlib.util.find_spec(SPARSE_LINALG)
-        if spec is not None and spec.loader is not None and hasattr(spec.loader,
-                                                                      "exec_module"):
-            module = importlib.util.module_from_spec(spec)  # the import system's own
-            module.__class__ = _LinalgLater
-            sys.modules[SPARSE_LINALG] = module
-            try:
-                interface = importlib.import_module(f"{SPARSE_LINALG}._interface")
-            except BaseException:
-                del sys.modules[SPARSE_LINALG]
-                raise
-            vars(module)["LinearOperator"] = interface.LinearOperator
-            vars(sparse)["linalg"] = module  # as the import system binds a submodule
+    a :class:`mitld_lp.own_imports.BodyLater`, which csgraph's ``_laplacian`` takes its
+    one name from (``LinearOperator``, for ``laplacian(form="lo")``).  csgraph's
+    searches need none of it; its ``__init__`` imports ``scipy.linalg`` (LAPACK, BLAS,
+    decompositions): 0.11 s of CPU on a PRISM route that only walks graphs.  The direct
+    solvers (``splu``, ``spsolve``...) are served from their own module with
+    ``scipy.linalg`` left for later too; the first other name read loads it whole.
+    Nothing if it is imported already."""
+    body_later(SPARSE_LINALG)
     return lambda csgraph: None
 
 
