@@ -128,7 +128,11 @@ def preload() -> None:
     import mitld_lp.solvers.lp  # noqa: F401
     from mitld_lp.util import traversal
 
-    traversal.csgraph()
+    if hasattr(traversal, "csgraph"):
+        traversal.csgraph()
+    else:  # a checkout from before it (``--compare``): its preload, as it was
+        import scipy.sparse.csgraph
+        import scipy.sparse.linalg  # noqa: F401
 
 
 def work_ours(inst: Instance, work: Path) -> dict[str, Any]:

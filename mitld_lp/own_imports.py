@@ -330,6 +330,35 @@ def _sparse_linalg_later(loader: Any, module: ModuleType) -> None:
     module.__class__ = BodyLater
 
 
+def _lark_around() -> Callable[[ModuleType | None], None]:
+    """lark imported by the package (the window opened as for any package import): lark
+    imports the ``regex`` package at its start when it can, for grammars that ask for it
+    (``Lark(regex=True)``, Unicode categories in a terminal), which the formula grammar
+    does not; its import is 0.01 s of CPU.  While lark's body runs, ``regex`` is a
+    stand-in (:func:`mitld_lp.stand_ins.later`) that lark binds as its ``regex`` and that
+    imports the real module when lark first reads a name of it; it leaves
+    ``sys.modules`` when lark's import ends, so the program's own ``import regex`` is
+    Python's as before.  lark sees ``regex`` installed, as it is, and behaves alike."""
+    close = _open()
+    stand_in = None
+    import importlib.util
+
+    if importlib.util.find_spec("regex") is not None:
+        from mitld_lp.stand_ins import later
+
+        stand_in = later("regex")
+        sys.modules["regex"] = stand_in
+
+    def after(module: ModuleType | None) -> None:
+        try:
+            if stand_in is not None and sys.modules.get("regex") is stand_in:
+                del sys.modules["regex"]
+        finally:
+            close(module)
+
+    return after
+
+
 #: The modules the package's makers come from (their window cannot put them in place).
 _MAKERS_OWN = frozenset((f"{PACKAGE}.dataclass_closures", f"{PACKAGE}.init_cache"))
 
@@ -365,6 +394,9 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _open
     if name == SPARSE_LINALG and (_depth > 0 or _imported_by_package(name)):
         return _sparse_linalg_later
+    if name == "lark" and "regex" not in sys.modules and (
+            _depth > 0 or _imported_by_package(name)):
+        return _lark_around
     if _depth == 0 and name in LATER and _imported_by_package(name):
         return _open
     if _depth > 0:
