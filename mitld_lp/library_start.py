@@ -5,12 +5,12 @@ whole process imports and how every dataclass is made.  A program that imports t
 package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
 service) may ask for three cuts that change nothing it can use, by calling
 :func:`install` before its own heavy imports; each is made when its module is first
-imported.  ``import mitld_lp`` alone installs none of this hook; it makes the first two
+imported.  ``import mitld_lp`` alone installs none of this hook; it makes the three
 cuts only for what the package itself imports, while its modules import
-(:mod:`mitld_lp.own_imports`, the collector held too), and leaves the third to a program
-that asks: it leaves a stand-in for a SciPy module in the program's modules (and
-``import mitld_lp`` stays free of NumPy and ``dataclasses``: :mod:`mitld_lp.runtime`
-imports NumPy alone):
+(:mod:`mitld_lp.own_imports`, the collector held too: the third when the package's own
+code imports csgraph or ``scipy.sparse.linalg``), and the hook makes them for the
+program's own imports too (``import mitld_lp`` stays free of NumPy and ``dataclasses``:
+:mod:`mitld_lp.runtime` imports NumPy alone):
 
 * SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
   ``scipy.sparse`` import loads) copies NumPy's namespace without importing
@@ -27,10 +27,11 @@ imports NumPy alone):
 * ``scipy.sparse.csgraph`` is imported without ``scipy.sparse.linalg``'s ``__init__``
   and so without ``scipy.linalg`` (LAPACK and BLAS wrappers, whose OpenBLAS starts its
   threads): csgraph's searches need neither, and ``scipy.sparse.linalg`` loads whole at
-  the first name read other than ``LinearOperator`` (:func:`sparse_linalg_later`):
-  0.11 s of CPU on a PRISM route that walks graphs and factorises nothing (the
-  deadline instances); a route that factorises pays it at its first ``splu``.  The
-  command line's start keeps this one (:func:`install` with ``command``).
+  the first name read other than ``LinearOperator`` and the direct solvers (``splu``,
+  ``spsolve``..., served from their own module with ``scipy.linalg`` left for later
+  too, :func:`mitld_lp.own_imports.linalg_later`) (:func:`sparse_linalg_later`):
+  0.05-0.11 s of CPU on a PRISM route, which walks graphs and factorises with ``splu``
+  alone.  The command line's start keeps this one (:func:`install` with ``command``).
 
 The hook is a finder at the front of ``sys.meta_path`` that answers for those modules
 only, once each (the module's own finder finds it; the loader is wrapped for the one

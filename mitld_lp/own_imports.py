@@ -18,7 +18,14 @@ lark's included -- and only then:
 * SciPy's array-API layer, if the body is what imports it, copies NumPy's namespace
   without importing ``numpy.f2py``, ``numpy.testing``, ``numpy.ma``... which the copy
   hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`'s two
-  halves): the same names, each NumPy's own object, later.
+  halves): the same names, each NumPy's own object, later;
+* ``scipy.sparse.linalg``, when the package's code (or csgraph inside the window)
+  imports it, is a :class:`BodyLater`: its ``__init__`` (which imports ``scipy.linalg``,
+  LAPACK and BLAS: 0.05-0.07 s of CPU) runs when a name other than ``LinearOperator``
+  and the direct solvers' (``splu``...) is read; those come from their own modules with
+  ``scipy.linalg`` left for later as well (it serves ``LinAlgError``, NumPy's class);
+* lark, imported by the package, binds a stand-in of ``regex`` (imported when lark
+  first uses it, out of ``sys.modules`` once lark is imported: :func:`_lark_around`).
 
 :func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
 of the package's modules to import and installs the finder then, but for the robot's
