@@ -116,15 +116,23 @@ def preload() -> None:
     solvers, the acceptance), so that ``solve_cpu`` is the solve and not a one-time
     library load (0.1-0.3 s): Storm's check is timed after stormpy is loaded too.  The
     process figures include it; numba, loaded only for a large product, stays inside.
-    SciPy's csgraph and sparse linear algebra are loaded by the solve of a product past
-    the small-graph walks (``mitld_lp.util.traversal``), as every instance here is."""
-    import scipy.sparse.csgraph
-    import scipy.sparse.linalg  # noqa: F401
-
+    SciPy's csgraph is loaded by the solve of a product past the small-graph walks
+    (``mitld_lp.util.traversal``), as every instance here is, and as the package loads
+    it: without ``scipy.sparse.linalg``'s ``__init__`` and ``scipy.linalg``, which the
+    route imports where it uses them (the direct solvers, 3 ms, at a chain's first
+    factorisation; ``scipy.linalg`` whole only where something reads more of it), so
+    they are not imported here."""
     import mitld_lp.routes.acceptance
     import mitld_lp.solvers.analysis
     import mitld_lp.solvers.iteration
     import mitld_lp.solvers.lp  # noqa: F401
+    from mitld_lp.util import traversal
+
+    if hasattr(traversal, "csgraph"):
+        traversal.csgraph()
+    else:  # a checkout from before it (``--compare``): its preload, as it was
+        import scipy.sparse.csgraph
+        import scipy.sparse.linalg  # noqa: F401
 
 
 def work_ours(inst: Instance, work: Path) -> dict[str, Any]:

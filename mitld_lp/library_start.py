@@ -5,12 +5,12 @@ whole process imports and how every dataclass is made.  A program that imports t
 package (a notebook, a benchmark's worker timing ``load_model`` and ``synthesize``, a
 service) may ask for three cuts that change nothing it can use, by calling
 :func:`install` before its own heavy imports; each is made when its module is first
-imported.  ``import mitld_lp`` alone installs none of this hook; it makes the first two
+imported.  ``import mitld_lp`` alone installs none of this hook; it makes the three
 cuts only for what the package itself imports, while its modules import
-(:mod:`mitld_lp.own_imports`, the collector held too), and leaves the third to a program
-that asks: it leaves a stand-in for a SciPy module in the program's modules (and
-``import mitld_lp`` stays free of NumPy and ``dataclasses``: :mod:`mitld_lp.runtime`
-imports NumPy alone):
+(:mod:`mitld_lp.own_imports`, the collector held too: the third when the package's own
+code imports csgraph or ``scipy.sparse.linalg``), and the hook makes them for the
+program's own imports too (``import mitld_lp`` stays free of NumPy and ``dataclasses``:
+:mod:`mitld_lp.runtime` imports NumPy alone):
 
 * SciPy's array-API layer (``scipy._lib.array_api_compat.numpy``, which every
   ``scipy.sparse`` import loads) copies NumPy's namespace without importing
@@ -27,10 +27,11 @@ imports NumPy alone):
 * ``scipy.sparse.csgraph`` is imported without ``scipy.sparse.linalg``'s ``__init__``
   and so without ``scipy.linalg`` (LAPACK and BLAS wrappers, whose OpenBLAS starts its
   threads): csgraph's searches need neither, and ``scipy.sparse.linalg`` loads whole at
-  the first name read other than ``LinearOperator`` (:func:`sparse_linalg_later`):
-  0.11 s of CPU on a PRISM route that walks graphs and factorises nothing (the
-  deadline instances); a route that factorises pays it at its first ``splu``.  The
-  command line's start keeps this one (:func:`install` with ``command``).
+  the first name read other than ``LinearOperator`` and the direct solvers (``splu``,
+  ``spsolve``..., served from their own module with ``scipy.linalg`` left for later
+  too, :func:`mitld_lp.own_imports.linalg_later`) (:func:`sparse_linalg_later`):
+  0.05-0.11 s of CPU on a PRISM route, which walks graphs and factorises with ``splu``
+  alone.  The command line's start keeps this one (:func:`install` with ``command``).
 
 The hook is a finder at the front of ``sys.meta_path`` that answers for those modules
 only, once each (the module's own finder finds it; the loader is wrapped for the one
@@ -41,11 +42,12 @@ seen.  Nothing changes an answer: the same objects, the same methods.
 from __future__ import annotations
 
 import sys
-import types
 
 from mitld_lp.own_imports import (  # the halves, named here too (startup, tests)
     NUMPY_EXTRAS,
     SCIPY_NUMPY_COPY,
+    SPARSE_LINALG,
+    body_later,
     hand_over_extras,
     numpy_listed_without_extras,
     scipy_copy_around,
@@ -81,56 +83,16 @@ def _dataclasses_cut() -> None:
     init_cache.install(package_only=True)
 
 
-#: SciPy's sparse linear algebra, which ``scipy.sparse.csgraph`` imports at its start
-#: for one name (:func:`sparse_linalg_later`).
-SPARSE_LINALG = "scipy.sparse.linalg"
-
-
-class _LinalgLater(types.ModuleType):
-    """``scipy.sparse.linalg`` before its ``__init__`` ran: its spec, path and
-    ``LinearOperator`` (from its submodule ``_interface``) are there; reading any other
-    name, or ``dir``, runs the real ``__init__`` in this same module, which then is the
-    plain module SciPy's import makes."""
-
-    def _load(self) -> None:
-        spec = vars(self)["__spec__"]
-        self.__class__ = types.ModuleType  # no more stand-in, whatever happens below
-        spec.loader.exec_module(self)
-
-    def __getattr__(self, name: str) -> Any:
-        self._load()
-        return getattr(self, name)
-
-    def __dir__(self) -> list[str]:
-        self._load()
-        return dir(self)
-
-
 def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
     """Before ``scipy.sparse.csgraph`` runs: ``scipy.sparse.linalg`` in ``sys.modules`` as
-    a :class:`_LinalgLater`, which csgraph's ``_laplacian`` takes its one name from
-    (``LinearOperator``, for ``laplacian(form="lo")``).  csgraph's searches need none of
-    it; its ``__init__`` imports ``scipy.linalg`` (LAPACK, BLAS, decompositions): 0.11 s
-    of CPU on a PRISM route that only walks graphs.  The first other name read (``splu``,
-    ``spsolve``...) loads it whole.  Nothing if it is imported already."""
-    if SPARSE_LINALG not in sys.modules:
-        import importlib
-        import importlib.util
-
-        sparse = importlib.import_module("scipy.sparse")
-        spec = importlib.util.find_spec(SPARSE_LINALG)
-        if spec is not None and spec.loader is not None and hasattr(spec.loader,
-                                                                      "exec_module"):
-            module = importlib.util.module_from_spec(spec)  # the import system's own
-            module.__class__ = _LinalgLater
-            sys.modules[SPARSE_LINALG] = module
-            try:
-                interface = importlib.import_module(f"{SPARSE_LINALG}._interface")
-            except BaseException:
-                del sys.modules[SPARSE_LINALG]
-                raise
-            vars(module)["LinearOperator"] = interface.LinearOperator
-            vars(sparse)["linalg"] = module  # as the import system binds a submodule
+    a :class:`mitld_lp.own_imports.BodyLater`, which csgraph's ``_laplacian`` takes its
+    one name from (``LinearOperator``, for ``laplacian(form="lo")``).  csgraph's
+    searches need none of it; its ``__init__`` imports ``scipy.linalg`` (LAPACK, BLAS,
+    decompositions): 0.11 s of CPU on a PRISM route that only walks graphs.  The direct
+    solvers (``splu``, ``spsolve``...) are served from their own module with
+    ``scipy.linalg`` left for later too; the first other name read loads it whole.
+    Nothing if it is imported already."""
+    body_later(SPARSE_LINALG)
     return lambda csgraph: None
 
 

@@ -18,7 +18,14 @@ lark's included -- and only then:
 * SciPy's array-API layer, if the body is what imports it, copies NumPy's namespace
   without importing ``numpy.f2py``, ``numpy.testing``, ``numpy.ma``... which the copy
   hands over from NumPy when first asked (:func:`mitld_lp.startup.lean_scipy`'s two
-  halves): the same names, each NumPy's own object, later.
+  halves): the same names, each NumPy's own object, later;
+* ``scipy.sparse.linalg``, when the package's code (or csgraph inside the window)
+  imports it, is a :class:`BodyLater`: its ``__init__`` (which imports ``scipy.linalg``,
+  LAPACK and BLAS: 0.05-0.07 s of CPU) runs when a name other than ``LinearOperator``
+  and the direct solvers' (``splu``...) is read; those come from their own modules with
+  ``scipy.linalg`` left for later as well (it serves ``LinAlgError``, NumPy's class);
+* lark, imported by the package, binds a stand-in of ``regex`` (imported when lark
+  first uses it, out of ``sys.modules`` once lark is imported: :func:`_lark_around`).
 
 :func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
 of the package's modules to import and installs the finder then, but for the robot's
@@ -35,6 +42,7 @@ from __future__ import annotations
 
 import _thread
 import sys
+import types
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -217,6 +225,147 @@ LATER = frozenset(("numba", "stormpy", "scipy.sparse.csgraph", "scipy.sparse.lin
                    "cvxpy", "lark"))
 
 
+#: SciPy's sparse linear algebra, which ``scipy.sparse.csgraph`` imports at its start
+#: for one name (``LinearOperator``), and its direct solvers' module (``splu``...), which
+#: needs one name of ``scipy.linalg`` (``LinAlgError``, NumPy's own class).
+SPARSE_LINALG = "scipy.sparse.linalg"
+DIRECT_SOLVERS = "scipy.sparse.linalg._dsolve"
+SCIPY_LINALG = "scipy.linalg"
+
+
+class BodyLater(types.ModuleType):
+    """A module whose ``__init__`` has not run yet: its spec, path and the names
+    :data:`SERVED` gives for it are there; reading any other name, or ``dir``, runs the
+    real ``__init__`` in this same module, which then is the plain module the import
+    system makes (the names served are the ones its ``__init__`` binds)."""
+
+    def _load(self) -> None:
+        spec = vars(self)["__spec__"]
+        self.__class__ = types.ModuleType  # no more stand-in, whatever happens below
+        spec.loader.exec_module(self)
+
+    def __getattr__(self, name: str) -> Any:
+        serve = SERVED.get(vars(self)["__name__"])
+        if serve is not None and not name.startswith("__"):
+            found = serve(name)
+            if found is not _NOT_SERVED:
+                vars(self)[name] = found
+                return found
+        self._load()
+        return getattr(self, name)
+
+    def __dir__(self) -> list[str]:
+        self._load()
+        return dir(self)
+
+
+_NOT_SERVED = object()
+
+
+def _linear_operator(name: str) -> Any:
+    """``scipy.sparse.linalg``'s names served before its ``__init__``: ``LinearOperator``
+    (from ``_interface``, csgraph's one name) and the direct solvers (``splu``,
+    ``spsolve``..., the names of ``_dsolve.__all__``, which the ``__init__`` binds with
+    ``from ._dsolve import *``), imported with ``scipy.linalg`` left for later
+    (:func:`linalg_later`)."""
+    import importlib
+
+    if name == "LinearOperator":
+        return importlib.import_module(f"{SPARSE_LINALG}._interface").LinearOperator
+    if name not in DIRECT_NAMES:
+        return _NOT_SERVED
+    linalg_later()
+    direct = importlib.import_module(DIRECT_SOLVERS)
+    return getattr(direct, name) if name in getattr(direct, "__all__", ()) else _NOT_SERVED
+
+
+#: The names of ``scipy.sparse.linalg._dsolve`` (SciPy 1.17) served before the whole of
+#: ``scipy.sparse.linalg``; one a SciPy release lacks loads the whole module.
+DIRECT_NAMES = frozenset(("splu", "spilu", "spsolve", "factorized", "SuperLU",
+                          "MatrixRankWarning", "spsolve_triangular", "use_solver",
+                          "is_sptriangular", "spbandwidth"))
+
+
+def _numpy_linalg_error(name: str) -> Any:
+    """``scipy.linalg``'s one name served before its ``__init__``: ``LinAlgError``, which
+    SciPy takes from NumPy (``scipy.linalg._misc``: ``from numpy.linalg import
+    LinAlgError``)."""
+    if name != "LinAlgError":
+        return _NOT_SERVED
+    import numpy.linalg
+
+    return numpy.linalg.LinAlgError
+
+
+#: What each stand-in serves before its ``__init__`` runs.
+SERVED = {SPARSE_LINALG: _linear_operator, SCIPY_LINALG: _numpy_linalg_error}
+
+
+def body_later(name: str) -> ModuleType | None:
+    """``name`` (one of :data:`SERVED`) in ``sys.modules`` as a :class:`BodyLater` not run
+    yet, bound in its parent package as the import system binds a submodule; the module
+    already imported when it is (None when it cannot be found)."""
+    if name in sys.modules:
+        return sys.modules[name]
+    import importlib
+    import importlib.util
+
+    parent_name, _, child = name.rpartition(".")
+    parent = importlib.import_module(parent_name)
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+        return None
+    module = importlib.util.module_from_spec(spec)  # the import system's own
+    module.__class__ = BodyLater
+    sys.modules[name] = module
+    vars(parent)[child] = module
+    return module
+
+
+def linalg_later() -> None:
+    """``scipy.linalg`` left for later (a :class:`BodyLater`, serving ``LinAlgError``):
+    SciPy's direct sparse solvers import it for that one name; its ``__init__`` (LAPACK
+    and BLAS wrappers, the decompositions) is 0.05-0.07 s of CPU.  The first other name
+    read loads it whole.  Nothing if it is imported already."""
+    body_later(SCIPY_LINALG)
+
+
+def _sparse_linalg_later(loader: Any, module: ModuleType) -> None:
+    """The package's own import of ``scipy.sparse.linalg`` (its own ``import`` or
+    csgraph's, inside the window): the module made as a :class:`BodyLater`, its
+    ``__init__`` run when a name it does not serve is read."""
+    module.__class__ = BodyLater
+
+
+def _lark_around() -> Callable[[ModuleType | None], None]:
+    """lark imported by the package (the window opened as for any package import): lark
+    imports the ``regex`` package at its start when it can, for grammars that ask for it
+    (``Lark(regex=True)``, Unicode categories in a terminal), which the formula grammar
+    does not; its import is 0.01 s of CPU.  While lark's body runs, ``regex`` is a
+    stand-in (:func:`mitld_lp.stand_ins.later`) that lark binds as its ``regex`` and that
+    imports the real module when lark first reads a name of it; it leaves
+    ``sys.modules`` when lark's import ends, so the program's own ``import regex`` is
+    Python's as before.  lark sees ``regex`` installed, as it is, and behaves alike."""
+    close = _open()
+    stand_in = None
+    import importlib.util
+
+    if importlib.util.find_spec("regex") is not None:
+        from mitld_lp.stand_ins import later
+
+        stand_in = later("regex")
+        sys.modules["regex"] = stand_in
+
+    def after(module: ModuleType | None) -> None:
+        try:
+            if stand_in is not None and sys.modules.get("regex") is stand_in:
+                del sys.modules["regex"]
+        finally:
+            close(module)
+
+    return after
+
+
 #: The modules the package's makers come from (their window cannot put them in place).
 _MAKERS_OWN = frozenset((f"{PACKAGE}.dataclass_closures", f"{PACKAGE}.init_cache"))
 
@@ -225,16 +374,20 @@ def _open_without_makers() -> Callable[[ModuleType | None], None]:
     return _open(makers=False)
 
 
-def _imported_by_package() -> bool:
-    """Whether the code importing now (the first frame outside ``importlib``) is one of
-    the package's modules."""
+def _imported_by_package(imported: str = "") -> bool:
+    """Whether the code importing now (the first frame outside ``importlib`` and outside
+    a lazy package's ``__getattr__`` importing its submodule ``imported``, as
+    ``from scipy.sparse import csgraph`` does on SciPy 1.17) is one of the package's
+    modules."""
     frame = sys._getframe(2)
     while frame is not None:
         name = frame.f_globals.get("__name__", "")
         if not isinstance(name, str):
             return False
-        if name != __name__ and name.partition(".")[0] not in ("importlib",
-                                                                "_frozen_importlib"):
+        if (name != __name__ and name.partition(".")[0] not in ("importlib",
+                                                                 "_frozen_importlib")
+                and not (frame.f_code.co_name == "__getattr__"
+                         and imported.startswith(name + "."))):
             return name.partition(".")[0] == PACKAGE
         frame = frame.f_back
     return False
@@ -246,7 +399,12 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _open_without_makers
     if name.startswith(PACKAGE + "."):
         return _open
-    if _depth == 0 and name in LATER and _imported_by_package():
+    if name == SPARSE_LINALG and (_depth > 0 or _imported_by_package(name)):
+        return _sparse_linalg_later
+    if name == "lark" and "regex" not in sys.modules and (
+            _depth > 0 or _imported_by_package(name)):
+        return _lark_around
+    if _depth == 0 and name in LATER and _imported_by_package(name):
         return _open
     if _depth > 0:
         if name == "dataclasses":
@@ -284,6 +442,18 @@ class Loader:
         after(module)
 
 
+class BodyLaterLoader(Loader):
+    """The module's own loader for one import that does not run its body: ``around``
+    makes the module a stand-in (:class:`BodyLater`) whose first use runs it."""
+
+    def exec_module(self, module: ModuleType) -> None:
+        loader = self._loader
+        module.__loader__ = loader
+        if module.__spec__ is not None:
+            module.__spec__.loader = loader
+        self._around(loader, module)
+
+
 class _Finder:
     """The finder: the package's modules and, inside the window, ``dataclasses`` and
     SciPy's layer; each found by the finders after it, its loader wrapped for the one
@@ -305,7 +475,8 @@ def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> Mo
         spec = finder.find_spec(name, path, target)
         if spec is not None:
             if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                spec.loader = Loader(spec.loader, around)
+                kind = BodyLaterLoader if around is _sparse_linalg_later else Loader
+                spec.loader = kind(spec.loader, around)
             return spec
     return None
 

@@ -20,7 +20,7 @@ import sys
 import types
 from typing import Any
 
-__all__ = ["LATER_MODULES", "NUMPY_DOC_MODULES", "SCIPY_TESTS", "modules_when_used",
+__all__ = ["LATER_MODULES", "NUMPY_DOC_MODULES", "SCIPY_TESTS", "later", "modules_when_used",
            "numpy_docs_left_out", "scipy_tests_when_used"]
 
 #: Standard-library modules that NumPy, SciPy, lark and the package's file writers import
@@ -84,6 +84,16 @@ class _Later(types.ModuleType):
 
     def __dir__(self) -> list[str]:
         return dir(self._real())
+
+
+def later(name: str) -> types.ModuleType:
+    """A stand-in for the module ``name`` (found, not imported yet) that imports it when
+    one of its names is first read (:class:`_Later`); the caller decides where it goes
+    (:func:`modules_when_used` puts it in ``sys.modules``; :mod:`mitld_lp.own_imports`
+    hands ``regex`` to lark alone)."""
+    spec = importlib.util.find_spec(name)
+    return _Later(name, {"_package": spec is not None
+                         and spec.submodule_search_locations is not None})
 
 
 def modules_when_used() -> None:

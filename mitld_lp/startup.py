@@ -36,8 +36,10 @@ imports the package gets NumPy, SciPy and lark as they import themselves, but fo
 cuts nobody can see, made while the package's own modules import
 (:mod:`mitld_lp.own_imports`: the collector held and put back, SciPy's layer as here
 when the package imports it, the package's own dataclasses as below, not the
-program's), and on request (:mod:`mitld_lp.library_start`) ``scipy.sparse.csgraph``
-without ``scipy.linalg`` until a factorisation (the command line too).
+program's, ``scipy.sparse.csgraph`` and the direct sparse solvers without
+``scipy.linalg`` when the package imports them, lark's ``regex`` when lark uses it),
+and on request (:mod:`mitld_lp.library_start`) the csgraph cut for the program's own
+imports (the command line too).
 
 First of all, :func:`command` has the dataclasses the command line imports (about 120,
 nearly all frozen) made with their comparison, hash, representation and frozen

@@ -1,8 +1,9 @@
 """Strongly connected components and breadth-first search of a sparse graph, in plain
 Python for a small graph and by SciPy's ``csgraph`` for a large one.
 
-Importing ``scipy.sparse.csgraph`` imports ``scipy.sparse.linalg`` and ``scipy.linalg``
-with it: about 0.18 s of CPU (``python -X importtime``), a third of a whole
+Importing ``scipy.sparse.csgraph`` plainly imports ``scipy.sparse.linalg`` and ``scipy.linalg``
+with it (the package's own import leaves both for later, :func:`csgraph`): about 0.18 s
+of CPU (``python -X importtime``), a third of a whole
 ``mitld-lp solve`` of the bundled 371-state case.  On a graph of at most :data:`SMALL`
 nodes and stored entries these routines walk the graph themselves (an iterative Tarjan, a queue),
 in less time than that import; a larger graph goes to csgraph, imported then.  Nodes
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["SMALL", "breadth_first_order", "strong_components"]
+__all__ = ["SMALL", "breadth_first_order", "csgraph", "strong_components"]
 
 SMALL = 20_000
 """Nodes plus stored entries up to which a graph is walked in plain Python (4-5 ms for
@@ -45,10 +46,16 @@ def _small(graph: Any) -> bool:
     return int(graph.shape[0]) + int(graph.nnz) <= SMALL
 
 
-def _csgraph() -> Any:
+def csgraph() -> Any:
+    """``scipy.sparse.csgraph`` as the package imports it: inside the package's imports
+    (:mod:`mitld_lp.own_imports`) its ``scipy.sparse.linalg`` is left for later, and so
+    ``scipy.linalg``, until a name of theirs other than those served is read."""
     from scipy.sparse import csgraph
 
     return csgraph
+
+
+_csgraph = csgraph
 
 
 def strong_components(graph: Any) -> tuple[int, np.ndarray]:
