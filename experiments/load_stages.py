@@ -50,8 +50,8 @@ FIVE = ("consensus.4-4.c2", "zeroconf_dl.1000-1-false-30.deadline_max",
         "csma.4-2.some_before")
 QUICK = ("consensus.4-4.c2",)
 
-PROBE = r"""
-import functools, json, re, resource, sys, time
+HELPERS = r"""
+import functools, json, re, resource, sys
 
 def cpu():
     u, c = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
@@ -69,6 +69,9 @@ def reset_peak():
     except OSError:
         pass
 
+"""
+
+PROBE = HELPERS + r"""
 job = json.loads(sys.argv[1])
 c = cpu()
 import stormpy
@@ -124,24 +127,7 @@ out["else"] = here - sum(stages[k][0] for k in stages)
 print(json.dumps(out))
 """
 
-REFERENCE = r"""
-import json, re, resource, sys
-def cpu():
-    u, c = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
-    return u.ru_utime + u.ru_stime + c.ru_utime + c.ru_stime
-
-def rss_mb():
-    with open("/proc/self/status") as f:
-        return {k: int(v.split()[0]) / 1024 for k, v in
-                (line.split(":", 1) for line in f) if k in ("VmRSS", "VmHWM")}
-
-def reset_peak():
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-    except OSError:
-        pass
-
+REFERENCE = HELPERS + r"""
 job = json.loads(sys.argv[1])
 import stormpy
 out = {}
