@@ -51,7 +51,7 @@ from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components, may_cycle
 from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
-from mitld_lp.solvers.certify_compiled import compiled_checks
+from mitld_lp.solvers.certify_compiled import compiled_checks, load_if_warm
 from mitld_lp.solvers.certify_everywhere import EVERYWHERE, EVERYWHERE_BATCH, everywhere
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
@@ -88,9 +88,7 @@ __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "a
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
            "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
-           "EVERYWHERE_BATCH", "ROUNDS",
-           "SPARSE_LEVEL",
-           "is_certificate_check"]
+           "EVERYWHERE_BATCH", "ROUNDS", "SPARSE_LEVEL", "is_certificate_check"]
 
 log = logging.getLogger(__name__)
 
@@ -569,6 +567,7 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
         raise ValueError(f"sense: must be 'max' or 'min', got {sense!r}")
     target = np.asarray(target, dtype=bool)
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
+    load_if_warm(int(mdp.matrix.nnz))  # the compiled kernels' load, where cheap
     if layers is None:
         layers = support_layers(mdp)
     # a minimum's end-component check reads no chain: made before it, whose vectors

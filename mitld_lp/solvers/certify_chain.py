@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
+from mitld_lp.solvers.certify_compiled import compiled_chain_sets
 from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
@@ -102,31 +103,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     policy = np.asarray(policy, dtype=np.int64)
     acting = (policy >= 0) & ~target
     states = np.flatnonzero(acting)
-    rows = policy[states]
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    counts = m.indptr[rows + 1] - m.indptr[rows]
-    dst, pos = _columns(m, rows, counts, index)
-    del rows
-    if pos is None:  # the chain's edges as a CSR over the states: no source an edge
-        # in the reversal's index type where it fits: it reads them without a copy
-        small = n + dst.size < np.iinfo(np.int32).max
-        starts = np.zeros(n + 1, dtype=np.int32 if small else np.int64)
-        starts[states + 1] = counts
-        np.cumsum(starts, out=starts, dtype=starts.dtype)
-        del states, counts
-        edges = Reversed(n, None, dst, starts=starts)
-        del starts
-    else:  # its positive entries (in the rows' order), each with its source
-        src = np.repeat(states.astype(index), counts)
-        del states, counts
-        src, dst = src[pos], dst[pos]
-        del pos
-        edges = Reversed(n, src, dst)
-        del src
-    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
-    never = ~edges.reaching(target)
-    sure = ~edges.reaching(never)
-    del edges
+    never, sure = _sets(m, n, states, policy[states], target, index)
+    del states
     solved = acting & ~never & ~sure
     del acting
     idx = np.flatnonzero(solved)
@@ -174,6 +153,42 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         np.maximum(w, 0.0, out=slack)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
+
+
+def _sets(m: sp.csr_array, n: int, states: np.ndarray, rows: np.ndarray,
+          target: np.ndarray, index: type) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's ``never`` and ``sure`` sets (:class:`Chain`) from its edges, the
+    positive entries of row ``rows[i]`` out of state ``states[i]``: by one compiled
+    call where the kernels' load is paid
+    (:func:`~mitld_lp.solvers.certify_compiled.compiled_chain_sets`), else the edges
+    reversed once (:class:`~mitld_lp.solvers.graph.Reversed`) and searched twice; the
+    same sets."""
+    got = compiled_chain_sets(m, states, rows, target)
+    if got is not None:
+        return got
+    counts = m.indptr[rows + 1] - m.indptr[rows]
+    dst, pos = _columns(m, rows, counts, index)
+    del rows
+    if pos is None:  # the chain's edges as a CSR over the states: no source an edge
+        # in the reversal's index type where it fits: it reads them without a copy
+        small = n + dst.size < np.iinfo(np.int32).max
+        starts = np.zeros(n + 1, dtype=np.int32 if small else np.int64)
+        starts[states + 1] = counts
+        np.cumsum(starts, out=starts, dtype=starts.dtype)
+        del states, counts
+        edges = Reversed(n, None, dst, starts=starts)
+        del starts
+    else:  # its positive entries (in the rows' order), each with its source
+        src = np.repeat(states.astype(index), counts)
+        del states, counts
+        src, dst = src[pos], dst[pos]
+        del pos
+        edges = Reversed(n, src, dst)
+        del src
+    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
+    never = ~edges.reaching(target)
+    sure = ~edges.reaching(never)
+    return never, sure
 
 
 COLUMNS_BATCH = 1 << 14
