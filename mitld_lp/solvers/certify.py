@@ -49,8 +49,8 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.analysis import end_components, may_cycle
-from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
+from mitld_lp.solvers.analysis import end_components
+from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, escapes, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_checks, load_if_warm
 from mitld_lp.solvers.certify_everywhere import EVERYWHERE, EVERYWHERE_BATCH, everywhere
 from mitld_lp.solvers.certify_repair import (
@@ -511,7 +511,8 @@ def _trapped(mdp: MDP, zero: np.ndarray, target: np.ndarray,
 def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
     """Whether no end component lies among the ``left`` states (``comp``: each state's
     strongly connected component in ``mdp``'s support graph), shown without searching
-    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`),
+    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`,
+    read on their choices alone: :func:`~mitld_lp.solvers.certify_chain.cycling_among`),
     or every policy leaves those that may with positive probability, one
     :func:`~mitld_lp.solvers.graph.attractor` of the other states (and of the states
     with no choice, where a play stops) covering them.  An end component inside ``left``
@@ -520,13 +521,8 @@ def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
     the caller, as does a matrix that stores a zero (its pattern is more than the
     support).  The attractor is walked on those states' own rows alone
     (:func:`~mitld_lp.solvers.certify_chain.attracted`): the same set there."""
-    m = sp.csr_array(mdp.matrix)
-    if m.nnz and not bool(np.all(m.data > 0)):
-        return False
-    groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    # (a state with no choice is a seed: attracted)
-    inside = left & may_cycle(mdp, comp) & (np.diff(groups) > 0)
-    return True if not inside.any() else attracted(m, groups, inside)
+    return escapes(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64),
+                   comp, left)
 
 
 # ------------------------------------------------------------------ one model

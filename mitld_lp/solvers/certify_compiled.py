@@ -164,7 +164,8 @@ def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np
     except ImportError:  # pragma: no cover - numba is a dependency of the solvers
         return None
     never, sure = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+    # (the target copied: a writable array whatever the caller's, one signature of the
+    # kernel and so one cache file, not a compile for a read-only one)
     chain_sets(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
-               m.indptr, m.indices, m.data, np.ascontiguousarray(target, dtype=bool),
-               never, sure)
+               m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
     return never, sure
