@@ -310,3 +310,41 @@ def test_the_chain_of_a_certificate_is_the_same_compiled_or_not(monkeypatch) -> 
         # the policy's exact value is inside the chain's float value's reach
         assert ch.sure[int(np.flatnonzero(np.asarray(mdp.target))[0])]
     assert got[0] == got[1]
+
+
+def _attractor_by_fixpoint(m: sp.csr_array, groups: np.ndarray, seeds: np.ndarray
+                           ) -> np.ndarray:
+    """The states from which every policy reaches ``seeds`` with positive probability
+    (a state with no choice only if a seed), by the plain fixpoint: a state joins when
+    every one of its choices has an entry into the set."""
+    got = seeds.copy()
+    while True:
+        more = got.copy()
+        for s in np.flatnonzero(~got):
+            rows = range(int(groups[s]), int(groups[s + 1]))
+            more[s] = len(rows) > 0 and all(
+                got[m.indices[m.indptr[r]:m.indptr[r + 1]]].any() for r in rows)
+        if np.array_equal(more, got):
+            return got
+        got = more
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_attracted_compiled_or_not_is_the_fixpoint(seed, monkeypatch) -> None:
+    rng = np.random.default_rng(seed)
+    n = 40
+    per = rng.integers(1, 3, size=n)
+    groups = np.concatenate([[0], np.cumsum(per)]).astype(np.int64)
+    cols, ptr = [], [0]
+    for _ in range(int(groups[-1])):
+        cols += np.sort(rng.choice(n, size=int(rng.integers(1, 3)), replace=False)).tolist()
+        ptr.append(len(cols))
+    m = sp.csr_array((np.full(len(cols), 0.5), np.array(cols, dtype=np.int32),
+                      np.array(ptr, dtype=np.int32)), shape=(int(groups[-1]), n))
+    inside = rng.random(n) < (0.3 + 0.05 * (seed % 6))
+    want = bool(_attractor_by_fixpoint(m, groups, ~inside)[inside].all())
+    got = []
+    for compiled in (True, False):
+        _paid(monkeypatch, compiled)
+        got.append(certify_chain.attracted(m, groups, inside))
+    assert got == [want, want]

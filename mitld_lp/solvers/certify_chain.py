@@ -17,6 +17,7 @@ from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
+from mitld_lp.solvers.walks import load_walks
 from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
@@ -375,7 +376,17 @@ def attracted(m: sp.csr_array, groups: np.ndarray, inside: np.ndarray) -> bool:
     the least fixed point lies among them: the attractor of no seed on their rows with
     their columns (those hits given), the same set on them.  QVBS ``consensus`` 4-4
     ``c2``: 19,157 of 43,133 states, whose first round of the whole walk read the
-    predecessors of every other state."""
+    predecessors of every other state.  Where the compiled kernels' load is paid, the
+    compiled attractor of the other states on the whole matrix
+    (:func:`~mitld_lp.solvers.compiled_graph.backward`, the walk
+    :func:`~mitld_lp.solvers.graph.attractor` runs on a large graph: the same set), one
+    pass with nothing gathered."""
+    if kernel_loader.compiled_paid():
+        walks = load_walks()
+        if walks is not None:
+            got = walks.backward(m.indptr, m.indices, groups, ~inside,
+                                 np.zeros(m.shape[0], dtype=bool), True)
+            return bool(np.all(got[inside]))
     states = np.flatnonzero(inside)
     lo, hi = groups[states], groups[states + 1]
     choices = gather_ranges(lo, hi)
