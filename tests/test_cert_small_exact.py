@@ -28,6 +28,7 @@ from mitld_lp.solvers import certify as C
 from mitld_lp.solvers import certify_chain, certify_compiled
 from mitld_lp.solvers.analysis import may_cycle
 from mitld_lp.solvers.rounding import rounding
+from mitld_lp.testing.exact import chain_values
 
 RARE = (1e-12, 3e-12, 7e-13, 2.5e-12)
 
@@ -72,7 +73,8 @@ def _policy_values(mdp: MDP, exact: list[dict[int, Fraction]], policy: tuple[int
                    ) -> list[Fraction]:
     """The exact values of ``policy`` (a row per unknown state): 0 where its chain
     cannot reach the target (a search on the graph), else ``v = P v`` with the target
-    1 by Gauss-Jordan elimination in fractions (those states are transient)."""
+    1 by Gauss-Jordan elimination in fractions (those states are transient:
+    :func:`~mitld_lp.testing.exact.chain_values`)."""
     n = mdp.n_states
     target = int(np.flatnonzero(np.asarray(mdp.target))[0])
     succ = {s: [t for t, p in exact[policy[s]].items() if p > 0] if s < len(policy)
@@ -86,28 +88,11 @@ def _policy_values(mdp: MDP, exact: list[dict[int, Fraction]], policy: tuple[int
                 reach.add(s)
                 grew = True
     live = sorted(s for s in reach if s != target)
-    at = {s: i for i, s in enumerate(live)}
-    k = len(live)
-    a = [[Fraction(int(i == j)) for j in range(k)] + [Fraction(0)] for i in range(k)]
-    for s in live:
-        for t, p in exact[policy[s]].items():
-            if t == target:
-                a[at[s]][k] += p
-            elif t in at:
-                a[at[s]][at[t]] -= p
-    for c in range(k):
-        piv = next(r for r in range(c, k) if a[r][c] != 0)
-        a[c], a[piv] = a[piv], a[c]
-        f = a[c][c]
-        a[c] = [x / f for x in a[c]]
-        for r in range(k):
-            if r != c and a[r][c] != 0:
-                g = a[r][c]
-                a[r] = [x - g * y for x, y in zip(a[r], a[c], strict=True)]
+    step = {s: exact[policy[s]] for s in live}
     out = [Fraction(0)] * n
     out[target] = Fraction(1)
-    for s in live:
-        out[s] = a[at[s]][k]
+    for s, p in chain_values(step, live, target).items():
+        out[s] = p
     return out
 
 
