@@ -40,9 +40,12 @@ WARM_KERNELS = (("mitld_lp.solvers.certify_kernels", "bellman_rows"),
                 ("mitld_lp.solvers.certify_kernels", "state_needs"),
                 ("mitld_lp.solvers.certify_kernels", "chain_sets"),
                 ("mitld_lp.solvers.level_kernels", "chain_values"),
+                ("mitld_lp.solvers.level_kernels", "chain_solve"),
+                ("mitld_lp.solvers.compiled_graph", "components_and_levels"),
                 ("mitld_lp.solvers.compiled_graph", "_backward"))
 """The kernels a certificate runs once the load is paid (the Bellman check, the
-repair's needs, the chain's sets, its single states, a minimum's attractor): :func:`load_if_warm`
+repair's needs, the chain's sets, its single states and its walk over its own
+components, a minimum's attractor): :func:`load_if_warm`
 pays it only where each has a cache file, so that a cold one never makes a
 certificate pay numba's compile it would not otherwise pay."""
 
