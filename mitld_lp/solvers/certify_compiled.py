@@ -26,28 +26,27 @@ compiled kernel's load is paid (the kernel's own first read, about 2 ms, against
 NumPy check's 10-20 ns a row and its dozen calls a batch)."""
 
 
-WARM_LOAD_MIN_ENTRIES = 100_000
+WARM_LOAD_MIN_ENTRIES = 150_000
 """The fewest stored entries of a model whose certificate pays the compiled kernels'
-load itself where it is the loader's cheap one (:func:`load_if_warm`): a warm load
-measured 2-3 ms of CPU in a fresh process (the loader's pieces, then about 1 ms a
-kernel), against the NumPy Bellman check's 13-18 ms on QVBS firewire_dl 3-600
-(197,013 entries) and csma 4-2 (1.09 million), which the compiled check does in 1-4
-ms; the walks the certificate runs compiled once the load is paid (the chain's sets
-and its single states over many levels, a minimum's attractor: some 10 ms of NumPy
-rounds on QVBS consensus 4-4's 144,349 entries) gain beside."""
+load itself where it is the loader's cheap one (:func:`load_if_warm`): inside a solve
+the load measured 5-10 ms of CPU (the cache look-ups, the loader's pieces), then about
+1 ms a kernel's first call, against the NumPy Bellman check's 13-18 ms on QVBS
+firewire_dl 3-600 (197,013 entries) and csma 4-2 (1.09 million), which the compiled
+check does in 1-4 ms, beside the chain's sets and its single states over many levels.
+On QVBS consensus 4-4 (144,349 entries) the load cost what it saved (a minimum's
+attractor test, 15-20 ms of NumPy rounds, 3-8 ms compiled): not paid there."""
 
 WARM_KERNELS = (("mitld_lp.solvers.certify_kernels", "bellman_rows"),
-                ("mitld_lp.solvers.certify_kernels", "state_needs"),
                 ("mitld_lp.solvers.certify_kernels", "chain_sets"),
                 ("mitld_lp.solvers.level_kernels", "chain_values"),
-                ("mitld_lp.solvers.level_kernels", "chain_solve"),
-                ("mitld_lp.solvers.compiled_graph", "components_and_levels"),
                 ("mitld_lp.solvers.compiled_graph", "_backward"))
-"""The kernels a certificate runs once the load is paid (the Bellman check, the
-repair's needs, the chain's sets, its single states and its walk over its own
-components, a minimum's attractor): :func:`load_if_warm`
-pays it only where each has a cache file, so that a cold one never makes a
-certificate pay numba's compile it would not otherwise pay."""
+"""The kernels a certificate runs once the load is paid, one or two of each module
+(the Bellman check and the chain's sets, the chain's single states, a minimum's
+attractor): :func:`load_if_warm` pays it only where each has a cache file, so that a
+cold one never makes a certificate pay numba's compile it would not otherwise pay.
+Each look-up reads a cache directory (0.3-0.6 ms: the seven of every kernel the
+certificate may run were some 4 ms of QVBS consensus 4-4's 9 ms load); a module's
+kernels are compiled by the same certificates, so one stands for the others."""
 
 _WARM: list[bool] = []  # whether every kernel of WARM_KERNELS is cached, once a process
 
