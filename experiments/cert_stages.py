@@ -247,14 +247,9 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
 
     import bench_sweeps as bs
 
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import synthesize
 
-    if "bus" in job:  # an instance of bench_sweeps.py, posed as it poses them
-        from bench_scaling import Instance
-
-        model = bs._model(Instance(*job["bus"]))
-    else:
-        model = load_model(job["model"], max_states=job["max_states"])
+    model = _load_model(job)  # (a bus instance, the sensed case or a QVBS one)
     bs.preload()
     spent: dict[str, float] = defaultdict(float)
     for module, name, *column in TIMED:
