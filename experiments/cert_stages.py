@@ -14,8 +14,10 @@ the same bits before and after, or not).  Storm's check of the same product is i
   reads it), ``solve_lp``, ``certify``, ``_keeping``;
 * the certificate's sides: ``rounding`` (its factors), ``policy_lower`` /
   ``policy_upper``, ``optimum_upper`` / ``optimum_lower``, ``everywhere``;
-* inside the certificate: the policy's chain (``chain``), its edges reversed
-  (``Reversed.__init__``) and its two searches (``Reversed.reaching``), its values and
+* inside the certificate: the kernels' load where their cache is warm (``warm_load``),
+  the policy's chain (``chain``), its never / sure sets (``chain_sets``: compiled once
+  the load is paid, else its edges reversed (``Reversed.__init__``) and its two
+  searches (``Reversed.reaching``)), its values and
   slack (``_solve``), the Bellman checks (``_fails``), the repair (``_Repair.run``) and
   the recheck after it (``_touched``, ``_fails_among``: cert-half's, empty before);
 * ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
@@ -114,7 +116,12 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          # edges reversed (``Reversed.__init__`` above) and the readers by column
          ("mitld_lp.solvers.certify", "compiled_checks"),
          ("mitld_lp.solvers.certify_repair", "compiled_needs"),
-         ("mitld_lp.solvers.certify_repair", "readers_by_column"))
+         ("mitld_lp.solvers.certify_repair", "readers_by_column"),
+         # cert-small: the kernels' load where their cache is warm (its figure the
+         # load alone, numba's pieces and none of the kernels), the chain's never /
+         # sure sets (compiled once paid, else the edges reversed and searched twice)
+         ("mitld_lp.solvers.certify", "load_if_warm", "warm_load"),
+         ("mitld_lp.solvers.certify_chain", "_sets", "chain_sets"))
 """The entry points timed in place: (module, attribute, column); the column is the
 attribute's name where no third is given.  ``solve_stage``: the plain route's
 ``solve_models`` (the analysis to the certificates, without the result's record);
@@ -240,14 +247,9 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
 
     import bench_sweeps as bs
 
-    from mitld_lp import load_model, synthesize
+    from mitld_lp import synthesize
 
-    if "bus" in job:  # an instance of bench_sweeps.py, posed as it poses them
-        from bench_scaling import Instance
-
-        model = bs._model(Instance(*job["bus"]))
-    else:
-        model = load_model(job["model"], max_states=job["max_states"])
+    model = _load_model(job)  # (a bus instance, the sensed case or a QVBS one)
     bs.preload()
     spent: dict[str, float] = defaultdict(float)
     for module, name, *column in TIMED:

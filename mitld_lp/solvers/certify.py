@@ -49,9 +49,9 @@ import scipy.sparse as sp
 
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.analysis import end_components, may_cycle
-from mitld_lp.solvers.certify_chain import Chain, RowModel, attracted, chain, support_layers
-from mitld_lp.solvers.certify_compiled import compiled_checks
+from mitld_lp.solvers.analysis import end_components
+from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, escapes, support_layers
+from mitld_lp.solvers.certify_compiled import compiled_checks, load_if_warm
 from mitld_lp.solvers.certify_everywhere import EVERYWHERE, EVERYWHERE_BATCH, everywhere
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
@@ -88,9 +88,7 @@ __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "a
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
            "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
-           "EVERYWHERE_BATCH", "ROUNDS",
-           "SPARSE_LEVEL",
-           "is_certificate_check"]
+           "EVERYWHERE_BATCH", "ROUNDS", "SPARSE_LEVEL", "is_certificate_check"]
 
 log = logging.getLogger(__name__)
 
@@ -513,7 +511,8 @@ def _trapped(mdp: MDP, zero: np.ndarray, target: np.ndarray,
 def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
     """Whether no end component lies among the ``left`` states (``comp``: each state's
     strongly connected component in ``mdp``'s support graph), shown without searching
-    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`),
+    for one: none of them may hold one (:func:`~mitld_lp.solvers.analysis.may_cycle`,
+    read on their choices alone: :func:`~mitld_lp.solvers.certify_chain.cycling_among`),
     or every policy leaves those that may with positive probability, one
     :func:`~mitld_lp.solvers.graph.attractor` of the other states (and of the states
     with no choice, where a play stops) covering them.  An end component inside ``left``
@@ -522,13 +521,8 @@ def _escapes(mdp: MDP, left: np.ndarray, comp: np.ndarray) -> bool:
     the caller, as does a matrix that stores a zero (its pattern is more than the
     support).  The attractor is walked on those states' own rows alone
     (:func:`~mitld_lp.solvers.certify_chain.attracted`): the same set there."""
-    m = sp.csr_array(mdp.matrix)
-    if m.nnz and not bool(np.all(m.data > 0)):
-        return False
-    groups = np.asarray(mdp.row_groups, dtype=np.int64)
-    # (a state with no choice is a seed: attracted)
-    inside = left & may_cycle(mdp, comp) & (np.diff(groups) > 0)
-    return True if not inside.any() else attracted(m, groups, inside)
+    return escapes(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64),
+                   comp, left)
 
 
 # ------------------------------------------------------------------ one model
@@ -569,6 +563,7 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
         raise ValueError(f"sense: must be 'max' or 'min', got {sense!r}")
     target = np.asarray(target, dtype=bool)
     rnd = rounding(sp.csr_array(mdp.matrix), eta)
+    load_if_warm(int(mdp.matrix.nnz))  # the compiled kernels' load, where cheap
     if layers is None:
         layers = support_layers(mdp)
     # a minimum's end-component check reads no chain: made before it, whose vectors

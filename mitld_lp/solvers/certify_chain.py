@@ -10,12 +10,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
+from mitld_lp.solvers.certify_compiled import compiled_chain_sets
 from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
+from mitld_lp.solvers.walks import load_walks
 from mitld_lp.util import kernel_loader
 
 try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
@@ -24,7 +26,7 @@ except ImportError:  # pragma: no cover - a SciPy without it: the bincounts belo
     _st = None
 
 __all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "support_layers", "chain",
-           "attracted"]
+           "attracted", "cycling_among", "escapes"]
 
 CHAIN_KERNEL_MIN_LEVELS = 200
 """The fewest levels of a chain whose single states are solved by the compiled walk
@@ -102,31 +104,9 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     policy = np.asarray(policy, dtype=np.int64)
     acting = (policy >= 0) & ~target
     states = np.flatnonzero(acting)
-    rows = policy[states]
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    counts = m.indptr[rows + 1] - m.indptr[rows]
-    dst, pos = _columns(m, rows, counts, index)
-    del rows
-    if pos is None:  # the chain's edges as a CSR over the states: no source an edge
-        # in the reversal's index type where it fits: it reads them without a copy
-        small = n + dst.size < np.iinfo(np.int32).max
-        starts = np.zeros(n + 1, dtype=np.int32 if small else np.int64)
-        starts[states + 1] = counts
-        np.cumsum(starts, out=starts, dtype=starts.dtype)
-        del states, counts
-        edges = Reversed(n, None, dst, starts=starts)
-        del starts
-    else:  # its positive entries (in the rows' order), each with its source
-        src = np.repeat(states.astype(index), counts)
-        del states, counts
-        src, dst = src[pos], dst[pos]
-        del pos
-        edges = Reversed(n, src, dst)
-        del src
-    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
-    never = ~edges.reaching(target)
-    sure = ~edges.reaching(never)
-    del edges
+    never, sure = _sets(m, n, states, policy[states], target, index)
+    del states
     solved = acting & ~never & ~sure
     del acting
     idx = np.flatnonzero(solved)
@@ -174,6 +154,42 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         np.maximum(w, 0.0, out=slack)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
+
+
+def _sets(m: sp.csr_array, n: int, states: np.ndarray, rows: np.ndarray,
+          target: np.ndarray, index: type) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's ``never`` and ``sure`` sets (:class:`Chain`) from its edges, the
+    positive entries of row ``rows[i]`` out of state ``states[i]``: by one compiled
+    call where the kernels' load is paid
+    (:func:`~mitld_lp.solvers.certify_compiled.compiled_chain_sets`), else the edges
+    reversed once (:class:`~mitld_lp.solvers.graph.Reversed`) and searched twice; the
+    same sets."""
+    got = compiled_chain_sets(m, states, rows, target)
+    if got is not None:
+        return got
+    counts = m.indptr[rows + 1] - m.indptr[rows]
+    dst, pos = _columns(m, rows, counts, index)
+    del rows
+    if pos is None:  # the chain's edges as a CSR over the states: no source an edge
+        # in the reversal's index type where it fits: it reads them without a copy
+        small = n + dst.size < np.iinfo(np.int32).max
+        starts = np.zeros(n + 1, dtype=np.int32 if small else np.int64)
+        starts[states + 1] = counts
+        np.cumsum(starts, out=starts, dtype=starts.dtype)
+        del states, counts
+        edges = Reversed(n, None, dst, starts=starts)
+        del starts
+    else:  # its positive entries (in the rows' order), each with its source
+        src = np.repeat(states.astype(index), counts)
+        del states, counts
+        src, dst = src[pos], dst[pos]
+        del pos
+        edges = Reversed(n, src, dst)
+        del src
+    del dst  # reversed: its own copy (QVBS csma 4-2: the certificate's peak here)
+    never = ~edges.reaching(target)
+    sure = ~edges.reaching(never)
+    return never, sure
 
 
 COLUMNS_BATCH = 1 << 14
@@ -360,7 +376,17 @@ def attracted(m: sp.csr_array, groups: np.ndarray, inside: np.ndarray) -> bool:
     the least fixed point lies among them: the attractor of no seed on their rows with
     their columns (those hits given), the same set on them.  QVBS ``consensus`` 4-4
     ``c2``: 19,157 of 43,133 states, whose first round of the whole walk read the
-    predecessors of every other state."""
+    predecessors of every other state.  Where the compiled kernels' load is paid, the
+    compiled attractor of the other states on the whole matrix
+    (:func:`~mitld_lp.solvers.compiled_graph.backward`, the walk
+    :func:`~mitld_lp.solvers.graph.attractor` runs on a large graph: the same set), one
+    pass with nothing gathered."""
+    if kernel_loader.compiled_paid():
+        walks = load_walks()
+        if walks is not None:
+            got = walks.backward(m.indptr, m.indices, groups, ~inside,
+                                 np.zeros(m.shape[0], dtype=bool), True)
+            return bool(np.all(got[inside]))
     states = np.flatnonzero(inside)
     lo, hi = groups[states], groups[states + 1]
     choices = gather_ranges(lo, hi)
@@ -384,3 +410,41 @@ def attracted(m: sp.csr_array, groups: np.ndarray, inside: np.ndarray) -> bool:
     np.cumsum(hi - lo, out=sub_groups[1:])
     return bool(np.all(attractor(sub, sub_groups, np.zeros(states.size, dtype=bool),
                                  hit)))
+
+
+def cycling_among(m: sp.csr_array, groups: np.ndarray, comp: np.ndarray,
+                  left: np.ndarray) -> np.ndarray:
+    """``left & may_cycle(mdp, comp)`` (:func:`~mitld_lp.solvers.analysis.may_cycle`:
+    the states an end component may hold) for the model of matrix ``m`` and
+    ``groups``, read on the ``left`` states' choices alone: a ``left`` state of a
+    non-trivial component, or one with a choice that has entries all in its own column
+    (its first entry there, then every entry read).  Not the choices' states and the
+    first entries of every choice of the model (QVBS csma 4-2: 658,129 choices, of
+    which a minimum's certificate asks about 232,810 states')."""
+    size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
+    out = left & (size > 1)[comp]
+    rest = np.flatnonzero(left & ~out)
+    if rest.size == 0 or m.nnz == 0:
+        return out
+    lo, hi = groups[rest], groups[rest + 1]
+    choices = gather_ranges(lo, hi)
+    own = np.repeat(rest, hi - lo)
+    start, stop = m.indptr[choices], m.indptr[choices + 1]
+    cand = np.flatnonzero((stop > start) & (m.indices[np.minimum(start, m.nnz - 1)] == own))
+    start, stop, own = start[cand], stop[cand], own[cand]
+    apart = m.indices[gather_ranges(start, stop)] != np.repeat(own, stop - start)
+    pure = np.ones(cand.size, dtype=bool)
+    pure[np.repeat(np.arange(cand.size), stop - start)[apart]] = False
+    out[own[pure]] = True
+    return out
+
+
+def escapes(m: sp.csr_array, groups: np.ndarray, comp: np.ndarray, left: np.ndarray) -> bool:
+    """:func:`~mitld_lp.solvers.certify._escapes` on the model of matrix ``m`` and
+    ``groups`` (int64): False where ``m`` stores a zero, else whether every ``left``
+    state that may hold an end component (:func:`cycling_among`) and has a choice is
+    :func:`attracted` by the others (a state with no choice is a seed)."""
+    if m.nnz and not bool(np.all(m.data > 0)):
+        return False
+    inside = cycling_among(m, groups, comp, left) & (np.diff(groups) > 0)
+    return True if not inside.any() else attracted(m, groups, inside)

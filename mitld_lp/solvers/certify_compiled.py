@@ -17,12 +17,60 @@ import numpy as np
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.util import kernel_loader
 
-__all__ = ["COMPILED_CHECK_MIN_ROWS", "compiled_checks", "compiled_needs"]
+__all__ = ["COMPILED_CHECK_MIN_ROWS", "WARM_LOAD_MIN_ENTRIES", "compiled_chain_sets",
+           "compiled_checks", "compiled_needs", "load_if_warm"]
 
 COMPILED_CHECK_MIN_ROWS = 20_000
 """The fewest rows whose Bellman check (:func:`compiled_checks`) runs compiled, once a
 compiled kernel's load is paid (the kernel's own first read, about 2 ms, against the
 NumPy check's 10-20 ns a row and its dozen calls a batch)."""
+
+
+WARM_LOAD_MIN_ENTRIES = 150_000
+"""The fewest stored entries of a model whose certificate pays the compiled kernels'
+load itself where it is the loader's cheap one (:func:`load_if_warm`): inside a solve
+the load measured 5-10 ms of CPU (the cache look-ups, the loader's pieces), then about
+1 ms a kernel's first call, against the NumPy Bellman check's 13-18 ms on QVBS
+firewire_dl 3-600 (197,013 entries) and csma 4-2 (1.09 million), which the compiled
+check does in 1-4 ms, beside the chain's sets and its single states over many levels.
+On QVBS consensus 4-4 (144,349 entries) the load cost what it saved (a minimum's
+attractor test, 15-20 ms of NumPy rounds, 3-8 ms compiled): not paid there."""
+
+WARM_KERNELS = (("mitld_lp.solvers.certify_kernels", "bellman_rows"),
+                ("mitld_lp.solvers.certify_kernels", "chain_sets"),
+                ("mitld_lp.solvers.level_kernels", "chain_values"),
+                ("mitld_lp.solvers.compiled_graph", "_backward"))
+"""The kernels a certificate runs once the load is paid, one or two of each module
+(the Bellman check and the chain's sets, the chain's single states, a minimum's
+attractor): :func:`load_if_warm` pays it only where each has a cache file, so that a
+cold one never makes a certificate pay numba's compile it would not otherwise pay.
+Each look-up reads a cache directory (0.3-0.6 ms: the seven of every kernel the
+certificate may run were some 4 ms of QVBS consensus 4-4's 9 ms load); a module's
+kernels are compiled by the same certificates, so one stands for the others."""
+
+_WARM: list[bool] = []  # whether every kernel of WARM_KERNELS is cached, once a process
+
+
+def load_if_warm(entries: int) -> bool:
+    """Whether the compiled kernels' load is paid for a certificate of a model with
+    ``entries`` stored entries, paying it (:func:`~mitld_lp.util.kernel_loader.prepare`)
+    where it was not and it is cheap: at least :data:`WARM_LOAD_MIN_ENTRIES` entries and
+    every kernel of :data:`WARM_KERNELS` linked from the loader's cache (the loader on,
+    numba installed, a cache file there: :func:`~mitld_lp.util.kernel_loader.cached`).
+    The gates of the certificate's compiled paths ask
+    :func:`~mitld_lp.util.kernel_loader.compiled_paid` after; every compiled path gives
+    the NumPy path's bits, so only the time differs."""
+    if kernel_loader.compiled_paid():
+        return True
+    if entries < WARM_LOAD_MIN_ENTRIES:
+        return False
+    if not _WARM:
+        _WARM.append(all(kernel_loader.module_cached(module, name)
+                         for module, name in WARM_KERNELS))
+    if not _WARM[0]:
+        return False
+    kernel_loader.prepare()
+    return kernel_loader.compiled_paid()
 
 
 def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
@@ -96,3 +144,31 @@ def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
                 np.ascontiguousarray(x), rnd.count, rnd.slack_of,
                 rnd.high_of if upper else rnd.low_of, bool(upper), out)
     return out
+
+
+def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np.ndarray,
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ``never`` and ``sure`` sets of a policy's chain
+    (:func:`~mitld_lp.solvers.certify_chain.chain`: its edges the positive entries of
+    row ``rows[i]`` out of state ``states[i]``) by one compiled call
+    (:func:`~mitld_lp.solvers.certify_kernels.chain_sets`: the same sets as the
+    reversal and the two searches of :class:`~mitld_lp.solvers.reach.Reversed`); None
+    where those run instead: fewer than :data:`COMPILED_CHECK_MIN_ROWS` acting states,
+    no compiled kernel loaded yet in this process, numba not installed, or arrays of
+    other kinds than SciPy's product takes, or more states or entries than an int32
+    holds."""
+    n = int(target.shape[0])
+    if (states.size < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
+            or m.data.dtype != np.float64 or max(n, m.nnz) >= 2**31 - 1
+            or m.indices.dtype not in (np.int32, np.int64)):
+        return None
+    try:
+        from mitld_lp.solvers.certify_kernels import chain_sets
+    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
+        return None
+    never, sure = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+    # (the target copied: a writable array whatever the caller's, one signature of the
+    # kernel and so one cache file, not a compile for a read-only one)
+    chain_sets(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
+               m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
+    return never, sure

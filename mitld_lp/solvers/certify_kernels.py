@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "state_needs"]
+__all__ = ["bellman_rows", "chain_sets", "state_needs"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -136,3 +136,61 @@ def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_o
             elif pick < best:
                 best = pick
         out[i] = best
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pragma: no cover
+    """The sets of a policy's chain that its graph decides
+    (:func:`~mitld_lp.solvers.certify_chain.chain`): the chain's edges are the positive
+    stored entries of row ``rows[i]`` out of state ``states[i]`` (the other states have
+    none); ``never``: the states with no path to a ``target`` state, ``sure``: those
+    with no path to a ``never`` state.  The edges reversed once by a counting sort,
+    then two breadth-first searches from the seeds: which edges exist is all that is
+    read, so the sets are those of the NumPy searches.  Written into ``never`` and
+    ``sure`` (bool, a state each)."""
+    n = target.shape[0]
+    # each head's count of edges, then the end of its sources; filled from the ends
+    # down, so that the pointers become each head's start (the caller checks that
+    # the edges and states fit an int32)
+    ptr = np.zeros(n + 1, dtype=np.int32)
+    for i in range(states.shape[0]):
+        r = rows[i]
+        for e in range(indptr[r], indptr[r + 1]):
+            if data[e] > 0.0:
+                ptr[indices[e] + 1] += 1
+    for j in range(n):
+        ptr[j + 1] += ptr[j]
+    src = np.empty(ptr[n], dtype=np.int32)
+    for i in range(states.shape[0]):
+        r = rows[i]
+        s = states[i]
+        for e in range(indptr[r], indptr[r + 1]):
+            if data[e] > 0.0:
+                c = indices[e] + 1
+                ptr[c] -= 1
+                src[ptr[c]] = s
+    # (now ptr[j + 1] is head j's start and ptr[j + 2] its end: shifted by one)
+    queue = np.empty(n, dtype=np.int32)
+    for side in range(2):
+        seen = np.zeros(n, dtype=np.bool_)
+        head = 0
+        tail = 0
+        for j in range(n):
+            if (target[j] if side == 0 else never[j]):
+                seen[j] = True
+                queue[tail] = j
+                tail += 1
+        while head < tail:
+            j = queue[head]
+            head += 1
+            for e in range(ptr[j + 1], ptr[j + 2] if j + 2 <= n else src.shape[0]):
+                s = src[e]
+                if not seen[s]:
+                    seen[s] = True
+                    queue[tail] = s
+                    tail += 1
+        for j in range(n):
+            if side == 0:
+                never[j] = not seen[j]
+            else:
+                sure[j] = not seen[j]
