@@ -1,5 +1,5 @@
 """analysis-gates: the analysis's attractors run compiled on a warm cache from 100,000
-entries (:mod:`mitld_lp.solvers.attractor_gate`), the components staying on SciPy's walk.
+entries (:mod:`mitld_lp.solvers.analysis_gates`), the components staying on SciPy's walk.
 
 * the compiled attractor (and its spared choices) and the analysis's sets with the
   attractor compiled against fixed points written here in plain Python over dicts of
@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 import mitld_lp.solvers
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers import attractor_gate, graph
+from mitld_lp.solvers import analysis_gates, graph
 from mitld_lp.solvers import walks as walks_module
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
@@ -38,24 +38,31 @@ from mitld_lp.solvers import compiled_graph  # noqa: E402  (needs numba)
 
 @pytest.fixture
 def gate(monkeypatch: pytest.MonkeyPatch):
-    """``gate(True)``: the attractors compiled whatever their size, every other walk on
-    NumPy (the mix of a mid-sized product: ``compiled_walks`` says no); ``gate(False)``:
-    all on NumPy.  Returns the list of the compiled attractor kernel's calls."""
-    calls: list[int] = []
-    inner = compiled_graph.backward
+    """``gate(True)``: the attractors and the quotient's levels compiled whatever their
+    size, every other walk on NumPy (the mix of a mid-sized product: ``compiled_walks``
+    says no); ``gate(False)``: all on NumPy.  Returns the list of the compiled
+    attractor's and levels' kernel calls (their names)."""
+    calls: list[str] = []
 
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return inner(*args, **kwargs)
+    def counted(name: str):
+        inner = getattr(compiled_graph, name)
 
-    monkeypatch.setattr(compiled_graph, "backward", counted)
+        def call(*args, **kwargs):
+            calls.append(name)
+            return inner(*args, **kwargs)
+        return call
+
+    for name in ("backward", "state_levels"):
+        monkeypatch.setattr(compiled_graph, name, counted(name))
     monkeypatch.setattr(walks_module, "COMPILED_MIN_ENTRIES", sys.maxsize)
     monkeypatch.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", sys.maxsize)
 
-    def use(on: bool) -> list[int]:
+    def use(on: bool) -> list[str]:
         calls.clear()
-        monkeypatch.setattr(attractor_gate, "WARM_MIN_ENTRIES", 0 if on else sys.maxsize)
-        monkeypatch.setattr(attractor_gate, "_WARM", [on])
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+            monkeypatch.setattr(analysis_gates, name, 0 if on else sys.maxsize)
+        monkeypatch.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: on,
+                                                      analysis_gates.LEVELS: on})
         return calls
     return use
 
@@ -208,35 +215,82 @@ def test_both_quotients_are_the_same_with_the_gate_forced_either_way(seed: int, 
     for on in (True, False):
         calls = gate(on)
         got[on] = [_arrays(q) for q in analyse(mdp, goal, extra, sense=sense)]
-        assert bool(calls) is on
+        assert ("backward" in calls) is on
+        assert on or not calls
+        LEVELS_CALLED.extend(c for c in calls if c == "state_levels")
     assert got[True] == got[False]
 
 
-def expected(entries: int, paid: bool, warm: bool) -> bool:
+LEVELS_CALLED: list[str] = []
+
+
+def test_the_quotients_levels_were_compiled_in_some_case_above() -> None:
+    """(after the cases above, in this file's order): the forced gate reached the
+    quotient's levels, so their equality above covers the compiled levels too."""
+    if not LEVELS_CALLED:
+        for seed in range(6):
+            for sense in (Sense.MAX, Sense.MIN):
+                mdp = _mdp(100 + seed, 200)
+                with pytest.MonkeyPatch.context() as mp:
+                    mp.setattr(walks_module, "COMPILED_MIN_ENTRIES", sys.maxsize)
+                    mp.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", sys.maxsize)
+                    mp.setattr(analysis_gates, "PAID_MIN_ENTRIES", 0)
+                    mp.setattr(analysis_gates, "WARM_MIN_ENTRIES", 0)
+                    mp.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: True,
+                                                         analysis_gates.LEVELS: True})
+                    seen: list[int] = []
+                    inner = compiled_graph.state_levels
+                    mp.setattr(compiled_graph, "state_levels",
+                               lambda *a, _i=inner, _s=seen: _s.append(1) or _i(*a))
+                    analyse(mdp, np.asarray(mdp.target), sense=sense)
+                LEVELS_CALLED.extend("state_levels" for _ in seen)
+    assert LEVELS_CALLED
+
+
+def expected(entries: int, paid: bool, warm: bool, levels: bool) -> bool:
     """The rule: compiled from 4 million entries, from 150,000 once a kernel's load is
-    paid, from 100,000 where the attractor's kernel is warm in the loader's cache."""
-    return (entries >= 4_000_000 or (paid and entries >= 150_000)
-            or (warm and entries >= 100_000))
+    paid; where the kernel is warm in the loader's cache, an attractor from 100,000
+    entries, and an attractor or the quotient's levels from 20,000 once a load is paid."""
+    if entries >= 4_000_000 or (paid and entries >= 150_000):
+        return True
+    if not warm or entries < 20_000:
+        return False
+    return paid or (not levels and entries >= 100_000)
 
 
-@pytest.mark.parametrize("entries", [0, 99_999, 100_000, 149_999, 150_000, 3_999_999,
-                                     4_000_000])
+@pytest.mark.parametrize("entries", [0, 19_999, 20_000, 99_999, 100_000, 149_999, 150_000,
+                                     3_999_999, 4_000_000])
 @pytest.mark.parametrize("paid", [True, False])
 @pytest.mark.parametrize("warm", [True, False])
-def test_the_gate_follows_the_rule(entries: int, paid: bool, warm: bool,
+@pytest.mark.parametrize("levels", [True, False])
+def test_the_gates_follow_the_rule(entries: int, paid: bool, warm: bool, levels: bool,
                                    monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid)
-    monkeypatch.setattr(attractor_gate, "_WARM", [warm])
-    got = attractor_gate.attractor_walks(entries)
-    assert (got is not None) is expected(entries, paid, warm)
+    monkeypatch.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: warm,
+                                                  analysis_gates.LEVELS: warm})
+    got = (analysis_gates.level_walks if levels else analysis_gates.attractor_walks)(entries)
+    assert (got is not None) is expected(entries, paid, warm, levels)
     assert got is None or got is compiled_graph
 
 
+def test_each_gate_asks_for_its_own_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: True)
+    monkeypatch.setattr(analysis_gates, "_WARM", {})
+    monkeypatch.setattr(kernel_loader, "cached", lambda f, q: q == "_backward")
+    assert analysis_gates.attractor_walks(50_000) is compiled_graph
+    assert analysis_gates.level_walks(50_000) is None
+    monkeypatch.setattr(analysis_gates, "_WARM", {})
+    monkeypatch.setattr(kernel_loader, "cached", lambda f, q: q == "state_levels")
+    assert analysis_gates.attractor_walks(50_000) is None
+    assert analysis_gates.level_walks(50_000) is compiled_graph
+
+
 @pytest.mark.parametrize("why", ["off", "cold", "no numba"])
-def test_the_gate_refuses_unless_the_loader_links_the_cached_kernel(
+def test_the_gates_refuse_unless_the_loader_links_the_cached_kernel(
         why: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: False)
-    monkeypatch.setattr(attractor_gate, "_WARM", [])
+    paid = [False]
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid[0])
+    monkeypatch.setattr(analysis_gates, "_WARM", {})
     if why == "off":
         monkeypatch.setattr(kernel_loader, "ENABLED", False)
     elif why == "cold":
@@ -244,25 +298,79 @@ def test_the_gate_refuses_unless_the_loader_links_the_cached_kernel(
     else:
         monkeypatch.setitem(sys.modules, "mitld_lp.solvers.compiled_graph", None)
         monkeypatch.delattr(mitld_lp.solvers, "compiled_graph", raising=False)
-    assert attractor_gate.warm() is False
-    assert attractor_gate.attractor_walks(1_000_000) is None
-    # the same lookup with the loader on, numba there and the kernel's file cached
-    monkeypatch.setattr(attractor_gate, "_WARM", [])
+    assert analysis_gates.warm(analysis_gates.ATTRACTOR) is False
+    assert analysis_gates.warm(analysis_gates.LEVELS) is False
+    assert analysis_gates.attractor_walks(1_000_000) is None
+    paid[0] = True  # a load paid by another kernel: still no walk of these compiled
+    assert analysis_gates.attractor_walks(100_000) is None
+    assert analysis_gates.level_walks(100_000) is None
+    # the same lookups with the loader on, numba there and the kernels' files cached
+    paid[0] = False
+    monkeypatch.setattr(analysis_gates, "_WARM", {})
     monkeypatch.setattr(kernel_loader, "ENABLED", True)
-    monkeypatch.setattr(kernel_loader, "cached", lambda f, q: q == "_backward")
+    monkeypatch.setattr(kernel_loader, "cached", lambda f, q: q in ("_backward", "state_levels"))
     monkeypatch.setitem(sys.modules, "mitld_lp.solvers.compiled_graph", compiled_graph)
-    assert attractor_gate.warm() is True
-    assert attractor_gate.attractor_walks(1_000_000) is compiled_graph
+    assert analysis_gates.warm(analysis_gates.ATTRACTOR) is True
+    assert analysis_gates.attractor_walks(1_000_000) is compiled_graph
+    paid[0] = True
+    assert analysis_gates.level_walks(100_000) is compiled_graph
 
 
 def test_the_loader_switched_off_keeps_numpys_attractor_in_a_fresh_process() -> None:
-    code = ("import sys; from mitld_lp.solvers import attractor_gate as g; "
+    code = ("import sys; from mitld_lp.solvers import analysis_gates as g; "
             "from mitld_lp.util import kernel_loader as k; "
-            "print(g.warm(), g.attractor_walks(1_000_000) is None, k.compiled_paid(), "
-            "'numba' in sys.modules)")
+            "print(g.warm(), g.warm(g.LEVELS), g.attractor_walks(1_000_000) is None, "
+            "k.compiled_paid(), 'numba' in sys.modules)")
     root = str(Path(__file__).resolve().parent.parent)
     env = dict(os.environ, MITLD_LP_KERNEL_LOADER="0",
                PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=env, check=True, timeout=120)
-    assert out.stdout.split() == ["False", "True", "False", "False"]
+    assert out.stdout.split() == ["False", "False", "True", "False", "False"]
+
+
+def plain_levels(succ: list[set[int]], comp: np.ndarray) -> dict[int, int]:
+    """Each component's level by memoised recursion over the condensation: 0 without a
+    successor component, else one more than its highest successor's."""
+    out_of: dict[int, set[int]] = {}
+    for s, ts in enumerate(succ):
+        out_of.setdefault(int(comp[s]), set()).update(
+            int(comp[t]) for t in ts if comp[t] != comp[s])
+    memo: dict[int, int] = {}
+
+    def level(c: int) -> int:
+        if c not in memo:
+            memo[c] = 1 + max((level(d) for d in out_of[c]), default=-1)
+        return memo[c]
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(out_of) + 1000))
+    return {c: level(c) for c in out_of}
+
+
+@pytest.mark.parametrize(("seed", "n"), [(0, 60), (1, 400), (2, 3000), (3, 9000)])
+def test_the_compiled_quotient_levels_are_scipys_and_the_plain_levels(seed: int, n: int,
+                                                                        gate) -> None:
+    """On state graphs below and above the plain walk's size (SciPy's search numbers
+    the components of the latter): the compiled levels against SciPy's components (the
+    partition) and levels by recursion written here, and the same numbers as the NumPy
+    walk's."""
+    from scipy.sparse.csgraph import connected_components
+
+    mdp = _mdp(200 + seed, n)
+    m = sp.csr_array(mdp.matrix)
+    gate(True)
+    got = graph.state_levels(m, mdp.row_groups, walks=compiled_graph)
+    gate(False)
+    numpy = graph.state_levels(m, mdp.row_groups)
+    assert np.array_equal(got.component, numpy.component)
+    assert np.array_equal(got.level, numpy.level)
+    succ = [set().union(*cs) for cs in successors(mdp).values()]
+    rows = [s for s, ts in enumerate(succ) for _ in ts]
+    cols = [t for ts in succ for t in ts]
+    g = sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    k, label = connected_components(g, directed=True, connection="strong")
+    # the same partition: a one-to-one map between the labels
+    pairs = set(zip(got.component.tolist(), label.tolist(), strict=True))
+    assert len(pairs) == k == len({a for a, _ in pairs}) == got.level.size
+    want = plain_levels(succ, got.component)
+    assert [want[c] for c in range(got.level.size)] == got.level.tolist()

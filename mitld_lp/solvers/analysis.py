@@ -77,7 +77,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
-from mitld_lp.solvers.attractor_gate import attractor_walks
+from mitld_lp.solvers.analysis_gates import attractor_walks
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -403,7 +403,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # its reversed choices are freed before the state graph's reversal is made, which
     # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
     # analysis's peak); compiled, it holds no such graph and runs after, as before (after
-    # the components, which keep SciPy's walk though its load is then paid: attractor_gate)
+    # the components, which keep SciPy's walk though its load is then paid: analysis_gates)
     early = sense is Sense.MIN and attractor_walks(m.nnz) is None
     if early:
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())

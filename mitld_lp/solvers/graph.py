@@ -7,7 +7,7 @@ backward searches (:mod:`~mitld_lp.solvers.reach`) and the maximal end component
 their names importable from here.  All of them look only at which transitions have
 positive probability, so they are exact.  A large graph is walked by compiled kernels
 (:mod:`~mitld_lp.solvers.compiled_graph`, chosen by :mod:`~mitld_lp.solvers.walks`, an
-attractor by :mod:`~mitld_lp.solvers.attractor_gate`) with the same results.  This module
+attractor by :mod:`~mitld_lp.solvers.analysis_gates`) with the same results.  This module
 imports no solver module but those, the level search, the rows and
 :mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
 :mod:`~mitld_lp.solvers.quotient` and :mod:`~mitld_lp.solvers.topological` build on it.
@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers.attractor_gate import attractor_walks
+from mitld_lp.solvers.analysis_gates import attractor_walks
 from mitld_lp.solvers.end_components import (
     EndComponents,
     compiled_end_components,
@@ -132,14 +132,14 @@ def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.nda
     backwards from the seeds a frontier at a time (a choice is hit once, a state joins
     when its last choice is), vectorised per round; the predecessors are the matrix's
     pattern in column order (one counting sort).  A large matrix is walked compiled
-    (:func:`~mitld_lp.solvers.attractor_gate.attractor_walks`), a state at a time: the
+    (:func:`~mitld_lp.solvers.analysis_gates.attractor_walks`), a state at a time: the
     same set.
 
     Returned with the choices **hit** at the end (``(n_choices,)`` bool: those of
     ``hit`` and those with an entry into the set; both walks mark every such choice).
-    A state outside the set with a choice keeps at least one not hit (else it
-    would have joined), and such a choice's whole support lies outside the set: the choices
-    *spared* are the ones by which a policy stays out of the set."""
+    A state outside the set with a choice keeps at least one not hit (else it would have
+    joined), its whole support outside the set: the choices *spared*, by which a policy
+    stays out of the set."""
     n_choices = int(matrix.indptr.size - 1)
     walks = attractor_walks(matrix.nnz)
     if walks is not None:
@@ -277,9 +277,8 @@ def graph_view(matrix: sp.csr_array, row_groups: np.ndarray) -> sp.csr_array:
     """``(n, n)`` bool: ``s -> s'`` iff a choice of ``s`` has an entry for ``s'`` (a
     state's choices are consecutive rows, so its successors are a slice of the matrix's
     column indices); an entry of probability 0 is an edge too, so it must not be stored.
-    The duplicates (several choices to one successor, often two thirds of the entries)
-    are merged: scipy's strongly connected components did not finish on a graph with
-    them (scipy 1.17, 1e4 states)."""
+    The duplicates (often two thirds of the entries) are merged: scipy's strongly
+    connected components did not finish on a graph with them (scipy 1.17, 1e4 states)."""
     n = row_groups.shape[0] - 1
     index = np.int32 if max(n, matrix.nnz) < 2**31 else np.int64
     graph = sp.csr_array((np.ones(matrix.nnz, dtype=bool), matrix.indices.astype(index),
@@ -472,11 +471,12 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     return Levels(comp, None, None, later), reach, back  # type: ignore[arg-type]
 
 
-def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,
-                 seeds: np.ndarray | None = None) -> Levels:
+def state_levels(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray | None = None,
+                 walks: Any = None) -> Levels:
     """:func:`levels` of ``graph_view(matrix, row_groups)`` (no stored zero), the state
-    graph built by the compiled walk itself where they are used."""
-    walks = compiled_walks(matrix.nnz)
+    graph built by the compiled walk itself where they are used (``walks``: whatever the
+    size, :func:`~mitld_lp.solvers.analysis_gates.level_walks`)."""
+    walks = compiled_walks(matrix.nnz) if walks is None else walks
     if walks is None:
         return levels(graph_view(matrix, row_groups), seeds)
     n = row_groups.shape[0] - 1
