@@ -25,11 +25,13 @@ with the entry point of each part timed (CPU seconds, medians):
 * the same parts of the *first* call, the route's own in ``synthesize`` (what
   ``bench_qvbs.py``'s ``analysis_cpu`` counts: numba's import and each kernel's load
   from the disk cache inside, and the first touch of every array);
-* then, in the same child, numba imported and the compiled walks loaded
-  (``numba_import``, ``walks_load``), the first analysis on the compiled walks
-  (``first_compiled``: each kernel's load from the disk cache inside) and the median of
-  the next (``compiled``).  Where the instance's sweeps load numba anyway, the analysis
-  above already ran compiled and ``numba_import`` is 0.
+* then, in the same child, the kernel loader's load paid (``numba_import``:
+  ``kernel_loader.prepare``, its pieces or numba's import where they cannot be set up)
+  and the compiled walks' module imported (``walks_load``), and every walk's gate
+  forced on whatever the graph's size: the first analysis (``first_compiled``: each
+  kernel's link inside) and the median of the next (``compiled``), with their parts
+  (the third table).  Where the instance's load is paid already, ``numba_import`` is
+  about 0.
 
 The answer (the solve's lower bound) is printed beside.  ::
 

@@ -374,3 +374,57 @@ def test_the_compiled_quotient_levels_are_scipys_and_the_plain_levels(seed: int,
     assert len(pairs) == k == len({a for a, _ in pairs}) == got.level.size
     want = plain_levels(succ, got.component)
     assert [want[c] for c in range(got.level.size)] == got.level.tolist()
+
+
+@pytest.mark.parametrize("entries", [0, 149_999, 150_000, 3_999_999, 4_000_000, 10**8])
+@pytest.mark.parametrize("paid", [True, False])
+def test_the_products_components_are_compiled_only_from_4_million_entries(
+        entries: int, paid: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid)
+    got = analysis_gates.component_walks(entries)
+    assert (got is not None) is (entries >= 4_000_000)
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("seed", range(4))
+def test_the_quotients_are_the_same_with_the_components_on_scipy_or_compiled(
+        seed: int, sense: Sense, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A product past the plain walk's size (SciPy's search), its load paid: every walk
+    compiled, every walk but the product's components compiled (this gate), and every
+    walk on NumPy give the same quotients; the product's components are SciPy's
+    partition."""
+    from scipy.sparse.csgraph import connected_components
+
+    mdp = _mdp(300 + seed, 6000)
+    goal = np.asarray(mdp.target)
+    extra = np.zeros(mdp.n_states, dtype=bool)
+    extra[np.random.default_rng(seed).choice(mdp.n_states, 40, replace=False)] = True
+    extra &= ~goal
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: True)
+    monkeypatch.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: True,
+                                                  analysis_gates.LEVELS: True})
+    calls: list[str] = []
+    for name in ("state_levels", "backward"):
+        inner = getattr(compiled_graph, name)
+        monkeypatch.setattr(compiled_graph, name,
+                            lambda *a, _i=inner, _n=name: calls.append(_n) or _i(*a))
+    got = {}
+    for mode, low, loaded in (("all", 0, 0), ("gate", sys.maxsize, 0),
+                              ("numpy", sys.maxsize, sys.maxsize)):
+        monkeypatch.setattr(walks_module, "COMPILED_MIN_ENTRIES", low)
+        monkeypatch.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", loaded)
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+            monkeypatch.setattr(analysis_gates, name, loaded)
+        calls.clear()
+        qs = analyse(mdp, goal, extra, sense=sense)
+        got[mode] = [_arrays(q) for q in qs]
+        assert ("backward" in calls) is (mode != "numpy"), mode
+        if mode == "all":
+            assert "state_levels" in calls  # the product's components compiled
+        comp = np.asarray(qs[0].layers[0])
+    assert got["all"] == got["gate"] == got["numpy"]
+    m = sp.csr_array(mdp.matrix)
+    g = graph.graph_view(m, mdp.row_groups)
+    k, label = connected_components(g, directed=True, connection="strong")
+    pairs = set(zip(comp.tolist(), label.tolist(), strict=True))
+    assert len(pairs) == k == len({a for a, _ in pairs})
