@@ -11,8 +11,9 @@ and two of the analysis's walks pay it back on a mid-sized product:
   frontier, thousands of rounds on a deadline's product): compiled from
   :data:`WARM_MIN_ENTRIES` entries where its kernel is warm, whether or not a load is
   paid (QVBS firewire_dl 3-600: 0.020 -> 0.010 s; consensus 4-4: 0.010 -> 0.001; csma
-  4-2: 0.037 -> 0.012), and from :data:`PAID_MIN_ENTRIES` once a load is paid (QVBS
-  zeroconf 1000-4's value-1 attractor over 75,780 entries: 0.020 s on NumPy);
+  4-2: 0.037 -> 0.012), and from :data:`PAID_MIN_ENTRIES` once a load is paid (the
+  certificate's attractor on QVBS consensus 4-4, :func:`~mitld_lp.solvers.graph.
+  attractor` over 75,780 entries: 0.020 s on NumPy);
 * the **quotient's own levels** (:func:`level_walks`,
   :func:`~mitld_lp.solvers.quotient_order.quotient_blocks`): compiled from
   :data:`PAID_MIN_ENTRIES` once a load is paid and the kernel is warm, in place of SciPy's
