@@ -377,12 +377,17 @@ def test_the_compiled_quotient_levels_are_scipys_and_the_plain_levels(seed: int,
 
 
 @pytest.mark.parametrize("entries", [0, 149_999, 150_000, 3_999_999, 4_000_000, 10**8])
+@pytest.mark.parametrize("per_state", [1, 2.3, 7.9, 8, 20.6])
 @pytest.mark.parametrize("paid", [True, False])
-def test_the_products_components_are_compiled_only_from_4_million_entries(
-        entries: int, paid: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_products_components_are_compiled_from_4_million_entries_or_dense(
+        entries: int, per_state: float, paid: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """From 4 million entries; from 150,000 once a load is paid where a state has at
+    least 8 entries; else SciPy's walk."""
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid)
-    got = analysis_gates.component_walks(entries)
-    assert (got is not None) is (entries >= 4_000_000)
+    states = int(entries / per_state)
+    got = analysis_gates.component_walks(entries, states)
+    want = entries >= 4_000_000 or (paid and entries >= 150_000 and entries >= 8 * states)
+    assert (got is not None) is want
 
 
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])

@@ -20,12 +20,15 @@ and two of the analysis's walks pay it back on a mid-sized product:
   components and Dijkstra's search of thin levels.
 
 The product's components and reach (:func:`component_walks`,
-:func:`~mitld_lp.solvers.graph.components_reaching`) run compiled only from
-:data:`~mitld_lp.solvers.walks.COMPILED_MIN_ENTRIES` entries, a load paid or not: since
-the quotient's levels are found on the quotient alone, SciPy's components and a search of
-the reversed graph cost less than the compiled Tarjan with the product's levels (QVBS csma
-4-2, its load paid by the product's build: the analysis 0.104 -> 0.077 s, firewire_dl
-3-600 0.024 -> 0.019, zeroconf 1000-4 0.161 -> 0.165; medians of 7 in one process).
+:func:`~mitld_lp.solvers.graph.components_reaching`) run compiled, once a load is paid,
+only where the product has at least :data:`DENSE_ENTRIES` entries a state (or from
+:data:`~mitld_lp.solvers.walks.COMPILED_MIN_ENTRIES` entries): since the quotient's
+levels are found on the quotient alone, SciPy's components and a search of the reversed
+graph cost less than the compiled Tarjan with the product's levels where a state has a
+few entries (QVBS csma 4-2, 1.8 entries a state, its load paid by the product's build:
+the analysis 0.104 -> 0.077 s; firewire_dl 3-600, 1.2: 0.024 -> 0.019; zeroconf 1000-4,
+2.3: 0.161 -> 0.165; medians of 7 in one process), not where it has many (the sensed
+bus case, 20.6 entries a state: 0.056 compiled against 0.064).
 
 A kernel is warm where the loader would link it from its cache
 (:func:`~mitld_lp.util.kernel_loader.cached`: the loader on, numba installed, a cache
@@ -42,8 +45,8 @@ from mitld_lp.solvers import walks as _walks
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util import kernel_loader
 
-__all__ = ["ATTRACTOR", "LEVELS", "PAID_MIN_ENTRIES", "WARM_MIN_ENTRIES", "attractor_walks",
-           "component_walks", "level_walks", "warm"]
+__all__ = ["ATTRACTOR", "DENSE_ENTRIES", "LEVELS", "PAID_MIN_ENTRIES", "WARM_MIN_ENTRIES",
+           "attractor_walks", "component_walks", "level_walks", "warm"]
 
 WARM_MIN_ENTRIES = 100_000
 """Stored entries from which an attractor runs compiled on a warm cache before any
@@ -55,6 +58,11 @@ PAID_MIN_ENTRIES = 20_000
 """Stored entries from which an attractor or the quotient's levels run compiled on a
 warm cache once a kernel's load is paid (only the kernel's link is left, 1-3 ms once a
 process): below, the plain walks' 4-5 ms (:data:`~mitld_lp.util.traversal.SMALL`)."""
+
+DENSE_ENTRIES = 8
+"""Entries a state from which the product's components run compiled once a load is paid
+(between QVBS zeroconf 1000-4's 2.3, SciPy's walk no slower, and the sensed bus case's
+20.6, the compiled walk 13% faster)."""
 
 ATTRACTOR = ("mitld_lp.solvers.compiled_graph", "_backward")
 LEVELS = ("mitld_lp.solvers.compiled_graph", "state_levels")
@@ -92,9 +100,11 @@ def level_walks(entries: int) -> Any:
     return load_walks()
 
 
-def component_walks(entries: int) -> Any:
+def component_walks(entries: int, states: int) -> Any:
     """The module of compiled walks for the product's components and reach on a matrix of
-    ``entries`` stored entries: :func:`~mitld_lp.solvers.walks.compiled_walks`'s from
-    :data:`~mitld_lp.solvers.walks.COMPILED_MIN_ENTRIES` entries, else None (SciPy's walk,
-    module docs)."""
-    return None if entries < _walks.COMPILED_MIN_ENTRIES else compiled_walks(entries)
+    ``entries`` stored entries over ``states`` states: :func:`~mitld_lp.solvers.walks.
+    compiled_walks`'s from :data:`~mitld_lp.solvers.walks.COMPILED_MIN_ENTRIES` entries or
+    from :data:`DENSE_ENTRIES` entries a state, else None (SciPy's walk, module docs)."""
+    if entries < _walks.COMPILED_MIN_ENTRIES and entries < DENSE_ENTRIES * states:
+        return None
+    return compiled_walks(entries)

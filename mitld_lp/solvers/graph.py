@@ -434,7 +434,7 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     where it was not made).  Where the components are fewer than half the states, the
     condensation is searched as :func:`state_components` does (QVBS zeroconf 1000-4:
     87,952 components of 301,219 states, whose levels are walked anyway)."""
-    if component_walks(matrix.nnz) is not None:  # compiled only where it is no slower
+    if component_walks(matrix.nnz, row_groups.shape[0] - 1) is not None:  # no slower
         found = state_components(matrix, row_groups, seeds)
         return found, found.reach[found.component], None
     graph = graph_view(matrix, row_groups)
