@@ -25,11 +25,13 @@ with the entry point of each part timed (CPU seconds, medians):
 * the same parts of the *first* call, the route's own in ``synthesize`` (what
   ``bench_qvbs.py``'s ``analysis_cpu`` counts: numba's import and each kernel's load
   from the disk cache inside, and the first touch of every array);
-* then, in the same child, numba imported and the compiled walks loaded
-  (``numba_import``, ``walks_load``), the first analysis on the compiled walks
-  (``first_compiled``: each kernel's load from the disk cache inside) and the median of
-  the next (``compiled``).  Where the instance's sweeps load numba anyway, the analysis
-  above already ran compiled and ``numba_import`` is 0.
+* then, in the same child, the kernel loader's load paid (``numba_import``:
+  ``kernel_loader.prepare``, its pieces or numba's import where they cannot be set up)
+  and the compiled walks' module imported (``walks_load``), and every walk's gate
+  forced on whatever the graph's size: the first analysis (``first_compiled``: each
+  kernel's link inside) and the median of the next (``compiled``), with their parts
+  (the third table).  Where the instance's load is paid already, ``numba_import`` is
+  about 0.
 
 The answer (the solve's lower bound) is printed beside.  ::
 
@@ -96,6 +98,7 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
 
     from mitld_lp import load_model, synthesize
     from mitld_lp.solvers import analysis
+    from mitld_lp.util import kernel_loader
 
     model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
@@ -139,29 +142,45 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
         inner(*kept["args"], **kept["kwargs"])
         return time.process_time() - c
 
-    rows: list[dict[str, float]] = []
-    try:
-        run()
-        for _ in range(job["reps"]):
+    def parts(reps: int) -> dict[str, float]:
+        rows: list[dict[str, float]] = []
+        for _ in range(reps):
             spent.clear()
             whole = run()
             rows.append(dict(spent, analyse=whole, rest=whole - _inside(spent, kept)))
+        return {k: _median([r.get(k, 0.0) for r in rows]) for k in (*PARTS, "analyse", "rest")}
+
+    from mitld_lp.solvers import walks
+    gate = walks.compiled_walks
+    try:
+        run()
+        out = parts(job["reps"])
+        c = time.process_time()
+        kernel_loader.prepare()
+        loaded = time.process_time()
+        walks.load_walks()
+        walks_loaded = time.process_time()
+        # every walk compiled, whatever the graph's size (the gate forced on)
+        for mod in _callers():
+            mod.compiled_walks = lambda entries: walks.load_walks()
+        first = run()
+        forced = parts(job["reps"])
     finally:
         for mod, attr, f in originals:
             setattr(mod, attr, f)
-    out = {k: _median([r.get(k, 0.0) for r in rows]) for k in (*PARTS, "analyse", "rest")}
-    c = time.process_time()
-    from mitld_lp.solvers import walks
-    from mitld_lp.util import numba_narrow
-    numba_narrow.import_numba()
-    loaded = time.process_time()
-    walks.load_walks()
-    walks_loaded = time.process_time()
-    first = run()
-    compiled = _median([run() for _ in range(job["reps"])])
+        for mod in _callers():
+            mod.compiled_walks = gate
     return dict(out, value=result.lower, numba_before=numba_before, first_call=first_call,
                 numba_import=loaded - c, walks_load=walks_loaded - loaded,
-                first_compiled=first, compiled=compiled)
+                first_compiled=first, compiled=forced["analyse"], forced=forced)
+
+
+def _callers() -> list[Any]:
+    """The modules that ask :func:`mitld_lp.solvers.walks.compiled_walks` by that name."""
+    import importlib
+
+    return [importlib.import_module(f"mitld_lp.solvers.{m}")
+            for m in ("analysis", "graph", "end_components", "reach")]
 
 
 def _inside(spent: dict[str, float], kept: dict[str, Any]) -> float:
@@ -193,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--qvbs is required (a checkout's benchmarks/ folder)")
     out = _common.out_dir(args)
     reps = 2 if args.quick else args.reps
-    rows, firsts = [], []
+    rows, firsts, forced = [], [], []
     with tempfile.TemporaryDirectory(prefix="analysis_parts_") as tmp:
         work = Path(tmp)
         for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
@@ -212,6 +231,9 @@ def main(argv: list[str] | None = None) -> int:
                            *(round(got["first_call"].get(k, 0.0), 4) for k in FIRST[2:])])
             print(_common.text_table(COLUMNS, rows[-1:]), flush=True)
             print(_common.text_table(FIRST, firsts[-1:]), flush=True)
+            forced.append([inst.name, f"{got['value']:.6g}",
+                           *(round(got["forced"].get(k, 0.0), 4) for k in FIRST[2:])])
+            print(_common.text_table(FIRST, forced[-1:]), flush=True)
     text = ("## The graph analysis part by part, and compiled (CPU seconds, medians)\n\n"
             + _common.markdown_table(COLUMNS, rows)
             + f"\n\n{reps} timed analyses an instance after one untimed, in one process; "
@@ -221,7 +243,12 @@ def main(argv: list[str] | None = None) -> int:
             + _common.markdown_table(FIRST, firsts)
             + "\n\nThe route's own call (what bench_qvbs.py's analysis_cpu counts): "
               "numba's import (numba_load) and each kernel's load from the disk cache "
-              "inside the parts that make them.\n")
+              "inside the parts that make them.\n\n"
+              "## Every walk compiled, part by part (CPU seconds, medians)\n\n"
+            + _common.markdown_table(FIRST, forced)
+            + "\n\nThe gate of the compiled walks forced on whatever the graph's size, "
+              "after the kernel loader's load (numba_import: its pieces, or numba's "
+              "import where they cannot be set up) and the walks' module.\n")
     _common.write_text(out / "analysis_parts.md", text)
     print(text)
     return 0

@@ -97,9 +97,12 @@ def _bound(mdp: MDP) -> int:
 @pytest.fixture
 def numpy_walks(monkeypatch: pytest.MonkeyPatch) -> None:
     """The NumPy walks whatever numba's state (csma's analysis in the route)."""
-    from mitld_lp.solvers import walks
+    from mitld_lp.solvers import analysis_gates, walks
 
     monkeypatch.setattr(walks, "COMPILED_LOADED_MIN_ENTRIES", 1 << 40)
+    # the attractor's and the quotient levels' own gates (a warm cache), off too
+    monkeypatch.setattr(analysis_gates, "WARM_MIN_ENTRIES", 1 << 40)
+    monkeypatch.setattr(analysis_gates, "PAID_MIN_ENTRIES", 1 << 40)
 
 
 @pytest.mark.usefixtures("numpy_walks")

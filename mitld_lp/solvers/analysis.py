@@ -77,6 +77,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.analysis_gates import attractor_walks
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -309,7 +310,7 @@ def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.nd
     owner = np.repeat(np.arange(n), np.diff(row_groups))
     seeds = zero.copy()
     seeds[owner[leaks]] = True
-    walks = compiled_walks(matrix.nnz)
+    walks = attractor_walks(matrix.nnz)
     if walks is not None:
         return ~walks.backward(matrix.indptr, matrix.indices, row_groups, seeds,
                                np.zeros(matrix.shape[0], dtype=bool), False), None
@@ -401,8 +402,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # a minimum's Prob0E (the attractors of its targets) first where NumPy walks it:
     # its reversed choices are freed before the state graph's reversal is made, which
     # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
-    # analysis's peak); compiled, it holds no such graph and runs after, as before
-    early = sense is Sense.MIN and compiled_walks(m.nnz) is None
+    # analysis's peak); compiled, it holds no such graph and runs after, as before (after
+    # the components, which keep SciPy's walk though its load is then paid: analysis_gates)
+    early = sense is Sense.MIN and attractor_walks(m.nnz) is None
     if early:
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them

@@ -6,11 +6,11 @@ backward searches (:mod:`~mitld_lp.solvers.reach`) and the maximal end component
 (:mod:`~mitld_lp.solvers.end_components`) live in modules of their own below this one,
 their names importable from here.  All of them look only at which transitions have
 positive probability, so they are exact.  A large graph is walked by compiled kernels
-(:mod:`~mitld_lp.solvers.compiled_graph`, chosen by :mod:`~mitld_lp.solvers.walks`)
-with the same results.  This module imports no solver module but those, the level
-search, the rows and :mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
-:mod:`~mitld_lp.solvers.quotient` and :mod:`~mitld_lp.solvers.topological` all build
-on it.
+(:mod:`~mitld_lp.solvers.compiled_graph`, chosen by :mod:`~mitld_lp.solvers.walks`, an
+attractor by :mod:`~mitld_lp.solvers.analysis_gates`) with the same results.  This module
+imports no solver module but those, the level search, the rows and
+:mod:`~mitld_lp.solvers.result`: :mod:`~mitld_lp.solvers.analysis`,
+:mod:`~mitld_lp.solvers.quotient` and :mod:`~mitld_lp.solvers.topological` build on it.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
+from mitld_lp.solvers.analysis_gates import attractor_walks, component_walks
 from mitld_lp.solvers.end_components import (
     EndComponents,
     compiled_end_components,
@@ -39,10 +40,9 @@ from mitld_lp.util.traversal import SMALL, breadth_first_order, strong_component
 
 __all__ = [
     "Sense", "attractor", "attractor_spared", "attractors", "Blocks", "Edges", "Reversed",
-    "EndComponents", "Level", "Levels", "backward_reachable", "blocks_from",
+    "EndComponents", "Level", "Levels", "backward_reachable", "blocks_from", "toward",
     "components_reaching", "compiled_end_components", "edges", "graph_blocks", "graph_view",
-    "levels", "maximal_end_components", "state_components", "state_levels",
-    "segmented_argmax", "toward",
+    "levels", "maximal_end_components", "state_components", "state_levels", "segmented_argmax",
 ]
 
 
@@ -132,20 +132,20 @@ def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.nda
     backwards from the seeds a frontier at a time (a choice is hit once, a state joins
     when its last choice is), vectorised per round; the predecessors are the matrix's
     pattern in column order (one counting sort).  A large matrix is walked compiled
-    (:func:`~mitld_lp.solvers.walks.compiled_walks`), a state at a time: the same set.
+    (:func:`~mitld_lp.solvers.analysis_gates.attractor_walks`), a state at a time: the
+    same set.
 
     Returned with the choices **hit** at the end (``(n_choices,)`` bool: those of
     ``hit`` and those with an entry into the set; both walks mark every such choice).
-    A state outside the set with a choice keeps at least one not hit (else it
-    would have joined), and such a choice's whole support lies outside the set: the choices
-    *spared* are the ones by which a policy stays out of the set."""
+    A state outside the set with a choice keeps at least one not hit (else it would have
+    joined), its whole support outside the set: the choices *spared*, by which a policy
+    stays out of the set."""
     n_choices = int(matrix.indptr.size - 1)
-    walks = compiled_walks(matrix.nnz)
+    walks = attractor_walks(matrix.nnz)
     if walks is not None:
         hit = np.zeros(n_choices, dtype=bool) if hit is None else np.array(hit, dtype=bool)
-        # the kernel writes its hits into this copy
         inside = walks.backward(matrix.indptr, matrix.indices, np.asarray(row_groups),
-                                np.array(seeds, dtype=bool), hit, True)
+                                np.array(seeds, dtype=bool), hit, True)  # hits into hit
         return inside, hit
     return _attract(_choices_reversed(matrix, row_groups), seeds, hit)
 
@@ -153,7 +153,7 @@ def attractor_spared(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.nda
 def attractors(matrix: sp.csr_array, row_groups: np.ndarray, seed_sets: list[np.ndarray],
                ) -> list[np.ndarray]:
     """:func:`attractor` of each of ``seed_sets``: one reversed pattern for all."""
-    back = None if compiled_walks(matrix.nnz) else _choices_reversed(matrix, row_groups)
+    back = None if attractor_walks(matrix.nnz) else _choices_reversed(matrix, row_groups)
     return [attractor(matrix, row_groups, s) if back is None else _attract(back, s, None)[0]
             for s in seed_sets]
 
@@ -277,9 +277,8 @@ def graph_view(matrix: sp.csr_array, row_groups: np.ndarray) -> sp.csr_array:
     """``(n, n)`` bool: ``s -> s'`` iff a choice of ``s`` has an entry for ``s'`` (a
     state's choices are consecutive rows, so its successors are a slice of the matrix's
     column indices); an entry of probability 0 is an edge too, so it must not be stored.
-    The duplicates (several choices to one successor, often two thirds of the entries)
-    are merged: scipy's strongly connected components did not finish on a graph with
-    them (scipy 1.17, 1e4 states)."""
+    The duplicates (often two thirds of the entries) are merged: scipy's strongly
+    connected components did not finish on a graph with them (scipy 1.17, 1e4 states)."""
     n = row_groups.shape[0] - 1
     index = np.int32 if max(n, matrix.nnz) < 2**31 else np.int64
     graph = sp.csr_array((np.ones(matrix.nnz, dtype=bool), matrix.indices.astype(index),
@@ -435,7 +434,7 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     where it was not made).  Where the components are fewer than half the states, the
     condensation is searched as :func:`state_components` does (QVBS zeroconf 1000-4:
     87,952 components of 301,219 states, whose levels are walked anyway)."""
-    if compiled_walks(matrix.nnz) is not None:
+    if component_walks(matrix.nnz, row_groups.shape[0] - 1) is not None:  # no slower
         found = state_components(matrix, row_groups, seeds)
         return found, found.reach[found.component], None
     graph = graph_view(matrix, row_groups)
@@ -472,11 +471,12 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     return Levels(comp, None, None, later), reach, back  # type: ignore[arg-type]
 
 
-def state_levels(matrix: sp.csr_array, row_groups: np.ndarray,
-                 seeds: np.ndarray | None = None) -> Levels:
+def state_levels(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray | None = None,
+                 walks: Any = None) -> Levels:
     """:func:`levels` of ``graph_view(matrix, row_groups)`` (no stored zero), the state
-    graph built by the compiled walk itself where they are used."""
-    walks = compiled_walks(matrix.nnz)
+    graph built by the compiled walk itself where they are used (``walks``: whatever the
+    size, :func:`~mitld_lp.solvers.analysis_gates.level_walks`)."""
+    walks = compiled_walks(matrix.nnz) if walks is None else walks
     if walks is None:
         return levels(graph_view(matrix, row_groups), seeds)
     n = row_groups.shape[0] - 1

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers.analysis_gates import level_walks
 from mitld_lp.solvers.graph import Blocks, blocks_from, state_levels
 from mitld_lp.util.arrays import index_dtype
 
@@ -102,7 +103,9 @@ def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
     # a component of the product that lost states to prob-one may be several of the
     # quotient: the quotient's own are found (a block is one component: a single
     # state is solved apart)
-    own = state_levels(matrix, row_groups)
+    # compiled where a kernel's load is paid and its cache warm (analysis_gates), in
+    # place of SciPy's components and Dijkstra's search of thin levels: the same numbers
+    own = state_levels(matrix, row_groups, walks=level_walks(matrix.nnz))
     order = order_of(matrix, row_groups, own.component, own.level)
     if cut:  # the product's levels for the layers, as before
         if level is None:
