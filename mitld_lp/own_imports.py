@@ -337,29 +337,38 @@ def _sparse_linalg_later(loader: Any, module: ModuleType) -> None:
     module.__class__ = BodyLater
 
 
+#: What lark imports at its start for its grammar loader and its cache alone, which a
+#: parser loaded from stored tables (:mod:`mitld_lp.logic.tables`) never calls:
+#: ``regex`` (grammars that ask for it), ``hashlib`` (the grammar's digest; OpenSSL's
+#: start), ``getpass`` and ``tempfile`` (the cache file's name and folder) and
+#: ``pkgutil`` (grammars imported from packages).
+LARK_LATER = ("regex", "hashlib", "getpass", "tempfile", "pkgutil")
+
+
 def _lark_around() -> Callable[[ModuleType | None], None]:
     """lark imported by the package (the window opened as for any package import): lark
-    imports the ``regex`` package at its start when it can, for grammars that ask for it
-    (``Lark(regex=True)``, Unicode categories in a terminal), which the formula grammar
-    does not; its import is 0.01 s of CPU.  While lark's body runs, ``regex`` is a
-    stand-in (:func:`mitld_lp.stand_ins.later`) that lark binds as its ``regex`` and that
-    imports the real module when lark first reads a name of it; it leaves
-    ``sys.modules`` when lark's import ends, so the program's own ``import regex`` is
-    Python's as before.  lark sees ``regex`` installed, as it is, and behaves alike."""
+    imports the modules of :data:`LARK_LATER` at its start (0.01-0.02 s of CPU), which
+    the package's parser, loaded from its stored tables, never uses.  While lark's body
+    runs, each one not imported yet is a stand-in (:func:`mitld_lp.stand_ins.later`)
+    that lark binds and that imports the real module when lark first reads a name of it
+    (building a parser from a grammar, its cache); the stand-ins leave ``sys.modules``
+    when lark's import ends, so the program's own ``import hashlib`` is Python's as
+    before.  lark sees each module installed, as it is, and behaves alike."""
     close = _open()
-    stand_in = None
     import importlib.util
 
-    if importlib.util.find_spec("regex") is not None:
-        from mitld_lp.stand_ins import later
+    from mitld_lp.stand_ins import later
 
-        stand_in = later("regex")
-        sys.modules["regex"] = stand_in
+    stand_ins = {}
+    for name in LARK_LATER:
+        if name not in sys.modules and importlib.util.find_spec(name) is not None:
+            stand_ins[name] = sys.modules[name] = later(name)
 
     def after(module: ModuleType | None) -> None:
         try:
-            if stand_in is not None and sys.modules.get("regex") is stand_in:
-                del sys.modules["regex"]
+            for name, stand_in in stand_ins.items():
+                if sys.modules.get(name) is stand_in:
+                    del sys.modules[name]
         finally:
             close(module)
 
@@ -401,8 +410,7 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _open
     if name == SPARSE_LINALG and (_depth > 0 or _imported_by_package(name)):
         return _sparse_linalg_later
-    if name == "lark" and "regex" not in sys.modules and (
-            _depth > 0 or _imported_by_package(name)):
+    if name == "lark" and (_depth > 0 or _imported_by_package(name)):
         return _lark_around
     if _depth == 0 and name in LATER and _imported_by_package(name):
         return _open
