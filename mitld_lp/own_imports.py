@@ -337,6 +337,84 @@ def _sparse_linalg_later(loader: Any, module: ModuleType) -> None:
     module.__class__ = BodyLater
 
 
+#: SciPy's array-API layer, which ``scipy._lib._util`` imports at its start for
+#: :data:`LAYER_NAMES` and calls only inside functions that no sparse routine of the
+#: package's reaches (``array_namespace``... for SciPy's array-API-aware functions).
+ARRAY_API = "scipy._lib._array_api"
+SCIPY_UTIL = "scipy._lib._util"
+#: The names ``scipy._lib._util`` binds from the layer (SciPy 1.17), and the SciPy
+#: releases checked to bind exactly these (another release imports the layer as usual).
+LAYER_NAMES = ("Array", "array_namespace", "is_lazy_array", "is_numpy", "is_marray",
+               "xp_size", "xp_result_device", "xp_result_type")
+LAYER_SCIPY = ("1.17.",)
+
+
+class LayerLater(BodyLater):
+    """SciPy's array-API layer before its body has run: ``scipy._lib._util``'s own
+    ``from scipy._lib._array_api import ...`` gets ``Array`` (``typing.Any``, the
+    layer's own alias) and, for each function, a forwarder that runs the layer's body
+    and calls SciPy's function; the body then puts SciPy's functions in place of the
+    forwarders in ``scipy._lib._util``.  Any other reader (another module's ``from``
+    import, an attribute, ``dir``) runs the body at once and gets SciPy's objects: the
+    module is then the one the import system made, run as it would have been (inside
+    the window, so its copy of NumPy's namespace is made as in the package's own
+    import)."""
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "__path__":  # not a package (the import system asks at ``from``)
+            raise AttributeError(name)
+        if name in LAYER_NAMES and sys._getframe(1).f_globals.get("__name__") == SCIPY_UTIL:
+            return _layer_served(name)
+        self._load()
+        return getattr(self, name)
+
+    def _load(self) -> None:
+        close = _open(makers=False)
+        try:
+            BodyLater._load(self)
+        finally:
+            close(self)
+        util = sys.modules.get(SCIPY_UTIL)
+        if util is not None:
+            for name, served in _layer_forwarders.items():
+                if vars(util).get(name) is served:
+                    setattr(util, name, getattr(self, name))
+
+
+_layer_forwarders: dict[str, Any] = {}
+
+
+def _layer_served(name: str) -> Any:
+    """What the layer serves ``scipy._lib._util`` before its body runs."""
+    if name == "Array":
+        from typing import Any as array  # the layer's ``Array: TypeAlias = Any``
+
+        return array
+    forward = _layer_forwarders.get(name)
+    if forward is None:
+        def forward(*args: Any, **kwargs: Any) -> Any:
+            layer = sys.modules[ARRAY_API]
+            if isinstance(layer, LayerLater):
+                layer._load()
+            return getattr(layer, name)(*args, **kwargs)
+
+        forward.__name__ = forward.__qualname__ = name
+        forward.__doc__ = f"SciPy's {ARRAY_API}.{name}, its module run on the first call."
+        _layer_forwarders[name] = forward
+    return forward
+
+
+def _layer_later(loader: Any, module: ModuleType) -> None:
+    """``scipy._lib._util`` importing the layer inside the package's window, on a SciPy
+    release of :data:`LAYER_SCIPY`: the module made as a :class:`LayerLater`."""
+    module.__class__ = LayerLater
+
+
+def _layer_checked() -> bool:
+    version = getattr(sys.modules.get("scipy"), "__version__", "")
+    return isinstance(version, str) and version.startswith(LAYER_SCIPY)
+
+
 #: What lark imports at its start for its grammar loader and its cache alone, which a
 #: parser loaded from stored tables (:mod:`mitld_lp.logic.tables`) never calls:
 #: ``regex`` (grammars that ask for it), ``hashlib`` (the grammar's digest; OpenSSL's
@@ -410,6 +488,8 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _open
     if name == SPARSE_LINALG and (_depth > 0 or _imported_by_package(name)):
         return _sparse_linalg_later
+    if name == ARRAY_API and _depth > 0 and _layer_checked():
+        return _layer_later
     if name == "lark" and (_depth > 0 or _imported_by_package(name)):
         return _lark_around
     if _depth == 0 and name in LATER and _imported_by_package(name):
@@ -483,7 +563,7 @@ def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> Mo
         spec = finder.find_spec(name, path, target)
         if spec is not None:
             if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                kind = BodyLaterLoader if around is _sparse_linalg_later else Loader
+                kind = BodyLaterLoader if around in (_sparse_linalg_later, _layer_later) else Loader
                 spec.loader = kind(spec.loader, around)
             return spec
     return None

@@ -1,15 +1,19 @@
-"""A PRISM property's route leaves lark's grammar-loader modules and ``zipfile`` out.
+"""A PRISM property's route leaves SciPy's array-API layer, lark's cache modules and
+``zipfile`` out.
 
 A fresh program imports the package and answers a PRISM property (its spec parsed by the
 package's formula parser, loaded from the stored LALR tables).  After the answer,
 ``sys.modules`` holds neither ``getpass`` (lark's cache owner, with ``termios``) nor
-``zipfile``: lark took stand-ins at its import and never used them, and the
-file rules import ``zipfile`` only where an archive is read.  The answer is checked
-against Storm's sound check of the same PRISM file (an independent route).  Then, in the
+``zipfile``, and SciPy's array-API layer is a stand-in whose body has not run
+(``mitld_lp.own_imports.LayerLater``): lark took stand-ins at its import and never
+used them, and the file rules import ``zipfile`` only where an archive is read.  The
+answer is checked against Storm's sound check of the same PRISM file (an independent route).  Then, in the
 same process, lark building a parser from a grammar with its cache (the grammar's
 SHA-256 through ``hashlib``, the cache's folder through ``tempfile``, its owner through
 ``getpass``) gets the real modules, and a zip archive read through the file rules is
-checked by the real ``zipfile``.
+checked by the real ``zipfile``, and SciPy's ``_contains_nan`` (which asks the layer for
+the array's namespace) runs the layer's body in the same module, after which
+``scipy._lib._util`` holds SciPy's own functions and ``scipy.stats`` imports as usual.
 """
 
 from __future__ import annotations
@@ -39,8 +43,22 @@ import json, sys, types
 from mitld_lp import load_model, synthesize
 r = synthesize(load_model(sys.argv[1]))
 out = dict(lower=r.lower, upper=r.upper, certified=r.certified,
-           left_out=sorted(m for m in ("getpass", "termios", "zipfile", "regex")
-                           if m in sys.modules))
+           left_out=sorted(m for m in ("getpass", "termios", "zipfile", "regex",
+                                       "scipy._lib.array_api_compat",
+                                       "scipy._lib.array_api_extra") if m in sys.modules),
+           layer=type(sys.modules.get("scipy._lib._array_api")).__name__)
+# another route: SciPy's array-API layer on its first use, through scipy._lib._util
+import numpy as np
+layer = sys.modules["scipy._lib._array_api"]
+import scipy._lib._util as util
+out["nan"] = [bool(util._contains_nan(np.array([1.0, np.nan]))),
+              bool(util._contains_nan(np.array([1.0, 2.0])))]
+out["layer_after"] = [type(layer) is types.ModuleType,
+                      sys.modules["scipy._lib._array_api"] is layer,
+                      util.array_namespace is layer.array_namespace,
+                      util.xp_size is layer.xp_size, util.Array is layer.Array]
+import scipy.stats
+out["cdf"] = float(scipy.stats.norm.cdf(0.0))
 # another route: lark building a parser from a grammar, with its cache
 import lark.lark, lark.load_grammar
 from lark import Lark
@@ -126,3 +144,12 @@ def test_lark_and_the_file_rules_get_the_real_modules_on_first_use(run) -> None:
     assert got["same"] == [True, True, True]
     assert got["zip"] == "refused"  # 1,000 bytes inflated against a limit of 999
     assert got["zip_ok"] is True
+
+
+def test_scipys_array_api_layer_is_left_unrun_and_is_scipys_on_first_use(run) -> None:
+    got, _ = run
+    assert got["layer"] == "LayerLater"
+    # [1, nan] holds a NaN, [1, 2] does not
+    assert got["nan"] == [True, False]
+    assert got["layer_after"] == [True, True, True, True, True]
+    assert got["cdf"] == 0.5  # the standard normal's distribution at its median
