@@ -4,15 +4,14 @@
 A fresh program imports the package and answers a PRISM property (its spec parsed by the
 package's formula parser, loaded from the stored LALR tables).  After the answer,
 ``sys.modules`` holds neither ``getpass`` (lark's cache owner, with ``termios``) nor
-``zipfile``, and SciPy's array-API layer is a stand-in whose body has not run
-(``mitld_lp.own_imports.LayerLater``): lark took stand-ins at its import and never
-used them, and the file rules import ``zipfile`` only where an archive is read.  The
-answer is checked against Storm's sound check of the same PRISM file (an independent route).  Then, in the
-same process, lark building a parser from a grammar with its cache (the grammar's
-SHA-256 through ``hashlib``, the cache's folder through ``tempfile``, its owner through
-``getpass``) gets the real modules, and a zip archive read through the file rules is
-checked by the real ``zipfile``, and SciPy's ``_contains_nan`` (which asks the layer for
-the array's namespace) runs the layer's body in the same module, after which
+``zipfile`` nor SciPy's ``array_api_compat``/``array_api_extra``, and SciPy's array-API
+layer is a stand-in whose body has not run (``mitld_lp.own_imports.LayerLater``).  The
+answer is checked against Storm's sound check of the same PRISM file (an independent
+route).  Then, in the same process: lark building a parser from a grammar with its cache
+(the grammar's SHA-256 through ``hashlib``, the cache's folder through ``tempfile``, its
+owner through ``getpass``) gets the real modules; a zip archive read through the file
+rules is checked by the real ``zipfile``; SciPy's ``_contains_nan`` (which asks the
+layer for the array's namespace) runs the layer's body in the same module, after which
 ``scipy._lib._util`` holds SciPy's own functions and ``scipy.stats`` imports as usual.
 """
 
