@@ -24,8 +24,11 @@ lark's included -- and only then:
   LAPACK and BLAS: 0.05-0.07 s of CPU) runs when a name other than ``LinearOperator``
   and the direct solvers' (``splu``...) is read; those come from their own modules with
   ``scipy.linalg`` left for later as well (it serves ``LinAlgError``, NumPy's class);
-* lark, imported by the package, binds a stand-in of ``regex`` (imported when lark
-  first uses it, out of ``sys.modules`` once lark is imported: :func:`_lark_around`).
+* lark, imported by the package, binds stand-ins of ``regex`` and its cache's modules
+  (imported when lark first uses them, out of ``sys.modules`` once lark is imported:
+  :func:`_lark_around`);
+* SciPy's array-API layer, imported by ``scipy._lib._util`` inside the window, is a
+  :class:`LayerLater`: its body runs when one of its functions is first called.
 
 :func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
 of the package's modules to import and installs the finder then, but for the robot's
