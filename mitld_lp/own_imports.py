@@ -24,8 +24,11 @@ lark's included -- and only then:
   LAPACK and BLAS: 0.05-0.07 s of CPU) runs when a name other than ``LinearOperator``
   and the direct solvers' (``splu``...) is read; those come from their own modules with
   ``scipy.linalg`` left for later as well (it serves ``LinAlgError``, NumPy's class);
-* lark, imported by the package, binds a stand-in of ``regex`` (imported when lark
-  first uses it, out of ``sys.modules`` once lark is imported: :func:`_lark_around`).
+* lark, imported by the package, binds stand-ins of ``regex`` and its cache's modules
+  (imported when lark first uses them, out of ``sys.modules`` once lark is imported:
+  :func:`_lark_around`);
+* SciPy's array-API layer, imported by ``scipy._lib._util`` inside the window, is a
+  :class:`LayerLater`: its body runs when one of its functions is first called.
 
 :func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
 of the package's modules to import and installs the finder then, but for the robot's
@@ -337,29 +340,116 @@ def _sparse_linalg_later(loader: Any, module: ModuleType) -> None:
     module.__class__ = BodyLater
 
 
+#: SciPy's array-API layer, which ``scipy._lib._util`` imports at its start for
+#: :data:`LAYER_NAMES` and calls only inside functions that no sparse routine of the
+#: package's reaches (``array_namespace``... for SciPy's array-API-aware functions).
+ARRAY_API = "scipy._lib._array_api"
+SCIPY_UTIL = "scipy._lib._util"
+#: The names ``scipy._lib._util`` binds from the layer (SciPy 1.17), and the SciPy
+#: releases checked to bind exactly these (another release imports the layer as usual).
+LAYER_NAMES = ("Array", "array_namespace", "is_lazy_array", "is_numpy", "is_marray",
+               "xp_size", "xp_result_device", "xp_result_type")
+LAYER_SCIPY = ("1.17.",)
+
+
+class LayerLater(BodyLater):
+    """SciPy's array-API layer before its body has run: ``scipy._lib._util``'s own
+    ``from scipy._lib._array_api import ...`` gets ``Array`` (``typing.Any``, the
+    layer's own alias) and, for each function, a forwarder that runs the layer's body
+    and calls SciPy's function; the body then puts SciPy's functions in place of the
+    forwarders in ``scipy._lib._util``.  Any other reader (another module's ``from``
+    import, an attribute, ``dir``) runs the body at once and gets SciPy's objects: the
+    module is then the one the import system made, run as it would have been (inside
+    the window, so its copy of NumPy's namespace is made as in the package's own
+    import)."""
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "__path__":  # not a package (the import system asks at ``from``)
+            raise AttributeError(name)
+        if name in LAYER_NAMES and sys._getframe(1).f_globals.get("__name__") == SCIPY_UTIL:
+            return _layer_served(name)
+        self._load()
+        return getattr(self, name)
+
+    def _load(self) -> None:
+        close = _open(makers=False)
+        try:
+            BodyLater._load(self)
+        finally:
+            close(self)
+        util = sys.modules.get(SCIPY_UTIL)
+        if util is not None:
+            for name, served in _layer_forwarders.items():
+                if vars(util).get(name) is served:
+                    setattr(util, name, getattr(self, name))
+
+
+_layer_forwarders: dict[str, Any] = {}
+
+
+def _layer_served(name: str) -> Any:
+    """What the layer serves ``scipy._lib._util`` before its body runs."""
+    if name == "Array":
+        from typing import Any as array  # the layer's ``Array: TypeAlias = Any``
+
+        return array
+    forward = _layer_forwarders.get(name)
+    if forward is None:
+        def forward(*args: Any, **kwargs: Any) -> Any:
+            layer = sys.modules[ARRAY_API]
+            if isinstance(layer, LayerLater):
+                layer._load()
+            return getattr(layer, name)(*args, **kwargs)
+
+        forward.__name__ = forward.__qualname__ = name
+        forward.__doc__ = f"SciPy's {ARRAY_API}.{name}, its module run on the first call."
+        _layer_forwarders[name] = forward
+    return forward
+
+
+def _layer_later(loader: Any, module: ModuleType) -> None:
+    """``scipy._lib._util`` importing the layer inside the package's window, on a SciPy
+    release of :data:`LAYER_SCIPY`: the module made as a :class:`LayerLater`."""
+    module.__class__ = LayerLater
+
+
+def _layer_checked() -> bool:
+    version = getattr(sys.modules.get("scipy"), "__version__", "")
+    return isinstance(version, str) and version.startswith(LAYER_SCIPY)
+
+
+#: What lark imports at its start for its grammar loader and its cache alone, which a
+#: parser loaded from stored tables (:mod:`mitld_lp.logic.tables`) never calls:
+#: ``regex`` (grammars that ask for it), ``hashlib`` (the grammar's digest; OpenSSL's
+#: start), ``getpass`` and ``tempfile`` (the cache file's name and folder) and
+#: ``pkgutil`` (grammars imported from packages).
+LARK_LATER = ("regex", "hashlib", "getpass", "tempfile", "pkgutil")
+
+
 def _lark_around() -> Callable[[ModuleType | None], None]:
     """lark imported by the package (the window opened as for any package import): lark
-    imports the ``regex`` package at its start when it can, for grammars that ask for it
-    (``Lark(regex=True)``, Unicode categories in a terminal), which the formula grammar
-    does not; its import is 0.01 s of CPU.  While lark's body runs, ``regex`` is a
-    stand-in (:func:`mitld_lp.stand_ins.later`) that lark binds as its ``regex`` and that
-    imports the real module when lark first reads a name of it; it leaves
-    ``sys.modules`` when lark's import ends, so the program's own ``import regex`` is
-    Python's as before.  lark sees ``regex`` installed, as it is, and behaves alike."""
+    imports the modules of :data:`LARK_LATER` at its start (0.01-0.02 s of CPU), which
+    the package's parser, loaded from its stored tables, never uses.  While lark's body
+    runs, each one not imported yet is a stand-in (:func:`mitld_lp.stand_ins.later`)
+    that lark binds and that imports the real module when lark first reads a name of it
+    (building a parser from a grammar, its cache); the stand-ins leave ``sys.modules``
+    when lark's import ends, so the program's own ``import hashlib`` is Python's as
+    before.  lark sees each module installed, as it is, and behaves alike."""
     close = _open()
-    stand_in = None
     import importlib.util
 
-    if importlib.util.find_spec("regex") is not None:
-        from mitld_lp.stand_ins import later
+    from mitld_lp.stand_ins import later
 
-        stand_in = later("regex")
-        sys.modules["regex"] = stand_in
+    stand_ins = {}
+    for name in LARK_LATER:
+        if name not in sys.modules and importlib.util.find_spec(name) is not None:
+            stand_ins[name] = sys.modules[name] = later(name)
 
     def after(module: ModuleType | None) -> None:
         try:
-            if stand_in is not None and sys.modules.get("regex") is stand_in:
-                del sys.modules["regex"]
+            for name, stand_in in stand_ins.items():
+                if sys.modules.get(name) is stand_in:
+                    del sys.modules[name]
         finally:
             close(module)
 
@@ -401,8 +491,9 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _open
     if name == SPARSE_LINALG and (_depth > 0 or _imported_by_package(name)):
         return _sparse_linalg_later
-    if name == "lark" and "regex" not in sys.modules and (
-            _depth > 0 or _imported_by_package(name)):
+    if name == ARRAY_API and _depth > 0 and _layer_checked():
+        return _layer_later
+    if name == "lark" and (_depth > 0 or _imported_by_package(name)):
         return _lark_around
     if _depth == 0 and name in LATER and _imported_by_package(name):
         return _open
@@ -475,7 +566,7 @@ def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> Mo
         spec = finder.find_spec(name, path, target)
         if spec is not None:
             if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                kind = BodyLaterLoader if around is _sparse_linalg_later else Loader
+                kind = BodyLaterLoader if around in (_sparse_linalg_later, _layer_later) else Loader
                 spec.loader = kind(spec.loader, around)
             return spec
     return None

@@ -16,10 +16,12 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-import zipfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import zipfile
 
 __all__ = [
     "OutputPathError",
@@ -178,6 +180,8 @@ def check_zip(handle: IO[bytes], limit: int, what: str) -> None:
     bytes than the member holds is refused before NumPy allocates it.  Raises
     :class:`InputFileError` naming ``what``; a file that is no zip archive is left to
     the reader to refuse."""
+    import zipfile  # here: a process that reads no archive does not import it
+
     try:
         archive = zipfile.ZipFile(handle)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError):
