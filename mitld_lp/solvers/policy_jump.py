@@ -47,7 +47,9 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.graph import Sense, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
+from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.topological import (
+    DENSE_LU_STATES,
     GAIN,
     POLICY_ROUNDS,
     Block,
@@ -164,7 +166,7 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
         lu = factors.lu
         factors.reused += 1
     else:
-        lu = chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+        lu = chain_factor(chain)
         factors.lu, factors.base = lu, chain
         factors.factorised += 1
     x = lu.solve(rhs).astype(np.longdouble)
@@ -182,6 +184,67 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
     gain = sense.gain(score[better], score[chosen])
     scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
     return v, t, np.where(gain > GAIN * scale, better, chosen)
+
+
+TOPO_LU = True
+"""Chains whose strong components are all small factorised in their components' order
+(:func:`chain_factor`), else by :func:`~mitld_lp.solvers.topological.chain_lu`."""
+
+TOPO_MAX_COMPONENT = 256
+"""The largest strong component of a chain :func:`chain_factor` factorises in its
+components' order (a component is factorised whole, its fill at most its square)."""
+
+
+class TopoLU:
+    """The LU of ``I - Q`` permuted to its strong components' order, ``solve`` as
+    SciPy's ``SuperLU`` answers it in the chain's own order."""
+
+    __slots__ = ("at", "lu", "order")
+
+    def __init__(self, lu: object, order: np.ndarray, at: np.ndarray) -> None:
+        self.lu, self.order, self.at = lu, order, at
+
+    def solve(self, rhs: np.ndarray, trans: str = "N") -> np.ndarray:
+        if trans != "N":
+            raise ValueError("TopoLU.solve: only trans='N' (the chain's own solve)")
+        # np.take: a tenth of the time of fancy indexing of (k, 2) rows
+        y = self.lu.solve(np.take(rhs, self.order, axis=0))
+        return np.take(y, self.at, axis=0)
+
+
+def chain_factor(chain: sp.csr_array) -> object:
+    """The factorisation of ``I - Q`` (``chain``: ``Q``) the policy iterations solve on.
+    A chain of more than :data:`~mitld_lp.solvers.topological.DENSE_LU_STATES` states
+    whose strong components have at most :data:`TOPO_MAX_COMPONENT` states each (a
+    policy's chain on QVBS ``consensus``: 7,860 states in 7,376 components, the largest
+    122) is permuted so that each component's states are contiguous, the components
+    in the order SciPy labels them (nearly downstream first), and factorised by SuperLU
+    in that order (``NATURAL``, the diagonal pivoted on): no fill across components, no
+    minimum-degree ordering of the whole; 0.8-1.1 ms against 2.8-9 ms at 7,863 states.
+    Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Either is solved to the same
+    answer up to rounding, and every policy evaluation is refined twice in extended
+    precision after it."""
+    k = chain.shape[0]
+    if not TOPO_LU or k <= DENSE_LU_STATES:
+        return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+    from scipy.sparse import csgraph  # beside scipy.sparse.linalg, which chain_lu needs
+
+    _, label = csgraph.connected_components(chain, directed=True, connection="strong")
+    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT:
+        return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+    import scipy.sparse.linalg as spla
+
+    order = np.argsort(label, kind="stable")
+    at = np.empty(k, dtype=chain.indices.dtype)  # a state's place in the order
+    at[order] = np.arange(k, dtype=at.dtype)
+    # I - Q in the order, rows gathered and columns renumbered (no SciPy indexing)
+    a = sp.csr_array(sp.eye_array(k, format="csr") - chain)
+    take = gather_ranges(a.indptr[order], a.indptr[order + 1])
+    indptr = np.concatenate([[0], np.cumsum(np.diff(a.indptr)[order])]).astype(a.indptr.dtype)
+    permuted = sp.csc_array(sp.csr_array((a.data[take], at[a.indices[take]], indptr),
+                                         shape=(k, k)))
+    return TopoLU(spla.splu(permuted, permc_spec="NATURAL",
+                            options={"SymmetricMode": True}), order, at)
 
 
 def _same_chain(a: sp.csr_array, b: sp.csr_array) -> bool:
