@@ -198,3 +198,12 @@ def test_large_component_falls_back_to_the_whole_chain(monkeypatch):
     # both solve x = 1 + Q x: the cycle's x = 2, the line's 2 - 2^-(3 - i) ... by hand
     assert np.allclose(pj.chain_factor(cycle).solve(np.ones(4)), 2.0)
     assert np.allclose(pj.chain_factor(line).solve(np.ones(4)), [1.875, 1.75, 1.5, 1.0])
+
+
+def test_one_way_reads_the_labels():
+    """_one_way: the labels order the components (moves between them all one way) or
+    not; checked by hand on the line 0 -> 1 -> 2."""
+    line = sp.csr_array(np.eye(3, k=1) * 0.5)
+    assert pj._one_way(line, np.array([2, 1, 0]))  # downstream lower
+    assert pj._one_way(line, np.array([0, 1, 2]))  # downstream higher
+    assert not pj._one_way(line, np.array([1, 2, 0]))  # 0 -> 1 up, 1 -> 2 down

@@ -218,7 +218,8 @@ def chain_factor(chain: sp.csr_array) -> object:
     whose strong components have at most :data:`TOPO_MAX_COMPONENT` states each (a
     policy's chain on QVBS ``consensus``: 7,860 states in 7,376 components, the largest
     122) is permuted so that each component's states are contiguous, the components
-    in the order SciPy labels them (nearly downstream first), and factorised by SuperLU
+    in the order SciPy labels them (downstream first: :func:`_one_way` checks that
+    the labels order them, else the chain is factorised whole), and factorised by SuperLU
     in that order (``NATURAL``, the diagonal pivoted on): no fill across components, no
     minimum-degree ordering of the whole; 0.8-1.1 ms against 2.8-9 ms at 7,863 states.
     Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Either is solved to the same
@@ -230,7 +231,8 @@ def chain_factor(chain: sp.csr_array) -> object:
     from scipy.sparse import csgraph  # beside scipy.sparse.linalg, which chain_lu needs
 
     _, label = csgraph.connected_components(chain, directed=True, connection="strong")
-    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT:
+    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT \
+            or not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 
@@ -245,6 +247,20 @@ def chain_factor(chain: sp.csr_array) -> object:
                                          shape=(k, k)))
     return TopoLU(spla.splu(permuted, permc_spec="NATURAL",
                             options={"SymmetricMode": True}), order, at)
+
+
+def _one_way(chain: sp.csr_array, label: np.ndarray) -> bool:
+    """Every move between components of ``chain`` goes from a higher label to a lower
+    one, or every one from a lower to a higher: the labels order the components (so
+    the permuted ``I - Q`` is block triangular and its LU fills inside the components
+    only).  SciPy numbers them so; checked rather than assumed."""
+    src = np.repeat(label, np.diff(chain.indptr))
+    dst = label[chain.indices]
+    cross = src != dst
+    if not cross.any():
+        return True
+    down = src[cross] > dst[cross]
+    return bool(down.all() or not down.any())
 
 
 def _same_chain(a: sp.csr_array, b: sp.csr_array) -> bool:
