@@ -277,10 +277,14 @@ def _watch_rounds() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
                       and a[3] is not None or k.get("allowed") is not None})
         first = len(rounds)
         c = _cpu()
-        out = improve(*a, **k)
-        mine = rounds[first:]
-        calls[-1].update(total_s=_cpu() - c, rounds=len(mine), ahead_s=_cpu() - c - sum(
-            r["factor_s"] + r["rest_s"] for r in mine))
+        calls[-1]["abandoned"] = True  # until it returns (a budgeted jump may stop)
+        try:
+            out = improve(*a, **k)
+            calls[-1]["abandoned"] = False
+        finally:
+            mine = rounds[first:]
+            calls[-1].update(total_s=_cpu() - c, rounds=len(mine), ahead_s=_cpu() - c - sum(
+                r["factor_s"] + r["rest_s"] for r in mine))
         return out
 
     policy_jump.improve_ahead = timed_improve
@@ -437,7 +441,8 @@ def _rounds_report(r: dict[str, Any]) -> list[str]:
     for x in rounds:
         seen[x["call"]] = seen.get(x["call"], 0) + 1
         call = calls[x["call"]]
-        tag = f"{x['call']}{' (allowed)' if call['allowed'] else ''}"
+        tag = (f"{x['call']}{' (allowed)' if call['allowed'] else ''}"
+               f"{' (abandoned)' if call.get('abandoned') else ''}")
         lines.append(f"| {tag} | {x['states']} | {seen[x['call']]} | {x['entries']} "
                      f"| {x['components']} ({x['largest']}) | {x['factor']} "
                      f"| {_f(x['factor_s'])} | {_f(x['rest_s'])} | {x['switches']} |")
