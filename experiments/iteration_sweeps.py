@@ -34,6 +34,8 @@ The wrapped run's total is printed beside the plain one (the wrappers cost a lit
         --bus bus_scaled_n64_d3 bus_scaled_n128_d3 --compare /tmp/base
     python experiments/iteration_sweeps.py --qvbs /work/shared/qvbs --quick
 
+``--rounds`` also runs the captured iteration once with the policy jump's rounds of
+policy iteration watched one by one (:func:`_watch_rounds`).
 ``--routes`` also runs the captured iteration with every block compiled and with none
 (numba loaded in the first), each with its sweeps and bracket: what the gate chose
 between.  ``--compare DIR`` runs every child again with the ``mitld_lp`` of another checkout (the
@@ -208,7 +210,85 @@ def child_split(job: dict[str, Any]) -> dict[str, Any]:
                other=total - counted - split.own, split_own=split.own,
                split_same=[[repr(x.value_lower), repr(x.value_upper)]
                            for x in results] == out["brackets"])
+    if job.get("rounds"):
+        rounds, calls = _watch_rounds()
+        c = _cpu()
+        results = plain(*args, **kwargs)
+        out.update(rounds_total_s=_cpu() - c, rounds=rounds, round_calls=calls,
+                   rounds_same=[[repr(x.value_lower), repr(x.value_upper)]
+                                for x in results] == out["brackets"])
     return out
+
+
+def _watch_rounds() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The policy jump's rounds of policy iteration wrapped (``--rounds``): per round
+    the block's states, the policy's chain (its entries, its strong components and the
+    largest), the factorisation (new or reused; which kind; its CPU), the rest of the
+    round (the solve, its two refinements and the greedy step) and the switches; per
+    call of ``improve_ahead`` (the jump calls it for the policy's own bound, for every
+    choice's and, where the check refuses, for the slowest choices' totals) its rounds
+    and its look-ahead sweeps' CPU (the call's CPU outside its rounds).  Wraps
+    ``policy_jump.lean_round`` where it exists, else ``policy_round`` (the base), and
+    ``chain_factor`` where it exists, else ``topological.chain_lu``."""
+    import numpy as np
+    import scipy.sparse as sp
+    from scipy.sparse import csgraph
+
+    from mitld_lp.solvers import policy_jump, topological
+
+    rounds: list[dict[str, Any]] = []
+    calls: list[dict[str, Any]] = []
+    made: list[tuple[str, float]] = []
+    owner, name = ((policy_jump, "chain_factor") if hasattr(policy_jump, "chain_factor")
+                   else (topological, "chain_lu"))
+    factor = getattr(owner, name)
+
+    def timed_factor(*a: Any, **k: Any) -> Any:
+        c = _cpu()
+        lu = factor(*a, **k)
+        made.append((type(lu).__name__, _cpu() - c))
+        return lu
+
+    setattr(owner, name, timed_factor)
+    rname = "lean_round" if hasattr(policy_jump, "lean_round") else "policy_round"
+    step = getattr(policy_jump, rname)
+
+    def timed_round(block: Any, inner: Any, reward: Any, chosen: Any, *a: Any) -> Any:
+        chain = sp.csr_array(block.inner[chosen])
+        n, label = csgraph.connected_components(chain, directed=True, connection="strong")
+        made.clear()
+        c = _cpu()
+        v, t, nxt = step(block, inner, reward, chosen, *a)
+        spent = _cpu() - c
+        lu_s = sum(x for _, x in made)
+        rounds.append({"call": len(calls) - 1, "states": int(block.states.size),
+                       "entries": int(chain.nnz), "components": int(n),
+                       "largest": int(np.bincount(label).max()),
+                       "factor": made[0][0] if made else "reused", "factor_s": lu_s,
+                       "rest_s": spent - lu_s,
+                       "switches": int(np.count_nonzero(nxt != chosen))})
+        return v, t, nxt
+
+    setattr(policy_jump, rname, timed_round)
+    improve = policy_jump.improve_ahead
+
+    def timed_improve(*a: Any, **k: Any) -> Any:
+        calls.append({"states": int(a[0].states.size), "allowed": len(a) > 3
+                      and a[3] is not None or k.get("allowed") is not None})
+        first = len(rounds)
+        c = _cpu()
+        calls[-1]["abandoned"] = True  # until it returns (a budgeted jump may stop)
+        try:
+            out = improve(*a, **k)
+            calls[-1]["abandoned"] = False
+        finally:
+            mine = rounds[first:]
+            calls[-1].update(total_s=_cpu() - c, rounds=len(mine), ahead_s=_cpu() - c - sum(
+                r["factor_s"] + r["rest_s"] for r in mine))
+        return out
+
+    policy_jump.improve_ahead = timed_improve
+    return rounds, calls
 
 
 def _instrument(iteration: Any) -> _Split:
@@ -316,7 +396,8 @@ def _jobs(args: argparse.Namespace, work: Path) -> list[tuple[str, dict[str, Any
         if missing:
             raise SystemExit(f"iteration_sweeps.py: --only: no such QVBS instance under "
                              f"{args.qvbs}: {', '.join(missing)}")
-        out += [(name, dict(byname[name], repeats=args.repeats, routes=args.routes))
+        out += [(name, dict(byname[name], repeats=args.repeats, routes=args.routes,
+                            rounds=args.rounds))
                 for name in sorted(wanted)]
     if args.bus and not args.quick:
         import bench_sweeps as bs
@@ -327,7 +408,8 @@ def _jobs(args: argparse.Namespace, work: Path) -> list[tuple[str, dict[str, Any
         if unknown:
             raise SystemExit(f"iteration_sweeps.py: --bus: no such instance of "
                              f"bench_sweeps.py: {', '.join(unknown)}")
-        out += [(n, {"bus": list(known[n]), "repeats": args.repeats, "routes": args.routes})
+        out += [(n, {"bus": list(known[n]), "repeats": args.repeats, "routes": args.routes,
+                     "rounds": args.rounds})
                 for n in args.bus]
     return out
 
@@ -338,6 +420,33 @@ def _f(x: Any, digits: int = 4) -> str:
     if isinstance(x, float):
         return f"{x:.{digits}f}"
     return str(x)
+
+
+def _rounds_report(r: dict[str, Any]) -> list[str]:
+    """The ``--rounds`` table: one line a round, grouped by ``improve_ahead`` call."""
+    if "rounds" not in r:
+        return []
+    calls, rounds = r["round_calls"], r["rounds"]
+    lu = sum(x["factor_s"] for x in rounds)
+    rest = sum(x["rest_s"] for x in rounds)
+    ahead = sum(c["ahead_s"] for c in calls)
+    lines = [f"policy jump's rounds: {len(calls)} improve_ahead calls, {len(rounds)} rounds, "
+             f"{sum(x['factor'] != 'reused' for x in rounds)} factorisations "
+             f"({_f(lu)} s), solves and greedy steps {_f(rest)} s, look-ahead sweeps "
+             f"{_f(ahead)} s; whole run {_f(r['rounds_total_s'])} s (same bracket: "
+             f"{r['rounds_same']})", "",
+             "| call | states | round | chain entries | components (largest) | factor "
+             "| factor_s | solve+greedy_s | switches |", "|---|---|---|---|---|---|---|---|---|"]
+    seen: dict[int, int] = {}
+    for x in rounds:
+        seen[x["call"]] = seen.get(x["call"], 0) + 1
+        call = calls[x["call"]]
+        tag = (f"{x['call']}{' (allowed)' if call['allowed'] else ''}"
+               f"{' (abandoned)' if call.get('abandoned') else ''}")
+        lines.append(f"| {tag} | {x['states']} | {seen[x['call']]} | {x['entries']} "
+                     f"| {x['components']} ({x['largest']}) | {x['factor']} "
+                     f"| {_f(x['factor_s'])} | {_f(x['rest_s'])} | {x['switches']} |")
+    return [*lines, ""]
 
 
 def report(rows: list[dict[str, Any]]) -> str:
@@ -383,6 +492,7 @@ def report(rows: list[dict[str, Any]]) -> str:
                     f"| {_f(b.get('prepare'))} | {_f(b.get('stop_test'))} | {b['jumps']} "
                     f"| {_f(b.get('jump'))} | {_f(b.get('early_jump'))} |")
             lines.append("")
+            lines += _rounds_report(r)
         if row.get("this") and row.get("base") and "error" not in row["this"] \
                 and "error" not in row["base"]:
             a, b = row["this"], row["base"]
@@ -405,6 +515,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="another checkout whose mitld_lp runs the same children")
     ap.add_argument("--routes", action="store_true",
                     help="also every block compiled, and none (after the plain runs)")
+    ap.add_argument("--rounds", action="store_true",
+                    help="also the policy jump's rounds one by one (after the split)")
     ap.add_argument("--quick", action="store_true", help="one small instance")
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
