@@ -17,10 +17,6 @@ layer for the array's namespace) runs the layer's body in the same module, after
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -88,20 +84,10 @@ print(json.dumps(out))
 
 
 def _storm(prism: Path) -> float:
-    stormpy = pytest.importorskip("stormpy")
-    program = stormpy.parse_prism_program(str(prism))
-    prop = stormpy.parse_properties('Pmin=? [F x=4]', program)[0]
-    model = stormpy.build_model(program, [prop])
-    import stormpy.environments as envs
+    pytest.importorskip("stormpy")
+    from storm_exact import storm_sound
 
-    env = stormpy.Environment()
-    env.solver().force_soundness = True
-    minmax = env.solver().min_max()
-    minmax.method = envs.MinMaxMethod.INTERVAL_ITERATION
-    minmax.precision = stormpy.Rational("1/1000000000")
-    minmax.relative_termination_criterion = False
-    result = stormpy.model_checking(model, prop, environment=env)
-    return float(result.get_value(model.initial_states[0]))
+    return storm_sound(prism, 'Pmin=? [F x=4]')
 
 
 @pytest.fixture(scope="module")
@@ -113,13 +99,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, float]:
     model = work / "walk.toml"
     model.write_text('name = "walk"\nspec = "F reached"\nobjective = "min"\n\n[prism]\n'
                      'file = "walk.prism"\n\n[labels]\nreached = "x = 4"\n', encoding="utf-8")
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONDONTWRITEBYTECODE", "MITLD_LP_PLAIN_IMPORTS")}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
-    done = subprocess.run([sys.executable, "-c", PROBE, str(model), str(work / "lark.cache")],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.strip().splitlines()[-1]), _storm(prism)
+    from fresh_child import run_fresh
+
+    return run_fresh(PROBE, str(model), str(work / "lark.cache")), _storm(prism)
 
 
 def test_the_prism_route_leaves_larks_cache_modules_and_zipfile_out(run) -> None:

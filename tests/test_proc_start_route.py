@@ -13,10 +13,6 @@ whole, as SciPy's and lark's own.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -70,20 +66,10 @@ print(json.dumps(out))
 
 
 def _storm(prism: Path) -> float:
-    stormpy = pytest.importorskip("stormpy")
-    program = stormpy.parse_prism_program(str(prism))
-    prop = stormpy.parse_properties('Pmax=? [F "goal"]', program)[0]
-    model = stormpy.build_model(program, [prop])
-    import stormpy.environments as envs
+    pytest.importorskip("stormpy")
+    from storm_exact import storm_sound
 
-    env = stormpy.Environment()
-    env.solver().force_soundness = True
-    minmax = env.solver().min_max()
-    minmax.method = envs.MinMaxMethod.INTERVAL_ITERATION
-    minmax.precision = stormpy.Rational("1/1000000000")
-    minmax.relative_termination_criterion = False
-    result = stormpy.model_checking(model, prop, environment=env)
-    return float(result.get_value(model.initial_states[0]))
+    return storm_sound(prism, 'Pmax=? [F "goal"]')
 
 
 @pytest.fixture(scope="module")
@@ -95,13 +81,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, float]:
     model = work / "walk.toml"
     model.write_text('name = "walk"\nspec = "F reached"\n\n[prism]\nfile = "walk.prism"\n\n'
                      '[labels]\nreached = "x = N + 1"\n', encoding="utf-8")
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONDONTWRITEBYTECODE", "MITLD_LP_PLAIN_IMPORTS")}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
-    done = subprocess.run([sys.executable, "-c", PROBE, str(model)], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.strip().splitlines()[-1]), _storm(prism)
+    from fresh_child import run_fresh
+
+    return run_fresh(PROBE, str(model)), _storm(prism)
 
 
 def test_the_prism_route_leaves_scipys_linear_algebra_and_regex_unimported(run) -> None:
