@@ -343,8 +343,12 @@ def plain_levels(succ: list[set[int]], comp: np.ndarray) -> dict[int, int]:
             memo[c] = 1 + max((level(d) for d in out_of[c]), default=-1)
         return memo[c]
 
-    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(out_of) + 1000))
-    return {c: level(c) for c in out_of}
+    limit = sys.getrecursionlimit()  # raised for this recursion only: other tests in the
+    sys.setrecursionlimit(max(limit, 10 * len(out_of) + 1000))  # worker rely on the default
+    try:
+        return {c: level(c) for c in out_of}
+    finally:
+        sys.setrecursionlimit(limit)
 
 
 @pytest.mark.parametrize(("seed", "n"), [(0, 60), (1, 400), (2, 3000), (3, 9000)])
