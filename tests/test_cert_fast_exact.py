@@ -52,10 +52,10 @@ def _model(seed: int, n: int, cyclic: bool) -> tuple[MDP, list[dict[int, Fractio
             choices.append(row)
         rows.append(choices)
     rows += [[], []]
-    return _build(rows, target, sink)
+    return model_of_rows(rows, target, sink)
 
 
-def _build(rows: list[list[dict[int, float]]], target: int, sink: int
+def model_of_rows(rows: list[list[dict[int, float]]], target: int, sink: int
            ) -> tuple[MDP, list[dict[int, Fraction]]]:
     """The MDP of ``rows`` (absorbing states one self-loop) and its exact model: each
     stored row in rational arithmetic divided by its exact sum (within a few units of

@@ -21,7 +21,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_cert_fast_exact import _build
+from test_cert_fast_exact import model_of_rows
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import certify as C
@@ -66,7 +66,7 @@ def _model(seed: int, n: int) -> tuple[MDP, list[dict[int, Fraction]]]:
             choices.append(row)
         rows.append(choices)
     rows += [[], []]
-    return _build(rows, target, sink)
+    return model_of_rows(rows, target, sink)
 
 
 def _policy_values(mdp: MDP, exact: list[dict[int, Fraction]], policy: tuple[int, ...]

@@ -119,7 +119,7 @@ def kernels_off() -> int:
 
 
 # ------------------------------------- small MDPs: the bracket holds the exact value
-def _mdp(choices: list[list[dict[int, Fraction]]], n_states: int) -> MDP:
+def fraction_mdp(choices: list[list[dict[int, Fraction]]], n_states: int) -> MDP:
     """An MDP of ``n_states`` states (the last two: the goal and a fail state, both
     absorbing); ``choices[s]``: state ``s``'s choices as successor -> probability."""
     rows, cols, vals, groups = [], [], [], [0]
@@ -215,7 +215,7 @@ def _holds(lower: float, exact: Fraction, upper: float) -> bool:
 def test_compiled_bracket_holds_the_exact_optimum(seed: int, sense: Sense) -> None:
     n = 6
     choices = _dyadic_choices(seed, n)
-    mdp = _mdp(choices, n + 2)
+    mdp = fraction_mdp(choices, n + 2)
     exact = _exact(choices, n + 2, maximise=sense is Sense.MAX)
     res = interval_iteration(mdp, mdp.target, sense=sense, compiled=True)
     assert res.status is Status.OPTIMAL
@@ -226,7 +226,7 @@ def test_compiled_bracket_holds_the_exact_optimum(seed: int, sense: Sense) -> No
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_rare_event_bracket_holds_the_exact_value_to_its_precision(sense: Sense) -> None:
     choices = _rare_choices()
-    mdp = _mdp(choices, 7)
+    mdp = fraction_mdp(choices, 7)
     exact = _exact(choices, 7, maximise=sense is Sense.MAX)
     assert 1e-6 < exact < 1e-5  # a rare event: tol's 1e-9 alone is 1e-3 of it
     res = interval_iteration(mdp, mdp.target, sense=sense, compiled=True, precision=1e-6)

@@ -15,7 +15,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from test_iter_rare_sweeps import _mdp as rare_mdp
+from test_iter_rare_sweeps import fraction_mdp as rare_mdp
 from test_sweep_gate_choice import _block
 
 from mitld_lp.mdp import MDP
