@@ -34,8 +34,9 @@ logger = logging.getLogger("mitld_lp.solvers.iteration")
 def early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.ndarray,
                 tol: float, precision: float | None, sense: Sense, saved: float,
                 exits: np.ndarray, q: Quotient) -> bool | Block | None:
-    """The early jump of the iteration's ``_EARLY`` on every model, if its cost is at most that of
-    the ``saved`` sweeps (:func:`mitld_lp.solvers.jump_cost.worth`), its rounds of
+    """The early jump of the iteration's ``_EARLY`` on every model, if its cost is at most
+    a share of that of the ``saved`` sweeps (:func:`mitld_lp.solvers.jump_cost.worth`),
+    its rounds of
     policy iteration within what they pay for; ``True`` if it closed the block's gap
     (else its bounds are at least as tight, and the block with its moves out of it,
     made for the jump, is returned; ``None`` where the jump was refused before it).
@@ -47,14 +48,14 @@ def early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.
     models = bounds.shape[1] // 2
     own = 0 if sense is Sense.MAX else 1  # the first model's start (policy_jump.jump)
     exit_own = np.ascontiguousarray(exits[:, own])
-    c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense))
+    c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense), saved)
     logger.debug("early jump on %d states: %.0f sweeps saved, %.1f rounds of %.1f "
                  "sweeps forecast (depth %d, %.3g LU multiplies)", block.states.size,
                  saved, c.rounds, c.round / c.sweep, c.depth, c.flops)
     # a sweep and a jump both cost once per model: the models cancel in the decision
     if not jump_cost.worth(c, saved):
-        logger.debug("early jump on %d states refused: it would cost more than the "
-                     "sweeps it saves", block.states.size)
+        logger.debug("early jump on %d states refused: it would cost more than "
+                     "half the sweeps it saves", block.states.size)
         return None
     block = whole(q, block)
     allowance = c.allowance(saved * models)

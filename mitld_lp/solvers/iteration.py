@@ -55,9 +55,9 @@ A block is jumped before ``_SWEEPS_BEFORE_POLICY`` sweeps where the rate at whic
 gap shrinks forecasts that the sweeps cannot close it by then (``_hopeless``).  A
 compiled block is first looked at after 32 sweeps (``_EARLY``): one forecast to need
 many more is jumped there if the jump's cost, estimated from the block's structure
-(:mod:`mitld_lp.solvers.jump_cost`: entries touched, no clock), is at most what the
-sweeps it would save cost; a jump whose rounds of policy iteration (their LUs) are
-forecast to pass that is abandoned, its bounds untouched, and the block swept on.  The
+(:mod:`mitld_lp.solvers.jump_cost`: entries touched, no clock), is at most half what
+the sweeps it would save cost; a jump whose rounds of policy iteration (their LUs) are
+forecast to pass what they cost is abandoned, its bounds untouched, and the block swept on.  The
 compiled sweeps visit a block's states by their distance to the target inside it
 (:mod:`mitld_lp.solvers.sweep_order`), so that one sweep carries the target's value back
 across the block.
@@ -199,8 +199,8 @@ _FORECAST_WINDOW = 64
 _EARLY = (32, 16, 256)
 """The compiled sweeps' early look (:func:`_needed` read from 32 sweeps over the last
 16): a block forecast to need more than 256 sweeps more is jumped there, from the
-policy greedy on the bounds its sweeps started from, if the jump's cost is at most the
-sweeps' it would save (those forecast still needed, at most the limit's left), both
+policy greedy on the bounds its sweeps started from, if the jump's cost is at most half
+the sweeps' it would save (those forecast still needed, at most the limit's left), both
 estimated from the block's structure in entries touched
 (:mod:`mitld_lp.solvers.jump_cost`; before the work, no clock read: the same block
 decides the same on an idle and on a loaded machine).  The jump abandons

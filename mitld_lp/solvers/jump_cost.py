@@ -27,7 +27,8 @@ thousand times more than a policy's.
 block's state graph (the eccentricity found by two breadth-first searches): each round
 carries an improvement at least ``AHEAD_SWEEPS + 1`` steps, as its look-ahead does.
 
-The jump is started where ``rounds * round <= saved * sweep`` (:func:`worth`), and once
+The jump is started where ``rounds * round <= SHARE * saved * sweep`` (:func:`worth`,
+:data:`SHARE` a half: the forecast must leave a margin, module docs below), and once
 started it is abandoned before a round of policy iteration that would take it past
 ``saved * sweep / round`` rounds (:attr:`Cost.allowance`), the rounds left forecast from
 how fast the switches fall (:func:`mitld_lp.solvers.policy_jump.improve_ahead`).
@@ -47,7 +48,19 @@ three consensus blocks (about 5.5 rounds against 400-700 sweeps saved: the jumps
 policy iteration switched 9,495, 9,187, ... and 2,950, 3,232 states a round there, 18
 rounds went by in the first block without a fixpoint).  The estimate costs 30-40 ms a
 block there and 65-110 ms on consensus's (the state graph made symmetric, two searches,
-two sampled LUs)."""
+two sampled LUs).
+
+**The margin** (:data:`SHARE`).  A jump refused costs at most the sweeps it would have
+saved; one started and abandoned costs its rounds on top of all those sweeps, so a
+forecast near the saving is a poor bet.  And the model errs short on blocks like the
+bus grids: a round measured 57-77 sweeps there (45-50 modelled: a compiled sweep of a
+grid touches an entry in 3 ns, the calibration's 6-10), and the rounds run long where
+policy iteration's switches fall slowly.  On ``bus_scaled`` n64 d3 the block of 8,192
+states (depth 126) was forecast 12.5 rounds of 45.6 sweeps, 570 sweeps, against 629
+saved: started, its switches fell 2,679 -> 2,483 in two rounds (103 more forecast) and
+it was abandoned, 0.056 s spent.  With the margin it is refused up front; consensus
+6-2 ``c2``'s three blocks, forecast 226-303 sweeps against 968 saved (0.23-0.31 of the
+saving), are jumped as before (4-5 LUs each)."""
 
 from __future__ import annotations
 
@@ -59,8 +72,8 @@ import scipy.sparse as sp
 from mitld_lp.solvers.policy_jump import AHEAD_SWEEPS
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["Cost", "ROUND_ENTRY", "ROUND_FLOP", "ROUND_STATE", "SAMPLE", "block_depth",
-           "cost", "lu_flops", "worth"]
+__all__ = ["Cost", "ROUND_ENTRY", "ROUND_FLOP", "ROUND_STATE", "SAMPLE", "SHARE",
+           "block_depth", "cost", "lu_flops", "worth"]
 
 ROUND_STATE = 400.0
 """Entries a state that a round of policy iteration costs besides the LU's multiplies
@@ -70,6 +83,9 @@ ROUND_FLOP = 0.5
 ROUND_ENTRY = 20.0
 """Entries a round costs per entry of the block's rows (11 look-ahead sweeps in NumPy,
 the scores and residuals in extended precision)."""
+SHARE = 0.5
+"""The share of the saved sweeps' cost that a jump's forecast may reach and still be
+started (module docs: the margin)."""
 SAMPLE = 4096
 """The largest state graph whose LU is counted exactly (a few ms); above, balls of
 ``SAMPLE / 4`` and ``SAMPLE`` states are counted and extrapolated."""
@@ -99,16 +115,29 @@ class Cost:
 
 
 def worth(c: Cost, saved: float) -> bool:
-    """Whether the forecast jump costs at most the ``saved`` sweeps (module docs)."""
-    return c.rounds * c.round <= saved * c.sweep
+    """Whether the forecast jump costs at most :data:`SHARE` of the ``saved`` sweeps
+    (module docs)."""
+    return c.rounds * c.round <= SHARE * saved * c.sweep
 
 
-def cost(block: Block, chosen: np.ndarray) -> Cost:
+def cost(block: Block, chosen: np.ndarray, saved: float | None = None) -> Cost:
     """The block's :class:`Cost` for a jump from the policy ``chosen`` (local choice
-    indices, one a state), a function of the block's structure alone (module docs)."""
+    indices, one a state), a function of the block's structure alone (module docs).
+    ``saved``: where the cost without the LU's multiplies (a lower bound: they are
+    counted at least 0) is already not :func:`worth` those sweeps, that is returned,
+    ``flops`` NaN, the LU not counted (the same decision, the samples' LUs spared)."""
     graph = _state_graph(block)
     n = graph.shape[0]
     depth, order = _depth(graph)
+    entries = float(block.inner.nnz)
+    sweep = entries + float(block.choices.shape[0])
+    rounds = 1.0 + depth / LOOK_AHEAD
+    floor = ROUND_STATE * n + ROUND_ENTRY * entries
+    if saved is not None:
+        least = Cost(sweep=sweep, round=floor, rounds=rounds, depth=depth,
+                     flops=float("nan"))
+        if not worth(least, saved):
+            return least
     chain = sp.csr_array(block.inner[chosen])
     if n <= SAMPLE:
         flops = lu_flops(chain)
@@ -118,10 +147,7 @@ def cost(block: Block, chosen: np.ndarray) -> Cost:
         growth = 0.0 if small <= 0.0 or large <= 0.0 else float(
             np.clip(np.log(large / small) / np.log(4.0), 0.0, 1.0))
         flops = large * n * (n / SAMPLE) ** growth
-    entries = float(block.inner.nnz)
-    sweep = entries + float(block.choices.shape[0])
-    per_round = ROUND_STATE * n + ROUND_FLOP * flops + ROUND_ENTRY * entries
-    return Cost(sweep=sweep, round=per_round, rounds=1.0 + depth / LOOK_AHEAD,
+    return Cost(sweep=sweep, round=floor + ROUND_FLOP * flops, rounds=rounds,
                 depth=depth, flops=flops)
 
 
