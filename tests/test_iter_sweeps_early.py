@@ -162,10 +162,10 @@ def test_early_jump_forecast_reads_what_the_whole_block_gives(
         wanted.append(start_policy(full, theirs, first[:, own], sense_))
         return plain(block, rewards, bounds, first, tol, precision, sense_, saved, exits, q)
 
-    def forecast(block, chosen):  # the start policy the forecast is made from
+    def forecast(block, chosen, saved=None):  # the start policy the forecast is made from
         np.testing.assert_array_equal(chosen, wanted[-1])
         seen.append(block.states.size)
-        return cost(block, chosen)
+        return cost(block, chosen, saved)
 
     monkeypatch.setattr(jump_cost, "cost", forecast)
     monkeypatch.setattr(iteration, "_early_jump", check)
