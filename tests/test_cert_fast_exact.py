@@ -266,7 +266,7 @@ def test_compiled_check_gives_numpys_verdict_on_every_row(seed, nature,
     rnd = rounding(st.matrix)
     for upper in (True, False):
         for y in (x, x * (1 + 1e-13), np.where(rng.random(x.size) < 0.5, 0.0, x)):
-            want = C._numpy_checks(st, rnd, y, free, upper)
+            want = C.numpy_checks(st, rnd, y, free, upper)
             _paid(monkeypatch, True)
             got = certify_compiled.compiled_checks(st, rnd, y, free, upper)
             assert got is not None and np.array_equal(got, want)

@@ -87,7 +87,7 @@ def test_compiled_check_in_batches_gives_numpys_verdicts(seed, nature, monkeypat
     monkeypatch.setattr(certify_compiled, "COMPILED_CHECK_MIN_ROWS", 0)
     for upper in (True, False):
         for y in (x, x * (1 + 1e-13), np.where(rng.random(x.size) < 0.5, 0.0, x)):
-            want = C._numpy_checks(st, rnd, y, free, upper)
+            want = C.numpy_checks(st, rnd, y, free, upper)
             assert not want.all()  # some rows fail: the verdicts say something
             for batch in (1, 3, 1 << 16):
                 monkeypatch.setattr(certify_compiled, "CHECK_BATCH", batch)

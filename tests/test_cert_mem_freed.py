@@ -109,7 +109,7 @@ def test_the_bellman_check_holds_no_index_a_row(monkeypatch: pytest.MonkeyPatch)
     x = rng.random(mdp.n_states)
     free = np.asarray(mdp.target, dtype=bool)
     rows, n = st.matrix.shape[0], mdp.n_states
-    ok, peak = _traced_peak(lambda: C._numpy_checks(st, rnd, x, free, True))
+    ok, peak = _traced_peak(lambda: C.numpy_checks(st, rnd, x, free, True))
     assert ok.size == rows
     # the verdict a row (kept), the states past the bottom (a bool a state) and one
     # batch's temporaries; the state of every row (4 bytes a row) and a float a state

@@ -191,13 +191,13 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     choice passes when one of nature's rows does)."""
     ok = compiled_checks(st, rnd, x, free, upper)  # one compiled pass, where paid
     if ok is None:
-        ok = _numpy_checks(st, rnd, x, free, upper)
+        ok = numpy_checks(st, rnd, x, free, upper)
     if st.nature is not None:
         ok = np.logical_or.reduceat(ok, st.nature[:-1])
     return ~np.logical_and.reduceat(ok, st.groups[:-1])
 
 
-def _numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+def numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                   upper: bool) -> np.ndarray:
     """Per row of ``st.matrix``: whether it passes :func:`_fails`'s check, by NumPy."""
     m = st.matrix
