@@ -29,6 +29,8 @@ lark's included -- and only then:
   :func:`_lark_around`);
 * SciPy's array-API layer, imported by ``scipy._lib._util`` inside the window, is a
   :class:`LayerLater`: its body runs when one of its functions is first called.
+* NumPy's and SciPy's OpenBLAS, loaded after the finder is installed, start their
+  thread pools idle (:mod:`mitld_lp.util.blas_idle`, a finder placed after this one).
 
 :func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
 of the package's modules to import and installs the finder then, but for the robot's
@@ -582,6 +584,9 @@ def install() -> _Finder | None:
         if _finder is None and os.environ.get("MITLD_LP_PLAIN_IMPORTS") != "1":
             _finder = _Finder()
             sys.meta_path.insert(0, _finder)
+            from mitld_lp.util import blas_idle  # OpenBLAS's pools idle at once
+
+            blas_idle.install(after=_finder)
     return _finder
 
 
