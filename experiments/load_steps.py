@@ -65,6 +65,7 @@ def timed(module, name, label):
     setattr(module, name, run)
 import stormpy.io
 from mitld_lp.worlds import prism_bounded as pbd, prism_tables as pt
+from mitld_lp.worlds import prism_program as pp
 here = sys.argv[2] == "here"
 if here:
     pb.can_cap = lambda: False
@@ -74,6 +75,8 @@ if here:
                                 (gt, "parse_spec", "parse_spec"),
                                 (pr, "parse_program", "parse_program"),
                                 (pr, "with_labels", "with_labels"),
+                                (pp, "parse_program", "parse_program"),
+                                (pp, "with_labels", "with_labels"),
                                 (pr, "check_program", "check_program"),
                                 # inside read_model:
                                 (stormpy.io, "export_to_umb", "umb_export"),

@@ -111,12 +111,10 @@ from mitld_lp.worlds.prism_names import DeferredNames
 from mitld_lp.worlds.prism_program import (
     check_constants,
     check_program,
-    extra_labels,
-    parse_program,
+    labelled_program,
     storm_error,
     storm_quiet,
     with_constants,
-    with_labels,
 )
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables
 from mitld_lp.worlds.prism_terminal import decided as decided_when
@@ -497,15 +495,8 @@ def load_prism(
     depth = ExpressionDepth()
     check_text(p, where, depth)  # before Storm's parser, which can crash on it
     stormpy = stormpy_module()
-    program = parse_program(stormpy, where, where)
-    kind = str(program.model_type).rsplit(".", 1)[-1]
-    if kind != "MDP":
-        hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
-        raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
-
-    extra = extra_labels(program, dict(define or {}), where, depth)
-    if extra:
-        program = with_labels(stormpy, p, extra, where)
+    program = labelled_program(stormpy, p, where, dict(define or {}), where, depth,
+                               lambda program: _an_mdp(program, where))
     given = dict(constants or {})
     check_constants(program, given, where)
     defined = [lab.name for lab in program.labels]
@@ -582,6 +573,14 @@ def load_prism(
     return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
                          max_states=max_states,
                          program_actions=frozenset(_names(program)) - event_set)
+
+
+def _an_mdp(program: Any, where: str) -> None:
+    """A :class:`WorldError` unless ``program`` is an MDP."""
+    kind = str(program.model_type).rsplit(".", 1)[-1]
+    if kind != "MDP":
+        hint = " (a dtmc is an mdp with one command per state: write mdp)" if kind == "DTMC" else ""
+        raise WorldError(f"{where}: the model is a {kind}, a game needs an mdp{hint}")
 
 
 def _labelled(program: Any) -> set[str]:

@@ -32,12 +32,10 @@ from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_origins import needs_origins
 from mitld_lp.worlds.prism_program import (
     builder_options,
-    extra_labels,
-    parse_program,
+    labelled_program,
     storm_error,
     storm_quiet,
     with_constants,
-    with_labels,
 )
 from mitld_lp.worlds.prism_tables import Tables
 
@@ -76,10 +74,7 @@ def program_of(stormpy: Any, recipe: PrismRecipe, *, exact: bool = True) -> Any:
     """The program as the world's build prepared it, its constants exact (``exact``)
     or as given."""
     where = recipe.where
-    program = parse_program(stormpy, recipe.path, where)
-    extra = extra_labels(program, dict(recipe.define), where)
-    if extra:
-        program = with_labels(stormpy, Path(recipe.path), extra, where)
+    program = labelled_program(stormpy, Path(recipe.path), recipe.path, recipe.define, where)
     given = exact_constants(stormpy, recipe.constants) if exact else dict(recipe.constants)
     return with_constants(stormpy, program, given, where)
 
