@@ -16,7 +16,9 @@ importing NumPy, then the package), loading the model and solving it:
   the cuts;
 * the answer (the bracket) beside them.
 
-The median of each over the repeats is printed per checkout.
+The median of each over the repeats is printed per checkout.  ``--first package``: the
+program imports the package before NumPy (the package's modules import it), as a
+program whose first import is ``from mitld_lp import ...``.
 
     python experiments/proc_lean_parts.py --qvbs /work/shared/qvbs --compare /tmp/base \\
         --only consensus.4-4.c2 firewire_dl.3-600.deadline --repeats 7 --out /tmp/x
@@ -45,7 +47,8 @@ def cpu():
     u, c = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
     return u.ru_utime + u.ru_stime + c.ru_utime + c.ru_stime
 job = json.loads(sys.argv[1])
-import numpy
+if job.get("first") != "package":
+    import numpy
 from mitld_lp import load_model, synthesize
 import stormpy
 parses = [0, 0.0]
@@ -96,12 +99,15 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
     p.add_argument("--repeats", type=int, default=5, help="processes per checkout")
     p.add_argument("--compare", type=Path, default=None, metavar="DIR",
                    help="also the checkout DIR's package (before), taking turns with this one")
+    p.add_argument("--first", choices=("numpy", "package"), default="numpy",
+                   help="what the program imports first (default NumPy, as bench_qvbs)")
     args = p.parse_args(argv)
     out = _common.out_dir(args)
     work = out / "proc_lean_models"
     work.mkdir(parents=True, exist_ok=True)
     found, _ = bench_qvbs.jobs(args.qvbs, 0, 2_000_000, tuple(bench_qvbs.FAMILIES), work)
-    jobs = {inst.name: job for inst, job in found if inst.name in args.only}
+    jobs = {inst.name: dict(job, first=args.first) for inst, job in found
+            if inst.name in args.only}
     missing = [n for n in args.only if n not in jobs]
     if missing:
         raise SystemExit(f"not found under {args.qvbs}: {', '.join(missing)}")
