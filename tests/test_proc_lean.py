@@ -264,6 +264,8 @@ import mitld_lp
 from mitld_lp import synthesis  # the package's first module: its import window
 import numpy, scipy.linalg
 out = {"env": os.environ.get("OPENBLAS_THREAD_TIMEOUT")}
+fblas = sys.modules["scipy.linalg._fblas"]  # an extension module: its own loader kept
+out["loader"] = sorted({type(fblas.__loader__).__name__, type(fblas.__spec__.loader).__name__})
 for pkg, pattern in (("numpy", "numpy.libs/libscipy_openblas*.so"),
                      ("scipy", "scipy.libs/libscipy_openblas*.so")):
     root = os.path.dirname(os.path.dirname(sys.modules[pkg].__file__))
@@ -290,9 +292,8 @@ def test_the_libraries_read_the_setting_when_the_package_loads_them() -> None:
     late = _probe("package")
     if late["numpy"] is None or late["scipy"] is None:
         pytest.skip("this NumPy or SciPy does not bundle OpenBLAS")
-    assert late == {"env": None, "numpy": 4, "scipy": 4}
-    assert _probe("numpy") == {"env": None, "numpy": 0, "scipy": 4}
-    assert _probe("package", MITLD_LP_PLAIN_IMPORTS="1") == {"env": None, "numpy": 0,
-                                                              "scipy": 0}
-    assert _probe("package", OPENBLAS_NUM_THREADS="1") == {"env": None, "numpy": 0,
-                                                            "scipy": 0}
+    own = {"env": None, "loader": ["ExtensionFileLoader"]}
+    assert late == {**own, "numpy": 4, "scipy": 4}
+    assert _probe("numpy") == {**own, "numpy": 0, "scipy": 4}
+    assert _probe("package", MITLD_LP_PLAIN_IMPORTS="1") == {**own, "numpy": 0, "scipy": 0}
+    assert _probe("package", OPENBLAS_NUM_THREADS="1") == {**own, "numpy": 0, "scipy": 0}
