@@ -244,6 +244,21 @@ def test_a_users_setting_is_left_alone(clean_blas_env: None, monkeypatch: pytest
                                         or blas_idle.SETTING not in os.environ)
 
 
+def test_no_setting_while_another_thread_runs(clean_blas_env: None) -> None:
+    import threading
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        seen = _Recorder()
+        blas_idle.IdleLoader(seen).create_module(_Spec())
+    finally:
+        stop.set()
+        other.join()
+    assert seen.seen == [None] and blas_idle.SETTING not in os.environ
+
+
 def test_a_failed_load_puts_the_environment_back(clean_blas_env: None) -> None:
     class Failing(_Recorder):
         def create_module(self, spec: object) -> None:

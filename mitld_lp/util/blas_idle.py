@@ -22,8 +22,9 @@ Nothing is set when the environment already says anything about OpenBLAS's threa
 already loaded (NumPy imported before the package: its pool is as NumPy made it).
 :func:`install` puts the finder in ``sys.meta_path`` (the package's import window,
 :func:`mitld_lp.own_imports.install`, does; ``MITLD_LP_PLAIN_IMPORTS=1`` leaves both
-out).  Another thread reading the environment during such a ``dlopen`` would see the
-setting, which changes nothing but an OpenBLAS's idle spin.
+out).  The setting is made only while the process runs one Python thread: the C
+library's environment is not safe to change while another thread may read it; where
+another runs, the pools are left as the libraries make them.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ class IdleLoader:
         global _loading
         spec.loader = self._loader  # the module's own loader, as without the finder
         with _lock:  # (a module's init may import others: the setting made once)
-            made = _loading > 0 or wanted()
+            made = _loading > 0 or (wanted() and threading.active_count() == 1)
             if made:
                 _loading += 1
                 os.environ[SETTING] = TIMEOUT
