@@ -120,6 +120,11 @@ def test_the_world_is_the_brute_force_explorers(tmp_path: Path, text: str,
             assert set(got) == set(dist), (key(state), action)
             for t, p in dist.items():
                 assert abs(got[t] - float(p)) <= 1e-15, (key(state), action, t)
+            # Storm's exact build of the program as loaded (labels parsed in once too)
+            exact: dict[tuple[int, bool], Fraction] = {}
+            for t, p in game.exact_successors(state, action, frozenset()):
+                exact[key(t)] = exact.get(key(t), Fraction(0)) + Fraction(p)
+            assert exact == dist, (key(state), action)
 
 
 def _labels(program) -> list[tuple[str, str]]:
