@@ -127,7 +127,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     del states
     solved = acting & ~never & ~sure
     del acting
-    idx = np.flatnonzero(solved)
+    idx = np.flatnonzero(solved).astype(index, copy=False)  # 4 bytes a state if it can
     v = w = None
     if idx.size:
         # the chain in the edges' index type, as the greedy block's chains are: the
@@ -162,7 +162,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         del at, d, p, into, indptr
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
-                      None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
+                      None if guess is None else _Gathered(guess, idx))
         del sub, b, kappa
     # the solved states' values alone (:attr:`Chain.values` makes every state's)
     values = np.zeros(idx.size)
@@ -252,7 +252,7 @@ def _solved_layers(layers: tuple[np.ndarray, np.ndarray] | None, idx: np.ndarray
 
 def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
            layers: tuple[np.ndarray, np.ndarray] | None,
-           guess: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+           guess: np.ndarray | _Gathered | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``v = b + Q v`` and ``W = delta v + Q W`` on a transient chain ``Q`` (``sub``),
     level by level downstream first; ``delta`` per state is twice its relative residual
     plus its rounding bound ``kappa`` (module docs).  ``guess``: an estimate of ``v``
@@ -273,13 +273,17 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         done = index + 1
         inner = blk.states_at(index)
         inner = inner[~blk.single(inner)]
-        if inner.size == k and sub.has_canonical_format:
+        if (inner.size == k and sub.has_canonical_format
+                and bool(np.all(inner[1:] > inner[:-1]))):
             # every state of the chain in one level's components (``inner`` ascending:
             # ``arange(k)``): its rows and its block are the chain itself, entry for
             # entry, in its order; not two copies beside it (QVBS zeroconf 1000-4's
             # 166,000-state chain, at the certificate's traced peak).  Canonical: the
-            # walk keeps it as it is (:func:`~mitld_lp.solvers.chain_levels.walk_of`)
+            # walk keeps it as it is (:func:`~mitld_lp.solvers.chain_levels.walk_of`).
+            # Every state: its vectors read whole (views), not gathered by an index of
+            # every state
             rows = block = sub
+            inner = slice(None)
         else:
             rows = sp.csr_array(sub[inner])
             block = sp.csr_array(rows[:, inner])
@@ -314,6 +318,21 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         del need
     singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
+
+
+class _Gathered:
+    """The ``idx`` entries of ``full`` (a vector of every state), read as ``full[idx]``
+    would be, a selection at a time: :func:`_solve`'s ``guess`` without its copy on
+    every solved state held through the walk (QVBS zeroconf 1000-4's certificate
+    peak, where it is not read at all: the guess is not positive on its block)."""
+
+    __slots__ = ("full", "idx")
+
+    def __init__(self, full: np.ndarray, idx: np.ndarray) -> None:
+        self.full, self.idx = np.asarray(full, dtype=np.float64), idx
+
+    def __getitem__(self, at: np.ndarray | slice) -> np.ndarray:
+        return self.full[self.idx[at]]
 
 
 class _Singles:
