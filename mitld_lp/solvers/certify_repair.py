@@ -510,57 +510,33 @@ class _Repair:
         bounds = at.tolist()
         for k, is_small in enumerate(small.tolist()):
             mine = live[bounds[k]:bounds[k + 1]]
-            if not is_small:  # the rows of the states to do, round by round
-                if not self._sparse_level(x, mine, failing, moved, fresh):
-                    return False
-                continue
             a, z = walk_at[k], walk_at[k + 1]
-            todo = failing[mine] | walk.reading(moved, a, z)
+            todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
+                                    self.readers(np.flatnonzero(moved), mine, fresh))
             for r in range(ROUNDS):
                 if not todo.any():
                     break
-                # the level's slices, the states not to do masked
-                changed = self._move(x, mine, walk.needed(self.rnd, x, a, z, self.upper),
-                                     todo)
+                if is_small:  # the level's slices, the states not to do masked
+                    changed = self._move(x, mine, walk.needed(self.rnd, x, a, z,
+                                                              self.upper), todo)
+                else:  # the rows of the states to do
+                    doing = mine[todo]
+                    changed = self._move(x, doing, _needed(self.st, self.rnd, x, doing,
+                                                           self.upper))
                 if changed.size == 0:
                     break
                 self.moved += int(changed.size)
                 now = self.together(x, changed)
                 moved[now] = True
                 # within the level (its cycles): the states reading those just moved
-                if not walk.inward[a] and r + 1 < ROUNDS:
-                    break  # no row of the level reads it: none to take up again
-                fresh[now] = True
-                todo = walk.reading(fresh, a, z)
-                fresh[now] = False
+                if is_small:
+                    if not walk.inward[a] and r + 1 < ROUNDS:
+                        break  # no row of the level reads it: none to take up again
+                    fresh[now] = True
+                    todo = walk.reading(fresh, a, z)
+                    fresh[now] = False
+                else:
+                    todo = self.readers(now, mine, fresh)
             else:
                 return False
         return True
-
-    def _sparse_level(self, x: np.ndarray, mine: np.ndarray, failing: np.ndarray,
-                      moved: np.ndarray, scratch: np.ndarray) -> bool:
-        """:meth:`run`'s rounds on a level of at least :data:`SPARSE_LEVEL` states
-        (``mine``, ascending), ``moved`` marking every state moved so far; False when
-        it does not settle within :data:`ROUNDS` rounds.  Its states to do are kept as
-        their indices, ascending (the level's states that failed or read a moved one,
-        then the readers of those just moved), not a mask of the level's states made,
-        read and tested every round: QVBS zeroconf 1000-4's 213,268-state level, 14
-        rounds of a few thousand states.  The same states in the same order each
-        round, so the same needs, moves and count."""
-        doing = mine[failing[mine] | self.readers(np.flatnonzero(moved), mine, scratch)]
-        inside = np.zeros(x.shape[0], dtype=bool)
-        inside[mine] = True
-        for _ in range(ROUNDS):
-            if doing.size == 0:
-                return True
-            changed = self._move(x, doing, _needed(self.st, self.rnd, x, doing,
-                                                   self.upper))
-            if changed.size == 0:
-                return True
-            self.moved += int(changed.size)
-            now = self.together(x, changed)
-            moved[now] = True
-            # within the level (its cycles): the states reading those just moved
-            found = self._read_by(now)
-            doing = np.unique(found[inside[found]])
-        return False
