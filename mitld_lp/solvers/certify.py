@@ -50,9 +50,24 @@ import scipy.sparse as sp
 from mitld_lp.checks import Check
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.analysis import end_components
-from mitld_lp.solvers.certify_chain import Chain, RowModel, chain, escapes, support_layers
+from mitld_lp.solvers.certify_chain import (
+    Chain,
+    RowModel,
+    chain,
+    escapes,
+    full_values,
+    support_layers,
+)
 from mitld_lp.solvers.certify_compiled import compiled_checks, load_if_warm
 from mitld_lp.solvers.certify_everywhere import EVERYWHERE, EVERYWHERE_BATCH, everywhere
+from mitld_lp.solvers.certify_policy import (
+    GROWTH,
+    RETRIES,
+    Side,
+    policy_lower,
+    policy_upper,
+    scales,
+)
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
     SPARSE_LEVEL,
@@ -88,17 +103,12 @@ __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "a
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
            "everywhere", "policy_lower", "policy_upper", "optimum_upper", "optimum_lower",
            "model_eta", "float_down", "float_up", "one_minus", "EVERYWHERE",
-           "EVERYWHERE_BATCH", "ROUNDS", "SPARSE_LEVEL", "is_certificate_check"]
+           "EVERYWHERE_BATCH", "ROUNDS", "SPARSE_LEVEL", "is_certificate_check", "GROWTH",
+           "RETRIES"]
 
 log = logging.getLogger(__name__)
 
-GROWTH = 16.0
-"""How much the candidates' slack grows on each retry."""
-
 _LOWER_OPTIMUM = "lower bound: the optimum"  # the name of :func:`optimum_lower`'s check
-
-RETRIES = 2
-"""Retries with a larger slack before the repair and the fallbacks."""
 
 BATCH = 1 << 14
 """Rows the NumPy Bellman check reads at a time (:func:`_fails`; its temporaries,
@@ -110,6 +120,7 @@ the matrix (:func:`~mitld_lp.solvers.rounding.range_extreme`) when at least one 
 this many fails the arithmetic, else from the failing rows' entries
 (:func:`~mitld_lp.solvers.rounding.support_extreme`): the same extremes either way."""
 
+
 def is_certificate_check(check: Check) -> bool:
     """Whether ``check`` is one of a model's certificate checks (a bound or
     :func:`everywhere`): what an exact answer proves in their place."""
@@ -117,60 +128,7 @@ def is_certificate_check(check: Check) -> bool:
         check.name == EVERYWHERE
 
 
-# ------------------------------------------------------------------ one side's bound
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Side:
-    """One checked bound: its ``vector`` on every state and its ``value`` at the
-    initial state (sound whatever ``check`` says: a failed check falls back to a
-    trivial bound) and the ``check`` that says what was proved."""
-
-    value: float
-    check: Check
-    vector: np.ndarray
-
-
-def _scales() -> list[float]:
-    return [GROWTH**k for k in range(RETRIES + 1)]
-
-
-def policy_lower(mdp: MDP, ch: Chain, rnd: Rounding) -> Side:
-    """A lower bound on the policy's exact value at the initial state (module docs)."""
-    return _policy_side(mdp, ch, rnd, upper=False)
-
-
-def policy_upper(mdp: MDP, ch: Chain, rnd: Rounding) -> Side:
-    """An upper bound on the policy's exact value at the initial state."""
-    return _policy_side(mdp, ch, rnd, upper=True)
-
-
-def _policy_side(mdp: MDP, ch: Chain, rnd: Rounding, *, upper: bool) -> Side:
-    m = sp.csr_array(mdp.matrix)
-    idx = np.flatnonzero(ch.solved)
-    rows = ch.policy[idx]
-    x = np.where(ch.sure, 1.0, 0.0)
-    name = "upper bound: the policy's value" if upper else "lower bound: the policy's value"
-    s0 = int(mdp.initial)
-    if idx.size == 0:
-        return Side(float(x[s0]), Check(name, True, "decided by the chain's graph: "
-                                        f"{x[s0]:g} (no state left to solve)"), read_only(x))
-    for scale in _scales():
-        x[idx] = (np.minimum(ch.values[idx] + scale * ch.w, 1.0) if upper else
-                  np.maximum(ch.values[idx] - scale * ch.w, 0.0))
-        sums = rows_dot(m, rows, x)
-        ok = (x[idx] >= above(rnd, rows, sums)) if upper else (x[idx] <= below(rnd, rows, sums))
-        if ok.all():
-            return Side(float(x[s0]), Check(name, True, (
-                f"{'pre' if upper else 'sub'}-fixed point of the policy's chain checked "
-                f"in exact arithmetic on {idx.size} states (slack x{scale:g}, eta "
-                f"{rnd.eta:.2g}): {float(x[s0])!r}")), read_only(x))
-    worst = idx[~ok][:5].tolist()
-    x[idx] = 1.0 if upper else 0.0
-    return Side(float(x[s0]), Check(name, False, (
-        f"the {'pre' if upper else 'sub'}-fixed point check failed in {int((~ok).sum())} "
-        f"states (first {worst}) at every slack; the bound is the trivial "
-        f"{x[s0]:g}")), read_only(x))
+# ------------------------------------------------------------------ the Bellman checks
 
 
 def _direct(m: sp.csr_array, x: np.ndarray) -> bool:
@@ -371,15 +329,17 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     def candidate(scale: float) -> np.ndarray:
         x = base()
         idx = ch.solved & ~free
-        w = ch.w[~free[ch.solved]]  # (``w`` is the solved states', in their order)
+        kept = ~free[ch.solved]  # (``v`` and ``w`` are the solved states', in their order)
+        v, w = ch.v[kept], ch.w[kept]
+        del kept
         if upper:
-            x[idx] = np.minimum(ch.values[idx] + scale * w, 1.0)
+            x[idx] = np.minimum(v + scale * w, 1.0)
             x[ch.sure & ~free] = 1.0
             rest = ch.never & ~free
             x[rest] = 1.0 if fallback is None else np.minimum(fallback[rest] * 1.0000001, 1.0)
             x[zero & ~free] = 0.0
         else:
-            x[idx] = np.maximum(ch.values[idx] - scale * w, 0.0)
+            x[idx] = np.maximum(v - scale * w, 0.0)
             x[ch.sure & ~free] = 1.0
             x[ch.never & ~free] = 0.0
         return x
@@ -387,10 +347,10 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     tried = []
     # the end components the repair moves together (none: nothing to gather)
     mecs = mec_of if upper and mec_of is not None and bool(np.any(mec_of >= 0)) else None
-    candidates = [(f"slack x{s:g}", lambda s=s: candidate(s)) for s in _scales()]
+    candidates = [(f"slack x{s:g}", lambda s=s: candidate(s)) for s in scales()]
     if fallback is not None:
         def from_iteration() -> np.ndarray:
-            x = candidate(_scales()[-1])
+            x = candidate(scales()[-1])
             f = np.asarray(fallback, dtype=np.float64)
             live = ~free
             if upper:
@@ -584,12 +544,22 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
         high = (optimum_upper(mdp, ch, rnd, zero=zero, layers=layers, mec_of=mec_of,
                               fallback=fallback_upper) if sense == "max" else
                 policy_upper(mdp, ch, rnd))
-    values = ch.values
-    del ch  # its slack and sets, read by the sides alone: freed before the last check
+    # the policy's values on every state made last, once the sides' vectors are
+    # freed: a float a state not held beside them through the policy's side and the
+    # last check (QVBS csma 4-2's certificate peak), only the solved states' values
+    # and two sets as bits; the rounding's counts (an index a row) freed before the
+    # last check
+    n = int(ch.solved.shape[0])
+    solved_values = ch.v
+    solved, sure = np.packbits(ch.solved), np.packbits(ch.sure)
+    del ch, rnd  # its slack and sets, read by the sides alone: freed before the last check
     checks = [s.check for s in (low, high) if s is not None]
     if low is not None and high is not None and precision is not None:
         checks.append(everywhere(low.vector, high.vector, int(mdp.initial), precision,
                                  complement=complement))
-    return Certificate(float("nan") if low is None else low.value,
-                       float("nan") if high is None else high.value, values,
-                       tuple(checks))
+    lower = float("nan") if low is None else low.value
+    upper = float("nan") if high is None else high.value
+    del low, high
+    values = full_values(solved_values, np.unpackbits(solved, count=n).view(bool),
+                         np.unpackbits(sure, count=n).view(bool))
+    return Certificate(lower, upper, read_only(values), tuple(checks))

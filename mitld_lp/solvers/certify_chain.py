@@ -25,7 +25,7 @@ try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
 except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
     _st = None
 
-__all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "support_layers", "chain",
+__all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "full_values", "support_layers", "chain",
            "attracted", "cycling_among", "escapes", "CYCLING_BATCH"]
 
 CHAIN_KERNEL_MIN_LEVELS = 200
@@ -37,16 +37,17 @@ same values to the last bit (:mod:`mitld_lp.solvers.level_kernels`)."""
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Chain:
-    """A policy's chain solved for the certificates: ``values`` (float, every state; 1
-    on ``sure``, 0 on ``never``), ``w`` (the slack ``W`` on the ``solved`` states, in
-    their order: a float a solved state, not one a state held through both sides of
-    the certificate; QVBS csma 4-2 solves 678 of 600,267 states), and the three sets of
+    """A policy's chain solved for the certificates: ``v`` (its values on the ``solved``
+    states, in their order, within [0, 1]; :attr:`values` every state's, 1 on ``sure``
+    and 0 elsewhere), ``w`` (the slack ``W`` on the ``solved`` states, in their
+    order), each a float a solved state, not one a state held through both sides of
+    the certificate (QVBS csma 4-2 solves 678 of 600,267 states), and the three sets of
     its graph: ``sure`` (the target reached almost surely, the target included),
     ``never`` (the target unreachable) and ``solved`` (the rest: transient).  Given a
-    ``w`` of every state (the slack of each, 0 outside ``solved``), it keeps the
+    ``v`` or a ``w`` of every state (0 outside ``solved`` for ``w``), it keeps the
     ``solved`` states' entries."""
 
-    values: np.ndarray
+    v: np.ndarray
     w: np.ndarray
     solved: np.ndarray
     sure: np.ndarray
@@ -55,16 +56,33 @@ class Chain:
     target: np.ndarray
 
     def __post_init__(self) -> None:
-        w = np.asarray(self.w)
-        if w.shape[0] != int(np.count_nonzero(self.solved)):  # one a state: kept compact
-            object.__setattr__(self, "w", read_only(w[np.asarray(self.solved, dtype=bool)]))
+        solved = np.asarray(self.solved, dtype=bool)
+        count = int(np.count_nonzero(solved))
+        for name in ("v", "w"):  # one a state: kept compact
+            got = np.asarray(getattr(self, name))
+            if got.shape[0] != count:
+                object.__setattr__(self, name, read_only(got[solved]))
+
+    @property
+    def values(self) -> np.ndarray:
+        """The policy's float values on every state: ``v`` on the ``solved`` states, 1
+        on ``sure``, 0 elsewhere (made on each call)."""
+        return full_values(self.v, self.solved, self.sure)
 
     @property
     def slack(self) -> np.ndarray:
         """``W`` on every state, 0 outside ``solved`` (made on each call)."""
-        out = np.zeros(self.values.shape[0])
+        out = np.zeros(self.solved.shape[0])
         out[np.asarray(self.solved, dtype=bool)] = self.w
         return out
+
+
+def full_values(v: np.ndarray, solved: np.ndarray, sure: np.ndarray) -> np.ndarray:
+    """A chain's values on every state (:attr:`Chain.values`) from its solved states'
+    ``v`` and its ``solved`` and ``sure`` sets."""
+    out = np.where(np.asarray(sure, dtype=bool), 1.0, 0.0)
+    out[np.asarray(solved, dtype=bool)] = v
+    return out
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -109,7 +127,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     del states
     solved = acting & ~never & ~sure
     del acting
-    idx = np.flatnonzero(solved)
+    idx = np.flatnonzero(solved).astype(index, copy=False)  # 4 bytes a state if it can
     v = w = None
     if idx.size:
         # the chain in the edges' index type, as the greedy block's chains are: the
@@ -144,13 +162,13 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         del at, d, p, into, indptr
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
-                      None if guess is None else np.asarray(guess, dtype=np.float64)[idx])
+                      None if guess is None else _Gathered(guess, idx))
         del sub, b, kappa
-    # the values of every state made after the solve, not held through it
-    values = np.where(sure, 1.0, 0.0)
+    # the solved states' values alone (:attr:`Chain.values` makes every state's)
+    values = np.zeros(idx.size)
     slack = np.zeros(idx.size)
     if v is not None:
-        values[idx] = np.clip(v, 0.0, 1.0)
+        np.clip(v, 0.0, 1.0, out=values)
         np.maximum(w, 0.0, out=slack)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
@@ -234,7 +252,7 @@ def _solved_layers(layers: tuple[np.ndarray, np.ndarray] | None, idx: np.ndarray
 
 def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
            layers: tuple[np.ndarray, np.ndarray] | None,
-           guess: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+           guess: np.ndarray | _Gathered | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``v = b + Q v`` and ``W = delta v + Q W`` on a transient chain ``Q`` (``sub``),
     level by level downstream first; ``delta`` per state is twice its relative residual
     plus its rounding bound ``kappa`` (module docs).  ``guess``: an estimate of ``v``
@@ -255,13 +273,17 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         done = index + 1
         inner = blk.states_at(index)
         inner = inner[~blk.single(inner)]
-        if inner.size == k and sub.has_canonical_format:
+        if (inner.size == k and sub.has_canonical_format
+                and bool(np.all(inner[1:] > inner[:-1]))):
             # every state of the chain in one level's components (``inner`` ascending:
             # ``arange(k)``): its rows and its block are the chain itself, entry for
             # entry, in its order; not two copies beside it (QVBS zeroconf 1000-4's
             # 166,000-state chain, at the certificate's traced peak).  Canonical: the
-            # walk keeps it as it is (:func:`~mitld_lp.solvers.chain_levels.walk_of`)
+            # walk keeps it as it is (:func:`~mitld_lp.solvers.chain_levels.walk_of`).
+            # Every state: its vectors read whole (views), not gathered by an index of
+            # every state
             rows = block = sub
+            inner = slice(None)
         else:
             rows = sp.csr_array(sub[inner])
             block = sp.csr_array(rows[:, inner])
@@ -296,6 +318,21 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         del need
     singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
+
+
+class _Gathered:
+    """The ``idx`` entries of ``full`` (a vector of every state), read as ``full[idx]``
+    would be, a selection at a time: :func:`_solve`'s ``guess`` without its copy on
+    every solved state held through the walk (QVBS zeroconf 1000-4's certificate
+    peak, where it is not read at all: the guess is not positive on its block)."""
+
+    __slots__ = ("full", "idx")
+
+    def __init__(self, full: np.ndarray, idx: np.ndarray) -> None:
+        self.full, self.idx = np.asarray(full, dtype=np.float64), idx
+
+    def __getitem__(self, at: np.ndarray | slice) -> np.ndarray:
+        return self.full[self.idx[at]]
 
 
 class _Singles:

@@ -128,9 +128,12 @@ def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
     states = np.flatnonzero(zero)
     if bool(np.any(x[states] != 0.0)):
         return False
-    rows, _, _ = st.rows_of(states)
+    # a state's rows (nature's too) are consecutive, so its entries are one range of
+    # the matrix's arrays: read there, not gathered row by row (the same entries)
+    first = _state_groups(st)
     m = st.matrix
-    return bool(np.all(zero[m.indices[gather_ranges(m.indptr[rows], m.indptr[rows + 1])]]))
+    ptr = m.indptr[first]
+    return bool(np.all(zero[m.indices[gather_ranges(ptr[states], ptr[states + 1])]]))
 
 
 def _state_groups(st: Rows) -> np.ndarray:

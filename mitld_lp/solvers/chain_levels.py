@@ -56,7 +56,8 @@ class ChainLevels:
 fewer than :data:`WALK_MIN_STATES` states is one LU
 (:func:`~mitld_lp.solvers.topological.chain_lu`: dense when small)."""
 
-    __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles")
+    __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles",
+                 "_upstream")
 
     def same_chain(self, other: sp.csr_array) -> bool:
         """Whether ``other`` (CSR) has this walk's chain entry for entry (its rows'
@@ -81,7 +82,8 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         # quotient's level walks are compiled (numba loaded, or many levels)
         self._kernels = (None if self.blocks is None else
                          level_kernels(self.chain.nnz, self.blocks.n_levels))
-        self._singles: tuple[np.ndarray, np.ndarray, np.ndarray, list[int]] | None = None
+        self._singles: tuple[np.ndarray, np.ndarray, list[int]] | None = None
+        self._upstream: np.ndarray | None = None  # made at the first transposed solve
 
     def _factor(self, level: int, states: np.ndarray) -> tuple[sp.csr_array,
                                                               SuperLU | DenseLU]:
@@ -183,10 +185,12 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
             np.add.at(x, col[out], flow * (val[out] if x.ndim == 1 else val[out, None]))
         return x
 
-    def _runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    def _runs(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """The single states downstream first (in level order), where each level's
-        start among them, the same states upstream first (each level's in the same
-        order), and the levels with cyclic components; gathered once."""
+        start among them, and the levels with cyclic components; gathered once.  Their
+        upstream order is :meth:`_upstream_singles`', made only for a transposed solve
+        (the certificates' chains are solved forward alone: QVBS ``zeroconf``
+        1000-4's 166,000 single states sorted for nothing)."""
         if self._singles is None:
             blk = self.blocks
             assert blk is not None
@@ -195,10 +199,24 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
             states = np.ascontiguousarray(order[one])
             level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[one]
             at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
-            upstream = np.ascontiguousarray(states[np.argsort(-level_of, kind="stable")])
-            self._singles = (states, at, upstream,
-                             np.unique(blk.level[blk.size > 1]).tolist())
+            self._singles = (states, at, np.unique(blk.level[blk.size > 1]).tolist())
         return self._singles
+
+    def _upstream_singles(self) -> np.ndarray:
+        """The single states of :meth:`_runs` upstream first: the levels last to first,
+        each level's states in their order there (as a stable sort of them by
+        decreasing level gives them); made at the first call and kept."""
+        if self._upstream is None:
+            states, at, _ = self._runs()
+            total = int(at[-1])
+            sizes = np.diff(at)
+            # level ``l``'s states start at ``total - at[l + 1]`` upstream first
+            shift = np.repeat(total - at[1:] - at[:-1], sizes)
+            dest = np.arange(total, dtype=np.int64) + shift
+            upstream = np.empty_like(states)
+            upstream[dest] = states
+            self._upstream = upstream
+        return self._upstream
 
     def _compiled(self, rhs: np.ndarray, *, transposed: bool) -> np.ndarray:
         """:meth:`solve` (``rhs``) or :meth:`solve_transposed` (``rhs``: a copy, the
@@ -209,10 +227,11 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         NumPy walk costs a few calls per level."""
         blk, kern, c = self.blocks, self._kernels, self.chain
         assert blk is not None
-        states, at, upstream, cyclic_levels = self._runs()
+        states, at, cyclic_levels = self._runs()
         b = np.ascontiguousarray(rhs.reshape(rhs.shape[0], -1))
         total = int(at[-1])
         if transposed:
+            upstream = self._upstream_singles()
             x = b
             stop = blk.n_levels
             for lv in reversed(cyclic_levels):
