@@ -279,11 +279,10 @@ class FrontierBuilder(StepRules):
         self.keys = Keys(6)
 
     def release(self) -> None:
-        """Drop every array of the build once built (:meth:`release_levels`'s, and the
-        states' columns and hypotheses, which :meth:`states` copied): the builder's
-        tables hold its bound methods (cycles), so it lives until the collector's next
-        full pass, and those (some 100 MB on issue 45's sensed case) would hold the
-        solve above the build's peak."""
+        """Drop every array of the build once built (:meth:`release_levels`'s, the
+        states' columns and hypotheses, which :meth:`states` copied): the builder's tables
+        hold its bound methods (cycles), so it lives until the collector's next full
+        pass, and those (100 MB on issue 45's sensed case) would hold up the solve."""
         self.release_levels()
         self.cols = Columns(6)
         self.hyp_code, self.hyp_weight = np.zeros(0, _I), np.zeros(0, np.float64)
@@ -565,13 +564,14 @@ class FrontierBuilder(StepRules):
         shown.close()
         self.release_levels()
         n, n_choices = self.cols.n, self.n_choices
-        indptr = np.zeros(n_choices + 1, np.int64)
-        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:])
+        # int32 indices where they fit, as the plain product's (12 bytes a transition)
+        index = np.int32 if max(sum(len(p[3]) for p in parts), n_choices) < 2**31 else _I
+        indptr = np.zeros(n_choices + 1, index)
+        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:], dtype=index)
         per_state = np.zeros(n + 1, np.int64)
         np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
         act = np.concatenate([p[1] for p in parts])
-        # the columns int64 as scipy keeps them beside an int64 indptr (no second copy)
-        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, np.int64),
+        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, index),
                                indptr), shape=(n_choices, n))
         del parts
         # the actions numbered as the choices first show them
