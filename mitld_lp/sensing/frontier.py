@@ -140,7 +140,7 @@ class FrontierBuilder(StepRules):
         # the moves (Moves): per level its first choice and its runs of rows (choice,
         # world, occurred, new, target)
         self.n_choices = 0
-        self.move_rows: list[tuple[int, tuple[tuple[np.ndarray, ...], ...]]] = []
+        self.move_rows: list[tuple[int, Any]] = []  # Moves' levels (PackedRuns)
         # the absorbing records (ends, the truncation): id and state (-1 until stored)
         self.records: list[Hashable] = []
         self.record_id: dict[Hashable, int] = {}
