@@ -109,3 +109,22 @@ def test_trims_after_each_lp_change_no_value(monkeypatch):
         assert np.array_equal(a.policy, b.policy)
         assert np.array_equal(a.policy_values, b.policy_values)
         assert a.bounds == b.bounds
+
+
+def test_packed_runs_give_the_columns_back_to_the_bit():
+    from mitld_lp.sensing.moves import PackedRuns
+
+    rng = np.random.default_rng(7)
+    runs = []
+    for n in (0, 1, 5, 1000):
+        runs.append((rng.integers(-3, 30_000, n).astype(np.int16),
+                     rng.integers(0, 2**31 - 1, n).astype(np.int32),
+                     rng.integers(-2**40, 2**40, n),  # int64
+                     rng.integers(-100, 100, n).astype(np.int8)))
+    back = PackedRuns(runs).unpack()
+    assert len(back) == len(runs)
+    for got, want in zip(back, runs, strict=True):
+        assert len(got) == len(want)
+        for g, w in zip(got, want, strict=True):
+            assert g.dtype == w.dtype and g.tolist() == w.tolist()
+    assert PackedRuns(()).unpack() == ()
