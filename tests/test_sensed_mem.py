@@ -6,9 +6,9 @@ transitions), checked on small sensed cases:
   builder's step tables are emptied once built: the answer read from that product is
   the optimum found here by a value iteration written in this file (dense, from
   below), which reads nothing of the package's solvers;
-* the heap handed back between the two LPs (``routes/plain._trimmed``) for a product
-  of at least ``TRIM_FROM_TRANSITIONS``: the same bracket, policy and values to the bit
-  as without it."""
+* the heap handed back after each LP (``routes/plain._trimmed``) for a product of at
+  least ``TRIM_FROM_TRANSITIONS``: the same bracket, policy and values to the bit as
+  without it, and one trim per LP."""
 
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ def test_trims_after_each_lp_change_no_value(monkeypatch):
     trimmed = synthesize(model)
     n_models = len({id(trimmed.lower_model), id(trimmed.upper_model)})
     assert n_models == 2  # truncated: both models solved, an LP each
-    assert calls == ["build", "lp"]  # between the two LPs only
+    assert calls == ["build", "lp", "lp"]
     assert (trimmed.lower, trimmed.upper) == (plain_run.lower, plain_run.upper)
     for a, b in ((trimmed.lower_model, plain_run.lower_model),
                  (trimmed.upper_model, plain_run.upper_model)):
