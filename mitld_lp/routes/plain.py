@@ -42,6 +42,7 @@ from mitld_lp.report import bracket_text
 from mitld_lp.result import Part, Result, from_models
 from mitld_lp.routes.route import Route
 from mitld_lp.routes.stages import Built, build_task
+from mitld_lp.util import heap
 from mitld_lp.util.clock import Deadline
 from mitld_lp.util.heap import release_free_memory
 
@@ -291,6 +292,19 @@ def _unfolded(sol: ModelSolution, folded: dict[str, _Folded]) -> ModelSolution:
     return replace(sol, iteration=it, lp=lp)
 
 
+def _trimmed(mdp: MDP, lp: LPResult | None) -> LPResult | None:
+    """``lp``, the heap's free pages handed back to the system first for a product of
+    at least :data:`TRIM_FROM_TRANSITIONS` (:mod:`mitld_lp.util.heap`): an LP's freed
+    temporaries are holes the next LP and the certificates only partly fill.  On issue
+    45's sensed case (1.08M transitions, two LPs) the solve's resident peak, at the LPs'
+    ends, went from 112 to 103 bytes a transition (experiments/bench_qvbs.py); trimming
+    after the interval iteration as well freed nothing at peak (the first LP fills
+    those pages again)."""
+    if mdp.n_transitions >= TRIM_FROM_TRANSITIONS:
+        heap.release_free_memory()
+    return lp
+
+
 def _iterate(mdp: MDP, quotients: list[Quotient], s: Settings,
              deadline: Deadline) -> list[IterationResult]:
     """Interval iteration of the models in one pass over their shared quotient.  When the
@@ -352,7 +366,9 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     quotients = analyse(mdp, accept.goal, mdp.truncated, sense=Sense(sense))
     quotients = quotients[:1] if quotients[1] is quotients[0] else list(quotients)
     its = _iterate(mdp, quotients, s, deadline)
-    lps = [_solve_lp(mdp, q, it, s, deadline) for q, it in zip(quotients, its, strict=True)]
+    # (each LP's freed pages handed back before the next stage: _trimmed)
+    lps = [_trimmed(mdp, _solve_lp(mdp, q, it, s, deadline))
+           for q, it in zip(quotients, its, strict=True)]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
     # (a minimum's certificate reads no end components: its quotient has none, and

@@ -58,6 +58,7 @@ from mitld_lp.sensing.rows import (
     lex_order,
     load_kernels,
     mix64,
+    narrow,
     ordered_groups,
     scatter,
     spread,
@@ -76,11 +77,11 @@ log = logging.getLogger("mitld_lp.sensing.belief")
 CHUNK = 8_192  # the most states expanded together (and CHUNK_HYPOTHESES)
 CHUNK_HYPOTHESES = 8_192
 """The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`; one
-state alone may hold more).  A chunk's rows, some twenty numbers each, are its
-hypotheses' branches and successors: on issue 45's sensed case 8,192 states of a late
-level held some 50,000 hypotheses and made 635,000 rows, whose pages and arrays (some
-200 MB) set the build's peak at 323 bytes a transition; bounded so, a chunk makes at
-most some 210,000 rows and the peak is 130, for the same build time."""
+state alone may hold more).  A chunk's rows, some twenty numbers each, are its hypotheses'
+branches and successors: on issue 45's sensed case 8,192 states of a late level held some
+50,000 hypotheses and made 635,000 rows, whose pages and arrays (200 MB) set the build's
+peak at 323 bytes a transition; bounded so, a chunk makes at most some 210,000 rows and
+the peak is 130, for the same build time."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
@@ -139,7 +140,7 @@ class FrontierBuilder(StepRules):
         # the moves (Moves): per level its first choice and its runs of rows (choice,
         # world, occurred, new, target)
         self.n_choices = 0
-        self.move_rows: list[tuple[int, tuple[tuple[np.ndarray, ...], ...]]] = []
+        self.move_rows: list[tuple[int, Any]] = []  # Moves' levels (PackedRuns)
         # the absorbing records (ends, the truncation): id and state (-1 until stored)
         self.records: list[Hashable] = []
         self.record_id: dict[Hashable, int] = {}
@@ -264,30 +265,28 @@ class FrontierBuilder(StepRules):
         self.bytes += BYTES_PER_INFO_STATE * len(world) + BYTES_PER_HYPOTHESIS * len(codes)
 
     def states(self) -> InfoStates:
-        """The states stored so far, their records made when asked for."""
-        n = self.cols.n
-        return InfoStates(self.cols.data[:, :n].copy(), self.hyp_code[:self.n_hyps].copy(),
+        """The states stored so far (copied, narrowed), their records made when asked."""
+        cols, codes = self.cols.data[:, :self.cols.n], self.hyp_code[:self.n_hyps]
+        return InfoStates(narrow(cols, True), narrow(codes, True),
                           self.hyp_weight[:self.n_hyps].copy(), self.nq, self.times,
                           self.worlds, self.s_sets, self.u_sets,
                           {at: r for r, at in zip(self.records, self.record_state,
                                                   strict=True) if at >= 0})
 
     def release_levels(self) -> None:
-        """Drop the rows' pages (compiled.py's) and the states' keys once the last level
-        is expanded, before the product is assembled: nothing reads them after."""
-        self.row_work = (np.zeros((15, 0), _I), np.zeros((2, 0)))
-        self.keys = Keys(6)
+        """Drop the rows' pages (compiled.py's), the states' keys and the step tables'
+        rows once the last level is expanded, before the product is assembled."""
+        self.row_work, self.keys = (np.zeros((15, 0), _I), np.zeros((2, 0))), Keys(6)
+        for t in (self.outcomes, self.branches, self.successors, self.actions):
+            t.clear()  # 2 bytes a transition on issue 45's sensed case
 
     def release(self) -> None:
-        """Drop every array of the build once built (:meth:`release_levels`'s, and the
-        states' columns and hypotheses, which :meth:`states` copied): the builder's
-        tables hold its bound methods (cycles), so it lives until the collector's next
-        full pass, and those (some 100 MB on issue 45's sensed case) would hold the
-        solve above the build's peak."""
+        """Drop every array of the build once built (:meth:`release_levels`'s, the states'
+        columns and hypotheses, which :meth:`states` copied): the builder lives in cycles
+        until the collector's next full pass, and those would hold up the solve."""
         self.release_levels()
         self.cols = Columns(6)
-        self.hyp_code, self.hyp_weight = np.zeros(0, _I), np.zeros(0, np.float64)
-        self.n_hyps = 0
+        self.hyp_code, self.hyp_weight, self.n_hyps = np.zeros(0, _I), np.zeros(0), 0
 
     # ---------------------------------------------------------------- one level
 
@@ -565,13 +564,14 @@ class FrontierBuilder(StepRules):
         shown.close()
         self.release_levels()
         n, n_choices = self.cols.n, self.n_choices
-        indptr = np.zeros(n_choices + 1, np.int64)
-        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:])
+        index = np.int32 if max(sum(len(p[3]) for p in parts), n_choices) < 2**31 else _I
+        indptr = np.zeros(n_choices + 1, index)
+        np.cumsum(np.concatenate([p[2] for p in parts]), out=indptr[1:], dtype=index)
         per_state = np.zeros(n + 1, np.int64)
         np.cumsum(np.concatenate([p[0] for p in parts]), out=per_state[1:])
         act = np.concatenate([p[1] for p in parts])
-        # the columns int64 as scipy keeps them beside an int64 indptr (no second copy)
-        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, np.int64),
+        # int32 indices where they fit, as the plain product's (12 bytes a transition)
+        matrix = sp.csr_array((join_parts(parts, 4, np.float64), join_parts(parts, 3, index),
                                indptr), shape=(n_choices, n))
         del parts
         # the actions numbered as the choices first show them
@@ -582,9 +582,9 @@ class FrontierBuilder(StepRules):
         number[shown_first] = np.arange(len(shown_first))
         names = tuple(self.act_names[k] for k in shown_first.tolist())
         act = np.where(act < 0, ABSORB, number[np.maximum(act, 0)]).astype(np.int32)
-        log.info("information-state product: %s states, %s choices, %s transitions (%s "
-                 "groups shifted: merge.py)", *(f"{x:,}" for x in (n, n_choices, matrix.nnz,
-                                                                   self.shifts.merged)))
+        sizes = (n, n_choices, matrix.nnz, self.shifts.merged)
+        log.info("information-state product: %s states, %s choices, %s transitions (%s groups "
+                 "shifted: merge.py)", *(f"{x:,}" for x in sizes))
         kind = np.zeros(n, np.int8)  # the records stored are the only absorbing states
         for record, at in zip(self.records, self.record_state, strict=True):
             if at >= 0 and isinstance(record, Absorbing):

@@ -159,8 +159,8 @@ class KeyedTable(Table):
     not met before are made in their lexicographic order, as :meth:`Table.find` makes
     them (the order numbers worlds, times and records), so the tables are the same."""
 
-    def __init__(self, width: int, dtypes: tuple[Any, ...]) -> None:
-        super().__init__(width, dtypes)
+    def clear(self) -> None:
+        super().clear()
         self.keyed: Keys | None = None
 
     def find(self, cols: tuple[np.ndarray, ...], make: Any) -> np.ndarray:

@@ -98,17 +98,18 @@ def small_pages() -> Iterator[None]:
         _set_madvise_hugepage(before)
 
 
-def narrow(x: np.ndarray) -> np.ndarray:
+def narrow(x: np.ndarray, copy: bool = False) -> np.ndarray:
     """``x`` (integers) in the narrowest of int8, int16, int32 and int64 that holds
-    every value (a copy where narrower): for arrays kept until the build's end."""
-    if len(x) == 0:
-        return x
+    every value (a copy where narrower; ``copy``: always a copy, never a view of a
+    buffer the caller drops): for arrays kept until the build's end or after it."""
+    if x.size == 0:
+        return x.copy() if copy else x
     lo, hi = int(x.min()), int(x.max())
     for dtype in (np.int8, np.int16, np.int32):
         info = np.iinfo(dtype)
         if info.min <= lo and hi <= info.max:
             return x.astype(dtype)
-    return x
+    return x.copy() if copy else x
 
 
 def join_parts(parts: list[list[Any]], k: int, dtype: Any) -> np.ndarray:
@@ -299,11 +300,15 @@ class Table:
     indices, each entry's parent and the entry columns."""
 
     def __init__(self, width: int, dtypes: tuple[Any, ...]) -> None:
-        self.index: dict[Hashable, int] = {}
-        self.entries: list[tuple[np.ndarray, ...]] = []
         self.dtypes = dtypes
         self.width = width
-        self.flat_cols: tuple[np.ndarray, ...] = tuple(np.zeros(0, d) for d in dtypes)
+        self.clear()
+
+    def clear(self) -> None:
+        """Every key and entry dropped (a build's end: nothing looks them up after)."""
+        self.index: dict[Hashable, int] = {}
+        self.entries: list[tuple[np.ndarray, ...]] = []
+        self.flat_cols: tuple[np.ndarray, ...] = tuple(np.zeros(0, d) for d in self.dtypes)
         self.flat_start = np.zeros(0, _I)
         self.flat_len = np.zeros(0, _I)
 
