@@ -675,7 +675,8 @@ def product_digest(mdp: Any) -> str:
     """A SHA-256 of the product as built: its choices, their actions and rows (indices
     and probabilities, bit for bit), the initial state, the target, sink and truncated
     masks, the states' codes and the records of 64 states spread over it (two products
-    with one digest are taken to be the same product, state for state)."""
+    with one digest are taken to be the same product, state for state).  Integer arrays
+    are hashed as 64-bit values, so a narrower index type is the same product."""
     import hashlib
 
     import numpy as np
@@ -685,6 +686,8 @@ def product_digest(mdp: Any) -> str:
     for a in (mdp.row_groups, mdp.choice_actions, m.indptr, m.indices, m.data, mdp.target,
               mdp.sink, mdp.truncated, getattr(mdp.states, "_keys", np.zeros(0))):
         a = np.ascontiguousarray(a)
+        if a.dtype.kind in "iu":  # index values, not their width: int32 and int64 alike
+            a = a.astype(np.int64)
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(a.tobytes())
     n = len(mdp.states)

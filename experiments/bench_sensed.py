@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def digest(mdp: Any) -> str:
     """The start of a SHA-256 of the product's matrix: every probability's bits, its
-    column, each choice's row and each state's choices."""
+    column, each choice's row and each state's choices (integers as 64-bit values)."""
     import hashlib
 
     import numpy as np
@@ -264,7 +264,9 @@ def digest(mdp: Any) -> str:
     h = hashlib.sha256()
     m = mdp.matrix
     for x in (m.data, m.indices, m.indptr, mdp.row_groups, mdp.choice_actions):
-        h.update(np.ascontiguousarray(x).tobytes())
+        x = np.ascontiguousarray(x)
+        # index values, not their width: an int32 and an int64 copy hash alike
+        h.update((x.astype(np.int64) if x.dtype.kind in "iu" else x).tobytes())
     return h.hexdigest()[:12]
 
 
