@@ -55,7 +55,7 @@ def shared_levels(q: Quotient, b: Blocks, *, last: bool = False) -> SingleLevels
     one, kept for the next caller while ``q.matrix`` lives.  ``last``: the caller is the
     last to use them (the LP stage): they are not kept past its use, whose memory peak
     is then the one of levels built for it alone."""
-    kernels = level_kernels(q.matrix.nnz, b.n_levels)
+    kernels = level_kernels(q.matrix.nnz, b.n_levels, singles=True)
     key = id(q.matrix)
     kept = _KEPT.pop(key, None) if last else _KEPT.get(key)
     if kept is not None:
