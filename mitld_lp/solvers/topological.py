@@ -228,10 +228,14 @@ class SingleLevels:
         self.leave = 1.0 - b.self_loop[self.choices]
         self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
-        # the NumPy walks' slices, once: per level with single states its states',
-        # choices' and entries' bounds (``runs``, ``run_at[k]`` the first run of level
-        # ``k`` or above); per state its first choice and per choice its state, both
-        # counted from the start of their level (a level's segments without arithmetic)
+        # the NumPy walks' slices, once (not for the compiled walks, which never read
+        # them): per level with single states its states', choices' and entries' bounds
+        # (``runs``, ``run_at[k]`` the first run of level ``k`` or above); per state its
+        # first choice and per choice its state, both counted from the start of their
+        # level (a level's segments without arithmetic)
+        if wide:
+            self.runs = self.run_at = self.first_choice = self.owner_at = None
+            return
         at = self.level_state
         marks = np.flatnonzero(np.diff(at))
         a, z = at[marks], at[marks + 1]
