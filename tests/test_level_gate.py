@@ -8,7 +8,12 @@
   iteration's bounds, the LP's values at every state and the value of the LP's policy
   are those of a backward induction in exact arithmetic written here (a dict of
   Fractions, the states in reverse order), within 1e-12; the NumPy walks give the
-  same floats bit for bit.
+  same floats bit for bit;
+* the LP's values walk made in the iteration's pass and handed over: the LP's values,
+  policy and objectives are those of its own walk bit for bit (random chains, exact
+  ties, and near-ties where the LP's rule picks a choice one unit in the last place
+  below the bound, so its values are not the bounds), its message says so, and the
+  NumPy walks hand nothing over.
 """
 
 from __future__ import annotations
@@ -152,3 +157,128 @@ def test_compiled_and_numpy_walks_give_the_same_bits(monkeypatch, sense: Sense) 
         got.append([np.asarray(x) for x in (it.lower, it.upper, lp.values, lp.policy)])
     for a, b in zip(*got, strict=True):
         assert np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _lp_both_ways(monkeypatch, mdp, sense: Sense, everywhere: bool):
+    """The iteration and the LP stage as the plain route runs them (one quotient, the
+    iteration's bounds), once with the walk handed over and once without."""
+    from mitld_lp.solvers import iteration
+
+    out = []
+    for hand in (True, False):
+        shared_levels._KEPT.clear()
+        if not hand:
+            monkeypatch.setattr(iteration, "walk_handing", lambda *a: False)
+        q, _ = analyse(mdp, mdp.target, sense=sense)
+        it = interval_iteration(mdp, mdp.target, quotient=q, sense=sense, progress=False,
+                                gap="max" if everywhere else "initial")
+        lp = solve_lp(mdp, mdp.target, quotient=q, sense=sense, everywhere=everywhere,
+                      bounds=(it.lower, it.upper), progress=False)
+        out.append((it, lp))
+    monkeypatch.undo()
+    return out
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("seed", [3, 4])
+@pytest.mark.parametrize("everywhere", [True, False])
+def test_the_lp_takes_the_iterations_walk_to_the_bit(warm, monkeypatch, seed: int,
+                                                     sense: Sense, everywhere: bool) -> None:
+    mdp, rows, goal = _chain(seed, depth=230)
+    (it, lp), (it0, lp0) = _lp_both_ways(monkeypatch, mdp, sense, everywhere)
+    assert "made in the interval iteration's pass" in lp.message  # said where it came from
+    assert "made in the interval iteration's pass" not in lp0.message
+    assert lp.status.value == lp0.status.value == "optimal"
+    for a, b in ((it.lower, it0.lower), (it.upper, it0.upper), (lp.values, lp0.values),
+                 (lp.policy, lp0.policy)):
+        assert np.array_equal(np.asarray(a).view(np.int64), np.asarray(b).view(np.int64))
+    assert lp.primal_objective == lp0.primal_objective
+    assert lp.dual_objective == lp0.dual_objective
+    truth = _induction(rows, goal, sense)  # and both are the exact optimum
+    assert abs(lp.value - float(truth[0])) <= 1e-12
+    got = _policy_value(rows, goal, np.asarray(lp.policy), mdp)
+    reached = np.asarray(lp.values)[:len(rows)]
+    assert abs(float(got[0] - truth[0])) <= 1e-12
+    if everywhere:
+        assert max(abs(float(a - b)) for a, b in zip(got, truth, strict=True)) <= 1e-12
+        assert np.max(np.abs(reached - np.array([float(x) for x in truth]))) <= 1e-12
+
+
+def _tied(near: bool):
+    """A chain of 220 steps where every state has the value 1/2 by three choices: to the
+    goal and the dead end, half each; a quarter (``near``: 0.3, not a binary fraction,
+    so its score may differ from 1/2 in its last bits) to the goal and the rest through
+    the next state; all through the next state: ties where the LP's rule (the larger
+    one-step target probability, for a minimum the least) decides."""
+    depth = 220
+    goal, dead = depth, depth + 1
+    r = 0.3 if near else 0.25
+    rows: list[list[dict[int, float]]] = []
+    for s in range(depth):
+        if s + 1 == depth:
+            rows.append([{goal: 0.5, dead: 0.5}])
+            continue
+        p = (0.5 - r) / 0.5  # r + p / 2 = 1/2
+        rows.append([{goal: 0.5, dead: 0.5},
+                     {goal: r, s + 1: p, dead: 1.0 - r - p},
+                     {s + 1: 1.0}])
+    choices = [[(f"a{i}", r) for i, r in enumerate(rs)] for rs in rows] + [[], []]
+    return build_mdp(choices, target=[goal], sink=[dead]), rows, goal
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+@pytest.mark.parametrize("near", [False, True])
+def test_ties_go_as_the_lps_own_walk_breaks_them(warm, monkeypatch, sense: Sense,
+                                                 near: bool) -> None:
+    mdp, rows, goal = _tied(near)
+    (it, lp), (_, lp0) = _lp_both_ways(monkeypatch, mdp, sense, True)
+    assert np.array_equal(np.asarray(lp.policy), np.asarray(lp0.policy))
+    assert np.array_equal(np.asarray(lp.values).view(np.int64),
+                          np.asarray(lp0.values).view(np.int64))
+    truth = _induction(rows, goal, sense)
+    got = _policy_value(rows, goal, np.asarray(lp.policy), mdp)
+    assert max(abs(float(a - b)) for a, b in zip(got, truth, strict=True)) <= 1e-12
+
+
+def test_nothing_handed_for_the_numpy_walks(cold, monkeypatch) -> None:
+    mdp, _, _ = _chain(5, depth=210)
+    shared_levels._KEPT.clear()
+    q, _ = analyse(mdp, mdp.target, sense=Sense.MAX)
+    it = interval_iteration(mdp, mdp.target, quotient=q, progress=False)
+    assert not shared_levels._KEPT[id(q.matrix)][5]  # the NumPy walk hands nothing
+    lp = solve_lp(mdp, mdp.target, quotient=q, bounds=(it.lower, it.upper), progress=False)
+    assert "made in the interval iteration's pass" not in lp.message
+
+
+def _near(depth: int = 220):
+    """A chain where each state's choice of the larger one-step target probability
+    scores one unit in the last place below its other choice (the walk's floats, made
+    here from the end): the LP's rule picks it, so its value is not the iteration's
+    bound to the bit (the bound is the larger score)."""
+    goal, dead = depth, depth + 1
+    rows: list[list[dict[int, float]]] = [[] for _ in range(depth)]
+    rows[depth - 1] = [{goal: 0.5, dead: 0.5}]
+    v = 0.5  # the walk's bound at the next state
+    r, p = 0.125, 0.75
+    for s in range(depth - 2, -1, -1):
+        score = r + p * v
+        g = float(np.nextafter(score, 0.0))
+        rows[s] = [{goal: g, dead: 1.0 - g}, {goal: r, s + 1: p, dead: 1.0 - r - p}]
+        v = score
+    choices = [[(f"a{i}", x) for i, x in enumerate(rs)] for rs in rows] + [[], []]
+    return build_mdp(choices, target=[goal], sink=[dead]), rows, goal
+
+
+def test_near_ties_hand_over_the_lps_own_values_not_the_bounds(warm, monkeypatch) -> None:
+    mdp, rows, goal = _near()
+    (it, lp), (_, lp0) = _lp_both_ways(monkeypatch, mdp, Sense.MAX, True)
+    assert "made in the interval iteration's pass" in lp.message
+    n = len(rows)
+    picked = np.asarray(lp.policy)[:n - 1] - np.asarray(mdp.row_groups)[:n - 1]
+    assert np.all(picked == 0)  # the tie went to the larger one-step probability
+    assert np.all(np.asarray(lp.values)[:n - 1] < np.asarray(it.lower)[:n - 1])  # below
+    for a, b in ((lp.values, lp0.values), (lp.policy, lp0.policy)):
+        assert np.array_equal(np.asarray(a).view(np.int64), np.asarray(b).view(np.int64))
+    truth = _induction(rows, goal, Sense.MAX)
+    got = _policy_value(rows, goal, np.asarray(lp.policy), mdp)
+    assert max(abs(float(a - b)) for a, b in zip(got, truth, strict=True)) <= 1e-12

@@ -33,7 +33,7 @@ the iteration's bounds walk 0.7-0.8 ms against 6-18 ms on ``zeroconf_dl`` 1000-1
 (719 levels), and a level costs NumPy 15-60 microseconds a walk: at 200 levels, three
 walks cost 9-36 ms, above the loader's load where nothing is paid yet."""
 
-WALKS = ("single_bounds", "single_values", "single_flow")
+WALKS = ("single_bounds", "single_bounds_values", "single_values", "single_flow")
 """The kernels of :mod:`~mitld_lp.solvers.level_kernels` a quotient's walks call, each
 asked for its cache file."""
 
