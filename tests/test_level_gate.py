@@ -282,3 +282,54 @@ def test_near_ties_hand_over_the_lps_own_values_not_the_bounds(warm, monkeypatch
     truth = _induction(rows, goal, Sense.MAX)
     got = _policy_value(rows, goal, np.asarray(lp.policy), mdp)
     assert max(abs(float(a - b)) for a, b in zip(got, truth, strict=True)) <= 1e-12
+
+
+def _truncated(seed: int, depth: int = 215):
+    """:func:`_chain` with a truncated end beside the goal and the dead end: some rows
+    send a sixteenth there, so the lower and the upper model differ."""
+    mdp, rows, goal = _chain(seed, depth)
+    cut = goal + 2
+    rng = np.random.default_rng(seed + 100)
+    for rs in rows:
+        for r in rs:
+            dead = goal + 1
+            if r.get(dead, 0.0) >= 1 / 16 and rng.random() < 0.5:
+                r[dead] -= 1 / 16
+                r[cut] = 1 / 16
+                if r[dead] == 0.0:
+                    del r[dead]
+    choices = [[(f"a{i}", r) for i, r in enumerate(rs)] for rs in rows] + [[], [], []]
+    return build_mdp(choices, target=[goal], sink=[goal + 1], truncated=[cut]), rows, goal
+
+
+@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
+def test_both_truncation_models_take_their_own_walk(warm, monkeypatch, sense: Sense) -> None:
+    from mitld_lp.solvers import iteration
+    from mitld_lp.solvers.iteration import interval_iterations
+
+    mdp, rows, goal = _truncated(6)
+    got = []
+    for hand in (True, False):
+        shared_levels._KEPT.clear()
+        if not hand:
+            monkeypatch.setattr(iteration, "walk_handing", lambda *a: False)
+        low, up = analyse(mdp, mdp.target, mdp.truncated, sense=sense)
+        assert low is not up and low.matrix is up.matrix
+        its = interval_iterations(mdp, [low, up], progress=False, gap="max")
+        lps = [solve_lp(mdp, np.asarray(q.target), quotient=q, sense=sense,
+                        everywhere=True, bounds=(it.lower, it.upper), progress=False)
+               for q, it in zip((low, up), its, strict=True)]
+        assert all(("made in the interval iteration's pass" in lp.message) is hand
+                   for lp in lps)
+        got.append(lps)
+    monkeypatch.undo()
+    for a, b in zip(*got, strict=True):
+        for x, y in ((a.values, b.values), (a.policy, b.policy)):
+            assert np.array_equal(np.asarray(x).view(np.int64), np.asarray(y).view(np.int64))
+    assert not np.array_equal(np.asarray(got[0][0].values), np.asarray(got[0][1].values))
+    n = len(rows)  # the lower model: the truncated end loses; exact induction
+    truth = _induction([[{t: p for t, p in r.items() if t != goal + 2} | (
+        {goal + 1: r.get(goal + 1, 0.0) + r[goal + 2]} if goal + 2 in r else {})
+        for r in rs] for rs in rows], goal, sense)
+    assert np.max(np.abs(np.asarray(got[0][0].values)[:n] - np.array(
+        [float(x) for x in truth]))) <= 1e-12

@@ -77,10 +77,10 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
                          picks):  # pragma: no cover - compiled
     """:func:`single_bounds` (the same bounds to the bit) and, in the same pass, for each
     column ``picked[h]`` of ``rewards``, :func:`single_values` on its own values
-    ``values[:, h]`` (a state ``skip[s, h]`` left out, at the 0 it holds): each
+    ``values[h]`` (a state ``skip[h, s]`` left out, at the 0 it holds): each
     state's choices scored on the values below it, ties within ``tie`` of the best to
     the larger one-step reward (the least for a minimum), then the first; the pick's
-    score written, the pick (a quotient choice) in ``picks[i - a, h]`` (-1 where
+    score written, the pick (a quotient choice) in ``picks[h, i - a]`` (-1 where
     skipped).  The same sums in the same order as :func:`single_values`, so the same
     values and choices to the bit."""
     k = bounds.shape[1]
@@ -117,15 +117,15 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
         for j in range(k):
             bounds[s, j] = best[j]
         for h in range(p):
-            picks[i - a, h] = -1
-            if skip[s, h]:
+            picks[h, i - a] = -1
+            if skip[h, s]:
                 continue
             col = picked[h]
             for m in range(n):
                 c = c0 + m
                 total = 0.0
                 for e in range(choice_entry[c], choice_entry[c + 1]):
-                    total += vals[e] * values[cols[e], h]
+                    total += vals[e] * values[h, cols[e]]
                 score[m] = _score(total, rewards[choices[c], col], leave[c])
             top_score = score[0]
             for m in range(1, n):
@@ -146,8 +146,8 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
                     if (-key if minimise else key) >= top:
                         pick = m
                         break
-            values[s, h] = score[pick]
-            picks[i - a, h] = choices[c0 + pick]
+            values[h, s] = score[pick]
+            picks[h, i - a] = choices[c0 + pick]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -17,11 +17,20 @@ they are put back afterwards (:func:`mitld_lp.solvers.iteration._topological`): 
 the initial state reaches has only such successors, so no bound it reads changes, and the
 bounds are those of the walk with the skip, bit for bit.
 
+On a quotient of single states only (a deadline's product), the iteration's compiled walk
+also makes, in the same pass, each model's LP values walk (:func:`walk_handing`: the
+LP's values and choices, the same sums in the same order as
+:meth:`~mitld_lp.solvers.topological.SingleLevels.values`), handed over with the levels;
+the LP stage takes them (:func:`handed`, :func:`mitld_lp.solvers.lp.solve_lp`) and walks
+only the policy's flow (QVBS ``zeroconf_dl`` 1000-1-30: the LP stage 26 -> 6 ms of CPU
+in a fresh process).
+
 The object is kept while the quotient's matrix lives (a weak reference to it), until the
-LP stage takes it (``last``): the LP's peak and what it keeps are what they were.  It is
-kept only for quotients of at least :data:`RUNS_MIN_LEVELS` levels, where the LP walks
-it.  Held from the iteration's end to the LP (some 30 bytes a transition on the
-deadline products), beside the iteration's greedy policy and lifted bounds: the
+LP stage takes it (``last``, or the last model's handed walk): the LP's peak and what it
+keeps are what they were.  It is kept only for quotients of at least
+:data:`RUNS_MIN_LEVELS` levels, where the LP walks it.  Held from the iteration's end to
+the LP (some 30 bytes a transition on the deadline products, and the handed walks' float
+and int64 a state and model), beside the iteration's greedy policy and lifted bounds: the
 iteration makes the policy before it lifts the bounds, so that its traced peak stays
 under the LP's (zeroconf_dl 154.5 against 154.6 bytes a transition).
 """
@@ -108,32 +117,34 @@ def walk_handing(q: Quotient, levels: SingleLevels, rewards: np.ndarray,
             or not _same(kept, q, q.order) or levels.states.size == 0):
         return False
     picked = np.arange(0, 2 * len(models), 2, dtype=np.int64)
-    skip = np.column_stack([np.asarray(m.zero, dtype=bool) for m in models])
-    values = np.zeros((q.n_states, len(models)))
-    picks = np.empty((levels.states.size, len(models)), dtype=np.int64)
+    skip = np.stack([np.asarray(m.zero, dtype=bool) for m in models])
+    values = np.zeros((len(models), q.n_states))  # a model's row contiguous: no copy
+    picks = np.empty((len(models), levels.states.size), dtype=np.int64)
     levels.kernels.single_bounds_values(
         0, levels.states.size, levels.state_choice, levels.choice_entry, levels.states,
         levels.choices, levels.cols, levels.vals, levels.leave,
         np.asarray(rewards, dtype=np.float64), bounds, q.sense is Sense.MIN, picked,
         skip, TIE, values, picks)
-    kept[5][:] = [tuple((m.to_target, Walked(values[:, j].copy(), picks[:, j].copy()))
-                        for j, m in enumerate(models))]
+    kept[5][:] = [(m.to_target, Walked(values[j], picks[j])) for j, m in enumerate(models)]
     return True
 
 
 def handed(q: Quotient, b: Blocks) -> tuple[SingleLevels, Walked] | None:
     """The levels kept for ``q`` and the walk the iteration handed over with them for
     ``q``'s model (:func:`walk_handing`; the model found by its one-step target
-    probabilities, the same array), taken: not kept past this call (the LP stage is
-    their last user); None where there is none (nothing is taken then)."""
+    probabilities, the same array), taken: the levels are not kept past the last
+    model's (the LP stage is their last user); None where there is none (nothing is
+    taken then)."""
     key = id(q.matrix)
     kept = _KEPT.get(key)
-    if kept is None or not kept[5] or not _same(kept, q, b):
+    if kept is None or not _same(kept, q, b):
         return None
-    walked = next((w for t, w in kept[5][0] if t is q.to_target), None)
-    if walked is None:
+    at = next((k for k, (t, _) in enumerate(kept[5]) if t is q.to_target), None)
+    if at is None:
         return None
-    del _KEPT[key]
+    walked = kept[5].pop(at)[1]
+    if not kept[5]:
+        del _KEPT[key]
     return kept[4], walked
 
 
