@@ -89,7 +89,7 @@ from mitld_lp.solvers.policy_jump import jump
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
-from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels
+from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels, walk_handing
 from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import for_sweeps, value_order, whole
 from mitld_lp.solvers.topological import (
@@ -321,7 +321,8 @@ def _saved(early: _Early, limit: int) -> float:
 
 def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: float,
                  precision: float | None, budget: _Budget, bar: Bar, *,
-                 skip: np.ndarray | None, compiled: bool | None) -> None:
+                 skip: np.ndarray | None, compiled: bool | None,
+                 models: list[Quotient] | None = None) -> None:
     """Fill ``bounds`` (a lower and an upper column per model, ``rewards`` their
     one-step target probabilities) level by level (module docs) until every gap is
     below its threshold (``tol``, and ``precision`` times the lower bound); stops early
@@ -329,7 +330,9 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     their successors are unreachable too, so nothing the others need is skipped); they
     keep what they had.  ``compiled``: the blocks are swept by the compiled kernel
     (``None``: the blocks :func:`~mitld_lp.solvers.sweep_gate.use_compiled` picks, numba
-    loaded at the first of them)."""
+    loaded at the first of them).  ``models``: the quotients iterated (one
+    matrix), for whose LPs a quotient of single states only hands over its walk
+    (:func:`~mitld_lp.solvers.shared_levels.walk_handing`)."""
     blk = blocks(q)
     if blk.n_levels < RUNS_MIN_LEVELS:  # the LP walks its levels one by one
         _levels(q, blk, rewards, bounds, tol, precision, budget, bar, SingleLevels(
@@ -342,7 +345,7 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     kept = None if held is None else bounds[held]
     try:
         _levels(q, blk, rewards, bounds, tol, precision, budget, bar, singles, skip=skip,
-                compiled=compiled)
+                compiled=compiled, models=models)
     finally:
         if held is not None:
             bounds[held] = kept
@@ -350,8 +353,10 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
 
 def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, tol: float,
             precision: float | None, budget: _Budget, bar: Bar, singles: SingleLevels, *,
-            skip: np.ndarray | None, compiled: bool | None) -> None:
-    """:func:`_topological`'s walk of the levels with the single states' ``singles``."""
+            skip: np.ndarray | None, compiled: bool | None,
+            models: list[Quotient] | None = None) -> None:
+    """:func:`_topological`'s walk of the levels with the single states' ``singles``
+    (with no block and ``models``, the walk that hands the LPs their values)."""
     sense = q.sense
     done = 0  # the levels whose single states are solved
     with_blocks = np.zeros(blk.n_levels, dtype=bool)  # not np.unique: it imports numpy.ma
@@ -406,7 +411,9 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if not _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget,
                              bar, fast):
             return
-    singles.solve(done, blk.n_levels, rewards, bounds)
+    if not (done == 0 and models is not None
+            and walk_handing(q, singles, rewards, bounds, models)):
+        singles.solve(done, blk.n_levels, rewards, bounds)
 
 
 def interval_iteration(
@@ -504,7 +511,7 @@ def interval_iterations(
                 # where the bracket is still wider than the relative precision, again
                 # with both thresholds per state (module docs)
                 _topological(q, rewards, bounds, tol, None, budget, bar, skip=skip,
-                             compiled=compiled)
+                             compiled=compiled, models=list(quotients))
                 if (precision is not None and budget.stopped is None
                         and _over(bounds, q, gap, tol, precision) >= 1.0):
                     _topological(q, rewards, bounds, tol, precision, budget, bar,

@@ -27,8 +27,8 @@ from mitld_lp.util import kernel_loader
 numba = kernel_loader.lazy_numba(globals())
 
 
-__all__ = ["chain_flow", "chain_solve", "chain_values", "single_bounds", "single_flow",
-           "single_values"]
+__all__ = ["chain_flow", "chain_solve", "chain_values", "single_bounds",
+           "single_bounds_values", "single_flow", "single_values"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -69,6 +69,85 @@ def single_bounds(a, z, state_choice, choice_entry, states, choices, cols, vals,
         s = states[i]
         for j in range(k):
             bounds[s, j] = best[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols, vals,
+                         leave, rewards, bounds, minimise, picked, skip, tie, values,
+                         picks):  # pragma: no cover - compiled
+    """:func:`single_bounds` (the same bounds to the bit) and, in the same pass, for each
+    column ``picked[h]`` of ``rewards``, :func:`single_values` on its own values
+    ``values[h]`` (a state ``skip[h, s]`` left out, at the 0 it holds): each
+    state's choices scored on the values below it, ties within ``tie`` of the best to
+    the larger one-step reward (the least for a minimum), then the first; the pick's
+    score written, the pick (a quotient choice) in ``picks[h, i - a]`` (-1 where
+    skipped).  The same sums in the same order as :func:`single_values`, so the same
+    values and choices to the bit."""
+    k = bounds.shape[1]
+    p = picked.shape[0]
+    width = 1
+    for i in range(a, z):
+        width = max(width, state_choice[i + 1] - state_choice[i])
+    acc = np.empty(k)
+    best = np.empty(k)
+    score = np.empty(width)
+    for i in range(a, z):
+        c0 = state_choice[i]
+        n = state_choice[i + 1] - c0
+        for m in range(n):
+            c = c0 + m
+            for j in range(k):
+                acc[j] = 0.0
+            for e in range(choice_entry[c], choice_entry[c + 1]):
+                t = cols[e]
+                w = vals[e]
+                for j in range(k):
+                    acc[j] += w * bounds[t, j]
+            ch = choices[c]
+            lv = leave[c]
+            for j in range(k):
+                val = _score(acc[j], rewards[ch, j], lv)
+                if m == 0:
+                    best[j] = val
+                elif minimise:
+                    best[j] = min(best[j], val)
+                else:
+                    best[j] = max(best[j], val)
+        s = states[i]
+        for j in range(k):
+            bounds[s, j] = best[j]
+        for h in range(p):
+            picks[h, i - a] = -1
+            if skip[h, s]:
+                continue
+            col = picked[h]
+            for m in range(n):
+                c = c0 + m
+                total = 0.0
+                for e in range(choice_entry[c], choice_entry[c + 1]):
+                    total += vals[e] * values[h, cols[e]]
+                score[m] = _score(total, rewards[choices[c], col], leave[c])
+            top_score = score[0]
+            for m in range(1, n):
+                top_score = min(top_score, score[m]) if minimise else max(top_score,
+                                                                          score[m])
+            slack = -tie * abs(top_score)
+            top = -np.inf
+            for m in range(n):
+                gain = top_score - score[m] if minimise else score[m] - top_score
+                if gain >= slack:
+                    key = rewards[choices[c0 + m], col]
+                    top = max(top, -key if minimise else key)
+            pick = -1
+            for m in range(n):
+                gain = top_score - score[m] if minimise else score[m] - top_score
+                if gain >= slack:
+                    key = rewards[choices[c0 + m], col]
+                    if (-key if minimise else key) >= top:
+                        pick = m
+                        break
+            values[h, s] = score[pick]
+            picks[h, i - a] = choices[c0 + pick]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -71,13 +71,15 @@ from mitld_lp.solvers.lp_backends import Matrices, Raw, unusable_reason
 from mitld_lp.solvers.lp_blocks import (
     Answer,
     flow_matrix,
+    policy_flow,
     sensed,
     solve_decomposed,
 )
 from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
-from mitld_lp.solvers.reduced import Quotient, greedy_choices
+from mitld_lp.solvers.reduced import Quotient, greedy_choices, keeping_zero
 from mitld_lp.solvers.result import LPResult, Status, read_only
+from mitld_lp.solvers.shared_levels import handed
 from mitld_lp.util.arrays import SLICE_STATES, spread
 
 __all__ = ["Layout", "OccupancyLP", "occupancy_lp", "solve_lp"]
@@ -351,9 +353,12 @@ def solve_lp(
             0.0, 0.0, 0)
     elif layout is Layout.BLOCKS:
         # the start weights made when the flow needs them (a float a state less
-        # through the blocks)
-        answer = solve_decomposed(q, lambda: _start_weights(q, everywhere), settings,
-                                  _reduced_bounds(q, bounds), progress)
+        # through the blocks); a quotient of single states whose values and choices
+        # the iteration's walk handed over takes them (_from_iteration)
+        answer = (bounds is not None and _from_iteration(q, lambda: _start_weights(
+            q, everywhere))) or solve_decomposed(
+                q, lambda: _start_weights(q, everywhere), settings,
+                _reduced_bounds(q, bounds), progress)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -362,6 +367,43 @@ def solve_lp(
     taken = [answer]  # _result empties it: the reduced arrays freed once mapped back
     del answer
     return _result(mdp, q, taken, settings, start, shape, flows)
+
+
+def _from_iteration(q: Quotient, b_eq: Any) -> Answer | None:
+    """The decomposed LP's answer on a quotient of single states only (a deadline's
+    product) whose values walk the interval iteration made in its own pass over the
+    levels and handed over (:func:`~mitld_lp.solvers.shared_levels.walk_handing`: the
+    LP's walk, the same sums in the same order, the same choices among ties): those
+    values and choices, the known zeros' choices and the policy's flow from ``b_eq()``
+    (the primal point) as :func:`~mitld_lp.solvers.lp_blocks.solve_decomposed` makes
+    them; the message says where the values were made.  None (nothing done) where
+    nothing was handed over."""
+    blk = q.order
+    if bool((blk.size > 1).any()) or q.n_states == 0:
+        return None
+    taken = handed(q, blk)
+    if taken is None:
+        return None
+    singles, walked = taken
+    zero = np.asarray(q.zero)
+    states = np.asarray(singles.states, dtype=np.int64)
+    live = ~zero[states]
+    reduced_choice = (keeping_zero(q) if zero.any()
+                      else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
+    weights = np.zeros(q.n_choices)
+    weights[reduced_choice[zero]] = 1.0
+    picks = walked.picks[live]
+    reduced_choice[states[live]] = picks
+    weights[picks] = 1.0
+    values = walked.values
+    del picks, walked, live, states, taken
+    b_eq = b_eq()
+    y = policy_flow(q, blk, weights, b_eq, singles, {})
+    message = (f"0 block LPs and {q.n_states} single states over {blk.n_levels} levels "
+               "(their values walk made in the interval iteration's pass)")
+    return Answer(Raw(Status.OPTIMAL, message), y, values, reduced_choice,
+                  float(np.einsum("i,i->", q.to_target, y)),
+                  float(np.einsum("i,i->", b_eq, values)), 0)
 
 
 def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,

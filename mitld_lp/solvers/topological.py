@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers import level_batches
+from mitld_lp.solvers import level_batches, level_gate
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
@@ -51,23 +51,9 @@ if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
 
 __all__ = [
-    "Block",
-    "Blocks",
-    "Level",
-    "LevelUpdate",
-    "blocks",
-    "blocks_from",
-    "Factors",
-    "evaluate_chain",
-    "gather_ranges",
-    "graph_blocks",
-    "solve_chain",
-    "transient_solve",
-    "improve_policy",
-    "GAIN",
-    "single_scores",
-    "SingleLevels",
-    "solve_single_states",
+    "Block", "Blocks", "Level", "LevelUpdate", "blocks", "blocks_from", "Factors",
+    "evaluate_chain", "gather_ranges", "graph_blocks", "solve_chain", "transient_solve",
+    "improve_policy", "GAIN", "single_scores", "SingleLevels", "solve_single_states",
     "level_kernels",
 ]
 
@@ -85,8 +71,6 @@ def blocks(q: Quotient) -> Blocks:
     """The SCCs of ``q``'s state graph and their levels: the order the analysis that
     made ``q`` found (:mod:`mitld_lp.solvers.analysis`), not computed again."""
     return q.order
-
-
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -158,16 +142,20 @@ levels cost some 60 microseconds a level and walk, four walks a solve."""
 _LEVEL_KERNELS: Any = None  # the compiled module once imported, False without numba
 
 
-def level_kernels(entries: int, n_levels: int, compiled: bool | None = None) -> Any:
+def level_kernels(entries: int, n_levels: int, compiled: bool | None = None, *,
+                  singles: bool = False) -> Any:
     """The compiled level walks (:mod:`mitld_lp.solvers.level_kernels`, imported here
     the first time) for a quotient of ``entries`` entries over ``n_levels`` levels, or
     ``None`` for the NumPy walks: a small product, a shallow one while numba is not
     loaded, numba not installed, or ``compiled=False`` (``True``: whatever the size, if
-    numba is installed).  Both walks give the same answers to the last bit."""
+    numba is installed); ``singles`` (the single-state walks) deep enough for
+    :func:`mitld_lp.solvers.level_gate.deep` whatever its size.  Both walks give the
+    same answers to the last bit."""
     global _LEVEL_KERNELS
     if compiled is False or (compiled is None and (
             entries < LEVEL_KERNEL_MIN_ENTRIES or (n_levels < LEVEL_KERNEL_MIN_LEVELS
-                                                   and not kernel_loader.compiled_paid()))):
+                                                   and not kernel_loader.compiled_paid()))
+            and not (singles and level_gate.deep(n_levels))):
         return None
     if _LEVEL_KERNELS is None:
         try:
@@ -202,7 +190,7 @@ class SingleLevels:
         if skip is not None:
             one &= ~skip[order]
         # the compiled walks (:func:`level_kernels`): the same answers, one call a run
-        self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled)
+        self.kernels = level_kernels(q.matrix.nnz, b.n_levels, compiled, singles=True)
         # the NumPy walks index with any integer type: their states, choices and
         # pointers in 4 bytes where the sizes allow (index_dtype); the compiled walks'
         # signatures take int64's
@@ -240,10 +228,14 @@ class SingleLevels:
         self.leave = 1.0 - b.self_loop[self.choices]
         self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
         self.sense = q.sense
-        # the NumPy walks' slices, once: per level with single states its states',
-        # choices' and entries' bounds (``runs``, ``run_at[k]`` the first run of level
-        # ``k`` or above); per state its first choice and per choice its state, both
-        # counted from the start of their level (a level's segments without arithmetic)
+        # the NumPy walks' slices, once (not for the compiled walks, which never read
+        # them): per level with single states its states', choices' and entries' bounds
+        # (``runs``, ``run_at[k]`` the first run of level ``k`` or above); per state its
+        # first choice and per choice its state, both counted from the start of their
+        # level (a level's segments without arithmetic)
+        if wide:
+            self.runs = self.run_at = self.first_choice = self.owner_at = None
+            return
         at = self.level_state
         marks = np.flatnonzero(np.diff(at))
         a, z = at[marks], at[marks + 1]
