@@ -107,7 +107,8 @@ from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "analyse", "end_components", "may_cycle"]
+__all__ = ["ATTRACTOR_STRATEGY", "CHUNK_ENTRIES", "SureStrategy", "analyse", "end_components",
+           "largest_inside", "may_cycle"]
 
 
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
@@ -257,10 +258,34 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
     if np.bincount(comp, weights=per_state).max(initial=0) < \
             kernels.COMPILED_MIN_BLOCK_ENTRIES:
         return False
-    owner = np.repeat(comp, per_state)
-    inside = owner[owner == comp[m.indices]]
-    del owner
-    return bool(np.bincount(inside).max(initial=0) >= kernels.COMPILED_MIN_BLOCK_ENTRIES)
+    return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
+
+
+CHUNK_ENTRIES = 1 << 18
+"""Entries of the product read at a time by :func:`largest_inside` (a chunk's owner and
+column components: 2 MB at most, whatever the product's size)."""
+
+
+def largest_inside(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> int:
+    """The most entries any strongly connected component ``comp`` holds inside it (an
+    entry whose state and column lie in the same component), counted a run of states at a
+    time (about :data:`CHUNK_ENTRIES` entries a run): no array an entry of the whole
+    product (the owner and column components of every entry were the analysis's peak on
+    the bus family, 25 bytes an entry)."""
+    n = row_groups.shape[0] - 1
+    starts = np.asarray(m.indptr[row_groups], dtype=np.int64)
+    per_state = np.zeros(n, dtype=np.int64)  # each state's entries inside its component
+    cuts = np.searchsorted(starts, np.arange(0, int(starts[-1]), CHUNK_ENTRIES),
+                           side="right") - 1
+    cuts = np.unique(np.concatenate([cuts, [n]]))
+    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True):
+        lo, hi = int(starts[a]), int(starts[b])
+        if hi == lo:
+            continue
+        owner = np.repeat(comp[a:b], np.diff(starts[a:b + 1]))
+        run = np.concatenate([[0], np.cumsum(owner == comp[m.indices[lo:hi]])])
+        per_state[a:b] = run[starts[a + 1:b + 1] - lo] - run[starts[a:b] - lo]
+    return int(np.bincount(comp, weights=per_state).max(initial=0))
 
 
 def _compact(matrix: sp.csr_array) -> None:
