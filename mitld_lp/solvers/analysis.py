@@ -261,9 +261,10 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
     return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
 
 
-CHUNK_ENTRIES = 1 << 18
-"""Entries of the product read at a time by :func:`largest_inside` (a chunk's owner and
-column components: 2 MB at most, whatever the product's size)."""
+CHUNK_ENTRIES = 1 << 16
+"""Entries of the product read at a time by :func:`largest_inside` (a chunk's owner, its
+columns' components and their running count: about 2 MB, whatever the product's size;
+1 << 18 was 8 MB, 7 bytes an entry of QVBS csma 4-2 at the analysis's peak)."""
 
 
 def largest_inside(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> int:
