@@ -26,7 +26,7 @@ import pytest
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers import analysis, walks
+from mitld_lp.solvers import analysis_patterns, walks
 from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, analyse
 from mitld_lp.solvers.graph import Sense
 
@@ -127,7 +127,7 @@ def route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> st
     monkeypatch.setattr(walks, "COMPILED_LOADED_MIN_ENTRIES", 10**12)
     monkeypatch.setattr(walks, "COMPILED_MIN_ENTRIES", 10**12)
     if request.param == "numpy_chunked":
-        monkeypatch.setattr(analysis, "CHUNK_ENTRIES", 3)
+        monkeypatch.setattr(analysis_patterns, "CHUNK_ENTRIES", 3)
     return request.param
 
 
@@ -202,5 +202,5 @@ def test_component_entries_counted_in_chunks(monkeypatch: pytest.MonkeyPatch) ->
                                 for s in range(n)] + [np.zeros(0, dtype=comp.dtype)])
         expect = max([int(np.sum((owner == k) & (comp[indices] == k)))
                       for k in range(int(comp.max()) + 1)] + [0])
-        monkeypatch.setattr(analysis, "CHUNK_ENTRIES", int(rng.integers(1, 30)))
-        assert analysis.largest_inside(m, groups, comp) == expect
+        monkeypatch.setattr(analysis_patterns, "CHUNK_ENTRIES", int(rng.integers(1, 30)))
+        assert analysis_patterns.largest_inside(m, groups, comp) == expect

@@ -78,6 +78,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
+from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -107,8 +108,7 @@ from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["ATTRACTOR_STRATEGY", "CHUNK_ENTRIES", "SureStrategy", "analyse", "end_components",
-           "largest_inside", "may_cycle"]
+__all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "analyse", "end_components", "may_cycle"]
 
 
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
@@ -207,13 +207,8 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
                              found.internal, found.n_mecs)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
     choices = gather_ranges(lo, hi)
-    rows = sp.csr_array(m[choices])
-    local = np.full(n, cand.size, dtype=np.int64)  # the extra state: "elsewhere"
-    local[cand] = np.arange(cand.size)
+    sub = candidates_pattern(m, choices, cand, n)
     k = cand.size + 1
-    sub = sp.csr_array((rows.data, local[rows.indices], rows.indptr), shape=(rows.shape[0], k))
-    sub = sp.csr_array(sp.vstack([sub, sp.csr_array(([1.0], ([0], [cand.size])),
-                                                     shape=(1, k))]))
     row_groups = np.concatenate([[0], np.cumsum(hi - lo), [choices.size + 1]])
     no = np.zeros(k, dtype=bool)
     small = MDP(matrix=sub, row_groups=row_groups,
@@ -259,34 +254,6 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
             kernels.COMPILED_MIN_BLOCK_ENTRIES:
         return False
     return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
-
-
-CHUNK_ENTRIES = 1 << 16
-"""Entries of the product read at a time by :func:`largest_inside` (a chunk's owner, its
-columns' components and their running count: about 2 MB, whatever the product's size;
-1 << 18 was 8 MB, 7 bytes an entry of QVBS csma 4-2 at the analysis's peak)."""
-
-
-def largest_inside(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> int:
-    """The most entries any strongly connected component ``comp`` holds inside it (an
-    entry whose state and column lie in the same component), counted a run of states at a
-    time (about :data:`CHUNK_ENTRIES` entries a run): no array an entry of the whole
-    product (the owner and column components of every entry were the analysis's peak on
-    the bus family, 25 bytes an entry)."""
-    n = row_groups.shape[0] - 1
-    starts = np.asarray(m.indptr[row_groups], dtype=np.int64)
-    per_state = np.zeros(n, dtype=np.int64)  # each state's entries inside its component
-    cuts = np.searchsorted(starts, np.arange(0, int(starts[-1]), CHUNK_ENTRIES),
-                           side="right") - 1
-    cuts = np.unique(np.concatenate([cuts, [n]]))
-    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True):
-        lo, hi = int(starts[a]), int(starts[b])
-        if hi == lo:
-            continue
-        owner = np.repeat(comp[a:b], np.diff(starts[a:b + 1]))
-        run = np.concatenate([[0], np.cumsum(owner == comp[m.indices[lo:hi]])])
-        per_state[a:b] = run[starts[a + 1:b + 1] - lo] - run[starts[a:b] - lo]
-    return int(np.bincount(comp, weights=per_state).max(initial=0))
 
 
 def _compact(matrix: sp.csr_array) -> None:
