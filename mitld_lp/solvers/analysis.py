@@ -79,6 +79,11 @@ import scipy.sparse as sp
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
 from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
+from mitld_lp.solvers.analysis_singles import (
+    prob1e_single_states,
+    single_states,
+    without_states,
+)
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -433,11 +438,17 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one and sense is Sense.MIN:
         sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
-    elif without_one and not mecs.n_mecs:
-        sure_state, played = prob1e_first(mdp, m, maybe, prob0[j0], mecs)
+    elif without_one and (not mecs.n_mecs or single_states(mecs)):
+        # with end components of one state each (a deadline's self-loops) too: their
+        # staying choices hit from the start, the components of value 1 dropped
+        # (analysis_singles), so no quotient of every maybe state is built and cut
+        first = prob1e_first if not mecs.n_mecs else prob1e_single_states
+        sure_state, played = first(mdp, m, maybe, prob0[j0], mecs)
         if played is not None:
             shared[ATTRACTOR_STRATEGY] = played
         del played
+        if mecs.n_mecs:
+            mecs = without_states(mecs, sure_state, mdp)
     del back
     maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
@@ -503,7 +514,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # with collapsed end components, a maximum's value-1 states out of the quotient
     # (_without_one): Prob1E (a collapsed end component leaves whole)
     sure = np.zeros(n_red, dtype=bool)
-    if without_one and sense is Sense.MAX and mecs.n_mecs:
+    if without_one and sense is Sense.MAX and mecs.n_mecs and not sure_state.any():
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
         sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])
