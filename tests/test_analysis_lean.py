@@ -33,7 +33,8 @@ from mitld_lp.solvers.graph import Sense
 
 def _mdp(seed: int, shape: str) -> tuple[MDP, list[np.ndarray], np.ndarray, np.ndarray]:
     """A random MDP of 6-14 states: goal, truncated and sink states absorbing; others
-    1-3 choices (1 in ``"single"``) of 1-3 successors.  ``"deadline"``: successors only
+    1-3 choices (1 in ``"single"``) of 1-3 successors; in ``"cyclic"`` some goal states
+    move on.  ``"deadline"``: successors only
     above the state, or a pure self-loop; ``"cyclic"``: anywhere, and some choices
     staying in a small group of neighbours (end components of several states).
     Returned with each state's choices as Boolean support rows, the goal and the
@@ -48,7 +49,13 @@ def _mdp(seed: int, shape: str) -> tuple[MDP, list[np.ndarray], np.ndarray, np.n
     rows, cols, vals, groups = [], [], [], [0]
     for s in range(n):
         posts: list[np.ndarray] = []
-        if goal[s] or extra[s] or sink[s]:
+        if goal[s] and shape == "cyclic" and s < n - 1 and rng.random() < 0.5:
+            # a goal state that moves on (not closed: the pattern of the maybe states'
+            # rows is searched, not the product's own)
+            post = np.zeros(n, dtype=bool)
+            post[rng.integers(0, n, int(rng.integers(1, 3)))] = True
+            posts.append(post)
+        elif goal[s] or extra[s] or sink[s]:
             posts.append(np.arange(n) == s)
         else:
             for _ in range(1 if shape == "single" else int(rng.integers(1, 4))):

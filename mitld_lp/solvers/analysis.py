@@ -80,6 +80,7 @@ from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
 from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
 from mitld_lp.solvers.analysis_singles import (
+    prob1e_on_product,
     prob1e_single_states,
     single_states,
     without_states,
@@ -442,8 +443,11 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         # with end components of one state each (a deadline's self-loops) too: their
         # staying choices hit from the start, the components of value 1 dropped
         # (analysis_singles), so no quotient of every maybe state is built and cut
+        got = prob1e_on_product(mdp, m, maybe, prob0[j0], mecs)
         first = prob1e_first if not mecs.n_mecs else prob1e_single_states
-        sure_state, played = first(mdp, m, maybe, prob0[j0], mecs)
+        sure_state, played = got if got is not None else first(mdp, m, maybe, prob0[j0],
+                                                                mecs)
+        del got
         if played is not None:
             shared[ATTRACTOR_STRATEGY] = played
         del played

@@ -27,12 +27,12 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.graph import EndComponents, attractor_spared
-from mitld_lp.solvers.quotient_rows import row_columns
+from mitld_lp.solvers.quotient_rows import row_columns, take_ranges
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.value_one import SureStrategy, attractor_strategy, choices_of
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["prob1e_single_states", "single_states", "without_states"]
+__all__ = ["prob1e_on_product", "prob1e_single_states", "single_states", "without_states"]
 
 
 def single_states(mecs: EndComponents) -> bool:
@@ -97,3 +97,33 @@ def without_states(mecs: EndComponents, gone: np.ndarray, mdp: MDP) -> EndCompon
     was = np.flatnonzero(internal)
     internal[was[new_of[mdp.state_of(was)] < 0]] = False
     return EndComponents(read_only(new_of), read_only(internal), int(np.count_nonzero(~drop)))
+
+
+def prob1e_on_product(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
+                      mecs: EndComponents) -> tuple[np.ndarray, SureStrategy | None] | None:
+    """:func:`prob1e_single_states` (and :func:`~mitld_lp.solvers.value_one.
+    prob1e_first` where ``mecs`` has none) by one attractor over the product's own rows,
+    no pattern of the maybe states' rows copied, where the states neither ``maybe`` nor
+    ``zero`` (a product's targets) are closed: every entry of their choices stays among
+    them, so none of their choices is hit before one of them joins, and none joins (as
+    in the copied pattern, where they have no choice).  The same sets, hits and
+    strategy (the maybe states' choices in the same order); None where they are not
+    closed (the caller copies the pattern)."""
+    groups = np.asarray(mdp.row_groups)
+    others = ~maybe & ~zero
+    at = np.flatnonzero(others)
+    if not bool(np.all(others[take_ranges(m.indices, m.indptr[groups[at]],
+                                          m.indptr[groups[at + 1]])])):
+        return None
+    del at, others
+    internal = np.asarray(mecs.internal) if mecs.n_mecs else None
+    lose, hit = attractor_spared(m, groups, zero, internal)
+    sure = maybe & ~lose
+    del lose
+    if not sure.any():
+        return sure, None
+    n = mdp.n_states
+    played = attractor_strategy(mdp, sure, ~hit, groups,
+                                np.arange(mdp.n_choices, dtype=index_dtype(mdp.n_choices)),
+                                np.arange(n, dtype=index_dtype(n)), n, mecs)
+    return sure, played
