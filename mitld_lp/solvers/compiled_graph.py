@@ -210,7 +210,7 @@ def _layer(ptr, succ, seeds, label, members, c, level, reach):  # pragma: no cov
 def _transpose(indptr, indices, n_cols):  # pragma: no cover - compiled
     """The rows of each column of the pattern ``indptr, indices`` (a counting sort)."""
     n_rows = indptr.shape[0] - 1
-    col_ptr = np.zeros(n_cols + 1, dtype=np.int64)
+    col_ptr = np.zeros(n_cols + 1, dtype=indptr.dtype)  # up to the entries: their type
     for e in range(indptr[n_rows]):
         col_ptr[indices[e] + 1] += 1
     for t in range(n_cols):
@@ -250,7 +250,8 @@ def _backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cov
     n = row_groups.shape[0] - 1
     col_ptr, col_rows = _transpose(indptr, indices, n)
     owner = np.empty(row_groups[n], dtype=indices.dtype)  # a state: a column's type
-    remaining = np.zeros(n, dtype=np.int64)  # the choices still to hit before joining
+    # the choices still to hit before joining (fewer than the rows: the indices' type)
+    remaining = np.zeros(n, dtype=indices.dtype)
     for s in range(n):
         for c in range(row_groups[s], row_groups[s + 1]):
             owner[c] = s
@@ -290,7 +291,7 @@ def _joined(col_ptr, col_rows, owner, remaining, inside, hit):  # pragma: no cov
     ``hit`` is hit by an entry into the set, and its owner joins when its
     ``remaining`` count of choices to hit reaches 0."""
     n = inside.shape[0]
-    queue = np.empty(n, dtype=np.int64)
+    queue = np.empty(n, dtype=col_rows.dtype)  # states: within the rows' type
     tail = 0
     for s in range(n):
         if inside[s]:
