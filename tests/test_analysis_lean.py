@@ -211,3 +211,74 @@ def test_component_entries_counted_in_chunks(monkeypatch: pytest.MonkeyPatch) ->
                       for k in range(int(comp.max()) + 1)] + [0])
         monkeypatch.setattr(analysis_patterns, "CHUNK_ENTRIES", int(rng.integers(1, 30)))
         assert analysis_patterns.largest_inside(m, groups, comp) == expect
+
+
+@pytest.mark.parametrize("shape", ["cyclic", "deadline", "single"])
+def test_value_one_on_the_product_as_on_the_copied_pattern(shape: str) -> None:
+    """A maximum's value-1 states and strategy read by one attractor over the product's
+    own rows (``prob1e_on_product``) are those of the pattern of the maybe states' rows
+    copied (``value_one.prob1e_first`` without end components, ``prob1e_single_states``
+    with single-state ones), wherever the product's other states are closed."""
+    from mitld_lp.solvers.analysis_singles import (
+        prob1e_on_product,
+        prob1e_single_states,
+        single_states,
+    )
+    from mitld_lp.solvers.end_components import maximal_end_components
+    from mitld_lp.solvers.value_one import prob1e_first
+
+    compared = 0
+    for seed in range(40):
+        mdp, supports, goal, extra = _mdp(seed, shape)
+        n = mdp.n_states
+        wide = goal | extra
+        maybe = _reach(supports, wide, np.ones(n, dtype=bool)) & ~wide
+        zero = ~_reach(supports, goal, np.ones(n, dtype=bool)) & ~goal
+        mecs = maximal_end_components(mdp, maybe)
+        if mecs.n_mecs and not single_states(mecs):
+            continue
+        m = sp.csr_array(mdp.matrix)
+        got = prob1e_on_product(mdp, m, maybe, zero, mecs)
+        if got is None:  # a goal state that moves on: the copied pattern only
+            continue
+        first = prob1e_first if not mecs.n_mecs else prob1e_single_states
+        expect = first(mdp, m, maybe, zero, mecs)
+        assert np.array_equal(got[0], expect[0]), f"seed {seed}"
+        assert got[1] == expect[1], f"seed {seed}"
+        compared += 1
+    assert compared >= 10
+
+
+def test_candidates_pattern_as_the_rows_copied() -> None:
+    """The end components' candidates' pattern, made a slice at a time in the index
+    type, has the pattern of their rows copied and renumbered (every other state one
+    extra absorbing column), on random matrices with the slices forced small."""
+    from mitld_lp.solvers import quotient_rows
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        n = int(rng.integers(2, 30))
+        per = rng.integers(1, 4, n)
+        groups = np.concatenate([[0], np.cumsum(per)])
+        counts = rng.integers(1, 4, int(groups[-1]))
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        m = sp.csr_array((rng.random(int(indptr[-1])) + 0.1,
+                          rng.integers(0, n, int(indptr[-1])), indptr),
+                         shape=(int(groups[-1]), n))
+        cand = np.flatnonzero(rng.random(n) < 0.5)
+        choices = np.concatenate([np.arange(groups[s], groups[s + 1]) for s in cand] +
+                                 [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+        old = quotient_rows.SLICE
+        quotient_rows.SLICE = int(rng.integers(1, 6))
+        try:
+            got = analysis_patterns.candidates_pattern(m, choices, cand, n)
+        finally:
+            quotient_rows.SLICE = old
+        local = np.full(n, cand.size)
+        local[cand] = np.arange(cand.size)
+        rows = [local[m.indices[m.indptr[c]:m.indptr[c + 1]]].tolist() for c in choices]
+        rows.append([cand.size])
+        assert got.shape == (choices.size + 1, cand.size + 1)
+        assert [got.indices[got.indptr[r]:got.indptr[r + 1]].tolist()
+                for r in range(got.shape[0])] == rows
+        assert np.all(got.data == 1.0)
