@@ -61,7 +61,11 @@ there the lifted policy plays an attractor strategy
 (:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
 surely: the one read from the attractor that found them
 (:func:`~mitld_lp.solvers.value_one.attractor_strategy`, kept in ``Quotient.shared``),
-no second search.  The step and cost objectives never
+no second search.  Where no end component is collapsed, or each is one state (a
+deadline's self-loops: :mod:`~mitld_lp.solvers.analysis_singles`, their staying choices
+counted as hit), they are found on the product before the quotient is made, by one
+attractor over the product's own rows where its other states are closed (its targets);
+else on the quotient, which is then cut.  The step and cost objectives never
 read this quotient (their routes count the steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
@@ -432,8 +436,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     # the goal's value-1 states out of the quotient, found on the pattern before it is
-    # made (value_one): Prob1A of a minimum, Prob1E of a maximum where no end component
-    # is collapsed (else on the quotient below, _without_one cutting them out)
+    # made (value_one, analysis_singles): Prob1A of a minimum, Prob1E of a maximum where
+    # no end component, or only single states, are collapsed (else on the quotient
+    # below, _without_one cutting them out)
     j0 = 1 if same else 0
     sure_state = np.zeros(n, dtype=bool)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
