@@ -61,7 +61,11 @@ there the lifted policy plays an attractor strategy
 (:func:`mitld_lp.solvers.quotient.lift_policy`), which reaches the target almost
 surely: the one read from the attractor that found them
 (:func:`~mitld_lp.solvers.value_one.attractor_strategy`, kept in ``Quotient.shared``),
-no second search.  The step and cost objectives never
+no second search.  Where no end component is collapsed, or each is one state (a
+deadline's self-loops: :mod:`~mitld_lp.solvers.analysis_singles`, their staying choices
+counted as hit), they are found on the product before the quotient is made, by one
+attractor over the product's own rows where its other states are closed (its targets);
+else on the quotient, which is then cut.  The step and cost objectives never
 read this quotient (their routes count the steps of such states).
 
 The solvers walk the components in the order the analysis found (``Quotient.order``)
@@ -78,6 +82,13 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
+from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
+from mitld_lp.solvers.analysis_singles import (
+    prob1e_on_product,
+    prob1e_single_states,
+    single_states,
+    without_states,
+)
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -206,13 +217,8 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
                              found.internal, found.n_mecs)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
     choices = gather_ranges(lo, hi)
-    rows = sp.csr_array(m[choices])
-    local = np.full(n, cand.size, dtype=np.int64)  # the extra state: "elsewhere"
-    local[cand] = np.arange(cand.size)
+    sub = candidates_pattern(m, choices, cand, n)
     k = cand.size + 1
-    sub = sp.csr_array((rows.data, local[rows.indices], rows.indptr), shape=(rows.shape[0], k))
-    sub = sp.csr_array(sp.vstack([sub, sp.csr_array(([1.0], ([0], [cand.size])),
-                                                     shape=(1, k))]))
     row_groups = np.concatenate([[0], np.cumsum(hi - lo), [choices.size + 1]])
     no = np.zeros(k, dtype=bool)
     small = MDP(matrix=sub, row_groups=row_groups,
@@ -257,10 +263,7 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
     if np.bincount(comp, weights=per_state).max(initial=0) < \
             kernels.COMPILED_MIN_BLOCK_ENTRIES:
         return False
-    owner = np.repeat(comp, per_state)
-    inside = owner[owner == comp[m.indices]]
-    del owner
-    return bool(np.bincount(inside).max(initial=0) >= kernels.COMPILED_MIN_BLOCK_ENTRIES)
+    return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
 
 
 def _compact(matrix: sp.csr_array) -> None:
@@ -433,18 +436,28 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     # the goal's value-1 states out of the quotient, found on the pattern before it is
-    # made (value_one): Prob1A of a minimum, Prob1E of a maximum where no end component
-    # is collapsed (else on the quotient below, _without_one cutting them out)
+    # made (value_one, analysis_singles): Prob1A of a minimum, Prob1E of a maximum where
+    # no end component, or only single states, are collapsed (else on the quotient
+    # below, _without_one cutting them out)
     j0 = 1 if same else 0
     sure_state = np.zeros(n, dtype=bool)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
     if without_one and sense is Sense.MIN:
         sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
-    elif without_one and not mecs.n_mecs:
-        sure_state, played = prob1e_first(mdp, m, maybe, prob0[j0], mecs)
+    elif without_one and (not mecs.n_mecs or single_states(mecs)):
+        # with end components of one state each (a deadline's self-loops) too: their
+        # staying choices hit from the start, the components of value 1 dropped
+        # (analysis_singles), so no quotient of every maybe state is built and cut
+        got = prob1e_on_product(mdp, m, maybe, prob0[j0], mecs)
+        first = prob1e_first if not mecs.n_mecs else prob1e_single_states
+        sure_state, played = got if got is not None else first(mdp, m, maybe, prob0[j0],
+                                                                mecs)
+        del got
         if played is not None:
             shared[ATTRACTOR_STRATEGY] = played
         del played
+        if mecs.n_mecs:
+            mecs = without_states(mecs, sure_state, mdp)
     del back
     maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0)
@@ -510,7 +523,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # with collapsed end components, a maximum's value-1 states out of the quotient
     # (_without_one): Prob1E (a collapsed end component leaves whole)
     sure = np.zeros(n_red, dtype=bool)
-    if without_one and sense is Sense.MAX and mecs.n_mecs:
+    if without_one and sense is Sense.MAX and mecs.n_mecs and not sure_state.any():
         zero0 = np.zeros(n_red, dtype=bool)
         zero0[state_map[maybe & prob0[j0]]] = True
         sure, spared = _one(sense, matrix, row_groups, zero0, leaks[j0])

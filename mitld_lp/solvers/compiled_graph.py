@@ -210,13 +210,13 @@ def _layer(ptr, succ, seeds, label, members, c, level, reach):  # pragma: no cov
 def _transpose(indptr, indices, n_cols):  # pragma: no cover - compiled
     """The rows of each column of the pattern ``indptr, indices`` (a counting sort)."""
     n_rows = indptr.shape[0] - 1
-    col_ptr = np.zeros(n_cols + 1, dtype=np.int64)
+    col_ptr = np.zeros(n_cols + 1, dtype=indptr.dtype)  # up to the entries: their type
     for e in range(indptr[n_rows]):
         col_ptr[indices[e] + 1] += 1
     for t in range(n_cols):
         col_ptr[t + 1] += col_ptr[t]
     fill = col_ptr[:-1].copy()
-    rows = np.empty(indptr[n_rows], dtype=np.int64)
+    rows = np.empty(indptr[n_rows], dtype=indices.dtype)  # 4 bytes an entry where int32
     for r in range(n_rows):
         for e in range(indptr[r], indptr[r + 1]):
             t = indices[e]
@@ -232,6 +232,8 @@ def backward(indptr: np.ndarray, indices: np.ndarray, row_groups: np.ndarray,
     numba compiles one machine code for each (1 s of CPU on a cold cache); the kernel
     only reads them."""
     row_groups = np.asarray(row_groups)
+    if indptr.shape[0] - 1 > np.iinfo(indices.dtype).max:  # a choice's id past the type
+        indices = indices.astype(np.int64)
     if row_groups.flags.writeable:
         row_groups = row_groups.view()
         row_groups.flags.writeable = False
@@ -247,8 +249,9 @@ def _backward(indptr, indices, row_groups, seeds, hit, every):  # pragma: no cov
     seeds.  A work queue over the transposed pattern."""
     n = row_groups.shape[0] - 1
     col_ptr, col_rows = _transpose(indptr, indices, n)
-    owner = np.empty(row_groups[n], dtype=np.int64)
-    remaining = np.zeros(n, dtype=np.int64)  # the choices still to hit before joining
+    owner = np.empty(row_groups[n], dtype=indices.dtype)  # a state: a column's type
+    # the choices still to hit before joining (fewer than the rows: the indices' type)
+    remaining = np.zeros(n, dtype=indices.dtype)
     for s in range(n):
         for c in range(row_groups[s], row_groups[s + 1]):
             owner[c] = s
@@ -288,7 +291,7 @@ def _joined(col_ptr, col_rows, owner, remaining, inside, hit):  # pragma: no cov
     ``hit`` is hit by an entry into the set, and its owner joins when its
     ``remaining`` count of choices to hit reaches 0."""
     n = inside.shape[0]
-    queue = np.empty(n, dtype=np.int64)
+    queue = np.empty(n, dtype=col_rows.dtype)  # states: within the rows' type
     tail = 0
     for s in range(n):
         if inside[s]:
@@ -336,7 +339,10 @@ def end_components_among(indptr, indices, positive, row_groups,
     # the candidates' graph in int64, as state_graph's: components_and_levels compiled
     # for one signature
     ptr = np.zeros(k + 1, dtype=np.int64)
-    succ = np.empty(indptr[row_groups[n]], dtype=np.int64)
+    held = 0  # the candidates' entries, not the product's: the most succ holds
+    for i in range(k):
+        held += indptr[row_groups[cand[i] + 1]] - indptr[row_groups[cand[i]]]
+    succ = np.empty(held, dtype=np.int64)
     mark = np.full(k, -1, dtype=np.int64)
     while True:
         pos = 0
