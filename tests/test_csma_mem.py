@@ -262,3 +262,37 @@ def test_lift_policy_in_slices_is_the_whole(mdps, monkeypatch) -> None:
             with monkeypatch.context() as m:
                 m.setattr(quotient_mod, "SLICE_STATES", 5)
                 assert np.array_equal(lift_policy(mdp, q, choice), whole)
+
+
+def test_staying_is_the_loop_over_the_entries(mdps, monkeypatch) -> None:
+    """``quotient_order.staying`` (a slice of states at a time) against a loop adding
+    each row's entries in its own state's column, in their order (the same sums, to
+    the bit), on the quotients (self-loops on collapsed end components) and on the
+    products themselves."""
+    from mitld_lp.solvers import quotient_order
+
+    def by_loop(matrix, row_groups):
+        m = sp.csr_array(matrix)
+        out = []
+        for s in range(row_groups.size - 1):
+            for c in range(int(row_groups[s]), int(row_groups[s + 1])):
+                total = 0.0
+                for j in range(m.indptr[c], m.indptr[c + 1]):
+                    if m.indices[j] == s:
+                        total += float(m.data[j])
+                out.append(total)
+        return np.asarray(out)
+
+    loops = 0
+    for mdp in mdps:
+        pairs = [(q.matrix, np.asarray(q.row_groups)) for q in _quotients(mdp)]
+        pairs.append((mdp.matrix, np.asarray(mdp.row_groups)))
+        for matrix, groups in pairs:
+            want = by_loop(matrix, groups)
+            loops += int(np.count_nonzero(want))
+            assert np.array_equal(quotient_order.staying(sp.csr_array(matrix), groups), want)
+            with monkeypatch.context() as m:
+                m.setattr(quotient_order, "SLICE_STATES", 4)
+                assert np.array_equal(
+                    quotient_order.staying(sp.csr_array(matrix), groups), want)
+    assert loops > 0
