@@ -296,3 +296,43 @@ def test_staying_is_the_loop_over_the_entries(mdps, monkeypatch) -> None:
                 assert np.array_equal(
                     quotient_order.staying(sp.csr_array(matrix), groups), want)
     assert loops > 0
+
+
+def test_no_end_components_record_is_stride_zero_and_answers_alike(mdps, monkeypatch
+                                                                   ) -> None:
+    """``EndComponents.none``: the values of a search that finds no end component
+    (``maximal_end_components`` over no state), nothing allocated a state or a choice;
+    and a minimum's analysis holding it in place of its materialised record gives the
+    same quotient, LP, iteration and lifted policy to the bit."""
+    from mitld_lp.solvers import analysis
+    from mitld_lp.solvers.end_components import EndComponents, maximal_end_components
+    from mitld_lp.solvers.iteration import interval_iteration
+    from mitld_lp.solvers.lp import solve_lp
+
+    for mdp in mdps[:4]:
+        none = EndComponents.none(mdp.n_states, mdp.n_choices)
+        found = maximal_end_components(mdp, np.zeros(mdp.n_states, dtype=bool))
+        assert none.n_mecs == found.n_mecs == 0
+        assert np.array_equal(none.mec_of, found.mec_of)
+        assert np.array_equal(none.internal, found.internal)
+        assert none.mec_of.dtype == np.int32 and none.internal.dtype == np.bool_
+        assert none.mec_of.strides == (0,) and none.internal.strides == (0,)
+        assert not none.mec_of.flags.writeable and not none.internal.flags.writeable
+
+    def answers(mdp):
+        q = analysis.analyse(mdp, mdp.target, sense=Sense.MIN)[0]
+        lp = solve_lp(mdp, mdp.target, quotient=q, sense=Sense.MIN, everywhere=True)
+        it = interval_iteration(mdp, mdp.target, quotient=q, sense=Sense.MIN)
+        choice = np.asarray(q.row_groups[:-1], dtype=np.int64)
+        return (q.state_map, q.choice_origin, q.matrix.toarray(), q.to_target,
+                lp.values, lp.policy, it.lower, it.upper, lift_policy(mdp, q, choice))
+
+    for mdp in mdps:
+        made = answers(mdp)
+        with monkeypatch.context() as m:
+            m.setattr(analysis, "_no_end_components", EndComponents.none)
+            views = answers(mdp)
+            held = analysis.analyse(mdp, mdp.target, sense=Sense.MIN)[0].mecs
+            assert held.mec_of.strides == (0,)  # the record held is the views
+        for a, b in zip(made, views, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
