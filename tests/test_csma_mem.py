@@ -5,8 +5,9 @@ for a minimum and a maximum:
 * ``absorbing_states`` (read from the ``ABSORB`` choices) against a loop over every
   state's choices and their action names, an ``ABSORB`` choice beside another choice
   included (not absorbing);
-* ``first_staying`` (a slice of states at a time) against a loop over each state's
-  choices and their stored entries, a stored zero leading out included (no edge);
+* ``first_staying`` (a slice of states at a time, views of the rows) against a loop
+  over each state's choices and their stored entries, a stored zero leading out
+  included (no edge);
 * ``lift_policy`` (written in place, a slice at a time): every state's choice is its
   own, -1 exactly on the target and the absorbing states, a minimum's prob-0 states
   stay among them, and the lifted policy's value, solved on the product by dense
@@ -138,16 +139,19 @@ def test_first_staying_is_the_loop_over_the_rows(mdps, monkeypatch) -> None:
     for mdp in mdps:
         for _ in range(4):
             inside = rng.random(mdp.n_states) < 0.6
-            states = np.flatnonzero(rng.random(mdp.n_states) < 0.7)
-            want = [_staying_by_loop(mdp, inside, int(s)) for s in states]
-            assert np.array_equal(first_staying(mdp, inside, states), want)
+            lo = int(rng.integers(0, mdp.n_states // 2))
+            hi = int(rng.integers(lo + 1, mdp.n_states + 1))
+            want = [_staying_by_loop(mdp, inside, s) for s in range(lo, hi)]
+            assert np.array_equal(first_staying(mdp, inside, lo, hi), want)
             with monkeypatch.context() as m:  # several slices, one state each at least
                 m.setattr(quotient_mod, "SLICE_STATES", 3)
-                assert np.array_equal(first_staying(mdp, inside, states), want)
-            later += int(np.count_nonzero(np.asarray(want) != mdp.row_groups[states]))
-            none += sum(not _stays(mdp, inside, c) for s in states
-                        for c in _choice_list(mdp, int(s))[:1]
-                        if _staying_by_loop(mdp, inside, int(s)) == c)
+                assert np.array_equal(first_staying(mdp, inside, lo, hi), want)
+            every = [_staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
+            assert np.array_equal(first_staying(mdp, inside), every)
+            later += int(np.count_nonzero(np.asarray(want) != mdp.row_groups[lo:hi]))
+            none += sum(not _stays(mdp, inside, _choice_list(mdp, s)[0])
+                        and _staying_by_loop(mdp, inside, s) == _choice_list(mdp, s)[0]
+                        for s in range(lo, hi))
     assert later > 0 and none > 0  # the test tells the cases apart
 
 
