@@ -1,6 +1,6 @@
-"""The lean lift of a quotient's policy (branch csma-mem) against brute force written
-otherwise, on small random MDPs with end components, absorbing states, stored zeros,
-for a minimum and a maximum:
+"""The lean lift of a quotient's policy and its neighbours (branch csma-mem) against
+brute force written otherwise, on small random MDPs with end components, absorbing
+states, stored zeros, for a minimum and a maximum:
 
 * ``absorbing_states`` (read from the ``ABSORB`` choices) against a loop over every
   state's choices and their action names, an ``ABSORB`` choice beside another choice
@@ -14,7 +14,11 @@ for a minimum and a maximum:
   linear algebra, equals the quotient policy's value solved on the quotient and
   lifted, at every state (end components, removed states of value 1 and prob-0 states
   included), with the analysis's recorded attractor strategy and with the one searched
-  when it is absent.
+  when it is absent;
+* ``quotient_order.staying`` (each choice's self-loop, a slice of states at a time)
+  against a loop adding each row's entries in its own column, to the bit;
+* ``EndComponents.none`` (stride-0 views) against a search that finds no end
+  component, and a minimum's analysis holding it: the same answers to the bit.
 """
 
 from __future__ import annotations
