@@ -177,9 +177,21 @@ class MDP(ActionChoices):
 
 
 def absorbing_states(mdp: MDP) -> np.ndarray:
-    """``(n_states,)`` bool: states whose only choice is an ``ABSORB`` self-loop."""
-    first = np.asarray(mdp.row_groups[:-1], dtype=np.int64)
-    return (np.diff(mdp.row_groups) == 1) & (np.asarray(mdp.choice_actions)[first] == ABSORB)
+    """``(n_states,)`` bool: states whose only choice is an ``ABSORB`` self-loop.
+
+    Read from the ``ABSORB`` choices themselves (a handful: the target, sink and
+    truncated states' loops), their states found by :meth:`MDPShape.state_of`, not from
+    per-state arrays of every state's choice count and first action (an int64 and an
+    int32 a state: on QVBS csma 4-2 they were the lifted policy's memory peak)."""
+    out = np.zeros(mdp.n_states, dtype=bool)
+    actions = np.asarray(mdp.choice_actions)
+    loops = np.flatnonzero(actions == ABSORB)
+    if loops.size:
+        states = mdp.state_of(loops)
+        groups = mdp.row_groups
+        alone = (groups[states + 1] - groups[states]) == 1
+        out[states[alone]] = True
+    return out
 
 
 def as_state_mask(mdp: MDP, mask: np.ndarray, name: str) -> np.ndarray:

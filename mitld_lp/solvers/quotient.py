@@ -34,7 +34,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import gather_ranges, row_entries
-from mitld_lp.util.arrays import index_dtype
+from mitld_lp.util.arrays import SLICE_STATES, index_dtype
 
 __all__ = [
     "EndComponents",
@@ -42,6 +42,7 @@ __all__ = [
     "Quotient",
     "Sense",
     "backward_reachable",
+    "first_staying",
     "greedy_choices",
     "lift_policy",
     "maximal_end_components",
@@ -145,40 +146,93 @@ def quotient_for(mdp: MDP, target: np.ndarray, quotient: Quotient | None,
     return quotient
 
 
-def _outside(mdp: MDP, quotient: Quotient) -> np.ndarray:
-    """:func:`lift_policy`'s choices of the states the quotient removed (every other
-    state's first choice), the same for every policy lifted: made once per quotient
-    (``quotient.shared``: the iteration's policy and the LP's are lifted on it)."""
-    key = ("outside", id(quotient.prob0), id(quotient.target))  # one per model
-    kept = quotient.shared.get(key)
-    if kept is not None and kept[0] is quotient.prob0 and kept[1] is quotient.target:
-        return kept[2]
-    policy = np.asarray(mdp.row_groups[:-1], dtype=np.int64).copy()
+def _outside(mdp: MDP, quotient: Quotient, policy: np.ndarray) -> None:
+    """:func:`lift_policy`'s choices of the states the quotient removed, written into
+    ``policy`` (``(n_states,)`` int64; every other state gets its first choice, which
+    the lift overwrites).  Made again for each policy lifted, in place and a slice of
+    states at a time: no per-state array is kept for the quotient's life, nor made
+    beside ``policy`` (the first-choice copy, the prob-0 states' indices and the
+    int32 copy kept in ``quotient.shared`` were 9 bytes a transition of QVBS csma 4-2's
+    LP stage, at its peak); only a maximum's searched attractor strategy
+    (:func:`_almost_surely`, where the analysis recorded none) is kept there, as the
+    states and choices it covers."""
+    policy[:] = mdp.row_groups[:-1]
     if quotient.sense is Sense.MIN and quotient.prob0.any():
-        m = sp.csr_array(mdp.matrix)
-        leaves = (m @ (~quotient.prob0).astype(np.float64)) > 0
-        # each state's first choice that stays (segmented_argmax of ~leaves), else its
-        # first choice
-        first = np.minimum.reduceat(np.where(leaves, np.iinfo(np.int64).max,
-                                             np.arange(leaves.size)), policy)
-        stays = np.where(first == np.iinfo(np.int64).max, policy, first)
-        policy[quotient.prob0] = stays[quotient.prob0]
+        zero = np.asarray(quotient.prob0)
+        for lo in range(0, policy.size, SLICE_STATES):
+            hi = min(lo + SLICE_STATES, policy.size)
+            if zero[lo:hi].any():
+                np.copyto(policy[lo:hi], first_staying(mdp, zero, lo, hi),
+                          where=zero[lo:hi])
     if quotient.sense is Sense.MAX:  # the removed value-1 states: toward the target
         sure = np.asarray(quotient.qualitative.one) & (quotient.state_map < 0) \
             & ~quotient.target
         if sure.any():
             played = _recorded(quotient, sure)
-            if played is not None:  # the analysis's attractor strategy
-                policy[played.states] = played.choices
-            else:
-                step = _almost_surely(mdp, sure, np.asarray(quotient.target))
-                policy[sure] = step[sure]
-    policy[quotient.target | absorbing_states(mdp)] = -1
-    # kept for the quotient's life: int32 where the choices' count allows (lift_policy
-    # widens its own copy)
-    policy = read_only(policy.astype(index_dtype(mdp.n_choices), copy=False))
-    quotient.shared[key] = (quotient.prob0, quotient.target, policy)
-    return policy
+            if played is None:
+                played = _searched(mdp, quotient, sure)
+            policy[played.states] = played.choices
+        del sure
+    policy[quotient.target] = -1
+    policy[absorbing_states(mdp)] = -1
+
+
+def _searched(mdp: MDP, quotient: Quotient, sure: np.ndarray) -> SureStrategy:
+    """:func:`_almost_surely`'s strategy of the ``sure`` states, searched once per
+    model and kept in ``quotient.shared`` (the iteration's policy and the LP's are
+    lifted on it): the states it covers and their choices, not an array of every
+    state."""
+    key = ("almost surely", id(quotient.prob0), id(quotient.target))  # one per model
+    kept = quotient.shared.get(key)
+    if kept is not None and kept[0] is quotient.prob0 and kept[1] is quotient.target:
+        return kept[2]
+    step = _almost_surely(mdp, sure, np.asarray(quotient.target))
+    states = np.flatnonzero(sure)
+    played = SureStrategy(read_only(states), read_only(step[states]))
+    quotient.shared[key] = (quotient.prob0, quotient.target, played)
+    return played
+
+
+def first_staying(mdp: MDP, inside: np.ndarray, lo: int = 0, hi: int | None = None
+                  ) -> np.ndarray:
+    """Per state ``lo .. hi - 1``, its first choice whose every successor of positive
+    probability lies ``inside`` (``(n_states,)`` bool), else its first choice; in
+    :func:`~mitld_lp.util.arrays.index_dtype` of the choices' count.
+
+    A minimum's removed states of value 0 (``Prob0E``) play it in the lifted policy:
+    one such choice exists there, and staying avoids the target for ever.  The states'
+    choices are consecutive rows, their entries one range of the matrix: read as
+    views, :data:`SLICE_STATES` states at a time, with a mask and a count an entry of
+    the slice (no gathered index, column and value an entry, nor a product over every
+    choice with per-choice int64 arrays: on QVBS csma 4-2, 0.23 s and a temporary of
+    20 bytes a transition)."""
+    m = mdp.matrix
+    groups = np.asarray(mdp.row_groups)
+    hi = mdp.n_states if hi is None else hi
+    inside = np.asarray(inside, dtype=bool)
+    out = np.empty(hi - lo, dtype=index_dtype(mdp.n_choices))
+    for s0 in range(lo, hi, SLICE_STATES):
+        s1 = min(s0 + SLICE_STATES, hi)
+        a, b = int(groups[s0]), int(groups[s1])
+        ptr = m.indptr[a : b + 1]
+        e, f = int(ptr[0]), int(ptr[-1])
+        # an entry leads out: a positive probability outside (a stored zero is no edge)
+        out_edge = ~inside[m.indices[e:f]]
+        out_edge &= m.data[e:f] > 0
+        count = np.zeros(f - e + 1, dtype=np.int32 if f - e < 2**31 else np.int64)
+        np.cumsum(out_edge, out=count[1:])
+        del out_edge
+        rel = ptr - e
+        stays = count[rel[1:]] == count[rel[:-1]]  # per choice: no entry leads out
+        del count, rel
+        # each state's first staying choice: the least position among its staying
+        # choices (every state has a choice: reduceat's segments are not empty)
+        big = np.iinfo(out.dtype).max
+        where = np.where(stays, np.arange(a, b, dtype=out.dtype), out.dtype.type(big))
+        first = np.minimum.reduceat(where, groups[s0:s1] - a)
+        np.copyto(first, groups[s0:s1], where=first == big, casting="unsafe")
+        out[s0 - lo : s1 - lo] = first
+    return out
 
 
 def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:
@@ -240,15 +294,21 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       for a minimum, their first choice that stays among them (``Prob0E``: one does,
       and staying avoids the target for ever).
     """
-    policy = _outside(mdp, quotient).astype(np.int64)  # a copy, int64 as promised
+    policy = np.empty(mdp.n_states, dtype=np.int64)  # int64 as promised
+    _outside(mdp, quotient, policy)
 
     chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
-    if chosen.size:  # one gather over every state, kept where plain (a removed state's
-        # -1 reads the last entry and is not kept): not the plain states' indices, their
-        # reduced states and choices, three int64 arrays a state
-        plain = (quotient.state_map >= 0) & (quotient.mecs.mec_of < 0)
-        np.copyto(policy, chosen[quotient.state_map], where=plain)
-        del plain
+    if chosen.size:  # a gather kept where plain (a removed state's -1 reads the last
+        # entry and is not kept), a slice of states at a time: not the plain states'
+        # indices, their reduced states and choices, three int64 arrays a state, nor one
+        # gather over every state
+        state_map, mec_of = quotient.state_map, quotient.mecs.mec_of
+        for lo in range(0, policy.size, SLICE_STATES):
+            hi = lo + SLICE_STATES
+            reduced = state_map[lo:hi]
+            plain = reduced >= 0
+            plain &= mec_of[lo:hi] < 0
+            np.copyto(policy[lo:hi], chosen[reduced], where=plain)
 
     mecs = quotient.mecs
     if mecs.n_mecs == 0:

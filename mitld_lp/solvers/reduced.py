@@ -124,9 +124,10 @@ class Quotient(MDPShape):
     layers: tuple[np.ndarray, np.ndarray]
     sense: Sense
     qualitative: Qualitative
-    # what the solvers work out once for the quotients of one analysis and keep: the
-    # removed states' choices every lifted policy takes, per model
-    # (:func:`mitld_lp.solvers.quotient.lift_policy`); nothing the size of the matrix
+    # what the solvers work out once for the quotients of one analysis and keep: a
+    # maximum's attractor strategy of its removed value-1 states, recorded by the
+    # analysis or searched once per model (:func:`mitld_lp.solvers.quotient.
+    # lift_policy`); no array of every state, nothing the size of the matrix
     # (the single-state levels, kept from the iteration to the LP, raised the peak by
     # a fifth on QVBS firewire_dl 3-600 for 0.02 s)
     shared: dict[Any, Any] = field(default_factory=dict, repr=False)
