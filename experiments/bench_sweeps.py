@@ -242,7 +242,9 @@ def _child(route: str, inst: Instance, work: Path, code: Path | None = None,
     out = work / f"{route}.json"
     argv = [sys.executable, __file__, "--worker", route, inst.family, str(inst.n),
             str(inst.d), str(work)]
-    cpu, err = _cpu_of(argv, code)
+    # this checkout is put on the path too: run from elsewhere, the child would import
+    # whatever mitld_lp is installed (an editable install of another checkout)
+    cpu, err = _cpu_of(argv, code or ROOT)
     if cpu is None:
         raise RuntimeError(f"{route} on {inst.name} failed:\n{err[-2000:]}")
     return dict(json.loads(out.read_text(encoding="utf-8")), process_cpu=cpu)
