@@ -177,6 +177,9 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
         lu = factors.lu
         factors.reused += 1
     else:
+        # the last factorisation is of another chain: let go before the new one is
+        # made (SuperLU's factors of both were held at once)
+        factors.lu = factors.base = None
         lu = chain_factor(chain)
         factors.lu, factors.base = lu, chain
         factors.factorised += 1
