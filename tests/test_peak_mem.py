@@ -257,3 +257,49 @@ def test_jump_holds_no_long_double_copy_of_the_block():
     assert added > 2 * sparse.inner.nnz
     growth = _jump_peak(dense) - _jump_peak(sparse)
     assert growth < 24 * added, (growth / added)
+
+
+@pytest.mark.parametrize("refuse", [False, True])
+@pytest.mark.parametrize("seed", range(5))
+def test_greedy_blocks_with_narrow_choices_get_linprogs_values(seed, refuse, monkeypatch):
+    """``solve_decomposed`` hands the greedy check its block with int32 choices and the
+    LP (where the greedy policy settles nothing: ``refuse``) int64 ones again; either
+    way the values are SciPy linprog's optimum of the MDP (tests/test_greedy_block's
+    LP, written there independently) and the policy's own chain attains them."""
+    from mitld_lp.solvers import lp_blocks
+    from mitld_lp.solvers.iteration import interval_iteration
+    from mitld_lp.solvers.lp import solve_lp
+    from tests.test_greedy_block import _linprog_max, _tied
+
+    monkeypatch.setattr(lp_blocks, "GREEDY_MIN_CHOICES", 0)
+    seen: dict[str, list] = {"greedy": [], "lp": []}
+    real_greedy, real_lp = lp_blocks.certified_greedy, lp_blocks.block_lp
+
+    def greedy(block, *a, **k):
+        seen["greedy"].append(block.choices.dtype)
+        return None if refuse else real_greedy(block, *a, **k)
+
+    def block_lp(block, *a, **k):
+        seen["lp"].append(block.choices.dtype)
+        return real_lp(block, *a, **k)
+
+    monkeypatch.setattr(lp_blocks, "certified_greedy", greedy)
+    monkeypatch.setattr(lp_blocks, "block_lp", block_lp)
+    mdp = _tied(seed)
+    want = _linprog_max(mdp)
+    it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
+    got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
+    assert got.values is not None and got.policy is not None
+    np.testing.assert_allclose(got.values, want, atol=1e-8)
+    assert seen["greedy"] and all(d == np.int32 for d in seen["greedy"])
+    assert all(d == np.int64 for d in seen["lp"])
+    if refuse:
+        assert len(seen["lp"]) >= len(seen["greedy"])
+    # the policy's own chain from the values: v = P_pi v off the target and sinks
+    chosen = np.asarray(got.policy)
+    chain = mdp.matrix[chosen].toarray()
+    free = ~(mdp.target | mdp.sink)
+    v = np.where(mdp.target, 1.0, 0.0)
+    a = np.eye(mdp.n_states)[free][:, free] - chain[free][:, free]
+    v[free] = np.linalg.solve(a, chain[free][:, mdp.target].sum(axis=1))
+    np.testing.assert_allclose(v, want, atol=1e-8)
