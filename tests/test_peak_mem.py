@@ -303,3 +303,32 @@ def test_greedy_blocks_with_narrow_choices_get_linprogs_values(seed, refuse, mon
     a = np.eye(mdp.n_states)[free][:, free] - chain[free][:, free]
     v[free] = np.linalg.solve(a, chain[free][:, mdp.target].sum(axis=1))
     np.testing.assert_allclose(v, want, atol=1e-8)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_component_order_factorisation_solves_the_chain(seed, monkeypatch):
+    """chain_factor in strong-component order (its labels' stable order) on a chain of
+    many small cycles: its solve of ``(I - Q) x = b`` against NumPy's dense solve."""
+    rng = np.random.default_rng(seed)
+    k = 600
+    rows, cols, vals = [], [], []
+    for i in range(k):
+        if i % 3:  # cycles of three, each state also moving down the line
+            rows.append(i)
+            cols.append(i - 1)
+            vals.append(0.25)
+        else:
+            rows.append(i)
+            cols.append(i + 2 if i + 2 < k else i)
+            vals.append(0.25)
+        if i >= 3:
+            rows.append(i)
+            cols.append(int(rng.integers(0, i - i % 3)))
+            vals.append(0.5)
+    chain = sp.csr_array((vals, (rows, cols)), shape=(k, k))
+    monkeypatch.setattr(pj, "DENSE_LU_STATES", 0)
+    lu = pj.chain_factor(chain)
+    assert isinstance(lu, pj.TopoLU)
+    b = rng.random((k, 2))
+    want = np.linalg.solve(np.eye(k) - chain.toarray(), b)
+    np.testing.assert_allclose(lu.solve(b), want, rtol=1e-12, atol=1e-12)

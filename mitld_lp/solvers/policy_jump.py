@@ -263,13 +263,18 @@ def chain_factor(chain: sp.csr_array) -> object:
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     from scipy.sparse import csgraph  # beside scipy.sparse.linalg, which chain_lu needs
 
-    _, label = csgraph.connected_components(chain, directed=True, connection="strong")
+    n_comp, label = csgraph.connected_components(chain, directed=True,
+                                                 connection="strong")
     if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT \
             or not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 
-    order = np.argsort(label, kind="stable")
+    # the stable order of the labels (unique: the same permutation whatever the sort);
+    # on 16-bit keys NumPy's stable sort is a radix sort, 0.04 ms against 0.44 on
+    # consensus 4-4's 7,863 states
+    order = np.argsort(label.astype(np.uint16) if n_comp <= 1 << 16 else label,
+                       kind="stable")
     at = np.empty(k, dtype=chain.indices.dtype)  # a state's place in the order
     at[order] = np.arange(k, dtype=at.dtype)
     # I - Q in the order, rows gathered and columns renumbered (no SciPy indexing)
