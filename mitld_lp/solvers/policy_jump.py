@@ -157,6 +157,8 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                 lead = sense.gain(ahead[best], ahead[chosen])
                 size = np.maximum(np.abs(ahead[best]), np.abs(ahead[chosen]))
                 nxt = np.where(lead > AHEAD_GAIN * size, best, nxt)
+            # the look-ahead's scores let go before the next round's are made
+            del ahead, x, best, lead, size
         chosen = nxt
     return chosen, v, t
 
