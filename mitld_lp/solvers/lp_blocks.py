@@ -457,12 +457,20 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
             # greedy check's peak; the block takes a fresh copy back if the LP runs
             reward = block.to_target
             reward += block.outer @ values
-            block = replace(block, to_target=_TAKEN)
+            # the block's choices in 4 bytes each through the greedy check's peak (it
+            # reads their count only; the one-hot writes below index by them), not 8;
+            # the LP takes them back in int64
+            narrow = q.n_choices < 2**31 - 1
+            block = replace(block, to_target=_TAKEN,
+                            choices=(block.choices.astype(np.int32) if narrow
+                                     else block.choices))
             greedy = certified_greedy(block, reward,
                                       bounds[0 if q.sense is Sense.MAX else 1], q.sense,
                                       settings.tol, settings.precision, of_quotient=True)
             if greedy is None:
-                block = replace(block, to_target=q.to_target[block.choices])
+                choices = block.choices.astype(np.int64)
+                block = replace(block, to_target=q.to_target[choices], choices=choices)
+                del choices
         else:
             reward = exit_reward(block, values)
         if greedy is not None:  # the LP's optimality conditions hold (where not: left)

@@ -35,6 +35,17 @@ jump's policy iterations through their :class:`~mitld_lp.solvers.topological.Fac
 and the rounds left, read from how fast the switches fall (:func:`_rounds_left`).  If
 that passes the allowance the jump raises :class:`Abandoned` and writes nothing; the
 caller sweeps on.  No clock is read: the same block gives the same decisions.
+
+**What a jump holds** (the iteration's traced peak on QVBS ``consensus`` 4-4 ``c2``
+was in it: 32.1 bytes a product transition above the iteration's entry, 14.9 since,
+the same bracket to the bit).  No long double copy of the block's rows is made:
+each extended-precision product widens the rows :data:`LD_BATCH` entries at a time
+(:func:`ld_product`, the same sums as the widened matrix's); a policy's own rows only
+where only they are read; the refinement's residual, the scores and the checks made
+in place; one side's exit rewards at a time; the tie search by arrays a state, not a
+score and an index a choice; the last round's values and the last LU let go before
+the next ones are made.  ``experiments/peak_sites.py`` lists what is alive at a
+stage's traced peak.
 """
 
 from __future__ import annotations
@@ -96,17 +107,23 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
     more than ``GAIN`` of the values compared.  ``allowance``: :class:`Abandoned` is
     raised before a round after which the LUs made (``factors.factorised``, shared by
     the jump's calls) and the rounds forecast left would pass it (the policy jump's
-    budget, module docs).  ``inner_ld``: the block's rows in extended precision, if
-    the caller has them (:func:`jump` makes them once for its calls)."""
+    budget, module docs).  ``inner_ld``: the block's rows in extended precision, read
+    only by :func:`~mitld_lp.solvers.topological.policy_round` (made here if not given
+    and :data:`LEAN_ROUNDS` is off); :func:`lean_round` widens them a batch at a time
+    (:func:`ld_product`), so no long double copy of the block is held."""
     starts = block.starts
-    if inner_ld is None:
+    if inner_ld is None and not LEAN_ROUNDS:  # policy_round reads the block's rows so
         inner_ld = block.inner.astype(np.longdouble)
     factors = Factors() if factors is None else factors
     worst = -np.inf if sense is Sense.MAX else np.inf
     reward64 = np.asarray(reward, dtype=np.float64)
+    barred = None if allowed is None else ~allowed
     width = _width(block)
     before: int | None = None  # the switches of the last round
+    v = t = None
     for _ in range(POLICY_ROUNDS):
+        # the last round's values and times let go before the next round's are made
+        v = t = None
         if LEAN_ROUNDS:
             v, t, nxt = lean_round(block, inner_ld, reward, chosen, allowed, factors,
                                    sense, width)
@@ -127,9 +144,12 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
         if sweeps > 0:
             x = np.asarray(v, dtype=np.float64)
             for sweep in range(sweeps + 1):
-                ahead = reward64 + block.inner @ x
-                if allowed is not None:
-                    ahead = np.where(allowed, ahead, worst)
+                # in place: the product, plus the rewards (the same sums), the barred
+                # choices overwritten (no second float a choice)
+                ahead = block.inner @ x
+                ahead += reward64
+                if barred is not None:
+                    np.copyto(ahead, worst, where=barred)
                 if sweep < sweeps:  # the last sweep's scores are what is compared
                     x = _best(ahead, starts, width, sense)
             best = _argbest(ahead, block.groups, width, sense)
@@ -137,6 +157,8 @@ def improve_ahead(block: Block, reward: np.ndarray, chosen: np.ndarray,
                 lead = sense.gain(ahead[best], ahead[chosen])
                 size = np.maximum(np.abs(ahead[best]), np.abs(ahead[chosen]))
                 nxt = np.where(lead > AHEAD_GAIN * size, best, nxt)
+            # the look-ahead's scores let go before the next round's are made
+            del ahead, x, best, lead, size
         chosen = nxt
     return chosen, v, t
 
@@ -151,9 +173,11 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
                chosen: np.ndarray, allowed: np.ndarray | None, factors: Factors,
                sense: Sense, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`~mitld_lp.solvers.topological.policy_round` with the same operations on
-    the same operands (so the same bits), less around them: the chain's rows in
-    extended precision for the refinement made from its float64 arrays (SciPy's
-    ``astype`` copies and checks the index arrays too), and the greedy step by
+    the same operands (so the same bits), less around them and less held: the chain's
+    rows in extended precision for the refinement made from its float64 arrays (SciPy's
+    ``astype`` copies and checks the index arrays too), the refinement's residual and
+    the scores made in place, the block's rows widened a batch at a time
+    (:func:`ld_product`; ``inner_ld`` is not read), and the greedy step by
     :func:`_argbest`'s column folds where every state has ``width`` choices
     (``segmented_argmax``'s two ``reduceat`` passes over every choice: on
     ``consensus`` 4-4 ``c2`` about a third of a round that reuses its LU)."""
@@ -166,20 +190,31 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
         lu = factors.lu
         factors.reused += 1
     else:
+        # the last factorisation is of another chain: let go before the new one is
+        # made (SuperLU's factors of both were held at once)
+        factors.lu = factors.base = None
         lu = chain_factor(chain)
         factors.lu, factors.base = lu, chain
         factors.factorised += 1
     x = lu.solve(rhs).astype(np.longdouble)
     q_ld = sp.csr_array((chain.data.astype(np.longdouble), chain.indices, chain.indptr),
                         shape=chain.shape)
-    b_ld = rhs.astype(np.longdouble)
     for _ in range(2):  # evaluate_chain's two rounds of refinement
-        residual = b_ld + q_ld @ x - x
+        # b + Q x - x in place: ``rhs`` widens exactly where it is added (the same sums
+        # as with a long double copy of it, none held)
+        residual = q_ld @ x
+        residual += rhs
+        residual -= x
         x += lu.solve(np.asarray(residual, dtype=np.float64))
+        del residual
+    del q_ld, rhs
     v, t = x[:, 0], x[:, 1]
-    score = reward + inner_ld @ v
+    # the scores: the block's rows widened a batch at a time (ld_product: the sums of
+    # the block's long double copy, which is not held), the rewards added in place
+    score = ld_product(block.inner, v)
+    score += reward
     if allowed is not None:
-        score = np.where(allowed, score, -np.inf if sense is Sense.MAX else np.inf)
+        np.copyto(score, -np.inf if sense is Sense.MAX else np.inf, where=~allowed)
     better = _argbest(score, block.groups, width, sense)
     gain = sense.gain(score[better], score[chosen])
     scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
@@ -230,13 +265,18 @@ def chain_factor(chain: sp.csr_array) -> object:
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     from scipy.sparse import csgraph  # beside scipy.sparse.linalg, which chain_lu needs
 
-    _, label = csgraph.connected_components(chain, directed=True, connection="strong")
+    n_comp, label = csgraph.connected_components(chain, directed=True,
+                                                 connection="strong")
     if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT \
             or not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 
-    order = np.argsort(label, kind="stable")
+    # the stable order of the labels (unique: the same permutation whatever the sort);
+    # on 16-bit keys NumPy's stable sort is a radix sort, 0.04 ms against 0.44 on
+    # consensus 4-4's 7,863 states
+    order = np.argsort(label.astype(np.uint16) if n_comp <= 1 << 16 else label,
+                       kind="stable")
     at = np.empty(k, dtype=chain.indices.dtype)  # a state's place in the order
     at[order] = np.arange(k, dtype=at.dtype)
     # I - Q in the order, rows gathered and columns renumbered (no SciPy indexing)
@@ -308,14 +348,55 @@ def _argbest(scores: np.ndarray, groups: np.ndarray, width: int, sense: Sense
     if width == 0:
         return segmented_argmax(scores, groups, sense=sense)
     rows = scores.reshape(-1, width)
-    best = _best(scores, groups[:-1], width, sense)[:, None]
-    tied = sense.gain(rows, best) >= -0.0 * np.abs(best)
-    idx = np.where(tied, np.arange(scores.shape[0]).reshape(-1, width),
-                   np.iinfo(np.int64).max)
-    first = idx[:, 0].copy()
-    for j in range(1, width):
-        np.minimum(first, idx[:, j], out=first)
+    best = _best(scores, groups[:-1], width, sense)
+    floor = -0.0 * np.abs(best)
+    # the least tied column, the columns taken last to first (each overwrites the
+    # ties of the later ones): arrays a state, not a score and an index a choice
+    column = np.full(best.shape[0], width, dtype=np.int64)
+    for j in range(width - 1, -1, -1):
+        column[sense.gain(rows[:, j], best) >= floor] = j
+    first = np.arange(0, scores.shape[0], width, dtype=np.int64)
+    first += column
+    first[column == width] = np.iinfo(np.int64).max  # no tie (a NaN): reduceat's
     return first
+
+
+LD_BATCH = 1 << 13
+"""Stored entries widened to long double at a time by :func:`ld_product` (its memory
+bound, 16 bytes an entry, not its answer)."""
+
+
+def ld_product(matrix: sp.csr_array, x: np.ndarray, rows: np.ndarray | None = None
+               ) -> np.ndarray:
+    """``matrix.astype(np.longdouble) @ x`` (of its ``rows`` only, if given: the same
+    rows of that product) without a long double copy of ``matrix``: its rows widened
+    :data:`LD_BATCH` entries at a time, each batch put in canonical order as SciPy's
+    ``astype`` puts the whole (sorted columns, duplicates summed: on a copy of the
+    batch's indices, ``matrix`` untouched), so each row's sum adds the same products in
+    the same order: the same bits (SciPy sums a row of a CSR product on its own, from
+    0, in its stored order).  Returns long double per row."""
+    if rows is not None:
+        matrix = sp.csr_array(matrix[rows])
+    m = matrix.shape[0]
+    out = np.empty(m, dtype=np.longdouble)
+    indptr = matrix.indptr
+    canonical = matrix.has_canonical_format  # then every batch is (SciPy caches it)
+    a = 0
+    while a < m:
+        # whole rows, about LD_BATCH entries (one row at least)
+        z = int(np.searchsorted(indptr, indptr[a] + LD_BATCH, side="right")) - 1
+        z = min(max(z, a + 1), m)
+        lo, hi = int(indptr[a]), int(indptr[z])
+        batch = sp.csr_array((matrix.data[lo:hi].astype(np.longdouble),
+                              matrix.indices[lo:hi], indptr[a:z + 1] - lo),
+                             shape=(z - a, matrix.shape[1]))
+        if not canonical and not batch.has_canonical_format:
+            batch = sp.csr_array((batch.data, batch.indices.copy(), batch.indptr),
+                                 shape=batch.shape)
+            batch.sum_duplicates()
+        out[a:z] = batch @ x
+        a = z
+    return out
 
 
 def _rounds_left(before: int | None, switched: int) -> float:
@@ -352,45 +433,58 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     40x40 grid (``experiments/bench_big_component.py``) and one random model in four
     needed the redo, as a choice tied with the policy took far longer to leave than the
     policy's own, which the upper bound's margin must cover."""
-    exit2 = block.exits(lo, hi)
     groups = np.append(block.starts, block.choices.shape[0])
     counts = np.diff(groups)
+    width = _width(block)
     local = np.column_stack([lo[block.states], hi[block.states]])
     # the bound a policy's own values give (a maximum's lower, a minimum's upper), and
     # the one checked over every choice; -1 lowers a bound, +1 raises it
     own, every = (0, 1) if sense is Sense.MAX else (1, 0)
+    # each side's exit rewards (Block.exits' columns) made when that side starts and
+    # let go when it ends: one float a choice held at a time, not two
+    exit_own = _exit(block, (lo, hi)[own])
     seed = local if first is None else first
-    start = start_policy(block, exit2[:, own], seed[:, own], sense)
-    # the policy iterations below share their factorisations and the block's rows in
-    # extended precision
+    start = start_policy(block, exit_own, seed[:, own], sense)
+    # the policy iterations below share their factorisations; the block's rows are
+    # widened to extended precision a batch at a time where a product reads them
+    # (ld_product: no long double copy of the block held)
     factors = Factors() if factors is None else factors
-    inner_ld = block.inner.astype(np.longdouble)
-    chosen, v, t = improve_ahead(block, exit2[:, own], start, factors=factors,
-                                 sense=sense, allowance=allowance, inner_ld=inner_ld)
+    chosen, v, t = improve_ahead(block, exit_own, start, factors=factors,
+                                 sense=sense, allowance=allowance)
+    del start
     own_bound = _shifted(v, t, 1 if own else -1, tol, precision,
                          lambda u: evaluate_chain(block.inner, chosen, np.repeat(u, counts),
                                                   factors)[0])
-    own_image = exit2[chosen, own] + (inner_ld @ own_bound)[chosen]
+    # the policy's own rows only (the same rows of the whole product)
+    own_image = exit_own[chosen] + ld_product(block.inner, own_bound, chosen)
     own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
-    chosen_best, w, _ = improve_ahead(block, exit2[:, every], chosen, factors=factors,
-                                      sense=sense, allowance=allowance,
-                                      inner_ld=inner_ld)
+    del own_image, exit_own, v
+    exit_every = _exit(block, (lo, hi)[every])
+    chosen_best, w, _ = improve_ahead(block, exit_every, chosen, factors=factors,
+                                      sense=sense, allowance=allowance)
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: W = u + max over the choices within a quarter of the threshold of P W.
-    owner_w = np.repeat(w, counts)
-    loses = -sense.gain(exit2[:, every] + inner_ld @ w, owner_w)
+    # loses = -gain(r + P w, w(owner)), made in place in the scores' array
+    loses = ld_product(block.inner, w)
+    loses += exit_every
+    _less_owner(loses, w, counts, width, sense)
+    np.negative(loses, out=loses)
     tied = loses < np.repeat(thresholds(np.asarray(w, dtype=np.float64), tol, precision),
                              counts) / 4.0
+    del loses
 
     def slowest(u: np.ndarray) -> np.ndarray:
         return improve_ahead(block, np.repeat(u, counts), chosen_best, tied,
-                             factors=factors, allowance=allowance, inner_ld=inner_ld)[1]
-
-    sign = 1.0 if every else -1.0
+                             factors=factors, allowance=allowance)[1]
 
     def check(bound: np.ndarray) -> float:
-        image = exit2[:, every] + inner_ld @ bound
-        return float(np.max(sign * (image - np.repeat(bound, counts))))
+        # max of sign * (r + P bound - bound(owner)), in place: the same floats
+        image = ld_product(block.inner, bound)
+        image += exit_every
+        _less_owner(image, bound, counts, width, Sense.MAX)
+        if not every:
+            np.negative(image, out=image)
+        return float(np.max(image))
 
     # First the policy's own totals (no solve more): the check below proves the bound
     # whatever W is, so the slowest choices' totals are sought only if it refuses.
@@ -419,6 +513,27 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
                  "(excess %.1e; %d LUs)", block.states.size, own_ok, every_ok, worst,
                  factors.factorised)
     return own_ok and every_ok
+
+
+def _exit(block: Block, bound: np.ndarray) -> np.ndarray:
+    """Per choice of ``block``, its exit reward from ``bound`` downstream: the column
+    of ``block.exits`` for that bound (the same sums)."""
+    return block.to_target + block.outer @ bound
+
+
+def _less_owner(scores: np.ndarray, values: np.ndarray, counts: np.ndarray, width: int,
+                sense: Sense) -> None:
+    """``scores`` replaced in place by ``sense.gain(scores, owner's values)`` (for a
+    maximum ``scores - values(owner)``, for a minimum ``values(owner) - scores``): the
+    same floats as with ``np.repeat(values, counts)``, which is made only where the
+    states' choices are not all ``width``."""
+    owner = (np.repeat(values, counts) if width == 0 else
+             np.asarray(values)[:, None])
+    view = scores if width == 0 else scores.reshape(-1, width)
+    if sense is Sense.MAX:
+        np.subtract(view, owner, out=view)
+    else:
+        np.subtract(owner, view, out=view)
 
 
 def start_policy(block: Block, exit_own: np.ndarray, seed: np.ndarray,
