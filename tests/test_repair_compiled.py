@@ -43,7 +43,12 @@ def hot(monkeypatch):
 
 
 def _run(mdp, x0, free, upper, compiled: bool, monkeypatch, rounds: int | None = None):
-    st = C.Rows(sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups, dtype=np.int64))
+    """The repair of ``x0`` (compiled rounds or NumPy's), the matrix's indices in int32
+    as a product's are (so these tests leave the kernel's cache file a product reads)."""
+    m = sp.csr_array(mdp.matrix)
+    m = sp.csr_array((m.data, m.indices.astype(np.int32), m.indptr.astype(np.int32)),
+                     shape=m.shape)
+    st = C.Rows(m, np.asarray(mdp.row_groups, dtype=np.int64))
     rnd = rounding(st.matrix)
     comp, level = support_layers(mdp)
     level_of = np.asarray(level)[np.asarray(comp)]
@@ -211,3 +216,30 @@ def test_a_candidate_below_the_optimum_is_repaired_above_it(k, p, q, hot,
     assert a[0] and b[0] and a[1].tobytes() == b[1].tobytes() and a[2] == b[2] > 0
     assert not C._fails(b[3], b[4], b[1], free, True).any()
     assert all(Fraction(float(b[1][s])) >= exact[s] for s in range(mdp.n_states))
+
+
+@pytest.mark.parametrize("warm,paid", [(False, True), (True, False)])
+def test_no_compiled_rounds_on_a_cold_cache_or_an_unpaid_load(warm, paid,
+                                                              monkeypatch) -> None:
+    """Without the kernel's cache file, or before any compiled kernel's load is paid,
+    the rounds are NumPy's (no compile, no load paid by the repair), with the same
+    bounds."""
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid)
+    monkeypatch.setattr(CC, "_ROUNDS_WARM", [warm])
+    monkeypatch.setattr(R, "SPARSE_LEVEL", 1)
+    calls = []
+    real = CC.compiled_rounds
+
+    def counted(*args):
+        got = real(*args)
+        calls.append(got is not None)
+        return got
+
+    monkeypatch.setattr(R, "compiled_rounds", counted)
+    mdp = random_mdp(200, seed=3, locality=6, self_loop_fraction=0.3, max_choices=3)
+    free = np.asarray(mdp.target, dtype=bool)
+    x0 = np.where(free, 1.0, np.random.default_rng(3).random(mdp.n_states) * 0.5)
+    got = _run(mdp, x0, free, True, True, monkeypatch)
+    assert calls and not any(calls)
+    want = _run(mdp, x0, free, True, False, monkeypatch)
+    assert got[1].tobytes() == want[1].tobytes() and got[2] == want[2]

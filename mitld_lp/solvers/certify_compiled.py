@@ -243,7 +243,21 @@ def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
     nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
               np.asarray(st.nature, dtype=np.int64))
     out = np.zeros(2, dtype=np.int64)
-    level_rounds(mine, np.array(todo, dtype=bool), groups, nature, m.indptr, m.indices,
-                 m.data, x, rnd.count, rnd.slack_of, rnd.high_of if upper else rnd.low_of,
-                 bool(upper), col_ptr, col_state, int(rounds), moved, out)
+    # the arrays it only reads passed as read-only views (no copy): one signature of
+    # the kernel, and so one cache file, whether the caller's are writable or not (a
+    # product's are read-only, a test's not: else a warm cache of the one would still
+    # make the other compile)
+    level_rounds(*map(_read_only, (mine,)), np.array(todo, dtype=bool),
+                 *map(_read_only, (groups, nature, m.indptr, m.indices, m.data)), x,
+                 *map(_read_only, (rnd.count, rnd.slack_of,
+                                   rnd.high_of if upper else rnd.low_of)),
+                 bool(upper), *map(_read_only, (col_ptr, col_state)), int(rounds), moved,
+                 out)
     return int(out[0]), bool(out[1])
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only view (C-contiguous: a copy only where it is not)."""
+    view = np.ascontiguousarray(a).view()
+    view.flags.writeable = False
+    return view

@@ -504,7 +504,9 @@ class _Repair:
         a level does not settle within :data:`ROUNDS` rounds.  A level of fewer than
         :data:`SPARSE_LEVEL` states is read from slices gathered once for all of them
         (:class:`_Walk`), a larger one state by state: the rows of the states taken up,
-        their readers from the pattern by column.  Where every level is small and
+        their readers from the pattern by column, all its rounds in one compiled call
+        where that kernel is cached and no state of the level is in an end component
+        (:meth:`_compiled`: the same bounds, moves and verdict).  Where every level is small and
         reads only lower ones, and no state is in an end component, the repair goes
         pass by pass instead (:meth:`_passes`, :data:`PASSES`): the same bounds."""
         live = np.flatnonzero(~self.free)
