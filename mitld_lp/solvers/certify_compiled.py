@@ -18,7 +18,8 @@ from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.util import kernel_loader
 
 __all__ = ["CHECK_BATCH", "COMPILED_CHECK_MIN_ROWS", "WARM_LOAD_MIN_ENTRIES", "compiled_chain_sets",
-           "compiled_checks", "compiled_needs", "load_if_warm"]
+           "compiled_checks", "compiled_needs", "compiled_rounds", "load_if_warm",
+           "rounds_cached"]
 
 CHECK_BATCH = 1 << 16
 """States whose rows one call of the compiled Bellman check reads, where it checks
@@ -188,3 +189,75 @@ def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np
     chain_sets(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
                m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
     return never, sure
+
+
+ROUNDS_KERNEL = ("mitld_lp.solvers.certify_repair_kernels", "level_rounds")
+"""The repair's rounds on a large level (:func:`compiled_rounds`), asked for its cache
+file once a process (:func:`rounds_cached`)."""
+
+_ROUNDS_WARM: list[bool] = []  # whether ROUNDS_KERNEL has a cache file, once a process
+
+
+def rounds_cached() -> bool:
+    """Whether the kernel loader would link :data:`ROUNDS_KERNEL` from its cache
+    (:func:`~mitld_lp.util.kernel_loader.module_cached`), looked up once a process: a
+    cold cache never makes a repair pay numba's compile."""
+    if not _ROUNDS_WARM:
+        _ROUNDS_WARM.append(kernel_loader.module_cached(*ROUNDS_KERNEL))
+    return _ROUNDS_WARM[0]
+
+
+def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
+                    todo: np.ndarray, upper: bool, readers: tuple[np.ndarray, np.ndarray],
+                    moved: np.ndarray, rounds: int) -> tuple[int, bool] | None:
+    """The repair's rounds on the level ``mine`` from the states to do ``todo`` (a flag
+    a state of ``mine``), in one compiled call
+    (:func:`~mitld_lp.solvers.certify_repair_kernels.level_rounds`: the rounds of
+    :meth:`~mitld_lp.solvers.certify_repair._Repair.run` on a large level, the same
+    needs, moves and readers, so the same bounds in ``x``, flags in ``moved`` and
+    count): ``(moves, settled)``; None where the NumPy rounds run instead: the kernel's
+    load not paid or its cache file not there, arrays of other kinds than the kernel
+    takes, a value of ``x`` not finite, or a state of ``mine`` without a choice or a
+    choice without a row (:func:`compiled_needs`' refusals)."""
+    m = st.matrix
+    col_ptr, col_state = readers
+    if (not kernel_loader.compiled_paid() or not rounds_cached()
+            or x.dtype != np.float64 or x.ndim != 1 or not x.flags.c_contiguous
+            or not x.flags.writeable or m.data.dtype != np.float64
+            or m.indices.dtype not in (np.int32, np.int64)
+            or col_ptr.dtype not in (np.int32, np.int64)
+            or col_state.dtype not in (np.int32, np.int64)
+            or moved.dtype != np.bool_ or mine.size == 0):
+        return None
+    groups = np.asarray(st.groups, dtype=np.int64)
+    mine = np.asarray(mine, dtype=np.int64)
+    if not bool(np.all(groups[mine + 1] > groups[mine])) or (
+            st.nature is not None and not bool(np.all(np.diff(st.nature) > 0))):
+        return None
+    if not bool(np.isfinite(x).all()):
+        return None
+    try:
+        from mitld_lp.solvers.certify_repair_kernels import level_rounds
+    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
+        return None
+    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
+              np.asarray(st.nature, dtype=np.int64))
+    out = np.zeros(2, dtype=np.int64)
+    # the arrays it only reads passed as read-only views (no copy): one signature of
+    # the kernel, and so one cache file, whether the caller's are writable or not (a
+    # product's are read-only, a test's not: else a warm cache of the one would still
+    # make the other compile)
+    level_rounds(*map(_read_only, (mine,)), np.array(todo, dtype=bool),
+                 *map(_read_only, (groups, nature, m.indptr, m.indices, m.data)), x,
+                 *map(_read_only, (rnd.count, rnd.slack_of,
+                                   rnd.high_of if upper else rnd.low_of)),
+                 bool(upper), *map(_read_only, (col_ptr, col_state)), int(rounds), moved,
+                 out)
+    return int(out[0]), bool(out[1])
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only view (C-contiguous: a copy only where it is not)."""
+    view = np.ascontiguousarray(a).view()
+    view.flags.writeable = False
+    return view

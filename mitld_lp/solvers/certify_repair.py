@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.certify_chain import RowModel, support_layers
-from mitld_lp.solvers.certify_compiled import compiled_needs
+from mitld_lp.solvers.certify_compiled import compiled_needs, compiled_rounds
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 
@@ -476,13 +476,37 @@ class _Repair:
         col_ptr, col_state = self.readers_of
         return col_state[gather_ranges(col_ptr[moved], col_ptr[moved + 1])]
 
+    def _compiled(self, x: np.ndarray, mine: np.ndarray, todo: np.ndarray,
+                  moved: np.ndarray) -> bool | None:
+        """The rounds of :meth:`run` on the large level ``mine`` from ``todo`` by one
+        compiled call (:func:`~mitld_lp.solvers.certify_compiled.compiled_rounds`: the
+        same needs, moves, readers and count, so the same bounds), flagging the states
+        it moves in ``moved``: whether the level settled; None where the NumPy rounds
+        run instead (the kernel's refusals, or a state of the level in an end
+        component: :meth:`together` moves those)."""
+        if self.mec_of is not None and bool(np.any(self.mec_of[mine] >= 0)):
+            return None
+        if not todo.any():
+            return True
+        if self.readers_of is None:
+            self.readers_of = readers_by_column(self.st)
+        got = compiled_rounds(self.st, self.rnd, x, mine, todo, self.upper,
+                              self.readers_of, moved, ROUNDS)
+        if got is None:
+            return None
+        moves, settled = got
+        self.moved += moves
+        return settled
+
     def run(self, x: np.ndarray, failing: np.ndarray) -> bool:
         """Move the bounds of the ``failing`` states and of whatever they move upstream
         (a state is taken up when a row of its choices holds a moved state); False when
         a level does not settle within :data:`ROUNDS` rounds.  A level of fewer than
         :data:`SPARSE_LEVEL` states is read from slices gathered once for all of them
         (:class:`_Walk`), a larger one state by state: the rows of the states taken up,
-        their readers from the pattern by column.  Where every level is small and
+        their readers from the pattern by column, all its rounds in one compiled call
+        where that kernel is cached and no state of the level is in an end component
+        (:meth:`_compiled`: the same bounds, moves and verdict).  Where every level is small and
         reads only lower ones, and no state is in an end component, the repair goes
         pass by pass instead (:meth:`_passes`, :data:`PASSES`): the same bounds."""
         live = np.flatnonzero(~self.free)
@@ -513,6 +537,12 @@ class _Repair:
             a, z = walk_at[k], walk_at[k + 1]
             todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
                                     self.readers(np.flatnonzero(moved), mine, fresh))
+            if not is_small:
+                done = self._compiled(x, mine, todo, moved)
+                if done is not None:  # the same rounds in one call
+                    if not done:
+                        return False
+                    continue
             for r in range(ROUNDS):
                 if not todo.any():
                     break
