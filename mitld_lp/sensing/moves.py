@@ -43,6 +43,13 @@ class PackedRuns:
             out.append(tuple(cols))
         return tuple(out)
 
+    def __iter__(self) -> Iterator[tuple[np.ndarray, ...]]:
+        """The runs unpacked, as a level's plain sequence of runs iterates."""
+        return iter(self.unpack())
+
+    def __len__(self) -> int:
+        return len(self.layout)
+
 
 class Moves(Mapping[tuple[int, str], Mapping[Obs, Any]]):
     """``moves[(i, action)]``: for an information state ``i`` and one of its world
