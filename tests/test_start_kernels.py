@@ -199,3 +199,44 @@ ok = all(s == (core.masked_array, core.MaskedArray, core.nomask) for s in seen)
 print(json.dumps({"errors": errors, "n": len(seen), "ok": ok}))
 """
     assert _run(code) == {"errors": [], "n": 4, "ok": True}
+
+
+# --- remembered look-ups -------------------------------------------------------------
+
+
+def test_directories_follow_the_environment(tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    module = str(tmp_path / "pkg" / "mod.py")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "one"))
+    first = kernel_files.directories(module)
+    first.append(Path("/elsewhere"))  # the caller's list is its own
+    assert kernel_files.directories(module) == first[:1]
+    assert first[0].parent == tmp_path / "one"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "two"))
+    assert [d.parent for d in kernel_files.directories(module)] == [tmp_path / "two"]
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    found = kernel_files.directories(module)
+    assert found[0] == tmp_path / "pkg" / "__pycache__"
+    assert found[1].parent == tmp_path / "xdg" / "numba"
+    # a relative cache folder follows the working directory
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "rel")
+    monkeypatch.chdir(tmp_path)
+    here = kernel_files.directories(module)[0]
+    monkeypatch.chdir(tmp_path / "pkg" if (tmp_path / "pkg").is_dir() else "/")
+    assert here.parent == tmp_path / "rel"
+    assert kernel_files.directories(module)[0].parent != here.parent
+
+
+def test_resolver_remembers_the_process_symbols() -> None:
+    import ctypes
+
+    from mitld_lp.util import elf_runtime
+
+    resolve = elf_runtime.resolver({"strlen": 1234})
+    assert resolve("strlen") == 1234  # the explicit address first
+    libc = ctypes.CDLL(None)
+    direct = ctypes.cast(libc["strchr"], ctypes.c_void_p).value
+    assert resolve("strchr") == direct and resolve("strchr") == direct
+    assert resolve("no_such_symbol_mitld_lp") is None
+    assert resolve("no_such_symbol_mitld_lp") is None

@@ -29,9 +29,24 @@ def _subpath(py_file: str) -> str:
     return "_".join([os.path.split(sub)[-1], hashlib.sha1(sub.encode()).hexdigest()])
 
 
+_directories: dict[tuple, list[Path]] = {}  # (file, the settings they follow) -> folders
+
+
 def directories(py_file: str) -> list[Path]:
-    """numba's cache directories for a function of ``py_file``, in its locators' order."""
+    """numba's cache directories for a function of ``py_file``, in its locators' order
+    (remembered for the file and the settings they follow: the environment variables,
+    the working directory where a path is relative)."""
     env = os.environ.get("NUMBA_CACHE_DIR")
+    relative = not os.path.isabs(py_file) or bool(env) and not os.path.isabs(env)
+    key = (py_file, env, os.environ.get("XDG_CACHE_HOME"), os.environ.get("HOME"),
+           os.getcwd() if relative else None)
+    found = _directories.get(key)
+    if found is None:
+        found = _directories[key] = _find_directories(py_file, env)
+    return list(found)
+
+
+def _find_directories(py_file: str, env: str | None) -> list[Path]:
     if env:
         return [Path(os.path.abspath(env)) / _subpath(py_file)]
     home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
