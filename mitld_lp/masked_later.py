@@ -45,10 +45,10 @@ def asked_by_unique() -> bool:
     serving ``np.ma`` to NumPy's ``unique``, itself called (through NumPy's own
     functions only) by one of the package's modules."""
     frame = sys._getframe(1)
-    while frame is not None and (
-            frame.f_globals.get("__name__") in (__name__, f"{PACKAGE}.own_imports")
-            or frame.f_globals.get("__name__", "").partition(".")[0] in (
-                "importlib", "_frozen_importlib")):
+    while frame is not None and str(frame.f_globals.get("__name__")) in (
+            __name__, f"{PACKAGE}.own_imports", "importlib._bootstrap",
+            "importlib._bootstrap_external", "_frozen_importlib",
+            "_frozen_importlib_external"):
         frame = frame.f_back  # the finder's frames and the import system's
     if frame is None or frame.f_globals.get("__name__") != "numpy" or \
             frame.f_code.co_name != "__getattr__":
