@@ -24,6 +24,8 @@ lark's included -- and only then:
   LAPACK and BLAS: 0.05-0.07 s of CPU) runs when a name other than ``LinearOperator``
   and the direct solvers' (``splu``...) is read; those come from their own modules with
   ``scipy.linalg`` left for later as well (it serves ``LinAlgError``, NumPy's class);
+* ``numpy.ma``, imported by NumPy's ``unique`` for the package's code, is a
+  :class:`BodyLater` (:mod:`mitld_lp.masked_later`): its body runs at its first use;
 * lark, imported by the package, binds stand-ins of ``regex`` and its cache's modules
   (imported when lark first uses them, out of ``sys.modules`` once lark is imported:
   :func:`_lark_around`);
@@ -497,6 +499,9 @@ def _around(name: str) -> Callable[[], Callable[[ModuleType | None], None]] | No
         return _layer_later
     if name == "lark" and (_depth > 0 or _imported_by_package(name)):
         return _lark_around
+    if name == "numpy.ma":  # the package's np.unique asking for it: its body later
+        from mitld_lp import masked_later
+        return masked_later.made_later if masked_later.asked_by_unique() else None
     if _depth == 0 and name in LATER and _imported_by_package(name):
         return _open
     if _depth > 0:
@@ -568,8 +573,8 @@ def spec_around(skip: Any, name: str, path: Any, target: Any, around: Any) -> Mo
         spec = finder.find_spec(name, path, target)
         if spec is not None:
             if spec.loader is not None and hasattr(spec.loader, "exec_module"):
-                kind = BodyLaterLoader if around in (_sparse_linalg_later, _layer_later) else Loader
-                spec.loader = kind(spec.loader, around)
+                later = around in (_sparse_linalg_later, _layer_later) or name == "numpy.ma"
+                spec.loader = (BodyLaterLoader if later else Loader)(spec.loader, around)
             return spec
     return None
 

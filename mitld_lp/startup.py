@@ -263,8 +263,10 @@ def numpy_ma_when_used() -> None:
     function otherwise; any other name imports the real module (which then replaces the
     stand-in as ``numpy.ma``) and is its object.
 
-    The command line only (a program importing the package is left alone); nothing when
-    ``numpy.ma`` is already imported."""
+    The command line only (a program importing the package gets the narrower cut of
+    :mod:`mitld_lp.masked_later`: the module itself, its body run at first use, when the
+    package's own ``np.unique`` imports it); nothing when ``numpy.ma`` is already
+    imported."""
     import types
 
     import numpy

@@ -47,17 +47,23 @@ def explicit_symbols(helperlib: Any, nrt: Any, dynfunc: Any) -> dict[str, int]:
 
 def resolver(explicit: dict[str, int]) -> Callable[[str], int | None]:
     """A symbol's address: ``explicit`` first, then the process's (libc, libm, the
-    Python C API), None where neither has it."""
+    Python C API), None where neither has it.  The process's addresses found are
+    remembered: the kernels of a process name mostly the same ones (``dlsym`` through
+    ctypes is some microseconds a name)."""
     process = ctypes.CDLL(None)
+    found: dict[str, int] = {}
 
     def resolve(name: str) -> int | None:
-        address = explicit.get(name)
+        address = explicit.get(name) or found.get(name)
         if address is not None:
             return address
         try:
-            return ctypes.cast(process[name], ctypes.c_void_p).value
+            address = ctypes.cast(process[name], ctypes.c_void_p).value
         except (AttributeError, ValueError):
             return None
+        if address is not None:  # (a name not found may be loaded later: asked again)
+            found[name] = address
+        return address
 
     return resolve
 

@@ -14,8 +14,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FORMAT", "MAGIC", "SUFFIX", "directories", "file_name", "pack", "undefined_symbols",
-           "unpack", "write"]
+__all__ = ["FORMAT", "MAGIC", "SUFFIX", "directories", "file_name", "forget_listing", "listing",
+           "pack", "undefined_symbols", "unpack", "write"]
 
 FORMAT = "mitld_lp kernel object 1"
 MAGIC = (FORMAT + "\n").encode()
@@ -29,9 +29,24 @@ def _subpath(py_file: str) -> str:
     return "_".join([os.path.split(sub)[-1], hashlib.sha1(sub.encode()).hexdigest()])
 
 
+_directories: dict[tuple, list[Path]] = {}  # (file, the settings they follow) -> folders
+
+
 def directories(py_file: str) -> list[Path]:
-    """numba's cache directories for a function of ``py_file``, in its locators' order."""
+    """numba's cache directories for a function of ``py_file``, in its locators' order
+    (remembered for the file and the settings they follow: the environment variables,
+    the working directory where a path is relative)."""
     env = os.environ.get("NUMBA_CACHE_DIR")
+    relative = not os.path.isabs(py_file) or bool(env) and not os.path.isabs(env)
+    key = (py_file, env, os.environ.get("XDG_CACHE_HOME"), os.environ.get("HOME"),
+           os.getcwd() if relative else None)
+    found = _directories.get(key)
+    if found is None:
+        found = _directories[key] = _find_directories(py_file, env)
+    return list(found)
+
+
+def _find_directories(py_file: str, env: str | None) -> list[Path]:
     if env:
         return [Path(os.path.abspath(env)) / _subpath(py_file)]
     home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
@@ -45,6 +60,38 @@ def file_name(py_file: str, qualname: str, key: tuple) -> str:
     stem = os.path.splitext(os.path.basename(py_file))[0]
     digest = hashlib.sha256(repr(key).encode()).hexdigest()[:20]
     return f"{stem}.{qualname}-{digest}{SUFFIX}"
+
+
+_listings: dict[str, tuple[int, dict[str, list[str]]]] = {}  # folder -> (mtime, stems)
+
+
+def listing(directory: Path) -> dict[str, list[str]]:
+    """The cache files of a folder by their kernel's stem (the name up to its last
+    ``-``, :func:`file_name`), listed once and again when the folder's modification time
+    has moved (a file written, renamed in or removed there, by any process) or after
+    :func:`write` wrote one there (:func:`forget_listing`: a clock too coarse to move
+    within the listing's tick); {} where there is no such folder."""
+    where = str(directory)
+    try:
+        stamp = os.stat(where).st_mtime_ns
+        found = _listings.get(where)
+        if found is not None and found[0] == stamp:
+            return found[1]
+        names = os.listdir(where)
+    except OSError:
+        _listings.pop(where, None)
+        return {}
+    stems: dict[str, list[str]] = {}
+    for name in names:
+        if name.endswith(SUFFIX) and "-" in name:
+            stems.setdefault(name.rsplit("-", 1)[0], []).append(name)
+    _listings[where] = (stamp, stems)
+    return stems
+
+
+def forget_listing(directory: Path) -> None:
+    """Drop the listing of ``directory`` (:func:`listing`): it is made afresh next."""
+    _listings.pop(str(directory), None)
 
 
 def pack(meta: bytes, object_code: bytes) -> bytes:
@@ -107,6 +154,7 @@ def write(path: Path, data: bytes) -> None:
             f.write(data)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
+        forget_listing(path.parent)
     except OSError:
         try:
             os.unlink(tmp)

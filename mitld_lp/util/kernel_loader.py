@@ -111,8 +111,8 @@ def cached(module_file: str, qualname: str) -> bool:
         return False
     stem = kernel_files.file_name(module_file, qualname, ()).rsplit("-", 1)[0]
     source = _mtime(Path(module_file), 0)  # (a source not there counts against nothing)
-    return any(_mtime(f, -1) >= source for d in kernel_files.directories(module_file)
-               if d.is_dir() for f in d.glob(stem + "-*" + kernel_files.SUFFIX))
+    return any(_mtime(d / f, -1) >= source for d in kernel_files.directories(module_file)
+               for f in kernel_files.listing(d).get(stem, ()))  # a folder listed once
 
 
 def _mtime(path: Path, missing: int) -> int:
