@@ -207,12 +207,14 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
     if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
         return _no_end_components(n, mdp.n_choices)
     cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
+    if cand.size == 0:
+        return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
-    if cand.size == 0:
-        return EndComponents(read_only(mec_of), read_only(internal), 0)
     if walks is not None:  # the rounds among the candidates, with no sub-MDP built
         found = compiled_end_components(walks, mdp, cand)
+        if not found.n_mecs:
+            return _no_end_components(n, mdp.n_choices)
         return EndComponents(read_only(found.mec_of.astype(mec_of.dtype, copy=False)),
                              found.internal, found.n_mecs)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
@@ -288,8 +290,10 @@ def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.
 
 
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
-    return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
-                         read_only(np.zeros(n_choices, dtype=bool)), 0)
+    """The record of no end component (:meth:`~mitld_lp.solvers.end_components.
+    EndComponents.none`: read-only views of stride 0, nothing a state or a choice
+    allocated; a minimum's quotients hold it from the analysis to the LP)."""
+    return EndComponents.none(n, n_choices)
 
 
 def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.ndarray,
@@ -368,6 +372,8 @@ def _fewer_components(mecs: EndComponents, new_id: np.ndarray, sure: np.ndarray,
     the quotient (``sure``), the others numbered as their reduced states now are (in
     the same order): a removed component's members and internal choices are no longer
     any component's."""
+    if bool(np.all(sure[n_plain:])):  # none left: the record of none (stride-0 views)
+        return _no_end_components(mecs.mec_of.size, mecs.internal.size)
     kept_plain = int(np.count_nonzero(~sure[:n_plain]))
     renumber = new_id[n_plain:] - kept_plain  # -1 - kept_plain where removed
     renumber[sure[n_plain:]] = -1
@@ -460,25 +466,27 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             mecs = without_states(mecs, sure_state, mdp)
     del back
     maybe = maybe & ~sure_state
-    plain = maybe & (mecs.mec_of < 0)
+    plain = maybe & (mecs.mec_of < 0) if mecs.n_mecs else maybe
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
     # two per-state / per-choice index arrays, kept by both models: int32 where the
     # product's size allows (half the bytes), int64 past 2**31 - 1 (index_dtype)
     state_map = np.full(n, -1, dtype=index_dtype(n))
     state_map[plain] = np.arange(n_plain)
-    in_mec = mecs.mec_of >= 0
-    state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
+    if mecs.n_mecs:  # none: no mask a state of the stride-0 record read
+        in_mec = mecs.mec_of >= 0
+        state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
+        del in_mec
     n_red = n_plain + mecs.n_mecs
 
     # the maybe states' choices read from their ranges (no array a choice of the whole
     # product: most products keep a third to two thirds of their choices), ascending
     kept, owner = choices_of(np.asarray(mdp.row_groups), np.flatnonzero(maybe))
-    inside = mecs.internal[kept]
-    if inside.any():
-        kept, owner = kept[~inside], owner[~inside]
-    del inside
-    if mecs.n_mecs:
+    if mecs.n_mecs:  # no internal choice where no end component
+        inside = mecs.internal[kept]
+        if inside.any():
+            kept, owner = kept[~inside], owner[~inside]
+        del inside
         by_state = np.argsort(state_map[owner], kind="stable")
         kept, owner = kept[by_state], owner[by_state]
         del by_state
