@@ -408,49 +408,50 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # nothing truncated: one target, so one seed set, one reach and one set of leaks
     # (the second model's columns are the first's)
     same = not extra.any()
-    # a minimum's Prob0E (the attractors of its targets) first where NumPy walks it:
-    # its reversed choices are freed before the state graph's reversal is made, which
-    # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
-    # analysis's peak); compiled, it holds no such graph and runs after, as before (after
-    # the components, which keep SciPy's walk though its load is then paid: analysis_gates)
-    early = sense is Sense.MIN and attractor_walks(m.nnz) is None
-    if early:
+    # a minimum's Prob0E (the attractors of its targets) first: its reversed choices
+    # (NumPy's walk) are freed before the state graph's reversal is made, which the
+    # minimum's Prob1A reads; and its Prob1A (value_one) right after the components,
+    # so that the reversal is freed before the rest of the analysis (csma 4-2: the two
+    # were alive together at the analysis's peak, then the reversal beside the sweeps'
+    # gate and the components' checks)
+    minimum = sense is Sense.MIN
+    if minimum:
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
     found, reach, back = components_reaching(
         m, mdp.row_groups, np.column_stack([goal] if same else [goal, wide]))
+    reach = reach[:, [0, 0] if same else [0, 1]]
+    n = mdp.n_states
+    j0 = 1 if same else 0
+    sure_state = np.zeros(n, dtype=bool)
+    if minimum:
+        prob0, maybe = attracted
+        del attracted
+        mecs = _no_end_components(n, mdp.n_choices)
+        # the goal's value-1 states out of the quotient, found on the pattern before it
+        # is made (value_one): Prob1A on the reversal, then freed
+        if without_one:
+            sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
+    del back
     if not kernel_loader.compiled_paid() and _sweeps_compiled(m, mdp.row_groups,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
-    reach = reach[:, [0, 0] if same else [0, 1]]
-    if sense is Sense.MAX or not without_one:  # only a minimum's Prob1A searches it again
-        back = None
-    n = mdp.n_states
-    if sense is Sense.MAX:
+    if not minimum:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
         mecs = end_components(mdp, found.component, maybe)
-    else:
-        prob0, maybe = attracted if early else _prob0e(m, mdp.row_groups, goal, wide,
-                                                       extra.any())
-        mecs = _no_end_components(n, mdp.n_choices)
 
     if found.level is None and mixed(found.component, maybe):  # the order as before
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
-    # the goal's value-1 states out of the quotient, found on the pattern before it is
-    # made (value_one, analysis_singles): Prob1A of a minimum, Prob1E of a maximum where
-    # no end component, or only single states, are collapsed (else on the quotient
-    # below, _without_one cutting them out)
-    j0 = 1 if same else 0
-    sure_state = np.zeros(n, dtype=bool)
+    # a maximum's Prob1E where no end component, or only single states, are collapsed,
+    # found on the pattern before the quotient is made (value_one, analysis_singles;
+    # else on the quotient below, _without_one cutting them out)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
-    if without_one and sense is Sense.MIN:
-        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
-    elif without_one and (not mecs.n_mecs or single_states(mecs)):
+    if without_one and not minimum and (not mecs.n_mecs or single_states(mecs)):
         # with end components of one state each (a deadline's self-loops) too: their
         # staying choices hit from the start, the components of value 1 dropped
         # (analysis_singles), so no quotient of every maybe state is built and cut
@@ -464,7 +465,6 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         del played
         if mecs.n_mecs:
             mecs = without_states(mecs, sure_state, mdp)
-    del back
     maybe = maybe & ~sure_state
     plain = maybe & (mecs.mec_of < 0) if mecs.n_mecs else maybe
     n_plain = int(plain.sum())
@@ -564,6 +564,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
               read_only(comp_level.astype(index_dtype(n), copy=False)))
+    # their int64 originals freed before the quotients' masks are made (QVBS csma 4-2:
+    # 8.8 bytes a transition at the analysis's traced peak, its end)
+    del found, comp_level
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:
