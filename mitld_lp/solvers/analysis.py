@@ -172,6 +172,8 @@ def _self_loops_only(mdp: MDP, maybe: np.ndarray) -> EndComponents:
     n = mdp.n_states
     stay = _staying_choices(mdp)
     stay = stay[maybe[mdp.state_of(stay)]]
+    if not stay.size:  # none: the stride-0 record
+        return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))
     internal = np.zeros(mdp.n_choices, dtype=bool)
     internal[stay] = True
