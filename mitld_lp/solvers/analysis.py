@@ -82,7 +82,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
-from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
+from mitld_lp.solvers.analysis_patterns import candidates_pattern, compact, largest_inside
 from mitld_lp.solvers.analysis_singles import (
     prob1e_on_product,
     prob1e_single_states,
@@ -101,7 +101,7 @@ from mitld_lp.solvers.graph import (
     maximal_end_components,
     state_levels,
 )
-from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
+from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks, split
 from mitld_lp.solvers.quotient_rows import quotient_rows
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
@@ -268,15 +268,6 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
             kernels.COMPILED_MIN_BLOCK_ENTRIES:
         return False
     return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
-
-
-def _compact(matrix: sp.csr_array) -> None:
-    """``matrix``'s entries in arrays of their own size where ``eliminate_zeros`` left
-    them views of larger ones (it copies only below half)."""
-    for name in ("data", "indices"):
-        a = getattr(matrix, name)
-        if a.base is not None and a.size < a.base.size:
-            setattr(matrix, name, a.copy())
 
 
 def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
@@ -468,6 +459,12 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         if mecs.n_mecs:
             mecs = without_states(mecs, sure_state, mdp)
     maybe = maybe & ~sure_state
+    if found.level is None and found.later is not None and \
+            split(found.component, maybe, sure_state):
+        # the product's levels the layers read (quotient_blocks: a component split by
+        # the value-1 states, final here: none is cut below where some are found above),
+        # walked before the quotient's rows, its condensation freed (zeroconf 1000-4)
+        found = replace(found, level=found.later(), later=None)
     plain = maybe & (mecs.mec_of < 0) if mecs.n_mecs else maybe
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
@@ -528,7 +525,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if mecs.n_mecs:
         matrix.sum_duplicates()
         matrix.eliminate_zeros()
-        _compact(matrix)
+        compact(matrix)
 
     # with collapsed end components, a maximum's value-1 states out of the quotient
     # (_without_one): Prob1E (a collapsed end component leaves whole)
