@@ -82,7 +82,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_gates import attractor_walks
-from mitld_lp.solvers.analysis_patterns import candidates_pattern, largest_inside
+from mitld_lp.solvers.analysis_patterns import candidates_pattern, compact, largest_inside
 from mitld_lp.solvers.analysis_singles import (
     prob1e_on_product,
     prob1e_single_states,
@@ -101,7 +101,7 @@ from mitld_lp.solvers.graph import (
     maximal_end_components,
     state_levels,
 )
-from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks
+from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks, split
 from mitld_lp.solvers.quotient_rows import quotient_rows
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
@@ -172,6 +172,8 @@ def _self_loops_only(mdp: MDP, maybe: np.ndarray) -> EndComponents:
     n = mdp.n_states
     stay = _staying_choices(mdp)
     stay = stay[maybe[mdp.state_of(stay)]]
+    if not stay.size:  # none: the stride-0 record
+        return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))
     internal = np.zeros(mdp.n_choices, dtype=bool)
     internal[stay] = True
@@ -207,12 +209,14 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
     if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
         return _no_end_components(n, mdp.n_choices)
     cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
+    if cand.size == 0:
+        return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
-    if cand.size == 0:
-        return EndComponents(read_only(mec_of), read_only(internal), 0)
     if walks is not None:  # the rounds among the candidates, with no sub-MDP built
         found = compiled_end_components(walks, mdp, cand)
+        if not found.n_mecs:
+            return _no_end_components(n, mdp.n_choices)
         return EndComponents(read_only(found.mec_of.astype(mec_of.dtype, copy=False)),
                              found.internal, found.n_mecs)
     lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
@@ -266,15 +270,6 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
     return largest_inside(m, row_groups, comp) >= kernels.COMPILED_MIN_BLOCK_ENTRIES
 
 
-def _compact(matrix: sp.csr_array) -> None:
-    """``matrix``'s entries in arrays of their own size where ``eliminate_zeros`` left
-    them views of larger ones (it copies only below half)."""
-    for name in ("data", "indices"):
-        a = getattr(matrix, name)
-        if a.base is not None and a.size < a.base.size:
-            setattr(matrix, name, a.copy())
-
-
 def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
             two: bool) -> tuple[list[np.ndarray], np.ndarray]:
     """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
@@ -288,8 +283,10 @@ def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.
 
 
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
-    return EndComponents(read_only(np.full(n, -1, dtype=index_dtype(n))),
-                         read_only(np.zeros(n_choices, dtype=bool)), 0)
+    """The record of no end component (:meth:`~mitld_lp.solvers.end_components.
+    EndComponents.none`: read-only views of stride 0, nothing a state or a choice
+    allocated; a minimum's quotients hold it from the analysis to the LP)."""
+    return EndComponents.none(n, n_choices)
 
 
 def _one(sense: Sense, matrix: sp.csr_array, row_groups: np.ndarray, zero: np.ndarray,
@@ -368,6 +365,8 @@ def _fewer_components(mecs: EndComponents, new_id: np.ndarray, sure: np.ndarray,
     the quotient (``sure``), the others numbered as their reduced states now are (in
     the same order): a removed component's members and internal choices are no longer
     any component's."""
+    if bool(np.all(sure[n_plain:])):  # none left: the record of none (stride-0 views)
+        return _no_end_components(mecs.mec_of.size, mecs.internal.size)
     kept_plain = int(np.count_nonzero(~sure[:n_plain]))
     renumber = new_id[n_plain:] - kept_plain  # -1 - kept_plain where removed
     renumber[sure[n_plain:]] = -1
@@ -402,49 +401,50 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # nothing truncated: one target, so one seed set, one reach and one set of leaks
     # (the second model's columns are the first's)
     same = not extra.any()
-    # a minimum's Prob0E (the attractors of its targets) first where NumPy walks it:
-    # its reversed choices are freed before the state graph's reversal is made, which
-    # the minimum's Prob1A reads after (csma 4-2: the two were alive together at the
-    # analysis's peak); compiled, it holds no such graph and runs after, as before (after
-    # the components, which keep SciPy's walk though its load is then paid: analysis_gates)
-    early = sense is Sense.MIN and attractor_walks(m.nnz) is None
-    if early:
+    # a minimum's Prob0E (the attractors of its targets) first: its reversed choices
+    # (NumPy's walk) are freed before the state graph's reversal is made, which the
+    # minimum's Prob1A reads; and its Prob1A (value_one) right after the components,
+    # so that the reversal is freed before the rest of the analysis (csma 4-2: the two
+    # were alive together at the analysis's peak, then the reversal beside the sweeps'
+    # gate and the components' checks)
+    minimum = sense is Sense.MIN
+    if minimum:
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
     found, reach, back = components_reaching(
         m, mdp.row_groups, np.column_stack([goal] if same else [goal, wide]))
+    reach = reach[:, [0, 0] if same else [0, 1]]
+    n = mdp.n_states
+    j0 = 1 if same else 0
+    sure_state = np.zeros(n, dtype=bool)
+    if minimum:
+        prob0, maybe = attracted
+        del attracted
+        mecs = _no_end_components(n, mdp.n_choices)
+        # the goal's value-1 states out of the quotient, found on the pattern before it
+        # is made (value_one): Prob1A on the reversal, then freed
+        if without_one:
+            sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
+    del back
     if not kernel_loader.compiled_paid() and _sweeps_compiled(m, mdp.row_groups,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
-    reach = reach[:, [0, 0] if same else [0, 1]]
-    if sense is Sense.MAX or not without_one:  # only a minimum's Prob1A searches it again
-        back = None
-    n = mdp.n_states
-    if sense is Sense.MAX:
+    if not minimum:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
         mecs = end_components(mdp, found.component, maybe)
-    else:
-        prob0, maybe = attracted if early else _prob0e(m, mdp.row_groups, goal, wide,
-                                                       extra.any())
-        mecs = _no_end_components(n, mdp.n_choices)
 
     if found.level is None and mixed(found.component, maybe):  # the order as before
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
-    # the goal's value-1 states out of the quotient, found on the pattern before it is
-    # made (value_one, analysis_singles): Prob1A of a minimum, Prob1E of a maximum where
-    # no end component, or only single states, are collapsed (else on the quotient
-    # below, _without_one cutting them out)
-    j0 = 1 if same else 0
-    sure_state = np.zeros(n, dtype=bool)
+    # a maximum's Prob1E where no end component, or only single states, are collapsed,
+    # found on the pattern before the quotient is made (value_one, analysis_singles;
+    # else on the quotient below, _without_one cutting them out)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
-    if without_one and sense is Sense.MIN:
-        sure_state = prob1a_first(m, mdp.row_groups, maybe, prob0[j0], back)
-    elif without_one and (not mecs.n_mecs or single_states(mecs)):
+    if without_one and not minimum and (not mecs.n_mecs or single_states(mecs)):
         # with end components of one state each (a deadline's self-loops) too: their
         # staying choices hit from the start, the components of value 1 dropped
         # (analysis_singles), so no quotient of every maybe state is built and cut
@@ -458,27 +458,34 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         del played
         if mecs.n_mecs:
             mecs = without_states(mecs, sure_state, mdp)
-    del back
     maybe = maybe & ~sure_state
-    plain = maybe & (mecs.mec_of < 0)
+    if found.level is None and found.later is not None and \
+            split(found.component, maybe, sure_state):
+        # the product's levels the layers read (quotient_blocks: a component split by
+        # the value-1 states, final here: none is cut below where some are found above),
+        # walked before the quotient's rows, its condensation freed (zeroconf 1000-4)
+        found = replace(found, level=found.later(), later=None)
+    plain = maybe & (mecs.mec_of < 0) if mecs.n_mecs else maybe
     n_plain = int(plain.sum())
     # each state's reduced state and each kept choice's product choice, the quotient's
     # two per-state / per-choice index arrays, kept by both models: int32 where the
     # product's size allows (half the bytes), int64 past 2**31 - 1 (index_dtype)
     state_map = np.full(n, -1, dtype=index_dtype(n))
     state_map[plain] = np.arange(n_plain)
-    in_mec = mecs.mec_of >= 0
-    state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
+    if mecs.n_mecs:  # none: no mask a state of the stride-0 record read
+        in_mec = mecs.mec_of >= 0
+        state_map[in_mec] = n_plain + mecs.mec_of[in_mec]
+        del in_mec
     n_red = n_plain + mecs.n_mecs
 
     # the maybe states' choices read from their ranges (no array a choice of the whole
     # product: most products keep a third to two thirds of their choices), ascending
     kept, owner = choices_of(np.asarray(mdp.row_groups), np.flatnonzero(maybe))
-    inside = mecs.internal[kept]
-    if inside.any():
-        kept, owner = kept[~inside], owner[~inside]
-    del inside
-    if mecs.n_mecs:
+    if mecs.n_mecs:  # no internal choice where no end component
+        inside = mecs.internal[kept]
+        if inside.any():
+            kept, owner = kept[~inside], owner[~inside]
+        del inside
         by_state = np.argsort(state_map[owner], kind="stable")
         kept, owner = kept[by_state], owner[by_state]
         del by_state
@@ -518,7 +525,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if mecs.n_mecs:
         matrix.sum_duplicates()
         matrix.eliminate_zeros()
-        _compact(matrix)
+        compact(matrix)
 
     # with collapsed end components, a maximum's value-1 states out of the quotient
     # (_without_one): Prob1E (a collapsed end component leaves whole)
@@ -556,6 +563,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
               read_only(comp_level.astype(index_dtype(n), copy=False)))
+    # their int64 originals freed before the quotients' masks are made (QVBS csma 4-2:
+    # 8.8 bytes a transition at the analysis's traced peak, its end)
+    del found, comp_level
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.quotient_rows import row_columns
 
-__all__ = ["CHUNK_ENTRIES", "candidates_pattern", "largest_inside"]
+__all__ = ["CHUNK_ENTRIES", "candidates_pattern", "compact", "largest_inside"]
 
 
 CHUNK_ENTRIES = 1 << 16
@@ -70,3 +70,12 @@ def candidates_pattern(m: sp.csr_array, choices: np.ndarray, cand: np.ndarray, n
     indptr[-1] = total + 1
     return sp.csr_array((np.broadcast_to(np.float64(1.0), (total + 1,)), indices, indptr),
                         shape=(choices.size + 1, cand.size + 1), copy=False)
+
+
+def compact(matrix: sp.csr_array) -> None:
+    """``matrix``'s entries in arrays of their own size where ``eliminate_zeros`` left
+    them views of larger ones (it copies only below half)."""
+    for name in ("data", "indices"):
+        a = getattr(matrix, name)
+        if a.base is not None and a.size < a.base.size:
+            setattr(matrix, name, a.copy())

@@ -90,6 +90,8 @@ def without_states(mecs: EndComponents, gone: np.ndarray, mdp: MDP) -> EndCompon
     drop[mec_of[members & gone]] = True
     if not drop.any():
         return mecs
+    if drop.all():  # none left: the record of none (stride-0 views)
+        return EndComponents.none(mec_of.size, np.asarray(mecs.internal).size)
     renumber = np.cumsum(~drop) - 1
     renumber[drop] = -1
     new_of = np.where(members, renumber[np.maximum(mec_of, 0)], -1).astype(mec_of.dtype)

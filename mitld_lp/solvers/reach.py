@@ -105,9 +105,12 @@ class Reversed:
             else:
                 rows = np.zeros(n + 1, dtype=index)
                 np.cumsum(np.bincount(source, minlength=n), out=rows[1:])
-            _st.csr_tocsc(n, n, rows, succ.astype(index, copy=False),
-                          np.zeros(m, dtype=np.int8), self.indptr[:n + 1],
-                          self.indices[:m], np.empty(m, dtype=np.int8))
+            # the values (unread: a byte an edge) one array of zeros, read and written
+            # in place (each write a zero over a zero): not a second one (1 B/t)
+            zeros = np.zeros(m, dtype=np.int8)
+            _st.csr_tocsc(n, n, rows, succ.astype(index, copy=False), zeros,
+                          self.indptr[:n + 1], self.indices[:m], zeros)
+            del zeros
         else:  # one row an edge, its source the entry's value: the same sort
             _st.csr_tocsc(m, n, np.arange(m + 1, dtype=index),
                           succ.astype(index, copy=False), source.astype(index, copy=False),
