@@ -25,10 +25,12 @@ import threading
 import types
 from typing import Any
 
-from mitld_lp.own_imports import PACKAGE, BodyLater
-
 __all__ = ["NUMPY_MA", "UNIQUE_MODULE", "MaskedLater", "asked_by_unique", "made_later",
            "plain_is_masked"]
+
+#: The package whose modules' ``np.unique`` get ``numpy.ma`` later (not imported from
+#: :mod:`mitld_lp.own_imports`, which imports this module: no circle).
+PACKAGE = __name__.partition(".")[0]
 
 #: The module put off.
 NUMPY_MA = "numpy.ma"
@@ -76,8 +78,9 @@ def plain_is_masked(x: object) -> Any:
     return sys.modules[NUMPY_MA].is_masked(x)
 
 
-class MaskedLater(BodyLater):
-    """``numpy.ma`` whose ``__init__`` has not run (module docs)."""
+class MaskedLater(types.ModuleType):
+    """``numpy.ma`` whose ``__init__`` has not run (module docs): like
+    :class:`mitld_lp.own_imports.BodyLater`, with its own lock and one name served."""
 
     def _load(self) -> None:
         with _lock:
