@@ -66,7 +66,7 @@ def _twinned(base: MDP) -> MDP:
                truncated=np.zeros(2 * n, dtype=bool), states=tuple(range(2 * n)))
 
 
-def _linprog_max(mdp: MDP) -> np.ndarray:
+def linprog_max(mdp: MDP) -> np.ndarray:
     """Pmax by scipy's LP: the least ``v >= 0`` with ``v(s) >= P(c) v`` for every
     choice of a non-target state and ``v = 1`` on the target."""
     n, p = mdp.n_states, mdp.matrix.toarray()
@@ -108,15 +108,15 @@ def _linprog_min(mdp: MDP) -> np.ndarray:
     return res.x
 
 
-def _tied(seed: int, n: int = 30) -> MDP:
+def tied_mdp(seed: int, n: int = 30) -> MDP:
     return _twinned(random_mdp(n, seed=seed, target_fraction=0.1, sink_fraction=0.1,
                                self_loop_fraction=0.0, max_choices=3, max_successors=3))
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_tied_blocks_get_linprogs_values(seed: int) -> None:
-    mdp = _tied(seed)
-    want = _linprog_max(mdp)
+    mdp = tied_mdp(seed)
+    want = linprog_max(mdp)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
     solved = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper),
@@ -146,7 +146,7 @@ def test_tied_blocks_get_linprogs_values(seed: int) -> None:
 def test_a_block_was_certified_at_all() -> None:
     """The seeds above include blocks the certificate answers (else the test would
     only have checked the LP again)."""
-    mdp = _tied(0)
+    mdp = tied_mdp(0)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
     assert "by the bounds' greedy policy, certified" in got.message
@@ -155,7 +155,7 @@ def test_a_block_was_certified_at_all() -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_minimum_with_ties_gets_linprogs_values(seed: int) -> None:
-    mdp = _tied(seed)
+    mdp = tied_mdp(seed)
     want = _linprog_min(mdp)
     it = interval_iteration(mdp, mdp.target, sense=Sense.MIN, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, sense=Sense.MIN, everywhere=True,
@@ -179,8 +179,8 @@ def test_a_losing_greedy_policy_is_refused(seed: int, batch: int, monkeypatch) -
     on that choice's own successors) it is refused at that choice's state and every
     state upstream of it; the states downstream keep the optimum."""
     monkeypatch.setattr(greedy_block, "BATCH", batch)
-    mdp = _tied(seed)
-    want = _linprog_max(mdp)
+    mdp = tied_mdp(seed)
+    want = linprog_max(mdp)
     q, block, kept = _whole(mdp)
     v = np.zeros(q.n_states)
     v[q.state_map[kept]] = want[kept]
@@ -267,7 +267,7 @@ def test_a_level_of_two_components_is_settled_apart() -> None:
     """A block of two components of one level, the greedy policy losing in one of
     them: the other is settled by the certificate, the LP solves the first alone, and
     the values are linprog's."""
-    a, b = _tied(0), _tied(1)
+    a, b = tied_mdp(0), tied_mdp(1)
     na, nb = a.n_states, b.n_states
     matrix = sp.block_diag([a.matrix, b.matrix], format="csr")
     both = MDP(matrix=sp.csr_array(matrix),
@@ -277,7 +277,7 @@ def test_a_level_of_two_components_is_settled_apart() -> None:
                target=np.concatenate([a.target, b.target]),
                sink=np.concatenate([a.sink, b.sink]),
                truncated=np.zeros(na + nb, dtype=bool), states=tuple(range(na + nb)))
-    want = _linprog_max(both)
+    want = linprog_max(both)
     # the optimum as the lower bound, except that in the first half a state's worst
     # choice is made greedy by raising its successors' bounds
     lower = want.copy()

@@ -204,7 +204,7 @@ def test_the_lp_takes_the_iterations_walk_to_the_bit(warm, monkeypatch, seed: in
         assert np.max(np.abs(reached - np.array([float(x) for x in truth]))) <= 1e-12
 
 
-def _tied(near: bool):
+def tied_mdp(near: bool):
     """A chain of 220 steps where every state has the value 1/2 by three choices: to the
     goal and the dead end, half each; a quarter (``near``: 0.3, not a binary fraction,
     so its score may differ from 1/2 in its last bits) to the goal and the rest through
@@ -230,7 +230,7 @@ def _tied(near: bool):
 @pytest.mark.parametrize("near", [False, True])
 def test_ties_go_as_the_lps_own_walk_breaks_them(warm, monkeypatch, sense: Sense,
                                                  near: bool) -> None:
-    mdp, rows, goal = _tied(near)
+    mdp, rows, goal = tied_mdp(near)
     (it, lp), (_, lp0) = _lp_both_ways(monkeypatch, mdp, sense, True)
     assert np.array_equal(np.asarray(lp.policy), np.asarray(lp0.policy))
     assert np.array_equal(np.asarray(lp.values).view(np.int64),

@@ -24,7 +24,7 @@ from mitld_lp.solvers.greedy_block import _owners, _rows, _scores
 from mitld_lp.solvers.iteration import interval_iteration
 from mitld_lp.solvers.lp import _reduced_bounds, solve_lp
 from mitld_lp.solvers.quotient import reduce
-from tests.test_greedy_block import _linprog_max, _tied
+from tests.test_greedy_block import linprog_max, tied_mdp
 
 
 def _random_rows(rng: np.random.Generator, m: int, n: int, *,
@@ -90,7 +90,7 @@ def test_owners_from_the_first_choices_alone(seed: int) -> None:
 
 @pytest.mark.parametrize("seed", range(4))
 def test_bounds_read_on_the_reduced_states(seed: int) -> None:
-    mdp = _tied(seed)
+    mdp = tied_mdp(seed)
     q = reduce(mdp, mdp.target)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     lo, hi = _reduced_bounds(q, (it.lower, it.upper))
@@ -125,7 +125,7 @@ def test_block_left_to_the_lp_after_the_greedy_gets_linprogs_values(
         calls.append(greedy_block.certified_greedy(*args, **kwargs))
         return None
 
-    mdp = _tied(seed)
+    mdp = tied_mdp(seed)
     q = reduce(mdp, mdp.target)
     polish = lp_blocks.polish
     polished = []
@@ -138,7 +138,7 @@ def test_block_left_to_the_lp_after_the_greedy_gets_linprogs_values(
 
     monkeypatch.setattr(lp_blocks, "certified_greedy", refused)
     monkeypatch.setattr(lp_blocks, "polish", checked)
-    want = _linprog_max(mdp)
+    want = linprog_max(mdp)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
     assert calls, "no block went through the greedy check"

@@ -269,7 +269,7 @@ def test_greedy_blocks_with_narrow_choices_get_linprogs_values(seed, refuse, mon
     from mitld_lp.solvers import lp_blocks
     from mitld_lp.solvers.iteration import interval_iteration
     from mitld_lp.solvers.lp import solve_lp
-    from tests.test_greedy_block import _linprog_max, _tied
+    from tests.test_greedy_block import linprog_max, tied_mdp
 
     monkeypatch.setattr(lp_blocks, "GREEDY_MIN_CHOICES", 0)
     seen: dict[str, list] = {"greedy": [], "lp": []}
@@ -285,8 +285,8 @@ def test_greedy_blocks_with_narrow_choices_get_linprogs_values(seed, refuse, mon
 
     monkeypatch.setattr(lp_blocks, "certified_greedy", greedy)
     monkeypatch.setattr(lp_blocks, "block_lp", block_lp)
-    mdp = _tied(seed)
-    want = _linprog_max(mdp)
+    mdp = tied_mdp(seed)
+    want = linprog_max(mdp)
     it = interval_iteration(mdp, mdp.target, gap="max", progress=False)
     got = solve_lp(mdp, mdp.target, everywhere=True, bounds=(it.lower, it.upper))
     assert got.values is not None and got.policy is not None
