@@ -27,9 +27,9 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers.graph import EndComponents, attractor_spared
-from mitld_lp.solvers.quotient_rows import row_columns, take_ranges
+from mitld_lp.solvers.quotient_rows import take_ranges
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.value_one import SureStrategy, attractor_strategy, choices_of
+from mitld_lp.solvers.value_one import SureStrategy, attractor_strategy, prob1e_first
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["prob1e_on_product", "prob1e_single_states", "single_states", "without_states"]
@@ -50,34 +50,7 @@ def prob1e_single_states(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.
     docs): those outside the attractor of ``zero`` over the ``maybe`` states' choices,
     the components' internal choices hit from the start; and the lift's strategy there
     (None where there is none)."""
-    n = mdp.n_states
-    groups = np.asarray(mdp.row_groups)
-    states = np.flatnonzero(maybe)
-    kept, _ = choices_of(groups, states)
-    per_state = np.zeros(n, dtype=np.int64)
-    per_state[states] = groups[states + 1] - groups[states]
-    sub_groups = np.concatenate([[0], np.cumsum(per_state)])
-    del per_state
-    indptr = np.concatenate([[0], np.cumsum(m.indptr[kept + 1] - m.indptr[kept])]
-                            ).astype(m.indptr.dtype)
-    pattern = sp.csr_array((np.broadcast_to(np.float64(1.0), (int(indptr[-1]),)),
-                            row_columns(m, kept), indptr),
-                           shape=(kept.size, n), copy=False)
-    lose, hit = attractor_spared(pattern, sub_groups, zero, np.asarray(mecs.internal)[kept])
-    del pattern, sub_groups
-    sure = np.zeros(n, dtype=bool)
-    sure[states] = ~lose[states]
-    if not sure.any():
-        return sure, None
-    # every maybe state's numbering, each a state of its own (the components' too)
-    state_map = np.full(n, -1, dtype=index_dtype(n))
-    state_map[states] = np.arange(states.size)
-    row_groups = np.concatenate([[0], np.cumsum(groups[states + 1] - groups[states])]
-                                ).astype(np.int64)
-    played = attractor_strategy(mdp, sure[states], ~hit, row_groups,
-                                kept.astype(index_dtype(mdp.n_choices), copy=False),
-                                state_map, states.size, mecs)
-    return sure, played
+    return prob1e_first(mdp, m, maybe, zero, mecs, internal_hit=True)
 
 
 def without_states(mecs: EndComponents, gone: np.ndarray, mdp: MDP) -> EndComponents:

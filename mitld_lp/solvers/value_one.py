@@ -65,14 +65,17 @@ def _closed(m: sp.csr_array, row_groups: np.ndarray, states: np.ndarray) -> bool
 
 
 def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
-                 no_mecs: EndComponents) -> tuple[np.ndarray, SureStrategy | None]:
+                 no_mecs: EndComponents, *, internal_hit: bool = False,
+                 ) -> tuple[np.ndarray, SureStrategy | None]:
     """``(n,)`` bool: a maximum's ``maybe`` states of value 1 for the target whose
     prob-0 states are ``zero``, where no end component is collapsed (``no_mecs``):
     those outside the attractor of ``zero`` over the ``maybe`` states' choices (the
     pattern of their rows, every other state without a choice); and the lift's
     strategy there (:func:`attractor_strategy`, None where there is none), read from
     the choices the attractor spared, numbered as the quotient of every maybe state
-    would number them."""
+    would number them.  ``internal_hit``: ``no_mecs`` has components, each one state,
+    whose internal choices count as hit from the start (their state kept as its own:
+    :func:`~mitld_lp.solvers.analysis_singles.prob1e_single_states`)."""
     n = mdp.n_states
     groups = np.asarray(mdp.row_groups)
     states = np.flatnonzero(maybe)
@@ -86,7 +89,8 @@ def prob1e_first(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
     pattern = sp.csr_array((np.broadcast_to(np.float64(1.0), (int(indptr[-1]),)),
                             row_columns(m, kept), indptr),
                            shape=(kept.size, n), copy=False)
-    lose, hit = attractor_spared(pattern, sub_groups, zero)
+    lose, hit = attractor_spared(pattern, sub_groups, zero,
+                                 np.asarray(no_mecs.internal)[kept] if internal_hit else None)
     del pattern, sub_groups
     sure = np.zeros(n, dtype=bool)
     sure[states] = ~lose[states]
