@@ -85,6 +85,7 @@ from mitld_lp.solvers.kernels import (
     excess,
     numpy_sweeps,
 )
+from mitld_lp.solvers.level_first import FirstBounds
 from mitld_lp.solvers.policy_jump import jump
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
@@ -383,7 +384,7 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         prep = Prepared(block.inner, block.groups)
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY
         # a copy: the early jump (compiled blocks only) starts greedy on it
-        first = bounds[block.states] if fast else None
+        first = FirstBounds(bounds, block.states) if fast else None
         early = _Early() if fast else None
         if _block_sweeps(block, prep, exits, bounds, tol, precision, sense, budget, bar,
                          fast, limit, early):
@@ -391,8 +392,8 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if early is not None and early.stopped and budget.stopped is None:
             # the jump's cost forecast on the block as swept; the moves out of it
             # (``whole``) made only for a jump that is taken
-            jumped = _early_jump(block, rewards, bounds, first, tol, precision, sense,
-                                 _saved(early, limit), exits, q)
+            jumped = _early_jump(block, rewards, bounds, first.values(), tol, precision,
+                                 sense, _saved(early, limit), exits, q)
             if jumped is True:
                 continue
             block = jumped or block

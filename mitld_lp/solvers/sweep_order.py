@@ -55,7 +55,8 @@ __all__ = ["for_sweeps", "renumbered", "value_order", "whole"]
 def for_sweeps(held: list[Block], order: np.ndarray, exits: np.ndarray,
                ) -> tuple[Block, np.ndarray]:
     """:func:`renumbered` without the block's moves out of it (``outer`` is ``None``)
-    and its ``exits`` (a row a choice, made from them before) taken in the new order:
+    nor its target probabilities (``to_target`` is ``None``; its choices in int32 where
+    they fit) and its ``exits`` (a row a choice, made from them before) taken in the new order:
     the sweeps read no more of them (QVBS ``zeroconf`` 1000-4: the moves out of its
     block of 213,268 states held 9 bytes a transition through the sweeps).  The same
     exits to the bit: each row's product adds the same entries in the same order.  A
@@ -102,8 +103,16 @@ def _renumber(held: list[Block], order: np.ndarray, *, outer: bool,
     del place
     moved = _rows(matrices, picked, None) if outer else None
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    return Block(states[order], choices[picked], inner, moved, starts,
-                 to_target[picked]), picked
+    if outer:
+        return Block(states[order], choices[picked], inner, moved, starts,
+                     to_target[picked]), picked
+    # the sweeps, the jump's forecast and its greedy start read neither the choices'
+    # numbers nor their target probabilities (the early jump and ``whole`` take them
+    # from the quotient again): the choices in int32, no target probabilities (QVBS
+    # ``zeroconf`` 1000-4: 5.2 bytes a transition through the sweeps)
+    index = np.int32 if int(choices.max(initial=0)) <= np.iinfo(np.int32).max else np.int64
+    return Block(states[order], choices.astype(index, copy=False)[picked], inner, None,
+                 starts, None), picked
 
 
 def _rows(held: list[sp.csr_array], rows: np.ndarray, rename: np.ndarray | None,
