@@ -381,7 +381,10 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
             del block  # renumbered lets the old block's matrices go as it goes
             block, exits = for_sweeps(held, order, exits)  # Block.of's, without its outer
             rest = block.states
-        prep = Prepared(block.inner, block.groups)
+        groups = block.groups  # the block's starts a view of them: held once, not twice
+        block = replace(block, starts=groups[:-1])
+        prep = Prepared(block.inner, groups)
+        del groups
         limit = _COMPILED_SWEEPS_BEFORE_POLICY if fast else _SWEEPS_BEFORE_POLICY
         # a copy: the early jump (compiled blocks only) starts greedy on it
         first = FirstBounds(bounds, block.states) if fast else None
