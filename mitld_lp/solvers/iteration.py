@@ -374,12 +374,15 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         block = Block.of(q, rest)
         fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block) if compiled is None
                 else compiled)
+        if fast:  # the order before the exits: its searches peak without them beside
+            order = value_order(block)[::-1]
         exits = rewards[block.choices] + block.outer @ bounds
         if fast:  # the target's value carried back in one sweep, the block renumbered
             # for the kernel's sweep from last to first (sweep_order's docs)
-            held, order = [block], value_order(block)[::-1]
+            held = [block]
             del block  # renumbered lets the old block's matrices go as it goes
             block, exits = for_sweeps(held, order, exits)  # Block.of's, without its outer
+            del order
             rest = block.states
         groups = block.groups  # the block's starts a view of them: held once, not twice
         block = replace(block, starts=groups[:-1])
