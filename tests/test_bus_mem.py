@@ -1,0 +1,116 @@
+"""The bus family's memory cuts, each checked against an independent computation on
+small models: the repair's closed-at-zero test read a slice of states at a time
+(against a loop over every row's entries), and a one-LU chain walk that keeps the chain
+itself beside its LU (its solves against NumPy's dense solve of ``I - Q``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from mitld_lp.solvers import certify_repair
+from mitld_lp.solvers.certify_repair import Rows, closed_at_zero
+from mitld_lp.solvers.chain_levels import WALK_MIN_STATES, ChainLevels
+
+
+def _model(rng: np.random.Generator, n: int, nature: bool) -> Rows:
+    """A random model of ``n`` states, 1-3 choices a state, with nature's rows (1-2 a
+    choice) where asked, some of its entries stored zeros."""
+    per_state = rng.integers(1, 4, size=n)
+    groups = np.concatenate([[0], np.cumsum(per_state)])
+    n_choices = int(groups[-1])
+    if nature:
+        per_choice = rng.integers(1, 3, size=n_choices)
+        nat = np.concatenate([[0], np.cumsum(per_choice)])
+        n_rows = int(nat[-1])
+    else:
+        nat, n_rows = None, n_choices
+    dense = np.zeros((n_rows, n))
+    for r in range(n_rows):
+        cols = rng.choice(n, size=min(n, int(rng.integers(1, 4))), replace=False)
+        dense[r, cols] = rng.random(cols.size)
+    m = sp.csr_array(dense)
+    # a few stored zeros: entries the pattern holds whose value is 0
+    m.data[rng.random(m.nnz) < 0.1] = 0.0
+    return Rows(m, groups, nat)
+
+
+def _brute(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+    """Every ``zero`` state is 0 in ``x`` and every stored entry of each of its rows
+    (nature's included) has its column in ``zero``: row by row, from the definition."""
+    m = st.matrix
+    for s in np.flatnonzero(zero):
+        if x[s] != 0.0:
+            return False
+        for c in range(int(st.groups[s]), int(st.groups[s + 1])):
+            rows = (range(c, c + 1) if st.nature is None else
+                    range(int(st.nature[c]), int(st.nature[c + 1])))
+            for r in rows:
+                for k in range(int(m.indptr[r]), int(m.indptr[r + 1])):
+                    if not zero[m.indices[k]]:
+                        return False
+    return True
+
+
+@pytest.mark.parametrize("slice_states", [1, 2, 3, 4096])
+@pytest.mark.parametrize("nature", [False, True])
+def test_closed_at_zero_matches_a_loop_over_the_rows(monkeypatch: pytest.MonkeyPatch,
+                                                     slice_states: int,
+                                                     nature: bool) -> None:
+    monkeypatch.setattr(certify_repair, "CLOSED_SLICE", slice_states)
+    rng = np.random.default_rng(7 + slice_states + 100 * nature)
+    seen = {True: 0, False: 0}
+    for _ in range(60):
+        n = int(rng.integers(2, 12))
+        st = _model(rng, n, nature)
+        zero = rng.random(n) < 0.5
+        if rng.random() < 0.5:  # close the set: every state reaching a non-zero one out
+            m = st.matrix
+            for _round in range(n):
+                for s in np.flatnonzero(zero):
+                    lo = int(st.groups[s])
+                    hi = int(st.groups[s + 1])
+                    if st.nature is not None:
+                        lo, hi = int(st.nature[lo]), int(st.nature[hi])
+                    if not zero[m.indices[m.indptr[lo]:m.indptr[hi]]].all():
+                        zero[s] = False
+        x = np.where(zero, 0.0, rng.random(n))
+        if rng.random() < 0.2 and zero.any():
+            x[np.flatnonzero(zero)[0]] = 0.5  # not 0 at a zero state: not closed
+        want = _brute(st, zero, x)
+        assert closed_at_zero(st, zero, x) is want
+        seen[want] += 1
+    assert seen[True] and seen[False]  # both answers were asked
+
+
+def _chain(rng: np.random.Generator, n: int) -> sp.csr_array:
+    """A random transient chain: each row's mass below 1, a self-loop on some."""
+    dense = np.zeros((n, n))
+    for r in range(n):
+        cols = rng.choice(n, size=min(n, int(rng.integers(1, 4))), replace=False)
+        dense[r, cols] = rng.random(cols.size)
+        dense[r] *= rng.uniform(0.2, 0.95) / dense[r].sum()
+    return sp.csr_array(dense)
+
+
+@pytest.mark.parametrize("n", [5, 40, 300])
+def test_one_lu_walk_solves_as_the_dense_solve(n: int) -> None:
+    assert n < WALK_MIN_STATES  # one LU, no walk over components
+    rng = np.random.default_rng(n)
+    chain = _chain(rng, n)
+    want_matrix = np.eye(n) - chain.toarray()
+    walk = ChainLevels(chain)
+    for _ in range(2):  # the second solves on the kept factorisation
+        rhs = rng.random(n)
+        np.testing.assert_allclose(walk.solve(rhs), np.linalg.solve(want_matrix, rhs),
+                                   rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(walk.solve_transposed(rhs),
+                                   np.linalg.solve(want_matrix.T, rhs),
+                                   rtol=1e-10, atol=1e-12)
+        two = rng.random((n, 2))
+        np.testing.assert_allclose(walk.solve(two), np.linalg.solve(want_matrix, two),
+                                   rtol=1e-10, atol=1e-12)
+    # the rows kept beside the one LU are the walk's chain, not a copy of it
+    (rows, _lu), = walk._cyclic.values()
+    assert rows is walk.chain
