@@ -114,3 +114,56 @@ def test_one_lu_walk_solves_as_the_dense_solve(n: int) -> None:
     # the rows kept beside the one LU are the walk's chain, not a copy of it
     (rows, _lu), = walk._cyclic.values()
     assert rows is walk.chain
+
+
+def _linprog_max_reach(mdp) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The maximal reachability probabilities of ``mdp.target`` by SciPy's ``linprog``:
+    the least ``v`` in [0, 1] with ``v(s) >= sum_s' P(c, s') v(s')`` for every choice
+    ``c`` of a non-target state ``s`` and ``v = 1`` on the target (min the sum of ``v``)."""
+    from scipy.optimize import linprog
+
+    n = mdp.n_states
+    p = mdp.matrix.toarray()
+    owner = np.repeat(np.arange(n), np.diff(mdp.row_groups))
+    target = np.asarray(mdp.target)
+    keep = ~target[owner]
+    a_ub = p[keep].copy()
+    a_ub[np.arange(a_ub.shape[0]), owner[keep]] -= 1.0  # P v - v(s) <= 0
+    bounds = [(1.0, 1.0) if t else (0.0, 1.0) for t in target]
+    res = linprog(np.ones(n), A_ub=a_ub, b_ub=np.zeros(a_ub.shape[0]), bounds=bounds,
+                  method="highs")
+    assert res.status == 0
+    return res.x
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lp_without_flows_values_as_linprog(seed: int) -> None:
+    """``solve_lp(..., flows=False)`` (its flow freed before the values are lifted):
+    every state's value as SciPy's own LP of the maximal reachability, and its policy's
+    chain reaching the target with the initial state's value."""
+    from mitld_lp.solvers import analysis
+    from mitld_lp.solvers import lp as L
+    from mitld_lp.solvers.graph import Sense
+    from mitld_lp.solvers.iteration import interval_iteration
+    from mitld_lp.testing import random_mdp
+
+    mdp = random_mdp(60, seed=seed, locality=None if seed % 2 else 10)
+    q = analysis.analyse(mdp, mdp.target, sense=Sense.MAX)[0]
+    it = interval_iteration(mdp, mdp.target, quotient=q, sense=Sense.MAX, tol=1e-10,
+                            precision=None, gap="max")
+    got = L.solve_lp(mdp, mdp.target, quotient=q, sense=Sense.MAX, everywhere=True,
+                     bounds=(it.lower, it.upper), flows=False)
+    assert got.occupancy is None and got.randomized is None
+    want = _linprog_max_reach(mdp)
+    np.testing.assert_allclose(got.values, want, atol=1e-7)
+    # the policy's own chain from 0 (the least fixed point: a loop that never reaches
+    # the target stays 0), iterated densely until it no longer moves
+    p = mdp.matrix.toarray()[np.asarray(got.policy)]
+    target = np.asarray(mdp.target)
+    x = target.astype(float)
+    for _ in range(100_000):
+        nxt = np.where(target, 1.0, p @ x)
+        if np.max(np.abs(nxt - x)) < 1e-15:
+            break
+        x = nxt
+    assert abs(x[mdp.initial] - want[mdp.initial]) < 1e-6
