@@ -167,3 +167,47 @@ def test_lp_without_flows_values_as_linprog(seed: int) -> None:
             break
         x = nxt
     assert abs(x[mdp.initial] - want[mdp.initial]) < 1e-6
+
+
+def test_route_trims_before_its_lps_and_the_answer_keeps_its_bits(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plain route hands the free heap back between the interval iteration and the
+    LPs (from TRIM_FROM_TRANSITIONS, lowered here to every product); the answer is the
+    same to the bit as with no trim at all, and the iteration's bounds bracket it."""
+    from pathlib import Path
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.routes import plain
+    from mitld_lp.solvers import lp as L
+
+    model = load_model(Path(__file__).resolve().parent.parent / "models" / "bus_grid.toml")
+    events: list[str] = []
+    solve_lp = L.solve_lp
+
+    def traced_lp(*a, **k):  # type: ignore[no-untyped-def]
+        events.append("lp")
+        return solve_lp(*a, **k)
+
+    monkeypatch.setattr(L, "solve_lp", traced_lp)
+    iterate = plain._iterate
+
+    def traced_iterate(*a, **k):  # type: ignore[no-untyped-def]
+        events.append("iteration")
+        return iterate(*a, **k)
+
+    monkeypatch.setattr(plain, "_iterate", traced_iterate)
+    monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", 0)
+    monkeypatch.setattr(plain, "release_free_memory", lambda: events.append("trim"))
+    trimmed = synthesize(model)
+    assert "lp" in events
+    first_lp = events.index("lp")
+    # the analysis's trim, the iteration, then a trim right before the first LP
+    assert events[:first_lp] == ["trim", "iteration", "trim"]
+    monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", 10**18)  # no trim at all
+    events.clear()
+    plain_run = synthesize(model)
+    assert "trim" not in events
+    assert np.float64(trimmed.lower).tobytes() == np.float64(plain_run.lower).tobytes()
+    assert np.float64(trimmed.upper).tobytes() == np.float64(plain_run.upper).tobytes()
+    assert trimmed.certified and plain_run.certified
+    assert trimmed.lower <= 0.9244053 + 1e-6 and trimmed.upper >= 0.9244053 - 1e-6
