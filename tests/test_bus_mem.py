@@ -172,7 +172,7 @@ def test_lp_without_flows_values_as_linprog(seed: int) -> None:
 def test_route_trims_before_its_lps_and_the_answer_keeps_its_bits(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The plain route hands the free heap back between the interval iteration and the
-    LPs (from TRIM_FROM_TRANSITIONS, lowered here to every product); the answer is the
+    LPs (from TRIM_BEFORE_LP_FROM, lowered here to every product); the answer is the
     same to the bit as with no trim at all, and the iteration's bounds bracket it."""
     from pathlib import Path
 
@@ -197,6 +197,7 @@ def test_route_trims_before_its_lps_and_the_answer_keeps_its_bits(
 
     monkeypatch.setattr(plain, "_iterate", traced_iterate)
     monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", 0)
+    monkeypatch.setattr(plain, "TRIM_BEFORE_LP_FROM", 0)
     monkeypatch.setattr(plain, "release_free_memory", lambda: events.append("trim"))
     trimmed = synthesize(model)
     assert "lp" in events
@@ -204,6 +205,7 @@ def test_route_trims_before_its_lps_and_the_answer_keeps_its_bits(
     # the analysis's trim, the iteration, then a trim right before the first LP
     assert events[:first_lp] == ["trim", "iteration", "trim"]
     monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", 10**18)  # no trim at all
+    monkeypatch.setattr(plain, "TRIM_BEFORE_LP_FROM", 10**18)
     events.clear()
     plain_run = synthesize(model)
     assert "trim" not in events
