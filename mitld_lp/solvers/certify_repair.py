@@ -22,8 +22,8 @@ try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
 except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
     _st = None
 
-__all__ = ["PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "readers_by_column",
-           "repair_levels"]
+__all__ = ["CLOSED_SLICE", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "closed_at_zero",
+           "readers_by_column", "repair_levels"]
 
 
 PASSES = True
@@ -40,6 +40,10 @@ SPARSE_LEVEL = 4096
 up and finds their readers by column (a large component's rounds move few of its
 states: QVBS zeroconf 1000-4's 213,268-state level, 3,497 failing), not the slices of
 every state of the level (:class:`_Walk`)."""
+
+CLOSED_SLICE = 4096
+"""The states of ``zero`` whose rows :func:`closed_at_zero` reads at a time (their
+entries' index, column and membership arrays are its temporaries)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -103,7 +107,7 @@ def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarra
     is held where its bound cannot need a move: at its extreme (1 for an upper bound,
     ``zero`` None; 0 for a lower one), where the repair never moves a bound past, or,
     for an upper bound, in ``zero`` (a maximum's prob-0 set) when every stored entry
-    of its rows stays in it and it is all 0 (:func:`_closed_at_zero`).  Holding a state
+    of its rows stays in it and it is all 0 (:func:`closed_at_zero`).  Holding a state
     is sound whatever it is: the caller checks again every state that failed and every
     reader of a moved one.  If some other state has no level, the levels of the whole
     support graph are found (:func:`support_layers`)."""
@@ -111,7 +115,7 @@ def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarra
     if not unknown.any():
         return level_of, free
     still = (x == 1.0) if zero is not None else (x == 0.0)
-    if zero is not None and _closed_at_zero(st, zero, x):
+    if zero is not None and closed_at_zero(st, zero, x):
         still |= zero
     held = free | (unknown & still)
     if not bool(np.any(unknown & ~held)):
@@ -120,7 +124,7 @@ def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarra
     return np.asarray(level)[np.asarray(comp)], free
 
 
-def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
+def closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
     """Whether every ``zero`` state passes the upper check at 0 for ever: all 0 in ``x``,
     every stored entry of their rows (nature's included) in ``zero``.  The graph reads
     no stored zero, the check does: a 0 entry out of it (the sensed chain models') makes
@@ -130,10 +134,18 @@ def _closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
         return False
     # a state's rows (nature's too) are consecutive, so its entries are one range of
     # the matrix's arrays: read there, not gathered row by row (the same entries)
+    # a slice of states at a time (:data:`CLOSED_SLICE`): the whole set's entries
+    # gathered at once, an int64 index an entry twice over, were the certificate's
+    # traced peak on ``bus_scaled`` n64 d3 (7 bytes a transition); the same test
     first = _state_groups(st)
     m = st.matrix
     ptr = m.indptr[first]
-    return bool(np.all(zero[m.indices[gather_ranges(ptr[states], ptr[states + 1])]]))
+    del first
+    for lo in range(0, states.size, CLOSED_SLICE):
+        part = states[lo:lo + CLOSED_SLICE]
+        if not bool(np.all(zero[m.indices[gather_ranges(ptr[part], ptr[part + 1])]])):
+            return False
+    return True
 
 
 def _state_groups(st: Rows) -> np.ndarray:

@@ -90,14 +90,20 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
         got = self._cyclic.get(level)
         if got is None and self.blocks is not None:
             got = self._cyclic[level] = self._level_factor(states)
-        if got is None:
+        if got is None:  # the whole chain, one LU (no walk: ``states`` are all)
             rows = sp.csr_array(self.chain[states])
             inner = sp.csc_array(rows[:, states])
+            del rows
+            a = sp.csc_array(sp.eye_array(states.size, format="csc") - inner)
+            del inner
             # SuperLU even for a small component when walking: the dense LU's solve is
             # LAPACK's, whose threads crawled on a loaded machine (16 solves of about
-            # 100 states: 0.8 s against 0.02 s for SciPy's whole-chain solve)
-            got = rows, chain_lu(sp.csc_array(sp.eye_array(states.size, format="csc")
-                                              - inner), dense=self.blocks is None)
+            # 100 states: 0.8 s against 0.02 s for SciPy's whole-chain solve).  The
+            # rows kept beside the LU are the chain itself (every row, the same
+            # entries), not a copy of it held with the walk until the certificate's
+            # chain takes it (:func:`offer`); the copies made for ``I - Q`` are freed
+            # before SuperLU allocates
+            got = self.chain, chain_lu(a, dense=self.blocks is None)
             self._cyclic[level] = got
         return got
 

@@ -449,6 +449,8 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     raw, primal, dual, calls = answer.raw, answer.primal, answer.dual, answer.n_solver_calls
     v, reduced_choice, y = answer.v, answer.reduced_choice, answer.y
     del answer
+    if not flows:  # the flow (a float a reduced choice) freed before the lifts: they
+        del y  # were the LP stage's resident peak on bus_scaled n64 d3 with it alive
     values = q.lift(v)
     del v
     value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
@@ -462,8 +464,6 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
         del state_flow
         randomized = read_only(_randomized(mdp, occupancy, flow, policy, settings.tol))
         occupancy = read_only(occupancy)
-    else:
-        del y
     seconds = time.perf_counter() - start
     logger.info("LP %s in %.3fs: value %.12g (%s)", raw.status.value, seconds, value,
                 raw.message)
