@@ -18,7 +18,7 @@ the same bits before and after, or not).  Storm's check of the same product is i
   the policy's chain (``chain``), its never / sure sets (``chain_sets``: compiled once
   the load is paid, else its edges reversed (``Reversed.__init__``) and its two
   searches (``Reversed.reaching``)), its values and
-  slack (``_solve``), the Bellman checks (``_fails``), the repair (``_Repair.run``) and
+  slack (``_solve``), the Bellman checks (``_fails``), the repair (``Repair.run``) and
   the recheck after it (``_touched``, ``_fails_among``: cert-half's, empty before);
 * ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
   certificate's), ``chain_walk_solve`` their solves;
@@ -94,7 +94,7 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          ("mitld_lp.solvers.certify", "_fails"),
          ("mitld_lp.solvers.certify", "_fails_among"),
          ("mitld_lp.solvers.certify", "_touched"),
-         ("mitld_lp.solvers.certify_repair", "_Repair.run"),
+         ("mitld_lp.solvers.certify_repair", "Repair.run"),
          ("mitld_lp.solvers.certify", "everywhere"),
          ("mitld_lp.solvers.chain_levels", "ChainLevels.__init__"),
          ("mitld_lp.routes.plain", "_keeping"),
@@ -111,7 +111,7 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          # the certificate's proof that a minimum leaves no end component
          ("mitld_lp.solvers.certify", "_escapes"),
          # cert-fast: the Bellman check's rows and the repair's needs by one compiled
-         # call where a kernel's load is paid (inside ``_fails`` / ``_Repair.run``; a
+         # call where a kernel's load is paid (inside ``_fails`` / ``Repair.run``; a
          # call that returns None, the NumPy code running, is timed too), the chain's
          # edges reversed (``Reversed.__init__`` above) and the readers by column
          ("mitld_lp.solvers.certify", "compiled_checks"),
@@ -203,7 +203,8 @@ def memory_child(job: dict[str, Any]) -> dict[str, Any]:
         owner: Any = importlib.import_module(module)
         *path, last = name.split(".")
         for part in path:
-            owner = getattr(owner, part)
+            # a class's old private name in a checkout before it was made public
+            owner = getattr(owner, part, None) or getattr(owner, "_" + part)
         if hasattr(owner, last):
             setattr(owner, last, traced(getattr(owner, last), name))
     main_id = threading.get_ident()
@@ -259,7 +260,8 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
             continue
         *path, last = name.split(".")
         for part in path:
-            owner = getattr(owner, part)
+            # a class's old private name in a checkout before it was made public
+            owner = getattr(owner, part, None) or getattr(owner, "_" + part)
         if hasattr(owner, last):  # (a checkout before it was written: no column)
             setattr(owner, last, _timed(getattr(owner, last), (column or [name])[0],
                                         spent))

@@ -72,7 +72,7 @@ WALKS = {"levels": ("mitld_lp.solvers.graph", "levels"),
          "single_values": ("mitld_lp.solvers.topological", "SingleLevels.values"),
          "single_flow": ("mitld_lp.solvers.topological", "SingleLevels.flow"),
          "chain_singles": ("mitld_lp.solvers.certify_chain", "_Singles.solve"),
-         "repair": ("mitld_lp.solvers.certify_repair", "_Repair.run")}
+         "repair": ("mitld_lp.solvers.certify_repair", "Repair.run")}
 """The level walks inside the stages, timed alike (each inside its stage's figure): the
 component levels of the analysis, the single-state walks of the iteration (bounds) and
 of the LP (values, flow), the certificate's chain and its repair."""
@@ -123,7 +123,8 @@ def child_stages(job: dict[str, Any]) -> dict[str, Any]:
         owner: Any = importlib.import_module(module)
         *path, name = name.split(".")  # a method: wrapped on its class
         for part in path:
-            owner = getattr(owner, part)
+            # a class's old private name in a checkout before it was made public
+            owner = getattr(owner, part, None) or getattr(owner, "_" + part)
         setattr(owner, name, _timed(getattr(owner, name), stage, spent))
     iteration = importlib.import_module(STAGES["iteration"][0])
     timed_iteration = iteration.interval_iterations

@@ -248,7 +248,7 @@ def test_a_repair_skips_no_round_a_level_needs(seed, loops, monkeypatch) -> None
                 self.inward = np.ones_like(self.inward)
             monkeypatch.setattr(R._Walk, "__init__", everywhere)
         x = x0.copy()
-        repair = R._Repair(st, rnd, free, level_of, None, True)
+        repair = R.Repair(st, rnd, free, level_of, None, True)
         runs.append((repair.run(x, failing), x, repair.moved))
     (ok_a, a, moved_a), (ok_b, b, moved_b) = runs
     assert ok_a == ok_b and np.array_equal(a, b) and moved_a == moved_b > 0

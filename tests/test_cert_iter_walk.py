@@ -140,7 +140,7 @@ def test_a_repair_by_the_walk_is_the_repair_state_by_state(seed: int, upper: boo
         if sparse is not None:
             monkeypatch.setattr(R, "SPARSE_LEVEL", sparse)
         x = x0.copy()
-        repair = R._Repair(st, rnd, free, level_of, None, upper)
+        repair = R.Repair(st, rnd, free, level_of, None, upper)
         runs.append((repair.run(x, failing), x, repair.moved))
     (ok_a, a, moved_a), (ok_b, b, moved_b) = runs
     assert ok_a == ok_b and a.tobytes() == b.tobytes() and moved_a == moved_b > 0
@@ -217,13 +217,13 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
     failing = C._fails(st, rnd, x0, free, upper)
     assert failing.any()
     passes = []
-    real = R._Repair._passes
+    real = R.Repair._passes
 
     def counted(self, *args):
         passes.append(1)
         return real(self, *args)
 
-    monkeypatch.setattr(R._Repair, "_passes", counted)
+    monkeypatch.setattr(R.Repair, "_passes", counted)
     runs = []
     for route in ("passes", "levels", "states"):
         if route == "levels":
@@ -231,7 +231,7 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
         if route == "states":
             monkeypatch.setattr(R, "SPARSE_LEVEL", 1)
         x = x0.copy()
-        repair = R._Repair(st, rnd, free, level_of, None, upper)
+        repair = R.Repair(st, rnd, free, level_of, None, upper)
         runs.append((repair.run(x, failing), x.tobytes(), repair.moved))
         if route == "passes":
             assert passes == [1]  # the route taken on these levels

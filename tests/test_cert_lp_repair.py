@@ -43,14 +43,14 @@ def test_a_repair_on_the_last_ones_pattern_moves_the_same_bounds(seed: int,
     mec_of[:6] = [0, 0, 1, 1, 1, 2]  # end components' members moved together
     free = target.copy()
     rng = np.random.default_rng(seed)
-    first = R._Repair(st, rnd, free, level_of, mec_of, True)
+    first = R.Repair(st, rnd, free, level_of, mec_of, True)
     for k in range(2):  # two candidates below the optimum in a third of the states
         x0 = np.where(rng.random(mdp.n_states) < 0.3, v * (0.8 + 0.1 * k), v)
         x0 = np.clip(np.where(target, 1.0, x0), 0.0, 1.0)
         failing = C._fails(st, rnd, x0, free, True)
         assert failing.any()
-        fresh = R._Repair(st, rnd, free, level_of, mec_of, True)
-        shared = R._Repair(st, rnd, free, level_of, mec_of, True, members=first.members,
+        fresh = R.Repair(st, rnd, free, level_of, mec_of, True)
+        shared = R.Repair(st, rnd, free, level_of, mec_of, True, members=first.members,
                            readers_of=first.readers_of)
         a, b = x0.copy(), x0.copy()
         ok_a, ok_b = fresh.run(a, failing), shared.run(b, failing)

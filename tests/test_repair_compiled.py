@@ -59,7 +59,7 @@ def _run(mdp, x0, free, upper, compiled: bool, monkeypatch, rounds: int | None =
             mp.setattr(R, "compiled_rounds", lambda *a: None)
         if rounds is not None:
             mp.setattr(R, "ROUNDS", rounds)
-        rep = R._Repair(st, rnd, free, level_of, None, upper)
+        rep = R.Repair(st, rnd, free, level_of, None, upper)
         ok = rep.run(x, failing)
     return ok, x, rep.moved, st, rnd
 

@@ -51,7 +51,7 @@ def _repaired(mdp, x0: np.ndarray, free: np.ndarray, upper: bool, st: C.Rows | N
     old = R.SPARSE_LEVEL
     R.SPARSE_LEVEL = sparse_level
     try:
-        rep = R._Repair(st, rnd, free, level_of, None, upper)
+        rep = R.Repair(st, rnd, free, level_of, None, upper)
         ok = rep.run(x, failing)
     finally:
         R.SPARSE_LEVEL = old

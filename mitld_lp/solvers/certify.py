@@ -71,8 +71,8 @@ from mitld_lp.solvers.certify_policy import (
 from mitld_lp.solvers.certify_repair import (
     ROUNDS,
     SPARSE_LEVEL,
+    Repair,
     Rows,
-    _Repair,
     repair_levels,
 )
 from mitld_lp.solvers.chain_levels import forget
@@ -371,7 +371,7 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
             level_of, held = repair_levels(st, level_of, x, free, zero if upper else None)
             # what a repair reads of the model alone, made once for every candidate
             # (bus_scaled n128 d3: two candidates repaired, each transposed the pattern)
-            repair = last = _Repair(st, rnd, held, level_of, mecs, upper,
+            repair = last = Repair(st, rnd, held, level_of, mecs, upper,
                                     members=None if last is None else last.members,
                                     readers_of=None if last is None else last.readers_of)
             before = x.copy()

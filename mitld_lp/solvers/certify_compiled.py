@@ -213,7 +213,7 @@ def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
     """The repair's rounds on the level ``mine`` from the states to do ``todo`` (a flag
     a state of ``mine``), in one compiled call
     (:func:`~mitld_lp.solvers.certify_repair_kernels.level_rounds`: the rounds of
-    :meth:`~mitld_lp.solvers.certify_repair._Repair.run` on a large level, the same
+    :meth:`~mitld_lp.solvers.certify_repair.Repair.run` on a large level, the same
     needs, moves and readers, so the same bounds in ``x``, flags in ``moved`` and
     count): ``(moves, settled)``; None where the NumPy rounds run instead: the kernel's
     load not paid or its cache file not there, arrays of other kinds than the kernel

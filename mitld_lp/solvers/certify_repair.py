@@ -28,7 +28,7 @@ __all__ = ["CLOSED_SLICE", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "closed_a
 
 PASSES = True
 """Whether a repair whose levels read only lower ones is made pass by pass over the
-states that can move (:meth:`_Repair._passes`) rather than level by level: the same
+states that can move (:meth:`Repair._passes`) rather than level by level: the same
 bounds (QVBS ``zeroconf_dl`` 1000-1-30: 14 passes for its 775 levels, the repair
 0.060 -> 0.030 s); False walks every level (kept for the tests that compare the two)."""
 
@@ -156,7 +156,7 @@ def _state_groups(st: Rows) -> np.ndarray:
 def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
     """The matrix's pattern by column as each entry's state: ``(col_ptr, col_state)``,
     the states of the rows holding column ``j`` at ``col_state[col_ptr[j]:col_ptr[j +
-    1]]`` (with repeats; rows ascending), what :meth:`_Repair._read_by` and
+    1]]`` (with repeats; rows ascending), what :meth:`Repair._read_by` and
     :func:`~mitld_lp.solvers.certify._touched` read.  By SciPy's compiled CSR-to-CSC
     transpose with no values carried (one byte an entry, not a boolean matrix and its
     transposed copy), the rows mapped to their states at once: one index an entry
@@ -277,7 +277,7 @@ class _Walk:
         above_it = where[self.cols] - level[self.entry_state]  # >= 0: not below
         same = above_it == 0
         # whether every entry reads a state below its own level or none the walk moves:
-        # each state's need then depends on lower levels alone (:meth:`_Repair._passes`)
+        # each state's need then depends on lower levels alone (:meth:`Repair._passes`)
         self.downward = not bool(np.any(above_it >= 0))
         del above_it
         self.inward = (np.bincount(level[self.entry_state[same]],
@@ -380,7 +380,7 @@ def _downward(st: Rows, live: np.ndarray, lv: np.ndarray, level_of: np.ndarray) 
 
 
 @dataclass(slots=True, eq=False)
-class _Repair:
+class Repair:
     """The repair of a candidate (module docs): a failing state's bound moved to what its
     choices need, levels downstream first (one pass over the levels above the lowest
     failing one, a level's states taken again while they move, at most :data:`ROUNDS`

@@ -1,5 +1,5 @@
 """The numba kernel of the repair's rounds on a large level
-(:meth:`~mitld_lp.solvers.certify_repair._Repair.run`), run through
+(:meth:`~mitld_lp.solvers.certify_repair.Repair.run`), run through
 :mod:`mitld_lp.util.kernel_loader` and only where its cache file is there and a
 compiled kernel's load is paid (:func:`~mitld_lp.solvers.certify_compiled.
 compiled_rounds`).  A module of its own: an edit here does not make the Bellman
