@@ -62,12 +62,17 @@ log = logging.getLogger(__name__)
 TRIM_FROM_TRANSITIONS = 1_000_000
 
 #: The product size from which the free heap is handed back between the interval
-#: iteration and the LPs too (:func:`solve_models`).  On bus_scaled n128 d3 (7.1M
-#: transitions) it took the resident peak from 49.9 to 45.3-45.6 bytes a transition with
-#: no more solve CPU (1.238 -> 1.195 s, 1.260 -> 1.235 s in the same runs); on n64 d3
-#: (1.77M) from 51.5 to 47.9-48.0, but for 4.5-5.3% more solve CPU (the LP faulting its
-#: pages in afresh), so not there.
-TRIM_BEFORE_LP_FROM = 4_000_000
+#: iteration and the LPs too (:func:`solve_models`): the builder's threshold.  On
+#: bus_scaled n128 d3 (7.1M transitions) it took the resident peak from 49.9 to 45.3-45.6
+#: bytes a transition with no more solve CPU; on n64 d3 (1.77M), where the LP stage's end
+#: (the SuperLU factorisations its greedy check keeps for the certificates, then the
+#: policy's flow) is the peak, from 49.6-51.6 to 47.2-47.3 in three alternated fresh
+#: processes, the LP stage's CPU 0.049-0.061 -> 0.053-0.065 s (the pages it touches again)
+#: and the solve's within the machine's noise (docs/results.md, lp-fast of 2026-12-02).
+#: An earlier measurement put that cost at 4.5-5.3% of n64's solve; a trim inside the LP
+#: (before its greedy checks: 46.2-46.7) or before the flow alone (49.3-50.8) was dearer
+#: or saved too little.
+TRIM_BEFORE_LP_FROM = TRIM_FROM_TRANSITIONS
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ModelSolution:
