@@ -64,14 +64,13 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 #: The product size from which the free heap is handed back between the interval
 #: iteration and the LPs too (:func:`solve_models`): the builder's threshold.  On
 #: bus_scaled n128 d3 (7.1M transitions) it took the resident peak from 49.9 to 45.3-45.6
-#: bytes a transition with no more solve CPU; on n64 d3 (1.77M), where the LP stage's end
-#: (the SuperLU factorisations its greedy check keeps for the certificates, then the
-#: policy's flow) is the peak, from 49.6-51.6 to 47.2-47.3 in three alternated fresh
-#: processes, the LP stage's CPU 0.049-0.061 -> 0.053-0.065 s (the pages it touches again)
-#: and the solve's within the machine's noise (docs/results.md, lp-fast of 2026-12-02).
-#: An earlier measurement put that cost at 4.5-5.3% of n64's solve; a trim inside the LP
-#: (before its greedy checks: 46.2-46.7) or before the flow alone (49.3-50.8) was dearer
-#: or saved too little.
+#: bytes a transition with no more solve CPU; on n64 d3 (1.77M), whose peak was the LP
+#: stage's end (its greedy checks' SuperLU factorisations, kept for the certificates, then
+#: the policy's flow), from 50.2-54.5 to 46.7-49.6 over 15 fresh processes, the peak now the
+#: iteration's end, for 4-11 ms of the LP stage's CPU (the pages it faults in again), about
+#: 3% of the solve (docs/results.md, lp-fast of 2026-12-02).  A trim before each greedy
+#: check instead (46.2-46.7, two trims) was dearer, one before the flow alone (49.3-50.8)
+#: saved too little.
 TRIM_BEFORE_LP_FROM = TRIM_FROM_TRANSITIONS
 
 @dataclass(frozen=True, slots=True, eq=False)
