@@ -66,7 +66,7 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 #: bus_scaled n128 d3 (7.1M transitions) it took the resident peak from 49.9 to 45.3-45.6
 #: bytes a transition with no more solve CPU; on n64 d3 (1.77M), whose peak was the LP
 #: stage's end (its greedy checks' SuperLU factorisations, kept for the certificates, then
-#: the policy's flow), from 50.2-54.5 to 46.7-49.6 over 15 fresh processes, the peak now the
+#: the policy's flow), from 50.2-54.5 to 46.0-49.6 in alternated fresh processes, the peak now the
 #: iteration's end, for 4-11 ms of the LP stage's CPU (the pages it faults in again), about
 #: 3% of the solve (docs/results.md, lp-fast of 2026-12-02).  A trim before each greedy
 #: check instead (46.2-46.7, two trims) was dearer, one before the flow alone (49.3-50.8)
