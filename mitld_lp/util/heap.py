@@ -22,8 +22,9 @@ LP fills its pages again), but on the bus family, whose LPs keep their chains' S
 factorisations for the certificates, a trim after the iteration took the peak at the
 LP's end from 51.5 to 46.6-48.0 bytes a transition (n64 d3) and from 49.9 to 44.2-45.8
 (n128 d3), for a 2 and a 7 ms trim (``experiments/bench_sweeps.py``); the n64 trim cost
-4.5-5.3% of its solve CPU in pages faulted in again, n128's nothing, so the plain route
-trims there from 4M transitions (``routes/plain.TRIM_BEFORE_LP_FROM``). A fixed
+4.5-5.3% of its solve CPU in pages faulted in again (about 3% measured again later,
+for a peak under 50 bytes a transition), n128's nothing, so the plain route trims there
+from 1M transitions (``routes/plain.TRIM_BEFORE_LP_FROM``). A fixed
 ``M_MMAP_THRESHOLD`` of 128 KiB (every larger array its own mapping, handed back when
 freed) took bus n64 d10 from 66 to 54.5 bytes a transition (numba loaded then, as it no
 longer is there) but the product build to 2.1-2.5x its CPU, every array faulted in
