@@ -51,3 +51,32 @@ def test_controller_of_no_kept_state_names_none() -> None:
     policy = np.full(belief.mdp.n_states, -1, np.int64)
     assert list(controller_of(model.game, belief, policy).tables().actions) == \
         [None] * belief.mdp.n_states
+
+
+def test_state_records_unpacked_once_at_the_first_read(monkeypatch) -> None:
+    """The states' arrays stay packed through ``len`` and the absorbing mask (what the
+    solve and the controller read), are unpacked at the first record asked for and
+    not again; the records equal those of the product pickled and read back."""
+    import pickle
+
+    from mitld_lp.sensing import moves
+
+    model = CASES["two cameras"]()
+    belief = belief_product(model.game, to_dta(model.spec), model.distributions,
+                            dict(model.sensors), model.epsilon, max_states=10**6)
+    states = belief.mdp.states
+    calls = []
+    unpack = moves.PackedRuns.unpack
+    monkeypatch.setattr(moves.PackedRuns, "unpack",
+                        lambda self: calls.append(1) or unpack(self))
+    n = len(states)
+    kinds = states.absorbing()
+    assert calls == [] and n == belief.mdp.n_states and kinds.any()
+    records = [states[i] for i in range(n)]
+    assert calls == [1]
+    again = pickle.loads(pickle.dumps(states))
+    assert [again[i] for i in range(n)] == records
+    assert calls == [1, 1]  # the copy read back is packed again, unpacked at its read
+    # an information state's posteriors sum to 1 (not the empty arrays of a bad unpack)
+    live = [s for s, k in zip(records, kinds.tolist(), strict=True) if not k]
+    assert live and all(abs(sum(s.weights) - 1.0) < 1e-12 for s in live)
