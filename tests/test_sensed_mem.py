@@ -70,13 +70,14 @@ def test_narrow_product_answers_the_brute_force_optimum(monkeypatch, sensors, ep
     m = r.mdp.matrix
     assert m.indices.dtype == np.int32 and m.indptr.dtype == np.int32
     states = r.mdp.states
-    for a in (states._cols, states._codes):
-        assert a.dtype.itemsize < 8 and a.flags.owndata  # narrowed, not a view
+    cols, codes, _ = states.columns()
+    for a in (cols, codes):
+        assert a.dtype.itemsize < 8  # narrowed
     # the posteriors and hypothesis counts read back whole from the narrowed columns
-    counts = np.asarray(states._cols[5], dtype=np.int64)
-    starts = np.asarray(states._cols[4], dtype=np.int64)
+    counts = np.asarray(cols[5], dtype=np.int64)
+    starts = np.asarray(cols[4], dtype=np.int64)
     live = counts > 0
-    assert np.all(starts[live] + counts[live] <= len(states._codes))
+    assert np.all(starts[live] + counts[live] <= len(codes))
     for i in np.flatnonzero(live)[:50].tolist():
         s = states[i]
         assert len(s.hypotheses) == counts[i]

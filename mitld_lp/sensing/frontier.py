@@ -594,7 +594,7 @@ class FrontierBuilder(StepRules):
                   choice_actions=act, action_names=names,
                   initial=initial, target=kind == 1, sink=kind == 2, truncated=kind == 3,
                   states=self.states())
-        moves = Moves(mdp.row_groups, self.cols.col(0).copy(), self.world_acts,
+        moves = Moves(mdp.row_groups, narrow(self.cols.col(0), True), self.world_acts,
                       self.worlds, self.u_sets, self.s_sets, self.records, self.move_rows)
         return Belief(mdp, self.sta, self.sensed, self.sensors, moves)
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from mitld_lp.product import Absorbing
 from mitld_lp.sensing.info import InfoState
+from mitld_lp.sensing.moves import PackedRuns
 
 __all__ = ["InfoStates"]
 
@@ -30,33 +31,52 @@ class InfoStates(Sequence[Hashable]):
     first hypothesis and number of hypotheses (the build's :class:`Columns`);
     ``codes``, ``weights``: every state's hypotheses (``times index * nq + automaton
     state``) and posteriors; ``times``, ``worlds``, ``s_sets``, ``u_sets``: the build's
-    tables the indices read; ``records``: the absorbing records by state."""
+    tables the indices read; ``records``: the absorbing records by state.
 
-    __slots__ = ("_cols", "_codes", "_weights", "_nq", "_times", "_worlds", "_s_sets",
+    The three arrays are kept packed (:class:`~mitld_lp.sensing.moves.PackedRuns`, zlib
+    level 1) until a record is first asked for (:meth:`columns`): the solvers read the
+    matrix only, and the product's records are asked for after the solve, which the
+    arrays would otherwise sit through (issue 45's sensed case: 3.9 bytes a transition
+    packed into 0.4, some 13 ms CPU; the posteriors repeat)."""
+
+    __slots__ = ("_n", "_packed", "_arrays", "_nq", "_times", "_worlds", "_s_sets",
                  "_u_sets", "_records")
 
     def __init__(self, cols: np.ndarray, codes: np.ndarray, weights: np.ndarray, nq: int,
                  times: Sequence[tuple[int, ...]], worlds: Sequence[Hashable],
                  s_sets: Sequence[frozenset[str]], u_sets: Sequence[frozenset[str]],
                  records: Mapping[int, Hashable]) -> None:
-        self._cols, self._codes, self._weights, self._nq = cols, codes, weights, nq
-        self._times, self._worlds = times, worlds
+        self._n = int(cols.shape[1])
+        self._packed: PackedRuns | None = PackedRuns([(cols.reshape(-1), codes, weights)])
+        self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._nq, self._times, self._worlds = nq, times, worlds
         self._s_sets, self._u_sets = s_sets, u_sets
         self._records = dict(records)
 
     def __len__(self) -> int:
-        return int(self._cols.shape[1])
+        return self._n
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(cols, codes, weights)`` (class docs), unpacked at the first call and kept
+        from then on (read-only, the bits as built)."""
+        if self._arrays is None:
+            assert self._packed is not None
+            ((flat, codes, weights),) = self._packed.unpack()
+            self._arrays = (flat.reshape(-1, self._n) if self._n else
+                            np.zeros((6, 0), flat.dtype), codes, weights)
+            self._packed = None
+        return self._arrays
 
     def _make(self, i: int) -> Hashable:
         record = self._records.get(i)
         if record is not None:
             return record
-        w, t, r, p, h, n = self._cols[:, i].tolist()
+        cols, codes, weights = self.columns()
+        w, t, r, p, h, n = cols[:, i].tolist()
         times, nq = self._times, self._nq
         return InfoState(self._worlds[w], t, self._s_sets[r], self._u_sets[p],
-                         tuple((times[c // nq], c % nq)
-                               for c in self._codes[h:h + n].tolist()),
-                         tuple(self._weights[h:h + n].tolist()))
+                         tuple((times[c // nq], c % nq) for c in codes[h:h + n].tolist()),
+                         tuple(weights[h:h + n].tolist()))
 
     @overload
     def __getitem__(self, i: int) -> Hashable: ...
@@ -94,6 +114,6 @@ class InfoStates(Sequence[Hashable]):
         return out
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (InfoStates, (self._cols, self._codes, self._weights, self._nq,
+        return (InfoStates, (*self.columns(), self._nq,
                              list(self._times), list(self._worlds), list(self._s_sets),
                              list(self._u_sets), self._records))
