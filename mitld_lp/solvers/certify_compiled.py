@@ -133,8 +133,8 @@ def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
 def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
                     upper: bool) -> np.ndarray | None:
     """:func:`~mitld_lp.solvers.certify_repair._needed` by one compiled call
-    (:func:`~mitld_lp.solvers.certify_kernels.state_needs`: the same operations on the
-    same operands, so the same values), read from the matrix in place with no rows or
+    (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs`: the same operations
+    on the same operands, so the same values), read from the matrix in place with no rows or
     entries gathered; None where :func:`compiled_checks` would not run, or where a
     state has no choice or a choice no row (NumPy's segmented reductions read the next
     segment's first value there)."""
@@ -151,7 +151,7 @@ def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
     if not bool(np.isfinite(x).all()):
         return None
     try:
-        from mitld_lp.solvers.certify_kernels import state_needs
+        from mitld_lp.solvers.certify_repair_kernels import state_needs
     except ImportError:  # pragma: no cover - numba is a dependency of the solvers
         return None
     nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
