@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "chain_sets"]
+__all__ = ["bellman_rows", "chain_sets", "cycling"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -140,3 +140,43 @@ def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pra
             else:
                 sure[j] = not seen[j]
 
+
+@numba.njit(cache=True, nogil=True)
+def cycling(groups, indptr, indices, comp, left, out):  # pragma: no cover - compiled
+    """What :func:`~mitld_lp.solvers.certify_chain.cycling_among` sets in ``out`` (a
+    bool a state, False on entry): a ``left`` state of a strongly connected component
+    ``comp`` of more than one state, or one with a choice (row ``c`` of
+    ``groups[s]:groups[s + 1]``) whose stored entries, at least one, all lie in its own
+    column.  Which entries exist and where is all that is read: the same set.  Returns
+    False, ``out`` untouched, where a component number is negative (the caller's NumPy
+    path then reports it)."""
+    n = left.shape[0]
+    top = -1
+    for s in range(n):
+        if comp[s] < 0:
+            return False
+        if comp[s] > top:
+            top = comp[s]
+    size = np.zeros(top + 1, dtype=np.int64)
+    for s in range(n):
+        size[comp[s]] += 1
+    for s in range(n):
+        if not left[s]:
+            continue
+        if size[comp[s]] > 1:
+            out[s] = True
+            continue
+        for c in range(groups[s], groups[s + 1]):
+            a = indptr[c]
+            z = indptr[c + 1]
+            if z == a:
+                continue
+            pure = True
+            for e in range(a, z):
+                if indices[e] != s:
+                    pure = False
+                    break
+            if pure:
+                out[s] = True
+                break
+    return True
