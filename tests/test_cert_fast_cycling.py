@@ -101,8 +101,9 @@ def test_compiled_cycling_is_the_definition(seed, monkeypatch) -> None:
                                choice_state=lambda: owner)
     assert np.array_equal(want, left & may_cycle(analysis, comp))
     _paid(monkeypatch, True)
-    got = certify_compiled.compiled_cycling(m, groups, comp, left)
-    assert got is not None and np.array_equal(got, want)
+    for kind in (np.int32, np.int64):  # a product's components are int32
+        got = certify_compiled.compiled_cycling(m, groups, comp.astype(kind), left)
+        assert got is not None and np.array_equal(got, want)
     assert np.array_equal(certify_chain.cycling_among(m, groups, comp, left), want)
     _paid(monkeypatch, False)
     assert certify_compiled.compiled_cycling(m, groups, comp, left) is None
@@ -119,12 +120,15 @@ def test_few_states_asked_stay_on_numpy(monkeypatch) -> None:
     assert certify_compiled.compiled_cycling(m, groups, comp, left) is None
 
 
-def test_a_negative_component_number_is_left_to_numpy(monkeypatch) -> None:
+def test_a_component_number_out_of_range_is_left_to_numpy(monkeypatch) -> None:
     m, groups = _random_model(0)
     comp = np.zeros(groups.size - 1, dtype=np.int64)
     comp[3] = -1
     _paid(monkeypatch, True)
     assert certify_compiled.compiled_cycling(m, groups, comp,
+                                             np.ones(comp.size, dtype=bool)) is None
+    comp[3] = comp.size  # a component number no state count allows
+    assert certify_compiled.compiled_cycling(m, groups, comp.astype(np.int32),
                                              np.ones(comp.size, dtype=bool)) is None
 
 

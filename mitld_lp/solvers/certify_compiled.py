@@ -208,7 +208,7 @@ def compiled_cycling(m: Any, groups: np.ndarray, comp: np.ndarray, left: np.ndar
     matrix in place, nothing gathered); None where the NumPy reads run instead: fewer
     than :data:`CYCLING_MIN_STATES` states asked about, no compiled kernel loaded yet in
     this process, numba not installed, arrays of other kinds than SciPy's product takes,
-    or a component number that is negative."""
+    or a component number that is negative or not below the count of states."""
     n = int(left.shape[0])
     if (n < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
             or int(np.count_nonzero(left)) < CYCLING_MIN_STATES
@@ -222,9 +222,13 @@ def compiled_cycling(m: Any, groups: np.ndarray, comp: np.ndarray, left: np.ndar
     out = np.zeros(n, dtype=bool)
     # (the inputs passed as read-only views: one signature of the kernel, and so one
     # cache file, whether the caller's arrays are writable or not)
+    # (the components in their own index type where it is one: a product's are int32,
+    # and a copy in int64 was a pass over the states of its own)
+    comp = np.asarray(comp)
+    if comp.dtype not in (np.int32, np.int64):
+        comp = comp.astype(np.int64)
     done = cycling(*map(_read_only, (np.asarray(groups, dtype=np.int64), m.indptr,
-                                     m.indices, np.asarray(comp, dtype=np.int64),
-                                     np.asarray(left, dtype=bool))), out)
+                                     m.indices, comp, np.asarray(left, dtype=bool))), out)
     return out if done else None
 
 

@@ -148,18 +148,15 @@ def cycling(groups, indptr, indices, comp, left, out):  # pragma: no cover - com
     ``comp`` of more than one state, or one with a choice (row ``c`` of
     ``groups[s]:groups[s + 1]``) whose stored entries, at least one, all lie in its own
     column.  Which entries exist and where is all that is read: the same set.  Returns
-    False, ``out`` untouched, where a component number is negative (the caller's NumPy
-    path then reports it)."""
+    False, ``out`` untouched, where a component number is negative or not below the
+    count of states (the caller's NumPy path then runs)."""
     n = left.shape[0]
-    top = -1
+    size = np.zeros(n, dtype=np.int32)  # (a component number is below the states')
     for s in range(n):
-        if comp[s] < 0:
+        c = comp[s]
+        if c < 0 or c >= n:
             return False
-        if comp[s] > top:
-            top = comp[s]
-    size = np.zeros(top + 1, dtype=np.int64)
-    for s in range(n):
-        size[comp[s]] += 1
+        size[c] += 1
     for s in range(n):
         if not left[s]:
             continue
