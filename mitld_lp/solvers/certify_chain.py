@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
-from mitld_lp.solvers.certify_compiled import compiled_chain_sets
+from mitld_lp.solvers.certify_compiled import compiled_chain_sets, compiled_cycling
 from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
@@ -457,7 +457,12 @@ def cycling_among(m: sp.csr_array, groups: np.ndarray, comp: np.ndarray,
     non-trivial component, or one with a choice that has entries all in its own column
     (its first entry there, then every entry read).  Not the choices' states and the
     first entries of every choice of the model (QVBS csma 4-2: 658,129 choices, of
-    which a minimum's certificate asks about 232,810 states')."""
+    which a minimum's certificate asks about 232,810 states').  By one compiled call
+    where the kernels' load is paid
+    (:func:`~mitld_lp.solvers.certify_compiled.compiled_cycling`): the same set."""
+    got = compiled_cycling(m, groups, comp, left)
+    if got is not None:
+        return got
     size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
     out = left & (size > 1)[comp]
     rest = np.flatnonzero(left & ~out)

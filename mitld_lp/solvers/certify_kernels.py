@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "chain_sets", "state_needs"]
+__all__ = ["bellman_rows", "chain_sets", "cycling"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -84,61 +84,6 @@ def bellman_rows(states, groups, nature, indptr, indices, data, x, count, slack_
 
 
 @numba.njit(cache=True, nogil=True)
-def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_of,
-                factor_of, upper, out):  # pragma: no cover - compiled
-    """Per state of ``states`` (each with a choice, each choice with a row), what the
-    repair's :func:`~mitld_lp.solvers.certify_repair._need_of` computes: per row the
-    rounded bound of its float sum (:func:`bellman_rows`' arithmetic) capped by the
-    extreme of ``x`` over its stored entries (``min`` of the two above, ``max`` below),
-    the least over a choice's rows (nature's pick), and the largest (``upper``) or
-    least over the state's choices.  Written into ``out``."""
-    has_nature = nature.shape[0] > 0
-    for i in range(states.shape[0]):
-        s = states[i]
-        best = -np.inf if upper else np.inf
-        for c in range(groups[s], groups[s + 1]):
-            lo = c
-            hi = c + 1
-            if has_nature:
-                lo = nature[c]
-                hi = nature[c + 1]
-            pick = np.inf
-            for r in range(lo, hi):
-                acc = 0.0
-                for e in range(indptr[r], indptr[r + 1]):
-                    acc += data[e] * x[indices[e]]
-                k = count[r]
-                if upper:
-                    each = (acc + slack_of[k]) * factor_of[k]
-                    ext = -np.inf
-                    for e in range(indptr[r], indptr[r + 1]):
-                        v = x[indices[e]]
-                        if v > ext:
-                            ext = v
-                    if ext < each:
-                        each = ext
-                else:
-                    each = (acc - slack_of[k]) * factor_of[k]
-                    if each < 0.0:
-                        each = 0.0
-                    ext = np.inf
-                    for e in range(indptr[r], indptr[r + 1]):
-                        v = x[indices[e]]
-                        if v < ext:
-                            ext = v
-                    if ext > each:
-                        each = ext
-                if each < pick:
-                    pick = each
-            if upper:
-                if pick > best:
-                    best = pick
-            elif pick < best:
-                best = pick
-        out[i] = best
-
-
-@numba.njit(cache=True, nogil=True)
 def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pragma: no cover
     """The sets of a policy's chain that its graph decides
     (:func:`~mitld_lp.solvers.certify_chain.chain`): the chain's edges are the positive
@@ -194,3 +139,41 @@ def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pra
                 never[j] = not seen[j]
             else:
                 sure[j] = not seen[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def cycling(groups, indptr, indices, comp, left, out):  # pragma: no cover - compiled
+    """What :func:`~mitld_lp.solvers.certify_chain.cycling_among` sets in ``out`` (a
+    bool a state, False on entry): a ``left`` state of a strongly connected component
+    ``comp`` of more than one state, or one with a choice (row ``c`` of
+    ``groups[s]:groups[s + 1]``) whose stored entries, at least one, all lie in its own
+    column.  Which entries exist and where is all that is read: the same set.  Returns
+    False, ``out`` untouched, where a component number is negative or not below the
+    count of states (the caller's NumPy path then runs)."""
+    n = left.shape[0]
+    size = np.zeros(n, dtype=np.int32)  # (a component number is below the states')
+    for s in range(n):
+        c = comp[s]
+        if c < 0 or c >= n:
+            return False
+        size[c] += 1
+    for s in range(n):
+        if not left[s]:
+            continue
+        if size[comp[s]] > 1:
+            out[s] = True
+            continue
+        for c in range(groups[s], groups[s + 1]):
+            a = indptr[c]
+            z = indptr[c + 1]
+            if z == a:
+                continue
+            pure = True
+            for e in range(a, z):
+                if indices[e] != s:
+                    pure = False
+                    break
+            if pure:
+                out[s] = True
+                break
+    return True

@@ -3,11 +3,14 @@
 :mod:`mitld_lp.util.kernel_loader` and only where its cache file is there and a
 compiled kernel's load is paid (:func:`~mitld_lp.solvers.certify_compiled.
 compiled_rounds`).  A module of its own: an edit here does not make the Bellman
-check's kernels (:mod:`mitld_lp.solvers.certify_kernels`) stale in the loader's cache.
+check's kernels (:mod:`mitld_lp.solvers.certify_kernels`) stale in the loader's cache;
+the repair's needs outside the rounds (:func:`state_needs`) are here too, beside the
+arithmetic they share.
 
 :func:`level_rounds` makes the rounds the NumPy code makes on one level, in one call:
-per round the needs of the states to do (:func:`~mitld_lp.solvers.certify_kernels.
-state_needs`' arithmetic: the same operations on the same operands, so the same bits),
+per round the needs of the states to do (:func:`_need`, the one copy of the need's
+arithmetic, which :func:`state_needs` runs for the repair's other calls: the same
+operations on the same operands as the NumPy need, so the same bits),
 all read before any bound moves (as the NumPy round reads them), then the moves, then
 the level's readers of the moved states as the next round's states to do (the matrix's
 pattern by column, :func:`~mitld_lp.solvers.certify_repair.readers_by_column`).  So the
@@ -30,14 +33,19 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["level_rounds"]
+__all__ = ["level_rounds", "state_needs"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_of,
           factor_of, upper):  # pragma: no cover - compiled
-    """State ``s``'s need (:func:`~mitld_lp.solvers.certify_kernels.state_needs`' for
-    one state: the same operations in the same order)."""
+    """State ``s``'s need (each with a choice, each choice with a row), what the
+    repair's :func:`~mitld_lp.solvers.certify_repair._need_of` computes: per row the
+    rounded bound of its float sum (:func:`~mitld_lp.solvers.certify_kernels.
+    bellman_rows`' arithmetic) capped by the extreme of ``x`` over its stored entries
+    (``min`` of the two above, ``max`` below), the least over a choice's rows (nature's
+    pick), and the largest (``upper``) or least over the state's choices.  The one
+    copy of that arithmetic: :func:`state_needs` and :func:`level_rounds` both call it."""
     best = -np.inf if upper else np.inf
     for c in range(groups[s], groups[s + 1]):
         lo = c
@@ -79,6 +87,19 @@ def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_
         elif pick < best:
             best = pick
     return best
+
+
+@numba.njit(cache=True, nogil=True)
+def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_of,
+                factor_of, upper, out):  # pragma: no cover - compiled
+    """Per state of ``states`` (each with a choice, each choice with a row), its need
+    (:func:`_need`), written into ``out``: what the repair's NumPy
+    :func:`~mitld_lp.solvers.certify_repair._needed` gives, the same operations on the
+    same operands."""
+    has_nature = nature.shape[0] > 0
+    for i in range(states.shape[0]):
+        out[i] = _need(states[i], groups, nature, has_nature, indptr, indices, data, x,
+                       count, slack_of, factor_of, upper)
 
 
 @numba.njit(cache=True, nogil=True)
