@@ -158,6 +158,18 @@ def test_refusals() -> None:
         elf_link.link(b"\0" * 100, _resolve)
 
 
+def test_a_table_of_a_partial_entry_is_refused() -> None:
+    obj = bytearray(_object([(0, 1, "far", 0), (8, 1, "small", 0)]))
+    shoff = struct.unpack_from("<Q", obj, 0x28)[0]
+    for section, entry in ((3, 24), (4, 24)):  # .rela.text, .symtab
+        bad = bytearray(obj)
+        at = shoff + 64 * section + 32  # sh_size
+        size = struct.unpack_from("<Q", bad, at)[0]
+        struct.pack_into("<Q", bad, at, size - entry // 2)
+        with pytest.raises(elf_link.Refused, match="partial entry"):
+            elf_link.link(bytes(bad), _resolve)
+
+
 # --- real kernels -----------------------------------------------------------------------
 
 pytest.importorskip("numba")

@@ -151,67 +151,87 @@ def checked(indptr, indices, data, starts, leave, exits, local, guess, s, best, 
             track[OFF + 3 * k + j] = 3.0  # beyond the other side's proven bound
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def packed2(indptr, indices, data, starts, leave, exits, work, s, minimise,
-            track):  # pragma: no cover - compiled
-    """:func:`checked` for one model (two columns), its sums in scalars, on the packed
-    rows (:func:`_verifying`): ``work[t]`` holds ``t``'s lower and upper bound and its
-    lower and upper guess side by side."""
-    lo_best = np.inf if minimise else -np.inf
-    hi_best = lo_best
-    gl_best = lo_best
-    gh_best = lo_best
-    for c in range(starts[s], starts[s + 1]):
-        lo = exits[c, 0]
-        hi = exits[c, 1]
-        gl = lo
-        gh = hi
-        for e in range(indptr[c], indptr[c + 1]):
-            t = indices[e]
-            if t != s:
-                w = data[e]
-                lo += w * work[t, 0]
-                hi += w * work[t, 1]
-                gl += w * work[t, 2]
-                gh += w * work[t, 3]
-        lv = leave[c]
-        if lv != 1.0:  # x / 1.0 is x: the same bits without the divides
-            if lv > 0.0:
-                lo /= lv
-                hi /= lv
-                gl /= lv
-                gh /= lv
+@numba.njit(cache=True, nogil=True)
+def _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
+                track):  # pragma: no cover - compiled
+    """:func:`_verifying` for one model (two columns), its sums in scalars, on the
+    packed rows: ``work[t]`` holds ``t``'s lower and upper bound and its lower and upper
+    guess side by side.  The guesses' trial and failure flags (``track``'s) are held in
+    locals for the sweep and written back at its end: read and written in ``track``
+    state by state, every store to it could alias ``work``'s rows, so each state's
+    entries were read again from memory; the same updates in the same order (a flag
+    set mid-sweep stops its guess's updates from the next state on, as it did), the
+    same bits, the sweep on QVBS ``zeroconf`` 1000-4's block 7.1-8.0 -> 2.5-3.2 ms."""
+    n = work.shape[0]
+    lower_on = track[OFF + 6]  # the lower guess's trial (1: on trial, 3: crossed)
+    upper_on = track[OFF + 7]
+    lower_fell = track[OFF + 10]  # 1: a lower guess fell in this sweep
+    upper_rose = track[OFF + 11]
+    for i in range(n):
+        s = order[i]
+        lo_best = np.inf if minimise else -np.inf
+        hi_best = lo_best
+        gl_best = lo_best
+        gh_best = lo_best
+        for c in range(starts[s], starts[s + 1]):
+            lo = exits[c, 0]
+            hi = exits[c, 1]
+            gl = lo
+            gh = hi
+            first = indptr[c]
+            last = indptr[c + 1]
+            for e in range(first, last):
+                t = indices[e]
+                if t != s:
+                    w = data[e]
+                    lo += w * work[t, 0]
+                    hi += w * work[t, 1]
+                    gl += w * work[t, 2]
+                    gh += w * work[t, 3]
+            lv = leave[c]
+            if lv != 1.0:  # x / 1.0 is x: the same bits without the divides
+                if lv > 0.0:
+                    lo /= lv
+                    hi /= lv
+                    gl /= lv
+                    gh /= lv
+                else:
+                    lo = hi = gl = gh = 0.0
+            wide = (last - first + 8) * 2.0**-52
+            gl *= 1.0 - wide
+            gh *= 1.0 + wide
+            if minimise:
+                lo_best = min(lo_best, lo)
+                hi_best = min(hi_best, hi)
+                gl_best = min(gl_best, gl)
+                gh_best = min(gh_best, gh)
             else:
-                lo = hi = gl = gh = 0.0
-        wide = (indptr[c + 1] - indptr[c] + 8) * 2.0**-52
-        gl *= 1.0 - wide
-        gh *= 1.0 + wide
-        if minimise:
-            lo_best = min(lo_best, lo)
-            hi_best = min(hi_best, hi)
-            gl_best = min(gl_best, gl)
-            gh_best = min(gh_best, gh)
-        else:
-            lo_best = max(lo_best, lo)
-            hi_best = max(hi_best, hi)
-            gl_best = max(gl_best, gl)
-            gh_best = max(gh_best, gh)
-    work[s, 0] = max(work[s, 0], min(max(lo_best, 0.0), 1.0))
-    work[s, 1] = min(work[s, 1], min(max(hi_best, 0.0), 1.0))
-    if track[OFF + 6] == 1.0:  # the lower guess on trial
-        val = min(max(gl_best, 0.0), 1.0)
-        if val < work[s, 2]:
-            track[OFF + 10] = 1.0
-        work[s, 2] = val
-        if val > work[s, 1]:
-            track[OFF + 6] = 3.0
-    if track[OFF + 7] == 1.0:  # the upper guess on trial
-        val = min(max(gh_best, 0.0), 1.0)
-        if val > work[s, 3]:
-            track[OFF + 11] = 1.0
-        work[s, 3] = val
-        if val < work[s, 0]:
-            track[OFF + 7] = 3.0
+                lo_best = max(lo_best, lo)
+                hi_best = max(hi_best, hi)
+                gl_best = max(gl_best, gl)
+                gh_best = max(gh_best, gh)
+        low = max(work[s, 0], min(max(lo_best, 0.0), 1.0))
+        high = min(work[s, 1], min(max(hi_best, 0.0), 1.0))
+        work[s, 0] = low
+        work[s, 1] = high
+        if lower_on == 1.0:
+            val = min(max(gl_best, 0.0), 1.0)
+            if val < work[s, 2]:
+                lower_fell = 1.0
+            work[s, 2] = val
+            if val > high:
+                lower_on = 3.0
+        if upper_on == 1.0:
+            val = min(max(gh_best, 0.0), 1.0)
+            if val > work[s, 3]:
+                upper_rose = 1.0
+            work[s, 3] = val
+            if val < low:
+                upper_on = 3.0
+    track[OFF + 6] = lower_on
+    track[OFF + 7] = upper_on
+    track[OFF + 10] = lower_fell
+    track[OFF + 11] = upper_rose
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -315,13 +335,13 @@ def _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
     far apart in memory, the verifying sweep's price 2.4 plain ones before."""
     n, kk = work.shape
     k = kk // 2
+    if k == 2:
+        _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
+                    track)
+        return
     for i in range(n):
-        if k == 2:
-            packed2(indptr, indices, data, starts, leave, exits, work, order[i],
-                    minimise, track)
-        else:
-            checked(indptr, indices, data, starts, leave, exits, work[:, :k],
-                    work[:, k:], order[i], best, acc, minimise, track, k)
+        checked(indptr, indices, data, starts, leave, exits, work[:, :k], work[:, k:],
+                order[i], best, acc, minimise, track, k)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -84,6 +84,8 @@ from mitld_lp.solvers.kernels import (
     compiled_sweeps,
     excess,
     numpy_sweeps,
+    put_rows,
+    take_rows,
 )
 from mitld_lp.solvers.level_first import FirstBounds
 from mitld_lp.solvers.policy_jump import jump
@@ -161,7 +163,7 @@ def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
     model's gap is below its threshold (``tol``, and ``precision`` times the lower
     bound; at ``initial`` or over the block); ``False`` if the budget or ``limit``
     sweeps ran out first.  One sparse product serves every column."""
-    local = bounds[block.states]
+    local = take_rows(bounds, block.states)
 
     def over() -> float:
         if width == "initial" and initial >= 0:
@@ -179,7 +181,7 @@ def _sweeps(block: Block, exits: np.ndarray, bounds: np.ndarray, tol: float,
                 bar.update(100)
         return True
     finally:
-        bounds[block.states] = local
+        put_rows(bounds, block.states, local)
 
 
 _CHUNK = 16
@@ -260,7 +262,7 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
     run = compiled_sweeps if compiled else numpy_sweeps
     forecast = ((_FORECAST_FROM, _FORECAST_WINDOW) if compiled
                 else (_NUMPY_FORECAST_FROM, _NUMPY_FORECAST_WINDOW))
-    local = bounds[block.states]
+    local = take_rows(bounds, block.states)
     done = 0
     seen: list[tuple[int, float]] = []  # (sweeps done, gap over threshold) per chunk
     try:
@@ -286,7 +288,7 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
                 elif _hopeless(seen, limit, *forecast):
                     return False
     finally:
-        bounds[block.states] = local
+        put_rows(bounds, block.states, local)
 
 
 def _needed(seen: list[tuple[int, float]], start: int, window: int) -> float | None:
@@ -343,13 +345,13 @@ def _topological(q: Quotient, rewards: np.ndarray, bounds: np.ndarray, tol: floa
     # walked too and their bounds put back: no state the initial one reaches reads them
     singles = shared_levels(q, blk)
     held = None if skip is None else singles.states[skip[singles.states]]
-    kept = None if held is None else bounds[held]
+    kept = None if held is None else take_rows(bounds, held)
     try:
         _levels(q, blk, rewards, bounds, tol, precision, budget, bar, singles, skip=skip,
                 compiled=compiled, models=models)
     finally:
         if held is not None:
-            bounds[held] = kept
+            put_rows(bounds, held, kept)
 
 
 def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, tol: float,
@@ -376,7 +378,7 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
                 else compiled)
         if fast:  # the order before the exits: its searches peak without them beside
             order = value_order(block)[::-1]
-        exits = rewards[block.choices] + block.outer @ bounds
+        exits = take_rows(rewards, block.choices) + block.outer @ bounds
         if fast:  # the target's value carried back in one sweep, the block renumbered
             # for the kernel's sweep from last to first (sweep_order's docs)
             held = [block]
@@ -525,8 +527,8 @@ def interval_iterations(
                                  skip=skip, compiled=compiled)
             else:
                 whole = Block.of(q, np.arange(n))
-                _sweeps(whole, rewards[whole.choices] + whole.outer @ bounds, bounds, tol,
-                        precision, q.sense, budget, gap, q.initial, bar)
+                _sweeps(whole, take_rows(rewards, whole.choices) + whole.outer @ bounds,
+                        bounds, tol, precision, q.sense, budget, gap, q.initial, bar)
     finally:
         bar.close()
     np.clip(bounds, 0.0, 1.0, out=bounds)  # rounding can push the upper bound past 1

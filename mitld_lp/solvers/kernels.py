@@ -97,8 +97,8 @@ from mitld_lp.solvers.graph import Sense
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
-           "compiled_sweeps", "excess", "kernel_loaded", "numpy_sweeps", "sweep_order",
-           "thresholds", "use_compiled"]
+           "compiled_sweeps", "excess", "kernel_loaded", "numpy_sweeps", "put_rows",
+           "sweep_order", "take_rows", "thresholds", "use_compiled"]
 
 logger = logging.getLogger(__name__)
 
@@ -156,6 +156,37 @@ def excess(local: np.ndarray, tol: float, precision: float | None) -> float:
     if precision is None:
         return float(np.max(gaps, initial=0.0)) / tol
     return float(np.max(gaps / thresholds(local[:, 0::2], tol, precision), initial=0.0))
+
+
+def take_rows(a: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``a[index]`` (rows of a 2-D array: the bounds a column each, a block's exit
+    rewards), the same new C-contiguous array to the bit, by ``take`` along the first
+    axis: NumPy's fancy index of a 2-D array's rows goes through its general path, an
+    index a row, ``take`` copies the rows as blocks.  QVBS ``zeroconf`` 1000-4's block
+    (299,444 choices, two columns): its exits taken in the sweeps' order 8.5 ms against
+    0.3-0.5; 163,751 rows of bounds 1.2-4.8 ms against 0.1-0.2."""
+    index = np.asarray(index)
+    return a[index] if index.dtype == bool else a.take(index, axis=0)
+
+
+def put_rows(a: np.ndarray, index: np.ndarray, rows: np.ndarray) -> None:
+    """``a[index] = rows`` (rows of a 2-D array, :func:`take_rows`' converse), the same
+    writes: where both are C-contiguous of one dtype, each row written as one item of a
+    1-D view of ``a`` whose items are its rows (NumPy's 1-D fancy assignment, an index a
+    row, not its general path; a repeated index: the last row written wins, as there)."""
+    index = np.asarray(index)
+    if (index.dtype != bool and a.ndim == 2 and rows.ndim == 2 and a.shape[0] > 0
+            and rows.shape[0] > 0
+            and a.shape[1] > 0 and a.shape[1] == rows.shape[1] and a.dtype == rows.dtype
+            and a.flags.c_contiguous and rows.flags.c_contiguous):
+        _as_items(a)[index] = _as_items(rows)
+    else:
+        a[index] = rows
+
+
+def _as_items(a: np.ndarray) -> np.ndarray:
+    """A C-contiguous 2-D ``a`` as a 1-D view of its rows (each an opaque item)."""
+    return a.view(np.dtype((np.void, a.shape[1] * a.itemsize))).reshape(-1)
 
 
 def use_compiled(entries: int, block_entries: int) -> bool:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mitld_lp.solvers.kernels import take_rows
+
 __all__ = ["FirstBounds"]
 
 _ONE = np.float64(1.0).view(np.uint64)
@@ -24,7 +26,7 @@ class FirstBounds:
     __slots__ = ("_held", "_packed")
 
     def __init__(self, bounds: np.ndarray, states: np.ndarray) -> None:
-        rows = bounds[states]
+        rows = take_rows(bounds, states)
         bits = rows.view(np.uint64)
         zero = bits == 0
         one = bits == _ONE

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.kernels import sweep_order
+from mitld_lp.solvers.kernels import sweep_order, take_rows
 from mitld_lp.solvers.topological import Block
 
 if TYPE_CHECKING:
@@ -61,7 +61,7 @@ def for_sweeps(held: list[Block], order: np.ndarray, exits: np.ndarray,
     exits to the bit: each row's product adds the same entries in the same order.  A
     jump rebuilds the whole block (:func:`whole`)."""
     block, picked = _renumber(held, order, outer=False)
-    return block, exits[picked]
+    return block, take_rows(exits, picked)
 
 
 def whole(q: Quotient, block: Block) -> Block:

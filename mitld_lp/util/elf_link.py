@@ -52,6 +52,7 @@ _STUB = 16  # jmp *0(%rip) (6 bytes), the target's address (8), two bytes of pad
 _SECTION = struct.Struct("<IIQQQQIIQQ")
 _SYMBOL = struct.Struct("<IBBHQQ")
 _RELA = struct.Struct("<QQq")
+_U64 = struct.Struct("<Q")
 
 
 class Refused(Exception):
@@ -139,17 +140,15 @@ def _loaded_sections(sections: list[_Section]) -> list[_Section]:
 
 
 def _symbols(obj: bytes, sections: list[_Section]) -> tuple[list[tuple], _Section]:
+    """The symbol table's entries as read (``st_name`` an offset, not yet a name: most
+    are local and never named) and the table's section."""
     tables = [s for s in sections if s.type == SHT_SYMTAB]
     if len(tables) != 1:
         raise Refused("not one symbol table")
     table = tables[0]
-    strings = sections[table.link].offset
-    out = []
-    for off in range(table.offset, table.offset + table.size, _SYMBOL.size):
-        st_name, info, _other, shndx, value, size = _SYMBOL.unpack_from(obj, off)
-        out.append((_name(obj, strings + st_name) if st_name else "", info >> 4, info & 0xF,
-                    shndx, value, size))
-    return out, table
+    if table.size % _SYMBOL.size:
+        raise Refused("a symbol table of a partial entry")
+    return list(_SYMBOL.iter_unpack(obj[table.offset:table.offset + table.size])), table
 
 
 def _align(n: int, a: int) -> int:
@@ -164,6 +163,13 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
     sections = _sections(obj)
     loaded = _loaded_sections(sections)
     symbols, table = _symbols(obj, sections)
+    strings = sections[table.link].offset
+
+    def name_of(sym: int) -> str:
+        st_name = symbols[sym][0]
+        return _name(obj, strings + st_name) if st_name else ""
+
+    n_symbols = len(symbols)
     relocations = []  # (target section, offset, type, symbol index, addend)
     for sec in sections:
         if sec.type != SHT_RELA or sec.info >= len(sections):
@@ -173,14 +179,16 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             continue
         if sections[sec.link] is not table:
             raise Refused(f"{sec.name} names another symbol table")
-        for off in range(sec.offset, sec.offset + sec.size, _RELA.size):
-            r_offset, r_info, addend = _RELA.unpack_from(obj, off)
-            relocations.append((target, r_offset, r_info & 0xFFFFFFFF, r_info >> 32, addend))
-    for _t, _o, typ, sym, _a in relocations:
-        if typ not in KNOWN:
-            raise Refused(f"relocation type {typ}")
-        if sym >= len(symbols):
-            raise Refused("relocation of a symbol past the table")
+        if sec.size % _RELA.size:
+            raise Refused(f"{sec.name} ends in a partial entry")
+        for r_offset, r_info, addend in _RELA.iter_unpack(
+                obj[sec.offset:sec.offset + sec.size]):
+            typ, sym = r_info & 0xFFFFFFFF, r_info >> 32
+            if typ not in KNOWN:
+                raise Refused(f"relocation type {typ}")
+            if sym >= n_symbols:
+                raise Refused("relocation of a symbol past the table")
+            relocations.append((target, r_offset, typ, sym, addend))
 
     # the layout: executable sections and stubs, read-only sections and GOT, writable
     stubs = sorted({sym for _t, _o, typ, sym, _a in relocations
@@ -208,7 +216,7 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             size += 8 * len(got)
         else:
             commons = {}
-            for i, (_n, _b, _ty, shndx, value, sz) in enumerate(symbols):
+            for i, (_n, _info, _other, shndx, value, sz) in enumerate(symbols):
                 if shndx == SHN_COMMON:
                     size = _align(size, max(value, 1))
                     commons[i] = size
@@ -224,47 +232,56 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
                 image[at:at + sec.size] = obj[sec.offset:sec.offset + sec.size]
         address: list[int | None] = []
         out: dict[str, int] = {}
-        for i, (name, bind, typ, shndx, value, _sz) in enumerate(symbols):
+        for i, (st_name, info, _other, shndx, value, _sz) in enumerate(symbols):
+            bind, typ = info >> 4, info & 0xF
             if typ in (STT_TLS, STT_GNU_IFUNC):
-                raise Refused(f"symbol {name!r} of type {typ}")
+                raise Refused(f"symbol {name_of(i)!r} of type {typ}")
             if shndx == SHN_UNDEF:
+                name = name_of(i)
                 addr = resolve(name) if name else None
             elif shndx == SHN_ABS:
                 addr = value
             elif shndx == SHN_COMMON:
                 addr = base + commons[i]
             elif shndx >= SHN_LORESERVE:
-                raise Refused(f"symbol {name!r} in special section {shndx:#x}")
+                raise Refused(f"symbol {name_of(i)!r} in special section {shndx:#x}")
             else:
                 addr = base + where[shndx] + value if shndx in where else None
             address.append(addr)
-            if addr is not None and name and bind != STB_LOCAL and typ != STT_SECTION:
-                out[name] = addr
+            if addr is not None and st_name and bind != STB_LOCAL and typ != STT_SECTION:
+                name = name_of(i)  # a global's name (the locals are never named)
+                if name:
+                    out[name] = addr
         for n, sym in enumerate(got):
             target = address[sym]
             if target is None:
-                raise Refused(f"symbol {symbols[sym][0]!r} not found")
-            struct.pack_into("<Q", image, got_at + 8 * n, target)
+                raise Refused(f"symbol {name_of(sym)!r} not found")
+            _U64.pack_into(image, got_at + 8 * n, target)
         stub_of = {}
         for n, sym in enumerate(stubs):
             target = address[sym]
             if target is None:
-                raise Refused(f"symbol {symbols[sym][0]!r} not found")
+                raise Refused(f"symbol {name_of(sym)!r} not found")
             at = stub_at + _STUB * n
             image[at:at + 6] = b"\xff\x25\x00\x00\x00\x00"
-            struct.pack_into("<Q", image, at + 6, target)
+            _U64.pack_into(image, at + 6, target)
             stub_of[sym] = base + at
         got_of = {sym: base + got_at + 8 * n for n, sym in enumerate(got)}
+        put64 = _U64.pack_into
         for target, r_offset, typ, sym, addend in relocations:
             if typ == R_X86_64_NONE:
                 continue
             s = address[sym]
             if s is None:
-                raise Refused(f"symbol {symbols[sym][0]!r} not found")
+                raise Refused(f"symbol {name_of(sym)!r} not found")
             at = where[target.index] + r_offset
             if r_offset + (8 if typ in (R_X86_64_64, R_X86_64_PC64) else 4) > target.size:
                 raise Refused("relocation past its section")
-            _apply(image, at, base + at, typ, s, addend, stub_of.get(sym), got_of.get(sym))
+            if typ == R_X86_64_64:  # nearly all of numba's (its large code model)
+                put64(image, at, (s + addend) & 0xFFFFFFFFFFFFFFFF)
+            else:
+                _apply(image, at, base + at, typ, s, addend, stub_of.get(sym),
+                       got_of.get(sym))
         ctypes.memmove(base, bytes(image), size)
         for kind, start, end in groups:
             prot = {"x": 5, "r": 1, "w": 3}[kind]  # PROT_READ | EXEC, READ, READ | WRITE
