@@ -213,7 +213,7 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
         return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
-    if walks is not None:  # the rounds among the candidates, with no sub-MDP built
+    if walks is not None and walks.fits(n, m.nnz):  # the rounds among the candidates
         found = compiled_end_components(walks, mdp, cand)
         if not found.n_mecs:
             return _no_end_components(n, mdp.n_choices)
