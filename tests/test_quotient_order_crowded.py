@@ -9,6 +9,7 @@ a maximum's attractor strategy against a first choice found by a loop."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -91,3 +92,40 @@ def test_the_attractor_strategy_plays_each_states_first_spared_choice() -> None:
                 for s in range(n) if sure[s]]
         assert got is not None
         assert list(zip(got.states.tolist(), got.choices.tolist(), strict=True)) == want
+
+
+def test_a_graph_past_int32_takes_numpys_walks(monkeypatch) -> None:
+    """The compiled components walk int32 graphs only (``compiled_graph.fits``): with the
+    bound lowered below a graph's size, the levels and the end components are NumPy's
+    (no compiled kernel called), the same as the compiled walk's below it."""
+    import scipy.sparse as sp
+
+    from mitld_lp.solvers import graph
+    from mitld_lp.solvers.end_components import maximal_end_components
+    from mitld_lp.testing import random_mdp
+
+    pytest.importorskip("numba")
+    from mitld_lp.solvers import compiled_graph, walks
+
+    mdp = random_mdp(300, seed=4)
+    m, groups = sp.csr_array(mdp.matrix), np.asarray(mdp.row_groups)
+    assert compiled_graph.fits(mdp.n_states, m.nnz)
+    fast = graph.state_levels(m, groups, walks=compiled_graph)
+    monkeypatch.setattr(walks, "compiled_walks", lambda entries: compiled_graph)
+    monkeypatch.setattr(graph, "compiled_walks", lambda entries: compiled_graph)
+    from mitld_lp.solvers import end_components
+    monkeypatch.setattr(end_components, "compiled_walks", lambda entries: compiled_graph)
+    mecs_fast = maximal_end_components(mdp, np.ones(mdp.n_states, dtype=bool))
+    monkeypatch.setattr(compiled_graph, "INDEX_LIMIT", mdp.n_states)  # the graph past it
+    assert not compiled_graph.fits(mdp.n_states, m.nnz)
+    for name in ("state_levels", "components_and_levels", "end_components_among"):
+        def refuse(*args, name=name):
+            raise AssertionError(f"{name} called past the bound")
+        monkeypatch.setattr(compiled_graph, name, refuse)
+    slow = graph.state_levels(m, groups, walks=compiled_graph)
+    assert np.array_equal(slow.component, fast.component)
+    assert np.array_equal(slow.level, fast.level)
+    mecs_slow = maximal_end_components(mdp, np.ones(mdp.n_states, dtype=bool))
+    assert mecs_slow.n_mecs == mecs_fast.n_mecs
+    assert np.array_equal(np.asarray(mecs_slow.mec_of), np.asarray(mecs_fast.mec_of))
+    assert np.array_equal(np.asarray(mecs_slow.internal), np.asarray(mecs_fast.internal))
