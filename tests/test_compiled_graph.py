@@ -87,8 +87,8 @@ def test_components_levels_and_reach_match_a_closure():
         seeds = rng.random((n, 2)) < 0.1
         r = closure(g)
         for descending in (False, True):
-            k, label, level, reach = cg.components_and_levels(
-                g.indptr, g.indices, descending, seeds, True)
+            k, label, level, reach = cg.components_and_levels(  # int32, as every caller's
+                g.indptr.astype(np.int32), g.indices.astype(np.int32), descending, seeds, True)
             assert np.array_equal(label[:, None] == label[None, :], r & r.T)
             assert k == np.unique(label).size
             # longest path to a sink of the condensation, by recursion over the closure

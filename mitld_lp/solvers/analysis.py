@@ -101,7 +101,7 @@ from mitld_lp.solvers.graph import (
     maximal_end_components,
     state_levels,
 )
-from mitld_lp.solvers.quotient_order import may_split, mixed, quotient_blocks, split
+from mitld_lp.solvers.quotient_order import crowded, may_split, mixed, quotient_blocks, split
 from mitld_lp.solvers.quotient_rows import quotient_rows
 from mitld_lp.solvers.reduced import Qualitative, Quotient
 from mitld_lp.solvers.result import read_only
@@ -213,7 +213,7 @@ def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
         return _no_end_components(n, mdp.n_choices)
     mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
     internal = np.zeros(mdp.n_choices, dtype=bool)
-    if walks is not None:  # the rounds among the candidates, with no sub-MDP built
+    if walks is not None and walks.fits(n, m.nnz):  # the rounds among the candidates
         found = compiled_end_components(walks, mdp, cand)
         if not found.n_mecs:
             return _no_end_components(n, mdp.n_choices)
@@ -436,9 +436,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         maybe = reach[:, 1] & ~wide
         mecs = end_components(mdp, found.component, maybe)
 
-    if found.level is None and mixed(found.component, maybe):  # the order as before
+    crowd = crowded(found.component)  # the only states the components' tests read
+    if found.level is None and mixed(found.component, maybe, crowd):  # the order as before
         found = replace(found, level=found.later())
-    if found.level is not None or not may_split(found.component, maybe):
+    if found.level is not None or not may_split(found.component, maybe, crowd):
         found = replace(found, later=None)  # the condensation freed (csma: 14 B/t)
     # a maximum's Prob1E where no end component, or only single states, are collapsed,
     # found on the pattern before the quotient is made (value_one, analysis_singles;
@@ -460,7 +461,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
             mecs = without_states(mecs, sure_state, mdp)
     maybe = maybe & ~sure_state
     if found.level is None and found.later is not None and \
-            split(found.component, maybe, sure_state):
+            split(found.component, maybe, sure_state, crowd):
         # the product's levels the layers read (quotient_blocks: a component split by
         # the value-1 states, final here: none is cut below where some are found above),
         # walked before the quotient's rows, its condensation freed (zeroconf 1000-4)
@@ -557,15 +558,15 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         del cut
     del sure
 
-    order, comp_level = quotient_blocks(found, matrix, row_groups, maybe, sure_state,
-                                        state_map, lambda: state_levels(m, mdp.row_groups))
+    order, comp_level = quotient_blocks(found, matrix, row_groups, maybe, sure_state, state_map,
+                                        lambda: state_levels(m, mdp.row_groups), crowd)
     # kept by the models for the certificate: in the index type (4 bytes a state and a
     # component where the size allows; the same numbers)
     layers = (read_only(found.component.astype(index_dtype(n), copy=False)),
               read_only(comp_level.astype(index_dtype(n), copy=False)))
     # their int64 originals freed before the quotients' masks are made (QVBS csma 4-2:
     # 8.8 bytes a transition at the analysis's traced peak, its end)
-    del found, comp_level
+    del found, comp_level, crowd
     init = int(mdp.initial)
 
     def quotient(target: np.ndarray, to_target: np.ndarray, j: int) -> Quotient:

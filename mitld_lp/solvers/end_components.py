@@ -75,7 +75,7 @@ def maximal_end_components(mdp: MDP, states_mask: np.ndarray) -> EndComponents:
     states_mask = as_state_mask(mdp, states_mask, "states_mask")
     n = mdp.n_states
     walks = compiled_walks(mdp.matrix.nnz)
-    if walks is not None:
+    if walks is not None and walks.fits(n, mdp.matrix.nnz):  # int32 graphs (fits)
         return compiled_end_components(walks, mdp, np.flatnonzero(states_mask))
     cstate = mdp.choice_state()
     choice, source, succ = _edge_ends(mdp)

@@ -309,7 +309,8 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     levels turn out thin is finished by SciPy's searches
     (:mod:`~mitld_lp.solvers.level_search`), alike."""
     walks = compiled_walks(graph.nnz)
-    if walks is not None and graph.has_canonical_format:
+    if walks is not None and graph.has_canonical_format and walks.fits(graph.shape[0],
+                                                                        graph.nnz):
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
     return _leveled(graph.shape[0] + graph.nnz, *_condensed(graph), seeds)
 
@@ -477,9 +478,9 @@ def state_levels(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray
     graph built by the compiled walk itself where they are used (``walks``: whatever the
     size, :func:`~mitld_lp.solvers.analysis_gates.level_walks`)."""
     walks = compiled_walks(matrix.nnz) if walks is None else walks
-    if walks is None:
-        return levels(graph_view(matrix, row_groups), seeds)
     n = row_groups.shape[0] - 1
+    if walks is None or not walks.fits(n, matrix.nnz):  # past int32: NumPy's walk
+        return levels(graph_view(matrix, row_groups), seeds)
     if seeds is None:
         seeds = np.zeros((n, 0), dtype=bool)
     comp, level, reach = walks.state_levels(matrix.indptr, matrix.indices,
@@ -498,9 +499,8 @@ def _compiled_levels(walks: Any, ptr: np.ndarray, succ: np.ndarray,
     n = ptr.shape[0] - 1
     if seeds is None:
         seeds = np.zeros((n, 0), dtype=bool)
-    # int64 as the state graph's: one compiled signature (a chain's int32 graph would
-    # compile, or load, a second one in the same process)
-    ptr, succ = ptr.astype(np.int64, copy=False), succ.astype(np.int64, copy=False)
+    # int32 as the state graph's (fits checked): one compiled signature, not two a process
+    ptr, succ = ptr.astype(np.int32, copy=False), succ.astype(np.int32, copy=False)
     _, comp, level, reach = walks.components_and_levels(
         ptr, succ, n + succ.shape[0] > SMALL, np.ascontiguousarray(seeds, dtype=bool), True)
     return Levels(np.asarray(comp, dtype=np.int64), level, reach)

@@ -26,7 +26,8 @@ from mitld_lp.solvers.analysis_gates import level_walks
 from mitld_lp.solvers.graph import Blocks, blocks_from, state_levels
 from mitld_lp.util.arrays import SLICE_STATES, index_dtype
 
-__all__ = ["may_split", "mixed", "order_of", "quotient_blocks", "split", "staying"]
+__all__ = ["crowded", "may_split", "mixed", "order_of", "quotient_blocks", "split",
+           "staying"]
 
 
 def order_of(q_matrix: sp.csr_array, row_groups: np.ndarray, comp_of: np.ndarray,
@@ -63,40 +64,68 @@ def staying(q_matrix: sp.csr_array, row_groups: np.ndarray) -> np.ndarray:
     return out
 
 
-def split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray) -> bool:
+def crowded(component: np.ndarray) -> np.ndarray:
+    """The states (ascending ids) whose component holds more than one state: the only
+    ones :func:`mixed`, :func:`may_split` and :func:`split` need to look at (a component
+    of one state holds no two states).  One count a component and one gather, once an
+    analysis, in place of a scatter, a gather and a count over every state in each test
+    (QVBS csma 4-2: 8,345 of 600,267 states; firewire_dl 3-600 and zeroconf_dl
+    1000-1-30: none)."""
+    if not component.size:
+        return np.zeros(0, dtype=np.int64)
+    size = np.bincount(component)
+    if int(size.max()) < 2:  # every component one state
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(size[component] > 1).astype(index_dtype(component.size),
+                                                       copy=False)
+
+
+def split(component: np.ndarray, maybe: np.ndarray, sure: np.ndarray,
+          crowd: np.ndarray | None = None) -> bool:
     """Whether a component of the product holds both a state left in the quotient
-    (``maybe``) and one removed with value 1 (``sure``)."""
+    (``maybe``) and one removed with value 1 (``sure``); ``crowd``: :func:`crowded`'s
+    states of ``component``, where the caller has them (a component of one state holds
+    both only where its state is in both)."""
     if not sure.any():
         return False
-    kept = np.zeros(int(component.max(initial=-1)) + 1, dtype=bool)
-    kept[component[maybe]] = True
-    return bool(kept[component[sure]].any())
+    if bool(np.any(maybe & sure)):  # a state in both: its component holds both
+        return True
+    at = crowded(component) if crowd is None else crowd
+    comp = component[at]
+    kept = np.zeros(int(comp.max(initial=-1)) + 1, dtype=bool)
+    kept[comp[maybe[at]]] = True
+    return bool(kept[comp[sure[at]]].any())
 
 
-def mixed(comp: np.ndarray, maybe: np.ndarray) -> bool:
+def mixed(comp: np.ndarray, maybe: np.ndarray, crowd: np.ndarray | None = None) -> bool:
     """Whether a component of the product holds both a state of the quotient
     (``maybe``) and one out of it (then the quotient's levels are not the product's
-    lifted, and the product's are walked: QVBS zeroconf 1000-4's large component)."""
+    lifted, and the product's are walked: QVBS zeroconf 1000-4's large component);
+    ``crowd``: :func:`crowded`'s states of ``comp`` (only those can be in such a
+    component), where the caller has them."""
     # one state's mark written for each component (any one: a component all in or all
     # out gets its own mark), then any state whose mark differs from its component's:
-    # bools a state, not two int64 counts a component (csma 4-2: 9.5 MB at the
-    # analysis's peak)
-    mark = np.zeros(int(comp.max(initial=-1)) + 1, dtype=bool)
-    mark[comp] = maybe
-    return bool(np.any(mark[comp] != maybe))
+    # bools a component, not two int64 counts (csma 4-2: 9.5 MB at the analysis's peak)
+    at = crowded(comp) if crowd is None else crowd
+    own, inside = comp[at], maybe[at]
+    mark = np.zeros(int(own.max(initial=-1)) + 1, dtype=bool)
+    mark[own] = inside
+    return bool(np.any(mark[own] != inside))
 
 
-def may_split(comp: np.ndarray, maybe: np.ndarray) -> bool:
+def may_split(comp: np.ndarray, maybe: np.ndarray, crowd: np.ndarray | None = None) -> bool:
     """Whether prob-one may split a component of the product (:func:`split`): some
-    ``maybe`` state lies in a component of more than one state.  If not, the caller
-    needs the product's levels in no case and frees what would walk them."""
-    big = np.bincount(comp) > 1
-    return bool(np.any(big[comp] & maybe))
+    ``maybe`` state lies in a component of more than one state (``crowd``:
+    :func:`crowded`'s states of ``comp``, where the caller has them).  If not, the
+    caller needs the product's levels in no case and frees what would walk them."""
+    at = crowded(comp) if crowd is None else crowd
+    return bool(np.any(maybe[at]))
 
 
 def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
                     maybe: np.ndarray, sure_state: np.ndarray, state_map: np.ndarray,
-                    product_levels: Callable[[], Any]) -> tuple[Blocks, np.ndarray]:
+                    product_levels: Callable[[], Any], crowd: np.ndarray | None = None,
+                    ) -> tuple[Blocks, np.ndarray]:
     """The quotient's block order and a level per component of the product for the
     certificate (``Quotient.layers``).  With the product's levels (``found.level``:
     from the compiled walk, or walked by the caller where a component of the product
@@ -108,10 +137,11 @@ def quotient_blocks(found: Any, matrix: sp.csr_array, row_groups: np.ndarray,
     (:mod:`~mitld_lp.solvers.certify`).  Where prob-one's removal split a component
     (:func:`split`), the product's levels are walked (``found.later()``, kept by the
     caller where :func:`may_split`; else ``product_levels()``, the same components)
-    for the layers, as before."""
+    for the layers, as before.  ``crowd``: :func:`crowded`'s states of the product's
+    components, where the caller has them."""
     comp = found.component
     level = found.level
-    cut = split(comp, maybe, sure_state)
+    cut = split(comp, maybe, sure_state, crowd)
     if level is not None and not cut:
         comp_of = np.zeros(row_groups.shape[0] - 1, dtype=np.int64)
         comp_of[state_map[maybe]] = comp[maybe]

@@ -165,7 +165,10 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
     rows, owner = choices_of(row_groups, red)
     free = spared[rows]
     rows, owner = rows[free], owner[free]
-    has, first = np.unique(owner, return_index=True)  # ascending: each one's first
+    # each state's first (owner ascending, choices_of's order): where the owner changes,
+    # np.unique's first occurrences without its sort (QVBS zeroconf_dl: 1.5 ms)
+    first = np.flatnonzero(np.diff(owner, prepend=-1) != 0)  # owners are not negative
+    has = owner[first]
     if has.size != red.size:  # pragma: no cover - the attractor spares one a state
         return None
     play = np.full(sure.size, -1, dtype=np.int64)
