@@ -1,0 +1,254 @@
+"""A PRISM MDP compiled to flat arrays for the own explorer (:mod:`mitld_lp.worlds.prism_explore`).
+
+:func:`compile_program` reads a stormpy ``Program`` whose constants are given (the load's
+``program.substitute_constants()``; its formulas are substituted here) and gives a
+:class:`Compiled`: the state variables (Booleans and bounded integers, global first, then
+each module's, Booleans before integers as Storm's ``VariableInformation`` orders them)
+with their ranges and initial values, every command's guard, its updates' probabilities
+and assignments, each label's expression and the decided-states condition, each
+expression as bytecode for a stack machine over float64 (:data:`OPS`; an integer value
+is exact in a double up to 2^53, and Storm's own evaluator of a double model computes in
+doubles as well).  Anything outside that fragment raises :class:`Unsupported` with the
+reason (an operator not compiled, an unbounded or too wide variable, an ``init ...
+endinit`` block, a model that is no MDP): the
+load then builds with Storm.
+
+The choices are listed in Storm's order (``PrismNextStateGenerator``): first the
+*asynchronous* commands -- without an action, or of an action only one module has -- in
+module and command order; then each action that several modules have, by its index in
+the program, one choice per combination of enabled commands (one from each module that
+has the action, the last module's command varying fastest)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Unsupported", "Compiled", "compile_program", "compile_expression", "OPS"]
+
+OPS = {name: k for k, name in enumerate((
+    "CONST", "LOAD", "NOT", "NEG", "AND", "OR", "XOR", "IMPLIES", "IFF", "PLUS", "MINUS",
+    "TIMES", "DIVIDE", "EQUAL", "NOT_EQUAL", "LESS", "LESS_OR_EQUAL", "GREATER",
+    "GREATER_OR_EQUAL", "MIN", "MAX", "FLOOR", "CEIL", "POWER", "MODULO", "ITE"))}
+"""The stack machine's operations: ``CONST k`` pushes constant ``k``, ``LOAD v`` variable
+``v``'s value; the others pop their operands and push the result (a truth value as 1.0 or
+0.0; ``MODULO`` as C's ``fmod``, ``DIVIDE`` in doubles)."""
+
+MAX_BITS = 62
+"""The widest integer variable compiled (a state is packed in 64-bit words)."""
+
+
+class Unsupported(Exception):
+    """The program is outside the own explorer's fragment (the message says why)."""
+
+
+@dataclass
+class Compiled:
+    """A program as arrays (see the module docstring).
+
+    ``code``/``consts`` hold every expression, expression ``e`` being
+    ``code[starts[e]:starts[e + 1]]``; a command's guard, an update's probability and an
+    assignment's value are expression numbers.  Variable ``v`` is stored in bits
+    ``shift[v]`` upward of word ``word[v]`` of a packed state, as its value minus
+    ``low[v]`` (``width[v]`` bits)."""
+
+    names: list[str] = field(default_factory=list)
+    booleans: list[int] = field(default_factory=list)
+    low: list[int] = field(default_factory=list)
+    high: list[int] = field(default_factory=list)
+    initial: list[int] = field(default_factory=list)
+    code: list[int] = field(default_factory=list)
+    consts: list[float] = field(default_factory=list)
+    starts: list[int] = field(default_factory=lambda: [0])
+    # commands (in the order the choices list them, see the module docstring)
+    cmd_guard: list[int] = field(default_factory=list)
+    cmd_name: list[str] = field(default_factory=list)  # action, or <module>_cmd<k>
+    cmd_labelled: list[bool] = field(default_factory=list)
+    cmd_global: list[int] = field(default_factory=list)  # Storm's global command index
+    cmd_updates: list[int] = field(default_factory=lambda: [0])  # offsets into upd_*
+    upd_prob: list[int] = field(default_factory=list)
+    upd_assign: list[int] = field(default_factory=lambda: [0])  # offsets into asg_*
+    asg_var: list[int] = field(default_factory=list)
+    asg_expr: list[int] = field(default_factory=list)
+    n_async: int = 0  # commands [0, n_async) are asynchronous
+    # synchronised actions: action a's modules are sync_mod[sync_start[a]:...]; module
+    # slot j's commands are sync_cmd[mod_start[j]:mod_start[j + 1]]
+    sync_start: list[int] = field(default_factory=lambda: [0])
+    mod_start: list[int] = field(default_factory=lambda: [0])
+    sync_cmd: list[int] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    label_expr: list[int] = field(default_factory=list)
+    terminal: int = -1  # the decided-states condition's expression, -1: none
+    action_names: list[str] = field(default_factory=list)  # of the synchronised actions
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The kernel's inputs as numpy arrays (:mod:`mitld_lp.worlds.prism_explore`)."""
+        word, shift, width, bit = [], [], [], 0
+        for lo, hi in zip(self.low, self.high, strict=True):
+            w = max(1, int(hi - lo).bit_length())
+            if bit // 64 != (bit + w - 1) // 64:  # no field across two words
+                bit = (bit // 64 + 1) * 64
+            word.append(bit // 64)
+            shift.append(bit % 64)
+            width.append(w)
+            bit += w
+        i64 = np.int64
+        return dict(
+            code=np.asarray(self.code, dtype=i64), consts=np.asarray(self.consts, dtype=float),
+            starts=np.asarray(self.starts, dtype=i64), word=np.asarray(word, dtype=i64),
+            shift=np.asarray(shift, dtype=i64), width=np.asarray(width, dtype=i64),
+            low=np.asarray(self.low, dtype=i64), high=np.asarray(self.high, dtype=i64),
+            initial=np.asarray(self.initial, dtype=i64),
+            cmd_guard=np.asarray(self.cmd_guard, dtype=i64),
+            cmd_updates=np.asarray(self.cmd_updates, dtype=i64),
+            upd_prob=np.asarray(self.upd_prob, dtype=i64),
+            upd_assign=np.asarray(self.upd_assign, dtype=i64),
+            asg_var=np.asarray(self.asg_var, dtype=i64),
+            asg_expr=np.asarray(self.asg_expr, dtype=i64),
+            sync_start=np.asarray(self.sync_start, dtype=i64),
+            mod_start=np.asarray(self.mod_start, dtype=i64),
+            sync_cmd=np.asarray(self.sync_cmd, dtype=i64),
+            label_expr=np.asarray(self.label_expr, dtype=i64),
+            words=np.int64(max(1, (bit + 63) // 64)),
+        )
+
+
+_UNARY = {"NOT", "FLOOR", "CEIL"}
+_BINARY = {"AND", "OR", "XOR", "IMPLIES", "IFF", "PLUS", "MINUS", "TIMES", "DIVIDE",
+           "EQUAL", "NOT_EQUAL", "LESS", "LESS_OR_EQUAL", "GREATER", "GREATER_OR_EQUAL",
+           "MIN", "MAX", "POWER", "MODULO"}
+
+
+def compile_expression(expr: Any, index: dict[str, int], out: Compiled) -> int:
+    """Append ``expr``'s bytecode to ``out`` as a new expression; its number."""
+    code = out.code
+
+    def emit(e: Any) -> None:
+        if e.is_literal():
+            value = e.evaluate_as_bool() if e.has_boolean_type() else e.evaluate_as_double()
+            code.extend((OPS["CONST"], len(out.consts)))
+            out.consts.append(float(value))
+            return
+        if e.is_variable():
+            name = e.get_identifier()
+            if name not in index:
+                raise Unsupported(f"expression {e}: {name!r} is not a state variable")
+            code.extend((OPS["LOAD"], index[name]))
+            return
+        try:
+            op = str(e.operator).rsplit(".", 1)[-1]
+        except Exception as exc:  # noqa: BLE001 - stormpy's own, for another expression
+            raise Unsupported(f"expression {e}: not an operator ({exc})") from None
+        arity = e.arity
+        if op == "MINUS" and arity == 1:
+            emit(e.get_operand(0))
+            code.append(OPS["NEG"])
+            return
+        if (op in _UNARY and arity == 1) or (op in _BINARY and arity == 2) or (
+                op == "ITE" and arity == 3):
+            for i in range(arity):
+                emit(e.get_operand(i))
+            code.append(OPS[op])
+            return
+        raise Unsupported(f"expression {e}: operator {op} of {arity} operands")
+
+    emit(expr)
+    out.starts.append(len(code))
+    return len(out.starts) - 2
+
+
+def _variables(program: Any, out: Compiled) -> dict[str, int]:
+    """The state variables in Storm's order, into ``out``; name -> number."""
+    def add(var: Any, boolean: bool) -> None:
+        if boolean:
+            lo, hi = 0, 1
+        else:
+            if var.lower_bound_expression is None or var.upper_bound_expression is None:
+                raise Unsupported(f"variable {var.name}: unbounded")
+            lo = var.lower_bound_expression.evaluate_as_int()
+            hi = var.upper_bound_expression.evaluate_as_int()
+            if hi < lo or (hi - lo).bit_length() > MAX_BITS:
+                raise Unsupported(f"variable {var.name}: range {lo}..{hi}")
+        init = var.initial_value_expression
+        if init is None:
+            raise Unsupported(f"variable {var.name}: no initial value")
+        value = int(init.evaluate_as_bool()) if boolean else init.evaluate_as_int()
+        out.names.append(var.name)
+        if boolean:
+            out.booleans.append(len(out.names) - 1)
+        out.low.append(lo)
+        out.high.append(hi)
+        out.initial.append(value)
+
+    for var in program.global_boolean_variables:
+        add(var, True)
+    for var in program.global_integer_variables:
+        add(var, False)
+    for module in program.modules:
+        for var in module.boolean_variables:
+            add(var, True)
+        for var in module.integer_variables:
+            add(var, False)
+    return {name: k for k, name in enumerate(out.names)}
+
+
+def _command(cmd: Any, name: str, index: dict[str, int], out: Compiled) -> None:
+    out.cmd_guard.append(compile_expression(cmd.guard_expression, index, out))
+    out.cmd_name.append(name)
+    out.cmd_labelled.append(bool(cmd.is_labeled))
+    out.cmd_global.append(int(cmd.global_index))
+    for update in cmd.updates:
+        out.upd_prob.append(compile_expression(update.probability_expression, index, out))
+        for a in update.assignments:
+            out.asg_var.append(index[a.variable.name])
+            out.asg_expr.append(compile_expression(a.expression, index, out))
+        out.upd_assign.append(len(out.asg_var))
+    out.cmd_updates.append(len(out.upd_prob))
+
+
+def compile_program(program: Any, terminal: Any = None) -> Compiled:
+    """``program`` (its constants given) as a :class:`Compiled`; ``terminal``: the
+    decided-states condition as a stormpy ``Expression`` over the state variables (None:
+    every state expanded).  :class:`Unsupported` outside the fragment."""
+    kind = str(program.model_type).rsplit(".", 1)[-1]
+    if kind != "MDP":
+        raise Unsupported(f"a {kind}, not an MDP")
+    if program.has_initial_states_expression:
+        raise Unsupported("an init ... endinit block")
+    program = program.substitute_formulas()
+    if program.has_undefined_constants:
+        raise Unsupported("undefined constants")
+    out = Compiled()
+    index = _variables(program, out)
+    modules = list(program.modules)
+    owners: dict[int, list[int]] = {}  # action index -> modules with it
+    for j, module in enumerate(modules):
+        for a in sorted({c.action_index for c in module.commands if c.is_labeled}):
+            owners.setdefault(a, []).append(j)
+    names = {f"{m.name}_cmd{k}" for m in modules for k, c in enumerate(m.commands, 1)
+             if not c.is_labeled}
+    if names & {c.action_name for m in modules for c in m.commands if c.is_labeled}:
+        raise Unsupported("an action named as a command without one")
+    for module in modules:  # asynchronous commands first, in module and command order
+        for k, cmd in enumerate(module.commands, start=1):
+            if not cmd.is_labeled or len(owners[cmd.action_index]) == 1:
+                _command(cmd, cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}",
+                         index, out)
+    out.n_async = len(out.cmd_guard)
+    for a in sorted(a for a, mods in owners.items() if len(mods) > 1):
+        for j in owners[a]:
+            for cmd in modules[j].commands:
+                if cmd.is_labeled and cmd.action_index == a:
+                    out.sync_cmd.append(len(out.cmd_guard))
+                    _command(cmd, cmd.action_name, index, out)
+            out.mod_start.append(len(out.sync_cmd))
+        out.sync_start.append(len(out.mod_start) - 1)
+        out.action_names.append(program.get_action_name(a))
+    for label in program.labels:
+        out.labels.append(label.name)
+        out.label_expr.append(compile_expression(label.expression, index, out))
+    if terminal is not None:
+        out.terminal = compile_expression(terminal, index, out)
+    return out

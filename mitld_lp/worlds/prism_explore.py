@@ -1,0 +1,239 @@
+"""The own explorer of a PRISM MDP: :mod:`~mitld_lp.worlds.prism_compile`'s tables run by
+:mod:`~mitld_lp.worlds.prism_kernels`' compiled breadth-first search, read into the
+:class:`~mitld_lp.worlds.prism_tables.Tables` Storm's build gives (the same states in
+the same order, the same choices, rows, labels and names), so that nothing after the
+load changes.
+
+Which builder the load uses (:func:`chosen_builder`): the environment variable
+``MITLD_PRISM_BUILDER`` = ``storm`` or ``own`` forces one; by default (``auto``) the own
+explorer runs where its kernel's machine code is cached on disk (a first compile, about
+10 s, is paid only where asked for: ``own``, the tests, ``experiments/explore_vs_storm.py``).
+It declines, and Storm builds, where the program is outside the fragment
+(:class:`~mitld_lp.worlds.prism_compile.Unsupported`), where an update leaves a
+variable's range or a probability is negative (Storm's build then refuses it in its own
+words), where two choices of one state would carry one name (Storm's choice origins name
+them), or where event effects are asked for; :attr:`Explored.reason` says why (logged
+at debug level).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.worlds import WorldError
+from mitld_lp.worlds.prism_compile import Compiled, Unsupported, compile_program
+from mitld_lp.worlds.prism_labels import state_labels
+from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, Valuations
+from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
+
+__all__ = ["Explored", "chosen_builder", "explore_program", "explore_tables", "BUILDER_ENV"]
+
+log = logging.getLogger("mitld_lp.worlds.prism")
+
+BUILDER_ENV = "MITLD_PRISM_BUILDER"
+"""The environment variable that forces a builder: ``storm``, ``own`` or ``auto``."""
+
+_STATUS = {1: "an update leaves a variable's range", 2: "a probability is negative",
+           3: "more states than max_states"}
+
+
+@dataclass
+class Explored:
+    """The own explorer's raw build: ``keys`` (``n x words`` packed states), the
+    offsets and branches as in :class:`Tables`, each choice's command (``origin``; -1 a
+    deadlock's self-loop, -2 a decided state's, ``-3 - i``: a synchronised choice whose
+    commands are ``combos[i:i + k]``), and ``values`` (``n x variables``)."""
+
+    compiled: Compiled
+    values: np.ndarray
+    choices: np.ndarray
+    branches: np.ndarray
+    targets: np.ndarray
+    probabilities: np.ndarray
+    origin: np.ndarray
+    combos: np.ndarray
+    keys: np.ndarray
+    layout: dict[str, Any]
+
+
+def chosen_builder() -> str:
+    """``storm``, ``own`` or ``auto`` from :data:`BUILDER_ENV` (``auto`` if unset);
+    ``ValueError`` for another value."""
+    value = os.environ.get(BUILDER_ENV, "auto").strip().lower() or "auto"
+    if value not in ("storm", "own", "auto"):
+        raise ValueError(f"{BUILDER_ENV}={value!r}: expected storm, own or auto")
+    return value
+
+
+def kernel_ready() -> bool:
+    """Whether the explorer's machine code can be had without a compile."""
+    from mitld_lp.util import kernel_loader
+
+    return all(kernel_loader.module_cached("mitld_lp.worlds.prism_kernels", name)
+               for name in ("explore", "label_flags"))
+
+
+def _kernels() -> Any:
+    from mitld_lp.worlds import prism_kernels
+
+    return prism_kernels
+
+
+def terminal_expression(stormpy: Any, plain: Any, terminal: str) -> Any:
+    """The decided-states condition ``terminal`` (a PRISM expression over ``plain``'s
+    variables) as a stormpy ``Expression``; None for ``""``."""
+    if not terminal:
+        return None
+    with storm_quiet():
+        prop = stormpy.parse_properties(f"Pmax=? [F {terminal}]", plain)[0]
+    inner = prop.get_raw_formula().subformula.subformula
+    if not hasattr(inner, "get_expression"):
+        raise Unsupported(f"the decided-states condition {terminal} is not one expression")
+    return inner.get_expression()
+
+
+def explore_program(compiled: Compiled, max_states: int) -> Explored | str:
+    """The own build of ``compiled``; a reason string where it declines (a status)."""
+    k = _kernels()
+    a = compiled.arrays()
+    words = int(a["words"])
+    status, counts, keys, choices, branches, targets, probs, origin, combos = k.explore(
+        a["code"], a["consts"], a["starts"], a["word"], a["shift"], a["width"], a["low"],
+        a["high"], a["initial"], a["cmd_guard"], a["cmd_updates"], a["upd_prob"],
+        a["upd_assign"], a["asg_var"], a["asg_expr"], np.int64(compiled.n_async),
+        a["sync_start"], a["mod_start"], a["sync_cmd"], np.int64(compiled.terminal),
+        np.int64(words), np.int64(max_states))
+    if status != k.OK:
+        return f"{_STATUS[int(status)]} (state {int(counts[0])}, command {int(counts[1])})"
+    n, m, b, nk = (int(x) for x in counts)
+    keys = keys[: n * words]
+    packed = keys.reshape(n, words)
+    values = np.empty((n, len(compiled.names)), dtype=np.int64)
+    for v in range(len(compiled.names)):
+        field = packed[:, a["word"][v]] >> a["shift"][v]
+        values[:, v] = (field & ((1 << int(a["width"][v])) - 1)) + a["low"][v]
+    return Explored(compiled, values, choices[: n + 1].copy(), branches[: m + 1].copy(),
+                    targets[:b].copy(), probs[:b].copy(), origin[:m].copy(),
+                    combos[:nk].copy(), keys, a)
+
+
+def _narrow(values: np.ndarray) -> np.ndarray:
+    lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
+    for kind in (np.int8, np.int16, np.int32):
+        if np.iinfo(kind).min <= lo and hi <= np.iinfo(kind).max:
+            return values.astype(kind)
+    return values
+
+
+class _Flags:
+    """``n`` flags in the shape of Storm's labelling, for
+    :func:`~mitld_lp.worlds.prism_labels.state_labels`."""
+
+    def __init__(self, flags: dict[str, np.ndarray], n: int) -> None:
+        self.flags, self.nr_states, self.labeling = flags, n, self
+
+    def get_states(self, label: str) -> Any:
+        return _Bits(self.flags[label])
+
+
+class _Bits:
+    def __init__(self, flags: np.ndarray) -> None:
+        self.f = flags
+        self.before = np.cumsum(flags) - flags
+
+    def size(self) -> int:
+        return int(self.f.size)
+
+    def get_number_of_set_bits(self) -> int:
+        return int(np.count_nonzero(self.f))
+
+    def get(self, i: int) -> bool:
+        return bool(self.f[i])
+
+    def get_number_of_set_bits_before_index(self, i: int) -> int:
+        return int(self.before[i])
+
+
+def label_values(built: Explored, exprs: list[int]) -> np.ndarray:
+    """``n x len(exprs)`` flags: each state's truth of each compiled expression."""
+    a = built.layout
+    return _kernels().label_flags(a["code"], a["consts"], a["starts"], built.keys,
+                                  a["words"], a["word"], a["shift"], a["width"], a["low"],
+                                  np.asarray(exprs, dtype=np.int64))
+
+
+def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
+                   events: frozenset[str], terminal: str, max_states: int,
+                   ) -> tuple[Tables | None, str]:
+    """The own build of ``plain`` (the program with its constants) as :class:`Tables`,
+    as :func:`~mitld_lp.worlds.prism_build.build_tables` would read Storm's; or
+    ``(None, reason)`` where it declines (the module docstring)."""
+    if events:
+        return None, "event effects"
+    try:
+        compiled = compile_program(plain, terminal_expression(stormpy, plain, terminal))
+    except Unsupported as exc:
+        return None, str(exc)
+    built = explore_program(compiled, max_states + 1)
+    if isinstance(built, str):
+        return None, built
+    n, m = len(built.choices) - 1, len(built.branches) - 1
+    if n > max_states:
+        from mitld_lp.worlds.prism_build import PrismTooLarge
+
+        raise PrismTooLarge(f"{where}: the exploration found more than max_states = "
+                            f"{max_states:,} states: raise max_states (--max-world-states)")
+    names = compiled.cmd_name
+    table = list(dict.fromkeys(names)) + [DEADLOCK_ACTION, DECIDED_ACTION]
+    code_of = {name: k for k, name in enumerate(table)}
+    cmd_code = np.array([code_of[x] for x in names] or [0], dtype=np.int64)
+    first = np.where(built.origin >= 0, built.origin,
+                     np.where(built.origin <= -3, built.combos[np.maximum(-3 - built.origin, 0)]
+                              if built.combos.size else 0, 0))
+    code = np.where(built.origin == -1, len(table) - 2,
+                    np.where(built.origin == -2, len(table) - 1, cmd_code[first]))
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
+    key = state_of * len(table) + code
+    if np.unique(key).size != m:
+        return None, "two choices of one state with one name"
+    lengths = np.diff(built.branches)
+    bad, total, branch_row = checked_rows(lengths, built.probabilities, SUM_TOLERANCE)
+    if bad.size:
+        return None, "a distribution that is not one (Storm's build refuses it)"
+    probabilities, rows, largest = normalise_rows(lengths, built.probabilities,
+                                                  (total, branch_row))
+    normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
+    if normalised is not None:
+        log.info("%s", normalised)
+    used = np.unique(code)
+    remap = np.full(len(table), -1, dtype=np.int32)
+    remap[used] = np.arange(used.size, dtype=np.int32)
+    labels = sorted(chosen)
+    exprs = [compiled.label_expr[compiled.labels.index(x)] for x in labels]
+    flags = label_values(built, exprs) if labels else np.zeros((n, 0), dtype=bool)
+    label_sets, label_index = state_labels(
+        _Flags({x: flags[:, k] for k, x in enumerate(labels)}, n), chosen)
+    order = [compiled.names.index(x) for x in storm_order(compiled)]
+    booleans = tuple(k for k, v in enumerate(order) if v in compiled.booleans)
+    states = Valuations(_narrow(built.values[:, order]), booleans)
+    tables = Tables(
+        variables=tuple(compiled.names[v] for v in order), states=states, initial=0,
+        label_sets=label_sets, label_index=label_index, choices=built.choices,
+        branches=built.branches, targets=built.targets, probabilities=probabilities,
+        action_names=tuple(table[k] for k in used.tolist()), action_index=remap[code],
+        effects={}, decided=int(np.count_nonzero(built.origin == -2)),
+        normalised=normalised, checked=True)
+    return tables, ""
+
+
+def storm_order(compiled: Compiled) -> list[str]:
+    """The variables in the order of Storm's state valuations: Booleans first, then
+    integers, each in :mod:`~mitld_lp.worlds.prism_compile`'s order."""
+    bools = [compiled.names[v] for v in compiled.booleans]
+    return bools + [x for v, x in enumerate(compiled.names) if v not in compiled.booleans]
