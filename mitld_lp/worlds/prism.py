@@ -102,6 +102,7 @@ from mitld_lp.worlds.prism_build import (
     Grower,
     PrismTooLarge,
     build_tables,
+    own_build,
     build_within,
     check_budgets,
 )
@@ -532,9 +533,9 @@ def load_prism(
         terminal = ""
     recipe = PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal)
 
-    def work(limit: int | None = None) -> Tables:
+    def work(limit: int | None = None, own: bool = True) -> Tables:
         return build_tables(stormpy, program, plain, where, chosen, event_set, terminal,
-                            max_states, limit, recipe)
+                            max_states, limit, recipe, own=own)
 
     lazy = explore == "lazy" or (explore == "auto" and task is not None
                                  and horizon(task) is not None and not event_set
@@ -549,7 +550,10 @@ def load_prism(
         tables, first = grower.within(first, steps, LAZY_GROWTH)
     else:
         fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
-        tables = build_within(work, where, fits, str(bound), max_states, memory)
+        own = None if fits or event_set else own_build(stormpy, plain, where, chosen,
+                                                       terminal, max_states, memory)
+        tables = own if own is not None else build_within(
+            lambda: work(None, own=fits), where, fits, str(bound), max_states, memory)
     log.info(
         "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
         where, len(tables.states), bound, tables.decided, terminal or "never",

@@ -30,14 +30,21 @@ from mitld_lp.worlds.prism_compile import Compiled, Unsupported, compile_program
 from mitld_lp.worlds.prism_labels import state_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, Valuations
+from mitld_lp.worlds.table import LATE, LateNames
 from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 
-__all__ = ["Explored", "chosen_builder", "explore_program", "explore_tables", "BUILDER_ENV"]
+__all__ = ["OWN_BYTES_PER_STATE", "Explored", "chosen_builder", "explore_program", "explore_tables", "BUILDER_ENV"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
 BUILDER_ENV = "MITLD_PRISM_BUILDER"
 """The environment variable that forces a builder: ``storm``, ``own`` or ``auto``."""
+
+OWN_BYTES_PER_STATE = 512
+"""Memory per state of the own explorer's build at its peak, for the budget: the packed
+state and its hash slot (about 40 bytes), the growing arrays of choices and branches
+(doubled: up to twice their 16 bytes per branch at ten branches a state), the tables'
+copies and the product's later reading of them, rounded up."""
 
 _STATUS = {1: "an update leaves a variable's range", 2: "a probability is negative",
            3: "more states than max_states"}
@@ -189,19 +196,10 @@ def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
 
         raise PrismTooLarge(f"{where}: the exploration found more than max_states = "
                             f"{max_states:,} states: raise max_states (--max-world-states)")
-    names = compiled.cmd_name
-    table = list(dict.fromkeys(names)) + [DEADLOCK_ACTION, DECIDED_ACTION]
-    code_of = {name: k for k, name in enumerate(table)}
-    cmd_code = np.array([code_of[x] for x in names] or [0], dtype=np.int64)
-    first = np.where(built.origin >= 0, built.origin,
-                     np.where(built.origin <= -3, built.combos[np.maximum(-3 - built.origin, 0)]
-                              if built.combos.size else 0, 0))
-    code = np.where(built.origin == -1, len(table) - 2,
-                    np.where(built.origin == -2, len(table) - 1, cmd_code[first]))
-    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
-    key = state_of * len(table) + code
-    if np.unique(key).size != m:
-        return None, "two choices of one state with one name"
+    naming = _naming(plain, compiled, built, terminal)
+    if isinstance(naming, str):
+        return None, naming
+    action_names, action_index = naming
     lengths = np.diff(built.branches)
     bad, total, branch_row = checked_rows(lengths, built.probabilities, SUM_TOLERANCE)
     if bad.size:
@@ -211,29 +209,93 @@ def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
     normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
     if normalised is not None:
         log.info("%s", normalised)
-    used = np.unique(code)
-    remap = np.full(len(table), -1, dtype=np.int32)
-    remap[used] = np.arange(used.size, dtype=np.int32)
     labels = sorted(chosen)
     exprs = [compiled.label_expr[compiled.labels.index(x)] for x in labels]
     flags = label_values(built, exprs) if labels else np.zeros((n, 0), dtype=bool)
-    label_sets, label_index = state_labels(
-        _Flags({x: flags[:, k] for k, x in enumerate(labels)}, n), chosen)
-    order = [compiled.names.index(x) for x in storm_order(compiled)]
+    by_label = {x: np.ascontiguousarray(flags[:, k]) for k, x in enumerate(labels)}
+    label_sets, label_index = state_labels(_Flags(by_label, n), chosen, by_label)
+    order = [compiled.names.index(x) for x in sorted(compiled.names)]  # program_head's
     booleans = tuple(k for k, v in enumerate(order) if v in compiled.booleans)
     states = Valuations(_narrow(built.values[:, order]), booleans)
     tables = Tables(
         variables=tuple(compiled.names[v] for v in order), states=states, initial=0,
         label_sets=label_sets, label_index=label_index, choices=built.choices,
         branches=built.branches, targets=built.targets, probabilities=probabilities,
-        action_names=tuple(table[k] for k in used.tolist()), action_index=remap[code],
+        action_names=action_names, action_index=action_index,
         effects={}, decided=int(np.count_nonzero(built.origin == -2)),
         normalised=normalised, checked=True)
     return tables, ""
 
 
-def storm_order(compiled: Compiled) -> list[str]:
-    """The variables in the order of Storm's state valuations: Booleans first, then
-    integers, each in :mod:`~mitld_lp.worlds.prism_compile`'s order."""
-    bools = [compiled.names[v] for v in compiled.booleans]
-    return bools + [x for v, x in enumerate(compiled.names) if v not in compiled.booleans]
+def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
+            ) -> tuple[Any, np.ndarray] | str:
+    """``(action_names, action_index)`` as :func:`~mitld_lp.worlds.prism_build.build_tables`
+    names Storm's build of ``plain`` (whole, without events, its valuations deferred):
+    by the choices' labels, the distinct ones sorted, then ``deadlock`` and, with a
+    decided-states condition, ``decided`` (a program whose commands all have actions and
+    no module two of one action); or every choice but those self-loops named when first
+    read (:class:`KnownNames`; :func:`~mitld_lp.worlds.prism_names.late_names`).  A
+    reason where neither applies or two choices of a state would share a name."""
+    from mitld_lp.worlds.prism_names import late_names
+    from mitld_lp.worlds.prism_origins import needs_origins
+
+    late = late_names(plain)
+    if needs_origins(plain) and not late:
+        return "choices named from Storm's choice origins"
+    n, m = len(built.choices) - 1, len(built.branches) - 1
+    if late and m >= LATE:
+        return "too many choices for late names"
+    cmd_names = list(dict.fromkeys(compiled.cmd_name))
+    of_cmd = np.array([cmd_names.index(x) for x in compiled.cmd_name] or [0], dtype=np.int64)
+    first = built.origin.copy()
+    sync = first <= -3
+    if sync.any():
+        first[sync] = built.combos[-3 - first[sync]]
+    loop = first < 0
+    of = np.where(loop, -1, of_cmd[np.maximum(first, 0)])
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
+    key = state_of * (len(cmd_names) + 1) + of + 1
+    if np.unique(key).size != m:
+        return "two choices of one state with one name (Storm's choice origins tell them apart)"
+    known = (DEADLOCK_ACTION,) + ((DECIDED_ACTION,) if terminal else ())
+    if late:
+        index = np.where(loop, 0, LATE + np.arange(m, dtype=np.int64))
+        index[built.origin == -2] = len(known) - 1
+        index = index.astype(np.int64)
+        return KnownNames(known, of, cmd_names, index), index
+    table = sorted(set(cmd_names)) + list(known)
+    distinct = {x: k for k, x in enumerate(dict.fromkeys(table))}
+    remap = np.array([distinct[x] for x in cmd_names] + [distinct[DEADLOCK_ACTION]]
+                     + [distinct[known[-1]]], dtype=np.int32)
+    code = np.where(built.origin == -1, len(cmd_names),
+                    np.where(built.origin == -2, len(cmd_names) + 1, of))
+    used = sorted(set(cmd_names) & {cmd_names[k] for k in np.unique(of[of >= 0]).tolist()})
+    if used != sorted(set(cmd_names)):  # only the labels some choice has, as Storm's
+        return _relabel(used, known, remap, cmd_names, code)
+    return tuple(distinct), remap[code]
+
+
+def _relabel(used: list[str], known: tuple[str, ...], remap: np.ndarray,
+             cmd_names: list[str], code: np.ndarray) -> tuple[Any, np.ndarray]:
+    """:func:`_naming`'s labels where some action has no choice: the used ones only."""
+    distinct = {x: k for k, x in enumerate(dict.fromkeys(used + list(known)))}
+    again = np.array([distinct.get(x, -1) for x in cmd_names] + [distinct[DEADLOCK_ACTION]]
+                     + [distinct[known[-1]]], dtype=np.int32)
+    return tuple(distinct), again[code]
+
+
+class KnownNames(LateNames):
+    """A world's names where every choice but the deadlock and decided self-loops has
+    the id ``LATE + c`` (as Storm's build names them when first read,
+    :class:`~mitld_lp.worlds.prism_names.DeferredNames`), all known already: choice
+    ``c``'s is ``names[of[c]]``."""
+
+    def __init__(self, known: tuple[str, ...], of: np.ndarray, names: list[str],
+                 index: np.ndarray) -> None:
+        self.known, self.of, self.names, self.index = known, of, tuple(names), index
+
+    def names_of(self, choices: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+        choices = np.asarray(choices, dtype=np.int64)
+        of = self.of[choices]
+        codes = np.where(of >= 0, len(self.known) + of, self.index[choices])
+        return codes, self.known + self.names
