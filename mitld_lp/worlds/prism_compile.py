@@ -31,10 +31,12 @@ __all__ = ["Unsupported", "Compiled", "compile_program", "compile_expression", "
 OPS = {name: k for k, name in enumerate((
     "CONST", "LOAD", "NOT", "NEG", "AND", "OR", "XOR", "IMPLIES", "IFF", "PLUS", "MINUS",
     "TIMES", "DIVIDE", "EQUAL", "NOT_EQUAL", "LESS", "LESS_OR_EQUAL", "GREATER",
-    "GREATER_OR_EQUAL", "MIN", "MAX", "FLOOR", "CEIL", "POWER", "MODULO", "ITE"))}
+    "GREATER_OR_EQUAL", "MIN", "MAX", "FLOOR", "CEIL", "POWER", "MODULO", "ITE",
+    "COMPARE"))}
 """The stack machine's operations: ``CONST k`` pushes constant ``k``, ``LOAD v`` variable
 ``v``'s value; the others pop their operands and push the result (a truth value as 1.0 or
-0.0; ``MODULO`` as C's ``fmod``, ``DIVIDE`` in doubles)."""
+0.0; ``MODULO`` as C's ``fmod``, ``DIVIDE`` in doubles); ``COMPARE v k r`` is ``LOAD v,
+CONST k`` and the comparison ``r`` (``EQUAL`` ... ``GREATER_OR_EQUAL``) in one step."""
 
 MAX_BITS = 62
 """The widest integer variable compiled (a state is packed in 64-bit words)."""
@@ -63,7 +65,8 @@ class Compiled:
     consts: list[float] = field(default_factory=list)
     starts: list[int] = field(default_factory=lambda: [0])
     # commands (in the order the choices list them, see the module docstring)
-    cmd_guard: list[int] = field(default_factory=list)
+    cmd_guard: list[int] = field(default_factory=lambda: [0])  # offsets into conj
+    conj: list[int] = field(default_factory=list)  # the guards' conjuncts
     cmd_name: list[str] = field(default_factory=list)  # action, or <module>_cmd<k>
     cmd_labelled: list[bool] = field(default_factory=list)
     cmd_global: list[int] = field(default_factory=list)  # Storm's global command index
@@ -102,6 +105,7 @@ class Compiled:
             low=np.asarray(self.low, dtype=i64), high=np.asarray(self.high, dtype=i64),
             initial=np.asarray(self.initial, dtype=i64),
             cmd_guard=np.asarray(self.cmd_guard, dtype=i64),
+            conj=np.asarray(self.conj, dtype=i64),
             cmd_updates=np.asarray(self.cmd_updates, dtype=i64),
             upd_prob=np.asarray(self.upd_prob, dtype=i64),
             upd_assign=np.asarray(self.upd_assign, dtype=i64),
@@ -121,13 +125,36 @@ _BINARY = {"AND", "OR", "XOR", "IMPLIES", "IFF", "PLUS", "MINUS", "TIMES", "DIVI
            "MIN", "MAX", "POWER", "MODULO"}
 
 
+_COMPARE = {"EQUAL", "NOT_EQUAL", "LESS", "LESS_OR_EQUAL", "GREATER", "GREATER_OR_EQUAL"}
+
+
+def _literal(e: Any) -> float:
+    """A literal's value as Storm's build evaluates it in doubles: a rational ``p/q`` as
+    ``float(p) / float(q)`` (``9/10`` is 0.9; stormpy's ``evaluate_as_double`` truncates
+    to 0.8999999999999999)."""
+    if e.has_boolean_type():
+        return float(e.evaluate_as_bool())
+    if e.has_integer_type():
+        return float(e.evaluate_as_int())
+    r = e.evaluate_as_rational()
+    return float(int(str(r.numerator))) / float(int(str(r.denominator)))
+
+
+def conjuncts(expr: Any) -> list[Any]:
+    """The operands of ``expr``'s top-level conjunctions, left to right."""
+    if not (expr.is_literal() or expr.is_variable()) and expr.arity == 2 and \
+            str(expr.operator).rsplit(".", 1)[-1] == "AND":
+        return conjuncts(expr.get_operand(0)) + conjuncts(expr.get_operand(1))
+    return [expr]
+
+
 def compile_expression(expr: Any, index: dict[str, int], out: Compiled) -> int:
     """Append ``expr``'s bytecode to ``out`` as a new expression; its number."""
     code = out.code
 
     def emit(e: Any) -> None:
         if e.is_literal():
-            value = e.evaluate_as_bool() if e.has_boolean_type() else e.evaluate_as_double()
+            value = _literal(e)
             code.extend((OPS["CONST"], len(out.consts)))
             out.consts.append(float(value))
             return
@@ -145,6 +172,14 @@ def compile_expression(expr: Any, index: dict[str, int], out: Compiled) -> int:
         if op == "MINUS" and arity == 1:
             emit(e.get_operand(0))
             code.append(OPS["NEG"])
+            return
+        if op in _COMPARE and arity == 2 and e.get_operand(0).is_variable() and \
+                e.get_operand(1).is_literal() and e.get_operand(0).get_identifier() in index:
+            right = e.get_operand(1)  # a variable against a number: one step
+            value = _literal(right)
+            code.extend((OPS["COMPARE"], index[e.get_operand(0).get_identifier()],
+                         len(out.consts), OPS[op]))
+            out.consts.append(float(value))
             return
         if (op in _UNARY and arity == 1) or (op in _BINARY and arity == 2) or (
                 op == "ITE" and arity == 3):
@@ -195,7 +230,9 @@ def _variables(program: Any, out: Compiled) -> dict[str, int]:
 
 
 def _command(cmd: Any, name: str, index: dict[str, int], out: Compiled) -> None:
-    out.cmd_guard.append(compile_expression(cmd.guard_expression, index, out))
+    for part in conjuncts(cmd.guard_expression):  # tried in turn, the first false ends it
+        out.conj.append(compile_expression(part, index, out))
+    out.cmd_guard.append(len(out.conj))
     out.cmd_name.append(name)
     out.cmd_labelled.append(bool(cmd.is_labeled))
     out.cmd_global.append(int(cmd.global_index))
@@ -236,12 +273,12 @@ def compile_program(program: Any, terminal: Any = None) -> Compiled:
             if not cmd.is_labeled or len(owners[cmd.action_index]) == 1:
                 _command(cmd, cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}",
                          index, out)
-    out.n_async = len(out.cmd_guard)
+    out.n_async = len(out.cmd_name)
     for a in sorted(a for a, mods in owners.items() if len(mods) > 1):
         for j in owners[a]:
             for cmd in modules[j].commands:
                 if cmd.is_labeled and cmd.action_index == a:
-                    out.sync_cmd.append(len(out.cmd_guard))
+                    out.sync_cmd.append(len(out.cmd_name))
                     _command(cmd, cmd.action_name, index, out)
             out.mod_start.append(len(out.sync_cmd))
         out.sync_start.append(len(out.mod_start) - 1)

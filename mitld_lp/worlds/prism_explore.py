@@ -105,29 +105,64 @@ def terminal_expression(stormpy: Any, plain: Any, terminal: str) -> Any:
     return inner.get_expression()
 
 
-def explore_program(compiled: Compiled, max_states: int) -> Explored | str:
-    """The own build of ``compiled``; a reason string where it declines (a status)."""
+def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 12,
+                    ) -> Explored | str:
+    """The own build of ``compiled``; a reason string where it declines (a status).
+    The arrays start at ``guess`` states (and four choices and branches a state) and
+    are doubled where the kernel stops for room."""
     k = _kernels()
     a = compiled.arrays()
     words = int(a["words"])
-    status, counts, keys, choices, branches, targets, probs, origin, combos = k.explore(
-        a["code"], a["consts"], a["starts"], a["word"], a["shift"], a["width"], a["low"],
-        a["high"], a["initial"], a["cmd_guard"], a["cmd_updates"], a["upd_prob"],
-        a["upd_assign"], a["asg_var"], a["asg_expr"], np.int64(compiled.n_async),
-        a["sync_start"], a["mod_start"], a["sync_cmd"], np.int64(compiled.terminal),
-        np.int64(words), np.int64(max_states))
-    if status != k.OK:
-        return f"{_STATUS[int(status)]} (state {int(counts[0])}, command {int(counts[1])})"
-    n, m, b, nk = (int(x) for x in counts)
-    keys = keys[: n * words]
-    packed = keys.reshape(n, words)
-    values = np.empty((n, len(compiled.names)), dtype=np.int64)
+    i64 = np.int64
+    keys = np.empty(guess * words, dtype=i64)
+    table = np.full(4 * guess, -1, dtype=i64)
+    choices = np.empty(guess + 1, dtype=i64)
+    branches = np.empty(4 * guess + 1, dtype=i64)
+    targets = np.empty(4 * guess, dtype=i64)
+    probs = np.empty(4 * guess, dtype=np.float64)
+    origin = np.empty(4 * guess, dtype=i64)
+    combos = np.empty(4 * guess, dtype=i64)
+    pos = np.zeros(7, dtype=i64)
+    while True:
+        status = int(k.explore(
+            a["code"], a["consts"], a["starts"], a["word"], a["shift"], a["width"], a["low"],
+            a["high"], a["initial"], a["cmd_guard"], a["conj"], a["cmd_updates"], a["upd_prob"],
+            a["upd_assign"], a["asg_var"], a["asg_expr"], i64(compiled.n_async),
+            a["sync_start"], a["mod_start"], a["sync_cmd"], i64(compiled.terminal),
+            i64(words), i64(max_states), keys, table, choices, branches, targets, probs,
+            origin, combos, pos))
+        if status == k.REHASH:
+            table = k.rehash(keys, i64(pos[1]), i64(words), i64(2 * table.size))
+        elif status == k.FULL:  # every array at least half full doubled
+            n, m, b, nk = (int(x) for x in pos[1:5])
+            keys = _doubled(keys, n * words)
+            choices = _doubled(choices, n + 1)
+            branches, origin = _doubled(branches, m + 1), _doubled(origin, m)
+            targets, probs = _doubled(targets, b), _doubled(probs, b)
+            combos = _doubled(combos, nk)
+        elif status != k.OK:
+            return f"{_STATUS[status]} (state {int(pos[5])}, command {int(pos[6])})"
+        else:
+            break
+    n, m, b, nk = (int(x) for x in pos[1:5])
+    packed = keys[: n * words].reshape(n, words)
+    values = np.empty((n, len(compiled.names)), dtype=i64)
     for v in range(len(compiled.names)):
         field = packed[:, a["word"][v]] >> a["shift"][v]
         values[:, v] = (field & ((1 << int(a["width"][v])) - 1)) + a["low"][v]
     return Explored(compiled, values, choices[: n + 1].copy(), branches[: m + 1].copy(),
                     targets[:b].copy(), probs[:b].copy(), origin[:m].copy(),
-                    combos[:nk].copy(), keys, a)
+                    combos[:nk].copy(), keys[: n * words], a)
+
+
+def _doubled(array: np.ndarray, used: int) -> np.ndarray:
+    """``array`` twice as long (its first ``used`` entries kept) when at least half full
+    (every one, so that a state needing more than half the room gets it in time)."""
+    if 2 * used < array.size:
+        return array
+    out = np.empty(2 * array.size, dtype=array.dtype)
+    out[:used] = array[:used]
+    return out
 
 
 def _narrow(values: np.ndarray) -> np.ndarray:

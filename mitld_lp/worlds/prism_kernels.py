@@ -26,13 +26,14 @@ from mitld_lp.util import kernel_loader
 
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["explore", "label_flags", "OK", "OUT_OF_RANGE", "NEGATIVE", "BUDGET"]
+__all__ = ["explore", "rehash", "label_flags", "OK", "OUT_OF_RANGE", "NEGATIVE", "BUDGET",
+           "FULL", "REHASH"]
 
-OK, OUT_OF_RANGE, NEGATIVE, BUDGET = 0, 1, 2, 3
+OK, OUT_OF_RANGE, NEGATIVE, BUDGET, FULL, REHASH = 0, 1, 2, 3, 4, 5
 DEADLOCK_CHOICE, DECIDED_CHOICE = -1, -2
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _eval(code, consts, lo, hi, vals, stack):  # pragma: no cover - compiled
     """The value of the expression ``code[lo:hi]`` at the state ``vals``."""
     sp = 0
@@ -47,6 +48,25 @@ def _eval(code, consts, lo, hi, vals, stack):  # pragma: no cover - compiled
         elif op == 1:  # LOAD
             stack[sp] = vals[code[pc]]
             pc += 1
+            sp += 1
+        elif op == 26:  # COMPARE v k r: a variable against a constant
+            a = vals[code[pc]]
+            b = consts[code[pc + 1]]
+            r = code[pc + 2]
+            pc += 3
+            if r == 13:
+                t = a == b
+            elif r == 14:
+                t = a != b
+            elif r == 15:
+                t = a < b
+            elif r == 16:
+                t = a <= b
+            elif r == 17:
+                t = a > b
+            else:
+                t = a >= b
+            stack[sp] = 1.0 if t else 0.0
             sp += 1
         elif op == 2:  # NOT
             stack[sp - 1] = 0.0 if stack[sp - 1] != 0.0 else 1.0
@@ -105,42 +125,38 @@ def _eval(code, consts, lo, hi, vals, stack):  # pragma: no cover - compiled
     return stack[0]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _enabled(code, consts, starts, conj, cmd_guard, c, vals, stack):  # pragma: no cover
+    """Whether command ``c``'s guard holds: its conjuncts in turn, the first false ends."""
+    for i in range(cmd_guard[c], cmd_guard[c + 1]):
+        e = conj[i]
+        if _eval(code, consts, starts[e], starts[e + 1], vals, stack) == 0.0:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _unpack(keys, at, words, word, shift, width, low, vals):  # pragma: no cover
     for v in range(vals.shape[0]):
         x = keys[at * words + word[v]]
         vals[v] = float(((x >> shift[v]) & ((np.int64(1) << width[v]) - 1)) + low[v])
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _hash(buf, words):  # pragma: no cover - compiled
-    h = np.uint64(1469598103934665603)
+    """A 64-bit mix of the packed state (splitmix64's finaliser over its words)."""
+    h = np.uint64(0x9E3779B97F4A7C15)
     for w in range(words):
         h ^= np.uint64(buf[w])
-        h *= np.uint64(1099511628211)
-        h ^= h >> np.uint64(29)
+        h ^= h >> np.uint64(30)
+        h *= np.uint64(0xBF58476D1CE4E5B9)
+        h ^= h >> np.uint64(27)
+        h *= np.uint64(0x94D049BB133111EB)
+        h ^= h >> np.uint64(31)
     return h
 
 
-@numba.njit(cache=True, nogil=True)
-def _grow_i(a, need):  # pragma: no cover - compiled
-    if need <= a.shape[0]:
-        return a
-    b = np.empty(max(need, 2 * a.shape[0]), dtype=a.dtype)
-    b[: a.shape[0]] = a
-    return b
-
-
-@numba.njit(cache=True, nogil=True)
-def _grow_f(a, need):  # pragma: no cover - compiled
-    if need <= a.shape[0]:
-        return a
-    b = np.empty(max(need, 2 * a.shape[0]), dtype=a.dtype)
-    b[: a.shape[0]] = a
-    return b
-
-
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _assign(code, consts, starts, vals, stack, upd_assign, asg_var, asg_expr, u, buf,
             word, shift, width, low, high):  # pragma: no cover - compiled
     """Update ``u``'s assignments into the packed state ``buf``; False if one leaves
@@ -156,73 +172,116 @@ def _assign(code, consts, starts, vals, stack, upd_assign, asg_var, asg_expr, u,
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _number(buf, words, keys, table, pos, max_states):  # pragma: no cover - compiled
+    """The number of the packed state ``buf``, appended (``pos[1]`` states) when new;
+    -1 past ``max_states``, -2 when ``keys`` is full, -3 when the table must grow."""
+    mask = np.uint64(table.shape[0] - 1)
+    slot = _hash(buf, words) & mask
+    while table[slot] >= 0:
+        s = table[slot]
+        same = True
+        for w in range(words):
+            if keys[s * words + w] != buf[w]:
+                same = False
+                break
+        if same:
+            return s
+        slot = (slot + np.uint64(1)) & mask
+    n = pos[1]
+    if n >= max_states:
+        return -1
+    if (n + 1) * words > keys.shape[0]:
+        return -2
+    if 2 * (n + 1) > table.shape[0]:
+        return -3
+    for w in range(words):
+        keys[n * words + w] = buf[w]
+    table[slot] = n
+    pos[1] = n + 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _add(targets, probs, row, nb, t, p):  # pragma: no cover - compiled
+    """Branch ``(t, p)`` into the row from ``row`` (``nb`` branches so far), summed onto
+    an earlier one to ``t``; the new count, or -1 when ``targets`` is full."""
+    j = row
+    while j < nb and targets[j] != t:
+        j += 1
+    if j < nb:
+        probs[j] += p
+        return nb
+    if nb >= targets.shape[0]:
+        return -1
+    targets[nb] = t
+    probs[nb] = p
+    return nb + 1
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_guard,
+def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_guard, conj,
             cmd_updates, upd_prob, upd_assign, asg_var, asg_expr, n_async, sync_start,
-            mod_start, sync_cmd, terminal, words, max_states):  # pragma: no cover
-    """The breadth-first build (module docstring).  Returns ``(status, counts, keys,
-    choices, branches, targets, probabilities, origin, combos)``: the packed states
-    (``words`` int64 each), the offsets of each state's choices and each choice's
-    branches, the branches, each choice's first command (or -1 a deadlock's self-loop,
-    -2 a decided state's) and, for a synchronised choice, its commands at
-    ``combos[origin_of ...]`` (see :func:`mitld_lp.worlds.prism_explore.explore_tables`);
-    the arrays are longer than filled: ``counts`` (the second item) is ``(states, choices,
-branches, combos)``, or the state and the command where a status other than OK stopped it."""
-    nv = low.shape[0]
-    vals = np.empty(nv, dtype=np.float64)
+            mod_start, sync_cmd, terminal, words, max_states, keys, table, choices,
+            branches, targets, probs, origin, combos, pos):  # pragma: no cover
+    """The breadth-first build (module docstring) into the caller's arrays, from
+    ``pos`` = ``(head, states, choices, branches, combos, state, command)`` on, until done
+    (:data:`OK`) or stopped: :data:`FULL` (an output array or ``keys`` too short: the
+    caller grows them and calls again, the state at ``head`` expanded afresh: the states
+    it found are kept, and found again in the same order), :data:`REHASH` (the table
+    must grow: :func:`rehash`), or a refusal (its state and command in ``pos[5:7]``).
+    ``keys``: the packed states (``words`` int64 each); ``choices``/``branches``: the
+    offsets of each state's choices and each choice's branches; ``origin``: each
+    choice's command (-1 a deadlock's self-loop, -2 a decided state's, ``-3 - i``: a
+    synchronised choice whose commands are ``combos[i:i + k]``)."""
+    vals = np.empty(low.shape[0], dtype=np.float64)
     stack = np.empty(max(16, code.shape[0]), dtype=np.float64)
-    cap = 1 << 10
-    keys = np.empty(cap * words, dtype=np.int64)
-    tsize = 1 << 12
-    table = np.full(tsize, -1, dtype=np.int64)
-    choices = np.empty(cap + 1, dtype=np.int64)
-    branches = np.empty(cap + 1, dtype=np.int64)
-    targets = np.empty(cap, dtype=np.int64)
-    probs = np.empty(cap, dtype=np.float64)
-    origin = np.empty(cap, dtype=np.int64)
-    combos = np.empty(cap, dtype=np.int64)  # a synchronised choice's commands, flat
-    n_combo = 0
     buf = np.empty(words, dtype=np.int64)
     base = np.empty(words, dtype=np.int64)
-    for w in range(words):
-        buf[w] = 0
-    for v in range(nv):
-        buf[word[v]] |= (initial[v] - low[v]) << shift[v]
-    for w in range(words):
-        keys[w] = buf[w]
-    table[_hash(buf, words) & np.uint64(tsize - 1)] = 0
-    n = 1
-    nc = 0
-    nb = 0
-    choices[0] = 0
-    branches[0] = 0
+    if pos[1] == 0:  # the initial state
+        for w in range(words):
+            buf[w] = 0
+        for v in range(low.shape[0]):
+            buf[word[v]] |= (initial[v] - low[v]) << shift[v]
+        _number(buf, words, keys, table, pos, max_states)
+        choices[0] = 0
+        branches[0] = 0
     n_mods = 1
     for a in range(sync_start.shape[0] - 1):
         n_mods = max(n_mods, sync_start[a + 1] - sync_start[a])
-    enabled = np.empty(cmd_guard.shape[0] + 1, dtype=np.int64)
+    enabled = np.empty(max(1, cmd_guard.shape[0]), dtype=np.int64)
     en_start = np.empty(n_mods + 1, dtype=np.int64)
     pick = np.empty(n_mods, dtype=np.int64)
     level_buf = np.empty((n_mods + 1) * words, dtype=np.int64)
     level_p = np.empty(n_mods + 1, dtype=np.float64)
     level_u = np.empty(n_mods + 1, dtype=np.int64)
-    head = 0
-    while head < n:
+    head = pos[0]
+    nc = pos[2]
+    nb = pos[3]
+    nk = pos[4]
+    status = OK
+    while head < pos[1]:
+        nc0 = nc
+        nb0 = nb
+        nk0 = nk
+        if head + 2 > choices.shape[0]:
+            status = FULL
+            break
         _unpack(keys, head, words, word, shift, width, low, vals)
         for w in range(words):
             base[w] = keys[head * words + w]
-        choices = _grow_i(choices, head + 2)
-        first_choice = nc
         expand = True
         if terminal >= 0:
             if _eval(code, consts, starts[terminal], starts[terminal + 1], vals, stack) != 0.0:
                 expand = False
+        c = 0
         if expand:
             for c in range(n_async):
-                g = cmd_guard[c]
-                if _eval(code, consts, starts[g], starts[g + 1], vals, stack) == 0.0:
+                if not _enabled(code, consts, starts, conj, cmd_guard, c, vals, stack):
                     continue
-                branches = _grow_i(branches, nc + 2)
-                origin = _grow_i(origin, nc + 1)
+                if nc + 2 > branches.shape[0] or nc + 1 > origin.shape[0]:
+                    status = FULL
+                    break
                 row = nb
                 for u in range(cmd_updates[c], cmd_updates[c + 1]):
                     e = upd_prob[u]
@@ -230,53 +289,30 @@ branches, combos)``, or the state and the command where a status other than OK s
                     if p == 0.0:
                         continue
                     if p < 0.0:
-                        return NEGATIVE, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
+                        status = NEGATIVE
+                        break
                     for w in range(words):
                         buf[w] = base[w]
                     if not _assign(code, consts, starts, vals, stack, upd_assign, asg_var,
                                    asg_expr, u, buf, word, shift, width, low, high):
-                        return OUT_OF_RANGE, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
-                    # the successor's number (a new state appended)
-                    slot = _hash(buf, words) & np.uint64(table.shape[0] - 1)
-                    t = -1
-                    while table[slot] >= 0:
-                        s = table[slot]
-                        same = True
-                        for w in range(words):
-                            if keys[s * words + w] != buf[w]:
-                                same = False
-                                break
-                        if same:
-                            t = s
-                            break
-                        slot = (slot + np.uint64(1)) & np.uint64(table.shape[0] - 1)
+                        status = OUT_OF_RANGE
+                        break
+                    t = _number(buf, words, keys, table, pos, max_states)
                     if t < 0:
-                        if n >= max_states:
-                            return BUDGET, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
-                        keys = _grow_i(keys, (n + 1) * words)
-                        for w in range(words):
-                            keys[n * words + w] = buf[w]
-                        table[slot] = n
-                        t = n
-                        n += 1
-                        if 2 * n > table.shape[0]:
-                            table = _rehash(keys, n, words, 2 * table.shape[0])
-                    j = row
-                    while j < nb and targets[j] != t:
-                        j += 1
-                    if j < nb:
-                        probs[j] += p
-                    else:
-                        targets = _grow_i(targets, nb + 1)
-                        probs = _grow_f(probs, nb + 1)
-                        targets[nb] = t
-                        probs[nb] = p
-                        nb += 1
+                        status = BUDGET if t == -1 else (FULL if t == -2 else REHASH)
+                        break
+                    nb = _add(targets, probs, row, nb, t, p)
+                    if nb < 0:
+                        status = FULL
+                        break
+                if status != OK:
+                    break
                 _sort_row(targets, probs, row, nb)
                 origin[nc] = c
                 nc += 1
                 branches[nc] = nb
-            for a in range(sync_start.shape[0] - 1):
+            a = 0
+            while status == OK and a < sync_start.shape[0] - 1:
                 k = sync_start[a + 1] - sync_start[a]
                 ok = True
                 en_start[0] = 0
@@ -285,26 +321,27 @@ branches, combos)``, or the state and the command where a status other than OK s
                     slot_m = sync_start[a] + j
                     for i in range(mod_start[slot_m], mod_start[slot_m + 1]):
                         c = sync_cmd[i]
-                        g = cmd_guard[c]
-                        if _eval(code, consts, starts[g], starts[g + 1], vals, stack) != 0.0:
+                        if _enabled(code, consts, starts, conj, cmd_guard, c, vals, stack):
                             enabled[ne] = c
                             ne += 1
                     en_start[j + 1] = ne
                     if ne == en_start[j]:
                         ok = False
                         break
+                a += 1
                 if not ok:
                     continue
                 for j in range(k):
                     pick[j] = en_start[j]
-                while True:  # each combination, the last module's command fastest
-                    branches = _grow_i(branches, nc + 2)
-                    origin = _grow_i(origin, nc + 1)
-                    combos = _grow_i(combos, n_combo + k)
-                    origin[nc] = -3 - n_combo
+                while status == OK:  # each combination, the last module's fastest
+                    if nc + 2 > branches.shape[0] or nc + 1 > origin.shape[0] or \
+                            nk + k > combos.shape[0]:
+                        status = FULL
+                        break
+                    origin[nc] = -3 - nk
                     for j in range(k):
-                        combos[n_combo + j] = enabled[pick[j]]
-                    n_combo += k
+                        combos[nk + j] = enabled[pick[j]]
+                    nk += k
                     row = nb
                     # depth first over the updates: level j applies module j's update
                     for w in range(words):
@@ -322,58 +359,34 @@ branches, combos)``, or the state and the command where a status other than OK s
                         e = upd_prob[u]
                         q = _eval(code, consts, starts[e], starts[e + 1], vals, stack)
                         if q < 0.0:
-                            return NEGATIVE, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
+                            status = NEGATIVE
+                            break
                         q = q * level_p[lev]
                         for w in range(words):
-                            level_buf[(lev + 1) * words + w] = level_buf[lev * words + w]
+                            buf[w] = level_buf[lev * words + w]
                         if not _assign(code, consts, starts, vals, stack, upd_assign, asg_var,
-                                       asg_expr, u, level_buf[(lev + 1) * words:(lev + 2) * words],
-                                       word, shift, width, low, high):
-                            return OUT_OF_RANGE, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
+                                       asg_expr, u, buf, word, shift, width, low, high):
+                            status = OUT_OF_RANGE
+                            break
                         if q == 0.0:
                             continue
                         if lev + 1 < k:
                             lev += 1
+                            for w in range(words):
+                                level_buf[lev * words + w] = buf[w]
                             level_p[lev] = q
                             level_u[lev] = cmd_updates[enabled[pick[lev]]] - 1
                             continue
-                        for w in range(words):
-                            buf[w] = level_buf[k * words + w]
-                        slot = _hash(buf, words) & np.uint64(table.shape[0] - 1)
-                        t = -1
-                        while table[slot] >= 0:
-                            s = table[slot]
-                            same = True
-                            for w in range(words):
-                                if keys[s * words + w] != buf[w]:
-                                    same = False
-                                    break
-                            if same:
-                                t = s
-                                break
-                            slot = (slot + np.uint64(1)) & np.uint64(table.shape[0] - 1)
+                        t = _number(buf, words, keys, table, pos, max_states)
                         if t < 0:
-                            if n >= max_states:
-                                return BUDGET, (head, c, 0, 0), keys, choices, branches, targets, probs, origin, combos
-                            keys = _grow_i(keys, (n + 1) * words)
-                            for w in range(words):
-                                keys[n * words + w] = buf[w]
-                            table[slot] = n
-                            t = n
-                            n += 1
-                            if 2 * n > table.shape[0]:
-                                table = _rehash(keys, n, words, 2 * table.shape[0])
-                        j = row
-                        while j < nb and targets[j] != t:
-                            j += 1
-                        if j < nb:
-                            probs[j] += q
-                        else:
-                            targets = _grow_i(targets, nb + 1)
-                            probs = _grow_f(probs, nb + 1)
-                            targets[nb] = t
-                            probs[nb] = q
-                            nb += 1
+                            status = BUDGET if t == -1 else (FULL if t == -2 else REHASH)
+                            break
+                        nb = _add(targets, probs, row, nb, t, q)
+                        if nb < 0:
+                            status = FULL
+                            break
+                    if status != OK:
+                        break
                     _sort_row(targets, probs, row, nb)
                     nc += 1
                     branches[nc] = nb
@@ -386,24 +399,36 @@ branches, combos)``, or the state and the command where a status other than OK s
                         j -= 1
                     if j < 0:
                         break
-        if nc == first_choice:  # not expanded, or no command enabled: a self-loop
-            branches = _grow_i(branches, nc + 2)
-            origin = _grow_i(origin, nc + 1)
-            targets = _grow_i(targets, nb + 1)
-            probs = _grow_f(probs, nb + 1)
-            targets[nb] = head
-            probs[nb] = 1.0
-            nb += 1
-            origin[nc] = DEADLOCK_CHOICE if expand else DECIDED_CHOICE
-            nc += 1
-            branches[nc] = nb
+        if status == OK and nc == nc0:  # not expanded, or no command enabled: a self-loop
+            if nc + 2 > branches.shape[0] or nc + 1 > origin.shape[0] or \
+                    nb + 1 > targets.shape[0]:
+                status = FULL
+            else:
+                targets[nb] = head
+                probs[nb] = 1.0
+                nb += 1
+                origin[nc] = DEADLOCK_CHOICE if expand else DECIDED_CHOICE
+                nc += 1
+                branches[nc] = nb
+        if status != OK:  # this state again from its start, after the caller's work
+            nc = nc0
+            nb = nb0
+            nk = nk0
+            pos[5] = head
+            pos[6] = c
+            break
         head += 1
         choices[head] = nc
-    return OK, (n, nc, nb, n_combo), keys, choices, branches, targets, probs, origin, combos
+    pos[0] = head
+    pos[2] = nc
+    pos[3] = nb
+    pos[4] = nk
+    return status
 
 
 @numba.njit(cache=True, nogil=True)
-def _rehash(keys, n, words, size):  # pragma: no cover - compiled
+def rehash(keys, n, words, size):  # pragma: no cover - compiled
+    """The hash table of the first ``n`` packed states of ``keys``, ``size`` slots."""
     table = np.full(size, -1, dtype=np.int64)
     mask = np.uint64(size - 1)
     for s in range(n):
@@ -414,7 +439,7 @@ def _rehash(keys, n, words, size):  # pragma: no cover - compiled
     return table
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sort_row(targets, probs, lo, hi):  # pragma: no cover - compiled
     """Insertion sort of the branches ``lo:hi`` by successor (a few a row)."""
     for i in range(lo + 1, hi):
