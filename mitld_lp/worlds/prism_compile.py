@@ -21,7 +21,9 @@ has the action, the last module's command varying fastest)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
@@ -129,15 +131,47 @@ _COMPARE = {"EQUAL", "NOT_EQUAL", "LESS", "LESS_OR_EQUAL", "GREATER", "GREATER_O
 
 
 def _literal(e: Any) -> float:
-    """A literal's value as Storm's build evaluates it in doubles: a rational ``p/q`` as
-    ``float(p) / float(q)`` (``9/10`` is 0.9; stormpy's ``evaluate_as_double`` truncates
-    to 0.8999999999999999)."""
+    """A literal's value as Storm's build evaluates it in doubles: a rational is handed
+    to its expression evaluator (exprtk) as text, its double (GMP's, truncated) written
+    with 17 digits (``ToExprtkStringVisitor``), which exprtk reads back with its own
+    arithmetic (:func:`exprtk_number`): ``4/5`` is 0.7999999999999999 there, ``1/5`` 0.2
+    and ``9/10`` 0.9."""
     if e.has_boolean_type():
         return float(e.evaluate_as_bool())
     if e.has_integer_type():
         return float(e.evaluate_as_int())
     r = e.evaluate_as_rational()
-    return float(int(str(r.numerator))) / float(int(str(r.denominator)))
+    exact = Fraction(int(str(r.numerator)), int(str(r.denominator)))
+    value = float(exact)  # nearest; GMP's mpq_get_d truncates toward zero
+    if abs(Fraction(value)) > abs(exact):
+        value = math.nextafter(value, 0.0)
+    return exprtk_number(f"{value:.17e}")
+
+
+def exprtk_number(text: str) -> float:
+    """``text`` (``-d.ddde+XX``) read as exprtk's ``string_to_real`` reads a number: the
+    digits before and after the point accumulated in doubles, the fraction divided by
+    its power of ten, then the exponent applied by one multiplication or division by a
+    power of ten (two below 1e-307)."""
+    negative = text.startswith("-")
+    mantissa, _, exponent = text.lstrip("+-").partition("e")
+    whole, _, fraction = mantissa.partition(".")
+    d = 0.0
+    for ch in whole.lstrip("0"):
+        d = d * 10.0 + int(ch)
+    if fraction:
+        t = 0.0
+        for ch in fraction:
+            t = t * 10.0 + int(ch)
+        d += t / float(10 ** len(fraction))
+    k = int(exponent) if exponent else 0
+    if k >= 0:
+        d = d * float(10 ** k) if k else d
+    elif k >= -307:
+        d = d / float(10 ** -k)
+    else:
+        d = d / float(10 ** 307) / float(10 ** (-k - 307))
+    return -d if negative else d
 
 
 def conjuncts(expr: Any) -> list[Any]:
