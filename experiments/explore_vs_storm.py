@@ -22,7 +22,6 @@ import argparse
 import json
 import sys
 import time
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -67,8 +66,8 @@ def signature(names, values, choices, branches, targets, probs, order):
         rows = []
         for c in range(choices[s], choices[s + 1]):
             lo, hi = branches[c], branches[c + 1]
-            rows.append(tuple(sorted((keys[t], float(p)) for t, p in
-                                     zip(targets[lo:hi].tolist(), probs[lo:hi].tolist(), strict=True))))
+            pairs = zip(targets[lo:hi].tolist(), probs[lo:hi].tolist(), strict=True)
+            rows.append(tuple(sorted((keys[t], float(p)) for t, p in pairs)))
         out[keys[s]] = tuple(sorted(rows))
     return out, keys
 
@@ -133,9 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=None, help="families")
     ap.add_argument("--out", type=Path, default=None, help="a JSON file of the rows")
     args = ap.parse_args(argv)
-    import stormpy
-
     import qvbs
+    import stormpy
 
     cap = 20_000 if args.quick else args.max_states
     instances, _ = qvbs.find_instances(args.qvbs, cap)

@@ -176,3 +176,13 @@ def test_builder_variable(monkeypatch) -> None:
     monkeypatch.setenv(BUILDER_ENV, "fast")
     with pytest.raises(ValueError, match="MITLD_PRISM_BUILDER='fast'"):
         chosen_builder()
+
+
+def test_two_choices_of_one_name_left_to_storm(tmp_path, monkeypatch) -> None:
+    """Two enabled commands of one action in a module: two choices named ``go`` in a
+    state, which Storm's choice origins tell apart (``go@m_cmd1``): Storm builds it."""
+    text = DEADLOCK.replace("[go] x < 2 -> 0.5 : (x'=x+1) + 0.5 : (x'=x+2);",
+                            "[go] x < 2 -> (x'=x+1);\n  [go] x < 3 -> (x'=x+1);")
+    storm, own = both(monkeypatch, write(tmp_path, text))
+    assert any("@" in name for name in names(storm))
+    same(storm, own)

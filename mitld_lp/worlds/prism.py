@@ -102,9 +102,9 @@ from mitld_lp.worlds.prism_build import (
     Grower,
     PrismTooLarge,
     build_tables,
-    own_build,
     build_within,
     check_budgets,
+    own_build,
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities

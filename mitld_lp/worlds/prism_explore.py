@@ -25,15 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_compile import Compiled, Unsupported, compile_program
 from mitld_lp.worlds.prism_labels import state_labels
-from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
+from mitld_lp.worlds.prism_program import SUM_TOLERANCE, storm_quiet
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, Valuations
-from mitld_lp.worlds.table import LATE, LateNames
 from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
+from mitld_lp.worlds.table import LATE, LateNames
 
-__all__ = ["OWN_BYTES_PER_STATE", "Explored", "chosen_builder", "explore_program", "explore_tables", "BUILDER_ENV"]
+__all__ = ["OWN_BYTES_PER_STATE", "BUILDER_ENV", "Explored", "KnownNames", "chosen_builder",
+           "explore_program", "explore_tables", "kernel_ready", "label_values",
+           "terminal_expression"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -105,7 +106,7 @@ def terminal_expression(stormpy: Any, plain: Any, terminal: str) -> Any:
     return inner.get_expression()
 
 
-def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 12,
+def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
                     ) -> Explored | str:
     """The own build of ``compiled``; a reason string where it declines (a status).
     The arrays start at ``guess`` states (and four choices and branches a state) and
@@ -222,15 +223,10 @@ def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
         compiled = compile_program(plain, terminal_expression(stormpy, plain, terminal))
     except Unsupported as exc:
         return None, str(exc)
-    built = explore_program(compiled, max_states + 1)
+    built = explore_program(compiled, max_states)  # past it: Storm's build says so
     if isinstance(built, str):
         return None, built
-    n, m = len(built.choices) - 1, len(built.branches) - 1
-    if n > max_states:
-        from mitld_lp.worlds.prism_build import PrismTooLarge
-
-        raise PrismTooLarge(f"{where}: the exploration found more than max_states = "
-                            f"{max_states:,} states: raise max_states (--max-world-states)")
+    n = len(built.choices) - 1
     naming = _naming(plain, compiled, built, terminal)
     if isinstance(naming, str):
         return None, naming
@@ -272,7 +268,7 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
     read (:class:`KnownNames`; :func:`~mitld_lp.worlds.prism_names.late_names`).  A
     reason where neither applies or two choices of a state would share a name."""
     from mitld_lp.worlds.prism_names import late_names
-    from mitld_lp.worlds.prism_origins import needs_origins
+    from mitld_lp.worlds.prism_origins import may_share_names, needs_origins
 
     late = late_names(plain)
     if needs_origins(plain) and not late:
@@ -288,10 +284,11 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
         first[sync] = built.combos[-3 - first[sync]]
     loop = first < 0
     of = np.where(loop, -1, of_cmd[np.maximum(first, 0)])
-    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
-    key = state_of * (len(cmd_names) + 1) + of + 1
-    if np.unique(key).size != m:
-        return "two choices of one state with one name (Storm's choice origins tell them apart)"
+    if may_share_names(plain):  # else no two choices of a state can share a name
+        state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
+        key = np.sort(state_of * (len(cmd_names) + 1) + of + 1)
+        if m and not np.diff(key).all():
+            return "two choices of one state with one name (Storm's choice origins name them)"
     known = (DEADLOCK_ACTION,) + ((DECIDED_ACTION,) if terminal else ())
     if late:
         index = np.where(loop, 0, LATE + np.arange(m, dtype=np.int64))
