@@ -550,9 +550,8 @@ def load_prism(
         tables, first = grower.within(first, steps, LAZY_GROWTH)
     else:
         fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
-        own = None if fits or event_set else own_build(stormpy, plain, where, chosen,
-                                                       terminal, max_states, memory)
-        tables = own if own is not None else build_within(
+        tables = (None if fits or event_set else own_build(  # the own explorer, else Storm
+            stormpy, plain, where, chosen, terminal, max_states, memory)) or build_within(
             lambda: work(None, own=fits), where, fits, str(bound), max_states, memory)
     log.info(
         "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
