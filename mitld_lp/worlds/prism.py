@@ -121,7 +121,7 @@ from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 from mitld_lp.worlds.successors import Normalisation
-from mitld_lp.worlds.table import LATE, WorldTable
+from mitld_lp.worlds.table import LATE, LateNames, WorldTable
 
 __all__ = [
     "PrismGame", "LazyPrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION",
@@ -233,14 +233,12 @@ class PrismGame:
         unless ``exact``, which names them)."""
         t = self._tables
         names, ids = t.action_names, t.action_index
-        if isinstance(names, DeferredNames):
-            if exact:
-                names.resolve()
-            if not names.resolved:  # not named yet: every name of a command
-                used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))
-                return frozenset(names[k] for k in used.tolist()) | names.commands
+        if isinstance(names, DeferredNames) and not exact and not names.resolved:
+            used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))  # every name
+            return frozenset(names[k] for k in used.tolist()) | names.commands  # of a command
+        if isinstance(names, LateNames):  # all at once (Storm's second build, if deferred)
             codes, table = names.names_of(np.arange(ids.size))
-            return frozenset(table[k] for k in np.unique(codes).tolist())
+            return frozenset(table[k] for k in np.flatnonzero(np.bincount(codes)).tolist())
         used = np.unique(ids)
         return frozenset(names[k] for k in used[used >= 0].tolist())
 
