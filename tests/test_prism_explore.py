@@ -186,3 +186,15 @@ def test_two_choices_of_one_name_left_to_storm(tmp_path, monkeypatch) -> None:
     storm, own = both(monkeypatch, write(tmp_path, text))
     assert any("@" in name for name in names(storm))
     same(storm, own)
+
+
+def test_two_choices_of_one_name_told_apart_by_their_commands(tmp_path, monkeypatch) -> None:
+    """With a command without an action the choices are named late: two ``go`` choices
+    of one state are then ``go@m_cmd1`` and ``go@m_cmd2`` in both builds."""
+    text = DEADLOCK.replace("[go] x < 2 -> 0.5 : (x'=x+1) + 0.5 : (x'=x+2);",
+                            "[go] x < 2 -> (x'=x+1);\n  [go] x < 3 -> (x'=x+1);\n"
+                            "  [] x = 3 -> (x'=0);")
+    storm, own = both(monkeypatch, write(tmp_path, text))
+    assert {"go@m_cmd1", "go@m_cmd2"} <= set(names(storm))
+    assert type(own.action_names).__name__ == "KnownNames"  # the own explorer's
+    same(storm, own)

@@ -72,6 +72,8 @@ class Compiled:
     cmd_name: list[str] = field(default_factory=list)  # action, or <module>_cmd<k>
     cmd_labelled: list[bool] = field(default_factory=list)
     cmd_global: list[int] = field(default_factory=list)  # Storm's global command index
+    cmd_text: list[str] = field(default_factory=list)  # <module>_cmd<k>
+    cmd_k: list[int] = field(default_factory=list)  # the commands a choice of it joins
     cmd_updates: list[int] = field(default_factory=lambda: [0])  # offsets into upd_*
     upd_prob: list[int] = field(default_factory=list)
     upd_assign: list[int] = field(default_factory=lambda: [0])  # offsets into asg_*
@@ -263,11 +265,14 @@ def _variables(program: Any, out: Compiled) -> dict[str, int]:
     return {name: k for k, name in enumerate(out.names)}
 
 
-def _command(cmd: Any, name: str, index: dict[str, int], out: Compiled) -> None:
+def _command(cmd: Any, name: str, index: dict[str, int], out: Compiled, text: str,
+             k: int = 1) -> None:
     for part in conjuncts(cmd.guard_expression):  # tried in turn, the first false ends it
         out.conj.append(compile_expression(part, index, out))
     out.cmd_guard.append(len(out.conj))
     out.cmd_name.append(name)
+    out.cmd_text.append(text)
+    out.cmd_k.append(k)
     out.cmd_labelled.append(bool(cmd.is_labeled))
     out.cmd_global.append(int(cmd.global_index))
     for update in cmd.updates:
@@ -306,14 +311,15 @@ def compile_program(program: Any, terminal: Any = None) -> Compiled:
         for k, cmd in enumerate(module.commands, start=1):
             if not cmd.is_labeled or len(owners[cmd.action_index]) == 1:
                 _command(cmd, cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}",
-                         index, out)
+                         index, out, f"{module.name}_cmd{k}")
     out.n_async = len(out.cmd_name)
     for a in sorted(a for a, mods in owners.items() if len(mods) > 1):
         for j in owners[a]:
-            for cmd in modules[j].commands:
+            for k, cmd in enumerate(modules[j].commands, start=1):
                 if cmd.is_labeled and cmd.action_index == a:
                     out.sync_cmd.append(len(out.cmd_name))
-                    _command(cmd, cmd.action_name, index, out)
+                    _command(cmd, cmd.action_name, index, out, f"{modules[j].name}_cmd{k}",
+                             len(owners[a]))
             out.mod_start.append(len(out.sync_cmd))
         out.sync_start.append(len(out.mod_start) - 1)
         out.action_names.append(program.get_action_name(a))

@@ -273,7 +273,7 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
     late = late_names(plain)
     if needs_origins(plain) and not late:
         return "choices named from Storm's choice origins"
-    n, m = len(built.choices) - 1, len(built.branches) - 1
+    m = len(built.branches) - 1
     if late and m >= LATE:
         return "too many choices for late names"
     cmd_names = list(dict.fromkeys(compiled.cmd_name))
@@ -284,12 +284,14 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
         first[sync] = built.combos[-3 - first[sync]]
     loop = first < 0
     of = np.where(loop, -1, of_cmd[np.maximum(first, 0)])
-    if may_share_names(plain):  # else no two choices of a state can share a name
-        state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
-        key = np.sort(state_of * (len(cmd_names) + 1) + of + 1)
-        if m and not np.diff(key).all():
-            return "two choices of one state with one name (Storm's choice origins name them)"
+    clash = _clashes(built, of, len(cmd_names)) if may_share_names(plain) else None
+    if clash is not None and clash.size and not late:
+        return "two choices of one state with one name (Storm's choice origins name them)"
     known = (DEADLOCK_ACTION,) + ((DECIDED_ACTION,) if terminal else ())
+    if clash is not None and clash.size:  # told apart by their commands, go@m_cmd2
+        of, cmd_names = _told_apart(built, compiled, of, cmd_names, clash)
+        if _clashes(built, of, len(cmd_names)).size:
+            return "two choices of one state with one name after their commands"
     if late:
         index = np.where(loop, 0, LATE + np.arange(m, dtype=np.int64))
         index[built.origin == -2] = len(known) - 1
@@ -305,6 +307,41 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
     if used != sorted(set(cmd_names)):  # only the labels some choice has, as Storm's
         return _relabel(used, known, remap, cmd_names, code)
     return tuple(distinct), remap[code]
+
+
+def _clashes(built: Explored, of: np.ndarray, k: int) -> np.ndarray:
+    """The choices that share their name (``of``, ``k`` names) with another of their
+    state, ascending."""
+    n = len(built.choices) - 1
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
+    key = state_of * (k + 1) + of + 1
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    twice = np.zeros(key.size, dtype=bool)
+    twice[order[1:][same]] = True
+    twice[order[:-1][same]] = True
+    return np.flatnonzero(twice & (of >= 0))
+
+
+def _told_apart(built: Explored, compiled: Compiled, of: np.ndarray, names: list[str],
+                clash: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The ``clash`` choices renamed ``<name>@<their commands>`` (their
+    ``<module>_cmd<k>`` in Storm's global order, joined by ``+``), as
+    :func:`mitld_lp.worlds.prism_names.origin_codes` names them."""
+    of, names = of.copy(), list(names)
+    position = {x: k for k, x in enumerate(names)}
+    for c in clash.tolist():
+        o = int(built.origin[c])
+        cmds = [o] if o >= 0 else built.combos[-3 - o: -3 - o + compiled.cmd_k[
+            int(built.combos[-3 - o])]].tolist()
+        text = "+".join(compiled.cmd_text[x] for x in sorted(
+            cmds, key=lambda x: compiled.cmd_global[x]))
+        name = f"{names[int(of[c])]}@{text}"
+        k = position.setdefault(name, len(position))
+        if k == len(names):
+            names.append(name)
+        of[c] = k
+    return of, names
 
 
 def _relabel(used: list[str], known: tuple[str, ...], remap: np.ndarray,
