@@ -131,27 +131,19 @@ def test_deadlock_self_loops(tmp_path, monkeypatch) -> None:
     same(storm, own)
 
 
-def test_out_of_range_refused_in_storms_words(tmp_path, monkeypatch) -> None:
-    path = write(tmp_path, DEADLOCK.replace("x'=x+2", "x'=x+3"))
+@pytest.mark.parametrize(("old", "new", "words"), [
+    ("x'=x+2", "x'=x+3", "outside its range"),  # an update out of the variable's range
+    ("0.5 : (x'=x+2)", "0.4 : (x'=x+2)", "sum to"),  # beyond PRISM's tolerance
+])
+def test_refused_in_storms_words(tmp_path, monkeypatch, old, new, words) -> None:
+    path = write(tmp_path, DEADLOCK.replace(old, new))
     errors = []
     for builder in ("storm", "own"):
         monkeypatch.setenv(BUILDER_ENV, builder)
         with pytest.raises(WorldError) as info:
             load_prism(path)
         errors.append(str(info.value))
-    assert "outside its range" in errors[0]
-    assert errors[1] == errors[0]
-
-
-def test_sum_refused_in_storms_words(tmp_path, monkeypatch) -> None:
-    path = write(tmp_path, DEADLOCK.replace("0.5 : (x'=x+2)", "0.4 : (x'=x+2)"))
-    errors = []
-    for builder in ("storm", "own"):
-        monkeypatch.setenv(BUILDER_ENV, builder)
-        with pytest.raises(WorldError) as info:
-            load_prism(path)
-        errors.append(str(info.value))
-    assert "sum to" in errors[0]
+    assert words in errors[0]
     assert errors[1] == errors[0]
 
 

@@ -101,26 +101,15 @@ class Compiled:
             shift.append(bit % 64)
             width.append(w)
             bit += w
-        i64 = np.int64
-        return dict(
-            code=np.asarray(self.code, dtype=i64), consts=np.asarray(self.consts, dtype=float),
-            starts=np.asarray(self.starts, dtype=i64), word=np.asarray(word, dtype=i64),
-            shift=np.asarray(shift, dtype=i64), width=np.asarray(width, dtype=i64),
-            low=np.asarray(self.low, dtype=i64), high=np.asarray(self.high, dtype=i64),
-            initial=np.asarray(self.initial, dtype=i64),
-            cmd_guard=np.asarray(self.cmd_guard, dtype=i64),
-            conj=np.asarray(self.conj, dtype=i64),
-            cmd_updates=np.asarray(self.cmd_updates, dtype=i64),
-            upd_prob=np.asarray(self.upd_prob, dtype=i64),
-            upd_assign=np.asarray(self.upd_assign, dtype=i64),
-            asg_var=np.asarray(self.asg_var, dtype=i64),
-            asg_expr=np.asarray(self.asg_expr, dtype=i64),
-            sync_start=np.asarray(self.sync_start, dtype=i64),
-            mod_start=np.asarray(self.mod_start, dtype=i64),
-            sync_cmd=np.asarray(self.sync_cmd, dtype=i64),
-            label_expr=np.asarray(self.label_expr, dtype=i64),
-            words=np.int64(max(1, (bit + 63) // 64)),
-        )
+        out = {name: np.asarray(getattr(self, name), dtype=np.int64) for name in (
+            "code", "starts", "low", "high", "initial", "cmd_guard", "conj", "cmd_updates",
+            "upd_prob", "upd_assign", "asg_var", "asg_expr", "sync_start", "mod_start",
+            "sync_cmd", "label_expr")}
+        out.update(consts=np.asarray(self.consts, dtype=float),
+                   word=np.asarray(word, dtype=np.int64), shift=np.asarray(shift, dtype=np.int64),
+                   width=np.asarray(width, dtype=np.int64),
+                   words=np.int64(max(1, (bit + 63) // 64)))
+        return out
 
 
 _UNARY = {"NOT", "FLOOR", "CEIL"}

@@ -219,6 +219,20 @@ def _add(targets, probs, row, nb, t, p):  # pragma: no cover - compiled
     return nb + 1
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _branch(buf, words, keys, table, pos, max_states, targets, probs, row, nb,
+            p):  # pragma: no cover - compiled
+    """The successor ``buf`` numbered (:func:`_number`) and its branch added to the row
+    (:func:`_add`): ``(status, branches)``, the count unchanged when not OK."""
+    t = _number(buf, words, keys, table, pos, max_states)
+    if t < 0:
+        return (BUDGET if t == -1 else (FULL if t == -2 else REHASH)), nb
+    added = _add(targets, probs, row, nb, t, p)
+    if added < 0:
+        return FULL, nb
+    return OK, added
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_guard, conj,
             cmd_updates, upd_prob, upd_assign, asg_var, asg_expr, n_async, sync_start,
@@ -297,13 +311,9 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
                                    asg_expr, u, buf, word, shift, width, low, high):
                         status = OUT_OF_RANGE
                         break
-                    t = _number(buf, words, keys, table, pos, max_states)
-                    if t < 0:
-                        status = BUDGET if t == -1 else (FULL if t == -2 else REHASH)
-                        break
-                    nb = _add(targets, probs, row, nb, t, p)
-                    if nb < 0:
-                        status = FULL
+                    status, nb = _branch(buf, words, keys, table, pos, max_states, targets,
+                                         probs, row, nb, p)
+                    if status != OK:
                         break
                 if status != OK:
                     break
@@ -377,13 +387,9 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
                             level_p[lev] = q
                             level_u[lev] = cmd_updates[enabled[pick[lev]]] - 1
                             continue
-                        t = _number(buf, words, keys, table, pos, max_states)
-                        if t < 0:
-                            status = BUDGET if t == -1 else (FULL if t == -2 else REHASH)
-                            break
-                        nb = _add(targets, probs, row, nb, t, q)
-                        if nb < 0:
-                            status = FULL
+                        status, nb = _branch(buf, words, keys, table, pos, max_states,
+                                             targets, probs, row, nb, q)
+                        if status != OK:
                             break
                     if status != OK:
                         break
