@@ -33,6 +33,14 @@ label "hurt" = hit;
 long for a ustar header once encoded."""
 
 
+
+@pytest.fixture(autouse=True)
+def _storms_build(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests look into Storm's build (its options, its second build, its files):
+    the load uses it, not the own explorer (tests/test_prism_explore.py compares them)."""
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")
+
+
 def _marked(monkeypatch: pytest.MonkeyPatch, module: object, name: str, log: Path,
             mark: Callable[..., str]) -> None:
     """``module.name`` writing ``mark(*args, **kwargs)`` as a line of ``log`` at each call

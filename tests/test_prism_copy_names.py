@@ -58,6 +58,14 @@ label "bad" = hurt;
 """
 
 
+
+@pytest.fixture(autouse=True)
+def _storms_build(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests look into Storm's build (its options, its second build, its files):
+    the load uses it, not the own explorer (tests/test_prism_explore.py compares them)."""
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")
+
+
 def _toml(tmp_path: Path, name: str, text: str, spec: str) -> Path:
     (tmp_path / f"{name}.prism").write_text(text, encoding="utf-8")
     path = tmp_path / f"{name}.toml"

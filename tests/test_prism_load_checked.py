@@ -24,6 +24,14 @@ needs_storm = pytest.mark.skipif(importlib.util.find_spec("stormpy") is None,
                                  reason="needs stormpy: pip install -e '.[prism]'")
 
 
+
+@pytest.fixture(autouse=True)
+def _storms_build(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests look into Storm's build (its options, its second build, its files):
+    the load uses it, not the own explorer (tests/test_prism_explore.py compares them)."""
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")
+
+
 def _in_order(lengths: list[int], probs: list[float]) -> tuple[list[int], list[float]]:
     """The faulty rows and each row's total, summed left to right in plain Python."""
     bad, totals, at = [], [], 0

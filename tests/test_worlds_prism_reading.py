@@ -38,6 +38,14 @@ label "wall" = x=0 & y=1;
 """
 
 
+
+@pytest.fixture(autouse=True)
+def _storms_build(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests look into Storm's build (its options, its second build, its files):
+    the load uses it, not the own explorer (tests/test_prism_explore.py compares them)."""
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")
+
+
 def write(tmp_path: Path, text: str, name: str = "m.prism") -> Path:
     p = tmp_path / name
     p.write_text(text)

@@ -104,6 +104,7 @@ from mitld_lp.worlds.prism_build import (
     build_tables,
     build_within,
     check_budgets,
+    own_build,
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
@@ -120,7 +121,7 @@ from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables
 from mitld_lp.worlds.prism_terminal import decided as decided_when
 from mitld_lp.worlds.prism_terminal import render
 from mitld_lp.worlds.successors import Normalisation
-from mitld_lp.worlds.table import LATE, WorldTable
+from mitld_lp.worlds.table import LATE, LateNames, WorldTable
 
 __all__ = [
     "PrismGame", "LazyPrismGame", "PrismTooLarge", "load_prism", "DEADLOCK_ACTION",
@@ -232,14 +233,12 @@ class PrismGame:
         unless ``exact``, which names them)."""
         t = self._tables
         names, ids = t.action_names, t.action_index
-        if isinstance(names, DeferredNames):
-            if exact:
-                names.resolve()
-            if not names.resolved:  # not named yet: every name of a command
-                used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))
-                return frozenset(names[k] for k in used.tolist()) | names.commands
+        if isinstance(names, DeferredNames) and not exact and not names.resolved:
+            used = np.flatnonzero(np.bincount(ids[ids < LATE], minlength=1))  # every name
+            return frozenset(names[k] for k in used.tolist()) | names.commands  # of a command
+        if isinstance(names, LateNames):  # all at once (Storm's second build, if deferred)
             codes, table = names.names_of(np.arange(ids.size))
-            return frozenset(table[k] for k in np.unique(codes).tolist())
+            return frozenset(table[k] for k in np.flatnonzero(np.bincount(codes)).tolist())
         used = np.unique(ids)
         return frozenset(names[k] for k in used[used >= 0].tolist())
 
@@ -532,9 +531,9 @@ def load_prism(
         terminal = ""
     recipe = PrismRecipe(str(p.resolve()), where, dict(given), dict(define or {}), terminal)
 
-    def work(limit: int | None = None) -> Tables:
+    def work(limit: int | None = None, own: bool = True) -> Tables:
         return build_tables(stormpy, program, plain, where, chosen, event_set, terminal,
-                            max_states, limit, recipe)
+                            max_states, limit, recipe, own=own)
 
     lazy = explore == "lazy" or (explore == "auto" and task is not None
                                  and horizon(task) is not None and not event_set
@@ -549,7 +548,9 @@ def load_prism(
         tables, first = grower.within(first, steps, LAZY_GROWTH)
     else:
         fits = bound.states <= max_states and bound.states * BYTES_PER_STATE <= memory
-        tables = build_within(work, where, fits, str(bound), max_states, memory)
+        tables = (None if fits or event_set else own_build(  # the own explorer, else Storm
+            stormpy, plain, where, chosen, terminal, max_states, memory)) or build_within(
+            lambda: work(None, own=fits), where, fits, str(bound), max_states, memory)
     log.info(
         "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
         where, len(tables.states), bound, tables.decided, terminal or "never",

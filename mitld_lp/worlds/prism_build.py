@@ -147,7 +147,8 @@ class Grower:
 def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: frozenset[str],
                  events: frozenset[str], terminal: str,
                  max_states: int, limit: int | None = None,
-                 recipe: PrismRecipe | None = None, late_names: bool = True) -> Tables:
+                 recipe: PrismRecipe | None = None, late_names: bool = True,
+                 own: bool = True) -> Tables:
     """Storm's build of ``program``, copied into :class:`Tables`; with ``limit``, only
     the states Storm expands before it has found ``limit`` states (the module docstring).
     Given the ``recipe`` to build it again, a whole build without event effects leaves
@@ -173,6 +174,10 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     self-loops is named when first read (``late_names``; :mod:`mitld_lp.worlds.prism_names`),
     and Storm builds neither choice origins nor choice labels (up to 4% of its build),
     the names made by the second build that makes the valuations."""
+    if limit is None and recipe is not None and not events and late_names and own:
+        tables = own_build(stormpy, plain, where, chosen, terminal, max_states, None)
+        if tables is not None:
+            return tables
     # (a world whose events change it is read state by state, every state named: built
     # with its valuations at once)
     deferred = limit is None and recipe is not None and not events
@@ -261,6 +266,27 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
         names.share(tables.states)  # one second build for the values and the names
         tables = dataclasses.replace(tables, action_names=names)
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
+
+
+def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], terminal: str,
+              max_states: int, memory: int | None) -> Tables | None:
+    """The own explorer's tables of a whole build (:mod:`mitld_lp.worlds.prism_explore`)
+    where the builder chosen (``MITLD_PRISM_BUILDER``; ``auto``: its kernel cached) takes
+    the program; None for Storm's build (the reason logged).  Given ``memory``, only
+    where ``max_states`` states at :data:`~mitld_lp.worlds.prism_explore.OWN_BYTES_PER_STATE`
+    fit it (it runs here, its state budget checked as it explores: no capped child)."""
+    from mitld_lp.worlds import prism_explore
+
+    builder = prism_explore.chosen_builder()
+    if builder == "storm" or (builder == "auto" and not prism_explore.kernel_ready()):
+        return None
+    if memory is not None and max_states * prism_explore.OWN_BYTES_PER_STATE > memory:
+        return None
+    tables, reason = prism_explore.explore_tables(stormpy, plain, where, chosen,
+                                                  frozenset(), terminal, max_states)
+    if tables is None:
+        log.debug("%s: Storm builds it, not the own explorer: %s", where, reason)
+    return tables
 
 
 def _exact_refusal(stormpy: Any, program: Any, plain: Any, where: str, options: Any) -> None:

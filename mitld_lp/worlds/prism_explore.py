@@ -1,0 +1,370 @@
+"""The own explorer of a PRISM MDP: :mod:`~mitld_lp.worlds.prism_compile`'s tables run by
+:mod:`~mitld_lp.worlds.prism_kernels`' compiled breadth-first search, read into the
+:class:`~mitld_lp.worlds.prism_tables.Tables` Storm's build gives (the same states in
+the same order, the same choices, rows, labels and names), so that nothing after the
+load changes.
+
+Which builder the load uses (:func:`chosen_builder`): the environment variable
+``MITLD_PRISM_BUILDER`` = ``storm`` or ``own`` forces one; by default (``auto``) the own
+explorer runs where its kernel's machine code is cached on disk (a first compile, about
+10 s, is paid only where asked for: ``own``, the tests, ``experiments/explore_vs_storm.py``).
+It declines, and Storm builds, where the program is outside the fragment
+(:class:`~mitld_lp.worlds.prism_compile.Unsupported`), where an update leaves a
+variable's range or a probability is negative (Storm's build then refuses it in its own
+words), where two choices of one state would carry one name (Storm's choice origins name
+them), or where event effects are asked for; :attr:`Explored.reason` says why (logged
+at debug level).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.worlds.prism_compile import Compiled, Unsupported, compile_program
+from mitld_lp.worlds.prism_labels import state_labels
+from mitld_lp.worlds.prism_program import SUM_TOLERANCE, storm_quiet
+from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, Valuations
+from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
+from mitld_lp.worlds.table import LATE, LateNames
+
+__all__ = ["OWN_BYTES_PER_STATE", "BUILDER_ENV", "Explored", "KnownNames", "chosen_builder",
+           "explore_program", "explore_tables", "kernel_ready", "label_values",
+           "terminal_expression"]
+
+log = logging.getLogger("mitld_lp.worlds.prism")
+
+BUILDER_ENV = "MITLD_PRISM_BUILDER"
+"""The environment variable that forces a builder: ``storm``, ``own`` or ``auto``."""
+
+OWN_BYTES_PER_STATE = 512
+"""Memory per state of the own explorer's build at its peak, for the budget: the packed
+state and its hash slot (about 40 bytes), the growing arrays of choices and branches
+(doubled: up to twice their 16 bytes per branch at ten branches a state), the tables'
+copies and the product's later reading of them, rounded up."""
+
+_STATUS = {1: "an update leaves a variable's range", 2: "a probability is negative",
+           3: "more states than max_states"}
+
+
+@dataclass
+class Explored:
+    """The own explorer's raw build: ``keys`` (``n x words`` packed states), the
+    offsets and branches as in :class:`Tables`, each choice's command (``origin``; -1 a
+    deadlock's self-loop, -2 a decided state's, ``-3 - i``: a synchronised choice whose
+    commands are ``combos[i:i + k]``), and ``values`` (``n x variables``)."""
+
+    compiled: Compiled
+    values: np.ndarray
+    choices: np.ndarray
+    branches: np.ndarray
+    targets: np.ndarray
+    probabilities: np.ndarray
+    origin: np.ndarray
+    combos: np.ndarray
+    keys: np.ndarray
+    layout: dict[str, Any]
+
+
+def chosen_builder() -> str:
+    """``storm``, ``own`` or ``auto`` from :data:`BUILDER_ENV` (``auto`` if unset);
+    ``ValueError`` for another value."""
+    value = os.environ.get(BUILDER_ENV, "auto").strip().lower() or "auto"
+    if value not in ("storm", "own", "auto"):
+        raise ValueError(f"{BUILDER_ENV}={value!r}: expected storm, own or auto")
+    return value
+
+
+def kernel_ready() -> bool:
+    """Whether the explorer's machine code can be had without a compile."""
+    from mitld_lp.util import kernel_loader
+
+    return all(kernel_loader.module_cached("mitld_lp.worlds.prism_kernels", name)
+               for name in ("explore", "label_flags"))
+
+
+def _kernels() -> Any:
+    from mitld_lp.worlds import prism_kernels
+
+    return prism_kernels
+
+
+def terminal_expression(stormpy: Any, plain: Any, terminal: str) -> Any:
+    """The decided-states condition ``terminal`` (a PRISM expression over ``plain``'s
+    variables) as a stormpy ``Expression``; None for ``""``."""
+    if not terminal:
+        return None
+    with storm_quiet():
+        prop = stormpy.parse_properties(f"Pmax=? [F {terminal}]", plain)[0]
+    inner = prop.get_raw_formula().subformula.subformula
+    if not hasattr(inner, "get_expression"):
+        raise Unsupported(f"the decided-states condition {terminal} is not one expression")
+    return inner.get_expression()
+
+
+def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
+                    ) -> Explored | str:
+    """The own build of ``compiled``; a reason string where it declines (a status).
+    The arrays start at ``guess`` states (and four choices and branches a state) and
+    are doubled where the kernel stops for room."""
+    k = _kernels()
+    a = compiled.arrays()
+    words = int(a["words"])
+    i64 = np.int64
+    keys = np.empty(guess * words, dtype=i64)
+    table = np.full(4 * guess, -1, dtype=i64)
+    choices = np.empty(guess + 1, dtype=i64)
+    branches = np.empty(4 * guess + 1, dtype=i64)
+    targets = np.empty(4 * guess, dtype=i64)
+    probs = np.empty(4 * guess, dtype=np.float64)
+    origin = np.empty(4 * guess, dtype=i64)
+    combos = np.empty(4 * guess, dtype=i64)
+    pos = np.zeros(7, dtype=i64)
+    while True:
+        status = int(k.explore(
+            a["code"], a["consts"], a["starts"], a["word"], a["shift"], a["width"], a["low"],
+            a["high"], a["initial"], a["cmd_guard"], a["conj"], a["cmd_updates"], a["upd_prob"],
+            a["upd_assign"], a["asg_var"], a["asg_expr"], i64(compiled.n_async),
+            a["sync_start"], a["mod_start"], a["sync_cmd"], i64(compiled.terminal),
+            i64(words), i64(max_states), keys, table, choices, branches, targets, probs,
+            origin, combos, pos))
+        if status == k.REHASH:
+            table = k.rehash(keys, i64(pos[1]), i64(words), i64(2 * table.size))
+        elif status == k.FULL:  # every array at least half full doubled
+            n, m, b, nk = (int(x) for x in pos[1:5])
+            keys = _doubled(keys, n * words)
+            choices = _doubled(choices, n + 1)
+            branches, origin = _doubled(branches, m + 1), _doubled(origin, m)
+            targets, probs = _doubled(targets, b), _doubled(probs, b)
+            combos = _doubled(combos, nk)
+        elif status != k.OK:
+            return f"{_STATUS[status]} (state {int(pos[5])}, command {int(pos[6])})"
+        else:
+            break
+    n, m, b, nk = (int(x) for x in pos[1:5])
+    packed = keys[: n * words].reshape(n, words)
+    values = np.empty((n, len(compiled.names)), dtype=i64)
+    for v in range(len(compiled.names)):
+        field = packed[:, a["word"][v]] >> a["shift"][v]
+        values[:, v] = (field & ((1 << int(a["width"][v])) - 1)) + a["low"][v]
+    return Explored(compiled, values, choices[: n + 1].copy(), branches[: m + 1].copy(),
+                    targets[:b].copy(), probs[:b].copy(), origin[:m].copy(),
+                    combos[:nk].copy(), keys[: n * words], a)
+
+
+def _doubled(array: np.ndarray, used: int) -> np.ndarray:
+    """``array`` twice as long (its first ``used`` entries kept) when at least half full
+    (every one, so that a state needing more than half the room gets it in time)."""
+    if 2 * used < array.size:
+        return array
+    out = np.empty(2 * array.size, dtype=array.dtype)
+    out[:used] = array[:used]
+    return out
+
+
+def _narrow(values: np.ndarray) -> np.ndarray:
+    lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
+    for kind in (np.int8, np.int16, np.int32):
+        if np.iinfo(kind).min <= lo and hi <= np.iinfo(kind).max:
+            return values.astype(kind)
+    return values
+
+
+class _Flags:
+    """``n`` flags in the shape of Storm's labelling, for
+    :func:`~mitld_lp.worlds.prism_labels.state_labels`."""
+
+    def __init__(self, flags: dict[str, np.ndarray], n: int) -> None:
+        self.flags, self.nr_states, self.labeling = flags, n, self
+
+    def get_states(self, label: str) -> Any:
+        return _Bits(self.flags[label])
+
+
+class _Bits:
+    def __init__(self, flags: np.ndarray) -> None:
+        self.f = flags
+        self.before = np.cumsum(flags) - flags
+
+    def size(self) -> int:
+        return int(self.f.size)
+
+    def get_number_of_set_bits(self) -> int:
+        return int(np.count_nonzero(self.f))
+
+    def get(self, i: int) -> bool:
+        return bool(self.f[i])
+
+    def get_number_of_set_bits_before_index(self, i: int) -> int:
+        return int(self.before[i])
+
+
+def label_values(built: Explored, exprs: list[int]) -> np.ndarray:
+    """``n x len(exprs)`` flags: each state's truth of each compiled expression."""
+    a = built.layout
+    return _kernels().label_flags(a["code"], a["consts"], a["starts"], built.keys,
+                                  a["words"], a["word"], a["shift"], a["width"], a["low"],
+                                  np.asarray(exprs, dtype=np.int64))
+
+
+def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
+                   events: frozenset[str], terminal: str, max_states: int,
+                   ) -> tuple[Tables | None, str]:
+    """The own build of ``plain`` (the program with its constants) as :class:`Tables`,
+    as :func:`~mitld_lp.worlds.prism_build.build_tables` would read Storm's; or
+    ``(None, reason)`` where it declines (the module docstring)."""
+    if events:
+        return None, "event effects"
+    try:
+        compiled = compile_program(plain, terminal_expression(stormpy, plain, terminal))
+    except Unsupported as exc:
+        return None, str(exc)
+    built = explore_program(compiled, max_states)  # past it: Storm's build says so
+    if isinstance(built, str):
+        return None, built
+    n = len(built.choices) - 1
+    naming = _naming(plain, compiled, built, terminal)
+    if isinstance(naming, str):
+        return None, naming
+    action_names, action_index = naming
+    lengths = np.diff(built.branches)
+    bad, total, branch_row = checked_rows(lengths, built.probabilities, SUM_TOLERANCE)
+    if bad.size:
+        return None, "a distribution that is not one (Storm's build refuses it)"
+    probabilities, rows, largest = normalise_rows(lengths, built.probabilities,
+                                                  (total, branch_row))
+    normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
+    if normalised is not None:
+        log.info("%s", normalised)
+    labels = sorted(chosen)
+    exprs = [compiled.label_expr[compiled.labels.index(x)] for x in labels]
+    flags = label_values(built, exprs) if labels else np.zeros((n, 0), dtype=bool)
+    by_label = {x: np.ascontiguousarray(flags[:, k]) for k, x in enumerate(labels)}
+    label_sets, label_index = state_labels(_Flags(by_label, n), chosen, by_label)
+    order = [compiled.names.index(x) for x in sorted(compiled.names)]  # program_head's
+    booleans = tuple(k for k, v in enumerate(order) if v in compiled.booleans)
+    states = Valuations(_narrow(built.values[:, order]), booleans)
+    tables = Tables(
+        variables=tuple(compiled.names[v] for v in order), states=states, initial=0,
+        label_sets=label_sets, label_index=label_index, choices=built.choices,
+        branches=built.branches, targets=built.targets, probabilities=probabilities,
+        action_names=action_names, action_index=action_index,
+        effects={}, decided=int(np.count_nonzero(built.origin == -2)),
+        normalised=normalised, checked=True)
+    return tables, ""
+
+
+def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
+            ) -> tuple[Any, np.ndarray] | str:
+    """``(action_names, action_index)`` as :func:`~mitld_lp.worlds.prism_build.build_tables`
+    names Storm's build of ``plain`` (whole, without events, its valuations deferred):
+    by the choices' labels, the distinct ones sorted, then ``deadlock`` and, with a
+    decided-states condition, ``decided`` (a program whose commands all have actions and
+    no module two of one action); or every choice but those self-loops named when first
+    read (:class:`KnownNames`; :func:`~mitld_lp.worlds.prism_names.late_names`).  A
+    reason where neither applies or two choices of a state would share a name."""
+    from mitld_lp.worlds.prism_names import late_names
+    from mitld_lp.worlds.prism_origins import may_share_names, needs_origins
+
+    late = late_names(plain)
+    if needs_origins(plain) and not late:
+        return "choices named from Storm's choice origins"
+    m = len(built.branches) - 1
+    if late and m >= LATE:
+        return "too many choices for late names"
+    cmd_names = list(dict.fromkeys(compiled.cmd_name))
+    of_cmd = np.array([cmd_names.index(x) for x in compiled.cmd_name] or [0], dtype=np.int64)
+    first = built.origin.copy()
+    sync = first <= -3
+    if sync.any():
+        first[sync] = built.combos[-3 - first[sync]]
+    loop = first < 0
+    of = np.where(loop, -1, of_cmd[np.maximum(first, 0)])
+    clash = _clashes(built, of, len(cmd_names)) if may_share_names(plain) else None
+    if clash is not None and clash.size and not late:
+        return "two choices of one state with one name (Storm's choice origins name them)"
+    known = (DEADLOCK_ACTION,) + ((DECIDED_ACTION,) if terminal else ())
+    if clash is not None and clash.size:  # told apart by their commands, go@m_cmd2
+        of, cmd_names = _told_apart(built, compiled, of, cmd_names, clash)
+        if _clashes(built, of, len(cmd_names)).size:
+            return "two choices of one state with one name after their commands"
+    if late:
+        index = np.where(loop, 0, LATE + np.arange(m, dtype=np.int64))
+        index[built.origin == -2] = len(known) - 1
+        index = index.astype(np.int64)
+        return KnownNames(known, of, cmd_names, index), index
+    table = sorted(set(cmd_names)) + list(known)
+    distinct = {x: k for k, x in enumerate(dict.fromkeys(table))}
+    remap = np.array([distinct[x] for x in cmd_names] + [distinct[DEADLOCK_ACTION]]
+                     + [distinct[known[-1]]], dtype=np.int32)
+    code = np.where(built.origin == -1, len(cmd_names),
+                    np.where(built.origin == -2, len(cmd_names) + 1, of))
+    used = sorted(set(cmd_names) & {cmd_names[k] for k in np.unique(of[of >= 0]).tolist()})
+    if used != sorted(set(cmd_names)):  # only the labels some choice has, as Storm's
+        return _relabel(used, known, remap, cmd_names, code)
+    return tuple(distinct), remap[code]
+
+
+def _clashes(built: Explored, of: np.ndarray, k: int) -> np.ndarray:
+    """The choices that share their name (``of``, ``k`` names) with another of their
+    state, ascending."""
+    n = len(built.choices) - 1
+    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
+    key = state_of * (k + 1) + of + 1
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    twice = np.zeros(key.size, dtype=bool)
+    twice[order[1:][same]] = True
+    twice[order[:-1][same]] = True
+    return np.flatnonzero(twice & (of >= 0))
+
+
+def _told_apart(built: Explored, compiled: Compiled, of: np.ndarray, names: list[str],
+                clash: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The ``clash`` choices renamed ``<name>@<their commands>`` (their
+    ``<module>_cmd<k>`` in Storm's global order, joined by ``+``), as
+    :func:`mitld_lp.worlds.prism_names.origin_codes` names them."""
+    of, names = of.copy(), list(names)
+    position = {x: k for k, x in enumerate(names)}
+    for c in clash.tolist():
+        o = int(built.origin[c])
+        cmds = [o] if o >= 0 else built.combos[-3 - o: -3 - o + compiled.cmd_k[
+            int(built.combos[-3 - o])]].tolist()
+        text = "+".join(compiled.cmd_text[x] for x in sorted(
+            cmds, key=lambda x: compiled.cmd_global[x]))
+        name = f"{names[int(of[c])]}@{text}"
+        k = position.setdefault(name, len(position))
+        if k == len(names):
+            names.append(name)
+        of[c] = k
+    return of, names
+
+
+def _relabel(used: list[str], known: tuple[str, ...], remap: np.ndarray,
+             cmd_names: list[str], code: np.ndarray) -> tuple[Any, np.ndarray]:
+    """:func:`_naming`'s labels where some action has no choice: the used ones only."""
+    distinct = {x: k for k, x in enumerate(dict.fromkeys(used + list(known)))}
+    again = np.array([distinct.get(x, -1) for x in cmd_names] + [distinct[DEADLOCK_ACTION]]
+                     + [distinct[known[-1]]], dtype=np.int32)
+    return tuple(distinct), again[code]
+
+
+class KnownNames(LateNames):
+    """A world's names where every choice but the deadlock and decided self-loops has
+    the id ``LATE + c`` (as Storm's build names them when first read,
+    :class:`~mitld_lp.worlds.prism_names.DeferredNames`), all known already: choice
+    ``c``'s is ``names[of[c]]``."""
+
+    def __init__(self, known: tuple[str, ...], of: np.ndarray, names: list[str],
+                 index: np.ndarray) -> None:
+        self.known, self.of, self.names, self.index = known, of, tuple(names), index
+
+    def names_of(self, choices: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+        choices = np.asarray(choices, dtype=np.int64)
+        of = self.of[choices]
+        codes = np.where(of >= 0, len(self.known) + of, self.index[choices])
+        return codes, self.known + self.names
