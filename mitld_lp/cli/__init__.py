@@ -92,6 +92,8 @@ _VERBS: list[
      _verb("run", "args_run"), _verb("run", "cmd_run")),
     ("pareto", "the certified curve of success probability against steps, cost or a risk",
      _verb("constrained", "args_pareto"), _verb("constrained", "cmd_pareto")),
+    ("warm", "compile the own PRISM explorer once on this machine (faster PRISM loads)",
+     _verb("warm", "args_warm"), _verb("warm", "cmd_warm")),
 ]
 
 

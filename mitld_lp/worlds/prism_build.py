@@ -268,6 +268,10 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
 
 
+_COLD_SAID: list[str] = []
+"""The first load told that the own explorer is not compiled (said once a process)."""
+
+
 def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], terminal: str,
               max_states: int, memory: int | None) -> Tables | None:
     """The own explorer's tables of a whole build (:mod:`mitld_lp.worlds.prism_explore`)
@@ -278,7 +282,13 @@ def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], term
     from mitld_lp.worlds import prism_explore
 
     builder = prism_explore.chosen_builder()
-    if builder == "storm" or (builder == "auto" and not prism_explore.kernel_ready()):
+    if builder == "storm":
+        return None
+    if builder == "auto" and not prism_explore.kernel_ready():
+        if not _COLD_SAID:  # once a process: the way to the faster build
+            _COLD_SAID.append(where)
+            log.info("%s: built by Storm's explicit builder: the own PRISM explorer is not "
+                     "compiled on this machine yet (`mitld-lp warm` compiles it once)", where)
         return None
     if memory is not None and max_states * prism_explore.OWN_BYTES_PER_STATE > memory:
         return None

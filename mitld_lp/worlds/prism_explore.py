@@ -34,7 +34,7 @@ from mitld_lp.worlds.table import LATE, LateNames
 
 __all__ = ["OWN_BYTES_PER_STATE", "BUILDER_ENV", "Explored", "KnownNames", "chosen_builder",
            "explore_program", "explore_tables", "kernel_ready", "label_values",
-           "terminal_expression"]
+           "terminal_expression", "compile_kernels", "WARM_PROGRAM"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -85,6 +85,40 @@ def kernel_ready() -> bool:
 
     return all(kernel_loader.module_cached("mitld_lp.worlds.prism_kernels", name)
                for name in ("explore", "label_flags"))
+
+
+WARM_PROGRAM = """mdp
+module warm
+  x : [0..2] init 0;
+  b : bool init false;
+  [go] x<2 -> 0.5:(x'=x+1) + 0.5:(b'=!b);
+  [] x=2 -> (x'=0);
+endmodule
+label "done" = x=2 & b;
+"""
+"""A program whose build calls both of the explorer's kernels (a state's choices and a
+label's flags): :func:`compile_kernels` builds it."""
+
+
+def compile_kernels(stormpy: Any) -> bool:
+    """Compile the explorer's kernels into the cache on disk, by building
+    :data:`WARM_PROGRAM` with them (the command line's ``warm``); False where they were
+    cached already (nothing compiled)."""
+    import tempfile
+    from pathlib import Path
+
+    if kernel_ready():
+        return False
+    with tempfile.TemporaryDirectory() as folder:  # stormpy parses files only
+        path = Path(folder) / "warm.prism"
+        path.write_text(WARM_PROGRAM, encoding="ascii")
+        with storm_quiet():
+            program = stormpy.parse_prism_program(str(path))
+    compiled = compile_program(program, None)
+    built = explore_program(compiled, 100)
+    assert not isinstance(built, str), built  # the program is in the fragment
+    label_values(built, [compiled.label_expr[compiled.labels.index("done")]])
+    return True
 
 
 def _kernels() -> Any:

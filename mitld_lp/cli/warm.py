@@ -1,0 +1,33 @@
+"""The command line's ``warm`` verb: compile, once on a machine, the own PRISM explorer's
+kernels (:mod:`mitld_lp.worlds.prism_explore`), which a PRISM or JANI load uses only
+where their machine code is cached already; until then Storm's explicit builder builds
+every PRISM world (the same tables, slower)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from mitld_lp.cli.kernel import EXIT_OK, say_answer
+
+__all__ = ["args_warm", "cmd_warm"]
+
+
+def args_warm(p: argparse.ArgumentParser) -> None:
+    del p  # no arguments: the kernels are the package's own
+
+
+def cmd_warm(args: argparse.Namespace) -> int:
+    """Compile the explorer's kernels if they are not cached; say which it was."""
+    del args
+    from mitld_lp.worlds.prism import stormpy_module
+    from mitld_lp.worlds.prism_explore import compile_kernels
+
+    start = time.process_time()
+    if compile_kernels(stormpy_module()):
+        say_answer(f"compiled the own PRISM explorer's kernels in "
+                   f"{time.process_time() - start:.1f} s of CPU; PRISM files are now "
+                   f"built with them")
+    else:
+        say_answer("the own PRISM explorer's kernels were compiled already")
+    return EXIT_OK

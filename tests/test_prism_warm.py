@@ -1,0 +1,66 @@
+"""The ``warm`` verb and the load's word on a cold explorer (mitld_lp.cli.warm,
+mitld_lp.worlds.prism_explore.compile_kernels, prism_build.own_build)."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+pytest.importorskip("stormpy")
+
+import stormpy  # noqa: E402
+
+from mitld_lp.cli import main  # noqa: E402
+from mitld_lp.worlds import prism_build, prism_explore  # noqa: E402
+from mitld_lp.worlds.prism import load_prism  # noqa: E402
+
+
+def test_warm_program_builds_its_six_states(tmp_path):
+    # by hand: x in 0..2 and b both ways are reached (go flips b or counts x up; x=2
+    # returns to x=0 keeping b), 6 states; the label "done" holds at x=2 & b only
+    prism_explore.compile_kernels(stormpy)
+    assert prism_explore.kernel_ready()
+    path = tmp_path / "warm.prism"
+    path.write_text(prism_explore.WARM_PROGRAM, encoding="ascii")
+    program = stormpy.parse_prism_program(str(path))
+    compiled = prism_explore.compile_program(program, None)
+    built = prism_explore.explore_program(compiled, 100)
+    assert not isinstance(built, str)
+    values = {tuple(int(v) for v in row) for row in built.values}
+    names = list(compiled.names)
+    assert len(values) == 6
+    assert {(row[names.index("x")], row[names.index("b")]) for row in values} == {
+        (x, b) for x in range(3) for b in (0, 1)}
+    flags = prism_explore.label_values(
+        built, [compiled.label_expr[compiled.labels.index("done")]])
+    done = {tuple(int(v) for v in built.values[i]) for i in range(len(built.values))
+            if flags[i, 0]}
+    assert done == {r for r in values if r[names.index("x")] == 2 and r[names.index("b")] == 1}
+
+
+def test_warm_says_what_it_did(monkeypatch, capsys):
+    prism_explore.compile_kernels(stormpy)  # cached from here (compiled once if cold)
+    assert main(["warm"]) == 0
+    assert "compiled already" in capsys.readouterr().out
+    monkeypatch.setattr(prism_explore, "kernel_ready", lambda: False)  # as if cold
+    assert main(["warm"]) == 0
+    assert "compiled the own PRISM explorer's kernels" in capsys.readouterr().out
+
+
+def test_cold_explorer_said_once_and_storm_builds(monkeypatch, caplog, tmp_path):
+    path = tmp_path / "warm.prism"
+    path.write_text(prism_explore.WARM_PROGRAM, encoding="ascii")
+    monkeypatch.delenv(prism_explore.BUILDER_ENV, raising=False)
+    monkeypatch.setattr(prism_explore, "kernel_ready", lambda: False)
+    monkeypatch.setattr(prism_build, "_COLD_SAID", [])
+    called = []
+    monkeypatch.setattr(prism_explore, "explore_tables",
+                        lambda *a, **k: called.append(a) or (None, "not asked"))
+    with caplog.at_level(logging.INFO, logger="mitld_lp.worlds.prism"):
+        first = load_prism(path)
+        load_prism(path)
+    said = [r for r in caplog.records if "mitld-lp warm" in r.getMessage()]
+    assert len(said) == 1  # once a process
+    assert not called  # Storm built both
+    assert len(first._tables.states) == 6
