@@ -54,6 +54,7 @@ def test_cold_explorer_said_once_and_storm_builds(monkeypatch, caplog, tmp_path)
     monkeypatch.delenv(prism_explore.BUILDER_ENV, raising=False)
     monkeypatch.setattr(prism_explore, "kernel_ready", lambda: False)
     monkeypatch.setattr(prism_build, "_COLD_SAID", [])
+    monkeypatch.setattr(prism_build, "OWN_FROM_STATES", 0)  # a program this small too
     called = []
     monkeypatch.setattr(prism_explore, "explore_tables",
                         lambda *a, **k: called.append(a) or (None, "not asked"))
@@ -64,3 +65,20 @@ def test_cold_explorer_said_once_and_storm_builds(monkeypatch, caplog, tmp_path)
     assert len(said) == 1  # once a process
     assert not called  # Storm built both
     assert len(first._tables.states) == 6
+
+
+@pytest.mark.parametrize("floor, own", [(None, False), (0, True)])
+def test_auto_leaves_a_small_program_to_storm(monkeypatch, tmp_path, floor, own):
+    # WARM_PROGRAM has 3 x 2 = 6 valuations, under the default floor
+    assert prism_build.OWN_FROM_STATES > 6
+    path = tmp_path / "warm.prism"
+    path.write_text(prism_explore.WARM_PROGRAM, encoding="ascii")
+    monkeypatch.delenv(prism_explore.BUILDER_ENV, raising=False)
+    monkeypatch.setattr(prism_explore, "kernel_ready", lambda: True)
+    if floor is not None:
+        monkeypatch.setattr(prism_build, "OWN_FROM_STATES", floor)
+    called = []
+    monkeypatch.setattr(prism_explore, "explore_tables",
+                        lambda *a, **k: called.append(a) or (None, "not asked"))
+    assert len(load_prism(path)._tables.states) == 6
+    assert bool(called) == own

@@ -33,6 +33,7 @@ from mitld_lp.worlds.prism_origins import OriginNames, may_share_names, needs_or
 from mitld_lp.worlds.prism_program import (
     SUM_TOLERANCE,
     builder_options,
+    check_program,
     show_sum,
     storm_build,
     storm_error,
@@ -268,6 +269,13 @@ def build_tables(stormpy: Any, program: Any, plain: Any, where: str, chosen: fro
     return dataclasses.replace(tables, unexplored=unexplored) if unexplored.any() else tables
 
 
+OWN_FROM_STATES = 20_000
+"""Under ``auto``, a program of fewer valuations (the product of its variables' numbers of
+values, :class:`~mitld_lp.worlds.prism_program.SizeBound`) is built by Storm: a build of
+that size costs Storm a few milliseconds, about what loading the explorer's machine code
+(numba's runtime, the link) costs, and it leaves numba unloaded."""
+
+
 _COLD_SAID: list[str] = []
 """The first load told that the own explorer is not compiled (said once a process)."""
 
@@ -284,6 +292,8 @@ def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], term
     builder = prism_explore.chosen_builder()
     if builder == "storm":
         return None
+    if builder == "auto" and check_program(plain, where).states < OWN_FROM_STATES:
+        return None  # Storm's build is quicker than loading the explorer's machine code
     if builder == "auto" and not prism_explore.kernel_ready():
         if not _COLD_SAID:  # once a process: the way to the faster build
             _COLD_SAID.append(where)
