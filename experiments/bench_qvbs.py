@@ -23,7 +23,11 @@ property as an MITLD spec).  Per instance, each route in a child process of its 
   before the solve (the product with the task's automaton, mostly);
   ``bytes_per_transition`` the peak resident size during ``synthesize`` (the peak is
   reset after the load, where Linux allows it) over the size before it, per product
-  transition (the product is built inside ``synthesize``).  After the figures are
+  transition (the product is built inside ``synthesize``); ``process_peak_mb`` the
+  whole process's peak resident size in MB, the load's included (and a capped child's,
+  where Storm builds in one), beside Storm's whole run's (``storm_process_peak_mb``):
+  unlike the figure per transition it does not depend on what the load left free in
+  the heap for the synthesis to reuse.  After the figures are
   taken, the product is written as DRN (target: the lower model's goal) and one sweep
   of it is timed (a sparse product and a maximum per state; the median of seven
   batches of at least 0.05 s each, as the CPU clock ticks in milliseconds);
@@ -153,7 +157,8 @@ COLUMNS = ("instance", "value", "upper", "reference", "states", "transitions", "
            "solve_over_storm_check", "whole_cpu", "load_cpu", "product_cpu",
            "storm_build_cpu", "process_cpu", "storm_prism_value", "storm_prism_cpu",
            "storm_process_cpu", "process_over_storm_process", "bytes_per_transition",
-           "storm_bytes_per_transition", "storm_agrees", "certified")
+           "storm_bytes_per_transition", "process_peak_mb", "storm_process_peak_mb",
+           "storm_agrees", "certified")
 CASES = ("grid", "sensed")  # the issue's own cases, rows beside the QVBS instances
 GRID_N, QUICK_GRID_N = 2001, 201  # the grid's side: 4,004,001 states (--quick 40,401)
 SENSED, QUICK_SENSED = 0, 0  # bench_sensed.FULL[0] (one camera), bench_sensed.QUICK[0]
@@ -302,6 +307,7 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     model = _load(job)
     load_cpu = _process_cpu() - c
     bs.preload()
+    load_peak = _hwm_kb()  # the whole process's peak so far (the load's)
     fresh = _reset_peak()  # the PRISM exploration may have peaked higher than the solve
     before = bs._rss_kb()
     analysis = _timed_analysis()
@@ -312,6 +318,8 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     solve_cpu = r.solve_cpu if sensed is None else sensed[0]
     process_cpu = _process_cpu()  # the process so far; the bench's extras below are not ours
     peak = _hwm_kb() if fresh else bs._peak_kb()
+    import resource  # a capped child's build (Storm's, where the program may not fit)
+    child_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     mdp = r.mdp
     solved = [m for m in (r.lower_model, r.upper_model) if m is not None]
     lp = [m.lp for m in solved if m.lp is not None]
@@ -325,7 +333,8 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
                process_cpu=process_cpu, analysis_cpu=analysis[0],
                whole_cpu=load_cpu + synth_cpu, load_cpu=load_cpu,
                product_cpu=max(synth_cpu - solve_cpu, 0.0),
-               bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1))
+               bytes_per_transition=max(peak - before, 0) * 1024 / max(mdp.n_transitions, 1),
+               process_peak_mb=max(load_peak, peak, child_peak) / 1024)
     # untimed from here: the product's digest, the DRN for Storm and the unit sweep
     out["product_digest"] = product_digest(mdp)
     from mitld_lp.solvers import write_drn  # (the route itself does not import it)
@@ -432,7 +441,7 @@ def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
     checks = bs._checks(model, prop, (method,))
     return dict(build_cpu=build_cpu, whole_cpu=build_cpu + checks["best_cpu"],
                 states=model.nr_states, value=checks["methods"][method]["value"],
-                process_cpu=_process_cpu(), **checks)
+                process_cpu=_process_cpu(), process_peak_mb=bs._peak_kb() / 1024, **checks)
 
 
 def work_memory(job: dict[str, Any], work: Path) -> dict[str, Any]:
@@ -637,6 +646,8 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
                                          prism["process_cpu"] if prism else None),
         bytes_per_transition=ours["bytes_per_transition"],
         storm_bytes_per_transition=storm["bytes_per_transition"],
+        process_peak_mb=ours.get("process_peak_mb"),
+        storm_process_peak_mb=prism.get("process_peak_mb") if prism else None,
         child_cpu=ours["child_cpu"], storm_child_cpu=prism["child_cpu"] if prism else None,
         harness_cpu=ours.get("harness_cpu"),
         storm_harness_cpu=prism.get("harness_cpu") if prism else None,
@@ -663,6 +674,7 @@ def _compared(base: dict[str, Any], ours: dict[str, Any], prism: dict[str, Any] 
         base_whole_cpu=base["whole_cpu"], base_process_cpu=base["process_cpu"],
         base_load_cpu=base["load_cpu"], base_product_cpu=base.get("product_cpu"),
         base_bytes_per_transition=base["bytes_per_transition"],
+        base_process_peak_mb=base.get("process_peak_mb"),
         base_process_over_storm_process=None if flat or not storm
         else base["process_cpu"] / storm,
         same_bracket=(base["lower"], base["upper"]) == (ours["lower"], ours["upper"]),
@@ -704,7 +716,8 @@ COMPARED = ("instance", "value", "base_value", "same_bracket", "same_product", "
             "product_cpu", "base_process_cpu", "process_cpu",
             "storm_process_cpu", "base_process_over_storm_process",
             "process_over_storm_process", "base_bytes_per_transition",
-            "bytes_per_transition", "storm_bytes_per_transition")
+            "bytes_per_transition", "storm_bytes_per_transition", "base_process_peak_mb",
+            "process_peak_mb", "storm_process_peak_mb")
 
 
 def _line(row: dict) -> str:
