@@ -132,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=None, help="families")
     ap.add_argument("--out", type=Path, default=None, help="a JSON file of the rows")
     args = ap.parse_args(argv)
+    if args.out is not None and args.out.exists():  # never over a file already there
+        ap.error(f"--out {args.out}: the file exists; give a new name")
     import qvbs
     import stormpy
 
