@@ -58,3 +58,25 @@ def test_keeping_zero_without_entries() -> None:
     q = SimpleNamespace(matrix=matrix, zero=np.array([True, True]),
                         to_target=np.array([0.5, 0.0, 0.2]), row_groups=groups, n_choices=3)
     assert keeping_zero(q).tolist() == [1, 2]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gather_ranges_concatenates_the_ranges(seed: int) -> None:
+    from mitld_lp.solvers.rows import gather_ranges
+
+    rng = np.random.default_rng(100 + seed)
+    k = int(rng.integers(0, 30))
+    starts = rng.integers(0, 1000, size=k)
+    stops = starts + rng.integers(0, 6, size=k)  # empty ranges too, overlaps, any order
+    expected = [i for a, b in zip(starts, stops, strict=True) for i in range(a, b)]
+    got = gather_ranges(starts, stops)
+    assert got.dtype == np.int64
+    assert got.tolist() == expected
+
+
+def test_gather_ranges_refuses_a_range_ending_before_its_start() -> None:
+    from mitld_lp.solvers.rows import gather_ranges
+
+    with pytest.raises(ValueError, match="gather_ranges"):
+        gather_ranges(np.array([5, 2]), np.array([7, 1]))
+    assert gather_ranges(np.array([], dtype=np.int64), np.array([], dtype=np.int64)).size == 0
