@@ -60,10 +60,14 @@ def test_keeping_zero_without_entries() -> None:
     assert keeping_zero(q).tolist() == [1, 2]
 
 
+@pytest.mark.parametrize("in_place_from", [0, 1 << 17])
 @pytest.mark.parametrize("seed", range(6))
-def test_gather_ranges_concatenates_the_ranges(seed: int) -> None:
+def test_gather_ranges_concatenates_the_ranges(seed: int, in_place_from: int,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from mitld_lp.solvers import rows
     from mitld_lp.solvers.rows import gather_ranges
 
+    monkeypatch.setattr(rows, "IN_PLACE_FROM", in_place_from)  # both ways of making it
     rng = np.random.default_rng(100 + seed)
     k = int(rng.integers(0, 30))
     starts = rng.integers(0, 1000, size=k)
