@@ -160,11 +160,13 @@ def block_depth(block: Block) -> int:
 def _state_graph(block: Block) -> sp.csr_array:
     """``(n, n)`` pattern of the block without directions: ``s - s'`` if a choice of
     ``s`` may move to ``s'`` inside the block or one of ``s'`` to ``s``.  A state's
-    choices are consecutive rows, so its entries are read in place."""
+    choices are consecutive rows, so its entries are read in place.  Its entries are
+    booleans (the pattern is all the searches read: :func:`_depth`'s are unweighted), a
+    byte an entry where float64 ones were eight, through the transpose and the sum."""
     n = block.states.size
     inner = block.inner
-    moves = sp.csr_array((np.ones(inner.nnz), inner.indices, inner.indptr[block.groups]),
-                         shape=(n, n))
+    moves = sp.csr_array((np.ones(inner.nnz, dtype=bool), inner.indices,
+                          inner.indptr[block.groups]), shape=(n, n))
     return sp.csr_array(moves + moves.T)
 
 

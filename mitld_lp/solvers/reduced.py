@@ -171,9 +171,26 @@ def keeping_zero(q: Quotient) -> np.ndarray:
     entering the target and every successor known to be 0 (``q.zero``).  Every choice
     of a maximum's zero state does (it has no path to the target); a minimum's zero
     state (some policy avoids the target for ever) has one.  The first choice where
-    none does."""
-    n_choices = q.n_choices
-    entry_row = np.repeat(np.arange(n_choices), np.diff(q.matrix.indptr))
-    moves = np.bincount(entry_row[~q.zero[q.matrix.indices]], minlength=n_choices) > 0
-    keeps = ~moves & (q.to_target == 0.0)
-    return segmented_argmax(keeps.astype(np.float64), q.row_groups)
+    none does.
+
+    A byte an entry (whether its successor may be above 0), or-ed over each choice's
+    entries, and the keeping choices' indices only: no int64 row of every entry nor
+    float64 arrays of every choice (they were the sensed case's traced peak, at the LP
+    stage)."""
+    ptr = q.matrix.indptr
+    moves = np.zeros(q.n_choices, dtype=bool)
+    if q.matrix.indices.size:
+        nonzero = q.zero[q.matrix.indices]
+        np.logical_not(nonzero, out=nonzero)
+        stored = ptr[1:] > ptr[:-1]  # reduceat reads an empty row as its next entry
+        moves[stored] = np.logical_or.reduceat(nonzero, ptr[:-1][stored])
+        del nonzero, stored
+    keeps = np.flatnonzero(~moves & (q.to_target == 0.0))
+    del moves
+    groups = np.asarray(q.row_groups)
+    out = np.asarray(groups[:-1], dtype=np.int64).copy()
+    owner = np.searchsorted(groups, keeps, side="right") - 1  # each one's state
+    first = np.ones(keeps.size, dtype=bool)  # (keeps ascending: owners too)
+    np.not_equal(owner[1:], owner[:-1], out=first[1:])
+    out[owner[first]] = keeps[first]
+    return out

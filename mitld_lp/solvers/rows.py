@@ -23,13 +23,36 @@ __all__ = ["gather_ranges", "off_diagonal_entries", "row_columns", "row_entries"
 BATCH = 1 << 14
 
 
+#: entries from which :func:`gather_ranges` sums in its output (below, the repeated
+#: offset and the ``arange``: 0.08 against 0.11 ms at 65k entries, 10 against 16 us at
+#: 600; a deadline's levels call it by the thousand)
+IN_PLACE_FROM = 1 << 17
+
+
 def gather_ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised."""
+    """The concatenation of ``arange(starts[i], stops[i])`` over ``i``, vectorised.
+
+    Made in its output alone: ones, each range's first entry its step from the previous
+    range's last, summed in place (not a repeated offset and an ``arange`` of every
+    entry beside the output: three int64 arrays of the entries at once)."""
     starts = np.asarray(starts, dtype=np.int64)
     counts = np.asarray(stops, dtype=np.int64) - starts
+    if counts.size and int(counts.min()) < 0:
+        raise ValueError("gather_ranges: a range ends before it starts")
     total = int(counts.sum())
-    offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
-    return offsets + np.arange(total, dtype=np.int64)
+    if total < IN_PLACE_FROM:  # the same entries; NumPy's two calls are quicker here
+        offsets = np.repeat(starts - (np.cumsum(counts) - counts), counts)
+        return offsets + np.arange(total, dtype=np.int64)
+    out = np.ones(total, dtype=np.int64)
+    full = counts > 0
+    if total:
+        first, size = starts[full], counts[full]
+        at = np.cumsum(size)
+        at -= size  # each range's first entry in the output
+        out[0] = first[0]
+        out[at[1:]] = first[1:] - first[:-1] - size[:-1] + 1
+        np.cumsum(out, out=out)
+    return out
 
 
 def row_entries(matrix: sp.csr_array, rows: np.ndarray
