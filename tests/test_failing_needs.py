@@ -131,22 +131,40 @@ def _small():
 
 
 def test_where_verdicts_could_part_the_check_runs() -> None:
-    """A NaN or negative value, a negative or infinite stored value, a state with no
-    choice, rows beyond the states': no verdict from the needs."""
+    """A value of ``x`` not finite (the compiled check refuses it too), a state with no
+    choice, rows beyond the states': no verdict from the kernel."""
     st = _small()
     rnd = rounding(st.matrix)
     free = np.zeros(2, dtype=bool)
     assert _from_needs(st, rnd, np.array([0.5, 0.5]), free) is not None
-    for bad in ([np.nan, 0.5], [-0.25, 0.5], [np.inf, 0.5]):
+    for bad in ([np.nan, 0.5], [np.inf, 0.5]):
         assert _from_needs(st, rnd, np.array(bad), free) is None
-    for value in (-0.5, np.inf, np.nan):
-        m = st.matrix.copy()
-        m.data[0] = value
-        assert _from_needs(C.Rows(m, st.groups), rnd, np.array([0.5, 0.5]), free) is None
     no_choice = C.Rows(st.matrix, np.array([0, 0, 2], dtype=np.int64))
     assert _from_needs(no_choice, rnd, np.array([0.5, 0.5]), free) is None
     short = C.Rows(st.matrix, np.array([0, 1], dtype=np.int64))
     assert _from_needs(short, rnd, np.array([0.5]), np.zeros(1, dtype=bool)) is None
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(models(), hs.sampled_from([np.nan, np.inf, -np.inf, -0.5, 1e308]),
+       hs.sampled_from([-0.25, 2.0]))
+def test_odd_values_give_the_checks_verdicts(model, entry, below) -> None:
+    """A stored value NaN, infinite, negative or huge (a NaN bound goes on to the convex
+    rule, as in the check), a negative or above-1 ``x``: the compiled and the NumPy
+    check's verdicts."""
+    st, x, free = model
+    m = st.matrix.copy()
+    if m.nnz:
+        m.data[0] = entry
+    st = C.Rows(m, st.groups, st.nature)
+    x = x.copy()
+    x[0] = below
+    rnd = rounding(st.matrix)
+    got = _from_needs(st, rnd, x, free)
+    assert got is not None
+    with np.errstate(all="ignore"):
+        np.testing.assert_array_equal(got, _present(st, rnd, x, free, compiled=True))
+        np.testing.assert_array_equal(got, _present(st, rnd, x, free, compiled=False))
 
 
 def test_a_maximums_check_links_no_check_kernel(monkeypatch) -> None:

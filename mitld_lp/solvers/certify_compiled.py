@@ -160,31 +160,26 @@ def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
     out = np.empty(states.size)
     state_needs(states, groups, nature, m.indptr, m.indices, m.data,
                 np.ascontiguousarray(x), rnd.count, rnd.slack_of,
-                rnd.high_of if upper else rnd.low_of, bool(upper), out)
+                rnd.high_of if upper else rnd.low_of, bool(upper), out, False)
     return out
 
 
 def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                      states: np.ndarray | None = None) -> np.ndarray | None:
     """The pre-fixed point (upper) Bellman check's failing states (a mask: those of
-    ``states``, every state where None, that are not ``free``) read from the repair's
-    needs (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs`), so that a
-    maximum's certificate links one kernel, not the check's beside the repair's.  A
-    row passes the check when its rounded bound or the largest ``x`` over its stored
-    entries is at most its state's value, so exactly when their least, the row's term
-    of the need, is; a choice when one of nature's rows does, so when their least is;
-    a state when every choice does, so when the largest of those, its need, is:
-    failing is ``need > x``, the check's verdict.  That holds where no bound is NaN
-    (a NaN row fails the need but goes on to the convex rule in the check): ``x`` and
-    the stored values finite and not negative, the rounding's factors finite and
-    positive, its slacks finite, so every bound is a number or +inf.  None where these
-    do not hold, where :func:`compiled_needs` would not run, or where a state has no
-    choice or a choice no row, or (every state) the rows are not the states' choices
-    one after the other (the check's segmented reductions read other rows there)."""
+    ``states``, every state where None, that are not ``free``) by the repair's kernel
+    (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs` asked for verdicts:
+    the comparisons of :func:`~mitld_lp.solvers.certify_kernels.bellman_rows` on the
+    same operands, a state at a time), so that a maximum's certificate links one
+    kernel, not the check's beside the repair's.  None where :func:`compiled_checks`
+    would not run, where a state has no choice or a choice no row, or (every state)
+    where the rows are not the states' choices one after the other (the check's
+    segmented reductions read other rows there)."""
     m = st.matrix
     if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
             or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
-            or m.indices.dtype not in (np.int32, np.int64)):
+            or m.indices.dtype not in (np.int32, np.int64)
+            or not bool(np.isfinite(x).all())):
         return None
     groups = np.asarray(st.groups, dtype=np.int64)
     nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
@@ -194,14 +189,6 @@ def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
         return None
     ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
     if int(ends[0]) != 0 or int(ends[1]) != m.shape[0]:
-        return None
-    # no NaN bound (the docs): NaN fails every comparison, so min and max see it
-    if x.size == 0 or not (float(np.min(x)) >= 0.0 and np.isfinite(np.max(x))):
-        return None
-    if m.data.size and not (float(np.min(m.data)) >= 0.0 and np.isfinite(np.max(m.data))):
-        return None
-    if not (bool(np.all(np.isfinite(rnd.slack_of))) and bool(np.all(rnd.high_of > 0))
-            and bool(np.all(np.isfinite(rnd.high_of)))):
         return None
     try:
         from mitld_lp.solvers.certify_repair_kernels import state_needs
@@ -213,11 +200,11 @@ def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     failing = np.zeros(st.n_states, dtype=bool)
     if ask.size:
         ask = ask.astype(np.int64, copy=False)
-        need = np.empty(ask.size)
+        out = np.empty(ask.size)
         state_needs(ask, groups, nature, m.indptr, m.indices, m.data,
                     np.ascontiguousarray(x), rnd.count, rnd.slack_of, rnd.high_of, True,
-                    need)
-        failing[ask] = need > x[ask]
+                    out, True)
+        failing[ask] = out > 0
     return failing
 
 
