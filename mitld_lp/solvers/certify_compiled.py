@@ -79,6 +79,24 @@ def load_if_warm(entries: int) -> bool:
     return kernel_loader.compiled_paid()
 
 
+def _checked_arrays(st: Any, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The states' first choices and the choices' first rows (empty: a row a choice),
+    int64, where the compiled Bellman check may run on ``st`` and ``x``; None where
+    not: fewer than :data:`COMPILED_CHECK_MIN_ROWS` rows, no compiled kernel loaded
+    yet in this process, a value of ``x`` not finite, or arrays of other kinds than
+    SciPy's product takes."""
+    m = st.matrix
+    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
+            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
+            or m.indices.dtype not in (np.int32, np.int64)
+            or not bool(np.isfinite(x).all())):
+        return None
+    groups = np.asarray(st.groups, dtype=np.int64)
+    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
+              np.asarray(st.nature, dtype=np.int64))
+    return groups, nature
+
+
 def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                     upper: bool, states: np.ndarray | None = None) -> np.ndarray | None:
     """Per row of the ``states``' choices (every state: the matrix's rows), whether it
@@ -89,14 +107,10 @@ def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     rows, no compiled kernel loaded yet in this process, numba not installed, a value
     of ``x`` not finite, or arrays of other kinds than SciPy's product takes."""
     m = st.matrix
-    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
-            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
-            or m.indices.dtype not in (np.int32, np.int64)
-            or not bool(np.isfinite(x).all())):
+    got = _checked_arrays(st, x)
+    if got is None:
         return None
-    groups = np.asarray(st.groups, dtype=np.int64)
-    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
-              np.asarray(st.nature, dtype=np.int64))
+    groups, nature = got
     ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
     if states is None and (int(ends[0]) != 0 or int(ends[1]) != m.shape[0]):
         return None  # (the rows are not the states' choices one after the other)
@@ -176,14 +190,10 @@ def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     where the rows are not the states' choices one after the other (the check's
     segmented reductions read other rows there)."""
     m = st.matrix
-    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
-            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
-            or m.indices.dtype not in (np.int32, np.int64)
-            or not bool(np.isfinite(x).all())):
+    got = _checked_arrays(st, x)
+    if got is None:
         return None
-    groups = np.asarray(st.groups, dtype=np.int64)
-    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
-              np.asarray(st.nature, dtype=np.int64))
+    groups, nature = got
     if not bool(np.all(groups[1:] > groups[:-1])) or (
             st.nature is not None and not bool(np.all(nature[1:] > nature[:-1]))):
         return None

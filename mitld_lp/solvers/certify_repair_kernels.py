@@ -37,6 +37,14 @@ __all__ = ["level_rounds", "state_needs"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _rows_of(c, nature, has_nature):  # pragma: no cover - compiled
+    """Choice ``c``'s rows ``lo, hi``: nature's where given, else the row ``c``."""
+    if has_nature:
+        return nature[c], nature[c + 1]
+    return c, c + 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_of,
           factor_of, upper):  # pragma: no cover - compiled
     """State ``s``'s need (each with a choice, each choice with a row), what the
@@ -48,11 +56,7 @@ def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_
     copy of that arithmetic: :func:`state_needs` and :func:`level_rounds` both call it."""
     best = -np.inf if upper else np.inf
     for c in range(groups[s], groups[s + 1]):
-        lo = c
-        hi = c + 1
-        if has_nature:
-            lo = nature[c]
-            hi = nature[c + 1]
+        lo, hi = _rows_of(c, nature, has_nature)
         pick = np.inf
         for r in range(lo, hi):
             acc = 0.0
@@ -100,11 +104,7 @@ def _fails_above(s, groups, nature, has_nature, indptr, indices, data, x, count,
     passing row and at the first failing choice."""
     own = x[s]
     for c in range(groups[s], groups[s + 1]):
-        lo = c
-        hi = c + 1
-        if has_nature:
-            lo = nature[c]
-            hi = nature[c + 1]
+        lo, hi = _rows_of(c, nature, has_nature)
         passed = False
         for r in range(lo, hi):
             acc = 0.0
