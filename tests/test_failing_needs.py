@@ -1,10 +1,11 @@
-"""A maximum's Bellman check read from the repair's needs
+"""A maximum's Bellman check by the repair's kernel asked for verdicts
 (:func:`mitld_lp.solvers.certify_compiled.compiled_failing`) against the check it
 replaces: on random models (robust rows of nature among them, empty rows, tied values
-of ``x``) the same failing states as the compiled check and the NumPy check, and as
-the check's definition evaluated here a row at a time (the rounded sum in the row's
-order, the convex rule's extreme compared in exact rationals); and the cases where
-the verdicts could part (a NaN bound, a state with no choice) are left to the check."""
+of ``x``, odd stored values) the same failing states as the compiled check and the
+NumPy check, and as the check's definition evaluated here a row at a time (the
+rounded sum in the row's order, the convex rule's extreme compared in exact
+rationals); where the check's segmented reductions read other rows (a state with no
+choice, rows beyond the states') or ``x`` is not finite, the check runs."""
 
 from __future__ import annotations
 
