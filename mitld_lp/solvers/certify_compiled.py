@@ -19,8 +19,8 @@ from mitld_lp.util import kernel_loader
 
 __all__ = ["CHECK_BATCH", "COMPILED_CHECK_MIN_ROWS", "CYCLING_MIN_STATES",
            "WARM_LOAD_MIN_ENTRIES", "compiled_chain_sets", "compiled_checks",
-           "compiled_cycling", "compiled_needs", "compiled_rounds", "load_if_warm",
-           "rounds_cached"]
+           "compiled_cycling", "compiled_failing", "compiled_needs", "compiled_rounds",
+           "load_if_warm", "rounds_cached"]
 
 CHECK_BATCH = 1 << 16
 """States whose rows one call of the compiled Bellman check reads, where it checks
@@ -79,6 +79,24 @@ def load_if_warm(entries: int) -> bool:
     return kernel_loader.compiled_paid()
 
 
+def _checked_arrays(st: Any, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The states' first choices and the choices' first rows (empty: a row a choice),
+    int64, where the compiled Bellman check may run on ``st`` and ``x``; None where
+    not: fewer than :data:`COMPILED_CHECK_MIN_ROWS` rows, no compiled kernel loaded
+    yet in this process, a value of ``x`` not finite, or arrays of other kinds than
+    SciPy's product takes."""
+    m = st.matrix
+    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
+            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
+            or m.indices.dtype not in (np.int32, np.int64)
+            or not bool(np.isfinite(x).all())):
+        return None
+    groups = np.asarray(st.groups, dtype=np.int64)
+    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
+              np.asarray(st.nature, dtype=np.int64))
+    return groups, nature
+
+
 def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
                     upper: bool, states: np.ndarray | None = None) -> np.ndarray | None:
     """Per row of the ``states``' choices (every state: the matrix's rows), whether it
@@ -89,14 +107,10 @@ def compiled_checks(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
     rows, no compiled kernel loaded yet in this process, numba not installed, a value
     of ``x`` not finite, or arrays of other kinds than SciPy's product takes."""
     m = st.matrix
-    if (m.shape[0] < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
-            or x.dtype != np.float64 or x.ndim != 1 or m.data.dtype != np.float64
-            or m.indices.dtype not in (np.int32, np.int64)
-            or not bool(np.isfinite(x).all())):
+    got = _checked_arrays(st, x)
+    if got is None:
         return None
-    groups = np.asarray(st.groups, dtype=np.int64)
-    nature = (np.zeros(0, dtype=np.int64) if st.nature is None else
-              np.asarray(st.nature, dtype=np.int64))
+    groups, nature = got
     ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
     if states is None and (int(ends[0]) != 0 or int(ends[1]) != m.shape[0]):
         return None  # (the rows are not the states' choices one after the other)
@@ -160,8 +174,48 @@ def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
     out = np.empty(states.size)
     state_needs(states, groups, nature, m.indptr, m.indices, m.data,
                 np.ascontiguousarray(x), rnd.count, rnd.slack_of,
-                rnd.high_of if upper else rnd.low_of, bool(upper), out)
+                rnd.high_of if upper else rnd.low_of, bool(upper), out, False)
     return out
+
+
+def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
+                     states: np.ndarray | None = None) -> np.ndarray | None:
+    """The pre-fixed point (upper) Bellman check's failing states (a mask: those of
+    ``states``, every state where None, that are not ``free``) by the repair's kernel
+    (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs` asked for verdicts:
+    the comparisons of :func:`~mitld_lp.solvers.certify_kernels.bellman_rows` on the
+    same operands, a state at a time), so that a maximum's certificate links one
+    kernel, not the check's beside the repair's.  None where :func:`compiled_checks`
+    would not run, where a state has no choice or a choice no row, or (every state)
+    where the rows are not the states' choices one after the other (the check's
+    segmented reductions read other rows there)."""
+    m = st.matrix
+    got = _checked_arrays(st, x)
+    if got is None:
+        return None
+    groups, nature = got
+    if not bool(np.all(groups[1:] > groups[:-1])) or (
+            st.nature is not None and not bool(np.all(nature[1:] > nature[:-1]))):
+        return None
+    ends = groups[[0, -1]] if st.nature is None else nature[groups[[0, -1]]]
+    if int(ends[0]) != 0 or int(ends[1]) != m.shape[0]:
+        return None
+    try:
+        from mitld_lp.solvers.certify_repair_kernels import state_needs
+    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
+        return None
+    free = np.asarray(free, dtype=bool)
+    ask = (np.flatnonzero(~free) if states is None else
+           np.asarray(states, dtype=np.int64)[~free[states]])
+    failing = np.zeros(st.n_states, dtype=bool)
+    if ask.size:
+        ask = ask.astype(np.int64, copy=False)
+        out = np.empty(ask.size)
+        state_needs(ask, groups, nature, m.indptr, m.indices, m.data,
+                    np.ascontiguousarray(x), rnd.count, rnd.slack_of, rnd.high_of, True,
+                    out, True)
+        failing[ask] = out > 0
+    return failing
 
 
 def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np.ndarray,

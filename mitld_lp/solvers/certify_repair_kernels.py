@@ -37,6 +37,14 @@ __all__ = ["level_rounds", "state_needs"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _rows_of(c, nature, has_nature):  # pragma: no cover - compiled
+    """Choice ``c``'s rows ``lo, hi``: nature's where given, else the row ``c``."""
+    if has_nature:
+        return nature[c], nature[c + 1]
+    return c, c + 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_of,
           factor_of, upper):  # pragma: no cover - compiled
     """State ``s``'s need (each with a choice, each choice with a row), what the
@@ -48,11 +56,7 @@ def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_
     copy of that arithmetic: :func:`state_needs` and :func:`level_rounds` both call it."""
     best = -np.inf if upper else np.inf
     for c in range(groups[s], groups[s + 1]):
-        lo = c
-        hi = c + 1
-        if has_nature:
-            lo = nature[c]
-            hi = nature[c + 1]
+        lo, hi = _rows_of(c, nature, has_nature)
         pick = np.inf
         for r in range(lo, hi):
             acc = 0.0
@@ -89,14 +93,57 @@ def _need(s, groups, nature, has_nature, indptr, indices, data, x, count, slack_
     return best
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _fails_above(s, groups, nature, has_nature, indptr, indices, data, x, count,
+                 slack_of, factor_of):  # pragma: no cover - compiled
+    """Whether state ``s`` (each choice with a row) fails the pre-fixed point check of
+    :func:`~mitld_lp.solvers.certify_kernels.bellman_rows` (``upper``): the same
+    comparisons on the same operands (a row passes when its rounded bound, else the
+    largest ``x`` over its stored entries, is at most ``x[s]``; a choice when one of
+    its rows does; the state when every choice does), stopping at a choice's first
+    passing row and at the first failing choice."""
+    own = x[s]
+    for c in range(groups[s], groups[s + 1]):
+        lo, hi = _rows_of(c, nature, has_nature)
+        passed = False
+        for r in range(lo, hi):
+            acc = 0.0
+            for e in range(indptr[r], indptr[r + 1]):
+                acc += data[e] * x[indices[e]]
+            f = count[r]
+            if (acc + slack_of[f]) * factor_of[f] <= own:
+                passed = True
+                break
+            ext = -np.inf
+            for e in range(indptr[r], indptr[r + 1]):
+                v = x[indices[e]]
+                if v > ext:
+                    ext = v
+            if ext <= own:
+                passed = True
+                break
+        if not passed:
+            return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
 def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_of,
-                factor_of, upper, out):  # pragma: no cover - compiled
+                factor_of, upper, out, verdict):  # pragma: no cover - compiled
     """Per state of ``states`` (each with a choice, each choice with a row), its need
     (:func:`_need`), written into ``out``: what the repair's NumPy
     :func:`~mitld_lp.solvers.certify_repair._needed` gives, the same operations on the
-    same operands."""
+    same operands.  ``verdict`` (with ``upper``): instead of the need, +inf where the
+    state fails the pre-fixed point check and -inf where it passes
+    (:func:`_fails_above`: the Bellman check's verdict, so that a maximum's check and
+    its repair link this one kernel)."""
     has_nature = nature.shape[0] > 0
+    if verdict and upper:
+        for i in range(states.shape[0]):
+            out[i] = np.inf if _fails_above(states[i], groups, nature, has_nature, indptr,
+                                            indices, data, x, count, slack_of,
+                                            factor_of) else -np.inf
+        return
     for i in range(states.shape[0]):
         out[i] = _need(states[i], groups, nature, has_nature, indptr, indices, data, x,
                        count, slack_of, factor_of, upper)
