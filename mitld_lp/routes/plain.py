@@ -174,7 +174,8 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     cert = certify(mdp, target, policy, sense=sense, zero=decided.zero,
                    one=decided.one if minimum else None, mec_of=None if minimum else mec_of,
                    layers=layers, fallback_lower=fallback[0], fallback_upper=fallback[1],
-                   eta=eta, precision=s.precision, complement=complement and not minimum)
+                   eta=eta, precision=s.precision, complement=complement and not minimum,
+                   trim=mdp.n_transitions >= TRIM_FROM_TRANSITIONS)
     checks.extend(cert.checks)
     return ModelSolution(which, status, value, policy, read_only(np.asarray(cert.values)),
                          (it.value_lower, it.value_upper), lp, it, decided.unreachable,
