@@ -27,7 +27,6 @@ CHOICES = (((1, 0.5), (-1, 0.497), 0.0018, 0.0012),
            ((2, 0.3), (-3, 0.6976), 0.0015, 0.0009))
 EXACT = {Sense.MAX: (0.625, 0.4), Sense.MIN: (0.6, 0.375)}
 HELPERS = ("_pack", "_after_sweep", "_over", "_plain", "_watched", "_verifying", "_verifying2",
-           "plain4", "watched4", "verifying4",
            "gauss_seidel")
 
 

@@ -29,53 +29,65 @@ K = 4
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _add4(a0, a1, a2, a3, w, x, t, col):  # pragma: no cover - compiled
+    """Four sums each plus ``w`` times ``x[t, col:col + 4]``'s entry."""
+    return (a0 + w * x[t, col], a1 + w * x[t, col + 1], a2 + w * x[t, col + 2],
+            a3 + w * x[t, col + 3])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _divide4(a0, a1, a2, a3, lv):  # pragma: no cover - compiled
+    """Four sums over a choice's ``leave`` (``x / 1.0`` left out: it is ``x``; 0 where the
+    choice never leaves)."""
+    if lv == 1.0:
+        return a0, a1, a2, a3
+    if lv > 0.0:
+        return a0 / lv, a1 / lv, a2 / lv, a3 / lv
+    return 0.0, 0.0, 0.0, 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pick(v, b, minimise):  # pragma: no cover - compiled
+    """``v`` where it is strictly better than the best ``b`` so far, else ``b``."""
+    return v if ((v < b) if minimise else (v > b)) else b
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pick4(v0, v1, v2, v3, b0, b1, b2, b3, minimise):  # pragma: no cover - compiled
+    return (_pick(v0, b0, minimise), _pick(v1, b1, minimise), _pick(v2, b2, minimise),
+            _pick(v3, b3, minimise))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _trial(work, s, j, g, on, bad):  # pragma: no cover - compiled
+    """Guess column ``j`` (0-3; even a lower, odd an upper guess) of ``s`` replaced by its
+    clipped update ``g`` while on trial (``on``): ``bad`` set where it moved the wrong
+    way, ``on`` 3 where it crossed the proven bound on its pair's other side."""
+    if on != 1.0:
+        return on, bad
+    v = min(max(g, 0.0), 1.0)
+    lower = j % 2 == 0
+    if (v < work[s, 4 + j]) if lower else (v > work[s, 4 + j]):
+        bad = 1.0
+    work[s, 4 + j] = v
+    if (v > work[s, j + 1]) if lower else (v < work[s, j - 1]):
+        on = 3.0  # beyond the other side's proven bound
+    return on, bad
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _update4(indptr, indices, data, starts, leave, exits, local, s,
              minimise):  # pragma: no cover - compiled
     """``s``'s four bounds updated (``compiled_kernels.update`` for ``k == 4``)."""
-    b0 = np.inf if minimise else -np.inf
-    b1 = b0
-    b2 = b0
-    b3 = b0
+    b0 = b1 = b2 = b3 = np.inf if minimise else -np.inf
     for c in range(starts[s], starts[s + 1]):
-        v0 = exits[c, 0]
-        v1 = exits[c, 1]
-        v2 = exits[c, 2]
-        v3 = exits[c, 3]
+        v0, v1, v2, v3 = exits[c, 0], exits[c, 1], exits[c, 2], exits[c, 3]
         for e in range(indptr[c], indptr[c + 1]):
             t = indices[e]
             if t != s:
-                w = data[e]
-                v0 += w * local[t, 0]
-                v1 += w * local[t, 1]
-                v2 += w * local[t, 2]
-                v3 += w * local[t, 3]
-        lv = leave[c]
-        if lv != 1.0:  # x / 1.0 is x: the same bits without the divides
-            if lv > 0.0:
-                v0 /= lv
-                v1 /= lv
-                v2 /= lv
-                v3 /= lv
-            else:
-                v0 = v1 = v2 = v3 = 0.0
-        if minimise:
-            if v0 < b0:
-                b0 = v0
-            if v1 < b1:
-                b1 = v1
-            if v2 < b2:
-                b2 = v2
-            if v3 < b3:
-                b3 = v3
-        else:
-            if v0 > b0:
-                b0 = v0
-            if v1 > b1:
-                b1 = v1
-            if v2 > b2:
-                b2 = v2
-            if v3 > b3:
-                b3 = v3
+                v0, v1, v2, v3 = _add4(v0, v1, v2, v3, data[e], local, t, 0)
+        v0, v1, v2, v3 = _divide4(v0, v1, v2, v3, leave[c])
+        b0, b1, b2, b3 = _pick4(v0, v1, v2, v3, b0, b1, b2, b3, minimise)
     _keep4(local, s, b0, b1, b2, b3)
 
 
@@ -83,18 +95,17 @@ def _update4(indptr, indices, data, starts, leave, exits, local, s,
 def _keep4(local, s, b0, b1, b2, b3):  # pragma: no cover - compiled
     """``compiled_kernels.keep``: each best clipped to [0, 1], a lower bound only raised,
     an upper one only lowered."""
-    v = min(max(b0, 0.0), 1.0)
-    if v > local[s, 0]:
-        local[s, 0] = v
-    v = min(max(b1, 0.0), 1.0)
-    if v < local[s, 1]:
-        local[s, 1] = v
-    v = min(max(b2, 0.0), 1.0)
-    if v > local[s, 2]:
-        local[s, 2] = v
-    v = min(max(b3, 0.0), 1.0)
-    if v < local[s, 3]:
-        local[s, 3] = v
+    _kept(local, s, 0, b0)
+    _kept(local, s, 1, b1)
+    _kept(local, s, 2, b2)
+    _kept(local, s, 3, b3)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _kept(local, s, j, best):  # pragma: no cover - compiled
+    v = min(max(best, 0.0), 1.0)
+    if (v > local[s, j]) if j % 2 == 0 else (v < local[s, j]):
+        local[s, j] = v
 
 
 @numba.njit(cache=True, nogil=True)
@@ -110,6 +121,14 @@ def _gap(lo, hi, tol, precision, floor):  # pragma: no cover - compiled
     """A pair's gap over its threshold (``compiled_kernels.threshold`` of its lower
     bound, the same expression)."""
     return (hi - lo) / (tol if precision < 0.0 else min(tol, max(precision * lo, floor)))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _moved(guess, s, j, new, old, most):  # pragma: no cover - compiled
+    """A bound's change written into ``guess[s, j]``; the largest change so far."""
+    d = abs(new - old)
+    guess[s, j] = d
+    return d if d > most else most
 
 
 @numba.njit(cache=True, nogil=True)
@@ -135,28 +154,12 @@ def watched4(indptr, indices, data, starts, leave, exits, local, order, minimise
         hi0 = local[s, 1]
         lo1 = local[s, 2]
         hi1 = local[s, 3]
-        d = abs(lo0 - a0)
-        guess[s, 0] = d
-        if d > m0:
-            m0 = d
-        d = abs(hi0 - a1)
-        guess[s, 1] = d
-        if d > m1:
-            m1 = d
-        d = abs(lo1 - a2)
-        guess[s, 2] = d
-        if d > m2:
-            m2 = d
-        d = abs(hi1 - a3)
-        guess[s, 3] = d
-        if d > m3:
-            m3 = d
-        r = _gap(lo0, hi0, tol, precision, floor)
-        if r > over:
-            over = r
-        r = _gap(lo1, hi1, tol, precision, floor)
-        if r > over:
-            over = r
+        m0 = _moved(guess, s, 0, lo0, a0, m0)
+        m1 = _moved(guess, s, 1, hi0, a1, m1)
+        m2 = _moved(guess, s, 2, lo1, a2, m2)
+        m3 = _moved(guess, s, 3, hi1, a3, m3)
+        over = max(over, _gap(lo0, hi0, tol, precision, floor),
+                   _gap(lo1, hi1, tol, precision, floor))
     track[OFF + 4 * K] = m0
     track[OFF + 4 * K + 1] = m1
     track[OFF + 4 * K + 2] = m2
@@ -183,112 +186,27 @@ def verifying4(indptr, indices, data, starts, leave, exits, work, order, minimis
     bad3 = track[OFF + 5 * K + 3]
     for i in range(work.shape[0]):
         s = order[i]
-        b0 = np.inf if minimise else -np.inf
-        b1 = b2 = b3 = g0 = g1 = g2 = g3 = b0
+        b0 = b1 = b2 = b3 = g0 = g1 = g2 = g3 = np.inf if minimise else -np.inf
         for c in range(starts[s], starts[s + 1]):
-            v0 = exits[c, 0]
-            v1 = exits[c, 1]
-            v2 = exits[c, 2]
-            v3 = exits[c, 3]
-            u0 = v0
-            u1 = v1
-            u2 = v2
-            u3 = v3
-            first = indptr[c]
-            last = indptr[c + 1]
-            for e in range(first, last):
-                t = indices[e]
-                if t != s:
-                    w = data[e]
-                    v0 += w * work[t, 0]
-                    v1 += w * work[t, 1]
-                    v2 += w * work[t, 2]
-                    v3 += w * work[t, 3]
-                    u0 += w * work[t, 4]
-                    u1 += w * work[t, 5]
-                    u2 += w * work[t, 6]
-                    u3 += w * work[t, 7]
+            v0, v1, v2, v3 = exits[c, 0], exits[c, 1], exits[c, 2], exits[c, 3]
+            u0, u1, u2, u3 = v0, v1, v2, v3
+            for e in range(indptr[c], indptr[c + 1]):
+                if indices[e] != s:
+                    v0, v1, v2, v3 = _add4(v0, v1, v2, v3, data[e], work, indices[e], 0)
+                    u0, u1, u2, u3 = _add4(u0, u1, u2, u3, data[e], work, indices[e], 4)
             lv = leave[c]
-            if lv != 1.0:  # x / 1.0 is x: the same bits without the divides
-                if lv > 0.0:
-                    v0 /= lv
-                    v1 /= lv
-                    v2 /= lv
-                    v3 /= lv
-                    u0 /= lv
-                    u1 /= lv
-                    u2 /= lv
-                    u3 /= lv
-                else:
-                    v0 = v1 = v2 = v3 = u0 = u1 = u2 = u3 = 0.0
-            wide = (last - first + 8) * 2.0**-52
-            u0 = u0 * (1.0 - wide)
-            u1 = u1 * (1.0 + wide)
-            u2 = u2 * (1.0 - wide)
-            u3 = u3 * (1.0 + wide)
-            if minimise:
-                if v0 < b0:
-                    b0 = v0
-                if v1 < b1:
-                    b1 = v1
-                if v2 < b2:
-                    b2 = v2
-                if v3 < b3:
-                    b3 = v3
-                if u0 < g0:
-                    g0 = u0
-                if u1 < g1:
-                    g1 = u1
-                if u2 < g2:
-                    g2 = u2
-                if u3 < g3:
-                    g3 = u3
-            else:
-                if v0 > b0:
-                    b0 = v0
-                if v1 > b1:
-                    b1 = v1
-                if v2 > b2:
-                    b2 = v2
-                if v3 > b3:
-                    b3 = v3
-                if u0 > g0:
-                    g0 = u0
-                if u1 > g1:
-                    g1 = u1
-                if u2 > g2:
-                    g2 = u2
-                if u3 > g3:
-                    g3 = u3
+            v0, v1, v2, v3 = _divide4(v0, v1, v2, v3, lv)
+            u0, u1, u2, u3 = _divide4(u0, u1, u2, u3, lv)
+            wide = (indptr[c + 1] - indptr[c] + 8) * 2.0**-52
+            u0, u2 = u0 * (1.0 - wide), u2 * (1.0 - wide)  # lower guesses lowered
+            u1, u3 = u1 * (1.0 + wide), u3 * (1.0 + wide)  # upper ones raised
+            b0, b1, b2, b3 = _pick4(v0, v1, v2, v3, b0, b1, b2, b3, minimise)
+            g0, g1, g2, g3 = _pick4(u0, u1, u2, u3, g0, g1, g2, g3, minimise)
         _keep4(work, s, b0, b1, b2, b3)
-        if on0 == 1.0:
-            v = min(max(g0, 0.0), 1.0)
-            if v < work[s, 4]:
-                bad0 = 1.0
-            work[s, 4] = v
-            if v > work[s, 1]:
-                on0 = 3.0  # beyond the other side's proven bound
-        if on1 == 1.0:
-            v = min(max(g1, 0.0), 1.0)
-            if v > work[s, 5]:
-                bad1 = 1.0
-            work[s, 5] = v
-            if v < work[s, 0]:
-                on1 = 3.0
-        if on2 == 1.0:
-            v = min(max(g2, 0.0), 1.0)
-            if v < work[s, 6]:
-                bad2 = 1.0
-            work[s, 6] = v
-            if v > work[s, 3]:
-                on2 = 3.0
-        if on3 == 1.0:
-            v = min(max(g3, 0.0), 1.0)
-            if v > work[s, 7]:
-                bad3 = 1.0
-            work[s, 7] = v
-            if v < work[s, 2]:
-                on3 = 3.0
+        on0, bad0 = _trial(work, s, 0, g0, on0, bad0)
+        on1, bad1 = _trial(work, s, 1, g1, on1, bad1)
+        on2, bad2 = _trial(work, s, 2, g2, on2, bad2)
+        on3, bad3 = _trial(work, s, 3, g3, on3, bad3)
     track[OFF + 3 * K] = on0
     track[OFF + 3 * K + 1] = on1
     track[OFF + 3 * K + 2] = on2
