@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mitld_lp.solvers.sweep_four import plain4, verifying4, watched4
 from mitld_lp.util import kernel_loader
 
 # numba's cached machine code run without importing numba; numba itself on a miss
@@ -261,6 +262,9 @@ def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
            acc, minimise):  # pragma: no cover - compiled
     """One sweep of ``local`` through the states in ``order``."""
     n, k = local.shape
+    if k == 4:  # two models: their sums in scalars (sweep_four)
+        plain4(indptr, indices, data, starts, leave, exits, local, order, minimise)
+        return
     for i in range(n):
         s = order[i]
         if k == 2:
@@ -309,6 +313,9 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
         track[OFF + 8] = m0
         track[OFF + 9] = m1
         return over
+    if k == 4:
+        return watched4(indptr, indices, data, starts, leave, exits, local, order,
+                        minimise, guess, track, tol, precision, floor)
     for i in range(n):
         s = order[i]
         for j in range(k):
@@ -338,6 +345,10 @@ def _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
     if k == 2:
         _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
                     track)
+        return
+    if k == 4:
+        verifying4(indptr, indices, data, starts, leave, exits, work, order, minimise,
+                   track)
         return
     for i in range(n):
         checked(indptr, indices, data, starts, leave, exits, work[:, :k], work[:, k:],
