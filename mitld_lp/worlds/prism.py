@@ -104,6 +104,7 @@ from mitld_lp.worlds.prism_build import (
     build_tables,
     build_within,
     check_budgets,
+    cold_note,
     own_build,
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
@@ -552,9 +553,9 @@ def load_prism(
             stormpy, plain, where, chosen, terminal, max_states, memory)) or build_within(
             lambda: work(None, own=fits), where, fits, str(bound), max_states, memory)
     log.info(
-        "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s",
+        "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s%s",
         where, len(tables.states), bound, tables.decided, terminal or "never",
-        sorted(chosen), sorted(event_set),
+        sorted(chosen), sorted(event_set), cold_note(),
     )
     common = dict(
         source=where,

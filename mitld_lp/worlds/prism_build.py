@@ -277,7 +277,18 @@ that size costs Storm a few milliseconds, about what loading the explorer's mach
 
 
 _COLD_SAID: list[str] = []
-"""The first load told that the own explorer is not compiled (said once a process)."""
+"""Whether a load was built by Storm because the own explorer is not compiled: "" until
+:func:`cold_note` has said so, then "said" (once a process)."""
+
+
+def cold_note() -> str:
+    """The words the load's line adds the first time a world was built by Storm because
+    the own explorer is not compiled (after the build: an error stays one line)."""
+    if _COLD_SAID != [""]:
+        return ""
+    _COLD_SAID[0] = "said"
+    return ("; built by Storm's explicit builder: the own PRISM explorer is not compiled on "
+            "this machine yet (`mitld-lp warm` compiles it once)")
 
 
 def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], terminal: str,
@@ -295,10 +306,8 @@ def own_build(stormpy: Any, plain: Any, where: str, chosen: frozenset[str], term
     if builder == "auto" and check_program(plain, where).states < OWN_FROM_STATES:
         return None  # Storm's build is quicker than loading the explorer's machine code
     if builder == "auto" and not prism_explore.kernel_ready():
-        if not _COLD_SAID:  # once a process: the way to the faster build
-            _COLD_SAID.append(where)
-            log.info("%s: built by Storm's explicit builder: the own PRISM explorer is not "
-                     "compiled on this machine yet (`mitld-lp warm` compiles it once)", where)
+        if not _COLD_SAID:  # said once a process, with the build's line (cold_note)
+            _COLD_SAID.append("")
         return None
     if memory is not None and max_states * prism_explore.OWN_BYTES_PER_STATE > memory:
         return None
