@@ -60,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from mitld_lp.util import elf_link, elf_runtime, kernel_files
+from mitld_lp.util import elf_link, elf_runtime, kernel_files, kernel_sources
 
 __all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
 
@@ -234,6 +234,8 @@ class Kernel:
         if call is not None:
             return call(*args)
         dispatcher = self.numba_dispatcher()
+        if (self.__module__, self.__qualname__) in kernel_sources.STALE:
+            kernel_sources.flush_numba_cache(self, dispatcher)
         result = dispatcher(*args)
         with _lock:
             if self._calls.get(key) is None:
@@ -375,43 +377,11 @@ def _numba_settings() -> bool:
             or os.path.isfile(".numba_config.yaml"))
 
 
-def _callee_sources(modules: Any) -> tuple:
-    """``(module, SHA-256 of its source)`` of each of our modules named (the modules of
-    the kernels linked into a kernel: their environments name them), or () where one
-    cannot be read: a kernel's key holds its own module's source, and these hold the
-    source of every kernel compiled into it from another module."""
-    out = []
-    for name in sorted(set(modules)):
-        module = sys.modules.get(name)
-        path = getattr(module, "__file__", None)
-        if path is None:
-            spec = importlib.util.find_spec(name)
-            path = None if spec is None else spec.origin
-        if path is None:
-            return ()
-        try:
-            out.append((name, _source_hash(path)))
-        except OSError:
-            return ()
-    return tuple(out)
-
-
-_sources: dict[str, str] = {}
-
-
-def _source_hash(path: str) -> str:
-    digest = _sources.get(path)
-    if digest is None:
-        with open(path, "rb") as f:
-            digest = _sources[path] = hashlib.sha256(f.read()).hexdigest()
-    return digest
-
-
 def _runtime_key(kernel: Kernel, key: tuple, parts: tuple) -> bytes:
     """The key a cache file must carry (module docs)."""
     code = kernel.py_func.__code__
     return repr((kernel_files.FORMAT, parts, kernel.__module__, kernel.__qualname__,
-                 _source_hash(code.co_filename),
+                 kernel_sources.source_hash(code.co_filename),
                  hashlib.sha256(code.co_code).hexdigest(), key)).encode()
 
 
@@ -449,8 +419,12 @@ def _link(kernel: Kernel, key: tuple, data: bytes) -> Any:
     if meta.get("key") != _runtime_key(kernel, key, parts):
         return None
     sources = meta.get("sources", ())
-    if _callee_sources(m for m, _ in sources) != sources:
-        return None  # a kernel of another module compiled into it has changed
+    if kernel_sources.callee_sources(m for m, _ in sources) != sources:
+        # a kernel of another module compiled into it has changed; numba's own cache
+        # checks the kernel's own file only, so its entry is as stale: flushed before
+        # numba's call (Kernel.__call__), which then compiles afresh
+        kernel_sources.STALE.add((kernel.__module__, kernel.__qualname__))
+        return None
     module = sys.modules.get(kernel.__module__)
     if module is None:
         return None
@@ -587,7 +561,7 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
     if len({n for n, _, _ in envs}) != len(envs):
         envs = list(dict.fromkeys(envs))
     callees = [m for _, m, _ in envs if m.startswith("mitld_lp.") and m != kernel.__module__]
-    sources = _callee_sources(callees)
+    sources = kernel_sources.callee_sources(callees)
     if callees and not sources:
         return
     meta = {"key": _runtime_key(kernel, key, parts),
