@@ -59,11 +59,11 @@ def test_numba_keeps_a_stale_callee_and_the_flush_compiles_afresh(tmp_path):
     assert _run(tmp_path, "plain") == 31  # and saved so
 
 
-def test_a_stale_kernel_is_flushed_once_before_numbas_call(monkeypatch):
+def test_a_stale_kernel_is_flushed_once_before_numbas_call(monkeypatch, tmp_path):
     order = []
 
     class Cache:
-        _cache_path = str(Path.cwd())
+        _cache_path = str(tmp_path)  # the lock file goes there
 
         def flush(self) -> None:
             order.append("flush")
