@@ -27,6 +27,8 @@ def test_warm_program_builds_its_six_states(tmp_path):
     compiled = prism_explore.compile_program(program, None)
     built = prism_explore.explore_program(compiled, 100)
     assert not isinstance(built, str)
+    assert built.values.dtype.itemsize == 1  # x in 0..2 and b in 0..1: a byte each
+    assert len(built.choices) == 7 and built.targets.size == built.probabilities.size
     values = {tuple(int(v) for v in row) for row in built.values}
     names = list(compiled.names)
     assert len(values) == 6

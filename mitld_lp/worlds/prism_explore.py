@@ -180,14 +180,31 @@ def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
         else:
             break
     n, m, b, nk = (int(x) for x in pos[1:5])
-    packed = keys[: n * words].reshape(n, words)
-    values = np.empty((n, len(compiled.names)), dtype=i64)
+    # each grown array cut to its use one at a time, the room left freed as it goes (the
+    # hash table first): all the cuts beside all the rooms were the load's peak
+    del table
+    keys = keys[: n * words].copy()
+    choices, branches = choices[: n + 1].copy(), branches[: m + 1].copy()
+    origin, combos = origin[:m].copy(), combos[:nk].copy()
+    targets, probs = targets[:b].copy(), probs[:b].copy()
+    packed = keys.reshape(n, words)
+    values = np.empty((n, len(compiled.names)), dtype=_value_type(a["low"], a["high"]))
     for v in range(len(compiled.names)):
         field = packed[:, a["word"][v]] >> a["shift"][v]
         values[:, v] = (field & ((1 << int(a["width"][v])) - 1)) + a["low"][v]
-    return Explored(compiled, values, choices[: n + 1].copy(), branches[: m + 1].copy(),
-                    targets[:b].copy(), probs[:b].copy(), origin[:m].copy(),
-                    combos[:nk].copy(), keys[: n * words], a)
+    return Explored(compiled, values, choices, branches, targets, probs, origin, combos,
+                    keys, a)
+
+
+def _value_type(low: np.ndarray, high: np.ndarray) -> Any:
+    """The narrowest signed integer type holding every variable's range (int64 at most):
+    a state's values, eight bytes a variable in int64, were the largest array of a build
+    with many variables (csma 4-2: 13 a state)."""
+    lo, hi = (int(low.min()), int(high.max())) if low.size else (0, 0)
+    for kind in (np.int8, np.int16, np.int32):
+        if np.iinfo(kind).min <= lo and hi <= np.iinfo(kind).max:
+            return kind
+    return np.int64
 
 
 def _doubled(array: np.ndarray, used: int) -> np.ndarray:
