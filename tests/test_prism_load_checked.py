@@ -322,7 +322,7 @@ def test_state_labels_read_from_the_export_are_storms_bit_vectors(tmp_path: Path
     import stormpy
 
     from mitld_lp.worlds.prism_labels import agrees, indices
-    from mitld_lp.worlds.prism_tables import _read_export, label_states
+    from mitld_lp.worlds.prism_tables import label_states, read_export_parts
 
     path = tmp_path / "wide.prism"
     path.write_text(WIDE_LABELS)
@@ -332,7 +332,7 @@ def test_state_labels_read_from_the_export_are_storms_bit_vectors(tmp_path: Path
     model = stormpy.build_model(program, options=options)
     assert model.nr_states == 150
     archive: dict[str, np.ndarray] = {}
-    _read_export(model, str(path), labels=archive)
+    read_export_parts(model, str(path), labels=archive)
     assert {"odd", "corner", "never", "thirds"} <= set(archive)
     for label in ("odd", "corner", "never", "thirds", "deadlock"):
         want = np.fromiter(model.labeling.get_states(label), dtype=np.int64)  # one by one

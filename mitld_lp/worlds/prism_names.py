@@ -39,7 +39,7 @@ from mitld_lp.worlds.prism_program import builder_options
 from mitld_lp.worlds.prism_tables import (
     DEADLOCK_ACTION,
     DECIDED_ACTION,
-    _read_export,
+    read_export_parts,
     valuations_of,
 )
 from mitld_lp.worlds.prism_valuations import DeferredValuations, ValuationRecipe, quiet_build
@@ -95,7 +95,7 @@ def origin_codes(make: ValuationRecipe, choices: np.ndarray, targets: np.ndarray
                               origins=True, valuations=values)
     model = quiet_build(stormpy, program, options, where, None)
     found = (model.nr_states, model.nr_choices, int(model.initial_states[0]))
-    (offsets, _, again, _), packed, archive = _read_export(model, where, origins=True)
+    (offsets, _, again, _), packed, archive = read_export_parts(model, where, origins=True)
     if found != (make.n_states, make.n_choices, make.initial) or not (
             np.array_equal(offsets, choices) and np.array_equal(again, targets)):
         raise WorldError(f"{where}: Storm's build with choice origins has {found[0]:,} "

@@ -37,7 +37,8 @@ from mitld_lp.worlds.prism_program import SUM_TOLERANCE, show_sum, storm_quiet
 from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 from mitld_lp.worlds.table import LATE
 
-__all__ = ["Tables", "Valuations", "read_model", "read_export", "transition_arrays",
+__all__ = ["Tables", "Valuations", "read_model", "read_export", "read_export_parts",
+           "transition_arrays",
            "label_states",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
            "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
@@ -121,11 +122,11 @@ def read_export(model: Any, where: str) -> tuple[tuple[np.ndarray, ...],
     """:func:`transition_arrays`'s arrays and the state valuations the archive holds,
     by variable (:func:`unpack_valuations`; None where the layout is not the one read
     here, or the model was built without them)."""
-    arrays, packed, _ = _read_export(model, where)
+    arrays, packed, _ = read_export_parts(model, where)
     return arrays, packed
 
 
-def _read_export(model: Any, where: str, origins: bool = False,
+def read_export_parts(model: Any, where: str, origins: bool = False,
                  labels: dict[str, np.ndarray] | None = None,
                  ) -> tuple[tuple[np.ndarray, ...], dict[str, np.ndarray] | None,
                             tuple[np.ndarray, list[str]] | None]:
@@ -201,7 +202,7 @@ def _export(model: Any, where: str, origins: bool = False,
             lambda: np.fromfile(path, dtype=np.uint8, count=records.size,
                                 offset=records.offset_data))
         # Storm's unsigned 64-bit offsets and targets read as int64 at once (no copy):
-        # one of 2^63 or more would read negative, which _read_export's checks refuse
+        # one of 2^63 or more would read negative, which read_export_parts's checks refuse
         return (
             np.arange(n + 1, dtype=np.int64) if one_each else
             read("state-to-choices.bin", "<i8", n + 1),
@@ -457,7 +458,7 @@ def read_model(
     and counted in :attr:`Tables.normalised`: the one place PRISM's rule is applied.
     """
     archive: dict[str, np.ndarray] = {}  # the state labels the export holds
-    (choices, branches, targets, probabilities), packed, actions = _read_export(
+    (choices, branches, targets, probabilities), packed, actions = read_export_parts(
         model, where, origins=named is not None, labels=archive)
     variables, states = (valuations if valuations is not None else
                          valuations_of(model, hidden, packed))
