@@ -47,7 +47,11 @@ def test_warm_says_what_it_did(monkeypatch, capsys):
     assert "compiled already" in capsys.readouterr().out
     monkeypatch.setattr(prism_explore, "kernel_ready", lambda: False)  # as if cold
     assert main(["warm"]) == 0
-    assert "compiled the own PRISM explorer's kernels" in capsys.readouterr().out
+    said = capsys.readouterr()
+    assert "compiled the own PRISM explorer's kernels" in said.out
+    assert "compiling the own PRISM explorer" in said.err  # before the half minute
+    assert main(["warm", "-q"]) == 0
+    assert capsys.readouterr().err == ""  # -q: nothing on stderr
 
 
 def test_cold_explorer_said_once_and_storm_builds(monkeypatch, caplog, tmp_path):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from mitld_lp.cli.kernel import EXIT_OK, say_answer
+from mitld_lp.cli.kernel import EXIT_OK, say, say_answer
 
 __all__ = ["args_warm", "cmd_warm"]
 
@@ -19,10 +19,11 @@ def args_warm(p: argparse.ArgumentParser) -> None:
 
 def cmd_warm(args: argparse.Namespace) -> int:
     """Compile the explorer's kernels if they are not cached; say which it was."""
-    del args
     from mitld_lp.worlds.prism import stormpy_module
-    from mitld_lp.worlds.prism_explore import compile_kernels
+    from mitld_lp.worlds.prism_explore import compile_kernels, kernel_ready
 
+    if not kernel_ready() and not args.quiet:  # half a minute with nothing else said
+        say("compiling the own PRISM explorer (about half a minute of CPU, once)")
     start = time.process_time()
     if compile_kernels(stormpy_module()):
         say_answer(f"compiled the own PRISM explorer's kernels in "
