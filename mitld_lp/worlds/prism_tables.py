@@ -38,8 +38,7 @@ from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_ro
 from mitld_lp.worlds.table import LATE
 
 __all__ = ["Tables", "Valuations", "read_model", "read_export", "read_export_parts",
-           "transition_arrays",
-           "label_states",
+           "transition_arrays", "label_states",
            "unpack_valuations", "valuations_of", "DEADLOCK_ACTION", "DECIDED_ACTION",
            "OUT_OF_BOUNDS", "OUT_OF_BOUNDS_BIT"]
 
