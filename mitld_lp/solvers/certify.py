@@ -94,11 +94,7 @@ from mitld_lp.solvers.rounding import (
 )
 from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
 from mitld_lp.util.heap import release_free_memory
-
-try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: the rows sliced
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",

@@ -19,11 +19,7 @@ from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
 from mitld_lp.solvers.walks import load_walks
 from mitld_lp.util import kernel_loader
-
-try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: the bincounts below
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "full_values", "support_layers", "chain",
            "attracted", "cycling_among", "escapes", "CYCLING_BATCH"]

@@ -17,11 +17,7 @@ from mitld_lp.solvers.certify_chain import Chain
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import row_columns, rows_dot
-
-try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: rows_dot
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["GROWTH", "RETRIES", "Side", "policy_lower", "policy_upper", "scales"]
 

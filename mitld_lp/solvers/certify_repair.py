@@ -16,11 +16,7 @@ from mitld_lp.solvers.certify_chain import RowModel, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_needs, compiled_rounds
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
-
-try:  # SciPy's compiled CSR product, as scipy.sparse's own product calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: bincount and ufunc.at
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["CLOSED_SLICE", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "closed_at_zero",
            "readers_by_column", "repair_levels"]

@@ -34,11 +34,7 @@ import numpy as np
 from mitld_lp.solvers import level_sweeps
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.rows import gather_ranges
-
-try:  # SciPy's compiled CSR/CSC products, as scipy.sparse's own products call them
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: the NumPy calls below
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 try:  # the ufunc ``np.clip`` calls on floats: its Python wrappers cost two to three
     # times the clip of a level's scores (some 10 microseconds a level and walk)

@@ -42,11 +42,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.solvers.rows import gather_ranges, row_columns
-
-try:  # SciPy's compiled CSR/CSC products
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: the level walks
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["flow"]
 

@@ -26,11 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
-
-try:  # SciPy's compiled row gather, as ``matrix[rows]`` calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: NumPy's gathers
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["CLASSES", "QuotientRows", "quotient_rows", "row_columns", "take_ranges"]
 

@@ -13,12 +13,8 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
+from mitld_lp.util.sparsetools import sparsetools as _st
 from mitld_lp.util.traversal import breadth_first_order
-
-try:  # SciPy's compiled CSR -> CSC transpose, as scipy.sparse's own tocsc calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: a stable argsort
-    _st = None
 
 __all__ = ["Reversed", "backward_reachable", "reaching_through"]
 

@@ -9,10 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-try:  # SciPy's compiled row gather, as ``matrix[rows]`` calls it
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: NumPy's gathers
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["gather_ranges", "off_diagonal_entries", "row_columns", "row_entries",
            "rows_dot"]

@@ -23,11 +23,7 @@ from mitld_lp.solvers.graph import Blocks, Sense, segmented_argmax
 from mitld_lp.solvers.reach import backward_reachable
 from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.topological import TIE, SingleLevels
-
-try:  # SciPy's compiled CSR product (the level walks' sums, :mod:`level_batches`)
-    from scipy.sparse import _sparsetools as _st
-except ImportError:  # pragma: no cover - a SciPy without it: the bincount sums
-    _st = None
+from mitld_lp.util.sparsetools import sparsetools as _st
 
 __all__ = ["SETTLED_BY_BOUNDS", "settled_by_bounds"]
 
