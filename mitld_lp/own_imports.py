@@ -6,9 +6,9 @@ module runs its body -- the outermost one, with every import it starts, SciPy's 
 lark's included -- and only then:
 
 * Python's cyclic garbage collector is held (``gc.disable``) and put back as the caller
-  had it when the body ends (on if it was on; nothing is frozen: a program's objects
-  stay in the collector's reach).  Imports make no garbage cycles worth collecting,
-  yet their allocations triggered the collector over the modules already imported;
+  had it when the body ends, the imports' objects in its oldest generation
+  (:func:`mitld_lp.util.collector.release`: nothing frozen, in its reach).  Imports make
+  no garbage cycles worth collecting, yet the collector passed over their objects;
 * the package's own dataclasses get their comparison, hash, representation and frozen
   methods as closures and their ``__init__`` from the table of compiled code
   (:mod:`mitld_lp.dataclass_closures`, :mod:`mitld_lp.init_cache`, ``package_only``):
@@ -34,15 +34,13 @@ lark's included -- and only then:
 * NumPy's and SciPy's OpenBLAS, loaded after the finder is installed, start their
   thread pools idle (:mod:`mitld_lp.util.blas_idle`, a finder placed after this one).
 
-:func:`mitld_lp.startup.package_imports_held` waits at ``import mitld_lp`` for the first
-of the package's modules to import and installs the finder then, but for the robot's
-runtime (``mitld_lp.runtime`` with the saved controller's readers, ``mitld_lp.controllers``
-and ``mitld_lp.files``, imported first), whose process imports NumPy and those alone.
+:func:`mitld_lp.startup.package_imports_held` installs the finder at the first of the
+package's modules to import, but for the robot's runtime (``mitld_lp.runtime``, the
+saved controller's readers, ``mitld_lp.controllers``, ``mitld_lp.files``: NumPy alone).
 A program that imported SciPy (or made the layer) before is left as it was; what the
-command line's start did already (:func:`mitld_lp.startup.lean_start`, every class's
-makers, the collector off) is not done twice.  Nothing changes an answer: the same
-classes with the same behaviour, the same objects.  ``MITLD_LP_PLAIN_IMPORTS=1`` in
-the environment leaves the finder out (the imports exactly as Python makes them).
+command line's start did (:func:`mitld_lp.startup.lean_start`: every class's makers, the
+collector off) is not done twice.  Nothing changes an answer: the same classes and
+objects.  ``MITLD_LP_PLAIN_IMPORTS=1`` leaves the finder out (Python's plain imports).
 """
 
 from __future__ import annotations
@@ -50,6 +48,8 @@ from __future__ import annotations
 import _thread
 import sys
 import types
+
+from mitld_lp.util import collector
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -106,9 +106,9 @@ def _open(makers: bool = True) -> Callable[[ModuleType | None], None]:
             _depth -= 1
             if _depth == 0:
                 _makers_off()
-                if _held:
+                if _held:  # on again, the imports' objects aged (no pass over them)
                     _held = False
-                    gc.enable()
+                    collector.release()
 
     return close
 
