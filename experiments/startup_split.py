@@ -28,6 +28,14 @@ imported (NumPy's, SciPy's, lark's, ...) at the end.
     python experiments/startup_split.py --qvbs /work/shared/qvbs --quick  # one instance
     python experiments/startup_split.py --qvbs /work/shared/qvbs --compare ../base  # before too
 
+``--parts`` runs ``ours`` (and ``base``) a further ``--repeats`` times with three meters
+in the process (module :func:`_meters`): each import's own CPU (``time.process_time``
+around the import system's ``_load_unlocked``, its nested imports taken out), the cyclic
+collector's passes (``gc.callbacks``, thread CPU) and the compiled kernels' loads
+(``kernel_loader._load``), and prints one table: each component's CPU seconds and share
+of the process up to the end of the synthesis (``process_cpu``), Storm's whole run
+beside it.  The meters cost a few ms of their own (in ``rest``).
+
 Nothing is written: the figures are printed (``--quick`` keeps it so).
 """
 
@@ -35,6 +43,7 @@ from __future__ import annotations
 
 import resource
 import sys
+from typing import Any
 
 _T0 = resource.getrusage(resource.RUSAGE_SELF)
 
@@ -59,7 +68,8 @@ def child(route: str, job_file: str, method: str) -> None:
     phases.append(("harness", _cpu()))
     job = json.loads(Path(job_file).read_text(encoding="utf-8"))
     out: dict = {}
-    if route == "ours":
+    meters = _meters(phases) if route == "parts" else None
+    if route in ("ours", "parts"):
         import numpy  # noqa: F401
 
         phases.append(("numpy", _cpu()))
@@ -73,6 +83,7 @@ def child(route: str, job_file: str, method: str) -> None:
         r = synthesize(model)
         phases.append(("synthesis", _cpu()))
         out["answer"] = [r.lower, r.upper]
+        out["solve"] = r.solve_cpu
         third = sorted(m for m in sys.modules if m.split(".")[0] in
                        ("numpy", "scipy", "lark", "regex", "cvxpy", "pandas", "numba",
                         "llvmlite", "clarabel", "highspy"))
@@ -93,7 +104,95 @@ def child(route: str, job_file: str, method: str) -> None:
     for name, at in phases:
         split[name] = at - before
         before = at
+    if meters is not None:
+        out["meters"] = meters()
     print(json.dumps(dict(out, split=split)))
+
+
+#: Top-level packages whose imports the parts table names apart (the rest: ``other``).
+NAMED = ("numpy", "scipy", "lark", "stormpy", "numba", "llvmlite", "mitld_lp")
+
+
+def _meters(phases: list) -> Any:
+    """Install the three meters (module docs, ``--parts``); the function returning, per
+    phase of ``phases`` (filled meanwhile), the CPU of imports by top-level package, of
+    the collector and of kernel loads."""
+    import _frozen_importlib as boot
+    import gc
+    import time
+
+    clock, thread = time.process_time, time.thread_time
+    events: list[tuple[float, str, float]] = []  # (process CPU at the end, kind, seconds)
+    stack: list[float] = []
+    load_unlocked = boot._load_unlocked
+
+    def timed_load(spec: Any) -> Any:
+        stack.append(0.0)
+        t = clock()
+        try:
+            return load_unlocked(spec)
+        finally:
+            spent = clock() - t
+            nested = stack.pop()
+            if stack:
+                stack[-1] += spent
+            top = spec.name.partition(".")[0]
+            events.append((_cpu(), "import " + (top if top in NAMED else "other"),
+                           spent - nested))
+
+    boot._load_unlocked = timed_load
+    started = [0.0]
+
+    def collected(phase: str, info: dict) -> None:
+        if phase == "start":
+            started[0] = thread()
+        else:
+            spent = thread() - started[0]
+            if stack:  # inside an import: the pass is the collector's, not the import's
+                stack[-1] += spent
+            events.append((_cpu(), f"gc {info['generation']}", spent))
+
+    gc.callbacks.append(collected)
+    wrapped: list = []
+
+    def kernels_timed() -> None:  # once the loader is imported (by the package)
+        kernel_loader = sys.modules.get("mitld_lp.util.kernel_loader")
+        if wrapped or not hasattr(kernel_loader, "_load"):  # (not imported, or half)
+            return
+        inner = kernel_loader._load
+
+        def timed(*args: Any) -> Any:
+            t = clock()
+            try:
+                return inner(*args)
+            finally:
+                events.append((_cpu(), "kernel loads", clock() - t))
+
+        kernel_loader._load = timed
+        wrapped.append(inner)
+
+    def report() -> dict:
+        boot._load_unlocked = load_unlocked
+        gc.callbacks.remove(collected)
+        per: dict[str, dict[str, float]] = {name: {} for name, _ in phases}
+        for at, kind, spent in events:
+            name = next((n for n, end in phases if at <= end + 1e-9), phases[-1][0])
+            per[name][kind] = per[name].get(kind, 0.0) + spent
+        return per
+
+    sys.meta_path.insert(0, _Watch(kernels_timed))
+    return report
+
+
+class _Watch:
+    """A finder finding nothing: after each import is looked for, ``then`` runs."""
+
+    def __init__(self, then: Any) -> None:
+        self.then = then
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
+        self.then()
+        return None
 
 
 def main() -> None:
@@ -114,6 +213,8 @@ def main() -> None:
                    help="Storm's sound method for its check")
     p.add_argument("--importtime", action="store_true")
     p.add_argument("--modules", action="store_true")
+    p.add_argument("--parts", action="store_true",
+                   help="one table of the process's components (module docs)")
     p.add_argument("--compare", type=Path, default=None,
                    help="another checkout: its mitld_lp as the route 'base' (ours' phases)")
     args = p.parse_args()
@@ -161,6 +262,8 @@ def main() -> None:
                     for m in kept[-1]["modules"]:
                         tops[m.split(".")[0]] = tops.get(m.split(".")[0], 0) + 1
                     print(f"  ours' third-party modules: {tops}")
+            if args.parts:
+                _parts_table(args, work, env, runs.get("storm", []), repeats)
             if args.importtime:
                 done = subprocess.run(
                     [sys.executable, "-X", "importtime", __file__, "--child", "ours",
@@ -169,6 +272,57 @@ def main() -> None:
                     cwd=str(_common.ROOT), check=True)
                 print("  ours under -X importtime (self us, inflated):")
                 print(_importtime(done.stderr))
+
+
+def _parts_table(args: Any, work: Any, env: dict, storm: list, repeats: int) -> None:
+    """``--parts``: the metered children's medians as one table per route (module docs)."""
+    import json
+    import os
+    import statistics
+    import subprocess
+
+    import _common
+
+    routes = {"ours": _common.ROOT}
+    if args.compare is not None:
+        routes = {"base": args.compare, **routes}
+    storm_total = (statistics.median(sum(g["split"].values()) for g in storm[1:] or storm)
+                   if storm else None)
+    for route, code in routes.items():
+        got = []
+        for _ in range(repeats):
+            done = subprocess.run(
+                [sys.executable, __file__, "--child", "parts", str(work / "job.json"),
+                 args.method], capture_output=True, text=True, cwd=str(code),
+                env=dict(env, PYTHONPATH=os.pathsep.join(
+                    [str(code), *filter(None, [os.environ.get("PYTHONPATH")])])), check=True)
+            got.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        kept = got[1:] if len(got) > 1 else got
+        rows: dict[str, list[float]] = {}
+        for g in kept:
+            one: dict[str, float] = {}
+            for phase, spent in g["split"].items():
+                metered = g["meters"].get(phase, {})
+                if phase == "synthesis":  # its solve stage, the rest its product and more
+                    one["synthesis: solve stage"] = g["solve"]
+                    spent -= g["solve"]
+                for kind, t in metered.items():
+                    one[f"{phase}: {kind}"] = one.get(f"{phase}: {kind}", 0.0) + t
+                    spent -= t
+                one[f"{phase}: rest"] = spent
+            for k, v in one.items():
+                rows.setdefault(k, []).append(v)
+        total = statistics.median(sum(g["split"].values()) for g in kept)
+        table = [(k, f"{statistics.median(v):.4f}",
+                  f"{100 * statistics.median(v) / total:.1f}%") for k, v in rows.items()
+                 if statistics.median(v) >= 0.0005]
+        table.append(("process (to the synthesis's end)", f"{total:.4f}", "100%"))
+        if storm_total is not None:
+            table.append(("Storm's whole run", f"{storm_total:.4f}",
+                          f"{100 * storm_total / total:.0f}% of ours"))
+        print(f"  {route}: components, CPU s (median of {len(kept)}), answer "
+              f"{kept[-1]['answer']}")
+        print(_common.markdown_table(("component", "CPU s", "share"), table))
 
 
 def _importtime(text: str, top: int = 15) -> str:
