@@ -316,7 +316,28 @@ def run() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
-    sys.exit(code)
+    _exit_done(code)
+
+
+def _exit_done(code: int) -> NoReturn:
+    """The command done: exit without the interpreter's teardown of every module and
+    object (15-25 ms of CPU, 5-7 % of the bundled case's process) where nothing can run
+    after it.  The exit handlers (``atexit``: logging's, the finalizers') run here, both
+    streams are flushed, then ``os._exit``.  With another Python thread alive (the
+    interpreter would wait for it), no way to run the handlers, or a handler or flush
+    that fails, the interpreter's own exit (``sys.exit``) as before."""
+    import atexit
+
+    handlers = getattr(atexit, "_run_exitfuncs", None)  # what the interpreter's exit runs
+    if handlers is None or threading.active_count() != 1:
+        sys.exit(code)
+    try:
+        handlers()  # (each handler's own error is printed by atexit, as at exit)
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001 - the interpreter's exit says it as it did
+        sys.exit(code)
+    os._exit(code)
 
 
 if __name__ == "__main__":
