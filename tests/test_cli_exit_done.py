@@ -1,8 +1,9 @@
-"""The command line's exit when its command is done (``mitld_lp.cli._exit_done``): the
-exit handlers run and both streams are flushed before the process ends without the
-interpreter's teardown; with another Python thread alive the interpreter's own exit
-waits for it as before.  Each in a fresh interpreter running the console script's
-function; the expected lines are the probe's own, the exit status the command's."""
+"""The command line's exit when its command is done (``mitld_lp.cli._exit_done``): in a
+process that is the command (``python -m mitld_lp``) the exit handlers run and both
+streams are flushed before the process ends without the interpreter's teardown; with
+another Python thread alive, or in a program that calls the command's function and
+catches its ``SystemExit``, the interpreter's own exit as before.  Each in a fresh
+interpreter; the expected lines are the probe's own, the exit status the command's."""
 
 from __future__ import annotations
 
@@ -13,23 +14,32 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-#: argv[1]: "thread" to leave a non-daemon thread running when the command ends.
+#: argv[1]: "thread" to leave a non-daemon thread running when the command ends,
+#: "called" to call the command's function and go on after its ``SystemExit``.
 PROBE = r"""
 import atexit, os, sys, threading, time
+mode = sys.argv[1]
 ended = os._exit
 def marked_exit(code):  # the process's end without the interpreter's teardown, marked
     os.write(2, b"os._exit\n")
     ended(code)
 os._exit = marked_exit
 atexit.register(lambda: sys.stderr.write("handler ran\n"))
-if sys.argv[1] == "thread":
+if mode == "thread":
     def late():
         time.sleep(2.0)  # past the command's end
         sys.stdout.write("thread done\n")
     threading.Thread(target=late).start()
 sys.argv = ["mitld-lp", "check", "F[0,5] goal"]
-from mitld_lp import startup
-startup.command()
+if mode == "called":
+    from mitld_lp import startup
+    try:
+        startup.command()
+    except SystemExit as stop:
+        sys.stdout.write(f"went on after exit {stop.code}\n")
+else:  # as python -m mitld_lp runs it
+    import runpy
+    runpy.run_module("mitld_lp", run_name="__main__", alter_sys=True)
 """
 
 
@@ -54,3 +64,10 @@ def test_another_thread_alive_leaves_the_interpreters_exit() -> None:
     assert "horizon:   5" in done.stdout and "thread done" in done.stdout  # waited for
     assert "handler ran" in done.stderr
     assert "os._exit" not in done.stderr  # the interpreter's own exit, as before
+
+
+def test_a_program_calling_the_command_goes_on_after_it() -> None:
+    done = _run("called")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "horizon:   5" in done.stdout and "went on after exit 0" in done.stdout
+    assert "os._exit" not in done.stderr and "handler ran" in done.stderr

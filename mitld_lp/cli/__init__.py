@@ -322,14 +322,16 @@ def run() -> None:
 def _exit_done(code: int) -> NoReturn:
     """The command done: exit without the interpreter's teardown of every module and
     object (15-25 ms of CPU, 5-7 % of the bundled case's process) where nothing can run
-    after it.  The exit handlers (``atexit``: logging's, the finalizers') run here, both
-    streams are flushed, then ``os._exit``.  With another Python thread alive (the
-    interpreter would wait for it), no way to run the handlers, or a handler or flush
-    that fails, the interpreter's own exit (``sys.exit``) as before."""
+    after it: the process is the command itself (:func:`_the_program`).  The exit
+    handlers (``atexit``: logging's, the finalizers') run here, both streams are flushed,
+    then ``os._exit``.  In a program that called the command's function (it may catch
+    ``SystemExit`` and go on), with another Python thread alive (the interpreter would
+    wait for it), no way to run the handlers, or a handler or flush that fails, the
+    interpreter's own exit (``sys.exit``) as before."""
     import atexit
 
     handlers = getattr(atexit, "_run_exitfuncs", None)  # what the interpreter's exit runs
-    if handlers is None or threading.active_count() != 1:
+    if handlers is None or threading.active_count() != 1 or not _the_program():
         sys.exit(code)
     try:
         handlers()  # (each handler's own error is printed by atexit, as at exit)
@@ -338,6 +340,18 @@ def _exit_done(code: int) -> NoReturn:
     except BaseException:  # noqa: BLE001 - the interpreter's exit says it as it did
         sys.exit(code)
     os._exit(code)
+
+
+def _the_program() -> bool:
+    """Whether the process's main module is the command: ``python -m mitld_lp`` or the
+    console script the installer wrote (``mitld-lp``, whose module ends with
+    ``sys.exit(command())``), not a program calling the command's function."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    if spec is not None:
+        return bool(spec.name == "mitld_lp.__main__")
+    name = os.path.basename(getattr(main, "__file__", None) or "")
+    return name.removesuffix(".exe").removesuffix("-script.py") == PROG
 
 
 if __name__ == "__main__":
