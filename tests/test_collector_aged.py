@@ -63,3 +63,41 @@ def test_a_programs_frozen_objects_stay_frozen() -> None:
     assert got["frozen_before"] > 0
     assert got["frozen_after"] == got["frozen_before"]  # not given back to the collector
     assert got["enabled"] is True and got["collected"] is True
+
+
+#: How often ``release`` asks ``gc.get_freeze_count`` (a walk over every frozen object):
+#: never after ``leave_frozen``; with the program's objects frozen, once and then never.
+COUNTS = r"""
+import gc, json, sys
+from mitld_lp.util import collector
+asked = [0]
+count = gc.get_freeze_count
+def counted():
+    asked[0] += 1
+    return count()
+gc.get_freeze_count = counted
+if sys.argv[1] == "command":
+    gc.freeze()
+    collector.leave_frozen()
+else:
+    kept = [[i] for i in range(100)]
+    gc.freeze()
+for _ in range(3):
+    gc.disable()
+    collector.release()
+print(json.dumps(dict(asked=asked[0], enabled=gc.isenabled(), frozen=count() > 0)))
+"""
+
+
+def _counts(mode: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
+    done = subprocess.run([sys.executable, "-c", COUNTS, mode], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_the_frozen_count_is_not_walked_once_objects_are_frozen() -> None:
+    assert _counts("command") == dict(asked=0, enabled=True, frozen=True)
+    assert _counts("program") == dict(asked=1, enabled=True, frozen=True)
