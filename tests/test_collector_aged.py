@@ -40,11 +40,12 @@ print(json.dumps(dict(where=where, frozen_before=frozen_before, frozen_after=fro
 """
 
 
-def _run(mode: str) -> dict:
+def _run(mode: str, code: str = PROBE) -> dict:
+    """``code`` in a fresh interpreter with ``mode`` as its argument: its last line's JSON."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("PYTHONDONTWRITEBYTECODE", "MITLD_LP_PLAIN_IMPORTS")}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
-    done = subprocess.run([sys.executable, "-c", PROBE, mode], cwd=ROOT, env=env,
+    done = subprocess.run([sys.executable, "-c", code, mode], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -89,15 +90,6 @@ print(json.dumps(dict(asked=asked[0], enabled=gc.isenabled(), frozen=count() > 0
 """
 
 
-def _counts(mode: str) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
-    done = subprocess.run([sys.executable, "-c", COUNTS, mode], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def test_the_frozen_count_is_not_walked_once_objects_are_frozen() -> None:
-    assert _counts("command") == dict(asked=0, enabled=True, frozen=True)
-    assert _counts("program") == dict(asked=1, enabled=True, frozen=True)
+    assert _run("command", COUNTS) == dict(asked=0, enabled=True, frozen=True)
+    assert _run("program", COUNTS) == dict(asked=1, enabled=True, frozen=True)
