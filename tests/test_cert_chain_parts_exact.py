@@ -16,7 +16,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from test_cert_small_exact import N, SEEDS, _chain_case, _model, _paid, _sets_by_fixpoint
+from test_cert_small_exact import SEEDS, N, _chain_case, _model, _paid, _sets_by_fixpoint
 from test_cert_small_exact import exact_optimum as _exact_optimum
 
 from mitld_lp.solvers import certify as C
