@@ -368,7 +368,20 @@ class _Singles:
         self.order = order[single]
         level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
         self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
-        self.local, self.cols, self.vals = row_entries(sub, self.order)
+        self.sub = sub
+        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
+        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
+        # 5 ms of NumPy calls against one call)
+        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
+            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
+            else None)
+        if self.kernels is None:  # (the kernel reads the chain itself: nothing gathered)
+            self._gather()
+
+    def _gather(self) -> None:
+        """The single states' rows' entries, each state's first entry and, where SciPy's
+        product takes them, the entries' pointers: what the NumPy levels read."""
+        self.local, self.cols, self.vals = row_entries(self.sub, self.order)
         # each state's first entry: its row's length counted (``local`` is sorted), not
         # a binary search of every state in ``local``: the same pointers
         self.entry_at = np.zeros(self.order.size + 1, dtype=np.int64)
@@ -379,13 +392,6 @@ class _Singles:
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         # entry pointers of the columns' type: SciPy's product sums a level's rows
         self.ptr = self.entry_at.astype(self.cols.dtype) if fits else None
-        self.sub = sub
-        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
-        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
-        # 5 ms of NumPy calls against one call)
-        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
-            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
-            else None)
 
     def solve(self, first: int, stop: int, b: np.ndarray, kappa: np.ndarray,
               diag: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:
