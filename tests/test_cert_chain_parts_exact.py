@@ -49,13 +49,15 @@ def _parts_by_hand(m, states, rows, target):
 
 @pytest.mark.parametrize("seed", range(12))
 def test_compiled_chain_parts_are_the_entries_one_by_one(seed, monkeypatch) -> None:
-    m, states, rows, target = _chain_case(seed)
-    want = _parts_by_hand(m, states, rows, target)
-    _paid(monkeypatch, False)
-    assert certify_compiled.compiled_chain_parts(m, states, rows, target) is None
-    _paid(monkeypatch, True)
-    got = certify_compiled.compiled_chain_parts(m, states, rows, target)
-    assert got is not None
+    case = _chain_case(seed)
+    want = _parts_by_hand(*case)
+    by_path = {}
+    for compiled in (False, True):  # refused where no kernel's load is paid
+        _paid(monkeypatch, compiled)
+        by_path[compiled] = certify_compiled.compiled_chain_parts(*case)
+    assert by_path[False] is None and by_path[True] is not None
+    m, states, rows, target = case
+    got = by_path[True]
     never, sure, idx, b, vals, cols, ptr = got
     assert np.array_equal(never, want[0]) and np.array_equal(sure, want[1])
     assert idx.tolist() == want[2] and cols.tolist() == want[5] and ptr.tolist() == want[6]
@@ -83,33 +85,33 @@ def test_compiled_chain_parts_refuse_states_out_of_order(monkeypatch) -> None:
                                                  target) is None
 
 
+def _bracket(mdp, target, v, policy, upper, compiled, monkeypatch):
+    """The certificate's bracket and values (hex digits, bytes) with the compiled paths
+    on or off, and whether its chain came from the compiled call."""
+    ran = []
+    real = certify_compiled.compiled_chain_parts
+    monkeypatch.setattr(certify_chain, "compiled_chain_parts",
+                        lambda *a: ran.append(real(*a)) or ran[-1])
+    _paid(monkeypatch, compiled)
+    cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
+                     zero=np.array([p == 0 for p in v]),
+                     one=None if upper else np.array([p == 1 for p in v]))
+    assert Fraction(cert.lower) <= v[0] <= Fraction(cert.upper), (upper, v[0])
+    assert cert.certified, [c.detail for c in cert.checks]
+    return ((cert.lower.hex(), cert.upper.hex(), np.asarray(cert.values).tobytes()),
+            [r is not None for r in ran])
+
+
+@pytest.mark.parametrize("upper", (True, False))
 @pytest.mark.parametrize("seed", SEEDS)
-def test_brackets_from_the_compiled_chain_parts_hold_the_exact_optimum(seed,
-                                                                      monkeypatch) -> None:
+def test_brackets_from_the_compiled_chain_parts_hold_the_exact_optimum(
+        seed, upper, monkeypatch) -> None:
     """Certificates whose chain came from the compiled call (checked: it returned
     arrays) bracket the brute force's exact optimum, with the bits of the NumPy path."""
     mdp, exact = _model(seed, N)
+    v, policy = _exact_optimum(mdp, exact, N, upper)
     target = np.asarray(mdp.target)
-    ran = []
-    real = certify_chain.compiled_chain_parts
-
-    def spy(*a):
-        got = real(*a)
-        ran.append(got is not None)
-        return got
-
-    monkeypatch.setattr(certify_chain, "compiled_chain_parts", spy)
-    for upper in (True, False):
-        v, policy = _exact_optimum(mdp, exact, N, upper)
-        zero = np.array([p == 0 for p in v])
-        got = []
-        for compiled in (True, False):
-            _paid(monkeypatch, compiled)
-            ran.clear()
-            cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
-                             zero=zero, one=None if upper else np.array([p == 1 for p in v]))
-            assert ran == [compiled]
-            assert Fraction(cert.lower) <= v[0] <= Fraction(cert.upper), (upper, v[0])
-            assert cert.certified, [c.detail for c in cert.checks]
-            got.append((cert.lower.hex(), cert.upper.hex(), np.asarray(cert.values).tobytes()))
-        assert got[0] == got[1]
+    on, ran_on = _bracket(mdp, target, v, policy, upper, True, monkeypatch)
+    off, ran_off = _bracket(mdp, target, v, policy, upper, False, monkeypatch)
+    assert ran_on == [True] and ran_off == [False]
+    assert on == off
