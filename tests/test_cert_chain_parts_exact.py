@@ -78,59 +78,6 @@ def test_compiled_chain_parts_are_the_entries_one_by_one(seed, monkeypatch) -> N
         assert sub.indices.dtype == cols.dtype and sub.indptr.dtype == ptr.dtype
 
 
-def _closed_away_by_hand(m, states, rows, target, hint) -> bool:
-    """:func:`~mitld_lp.solvers.certify_kernels.closed_away` an entry at a time."""
-    if bool(np.any(hint & target)):
-        return False
-    for s, r in zip(states.tolist(), rows.tolist(), strict=True):
-        for e in range(int(m.indptr[r]), int(m.indptr[r + 1])):
-            if hint[s] and m.data[e] > 0 and not hint[m.indices[e]]:
-                return False
-    return True
-
-
-@pytest.mark.parametrize("seed", range(12))
-def test_chain_parts_with_a_hint_are_those_without(seed, monkeypatch) -> None:
-    """A hint of states that never reach the target (closed and away from it: the
-    states with no path to the target or to some other states; used) or not (a random
-    set, or one holding a target state: left unused) never changes the arrays."""
-    from mitld_lp.solvers.certify_kernels import closed_away
-
-    m, states, rows, target = case = _chain_case(seed)
-    want = _parts_by_hand(*case)
-    rng = np.random.default_rng(seed)
-    other = rng.random(target.size) < 0.1
-    hints = [want[0].copy(), _sets_by_fixpoint(m, states, rows, target | other)[0],
-             rng.random(target.size) < 0.5, want[0] | target]
-    used = []
-    _paid(monkeypatch, True)
-    for hint in hints:
-        used.append(bool(closed_away(states.astype(np.int64), rows.astype(np.int64),
-                                     m.indptr, m.indices, m.data, target.copy(), hint)))
-        assert used[-1] == _closed_away_by_hand(m, states, rows, target, hint)
-        got = certify_compiled.compiled_chain_parts(m, states, rows, target, hint)
-        assert got is not None
-        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
-        assert got[2].tolist() == want[2] and got[5].tolist() == want[5]
-        assert got[6].tolist() == want[6]
-        assert [x.hex() for x in got[3].tolist()] == [x.hex() for x in want[3]]
-        assert [x.hex() for x in got[4].tolist()] == [x.hex() for x in want[4]]
-    assert used[0] and used[1] and not used[3]
-
-
-def test_the_hints_are_used_and_refused_across_the_cases() -> None:
-    """The cases above take both branches: a random hint is mostly not closed."""
-    from mitld_lp.solvers.certify_kernels import closed_away
-
-    verdicts = set()
-    for seed in range(12):
-        m, states, rows, target = _chain_case(seed)
-        hint = np.random.default_rng(seed).random(target.size) < 0.5
-        verdicts.add(bool(closed_away(states.astype(np.int64), rows.astype(np.int64),
-                                      m.indptr, m.indices, m.data, target.copy(), hint)))
-    assert verdicts == {False}
-
-
 def test_compiled_chain_parts_refuse_states_out_of_order(monkeypatch) -> None:
     m, states, rows, target = _chain_case(0)
     _paid(monkeypatch, True)

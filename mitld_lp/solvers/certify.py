@@ -542,8 +542,7 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     checked = sense == "min" and "lower" in sides
     trapped = _trapped(mdp, zero, target, layers) if checked else None
     try:  # the LP's walks offered to the chain (:func:`chain_levels.offer`), then freed
-        ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower,
-                   never_hint=zero)
+        ch = chain(mdp, target, policy, rnd, layers, guess=fallback_lower)
     finally:
         forget()
     low = high = None

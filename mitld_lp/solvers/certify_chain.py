@@ -107,7 +107,7 @@ def support_layers(mdp: MDP | RowModel) -> tuple[np.ndarray, np.ndarray]:
 
 def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
           layers: tuple[np.ndarray, np.ndarray] | None = None,
-          guess: np.ndarray | None = None, never_hint: np.ndarray | None = None) -> Chain:
+          guess: np.ndarray | None = None) -> Chain:
     """The values of ``policy`` (a choice row per state, ``-1`` on the target and the
     absorbing states) and the slack ``W`` of its certificates (module docs), solved
     level by level, a non-trivial component of the layers by the walk over the chain's
@@ -115,10 +115,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     factorisations serving both.  ``layers``:
     the components and levels of ``mdp``'s support graph (:func:`support_layers`; a
     level -1 where unknown: the chain's own levels are found then);
-    ``guess``: an estimate of the values (every state), to solve ``W`` beside them;
-    ``never_hint``: states thought never to reach the target (the analysis's zero set),
-    a short cut of the compiled sets' searches where proved, never taken on trust
-    (:func:`~mitld_lp.solvers.certify_compiled.compiled_chain_parts`)."""
+    ``guess``: an estimate of the values (every state), to solve ``W`` beside them."""
     m = sp.csr_array(mdp.matrix)
     n = mdp.n_states
     target = np.asarray(target, dtype=bool)
@@ -129,7 +126,7 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     # the sets and the solved states' chain by one compiled call where paid (the same
     # arrays as the NumPy gather below: QVBS zeroconf 1000-4's 164,171 solved states,
     # some ten NumPy passes over their rows)
-    got = compiled_chain_parts(m, states, policy[states], target, never_hint)
+    got = compiled_chain_parts(m, states, policy[states], target)
     if got is not None:
         never, sure, idx, b, vals, cols, ptr = got
         del got, states

@@ -248,17 +248,14 @@ def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np
 
 
 def compiled_chain_parts(m: Any, states: np.ndarray, rows: np.ndarray, target: np.ndarray,
-                         hint: np.ndarray | None = None) -> tuple[np.ndarray, ...] | None:
+                         ) -> tuple[np.ndarray, ...] | None:
     """:func:`compiled_chain_sets` and the solved states' chain in the same call
     (:func:`~mitld_lp.solvers.certify_kernels.chain_parts`): ``(never, sure, idx, b,
     vals, cols, ptr)``, the arrays :func:`~mitld_lp.solvers.certify_chain.chain` gathers
     with NumPy (the same values, in the same order and index types: int32, as its
     ``index`` is for fewer states than an int32 holds).  None where
     :func:`compiled_chain_sets` would not run, or where ``states`` is not increasing
-    (the NumPy code then runs).  ``hint``: states thought never to reach the target (a
-    bool a state: a maximum's Prob0A, a minimum's Prob0E), whose edges the sets' searches
-    leave out where the kernel proves them closed and away from the target
-    (:func:`~mitld_lp.solvers.certify_kernels.closed_away`): the same sets."""
+    (the NumPy code then runs)."""
     n = int(target.shape[0])
     if (states.size < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
             or m.data.dtype != np.float64 or max(n, m.nnz) >= 2**31 - 1
@@ -271,12 +268,8 @@ def compiled_chain_parts(m: Any, states: np.ndarray, rows: np.ndarray, target: n
         return None
     never, sure = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
     # (the target copied, as for :func:`compiled_chain_sets`: one signature)
-    # (the hint copied as the target is: writable, one signature; empty: none)
-    hint = (np.zeros(0, dtype=bool) if hint is None or np.shape(hint) != (n,) else
-            np.array(hint, dtype=bool))
     got = chain_parts(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
-                      m.indptr, m.indices, m.data, np.array(target, dtype=bool), hint,
-                      never, sure)
+                      m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
     return (never, sure, *got)
 
 

@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "chain_parts", "chain_sets", "closed_away", "cycling"]
+__all__ = ["bellman_rows", "chain_parts", "chain_sets", "cycling"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -93,28 +93,12 @@ def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pra
     then two breadth-first searches from the seeds: which edges exist is all that is
     read, so the sets are those of the NumPy searches.  Written into ``never`` and
     ``sure`` (bool, a state each)."""
-    _sets_skipping(states, rows, indptr, indices, data, target,
-                   np.zeros(target.shape[0], dtype=np.bool_), never, sure)
-
-
-@numba.njit(cache=True, nogil=True)
-def _sets_skipping(states, rows, indptr, indices, data, target, skip, never,
-                   sure):  # pragma: no cover - compiled
-    """:func:`chain_sets` with the edges out of the ``skip`` states left out of the
-    reversal: the same sets where ``skip`` is closed (every edge out of a ``skip``
-    state ends in one) and holds no ``target`` state (:func:`closed_away`).  Then no
-    ``skip`` state reaches the target, so none lies on a path to it, and each is
-    ``never`` (never enqueued by the first search: no edge into it is kept, and it is
-    no seed); and a path to a ``never`` state is one of states outside ``never`` (so
-    outside ``skip``) up to its first ``never`` state, its edges all kept."""
     n = target.shape[0]
     # each head's count of edges, then the end of its sources; filled from the ends
     # down, so that the pointers become each head's start (the caller checks that
     # the edges and states fit an int32)
     ptr = np.zeros(n + 1, dtype=np.int32)
     for i in range(states.shape[0]):
-        if skip[states[i]]:
-            continue
         r = rows[i]
         for e in range(indptr[r], indptr[r + 1]):
             if data[e] > 0.0:
@@ -123,10 +107,8 @@ def _sets_skipping(states, rows, indptr, indices, data, target, skip, never,
         ptr[j + 1] += ptr[j]
     src = np.empty(ptr[n], dtype=np.int32)
     for i in range(states.shape[0]):
-        s = states[i]
-        if skip[s]:
-            continue
         r = rows[i]
+        s = states[i]
         for e in range(indptr[r], indptr[r + 1]):
             if data[e] > 0.0:
                 c = indices[e] + 1
@@ -160,25 +142,7 @@ def _sets_skipping(states, rows, indptr, indices, data, target, skip, never,
 
 
 @numba.njit(cache=True, nogil=True)
-def closed_away(states, rows, indptr, indices, data, target, hint):  # pragma: no cover
-    """Whether the ``hint`` states (a bool a state) hold no ``target`` state and every
-    edge of the chain (:func:`chain_sets`) out of one ends in one: then none reaches
-    the target, whatever the rest of the chain (its paths stay among them)."""
-    for j in range(target.shape[0]):
-        if hint[j] and target[j]:
-            return False
-    for i in range(states.shape[0]):
-        if not hint[states[i]]:
-            continue
-        r = rows[i]
-        for e in range(indptr[r], indptr[r + 1]):
-            if data[e] > 0.0 and not hint[indices[e]]:
-                return False
-    return True
-
-
-@numba.njit(cache=True, nogil=True)
-def chain_parts(states, rows, indptr, indices, data, target, hint, never,
+def chain_parts(states, rows, indptr, indices, data, target, never,
                 sure):  # pragma: no cover - compiled
     """:func:`chain_sets`, then in the same call what
     :func:`~mitld_lp.solvers.certify_chain.chain` gathers with NumPy for the solve: the
@@ -188,14 +152,8 @@ def chain_parts(states, rows, indptr, indices, data, target, hint, never,
     positive entries into solved states (their values, and their columns as positions
     among the solved states, in the row's order: the chain ``sub`` as CSR).  Returns
     ``(idx, b, vals, cols, ptr)``, the indices int32 (the caller checks that states and
-    entries fit).  ``hint``: states thought never to reach the target (a bool a state,
-    or empty): where :func:`closed_away` proves it, their edges are left out of the
-    sets' reversal and searches (:func:`_sets_skipping`: the same sets), else unused."""
-    if hint.shape[0] == target.shape[0] and closed_away(states, rows, indptr, indices,
-                                                         data, target, hint):
-        _sets_skipping(states, rows, indptr, indices, data, target, hint, never, sure)
-    else:
-        chain_sets(states, rows, indptr, indices, data, target, never, sure)
+    entries fit)."""
+    chain_sets(states, rows, indptr, indices, data, target, never, sure)
     n = target.shape[0]
     at = np.full(n, -1, dtype=np.int32)
     k = 0
