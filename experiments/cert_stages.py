@@ -20,6 +20,12 @@ the same bits before and after, or not).  Storm's check of the same product is i
   searches (``Reversed.reaching``)), its values and
   slack (``_solve``), the Bellman checks (``_fails``), the repair (``Repair.run``) and
   the recheck after it (``_touched``, ``_fails_among``: cert-half's, empty before);
+* the chain's pieces (cert-78): its sets and solved states' chain by one compiled call
+  (``chain_parts``), else the sets (``chain_sets``) and the NumPy gather
+  (``chain_gather``); ``chain_rest`` the chain outside its sets and ``_solve`` (the
+  gather, inline before cert-78); inside ``_solve`` the blocks renumbered
+  (``chain_blocks``), the single states' set-up (``chain_singles``) and the walk found
+  (``chain_walk``);
 * ``ChainLevels.__init__``: the chains' own components (the LP's greedy chain and the
   certificate's), ``chain_walk_solve`` their solves;
 * the iteration's pieces: its sweeps (``compiled_sweeps``, ``numpy_sweeps``; their
@@ -121,7 +127,18 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          # load alone, numba's pieces and none of the kernels), the chain's never /
          # sure sets (compiled once paid, else the edges reversed and searched twice)
          ("mitld_lp.solvers.certify", "load_if_warm", "warm_load"),
-         ("mitld_lp.solvers.certify_chain", "_sets", "chain_sets"))
+         ("mitld_lp.solvers.certify_chain", "_sets", "chain_sets"),
+         # cert-78: the chain's sets and its solved states' chain by one compiled call
+         # (``chain_parts``; a call that returns None is timed too), the NumPy gather
+         # where it does not run (``chain_gather``), and inside ``_solve``: the support
+         # graph's blocks renumbered (``chain_blocks``), the single states' set-up
+         # (``chain_singles``) and the chain's own walk found (``chain_walk``:
+         # ``ChainLevels``' components, or the LP's walk taken over)
+         ("mitld_lp.solvers.certify_chain", "compiled_chain_parts", "chain_parts"),
+         ("mitld_lp.solvers.certify_chain", "_gathered", "chain_gather"),
+         ("mitld_lp.solvers.certify_chain", "blocks_from", "chain_blocks"),
+         ("mitld_lp.solvers.certify_chain", "_Singles.__init__", "chain_singles"),
+         ("mitld_lp.solvers.certify_chain", "walk_of", "chain_walk"))
 """The entry points timed in place: (module, attribute, column); the column is the
 attribute's name where no third is given.  ``solve_stage``: the plain route's
 ``solve_models`` (the analysis to the certificates, without the result's record);
@@ -131,13 +148,17 @@ that first read, where the route needs it (absent before).  ``sweeps``: the inte
 iteration's sweeps (every block's), ``ms_per_sweep`` the sweeps' CPU (compiled and
 NumPy) over them (empty where none)."""
 COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu", "sweeps",
-           "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED))
+           "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED), "chain_rest")
+"""``chain_rest``: the chain's CPU outside its sets (``chain_sets`` / ``chain_parts``)
+and ``_solve``: the NumPy gather of the solved states' rows where it runs, inline in a
+checkout before cert-78."""
 
 
 TRACED = tuple((module, name) for module, name, *_ in TIMED
                if module.startswith("mitld_lp.solvers.certify") and name not in (
                    "_fails_among", "_touched", "_escapes", "compiled_checks",
-                   "compiled_needs", "readers_by_column")) + (
+                   "compiled_needs", "readers_by_column", "blocks_from",
+                   "_Singles.__init__", "walk_of")) + (
     ("mitld_lp.solvers.certify", "_trapped"),)
 """The certificate's pieces whose traced peaks ``--memory`` reads (module, attribute);
 a checkout without one has no figure for it."""
@@ -272,7 +293,10 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     it = getattr(getattr(part, "lower_model", None), "iteration", None)
     sweeps = None if it is None else int(it.iterations)
     swept = spent.get("compiled_sweeps", 0.0) + spent.get("numpy_sweeps", 0.0)
+    rest = spent.get("chain", 0.0) - sum(spent.get(k, 0.0) for k in (
+        "chain_sets", "chain_parts", "_solve"))
     return dict(spent, solve_cpu=solve_cpu, lower=r.lower.hex(), upper=r.upper.hex(),
+                chain_rest=rest if "chain" in spent else None,
                 sweeps=sweeps, ms_per_sweep=1e3 * swept / sweeps if sweeps else None)
 
 

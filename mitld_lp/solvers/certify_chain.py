@@ -10,7 +10,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
-from mitld_lp.solvers.certify_compiled import compiled_chain_sets, compiled_cycling
+from mitld_lp.solvers.certify_compiled import (
+    compiled_chain_parts,
+    compiled_chain_sets,
+    compiled_cycling,
+)
 from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import read_only
@@ -119,43 +123,25 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
     acting = (policy >= 0) & ~target
     states = np.flatnonzero(acting)
     index = np.int32 if n < np.iinfo(np.int32).max else np.int64  # 4 bytes if it can
-    never, sure = _sets(m, n, states, policy[states], target, index)
-    del states
-    solved = acting & ~never & ~sure
+    # the sets and the solved states' chain by one compiled call where paid (the same
+    # arrays as the NumPy gather below: QVBS zeroconf 1000-4's 164,171 solved states,
+    # some ten NumPy passes over their rows)
+    got = compiled_chain_parts(m, states, policy[states], target)
+    if got is not None:
+        never, sure, idx, b, vals, cols, ptr = got
+        del got, states
+        solved = acting & ~never & ~sure
+        sub = sp.csr_array((vals, cols, ptr), shape=(idx.size,) * 2) if idx.size else None
+        del vals, cols, ptr
+    else:
+        never, sure = _sets(m, n, states, policy[states], target, index)
+        del states
+        solved = acting & ~never & ~sure
+        idx = np.flatnonzero(solved).astype(index, copy=False)  # 4 bytes a state if it can
+        b, sub = _gathered(m, policy, idx, solved, sure, index) if idx.size else (None, None)
     del acting
-    idx = np.flatnonzero(solved).astype(index, copy=False)  # 4 bytes a state if it can
     v = w = None
-    if idx.size:
-        # the chain in the edges' index type, as the greedy block's chains are: the
-        # level kernels load one variant, not one per type (each a compilation on a
-        # fresh cache and a load per process), and 4 bytes an entry when it can
-        at = np.full(n, -1, dtype=index)
-        at[idx] = np.arange(idx.size, dtype=index)
-        # the solved states' rows gathered again, their positive entries in the rows'
-        # order: the entries the edges above held for them (each its local row)
-        rows = policy[idx]
-        s_loc = np.repeat(np.arange(idx.size, dtype=index),
-                          m.indptr[rows + 1] - m.indptr[rows])
-        d, p = row_columns(m, rows)
-        d = d.astype(index, copy=False)
-        del rows
-        pos = p > 0
-        if not pos.all():
-            s_loc, d, p = s_loc[pos], d[pos], p[pos]
-        del pos
-        into = solved[d]
-        b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
-        # the entries come row by row in the states' order: the CSR arrays directly
-        rows_of = s_loc[into]
-        del s_loc
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
-        del rows_of
-        if indptr[-1] <= np.iinfo(index).max:
-            indptr = indptr.astype(index)
-        sub = sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
-        # the entries' copies and the map freed before the chain's own components are
-        # searched (QVBS zeroconf 1000-4: the certificate's traced peak, in the walk)
-        del at, d, p, into, indptr
+    if sub is not None:
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
                       None if guess is None else _Gathered(guess, idx))
@@ -168,6 +154,43 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         np.maximum(w, 0.0, out=slack)
     return Chain(read_only(values), read_only(slack), read_only(solved), read_only(sure),
                  read_only(never), read_only(policy), read_only(target.copy()))
+
+
+def _gathered(m: sp.csr_array, policy: np.ndarray, idx: np.ndarray, solved: np.ndarray,
+              sure: np.ndarray, index: type) -> tuple[np.ndarray, sp.csr_array]:
+    """The ``idx`` (solved) states' mass into ``sure`` (``b``) and their chain among
+    themselves (``sub``, CSR in ``index``), from their policy rows' positive entries in
+    the rows' order (:func:`chain`'s NumPy path)."""
+    n = solved.shape[0]
+    # the chain in the edges' index type, as the greedy block's chains are: the
+    # level kernels load one variant, not one per type (each a compilation on a
+    # fresh cache and a load per process), and 4 bytes an entry when it can
+    at = np.full(n, -1, dtype=index)
+    at[idx] = np.arange(idx.size, dtype=index)
+    # the solved states' rows gathered again, their positive entries in the rows'
+    # order: the entries the edges above held for them (each its local row)
+    rows = policy[idx]
+    s_loc = np.repeat(np.arange(idx.size, dtype=index),
+                      m.indptr[rows + 1] - m.indptr[rows])
+    d, p = row_columns(m, rows)
+    d = d.astype(index, copy=False)
+    del rows
+    pos = p > 0
+    if not pos.all():
+        s_loc, d, p = s_loc[pos], d[pos], p[pos]
+    del pos
+    into = solved[d]
+    b = np.bincount(s_loc[sure[d]], weights=p[sure[d]], minlength=idx.size)
+    # the entries come row by row in the states' order: the CSR arrays directly
+    rows_of = s_loc[into]
+    del s_loc
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_of, minlength=idx.size))])
+    del rows_of
+    if indptr[-1] <= np.iinfo(index).max:
+        indptr = indptr.astype(index)
+    # the entries' copies and the map freed before the chain's own components are
+    # searched (QVBS zeroconf 1000-4: the certificate's traced peak, in the walk)
+    return b, sp.csr_array((p[into], at[d[into]], indptr), shape=(idx.size,) * 2)
 
 
 def _sets(m: sp.csr_array, n: int, states: np.ndarray, rows: np.ndarray,
@@ -345,7 +368,20 @@ class _Singles:
         self.order = order[single]
         level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
         self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
-        self.local, self.cols, self.vals = row_entries(sub, self.order)
+        self.sub = sub
+        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
+        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
+        # 5 ms of NumPy calls against one call)
+        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
+            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
+            else None)
+        if self.kernels is None:  # (the kernel reads the chain itself: nothing gathered)
+            self._gather()
+
+    def _gather(self) -> None:
+        """The single states' rows' entries, each state's first entry and, where SciPy's
+        product takes them, the entries' pointers: what the NumPy levels read."""
+        self.local, self.cols, self.vals = row_entries(self.sub, self.order)
         # each state's first entry: its row's length counted (``local`` is sorted), not
         # a binary search of every state in ``local``: the same pointers
         self.entry_at = np.zeros(self.order.size + 1, dtype=np.int64)
@@ -356,13 +392,6 @@ class _Singles:
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         # entry pointers of the columns' type: SciPy's product sums a level's rows
         self.ptr = self.entry_at.astype(self.cols.dtype) if fits else None
-        self.sub = sub
-        # compiled as the quotient's walks are, or wherever a compiled kernel's load is
-        # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
-        # 5 ms of NumPy calls against one call)
-        self.kernels = level_kernels(sub.nnz, blk.n_levels, True if (
-            blk.n_levels >= CHAIN_KERNEL_MIN_LEVELS and kernel_loader.compiled_paid())
-            else None)
 
     def solve(self, first: int, stop: int, b: np.ndarray, kappa: np.ndarray,
               diag: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:

@@ -18,7 +18,8 @@ from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.util import kernel_loader
 
 __all__ = ["CHECK_BATCH", "COMPILED_CHECK_MIN_ROWS", "CYCLING_MIN_STATES",
-           "WARM_LOAD_MIN_ENTRIES", "compiled_chain_sets", "compiled_checks",
+           "WARM_LOAD_MIN_ENTRIES", "compiled_chain_parts", "compiled_chain_sets",
+           "compiled_checks",
            "compiled_cycling", "compiled_failing", "compiled_needs", "compiled_rounds",
            "load_if_warm", "rounds_cached"]
 
@@ -43,7 +44,7 @@ On QVBS consensus 4-4 (144,349 entries) the load cost what it saved (a minimum's
 attractor test, 15-20 ms of NumPy rounds, 3-8 ms compiled): not paid there."""
 
 WARM_KERNELS = (("mitld_lp.solvers.certify_kernels", "bellman_rows"),
-                ("mitld_lp.solvers.certify_kernels", "chain_sets"),
+                ("mitld_lp.solvers.certify_kernels", "chain_parts"),
                 ("mitld_lp.solvers.level_kernels", "chain_values"),
                 ("mitld_lp.solvers.compiled_graph", "_backward"))
 """The kernels a certificate runs once the load is paid, one or two of each module
@@ -244,6 +245,32 @@ def compiled_chain_sets(m: Any, states: np.ndarray, rows: np.ndarray, target: np
     chain_sets(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
                m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
     return never, sure
+
+
+def compiled_chain_parts(m: Any, states: np.ndarray, rows: np.ndarray, target: np.ndarray,
+                         ) -> tuple[np.ndarray, ...] | None:
+    """:func:`compiled_chain_sets` and the solved states' chain in the same call
+    (:func:`~mitld_lp.solvers.certify_kernels.chain_parts`): ``(never, sure, idx, b,
+    vals, cols, ptr)``, the arrays :func:`~mitld_lp.solvers.certify_chain.chain` gathers
+    with NumPy (the same values, in the same order and index types: int32, as its
+    ``index`` is for fewer states than an int32 holds).  None where
+    :func:`compiled_chain_sets` would not run, or where ``states`` is not increasing
+    (the NumPy code then runs)."""
+    n = int(target.shape[0])
+    if (states.size < COMPILED_CHECK_MIN_ROWS or not kernel_loader.compiled_paid()
+            or m.data.dtype != np.float64 or max(n, m.nnz) >= 2**31 - 1
+            or m.indices.dtype not in (np.int32, np.int64)
+            or not bool(np.all(states[1:] > states[:-1]))):
+        return None
+    try:
+        from mitld_lp.solvers.certify_kernels import chain_parts
+    except ImportError:  # pragma: no cover - numba is a dependency of the solvers
+        return None
+    never, sure = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+    # (the target copied, as for :func:`compiled_chain_sets`: one signature)
+    got = chain_parts(np.asarray(states, dtype=np.int64), np.asarray(rows, dtype=np.int64),
+                      m.indptr, m.indices, m.data, np.array(target, dtype=bool), never, sure)
+    return (never, sure, *got)
 
 
 CYCLING_MIN_STATES = 120_000

@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "chain_sets", "cycling"]
+__all__ = ["bellman_rows", "chain_parts", "chain_sets", "cycling"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -139,6 +139,65 @@ def chain_sets(states, rows, indptr, indices, data, target, never, sure):  # pra
                 never[j] = not seen[j]
             else:
                 sure[j] = not seen[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_parts(states, rows, indptr, indices, data, target, never,
+                sure):  # pragma: no cover - compiled
+    """:func:`chain_sets`, then in the same call what
+    :func:`~mitld_lp.solvers.certify_chain.chain` gathers with NumPy for the solve: the
+    ``solved`` states (acting, neither ``never`` nor ``sure``; ``states`` increasing, so
+    in increasing order), each one's mass into ``sure`` (``b``: its positive entries
+    there summed from 0 in the row's order, as ``np.bincount`` adds its weights) and its
+    positive entries into solved states (their values, and their columns as positions
+    among the solved states, in the row's order: the chain ``sub`` as CSR).  Returns
+    ``(idx, b, vals, cols, ptr)``, the indices int32 (the caller checks that states and
+    entries fit)."""
+    chain_sets(states, rows, indptr, indices, data, target, never, sure)
+    n = target.shape[0]
+    at = np.full(n, -1, dtype=np.int32)
+    k = 0
+    entries = 0
+    for i in range(states.shape[0]):
+        s = states[i]
+        if not never[s] and not sure[s]:
+            at[s] = k
+            k += 1
+    for i in range(states.shape[0]):
+        if at[states[i]] < 0:
+            continue
+        r = rows[i]
+        for e in range(indptr[r], indptr[r + 1]):
+            if data[e] > 0.0 and at[indices[e]] >= 0:
+                entries += 1
+    idx = np.empty(k, dtype=np.int32)
+    b = np.empty(k, dtype=np.float64)
+    vals = np.empty(entries, dtype=np.float64)
+    cols = np.empty(entries, dtype=np.int32)
+    ptr = np.zeros(k + 1, dtype=np.int32)
+    j = 0
+    pos = 0
+    for i in range(states.shape[0]):
+        s = states[i]
+        if at[s] < 0:
+            continue
+        r = rows[i]
+        acc = 0.0
+        for e in range(indptr[r], indptr[r + 1]):
+            p = data[e]
+            if p > 0.0:
+                c = indices[e]
+                if sure[c]:
+                    acc += p
+                elif at[c] >= 0:
+                    cols[pos] = at[c]
+                    vals[pos] = p
+                    pos += 1
+        idx[j] = s
+        b[j] = acc
+        j += 1
+        ptr[j] = pos
+    return idx, b, vals, cols, ptr
 
 
 @numba.njit(cache=True, nogil=True)
