@@ -3,18 +3,19 @@ whose gap is forecast to close within a chunk is swept plainly, no guess watched
 verified, and watches again if the forecast was wrong.  The forecast's arithmetic against
 hand calculations; the switches on a kernel state made here; and the interval iteration's
 bracket, with the close-out taken (a spy says so), against the exact optimum of small
-rare-event MDPs (every memoryless policy's chain solved in fractions,
-``test_iter_rare_sweeps``'s routes): a maximum near 1e-30 and a minimum near 1e-10."""
+rare-event MDPs (every memoryless policy's linear system solved here by Gauss--Jordan
+elimination in fractions): a maximum near 1e-30 and a minimum near 1e-10."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from fractions import Fraction
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_iter_rare_sweeps import _exact, _holds, fraction_mdp
+from test_iter_rare_sweeps import fraction_mdp
 
 from mitld_lp.solvers import Status, interval_iteration, iteration, kernels
 from mitld_lp.solvers.graph import Sense
@@ -89,6 +90,40 @@ def _ring(goal: Fraction, fail: Fraction, n: int = 5) -> list[list[dict[int, Fra
     return out
 
 
+def _optimum(choices: list[list[dict[int, Fraction]]], maximise: bool) -> Fraction:
+    """State 0's optimal probability of the goal (state ``n``) over the memoryless
+    policies of a ring of ``n`` transient states (every step fails with a positive
+    probability, so each policy's ``(I - P) x = goal`` has one solution), each system
+    solved by Gauss--Jordan elimination in fractions."""
+    n = len(choices)
+    values = []
+    for policy in itertools.product(*(range(len(c)) for c in choices)):
+        rows = []
+        for s, c in enumerate(policy):
+            step = choices[s][c]
+            rows.append([(Fraction(s == t) - step.get(t, Fraction(0))) for t in range(n)]
+                        + [step.get(n, Fraction(0))])
+        for col in range(n):
+            pivot = next(r for r in range(col, n) if rows[r][col] != 0)
+            rows[col], rows[pivot] = rows[pivot], rows[col]
+            lead = rows[col][col]
+            rows[col] = [x / lead for x in rows[col]]
+            for r in range(n):
+                if r != col and rows[r][col] != 0:
+                    f = rows[r][col]
+                    rows[r] = [x - f * y for x, y in zip(rows[r], rows[col], strict=True)]
+        values.append(rows[0][n])
+    return max(values) if maximise else min(values)
+
+
+def _within(lower: float, exact: Fraction, upper: float, ulps: int = 4) -> bool:
+    """``exact`` in ``[lower, upper]`` widened by ``ulps`` units in the last place of
+    each end (the iteration's bounds are float sums rounded to nearest; the certificate
+    makes a bracket strict, not the iteration)."""
+    return (Fraction(lower) - ulps * Fraction(float(np.spacing(lower))) <= exact
+            <= Fraction(upper) + ulps * Fraction(float(np.spacing(upper))))
+
+
 @pytest.mark.skipif(kernels.compiled_kernel() is None, reason="numba is not installed")
 @pytest.mark.parametrize(("goal", "fail", "sense", "low", "high"), [
     (Fraction(1, 2**103), Fraction(1, 16), Sense.MAX, 1e-30, 1e-29),  # a maximum near 1e-30
@@ -109,10 +144,10 @@ def test_the_bracket_holds_the_exact_value_with_the_close_out_taken(
     monkeypatch.setattr(iteration, "close_out", spy)
     choices = _ring(goal, fail)
     mdp = fraction_mdp(choices, 7)
-    exact = _exact(choices, 7, maximise=sense is Sense.MAX)
+    exact = _optimum(choices, maximise=sense is Sense.MAX)
     assert low < exact < high
     res = interval_iteration(mdp, mdp.target, sense=sense, compiled=True, precision=1e-6)
     assert any(taken)  # the block was closed out
     assert res.status is Status.OPTIMAL
-    assert _holds(res.value_lower, exact, res.value_upper)
+    assert _within(res.value_lower, exact, res.value_upper)
     assert res.value_upper - res.value_lower <= 1e-6 * res.value_lower
