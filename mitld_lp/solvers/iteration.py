@@ -93,6 +93,8 @@ from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
 from mitld_lp.solvers.result import IterationResult, Status, read_only
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels, walk_handing
+from mitld_lp.solvers.sweep_forecast import close_out
+from mitld_lp.solvers.sweep_forecast import needed as _needed
 from mitld_lp.solvers.sweep_gate import use_compiled
 from mitld_lp.solvers.sweep_order import for_sweeps, value_order, whole
 from mitld_lp.solvers.topological import (
@@ -280,6 +282,8 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
                 return False
             if limit is not None:
                 seen.append((done, over))
+                if compiled:
+                    close_out(prep, seen, _CHUNK)
                 if early is not None and done < forecast[0]:
                     needed = _needed(seen, *_EARLY[:2])
                     if needed is not None and needed > min(_EARLY[2], 2 * (limit - done)):
@@ -289,22 +293,6 @@ def _block_sweeps(block: Block, prep: Prepared, exits: np.ndarray, bounds: np.nd
                     return False
     finally:
         put_rows(bounds, block.states, local)
-
-
-def _needed(seen: list[tuple[int, float]], start: int, window: int) -> float | None:
-    """The sweeps a block's gap (over its threshold, read after each chunk of sweeps:
-    ``seen``) still needs if it kept shrinking at the rate of the last ``window``
-    sweeps (``inf`` if it does not shrink); ``None`` before ``start`` sweeps."""
-    done, over = seen[-1]
-    if done < start:
-        return None
-    then = next(((d, g) for d, g in reversed(seen) if d <= done - window), None)
-    if then is None or then[1] <= 0.0:
-        return None
-    rate = (over / then[1]) ** (1.0 / (done - then[0]))  # per sweep
-    if rate >= 1.0:
-        return float("inf")
-    return float(np.log(1.0 / over) / np.log(rate))
 
 
 def _hopeless(seen: list[tuple[int, float]], limit: int, start: int = _FORECAST_FROM,

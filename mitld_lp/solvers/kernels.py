@@ -98,7 +98,7 @@ from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["COMPILED_MIN_BLOCK_ENTRIES", "COMPILED_MIN_ENTRIES", "FLOOR", "compiled_kernel",
            "compiled_sweeps", "excess", "kernel_loaded", "numpy_sweeps", "put_rows",
-           "sweep_order", "take_rows", "thresholds", "use_compiled"]
+           "sweep_order", "take_rows", "thresholds", "use_compiled", "watch_again"]
 
 logger = logging.getLogger(__name__)
 
@@ -254,7 +254,7 @@ class Prepared:
     for the NumPy sweeps, the matrix without its diagonal."""
 
     __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off", "guess",
-                 "track", "_index")
+                 "track", "_index", "closing")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -277,6 +277,7 @@ class Prepared:
         self.order = sweep_order(self.groups.size - 1)
         self.guess: np.ndarray | None = None  # the compiled sweeps' guesses, made there
         self.track: np.ndarray | None = None
+        self.closing = False  # the guesses turned off near the end (iteration._close_out)
         self._index: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
@@ -355,3 +356,12 @@ def _new_track(k: int, optimistic: bool) -> np.ndarray:
     track[0] = 0.0 if optimistic else -1.0
     track[5] = 1.0 / 16.0
     return track
+
+
+def watch_again(track: np.ndarray, k: int) -> None:
+    """``track`` (:func:`_new_track`'s, ``k`` columns) watching again for guesses after
+    plain sweeps: its watched sweeps and each column's changes and ratios from before
+    them cleared (a guess is made only from ratios read in watched sweeps in a row)."""
+    track[0] = 0.0
+    track[4] = 0.0
+    track[8:8 + 3 * k] = 0.0
