@@ -32,8 +32,15 @@ machine):
   ``GS_BASE + GS_PER_DEPTH * depth`` sweeps of ``sweep`` entries.
 
 The depth costs two breadth-first searches of the block (2.5-5 ms on the blocks
-above); a block too small for NumPy's forecast to reach numba's load even at the
-greatest depth it could have (its states) is decided without them.
+above, more where the block holds many components: one search each, up to
+:data:`~mitld_lp.solvers.jump_cost.SEARCHES`); a block too small for NumPy's forecast to
+reach numba's load even at the greatest depth it could have (its states) is decided
+without them, and so is a block whose largest part (:func:`largest_part`, the states of
+its largest connected piece, one linear pass) is too small for a depth above
+:data:`JACOBI_SWEEPS`: a depth counts steps inside one piece, at most its states less
+one, and the gate sends no block of that depth or less to the compiled sweeps.  The
+sensed case's two blocks (2,464 states of 154 pieces, the largest 16 states, depth 6)
+were searched 3.5 ms each to be sent to NumPy; their largest part is read in 0.6-0.9 ms.
 
 Calibrated on this machine (2 cores, CPU seconds, 2026-11-30, with
 ``experiments/gate_blocks.py``: every block of an instance swept by each route in a
@@ -45,12 +52,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+import scipy.sparse as sp
+
 from mitld_lp.solvers import jump_cost, kernels
 from mitld_lp.solvers.topological import Block
 
 __all__ = ["Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS", "LOADER_LOAD",
-           "NUMBA_LOAD", "NUMPY_ENTRY", "forecast", "load_is_cheap", "prefers_compiled",
-           "use_compiled"]
+           "NUMBA_LOAD", "NUMPY_ENTRY", "forecast", "largest_part", "load_is_cheap",
+           "prefers_compiled", "use_compiled"]
 
 JACOBI_SWEEPS = 100
 """The NumPy sweeps before a block is jumped (the iteration's ``_SWEEPS_BEFORE_POLICY``):
@@ -128,6 +138,22 @@ def forecast(block: Block, loaded: bool) -> Forecast:
                     _compiled(sweep, depth, loaded))
 
 
+def largest_part(block: Block) -> int:
+    """The states of the block's largest weakly connected piece (its moves inside the
+    block, directions dropped): a bound of its depth (:func:`jump_cost.block_depth`, a
+    distance inside one piece) plus one, found without a search from each piece."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = int(block.states.size)
+    if n == 0:
+        return 0
+    inner = block.inner
+    moves = sp.csr_array((np.ones(inner.nnz, dtype=bool), inner.indices,
+                          inner.indptr[block.groups]), shape=(n, n))
+    _, labels = connected_components(moves, directed=True, connection="weak")
+    return int(np.bincount(labels).max())
+
+
 def prefers_compiled(block: Block, loaded: bool) -> bool:
     """Whether the block's compiled sweeps are forecast to cost less than its NumPy
     sweeps and jump (module docs); ``loaded``: numba's kernel is loaded already."""
@@ -138,6 +164,10 @@ def prefers_compiled(block: Block, loaded: bool) -> bool:
     # the least the compiled sweeps could: if even that does not pay, no search
     if (states <= JACOBI_SWEEPS
             or _numpy(states, entries, sweep, states) <= _compiled(sweep, 0, loaded)):
+        return False
+    # no piece deep enough for the compiled sweeps (a depth is at most a piece's states
+    # less one): no search
+    if largest_part(block) <= JACOBI_SWEEPS + 1:
         return False
     f = forecast(block, loaded)
     return f.depth > JACOBI_SWEEPS and f.compiled < f.numpy
