@@ -58,9 +58,10 @@ import scipy.sparse as sp
 from mitld_lp.solvers import jump_cost, kernels
 from mitld_lp.solvers.topological import Block
 
-__all__ = ["Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS", "LOADER_LOAD",
-           "NUMBA_LOAD", "NUMPY_ENTRY", "forecast", "largest_part", "load_is_cheap",
-           "prefers_compiled", "use_compiled"]
+__all__ = ["FOUR_BASE", "Forecast", "GS_BASE", "GS_PER_DEPTH", "JACOBI_SWEEPS",
+           "LOADER_LOAD", "NUMBA_LOAD", "NUMPY_ENTRY", "PAID_LOAD", "forecast",
+           "largest_part", "load_is_cheap", "prefers_compiled", "prefers_four",
+           "use_compiled"]
 
 JACOBI_SWEEPS = 100
 """The NumPy sweeps before a block is jumped (the iteration's ``_SWEEPS_BEFORE_POLICY``):
@@ -86,6 +87,20 @@ GS_PER_DEPTH = 1.0
 """Gauss--Seidel sweeps a step of the block's depth, in the value order: an upper figure
 of those measured, bus n64 d3 (depth 126) 96 (and an early jump) and 129, bus n128 d3
 (depth 254) 200 and 265, QVBS ``zeroconf`` 1000-4 (depth 66) 39."""
+
+FOUR_BASE = 1.0
+"""Gauss--Seidel sweeps of a two-model block (four columns, the kernels of
+:mod:`mitld_lp.solvers.sweep_four`) beyond its depth (:func:`prefers_four`): the sensed
+case's two blocks (depth 6) closed in 7 and 5 (``experiments/bench_sensed_gate.py``),
+where its NumPy sweeps took 13 and 9."""
+PAID_LOAD = 2.0e5
+"""The Gauss--Seidel kernel's load where the kernel loader's run-time is set up already
+(:func:`mitld_lp.util.kernel_loader.compiled_paid`: another kernel linked before, as the
+sensed build's are): its own link and first call, 0.1 ms and about 1-1.5 ms on the
+sensed case (``experiments/bench_sensed_gate.py``'s ``cold`` route against the kernel
+loaded before the solve), taken as 1.7 ms over 8.6 ns an entry.  Counted by the
+two-model rule (:func:`prefers_four`) only: the one-model rule keeps its load
+(:data:`LOADER_LOAD`, calibrated with it)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,16 +188,58 @@ def prefers_compiled(block: Block, loaded: bool) -> bool:
     return f.depth > JACOBI_SWEEPS and f.compiled < f.numpy
 
 
-def use_compiled(entries: int, block_entries: int, block: Block | None = None) -> bool:
+def prefers_four(block: Block, loaded: bool) -> bool:
+    """Whether a two-model block (four columns: :mod:`mitld_lp.solvers.sweep_four`'s
+    kernels) is forecast cheaper compiled, at any depth: NumPy's forecast as
+    :func:`prefers_compiled`'s (``NUMPY_ENTRY * min(depth, JACOBI_SWEEPS)`` sweeps, the
+    jump's rounds past them), the compiled one ``FOUR_BASE + depth`` sweeps plus the
+    kernel's load (0 once loaded; :data:`PAID_LOAD` where the loader's run-time is set
+    up; else as the one-model rule).  Measured on the sensed case's blocks
+    (``experiments/bench_sensed_gate.py``, CPU s): NumPy 13 and 9 sweeps, 0.0072-0.0114 s
+    a block, compiled 7 and 5, 0.0015-0.0040 s with the kernel's load.  The one-model
+    rule's depth floor (:data:`JACOBI_SWEEPS`) is not asked: it was set on one-model
+    blocks whose gap a random walk keeps open (QVBS ``consensus``), where the compiled
+    sweeps did not pay.  Up to that depth the forecasts' difference grows with the
+    depth, so the block's least depth (1: its pieces hold two states or more) and its
+    greatest (:func:`largest_part` less one) decide it without a search where they
+    agree."""
+    from mitld_lp.util import kernel_loader
+
+    states = int(block.states.size)
+    entries = float(block.inner.nnz)
+    sweep = entries + float(block.choices.shape[0])
+    load = (0.0 if loaded else PAID_LOAD if kernel_loader.compiled_paid()
+            else LOADER_LOAD if load_is_cheap() else NUMBA_LOAD)
+
+    def cheaper(depth: int) -> bool:
+        return load + (FOUR_BASE + depth) * sweep < _numpy(states, entries, sweep, depth)
+
+    top = largest_part(block) - 1
+    if top < 1:
+        return False
+    if top <= JACOBI_SWEEPS:
+        if cheaper(1):
+            return True
+        if not cheaper(top):
+            return False
+    return cheaper(jump_cost.block_depth(block))
+
+
+def use_compiled(entries: int, block_entries: int, block: Block | None = None,
+                 columns: int = 2) -> bool:
     """Whether a block of ``block_entries`` entries in a product of ``entries``
     transitions is swept with the compiled kernel (numba importable: imported here the
     first time).  A product below :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_ENTRIES`
     never; a block of at least :data:`~mitld_lp.solvers.kernels.COMPILED_MIN_BLOCK_ENTRIES`
-    always; a smaller one, when ``block`` is given, where :func:`prefers_compiled`
-    (numba's load counted unless the kernel is loaded already)."""
+    always; a smaller one, when ``block`` is given, where :func:`prefers_compiled` (one
+    model), or with ``columns`` 4 (two models) :func:`prefers_four` (numba's load
+    counted unless the kernel is loaded already)."""
     if entries < kernels.COMPILED_MIN_ENTRIES:
         return False
-    if block_entries < kernels.COMPILED_MIN_BLOCK_ENTRIES and (
-            block is None or not prefers_compiled(block, loaded=kernels.kernel_loaded())):
-        return False
+    if block_entries < kernels.COMPILED_MIN_BLOCK_ENTRIES:
+        if block is None:
+            return False
+        prefers = prefers_four if columns == 4 else prefers_compiled
+        if not prefers(block, loaded=kernels.kernel_loaded()):
+            return False
     return kernels.compiled_kernel() is not None
