@@ -10,10 +10,12 @@ handed in where it loads a model file): ``numpy`` (every block below the compile
 swept by NumPy), ``compiled`` (every block compiled, numba's kernel loaded before the
 solve and its load timed apart: ``load``), ``cold`` (every block compiled, the kernel
 loaded where the first block is swept, as a compiled pick of the gate loads it: its load
-counted in the route's sum, its first call in that block's figure) and ``default`` (the gate's picks).  Per
-block, in the order the iteration meets them: its states, entries, depth, the gate's
-forecasts (entries touched, numba not loaded) and its pick, then each route's sweeps and
-CPU seconds (sweeps plus set-up: the value order, the preparation).  ``best``
+counted in the route's sum, its first call in that block's figure) and ``default`` (the
+gate's picks).  Per block, in the order the iteration meets them: its states, entries,
+depth, the one-model rule's forecasts (``gate_blocks``': entries touched, numba not
+loaded; a two-model block is decided by ``sweep_gate.prefers_four``'s) and the gate's
+pick, then each route's sweeps and CPU seconds (sweeps plus set-up: the value order, the
+preparation).  ``best``
 names the cheaper route over the case's blocks as the solve meets them (``numpy`` or
 ``cold``: the sensed iteration starts with the kernel not loaded, ``loaded_at_start``).
 
@@ -129,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"({all(g['value'] == d['value'] and g['upper'] == d['upper'] for g in got.values())}); "  # noqa: E501
                 f"{len(blocks[0])} block(s); NumPy {numpy:.4f} s, compiled {compiled:.4f} s "
                 f"(its load before the solve {got['compiled']['numba_load']:.4f}), cold "
-                f"{cold:.4f} s (its load at the first block {got['cold']['numba_load']:.4f}); best {best}; the gate picks "
+                f"{cold:.4f} s (its load at the first block "
+                f"{got['cold']['numba_load']:.4f}); best {best}; the gate picks "
                 f"{['compiled' if b['gate'] else 'numpy' for b in blocks[3]]}; "
                 f"kernel loaded at the iteration's start: {d['loaded_at_start']}")
             print(lines[-1], flush=True)
