@@ -42,6 +42,7 @@ import _common  # noqa: E402
 import bench_sensed as B  # noqa: E402
 import profile_solve as ps  # noqa: E402
 
+TITLE = "## The sensed cases' blocks by route (CPU seconds; forecasts in entries touched)\n\n"
 ROUTES = ("numpy", "compiled", "cold", "default")
 HEADER = ("case", "block", "states", "entries", "depth", "numpy_forecast",
           "compiled_forecast", "gate", "numpy_sweeps", "numpy_cpu", "compiled_sweeps",
@@ -85,6 +86,13 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     return got
 
 
+def _answer(kind: str, work: str) -> int:
+    """The child's side of ``profile_solve._run_child``: its job read, its answer written."""
+    job = json.loads(Path(work, "job.json").read_text(encoding="utf-8"))
+    Path(work, kind + ".json").write_text(json.dumps(child(job)), encoding="utf-8")
+    return 0
+
+
 def _cpu(b: dict[str, Any]) -> float:
     return float(b["sweep_cpu"] + b["setup_cpu"] + b["jump_cpu"])
 
@@ -95,10 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--child", nargs=2, default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:  # run by profile_solve._run_child
-        work = Path(args.child[1])
-        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        (work / f"{args.child[0]}.json").write_text(json.dumps(child(job)), encoding="utf-8")
-        return 0
+        return _answer(*args.child)
     out = _common.out_dir(args)
     cases = B.QUICK if args.quick else B.FULL
     chosen = [i for i, c in enumerate(cases)
@@ -136,11 +141,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"{['compiled' if b['gate'] else 'numpy' for b in blocks[3]]}; "
                 f"kernel loaded at the iteration's start: {d['loaded_at_start']}")
             print(lines[-1], flush=True)
-    text = ("## The sensed cases' blocks by route (CPU seconds; forecasts in entries "
-            "touched)\n\n" + _common.markdown_table(HEADER, rows) + "\n"
-            + "\n".join(f"- {x}" for x in lines) + "\n")
-    _common.write_text(out / "bench_sensed_gate.md", text)
-    print(text)
+    body = _common.markdown_table(HEADER, rows) + "\n" + "".join(f"- {x}\n" for x in lines)
+    _common.write_text(out / "bench_sensed_gate.md", TITLE + body)
+    print(TITLE + body)
     return 0
 
 
