@@ -63,12 +63,12 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     blocks: list[dict[str, Any]] = []
     gate = sweep_gate.use_compiled
 
-    def use(entries: int, block_entries: int, block: Any = None) -> bool:
+    def use(entries: int, block_entries: int, block: Any = None, *rest: Any) -> bool:
         f = sweep_gate.forecast(block, loaded=False)
         blocks.append(dict(states=int(block.states.size), entries=int(block_entries),
                            depth=f.depth, numpy_forecast=f.numpy,
                            compiled_forecast=f.compiled,
-                           gate=bool(gate(entries, block_entries, block)),
+                           gate=bool(gate(entries, block_entries, block, *rest)),
                            sweeps=0, sweep_cpu=0.0, jump_cpu=0.0, setup_cpu=0.0))
         if route == "default" or block_entries >= kernels.COMPILED_MIN_BLOCK_ENTRIES:
             return blocks[-1]["gate"]

@@ -362,8 +362,8 @@ def _levels(q: Quotient, blk: Blocks, rewards: np.ndarray, bounds: np.ndarray, t
         if rest.size == 0:
             continue
         block = Block.of(q, rest)
-        fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block) if compiled is None
-                else compiled)
+        fast = (use_compiled(q.matrix.nnz, block.inner.nnz, block, bounds.shape[1])
+                if compiled is None else compiled)
         if fast:  # the order before the exits: its searches peak without them beside
             order = value_order(block)[::-1]
         exits = take_rows(rewards, block.choices) + block.outer @ bounds
