@@ -11,7 +11,9 @@ levels kept (``levels_after``) and the second takes them:
   lower model, 1 in the upper one), within the LP's tolerance;
 * nothing is left kept after the second LP (it takes them), and an LP with
   ``levels_after`` whose follower never comes leaves them only while its quotient's
-  matrix lives.
+  matrix lives;
+* ``keeping_zero(q, zero_only=True)`` (the LPs' call: only the known zeros' rows read)
+  is, on the zero states, a loop's first choice that keeps 0, elsewhere the first.
 """
 
 from __future__ import annotations
@@ -125,3 +127,39 @@ def test_levels_left_for_a_follower_go_with_their_matrix() -> None:
     del low, high
     gc.collect()
     assert key not in shared_mod._KEPT  # gone with the quotients' matrix
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_keeping_zero_of_the_zero_states_only(seed: int) -> None:
+    """``keeping_zero(q, zero_only=True)``: on the zero states the choice a loop over
+    their choices and entries finds (the first with no target mass and every successor
+    known 0, else the first), the first choice on every other state."""
+    from types import SimpleNamespace
+
+    import scipy.sparse as sp
+
+    from mitld_lp.solvers.reduced import keeping_zero
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    groups = np.concatenate([[0], np.cumsum(rng.integers(1, 5, size=n))])
+    m = int(groups[-1])
+    indptr = np.concatenate([[0], np.cumsum(rng.integers(0, 4, size=m))]).astype(np.int32)
+    indices = rng.integers(0, n, size=int(indptr[-1])).astype(np.int32)
+    data = rng.random(indices.size)
+    zero = rng.random(n) < rng.choice([0.05, 0.6])
+    to_target = np.where(rng.random(m) < 0.3, rng.random(m), 0.0)
+    q = SimpleNamespace(matrix=sp.csr_array((data, indices, indptr), shape=(m, n)),
+                        zero=zero, to_target=to_target, row_groups=groups, n_choices=m)
+    want = []
+    for s in range(n):
+        pick = int(groups[s])
+        if zero[s]:
+            for c in range(groups[s], groups[s + 1]):
+                succ = indices[indptr[c]:indptr[c + 1]]
+                if to_target[c] == 0.0 and all(zero[t] for t in succ):
+                    pick = c
+                    break
+        want.append(pick)
+    got = keeping_zero(q, zero_only=True)
+    assert got.dtype == np.int64 and got.tolist() == want

@@ -392,7 +392,7 @@ def _from_iteration(q: Quotient, b_eq: Any) -> Answer | None:
     zero = np.asarray(q.zero)
     states = np.asarray(singles.states, dtype=np.int64)
     live = ~zero[states]
-    reduced_choice = (keeping_zero(q) if zero.any()
+    reduced_choice = (keeping_zero(q, zero_only=True) if zero.any()
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights = np.zeros(q.n_choices)
     weights[reduced_choice[zero]] = 1.0

@@ -431,7 +431,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
     # a state known to have value 0 takes a choice that keeps it 0 and is not solved
-    reduced_choice = (keeping_zero(q) if q.zero.any()
+    reduced_choice = (keeping_zero(q, zero_only=True) if q.zero.any()
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
