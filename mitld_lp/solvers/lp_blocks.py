@@ -175,7 +175,9 @@ class Walked:
     def of(block: Block, walk: ChainLevels) -> Walked:
         outer = block.outer
         row = np.repeat(np.arange(outer.shape[0], dtype=np.int64), np.diff(outer.indptr))
-        return Walked(block.states, walk, row, outer.indices.copy(), outer.data.copy())
+        # the outer matrix's own arrays (Block.of makes them; the block is dropped
+        # once walked), not copies of them
+        return Walked(block.states, walk, row, outer.indices, outer.data)
 
     def push(self, q: Quotient, weights: np.ndarray, x: np.ndarray) -> None:
         """Add the flow ``x`` of the level's states (solved) along its exits: each
