@@ -24,6 +24,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from conftest import build_mdp
+from test_peak_1e6 import _brute
+from test_single_levels import _layered, _recursion
 
 from mitld_lp.solvers import shared_levels as shared_mod
 from mitld_lp.solvers.analysis import analyse
@@ -32,49 +34,29 @@ from mitld_lp.solvers.lp import solve_lp
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS
 
 
-def _layers(seed: int, depth: int = 40, width: int = 3):
-    """``depth`` layers of ``width`` states; each choice may stay put, moves on to two
-    states of the next layer, to the goal, to a sink and to a truncated state; the
-    last layer ends there.  The MDP and each state's exact rows."""
-    rng = np.random.default_rng(seed)
-    n = depth * width
-    goal, sink, cut = n, n + 1, n + 2
-    states, exact = [], []
-    for s in range(n):
-        layer = s // width
-        mine, ex = [], []
-        for a in range(int(rng.integers(1, 4))):
-            nxt = [goal, sink, cut] + ([(layer + 1) * width + int(j) for j in
-                                        rng.choice(width, size=2, replace=False)]
-                                       if layer + 1 < depth else [])
-            w = rng.integers(1, 9, size=len(nxt) + 1).astype(float)
-            w[0] = w[0] if rng.random() < 0.5 else 0.0  # a self-loop half the time
-            p = w / w.sum()
-            row = {s: float(p[0])} if p[0] > 0 else {}
-            for t, x in zip(nxt, p[1:], strict=True):
-                row[t] = row.get(t, 0.0) + float(x)
-            row[sink] += 1.0 - sum(row.values())  # rows sum to 1 in floats
-            mine.append((f"a{a}", row))
-            ex.append(row)
-        states.append(mine)
-        exact.append(ex)
-    states += [[], [], []]
-    mdp = build_mdp(states, target=[goal], sink=[sink], truncated=[cut])
-    return mdp, exact, n
+def _layers(seed: int):
+    """:func:`test_single_levels._layered`'s layers (40 of 3 states) with its dead end
+    a truncated state: the MDP, each state's exact rows, the goal and the layers'
+    states' count."""
+    _, exact, goal = _layered(seed, depth=40)
+    states = [[(f"a{k}", row) for k, row in enumerate(rows)] for rows in exact]
+    states += [[], []]
+    return build_mdp(states, target=[goal], truncated=[goal + 1]), exact, goal
 
 
-def _exact(exact, n: int, cut_value: int, sense: Sense) -> list[Fraction]:
-    """Backward induction over the layers in fractions of the stored floats."""
-    pick = max if sense is Sense.MAX else min
-    v = {n: Fraction(1), n + 1: Fraction(0), n + 2: Fraction(cut_value)}
-    for s in range(n - 1, -1, -1):
-        scores = []
-        for row in exact[s]:
-            stay = Fraction(row.get(s, 0.0))
-            gain = sum((Fraction(p) * v[t] for t, p in row.items() if t != s), Fraction(0))
-            scores.append(gain / (1 - stay))
-        v[s] = pick(scores)
-    return [v[s] for s in range(n)]
+def _exact(exact, goal: int, cut_value: int, sense: Sense) -> list[Fraction]:
+    """The exact optimum by backward induction (``_recursion``): the truncated state
+    counts 0, or 1 as a second goal (its mass added to the goal's, in fractions)."""
+    if cut_value:
+        exact = [[_merged(row, goal) for row in rows] for rows in exact]
+    return _recursion(exact, goal, goal, sense)
+
+
+def _merged(row: dict, goal: int) -> dict:
+    """``row`` with the truncated state's probability moved onto the goal, exactly."""
+    out = {t: Fraction(p) for t, p in row.items() if t != goal + 1}
+    out[goal] = out.get(goal, Fraction(0)) + Fraction(row.get(goal + 1, 0.0))
+    return out
 
 
 def _solve_both(mdp, quotients, after: bool):
@@ -90,7 +72,7 @@ def _solve_both(mdp, quotients, after: bool):
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_the_second_lp_takes_the_first_lps_levels(seed: int, sense: Sense,
                                                     monkeypatch) -> None:
-    mdp, exact, n = _layers(seed)
+    mdp, exact, n = _layers(seed)  # (n: the goal, after the layers' n states)
     built = []
     original = shared_mod.SingleLevels
 
@@ -151,15 +133,7 @@ def test_keeping_zero_of_the_zero_states_only(seed: int) -> None:
     to_target = np.where(rng.random(m) < 0.3, rng.random(m), 0.0)
     q = SimpleNamespace(matrix=sp.csr_array((data, indices, indptr), shape=(m, n)),
                         zero=zero, to_target=to_target, row_groups=groups, n_choices=m)
-    want = []
-    for s in range(n):
-        pick = int(groups[s])
-        if zero[s]:
-            for c in range(groups[s], groups[s + 1]):
-                succ = indices[indptr[c]:indptr[c + 1]]
-                if to_target[c] == 0.0 and all(zero[t] for t in succ):
-                    pick = c
-                    break
-        want.append(pick)
+    full = _brute(indptr, indices, zero, to_target, groups)
+    want = [full[s] if zero[s] else int(groups[s]) for s in range(n)]
     got = keeping_zero(q, zero_only=True)
     assert got.dtype == np.int64 and got.tolist() == want
