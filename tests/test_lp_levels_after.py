@@ -13,7 +13,9 @@ levels kept (``levels_after``) and the second takes them:
   ``levels_after`` whose follower never comes leaves them only while its quotient's
   matrix lives;
 * ``keeping_zero(q, zero_only=True)`` (the LPs' call: only the known zeros' rows read)
-  is, on the zero states, a loop's first choice that keeps 0, elsewhere the first.
+  is, on the zero states, a loop's first choice that keeps 0, elsewhere the first;
+  and ``first_staying`` is test_csma_mem's loop; both with their entries read in
+  chunks of 1, a few and 8,192.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from conftest import build_mdp
 from test_peak_1e6 import _brute
 from test_single_levels import _layered, _recursion
 
+from mitld_lp.solvers import rows
 from mitld_lp.solvers import shared_levels as shared_mod
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
@@ -111,8 +114,9 @@ def test_levels_left_for_a_follower_go_with_their_matrix() -> None:
     assert key not in shared_mod._KEPT  # gone with the quotients' matrix
 
 
+@pytest.mark.parametrize("chunk", [1, 5, 1 << 13])
 @pytest.mark.parametrize("seed", range(8))
-def test_keeping_zero_of_the_zero_states_only(seed: int) -> None:
+def test_keeping_zero_of_the_zero_states_only(seed: int, chunk: int, monkeypatch) -> None:
     """``keeping_zero(q, zero_only=True)``: on the zero states the choice a loop over
     their choices and entries finds (the first with no target mass and every successor
     known 0, else the first), the first choice on every other state."""
@@ -135,5 +139,23 @@ def test_keeping_zero_of_the_zero_states_only(seed: int) -> None:
                         zero=zero, to_target=to_target, row_groups=groups, n_choices=m)
     full = _brute(indptr, indices, zero, to_target, groups)
     want = [full[s] if zero[s] else int(groups[s]) for s in range(n)]
+    monkeypatch.setattr(rows, "ENTRY_CHUNK", chunk)  # entries read at a time
     got = keeping_zero(q, zero_only=True)
     assert got.dtype == np.int64 and got.tolist() == want
+
+
+@pytest.mark.parametrize("chunk", [1, 4, 1 << 13])
+def test_first_staying_read_a_chunk_of_entries_at_a_time(chunk: int, monkeypatch) -> None:
+    """``first_staying`` (only the states of several choices searched, their entries a
+    chunk at a time) is test_csma_mem's loop over every state's rows, stored zeros
+    included (no edge)."""
+    from test_csma_mem import _random_mdp, _staying_by_loop, _with_zeros
+
+    from mitld_lp.solvers.quotient import first_staying
+
+    monkeypatch.setattr(rows, "ENTRY_CHUNK", chunk)
+    rng = np.random.default_rng(chunk)
+    for mdp in [_random_mdp(3), _with_zeros(_random_mdp(7), 7)]:
+        inside = rng.random(mdp.n_states) < 0.6
+        want = [_staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
+        assert first_staying(mdp, inside).tolist() == want

@@ -33,7 +33,7 @@ from mitld_lp.solvers.graph import (
 )
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
-from mitld_lp.solvers.rows import gather_ranges, row_entries
+from mitld_lp.solvers.rows import first_choice_without, gather_ranges, row_entries
 from mitld_lp.util.arrays import SLICE_STATES, index_dtype
 
 __all__ = [
@@ -223,32 +223,12 @@ def first_staying(mdp: MDP, inside: np.ndarray, lo: int = 0, hi: int | None = No
 
 
 def staying_choices(mdp: MDP, inside: np.ndarray, states: np.ndarray) -> np.ndarray:
-    """:func:`first_staying` of the ``states`` (increasing; a slice's worth), int64:
-    their choices' entries gathered (a stored zero is no edge), each choice's entries
-    leading out counted by a running sum, the least staying choice of each state by a
-    segmented minimum (its first choice where none stays)."""
+    """:func:`first_staying` of the ``states`` (increasing), int64: the first choice
+    with no entry of positive probability outside (a stored zero is no edge), read a
+    chunk of entries at a time (:func:`~mitld_lp.solvers.rows.first_choice_without`)."""
     m = mdp.matrix
-    groups = np.asarray(mdp.row_groups)
-    first, stop = groups[states].astype(np.int64), groups[states + 1].astype(np.int64)
-    choices = gather_ranges(first, stop)
-    ptr = np.asarray(m.indptr)
-    lo, size = ptr[choices].astype(np.int64), (ptr[choices + 1] - ptr[choices]).astype(np.int64)
-    entries = gather_ranges(lo, lo + size)
-    out_edge = ~inside[m.indices[entries]]
-    out_edge &= m.data[entries] > 0
-    del entries
-    count = np.zeros(out_edge.size + 1, dtype=np.int64)
-    np.cumsum(out_edge, out=count[1:])
-    del out_edge
-    end = np.cumsum(size)
-    stays = count[end] == count[end - size]  # per choice: no entry leads out
-    del count, end, size, lo
-    big = np.iinfo(np.int64).max
-    where = np.where(stays, choices, big)
-    starts = np.cumsum(stop - first) - (stop - first)  # each state's first in ``choices``
-    best = np.minimum.reduceat(where, starts)
-    np.copyto(best, first, where=best == big)
-    return best
+    return first_choice_without(mdp.row_groups, m, states,
+                                lambda e: ~inside[m.indices[e]] & (m.data[e] > 0))
 
 
 def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:

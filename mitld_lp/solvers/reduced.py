@@ -15,7 +15,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDPShape
 from mitld_lp.solvers.graph import Blocks, EndComponents, Sense, segmented_argmax
-from mitld_lp.solvers.rows import gather_ranges
+from mitld_lp.solvers.rows import first_choice_without
 
 __all__ = ["Qualitative", "Quotient", "greedy_choices", "keeping_zero"]
 
@@ -203,26 +203,12 @@ def keeping_zero(q: Quotient, *, zero_only: bool = False) -> np.ndarray:
 
 
 def _keeping_zero_of(q: Quotient, states: np.ndarray) -> np.ndarray:
-    """:func:`keeping_zero` of ``states`` (increasing), the first choice elsewhere: the
-    states' choices and their entries gathered, each choice's entries into a state not
-    known to be 0 counted by a running sum (an empty row counts none)."""
-    groups = np.asarray(q.row_groups)
-    out = np.asarray(groups[:-1], dtype=np.int64).copy()
-    if states.size == 0:
-        return out
-    first = groups[states].astype(np.int64)
-    choices = gather_ranges(first, groups[states + 1])
-    ptr = np.asarray(q.matrix.indptr)
-    lo = ptr[choices].astype(np.int64)
-    size = ptr[choices + 1].astype(np.int64) - lo
-    moving = ~np.asarray(q.zero, dtype=bool)[q.matrix.indices[gather_ranges(lo, lo + size)]]
-    count = np.zeros(moving.size + 1, dtype=np.int64)
-    np.cumsum(moving, out=count[1:])
-    end = np.cumsum(size)
-    keeps = choices[(count[end] == count[end - size])
-                    & (np.asarray(q.to_target)[choices] == 0.0)]
-    owner = np.searchsorted(groups, keeps, side="right") - 1  # each one's state
-    lead = np.ones(keeps.size, dtype=bool)  # (keeps ascending: owners too)
-    np.not_equal(owner[1:], owner[:-1], out=lead[1:])
-    out[owner[lead]] = keeps[lead]
+    """:func:`keeping_zero` of ``states`` (increasing), the first choice elsewhere
+    (:func:`~mitld_lp.solvers.rows.first_choice_without`: a chunk of their entries at
+    a time; a stored zero is still a move)."""
+    out = np.asarray(q.row_groups[:-1], dtype=np.int64).copy()
+    zero, to_target, m = np.asarray(q.zero, dtype=bool), np.asarray(q.to_target), q.matrix
+    out[states] = first_choice_without(q.row_groups, m, states,
+                                       lambda e: ~zero[m.indices[e]],
+                                       lambda c: to_target[c] == 0.0)
     return out
