@@ -7,17 +7,19 @@ loaded where the stage first calls them), the answer beside::
     python experiments/lp_stage_parts.py <checkout> <QVBS benchmarks dir> <instance>... \\
         [--compare <other checkout>] [--out FILE.md]
 
-An instance is a QVBS name (``zeroconf.1000-4-false.correct_max``) or a
-``bench_sweeps.py`` one (``bus_scaled_n64_d3``).  The parts (:data:`PARTS`) nest: the
-chain walks (``ChainLevels``: a policy's chain, its components found and levels
-factorised, and its forward solves) are inside whichever part makes them (the greedy
-check's policy chain, the crossover's, a flow's cyclic level), the numba loads inside
-whichever part first calls a kernel; ``other`` is the stage less the top-level
-parts; ``singles`` holds the single states' level walk and, where the iteration's
-bounds already answer it, their check (``settled_by_bounds``).  ``jump``, outside the
-LP stage, is the interval iteration's policy jumps
-(:func:`mitld_lp.solvers.policy_jump.jump`: their policy iterations' factorisations
-and look-ahead sweeps), which the LP stage's bounds come from.
+An instance is a QVBS name (``zeroconf.1000-4-false.correct_max``), a
+``bench_sweeps.py`` one (``bus_scaled_n64_d3``) or ``sensed`` (``bench_qvbs.py``'s
+sensed bus case, ``bench_sensed.py``'s first: its two truncation models' LPs summed, and
+``solve CPU`` the sensed route's solve as ``bench_qvbs.py`` counts it). The parts
+(:data:`PARTS`) nest: the chain walks (``ChainLevels``: a policy's chain, its components
+found and levels factorised, and its forward solves) are inside whichever part makes
+them (the greedy check's policy chain, the crossover's, a flow's cyclic level), the
+numba loads inside whichever part first calls a kernel; ``other`` is the stage less the
+top-level parts; ``singles`` holds the single states' level walk and, where the
+iteration's bounds already answer it, their check (``settled_by_bounds``). ``jump``,
+outside the LP stage, is the interval iteration's policy jumps
+(:func:`mitld_lp.solvers.policy_jump.jump`: their policy iterations' factorisations and
+look-ahead sweeps), which the LP stage's bounds come from.
 """
 
 from __future__ import annotations
@@ -52,6 +54,13 @@ COLUMNS = TOP + ("chain walks", "numba loads", "other", "jump")
 
 
 def _model(root: Path, benchmarks: Path, name: str) -> Any:
+    if name == "sensed":
+        import bench_qvbs as bq
+        import bench_sensed
+
+        model = bench_sensed.case_model(bq.SENSED, False)
+        bq.bs.preload()
+        return model
     if name.startswith("bus_scaled_"):
         import bench_sweeps as bs
 
@@ -135,10 +144,16 @@ def child(root: Path, benchmarks: Path, name: str) -> dict[str, Any]:
     for mod in list(sys.modules.values()):
         if getattr(mod, "solve_lp", None) is solve_lp:
             mod.solve_lp = lp_timed
+    sensed_cpu = None
+    if name == "sensed":  # the route leaves Result.solve_cpu unset: bench_qvbs's timer
+        import bench_qvbs as bq
+
+        sensed_cpu = bq._timed_sensed_solve()
     r = synthesize(model)
     cpu["other"] = cpu["lp"] - sum(cpu.get(p, 0.0) for p in TOP)
     return {"instance": name, "lower": repr(r.lower), "upper": repr(r.upper),
-            "solve_cpu": r.solve_cpu, "cpu": cpu}
+            "solve_cpu": (r.solve_cpu if sensed_cpu is None else sum(sensed_cpu)),
+            "cpu": cpu}
 
 
 def main(argv: list[str]) -> None:

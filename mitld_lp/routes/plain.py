@@ -112,11 +112,13 @@ class ModelSolution:
 
 
 def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
-              deadline: Deadline) -> LPResult | None:
+              deadline: Deadline, after: Quotient | None = None) -> LPResult | None:
     """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
     :class:`Quotient`, made by the one analysis of the product both models share
     (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
-    iteration (both models are iterated in one pass, :func:`_iterate`)."""
+    iteration (both models are iterated in one pass, :func:`_iterate`).  ``after``: the
+    next model's quotient, whose LP then reads this one's single-state levels where it
+    shares the matrix (they are built once for both)."""
     if s.method != "lp":
         return None
     from mitld_lp.solvers.lp import solve_lp
@@ -127,7 +129,10 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
                     layout="blocks" if s.decompose is not False else "whole",
                     time_limit=deadline.left(), bounds=(it.lower, it.upper),
                     everywhere=quotient.initial < 0, progress=s.progress,
-                    flows=False)  # nothing reads a model's occupancy: not at the peak
+                    flows=False,  # nothing reads a model's occupancy: not at the peak
+                    levels_after=after is not None and after.matrix is quotient.matrix
+                    and after.order is quotient.order
+                    and after.row_groups is quotient.row_groups)
 
 
 def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
@@ -386,8 +391,9 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     if mdp.n_transitions >= TRIM_BEFORE_LP_FROM:
         release_free_memory()
     # (each LP's freed pages handed back before the next stage: _trimmed)
-    lps = [_trimmed(mdp, _solve_lp(mdp, q, it, s, deadline))
-           for q, it in zip(quotients, its, strict=True)]
+    lps = [_trimmed(mdp, _solve_lp(mdp, q, it, s, deadline,
+                                   quotients[k + 1] if k + 1 < len(quotients) else None))
+           for k, (q, it) in enumerate(zip(quotients, its, strict=True))]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.
     # (a minimum's certificate reads no end components: its quotient has none, and

@@ -263,6 +263,7 @@ def solve_lp(
     progress: bool | None = None,
     greedy: bool = True,
     flows: bool = True,
+    levels_after: bool = False,
 ) -> LPResult:
     """Maximal (``sense=Sense.MIN``: minimal) probability of reaching ``target`` from
     ``mdp.initial``, by the occupancy LP.
@@ -311,6 +312,9 @@ def solve_lp(
             not made (two floats a choice of the product; a caller that reads only
             the policy and the values, as the plain route does, keeps them out of the
             certificate's peak).  Everything else is the same to the bit.
+        levels_after: another model's LP on a quotient sharing this one's matrix,
+            order and row groups comes next: the single states' levels are left for it
+            (:func:`~mitld_lp.solvers.lp_blocks.solve_decomposed`); the same answers.
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
@@ -358,7 +362,7 @@ def solve_lp(
         answer = (bounds is not None and _from_iteration(q, lambda: _start_weights(
             q, everywhere))) or solve_decomposed(
                 q, lambda: _start_weights(q, everywhere), settings,
-                _reduced_bounds(q, bounds), progress)
+                _reduced_bounds(q, bounds), progress, levels_after=levels_after)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -388,7 +392,7 @@ def _from_iteration(q: Quotient, b_eq: Any) -> Answer | None:
     zero = np.asarray(q.zero)
     states = np.asarray(singles.states, dtype=np.int64)
     live = ~zero[states]
-    reduced_choice = (keeping_zero(q) if zero.any()
+    reduced_choice = (keeping_zero(q, zero_only=True) if zero.any()
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights = np.zeros(q.n_choices)
     weights[reduced_choice[zero]] = 1.0

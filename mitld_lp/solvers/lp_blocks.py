@@ -175,7 +175,9 @@ class Walked:
     def of(block: Block, walk: ChainLevels) -> Walked:
         outer = block.outer
         row = np.repeat(np.arange(outer.shape[0], dtype=np.int64), np.diff(outer.indptr))
-        return Walked(block.states, walk, row, outer.indices.copy(), outer.data.copy())
+        # the outer matrix's own arrays (Block.of makes them; the block is dropped
+        # once walked), not copies of them
+        return Walked(block.states, walk, row, outer.indices, outer.data)
 
     def push(self, q: Quotient, weights: np.ndarray, x: np.ndarray) -> None:
         """Add the flow ``x`` of the level's states (solved) along its exits: each
@@ -386,7 +388,7 @@ def solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
 def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
                       settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
-                      progress: bool | None = None
+                      progress: bool | None = None, *, levels_after: bool = False
                       ) -> Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
@@ -420,12 +422,18 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     The states left with one column are eliminated before the solver when the block
     is large (:mod:`mitld_lp.solvers.eliminate`, :func:`solve_block`): the LP is
     over the states that keep a choice, and its answer is lifted back to the whole
-    block before the polish."""
+    block before the polish.
+
+    ``levels_after``: another LP on a quotient of the same matrix, order and row groups
+    follows (the other truncation model's): the single states' levels
+    (:func:`~mitld_lp.solvers.shared_levels.shared_levels`) are left kept for it, not
+    taken here and built again there (the sensed case's second LP rebuilt them, at its
+    peak)."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
     # a state known to have value 0 takes a choice that keeps it 0 and is not solved
-    reduced_choice = (keeping_zero(q) if q.zero.any()
+    reduced_choice = (keeping_zero(q, zero_only=True) if q.zero.any()
                       else np.asarray(q.row_groups[:-1], dtype=np.int64).copy())
     weights[reduced_choice[q.zero]] = 1.0
     worst = Raw(Status.OPTIMAL, "")
@@ -434,7 +442,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     # (shared_levels: the iteration's, where it built them for this quotient)
-    singles = (shared_levels(q, blk, last=True) if blk.n_levels >= RUNS_MIN_LEVELS
+    singles = (shared_levels(q, blk, last=not levels_after)
+               if blk.n_levels >= RUNS_MIN_LEVELS
                else None)
     walk = (blk.walk(skip=q.zero) if singles is None else
             iter(()) if settled_by_bounds(q, blk, singles, bounds, values, reduced_choice,
