@@ -90,6 +90,7 @@ def load():
 out = dict(stormpy_import=stormpy_import, ours_import=ours_import)
 if sys.argv[2] == "whole":  # the load as the benchmark runs it, first in its process
     _, out["load"] = load()
+    out["process_peak_mb"] = rss_mb()["VmHWM"]
     out["child_peak_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     print(json.dumps(out))
     sys.exit(0)
@@ -114,10 +115,14 @@ def timed(module, name, label):
 
 pb.can_cap = lambda: False
 from mitld_lp.worlds import prism_program as pp  # (where the parse runs since proc-lean)
+from mitld_lp.worlds import prism_explore as pe
 for module, name, label in ((pr, "parse_program", "parse"), (pr, "with_labels", "parse"),
                             (pp, "parse_program", "parse"), (pp, "with_labels", "parse"),
                             (pr, "with_constants", "parse"), (pr, "check_program", "parse"),
-                            (pb, "storm_build", "storm_ours"), (pb, "read_model", "convert")):
+                            (pb, "storm_build", "storm_ours"), (pb, "read_model", "convert"),
+                            (pb, "own_build", "own"), (pr, "own_build", "own"),
+                            (pe, "explore_program", "explore"),
+                            (pe, "label_values", "own_labels")):
     if hasattr(module, name):  # (a name prism.py no longer imports: its module's)
         timed(module, name, label)
 model, here = load()
@@ -126,7 +131,7 @@ out.update(here=here, states=len(t.states), transitions=int(t.targets.size),
            props=len(model.game.proposition_names))
 for label, (spent, peak) in stages.items():
     out[label], out[label + "_mb"] = spent, peak
-out["else"] = here - sum(stages[k][0] for k in stages)
+out["else"] = here - sum(v[0] for k, v in stages.items() if k not in ("explore", "own_labels"))
 print(json.dumps(out))
 """
 
@@ -158,8 +163,9 @@ print(json.dumps(out))
 """
 
 COLUMNS = ("states", "transitions", "props", "ref_states", "stormpy_import", "ours_import",
-           "load", "here", "parse", "storm_ours", "storm_ref", "convert", "else", "ref_parse",
-           "storm_ours_mb", "storm_ref_mb", "convert_mb", "child_peak_mb")
+           "load", "here", "parse", "storm_ours", "storm_ref", "convert", "own", "explore",
+           "own_labels", "else", "ref_parse", "storm_ours_mb", "storm_ref_mb", "convert_mb",
+           "own_mb", "explore_mb", "child_peak_mb", "process_peak_mb")
 
 
 def probe(job: dict, root: Path, code: str = PROBE, mode: str = "stages") -> dict:
@@ -203,7 +209,8 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
             for label, root in roots:
                 whole = probe(jobs[name], root, mode="whole")
                 runs[label].append(dict(probe(jobs[name], root), **ref, load=whole["load"],
-                                        child_peak_mb=whole["child_peak_mb"]))
+                                        child_peak_mb=whole["child_peak_mb"],
+                                        process_peak_mb=whole["process_peak_mb"]))
         sizes = {(r["states"], r["transitions"]) for rs in runs.values() for r in rs}
         if len(sizes) != 1:
             raise SystemExit(f"{name}: the checkouts load other worlds: {sorted(sizes)}")

@@ -90,7 +90,7 @@ def checked_rows(lengths: np.ndarray, probs: np.ndarray, tolerance: float
     row, which :func:`normalise_rows` takes instead of computing them again (where no
     row is faulty the totals are its own, bit for bit: the same sums in the same order)."""
     n = lengths.size
-    row = np.repeat(np.arange(n), lengths)
+    row = np.repeat(np.arange(n, dtype=np.int32 if n < 1 << 31 else np.int64), lengths)
     wrong = ~np.isfinite(probs) | (probs < 0.0)
     bad = lengths == 0
     if wrong.any():
