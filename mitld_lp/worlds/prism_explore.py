@@ -71,6 +71,7 @@ class Explored:
     keys: np.ndarray
     layout: dict[str, Any]
     sync_base: np.ndarray
+    radix: tuple[list[list[int]], np.ndarray] | None = None
 
     @property
     def values(self) -> np.ndarray:
@@ -112,7 +113,9 @@ class Explored:
 
     def _radix(self) -> tuple[list[list[int]], np.ndarray]:
         """Per action, its modules' numbers of commands, and the first one's weight."""
-        return sync_radix(self.layout["sync_start"], self.layout["mod_start"])
+        if self.radix is None:
+            self.radix = sync_radix(self.layout["sync_start"], self.layout["mod_start"])
+        return self.radix
 
 
 def sync_radix(sync_start: Any, mod_start: Any) -> tuple[list[list[int]], np.ndarray]:
@@ -445,15 +448,22 @@ def _told_apart(built: Explored, compiled: Compiled, of: np.ndarray, names: list
     :func:`mitld_lp.worlds.prism_names.origin_codes` names them."""
     of, names = of.copy(), list(names)
     position = {x: k for k, x in enumerate(names)}
-    for c in clash.tolist():
-        cmds = built.commands(c)
+    # a choice's commands, and so its name, are its origin's: each distinct one named
+    # once, in the order the clashing choices first show them (zeroconf_dl: 2,384
+    # choices, a few origins)
+    origins, first_at, inverse = np.unique(built.origin[clash], return_index=True,
+                                           return_inverse=True)
+    renamed = np.empty(origins.size, dtype=of.dtype)
+    for j in np.argsort(first_at, kind="stable").tolist():
+        c = int(clash[first_at[j]])
         text = "+".join(compiled.cmd_text[x] for x in sorted(
-            cmds, key=lambda x: compiled.cmd_global[x]))
+            built.commands(c), key=lambda x: compiled.cmd_global[x]))
         name = f"{names[int(of[c])]}@{text}"
         k = position.setdefault(name, len(position))
         if k == len(names):
             names.append(name)
-        of[c] = k
+        renamed[j] = k
+    of[clash] = renamed[np.asarray(inverse).reshape(-1)]
     return of, names
 
 
