@@ -145,8 +145,9 @@ def decoded(keys: np.ndarray, layout: dict[str, Any], columns: list[int]) -> np.
 class PackedValuations(Valuations):
     """:class:`~mitld_lp.worlds.prism_tables.Valuations` kept as the explorer's packed
     states (``words`` int64 a state: csma 4-2's 19 variables in one word) and decoded
-    when first read (a solve reads none; the decode and its copies were a third of the
-    explorer's tables step and its largest array)."""
+    when first read whole (a solve reads none; the decode and its copies were a third of
+    the explorer's tables step and its largest array); a few states asked for (the
+    initial one, a policy's) are decoded alone."""
 
     def __init__(self, keys: np.ndarray, layout: dict[str, Any], columns: list[int],
                  booleans: tuple[int, ...]) -> None:
@@ -165,6 +166,25 @@ class PackedValuations(Valuations):
         if self._values is not None:
             return int(self._values.shape[0])
         return int(self.keys.size // int(self.layout["words"]))
+
+    def _of(self, at: Any) -> np.ndarray:
+        """The values of the states ``at`` (an index array or a slice): decoded from
+        their packed states alone until every state's are."""
+        if self._values is not None:
+            return self._values[at]
+        packed = self.keys.reshape(-1, int(self.layout["words"]))[at]
+        return decoded(packed.reshape(-1), self.layout, self.columns)
+
+    def rows(self, indices: np.ndarray) -> list[Any]:
+        return self._tuples(self._of(np.asarray(indices, dtype=np.int64)))
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return tuple(self._tuples(self._of(i)))
+        i = int(i)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"state {i} of {len(self)}")
+        return self._tuples(self._of(np.array([i % len(self)])))[0]
 
 
 def chosen_builder() -> str:
@@ -429,7 +449,9 @@ def _clashes(built: Explored, of: np.ndarray, k: int) -> np.ndarray:
     key = np.repeat(np.arange(0, n * (k + 1), k + 1, dtype=np.int64), np.diff(built.choices))
     key += of
     key += 1
-    ordered = np.sort(key)  # the common case, no two alike, told without the order's arrays
+    # the common case, no two alike, told without the order's arrays; a stable sort: the
+    # keys come in a run per state, merged in about one pass
+    ordered = np.sort(key, kind="stable")
     if not (ordered[1:] == ordered[:-1]).any():
         return np.empty(0, dtype=np.int64)
     del ordered
