@@ -50,6 +50,9 @@ state and its hash slot (about 40 bytes), the growing arrays of choices and bran
 (doubled: up to twice their 16 bytes per branch at ten branches a state), the tables'
 copies and the product's later reading of them, rounded up."""
 
+NAMES_BLOCK = 1 << 17
+"""The choices whose first commands :func:`_naming` reads at a time."""
+
 _STATUS = {1: "an update leaves a variable's range", 2: "a probability is negative",
            3: "more states than max_states"}
 
@@ -78,13 +81,14 @@ class Explored:
         """``n x variables`` values in the compiled order, the narrowest type."""
         return decoded(self.keys, self.layout, list(range(len(self.compiled.names))))
 
-    def first_commands(self) -> np.ndarray:
-        """Each choice's first command (its name's): ``origin`` where a command, the
-        first module's of a synchronised one, -1 for the self-loops."""
-        first = np.where(self.origin >= 0, self.origin, -1)
-        sync = np.flatnonzero(self.origin <= -3)
+    def first_commands(self, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Each choice's (from ``lo`` to ``hi``) first command (its name's): ``origin``
+        where a command, the first module's of a synchronised one, -1 for the self-loops."""
+        origin = self.origin[lo:hi]
+        first = np.where(origin >= 0, origin, -1)
+        sync = np.flatnonzero(origin <= -3)
         if sync.size:
-            i = -3 - self.origin[sync]
+            i = -3 - origin[sync]
             a = np.searchsorted(self.sync_base, i, side="right") - 1
             high = self._radix()[1]  # the first module's digit's weight per action
             slot = np.asarray(self.layout["sync_start"])[a]
@@ -411,12 +415,11 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
         return "too many choices for late names"
     cmd_names = list(dict.fromkeys(compiled.cmd_name))
     of_cmd = np.array([cmd_names.index(x) for x in compiled.cmd_name] or [0], dtype=np.int32)
-    first = built.first_commands()
-    loop = first < 0
-    np.maximum(first, 0, out=first)
-    of = of_cmd[first]
-    del first
-    of[loop] = -1
+    of = np.empty(m, dtype=np.int32)
+    for lo in range(0, m, NAMES_BLOCK):  # in blocks: a block's temporaries, not a build's
+        first = built.first_commands(lo, lo + NAMES_BLOCK)
+        of[lo:lo + first.size] = np.where(first < 0, -1, of_cmd[np.maximum(first, 0)])
+    loop = of < 0
     clash = _clashes(built, of, len(cmd_names)) if may_share_names(plain) else None
     if clash is not None and clash.size and not late:
         return "two choices of one state with one name (Storm's choice origins name them)"
@@ -446,7 +449,8 @@ def _clashes(built: Explored, of: np.ndarray, k: int) -> np.ndarray:
     """The choices that share their name (``of``, ``k`` names) with another of their
     state, ascending."""
     n = len(built.choices) - 1
-    key = np.repeat(np.arange(0, n * (k + 1), k + 1, dtype=np.int64), np.diff(built.choices))
+    kind = np.int32 if (n + 1) * (k + 1) < 1 << 31 else np.int64  # the narrower when it fits
+    key = np.repeat(np.arange(0, n * (k + 1), k + 1, dtype=kind), np.diff(built.choices))
     key += of
     key += 1
     # the common case, no two alike, told without the order's arrays; a stable sort: the
