@@ -26,9 +26,10 @@ Each stage's peak is the resident size's high-water mark while it runs over the 
 when it starts (``*_mb``; reset through ``/proc/self/clear_refs``; Storm's reference in
 a process of its own, so that it reuses no heap our load freed); ``child_peak_mb`` the
 capped child's whole peak (0: the budgets asked for no child); ``process_peak_mb`` the
-whole process's peak after the load as the benchmark runs it (imports included).  The answer beside the
-times: the states and transitions of our world and of Storm's reference build (ours stops
-where the task is decided, as the reference stops where its property is).
+whole process's peak after the load as the benchmark runs it (imports included).  The
+answer beside the times: the states and transitions of our world and of Storm's
+reference build (ours stops where the task is decided, as the reference stops where its
+property is).
 
     python experiments/load_stages.py --qvbs /work/shared/qvbs --compare /tmp/base
     python experiments/load_stages.py --quick --qvbs /work/shared/qvbs
