@@ -85,6 +85,27 @@ def test_packed_values_are_storms_valuations(tmp_path, monkeypatch) -> None:
     assert isinstance(states[1][2], bool) and isinstance(states[1][0], int)
 
 
+def test_many_states_read_one_by_one_decoded_whole(tmp_path, monkeypatch) -> None:
+    """A reader going through many states one by one gets every state decoded once
+    (after ``ALONE`` alone), and the same values as Storm's."""
+    from mitld_lp.worlds import prism_explore
+
+    path, program = _program(tmp_path)
+    options = stormpy.BuilderOptions()
+    options.set_build_state_valuations()
+    expected = _storm_states(stormpy.build_model[float](program, options=options))
+    monkeypatch.setenv(BUILDER_ENV, "own")
+    monkeypatch.setattr(prism_explore, "ALONE", 3)
+    states = load_prism(path)._tables.states
+    states._alone = 0  # whatever the load itself read (the initial state)
+    seen = []
+    for i in range(6):
+        seen.append(states[i])
+        assert (states._values is None) == (i < 3), i
+    assert seen == expected[:6]
+    assert [states[i] for i in range(len(expected))] == expected
+
+
 def test_synchronised_commands_are_storms_origins(tmp_path) -> None:
     _, program = _program(tmp_path)
     options = stormpy.BuilderOptions()

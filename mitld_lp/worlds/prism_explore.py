@@ -146,6 +146,10 @@ def decoded(keys: np.ndarray, layout: dict[str, Any], columns: list[int]) -> np.
     return out
 
 
+ALONE = 4096
+"""States a :class:`PackedValuations` decodes alone before it decodes every state's."""
+
+
 class PackedValuations(Valuations):
     """:class:`~mitld_lp.worlds.prism_tables.Valuations` kept as the explorer's packed
     states (``words`` int64 a state: csma 4-2's 19 variables in one word) and decoded
@@ -158,6 +162,7 @@ class PackedValuations(Valuations):
         self.keys, self.layout, self.columns = keys, layout, columns
         self.booleans = booleans
         self._values: np.ndarray | None = None
+        self._alone = 0  # the states decoded alone so far
 
     @property  # type: ignore[override]
     def values(self) -> np.ndarray:
@@ -173,10 +178,15 @@ class PackedValuations(Valuations):
 
     def _of(self, at: Any) -> np.ndarray:
         """The values of the states ``at`` (an index array or a slice): decoded from
-        their packed states alone until every state's are."""
+        their packed states alone until every state's are, or until :data:`ALONE`
+        states were (a reader going through many states one by one: every state's
+        then, each a row read after)."""
+        if self._values is None and self._alone >= ALONE:
+            return self.values[at]
         if self._values is not None:
             return self._values[at]
         packed = self.keys.reshape(-1, int(self.layout["words"]))[at]
+        self._alone += packed.shape[0]
         return decoded(packed.reshape(-1), self.layout, self.columns)
 
     def rows(self, indices: np.ndarray) -> list[Any]:
