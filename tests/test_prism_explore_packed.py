@@ -155,3 +155,21 @@ def test_names_of_synchronised_clashes_are_storms(tmp_path, monkeypatch) -> None
     assert any(name is not None and name.count("+") == 2 for name in theirs)
     assert _names(own) == theirs
     assert own.action_index.dtype == storm.action_index.dtype == np.int32
+
+
+@pytest.mark.parametrize("guess", [1, 3, 6, 1 << 16])
+def test_any_guess_and_a_small_budget(tmp_path, guess) -> None:
+    """Arrays started at any number of states (the hash table a power of two whatever
+    the guess) give Storm's build; a budget below the states found stops with its
+    reason. By hand: x in -1..3 (5 values) x y in 0..2 x z both ways, and the build
+    must find more than 5 states."""
+    _, program = _program(tmp_path)
+    model = stormpy.build_model[float](program)
+    compiled = compile_program(program)
+    built = explore_program(compiled, 1 << 20, guess=guess)
+    assert not isinstance(built, str)
+    assert len(built.choices) - 1 == model.nr_states > 5
+    assert built.targets.size == model.nr_transitions
+    assert len(built.keys) == model.nr_states  # one word a state, cut in place
+    stopped = explore_program(compiled, 5, guess=guess)
+    assert isinstance(stopped, str) and stopped.startswith("more states than max_states")

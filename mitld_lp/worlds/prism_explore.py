@@ -287,9 +287,10 @@ def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
         return "too many combinations of synchronised commands to number"
     sync_base = np.array([0] + list(itertools.accumulate(sizes)), dtype=np.int64)
     i64 = np.int64
-    guess = max(1, min(guess, max_states + 1))
     keys = np.empty(guess * words, dtype=i64)
-    table = np.full(4 * guess, -1, dtype=np.int32)
+    # a power of two: the probe's mask (a table of another size leaves slots unreachable,
+    # and a probe over the rest may never end)
+    table = np.full(1 << max(2, (4 * guess - 1).bit_length()), -1, dtype=np.int32)
     choices = np.empty(guess + 1, dtype=i64)
     branches = np.empty(4 * guess + 1, dtype=i64)
     targets = np.empty(4 * guess, dtype=i64)
@@ -310,10 +311,17 @@ def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
             table = k.rehash(keys, i64(pos[1]), i64(words), i64(size))
         elif status == k.FULL:  # every array at least half full doubled
             n, m, b = (int(x) for x in pos[1:4])
+            before = (keys, choices, branches, origin, targets, probs)
             keys = _doubled(keys, n * words)
             choices = _doubled(choices, n + 1)
             branches, origin = _doubled(branches, m + 1), _doubled(origin, m)
             targets, probs = _doubled(targets, b), _doubled(probs, b)
+            if all(x is y for x, y in zip(before, (keys, choices, branches, origin, targets,
+                                                   probs), strict=True)):
+                # none half full: the state stopped at needs more than the half left of
+                # its choices' or branches' arrays (a small guess), so those doubled
+                branches, origin = _doubled(branches, m + 1, True), _doubled(origin, m, True)
+                targets, probs = _doubled(targets, b, True), _doubled(probs, b, True)
         elif status != k.OK:
             return f"{_STATUS[status]} (state {int(pos[5])}, command {int(pos[6])})"
         else:
@@ -337,10 +345,11 @@ def _value_type(low: np.ndarray, high: np.ndarray) -> Any:
     return np.int64
 
 
-def _doubled(array: np.ndarray, used: int) -> np.ndarray:
+def _doubled(array: np.ndarray, used: int, force: bool = False) -> np.ndarray:
     """``array`` twice as long (its first ``used`` entries kept) when at least half full
-    (every one, so that a state needing more than half the room gets it in time)."""
-    if 2 * used < array.size:
+    (every one, so that a state needing more than half the room gets it in time), or
+    ``force``d."""
+    if 2 * used < array.size and not force:
         return array
     out = np.empty(2 * array.size, dtype=array.dtype)
     out[:used] = array[:used]
