@@ -13,7 +13,11 @@ table), in a fresh process per checkout:
   program's checks), ``storm_ours`` (Storm's build with the load's options:
   ``prism_build.storm_build``), ``convert`` (Storm's model copied into our arrays,
   ``prism_tables.read_model``: the UMB export and its read, the labels, the rows'
-  checks), ``else`` (the rest: the spec's parse, the task's decided states, the game);
+  checks), or, where the own explorer builds (``own``: ``prism_build.own_build``), inside
+  it ``explore`` (the kernel and its arrays), ``own_compile`` (the program compiled to
+  bytecode), ``own_names`` (the choices' names), ``own_rows`` (the rows' check and
+  normalisation) and ``own_labels`` (the labels' flags); ``spec`` (the spec's parse) and
+  ``else`` (the rest: the task's decided states, the game);
 * ``storm_ref``: Storm's build as ``bench_qvbs``'s reference run makes it,
   ``stormpy.build_model(program, [prop])`` (the property's labels, no valuations, no
   choice labels), its parse apart (``ref_parse``).
@@ -21,9 +25,11 @@ table), in a fresh process per checkout:
 Each stage's peak is the resident size's high-water mark while it runs over the size
 when it starts (``*_mb``; reset through ``/proc/self/clear_refs``; Storm's reference in
 a process of its own, so that it reuses no heap our load freed); ``child_peak_mb`` the
-capped child's whole peak (0: the budgets asked for no child).  The answer beside the
-times: the states and transitions of our world and of Storm's reference build (ours stops
-where the task is decided, as the reference stops where its property is).
+capped child's whole peak (0: the budgets asked for no child); ``process_peak_mb`` the
+whole process's peak after the load as the benchmark runs it (imports included).  The
+answer beside the times: the states and transitions of our world and of Storm's
+reference build (ours stops where the task is decided, as the reference stops where its
+property is).
 
     python experiments/load_stages.py --qvbs /work/shared/qvbs --compare /tmp/base
     python experiments/load_stages.py --quick --qvbs /work/shared/qvbs
@@ -90,6 +96,7 @@ def load():
 out = dict(stormpy_import=stormpy_import, ours_import=ours_import)
 if sys.argv[2] == "whole":  # the load as the benchmark runs it, first in its process
     _, out["load"] = load()
+    out["process_peak_mb"] = rss_mb()["VmHWM"]
     out["child_peak_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     print(json.dumps(out))
     sys.exit(0)
@@ -114,10 +121,18 @@ def timed(module, name, label):
 
 pb.can_cap = lambda: False
 from mitld_lp.worlds import prism_program as pp  # (where the parse runs since proc-lean)
+from mitld_lp.worlds import prism_explore as pe
+from mitld_lp import game_tables as gt
 for module, name, label in ((pr, "parse_program", "parse"), (pr, "with_labels", "parse"),
                             (pp, "parse_program", "parse"), (pp, "with_labels", "parse"),
                             (pr, "with_constants", "parse"), (pr, "check_program", "parse"),
-                            (pb, "storm_build", "storm_ours"), (pb, "read_model", "convert")):
+                            (pb, "storm_build", "storm_ours"), (pb, "read_model", "convert"),
+                            (pb, "own_build", "own"), (pr, "own_build", "own"),
+                            (pe, "explore_program", "explore"),
+                            (pe, "label_values", "own_labels"),
+                            (pe, "compile_program", "own_compile"),
+                            (pe, "_naming", "own_names"), (pe, "checked_rows", "own_rows"),
+                            (pe, "normalise_rows", "own_rows"), (gt, "parse_spec", "spec")):
     if hasattr(module, name):  # (a name prism.py no longer imports: its module's)
         timed(module, name, label)
 model, here = load()
@@ -126,7 +141,8 @@ out.update(here=here, states=len(t.states), transitions=int(t.targets.size),
            props=len(model.game.proposition_names))
 for label, (spent, peak) in stages.items():
     out[label], out[label + "_mb"] = spent, peak
-out["else"] = here - sum(stages[k][0] for k in stages)
+NESTED = ("explore", "own_labels", "own_compile", "own_names", "own_rows")  # inside "own"
+out["else"] = here - sum(v[0] for k, v in stages.items() if k not in NESTED)
 print(json.dumps(out))
 """
 
@@ -158,8 +174,10 @@ print(json.dumps(out))
 """
 
 COLUMNS = ("states", "transitions", "props", "ref_states", "stormpy_import", "ours_import",
-           "load", "here", "parse", "storm_ours", "storm_ref", "convert", "else", "ref_parse",
-           "storm_ours_mb", "storm_ref_mb", "convert_mb", "child_peak_mb")
+           "load", "here", "parse", "spec", "storm_ours", "storm_ref", "convert", "own",
+           "explore", "own_compile", "own_names", "own_rows", "own_labels", "else",
+           "ref_parse", "storm_ours_mb", "storm_ref_mb", "convert_mb", "own_mb", "explore_mb",
+           "child_peak_mb", "process_peak_mb")
 
 
 def probe(job: dict, root: Path, code: str = PROBE, mode: str = "stages") -> dict:
@@ -203,7 +221,8 @@ def main(argv: list[str] | None = None) -> list[list[object]]:
             for label, root in roots:
                 whole = probe(jobs[name], root, mode="whole")
                 runs[label].append(dict(probe(jobs[name], root), **ref, load=whole["load"],
-                                        child_peak_mb=whole["child_peak_mb"]))
+                                        child_peak_mb=whole["child_peak_mb"],
+                                        process_peak_mb=whole["process_peak_mb"]))
         sizes = {(r["states"], r["transitions"]) for rs in runs.values() for r in rs}
         if len(sizes) != 1:
             raise SystemExit(f"{name}: the checkouts load other worlds: {sorted(sizes)}")

@@ -18,7 +18,9 @@ at debug level).
 
 from __future__ import annotations
 
+import itertools
 import logging
+import math
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -26,15 +28,16 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.worlds.prism_compile import Compiled, Unsupported, compile_program
-from mitld_lp.worlds.prism_labels import state_labels
+from mitld_lp.worlds.prism_labels import flag_labels
 from mitld_lp.worlds.prism_program import SUM_TOLERANCE, storm_quiet
 from mitld_lp.worlds.prism_tables import DEADLOCK_ACTION, DECIDED_ACTION, Tables, Valuations
 from mitld_lp.worlds.successors import Normalisation, checked_rows, normalise_rows
 from mitld_lp.worlds.table import LATE, LateNames
 
-__all__ = ["OWN_BYTES_PER_STATE", "BUILDER_ENV", "Explored", "KnownNames", "chosen_builder",
-           "explore_program", "explore_tables", "kernel_ready", "label_values",
-           "terminal_expression", "compile_kernels", "WARM_PROGRAM"]
+__all__ = ["OWN_BYTES_PER_STATE", "BUILDER_ENV", "Explored", "KnownNames", "PackedValuations",
+           "chosen_builder", "decoded", "explore_program", "explore_tables", "kernel_ready",
+           "label_values", "sync_radix", "terminal_expression", "compile_kernels",
+           "WARM_PROGRAM"]
 
 log = logging.getLogger("mitld_lp.worlds.prism")
 
@@ -47,27 +50,155 @@ state and its hash slot (about 40 bytes), the growing arrays of choices and bran
 (doubled: up to twice their 16 bytes per branch at ten branches a state), the tables'
 copies and the product's later reading of them, rounded up."""
 
+NAMES_BLOCK = 1 << 17
+"""The choices whose first commands :func:`_naming` reads at a time."""
+
 _STATUS = {1: "an update leaves a variable's range", 2: "a probability is negative",
            3: "more states than max_states"}
 
 
 @dataclass
 class Explored:
-    """The own explorer's raw build: ``keys`` (``n x words`` packed states), the
+    """The own explorer's raw build: ``keys`` (``n x words`` packed states, flat), the
     offsets and branches as in :class:`Tables`, each choice's command (``origin``; -1 a
     deadlock's self-loop, -2 a decided state's, ``-3 - i``: a synchronised choice whose
-    commands are ``combos[i:i + k]``), and ``values`` (``n x variables``)."""
+    commands :meth:`commands` reads from ``i``, ``sync_base`` and the layout); a state's
+    values are decoded from ``keys`` when asked for (:attr:`values`)."""
 
     compiled: Compiled
-    values: np.ndarray
     choices: np.ndarray
     branches: np.ndarray
     targets: np.ndarray
     probabilities: np.ndarray
     origin: np.ndarray
-    combos: np.ndarray
     keys: np.ndarray
     layout: dict[str, Any]
+    sync_base: np.ndarray
+    radix: tuple[list[list[int]], np.ndarray] | None = None
+
+    @property
+    def values(self) -> np.ndarray:
+        """``n x variables`` values in the compiled order, the narrowest type."""
+        return decoded(self.keys, self.layout, list(range(len(self.compiled.names))))
+
+    def first_commands(self, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Each choice's (from ``lo`` to ``hi``) first command (its name's): ``origin``
+        where a command, the first module's of a synchronised one, -1 for the self-loops."""
+        origin = self.origin[lo:hi]
+        first = np.where(origin >= 0, origin, -1)
+        sync = np.flatnonzero(origin <= -3)
+        if sync.size:
+            i = -3 - origin[sync]
+            a = np.searchsorted(self.sync_base, i, side="right") - 1
+            high = self._radix()[1]  # the first module's digit's weight per action
+            slot = np.asarray(self.layout["sync_start"])[a]
+            lo = np.asarray(self.layout["mod_start"])[slot]
+            first[sync] = np.asarray(self.layout["sync_cmd"])[lo + (i - self.sync_base[a])
+                                                               // high[a]]
+        return first
+
+    def commands(self, c: int) -> list[int]:
+        """Choice ``c``'s commands (one, or one a module of a synchronised choice)."""
+        o = int(self.origin[c])
+        if o >= 0:
+            return [o]
+        i = -3 - o
+        a = int(np.searchsorted(self.sync_base, i, side="right")) - 1
+        r = i - int(self.sync_base[a])
+        counts = self._radix()[0][a]
+        slots = range(int(self.layout["sync_start"][a]), int(self.layout["sync_start"][a + 1]))
+        digits = []
+        for k in reversed(counts):
+            digits.append(r % k)
+            r //= k
+        mod_start, sync_cmd = self.layout["mod_start"], self.layout["sync_cmd"]
+        return [int(sync_cmd[int(mod_start[s]) + d]) for s, d in zip(slots, reversed(digits),
+                                                                     strict=True)]
+
+    def _radix(self) -> tuple[list[list[int]], np.ndarray]:
+        """Per action, its modules' numbers of commands, and the first one's weight."""
+        if self.radix is None:
+            self.radix = sync_radix(self.layout["sync_start"], self.layout["mod_start"])
+        return self.radix
+
+
+def sync_radix(sync_start: Any, mod_start: Any) -> tuple[list[list[int]], np.ndarray]:
+    """Per synchronised action, its modules' numbers of commands of it, and the weight
+    of the first module's digit (the product of the others' numbers)."""
+    counts = [[int(mod_start[s + 1] - mod_start[s]) for s in range(int(sync_start[a]),
+                                                                  int(sync_start[a + 1]))]
+              for a in range(len(sync_start) - 1)]
+    return counts, np.array([math.prod(k[1:]) for k in counts] or [1], dtype=np.int64)
+
+
+def decoded(keys: np.ndarray, layout: dict[str, Any], columns: list[int]) -> np.ndarray:
+    """The values of the variables ``columns`` of each packed state of ``keys``, one
+    column at a time, in the narrowest type holding every variable's range."""
+    words = int(layout["words"])
+    packed = keys.reshape(-1, words)
+    out = np.empty((packed.shape[0], len(columns)),
+                   dtype=_value_type(layout["low"], layout["high"]))
+    for j, v in enumerate(columns):
+        field = packed[:, layout["word"][v]] >> layout["shift"][v]
+        field &= (1 << int(layout["width"][v])) - 1
+        field += layout["low"][v]
+        out[:, j] = field
+    return out
+
+
+ALONE = 4096
+"""States a :class:`PackedValuations` decodes alone before it decodes every state's."""
+
+
+class PackedValuations(Valuations):
+    """:class:`~mitld_lp.worlds.prism_tables.Valuations` kept as the explorer's packed
+    states (``words`` int64 a state: csma 4-2's 19 variables in one word) and decoded
+    when first read whole (a solve reads none; the decode and its copies were a third of
+    the explorer's tables step and its largest array); a few states asked for (the
+    initial one, a policy's) are decoded alone."""
+
+    def __init__(self, keys: np.ndarray, layout: dict[str, Any], columns: list[int],
+                 booleans: tuple[int, ...]) -> None:
+        self.keys, self.layout, self.columns = keys, layout, columns
+        self.booleans = booleans
+        self._values: np.ndarray | None = None
+        self._alone = 0  # the states decoded alone so far
+
+    @property  # type: ignore[override]
+    def values(self) -> np.ndarray:
+        if self._values is None:
+            self._values = decoded(self.keys, self.layout, self.columns)
+            self.keys = self.keys[:0]
+        return self._values
+
+    def __len__(self) -> int:
+        if self._values is not None:
+            return int(self._values.shape[0])
+        return int(self.keys.size // int(self.layout["words"]))
+
+    def _of(self, at: Any) -> np.ndarray:
+        """The values of the states ``at`` (an index array or a slice): decoded from
+        their packed states alone until every state's are, or until :data:`ALONE`
+        states were (a reader going through many states one by one: every state's
+        then, each a row read after)."""
+        if self._values is None and self._alone >= ALONE:
+            return self.values[at]
+        if self._values is not None:
+            return self._values[at]
+        packed = self.keys.reshape(-1, int(self.layout["words"]))[at]
+        self._alone += packed.shape[0]
+        return decoded(packed.reshape(-1), self.layout, self.columns)
+
+    def rows(self, indices: np.ndarray) -> list[Any]:
+        return self._tuples(self._of(np.asarray(indices, dtype=np.int64)))
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return tuple(self._tuples(self._of(i)))
+        i = int(i)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"state {i} of {len(self)}")
+        return self._tuples(self._of(np.array([i % len(self)])))[0]
 
 
 def chosen_builder() -> str:
@@ -143,57 +274,64 @@ def terminal_expression(stormpy: Any, plain: Any, terminal: str) -> Any:
 def explore_program(compiled: Compiled, max_states: int, guess: int = 1 << 16,
                     ) -> Explored | str:
     """The own build of ``compiled``; a reason string where it declines (a status).
-    The arrays start at ``guess`` states (and four choices and branches a state) and
-    are doubled where the kernel stops for room."""
+    The arrays start at ``guess`` states (and four choices and branches a state), are
+    doubled where the kernel stops for room (a new array written only as far as used)
+    and cut to their use in place (``resize``: no second copy)."""
     k = _kernels()
     a = compiled.arrays()
     words = int(a["words"])
+    max_states = min(max_states, (1 << 31) - 1)  # the hash table's int32 slots
+    counts, _ = sync_radix(a["sync_start"], a["mod_start"])
+    sizes = [math.prod(x) for x in counts]
+    if sum(sizes) >= 1 << 60:
+        return "too many combinations of synchronised commands to number"
+    sync_base = np.array([0] + list(itertools.accumulate(sizes)), dtype=np.int64)
     i64 = np.int64
     keys = np.empty(guess * words, dtype=i64)
-    table = np.full(4 * guess, -1, dtype=i64)
+    # a power of two: the probe's mask (a table of another size leaves slots unreachable,
+    # and a probe over the rest may never end)
+    table = np.full(1 << max(2, (4 * guess - 1).bit_length()), -1, dtype=np.int32)
     choices = np.empty(guess + 1, dtype=i64)
     branches = np.empty(4 * guess + 1, dtype=i64)
     targets = np.empty(4 * guess, dtype=i64)
     probs = np.empty(4 * guess, dtype=np.float64)
     origin = np.empty(4 * guess, dtype=i64)
-    combos = np.empty(4 * guess, dtype=i64)
     pos = np.zeros(7, dtype=i64)
     while True:
         status = int(k.explore(
             a["code"], a["consts"], a["starts"], a["word"], a["shift"], a["width"], a["low"],
             a["high"], a["initial"], a["cmd_guard"], a["conj"], a["cmd_updates"], a["upd_prob"],
             a["upd_assign"], a["asg_var"], a["asg_expr"], i64(compiled.n_async),
-            a["sync_start"], a["mod_start"], a["sync_cmd"], i64(compiled.terminal),
+            a["sync_start"], a["mod_start"], a["sync_cmd"], sync_base, i64(compiled.terminal),
             i64(words), i64(max_states), keys, table, choices, branches, targets, probs,
-            origin, combos, pos))
+            origin, pos))
         if status == k.REHASH:
-            table = k.rehash(keys, i64(pos[1]), i64(words), i64(2 * table.size))
+            size = 2 * table.size
+            del table  # the old slots freed before the new are filled
+            table = k.rehash(keys, i64(pos[1]), i64(words), i64(size))
         elif status == k.FULL:  # every array at least half full doubled
-            n, m, b, nk = (int(x) for x in pos[1:5])
+            n, m, b = (int(x) for x in pos[1:4])
+            before = (keys, choices, branches, origin, targets, probs)
             keys = _doubled(keys, n * words)
             choices = _doubled(choices, n + 1)
             branches, origin = _doubled(branches, m + 1), _doubled(origin, m)
             targets, probs = _doubled(targets, b), _doubled(probs, b)
-            combos = _doubled(combos, nk)
+            if all(x is y for x, y in zip(before, (keys, choices, branches, origin, targets,
+                                                   probs), strict=True)):
+                # none half full: the state stopped at needs more than the half left of
+                # its choices' or branches' arrays (a small guess), so those doubled
+                branches, origin = _doubled(branches, m + 1, True), _doubled(origin, m, True)
+                targets, probs = _doubled(targets, b, True), _doubled(probs, b, True)
         elif status != k.OK:
             return f"{_STATUS[status]} (state {int(pos[5])}, command {int(pos[6])})"
         else:
             break
-    n, m, b, nk = (int(x) for x in pos[1:5])
-    # each grown array cut to its use one at a time, the room left freed as it goes (the
-    # hash table first): all the cuts beside all the rooms were the load's peak
+    n, m, b = (int(x) for x in pos[1:4])
     del table
-    keys = keys[: n * words].copy()
-    choices, branches = choices[: n + 1].copy(), branches[: m + 1].copy()
-    origin, combos = origin[:m].copy(), combos[:nk].copy()
-    targets, probs = targets[:b].copy(), probs[:b].copy()
-    packed = keys.reshape(n, words)
-    values = np.empty((n, len(compiled.names)), dtype=_value_type(a["low"], a["high"]))
-    for v in range(len(compiled.names)):
-        field = packed[:, a["word"][v]] >> a["shift"][v]
-        values[:, v] = (field & ((1 << int(a["width"][v])) - 1)) + a["low"][v]
-    return Explored(compiled, values, choices, branches, targets, probs, origin, combos,
-                    keys, a)
+    for array, used in ((keys, n * words), (choices, n + 1), (branches, m + 1),
+                        (origin, m), (targets, b), (probs, b)):
+        array.resize(used, refcheck=False)  # in place: realloc gives the rest back
+    return Explored(compiled, choices, branches, targets, probs, origin, keys, a, sync_base)
 
 
 def _value_type(low: np.ndarray, high: np.ndarray) -> Any:
@@ -207,51 +345,15 @@ def _value_type(low: np.ndarray, high: np.ndarray) -> Any:
     return np.int64
 
 
-def _doubled(array: np.ndarray, used: int) -> np.ndarray:
+def _doubled(array: np.ndarray, used: int, force: bool = False) -> np.ndarray:
     """``array`` twice as long (its first ``used`` entries kept) when at least half full
-    (every one, so that a state needing more than half the room gets it in time)."""
-    if 2 * used < array.size:
+    (every one, so that a state needing more than half the room gets it in time), or
+    ``force``d."""
+    if 2 * used < array.size and not force:
         return array
     out = np.empty(2 * array.size, dtype=array.dtype)
     out[:used] = array[:used]
     return out
-
-
-def _narrow(values: np.ndarray) -> np.ndarray:
-    lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
-    for kind in (np.int8, np.int16, np.int32):
-        if np.iinfo(kind).min <= lo and hi <= np.iinfo(kind).max:
-            return values.astype(kind)
-    return values
-
-
-class _Flags:
-    """``n`` flags in the shape of Storm's labelling, for
-    :func:`~mitld_lp.worlds.prism_labels.state_labels`."""
-
-    def __init__(self, flags: dict[str, np.ndarray], n: int) -> None:
-        self.flags, self.nr_states, self.labeling = flags, n, self
-
-    def get_states(self, label: str) -> Any:
-        return _Bits(self.flags[label])
-
-
-class _Bits:
-    def __init__(self, flags: np.ndarray) -> None:
-        self.f = flags
-        self.before = np.cumsum(flags) - flags
-
-    def size(self) -> int:
-        return int(self.f.size)
-
-    def get_number_of_set_bits(self) -> int:
-        return int(np.count_nonzero(self.f))
-
-    def get(self, i: int) -> bool:
-        return bool(self.f[i])
-
-    def get_number_of_set_bits_before_index(self, i: int) -> int:
-        return int(self.before[i])
 
 
 def label_values(built: Explored, exprs: list[int]) -> np.ndarray:
@@ -282,29 +384,32 @@ def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
     if isinstance(naming, str):
         return None, naming
     action_names, action_index = naming
+    decided = int(np.count_nonzero(built.origin == -2))
+    built.origin = built.origin[:0]  # read by the names only: freed before the labels
     lengths = np.diff(built.branches)
     bad, total, branch_row = checked_rows(lengths, built.probabilities, SUM_TOLERANCE)
     if bad.size:
         return None, "a distribution that is not one (Storm's build refuses it)"
     probabilities, rows, largest = normalise_rows(lengths, built.probabilities,
                                                   (total, branch_row))
+    del lengths, total, branch_row  # a choice's and a branch's each: freed before the labels
     normalised = None if rows == 0 else Normalisation(where, rows, largest, SUM_TOLERANCE)
     if normalised is not None:
         log.info("%s", normalised)
     labels = sorted(chosen)
     exprs = [compiled.label_expr[compiled.labels.index(x)] for x in labels]
     flags = label_values(built, exprs) if labels else np.zeros((n, 0), dtype=bool)
-    by_label = {x: np.ascontiguousarray(flags[:, k]) for k, x in enumerate(labels)}
-    label_sets, label_index = state_labels(_Flags(by_label, n), chosen, by_label)
+    label_sets, label_index = flag_labels(flags, labels)
+    del flags
     order = [compiled.names.index(x) for x in sorted(compiled.names)]  # program_head's
     booleans = tuple(k for k, v in enumerate(order) if v in compiled.booleans)
-    states = Valuations(_narrow(built.values[:, order]), booleans)
+    states = PackedValuations(built.keys, built.layout, order, booleans)
     tables = Tables(
         variables=tuple(compiled.names[v] for v in order), states=states, initial=0,
         label_sets=label_sets, label_index=label_index, choices=built.choices,
         branches=built.branches, targets=built.targets, probabilities=probabilities,
         action_names=action_names, action_index=action_index,
-        effects={}, decided=int(np.count_nonzero(built.origin == -2)),
+        effects={}, decided=decided,
         normalised=normalised, checked=True)
     return tables, ""
 
@@ -328,13 +433,12 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
     if late and m >= LATE:
         return "too many choices for late names"
     cmd_names = list(dict.fromkeys(compiled.cmd_name))
-    of_cmd = np.array([cmd_names.index(x) for x in compiled.cmd_name] or [0], dtype=np.int64)
-    first = built.origin.copy()
-    sync = first <= -3
-    if sync.any():
-        first[sync] = built.combos[-3 - first[sync]]
-    loop = first < 0
-    of = np.where(loop, -1, of_cmd[np.maximum(first, 0)])
+    of_cmd = np.array([cmd_names.index(x) for x in compiled.cmd_name] or [0], dtype=np.int32)
+    of = np.empty(m, dtype=np.int32)
+    for lo in range(0, m, NAMES_BLOCK):  # in blocks: a block's temporaries, not a build's
+        first = built.first_commands(lo, lo + NAMES_BLOCK)
+        of[lo:lo + first.size] = np.where(first < 0, -1, of_cmd[np.maximum(first, 0)])
+    loop = of < 0
     clash = _clashes(built, of, len(cmd_names)) if may_share_names(plain) else None
     if clash is not None and clash.size and not late:
         return "two choices of one state with one name (Storm's choice origins name them)"
@@ -344,9 +448,9 @@ def _naming(plain: Any, compiled: Compiled, built: Explored, terminal: str,
         if _clashes(built, of, len(cmd_names)).size:
             return "two choices of one state with one name after their commands"
     if late:
-        index = np.where(loop, 0, LATE + np.arange(m, dtype=np.int64))
+        index = np.arange(LATE, LATE + m, dtype=np.int32)  # int32, as Storm's build's
+        index[loop] = 0
         index[built.origin == -2] = len(known) - 1
-        index = index.astype(np.int64)
         return KnownNames(known, of, cmd_names, index), index
     table = sorted(set(cmd_names)) + list(known)
     distinct = {x: k for k, x in enumerate(dict.fromkeys(table))}
@@ -364,8 +468,16 @@ def _clashes(built: Explored, of: np.ndarray, k: int) -> np.ndarray:
     """The choices that share their name (``of``, ``k`` names) with another of their
     state, ascending."""
     n = len(built.choices) - 1
-    state_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(built.choices))
-    key = state_of * (k + 1) + of + 1
+    kind = np.int32 if (n + 1) * (k + 1) < 1 << 31 else np.int64  # the narrower when it fits
+    key = np.repeat(np.arange(0, n * (k + 1), k + 1, dtype=kind), np.diff(built.choices))
+    key += of
+    key += 1
+    # the common case, no two alike, told without the order's arrays; a stable sort: the
+    # keys come in a run per state, merged in about one pass
+    ordered = np.sort(key, kind="stable")
+    if not (ordered[1:] == ordered[:-1]).any():
+        return np.empty(0, dtype=np.int64)
+    del ordered
     order = np.argsort(key, kind="stable")
     same = key[order][1:] == key[order][:-1]
     twice = np.zeros(key.size, dtype=bool)
@@ -381,17 +493,22 @@ def _told_apart(built: Explored, compiled: Compiled, of: np.ndarray, names: list
     :func:`mitld_lp.worlds.prism_names.origin_codes` names them."""
     of, names = of.copy(), list(names)
     position = {x: k for k, x in enumerate(names)}
-    for c in clash.tolist():
-        o = int(built.origin[c])
-        cmds = [o] if o >= 0 else built.combos[-3 - o: -3 - o + compiled.cmd_k[
-            int(built.combos[-3 - o])]].tolist()
+    # a choice's commands, and so its name, are its origin's: each distinct one named
+    # once, in the order the clashing choices first show them (zeroconf_dl: 2,384
+    # choices, a few origins)
+    origins, first_at, inverse = np.unique(built.origin[clash], return_index=True,
+                                           return_inverse=True)
+    renamed = np.empty(origins.size, dtype=of.dtype)
+    for j in np.argsort(first_at, kind="stable").tolist():
+        c = int(clash[first_at[j]])
         text = "+".join(compiled.cmd_text[x] for x in sorted(
-            cmds, key=lambda x: compiled.cmd_global[x]))
+            built.commands(c), key=lambda x: compiled.cmd_global[x]))
         name = f"{names[int(of[c])]}@{text}"
         k = position.setdefault(name, len(position))
         if k == len(names):
             names.append(name)
-        of[c] = k
+        renamed[j] = k
+    of[clash] = renamed[np.asarray(inverse).reshape(-1)]
     return of, names
 
 
@@ -418,4 +535,4 @@ class KnownNames(LateNames):
         choices = np.asarray(choices, dtype=np.int64)
         of = self.of[choices]
         codes = np.where(of >= 0, len(self.known) + of, self.index[choices])
-        return codes, self.known + self.names
+        return codes.astype(np.int64), self.known + self.names

@@ -236,18 +236,21 @@ def _branch(buf, words, keys, table, pos, max_states, targets, probs, row, nb,
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_guard, conj,
             cmd_updates, upd_prob, upd_assign, asg_var, asg_expr, n_async, sync_start,
-            mod_start, sync_cmd, terminal, words, max_states, keys, table, choices,
-            branches, targets, probs, origin, combos, pos):  # pragma: no cover
+            mod_start, sync_cmd, sync_base, terminal, words, max_states, keys, table,
+            choices, branches, targets, probs, origin, pos):  # pragma: no cover
     """The breadth-first build (module docstring) into the caller's arrays, from
-    ``pos`` = ``(head, states, choices, branches, combos, state, command)`` on, until done
+    ``pos`` = ``(head, states, choices, branches, -, state, command)`` on, until done
     (:data:`OK`) or stopped: :data:`FULL` (an output array or ``keys`` too short: the
     caller grows them and calls again, the state at ``head`` expanded afresh: the states
     it found are kept, and found again in the same order), :data:`REHASH` (the table
     must grow: :func:`rehash`), or a refusal (its state and command in ``pos[5:7]``).
     ``keys``: the packed states (``words`` int64 each); ``choices``/``branches``: the
-    offsets of each state's choices and each choice's branches; ``origin``: each
-    choice's command (-1 a deadlock's self-loop, -2 a decided state's, ``-3 - i``: a
-    synchronised choice whose commands are ``combos[i:i + k]``)."""
+    offsets of each state's choices and each choice's branches (``table``: int32 slots,
+    -1 free); ``origin``: each choice's command (-1 a deadlock's self-loop, -2 a decided
+    state's, ``-3 - i``: a synchronised choice of action ``a``, ``i = sync_base[a] + r``
+    with ``r`` its commands' positions in their modules' lists of the action's commands
+    as the digits of a mixed-radix number, the first module's the highest: one number a
+    choice, no list of its commands kept)."""
     vals = np.empty(low.shape[0], dtype=np.float64)
     stack = np.empty(max(16, code.shape[0]), dtype=np.float64)
     buf = np.empty(words, dtype=np.int64)
@@ -264,6 +267,7 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
     for a in range(sync_start.shape[0] - 1):
         n_mods = max(n_mods, sync_start[a + 1] - sync_start[a])
     enabled = np.empty(max(1, cmd_guard.shape[0]), dtype=np.int64)
+    en_pos = np.empty(max(1, cmd_guard.shape[0]), dtype=np.int64)
     en_start = np.empty(n_mods + 1, dtype=np.int64)
     pick = np.empty(n_mods, dtype=np.int64)
     level_buf = np.empty((n_mods + 1) * words, dtype=np.int64)
@@ -272,12 +276,10 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
     head = pos[0]
     nc = pos[2]
     nb = pos[3]
-    nk = pos[4]
     status = OK
     while head < pos[1]:
         nc0 = nc
         nb0 = nb
-        nk0 = nk
         if head + 2 > choices.shape[0]:
             status = FULL
             break
@@ -333,6 +335,7 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
                         c = sync_cmd[i]
                         if _enabled(code, consts, starts, conj, cmd_guard, c, vals, stack):
                             enabled[ne] = c
+                            en_pos[ne] = i - mod_start[slot_m]
                             ne += 1
                     en_start[j + 1] = ne
                     if ne == en_start[j]:
@@ -344,14 +347,14 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
                 for j in range(k):
                     pick[j] = en_start[j]
                 while status == OK:  # each combination, the last module's fastest
-                    if nc + 2 > branches.shape[0] or nc + 1 > origin.shape[0] or \
-                            nk + k > combos.shape[0]:
+                    if nc + 2 > branches.shape[0] or nc + 1 > origin.shape[0]:
                         status = FULL
                         break
-                    origin[nc] = -3 - nk
+                    r = np.int64(0)
                     for j in range(k):
-                        combos[nk + j] = enabled[pick[j]]
-                    nk += k
+                        slot_m = sync_start[a - 1] + j
+                        r = r * (mod_start[slot_m + 1] - mod_start[slot_m]) + en_pos[pick[j]]
+                    origin[nc] = -3 - (sync_base[a - 1] + r)
                     row = nb
                     # depth first over the updates: level j applies module j's update
                     for w in range(words):
@@ -419,7 +422,6 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
         if status != OK:  # this state again from its start, after the caller's work
             nc = nc0
             nb = nb0
-            nk = nk0
             pos[5] = head
             pos[6] = c
             break
@@ -428,14 +430,14 @@ def explore(code, consts, starts, word, shift, width, low, high, initial, cmd_gu
     pos[0] = head
     pos[2] = nc
     pos[3] = nb
-    pos[4] = nk
     return status
 
 
 @numba.njit(cache=True, nogil=True)
 def rehash(keys, n, words, size):  # pragma: no cover - compiled
-    """The hash table of the first ``n`` packed states of ``keys``, ``size`` slots."""
-    table = np.full(size, -1, dtype=np.int64)
+    """The hash table of the first ``n`` packed states of ``keys``, ``size`` slots
+    (int32: a build has fewer than 2**31 states)."""
+    table = np.full(size, -1, dtype=np.int32)
     mask = np.uint64(size - 1)
     for s in range(n):
         slot = _hash(keys[s * words:(s + 1) * words], words) & mask

@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["indices", "agrees", "state_labels", "choice_labels", "repeated"]
+__all__ = ["indices", "agrees", "state_labels", "flag_labels", "label_sets", "choice_labels",
+           "repeated"]
 
 
 def indices(bits: Any) -> np.ndarray:
@@ -66,6 +67,24 @@ def state_labels(model: Any, chosen: frozenset[str],
             packed[:, k // 8] |= flags.view(np.uint8) * np.uint8(128 >> (k % 8))
         else:
             packed[indices(bits), k // 8] |= np.uint8(128 >> (k % 8))
+    return label_sets(packed, names)
+
+
+def flag_labels(flags: np.ndarray, names: list[str]) -> tuple[tuple[frozenset[str], ...],
+                                                               np.ndarray]:
+    """:func:`state_labels` of ``n x len(names)`` flags (the own explorer's, each
+    state's truth of each label, ``names`` sorted): nothing to check against Storm's."""
+    if not names:
+        return (frozenset(),), np.zeros(flags.shape[0], dtype=np.int32)
+    packed = np.packbits(flags, axis=1)  # label k at bit 128 >> (k % 8) of byte k // 8
+    return label_sets(packed, names)
+
+
+def label_sets(packed: np.ndarray, names: list[str]) -> tuple[tuple[frozenset[str], ...],
+                                                               np.ndarray]:
+    """The distinct rows of ``packed`` (label ``k`` of ``names`` at bit ``128 >> (k % 8)``
+    of byte ``k // 8``) as sets of names, and each row's index among them."""
+    n = packed.shape[0]
     if packed.shape[1] <= 2:  # at most 16 labels: a count per code, no sort
         rows, inverse = _small_unique(packed)
     elif packed.shape[1] <= 8:  # a state's labels as one big-endian integer: a 1-d unique

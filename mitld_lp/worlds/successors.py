@@ -90,14 +90,17 @@ def checked_rows(lengths: np.ndarray, probs: np.ndarray, tolerance: float
     row, which :func:`normalise_rows` takes instead of computing them again (where no
     row is faulty the totals are its own, bit for bit: the same sums in the same order)."""
     n = lengths.size
-    row = np.repeat(np.arange(n), lengths)
+    row = np.repeat(np.arange(n, dtype=np.int32 if n < 1 << 31 else np.int64), lengths)
     wrong = ~np.isfinite(probs) | (probs < 0.0)
     bad = lengths == 0
     if wrong.any():
         bad[row[wrong]] = True
         probs = np.where(wrong, 0.0, probs)
     total = np.bincount(row, weights=probs, minlength=n)
-    bad |= np.abs(total - 1.0) > tolerance
+    off = total - 1.0  # one temporary a row, not two
+    np.abs(off, out=off)
+    bad |= off > tolerance
+    del off
     return np.flatnonzero(bad), total, row
 
 
@@ -145,7 +148,8 @@ def normalise_rows(lengths: np.ndarray, probs: np.ndarray,
         total = np.bincount(row, weights=probs, minlength=n)
     else:
         total, row = checked
-    deviation = np.abs(total - 1.0)
+    deviation = total - 1.0
+    np.abs(deviation, out=deviation)
     off = deviation > PROBABILITY_TOLERANCE
     if not off.any():
         return probs, 0, 0.0
