@@ -7,9 +7,11 @@ and those with a choice that stays put (:func:`may_cycle`).  On a large product 
 attractor pass first shows whether there is any (:func:`_none_among`).  Where the goal's
 value-1 states are found on the product's rows anyway (a maximum's ``Prob1E`` where no end
 component is collapsed, :func:`~mitld_lp.solvers.analysis_singles.prob1e_on_product`), that
-attractor comes first: every end component of the maybe states lies outside it (the first
-of its states to join would need its staying choice hit from a state not yet joined), so
-among the states it leaves, whose rows alone are walked
+attractor comes first: every end component of the maybe states outside its seeds lies
+outside it (the first of its states to join would need its staying choice hit from a state
+not yet joined), and one that meets the seeds lies among them (its states reach the same
+states), so among the states it leaves and the maybe states among its seeds, whose rows
+alone are walked
 (:func:`~mitld_lp.solvers.compiled_graph.closed_among`) in place of the pass over the whole
 product's (QVBS zeroconf 1000-4: 49,892 of 214,063 maybe states, 122,602 of 697,823
 entries; the sensed bus case: none of 43,930).
@@ -189,9 +191,13 @@ def ends_and_sure(mdp: MDP, comp: np.ndarray, maybe: np.ndarray, zero: np.ndarra
     if got is None:  # the targets not closed: the copied pattern's route
         return end_components(mdp, comp, maybe), None
     sure = maybe & ~got[0]
-    at = np.flatnonzero(sure)
+    # the maybe states the attractor left, and those it started from: a maybe state of
+    # prob 0 for the goal (it reaches a truncated state only) may lie in an end component
+    # of such states, all of them seeds
+    among = sure | (maybe & zero)
+    at = np.flatnonzero(among)
     if at.size and walks.closed_among(m.indptr, m.indices, np.asarray(mdp.row_groups), at,
-                                      sure):
+                                      among):
         return _searched(mdp, comp, maybe, some=True), None  # some: searched as before
     none = EndComponents.none(mdp.n_states, mdp.n_choices)
     return none, product_strategy(mdp, sure, got[1], none)
