@@ -30,7 +30,6 @@ from mitld_lp.solvers.graph import EndComponents, attractor_spared
 from mitld_lp.solvers.quotient_rows import take_ranges
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.value_one import SureStrategy, attractor_strategy, prob1e_first
-from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["prob1e_on_product", "prob1e_single_states", "product_attractor", "product_strategy",
            "single_states", "without_states"]
@@ -114,8 +113,6 @@ def product_strategy(mdp: MDP, sure: np.ndarray, hit: np.ndarray, mecs: EndCompo
     strategy there, read from its ``hit`` choices (None where no state is sure)."""
     if not sure.any():
         return sure, None
-    n = mdp.n_states
-    played = attractor_strategy(mdp, sure, ~hit, np.asarray(mdp.row_groups),
-                                np.arange(mdp.n_choices, dtype=index_dtype(mdp.n_choices)),
-                                np.arange(n, dtype=index_dtype(n)), n, mecs)
-    return sure, played
+    # the product's own rows: no map of its states and choices (attractor_strategy)
+    return sure, attractor_strategy(mdp, sure, ~hit, np.asarray(mdp.row_groups), None, None,
+                                    mdp.n_states, mecs)
