@@ -36,7 +36,7 @@ def _mdp(rng: np.random.Generator, n: int, loops: float, extra: bool = False,
     choice now and then), a choice that stays put with probability ``loops``; the last
     state absorbing (the goal), with ``extra`` the one before it too (truncated)."""
     supports: list[list[set[int]]] = []
-    rows, cols, vals, groups = [], [], [], [0]
+    groups = [0]
     for s in range(n):
         if s == n - 1 or (extra and s == n - 2):
             choices = [{s}]
@@ -49,13 +49,13 @@ def _mdp(rng: np.random.Generator, n: int, loops: float, extra: bool = False,
                 k = int(rng.integers(1, min(3, n) + 1))
                 choices.append({int(t) for t in rng.choice(n, k, replace=False)})
         supports.append(choices)
-        for i, post in enumerate(choices):
-            p = rng.random(len(post)) + 0.1
-            rows += [groups[-1] + i] * len(post)
-            cols += sorted(post)
-            vals += (p / p.sum()).tolist()
         groups.append(groups[-1] + len(choices))
-    matrix = sp.csr_array((vals, (rows, cols)), shape=(groups[-1], n))
+    # a dense table of the choices' rows: random positive weights on each support
+    table = np.zeros((groups[-1], n))
+    for row, post in enumerate(p for choices in supports for p in choices):
+        weights = rng.random(len(post)) + 0.1
+        table[row, sorted(post)] = weights / weights.sum()
+    matrix = sp.csr_array(table)
     goal = np.zeros(n, dtype=bool)
     goal[-1] = True
     cut = np.zeros(n, dtype=bool)

@@ -380,30 +380,8 @@ def closed_among(indptr, indices, row_groups, states, among):  # pragma: no cove
                 t = local[indices[e]]
                 rows[fill[t]] = lc
                 fill[t] += 1
-    inside = np.zeros(k, dtype=np.bool_)
-    queue = np.empty(k, dtype=np.int32)
-    tail = 0
-    for i in range(k):
-        if remaining[i] == 0:  # every choice leaves, or none
-            inside[i] = True
-            queue[tail] = i
-            tail += 1
-    head = 0
-    while head < tail:
-        t = queue[head]
-        head += 1
-        for e in range(count[t], count[t + 1]):
-            lc = rows[e]
-            if hit[lc]:
-                continue
-            hit[lc] = True
-            o = owner[lc]
-            remaining[o] -= 1
-            if remaining[o] == 0:
-                inside[o] = True
-                queue[tail] = o
-                tail += 1
-    return k - tail
+    inside = remaining == 0  # every choice leaves, or none
+    return k - np.count_nonzero(_joined(count, rows, owner, remaining, inside, hit))
 
 
 @numba.njit(cache=True, nogil=True)
