@@ -14,7 +14,10 @@ with the entry point of each part timed (CPU seconds, medians):
   ``components`` (SciPy's Tarjan, ``graph.strong_components``) and ``searched``
   (``graph.searched_levels``: Dijkstra where the levels are thin) and ``reach``
   (``graph.reaching``: a breadth-first search a target);
-* ``end_components`` (maxima), ``attractor`` (the minima's ``Prob0E``, and the
+* ``end_components`` (maxima), ``ends_and_sure`` (a maximum's end components with,
+  where none, its goal's value-1 states and their attractor first: ``analysis_ends``;
+  0 in a checkout without it, whose ``end_components`` and the rest hold them),
+  ``attractor`` (the minima's ``Prob0E``, and the
   maxima's value-1 states inside ``one``), ``one`` (the quotients' value-1 states),
   ``order`` (the quotient's blocks), ``prob1a_first`` / ``prob1e_first`` (the goal's
   value-1 states found before the quotient: ``solvers.value_one``; 0 in a checkout
@@ -36,7 +39,7 @@ with the entry point of each part timed (CPU seconds, medians):
 The answer (the solve's lower bound) is printed beside.  ::
 
     python experiments/analysis_parts.py --qvbs qcomp/benchmarks --min-states 0 \\
-        --only zeroconf_dl.1000-1-false-30.deadline_max csma.4-2.some_before
+        --only zeroconf_dl.1000-1-false-30.deadline_max csma.4-2.some_before --sensed
 
 Written: ``analysis_parts.md``.
 """
@@ -65,6 +68,7 @@ PARTS = {"levels": ("analysis", "components_reaching"),
          "searched": ("graph", "searched_levels"),
          "reach": ("graph", "reaching"),
          "end_components": ("analysis", "end_components"),
+         "ends_and_sure": ("analysis", "ends_and_sure"),
          "attractor": ("analysis", "attractor"),
          "one": ("analysis", "_one"),
          "order": ("quotient_order", "order_of"),
@@ -74,7 +78,8 @@ PARTS = {"levels": ("analysis", "components_reaching"),
          "walks_loaded": ("analysis", "load_walks")}
 """Each part: the module (of ``mitld_lp.solvers``, or the package path below ``mitld_lp`` where
 it has a dot) whose name the analysis calls it by."""
-OUTER = ("levels", "quotient_levels", "end_components", "attractor", "order", "prob1a_first",
+OUTER = ("levels", "quotient_levels", "end_components", "ends_and_sure", "attractor", "order",
+         "prob1a_first",
          "prob1e_first", "numba_load", "walks_loaded")
 """The parts called by ``analyse`` itself (``one`` calls ``attractor`` on a maximum;
 ``rest`` is ``analyse`` less these and ``one``'s own time)."""
@@ -100,7 +105,12 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
     from mitld_lp.solvers import analysis
     from mitld_lp.util import kernel_loader
 
-    model = load_model(job["model"], max_states=job["max_states"])
+    if job.get("case") == "sensed":  # bench_qvbs.py's sensed case
+        import bench_sensed
+
+        model = bench_sensed.case_model(job["index"], job["quick"])
+    else:
+        model = load_model(job["model"], max_states=job["max_states"])
     bs.preload()
     inner = analysis.analyse
     kept: dict[str, Any] = {}
@@ -204,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-states", type=int, default=bq.MIN_STATES,
                     help="the least QVBS size of an instance (default: the benchmark's)")
     ap.add_argument("--reps", type=int, default=5, help="timed analyses an instance")
+    ap.add_argument("--sensed", action="store_true",
+                    help="also bench_qvbs.py's sensed case (--quick: its smallest)")
     ap.add_argument("--child", default=None, help=ps.argparse_hidden())
     args = ap.parse_args(argv)
     if args.child:  # one instance, in this process: its job and answer in that folder
@@ -215,9 +227,10 @@ def main(argv: list[str] | None = None) -> int:
     rows, firsts, forced = [], [], []
     with tempfile.TemporaryDirectory(prefix="analysis_parts_") as tmp:
         work = Path(tmp)
-        for inst, job in ps.chosen_jobs(args.qvbs, args.quick,
-                                        set(args.only or ps.INSTANCES), work,
-                                        args.min_states):
+        for inst, job in [*ps.chosen_jobs(args.qvbs, args.quick,
+                                          set(args.only or ps.INSTANCES), work,
+                                          args.min_states),
+                          *(bq.case_jobs(["sensed"], args.quick, work) if args.sensed else [])]:
             (work / "job.json").write_text(json.dumps(dict(job, reps=reps)), encoding="utf-8")
             proc = subprocess.run([sys.executable, __file__, "--child", str(work)],
                                   capture_output=True, text=True, timeout=bq.BUDGET)

@@ -284,7 +284,7 @@ def test_quotients_as_the_searches_replaced(kind: str, seed: int, sense: Sense,
     component a state of its own)."""
     import dataclasses
 
-    from mitld_lp.solvers import analysis
+    from mitld_lp.solvers import analysis, analysis_ends
 
     mdp = _make(kind, seed)
     n = mdp.n_states
@@ -306,8 +306,9 @@ def test_quotients_as_the_searches_replaced(kind: str, seed: int, sense: Sense,
         return found, found.reach[found.component], None
 
     monkeypatch.setattr(analysis, "components_reaching", old_reach)
-    monkeypatch.setattr(analysis, "_self_loops_only", lambda mdp, maybe: analysis._searched(
-        mdp, np.arange(mdp.n_states), maybe))
+    monkeypatch.setattr(analysis_ends, "_self_loops_only",
+                        lambda mdp, maybe: analysis_ends._searched(mdp, np.arange(mdp.n_states),
+                                                                   maybe))
     old = analyse(mdp, goal, extra, sense=sense)
 
     def arrays(x: object, at: str = "") -> dict[str, object]:

@@ -205,7 +205,7 @@ def test_the_attractor_pass_decides_no_end_component_alone(walks, monkeypatch) -
     decided by the attractor pass: de Alfaro's rounds are not run; one with an end
     component still runs them."""
     walks(True)
-    from mitld_lp.solvers import analysis
+    from mitld_lp.solvers import analysis_ends
     from mitld_lp.solvers import graph as graph_module
 
     rounds = []
@@ -215,7 +215,7 @@ def test_the_attractor_pass_decides_no_end_component_alone(walks, monkeypatch) -
         rounds.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(analysis, "compiled_end_components", counted)
+    monkeypatch.setattr(analysis_ends, "compiled_end_components", counted)
     # a ring 0 -> 1 -> 2 -> 0 that leaks to the goal 3 and the sink 4 from every state
     ring = [[{1, 3, 4}], [{2, 4}], [{0, 4}], [{3}], [{4}]]
     mdp = _mdp(ring, goal=3)

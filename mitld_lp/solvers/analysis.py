@@ -75,14 +75,14 @@ and never decompose the graph again.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
+from mitld_lp.solvers.analysis_ends import end_components, ends_and_sure, may_cycle
 from mitld_lp.solvers.analysis_gates import attractor_walks
-from mitld_lp.solvers.analysis_patterns import candidates_pattern, compact, largest_inside
+from mitld_lp.solvers.analysis_patterns import compact, largest_inside
 from mitld_lp.solvers.analysis_singles import (
     prob1e_on_product,
     prob1e_single_states,
@@ -96,9 +96,7 @@ from mitld_lp.solvers.graph import (
     attractor_spared,
     attractors,
     backward_reachable,
-    compiled_end_components,
     components_reaching,
-    maximal_end_components,
     state_levels,
 )
 from mitld_lp.solvers.quotient_order import crowded, may_split, mixed, quotient_blocks, split
@@ -114,141 +112,11 @@ from mitld_lp.solvers.value_one import (
     prob1a_first,
     prob1e_first,
 )
-from mitld_lp.solvers.walks import compiled_walks, load_walks
+from mitld_lp.solvers.walks import load_walks
 from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "analyse", "end_components", "may_cycle"]
-
-
-def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
-    """``(n_states,)`` bool: the states an end component may hold, given each state's
-    strongly connected component ``comp`` in ``mdp``'s support graph (no zero stored):
-    those of a non-trivial component, and those with a choice that stays put (it has
-    entries, all in its own column: :func:`_stays_put`).  An end component is
-    strongly connected: it is one of these states or lies among them."""
-    size = np.bincount(comp, minlength=int(comp.max(initial=-1)) + 1)
-    out = (size > 1)[comp]
-    out[_stays_put(mdp)] = True
-    return out
-
-
-def _stays_put(mdp: MDP) -> np.ndarray:
-    """The states (ascending, maybe repeated) with a choice all of whose entries lie in
-    their own column (:func:`_staying_choices`' owners)."""
-    return mdp.state_of(_staying_choices(mdp)) if mdp.matrix.nnz else \
-        np.zeros(0, dtype=np.int64)
-
-
-def _staying_choices(mdp: MDP) -> np.ndarray:
-    """The choices (ascending) all of whose entries lie in their own state's column.
-    Such a choice's first entry does: only the choices whose first entry does (few: a
-    product's self-loops) have their other entries read, not a minimum and a maximum
-    over every entry of the matrix and a reduction over every choice (0.044 -> 0.02 s
-    of CPU on QVBS csma 4-2's 1.1 million entries; the same states).  A choice with no
-    entry stays nowhere (none in a product) and a state with no choice has none that
-    stays."""
-    m = mdp.matrix
-    if not m.nnz:
-        return np.zeros(0, dtype=np.int64)
-    own = mdp.choice_state()
-    lo, hi = m.indptr[:-1], m.indptr[1:]
-    cand = np.flatnonzero((hi > lo) & (m.indices[np.minimum(lo, m.nnz - 1)] == own))
-    lo, hi = lo[cand], hi[cand]
-    apart = m.indices[gather_ranges(lo, hi)] != np.repeat(own[cand], hi - lo)
-    pure = np.ones(cand.size, dtype=bool)
-    pure[np.repeat(np.arange(cand.size), hi - lo)[apart]] = False
-    return cand[pure]
-
-
-def _self_loops_only(mdp: MDP, maybe: np.ndarray) -> EndComponents:
-    """The maximal end components of the ``maybe`` states of a product whose strongly
-    connected components are single states (acyclic apart from self-loops: a deadline's
-    clock counts time): each ``maybe`` state with a choice that stays put is one, alone,
-    its internal choices those that stay put; numbered by their states, ascending, as
-    the rounds number them (:func:`end_components`).  No sub-MDP, no rounds: the end
-    components of such a graph need no search (QVBS zeroconf_dl 1000-1-30: 3,070
-    self-loops)."""
-    n = mdp.n_states
-    stay = _staying_choices(mdp)
-    stay = stay[maybe[mdp.state_of(stay)]]
-    if not stay.size:  # none: the stride-0 record
-        return _no_end_components(n, mdp.n_choices)
-    mec_of = np.full(n, -1, dtype=index_dtype(n))
-    internal = np.zeros(mdp.n_choices, dtype=bool)
-    internal[stay] = True
-    members = np.unique(mdp.state_of(stay))
-    mec_of[members] = np.arange(members.size)
-    return EndComponents(read_only(mec_of), read_only(internal), int(members.size))
-
-
-def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
-    """The maximal end components of the ``maybe`` states (module docs), given each
-    state's strongly connected component ``comp`` in ``mdp``'s support graph: searched
-    by :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
-    candidates (the states of non-trivial components and those with a choice that
-    stays put), with one extra absorbing state standing for everything else; none
-    searched for when there is no candidate (an acyclic product) or, on the compiled
-    walks, when one attractor pass shows there is none (:func:`_none_among`).  The
-    same components as :func:`~mitld_lp.solvers.graph.maximal_end_components` on
-    ``maybe``, numbered in another order (which it is, on a matrix that stores a
-    zero).  Where every component is one state, :func:`_self_loops_only`."""
-    m = mdp.matrix
-    if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
-        return maximal_end_components(mdp, maybe)
-    if comp.size and int(np.bincount(comp).max()) == 1:  # acyclic apart from self-loops
-        return _self_loops_only(mdp, maybe)
-    return _searched(mdp, comp, maybe)
-
-
-def _searched(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
-    """:func:`end_components` by the search (no stored zero)."""
-    n = mdp.n_states
-    m = mdp.matrix
-    walks = compiled_walks(m.nnz)
-    if walks is not None and _none_among(walks, m, np.asarray(mdp.row_groups), maybe):
-        return _no_end_components(n, mdp.n_choices)
-    cand = np.flatnonzero(maybe & may_cycle(mdp, comp))
-    if cand.size == 0:
-        return _no_end_components(n, mdp.n_choices)
-    mec_of = np.full(n, -1, dtype=index_dtype(n))  # kept by both quotients
-    internal = np.zeros(mdp.n_choices, dtype=bool)
-    if walks is not None and walks.fits(n, m.nnz):  # the rounds among the candidates
-        found = compiled_end_components(walks, mdp, cand)
-        if not found.n_mecs:
-            return _no_end_components(n, mdp.n_choices)
-        return EndComponents(read_only(found.mec_of.astype(mec_of.dtype, copy=False)),
-                             found.internal, found.n_mecs)
-    lo, hi = mdp.row_groups[cand], mdp.row_groups[cand + 1]
-    choices = gather_ranges(lo, hi)
-    sub = candidates_pattern(m, choices, cand, n)
-    k = cand.size + 1
-    row_groups = np.concatenate([[0], np.cumsum(hi - lo), [choices.size + 1]])
-    no = np.zeros(k, dtype=bool)
-    small = MDP(matrix=sub, row_groups=row_groups,
-                choice_actions=np.zeros(choices.size + 1, dtype=np.int32), action_names=(),
-                initial=0, target=no, sink=no, truncated=no, states=range(k))
-    found = maximal_end_components(small, np.arange(k) < cand.size)
-    mec_of[cand] = found.mec_of[: cand.size]
-    internal[choices] = found.internal[: choices.size]
-    return EndComponents(read_only(mec_of), read_only(internal), found.n_mecs)
-
-
-def _none_among(walks: Any, m: sp.csr_array, groups: np.ndarray, maybe: np.ndarray,
-                ) -> bool:
-    """Whether no end component lies among the ``maybe`` states, shown by one compiled
-    :func:`~mitld_lp.solvers.graph.attractor` pass instead of de Alfaro's rounds: the
-    states from which every policy leaves them (or stops: a state with no choice) with
-    positive probability.  Its complement among them is closed (each such state has a
-    choice whose support stays there), so it holds an end component iff it is not
-    empty; an end component's states never join (each keeps a choice inside it).  A
-    rare event's product (QVBS zeroconf 1000-4: 213,268 candidates, none) is decided
-    here in one pass over the pattern, with the attractor's kernel, which the
-    quotient's prob-1 states load anyway.  ``m`` stores no zero (the caller checked)."""
-    seeds = ~maybe | (np.diff(groups) == 0)
-    left = walks.backward(m.indptr, m.indices, groups, seeds,
-                          np.zeros(m.shape[0], dtype=bool), True)
-    return bool(np.all(left[maybe]))
 
 
 def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) -> bool:
@@ -418,6 +286,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     n = mdp.n_states
     j0 = 1 if same else 0
     sure_state = np.zeros(n, dtype=bool)
+    early = None  # a maximum's value-1 states found with its end components
     if minimum:
         prob0, maybe = attracted
         del attracted
@@ -434,7 +303,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     if not minimum:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
-        mecs = end_components(mdp, found.component, maybe)
+        # with the goal's value-1 states where none (their attractor first: analysis_ends)
+        mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0]) if without_one \
+            else (end_components(mdp, found.component, maybe), None)
 
     crowd = crowded(found.component)  # the only states the components' tests read
     if found.level is None and mixed(found.component, maybe, crowd):  # the order as before
@@ -449,7 +320,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         # with end components of one state each (a deadline's self-loops) too: their
         # staying choices hit from the start, the components of value 1 dropped
         # (analysis_singles), so no quotient of every maybe state is built and cut
-        got = prob1e_on_product(mdp, m, maybe, prob0[j0], mecs)
+        got = early if early is not None else prob1e_on_product(mdp, m, maybe, prob0[j0],
+                                                                mecs)
         first = prob1e_first if not mecs.n_mecs else prob1e_single_states
         sure_state, played = got if got is not None else first(mdp, m, maybe, prob0[j0],
                                                                 mecs)

@@ -30,9 +30,9 @@ from mitld_lp.solvers.graph import EndComponents, attractor_spared
 from mitld_lp.solvers.quotient_rows import take_ranges
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.value_one import SureStrategy, attractor_strategy, prob1e_first
-from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["prob1e_on_product", "prob1e_single_states", "single_states", "without_states"]
+__all__ = ["prob1e_on_product", "prob1e_single_states", "product_attractor", "product_strategy",
+           "single_states", "without_states"]
 
 
 def single_states(mecs: EndComponents) -> bool:
@@ -84,6 +84,19 @@ def prob1e_on_product(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.nda
     in the copied pattern, where they have no choice).  The same sets, hits and
     strategy (the maybe states' choices in the same order); None where they are not
     closed (the caller copies the pattern)."""
+    got = product_attractor(mdp, m, maybe, zero,
+                            np.asarray(mecs.internal) if mecs.n_mecs else None)
+    if got is None:
+        return None
+    return product_strategy(mdp, maybe & ~got[0], got[1], mecs)
+
+
+def product_attractor(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.ndarray,
+                      internal: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`prob1e_on_product`'s attractor of ``zero`` over the product's rows
+    (``internal``: the choices hit from the start, or None), with its hit choices
+    (:func:`~mitld_lp.solvers.graph.attractor_spared`); None where the states neither
+    ``maybe`` nor ``zero`` are not closed."""
     groups = np.asarray(mdp.row_groups)
     others = ~maybe & ~zero
     at = np.flatnonzero(others)
@@ -91,14 +104,15 @@ def prob1e_on_product(mdp: MDP, m: sp.csr_array, maybe: np.ndarray, zero: np.nda
                                           m.indptr[groups[at + 1]])])):
         return None
     del at, others
-    internal = np.asarray(mecs.internal) if mecs.n_mecs else None
-    lose, hit = attractor_spared(m, groups, zero, internal)
-    sure = maybe & ~lose
-    del lose
+    return attractor_spared(m, groups, zero, internal)
+
+
+def product_strategy(mdp: MDP, sure: np.ndarray, hit: np.ndarray, mecs: EndComponents,
+                     ) -> tuple[np.ndarray, SureStrategy | None]:
+    """``sure`` (the maybe states outside :func:`product_attractor`'s set) and the lift's
+    strategy there, read from its ``hit`` choices (None where no state is sure)."""
     if not sure.any():
         return sure, None
-    n = mdp.n_states
-    played = attractor_strategy(mdp, sure, ~hit, groups,
-                                np.arange(mdp.n_choices, dtype=index_dtype(mdp.n_choices)),
-                                np.arange(n, dtype=index_dtype(n)), n, mecs)
-    return sure, played
+    # the product's own rows: no map of its states and choices (attractor_strategy)
+    return sure, attractor_strategy(mdp, sure, ~hit, np.asarray(mdp.row_groups), None, None,
+                                    mdp.n_states, mecs)

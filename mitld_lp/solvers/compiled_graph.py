@@ -20,6 +20,8 @@ Each kernel gives what its NumPy counterpart gives, not merely an equivalent ans
   and of :func:`~mitld_lp.solvers.graph.backward_reachable` by a work queue over the
   transposed pattern (a set: the order of the queue does not change it), and
   :func:`reaching_edges` the same reach along a list of edges;
+* :func:`closed_among`: how many of some states lie outside the attractor of the
+  others, on their own rows (whether an end component lies among them);
 * :func:`end_components_among`: de Alfaro's rounds of
   :func:`~mitld_lp.solvers.graph.maximal_end_components` on the candidate states alone
   (no sub-MDP is built for them).
@@ -36,7 +38,8 @@ from mitld_lp.util import kernel_loader
 numba = kernel_loader.lazy_numba(globals())
 
 
-__all__ = ["INDEX_LIMIT", "backward", "components_and_levels", "end_components_among",
+__all__ = ["INDEX_LIMIT", "backward", "closed_among", "components_and_levels",
+           "end_components_among",
            "fits", "reaching_edges", "state_graph", "state_levels", "strong_components"]
 
 
@@ -328,6 +331,57 @@ def _joined(col_ptr, col_rows, owner, remaining, inside, hit):  # pragma: no cov
                 queue[tail] = o
                 tail += 1
     return inside
+
+
+@numba.njit(cache=True, nogil=True)
+def closed_among(indptr, indices, row_groups, states, among):  # pragma: no cover
+    """How many of ``states`` (ascending ids; ``among`` their ``(n,)`` mask) are outside
+    the attractor of the other states: :func:`_backward` with ``every``, seeded by the
+    states not among them, found on the rows of ``states`` alone (their entries, not the
+    whole pattern's).  A choice is hit once an entry of it leaves the set or enters the
+    attractor (a choice without an entry never is); a state with no choice is in the
+    attractor at once.  The states counted keep a choice whose entries all stay among
+    them, so 0 iff no end component lies among ``states`` (a non-empty such set holds
+    one: a bottom component of those choices' graph)."""
+    k = states.shape[0]
+    local = np.full(among.shape[0], -1, dtype=np.int32)
+    cptr = np.zeros(k + 1, dtype=np.int64)
+    for i in range(k):
+        local[states[i]] = i
+        cptr[i + 1] = cptr[i] + row_groups[states[i] + 1] - row_groups[states[i]]
+    owner = np.empty(cptr[k], dtype=np.int32)
+    hit = np.zeros(cptr[k], dtype=np.bool_)
+    remaining = np.zeros(k, dtype=np.int32)
+    count = np.zeros(k + 1, dtype=np.int64)  # the entries into each state, kept choices
+    for i in range(k):
+        first = row_groups[states[i]]
+        for lc in range(cptr[i], cptr[i + 1]):
+            owner[lc] = i
+            c = first + lc - cptr[i]
+            for e in range(indptr[c], indptr[c + 1]):
+                if local[indices[e]] < 0:
+                    hit[lc] = True
+                    break
+            if not hit[lc]:
+                remaining[i] += 1
+                for e in range(indptr[c], indptr[c + 1]):
+                    count[local[indices[e]] + 1] += 1
+    for i in range(k):
+        count[i + 1] += count[i]
+    fill = count[:-1].copy()
+    rows = np.empty(count[k], dtype=np.int32)
+    for i in range(k):
+        first = row_groups[states[i]]
+        for lc in range(cptr[i], cptr[i + 1]):
+            if hit[lc]:
+                continue
+            c = first + lc - cptr[i]
+            for e in range(indptr[c], indptr[c + 1]):
+                t = local[indices[e]]
+                rows[fill[t]] = lc
+                fill[t] += 1
+    inside = remaining == 0  # every choice leaves, or none
+    return k - np.count_nonzero(_joined(count, rows, owner, remaining, inside, hit))
 
 
 @numba.njit(cache=True, nogil=True)

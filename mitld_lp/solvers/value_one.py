@@ -142,8 +142,8 @@ class SureStrategy:
 
 
 def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
-                        row_groups: np.ndarray, kept: np.ndarray, state_map: np.ndarray,
-                        n_plain: int, mecs: EndComponents,
+                        row_groups: np.ndarray, kept: np.ndarray | None,
+                        state_map: np.ndarray | None, n_plain: int, mecs: EndComponents,
                         ) -> SureStrategy | None:
     """A maximum's strategy for the product states of the reduced states ``sure``
     (``Prob1E`` of the goal, about to leave the quotient), read from the attractor that
@@ -160,7 +160,10 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
     reaches the exit's owner with positive probability).  The product states ascending
     and each one's choice (rows of ``mdp``); None if a state
     has no such choice (never, by the attractor's fixed point: the caller keeps the
-    second search then)."""
+    second search then).  ``kept`` and ``state_map`` None: the reduced states and
+    choices are the product's own (an attractor over the product's rows, ``n_plain`` its
+    states: no component collapsed), so each state's first spared choice is its own
+    play, with no array a state of the product mapped."""
     red = np.flatnonzero(sure)
     rows, owner = choices_of(row_groups, red)
     free = spared[rows]
@@ -171,6 +174,10 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
     has = owner[first]
     if has.size != red.size:  # pragma: no cover - the attractor spares one a state
         return None
+    itype = index_dtype(mdp.n_choices)
+    if state_map is None:  # the product's own rows: each sure state plays its first
+        return SureStrategy(read_only(red.astype(index_dtype(mdp.n_states), copy=False)),
+                            read_only(rows[first].astype(itype, copy=False)))
     play = np.full(sure.size, -1, dtype=np.int64)
     play[red] = kept[rows[first]]
     del rows, owner, free, has, first
@@ -191,6 +198,5 @@ def attractor_strategy(mdp: MDP, sure: np.ndarray, spared: np.ndarray,
             if np.any(step[states[walk]] < 0):  # pragma: no cover - strongly connected
                 return None
             choices[walk] = step[states[walk]]
-    itype = index_dtype(mdp.n_choices)
     return SureStrategy(read_only(states.astype(index_dtype(mdp.n_states), copy=False)),
                         read_only(choices.astype(itype, copy=False)))
