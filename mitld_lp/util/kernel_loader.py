@@ -47,6 +47,7 @@ numba's order.  The file's format: :func:`mitld_lp.util.kernel_files.pack`.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import importlib.machinery
@@ -104,15 +105,39 @@ def compiled_paid() -> bool:
 def cached(module_file: str, qualname: str) -> bool:
     """Whether the loader could link the kernel ``qualname`` of ``module_file`` from a
     cache file instead of compiling it (a warm cache): the loader is on and a cache file
-    of some signature of it exists, not older than ``module_file`` (after an upgrade or an
-    edit the load would refuse it and compile).  The gates that load a kernel before its
-    load is paid ask this, so that a cold cache never makes them pay numba's compile."""
+    of some signature of it exists, not older than ``module_file`` or, if older, made
+    from its present text (then touched; an edit makes the load compile).  The gates that
+    load a kernel before its load is paid ask this, so a cold cache never costs a compile."""
     if not ENABLED or _numba_settings():
         return False
     stem = kernel_files.file_name(module_file, qualname, ()).rsplit("-", 1)[0]
     source = _mtime(Path(module_file), 0)  # (a source not there counts against nothing)
-    return any(_mtime(d / f, -1) >= source for d in kernel_files.directories(module_file)
-               for f in kernel_files.listing(d).get(stem, ()))  # a folder listed once
+    older = []
+    for d in kernel_files.directories(module_file):
+        for f in kernel_files.listing(d).get(stem, ()):  # a folder listed once
+            if _mtime(d / f, -1) >= source:
+                return True
+            older.append(d / f)
+    for path in older:  # the source rewritten with the same text (a checkout, a reinstall)
+        if _same_source(path, module_file):
+            with contextlib.suppress(OSError):
+                os.utime(path)  # the times answer from now on
+            return True
+    return False
+
+
+def _same_source(path: Path, module_file: str) -> bool:
+    """Whether the cache file ``path`` was made from ``module_file``'s present text and
+    its callees' (the hashes its key and ``sources`` hold, as :func:`_link` checks)."""
+    try:
+        found = kernel_files.unpack(path.read_bytes())
+        own = kernel_sources.source_hash(module_file).encode()
+    except OSError:
+        return False
+    meta = {} if found is None else found[0]
+    key, sources = meta.get("key"), meta.get("sources", ())
+    return (isinstance(key, bytes) and own in key
+            and kernel_sources.callee_sources(m for m, _ in sources) == tuple(sources))
 
 
 def _mtime(path: Path, missing: int) -> int:
