@@ -1,0 +1,254 @@
+"""The step-bounded route: ``F[0,k] phi`` (``psi U[0,k] phi``) over an explored world's
+labels, solved by backward induction over the world (:mod:`mitld_lp.solvers.horizon`)
+instead of the product with a step-counting automaton.
+
+It claims a problem only when all of these hold: the task is exactly ``F[0,k] phi`` or
+``psi U[0,k] phi`` with ``phi`` and ``psi`` Boolean combinations of the world's
+propositions (no events, no distribution eventualities); no constraints, band, sensor
+that misses or exact answer asked; the world is a table already explored
+(:func:`mitld_lp.worlds.table.table_of`: a PRISM program built whole, not a world
+explored on the fly or within a state limit); and the product's bound from its factors,
+world states times ``k + 1``, is at least :data:`CLAIM_FROM`.  Every other problem stays
+with the routes after it (the plain route's product is exact for it too, and faster on
+a small bound).
+
+The answer: the bracket at the initial state (``lower``: what the returned policy
+guarantees, for a maximum; ``upper``: what no policy beats), certified by construction
+(the induction's directed rounding).  The policy is step-dependent, kept within
+:data:`mitld_lp.solvers.horizon.POLICY_MAX_BYTES`; past it :meth:`Result.policy_table`
+and the controller refuse with the size and the budget (:class:`HorizonPart`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mitld_lp.checks import Check
+from mitld_lp.logic.syntax import And, Const, Formula, Not, Or, Prop, Until
+from mitld_lp.problem import Posed, ProblemError
+from mitld_lp.result import Part, Result, precision_check
+from mitld_lp.routes.route import Route
+
+__all__ = ["CLAIM_FROM", "HorizonRoute", "HorizonPart", "HorizonBuilt", "step_bounded",
+           "HorizonController"]
+
+#: The product's bound (world states x (k + 1)) from which this route takes a
+#: step-bounded reachability from the plain route: resource-gathering 200-15-15 (24,064
+#: states, k = 200: a bound of 4.8M) took the plain route 8.1x Storm's whole process
+#: (docs/results.md, horizon-78).
+CLAIM_FROM = 1_000_000
+
+
+def _boolean(f: Formula, names: frozenset[str]) -> bool:
+    """Whether ``f`` is a Boolean combination of the world's propositions ``names``."""
+    if isinstance(f, Const):
+        return True
+    if isinstance(f, Prop):
+        return f.name in names
+    if isinstance(f, Not):
+        return _boolean(f.arg, names)
+    if isinstance(f, And | Or):
+        return all(_boolean(a, names) for a in f.args)
+    return False
+
+
+def _holds(f: Formula, labels: frozenset[str]) -> bool:
+    if isinstance(f, Const):
+        return f.value
+    if isinstance(f, Prop):
+        return f.name in labels
+    if isinstance(f, Not):
+        return not _holds(f.arg, labels)
+    if isinstance(f, And):
+        return all(_holds(a, labels) for a in f.args)
+    return any(_holds(a, labels) for a in f.args)  # Or
+
+
+def step_bounded(spec: Formula, names: frozenset[str]) -> tuple[Formula, Formula, int] | None:
+    """``(psi, phi, k)`` when ``spec`` is ``psi U[0,k] phi`` (``F[0,k] phi``: ``psi``
+    true) over the propositions ``names``, else None."""
+    if not isinstance(spec, Until) or spec.interval is None or spec.interval.lo != 0:
+        return None
+    if not (_boolean(spec.left, names) and _boolean(spec.right, names)):
+        return None
+    return spec.left, spec.right, int(spec.interval.hi)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class HorizonBuilt:
+    """What the route solves on: the world's table, the states where ``phi`` holds
+    (``goal``) and where ``psi`` does (``allowed``), the steps and the sense."""
+
+    table: Any  # mitld_lp.worlds.table.WorldTable
+    goal: np.ndarray
+    allowed: np.ndarray
+    steps: int
+    sense: str
+    timings: dict[str, float]
+    dta: Any = None  # the unbounded task's automaton (the step counter is the policy's rows)
+    sta: Any = None
+
+
+@dataclass(frozen=True, eq=False)
+class WorldSize:
+    """The sizes a result reports of the model solved: the world itself."""
+
+    n_states: int
+    n_choices: int
+    n_transitions: int
+    initial: int
+
+
+class HorizonController:
+    """The step-dependent policy as a controller: :meth:`act` on the world state seen,
+    the steps counted from :meth:`reset`; every method refuses, naming the reason and
+    the size, where the policy was not kept."""
+
+    def __init__(self, game: Any, table: Any, built: HorizonBuilt, solution: Any) -> None:
+        self.game, self.table, self.built, self.solution = game, table, built, solution
+        self.randomised, self._steps, self._index = False, 0, None
+
+    def _kept(self) -> None:
+        if self.solution.policy is None:
+            raise ProblemError(f"horizon route: no policy kept: {self.solution.why_no_policy}")
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    def reset(self, seed: int | None = None) -> None:
+        self._kept()
+        self._steps = 0
+
+    def act(self, observation: Any) -> str | None:
+        """The action at the world state ``observation`` (an Observation or the state),
+        None once the task is decided (``phi`` reached, ``psi`` broken, no steps left)."""
+        self._kept()
+        state = getattr(observation, "state", observation)
+        if self._index is None:
+            self._index = {s: i for i, s in enumerate(self.table.states)}
+        i = self._index[state]
+        left = self.built.steps - self._steps
+        self._steps += 1
+        if self.built.goal[i] or not self.built.allowed[i] or left <= 0:
+            return None
+        local = self.solution.choice(i, left)
+        return self.game.actions(state)[local]
+
+    def __getattr__(self, name: str) -> Any:  # plan, tables, save...: not for this route
+        if name.startswith("_"):
+            raise AttributeError(name)
+        self._kept()
+        raise ProblemError(f"horizon route: the step-dependent controller has no {name!r} "
+                           "(use act(), reset() or Result.policy_table())")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class HorizonPart(Part):
+    """The step-bounded route's part: the induction's record and what it solved."""
+
+    solution: Any = field()
+    built: HorizonBuilt = field()
+
+    def policy_table(self, result: Result) -> list[dict[str, Any]]:
+        """One row per step left and state with a decision: the world state, the steps
+        left and the action (refused, with the size, where the policy was not kept)."""
+        from mitld_lp.report import state_record
+
+        sol, built = self.solution, self.built
+        if sol.policy is None:
+            raise ProblemError(f"horizon route: no policy table: {sol.why_no_policy}")
+        game, table = result.model.game, built.table
+        undecided = np.flatnonzero(built.allowed & ~built.goal)
+        rows = []
+        for left in range(1, built.steps + 1):
+            for i in undecided.tolist():
+                state = table.states[i]
+                rows.append({"game_state": state_record(game, state), "steps_left": left,
+                             "action": game.actions(state)[sol.choice(i, left)]})
+        return rows
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        mdp, sol = result.mdp, self.solution
+        return {"states": mdp.n_states, "choices": mdp.n_choices,
+                "transitions": mdp.n_transitions, "lp": None,
+                "iteration": {"status": "optimal", "steps": sol.steps,
+                              "steps_run": sol.steps_run, "policy_kept": sol.policy is not None,
+                              "no_policy": sol.why_no_policy or None}}
+
+
+class HorizonRoute(Route):
+    """Step-bounded reachability on an explored world, by backward induction (module
+    docs).  ``first``: listed before the plain route (its precedence entry)."""
+
+    name = "horizon"
+
+    def __init__(self, first: bool = True) -> None:
+        self.first = first
+
+    def claims(self, posed: Posed) -> bool:
+        from mitld_lp.worlds.table import table_of
+
+        s, game = posed.settings, posed.model.game
+        if posed.robust or posed.problem.constrained or posed.sensed or s.exact:
+            return False
+        shape = step_bounded(posed.model.spec, frozenset(game.proposition_names))
+        if shape is None:
+            return False
+        table = table_of(game)
+        return table is not None and table.n_states * (shape[2] + 1) >= CLAIM_FROM
+
+    def refusal(self, posed: Posed) -> list[str]:
+        return []
+
+    def build(self, posed: Posed, progress: bool | None = None) -> HorizonBuilt:
+        from mitld_lp.automata.sta import make_sta
+        from mitld_lp.automata.translate import to_dta
+        from mitld_lp.logic.syntax import until
+        from mitld_lp.worlds.table import table_of
+
+        t0 = time.perf_counter()
+        game = posed.model.game
+        psi, phi, k = step_bounded(posed.model.spec, frozenset(game.proposition_names))
+        table = table_of(game)
+        labels = table.label_sets
+        goal = np.array([_holds(phi, ls) for ls in labels], dtype=bool)[table.label_of]
+        allowed = np.array([_holds(psi, ls) for ls in labels], dtype=bool)[table.label_of]
+        dta = to_dta(until(psi, phi))
+        sta = make_sta(dta, {}, posed.model.epsilon)
+        return HorizonBuilt(table, goal, allowed, k, "min" if posed.minimise else "max",
+                            {"automaton": time.perf_counter() - t0}, dta, sta)
+
+    def solve(self, posed: Posed, built: HorizonBuilt, *, costs: Any = None,
+              seed: int | None = 0) -> Result:
+        from mitld_lp.solvers.horizon import horizon_reach
+        from mitld_lp.solvers.result import Status
+
+        s, t = posed.settings, built.table
+        t0, c0 = time.perf_counter(), time.process_time()
+        sol = horizon_reach(np.asarray(t.choices), np.asarray(t.branches),
+                            np.asarray(t.targets), np.asarray(t.probabilities),
+                            built.goal, built.allowed, built.steps, built.sense,
+                            time_limit=s.time_limit)
+        timings = {**built.timings, "solve": time.perf_counter() - t0}
+        lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
+        near = lower if built.sense == "max" else upper  # the policy's guarantee
+        checks = (Check("step-bounded induction", bool(lower <= upper),
+                        f"{sol.steps_run} of {sol.steps} steps (the rest a fixed point); "
+                        "every sum rounded outward"),
+                  precision_check(lower, upper, upper - lower, 0.0, s.precision))
+        size = WorldSize(t.n_states, int(t.choices[-1]), int(t.branches[-1]), t.initial)
+        eps = posed.model.epsilon if s.epsilon is None else s.epsilon
+        return Result(
+            route=self.name, model=posed.model, objective=posed.problem.objective,
+            method=s.method, epsilon=eps, status=Status.OPTIMAL, lower=lower, upper=upper,
+            value=near, certified=all(c.passed for c in checks), checks=checks,
+            controller=HorizonController(posed.model.game, t, built, sol), sta=built.sta,
+            mdp=size, timings=timings, part=HorizonPart(sol, built),
+            solve_cpu=time.process_time() - c0, dta=built.dta, precision=s.precision,
+            width={"total": upper - lower, "truncation": 0.0, "solver": upper - lower},
+            sense=built.sense)
