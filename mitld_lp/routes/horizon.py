@@ -113,7 +113,7 @@ class HorizonController:
         self.randomised, self._steps, self._index = False, 0, None
 
     def _kept(self) -> None:
-        if self.solution.policy is None:
+        if self.solution.picks is None:
             raise ProblemError(f"horizon route: no policy kept: {self.solution.why_no_policy}")
 
     @property
@@ -160,16 +160,16 @@ class HorizonPart(Part):
         from mitld_lp.report import state_record
 
         sol, built = self.solution, self.built
-        if sol.policy is None:
+        if sol.picks is None:
             raise ProblemError(f"horizon route: no policy table: {sol.why_no_policy}")
         game, table = result.model.game, built.table
-        undecided = np.flatnonzero(built.allowed & ~built.goal)
         rows = []
-        for left in range(1, built.steps + 1):
-            for i in undecided.tolist():
+        for step in range(built.steps):
+            states, picks = sol.decisions(step)
+            for i, c in zip(states.tolist(), picks.tolist(), strict=True):
                 state = table.states[i]
-                rows.append({"game_state": state_record(game, state), "steps_left": left,
-                             "action": game.actions(state)[sol.choice(i, left)]})
+                rows.append({"game_state": state_record(game, state), "steps_left": step + 1,
+                             "action": game.actions(state)[c]})
         return rows
 
     def summary(self, result: Result) -> dict[str, Any]:
@@ -177,7 +177,8 @@ class HorizonPart(Part):
         return {"states": mdp.n_states, "choices": mdp.n_choices,
                 "transitions": mdp.n_transitions, "lp": None,
                 "iteration": {"status": "optimal", "steps": sol.steps,
-                              "steps_run": sol.steps_run, "policy_kept": sol.policy is not None,
+                              "decisions": int(sol.offsets[-1]),
+                              "policy_kept": sol.picks is not None,
                               "no_policy": sol.why_no_policy or None}}
 
 
@@ -233,13 +234,14 @@ class HorizonRoute(Route):
         sol = horizon_reach(np.asarray(t.choices), np.asarray(t.branches),
                             np.asarray(t.targets), np.asarray(t.probabilities),
                             built.goal, built.allowed, built.steps, built.sense,
-                            time_limit=s.time_limit)
+                            initial=t.initial, time_limit=s.time_limit)
         timings = {**built.timings, "solve": time.perf_counter() - t0}
         lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
         near = lower if built.sense == "max" else upper  # the policy's guarantee
         checks = (Check("step-bounded induction", bool(lower <= upper),
-                        f"{sol.steps_run} of {sol.steps} steps (the rest a fixed point); "
-                        "every sum rounded outward"),
+                        f"{sol.steps} steps over the states read at each "
+                        f"({len(sol.order):,} of {t.n_states:,} ever); every sum "
+                        "rounded outward"),
                   precision_check(lower, upper, upper - lower, 0.0, s.precision))
         size = WorldSize(t.n_states, int(t.choices[-1]), int(t.branches[-1]), t.initial)
         eps = posed.model.epsilon if s.epsilon is None else s.epsilon
