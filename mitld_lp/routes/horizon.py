@@ -226,15 +226,16 @@ class HorizonRoute(Route):
 
     def solve(self, posed: Posed, built: HorizonBuilt, *, costs: Any = None,
               seed: int | None = 0) -> Result:
-        from mitld_lp.solvers.horizon import horizon_reach
+        from mitld_lp.solvers import horizon
         from mitld_lp.solvers.result import Status
 
         s, t = posed.settings, built.table
         t0, c0 = time.perf_counter(), time.process_time()
-        sol = horizon_reach(np.asarray(t.choices), np.asarray(t.branches),
+        sol = horizon.horizon_reach(np.asarray(t.choices), np.asarray(t.branches),
                             np.asarray(t.targets), np.asarray(t.probabilities),
                             built.goal, built.allowed, built.steps, built.sense,
-                            initial=t.initial, time_limit=s.time_limit)
+                            initial=t.initial, time_limit=s.time_limit,
+                            policy_max_bytes=horizon.POLICY_MAX_BYTES)
         timings = {**built.timings, "solve": time.perf_counter() - t0}
         lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
         near = lower if built.sense == "max" else upper  # the policy's guarantee

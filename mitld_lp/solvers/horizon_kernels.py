@@ -7,7 +7,8 @@ their transitions: per choice the float sums ``sum P^ lo`` and ``sum P^ hi``, ea
 turned into a bound by its row's factors (:mod:`mitld_lp.solvers.rounding`: the slack
 subtracted or added, the factor applied; the factors' margin covers these two float
 operations), the best over the state's choices, ``lo`` kept at least 0 and ``hi`` at
-most 1 (the exact values are probabilities): the operations of
+most 1 (the exact values are probabilities; a choice whose successors all have the
+upper bound 0 has the exact value 0, not its slack): the operations of
 :func:`mitld_lp.solvers.rounding.below` / ``above`` in one loop instead of a dozen array
 passes.  (``np.nextafter`` outward after them, as
 :func:`mitld_lp.solvers.step_bounded.horizon_bracket` does after adding a reward, is not
@@ -112,7 +113,14 @@ def reach_steps(first, last, steps, order, ends, ahead, choices, branches, targe
                     b += p * hi[t]
                 n = count[c]
                 a = (a - slack_of[n]) * low_of[n]
-                b = (b + slack_of[n]) * high_of[n]
+                if b == 0.0:  # exactly 0 if every successor's bound is (not underflow)
+                    for e in range(branches[c], branches[c + 1]):
+                        if hi[targets[e]] != 0.0:
+                            b = slack_of[n]
+                            break
+                    b *= high_of[n]
+                else:
+                    b = (b + slack_of[n]) * high_of[n]
                 if not minimise:
                     if a > best_lo:
                         best_lo = a
