@@ -172,7 +172,8 @@ def test_policy_table_controller_and_their_refusal_past_the_budget(tmp_path, mon
     r = synthesize(load_model(path))
     rows = r.policy_table()
     # x=4 with 1 step left: b (0.5) beats a (0.3); x=3 with 1 step left: b too
-    at = {(row["game_state"]["x"], row["steps_left"]): row["action"] for row in rows}
+    at = {(row["game_state"]["x"], int(row["automaton_state"].split()[0])): row["action"]
+          for row in rows}
     assert at[(4, 1)] == "b" and at[(3, 1)] == "b"
     assert {left for _, left in at} <= {1, 2, 3}
     c = r.controller

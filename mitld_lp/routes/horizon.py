@@ -37,10 +37,14 @@ __all__ = ["CLAIM_FROM", "HorizonRoute", "HorizonPart", "HorizonBuilt", "step_bo
            "HorizonController"]
 
 #: The product's bound (world states x (k + 1)) from which this route takes a
-#: step-bounded reachability from the plain route: resource-gathering 200-15-15 (24,064
-#: states, k = 200: a bound of 4.8M) took the plain route 8.1x Storm's whole process
-#: (docs/results.md, horizon-78).
-CLAIM_FROM = 1_000_000
+#: step-bounded reachability from the plain route.  Measured (experiments/
+#: horizon_threshold.py, resource-gathering at growing B, synthesize's CPU): bound 15,813
+#: plain 0.010 s / this route 0.001 s; 115,107: 0.031 / 0.001; 759,621: 0.371 / 0.002;
+#: 4,818,171: 2.6 / 0.007 (docs/results.md, horizon-78).  This route is faster at every
+#: size measured; below 100,000 the plain route's whole solve is a few hundredths of a
+#: second, and it keeps there what only a product gives (an exact answer, the product's
+#: exports, simulate and a saved controller).
+CLAIM_FROM = 100_000
 
 
 def _boolean(f: Formula, names: frozenset[str]) -> bool:
@@ -91,6 +95,16 @@ class HorizonBuilt:
     timings: dict[str, float]
     dta: Any = None  # the unbounded task's automaton (the step counter is the policy's rows)
     sta: Any = None
+
+    @property
+    def mdp(self) -> Any:
+        """Refused: this route builds no product (what ``info`` and ``export`` read)."""
+        raise ProblemError(
+            f"horizon route: no product is built for a step-bounded reachability over "
+            f"{self.table.n_states:,} world states and {self.steps:,} steps (a bound of "
+            f"{self.table.n_states * (self.steps + 1):,} product states, at least "
+            f"mitld_lp.routes.horizon.CLAIM_FROM = {CLAIM_FROM:,}): it is solved by "
+            "backward induction over the world; this command reads the product")
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,8 +157,9 @@ class HorizonController:
         if name.startswith("_"):
             raise AttributeError(name)
         self._kept()
-        raise ProblemError(f"horizon route: the step-dependent controller has no {name!r} "
-                           "(use act(), reset() or Result.policy_table())")
+        raise ProblemError(f"horizon route: the step-dependent controller answers act() and "
+                           f"reset() only, not {name!r} (what simulate, run and a saved "
+                           "controller read); its decisions are Result.policy_table()")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -155,8 +170,11 @@ class HorizonPart(Part):
     built: HorizonBuilt = field()
 
     def policy_table(self, result: Result) -> list[dict[str, Any]]:
-        """One row per step left and state with a decision: the world state, the steps
-        left and the action (refused, with the size, where the policy was not kept)."""
+        """One row per step left and state with a decision, in the product route's
+        columns (:data:`mitld_lp.files.write.POLICY_COLUMNS`): the world state, the
+        steps left as the automaton state (``"<j> steps left"``), the action; ``value``
+        NaN (the values of the steps before the last are not kept).  Refused, with the
+        size, where the policy was not kept."""
         from mitld_lp.report import state_record
 
         sol, built = self.solution, self.built
@@ -168,8 +186,10 @@ class HorizonPart(Part):
             states, picks = sol.decisions(step)
             for i, c in zip(states.tolist(), picks.tolist(), strict=True):
                 state = table.states[i]
-                rows.append({"game_state": state_record(game, state), "steps_left": step + 1,
-                             "action": game.actions(state)[c]})
+                rows.append({"game_state": state_record(game, state),
+                             "automaton_state": f"{step + 1} steps left", "pending": [],
+                             "clock": 0, "action": game.actions(state)[c],
+                             "value": float("nan"), "accepting_component": False})
         return rows
 
     def summary(self, result: Result) -> dict[str, Any]:
