@@ -232,3 +232,14 @@ def test_resource_gathering_200_15_15_holds_qvbs_exact_value(tmp_path):
     r = synthesize(load_model(path))
     assert r.route == "horizon" and r.certified
     assert Fraction(r.lower) <= exact <= Fraction(r.upper)
+
+
+def test_a_memory_budget_drops_the_policy_by_name_not_the_answer(tmp_path, monkeypatch):
+    pytest.importorskip("stormpy")
+    monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
+    path = _walk_model(tmp_path, "F[0,12] goal")
+    whole = synthesize(load_model(path))
+    tight = synthesize(load_model(path), max_memory=2)  # one byte for the policy
+    assert (tight.lower, tight.upper) == (whole.lower, whole.upper)
+    with pytest.raises(ProblemError, match="max_memory"):
+        tight.policy_table()

@@ -202,6 +202,16 @@ class HorizonPart(Part):
                               "no_policy": sol.why_no_policy or None}}
 
 
+def _policy_budget(max_memory: int | None) -> int:
+    """The policy's bytes: :data:`~mitld_lp.solvers.horizon.POLICY_MAX_BYTES`, and at
+    most half of the problem's memory budget where one is set (the rest for the world's
+    arrays and the induction's vectors)."""
+    from mitld_lp.solvers import horizon
+
+    cap = horizon.POLICY_MAX_BYTES
+    return cap if max_memory is None else min(cap, int(max_memory) // 2)
+
+
 class HorizonRoute(Route):
     """Step-bounded reachability on an explored world, by backward induction (module
     docs).  ``first``: listed before the plain route (its precedence entry)."""
@@ -255,7 +265,7 @@ class HorizonRoute(Route):
                             np.asarray(t.targets), np.asarray(t.probabilities),
                             built.goal, built.allowed, built.steps, built.sense,
                             initial=t.initial, time_limit=s.time_limit,
-                            policy_max_bytes=horizon.POLICY_MAX_BYTES)
+                            policy_max_bytes=_policy_budget(s.max_memory))
         timings = {**built.timings, "solve": time.perf_counter() - t0}
         lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
         near = lower if built.sense == "max" else upper  # the policy's guarantee

@@ -167,8 +167,8 @@ def horizon_reach(choices: np.ndarray, branches: np.ndarray, targets: np.ndarray
     if size > policy_max_bytes:
         why = (f"the step-dependent policy ({int(offsets[-1]):,} decisions of states with "
                f"a choice over {steps:,} steps x {dtype.itemsize} byte(s) = {size:,} "
-               f"bytes) is past the {policy_max_bytes:,} bytes of "
-               "mitld_lp.solvers.horizon.POLICY_MAX_BYTES")
+               f"bytes) is past the {policy_max_bytes:,} bytes allowed "
+               "(mitld_lp.solvers.horizon.POLICY_MAX_BYTES, at most half of max_memory)")
         picks = np.zeros(0, dtype=np.uint8)
     else:
         picks = np.zeros(int(offsets[-1]), dtype=dtype)
