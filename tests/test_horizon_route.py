@@ -243,3 +243,11 @@ def test_a_memory_budget_drops_the_policy_by_name_not_the_answer(tmp_path, monke
     assert (tight.lower, tight.upper) == (whole.lower, whole.upper)
     with pytest.raises(ProblemError, match="max_memory"):
         tight.policy_table()
+
+
+def test_work_past_the_budget_is_refused_at_pose(tmp_path, monkeypatch):
+    pytest.importorskip("stormpy")
+    monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
+    monkeypatch.setattr("mitld_lp.solvers.horizon.MAX_WORK", 10)
+    with pytest.raises(ProblemError, match="MAX_WORK"):
+        pose(load_model(_walk_model(tmp_path, "F[0,12] goal")))

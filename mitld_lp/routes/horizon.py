@@ -32,6 +32,7 @@ from mitld_lp.logic.syntax import And, Const, Formula, Not, Or, Prop, Until
 from mitld_lp.problem import Posed, ProblemError
 from mitld_lp.result import Part, Result, precision_check
 from mitld_lp.routes.route import Route
+from mitld_lp.util.stops import TimeUp
 
 __all__ = ["CLAIM_FROM", "HorizonRoute", "HorizonPart", "HorizonBuilt", "step_bounded",
            "HorizonController"]
@@ -127,6 +128,8 @@ class HorizonController:
         self.randomised, self._steps, self._index = False, 0, None
 
     def _kept(self) -> None:
+        if self.solution is None:
+            raise ProblemError("horizon route: no policy: the time limit passed")
         if self.solution.picks is None:
             raise ProblemError(f"horizon route: no policy kept: {self.solution.why_no_policy}")
 
@@ -178,6 +181,8 @@ class HorizonPart(Part):
         from mitld_lp.report import state_record
 
         sol, built = self.solution, self.built
+        if sol is None:
+            raise ProblemError("horizon route: no policy table: the time limit passed")
         if sol.picks is None:
             raise ProblemError(f"horizon route: no policy table: {sol.why_no_policy}")
         game, table = result.model.game, built.table
@@ -194,12 +199,13 @@ class HorizonPart(Part):
 
     def summary(self, result: Result) -> dict[str, Any]:
         mdp, sol = result.mdp, self.solution
-        return {"states": mdp.n_states, "choices": mdp.n_choices,
-                "transitions": mdp.n_transitions, "lp": None,
-                "iteration": {"status": "optimal", "steps": sol.steps,
-                              "decisions": int(sol.offsets[-1]),
-                              "policy_kept": sol.picks is not None,
-                              "no_policy": sol.why_no_policy or None}}
+        out = {"states": mdp.n_states, "choices": mdp.n_choices,
+               "transitions": mdp.n_transitions, "lp": None}
+        out["iteration"] = {"status": str(result.status), "steps": self.built.steps} | (
+            {} if sol is None else {"decisions": int(sol.offsets[-1]),
+                                    "policy_kept": sol.picks is not None,
+                                    "no_policy": sol.why_no_policy or None})
+        return out
 
 
 def _policy_budget(max_memory: int | None) -> int:
@@ -234,7 +240,23 @@ class HorizonRoute(Route):
         return table is not None and table.n_states * (shape[2] + 1) >= CLAIM_FROM
 
     def refusal(self, posed: Posed) -> list[str]:
-        return []
+        """The induction's work past :data:`mitld_lp.solvers.horizon.MAX_WORK` (from
+        the world's sizes and the steps, before any work)."""
+        from mitld_lp.solvers import horizon
+        from mitld_lp.worlds.table import table_of
+
+        game = posed.model.game
+        shape = step_bounded(posed.model.spec, frozenset(game.proposition_names))
+        table = table_of(game)
+        if shape is None or table is None:
+            return []
+        work = horizon.horizon_work(table.choices, table.branches, shape[2])
+        if work <= horizon.MAX_WORK:
+            return []
+        return [f"horizon route: {shape[2]:,} steps x ({int(table.branches[-1]):,} "
+                f"transitions + {int(table.choices[-1]):,} choices) = {work:,} updates, "
+                f"more than the {horizon.MAX_WORK:,} of "
+                "mitld_lp.solvers.horizon.MAX_WORK"]
 
     def build(self, posed: Posed, progress: bool | None = None) -> HorizonBuilt:
         from mitld_lp.automata.sta import make_sta
@@ -261,24 +283,32 @@ class HorizonRoute(Route):
 
         s, t = posed.settings, built.table
         t0, c0 = time.perf_counter(), time.process_time()
-        sol = horizon.horizon_reach(np.asarray(t.choices), np.asarray(t.branches),
-                            np.asarray(t.targets), np.asarray(t.probabilities),
-                            built.goal, built.allowed, built.steps, built.sense,
-                            initial=t.initial, time_limit=s.time_limit,
-                            policy_max_bytes=_policy_budget(s.max_memory))
+        try:
+            sol = horizon.horizon_reach(
+                np.asarray(t.choices), np.asarray(t.branches), np.asarray(t.targets),
+                np.asarray(t.probabilities), built.goal, built.allowed, built.steps,
+                built.sense, initial=t.initial, time_limit=s.time_limit,
+                policy_max_bytes=_policy_budget(s.max_memory))
+        except TimeUp:  # the trivial bracket, uncertified, no policy
+            sol, status = None, Status.TIME_LIMIT
+            lower, upper = 0.0, 1.0
+            checks: tuple[Check, ...] = (Check("step-bounded induction", False,
+                                               f"time limit of {s.time_limit} s passed"),)
+        else:
+            status = Status.OPTIMAL
+            lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
+            checks = (Check("step-bounded induction", bool(lower <= upper),
+                            f"{sol.steps} steps over the states read at each "
+                            f"({len(sol.order):,} of {t.n_states:,} ever); every sum "
+                            "rounded outward"),
+                      precision_check(lower, upper, upper - lower, 0.0, s.precision))
         timings = {**built.timings, "solve": time.perf_counter() - t0}
-        lower, upper = float(sol.lo[t.initial]), float(sol.hi[t.initial])
         near = lower if built.sense == "max" else upper  # the policy's guarantee
-        checks = (Check("step-bounded induction", bool(lower <= upper),
-                        f"{sol.steps} steps over the states read at each "
-                        f"({len(sol.order):,} of {t.n_states:,} ever); every sum "
-                        "rounded outward"),
-                  precision_check(lower, upper, upper - lower, 0.0, s.precision))
         size = WorldSize(t.n_states, int(t.choices[-1]), int(t.branches[-1]), t.initial)
         eps = posed.model.epsilon if s.epsilon is None else s.epsilon
         return Result(
             route=self.name, model=posed.model, objective=posed.problem.objective,
-            method=s.method, epsilon=eps, status=Status.OPTIMAL, lower=lower, upper=upper,
+            method=s.method, epsilon=eps, status=status, lower=lower, upper=upper,
             value=near, certified=all(c.passed for c in checks), checks=checks,
             controller=HorizonController(posed.model.game, t, built, sol), sta=built.sta,
             mdp=size, timings=timings, part=HorizonPart(sol, built),
