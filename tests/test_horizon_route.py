@@ -251,3 +251,14 @@ def test_work_past_the_budget_is_refused_at_pose(tmp_path, monkeypatch):
     monkeypatch.setattr("mitld_lp.solvers.horizon.MAX_WORK", 10)
     with pytest.raises(ProblemError, match="MAX_WORK"):
         pose(load_model(_walk_model(tmp_path, "F[0,12] goal")))
+
+
+def test_a_policy_table_past_max_states_rows_is_refused_by_name(tmp_path, monkeypatch):
+    pytest.importorskip("stormpy")
+    monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
+    path = _walk_model(tmp_path, "F[0,12] goal")
+    r = synthesize(load_model(path), max_states=3)
+    with pytest.raises(ProblemError, match="max_states"):
+        r.policy_table()
+    r.controller.reset()
+    assert r.controller.act(r.model.game.initial) in ("a", "b")  # the policy is kept

@@ -171,6 +171,7 @@ class HorizonPart(Part):
 
     solution: Any = field()
     built: HorizonBuilt = field()
+    max_rows: int = field()  # the problem's max_states: a product's table has no more rows
 
     def policy_table(self, result: Result) -> list[dict[str, Any]]:
         """One row per step left and state with a decision, in the product route's
@@ -185,6 +186,13 @@ class HorizonPart(Part):
             raise ProblemError("horizon route: no policy table: the time limit passed")
         if sol.picks is None:
             raise ProblemError(f"horizon route: no policy table: {sol.why_no_policy}")
+        limit = self.max_rows
+        if int(sol.offsets[-1]) > limit:
+            raise ProblemError(
+                f"horizon route: no policy table: {int(sol.offsets[-1]):,} rows (one per "
+                f"step and state with a choice) are more than the {limit:,} of max_states, "
+                "the most rows a product's table has; the controller's act() reads the "
+                "policy kept")
         game, table = result.model.game, built.table
         rows = []
         for step in range(built.steps):
@@ -311,7 +319,7 @@ class HorizonRoute(Route):
             method=s.method, epsilon=eps, status=status, lower=lower, upper=upper,
             value=near, certified=all(c.passed for c in checks), checks=checks,
             controller=HorizonController(posed.model.game, t, built, sol), sta=built.sta,
-            mdp=size, timings=timings, part=HorizonPart(sol, built),
+            mdp=size, timings=timings, part=HorizonPart(sol, built, int(s.max_states)),
             solve_cpu=time.process_time() - c0, dta=built.dta, precision=s.precision,
             width={"total": upper - lower, "truncation": 0.0, "solver": upper - lower},
             sense=built.sense)
