@@ -8,7 +8,8 @@ propositions (no events, no distribution eventualities); no constraints, band, s
 that misses or exact answer asked; the world is a table already explored
 (:func:`mitld_lp.worlds.table.table_of`: a PRISM program built whole, not a world
 explored on the fly or within a state limit); and the product's bound from its factors,
-world states times ``k + 1``, is at least :data:`CLAIM_FROM`.  Every other problem stays
+world states times ``k + 1``, and a sharper bound from the world's distances
+(:func:`product_bound`) are at least :data:`CLAIM_FROM`.  Every other problem stays
 with the routes after it (the plain route's product is exact for it too, and faster on
 a small bound).
 
@@ -81,6 +82,53 @@ def step_bounded(spec: Formula, names: frozenset[str]) -> tuple[Formula, Formula
     if not (_boolean(spec.left, names) and _boolean(spec.right, names)):
         return None
     return spec.left, spec.right, int(spec.interval.hi)
+
+
+def _sets(table: Any, psi: Formula, phi: Formula) -> tuple[np.ndarray, np.ndarray]:
+    """Per world state: where ``phi`` holds (the goal), where ``psi`` does."""
+    labels = table.label_sets
+    goal = np.array([_holds(phi, ls) for ls in labels], dtype=bool)[table.label_of]
+    allowed = np.array([_holds(psi, ls) for ls in labels], dtype=bool)[table.label_of]
+    return goal, allowed
+
+
+def product_bound(table: Any, goal: np.ndarray, moving: np.ndarray, steps: int,
+                  enough: int) -> int:
+    """A bound on the product's states for ``steps`` steps, from the world's distances:
+    a product state (world state ``s``, step ``t``) is reachable only if ``s`` is at most
+    ``t <= steps`` moves from the initial state through ``moving`` states, so the product
+    has at most the sum over those ``s`` of ``steps + 1 - distance(s)`` states.  The
+    breadth-first search stops once the sum reaches ``enough`` (then returned as it is):
+    a world explored whole whose task reads only a few states near the start (a grid with
+    ``F[0,10] goal``) keeps its small product, as when it is explored to the horizon."""
+    choices, branches = np.asarray(table.choices), np.asarray(table.branches)
+    targets = np.asarray(table.targets)
+    seen = np.zeros(table.n_states, dtype=bool)
+    front = np.array([table.initial])
+    seen[front] = True
+    total = 0
+    for d in range(steps + 1):
+        total += front.size * (steps + 1 - d)
+        if total >= enough or d == steps:
+            return total
+        front = front[moving[front]]
+        cs = _ranges(choices[front], choices[front + 1])
+        nxt = np.unique(targets[_ranges(branches[cs], branches[cs + 1])])
+        front = nxt[~seen[nxt]]
+        seen[front] = True
+        if front.size == 0:
+            return total
+    return total
+
+
+def _ranges(starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The indices ``starts[i]:ends[i]`` for every ``i``, concatenated."""
+    sizes = ends - starts
+    total = int(sizes.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    offsets = np.repeat(starts - np.concatenate(([0], np.cumsum(sizes)[:-1])), sizes)
+    return np.arange(total) + offsets
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -245,7 +293,11 @@ class HorizonRoute(Route):
         if shape is None:
             return False
         table = table_of(game)
-        return table is not None and table.n_states * (shape[2] + 1) >= CLAIM_FROM
+        if table is None or table.n_states * (shape[2] + 1) < CLAIM_FROM:
+            return False
+        goal, allowed = _sets(table, shape[0], shape[1])
+        return product_bound(table, goal, allowed & ~goal, shape[2],
+                             CLAIM_FROM) >= CLAIM_FROM
 
     def refusal(self, posed: Posed) -> list[str]:
         """The induction's work past :data:`mitld_lp.solvers.horizon.MAX_WORK` (from
@@ -276,9 +328,7 @@ class HorizonRoute(Route):
         game = posed.model.game
         psi, phi, k = step_bounded(posed.model.spec, frozenset(game.proposition_names))
         table = table_of(game)
-        labels = table.label_sets
-        goal = np.array([_holds(phi, ls) for ls in labels], dtype=bool)[table.label_of]
-        allowed = np.array([_holds(psi, ls) for ls in labels], dtype=bool)[table.label_of]
+        goal, allowed = _sets(table, psi, phi)
         dta = to_dta(until(psi, phi))
         sta = make_sta(dta, {}, posed.model.epsilon)
         return HorizonBuilt(table, goal, allowed, k, "min" if posed.minimise else "max",
