@@ -320,6 +320,11 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     peak = _hwm_kb() if fresh else bs._peak_kb()
     import resource  # a capped child's build (Storm's, where the program may not fit)
     child_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    if r.lower_model is None and r.route == "horizon":  # the world solved, no product
+        return _ours_on_the_world(model, r, synth_cpu, dict(
+            load_cpu=load_cpu, process_cpu=process_cpu, analysis_cpu=analysis[0],
+            peak_kb=max(peak - before, 0), process_peak_mb=max(load_peak, peak,
+                                                                child_peak) / 1024))
     mdp = r.mdp
     solved = [m for m in (r.lower_model, r.upper_model) if m is not None]
     lp = [m.lp for m in solved if m.lp is not None]
@@ -353,6 +358,40 @@ def work_ours(job: dict[str, Any], work: Path) -> dict[str, Any]:
     # Storm optimises the DRN's target as we do (a checkout before Result.sense: "max")
     (work / "sense.txt").write_text(getattr(r, "sense", "max"))
     return dict(out, sweep_cpu=float(np.median(times)))
+
+
+def _ours_on_the_world(model: Any, r: Any, synth_cpu: float, got: dict[str, Any],
+                       ) -> dict[str, Any]:
+    """``work_ours``'s figures for an answer from the world itself (the step-bounded
+    route, ``mitld_lp.routes.horizon``: backward induction over the world, no product):
+    the sizes are the world's, the unit sweep one over the world's choices, no DRN (its
+    Storm peer is Storm's own check of the PRISM property, ``no_product``)."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from mitld_lp.worlds.table import table_of
+
+    t = table_of(model.game)
+    n, m = t.n_states, int(t.choices[-1])
+    matrix = sp.csr_array((t.probabilities, t.targets, t.branches), shape=(m, n))
+    v, starts, times = np.random.default_rng(0).random(n), np.asarray(t.choices[:-1]), []
+    for _ in range(7):
+        c, k = bs._cpu(), 0
+        while k == 0 or bs._cpu() - c < 0.05:
+            np.maximum.reduceat(matrix @ v, starts)
+            k += 1
+        times.append((bs._cpu() - c) / k)
+    sol = r.part.solution
+    return dict(states=n, transitions=int(t.branches[-1]), lower=r.lower, upper=r.upper,
+                trivial=None, iteration_sweeps=sol.steps, iteration_s=sol.seconds,
+                lp_s=None, product_value=float(r.lower), certified=r.certified,
+                status=r.status.value, solve_cpu=r.solve_cpu,
+                process_cpu=got["process_cpu"], analysis_cpu=got["analysis_cpu"],
+                whole_cpu=got["load_cpu"] + synth_cpu, load_cpu=got["load_cpu"],
+                product_cpu=max(synth_cpu - r.solve_cpu, 0.0),
+                bytes_per_transition=got["peak_kb"] * 1024 / max(int(t.branches[-1]), 1),
+                process_peak_mb=got["process_peak_mb"], product_digest="",
+                sweep_cpu=float(np.median(times)), no_product=True)
 
 
 def trivial(solved: list[Any], initial: int) -> str | None:
@@ -437,11 +476,16 @@ def work_storm_prism(job: dict[str, Any], work: Path) -> dict[str, Any]:
     prop = stormpy.parse_properties(text, program)[0]
     model = stormpy.build_model(program, [prop])
     build_cpu = bs._cpu() - c
-    method = job["best"]
-    checks = bs._checks(model, prop, (method,))
+    method = job["best"]  # None: every sound method, the best one's check (no DRN)
+    checks = bs._checks(model, prop, bs.METHODS if method is None else (method,))
+    method = checks["best"]
+    others = sum(v["cpu"] for k, v in checks["methods"].items() if k != method)
     return dict(build_cpu=build_cpu, whole_cpu=build_cpu + checks["best_cpu"],
-                states=model.nr_states, value=checks["methods"][method]["value"],
-                process_cpu=_process_cpu(), process_peak_mb=bs._peak_kb() / 1024, **checks)
+                states=model.nr_states, transitions=model.nr_transitions,
+                value=checks["methods"][method]["value"],
+                # the process as with the best method alone (the others' checks taken out)
+                process_cpu=_process_cpu() - others, process_peak_mb=bs._peak_kb() / 1024,
+                **checks)
 
 
 def work_memory(job: dict[str, Any], work: Path) -> dict[str, Any]:
@@ -594,12 +638,18 @@ def _measure(inst: qvbs.Instance, job: dict[str, Any], work: Path,
     ours = _child("ours", job, work, budget)
     if "error" in ours:
         return dict(instance=inst.name, error=ours["error"])
-    storm = _child("storm_check", job, work, budget)
-    (work / "model.drn").unlink(missing_ok=True)
-    if "error" in storm:
-        return dict(instance=inst.name, error=storm["error"])
-    prism = (_child("storm_prism", dict(job, best=storm["best"]), work, budget)
-             if "prism" in job else None)  # the sensed case has no PRISM file
+    if ours.get("no_product"):  # Storm's peer: every sound method on its own build
+        prism = _child("storm_prism", dict(job, best=None), work, budget)
+        if "error" in prism:
+            return dict(instance=inst.name, error=prism["error"])
+        storm = dict(prism, bytes_per_transition=None)
+    else:
+        storm = _child("storm_check", job, work, budget)
+        (work / "model.drn").unlink(missing_ok=True)
+        if "error" in storm:
+            return dict(instance=inst.name, error=storm["error"])
+        prism = (_child("storm_prism", dict(job, best=storm["best"]), work, budget)
+                 if "prism" in job else None)  # the sensed case has no PRISM file
     if prism is not None and "error" in prism:
         prism = None
     reference = None if inst.reference is None else float(inst.reference)

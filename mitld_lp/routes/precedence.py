@@ -70,6 +70,7 @@ ROUTES: list[Any] = [
     Later("robust_constrained", "RobustConstrainedRoute"),  # constraints and a band
     Later("constrained", "ConstrainedRoute"),  # constraints or then, point laws
     Later("robust", "RobustRoute"),  # a band
+    Later("horizon", "HorizonRoute", first=True),  # F[0,k] on a large explored world
     _PLAIN,  # point laws, no constraints, perfect sensors
 ]
 
