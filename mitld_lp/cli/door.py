@@ -285,7 +285,9 @@ def _answer(args: argparse.Namespace, query: Any, model: Any, r: Any, seconds: f
     head = probability_head(query, bracket_text(r.lower, r.upper), decided)
     tail = [f"task {query.spec}" + "".join(f", {k} = {v}" for k, v in query.define.items()),
             "certified" if r.certified else f"NOT certified ({r.status.value})",
-            f"{model.game.explored} world states, {r.mdp.n_states} product states",
+            f"{model.game.explored} world states, " + (
+                f"{r.mdp.n_states} product states" if getattr(r.mdp, "product", True)
+                else "no product (solved over the world)"),
             f"{seconds:.2f} s"]
     if exact is not None:
         tail.insert(1, f"exact {exact}")

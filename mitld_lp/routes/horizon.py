@@ -158,12 +158,14 @@ class HorizonBuilt:
 
 @dataclass(frozen=True, eq=False)
 class WorldSize:
-    """The sizes a result reports of the model solved: the world itself."""
+    """The sizes a result reports of the model solved: the world itself (``product``
+    False: the readers that print a product's size say that none was built)."""
 
     n_states: int
     n_choices: int
     n_transitions: int
     initial: int
+    product: bool = False
 
 
 class HorizonController:
