@@ -16,7 +16,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from test_cert_small_exact import SEEDS, N, _chain_case, _model, _paid, _sets_by_fixpoint
+from test_cert_small_exact import SEEDS, N, chain_case, paid_kernels, sets_by_fixpoint, small_model
 from test_cert_small_exact import exact_optimum as _exact_optimum
 
 from mitld_lp.solvers import certify as C
@@ -25,7 +25,7 @@ from mitld_lp.solvers import certify_chain, certify_compiled
 
 def _parts_by_hand(m, states, rows, target):
     """``(never, sure, idx, b, vals, cols, ptr)`` as lists, an entry at a time."""
-    never, sure = _sets_by_fixpoint(m, states, rows, target)
+    never, sure = sets_by_fixpoint(m, states, rows, target)
     solved = [int(s) for s in states if not never[s] and not sure[s]]
     at = {s: k for k, s in enumerate(solved)}
     row_of = dict(zip(states.tolist(), rows.tolist(), strict=True))
@@ -49,11 +49,11 @@ def _parts_by_hand(m, states, rows, target):
 
 @pytest.mark.parametrize("seed", range(12))
 def test_compiled_chain_parts_are_the_entries_one_by_one(seed, monkeypatch) -> None:
-    case = _chain_case(seed)
+    case = chain_case(seed)
     want = _parts_by_hand(*case)
     by_path = {}
     for compiled in (False, True):  # refused where no kernel's load is paid
-        _paid(monkeypatch, compiled)
+        paid_kernels(monkeypatch, compiled)
         by_path[compiled] = certify_compiled.compiled_chain_parts(*case)
     assert by_path[False] is None and by_path[True] is not None
     m, states, rows, target = case
@@ -79,8 +79,8 @@ def test_compiled_chain_parts_are_the_entries_one_by_one(seed, monkeypatch) -> N
 
 
 def test_compiled_chain_parts_refuse_states_out_of_order(monkeypatch) -> None:
-    m, states, rows, target = _chain_case(0)
-    _paid(monkeypatch, True)
+    m, states, rows, target = chain_case(0)
+    paid_kernels(monkeypatch, True)
     assert certify_compiled.compiled_chain_parts(m, states[::-1].copy(), rows[::-1].copy(),
                                                  target) is None
 
@@ -92,7 +92,7 @@ def _bracket(mdp, target, v, policy, upper, compiled, monkeypatch):
     real = certify_compiled.compiled_chain_parts
     monkeypatch.setattr(certify_chain, "compiled_chain_parts",
                         lambda *a: ran.append(real(*a)) or ran[-1])
-    _paid(monkeypatch, compiled)
+    paid_kernels(monkeypatch, compiled)
     cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
                      zero=np.array([p == 0 for p in v]),
                      one=None if upper else np.array([p == 1 for p in v]))
@@ -108,7 +108,7 @@ def test_brackets_from_the_compiled_chain_parts_hold_the_exact_optimum(
         seed, upper, monkeypatch) -> None:
     """Certificates whose chain came from the compiled call (checked: it returned
     arrays) bracket the brute force's exact optimum, with the bits of the NumPy path."""
-    mdp, exact = _model(seed, N)
+    mdp, exact = small_model(seed, N)
     v, policy = _exact_optimum(mdp, exact, N, upper)
     target = np.asarray(mdp.target)
     on, ran_on = _bracket(mdp, target, v, policy, upper, True, monkeypatch)

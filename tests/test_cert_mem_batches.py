@@ -13,7 +13,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_single_levels import _layered, _recursion
+from test_single_levels import layered_mdp, recursion_values
 
 from mitld_lp.solvers import certify as C
 from mitld_lp.solvers import certify_chain, certify_everywhere
@@ -44,8 +44,8 @@ def _solved(mdp, sense: Sense):
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_brackets_hold_the_exact_optimum_in_every_state_with_tiny_batches(
         monkeypatch: pytest.MonkeyPatch, seed: int, sense: Sense) -> None:
-    mdp, exact, goal = _layered(seed, depth=12)
-    want = _recursion(exact, goal, goal, sense) + [Fraction(1), Fraction(0)]
+    mdp, exact, goal = layered_mdp(seed, depth=12)
+    want = recursion_values(exact, goal, goal, sense) + [Fraction(1), Fraction(0)]
     it, lp, q = _solved(mdp, sense)
     low = sense is Sense.MIN
     decided = q.qualitative

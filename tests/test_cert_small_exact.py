@@ -33,7 +33,7 @@ from mitld_lp.testing.exact import chain_values
 RARE = (1e-12, 3e-12, 7e-13, 2.5e-12)
 
 
-def _model(seed: int, n: int) -> tuple[MDP, list[dict[int, Fraction]]]:
+def small_model(seed: int, n: int) -> tuple[MDP, list[dict[int, Fraction]]]:
     """``n`` unknown states, the target ``n`` and the sink ``n + 1``.  A state's choices
     are of two kinds: one that stays among the unknown states (a self-loop, or a split
     between two of them: end components), and one that leaves to the sink and to the
@@ -109,7 +109,7 @@ def exact_optimum(mdp: MDP, exact: list[dict[int, Fraction]], n: int, upper: boo
     return best, np.array(list(policy) + [-1, -1], dtype=np.int64)
 
 
-def _paid(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
+def paid_kernels(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
     """The certificate's compiled paths (the chain's sets and single levels, the
     Bellman check, the repair's needs) on or off, whatever this process loaded."""
     fake = SimpleNamespace(compiled_paid=lambda: compiled,
@@ -126,14 +126,14 @@ SEEDS = range(8)
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_brackets_hold_the_brute_force_optimum_compiled_or_not(seed, monkeypatch) -> None:
-    mdp, exact = _model(seed, N)
+    mdp, exact = small_model(seed, N)
     target = np.asarray(mdp.target)
     for upper in (True, False):
         v, policy = exact_optimum(mdp, exact, N, upper)
         zero = np.array([p == 0 for p in v])
         got = []
         for compiled in (True, False):
-            _paid(monkeypatch, compiled)
+            paid_kernels(monkeypatch, compiled)
             cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
                              zero=zero, one=None if upper else np.array([p == 1 for p in v]))
             assert Fraction(cert.lower) <= v[0] <= Fraction(cert.upper), (upper, v[0])
@@ -147,7 +147,7 @@ def test_the_models_have_end_components_and_rare_values() -> None:
     component among the unknown states, some with an optimum below 1e-10."""
     ecs = rare = 0
     for seed in SEEDS:
-        mdp, exact = _model(seed, N)
+        mdp, exact = small_model(seed, N)
         comp = C.support_layers(mdp)[0]
         ecs += bool(may_cycle(mdp, comp)[:N].any())
         v, _ = exact_optimum(mdp, exact, N, True)
@@ -155,7 +155,7 @@ def test_the_models_have_end_components_and_rare_values() -> None:
     assert ecs >= 4 and rare >= 2, (ecs, rare)
 
 
-def _chain_case(seed: int) -> tuple[sp.csr_array, np.ndarray, np.ndarray, np.ndarray]:
+def chain_case(seed: int) -> tuple[sp.csr_array, np.ndarray, np.ndarray, np.ndarray]:
     """A random matrix of choices (stored zeros among the entries), a policy's row for
     each acting state, and a target."""
     rng = np.random.default_rng(seed)
@@ -178,7 +178,7 @@ def _chain_case(seed: int) -> tuple[sp.csr_array, np.ndarray, np.ndarray, np.nda
     return m, states, rng.integers(0, n_rows, size=states.size), target
 
 
-def _sets_by_fixpoint(m: sp.csr_array, states: np.ndarray, rows: np.ndarray,
+def sets_by_fixpoint(m: sp.csr_array, states: np.ndarray, rows: np.ndarray,
                       target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``never`` and ``sure`` by a forward fixpoint on a dense boolean adjacency (a
     route that shares nothing with either search)."""
@@ -202,12 +202,12 @@ def _sets_by_fixpoint(m: sp.csr_array, states: np.ndarray, rows: np.ndarray,
 
 @pytest.mark.parametrize("seed", range(10))
 def test_compiled_chain_sets_are_the_searches(seed, monkeypatch) -> None:
-    m, states, rows, target = _chain_case(seed)
-    want = _sets_by_fixpoint(m, states, rows, target)
-    _paid(monkeypatch, False)
+    m, states, rows, target = chain_case(seed)
+    want = sets_by_fixpoint(m, states, rows, target)
+    paid_kernels(monkeypatch, False)
     assert certify_compiled.compiled_chain_sets(m, states, rows, target) is None
     numpy = certify_chain._sets(m, target.size, states, rows, target, np.int32)
-    _paid(monkeypatch, True)
+    paid_kernels(monkeypatch, True)
     got = certify_compiled.compiled_chain_sets(m, states, rows, target)
     assert got is not None
     for a, b, c in zip(want, numpy, got, strict=True):
@@ -283,12 +283,12 @@ def test_a_disabled_loader_is_never_warm(monkeypatch) -> None:
 def test_the_chain_of_a_certificate_is_the_same_compiled_or_not(monkeypatch) -> None:
     """The whole chain (its sets, values and slack) on a model with end components,
     compiled paths on and off: the same bits."""
-    mdp, exact = _model(3, N)
+    mdp, exact = small_model(3, N)
     v, policy = exact_optimum(mdp, exact, N, True)
     rnd = rounding(sp.csr_array(mdp.matrix))
     got = []
     for compiled in (True, False):
-        _paid(monkeypatch, compiled)
+        paid_kernels(monkeypatch, compiled)
         ch = C.chain(mdp, np.asarray(mdp.target), policy, rnd)
         got.append([np.asarray(a).tobytes() for a in (ch.values, ch.w, ch.solved,
                                                       ch.sure, ch.never)])
@@ -330,6 +330,6 @@ def test_attracted_compiled_or_not_is_the_fixpoint(seed, monkeypatch) -> None:
     want = bool(_attractor_by_fixpoint(m, groups, ~inside)[inside].all())
     got = []
     for compiled in (True, False):
-        _paid(monkeypatch, compiled)
+        paid_kernels(monkeypatch, compiled)
         got.append(certify_chain.attracted(m, groups, inside))
     assert got == [want, want]

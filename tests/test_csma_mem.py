@@ -38,7 +38,7 @@ from mitld_lp.solvers.quotient import first_staying, lift_policy, reduce
 from mitld_lp.solvers.value_one import ATTRACTOR_STRATEGY
 
 
-def _random_mdp(seed: int, n: int = 36):
+def random_mdp(seed: int, n: int = 36):
     """Random choices among ``n`` states: some stay among a state and its two
     neighbours (end components), some go to a trap of two states that loop (``n``,
     ``n + 1``: a minimum avoids the goal there), some to two states from which every
@@ -73,7 +73,7 @@ def _random_mdp(seed: int, n: int = 36):
     return build_mdp(states, target=[goal], sink=[dead])
 
 
-def _with_zeros(mdp, seed: int):
+def with_zeros(mdp, seed: int):
     """``mdp`` with a stored zero in some rows, in a column the row does not reach (no
     edge: every analysis ignores it)."""
     rng = np.random.default_rng(seed)
@@ -99,8 +99,8 @@ def _with_zeros(mdp, seed: int):
 
 @pytest.fixture(scope="module")
 def mdps():
-    out = [_random_mdp(seed) for seed in range(6)]
-    out += [_with_zeros(_random_mdp(seed), seed) for seed in range(6, 9)]
+    out = [random_mdp(seed) for seed in range(6)]
+    out += [with_zeros(random_mdp(seed), seed) for seed in range(6, 9)]
     return out
 
 
@@ -127,7 +127,7 @@ def test_absorbing_states_is_the_loop_over_the_choices(mdps) -> None:
         assert absorbing_states(mdp).sum() == 2  # the goal and the dead end
 
 
-def _staying_by_loop(mdp, inside: np.ndarray, s: int) -> int:
+def staying_by_loop(mdp, inside: np.ndarray, s: int) -> int:
     m = sp.csr_array(mdp.matrix)
     for c in _choice_list(mdp, s):
         lo, hi = m.indptr[c], m.indptr[c + 1]
@@ -145,16 +145,16 @@ def test_first_staying_is_the_loop_over_the_rows(mdps, monkeypatch) -> None:
             inside = rng.random(mdp.n_states) < 0.6
             lo = int(rng.integers(0, mdp.n_states // 2))
             hi = int(rng.integers(lo + 1, mdp.n_states + 1))
-            want = [_staying_by_loop(mdp, inside, s) for s in range(lo, hi)]
+            want = [staying_by_loop(mdp, inside, s) for s in range(lo, hi)]
             assert np.array_equal(first_staying(mdp, inside, lo, hi), want)
             with monkeypatch.context() as m:  # several slices, one state each at least
                 m.setattr(quotient_mod, "SLICE_STATES", 3)
                 assert np.array_equal(first_staying(mdp, inside, lo, hi), want)
-            every = [_staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
+            every = [staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
             assert np.array_equal(first_staying(mdp, inside), every)
             later += int(np.count_nonzero(np.asarray(want) != mdp.row_groups[lo:hi]))
             none += sum(not _stays(mdp, inside, _choice_list(mdp, s)[0])
-                        and _staying_by_loop(mdp, inside, s) == _choice_list(mdp, s)[0]
+                        and staying_by_loop(mdp, inside, s) == _choice_list(mdp, s)[0]
                         for s in range(lo, hi))
     assert later > 0 and none > 0  # the test tells the cases apart
 
@@ -214,7 +214,7 @@ def _check_lift(mdp, q, choice: np.ndarray) -> None:
         assert int(policy[s]) in _choice_list(mdp, int(s))
     if q.sense is Sense.MIN:  # prob-0: a choice that stays among them where one does
         for s in np.flatnonzero(q.prob0 & ~ends):
-            assert policy[s] == _staying_by_loop(mdp, q.prob0, int(s))
+            assert policy[s] == staying_by_loop(mdp, q.prob0, int(s))
     want = q.lift(_quotient_values(q, choice)) if q.n_states else q.lift(np.zeros(0))
     got = _policy_values(mdp, policy, mdp.target)
     assert np.allclose(got, want, rtol=1e-9, atol=1e-12)

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import build_mdp
 from test_level_runs import _mixed
-from test_single_levels import _layered
+from test_single_levels import layered_mdp
 
 from mitld_lp.solvers import iteration, shared_levels
 from mitld_lp.solvers.analysis import analyse
@@ -37,7 +37,7 @@ def _quotient(mdp, sense: Sense):
 
 
 def _random(kind: str, seed: int):
-    return _layered(seed, depth=30)[0] if kind == "acyclic" else _mixed(seed, depth=30)
+    return layered_mdp(seed, depth=30)[0] if kind == "acyclic" else _mixed(seed, depth=30)
 
 
 def _skip(q) -> np.ndarray:
@@ -112,7 +112,7 @@ def test_the_iteration_with_shared_levels_gives_the_old_bounds(
 
 
 def test_the_kept_levels_go_with_their_quotient() -> None:
-    q = _quotient(_layered(0, depth=30)[0], Sense.MAX)
+    q = _quotient(layered_mdp(0, depth=30)[0], Sense.MAX)
     shared_levels.shared_levels(q, q.order)
     key = id(q.matrix)
     assert key in shared_levels._KEPT
@@ -122,7 +122,7 @@ def test_the_kept_levels_go_with_their_quotient() -> None:
 
 
 def test_the_lp_stage_takes_the_levels_it_is_the_last_to_use() -> None:
-    q = _quotient(_layered(1, depth=30)[0], Sense.MAX)
+    q = _quotient(layered_mdp(1, depth=30)[0], Sense.MAX)
     first = shared_levels.shared_levels(q, q.order)
     assert shared_levels.shared_levels(q, q.order, last=True) is first
     assert id(q.matrix) not in shared_levels._KEPT  # not kept past the LP

@@ -12,7 +12,7 @@ import pytest
 import mitld_lp.solvers
 from mitld_lp.solvers import jump_cost, sweep_gate
 from mitld_lp.util import kernel_loader
-from tests.test_sweep_gate_choice import _block, _grid
+from tests.test_sweep_gate_choice import gate_block, gate_grid
 
 
 def expected(w: int, h: int, loaded: bool, warm: bool) -> bool:
@@ -38,7 +38,7 @@ GRIDS = [(64, 32), (64, 64), (96, 40), (128, 64), (60, 50), (200, 8), (40, 40)]
 def test_the_gate_follows_the_forecast(wh: tuple[int, int], warm: bool, loaded: bool,
                                        monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(sweep_gate, "_CHEAP", [warm])
-    assert sweep_gate.prefers_compiled(_block(_grid(*wh)), loaded=loaded) == expected(
+    assert sweep_gate.prefers_compiled(gate_block(gate_grid(*wh)), loaded=loaded) == expected(
         *wh, loaded, warm)
 
 
@@ -46,7 +46,7 @@ def test_a_warm_load_sends_bus_n64s_second_block_compiled(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The 64 x 64 grid (depth 126, as bus n64 d3's second block): NumPy's forecast is
     below numba's import but above the loader's link."""
-    middle = _block(_grid(64, 64))
+    middle = gate_block(gate_grid(64, 64))
     monkeypatch.setattr(sweep_gate, "_CHEAP", [False])
     assert not sweep_gate.prefers_compiled(middle, loaded=False)
     monkeypatch.setattr(sweep_gate, "_CHEAP", [True])

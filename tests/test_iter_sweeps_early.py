@@ -16,7 +16,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from test_iter_rare_sweeps import fraction_mdp as rare_mdp
-from test_sweep_gate_choice import _block
+from test_sweep_gate_choice import gate_block
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import early_jump, iteration, jump_cost, kernels, sweep_gate
@@ -286,7 +286,7 @@ def test_gate_decides_as_its_rule_written_here(monkeypatch: pytest.MonkeyPatch,
         edge = _boundary(w, loaded, cheap)
         assert edge is not None
         for h in (edge - 1, edge, edge + 1, 101 - w + 1, 102 - w + 1):
-            block = _block(_grid(w, h))
+            block = gate_block(_grid(w, h))
             assert jump_cost.block_depth(block) == w + h - 2  # the depth written here
             for entries in (149_999, 10**7):
                 want = _grid_rule(w, h, entries, loaded, cheap)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.optimize as opt
 from conftest import build_mdp
-from test_single_levels import _layered, _recursion
+from test_single_levels import layered_mdp, recursion_values
 
 from mitld_lp.solvers import lp_blocks, topological
 from mitld_lp.solvers.analysis import analyse
@@ -75,11 +75,11 @@ def _same(a, b) -> None:
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_acyclic_runs_give_the_level_walks_answer_and_the_exact_values(
         monkeypatch: pytest.MonkeyPatch, seed: int, sense: Sense) -> None:
-    mdp, exact, goal = _layered(seed, depth=40)
+    mdp, exact, goal = layered_mdp(seed, depth=40)
     got = _answers(monkeypatch, mdp, sense)
     _same(got["levels"], got["numpy"])
     _same(got["levels"], got["compiled"])
-    want = _recursion(exact, goal, goal, sense)
+    want = recursion_values(exact, goal, goal, sense)
     cert = got["compiled"][2]  # the certified bracket holds the exact optimum
     assert Fraction(cert.lower) <= want[0] <= Fraction(cert.upper)
     assert cert.upper - cert.lower <= 1e-6 * cert.lower
@@ -142,7 +142,7 @@ def _mixed(seed: int, depth: int = 40, width: int = 3):
     1/2, to the goal with probability 1/2 (the larger one-step target probability),
     and that again (the later index)."""
     rng = np.random.default_rng(seed)
-    mdp, _, goal = _layered(seed, depth, width)
+    mdp, _, goal = layered_mdp(seed, depth, width)
     half = goal + 2
     rows = []
     for s in range(goal):
@@ -198,9 +198,9 @@ def test_the_repair_reaches_every_state_a_moved_bound_is_read_by(seed: int) -> N
     exact optimum (the backward recursion) at the initial state."""
     from mitld_lp.solvers import certify as C
 
-    mdp, exact, goal = _layered(seed, depth=40)
-    want = _recursion(exact, goal, goal, Sense.MAX)
-    worst = _recursion(exact, goal, goal, Sense.MIN)
+    mdp, exact, goal = layered_mdp(seed, depth=40)
+    want = recursion_values(exact, goal, goal, Sense.MAX)
+    worst = recursion_values(exact, goal, goal, Sense.MIN)
     policy = np.full(mdp.n_states, -1, dtype=np.int64)
     for s in range(goal):  # the minimum's choice: the chain of the worst policy
         scores = []

@@ -26,8 +26,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from conftest import build_mdp
-from test_peak_1e6 import _brute
-from test_single_levels import _layered, _recursion
+from test_peak_1e6 import brute_keeping_zero
+from test_single_levels import layered_mdp, recursion_values
 
 from mitld_lp.solvers import rows
 from mitld_lp.solvers import shared_levels as shared_mod
@@ -41,18 +41,18 @@ def _layers(seed: int):
     """:func:`test_single_levels._layered`'s layers (40 of 3 states) with its dead end
     a truncated state: the MDP, each state's exact rows, the goal and the layers'
     states' count."""
-    _, exact, goal = _layered(seed, depth=40)
+    _, exact, goal = layered_mdp(seed, depth=40)
     states = [[(f"a{k}", row) for k, row in enumerate(rows)] for rows in exact]
     states += [[], []]
     return build_mdp(states, target=[goal], truncated=[goal + 1]), exact, goal
 
 
 def _exact(exact, goal: int, cut_value: int, sense: Sense) -> list[Fraction]:
-    """The exact optimum by backward induction (``_recursion``): the truncated state
+    """The exact optimum by backward induction (``recursion_values``): the truncated state
     counts 0, or 1 as a second goal (its mass added to the goal's, in fractions)."""
     if cut_value:
         exact = [[_merged(row, goal) for row in rows] for rows in exact]
-    return _recursion(exact, goal, goal, sense)
+    return recursion_values(exact, goal, goal, sense)
 
 
 def _merged(row: dict, goal: int) -> dict:
@@ -137,7 +137,7 @@ def test_keeping_zero_of_the_zero_states_only(seed: int, chunk: int, monkeypatch
     to_target = np.where(rng.random(m) < 0.3, rng.random(m), 0.0)
     q = SimpleNamespace(matrix=sp.csr_array((data, indices, indptr), shape=(m, n)),
                         zero=zero, to_target=to_target, row_groups=groups, n_choices=m)
-    full = _brute(indptr, indices, zero, to_target, groups)
+    full = brute_keeping_zero(indptr, indices, zero, to_target, groups)
     want = [full[s] if zero[s] else int(groups[s]) for s in range(n)]
     monkeypatch.setattr(rows, "ENTRY_CHUNK", chunk)  # entries read at a time
     got = keeping_zero(q, zero_only=True)
@@ -149,13 +149,13 @@ def test_first_staying_read_a_chunk_of_entries_at_a_time(chunk: int, monkeypatch
     """``first_staying`` (only the states of several choices searched, their entries a
     chunk at a time) is test_csma_mem's loop over every state's rows, stored zeros
     included (no edge)."""
-    from test_csma_mem import _random_mdp, _staying_by_loop, _with_zeros
+    from test_csma_mem import random_mdp, staying_by_loop, with_zeros
 
     from mitld_lp.solvers.quotient import first_staying
 
     monkeypatch.setattr(rows, "ENTRY_CHUNK", chunk)
     rng = np.random.default_rng(chunk)
-    for mdp in [_random_mdp(3), _with_zeros(_random_mdp(7), 7)]:
+    for mdp in [random_mdp(3), with_zeros(random_mdp(7), 7)]:
         inside = rng.random(mdp.n_states) < 0.6
-        want = [_staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
+        want = [staying_by_loop(mdp, inside, s) for s in range(mdp.n_states)]
         assert first_staying(mdp, inside).tolist() == want

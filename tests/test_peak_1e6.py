@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from mitld_lp.solvers.reduced import keeping_zero
 
 
-def _brute(indptr, indices, zero, to_target, groups) -> list[int]:
+def brute_keeping_zero(indptr, indices, zero, to_target, groups) -> list[int]:
     out = []
     for s in range(len(groups) - 1):
         pick = groups[s]
@@ -48,7 +48,7 @@ def test_keeping_zero_matches_a_loop(seed: int) -> None:
                         n_choices=m)
     got = keeping_zero(q)
     assert got.dtype == np.int64
-    assert got.tolist() == _brute(indptr, indices, zero, to_target, groups)
+    assert got.tolist() == brute_keeping_zero(indptr, indices, zero, to_target, groups)
 
 
 def test_keeping_zero_without_entries() -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from mitld_lp.solvers import jump_cost, sweep_gate
-from tests.test_sweep_gate_choice import _block, _grid, _shallow
+from tests.test_sweep_gate_choice import gate_block, gate_grid, shallow_gate_block
 
 
 def _pieces(succ: list[list[int]]) -> list[int]:
@@ -55,15 +55,15 @@ def _rule(block, loaded: bool) -> bool:
     _rings([16] * 154),  # the sensed case's blocks: 154 pieces of at most 16 states
     _rings([3, 101, 7, 102, 1], steps=2),
     _rings([40, 250]),
-    _grid(30, 20),
-    _shallow(3000, 3, 7),
+    gate_grid(30, 20),
+    shallow_gate_block(3000, 3, 7),
 ])
 def test_largest_part_is_the_largest_piece(succ: list[list[int]]) -> None:
-    assert sweep_gate.largest_part(_block(succ)) == _pieces(succ)[-1]
+    assert sweep_gate.largest_part(gate_block(succ)) == _pieces(succ)[-1]
 
 
 def test_largest_part_of_an_empty_block() -> None:
-    assert sweep_gate.largest_part(_block([])) == 0
+    assert sweep_gate.largest_part(gate_block([])) == 0
 
 
 @pytest.mark.parametrize("succ", [
@@ -71,13 +71,13 @@ def test_largest_part_of_an_empty_block() -> None:
     _rings([101] * 30),  # each piece's depth at most 100: without a search
     _rings([102] * 30),  # a ring of 102 states: depth 51 (undirected), searched
     _rings([5] * 400 + [1200]),  # one deep piece among shallow ones: searched
-    _grid(128, 64),
-    _shallow(8192, 4, 1),
+    gate_grid(128, 64),
+    shallow_gate_block(8192, 4, 1),
 ])
 @pytest.mark.parametrize("loaded", [False, True])
 def test_same_decision_as_the_searched_depth(succ: list[list[int]], loaded: bool,
                                              monkeypatch: pytest.MonkeyPatch) -> None:
-    block = _block(succ)
+    block = gate_block(succ)
     expected = _rule(block, loaded)
     searched = []
     depth = jump_cost.block_depth
@@ -113,9 +113,9 @@ FOUR_BLOCKS = [
     _rings([40] * 154, steps=3),
     _rings([16] * 20),
     _rings([3] * 50),  # too small for any load but none
-    _grid(30, 20),
-    _grid(128, 64),  # deeper than the NumPy sweeps carry
-    _shallow(3000, 3, 7),
+    gate_grid(30, 20),
+    gate_grid(128, 64),  # deeper than the NumPy sweeps carry
+    shallow_gate_block(3000, 3, 7),
     _rings([5] * 400 + [1200]),
 ]
 
@@ -130,7 +130,7 @@ def test_two_models_follow_their_forecast(succ: list[list[int]], loaded: bool, p
 
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: paid)
     monkeypatch.setattr(sweep_gate, "_CHEAP", [cheap])
-    block = _block(succ)
+    block = gate_block(succ)
     assert sweep_gate.prefers_four(block, loaded) is _four_rule(block, loaded, paid, cheap)
 
 
@@ -143,7 +143,7 @@ def test_a_shallow_block_of_two_models_goes_compiled_of_one_model_not(
     from mitld_lp.solvers import kernels
     from mitld_lp.util import kernel_loader
 
-    block = _block(_rings([40] * 154, steps=3))
+    block = gate_block(_rings([40] * 154, steps=3))
     assert jump_cost.block_depth(block) == 7  # ceil(20 / 3)
     monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: True)
     monkeypatch.setattr(kernels, "compiled_kernel", lambda: object())

@@ -14,7 +14,7 @@ from mitld_lp.solvers import Status, interval_iteration
 from mitld_lp.solvers.graph import Sense
 
 
-def _layered(seed: int, depth: int = 60, width: int = 3):
+def layered_mdp(seed: int, depth: int = 60, width: int = 3):
     """``depth`` layers of ``width`` states; each choice stays put, moves to the next
     layer, or reaches the goal / the dead end; the last layer's choices end there.
     Returns the MDP and each state's choices as exact ``(stay, {succ: p}, goal)``."""
@@ -45,7 +45,7 @@ def _layered(seed: int, depth: int = 60, width: int = 3):
     return build_mdp(states, target=[goal], sink=[dead]), exact, goal
 
 
-def _recursion(exact, goal: int, n: int, sense: Sense) -> list[Fraction]:
+def recursion_values(exact, goal: int, n: int, sense: Sense) -> list[Fraction]:
     pick = max if sense is Sense.MAX else min
     v: dict[int, Fraction] = {goal: Fraction(1), goal + 1: Fraction(0)}
     for s in range(n - 1, -1, -1):  # later layers first
@@ -61,9 +61,9 @@ def _recursion(exact, goal: int, n: int, sense: Sense) -> list[Fraction]:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_many_single_levels_match_the_exact_recursion(seed: int, sense: Sense) -> None:
-    mdp, exact, goal = _layered(seed)
+    mdp, exact, goal = layered_mdp(seed)
     n = goal
-    want = _recursion(exact, goal, n, sense)
+    want = recursion_values(exact, goal, n, sense)
     r = interval_iteration(mdp, mdp.target, sense=sense, gap="max", progress=False)
     assert r.status is Status.OPTIMAL, r.message
     assert r.iterations == 0  # no cycle but the self-loops, solved exactly

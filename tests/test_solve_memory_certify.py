@@ -11,7 +11,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_single_levels import _layered, _recursion
+from test_single_levels import layered_mdp, recursion_values
 
 from mitld_lp.solvers import certify as certify_mod
 from mitld_lp.solvers.analysis import analyse
@@ -23,8 +23,8 @@ from mitld_lp.solvers.rounding import rounding
 
 
 def _exact(seed: int, sense: Sense):
-    mdp, exact, goal = _layered(seed, depth=15)
-    return mdp, _recursion(exact, goal, goal, sense), goal
+    mdp, exact, goal = layered_mdp(seed, depth=15)
+    return mdp, recursion_values(exact, goal, goal, sense), goal
 
 
 @pytest.mark.parametrize("batch", [1, 4, 1 << 16])

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_single_levels import _layered
+from test_single_levels import layered_mdp
 
 from mitld_lp.solvers import rows as rows_mod
 from mitld_lp.solvers.analysis import analyse
@@ -60,7 +60,7 @@ def test_off_diagonal_entries_of_no_rows_are_empty() -> None:
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_single_levels_hold_each_choices_entries_but_its_self_loop_in_int32(
         sense: Sense) -> None:
-    mdp, _, _ = _layered(3, depth=12)
+    mdp, _, _ = layered_mdp(3, depth=12)
     q, _ = analyse(mdp, mdp.target, sense=sense)
     singles = SingleLevels(q, blocks(q))
     assert singles.choices.size > 0

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from conftest import build_mdp
-from test_single_levels import _layered
+from test_single_levels import layered_mdp
 
 from mitld_lp.solvers import lp as lp_mod
 from mitld_lp.solvers.graph import Sense
@@ -54,7 +54,7 @@ def test_the_randomised_policy_is_each_choices_share_of_its_state() -> None:
 
 
 def test_the_lps_randomised_policy_is_its_occupancys_share() -> None:
-    mdp, _, _ = _layered(7, depth=10)
+    mdp, _, _ = layered_mdp(7, depth=10)
     tol = 1e-9
     lp = solve_lp(mdp, mdp.target, sense=Sense.MAX, everywhere=True, tol=tol)
     want = _by_loop(np.asarray(mdp.row_groups), lp.occupancy, lp.policy,

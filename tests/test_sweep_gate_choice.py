@@ -13,7 +13,7 @@ from mitld_lp.solvers import interval_iteration, iteration, jump_cost, kernels, 
 from mitld_lp.solvers.topological import Block
 
 
-def _block(succ: list[list[int]], leave: float = 0.01) -> Block:
+def gate_block(succ: list[list[int]], leave: float = 0.01) -> Block:
     """A block of ``len(succ)`` states, one choice each, moving to ``succ[s]`` with equal
     shares of ``1 - leave`` (``leave`` to the target)."""
     n = len(succ)
@@ -25,7 +25,7 @@ def _block(succ: list[list[int]], leave: float = 0.01) -> Block:
                  np.arange(n, dtype=np.int64), np.full(n, leave))
 
 
-def _grid(w: int, h: int) -> list[list[int]]:
+def gate_grid(w: int, h: int) -> list[list[int]]:
     """A ``w x h`` grid's four-neighbour moves (its depth: ``w + h - 2``)."""
     out = []
     for s in range(w * h):
@@ -35,7 +35,7 @@ def _grid(w: int, h: int) -> list[list[int]]:
     return out
 
 
-def _shallow(n: int, degree: int, seed: int) -> list[list[int]]:
+def shallow_gate_block(n: int, degree: int, seed: int) -> list[list[int]]:
     """``n`` states, each moving to ``degree`` others drawn at random: a random graph of
     that degree has a depth of a few times its logarithm."""
     rng = np.random.default_rng(seed)
@@ -45,16 +45,16 @@ def _shallow(n: int, degree: int, seed: int) -> list[list[int]]:
 
 def test_depth_of_hand_built_blocks() -> None:
     line = [[t for t in (s - 1, s + 1) if 0 <= t < 300] for s in range(300)]
-    assert jump_cost.block_depth(_block(line)) == 299
-    assert jump_cost.block_depth(_block(_grid(128, 64))) == 128 + 64 - 2
-    assert jump_cost.block_depth(_block(_shallow(8192, 4, 0))) < 30
+    assert jump_cost.block_depth(gate_block(line)) == 299
+    assert jump_cost.block_depth(gate_block(gate_grid(128, 64))) == 128 + 64 - 2
+    assert jump_cost.block_depth(gate_block(shallow_gate_block(8192, 4, 0))) < 30
 
 
 def test_same_size_different_depth_different_route() -> None:
     # bus_scaled n64 d3's first grid block has 8,192 states; a grid of them (depth 190)
     # and a random graph of the same states and about the same entries (depth < 30):
     # a size threshold sends both the same way, the gate does not
-    deep, shallow = _block(_grid(128, 64)), _block(_shallow(8192, 4, 1))
+    deep, shallow = gate_block(gate_grid(128, 64)), gate_block(shallow_gate_block(8192, 4, 1))
     assert abs(deep.inner.nnz - shallow.inner.nnz) < 0.05 * deep.inner.nnz
     assert sweep_gate.prefers_compiled(deep, loaded=False)
     assert not sweep_gate.prefers_compiled(shallow, loaded=False)
@@ -68,8 +68,8 @@ def test_numba_load_decides_a_middle_block(monkeypatch: pytest.MonkeyPatch) -> N
     # a 64 x 32 grid (depth 94) stays within what 100 Jacobi sweeps carry; a 64 x 64 one
     # (depth 126, 4,096 states as bus n64 d3's second block) does not, but its NumPy
     # work is below numba's load: compiled only where numba is loaded already
-    assert not sweep_gate.prefers_compiled(_block(_grid(64, 32)), loaded=True)
-    middle = _block(_grid(64, 64))
+    assert not sweep_gate.prefers_compiled(gate_block(gate_grid(64, 32)), loaded=True)
+    middle = gate_block(gate_grid(64, 64))
     f = sweep_gate.forecast(middle, loaded=False)
     assert f.depth == 126
     assert f.compiled - sweep_gate.NUMBA_LOAD < f.numpy < f.compiled
@@ -78,12 +78,12 @@ def test_numba_load_decides_a_middle_block(monkeypatch: pytest.MonkeyPatch) -> N
 
 
 def test_use_compiled_keeps_its_size_floors(monkeypatch: pytest.MonkeyPatch) -> None:
-    deep = _block(_grid(128, 64))
+    deep = gate_block(gate_grid(128, 64))
     assert not sweep_gate.use_compiled(kernels.COMPILED_MIN_ENTRIES - 1, deep.inner.nnz, deep)
     assert not sweep_gate.use_compiled(10**7, deep.inner.nnz)  # no block: sizes alone
     # a block of at most JACOBI_SWEEPS states is decided without a search
     monkeypatch.setattr(jump_cost, "block_depth", lambda block: 1 / 0)
-    small = _block(_grid(10, 10))
+    small = gate_block(gate_grid(10, 10))
     assert not sweep_gate.use_compiled(10**7, small.inner.nnz, small)
 
 
@@ -163,7 +163,7 @@ def test_value_order_distances_read_by_levels_as_by_pointer_jumping(seed: int) -
     n = 3000
     succ = [sorted(set(rng.integers(max(0, s - 20), min(n, s + 20), size=3).tolist()))
             for s in range(n)]
-    block = _block(succ, leave=0.0)
+    block = gate_block(succ, leave=0.0)
     block = Block(block.states, block.choices, block.inner, block.outer, block.starts,
                   np.where(rng.random(n) < 0.002, 0.1, 0.0))
     fast = sweep_order.value_order(block)
