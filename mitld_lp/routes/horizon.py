@@ -348,7 +348,7 @@ class HorizonRoute(Route):
                 np.asarray(t.choices), np.asarray(t.branches), np.asarray(t.targets),
                 np.asarray(t.probabilities), built.goal, built.allowed, built.steps,
                 built.sense, initial=t.initial, time_limit=s.time_limit,
-                policy_max_bytes=_policy_budget(s.max_memory))
+                policy_max_bytes=_policy_budget(s.max_memory), progress=s.progress)
         except TimeUp:  # the trivial bracket, uncertified, no policy
             sol, status = None, Status.TIME_LIMIT
             lower, upper = 0.0, 1.0

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitld_lp.solvers.rounding import ETA, rounding
+from mitld_lp.util.progress import bar as progress_bar
 from mitld_lp.util.stops import TimeUp
 
 __all__ = ["MAX_WORK", "POLICY_MAX_BYTES", "HorizonSolution", "HorizonTooLarge",
@@ -123,13 +124,14 @@ def horizon_reach(choices: np.ndarray, branches: np.ndarray, targets: np.ndarray
                   probabilities: np.ndarray, goal: np.ndarray, allowed: np.ndarray,
                   steps: int, sense: str = "max", *, initial: int = 0, eta: float = ETA,
                   max_work: int = MAX_WORK, policy_max_bytes: int = POLICY_MAX_BYTES,
-                  time_limit: float | None = None) -> HorizonSolution:
+                  time_limit: float | None = None, progress: bool | None = None
+                  ) -> HorizonSolution:
     """The bracket of ``allowed U[0,steps] goal`` at ``initial`` (and every state it
     needs), in the world given by its arrays (:class:`mitld_lp.worlds.table.WorldTable`'s
     ``choices``, ``branches``, ``targets``, ``probabilities``), optimised in ``sense``
     (module docs).  ``goal`` and ``allowed``: a bool per state.  Raises
     :class:`HorizonTooLarge` past ``max_work`` (before any work), :class:`TimeUp` past
-    ``time_limit`` seconds."""
+    ``time_limit`` seconds.  ``progress``: a bar over the steps (:mod:`mitld_lp.util.progress`)."""
     import scipy.sparse as sp
 
     from mitld_lp.solvers.horizon_kernels import distances, reach_steps
@@ -179,15 +181,23 @@ def horizon_reach(choices: np.ndarray, branches: np.ndarray, targets: np.ndarray
     args = (*arrays, np.asarray(probabilities, dtype=np.float64), r.count,
             np.asarray(r.low_of), np.asarray(r.high_of), np.asarray(r.slack_of))
     per_step = max(1, int(ends[-1]) if steps else 1) * 8
-    done, batch = 0, max(1, 50_000_000 // per_step)
-    while done < steps:
-        if time.perf_counter() > deadline:
-            raise TimeUp
-        last = min(done + batch, steps)
-        reach_steps(done, last, steps, order, ends, ahead, *args, lo, hi, lo2, hi2,
-                    sense == "min", multi, picks, offsets)
-        if (last - done) % 2 == 1:  # the kernel's last step wrote the other pair
-            lo, lo2, hi, hi2 = lo2, lo, hi2, hi
-        done = last
+    # batches of steps between the time and the bar's looks: at most 50M entries' work,
+    # and at least twenty looks over the whole induction
+    done, batch = 0, max(1, min(50_000_000 // per_step, -(-steps // 20)))
+    shown = progress_bar(progress, total=steps, desc="step-bounded induction", unit="step",
+                         leave=False)
+    try:
+        while done < steps:
+            if time.perf_counter() > deadline:
+                raise TimeUp
+            last = min(done + batch, steps)
+            reach_steps(done, last, steps, order, ends, ahead, *args, lo, hi, lo2, hi2,
+                        sense == "min", multi, picks, offsets)
+            if (last - done) % 2 == 1:  # the kernel's last step wrote the other pair
+                lo, lo2, hi, hi2 = lo2, lo, hi2, hi
+            shown.update(last - done)
+            done = last
+    finally:
+        shown.close()
     return HorizonSolution(lo, hi, steps, sense, order, back, ahead, multi,
                            None if why else picks, offsets, why, time.perf_counter() - t0)
