@@ -43,3 +43,31 @@ def test_the_bar_counts_every_step_and_the_bracket_is_unchanged(monkeypatch, sen
 def test_no_bar_under_silenced_whatever_is_asked() -> None:
     with silenced():
         assert type(bar(True, total=3)).__name__ == "_Off"
+
+
+@pytest.mark.parametrize("given", [dict(method="vi"), dict(solver="HIGHS"),
+                                   dict(backend="cvxpy"), dict(decompose=False)])
+def test_a_setting_of_the_products_solve_keeps_the_product_route(tmp_path, monkeypatch,
+                                                                  given) -> None:
+    """An LP setting the horizon route would not read sends the problem to the product
+    route, which reads it, instead of being dropped; the same problem without it is the
+    horizon route's, and both brackets hold the exact induction."""
+    pytest.importorskip("stormpy")
+    from fractions import Fraction
+
+    from test_horizon_route import _walk_model
+
+    from mitld_lp import load_model, synthesize
+    from mitld_lp.problem import Settings
+    from mitld_lp.synthesis import pose
+
+    monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
+    model = load_model(_walk_model(tmp_path, "F[0,12] goal"))
+    assert pose(model).route.name == "horizon"
+    assert pose(model, settings=Settings(**given)).route.name == "plain"
+    r = synthesize(model, **given)
+    assert r.route == "plain" and r.certified
+    assert pose(model).route.name == "horizon"
+    h = synthesize(model)
+    assert h.route == "horizon" and h.certified
+    assert Fraction(max(r.lower, h.lower)) <= Fraction(min(r.upper, h.upper))

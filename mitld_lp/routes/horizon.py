@@ -36,7 +36,7 @@ from mitld_lp.routes.route import Route
 from mitld_lp.util.stops import TimeUp
 
 __all__ = ["CLAIM_FROM", "HorizonRoute", "HorizonPart", "HorizonBuilt", "step_bounded",
-           "HorizonController"]
+           "HorizonController", "lp_settings"]
 
 #: The product's bound (world states x (k + 1)) from which this route takes a
 #: step-bounded reachability from the plain route.  Measured (experiments/
@@ -154,6 +154,18 @@ class HorizonBuilt:
             f"{self.table.n_states * (self.steps + 1):,} product states, at least "
             f"mitld_lp.routes.horizon.CLAIM_FROM = {CLAIM_FROM:,}): it is solved by "
             "backward induction over the world; this command reads the product")
+
+
+def lp_settings(s: Any) -> list[str]:
+    """The settings given that only the product route's solve reads (its method, its LP
+    solver and backend, its decomposition): with any, this route leaves the problem to
+    the product route rather than answer it without them."""
+    from mitld_lp import defaults
+
+    return [name for name, given in (("method", s.method != "lp"),
+                                     ("solver", s.solver != defaults.SOLVER),
+                                     ("backend", s.backend != "auto"),
+                                     ("decompose", s.decompose is not None)) if given]
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,6 +302,8 @@ class HorizonRoute(Route):
 
         s, game = posed.settings, posed.model.game
         if posed.robust or posed.problem.constrained or posed.sensed or s.exact:
+            return False
+        if lp_settings(s):  # asked of the product's solve: the product route answers them
             return False
         shape = step_bounded(posed.model.spec, frozenset(game.proposition_names))
         if shape is None:
