@@ -55,14 +55,14 @@ def test_a_setting_of_the_products_solve_keeps_the_product_route(tmp_path, monke
     pytest.importorskip("stormpy")
     from fractions import Fraction
 
-    from test_horizon_route import _walk_model
+    from test_horizon_route import walk_prism_model
 
     from mitld_lp import load_model, synthesize
     from mitld_lp.problem import Settings
     from mitld_lp.synthesis import pose
 
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
-    model = load_model(_walk_model(tmp_path, "F[0,12] goal"))
+    model = load_model(walk_prism_model(tmp_path, "F[0,12] goal"))
     assert pose(model).route.name == "horizon"
     assert pose(model, settings=Settings(**given)).route.name == "plain"
     r = synthesize(model, **given)

@@ -134,7 +134,7 @@ def test_work_budget_refused_before_the_work():
         horizon_reach(*arrays(WALK_MOVES), g, np.ones(6, bool), 10**6, "max", max_work=1000)
 
 
-def _walk_model(tmp_path: Path, spec: str, objective: str = "max") -> Path:
+def walk_prism_model(tmp_path: Path, spec: str, objective: str = "max") -> Path:
     (tmp_path / "w.prism").write_text(WALK)
     path = tmp_path / f"w_{objective}.toml"
     path.write_text(f'name = "w"\nspec = "{spec}"\nobjective = "{objective}"\n\n'
@@ -153,7 +153,7 @@ def test_route_answers_storms_exact_value_and_the_plain_routes(tmp_path, monkeyp
     pytest.importorskip("stormpy")
     from storm_exact import storm_rational
 
-    path = _walk_model(tmp_path, spec, objective)
+    path = walk_prism_model(tmp_path, spec, objective)
     plain = synthesize(load_model(path))  # the bound 6 x 13 is below CLAIM_FROM
     assert plain.route == "plain"
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
@@ -168,7 +168,7 @@ def test_route_answers_storms_exact_value_and_the_plain_routes(tmp_path, monkeyp
 def test_policy_table_controller_and_their_refusal_past_the_budget(tmp_path, monkeypatch):
     pytest.importorskip("stormpy")
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
-    path = _walk_model(tmp_path, "F[0,3] goal")
+    path = walk_prism_model(tmp_path, "F[0,3] goal")
     r = synthesize(load_model(path))
     rows = r.policy_table()
     # x=4 with 1 step left: b (0.5) beats a (0.3); x=3 with 1 step left: b too
@@ -192,13 +192,13 @@ def test_policy_table_controller_and_their_refusal_past_the_budget(tmp_path, mon
 def test_not_claimed_with_exact_constraints_or_an_event(tmp_path, monkeypatch):
     pytest.importorskip("stormpy")
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
-    path = _walk_model(tmp_path, "F[0,12] goal")
+    path = walk_prism_model(tmp_path, "F[0,12] goal")
     model = load_model(path)
     assert pose(model).route.name == "horizon"
     assert pose(model, ["P(F bad) <= 0.5"]).route.name != "horizon"
-    event = _walk_model(tmp_path, "D[geometric(0.5)] e & F[0,12] goal")
+    event = walk_prism_model(tmp_path, "D[geometric(0.5)] e & F[0,12] goal")
     assert pose(load_model(event)).route.name != "horizon"
-    unbounded = _walk_model(tmp_path, "F goal")
+    unbounded = walk_prism_model(tmp_path, "F goal")
     assert pose(load_model(unbounded)).route.name == "plain"
 
 
@@ -237,7 +237,7 @@ def test_resource_gathering_200_15_15_holds_qvbs_exact_value(tmp_path):
 def test_a_memory_budget_drops_the_policy_by_name_not_the_answer(tmp_path, monkeypatch):
     pytest.importorskip("stormpy")
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
-    path = _walk_model(tmp_path, "F[0,12] goal")
+    path = walk_prism_model(tmp_path, "F[0,12] goal")
     whole = synthesize(load_model(path))
     tight = synthesize(load_model(path), max_memory=2)  # one byte for the policy
     assert (tight.lower, tight.upper) == (whole.lower, whole.upper)
@@ -250,13 +250,13 @@ def test_work_past_the_budget_is_refused_at_pose(tmp_path, monkeypatch):
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
     monkeypatch.setattr("mitld_lp.solvers.horizon.MAX_WORK", 10)
     with pytest.raises(ProblemError, match="MAX_WORK"):
-        pose(load_model(_walk_model(tmp_path, "F[0,12] goal")))
+        pose(load_model(walk_prism_model(tmp_path, "F[0,12] goal")))
 
 
 def test_a_policy_table_past_max_states_rows_is_refused_by_name(tmp_path, monkeypatch):
     pytest.importorskip("stormpy")
     monkeypatch.setattr("mitld_lp.routes.horizon.CLAIM_FROM", 1)
-    path = _walk_model(tmp_path, "F[0,12] goal")
+    path = walk_prism_model(tmp_path, "F[0,12] goal")
     r = synthesize(load_model(path), max_states=3)
     with pytest.raises(ProblemError, match="max_states"):
         r.policy_table()
