@@ -215,7 +215,7 @@ def kernel_ready() -> bool:
     from mitld_lp.util import kernel_loader
 
     return all(kernel_loader.module_cached("mitld_lp.worlds.prism_kernels", name)
-               for name in ("explore", "label_flags"))
+               for name in ("explore", "label_flags", "rehash"))
 
 
 WARM_PROGRAM = """mdp
@@ -233,8 +233,10 @@ label's flags): :func:`compile_kernels` builds it."""
 
 def compile_kernels(stormpy: Any) -> bool:
     """Compile the explorer's kernels into the cache on disk, by building
-    :data:`WARM_PROGRAM` with them (the command line's ``warm``); False where they were
-    cached already (nothing compiled)."""
+    :data:`WARM_PROGRAM` with them and growing a small hash table (``rehash``, which a
+    build of more than 2**16 states calls: left out, a large model's first load after
+    ``warm`` compiled it, 1 s of CPU); the command line's ``warm``. False where they
+    were cached already (nothing compiled)."""
     import tempfile
     from pathlib import Path
 
@@ -249,6 +251,8 @@ def compile_kernels(stormpy: Any) -> bool:
     built = explore_program(compiled, 100)
     assert not isinstance(built, str), built  # the program is in the fragment
     label_values(built, [compiled.label_expr[compiled.labels.index("done")]])
+    i64 = np.int64  # a build past 2**16 states grows its table: rehash, as explore calls it
+    _kernels().rehash(np.zeros(2, dtype=i64), i64(1), i64(2), i64(4))
     return True
 
 
