@@ -36,9 +36,6 @@ import math
 from collections.abc import Iterable
 from functools import cache
 
-from lark import Token, Tree
-from lark.exceptions import LarkError, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
-
 from mitld_lp.distributions import (
     FAMILIES,
     DistArg,
@@ -46,7 +43,7 @@ from mitld_lp.distributions import (
     DistributionError,
     Family,
 )
-from mitld_lp.logic import tables
+from mitld_lp.logic.plain_parse import plain_source
 from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
     FALSE,
@@ -78,6 +75,13 @@ from mitld_lp.logic.syntax import (
 )
 from mitld_lp.util.decimals import Written
 from mitld_lp.util.text import excerpt
+
+# lark and its tables are imported where a text goes to lark: a formula the plain
+# parser leaves to it (a malformed one among them), a distribution written alone
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from lark import Token, Tree
+    from lark.exceptions import UnexpectedInput, UnexpectedToken
 
 __all__ = ["ParseError", "parse", "parse_source", "parse_distribution", "MAX_DEPTH"]
 
@@ -368,6 +372,8 @@ def _end_position(text: str) -> tuple[int, int]:
 
 
 def _from_lark(err: UnexpectedInput, text: str, start: str) -> ParseError:
+    from lark.exceptions import UnexpectedCharacters, UnexpectedToken
+
     if isinstance(err, UnexpectedToken):
         tok = err.token
         expected = _describe_expected(_accepts_at(err))
@@ -411,6 +417,8 @@ _OPERATOR_OF = {
 @cache
 def _keyword_terminals() -> dict[str, str]:
     """Terminal name -> reserved word, for the grammar's keyword terminals."""
+    from mitld_lp.logic import tables
+
     return {
         t.name: t.pattern.value
         for t in tables.parser().terminals
@@ -421,6 +429,10 @@ def _keyword_terminals() -> dict[str, str]:
 def _reserved_hint(text: str, tok: Token) -> str:
     """A note when the offending token, or the one before it, is a reserved word (a
     user who writes ``F (D & E)`` means propositions ``D`` and ``E``)."""
+    from lark.exceptions import LarkError
+
+    from mitld_lp.logic import tables
+
     keywords = _keyword_terminals()
     word = keywords.get(tok.type)
     if word is None:
@@ -454,6 +466,8 @@ def _accepts_at(err: UnexpectedToken) -> set[str]:
 
 def _accepts_before(prefix: str, start: str) -> set[str]:
     """The terminals the parser accepts after ``prefix`` (which lexes and parses)."""
+    from mitld_lp.logic import tables
+
     try:
         ip = tables.parser().parse_interactive(prefix, start=start)
         ip.exhaust_lexer()
@@ -469,6 +483,10 @@ def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
     """The parse tree of ``text`` and the value built for each of its nodes (by id)."""
     if not isinstance(text, str):
         raise TypeError(f"expected a str to parse, got {type(text).__name__}")
+    from lark.exceptions import LarkError, UnexpectedInput
+
+    from mitld_lp.logic import tables
+
     try:
         tree = tables.parser().parse(text, start=start)
         return tree, _transform(tree, _Build(text))
@@ -488,6 +506,8 @@ def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
 def _transform(tree: Tree, builder: _Build) -> dict[int, object]:
     """Apply ``builder``'s rule methods bottom-up, iteratively (deep input must not
     overflow the Python stack); the value of every node, by ``id``."""
+    from lark import Tree
+
     results: dict[int, object] = {}
     stack: list[tuple[Tree, bool]] = [(tree, False)]
     while stack:
@@ -547,7 +567,14 @@ def parse_source(text: str) -> Source:
     """Parse one MITLD formula and keep what its text says beyond the simplified formula:
     every ``D[mu] a`` written (also one a constant absorbed, as in ``D[mu] a & false``)
     and where each subformula is written (see :mod:`mitld_lp.logic.source`).  Raises
-    :class:`ParseError` as :func:`parse` does."""
+    :class:`ParseError` as :func:`parse` does.
+
+    A well-formed formula is read without lark (:mod:`mitld_lp.logic.plain_parse`, the
+    same :class:`Source`); whatever that parser leaves, and a formula nested deeper than
+    :data:`MAX_DEPTH`, goes to lark, which reports every error."""
+    plain = plain_source(text) if isinstance(text, str) else None
+    if plain is not None and not _too_deep_source(plain):
+        return plain
     tree, built = _run(text, "start")
     result = built[id(tree)]
     assert isinstance(result, Formula)
@@ -557,9 +584,16 @@ def parse_source(text: str) -> Source:
         source = source_of(text, tree, built)
     except RecursionError:  # a deep operand that the simplification dropped
         raise _too_deep(text) from None
-    if any(_depth(site.dist) > MAX_DEPTH for site in source.laws):
+    if _too_deep_source(source):
         raise _too_deep(text)
     return source
+
+
+def _too_deep_source(source: Source) -> bool:
+    """Whether the formula of ``source``, or a law its text writes, nests deeper than
+    :data:`MAX_DEPTH`."""
+    return (_depth(source.formula) > MAX_DEPTH
+            or any(_depth(site.dist) > MAX_DEPTH for site in source.laws))
 
 
 def parse_distribution(text: str) -> DistSpec:

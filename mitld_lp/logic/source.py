@@ -22,10 +22,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-from lark import Tree
-
 from mitld_lp.logic.syntax import Dist, Formula
 from mitld_lp.util.text import printable
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from lark import Tree
 
 __all__ = ["LawSite", "Source", "source_of"]
 
@@ -94,7 +96,9 @@ def excerpt(text: str) -> str:
 def source_of(text: str, tree: Tree, built: Mapping[int, object]) -> Source:
     """The :class:`Source` of ``text`` from its parse ``tree`` (built with
     ``propagate_positions``) and ``built``, the value made of each tree node (by
-    ``id``).  Walks the tree from the root, left to right, counting negations."""
+    ``id``).  Walks the tree from the root, left to right, counting negations.  A tree
+    is read through ``data``, ``children`` and ``meta`` alone (lark's, or
+    :mod:`mitld_lp.logic.plain_parse`'s nodes, which import no lark)."""
     positions: dict[Formula, tuple[int, int]] = {}
     laws: list[LawSite] = []
     stack: list[tuple[Tree, bool, Tree | None]] = [(tree, True, None)]
@@ -110,7 +114,8 @@ def source_of(text: str, tree: Tree, built: Mapping[int, object]) -> Source:
             if negation is not None:
                 shown = excerpt(text[negation.meta.start_pos : negation.meta.end_pos])
             laws.append(LawSite(value, positive, shown, *where))
-        children = [c for c in node.children if isinstance(c, Tree) and c.data in _FORMULA_RULES]
+        children = [c for c in node.children
+                    if getattr(c, "data", None) in _FORMULA_RULES]  # no token has data
         for i in reversed(range(len(children))):
             flips = node.data == "neg" or (node.data == "implies" and i == 0)
             stack.append((children[i], positive != flips, node if flips else negation))
