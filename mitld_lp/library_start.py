@@ -62,7 +62,8 @@ if TYPE_CHECKING:
     from typing import Any
 
 __all__ = ["NUMPY_EXTRAS", "SCIPY_NUMPY_COPY", "install", "remove", "installed", "waiting_for",
-           "sparse_linalg_later", "numpy_listed_without_extras", "hand_over_extras"]
+           "sparse_linalg_later", "lark_without_regex", "numpy_listed_without_extras",
+           "hand_over_extras"]
 
 
 def _dataclasses_around() -> Callable[[ModuleType | None], None]:
@@ -96,6 +97,25 @@ def sparse_linalg_later() -> Callable[[ModuleType | None], None]:
     return lambda csgraph: None
 
 
+def lark_without_regex() -> Callable[[ModuleType | None], None]:
+    """Before lark runs: ``import regex`` fails, as where the ``regex`` package is not
+    installed (it is not one of lark's requirements): lark imports it at once when it
+    can, for grammars that ask for it (``Lark(regex=True)``, Unicode categories), which
+    the formula grammar does not; its import is 0.012 s of CPU.  After lark's body,
+    ``regex`` imports for whoever asks, as usual.  The command line's start waits for
+    lark so (a solve whose formula the plain parser reads never imports lark: the
+    start no longer imports it to cut ``regex``); nothing if ``regex`` is imported."""
+    if "regex" in sys.modules:
+        return lambda lark: None
+    sys.modules["regex"] = None  # type: ignore[assignment]  # ``import regex`` fails
+
+    def after(lark: ModuleType | None) -> None:
+        if "regex" in sys.modules and sys.modules["regex"] is None:
+            del sys.modules["regex"]
+
+    return after
+
+
 class _Hook:
     """The finder: the modules it waits for, and what runs around each one's import."""
 
@@ -117,8 +137,9 @@ _hook: _Hook | None = None
 def install(command: bool = False) -> None:
     """Put the hook in place (a program asks for it; ``command``: the command line's
     :func:`mitld_lp.startup.lean_start` does, with its own wider cuts, so the hook waits
-    for csgraph only): each cut now if its module is imported already, else when it
-    is."""
+    for csgraph, and for lark to import it without ``regex``,
+    :func:`lark_without_regex`): each cut now if its module is imported already, else
+    when it is."""
     global _hook
     remove()
     hook = _Hook()
@@ -131,6 +152,8 @@ def install(command: bool = False) -> None:
             hook.waiting[SCIPY_NUMPY_COPY] = scipy_copy_around
     if "scipy.sparse.csgraph" not in sys.modules:
         hook.waiting["scipy.sparse.csgraph"] = sparse_linalg_later
+    if command and "lark" not in sys.modules and "regex" not in sys.modules:
+        hook.waiting["lark"] = lark_without_regex
     if hook.waiting:
         _hook = hook
         sys.meta_path.insert(0, hook)

@@ -26,10 +26,12 @@ and over (a full pass over NumPy, SciPy and the package): about 0.03 s of the bu
 case's CPU, and each later pass of the solve walked them again.
 
 Before the command line is imported, :func:`command` also imports SciPy's array-API
-layer without the NumPy submodules no command uses (:func:`lean_scipy`) and lark
-without the ``regex`` package (:func:`lark_without_regex`): 0.085 s of the bundled
-case's CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would
-import, until a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
+layer without the NumPy submodules no command uses (:func:`lean_scipy`), and has lark,
+if a formula the plain parser leaves (:mod:`mitld_lp.logic.plain_parse`) imports it,
+import without the ``regex`` package
+(:func:`mitld_lp.library_start.lark_without_regex`): 0.085 s of the bundled case's
+CPU.  It also puts off ``numpy.ma``, which the first ``np.unique`` would import, until
+a masked array is asked for (:func:`numpy_ma_when_used`: 0.012 s).
 These leave every name where it was (the layer hands NumPy's submodules over when
 asked; ``regex`` and ``numpy.ma`` import for whoever asks later).  A program that
 imports the package gets NumPy, SciPy and lark as they import themselves, but for the
@@ -173,12 +175,13 @@ def lean_start() -> None:
     methods as closures and their ``__init__`` code from the table of an earlier run
     (:func:`dataclass_methods_without_exec`, :mod:`mitld_lp.init_cache`), SciPy's
     array-API layer without NumPy's extra submodules (:func:`lean_scipy`), ``numpy.ma``
-    when first used (:func:`numpy_ma_when_used`), lark without ``regex``
-    (:func:`lark_without_regex`), and the stand-ins of :mod:`mitld_lp.stand_ins`: NumPy
-    without the docstrings of its C objects, SciPy's test runner and a few standard
-    modules imported when first used; and ``scipy.sparse.csgraph`` without
-    ``scipy.linalg`` (:func:`mitld_lp.library_start.sparse_linalg_later`, the one cut of
-    the program's start it keeps).
+    when first used (:func:`numpy_ma_when_used`), lark without ``regex`` when a formula
+    needs it (:func:`mitld_lp.library_start.lark_without_regex`), and the stand-ins of
+    :mod:`mitld_lp.stand_ins`: NumPy without the docstrings of its C objects, SciPy's
+    test runner and a few standard modules imported when first used; and
+    ``scipy.sparse.csgraph`` without ``scipy.linalg``
+    (:func:`mitld_lp.library_start.sparse_linalg_later`, the one cut of the program's
+    start it keeps).
 
     :func:`command` calls it; a program that runs the package's routes and nothing else
     (a benchmark's worker process measuring what the command line's process costs) may
@@ -199,7 +202,6 @@ def lean_start() -> None:
     stand_ins.modules_when_used()
     lean_scipy()
     numpy_ma_when_used()
-    lark_without_regex()
 
 
 def hold_collector() -> None:
@@ -297,13 +299,16 @@ def numpy_ma_when_used() -> None:
 
 
 def lark_without_regex() -> None:
-    """Import lark as where the ``regex`` package is not installed (it is not one of
+    """Import lark now as where the ``regex`` package is not installed (it is not one of
     lark's requirements): lark imports ``regex`` at once when it can, for grammars
     that ask for it (``Lark(regex=True)``, Unicode categories), which the formula
     grammar does not; its import is 0.012 s of CPU.  Another package that imports
-    ``regex`` later gets it as usual.
+    ``regex`` later gets it as usual.  The command line's start no longer calls it:
+    it waits for lark's import instead
+    (:func:`mitld_lp.library_start.lark_without_regex`), which a plain formula never
+    makes.
 
-    The command line only (a program importing the package may build its own lark
+    For the command line only (a program importing the package may build its own lark
     grammars with ``regex=True``); nothing when lark or ``regex`` is already imported."""
     if "lark" in sys.modules or "regex" in sys.modules:
         return
