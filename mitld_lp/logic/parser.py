@@ -43,6 +43,7 @@ from mitld_lp.distributions import (
     DistributionError,
     Family,
 )
+from mitld_lp.logic import tables
 from mitld_lp.logic.plain_parse import plain_source
 from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
@@ -417,8 +418,6 @@ _OPERATOR_OF = {
 @cache
 def _keyword_terminals() -> dict[str, str]:
     """Terminal name -> reserved word, for the grammar's keyword terminals."""
-    from mitld_lp.logic import tables
-
     return {
         t.name: t.pattern.value
         for t in tables.parser().terminals
@@ -430,8 +429,6 @@ def _reserved_hint(text: str, tok: Token) -> str:
     """A note when the offending token, or the one before it, is a reserved word (a
     user who writes ``F (D & E)`` means propositions ``D`` and ``E``)."""
     from lark.exceptions import LarkError
-
-    from mitld_lp.logic import tables
 
     keywords = _keyword_terminals()
     word = keywords.get(tok.type)
@@ -466,8 +463,6 @@ def _accepts_at(err: UnexpectedToken) -> set[str]:
 
 def _accepts_before(prefix: str, start: str) -> set[str]:
     """The terminals the parser accepts after ``prefix`` (which lexes and parses)."""
-    from mitld_lp.logic import tables
-
     try:
         ip = tables.parser().parse_interactive(prefix, start=start)
         ip.exhaust_lexer()
@@ -484,8 +479,6 @@ def _run(text: str, start: str) -> tuple[Tree, dict[int, object]]:
     if not isinstance(text, str):
         raise TypeError(f"expected a str to parse, got {type(text).__name__}")
     from lark.exceptions import LarkError, UnexpectedInput
-
-    from mitld_lp.logic import tables
 
     try:
         tree = tables.parser().parse(text, start=start)

@@ -25,11 +25,11 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import lark
-from lark import Lark
-from lark.exceptions import LarkError
-from lark.grammar import Rule
-from lark.lexer import TerminalDef
+# lark is imported where a parser is loaded or written: a formula the plain parser
+# (mitld_lp.logic.plain_parse) reads never needs it
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from lark import Lark
 
 __all__ = ["OPTIONS", "TABLES", "grammar", "grammar_digest", "grammar_key", "parser", "stored",
            "write"]
@@ -92,6 +92,8 @@ def stored() -> dict[str, Any] | None:
         text = _beside(TABLES)
     except FileNotFoundError:
         return None
+    import lark
+
     tables = json.loads(text, object_pairs_hook=_int_keys)
     if (tables.get("grammar_key") != grammar_key()
             or tables.get("lark_version") != lark.__version__):
@@ -104,6 +106,9 @@ def parser() -> Lark:
     """The formula parser: from the stored tables when they are current (see above); a
     file that cannot be read as tables (damaged in packaging) is logged and the parser
     built from the grammar."""
+    from lark import Lark
+    from lark.exceptions import LarkError
+
     try:
         tables = stored()
         if tables is not None:
@@ -118,6 +123,11 @@ def parser() -> Lark:
 def write(path: Path | None = None) -> None:
     """Build the parser from the grammar and write its tables to ``path`` (default:
     :data:`TABLES` beside this file)."""
+    import lark
+    from lark import Lark
+    from lark.grammar import Rule
+    from lark.lexer import TerminalDef
+
     path = path if path is not None else Path(__file__).with_name(TABLES)
     data, memo = Lark(grammar(), **OPTIONS).memo_serialize([TerminalDef, Rule])
     tables = {"grammar_sha256": grammar_digest(), "grammar_key": grammar_key(),
