@@ -29,8 +29,8 @@ def _run(code: str, *args: str, plain: bool = False) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-#: A finder after the package's that notes the collector's state when lark (imported by
-#: the formula parser's module body) and NumPy are looked for, then the route's imports;
+#: A finder after the package's that notes the collector's state when SciPy (imported by
+#: the MDP's module body) and NumPy are looked for, then the route's imports;
 #: argv[1]: the caller's collector, "on" or "off".
 GC_PROBE = r"""
 import gc, json, sys
@@ -39,7 +39,7 @@ if sys.argv[1] == "off":
 seen = {}
 class Spy:
     def find_spec(self, name, path=None, target=None):
-        if name in ("lark", "numpy"):
+        if name in ("scipy", "numpy"):
             seen.setdefault(name, gc.isenabled())
         return None
 import mitld_lp
@@ -55,8 +55,8 @@ print(json.dumps(dict(seen=seen, enabled=gc.isenabled(), frozen=gc.get_freeze_co
 @pytest.mark.parametrize("caller", ["on", "off"])
 def test_the_collector_is_held_while_the_package_imports_and_put_back(caller: str) -> None:
     got = _run(GC_PROBE, caller)
-    # during the package's module bodies (the parser's imports lark, the model's NumPy)
-    assert got["seen"] == {"lark": False, "numpy": False}
+    # during the package's module bodies (the MDP's imports SciPy, the model's NumPy)
+    assert got["seen"] == {"scipy": False, "numpy": False}
     # after: as the caller had it, and none of the caller's objects frozen
     assert got["enabled"] is (caller == "on")
     assert got["frozen"] == 0
@@ -68,7 +68,7 @@ def test_plain_imports_leave_the_collector_running() -> None:
     """The probe can see the difference: with ``MITLD_LP_PLAIN_IMPORTS=1`` the imports
     run with the collector on."""
     got = _run(GC_PROBE, "on", plain=True)
-    assert got["seen"] == {"lark": True, "numpy": True} and got["enabled"] is True
+    assert got["seen"] == {"scipy": True, "numpy": True} and got["enabled"] is True
 
 
 #: The package's class and the program's class made after the package's imports (the

@@ -57,11 +57,12 @@ print(json.dumps({"lower": r.lower, "upper": r.upper, "modules": sorted(sys.modu
 
 # what a plain PRISM solve never needs: other solvers, the command line, the sweeps,
 # the DRN writer, the simulator, exact arithmetic, plots, the trade-off curves, a saved
-# controller's reader, numba (a small product)
+# controller's reader, numba (a small product), lark and its regex (the task's formula
+# is plain: mitld_lp.logic.plain_parse reads it)
 NEVER = ("cvxpy", "pandas", "matplotlib", "numba", "highspy", "mitld_lp.cli",
          "mitld_lp.sweep", "mitld_lp.files.drn", "mitld_lp.running",
          "mitld_lp.controllers.reader", "mitld_lp.plot", "mitld_lp.exact",
-         "mitld_lp.tradeoff")
+         "mitld_lp.tradeoff", "lark", "regex")
 # ... and, started as the command line starts, what SciPy would import for nothing
 # (numpy.random is not among them: SciPy's own ``_lib._util`` imports it)
 NEVER_COMMAND = ("numpy.testing", "numpy.f2py", "numpy.polynomial")
@@ -102,6 +103,38 @@ def test_prism_solve_imports_only_what_it_uses(tmp_path, start):
     assert got["lower"] - 1e-9 <= 0.6 <= got["upper"] + 1e-9  # by hand (TINY)
     assert got["upper"] - got["lower"] <= 1e-6
     assert abs(_storm_value(tmp_path / "tiny.prism") - 0.6) <= 1e-6  # Storm agrees
+
+
+# The command line's start with a formula the plain parser leaves to lark: lark is
+# imported then, without regex (mitld_lp.library_start.lark_without_regex), and regex
+# imports as usual after it.
+MALFORMED = """
+import json, sys
+from mitld_lp import startup
+startup.lean_start()
+from mitld_lp.logic import ParseError, parse
+try:
+    parse(sys.argv[1])
+except ParseError as err:
+    said = str(err)
+import lark.utils
+had = "regex" in sys.modules
+import regex
+print(json.dumps({"said": said, "lark_regex": lark.utils._has_regex, "had": had,
+                  "regex": regex.__name__}))
+"""
+
+
+def test_command_start_gets_lark_without_regex_only_when_a_formula_needs_it(tmp_path):
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "PYTHONDONTWRITEBYTECODE": "1"}
+    out = subprocess.run([sys.executable, "-c", MALFORMED, "F[0,3] a &"], cwd=tmp_path,
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    # lark's message, with the column of the end of input (by hand: after 10 characters)
+    assert got["said"] == "1:11: unexpected end of input; expected a formula"
+    assert got["lark_regex"] is False and got["had"] is False  # lark as without regex
+    assert got["regex"] == "regex"  # ... and regex is anyone's after lark
 
 
 @needs_stormpy
