@@ -20,6 +20,7 @@ import pytest
 from mitld_lp.logic import parser
 from mitld_lp.logic.parser import ParseError, parse_source
 from mitld_lp.logic.plain_parse import NESTING, plain_source
+from mitld_lp.testing.fuzz import formula_text, random_formula
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -118,46 +119,36 @@ _TOKENS = ["p", "q", "e", "A", "F1", "mu", "true", "false", "⊤", "⊥", "!", "
            "geometric", "pmf", "0.5"]
 
 
-def _random_formula(rng: random.Random, depth: int) -> str:
-    """A formula text over the whole grammar, with random spacing and parentheses."""
-    sp = lambda: rng.choice(["", " ", "  ", "\n", "\t"])  # noqa: E731
-    if depth <= 0 or rng.random() < 0.2:
-        return rng.choice(["p", "q", "e", "A", "F1", "Xp", "true", "false", "⊤", "⊥"])
-    sub = lambda: _random_formula(rng, depth - 1)  # noqa: E731
-    bounds = lambda: rng.choice(  # noqa: E731
-        ["", f"[{rng.randint(0, 3)},{rng.randint(3, 6)}]", f"<={rng.randint(0, 5)}",
-         f"≤ {rng.randint(0, 5)}"])
-    law = lambda: rng.choice(  # noqa: E731
-        ["mu", "nu", "geometric(0.3)", "pmf(0.5, 0.5)", "uniform(1, 4)", "poisson(2)"])
-    k = rng.randrange(12)
-    if k == 0:
-        return f"{rng.choice(['!', '~', '¬'])}{sp()}{sub()}"
-    if k == 1:
-        return f"X {sub()}"
-    if k == 2:
-        return f"{rng.choice(['F', '◇', 'G', '□'])}{bounds()} {sub()}"
-    if k == 3:
-        return f"D[{law()}]{sp()} {sub()}"
-    if k == 4:
-        return f"({sp()}{sub()}{sp()})"
-    op = rng.choice(["&", "&&", "∧", "|", "||", "∨", "->", "→", "U", "𝒰", "R", "W"])
-    if op in ("U", "𝒰", "R"):
-        op += bounds()
-    return f"{sub()}{sp()} {op} {sp()}{sub()}"
+def _agree(text: str, monkeypatch: pytest.MonkeyPatch) -> bool:
+    """Lark's answer and the plain parser's agree on ``text``; whether lark accepts it."""
+    lark = _lark(text, monkeypatch)
+    plain = plain_source(text)
+    if isinstance(lark, ParseError):
+        assert plain is None, text  # left to lark
+        return False
+    assert plain is not None, text
+    _same(plain, lark)
+    return True
+
+
+_SPACES = (" ", "  ", "\n", "\t", " \r\n ", "\f")
 
 
 @pytest.mark.parametrize("seed", range(4))
 def test_generated_formulas_are_larks(seed, monkeypatch):
+    # formulas shaped by the grammar, often with invalid bounds or laws (the fuzzer's),
+    # with other spacing, some until a weak until, and with fewer parentheses
     rng = random.Random(seed)
-    for _ in range(150):
-        text = _random_formula(rng, 5)
-        lark = _lark(text, monkeypatch)
-        plain = plain_source(text)
-        if isinstance(lark, ParseError):  # e.g. a W with bounds: never accepted here
-            assert plain is None, text
-        else:
-            assert plain is not None, text
-            _same(plain, lark)
+    accepted = 0
+    for i in range(200):
+        text = random_formula(rng, 5) if i % 2 else formula_text(rng)
+        text = text.replace(" ", rng.choice(_SPACES))
+        if rng.random() < 0.3:
+            text = text.replace(" U", " W", 1)
+        if rng.random() < 0.3:
+            text = text.replace("(", "", 1).replace(")", "", 1)
+        accepted += _agree(text, monkeypatch)
+    assert accepted > 20
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -167,14 +158,7 @@ def test_random_token_strings_agree_with_lark(seed, monkeypatch):
     for _ in range(300):
         text = rng.choice(["", " "]).join(rng.choice(_TOKENS)
                                            for _ in range(rng.randint(1, 8)))
-        lark = _lark(text, monkeypatch)
-        plain = plain_source(text)
-        if isinstance(lark, ParseError):
-            assert plain is None, text
-        else:
-            accepted += 1
-            assert plain is not None, text
-            _same(plain, lark)
+        accepted += _agree(text, monkeypatch)
     assert accepted > 0
 
 

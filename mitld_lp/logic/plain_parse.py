@@ -24,27 +24,9 @@ import math
 import re
 
 from mitld_lp.distributions import FAMILIES, DistLiteral, DistributionError
+from mitld_lp.logic import syntax as sx
 from mitld_lp.logic.source import Source, source_of
-from mitld_lp.logic.syntax import (
-    FALSE,
-    RESERVED,
-    TRUE,
-    DistRef,
-    Formula,
-    Interval,
-    Prop,
-    always,
-    conj,
-    disj,
-    dist,
-    eventually,
-    implies,
-    neg,
-    nxt,
-    release,
-    until,
-    weak,
-)
+from mitld_lp.logic.syntax import RESERVED, DistRef, Formula, Interval
 from mitld_lp.util.decimals import Written
 
 __all__ = ["NESTING", "plain_source"]
@@ -163,7 +145,7 @@ class _Parser:
         self.deeper()
         right = self.implication()
         self.depth -= 1
-        return self.node("implies", [left, right], implies(self.value(left), self.value(right)),
+        return self.node("implies", [left, right], sx.implies(self.value(left), self.value(right)),
                          left.outer, right.outer_end)
 
     def _nary(self, op: str, data: str, operand, build) -> _Node:
@@ -178,10 +160,10 @@ class _Parser:
                          parts[-1].outer_end)
 
     def disjunction(self) -> _Node:
-        return self._nary("OR", "disj", self.conjunction, disj)
+        return self._nary("OR", "disj", self.conjunction, sx.disj)
 
     def conjunction(self) -> _Node:
-        return self._nary("AND", "conj", self.binary, conj)
+        return self._nary("AND", "conj", self.binary, sx.conj)
 
     def binary(self) -> _Node:
         left = self.unary()
@@ -195,11 +177,11 @@ class _Parser:
         self.depth -= 1
         lv, rv = self.value(left), self.value(right)
         if kind == "U":
-            data, value = "until", until(lv, rv, bounds)
+            data, value = "until", sx.until(lv, rv, bounds)
         elif kind == "R":
-            data, value = "release", release(lv, rv, bounds)
+            data, value = "release", sx.release(lv, rv, bounds)
         else:
-            data, value = "weak", weak(lv, rv)
+            data, value = "weak", sx.weak(lv, rv)
         return self.node(data, [left, right], value, left.outer, right.outer_end)
 
     def unary(self) -> _Node:
@@ -219,20 +201,20 @@ class _Parser:
         self.depth -= 1
         a = self.value(arg)
         if kind == "NOT":
-            data, value = "neg", neg(a)
+            data, value = "neg", sx.neg(a)
         elif kind == "X":
-            data, value = "nxt", nxt(a)
+            data, value = "nxt", sx.nxt(a)
         elif kind == "F":
-            data, value = "eventually", eventually(a, bounds)
+            data, value = "eventually", sx.eventually(a, bounds)
         elif kind == "G":
-            data, value = "always", always(a, bounds)
+            data, value = "always", sx.always(a, bounds)
         else:
             if isinstance(mu, DistLiteral):
                 try:
                     mu.law  # noqa: B018 - built here, kept by the literal (the lark route's)
                 except DistributionError:
                     raise _Refused from None
-            data, value = "dist", dist(mu, a)  # type: ignore[arg-type]
+            data, value = "dist", sx.dist(mu, a)  # type: ignore[arg-type]
         return self.node(data, [arg], value, first, arg.outer_end)
 
     def atom(self) -> _Node:
@@ -241,7 +223,7 @@ class _Parser:
         if kind in ("true", "false", "NAME"):
             tok = self.i
             self.i += 1
-            value = TRUE if kind == "true" else FALSE if kind == "false" else Prop(
+            value = sx.TRUE if kind == "true" else sx.FALSE if kind == "false" else sx.Prop(
                 self.values[tok])
             data = kind if kind != "NAME" else "prop"
             return self.node(data, [], value, start, self.end_of(tok))
