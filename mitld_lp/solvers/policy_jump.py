@@ -56,6 +56,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers import topo_chain
 from mitld_lp.solvers.graph import Sense, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.rows import gather_ranges
@@ -267,8 +268,12 @@ def chain_factor(chain: sp.csr_array) -> object:
 
     n_comp, label = csgraph.connected_components(chain, directed=True,
                                                  connection="strong")
-    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT \
-            or not _one_way(chain, label):
+    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT:
+        return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
+    compiled = topo_chain.factor(chain, label, n_comp)  # where a kernel's load is paid
+    if compiled is not None:
+        return compiled
+    if not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 

@@ -1,0 +1,123 @@
+"""A policy's chain factorised and solved compiled, in its strong components' order
+(:mod:`mitld_lp.solvers.topo_kernels`), for the policy jump's rounds
+(:func:`mitld_lp.solvers.policy_jump.chain_factor`).
+
+SuperLU on the chain permuted to its components' order (``NATURAL``: no fill across
+components) already avoids a minimum-degree ordering of the whole; what it still
+costs on chains of thousands of components, nearly all single states, is its set-up
+per call and the permutation of every right-hand side in and out (each policy
+evaluation solves three times: once, then twice in its refinement).  The kernels lay
+the states out once and walk the components downstream first, a single state by one
+division, a component of more by a dense LU of its size (at most
+:data:`~mitld_lp.solvers.policy_jump.TOPO_MAX_COMPONENT` states).  Used only where a
+compiled kernel's load is paid already and both kernels are in the loader's cache, so
+it never costs a compile or numba's import.  Its answers are those of a direct solve
+up to rounding, as SuperLU's are, and every policy evaluation refines them twice in
+extended precision after.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mitld_lp.util import kernel_loader
+
+__all__ = ["COMPILED", "CompiledTopoLU", "KERNELS", "factor", "kernels"]
+
+COMPILED = True
+"""Whether :func:`factor` may use the compiled kernels (the tests turn it off to reach
+SciPy's route)."""
+
+KERNELS = ("topo_factor", "topo_solve")
+
+_KERNELS: list[Any] = []  # the kernel module if it is usable, None if not (once)
+
+
+def kernels(force: bool = False) -> Any:
+    """The kernel module, or ``None``: :data:`COMPILED` off, numba not installed, a
+    kernel's load not paid in this process, or a kernel not in the loader's cache
+    (looked up once a process).  ``force``: whatever the load and the cache (the
+    tests; a cold cache compiles)."""
+    if not COMPILED:
+        return None
+    if force or not _KERNELS:
+        try:
+            from mitld_lp.solvers import topo_kernels
+        except ImportError:
+            topo_kernels = None
+        if force:
+            return topo_kernels
+        warm = topo_kernels is not None and all(
+            kernel_loader.module_cached("mitld_lp.solvers.topo_kernels", k)
+            for k in KERNELS)
+        _KERNELS.append(topo_kernels if warm else None)
+    if _KERNELS[0] is None or not kernel_loader.compiled_paid():
+        return None
+    return _KERNELS[0]
+
+
+class CompiledTopoLU:
+    """The factors :func:`factor` made; ``solve`` answers as SciPy's ``SuperLU`` does
+    (``trans='N'`` only), ``rhs`` of one or more columns."""
+
+    __slots__ = ("arrays", "run")
+
+    def __init__(self, run: Any, arrays: tuple) -> None:
+        self.run, self.arrays = run, arrays
+
+    def solve(self, rhs: np.ndarray, trans: str = "N") -> np.ndarray:
+        if trans != "N":
+            raise ValueError("CompiledTopoLU.solve: only trans='N' (the chain's own solve)")
+        rhs = np.asarray(rhs, dtype=np.float64)
+        flat = rhs.ndim == 1
+        b = np.ascontiguousarray(rhs.reshape(rhs.shape[0], -1))
+        x = np.empty_like(b)
+        self.run.topo_solve(*self.arrays, b, x, np.empty_like(b))
+        return x[:, 0] if flat else x
+
+
+def factor(chain: sp.csr_array, label: np.ndarray, n_comp: int,
+           force: bool = False) -> CompiledTopoLU | None:
+    """The compiled factors of ``I - chain`` in the order of its strong components
+    ``label`` (``n_comp`` of them, SciPy's labels: every move between two goes the same
+    way along them), or ``None`` where the kernels are not to be used (:func:`kernels`)
+    or refuse (the labels do not order the components, or a pivot is not positive):
+    the caller factorises by SciPy then."""
+    run = kernels(force)
+    if run is None:
+        return None
+    k = chain.shape[0]
+    sizes = np.bincount(label, minlength=n_comp)
+    largest = int(sizes.max()) if n_comp else 0
+    indptr = chain.indptr.astype(np.int64, copy=False)
+    indices = chain.indices.astype(np.int64, copy=False)
+    data = np.asarray(chain.data, dtype=np.float64)
+    # room for every factor entry a component could fill (its square less its pivots)
+    room = int(np.dot(sizes.astype(np.int64), sizes - 1))
+    # the labels' two directions, SciPy's first (its labels number the components
+    # downstream first); the stable order of the labels, a radix sort on 16-bit keys
+    for flip in (False, True):
+        key = (n_comp - 1 - label) if flip else label
+        order = np.argsort(key.astype(np.uint16) if n_comp <= 1 << 16 else key,
+                           kind="stable").astype(np.int64)
+        at = np.empty(k, dtype=np.int64)
+        at[order] = np.arange(k, dtype=np.int64)
+        bounds = np.zeros(n_comp + 1, dtype=np.int64)
+        np.cumsum(sizes[::-1] if flip else sizes, out=bounds[1:])
+        start = np.empty(3 * k, dtype=np.int64)
+        diag = np.empty(k)
+        fidx = np.empty(room, dtype=np.int64)
+        fval = np.empty(room)
+        status = int(run.topo_factor(order, bounds, at, indptr, indices, data, start,
+                                     diag, fidx, fval, np.zeros(largest),
+                                     np.zeros(largest, dtype=np.bool_)))
+        if status == -1:
+            used = int(start[-1]) if k else 0
+            return CompiledTopoLU(run, (order, bounds, at, indptr, indices, data, start,
+                                        diag, fidx[:used].copy(), fval[:used].copy()))
+        if status != -2:  # a pivot not positive: not a transient chain's
+            return None
+    return None
