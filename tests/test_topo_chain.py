@@ -137,3 +137,21 @@ def test_fraction_check_of_a_small_solve():
     n, label = _labels(chain)
     got = topo_chain.factor(chain, label, n, force=True).solve(np.ones(3))
     assert np.allclose(got, [float(x0), float(x1), float(x2)], rtol=1e-15)
+
+
+def test_compile_kernels_fills_a_cold_cache(tmp_path):
+    """``mitld-lp warm``'s step: on an empty cache directory both kernels are compiled
+    (True) and found by the gate's look-up after; a second call has nothing to do."""
+    import subprocess
+    import sys
+
+    code = ("from mitld_lp.solvers import topo_chain as t; from mitld_lp.util import "
+            "kernel_loader as k; m = 'mitld_lp.solvers.topo_kernels'; "
+            "before = [k.module_cached(m, n) for n in t.KERNELS]; "
+            "print(before, t.compile_kernels(), t.compile_kernels(), "
+            "[k.module_cached(m, n) for n in t.KERNELS])")
+    env = dict(__import__("os").environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, check=True, cwd=__import__("pathlib").Path(
+                             __file__).resolve().parents[1]).stdout
+    assert out.split() == ["[False,", "False]", "True", "False", "[True,", "True]"]

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 from mitld_lp.util import kernel_loader
 
-__all__ = ["COMPILED", "CompiledTopoLU", "KERNELS", "factor", "kernels"]
+__all__ = ["COMPILED", "CompiledTopoLU", "KERNELS", "compile_kernels", "factor", "kernels"]
 
 COMPILED = True
 """Whether :func:`factor` may use the compiled kernels (the tests turn it off to reach
@@ -121,3 +121,24 @@ def factor(chain: sp.csr_array, label: np.ndarray, n_comp: int,
         if status != -2:  # a pivot not positive: not a transient chain's
             return None
     return None
+
+
+def compile_kernels() -> bool:
+    """Compile both kernels into the loader's cache (``mitld-lp warm``) by factorising
+    and solving a small chain (a ring of two and a state below it) with the argument
+    types :func:`factor` passes; ``False`` if they were cached already or numba is not
+    installed (nothing to do)."""
+    if not COMPILED or all(kernel_loader.module_cached("mitld_lp.solvers.topo_kernels",
+                                                       k) for k in KERNELS):
+        return False
+    if kernels(force=True) is None:
+        return False
+    from scipy.sparse import csgraph
+
+    chain = sp.csr_array(np.array([[0.25, 0.5, 0.0], [0.5, 0.0, 0.25], [0.0, 0.0, 0.5]]))
+    n_comp, label = csgraph.connected_components(chain, directed=True, connection="strong")
+    lu = factor(chain, label, n_comp, force=True)
+    if lu is not None:
+        lu.solve(np.ones((3, 2)))
+    _KERNELS.clear()  # looked up again: warm now
+    return True
