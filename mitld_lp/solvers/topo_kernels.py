@@ -100,6 +100,52 @@ def topo_factor(order, bounds, at, indptr, indices, data, start, diag, fidx, fva
 
 
 @numba.njit(cache=True, nogil=True)
+def _solve_pair(order, bounds, at, indptr, indices, data, start, diag, fidx, fval,
+                rhs, x, y):  # pragma: no cover - compiled
+    """:func:`topo_solve` of two columns, each in a scalar (the same operations in the
+    same order: the sums from 0, then the right-hand side, then the factors)."""
+    n_comp = bounds.shape[0] - 1
+    for c in range(n_comp):
+        a = bounds[c]
+        b = bounds[c + 1]
+        for p in range(a, b):
+            row = order[p]
+            s0 = 0.0
+            s1 = 0.0
+            for e in range(indptr[row], indptr[row + 1]):
+                col = indices[e]
+                if at[col] < a:
+                    v = data[e]
+                    s0 += v * x[col, 0]
+                    s1 += v * x[col, 1]
+            s0 += rhs[row, 0]
+            s1 += rhs[row, 1]
+            for e in range(start[3 * p], start[3 * p + 1]):
+                k = fidx[e]
+                v = fval[e]
+                s0 -= v * y[k, 0]
+                s1 -= v * y[k, 1]
+            y[p, 0] = s0
+            y[p, 1] = s1
+        for p in range(b - 1, a - 1, -1):
+            s0 = y[p, 0]
+            s1 = y[p, 1]
+            for e in range(start[3 * p + 1], start[3 * p + 2]):
+                k = fidx[e]
+                v = fval[e]
+                s0 -= v * y[k, 0]
+                s1 -= v * y[k, 1]
+            d = diag[p]
+            s0 /= d
+            s1 /= d
+            y[p, 0] = s0
+            y[p, 1] = s1
+            row = order[p]
+            x[row, 0] = s0
+            x[row, 1] = s1
+
+
+@numba.njit(cache=True, nogil=True)
 def topo_solve(order, bounds, at, indptr, indices, data, start, diag, fidx, fval,
                rhs, x, y):  # pragma: no cover - compiled
     """``x = rhs + Q x`` (a column per right-hand side, rows in the chain's own state
@@ -107,6 +153,10 @@ def topo_solve(order, bounds, at, indptr, indices, data, start, diag, fidx, fval
     scratch ``(states, columns)`` array in position order."""
     n_comp = bounds.shape[0] - 1
     m = rhs.shape[1]
+    if m == 2:  # a value and an exit time, the policy evaluations' pair
+        _solve_pair(order, bounds, at, indptr, indices, data, start, diag, fidx, fval,
+                    rhs, x, y)
+        return
     for c in range(n_comp):
         a = bounds[c]
         b = bounds[c + 1]
