@@ -217,8 +217,9 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
     if allowed is not None:
         np.copyto(score, -np.inf if sense is Sense.MAX else np.inf, where=~allowed)
     better = _argbest(score, block.groups, width, sense)
-    gain = sense.gain(score[better], score[chosen])
-    scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
+    top, own = score[better], score[chosen]  # each gathered once (long doubles)
+    gain = sense.gain(top, own)
+    scale = np.maximum(np.abs(top, out=top), np.abs(own, out=own))
     return v, t, np.where(gain > GAIN * scale, better, chosen)
 
 
