@@ -155,3 +155,52 @@ def test_compile_kernels_fills_a_cold_cache(tmp_path):
                          env=env, check=True, cwd=__import__("pathlib").Path(
                              __file__).resolve().parents[1]).stdout
     assert out.split() == ["[False,", "False]", "True", "False", "[True,", "True]"]
+
+
+def _big_ring(k: int = 600, seed: int = 0) -> sp.csr_array:
+    """One strong component of ``k`` states: a ring (half a state's mass to the next)
+    with random chords (a tenth each, two a state) that fill its factors, and a tenth
+    lost a step."""
+    rng = np.random.default_rng(seed)
+    rows, cols, vals = [], [], []
+    for i in range(k):
+        rows += [i, i, i]
+        cols += [(i + 1) % k, int(rng.integers(0, k)), int(rng.integers(0, k))]
+        vals += [0.5, 0.1, 0.1]
+    chain = sp.csr_array((vals, (rows, cols)), shape=(k, k))
+    chain.sum_duplicates()
+    return chain
+
+
+@pytest.mark.parametrize("room", [4, 0])
+def test_a_large_component_and_a_short_first_room(room, monkeypatch):
+    """A component of 600 states (past SciPy's route's 256) solved compiled; with no
+    room per entry the first factorisation runs out of room and is made again with
+    all of it: the same answer as a dense solve either way."""
+    monkeypatch.setattr(topo_chain, "ROOM_PER_ENTRY", room)
+    chain = _big_ring()
+    n, label = _labels(chain)
+    assert n == 1
+    lu = topo_chain.factor(chain, label, n, force=True)
+    b = np.random.default_rng(1).random((600, 2))
+    want = np.linalg.solve(np.eye(600) - chain.toarray(), b)
+    np.testing.assert_allclose(lu.solve(b), want, rtol=1e-12)
+
+
+def test_too_much_fill_for_the_cap_gives_none(monkeypatch):
+    monkeypatch.setattr(topo_chain, "ROOM_PER_ENTRY", 0)
+    monkeypatch.setattr(topo_chain, "MAX_ROOM", 1000)
+    chain = _big_ring()
+    n, label = _labels(chain)
+    assert topo_chain.factor(chain, label, n, force=True) is None
+
+
+def test_chain_factor_takes_large_components_compiled(monkeypatch):
+    """policy_jump.chain_factor: a 600-state component goes to the compiled route
+    where it is allowed, and to the whole chain's SuperLU where it is not."""
+    chain = _big_ring()
+    run = topo_chain.kernels(force=True)
+    monkeypatch.setattr(topo_chain, "kernels", lambda force=False: run)
+    assert isinstance(pj.chain_factor(chain), topo_chain.CompiledTopoLU)
+    monkeypatch.setattr(topo_chain, "MAX_COMPONENT", 512)
+    assert not isinstance(pj.chain_factor(chain), (topo_chain.CompiledTopoLU, pj.TopoLU))

@@ -259,9 +259,12 @@ def chain_factor(chain: sp.csr_array) -> object:
     the labels order them, else the chain is factorised whole), and factorised by SuperLU
     in that order (``NATURAL``, the diagonal pivoted on): no fill across components, no
     minimum-degree ordering of the whole; 0.8-1.1 ms against 2.8-9 ms at 7,863 states.
-    Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Either is solved to the same
-    answer up to rounding, and every policy evaluation is refined twice in extended
-    precision after it."""
+    Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Before both, where a
+    kernel's load is paid and the largest component has at most
+    :data:`~mitld_lp.solvers.topo_chain.MAX_COMPONENT` states, the compiled
+    factorisation in the same order (:mod:`~mitld_lp.solvers.topo_chain`).  Each is
+    solved to the same answer up to rounding, and every policy evaluation is refined
+    twice in extended precision after it."""
     k = chain.shape[0]
     if not TOPO_LU or k <= DENSE_LU_STATES:
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
@@ -269,12 +272,12 @@ def chain_factor(chain: sp.csr_array) -> object:
 
     n_comp, label = csgraph.connected_components(chain, directed=True,
                                                  connection="strong")
-    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT:
-        return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
-    compiled = topo_chain.factor(chain, label, n_comp)  # where a kernel's load is paid
+    largest = int(np.bincount(label).max())
+    compiled = (topo_chain.factor(chain, label, n_comp)  # where a kernel's load is paid
+                if largest <= topo_chain.MAX_COMPONENT else None)
     if compiled is not None:
         return compiled
-    if not _one_way(chain, label):
+    if largest > TOPO_MAX_COMPONENT or not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 

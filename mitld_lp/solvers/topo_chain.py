@@ -33,6 +33,20 @@ SciPy's route)."""
 
 KERNELS = ("topo_factor", "topo_solve")
 
+MAX_COMPONENT = 4096
+"""The largest strong component a chain :func:`factor` takes may have (its work row
+and its elimination's scan are of that size; SciPy's route factorises in component
+order only up to :data:`~mitld_lp.solvers.policy_jump.TOPO_MAX_COMPONENT`, 256).
+QVBS ``consensus`` 4-4 ``disagree``: policies' chains of 8,302 states whose largest
+component has 984-1,246 states, factorised whole by SuperLU in 9-11 ms."""
+
+ROOM_PER_ENTRY = 4
+"""The factors' first room: this many entries per entry of the chain (plus one per
+state); past it, every entry the components could fill (at most :data:`MAX_ROOM`)."""
+
+MAX_ROOM = 1 << 25
+"""The most factor entries :func:`factor` makes room for (16 bytes each)."""
+
 _KERNELS: list[Any] = []  # the kernel module if it is usable, None if not (once)
 
 
@@ -95,8 +109,11 @@ def factor(chain: sp.csr_array, label: np.ndarray, n_comp: int,
     indptr = chain.indptr.astype(np.int64, copy=False)
     indices = chain.indices.astype(np.int64, copy=False)
     data = np.asarray(chain.data, dtype=np.float64)
-    # room for every factor entry a component could fill (its square less its pivots)
-    room = int(np.dot(sizes.astype(np.int64), sizes - 1))
+    # room for the factors: a few times the chain's entries first (the components are
+    # rings that fill little), every entry a component could fill (its square less its
+    # pivots) if that is short
+    full = int(np.dot(sizes.astype(np.int64), sizes - 1))
+    room = min(full, ROOM_PER_ENTRY * chain.nnz + k)
     # the labels' two directions, SciPy's first (its labels number the components
     # downstream first); the stable order of the labels, a radix sort on 16-bit keys
     for flip in (False, True):
@@ -109,16 +126,20 @@ def factor(chain: sp.csr_array, label: np.ndarray, n_comp: int,
         np.cumsum(sizes[::-1] if flip else sizes, out=bounds[1:])
         start = np.empty(3 * k, dtype=np.int64)
         diag = np.empty(k)
-        fidx = np.empty(room, dtype=np.int64)
-        fval = np.empty(room)
-        status = int(run.topo_factor(order, bounds, at, indptr, indices, data, start,
-                                     diag, fidx, fval, np.zeros(largest),
-                                     np.zeros(largest, dtype=np.bool_)))
+        while True:
+            fidx = np.empty(room, dtype=np.int64)
+            fval = np.empty(room)
+            status = int(run.topo_factor(order, bounds, at, indptr, indices, data, start,
+                                         diag, fidx, fval, np.zeros(largest),
+                                         np.zeros(largest, dtype=np.bool_)))
+            if status != -3 or room >= full or full > MAX_ROOM:
+                break
+            room = full  # filled past the first room: once more with all of it
         if status == -1:
             used = int(start[-1]) if k else 0
             return CompiledTopoLU(run, (order, bounds, at, indptr, indices, data, start,
                                         diag, fidx[:used].copy(), fval[:used].copy()))
-        if status != -2:  # a pivot not positive: not a transient chain's
+        if status != -2:  # a pivot not positive, or too much fill: SciPy's then
             return None
     return None
 

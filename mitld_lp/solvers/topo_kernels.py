@@ -36,9 +36,10 @@ def topo_factor(order, bounds, at, indptr, indices, data, start, diag, fidx, fva
     start[3p + 2])``, both as positions; ``w`` / ``mark`` a zeroed work row and
     cleared marks of the largest component's size.  Returns -1 if every pivot is
     positive, the position of the first one that is not (the caller then factorises
-    otherwise), or -2 if an entry leaves to a component after its own (the order is
-    not downstream first)."""
+    otherwise), -2 if an entry leaves to a component after its own (the order is
+    not downstream first), or -3 if the factors fill more than ``fidx`` holds."""
     n_comp = bounds.shape[0] - 1
+    room = fidx.shape[0]
     f = 0
     for c in range(n_comp):
         a = bounds[c]
@@ -71,6 +72,8 @@ def topo_factor(order, bounds, at, indptr, indices, data, start, diag, fidx, fva
                     mark[k] = False
                     continue
                 m /= diag[a + k]
+                if f >= room:
+                    return -3
                 fidx[f] = a + k
                 fval[f] = m
                 f += 1
@@ -92,6 +95,8 @@ def topo_factor(order, bounds, at, indptr, indices, data, start, diag, fidx, fva
                 if mark[j]:
                     mark[j] = False
                     if w[j] != 0.0:
+                        if f >= room:
+                            return -3
                         fidx[f] = a + j
                         fval[f] = w[j]
                         f += 1
