@@ -2,7 +2,7 @@
 the same number of choices (mitld_lp.solvers.kernels.numpy_sweeps) against the sweep
 written here as the module docs state it (one sparse product, the self-loop divided
 out with a guard, a segmented max/min by ``reduceat``, clipped, the bounds only
-tightened): the same bits, sweep by sweep; and the bounds bracket the exact optimum
+tightened): the same bits, sweep by sweep; and the bounds bracket the optimum
 (every policy's chain solved dense by NumPy)."""
 
 from __future__ import annotations
