@@ -19,6 +19,7 @@ import pytest
 import scipy.sparse as sp
 
 from mitld_lp.solvers import policy_jump as pj
+from mitld_lp.solvers import topo_chain
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.topological import Block, Factors
 
@@ -108,15 +109,28 @@ def test_lean_round_same_bits_as_policy_round(monkeypatch, seed, sense):
         assert x.dtype == y.dtype and np.array_equal(x, y)
 
 
+def _compiled_topo(monkeypatch, compiled: bool) -> None:
+    """The compiled factorisation in component order (topo_chain) forced on (a cold
+    cache compiles), or off (SciPy's TopoLU)."""
+    monkeypatch.setattr(topo_chain, "COMPILED", compiled)
+    if compiled:
+        pytest.importorskip("numba")
+        run = topo_chain.kernels(force=True)
+        monkeypatch.setattr(topo_chain, "kernels", lambda force=False: run)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 @pytest.mark.parametrize("seed", SEEDS)
-def test_component_order_values_against_fractions(monkeypatch, seed, sense):
+def test_component_order_values_against_fractions(monkeypatch, seed, sense, compiled):
     """The factorisation in strong-component order forced on (every chain, however
-    small): the policy iteration's values are the exact optimum (brute force over the
-    policies, Fractions) and its policy's own exact values, to extended precision."""
+    small; SciPy's or the compiled one): the policy iteration's values are the exact
+    optimum (brute force over the policies, Fractions) and its policy's own exact
+    values, to extended precision."""
     block = _random_block(seed)
     monkeypatch.setattr(pj, "DENSE_LU_STATES", 0)
     monkeypatch.setattr(pj, "TOPO_LU", True)
+    _compiled_topo(monkeypatch, compiled)
     made = []
     real = pj.chain_factor
 
@@ -127,7 +141,7 @@ def test_component_order_values_against_fractions(monkeypatch, seed, sense):
 
     monkeypatch.setattr(pj, "chain_factor", spy)
     chosen, v, t = _improve(block, sense)
-    assert "TopoLU" in made
+    assert ("CompiledTopoLU" if compiled else "TopoLU") in made
     exact = _exact_values(block, chosen, block.to_target)
     steps = _exact_values(block, chosen, np.ones(block.choices.size))
     best = _optimum(block, block.to_target, sense)
@@ -173,7 +187,9 @@ def test_jump_brackets_contain_the_optimum(monkeypatch, seed, sense):
     block = _random_block(seed)
     best = _optimum(block, block.to_target, sense)
     got = {}
-    for topo, lean in ((True, True), (False, True), (False, False)):
+    for topo, lean in (("compiled", True), (True, True), (False, True), (False, False)):
+        _compiled_topo(monkeypatch, topo == "compiled")
+        topo = bool(topo)
         monkeypatch.setattr(pj, "DENSE_LU_STATES", 0 if topo else 256)
         monkeypatch.setattr(pj, "TOPO_LU", topo)
         monkeypatch.setattr(pj, "LEAN_ROUNDS", lean)
@@ -193,6 +209,7 @@ def test_large_component_falls_back_to_the_whole_chain(monkeypatch):
     cycle = sp.csr_array(np.roll(np.eye(4), 1, axis=1) * 0.5)  # one component of 4
     line = sp.csr_array(np.eye(4, k=1) * 0.5)  # four components of 1
     monkeypatch.setattr(pj, "TOPO_MAX_COMPONENT", 3)
+    monkeypatch.setattr(topo_chain, "COMPILED", False)  # SciPy's route
     assert not isinstance(pj.chain_factor(cycle), pj.TopoLU)
     assert isinstance(pj.chain_factor(line), pj.TopoLU)
     # both solve x = 1 + Q x: the cycle's x = 2, the line's 2 - 2^-(3 - i) ... by hand

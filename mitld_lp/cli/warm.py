@@ -31,4 +31,10 @@ def cmd_warm(args: argparse.Namespace) -> int:
                    f"built with them")
     else:
         say_answer("the own PRISM explorer's kernels were compiled already")
+    from mitld_lp.solvers.topo_chain import compile_kernels as compile_chain_kernels
+
+    start = time.process_time()
+    if compile_chain_kernels():  # the policy jump's chain solve (seconds, once)
+        say_answer(f"compiled the policy jump's chain kernels in "
+                   f"{time.process_time() - start:.1f} s of CPU")
     return EXIT_OK

@@ -254,7 +254,7 @@ class Prepared:
     for the NumPy sweeps, the matrix without its diagonal."""
 
     __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off", "guess",
-                 "track", "_index", "closing")
+                 "track", "_index", "closing", "_fold")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -279,6 +279,19 @@ class Prepared:
         self.track: np.ndarray | None = None
         self.closing = False  # the guesses turned off near the end (iteration._close_out)
         self._index: tuple[np.ndarray, np.ndarray] | None = None
+        self._fold: tuple[int, bool] | None = None
+
+    @property
+    def fold(self) -> tuple[int, bool]:
+        """For the NumPy sweeps: the number of choices of every state if all have the
+        same (else 0), and whether every choice leaves (``leave > 0``: no guard)."""
+        if self._fold is None:
+            n, m = self.groups.size - 1, int(self.groups[-1])
+            width = m // n if n and m % n == 0 else 0
+            if width and not np.array_equal(self.starts, np.arange(0, m, width)):
+                width = 0
+            self._fold = (width, bool(np.all(self.leave > 0)))
+        return self._fold
 
     @property
     def index(self) -> tuple[np.ndarray, np.ndarray]:
@@ -308,12 +321,25 @@ def numpy_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: floa
     odd upper bounds) for the optimum in ``sense`` until every gap is below its
     threshold (module docs); the sweeps done and the largest gap over its threshold."""
     leave = prep.leave[:, None]
+    width, positive = prep.fold
+    op = np.maximum if sense is Sense.MAX else np.minimum
     done = 0
     over = excess(local, tol, precision)
     while done < max_sweeps and over >= 1.0:
-        num = exits + prep.off @ local
-        score = np.divide(num, leave, out=np.zeros_like(num), where=leave > 0)
-        new = np.clip(sense.reduce(score, prep.starts), 0.0, 1.0)
+        num = prep.off @ local
+        num += exits  # in place: the same sums as exits + off @ local
+        if positive:  # every choice leaves: the division alone, in place
+            score = np.divide(num, leave, out=num)
+        else:
+            score = np.divide(num, leave, out=np.zeros_like(num), where=leave > 0)
+        if width:  # each state's choices folded column by column: reduceat's operands
+            rows = score.reshape(-1, width, score.shape[1])  # in its order, its floats
+            new = rows[:, 0].copy()
+            for j in range(1, width):
+                op(new, rows[:, j], out=new)
+        else:
+            new = sense.reduce(score, prep.starts)
+        np.clip(new, 0.0, 1.0, out=new)
         np.maximum(local[:, 0::2], new[:, 0::2], out=local[:, 0::2])
         np.minimum(local[:, 1::2], new[:, 1::2], out=local[:, 1::2])
         done += 1

@@ -56,6 +56,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from mitld_lp.solvers import topo_chain
 from mitld_lp.solvers.graph import Sense, segmented_argmax
 from mitld_lp.solvers.kernels import thresholds
 from mitld_lp.solvers.rows import gather_ranges
@@ -216,8 +217,9 @@ def lean_round(block: Block, inner_ld: sp.csr_array, reward: np.ndarray,
     if allowed is not None:
         np.copyto(score, -np.inf if sense is Sense.MAX else np.inf, where=~allowed)
     better = _argbest(score, block.groups, width, sense)
-    gain = sense.gain(score[better], score[chosen])
-    scale = np.maximum(np.abs(score[better]), np.abs(score[chosen]))
+    top, own = score[better], score[chosen]  # each gathered once (long doubles)
+    gain = sense.gain(top, own)
+    scale = np.maximum(np.abs(top, out=top), np.abs(own, out=own))
     return v, t, np.where(gain > GAIN * scale, better, chosen)
 
 
@@ -257,9 +259,12 @@ def chain_factor(chain: sp.csr_array) -> object:
     the labels order them, else the chain is factorised whole), and factorised by SuperLU
     in that order (``NATURAL``, the diagonal pivoted on): no fill across components, no
     minimum-degree ordering of the whole; 0.8-1.1 ms against 2.8-9 ms at 7,863 states.
-    Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Either is solved to the same
-    answer up to rounding, and every policy evaluation is refined twice in extended
-    precision after it."""
+    Else :func:`~mitld_lp.solvers.topological.chain_lu`.  Before both, where a
+    kernel's load is paid and the largest component has at most
+    :data:`~mitld_lp.solvers.topo_chain.MAX_COMPONENT` states, the compiled
+    factorisation in the same order (:mod:`~mitld_lp.solvers.topo_chain`).  Each is
+    solved to the same answer up to rounding, and every policy evaluation is refined
+    twice in extended precision after it."""
     k = chain.shape[0]
     if not TOPO_LU or k <= DENSE_LU_STATES:
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
@@ -267,8 +272,12 @@ def chain_factor(chain: sp.csr_array) -> object:
 
     n_comp, label = csgraph.connected_components(chain, directed=True,
                                                  connection="strong")
-    if int(np.bincount(label).max()) > TOPO_MAX_COMPONENT \
-            or not _one_way(chain, label):
+    largest = int(np.bincount(label).max())
+    compiled = (topo_chain.factor(chain, label, n_comp)  # where a kernel's load is paid
+                if largest <= topo_chain.MAX_COMPONENT else None)
+    if compiled is not None:
+        return compiled
+    if largest > TOPO_MAX_COMPONENT or not _one_way(chain, label):
         return chain_lu(sp.csc_array(sp.eye_array(k, format="csc") - chain))
     import scipy.sparse.linalg as spla
 
